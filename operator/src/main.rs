@@ -1,0 +1,2 @@
+//! The `amiro` command: talk to the robot over CAN from the operator computer.
+fn main() {}
