@@ -1,0 +1,61 @@
+//! The three AMiRo boards as the build knows them: folder, target, chip, memory and the AMiRo-BLT layout.
+
+/// One firmware crate and the chip it runs on.
+#[derive(Debug, Clone, Copy)]
+pub struct Board {
+    /// Crate and folder name.
+    pub name: &'static str,
+    /// Rust target triple.
+    pub target: &'static str,
+    /// probe-rs chip name.
+    pub chip: &'static str,
+    /// Whether the target uses the hard-float ABI (checked in the ELF header).
+    pub hard_float: bool,
+    /// Flash size of the chip in bytes.
+    pub flash_bytes: u64,
+    /// RAM size of the chip in bytes (the RAM the firmware links into).
+    pub ram_bytes: u64,
+    /// Where AMiRo-BLT starts the application.
+    pub app_base: u64,
+    /// Offset from `app_base` of the word AMiRo-BLT writes its checksum into.
+    pub checksum_slot: u64,
+}
+
+/// DiWheelDrive, PowerManagement and LightRing.
+pub const BOARDS: [Board; 3] = [
+    Board {
+        name: "diwheeldrive",
+        target: "thumbv7m-none-eabi",
+        chip: "STM32F103RE",
+        hard_float: false,
+        flash_bytes: 512 * 1024,
+        ram_bytes: 64 * 1024,
+        app_base: 0x0800_6000,
+        checksum_slot: 0x150,
+    },
+    Board {
+        name: "powermgmt",
+        target: "thumbv7em-none-eabihf",
+        chip: "STM32F405RG",
+        hard_float: true,
+        flash_bytes: 1024 * 1024,
+        ram_bytes: 128 * 1024,
+        app_base: 0x0800_8000,
+        checksum_slot: 0x1AC,
+    },
+    Board {
+        name: "lightring",
+        target: "thumbv7m-none-eabi",
+        chip: "STM32F103RE",
+        hard_float: false,
+        flash_bytes: 512 * 1024,
+        ram_bytes: 64 * 1024,
+        app_base: 0x0800_6000,
+        checksum_slot: 0x150,
+    },
+];
+
+/// Looks a board up by name.
+pub fn by_name(name: &str) -> Option<&'static Board> {
+    BOARDS.iter().find(|b| b.name == name)
+}

@@ -1,0 +1,141 @@
+//! Reads a built firmware ELF: its size (text, data, bss) and the checks a robot needs before flashing
+//! (architecture, float ABI, the AMiRo-BLT checksum slot left free).
+use anyhow::{bail, Context, Result};
+use object::elf::{EF_ARM_ABI_FLOAT_HARD, EM_ARM};
+use object::{Object, ObjectSection, SectionFlags, SectionKind};
+use serde::Serialize;
+use std::path::Path;
+
+use crate::boards::Board;
+
+/// Section sizes of one firmware image.
+#[derive(Debug, Clone, Serialize)]
+pub struct SizeReport {
+    /// Board name.
+    pub board: String,
+    /// Code and read-only data in flash (vector table, .text, .rodata).
+    pub text: u64,
+    /// Initialised data (stored in flash, copied to RAM).
+    pub data: u64,
+    /// Zero-initialised and uninitialised RAM.
+    pub bss: u64,
+    /// Flash used: text + data.
+    pub flash_used: u64,
+    /// Flash available to the application behind the bootloader.
+    pub flash_available: u64,
+    /// Static RAM used: data + bss (the stack takes the rest of RAM).
+    pub ram_used: u64,
+    /// RAM of the chip.
+    pub ram_available: u64,
+    /// Address of the image's vector table.
+    pub vector_table: u64,
+}
+
+/// Parses `elf`, checks it against `board` and returns its sizes.
+pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<SizeReport> {
+    let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+    let file = object::File::parse(&*bytes).with_context(|| format!("parsing {}", elf.display()))?;
+    let (machine, flags) = match file.flags() {
+        object::FileFlags::Elf { e_flags, .. } => (file.architecture(), e_flags),
+        _ => bail!("{} is not an ELF file", elf.display()),
+    };
+    if machine != object::Architecture::Arm {
+        bail!("{}: expected an ARM image, found {:?}", elf.display(), machine);
+    }
+    let _ = EM_ARM;
+    let hard = flags & EF_ARM_ABI_FLOAT_HARD != 0;
+    if hard != board.hard_float {
+        bail!(
+            "{}: float ABI is {} but {} needs {}",
+            elf.display(),
+            if hard { "hard" } else { "soft" },
+            board.name,
+            if board.hard_float { "hard" } else { "soft" }
+        );
+    }
+
+    let mut report = SizeReport {
+        board: board.name.to_string(),
+        text: 0,
+        data: 0,
+        bss: 0,
+        flash_used: 0,
+        flash_available: 0,
+        ram_used: 0,
+        ram_available: board.ram_bytes,
+        vector_table: 0,
+    };
+    let mut vector_end = 0;
+    let slot = board.app_base + board.checksum_slot;
+    for section in file.sections() {
+        let name = section.name().unwrap_or("");
+        let alloc = match section.flags() {
+            SectionFlags::Elf { sh_flags } => sh_flags & u64::from(object::elf::SHF_ALLOC) != 0,
+            _ => false,
+        };
+        if !alloc || section.size() == 0 {
+            continue;
+        }
+        let (start, end) = (section.address(), section.address() + section.size());
+        if name == ".vector_table" {
+            report.vector_table = start;
+            vector_end = end;
+        }
+        match section.kind() {
+            SectionKind::UninitializedData | SectionKind::UninitializedTls => report.bss += section.size(),
+            SectionKind::Data | SectionKind::Tls => report.data += section.size(),
+            _ if name == ".data" => report.data += section.size(),
+            _ if name == ".bss" || name == ".uninit" => report.bss += section.size(),
+            _ => report.text += section.size(),
+        }
+        // Nothing the image loads into flash may cover the word AMiRo-BLT writes.
+        if behind_bootloader && start < slot + 4 && slot < end && start < 0x2000_0000 {
+            bail!(
+                "{}: section {name} ({start:#010x}..{end:#010x}) covers the AMiRo-BLT checksum slot {slot:#010x}",
+                elf.display()
+            );
+        }
+    }
+    if behind_bootloader {
+        if report.vector_table != board.app_base {
+            bail!(
+                "{}: vector table at {:#010x}, but AMiRo-BLT starts the application at {:#010x}",
+                elf.display(),
+                report.vector_table,
+                board.app_base
+            );
+        }
+        if vector_end > slot {
+            bail!("{}: vector table runs into the AMiRo-BLT checksum slot {slot:#010x}", elf.display());
+        }
+        report.flash_available = board.flash_bytes - (board.app_base - 0x0800_0000);
+    } else {
+        report.flash_available = board.flash_bytes;
+    }
+    report.flash_used = report.text + report.data;
+    report.ram_used = report.data + report.bss;
+    Ok(report)
+}
+
+/// Prints the size table.
+pub fn print_table(reports: &[SizeReport]) {
+    println!(
+        "{:<14} {:>8} {:>7} {:>7} {:>22} {:>20}",
+        "board", "text", "data", "bss", "flash used", "static RAM used"
+    );
+    for r in reports {
+        println!(
+            "{:<14} {:>8} {:>7} {:>7} {:>9} / {:>6} KiB {:>4.1}% {:>7} / {:>4} KiB {:>4.1}%",
+            r.board,
+            r.text,
+            r.data,
+            r.bss,
+            r.flash_used,
+            r.flash_available / 1024,
+            100.0 * r.flash_used as f64 / r.flash_available as f64,
+            r.ram_used,
+            r.ram_available / 1024,
+            100.0 * r.ram_used as f64 / r.ram_available as f64,
+        );
+    }
+}
