@@ -1,0 +1,117 @@
+//! A classic CAN data frame with an AMiRo identifier, independent of any driver.
+
+use core::fmt;
+
+use crate::error::DecodeError;
+use crate::id::CanId;
+
+/// A data frame: identifier and 0..=8 data bytes. The length is validated on construction, so
+/// [`Frame::data`] never panics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Frame {
+    id: CanId,
+    len: u8,
+    data: [u8; 8],
+}
+
+impl Frame {
+    /// A frame with these data bytes; more than 8 bytes is [`DecodeError::FrameTooLong`].
+    pub fn new(id: CanId, data: &[u8]) -> Result<Frame, DecodeError> {
+        let mut bytes = [0u8; 8];
+        match bytes.get_mut(..data.len()) {
+            Some(prefix) => {
+                prefix.copy_from_slice(data);
+                // data.len() <= 8 here, so the cast is exact.
+                Ok(Frame {
+                    id,
+                    len: data.len() as u8,
+                    data: bytes,
+                })
+            }
+            None => Err(DecodeError::FrameTooLong { len: data.len() }),
+        }
+    }
+
+    /// A frame from an 8-byte buffer of which the first `len` bytes are used; `len` above 8 is an error.
+    pub fn from_parts(id: CanId, len: u8, data: [u8; 8]) -> Result<Frame, DecodeError> {
+        if len <= 8 {
+            Ok(Frame { id, len, data })
+        } else {
+            Err(DecodeError::FrameTooLong {
+                len: usize::from(len),
+            })
+        }
+    }
+
+    /// For encoders in this crate that build `len <= 8` by construction; clamps instead of failing.
+    pub(crate) const fn from_valid(id: CanId, len: u8, data: [u8; 8]) -> Frame {
+        let len = if len > 8 { 8 } else { len };
+        Frame { id, len, data }
+    }
+
+    /// The identifier.
+    pub const fn id(&self) -> CanId {
+        self.id
+    }
+
+    /// The data length code (0..=8).
+    pub const fn dlc(&self) -> u8 {
+        self.len
+    }
+
+    /// The data bytes (`dlc()` of them).
+    pub fn data(&self) -> &[u8] {
+        // len <= 8 is an invariant of every constructor; the fallback is never taken.
+        self.data.get(..usize::from(self.len)).unwrap_or(&self.data)
+    }
+
+    /// Decodes this frame; see [`crate::decode`].
+    pub fn decode(&self) -> Result<crate::Message, DecodeError> {
+        crate::decode(self.id.raw(), self.data())
+    }
+}
+
+impl fmt::Display for Frame {
+    /// can-utils `cansend` form: `205#01840302`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}#", self.id)?;
+        for byte in self.data() {
+            write!(f, "{byte:02X}")?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::id::{Kind, Priority};
+
+    #[test]
+    fn lengths() {
+        let id = CanId::new(Kind::Command, Priority::Medium, 0x05);
+        for len in 0..=8usize {
+            let bytes = [0xAAu8; 8];
+            let frame = Frame::new(id, &bytes[..len]).unwrap();
+            assert_eq!(frame.data(), &bytes[..len]);
+            assert_eq!(usize::from(frame.dlc()), len);
+        }
+        assert_eq!(
+            Frame::new(id, &[0; 9]),
+            Err(DecodeError::FrameTooLong { len: 9 })
+        );
+        assert_eq!(
+            Frame::from_parts(id, 9, [0; 8]),
+            Err(DecodeError::FrameTooLong { len: 9 })
+        );
+    }
+
+    #[test]
+    fn display_is_cansend_form() {
+        let id = CanId::new(Kind::Command, Priority::Medium, 0x05);
+        let frame = Frame::new(id, &[0x01, 0x84, 0x03, 0x02]).unwrap();
+        assert_eq!(std::format!("{frame}"), "205#01840302");
+        let empty = Frame::new(CanId::try_from(0x7FF).unwrap(), &[]).unwrap();
+        assert_eq!(std::format!("{empty}"), "7FF#");
+    }
+}
