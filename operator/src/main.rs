@@ -1,2 +1,46 @@
 //! The `amiro` command: talk to the robot over CAN from the operator computer.
-fn main() {}
+//!
+//! `decode` and `encode` work offline on frame text; `send` and `monitor` reach the robot through a bus
+//! (SocketCAN, an SLCAN adapter, or a candump log file). The protocol itself lives in `amiro-can`; this binary
+//! adds text formats, transports and words for people.
+
+mod bus;
+mod cli;
+mod commands;
+mod describe;
+mod encode;
+mod frame;
+mod period;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+use crate::cli::{Cli, CliCommand};
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let outcome = match &cli.command {
+        CliCommand::Decode(args) => commands::decode(args),
+        CliCommand::Encode(args) => commands::encode(args),
+        CliCommand::Send(args) => commands::send(args),
+        CliCommand::Monitor(args) => commands::monitor(args),
+        CliCommand::Topics => commands::topics(),
+    };
+    match outcome {
+        Ok(code) => code,
+        // `amiro decode ... | head` closes our output early: that is the reader's choice, not an error.
+        Err(error) if is_broken_pipe(&error) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn is_broken_pipe(error: &anyhow::Error) -> bool {
+    error
+        .chain()
+        .filter_map(|cause| cause.downcast_ref::<std::io::Error>())
+        .any(|io_error| io_error.kind() == std::io::ErrorKind::BrokenPipe)
+}

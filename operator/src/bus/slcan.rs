@@ -1,0 +1,444 @@
+//! The `slcan:` bus: USB-serial CAN adapters speaking the SLCAN (Lawicel) ASCII protocol.
+//!
+//! The protocol is line-based: every command and every received frame ends in `\r`; an adapter answers a command
+//! with `\r` (done), `z\r`/`Z\r` (frame queued for transmission) or a BEL byte (refused). We open the channel the way
+//! `slcand -o -c -s8` does: `C` (close whatever an earlier program left open), `S8` (1 Mbit/s, the AMiRo bus
+//! rate everywhere), `O` (open); and close it with `C` when done, so the adapter stops buffering frames nobody reads.
+//! Frames can arrive while we wait for an answer; they are queued, never dropped.
+
+use std::collections::VecDeque;
+use std::fs::{File, OpenOptions};
+use std::io::{ErrorKind, Read, Write};
+use std::os::fd::AsFd;
+use std::os::unix::fs::OpenOptionsExt;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+use nix::sys::termios::{self, BaudRate, ControlFlags, SetArg};
+
+use super::{interrupted, Bus, Reception};
+use crate::frame::{parse_hex_bytes, FrameId, LoggedFrame, RawFrame, Timestamp};
+
+/// How long an adapter may take to answer a command; real ones answer in well under a millisecond.
+const REPLY_TIMEOUT: Duration = Duration::from_secs(1);
+/// The bitrate command for 1 Mbit/s, the AMiRo bus rate.
+const BITRATE_1MBIT: &str = "S8";
+/// Interface name shown for frames received through an adapter.
+const INTERFACE: &str = "slcan";
+
+const BELL: u8 = 0x07;
+const CR: u8 = b'\r';
+
+/// One message from the adapter, without its terminator.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum AdapterMessage {
+    /// `\r` alone: the last command was carried out.
+    Done,
+    /// BEL: the last command was refused.
+    Refused,
+    /// `z` or `Z`: a frame was queued for transmission.
+    Queued,
+    /// A received frame.
+    Frame(RawFrame),
+    /// Anything else (version strings, status flags, a garbled frame).
+    Other(String),
+}
+
+/// The SLCAN text of a frame to transmit, including the final `\r`: `t2054018403 02\r` for 205#01840302.
+pub fn frame_command(frame: &RawFrame) -> String {
+    let (data_letter, remote_letter, id) = match frame.id() {
+        FrameId::Standard(id) => ('t', 'r', format!("{id:03X}")),
+        FrameId::Extended(id) => ('T', 'R', format!("{id:08X}")),
+    };
+    let letter = if frame.is_remote() {
+        remote_letter
+    } else {
+        data_letter
+    };
+    format!("{letter}{id}{}{}\r", frame.len(), frame.data_hex())
+}
+
+/// Reads one adapter message (terminator removed). A received frame may carry a 4-digit adapter timestamp
+/// (after `Z1`), which we ignore: the host stamps frames itself.
+pub fn parse_message(message: &[u8]) -> AdapterMessage {
+    let Ok(text) = std::str::from_utf8(message) else {
+        return AdapterMessage::Other(String::from_utf8_lossy(message).into_owned());
+    };
+    match text {
+        "" => return AdapterMessage::Done,
+        "z" | "Z" => return AdapterMessage::Queued,
+        _ => {}
+    }
+    parse_frame_text(text).map_or_else(
+        || AdapterMessage::Other(text.to_string()),
+        AdapterMessage::Frame,
+    )
+}
+
+fn parse_frame_text(text: &str) -> Option<RawFrame> {
+    let (id_digits, remote) = match text.as_bytes().first()? {
+        b't' => (3, false),
+        b'r' => (3, true),
+        b'T' => (8, false),
+        b'R' => (8, true),
+        _ => return None,
+    };
+    let id_text = text.get(1..1 + id_digits)?;
+    if !id_text.bytes().all(|b| b.is_ascii_hexdigit()) {
+        return None;
+    }
+    let id_value = u32::from_str_radix(id_text, 16).ok()?;
+    let id = if id_digits == 3 {
+        FrameId::Standard(u16::try_from(id_value).ok()?)
+    } else {
+        FrameId::Extended(id_value)
+    };
+    let len_char = text.as_bytes().get(1 + id_digits)?;
+    let len = char::from(*len_char).to_digit(10).filter(|len| *len <= 8)? as u8;
+    let body = text.get(2 + id_digits..)?;
+    let data_digits = if remote { 0 } else { 2 * usize::from(len) };
+    let (data_text, rest) = (body.get(..data_digits)?, body.get(data_digits..)?);
+    let timestamp_ok =
+        rest.is_empty() || (rest.len() == 4 && rest.bytes().all(|b| b.is_ascii_hexdigit()));
+    if !timestamp_ok {
+        return None;
+    }
+    if remote {
+        RawFrame::remote_frame(id, len)
+    } else {
+        RawFrame::data_frame(id, &parse_hex_bytes(data_text)?)
+    }
+}
+
+/// What waiting on the adapter produced.
+enum Wait {
+    Message(AdapterMessage),
+    TimedOut,
+    Interrupted,
+}
+
+/// An open SLCAN adapter.
+pub struct Slcan {
+    path: PathBuf,
+    port: File,
+    /// Bytes received but not yet ending in a terminator.
+    partial: Vec<u8>,
+    /// Complete messages read but not yet handed out.
+    messages: VecDeque<AdapterMessage>,
+    /// Frames that arrived while we were waiting for a command's answer.
+    received: VecDeque<RawFrame>,
+    channel_open: bool,
+}
+
+impl Slcan {
+    /// Opens the serial device, configures it raw (and at `baud`, if given), and opens the CAN channel.
+    pub fn open(path: &Path, baud: Option<u32>) -> Result<Self> {
+        let port = OpenOptions::new()
+            .read(true)
+            .write(true)
+            // The adapter must not become our controlling terminal (a hang-up would kill us).
+            .custom_flags(nix::libc::O_NOCTTY)
+            .open(path)
+            .with_context(|| format!("cannot open {}", path.display()))?;
+        configure_port(&port, baud)
+            .with_context(|| format!("cannot configure {}", path.display()))?;
+        let mut adapter = Self {
+            path: path.to_path_buf(),
+            port,
+            partial: Vec::new(),
+            messages: VecDeque::new(),
+            received: VecDeque::new(),
+            channel_open: false,
+        };
+        // An earlier program may have left the channel open; refusing this `C` just means it was closed.
+        adapter.command("C", "close the CAN channel", true)?;
+        adapter.command(BITRATE_1MBIT, "set the bitrate to 1 Mbit/s", false)?;
+        adapter.command("O", "open the CAN channel", false)?;
+        adapter.channel_open = true;
+        Ok(adapter)
+    }
+
+    /// Sends a command and waits for its answer; frames that arrive meanwhile are kept.
+    fn command(&mut self, command: &str, meaning: &str, refusal_is_fine: bool) -> Result<()> {
+        self.write(&format!("{command}\r"))?;
+        match self.await_answer()? {
+            Some(true) => Ok(()),
+            Some(false) if refusal_is_fine => Ok(()),
+            Some(false) => bail!("the adapter refused {command:?} ({meaning})"),
+            None => bail!(
+                "no answer to {command:?} ({meaning}) within {} ms: is {} an SLCAN adapter?",
+                REPLY_TIMEOUT.as_millis(),
+                self.path.display()
+            ),
+        }
+    }
+
+    /// Waits for done/queued (`Some(true)`), refused (`Some(false)`) or nothing (`None`).
+    fn await_answer(&mut self) -> Result<Option<bool>> {
+        let deadline = Instant::now() + REPLY_TIMEOUT;
+        loop {
+            match self.next_message(Some(deadline))? {
+                Wait::Message(AdapterMessage::Done | AdapterMessage::Queued) => {
+                    return Ok(Some(true))
+                }
+                Wait::Message(AdapterMessage::Refused) => return Ok(Some(false)),
+                Wait::Message(AdapterMessage::Frame(frame)) => self.received.push_back(frame),
+                Wait::Message(AdapterMessage::Other(text)) => warn_unknown(&text),
+                Wait::TimedOut | Wait::Interrupted => return Ok(None),
+            }
+        }
+    }
+
+    fn write(&mut self, text: &str) -> Result<()> {
+        self.port
+            .write_all(text.as_bytes())
+            .and_then(|()| self.port.flush())
+            .with_context(|| format!("cannot write to {}", self.path.display()))
+    }
+
+    /// The next complete message, reading more bytes until `deadline` if needed.
+    fn next_message(&mut self, deadline: Option<Instant>) -> Result<Wait> {
+        loop {
+            if let Some(message) = self.messages.pop_front() {
+                return Ok(Wait::Message(message));
+            }
+            if interrupted() {
+                return Ok(Wait::Interrupted);
+            }
+            let timeout = match deadline {
+                None => PollTimeout::NONE,
+                Some(deadline) => {
+                    let left = deadline.saturating_duration_since(Instant::now());
+                    if left.is_zero() {
+                        return Ok(Wait::TimedOut);
+                    }
+                    // Round up so a sub-millisecond remainder still waits instead of spinning.
+                    PollTimeout::try_from(left + Duration::from_micros(999))
+                        .unwrap_or(PollTimeout::MAX)
+                }
+            };
+            let mut fds = [PollFd::new(self.port.as_fd(), PollFlags::POLLIN)];
+            match poll(&mut fds, timeout) {
+                Ok(0) => continue,
+                Ok(_) => {}
+                Err(nix::errno::Errno::EINTR) => continue,
+                Err(error) => return Err(error).context("waiting for the adapter"),
+            }
+            let mut buffer = [0u8; 256];
+            let count = match self.port.read(&mut buffer) {
+                Ok(0) => bail!("{} closed (adapter unplugged?)", self.path.display()),
+                Ok(count) => count,
+                Err(error)
+                    if matches!(error.kind(), ErrorKind::Interrupted | ErrorKind::WouldBlock) =>
+                {
+                    continue
+                }
+                Err(error) => {
+                    return Err(error)
+                        .with_context(|| format!("cannot read from {}", self.path.display()))
+                }
+            };
+            self.take_bytes(&buffer[..count]);
+        }
+    }
+
+    /// Splits incoming bytes into messages at `\r` and BEL.
+    fn take_bytes(&mut self, bytes: &[u8]) {
+        for &byte in bytes {
+            match byte {
+                CR => {
+                    let message = std::mem::take(&mut self.partial);
+                    self.messages.push_back(parse_message(&message));
+                }
+                BELL => {
+                    self.partial.clear();
+                    self.messages.push_back(AdapterMessage::Refused);
+                }
+                // Some adapters end lines with "\r\n"; the newline carries nothing.
+                b'\n' => {}
+                other => self.partial.push(other),
+            }
+        }
+    }
+}
+
+fn warn_unknown(text: &str) {
+    eprintln!(
+        "warning: SLCAN adapter sent {text:?}, which is neither an answer nor a frame; ignored"
+    );
+}
+
+impl Bus for Slcan {
+    fn send(&mut self, frame: &RawFrame) -> Result<()> {
+        self.write(&frame_command(frame))?;
+        match self.await_answer()? {
+            Some(true) => Ok(()),
+            Some(false) => {
+                bail!("the adapter refused to transmit {frame} (transmit queue full or bus off?)")
+            }
+            None => bail!(
+                "the adapter did not confirm {frame} within {} ms",
+                REPLY_TIMEOUT.as_millis()
+            ),
+        }
+    }
+
+    fn receive(&mut self, timeout: Option<Duration>) -> Result<Reception> {
+        let deadline = timeout.map(|timeout| Instant::now() + timeout);
+        loop {
+            if let Some(frame) = self.received.pop_front() {
+                let logged = LoggedFrame {
+                    timestamp: Some(Timestamp::now()),
+                    interface: Some(INTERFACE.into()),
+                    frame,
+                };
+                return Ok(Reception::Frame(logged));
+            }
+            match self.next_message(deadline)? {
+                Wait::Message(AdapterMessage::Frame(frame)) => self.received.push_back(frame),
+                // A late answer to an earlier command carries nothing now.
+                Wait::Message(AdapterMessage::Done | AdapterMessage::Queued) => {}
+                Wait::Message(AdapterMessage::Refused) => {
+                    eprintln!("warning: the SLCAN adapter signalled an error (BEL)")
+                }
+                Wait::Message(AdapterMessage::Other(text)) => warn_unknown(&text),
+                Wait::TimedOut => return Ok(Reception::TimedOut),
+                Wait::Interrupted => return Ok(Reception::Interrupted),
+            }
+        }
+    }
+
+    fn close(&mut self) -> Result<()> {
+        if !self.channel_open {
+            return Ok(());
+        }
+        self.channel_open = false;
+        self.command("C", "close the CAN channel", false)
+    }
+}
+
+impl Drop for Slcan {
+    fn drop(&mut self) {
+        // Best effort on an error path: the adapter should not keep the channel open for nobody.
+        if self.channel_open {
+            self.channel_open = false;
+            let _ = self.write("C\r");
+        }
+    }
+}
+
+/// Raw mode (no echo, no line editing, no CR/LF translation), receiver on, modem lines ignored.
+/// A device that is not a terminal (a FIFO in a test rig) is used as it is.
+fn configure_port(port: &File, baud: Option<u32>) -> Result<()> {
+    let mut settings = match termios::tcgetattr(port.as_fd()) {
+        Ok(settings) => settings,
+        Err(nix::errno::Errno::ENOTTY) if baud.is_none() => return Ok(()),
+        Err(error) => return Err(error).context("not a serial port"),
+    };
+    termios::cfmakeraw(&mut settings);
+    settings.control_flags |= ControlFlags::CREAD | ControlFlags::CLOCAL;
+    if let Some(baud) = baud {
+        termios::cfsetspeed(&mut settings, baud_rate(baud)?).context("cannot set the baud rate")?;
+    }
+    termios::tcsetattr(port.as_fd(), SetArg::TCSANOW, &settings)
+        .context("cannot apply serial settings")?;
+    // Bytes queued before we took the port belong to someone else's session.
+    termios::tcflush(port.as_fd(), termios::FlushArg::TCIFLUSH)
+        .context("cannot flush the serial port")?;
+    Ok(())
+}
+
+fn baud_rate(baud: u32) -> Result<BaudRate> {
+    Ok(match baud {
+        9_600 => BaudRate::B9600,
+        19_200 => BaudRate::B19200,
+        38_400 => BaudRate::B38400,
+        57_600 => BaudRate::B57600,
+        115_200 => BaudRate::B115200,
+        230_400 => BaudRate::B230400,
+        460_800 => BaudRate::B460800,
+        500_000 => BaudRate::B500000,
+        921_600 => BaudRate::B921600,
+        1_000_000 => BaudRate::B1000000,
+        2_000_000 => BaudRate::B2000000,
+        3_000_000 => BaudRate::B3000000,
+        other => bail!(
+            "unsupported serial baud rate {other}: use 9600, 19200, 38400, 57600, 115200, 230400, 460800, \
+             500000, 921600, 1000000, 2000000 or 3000000"
+        ),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::parse_compact;
+
+    #[test]
+    fn frames_become_slcan_commands() {
+        assert_eq!(
+            frame_command(&parse_compact("205#01840302").unwrap()),
+            "t205401840302\r"
+        );
+        assert_eq!(frame_command(&parse_compact("605#").unwrap()), "t6050\r");
+        assert_eq!(
+            frame_command(&parse_compact("1234ABCD#FF").unwrap()),
+            "T1234ABCD1FF\r"
+        );
+        assert_eq!(frame_command(&parse_compact("205#R4").unwrap()), "r2054\r");
+        assert_eq!(
+            frame_command(&parse_compact("00000205#R").unwrap()),
+            "R000002050\r"
+        );
+    }
+
+    #[test]
+    fn adapter_messages_are_recognised() {
+        assert_eq!(parse_message(b""), AdapterMessage::Done);
+        assert_eq!(parse_message(b"z"), AdapterMessage::Queued);
+        assert_eq!(parse_message(b"Z"), AdapterMessage::Queued);
+        let expected = parse_compact("608#FCFF02000000").unwrap();
+        assert_eq!(
+            parse_message(b"t6086FCFF02000000"),
+            AdapterMessage::Frame(expected)
+        );
+        assert_eq!(
+            parse_message(b"t6086fcff02000000"),
+            AdapterMessage::Frame(expected)
+        );
+        // With the adapter's own 16-bit timestamp appended.
+        assert_eq!(
+            parse_message(b"t6086FCFF020000001A2B"),
+            AdapterMessage::Frame(expected)
+        );
+        assert_eq!(
+            parse_message(b"r2052"),
+            AdapterMessage::Frame(parse_compact("205#R2").unwrap())
+        );
+        assert_eq!(
+            parse_message(b"T1234ABCD1FF"),
+            AdapterMessage::Frame(parse_compact("1234ABCD#FF").unwrap())
+        );
+    }
+
+    #[test]
+    fn garbled_frames_are_not_frames() {
+        for garbled in [
+            &b"t60"[..],
+            b"t6089",
+            b"t6082FF",
+            b"t6082FFFFF",
+            b"t8001FF",
+            b"tXYZ0",
+            b"V1013",
+            b"\xff",
+        ] {
+            assert!(
+                matches!(parse_message(garbled), AdapterMessage::Other(_)),
+                "{garbled:?}"
+            );
+        }
+    }
+}

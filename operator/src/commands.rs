@@ -1,0 +1,241 @@
+//! What each subcommand does: read frames, decode or encode them, talk to a bus, print the results.
+
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, IsTerminal, Write};
+use std::path::Path;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use amiro_can::TOPICS;
+use anyhow::{bail, Context, Result};
+
+use crate::bus::{self, BusUrl, Direction, Reception};
+use crate::cli::{DecodeArgs, EncodeArgs, MessageArgs, MonitorArgs, SendArgs};
+use crate::describe::{decode_frame, json_record, json_unreadable, text_line, text_unreadable};
+use crate::encode;
+use crate::frame::{parse_compact, parse_line, FrameTextError, LoggedFrame, RawFrame};
+use crate::period::human_micros;
+
+/// Writes decoded frames in the chosen format and remembers whether anything was wrong.
+struct Report<W: Write> {
+    out: W,
+    json: bool,
+    all_decoded: bool,
+}
+
+impl<W: Write> Report<W> {
+    fn new(out: W, json: bool) -> Self {
+        Self {
+            out,
+            json,
+            all_decoded: true,
+        }
+    }
+
+    fn frame(&mut self, logged: &LoggedFrame, line: Option<usize>) -> io::Result<()> {
+        let decoded = decode_frame(&logged.frame);
+        self.all_decoded &= decoded.is_ok();
+        if self.json {
+            writeln!(self.out, "{}", json_record(logged, line, &decoded))
+        } else {
+            writeln!(self.out, "{}", text_line(logged, &decoded))
+        }
+    }
+
+    fn unreadable(
+        &mut self,
+        line: Option<usize>,
+        input: &str,
+        error: &FrameTextError,
+    ) -> io::Result<()> {
+        self.all_decoded = false;
+        if self.json {
+            writeln!(self.out, "{}", json_unreadable(line, input, error))
+        } else {
+            writeln!(self.out, "{}", text_unreadable(line, error))
+        }
+    }
+
+    fn exit_code(&self) -> ExitCode {
+        if self.all_decoded {
+            ExitCode::SUCCESS
+        } else {
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// `amiro decode`.
+pub fn decode(args: &DecodeArgs) -> Result<ExitCode> {
+    let mut report = Report::new(io::stdout().lock(), args.json);
+    if !args.frames.is_empty() {
+        for text in &args.frames {
+            match parse_line(text) {
+                Ok(Some(logged)) => report.frame(&logged, None)?,
+                Ok(None) => {}
+                Err(error) => report.unreadable(None, text, &error)?,
+            }
+        }
+        return Ok(report.exit_code());
+    }
+    let input: Box<dyn BufRead> = match args.file.as_deref() {
+        Some(path) if path != Path::new("-") => Box::new(BufReader::new(
+            File::open(path).with_context(|| format!("cannot open {}", path.display()))?,
+        )),
+        _ => {
+            if io::stdin().is_terminal() {
+                eprintln!("Reading frames from the terminal, one per line; end with Ctrl-D.");
+            }
+            Box::new(io::stdin().lock())
+        }
+    };
+    for (index, line) in input.lines().enumerate() {
+        let line = line.context("cannot read the input")?;
+        let number = Some(index + 1);
+        match parse_line(&line) {
+            Ok(Some(logged)) => report.frame(&logged, number)?,
+            Ok(None) => {}
+            Err(error) => report.unreadable(number, &line, &error)?,
+        }
+    }
+    Ok(report.exit_code())
+}
+
+/// `amiro encode`.
+pub fn encode(args: &EncodeArgs) -> Result<ExitCode> {
+    let frame = encode::frame(&encode::message(&args.message)?)?;
+    writeln!(io::stdout(), "{frame}")?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `amiro send`.
+pub fn send(args: &SendArgs) -> Result<ExitCode> {
+    let frames = frames_to_send(args.message.as_ref(), &args.frames, args.raw)?;
+    let url = bus_url(args.bus.as_deref())?;
+    let mut bus = bus::open(&url, Direction::Send)?;
+    let mut report = Report::new(io::stdout().lock(), false);
+    let mut outcome = Ok(());
+    for frame in &frames {
+        if let Err(error) = bus.send(frame) {
+            outcome = Err(error);
+            break;
+        }
+        write!(report.out, "sent ")?;
+        report.frame(&LoggedFrame::bare(*frame), None)?;
+    }
+    // Close even after a failed send, so an adapter is not left with an open channel.
+    let closed = bus.close().with_context(|| format!("closing {url}"));
+    outcome.with_context(|| format!("sending on {url}"))?;
+    closed?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The frames `send` was asked for, each checked against the decoder unless `raw`.
+fn frames_to_send(
+    message: Option<&MessageArgs>,
+    texts: &[String],
+    raw: bool,
+) -> Result<Vec<RawFrame>> {
+    if let Some(message) = message {
+        return Ok(vec![encode::frame(&encode::message(message)?)?]);
+    }
+    if texts.is_empty() {
+        bail!("nothing to send: give frames such as 205#01840302, or a command such as `publish gyroscope ...`");
+    }
+    let mut frames = Vec::with_capacity(texts.len());
+    for text in texts {
+        let frame = parse_compact(text).with_context(|| format!("cannot send {text:?}"))?;
+        if !raw {
+            if let Err(error) = decode_frame(&frame) {
+                bail!("{frame} is not a valid AMiRo frame: {error} [{}] (use --raw to send it anyway)", error.kind_name());
+            }
+        }
+        frames.push(frame);
+    }
+    Ok(frames)
+}
+
+fn bus_url(bus: Option<&str>) -> Result<BusUrl> {
+    let Some(bus) = bus else {
+        bail!("no bus given: add --bus socketcan:can0 (or slcan:/dev/ttyUSB0, file:out.log), or set AMIRO_BUS");
+    };
+    BusUrl::parse(bus)
+}
+
+/// `amiro monitor`.
+pub fn monitor(args: &MonitorArgs) -> Result<ExitCode> {
+    let url = BusUrl::parse(&args.bus)?;
+    if args.realtime && !matches!(url, BusUrl::File { .. }) {
+        bail!("--realtime paces a log file; {url} is a live bus, which is always in real time");
+    }
+    bus::catch_interrupts()?;
+    let mut bus = bus::open(
+        &url,
+        Direction::Receive {
+            realtime: args.realtime,
+        },
+    )?;
+    let outcome = watch(bus.as_mut(), args);
+    let closed = bus.close().with_context(|| format!("closing {url}"));
+    let received = outcome.with_context(|| format!("monitoring {url}"))?;
+    closed?;
+    match args.count {
+        Some(count) if received < count => {
+            eprintln!("only {received} of {count} frames arrived");
+            Ok(ExitCode::FAILURE)
+        }
+        _ => Ok(ExitCode::SUCCESS),
+    }
+}
+
+/// Prints frames until the count, the timeout, the end of the log or Ctrl-C; returns how many arrived.
+fn watch(bus: &mut dyn bus::Bus, args: &MonitorArgs) -> Result<u64> {
+    let mut report = Report::new(io::stdout().lock(), args.json);
+    let give_up = args.timeout.map(|timeout| Instant::now() + timeout);
+    let mut received = 0;
+    while args.count.is_none_or(|count| received < count) {
+        let left = give_up.map(|give_up| give_up.saturating_duration_since(Instant::now()));
+        if left.is_some_and(|left| left.is_zero()) {
+            break;
+        }
+        match bus.receive(left)? {
+            Reception::Frame(logged) => {
+                received += 1;
+                report.frame(&logged, None)?;
+                report.out.flush()?;
+            }
+            Reception::TimedOut | Reception::Ended | Reception::Interrupted => break,
+        }
+    }
+    Ok(received)
+}
+
+/// `amiro topics`.
+pub fn topics() -> Result<ExitCode> {
+    let mut out = io::stdout().lock();
+    writeln!(
+        out,
+        "{:<5} {:<16} {:<16} {:<8} {:>3} {:>6} {:>9}  payload",
+        "topic", "name", "board", "kind", "dlc", "frames", "default"
+    )?;
+    for info in TOPICS {
+        let (kind, default) = if info.is_sensor {
+            ("sensor", human_micros(u64::from(info.default_period_us)))
+        } else {
+            ("actuator", "-".to_string())
+        };
+        writeln!(
+            out,
+            "0x{:02X}  {:<16} {:<16} {:<8} {:>3} {:>6} {:>9}  {}",
+            info.topic.byte(),
+            info.name,
+            info.board.name(),
+            kind,
+            info.dlc,
+            info.frames_per_sample,
+            default,
+            info.layout
+        )?;
+    }
+    Ok(ExitCode::SUCCESS)
+}

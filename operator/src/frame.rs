@@ -1,0 +1,593 @@
+//! Raw CAN frames as text: can-utils `ID#DATA`, `candump -l` log lines and candump's screen format.
+//!
+//! This layer knows nothing about the AMiRo protocol. It only turns text into the frame that was (or will be) on
+//! the wire, so that the AMiRo decoder can judge it; frames the robot never sends (extended identifiers, remote
+//! frames) are still read here, because an operator watching a bus wants to see them reported, not lost.
+
+use std::fmt;
+
+/// Largest standard (11-bit) identifier.
+const MAX_STANDARD_ID: u32 = 0x7FF;
+/// Largest extended (29-bit) identifier.
+const MAX_EXTENDED_ID: u32 = 0x1FFF_FFFF;
+
+/// A CAN identifier as it appears on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameId {
+    /// 11-bit base-format identifier: the only kind the AMiRo protocol uses.
+    Standard(u16),
+    /// 29-bit extended identifier.
+    Extended(u32),
+}
+
+/// One classic CAN frame (up to 8 data bytes), before anyone has decided what it means.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RawFrame {
+    id: FrameId,
+    remote: bool,
+    len: u8,
+    data: [u8; 8],
+}
+
+impl RawFrame {
+    /// A data frame. `None` if the identifier is out of range or there are more than 8 bytes.
+    pub fn data_frame(id: FrameId, bytes: &[u8]) -> Option<Self> {
+        if !id_in_range(id) || bytes.len() > 8 {
+            return None;
+        }
+        let mut data = [0; 8];
+        data[..bytes.len()].copy_from_slice(bytes);
+        Some(Self {
+            id,
+            remote: false,
+            len: bytes.len() as u8,
+            data,
+        })
+    }
+
+    /// A remote (RTR) frame asking for `len` bytes. `None` if out of range.
+    pub fn remote_frame(id: FrameId, len: u8) -> Option<Self> {
+        if !id_in_range(id) || len > 8 {
+            return None;
+        }
+        Some(Self {
+            id,
+            remote: true,
+            len,
+            data: [0; 8],
+        })
+    }
+
+    /// The identifier.
+    pub fn id(&self) -> FrameId {
+        self.id
+    }
+
+    /// Whether this is a remote (RTR) frame, which carries a length but no data.
+    pub fn is_remote(&self) -> bool {
+        self.remote
+    }
+
+    /// The data length code.
+    pub fn len(&self) -> u8 {
+        self.len
+    }
+
+    /// The data bytes (empty for a remote frame).
+    pub fn data(&self) -> &[u8] {
+        if self.remote {
+            &[]
+        } else {
+            &self.data[..usize::from(self.len)]
+        }
+    }
+
+    /// The data bytes as uppercase hex without separators, as can-utils writes them.
+    pub fn data_hex(&self) -> String {
+        self.data().iter().map(|b| format!("{b:02X}")).collect()
+    }
+
+    /// The identifier as can-utils writes it: 3 hex digits (standard) or 8 (extended).
+    pub fn id_hex(&self) -> String {
+        match self.id {
+            FrameId::Standard(id) => format!("{id:03X}"),
+            FrameId::Extended(id) => format!("{id:08X}"),
+        }
+    }
+}
+
+fn id_in_range(id: FrameId) -> bool {
+    match id {
+        FrameId::Standard(id) => u32::from(id) <= MAX_STANDARD_ID,
+        FrameId::Extended(id) => id <= MAX_EXTENDED_ID,
+    }
+}
+
+/// can-utils compact form: `205#01840302`, `12345678#00`, `205#R`, `205#R4`.
+impl fmt::Display for RawFrame {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}#", self.id_hex())?;
+        if self.remote {
+            f.write_str("R")?;
+            if self.len > 0 {
+                write!(f, "{}", self.len)?;
+            }
+            Ok(())
+        } else {
+            f.write_str(&self.data_hex())
+        }
+    }
+}
+
+/// Seconds and microseconds, as candump writes `(1700000000.123456)`; kept as integers so nothing is rounded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Timestamp {
+    /// Whole seconds (since the epoch for `candump -l`, since the start for relative logs).
+    pub secs: u64,
+    /// Microseconds, 0..1_000_000.
+    pub micros: u32,
+}
+
+impl Timestamp {
+    /// The current wall-clock time.
+    pub fn now() -> Self {
+        let since_epoch = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default();
+        Self {
+            secs: since_epoch.as_secs(),
+            micros: since_epoch.subsec_micros(),
+        }
+    }
+
+    /// Microseconds since the timestamp's origin (saturating, far beyond any log's range).
+    pub fn as_micros(&self) -> u64 {
+        self.secs
+            .saturating_mul(1_000_000)
+            .saturating_add(u64::from(self.micros))
+    }
+}
+
+impl fmt::Display for Timestamp {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:010}.{:06}", self.secs, self.micros)
+    }
+}
+
+/// A frame with what a log line or a live bus adds to it: when and on which interface it was seen.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LoggedFrame {
+    /// When the frame was seen, if known.
+    pub timestamp: Option<Timestamp>,
+    /// The interface it was seen on (`can0`), if known.
+    pub interface: Option<String>,
+    /// The frame itself.
+    pub frame: RawFrame,
+}
+
+impl LoggedFrame {
+    /// A frame without timestamp or interface (a command-line argument).
+    pub fn bare(frame: RawFrame) -> Self {
+        Self {
+            timestamp: None,
+            interface: None,
+            frame,
+        }
+    }
+
+    /// The line as `candump -l` writes it: `(1700000000.123456) can0 205#01840302`.
+    /// Missing parts are filled with the current time and `can0`, so the line always replays with `canplayer`.
+    pub fn to_log_line(&self) -> String {
+        let timestamp = self.timestamp.unwrap_or_else(Timestamp::now);
+        let interface = self.interface.as_deref().unwrap_or("can0");
+        format!("({timestamp}) {interface} {}", self.frame)
+    }
+
+    /// The prefix shown before a frame in human-readable output: `(ts) can0 ` or nothing.
+    pub fn origin_prefix(&self) -> String {
+        let mut prefix = String::new();
+        if let Some(timestamp) = self.timestamp {
+            prefix.push_str(&format!("({timestamp}) "));
+        }
+        if let Some(interface) = &self.interface {
+            prefix.push_str(interface);
+            prefix.push(' ');
+        }
+        prefix
+    }
+}
+
+/// Why a line of text is not a CAN frame.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum FrameTextError {
+    /// Nothing that looks like a frame (no `#`, not candump's `ID [n] bytes` form).
+    NotAFrame(String),
+    /// The `(seconds.micros)` part does not parse.
+    BadTimestamp(String),
+    /// The identifier is not 3 hex digits (standard) or 8 (extended).
+    BadIdentifier(String),
+    /// The identifier has the right length but too large a value (standard above 7FF, extended above 1FFFFFFF).
+    IdentifierOutOfRange(String),
+    /// The data is not whole hex bytes.
+    BadData(String),
+    /// More than 8 data bytes.
+    TooManyBytes(usize),
+    /// A CAN FD frame (`##`): the AMiRo bus is classic CAN.
+    CanFd,
+    /// candump's `[n]` disagrees with the number of bytes that follow.
+    LengthMismatch {
+        /// The length in brackets.
+        declared: usize,
+        /// The bytes actually listed.
+        found: usize,
+    },
+    /// Something follows the frame that is not part of any known format.
+    TrailingText(String),
+}
+
+impl FrameTextError {
+    /// A short, stable name for the reason, as used in JSON output.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            Self::NotAFrame(_) => "not-a-frame",
+            Self::BadTimestamp(_) => "bad-timestamp",
+            Self::BadIdentifier(_) => "bad-identifier",
+            Self::IdentifierOutOfRange(_) => "identifier-out-of-range",
+            Self::BadData(_) => "bad-data",
+            Self::TooManyBytes(_) => "too-many-bytes",
+            Self::CanFd => "can-fd",
+            Self::LengthMismatch { .. } => "length-mismatch",
+            Self::TrailingText(_) => "trailing-text",
+        }
+    }
+}
+
+impl fmt::Display for FrameTextError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::NotAFrame(text) => {
+                write!(f, "not a CAN frame: {text:?} (expected e.g. 205#01840302 or a candump -l line)")
+            }
+            Self::BadTimestamp(text) => write!(f, "bad timestamp {text:?} (expected (seconds.microseconds))"),
+            Self::BadIdentifier(text) => write!(
+                f,
+                "bad identifier {text:?}: expected 3 hex digits (standard, e.g. 205) or 8 (extended)"
+            ),
+            Self::IdentifierOutOfRange(text) => write!(
+                f,
+                "identifier {text} out of range (standard identifiers go up to 7FF, extended up to 1FFFFFFF)"
+            ),
+            Self::BadData(text) => write!(f, "bad data {text:?}: expected hex bytes such as 01840302"),
+            Self::TooManyBytes(n) => write!(f, "{n} data bytes: a classic CAN frame carries at most 8"),
+            Self::CanFd => f.write_str("CAN FD frame (##): the AMiRo bus is classic CAN"),
+            Self::LengthMismatch { declared, found } => {
+                write!(f, "length [{declared}] but {found} data bytes follow")
+            }
+            Self::TrailingText(text) => write!(f, "unexpected text after the frame: {text:?}"),
+        }
+    }
+}
+
+impl std::error::Error for FrameTextError {}
+
+/// Parses one line of input: a bare `ID#DATA`, a `candump -l` line, or a candump screen line
+/// (`can0  205   [4]  01 84 03 02`, with or without a timestamp).
+///
+/// Blank lines and comments (starting with `#` or `//`) give `Ok(None)`.
+pub fn parse_line(line: &str) -> Result<Option<LoggedFrame>, FrameTextError> {
+    let line = line.trim();
+    if line.is_empty() || line.starts_with('#') || line.starts_with("//") {
+        return Ok(None);
+    }
+    let mut tokens: Vec<&str> = line.split_whitespace().collect();
+
+    let mut timestamp = None;
+    if let Some(first) = tokens.first() {
+        if first.starts_with('(') {
+            timestamp = Some(parse_timestamp(first)?);
+            tokens.remove(0);
+        }
+    }
+
+    // The frame token is the first containing '#'; an interface name may stand before it.
+    if let Some(at) = tokens.iter().position(|t| t.contains('#')) {
+        let interface = match at {
+            0 => None,
+            1 => Some(tokens[0].to_string()),
+            _ => return Err(FrameTextError::NotAFrame(line.to_string())),
+        };
+        let frame = parse_compact(tokens[at])?;
+        let rest = &tokens[at + 1..];
+        // Newer candump versions may log the direction (R = received, T = transmitted) after the frame.
+        let rest_is_direction = matches!(rest, [] | ["R"] | ["T"]);
+        if !rest_is_direction {
+            return Err(FrameTextError::TrailingText(rest.join(" ")));
+        }
+        return Ok(Some(LoggedFrame {
+            timestamp,
+            interface,
+            frame,
+        }));
+    }
+
+    parse_screen(&tokens, line).map(|(interface, frame)| {
+        Some(LoggedFrame {
+            timestamp,
+            interface,
+            frame,
+        })
+    })
+}
+
+/// Parses just a compact frame `ID#DATA` (a command-line argument).
+pub fn parse_compact(text: &str) -> Result<RawFrame, FrameTextError> {
+    let Some((id_text, data_text)) = text.split_once('#') else {
+        return Err(FrameTextError::NotAFrame(text.to_string()));
+    };
+    if data_text.starts_with('#') {
+        return Err(FrameTextError::CanFd);
+    }
+    let id = parse_id(id_text)?;
+    if let Some(len_text) = data_text.strip_prefix(['R', 'r']) {
+        let len = match len_text {
+            "" => 0,
+            digit => digit
+                .parse::<u8>()
+                .ok()
+                .filter(|len| *len <= 8)
+                .ok_or_else(|| FrameTextError::BadData(data_text.to_string()))?,
+        };
+        return RawFrame::remote_frame(id, len)
+            .ok_or_else(|| FrameTextError::BadData(data_text.to_string()));
+    }
+    // can-utils allows a '.' between bytes for readability.
+    let digits: String = data_text.chars().filter(|c| *c != '.').collect();
+    let bytes =
+        parse_hex_bytes(&digits).ok_or_else(|| FrameTextError::BadData(data_text.to_string()))?;
+    if bytes.len() > 8 {
+        return Err(FrameTextError::TooManyBytes(bytes.len()));
+    }
+    RawFrame::data_frame(id, &bytes).ok_or_else(|| FrameTextError::BadData(data_text.to_string()))
+}
+
+/// candump's screen form: `[iface] ID [n] b0 b1 ...` or `[iface] ID [n] remote request`.
+fn parse_screen(tokens: &[&str], line: &str) -> Result<(Option<String>, RawFrame), FrameTextError> {
+    let not_a_frame = || FrameTextError::NotAFrame(line.to_string());
+    let bracket = tokens
+        .iter()
+        .position(|t| t.starts_with('[') && t.ends_with(']'))
+        .ok_or_else(not_a_frame)?;
+    let (interface, id_text) = match bracket {
+        1 => (None, tokens[0]),
+        2 => (Some(tokens[0].to_string()), tokens[1]),
+        _ => return Err(not_a_frame()),
+    };
+    let id = parse_id(id_text)?;
+    let len_text = &tokens[bracket][1..tokens[bracket].len() - 1];
+    let declared: usize = len_text.parse().map_err(|_| not_a_frame())?;
+    if declared > 8 {
+        return Err(FrameTextError::TooManyBytes(declared));
+    }
+    let rest = &tokens[bracket + 1..];
+    if rest.starts_with(&["remote", "request"]) {
+        let frame = RawFrame::remote_frame(id, declared as u8).ok_or_else(not_a_frame)?;
+        return Ok((interface, frame));
+    }
+    // `candump -a` appends the bytes as ASCII in quotes; that is a copy of the data, not more data.
+    let byte_tokens: Vec<&str> = rest
+        .iter()
+        .copied()
+        .take_while(|t| !t.starts_with('\''))
+        .collect();
+    let mut bytes = Vec::with_capacity(byte_tokens.len());
+    for token in &byte_tokens {
+        match parse_hex_bytes(token).as_deref() {
+            Some([byte]) => bytes.push(*byte),
+            _ => return Err(FrameTextError::BadData((*token).to_string())),
+        }
+    }
+    if bytes.len() != declared {
+        return Err(FrameTextError::LengthMismatch {
+            declared,
+            found: bytes.len(),
+        });
+    }
+    let frame = RawFrame::data_frame(id, &bytes).ok_or_else(not_a_frame)?;
+    Ok((interface, frame))
+}
+
+fn parse_id(text: &str) -> Result<FrameId, FrameTextError> {
+    let bad = || FrameTextError::BadIdentifier(text.to_string());
+    if !text.chars().all(|c| c.is_ascii_hexdigit()) {
+        return Err(bad());
+    }
+    let value = u32::from_str_radix(text, 16).map_err(|_| bad())?;
+    // can-utils tells standard from extended by the number of digits, not by the value.
+    match text.len() {
+        3 if value <= MAX_STANDARD_ID => Ok(FrameId::Standard(value as u16)),
+        8 if value <= MAX_EXTENDED_ID => Ok(FrameId::Extended(value)),
+        3 | 8 => Err(FrameTextError::IdentifierOutOfRange(text.to_uppercase())),
+        _ => Err(bad()),
+    }
+}
+
+fn parse_timestamp(token: &str) -> Result<Timestamp, FrameTextError> {
+    let bad = || FrameTextError::BadTimestamp(token.to_string());
+    let inner = token
+        .strip_prefix('(')
+        .and_then(|t| t.strip_suffix(')'))
+        .ok_or_else(bad)?;
+    let (secs_text, fraction) = inner.split_once('.').unwrap_or((inner, ""));
+    if secs_text.is_empty() || !secs_text.chars().all(|c| c.is_ascii_digit()) {
+        return Err(bad());
+    }
+    if !fraction.chars().all(|c| c.is_ascii_digit()) {
+        return Err(bad());
+    }
+    let secs = secs_text.parse().map_err(|_| bad())?;
+    // Keep microseconds: pad a short fraction, drop digits beyond the sixth (nanosecond logs).
+    let mut micros: u32 = 0;
+    for position in 0..6 {
+        let digit = fraction
+            .as_bytes()
+            .get(position)
+            .map_or(0, |d| u32::from(*d - b'0'));
+        micros = micros * 10 + digit;
+    }
+    Ok(Timestamp { secs, micros })
+}
+
+/// Hex pairs to bytes; `None` if the count is odd or a character is not hex.
+pub fn parse_hex_bytes(text: &str) -> Option<Vec<u8>> {
+    if text.len() % 2 != 0 || !text.is_ascii() {
+        return None;
+    }
+    (0..text.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&text[i..i + 2], 16).ok())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn standard(id: u16, bytes: &[u8]) -> RawFrame {
+        RawFrame::data_frame(FrameId::Standard(id), bytes).unwrap()
+    }
+
+    #[test]
+    fn compact_frame_round_trips_through_text() {
+        let frame = parse_compact("205#01840302").unwrap();
+        assert_eq!(frame, standard(0x205, &[0x01, 0x84, 0x03, 0x02]));
+        assert_eq!(frame.to_string(), "205#01840302");
+        assert_eq!(parse_compact("61e#ff.00").unwrap().to_string(), "61E#FF00");
+        assert_eq!(parse_compact("205#").unwrap().data(), &[] as &[u8]);
+    }
+
+    #[test]
+    fn extended_and_remote_frames_are_read() {
+        let frame = parse_compact("12345678#AA").unwrap();
+        assert_eq!(frame.id(), FrameId::Extended(0x1234_5678));
+        assert_eq!(frame.to_string(), "12345678#AA");
+        let remote = parse_compact("205#R4").unwrap();
+        assert!(remote.is_remote());
+        assert_eq!(remote.len(), 4);
+        assert_eq!(remote.to_string(), "205#R4");
+        assert_eq!(parse_compact("205#R").unwrap().to_string(), "205#R");
+    }
+
+    #[test]
+    fn malformed_frames_say_what_is_wrong() {
+        assert_eq!(
+            parse_compact("2050#01"),
+            Err(FrameTextError::BadIdentifier("2050".into()))
+        );
+        assert_eq!(
+            parse_compact("800#01"),
+            Err(FrameTextError::IdentifierOutOfRange("800".into()))
+        );
+        assert_eq!(
+            parse_compact("20G#01"),
+            Err(FrameTextError::BadIdentifier("20G".into()))
+        );
+        assert_eq!(
+            parse_compact("205#018"),
+            Err(FrameTextError::BadData("018".into()))
+        );
+        assert_eq!(
+            parse_compact("205#0102030405060708090A"),
+            Err(FrameTextError::TooManyBytes(10))
+        );
+        assert_eq!(parse_compact("205##1"), Err(FrameTextError::CanFd));
+        assert_eq!(
+            parse_compact("205#R9"),
+            Err(FrameTextError::BadData("R9".into()))
+        );
+        assert_eq!(
+            parse_compact("hello"),
+            Err(FrameTextError::NotAFrame("hello".into()))
+        );
+        assert_eq!(
+            parse_compact("205#zz"),
+            Err(FrameTextError::BadData("zz".into()))
+        );
+        assert_eq!(
+            parse_compact("205#é1"),
+            Err(FrameTextError::BadData("é1".into()))
+        );
+    }
+
+    #[test]
+    fn candump_log_lines_keep_timestamp_and_interface() {
+        let logged = parse_line("(1700000000.123456) can0 605#D2FBFFFF")
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            logged.timestamp,
+            Some(Timestamp {
+                secs: 1_700_000_000,
+                micros: 123_456
+            })
+        );
+        assert_eq!(logged.interface.as_deref(), Some("can0"));
+        assert_eq!(logged.frame, standard(0x605, &[0xD2, 0xFB, 0xFF, 0xFF]));
+        assert_eq!(
+            logged.to_log_line(),
+            "(1700000000.123456) can0 605#D2FBFFFF"
+        );
+        // Direction flag of newer candump versions.
+        assert!(parse_line("(1700000000.123456) can0 605#D2FBFFFF R")
+            .unwrap()
+            .is_some());
+        // Relative timestamps and a short fraction.
+        let relative = parse_line("(0.5) vcan0 205#02").unwrap().unwrap();
+        assert_eq!(
+            relative.timestamp,
+            Some(Timestamp {
+                secs: 0,
+                micros: 500_000
+            })
+        );
+    }
+
+    #[test]
+    fn candump_screen_lines_are_read() {
+        let logged = parse_line("  can0  205   [4]  01 84 03 02")
+            .unwrap()
+            .unwrap();
+        assert_eq!(logged.interface.as_deref(), Some("can0"));
+        assert_eq!(logged.frame.to_string(), "205#01840302");
+        let with_time =
+            parse_line(" (1700000000.000001)  can0  608   [6]  FC FF 02 00 00 00   '......'")
+                .unwrap();
+        assert_eq!(with_time.unwrap().frame.to_string(), "608#FCFF02000000");
+        let remote = parse_line("can0  205   [2]  remote request")
+            .unwrap()
+            .unwrap();
+        assert!(remote.frame.is_remote());
+        assert_eq!(
+            parse_line("can0  205   [4]  01 84 03"),
+            Err(FrameTextError::LengthMismatch {
+                declared: 4,
+                found: 3
+            })
+        );
+    }
+
+    #[test]
+    fn blank_lines_and_comments_are_skipped() {
+        assert_eq!(parse_line(""), Ok(None));
+        assert_eq!(parse_line("   \t"), Ok(None));
+        assert_eq!(parse_line("# a comment 205#01"), Ok(None));
+        assert_eq!(parse_line("// another"), Ok(None));
+    }
+
+    #[test]
+    fn garbage_lines_are_errors_not_frames() {
+        assert!(parse_line("hello world").is_err());
+        assert!(parse_line("(17x) can0 205#01").is_err());
+        assert!(parse_line("(1700000000.1) can0 205#01 extra words").is_err());
+        assert!(parse_line("a b c 205#01").is_err());
+    }
+}
