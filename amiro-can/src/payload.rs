@@ -438,7 +438,8 @@ fn split_three_i16([x0, x1, y0, y1, z0, z1]: [u8; 6]) -> [i16; 3] {
 }
 
 impl fmt::Display for SensorData {
-    /// `gyroscope x=-4 y=30 z=5 dps`, `magnetometer-x 21000 nT`, `proximity-ring sensor 3: 120 mm`, ...
+    /// `gyroscope x=-4 y=30 z=5 dps`, `magnetometer-x 21000 nT`, `floor-proximity 310 295 12 980 counts`,
+    /// `proximity-ring sensor 3: 120 mm`, ...
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let topic = self.topic();
         match self {
@@ -446,7 +447,7 @@ impl fmt::Display for SensorData {
             SensorData::Accelerometer([x, y, z]) => write!(f, "{topic} x={x} y={y} z={z} milli-g"),
             SensorData::Magnetometer { nanotesla, .. } => write!(f, "{topic} {nanotesla} nT"),
             SensorData::FloorProximity([a, b, c, d]) => {
-                write!(f, "{topic} 1={a} 2={b} 3={c} 4={d} counts")
+                write!(f, "{topic} {a} {b} {c} {d} counts")
             }
             SensorData::Odometry(o) => write!(f, "{topic} {o}"),
             SensorData::Velocity(v) => {
@@ -565,7 +566,7 @@ mod tests {
         );
         assert_eq!(
             format!("{}", SensorData::FloorProximity([1, 2, 3, 65535])),
-            "floor-proximity 1=1 2=2 3=3 4=65535 counts"
+            "floor-proximity 1 2 3 65535 counts"
         );
         assert_eq!(
             format!(

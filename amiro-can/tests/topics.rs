@@ -1,0 +1,533 @@
+//! Every topic encoded and decoded both ways against hand-computed bytes, the thesis example, and one bad frame for
+//! every reason the decoder can give.
+
+use amiro_can::{
+    decode, decode_command, Axis, CanId, Command, DecodeError, Frame, Kind, LedCommand, Message,
+    MotorCommand, Odometry, PowerStatus, Priority, Rgb, SampleTime, SensorCommand, SensorData,
+    SensorMode, TimeUnit, Topic, Velocity, TOPICS,
+};
+
+fn frame(id: u16, data: &[u8]) -> Frame {
+    Frame::new(CanId::try_from(id).unwrap(), data).unwrap()
+}
+
+/// Asserts both directions: the bytes decode to the message, and the message encodes to the bytes.
+fn both_ways(id: u16, data: &[u8], message: Message) {
+    assert_eq!(decode(id, data), Ok(message), "decode {id:03X}#{data:02X?}");
+    assert_eq!(message.encode(), frame(id, data), "encode {message}");
+    assert_eq!(message.try_encode(), Ok(frame(id, data)));
+}
+
+fn sample(priority: Priority, data: SensorData) -> Message {
+    Message::Sample { priority, data }
+}
+
+fn sensor_command(topic: Topic, priority: Priority, mode: SensorMode) -> Message {
+    Message::Command(Command::Sensor(SensorCommand {
+        topic,
+        priority,
+        mode,
+    }))
+}
+
+#[test]
+fn thesis_example() {
+    // ID 0x205, DLC 4, 01 84 03 02: publish magnetometer x every 900 µs at medium priority.
+    let expected = SensorCommand {
+        topic: Topic::MagnetometerX,
+        priority: Priority::Medium,
+        mode: SensorMode::Publish(SampleTime {
+            value: 900,
+            unit: TimeUnit::Micros,
+        }),
+    };
+    assert_eq!(
+        decode_command(0x205, &[0x01, 0x84, 0x03, 0x02]),
+        Ok(Command::Sensor(expected))
+    );
+    both_ways(
+        0x205,
+        &[0x01, 0x84, 0x03, 0x02],
+        Message::Command(Command::Sensor(expected)),
+    );
+    // The board answers on 0x605 ...
+    assert_eq!(expected.reply_id().raw(), 0x605);
+    // ... and such a frame decodes as magnetometer-x data at medium priority.
+    let answer = SensorData::Magnetometer {
+        axis: Axis::X,
+        nanotesla: 21_000,
+    }
+    .encode(Priority::Medium);
+    assert_eq!(answer.id().raw(), 0x605);
+    assert_eq!(
+        decode(0x605, answer.data()),
+        Ok(sample(
+            Priority::Medium,
+            SensorData::Magnetometer {
+                axis: Axis::X,
+                nanotesla: 21_000
+            }
+        ))
+    );
+    assert_eq!(answer.to_string(), "605#08520000");
+}
+
+#[test]
+fn thesis_stop_and_once_examples() {
+    // "the id of the CAN frame should be '0x204' with DLC 0: 2" — one floor-proximity sample.
+    both_ways(
+        0x204,
+        &[2],
+        sensor_command(Topic::FloorProximity, Priority::Medium, SensorMode::Once),
+    );
+    // "the same '0x205', with DLC 0: 0" — stop the magnetometer x publisher.
+    both_ways(
+        0x205,
+        &[0],
+        sensor_command(Topic::MagnetometerX, Priority::Medium, SensorMode::Stop),
+    );
+    // Mode 1 with only the mode byte: the default 50 ms (encoded back with its sample time).
+    let default = sensor_command(
+        Topic::Gyroscope,
+        Priority::High,
+        SensorMode::Publish(SampleTime::DEFAULT),
+    );
+    assert_eq!(decode(0x108, &[1]), Ok(default));
+    assert_eq!(default.encode(), frame(0x108, &[1, 50, 0, 0]));
+}
+
+#[test]
+fn every_sensor_topic_with_known_bytes() {
+    use Priority::*;
+    both_ways(
+        0x508,
+        &[0xFC, 0xFF, 0x1E, 0x00, 0x05, 0x00],
+        sample(High, SensorData::Gyroscope([-4, 30, 5])),
+    );
+    both_ways(
+        0x509,
+        &[0x1A, 0x00, 0xFE, 0xFF, 0x0E, 0x04],
+        sample(High, SensorData::Accelerometer([26, -2, 1038])),
+    );
+    both_ways(
+        0x605,
+        &[0xF8, 0xAD, 0xFF, 0xFF],
+        sample(
+            Medium,
+            SensorData::Magnetometer {
+                axis: Axis::X,
+                nanotesla: -21_000,
+            },
+        ),
+    );
+    both_ways(
+        0x706,
+        &[0x00, 0x00, 0x00, 0x80],
+        sample(
+            Low,
+            SensorData::Magnetometer {
+                axis: Axis::Y,
+                nanotesla: i32::MIN,
+            },
+        ),
+    );
+    both_ways(
+        0x407,
+        &[0xFF, 0xFF, 0xFF, 0x7F],
+        sample(
+            Urgent,
+            SensorData::Magnetometer {
+                axis: Axis::Z,
+                nanotesla: i32::MAX,
+            },
+        ),
+    );
+    both_ways(
+        0x504,
+        &[0x01, 0x00, 0x02, 0x00, 0x03, 0x00, 0xFF, 0xFF],
+        sample(High, SensorData::FloorProximity([1, 2, 3, 65_535])),
+    );
+    both_ways(
+        0x501,
+        &[0x39, 0x30, 0x00, 0xFD, 0xFF, 0xFF, 0x00, 0x40],
+        sample(
+            High,
+            SensorData::Odometry(Odometry::new(12_345, -3, 16_384).unwrap()),
+        ),
+    );
+    both_ways(
+        0x502,
+        &[0xA0, 0x86, 0x01, 0x00, 0xB0, 0x3C, 0xFF, 0xFF],
+        sample(
+            High,
+            SensorData::Velocity(Velocity {
+                velocity_um_s: 100_000,
+                angular_urad_s: -50_000,
+            }),
+        ),
+    );
+    both_ways(
+        0x51E,
+        &[0x00, 0x3E, 0x47, 0x01, 0x72, 0x0C],
+        sample(
+            High,
+            SensorData::PowerStatus(PowerStatus {
+                charging: false,
+                state_of_charge: 62,
+                minutes: 327,
+                power_mw: 3186,
+            }),
+        ),
+    );
+    both_ways(
+        0x51E,
+        &[0x01, 0x64, 0x00, 0x00, 0x00, 0x00],
+        sample(
+            High,
+            SensorData::PowerStatus(PowerStatus {
+                charging: true,
+                state_of_charge: 100,
+                minutes: 0,
+                power_mw: 0,
+            }),
+        ),
+    );
+    for sensor in 0..8u8 {
+        both_ways(
+            0x51F,
+            &[sensor, 0x78, 0x00],
+            sample(High, SensorData::ProximityRing { sensor, mm: 120 }),
+        );
+    }
+}
+
+#[test]
+fn every_actuator_topic_with_known_bytes() {
+    both_ways(
+        0x010,
+        &[0xA0, 0x86, 0x01, 0x00, 0xB0, 0x3C, 0xFF, 0xFF],
+        Message::Command(Command::Motor {
+            priority: Priority::Urgent,
+            command: MotorCommand {
+                velocity_um_s: 100_000,
+                angular_urad_s: -50_000,
+            },
+        }),
+    );
+    for led in 1..=8u8 {
+        both_ways(
+            0x310 + u16::from(led),
+            &[10, 50, 120],
+            Message::Command(Command::Led {
+                priority: Priority::Low,
+                command: LedCommand {
+                    led,
+                    rgb: Rgb {
+                        r: 10,
+                        g: 50,
+                        b: 120,
+                    },
+                },
+            }),
+        );
+    }
+}
+
+#[test]
+fn every_topic_every_priority_every_mode() {
+    for info in TOPICS {
+        for priority in Priority::ALL {
+            let command_id = CanId::new(Kind::Command, priority, info.topic.byte()).raw();
+            let data_id = CanId::new(Kind::Sensor, priority, info.topic.byte()).raw();
+            if info.is_sensor {
+                for mode in [
+                    SensorMode::Stop,
+                    SensorMode::Once,
+                    SensorMode::Publish(SampleTime {
+                        value: 1,
+                        unit: TimeUnit::Micros,
+                    }),
+                    SensorMode::Publish(SampleTime {
+                        value: 65_535,
+                        unit: TimeUnit::Millis,
+                    }),
+                    SensorMode::Publish(SampleTime {
+                        value: 4_294,
+                        unit: TimeUnit::Seconds,
+                    }),
+                ] {
+                    let m = sensor_command(info.topic, priority, mode);
+                    let f = m.encode();
+                    assert_eq!(f.id().raw(), command_id);
+                    assert_eq!(decode(command_id, f.data()), Ok(m));
+                }
+                // A data frame of the table's DLC decodes (all-zero is valid for every sensor payload).
+                let zeros = [0u8; 8];
+                let data = &zeros[..usize::from(info.dlc)];
+                let m = decode(data_id, data).unwrap();
+                assert_eq!(m.topic(), Ok(info.topic));
+                assert_eq!(m.priority(), priority);
+                assert_eq!(m.encode(), frame(data_id, data));
+                assert_eq!(
+                    decode_command(data_id, data),
+                    Err(DecodeError::ExpectedCommand { topic: info.topic })
+                );
+            } else {
+                let zeros = [0u8; 8];
+                let data = &zeros[..usize::from(info.dlc)];
+                let m = decode(command_id, data).unwrap();
+                assert_eq!(m.topic(), Ok(info.topic));
+                assert_eq!(m.encode(), frame(command_id, data));
+                assert_eq!(
+                    decode(data_id, data),
+                    Err(DecodeError::SensorDataOnActuator { topic: info.topic })
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn wrong_lengths_for_every_topic() {
+    for info in TOPICS {
+        let (id, kind) = if info.is_sensor {
+            (
+                CanId::new(Kind::Sensor, Priority::Low, info.topic.byte()),
+                Kind::Sensor,
+            )
+        } else {
+            (
+                CanId::new(Kind::Command, Priority::Low, info.topic.byte()),
+                Kind::Command,
+            )
+        };
+        for dlc in 0..=8u8 {
+            let data = [0u8; 8];
+            let result = decode(id.raw(), &data[..usize::from(dlc)]);
+            let topic = info.topic;
+            let expected = info.dlc;
+            match dlc.cmp(&info.dlc) {
+                core::cmp::Ordering::Less => {
+                    assert_eq!(
+                        result,
+                        Err(DecodeError::DlcTooShort {
+                            topic,
+                            frame: kind,
+                            dlc,
+                            expected
+                        })
+                    )
+                }
+                core::cmp::Ordering::Greater => {
+                    assert_eq!(
+                        result,
+                        Err(DecodeError::DlcTooLong {
+                            topic,
+                            frame: kind,
+                            dlc,
+                            expected
+                        })
+                    )
+                }
+                core::cmp::Ordering::Equal => assert!(result.is_ok()),
+            }
+        }
+    }
+}
+
+#[test]
+fn every_decode_error_reason() {
+    use DecodeError as E;
+    let cases: &[(u16, &[u8], DecodeError)] = &[
+        (0x800, &[], E::IdOutOfRange { id: 0x800 }),
+        (0xFFFF, &[1], E::IdOutOfRange { id: 0xFFFF }),
+        (0x205, &[0; 9], E::FrameTooLong { len: 9 }),
+        (0x203, &[0], E::UnknownTopic { topic: 0x03 }),
+        (0x6FF, &[0], E::UnknownTopic { topic: 0xFF }),
+        (
+            0x610,
+            &[0; 8],
+            E::SensorDataOnActuator {
+                topic: Topic::MotorCommand,
+            },
+        ),
+        (
+            0x611,
+            &[0; 3],
+            E::SensorDataOnActuator { topic: Topic::Led1 },
+        ),
+        (
+            0x205,
+            &[],
+            E::DlcTooShort {
+                topic: Topic::MagnetometerX,
+                frame: Kind::Command,
+                dlc: 0,
+                expected: 1,
+            },
+        ),
+        (
+            0x205,
+            &[1, 0x84],
+            E::DlcTooShort {
+                topic: Topic::MagnetometerX,
+                frame: Kind::Command,
+                dlc: 2,
+                expected: 4,
+            },
+        ),
+        (
+            0x205,
+            &[1, 0x84, 0x03],
+            E::DlcTooShort {
+                topic: Topic::MagnetometerX,
+                frame: Kind::Command,
+                dlc: 3,
+                expected: 4,
+            },
+        ),
+        (
+            0x205,
+            &[1, 0x84, 0x03, 0x02, 0],
+            E::DlcTooLong {
+                topic: Topic::MagnetometerX,
+                frame: Kind::Command,
+                dlc: 5,
+                expected: 4,
+            },
+        ),
+        (
+            0x205,
+            &[0, 0],
+            E::DlcTooLong {
+                topic: Topic::MagnetometerX,
+                frame: Kind::Command,
+                dlc: 2,
+                expected: 1,
+            },
+        ),
+        (
+            0x204,
+            &[2, 0, 0, 0],
+            E::DlcTooLong {
+                topic: Topic::FloorProximity,
+                frame: Kind::Command,
+                dlc: 4,
+                expected: 1,
+            },
+        ),
+        (0x208, &[3], E::BadMode { mode: 3 }),
+        (0x208, &[1, 1, 0, 3], E::BadUnit { unit: 3 }),
+        (0x208, &[1, 0, 0, 0], E::ZeroSampleTime),
+        (0x208, &[1, 0, 0, 2], E::ZeroSampleTime),
+        (
+            0x208,
+            &[1, 0xFF, 0xFF, 1],
+            E::PeriodTooLong {
+                micros: 65_535_000_000,
+            },
+        ),
+        (0x51F, &[8, 0, 0], E::SensorIndexOutOfRange { index: 8 }),
+        (
+            0x51F,
+            &[0xFF, 0, 0],
+            E::SensorIndexOutOfRange { index: 0xFF },
+        ),
+        (0x51E, &[2, 50, 0, 0, 0, 0], E::BadChargingFlag { value: 2 }),
+        (
+            0x51E,
+            &[0, 101, 0, 0, 0, 0],
+            E::StateOfChargeOutOfRange { percent: 101 },
+        ),
+    ];
+    for (id, data, expected) in cases {
+        assert_eq!(decode(*id, data), Err(*expected), "{id:03X}#{data:02X?}");
+        // Every error has a reason name and a non-empty message.
+        assert!(expected.kind_index() < DecodeError::KINDS.len());
+        assert!(!expected.to_string().is_empty());
+    }
+    assert_eq!(
+        decode_command(0x605, &[0; 4]),
+        Err(E::ExpectedCommand {
+            topic: Topic::MagnetometerX
+        })
+    );
+}
+
+#[test]
+fn kinds_cover_every_variant_once() {
+    use DecodeError as E;
+    let t = Topic::Gyroscope;
+    let all = [
+        E::IdOutOfRange { id: 0 },
+        E::ExtendedId { id: 0 },
+        E::RemoteFrame,
+        E::FrameTooLong { len: 9 },
+        E::BadPriority { value: 4 },
+        E::UnknownTopic { topic: 0 },
+        E::SensorDataOnActuator { topic: t },
+        E::ExpectedCommand { topic: t },
+        E::NotASensor { topic: t },
+        E::DlcTooShort {
+            topic: t,
+            frame: Kind::Sensor,
+            dlc: 0,
+            expected: 6,
+        },
+        E::DlcTooLong {
+            topic: t,
+            frame: Kind::Sensor,
+            dlc: 8,
+            expected: 6,
+        },
+        E::BadMode { mode: 9 },
+        E::BadUnit { unit: 9 },
+        E::ZeroSampleTime,
+        E::PeriodTooLong { micros: u64::MAX },
+        E::PeriodNotEncodable { micros: 65_537 },
+        E::LedOutOfRange { led: 0 },
+        E::SensorIndexOutOfRange { index: 8 },
+        E::BadChargingFlag { value: 2 },
+        E::StateOfChargeOutOfRange { percent: 101 },
+    ];
+    assert_eq!(all.len(), DecodeError::KINDS.len());
+    for (i, e) in all.iter().enumerate() {
+        assert_eq!(e.kind_index(), i, "{e:?}");
+        assert_eq!(e.kind_name(), DecodeError::KINDS[i]);
+    }
+}
+
+#[test]
+fn display_of_decoded_frames() {
+    let show = |id: u16, data: &[u8]| decode(id, data).unwrap().to_string();
+    assert_eq!(
+        show(0x508, &[0xFC, 0xFF, 0x1E, 0x00, 0x05, 0x00]),
+        "high gyroscope x=-4 y=30 z=5 dps"
+    );
+    assert_eq!(
+        show(0x205, &[1, 0x84, 3, 2]),
+        "medium command: publish magnetometer-x every 900 µs"
+    );
+    assert_eq!(show(0x204, &[2]), "medium command: once floor-proximity");
+    assert_eq!(show(0x31F, &[0]), "low command: stop proximity-ring");
+    assert_eq!(
+        show(0x113, &[10, 50, 120]),
+        "high command: led 3 rgb(10,50,120)"
+    );
+    assert_eq!(
+        show(0x010, &[0xA0, 0x86, 0x01, 0x00, 0xB0, 0x3C, 0xFF, 0xFF]),
+        "urgent command: motor 100000 µm/s, -50000 µrad/s"
+    );
+    assert_eq!(
+        show(0x71E, &[0x00, 0x3E, 0x47, 0x01, 0x72, 0x0C]),
+        "low power-status discharging, 62 %, 327 min to empty, 3186 mW"
+    );
+    assert_eq!(
+        decode(0x205, &[1, 0, 0, 0]).unwrap_err().to_string(),
+        "sample time of zero"
+    );
+    assert_eq!(
+        decode(0x205, &[1, 0x84]).unwrap_err().to_string(),
+        "DLC 2 too short for magnetometer-x command frame (needs 4)"
+    );
+}
