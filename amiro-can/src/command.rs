@@ -43,6 +43,12 @@ impl TimeUnit {
     }
 }
 
+impl fmt::Display for TimeUnit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.symbol())
+    }
+}
+
 impl TryFrom<u8> for TimeUnit {
     type Error = DecodeError;
 
@@ -450,11 +456,9 @@ impl Command {
         if topic.is_sensor() {
             return SensorCommand::decode(topic, priority, data).map(Command::Sensor);
         }
-        let info = topic.info();
         match topic.led_number() {
             Some(led) => {
                 let [r, g, b] = wire::exact::<3>(topic, Kind::Command, data)?;
-                debug_assert_eq!(info.dlc, 3);
                 Ok(Command::Led {
                     priority,
                     command: LedCommand {
@@ -465,7 +469,6 @@ impl Command {
             }
             None => {
                 let bytes = wire::exact::<8>(topic, Kind::Command, data)?;
-                debug_assert_eq!(info.dlc, 8);
                 Ok(Command::Motor {
                     priority,
                     command: MotorCommand::from_bytes(bytes),

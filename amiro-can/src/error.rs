@@ -265,6 +265,9 @@ impl fmt::Display for DecodeError {
     }
 }
 
+/// Lets hosts use `?` into `anyhow` / `Box<dyn Error>`; `core::error::Error` needs no std.
+impl core::error::Error for DecodeError {}
+
 #[cfg(test)]
 mod tests {
     use super::*;

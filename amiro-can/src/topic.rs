@@ -196,6 +196,16 @@ impl Topic {
         self.info().is_sensor
     }
 
+    /// The identifier of a command to this topic at `priority` (C/S = 0).
+    pub const fn command_id(self, priority: crate::Priority) -> crate::CanId {
+        crate::CanId::new(crate::Kind::Command, priority, self as u8)
+    }
+
+    /// The identifier of this topic's data at `priority` (C/S = 1).
+    pub const fn data_id(self, priority: crate::Priority) -> crate::CanId {
+        crate::CanId::new(crate::Kind::Sensor, priority, self as u8)
+    }
+
     /// The LED number 1..=8 for an LED topic.
     pub const fn led_number(self) -> Option<u8> {
         match self {
@@ -481,6 +491,16 @@ mod tests {
         assert_eq!(Topic::led(0), None);
         assert_eq!(Topic::led(9), None);
         assert_eq!(Topic::Gyroscope.led_number(), None);
+        assert_eq!(
+            Topic::MagnetometerX
+                .command_id(crate::Priority::Medium)
+                .raw(),
+            0x205
+        );
+        assert_eq!(
+            Topic::MagnetometerX.data_id(crate::Priority::Medium).raw(),
+            0x605
+        );
     }
 
     #[test]
