@@ -49,7 +49,7 @@ const fn sensor_topics_of(board: Board) -> usize {
 pub const REJECT_REASONS: usize = DecodeError::KINDS.len();
 
 /// The number of CAN priority levels, and so of publisher tasks in a firmware.
-pub const LEVELS: usize = 4;
+pub const LEVELS: usize = Priority::ALL.len();
 
 /// What a publisher slot is doing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
