@@ -15,12 +15,12 @@ const ABOUT: &str =
 const LONG_ABOUT: &str = "\
 Talk to the AMiRo robot over its CAN bus.
 
-Every board of the robot shares one CAN bus. A frame has an 11-bit identifier and up to 8 data bytes, written
-here the way the Linux can-utils write them: 205#01840302 is identifier 0x205 with the bytes 01 84 03 02.
-The identifier says whether the frame is a command (to a board) or sensor data (from a board), its
+Every board of the robot shares one CAN bus. A frame has an 11-bit identifier and up to 8 data bytes, written \
+here the way the Linux can-utils write them: 205#01840302 is identifier 0x205 with the bytes 01 84 03 02. \
+The identifier says whether the frame is a command (to a board) or sensor data (from a board), its \
 priority (urgent, high, medium, low), and its topic (gyroscope, motor, led-3, ...).
 
-To get sensor data you send a command to the sensor's topic: publish (send samples every so often), once
+To get sensor data you send a command to the sensor's topic: publish (send samples every so often), once \
 (send one sample now) or stop. The board then sends the samples with the same priority as the command.
 
 Run `amiro topics` to see every topic, and `amiro <command> --help` for each command.";
@@ -48,8 +48,8 @@ pub enum CliCommand {
     /// Explain frames in plain English (or JSON)
     #[command(
         long_about = "\
-Explain CAN frames in plain English: who they are for, their priority, and the command or the sensor values
-they carry, with units and signs. A frame the robot would reject is reported with the reason, and decoding
+Explain CAN frames in plain English: who they are for, their priority, and the command or the sensor values \
+they carry, with units and signs. A frame the robot would reject is reported with the reason, and decoding \
 goes on with the next one.
 
 Frames come from the command line, from a file (--file), or from standard input. Accepted forms:
@@ -62,7 +62,7 @@ Exit status: 0 if every frame decoded, 1 if some frame or line could not be (all
         after_help = "\
 Examples:
   amiro decode 205#01840302
-      205#01840302          medium command magnetometer-x: publish every 900 µs (samples arrive on 605)
+      says: medium command magnetometer-x: publish every 900 µs (samples arrive on 605)
   amiro decode 608#FCFF1E00FBFF --json
   amiro decode --file candump-2024-01-01_120000.log
   candump -L can0 | amiro decode"
@@ -72,7 +72,7 @@ Examples:
     /// Build a command frame and print it as ID#DATA
     #[command(
         long_about = "\
-Build a command frame and print it in can-utils form (ID#DATA), ready for `cansend can0 ...` or
+Build a command frame and print it in can-utils form (ID#DATA), ready for `cansend can0 ...` or \
 `amiro send`. Nothing is sent.",
         after_help = "\
 Examples:
@@ -87,8 +87,8 @@ Examples:
     /// Put frames on a bus
     #[command(
         long_about = "\
-Put frames on a bus. Give either frames (ID#DATA, as `encode` prints them) or the same words as `encode`.
-Each frame is checked with the AMiRo decoder first; one the robot would reject is not sent (unless --raw).
+Put frames on a bus. Give either frames (ID#DATA, as `encode` prints them) or the same words as `encode`. \
+Each frame is checked with the AMiRo decoder first; one the robot would reject is not sent (unless --raw). \
 Each sent frame is echoed with its meaning.",
         after_help = "\
 Bus URLs (--bus, or the AMIRO_BUS environment variable):
@@ -109,7 +109,7 @@ Examples:
     /// Watch a bus and explain every frame
     #[command(
         long_about = "\
-Watch a bus and explain every frame as it arrives, like `decode` does. Stops after --count frames, after
+Watch a bus and explain every frame as it arrives, like `decode` does. Stops after --count frames, after \
 --timeout, at the end of a log file, or on Ctrl-C (an SLCAN adapter's channel is closed properly).
 
 Exit status: 0 normally; 1 if --count frames did not arrive before the timeout or the end of the log.",
@@ -163,10 +163,10 @@ pub enum MessageArgs {
     /// Start (or change) a sensor's publisher: samples every PERIOD
     #[command(
         long_about = "\
-Start a sensor's publisher, or change the period and priority of one that runs: the board then sends a
-sample every PERIOD, with the priority of this command. The period is sent as a 16-bit count of µs, ms or
-s; the unit you write is kept if it fits, otherwise one that holds the period exactly is chosen (70000us is
-sent as 70 ms). A period with no exact encoding, zero, or longer than the firmware can schedule
+Start a sensor's publisher, or change the period and priority of one that runs: the board then sends a \
+sample every PERIOD, with the priority of this command. The period is sent as a 16-bit count of µs, ms or \
+s; the unit you write is kept if it fits, otherwise one that holds the period exactly is chosen (70000us is \
+sent as 70 ms). A period with no exact encoding, zero, or longer than the firmware can schedule \
 (4294.967295 s) is refused.",
         after_help = "\
 Examples:
@@ -215,8 +215,8 @@ Example:
     /// Drive: set the forward and turning velocity of the wheels
     #[command(
         long_about = "\
-Set the target velocity of the differential drive (DiWheelDrive board): forward velocity in µm/s
-(100000 = 10 cm/s, negative = backwards) and turning rate in µrad/s (1000000 ≈ 57°/s, positive =
+Set the target velocity of the differential drive (DiWheelDrive board): forward velocity in µm/s \
+(100000 = 10 cm/s, negative = backwards) and turning rate in µrad/s (1000000 ≈ 57°/s, positive = \
 counter-clockwise seen from above). 0 and 0 stops the robot.",
         after_help = "\
 Examples:

@@ -84,8 +84,9 @@ fn describe_sample(data: &SensorData) -> String {
         }
         SensorData::Odometry(odometry) => format!(
             "x {} mm, y {} mm, heading {}°",
-            fixed_point(i64::from(odometry.x_um()), 3),
-            fixed_point(i64::from(odometry.y_um()), 3),
+            // The wire resolution is 100 µm, so one decimal of a millimetre is exact.
+            fixed_point(i64::from(odometry.x_100um()), 1),
+            fixed_point(i64::from(odometry.y_100um()), 1),
             fixed_point(i64::from(odometry.heading_centidegrees()), 2)
         ),
         SensorData::Velocity(velocity) => format!(
@@ -307,7 +308,7 @@ mod tests {
         );
         let line = describe("601#FFFFFF3930000040");
         assert!(
-            line.ends_with("odometry: x -0.100 mm, y 1234.500 mm, heading 90.00°"),
+            line.ends_with("odometry: x -0.1 mm, y 1234.5 mm, heading 90.00°"),
             "{line}"
         );
     }

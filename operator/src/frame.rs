@@ -439,7 +439,7 @@ fn parse_timestamp(token: &str) -> Result<Timestamp, FrameTextError> {
 
 /// Hex pairs to bytes; `None` if the count is odd or a character is not hex.
 pub fn parse_hex_bytes(text: &str) -> Option<Vec<u8>> {
-    if text.len() % 2 != 0 || !text.is_ascii() {
+    if !text.len().is_multiple_of(2) || !text.is_ascii() {
         return None;
     }
     (0..text.len())

@@ -202,7 +202,7 @@ pub fn encode_period(period: Period, max_micros: u64) -> Result<EncodedPeriod, P
 
 /// The 16-bit count of `unit` that is exactly `micros`, if any.
 fn exact_count(micros: u64, unit: PeriodUnit) -> Option<u16> {
-    if micros % unit.micros() != 0 {
+    if !micros.is_multiple_of(unit.micros()) {
         return None;
     }
     u16::try_from(micros / unit.micros())

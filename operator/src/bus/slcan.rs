@@ -179,14 +179,16 @@ impl Slcan {
     fn await_answer(&mut self) -> Result<Option<bool>> {
         let deadline = Instant::now() + REPLY_TIMEOUT;
         loop {
-            match self.next_message(Some(deadline))? {
+            match self.next_message(Some(deadline), false)? {
                 Wait::Message(AdapterMessage::Done | AdapterMessage::Queued) => {
                     return Ok(Some(true))
                 }
                 Wait::Message(AdapterMessage::Refused) => return Ok(Some(false)),
                 Wait::Message(AdapterMessage::Frame(frame)) => self.received.push_back(frame),
                 Wait::Message(AdapterMessage::Other(text)) => warn_unknown(&text),
-                Wait::TimedOut | Wait::Interrupted => return Ok(None),
+                Wait::TimedOut => return Ok(None),
+                // Only an interruptible wait reports Ctrl-C, and this one is not.
+                Wait::Interrupted => return Ok(None),
             }
         }
     }
@@ -198,13 +200,15 @@ impl Slcan {
             .with_context(|| format!("cannot write to {}", self.path.display()))
     }
 
-    /// The next complete message, reading more bytes until `deadline` if needed.
-    fn next_message(&mut self, deadline: Option<Instant>) -> Result<Wait> {
+    /// The next complete message, reading more bytes until `deadline` if needed. Ctrl-C ends the wait only when
+    /// `interruptible`: answers to commands are awaited regardless (for at most `REPLY_TIMEOUT`), so that the
+    /// closing `C` after a Ctrl-C is still confirmed.
+    fn next_message(&mut self, deadline: Option<Instant>, interruptible: bool) -> Result<Wait> {
         loop {
             if let Some(message) = self.messages.pop_front() {
                 return Ok(Wait::Message(message));
             }
-            if interrupted() {
+            if interruptible && interrupted() {
                 return Ok(Wait::Interrupted);
             }
             let timeout = match deadline {
@@ -296,7 +300,7 @@ impl Bus for Slcan {
                 };
                 return Ok(Reception::Frame(logged));
             }
-            match self.next_message(deadline)? {
+            match self.next_message(deadline, true)? {
                 Wait::Message(AdapterMessage::Frame(frame)) => self.received.push_back(frame),
                 // A late answer to an earlier command carries nothing now.
                 Wait::Message(AdapterMessage::Done | AdapterMessage::Queued) => {}
