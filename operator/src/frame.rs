@@ -590,4 +590,48 @@ mod tests {
         assert!(parse_line("(1700000000.1) can0 205#01 extra words").is_err());
         assert!(parse_line("a b c 205#01").is_err());
     }
+
+    mod properties {
+        use super::*;
+        use proptest::prelude::*;
+
+        fn any_frame() -> impl Strategy<Value = RawFrame> {
+            let id = prop_oneof![
+                (0u16..=0x7FF).prop_map(FrameId::Standard),
+                (0u32..=0x1FFF_FFFF).prop_map(FrameId::Extended),
+            ];
+            (
+                id,
+                proptest::collection::vec(any::<u8>(), 0..=8),
+                any::<bool>(),
+            )
+                .prop_map(|(id, bytes, remote)| {
+                    if remote {
+                        RawFrame::remote_frame(id, bytes.len() as u8).unwrap()
+                    } else {
+                        RawFrame::data_frame(id, &bytes).unwrap()
+                    }
+                })
+        }
+
+        proptest! {
+            #[test]
+            fn any_text_is_a_frame_a_skip_or_an_error_never_a_panic(line in "\\PC{0,60}") {
+                let _ = parse_line(&line);
+                let _ = parse_compact(&line);
+            }
+
+            #[test]
+            fn frame_like_text_never_panics(line in "[ (]{0,2}[0-9.]{0,12}[) ]{0,2}[a-z0-9]{0,5} [0-9A-Fa-f]{0,9}[#R\\[\\] ]{0,3}[0-9A-Fa-f. ]{0,20}") {
+                let _ = parse_line(&line);
+            }
+
+            #[test]
+            fn every_frame_survives_its_text_and_log_line(frame in any_frame(), secs in 0u64..10_000_000_000, micros in 0u32..1_000_000) {
+                prop_assert_eq!(parse_compact(&frame.to_string()), Ok(frame));
+                let logged = LoggedFrame { timestamp: Some(Timestamp { secs, micros }), interface: Some("can0".into()), frame };
+                prop_assert_eq!(parse_line(&logged.to_log_line()), Ok(Some(logged)));
+            }
+        }
+    }
 }

@@ -338,4 +338,31 @@ mod tests {
         assert_eq!(human_micros(0), "0 µs");
         assert_eq!(parse_duration("1.5s"), Ok(Duration::from_millis(1500)));
     }
+
+    mod properties {
+        use super::*;
+        use proptest::prelude::*;
+
+        proptest! {
+            #[test]
+            fn an_accepted_period_is_encoded_exactly(micros in 1u64..=MAX, unit in 0usize..3) {
+                let written_unit = [PeriodUnit::Micros, PeriodUnit::Millis, PeriodUnit::Seconds][unit];
+                match encode_period(Period { micros, written_unit }, MAX) {
+                    Ok(encoded) => prop_assert_eq!(u64::from(encoded.value) * encoded.unit.micros(), micros),
+                    Err(error) => prop_assert_eq!(error, PeriodError::NotExact { micros }),
+                }
+            }
+
+            #[test]
+            fn printed_periods_parse_back(micros in 1u64..=MAX) {
+                let text = human_micros(micros).replace(' ', "");
+                prop_assert_eq!(parse_period(&text).map(|period| period.micros), Ok(micros));
+            }
+
+            #[test]
+            fn any_text_is_a_period_or_an_error(text in "\\PC{0,20}") {
+                let _ = parse_period(&text);
+            }
+        }
+    }
 }

@@ -445,4 +445,35 @@ mod tests {
             );
         }
     }
+
+    mod properties {
+        use super::*;
+        use crate::frame::FrameId;
+        use proptest::prelude::*;
+
+        proptest! {
+            #[test]
+            fn every_frame_survives_the_adapter_text(
+                standard in any::<bool>(),
+                id in 0u32..=0x1FFF_FFFF,
+                bytes in proptest::collection::vec(any::<u8>(), 0..=8),
+                remote in any::<bool>(),
+            ) {
+                let id = if standard { FrameId::Standard((id & 0x7FF) as u16) } else { FrameId::Extended(id) };
+                let frame = if remote {
+                    RawFrame::remote_frame(id, bytes.len() as u8).unwrap()
+                } else {
+                    RawFrame::data_frame(id, &bytes).unwrap()
+                };
+                let command = frame_command(&frame);
+                let text = command.strip_suffix('\r').unwrap();
+                prop_assert_eq!(parse_message(text.as_bytes()), AdapterMessage::Frame(frame));
+            }
+
+            #[test]
+            fn any_bytes_from_an_adapter_are_handled(bytes in proptest::collection::vec(any::<u8>(), 0..40)) {
+                let _ = parse_message(&bytes);
+            }
+        }
+    }
 }
