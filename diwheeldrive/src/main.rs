@@ -1,11 +1,35 @@
-//! DiWheelDrive firmware (STM32F103xE): minimal RTIC app, grows into the full board app.
+//! DiWheelDrive firmware (STM32F103xE, board revision 1-1): the RTIC app.
+//!
+//! This file is wiring only: resources, bindings, priorities. Every task body locks what it needs
+//! and calls host-tested code from `amiro-can` and `amiro-sensors`; the chip is behind `board`
+//! (or `qemu` for the QEMU build of this same app).
+//!
+//! Task priorities (RTIC, higher = more urgent; the mapping of CAN priorities lives in `levels`):
+//! `shutdown` 7 · `can_rx`, `can_tx` 6 · `handle_commands`, `motor_control` 5 ·
+//! `publish_urgent` 4 · `publish_high` 3 · `publish_medium` 2 · `publish_low`, `watchdog` 1.
+//! `cargo xtask analyze` reads these tasks, priorities and shared resources from this file.
 #![no_std]
 #![no_main]
 
+mod bootloader;
+mod can;
+mod fault;
+mod levels;
 mod mono;
+mod publisher;
+mod sensors;
+mod telemetry;
 
+#[cfg(not(feature = "qemu"))]
+mod board;
+#[cfg(not(feature = "qemu"))]
+use board as platform;
+#[cfg(feature = "qemu")]
+mod qemu;
+#[cfg(feature = "qemu")]
+use qemu as platform;
 
-/// NVIC priority bits implemented on the STM32F1/F4.
+/// NVIC priority bits implemented on the STM32F1.
 const NVIC_PRIO_BITS: u8 = 4;
 
 /// Converts an RTIC logical priority (1 = least urgent) to the NVIC's hardware encoding.
@@ -13,46 +37,282 @@ pub(crate) const fn hw_priority(logical: u8) -> u8 {
     ((1 << NVIC_PRIO_BITS) - logical) << (8 - NVIC_PRIO_BITS)
 }
 
-#[panic_handler]
-fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
-    cortex_m::interrupt::disable();
-    loop {
-        cortex_m::asm::nop();
-    }
-}
+/// Depth of the queue between the CAN receive interrupt and command handling.
+pub const RX_QUEUE_LEN: usize = 16;
+/// Depth of the transmit queue (frames waiting for a mailbox).
+pub const TX_QUEUE_LEN: usize = 16;
+/// Motor control period.
+pub const MOTOR_PERIOD_US: u64 = 10_000;
+/// Watchdog check period; the IWDG resets the board if it is not fed for `WATCHDOG_TIMEOUT_MS`.
+pub const WATCHDOG_PERIOD_US: u64 = 100_000;
+/// Independent watchdog timeout.
+pub const WATCHDOG_TIMEOUT_MS: u32 = 500;
 
-#[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4])]
+#[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4, UART5, TIM6, TIM7, SDIO, DMA2_CHANNEL1])]
 mod app {
-    use crate::mono;
-    use rtt_target::{rprintln, rtt_init_print};
-    use stm32f1xx_hal::{prelude::*, rcc};
+    use crate::can::{CanRx, CanTx, RxFrame, Transmit};
+    use crate::publisher::{self, Liveness};
+    use crate::sensors::{Compass, Floor, Imu};
+    use crate::{levels, mono, platform, telemetry, RX_QUEUE_LEN, TX_QUEUE_LEN};
+    use amiro_can::{Board as CanBoard, Priority};
+    use amiro_sensors::drivers::floor::FloorSensors;
+    use amiro_sensors::drivers::suite::{self, InertialSensors};
+    use amiro_sensors::handler::{Outcome, SensorDataHandler};
+    use amiro_sensors::motion::DriveController;
+    use amiro_sensors::trace::{TraceEvent, TraceKind};
+    use amiro_sensors::tx_queue::TxQueue;
+    use rtic_sync::channel::{Receiver, Sender};
+    use rtic_sync::make_channel;
+
+    /// A wake-up for one publisher level: the publisher table changed.
+    type Wake = Receiver<'static, (), 1>;
 
     #[shared]
-    struct Shared {}
-
-    #[local]
-    struct Local {}
-
-    #[init]
-    fn init(cx: init::Context) -> (Shared, Local) {
-        rtt_init_print!();
-        let mut flash = cx.device.FLASH.constrain();
-        let rcc_regs = unsafe { &*stm32f1xx_hal::pac::RCC::ptr() };
-        let _rcc = cx.device.RCC.freeze(
-            rcc::Config::hse(8.MHz()).sysclk(72.MHz()).pclk1(36.MHz()).pclk2(36.MHz()),
-            &mut flash.acr,
-        );
-        crate::mono::Tim5Backend::start(cx.device.TIM5, rcc_regs, 72_000_000, 8);
-        heartbeat::spawn().ok();
-        (Shared {}, Local {})
+    struct Shared {
+        /// The sensor-data handler: the publisher table and the command counters.
+        handler: SensorDataHandler,
+        /// Frames waiting for a transmit mailbox, most urgent ID first.
+        tx_queue: TxQueue<TX_QUEUE_LEN>,
+        /// Wheel speed control, odometry and velocity.
+        drive: DriveController,
+        /// Gyroscope and accelerometer on SPI1.
+        imu: Imu,
+        /// Magnetometer on I2C1.
+        compass: Compass,
+        /// Floor sensors behind the I2C2 multiplexer.
+        floor: Floor,
+        /// Progress marks the watchdog checks.
+        alive: Liveness,
     }
 
-    #[task(priority = 1)]
-    async fn heartbeat(_cx: heartbeat::Context) {
-        loop {
-            let now = mono::now_us();
-            rprintln!("alive at {} us", now);
-            mono::delay_until_us(now + 500_000).await;
+    #[local]
+    struct Local {
+        can_rx: platform::CanRxPort,
+        can_tx: platform::CanTxPort,
+        rx_frames: Sender<'static, RxFrame, RX_QUEUE_LEN>,
+        commands: Receiver<'static, RxFrame, RX_QUEUE_LEN>,
+        wake_levels: [Sender<'static, (), 1>; 4],
+        wake_urgent: Wake,
+        wake_high: Wake,
+        wake_medium: Wake,
+        wake_low: Wake,
+        motors: platform::Motors,
+        encoders: platform::Encoders,
+        signals: platform::SystemSignals,
+        watchdog: platform::Watchdog,
+    }
+
+    #[init(local = [spi_bus: Option<embedded_hal_bus::util::AtomicCell<platform::ImuBus>> = None])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        telemetry::init();
+        let (hw, _nvic) = platform::init(cx.device, cx.core, cx.local.spi_bus);
+        let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
+        let (wake_u, wake_urgent) = make_channel!((), 1);
+        let (wake_h, wake_high) = make_channel!((), 1);
+        let (wake_m, wake_medium) = make_channel!((), 1);
+        let (wake_l, wake_low) = make_channel!((), 1);
+
+        let imu = Imu::new(InertialSensors::new(hw.gyro_spi, hw.accel_spi));
+        let compass = Compass::new(suite::Compass::new(hw.compass_i2c));
+        let floor = Floor::new(FloorSensors::new(hw.floor_i2c));
+        let mut signals = hw.signals;
+        crate::log!("DiWheelDrive: sensors {}", sensors_summary(&imu, &compass, &floor));
+
+        platform::start_monotonic(levels::MONOTONIC);
+        publish_urgent::spawn().ok();
+        publish_high::spawn().ok();
+        publish_medium::spawn().ok();
+        publish_low::spawn().ok();
+        handle_commands::spawn().ok();
+        motor_control::spawn().ok();
+        watchdog::spawn().ok();
+        #[cfg(feature = "qemu")]
+        stimulus::spawn().ok();
+
+        // Initialised: let the system come up (SYS_SYNC_N is wired-OR; it reads high once every
+        // module has released it).
+        signals.release_sync();
+        (
+            Shared {
+                handler: SensorDataHandler::new(CanBoard::DiWheelDrive),
+                tx_queue: TxQueue::new(),
+                drive: DriveController::new(Default::default()),
+                imu,
+                compass,
+                floor,
+                alive: Liveness::new(),
+            },
+            Local {
+                can_rx: hw.can_rx,
+                can_tx: hw.can_tx,
+                rx_frames,
+                commands,
+                wake_levels: [wake_u, wake_h, wake_m, wake_l],
+                wake_urgent,
+                wake_high,
+                wake_medium,
+                wake_low,
+                motors: hw.motors,
+                encoders: hw.encoders,
+                signals,
+                watchdog: hw.watchdog,
+            },
+        )
+    }
+
+    fn sensors_summary(imu: &Imu, compass: &Compass, floor: &Floor) -> &'static str {
+        if imu.is_ready() && compass.is_ready() && floor.is_ready() {
+            "ready"
+        } else {
+            "partly missing (their topics answer nothing)"
         }
+    }
+
+    /// CAN receive FIFO 0: move frames into the bounded command queue; a full queue drops and counts.
+    #[task(binds = USB_LP_CAN_RX0, priority = 6, local = [can_rx, rx_frames])]
+    fn can_rx(cx: can_rx::Context) {
+        while let Some(received) = CanRx::receive(cx.local.can_rx) {
+            match received {
+                Ok(frame) => {
+                    if cx.local.rx_frames.try_send(frame).is_err() {
+                        publisher::count_rx_dropped();
+                    }
+                }
+                Err(()) => publisher::count_rx_dropped(),
+            }
+        }
+    }
+
+    /// CAN transmit mailboxes: fill them from the priority queue, most urgent first. A frame that a
+    /// more urgent one displaces from a mailbox goes back into the queue.
+    #[task(binds = USB_HP_CAN_TX, priority = 6, shared = [tx_queue], local = [can_tx])]
+    fn can_tx(mut cx: can_tx::Context) {
+        let port = cx.local.can_tx;
+        CanTx::clear_interrupt(port);
+        cx.shared.tx_queue.lock(|queue| {
+            while let Some(frame) = queue.peek().copied() {
+                match CanTx::transmit(port, &frame) {
+                    Transmit::Queued => {
+                        queue.pop();
+                        telemetry::trace(&TraceEvent::new(mono::now_us(), TraceKind::FrameSent { id: frame.id().raw() }));
+                    }
+                    Transmit::Displaced(displaced) => {
+                        queue.pop();
+                        telemetry::trace(&TraceEvent::new(mono::now_us(), TraceKind::FrameSent { id: frame.id().raw() }));
+                        let _ = queue.requeue(displaced);
+                    }
+                    Transmit::Busy => break,
+                }
+            }
+        });
+    }
+
+    /// Decodes each command, updates the publisher table or the motor target, and wakes the
+    /// publisher levels whose schedule changed.
+    #[task(priority = 5, shared = [handler, drive], local = [commands, wake_levels])]
+    async fn handle_commands(mut cx: handle_commands::Context) {
+        while let Ok(frame) = cx.local.commands.recv().await {
+            let now = mono::now_us();
+            let outcome = cx.shared.handler.lock(|h| h.on_frame(now, frame.id, frame.payload()));
+            publisher::trace_outcome(now, frame.id, &outcome);
+            match outcome {
+                Ok(Outcome::Motor { command, .. }) => cx.shared.drive.lock(|d| d.set_target(command, now)),
+                Ok(Outcome::Sensor { wake, .. }) => {
+                    // Wake the levels whose schedule changed; each re-reads its next due time.
+                    for level in wake.iter() {
+                        let _ = cx.local.wake_levels[levels::level_index(level)].try_send(());
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// The wheel speed controller at 100 Hz, with the dead-man stop.
+    #[task(priority = 5, shared = [drive, alive], local = [motors, encoders])]
+    async fn motor_control(mut cx: motor_control::Context) {
+        let mut next = mono::now_us();
+        loop {
+            next += crate::MOTOR_PERIOD_US;
+            mono::delay_until_us(next).await;
+            let (left, right) = cx.local.encoders.counts();
+            let now = mono::now_us();
+            let output = cx.shared.drive.lock(|d| d.update(now, left, right));
+            publisher::apply_drive(cx.local.motors, now, &output);
+            cx.shared.alive.lock(|a| a.motor_control_ran());
+        }
+    }
+
+    /// Publisher for topics at CAN priority urgent.
+    #[task(priority = 4, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_urgent])]
+    async fn publish_urgent(cx: publish_urgent::Context) {
+        let s = cx.shared;
+        publisher::serve_level(Priority::Urgent, cx.local.wake_urgent, s.handler, s.tx_queue, s.drive, s.imu, s.compass, s.floor).await;
+    }
+
+    /// Publisher for topics at CAN priority high.
+    #[task(priority = 3, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_high])]
+    async fn publish_high(cx: publish_high::Context) {
+        let s = cx.shared;
+        publisher::serve_level(Priority::High, cx.local.wake_high, s.handler, s.tx_queue, s.drive, s.imu, s.compass, s.floor).await;
+    }
+
+    /// Publisher for topics at CAN priority medium.
+    #[task(priority = 2, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_medium])]
+    async fn publish_medium(cx: publish_medium::Context) {
+        let s = cx.shared;
+        publisher::serve_level(Priority::Medium, cx.local.wake_medium, s.handler, s.tx_queue, s.drive, s.imu, s.compass, s.floor).await;
+    }
+
+    /// Publisher for topics at CAN priority low.
+    #[task(priority = 1, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_low])]
+    async fn publish_low(cx: publish_low::Context) {
+        let s = cx.shared;
+        publisher::serve_level(Priority::Low, cx.local.wake_low, s.handler, s.tx_queue, s.drive, s.imu, s.compass, s.floor).await;
+    }
+
+    /// Feeds the independent watchdog — from the least urgent level, and only while motor control
+    /// keeps running: a fed dog proves the whole schedule is alive.
+    #[task(priority = 1, shared = [alive], local = [watchdog])]
+    async fn watchdog(mut cx: watchdog::Context) {
+        platform::start_watchdog(cx.local.watchdog, crate::WATCHDOG_TIMEOUT_MS);
+        let mut next = mono::now_us();
+        loop {
+            next += crate::WATCHDOG_PERIOD_US;
+            mono::delay_until_us(next).await;
+            if cx.shared.alive.lock(|a| a.take_motor_control_ran()) {
+                platform::feed_watchdog(cx.local.watchdog);
+            }
+        }
+    }
+
+    /// SYS_PD_N fell: another module requests shutdown. Motors off first, then hand over.
+    #[task(binds = EXTI9_5, priority = 7, local = [signals])]
+    fn shutdown(cx: shutdown::Context) {
+        cx.local.signals.clear_shutdown_interrupt();
+        platform::emergency_motors_off();
+        publisher::request_shutdown();
+        shutdown_sequence::spawn().ok();
+    }
+
+    /// Stops every publisher, lets the transmit queue drain, then calls AMiRo-BLT's shutdown handler.
+    #[task(priority = 5, shared = [handler, tx_queue])]
+    async fn shutdown_sequence(mut cx: shutdown_sequence::Context) {
+        let now = mono::now_us();
+        cx.shared.handler.lock(|h| h.stop_all());
+        telemetry::trace(&TraceEvent::new(now, TraceKind::MotorsStopped { reason: amiro_sensors::trace::StopReason::Shutdown }));
+        // Give the queued frames up to 10 ms to leave, then hand over regardless.
+        let deadline = now + 10_000;
+        while cx.shared.tx_queue.lock(|q| q.len()) > 0 && mono::now_us() < deadline {
+            mono::delay_until_us(mono::now_us() + 1_000).await;
+        }
+        platform::hand_over_shutdown();
+    }
+
+    /// QEMU only: replays the stimulus log as if its frames arrived on the bus.
+    #[cfg(feature = "qemu")]
+    #[task(priority = 7)]
+    async fn stimulus(_cx: stimulus::Context) {
+        crate::qemu::replay_stimulus().await;
     }
 }

@@ -1,9 +1,21 @@
-//! The board's microsecond monotonic on TIM5 (a 16-bit general-purpose timer on the STM32F103xE).
+//! The board's microsecond monotonic: TIM5 on the real chip, SysTick in the QEMU build.
+//!
+//! Both expose the same three functions ([`now_us`], [`delay_until_us`], [`timeout_at_us`]), so the
+//! tasks never know which one runs.
+//!
+//! On the real board the monotonic is TIM5 (a 16-bit general-purpose timer on the STM32F103xE).
 //!
 //! rtic-monotonics offers TIM3 on this chip, but on DiWheelDrive TIM3 and TIM4 count the wheel
 //! encoders and TIM2 drives the motors, so the monotonic lives on TIM5 — the timer the original
 //! firmware also used for its OS tick. The 16-bit counter is extended to 64 bits with rtic-time's
 //! race-free half-period counter (an interrupt at 0x0000 and one at 0x8000).
+#[cfg(not(feature = "qemu"))]
+pub use tim5::*;
+#[cfg(feature = "qemu")]
+pub use systick::*;
+
+#[cfg(not(feature = "qemu"))]
+mod tim5 {
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use rtic_time::half_period_counter::calculate_now;
@@ -126,4 +138,34 @@ pub async fn delay_until_us(at_us: u64) {
 /// Runs `future` until it completes or the monotonic reaches `at_us`, whichever comes first.
 pub async fn timeout_at_us<F: core::future::Future>(at_us: u64, future: F) -> Option<F::Output> {
     QUEUE.timeout_at(at_us, future).await.ok()
+}
+}
+
+/// The QEMU build: rtic-monotonics' SysTick monotonic at 1 MHz (QEMU emulates no STM32 timer the
+/// board's TIM5 monotonic could use; under `-icount` SysTick runs in exact virtual time).
+#[cfg(feature = "qemu")]
+mod systick {
+    use rtic_monotonics::systick::prelude::*;
+
+    rtic_monotonics::systick_monotonic!(Mono, 1_000_000);
+
+    /// Starts SysTick from the core clock of the emulated machine.
+    pub fn start(syst: cortex_m::peripheral::SYST, core_clock_hz: u32) {
+        Mono::start(syst, core_clock_hz);
+    }
+
+    /// Microseconds since the monotonic started.
+    pub fn now_us() -> u64 {
+        Mono::now().ticks()
+    }
+
+    /// Waits until the monotonic reaches `at_us`.
+    pub async fn delay_until_us(at_us: u64) {
+        Mono::delay_until(<Mono as Monotonic>::Instant::from_ticks(at_us)).await;
+    }
+
+    /// Runs `future` until it completes or the monotonic reaches `at_us`, whichever comes first.
+    pub async fn timeout_at_us<F: core::future::Future>(at_us: u64, future: F) -> Option<F::Output> {
+        Mono::timeout_at(<Mono as Monotonic>::Instant::from_ticks(at_us), future).await.ok()
+    }
 }

@@ -1,0 +1,366 @@
+//! DiWheelDrive revision 1-1 as the real chip sees it: the one place that names pins and peripherals.
+//!
+//! Facts from `shared/reference/amiro-boards.md` §0, §4: 8 MHz crystal → 72 MHz, CAN1 on PA11/PA12
+//! at 1 Mbit/s, SPI1 (PA5/6/7) with the L3G4200D (CS PC14) and LIS331DLH (CS PC13), I2C1 remapped to
+//! PB8/PB9 with the HMC5883L, I2C2 (PB10/PB11) with the PCA9544A mux and the four VCNL4020 floor
+//! sensors, motor PWM on TIM2 partial remap 1 (PA15 left fwd, PB3 left back, PA2 right fwd,
+//! PA3 right back) into an A3906, POWER_EN PB2, encoders on TIM3 full remap (PC6/PC7, left) and
+//! TIM4 (PB6/PB7, right), SYS_SYNC_N PC1, SYS_PD_N PC8, status LED PA1 (active low).
+use bxcan::filter::Mask32;
+use bxcan::{Fifo, Interrupts, Rx0, StandardId, Tx};
+use embedded_hal_bus::spi::{AtomicDevice, NoDelay};
+use embedded_hal_bus::util::AtomicCell;
+use stm32f1xx_hal::afio::AfioExt;
+use stm32f1xx_hal::can::Can;
+use stm32f1xx_hal::gpio::{
+    Edge, ExtiPin, GpioExt, Input, OpenDrain, Output, PinState, PullUp, PushPull, PA1, PB2, PC1, PC13, PC14,
+    PC8,
+};
+use stm32f1xx_hal::i2c::{BlockingI2c, DutyCycle, Mode as I2cMode};
+use stm32f1xx_hal::pac::{self, CAN, I2C1, I2C2, SPI1};
+use stm32f1xx_hal::prelude::*;
+use stm32f1xx_hal::rcc;
+use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
+use stm32f1xx_hal::watchdog::IndependentWatchdog;
+
+/// The board's CAN bit timing at 1 Mbit/s from a 36 MHz APB1: the original firmware's BTR
+/// (18 MHz quanta, 1 + 14 + 3 tq, sample point 83 %).
+pub const CAN_BTR: u32 = 0x012D_0001;
+/// Motor PWM: 72 MHz timer clock, period 3600 → 20 kHz, as the original 1.x firmware.
+pub const PWM_PERIOD: u16 = 3600;
+/// System clock.
+pub const SYSCLK_HZ: u32 = 72_000_000;
+
+/// SPI1 shared by the gyroscope and the accelerometer.
+pub type ImuBus = Spi<SPI1, u8>;
+/// The gyroscope's SPI device (chip select PC14).
+pub type GyroSpi = AtomicDevice<'static, ImuBus, PC14<Output<PushPull>>, NoDelay>;
+/// The accelerometer's SPI device (chip select PC13).
+pub type AccelSpi = AtomicDevice<'static, ImuBus, PC13<Output<PushPull>>, NoDelay>;
+/// I2C1 (remapped to PB8/PB9): the HMC5883L.
+pub type CompassI2c = BlockingI2c<I2C1>;
+/// I2C2: the PCA9544A multiplexer and the floor sensors.
+pub type FloorI2c = BlockingI2c<I2C2>;
+/// The CAN controller's halves.
+pub type CanTxPort = Tx<Can<CAN>>;
+/// The CAN controller's receive FIFO 0.
+pub type CanRxPort = Rx0<Can<CAN>>;
+
+/// Everything `init` hands on to the tasks.
+pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: CanTxPort,
+    /// CAN receive FIFO 0 (command frames only, by hardware filter).
+    pub can_rx: CanRxPort,
+    /// Gyroscope SPI device.
+    pub gyro_spi: GyroSpi,
+    /// Accelerometer SPI device.
+    pub accel_spi: AccelSpi,
+    /// Compass bus.
+    pub compass_i2c: CompassI2c,
+    /// Floor-sensor bus.
+    pub floor_i2c: FloorI2c,
+    /// Motor PWM and POWER_EN.
+    pub motors: Motors,
+    /// Wheel encoders.
+    pub encoders: Encoders,
+    /// System signals.
+    pub signals: SystemSignals,
+    /// The independent watchdog (started by `start_watchdog`).
+    pub watchdog: IndependentWatchdog,
+}
+
+/// The module's system-bus signals.
+pub struct SystemSignals {
+    /// SYS_SYNC_N: held low until the module is initialised (open drain, wired-OR).
+    pub sys_sync: PC1<Output<OpenDrain>>,
+    /// SYS_PD_N: a falling edge is a shutdown request (EXTI line 8).
+    pub sys_pd: PC8<Input<PullUp>>,
+    /// Status LED, active low.
+    pub led: PA1<Output<OpenDrain>>,
+}
+
+/// Switches the clock tree back to the internal oscillator with the PLL off.
+///
+/// AMiRo-BLT hands over with the PLL already running as the system clock; the PLL cannot be
+/// reconfigured while it drives SYSCLK, so start from the reset state before the HAL sets it up.
+fn clock_tree_to_reset_state(rcc: &pac::RCC) {
+    rcc.cr().modify(|_, w| w.hsion().set_bit());
+    while rcc.cr().read().hsirdy().bit_is_clear() {}
+    rcc.cfgr().modify(|_, w| w.sw().hsi());
+    while !rcc.cfgr().read().sws().is_hsi() {}
+    rcc.cr().modify(|_, w| w.pllon().clear_bit());
+    while rcc.cr().read().pllrdy().bit_is_set() {}
+}
+
+/// Brings the board up. `spi_cell` is the static home of the SPI bus the two IMU devices share.
+pub fn init(
+    dp: pac::Peripherals,
+    mut cp: cortex_m::Peripherals,
+    spi_cell: &'static mut Option<AtomicCell<ImuBus>>,
+) -> (Board, cortex_m::peripheral::NVIC) {
+    clock_tree_to_reset_state(&dp.RCC);
+    let mut flash = dp.FLASH.constrain();
+    let mut rcc = dp.RCC.freeze(
+        rcc::Config::hse(8.MHz()).sysclk(72.MHz()).hclk(72.MHz()).pclk1(36.MHz()).pclk2(36.MHz()),
+        &mut flash.acr,
+    );
+    // The blocking I2C driver times out on the DWT cycle counter.
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+
+    let mut afio = dp.AFIO.constrain(&mut rcc);
+    let mut gpioa = dp.GPIOA.split(&mut rcc);
+    let mut gpiob = dp.GPIOB.split(&mut rcc);
+    let mut gpioc = dp.GPIOC.split(&mut rcc);
+
+    // System signals first: SYS_SYNC_N stays low until `release_sync`, as AMiRo-BLT left it.
+    let sys_sync = gpioc.pc1.into_open_drain_output_with_state(&mut gpioc.crl, PinState::Low);
+    let mut sys_pd = gpioc.pc8.into_pull_up_input(&mut gpioc.crh);
+    sys_pd.make_interrupt_source(&mut afio);
+    let mut exti = dp.EXTI;
+    sys_pd.trigger_on_edge(&mut exti, Edge::Falling);
+    sys_pd.enable_interrupt(&mut exti);
+    let led = gpioa.pa1.into_open_drain_output_with_state(&mut gpioa.crl, PinState::Low);
+
+    // Motor power stays off until a motor command arrives.
+    let power_en = gpiob.pb2.into_push_pull_output_with_state(&mut gpiob.crl, PinState::Low);
+
+    // JTAG off (its pins carry motor PWM), SWD kept for probe-rs; TIM2 partial remap 1, TIM3 full remap.
+    let (pa15, pb3, _pb4) = afio.mapr.disable_jtag(gpioa.pa15, gpiob.pb3, gpiob.pb4);
+    afio.mapr.modify_mapr(|_, w| unsafe { w.tim2_remap().bits(0b01).tim3_remap().bits(0b11) });
+    let _pwm_pins = (
+        pa15.into_alternate_push_pull(&mut gpioa.crh),
+        pb3.into_alternate_push_pull(&mut gpiob.crl),
+        gpioa.pa2.into_alternate_push_pull(&mut gpioa.crl),
+        gpioa.pa3.into_alternate_push_pull(&mut gpioa.crl),
+    );
+    let _encoder_pins = (
+        gpioc.pc6.into_floating_input(&mut gpioc.crl),
+        gpioc.pc7.into_floating_input(&mut gpioc.crl),
+        gpiob.pb6.into_floating_input(&mut gpiob.crl),
+        gpiob.pb7.into_floating_input(&mut gpiob.crl),
+    );
+    let motors = Motors::new(dp.TIM2, power_en);
+    let encoders = Encoders::new(dp.TIM3, dp.TIM4);
+
+    // SPI1, mode 0 at 9 MHz (PCLK2 / 4), chip selects idle high.
+    let gyro_cs = gpioc.pc14.into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+    let accel_cs = gpioc.pc13.into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+    let spi = dp.SPI1.spi(
+        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
+        SpiMode { polarity: Polarity::IdleLow, phase: Phase::CaptureOnFirstTransition },
+        9.MHz(),
+        &mut rcc,
+    );
+    // Both devices live in the one `imu` resource, so the bus is never contended; the atomic
+    // cell only makes the shared bus `Sync` without a critical section.
+    let bus: &'static AtomicCell<ImuBus> = spi_cell.insert(AtomicCell::new(spi));
+    let gyro_spi = AtomicDevice::new_no_delay(bus, gyro_cs).unwrap_or_else(|_| unreachable_pin());
+    let accel_spi = AtomicDevice::new_no_delay(bus, accel_cs).unwrap_or_else(|_| unreachable_pin());
+
+    // I2C1 remapped to PB8/PB9 and I2C2 on PB10/PB11, both 400 kHz.
+    let compass_i2c = BlockingI2c::new(
+        dp.I2C1.remap(&mut afio.mapr),
+        (gpiob.pb8, gpiob.pb9),
+        I2cMode::fast(400.kHz(), DutyCycle::Ratio2to1),
+        &mut rcc,
+        1000,
+        3,
+        1000,
+        1000,
+    );
+    let floor_i2c = BlockingI2c::new(dp.I2C2, (gpiob.pb10, gpiob.pb11), I2cMode::fast(400.kHz(), DutyCycle::Ratio2to1), &mut rcc, 1000, 3, 1000, 1000);
+
+    // CAN1 on PA11/PA12 at 1 Mbit/s. Only command frames (C/S bit 0, standard IDs, data frames)
+    // pass the hardware filter; TX mailboxes are served by identifier, as the analysis assumes.
+    let can = Can::new(dp.CAN, dp.USB, (gpioa.pa12, gpioa.pa11), &mut rcc);
+    let mut can = bxcan::Can::builder(can).set_bit_timing(CAN_BTR).set_automatic_retransmit(true).leave_disabled();
+    {
+        let mut filter = Mask32::frames_with_std_id(
+            StandardId::new(0).unwrap_or(StandardId::ZERO),
+            StandardId::new(0x400).unwrap_or(StandardId::ZERO),
+        );
+        filter.data_frames_only();
+        can.modify_filters().enable_bank(0, Fifo::Fifo0, filter);
+    }
+    can.enable_interrupts(Interrupts::TRANSMIT_MAILBOX_EMPTY | Interrupts::FIFO0_MESSAGE_PENDING);
+    // Joining the bus needs 11 recessive bits; don't wait for it here, the hardware finishes it.
+    let _ = can.enable_non_blocking();
+    let (can_tx, can_rx, _) = can.split();
+
+    let watchdog = IndependentWatchdog::new(dp.IWDG);
+    let signals = SystemSignals { sys_sync, sys_pd, led };
+    (
+        Board {
+            can_tx,
+            can_rx,
+            gyro_spi,
+            accel_spi,
+            compass_i2c,
+            floor_i2c,
+            motors,
+            encoders,
+            signals,
+            watchdog,
+        },
+        cp.NVIC,
+    )
+}
+
+/// Setting a push-pull chip select high cannot fail on this chip.
+fn unreachable_pin() -> ! {
+    crate::fault::halt()
+}
+
+/// The two DC motors: TIM2 PWM into the A3906 H-bridge, and the POWER_EN switch.
+pub struct Motors {
+    tim: pac::TIM2,
+    power_en: PB2<Output<PushPull>>,
+}
+
+impl Motors {
+    fn new(tim: pac::TIM2, power_en: PB2<Output<PushPull>>) -> Self {
+        // SAFETY: enabling TIM2's clock is a single bit in a register only init touches.
+        let rcc = unsafe { &*pac::RCC::ptr() };
+        rcc.apb1enr().modify(|_, w| w.tim2en().set_bit());
+        tim.psc().write(|w| w.psc().set(0));
+        tim.arr().write(|w| w.arr().set(PWM_PERIOD - 1));
+        // PWM mode 1 with preload on all four channels.
+        tim.ccmr1_output().write(|w| w.oc1m().pwm_mode1().oc1pe().set_bit().oc2m().pwm_mode1().oc2pe().set_bit());
+        tim.ccmr2_output().write(|w| w.oc3m().pwm_mode1().oc3pe().set_bit().oc4m().pwm_mode1().oc4pe().set_bit());
+        for ch in 0..4 {
+            tim.ccr(ch).write(|w| w.ccr().set(0));
+        }
+        tim.ccer().write(|w| w.cc1e().set_bit().cc2e().set_bit().cc3e().set_bit().cc4e().set_bit());
+        tim.cr1().write(|w| w.arpe().set_bit().cen().set_bit());
+        Self { tim, power_en }
+    }
+
+    /// Sets the duties in 1/10000 of full scale (sign = direction): per motor one input of the
+    /// H-bridge gets the PWM, the other stays low.
+    pub fn set(&mut self, left: i16, right: i16) {
+        let (lf, lb) = split_duty(left);
+        let (rf, rb) = split_duty(right);
+        self.tim.ccr(0).write(|w| w.ccr().set(lf));
+        self.tim.ccr(1).write(|w| w.ccr().set(lb));
+        self.tim.ccr(2).write(|w| w.ccr().set(rf));
+        self.tim.ccr(3).write(|w| w.ccr().set(rb));
+    }
+
+    /// Switches the motor supply.
+    pub fn power(&mut self, on: bool) {
+        if on {
+            self.power_en.set_high();
+        } else {
+            self.power_en.set_low();
+        }
+    }
+}
+
+fn split_duty(duty: i16) -> (u16, u16) {
+    let magnitude = u32::from(duty.unsigned_abs().min(10_000));
+    let compare = (magnitude * u32::from(PWM_PERIOD) / 10_000) as u16;
+    if duty >= 0 {
+        (compare, 0)
+    } else {
+        (0, compare)
+    }
+}
+
+/// Stops the motors from any context, whatever state the program is in: POWER_EN low, PWM zero.
+///
+/// Used by the panic and HardFault handlers, so it touches the registers directly.
+pub fn emergency_motors_off() {
+    // SAFETY: single writes of "off" values; racing with a task at worst repeats them.
+    unsafe {
+        let gpiob = &*pac::GPIOB::ptr();
+        gpiob.bsrr().write(|w| w.br2().set_bit());
+        let tim2 = &*pac::TIM2::ptr();
+        for ch in 0..4 {
+            tim2.ccr(ch).write(|w| w.ccr().set(0));
+        }
+    }
+}
+
+/// The wheel encoders: TIM3 (left) and TIM4 (right) in encoder mode 3, counting both edges of both
+/// channels (4 × 16 lines × 22:1 gear = 1408 counts per wheel turn).
+pub struct Encoders {
+    left: pac::TIM3,
+    right: pac::TIM4,
+}
+
+impl Encoders {
+    fn new(left: pac::TIM3, right: pac::TIM4) -> Self {
+        // SAFETY: enabling the timers' clocks is owned by init.
+        let rcc = unsafe { &*pac::RCC::ptr() };
+        rcc.apb1enr().modify(|_, w| w.tim3en().set_bit().tim4en().set_bit());
+        // Left: both inputs direct, TI1 polarity inverted so forward counts up on both wheels
+        // (the original inverts channel 1 of the quadrature pair).
+        left.ccmr1_input().write(|w| w.cc1s().ti1().cc2s().ti2());
+        left.ccer().write(|w| w.cc1p().set_bit());
+        left.smcr().write(|w| w.sms().encoder_mode_3());
+        left.arr().write(|w| w.arr().set(0xFFFF));
+        left.cr1().write(|w| w.cen().set_bit());
+        right.ccmr1_input().write(|w| w.cc1s().ti1().cc2s().ti2());
+        right.smcr().write(|w| w.sms().encoder_mode_3());
+        right.arr().write(|w| w.arr().set(0xFFFF));
+        right.cr1().write(|w| w.cen().set_bit());
+        Self { left, right }
+    }
+
+    /// The wrapping 16-bit counts (left, right).
+    pub fn counts(&self) -> (u16, u16) {
+        (self.left.cnt().read().cnt().bits(), self.right.cnt().read().cnt().bits())
+    }
+}
+
+impl SystemSignals {
+    /// Releases SYS_SYNC_N: this module is initialised.
+    pub fn release_sync(&mut self) {
+        self.sys_sync.set_high();
+    }
+
+    /// Acknowledges the SYS_PD_N edge interrupt.
+    pub fn clear_shutdown_interrupt(&mut self) {
+        self.sys_pd.clear_interrupt_pending_bit();
+    }
+
+    /// Status LED (active low).
+    pub fn set_led(&mut self, on: bool) {
+        if on {
+            self.led.set_low();
+        } else {
+            self.led.set_high();
+        }
+    }
+}
+
+/// Interrupt that runs the transmit path.
+pub const CAN_TX_INTERRUPT: pac::Interrupt = pac::Interrupt::USB_HP_CAN_TX;
+
+/// The independent watchdog.
+pub type Watchdog = IndependentWatchdog;
+
+/// Starts the TIM5 monotonic (APB1 timers run at 2 × 36 MHz).
+pub fn start_monotonic(priority: u8) {
+    // SAFETY: init owns TIM5 and RCC at this point; the monotonic takes TIM5 over for good.
+    let (tim5, rcc) = unsafe { (pac::Peripherals::steal().TIM5, &*pac::RCC::ptr()) };
+    crate::mono::Tim5Backend::start(tim5, rcc, SYSCLK_HZ, priority);
+}
+
+/// Starts the independent watchdog.
+pub fn start_watchdog(dog: &mut Watchdog, timeout_ms: u32) {
+    dog.start(timeout_ms.millis());
+}
+
+/// Feeds the independent watchdog.
+pub fn feed_watchdog(dog: &mut Watchdog) {
+    dog.feed();
+}
+
+/// Hands over to AMiRo-BLT's shutdown handling (never returns on a robot); parks otherwise.
+pub fn hand_over_shutdown() -> ! {
+    crate::bootloader::hand_over_shutdown();
+    crate::fault::halt()
+}

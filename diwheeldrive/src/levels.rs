@@ -1,0 +1,53 @@
+//! The one place that maps the robot's four CAN priorities to static RTIC priorities.
+//!
+//! A command's priority bits decide which publisher task serves the topic; the RTIC priorities of
+//! those tasks are fixed at compile time (RTIC needs static priorities). The `#[task(priority = ..)]`
+//! attributes in `main.rs` use these constants, and the schedule analysis reads them from there.
+use amiro_can::Priority;
+
+/// RTIC priority of the publisher serving CAN priority `Urgent`.
+pub const PUBLISH_URGENT: u8 = 4;
+/// RTIC priority of the publisher serving CAN priority `High`.
+pub const PUBLISH_HIGH: u8 = 3;
+/// RTIC priority of the publisher serving CAN priority `Medium`.
+pub const PUBLISH_MEDIUM: u8 = 2;
+/// RTIC priority of the publisher serving CAN priority `Low`.
+pub const PUBLISH_LOW: u8 = 1;
+/// Command handling and motor control run above every publisher.
+pub const CONTROL: u8 = 5;
+/// The CAN interrupts.
+pub const CAN_IRQ: u8 = 6;
+/// The shutdown request (falling SYS_PD_N) pre-empts everything but the monotonic.
+pub const SHUTDOWN: u8 = 7;
+/// The monotonic's timer interrupt: above every task that waits on it.
+pub const MONOTONIC: u8 = 8;
+
+/// The RTIC priority of the publisher task that serves CAN priority `p`.
+pub const fn rtic_priority(p: Priority) -> u8 {
+    match p {
+        Priority::Urgent => PUBLISH_URGENT,
+        Priority::High => PUBLISH_HIGH,
+        Priority::Medium => PUBLISH_MEDIUM,
+        Priority::Low => PUBLISH_LOW,
+    }
+}
+
+/// Index of a CAN priority level in per-level arrays (0 = urgent).
+pub const fn level_index(p: Priority) -> usize {
+    p as usize
+}
+
+// The mapping is checked where it is defined, at compile time: a more urgent CAN priority must get a
+// strictly higher RTIC priority, and every publisher must stay below command handling, which stays
+// below the CAN interrupts, which stay below the shutdown request and the monotonic.
+const _: () = {
+    assert!(rtic_priority(Priority::Urgent) > rtic_priority(Priority::High));
+    assert!(rtic_priority(Priority::High) > rtic_priority(Priority::Medium));
+    assert!(rtic_priority(Priority::Medium) > rtic_priority(Priority::Low));
+    assert!(rtic_priority(Priority::Low) >= 1);
+    assert!(CONTROL > PUBLISH_URGENT);
+    assert!(CAN_IRQ > CONTROL);
+    assert!(SHUTDOWN > CAN_IRQ);
+    assert!(MONOTONIC > SHUTDOWN);
+    assert!(level_index(Priority::Urgent) == 0 && level_index(Priority::Low) == 3);
+};
