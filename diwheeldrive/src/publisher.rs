@@ -78,6 +78,14 @@ pub fn apply_drive(motors: &mut platform::Motors, now: u64, output: &DriveOutput
     }
 }
 
+#[inline(never)]
+fn trace_push(id: u16, outcome: &amiro_sensors::tx_queue::PushOutcome) {
+    let at = mono::now_us();
+    for kind in TraceKind::for_push(id, outcome) {
+        telemetry::trace(&TraceEvent::new(at, kind));
+    }
+}
+
 /// Serves the topics of CAN priority `level` forever.
 #[allow(clippy::too_many_arguments)]
 pub async fn serve_level(
@@ -120,12 +128,8 @@ pub async fn serve_level(
             telemetry::trace(&TraceEvent::new(taken, TraceKind::SampleTaken { topic, release_us: release.release_us }));
             for data in samples {
                 let frame = data.encode(release.priority);
-                let id = frame.id().raw();
                 let outcome = tx_queue.lock(|q| q.push(frame));
-                let at = mono::now_us();
-                for kind in TraceKind::for_push(id, &outcome) {
-                    telemetry::trace(&TraceEvent::new(at, kind));
-                }
+                trace_push(frame.id().raw(), &outcome);
             }
             rtic::pend(platform::CAN_TX_INTERRUPT);
         }

@@ -38,6 +38,8 @@ impl<G: SensorGroup> Group<G> {
     }
 
     /// One sample of `topic`: its frames, or none when the group is missing or the read failed.
+    // One copy for the four publisher tasks that call it (they are generic over their locks).
+    #[inline(never)]
     pub fn sample(&mut self, topic: Topic, now_us: u64) -> Samples {
         if !self.ready {
             return Samples::new();
@@ -60,6 +62,7 @@ pub type Compass = Group<suite::Compass<CompassI2c>>;
 pub type Floor = Group<FloorSensors<FloorI2c>>;
 
 /// The odometry and velocity topics come from the drive controller, not from a bus.
+#[inline(never)]
 pub fn sample_drive(drive: &DriveController, topic: Topic) -> Samples {
     let mut samples = Samples::new();
     if let Some(data) = drive.sample(topic) {
