@@ -1,0 +1,295 @@
+//! Texas Instruments bq27500 fuel gauge on I2C (address 0x55; PowerManagement has two, one per
+//! battery: the front gauge on I2C2, the rear gauge on I2C1).
+//!
+//! The gauge speaks "standard commands": one command byte selects a 16-bit little-endian value.
+//! The map used here (bq27500 datasheet, standard data commands):
+//!
+//! | cmd | name | unit |
+//! |---|---|---|
+//! | 0x00 | Control() | subcommand in, result out |
+//! | 0x06 | Temperature() | 0.1 K |
+//! | 0x08 | Voltage() | mV |
+//! | 0x0A | Flags() | bits, see [`Flags`] |
+//! | 0x10 | RemainingCapacity() | mAh |
+//! | 0x12 | FullChargeCapacity() | mAh |
+//! | 0x14 | AverageCurrent() | mA, signed, positive = charging |
+//! | 0x16 | TimeToEmpty() | min, 65535 = not discharging |
+//! | 0x18 | TimeToFull() | min, 65535 = not charging |
+//! | 0x24 | AveragePower() | mW, signed, positive = charging |
+//! | 0x2C | StateOfCharge() | % |
+//!
+//! Control(): the subcommand is written to 0x00/0x01, then the result read from 0x00;
+//! DEVICE_TYPE (0x0001) answers 0x0500. The datasheet asks for at least 66 µs of bus-free time
+//! between packets to the gauge and, above 100 kHz, for single-byte writes; this driver writes the
+//! subcommand as two one-byte writes and waits [`BUS_FREE_NS`] after every transfer (the AMiRo
+//! 2.x runs the buses at 400 kHz).
+
+use embedded_hal::delay::DelayNs;
+use embedded_hal::i2c::I2c;
+
+use super::Error;
+
+/// The gauge's fixed 7-bit address.
+pub const ADDRESS: u8 = 0x55;
+/// Bus-free time the gauge needs between packets.
+pub const BUS_FREE_NS: u32 = 66_000;
+/// What Control(DEVICE_TYPE) returns on a bq27500.
+pub const DEVICE_TYPE_VALUE: u16 = 0x0500;
+/// The 0.1 K value of 0 °C.
+const ZERO_CELSIUS_DECIKELVIN: i32 = 2731;
+
+/// Standard command codes.
+pub mod cmd {
+    /// Control(): subcommand register.
+    pub const CONTROL: u8 = 0x00;
+    /// Temperature() in 0.1 K.
+    pub const TEMPERATURE: u8 = 0x06;
+    /// Voltage() in mV.
+    pub const VOLTAGE: u8 = 0x08;
+    /// Flags().
+    pub const FLAGS: u8 = 0x0A;
+    /// RemainingCapacity() in mAh.
+    pub const REMAINING_CAPACITY: u8 = 0x10;
+    /// FullChargeCapacity() in mAh.
+    pub const FULL_CHARGE_CAPACITY: u8 = 0x12;
+    /// AverageCurrent() in mA.
+    pub const AVERAGE_CURRENT: u8 = 0x14;
+    /// TimeToEmpty() in minutes.
+    pub const TIME_TO_EMPTY: u8 = 0x16;
+    /// TimeToFull() in minutes.
+    pub const TIME_TO_FULL: u8 = 0x18;
+    /// AveragePower() in mW.
+    pub const AVERAGE_POWER: u8 = 0x24;
+    /// StateOfCharge() in %.
+    pub const STATE_OF_CHARGE: u8 = 0x2C;
+}
+
+/// Control() subcommands.
+pub mod subcommand {
+    /// CONTROL_STATUS.
+    pub const CONTROL_STATUS: u16 = 0x0000;
+    /// DEVICE_TYPE, answers [`super::DEVICE_TYPE_VALUE`].
+    pub const DEVICE_TYPE: u16 = 0x0001;
+    /// FW_VERSION.
+    pub const FW_VERSION: u16 = 0x0002;
+}
+
+/// The time registers' "not applicable" value.
+pub const TIME_NOT_APPLICABLE: u16 = 0xFFFF;
+
+/// Flags() bits this crate interprets (bq27500 datasheet Flags table).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Flags(pub u16);
+
+impl Flags {
+    /// Bit 15 OTC: over-temperature while charging.
+    pub const OVER_TEMPERATURE_CHARGE: u16 = 1 << 15;
+    /// Bit 14 OTD: over-temperature while discharging.
+    pub const OVER_TEMPERATURE_DISCHARGE: u16 = 1 << 14;
+    /// Bit 9 FC: full charge detected.
+    pub const FULL_CHARGE: u16 = 1 << 9;
+    /// Bit 8 CHG: (fast) charging allowed.
+    pub const CHARGE_ALLOWED: u16 = 1 << 8;
+    /// Bit 2 SOC1: state of charge below the first threshold.
+    pub const SOC_LOW: u16 = 1 << 2;
+    /// Bit 1 SOCF: state of charge below the final threshold.
+    pub const SOC_FINAL: u16 = 1 << 1;
+    /// Bit 0 DSG: discharging detected.
+    pub const DISCHARGING: u16 = 1 << 0;
+
+    /// Whether `bit` (one of the constants above) is set.
+    pub const fn contains(self, bit: u16) -> bool {
+        self.0 & bit != 0
+    }
+}
+
+/// One battery's state as the gauge reports it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct BatteryStatus {
+    /// Cell temperature in 0.1 °C.
+    pub temperature_decicelsius: i16,
+    /// Battery voltage in mV.
+    pub voltage_mv: u16,
+    /// Flags().
+    pub flags: Flags,
+    /// Remaining capacity in mAh.
+    pub remaining_capacity_mah: u16,
+    /// Full-charge capacity in mAh.
+    pub full_charge_capacity_mah: u16,
+    /// Average current in mA, positive while charging.
+    pub average_current_ma: i16,
+    /// Minutes to empty, `None` while not discharging.
+    pub time_to_empty_min: Option<u16>,
+    /// Minutes to full, `None` while not charging.
+    pub time_to_full_min: Option<u16>,
+    /// Average power in mW, positive while charging.
+    pub average_power_mw: i16,
+    /// State of charge in % (0..=100).
+    pub state_of_charge: u8,
+}
+
+impl BatteryStatus {
+    /// Charging: current flows in and the gauge has not flagged discharge.
+    pub const fn charging(&self) -> bool {
+        self.average_current_ma > 0 && !self.flags.contains(Flags::DISCHARGING)
+    }
+
+    /// Minutes to full while charging, to empty otherwise; 65535 when the gauge has no estimate.
+    pub fn minutes(&self) -> u16 {
+        let estimate = if self.charging() {
+            self.time_to_full_min
+        } else {
+            self.time_to_empty_min
+        };
+        estimate.unwrap_or(TIME_NOT_APPLICABLE)
+    }
+
+    /// Magnitude of the average power in mW.
+    pub const fn power_mw(&self) -> u16 {
+        self.average_power_mw.unsigned_abs()
+    }
+}
+
+/// The robot's power state from both batteries: what the protocol's power-status frame carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PowerSummary {
+    /// At least one battery is charging.
+    pub charging: bool,
+    /// Capacity-weighted state of charge of both batteries, %.
+    pub state_of_charge: u8,
+    /// Minutes until both are full (charging) or until both are empty (discharging); 65535 unknown.
+    pub minutes: u16,
+    /// Total power into or out of both batteries, mW (saturating).
+    pub power_mw: u16,
+}
+
+impl PowerSummary {
+    /// The summary of one battery.
+    pub fn of(battery: &BatteryStatus) -> Self {
+        Self {
+            charging: battery.charging(),
+            state_of_charge: battery.state_of_charge,
+            minutes: battery.minutes(),
+            power_mw: battery.power_mw(),
+        }
+    }
+
+    /// The summary of the two batteries.
+    ///
+    /// Decisions (documented in docs/sensors.md): the state of charge is remaining over full
+    /// capacity of both packs (the mean of the two percentages when a gauge reports no capacity);
+    /// the robot runs on until the last pack is empty and is done charging when the last one is
+    /// full, so the minutes are the larger of the two estimates that apply (an unknown estimate is
+    /// ignored unless both are unknown); power is the sum.
+    pub fn of_pair(a: &BatteryStatus, b: &BatteryStatus) -> Self {
+        let charging = a.charging() || b.charging();
+        let full = u32::from(a.full_charge_capacity_mah) + u32::from(b.full_charge_capacity_mah);
+        let remaining = u32::from(a.remaining_capacity_mah) + u32::from(b.remaining_capacity_mah);
+        let state_of_charge = match (remaining.min(full) * 100).checked_div(full) {
+            Some(percent) => percent as u8,
+            None => ((u32::from(a.state_of_charge) + u32::from(b.state_of_charge)) / 2) as u8,
+        };
+        let pick = |s: &BatteryStatus| {
+            if charging {
+                s.time_to_full_min
+            } else {
+                s.time_to_empty_min
+            }
+        };
+        let minutes = match (pick(a), pick(b)) {
+            (Some(x), Some(y)) => x.max(y),
+            (Some(x), None) | (None, Some(x)) => x,
+            (None, None) => TIME_NOT_APPLICABLE,
+        };
+        Self {
+            charging,
+            state_of_charge,
+            minutes,
+            power_mw: a.power_mw().saturating_add(b.power_mw()),
+        }
+    }
+}
+
+/// A bq27500 on an I2C bus, with a delay for the gauge's bus-free time.
+#[derive(Debug)]
+pub struct Bq27500<I2C, D> {
+    i2c: I2C,
+    delay: D,
+}
+
+impl<I2C: I2c, D: DelayNs> Bq27500<I2C, D> {
+    /// A driver for the gauge at [`ADDRESS`]. Does no I/O.
+    pub const fn new(i2c: I2C, delay: D) -> Self {
+        Self { i2c, delay }
+    }
+
+    /// Checks that the gauge is a bq27500 (Control(DEVICE_TYPE) = 0x0500). The gauge needs no
+    /// configuration.
+    pub fn init(&mut self) -> Result<(), Error<I2C::Error>> {
+        let device_type = self.control(subcommand::DEVICE_TYPE)?;
+        if device_type == DEVICE_TYPE_VALUE {
+            Ok(())
+        } else {
+            Err(Error::WrongIdentity {
+                expected: DEVICE_TYPE_VALUE.into(),
+                found: device_type.into(),
+            })
+        }
+    }
+
+    /// Sends a Control() subcommand and reads its result.
+    pub fn control(&mut self, subcommand: u16) -> Result<u16, Error<I2C::Error>> {
+        let [low, high] = subcommand.to_le_bytes();
+        self.write_paced(&[cmd::CONTROL, low])?;
+        self.write_paced(&[cmd::CONTROL + 1, high])?;
+        self.read_u16(cmd::CONTROL)
+    }
+
+    /// Reads one standard command's 16-bit value.
+    pub fn read_u16(&mut self, command: u8) -> Result<u16, Error<I2C::Error>> {
+        let mut value = [0u8; 2];
+        let result = self.i2c.write_read(ADDRESS, &[command], &mut value);
+        self.delay.delay_ns(BUS_FREE_NS);
+        result?;
+        Ok(u16::from_le_bytes(value))
+    }
+
+    /// Reads everything [`BatteryStatus`] holds (ten transfers, in command order).
+    pub fn read_status(&mut self) -> Result<BatteryStatus, Error<I2C::Error>> {
+        let temperature = self.read_u16(cmd::TEMPERATURE)?;
+        let voltage_mv = self.read_u16(cmd::VOLTAGE)?;
+        let flags = Flags(self.read_u16(cmd::FLAGS)?);
+        let remaining_capacity_mah = self.read_u16(cmd::REMAINING_CAPACITY)?;
+        let full_charge_capacity_mah = self.read_u16(cmd::FULL_CHARGE_CAPACITY)?;
+        let average_current_ma = self.read_u16(cmd::AVERAGE_CURRENT)? as i16;
+        let time_to_empty = self.read_u16(cmd::TIME_TO_EMPTY)?;
+        let time_to_full = self.read_u16(cmd::TIME_TO_FULL)?;
+        let average_power_mw = self.read_u16(cmd::AVERAGE_POWER)? as i16;
+        let state_of_charge = self.read_u16(cmd::STATE_OF_CHARGE)?;
+        let celsius = i32::from(temperature) - ZERO_CELSIUS_DECIKELVIN;
+        Ok(BatteryStatus {
+            temperature_decicelsius: celsius.clamp(i16::MIN.into(), i16::MAX.into()) as i16,
+            voltage_mv,
+            flags,
+            remaining_capacity_mah,
+            full_charge_capacity_mah,
+            average_current_ma,
+            time_to_empty_min: (time_to_empty != TIME_NOT_APPLICABLE).then_some(time_to_empty),
+            time_to_full_min: (time_to_full != TIME_NOT_APPLICABLE).then_some(time_to_full),
+            average_power_mw,
+            state_of_charge: state_of_charge.min(100) as u8,
+        })
+    }
+
+    /// Gives the bus and the delay back.
+    pub fn release(self) -> (I2C, D) {
+        (self.i2c, self.delay)
+    }
+
+    fn write_paced(&mut self, bytes: &[u8]) -> Result<(), Error<I2C::Error>> {
+        let result = self.i2c.write(ADDRESS, bytes);
+        self.delay.delay_ns(BUS_FREE_NS);
+        result?;
+        Ok(())
+    }
+}

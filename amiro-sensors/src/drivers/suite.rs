@@ -1,0 +1,468 @@
+//! Each board's sensors bundled behind one call: `sample(topic, now_us)` reads what the topic needs
+//! and returns the amiro-can [`SensorData`] frames of one sample.
+//!
+//! A sample may be several frames (the proximity ring is eight), so `sample` returns [`Samples`], a
+//! fixed-capacity vector: no heap, and the caller encodes each element. Groups are split along what
+//! the firmware locks separately: on DiWheelDrive the SPI motion sensors ([`InertialSensors`]), the
+//! I2C1 magnetometer ([`Compass`]) and the I2C2 floor sensors ([`FloorSensors`]) are independent
+//! resources that publishers at different priorities can sample without blocking each other;
+//! [`DiWheelDriveSensors`] holds all three for a firmware that does not care. PowerManagement's
+//! ring and fuel gauges share both buses, so they are one group, [`PowerManagementSensors`].
+//!
+//! Errors lose their bus type here ([`BusFault`] keeps the embedded-hal error kind) and gain the
+//! device that failed, so one [`SampleError`] type serves every board.
+
+use core::fmt;
+
+use amiro_can::{Axis as CanAxis, LedCommand, PowerStatus, SensorData, Topic};
+use embedded_hal::delay::DelayNs;
+use embedded_hal::i2c::{self, I2c};
+use embedded_hal::spi::{self, SpiDevice};
+
+use super::bq27500::{BatteryStatus, Bq27500, PowerSummary};
+use super::floor::{FloorSensors, GroupError};
+use super::hmc5883l::{Hmc5883l, MagneticField};
+use super::l3g4200d::{AngularRate, L3g4200d};
+use super::lis331dlh::{Acceleration, Lis331dlh};
+use super::ring::{ProximityRing, RING_SENSORS};
+use super::tlc5947::LightRing;
+use super::{Axis, Error};
+
+/// Most frames one sample yields (the proximity ring's eight).
+pub const MAX_SAMPLES: usize = 8;
+
+/// The frames of one sample.
+pub type Samples = heapless::Vec<SensorData, MAX_SAMPLES>;
+
+/// A bus error with its type erased to the embedded-hal error kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BusFault {
+    /// An I2C transfer failed.
+    I2c(i2c::ErrorKind),
+    /// An SPI transfer failed.
+    Spi(spi::ErrorKind),
+}
+
+/// The device a [`SampleError`] is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Device {
+    /// L3G4200D.
+    Gyroscope,
+    /// LIS331DLH.
+    Accelerometer,
+    /// HMC5883L.
+    Magnetometer,
+    /// Floor sensor by protocol index (0 front-right .. 3 front-left), or its mux.
+    FloorSensor(u8),
+    /// Ring sensor by protocol index 0..=7, or its mux.
+    RingSensor(u8),
+    /// A bq27500 fuel gauge.
+    FuelGauge(Battery),
+    /// The LightRing's TLC5947.
+    LedDriver,
+}
+
+/// Which of PowerManagement's two batteries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Battery {
+    /// Battery A, "front", gauge on I2C2.
+    Front,
+    /// Battery B, "rear", gauge on I2C1.
+    Rear,
+}
+
+/// Why a sample could not be taken.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SampleError {
+    /// A device failed.
+    Device {
+        /// Which one.
+        device: Device,
+        /// What went wrong.
+        error: Error<BusFault>,
+    },
+    /// The topic is not one this group samples (another group's, another board's, or an actuator).
+    NotServed(Topic),
+}
+
+impl fmt::Display for SampleError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SampleError::Device { device, error } => write!(f, "{device:?}: {error}"),
+            SampleError::NotServed(topic) => write!(f, "topic {topic} is not sampled here"),
+        }
+    }
+}
+
+fn spi_error<E: spi::Error>(device: Device) -> impl Fn(Error<E>) -> SampleError {
+    move |error| SampleError::Device {
+        device,
+        error: error.map_bus(|e| BusFault::Spi(e.kind())),
+    }
+}
+
+fn i2c_error<E: i2c::Error>(device: Device) -> impl Fn(Error<E>) -> SampleError {
+    move |error| SampleError::Device {
+        device,
+        error: error.map_bus(|e| BusFault::I2c(e.kind())),
+    }
+}
+
+fn one(data: SensorData) -> Samples {
+    let mut samples = Samples::new();
+    // Capacity is MAX_SAMPLES ≥ 1, so the push cannot fail.
+    let _ = samples.push(data);
+    samples
+}
+
+/// A set of devices that can be sampled by topic.
+pub trait SensorGroup {
+    /// The topics [`sample`](Self::sample) serves.
+    fn topics(&self) -> &'static [Topic];
+
+    /// Checks identities and configures every device of the group.
+    fn init(&mut self) -> Result<(), SampleError>;
+
+    /// Reads one sample of `topic`, taken at `now_us` (groups that reuse a recent reading use it).
+    fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError>;
+
+    /// Whether this group serves `topic`.
+    fn serves(&self, topic: Topic) -> bool {
+        self.topics().contains(&topic)
+    }
+}
+
+/// DiWheelDrive 1-1's gyroscope and accelerometer (SPI1, each with its own chip select).
+#[derive(Debug)]
+pub struct InertialSensors<G, A> {
+    /// The L3G4200D.
+    pub gyroscope: L3g4200d<G>,
+    /// The LIS331DLH.
+    pub accelerometer: Lis331dlh<A>,
+}
+
+impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
+    /// The two parts at the protocol's ranges (±500 dps, ±8 g). Does no I/O.
+    pub const fn new(gyroscope: G, accelerometer: A) -> Self {
+        Self {
+            gyroscope: L3g4200d::new(gyroscope),
+            accelerometer: Lis331dlh::new(accelerometer),
+        }
+    }
+
+    /// One gyroscope reading in the finer unit (millidegrees per second).
+    pub fn read_gyroscope(&mut self) -> Result<AngularRate, SampleError> {
+        self.gyroscope.read().map_err(spi_error(Device::Gyroscope))
+    }
+
+    /// One accelerometer reading in the finer unit (micro-g).
+    pub fn read_accelerometer(&mut self) -> Result<Acceleration, SampleError> {
+        self.accelerometer.read().map_err(spi_error(Device::Accelerometer))
+    }
+}
+
+impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
+    fn topics(&self) -> &'static [Topic] {
+        &[Topic::Gyroscope, Topic::Accelerometer]
+    }
+
+    fn init(&mut self) -> Result<(), SampleError> {
+        self.gyroscope.init().map_err(spi_error(Device::Gyroscope))?;
+        self.accelerometer.init().map_err(spi_error(Device::Accelerometer))
+    }
+
+    fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
+        match topic {
+            Topic::Gyroscope => Ok(one(SensorData::Gyroscope(self.read_gyroscope()?.degrees_per_s()))),
+            Topic::Accelerometer => Ok(one(SensorData::Accelerometer(self.read_accelerometer()?.milli_g()))),
+            other => Err(SampleError::NotServed(other)),
+        }
+    }
+}
+
+/// One HMC5883L reading serves all three magnetometer topics.
+///
+/// The three axes are separate topics (one i32 each), usually published together. A reading is
+/// kept and handed out once per axis: the first axis sampled reads the part, the other two take
+/// the same reading if they come within [`Compass::reuse_window_us`] (default one output period of
+/// the part, 33.3 ms at 30 Hz — a fresh read in that window could only return the same data). An
+/// axis sampled twice always triggers a new read, so a single running topic never repeats itself.
+#[derive(Debug)]
+pub struct Compass<I2C> {
+    /// The HMC5883L.
+    pub magnetometer: Hmc5883l<I2C>,
+    reuse_window_us: u64,
+    last: Option<(MagneticField, u64)>,
+    delivered: [bool; 3],
+}
+
+/// One output period of the HMC5883L at the AMiRo's 30 Hz, in µs.
+pub const MAGNETOMETER_PERIOD_US: u64 = 33_333;
+
+impl<I2C: I2c> Compass<I2C> {
+    /// The magnetometer at the AMiRo's gain. Does no I/O.
+    pub const fn new(i2c: I2C) -> Self {
+        Self {
+            magnetometer: Hmc5883l::new(i2c),
+            reuse_window_us: MAGNETOMETER_PERIOD_US,
+            last: None,
+            delivered: [false; 3],
+        }
+    }
+
+    /// How long a reading may serve the other axes.
+    pub const fn reuse_window_us(&self) -> u64 {
+        self.reuse_window_us
+    }
+
+    /// Sets how long a reading may serve the other axes (0: every sample reads the part).
+    pub fn set_reuse_window_us(&mut self, window_us: u64) {
+        self.reuse_window_us = window_us;
+    }
+
+    /// Reads all three axes now (bypassing the reuse) and returns them as three frames, X, Y, Z.
+    pub fn sample_all(&mut self, now_us: u64) -> Result<Samples, SampleError> {
+        let field = self.read_fresh(now_us)?;
+        self.delivered = [true; 3];
+        let mut samples = Samples::new();
+        for (axis, can_axis) in Axis::ALL.into_iter().zip(CanAxis::ALL) {
+            let _ = samples.push(SensorData::Magnetometer {
+                axis: can_axis,
+                nanotesla: field.axis(axis),
+            });
+        }
+        Ok(samples)
+    }
+
+    fn read_fresh(&mut self, now_us: u64) -> Result<MagneticField, SampleError> {
+        match self.magnetometer.read() {
+            Ok(field) => {
+                self.last = Some((field, now_us));
+                self.delivered = [false; 3];
+                Ok(field)
+            }
+            Err(error) => {
+                self.last = None;
+                Err(i2c_error(Device::Magnetometer)(error))
+            }
+        }
+    }
+}
+
+impl<I2C: I2c> SensorGroup for Compass<I2C> {
+    fn topics(&self) -> &'static [Topic] {
+        &[Topic::MagnetometerX, Topic::MagnetometerY, Topic::MagnetometerZ]
+    }
+
+    fn init(&mut self) -> Result<(), SampleError> {
+        self.last = None;
+        self.magnetometer.init().map_err(i2c_error(Device::Magnetometer))
+    }
+
+    fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
+        let (axis, can_axis) = match topic {
+            Topic::MagnetometerX => (Axis::X, CanAxis::X),
+            Topic::MagnetometerY => (Axis::Y, CanAxis::Y),
+            Topic::MagnetometerZ => (Axis::Z, CanAxis::Z),
+            other => return Err(SampleError::NotServed(other)),
+        };
+        let already_sent = self.delivered.get(axis.index()).copied().unwrap_or(true);
+        let field = match self.last {
+            Some((field, at))
+                if !already_sent && now_us >= at && now_us - at <= self.reuse_window_us =>
+            {
+                field
+            }
+            _ => self.read_fresh(now_us)?,
+        };
+        if let Some(flag) = self.delivered.get_mut(axis.index()) {
+            *flag = true;
+        }
+        Ok(one(SensorData::Magnetometer {
+            axis: can_axis,
+            nanotesla: field.axis(axis),
+        }))
+    }
+}
+
+impl<I2C: I2c> SensorGroup for FloorSensors<I2C> {
+    fn topics(&self) -> &'static [Topic] {
+        &[Topic::FloorProximity]
+    }
+
+    fn init(&mut self) -> Result<(), SampleError> {
+        FloorSensors::init(self).map_err(floor_error)
+    }
+
+    fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
+        match topic {
+            Topic::FloorProximity => Ok(one(SensorData::FloorProximity(
+                self.read_proximity().map_err(floor_error)?,
+            ))),
+            other => Err(SampleError::NotServed(other)),
+        }
+    }
+}
+
+fn floor_error<E: i2c::Error>(e: GroupError<E>) -> SampleError {
+    i2c_error(Device::FloorSensor(e.sensor))(e.error)
+}
+
+/// Every sensor of DiWheelDrive 1-1. The fields are public so a firmware can split them into
+/// separately locked resources.
+#[derive(Debug)]
+pub struct DiWheelDriveSensors<G, A, M, F> {
+    /// Gyroscope and accelerometer on SPI1.
+    pub inertial: InertialSensors<G, A>,
+    /// Magnetometer on I2C1.
+    pub compass: Compass<M>,
+    /// Floor sensors behind the mux on I2C2.
+    pub floor: FloorSensors<F>,
+}
+
+impl<G: SpiDevice, A: SpiDevice, M: I2c, F: I2c> DiWheelDriveSensors<G, A, M, F> {
+    /// The board's sensors on their buses: gyroscope SPI device (CS PC14), accelerometer SPI
+    /// device (CS PC13), I2C1, I2C2. Does no I/O.
+    pub const fn new(gyroscope: G, accelerometer: A, i2c1: M, i2c2: F) -> Self {
+        Self {
+            inertial: InertialSensors::new(gyroscope, accelerometer),
+            compass: Compass::new(i2c1),
+            floor: FloorSensors::new(i2c2),
+        }
+    }
+}
+
+impl<G: SpiDevice, A: SpiDevice, M: I2c, F: I2c> SensorGroup for DiWheelDriveSensors<G, A, M, F> {
+    fn topics(&self) -> &'static [Topic] {
+        &[
+            Topic::Gyroscope,
+            Topic::Accelerometer,
+            Topic::MagnetometerX,
+            Topic::MagnetometerY,
+            Topic::MagnetometerZ,
+            Topic::FloorProximity,
+        ]
+    }
+
+    fn init(&mut self) -> Result<(), SampleError> {
+        self.inertial.init()?;
+        self.compass.init()?;
+        SensorGroup::init(&mut self.floor)
+    }
+
+    fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
+        match topic {
+            Topic::Gyroscope | Topic::Accelerometer => self.inertial.sample(topic, now_us),
+            Topic::MagnetometerX | Topic::MagnetometerY | Topic::MagnetometerZ => self.compass.sample(topic, now_us),
+            Topic::FloorProximity => SensorGroup::sample(&mut self.floor, topic, now_us),
+            other => Err(SampleError::NotServed(other)),
+        }
+    }
+}
+
+/// PowerManagement's proximity ring and its two fuel gauges, which share I2C1 and I2C2.
+#[derive(Debug)]
+pub struct PowerManagementSensors<I1, I2, D> {
+    /// The eight ring sensors and their muxes (which own the two buses).
+    pub ring: ProximityRing<I1, I2>,
+    delay: D,
+    gauge_faults: [u32; 2],
+}
+
+impl<I1: I2c, I2: I2c, D: DelayNs> PowerManagementSensors<I1, I2, D> {
+    /// The board's sensors on I2C1 and I2C2; `delay` paces the fuel gauges. Does no I/O.
+    pub const fn new(i2c1: I1, i2c2: I2, delay: D) -> Self {
+        Self {
+            ring: ProximityRing::new(i2c1, i2c2),
+            delay,
+            gauge_faults: [0; 2],
+        }
+    }
+
+    /// Both batteries' gauge readings, front then rear.
+    pub fn read_batteries(&mut self) -> (Result<BatteryStatus, SampleError>, Result<BatteryStatus, SampleError>) {
+        let front = Bq27500::new(self.ring.i2c2_mut(), &mut self.delay)
+            .read_status()
+            .map_err(i2c_error(Device::FuelGauge(Battery::Front)));
+        let rear = Bq27500::new(self.ring.i2c1_mut(), &mut self.delay)
+            .read_status()
+            .map_err(i2c_error(Device::FuelGauge(Battery::Rear)));
+        (front, rear)
+    }
+
+    /// The combined power status. If one gauge fails the other one's reading is used (and the
+    /// failure counted, see [`gauge_faults`](Self::gauge_faults)); if both fail, the front error.
+    pub fn read_power(&mut self) -> Result<PowerSummary, SampleError> {
+        let (front, rear) = self.read_batteries();
+        if front.is_err() {
+            self.gauge_faults[0] = self.gauge_faults[0].saturating_add(1);
+        }
+        if rear.is_err() {
+            self.gauge_faults[1] = self.gauge_faults[1].saturating_add(1);
+        }
+        match (front, rear) {
+            (Ok(a), Ok(b)) => Ok(PowerSummary::of_pair(&a, &b)),
+            (Ok(one), Err(_)) | (Err(_), Ok(one)) => Ok(PowerSummary::of(&one)),
+            (Err(e), Err(_)) => Err(e),
+        }
+    }
+
+    /// Failed gauge reads so far: `[front, rear]`.
+    pub const fn gauge_faults(&self) -> [u32; 2] {
+        self.gauge_faults
+    }
+}
+
+impl<I1: I2c, I2: I2c, D: DelayNs> SensorGroup for PowerManagementSensors<I1, I2, D> {
+    fn topics(&self) -> &'static [Topic] {
+        &[Topic::ProximityRing, Topic::PowerStatus]
+    }
+
+    fn init(&mut self) -> Result<(), SampleError> {
+        self.ring
+            .init()
+            .map_err(|e| i2c_error::<i2c::ErrorKind>(Device::RingSensor(e.sensor))(e.error))?;
+        Bq27500::new(self.ring.i2c2_mut(), &mut self.delay)
+            .init()
+            .map_err(i2c_error(Device::FuelGauge(Battery::Front)))?;
+        Bq27500::new(self.ring.i2c1_mut(), &mut self.delay)
+            .init()
+            .map_err(i2c_error(Device::FuelGauge(Battery::Rear)))
+    }
+
+    fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
+        match topic {
+            Topic::ProximityRing => {
+                let mm = self
+                    .ring
+                    .read_mm()
+                    .map_err(|e| i2c_error::<i2c::ErrorKind>(Device::RingSensor(e.sensor))(e.error))?;
+                let mut samples = Samples::new();
+                for (sensor, mm) in (0u8..).zip(mm).take(RING_SENSORS) {
+                    let _ = samples.push(SensorData::ProximityRing { sensor, mm });
+                }
+                Ok(samples)
+            }
+            Topic::PowerStatus => {
+                let power = self.read_power()?;
+                Ok(one(SensorData::PowerStatus(PowerStatus {
+                    charging: power.charging,
+                    state_of_charge: power.state_of_charge,
+                    minutes: power.minutes,
+                    power_mw: power.power_mw,
+                })))
+            }
+            other => Err(SampleError::NotServed(other)),
+        }
+    }
+}
+
+impl<SPI: SpiDevice> LightRing<SPI> {
+    /// Applies an LED command from the protocol: sets the LED's colour and latches the whole ring.
+    pub fn apply(&mut self, command: &LedCommand) -> Result<(), SampleError> {
+        let rgb = command.rgb;
+        self.set_led(command.led, rgb.r, rgb.g, rgb.b)
+            .and_then(|()| self.flush())
+            .map_err(spi_error(Device::LedDriver))
+    }
+}
