@@ -9,5 +9,6 @@ pub mod clock;
 pub mod drivers;
 pub mod handler;
 pub mod motion;
+pub mod sim;
 pub mod trace;
 pub mod tx_queue;

@@ -58,8 +58,8 @@ fn compass_rejects_a_wrong_identity() {
     assert_eq!(
         Hmc5883l::new(i2c.clone()).init(),
         Err(Error::WrongIdentity {
-            expected: 0x48_34_33,
-            found: 0x48_34_32
+            expected: 0x0048_3433,
+            found: 0x0048_3432
         })
     );
     i2c.done();
@@ -81,7 +81,11 @@ fn compass_reorders_x_z_y_and_converts_to_nanotesla() {
 fn compass_gain_sets_crb_and_scale() {
     assert_eq!(Gain::Ga1_3.config_b(), 0x20);
     assert_eq!(Gain::Ga8_1.config_b(), 0xE0);
-    let mut i2c = I2cMock::new(&[T::write_read(0x1E, vec![0x03], vec![0x04, 0x44, 0, 0, 0, 0])]);
+    let mut i2c = I2cMock::new(&[T::write_read(
+        0x1E,
+        vec![0x03],
+        vec![0x04, 0x44, 0, 0, 0, 0],
+    )]);
     let mut compass = Hmc5883l::with_gain(i2c.clone(), Gain::Ga1_3);
     // 1092 digits at 1090 LSB/Ga = 100 183.5 nT → rounds to 100 183 or 100 184.
     assert_eq!(compass.read().unwrap().nanotesla[0], 100_183);
@@ -93,7 +97,10 @@ fn compass_overflow_is_a_typed_error_naming_the_axis() {
     // Y (last pair) reads -4096.
     let data = vec![0x00, 0x10, 0x00, 0x10, 0xF0, 0x00];
     let mut i2c = I2cMock::new(&[T::write_read(0x1E, vec![0x03], data)]);
-    assert_eq!(Hmc5883l::new(i2c.clone()).read(), Err(Error::Overflow { axis: Axis::Y }));
+    assert_eq!(
+        Hmc5883l::new(i2c.clone()).read(),
+        Err(Error::Overflow { axis: Axis::Y })
+    );
     i2c.done();
 }
 
@@ -181,7 +188,10 @@ fn vcnl_reads_big_endian_results() {
 #[test]
 fn vcnl_bus_error() {
     let mut i2c = I2cMock::new(&[T::write_read(0x13, vec![0x87], vec![0, 0]).with_error(NACK)]);
-    assert_eq!(Vcnl4020::new(i2c.clone()).read_proximity(), Err(Error::Bus(NACK)));
+    assert_eq!(
+        Vcnl4020::new(i2c.clone()).read_proximity(),
+        Err(Error::Bus(NACK))
+    );
     i2c.done();
 }
 
@@ -215,7 +225,11 @@ fn mux_select_writes_enable_and_channel_then_passes_transfers_through() {
 #[test]
 fn mux_control_decoding() {
     assert_eq!(Control::from_byte(0x00).selected, None);
-    assert_eq!(Control::from_byte(0x03).selected, None, "channel bits without enable");
+    assert_eq!(
+        Control::from_byte(0x03).selected,
+        None,
+        "channel bits without enable"
+    );
     for ch in Channel::ALL {
         assert_eq!(Control::from_byte(ch.control_byte()).selected, Some(ch));
         assert_eq!(Channel::from_number(ch.number()), Some(ch));
@@ -255,7 +269,10 @@ fn floor_read_is_in_protocol_order_front_right_first() {
     }
     let mut i2c = I2cMock::new(&script);
     let mut floor = FloorSensors::new(i2c.clone());
-    assert_eq!(floor.read_proximity().unwrap(), [0x1000, 0x2000, 0x3000, 0x4000]);
+    assert_eq!(
+        floor.read_proximity().unwrap(),
+        [0x1000, 0x2000, 0x3000, 0x4000]
+    );
     assert_eq!(FloorSensor::ALL.map(|s| s.channel().number()), [0, 1, 2, 3]);
     i2c.done();
 }
@@ -299,7 +316,10 @@ fn ring_reads_each_index_through_its_bus_and_channel() {
     }
     let (mut i1, mut i2) = (I2cMock::new(&bus1), I2cMock::new(&bus2));
     let mut ring = ProximityRing::new(i1.clone(), i2.clone());
-    assert_eq!(ring.read_counts().unwrap(), [100, 200, 300, 400, 500, 600, 700, 800]);
+    assert_eq!(
+        ring.read_counts().unwrap(),
+        [100, 200, 300, 400, 500, 600, 700, 800]
+    );
     i1.done();
     i2.done();
 }
@@ -309,7 +329,16 @@ fn ring_wiring_matches_the_boards_table() {
     use amiro_sensors::drivers::ring::RingBus::{I2c1, I2c2};
     assert_eq!(
         WIRING.map(|(bus, ch)| (bus, ch.number())),
-        [(I2c1, 1), (I2c1, 3), (I2c1, 2), (I2c2, 0), (I2c2, 1), (I2c2, 3), (I2c2, 2), (I2c1, 0)]
+        [
+            (I2c1, 1),
+            (I2c1, 3),
+            (I2c1, 2),
+            (I2c2, 0),
+            (I2c2, 1),
+            (I2c2, 3),
+            (I2c2, 2),
+            (I2c1, 0)
+        ]
     );
 }
 
@@ -347,7 +376,11 @@ fn gauge_init_sends_device_type_as_two_single_byte_writes_and_paces_the_bus() {
         T::write(0x55, vec![0x01, 0x00]),
         gauge_read(0x00, 0x0500),
     ]);
-    let mut delay = CheckedDelay::new(&[D::delay_ns(66_000), D::delay_ns(66_000), D::delay_ns(66_000)]);
+    let mut delay = CheckedDelay::new(&[
+        D::delay_ns(66_000),
+        D::delay_ns(66_000),
+        D::delay_ns(66_000),
+    ]);
     Bq27500::new(i2c.clone(), &mut delay).init().unwrap();
     i2c.done();
     delay.done();
@@ -372,11 +405,11 @@ fn gauge_rejects_another_device_type() {
 
 fn status_script(flags: u16, current: i16, tte: u16, ttf: u16, power: i16) -> Vec<T> {
     vec![
-        gauge_read(0x06, 2981),     // 25.0 °C
-        gauge_read(0x08, 3_900),    // mV
+        gauge_read(0x06, 2981),  // 25.0 °C
+        gauge_read(0x08, 3_900), // mV
         gauge_read(0x0A, flags),
-        gauge_read(0x10, 1_200),    // remaining mAh
-        gauge_read(0x12, 2_000),    // full mAh
+        gauge_read(0x10, 1_200), // remaining mAh
+        gauge_read(0x12, 2_000), // full mAh
         gauge_read(0x14, current as u16),
         gauge_read(0x16, tte),
         gauge_read(0x18, ttf),
@@ -387,8 +420,16 @@ fn status_script(flags: u16, current: i16, tte: u16, ttf: u16, power: i16) -> Ve
 
 #[test]
 fn gauge_status_while_discharging() {
-    let mut i2c = I2cMock::new(&status_script(Flags::DISCHARGING, -450, 160, 0xFFFF, -1_755));
-    let status = Bq27500::new(i2c.clone(), NoopDelay::new()).read_status().unwrap();
+    let mut i2c = I2cMock::new(&status_script(
+        Flags::DISCHARGING,
+        -450,
+        160,
+        0xFFFF,
+        -1_755,
+    ));
+    let status = Bq27500::new(i2c.clone(), NoopDelay::new())
+        .read_status()
+        .unwrap();
     assert_eq!(status.temperature_decicelsius, 250);
     assert_eq!(status.voltage_mv, 3_900);
     assert_eq!(status.average_current_ma, -450);
@@ -403,8 +444,16 @@ fn gauge_status_while_discharging() {
 
 #[test]
 fn gauge_status_while_charging() {
-    let mut i2c = I2cMock::new(&status_script(Flags::CHARGE_ALLOWED, 800, 0xFFFF, 60, 3_120));
-    let status = Bq27500::new(i2c.clone(), NoopDelay::new()).read_status().unwrap();
+    let mut i2c = I2cMock::new(&status_script(
+        Flags::CHARGE_ALLOWED,
+        800,
+        0xFFFF,
+        60,
+        3_120,
+    ));
+    let status = Bq27500::new(i2c.clone(), NoopDelay::new())
+        .read_status()
+        .unwrap();
     assert!(status.charging());
     assert_eq!(status.minutes(), 60);
     assert_eq!(PowerSummary::of(&status).power_mw, 3_120);
@@ -423,7 +472,15 @@ fn gauge_bus_error_still_waits_the_bus_free_time() {
     delay.done();
 }
 
-fn battery(soc: u8, remaining: u16, full: u16, current: i16, tte: Option<u16>, ttf: Option<u16>, power: i16) -> BatteryStatus {
+fn battery(
+    soc: u8,
+    remaining: u16,
+    full: u16,
+    current: i16,
+    tte: Option<u16>,
+    ttf: Option<u16>,
+    power: i16,
+) -> BatteryStatus {
     BatteryStatus {
         state_of_charge: soc,
         remaining_capacity_mah: remaining,

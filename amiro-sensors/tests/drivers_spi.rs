@@ -46,9 +46,9 @@ const GYRO_CONFIG: [u8; 5] = [0x1F, 0x00, 0x08, 0x10, 0x00];
 
 fn gyro_init_script() -> Vec<T<u8>> {
     [
-        read_tx(0x8F, &[0xD3]),          // WHO_AM_I, read, single byte
-        write_tx(0x60, &GYRO_CONFIG),    // CTRL_REG1.., write, auto-increment
-        read_tx(0xE0, &GYRO_CONFIG),     // CTRL_REG1.., read, auto-increment
+        read_tx(0x8F, &[0xD3]),       // WHO_AM_I, read, single byte
+        write_tx(0x60, &GYRO_CONFIG), // CTRL_REG1.., write, auto-increment
+        read_tx(0xE0, &GYRO_CONFIG),  // CTRL_REG1.., read, auto-increment
     ]
     .concat()
 }
@@ -80,7 +80,12 @@ fn gyro_rejects_a_wrong_identity_before_writing_anything() {
 fn gyro_reports_a_register_that_did_not_take_the_range() {
     let mut readback = GYRO_CONFIG;
     readback[3] = 0x00; // still ±250 dps
-    let script = [read_tx(0x8F, &[0xD3]), write_tx(0x60, &GYRO_CONFIG), read_tx(0xE0, &readback)].concat();
+    let script = [
+        read_tx(0x8F, &[0xD3]),
+        write_tx(0x60, &GYRO_CONFIG),
+        read_tx(0xE0, &readback),
+    ]
+    .concat();
     let mut spi = SpiMock::new(&script);
     let mut gyro = L3g4200d::new(spi.clone());
     assert_eq!(
@@ -117,9 +122,18 @@ fn gyro_rounds_whole_degrees_to_nearest() {
 #[test]
 fn gyro_ranges_have_the_datasheet_sensitivities_and_ctrl4_bits() {
     use l3g4200d::Range;
-    assert_eq!(AngularRate::from_raw([1000, 0, 0], Range::Dps250).millidegrees_per_s[0], 8_750);
-    assert_eq!(AngularRate::from_raw([1000, 0, 0], Range::Dps2000).millidegrees_per_s[0], 70_000);
-    assert_eq!([Range::Dps250, Range::Dps500, Range::Dps2000].map(Range::ctrl_reg4), [0x00, 0x10, 0x20]);
+    assert_eq!(
+        AngularRate::from_raw([1000, 0, 0], Range::Dps250).millidegrees_per_s[0],
+        8_750
+    );
+    assert_eq!(
+        AngularRate::from_raw([1000, 0, 0], Range::Dps2000).millidegrees_per_s[0],
+        70_000
+    );
+    assert_eq!(
+        [Range::Dps250, Range::Dps500, Range::Dps2000].map(Range::ctrl_reg4),
+        [0x00, 0x10, 0x20]
+    );
 }
 
 #[test]
@@ -160,7 +174,12 @@ fn accel_init_writes_the_original_settings_at_8g() {
 #[test]
 fn accel_at_4g_writes_the_1x_ctrl4() {
     let config = [0x27, 0x00, 0x82, 0x10, 0x00];
-    let script = [read_tx(0x8F, &[0x32]), write_tx(0x60, &config), read_tx(0xE0, &config)].concat();
+    let script = [
+        read_tx(0x8F, &[0x32]),
+        write_tx(0x60, &config),
+        read_tx(0xE0, &config),
+    ]
+    .concat();
     let mut spi = SpiMock::new(&script);
     let mut accel = Lis331dlh::with_range(spi.clone(), lis331dlh::Range::G4);
     accel.init().unwrap();
@@ -171,7 +190,12 @@ fn accel_at_4g_writes_the_1x_ctrl4() {
 fn accel_ignores_the_self_clearing_boot_bit_on_read_back() {
     let mut readback = ACCEL_CONFIG;
     readback[1] = 0x80; // BOOT still showing: not a mismatch
-    let script = [read_tx(0x8F, &[0x32]), write_tx(0x60, &ACCEL_CONFIG), read_tx(0xE0, &readback)].concat();
+    let script = [
+        read_tx(0x8F, &[0x32]),
+        write_tx(0x60, &ACCEL_CONFIG),
+        read_tx(0xE0, &readback),
+    ]
+    .concat();
     let mut spi = SpiMock::new(&script);
     Lis331dlh::new(spi.clone()).init().unwrap();
     spi.done();
@@ -195,7 +219,12 @@ fn accel_rejects_a_wrong_identity() {
 fn accel_reports_a_range_mismatch() {
     let mut readback = ACCEL_CONFIG;
     readback[3] = 0x10;
-    let script = [read_tx(0x8F, &[0x32]), write_tx(0x60, &ACCEL_CONFIG), read_tx(0xE0, &readback)].concat();
+    let script = [
+        read_tx(0x8F, &[0x32]),
+        write_tx(0x60, &ACCEL_CONFIG),
+        read_tx(0xE0, &readback),
+    ]
+    .concat();
     let mut spi = SpiMock::new(&script);
     assert_eq!(
         Lis331dlh::new(spi.clone()).init(),

@@ -115,10 +115,15 @@ impl<I2C: I2c> FloorSensors<I2C> {
     fn with_sensor<T>(
         &mut self,
         sensor: FloorSensor,
-        f: impl FnOnce(&mut Vcnl4020<super::pca9544a::MuxedBus<'_, I2C>>) -> Result<T, Error<I2C::Error>>,
+        f: impl FnOnce(
+            &mut Vcnl4020<super::pca9544a::MuxedBus<'_, I2C>>,
+        ) -> Result<T, Error<I2C::Error>>,
     ) -> Result<T, GroupError<I2C::Error>> {
         let index = sensor as u8;
-        let tag = |error| GroupError { sensor: index, error };
+        let tag = |error| GroupError {
+            sensor: index,
+            error,
+        };
         let bus = self.mux.select(sensor.channel()).map_err(tag)?;
         f(&mut Vcnl4020::new(bus)).map_err(tag)
     }

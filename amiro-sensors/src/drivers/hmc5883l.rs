@@ -162,10 +162,13 @@ impl<I2C: I2c> Hmc5883l<I2C> {
             self.i2c.write(ADDRESS, &[register, value])?;
         }
         let mut readback = [0u8; 3];
-        self.i2c.write_read(ADDRESS, &[reg::CONFIG_A], &mut readback)?;
+        self.i2c
+            .write_read(ADDRESS, &[reg::CONFIG_A], &mut readback)?;
         // CRA bit 7 must stay clear; CRB bits 4..0 and MODE bits 6..2 read back as zero.
         let writable = [0x7F, 0xE0, 0x83];
-        for (((register, written), read), mask) in (reg::CONFIG_A..).zip(config).zip(readback).zip(writable) {
+        for (((register, written), read), mask) in
+            (reg::CONFIG_A..).zip(config).zip(readback).zip(writable)
+        {
             check_register(register, written, read, mask)?;
         }
         Ok(())
@@ -174,7 +177,8 @@ impl<I2C: I2c> Hmc5883l<I2C> {
     /// Reads the three identification registers and compares them with "H43".
     pub fn check_identity(&mut self) -> Result<(), Error<I2C::Error>> {
         let mut id = [0u8; 3];
-        self.i2c.write_read(ADDRESS, &[reg::IDENTIFICATION_A], &mut id)?;
+        self.i2c
+            .write_read(ADDRESS, &[reg::IDENTIFICATION_A], &mut id)?;
         if id == IDENTITY {
             Ok(())
         } else {

@@ -157,7 +157,13 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
 
     /// The five control register values [`init`](Self::init) writes.
     pub const fn control_registers(&self) -> [u8; 5] {
-        [CTRL_REG1_RUN, 0x00, CTRL_REG3_DRDY_INT2, self.range.ctrl_reg4(), 0x00]
+        [
+            CTRL_REG1_RUN,
+            0x00,
+            CTRL_REG3_DRDY_INT2,
+            self.range.ctrl_reg4(),
+            0x00,
+        ]
     }
 
     /// Reads the six output bytes in one burst: raw X, Y, Z digits.

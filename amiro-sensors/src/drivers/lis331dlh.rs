@@ -86,7 +86,11 @@ impl Acceleration {
         let s = range.micro_g_per_digit();
         // Arithmetic shift keeps the sign; the four bits below the 12-bit result carry nothing.
         Self {
-            micro_g: [(raw[0] >> 4) as i32 * s, (raw[1] >> 4) as i32 * s, (raw[2] >> 4) as i32 * s],
+            micro_g: [
+                (raw[0] >> 4) as i32 * s,
+                (raw[1] >> 4) as i32 * s,
+                (raw[2] >> 4) as i32 * s,
+            ],
         }
     }
 
@@ -133,7 +137,11 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
         st_spi::read(&mut self.spi, reg::CTRL_REG1, &mut readback)?;
         for ((register, written), read) in (reg::CTRL_REG1..).zip(config).zip(readback) {
             // CTRL_REG2 bit 7 (BOOT) clears itself; every other bit reads back as written.
-            let writable = if register == reg::CTRL_REG2 { 0x7F } else { 0xFF };
+            let writable = if register == reg::CTRL_REG2 {
+                0x7F
+            } else {
+                0xFF
+            };
             check_register(register, written, read, writable)?;
         }
         Ok(())
@@ -155,7 +163,13 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
 
     /// The five control register values [`init`](Self::init) writes.
     pub const fn control_registers(&self) -> [u8; 5] {
-        [CTRL_REG1_RUN, 0x00, CTRL_REG3_DRDY_INT1, self.range.ctrl_reg4(), 0x00]
+        [
+            CTRL_REG1_RUN,
+            0x00,
+            CTRL_REG3_DRDY_INT1,
+            self.range.ctrl_reg4(),
+            0x00,
+        ]
     }
 
     /// Reads the six output bytes in one burst: raw 16-bit X, Y, Z.

@@ -37,7 +37,7 @@ pub enum Error<E> {
     Bus(E),
     /// The identity register(s) did not hold the part's identity: wrong part, wrong address, or
     /// a dead bus reading all ones or all zeros. `expected` and `found` are the identity bytes
-    /// packed big-endian (e.g. `0x48_34_33` for the HMC5883L's "H43").
+    /// packed big-endian (e.g. `0x48_3433` for the HMC5883L's "H43").
     WrongIdentity {
         /// Identity the datasheet gives.
         expected: u32,
@@ -102,7 +102,10 @@ impl<E: fmt::Debug> fmt::Display for Error<E> {
         match self {
             Error::Bus(e) => write!(f, "bus error: {e:?}"),
             Error::WrongIdentity { expected, found } => {
-                write!(f, "wrong device identity: expected {expected:#x}, found {found:#x}")
+                write!(
+                    f,
+                    "wrong device identity: expected {expected:#x}, found {found:#x}"
+                )
             }
             Error::ConfigMismatch {
                 register,
@@ -144,7 +147,12 @@ impl Axis {
 }
 
 /// Compares a read-back register with what was written, on the bits the part lets us write.
-pub(crate) fn check_register<E>(register: u8, written: u8, read: u8, writable: u8) -> Result<(), Error<E>> {
+pub(crate) fn check_register<E>(
+    register: u8,
+    written: u8,
+    read: u8,
+    writable: u8,
+) -> Result<(), Error<E>> {
     if written & writable == read & writable {
         Ok(())
     } else {

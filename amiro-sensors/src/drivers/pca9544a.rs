@@ -162,7 +162,11 @@ impl<I2C: I2c> ErrorType for MuxedBus<'_, I2C> {
 }
 
 impl<I2C: I2c> I2c for MuxedBus<'_, I2C> {
-    fn transaction(&mut self, address: u8, operations: &mut [Operation<'_>]) -> Result<(), Self::Error> {
+    fn transaction(
+        &mut self,
+        address: u8,
+        operations: &mut [Operation<'_>],
+    ) -> Result<(), Self::Error> {
         self.mux.i2c.transaction(address, operations)
     }
 
@@ -174,7 +178,12 @@ impl<I2C: I2c> I2c for MuxedBus<'_, I2C> {
         self.mux.i2c.write(address, write)
     }
 
-    fn write_read(&mut self, address: u8, write: &[u8], read: &mut [u8]) -> Result<(), Self::Error> {
+    fn write_read(
+        &mut self,
+        address: u8,
+        write: &[u8],
+        read: &mut [u8],
+    ) -> Result<(), Self::Error> {
         self.mux.i2c.write_read(address, write, read)
     }
 }

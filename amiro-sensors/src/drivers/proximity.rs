@@ -50,14 +50,22 @@ impl ProximityCalibration {
     /// A calibration from two measurements: `offset` counts with nothing in front, and
     /// `counts_at_reference` with the reference object `reference_mm` away. `None` if the reference
     /// reading is not above the offset (the object was not seen) or `reference_mm` is zero.
-    pub const fn from_reference(offset: u16, counts_at_reference: u16, reference_mm: u16) -> Option<Self> {
+    pub const fn from_reference(
+        offset: u16,
+        counts_at_reference: u16,
+        reference_mm: u16,
+    ) -> Option<Self> {
         if counts_at_reference <= offset || reference_mm == 0 {
             return None;
         }
         let reflected = (counts_at_reference - offset) as u64;
         let mm = reference_mm as u64;
         let k = reflected * mm * mm;
-        let k_counts_mm2 = if k > u32::MAX as u64 { u32::MAX } else { k as u32 };
+        let k_counts_mm2 = if k > u32::MAX as u64 {
+            u32::MAX
+        } else {
+            k as u32
+        };
         Some(Self {
             offset,
             k_counts_mm2,

@@ -77,7 +77,11 @@ impl<I1: I2c, I2: I2c> ProximityRing<I1, I2> {
     }
 
     /// Replaces sensor `index`'s calibration.
-    pub fn set_calibration(&mut self, index: usize, calibration: ProximityCalibration) -> Result<(), Error<ErrorKind>> {
+    pub fn set_calibration(
+        &mut self,
+        index: usize,
+        calibration: ProximityCalibration,
+    ) -> Result<(), Error<ErrorKind>> {
         match self.calibration.get_mut(index) {
             Some(slot) => {
                 *slot = calibration;
@@ -108,7 +112,11 @@ impl<I1: I2c, I2: I2c> ProximityRing<I1, I2> {
     pub fn read_counts(&mut self) -> Result<[u16; RING_SENSORS], GroupError<ErrorKind>> {
         let mut counts = [0u16; RING_SENSORS];
         for (index, out) in counts.iter_mut().enumerate() {
-            *out = self.with_sensor(index, |vcnl| vcnl.read_proximity(), |vcnl| vcnl.read_proximity())?;
+            *out = self.with_sensor(
+                index,
+                |vcnl| vcnl.read_proximity(),
+                |vcnl| vcnl.read_proximity(),
+            )?;
         }
         Ok(counts)
     }
@@ -164,11 +172,17 @@ impl<I1: I2c, I2: I2c> ProximityRing<I1, I2> {
         };
         match bus {
             RingBus::I2c1 => {
-                let muxed = self.mux1.select(channel).map_err(|e| tag(e.map_bus(|b| b.kind())))?;
+                let muxed = self
+                    .mux1
+                    .select(channel)
+                    .map_err(|e| tag(e.map_bus(|b| b.kind())))?;
                 on1(&mut Vcnl4020::new(muxed)).map_err(|e| tag(e.map_bus(|b| b.kind())))
             }
             RingBus::I2c2 => {
-                let muxed = self.mux2.select(channel).map_err(|e| tag(e.map_bus(|b| b.kind())))?;
+                let muxed = self
+                    .mux2
+                    .select(channel)
+                    .map_err(|e| tag(e.map_bus(|b| b.kind())))?;
                 on2(&mut Vcnl4020::new(muxed)).map_err(|e| tag(e.map_bus(|b| b.kind())))
             }
         }

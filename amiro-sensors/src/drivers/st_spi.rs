@@ -26,7 +26,11 @@ pub(crate) const fn command(register: u8, read: bool, len: usize) -> u8 {
 }
 
 /// Reads `buffer.len()` consecutive registers starting at `register`.
-pub(crate) fn read<S: SpiDevice>(spi: &mut S, register: u8, buffer: &mut [u8]) -> Result<(), S::Error> {
+pub(crate) fn read<S: SpiDevice>(
+    spi: &mut S,
+    register: u8,
+    buffer: &mut [u8],
+) -> Result<(), S::Error> {
     let cmd = [command(register, true, buffer.len())];
     spi.transaction(&mut [Operation::Write(&cmd), Operation::Read(buffer)])
 }

@@ -157,7 +157,9 @@ impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
 
     /// One accelerometer reading in the finer unit (micro-g).
     pub fn read_accelerometer(&mut self) -> Result<Acceleration, SampleError> {
-        self.accelerometer.read().map_err(spi_error(Device::Accelerometer))
+        self.accelerometer
+            .read()
+            .map_err(spi_error(Device::Accelerometer))
     }
 }
 
@@ -167,14 +169,22 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
     }
 
     fn init(&mut self) -> Result<(), SampleError> {
-        self.gyroscope.init().map_err(spi_error(Device::Gyroscope))?;
-        self.accelerometer.init().map_err(spi_error(Device::Accelerometer))
+        self.gyroscope
+            .init()
+            .map_err(spi_error(Device::Gyroscope))?;
+        self.accelerometer
+            .init()
+            .map_err(spi_error(Device::Accelerometer))
     }
 
     fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
         match topic {
-            Topic::Gyroscope => Ok(one(SensorData::Gyroscope(self.read_gyroscope()?.degrees_per_s()))),
-            Topic::Accelerometer => Ok(one(SensorData::Accelerometer(self.read_accelerometer()?.milli_g()))),
+            Topic::Gyroscope => Ok(one(SensorData::Gyroscope(
+                self.read_gyroscope()?.degrees_per_s(),
+            ))),
+            Topic::Accelerometer => Ok(one(SensorData::Accelerometer(
+                self.read_accelerometer()?.milli_g(),
+            ))),
             other => Err(SampleError::NotServed(other)),
         }
     }
@@ -251,12 +261,18 @@ impl<I2C: I2c> Compass<I2C> {
 
 impl<I2C: I2c> SensorGroup for Compass<I2C> {
     fn topics(&self) -> &'static [Topic] {
-        &[Topic::MagnetometerX, Topic::MagnetometerY, Topic::MagnetometerZ]
+        &[
+            Topic::MagnetometerX,
+            Topic::MagnetometerY,
+            Topic::MagnetometerZ,
+        ]
     }
 
     fn init(&mut self) -> Result<(), SampleError> {
         self.last = None;
-        self.magnetometer.init().map_err(i2c_error(Device::Magnetometer))
+        self.magnetometer
+            .init()
+            .map_err(i2c_error(Device::Magnetometer))
     }
 
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
@@ -353,7 +369,9 @@ impl<G: SpiDevice, A: SpiDevice, M: I2c, F: I2c> SensorGroup for DiWheelDriveSen
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
         match topic {
             Topic::Gyroscope | Topic::Accelerometer => self.inertial.sample(topic, now_us),
-            Topic::MagnetometerX | Topic::MagnetometerY | Topic::MagnetometerZ => self.compass.sample(topic, now_us),
+            Topic::MagnetometerX | Topic::MagnetometerY | Topic::MagnetometerZ => {
+                self.compass.sample(topic, now_us)
+            }
             Topic::FloorProximity => SensorGroup::sample(&mut self.floor, topic, now_us),
             other => Err(SampleError::NotServed(other)),
         }
@@ -380,7 +398,12 @@ impl<I1: I2c, I2: I2c, D: DelayNs> PowerManagementSensors<I1, I2, D> {
     }
 
     /// Both batteries' gauge readings, front then rear.
-    pub fn read_batteries(&mut self) -> (Result<BatteryStatus, SampleError>, Result<BatteryStatus, SampleError>) {
+    pub fn read_batteries(
+        &mut self,
+    ) -> (
+        Result<BatteryStatus, SampleError>,
+        Result<BatteryStatus, SampleError>,
+    ) {
         let front = Bq27500::new(self.ring.i2c2_mut(), &mut self.delay)
             .read_status()
             .map_err(i2c_error(Device::FuelGauge(Battery::Front)));
@@ -433,10 +456,9 @@ impl<I1: I2c, I2: I2c, D: DelayNs> SensorGroup for PowerManagementSensors<I1, I2
     fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
         match topic {
             Topic::ProximityRing => {
-                let mm = self
-                    .ring
-                    .read_mm()
-                    .map_err(|e| i2c_error::<i2c::ErrorKind>(Device::RingSensor(e.sensor))(e.error))?;
+                let mm = self.ring.read_mm().map_err(|e| {
+                    i2c_error::<i2c::ErrorKind>(Device::RingSensor(e.sensor))(e.error)
+                })?;
                 let mut samples = Samples::new();
                 for (sensor, mm) in (0u8..).zip(mm).take(RING_SENSORS) {
                     let _ = samples.push(SensorData::ProximityRing { sensor, mm });

@@ -75,7 +75,10 @@ pub const fn led_outputs(led: u8) -> Option<[u8; 3]> {
 pub fn pack_frame(channels: &[u16; CHANNELS]) -> [u8; FRAME_BYTES] {
     let mut frame = [0u8; FRAME_BYTES];
     // Channel pairs from the top: (OUT23, OUT22), (OUT21, OUT20), ... each fills three bytes.
-    for (bytes, pair) in frame.chunks_exact_mut(3).zip(channels.chunks_exact(2).rev()) {
+    for (bytes, pair) in frame
+        .chunks_exact_mut(3)
+        .zip(channels.chunks_exact(2).rev())
+    {
         if let ([b0, b1, b2], [low, high]) = (bytes, pair) {
             let high = high & MAX_VALUE;
             let low = low & MAX_VALUE;
@@ -155,7 +158,13 @@ impl<SPI: SpiDevice> LightRing<SPI> {
     }
 
     /// Sets protocol LED `led` (1..=8) to an 8-bit colour (gamma-corrected) for the next flush.
-    pub fn set_led(&mut self, led: u8, red: u8, green: u8, blue: u8) -> Result<(), Error<SPI::Error>> {
+    pub fn set_led(
+        &mut self,
+        led: u8,
+        red: u8,
+        green: u8,
+        blue: u8,
+    ) -> Result<(), Error<SPI::Error>> {
         let Some(outputs) = led_outputs(led) else {
             return Err(Error::OutOfRange {
                 value: led.into(),

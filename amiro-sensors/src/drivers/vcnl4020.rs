@@ -166,7 +166,12 @@ impl<I2C: I2c> Vcnl4020<I2C> {
         Ok(u16::from_be_bytes(value))
     }
 
-    fn write_checked(&mut self, register: u8, value: u8, writable: u8) -> Result<(), Error<I2C::Error>> {
+    fn write_checked(
+        &mut self,
+        register: u8,
+        value: u8,
+        writable: u8,
+    ) -> Result<(), Error<I2C::Error>> {
         self.i2c.write(ADDRESS, &[register, value])?;
         let read = self.read_register(register)?;
         check_register(register, value, read, writable)

@@ -1,0 +1,284 @@
+//! Register-level simulators of the AMiRo's devices, and a simulated wheel plant: what the real
+//! drivers talk to on the host and in the firmware's QEMU build, where there is no hardware.
+//!
+//! Each simulator implements the bus trait its part sits on (`SpiDevice` for the SPI parts, `I2c`
+//! through [`SimBus`] for the I2C parts), answers the identity registers, stores configuration
+//! writes with the part's writable-bit rules (so the drivers' read-back checks mean something), and
+//! produces a slow, deterministic pattern computed from a per-device sample counter — no clock, no
+//! randomness, the same bytes on every run. Values are generated in physical units and encoded
+//! with whatever range the driver configured, so a driver that set the wrong range reads the
+//! wrong number. All state is a few bytes per device; nothing allocates.
+//!
+//! | simulator | part | bus |
+//! |---|---|---|
+//! | [`SimGyroscope`] | L3G4200D | `SpiDevice` |
+//! | [`SimAccelerometer`] | LIS331DLH | `SpiDevice` |
+//! | [`SimCompassBus`] | HMC5883L at 0x1E | `I2c` |
+//! | [`SimFloorBus`] | PCA9544A at 0x77 + 4 × VCNL4020 | `I2c` |
+//! | [`SimPowerBus`] | PCA9544A + 4 × VCNL4020 + bq27500 at 0x55 | `I2c` |
+//! | [`SimLedDriver`] | TLC5947 | `SpiDevice` |
+//! | [`WheelPlant`] | motors, gears, encoders | [`crate::motion::MotorPwm`], counts |
+
+use core::convert::Infallible;
+
+use embedded_hal::delay::DelayNs;
+use embedded_hal::i2c::{self, ErrorType, I2c, Operation};
+
+mod compass;
+mod fuel_gauge;
+mod leds;
+mod motion_sensors;
+mod plant;
+mod proximity;
+
+pub use compass::SimHmc5883l;
+pub use fuel_gauge::SimBq27500;
+pub use leds::SimLedDriver;
+pub use motion_sensors::{SimAccelerometer, SimGyroscope};
+pub use plant::{MotorModel, SimWheel, WheelPlant};
+pub use proximity::{SimMuxedProximity, SimVcnl4020};
+
+/// The DiWheelDrive's I2C1 with its HMC5883L.
+pub type SimCompassBus = SimBus<SimHmc5883l>;
+/// The DiWheelDrive's I2C2: the mux and the four floor sensors.
+pub type SimFloorBus = SimBus<SimMuxedProximity>;
+/// One of the PowerManagement's buses: a mux with four ring sensors, and a fuel gauge.
+pub type SimPowerBus = SimBus<(SimMuxedProximity, SimBq27500)>;
+
+/// A simulated I2C device (or several, see the tuple implementation): byte-level callbacks in
+/// the order the bus delivers them.
+pub trait I2cTarget {
+    /// Whether something answers `address` right now (a device behind a disabled mux channel
+    /// does not).
+    fn acknowledges(&self, address: u8) -> bool;
+    /// A START or repeated START for `address`, writing (`read == false`) or reading.
+    fn start(&mut self, address: u8, read: bool);
+    /// A byte written by the host.
+    fn write_byte(&mut self, address: u8, byte: u8);
+    /// A byte read by the host.
+    fn read_byte(&mut self, address: u8) -> u8;
+}
+
+/// Two targets on one bus: `A` is asked first.
+impl<A: I2cTarget, B: I2cTarget> I2cTarget for (A, B) {
+    fn acknowledges(&self, address: u8) -> bool {
+        self.0.acknowledges(address) || self.1.acknowledges(address)
+    }
+
+    fn start(&mut self, address: u8, read: bool) {
+        if self.0.acknowledges(address) {
+            self.0.start(address, read);
+        } else {
+            self.1.start(address, read);
+        }
+    }
+
+    fn write_byte(&mut self, address: u8, byte: u8) {
+        if self.0.acknowledges(address) {
+            self.0.write_byte(address, byte);
+        } else {
+            self.1.write_byte(address, byte);
+        }
+    }
+
+    fn read_byte(&mut self, address: u8) -> u8 {
+        if self.0.acknowledges(address) {
+            self.0.read_byte(address)
+        } else {
+            self.1.read_byte(address)
+        }
+    }
+}
+
+/// The only thing that goes wrong on a simulated bus: nobody acknowledged the address.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NoAcknowledge {
+    /// The address nobody answered.
+    pub address: u8,
+}
+
+impl i2c::Error for NoAcknowledge {
+    fn kind(&self) -> i2c::ErrorKind {
+        i2c::ErrorKind::NoAcknowledge(i2c::NoAcknowledgeSource::Address)
+    }
+}
+
+/// An I2C bus with simulated devices on it.
+#[derive(Debug, Clone, Default)]
+pub struct SimBus<T> {
+    /// The device(s) on the bus, for inspection.
+    pub target: T,
+}
+
+impl<T> SimBus<T> {
+    /// A bus with `target` on it.
+    pub const fn with(target: T) -> Self {
+        Self { target }
+    }
+}
+
+impl SimCompassBus {
+    /// The DiWheelDrive's I2C1: an HMC5883L at power-on.
+    pub const fn new() -> Self {
+        Self::with(SimHmc5883l::new())
+    }
+}
+
+impl SimFloorBus {
+    /// The DiWheelDrive's I2C2: the mux and four floor sensors (indices 0..=3) at power-on.
+    pub const fn new() -> Self {
+        Self::with(SimMuxedProximity::new(0))
+    }
+}
+
+impl SimPowerBus {
+    /// One PowerManagement bus: ring sensors numbered `first_sensor..first_sensor + 4` (so the two
+    /// buses give different patterns) and a gauge that is charging or not.
+    pub const fn new(first_sensor: u8, charging: bool) -> Self {
+        Self::with((
+            SimMuxedProximity::new(first_sensor),
+            SimBq27500::new(charging),
+        ))
+    }
+}
+
+impl<T: I2cTarget> ErrorType for SimBus<T> {
+    type Error = NoAcknowledge;
+}
+
+impl<T: I2cTarget> I2c for SimBus<T> {
+    fn transaction(
+        &mut self,
+        address: u8,
+        operations: &mut [Operation<'_>],
+    ) -> Result<(), Self::Error> {
+        if !self.target.acknowledges(address) {
+            return Err(NoAcknowledge { address });
+        }
+        // Adjacent operations of the same direction are one transfer; a change of direction is a
+        // repeated START (embedded-hal's transaction contract).
+        let mut direction = None;
+        for operation in operations {
+            let read = matches!(operation, Operation::Read(_));
+            if direction != Some(read) {
+                self.target.start(address, read);
+                direction = Some(read);
+            }
+            match operation {
+                Operation::Read(buffer) => {
+                    for byte in buffer.iter_mut() {
+                        *byte = self.target.read_byte(address);
+                    }
+                }
+                Operation::Write(bytes) => {
+                    for &byte in bytes.iter() {
+                        self.target.write_byte(address, byte);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A delay that returns at once: the simulated devices need no time between transfers.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoDelay;
+
+impl DelayNs for NoDelay {
+    fn delay_ns(&mut self, _ns: u32) {}
+}
+
+/// The SPI protocol of ST's motion sensors, for the simulators: a command byte (read bit,
+/// auto-increment bit, 6-bit address) then data, per chip-select assertion.
+pub(crate) trait StRegisters {
+    /// The host reads `register`.
+    fn read_register(&mut self, register: u8) -> u8;
+    /// The host writes `value` to `register`.
+    fn write_register(&mut self, register: u8, value: u8);
+}
+
+/// Where an ST SPI transaction is: before the command byte, or reading/writing at an address.
+#[derive(Clone, Copy)]
+struct StSpiState {
+    command: Option<(bool, bool, u8)>,
+}
+
+impl StSpiState {
+    fn exchange<R: StRegisters>(&mut self, device: &mut R, mosi: u8) -> u8 {
+        match self.command {
+            None => {
+                self.command = Some((mosi & 0x80 != 0, mosi & 0x40 != 0, mosi & 0x3F));
+                0xFF
+            }
+            Some((read, increment, address)) => {
+                let miso = if read {
+                    device.read_register(address)
+                } else {
+                    device.write_register(address, mosi);
+                    0xFF
+                };
+                if increment {
+                    self.command = Some((read, increment, (address + 1) & 0x3F));
+                }
+                miso
+            }
+        }
+    }
+}
+
+/// Runs one `SpiDevice` transaction against ST-style registers.
+pub(crate) fn st_spi_transaction<R: StRegisters>(
+    device: &mut R,
+    operations: &mut [embedded_hal::spi::Operation<'_, u8>],
+) -> Result<(), Infallible> {
+    use embedded_hal::spi::Operation as Op;
+    let mut state = StSpiState { command: None };
+    for operation in operations {
+        match operation {
+            Op::Read(buffer) => {
+                for byte in buffer.iter_mut() {
+                    *byte = state.exchange(device, 0x00);
+                }
+            }
+            Op::Write(bytes) => {
+                for &byte in bytes.iter() {
+                    state.exchange(device, byte);
+                }
+            }
+            Op::Transfer(read, write) => {
+                for i in 0..read.len().max(write.len()) {
+                    let miso = state.exchange(device, write.get(i).copied().unwrap_or(0x00));
+                    if let Some(slot) = read.get_mut(i) {
+                        *slot = miso;
+                    }
+                }
+            }
+            Op::TransferInPlace(buffer) => {
+                for byte in buffer.iter_mut() {
+                    *byte = state.exchange(device, *byte);
+                }
+            }
+            Op::DelayNs(_) => {}
+        }
+    }
+    Ok(())
+}
+
+/// A triangle wave through 0 → +amplitude → 0 → −amplitude → 0 over `period` samples.
+pub(crate) const fn triangle(sample: u32, period: u32, amplitude: i32) -> i32 {
+    if period == 0 {
+        return 0;
+    }
+    let p = (sample % period) as i64 * 4;
+    let period = period as i64;
+    let a = amplitude as i64;
+    let value = if p < period {
+        a * p / period
+    } else if p < 3 * period {
+        a * (2 * period - p) / period
+    } else {
+        a * (p - 4 * period) / period
+    };
+    value as i32
+}
