@@ -435,7 +435,7 @@ fn bad_commands() -> Vec<(u16, Vec<u8>, DecodeError)> {
         (mag_x, vec![1, 0, 0, 2], DecodeError::ZeroSampleTime),
         (
             mag_x,
-            vec![1, 0xA7, 0x10, 1],
+            vec![1, 0xC7, 0x10, 1],
             DecodeError::PeriodTooLong {
                 micros: 4_295_000_000,
             },
