@@ -13,8 +13,8 @@ use embedded_hal_bus::util::AtomicCell;
 use stm32f1xx_hal::afio::AfioExt;
 use stm32f1xx_hal::can::Can;
 use stm32f1xx_hal::gpio::{
-    Edge, ExtiPin, GpioExt, Input, OpenDrain, Output, PinState, PullUp, PushPull, PA1, PB2, PC1, PC13, PC14,
-    PC8,
+    Edge, ExtiPin, GpioExt, Input, OpenDrain, Output, PinState, PullUp, PushPull, PA1, PB2, PC1,
+    PC13, PC14, PC8,
 };
 use stm32f1xx_hal::i2c::{BlockingI2c, DutyCycle, Mode as I2cMode};
 use stm32f1xx_hal::pac::{self, CAN, I2C1, I2C2, SPI1};
@@ -102,7 +102,11 @@ pub fn init(
     clock_tree_to_reset_state(&dp.RCC);
     let mut flash = dp.FLASH.constrain();
     let mut rcc = dp.RCC.freeze(
-        rcc::Config::hse(8.MHz()).sysclk(72.MHz()).hclk(72.MHz()).pclk1(36.MHz()).pclk2(36.MHz()),
+        rcc::Config::hse(8.MHz())
+            .sysclk(72.MHz())
+            .hclk(72.MHz())
+            .pclk1(36.MHz())
+            .pclk2(36.MHz()),
         &mut flash.acr,
     );
     // The blocking I2C driver times out on the DWT cycle counter.
@@ -115,20 +119,27 @@ pub fn init(
     let mut gpioc = dp.GPIOC.split(&mut rcc);
 
     // System signals first: SYS_SYNC_N stays low until `release_sync`, as AMiRo-BLT left it.
-    let sys_sync = gpioc.pc1.into_open_drain_output_with_state(&mut gpioc.crl, PinState::Low);
+    let sys_sync = gpioc
+        .pc1
+        .into_open_drain_output_with_state(&mut gpioc.crl, PinState::Low);
     let mut sys_pd = gpioc.pc8.into_pull_up_input(&mut gpioc.crh);
     sys_pd.make_interrupt_source(&mut afio);
     let mut exti = dp.EXTI;
     sys_pd.trigger_on_edge(&mut exti, Edge::Falling);
     sys_pd.enable_interrupt(&mut exti);
-    let led = gpioa.pa1.into_open_drain_output_with_state(&mut gpioa.crl, PinState::Low);
+    let led = gpioa
+        .pa1
+        .into_open_drain_output_with_state(&mut gpioa.crl, PinState::Low);
 
     // Motor power stays off until a motor command arrives.
-    let power_en = gpiob.pb2.into_push_pull_output_with_state(&mut gpiob.crl, PinState::Low);
+    let power_en = gpiob
+        .pb2
+        .into_push_pull_output_with_state(&mut gpiob.crl, PinState::Low);
 
     // JTAG off (its pins carry motor PWM), SWD kept for probe-rs; TIM2 partial remap 1, TIM3 full remap.
     let (pa15, pb3, _pb4) = afio.mapr.disable_jtag(gpioa.pa15, gpiob.pb3, gpiob.pb4);
-    afio.mapr.modify_mapr(|_, w| unsafe { w.tim2_remap().bits(0b01).tim3_remap().bits(0b11) });
+    afio.mapr
+        .modify_mapr(|_, w| unsafe { w.tim2_remap().bits(0b01).tim3_remap().bits(0b11) });
     let _pwm_pins = (
         pa15.into_alternate_push_pull(&mut gpioa.crh),
         pb3.into_alternate_push_pull(&mut gpiob.crl),
@@ -145,11 +156,18 @@ pub fn init(
     let encoders = Encoders::new(dp.TIM3, dp.TIM4);
 
     // SPI1, mode 0 at 9 MHz (PCLK2 / 4), chip selects idle high.
-    let gyro_cs = gpioc.pc14.into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
-    let accel_cs = gpioc.pc13.into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+    let gyro_cs = gpioc
+        .pc14
+        .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+    let accel_cs = gpioc
+        .pc13
+        .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
     let spi = dp.SPI1.spi(
         (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
-        SpiMode { polarity: Polarity::IdleLow, phase: Phase::CaptureOnFirstTransition },
+        SpiMode {
+            polarity: Polarity::IdleLow,
+            phase: Phase::CaptureOnFirstTransition,
+        },
         9.MHz(),
         &mut rcc,
     );
@@ -170,12 +188,24 @@ pub fn init(
         1000,
         1000,
     );
-    let floor_i2c = BlockingI2c::new(dp.I2C2, (gpiob.pb10, gpiob.pb11), I2cMode::fast(400.kHz(), DutyCycle::Ratio2to1), &mut rcc, 1000, 3, 1000, 1000);
+    let floor_i2c = BlockingI2c::new(
+        dp.I2C2,
+        (gpiob.pb10, gpiob.pb11),
+        I2cMode::fast(400.kHz(), DutyCycle::Ratio2to1),
+        &mut rcc,
+        1000,
+        3,
+        1000,
+        1000,
+    );
 
     // CAN1 on PA11/PA12 at 1 Mbit/s. Only command frames (C/S bit 0, standard IDs, data frames)
     // pass the hardware filter; TX mailboxes are served by identifier, as the analysis assumes.
     let can = Can::new(dp.CAN, dp.USB, (gpioa.pa12, gpioa.pa11), &mut rcc);
-    let mut can = bxcan::Can::builder(can).set_bit_timing(CAN_BTR).set_automatic_retransmit(true).leave_disabled();
+    let mut can = bxcan::Can::builder(can)
+        .set_bit_timing(CAN_BTR)
+        .set_automatic_retransmit(true)
+        .leave_disabled();
     {
         let mut filter = Mask32::frames_with_std_id(
             StandardId::new(0).unwrap_or(StandardId::ZERO),
@@ -190,7 +220,11 @@ pub fn init(
     let (can_tx, can_rx, _) = can.split();
 
     let watchdog = IndependentWatchdog::new(dp.IWDG);
-    let signals = SystemSignals { sys_sync, sys_pd, led };
+    let signals = SystemSignals {
+        sys_sync,
+        sys_pd,
+        led,
+    };
     (
         Board {
             can_tx,
@@ -227,12 +261,39 @@ impl Motors {
         tim.psc().write(|w| w.psc().set(0));
         tim.arr().write(|w| w.arr().set(PWM_PERIOD - 1));
         // PWM mode 1 with preload on all four channels.
-        tim.ccmr1_output().write(|w| w.oc1m().pwm_mode1().oc1pe().set_bit().oc2m().pwm_mode1().oc2pe().set_bit());
-        tim.ccmr2_output().write(|w| w.oc3m().pwm_mode1().oc3pe().set_bit().oc4m().pwm_mode1().oc4pe().set_bit());
+        tim.ccmr1_output().write(|w| {
+            w.oc1m()
+                .pwm_mode1()
+                .oc1pe()
+                .set_bit()
+                .oc2m()
+                .pwm_mode1()
+                .oc2pe()
+                .set_bit()
+        });
+        tim.ccmr2_output().write(|w| {
+            w.oc3m()
+                .pwm_mode1()
+                .oc3pe()
+                .set_bit()
+                .oc4m()
+                .pwm_mode1()
+                .oc4pe()
+                .set_bit()
+        });
         for ch in 0..4 {
             tim.ccr(ch).write(|w| w.ccr().set(0));
         }
-        tim.ccer().write(|w| w.cc1e().set_bit().cc2e().set_bit().cc3e().set_bit().cc4e().set_bit());
+        tim.ccer().write(|w| {
+            w.cc1e()
+                .set_bit()
+                .cc2e()
+                .set_bit()
+                .cc3e()
+                .set_bit()
+                .cc4e()
+                .set_bit()
+        });
         tim.cr1().write(|w| w.arpe().set_bit().cen().set_bit());
         Self { tim, power_en }
     }
@@ -294,7 +355,8 @@ impl Encoders {
     fn new(left: pac::TIM3, right: pac::TIM4) -> Self {
         // SAFETY: enabling the timers' clocks is owned by init.
         let rcc = unsafe { &*pac::RCC::ptr() };
-        rcc.apb1enr().modify(|_, w| w.tim3en().set_bit().tim4en().set_bit());
+        rcc.apb1enr()
+            .modify(|_, w| w.tim3en().set_bit().tim4en().set_bit());
         // Left: both inputs direct, TI1 polarity inverted so forward counts up on both wheels
         // (the original inverts channel 1 of the quadrature pair).
         left.ccmr1_input().write(|w| w.cc1s().ti1().cc2s().ti2());
@@ -311,7 +373,10 @@ impl Encoders {
 
     /// The wrapping 16-bit counts (left, right).
     pub fn counts(&self) -> (u16, u16) {
-        (self.left.cnt().read().cnt().bits(), self.right.cnt().read().cnt().bits())
+        (
+            self.left.cnt().read().cnt().bits(),
+            self.right.cnt().read().cnt().bits(),
+        )
     }
 }
 

@@ -23,6 +23,8 @@ impl RxFrame {
 
 /// What happened to a frame handed to the transmit mailboxes.
 #[derive(Debug)]
+// QEMU's virtual mailboxes never fill up.
+#[cfg_attr(feature = "qemu", allow(dead_code))]
 pub enum Transmit {
     /// The frame is in a mailbox.
     Queued,
@@ -55,7 +57,10 @@ mod bxcan_port {
         fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
             let frame: bxcan::Frame = (*frame).into();
             match Tx::transmit(self, &frame) {
-                Ok(status) => match status.dequeued_frame().and_then(|f| amiro_can::Frame::try_from(f).ok()) {
+                Ok(status) => match status
+                    .dequeued_frame()
+                    .and_then(|f| amiro_can::Frame::try_from(f).ok())
+                {
                     Some(displaced) => Transmit::Displaced(displaced),
                     None => Transmit::Queued,
                 },
@@ -72,7 +77,11 @@ mod bxcan_port {
         fn receive(&mut self) -> Option<Result<RxFrame, ()>> {
             match Rx0::receive(self) {
                 Ok(frame) => {
-                    let mut out = RxFrame { id: u16::MAX, len: 0, data: [0; 8] };
+                    let mut out = RxFrame {
+                        id: u16::MAX,
+                        len: 0,
+                        data: [0; 8],
+                    };
                     if let (Id::Standard(id), Some(data)) = (frame.id(), frame.data()) {
                         out.id = id.as_raw();
                         out.len = data.len() as u8;

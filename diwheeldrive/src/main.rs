@@ -11,6 +11,7 @@
 #![no_std]
 #![no_main]
 
+#[cfg(not(feature = "qemu"))]
 mod bootloader;
 mod can;
 mod fault;
@@ -28,14 +29,6 @@ use board as platform;
 mod qemu;
 #[cfg(feature = "qemu")]
 use qemu as platform;
-
-/// NVIC priority bits implemented on the STM32F1.
-const NVIC_PRIO_BITS: u8 = 4;
-
-/// Converts an RTIC logical priority (1 = least urgent) to the NVIC's hardware encoding.
-pub(crate) const fn hw_priority(logical: u8) -> u8 {
-    ((1 << NVIC_PRIO_BITS) - logical) << (8 - NVIC_PRIO_BITS)
-}
 
 /// Depth of the queue between the CAN receive interrupt and command handling.
 pub const RX_QUEUE_LEN: usize = 16;
@@ -116,7 +109,10 @@ mod app {
         let compass = Compass::new(suite::Compass::new(hw.compass_i2c));
         let floor = Floor::new(FloorSensors::new(hw.floor_i2c));
         let mut signals = hw.signals;
-        crate::log!("DiWheelDrive: sensors {}", sensors_summary(&imu, &compass, &floor));
+        crate::log!(
+            "DiWheelDrive: sensors {}",
+            sensors_summary(&imu, &compass, &floor)
+        );
 
         platform::start_monotonic(levels::MONOTONIC);
         publish_urgent::spawn().ok();
@@ -194,11 +190,21 @@ mod app {
                 match CanTx::transmit(port, &frame) {
                     Transmit::Queued => {
                         queue.pop();
-                        telemetry::trace(&TraceEvent::new(mono::now_us(), TraceKind::FrameSent { id: frame.id().raw() }));
+                        telemetry::trace(&TraceEvent::new(
+                            mono::now_us(),
+                            TraceKind::FrameSent {
+                                id: frame.id().raw(),
+                            },
+                        ));
                     }
                     Transmit::Displaced(displaced) => {
                         queue.pop();
-                        telemetry::trace(&TraceEvent::new(mono::now_us(), TraceKind::FrameSent { id: frame.id().raw() }));
+                        telemetry::trace(&TraceEvent::new(
+                            mono::now_us(),
+                            TraceKind::FrameSent {
+                                id: frame.id().raw(),
+                            },
+                        ));
                         let _ = queue.requeue(displaced);
                     }
                     Transmit::Busy => break,
@@ -213,10 +219,15 @@ mod app {
     async fn handle_commands(mut cx: handle_commands::Context) {
         while let Ok(frame) = cx.local.commands.recv().await {
             let now = mono::now_us();
-            let outcome = cx.shared.handler.lock(|h| h.on_frame(now, frame.id, frame.payload()));
+            let outcome = cx
+                .shared
+                .handler
+                .lock(|h| h.on_frame(now, frame.id, frame.payload()));
             publisher::trace_outcome(now, frame.id, &outcome);
             match outcome {
-                Ok(Outcome::Motor { command, .. }) => cx.shared.drive.lock(|d| d.set_target(command, now)),
+                Ok(Outcome::Motor { command, .. }) => {
+                    cx.shared.drive.lock(|d| d.set_target(command, now))
+                }
                 Ok(Outcome::Sensor { wake, .. }) => {
                     // Wake the levels whose schedule changed; each re-reads its next due time.
                     for level in wake.iter() {
@@ -247,28 +258,68 @@ mod app {
     #[task(priority = 4, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_urgent])]
     async fn publish_urgent(cx: publish_urgent::Context) {
         let s = cx.shared;
-        publisher::serve_level(Priority::Urgent, cx.local.wake_urgent, s.handler, s.tx_queue, s.drive, s.imu, s.compass, s.floor).await;
+        publisher::serve_level(
+            Priority::Urgent,
+            cx.local.wake_urgent,
+            s.handler,
+            s.tx_queue,
+            s.drive,
+            s.imu,
+            s.compass,
+            s.floor,
+        )
+        .await;
     }
 
     /// Publisher for topics at CAN priority high.
     #[task(priority = 3, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_high])]
     async fn publish_high(cx: publish_high::Context) {
         let s = cx.shared;
-        publisher::serve_level(Priority::High, cx.local.wake_high, s.handler, s.tx_queue, s.drive, s.imu, s.compass, s.floor).await;
+        publisher::serve_level(
+            Priority::High,
+            cx.local.wake_high,
+            s.handler,
+            s.tx_queue,
+            s.drive,
+            s.imu,
+            s.compass,
+            s.floor,
+        )
+        .await;
     }
 
     /// Publisher for topics at CAN priority medium.
     #[task(priority = 2, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_medium])]
     async fn publish_medium(cx: publish_medium::Context) {
         let s = cx.shared;
-        publisher::serve_level(Priority::Medium, cx.local.wake_medium, s.handler, s.tx_queue, s.drive, s.imu, s.compass, s.floor).await;
+        publisher::serve_level(
+            Priority::Medium,
+            cx.local.wake_medium,
+            s.handler,
+            s.tx_queue,
+            s.drive,
+            s.imu,
+            s.compass,
+            s.floor,
+        )
+        .await;
     }
 
     /// Publisher for topics at CAN priority low.
     #[task(priority = 1, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_low])]
     async fn publish_low(cx: publish_low::Context) {
         let s = cx.shared;
-        publisher::serve_level(Priority::Low, cx.local.wake_low, s.handler, s.tx_queue, s.drive, s.imu, s.compass, s.floor).await;
+        publisher::serve_level(
+            Priority::Low,
+            cx.local.wake_low,
+            s.handler,
+            s.tx_queue,
+            s.drive,
+            s.imu,
+            s.compass,
+            s.floor,
+        )
+        .await;
     }
 
     /// Feeds the independent watchdog — from the least urgent level, and only while motor control
@@ -300,7 +351,12 @@ mod app {
     async fn shutdown_sequence(mut cx: shutdown_sequence::Context) {
         let now = mono::now_us();
         cx.shared.handler.lock(|h| h.stop_all());
-        telemetry::trace(&TraceEvent::new(now, TraceKind::MotorsStopped { reason: amiro_sensors::trace::StopReason::Shutdown }));
+        telemetry::trace(&TraceEvent::new(
+            now,
+            TraceKind::MotorsStopped {
+                reason: amiro_sensors::trace::StopReason::Shutdown,
+            },
+        ));
         // Give the queued frames up to 10 ms to leave, then hand over regardless.
         let deadline = now + 10_000;
         while cx.shared.tx_queue.lock(|q| q.len()) > 0 && mono::now_us() < deadline {

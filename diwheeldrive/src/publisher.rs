@@ -45,7 +45,9 @@ pub struct Liveness {
 impl Liveness {
     /// Nothing has run yet.
     pub const fn new() -> Self {
-        Self { motor_control_ran: false }
+        Self {
+            motor_control_ran: false,
+        }
     }
 
     /// Motor control completed a period.
@@ -74,7 +76,12 @@ pub fn apply_drive(motors: &mut platform::Motors, now: u64, output: &DriveOutput
     motors.power(output.motors_enabled);
     motors.set(output.duty_left.get(), output.duty_right.get());
     if output.deadman_tripped {
-        telemetry::trace(&TraceEvent::new(now, TraceKind::MotorsStopped { reason: StopReason::DeadMan }));
+        telemetry::trace(&TraceEvent::new(
+            now,
+            TraceKind::MotorsStopped {
+                reason: StopReason::DeadMan,
+            },
+        ));
     }
 }
 
@@ -122,10 +129,18 @@ pub async fn serve_level(
                     compass.lock(|d| d.sample(topic, taken))
                 }
                 Topic::FloorProximity => floor.lock(|d| d.sample(topic, taken)),
-                Topic::Odometry | Topic::Velocity => drive.lock(|d| crate::sensors::sample_drive(d, topic)),
+                Topic::Odometry | Topic::Velocity => {
+                    drive.lock(|d| crate::sensors::sample_drive(d, topic))
+                }
                 _ => Samples::new(),
             };
-            telemetry::trace(&TraceEvent::new(taken, TraceKind::SampleTaken { topic, release_us: release.release_us }));
+            telemetry::trace(&TraceEvent::new(
+                taken,
+                TraceKind::SampleTaken {
+                    topic,
+                    release_us: release.release_us,
+                },
+            ));
             for data in samples {
                 let frame = data.encode(release.priority);
                 let outcome = tx_queue.lock(|q| q.push(frame));

@@ -17,10 +17,13 @@ use critical_section::Mutex;
 use heapless::{Deque, String};
 use stm32f1xx_hal::pac::{self, Interrupt};
 
+use amiro_sensors::motion::{Duty, MotorPwm};
+
 use crate::can::{CanRx, CanTx, RxFrame, Transmit};
 
 pub use amiro_sensors::sim::{
-    SimAccelerometer as AccelSpi, SimCompassBus as CompassI2c, SimFloorBus as FloorI2c, SimGyroscope as GyroSpi,
+    SimAccelerometer as AccelSpi, SimCompassBus as CompassI2c, SimFloorBus as FloorI2c,
+    SimGyroscope as GyroSpi,
 };
 
 /// The QEMU build has no SPI bus object: each simulated device is its own `SpiDevice`.
@@ -33,7 +36,8 @@ pub const CORE_CLOCK_HZ: u32 = 120_000_000;
 static RX_FIFO: Mutex<RefCell<Deque<RxFrame, 3>>> = Mutex::new(RefCell::new(Deque::new()));
 static RX_OVERRUN: Mutex<RefCell<bool>> = Mutex::new(RefCell::new(false));
 static SYST: Mutex<RefCell<Option<cortex_m::peripheral::SYST>>> = Mutex::new(RefCell::new(None));
-static PLANT: Mutex<RefCell<Option<amiro_sensors::sim::WheelPlant>>> = Mutex::new(RefCell::new(None));
+static PLANT: Mutex<RefCell<Option<amiro_sensors::sim::WheelPlant>>> =
+    Mutex::new(RefCell::new(None));
 
 /// What `init` hands on to the tasks (same shape as the real board's).
 pub struct Board {
@@ -67,7 +71,9 @@ pub fn init(
 ) -> (Board, cortex_m::peripheral::NVIC) {
     critical_section::with(|cs| {
         SYST.borrow_ref_mut(cs).replace(cp.SYST);
-        PLANT.borrow_ref_mut(cs).replace(amiro_sensors::sim::WheelPlant::new());
+        PLANT
+            .borrow_ref_mut(cs)
+            .replace(amiro_sensors::sim::WheelPlant::new());
     });
     (
         Board {
@@ -100,7 +106,13 @@ impl CanTx for CanTxPort {
     fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
         let mut line: String<64> = String::new();
         let now = crate::mono::now_us();
-        let _ = write!(line, "({}.{:06}) can0 {:03X}#", now / 1_000_000, now % 1_000_000, frame.id().raw());
+        let _ = write!(
+            line,
+            "({}.{:06}) can0 {:03X}#",
+            now / 1_000_000,
+            now % 1_000_000,
+            frame.id().raw()
+        );
         for b in frame.data() {
             let _ = write!(line, "{b:02X}");
         }
@@ -142,7 +154,8 @@ pub async fn replay_stimulus() {
         return;
     }
     let duration = u64::from_le_bytes([
-        header[8], header[9], header[10], header[11], header[12], header[13], header[14], header[15],
+        header[8], header[9], header[10], header[11], header[12], header[13], header[14],
+        header[15],
     ]);
     let mut record = [0u8; RECORD];
     while file.read_exact(&mut record) {
@@ -153,7 +166,11 @@ pub async fn replay_stimulus() {
             break;
         }
         crate::mono::delay_until_us(at).await;
-        let mut frame = RxFrame { id: u16::from_le_bytes([record[8], record[9]]), len: record[10].min(8), data: [0; 8] };
+        let mut frame = RxFrame {
+            id: u16::from_le_bytes([record[8], record[9]]),
+            len: record[10].min(8),
+            data: [0; 8],
+        };
         frame.data.copy_from_slice(&record[12..20]);
         critical_section::with(|cs| {
             let mut fifo = RX_FIFO.borrow_ref_mut(cs);
@@ -164,13 +181,21 @@ pub async fn replay_stimulus() {
         rtic::pend(Interrupt::USB_LP_CAN_RX0);
     }
     crate::mono::delay_until_us(duration).await;
-    hprintln!("# qemu: end of run at {} us; rx dropped {}", duration, crate::publisher::rx_dropped());
+    hprintln!(
+        "# qemu: end of run at {} us; rx dropped {}",
+        duration,
+        crate::publisher::rx_dropped()
+    );
     exit(true);
 }
 
 /// Ends the QEMU run.
 pub fn exit(success: bool) {
-    debug::exit(if success { debug::EXIT_SUCCESS } else { debug::EXIT_FAILURE });
+    debug::exit(if success {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
 }
 
 struct HostFile(usize);
@@ -207,7 +232,10 @@ impl Motors {
     pub fn set(&mut self, left: i16, right: i16) {
         critical_section::with(|cs| {
             if let Some(plant) = PLANT.borrow_ref_mut(cs).as_mut() {
-                plant.set_duty(left, right);
+                plant.set_duty(
+                    Duty::saturating(left.into()),
+                    Duty::saturating(right.into()),
+                );
             }
         });
     }
@@ -227,7 +255,7 @@ pub fn emergency_motors_off() {
     critical_section::with(|cs| {
         if let Some(plant) = PLANT.borrow_ref_mut(cs).as_mut() {
             plant.set_power(false);
-            plant.set_duty(0, 0);
+            plant.set_duty(Duty::ZERO, Duty::ZERO);
         }
     });
 }
@@ -239,7 +267,13 @@ impl Encoders {
     /// Wrapping 16-bit counts (left, right).
     pub fn counts(&self) -> (u16, u16) {
         let now = crate::mono::now_us();
-        critical_section::with(|cs| PLANT.borrow_ref_mut(cs).as_mut().map(|p| p.counts(now)).unwrap_or((0, 0)))
+        critical_section::with(|cs| {
+            PLANT
+                .borrow_ref_mut(cs)
+                .as_mut()
+                .map(|p| p.counts(now))
+                .unwrap_or((0, 0))
+        })
     }
 }
 

@@ -24,7 +24,11 @@ impl<G: SensorGroup> Group<G> {
     /// Checks and configures the group's devices.
     pub fn new(mut group: G) -> Self {
         let ready = group.init().is_ok();
-        Self { group, ready, faults: 0 }
+        Self {
+            group,
+            ready,
+            faults: 0,
+        }
     }
 
     /// Whether every device of the group answered its identity check.

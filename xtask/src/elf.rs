@@ -34,13 +34,18 @@ pub struct SizeReport {
 /// Parses `elf`, checks it against `board` and returns its sizes.
 pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<SizeReport> {
     let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
-    let file = object::File::parse(&*bytes).with_context(|| format!("parsing {}", elf.display()))?;
+    let file =
+        object::File::parse(&*bytes).with_context(|| format!("parsing {}", elf.display()))?;
     let (machine, flags) = match file.flags() {
         object::FileFlags::Elf { e_flags, .. } => (file.architecture(), e_flags),
         _ => bail!("{} is not an ELF file", elf.display()),
     };
     if machine != object::Architecture::Arm {
-        bail!("{}: expected an ARM image, found {:?}", elf.display(), machine);
+        bail!(
+            "{}: expected an ARM image, found {:?}",
+            elf.display(),
+            machine
+        );
     }
     let _ = EM_ARM;
     let hard = flags & EF_ARM_ABI_FLOAT_HARD != 0;
@@ -82,7 +87,9 @@ pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<Siz
             vector_end = end;
         }
         match section.kind() {
-            SectionKind::UninitializedData | SectionKind::UninitializedTls => report.bss += section.size(),
+            SectionKind::UninitializedData | SectionKind::UninitializedTls => {
+                report.bss += section.size()
+            }
             SectionKind::Data | SectionKind::Tls => report.data += section.size(),
             _ if name == ".data" => report.data += section.size(),
             _ if name == ".bss" || name == ".uninit" => report.bss += section.size(),
@@ -106,7 +113,10 @@ pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<Siz
             );
         }
         if vector_end > slot {
-            bail!("{}: vector table runs into the AMiRo-BLT checksum slot {slot:#010x}", elf.display());
+            bail!(
+                "{}: vector table runs into the AMiRo-BLT checksum slot {slot:#010x}",
+                elf.display()
+            );
         }
         report.flash_available = board.flash_bytes - (board.app_base - 0x0800_0000);
     } else {

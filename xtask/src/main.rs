@@ -9,12 +9,18 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 
 mod boards;
+mod bounds;
 mod elf;
+mod qemu;
+mod scenarios;
 
 use boards::{Board, BOARDS};
 
 #[derive(Parser, Debug)]
-#[command(name = "cargo xtask", about = "Build, check, test and analyse the AMiRo firmware suite")]
+#[command(
+    name = "cargo xtask",
+    about = "Build, check, test and analyse the AMiRo firmware suite"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Cmd,
@@ -39,6 +45,18 @@ enum Cmd {
     Test,
     /// Everything CI runs: check, test, the analysis gate and the size report.
     Ci,
+    /// Run a board's QEMU build against a stimulus log in deterministic virtual time and print
+    /// every frame it puts on the bus (candump -l format) and its trace events (`#` lines).
+    Qemu {
+        /// The board (only diwheeldrive has a QEMU build so far).
+        board: String,
+        /// A candump -l log of timed command frames, timestamps relative to the start.
+        #[arg(long)]
+        stimulus: PathBuf,
+        /// How much virtual time to run: e.g. 2s, 500ms, 900us.
+        #[arg(long, default_value = "2s")]
+        duration: String,
+    },
     /// Flash a board through probe-rs and stream its RTT output.
     Flash {
         /// The board to flash.
@@ -61,7 +79,11 @@ fn main() -> ExitCode {
 fn run(cmd: Cmd) -> Result<bool> {
     let root = workspace_root();
     match cmd {
-        Cmd::Build { boards, json, bare_chip } => {
+        Cmd::Build {
+            boards,
+            json,
+            bare_chip,
+        } => {
             let selected = select_boards(&boards)?;
             let reports = build_boards(&root, &selected, bare_chip)?;
             if json {
@@ -78,10 +100,34 @@ fn run(cmd: Cmd) -> Result<bool> {
             test(&root)?;
             Ok(true)
         }
+        Cmd::Qemu {
+            board,
+            stimulus,
+            duration,
+        } => {
+            if board != "diwheeldrive" {
+                bail!("only diwheeldrive has a QEMU build");
+            }
+            ensure_qemu()?;
+            let elf = build_qemu(&root)?;
+            let frames = qemu::read_stimulus(&stimulus)?;
+            let out = qemu::run(
+                &elf,
+                &frames,
+                qemu::parse_duration(&duration)?,
+                &qemu::target_dir(&root).join("run"),
+            )?;
+            print!("{out}");
+            Ok(true)
+        }
         Cmd::Flash { board } => {
-            let board = boards::by_name(&board).with_context(|| format!("unknown board `{board}`"))?;
+            let board =
+                boards::by_name(&board).with_context(|| format!("unknown board `{board}`"))?;
             ensure_toolchain(&root)?;
-            println!("flashing {} ({}) through probe-rs; RTT follows", board.name, board.chip);
+            println!(
+                "flashing {} ({}) through probe-rs; RTT follows",
+                board.name, board.chip
+            );
             cargo(&root.join(board.name), &["run", "--release"])?;
             Ok(true)
         }
@@ -90,7 +136,10 @@ fn run(cmd: Cmd) -> Result<bool> {
 
 /// The workspace root (the parent of this crate's folder).
 fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_default()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default()
 }
 
 fn select_boards(names: &[String]) -> Result<Vec<&'static Board>> {
@@ -125,20 +174,33 @@ fn build_boards(root: &Path, boards: &[&Board], bare_chip: bool) -> Result<Vec<e
 
 /// Where cargo leaves a board's release ELF.
 fn firmware_elf(root: &Path, board: &Board) -> PathBuf {
-    target_dir(root).join(board.target).join("release").join(board.name)
+    target_dir(root)
+        .join(board.target)
+        .join("release")
+        .join(board.name)
 }
 
 fn target_dir(root: &Path) -> PathBuf {
-    std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| root.join("target"))
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target"))
 }
 
 fn check(root: &Path) -> Result<()> {
     ensure_toolchain(root)?;
-    cargo(root, &["fmt", "--all", "--", "--check"]).context("rustfmt found unformatted code (run `cargo fmt --all`)")?;
-    cargo(root, &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"]).context("clippy on the host crates")?;
+    cargo(root, &["fmt", "--all", "--", "--check"])
+        .context("rustfmt found unformatted code (run `cargo fmt --all`)")?;
+    cargo(
+        root,
+        &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
+    )
+    .context("clippy on the host crates")?;
     for board in BOARDS {
-        cargo(&root.join(board.name), &["clippy", "--quiet", "--release", "--", "-D", "warnings"])
-            .with_context(|| format!("clippy on {}", board.name))?;
+        cargo(
+            &root.join(board.name),
+            &["clippy", "--quiet", "--release", "--", "-D", "warnings"],
+        )
+        .with_context(|| format!("clippy on {}", board.name))?;
     }
     Ok(())
 }
@@ -148,7 +210,96 @@ fn test(root: &Path) -> Result<()> {
     cargo(root, &["test", "--quiet"]).context("host tests")?;
     let reports = build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), false)?;
     elf::print_table(&reports);
+    run_scenarios(root)
+}
+
+/// Builds DiWheelDrive's QEMU variant (its own target dir: the features differ from the robot build).
+fn build_qemu(root: &Path) -> Result<PathBuf> {
+    let dir = qemu::target_dir(root);
+    let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo_bin)
+        .args(["build", "--release", "--quiet", "--features", "qemu"])
+        .current_dir(root.join("diwheeldrive"))
+        .env("CARGO_TARGET_DIR", &dir)
+        .status()
+        .context("building the QEMU variant of diwheeldrive")?;
+    if !status.success() {
+        bail!("building the QEMU variant of diwheeldrive failed ({status})");
+    }
+    Ok(dir
+        .join("thumbv7m-none-eabi")
+        .join("release")
+        .join("diwheeldrive"))
+}
+
+/// Runs every QEMU scenario and checks its output.
+fn run_scenarios(root: &Path) -> Result<()> {
+    ensure_qemu()?;
+    let elf = build_qemu(root)?;
+    let bounds = scenarios::Bounds::from_analysis(root)?;
+    let mut passed = 0;
+    let mut failed = 0;
+    for scenario in scenarios::SCENARIOS {
+        let path = root
+            .join("diwheeldrive")
+            .join("qemu")
+            .join(format!("{}.log", scenario.name));
+        let result = (|| {
+            let frames = qemu::read_stimulus(&path)?;
+            let duration = scenarios::duration_of(&path)?;
+            let work = qemu::target_dir(root).join("scenarios").join(scenario.name);
+            let text = qemu::run(&elf, &frames, duration, &work)?;
+            std::fs::write(work.join("output.log"), &text)?;
+            let out = scenarios::RunOutput::parse(&text)?;
+            (scenario.check)(&out, &bounds)
+        })();
+        match result {
+            Ok(summary) => {
+                passed += 1;
+                println!("qemu scenario {:<16} ok: {summary}", scenario.name);
+            }
+            Err(e) => {
+                failed += 1;
+                println!(
+                    "qemu scenario {:<16} FAILED ({}): {e:#}",
+                    scenario.name, scenario.about
+                );
+            }
+        }
+    }
+    println!("qemu scenarios: {passed} passed, {failed} failed");
+    if failed > 0 {
+        bail!(
+            "{failed} QEMU scenario(s) failed (outputs in {})",
+            qemu::target_dir(root).join("scenarios").display()
+        );
+    }
     Ok(())
+}
+
+/// Installs QEMU where the machine lacks it and we may (root with apt-get); otherwise says how.
+fn ensure_qemu() -> Result<()> {
+    let found = Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if found {
+        return Ok(());
+    }
+    let is_root = output(Path::new("."), "id", &["-u"])
+        .map(|u| u.trim() == "0")
+        .unwrap_or(false);
+    if is_root {
+        run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
+        run_tool(
+            Path::new("."),
+            "apt-get",
+            &["install", "-y", "-qq", "qemu-system-arm"],
+        )?;
+        return Ok(());
+    }
+    bail!("qemu-system-arm is missing: install it (Debian/Ubuntu: sudo apt-get install qemu-system-arm)")
 }
 
 /// Runs cargo in `dir` and fails unless it succeeds.
@@ -162,7 +313,11 @@ fn cargo(dir: &Path, args: &[&str]) -> Result<()> {
         .status()
         .with_context(|| format!("running `cargo {}`", args.join(" ")))?;
     if !status.success() {
-        bail!("`cargo {}` in {} failed ({status})", args.join(" "), dir.display());
+        bail!(
+            "`cargo {}` in {} failed ({status})",
+            args.join(" "),
+            dir.display()
+        );
     }
     Ok(())
 }
@@ -179,7 +334,18 @@ fn ensure_toolchain(root: &Path) -> Result<()> {
         let mut args = vec!["target", "add"];
         args.extend(&missing);
         run_tool(root, "rustup", &args)?;
-        run_tool(root, "rustup", &["component", "add", "llvm-tools", "rust-src", "clippy", "rustfmt"])?;
+        run_tool(
+            root,
+            "rustup",
+            &[
+                "component",
+                "add",
+                "llvm-tools",
+                "rust-src",
+                "clippy",
+                "rustfmt",
+            ],
+        )?;
     }
     Ok(())
 }

@@ -1,0 +1,275 @@
+//! Runs a firmware's QEMU build in deterministic virtual time against a stimulus log.
+//!
+//! The stimulus is a `candump -l` log whose timestamps count from the start of the run. It is
+//! converted into fixed 20-byte records (`u64` µs, `u16` ID, `u8` length, `u8` flags, 8 data bytes)
+//! after a 16-byte header (`AMSTIM1\0`, `u64` duration in µs) that the firmware reads through
+//! semihosting. The firmware prints every frame it would put on the bus in the same log format,
+//! stamped with virtual time, and its trace events as lines starting with `#`.
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+
+/// The emulated machine: a Cortex-M3 STM32 (F205) with room for the app; QEMU emulates neither the
+/// F103's clock tree nor bxCAN, so the QEMU build touches only core peripherals.
+pub const MACHINE: &str = "netduino2";
+/// `-icount shift=0`: one instruction per virtual nanosecond, deterministic and fast enough that the
+/// 1 MHz SysTick monotonic costs a few percent.
+pub const ICOUNT_SHIFT: u32 = 0;
+
+/// One timed frame of a stimulus.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TimedFrame {
+    /// Microseconds from the start of the run.
+    pub at_us: u64,
+    /// Identifier (11-bit, or larger for an extended frame the board must ignore).
+    pub id: u32,
+    /// Payload (up to 8 bytes; longer payloads are kept to test the board's rejection).
+    pub data: Vec<u8>,
+}
+
+/// Parses a `candump -l` line: `(seconds.micros) iface ID#DATA`. Blank lines and `#` comments give `None`.
+pub fn parse_log_line(line: &str) -> Result<Option<TimedFrame>> {
+    let line = line.trim();
+    if line.is_empty() || line.starts_with('#') {
+        return Ok(None);
+    }
+    let rest = line
+        .strip_prefix('(')
+        .with_context(|| format!("`{line}`: expected `(seconds.micros)`"))?;
+    let (stamp, rest) = rest
+        .split_once(')')
+        .with_context(|| format!("`{line}`: unclosed timestamp"))?;
+    let (secs, micros) = stamp
+        .split_once('.')
+        .with_context(|| format!("`{line}`: timestamp needs a fraction"))?;
+    let secs: u64 = secs
+        .trim()
+        .parse()
+        .with_context(|| format!("`{line}`: bad seconds"))?;
+    if micros.len() != 6 {
+        bail!("`{line}`: the fraction must have six digits (microseconds)");
+    }
+    let micros: u64 = micros
+        .parse()
+        .with_context(|| format!("`{line}`: bad microseconds"))?;
+    let mut fields = rest.split_whitespace();
+    let _iface = fields
+        .next()
+        .with_context(|| format!("`{line}`: missing interface"))?;
+    let frame = fields
+        .next()
+        .with_context(|| format!("`{line}`: missing frame"))?;
+    let (id, data) = frame
+        .split_once('#')
+        .with_context(|| format!("`{line}`: frame needs `ID#DATA`"))?;
+    let id = u32::from_str_radix(id, 16).with_context(|| format!("`{line}`: bad ID"))?;
+    if data.len() % 2 != 0 {
+        bail!("`{line}`: odd number of hex digits in data");
+    }
+    let data = (0..data.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&data[i..i + 2], 16))
+        .collect::<Result<Vec<u8>, _>>()
+        .with_context(|| format!("`{line}`: bad data"))?;
+    Ok(Some(TimedFrame {
+        at_us: secs * 1_000_000 + micros,
+        id,
+        data,
+    }))
+}
+
+/// Encodes a stimulus for the firmware.
+pub fn encode_stimulus(frames: &[TimedFrame], duration_us: u64) -> Vec<u8> {
+    let mut out = Vec::with_capacity(16 + 20 * frames.len());
+    out.extend_from_slice(b"AMSTIM1\0");
+    out.extend_from_slice(&duration_us.to_le_bytes());
+    for f in frames {
+        out.extend_from_slice(&f.at_us.to_le_bytes());
+        let (id, flags) = if f.id <= 0x7FF {
+            (f.id as u16, 0u8)
+        } else {
+            (0xFFFF, 1u8)
+        };
+        out.extend_from_slice(&id.to_le_bytes());
+        out.push(f.data.len().min(255) as u8);
+        out.push(flags);
+        let mut data = [0u8; 8];
+        let n = f.data.len().min(8);
+        data[..n].copy_from_slice(&f.data[..n]);
+        out.extend_from_slice(&data);
+    }
+    out
+}
+
+/// Parses a duration like `2s`, `1500ms` or `900us`.
+pub fn parse_duration(text: &str) -> Result<u64> {
+    let (digits, scale) = if let Some(d) = text.strip_suffix("us") {
+        (d, 1)
+    } else if let Some(d) = text.strip_suffix("ms") {
+        (d, 1_000)
+    } else if let Some(d) = text.strip_suffix('s') {
+        (d, 1_000_000)
+    } else {
+        bail!("duration `{text}` needs a unit: us, ms or s")
+    };
+    let value: u64 = digits
+        .parse()
+        .with_context(|| format!("bad duration `{text}`"))?;
+    value
+        .checked_mul(scale)
+        .with_context(|| format!("duration `{text}` too long"))
+}
+
+/// Reads a stimulus log file.
+pub fn read_stimulus(path: &Path) -> Result<Vec<TimedFrame>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut frames = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        if let Some(f) =
+            parse_log_line(line).with_context(|| format!("{}:{}", path.display(), n + 1))?
+        {
+            frames.push(f);
+        }
+    }
+    frames.sort_by_key(|f| f.at_us);
+    Ok(frames)
+}
+
+/// Runs `elf` under QEMU with `stimulus` for `duration_us` of virtual time and returns its output.
+pub fn run(elf: &Path, stimulus: &[TimedFrame], duration_us: u64, work: &Path) -> Result<String> {
+    std::fs::create_dir_all(work)?;
+    std::fs::write(
+        work.join("stimulus.bin"),
+        encode_stimulus(stimulus, duration_us),
+    )?;
+    let mut child = Command::new("qemu-system-arm")
+        .args([
+            "-machine",
+            MACHINE,
+            "-nographic",
+            "-monitor",
+            "none",
+            "-serial",
+            "none",
+        ])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .args([
+            "-icount",
+            &format!("shift={ICOUNT_SHIFT},align=off,sleep=off"),
+        ])
+        .arg("-kernel")
+        .arg(elf)
+        .current_dir(work)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .context("starting qemu-system-arm (install it: apt-get install qemu-system-arm)")?;
+    // Drain the output while QEMU runs (a full pipe would stall the guest), and guard the wall
+    // clock only: the firmware exits by itself after `duration_us` of virtual time.
+    let mut stdout = child.stdout.take().context("QEMU stdout")?;
+    let mut stderr = child.stderr.take().context("QEMU stderr")?;
+    let out_reader = std::thread::spawn(move || {
+        let mut text = String::new();
+        let _ = std::io::Read::read_to_string(&mut stdout, &mut text);
+        text
+    });
+    let err_reader = std::thread::spawn(move || {
+        let mut text = String::new();
+        let _ = std::io::Read::read_to_string(&mut stderr, &mut text);
+        text
+    });
+    let limit = Duration::from_secs(120 + duration_us / 50_000);
+    let started = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait()? {
+            break status;
+        }
+        if started.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            bail!("QEMU run did not finish within {limit:?} of wall time");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let stdout = out_reader.join().unwrap_or_default();
+    let stderr = err_reader.join().unwrap_or_default();
+    if !status.success() {
+        bail!("QEMU run failed ({status}); output:\n{stdout}\n{stderr}");
+    }
+    Ok(stdout)
+}
+
+/// Where QEMU builds go, apart from the real-hardware builds.
+pub fn target_dir(root: &Path) -> PathBuf {
+    crate::target_dir(root).join("qemu")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_candump_lines() {
+        let f = parse_log_line("(0.010000) can0 205#01840302")
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            f,
+            TimedFrame {
+                at_us: 10_000,
+                id: 0x205,
+                data: vec![1, 0x84, 3, 2]
+            }
+        );
+        assert_eq!(parse_log_line("# comment").unwrap(), None);
+        assert_eq!(
+            parse_log_line("(1.000001) can0 7FF#")
+                .unwrap()
+                .unwrap()
+                .at_us,
+            1_000_001
+        );
+        assert!(parse_log_line("(0.01) can0 205#01").is_err());
+        assert!(parse_log_line("205#01").is_err());
+        assert!(parse_log_line("(0.000000) can0 205#0").is_err());
+    }
+
+    #[test]
+    fn encodes_records() {
+        let frames = vec![
+            TimedFrame {
+                at_us: 5,
+                id: 0x205,
+                data: vec![1, 2],
+            },
+            TimedFrame {
+                at_us: 6,
+                id: 0x1234_5678,
+                data: vec![],
+            },
+        ];
+        let bin = encode_stimulus(&frames, 2_000_000);
+        assert_eq!(bin.len(), 16 + 40);
+        assert_eq!(&bin[..8], b"AMSTIM1\0");
+        assert_eq!(
+            u64::from_le_bytes(bin[8..16].try_into().unwrap()),
+            2_000_000
+        );
+        assert_eq!(
+            &bin[16..30],
+            &[5, 0, 0, 0, 0, 0, 0, 0, 0x05, 0x02, 2, 0, 1, 2]
+        );
+        assert_eq!(&bin[44..48], &[0xFF, 0xFF, 0, 1]);
+    }
+
+    #[test]
+    fn durations() {
+        assert_eq!(parse_duration("2s").unwrap(), 2_000_000);
+        assert_eq!(parse_duration("1500ms").unwrap(), 1_500_000);
+        assert_eq!(parse_duration("900us").unwrap(), 900);
+        assert!(parse_duration("2").is_err());
+    }
+}
