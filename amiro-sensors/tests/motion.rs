@@ -476,3 +476,13 @@ fn velocity_is_averaged_over_the_window() {
     // 6 ticks per 40 ms = 18.6 mm/s.
     assert_eq!(drive.velocity().velocity_um_s, 18_645);
 }
+
+proptest! {
+    #[test]
+    fn odometry_step_never_overflows(left in any::<i32>(), right in any::<i32>()) {
+        let mut odo = DeadReckoning::new(DriveGeometry::AMIRO);
+        let step = odo.advance(left, right);
+        prop_assert_eq!(step.distance_nm, (step.left_nm + step.right_nm) / 2);
+        prop_assert!(odo.heading_nrad() >= 0 && odo.heading_nrad() < TURN_NRAD);
+    }
+}

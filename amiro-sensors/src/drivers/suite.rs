@@ -194,7 +194,7 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
 ///
 /// The three axes are separate topics (one i32 each), usually published together. A reading is
 /// kept and handed out once per axis: the first axis sampled reads the part, the other two take
-/// the same reading if they come within [`Compass::reuse_window_us`] (default one output period of
+/// the same reading if they come less than [`Compass::reuse_window_us`] later (default one output period of
 /// the part, 33.3 ms at 30 Hz — a fresh read in that window could only return the same data). An
 /// axis sampled twice always triggers a new read, so a single running topic never repeats itself.
 #[derive(Debug)]
@@ -285,7 +285,7 @@ impl<I2C: I2c> SensorGroup for Compass<I2C> {
         let already_sent = self.delivered.get(axis.index()).copied().unwrap_or(true);
         let field = match self.last {
             Some((field, at))
-                if !already_sent && now_us >= at && now_us - at <= self.reuse_window_us =>
+                if !already_sent && now_us >= at && now_us - at < self.reuse_window_us =>
             {
                 field
             }

@@ -172,8 +172,16 @@ impl DeadReckoning {
         let rotation_nrad = if self.geometry.axle_width_um == 0 {
             0
         } else {
-            // nm / µm = 1e-3 rad; × 1e6 gives nrad.
-            (right_nm - left_nm) * 1_000_000 / self.geometry.axle_width_um as i64
+            // nm / µm = 1e-3 rad; × 1e6 gives nrad. In i128: any i32 tick count fits.
+            let nrad = (right_nm as i128 - left_nm as i128) * 1_000_000
+                / self.geometry.axle_width_um as i128;
+            if nrad > i64::MAX as i128 {
+                i64::MAX
+            } else if nrad < i64::MIN as i128 {
+                i64::MIN
+            } else {
+                nrad as i64
+            }
         };
         Step {
             left_nm,
