@@ -1,4 +1,4 @@
-//! Picks the linker memory map: behind AMiRo-BLT by default, the whole chip with feature `bare-chip`,
+//! Picks the linker memory map: behind AMiRo-BLT by default (`memory.x`), the whole chip with feature `bare-chip`,
 //! the QEMU machine's map with feature `qemu`.
 use std::{env, fs, path::PathBuf};
 
@@ -9,7 +9,7 @@ fn main() {
     } else if env::var_os("CARGO_FEATURE_BARE_CHIP").is_some() {
         "memory-bare.x"
     } else {
-        "memory-bootloader.x"
+        "memory.x"
     };
     fs::copy(layout, out.join("memory.x")).expect("copy memory map");
     println!("cargo:rustc-link-search={}", out.display());

@@ -8,6 +8,19 @@ use rtic_monotonics::stm32::prelude::*;
 // TIM3 is free on LightRing (the original firmware ticks on TIM2), so rtic-monotonics' TIM3 serves.
 stm32_tim3_monotonic!(Mono, 1_000_000);
 
+/// Switches the clock tree back to the internal oscillator with the PLL off.
+///
+/// AMiRo-BLT hands over with the PLL already driving SYSCLK; the PLL cannot be reconfigured while
+/// it is the system clock, so start from the reset state before the HAL sets the clocks up.
+fn clock_tree_to_reset_state(rcc: &stm32f1xx_hal::pac::RCC) {
+    rcc.cr().modify(|_, w| w.hsion().set_bit());
+    while rcc.cr().read().hsirdy().bit_is_clear() {}
+    rcc.cfgr().modify(|_, w| w.sw().hsi());
+    while !rcc.cfgr().read().sws().is_hsi() {}
+    rcc.cr().modify(|_, w| w.pllon().clear_bit());
+    while rcc.cr().read().pllrdy().bit_is_set() {}
+}
+
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
     cortex_m::interrupt::disable();
@@ -32,6 +45,7 @@ mod app {
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
         rtt_init_print!();
+        super::clock_tree_to_reset_state(&cx.device.RCC);
         let mut flash = cx.device.FLASH.constrain();
         let mut rcc = cx.device.RCC.freeze(
             rcc::Config::hse(8u32.MHz()).sysclk(72u32.MHz()).pclk1(36u32.MHz()).pclk2(36u32.MHz()),

@@ -9,6 +9,19 @@ use rtic_monotonics::stm32::prelude::*;
 // TIM2 is the original firmware's tick timer on this board and is free for the monotonic.
 stm32_tim2_monotonic!(Mono, 1_000_000);
 
+/// Switches the clock tree back to the internal oscillator with the PLL off.
+///
+/// AMiRo-BLT hands over with the PLL already driving SYSCLK; the PLL cannot be reconfigured while
+/// it is the system clock, so start from the reset state before the HAL sets the clocks up.
+fn clock_tree_to_reset_state(rcc: &stm32f4xx_hal::pac::RCC) {
+    rcc.cr().modify(|_, w| w.hsion().set_bit());
+    while rcc.cr().read().hsirdy().bit_is_clear() {}
+    rcc.cfgr().modify(|_, w| w.sw().hsi());
+    while !rcc.cfgr().read().sws().is_hsi() {}
+    rcc.cr().modify(|_, w| w.pllon().clear_bit());
+    while rcc.cr().read().pllrdy().bit_is_set() {}
+}
+
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
     cortex_m::interrupt::disable();
@@ -33,6 +46,7 @@ mod app {
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
         rtt_init_print!();
+        super::clock_tree_to_reset_state(&cx.device.RCC);
         let _rcc = cx.device.RCC.freeze(
             Config::hse(8.MHz()).sysclk(168.MHz()).hclk(168.MHz()).pclk1(42.MHz()).pclk2(84.MHz()),
         );
