@@ -13,8 +13,8 @@
 
 use super::trig::{sin_cos, wrap_turn};
 
-/// π × 10¹², for the wheel circumference.
-const PI_PICO: i128 = 3_141_592_653_590;
+/// π × 10⁹, for the wheel circumference.
+const PI_NANO: u64 = 3_141_592_654;
 
 /// The drive's mechanical constants.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -38,27 +38,28 @@ impl DriveGeometry {
     /// The 1.x firmware's uncalibrated axle width, 69 mm.
     pub const AXLE_WIDTH_1X_UM: u32 = 69_000;
 
-    /// Wheel travel per tick in picometres (124 302 xxx pm for the AMiRo). Zero ticks per
+    /// Wheel travel per tick in picometres (124 302 647 pm for the AMiRo). Zero ticks per
     /// revolution gives 0 (no motion is ever measured) rather than a division fault.
     pub const fn pm_per_tick(&self) -> i64 {
         if self.ticks_per_revolution == 0 {
             return 0;
         }
-        // π × 10¹² × d [µm] / 10⁶ = π × d in pm: the circumference, shared out over the ticks.
-        let numerator = PI_PICO * self.wheel_diameter_um as i128;
-        let denominator = self.ticks_per_revolution as i128 * 1_000_000;
-        ((numerator + denominator / 2) / denominator) as i64
+        // π × 10⁹ × d [µm] is the circumference in fm (at most 1.35e19: fits a u64); shared out
+        // over the ticks and divided by 1000 for pm. 64-bit only, so the chip needs no 128-bit
+        // division routine.
+        let circumference_fm = PI_NANO * self.wheel_diameter_um as u64;
+        let denominator = self.ticks_per_revolution as u64 * 1000;
+        ((circumference_fm + denominator / 2) / denominator) as i64
     }
 
-    /// Wheel travel for `ticks` in nanometres.
+    /// Wheel travel for `ticks` in nanometres (saturating far beyond any real travel).
     pub const fn ticks_to_nm(&self, ticks: i64) -> i64 {
-        let pm = ticks as i128 * self.pm_per_tick() as i128;
-        let nm = if pm >= 0 {
-            (pm + 500) / 1000
+        let pm = ticks.saturating_mul(self.pm_per_tick());
+        if pm >= 0 {
+            pm.saturating_add(500) / 1000
         } else {
-            (pm - 500) / 1000
-        };
-        nm as i64
+            pm.saturating_sub(500) / 1000
+        }
     }
 
     /// Wheel speeds (left, right) in µm/s for a body velocity: `v ∓ ω · axle / 2`.
@@ -172,16 +173,8 @@ impl DeadReckoning {
         let rotation_nrad = if self.geometry.axle_width_um == 0 {
             0
         } else {
-            // nm / µm = 1e-3 rad; × 1e6 gives nrad. In i128: any i32 tick count fits.
-            let nrad = (right_nm as i128 - left_nm as i128) * 1_000_000
-                / self.geometry.axle_width_um as i128;
-            if nrad > i64::MAX as i128 {
-                i64::MAX
-            } else if nrad < i64::MIN as i128 {
-                i64::MIN
-            } else {
-                nrad as i64
-            }
+            // nm / µm = 1e-3 rad; × 1e6 gives nrad (saturating only for absurd tick counts).
+            (right_nm - left_nm).saturating_mul(1_000_000) / self.geometry.axle_width_um as i64
         };
         Step {
             left_nm,
