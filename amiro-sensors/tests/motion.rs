@@ -181,8 +181,7 @@ fn pi_integrates_a_steady_error_and_is_quiet_without_one() {
         max_duty: 10_000,
     });
     assert_eq!(pi.update(0, 0, 10_000), Duty::ZERO);
-    // 0.1 m/s error for 1 s at 100 000 duty/m = 10 000 × ... = 10 000 duty per (m/s·s) × 0.1 = 10 000? no:
-    // ki × error × t = 100 000 × 0.1 × 1 = 10 000 duty, reached after 100 steps of 10 ms.
+    // ki × error × t = 100 000 duty/m × 0.1 m/s × 0.5 s = 5000 duty after 50 steps of 10 ms.
     let mut last = Duty::ZERO;
     for _ in 0..50 {
         last = pi.update(100_000, 0, 10_000);
