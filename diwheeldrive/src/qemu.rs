@@ -8,6 +8,7 @@
 //!   mailboxes that print every frame in `candump -l` format with its virtual-time stamp;
 //! - the sensors are amiro-sensors' register-level simulators behind the real drivers;
 //! - the motors and encoders are a simulated wheel plant.
+//!
 //! Trace events and the human log are printed as lines starting with `#`.
 use core::cell::RefCell;
 use core::fmt::Write as _;

@@ -13,11 +13,15 @@ use crate::platform::{AccelSpi, CompassI2c, FloorI2c, GyroSpi};
 
 pub use amiro_sensors::drivers::suite::Samples;
 
+/// How long a group that failed its identity check waits before the next attempt.
+pub const RETRY_INIT_US: u64 = 1_000_000;
+
 /// A sensor group and whether it came up.
 pub struct Group<G> {
     group: G,
     ready: bool,
     faults: u32,
+    last_init_us: u64,
 }
 
 impl<G: SensorGroup> Group<G> {
@@ -28,6 +32,7 @@ impl<G: SensorGroup> Group<G> {
             group,
             ready,
             faults: 0,
+            last_init_us: 0,
         }
     }
 
@@ -36,17 +41,21 @@ impl<G: SensorGroup> Group<G> {
         self.ready
     }
 
-    /// Bus or device faults since boot (failed identity checks count once).
-    pub fn faults(&self) -> u32 {
-        self.faults + u32::from(!self.ready)
-    }
-
     /// One sample of `topic`: its frames, or none when the group is missing or the read failed.
+    /// A group that did not come up is initialised again, at most once per [`RETRY_INIT_US`], so a
+    /// sensor that was slow at boot joins later (the retry's transfers count against that sample).
     // One copy for the four publisher tasks that call it (they are generic over their locks).
     #[inline(never)]
     pub fn sample(&mut self, topic: Topic, now_us: u64) -> Samples {
         if !self.ready {
-            return Samples::new();
+            if now_us.saturating_sub(self.last_init_us) < RETRY_INIT_US {
+                return Samples::new();
+            }
+            self.last_init_us = now_us;
+            self.ready = self.group.init().is_ok();
+            if !self.ready {
+                return Samples::new();
+            }
         }
         match self.group.sample(topic, now_us) {
             Ok(samples) => samples,

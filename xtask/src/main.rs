@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 mod boards;
 mod bounds;
 mod elf;
+mod levels_check;
 mod qemu;
 mod scenarios;
 
@@ -56,6 +57,11 @@ enum Cmd {
         /// How much virtual time to run: e.g. 2s, 500ms, 900us.
         #[arg(long, default_value = "2s")]
         duration: String,
+    },
+    /// Decode a capture of a board's binary trace channel (RTT channel 1, "trace") into text lines.
+    Trace {
+        /// The raw bytes of RTT channel 1 as captured from the board.
+        file: PathBuf,
     },
     /// Flash a board through probe-rs and stream its RTT output.
     Flash {
@@ -119,6 +125,21 @@ fn run(cmd: Cmd) -> Result<bool> {
             )?;
             print!("{out}");
             Ok(true)
+        }
+        Cmd::Trace { file } => {
+            let bytes =
+                std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
+            let mut clean = true;
+            for (n, record) in bytes.chunks(amiro_sensors::trace::ENCODED_LEN).enumerate() {
+                match amiro_sensors::trace::TraceEvent::decode(record) {
+                    Ok(event) => println!("{event}"),
+                    Err(e) => {
+                        clean = false;
+                        println!("# record {n}: {e}");
+                    }
+                }
+            }
+            Ok(clean)
         }
         Cmd::Flash { board } => {
             let board =

@@ -1,0 +1,83 @@
+//! `cargo xtask analyze`: the worst-case response times of the boards and the CAN bus, end to end.
+//!
+//! Argument parsing, file loading and printing only; everything else is `schedule_analysis`
+//! (docs/analysis.md explains the model files, the equations and the report).
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, Context, Result};
+use schedule_analysis::model::{FrameCostSpec, Model};
+use schedule_analysis::report::{self, Format, Report};
+use schedule_analysis::scenario;
+
+/// Arguments of `cargo xtask analyze`.
+#[derive(clap::Args, Debug)]
+pub struct AnalyzeArgs {
+    /// Scenario to analyse: a name in schedule-analysis/models (`thesis-demo`, the default) or a path to a
+    /// `.scenario.json`. The boards' tasks come from their RTIC apps, the budgets from the timing files.
+    pub scenario: Option<String>,
+    /// Analyse a model file (the JSON model format of docs/analysis.md) instead of a scenario.
+    #[arg(long, value_name = "FILE", conflicts_with = "scenario")]
+    pub model: Option<PathBuf>,
+    /// CAN frame cost: `thesis` (545 µs), `exact` (worst-case stuffing) or a number of µs per frame. Without it
+    /// the model's own decides the verdict and the other model is shown beside it.
+    #[arg(long, value_name = "thesis|exact|US", value_parser = parse_frame_cost)]
+    pub frame_cost: Option<FrameCostSpec>,
+    /// Output format: table, markdown, json or svg.
+    #[arg(long, value_name = "table|markdown|json|svg", default_value = "table", value_parser = parse_format)]
+    pub format: Format,
+    /// Write the report to FILE instead of standard output.
+    #[arg(long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+    /// Exit with failure when any deadline or jitter budget is missed (for CI).
+    #[arg(long)]
+    pub check: bool,
+    /// Also write the combined model (scenario + timing files + apps) in the JSON model format to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub emit_model: Option<PathBuf>,
+}
+
+fn parse_frame_cost(text: &str) -> Result<FrameCostSpec, String> {
+    FrameCostSpec::parse(text)
+}
+
+fn parse_format(text: &str) -> Result<Format, String> {
+    Format::parse(text).ok_or_else(|| format!("unknown format `{text}`: expected table, markdown, json or svg"))
+}
+
+/// Runs the analysis and prints (or writes) the report. `Ok(true)`: everything is schedulable and within its
+/// jitter budget under the frame-cost model that decides the verdict.
+pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
+    let (model, title, sources, warnings, origin) = match &args.model {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            let model = Model::from_json(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+            let title = model.name.clone().unwrap_or_else(|| path.display().to_string());
+            (model, title, vec![format!("model file {}", path.display())], Vec::new(), path.display().to_string())
+        }
+        None => {
+            let name = args.scenario.as_deref().unwrap_or(scenario::DEFAULT_SCENARIO);
+            let path = scenario::find_scenario(root, name);
+            let built = scenario::build(root, &path, &scenario::timing_files(root))?;
+            let title = built.model.name.clone().unwrap_or_else(|| name.to_string());
+            (built.model, title, built.sources, built.warnings, "the built model".to_string())
+        }
+    };
+    if let Some(path) = &args.emit_model {
+        std::fs::write(path, model.to_json() + "\n").with_context(|| format!("writing {}", path.display()))?;
+    }
+    let system = model.validate().map_err(|e| anyhow!("{origin}: {e}"))?;
+    let report = Report::build(&system, title, sources, warnings, args.frame_cost);
+    let text = report::render(&report, args.format);
+    match &args.output {
+        Some(path) => {
+            std::fs::write(path, &text).with_context(|| format!("writing {}", path.display()))?;
+            eprintln!(
+                "wrote {} ({})",
+                path.display(),
+                if report.all_ok() { "schedulable" } else { "NOT schedulable" }
+            );
+        }
+        None => print!("{text}"),
+    }
+    Ok(report.all_ok())
+}
