@@ -64,12 +64,55 @@ pub struct Board {
     pub watchdog: Watchdog,
 }
 
+const STACK_PAINT: u32 = 0x5A5A_A5A5;
+
+extern "C" {
+    static mut __sheap: u32;
+    static _stack_start: u32;
+}
+
+/// Fills the free stack below the current stack pointer with a pattern, so the end of the run
+/// can tell how deep the stack ever went.
+fn paint_stack() {
+    let sp = cortex_m::register::msp::read() as usize;
+    // SAFETY: `__sheap` marks the end of .bss/.uninit; everything from there up to a margin below
+    // the live stack pointer is unused memory nobody else writes to.
+    unsafe {
+        let mut p = core::ptr::addr_of_mut!(__sheap) as usize;
+        while p + 64 < sp {
+            core::ptr::write_volatile(p as *mut u32, STACK_PAINT);
+            p += 4;
+        }
+    }
+}
+
+/// The deepest the stack has been, in bytes (from the top of RAM to the lowest overwritten word).
+pub fn stack_high_water() -> usize {
+    // SAFETY: reads the painted region back; see `paint_stack`.
+    unsafe {
+        let bottom = core::ptr::addr_of_mut!(__sheap) as usize;
+        let top = core::ptr::addr_of!(_stack_start) as usize;
+        let mut p = bottom;
+        while p < top && core::ptr::read_volatile(p as *const u32) == STACK_PAINT {
+            p += 4;
+        }
+        top - p
+    }
+}
+
+/// Static RAM (.data + .bss + .uninit), in bytes.
+pub fn static_ram() -> usize {
+    // SAFETY: only the addresses of linker symbols are taken.
+    unsafe { core::ptr::addr_of_mut!(__sheap) as usize - 0x2000_0000 }
+}
+
 /// Brings the simulated board up (touches no STM32 peripheral: QEMU's machine is a different chip).
 pub fn init(
     _dp: pac::Peripherals,
     cp: cortex_m::Peripherals,
     _spi_cell: &'static mut Option<embedded_hal_bus::util::AtomicCell<ImuBus>>,
 ) -> (Board, cortex_m::peripheral::NVIC) {
+    paint_stack();
     critical_section::with(|cs| {
         SYST.borrow_ref_mut(cs).replace(cp.SYST);
         PLANT
@@ -183,9 +226,11 @@ pub async fn replay_stimulus() {
     }
     crate::mono::delay_until_us(duration).await;
     hprintln!(
-        "# qemu: end of run at {} us; rx dropped {}",
+        "# qemu: end of run at {} us; rx dropped {}; ram static {} stack {}",
         duration,
-        crate::publisher::rx_dropped()
+        crate::publisher::rx_dropped(),
+        static_ram(),
+        stack_high_water()
     );
     exit(true);
 }

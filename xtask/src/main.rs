@@ -260,6 +260,7 @@ fn run_scenarios(root: &Path) -> Result<()> {
     let bounds = scenarios::Bounds::from_analysis(root)?;
     let mut passed = 0;
     let mut failed = 0;
+    let mut ram_high_water = 0;
     for scenario in scenarios::SCENARIOS {
         let path = root
             .join("diwheeldrive")
@@ -272,6 +273,8 @@ fn run_scenarios(root: &Path) -> Result<()> {
             let text = qemu::run(&elf, &frames, duration, &work)?;
             std::fs::write(work.join("output.log"), &text)?;
             let out = scenarios::RunOutput::parse(&text)?;
+            let (static_ram, stack) = out.ram_used()?;
+            ram_high_water = ram_high_water.max(static_ram + stack);
             (scenario.check)(&out, &bounds)
         })();
         match result {
@@ -287,6 +290,13 @@ fn run_scenarios(root: &Path) -> Result<()> {
                 );
             }
         }
+    }
+    // The board's RAM goal (16 KiB including the stack), measured by stack painting in QEMU.
+    const RAM_GOAL: u64 = 16 * 1024;
+    println!("diwheeldrive RAM in QEMU (static + deepest stack): {ram_high_water} bytes of a {RAM_GOAL}-byte goal");
+    if ram_high_water > RAM_GOAL {
+        failed += 1;
+        println!("diwheeldrive RAM goal missed");
     }
     println!("qemu scenarios: {passed} passed, {failed} failed");
     if failed > 0 {

@@ -43,6 +43,22 @@ impl RunOutput {
             .collect()
     }
 
+    /// RAM the run used: static data plus the stack's high-water mark (bytes), from the end-of-run
+    /// line; an error if the run did not reach its end.
+    pub fn ram_used(&self) -> Result<(u64, u64)> {
+        let line = self
+            .notes
+            .iter()
+            .find(|n| n.starts_with("qemu: end of run"))
+            .context("the run did not reach its end (no end-of-run line)")?;
+        let field = |name: &str| -> Result<u64> {
+            let at = line.find(name).with_context(|| format!("no `{name}` in `{line}`"))? + name.len();
+            let digits: String = line[at..].trim_start().chars().take_while(|c| c.is_ascii_digit()).collect();
+            digits.parse().with_context(|| format!("bad `{name}` in `{line}`"))
+        };
+        Ok((field("ram static")?, field("stack")?))
+    }
+
     /// Trace lines of one kind (e.g. `command-rejected`).
     pub fn traces(&self, kind: &str) -> Vec<&str> {
         self.notes
