@@ -48,12 +48,17 @@ mod app {
         super::clock_tree_to_reset_state(&cx.device.RCC);
         let mut flash = cx.device.FLASH.constrain();
         let mut rcc = cx.device.RCC.freeze(
-            rcc::Config::hse(8u32.MHz()).sysclk(72u32.MHz()).pclk1(36u32.MHz()).pclk2(36u32.MHz()),
+            rcc::Config::hse(8u32.MHz())
+                .sysclk(72u32.MHz())
+                .pclk1(36u32.MHz())
+                .pclk2(36u32.MHz()),
             &mut flash.acr,
         );
         // TLC5947 BLANK (PA4) stays high — LEDs dark — until the LED driver is configured.
         let mut gpioa = cx.device.GPIOA.split(&mut rcc);
-        let _blank = gpioa.pa4.into_push_pull_output_with_state(&mut gpioa.crl, stm32f1xx_hal::gpio::PinState::High);
+        let _blank = gpioa
+            .pa4
+            .into_push_pull_output_with_state(&mut gpioa.crl, stm32f1xx_hal::gpio::PinState::High);
         // APB1 timers run at 2 × PCLK1 = 72 MHz.
         Mono::start(72_000_000, Priority::new(8));
         heartbeat::spawn().ok();
@@ -64,7 +69,10 @@ mod app {
     #[task(priority = 1)]
     async fn heartbeat(_cx: heartbeat::Context) {
         loop {
-            rprintln!("alive at {} us", rtic_monotonics::rtic_time::monotonic::TimerQueueBasedInstant::ticks(Mono::now()));
+            rprintln!(
+                "alive at {} us",
+                rtic_monotonics::rtic_time::monotonic::TimerQueueBasedInstant::ticks(Mono::now())
+            );
             Mono::delay(500u64.millis()).await;
         }
     }

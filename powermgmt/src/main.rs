@@ -48,7 +48,11 @@ mod app {
         rtt_init_print!();
         super::clock_tree_to_reset_state(&cx.device.RCC);
         let _rcc = cx.device.RCC.freeze(
-            Config::hse(8.MHz()).sysclk(168.MHz()).hclk(168.MHz()).pclk1(42.MHz()).pclk2(84.MHz()),
+            Config::hse(8.MHz())
+                .sysclk(168.MHz())
+                .hclk(168.MHz())
+                .pclk1(42.MHz())
+                .pclk2(84.MHz()),
         );
         // APB1 timers run at 2 × PCLK1 = 84 MHz.
         Mono::start(84_000_000, Priority::new(8));
@@ -60,7 +64,10 @@ mod app {
     #[task(priority = 1)]
     async fn heartbeat(_cx: heartbeat::Context) {
         loop {
-            rprintln!("alive at {} us", rtic_monotonics::rtic_time::monotonic::TimerQueueBasedInstant::ticks(Mono::now()));
+            rprintln!(
+                "alive at {} us",
+                rtic_monotonics::rtic_time::monotonic::TimerQueueBasedInstant::ticks(Mono::now())
+            );
             Mono::delay(500u64.millis()).await;
         }
     }
