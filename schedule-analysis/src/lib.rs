@@ -1,1 +1,34 @@
 //! Worst-case response-time analysis of the AMiRo board tasks and the CAN bus, end to end.
+//!
+//! Two layers:
+//!
+//! * the **core** — [`time`], [`busy_window`], [`board`] and [`can`] — is `no_std` and allocation-free (build with
+//!   `--no-default-features`), so a board could one day run an admission test before it starts a publisher;
+//! * the **host layer** (feature `std`, on by default) reads models ([`model`]), RTIC apps ([`rtic_source`]),
+//!   timing files and scenarios ([`scenario`]), runs the whole system ([`analysis`], [`sensitivity`]) and renders
+//!   the report ([`report`]). `cargo xtask analyze` is a thin front end over it.
+//!
+//! docs/analysis.md documents the model format, the equations and how to read the report.
+#![cfg_attr(not(feature = "std"), no_std)]
+#![deny(missing_docs)]
+
+pub mod board;
+pub mod busy_window;
+pub mod can;
+pub mod time;
+
+#[cfg(feature = "std")]
+pub mod analysis;
+#[cfg(feature = "std")]
+pub mod model;
+#[cfg(feature = "std")]
+pub mod report;
+#[cfg(feature = "std")]
+pub mod rtic_source;
+#[cfg(feature = "std")]
+pub mod scenario;
+#[cfg(feature = "std")]
+pub mod sensitivity;
+
+pub use busy_window::{AnalysisError, Limits, Response};
+pub use time::Time;

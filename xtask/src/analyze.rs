@@ -41,7 +41,8 @@ fn parse_frame_cost(text: &str) -> Result<FrameCostSpec, String> {
 }
 
 fn parse_format(text: &str) -> Result<Format, String> {
-    Format::parse(text).ok_or_else(|| format!("unknown format `{text}`: expected table, markdown, json or svg"))
+    Format::parse(text)
+        .ok_or_else(|| format!("unknown format `{text}`: expected table, markdown, json or svg"))
 }
 
 /// Runs the analysis and prints (or writes) the report. `Ok(true)`: everything is schedulable and within its
@@ -49,21 +50,41 @@ fn parse_format(text: &str) -> Result<Format, String> {
 pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
     let (model, title, sources, warnings, origin) = match &args.model {
         Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
             let model = Model::from_json(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-            let title = model.name.clone().unwrap_or_else(|| path.display().to_string());
-            (model, title, vec![format!("model file {}", path.display())], Vec::new(), path.display().to_string())
+            let title = model
+                .name
+                .clone()
+                .unwrap_or_else(|| path.display().to_string());
+            (
+                model,
+                title,
+                vec![format!("model file {}", path.display())],
+                Vec::new(),
+                path.display().to_string(),
+            )
         }
         None => {
-            let name = args.scenario.as_deref().unwrap_or(scenario::DEFAULT_SCENARIO);
+            let name = args
+                .scenario
+                .as_deref()
+                .unwrap_or(scenario::DEFAULT_SCENARIO);
             let path = scenario::find_scenario(root, name);
             let built = scenario::build(root, &path, &scenario::timing_files(root))?;
             let title = built.model.name.clone().unwrap_or_else(|| name.to_string());
-            (built.model, title, built.sources, built.warnings, "the built model".to_string())
+            (
+                built.model,
+                title,
+                built.sources,
+                built.warnings,
+                "the built model".to_string(),
+            )
         }
     };
     if let Some(path) = &args.emit_model {
-        std::fs::write(path, model.to_json() + "\n").with_context(|| format!("writing {}", path.display()))?;
+        std::fs::write(path, model.to_json() + "\n")
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     let system = model.validate().map_err(|e| anyhow!("{origin}: {e}"))?;
     let report = Report::build(&system, title, sources, warnings, args.frame_cost);
@@ -74,7 +95,11 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
             eprintln!(
                 "wrote {} ({})",
                 path.display(),
-                if report.all_ok() { "schedulable" } else { "NOT schedulable" }
+                if report.all_ok() {
+                    "schedulable"
+                } else {
+                    "NOT schedulable"
+                }
             );
         }
         None => print!("{text}"),

@@ -1,0 +1,248 @@
+//! `cargo bench -p schedule-analysis`: how long the analysis takes for 10 … 10,000 tasks and messages.
+//!
+//! Board sets: random priorities (with ties), log-uniform periods 1 ms … 1 s, 85 % utilisation, release jitter up
+//! to 10 % of the period, every task locking up to two of eight shared resources (SRP ceilings and blocking are
+//! part of the timed work). Bus sets: unique identifiers (29-bit beyond 2048 messages), 0 … 8 data bytes,
+//! 80 % utilisation under the exact frame-cost model, queuing jitter up to 10 % of the period. Each row is the
+//! median of several runs of the whole analysis (no file parsing). Target: 1000 tasks and 1000 messages each well
+//! under 20 ms.
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use schedule_analysis::analysis::{analyse, analyse_board, Options};
+use schedule_analysis::busy_window::Limits;
+use schedule_analysis::can;
+use schedule_analysis::model::{
+    BoardSystem, BusSystem, FrameCostSpec, MessageSpec, OverheadTimes, System, TaskKind, TaskSpec,
+};
+use schedule_analysis::time::Time;
+
+/// xorshift64*: deterministic sets, no dependency.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Log-uniform between `lo` and `hi`.
+    fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        (lo.ln() + self.unit() * (hi.ln() - lo.ln())).exp()
+    }
+}
+
+/// Priority assignment of a benchmark set.
+#[derive(Clone, Copy)]
+enum Priorities {
+    /// Deadline-monotonic in n/4 levels (ties between neighbours): how RTIC priorities are assigned.
+    DeadlineMonotonic,
+    /// Random levels, unrelated to the periods: long busy windows with many jobs, the worst case for the
+    /// analysis's running time.
+    Random,
+}
+
+fn board(n: usize, seed: u64, priorities: Priorities) -> BoardSystem {
+    let mut rng = Rng(seed);
+    let shares: Vec<f64> = (0..n).map(|_| rng.unit() + 0.05).collect();
+    let total: f64 = shares.iter().sum();
+    let levels = (n / 4).max(2) as u64;
+    let tasks = shares
+        .iter()
+        .enumerate()
+        .map(|(i, share)| {
+            let period_us = rng.log_uniform(1_000.0, 1_000_000.0);
+            let wcet_us = (period_us * 0.85 * share / total).max(0.01);
+            let mut sections = Vec::new();
+            for _ in 0..(rng.next() % 3) {
+                let resource = format!("r{}", rng.next() % 8);
+                if !sections.iter().any(|(r, _)| *r == resource) {
+                    sections.push((resource, Time::from_us_up(wcet_us * rng.unit() * 0.5)));
+                }
+            }
+            let period = Time::from_us_down(period_us);
+            TaskSpec {
+                name: format!("task{i}"),
+                priority: match priorities {
+                    Priorities::Random => (1 + rng.next() % levels) as u32,
+                    // Shorter period, higher level: 1 µs … 1 s mapped logarithmically onto the levels.
+                    Priorities::DeadlineMonotonic => (1.0
+                        + (levels as f64 - 1.0)
+                            * (1.0 - (period_us / 1_000.0).ln() / 1_000f64.ln()))
+                    .round() as u32,
+                },
+                wcet: Time::from_us_up(wcet_us),
+                bcet: Time::ZERO,
+                period,
+                deadline: period.times(2),
+                deadline_follows_period: false,
+                jitter: Time::from_us_up(period_us * 0.1 * rng.unit()),
+                sections,
+                blocking: None,
+                kind: TaskKind::Plain,
+                released_by: None,
+                sporadic: false,
+                job_of: None,
+            }
+        })
+        .collect();
+    BoardSystem {
+        name: "bench".into(),
+        overheads: OverheadTimes::default(),
+        tasks,
+        idle_sections: Vec::new(),
+        can_tx_task: None,
+        static_ceilings: Vec::new(),
+    }
+}
+
+fn bus(n: usize, seed: u64) -> System {
+    let mut rng = Rng(seed);
+    let bit = can::bit_time(1_000_000);
+    let extended = n > 2048;
+    let mut ids: Vec<u32> = (0..n as u32)
+        .map(|i| if extended { i * 7919 % 0x1FFF_FFFF } else { i })
+        .collect();
+    // Shuffle so priority order and period order are unrelated.
+    for i in (1..ids.len()).rev() {
+        ids.swap(i, (rng.next() % (i as u64 + 1)) as usize);
+    }
+    let raw: Vec<(u8, f64)> = (0..n)
+        .map(|_| ((rng.next() % 9) as u8, rng.log_uniform(1.0, 1000.0)))
+        .collect();
+    // Scale the periods so the bus runs at 80 %.
+    let load: f64 = raw
+        .iter()
+        .map(|(dlc, p)| can::frame_time(can::FrameCost::Exact, *dlc, extended, bit).as_us_f64() / p)
+        .sum();
+    let scale = load / 0.8;
+    let messages = raw
+        .iter()
+        .zip(&ids)
+        .enumerate()
+        .map(|(i, ((dlc, p), &id))| {
+            let period_us = p * scale;
+            let period = Time::from_us_down(period_us);
+            MessageSpec {
+                name: format!("m{i}"),
+                id,
+                extended,
+                dlc: *dlc,
+                frames: 1,
+                period,
+                deadline: period.times(2),
+                deadline_follows_period: false,
+                jitter: Time::from_us_up(period_us * 0.1 * rng.unit()),
+                sender: None,
+                receiver: None,
+                jitter_budget: None,
+                e2e_deadline: None,
+            }
+        })
+        .collect();
+    System {
+        name: None,
+        boards: Vec::new(),
+        bus: Some(BusSystem {
+            bitrate: 1_000_000,
+            bit_time: bit,
+            frame_cost: FrameCostSpec::Exact,
+            messages,
+        }),
+    }
+}
+
+fn median(mut f: impl FnMut() -> usize, runs: usize) -> (Duration, usize) {
+    let mut times = Vec::with_capacity(runs);
+    let mut bounded = 0;
+    for _ in 0..runs {
+        let start = Instant::now();
+        bounded = black_box(f());
+        times.push(start.elapsed());
+    }
+    times.sort();
+    (times[times.len() / 2], bounded)
+}
+
+fn main() {
+    // `cargo bench` passes `--bench`; a filter argument is accepted and ignored.
+    let limits = Limits::default();
+    let options = Options {
+        frame_cost: FrameCostSpec::Exact,
+        horizon: None,
+    };
+    println!("schedule-analysis benchmark (median of runs; whole analysis, no parsing)");
+    println!();
+    println!(
+        "{:>7}  {:>20}  {:>11}  {:>20}  {:>11}  {:>20}  {:>11}",
+        "n",
+        "board, DM prio.",
+        "bounded",
+        "board, random prio.",
+        "bounded",
+        "CAN (exact)",
+        "bounded"
+    );
+    for n in [10usize, 100, 1_000, 10_000] {
+        let runs = if n >= 10_000 { 3 } else { 15 };
+        let dm = board(n, 0x5EED + n as u64, Priorities::DeadlineMonotonic);
+        let (board_time, board_bounded) = median(
+            || {
+                analyse_board(black_box(&dm), &limits)
+                    .tasks
+                    .iter()
+                    .filter(|t| t.bound.is_ok())
+                    .count()
+            },
+            runs,
+        );
+        let random = board(n, 0x5EED + n as u64, Priorities::Random);
+        let (random_time, random_bounded) = if n <= 1_000 {
+            median(
+                || {
+                    analyse_board(black_box(&random), &limits)
+                        .tasks
+                        .iter()
+                        .filter(|t| t.bound.is_ok())
+                        .count()
+                },
+                runs,
+            )
+        } else {
+            (Duration::ZERO, 0)
+        };
+        let s = bus(n, 0xB05 + n as u64);
+        let (bus_time, bus_bounded) = median(
+            || {
+                analyse(black_box(&s), &options).bus.map_or(0, |bus| {
+                    bus.messages.iter().filter(|m| m.bound.is_ok()).count()
+                })
+            },
+            runs,
+        );
+        let random_cell = if n <= 1_000 {
+            format!(
+                "{:>17.3} ms  {:>5}/{:<5}",
+                random_time.as_secs_f64() * 1e3,
+                random_bounded,
+                n
+            )
+        } else {
+            format!("{:>20}  {:>11}", "(skipped)", "")
+        };
+        println!(
+            "{n:>7}  {:>17.3} ms  {:>5}/{:<5}  {random_cell}  {:>17.3} ms  {:>5}/{:<5}",
+            board_time.as_secs_f64() * 1e3,
+            board_bounded,
+            n,
+            bus_time.as_secs_f64() * 1e3,
+            bus_bounded,
+            n
+        );
+    }
+}

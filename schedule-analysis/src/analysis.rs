@@ -1,0 +1,748 @@
+//! The whole system at once: every board (overheads, SRP ceilings, release chains), then the bus (sender response
+//! variation as queuing jitter), then every topic end to end with its jitter budget.
+//!
+//! Order of the holistic iteration: a board's tasks are analysed repeatedly until the release jitters inherited
+//! through `released_by` stop growing (they only grow, so this either settles or is reported as unbounded); the bus
+//! depends on the boards but never the other way round, so it is analysed once afterwards.
+
+use std::collections::{BinaryHeap, HashMap};
+use std::fmt;
+
+use crate::board::{self, CriticalSection, TaskTiming};
+use crate::busy_window::{AnalysisError, Counter, Limits, Response};
+use crate::can::{self, MessageTiming};
+use crate::model::{
+    BoardSystem, BusSystem, FrameCostSpec, System, TaskKind, TaskRef, GLOBAL_CRITICAL_SECTION,
+};
+use crate::time::Time;
+
+/// Rounds of the per-board jitter iteration before it is declared divergent.
+const MAX_JITTER_ROUNDS: usize = 100;
+
+/// Why a response time is unbounded.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Unbounded {
+    /// The core analysis found no bound (overload, or beyond the horizon).
+    Analysis(AnalysisError),
+    /// The task that releases this one is unbounded, so its release jitter is.
+    Releaser(String),
+    /// The task that sends this message (or its transmit path) is unbounded.
+    Sender(String),
+    /// Inherited release jitters kept growing.
+    NoConvergence,
+}
+
+impl fmt::Display for Unbounded {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Unbounded::Analysis(AnalysisError::Overload) => f.write_str("utilisation above 100 %"),
+            Unbounded::Analysis(AnalysisError::BeyondHorizon) => {
+                f.write_str("busy window beyond the horizon")
+            }
+            Unbounded::Analysis(e) => write!(f, "{e}"),
+            Unbounded::Releaser(name) => write!(f, "released by unbounded `{name}`"),
+            Unbounded::Sender(name) => write!(f, "sent by unbounded `{name}`"),
+            Unbounded::NoConvergence => f.write_str("inherited jitter does not converge"),
+        }
+    }
+}
+
+/// A response bound, or why there is none.
+pub type Bound = Result<Response, Unbounded>;
+
+/// Settings of one analysis run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    /// Frame-cost model for the bus.
+    pub frame_cost: FrameCostSpec,
+    /// Busy windows longer than this are unbounded; `None` picks max(60 s, 1000 × the longest period).
+    pub horizon: Option<Time>,
+}
+
+/// Everything the analysis found for one frame-cost model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Analysis {
+    /// Model label.
+    pub name: Option<String>,
+    /// Frame-cost model used on the bus.
+    pub frame_cost: FrameCostSpec,
+    /// Per board.
+    pub boards: Vec<BoardResult>,
+    /// The bus.
+    pub bus: Option<BusResult>,
+    /// Per message, end to end.
+    pub topics: Vec<TopicResult>,
+}
+
+/// One board's results.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoardResult {
+    /// Board name.
+    pub name: String,
+    /// CPU utilisation Σ C/T, overheads included.
+    pub utilisation: f64,
+    /// Tasks in model order.
+    pub tasks: Vec<TaskResult>,
+}
+
+/// One task's results.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TaskResult {
+    /// Task name.
+    pub name: String,
+    /// RTIC task it is a job of.
+    pub job_of: Option<String>,
+    /// Priority.
+    pub priority: u32,
+    /// Overhead class.
+    pub kind: TaskKind,
+    /// Sporadic (minimum inter-arrival time).
+    pub sporadic: bool,
+    /// Period.
+    pub period: Time,
+    /// Deadline.
+    pub deadline: Time,
+    /// Execution time with overheads.
+    pub wcet: Time,
+    /// The overheads in `wcet`.
+    pub overhead: Time,
+    /// Best-case response time (best-case execution, no interference).
+    pub bcrt: Time,
+    /// Blocking used.
+    pub blocking: Time,
+    /// Release jitter used (own plus inherited).
+    pub jitter: Time,
+    /// The bound.
+    pub bound: Bound,
+}
+
+impl TaskResult {
+    /// Worst-case response time, if bounded.
+    pub fn wcrt(&self) -> Option<Time> {
+        self.bound.as_ref().ok().map(|r| r.wcrt)
+    }
+    /// Bounded and within its deadline.
+    pub fn schedulable(&self) -> bool {
+        self.wcrt().is_some_and(|r| r <= self.deadline)
+    }
+    /// Deadline minus WCRT, µs (negative when missed).
+    pub fn slack_us(&self) -> Option<f64> {
+        self.wcrt().map(|r| signed_us(self.deadline, r))
+    }
+}
+
+/// The bus's results.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BusResult {
+    /// Bits per second.
+    pub bitrate: u32,
+    /// Bus utilisation Σ frames·C/T.
+    pub utilisation: f64,
+    /// Messages in model order.
+    pub messages: Vec<MessageResult>,
+}
+
+/// One message's results.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MessageResult {
+    /// Message name.
+    pub name: String,
+    /// Identifier.
+    pub id: u32,
+    /// 29-bit identifier.
+    pub extended: bool,
+    /// Data bytes.
+    pub dlc: u8,
+    /// Frames per activation.
+    pub frames: u32,
+    /// Period.
+    pub period: Time,
+    /// Deadline.
+    pub deadline: Time,
+    /// Worst time of one frame.
+    pub frame_time: Time,
+    /// Best time of one frame.
+    pub frame_time_best: Time,
+    /// Blocking by one lower-priority frame.
+    pub blocking: Time,
+    /// Queuing jitter used (own, sender variation, transmit path).
+    pub jitter: Time,
+    /// Where queuing can start at the earliest after the activation (the sender's best response).
+    pub offset: Time,
+    /// The sender (`board/task`).
+    pub sender: Option<String>,
+    /// The bus part of the bound (from the earliest queuing instant).
+    pub bound: Bound,
+    /// Best-case delivery after the activation.
+    pub bcrt: Time,
+}
+
+impl MessageResult {
+    /// Worst-case delivery after the activation (the sender's activation when linked).
+    pub fn wcrt(&self) -> Option<Time> {
+        self.bound.as_ref().ok().map(|r| self.offset.plus(r.wcrt))
+    }
+    /// Bounded and within its deadline.
+    pub fn schedulable(&self) -> bool {
+        self.wcrt().is_some_and(|r| r <= self.deadline)
+    }
+    /// Deadline minus WCRT, µs.
+    pub fn slack_us(&self) -> Option<f64> {
+        self.wcrt().map(|r| signed_us(self.deadline, r))
+    }
+}
+
+/// A topic end to end: sender activation, bus, receiver.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicResult {
+    /// The message name.
+    pub name: String,
+    /// Sender `board/task`.
+    pub sender: Option<String>,
+    /// Receiver `board/task`.
+    pub receiver: Option<String>,
+    /// Period.
+    pub period: Time,
+    /// Best case.
+    pub best: Time,
+    /// Worst case, if bounded.
+    pub worst: Option<Time>,
+    /// End-to-end deadline.
+    pub deadline: Time,
+    /// Jitter budget.
+    pub jitter_budget: Option<Time>,
+}
+
+impl TopicResult {
+    /// Worst minus best.
+    pub fn jitter(&self) -> Option<Time> {
+        self.worst.map(|w| w.minus(self.best))
+    }
+    /// Deadline minus worst, µs.
+    pub fn slack_us(&self) -> Option<f64> {
+        self.worst.map(|w| signed_us(self.deadline, w))
+    }
+    /// Budget minus jitter, µs.
+    pub fn budget_left_us(&self) -> Option<f64> {
+        match (self.jitter_budget, self.jitter()) {
+            (Some(budget), Some(jitter)) => Some(signed_us(budget, jitter)),
+            _ => None,
+        }
+    }
+    /// The worst case meets the deadline.
+    pub fn deadline_met(&self) -> bool {
+        self.worst.is_some_and(|w| w <= self.deadline)
+    }
+    /// The jitter stays within the budget (or there is none).
+    pub fn budget_met(&self) -> bool {
+        match self.jitter_budget {
+            None => self.worst.is_some(),
+            Some(budget) => self.jitter().is_some_and(|j| j <= budget),
+        }
+    }
+    /// Both.
+    pub fn ok(&self) -> bool {
+        self.deadline_met() && self.budget_met()
+    }
+}
+
+fn signed_us(a: Time, b: Time) -> f64 {
+    (a.as_ns() as f64 - b.as_ns() as f64) / 1000.0
+}
+
+impl Analysis {
+    /// Everything bounded, every deadline and every jitter budget met.
+    pub fn all_ok(&self) -> bool {
+        self.failures().is_empty()
+    }
+
+    /// What fails, as `board/task`, `bus/message`, `topic/name (deadline|jitter budget)`.
+    pub fn failures(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        for b in &self.boards {
+            for t in &b.tasks {
+                if !t.schedulable() {
+                    out.push(format!("{}/{}", b.name, t.name));
+                }
+            }
+        }
+        if let Some(bus) = &self.bus {
+            for m in &bus.messages {
+                if !m.schedulable() {
+                    out.push(format!("bus/{}", m.name));
+                }
+            }
+        }
+        for topic in &self.topics {
+            if !topic.deadline_met() {
+                out.push(format!("topic/{} (end-to-end deadline)", topic.name));
+            }
+            if !topic.budget_met() && topic.jitter_budget.is_some() {
+                out.push(format!("topic/{} (jitter budget)", topic.name));
+            }
+        }
+        out
+    }
+}
+
+/// Analyses the whole system under `options`.
+pub fn analyse(system: &System, options: &Options) -> Analysis {
+    let limits = Limits {
+        horizon: options.horizon.unwrap_or_else(|| default_horizon(system)),
+    };
+    let boards: Vec<BoardResult> = system
+        .boards
+        .iter()
+        .map(|b| analyse_board(b, &limits))
+        .collect();
+    let bus = system
+        .bus
+        .as_ref()
+        .map(|bus| analyse_bus(system, bus, &boards, options.frame_cost, &limits));
+    let topics = match (&system.bus, &bus) {
+        (Some(spec), Some(result)) => topics(system, spec, result, &boards),
+        _ => Vec::new(),
+    };
+    Analysis {
+        name: system.name.clone(),
+        frame_cost: options.frame_cost,
+        boards,
+        bus,
+        topics,
+    }
+}
+
+fn default_horizon(system: &System) -> Time {
+    let longest = system
+        .boards
+        .iter()
+        .flat_map(|b| b.tasks.iter().map(|t| t.period.max_of(t.deadline)))
+        .chain(
+            system
+                .bus
+                .iter()
+                .flat_map(|bus| bus.messages.iter().map(|m| m.period.max_of(m.deadline))),
+        )
+        .max()
+        .unwrap_or(Time::ZERO);
+    longest.times(1000).max_of(Time::from_us(60_000_000))
+}
+
+/// Analyses one board on its own.
+pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
+    let n = board.tasks.len();
+    let costs: Vec<Time> = board
+        .tasks
+        .iter()
+        .map(|t| t.wcet.plus(board.overheads.for_kind(t.kind)))
+        .collect();
+
+    // Ceilings from who uses what; "interrupts disabled" is above everyone.
+    let mut ceilings: HashMap<&str, u32> = HashMap::new();
+    for (resource, ceiling) in &board.static_ceilings {
+        ceilings.insert(resource.as_str(), *ceiling);
+    }
+    for task in &board.tasks {
+        for (resource, _) in &task.sections {
+            let c = ceilings.entry(resource.as_str()).or_insert(0);
+            *c = (*c).max(task.priority);
+        }
+    }
+    let ceiling_of = |resource: &str| -> u32 {
+        if resource == GLOBAL_CRITICAL_SECTION {
+            u32::MAX
+        } else {
+            ceilings.get(resource).copied().unwrap_or(0)
+        }
+    };
+    let mut sections = Vec::new();
+    for task in &board.tasks {
+        for (resource, length) in &task.sections {
+            sections.push(CriticalSection {
+                holder_priority: task.priority,
+                ceiling: ceiling_of(resource),
+                length: *length,
+            });
+        }
+    }
+    for (resource, length) in &board.idle_sections {
+        sections.push(CriticalSection {
+            holder_priority: 0,
+            ceiling: ceiling_of(resource),
+            length: *length,
+        });
+    }
+    let srp = srp_blockings(
+        &board.tasks.iter().map(|t| t.priority).collect::<Vec<_>>(),
+        &sections,
+    );
+    let blocking: Vec<Time> = board
+        .tasks
+        .iter()
+        .zip(&srp)
+        .map(|(t, computed)| t.blocking.unwrap_or(*computed))
+        .collect();
+
+    // Highest priority first; ties keep model order.
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| {
+        let (pa, pb) = (
+            board.tasks.get(a).map_or(0, |t| t.priority),
+            board.tasks.get(b).map_or(0, |t| t.priority),
+        );
+        pb.cmp(&pa)
+    });
+    let mut jitter: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
+    let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
+    let mut scratch = vec![Counter::default(); n];
+    let chained = board.tasks.iter().any(|t| t.released_by.is_some());
+    let mut settled = false;
+    for _ in 0..MAX_JITTER_ROUNDS {
+        let timings: Vec<TaskTiming> = order
+            .iter()
+            .map(|&i| TaskTiming {
+                priority: board.tasks.get(i).map_or(0, |t| t.priority),
+                wcet: costs.get(i).copied().unwrap_or(Time::ZERO),
+                period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
+                jitter: jitter.get(i).copied().unwrap_or(Time::ZERO),
+            })
+            .collect();
+        let sorted_blocking: Vec<Time> = order
+            .iter()
+            .map(|&i| blocking.get(i).copied().unwrap_or(Time::ZERO))
+            .collect();
+        let mut out = vec![Err(AnalysisError::NoSuchIndex); n];
+        board::response_times(&timings, &sorted_blocking, limits, &mut scratch, &mut out);
+        for (position, &i) in order.iter().enumerate() {
+            if let (Some(slot), Some(result)) = (bounds.get_mut(i), out.get(position)) {
+                *slot = result.map_err(Unbounded::Analysis);
+            }
+        }
+        if !chained {
+            settled = true;
+            break;
+        }
+        // Inherit the releasers' worst responses as release jitter.
+        let mut changed = false;
+        for (i, task) in board.tasks.iter().enumerate() {
+            let Some(r) = task.released_by else { continue };
+            let releaser = board.tasks.get(r).map_or("?", |t| t.name.as_str());
+            match bounds.get(r).cloned() {
+                Some(Ok(response)) => {
+                    let inherited = task.jitter.plus(response.wcrt);
+                    if jitter.get(i) != Some(&inherited) {
+                        if let Some(j) = jitter.get_mut(i) {
+                            *j = inherited;
+                        }
+                        changed = true;
+                    }
+                }
+                _ => {
+                    if let Some(slot) = bounds.get_mut(i) {
+                        *slot = Err(Unbounded::Releaser(releaser.to_string()));
+                    }
+                }
+            }
+        }
+        if !changed {
+            settled = true;
+            break;
+        }
+    }
+    if !settled {
+        for (i, task) in board.tasks.iter().enumerate() {
+            if task.released_by.is_some() {
+                if let Some(slot) = bounds.get_mut(i) {
+                    *slot = Err(Unbounded::NoConvergence);
+                }
+            }
+        }
+    }
+
+    let utilisation = board
+        .tasks
+        .iter()
+        .zip(&costs)
+        .map(|(t, c)| c.as_ns() as f64 / t.period.as_ns().max(1) as f64)
+        .sum();
+    let tasks = board
+        .tasks
+        .iter()
+        .enumerate()
+        .map(|(i, t)| TaskResult {
+            name: t.name.clone(),
+            job_of: t.job_of.clone(),
+            priority: t.priority,
+            kind: t.kind,
+            sporadic: t.sporadic,
+            period: t.period,
+            deadline: t.deadline,
+            wcet: costs.get(i).copied().unwrap_or(t.wcet),
+            overhead: board.overheads.for_kind(t.kind),
+            bcrt: t.bcet,
+            blocking: blocking.get(i).copied().unwrap_or(Time::ZERO),
+            jitter: jitter.get(i).copied().unwrap_or(t.jitter),
+            bound: bounds
+                .get(i)
+                .cloned()
+                .unwrap_or(Err(Unbounded::NoConvergence)),
+        })
+        .collect();
+    BoardResult {
+        name: board.name.clone(),
+        utilisation,
+        tasks,
+    }
+}
+
+/// [`board::srp_blocking`] for every priority in one sweep (upwards through the priorities, a max-heap of the
+/// sections whose holder is below, dropping those whose ceiling the sweep has passed): O((n + s) log s) instead
+/// of O(n·s).
+fn srp_blockings(priorities: &[u32], sections: &[CriticalSection]) -> Vec<Time> {
+    let mut by_holder: Vec<&CriticalSection> = sections.iter().collect();
+    by_holder.sort_by_key(|cs| cs.holder_priority);
+    let mut levels: Vec<u32> = priorities.to_vec();
+    levels.sort_unstable();
+    levels.dedup();
+    let mut heap: BinaryHeap<(Time, u32)> = BinaryHeap::new();
+    let mut next = 0;
+    let mut per_level: HashMap<u32, Time> = HashMap::with_capacity(levels.len());
+    for &p in &levels {
+        while let Some(cs) = by_holder.get(next).filter(|cs| cs.holder_priority < p) {
+            heap.push((cs.length, cs.ceiling));
+            next += 1;
+        }
+        // Ceilings below p can never block p or anything above it again.
+        while heap.peek().is_some_and(|&(_, ceiling)| ceiling < p) {
+            heap.pop();
+        }
+        per_level.insert(p, heap.peek().map_or(Time::ZERO, |&(length, _)| length));
+    }
+    priorities
+        .iter()
+        .map(|p| per_level.get(p).copied().unwrap_or(Time::ZERO))
+        .collect()
+}
+
+fn task_name(system: &System, r: TaskRef) -> String {
+    let board = system.boards.get(r.board);
+    format!(
+        "{}/{}",
+        board.map_or("?", |b| b.name.as_str()),
+        board
+            .and_then(|b| b.tasks.get(r.task))
+            .map_or("?", |t| t.name.as_str())
+    )
+}
+
+fn task_result(boards: &[BoardResult], r: TaskRef) -> Option<&TaskResult> {
+    boards.get(r.board).and_then(|b| b.tasks.get(r.task))
+}
+
+fn analyse_bus(
+    system: &System,
+    bus: &BusSystem,
+    boards: &[BoardResult],
+    frame_cost: FrameCostSpec,
+    limits: &Limits,
+) -> BusResult {
+    let cost = frame_cost.cost();
+    let bit = bus.bit_time;
+    let n = bus.messages.len();
+    // Queuing jitter and earliest queuing instant from the sender (and the board's transmit path).
+    let mut jitter = Vec::with_capacity(n);
+    let mut offset = Vec::with_capacity(n);
+    let mut sender_problem: Vec<Option<Unbounded>> = Vec::with_capacity(n);
+    for m in &bus.messages {
+        let Some(s) = m.sender else {
+            jitter.push(m.jitter);
+            offset.push(Time::ZERO);
+            sender_problem.push(None);
+            continue;
+        };
+        let sender = task_result(boards, s);
+        let tx = system
+            .boards
+            .get(s.board)
+            .and_then(|b| b.can_tx_task)
+            .filter(|&t| t != s.task)
+            .map(|t| TaskRef {
+                board: s.board,
+                task: t,
+            });
+        let tx_wcrt = match tx {
+            None => Ok(Time::ZERO),
+            Some(t) => task_result(boards, t)
+                .and_then(|r| r.wcrt())
+                .ok_or_else(|| task_name(system, t)),
+        };
+        match (sender.and_then(|r| r.wcrt().map(|w| (w, r.bcrt))), tx_wcrt) {
+            (Some((worst, best)), Ok(tx)) => {
+                jitter.push(m.jitter.plus(worst.minus(best)).plus(tx));
+                offset.push(best);
+                sender_problem.push(None);
+            }
+            (None, _) => {
+                jitter.push(m.jitter);
+                offset.push(Time::ZERO);
+                sender_problem.push(Some(Unbounded::Sender(task_name(system, s))));
+            }
+            (_, Err(name)) => {
+                jitter.push(m.jitter);
+                offset.push(Time::ZERO);
+                sender_problem.push(Some(Unbounded::Sender(name)));
+            }
+        }
+    }
+    let frame_times: Vec<Time> = bus
+        .messages
+        .iter()
+        .map(|m| can::frame_time(cost, m.dlc, m.extended, bit))
+        .collect();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by_key(|&i| {
+        bus.messages
+            .get(i)
+            .map_or(u32::MAX, |m| can::arbitration_key(m.id, m.extended))
+    });
+    let timings: Vec<MessageTiming> = order
+        .iter()
+        .map(|&i| {
+            let m = bus.messages.get(i);
+            MessageTiming {
+                key: m.map_or(u32::MAX, |m| can::arbitration_key(m.id, m.extended)),
+                frame_time: frame_times.get(i).copied().unwrap_or(Time::ZERO),
+                frames: m.map_or(1, |m| m.frames),
+                period: m.map_or(Time::ZERO, |m| m.period),
+                jitter: jitter.get(i).copied().unwrap_or(Time::ZERO),
+            }
+        })
+        .collect();
+    let mut scratch = vec![Counter::default(); n];
+    let mut sorted_blocking = vec![Time::ZERO; n];
+    can::blockings(&timings, &mut sorted_blocking);
+    let mut out = vec![Err(AnalysisError::NoSuchIndex); n];
+    can::response_times(
+        &timings,
+        &sorted_blocking,
+        bit,
+        limits,
+        &mut scratch,
+        &mut out,
+    );
+    let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
+    let mut blockings = vec![Time::ZERO; n];
+    for (position, &i) in order.iter().enumerate() {
+        if let (Some(slot), Some(result)) = (bounds.get_mut(i), out.get(position)) {
+            *slot = match sender_problem.get(i).cloned().flatten() {
+                Some(problem) => Err(problem),
+                None => result.map_err(Unbounded::Analysis),
+            };
+        }
+        if let (Some(slot), Some(b)) = (blockings.get_mut(i), sorted_blocking.get(position)) {
+            *slot = *b;
+        }
+    }
+    let messages = bus
+        .messages
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let best = can::frame_time_best(cost, m.dlc, m.extended, bit);
+            let off = offset.get(i).copied().unwrap_or(Time::ZERO);
+            MessageResult {
+                name: m.name.clone(),
+                id: m.id,
+                extended: m.extended,
+                dlc: m.dlc,
+                frames: m.frames,
+                period: m.period,
+                deadline: m.deadline,
+                frame_time: frame_times.get(i).copied().unwrap_or(Time::ZERO),
+                frame_time_best: best,
+                blocking: blockings.get(i).copied().unwrap_or(Time::ZERO),
+                jitter: jitter.get(i).copied().unwrap_or(m.jitter),
+                offset: off,
+                sender: m.sender.map(|s| task_name(system, s)),
+                bound: bounds
+                    .get(i)
+                    .cloned()
+                    .unwrap_or(Err(Unbounded::NoConvergence)),
+                bcrt: off.plus(best.times(u64::from(m.frames))),
+            }
+        })
+        .collect();
+    BusResult {
+        bitrate: bus.bitrate,
+        utilisation: can::utilisation(&timings),
+        messages,
+    }
+}
+
+fn topics(
+    system: &System,
+    spec: &BusSystem,
+    bus: &BusResult,
+    boards: &[BoardResult],
+) -> Vec<TopicResult> {
+    spec.messages
+        .iter()
+        .zip(&bus.messages)
+        .map(|(m, result)| {
+            let receiver = m.receiver.and_then(|r| task_result(boards, r));
+            let worst = match (result.wcrt(), m.receiver) {
+                (Some(w), None) => Some(w),
+                (Some(w), Some(_)) => receiver.and_then(|r| r.wcrt()).map(|rw| w.plus(rw)),
+                (None, _) => None,
+            };
+            let best = result.bcrt.plus(receiver.map_or(Time::ZERO, |r| r.bcrt));
+            TopicResult {
+                name: m.name.clone(),
+                sender: m.sender.map(|s| task_name(system, s)),
+                receiver: m.receiver.map(|r| task_name(system, r)),
+                period: m.period,
+                best,
+                worst,
+                deadline: m.end_to_end_deadline(),
+                jitter_budget: m.jitter_budget,
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sweep_blocking_matches_the_definition() {
+        // A small deterministic generator is enough to cover ties, idle holders and global sections.
+        let mut seed = 0x1234_5678u64;
+        let mut next = move |n: u64| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) % n
+        };
+        for _ in 0..200 {
+            let priorities: Vec<u32> = (0..1 + next(12)).map(|_| next(8) as u32).collect();
+            let sections: Vec<CriticalSection> = (0..next(15))
+                .map(|_| CriticalSection {
+                    holder_priority: next(8) as u32,
+                    ceiling: if next(10) == 0 {
+                        u32::MAX
+                    } else {
+                        next(9) as u32
+                    },
+                    length: Time::from_ns(next(1000)),
+                })
+                .collect();
+            let swept = srp_blockings(&priorities, &sections);
+            let direct: Vec<Time> = priorities
+                .iter()
+                .map(|&p| board::srp_blocking(p, &sections))
+                .collect();
+            assert_eq!(swept, direct);
+        }
+    }
+}

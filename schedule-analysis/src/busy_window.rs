@@ -1,0 +1,610 @@
+//! The busy-window fixed point that both analyses share: preemptive for the board tasks, non-preemptive for the
+//! CAN frames. Allocation-free; the caller lends a scratch slice of [`Counter`]s (each interferer's next
+//! activation) so that an iteration divides only for the interferers with a new activation in the grown window.
+//!
+//! Notation (docs/analysis.md has the derivation): a subject with cost `C` per instance, `n` instances per
+//! activation (frames per sample on the bus, 1 on a board), period `T`, release jitter `J` and blocking `B`,
+//! interfered with by streams `k` with cost `C_k` per activation, period `T_k` and jitter `J_k`.
+//! An interferer's activations before `x` number `⌈(x + J_k) / T_k⌉` (releases strictly before `x`).
+//!
+//! * Preemptive (RTIC, SRP): `w(q) = B + (q+1)·C + Σ_k ⌈(w(q) + J_k)/T_k⌉·C_k`, `R(q) = w(q) − q·T + J`;
+//!   the window closes after the first `q` with `w(q) + J ≤ (q+1)·T`.
+//! * Non-preemptive (CAN, Davis et al. 2007): the level busy period
+//!   `t = B + Σ_{k ∪ self} ⌈(t + J_k)/T_k⌉·C_k` holds `Q = ⌈(t + J)/T⌉` activations; for every instance `q`
+//!   (activation `q / n`) `w(q) = B + q·C + Σ_k ⌈(w(q) + J_k + τ)/T_k⌉·C_k` and
+//!   `R(q) = J + w(q) + C − ⌊q/n⌋·T`, with `τ` one bit time.
+//!
+//! The iterations start from a lower bound of the least fixed point derived from the utilisation
+//! (`w ≥ (B + C + Σ J_k·U_k) / (1 − U)`), which leaves the result exact and saves most iterations on large sets.
+
+use core::fmt;
+
+use crate::time::Time;
+
+/// Something that arrives periodically or sporadically and costs processor or bus time when it does.
+pub trait Activations {
+    /// Cost of one activation, all its instances included (a proximity-ring sample is 8 frames).
+    fn activation_cost(&self) -> Time;
+    /// Period, or minimum inter-arrival time for sporadic activations.
+    fn period(&self) -> Time;
+    /// Release jitter: how late after its nominal time an activation may become ready.
+    fn jitter(&self) -> Time;
+}
+
+/// Incremental count of one interferer's activations: an iteration compares the grown window with each
+/// interferer's next activation and divides only for those it passed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counter {
+    /// Nominal instant of the next activation not yet counted: `count·T − J`.
+    next: u64,
+    /// Activations counted so far.
+    count: u64,
+    /// Which interferer.
+    index: usize,
+}
+
+/// What is analysed: one task (or one CAN message) against the streams that may delay it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Subject {
+    /// Cost of one instance (one job, one frame).
+    pub cost: Time,
+    /// Instances queued together per activation (frames per sample); 1 for a board task.
+    pub instances_per_activation: u32,
+    /// Period or minimum inter-arrival time.
+    pub period: Time,
+    /// Release (or queuing) jitter.
+    pub jitter: Time,
+    /// Blocking by lower-priority work: an SRP critical section, or one lower-priority frame.
+    pub blocking: Time,
+    /// A value known not to exceed the first instance's window (the least fixed point for instance 0), e.g. that
+    /// of a higher-priority stream whose interferers are a subset of this one's; `ZERO` when none is known.
+    /// Only speeds the iteration up: a start at or below the least fixed point gives the same result.
+    pub known_first_window: Time,
+    /// The same for the non-preemptive level busy period.
+    pub known_busy_period: Time,
+}
+
+impl Subject {
+    /// A subject without start hints.
+    pub fn new(
+        cost: Time,
+        instances_per_activation: u32,
+        period: Time,
+        jitter: Time,
+        blocking: Time,
+    ) -> Subject {
+        Subject {
+            cost,
+            instances_per_activation,
+            period,
+            jitter,
+            blocking,
+            known_first_window: Time::ZERO,
+            known_busy_period: Time::ZERO,
+        }
+    }
+}
+
+/// How the resource is shared.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Discipline {
+    /// A processor under fixed-priority preemptive scheduling; equal-priority work runs to completion.
+    Preemptive,
+    /// A CAN bus: a frame once started is never interrupted; `bit_time` is the arbitration resolution.
+    NonPreemptive {
+        /// One bit time τ: a higher-priority frame queued up to τ after the bus becomes idle still wins.
+        bit_time: Time,
+    },
+}
+
+/// Where the analysis gives up on a busy window that keeps growing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// A busy window longer than this is reported as unbounded.
+    pub horizon: Time,
+}
+
+impl Default for Limits {
+    /// One minute: far beyond any AMiRo period, small enough to stop quickly.
+    fn default() -> Self {
+        Limits {
+            horizon: Time::from_us(60_000_000),
+        }
+    }
+}
+
+/// The worst case found in the busy window.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Response {
+    /// Worst-case response time, measured from the nominal activation (release jitter included).
+    pub wcrt: Time,
+    /// Which instance of the busy window (0-based) met the worst case.
+    pub worst_instance: u64,
+    /// Instances in the busy window.
+    pub instances: u64,
+    /// Length of the busy window.
+    pub busy_window: Time,
+    /// Interference by the other streams in the worst instance's window.
+    pub interference: Time,
+    /// The first instance's window: its completion (preemptive) or transmission start (non-preemptive) after the
+    /// critical instant — a start hint for lower-priority streams.
+    pub first_window: Time,
+}
+
+/// Why no response time exists (or none could be computed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AnalysisError {
+    /// The utilisation at this priority level exceeds 1 (or a period is zero): the busy window never closes.
+    Overload,
+    /// The busy window grew beyond [`Limits::horizon`] (utilisation at or within rounding of 1).
+    BeyondHorizon,
+    /// The set was not ordered by priority as the function requires.
+    NotSorted,
+    /// The index does not name an element of the set.
+    NoSuchIndex,
+}
+
+impl AnalysisError {
+    /// Whether the error means "no bound exists" rather than a usage mistake.
+    pub fn is_unbounded(self) -> bool {
+        matches!(self, AnalysisError::Overload | AnalysisError::BeyondHorizon)
+    }
+}
+
+impl fmt::Display for AnalysisError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            AnalysisError::Overload => {
+                "unbounded: utilisation at this priority level exceeds 100 %"
+            }
+            AnalysisError::BeyondHorizon => {
+                "unbounded: the busy window grows beyond the analysis horizon"
+            }
+            AnalysisError::NotSorted => "the set is not ordered by priority",
+            AnalysisError::NoSuchIndex => "no element with that index",
+        })
+    }
+}
+
+/// Utilisation above this counts as overload (float noise on an exact 1.0 must not).
+const OVERLOAD_MARGIN: f64 = 1e-9;
+/// The utilisation bound is only used to start the iteration when `1 − U` is at least this...
+const MIN_SLACK_FOR_BOUND: f64 = 1e-3;
+/// ...and then shrunk by this factor, so float error can never lift the start above the least fixed point.
+const BOUND_SAFETY: f64 = 1.0 - 1e-6;
+/// Instances examined in one busy window before giving up.
+const MAX_INSTANCES: u64 = 50_000_000;
+
+fn ceil_div(a: u64, b: u64) -> u64 {
+    if a == 0 {
+        0
+    } else {
+        (a - 1) / b + 1
+    }
+}
+
+/// Worst-case response time of `subject`, delayed by every stream in `others` except `exclude`.
+///
+/// `scratch` should hold at least `others.len()` counters; with fewer, every iteration divides once per
+/// interferer instead (same result, slower).
+pub fn response_time<A: Activations>(
+    subject: &Subject,
+    others: &[A],
+    exclude: Option<usize>,
+    discipline: Discipline,
+    limits: &Limits,
+    scratch: &mut [Counter],
+) -> Result<Response, AnalysisError> {
+    let t_own = subject.period.as_ns();
+    if t_own == 0 {
+        return Err(AnalysisError::Overload);
+    }
+    let per = u64::from(subject.instances_per_activation.max(1));
+    let own_activation = subject.cost.times(per).as_ns();
+
+    let mut u_hp = 0.0f64;
+    let mut jitter_load = 0.0f64;
+    for (k, other) in others.iter().enumerate() {
+        if Some(k) == exclude {
+            continue;
+        }
+        let (c, t) = (other.activation_cost().as_ns(), other.period().as_ns());
+        if c == 0 {
+            continue;
+        }
+        if t == 0 {
+            return Err(AnalysisError::Overload);
+        }
+        let u = c as f64 / t as f64;
+        u_hp += u;
+        jitter_load += other.jitter().as_ns() as f64 * u;
+    }
+    let u_own = own_activation as f64 / t_own as f64;
+    if u_hp + u_own > 1.0 + OVERLOAD_MARGIN || (u_hp >= 1.0 && own_activation > 0) {
+        return Err(AnalysisError::Overload);
+    }
+    let loads = Loads {
+        u_hp,
+        u_own,
+        jitter_load,
+    };
+    let mut window = Window::new(others, exclude, scratch, limits.horizon.as_ns());
+    match discipline {
+        Discipline::Preemptive => preemptive(subject, &mut window, &loads),
+        Discipline::NonPreemptive { bit_time } => {
+            non_preemptive(subject, per, bit_time.as_ns(), &mut window, &loads)
+        }
+    }
+}
+
+struct Loads {
+    u_hp: f64,
+    u_own: f64,
+    jitter_load: f64,
+}
+
+/// The interfering streams and their counters.
+struct Window<'a, 'b, A> {
+    others: &'a [A],
+    exclude: Option<usize>,
+    /// The counters (valid in `heap[..len]`), or empty when the scratch is too small to hold all.
+    heap: &'b mut [Counter],
+    len: usize,
+    /// Σ count·C over the heap.
+    sum: u64,
+    horizon: u64,
+}
+
+impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
+    fn new(
+        others: &'a [A],
+        exclude: Option<usize>,
+        scratch: &'b mut [Counter],
+        horizon: u64,
+    ) -> Self {
+        // Without room for every interferer, fall back to dividing once per interferer and iteration.
+        let heap = if scratch.len() >= others.len() {
+            scratch
+        } else {
+            &mut []
+        };
+        Window {
+            others,
+            exclude,
+            heap,
+            len: 0,
+            sum: 0,
+            horizon,
+        }
+    }
+
+    fn usable(&self, k: usize, other: &A) -> Option<(u64, u64, u64)> {
+        let (c, t) = (other.activation_cost().as_ns(), other.period().as_ns());
+        (Some(k) != self.exclude && c != 0 && t != 0).then_some((c, t, other.jitter().as_ns()))
+    }
+
+    /// Counts every interferer's activations before `x` from scratch: `⌈(x + J_k)/T_k⌉`.
+    fn start(&mut self, x: u64) {
+        self.len = 0;
+        self.sum = 0;
+        if self.heap.is_empty() {
+            return;
+        }
+        for (k, other) in self.others.iter().enumerate() {
+            let Some((c, t, j)) = self.usable(k, other) else {
+                continue;
+            };
+            let count = ceil_div(x.saturating_add(j), t);
+            if let Some(slot) = self.heap.get_mut(self.len) {
+                *slot = Counter {
+                    next: count.saturating_mul(t).saturating_sub(j),
+                    count,
+                    index: k,
+                };
+                self.len += 1;
+            }
+            self.sum = self.sum.saturating_add(count.saturating_mul(c));
+        }
+    }
+
+    /// Σ_k ⌈(x + J_k)/T_k⌉·C_k. With counters, `x` must not decrease between calls after [`Window::start`]:
+    /// a counter is only touched (one division) when the window passed its next activation.
+    fn demand(&mut self, x: u64) -> u64 {
+        if self.heap.is_empty() {
+            let mut sum = 0u64;
+            for (k, other) in self.others.iter().enumerate() {
+                if let Some((c, t, j)) = self.usable(k, other) {
+                    sum = sum.saturating_add(ceil_div(x.saturating_add(j), t).saturating_mul(c));
+                }
+            }
+            return sum;
+        }
+        let others = self.others;
+        let counters = self.heap.get_mut(..self.len).unwrap_or(&mut []);
+        for counter in counters.iter_mut().filter(|counter| counter.next < x) {
+            let Some(other) = others.get(counter.index) else {
+                continue;
+            };
+            let (c, t, j) = (
+                other.activation_cost().as_ns(),
+                other.period().as_ns(),
+                other.jitter().as_ns(),
+            );
+            // Jump straight to the count at `x` (one division however many activations the window grew by).
+            let count = ceil_div(x.saturating_add(j), t).max(counter.count + 1);
+            self.sum = self
+                .sum
+                .saturating_add((count - counter.count).saturating_mul(c));
+            counter.count = count;
+            counter.next = count.saturating_mul(t).saturating_sub(j);
+        }
+        self.sum
+    }
+}
+
+/// A start for the fixed point of `x = constant + Σ ⌈(x + shift + J_k)/T_k⌉·C_k` (plus the subject's own
+/// activations when `with_own`) that is at most its least solution: since `⌈y⌉ ≥ y`, every solution satisfies
+/// `x·(1 − U) ≥ constant + Σ (shift + J_k)·U_k`. `floor` is a start known to be safe anyway.
+fn lower_bound(
+    constant: u64,
+    floor: u64,
+    shift: u64,
+    loads: &Loads,
+    with_own: bool,
+    own_jitter: u64,
+) -> u64 {
+    let u = if with_own {
+        loads.u_hp + loads.u_own
+    } else {
+        loads.u_hp
+    };
+    let slack = 1.0 - u;
+    if slack < MIN_SLACK_FOR_BOUND {
+        return floor;
+    }
+    let mut numerator = constant as f64 + loads.jitter_load + shift as f64 * loads.u_hp;
+    if with_own {
+        numerator += own_jitter as f64 * loads.u_own;
+    }
+    let bound = numerator / slack * BOUND_SAFETY;
+    if bound >= u64::MAX as f64 {
+        return floor;
+    }
+    (bound as u64).max(floor)
+}
+
+fn preemptive<A: Activations>(
+    subject: &Subject,
+    window: &mut Window<'_, '_, A>,
+    loads: &Loads,
+) -> Result<Response, AnalysisError> {
+    let c = subject.cost.as_ns();
+    let b = subject.blocking.as_ns();
+    let t = subject.period.as_ns();
+    let j = subject.jitter.as_ns();
+    let mut w = lower_bound(b.saturating_add(c), b.saturating_add(c), 0, loads, false, 0)
+        .max(subject.known_first_window.as_ns());
+    window.start(w);
+    let mut worst: Option<Response> = None;
+    let mut q: u64 = 0;
+    loop {
+        let own = b.saturating_add((q + 1).saturating_mul(c));
+        let interference = loop {
+            let interference = window.demand(w);
+            let demand = own.saturating_add(interference);
+            if demand <= w {
+                break interference;
+            }
+            w = demand;
+            if w > window.horizon {
+                return Err(AnalysisError::BeyondHorizon);
+            }
+        };
+        let r = w.saturating_add(j).saturating_sub(q.saturating_mul(t));
+        if worst.is_none_or(|best| r > best.wcrt.as_ns()) {
+            worst = Some(Response {
+                wcrt: Time::from_ns(r),
+                worst_instance: q,
+                instances: 0,
+                busy_window: Time::ZERO,
+                interference: Time::from_ns(interference),
+                first_window: worst.map_or(Time::from_ns(w), |best| best.first_window),
+            });
+        }
+        if w.saturating_add(j) <= (q + 1).saturating_mul(t) {
+            break;
+        }
+        q += 1;
+        if q >= MAX_INSTANCES {
+            return Err(AnalysisError::BeyondHorizon);
+        }
+    }
+    let mut response = worst.ok_or(AnalysisError::BeyondHorizon)?;
+    response.instances = q + 1;
+    response.busy_window = Time::from_ns(w);
+    Ok(response)
+}
+
+fn non_preemptive<A: Activations>(
+    subject: &Subject,
+    per: u64,
+    tau: u64,
+    window: &mut Window<'_, '_, A>,
+    loads: &Loads,
+) -> Result<Response, AnalysisError> {
+    let c = subject.cost.as_ns();
+    let b = subject.blocking.as_ns();
+    let t = subject.period.as_ns();
+    let j = subject.jitter.as_ns();
+    let own_activation = c.saturating_mul(per);
+
+    // The level busy period, own activations included.
+    let mut busy = lower_bound(b, b.saturating_add(own_activation), 0, loads, true, j)
+        .max(subject.known_busy_period.as_ns())
+        .max(1);
+    window.start(busy);
+    loop {
+        let own = ceil_div(busy.saturating_add(j), t).saturating_mul(own_activation);
+        let demand = b.saturating_add(own).saturating_add(window.demand(busy));
+        if demand <= busy {
+            break;
+        }
+        busy = demand;
+        if busy > window.horizon {
+            return Err(AnalysisError::BeyondHorizon);
+        }
+    }
+    let activations = ceil_div(busy.saturating_add(j), t).max(1);
+    let instances = activations.saturating_mul(per);
+    if instances > MAX_INSTANCES {
+        return Err(AnalysisError::BeyondHorizon);
+    }
+
+    let mut w = lower_bound(b, b, tau, loads, false, 0).max(subject.known_first_window.as_ns());
+    window.start(w.saturating_add(tau));
+    let mut worst: Option<Response> = None;
+    for q in 0..instances {
+        let own = b.saturating_add(q.saturating_mul(c));
+        let interference = loop {
+            let interference = window.demand(w.saturating_add(tau));
+            let demand = own.saturating_add(interference);
+            if demand <= w {
+                break interference;
+            }
+            w = demand;
+            if w > window.horizon {
+                return Err(AnalysisError::BeyondHorizon);
+            }
+        };
+        let activation = q / per;
+        let r = w
+            .saturating_add(c)
+            .saturating_add(j)
+            .saturating_sub(activation.saturating_mul(t));
+        if worst.is_none_or(|best| r > best.wcrt.as_ns()) {
+            worst = Some(Response {
+                wcrt: Time::from_ns(r),
+                worst_instance: q,
+                instances,
+                busy_window: Time::from_ns(busy),
+                interference: Time::from_ns(interference),
+                first_window: worst.map_or(Time::from_ns(w), |best| best.first_window),
+            });
+        }
+    }
+    worst.ok_or(AnalysisError::BeyondHorizon)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Clone, Copy)]
+    struct Stream(u64, u64, u64);
+
+    impl Activations for Stream {
+        fn activation_cost(&self) -> Time {
+            Time::from_ns(self.0)
+        }
+        fn period(&self) -> Time {
+            Time::from_ns(self.1)
+        }
+        fn jitter(&self) -> Time {
+            Time::from_ns(self.2)
+        }
+    }
+
+    fn subject(c: u64, t: u64) -> Subject {
+        Subject::new(
+            Time::from_ns(c),
+            1,
+            Time::from_ns(t),
+            Time::ZERO,
+            Time::ZERO,
+        )
+    }
+
+    #[test]
+    fn counters_and_divisions_agree() {
+        // The same analysis with and without scratch must give the same answer.
+        let others = [Stream(3, 7, 2), Stream(3, 12, 0), Stream(1, 5, 4)];
+        let s = subject(5, 80);
+        let mut scratch = [Counter::default(); 3];
+        let with = response_time(
+            &s,
+            &others,
+            None,
+            Discipline::Preemptive,
+            &Limits::default(),
+            &mut scratch,
+        );
+        let without = response_time(
+            &s,
+            &others,
+            None,
+            Discipline::Preemptive,
+            &Limits::default(),
+            &mut [],
+        );
+        assert_eq!(with, without);
+        assert!(with.is_ok());
+    }
+
+    #[test]
+    fn overload_is_reported_not_looped_on() {
+        let others = [Stream(6, 10, 0)];
+        let s = subject(5, 10);
+        let r = response_time(
+            &s,
+            &others,
+            None,
+            Discipline::Preemptive,
+            &Limits::default(),
+            &mut [],
+        );
+        assert_eq!(r, Err(AnalysisError::Overload));
+        let r = response_time(
+            &s,
+            &others,
+            None,
+            Discipline::NonPreemptive {
+                bit_time: Time::from_ns(1),
+            },
+            &Limits::default(),
+            &mut [],
+        );
+        assert_eq!(r, Err(AnalysisError::Overload));
+    }
+
+    #[test]
+    fn full_utilisation_stops_at_the_horizon() {
+        // U = 1 exactly with co-prime periods: the window only closes at the hyperperiod, beyond the horizon.
+        let others = [Stream(500, 1000, 0)];
+        let s = subject(501, 1002);
+        let limits = Limits {
+            horizon: Time::from_ns(100_000),
+        };
+        let r = response_time(&s, &others, None, Discipline::Preemptive, &limits, &mut []);
+        assert!(
+            matches!(
+                r,
+                Err(AnalysisError::BeyondHorizon) | Err(AnalysisError::Overload)
+            ),
+            "{r:?}"
+        );
+    }
+
+    #[test]
+    fn a_zero_period_interferer_is_overload() {
+        let others = [Stream(1, 0, 0)];
+        let r = response_time(
+            &subject(1, 10),
+            &others,
+            None,
+            Discipline::Preemptive,
+            &Limits::default(),
+            &mut [],
+        );
+        assert_eq!(r, Err(AnalysisError::Overload));
+    }
+}

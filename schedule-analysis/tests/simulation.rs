@@ -1,0 +1,413 @@
+//! The analyses against the simulators on many random sets:
+//!
+//! * any release pattern (offsets, sporadic gaps, release jitter, shorter executions, SRP locks): no simulated
+//!   response exceeds the analysed bound;
+//! * synchronous release, no jitter, no blocking, full execution times: the simulated worst *equals* the bound
+//!   (distinct priorities on the board; on the bus for every message simulated with the higher-priority messages
+//!   only, against the analysis without its blocking term, and for the lowest-priority message in the whole set
+//!   against the full analysis).
+
+use proptest::prelude::*;
+use schedule_analysis::board::{self, CriticalSection, TaskTiming};
+use schedule_analysis::busy_window::{Counter, Limits, Response};
+use schedule_analysis::can::{self, FrameCost, MessageTiming};
+use schedule_analysis::time::Time;
+
+mod sim;
+
+use sim::{Activation, Job, Segment, SimMessage};
+
+const US: u64 = 1000;
+
+/// A random board task before scaling: priority, period (µs), utilisation share, jitter (fraction of the
+/// period, %), which of two resources it locks, and how long (fraction of its WCET, %).
+type RawTask = (u32, u64, u64, u64, (bool, bool), (u64, u64));
+
+struct BoardSet {
+    timings: Vec<TaskTiming>, // ordered by descending priority
+    sections: Vec<Vec<(usize, u64)>>,
+    ceilings: Vec<u32>,
+}
+
+fn board_set(
+    raw: &[RawTask],
+    total_utilisation: u64,
+    with_jitter: bool,
+    with_locks: bool,
+    distinct: bool,
+) -> BoardSet {
+    let shares: u64 = raw.iter().map(|t| t.2).sum::<u64>().max(1);
+    let mut tasks: Vec<(TaskTiming, Vec<(usize, u64)>)> = raw
+        .iter()
+        .enumerate()
+        .map(
+            |(i, &(priority, period_us, share, jitter_pct, (use0, use1), (len0, len1)))| {
+                let period = period_us * US;
+                // Utilisation per task in per mille of the total, WCET rounded down to whole µs, at least 1 µs.
+                let wcet =
+                    ((period * total_utilisation * share) / (shares * 1000) / US).max(1) * US;
+                let jitter = if with_jitter {
+                    period * jitter_pct / 100 / US * US
+                } else {
+                    0
+                };
+                let priority = if distinct { 100 - i as u32 } else { priority };
+                let mut sections = Vec::new();
+                if with_locks && use0 {
+                    sections.push((0, (wcet * len0 / 100 / US).max(1) * US));
+                }
+                if with_locks && use1 {
+                    sections.push((1, (wcet * len1 / 100 / US).max(1) * US));
+                }
+                let timing = TaskTiming {
+                    priority,
+                    wcet: Time::from_ns(wcet),
+                    period: Time::from_ns(period),
+                    jitter: Time::from_ns(jitter),
+                };
+                (timing, sections)
+            },
+        )
+        .collect();
+    tasks.sort_by_key(|t| std::cmp::Reverse(t.0.priority));
+    let ceilings = (0..2)
+        .map(|r| {
+            board::resource_ceiling(
+                tasks
+                    .iter()
+                    .filter(|t| t.1.iter().any(|s| s.0 == r))
+                    .map(|t| t.0.priority),
+            )
+        })
+        .collect();
+    BoardSet {
+        timings: tasks.iter().map(|t| t.0).collect(),
+        sections: tasks.into_iter().map(|t| t.1).collect(),
+        ceilings,
+    }
+}
+
+fn analyse_board(set: &BoardSet, with_blocking: bool) -> Vec<Option<Response>> {
+    let sections: Vec<CriticalSection> = set
+        .timings
+        .iter()
+        .zip(&set.sections)
+        .flat_map(|(t, s)| {
+            s.iter().map(|&(r, len)| CriticalSection {
+                holder_priority: t.priority,
+                ceiling: set.ceilings[r],
+                length: Time::from_ns(len),
+            })
+        })
+        .collect();
+    let mut scratch = vec![Counter::default(); set.timings.len()];
+    (0..set.timings.len())
+        .map(|i| {
+            let b = if with_blocking {
+                board::srp_blocking(set.timings[i].priority, &sections)
+            } else {
+                Time::ZERO
+            };
+            board::response_time(
+                &set.timings,
+                i,
+                b,
+                &Limits {
+                    horizon: Time::from_us(10_000_000),
+                },
+                &mut scratch,
+            )
+            .ok()
+        })
+        .collect()
+}
+
+/// A simple deterministic generator for the release patterns (proptest chooses its seed).
+struct Lcg(u64);
+
+impl Lcg {
+    fn next(&mut self) -> u64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        self.0 >> 33
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        if n == 0 {
+            0
+        } else {
+            self.next() % n
+        }
+    }
+}
+
+/// Random jobs: random offset, strictly periodic or with sporadic gaps, release jitter, execution up to the WCET,
+/// the task's critical sections at random places.
+fn random_jobs(set: &BoardSet, seed: u64, horizon: u64) -> Vec<Job> {
+    let mut rng = Lcg(seed);
+    let mut jobs = Vec::new();
+    for (task, t) in set.timings.iter().enumerate() {
+        let period = t.period.as_ns();
+        let mut arrival = rng.below(period / US) * US;
+        let sporadic = rng.below(3) == 0;
+        let mut last_release = 0;
+        while arrival <= horizon {
+            let jitter = rng.below(t.jitter.as_ns() / US + 1) * US;
+            // One task's jobs stay in order (a timer cannot wake them out of order).
+            let release = (arrival + jitter).max(last_release);
+            last_release = release;
+            let wcet = t.wcet.as_ns();
+            let exec = if rng.below(4) == 0 {
+                (rng.below(wcet / US) + 1) * US
+            } else {
+                wcet
+            };
+            let mut segments = Vec::new();
+            let mut used = 0;
+            for &(resource, len) in &set.sections[task] {
+                let len = len.min(exec - used);
+                if len == 0 {
+                    continue;
+                }
+                let before = rng.below((exec - used - len) / US + 1) * US;
+                if before > 0 {
+                    segments.push(Segment {
+                        length: before,
+                        lock: None,
+                    });
+                }
+                segments.push(Segment {
+                    length: len,
+                    lock: Some(resource),
+                });
+                used += before + len;
+            }
+            if exec > used {
+                segments.push(Segment {
+                    length: exec - used,
+                    lock: None,
+                });
+            }
+            jobs.push(Job {
+                task,
+                arrival,
+                release,
+                segments,
+            });
+            arrival += period
+                + if sporadic {
+                    rng.below(period / US) * US
+                } else {
+                    0
+                };
+        }
+    }
+    jobs
+}
+
+fn raw_tasks() -> impl Strategy<Value = Vec<RawTask>> {
+    prop::collection::vec(
+        (
+            1u32..=4,
+            20u64..=240,
+            1u64..=10,
+            0u64..=150,
+            (any::<bool>(), any::<bool>()),
+            (10u64..=100, 10u64..=100),
+        ),
+        1..=5,
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    #[test]
+    fn board_simulation_never_exceeds_the_analysis(
+        raw in raw_tasks(),
+        utilisation in 300u64..=950,
+        seed in any::<u64>(),
+    ) {
+        let set = board_set(&raw, utilisation, true, true, false);
+        let bounds = analyse_board(&set, true);
+        let longest = set.timings.iter().map(|t| t.period.as_ns()).max().unwrap_or(0);
+        let jobs = random_jobs(&set, seed, 40 * longest);
+        let priorities: Vec<u32> = set.timings.iter().map(|t| t.priority).collect();
+        let responses = sim::board_run(&priorities, &set.ceilings, &jobs);
+        for (job, r) in jobs.iter().zip(responses) {
+            if let Some(bound) = bounds[job.task] {
+                prop_assert!(r <= bound.wcrt.as_ns(), "task {} job at {}: simulated {} > analysed {}", job.task, job.arrival, r, bound.wcrt.as_ns());
+            }
+        }
+    }
+
+    #[test]
+    fn board_synchronous_release_meets_the_analysis_exactly(
+        raw in raw_tasks(),
+        utilisation in 300u64..=980,
+    ) {
+        let set = board_set(&raw, utilisation, false, false, true);
+        let bounds = analyse_board(&set, false);
+        prop_assume!(bounds.iter().all(Option::is_some));
+        let horizon = bounds.iter().flatten().map(|b| b.busy_window.as_ns()).max().unwrap_or(0);
+        let priorities: Vec<u32> = set.timings.iter().map(|t| t.priority).collect();
+        let wcets: Vec<u64> = set.timings.iter().map(|t| t.wcet.as_ns()).collect();
+        let periods: Vec<u64> = set.timings.iter().map(|t| t.period.as_ns()).collect();
+        let worst = sim::board_synchronous_worst(&priorities, &wcets, &periods, horizon);
+        for (i, bound) in bounds.iter().enumerate() {
+            prop_assert_eq!(worst[i], bound.map_or(0, |b| b.wcrt.as_ns()), "task {}", i);
+        }
+    }
+}
+
+/// A random message before scaling: DLC, frames per activation (1 = most), period (µs), utilisation share,
+/// jitter (% of the period).
+type RawMessage = (u8, u32, u64, u64, u64);
+
+fn message_set(
+    raw: &[RawMessage],
+    total_utilisation: u64,
+    with_jitter: bool,
+    ids: &[u32],
+) -> Vec<MessageTiming> {
+    let bit = can::bit_time(1_000_000);
+    let shares: u64 = raw.iter().map(|m| m.3).sum::<u64>().max(1);
+    let mut set: Vec<MessageTiming> = raw
+        .iter()
+        .zip(ids)
+        .map(|(&(dlc, frames, min_period_us, share, jitter_pct), &id)| {
+            let frames = if frames > 3 { 1 } else { frames };
+            let frame_time = can::frame_time(FrameCost::Exact, dlc, false, bit);
+            let cost = frame_time.as_ns() * u64::from(frames);
+            // Period from the utilisation share, on the 1 µs grid, never below the activation's own length.
+            let period = (cost * shares * 1000 / (total_utilisation * share.max(1)) / US * US)
+                .max(min_period_us * US)
+                .max(cost);
+            let jitter = if with_jitter {
+                period * jitter_pct / 100 / US * US
+            } else {
+                0
+            };
+            MessageTiming {
+                key: can::arbitration_key(id, false),
+                frame_time,
+                frames,
+                period: Time::from_ns(period),
+                jitter: Time::from_ns(jitter),
+            }
+        })
+        .collect();
+    set.sort_by_key(|m| m.key);
+    set
+}
+
+fn sim_messages(set: &[MessageTiming]) -> Vec<SimMessage> {
+    set.iter()
+        .map(|m| SimMessage {
+            key: m.key,
+            frame_time: m.frame_time.as_ns(),
+            frames: m.frames,
+            period: m.period.as_ns(),
+            jitter: m.jitter.as_ns(),
+        })
+        .collect()
+}
+
+fn analyse_bus(set: &[MessageTiming], with_blocking: bool) -> Vec<Option<Response>> {
+    let bit = can::bit_time(1_000_000);
+    let mut scratch = vec![Counter::default(); set.len()];
+    (0..set.len())
+        .map(|i| {
+            let b = if with_blocking {
+                can::blocking(set, i)
+            } else {
+                Time::ZERO
+            };
+            can::response_time(
+                set,
+                i,
+                b,
+                bit,
+                &Limits {
+                    horizon: Time::from_us(10_000_000),
+                },
+                &mut scratch,
+            )
+            .ok()
+        })
+        .collect()
+}
+
+fn raw_messages() -> impl Strategy<Value = (Vec<RawMessage>, Vec<u32>)> {
+    prop::collection::vec(
+        (0u8..=8, 1u32..=8, 100u64..=3000, 1u64..=10, 0u64..=150),
+        1..=6,
+    )
+    .prop_flat_map(|raw| {
+        let n = raw.len();
+        (
+            Just(raw),
+            Just((0u32..0x800).collect::<Vec<_>>())
+                .prop_shuffle()
+                .prop_map(move |ids| ids[..n].to_vec()),
+        )
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    #[test]
+    fn bus_simulation_never_exceeds_the_analysis(
+        (raw, ids) in raw_messages(),
+        utilisation in 300u64..=950,
+        seed in any::<u64>(),
+    ) {
+        let set = message_set(&raw, utilisation, true, &ids);
+        let bounds = analyse_bus(&set, true);
+        let longest = set.iter().map(|m| m.period.as_ns()).max().unwrap_or(0);
+        let mut rng = Lcg(seed);
+        let mut activations = Vec::new();
+        for (m, msg) in set.iter().enumerate() {
+            let period = msg.period.as_ns();
+            let mut arrival = rng.below(period);
+            let sporadic = rng.below(3) == 0;
+            let mut last = 0;
+            while arrival <= 30 * longest {
+                // Any nanosecond, not only bit boundaries: the analysis must hold for all of them.
+                let queued = (arrival + rng.below(msg.jitter.as_ns() + 1)).max(last);
+                last = queued;
+                activations.push(Activation { message: m, arrival, queued });
+                arrival += period + if sporadic { rng.below(period) } else { 0 };
+            }
+        }
+        let responses = sim::can_run(&sim_messages(&set), &activations);
+        for (a, r) in activations.iter().zip(responses) {
+            if let Some(bound) = bounds[a.message] {
+                prop_assert!(r <= bound.wcrt.as_ns(), "message {} at {}: simulated {} > analysed {}", a.message, a.arrival, r, bound.wcrt.as_ns());
+            }
+        }
+    }
+
+    #[test]
+    fn bus_synchronous_release_meets_the_analysis_exactly(
+        (raw, ids) in raw_messages(),
+        utilisation in 300u64..=980,
+    ) {
+        let set = message_set(&raw, utilisation, false, &ids);
+        let unblocked = analyse_bus(&set, false);
+        prop_assume!(unblocked.iter().all(Option::is_some));
+        let horizon = unblocked.iter().flatten().map(|b| b.busy_window.as_ns()).max().unwrap_or(0);
+        // Message i with the higher-priority messages only: no lower-priority frame can ever be in progress.
+        for (i, bound) in unblocked.iter().enumerate() {
+            let worst = sim::can_synchronous_worst(&sim_messages(&set[..=i]), horizon);
+            prop_assert_eq!(worst[i], bound.map_or(0, |b| b.wcrt.as_ns()), "message {}", i);
+        }
+        // The lowest-priority message has nothing to be blocked by: with the whole set, the full analysis is exact.
+        let full = analyse_bus(&set, true);
+        let worst = sim::can_synchronous_worst(&sim_messages(&set), horizon);
+        let last = set.len() - 1;
+        prop_assert_eq!(full[last].map(|b| b.wcrt.as_ns()), Some(worst[last]));
+    }
+}
