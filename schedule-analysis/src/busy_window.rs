@@ -551,6 +551,39 @@ mod tests {
     }
 
     #[test]
+    fn counters_jump_over_several_activations_at_once() {
+        // A later job adds 50 to the window at once: the interferer (T 10, J 25) gains five activations in one
+        // step, all of which the counter must take (w(1) = 100 + ⌈(w + 25)/10⌉ → 114).
+        let others = [Stream(1, 10, 25)];
+        let s = Subject::new(
+            Time::from_ns(50),
+            1,
+            Time::from_ns(60),
+            Time::from_ns(10),
+            Time::ZERO,
+        );
+        let mut scratch = [Counter::default(); 1];
+        let with = response_time(
+            &s,
+            &others,
+            None,
+            Discipline::Preemptive,
+            &Limits::default(),
+            &mut scratch,
+        );
+        let without = response_time(
+            &s,
+            &others,
+            None,
+            Discipline::Preemptive,
+            &Limits::default(),
+            &mut [],
+        );
+        assert_eq!(with, without);
+        assert_eq!(with.map(|r| r.instances > 1), Ok(true));
+    }
+
+    #[test]
     fn overload_is_reported_not_looped_on() {
         let others = [Stream(6, 10, 0)];
         let s = subject(5, 10);

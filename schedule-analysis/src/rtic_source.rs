@@ -242,17 +242,35 @@ fn cfgs(attrs: &[Attribute]) -> Vec<String> {
         .collect()
 }
 
-/// Splits a token stream at its top-level commas.
+/// Splits a token stream at its top-level commas. Brackets are token groups already; angle brackets are not, so
+/// their depth is tracked (a `local = [buf: Vec<u8, 4> = ..]` entry stays one entry). The `>` of `->` and `=>`
+/// closes nothing.
 fn split_commas(tokens: TokenStream) -> Vec<Vec<TokenTree>> {
     let mut parts = vec![Vec::new()];
+    let mut depth = 0usize;
+    let mut previous_joint = None;
     for tree in tokens {
-        match &tree {
-            TokenTree::Punct(p) if p.as_char() == ',' => parts.push(Vec::new()),
-            _ => {
-                if let Some(last) = parts.last_mut() {
-                    last.push(tree);
+        let mut joint = None;
+        if let TokenTree::Punct(p) = &tree {
+            match p.as_char() {
+                ',' if depth == 0 => {
+                    parts.push(Vec::new());
+                    previous_joint = None;
+                    continue;
                 }
+                '<' => depth += 1,
+                '>' if !matches!(previous_joint, Some('-') | Some('=')) => {
+                    depth = depth.saturating_sub(1)
+                }
+                _ => {}
             }
+            if p.spacing() == proc_macro2::Spacing::Joint {
+                joint = Some(p.as_char());
+            }
+        }
+        previous_joint = joint;
+        if let Some(last) = parts.last_mut() {
+            last.push(tree);
         }
     }
     parts.retain(|p| !p.is_empty());

@@ -411,3 +411,125 @@ proptest! {
         prop_assert_eq!(full[last].map(|b| b.wcrt.as_ns()), Some(worst[last]));
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    /// The batched analyses start each iteration from a higher-priority stream's window; they must give exactly
+    /// what the one-by-one analyses give.
+    #[test]
+    fn batched_analyses_equal_one_by_one(
+        raw in raw_tasks(),
+        (raw_m, ids) in raw_messages(),
+        utilisation in 300u64..=990,
+    ) {
+        let set = board_set(&raw, utilisation, true, true, false);
+        let sections: Vec<CriticalSection> = set
+            .timings
+            .iter()
+            .zip(&set.sections)
+            .flat_map(|(t, s)| {
+                s.iter().map(|&(r, len)| CriticalSection { holder_priority: t.priority, ceiling: set.ceilings[r], length: Time::from_ns(len) })
+            })
+            .collect();
+        let blockings: Vec<Time> = set.timings.iter().map(|t| board::srp_blocking(t.priority, &sections)).collect();
+        let limits = Limits { horizon: Time::from_us(10_000_000) };
+        let mut scratch = vec![Counter::default(); set.timings.len()];
+        let mut batched = vec![Err(schedule_analysis::AnalysisError::NoSuchIndex); set.timings.len()];
+        board::response_times(&set.timings, &blockings, &limits, &mut scratch, &mut batched);
+        for (i, b) in batched.iter().enumerate() {
+            let single = board::response_time(&set.timings, i, blockings[i], &limits, &mut scratch);
+            prop_assert_eq!(single.map(|r| (r.wcrt, r.worst_instance, r.instances, r.busy_window)), b.map(|r| (r.wcrt, r.worst_instance, r.instances, r.busy_window)));
+        }
+
+        let messages = message_set(&raw_m, utilisation, true, &ids);
+        let bit = can::bit_time(1_000_000);
+        let mut blockings = vec![Time::ZERO; messages.len()];
+        can::blockings(&messages, &mut blockings);
+        let mut scratch = vec![Counter::default(); messages.len()];
+        let mut batched = vec![Err(schedule_analysis::AnalysisError::NoSuchIndex); messages.len()];
+        can::response_times(&messages, &blockings, bit, &limits, &mut scratch, &mut batched);
+        for (i, b) in batched.iter().enumerate() {
+            prop_assert_eq!(blockings[i], can::blocking(&messages, i));
+            let single = can::response_time(&messages, i, blockings[i], bit, &limits, &mut scratch);
+            prop_assert_eq!(single.map(|r| (r.wcrt, r.worst_instance, r.instances, r.busy_window)), b.map(|r| (r.wcrt, r.worst_instance, r.instances, r.busy_window)));
+        }
+    }
+}
+
+/// Jobs of the critical instant with release jitter: every task's jobs whose nominal arrival is at or before `o`
+/// are released together at `o` (each as late as its jitter allows), later ones exactly on time.
+fn critical_instant_jobs(set: &BoardSet, o: u64, horizon: u64) -> Vec<Job> {
+    let mut jobs = Vec::new();
+    for (task, t) in set.timings.iter().enumerate() {
+        let (period, jitter, wcet) = (t.period.as_ns(), t.jitter.as_ns(), t.wcet.as_ns());
+        let mut arrival = o - jitter;
+        while arrival <= o + horizon {
+            let release = arrival.max(o);
+            jobs.push(Job {
+                task,
+                arrival,
+                release,
+                segments: vec![Segment {
+                    length: wcet,
+                    lock: None,
+                }],
+            });
+            arrival += period;
+        }
+    }
+    jobs
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    /// Release jitter is exact too: replaying the critical instant of the jitter analysis reproduces every bound.
+    #[test]
+    fn board_critical_instant_with_jitter_meets_the_analysis_exactly(
+        raw in raw_tasks(),
+        utilisation in 300u64..=950,
+    ) {
+        let set = board_set(&raw, utilisation, true, false, true);
+        let bounds = analyse_board(&set, false);
+        prop_assume!(bounds.iter().all(Option::is_some));
+        let o = set.timings.iter().map(|t| t.jitter.as_ns()).max().unwrap_or(0) + 1000;
+        let horizon = bounds.iter().flatten().map(|b| b.busy_window.as_ns()).max().unwrap_or(0);
+        let jobs = critical_instant_jobs(&set, o, horizon);
+        let priorities: Vec<u32> = set.timings.iter().map(|t| t.priority).collect();
+        let responses = sim::board_run(&priorities, &set.ceilings, &jobs);
+        let mut worst = vec![0u64; set.timings.len()];
+        for (job, r) in jobs.iter().zip(responses) {
+            worst[job.task] = worst[job.task].max(r);
+        }
+        for (i, bound) in bounds.iter().enumerate() {
+            prop_assert_eq!(worst[i], bound.map_or(0, |b| b.wcrt.as_ns()), "task {}", i);
+        }
+    }
+
+    /// The same on the bus: queuing jitter at its critical instant, each message with the more urgent ones.
+    #[test]
+    fn bus_critical_instant_with_jitter_meets_the_analysis_exactly(
+        (raw, ids) in raw_messages(),
+        utilisation in 300u64..=950,
+    ) {
+        let set = message_set(&raw, utilisation, true, &ids);
+        let unblocked = analyse_bus(&set, false);
+        prop_assume!(unblocked.iter().all(Option::is_some));
+        let o = set.iter().map(|m| m.jitter.as_ns()).max().unwrap_or(0) + 1000;
+        let horizon = unblocked.iter().flatten().map(|b| b.busy_window.as_ns()).max().unwrap_or(0);
+        for (i, bound) in unblocked.iter().enumerate() {
+            let mut activations = Vec::new();
+            for (m, msg) in set[..=i].iter().enumerate() {
+                let mut arrival = o - msg.jitter.as_ns();
+                while arrival <= o + horizon {
+                    activations.push(Activation { message: m, arrival, queued: arrival.max(o) });
+                    arrival += msg.period.as_ns();
+                }
+            }
+            let responses = sim::can_run(&sim_messages(&set[..=i]), &activations);
+            let worst = activations.iter().zip(responses).filter(|(a, _)| a.message == i).map(|(_, r)| r).max().unwrap_or(0);
+            prop_assert_eq!(worst, bound.map_or(0, |b| b.wcrt.as_ns()), "message {}", i);
+        }
+    }
+}

@@ -1,0 +1,360 @@
+//! The project's default model: the shipped scenarios build from the boards' apps and timing files and are
+//! schedulable; the task list cannot drift from the app (a missing or extra budget fails the build); a skeleton app
+//! falls back to the fallback description with a warning; every report format renders.
+
+use std::path::{Path, PathBuf};
+
+use schedule_analysis::analysis::{analyse, Options};
+use schedule_analysis::model::FrameCostSpec;
+use schedule_analysis::report::{self, Format, Report};
+use schedule_analysis::rtic_source::parse_app;
+use schedule_analysis::scenario::{self, build};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .expect("workspace root")
+}
+
+fn built(name: &str) -> scenario::Built {
+    let root = root();
+    build(
+        &root,
+        &scenario::find_scenario(&root, name),
+        &scenario::timing_files(&root),
+    )
+    .unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+#[test]
+fn thesis_demo_is_schedulable_under_exact_frame_costs() {
+    let built = built("thesis-demo");
+    let system = built.model.validate().expect("the built model validates");
+    let analysis = analyse(
+        &system,
+        &Options {
+            frame_cost: built.frame_cost,
+            horizon: None,
+        },
+    );
+    assert!(analysis.all_ok(), "failures: {:?}", analysis.failures());
+    let names: Vec<&str> = system.boards.iter().map(|b| b.name.as_str()).collect();
+    assert_eq!(names, ["diwheeldrive", "powermgmt", "lightring"]);
+
+    // Identifiers from the protocol: sensor bit, priority bits, topic byte.
+    let bus = system.bus.as_ref().expect("bus");
+    let id = |name: &str| bus.messages.iter().find(|m| m.name == name).map(|m| m.id);
+    assert_eq!(id("gyroscope"), Some(0x508));
+    assert_eq!(id("proximity-ring"), Some(0x61F));
+    assert_eq!(id("motor"), Some(0x010));
+    assert_eq!(
+        bus.messages
+            .iter()
+            .find(|m| m.name == "proximity-ring")
+            .map(|m| (m.frames, m.dlc)),
+        Some((8, 3))
+    );
+}
+
+#[test]
+fn the_magnetometer_example_builds() {
+    let built = built("thesis-magnetometer-900us");
+    let system = built.model.validate().expect("valid");
+    let analysis = analyse(
+        &system,
+        &Options {
+            frame_cost: FrameCostSpec::Exact,
+            horizon: None,
+        },
+    );
+    let bus = analysis.bus.as_ref().expect("bus");
+    assert_eq!(bus.messages[0].id, 0x605);
+    assert!(analysis.all_ok(), "failures: {:?}", analysis.failures());
+}
+
+#[test]
+fn every_task_of_the_app_is_in_the_model() {
+    // Whatever app is read (the real one, or the fallback while it is a skeleton), its tasks are all there.
+    let built = built("thesis-demo");
+    let source = built
+        .sources
+        .first()
+        .expect("a source line for diwheeldrive");
+    let path =
+        if source.contains("fallback") || built.warnings.iter().any(|w| w.contains("fallback")) {
+            root().join("schedule-analysis/models/diwheeldrive.fallback-app.rs")
+        } else {
+            root().join("diwheeldrive/src/main.rs")
+        };
+    let app = parse_app(&std::fs::read_to_string(path).expect("app"))
+        .expect("parses")
+        .with_features(&[]);
+    let board = &built.model.boards[0];
+    for task in &app.tasks {
+        let present = board
+            .tasks
+            .iter()
+            .any(|t| t.name == task.name || t.job_of.as_deref() == Some(task.name.as_str()));
+        let publisher_without_topics = task.name.starts_with("publish_");
+        assert!(
+            present || publisher_without_topics,
+            "task `{}` of the app is missing from the model",
+            task.name
+        );
+    }
+    // Priorities come from the app.
+    let can_rx = board
+        .tasks
+        .iter()
+        .find(|t| t.name == "can_rx")
+        .expect("can_rx");
+    assert_eq!(
+        Some(u32::from(app.task("can_rx").expect("declared").priority)),
+        Some(can_rx.priority)
+    );
+    // A published topic is a job of its level's publisher, woken by the timer.
+    let gyro = board
+        .tasks
+        .iter()
+        .find(|t| t.name == "publish_high[gyroscope]")
+        .expect("gyroscope job");
+    assert_eq!(gyro.job_of.as_deref(), Some("publish_high"));
+    assert_eq!(
+        gyro.released_by.as_deref(),
+        Some("monotonic[publish_high[gyroscope]]")
+    );
+    // Static ceilings cover every user in the app, also publishers without jobs.
+    assert_eq!(board.ceilings.get("tx_queue"), Some(&6));
+    assert_eq!(board.ceilings.get("imu"), Some(&4));
+}
+
+#[test]
+fn every_format_renders() {
+    let built = built("thesis-demo");
+    let system = built.model.validate().expect("valid");
+    let report = Report::build(
+        &system,
+        "thesis-demo".into(),
+        built.sources.clone(),
+        built.warnings.clone(),
+        None,
+    );
+    let table = report::render(&report, Format::Table);
+    assert!(
+        table.contains("Board diwheeldrive") && table.contains("VERDICT: schedulable"),
+        "{table}"
+    );
+    assert!(
+        table.contains("(alt)"),
+        "both frame-cost models side by side"
+    );
+    let markdown = report::render(&report, Format::Markdown);
+    assert!(
+        markdown.contains("| task |") && markdown.contains("## CAN bus"),
+        "{markdown}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&report::render(&report, Format::Json)).expect("JSON");
+    assert!(json["tasks"].as_array().is_some_and(|t| t.len() > 10));
+    assert!(json["sensitivity"]["publishers"]
+        .as_array()
+        .is_some_and(|p| !p.is_empty()));
+    let svg = report::render(&report, Format::Svg);
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+    assert_eq!(svg.matches("<text").count(), svg.matches("</text>").count());
+    // One chosen model: no comparison.
+    let chosen = Report::build(
+        &system,
+        "x".into(),
+        Vec::new(),
+        Vec::new(),
+        Some(FrameCostSpec::Thesis),
+    );
+    assert!(chosen.comparison.is_none());
+    assert!(!report::render(&chosen, Format::Table).contains("(alt)"));
+}
+
+/// A scratch workspace: an app, a timing file and a scenario.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Scratch {
+        let dir =
+            std::env::temp_dir().join(format!("schedule-analysis-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("app")).expect("scratch dir");
+        Scratch(dir)
+    }
+    fn write(&self, relative: &str, text: &str) -> PathBuf {
+        let path = self.0.join(relative);
+        std::fs::write(&path, text).expect("write");
+        path
+    }
+    fn build(&self, timing: &str) -> Result<scenario::Built, String> {
+        let scenario = self.write(
+            "s.scenario.json",
+            r#"{ "name": "s", "publishers": [ { "topic": "gyroscope", "priority": "high", "period_us": 10000 } ] }"#,
+        );
+        let timing = self.write("diwheeldrive.timing.json", timing);
+        build(&self.0, &scenario, &[timing]).map_err(|e| e.to_string())
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+const SMALL_APP: &str = r#"
+#[rtic::app(device = pac, dispatchers = [UART4])]
+mod app {
+    #[shared]
+    struct Shared { tx_queue: Q, imu: I }
+    #[local]
+    struct Local {}
+    #[task(binds = USB_LP_CAN_RX0, priority = 6)]
+    fn can_rx(_: can_rx::Context) {}
+    #[task(priority = 3, shared = [tx_queue, imu])]
+    async fn publish_high(_: publish_high::Context) {}
+}
+"#;
+
+fn timing(tasks: &str) -> String {
+    format!(
+        r#"{{ "board": "diwheeldrive", "app": {{ "source": "app/main.rs", "fallback": "app/fallback.rs" }},
+             "publishers": {{ "high": "publish_high" }},
+             "monotonic": {{ "priority": 8, "timer_isr_us": 2 }},
+             "tasks": {{ {tasks} }},
+             "topics": {{ "gyroscope": {{ "wcet_us": 20, "critical_sections_us": {{ "imu": 10, "tx_queue": 2 }} }} }} }}"#
+    )
+}
+
+#[test]
+fn the_task_list_cannot_drift_from_the_app() {
+    let s = Scratch::new("drift");
+    s.write("app/main.rs", SMALL_APP);
+    let good = timing(r#""can_rx": { "wcet_us": 3, "arrival": "bus_frame" }"#);
+    let built = s.build(&good).expect("matches the app");
+    let names: Vec<&str> = built.model.boards[0]
+        .tasks
+        .iter()
+        .map(|t| t.name.as_str())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "monotonic[publish_high[gyroscope]]",
+            "can_rx",
+            "publish_high[gyroscope]"
+        ]
+    );
+
+    // A task in the app without a budget.
+    let missing = s
+        .build(&timing(
+            r#""can_tx_typo": { "wcet_us": 3, "arrival": "bus_frame" }"#,
+        ))
+        .expect_err("drift");
+    assert!(
+        missing.contains("task `can_rx`") && missing.contains("app/main.rs:"),
+        "{missing}"
+    );
+    // A budget for a task the app does not declare.
+    let extra = s
+        .build(&timing(r#""can_rx": { "wcet_us": 3, "arrival": "bus_frame" }, "ghost": { "wcet_us": 1, "arrival": "bus_frame" }"#))
+        .expect_err("drift");
+    assert!(
+        extra.contains("tasks.ghost") && extra.contains("does not declare"),
+        "{extra}"
+    );
+    // A priority in the timing file where the app decides.
+    let overridden = s
+        .build(&timing(
+            r#""can_rx": { "priority": 2, "wcet_us": 3, "arrival": "bus_frame" }"#,
+        ))
+        .expect_err("drift");
+    assert!(overridden.contains("tasks.can_rx.priority"), "{overridden}");
+    // A critical section on a resource the task does not use.
+    let foreign = s
+        .build(&timing(r#""can_rx": { "wcet_us": 3, "arrival": "bus_frame", "critical_sections_us": { "imu": 1 } }"#))
+        .expect_err("drift");
+    assert!(
+        foreign.contains("tasks.can_rx.critical_sections_us.imu"),
+        "{foreign}"
+    );
+}
+
+#[test]
+fn a_skeleton_app_falls_back_with_a_warning() {
+    let s = Scratch::new("fallback");
+    s.write(
+        "app/main.rs",
+        "#[rtic::app(device = pac, dispatchers = [UART4])]\nmod app {\n    #[task(priority = 1)]\n    async fn heartbeat(_: heartbeat::Context) {}\n}\n",
+    );
+    s.write("app/fallback.rs", SMALL_APP);
+    let built = s
+        .build(&timing(
+            r#""can_rx": { "wcet_us": 3, "arrival": "bus_frame" }"#,
+        ))
+        .expect("falls back");
+    assert!(
+        built
+            .warnings
+            .iter()
+            .any(|w| w.contains("fallback app app/fallback.rs")),
+        "{:?}",
+        built.warnings
+    );
+    assert!(
+        built.sources.iter().any(|w| w.contains("app/fallback.rs")),
+        "{:?}",
+        built.sources
+    );
+}
+
+#[test]
+fn scenario_mistakes_name_the_field() {
+    let root = root();
+    let timings = scenario::timing_files(&root);
+    let s = Scratch::new("scenario");
+    let cases = [
+        (
+            r#"{ "name": "x", "publishers": [ { "topic": "gyro", "priority": "high", "period_us": 1 } ] }"#,
+            "publishers[0].topic",
+            "unknown topic `gyro`",
+        ),
+        (
+            r#"{ "name": "x", "publishers": [ { "topic": "motor", "priority": "high", "period_us": 1 } ] }"#,
+            "publishers[0].topic",
+            "actuator",
+        ),
+        (
+            r#"{ "name": "x", "publishers": [ { "topic": "gyroscope", "priority": "asap", "period_us": 1 } ] }"#,
+            "publishers[0].priority",
+            "urgent",
+        ),
+        (
+            r#"{ "name": "x", "publishers": [ { "topic": "gyroscope", "priority": "high" } ] }"#,
+            "publishers[0]",
+            "period_us",
+        ),
+        (
+            r#"{ "name": "x", "commands": [ { "topic": "odometry", "priority": "high", "period_us": 5 } ] }"#,
+            "commands[0].topic",
+            "sensor",
+        ),
+    ];
+    for (text, path, problem) in cases {
+        let file = s.write("x.scenario.json", text);
+        let message = build(&root, &file, &timings)
+            .map(|_| ())
+            .expect_err("refused")
+            .to_string();
+        assert!(
+            message.contains(path) && message.contains(problem),
+            "`{message}` for {text}"
+        );
+    }
+}
