@@ -1,9 +1,52 @@
-//! Analysed bounds the QEMU scenarios check against.
+//! Analysed bounds the QEMU scenarios check against: the schedule analysis, run on the
+//! DiWheelDrive app's own source and timing file, for the publisher a scenario starts.
 use std::path::Path;
 
-use anyhow::{bail, Result};
+use anyhow::{anyhow, Context, Result};
+use schedule_analysis::analysis::{analyse, Options};
+use schedule_analysis::model::FrameCostSpec;
+use schedule_analysis::scenario;
 
-/// Worst-case latency from a publisher's release to its frame in a mailbox.
-pub fn publisher_bound_us(_root: &Path, topic: &str, level: &str, period_us: u64) -> Result<u64> {
-    bail!("analysis bound for {topic} at {level} every {period_us} µs not wired yet")
+/// Worst-case latency from a publisher's release to its frame in a mailbox, as analysed for
+/// `topic` published alone at CAN priority `level` every `period_us`: the worst-case response
+/// time of the publisher's job (the transmit interrupt pre-empts the job the moment it queues the
+/// frame, so the frame reaches a mailbox before the job completes).
+pub fn publisher_bound_us(root: &Path, topic: &str, level: &str, period_us: u64) -> Result<u64> {
+    let dir = crate::qemu::target_dir(root).join("bounds");
+    std::fs::create_dir_all(&dir)?;
+    let name = format!("qemu-{topic}-{level}-{period_us}us");
+    let path = dir.join(format!("{name}.scenario.json"));
+    let json = serde_json::json!({
+        "name": name,
+        "description": "written by cargo xtask for a QEMU scenario's bound",
+        "publishers": [{
+            "topic": topic,
+            "priority": level,
+            "period_us": period_us,
+            // A late sample may not be overtaken; the bound is the job's response either way.
+            "deadline_us": 2 * period_us,
+        }],
+    });
+    std::fs::write(&path, serde_json::to_string_pretty(&json)?)?;
+    let built = scenario::build(root, &path, &scenario::timing_files(root))?;
+    let system = built.model.validate().map_err(|e| anyhow!("{name}: {e}"))?;
+    let analysis = analyse(
+        &system,
+        &Options {
+            frame_cost: FrameCostSpec::default(),
+            horizon: None,
+        },
+    );
+    let task = format!("publish_{level}[{topic}]");
+    let result = analysis
+        .boards
+        .iter()
+        .filter(|b| b.name == "diwheeldrive")
+        .flat_map(|b| b.tasks.iter())
+        .find(|t| t.name == task)
+        .with_context(|| format!("the analysis has no task {task} on diwheeldrive"))?;
+    let wcrt = result
+        .wcrt()
+        .with_context(|| format!("{task}: the busy window never closes"))?;
+    Ok(wcrt.as_ns().div_ceil(1_000))
 }

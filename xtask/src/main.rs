@@ -8,6 +8,7 @@ use std::process::{Command, ExitCode};
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 
+mod analyze;
 mod boards;
 mod bounds;
 mod elf;
@@ -58,11 +59,15 @@ enum Cmd {
         #[arg(long, default_value = "2s")]
         duration: String,
     },
+    /// Run only the QEMU scenarios CI runs (part of `test`).
+    Scenarios,
     /// Decode a capture of a board's binary trace channel (RTT channel 1, "trace") into text lines.
     Trace {
         /// The raw bytes of RTT channel 1 as captured from the board.
         file: PathBuf,
     },
+    /// The response-time report: worst-case response times of the board tasks and the CAN bus.
+    Analyze(analyze::AnalyzeArgs),
     /// Flash a board through probe-rs and stream its RTT output.
     Flash {
         /// The board to flash.
@@ -104,6 +109,7 @@ fn run(cmd: Cmd) -> Result<bool> {
         Cmd::Ci => {
             check(&root)?;
             test(&root)?;
+            analysis_gate(&root)?;
             Ok(true)
         }
         Cmd::Qemu {
@@ -126,6 +132,12 @@ fn run(cmd: Cmd) -> Result<bool> {
             print!("{out}");
             Ok(true)
         }
+        Cmd::Analyze(args) => {
+            let all_ok = analyze::run(&args, &root)?;
+            // An unschedulable set is a verdict, not an error: only `--check` turns it into a failure.
+            Ok(all_ok || !args.check)
+        }
+        Cmd::Scenarios => run_scenarios(&root).map(|()| true),
         Cmd::Trace { file } => {
             let bytes =
                 std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
@@ -232,6 +244,44 @@ fn test(root: &Path) -> Result<()> {
     let reports = build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), false)?;
     elf::print_table(&reports);
     run_scenarios(root)
+}
+
+/// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets.
+fn analysis_gate(root: &Path) -> Result<()> {
+    let models = root.join("schedule-analysis").join("models");
+    let mut scenarios: Vec<String> = std::fs::read_dir(&models)
+        .with_context(|| format!("listing {}", models.display()))?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            e.file_name()
+                .to_str()
+                .and_then(|n| n.strip_suffix(".scenario.json"))
+                .map(str::to_string)
+        })
+        .collect();
+    scenarios.sort();
+    for name in scenarios {
+        let args = analyze::AnalyzeArgs {
+            scenario: Some(name.clone()),
+            model: None,
+            frame_cost: None,
+            format: schedule_analysis::report::Format::Table,
+            output: Some(target_dir(root).join(format!("analysis-{name}.txt"))),
+            check: true,
+            emit_model: None,
+        };
+        if !analyze::run(&args, root)? {
+            bail!(
+                "scenario {name} is not schedulable (see {})",
+                args.output
+                    .as_ref()
+                    .map(|p| p.display().to_string())
+                    .unwrap_or_default()
+            );
+        }
+        println!("analysis gate: scenario {name} schedulable");
+    }
+    Ok(())
 }
 
 /// Builds DiWheelDrive's QEMU variant (its own target dir: the features differ from the robot build).

@@ -52,9 +52,18 @@ impl RunOutput {
             .find(|n| n.starts_with("qemu: end of run"))
             .context("the run did not reach its end (no end-of-run line)")?;
         let field = |name: &str| -> Result<u64> {
-            let at = line.find(name).with_context(|| format!("no `{name}` in `{line}`"))? + name.len();
-            let digits: String = line[at..].trim_start().chars().take_while(|c| c.is_ascii_digit()).collect();
-            digits.parse().with_context(|| format!("bad `{name}` in `{line}`"))
+            let at = line
+                .find(name)
+                .with_context(|| format!("no `{name}` in `{line}`"))?
+                + name.len();
+            let digits: String = line[at..]
+                .trim_start()
+                .chars()
+                .take_while(|c| c.is_ascii_digit())
+                .collect();
+            digits
+                .parse()
+                .with_context(|| format!("bad `{name}` in `{line}`"))
         };
         Ok((field("ram static")?, field("stack")?))
     }
@@ -81,23 +90,99 @@ pub fn duration_of(path: &Path) -> Result<u64> {
     bail!("{} has no `# duration:` header", path.display())
 }
 
-/// Release jitter of a periodic stream: for frames at `times`, released on the grid
-/// `first_release + k·period`, the largest `time − release` (µs). Fails if a release has no frame.
-pub fn worst_latency(times: &[u64], first_release: u64, period: u64) -> Result<u64> {
-    let mut worst = 0;
-    for (k, t) in times.iter().enumerate() {
-        let release = first_release + k as u64 * period;
-        ensure!(
-            *t >= release,
-            "frame {k} at {t} µs precedes its release at {release} µs"
-        );
-        ensure!(
-            *t < release + period,
-            "frame {k} at {t} µs is a full period late (release {release} µs): a release was skipped"
-        );
-        worst = worst.max(t - release);
+/// How a published topic behaved: its release grid and each frame's latency from its release.
+#[derive(Debug)]
+pub struct Stream {
+    /// Release times (µs) the firmware traced, in order.
+    pub releases: Vec<u64>,
+    /// Frame times (µs), in order.
+    pub frames: Vec<u64>,
+    /// Largest frame time minus its release (µs).
+    pub worst_latency: u64,
+}
+
+impl RunOutput {
+    /// Releases traced for `topic` (`sample-taken <topic> release=s.micros`) within `[from, to)`.
+    pub fn releases(&self, topic: &str, from: u64, to: u64) -> Result<Vec<u64>> {
+        let key = format!("sample-taken {topic} release=");
+        let mut out = Vec::new();
+        for note in &self.notes {
+            if let Some(at) = note.find(&key) {
+                let t = parse_seconds(
+                    note[at + key.len()..]
+                        .split_whitespace()
+                        .next()
+                        .unwrap_or(""),
+                )?;
+                if (from..to).contains(&t) {
+                    out.push(t);
+                }
+            }
+        }
+        Ok(out)
     }
-    Ok(worst)
+
+    /// The stream of frames `id` for `topic` within `[from, to)`: every release on the exact grid
+    /// `first + k·period` (drift-free, none skipped), one frame per release, each after its release.
+    pub fn periodic_stream(
+        &self,
+        id: u32,
+        topic: &str,
+        period: u64,
+        from: u64,
+        to: u64,
+    ) -> Result<Stream> {
+        let releases = self.releases(topic, from, to)?;
+        let frames: Vec<u64> = self
+            .times(id)
+            .into_iter()
+            .filter(|t| (from..to).contains(t))
+            .collect();
+        let first = *releases
+            .first()
+            .with_context(|| format!("no {topic} releases in {from}..{to} µs"))?;
+        for (k, r) in releases.iter().enumerate() {
+            let grid = first + k as u64 * period;
+            ensure!(
+                *r == grid,
+                "{topic} release {k} at {r} µs is off the {period} µs grid ({grid} µs)"
+            );
+        }
+        let expected = (to - first).div_ceil(period);
+        ensure!(
+            releases.len() as u64 == expected,
+            "{} {topic} releases in {first}..{to} µs, expected {expected} at {period} µs",
+            releases.len()
+        );
+        ensure!(
+            frames.len() == releases.len(),
+            "{} frames {id:03X} for {} releases",
+            frames.len(),
+            releases.len()
+        );
+        let mut worst = 0;
+        for (k, (f, r)) in frames.iter().zip(&releases).enumerate() {
+            ensure!(f >= r, "frame {k} at {f} µs precedes its release at {r} µs");
+            ensure!(
+                *f < r + period,
+                "frame {k} at {f} µs is a full period after its release at {r} µs"
+            );
+            worst = worst.max(f - r);
+        }
+        Ok(Stream {
+            releases,
+            frames,
+            worst_latency: worst,
+        })
+    }
+}
+
+fn parse_seconds(text: &str) -> Result<u64> {
+    let (s, us) = text
+        .split_once('.')
+        .with_context(|| format!("bad time `{text}`"))?;
+    ensure!(us.len() == 6, "bad time `{text}`");
+    Ok(s.parse::<u64>()? * 1_000_000 + us.parse::<u64>()?)
 }
 
 /// A named scenario and its check.
@@ -165,97 +250,92 @@ pub const SCENARIOS: &[Scenario] = &[
 ];
 
 fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    let times = out.times(0x605);
     ensure!(
         out.frames.iter().all(|f| f.id == 0x605),
-        "only magnetometer-x frames expected"
+        "only magnetometer-x frames (0x605) expected"
     );
     ensure!(
         out.frames.iter().all(|f| f.data.len() == 4),
         "magnetometer frames carry 4 bytes"
     );
-    // Commanded at 10 ms; publishing until 200 ms: releases at 10 ms + k·900 µs.
-    let expected = (200_000 - 10_000) / 900 + 1;
-    ensure!(
-        times.len() as u64 >= expected - 1 && times.len() as u64 <= expected,
-        "{} frames of 0x605, expected {expected}",
-        times.len()
-    );
-    let worst = worst_latency(&times, times[0].min(10_000 + 900).max(10_000), 900)?;
-    let first = times[0] - 10_000;
+    let stream = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, 200_000)?;
+    let answered = stream.releases[0] - 10_000;
     let bound = bounds.publisher_latency_us("magnetometer-x", "medium", 900)?;
+    let worst = stream.worst_latency;
     ensure!(
         worst <= bound,
         "release jitter {worst} µs exceeds the analysed bound {bound} µs"
     );
-    Ok(format!("{} frames 0x605 every 900 µs, first {first} µs after the command, worst latency {worst} µs ≤ analysed {bound} µs", times.len()))
+    Ok(format!(
+        "{} frames 0x605 every 900 µs (first release {answered} µs after the command), worst latency {worst} µs ≤ analysed {bound} µs",
+        stream.frames.len()
+    ))
 }
 
 fn stop_and_once(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
-    let gyro = out.times(0x508);
-    let before_stop = gyro.iter().filter(|t| **t < 105_000).count();
+    let gyro = out.periodic_stream(0x508, "gyroscope", 10_000, 0, 105_000)?;
     ensure!(
-        before_stop == 10,
-        "{before_stop} gyroscope frames before the stop, expected 10 (10..100 ms)"
+        gyro.frames.len() == 10,
+        "{} gyroscope frames before the stop, expected 10",
+        gyro.frames.len()
     );
-    let after_stop: Vec<_> = gyro.iter().filter(|t| **t >= 105_000).collect();
+    let after_stop = out
+        .times(0x508)
+        .into_iter()
+        .filter(|t| *t >= 105_000)
+        .collect::<Vec<_>>();
     ensure!(
         after_stop.len() == 1,
         "after the stop exactly the one-shot frame expected, got {}",
         after_stop.len()
     );
     ensure!(
-        (150_000..151_000).contains(after_stop[0]),
+        (150_000..151_000).contains(&after_stop[0]),
         "one-shot answered at {} µs",
         after_stop[0]
     );
-    let accel = out.times(0x509);
-    let before_once = accel.iter().filter(|t| **t < 250_000).count();
+    let accel = out.periodic_stream(0x509, "accelerometer", 5_000, 200_000, 250_000)?;
     ensure!(
-        before_once == 10,
-        "{before_once} accelerometer frames at 5 ms from 200 ms, expected 10"
+        accel.frames.len() == 10,
+        "{} accelerometer frames from 200 ms, expected 10",
+        accel.frames.len()
     );
-    let after_once = accel.iter().filter(|t| **t >= 250_000).count();
+    let after_once = out
+        .times(0x509)
+        .into_iter()
+        .filter(|t| *t >= 250_000)
+        .count();
     ensure!(
         after_once == 1,
         "a one-shot must stop the running publisher: {after_once} frames after it"
     );
-    Ok("stop silences, one-shot sends exactly one frame and stops a running publisher".into())
+    Ok("10 frames then silence after stop; one-shot sends one frame; a one-shot stops a running publisher".into())
 }
 
 fn priority_move(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
-    let low = out.times(0x708);
-    let urgent = out.times(0x408);
+    let low = out.periodic_stream(0x708, "gyroscope", 5_000, 0, 52_500)?;
+    let urgent_frames = out.times(0x408);
     ensure!(
-        !low.is_empty() && !urgent.is_empty(),
-        "frames at both priorities expected"
-    );
-    ensure!(
-        low.iter().all(|t| *t < 52_500),
-        "low-priority frames after the move"
-    );
-    ensure!(
-        urgent.iter().all(|t| *t >= 52_500),
+        urgent_frames.iter().all(|t| *t >= 52_500),
         "urgent frames before the move"
     );
-    // An update keeps the release already scheduled (55 ms, on the 5 ms grid from 10 ms) and
-    // serves it at the new level: no extra sample, no gap (docs/handler.md).
-    let worst = worst_latency(&urgent, 55_000, 5_000)?;
     ensure!(
-        urgent.len() == 14,
-        "{} urgent frames, expected 14 (55..120 ms)",
-        urgent.len()
+        out.times(0x708).iter().all(|t| *t < 52_500),
+        "low-priority frames after the move"
     );
-    let last_low = low.last().copied().unwrap_or(0);
+    // An update keeps the release already scheduled (on the 5 ms grid from the first command) and
+    // serves it at the new level: no extra sample, no gap (docs/handler.md).
+    let urgent = out.periodic_stream(0x408, "gyroscope", 5_000, 52_500, 120_000)?;
     ensure!(
-        urgent[0] - last_low < 5_000 + worst,
-        "gap of {} µs at the move",
-        urgent[0] - last_low
+        urgent.releases[0] == low.releases[0] + 9 * 5_000,
+        "the move changed the grid: first urgent release at {} µs",
+        urgent.releases[0]
     );
     Ok(format!(
-        "{} low-priority frames (0x708), then {} urgent (0x408), worst latency {worst} µs",
-        low.len(),
-        urgent.len()
+        "{} low-priority frames (0x708), then {} urgent (0x408) on the same grid, worst latency {} µs",
+        low.frames.len(),
+        urgent.frames.len(),
+        urgent.worst_latency
     ))
 }
 
@@ -306,34 +386,28 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         ignored == 1,
         "the LightRing command must be ignored, got {ignored}"
     );
-    let gyro = out.times(0x608);
-    let worst = worst_latency(&gyro, gyro.first().copied().unwrap_or(5_000), 2_000)?;
-    let expected = (150_000 - 5_000) / 2_000;
-    ensure!(
-        gyro.len() as u64 >= expected,
-        "{} gyroscope frames, expected {expected}: the publisher was disturbed",
-        gyro.len()
-    );
-    Ok(format!("{rejected} rejected, {ignored} ignored, gyroscope undisturbed ({} frames, worst latency {worst} µs)", gyro.len()))
+    let gyro = out.periodic_stream(0x608, "gyroscope", 2_000, 0, 150_000)?;
+    Ok(format!(
+        "{rejected} rejected, {ignored} ignored; gyroscope undisturbed: {} frames on its 2 ms grid, worst latency {} µs",
+        gyro.frames.len(),
+        gyro.worst_latency
+    ))
 }
 
 fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    let gyro = out.times(0x608);
-    let first = gyro.first().copied().context("no gyroscope frames")?;
-    let worst = worst_latency(&gyro, first.min(5_000 + 1_000).max(5_000), 1_000)?;
+    let gyro = out.periodic_stream(0x608, "gyroscope", 1_000, 0, 250_000)?;
     let bound = bounds.publisher_latency_us("gyroscope", "medium", 1_000)?;
+    let worst = gyro.worst_latency;
     ensure!(
         worst <= bound,
         "latency {worst} µs under the flood exceeds the analysed bound {bound} µs"
     );
     let handled = out.traces("command-").len();
     ensure!(
-        handled >= 1_900,
-        "only {handled} of the 2000 flood frames were handled"
+        handled == 2_001,
+        "{handled} of the 2001 commands were handled (none may be lost)"
     );
-    Ok(format!(
-        "{handled} flood frames handled; gyroscope worst latency {worst} µs ≤ analysed {bound} µs"
-    ))
+    Ok(format!("2000 flood frames handled; gyroscope on its 1 ms grid, worst latency {worst} µs ≤ analysed {bound} µs"))
 }
 
 /// The time of a trace line `(s.micros) ...`.
@@ -343,6 +417,64 @@ fn trace_time(line: &str) -> Result<u64> {
         .and_then(|r| r.split_once(')'))
         .map(|(s, _)| s)
         .with_context(|| format!("trace line without time: {line}"))?;
-    let (s, us) = stamp.split_once('.').context("bad trace time")?;
-    Ok(s.parse::<u64>()? * 1_000_000 + us.parse::<u64>()?)
+    parse_seconds(stamp)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(lines: &[&str]) -> RunOutput {
+        RunOutput::parse(&lines.join("\n")).unwrap()
+    }
+
+    #[test]
+    fn a_clean_stream_passes() {
+        let out = run(&[
+            "# (0.001000) trace sample-taken gyroscope release=0.001000",
+            "(0.001020) can0 608#000000000000",
+            "# (0.002000) trace sample-taken gyroscope release=0.002000",
+            "(0.002005) can0 608#000000000000",
+        ]);
+        let s = out
+            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
+            .unwrap();
+        assert_eq!(s.worst_latency, 20);
+        assert_eq!(s.releases, vec![1_000, 2_000]);
+    }
+
+    #[test]
+    fn drift_a_skipped_release_or_a_missing_frame_fails() {
+        let drift = run(&[
+            "# (0.001000) trace sample-taken gyroscope release=0.001000",
+            "(0.001020) can0 608#00",
+            "# (0.002001) trace sample-taken gyroscope release=0.002001",
+            "(0.002005) can0 608#00",
+        ]);
+        assert!(drift
+            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
+            .is_err());
+        let skipped = run(&[
+            "# (0.001000) trace sample-taken gyroscope release=0.001000",
+            "(0.001020) can0 608#00",
+        ]);
+        assert!(skipped
+            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
+            .is_err());
+        let no_frame = run(&[
+            "# (0.001000) trace sample-taken gyroscope release=0.001000",
+            "# (0.002000) trace sample-taken gyroscope release=0.002000",
+            "(0.002005) can0 608#00",
+        ]);
+        assert!(no_frame
+            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
+            .is_err());
+    }
+
+    #[test]
+    fn reads_the_end_of_run_line() {
+        let out = run(&["# qemu: end of run at 5 us; rx dropped 0; ram static 5040 stack 2056"]);
+        assert_eq!(out.ram_used().unwrap(), (5040, 2056));
+        assert!(run(&["(0.000001) can0 608#00"]).ram_used().is_err());
+    }
 }
