@@ -231,7 +231,11 @@ mod app {
                 Ok(Outcome::Sensor { wake, .. }) => {
                     // Wake the levels whose schedule changed; each re-reads its next due time.
                     for level in wake.iter() {
-                        let _ = cx.local.wake_levels[levels::level_index(level)].try_send(());
+                        if let Some(sender) =
+                            cx.local.wake_levels.get_mut(levels::level_index(level))
+                        {
+                            let _ = sender.try_send(());
+                        }
                     }
                 }
                 _ => {}

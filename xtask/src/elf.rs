@@ -71,7 +71,7 @@ pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<Siz
         vector_table: 0,
     };
     let mut vector_end = 0;
-    let slot = board.app_base + board.checksum_slot;
+    let mut flash_sections = Vec::new();
     for section in file.sections() {
         let name = section.name().unwrap_or("");
         let alloc = match section.flags() {
@@ -95,29 +95,13 @@ pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<Siz
             _ if name == ".bss" || name == ".uninit" => report.bss += section.size(),
             _ => report.text += section.size(),
         }
-        // Nothing the image loads into flash may cover the word AMiRo-BLT writes.
-        if behind_bootloader && start < slot + 4 && slot < end && start < 0x2000_0000 {
-            bail!(
-                "{}: section {name} ({start:#010x}..{end:#010x}) covers the AMiRo-BLT checksum slot {slot:#010x}",
-                elf.display()
-            );
+        if start < 0x2000_0000 {
+            flash_sections.push((name.to_string(), start, end));
         }
     }
     if behind_bootloader {
-        if report.vector_table != board.app_base {
-            bail!(
-                "{}: vector table at {:#010x}, but AMiRo-BLT starts the application at {:#010x}",
-                elf.display(),
-                report.vector_table,
-                board.app_base
-            );
-        }
-        if vector_end > slot {
-            bail!(
-                "{}: vector table runs into the AMiRo-BLT checksum slot {slot:#010x}",
-                elf.display()
-            );
-        }
+        check_bootloader_layout(board, (report.vector_table, vector_end), &flash_sections)
+            .with_context(|| format!("{}", elf.display()))?;
         report.flash_available = board.flash_bytes - (board.app_base - 0x0800_0000);
     } else {
         report.flash_available = board.flash_bytes;
@@ -125,6 +109,33 @@ pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<Siz
     report.flash_used = report.text + report.data;
     report.ram_used = report.data + report.bss;
     Ok(report)
+}
+
+/// Checks what AMiRo-BLT needs of an image: the vector table at the application origin and ending
+/// before the checksum slot, and no section loaded into flash covering the slot (the bootloader
+/// writes that word itself).
+pub fn check_bootloader_layout(
+    board: &Board,
+    vector: (u64, u64),
+    flash_sections: &[(String, u64, u64)],
+) -> Result<()> {
+    let slot = board.app_base + board.checksum_slot;
+    if vector.0 != board.app_base {
+        bail!(
+            "vector table at {:#010x}, but AMiRo-BLT starts the application at {:#010x}",
+            vector.0,
+            board.app_base
+        );
+    }
+    if vector.1 > slot {
+        bail!("vector table runs into the AMiRo-BLT checksum slot {slot:#010x}");
+    }
+    for (name, start, end) in flash_sections {
+        if *start < slot + 4 && slot < *end {
+            bail!("section {name} ({start:#010x}..{end:#010x}) covers the AMiRo-BLT checksum slot {slot:#010x}");
+        }
+    }
+    Ok(())
 }
 
 /// Prints the size table.
@@ -147,5 +158,48 @@ pub fn print_table(reports: &[SizeReport]) {
             r.ram_available / 1024,
             100.0 * r.ram_used as f64 / r.ram_available as f64,
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::boards::BOARDS;
+
+    fn sections(text_start: u64) -> Vec<(String, u64, u64)> {
+        vec![
+            (".vector_table".into(), 0x0800_6000, 0x0800_6130),
+            (".text".into(), text_start, 0x0800_9000),
+        ]
+    }
+
+    #[test]
+    fn the_shipped_layout_leaves_the_slot_free() {
+        let f103 = &BOARDS[0];
+        assert!(
+            check_bootloader_layout(f103, (0x0800_6000, 0x0800_6130), &sections(0x0800_6200))
+                .is_ok()
+        );
+    }
+
+    #[test]
+    fn code_over_the_slot_is_refused() {
+        let f103 = &BOARDS[0];
+        // .text right behind the vector table (cortex-m-rt's default) runs over app + 0x150.
+        let err = check_bootloader_layout(f103, (0x0800_6000, 0x0800_6130), &sections(0x0800_6130))
+            .unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("covers the AMiRo-BLT checksum slot 0x08006150"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_wrong_origin_or_a_long_vector_table_is_refused() {
+        let f405 = &BOARDS[1];
+        assert!(check_bootloader_layout(f405, (0x0800_0000, 0x0800_0188), &[]).is_err());
+        assert!(check_bootloader_layout(f405, (0x0800_8000, 0x0800_81B0), &[]).is_err());
+        assert!(check_bootloader_layout(f405, (0x0800_8000, 0x0800_8188), &[]).is_ok());
     }
 }

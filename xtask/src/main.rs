@@ -108,8 +108,8 @@ fn run(cmd: Cmd) -> Result<bool> {
         Cmd::Test => test(&root).map(|()| true),
         Cmd::Ci => {
             check(&root)?;
-            test(&root)?;
             analysis_gate(&root)?;
+            test(&root)?;
             Ok(true)
         }
         Cmd::Qemu {
@@ -348,7 +348,7 @@ fn run_scenarios(root: &Path) -> Result<()> {
         failed += 1;
         println!("diwheeldrive RAM goal missed");
     }
-    println!("qemu scenarios: {passed} passed, {failed} failed");
+    println!("scenarios: {passed} passed, {failed} failed");
     if failed > 0 {
         bail!(
             "{failed} QEMU scenario(s) failed (outputs in {})",
