@@ -241,6 +241,48 @@ fn check(root: &Path) -> Result<()> {
 fn test(root: &Path) -> Result<()> {
     ensure_toolchain(root)?;
     cargo(root, &["test", "--quiet"]).context("host tests")?;
+    // The libraries that run on the chips must build for both of them without a HAL.
+    for target in ["thumbv7m-none-eabi", "thumbv7em-none-eabihf"] {
+        cargo(
+            root,
+            &[
+                "build",
+                "--quiet",
+                "--target",
+                target,
+                "-p",
+                "amiro-can",
+                "--features",
+                "bxcan,embedded-can",
+            ],
+        )
+        .with_context(|| format!("amiro-can for {target}"))?;
+        cargo(
+            root,
+            &[
+                "build",
+                "--quiet",
+                "--target",
+                target,
+                "-p",
+                "amiro-sensors",
+            ],
+        )
+        .with_context(|| format!("amiro-sensors for {target}"))?;
+        cargo(
+            root,
+            &[
+                "build",
+                "--quiet",
+                "--target",
+                target,
+                "-p",
+                "schedule-analysis",
+                "--no-default-features",
+            ],
+        )
+        .with_context(|| format!("the no_std core of schedule-analysis for {target}"))?;
+    }
     let reports = build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), false)?;
     elf::print_table(&reports);
     run_scenarios(root)
