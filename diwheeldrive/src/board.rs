@@ -7,17 +7,16 @@
 //! PA3 right back) into an A3906, POWER_EN PB2, encoders on TIM3 full remap (PC6/PC7, left) and
 //! TIM4 (PB6/PB7, right), SYS_SYNC_N PC1, SYS_PD_N PC8, status LED PA1 (active low).
 use bxcan::filter::Mask32;
-use bxcan::{Fifo, Interrupts, Rx0, StandardId, Tx};
+use bxcan::{Fifo, Interrupts, StandardId};
 use embedded_hal_bus::spi::{AtomicDevice, NoDelay};
 use embedded_hal_bus::util::AtomicCell;
 use stm32f1xx_hal::afio::AfioExt;
 use stm32f1xx_hal::can::Can;
 use stm32f1xx_hal::gpio::{
-    Edge, ExtiPin, GpioExt, Input, OpenDrain, Output, PinState, PullUp, PushPull, PA1, PB2, PC1,
-    PC13, PC14, PC8,
+    GpioExt, OpenDrain, Output, PinState, PushPull, PA1, PB2, PC1, PC13, PC14, PC8,
 };
 use stm32f1xx_hal::i2c::{BlockingI2c, DutyCycle, Mode as I2cMode};
-use stm32f1xx_hal::pac::{self, CAN, I2C1, I2C2, SPI1};
+use stm32f1xx_hal::pac::{self, I2C1, I2C2, SPI1};
 use stm32f1xx_hal::prelude::*;
 use stm32f1xx_hal::rcc;
 use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
@@ -30,6 +29,8 @@ pub const CAN_BTR: u32 = 0x012D_0001;
 pub const PWM_PERIOD: u16 = 3600;
 /// System clock.
 pub const SYSCLK_HZ: u32 = 72_000_000;
+/// EXTI line of SYS_PD_N (PC8).
+const SYS_PD_LINE: u32 = 1 << 8;
 
 /// SPI1 shared by the gyroscope and the accelerometer.
 pub type ImuBus = Spi<SPI1, u8>;
@@ -41,10 +42,10 @@ pub type AccelSpi = AtomicDevice<'static, ImuBus, PC13<Output<PushPull>>, NoDela
 pub type CompassI2c = BlockingI2c<I2C1>;
 /// I2C2: the PCA9544A multiplexer and the floor sensors.
 pub type FloorI2c = BlockingI2c<I2C2>;
-/// The CAN controller's halves.
-pub type CanTxPort = Tx<Can<CAN>>;
-/// The CAN controller's receive FIFO 0.
-pub type CanRxPort = Rx0<Can<CAN>>;
+/// The CAN controller's transmit mailboxes (register level, see `can::Mailboxes`).
+pub type CanTxPort = crate::can::Mailboxes;
+/// The CAN controller's receive FIFO 0 (read at register level, see `can::Fifo0`).
+pub type CanRxPort = crate::can::Fifo0;
 
 /// Everything `init` hands on to the tasks.
 pub struct Board {
@@ -75,7 +76,7 @@ pub struct SystemSignals {
     /// SYS_SYNC_N: held low until the module is initialised (open drain, wired-OR).
     pub sys_sync: PC1<Output<OpenDrain>>,
     /// SYS_PD_N: a falling edge is a shutdown request (EXTI line 8).
-    pub sys_pd: PC8<Input<PullUp>>,
+    pub sys_pd: PC8<Output<OpenDrain>>,
     /// Status LED, active low.
     pub led: PA1<Output<OpenDrain>>,
 }
@@ -100,6 +101,10 @@ pub fn init(
     spi_cell: &'static mut Option<AtomicCell<ImuBus>>,
 ) -> (Board, cortex_m::peripheral::NVIC) {
     clock_tree_to_reset_state(&dp.RCC);
+    // AMiRo-BLT used bxCAN: reset it so no filter, mode bit (e.g. TX FIFO priority) or pending
+    // mailbox of the bootloader's survives into the application's configuration.
+    dp.RCC.apb1rstr().modify(|_, w| w.canrst().set_bit());
+    dp.RCC.apb1rstr().modify(|_, w| w.canrst().clear_bit());
     let mut flash = dp.FLASH.constrain();
     let mut rcc = dp.RCC.freeze(
         rcc::Config::hse(8.MHz())
@@ -122,11 +127,23 @@ pub fn init(
     let sys_sync = gpioc
         .pc1
         .into_open_drain_output_with_state(&mut gpioc.crl, PinState::Low);
-    let mut sys_pd = gpioc.pc8.into_pull_up_input(&mut gpioc.crh);
-    sys_pd.make_interrupt_source(&mut afio);
-    let mut exti = dp.EXTI;
-    sys_pd.trigger_on_edge(&mut exti, Edge::Falling);
-    sys_pd.enable_interrupt(&mut exti);
+    // SYS_PD_N is a wired-OR open-drain line that AMiRo-BLT also drives: keep it an open-drain
+    // output released high (its input level and EXTI still work) and watch line 8 for a falling edge.
+    let sys_pd = gpioc
+        .pc8
+        .into_open_drain_output_with_state(&mut gpioc.crh, PinState::High);
+    let exti = dp.EXTI;
+    // SAFETY: AFIO's clock is on (constrain above); EXTICR3 bits 0..4 select the port of line 8 and
+    // nothing else in this firmware uses EXTI lines 8..11.
+    unsafe {
+        (*pac::AFIO::ptr())
+            .exticr3()
+            .modify(|r, w| w.bits((r.bits() & !0xF) | 0x2));
+    }
+    exti.ftsr()
+        .modify(|r, w| unsafe { w.bits(r.bits() | SYS_PD_LINE) });
+    exti.imr()
+        .modify(|r, w| unsafe { w.bits(r.bits() | SYS_PD_LINE) });
     let led = gpioa
         .pa1
         .into_open_drain_output_with_state(&mut gpioa.crl, PinState::Low);
@@ -217,7 +234,10 @@ pub fn init(
     can.enable_interrupts(Interrupts::TRANSMIT_MAILBOX_EMPTY | Interrupts::FIFO0_MESSAGE_PENDING);
     // Joining the bus needs 11 recessive bits; don't wait for it here, the hardware finishes it.
     let _ = can.enable_non_blocking();
-    let (can_tx, can_rx, _) = can.split();
+    // bxcan's receive half is not used: `can::Fifo0` reads the FIFO without its DLC > 8 panic.
+    let (_tx, _rx0, _) = can.split();
+    let can_tx = crate::can::Mailboxes::new();
+    let can_rx = crate::can::Fifo0;
 
     let watchdog = IndependentWatchdog::new(dp.IWDG);
     let signals = SystemSignals {
@@ -360,11 +380,14 @@ impl Encoders {
         // Left: both inputs direct, TI1 polarity inverted so forward counts up on both wheels
         // (the original inverts channel 1 of the quadrature pair).
         left.ccmr1_input().write(|w| w.cc1s().ti1().cc2s().ti2());
-        left.ccer().write(|w| w.cc1p().set_bit());
+        // No input inverted on either wheel: the drive controller expects both counts to rise
+        // driving forward (amiro-sensors' DriveConfig can invert a wheel if the bench disagrees).
+        left.ccer().write(|w| unsafe { w.bits(0) });
         left.smcr().write(|w| w.sms().encoder_mode_3());
         left.arr().write(|w| w.arr().set(0xFFFF));
         left.cr1().write(|w| w.cen().set_bit());
         right.ccmr1_input().write(|w| w.cc1s().ti1().cc2s().ti2());
+        right.ccer().write(|w| unsafe { w.bits(0) });
         right.smcr().write(|w| w.sms().encoder_mode_3());
         right.arr().write(|w| w.arr().set(0xFFFF));
         right.cr1().write(|w| w.cen().set_bit());
@@ -388,7 +411,20 @@ impl SystemSignals {
 
     /// Acknowledges the SYS_PD_N edge interrupt.
     pub fn clear_shutdown_interrupt(&mut self) {
-        self.sys_pd.clear_interrupt_pending_bit();
+        // SAFETY: writing 1 clears only line 8's pending bit.
+        unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(SYS_PD_LINE)) };
+    }
+
+    /// Whether SYS_PD_N reads low (a shutdown is requested), whatever the edge detector saw.
+    pub fn shutdown_requested(&self) -> bool {
+        // SAFETY: a read of GPIOC's input data register.
+        unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 8) == 0 }
+    }
+
+    /// Pulls SYS_SYNC_N low: the first step of the shutdown protocol (AMiRo-BLT then counts the
+    /// power board's pulses on it to learn which low-power mode to enter).
+    pub fn pull_sync_low(&mut self) {
+        self.sys_sync.set_low();
     }
 
     /// Status LED (active low).
@@ -424,8 +460,33 @@ pub fn feed_watchdog(dog: &mut Watchdog) {
     dog.feed();
 }
 
+/// Interrupt of the SYS_PD_N line.
+pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI9_5;
+
 /// Hands over to AMiRo-BLT's shutdown handling (never returns on a robot); parks otherwise.
+///
+/// The bootloader's handler must not be pre-empted and may wait for the other modules for a long
+/// time, so first: interrupts off and cleared, the monotonic and CAN interrupts stopped, and the
+/// independent watchdog (which cannot be stopped) stretched to its longest period (~26 s).
 pub fn hand_over_shutdown() -> ! {
+    cortex_m::interrupt::disable();
+    emergency_motors_off();
+    // SAFETY: from here on nothing else runs; these are the application's last register writes.
+    unsafe {
+        let nvic = &*cortex_m::peripheral::NVIC::PTR;
+        for i in 0..nvic.icer.len() {
+            nvic.icer[i].write(u32::MAX);
+            nvic.icpr[i].write(u32::MAX);
+        }
+        (*pac::TIM5::ptr()).cr1().modify(|_, w| w.cen().clear_bit());
+        (*pac::CAN::ptr()).ier().write(|w| w.bits(0));
+        let iwdg = &*pac::IWDG::ptr();
+        iwdg.kr().write(|w| w.bits(0x5555));
+        iwdg.pr().write(|w| w.bits(0b110));
+        iwdg.rlr().write(|w| w.bits(0xFFF));
+        while iwdg.sr().read().bits() != 0 {}
+        iwdg.kr().write(|w| w.bits(0xAAAA));
+    }
     crate::bootloader::hand_over_shutdown();
     crate::fault::halt()
 }

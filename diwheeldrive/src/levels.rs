@@ -15,11 +15,14 @@ pub const PUBLISH_MEDIUM: u8 = 2;
 pub const PUBLISH_LOW: u8 = 1;
 /// Command handling and motor control run above every publisher.
 pub const CONTROL: u8 = 5;
-/// The CAN interrupts.
-pub const CAN_IRQ: u8 = 6;
+/// The CAN transmit interrupt.
+pub const CAN_TX: u8 = 6;
+/// The CAN receive interrupt: above transmit, so the 3-frame receive FIFO is emptied even while
+/// the transmit path is busy.
+pub const CAN_RX: u8 = 7;
 /// The shutdown request (falling SYS_PD_N) pre-empts everything but the monotonic.
 pub const SHUTDOWN: u8 = 7;
-/// The monotonic's timer interrupt: above every task that waits on it.
+/// The monotonic's timer interrupt: above every task.
 pub const MONOTONIC: u8 = 8;
 
 /// The RTIC priority of the publisher task that serves CAN priority `p`.
@@ -46,8 +49,9 @@ const _: () = {
     assert!(rtic_priority(Priority::Medium) > rtic_priority(Priority::Low));
     assert!(rtic_priority(Priority::Low) >= 1);
     assert!(CONTROL > PUBLISH_URGENT);
-    assert!(CAN_IRQ > CONTROL);
-    assert!(SHUTDOWN > CAN_IRQ);
+    assert!(CAN_TX > CONTROL);
+    assert!(CAN_RX > CAN_TX);
+    assert!(SHUTDOWN > CAN_TX);
     assert!(MONOTONIC > SHUTDOWN);
     assert!(level_index(Priority::Urgent) == 0 && level_index(Priority::Low) == 3);
 };

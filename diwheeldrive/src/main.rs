@@ -5,7 +5,7 @@
 //! (or `qemu` for the QEMU build of this same app).
 //!
 //! Task priorities (RTIC, higher = more urgent; the mapping of CAN priorities lives in `levels`):
-//! `shutdown` 7 · `can_rx`, `can_tx` 6 · `handle_commands`, `motor_control` 5 ·
+//! `shutdown`, `can_rx` 7 · `can_tx` 6 · `handle_commands`, `motor_control` 5 ·
 //! `publish_urgent` 4 · `publish_high` 3 · `publish_medium` 2 · `publish_low`, `watchdog` 1.
 //! `cargo xtask analyze` reads these tasks, priorities and shared resources from this file.
 #![no_std]
@@ -29,6 +29,13 @@ use board as platform;
 mod qemu;
 #[cfg(feature = "qemu")]
 use qemu as platform;
+
+/// The AMiRo-BLT checksum slot (see `memory.x`): erased flash until the bootloader or
+/// `cargo xtask flash` writes the word that makes the first vector words sum to zero.
+#[cfg(not(any(feature = "bare-chip", feature = "qemu")))]
+#[link_section = ".blt_checksum"]
+#[used]
+static BLT_CHECKSUM: u32 = 0xFFFF_FFFF;
 
 /// Depth of the queue between the CAN receive interrupt and command handling.
 pub const RX_QUEUE_LEN: usize = 16;
@@ -128,6 +135,10 @@ mod app {
         // Initialised: let the system come up (SYS_SYNC_N is wired-OR; it reads high once every
         // module has released it).
         signals.release_sync();
+        // A shutdown requested before we were up has no edge to catch: look at the level.
+        if signals.shutdown_requested() {
+            rtic::pend(platform::SHUTDOWN_INTERRUPT);
+        }
         (
             Shared {
                 handler: SensorDataHandler::new(CanBoard::DiWheelDrive),
@@ -165,7 +176,7 @@ mod app {
     }
 
     /// CAN receive FIFO 0: move frames into the bounded command queue; a full queue drops and counts.
-    #[task(binds = USB_LP_CAN_RX0, priority = 6, local = [can_rx, rx_frames])]
+    #[task(binds = USB_LP_CAN_RX0, priority = 7, local = [can_rx, rx_frames])]
     fn can_rx(cx: can_rx::Context) {
         while let Some(received) = CanRx::receive(cx.local.can_rx) {
             match received {
@@ -184,8 +195,11 @@ mod app {
     #[task(binds = USB_HP_CAN_TX, priority = 6, shared = [tx_queue], local = [can_tx])]
     fn can_tx(mut cx: can_tx::Context) {
         let port = cx.local.can_tx;
-        CanTx::clear_interrupt(port);
         cx.shared.tx_queue.lock(|queue| {
+            // Frames whose mailbox was aborted for a more urgent one go back into the queue.
+            port.completed(&mut |aborted| {
+                let _ = queue.requeue(aborted);
+            });
             while let Some(frame) = queue.peek().copied() {
                 match CanTx::transmit(port, &frame) {
                     Transmit::Queued => {
@@ -196,16 +210,6 @@ mod app {
                                 id: frame.id().raw(),
                             },
                         ));
-                    }
-                    Transmit::Displaced(displaced) => {
-                        queue.pop();
-                        telemetry::trace(&TraceEvent::new(
-                            mono::now_us(),
-                            TraceKind::FrameSent {
-                                id: frame.id().raw(),
-                            },
-                        ));
-                        let _ = queue.requeue(displaced);
                     }
                     Transmit::Busy => break,
                 }
@@ -218,6 +222,10 @@ mod app {
     #[task(priority = 5, shared = [handler, drive], local = [commands, wake_levels])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         while let Ok(frame) = cx.local.commands.recv().await {
+            if publisher::shutting_down() {
+                // Nothing may start a publisher or a motor again while handing over.
+                continue;
+            }
             let now = mono::now_us();
             let outcome = cx
                 .shared
@@ -345,8 +353,13 @@ mod app {
     #[task(binds = EXTI9_5, priority = 7, local = [signals])]
     fn shutdown(cx: shutdown::Context) {
         cx.local.signals.clear_shutdown_interrupt();
-        platform::emergency_motors_off();
+        // A glitch is not a request: act only while the line is really low.
+        if !cx.local.signals.shutdown_requested() {
+            return;
+        }
         publisher::request_shutdown();
+        platform::emergency_motors_off();
+        cx.local.signals.pull_sync_low();
         shutdown_sequence::spawn().ok();
     }
 
@@ -355,6 +368,8 @@ mod app {
     async fn shutdown_sequence(mut cx: shutdown_sequence::Context) {
         let now = mono::now_us();
         cx.shared.handler.lock(|h| h.stop_all());
+        // Motor control runs at this priority, so it cannot be half-way through re-enabling them.
+        platform::emergency_motors_off();
         telemetry::trace(&TraceEvent::new(
             now,
             TraceKind::MotorsStopped {

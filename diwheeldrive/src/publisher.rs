@@ -37,6 +37,11 @@ pub fn request_shutdown() {
     SHUTTING_DOWN.store(true, Ordering::SeqCst);
 }
 
+/// Whether a shutdown request is being handled.
+pub fn shutting_down() -> bool {
+    SHUTTING_DOWN.load(Ordering::SeqCst)
+}
+
 /// Progress marks for the watchdog.
 pub struct Liveness {
     motor_control_ran: bool,

@@ -29,6 +29,8 @@ pub use amiro_sensors::sim::{
 
 /// The QEMU build has no SPI bus object: each simulated device is its own `SpiDevice`.
 pub type ImuBus = ();
+/// Interrupt of the (not simulated) SYS_PD_N line.
+pub const SHUTDOWN_INTERRUPT: Interrupt = Interrupt::EXTI9_5;
 /// Interrupt that runs the transmit path.
 pub const CAN_TX_INTERRUPT: Interrupt = Interrupt::USB_HP_CAN_TX;
 /// SysTick's clock in QEMU's netduino2 (the STM32F205 core clock).
@@ -164,7 +166,7 @@ impl CanTx for CanTxPort {
         Transmit::Queued
     }
 
-    fn clear_interrupt(&mut self) {}
+    fn completed(&mut self, _requeue: &mut dyn FnMut(amiro_can::Frame)) {}
 }
 
 /// Virtual receive FIFO (three frames deep, like bxCAN's).
@@ -334,6 +336,16 @@ impl SystemSignals {
 
     /// Nothing to acknowledge.
     pub fn clear_shutdown_interrupt(&mut self) {}
+
+    /// SYS_PD_N is not simulated.
+    pub fn shutdown_requested(&self) -> bool {
+        false
+    }
+
+    /// Prints the SYS_SYNC_N edge.
+    pub fn pull_sync_low(&mut self) {
+        hprintln!("# qemu: SYS_SYNC_N pulled low");
+    }
 }
 
 /// No watchdog in QEMU (QEMU's machine has no STM32F1 IWDG).

@@ -21,6 +21,13 @@ fn clock_tree_to_reset_state(rcc: &stm32f1xx_hal::pac::RCC) {
     while rcc.cr().read().pllrdy().bit_is_set() {}
 }
 
+/// The AMiRo-BLT checksum slot (see `memory.x`): erased flash until the bootloader or
+/// `cargo xtask flash` writes the word that makes the first vector words sum to zero.
+#[cfg(not(feature = "bare-chip"))]
+#[link_section = ".blt_checksum"]
+#[used]
+static BLT_CHECKSUM: u32 = 0xFFFF_FFFF;
+
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
     cortex_m::interrupt::disable();

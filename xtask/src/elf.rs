@@ -111,9 +111,12 @@ pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<Siz
     Ok(report)
 }
 
+/// The section that holds the AMiRo-BLT checksum word (see the boards' `memory.x`).
+pub const CHECKSUM_SECTION: &str = ".blt_checksum";
+
 /// Checks what AMiRo-BLT needs of an image: the vector table at the application origin and ending
-/// before the checksum slot, and no section loaded into flash covering the slot (the bootloader
-/// writes that word itself).
+/// before the checksum slot, the slot held by exactly the 4-byte `.blt_checksum` section, and no
+/// other section loaded into flash covering it.
 pub fn check_bootloader_layout(
     board: &Board,
     vector: (u64, u64),
@@ -130,12 +133,68 @@ pub fn check_bootloader_layout(
     if vector.1 > slot {
         bail!("vector table runs into the AMiRo-BLT checksum slot {slot:#010x}");
     }
+    let mut slot_held = false;
     for (name, start, end) in flash_sections {
-        if *start < slot + 4 && slot < *end {
+        if name == CHECKSUM_SECTION {
+            if (*start, *end) != (slot, slot + 4) {
+                bail!("{CHECKSUM_SECTION} at {start:#010x}..{end:#010x}, but the slot is {slot:#010x}..{:#010x}", slot + 4);
+            }
+            slot_held = true;
+        } else if *start < slot + 4 && slot < *end {
             bail!("section {name} ({start:#010x}..{end:#010x}) covers the AMiRo-BLT checksum slot {slot:#010x}");
         }
     }
+    if !slot_held {
+        bail!("no {CHECKSUM_SECTION} section reserves the AMiRo-BLT checksum slot {slot:#010x}");
+    }
     Ok(())
+}
+
+/// The word AMiRo-BLT expects in the slot: the first seven vector words plus it sum to zero.
+pub fn checksum_word(vector_words: &[u32; 7]) -> u32 {
+    0u32.wrapping_sub(
+        vector_words
+            .iter()
+            .fold(0u32, |sum, w| sum.wrapping_add(*w)),
+    )
+}
+
+/// Writes the checksum word into a copy of `elf` at `out`, so an image flashed directly (probe-rs,
+/// without the bootloader's own programming) passes AMiRo-BLT's validity check.
+pub fn write_checksum(elf: &Path, out: &Path) -> Result<u32> {
+    let mut bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+    let (vector_offset, slot_offset) = {
+        let file =
+            object::File::parse(&*bytes).with_context(|| format!("parsing {}", elf.display()))?;
+        let offset_of = |name: &str| -> Result<u64> {
+            let section = file
+                .section_by_name(name)
+                .with_context(|| format!("{}: no {name} section", elf.display()))?;
+            let (offset, size) = section
+                .file_range()
+                .with_context(|| format!("{}: {name} has no file contents", elf.display()))?;
+            if name == CHECKSUM_SECTION && size != 4 {
+                bail!("{}: {name} is {size} bytes, expected 4", elf.display());
+            }
+            Ok(offset)
+        };
+        (offset_of(".vector_table")?, offset_of(CHECKSUM_SECTION)?)
+    };
+    let mut words = [0u32; 7];
+    for (i, w) in words.iter_mut().enumerate() {
+        let at = (vector_offset as usize) + 4 * i;
+        let chunk = bytes
+            .get(at..at + 4)
+            .context("vector table shorter than 7 words")?;
+        *w = u32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]);
+    }
+    let checksum = checksum_word(&words);
+    let slot = bytes
+        .get_mut(slot_offset as usize..slot_offset as usize + 4)
+        .context("checksum slot outside the file")?;
+    slot.copy_from_slice(&checksum.to_le_bytes());
+    std::fs::write(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
+    Ok(checksum)
 }
 
 /// Prints the size table.
@@ -169,6 +228,7 @@ mod tests {
     fn sections(text_start: u64) -> Vec<(String, u64, u64)> {
         vec![
             (".vector_table".into(), 0x0800_6000, 0x0800_6130),
+            (".blt_checksum".into(), 0x0800_6150, 0x0800_6154),
             (".text".into(), text_start, 0x0800_9000),
         ]
     }
@@ -196,10 +256,29 @@ mod tests {
     }
 
     #[test]
-    fn a_wrong_origin_or_a_long_vector_table_is_refused() {
+    fn a_wrong_origin_a_long_vector_table_or_a_missing_slot_is_refused() {
         let f405 = &BOARDS[1];
-        assert!(check_bootloader_layout(f405, (0x0800_0000, 0x0800_0188), &[]).is_err());
-        assert!(check_bootloader_layout(f405, (0x0800_8000, 0x0800_81B0), &[]).is_err());
-        assert!(check_bootloader_layout(f405, (0x0800_8000, 0x0800_8188), &[]).is_ok());
+        let slot = vec![(".blt_checksum".to_string(), 0x0800_81AC, 0x0800_81B0)];
+        assert!(check_bootloader_layout(f405, (0x0800_0000, 0x0800_0188), &slot).is_err());
+        assert!(check_bootloader_layout(f405, (0x0800_8000, 0x0800_81B0), &slot).is_err());
+        assert!(check_bootloader_layout(f405, (0x0800_8000, 0x0800_8188), &slot).is_ok());
+        assert!(check_bootloader_layout(f405, (0x0800_8000, 0x0800_8188), &[]).is_err());
+        let misplaced = vec![(".blt_checksum".to_string(), 0x0800_81A8, 0x0800_81AC)];
+        assert!(check_bootloader_layout(f405, (0x0800_8000, 0x0800_8188), &misplaced).is_err());
+    }
+
+    #[test]
+    fn checksum_makes_the_words_sum_to_zero() {
+        let words = [
+            0x2001_0000,
+            0x0800_6201,
+            0x0800_6301,
+            0x0800_6401,
+            0x0800_6301,
+            0x0800_6301,
+            0x0800_6301,
+        ];
+        let c = checksum_word(&words);
+        assert_eq!(words.iter().fold(c, |s, w| s.wrapping_add(*w)), 0);
     }
 }

@@ -30,8 +30,8 @@ mod tests {
             ("publish_low", "PUBLISH_LOW"),
             ("handle_commands", "CONTROL"),
             ("motor_control", "CONTROL"),
-            ("can_rx", "CAN_IRQ"),
-            ("can_tx", "CAN_IRQ"),
+            ("can_rx", "CAN_RX"),
+            ("can_tx", "CAN_TX"),
             ("shutdown", "SHUTDOWN"),
         ] {
             let declared = app

@@ -68,10 +68,18 @@ enum Cmd {
     },
     /// The response-time report: worst-case response times of the board tasks and the CAN bus.
     Analyze(analyze::AnalyzeArgs),
-    /// Flash a board through probe-rs and stream its RTT output.
+    /// Build a board, write the AMiRo-BLT checksum word, flash it through probe-rs and stream RTT.
     Flash {
         /// The board to flash.
         board: String,
+    },
+    /// Flash an already built ELF (the boards' `cargo run` runner): writes the AMiRo-BLT checksum
+    /// word into a copy, then runs probe-rs on it.
+    FlashElf {
+        /// The board the ELF is for.
+        board: String,
+        /// The ELF cargo built.
+        elf: PathBuf,
     },
 }
 
@@ -156,12 +164,14 @@ fn run(cmd: Cmd) -> Result<bool> {
         Cmd::Flash { board } => {
             let board =
                 boards::by_name(&board).with_context(|| format!("unknown board `{board}`"))?;
-            ensure_toolchain(&root)?;
-            println!(
-                "flashing {} ({}) through probe-rs; RTT follows",
-                board.name, board.chip
-            );
-            cargo(&root.join(board.name), &["run", "--release"])?;
+            build_boards(&root, &[board], false)?;
+            flash_elf(board, &firmware_elf(&root, board))?;
+            Ok(true)
+        }
+        Cmd::FlashElf { board, elf } => {
+            let board =
+                boards::by_name(&board).with_context(|| format!("unknown board `{board}`"))?;
+            flash_elf(board, &elf)?;
             Ok(true)
         }
     }
@@ -203,6 +213,42 @@ fn build_boards(root: &Path, boards: &[&Board], bare_chip: bool) -> Result<Vec<e
         reports.push(elf::inspect(board, &elf_path, !bare_chip)?);
     }
     Ok(reports)
+}
+
+/// Writes the AMiRo-BLT checksum word into a copy of `elf` (images linked behind the bootloader)
+/// and flashes it with probe-rs, which then streams RTT.
+fn flash_elf(board: &Board, elf: &Path) -> Result<()> {
+    let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+    let behind_bootloader = object::read::File::parse(&*bytes)
+        .map(|f| object::Object::section_by_name(&f, elf::CHECKSUM_SECTION).is_some())
+        .unwrap_or(false);
+    let image = if behind_bootloader {
+        let patched = elf.with_extension("blt.elf");
+        let word = elf::write_checksum(elf, &patched)?;
+        println!(
+            "{}: AMiRo-BLT checksum word {word:#010x} written into {}",
+            board.name,
+            patched.display()
+        );
+        patched
+    } else {
+        println!(
+            "{}: bare-chip image (no AMiRo-BLT slot), flashed as built",
+            board.name
+        );
+        elf.to_path_buf()
+    };
+    println!(
+        "flashing {} ({}) through probe-rs; RTT follows",
+        board.name, board.chip
+    );
+    let mut args = vec!["run", "--chip", board.chip];
+    // DiWheelDrive's original firmware disables the debug pins; connect under reset in any case.
+    args.push("--connect-under-reset");
+    let image_arg = image.to_string_lossy().into_owned();
+    args.push(&image_arg);
+    run_tool(Path::new("."), "probe-rs", &args)
+        .context("probe-rs (install: cargo install probe-rs-tools)")
 }
 
 /// Where cargo leaves a board's release ELF.
