@@ -281,6 +281,20 @@ fn check(root: &Path) -> Result<()> {
         )
         .with_context(|| format!("clippy on {}", board.name))?;
     }
+    let qemu_target = qemu::target_dir(root).to_string_lossy().into_owned();
+    let args = [
+        "clippy",
+        "--quiet",
+        "--release",
+        "--features",
+        "qemu",
+        "--target-dir",
+        &qemu_target,
+        "--",
+        "-D",
+        "warnings",
+    ];
+    cargo(&root.join("diwheeldrive"), &args).context("clippy on the QEMU build of diwheeldrive")?;
     Ok(())
 }
 
@@ -329,6 +343,8 @@ fn test(root: &Path) -> Result<()> {
         )
         .with_context(|| format!("the no_std core of schedule-analysis for {target}"))?;
     }
+    // The bare-chip layout must keep linking (it is the documented switch for development chips).
+    build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), true)?;
     let reports = build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), false)?;
     elf::print_table(&reports);
     run_scenarios(root)

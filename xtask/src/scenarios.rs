@@ -261,6 +261,11 @@ fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let stream = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, 200_000)?;
     let answered = stream.releases[0] - 10_000;
     let bound = bounds.publisher_latency_us("magnetometer-x", "medium", 900)?;
+    // The first release is the command's handling: it must come well inside one period.
+    ensure!(
+        answered < 900,
+        "the publisher started {answered} µs after the command"
+    );
     let worst = stream.worst_latency;
     ensure!(
         worst <= bound,
@@ -385,6 +390,32 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ensure!(
         ignored == 1,
         "the LightRing command must be ignored, got {ignored}"
+    );
+    // Each bad frame with its own reason, in the order of the stimulus.
+    let reasons: Vec<&str> = out
+        .traces("command-rejected")
+        .iter()
+        .filter_map(|line| line.split_whitespace().last())
+        .collect();
+    let expected = [
+        "unknown-topic",
+        "bad-mode",
+        "bad-unit",
+        "dlc-too-short",
+        "dlc-too-long",
+        "zero-sample-time",
+        "dlc-too-long",
+        "dlc-too-short",
+        "dlc-too-short",
+        "period-too-long",
+    ];
+    ensure!(
+        reasons == expected,
+        "rejection reasons {reasons:?}, expected {expected:?}"
+    );
+    ensure!(
+        out.frames.iter().all(|f| f.id == 0x608),
+        "a bad frame made the board send something other than the gyroscope's frames"
     );
     let gyro = out.periodic_stream(0x608, "gyroscope", 2_000, 0, 150_000)?;
     Ok(format!(
