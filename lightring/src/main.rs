@@ -66,6 +66,11 @@ mod app {
         let _blank = gpioa
             .pa4
             .into_push_pull_output_with_state(&mut gpioa.crl, stm32f1xx_hal::gpio::PinState::High);
+        // Initialised: release SYS_SYNC_N (PD2, open drain, wired-OR) so the robot can come up.
+        // (The pin configuration outlives the HAL handle.)
+        let mut gpiod = cx.device.GPIOD.split(&mut rcc);
+        let mut sys_sync = gpiod.pd2.into_open_drain_output(&mut gpiod.crl);
+        sys_sync.set_high();
         // APB1 timers run at 2 × PCLK1 = 72 MHz.
         Mono::start(72_000_000, Priority::new(8));
         heartbeat::spawn().ok();

@@ -54,13 +54,18 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         rtt_init_print!();
         super::clock_tree_to_reset_state(&cx.device.RCC);
-        let _rcc = cx.device.RCC.freeze(
+        let mut rcc = cx.device.RCC.freeze(
             Config::hse(8.MHz())
                 .sysclk(168.MHz())
                 .hclk(168.MHz())
                 .pclk1(42.MHz())
                 .pclk2(84.MHz()),
         );
+        // Initialised: release SYS_SYNC_N (PC12, open drain, wired-OR) so the robot can come up.
+        // (The pin configuration outlives the HAL handle.)
+        let gpioc = cx.device.GPIOC.split(&mut rcc);
+        let mut sys_sync = gpioc.pc12.into_open_drain_output();
+        sys_sync.set_high();
         // APB1 timers run at 2 × PCLK1 = 84 MHz.
         Mono::start(84_000_000, Priority::new(8));
         heartbeat::spawn().ok();
