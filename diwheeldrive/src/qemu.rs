@@ -38,6 +38,7 @@ pub const CORE_CLOCK_HZ: u32 = 120_000_000;
 
 static RX_FIFO: Mutex<RefCell<Deque<RxFrame, 3>>> = Mutex::new(RefCell::new(Deque::new()));
 static RX_OVERRUN: Mutex<RefCell<bool>> = Mutex::new(RefCell::new(false));
+static SYS_PD_LOW: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 static SYST: Mutex<RefCell<Option<cortex_m::peripheral::SYST>>> = Mutex::new(RefCell::new(None));
 static PLANT: Mutex<RefCell<Option<amiro_sensors::sim::WheelPlant>>> =
     Mutex::new(RefCell::new(None));
@@ -212,6 +213,12 @@ pub async fn replay_stimulus() {
             break;
         }
         crate::mono::delay_until_us(at).await;
+        if record[11] & 2 != 0 {
+            // SYS_PD_N falls: the same interrupt the real pin raises.
+            SYS_PD_LOW.store(true, core::sync::atomic::Ordering::SeqCst);
+            rtic::pend(SHUTDOWN_INTERRUPT);
+            continue;
+        }
         let mut frame = RxFrame {
             id: u16::from_le_bytes([record[8], record[9]]),
             len: record[10].min(8),
@@ -227,9 +234,15 @@ pub async fn replay_stimulus() {
         rtic::pend(Interrupt::USB_LP_CAN_RX0);
     }
     crate::mono::delay_until_us(duration).await;
+    finish("end of run");
+}
+
+/// Prints the run's last line (receive drops, static RAM, the stack's high-water mark) and ends it.
+fn finish(why: &str) {
     hprintln!(
-        "# qemu: end of run at {} us; rx dropped {}; ram static {} stack {}",
-        duration,
+        "# qemu: {} at {} us; rx dropped {}; ram static {} stack {}",
+        why,
+        crate::mono::now_us(),
         crate::publisher::rx_dropped(),
         static_ram(),
         stack_high_water()
@@ -337,9 +350,9 @@ impl SystemSignals {
     /// Nothing to acknowledge.
     pub fn clear_shutdown_interrupt(&mut self) {}
 
-    /// SYS_PD_N is not simulated.
+    /// SYS_PD_N, as the stimulus drives it.
     pub fn shutdown_requested(&self) -> bool {
-        false
+        SYS_PD_LOW.load(core::sync::atomic::Ordering::SeqCst)
     }
 
     /// Prints the SYS_SYNC_N edge.
@@ -359,6 +372,5 @@ pub fn feed_watchdog(_dog: &mut Watchdog) {}
 
 /// No bootloader in QEMU: end the run.
 pub fn hand_over_shutdown() {
-    hprintln!("# qemu: shutdown hand-over");
-    exit(true);
+    finish("shutdown hand-over");
 }

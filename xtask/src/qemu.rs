@@ -18,6 +18,9 @@ pub const MACHINE: &str = "netduino2";
 /// 1 MHz SysTick monotonic costs a few percent.
 pub const ICOUNT_SHIFT: u32 = 0;
 
+/// The pseudo-identifier of a SYS_PD_N shutdown request in a stimulus.
+pub const SIGNAL_SYS_PD_N: u32 = u32::MAX;
+
 /// One timed frame of a stimulus.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TimedFrame {
@@ -55,12 +58,24 @@ pub fn parse_log_line(line: &str) -> Result<Option<TimedFrame>> {
         .parse()
         .with_context(|| format!("`{line}`: bad microseconds"))?;
     let mut fields = rest.split_whitespace();
-    let _iface = fields
+    let iface = fields
         .next()
         .with_context(|| format!("`{line}`: missing interface"))?;
     let frame = fields
         .next()
         .with_context(|| format!("`{line}`: missing frame"))?;
+    let at_us = secs * 1_000_000 + micros;
+    // Not a frame: a system signal for the board (`(t) signal SYS_PD_N`), stimulus only.
+    if iface == "signal" {
+        if frame != "SYS_PD_N" {
+            bail!("`{line}`: the only signal is SYS_PD_N (a shutdown request)");
+        }
+        return Ok(Some(TimedFrame {
+            at_us,
+            id: SIGNAL_SYS_PD_N,
+            data: Vec::new(),
+        }));
+    }
     let (id, data) = frame
         .split_once('#')
         .with_context(|| format!("`{line}`: frame needs `ID#DATA`"))?;
@@ -73,11 +88,10 @@ pub fn parse_log_line(line: &str) -> Result<Option<TimedFrame>> {
         .map(|i| u8::from_str_radix(&data[i..i + 2], 16))
         .collect::<Result<Vec<u8>, _>>()
         .with_context(|| format!("`{line}`: bad data"))?;
-    Ok(Some(TimedFrame {
-        at_us: secs * 1_000_000 + micros,
-        id,
-        data,
-    }))
+    if data.len() > 8 {
+        bail!("`{line}`: a CAN frame carries at most 8 bytes");
+    }
+    Ok(Some(TimedFrame { at_us, id, data }))
 }
 
 /// Encodes a stimulus for the firmware.
@@ -87,7 +101,10 @@ pub fn encode_stimulus(frames: &[TimedFrame], duration_us: u64) -> Vec<u8> {
     out.extend_from_slice(&duration_us.to_le_bytes());
     for f in frames {
         out.extend_from_slice(&f.at_us.to_le_bytes());
-        let (id, flags) = if f.id <= 0x7FF {
+        // Flags: bit 0 = a frame the protocol cannot carry (extended ID), bit 1 = SYS_PD_N falls.
+        let (id, flags) = if f.id == SIGNAL_SYS_PD_N {
+            (0xFFFF, 2u8)
+        } else if f.id <= 0x7FF {
             (f.id as u16, 0u8)
         } else {
             (0xFFFF, 1u8)

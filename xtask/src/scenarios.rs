@@ -49,7 +49,9 @@ impl RunOutput {
         let line = self
             .notes
             .iter()
-            .find(|n| n.starts_with("qemu: end of run"))
+            .find(|n| {
+                n.starts_with("qemu: end of run") || n.starts_with("qemu: shutdown hand-over")
+            })
             .context("the run did not reach its end (no end-of-run line)")?;
         let field = |name: &str| -> Result<u64> {
             let at = line
@@ -241,6 +243,11 @@ pub const SCENARIOS: &[Scenario] = &[
         name: "malformed",
         about: "bad frames are counted and harmless",
         check: malformed,
+    },
+    Scenario {
+        name: "shutdown",
+        about: "SYS_PD_N falls: motors off, SYS_SYNC_N low, publishers stop, hand-over",
+        check: shutdown,
     },
     Scenario {
         name: "flood",
@@ -439,6 +446,57 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         "{handled} of the 2001 commands were handled (none may be lost)"
     );
     Ok(format!("2000 flood frames handled; gyroscope on its 1 ms grid, worst latency {worst} µs ≤ analysed {bound} µs"))
+}
+
+fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    const REQUEST: u64 = 100_000;
+    let gyro = out.periodic_stream(0x208 | 0x400, "gyroscope", 2_000, 0, REQUEST)?;
+    ensure!(
+        gyro.frames.len() == 48,
+        "{} gyroscope frames before the request, expected 48",
+        gyro.frames.len()
+    );
+    let late: Vec<u64> = out
+        .times(0x608)
+        .into_iter()
+        .filter(|t| *t > REQUEST + 100)
+        .collect();
+    ensure!(
+        late.is_empty(),
+        "frames after the shutdown request: {late:?}"
+    );
+    let stop = out
+        .traces("motors-stopped shutdown")
+        .first()
+        .map(|l| trace_time(l))
+        .transpose()?
+        .context("no motors-stopped shutdown trace")?;
+    ensure!(
+        (REQUEST..REQUEST + 100).contains(&stop),
+        "motors stopped at {stop} µs"
+    );
+    ensure!(
+        out.notes
+            .iter()
+            .any(|n| n.contains("SYS_SYNC_N pulled low")),
+        "SYS_SYNC_N was not pulled low"
+    );
+    let accepted_after = out
+        .traces("command-accepted")
+        .iter()
+        .filter_map(|l| trace_time(l).ok())
+        .filter(|t| *t > REQUEST)
+        .count();
+    ensure!(
+        accepted_after == 0,
+        "{accepted_after} commands accepted after the shutdown request"
+    );
+    let handover = out
+        .notes
+        .iter()
+        .find(|n| n.starts_with("qemu: shutdown hand-over"))
+        .context("no hand-over to the bootloader")?;
+    Ok(format!("48 frames, then motors off at {stop} µs, SYS_SYNC_N low, no frames or commands after; {handover}"))
 }
 
 /// The time of a trace line `(s.micros) ...`.
