@@ -29,6 +29,11 @@ pub const CAN_BTR: u32 = 0x012D_0001;
 pub const PWM_PERIOD: u16 = 3600;
 /// System clock.
 pub const SYSCLK_HZ: u32 = 72_000_000;
+/// I2C timeouts: a byte takes 25 µs at 400 kHz, so 200 µs means the bus is stuck. They bound how
+/// long a dead sensor can hold its bus lock (and so block the publishers sharing it).
+const I2C_START_TIMEOUT_US: u32 = 200;
+const I2C_START_RETRIES: u8 = 1;
+const I2C_TIMEOUT_US: u32 = 200;
 /// EXTI line of SYS_PD_N (PC8).
 const SYS_PD_LINE: u32 = 1 << 8;
 
@@ -200,20 +205,20 @@ pub fn init(
         (gpiob.pb8, gpiob.pb9),
         I2cMode::fast(400.kHz(), DutyCycle::Ratio2to1),
         &mut rcc,
-        1000,
-        3,
-        1000,
-        1000,
+        I2C_START_TIMEOUT_US,
+        I2C_START_RETRIES,
+        I2C_TIMEOUT_US,
+        I2C_TIMEOUT_US,
     );
     let floor_i2c = BlockingI2c::new(
         dp.I2C2,
         (gpiob.pb10, gpiob.pb11),
         I2cMode::fast(400.kHz(), DutyCycle::Ratio2to1),
         &mut rcc,
-        1000,
-        3,
-        1000,
-        1000,
+        I2C_START_TIMEOUT_US,
+        I2C_START_RETRIES,
+        I2C_TIMEOUT_US,
+        I2C_TIMEOUT_US,
     );
 
     // CAN1 on PA11/PA12 at 1 Mbit/s. Only command frames (C/S bit 0, standard IDs, data frames)

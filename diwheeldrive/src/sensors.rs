@@ -15,12 +15,16 @@ pub use amiro_sensors::drivers::suite::Samples;
 
 /// How long a group that failed its identity check waits before the next attempt.
 pub const RETRY_INIT_US: u64 = 1_000_000;
+/// Consecutive failed reads after which a group is treated as missing (and retried as above),
+/// so a dead bus costs one timeout per second instead of one per sample.
+pub const FAILURES_BEFORE_RETRY: u8 = 3;
 
 /// A sensor group and whether it came up.
 pub struct Group<G> {
     group: G,
     ready: bool,
     faults: u32,
+    consecutive_failures: u8,
     last_init_us: u64,
 }
 
@@ -32,6 +36,7 @@ impl<G: SensorGroup> Group<G> {
             group,
             ready,
             faults: 0,
+            consecutive_failures: 0,
             last_init_us: 0,
         }
     }
@@ -58,9 +63,18 @@ impl<G: SensorGroup> Group<G> {
             }
         }
         match self.group.sample(topic, now_us) {
-            Ok(samples) => samples,
+            Ok(samples) => {
+                self.consecutive_failures = 0;
+                samples
+            }
             Err(_) => {
                 self.faults = self.faults.saturating_add(1);
+                self.consecutive_failures = self.consecutive_failures.saturating_add(1);
+                if self.consecutive_failures >= FAILURES_BEFORE_RETRY {
+                    self.ready = false;
+                    self.consecutive_failures = 0;
+                    self.last_init_us = now_us;
+                }
                 Samples::new()
             }
         }

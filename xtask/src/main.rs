@@ -510,7 +510,10 @@ fn cargo(dir: &Path, args: &[&str]) -> Result<()> {
 /// Installs the thumb targets and components `rust-toolchain.toml` names when the pinned toolchain
 /// was already present without them (rustup only adds them when it installs the toolchain itself).
 fn ensure_toolchain(root: &Path) -> Result<()> {
-    let installed = output(root, "rustup", &["target", "list", "--installed"]).unwrap_or_default();
+    let Ok(installed) = output(root, "rustup", &["target", "list", "--installed"]) else {
+        // No rustup: the toolchain is managed some other way; cargo reports anything missing.
+        return Ok(());
+    };
     let missing: Vec<&str> = ["thumbv7m-none-eabi", "thumbv7em-none-eabihf"]
         .into_iter()
         .filter(|t| !installed.lines().any(|l| l.trim() == *t))
@@ -519,18 +522,18 @@ fn ensure_toolchain(root: &Path) -> Result<()> {
         let mut args = vec!["target", "add"];
         args.extend(&missing);
         run_tool(root, "rustup", &args)?;
-        run_tool(
-            root,
-            "rustup",
-            &[
-                "component",
-                "add",
-                "llvm-tools",
-                "rust-src",
-                "clippy",
-                "rustfmt",
-            ],
-        )?;
+    }
+    let components =
+        output(root, "rustup", &["component", "list", "--installed"]).unwrap_or_default();
+    let wanted = ["llvm-tools", "rust-src", "clippy", "rustfmt"];
+    let lacking: Vec<&str> = wanted
+        .into_iter()
+        .filter(|c| !components.lines().any(|l| l.starts_with(c)))
+        .collect();
+    if !lacking.is_empty() {
+        let mut args = vec!["component", "add"];
+        args.extend(&lacking);
+        run_tool(root, "rustup", &args)?;
     }
     Ok(())
 }
