@@ -1,4 +1,9 @@
 //! Conversions between [`Frame`] and `bxcan::Frame` (bxcan 0.8), the driver of all three boards' CAN cells.
+//!
+//! Caution on the receive side: bxcan 0.8 keeps a received frame's raw 4-bit length code, and its own
+//! accessors panic on a frame whose code is 9–15 (legal on the wire, meaning 8 bytes). A firmware
+//! must not hand such a frame to these conversions; DiWheelDrive therefore reads its receive FIFO at
+//! register level (`diwheeldrive/src/can.rs`) and decodes with [`decode_command`] on raw bytes.
 
 use crate::error::DecodeError;
 use crate::frame::Frame;
