@@ -97,6 +97,20 @@ mod bxcan_port {
         fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
             let can = can();
             let tsr = can.tsr().read().bits();
+            // Frames with the same identifier must leave in order, but pending mailboxes with equal
+            // identifiers go out by mailbox number: wait until an earlier one with this ID has left.
+            let same_id_pending = (0..3).any(|i| {
+                tsr & (TSR_TME0 << i) == 0
+                    && self
+                        .shadow
+                        .get(i)
+                        .copied()
+                        .flatten()
+                        .is_some_and(|f| f.id() == frame.id())
+            });
+            if same_id_pending {
+                return Transmit::Busy;
+            }
             if let Some(free) = (0..3).find(|i| tsr & (TSR_TME0 << i) != 0) {
                 let mut data = [0u8; 8];
                 data[..frame.data().len()].copy_from_slice(frame.data());
