@@ -8,7 +8,7 @@
 
 use embedded_hal::spi::SpiDevice;
 
-use super::{check_register, div_round, saturate_i16, st_spi, Error};
+use super::{div_round, saturate_i16, st_spi, Error};
 
 /// Register addresses (datasheet register map).
 pub mod reg {
@@ -132,27 +132,12 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
     pub fn init(&mut self) -> Result<(), Error<SPI::Error>> {
         self.check_identity()?;
         let config = self.control_registers();
-        st_spi::write(&mut self.spi, reg::CTRL_REG1, &config)?;
-        let mut readback = [0u8; 5];
-        st_spi::read(&mut self.spi, reg::CTRL_REG1, &mut readback)?;
-        for ((register, written), read) in (reg::CTRL_REG1..).zip(config).zip(readback) {
-            check_register(register, written, read, 0xFF)?;
-        }
-        Ok(())
+        st_spi::configure(&mut self.spi, reg::CTRL_REG1, config, |_| 0xFF)
     }
 
     /// Reads WHO_AM_I and compares it with [`WHO_AM_I_VALUE`].
     pub fn check_identity(&mut self) -> Result<(), Error<SPI::Error>> {
-        let mut id = [0u8];
-        st_spi::read(&mut self.spi, reg::WHO_AM_I, &mut id)?;
-        if id[0] == WHO_AM_I_VALUE {
-            Ok(())
-        } else {
-            Err(Error::WrongIdentity {
-                expected: WHO_AM_I_VALUE.into(),
-                found: id[0].into(),
-            })
-        }
+        st_spi::check_identity(&mut self.spi, reg::WHO_AM_I, WHO_AM_I_VALUE)
     }
 
     /// The five control register values [`init`](Self::init) writes.
@@ -168,13 +153,7 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
 
     /// Reads the six output bytes in one burst: raw X, Y, Z digits.
     pub fn read_raw(&mut self) -> Result<[i16; 3], Error<SPI::Error>> {
-        let mut out = [0u8; 6];
-        st_spi::read(&mut self.spi, reg::OUT_X_L, &mut out)?;
-        Ok([
-            i16::from_le_bytes([out[0], out[1]]),
-            i16::from_le_bytes([out[2], out[3]]),
-            i16::from_le_bytes([out[4], out[5]]),
-        ])
+        Ok(st_spi::read_xyz(&mut self.spi, reg::OUT_X_L)?)
     }
 
     /// Reads and converts one angular-rate sample.

@@ -9,7 +9,7 @@
 
 use embedded_hal::spi::SpiDevice;
 
-use super::{check_register, div_round, saturate_i16, st_spi, Error};
+use super::{div_round, saturate_i16, st_spi, Error};
 
 /// Register addresses (datasheet register map).
 pub mod reg {
@@ -132,33 +132,20 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
     pub fn init(&mut self) -> Result<(), Error<SPI::Error>> {
         self.check_identity()?;
         let config = self.control_registers();
-        st_spi::write(&mut self.spi, reg::CTRL_REG1, &config)?;
-        let mut readback = [0u8; 5];
-        st_spi::read(&mut self.spi, reg::CTRL_REG1, &mut readback)?;
-        for ((register, written), read) in (reg::CTRL_REG1..).zip(config).zip(readback) {
-            // CTRL_REG2 bit 7 (BOOT) clears itself; every other bit reads back as written.
-            let writable = if register == reg::CTRL_REG2 {
+        // CTRL_REG2 bit 7 (BOOT) clears itself; every other bit reads back as written.
+        let writable = |register| {
+            if register == reg::CTRL_REG2 {
                 0x7F
             } else {
                 0xFF
-            };
-            check_register(register, written, read, writable)?;
-        }
-        Ok(())
+            }
+        };
+        st_spi::configure(&mut self.spi, reg::CTRL_REG1, config, writable)
     }
 
     /// Reads WHO_AM_I and compares it with [`WHO_AM_I_VALUE`].
     pub fn check_identity(&mut self) -> Result<(), Error<SPI::Error>> {
-        let mut id = [0u8];
-        st_spi::read(&mut self.spi, reg::WHO_AM_I, &mut id)?;
-        if id[0] == WHO_AM_I_VALUE {
-            Ok(())
-        } else {
-            Err(Error::WrongIdentity {
-                expected: WHO_AM_I_VALUE.into(),
-                found: id[0].into(),
-            })
-        }
+        st_spi::check_identity(&mut self.spi, reg::WHO_AM_I, WHO_AM_I_VALUE)
     }
 
     /// The five control register values [`init`](Self::init) writes.
@@ -174,13 +161,7 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
 
     /// Reads the six output bytes in one burst: raw 16-bit X, Y, Z.
     pub fn read_raw(&mut self) -> Result<[i16; 3], Error<SPI::Error>> {
-        let mut out = [0u8; 6];
-        st_spi::read(&mut self.spi, reg::OUT_X_L, &mut out)?;
-        Ok([
-            i16::from_le_bytes([out[0], out[1]]),
-            i16::from_le_bytes([out[2], out[3]]),
-            i16::from_le_bytes([out[4], out[5]]),
-        ])
+        Ok(st_spi::read_xyz(&mut self.spi, reg::OUT_X_L)?)
     }
 
     /// Reads and converts one acceleration sample.

@@ -6,6 +6,8 @@
 
 use embedded_hal::spi::{Operation, SpiDevice};
 
+use super::{check_register, Error};
+
 /// Command bit 7: read.
 pub(crate) const READ: u8 = 0x80;
 /// Command bit 6: advance the register address after each byte.
@@ -39,4 +41,50 @@ pub(crate) fn read<S: SpiDevice>(
 pub(crate) fn write<S: SpiDevice>(spi: &mut S, register: u8, data: &[u8]) -> Result<(), S::Error> {
     let cmd = [command(register, false, data.len())];
     spi.transaction(&mut [Operation::Write(&cmd), Operation::Write(data)])
+}
+
+/// Reads the identity register and compares it with `expected`.
+pub(crate) fn check_identity<S: SpiDevice>(
+    spi: &mut S,
+    register: u8,
+    expected: u8,
+) -> Result<(), Error<S::Error>> {
+    let mut id = [0u8];
+    read(spi, register, &mut id)?;
+    if id[0] == expected {
+        Ok(())
+    } else {
+        Err(Error::WrongIdentity {
+            expected: expected.into(),
+            found: id[0].into(),
+        })
+    }
+}
+
+/// Writes the five control registers from `first` in one burst and reads them back;
+/// `writable(register)` gives the bits of that register that read back as written.
+pub(crate) fn configure<S: SpiDevice>(
+    spi: &mut S,
+    first: u8,
+    config: [u8; 5],
+    writable: impl Fn(u8) -> u8,
+) -> Result<(), Error<S::Error>> {
+    write(spi, first, &config)?;
+    let mut readback = [0u8; 5];
+    read(spi, first, &mut readback)?;
+    for ((register, written), read) in (first..).zip(config).zip(readback) {
+        check_register(register, written, read, writable(register))?;
+    }
+    Ok(())
+}
+
+/// Reads the six output bytes from `first` in one burst: X, Y, Z as little-endian `i16`.
+pub(crate) fn read_xyz<S: SpiDevice>(spi: &mut S, first: u8) -> Result<[i16; 3], S::Error> {
+    let mut out = [0u8; 6];
+    read(spi, first, &mut out)?;
+    Ok([
+        i16::from_le_bytes([out[0], out[1]]),
+        i16::from_le_bytes([out[2], out[3]]),
+        i16::from_le_bytes([out[4], out[5]]),
+    ])
 }
