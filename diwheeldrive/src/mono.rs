@@ -163,14 +163,17 @@ mod tim5 {
     }
 }
 
-/// The QEMU build: rtic-monotonics' SysTick monotonic at 1 MHz (QEMU emulates no STM32 timer the
+/// The QEMU build: rtic-monotonics' SysTick monotonic with a 10 µs tick, in microseconds (QEMU emulates no STM32 timer the
 /// board's TIM5 monotonic could use; under `-icount` SysTick runs in exact virtual time).
 #[cfg(feature = "qemu")]
 mod systick {
     use rtic_monotonics::systick::prelude::*;
     use rtic_time::monotonic::TimerQueueBasedInstant;
 
-    rtic_monotonics::systick_monotonic!(Mono, 1_000_000);
+    /// SysTick ticks every 10 µs: a 1 µs tick would interrupt the emulated CPU every microsecond,
+    /// which at an F103-like virtual speed would eat a large part of it.
+    const TICK_US: u64 = 10;
+    rtic_monotonics::systick_monotonic!(Mono, 100_000);
 
     /// Starts SysTick from the core clock of the emulated machine.
     pub fn start(syst: cortex_m::peripheral::SYST, core_clock_hz: u32) {
@@ -179,12 +182,15 @@ mod systick {
 
     /// Microseconds since the monotonic started.
     pub fn now_us() -> u64 {
-        Mono::now().ticks()
+        Mono::now().ticks() * TICK_US
     }
 
     /// Waits until the monotonic reaches `at_us`.
     pub async fn delay_until_us(at_us: u64) {
-        Mono::delay_until(<Mono as Timebase>::Instant::from_ticks(at_us)).await;
+        Mono::delay_until(<Mono as Timebase>::Instant::from_ticks(
+            at_us.div_ceil(TICK_US),
+        ))
+        .await;
     }
 
     /// Runs `future` until it completes or the monotonic reaches `at_us`, whichever comes first.
@@ -192,8 +198,11 @@ mod systick {
         at_us: u64,
         future: F,
     ) -> Option<F::Output> {
-        Mono::timeout_at(<Mono as Timebase>::Instant::from_ticks(at_us), future)
-            .await
-            .ok()
+        Mono::timeout_at(
+            <Mono as Timebase>::Instant::from_ticks(at_us.div_ceil(TICK_US)),
+            future,
+        )
+        .await
+        .ok()
     }
 }
