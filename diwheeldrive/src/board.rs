@@ -479,9 +479,9 @@ pub fn hand_over_shutdown() -> ! {
     // SAFETY: from here on nothing else runs; these are the application's last register writes.
     unsafe {
         let nvic = &*cortex_m::peripheral::NVIC::PTR;
-        for i in 0..nvic.icer.len() {
-            nvic.icer[i].write(u32::MAX);
-            nvic.icpr[i].write(u32::MAX);
+        for (enable, pending) in nvic.icer.iter().zip(nvic.icpr.iter()) {
+            enable.write(u32::MAX);
+            pending.write(u32::MAX);
         }
         (*pac::TIM5::ptr()).cr1().modify(|_, w| w.cen().clear_bit());
         (*pac::CAN::ptr()).ier().write(|w| w.bits(0));
