@@ -39,6 +39,12 @@ impl fmt::Display for Unbounded {
             Unbounded::Analysis(AnalysisError::BeyondHorizon) => {
                 f.write_str("busy window beyond the horizon")
             }
+            Unbounded::Analysis(AnalysisError::Overflow) => {
+                f.write_str("times beyond the 64-bit nanosecond range")
+            }
+            Unbounded::Analysis(AnalysisError::IterationLimit) => {
+                f.write_str("fixed point beyond the iteration limit")
+            }
             Unbounded::Analysis(e) => write!(f, "{e}"),
             Unbounded::Releaser(name) => write!(f, "released by unbounded `{name}`"),
             Unbounded::Sender(name) => write!(f, "sent by unbounded `{name}`"),
@@ -180,7 +186,11 @@ pub struct MessageResult {
 impl MessageResult {
     /// Worst-case delivery after the activation (the sender's activation when linked).
     pub fn wcrt(&self) -> Option<Time> {
-        self.bound.as_ref().ok().map(|r| self.offset.plus(r.wcrt))
+        // A sum that does not fit is no bound (never a saturated one).
+        self.bound
+            .as_ref()
+            .ok()
+            .and_then(|r| self.offset.checked_plus(r.wcrt))
     }
     /// Bounded and within its deadline.
     pub fn schedulable(&self) -> bool {
@@ -287,18 +297,35 @@ impl Analysis {
 
 /// Analyses the whole system under `options`.
 pub fn analyse(system: &System, options: &Options) -> Analysis {
+    analyse_with_progress(system, options, &mut |_| {})
+}
+
+/// [`analyse`], telling `progress` what it starts (one line per board and one for the bus), so that a front end
+/// can show a large model's progress.
+pub fn analyse_with_progress(
+    system: &System,
+    options: &Options,
+    progress: &mut dyn FnMut(&str),
+) -> Analysis {
     let limits = Limits {
         horizon: options.horizon.unwrap_or_else(|| default_horizon(system)),
     };
     let boards: Vec<BoardResult> = system
         .boards
         .iter()
-        .map(|b| analyse_board(b, &limits))
+        .map(|b| {
+            progress(&format!("board {} ({} tasks)", b.name, b.tasks.len()));
+            analyse_board(b, &limits)
+        })
         .collect();
-    let bus = system
-        .bus
-        .as_ref()
-        .map(|bus| analyse_bus(system, bus, &boards, options.frame_cost, &limits));
+    let bus = system.bus.as_ref().map(|bus| {
+        progress(&format!(
+            "CAN bus, {} ({} messages)",
+            options.frame_cost.label(),
+            bus.messages.len()
+        ));
+        analyse_bus(system, bus, &boards, options.frame_cost, &limits)
+    });
     let topics = match (&system.bus, &bus) {
         (Some(spec), Some(result)) => topics(system, spec, result, &boards),
         _ => Vec::new(),
@@ -429,7 +456,12 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
             let releaser = board.tasks.get(r).map_or("?", |t| t.name.as_str());
             match bounds.get(r).cloned() {
                 Some(Ok(response)) => {
-                    let inherited = task.jitter.plus(response.wcrt);
+                    let Some(inherited) = task.jitter.checked_plus(response.wcrt) else {
+                        if let Some(slot) = bounds.get_mut(i) {
+                            *slot = Err(Unbounded::Analysis(AnalysisError::Overflow));
+                        }
+                        continue;
+                    };
                     if jitter.get(i) != Some(&inherited) {
                         if let Some(j) = jitter.get_mut(i) {
                             *j = inherited;
@@ -692,7 +724,9 @@ fn topics(
             let receiver = m.receiver.and_then(|r| task_result(boards, r));
             let worst = match (result.wcrt(), m.receiver) {
                 (Some(w), None) => Some(w),
-                (Some(w), Some(_)) => receiver.and_then(|r| r.wcrt()).map(|rw| w.plus(rw)),
+                (Some(w), Some(_)) => receiver
+                    .and_then(|r| r.wcrt())
+                    .and_then(|rw| w.checked_plus(rw)),
                 (None, _) => None,
             };
             let best = result.bcrt.plus(receiver.map_or(Time::ZERO, |r| r.bcrt));

@@ -129,6 +129,9 @@ pub struct Response {
     /// The first instance's window: its completion (preemptive) or transmission start (non-preemptive) after the
     /// critical instant — a start hint for lower-priority streams.
     pub first_window: Time,
+    /// Fixed-point iterations this bound took (one per evaluation of the interference sum): the measure of the
+    /// analysis's cost that an on-chip admission check reports and bounds.
+    pub iterations: u64,
 }
 
 /// Why no response time exists (or none could be computed).
@@ -142,12 +145,24 @@ pub enum AnalysisError {
     NotSorted,
     /// The index does not name an element of the set.
     NoSuchIndex,
+    /// A time in the iteration does not fit in 64-bit nanoseconds (inputs near [`Time::MAX`]): no bound is
+    /// claimed rather than a saturated one.
+    Overflow,
+    /// The fixed point needed more than [`MAX_ITERATIONS`] iterations: reported as unbounded, so the analysis
+    /// ends in bounded time on any input.
+    IterationLimit,
 }
 
 impl AnalysisError {
     /// Whether the error means "no bound exists" rather than a usage mistake.
     pub fn is_unbounded(self) -> bool {
-        matches!(self, AnalysisError::Overload | AnalysisError::BeyondHorizon)
+        matches!(
+            self,
+            AnalysisError::Overload
+                | AnalysisError::BeyondHorizon
+                | AnalysisError::Overflow
+                | AnalysisError::IterationLimit
+        )
     }
 }
 
@@ -162,6 +177,12 @@ impl fmt::Display for AnalysisError {
             }
             AnalysisError::NotSorted => "the set is not ordered by priority",
             AnalysisError::NoSuchIndex => "no element with that index",
+            AnalysisError::Overflow => {
+                "unbounded: a time exceeds the analysis's 64-bit nanosecond range"
+            }
+            AnalysisError::IterationLimit => {
+                "unbounded: the fixed point needs more iterations than the analysis allows"
+            }
         })
     }
 }
@@ -174,6 +195,18 @@ const MIN_SLACK_FOR_BOUND: f64 = 1e-3;
 const BOUND_SAFETY: f64 = 1.0 - 1e-6;
 /// Instances examined in one busy window before giving up.
 const MAX_INSTANCES: u64 = 50_000_000;
+/// Fixed-point iterations (evaluations of the interference sum) one response time may take before it is
+/// reported as unbounded ([`AnalysisError::IterationLimit`]). Far above any AMiRo set (tens of iterations per
+/// task), it bounds the running time of the analysis on any input.
+pub const MAX_ITERATIONS: u64 = 10_000_000;
+
+fn add(a: u64, b: u64) -> Result<u64, AnalysisError> {
+    a.checked_add(b).ok_or(AnalysisError::Overflow)
+}
+
+fn mul(a: u64, b: u64) -> Result<u64, AnalysisError> {
+    a.checked_mul(b).ok_or(AnalysisError::Overflow)
+}
 
 fn ceil_div(a: u64, b: u64) -> u64 {
     if a == 0 {
@@ -200,7 +233,7 @@ pub fn response_time<A: Activations>(
         return Err(AnalysisError::Overload);
     }
     let per = u64::from(subject.instances_per_activation.max(1));
-    let own_activation = subject.cost.times(per).as_ns();
+    let own_activation = mul(subject.cost.as_ns(), per)?;
 
     let mut u_hp = 0.0f64;
     let mut jitter_load = 0.0f64;
@@ -253,6 +286,8 @@ struct Window<'a, 'b, A> {
     /// Σ count·C over the heap.
     sum: u64,
     horizon: u64,
+    /// Evaluations of the interference sum so far.
+    iterations: u64,
 }
 
 impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
@@ -275,6 +310,7 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
             len: 0,
             sum: 0,
             horizon,
+            iterations: 0,
         }
     }
 
@@ -284,40 +320,45 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
     }
 
     /// Counts every interferer's activations before `x` from scratch: `⌈(x + J_k)/T_k⌉`.
-    fn start(&mut self, x: u64) {
+    fn start(&mut self, x: u64) -> Result<(), AnalysisError> {
         self.len = 0;
         self.sum = 0;
         if self.heap.is_empty() {
-            return;
+            return Ok(());
         }
         for (k, other) in self.others.iter().enumerate() {
             let Some((c, t, j)) = self.usable(k, other) else {
                 continue;
             };
-            let count = ceil_div(x.saturating_add(j), t);
+            let count = ceil_div(add(x, j)?, t);
             if let Some(slot) = self.heap.get_mut(self.len) {
                 *slot = Counter {
-                    next: count.saturating_mul(t).saturating_sub(j),
+                    next: mul(count, t)?.saturating_sub(j),
                     count,
                     index: k,
                 };
                 self.len += 1;
             }
-            self.sum = self.sum.saturating_add(count.saturating_mul(c));
+            self.sum = add(self.sum, mul(count, c)?)?;
         }
+        Ok(())
     }
 
     /// Σ_k ⌈(x + J_k)/T_k⌉·C_k. With counters, `x` must not decrease between calls after [`Window::start`]:
     /// a counter is only touched (one division) when the window passed its next activation.
-    fn demand(&mut self, x: u64) -> u64 {
+    fn demand(&mut self, x: u64) -> Result<u64, AnalysisError> {
+        self.iterations += 1;
+        if self.iterations > MAX_ITERATIONS {
+            return Err(AnalysisError::IterationLimit);
+        }
         if self.heap.is_empty() {
             let mut sum = 0u64;
             for (k, other) in self.others.iter().enumerate() {
                 if let Some((c, t, j)) = self.usable(k, other) {
-                    sum = sum.saturating_add(ceil_div(x.saturating_add(j), t).saturating_mul(c));
+                    sum = add(sum, mul(ceil_div(add(x, j)?, t), c)?)?;
                 }
             }
-            return sum;
+            return Ok(sum);
         }
         let others = self.others;
         let counters = self.heap.get_mut(..self.len).unwrap_or(&mut []);
@@ -331,14 +372,12 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
                 other.jitter().as_ns(),
             );
             // Jump straight to the count at `x` (one division however many activations the window grew by).
-            let count = ceil_div(x.saturating_add(j), t).max(counter.count + 1);
-            self.sum = self
-                .sum
-                .saturating_add((count - counter.count).saturating_mul(c));
+            let count = ceil_div(add(x, j)?, t).max(counter.count + 1);
+            self.sum = add(self.sum, mul(count - counter.count, c)?)?;
             counter.count = count;
-            counter.next = count.saturating_mul(t).saturating_sub(j);
+            counter.next = mul(count, t)?.saturating_sub(j);
         }
-        self.sum
+        Ok(self.sum)
     }
 }
 
@@ -382,16 +421,17 @@ fn preemptive<A: Activations>(
     let b = subject.blocking.as_ns();
     let t = subject.period.as_ns();
     let j = subject.jitter.as_ns();
-    let mut w = lower_bound(b.saturating_add(c), b.saturating_add(c), 0, loads, false, 0)
-        .max(subject.known_first_window.as_ns());
-    window.start(w);
+    let first = add(b, c)?;
+    let mut w =
+        lower_bound(first, first, 0, loads, false, 0).max(subject.known_first_window.as_ns());
+    window.start(w)?;
     let mut worst: Option<Response> = None;
     let mut q: u64 = 0;
     loop {
-        let own = b.saturating_add((q + 1).saturating_mul(c));
+        let own = add(b, mul(q + 1, c)?)?;
         let interference = loop {
-            let interference = window.demand(w);
-            let demand = own.saturating_add(interference);
+            let interference = window.demand(w)?;
+            let demand = add(own, interference)?;
             if demand <= w {
                 break interference;
             }
@@ -400,7 +440,7 @@ fn preemptive<A: Activations>(
                 return Err(AnalysisError::BeyondHorizon);
             }
         };
-        let r = w.saturating_add(j).saturating_sub(q.saturating_mul(t));
+        let r = add(w, j)?.saturating_sub(mul(q, t)?);
         if worst.is_none_or(|best| r > best.wcrt.as_ns()) {
             worst = Some(Response {
                 wcrt: Time::from_ns(r),
@@ -409,9 +449,10 @@ fn preemptive<A: Activations>(
                 busy_window: Time::ZERO,
                 interference: Time::from_ns(interference),
                 first_window: worst.map_or(Time::from_ns(w), |best| best.first_window),
+                iterations: 0,
             });
         }
-        if w.saturating_add(j) <= (q + 1).saturating_mul(t) {
+        if add(w, j)? <= mul(q + 1, t)? {
             break;
         }
         q += 1;
@@ -422,6 +463,7 @@ fn preemptive<A: Activations>(
     let mut response = worst.ok_or(AnalysisError::BeyondHorizon)?;
     response.instances = q + 1;
     response.busy_window = Time::from_ns(w);
+    response.iterations = window.iterations;
     Ok(response)
 }
 
@@ -436,16 +478,16 @@ fn non_preemptive<A: Activations>(
     let b = subject.blocking.as_ns();
     let t = subject.period.as_ns();
     let j = subject.jitter.as_ns();
-    let own_activation = c.saturating_mul(per);
+    let own_activation = mul(c, per)?;
 
     // The level busy period, own activations included.
-    let mut busy = lower_bound(b, b.saturating_add(own_activation), 0, loads, true, j)
+    let mut busy = lower_bound(b, add(b, own_activation)?, 0, loads, true, j)
         .max(subject.known_busy_period.as_ns())
         .max(1);
-    window.start(busy);
+    window.start(busy)?;
     loop {
-        let own = ceil_div(busy.saturating_add(j), t).saturating_mul(own_activation);
-        let demand = b.saturating_add(own).saturating_add(window.demand(busy));
+        let own = mul(ceil_div(add(busy, j)?, t), own_activation)?;
+        let demand = add(add(b, own)?, window.demand(busy)?)?;
         if demand <= busy {
             break;
         }
@@ -454,20 +496,20 @@ fn non_preemptive<A: Activations>(
             return Err(AnalysisError::BeyondHorizon);
         }
     }
-    let activations = ceil_div(busy.saturating_add(j), t).max(1);
-    let instances = activations.saturating_mul(per);
+    let activations = ceil_div(add(busy, j)?, t).max(1);
+    let instances = mul(activations, per)?;
     if instances > MAX_INSTANCES {
         return Err(AnalysisError::BeyondHorizon);
     }
 
     let mut w = lower_bound(b, b, tau, loads, false, 0).max(subject.known_first_window.as_ns());
-    window.start(w.saturating_add(tau));
+    window.start(add(w, tau)?)?;
     let mut worst: Option<Response> = None;
     for q in 0..instances {
-        let own = b.saturating_add(q.saturating_mul(c));
+        let own = add(b, mul(q, c)?)?;
         let interference = loop {
-            let interference = window.demand(w.saturating_add(tau));
-            let demand = own.saturating_add(interference);
+            let interference = window.demand(add(w, tau)?)?;
+            let demand = add(own, interference)?;
             if demand <= w {
                 break interference;
             }
@@ -477,10 +519,7 @@ fn non_preemptive<A: Activations>(
             }
         };
         let activation = q / per;
-        let r = w
-            .saturating_add(c)
-            .saturating_add(j)
-            .saturating_sub(activation.saturating_mul(t));
+        let r = add(add(w, c)?, j)?.saturating_sub(mul(activation, t)?);
         if worst.is_none_or(|best| r > best.wcrt.as_ns()) {
             worst = Some(Response {
                 wcrt: Time::from_ns(r),
@@ -489,10 +528,13 @@ fn non_preemptive<A: Activations>(
                 busy_window: Time::from_ns(busy),
                 interference: Time::from_ns(interference),
                 first_window: worst.map_or(Time::from_ns(w), |best| best.first_window),
+                iterations: 0,
             });
         }
     }
-    worst.ok_or(AnalysisError::BeyondHorizon)
+    let mut response = worst.ok_or(AnalysisError::BeyondHorizon)?;
+    response.iterations = window.iterations;
+    Ok(response)
 }
 
 #[cfg(test)]
@@ -625,6 +667,65 @@ mod tests {
             ),
             "{r:?}"
         );
+    }
+
+    #[test]
+    fn saturation_is_an_error_never_a_bound() {
+        // Issue 12: WCET 1e300 µs, period 1e17 µs. Saturating arithmetic made the window "close" at u64::MAX and
+        // the response equal to the (saturated) deadline, i.e. "ok". Every such case must now be an error.
+        let huge = Time::from_us_up(1e300);
+        let period = Time::from_us_down(1e17);
+        let s = Subject::new(huge, 1, period, Time::ZERO, Time::from_ns(1));
+        for discipline in [
+            Discipline::Preemptive,
+            Discipline::NonPreemptive {
+                bit_time: Time::from_ns(1000),
+            },
+        ] {
+            let r = response_time(
+                &s,
+                &[Stream(1, 1_000_000, 0)],
+                None,
+                discipline,
+                &Limits { horizon: Time::MAX },
+                &mut [Counter::default(); 1],
+            );
+            assert!(
+                r.as_ref().err().is_some_and(|e| e.is_unbounded()),
+                "{discipline:?}: {r:?}"
+            );
+        }
+        // A jitter near the top of the range overflows the activation count.
+        let s = Subject::new(
+            Time::from_ns(1),
+            1,
+            Time::from_ns(100),
+            Time::ZERO,
+            Time::ZERO,
+        );
+        let r = response_time(
+            &s,
+            &[Stream(1, 100, u64::MAX - 1)],
+            None,
+            Discipline::Preemptive,
+            &Limits { horizon: Time::MAX },
+            &mut [Counter::default(); 1],
+        );
+        assert_eq!(r, Err(AnalysisError::Overflow));
+    }
+
+    #[test]
+    fn iterations_are_counted() {
+        let others = [Stream(3, 7, 2), Stream(3, 12, 0), Stream(1, 5, 4)];
+        let r = response_time(
+            &subject(5, 80),
+            &others,
+            None,
+            Discipline::Preemptive,
+            &Limits::default(),
+            &mut [],
+        );
+        assert!(r.is_ok_and(|r| r.iterations >= 2), "{r:?}");
     }
 
     #[test]

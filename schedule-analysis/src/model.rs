@@ -244,7 +244,7 @@ impl FrameCostSpec {
             "thesis" => Ok(FrameCostSpec::Thesis),
             "exact" => Ok(FrameCostSpec::Exact),
             other => match other.trim_end_matches("us").trim_end_matches("µs").trim().parse::<f64>() {
-                Ok(us) if us.is_finite() && us > 0.0 => Ok(FrameCostSpec::Micros(us)),
+                Ok(us) if us.is_finite() && us > 0.0 && us <= Time::LIMIT_US => Ok(FrameCostSpec::Micros(us)),
                 _ => Err(format!(
                     "unknown frame cost `{text}`: expected \"thesis\", \"exact\" or a positive number of microseconds"
                 )),
@@ -374,9 +374,30 @@ impl Model {
     }
 }
 
+/// Most tasks one board may have: larger sets are refused instead of analysed for minutes (the benchmark covers
+/// up to this size; docs/analysis.md).
+pub const MAX_TASKS_PER_BOARD: usize = 10_000;
+/// Most message streams on the bus, for the same reason.
+pub const MAX_MESSAGES: usize = 10_000;
+
+fn in_range(value: f64, path: &str) -> Result<(), ModelError> {
+    if value > Time::LIMIT_US {
+        Err(error(
+            path,
+            format!(
+                "{value} µs is beyond the longest time the analysis represents exactly \
+                 ({} µs, about 11.6 days)",
+                Time::LIMIT_US
+            ),
+        ))
+    } else {
+        Ok(())
+    }
+}
+
 fn non_negative(value: f64, path: &str) -> Result<(), ModelError> {
     if value.is_finite() && value >= 0.0 {
-        Ok(())
+        in_range(value, path)
     } else {
         Err(error(
             path,
@@ -387,7 +408,7 @@ fn non_negative(value: f64, path: &str) -> Result<(), ModelError> {
 
 fn positive(value: f64, path: &str) -> Result<(), ModelError> {
     if value.is_finite() && value > 0.0 {
-        Ok(())
+        in_range(value, path)
     } else {
         Err(error(
             path,
@@ -413,6 +434,15 @@ fn validate_board(board: &BoardModel, path: &str) -> Result<BoardSystem, ModelEr
             &format!("{path}.idle_critical_sections_us.{resource}"),
         )?;
         idle_sections.push((resource.clone(), Time::from_us_up(length)));
+    }
+    if board.tasks.len() > MAX_TASKS_PER_BOARD {
+        return Err(error(
+            format!("{path}.tasks"),
+            format!(
+                "{} tasks: the analysis accepts at most {MAX_TASKS_PER_BOARD} per board",
+                board.tasks.len()
+            ),
+        ));
     }
 
     let mut names = HashMap::new();
@@ -575,6 +605,18 @@ fn validate_bus(
 ) -> Result<BusSystem, ModelError> {
     if bus.bitrate == 0 {
         return Err(error("can.bitrate", "must be greater than 0"));
+    }
+    if let FrameCostSpec::Micros(us) = bus.frame_cost {
+        positive(us, "can.frame_cost")?;
+    }
+    if bus.messages.len() > MAX_MESSAGES {
+        return Err(error(
+            "can.messages",
+            format!(
+                "{} messages: the analysis accepts at most {MAX_MESSAGES}",
+                bus.messages.len()
+            ),
+        ));
     }
     let mut names = HashSet::new();
     let mut ids: HashMap<u32, usize> = HashMap::new();

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use serde_json::{json, Value};
 
 use crate::analysis::{
-    analyse, Analysis, BoardResult, MessageResult, Options, TaskResult, TopicResult,
+    analyse_with_progress, Analysis, BoardResult, MessageResult, Options, TaskResult, TopicResult,
 };
 use crate::model::{FrameCostSpec, System, TaskKind};
 use crate::sensitivity::{self, Sensitivity};
@@ -43,6 +43,19 @@ impl Report {
         warnings: Vec<String>,
         chosen: Option<FrameCostSpec>,
     ) -> Report {
+        Report::build_with_progress(system, title, sources, warnings, chosen, &mut |_| {})
+    }
+
+    /// [`Report::build`], telling `progress` each step it starts (analyses per board and bus, the sensitivity
+    /// search), for a front end that shows progress on large models.
+    pub fn build_with_progress(
+        system: &System,
+        title: String,
+        sources: Vec<String>,
+        warnings: Vec<String>,
+        chosen: Option<FrameCostSpec>,
+        progress: &mut dyn FnMut(&str),
+    ) -> Report {
         let own = system
             .bus
             .as_ref()
@@ -52,23 +65,25 @@ impl Report {
             frame_cost: primary_cost,
             horizon: None,
         };
-        let primary = analyse(system, &options);
+        let primary = analyse_with_progress(system, &options, progress);
         let comparison = match (chosen, &system.bus) {
             (None, Some(_)) => {
                 let other = match primary_cost {
                     FrameCostSpec::Exact => FrameCostSpec::Thesis,
                     FrameCostSpec::Thesis | FrameCostSpec::Micros(_) => FrameCostSpec::Exact,
                 };
-                Some(analyse(
+                Some(analyse_with_progress(
                     system,
                     &Options {
                         frame_cost: other,
                         horizon: None,
                     },
+                    progress,
                 ))
             }
             _ => None,
         };
+        progress("sensitivity search");
         let sensitivity = Some(sensitivity::sensitivity(
             system,
             &options,

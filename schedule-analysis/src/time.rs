@@ -17,8 +17,16 @@ const SNAP_NS: f64 = 1e-6;
 impl Time {
     /// No time at all.
     pub const ZERO: Time = Time(0);
-    /// The largest representable time (about 584 years); arithmetic saturates here.
+    /// The largest representable time (about 584 years). The `plus`/`times` helpers saturate here; the fixed
+    /// points use the checked forms ([`Time::checked_plus`], [`Time::checked_times`]) and report an overflow as
+    /// unbounded, so a saturated value can never pass as a response time.
     pub const MAX: Time = Time(u64::MAX);
+    /// The longest time a model may give (10^12 µs, about 11.6 days): with every input at most this, sums and
+    /// multiples the analysis forms stay far from [`Time::MAX`] (a default horizon of 1000 × the longest period
+    /// still fits), and the float utilisations stay exact to the nanosecond.
+    pub const LIMIT: Time = Time(1_000_000_000_000_000);
+    /// [`Time::LIMIT`] in microseconds, as model files write it.
+    pub const LIMIT_US: f64 = 1e12;
 
     /// From whole nanoseconds.
     pub const fn from_ns(ns: u64) -> Time {
@@ -75,6 +83,33 @@ impl Time {
     /// `self + other`, saturating at [`Time::MAX`].
     pub const fn plus(self, other: Time) -> Time {
         Time(self.0.saturating_add(other.0))
+    }
+
+    /// `self + other`, or `None` when the sum does not fit.
+    pub const fn checked_plus(self, other: Time) -> Option<Time> {
+        match self.0.checked_add(other.0) {
+            Some(ns) => Some(Time(ns)),
+            None => None,
+        }
+    }
+
+    /// `self × n`, or `None` when the product does not fit.
+    pub const fn checked_times(self, n: u64) -> Option<Time> {
+        match self.0.checked_mul(n) {
+            Some(ns) => Some(Time(ns)),
+            None => None,
+        }
+    }
+
+    /// From fractional microseconds rounded up like [`Time::from_us_up`], or `None` when the value is not a finite
+    /// number in `0 ..= LIMIT_US` (instead of saturating).
+    pub fn try_from_us_up(us: f64) -> Option<Time> {
+        (us.is_finite() && (0.0..=Time::LIMIT_US).contains(&us)).then(|| Time::convert(us, true))
+    }
+
+    /// From fractional microseconds rounded down like [`Time::from_us_down`], or `None` outside `0 ..= LIMIT_US`.
+    pub fn try_from_us_down(us: f64) -> Option<Time> {
+        (us.is_finite() && (0.0..=Time::LIMIT_US).contains(&us)).then(|| Time::convert(us, false))
     }
 
     /// `self - other`, or zero when `other` is larger.
@@ -148,6 +183,20 @@ mod tests {
         assert_eq!(Time::from_us_up(f64::INFINITY), Time::MAX);
         assert_eq!(Time::MAX.plus(Time::from_ns(1)), Time::MAX);
         assert_eq!(Time::ZERO.minus(Time::from_ns(1)), Time::ZERO);
+    }
+
+    #[test]
+    fn checked_forms_refuse_what_saturation_would_hide() {
+        assert_eq!(Time::MAX.checked_plus(Time::from_ns(1)), None);
+        assert_eq!(Time::from_ns(u64::MAX / 2 + 1).checked_times(2), None);
+        assert_eq!(Time::from_ns(3).checked_times(2), Some(Time::from_ns(6)));
+        // The reproducer: 1e300 µs and 1e17 µs are not times the analysis can represent.
+        assert_eq!(Time::try_from_us_up(1e300), None);
+        assert_eq!(Time::try_from_us_down(1e17), None);
+        assert_eq!(Time::try_from_us_up(f64::NAN), None);
+        assert_eq!(Time::try_from_us_up(-1.0), None);
+        assert_eq!(Time::try_from_us_down(Time::LIMIT_US), Some(Time::LIMIT));
+        assert_eq!(Time::try_from_us_up(12.5), Some(Time::from_ns(12_500)));
     }
 
     /// Formats into a stack buffer (the core builds without an allocator).

@@ -9,6 +9,7 @@ use schedule_analysis::model::FrameCostSpec;
 use schedule_analysis::report::{self, Format, Report};
 use schedule_analysis::rtic_source::parse_app;
 use schedule_analysis::scenario::{self, build};
+use schedule_analysis::time::Time;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -70,6 +71,14 @@ fn the_magnetometer_example_builds() {
     );
     let bus = analysis.bus.as_ref().expect("bus");
     assert_eq!(bus.messages[0].id, 0x605);
+    // Issue 11: the thesis's example holds with deadline = period once the command handler is rate-limited.
+    assert_eq!(bus.messages[0].deadline, Time::from_us(900));
+    let handler = analysis.boards[0]
+        .tasks
+        .iter()
+        .find(|t| t.name == "handle_commands")
+        .expect("handler");
+    assert!(handler.sporadic && handler.period == Time::from_us(400));
     assert!(analysis.all_ok(), "failures: {:?}", analysis.failures());
 }
 

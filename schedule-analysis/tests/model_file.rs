@@ -238,3 +238,53 @@ fn malformed_models_name_the_field() {
         );
     }
 }
+
+/// Issue 12: WCET 1e300 µs and period 1e17 µs saturated at ~584 years and the task came out "ok". Times beyond
+/// the analysis's range are now refused, naming the field.
+#[test]
+fn saturating_times_are_refused_not_reported_schedulable() {
+    let json = r#"{ "boards": [ { "name": "b", "tasks": [
+        { "name": "t", "priority": 1, "wcet_us": 1e300, "period_us": 1e17 } ] } ] }"#;
+    let message = error_of(json);
+    assert!(message.contains("boards[0].tasks[0].wcet_us"), "{message}");
+    assert!(message.contains("beyond the longest time"), "{message}");
+    let json = r#"{ "boards": [ { "name": "b", "tasks": [
+        { "name": "t", "priority": 1, "wcet_us": 1, "period_us": 1e17 } ] } ] }"#;
+    assert!(error_of(json).contains("boards[0].tasks[0].period_us"));
+    let json = r#"{ "can": { "frame_cost": 1e300, "messages": [] } }"#;
+    assert!(error_of(json).contains("can.frame_cost"));
+    assert!(FrameCostSpec::parse("1e300").is_err());
+    // The largest accepted times still give an honest verdict: one task needing the whole processor and more.
+    let json = r#"{ "boards": [ { "name": "b", "tasks": [
+        { "name": "a", "priority": 2, "wcet_us": 1e12, "period_us": 1e12 },
+        { "name": "t", "priority": 1, "wcet_us": 1e12, "period_us": 1e12 } ] } ] }"#;
+    let system = Model::from_json(json)
+        .and_then(|m| m.validate())
+        .expect("in range");
+    let a = analyse(
+        &system,
+        &Options {
+            frame_cost: FrameCostSpec::Exact,
+            horizon: None,
+        },
+    );
+    assert!(!a.all_ok(), "{:?}", a.failures());
+}
+
+/// Issue 12: a 10^5-task model ran for minutes without output. Models beyond the benchmarked size are refused
+/// with the limit named.
+#[test]
+fn oversized_models_are_refused_with_the_limit() {
+    let tasks: Vec<String> = (0..=schedule_analysis::model::MAX_TASKS_PER_BOARD)
+        .map(|i| {
+            format!(r#"{{ "name": "t{i}", "priority": {i}, "wcet_us": 1, "period_us": 1000000 }}"#)
+        })
+        .collect();
+    let json = format!(
+        r#"{{ "boards": [ {{ "name": "b", "tasks": [ {} ] }} ] }}"#,
+        tasks.join(",")
+    );
+    let message = error_of(&json);
+    assert!(message.contains("boards[0].tasks"), "{message}");
+    assert!(message.contains("at most 10000"), "{message}");
+}

@@ -9,6 +9,9 @@ use schedule_analysis::model::{FrameCostSpec, Model};
 use schedule_analysis::report::{self, Format, Report};
 use schedule_analysis::scenario;
 
+/// Models with at least this many tasks and messages report their progress on stderr.
+const LARGE_MODEL: usize = 1_000;
+
 /// Arguments of `cargo xtask analyze`.
 #[derive(clap::Args, Debug)]
 pub struct AnalyzeArgs {
@@ -87,7 +90,27 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     let system = model.validate().map_err(|e| anyhow!("{origin}: {e}"))?;
-    let report = Report::build(&system, title, sources, warnings, args.frame_cost);
+    // Large models take seconds: say what is being analysed on stderr (the report itself goes to stdout).
+    let entities = system.boards.iter().map(|b| b.tasks.len()).sum::<usize>()
+        + system.bus.as_ref().map_or(0, |b| b.messages.len());
+    let started = std::time::Instant::now();
+    let mut progress = |step: &str| {
+        if entities >= LARGE_MODEL {
+            eprintln!(
+                "analyze: {:>7.1} s  {step}",
+                started.elapsed().as_secs_f64()
+            );
+        }
+    };
+    let report = Report::build_with_progress(
+        &system,
+        title,
+        sources,
+        warnings,
+        args.frame_cost,
+        &mut progress,
+    );
+    progress("done");
     let text = report::render(&report, args.format);
     match &args.output {
         Some(path) => {
