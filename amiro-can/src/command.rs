@@ -1,12 +1,120 @@
-//! Commands (C/S = 0): sensor commands (stop / publish / once) and the actuator commands (motor, LEDs).
+//! Commands (C/S = 0): sensor commands (stop / publish / once), the admission-policy command on a diagnostics
+//! topic, and the actuator commands (motor, LEDs, shutdown).
 
 use core::fmt;
 
 use crate::error::DecodeError;
 use crate::frame::Frame;
 use crate::id::{CanId, Kind, Priority};
-use crate::topic::Topic;
+use crate::topic::{Board, Topic};
 use crate::wire;
+
+/// The mode byte (data\[0\]) of an admission-policy command on a diagnostics topic; modes 0–2 are the sensor
+/// command modes every sensor topic takes.
+pub const POLICY_MODE: u8 = 3;
+
+/// How a board answers a publish or re-prioritisation request its admission check says would break a bound.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[repr(u8)]
+pub enum AdmissionPolicy {
+    /// 0: refuse it, change nothing, and send an admission verdict (the default after reset).
+    #[default]
+    Refuse = 0,
+    /// 1: start it anyway and send an admission verdict that says it was accepted with a warning.
+    AcceptAndWarn = 1,
+}
+
+impl AdmissionPolicy {
+    /// The name used by `amiro` (`refuse`, `accept-and-warn`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            AdmissionPolicy::Refuse => "refuse",
+            AdmissionPolicy::AcceptAndWarn => "accept-and-warn",
+        }
+    }
+}
+
+impl TryFrom<u8> for AdmissionPolicy {
+    type Error = DecodeError;
+
+    fn try_from(value: u8) -> Result<Self, Self::Error> {
+        match value {
+            0 => Ok(AdmissionPolicy::Refuse),
+            1 => Ok(AdmissionPolicy::AcceptAndWarn),
+            _ => Err(DecodeError::BadPolicy { value }),
+        }
+    }
+}
+
+impl fmt::Display for AdmissionPolicy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Bytes 1–2 of a shutdown command (u16 little-endian): the payload of the AMiRo 1.x firmware's shutdown
+/// broadcast, kept as a key so that no stray or truncated frame powers the robot off.
+pub const SHUTDOWN_KEY: u16 = 0xAA55;
+
+/// What a shutdown command asks of the robot. The codes are AMiRo-BLT's shutdown reasons, the value
+/// PowerManagement writes to byte 0 of `RTC_BKP0R` before it hands over to the bootloader.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum ShutdownMode {
+    /// 1: hibernate — everything off except what wakes the robot on the charger or a button.
+    Hibernate = 1,
+    /// 2: deep sleep — everything off; a wake-up source restarts the robot.
+    DeepSleep = 2,
+    /// 3: transportation — everything off with the fewest wake-up sources (for shipping).
+    Transportation = 3,
+    /// 4: restart — power-cycle the system and boot again.
+    Restart = 4,
+}
+
+impl ShutdownMode {
+    /// Every mode, in code order.
+    pub const ALL: [ShutdownMode; 4] = [
+        ShutdownMode::Hibernate,
+        ShutdownMode::DeepSleep,
+        ShutdownMode::Transportation,
+        ShutdownMode::Restart,
+    ];
+
+    /// The AMiRo-BLT shutdown reason: byte 0 of `RTC_BKP0R` (the same number as the wire code).
+    pub const fn blt_reason(self) -> u8 {
+        self as u8
+    }
+
+    /// The name used by `amiro` (`hibernate`, `deep-sleep`, `transportation`, `restart`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            ShutdownMode::Hibernate => "hibernate",
+            ShutdownMode::DeepSleep => "deep-sleep",
+            ShutdownMode::Transportation => "transportation",
+            ShutdownMode::Restart => "restart",
+        }
+    }
+}
+
+impl TryFrom<u8> for ShutdownMode {
+    type Error = DecodeError;
+
+    fn try_from(value: u8) -> Result<Self, Self::Error> {
+        match value {
+            1 => Ok(ShutdownMode::Hibernate),
+            2 => Ok(ShutdownMode::DeepSleep),
+            3 => Ok(ShutdownMode::Transportation),
+            4 => Ok(ShutdownMode::Restart),
+            _ => Err(DecodeError::BadShutdownMode { value }),
+        }
+    }
+}
+
+impl fmt::Display for ShutdownMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// The longest publish period the firmware monotonic accepts, in µs (a 32-bit microsecond timer span, ≈ 71.6 min).
 pub const MAX_PERIOD_US: u64 = u32::MAX as u64;
@@ -390,6 +498,22 @@ pub enum Command {
         /// LED and colour.
         command: LedCommand,
     },
+    /// The admission policy of one board: mode 3 on that board's diagnostics topic, DLC 2.
+    Policy {
+        /// Frame priority.
+        priority: Priority,
+        /// The board the policy is for (the diagnostics topic's owner).
+        board: Board,
+        /// Refuse or accept-and-warn.
+        policy: AdmissionPolicy,
+    },
+    /// Shut the robot down (topic `shutdown`, PowerManagement, DLC 3: mode, then [`SHUTDOWN_KEY`]).
+    Shutdown {
+        /// Frame priority.
+        priority: Priority,
+        /// Hibernate, deep sleep, transportation or restart.
+        mode: ShutdownMode,
+    },
 }
 
 impl Command {
@@ -397,7 +521,10 @@ impl Command {
     pub const fn priority(&self) -> Priority {
         match self {
             Command::Sensor(c) => c.priority,
-            Command::Motor { priority, .. } | Command::Led { priority, .. } => *priority,
+            Command::Motor { priority, .. }
+            | Command::Led { priority, .. }
+            | Command::Policy { priority, .. }
+            | Command::Shutdown { priority, .. } => *priority,
         }
     }
 
@@ -407,6 +534,8 @@ impl Command {
             Command::Sensor(c) => Ok(c.topic),
             Command::Motor { .. } => Ok(Topic::MotorCommand),
             Command::Led { command, .. } => command.topic(),
+            Command::Policy { board, .. } => Ok(board.diagnostics_topic()),
+            Command::Shutdown { .. } => Ok(Topic::Shutdown),
         }
     }
 
@@ -430,6 +559,23 @@ impl Command {
                     [r, g, b, 0, 0, 0, 0, 0],
                 )
             }
+            Command::Policy {
+                priority,
+                board,
+                policy,
+            } => wire::frame(
+                board.diagnostics_topic().command_id(*priority),
+                2,
+                [POLICY_MODE, *policy as u8, 0, 0, 0, 0, 0, 0],
+            ),
+            Command::Shutdown { priority, mode } => {
+                let [k0, k1] = SHUTDOWN_KEY.to_le_bytes();
+                wire::frame(
+                    Topic::Shutdown.command_id(*priority),
+                    3,
+                    [*mode as u8, k0, k1, 0, 0, 0, 0, 0],
+                )
+            }
         }
     }
 
@@ -437,7 +583,7 @@ impl Command {
     pub const fn validate(&self) -> Result<(), DecodeError> {
         match self {
             Command::Sensor(c) => c.validate(),
-            Command::Motor { .. } => Ok(()),
+            Command::Motor { .. } | Command::Policy { .. } | Command::Shutdown { .. } => Ok(()),
             Command::Led { command, .. } => match command.topic() {
                 Ok(_) => Ok(()),
                 Err(e) => Err(e),
@@ -453,8 +599,27 @@ impl Command {
 
     /// Decodes the data of a command frame to `topic` (sensor command or actuator command by the topic's role).
     pub fn decode(topic: Topic, priority: Priority, data: &[u8]) -> Result<Command, DecodeError> {
+        if let (Some(board), Some(&POLICY_MODE)) = (topic.diagnostics_of(), data.first()) {
+            let [_, policy] = wire::exact::<2>(topic, Kind::Command, data)?;
+            return Ok(Command::Policy {
+                priority,
+                board,
+                policy: AdmissionPolicy::try_from(policy)?,
+            });
+        }
         if topic.is_sensor() {
             return SensorCommand::decode(topic, priority, data).map(Command::Sensor);
+        }
+        if topic == Topic::Shutdown {
+            let [mode, k0, k1] = wire::exact::<3>(topic, Kind::Command, data)?;
+            let key = u16::from_le_bytes([k0, k1]);
+            if key != SHUTDOWN_KEY {
+                return Err(DecodeError::BadShutdownKey { key });
+            }
+            return Ok(Command::Shutdown {
+                priority,
+                mode: ShutdownMode::try_from(mode)?,
+            });
         }
         match topic.led_number() {
             Some(led) => {
@@ -486,6 +651,10 @@ impl fmt::Display for Command {
             Command::Sensor(c) => write!(f, "{c}"),
             Command::Motor { command, .. } => write!(f, "{command}"),
             Command::Led { command, .. } => write!(f, "{command}"),
+            Command::Policy { board, policy, .. } => {
+                write!(f, "admission policy of {board}: {policy}")
+            }
+            Command::Shutdown { mode, .. } => write!(f, "shut the robot down ({mode})"),
         }
     }
 }

@@ -119,11 +119,40 @@ pub enum DecodeError {
         /// The percentage byte.
         percent: u8,
     },
+    /// A page byte (data\[0\]) that names no page of a multi-page topic (diagnostics).
+    UnknownPage {
+        /// The topic.
+        topic: Topic,
+        /// The page byte.
+        page: u8,
+    },
+    /// Bits the protocol reserves (must be 0) are set, or a field holds a code it reserves.
+    ReservedBits {
+        /// The topic.
+        topic: Topic,
+        /// The data byte that holds them.
+        byte: u8,
+    },
+    /// An admission-policy command with a policy other than 0 (refuse) or 1 (accept and warn).
+    BadPolicy {
+        /// The policy byte (data\[1\]).
+        value: u8,
+    },
+    /// A shutdown command whose bytes 1–2 are not [`crate::SHUTDOWN_KEY`].
+    BadShutdownKey {
+        /// The key received.
+        key: u16,
+    },
+    /// A shutdown command with a mode other than 1 (hibernate), 2 (deep sleep), 3 (transportation), 4 (restart).
+    BadShutdownMode {
+        /// The mode byte (data\[0\]).
+        value: u8,
+    },
 }
 
 impl DecodeError {
     /// One short, stable name per variant, in [`DecodeError::kind_index`] order: counter and log names.
-    pub const KINDS: [&'static str; 20] = [
+    pub const KINDS: [&'static str; 25] = [
         "id-out-of-range",
         "extended-id",
         "remote-frame",
@@ -144,6 +173,11 @@ impl DecodeError {
         "sensor-index-out-of-range",
         "bad-charging-flag",
         "state-of-charge-out-of-range",
+        "unknown-page",
+        "reserved-bits",
+        "bad-policy",
+        "bad-shutdown-mode",
+        "bad-shutdown-key",
     ];
 
     /// The index of this error's reason in [`DecodeError::KINDS`] (always below `KINDS.len()`).
@@ -169,6 +203,11 @@ impl DecodeError {
             DecodeError::SensorIndexOutOfRange { .. } => 17,
             DecodeError::BadChargingFlag { .. } => 18,
             DecodeError::StateOfChargeOutOfRange { .. } => 19,
+            DecodeError::UnknownPage { .. } => 20,
+            DecodeError::ReservedBits { .. } => 21,
+            DecodeError::BadPolicy { .. } => 22,
+            DecodeError::BadShutdownMode { .. } => 23,
+            DecodeError::BadShutdownKey { .. } => 24,
         }
     }
 
@@ -261,6 +300,25 @@ impl fmt::Display for DecodeError {
             DecodeError::StateOfChargeOutOfRange { percent } => {
                 write!(f, "state of charge {percent} % is above 100 %")
             }
+            DecodeError::UnknownPage { topic, page } => {
+                write!(f, "{topic} has no page 0x{page:02X}")
+            }
+            DecodeError::ReservedBits { topic, byte } => {
+                write!(f, "reserved bits or codes set in byte {byte} of {topic}")
+            }
+            DecodeError::BadPolicy { value } => write!(
+                f,
+                "bad admission policy {value} (0 refuse, 1 accept and warn)"
+            ),
+            DecodeError::BadShutdownKey { key } => write!(
+                f,
+                "shutdown key 0x{key:04X} is not 0x{:04X}",
+                crate::SHUTDOWN_KEY
+            ),
+            DecodeError::BadShutdownMode { value } => write!(
+                f,
+                "bad shutdown mode {value} (1 hibernate, 2 deep sleep, 3 transportation, 4 restart)"
+            ),
         }
     }
 }

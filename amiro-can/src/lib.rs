@@ -20,6 +20,7 @@
 #![deny(missing_docs)]
 
 mod command;
+mod diagnostics;
 mod error;
 mod frame;
 mod id;
@@ -34,8 +35,13 @@ pub mod bxcan_frame;
 pub mod embedded_frame;
 
 pub use command::{
-    Command, LedCommand, MotorCommand, Rgb, SampleTime, SensorCommand, SensorMode, TimeUnit,
-    MAX_PERIOD_US,
+    AdmissionPolicy, Command, LedCommand, MotorCommand, Rgb, SampleTime, SensorCommand, SensorMode,
+    ShutdownMode, TimeUnit, MAX_PERIOD_US, POLICY_MODE, SHUTDOWN_KEY,
+};
+pub use diagnostics::{
+    AdmissionVerdict, Count, Diagnostics, DiagnosticsPage, ResetCause, StatusFlags, Verdict,
+    VerdictBound, VerdictRequest, Violation, ViolationKind, PAGES_PER_SAMPLE,
+    REJECTIONS_PER_SAMPLE, REJECT_REASONS, VERDICT_BOUND_PAGE, VERDICT_PAGE,
 };
 pub use error::DecodeError;
 pub use frame::Frame;

@@ -5,10 +5,11 @@
 
 use core::fmt;
 
+use crate::diagnostics::DiagnosticsPage;
 use crate::error::DecodeError;
 use crate::frame::Frame;
 use crate::id::{CanId, Kind, Priority};
-use crate::topic::Topic;
+use crate::topic::{Board, Topic};
 use crate::wire;
 
 /// A magnetometer axis; each has its own topic because one i32 per axis fills half a frame.
@@ -265,6 +266,13 @@ pub enum SensorData {
         /// Distance in mm.
         mm: u16,
     },
+    /// One page of a board's diagnostics topic: a part of a health sample, or half of an admission verdict.
+    Diagnostics {
+        /// The board (its diagnostics topic carries the frame).
+        board: Board,
+        /// The page.
+        page: DiagnosticsPage,
+    },
 }
 
 impl SensorData {
@@ -279,6 +287,7 @@ impl SensorData {
             SensorData::Velocity(_) => Topic::Velocity,
             SensorData::PowerStatus(_) => Topic::PowerStatus,
             SensorData::ProximityRing { .. } => Topic::ProximityRing,
+            SensorData::Diagnostics { board, .. } => board.diagnostics_topic(),
         }
     }
 
@@ -320,6 +329,7 @@ impl SensorData {
                 let [d0, d1] = mm.to_le_bytes();
                 [sensor, d0, d1, 0, 0, 0, 0, 0]
             }
+            SensorData::Diagnostics { page, .. } => page.to_bytes(),
         };
         wire::frame(id, topic.info().dlc, data)
     }
@@ -335,6 +345,7 @@ impl SensorData {
             }) if state_of_charge > 100 => Err(DecodeError::StateOfChargeOutOfRange {
                 percent: state_of_charge,
             }),
+            SensorData::Diagnostics { page, .. } => page.validate(),
             _ => Ok(()),
         }
     }
@@ -410,7 +421,17 @@ impl SensorData {
                     mm: u16::from_le_bytes([d0, d1]),
                 }
             }
+            Topic::DiWheelDriveDiagnostics
+            | Topic::PowerManagementDiagnostics
+            | Topic::LightRingDiagnostics => {
+                let board = topic.board();
+                SensorData::Diagnostics {
+                    board,
+                    page: DiagnosticsPage::from_bytes(topic, wire::exact(topic, k, data)?)?,
+                }
+            }
             Topic::MotorCommand
+            | Topic::Shutdown
             | Topic::Led1
             | Topic::Led2
             | Topic::Led3
@@ -462,6 +483,7 @@ impl fmt::Display for SensorData {
             SensorData::ProximityRing { sensor, mm } => {
                 write!(f, "{topic} sensor {sensor}: {mm} mm")
             }
+            SensorData::Diagnostics { page, .. } => write!(f, "{topic} {page}"),
         }
     }
 }

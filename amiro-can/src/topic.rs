@@ -25,6 +25,16 @@ impl Board {
         Board::LightRing,
     ];
 
+    /// The board's diagnostics topic (`0x1A` DiWheelDrive, `0x1B` PowerManagement, `0x1C` LightRing): its health
+    /// counters as a sensor topic, and the admission verdicts and admission-policy command.
+    pub const fn diagnostics_topic(self) -> Topic {
+        match self {
+            Board::DiWheelDrive => Topic::DiWheelDriveDiagnostics,
+            Board::PowerManagement => Topic::PowerManagementDiagnostics,
+            Board::LightRing => Topic::LightRingDiagnostics,
+        }
+    }
+
     /// The board's name as the AMiRo project spells it (`DiWheelDrive`, `PowerManagement`, `LightRing`).
     pub const fn name(self) -> &'static str {
         match self {
@@ -79,6 +89,14 @@ pub enum Topic {
     Led7 = 0x17,
     /// LED 8 of the light ring (actuator).
     Led8 = 0x18,
+    /// DiWheelDrive's health: command, receive, transmit and deadline counters, faults, uptime (six pages).
+    DiWheelDriveDiagnostics = 0x1A,
+    /// PowerManagement's health (the same six pages as every diagnostics topic).
+    PowerManagementDiagnostics = 0x1B,
+    /// LightRing's health (the same six pages as every diagnostics topic).
+    LightRingDiagnostics = 0x1C,
+    /// Shut the robot down (PowerManagement, actuator): hibernate, deep sleep, transportation or restart.
+    Shutdown = 0x1D,
     /// Charging flag, state of charge, time left, power (PowerManagement). ID fixed by the thesis.
     PowerStatus = 0x1E,
     /// The eight proximity-ring sensors, one frame each (PowerManagement). ID fixed by the thesis.
@@ -86,7 +104,7 @@ pub enum Topic {
 }
 
 /// Number of known topics.
-pub const TOPIC_COUNT: usize = 19;
+pub const TOPIC_COUNT: usize = 23;
 
 impl Topic {
     /// Every topic in identifier order (the order of [`TOPICS`]).
@@ -108,6 +126,10 @@ impl Topic {
         Topic::Led6,
         Topic::Led7,
         Topic::Led8,
+        Topic::DiWheelDriveDiagnostics,
+        Topic::PowerManagementDiagnostics,
+        Topic::LightRingDiagnostics,
+        Topic::Shutdown,
         Topic::PowerStatus,
         Topic::ProximityRing,
     ];
@@ -137,8 +159,12 @@ impl Topic {
             Topic::Led6 => 14,
             Topic::Led7 => 15,
             Topic::Led8 => 16,
-            Topic::PowerStatus => 17,
-            Topic::ProximityRing => 18,
+            Topic::DiWheelDriveDiagnostics => 17,
+            Topic::PowerManagementDiagnostics => 18,
+            Topic::LightRingDiagnostics => 19,
+            Topic::Shutdown => 20,
+            Topic::PowerStatus => 21,
+            Topic::ProximityRing => 22,
         }
     }
 
@@ -162,6 +188,10 @@ impl Topic {
             0x16 => Topic::Led6,
             0x17 => Topic::Led7,
             0x18 => Topic::Led8,
+            0x1A => Topic::DiWheelDriveDiagnostics,
+            0x1B => Topic::PowerManagementDiagnostics,
+            0x1C => Topic::LightRingDiagnostics,
+            0x1D => Topic::Shutdown,
             0x1E => Topic::PowerStatus,
             0x1F => Topic::ProximityRing,
             _ => return None,
@@ -217,6 +247,16 @@ impl Topic {
             | Topic::Led6
             | Topic::Led7
             | Topic::Led8 => Some(self as u8 - Topic::Led1 as u8 + 1),
+            _ => None,
+        }
+    }
+
+    /// The board whose diagnostics topic this is, or `None` for any other topic.
+    pub const fn diagnostics_of(self) -> Option<Board> {
+        match self {
+            Topic::DiWheelDriveDiagnostics => Some(Board::DiWheelDrive),
+            Topic::PowerManagementDiagnostics => Some(Board::PowerManagement),
+            Topic::LightRingDiagnostics => Some(Board::LightRing),
             _ => None,
         }
     }
@@ -322,6 +362,10 @@ const fn actuator(
 }
 
 const LED_LAYOUT: &str = "r u8, g u8, b u8";
+const DIAGNOSTICS_LAYOUT: &str =
+    "page u8 (0..5 health, 0x80/0x81 admission verdict), 7 bytes by page (see Diagnostics)";
+/// Diagnostics are a health signal, not a control input: once a second is plenty.
+const DIAGNOSTICS_PERIOD_US: u32 = 1_000_000;
 
 static TOPIC_TABLE: [TopicInfo; TOPIC_COUNT] = [
     sensor(
@@ -412,6 +456,40 @@ static TOPIC_TABLE: [TopicInfo; TOPIC_COUNT] = [
     actuator(Topic::Led7, "led-7", Board::LightRing, LED_LAYOUT, 3),
     actuator(Topic::Led8, "led-8", Board::LightRing, LED_LAYOUT, 3),
     sensor(
+        Topic::DiWheelDriveDiagnostics,
+        "diwheeldrive-diagnostics",
+        Board::DiWheelDrive,
+        DIAGNOSTICS_LAYOUT,
+        crate::diagnostics::PAGES_PER_SAMPLE,
+        8,
+        DIAGNOSTICS_PERIOD_US,
+    ),
+    sensor(
+        Topic::PowerManagementDiagnostics,
+        "powermanagement-diagnostics",
+        Board::PowerManagement,
+        DIAGNOSTICS_LAYOUT,
+        crate::diagnostics::PAGES_PER_SAMPLE,
+        8,
+        DIAGNOSTICS_PERIOD_US,
+    ),
+    sensor(
+        Topic::LightRingDiagnostics,
+        "lightring-diagnostics",
+        Board::LightRing,
+        DIAGNOSTICS_LAYOUT,
+        crate::diagnostics::PAGES_PER_SAMPLE,
+        8,
+        DIAGNOSTICS_PERIOD_US,
+    ),
+    actuator(
+        Topic::Shutdown,
+        "shutdown",
+        Board::PowerManagement,
+        "mode u8 (1 hibernate, 2 deep sleep, 3 transportation, 4 restart), key u16 (0xAA55)",
+        3,
+    ),
+    sensor(
         Topic::PowerStatus,
         "power-status",
         Board::PowerManagement,
@@ -442,6 +520,11 @@ const _: () = {
         assert!(TOPIC_TABLE[i].topic as u8 == Topic::ALL[i] as u8);
         assert!(Topic::ALL[i].index() == i);
         assert!(TOPIC_TABLE[i].dlc <= 8);
+        // A diagnostics topic belongs to the board it describes.
+        if let Some(board) = Topic::ALL[i].diagnostics_of() {
+            assert!(TOPIC_TABLE[i].board as u8 == board as u8);
+            assert!(board.diagnostics_topic() as u8 == Topic::ALL[i] as u8);
+        }
         i += 1;
     }
 };

@@ -2,10 +2,20 @@
 //! every reason the decoder can give.
 
 use amiro_can::{
-    decode, decode_command, Axis, CanId, Command, DecodeError, Frame, Kind, LedCommand, Message,
-    MotorCommand, Odometry, PowerStatus, Priority, Rgb, SampleTime, SensorCommand, SensorData,
-    SensorMode, TimeUnit, Topic, Velocity, TOPICS,
+    decode, decode_command, AdmissionPolicy, AdmissionVerdict, Axis, Board, CanId, Command, Count,
+    DecodeError, Diagnostics, DiagnosticsPage, Frame, Kind, LedCommand, Message, MotorCommand,
+    Odometry, PowerStatus, Priority, ResetCause, Rgb, SampleTime, SensorCommand, SensorData,
+    SensorMode, ShutdownMode, StatusFlags, TimeUnit, Topic, Velocity, Verdict, Violation,
+    REJECT_REASONS, TOPICS,
 };
+
+/// A payload of the topic's DLC the decoder accepts: all zeros, except where zero is not a valid value.
+fn valid_payload(topic: Topic, dlc: u8) -> Vec<u8> {
+    if topic == Topic::Shutdown {
+        return vec![1, 0x55, 0xAA];
+    }
+    vec![0; usize::from(dlc)]
+}
 
 fn frame(id: u16, data: &[u8]) -> Frame {
     Frame::new(CanId::try_from(id).unwrap(), data).unwrap()
@@ -273,8 +283,8 @@ fn every_topic_every_priority_every_mode() {
                     Err(DecodeError::ExpectedCommand { topic: info.topic })
                 );
             } else {
-                let zeros = [0u8; 8];
-                let data = &zeros[..usize::from(info.dlc)];
+                let payload = valid_payload(info.topic, info.dlc);
+                let data = &payload[..];
                 let m = decode(command_id, data).unwrap();
                 assert_eq!(m.topic(), Ok(info.topic));
                 assert_eq!(m.encode(), frame(command_id, data));
@@ -302,7 +312,9 @@ fn wrong_lengths_for_every_topic() {
             )
         };
         for dlc in 0..=8u8 {
-            let data = [0u8; 8];
+            let mut data = [0u8; 8];
+            let valid = valid_payload(info.topic, info.dlc);
+            data[..valid.len()].copy_from_slice(&valid);
             let result = decode(id.raw(), &data[..usize::from(dlc)]);
             let topic = info.topic;
             let expected = info.dlc;
@@ -439,6 +451,107 @@ fn every_decode_error_reason() {
             &[0, 101, 0, 0, 0, 0],
             E::StateOfChargeOutOfRange { percent: 101 },
         ),
+        (
+            0x51A,
+            &[6, 0, 0, 0, 0, 0, 0, 0],
+            E::UnknownPage {
+                topic: Topic::DiWheelDriveDiagnostics,
+                page: 6,
+            },
+        ),
+        (
+            0x51B,
+            &[0x82, 0, 0, 0, 0, 0, 0, 0],
+            E::UnknownPage {
+                topic: Topic::PowerManagementDiagnostics,
+                page: 0x82,
+            },
+        ),
+        // Verdict: priority-needed code 5, violation kind 3, bit 7, a shortest period without its flag.
+        (
+            0x41A,
+            &[0x80, 0x09, 1, 0, 0b1010_0010, 0, 0, 0],
+            E::ReservedBits {
+                topic: Topic::DiWheelDriveDiagnostics,
+                byte: 4,
+            },
+        ),
+        (
+            0x41A,
+            &[0x80, 0x09, 1, 0, 2, 0, 0, 0b0000_1100],
+            E::ReservedBits {
+                topic: Topic::DiWheelDriveDiagnostics,
+                byte: 7,
+            },
+        ),
+        (
+            0x41A,
+            &[0x80, 0x09, 1, 0, 2, 0, 0, 0x80],
+            E::ReservedBits {
+                topic: Topic::DiWheelDriveDiagnostics,
+                byte: 7,
+            },
+        ),
+        (
+            0x41A,
+            &[0x80, 0x09, 1, 0, 2, 5, 0, 0],
+            E::ReservedBits {
+                topic: Topic::DiWheelDriveDiagnostics,
+                byte: 7,
+            },
+        ),
+        (
+            0x41A,
+            &[0x80, 0x09, 1, 0, 2, 0, 0, 0b0001_0100],
+            E::ReservedBits {
+                topic: Topic::DiWheelDriveDiagnostics,
+                byte: 7,
+            },
+        ),
+        (
+            0x41A,
+            &[0x80, 0x03, 1, 0, 2, 0, 0, 0],
+            E::UnknownTopic { topic: 0x03 },
+        ),
+        (0x41A, &[0x80, 0x09, 0, 0, 2, 0, 0, 0], E::ZeroSampleTime),
+        (
+            0x41A,
+            &[0x80, 0x09, 1, 0, 3, 0, 0, 0],
+            E::BadUnit { unit: 3 },
+        ),
+        (0x41A, &[0x80, 0x09, 1, 0, 2, 0, 0, 0x40], E::ZeroSampleTime),
+        (0x21A, &[3, 2], E::BadPolicy { value: 2 }),
+        (
+            0x21C,
+            &[3],
+            E::DlcTooShort {
+                topic: Topic::LightRingDiagnostics,
+                frame: Kind::Command,
+                dlc: 1,
+                expected: 2,
+            },
+        ),
+        (0x208, &[3, 1], E::BadMode { mode: 3 }),
+        (0x01D, &[0, 0x55, 0xAA], E::BadShutdownMode { value: 0 }),
+        (0x01D, &[5, 0x55, 0xAA], E::BadShutdownMode { value: 5 }),
+        (0x01D, &[3, 0xAA, 0x55], E::BadShutdownKey { key: 0x55AA }),
+        (
+            0x01D,
+            &[2],
+            E::DlcTooShort {
+                topic: Topic::Shutdown,
+                frame: Kind::Command,
+                dlc: 1,
+                expected: 3,
+            },
+        ),
+        (
+            0x41D,
+            &[3, 0x55, 0xAA],
+            E::SensorDataOnActuator {
+                topic: Topic::Shutdown,
+            },
+        ),
     ];
     for (id, data, expected) in cases {
         assert_eq!(decode(*id, data), Err(*expected), "{id:03X}#{data:02X?}");
@@ -489,6 +602,11 @@ fn kinds_cover_every_variant_once() {
         E::SensorIndexOutOfRange { index: 8 },
         E::BadChargingFlag { value: 2 },
         E::StateOfChargeOutOfRange { percent: 101 },
+        E::UnknownPage { topic: t, page: 9 },
+        E::ReservedBits { topic: t, byte: 7 },
+        E::BadPolicy { value: 2 },
+        E::BadShutdownMode { value: 0 },
+        E::BadShutdownKey { key: 0 },
     ];
     assert_eq!(all.len(), DecodeError::KINDS.len());
     for (i, e) in all.iter().enumerate() {
@@ -530,4 +648,315 @@ fn display_of_decoded_frames() {
         decode(0x205, &[1, 0x84]).unwrap_err().to_string(),
         "DLC 2 too short for magnetometer-x command frame (needs 4)"
     );
+}
+
+#[test]
+fn policy_and_shutdown_commands_with_known_bytes() {
+    both_ways(
+        0x21A,
+        &[3, 1],
+        Message::Command(Command::Policy {
+            priority: Priority::Medium,
+            board: Board::DiWheelDrive,
+            policy: AdmissionPolicy::AcceptAndWarn,
+        }),
+    );
+    both_ways(
+        0x31C,
+        &[3, 0],
+        Message::Command(Command::Policy {
+            priority: Priority::Low,
+            board: Board::LightRing,
+            policy: AdmissionPolicy::Refuse,
+        }),
+    );
+    // Modes 0..2 on a diagnostics topic stay sensor commands.
+    both_ways(
+        0x21B,
+        &[2],
+        sensor_command(
+            Topic::PowerManagementDiagnostics,
+            Priority::Medium,
+            SensorMode::Once,
+        ),
+    );
+    for (code, mode) in (1u8..).zip(ShutdownMode::ALL) {
+        assert_eq!(mode.blt_reason(), code);
+        both_ways(
+            0x01D,
+            &[code, 0x55, 0xAA],
+            Message::Command(Command::Shutdown {
+                priority: Priority::Urgent,
+                mode,
+            }),
+        );
+    }
+    assert_eq!(
+        decode(0x01D, &[3, 0x55, 0xAA]).unwrap().to_string(),
+        "urgent command: shut the robot down (transportation)"
+    );
+    assert_eq!(
+        decode(0x21A, &[3, 1]).unwrap().to_string(),
+        "medium command: admission policy of DiWheelDrive: accept-and-warn"
+    );
+}
+
+fn diagnostics(board: Board, page: DiagnosticsPage) -> SensorData {
+    SensorData::Diagnostics { board, page }
+}
+
+#[test]
+fn diagnostics_pages_with_known_bytes() {
+    let b = Board::DiWheelDrive;
+    both_ways(
+        0x71A,
+        &[0, 0x10, 0x0E, 0, 0, 0b0000_0110, 0b0000_1001, 3],
+        sample(
+            Priority::Low,
+            diagnostics(
+                b,
+                DiagnosticsPage::Status {
+                    uptime_s: 3600,
+                    reset_cause: ResetCause::PIN.with(ResetCause::INDEPENDENT_WATCHDOG),
+                    flags: StatusFlags::WATCHDOG.with(StatusFlags::ACCEPT_AND_WARN),
+                    sensor_faults: Count::saturating(3),
+                },
+            ),
+        ),
+    );
+    both_ways(
+        0x71B,
+        &[1, 0x40, 0x42, 0x0F, 0xFF, 0xFF, 0xFF, 25],
+        sample(
+            Priority::Low,
+            diagnostics(
+                Board::PowerManagement,
+                DiagnosticsPage::Commands {
+                    accepted: Count::saturating(1_000_000),
+                    rejected: Count::saturating(u32::MAX),
+                    reasons: 25,
+                },
+            ),
+        ),
+    );
+    both_ways(
+        0x61C,
+        &[2, 9, 1, 0, 0, 1, 0xFF, 0xFF],
+        sample(
+            Priority::Medium,
+            diagnostics(
+                Board::LightRing,
+                DiagnosticsPage::Rejections {
+                    first: 9,
+                    counts: [
+                        Count::saturating(1),
+                        Count::saturating(256),
+                        Count::saturating(70_000),
+                    ],
+                },
+            ),
+        ),
+    );
+    both_ways(
+        0x71A,
+        &[3, 2, 0, 1, 0, 0x34, 0x12, 7],
+        sample(
+            Priority::Low,
+            diagnostics(
+                b,
+                DiagnosticsPage::AdmissionAndReceive {
+                    refused: Count::saturating(2),
+                    warned: Count::saturating(1),
+                    rx_dropped: Count::saturating(0x1234),
+                    rx_overruns: Count::saturating(7),
+                },
+            ),
+        ),
+    );
+    both_ways(
+        0x71A,
+        &[4, 0x01, 0x00, 0x01, 5, 0, 2, 1],
+        sample(
+            Priority::Low,
+            diagnostics(
+                b,
+                DiagnosticsPage::Transmit {
+                    tx_dropped: Count::saturating(0x01_0001),
+                    tx_displaced: Count::saturating(5),
+                    error_passive: Count::saturating(2),
+                    bus_off: Count::saturating(1),
+                },
+            ),
+        ),
+    );
+    // urgent 1, high 2, medium 3, low 16383: 1 | 2 << 14 | 3 << 28 | 0x3FFF << 42.
+    let packed: u64 = 1 | 2 << 14 | 3 << 28 | 0x3FFF << 42;
+    let mut bytes = vec![5];
+    bytes.extend_from_slice(&packed.to_le_bytes()[..7]);
+    both_ways(
+        0x71A,
+        &bytes,
+        sample(
+            Priority::Low,
+            diagnostics(
+                b,
+                DiagnosticsPage::Deadlines {
+                    misses: [1, 2, 3, 99_999].map(Count::saturating),
+                },
+            ),
+        ),
+    );
+    assert_eq!(
+        decode(0x71A, &bytes).unwrap().to_string(),
+        "low diwheeldrive-diagnostics deadline misses: urgent=1 high=2 medium=3 low=16383+"
+    );
+}
+
+/// The verdict example in docs/protocol.md, byte for byte.
+#[test]
+fn admission_verdict_example_from_the_docs() {
+    let verdict = AdmissionVerdict {
+        board: Board::DiWheelDrive,
+        topic: Topic::Accelerometer,
+        requested: SampleTime {
+            value: 1,
+            unit: TimeUnit::Micros,
+        },
+        priority: Priority::Urgent,
+        verdict: Verdict::Refused,
+        violation: Violation::Task { index: 6 },
+        wcrt_us: Count::saturating(2000),
+        deadline_us: Count::saturating(1000),
+        shortest_period: Some(SampleTime {
+            value: 250,
+            unit: TimeUnit::Micros,
+        }),
+        priority_needed: None,
+    };
+    let [a, b] = verdict.frames(Priority::Urgent);
+    assert_eq!(a.to_string(), "41A#8009010002FA0046");
+    assert_eq!(b.to_string(), "41A#8106D00700E80300");
+    let (
+        Ok(Message::Sample {
+            data:
+                SensorData::Diagnostics {
+                    board,
+                    page: DiagnosticsPage::VerdictRequest(request),
+                },
+            ..
+        }),
+        Ok(Message::Sample {
+            data:
+                SensorData::Diagnostics {
+                    page: DiagnosticsPage::VerdictBound(bound),
+                    ..
+                },
+            ..
+        }),
+    ) = (a.decode(), b.decode())
+    else {
+        panic!("verdict frames decode to verdict pages");
+    };
+    assert_eq!(
+        AdmissionVerdict::from_pages(board, &request, &bound),
+        verdict
+    );
+    assert_eq!(
+        verdict.to_string(),
+        "DiWheelDrive refused \"publish accelerometer every 1 µs at urgent\": its task #6 would miss its \
+         deadline (worst-case response 2000 µs, deadline 1000 µs). At urgent it accepts every 250 µs or slower; \
+         no priority makes every 1 µs pass."
+    );
+    // A bus message violation names the frame by identifier.
+    let on_bus = AdmissionVerdict {
+        violation: Violation::Message {
+            id: Topic::Gyroscope.data_id(Priority::High),
+        },
+        priority_needed: Some(Priority::Urgent),
+        verdict: Verdict::AcceptedWithWarning,
+        ..verdict
+    };
+    let [a, b] = on_bus.frames(Priority::Urgent);
+    let pages = on_bus.pages();
+    let (DiagnosticsPage::VerdictRequest(r), DiagnosticsPage::VerdictBound(bd)) =
+        (pages[0], pages[1])
+    else {
+        panic!("verdict pages in order");
+    };
+    assert_eq!(
+        AdmissionVerdict::from_pages(Board::DiWheelDrive, &r, &bd),
+        on_bus
+    );
+    assert!(a.decode().is_ok() && b.decode().is_ok());
+    assert!(on_bus.to_string().contains("high gyroscope frames (0x508)"));
+    assert!(on_bus.to_string().contains("needs priority urgent"));
+}
+
+/// A board's counters survive the trip over the bus: after one full cycle of rejection windows the host's
+/// picture equals the board's.
+#[test]
+fn diagnostics_round_trip_through_frames() {
+    let mut board = Diagnostics {
+        uptime_s: 42,
+        reset_cause: ResetCause::POWER_ON,
+        flags: StatusFlags::WATCHDOG,
+        sensor_faults: 4,
+        accepted: 1234,
+        admission_refused: 3,
+        admission_warned: 1,
+        rx_dropped: 17,
+        rx_overruns: 2,
+        tx_dropped: 99,
+        tx_displaced: 5,
+        error_passive: 1,
+        bus_off: 0,
+        deadline_misses: [0, 1, 2, 3],
+        ..Diagnostics::ZERO
+    };
+    for (i, count) in board.rejected.iter_mut().enumerate() {
+        *count = (i as u32 + 1) * 10;
+    }
+    let mut host = Diagnostics::ZERO;
+    let mut window = 0;
+    for _ in 0..REJECT_REASONS.div_ceil(3) {
+        let frames = board.frames(Board::PowerManagement, Priority::Low, window);
+        assert_eq!(
+            frames.len(),
+            usize::from(Topic::PowerManagementDiagnostics.info().frames_per_sample)
+        );
+        for (page, frame) in frames.iter().enumerate() {
+            assert_eq!(frame.id().raw(), 0x71B);
+            assert_eq!(frame.data()[0], page as u8);
+            match frame.decode() {
+                Ok(Message::Sample {
+                    data: SensorData::Diagnostics { board: from, page },
+                    ..
+                }) => {
+                    assert_eq!(from, Board::PowerManagement);
+                    if let DiagnosticsPage::Commands { rejected, .. } = page {
+                        assert_eq!(rejected.get(), board.rejected_total());
+                    }
+                    host.absorb(&page);
+                }
+                other => panic!("diagnostics frame decoded to {other:?}"),
+            }
+        }
+        window = Diagnostics::next_window(window);
+    }
+    assert_eq!(host, board);
+    // Saturation, not wrap-around.
+    board.deadline_misses[3] = 1 << 20;
+    board.accepted = u32::MAX;
+    let mut host = Diagnostics::ZERO;
+    for frame in board.frames(Board::PowerManagement, Priority::Low, 0) {
+        if let Ok(Message::Sample {
+            data: SensorData::Diagnostics { page, .. },
+            ..
+        }) = frame.decode()
+        {
+            host.absorb(&page);
+        }
+    }
+    assert_eq!(host.deadline_misses[3], 16_383);
+    assert_eq!(host.accepted, 0xFF_FFFF);
 }

@@ -12,8 +12,8 @@ use core::fmt;
 use core::num::{NonZeroU32, NonZeroU64};
 
 use amiro_can::{
-    decode_command, Board, CanId, Command, DecodeError, Kind, LedCommand, MotorCommand, Priority,
-    SensorCommand, SensorMode, Topic,
+    decode_command, AdmissionPolicy, Board, CanId, Command, DecodeError, Kind, LedCommand,
+    MotorCommand, Priority, SensorCommand, SensorMode, ShutdownMode, Topic,
 };
 
 /// Room in the publisher table: the most sensor topics any one board owns in the protocol's topic
@@ -269,6 +269,22 @@ pub enum Outcome {
         /// The LED and its colour.
         command: LedCommand,
     },
+    /// An admission-policy command (mode 3 on this board's diagnostics topic). The handler keeps the
+    /// policy ([`SensorDataHandler::admission_policy`]); the firmware's admission check reads it there.
+    Policy {
+        /// The CAN priority it came with.
+        priority: Priority,
+        /// The policy now in force.
+        policy: AdmissionPolicy,
+    },
+    /// A shutdown command (PowerManagement only; the other boards ignore it and follow SYS_PD_N):
+    /// the firmware starts the robot's shutdown in this mode.
+    Shutdown {
+        /// The CAN priority it came with.
+        priority: Priority,
+        /// Hibernate, deep sleep, transportation or restart (the AMiRo-BLT reason).
+        mode: ShutdownMode,
+    },
     /// Not for this board; counted, nothing changed.
     Ignored(Ignored),
 }
@@ -351,6 +367,7 @@ pub struct SensorDataHandler {
     board: Board,
     publishers: heapless::Vec<Publisher, MAX_PUBLISHERS, u8>,
     counters: HandlerCounters,
+    policy: AdmissionPolicy,
 }
 
 impl SensorDataHandler {
@@ -369,7 +386,13 @@ impl SensorDataHandler {
             board,
             publishers,
             counters: HandlerCounters::ZERO,
+            policy: AdmissionPolicy::Refuse,
         }
+    }
+
+    /// The admission policy the last policy command set ([`AdmissionPolicy::Refuse`] after reset).
+    pub fn admission_policy(&self) -> AdmissionPolicy {
+        self.policy
     }
 
     /// The board this handler serves.
@@ -426,6 +449,23 @@ impl SensorDataHandler {
             },
             Command::Motor { priority, command } => Outcome::Motor { priority, command },
             Command::Led { priority, command } => Outcome::Led { priority, command },
+            // `not_for_us` already ignored another board's diagnostics topic and, on every board
+            // but PowerManagement, the shutdown topic; the checks here keep that true by themselves.
+            Command::Policy {
+                priority,
+                board,
+                policy,
+            } if board == self.board => {
+                self.policy = policy;
+                Outcome::Policy { priority, policy }
+            }
+            Command::Policy { board, .. } => {
+                Outcome::Ignored(Ignored::OtherBoard(board.diagnostics_topic()))
+            }
+            Command::Shutdown { priority, mode } if Topic::Shutdown.board() == self.board => {
+                Outcome::Shutdown { priority, mode }
+            }
+            Command::Shutdown { .. } => Outcome::Ignored(Ignored::OtherBoard(Topic::Shutdown)),
         };
         match outcome {
             Outcome::Ignored(_) => {
@@ -608,7 +648,10 @@ mod tests {
                 handler.publishers().iter().map(Publisher::topic).collect();
             assert_eq!(rows, owned, "{board}");
         }
-        assert_eq!(MAX_PUBLISHERS, 8, "DiWheelDrive publishes eight topics");
+        assert_eq!(
+            MAX_PUBLISHERS, 9,
+            "DiWheelDrive publishes eight sensor topics and its diagnostics"
+        );
     }
 
     #[test]

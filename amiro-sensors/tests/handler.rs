@@ -2,8 +2,8 @@
 //! payloads in, publisher table and releases out, under a fake clock.
 
 use amiro_can::{
-    Board, DecodeError, Kind, LedCommand, MotorCommand, Priority, Rgb, SampleTime, SensorMode,
-    TimeUnit, Topic,
+    AdmissionPolicy, Board, DecodeError, Kind, LedCommand, MotorCommand, Priority, Rgb, SampleTime,
+    SensorMode, ShutdownMode, TimeUnit, Topic,
 };
 use amiro_sensors::clock::{Clock, FakeClock};
 use amiro_sensors::handler::{
@@ -363,9 +363,11 @@ fn actuator_commands_go_to_the_sinks_of_their_board_only() {
 
     let led_id = command_id(Priority::Medium, Topic::Led5);
     let mut ring = SensorDataHandler::new(Board::LightRing);
-    assert!(
-        ring.publishers().is_empty(),
-        "the light ring publishes nothing"
+    let published: Vec<Topic> = ring.publishers().iter().map(Publisher::topic).collect();
+    assert_eq!(
+        published,
+        [Topic::LightRingDiagnostics],
+        "the light ring publishes only its diagnostics"
     );
     assert_eq!(
         ring.on_frame(0, led_id, &[10, 20, 30]),
@@ -731,6 +733,116 @@ fn stop_all_stops_publishers_and_pending_one_shots() {
     assert!(h.stop_all().is_empty());
 }
 
+#[test]
+fn admission_policy_command_is_only_for_the_board_it_names() {
+    for board in Board::ALL {
+        let mut h = SensorDataHandler::new(board);
+        assert_eq!(h.admission_policy(), AdmissionPolicy::Refuse);
+        for other in Board::ALL {
+            let id = command_id(Priority::High, other.diagnostics_topic());
+            let before = snapshot(&h);
+            let outcome = h.on_frame(10, id, &[3, 1]).unwrap();
+            if other == board {
+                assert_eq!(
+                    outcome,
+                    Outcome::Policy {
+                        priority: Priority::High,
+                        policy: AdmissionPolicy::AcceptAndWarn
+                    }
+                );
+                assert_eq!(h.admission_policy(), AdmissionPolicy::AcceptAndWarn);
+            } else {
+                assert_eq!(
+                    outcome,
+                    Outcome::Ignored(Ignored::OtherBoard(other.diagnostics_topic()))
+                );
+            }
+            // The policy never touches the publisher table.
+            assert_eq!(snapshot(&h), before);
+        }
+        let id = command_id(Priority::Low, board.diagnostics_topic());
+        assert_eq!(
+            h.on_frame(20, id, &[3, 0]),
+            Ok(Outcome::Policy {
+                priority: Priority::Low,
+                policy: AdmissionPolicy::Refuse
+            })
+        );
+        assert_eq!(h.admission_policy(), AdmissionPolicy::Refuse);
+        // A bad policy is rejected, counted, and changes nothing.
+        let rejection = h.on_frame(30, id, &[3, 2]).unwrap_err();
+        assert_eq!(rejection.reason, DecodeError::BadPolicy { value: 2 });
+        assert_eq!(h.counters().rejected_for(rejection.reason), 1);
+        assert_eq!(h.admission_policy(), AdmissionPolicy::Refuse);
+        assert_eq!(h.counters().accepted, 2);
+    }
+}
+
+#[test]
+fn diagnostics_topic_is_a_publisher_of_its_board() {
+    for board in Board::ALL {
+        let mut h = SensorDataHandler::new(board);
+        let topic = board.diagnostics_topic();
+        assert_eq!(row(&h, topic).state(), PublisherState::Stopped);
+        let outcome = h
+            .on_frame(
+                0,
+                command_id(Priority::Low, topic),
+                &publish(1, TimeUnit::Seconds),
+            )
+            .unwrap();
+        assert!(matches!(outcome, Outcome::Sensor { command, .. } if command.topic == topic));
+        assert_eq!(h.next_due(Priority::Low), Some(0));
+        assert_eq!(take_all(&mut h, Priority::Low, 0), vec![(topic, 0)]);
+        assert_eq!(h.next_due(Priority::Low), Some(1_000_000));
+    }
+}
+
+#[test]
+fn shutdown_command_is_for_power_management_only() {
+    let frame = [3, 0x55, 0xAA];
+    let id = command_id(Priority::Urgent, Topic::Shutdown);
+    for board in Board::ALL {
+        let mut h = SensorDataHandler::new(board);
+        h.on_frame(
+            0,
+            command_id(Priority::Low, board.diagnostics_topic()),
+            &publish(1, TimeUnit::Seconds),
+        )
+        .unwrap();
+        let before = snapshot(&h);
+        let outcome = h.on_frame(5, id, &frame).unwrap();
+        if board == Board::PowerManagement {
+            assert_eq!(
+                outcome,
+                Outcome::Shutdown {
+                    priority: Priority::Urgent,
+                    mode: ShutdownMode::Transportation
+                }
+            );
+            assert_eq!(h.counters().accepted, 2);
+            // A malformed shutdown (wrong key) is rejected with its reason.
+            assert_eq!(
+                h.on_frame(6, id, &[3, 0, 0]).unwrap_err().reason,
+                DecodeError::BadShutdownKey { key: 0 }
+            );
+        } else {
+            assert_eq!(
+                outcome,
+                Outcome::Ignored(Ignored::OtherBoard(Topic::Shutdown))
+            );
+            assert_eq!(h.counters().ignored_other_board, 1);
+            // Not ours: even a malformed one is ignored, not rejected.
+            assert!(matches!(
+                h.on_frame(6, id, &[3, 0, 0]),
+                Ok(Outcome::Ignored(_))
+            ));
+        }
+        // The handler does not stop anything itself: the firmware's shutdown sequence does.
+        assert_eq!(snapshot(&h), before);
+    }
+}
+
 proptest! {
     /// Whatever arrives on the bus, the handler never panics, and anything it does not accept
     /// leaves the schedule exactly as it was.
@@ -749,6 +861,13 @@ proptest! {
                 }
                 Ok(Outcome::Motor { .. }) | Ok(Outcome::Led { .. }) => {
                     prop_assert_eq!(snapshot(&h), before);
+                }
+                Ok(Outcome::Policy { policy, .. }) => {
+                    prop_assert_eq!(snapshot(&h), before);
+                    prop_assert_eq!(h.admission_policy(), policy);
+                }
+                Ok(Outcome::Shutdown { .. }) => {
+                    prop_assert!(false, "DiWheelDrive accepted a shutdown command: {}:{:02X?}", id, data);
                 }
                 Ok(Outcome::Ignored(_)) | Err(_) => {
                     prop_assert_eq!(snapshot(&h), before);

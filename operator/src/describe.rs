@@ -4,7 +4,10 @@
 //! Values are printed from the decoded signed integers, never from raw bytes, so −4 dps prints as `-4 dps`
 //! (the thesis's receiver printed 65532).
 
-use amiro_can::{Command, DecodeError, Kind, Message, SensorData, SensorMode, TimeUnit};
+use amiro_can::{
+    AdmissionPolicy, Command, DecodeError, DiagnosticsPage, Kind, Message, SensorData, SensorMode,
+    TimeUnit, Verdict, ViolationKind,
+};
 use serde_json::{json, Map, Value};
 
 use crate::frame::{FrameId, FrameTextError, LoggedFrame, RawFrame};
@@ -68,6 +71,20 @@ fn describe_command(command: &Command) -> String {
                 command.led, rgb.r, rgb.g, rgb.b
             )
         }
+        Command::Policy { board, policy, .. } => match policy {
+            AdmissionPolicy::Refuse => format!(
+                "{}: admission policy refuse — {board} refuses requests that would break a deadline",
+                board.diagnostics_topic()
+            ),
+            AdmissionPolicy::AcceptAndWarn => format!(
+                "{}: admission policy accept-and-warn — {board} carries out requests that break a deadline and warns",
+                board.diagnostics_topic()
+            ),
+        },
+        Command::Shutdown { mode, .. } => format!(
+            "shutdown: shut the robot down ({mode}; AMiRo-BLT reason {})",
+            mode.blt_reason()
+        ),
     }
 }
 
@@ -105,6 +122,7 @@ fn describe_sample(data: &SensorData) -> String {
             )
         }
         SensorData::ProximityRing { sensor, mm } => format!("sensor {sensor} sees {mm} mm"),
+        SensorData::Diagnostics { page, .. } => page.to_string(),
     };
     format!("{topic}: {values}")
 }
@@ -239,7 +257,109 @@ fn command_json(command: &Command) -> Value {
             "g": command.rgb.g,
             "b": command.rgb.b,
         }),
+        Command::Policy { board, policy, .. } => json!({
+            "action": "admission-policy",
+            "board": board.name(),
+            "policy": policy.name(),
+        }),
+        Command::Shutdown { mode, .. } => json!({
+            "action": "shutdown",
+            "mode": mode.name(),
+            "blt_reason": mode.blt_reason(),
+        }),
     }
+}
+
+fn diagnostics_json(page: &DiagnosticsPage) -> Value {
+    let mut fields = match page {
+        DiagnosticsPage::Status {
+            uptime_s,
+            reset_cause,
+            flags,
+            sensor_faults,
+        } => json!({
+            "uptime_s": uptime_s,
+            "reset_cause": reset_cause.bits(),
+            "reset_cause_names": reset_cause.to_string(),
+            "flags": flags.bits(),
+            "flag_names": flags.to_string(),
+            "sensor_faults": sensor_faults.get(),
+        }),
+        DiagnosticsPage::Commands {
+            accepted,
+            rejected,
+            reasons,
+        } => json!({
+            "accepted": accepted.get(),
+            "rejected": rejected.get(),
+            "reasons": reasons,
+        }),
+        DiagnosticsPage::Rejections { first, counts } => {
+            let mut by_reason = Map::new();
+            for (i, count) in counts.iter().enumerate() {
+                let index = usize::from(*first) + i;
+                if let Some(name) = DecodeError::KINDS.get(index) {
+                    by_reason.insert((*name).into(), json!(count.get()));
+                }
+            }
+            json!({ "first": first, "counts": counts.map(|c| c.get()), "by_reason": by_reason })
+        }
+        DiagnosticsPage::AdmissionAndReceive {
+            refused,
+            warned,
+            rx_dropped,
+            rx_overruns,
+        } => json!({
+            "admission_refused": refused.get(),
+            "admission_warned": warned.get(),
+            "rx_dropped_at_least": rx_dropped.get(),
+            "rx_overruns": rx_overruns.get(),
+        }),
+        DiagnosticsPage::Transmit {
+            tx_dropped,
+            tx_displaced,
+            error_passive,
+            bus_off,
+        } => json!({
+            "tx_dropped": tx_dropped.get(),
+            "tx_displaced": tx_displaced.get(),
+            "error_passive": error_passive.get(),
+            "bus_off": bus_off.get(),
+        }),
+        DiagnosticsPage::Deadlines { misses } => json!({
+            "deadline_misses": {
+                "urgent": misses[0].get(),
+                "high": misses[1].get(),
+                "medium": misses[2].get(),
+                "low": misses[3].get(),
+            }
+        }),
+        DiagnosticsPage::VerdictRequest(request) => json!({
+            "topic": request.topic.name(),
+            "requested_us": request.requested.as_micros(),
+            "priority": request.priority.name(),
+            "verdict": match request.verdict {
+                Verdict::Refused => "refused",
+                Verdict::AcceptedWithWarning => "accepted-with-warning",
+            },
+            "priority_needed": request.priority_needed.map(|p| p.name()),
+            "shortest_period_us": request.shortest_period.map(|t| t.as_micros()),
+            "violation": match request.violation {
+                ViolationKind::Unknown => json!("unknown"),
+                ViolationKind::Task => json!("task"),
+                ViolationKind::Message { priority } => json!({ "message_priority": priority.name() }),
+            },
+        }),
+        DiagnosticsPage::VerdictBound(bound) => json!({
+            "violated": bound.violated,
+            "wcrt_us": bound.wcrt_us.get(),
+            "deadline_us": bound.deadline_us.get(),
+        }),
+    };
+    if let Value::Object(map) = &mut fields {
+        map.insert("page".into(), json!(page.name()));
+    }
+    fields
 }
 
 fn sample_json(data: &SensorData) -> Value {
@@ -269,6 +389,7 @@ fn sample_json(data: &SensorData) -> Value {
             "power_mw": power.power_mw,
         }),
         SensorData::ProximityRing { sensor, mm } => json!({ "sensor": sensor, "mm": mm }),
+        SensorData::Diagnostics { page, .. } => diagnostics_json(page),
     }
 }
 

@@ -5,8 +5,10 @@
 #![allow(dead_code)]
 
 use amiro_can::{
-    Axis, Command, LedCommand, Message, MotorCommand, Odometry, PowerStatus, Priority, Rgb,
-    SampleTime, SensorCommand, SensorData, SensorMode, TimeUnit, Topic, Velocity, MAX_PERIOD_US,
+    AdmissionPolicy, Axis, Board, CanId, Command, Count, DiagnosticsPage, Kind, LedCommand,
+    Message, MotorCommand, Odometry, PowerStatus, Priority, ResetCause, Rgb, SampleTime,
+    SensorCommand, SensorData, SensorMode, ShutdownMode, StatusFlags, TimeUnit, Topic, Velocity,
+    Verdict, VerdictBound, VerdictRequest, ViolationKind, MAX_PERIOD_US,
 };
 use proptest::prelude::*;
 
@@ -80,9 +82,24 @@ pub fn motor() -> impl Strategy<Value = MotorCommand> {
     })
 }
 
+pub fn board() -> impl Strategy<Value = Board> {
+    prop::sample::select(Board::ALL.to_vec())
+}
+
 fn actuator_command(led: impl Strategy<Value = u8>) -> impl Strategy<Value = Command> {
     prop_oneof![
         (priority(), motor()).prop_map(|(priority, command)| Command::Motor { priority, command }),
+        (priority(), board(), any::<bool>()).prop_map(|(priority, board, warn)| Command::Policy {
+            priority,
+            board,
+            policy: if warn {
+                AdmissionPolicy::AcceptAndWarn
+            } else {
+                AdmissionPolicy::Refuse
+            },
+        }),
+        (priority(), prop::sample::select(ShutdownMode::ALL.to_vec()))
+            .prop_map(|(priority, mode)| Command::Shutdown { priority, mode }),
         (priority(), led, rgb()).prop_map(|(priority, led, rgb)| Command::Led {
             priority,
             command: LedCommand { led, rgb }
@@ -117,11 +134,130 @@ fn axis() -> impl Strategy<Value = Axis> {
     prop::sample::select(Axis::ALL.to_vec())
 }
 
+fn count<const BITS: u32>() -> impl Strategy<Value = Count<BITS>> {
+    prop_oneof![
+        Just(Count::<BITS>::ZERO),
+        Just(Count::<BITS>::saturating(u32::MAX)),
+        any::<u32>().prop_map(Count::saturating),
+        (0..=Count::<BITS>::MAX).prop_map(Count::saturating),
+    ]
+}
+
+fn verdict_request(
+    time: fn() -> BoxedStrategy<SampleTime>,
+) -> impl Strategy<Value = VerdictRequest> {
+    (
+        (any_topic(), time(), priority(), any::<bool>()),
+        (
+            prop::option::of(priority()),
+            prop::option::of(time()),
+            prop_oneof![
+                Just(ViolationKind::Unknown),
+                Just(ViolationKind::Task),
+                priority().prop_map(|priority| ViolationKind::Message { priority }),
+            ],
+        ),
+    )
+        .prop_map(
+            |(
+                (topic, requested, priority, warn),
+                (priority_needed, shortest_period, violation),
+            )| {
+                VerdictRequest {
+                    topic,
+                    requested,
+                    priority,
+                    verdict: if warn {
+                        Verdict::AcceptedWithWarning
+                    } else {
+                        Verdict::Refused
+                    },
+                    priority_needed,
+                    shortest_period,
+                    violation,
+                }
+            },
+        )
+}
+
+pub fn diagnostics_page(
+    time: fn() -> BoxedStrategy<SampleTime>,
+) -> impl Strategy<Value = DiagnosticsPage> {
+    prop_oneof![
+        (any::<u32>(), any::<u8>(), any::<u8>(), count::<8>()).prop_map(
+            |(uptime_s, cause, flags, sensor_faults)| DiagnosticsPage::Status {
+                uptime_s,
+                reset_cause: ResetCause::from_bits(cause),
+                flags: StatusFlags::from_bits(flags),
+                sensor_faults,
+            }
+        ),
+        (count::<24>(), count::<24>(), any::<u8>()).prop_map(|(accepted, rejected, reasons)| {
+            DiagnosticsPage::Commands {
+                accepted,
+                rejected,
+                reasons,
+            }
+        }),
+        (any::<u8>(), count::<16>(), count::<16>(), count::<16>()).prop_map(|(first, a, b, c)| {
+            DiagnosticsPage::Rejections {
+                first,
+                counts: [a, b, c],
+            }
+        }),
+        (count::<16>(), count::<16>(), count::<16>(), count::<8>()).prop_map(
+            |(refused, warned, rx_dropped, rx_overruns)| DiagnosticsPage::AdmissionAndReceive {
+                refused,
+                warned,
+                rx_dropped,
+                rx_overruns,
+            }
+        ),
+        (count::<24>(), count::<16>(), count::<8>(), count::<8>()).prop_map(
+            |(tx_dropped, tx_displaced, error_passive, bus_off)| DiagnosticsPage::Transmit {
+                tx_dropped,
+                tx_displaced,
+                error_passive,
+                bus_off,
+            }
+        ),
+        (count::<14>(), count::<14>(), count::<14>(), count::<14>()).prop_map(|(a, b, c, d)| {
+            DiagnosticsPage::Deadlines {
+                misses: [a, b, c, d],
+            }
+        }),
+        verdict_request(time).prop_map(DiagnosticsPage::VerdictRequest),
+        (any::<u8>(), count::<24>(), count::<24>()).prop_map(|(violated, wcrt_us, deadline_us)| {
+            DiagnosticsPage::VerdictBound(VerdictBound {
+                violated,
+                wcrt_us,
+                deadline_us,
+            })
+        }),
+    ]
+}
+
+fn boxed_valid_time() -> BoxedStrategy<SampleTime> {
+    valid_sample_time().boxed()
+}
+
+fn boxed_any_time() -> BoxedStrategy<SampleTime> {
+    any_sample_time().boxed()
+}
+
+/// A sensor-data identifier of a topic byte at a priority: the id of a violated message.
+pub fn data_id() -> impl Strategy<Value = CanId> {
+    (priority(), any::<u8>()).prop_map(|(p, t)| CanId::new(Kind::Sensor, p, t))
+}
+
 fn sensor_data(
     ring_index: impl Strategy<Value = u8>,
     percent: impl Strategy<Value = u8>,
+    time: fn() -> BoxedStrategy<SampleTime>,
 ) -> impl Strategy<Value = SensorData> {
     prop_oneof![
+        (board(), diagnostics_page(time))
+            .prop_map(|(board, page)| SensorData::Diagnostics { board, page }),
         any::<[i16; 3]>().prop_map(SensorData::Gyroscope),
         any::<[i16; 3]>().prop_map(SensorData::Accelerometer),
         (axis(), any::<i32>())
@@ -148,11 +284,11 @@ fn sensor_data(
 }
 
 pub fn valid_sensor_data() -> impl Strategy<Value = SensorData> {
-    sensor_data(0..=7u8, 0..=100u8)
+    sensor_data(0..=7u8, 0..=100u8, boxed_valid_time)
 }
 
 pub fn any_sensor_data() -> impl Strategy<Value = SensorData> {
-    sensor_data(any::<u8>(), any::<u8>())
+    sensor_data(any::<u8>(), any::<u8>(), boxed_any_time)
 }
 
 pub fn valid_message() -> impl Strategy<Value = Message> {
