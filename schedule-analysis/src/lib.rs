@@ -2,8 +2,9 @@
 //!
 //! Two layers:
 //!
-//! * the **core** — [`time`], [`busy_window`], [`board`] and [`can`] — is `no_std` and allocation-free (build with
-//!   `--no-default-features`), so a board could one day run an admission test before it starts a publisher;
+//! * the **core** — [`time`], [`busy_window`], [`board`], [`can`] and [`admission`] — is `no_std` and
+//!   allocation-free (build with `--no-default-features`): [`admission`] is the check a board runs before it
+//!   starts a publisher, on a table [`admission_host`] lowers from the same apps and timing files;
 //! * the **host layer** (feature `std`, on by default) reads models ([`model`]), RTIC apps ([`rtic_source`]),
 //!   timing files and scenarios ([`scenario`]), runs the whole system ([`analysis`], [`sensitivity`]) and renders
 //!   the report ([`report`]). `cargo xtask analyze` is a thin front end over it.
@@ -12,11 +13,14 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 
+pub mod admission;
 pub mod board;
 pub mod busy_window;
 pub mod can;
 pub mod time;
 
+#[cfg(feature = "std")]
+pub mod admission_host;
 #[cfg(feature = "std")]
 pub mod analysis;
 #[cfg(feature = "std")]

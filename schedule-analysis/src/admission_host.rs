@@ -1,0 +1,632 @@
+//! The host side of the on-chip admission check ([`crate::admission`]): lowers the boards' task models — built
+//! from the same RTIC apps and timing files `cargo xtask analyze` reads, through [`scenario::build`], so a drift
+//! between app and timing file fails here as it fails there — to the compact [`RobotTable`], emits it as Rust
+//! source for a board's `build.rs`, turns scenario entries into [`Stream`]s, and measures the check's cost.
+//!
+//! A board's build script (with `schedule-analysis` as a build-dependency):
+//!
+//! ```text
+//! let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+//! let robot = admission_host::lower(&root, &scenario::timing_files(&root), 1_000_000, FrameCostSpec::Exact)
+//!     .unwrap_or_else(|e| panic!("{e}"));          // drift between app and timing file: the build fails
+//! std::fs::write(out_dir.join("admission_table.rs"), robot.to_rust_source("schedule_analysis"))?;
+//! ```
+//!
+//! and the firmware `include!`s it: `ROBOT`, `MAX_TASKS`, `MAX_PUBLISHERS` and `BOARD_<NAME>` (the board's index).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use amiro_can::{CanId, Kind, Priority, Topic};
+
+use crate::admission::{
+    self, BoardTable, MonotonicRow, RobotTable, SectionRow, Sender, Stream, TaskRow, TopicRow,
+    TopicSection, LEVELS,
+};
+use crate::can::{self, FrameCost};
+use crate::model::{FrameCostSpec, Model, OverheadTimes, TaskKind, GLOBAL_CRITICAL_SECTION};
+use crate::scenario::{self, Arrival, BuildError, Timing};
+use crate::time::Time;
+
+/// Period of every publisher in the scenarios the lowering builds (only the budgets are read from them).
+const PROBE_PERIOD_US: f64 = 1_000_000.0;
+
+/// A topic row with owned sections.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OwnedTopic {
+    /// Topic name (amiro-can's).
+    pub name: String,
+    /// Protocol topic byte.
+    pub topic: u8,
+    /// Cost with overheads.
+    pub cost: Time,
+    /// Best case.
+    pub bcet: Time,
+    /// Critical sections.
+    pub sections: Vec<TopicSection>,
+}
+
+/// One board's table, owned.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OwnedBoard {
+    /// Board name.
+    pub name: String,
+    /// Task names, for messages (parallel to `tasks`).
+    pub task_names: Vec<String>,
+    /// Fixed tasks.
+    pub tasks: Vec<TaskRow>,
+    /// Their and idle's critical sections.
+    pub sections: Vec<SectionRow>,
+    /// Publishable topics.
+    pub topics: Vec<OwnedTopic>,
+    /// Publisher task priority per level.
+    pub levels: [Option<u32>; LEVELS],
+    /// Timer job.
+    pub monotonic: Option<MonotonicRow>,
+    /// Transmit task index.
+    pub can_tx: Option<u16>,
+    /// Command handler index.
+    pub command_handler: Option<u16>,
+}
+
+/// The whole robot's table, owned.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OwnedRobot {
+    /// Boards in timing-file order.
+    pub boards: Vec<OwnedBoard>,
+    /// Bits per second.
+    pub bitrate: u32,
+    /// Frame-cost model.
+    pub frame_cost: FrameCost,
+    /// The files it was made from (for the generated source's header).
+    pub sources: Vec<String>,
+}
+
+fn read_timing(root: &Path, path: &Path) -> Result<Timing, BuildError> {
+    let file = path
+        .strip_prefix(root)
+        .unwrap_or(path)
+        .display()
+        .to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| BuildError {
+        file: file.clone(),
+        path: String::new(),
+        problem: format!("cannot read: {e}"),
+    })?;
+    serde_json::from_str(&text).map_err(|e| BuildError {
+        file,
+        path: String::new(),
+        problem: e.to_string(),
+    })
+}
+
+fn build_with(
+    root: &Path,
+    timing_paths: &[PathBuf],
+    label: &str,
+    publishers: &[(String, &str)],
+) -> Result<Model, BuildError> {
+    let path = std::env::temp_dir().join(format!(
+        "schedule-analysis-lower-{}-{label}.scenario.json",
+        std::process::id()
+    ));
+    let json = serde_json::json!({
+        "name": format!("admission-table-{label}"),
+        "publishers": publishers.iter().map(|(topic, level)| serde_json::json!({
+            "topic": topic, "priority": level, "period_us": PROBE_PERIOD_US,
+        })).collect::<Vec<_>>(),
+    });
+    std::fs::write(&path, json.to_string()).map_err(|e| BuildError {
+        file: path.display().to_string(),
+        path: String::new(),
+        problem: e.to_string(),
+    })?;
+    let built = scenario::build(root, &path, timing_paths);
+    let _ = std::fs::remove_file(&path);
+    Ok(built?.model)
+}
+
+fn overhead_times(o: &crate::model::Overheads) -> OverheadTimes {
+    OverheadTimes {
+        isr_entry: Time::from_us_up(o.isr_entry_us),
+        isr_exit: Time::from_us_up(o.isr_exit_us),
+        dispatcher: Time::from_us_up(o.dispatcher_us),
+    }
+}
+
+/// Lowers every board of the timing files to the admission table, for the bus at `bitrate` under `frame_cost`.
+/// Fails exactly where `cargo xtask analyze` fails on the same files (an app task without a budget, a budget
+/// for a task the app does not declare, …).
+pub fn lower(
+    root: &Path,
+    timing_paths: &[PathBuf],
+    bitrate: u32,
+    frame_cost: FrameCostSpec,
+) -> Result<OwnedRobot, BuildError> {
+    let mut timings = Vec::new();
+    for path in timing_paths {
+        timings.push(read_timing(root, path)?);
+    }
+    let base = build_with(root, timing_paths, "base", &[])?;
+    let mut boards = Vec::new();
+    for (timing, board) in timings.iter().zip(&base.boards) {
+        let overheads = overhead_times(&board.overheads);
+        let index_of = |name: &str| {
+            board
+                .tasks
+                .iter()
+                .position(|t| t.name == name)
+                .map(|i| i as u16)
+        };
+        // Ceilings as the analysis computes them: the static ones, raised by every user's priority.
+        let mut ceilings: BTreeMap<&str, u32> = board
+            .ceilings
+            .iter()
+            .map(|(r, c)| (r.as_str(), *c))
+            .collect();
+        for t in &board.tasks {
+            for r in t.critical_sections_us.keys() {
+                let c = ceilings.entry(r.as_str()).or_insert(0);
+                *c = (*c).max(t.priority);
+            }
+        }
+        let ceiling_of = |r: &str| {
+            if r == GLOBAL_CRITICAL_SECTION {
+                u32::MAX
+            } else {
+                ceilings.get(r).copied().unwrap_or(0)
+            }
+        };
+        let mut tasks = Vec::new();
+        let mut sections = Vec::new();
+        for t in &board.tasks {
+            let own_frame = timing
+                .tasks
+                .get(&t.name)
+                .is_some_and(|b| b.arrival == Some(Arrival::OwnFrame));
+            tasks.push(TaskRow {
+                priority: t.priority,
+                cost: Time::from_us_up(t.wcet_us).plus(overheads.for_kind(t.kind)),
+                bcet: Time::from_us_down(t.bcet_us.unwrap_or(0.0)),
+                period: Time::from_us_down(t.period_us),
+                deadline: t.deadline_us.map(Time::from_us_down),
+                jitter: Time::from_us_up(t.jitter_us),
+                released_by: t.released_by.as_deref().and_then(index_of),
+                own_frame,
+            });
+            for (r, length) in &t.critical_sections_us {
+                sections.push(SectionRow {
+                    holder_priority: t.priority,
+                    ceiling: ceiling_of(r),
+                    length: Time::from_us_up(*length),
+                });
+            }
+        }
+        for (r, length) in &board.idle_critical_sections_us {
+            sections.push(SectionRow {
+                holder_priority: 0,
+                ceiling: ceiling_of(r),
+                length: Time::from_us_up(*length),
+            });
+        }
+        // The publishable topics: those the timing file budgets and the protocol gives to this board.
+        let owned: Vec<&'static amiro_can::TopicInfo> = timing
+            .topics
+            .keys()
+            .filter_map(|name| Topic::from_name(name).map(|t| t.info()))
+            .filter(|info| info.is_sensor && scenario::board_folder(info.board) == timing.board)
+            .collect();
+        let mut levels = [None; LEVELS];
+        let mut topics: Vec<OwnedTopic> = Vec::new();
+        let mut monotonic = None;
+        for (l, level) in Priority::ALL.iter().enumerate() {
+            let Some(publisher) = timing.publishers.get(level.name()) else {
+                continue;
+            };
+            if owned.is_empty() {
+                continue;
+            }
+            let wanted: Vec<(String, &str)> = owned
+                .iter()
+                .map(|i| (i.name.to_string(), level.name()))
+                .collect();
+            let model = build_with(
+                root,
+                timing_paths,
+                &format!("{}-{}", timing.board, level.name()),
+                &wanted,
+            )?;
+            let Some(b) = model.boards.iter().find(|b| b.name == timing.board) else {
+                continue;
+            };
+            for info in &owned {
+                let job_name = format!("{publisher}[{}]", info.name);
+                let Some(job) = b.tasks.iter().find(|t| t.name == job_name) else {
+                    continue;
+                };
+                if let Some(slot) = levels.get_mut(l) {
+                    *slot = Some(job.priority);
+                }
+                if !topics.iter().any(|t| t.name == info.name) {
+                    topics.push(OwnedTopic {
+                        name: info.name.to_string(),
+                        topic: info.topic.byte(),
+                        cost: Time::from_us_up(job.wcet_us)
+                            .plus(overheads.for_kind(TaskKind::Software)),
+                        bcet: Time::from_us_down(job.bcet_us.unwrap_or(0.0)),
+                        sections: job
+                            .critical_sections_us
+                            .iter()
+                            .map(|(r, length)| TopicSection {
+                                ceiling: ceiling_of(r),
+                                length: Time::from_us_up(*length),
+                            })
+                            .collect(),
+                    });
+                }
+                if let Some(timer) = b
+                    .tasks
+                    .iter()
+                    .find(|t| t.name == format!("monotonic[{job_name}]"))
+                {
+                    monotonic = Some(MonotonicRow {
+                        priority: timer.priority,
+                        cost: Time::from_us_up(timer.wcet_us)
+                            .plus(overheads.for_kind(TaskKind::Hardware)),
+                        jitter: Time::from_us_up(timer.jitter_us),
+                    });
+                }
+            }
+        }
+        boards.push(OwnedBoard {
+            name: timing.board.clone(),
+            task_names: board.tasks.iter().map(|t| t.name.clone()).collect(),
+            tasks,
+            sections,
+            topics,
+            levels,
+            monotonic,
+            can_tx: timing.can_tx_task.as_deref().and_then(index_of),
+            command_handler: timing.command_handler.as_deref().and_then(index_of),
+        });
+    }
+    Ok(OwnedRobot {
+        boards,
+        bitrate,
+        frame_cost: frame_cost.cost(),
+        sources: timing_paths
+            .iter()
+            .map(|p| p.strip_prefix(root).unwrap_or(p).display().to_string())
+            .collect(),
+    })
+}
+
+impl OwnedRobot {
+    /// Runs `f` on the borrowed [`RobotTable`] view of this table.
+    pub fn with_table<R>(&self, f: impl FnOnce(&RobotTable<'_>) -> R) -> R {
+        let topic_rows: Vec<Vec<TopicRow<'_>>> = self
+            .boards
+            .iter()
+            .map(|b| {
+                b.topics
+                    .iter()
+                    .map(|t| TopicRow {
+                        topic: t.topic,
+                        cost: t.cost,
+                        bcet: t.bcet,
+                        sections: &t.sections,
+                    })
+                    .collect()
+            })
+            .collect();
+        let boards: Vec<BoardTable<'_>> = self
+            .boards
+            .iter()
+            .zip(&topic_rows)
+            .map(|(b, topics)| BoardTable {
+                name: &b.name,
+                tasks: &b.tasks,
+                sections: &b.sections,
+                topics,
+                levels: b.levels,
+                monotonic: b.monotonic,
+                can_tx: b.can_tx,
+                command_handler: b.command_handler,
+            })
+            .collect();
+        f(&RobotTable {
+            boards: &boards,
+            bit_time: can::bit_time(self.bitrate),
+            frame_cost: self.frame_cost,
+        })
+    }
+
+    /// The most jobs one board can have: its fixed tasks plus a job and a timer job per publishable topic.
+    pub fn max_tasks(&self) -> usize {
+        self.boards
+            .iter()
+            .map(|b| b.tasks.len() + 2 * b.topics.len())
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The protocol's limit of running publishers on the bus: one per publishable sensor topic.
+    pub fn max_publishers(&self) -> usize {
+        self.boards.iter().map(|b| b.topics.len()).sum()
+    }
+
+    /// Index of a board by name.
+    pub fn board_index(&self, name: &str) -> Option<u8> {
+        self.boards
+            .iter()
+            .position(|b| b.name == name)
+            .map(|i| i as u8)
+    }
+
+    /// The stream of `topic` published at `level` every `period` (deadline `None`: the period).
+    pub fn publisher_stream(
+        &self,
+        topic: &str,
+        level: &str,
+        period: Time,
+        deadline: Option<Time>,
+    ) -> Option<Stream> {
+        let info = Topic::from_name(topic)?.info();
+        let priority = Priority::from_name(level)?;
+        let l = Priority::ALL.iter().position(|p| *p == priority)? as u8;
+        let board = self.board_index(scenario::board_folder(info.board))?;
+        Some(Stream {
+            id: u32::from(CanId::new(Kind::Sensor, priority, info.topic.byte()).raw()),
+            extended: false,
+            dlc: info.dlc,
+            frames: u32::from(info.frames_per_sample.max(1)),
+            period,
+            deadline,
+            jitter: Time::ZERO,
+            sender: Some(Sender {
+                board,
+                topic: info.topic.byte(),
+                level: l,
+            }),
+            receiver: None,
+        })
+    }
+
+    /// The stream of operator commands to `topic` at `level`, at least `period` apart.
+    pub fn command_stream(
+        &self,
+        topic: &str,
+        level: &str,
+        period: Time,
+        jitter: Time,
+        deadline: Option<Time>,
+    ) -> Option<Stream> {
+        let info = Topic::from_name(topic)?.info();
+        let priority = Priority::from_name(level)?;
+        let board = self.board_index(scenario::board_folder(info.board))?;
+        let has_handler = self
+            .boards
+            .get(usize::from(board))
+            .is_some_and(|b| b.command_handler.is_some());
+        Some(Stream {
+            id: u32::from(CanId::new(Kind::Command, priority, info.topic.byte()).raw()),
+            extended: false,
+            dlc: info.dlc,
+            frames: 1,
+            period,
+            deadline,
+            jitter,
+            sender: None,
+            receiver: has_handler.then_some(board),
+        })
+    }
+
+    /// The streams of a scenario file's publishers and commands.
+    pub fn scenario_streams(&self, scenario: &scenario::Scenario) -> Option<Vec<Stream>> {
+        let mut out = Vec::new();
+        for p in &scenario.publishers {
+            out.push(self.publisher_stream(
+                &p.topic,
+                &p.priority,
+                Time::from_us_down(p.period_us),
+                p.deadline_us.map(Time::from_us_down),
+            )?);
+        }
+        for c in &scenario.commands {
+            out.push(self.command_stream(
+                &c.topic,
+                &c.priority,
+                Time::from_us_down(c.period_us),
+                Time::from_us_up(c.jitter_us),
+                c.deadline_us.map(Time::from_us_down),
+            )?);
+        }
+        Some(out)
+    }
+
+    /// The table as Rust source: `static ROBOT: RobotTable<'static>` and its capacities, with types from
+    /// `crate_path` (`schedule_analysis`).
+    pub fn to_rust_source(&self, crate_path: &str) -> String {
+        let t = |time: Time| format!("{crate_path}::time::Time::from_ns({})", time.as_ns());
+        let opt_t = |time: Option<Time>| {
+            time.map_or_else(|| "None".to_string(), |x| format!("Some({})", t(x)))
+        };
+        let opt = |v: Option<u16>| v.map_or_else(|| "None".to_string(), |x| format!("Some({x})"));
+        let a = format!("{crate_path}::admission");
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "// Generated by schedule_analysis::admission_host::lower from {}. Do not edit: the build regenerates it.",
+            self.sources.join(", ")
+        );
+        let _ = writeln!(
+            s,
+            "/// Most jobs of one board (fixed tasks, publisher and timer jobs)."
+        );
+        let _ = writeln!(s, "pub const MAX_TASKS: usize = {};", self.max_tasks());
+        let _ = writeln!(
+            s,
+            "/// The protocol's limit of running publishers on the bus."
+        );
+        let _ = writeln!(
+            s,
+            "pub const MAX_PUBLISHERS: usize = {};",
+            self.max_publishers()
+        );
+        for (i, b) in self.boards.iter().enumerate() {
+            let _ = writeln!(s, "/// Index of board `{}` in `ROBOT.boards`.", b.name);
+            let _ = writeln!(
+                s,
+                "pub const BOARD_{}: u8 = {i};",
+                b.name.to_uppercase().replace('-', "_")
+            );
+        }
+        let _ = writeln!(s, "/// The robot's task models and bus, for `{a}::admit`.");
+        let _ = writeln!(
+            s,
+            "pub static ROBOT: {a}::RobotTable<'static> = {a}::RobotTable {{"
+        );
+        let _ = writeln!(s, "    boards: &[");
+        for b in &self.boards {
+            let _ = writeln!(s, "        {a}::BoardTable {{");
+            let _ = writeln!(s, "            name: {:?},", b.name);
+            let _ = writeln!(s, "            tasks: &[");
+            for (row, name) in b.tasks.iter().zip(&b.task_names) {
+                let _ = writeln!(
+                    s,
+                    "                // {name}\n                {a}::TaskRow {{ priority: {}, cost: {}, bcet: {}, period: {}, deadline: {}, jitter: {}, released_by: {}, own_frame: {} }},",
+                    row.priority, t(row.cost), t(row.bcet), t(row.period), opt_t(row.deadline), t(row.jitter), opt(row.released_by), row.own_frame
+                );
+            }
+            let _ = writeln!(s, "            ],\n            sections: &[");
+            for cs in &b.sections {
+                let _ = writeln!(
+                    s,
+                    "                {a}::SectionRow {{ holder_priority: {}, ceiling: {}, length: {} }},",
+                    cs.holder_priority, cs.ceiling, t(cs.length)
+                );
+            }
+            let _ = writeln!(s, "            ],\n            topics: &[");
+            for topic in &b.topics {
+                let sections: Vec<String> = topic
+                    .sections
+                    .iter()
+                    .map(|cs| {
+                        format!(
+                            "{a}::TopicSection {{ ceiling: {}, length: {} }}",
+                            cs.ceiling,
+                            t(cs.length)
+                        )
+                    })
+                    .collect();
+                let _ = writeln!(
+                    s,
+                    "                // {}\n                {a}::TopicRow {{ topic: {}, cost: {}, bcet: {}, sections: &[{}] }},",
+                    topic.name, topic.topic, t(topic.cost), t(topic.bcet), sections.join(", ")
+                );
+            }
+            let levels: Vec<String> = b
+                .levels
+                .iter()
+                .map(|l| l.map_or_else(|| "None".to_string(), |p| format!("Some({p})")))
+                .collect();
+            let _ = writeln!(
+                s,
+                "            ],\n            levels: [{}],",
+                levels.join(", ")
+            );
+            let _ = writeln!(
+                s,
+                "            monotonic: {},",
+                b.monotonic.map_or_else(
+                    || "None".to_string(),
+                    |m| format!(
+                        "Some({a}::MonotonicRow {{ priority: {}, cost: {}, jitter: {} }})",
+                        m.priority,
+                        t(m.cost),
+                        t(m.jitter)
+                    )
+                )
+            );
+            let _ = writeln!(s, "            can_tx: {},", opt(b.can_tx));
+            let _ = writeln!(
+                s,
+                "            command_handler: {},",
+                opt(b.command_handler)
+            );
+            let _ = writeln!(s, "        }},");
+        }
+        let cost = match self.frame_cost {
+            FrameCost::Thesis => format!("{crate_path}::can::FrameCost::Thesis"),
+            FrameCost::Exact => format!("{crate_path}::can::FrameCost::Exact"),
+            FrameCost::Fixed(x) => format!("{crate_path}::can::FrameCost::Fixed({})", t(x)),
+        };
+        let _ = writeln!(
+            s,
+            "    ],\n    bit_time: {},\n    frame_cost: {cost},\n}};",
+            t(can::bit_time(self.bitrate))
+        );
+        s
+    }
+
+    /// The on-chip check's cost on `board`'s worst configuration we know: every publishable topic of the robot
+    /// running (the protocol's limit) at its default period at one level, and `board`'s last topic requested
+    /// again at a tenth of its period with the refusal's searches — the most expensive of the four levels.
+    pub fn worst_case_cost(&self, board: usize) -> Option<CheckCost> {
+        let b = self.boards.get(board)?;
+        let mut worst: Option<CheckCost> = None;
+        for level in Priority::ALL {
+            let mut streams = Vec::new();
+            for other in &self.boards {
+                for t in &other.topics {
+                    let info = Topic::from_name(&t.name)?.info();
+                    let period = Time::from_us(u64::from(info.default_period_us.max(1)));
+                    streams.push(self.publisher_stream(&t.name, level.name(), period, None)?);
+                }
+            }
+            let Some(last) = b.topics.last() else {
+                continue;
+            };
+            let info = Topic::from_name(&last.name)?.info();
+            let request = self.publisher_stream(
+                &last.name,
+                level.name(),
+                Time::from_us(u64::from(info.default_period_us.max(10)) / 10),
+                None,
+            )?;
+            let (plain, searched) = self.with_table(|robot| {
+                (
+                    admission::admit::<64, 64>(robot, &streams, &request, false),
+                    admission::admit::<64, 64>(robot, &streams, &request, true),
+                )
+            });
+            let cost = CheckCost {
+                publishers: streams.len(),
+                tasks: b.tasks.len() + 2 * b.topics.len(),
+                iterations_per_analysis: plain.iterations,
+                iterations_with_search: searched.iterations,
+                analyses_with_search: searched.evaluations,
+            };
+            if worst.is_none_or(|w| cost.iterations_with_search > w.iterations_with_search) {
+                worst = Some(cost);
+            }
+        }
+        worst
+    }
+}
+
+/// What one on-chip decision costs, in fixed-point iterations.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CheckCost {
+    /// Running publishers on the bus in the configuration.
+    pub publishers: usize,
+    /// The board's jobs at most.
+    pub tasks: usize,
+    /// Iterations of one whole-robot analysis (a decision without suggestions).
+    pub iterations_per_analysis: u64,
+    /// Iterations of a refusal with both suggestion searches.
+    pub iterations_with_search: u64,
+    /// Whole-robot analyses that refusal ran.
+    pub analyses_with_search: u32,
+}
