@@ -26,6 +26,7 @@ mod frame;
 mod id;
 mod message;
 mod payload;
+pub mod signals;
 mod topic;
 mod wire;
 

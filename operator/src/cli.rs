@@ -5,7 +5,7 @@
 
 use std::path::PathBuf;
 
-use amiro_can::{Priority, Rgb, Topic, TOPICS};
+use amiro_can::{AdmissionPolicy, Board, Priority, Rgb, ShutdownMode, Topic, TOPICS};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
 
@@ -131,6 +131,24 @@ Examples:
 A command to topic T at priority P has identifier (P << 8) | T, its sensor data (0x400 | (P << 8) | T).
 Example: magnetometer-x is 0x05; at medium priority (2) the command is 0x205 and the data 0x605.")]
     Topics,
+
+    /// Write the whole protocol as a DBC file (for cantools, SavvyCAN, Vector tools)
+    #[command(after_help = "\
+Every identifier is one message: each topic's command and (for sensors) its data, at all four priorities,
+with scaled signals and units; pages of multi-frame topics are multiplexed signals.
+
+Examples:
+  amiro dbc --output amiro.dbc
+  python3 -c 'import cantools; db = cantools.database.load_file(\"amiro.dbc\"); print(db.decode_message(0x508, bytes.fromhex(\"FCFF1E000500\")))'")]
+    Dbc(DbcArgs),
+}
+
+/// `amiro dbc`.
+#[derive(Debug, Args)]
+pub struct DbcArgs {
+    /// Write to this file instead of standard output
+    #[arg(long, short, value_name = "FILE")]
+    pub output: Option<PathBuf>,
 }
 
 /// `amiro decode`.
@@ -253,6 +271,51 @@ Examples:
         #[arg(long, value_name = "PRIORITY", value_parser = priority_parser(), default_value = "low")]
         priority: Priority,
     },
+
+    /// Shut the whole robot down (PowerManagement, the power master, carries it out)
+    #[command(
+        long_about = "\
+Shut the robot down: PowerManagement pulls SYS_PD_N so every board stops, writes MODE where the AMiRo-BLT \
+bootloader reads it (RTC backup register) and hands over to the bootloader. hibernate: everything off, wakes \
+on the charger or a button; deep-sleep: everything off, a wake-up source restarts it; transportation: off \
+with the fewest wake-up sources, for shipping; restart: power-cycle and boot again.",
+        after_help = "\
+Examples:
+  amiro encode shutdown transportation                                   01D#0355AA
+  amiro encode shutdown restart --priority high                          11D#0455AA"
+    )]
+    Shutdown {
+        /// What to do
+        #[arg(value_name = "MODE", value_parser = shutdown_mode_parser())]
+        mode: ShutdownMode,
+        /// Priority of the command frame
+        #[arg(long, value_name = "PRIORITY", value_parser = priority_parser(), default_value = "urgent")]
+        priority: Priority,
+    },
+
+    /// Choose how a board answers a request that would make it miss a deadline
+    #[command(
+        long_about = "\
+Set a board's admission policy. refuse (the default after reset): a publish or re-prioritisation request \
+that would make a task or a frame miss its deadline is refused, nothing changes, and the board says why \
+(an admission verdict on its diagnostics topic, which `amiro decode`/`monitor` print). accept-and-warn: the \
+board carries the request out and sends the same verdict as a warning.",
+        after_help = "\
+Examples:
+  amiro encode policy diwheeldrive accept-and-warn                       21A#0301
+  amiro encode policy powermanagement refuse                             21B#0300"
+    )]
+    Policy {
+        /// The board
+        #[arg(value_name = "BOARD", value_parser = board_parser())]
+        board: Board,
+        /// refuse or accept-and-warn
+        #[arg(value_name = "POLICY", value_parser = policy_parser())]
+        policy: AdmissionPolicy,
+        /// Priority of the command frame
+        #[arg(long, value_name = "PRIORITY", value_parser = priority_parser(), default_value = "medium")]
+        priority: Priority,
+    },
 }
 
 /// `amiro send`.
@@ -302,6 +365,33 @@ pub struct MonitorArgs {
 fn priority_parser() -> impl TypedValueParser<Value = Priority> {
     PossibleValuesParser::new(Priority::ALL.map(Priority::name)).try_map(|name| {
         Priority::from_name(&name).ok_or_else(|| format!("unknown priority {name:?}"))
+    })
+}
+
+fn shutdown_mode_parser() -> impl TypedValueParser<Value = ShutdownMode> {
+    PossibleValuesParser::new(ShutdownMode::ALL.map(ShutdownMode::name)).try_map(|name| {
+        ShutdownMode::ALL
+            .into_iter()
+            .find(|mode| mode.name() == name)
+            .ok_or_else(|| format!("unknown shutdown mode {name:?}"))
+    })
+}
+
+fn board_parser() -> impl TypedValueParser<Value = Board> {
+    PossibleValuesParser::new(["diwheeldrive", "powermanagement", "lightring"]).try_map(|name| {
+        Board::ALL
+            .into_iter()
+            .find(|board| board.name().eq_ignore_ascii_case(&name))
+            .ok_or_else(|| format!("unknown board {name:?}"))
+    })
+}
+
+fn policy_parser() -> impl TypedValueParser<Value = AdmissionPolicy> {
+    let all = [AdmissionPolicy::Refuse, AdmissionPolicy::AcceptAndWarn];
+    PossibleValuesParser::new(all.map(AdmissionPolicy::name)).try_map(move |name| {
+        all.into_iter()
+            .find(|policy| policy.name() == name)
+            .ok_or_else(|| format!("unknown policy {name:?}"))
     })
 }
 

@@ -10,7 +10,7 @@ use amiro_can::TOPICS;
 use anyhow::{bail, Context, Result};
 
 use crate::bus::{self, BusUrl, Direction, Reception};
-use crate::cli::{DecodeArgs, EncodeArgs, MessageArgs, MonitorArgs, SendArgs};
+use crate::cli::{DbcArgs, DecodeArgs, EncodeArgs, MessageArgs, MonitorArgs, SendArgs};
 use crate::describe::{decode_frame, json_record, json_unreadable, text_line, text_unreadable};
 use crate::encode;
 use crate::frame::{parse_compact, parse_line, FrameTextError, LoggedFrame, RawFrame};
@@ -236,6 +236,17 @@ pub fn topics() -> Result<ExitCode> {
             default,
             info.layout
         )?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `amiro dbc`: the protocol as a DBC file, on standard output or into `--output`.
+pub fn dbc(args: &DbcArgs) -> Result<ExitCode> {
+    let text = crate::dbc::generate();
+    match &args.output {
+        Some(path) => std::fs::write(path, text)
+            .with_context(|| format!("cannot write {}", path.display()))?,
+        None => io::stdout().lock().write_all(text.as_bytes())?,
     }
     Ok(ExitCode::SUCCESS)
 }

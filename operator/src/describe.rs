@@ -337,6 +337,8 @@ fn diagnostics_json(page: &DiagnosticsPage) -> Value {
         DiagnosticsPage::VerdictRequest(request) => json!({
             "topic": request.topic.name(),
             "requested_us": request.requested.as_micros(),
+            "requested_value": request.requested.value,
+            "requested_unit": unit_name(request.requested.unit),
             "priority": request.priority.name(),
             "verdict": match request.verdict {
                 Verdict::Refused => "refused",
@@ -344,10 +346,17 @@ fn diagnostics_json(page: &DiagnosticsPage) -> Value {
             },
             "priority_needed": request.priority_needed.map(|p| p.name()),
             "shortest_period_us": request.shortest_period.map(|t| t.as_micros()),
+            "shortest_period_value": request.shortest_period.map_or(0, |t| t.value),
+            "shortest_period_unit": unit_name(request.shortest_period.map_or(TimeUnit::Millis, |t| t.unit)),
+            "has_shortest_period": request.shortest_period.is_some(),
             "violation": match request.violation {
-                ViolationKind::Unknown => json!("unknown"),
-                ViolationKind::Task => json!("task"),
-                ViolationKind::Message { priority } => json!({ "message_priority": priority.name() }),
+                ViolationKind::Unknown => "unknown",
+                ViolationKind::Task => "task",
+                ViolationKind::Message { .. } => "message",
+            },
+            "violated_priority": match request.violation {
+                ViolationKind::Message { priority } => priority.name(),
+                ViolationKind::Unknown | ViolationKind::Task => "urgent",
             },
         }),
         DiagnosticsPage::VerdictBound(bound) => json!({

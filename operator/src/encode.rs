@@ -49,6 +49,19 @@ pub fn message(args: &MessageArgs) -> Result<Message> {
             priority: *priority,
             command: LedCommand::new(*led, *rgb).map_err(|error| anyhow::anyhow!("{error}"))?,
         }),
+        MessageArgs::Shutdown { mode, priority } => Message::Command(Command::Shutdown {
+            priority: *priority,
+            mode: *mode,
+        }),
+        MessageArgs::Policy {
+            board,
+            policy,
+            priority,
+        } => Message::Command(Command::Policy {
+            priority: *priority,
+            board: *board,
+            policy: *policy,
+        }),
     })
 }
 

@@ -7,6 +7,7 @@
 mod bus;
 mod cli;
 mod commands;
+mod dbc;
 mod describe;
 mod encode;
 mod frame;
@@ -26,6 +27,7 @@ fn main() -> ExitCode {
         CliCommand::Send(args) => commands::send(args),
         CliCommand::Monitor(args) => commands::monitor(args),
         CliCommand::Topics => commands::topics(),
+        CliCommand::Dbc(args) => commands::dbc(args),
     };
     match outcome {
         Ok(code) => code,
