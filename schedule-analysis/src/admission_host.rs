@@ -571,34 +571,37 @@ impl OwnedRobot {
     }
 
     /// The on-chip check's cost on `board`'s worst configuration we know: every publishable topic of the robot
-    /// running (the protocol's limit) at its default period at one level, and `board`'s last topic requested
-    /// again at a tenth of its period with the refusal's searches — the most expensive of the four levels.
+    /// running (the protocol's limit) at its default period, all at one level; `board`'s last topic requested
+    /// at its default period (one analysis), and at 1 µs (refused: the analysis plus both suggestion searches).
+    /// The most expensive of the four levels is reported for each.
     pub fn worst_case_cost(&self, board: usize) -> Option<CheckCost> {
         let b = self.boards.get(board)?;
+        let last = b.topics.last()?;
+        let default_period = |name: &str| {
+            Topic::from_name(name)
+                .map(|t| Time::from_us(u64::from(t.info().default_period_us.max(1))))
+        };
         let mut worst: Option<CheckCost> = None;
         for level in Priority::ALL {
             let mut streams = Vec::new();
             for other in &self.boards {
                 for t in &other.topics {
-                    let info = Topic::from_name(&t.name)?.info();
-                    let period = Time::from_us(u64::from(info.default_period_us.max(1)));
-                    streams.push(self.publisher_stream(&t.name, level.name(), period, None)?);
+                    streams.push(self.publisher_stream(
+                        &t.name,
+                        level.name(),
+                        default_period(&t.name)?,
+                        None,
+                    )?);
                 }
             }
-            let Some(last) = b.topics.last() else {
-                continue;
-            };
-            let info = Topic::from_name(&last.name)?.info();
-            let request = self.publisher_stream(
-                &last.name,
-                level.name(),
-                Time::from_us(u64::from(info.default_period_us.max(10)) / 10),
-                None,
-            )?;
+            let request =
+                self.publisher_stream(&last.name, level.name(), default_period(&last.name)?, None)?;
+            let mut flood = request;
+            flood.period = Time::from_us(1);
             let (plain, searched) = self.with_table(|robot| {
                 (
                     admission::admit::<64, 64>(robot, &streams, &request, false),
-                    admission::admit::<64, 64>(robot, &streams, &request, true),
+                    admission::admit::<64, 64>(robot, &streams, &flood, true),
                 )
             });
             let cost = CheckCost {
@@ -608,9 +611,19 @@ impl OwnedRobot {
                 iterations_with_search: searched.iterations,
                 analyses_with_search: searched.evaluations,
             };
-            if worst.is_none_or(|w| cost.iterations_with_search > w.iterations_with_search) {
-                worst = Some(cost);
-            }
+            worst = Some(match worst {
+                None => cost,
+                Some(w) => CheckCost {
+                    iterations_per_analysis: w
+                        .iterations_per_analysis
+                        .max(cost.iterations_per_analysis),
+                    iterations_with_search: w
+                        .iterations_with_search
+                        .max(cost.iterations_with_search),
+                    analyses_with_search: w.analyses_with_search.max(cost.analyses_with_search),
+                    ..cost
+                },
+            });
         }
         worst
     }

@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 
 use serde_json::{json, Value};
 
+use crate::admission_host::{CheckCost, OwnedRobot};
 use crate::analysis::{
     analyse_with_progress, Analysis, BoardResult, MessageResult, Options, TaskResult, TopicResult,
 };
@@ -27,6 +28,8 @@ pub struct Report {
     pub comparison: Option<Analysis>,
     /// Shortest periods per publisher.
     pub sensitivity: Option<Sensitivity>,
+    /// The on-chip admission check's cost per board (empty unless [`Report::with_admission_cost`] added it).
+    pub admission: Vec<(String, CheckCost)>,
 }
 
 /// Publishers beyond this many skip the sensitivity search (each costs about twenty whole-system analyses).
@@ -96,7 +99,20 @@ impl Report {
             primary,
             comparison,
             sensitivity,
+            admission: Vec::new(),
         }
+    }
+
+    /// Adds the worst-case cost of the on-chip admission check of every board of `robot` (its tasks plus the
+    /// protocol's limit of running publishers on the bus), in fixed-point iterations.
+    pub fn with_admission_cost(mut self, robot: &OwnedRobot) -> Report {
+        self.admission = robot
+            .boards
+            .iter()
+            .enumerate()
+            .filter_map(|(i, b)| Some((b.name.clone(), robot.worst_case_cost(i)?)))
+            .collect();
+        self
     }
 
     /// The verdict: everything bounded, every deadline and jitter budget met under the primary frame-cost model.
@@ -558,6 +574,33 @@ fn text(report: &Report, markdown: bool) -> String {
             table.render(markdown, &mut out);
         }
     }
+    if !report.admission.is_empty() {
+        heading(
+            &mut out,
+            markdown,
+            2,
+            "On-chip admission check: worst-case cost per decision (fixed-point iterations)",
+        );
+        let mut table = Table::new(&[
+            ("board", false),
+            ("jobs ≤", true),
+            ("publishers on the bus", true),
+            ("iterations, one analysis", true),
+            ("iterations, refusal with suggestions", true),
+            ("analyses", true),
+        ]);
+        for (board, cost) in &report.admission {
+            table.rows.push(vec![
+                board.clone(),
+                cost.tasks.to_string(),
+                cost.publishers.to_string(),
+                cost.iterations_per_analysis.to_string(),
+                cost.iterations_with_search.to_string(),
+                cost.analyses_with_search.to_string(),
+            ]);
+        }
+        table.render(markdown, &mut out);
+    }
     let failures = primary.failures();
     let verdict = if failures.is_empty() {
         format!(
@@ -700,6 +743,21 @@ fn to_json(report: &Report) -> Value {
             "sensitivity".into(),
             json!({"skipped": s.skipped, "publishers": publishers}),
         );
+    }
+    if let (false, Value::Object(map)) = (report.admission.is_empty(), &mut out) {
+        let boards: Vec<Value> = report
+            .admission
+            .iter()
+            .map(|(board, c)| {
+                json!({
+                    "board": board, "jobs": c.tasks, "publishers": c.publishers,
+                    "iterations_per_analysis": c.iterations_per_analysis,
+                    "iterations_with_search": c.iterations_with_search,
+                    "analyses_with_search": c.analyses_with_search,
+                })
+            })
+            .collect();
+        map.insert("admission".into(), Value::Array(boards));
     }
     out
 }

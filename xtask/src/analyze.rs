@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, Context, Result};
 use schedule_analysis::model::{FrameCostSpec, Model};
 use schedule_analysis::report::{self, Format, Report};
-use schedule_analysis::scenario;
+use schedule_analysis::{admission_host, scenario};
 
 /// Models with at least this many tasks and messages report their progress on stderr.
 const LARGE_MODEL: usize = 1_000;
@@ -51,6 +51,7 @@ fn parse_format(text: &str) -> Result<Format, String> {
 /// Runs the analysis and prints (or writes) the report. `Ok(true)`: everything is schedulable and within its
 /// jitter budget under the frame-cost model that decides the verdict.
 pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
+    let mut robot = None;
     let (model, title, sources, warnings, origin) = match &args.model {
         Some(path) => {
             let text = std::fs::read_to_string(path)
@@ -75,6 +76,17 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
                 .unwrap_or(scenario::DEFAULT_SCENARIO);
             let path = scenario::find_scenario(root, name);
             let built = scenario::build(root, &path, &scenario::timing_files(root))?;
+            // The boards' admission tables, from the same apps and timing files, for the on-chip check's cost.
+            robot = Some(admission_host::lower(
+                root,
+                &scenario::timing_files(root),
+                built
+                    .model
+                    .can
+                    .as_ref()
+                    .map_or(schedule_analysis::can::DEFAULT_BITRATE, |c| c.bitrate),
+                args.frame_cost.unwrap_or(built.frame_cost),
+            )?);
             let title = built.model.name.clone().unwrap_or_else(|| name.to_string());
             (
                 built.model,
@@ -110,6 +122,13 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
         args.frame_cost,
         &mut progress,
     );
+    let report = match &robot {
+        Some(robot) => {
+            progress("on-chip admission check cost");
+            report.with_admission_cost(robot)
+        }
+        None => report,
+    };
     progress("done");
     let text = report::render(&report, args.format);
     match &args.output {
