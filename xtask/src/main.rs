@@ -12,6 +12,8 @@ mod analyze;
 mod boards;
 mod bounds;
 mod elf;
+mod flash;
+mod interop;
 mod levels_check;
 mod qemu;
 mod scenarios;
@@ -68,13 +70,13 @@ enum Cmd {
     },
     /// The response-time report: worst-case response times of the board tasks and the CAN bus.
     Analyze(analyze::AnalyzeArgs),
-    /// Build a board, write the AMiRo-BLT checksum word, flash it through probe-rs and stream RTT.
-    Flash {
-        /// The board to flash.
-        board: String,
-    },
-    /// Flash an already built ELF (the boards' `cargo run` runner): writes the AMiRo-BLT checksum
-    /// word into a copy, then runs probe-rs on it.
+    /// Build and flash boards: all of them through DiWheelDrive's serial port and AMiRo-BLT
+    /// (`--port /dev/ttyUSB0`), or one through probe-rs over SWD (`--probe`, writes the
+    /// AMiRo-BLT checksum word and streams RTT).
+    Flash(flash::FlashArgs),
+    /// Flash an already built ELF (the boards' `cargo run` runner): through AMiRo-BLT when
+    /// `AMIRO_PORT` names the serial port, else through probe-rs with the checksum word written
+    /// into a copy.
     FlashElf {
         /// The board the ELF is for.
         board: String,
@@ -161,18 +163,11 @@ fn run(cmd: Cmd) -> Result<bool> {
             }
             Ok(clean)
         }
-        Cmd::Flash { board } => {
-            let board =
-                boards::by_name(&board).with_context(|| format!("unknown board `{board}`"))?;
-            build_boards(&root, &[board], false)?;
-            flash_elf(board, &firmware_elf(&root, board))?;
-            Ok(true)
-        }
+        Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),
         Cmd::FlashElf { board, elf } => {
             let board =
                 boards::by_name(&board).with_context(|| format!("unknown board `{board}`"))?;
-            flash_elf(board, &elf)?;
-            Ok(true)
+            flash::run_elf(board, &elf).map(|()| true)
         }
     }
 }
@@ -346,7 +341,9 @@ fn test(root: &Path) -> Result<()> {
     // The bare-chip layout must keep linking (it is the documented switch for development chips).
     build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), true)?;
     let reports = build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), false)?;
+    flash::simulated_robot(root)?;
     elf::print_table(&reports);
+    interop::check(root)?;
     run_scenarios(root)
 }
 
