@@ -1,0 +1,107 @@
+//! Interop with other CAN tools: cantools loads `amiro dbc` and decodes sample frames to the values `amiro decode`
+//! prints; python-can's `CanutilsLogReader` and can-utils' `log2long` / `log2asc` read the candump logs `amiro`
+//! writes (`canplayer` needs a CAN interface, and CI kernels have no vcan, so it is not run here).
+//!
+//! The checks are `tools/interop/test_interop.py`, run with pytest in a venv under the target directory that
+//! holds exactly `tools/requirements-ci.txt`; the venv is rebuilt only when that file changes.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{bail, Context, Result};
+
+/// pytest's exit code when it collected no tests: a renamed file must not pass silently.
+const PYTEST_NO_TESTS: i32 = 5;
+
+/// Sets up the pinned tools (and can-utils), builds `amiro`, and runs the interop checks.
+pub fn check(root: &Path) -> Result<()> {
+    let work = super::target_dir(root).join("interop");
+    let python = venv(root, &work)?;
+    ensure_can_utils()?;
+    super::cargo(
+        root,
+        &["build", "--quiet", "-p", "operator", "--bin", "amiro"],
+    )
+    .context("building amiro for the interop checks")?;
+    let amiro = super::target_dir(root).join("debug").join("amiro");
+    println!("interop: cantools, python-can and can-utils against amiro");
+    let status = Command::new(&python)
+        .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
+        .arg(root.join("tools").join("interop"))
+        .env("AMIRO", &amiro)
+        .env("AMIRO_INTEROP_DIR", &work)
+        .current_dir(root)
+        .status()
+        .with_context(|| format!("running pytest with {}", python.display()))?;
+    match status.code() {
+        Some(0) => Ok(()),
+        Some(PYTEST_NO_TESTS) => bail!("interop: pytest found no tests in tools/interop"),
+        Some(code) => bail!("interop checks failed (pytest exit code {code})"),
+        None => bail!("interop checks were killed by a signal"),
+    }
+}
+
+/// The venv's python, with `tools/requirements-ci.txt` installed; reuses the venv while the file is unchanged.
+fn venv(root: &Path, work: &Path) -> Result<PathBuf> {
+    let requirements = root.join("tools").join("requirements-ci.txt");
+    let pinned = std::fs::read_to_string(&requirements)
+        .with_context(|| format!("reading {}", requirements.display()))?;
+    let venv = work.join("venv");
+    let python = venv.join("bin").join("python");
+    let stamp = venv.join("requirements-ci.txt");
+    if python.exists() && std::fs::read_to_string(&stamp).ok().as_deref() == Some(&pinned) {
+        return Ok(python);
+    }
+    if venv.exists() {
+        std::fs::remove_dir_all(&venv).with_context(|| format!("removing {}", venv.display()))?;
+    }
+    std::fs::create_dir_all(work).with_context(|| format!("creating {}", work.display()))?;
+    let venv_text = venv.to_string_lossy();
+    super::run_tool(root, "python3", &["-m", "venv", venv_text.as_ref()]).context(
+        "creating the interop venv (needs python3 with venv; Debian: apt-get install python3-venv)",
+    )?;
+    let requirements_text = requirements.to_string_lossy();
+    let python_text = python.to_string_lossy();
+    super::run_tool(
+        root,
+        python_text.as_ref(),
+        &[
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+            "--require-virtualenv",
+            "-r",
+            requirements_text.as_ref(),
+        ],
+    )
+    .context("installing tools/requirements-ci.txt")?;
+    std::fs::write(&stamp, pinned).with_context(|| format!("writing {}", stamp.display()))?;
+    Ok(python)
+}
+
+/// can-utils' log converters; installed with apt when running as root (as CI does), like QEMU.
+fn ensure_can_utils() -> Result<()> {
+    let found = Command::new("log2long")
+        .stdin(std::process::Stdio::null())
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if found {
+        return Ok(());
+    }
+    let is_root = super::output(Path::new("."), "id", &["-u"])
+        .map(|u| u.trim() == "0")
+        .unwrap_or(false);
+    if is_root {
+        super::run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
+        super::run_tool(
+            Path::new("."),
+            "apt-get",
+            &["install", "-y", "-qq", "can-utils"],
+        )?;
+        return Ok(());
+    }
+    bail!("can-utils is missing: install it (Debian/Ubuntu: sudo apt-get install can-utils)")
+}
