@@ -1,5 +1,9 @@
 //! `cargo bench -p schedule-analysis`: how long the analysis takes for 10 … 10,000 tasks and messages.
 //!
+//! First, small sets (10, 20, 40 tasks): the host's `analyse_board` (names, ceilings, blocking, results), the
+//! allocation-free core call the on-chip admission check makes (`board::response_times` on prepared arrays), and
+//! the textbook first-job iteration (what the `response-time-analysis` crate computes) as the baseline.
+//!
 //! Board sets: random priorities (with ties), log-uniform periods 1 ms … 1 s, 85 % utilisation, release jitter up
 //! to 10 % of the period, every task locking up to two of eight shared resources (SRP ceilings and blocking are
 //! part of the timed work). Bus sets: unique identifiers (29-bit beyond 2048 messages), 0 … 8 data bytes,
@@ -11,7 +15,8 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use schedule_analysis::analysis::{analyse, analyse_board, Options};
-use schedule_analysis::busy_window::Limits;
+use schedule_analysis::board::{self as board_core, TaskTiming};
+use schedule_analysis::busy_window::{AnalysisError, Counter, Limits};
 use schedule_analysis::can;
 use schedule_analysis::model::{
     BoardSystem, BusSystem, FrameCostSpec, MessageSpec, OverheadTimes, System, TaskKind, TaskSpec,
@@ -157,6 +162,115 @@ fn bus(n: usize, seed: u64) -> System {
     }
 }
 
+/// The textbook iteration (Joseph & Pandya; what the `response-time-analysis` crate computes): per task
+/// `w = C + Σ_hp ⌈w/T⌉·C` from `w = C`, first job only, no jitter or blocking — the baseline for small sets.
+fn textbook(tasks: &[TaskTiming]) -> usize {
+    let mut bounded = 0;
+    for (i, me) in tasks.iter().enumerate() {
+        let c = me.wcet.as_ns();
+        let mut w = c;
+        let ok = loop {
+            let mut next = c;
+            for (k, other) in tasks.iter().enumerate() {
+                if k != i && other.priority >= me.priority {
+                    next += w.div_ceil(other.period.as_ns()) * other.wcet.as_ns();
+                }
+            }
+            if next == w {
+                break true;
+            }
+            if next > 60_000_000_000 {
+                break false;
+            }
+            w = next;
+        };
+        bounded += usize::from(ok);
+    }
+    bounded
+}
+
+/// Median time of one call, from batches of `batch` calls.
+fn per_call(mut f: impl FnMut() -> usize, batch: usize) -> Duration {
+    let (t, _) = median(
+        || {
+            let mut n = 0;
+            for _ in 0..batch {
+                n += black_box(f());
+            }
+            n
+        },
+        15,
+    );
+    t / batch as u32
+}
+
+fn small_sets() {
+    println!("small sets (median per call, DM priorities, distinct levels): whole host board analysis, the");
+    println!("allocation-free core the on-chip check uses, and the textbook first-job iteration as the baseline");
+    println!();
+    println!(
+        "{:>4}  {:>16}  {:>16}  {:>16}  {:>10}",
+        "n", "analyse_board", "core", "textbook", "core/text"
+    );
+    let limits = Limits::default();
+    for n in [10usize, 20, 40] {
+        let mut system = board(n, 0xC0FFEE + n as u64, Priorities::DeadlineMonotonic);
+        // Distinct priorities, shortest period most urgent, no jitter or locks: the baseline's own model.
+        system.tasks.sort_by_key(|t| t.period);
+        for (i, t) in system.tasks.iter_mut().enumerate() {
+            t.priority = (n - i) as u32;
+            t.jitter = Time::ZERO;
+            t.sections.clear();
+            t.deadline = t.period;
+        }
+        let timings: Vec<TaskTiming> = system
+            .tasks
+            .iter()
+            .map(|t| TaskTiming {
+                priority: t.priority,
+                wcet: t.wcet,
+                period: t.period,
+                jitter: t.jitter,
+            })
+            .collect();
+        let blockings = vec![Time::ZERO; n];
+        let mut scratch = vec![Counter::default(); n];
+        let mut out = vec![Err(AnalysisError::NoSuchIndex); n];
+        let host = per_call(
+            || {
+                analyse_board(black_box(&system), &limits)
+                    .tasks
+                    .iter()
+                    .filter(|t| t.bound.is_ok())
+                    .count()
+            },
+            200,
+        );
+        let core = per_call(
+            || {
+                board_core::response_times(
+                    black_box(&timings),
+                    &blockings,
+                    &limits,
+                    &mut scratch,
+                    &mut out,
+                );
+                out.iter().filter(|r| r.is_ok()).count()
+            },
+            200,
+        );
+        let text = per_call(|| textbook(black_box(&timings)), 200);
+        println!(
+            "{n:>4}  {:>13.2} µs  {:>13.2} µs  {:>13.2} µs  {:>9.2}×",
+            host.as_secs_f64() * 1e6,
+            core.as_secs_f64() * 1e6,
+            text.as_secs_f64() * 1e6,
+            core.as_secs_f64() / text.as_secs_f64()
+        );
+    }
+    println!();
+}
+
 fn median(mut f: impl FnMut() -> usize, runs: usize) -> (Duration, usize) {
     let mut times = Vec::with_capacity(runs);
     let mut bounded = 0;
@@ -178,6 +292,7 @@ fn main() {
     };
     println!("schedule-analysis benchmark (median of runs; whole analysis, no parsing)");
     println!();
+    small_sets();
     println!(
         "{:>7}  {:>20}  {:>11}  {:>20}  {:>11}  {:>20}  {:>11}",
         "n",

@@ -364,22 +364,28 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
         .map(|t| t.wcet.plus(board.overheads.for_kind(t.kind)))
         .collect();
 
-    // Ceilings from who uses what; "interrupts disabled" is above everyone.
-    let mut ceilings: HashMap<&str, u32> = HashMap::new();
-    for (resource, ceiling) in &board.static_ceilings {
-        ceilings.insert(resource.as_str(), *ceiling);
-    }
-    for task in &board.tasks {
-        for (resource, _) in &task.sections {
-            let c = ceilings.entry(resource.as_str()).or_insert(0);
-            *c = (*c).max(task.priority);
-        }
-    }
+    // Ceilings from who uses what; "interrupts disabled" is above everyone. A sorted vector, not a hash map:
+    // the per-call set-up dominates small boards (docs/analysis.md, benchmark).
+    let mut ceilings: Vec<(&str, u32)> = board
+        .static_ceilings
+        .iter()
+        .map(|(r, c)| (r.as_str(), *c))
+        .chain(board.tasks.iter().flat_map(|t| {
+            t.sections
+                .iter()
+                .map(move |(r, _)| (r.as_str(), t.priority))
+        }))
+        .collect();
+    ceilings.sort_unstable();
     let ceiling_of = |resource: &str| -> u32 {
         if resource == GLOBAL_CRITICAL_SECTION {
-            u32::MAX
-        } else {
-            ceilings.get(resource).copied().unwrap_or(0)
+            return u32::MAX;
+        }
+        // The last entry of the resource's run holds its largest value.
+        let end = ceilings.partition_point(|(r, _)| *r <= resource);
+        match end.checked_sub(1).and_then(|i| ceilings.get(i)) {
+            Some((r, c)) if *r == resource => *c,
+            _ => 0,
         }
     };
     let mut sections = Vec::new();
@@ -424,21 +430,24 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
     let mut scratch = vec![Counter::default(); n];
     let chained = board.tasks.iter().any(|t| t.released_by.is_some());
     let mut settled = false;
+    let mut timings: Vec<TaskTiming> = order
+        .iter()
+        .map(|&i| TaskTiming {
+            priority: board.tasks.get(i).map_or(0, |t| t.priority),
+            wcet: costs.get(i).copied().unwrap_or(Time::ZERO),
+            period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
+            jitter: Time::ZERO,
+        })
+        .collect();
+    let sorted_blocking: Vec<Time> = order
+        .iter()
+        .map(|&i| blocking.get(i).copied().unwrap_or(Time::ZERO))
+        .collect();
+    let mut out = vec![Err(AnalysisError::NoSuchIndex); n];
     for _ in 0..MAX_JITTER_ROUNDS {
-        let timings: Vec<TaskTiming> = order
-            .iter()
-            .map(|&i| TaskTiming {
-                priority: board.tasks.get(i).map_or(0, |t| t.priority),
-                wcet: costs.get(i).copied().unwrap_or(Time::ZERO),
-                period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
-                jitter: jitter.get(i).copied().unwrap_or(Time::ZERO),
-            })
-            .collect();
-        let sorted_blocking: Vec<Time> = order
-            .iter()
-            .map(|&i| blocking.get(i).copied().unwrap_or(Time::ZERO))
-            .collect();
-        let mut out = vec![Err(AnalysisError::NoSuchIndex); n];
+        for (timing, &i) in timings.iter_mut().zip(&order) {
+            timing.jitter = jitter.get(i).copied().unwrap_or(Time::ZERO);
+        }
         board::response_times(&timings, &sorted_blocking, limits, &mut scratch, &mut out);
         for (position, &i) in order.iter().enumerate() {
             if let (Some(slot), Some(result)) = (bounds.get_mut(i), out.get(position)) {
@@ -531,6 +540,17 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
 /// sections whose holder is below, dropping those whose ceiling the sweep has passed): O((n + s) log s) instead
 /// of O(n·s).
 fn srp_blockings(priorities: &[u32], sections: &[CriticalSection]) -> Vec<Time> {
+    // Small boards: the definition directly, without the sweep's sorting, heap and map.
+    if priorities.len().saturating_mul(sections.len()) <= 4096 {
+        return priorities
+            .iter()
+            .map(|&p| board::srp_blocking(p, sections))
+            .collect();
+    }
+    srp_sweep(priorities, sections)
+}
+
+fn srp_sweep(priorities: &[u32], sections: &[CriticalSection]) -> Vec<Time> {
     let mut by_holder: Vec<&CriticalSection> = sections.iter().collect();
     by_holder.sort_by_key(|cs| cs.holder_priority);
     let mut levels: Vec<u32> = priorities.to_vec();
@@ -771,7 +791,8 @@ mod tests {
                     length: Time::from_ns(next(1000)),
                 })
                 .collect();
-            let swept = srp_blockings(&priorities, &sections);
+            let swept = srp_sweep(&priorities, &sections);
+            assert_eq!(srp_blockings(&priorities, &sections), swept);
             let direct: Vec<Time> = priorities
                 .iter()
                 .map(|&p| board::srp_blocking(p, &sections))
