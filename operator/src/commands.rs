@@ -13,7 +13,7 @@ use crate::bus::{self, BusUrl, Direction, Reception};
 use crate::cli::{DbcArgs, DecodeArgs, EncodeArgs, MessageArgs, MonitorArgs, SendArgs};
 use crate::describe::{decode_frame, json_record, json_unreadable, text_line, text_unreadable};
 use crate::encode;
-use crate::frame::{parse_compact, parse_line, FrameTextError, LoggedFrame, RawFrame};
+use crate::frame::{parse_compact, parse_line, text_lines, FrameTextError, LoggedFrame, RawFrame};
 use crate::period::human_micros;
 
 /// Writes decoded frames in the chosen format and remembers whether anything was wrong.
@@ -89,13 +89,22 @@ pub fn decode(args: &DecodeArgs) -> Result<ExitCode> {
             Box::new(io::stdin().lock())
         }
     };
-    for (index, line) in input.lines().enumerate() {
-        let line = line.context("cannot read the input")?;
-        let number = Some(index + 1);
-        match parse_line(&line) {
-            Ok(Some(logged)) => report.frame(&logged, number)?,
-            Ok(None) => {}
-            Err(error) => report.unreadable(number, &line, &error)?,
+    for line in text_lines(input) {
+        let (number, line) = line.context("cannot read the input")?;
+        let number = Some(number);
+        match line {
+            Ok(line) => match parse_line(&line) {
+                Ok(Some(logged)) => report.frame(&logged, number)?,
+                Ok(None) => {}
+                Err(error) => report.unreadable(number, &line, &error)?,
+            },
+            Err(error) => {
+                let input = match &error {
+                    FrameTextError::NotText { lossy } => lossy.clone(),
+                    _ => String::new(),
+                };
+                report.unreadable(number, &input, &error)?
+            }
         }
     }
     Ok(report.exit_code())

@@ -223,6 +223,11 @@ pub enum FrameTextError {
     },
     /// Something follows the frame that is not part of any known format.
     TrailingText(String),
+    /// The line is not UTF-8 text (a binary file, or a log damaged on disk).
+    NotText {
+        /// The line's bytes, with invalid sequences replaced by U+FFFD.
+        lossy: String,
+    },
 }
 
 impl FrameTextError {
@@ -238,6 +243,7 @@ impl FrameTextError {
             Self::CanFd => "can-fd",
             Self::LengthMismatch { .. } => "length-mismatch",
             Self::TrailingText(_) => "trailing-text",
+            Self::NotText { .. } => "not-text",
         }
     }
 }
@@ -264,11 +270,47 @@ impl fmt::Display for FrameTextError {
                 write!(f, "length [{declared}] but {found} data bytes follow")
             }
             Self::TrailingText(text) => write!(f, "unexpected text after the frame: {text:?}"),
+            Self::NotText { lossy } => write!(f, "not UTF-8 text: {lossy:?}"),
         }
     }
 }
 
 impl std::error::Error for FrameTextError {}
+
+/// Reads numbered lines (from 1) from `input` without giving up on bytes that are not UTF-8: such a line comes
+/// back as `Err(FrameTextError::NotText)` and reading goes on. Only an I/O error ends the iteration (with `Err`).
+pub fn text_lines<R: std::io::BufRead>(
+    mut input: R,
+) -> impl Iterator<Item = std::io::Result<(usize, Result<String, FrameTextError>)>> {
+    let mut number = 0;
+    let mut failed = false;
+    std::iter::from_fn(move || {
+        if failed {
+            return None;
+        }
+        let mut bytes = Vec::new();
+        match input.read_until(b'\n', &mut bytes) {
+            Ok(0) => None,
+            Ok(_) => {
+                number += 1;
+                if bytes.last() == Some(&b'\n') {
+                    bytes.pop();
+                    if bytes.last() == Some(&b'\r') {
+                        bytes.pop();
+                    }
+                }
+                let text = String::from_utf8(bytes).map_err(|error| FrameTextError::NotText {
+                    lossy: String::from_utf8_lossy(error.as_bytes()).into_owned(),
+                });
+                Some(Ok((number, text)))
+            }
+            Err(error) => {
+                failed = true;
+                Some(Err(error))
+            }
+        }
+    })
+}
 
 /// Parses one line of input: a bare `ID#DATA`, a `candump -l` line, or a candump screen line
 /// (`can0  205   [4]  01 84 03 02`, with or without a timestamp).

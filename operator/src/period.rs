@@ -69,6 +69,8 @@ pub enum PeriodError {
     BelowResolution(String),
     /// Zero: the firmware rejects a zero sample time.
     Zero,
+    /// So long that it does not even fit a 64-bit count of microseconds (the text as written).
+    Huge(String),
     /// Longer than the firmware's monotonic timer can wait.
     TooLong {
         /// The requested period in µs.
@@ -92,6 +94,12 @@ impl fmt::Display for PeriodError {
             Self::BelowResolution(text) => write!(f, "{text} is finer than the 1 µs resolution of the protocol"),
             Self::Zero => f.write_str(
                 "a period of zero cannot be encoded (the firmware rejects it); use `stop` to stop a publisher",
+            ),
+            Self::Huge(text) => write!(
+                f,
+                "{text} is longer than any period or duration amiro can count (the longest period the firmware \
+                 can schedule is {})",
+                human_micros(amiro_can::MAX_PERIOD_US)
             ),
             Self::TooLong { micros, max_micros } => write!(
                 f,
@@ -139,10 +147,8 @@ pub fn parse_period(text: &str) -> Result<Period, PeriodError> {
     if whole.is_empty() && fraction.is_empty() || fraction.contains('.') {
         return Err(PeriodError::Malformed(text.to_string()));
     }
-    let too_long = || PeriodError::TooLong {
-        micros: u64::MAX,
-        max_micros: u64::MAX,
-    };
+    // The true limit is the caller's; here we only know the number cannot be counted at all.
+    let too_long = || PeriodError::Huge(trimmed.to_string());
     let whole_value: u64 = if whole.is_empty() {
         0
     } else {
@@ -325,6 +331,21 @@ mod tests {
             Err(PeriodError::Malformed("1.2.3s".into()))
         );
         assert!(encode("99999999999999999999s").is_err());
+    }
+
+    #[test]
+    fn a_period_beyond_counting_names_the_real_limit() {
+        for huge in [
+            "99999999999999999999s",
+            "18446744073709552s",
+            "18446744073709551616us",
+        ] {
+            let error = encode(huge).unwrap_err();
+            assert_eq!(error, PeriodError::Huge(huge.into()));
+            let message = error.to_string();
+            assert!(message.contains("4294.967295 s"), "{message}");
+            assert!(!message.contains("18446744073709.551615"), "{message}");
+        }
     }
 
     #[test]

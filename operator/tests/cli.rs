@@ -558,3 +558,58 @@ fn user_guide_encode_examples_are_true() {
     }
     assert!(checked >= 7, "only {checked} examples found in the guide");
 }
+
+#[test]
+fn a_line_that_is_not_utf8_is_reported_with_its_number_and_decoding_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("damaged.log");
+    let mut log = b"(1700000000.000000) can0 205#01840302\n".to_vec();
+    log.extend_from_slice(b"(1700000000.000100) can0 \xff\xfe#00\n");
+    log.extend_from_slice(b"(1700000000.000900) can0 605#D8ADFFFF\r\n");
+    std::fs::write(&path, log).unwrap();
+    let output = amiro()
+        .args(["decode", "--file", path.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1));
+    let stdout = String::from_utf8(output.stdout).unwrap();
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 3, "{stdout}");
+    assert!(lines[0].contains("205#01840302"), "{stdout}");
+    assert!(
+        lines[1].starts_with("line 2: cannot read: not UTF-8 text"),
+        "{stdout}"
+    );
+    assert!(lines[2].contains("magnetometer-x: x -21032 nT"), "{stdout}");
+
+    let output = amiro()
+        .args(["decode", "--json", "--file", path.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let second: Value = serde_json::from_str(
+        String::from_utf8(output.stdout)
+            .unwrap()
+            .lines()
+            .nth(1)
+            .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(second["line"], 2);
+    assert_eq!(second["error"], "not-text");
+}
+
+#[test]
+fn a_period_too_long_to_count_names_the_firmware_limit() {
+    let (ok, _, stderr) = run(&[
+        "encode",
+        "publish",
+        "gyroscope",
+        "--every",
+        "99999999999999999999s",
+        "--priority",
+        "high",
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("4294.967295 s"), "{stderr}");
+    assert!(!stderr.contains("18446744073709"), "{stderr}");
+}

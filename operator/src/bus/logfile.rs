@@ -5,14 +5,14 @@
 //! onto a real bus with can-utils' `canplayer`.
 
 use std::fs::{File, OpenOptions};
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 
 use super::{interrupted, Bus, Reception};
-use crate::frame::{parse_line, LoggedFrame, RawFrame, Timestamp};
+use crate::frame::{parse_line, text_lines, FrameTextError, LoggedFrame, RawFrame, Timestamp};
 
 /// Interface name written into log lines, so that `canplayer` can map it (`canplayer can0=vcan0 ...`).
 const LOG_INTERFACE: &str = "can0";
@@ -61,8 +61,7 @@ impl Bus for LogWriter {
 /// Reads frames from a log file, optionally at the pace they were recorded.
 pub struct LogReader {
     path: PathBuf,
-    lines: std::io::Lines<BufReader<File>>,
-    line_number: usize,
+    lines: Box<dyn Iterator<Item = std::io::Result<(usize, Result<String, FrameTextError>)>>>,
     realtime: bool,
     /// The first frame's timestamp and the moment it was handed out: the origin of realtime pacing.
     pace_origin: Option<(Timestamp, Instant)>,
@@ -76,8 +75,7 @@ impl LogReader {
         let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
         Ok(Self {
             path: path.to_path_buf(),
-            lines: BufReader::new(file).lines(),
-            line_number: 0,
+            lines: Box::new(text_lines(BufReader::new(file))),
             realtime,
             pace_origin: None,
             waiting: None,
@@ -87,16 +85,12 @@ impl LogReader {
     /// The next frame in the file; lines that are not frames are reported on stderr and skipped.
     fn next_frame(&mut self) -> Result<Option<LoggedFrame>> {
         for line in self.lines.by_ref() {
-            self.line_number += 1;
-            let line = line.with_context(|| format!("cannot read {}", self.path.display()))?;
-            match parse_line(&line) {
+            let (number, line) =
+                line.with_context(|| format!("cannot read {}", self.path.display()))?;
+            match line.and_then(|line| parse_line(&line)) {
                 Ok(Some(frame)) => return Ok(Some(frame)),
                 Ok(None) => {}
-                Err(error) => eprintln!(
-                    "warning: {}:{}: {error}",
-                    self.path.display(),
-                    self.line_number
-                ),
+                Err(error) => eprintln!("warning: {}:{number}: {error}", self.path.display()),
             }
         }
         Ok(None)

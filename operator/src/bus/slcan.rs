@@ -30,6 +30,10 @@ const INTERFACE: &str = "slcan";
 
 const BELL: u8 = 0x07;
 const CR: u8 = b'\r';
+/// The longest message an adapter can mean: `T` + 8 id digits + length + 16 data digits + 4 timestamp digits is
+/// 30 bytes. Anything longer without a terminator is garbage (a wrong baud rate, a device that is not an adapter)
+/// and is dropped, so an adapter that never sends `\r` cannot grow our memory.
+pub const MAX_MESSAGE_LEN: usize = 64;
 
 /// One message from the adapter, without its terminator.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -44,6 +48,11 @@ pub enum AdapterMessage {
     Frame(RawFrame),
     /// Anything else (version strings, status flags, a garbled frame).
     Other(String),
+    /// More than [`MAX_MESSAGE_LEN`] bytes without a terminator; `bytes` of them were dropped.
+    Garbage {
+        /// How many bytes were dropped.
+        bytes: usize,
+    },
 }
 
 /// The SLCAN text of a frame to transmit, including the final `\r`: `t2054018403 02\r` for 205#01840302.
@@ -123,8 +132,10 @@ enum Wait {
 pub struct Slcan {
     path: PathBuf,
     port: File,
-    /// Bytes received but not yet ending in a terminator.
+    /// Bytes received but not yet ending in a terminator (at most `MAX_MESSAGE_LEN`).
     partial: Vec<u8>,
+    /// Bytes dropped from the current over-long line, reported once its end (or the next message) is seen.
+    dropped: usize,
     /// Complete messages read but not yet handed out.
     messages: VecDeque<AdapterMessage>,
     /// Frames that arrived while we were waiting for a command's answer.
@@ -148,6 +159,7 @@ impl Slcan {
             path: path.to_path_buf(),
             port,
             partial: Vec::new(),
+            dropped: 0,
             messages: VecDeque::new(),
             received: VecDeque::new(),
             channel_open: false,
@@ -186,6 +198,7 @@ impl Slcan {
                 Wait::Message(AdapterMessage::Refused) => return Ok(Some(false)),
                 Wait::Message(AdapterMessage::Frame(frame)) => self.received.push_back(frame),
                 Wait::Message(AdapterMessage::Other(text)) => warn_unknown(&text),
+                Wait::Message(AdapterMessage::Garbage { bytes }) => warn_garbage(bytes),
                 Wait::TimedOut => return Ok(None),
                 // Only an interruptible wait reports Ctrl-C, and this one is not.
                 Wait::Interrupted => return Ok(None),
@@ -250,22 +263,67 @@ impl Slcan {
 
     /// Splits incoming bytes into messages at `\r` and BEL.
     fn take_bytes(&mut self, bytes: &[u8]) {
-        for &byte in bytes {
-            match byte {
-                CR => {
-                    let message = std::mem::take(&mut self.partial);
-                    self.messages.push_back(parse_message(&message));
+        self.messages
+            .extend(split_messages(&mut self.partial, &mut self.dropped, bytes));
+    }
+}
+
+/// Splits adapter bytes into messages at `\r` and BEL, carrying an unfinished message over in `partial`. A line
+/// that grows past [`MAX_MESSAGE_LEN`] is dropped (counted in `dropped`) and reported as one `Garbage` message
+/// when it ends (and every 64 KiB while it does not): it is never kept, so memory stays bounded.
+pub fn split_messages(
+    partial: &mut Vec<u8>,
+    dropped: &mut usize,
+    bytes: &[u8],
+) -> Vec<AdapterMessage> {
+    let mut messages = Vec::new();
+    let mut end_garbage = |dropped: &mut usize, messages: &mut Vec<AdapterMessage>| {
+        if *dropped > 0 {
+            messages.push(AdapterMessage::Garbage { bytes: *dropped });
+            *dropped = 0;
+        }
+    };
+    for &byte in bytes {
+        match byte {
+            CR => {
+                if *dropped > 0 {
+                    *dropped += partial.len();
+                    partial.clear();
+                    end_garbage(dropped, &mut messages);
+                } else {
+                    let message = std::mem::take(partial);
+                    messages.push(parse_message(&message));
                 }
-                BELL => {
-                    self.partial.clear();
-                    self.messages.push_back(AdapterMessage::Refused);
+            }
+            BELL => {
+                *dropped += partial.len();
+                partial.clear();
+                end_garbage(dropped, &mut messages);
+                messages.push(AdapterMessage::Refused);
+            }
+            // Some adapters end lines with "\r\n"; the newline carries nothing.
+            b'\n' => {}
+            other => {
+                if partial.len() == MAX_MESSAGE_LEN {
+                    *dropped += partial.len();
+                    partial.clear();
                 }
-                // Some adapters end lines with "\r\n"; the newline carries nothing.
-                b'\n' => {}
-                other => self.partial.push(other),
+                partial.push(other);
             }
         }
     }
+    // A stream with no terminator at all is reported as it goes (one warning per 64 KiB), not only at its end.
+    if *dropped >= 65_536 {
+        end_garbage(dropped, &mut messages);
+    }
+    messages
+}
+
+fn warn_garbage(bytes: usize) {
+    eprintln!(
+        "warning: SLCAN adapter sent {bytes} bytes without a line end (longer than any SLCAN message); dropped. \
+         Wrong baud rate, or not an SLCAN adapter?"
+    );
 }
 
 fn warn_unknown(text: &str) {
@@ -308,6 +366,7 @@ impl Bus for Slcan {
                     eprintln!("warning: the SLCAN adapter signalled an error (BEL)")
                 }
                 Wait::Message(AdapterMessage::Other(text)) => warn_unknown(&text),
+                Wait::Message(AdapterMessage::Garbage { bytes }) => warn_garbage(bytes),
                 Wait::TimedOut => return Ok(Reception::TimedOut),
                 Wait::Interrupted => return Ok(Reception::Interrupted),
             }
@@ -424,6 +483,36 @@ mod tests {
         assert_eq!(
             parse_message(b"T1234ABCD1FF"),
             AdapterMessage::Frame(parse_compact("1234ABCD#FF").unwrap())
+        );
+    }
+
+    #[test]
+    fn an_adapter_that_never_ends_a_line_cannot_grow_memory() {
+        let (mut partial, mut dropped) = (Vec::new(), 0);
+        let mut garbage = 0;
+        for _ in 0..1000 {
+            for message in split_messages(&mut partial, &mut dropped, &[b'A'; 1000]) {
+                match message {
+                    AdapterMessage::Garbage { bytes } => garbage += bytes,
+                    other => panic!("unexpected {other:?}"),
+                }
+            }
+            assert!(
+                partial.len() <= MAX_MESSAGE_LEN,
+                "{} bytes kept",
+                partial.len()
+            );
+        }
+        // Reported while it goes on, and the rest when the line finally ends; then frames read normally again.
+        assert!(garbage >= 900_000, "{garbage}");
+        let after = split_messages(&mut partial, &mut dropped, b"\rt6054D8ADFFFF\r");
+        let AdapterMessage::Garbage { bytes } = after[0] else {
+            panic!("{after:?}")
+        };
+        assert_eq!(garbage + bytes, 1_000_000);
+        assert_eq!(
+            after[1],
+            AdapterMessage::Frame(parse_compact("605#D8ADFFFF").unwrap())
         );
     }
 
