@@ -161,6 +161,28 @@ pub enum TraceKind {
         /// How many.
         count: u32,
     },
+    /// An LED command set an LED's colour in the board's LED state (LightRing).
+    LedSet {
+        /// Protocol LED number, 1..=8.
+        led: u8,
+        /// Red, green, blue as commanded.
+        rgb: [u8; 3],
+    },
+    /// The LED state was shifted into the LED driver and latched: every LED now shows its colour
+    /// (LightRing). `changed` has bit n−1 set for each LED n whose colour changed with this latch.
+    LedsLatched {
+        /// LEDs whose colour changed.
+        changed: u8,
+    },
+    /// The CAN controller's error state changed (error-active 0, warning 1, passive 2, bus-off 3).
+    CanBusState {
+        /// The state now.
+        state: u8,
+        /// Transmit error counter.
+        tec: u8,
+        /// Receive error counter.
+        rec: u8,
+    },
 }
 
 impl TraceKind {
@@ -217,6 +239,9 @@ impl TraceKind {
             TraceKind::QueueOverflow { .. } => "queue-overflow",
             TraceKind::MotorsStopped { .. } => "motors-stopped",
             TraceKind::EventsLost { .. } => "events-lost",
+            TraceKind::LedSet { .. } => "led-set",
+            TraceKind::LedsLatched { .. } => "leds-latched",
+            TraceKind::CanBusState { .. } => "can-bus-state",
         }
     }
 
@@ -234,6 +259,9 @@ impl TraceKind {
             TraceKind::QueueOverflow { .. } => 9,
             TraceKind::MotorsStopped { .. } => 10,
             TraceKind::EventsLost { .. } => 11,
+            TraceKind::LedSet { .. } => 12,
+            TraceKind::LedsLatched { .. } => 13,
+            TraceKind::CanBusState { .. } => 14,
         }
     }
 }
@@ -337,6 +365,12 @@ impl TraceEvent {
             }
             TraceKind::MotorsStopped { reason } => writer.put(&[reason.code()]),
             TraceKind::EventsLost { count } => writer.put(&count.to_le_bytes()),
+            TraceKind::LedSet { led, rgb } => {
+                writer.put(&[led]);
+                writer.put(&rgb);
+            }
+            TraceKind::LedsLatched { changed } => writer.put(&[changed]),
+            TraceKind::CanBusState { state, tec, rec } => writer.put(&[state, tec, rec]),
         }
         record
     }
@@ -384,6 +418,18 @@ impl TraceEvent {
             }
             11 => TraceKind::EventsLost {
                 count: reader.u32(),
+            },
+            12 => TraceKind::LedSet {
+                led: reader.u8(),
+                rgb: [reader.u8(), reader.u8(), reader.u8()],
+            },
+            13 => TraceKind::LedsLatched {
+                changed: reader.u8(),
+            },
+            14 => TraceKind::CanBusState {
+                state: reader.u8(),
+                tec: reader.u8(),
+                rec: reader.u8(),
             },
             tag => return Err(TraceDecodeError::UnknownTag { tag }),
         };
@@ -487,6 +533,16 @@ impl fmt::Display for TraceEvent {
             } => write!(f, " {topic} missed={missed} late={late_us}us"),
             TraceKind::MotorsStopped { reason } => write!(f, " {}", reason.name()),
             TraceKind::EventsLost { count } => write!(f, " count={count}"),
+            TraceKind::LedSet {
+                led,
+                rgb: [r, g, b],
+            } => {
+                write!(f, " led={led} rgb={r:02X}{g:02X}{b:02X}")
+            }
+            TraceKind::LedsLatched { changed } => write!(f, " changed={changed:08b}"),
+            TraceKind::CanBusState { state, tec, rec } => {
+                write!(f, " state={state} tec={tec} rec={rec}")
+            }
         }
     }
 }

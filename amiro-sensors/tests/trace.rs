@@ -40,6 +40,9 @@ fn arb_kind() -> impl Strategy<Value = TraceKind> {
         id.prop_map(|id| TraceKind::QueueOverflow { id }),
         stop.prop_map(|reason| TraceKind::MotorsStopped { reason }),
         any::<u32>().prop_map(|count| TraceKind::EventsLost { count }),
+        (any::<u8>(), any::<[u8; 3]>()).prop_map(|(led, rgb)| TraceKind::LedSet { led, rgb }),
+        any::<u8>().prop_map(|changed| TraceKind::LedsLatched { changed }),
+        any::<[u8; 3]>().prop_map(|[state, tec, rec]| TraceKind::CanBusState { state, tec, rec }),
     ]
 }
 

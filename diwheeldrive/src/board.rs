@@ -6,12 +6,10 @@
 //! sensors, motor PWM on TIM2 partial remap 1 (PA15 left fwd, PB3 left back, PA2 right fwd,
 //! PA3 right back) into an A3906, POWER_EN PB2, encoders on TIM3 full remap (PC6/PC7, left) and
 //! TIM4 (PB6/PB7, right), SYS_SYNC_N PC1, SYS_PD_N PC8, status LED PA1 (active low).
-use bxcan::filter::Mask32;
-use bxcan::{Fifo, Interrupts, StandardId};
+use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use embedded_hal_bus::spi::{AtomicDevice, NoDelay};
 use embedded_hal_bus::util::AtomicCell;
 use stm32f1xx_hal::afio::AfioExt;
-use stm32f1xx_hal::can::Can;
 use stm32f1xx_hal::gpio::{
     GpioExt, OpenDrain, Output, PinState, PushPull, PA1, PB2, PC1, PC13, PC14, PC8,
 };
@@ -20,7 +18,6 @@ use stm32f1xx_hal::pac::{self, I2C1, I2C2, SPI1};
 use stm32f1xx_hal::prelude::*;
 use stm32f1xx_hal::rcc;
 use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
-use stm32f1xx_hal::watchdog::IndependentWatchdog;
 
 /// The board's CAN bit timing at 1 Mbit/s from a 36 MHz APB1: the original firmware's BTR
 /// (18 MHz quanta, 1 + 14 + 3 tq, sample point 83 %).
@@ -47,10 +44,12 @@ pub type AccelSpi = AtomicDevice<'static, ImuBus, PC13<Output<PushPull>>, NoDela
 pub type CompassI2c = BlockingI2c<I2C1>;
 /// I2C2: the PCA9544A multiplexer and the floor sensors.
 pub type FloorI2c = BlockingI2c<I2C2>;
-/// The CAN controller's transmit mailboxes (register level, see `can::Mailboxes`).
-pub type CanTxPort = crate::can::Mailboxes;
-/// The CAN controller's receive FIFO 0 (read at register level, see `can::Fifo0`).
-pub type CanRxPort = crate::can::Fifo0;
+/// The CAN controller's transmit mailboxes (the runtime's register-level driver).
+pub type CanTxPort = Mailboxes<Mmio>;
+/// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
+pub type CanRxPort = Fifo0<Mmio>;
+/// The board's monotonic clock (TIM5).
+pub type Clock = crate::mono::Clock;
 
 /// Everything `init` hands on to the tasks.
 pub struct Board {
@@ -72,8 +71,6 @@ pub struct Board {
     pub encoders: Encoders,
     /// System signals.
     pub signals: SystemSignals,
-    /// The independent watchdog (started by `start_watchdog`).
-    pub watchdog: IndependentWatchdog,
 }
 
 /// The module's system-bus signals.
@@ -86,26 +83,18 @@ pub struct SystemSignals {
     pub led: PA1<Output<OpenDrain>>,
 }
 
-/// Switches the clock tree back to the internal oscillator with the PLL off.
-///
-/// AMiRo-BLT hands over with the PLL already running as the system clock; the PLL cannot be
-/// reconfigured while it drives SYSCLK, so start from the reset state before the HAL sets it up.
-fn clock_tree_to_reset_state(rcc: &pac::RCC) {
-    rcc.cr().modify(|_, w| w.hsion().set_bit());
-    while rcc.cr().read().hsirdy().bit_is_clear() {}
-    rcc.cfgr().modify(|_, w| w.sw().hsi());
-    while !rcc.cfgr().read().sws().is_hsi() {}
-    rcc.cr().modify(|_, w| w.pllon().clear_bit());
-    while rcc.cr().read().pllrdy().bit_is_set() {}
-}
-
 /// Brings the board up. `spi_cell` is the static home of the SPI bus the two IMU devices share.
 pub fn init(
     dp: pac::Peripherals,
     mut cp: cortex_m::Peripherals,
     spi_cell: &'static mut Option<AtomicCell<ImuBus>>,
 ) -> (Board, cortex_m::peripheral::NVIC) {
-    clock_tree_to_reset_state(&dp.RCC);
+    if let Err(fault) = amiro_firmware::chip::clock_tree_to_reset_state() {
+        amiro_firmware::log!(
+            "clock reset: {:?} (continuing on the clock AMiRo-BLT left)",
+            fault
+        );
+    }
     // AMiRo-BLT used bxCAN: reset it so no filter, mode bit (e.g. TX FIFO priority) or pending
     // mailbox of the bootloader's survives into the application's configuration.
     dp.RCC.apb1rstr().modify(|_, w| w.canrst().set_bit());
@@ -221,35 +210,33 @@ pub fn init(
         I2C_TIMEOUT_US,
     );
 
-    // CAN1 on PA11/PA12 at 1 Mbit/s. Only command frames (C/S bit 0, standard IDs, data frames)
-    // pass the hardware filter; TX mailboxes are served by identifier, as the analysis assumes.
-    let can = Can::new(dp.CAN, dp.USB, (gpioa.pa12, gpioa.pa11), &mut rcc);
-    let mut can = bxcan::Can::builder(can)
-        .set_bit_timing(CAN_BTR)
-        .set_automatic_retransmit(true)
-        .leave_disabled();
-    {
-        let mut filter = Mask32::frames_with_std_id(
-            StandardId::new(0).unwrap_or(StandardId::ZERO),
-            StandardId::new(0x400).unwrap_or(StandardId::ZERO),
-        );
-        filter.data_frames_only();
-        can.modify_filters().enable_bank(0, Fifo::Fifo0, filter);
+    // CAN1 on PA11/PA12 at 1 Mbit/s (no remap): RX floating input, TX alternate push-pull. The
+    // runtime's driver configures the controller: only command frames (C/S bit 0, standard IDs,
+    // data frames) pass the hardware filter; TX mailboxes are served by identifier, as the analysis
+    // assumes; automatic bus-off recovery.
+    let _can_rx_pin = gpioa.pa11.into_floating_input(&mut gpioa.crh);
+    let _can_tx_pin = gpioa.pa12.into_alternate_push_pull(&mut gpioa.crh);
+    // SAFETY: one bit in a register only init touches (the HAL has consumed its RCC handle).
+    unsafe {
+        (*pac::RCC::ptr())
+            .apb1enr()
+            .modify(|_, w| w.canen().set_bit())
+    };
+    // SAFETY: CAN1 is this board's only CAN block; its halves are owned by one task each.
+    let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
+    if let Err(e) = bxcan::configure(&can, CAN_BTR) {
+        // The controller stays configured and joins once the bus frees; the error is logged.
+        amiro_firmware::log!("CAN set-up: {:?}", e);
     }
-    can.enable_interrupts(Interrupts::TRANSMIT_MAILBOX_EMPTY | Interrupts::FIFO0_MESSAGE_PENDING);
-    // Joining the bus needs 11 recessive bits; don't wait for it here, the hardware finishes it.
-    let _ = can.enable_non_blocking();
-    // bxcan's receive half is not used: `can::Fifo0` reads the FIFO without its DLC > 8 panic.
-    let (_tx, _rx0, _) = can.split();
-    let can_tx = crate::can::Mailboxes::new();
-    let can_rx = crate::can::Fifo0;
+    let can_tx = Mailboxes::new(can);
+    let can_rx = Fifo0::new(can);
 
-    let watchdog = IndependentWatchdog::new(dp.IWDG);
     let signals = SystemSignals {
         sys_sync,
         sys_pd,
         led,
     };
+    let _ = dp.IWDG;
     (
         Board {
             can_tx,
@@ -261,7 +248,6 @@ pub fn init(
             motors,
             encoders,
             signals,
-            watchdog,
         },
         cp.NVIC,
     )
@@ -269,7 +255,7 @@ pub fn init(
 
 /// Setting a push-pull chip select high cannot fail on this chip.
 fn unreachable_pin() -> ! {
-    crate::fault::halt()
+    amiro_firmware::fault::halt()
 }
 
 /// The two DC motors: TIM2 PWM into the A3906 H-bridge, and the POWER_EN switch.
@@ -354,9 +340,8 @@ fn split_duty(duty: i16) -> (u16, u16) {
     }
 }
 
-/// Stops the motors from any context, whatever state the program is in: POWER_EN low, PWM zero.
-///
-/// Used by the panic and HardFault handlers, so it touches the registers directly.
+/// DiWheelDrive's safe state, from any context, whatever state the program is in: POWER_EN low,
+/// PWM zero. The runtime's panic, HardFault and hand-over paths call it first.
 pub fn emergency_motors_off() {
     // SAFETY: single writes of "off" values; racing with a task at worst repeats them.
     unsafe {
@@ -408,30 +393,32 @@ impl Encoders {
     }
 }
 
-impl SystemSignals {
+impl amiro_firmware::signals::SystemSignals for SystemSignals {
     /// Releases SYS_SYNC_N: this module is initialised.
-    pub fn release_sync(&mut self) {
+    fn release_sync(&mut self) {
         self.sys_sync.set_high();
     }
 
     /// Acknowledges the SYS_PD_N edge interrupt.
-    pub fn clear_shutdown_interrupt(&mut self) {
+    fn clear_shutdown_interrupt(&mut self) {
         // SAFETY: writing 1 clears only line 8's pending bit.
         unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(SYS_PD_LINE)) };
     }
 
     /// Whether SYS_PD_N reads low (a shutdown is requested), whatever the edge detector saw.
-    pub fn shutdown_requested(&self) -> bool {
+    fn shutdown_requested(&self) -> bool {
         // SAFETY: a read of GPIOC's input data register.
         unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 8) == 0 }
     }
 
     /// Pulls SYS_SYNC_N low: the first step of the shutdown protocol (AMiRo-BLT then counts the
     /// power board's pulses on it to learn which low-power mode to enter).
-    pub fn pull_sync_low(&mut self) {
+    fn pull_sync_low(&mut self) {
         self.sys_sync.set_low();
     }
+}
 
+impl SystemSignals {
     /// Status LED (active low).
     pub fn set_led(&mut self, on: bool) {
         if on {
@@ -445,9 +432,6 @@ impl SystemSignals {
 /// Interrupt that runs the transmit path.
 pub const CAN_TX_INTERRUPT: pac::Interrupt = pac::Interrupt::USB_HP_CAN_TX;
 
-/// The independent watchdog.
-pub type Watchdog = IndependentWatchdog;
-
 /// Starts the TIM5 monotonic (APB1 timers run at 2 × 36 MHz).
 pub fn start_monotonic(priority: u8) {
     // SAFETY: init owns TIM5 and RCC at this point; the monotonic takes TIM5 over for good.
@@ -455,43 +439,5 @@ pub fn start_monotonic(priority: u8) {
     crate::mono::Tim5Backend::start(tim5, rcc, SYSCLK_HZ, priority);
 }
 
-/// Starts the independent watchdog.
-pub fn start_watchdog(dog: &mut Watchdog, timeout_ms: u32) {
-    dog.start(timeout_ms.millis());
-}
-
-/// Feeds the independent watchdog.
-pub fn feed_watchdog(dog: &mut Watchdog) {
-    dog.feed();
-}
-
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI9_5;
-
-/// Hands over to AMiRo-BLT's shutdown handling (never returns on a robot); parks otherwise.
-///
-/// The bootloader's handler must not be pre-empted and may wait for the other modules for a long
-/// time, so first: interrupts off and cleared, the monotonic and CAN interrupts stopped, and the
-/// independent watchdog (which cannot be stopped) stretched to its longest period (~26 s).
-pub fn hand_over_shutdown() -> ! {
-    cortex_m::interrupt::disable();
-    emergency_motors_off();
-    // SAFETY: from here on nothing else runs; these are the application's last register writes.
-    unsafe {
-        let nvic = &*cortex_m::peripheral::NVIC::PTR;
-        for (enable, pending) in nvic.icer.iter().zip(nvic.icpr.iter()) {
-            enable.write(u32::MAX);
-            pending.write(u32::MAX);
-        }
-        (*pac::TIM5::ptr()).cr1().modify(|_, w| w.cen().clear_bit());
-        (*pac::CAN::ptr()).ier().write(|w| w.bits(0));
-        let iwdg = &*pac::IWDG::ptr();
-        iwdg.kr().write(|w| w.bits(0x5555));
-        iwdg.pr().write(|w| w.bits(0b110));
-        iwdg.rlr().write(|w| w.bits(0xFFF));
-        while iwdg.sr().read().bits() != 0 {}
-        iwdg.kr().write(|w| w.bits(0xAAAA));
-    }
-    crate::bootloader::hand_over_shutdown();
-    crate::fault::halt()
-}

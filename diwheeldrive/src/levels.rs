@@ -35,11 +35,6 @@ pub const fn rtic_priority(p: Priority) -> u8 {
     }
 }
 
-/// Index of a CAN priority level in per-level arrays (0 = urgent).
-pub const fn level_index(p: Priority) -> usize {
-    p as usize
-}
-
 // The mapping is checked where it is defined, at compile time: a more urgent CAN priority must get a
 // strictly higher RTIC priority, and every publisher must stay below command handling, which stays
 // below the CAN interrupts, which stay below the shutdown request and the monotonic.
@@ -53,5 +48,4 @@ const _: () = {
     assert!(CAN_RX > CAN_TX);
     assert!(SHUTDOWN > CAN_TX);
     assert!(MONOTONIC > SHUTDOWN);
-    assert!(level_index(Priority::Urgent) == 0 && level_index(Priority::Low) == 3);
 };

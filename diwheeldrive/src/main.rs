@@ -1,8 +1,8 @@
 //! DiWheelDrive firmware (STM32F103xE, board revision 1-1): the RTIC app.
 //!
 //! This file is wiring only: resources, bindings, priorities. Every task body locks what it needs
-//! and calls host-tested code from `amiro-can` and `amiro-sensors`; the chip is behind `board`
-//! (or `qemu` for the QEMU build of this same app).
+//! and calls the runtime (`amiro-firmware`) or host-tested code from `amiro-can` and
+//! `amiro-sensors`; the chip is behind `board` (or `qemu` for the QEMU build of this same app).
 //!
 //! Task priorities (RTIC, higher = more urgent; the mapping of CAN priorities lives in `levels`):
 //! `shutdown`, `can_rx` 7 · `can_tx` 6 · `handle_commands`, `motor_control` 5 ·
@@ -11,18 +11,14 @@
 #![no_std]
 #![no_main]
 
-#[cfg(not(feature = "qemu"))]
-mod bootloader;
-mod can;
-mod fault;
+mod actuators;
 mod levels;
-mod mono;
-mod publisher;
 mod sensors;
-mod telemetry;
 
 #[cfg(not(feature = "qemu"))]
 mod board;
+#[cfg(not(feature = "qemu"))]
+mod mono;
 #[cfg(not(feature = "qemu"))]
 use board as platform;
 #[cfg(feature = "qemu")]
@@ -30,7 +26,10 @@ mod qemu;
 #[cfg(feature = "qemu")]
 use qemu as platform;
 
-/// The AMiRo-BLT checksum slot (see `memory.x`): erased flash until the bootloader or
+// Panic, HardFault and the hand-over stop the motors first.
+amiro_firmware::safe_state!(platform::emergency_motors_off);
+
+/// The AMiRo-BLT checksum slot (see `amiro_firmware::layout`): erased flash until the bootloader or
 /// `cargo xtask flash` writes the word that makes the first vector words sum to zero.
 #[cfg(not(any(feature = "bare-chip", feature = "qemu")))]
 #[link_section = ".blt_checksum"]
@@ -47,19 +46,30 @@ pub const MOTOR_PERIOD_US: u64 = 10_000;
 pub const WATCHDOG_PERIOD_US: u64 = 100_000;
 /// Independent watchdog timeout.
 pub const WATCHDOG_TIMEOUT_MS: u32 = 500;
+/// The watchdog's timeout during the boot (started first thing in `init`).
+pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
+/// The command handler takes at most one command per this interval (`docs/analysis.md`, "The
+/// command handler"): what command handling can cost is bounded, whatever arrives on the bus.
+pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
+
+/// The clock every task uses (TIM5 on the robot, SysTick in QEMU).
+type Clock = platform::Clock;
 
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4, UART5, TIM6, TIM7, SDIO, DMA2_CHANNEL1])]
 mod app {
-    use crate::can::{CanRx, CanTx, RxFrame, Transmit};
-    use crate::publisher::{self, Liveness};
-    use crate::sensors::{Compass, Floor, Imu};
-    use crate::{levels, mono, platform, telemetry, RX_QUEUE_LEN, TX_QUEUE_LEN};
+    use crate::sensors::{self, Compass, Floor, Imu};
+    use crate::{actuators, levels, platform, Clock, RX_QUEUE_LEN, TX_QUEUE_LEN};
     use amiro_can::{Board as CanBoard, Priority};
+    use amiro_firmware::can::RxFrame;
+    use amiro_firmware::liveness::Liveness;
+    use amiro_firmware::mono::Clock as _;
+    use amiro_firmware::signals::{self, SystemSignals as _};
+    use amiro_firmware::watchdog as iwdg;
+    use amiro_firmware::{bootloader, publisher, tasks};
     use amiro_sensors::drivers::floor::FloorSensors;
     use amiro_sensors::drivers::suite::{self, InertialSensors};
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
     use amiro_sensors::motion::DriveController;
-    use amiro_sensors::trace::{TraceEvent, TraceKind};
     use amiro_sensors::tx_queue::TxQueue;
     use rtic_sync::channel::{Receiver, Sender};
     use rtic_sync::make_channel;
@@ -81,7 +91,7 @@ mod app {
         compass: Compass,
         /// Floor sensors behind the I2C2 multiplexer.
         floor: Floor,
-        /// Progress marks the watchdog checks.
+        /// Motor control's progress mark for the watchdog.
         alive: Liveness,
     }
 
@@ -99,12 +109,13 @@ mod app {
         motors: platform::Motors,
         encoders: platform::Encoders,
         signals: platform::SystemSignals,
-        watchdog: platform::Watchdog,
     }
 
     #[init(local = [spi_bus: Option<embedded_hal_bus::util::AtomicCell<platform::ImuBus>> = None])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        telemetry::init();
+        // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
+        iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
+        amiro_firmware::telemetry::init();
         let (hw, _nvic) = platform::init(cx.device, cx.core, cx.local.spi_bus);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
         let (wake_u, wake_urgent) = make_channel!((), 1);
@@ -116,9 +127,9 @@ mod app {
         let compass = Compass::new(suite::Compass::new(hw.compass_i2c));
         let floor = Floor::new(FloorSensors::new(hw.floor_i2c));
         let mut signals = hw.signals;
-        crate::log!(
+        amiro_firmware::log!(
             "DiWheelDrive: sensors {}",
-            sensors_summary(&imu, &compass, &floor)
+            sensors::summary(&imu, &compass, &floor)
         );
 
         platform::start_monotonic(levels::MONOTONIC);
@@ -162,32 +173,14 @@ mod app {
                 motors: hw.motors,
                 encoders: hw.encoders,
                 signals,
-                watchdog: hw.watchdog,
             },
         )
-    }
-
-    fn sensors_summary(imu: &Imu, compass: &Compass, floor: &Floor) -> &'static str {
-        if imu.is_ready() && compass.is_ready() && floor.is_ready() {
-            "ready"
-        } else {
-            "partly missing (their topics answer nothing)"
-        }
     }
 
     /// CAN receive FIFO 0: move frames into the bounded command queue; a full queue drops and counts.
     #[task(binds = USB_LP_CAN_RX0, priority = 7, local = [can_rx, rx_frames])]
     fn can_rx(cx: can_rx::Context) {
-        while let Some(received) = CanRx::receive(cx.local.can_rx) {
-            match received {
-                Ok(frame) => {
-                    if cx.local.rx_frames.try_send(frame).is_err() {
-                        publisher::count_rx_dropped();
-                    }
-                }
-                Err(()) => publisher::count_rx_dropped(),
-            }
-        }
+        tasks::receive_frames(cx.local.can_rx, cx.local.rx_frames);
     }
 
     /// CAN transmit mailboxes: fill them from the priority queue, most urgent first. A frame that a
@@ -195,74 +188,41 @@ mod app {
     #[task(binds = USB_HP_CAN_TX, priority = 6, shared = [tx_queue], local = [can_tx])]
     fn can_tx(mut cx: can_tx::Context) {
         let port = cx.local.can_tx;
-        cx.shared.tx_queue.lock(|queue| {
-            // Frames whose mailbox was aborted for a more urgent one go back into the queue.
-            port.completed(&mut |aborted| {
-                let _ = queue.requeue(aborted);
-            });
-            while let Some(frame) = queue.peek().copied() {
-                match CanTx::transmit(port, &frame) {
-                    Transmit::Queued => {
-                        queue.pop();
-                        telemetry::trace(&TraceEvent::new(
-                            mono::now_us(),
-                            TraceKind::FrameSent {
-                                id: frame.id().raw(),
-                            },
-                        ));
-                    }
-                    Transmit::Busy => break,
-                }
-            }
-        });
+        cx.shared
+            .tx_queue
+            .lock(|queue| tasks::transmit_pending::<Clock, TX_QUEUE_LEN>(port, queue));
     }
 
     /// Decodes each command, updates the publisher table or the motor target, and wakes the
-    /// publisher levels whose schedule changed.
+    /// publisher levels whose schedule changed; at most one command per `COMMAND_MIN_INTERVAL_US`.
     #[task(priority = 5, shared = [handler, drive], local = [commands, wake_levels])]
     async fn handle_commands(mut cx: handle_commands::Context) {
-        while let Ok(frame) = cx.local.commands.recv().await {
-            if publisher::shutting_down() {
-                // Nothing may start a publisher or a motor again while handing over.
-                continue;
+        while let Some(frame) = tasks::next_command(cx.local.commands).await {
+            let started = Clock::now_us();
+            let outcome = tasks::handle_command::<Clock>(
+                &frame,
+                &mut cx.shared.handler,
+                cx.local.wake_levels,
+            );
+            if let Some((now, Outcome::Motor { command, .. })) = outcome {
+                cx.shared.drive.lock(|d| d.set_target(command, now));
             }
-            let now = mono::now_us();
-            let outcome = cx
-                .shared
-                .handler
-                .lock(|h| h.on_frame(now, frame.id, frame.payload()));
-            publisher::trace_outcome(now, frame.id, &outcome);
-            match outcome {
-                Ok(Outcome::Motor { command, .. }) => {
-                    cx.shared.drive.lock(|d| d.set_target(command, now))
-                }
-                Ok(Outcome::Sensor { wake, .. }) => {
-                    // Wake the levels whose schedule changed; each re-reads its next due time.
-                    for level in wake.iter() {
-                        if let Some(sender) =
-                            cx.local.wake_levels.get_mut(levels::level_index(level))
-                        {
-                            let _ = sender.try_send(());
-                        }
-                    }
-                }
-                _ => {}
-            }
+            Clock::delay_until_us(started + crate::COMMAND_MIN_INTERVAL_US).await;
         }
     }
 
     /// The wheel speed controller at 100 Hz, with the dead-man stop.
     #[task(priority = 5, shared = [drive, alive], local = [motors, encoders])]
     async fn motor_control(mut cx: motor_control::Context) {
-        let mut next = mono::now_us();
+        let mut next = Clock::now_us();
         loop {
             next += crate::MOTOR_PERIOD_US;
-            mono::delay_until_us(next).await;
+            Clock::delay_until_us(next).await;
             let (left, right) = cx.local.encoders.counts();
-            let now = mono::now_us();
+            let now = Clock::now_us();
             let output = cx.shared.drive.lock(|d| d.update(now, left, right));
-            publisher::apply_drive(cx.local.motors, now, &output);
-            cx.shared.alive.lock(|a| a.motor_control_ran());
+            actuators::apply_drive(cx.local.motors, now, &output);
+            cx.shared.alive.lock(|a| a.mark());
         }
     }
 
@@ -270,15 +230,14 @@ mod app {
     #[task(priority = 4, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_urgent])]
     async fn publish_urgent(cx: publish_urgent::Context) {
         let s = cx.shared;
-        publisher::serve_level(
+        let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             Priority::Urgent,
             cx.local.wake_urgent,
             s.handler,
             s.tx_queue,
-            s.drive,
-            s.imu,
-            s.compass,
-            s.floor,
+            sampler,
+            platform::CAN_TX_INTERRUPT,
         )
         .await;
     }
@@ -287,15 +246,14 @@ mod app {
     #[task(priority = 3, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_high])]
     async fn publish_high(cx: publish_high::Context) {
         let s = cx.shared;
-        publisher::serve_level(
+        let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             Priority::High,
             cx.local.wake_high,
             s.handler,
             s.tx_queue,
-            s.drive,
-            s.imu,
-            s.compass,
-            s.floor,
+            sampler,
+            platform::CAN_TX_INTERRUPT,
         )
         .await;
     }
@@ -304,15 +262,14 @@ mod app {
     #[task(priority = 2, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_medium])]
     async fn publish_medium(cx: publish_medium::Context) {
         let s = cx.shared;
-        publisher::serve_level(
+        let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             Priority::Medium,
             cx.local.wake_medium,
             s.handler,
             s.tx_queue,
-            s.drive,
-            s.imu,
-            s.compass,
-            s.floor,
+            sampler,
+            platform::CAN_TX_INTERRUPT,
         )
         .await;
     }
@@ -321,30 +278,29 @@ mod app {
     #[task(priority = 1, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_low])]
     async fn publish_low(cx: publish_low::Context) {
         let s = cx.shared;
-        publisher::serve_level(
+        let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             Priority::Low,
             cx.local.wake_low,
             s.handler,
             s.tx_queue,
-            s.drive,
-            s.imu,
-            s.compass,
-            s.floor,
+            sampler,
+            platform::CAN_TX_INTERRUPT,
         )
         .await;
     }
 
     /// Feeds the independent watchdog — from the least urgent level, and only while motor control
     /// keeps running: a fed dog proves the whole schedule is alive.
-    #[task(priority = 1, shared = [alive], local = [watchdog])]
+    #[task(priority = 1, shared = [alive])]
     async fn watchdog(mut cx: watchdog::Context) {
-        platform::start_watchdog(cx.local.watchdog, crate::WATCHDOG_TIMEOUT_MS);
-        let mut next = mono::now_us();
+        iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
+        let mut next = Clock::now_us();
         loop {
             next += crate::WATCHDOG_PERIOD_US;
-            mono::delay_until_us(next).await;
-            if cx.shared.alive.lock(|a| a.take_motor_control_ran()) {
-                platform::feed_watchdog(cx.local.watchdog);
+            Clock::delay_until_us(next).await;
+            if cx.shared.alive.lock(|a| a.take()) {
+                iwdg::feed();
             }
         }
     }
@@ -352,42 +308,36 @@ mod app {
     /// SYS_PD_N fell: another module requests shutdown. Motors off first, then hand over.
     #[task(binds = EXTI9_5, priority = 7, local = [signals])]
     fn shutdown(cx: shutdown::Context) {
-        cx.local.signals.clear_shutdown_interrupt();
-        // A glitch is not a request: act only while the line is really low.
-        if !cx.local.signals.shutdown_requested() {
-            return;
+        if signals::on_shutdown_edge(cx.local.signals) {
+            platform::emergency_motors_off();
+            shutdown_sequence::spawn().ok();
         }
-        publisher::request_shutdown();
-        platform::emergency_motors_off();
-        cx.local.signals.pull_sync_low();
-        shutdown_sequence::spawn().ok();
     }
 
     /// Stops every publisher, lets the transmit queue drain, then calls AMiRo-BLT's shutdown handler.
     #[task(priority = 5, shared = [handler, tx_queue])]
     async fn shutdown_sequence(mut cx: shutdown_sequence::Context) {
-        let now = mono::now_us();
+        let now = Clock::now_us();
         cx.shared.handler.lock(|h| h.stop_all());
         // Motor control runs at this priority, so it cannot be half-way through re-enabling them.
         platform::emergency_motors_off();
-        telemetry::trace(&TraceEvent::new(
-            now,
-            TraceKind::MotorsStopped {
-                reason: amiro_sensors::trace::StopReason::Shutdown,
-            },
-        ));
+        actuators::trace_shutdown_stop(now);
         // Give the queued frames up to 10 ms to leave, then hand over regardless.
         let deadline = now + 10_000;
-        while cx.shared.tx_queue.lock(|q| q.len()) > 0 && mono::now_us() < deadline {
-            mono::delay_until_us(mono::now_us() + 1_000).await;
+        while cx.shared.tx_queue.lock(|q| q.len()) > 0 && Clock::now_us() < deadline {
+            Clock::delay_until_us(Clock::now_us() + 1_000).await;
         }
-        platform::hand_over_shutdown();
+        bootloader::hand_over(bootloader::Callback::HandleShutdownRequest);
     }
 
     /// QEMU only: replays the stimulus log as if its frames arrived on the bus.
     #[cfg(feature = "qemu")]
     #[task(priority = 7)]
     async fn stimulus(_cx: stimulus::Context) {
-        crate::qemu::replay_stimulus().await;
+        amiro_firmware::qemu::replay_stimulus(
+            platform::CAN_RX_INTERRUPT,
+            platform::SHUTDOWN_INTERRUPT,
+        )
+        .await;
     }
 }

@@ -88,6 +88,15 @@ pub type Compass = Group<suite::Compass<CompassI2c>>;
 /// Floor sensors behind the PCA9544A on I2C2.
 pub type Floor = Group<FloorSensors<FloorI2c>>;
 
+/// One word on the groups for the boot log.
+pub fn summary(imu: &Imu, compass: &Compass, floor: &Floor) -> &'static str {
+    if imu.is_ready() && compass.is_ready() && floor.is_ready() {
+        "ready"
+    } else {
+        "partly missing (their topics answer nothing)"
+    }
+}
+
 /// The odometry and velocity topics come from the drive controller, not from a bus.
 #[inline(never)]
 pub fn sample_drive(drive: &DriveController, topic: Topic) -> Samples {
@@ -96,4 +105,22 @@ pub fn sample_drive(drive: &DriveController, topic: Topic) -> Samples {
         let _ = samples.push(data);
     }
     samples
+}
+
+/// What DiWheelDrive samples for a topic: each topic locks only the device group it reads.
+pub fn sampler(
+    mut imu: impl rtic::Mutex<T = Imu>,
+    mut compass: impl rtic::Mutex<T = Compass>,
+    mut floor: impl rtic::Mutex<T = Floor>,
+    mut drive: impl rtic::Mutex<T = DriveController>,
+) -> impl amiro_firmware::publisher::Sampler {
+    move |topic: Topic, taken: u64| match topic {
+        Topic::Gyroscope | Topic::Accelerometer => imu.lock(|d| d.sample(topic, taken)),
+        Topic::MagnetometerX | Topic::MagnetometerY | Topic::MagnetometerZ => {
+            compass.lock(|d| d.sample(topic, taken))
+        }
+        Topic::FloorProximity => floor.lock(|d| d.sample(topic, taken)),
+        Topic::Odometry | Topic::Velocity => drive.lock(|d| sample_drive(d, topic)),
+        _ => Samples::new(),
+    }
 }

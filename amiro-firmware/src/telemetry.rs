@@ -1,8 +1,10 @@
-//! Where the board's words go: the handler's trace events and a human log.
+//! Where a board's words go: trace events and a human log.
 //!
-//! On the robot both go over RTT (channel 0: the human log, channel 1: trace events in their compact
-//! binary form, decoded on the host); in QEMU both go to the semihosting console as text lines that
-//! start with `#`, so a log of the run still reads as a candump file.
+//! On the robot both go over RTT (channel 0 `log`: the human log; channel 1 `trace`: trace events in
+//! their compact binary form, decoded on the host by `cargo xtask trace`). In the QEMU build both go
+//! to the semihosting console as text lines starting with `#`, so a run's output still reads as a
+//! candump file.
+use amiro_sensors::trace::TraceEvent;
 
 #[cfg(not(feature = "qemu"))]
 mod rtt {
@@ -24,7 +26,7 @@ mod rtt {
         critical_section::with(|cs| TRACE.borrow_ref_mut(cs).replace(channels.up.1));
     }
 
-    /// Writes one encoded trace event. The critical section lasts one short copy into the RTT ring.
+    /// Writes one encoded trace event; the critical section lasts one short copy into the ring.
     pub fn write_trace(bytes: &[u8]) {
         critical_section::with(|cs| {
             if let Some(channel) = TRACE.borrow_ref_mut(cs).as_mut() {
@@ -41,20 +43,25 @@ pub fn init() {
 }
 
 /// Emits one trace event.
-pub fn trace(event: &amiro_sensors::trace::TraceEvent) {
+pub fn trace(event: &TraceEvent) {
     #[cfg(not(feature = "qemu"))]
     rtt::write_trace(&event.encode());
     #[cfg(feature = "qemu")]
-    crate::qemu::print_trace(event);
+    cortex_m_semihosting::hprintln!("# {}", event);
 }
 
-/// Writes a line to the human log.
+/// Writes a line to the human log (RTT channel 0 on the robot, a `#` line in QEMU).
 #[macro_export]
 macro_rules! log {
-    ($($arg:tt)*) => {{
-        #[cfg(not(feature = "qemu"))]
-        rtt_target::rprintln!($($arg)*);
-        #[cfg(feature = "qemu")]
-        cortex_m_semihosting::hprintln!("# {}", format_args!($($arg)*));
-    }};
+    ($($arg:tt)*) => {
+        $crate::telemetry::log_fmt(format_args!($($arg)*))
+    };
+}
+
+/// The function behind [`log!`].
+pub fn log_fmt(args: core::fmt::Arguments<'_>) {
+    #[cfg(not(feature = "qemu"))]
+    rtt_target::rprintln!("{}", args);
+    #[cfg(feature = "qemu")]
+    cortex_m_semihosting::hprintln!("# {}", args);
 }

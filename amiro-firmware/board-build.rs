@@ -1,0 +1,30 @@
+//! The one build script of every board crate (`build = "../amiro-firmware/board-build.rs"`):
+//! writes the linker memory map for the board's chip family (from the target triple) and link
+//! (behind AMiRo-BLT by default, feature `bare-chip` or `qemu` otherwise), from
+//! `amiro_firmware::layout`.
+use std::{env, fs, path::PathBuf};
+
+use amiro_firmware::layout::{Family, Link, MemoryMap};
+
+fn main() {
+    let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
+    let target = env::var("TARGET").expect("cargo sets TARGET");
+    let family = Family::of_target(&target)
+        .unwrap_or_else(|| panic!("{target} is not an AMiRo chip target (thumbv7m / thumbv7em)"));
+    let link = if env::var_os("CARGO_FEATURE_QEMU").is_some() {
+        Link::Qemu
+    } else if env::var_os("CARGO_FEATURE_BARE_CHIP").is_some() {
+        Link::BareChip
+    } else {
+        Link::Bootloader
+    };
+    let mut memory_x = String::new();
+    MemoryMap::new(family, link)
+        .write_memory_x(&mut memory_x)
+        .expect("formatting into a String");
+    fs::write(out.join("memory.x"), memory_x).expect("write memory.x");
+    println!("cargo:rustc-link-search={}", out.display());
+    println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rustc-link-arg-bins=--nmagic");
+    println!("cargo:rustc-link-arg-bins=-Tlink.x");
+}

@@ -1,0 +1,96 @@
+//! The chip-family differences the runtime needs, and the clock-tree reset every board runs first.
+//!
+//! Register addresses from RM0008 (F1) and RM0090 (F4). Only what differs between the families is
+//! here; the bxCAN block, the IWDG and the core peripherals sit at the same place on both.
+
+/// RCC base address.
+#[cfg(feature = "f1")]
+const RCC: usize = 0x4002_1000;
+#[cfg(feature = "f4")]
+const RCC: usize = 0x4002_3800;
+/// RCC_CFGR offset.
+#[cfg(feature = "f1")]
+const RCC_CFGR: usize = 0x04;
+#[cfg(feature = "f4")]
+const RCC_CFGR: usize = 0x08;
+const RCC_CR: usize = 0x00;
+
+const CR_HSION: u32 = 1 << 0;
+const CR_HSIRDY: u32 = 1 << 1;
+const CR_HSEON: u32 = 1 << 16;
+const CR_HSERDY: u32 = 1 << 17;
+const CR_PLLON: u32 = 1 << 24;
+const CR_PLLRDY: u32 = 1 << 25;
+const CFGR_SW: u32 = 0b11;
+const CFGR_SWS: u32 = 0b11 << 2;
+
+/// How many times a clock flag is polled before the step is declared failed. HSI and PLL flags
+/// settle within microseconds; the crystal within a few milliseconds (ST's HSE_STARTUP_TIMEOUT is
+/// 100 ms, far more than this many reads take at 8 MHz).
+pub const CLOCK_POLLS: u32 = 200_000;
+
+/// A clock step that did not complete in [`CLOCK_POLLS`] reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ClockFault {
+    /// The internal oscillator never reported ready.
+    HsiNotReady,
+    /// SYSCLK did not switch to the internal oscillator.
+    SwitchToHsi,
+    /// The PLL did not stop.
+    PllStillRunning,
+    /// The 8 MHz crystal did not start.
+    HseNotReady,
+}
+
+fn rcc_read(offset: usize) -> u32 {
+    // SAFETY: a register of the RCC block of this chip family.
+    unsafe { core::ptr::read_volatile((RCC + offset) as *const u32) }
+}
+
+fn rcc_modify(offset: usize, f: impl FnOnce(u32) -> u32) {
+    let value = f(rcc_read(offset));
+    // SAFETY: as in `rcc_read`; called from `init` only, before anything else uses the RCC.
+    unsafe { core::ptr::write_volatile((RCC + offset) as *mut u32, value) }
+}
+
+fn poll(done: impl Fn() -> bool, fault: ClockFault) -> Result<(), ClockFault> {
+    if (0..CLOCK_POLLS).any(|_| done()) {
+        Ok(())
+    } else {
+        Err(fault)
+    }
+}
+
+/// Switches the clock tree back to the internal oscillator with the PLL off.
+///
+/// AMiRo-BLT hands over with the PLL already driving SYSCLK; the PLL cannot be reconfigured while
+/// it is the system clock, so every board starts from the reset state before its HAL sets the
+/// clocks up. Every wait is bounded.
+pub fn clock_tree_to_reset_state() -> Result<(), ClockFault> {
+    rcc_modify(RCC_CR, |r| r | CR_HSION);
+    poll(
+        || rcc_read(RCC_CR) & CR_HSIRDY != 0,
+        ClockFault::HsiNotReady,
+    )?;
+    rcc_modify(RCC_CFGR, |r| r & !CFGR_SW);
+    poll(
+        || rcc_read(RCC_CFGR) & CFGR_SWS == 0,
+        ClockFault::SwitchToHsi,
+    )?;
+    rcc_modify(RCC_CR, |r| r & !CR_PLLON);
+    poll(
+        || rcc_read(RCC_CR) & CR_PLLRDY == 0,
+        ClockFault::PllStillRunning,
+    )
+}
+
+/// Starts the crystal oscillator and waits (bounded) for it. A board whose crystal does not start
+/// runs from the internal oscillator instead (and logs the fault) rather than hang in its HAL's
+/// unbounded wait.
+pub fn start_crystal() -> Result<(), ClockFault> {
+    rcc_modify(RCC_CR, |r| r | CR_HSEON);
+    poll(
+        || rcc_read(RCC_CR) & CR_HSERDY != 0,
+        ClockFault::HseNotReady,
+    )
+}

@@ -1,0 +1,47 @@
+//! The firmware runtime every AMiRo board app is built on.
+//!
+//! Everything a board does the same way lives here once: the CAN path (one register-level bxCAN
+//! driver for the F103 and the F405), the monotonic glue, telemetry (RTT on the robot, semihosting in
+//! QEMU), the fault policy hook, the system signals and the AMiRo-BLT hand-over, the generic
+//! publisher loop, the independent watchdog, the clock-tree reset, and the QEMU platform. A board
+//! crate keeps only its `board.rs` (pins and devices), its sampling and its RTIC app (wiring).
+//!
+//! The portable core ([`can`], [`bxcan`], [`layout`]) builds and is tested on the host; the rest
+//! exists only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
+//! is enabled on a chip build; `qemu` selects the QEMU platform.
+#![cfg_attr(not(test), no_std)]
+#![deny(missing_docs)]
+
+pub mod bxcan;
+pub mod can;
+pub mod layout;
+
+#[cfg(target_os = "none")]
+pub mod bootloader;
+#[cfg(target_os = "none")]
+pub mod chip;
+#[cfg(target_os = "none")]
+pub mod fault;
+#[cfg(target_os = "none")]
+pub mod liveness;
+#[cfg(target_os = "none")]
+pub mod mono;
+#[cfg(target_os = "none")]
+pub mod publisher;
+#[cfg(all(target_os = "none", feature = "qemu"))]
+pub mod qemu;
+#[cfg(target_os = "none")]
+pub mod signals;
+#[cfg(target_os = "none")]
+pub mod tasks;
+#[cfg(target_os = "none")]
+pub mod telemetry;
+#[cfg(target_os = "none")]
+pub mod watchdog;
+
+#[cfg(all(target_os = "none", not(any(feature = "f1", feature = "f4"))))]
+compile_error!("amiro-firmware: enable the chip family feature `f1` or `f4`");
+#[cfg(all(feature = "f1", feature = "f4"))]
+compile_error!(
+    "amiro-firmware: `f1` and `f4` are exclusive (build one firmware per cargo invocation)"
+);

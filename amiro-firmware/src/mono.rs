@@ -1,0 +1,50 @@
+//! The monotonic glue: microseconds over whichever timer a board uses.
+//!
+//! Tasks and the runtime see time only as [`Clock`]: `now_us`, `delay_until_us`,
+//! `timeout_at_us`. [`TimerClock`] provides it over any rtic-time timer-queue backend with 64-bit
+//! ticks of `TICK_US` microseconds: DiWheelDrive's TIM5 half-period counter, rtic-monotonics' TIM3
+//! (LightRing) and TIM2 (PowerManagement), and the SysTick of the QEMU builds.
+//!
+//! Deadlock freedom: rtic-monotonics keeps its 64-bit tick counters in `portable_atomic::AtomicU64`,
+//! which thumbv7 has no instructions for. Its default emulation is a global spin lock; a timer
+//! interrupt that pre-empts a task inside `now()` then spins for ever on the lock the task holds
+//! (rtic-rs/rtic#1117: the QEMU build deadlocked under load). This crate enables
+//! portable-atomic's `unsafe-assume-single-core` (both chips are single-core Cortex-M), which
+//! emulates 64-bit atomics by masking interrupts for a few instructions instead: no lock to spin on.
+use core::future::Future;
+use core::marker::PhantomData;
+
+use rtic_time::timer_queue::TimerQueueBackend;
+
+/// Time as the tasks see it: microseconds since the monotonic started.
+pub trait Clock {
+    /// Microseconds since the monotonic started.
+    fn now_us() -> u64;
+    /// Waits until the monotonic reaches `at_us`.
+    fn delay_until_us(at_us: u64) -> impl Future<Output = ()>;
+    /// Runs `future` until it completes or the monotonic reaches `at_us`, whichever is first.
+    fn timeout_at_us<F: Future>(at_us: u64, future: F) -> impl Future<Output = Option<F::Output>>;
+}
+
+/// [`Clock`] over the timer queue of `B`, whose ticks are `TICK_US` microseconds.
+pub struct TimerClock<B, const TICK_US: u64>(PhantomData<B>);
+
+impl<B, const TICK_US: u64> Clock for TimerClock<B, TICK_US>
+where
+    B: TimerQueueBackend<Ticks = u64>,
+{
+    fn now_us() -> u64 {
+        B::timer_queue().now().saturating_mul(TICK_US)
+    }
+
+    async fn delay_until_us(at_us: u64) {
+        B::timer_queue().delay_until(at_us.div_ceil(TICK_US)).await
+    }
+
+    async fn timeout_at_us<F: Future>(at_us: u64, future: F) -> Option<F::Output> {
+        B::timer_queue()
+            .timeout_at(at_us.div_ceil(TICK_US), future)
+            .await
+            .ok()
+    }
+}

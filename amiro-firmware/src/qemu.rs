@@ -1,0 +1,245 @@
+//! The QEMU platform every board's QEMU build shares: the same app, with what the chip does
+//! replaced by what QEMU can run.
+//!
+//! QEMU emulates neither the STM32 clock tree nor bxCAN, so a QEMU build sets up no clock and no
+//! CAN hardware. Instead:
+//! - the monotonic is SysTick with a 10 µs tick ([`Clock`]), in deterministic virtual time under
+//!   `-icount`;
+//! - the CAN bus is a stimulus log replayed from the host (read through semihosting) into a virtual
+//!   3-frame receive FIFO that raises the board's real CAN receive interrupt, and virtual transmit
+//!   mailboxes that print every frame in `candump -l` format with its virtual-time stamp;
+//! - SYS_PD_N is a stimulus signal; SYS_SYNC_N edges are printed;
+//! - the free RAM is painted at boot so the end-of-run line reports the stack's high-water mark.
+//!
+//! Trace events and the human log are printed as lines starting with `#`; the run ends with one
+//! `# qemu: … at N us; …` line (see [`finish`]).
+use core::cell::RefCell;
+use core::fmt::Write as _;
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use cortex_m::interrupt::InterruptNumber;
+use cortex_m_semihosting::{debug, hprintln, syscall};
+use critical_section::Mutex;
+use heapless::{Deque, String};
+
+use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
+use crate::mono::{Clock as _, TimerClock};
+use crate::signals::SystemSignals;
+
+/// SysTick's clock: the core clock of the QEMU machine (netduino2's STM32F205 for the F1 boards,
+/// netduinoplus2's STM32F405 for the F4 board).
+#[cfg(feature = "f1")]
+pub const CORE_CLOCK_HZ: u32 = 120_000_000;
+#[cfg(feature = "f4")]
+pub const CORE_CLOCK_HZ: u32 = 168_000_000;
+
+/// SysTick ticks every 10 µs: a 1 µs tick would interrupt the emulated CPU every microsecond.
+pub const TICK_US: u64 = 10;
+rtic_monotonics::systick_monotonic!(Mono, 100_000);
+
+/// The QEMU build's clock.
+pub type Clock = TimerClock<rtic_monotonics::systick::SystickBackend, TICK_US>;
+
+static RX_FIFO: Mutex<RefCell<Deque<RxFrame, 3>>> = Mutex::new(RefCell::new(Deque::new()));
+static RX_OVERRUN: AtomicBool = AtomicBool::new(false);
+static SYS_PD_LOW: AtomicBool = AtomicBool::new(false);
+
+const STACK_PAINT: u32 = 0x5A5A_A5A5;
+
+extern "C" {
+    static mut __sheap: u32;
+    static _stack_start: u32;
+}
+
+/// Paints the free RAM, starts the SysTick monotonic. Call first thing in `init`.
+pub fn init(syst: cortex_m::peripheral::SYST) {
+    paint_stack();
+    Mono::start(syst, CORE_CLOCK_HZ);
+}
+
+/// Fills the free stack below the current stack pointer with a pattern, so the end of the run can
+/// tell how deep the stack ever went.
+fn paint_stack() {
+    let sp = cortex_m::register::msp::read() as usize;
+    // SAFETY: `__sheap` marks the end of .bss/.uninit; everything from there up to a margin below
+    // the live stack pointer is unused memory nobody else writes to.
+    unsafe {
+        let mut p = core::ptr::addr_of_mut!(__sheap) as usize;
+        while p + 64 < sp {
+            core::ptr::write_volatile(p as *mut u32, STACK_PAINT);
+            p += 4;
+        }
+    }
+}
+
+/// The deepest the stack has been, in bytes (from the top of RAM to the lowest overwritten word).
+pub fn stack_high_water() -> usize {
+    // SAFETY: reads the painted region back; see `paint_stack`.
+    unsafe {
+        let bottom = core::ptr::addr_of_mut!(__sheap) as usize;
+        let top = core::ptr::addr_of!(_stack_start) as usize;
+        let mut p = bottom;
+        while p < top && core::ptr::read_volatile(p as *const u32) == STACK_PAINT {
+            p += 4;
+        }
+        top - p
+    }
+}
+
+/// Static RAM (.data + .bss + .uninit), in bytes.
+pub fn static_ram() -> usize {
+    // Only the address of a linker symbol is taken.
+    core::ptr::addr_of_mut!(__sheap) as usize - crate::layout::RAM_BASE as usize
+}
+
+/// Virtual transmit mailboxes: a frame is on the bus the moment it is offered.
+pub struct CanTxPort;
+
+impl CanTx for CanTxPort {
+    fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
+        let mut line: String<64> = String::new();
+        let now = Clock::now_us();
+        let _ = write!(
+            line,
+            "({}.{:06}) can0 {:03X}#",
+            now / 1_000_000,
+            now % 1_000_000,
+            frame.id().raw()
+        );
+        for b in frame.data() {
+            let _ = write!(line, "{b:02X}");
+        }
+        hprintln!("{}", line);
+        Transmit::Queued
+    }
+
+    fn completed(&mut self, _on_completion: &mut dyn FnMut(Completion)) {}
+}
+
+/// Virtual receive FIFO (three frames deep, like bxCAN's).
+pub struct CanRxPort;
+
+impl CanRx for CanRxPort {
+    fn receive(&mut self) -> Option<RxEvent> {
+        if RX_OVERRUN.swap(false, Ordering::SeqCst) {
+            return Some(RxEvent::Overrun);
+        }
+        critical_section::with(|cs| RX_FIFO.borrow_ref_mut(cs).pop_front().map(RxEvent::Frame))
+    }
+}
+
+/// Simulated system signals: SYS_PD_N as the stimulus drives it, SYS_SYNC_N edges printed.
+pub struct Signals;
+
+impl SystemSignals for Signals {
+    fn release_sync(&mut self) {
+        hprintln!("# qemu: SYS_SYNC_N released");
+    }
+
+    fn pull_sync_low(&mut self) {
+        hprintln!("# qemu: SYS_SYNC_N pulled low");
+    }
+
+    fn shutdown_requested(&self) -> bool {
+        SYS_PD_LOW.load(Ordering::SeqCst)
+    }
+
+    fn clear_shutdown_interrupt(&mut self) {}
+}
+
+/// A stimulus record's size: `u64` µs, `u16` ID, `u8` length, `u8` flags, 8 data bytes.
+const RECORD: usize = 20;
+
+/// Replays `stimulus.bin` from the host into the virtual receive FIFO (pending the board's CAN
+/// receive interrupt `rx_irq`, and `shutdown_irq` for a SYS_PD_N record), then ends the run.
+pub async fn replay_stimulus(
+    rx_irq: impl InterruptNumber,
+    shutdown_irq: impl InterruptNumber,
+) {
+    let Some(file) = HostFile::open(b"stimulus.bin\0") else {
+        hprintln!("# qemu: cannot open stimulus.bin");
+        exit(false);
+        return;
+    };
+    let mut header = [0u8; 16];
+    if !file.read_exact(&mut header) || &header[..8] != b"AMSTIM1\0" {
+        hprintln!("# qemu: stimulus.bin has no AMSTIM1 header");
+        exit(false);
+        return;
+    }
+    let duration = le_u64(&header[8..16]);
+    let mut record = [0u8; RECORD];
+    while file.read_exact(&mut record) {
+        let at = le_u64(&record[0..8]);
+        if at > duration {
+            break;
+        }
+        Clock::delay_until_us(at).await;
+        if record[11] & 2 != 0 {
+            // SYS_PD_N falls: the same interrupt the real pin raises.
+            SYS_PD_LOW.store(true, Ordering::SeqCst);
+            cortex_m::peripheral::NVIC::pend(shutdown_irq);
+            continue;
+        }
+        let mut frame = RxFrame {
+            id: u16::from_le_bytes([record[8], record[9]]),
+            len: record[10].min(8),
+            data: [0; 8],
+        };
+        frame.data.copy_from_slice(&record[12..20]);
+        critical_section::with(|cs| {
+            if RX_FIFO.borrow_ref_mut(cs).push_back(frame).is_err() {
+                RX_OVERRUN.store(true, Ordering::SeqCst);
+            }
+        });
+        cortex_m::peripheral::NVIC::pend(rx_irq);
+    }
+    Clock::delay_until_us(duration).await;
+    finish("end of run");
+}
+
+fn le_u64(bytes: &[u8]) -> u64 {
+    let mut b = [0u8; 8];
+    b.copy_from_slice(&bytes[..8]);
+    u64::from_le_bytes(b)
+}
+
+/// Prints the run's last line (receive losses, static RAM, the stack's high-water mark) and ends
+/// the run successfully.
+pub fn finish(why: &str) {
+    hprintln!(
+        "# qemu: {} at {} us; rx dropped {}; rx overruns {}; ram static {} stack {}",
+        why,
+        Clock::now_us(),
+        crate::tasks::rx_dropped(),
+        crate::tasks::rx_overruns(),
+        static_ram(),
+        stack_high_water()
+    );
+    exit(true);
+}
+
+/// Ends the QEMU run.
+pub fn exit(success: bool) {
+    debug::exit(if success {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+}
+
+struct HostFile(usize);
+
+impl HostFile {
+    fn open(name_nul: &[u8]) -> Option<Self> {
+        // SAFETY: semihosting OPEN with a NUL-terminated name, mode 1 ("rb"), length without the NUL.
+        let fd = unsafe { syscall!(OPEN, name_nul.as_ptr(), 1, name_nul.len() - 1) };
+        (fd as isize >= 0).then_some(Self(fd))
+    }
+
+    fn read_exact(&self, buf: &mut [u8]) -> bool {
+        // SAFETY: semihosting READ into a buffer we own; it returns the number of bytes NOT read.
+        let left = unsafe { syscall!(READ, self.0, buf.as_mut_ptr(), buf.len()) };
+        left == 0
+    }
+}

@@ -1,0 +1,118 @@
+//! The bodies of the tasks every board runs the same way: CAN receive, CAN transmit, command
+//! handling. The board's RTIC app binds them to its interrupts and priorities (`levels`) and
+//! passes its resources in; nothing here knows which board it runs on.
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use amiro_can::Priority;
+use amiro_sensors::handler::{Outcome, Rejection, SensorDataHandler};
+use amiro_sensors::trace::{TraceEvent, TraceKind};
+use amiro_sensors::tx_queue::TxQueue;
+use rtic_sync::channel::{Receiver, Sender};
+
+use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
+use crate::mono::Clock;
+use crate::{signals, telemetry};
+
+static RX_DROPPED: AtomicU32 = AtomicU32::new(0);
+static RX_OVERRUNS: AtomicU32 = AtomicU32::new(0);
+
+/// Frames the board received but could not queue for the command handler (queue full).
+pub fn rx_dropped() -> u32 {
+    RX_DROPPED.load(Ordering::Relaxed)
+}
+
+/// Receive-FIFO overrun events: each lost at least one frame (a lower bound on frames lost).
+pub fn rx_overruns() -> u32 {
+    RX_OVERRUNS.load(Ordering::Relaxed)
+}
+
+/// The CAN receive interrupt: moves every frame from the FIFO into the bounded command queue; a
+/// full queue drops the frame and counts it, an overrun is counted.
+pub fn receive_frames<const N: usize>(
+    port: &mut impl CanRx,
+    queue: &mut Sender<'static, RxFrame, N>,
+) {
+    while let Some(event) = port.receive() {
+        match event {
+            RxEvent::Frame(frame) => {
+                if queue.try_send(frame).is_err() {
+                    RX_DROPPED.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            RxEvent::Overrun => {
+                RX_OVERRUNS.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+/// The CAN transmit interrupt: frames whose mailbox was aborted for a more urgent one go back into
+/// the queue; then the mailboxes are filled from the queue, most urgent first.
+pub fn transmit_pending<C: Clock, const N: usize>(port: &mut impl CanTx, queue: &mut TxQueue<N>) {
+    port.completed(&mut |completion| {
+        if let Completion::Aborted(frame) = completion {
+            let _ = queue.requeue(frame);
+        }
+    });
+    while let Some(frame) = queue.peek().copied() {
+        match port.transmit(&frame) {
+            Transmit::Queued => {
+                queue.pop();
+                telemetry::trace(&TraceEvent::new(
+                    C::now_us(),
+                    TraceKind::FrameSent {
+                        id: frame.id().raw(),
+                    },
+                ));
+            }
+            Transmit::Busy => break,
+        }
+    }
+}
+
+/// Emits the trace event for a command's outcome.
+pub fn trace_outcome(now: u64, id: u16, outcome: &Result<Outcome, Rejection>) {
+    telemetry::trace(&TraceEvent::new(now, TraceKind::for_command(id, outcome)));
+}
+
+/// Handles one command frame: decodes it against the board's publisher table, traces the outcome,
+/// wakes the publisher levels whose schedule changed, and returns an actuator outcome (motor, LED,
+/// …) for the board to apply. While the board shuts down nothing may start again: the frame is
+/// dropped unseen.
+pub fn handle_command<C: Clock>(
+    frame: &RxFrame,
+    mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    wake_levels: &mut [Sender<'static, (), 1>],
+) -> Option<(u64, Outcome)> {
+    if signals::shutting_down() {
+        return None;
+    }
+    let now = C::now_us();
+    let outcome = handler.lock(|h| h.on_frame(now, frame.id, frame.payload()));
+    trace_outcome(now, frame.id, &outcome);
+    match outcome {
+        Ok(Outcome::Sensor { wake, .. }) => {
+            // Wake the levels whose schedule changed; each re-reads its next due time.
+            for level in wake.iter() {
+                if let Some(sender) = wake_levels.get_mut(level_index(level)) {
+                    let _ = sender.try_send(());
+                }
+            }
+            None
+        }
+        Ok(other) => Some((now, other)),
+        Err(_) => None,
+    }
+}
+
+/// Index of a CAN priority level in per-level arrays (0 = urgent).
+pub const fn level_index(p: Priority) -> usize {
+    p as usize
+}
+
+/// Waits for the next command frame.
+pub async fn next_command<const N: usize>(
+    commands: &mut Receiver<'static, RxFrame, N>,
+) -> Option<RxFrame> {
+    commands.recv().await.ok()
+}
