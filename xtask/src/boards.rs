@@ -19,6 +19,8 @@ pub struct Board {
     pub app_base: u64,
     /// Offset from `app_base` of the word AMiRo-BLT writes its checksum into.
     pub checksum_slot: u64,
+    /// The QEMU machine its QEMU build (feature `qemu`) runs on.
+    pub qemu_machine: &'static str,
 }
 
 /// DiWheelDrive, PowerManagement and LightRing.
@@ -32,6 +34,7 @@ pub const BOARDS: [Board; 3] = [
         ram_bytes: 64 * 1024,
         app_base: 0x0800_6000,
         checksum_slot: 0x150,
+        qemu_machine: "netduino2",
     },
     Board {
         name: "powermgmt",
@@ -42,6 +45,7 @@ pub const BOARDS: [Board; 3] = [
         ram_bytes: 128 * 1024,
         app_base: 0x0800_8000,
         checksum_slot: 0x1AC,
+        qemu_machine: "netduinoplus2",
     },
     Board {
         name: "lightring",
@@ -52,6 +56,7 @@ pub const BOARDS: [Board; 3] = [
         ram_bytes: 64 * 1024,
         app_base: 0x0800_6000,
         checksum_slot: 0x150,
+        qemu_machine: "netduino2",
     },
 ];
 

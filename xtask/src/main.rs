@@ -52,7 +52,7 @@ enum Cmd {
     /// Run a board's QEMU build against a stimulus log in deterministic virtual time and print
     /// every frame it puts on the bus (candump -l format) and its trace events (`#` lines).
     Qemu {
-        /// The board (only diwheeldrive has a QEMU build so far).
+        /// The board: diwheeldrive, lightring or powermgmt.
         board: String,
         /// A candump -l log of timed command frames, timestamps relative to the start.
         #[arg(long)]
@@ -127,19 +127,30 @@ fn run(cmd: Cmd) -> Result<bool> {
             stimulus,
             duration,
         } => {
-            if board != "diwheeldrive" {
-                bail!("only diwheeldrive has a QEMU build");
-            }
+            let board =
+                boards::by_name(&board).with_context(|| format!("unknown board `{board}`"))?;
             ensure_qemu()?;
-            let elf = build_qemu(&root)?;
+            let elf = build_qemu(&root, board)?;
             let frames = qemu::read_stimulus(&stimulus)?;
+            let work = qemu::fresh_work_dir(&root, board.name);
             let out = qemu::run(
                 &elf,
+                board.qemu_machine,
                 &frames,
                 qemu::parse_duration(&duration)?,
-                &qemu::target_dir(&root).join("run"),
+                &work,
             )?;
             print!("{out}");
+            // The bus alone, as a plain `candump -l` log other CAN tools read (python-can,
+            // can-utils), and the trace lines apart.
+            let (bus, trace) = qemu::split_output(&out);
+            std::fs::write(work.join("bus.log"), bus)?;
+            std::fs::write(work.join("trace.log"), trace)?;
+            eprintln!(
+                "bus log (candump -l): {}\ntrace: {}",
+                work.join("bus.log").display(),
+                work.join("trace.log").display()
+            );
             Ok(true)
         }
         Cmd::Analyze(args) => {
@@ -289,7 +300,13 @@ fn check(root: &Path) -> Result<()> {
         "-D",
         "warnings",
     ];
-    cargo(&root.join("diwheeldrive"), &args).context("clippy on the QEMU build of diwheeldrive")?;
+    for board in BOARDS
+        .iter()
+        .filter(|b| !scenarios::for_board(b.name).is_empty())
+    {
+        cargo(&root.join(board.name), &args)
+            .with_context(|| format!("clippy on the QEMU build of {}", board.name))?;
+    }
     Ok(())
 }
 
@@ -385,69 +402,83 @@ fn analysis_gate(root: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Builds DiWheelDrive's QEMU variant (its own target dir: the features differ from the robot build).
-fn build_qemu(root: &Path) -> Result<PathBuf> {
+/// Builds a board's QEMU variant (its own target dir: the features differ from the robot build).
+fn build_qemu(root: &Path, board: &Board) -> Result<PathBuf> {
     let dir = qemu::target_dir(root);
     let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo_bin)
         .args(["build", "--release", "--quiet", "--features", "qemu"])
-        .current_dir(root.join("diwheeldrive"))
+        .current_dir(root.join(board.name))
         .env("CARGO_TARGET_DIR", &dir)
         .status()
-        .context("building the QEMU variant of diwheeldrive")?;
+        .with_context(|| format!("building the QEMU variant of {}", board.name))?;
     if !status.success() {
-        bail!("building the QEMU variant of diwheeldrive failed ({status})");
+        bail!(
+            "building the QEMU variant of {} failed ({status})",
+            board.name
+        );
     }
-    Ok(dir
-        .join("thumbv7m-none-eabi")
-        .join("release")
-        .join("diwheeldrive"))
+    Ok(dir.join(board.target).join("release").join(board.name))
 }
 
-/// Runs every QEMU scenario and checks its output.
+/// Runs every board's QEMU scenarios and checks their output.
 fn run_scenarios(root: &Path) -> Result<()> {
     ensure_qemu()?;
-    let elf = build_qemu(root)?;
     let bounds = scenarios::Bounds::from_analysis(root)?;
     let mut passed = 0;
     let mut failed = 0;
-    let mut ram_high_water = 0;
-    for scenario in scenarios::SCENARIOS {
-        let path = root
-            .join("diwheeldrive")
-            .join("qemu")
-            .join(format!("{}.log", scenario.name));
-        let result = (|| {
-            let frames = qemu::read_stimulus(&path)?;
-            let duration = scenarios::duration_of(&path)?;
-            let work = qemu::target_dir(root).join("scenarios").join(scenario.name);
-            let text = qemu::run(&elf, &frames, duration, &work)?;
-            std::fs::write(work.join("output.log"), &text)?;
-            let out = scenarios::RunOutput::parse(&text)?;
-            let (static_ram, stack) = out.ram_used()?;
-            ram_high_water = ram_high_water.max(static_ram + stack);
-            (scenario.check)(&out, &bounds)
-        })();
-        match result {
-            Ok(summary) => {
-                passed += 1;
-                println!("qemu scenario {:<16} ok: {summary}", scenario.name);
-            }
-            Err(e) => {
-                failed += 1;
-                println!(
-                    "qemu scenario {:<16} FAILED ({}): {e:#}",
-                    scenario.name, scenario.about
-                );
+    for board in BOARDS.iter() {
+        let list = scenarios::for_board(board.name);
+        if list.is_empty() {
+            continue;
+        }
+        let elf = build_qemu(root, board)?;
+        let mut ram_high_water = 0;
+        for scenario in list {
+            let path = root
+                .join(board.name)
+                .join("qemu")
+                .join(format!("{}.log", scenario.name));
+            let work = qemu::target_dir(root)
+                .join("scenarios")
+                .join(board.name)
+                .join(scenario.name);
+            let result = (|| {
+                let frames = qemu::read_stimulus(&path)?;
+                let duration = scenarios::duration_of(&path)?;
+                let text = qemu::run(&elf, board.qemu_machine, &frames, duration, &work)?;
+                let out = scenarios::RunOutput::parse(&text)?;
+                let (static_ram, stack) = out.ram_used()?;
+                ram_high_water = ram_high_water.max(static_ram + stack);
+                (scenario.check)(&out, &bounds)
+            })();
+            match result {
+                Ok(summary) => {
+                    passed += 1;
+                    println!(
+                        "qemu {:<12} {:<16} ok: {summary}",
+                        board.name, scenario.name
+                    );
+                }
+                Err(e) => {
+                    failed += 1;
+                    println!(
+                        "qemu {:<12} {:<16} FAILED ({}): {e:#}",
+                        board.name, scenario.name, scenario.about
+                    );
+                }
             }
         }
-    }
-    // The board's RAM goal (16 KiB including the stack), measured by stack painting in QEMU.
-    const RAM_GOAL: u64 = 16 * 1024;
-    println!("diwheeldrive RAM in QEMU (static + deepest stack): {ram_high_water} bytes of a {RAM_GOAL}-byte goal");
-    if ram_high_water > RAM_GOAL {
-        failed += 1;
-        println!("diwheeldrive RAM goal missed");
+        // The board's RAM goal (including the stack), measured by stack painting in QEMU.
+        let goal = scenarios::ram_goal(board.name);
+        println!(
+            "{} RAM in QEMU (static + deepest stack): {ram_high_water} bytes of a {goal}-byte goal",
+            board.name
+        );
+        if ram_high_water > goal {
+            failed += 1;
+            println!("{} RAM goal missed", board.name);
+        }
     }
     println!("scenarios: {passed} passed, {failed} failed");
     if failed > 0 {

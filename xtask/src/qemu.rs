@@ -11,9 +11,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 
-/// The emulated machine: a Cortex-M3 STM32 (F205) with room for the app; QEMU emulates neither the
-/// F103's clock tree nor bxCAN, so the QEMU build touches only core peripherals.
-pub const MACHINE: &str = "netduino2";
 /// `-icount shift=3`: one instruction per 8 virtual nanoseconds (125 MIPS, within 2× of a 72 MHz
 /// F103), deterministic; the QEMU build's SysTick ticks every 10 µs so its interrupt costs little.
 pub const ICOUNT_SHIFT: u32 = 3;
@@ -64,7 +61,10 @@ pub fn parse_log_line(line: &str) -> Result<Option<TimedFrame>> {
     let frame = fields
         .next()
         .with_context(|| format!("`{line}`: missing frame"))?;
-    let at_us = secs * 1_000_000 + micros;
+    let at_us = secs
+        .checked_mul(1_000_000)
+        .and_then(|us| us.checked_add(micros))
+        .with_context(|| format!("`{line}`: timestamp beyond u64 microseconds"))?;
     // Not a frame: a system signal for the board (`(t) signal SYS_PD_N`), stimulus only.
     if iface == "signal" {
         if frame != "SYS_PD_N" {
@@ -80,6 +80,9 @@ pub fn parse_log_line(line: &str) -> Result<Option<TimedFrame>> {
         .split_once('#')
         .with_context(|| format!("`{line}`: frame needs `ID#DATA`"))?;
     let id = u32::from_str_radix(id, 16).with_context(|| format!("`{line}`: bad ID"))?;
+    if !data.is_ascii() {
+        bail!("`{line}`: identifier and data must be hex digits");
+    }
     if data.len() % 2 != 0 {
         bail!("`{line}`: odd number of hex digits in data");
     }
@@ -155,17 +158,37 @@ pub fn read_stimulus(path: &Path) -> Result<Vec<TimedFrame>> {
     Ok(frames)
 }
 
-/// Runs `elf` under QEMU with `stimulus` for `duration_us` of virtual time and returns its output.
-pub fn run(elf: &Path, stimulus: &[TimedFrame], duration_us: u64, work: &Path) -> Result<String> {
+/// Runs `elf` on QEMU's `machine` with `stimulus` for `duration_us` of virtual time and returns its
+/// output. QEMU emulates neither the STM32 clock tree nor bxCAN, so a QEMU build touches only core
+/// peripherals: netduino2 (a Cortex-M3 STM32F205) runs the F103 boards, netduinoplus2 (an
+/// STM32F405) the power board.
+///
+/// Everything the firmware prints is also written to `work/output.log` as it arrives, so a run that
+/// overruns its wall-clock guard (a hang) or fails keeps and shows what it did up to then.
+pub fn run(
+    elf: &Path,
+    machine: &str,
+    stimulus: &[TimedFrame],
+    duration_us: u64,
+    work: &Path,
+) -> Result<String> {
     std::fs::create_dir_all(work)?;
+    if stimulus.is_empty() {
+        eprintln!("note: the stimulus has no frames: the board only runs for the duration");
+    }
+    let late = stimulus.iter().filter(|f| f.at_us > duration_us).count();
+    if late > 0 {
+        eprintln!("note: {late} stimulus frame(s) come after the run's end ({duration_us} µs) and are not sent");
+    }
     std::fs::write(
         work.join("stimulus.bin"),
         encode_stimulus(stimulus, duration_us),
     )?;
+    let log_path = work.join("output.log");
     let mut child = Command::new("qemu-system-arm")
         .args([
             "-machine",
-            MACHINE,
+            machine,
             "-nographic",
             "-monitor",
             "none",
@@ -184,13 +207,22 @@ pub fn run(elf: &Path, stimulus: &[TimedFrame], duration_us: u64, work: &Path) -
         .stderr(Stdio::piped())
         .spawn()
         .context("starting qemu-system-arm (install it: apt-get install qemu-system-arm)")?;
-    // Drain the output while QEMU runs (a full pipe would stall the guest), and guard the wall
-    // clock only: the firmware exits by itself after `duration_us` of virtual time.
-    let mut stdout = child.stdout.take().context("QEMU stdout")?;
+    // Drain the output while QEMU runs (a full pipe would stall the guest) into memory and the log
+    // file, and guard the wall clock only: the firmware exits by itself after `duration_us` of
+    // virtual time.
+    let stdout = child.stdout.take().context("QEMU stdout")?;
     let mut stderr = child.stderr.take().context("QEMU stderr")?;
+    let mut log = std::fs::File::create(&log_path)
+        .with_context(|| format!("creating {}", log_path.display()))?;
     let out_reader = std::thread::spawn(move || {
+        use std::io::{BufRead, Write};
         let mut text = String::new();
-        let _ = std::io::Read::read_to_string(&mut stdout, &mut text);
+        for line in std::io::BufReader::new(stdout).lines() {
+            let Ok(line) = line else { break };
+            let _ = writeln!(log, "{line}");
+            text.push_str(&line);
+            text.push('\n');
+        }
         text
     });
     let err_reader = std::thread::spawn(move || {
@@ -202,21 +234,66 @@ pub fn run(elf: &Path, stimulus: &[TimedFrame], duration_us: u64, work: &Path) -
     let started = Instant::now();
     let status = loop {
         if let Some(status) = child.try_wait()? {
-            break status;
+            break Some(status);
         }
         if started.elapsed() > limit {
             let _ = child.kill();
             let _ = child.wait();
-            bail!("QEMU run did not finish within {limit:?} of wall time");
+            break None;
         }
         std::thread::sleep(Duration::from_millis(20));
     };
     let stdout = out_reader.join().unwrap_or_default();
     let stderr = err_reader.join().unwrap_or_default();
-    if !status.success() {
-        bail!("QEMU run failed ({status}); output:\n{stdout}\n{stderr}");
+    match status {
+        None => bail!(
+            "QEMU run did not finish within {limit:?} of wall time (a hang?); its output up to then \
+             is in {}; last lines:\n{}{stderr}",
+            log_path.display(),
+            tail(&stdout, 20)
+        ),
+        Some(status) if !status.success() => bail!(
+            "QEMU run failed ({status}); output in {}; last lines:\n{}{stderr}",
+            log_path.display(),
+            tail(&stdout, 20)
+        ),
+        Some(_) => Ok(stdout),
     }
-    Ok(stdout)
+}
+
+/// The last `n` lines of `text`.
+fn tail(text: &str, n: usize) -> String {
+    let lines: Vec<&str> = text.lines().collect();
+    let from = lines.len().saturating_sub(n);
+    lines[from..].iter().map(|l| format!("  {l}\n")).collect()
+}
+
+/// Splits a run's output into the bus (frame lines: a plain `candump -l` log) and the rest
+/// (trace and log lines).
+pub fn split_output(text: &str) -> (String, String) {
+    let mut bus = String::new();
+    let mut trace = String::new();
+    for line in text.lines() {
+        let target = if line.starts_with('(') {
+            &mut bus
+        } else {
+            &mut trace
+        };
+        target.push_str(line);
+        target.push('\n');
+    }
+    (bus, trace)
+}
+
+/// A work directory of its own for one `cargo xtask qemu` run (two runs at once never share one).
+pub fn fresh_work_dir(root: &Path, board: &str) -> PathBuf {
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or_default();
+    target_dir(root)
+        .join("runs")
+        .join(format!("{board}-{}-{stamp}", std::process::id()))
 }
 
 /// Where QEMU builds go, apart from the real-hardware builds.
@@ -252,6 +329,10 @@ mod tests {
         assert!(parse_log_line("(0.01) can0 205#01").is_err());
         assert!(parse_log_line("205#01").is_err());
         assert!(parse_log_line("(0.000000) can0 205#0").is_err());
+        // Hostile input is an error, never a panic.
+        assert!(parse_log_line("(18446744073710.000000) can0 205#01").is_err());
+        assert!(parse_log_line("(0.000001) can0 205#é1").is_err());
+        assert!(parse_log_line("(0.000001) can0 2é#01").is_err());
     }
 
     #[test]

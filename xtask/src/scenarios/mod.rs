@@ -1,0 +1,314 @@
+//! The QEMU scenarios CI runs against each board's firmware, and what each must show.
+//!
+//! Each scenario is a stimulus log in `<board>/qemu/` (its `# duration:` header says how long the
+//! run lasts); the checks live in one module per board. The firmware's output — every frame it put on the bus, stamped with virtual time,
+//! and its trace events — is parsed here and checked against the behaviour the protocol promises
+//! and against the analysed response-time bound.
+use std::path::Path;
+
+use anyhow::{bail, ensure, Context, Result};
+
+use crate::qemu::{self, TimedFrame};
+
+pub mod diwheeldrive;
+pub mod lightring;
+
+/// The RAM goal of a board in QEMU, static data plus the painted stack's high-water mark (bytes).
+pub fn ram_goal(board: &str) -> u64 {
+    match board {
+        "lightring" => 8 * 1024,
+        _ => 16 * 1024,
+    }
+}
+
+/// The scenarios of `board` (empty for a board without a QEMU build).
+pub fn for_board(board: &str) -> &'static [Scenario] {
+    match board {
+        "diwheeldrive" => diwheeldrive::SCENARIOS,
+        "lightring" => lightring::SCENARIOS,
+        _ => &[],
+    }
+}
+
+/// The firmware's output, split into frames and trace lines.
+#[derive(Debug, Default)]
+pub struct RunOutput {
+    /// Frames the board put on the bus, in order.
+    pub frames: Vec<TimedFrame>,
+    /// Trace and log lines (without the leading `# `).
+    pub notes: Vec<String>,
+}
+
+impl RunOutput {
+    /// Parses the console output of a QEMU run.
+    pub fn parse(text: &str) -> Result<Self> {
+        let mut out = RunOutput::default();
+        for line in text.lines() {
+            let line = line.trim();
+            if let Some(note) = line.strip_prefix('#') {
+                out.notes.push(note.trim().to_string());
+            } else if let Some(frame) = qemu::parse_log_line(line)? {
+                out.frames.push(frame);
+            }
+        }
+        Ok(out)
+    }
+
+    /// Timestamps of the frames with identifier `id`.
+    pub fn times(&self, id: u32) -> Vec<u64> {
+        self.frames
+            .iter()
+            .filter(|f| f.id == id)
+            .map(|f| f.at_us)
+            .collect()
+    }
+
+    /// The end-of-run line; an error if the run did not reach its end.
+    pub fn end_line(&self) -> Result<&str> {
+        self.notes
+            .iter()
+            .find(|n| {
+                n.starts_with("qemu: end of run") || n.starts_with("qemu: shutdown hand-over")
+            })
+            .map(String::as_str)
+            .context("the run did not reach its end (no end-of-run line)")
+    }
+
+    /// A number of the end-of-run line (`rx dropped`, `rx overruns`, `ram static`, `stack`).
+    pub fn end_field(&self, name: &str) -> Result<u64> {
+        let line = self.end_line()?;
+        let at = line
+            .find(name)
+            .with_context(|| format!("no `{name}` in `{line}`"))?
+            + name.len();
+        let digits: String = line[at..]
+            .trim_start()
+            .chars()
+            .take_while(|c| c.is_ascii_digit())
+            .collect();
+        digits
+            .parse()
+            .with_context(|| format!("bad `{name}` in `{line}`"))
+    }
+
+    /// RAM the run used: static data plus the stack's high-water mark (bytes), from the end-of-run
+    /// line; an error if the run did not reach its end.
+    pub fn ram_used(&self) -> Result<(u64, u64)> {
+        Ok((self.end_field("ram static")?, self.end_field("stack")?))
+    }
+
+    /// Trace lines of one kind (e.g. `command-rejected`).
+    pub fn traces(&self, kind: &str) -> Vec<&str> {
+        self.notes
+            .iter()
+            .filter(|n| n.contains(kind))
+            .map(String::as_str)
+            .collect()
+    }
+}
+
+/// The `# duration:` header of a stimulus log.
+pub fn duration_of(path: &Path) -> Result<u64> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    for line in text.lines() {
+        if let Some(d) = line.trim().strip_prefix("# duration:") {
+            return qemu::parse_duration(d.trim());
+        }
+    }
+    bail!("{} has no `# duration:` header", path.display())
+}
+
+/// How a published topic behaved: its release grid and each frame's latency from its release.
+#[derive(Debug)]
+pub struct Stream {
+    /// Release times (µs) the firmware traced, in order.
+    pub releases: Vec<u64>,
+    /// Frame times (µs), in order.
+    pub frames: Vec<u64>,
+    /// Largest frame time minus its release (µs).
+    pub worst_latency: u64,
+}
+
+impl RunOutput {
+    /// Releases traced for `topic` (`sample-taken <topic> release=s.micros`) within `[from, to)`.
+    pub fn releases(&self, topic: &str, from: u64, to: u64) -> Result<Vec<u64>> {
+        let key = format!("sample-taken {topic} release=");
+        let mut out = Vec::new();
+        for note in &self.notes {
+            if let Some(at) = note.find(&key) {
+                let t = parse_seconds(
+                    note[at + key.len()..]
+                        .split_whitespace()
+                        .next()
+                        .unwrap_or(""),
+                )?;
+                if (from..to).contains(&t) {
+                    out.push(t);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The stream of frames `id` for `topic` within `[from, to)`: every release on the exact grid
+    /// `first + k·period` (drift-free, none skipped), one frame per release, each after its release.
+    pub fn periodic_stream(
+        &self,
+        id: u32,
+        topic: &str,
+        period: u64,
+        from: u64,
+        to: u64,
+    ) -> Result<Stream> {
+        let releases = self.releases(topic, from, to)?;
+        let frames: Vec<u64> = self
+            .times(id)
+            .into_iter()
+            .filter(|t| (from..to).contains(t))
+            .collect();
+        let first = *releases
+            .first()
+            .with_context(|| format!("no {topic} releases in {from}..{to} µs"))?;
+        for (k, r) in releases.iter().enumerate() {
+            let grid = first + k as u64 * period;
+            ensure!(
+                *r == grid,
+                "{topic} release {k} at {r} µs is off the {period} µs grid ({grid} µs)"
+            );
+        }
+        let expected = (to - first).div_ceil(period);
+        ensure!(
+            releases.len() as u64 == expected,
+            "{} {topic} releases in {first}..{to} µs, expected {expected} at {period} µs",
+            releases.len()
+        );
+        ensure!(
+            frames.len() == releases.len(),
+            "{} frames {id:03X} for {} releases",
+            frames.len(),
+            releases.len()
+        );
+        let mut worst = 0;
+        for (k, (f, r)) in frames.iter().zip(&releases).enumerate() {
+            ensure!(f >= r, "frame {k} at {f} µs precedes its release at {r} µs");
+            ensure!(
+                *f < r + period,
+                "frame {k} at {f} µs is a full period after its release at {r} µs"
+            );
+            worst = worst.max(f - r);
+        }
+        Ok(Stream {
+            releases,
+            frames,
+            worst_latency: worst,
+        })
+    }
+}
+
+pub fn parse_seconds(text: &str) -> Result<u64> {
+    let (s, us) = text
+        .split_once('.')
+        .with_context(|| format!("bad time `{text}`"))?;
+    ensure!(us.len() == 6, "bad time `{text}`");
+    Ok(s.parse::<u64>()? * 1_000_000 + us.parse::<u64>()?)
+}
+
+/// A named scenario and its check.
+pub struct Scenario {
+    /// File stem in `<board>/qemu/`.
+    pub name: &'static str,
+    /// What it shows.
+    pub about: &'static str,
+    /// The check.
+    pub check: fn(&RunOutput, &Bounds) -> Result<String>,
+}
+
+/// Response-time bounds from the analysis, per published topic of the scenarios.
+pub struct Bounds {
+    root: std::path::PathBuf,
+}
+
+impl Bounds {
+    /// Bounds computed by the schedule analysis from the DiWheelDrive app's own source.
+    pub fn from_analysis(root: &Path) -> Result<Self> {
+        Ok(Self {
+            root: root.to_path_buf(),
+        })
+    }
+
+    /// Worst-case latency from a publisher's release to its frame in a mailbox, as analysed for
+    /// `topic` published alone at CAN priority `level` every `period_us`.
+    pub fn publisher_latency_us(&self, topic: &str, level: &str, period_us: u64) -> Result<u64> {
+        crate::bounds::publisher_bound_us(&self.root, topic, level, period_us)
+    }
+}
+
+/// The time of a trace line `(s.micros) ...`.
+pub fn trace_time(line: &str) -> Result<u64> {
+    let stamp = line
+        .strip_prefix('(')
+        .and_then(|r| r.split_once(')'))
+        .map(|(s, _)| s)
+        .with_context(|| format!("trace line without time: {line}"))?;
+    parse_seconds(stamp)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(lines: &[&str]) -> RunOutput {
+        RunOutput::parse(&lines.join("\n")).unwrap()
+    }
+
+    #[test]
+    fn a_clean_stream_passes() {
+        let out = run(&[
+            "# (0.001000) trace sample-taken gyroscope release=0.001000",
+            "(0.001020) can0 608#000000000000",
+            "# (0.002000) trace sample-taken gyroscope release=0.002000",
+            "(0.002005) can0 608#000000000000",
+        ]);
+        let s = out
+            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
+            .unwrap();
+        assert_eq!(s.worst_latency, 20);
+        assert_eq!(s.releases, vec![1_000, 2_000]);
+    }
+
+    #[test]
+    fn drift_a_skipped_release_or_a_missing_frame_fails() {
+        let drift = run(&[
+            "# (0.001000) trace sample-taken gyroscope release=0.001000",
+            "(0.001020) can0 608#00",
+            "# (0.002001) trace sample-taken gyroscope release=0.002001",
+            "(0.002005) can0 608#00",
+        ]);
+        assert!(drift
+            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
+            .is_err());
+        let skipped = run(&[
+            "# (0.001000) trace sample-taken gyroscope release=0.001000",
+            "(0.001020) can0 608#00",
+        ]);
+        assert!(skipped
+            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
+            .is_err());
+        let no_frame = run(&[
+            "# (0.001000) trace sample-taken gyroscope release=0.001000",
+            "# (0.002000) trace sample-taken gyroscope release=0.002000",
+            "(0.002005) can0 608#00",
+        ]);
+        assert!(no_frame
+            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
+            .is_err());
+    }
+
+    #[test]
+    fn reads_the_end_of_run_line() {
+        let out = run(&["# qemu: end of run at 5 us; rx dropped 0; ram static 5040 stack 2056"]);
+        assert_eq!(out.ram_used().unwrap(), (5040, 2056));
+        assert!(run(&["(0.000001) can0 608#00"]).ram_used().is_err());
+    }
+}
