@@ -141,6 +141,22 @@ Examples:
   amiro dbc --output amiro.dbc
   python3 -c 'import cantools; db = cantools.database.load_file(\"amiro.dbc\"); print(db.decode_message(0x508, bytes.fromhex(\"FCFF1E000500\")))'")]
     Dbc(DbcArgs),
+
+    /// One screen to command and watch the robot: live decoded bus, command line with completion, menus, driving
+    #[command(long_about = crate::cli_session::CONSOLE_ABOUT, after_help = crate::cli_session::CONSOLE_HELP)]
+    Console(crate::cli_session::ConsoleArgs),
+
+    /// Drive for a while, repeating the motor command within the board's dead-man, then stop
+    #[command(long_about = crate::cli_session::DRIVE_ABOUT, after_help = crate::cli_session::DRIVE_HELP)]
+    Drive(crate::cli_session::DriveArgs),
+
+    /// Play a script: timed commands, waits and drives, printing what comes back
+    #[command(long_about = crate::cli_session::RUN_ABOUT, after_help = crate::cli_session::RUN_HELP)]
+    Run(crate::cli_session::RunArgs),
+
+    /// Hold an SLCAN adapter and share it with other amiro commands until Ctrl-C
+    #[command(long_about = crate::cli_session::RELAY_ABOUT)]
+    Relay(crate::cli_session::RelayArgs),
 }
 
 /// `amiro dbc`.
@@ -235,7 +251,11 @@ Example:
         long_about = "\
 Set the target velocity of the differential drive (DiWheelDrive board): forward velocity in µm/s \
 (100000 = 10 cm/s, negative = backwards) and turning rate in µrad/s (1000000 ≈ 57°/s, positive = \
-counter-clockwise seen from above). 0 and 0 stops the robot.",
+counter-clockwise seen from above). 0 and 0 stops the robot.
+
+Dead-man: the DiWheelDrive stops the motors when no motor command arrived for 500 ms, so one frame drives \
+for half a second. To keep driving, repeat the command faster than that: `amiro drive --forward 100mm/s \
+--for 3s` does (every 200 ms, then a stop), and so do the console's teleoperation and scripts.",
         after_help = "\
 Examples:
   amiro encode motor --velocity 100000 --angular 0          10 cm/s straight ahead
@@ -329,6 +349,10 @@ pub struct SendArgs {
     #[arg(value_name = "FRAME")]
     pub frames: Vec<String>,
 
+    /// Read the frames from a file, one per line (`-` is standard input); candump -l logs work too
+    #[arg(long, short, value_name = "FILE", conflicts_with = "frames")]
+    pub file: Option<PathBuf>,
+
     /// The bus: socketcan:IFACE, slcan:DEVICE[@BAUD] or file:PATH
     #[arg(long, env = "AMIRO_BUS", global = true, value_name = "BUS")]
     pub bus: Option<String>,
@@ -360,6 +384,31 @@ pub struct MonitorArgs {
     /// With a file: bus, replay frames at the pace of their timestamps
     #[arg(long)]
     pub realtime: bool,
+
+    /// Print absolute timestamps (seconds since 1970 on a live bus) instead of seconds since the start
+    #[arg(long)]
+    pub absolute: bool,
+
+    /// Only frames of topics this board owns (repeatable)
+    #[arg(long, value_name = "BOARD", value_parser = board_parser())]
+    pub board: Vec<Board>,
+
+    /// Only frames of this topic (repeatable), e.g. gyroscope
+    #[arg(long, value_name = "TOPIC", value_parser = any_topic_parser())]
+    pub topic: Vec<Topic>,
+
+    /// Only sensor data (what the boards send), as the thesis's receiver shows
+    #[arg(long)]
+    pub sensor_data: bool,
+
+    /// Do not print the summary (frames, period and jitter per topic) on exit
+    #[arg(long)]
+    pub no_summary: bool,
+}
+
+fn any_topic_parser() -> impl TypedValueParser<Value = Topic> {
+    PossibleValuesParser::new(TOPICS.iter().map(|info| info.name))
+        .try_map(|name| Topic::from_name(&name).ok_or_else(|| format!("unknown topic {name:?}")))
 }
 
 fn priority_parser() -> impl TypedValueParser<Value = Priority> {

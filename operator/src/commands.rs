@@ -4,12 +4,11 @@ use std::fs::File;
 use std::io::{self, BufRead, BufReader, IsTerminal, Write};
 use std::path::Path;
 use std::process::ExitCode;
-use std::time::Instant;
 
 use amiro_can::TOPICS;
 use anyhow::{bail, Context, Result};
 
-use crate::bus::{self, BusUrl, Direction, Reception};
+use crate::bus::{self, BusUrl, Direction};
 use crate::cli::{DbcArgs, DecodeArgs, EncodeArgs, MessageArgs, MonitorArgs, SendArgs};
 use crate::describe::{decode_frame, json_record, json_unreadable, text_line, text_unreadable};
 use crate::encode;
@@ -119,7 +118,14 @@ pub fn encode(args: &EncodeArgs) -> Result<ExitCode> {
 
 /// `amiro send`.
 pub fn send(args: &SendArgs) -> Result<ExitCode> {
-    let frames = frames_to_send(args.message.as_ref(), &args.frames, args.raw)?;
+    let frames = match &args.file {
+        Some(path) => crate::session::frames_from_file(path, args.raw)?,
+        // `amiro send < frames.txt` or `amiro encode ... | amiro send`: frames from standard input.
+        None if args.message.is_none() && args.frames.is_empty() && !io::stdin().is_terminal() => {
+            crate::session::frames_from_file(Path::new("-"), args.raw)?
+        }
+        None => frames_to_send(args.message.as_ref(), &args.frames, args.raw)?,
+    };
     let url = bus_url(args.bus.as_deref())?;
     let mut bus = bus::open(&url, Direction::Send)?;
     let mut report = Report::new(io::stdout().lock(), false);
@@ -171,52 +177,9 @@ fn bus_url(bus: Option<&str>) -> Result<BusUrl> {
     BusUrl::parse(bus)
 }
 
-/// `amiro monitor`.
+/// `amiro monitor` (the receiver's view lives in `session`).
 pub fn monitor(args: &MonitorArgs) -> Result<ExitCode> {
-    let url = BusUrl::parse(&args.bus)?;
-    if args.realtime && !matches!(url, BusUrl::File { .. }) {
-        bail!("--realtime paces a log file; {url} is a live bus, which is always in real time");
-    }
-    bus::catch_interrupts()?;
-    let mut bus = bus::open(
-        &url,
-        Direction::Receive {
-            realtime: args.realtime,
-        },
-    )?;
-    let outcome = watch(bus.as_mut(), args);
-    let closed = bus.close().with_context(|| format!("closing {url}"));
-    let received = outcome.with_context(|| format!("monitoring {url}"))?;
-    closed?;
-    match args.count {
-        Some(count) if received < count => {
-            eprintln!("only {received} of {count} frames arrived");
-            Ok(ExitCode::FAILURE)
-        }
-        _ => Ok(ExitCode::SUCCESS),
-    }
-}
-
-/// Prints frames until the count, the timeout, the end of the log or Ctrl-C; returns how many arrived.
-fn watch(bus: &mut dyn bus::Bus, args: &MonitorArgs) -> Result<u64> {
-    let mut report = Report::new(io::stdout().lock(), args.json);
-    let give_up = args.timeout.map(|timeout| Instant::now() + timeout);
-    let mut received = 0;
-    while args.count.is_none_or(|count| received < count) {
-        let left = give_up.map(|give_up| give_up.saturating_duration_since(Instant::now()));
-        if left.is_some_and(|left| left.is_zero()) {
-            break;
-        }
-        match bus.receive(left)? {
-            Reception::Frame(logged) => {
-                received += 1;
-                report.frame(&logged, None)?;
-                report.out.flush()?;
-            }
-            Reception::TimedOut | Reception::Ended | Reception::Interrupted => break,
-        }
-    }
-    Ok(received)
+    crate::session::monitor(args)
 }
 
 /// `amiro topics`.

@@ -1,17 +1,23 @@
 //! The `amiro` command: talk to the robot over CAN from the operator computer.
 //!
-//! `decode` and `encode` work offline on frame text; `send` and `monitor` reach the robot through a bus
-//! (SocketCAN, an SLCAN adapter, or a candump log file). The protocol itself lives in `amiro-can`; this binary
+//! `decode` and `encode` work offline on frame text; `send`, `monitor`, `console`, `drive` and `run` reach the
+//! robot through a bus (SocketCAN, an SLCAN adapter — shared between `amiro` processes — or a candump log file). The protocol itself lives in `amiro-can`; this binary
 //! adds text formats, transports and words for people.
 
 mod bus;
 mod cli;
+mod cli_session;
 mod commands;
+mod console;
 mod dbc;
 mod describe;
+mod drive;
 mod encode;
 mod frame;
 mod period;
+mod script;
+mod session;
+mod watch;
 
 use std::process::ExitCode;
 
@@ -28,6 +34,10 @@ fn main() -> ExitCode {
         CliCommand::Monitor(args) => commands::monitor(args),
         CliCommand::Topics => commands::topics(),
         CliCommand::Dbc(args) => commands::dbc(args),
+        CliCommand::Console(args) => console::run(args),
+        CliCommand::Drive(args) => session::drive_command(args),
+        CliCommand::Run(args) => session::run(args),
+        CliCommand::Relay(args) => session::relay(args),
     };
     match outcome {
         Ok(code) => code,

@@ -4,7 +4,7 @@
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::{AsFd, AsRawFd, OwnedFd};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
@@ -89,10 +89,18 @@ impl FakeAdapter {
     }
 }
 
+/// A rendezvous directory of its own per test binary run, so no other `amiro` on this machine is found.
+fn runtime_dir() -> &'static Path {
+    static DIR: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| tempfile::tempdir().expect("tempdir"))
+        .path()
+}
+
 fn amiro(args: &[&str]) -> Child {
     Command::new(assert_cmd::cargo::cargo_bin("amiro"))
         .args(args)
         .env_remove("AMIRO_BUS")
+        .env("AMIRO_RUNTIME_DIR", runtime_dir())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -230,7 +238,8 @@ fn ctrl_c_closes_the_channel_before_exit() {
     );
     let stdout = String::from_utf8(output.stdout).unwrap();
     assert!(
-        stdout.contains("71F#037800") && stdout.contains("proximity-ring: sensor 3 sees 120 mm"),
+        stdout.contains("71F#037800")
+            && stdout.contains("proximity-ring: sensor 3 front-left sees 120 mm"),
         "{stdout}"
     );
     assert_eq!(adapter.heard, b"C\rS8\rO\rC\r");
@@ -281,5 +290,80 @@ fn a_silent_device_is_not_mistaken_for_an_adapter() {
     assert!(
         stderr.contains("no answer to \"C\"") && stderr.contains("SLCAN adapter"),
         "{stderr}"
+    );
+}
+
+fn interrupt(child: &Child) {
+    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).expect("SIGINT");
+}
+
+#[test]
+fn a_second_amiro_sends_through_the_first_without_closing_its_channel() {
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let monitor = amiro(&["monitor", "--bus", &bus, "--absolute"]);
+    adapter.accept_open();
+    // The thesis's workflow: one terminal watches, another sends.
+    let sender = amiro(&["send", "205#01840302", "--bus", &bus]);
+    adapter.expect("t205401840302\r", b"z\rt6054D8ADFFFF\r");
+    let sent = finish(sender);
+    assert!(
+        sent.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sent.stderr)
+    );
+    assert!(String::from_utf8_lossy(&sent.stdout).starts_with("sent 205#01840302"));
+    std::thread::sleep(Duration::from_millis(200));
+    interrupt(&monitor);
+    adapter.expect("C\r", b"\r");
+    let watched = finish(monitor);
+    assert!(
+        watched.status.success(),
+        "{}",
+        String::from_utf8_lossy(&watched.stderr)
+    );
+    // Only the owner opened and closed the channel; the sender's frame went through it.
+    assert_eq!(adapter.heard, b"C\rS8\rO\rt205401840302\rC\r");
+    let stdout = String::from_utf8(watched.stdout).unwrap();
+    let sent_at = stdout.find("205#01840302").expect(&stdout);
+    let answer_at = stdout.find("605#D8ADFFFF").expect(&stdout);
+    assert!(
+        sent_at < answer_at,
+        "the monitor shows the command, then the answer:\n{stdout}"
+    );
+}
+
+#[test]
+fn a_monitor_whose_bus_owner_ends_reports_the_lost_bus_and_fails() {
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let owner = amiro(&["monitor", "--bus", &bus]);
+    adapter.accept_open();
+    let mut user = amiro(&["monitor", "--bus", &bus]);
+    // Frames keep coming while the second monitor connects; once connected it prints them.
+    for _ in 0..6 {
+        adapter.say(b"t71F3037800\r");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(
+        user.try_wait().unwrap().is_none(),
+        "the second monitor runs"
+    );
+    interrupt(&owner);
+    adapter.expect("C\r", b"\r");
+    let owner_output = finish(owner);
+    assert!(owner_output.status.success());
+    let output = finish(user);
+    assert!(!output.status.success(), "a lost bus is a failure");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("lost the bus") && stderr.contains("amiro monitor"),
+        "{stderr}"
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        stdout.contains("71F#037800"),
+        "it saw frames while connected: {stdout}"
     );
 }

@@ -2,6 +2,7 @@
 //! one small trait every transport implements, so `send` and `monitor` never know which one they talk to.
 
 pub mod logfile;
+pub mod relay;
 pub mod slcan;
 #[cfg(feature = "socketcan")]
 pub mod socketcan;
@@ -136,10 +137,9 @@ pub enum Direction {
 pub fn open(url: &BusUrl, direction: Direction) -> Result<Box<dyn Bus>> {
     let bus: Box<dyn Bus> = match url {
         BusUrl::SocketCan { interface } => open_socketcan(interface)?,
-        BusUrl::Slcan { path, baud } => Box::new(
-            slcan::Slcan::open(path, *baud)
-                .with_context(|| format!("cannot open the SLCAN adapter {url}"))?,
-        ),
+        // Shared: a second `amiro` on the same adapter goes through the first instead of closing its channel.
+        BusUrl::Slcan { path, baud } => relay::open_shared(path, *baud)
+            .with_context(|| format!("cannot open the SLCAN adapter {url}"))?,
         BusUrl::File { path } => match direction {
             Direction::Send => Box::new(logfile::LogWriter::open(path)?),
             Direction::Receive { realtime } => Box::new(logfile::LogReader::open(path, realtime)?),

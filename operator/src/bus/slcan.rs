@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+use nix::fcntl::{Flock, FlockArg};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::termios::{self, BaudRate, ControlFlags, SetArg};
 
@@ -131,7 +132,10 @@ enum Wait {
 /// An open SLCAN adapter.
 pub struct Slcan {
     path: PathBuf,
-    port: File,
+    /// The serial port, locked (`flock`) so that no other `amiro` opens the same device by another name.
+    port: Flock<File>,
+    /// Whether Ctrl-C ends a wait for frames (false when a relay thread, not the user, is waiting).
+    interruptible: bool,
     /// Bytes received but not yet ending in a terminator (at most `MAX_MESSAGE_LEN`).
     partial: Vec<u8>,
     /// Bytes dropped from the current over-long line, reported once its end (or the next message) is seen.
@@ -153,11 +157,19 @@ impl Slcan {
             .custom_flags(nix::libc::O_NOCTTY)
             .open(path)
             .with_context(|| format!("cannot open {}", path.display()))?;
+        let port = Flock::lock(port, FlockArg::LockExclusiveNonblock).map_err(|(_, errno)| {
+            anyhow::anyhow!(
+                "{} is in use by another amiro that is not sharing it ({errno}); close that program, or start \
+                 it again so it shares the adapter",
+                path.display()
+            )
+        })?;
         configure_port(&port, baud)
             .with_context(|| format!("cannot configure {}", path.display()))?;
         let mut adapter = Self {
             path: path.to_path_buf(),
             port,
+            interruptible: true,
             partial: Vec::new(),
             dropped: 0,
             messages: VecDeque::new(),
@@ -170,6 +182,17 @@ impl Slcan {
         adapter.command("O", "open the CAN channel", false)?;
         adapter.channel_open = true;
         Ok(adapter)
+    }
+
+    /// Makes waits for frames ignore Ctrl-C: the relay thread that serves other processes is stopped by its owner,
+    /// not by the signal.
+    pub fn set_interruptible(&mut self, interruptible: bool) {
+        self.interruptible = interruptible;
+    }
+
+    /// The serial device.
+    pub fn path(&self) -> &Path {
+        &self.path
     }
 
     /// Sends a command and waits for its answer; frames that arrive meanwhile are kept.
@@ -277,7 +300,7 @@ pub fn split_messages(
     bytes: &[u8],
 ) -> Vec<AdapterMessage> {
     let mut messages = Vec::new();
-    let mut end_garbage = |dropped: &mut usize, messages: &mut Vec<AdapterMessage>| {
+    let end_garbage = |dropped: &mut usize, messages: &mut Vec<AdapterMessage>| {
         if *dropped > 0 {
             messages.push(AdapterMessage::Garbage { bytes: *dropped });
             *dropped = 0;
@@ -358,7 +381,7 @@ impl Bus for Slcan {
                 };
                 return Ok(Reception::Frame(logged));
             }
-            match self.next_message(deadline, true)? {
+            match self.next_message(deadline, self.interruptible)? {
                 Wait::Message(AdapterMessage::Frame(frame)) => self.received.push_back(frame),
                 // A late answer to an earlier command carries nothing now.
                 Wait::Message(AdapterMessage::Done | AdapterMessage::Queued) => {}
