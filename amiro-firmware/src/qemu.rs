@@ -152,10 +152,7 @@ const RECORD: usize = 20;
 
 /// Replays `stimulus.bin` from the host into the virtual receive FIFO (pending the board's CAN
 /// receive interrupt `rx_irq`, and `shutdown_irq` for a SYS_PD_N record), then ends the run.
-pub async fn replay_stimulus(
-    rx_irq: impl InterruptNumber,
-    shutdown_irq: impl InterruptNumber,
-) {
+pub async fn replay_stimulus(rx_irq: impl InterruptNumber, shutdown_irq: impl InterruptNumber) {
     let Some(file) = HostFile::open(b"stimulus.bin\0") else {
         hprintln!("# qemu: cannot open stimulus.bin");
         exit(false);
@@ -217,6 +214,11 @@ pub fn finish(why: &str) {
         stack_high_water()
     );
     exit(true);
+}
+
+/// Prints one line on the console (a board's simulated device reporting what it saw).
+pub fn print_line(line: &str) {
+    hprintln!("{}", line);
 }
 
 /// Ends the QEMU run.

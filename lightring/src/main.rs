@@ -1,91 +1,221 @@
-//! LightRing firmware (STM32F103xE): the RTIC skeleton — clocks, the TIM3 microsecond monotonic,
-//! RTT and a heartbeat task. The LED ring (TLC5947) and the CAN side come with the LightRing issue.
+//! LightRing firmware (STM32F103xE, board revision 1-0: one TLC5947, eight RGB LEDs): the RTIC app.
+//!
+//! This file is wiring only: resources, bindings, priorities. LED commands from the bus set the
+//! colours (`leds`), the latch task shifts them into the TLC5947; everything else (CAN, monotonic,
+//! telemetry, fault policy, system signals, AMiRo-BLT hand-over, watchdog, QEMU platform) is the
+//! runtime's (`amiro-firmware`). The chip is behind `board` (or `qemu` for the QEMU build).
+//!
+//! Task priorities (RTIC, higher = more urgent; the constants live in `levels`):
+//! `shutdown`, `can_rx` 7 · `handle_commands`, `shutdown_sequence` 5 · `latch_leds` 4 ·
+//! `watchdog` 1. `cargo xtask analyze` reads these tasks, priorities and shared resources from this
+//! file.
 #![no_std]
 #![no_main]
 
-use rtic_monotonics::stm32::prelude::*;
+mod leds;
+mod levels;
 
-// TIM3 is free on LightRing (the original firmware ticks on TIM2), so rtic-monotonics' TIM3 serves.
-stm32_tim3_monotonic!(Mono, 1_000_000);
+#[cfg(not(feature = "qemu"))]
+mod board;
+#[cfg(not(feature = "qemu"))]
+use board as platform;
+#[cfg(feature = "qemu")]
+mod qemu;
+#[cfg(feature = "qemu")]
+use qemu as platform;
 
-/// Switches the clock tree back to the internal oscillator with the PLL off.
-///
-/// AMiRo-BLT hands over with the PLL already driving SYSCLK; the PLL cannot be reconfigured while
-/// it is the system clock, so start from the reset state before the HAL sets the clocks up.
-fn clock_tree_to_reset_state(rcc: &stm32f1xx_hal::pac::RCC) {
-    rcc.cr().modify(|_, w| w.hsion().set_bit());
-    while rcc.cr().read().hsirdy().bit_is_clear() {}
-    rcc.cfgr().modify(|_, w| w.sw().hsi());
-    while !rcc.cfgr().read().sws().is_hsi() {}
-    rcc.cr().modify(|_, w| w.pllon().clear_bit());
-    while rcc.cr().read().pllrdy().bit_is_set() {}
-}
+// Panic, HardFault and the hand-over blank the LEDs first.
+amiro_firmware::safe_state!(platform::leds_dark);
 
-/// The AMiRo-BLT checksum slot (see `memory.x`): erased flash until the bootloader or
+/// The AMiRo-BLT checksum slot (see `amiro_firmware::layout`): erased flash until the bootloader or
 /// `cargo xtask flash` writes the word that makes the first vector words sum to zero.
-#[cfg(not(feature = "bare-chip"))]
+#[cfg(not(any(feature = "bare-chip", feature = "qemu")))]
 #[link_section = ".blt_checksum"]
 #[used]
 static BLT_CHECKSUM: u32 = 0xFFFF_FFFF;
 
-#[panic_handler]
-fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
-    cortex_m::interrupt::disable();
-    loop {
-        cortex_m::asm::nop();
-    }
-}
+/// Depth of the queue between the CAN receive interrupt and command handling.
+pub const RX_QUEUE_LEN: usize = 16;
+/// The latch task refreshes the driver at least this often (a latch also follows every command),
+/// so a glitch on the shift register never lasts, and the watchdog sees the schedule alive.
+pub const REFRESH_PERIOD_US: u64 = 20_000;
+/// Watchdog check period; the IWDG resets the board if it is not fed for `WATCHDOG_TIMEOUT_MS`.
+pub const WATCHDOG_PERIOD_US: u64 = 100_000;
+/// Independent watchdog timeout.
+pub const WATCHDOG_TIMEOUT_MS: u32 = 500;
+/// The watchdog's timeout during the boot (started first thing in `init`).
+pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
+/// The command handler takes at most one command per this interval (`docs/analysis.md`).
+pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 
-#[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4])]
+/// The clock every task uses (TIM3 on the robot, SysTick in QEMU).
+type Clock = platform::Clock;
+
+#[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4, UART5, TIM6, TIM7])]
 mod app {
-    use super::Mono;
-    use rtic_monotonics::stm32::prelude::*;
-    use rtt_target::{rprintln, rtt_init_print};
-    use stm32f1xx_hal::{prelude::*, rcc};
+    use crate::leds::{self, LedState};
+    use crate::{levels, platform, Clock, RX_QUEUE_LEN};
+    use amiro_can::Board as CanBoard;
+    use amiro_firmware::can::RxFrame;
+    use amiro_firmware::liveness::Liveness;
+    use amiro_firmware::mono::Clock as _;
+    use amiro_firmware::signals::{self, SystemSignals as _};
+    use amiro_firmware::watchdog as iwdg;
+    use amiro_firmware::{bootloader, tasks};
+    use amiro_sensors::drivers::tlc5947::LightRing;
+    use amiro_sensors::handler::{Outcome, SensorDataHandler};
+    use rtic_sync::channel::{Receiver, Sender};
+    use rtic_sync::make_channel;
 
     #[shared]
-    struct Shared {}
+    struct Shared {
+        /// The sensor-data handler: decodes commands, counts rejections.
+        handler: SensorDataHandler,
+        /// The commanded colours, waiting for the latch.
+        leds: LedState,
+        /// The latch task's progress mark for the watchdog.
+        alive: Liveness,
+    }
 
     #[local]
-    struct Local {}
+    struct Local {
+        can_rx: platform::CanRxPort,
+        rx_frames: Sender<'static, RxFrame, RX_QUEUE_LEN>,
+        commands: Receiver<'static, RxFrame, RX_QUEUE_LEN>,
+        wake_latch: Sender<'static, (), 1>,
+        latch_wakeups: Receiver<'static, (), 1>,
+        ring: LightRing<platform::LedSpi>,
+        blank: platform::Blank,
+        signals: platform::SystemSignals,
+    }
 
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
-        rtt_init_print!();
-        super::clock_tree_to_reset_state(&cx.device.RCC);
-        let mut flash = cx.device.FLASH.constrain();
-        let mut rcc = cx.device.RCC.freeze(
-            rcc::Config::hse(8u32.MHz())
-                .sysclk(72u32.MHz())
-                .pclk1(36u32.MHz())
-                .pclk2(36u32.MHz()),
-            &mut flash.acr,
-        );
-        // TLC5947 BLANK (PA4) stays high — LEDs dark — until the LED driver is configured.
-        let mut gpioa = cx.device.GPIOA.split(&mut rcc);
-        let _blank = gpioa
-            .pa4
-            .into_push_pull_output_with_state(&mut gpioa.crl, stm32f1xx_hal::gpio::PinState::High);
-        // Initialised: release SYS_SYNC_N (PD2, open drain, wired-OR) so the robot can come up.
-        // (The pin configuration outlives the HAL handle.)
-        let mut gpiod = cx.device.GPIOD.split(&mut rcc);
-        let mut sys_sync = gpiod.pd2.into_open_drain_output(&mut gpiod.crl);
-        sys_sync.set_high();
-        // APB1 timers run at 2 × PCLK1 = 72 MHz.
-        Mono::start(72_000_000, Priority::new(8));
-        heartbeat::spawn().ok();
-        rprintln!("LightRing up");
-        (Shared {}, Local {})
+        // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
+        iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
+        amiro_firmware::telemetry::init();
+        let hw = platform::init(cx.device, cx.core);
+        let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
+        let (wake_latch, latch_wakeups) = make_channel!((), 1);
+        let mut signals = hw.signals;
+
+        platform::start_monotonic(levels::MONOTONIC, hw.on_crystal);
+        handle_commands::spawn().ok();
+        latch_leds::spawn().ok();
+        watchdog::spawn().ok();
+        #[cfg(feature = "qemu")]
+        stimulus::spawn().ok();
+        amiro_firmware::log!("LightRing up");
+
+        signals.release_sync();
+        // A shutdown requested before we were up has no edge to catch: look at the level.
+        if signals.shutdown_requested() {
+            rtic::pend(platform::SHUTDOWN_INTERRUPT);
+        }
+        (
+            Shared {
+                handler: SensorDataHandler::new(CanBoard::LightRing),
+                leds: LedState::new(),
+                alive: Liveness::new(),
+            },
+            Local {
+                can_rx: hw.can_rx,
+                rx_frames,
+                commands,
+                wake_latch,
+                latch_wakeups,
+                ring: LightRing::new(hw.led_spi),
+                blank: hw.blank,
+                signals,
+            },
+        )
     }
 
-    #[task(priority = 1)]
-    async fn heartbeat(_cx: heartbeat::Context) {
-        loop {
-            rprintln!(
-                "alive at {} us",
-                rtic_monotonics::rtic_time::monotonic::TimerQueueBasedInstant::ticks(Mono::now())
-            );
-            Mono::delay(500u64.millis()).await;
+    /// CAN receive FIFO 0: move frames into the bounded command queue; a full queue drops and counts.
+    #[task(binds = USB_LP_CAN_RX0, priority = 7, local = [can_rx, rx_frames])]
+    fn can_rx(cx: can_rx::Context) {
+        tasks::receive_frames(cx.local.can_rx, cx.local.rx_frames);
+    }
+
+    /// Decodes each command; an LED command sets its LED's colour and wakes the latch. At most one
+    /// command per `COMMAND_MIN_INTERVAL_US`.
+    #[task(priority = 5, shared = [handler, leds], local = [commands, wake_latch])]
+    async fn handle_commands(mut cx: handle_commands::Context) {
+        while let Some(frame) = tasks::next_command(cx.local.commands).await {
+            let started = Clock::now_us();
+            if let Some((now, Outcome::Led { command, .. })) =
+                tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
+            {
+                cx.shared.leds.lock(|l| l.apply(now, &command));
+                let _ = cx.local.wake_latch.try_send(());
+            }
+            Clock::delay_until_us(started + crate::COMMAND_MIN_INTERVAL_US).await;
         }
+    }
+
+    /// Shifts the colours into the TLC5947 and latches them: after every change, and at least every
+    /// `REFRESH_PERIOD_US`. The first latch (all dark) lifts BLANK.
+    #[task(priority = 4, shared = [leds, alive], local = [latch_wakeups, ring, blank])]
+    async fn latch_leds(mut cx: latch_leds::Context) {
+        let mut shown = false;
+        let mut next = Clock::now_us();
+        loop {
+            let (colours, changed) = cx.shared.leds.lock(|l| l.take());
+            if !signals::shutting_down() {
+                leds::latch::<Clock, _>(cx.local.ring, &colours, changed);
+                if !shown {
+                    cx.local.blank.show();
+                    shown = true;
+                }
+            }
+            cx.shared.alive.lock(|a| a.mark());
+            next += crate::REFRESH_PERIOD_US;
+            let _ = Clock::timeout_at_us(next, cx.local.latch_wakeups.recv()).await;
+            next = next.max(Clock::now_us());
+        }
+    }
+
+    /// Feeds the independent watchdog — from the least urgent level, and only while the latch task
+    /// keeps running: a fed dog proves the whole schedule is alive.
+    #[task(priority = 1, shared = [alive])]
+    async fn watchdog(mut cx: watchdog::Context) {
+        iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
+        let mut next = Clock::now_us();
+        loop {
+            next += crate::WATCHDOG_PERIOD_US;
+            Clock::delay_until_us(next).await;
+            if cx.shared.alive.lock(|a| a.take()) {
+                iwdg::feed();
+            }
+        }
+    }
+
+    /// SYS_PD_N fell: another module requests shutdown. LEDs dark first, then hand over.
+    #[task(binds = EXTI15_10, priority = 7, local = [signals])]
+    fn shutdown(cx: shutdown::Context) {
+        if signals::on_shutdown_edge(cx.local.signals) {
+            platform::leds_dark();
+            shutdown_sequence::spawn().ok();
+        }
+    }
+
+    /// Stops everything and calls AMiRo-BLT's shutdown handler.
+    #[task(priority = 5, shared = [handler, leds])]
+    async fn shutdown_sequence(mut cx: shutdown_sequence::Context) {
+        cx.shared.handler.lock(|h| h.stop_all());
+        cx.shared.leds.lock(|l| l.clear());
+        platform::leds_dark();
+        bootloader::hand_over(bootloader::Callback::HandleShutdownRequest);
+    }
+
+    /// QEMU only: replays the stimulus log as if its frames arrived on the bus.
+    #[cfg(feature = "qemu")]
+    #[task(priority = 7)]
+    async fn stimulus(_cx: stimulus::Context) {
+        amiro_firmware::qemu::replay_stimulus(
+            platform::CAN_RX_INTERRUPT,
+            platform::SHUTDOWN_INTERRUPT,
+        )
+        .await;
     }
 }

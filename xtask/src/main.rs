@@ -61,8 +61,11 @@ enum Cmd {
         #[arg(long, default_value = "2s")]
         duration: String,
     },
-    /// Run only the QEMU scenarios CI runs (part of `test`).
-    Scenarios,
+    /// Run only the QEMU scenarios CI runs (part of `test`), of every board or of the boards named.
+    Scenarios {
+        /// Boards whose scenarios to run (default: all).
+        boards: Vec<String>,
+    },
     /// Decode a capture of a board's binary trace channel (RTT channel 1, "trace") into text lines.
     Trace {
         /// The raw bytes of RTT channel 1 as captured from the board.
@@ -158,7 +161,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             // An unschedulable set is a verdict, not an error: only `--check` turns it into a failure.
             Ok(all_ok || !args.check)
         }
-        Cmd::Scenarios => run_scenarios(&root).map(|()| true),
+        Cmd::Scenarios { boards } => run_scenarios(&root, &select_boards(&boards)?).map(|()| true),
         Cmd::Trace { file } => {
             let bytes =
                 std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
@@ -361,7 +364,7 @@ fn test(root: &Path) -> Result<()> {
     flash::simulated_robot(root)?;
     elf::print_table(&reports);
     interop::check(root)?;
-    run_scenarios(root)
+    run_scenarios(root, &BOARDS.iter().collect::<Vec<_>>())
 }
 
 /// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets.
@@ -422,12 +425,12 @@ fn build_qemu(root: &Path, board: &Board) -> Result<PathBuf> {
 }
 
 /// Runs every board's QEMU scenarios and checks their output.
-fn run_scenarios(root: &Path) -> Result<()> {
+fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
     ensure_qemu()?;
     let bounds = scenarios::Bounds::from_analysis(root)?;
     let mut passed = 0;
     let mut failed = 0;
-    for board in BOARDS.iter() {
+    for board in boards {
         let list = scenarios::for_board(board.name);
         if list.is_empty() {
             continue;

@@ -1,12 +1,430 @@
 //! LightRing's QEMU scenarios (`lightring/qemu/*.log`) and what each must show.
-use anyhow::Result;
+//!
+//! The QEMU build prints what the simulated TLC5947 really latched (`tlc5947 latched` followed by
+//! its 24 output values, OUT0 first) right before each `leds-latched` trace event, so these checks
+//! see the driver's channel order and gamma table at work, not only the firmware's intentions.
+use std::path::Path;
 
-use super::{Bounds, RunOutput, Scenario};
+use anyhow::{anyhow, bail, ensure, Context, Result};
+use schedule_analysis::analysis::{analyse, Options};
+use schedule_analysis::model::FrameCostSpec;
+use schedule_analysis::scenario;
+
+use amiro_sensors::drivers::tlc5947::{gamma, led_outputs, CHANNELS};
+
+use super::{trace_time, Bounds, RunOutput, Scenario};
 
 /// Every LightRing scenario CI runs.
-pub const SCENARIOS: &[Scenario] = &[];
+pub const SCENARIOS: &[Scenario] = &[
+    Scenario {
+        name: "led3",
+        about: "the thesis's example: LED 3 to an RGB colour, latched within the analysed bound",
+        check: led3,
+    },
+    Scenario {
+        name: "all-eight",
+        about: "all eight LEDs in one burst",
+        check: all_eight,
+    },
+    Scenario {
+        name: "other-boards",
+        about: "other boards' commands and sensor data are ignored",
+        check: other_boards,
+    },
+    Scenario {
+        name: "malformed",
+        about: "malformed LED frames rejected with their reasons, state unchanged",
+        check: malformed,
+    },
+    Scenario {
+        name: "flood",
+        about: "LED commands at 50 µs: a queued burst applied in order, the excess counted",
+        check: flood,
+    },
+    Scenario {
+        name: "shutdown",
+        about: "SYS_PD_N falls: LEDs dark, SYS_SYNC_N low, hand-over, nothing after",
+        check: shutdown,
+    },
+];
 
-#[allow(dead_code)]
-fn placeholder(_out: &RunOutput, _bounds: &Bounds) -> Result<String> {
-    Ok(String::new())
+type Outputs = [u16; CHANNELS];
+
+/// One latch: when XLAT rose and what the driver's outputs showed.
+struct Latch {
+    at_us: u64,
+    outputs: Outputs,
+}
+
+/// The latches of a run, in order.
+fn latches(out: &RunOutput) -> Result<Vec<Latch>> {
+    let mut pending: Option<Outputs> = None;
+    let mut latches = Vec::new();
+    for note in &out.notes {
+        if let Some(values) = note.strip_prefix("tlc5947 latched") {
+            let parsed: Vec<u16> = values
+                .split_whitespace()
+                .map(|v| u16::from_str_radix(v, 16))
+                .collect::<Result<_, _>>()
+                .with_context(|| format!("bad latch line `{note}`"))?;
+            let outputs: Outputs = parsed
+                .try_into()
+                .map_err(|_| anyhow!("`{note}`: expected {CHANNELS} outputs"))?;
+            pending = Some(outputs);
+        } else if note.contains("trace leds-latched") {
+            let outputs = pending
+                .take()
+                .with_context(|| format!("`{note}` without the driver's outputs before it"))?;
+            latches.push(Latch {
+                at_us: trace_time(note)?,
+                outputs,
+            });
+        }
+    }
+    Ok(latches)
+}
+
+/// The LED commands the board applied: (time, LED, colour).
+fn led_sets(out: &RunOutput) -> Result<Vec<(u64, u8, [u8; 3])>> {
+    out.traces("trace led-set")
+        .into_iter()
+        .map(|line| {
+            let led = field(line, "led=")?
+                .parse()
+                .with_context(|| format!("bad LED in `{line}`"))?;
+            let rgb = field(line, "rgb=")?;
+            let byte = |i: usize| {
+                rgb.get(2 * i..2 * i + 2)
+                    .and_then(|h| u8::from_str_radix(h, 16).ok())
+                    .with_context(|| format!("bad colour in `{line}`"))
+            };
+            Ok((trace_time(line)?, led, [byte(0)?, byte(1)?, byte(2)?]))
+        })
+        .collect()
+}
+
+fn field<'a>(line: &'a str, key: &str) -> Result<&'a str> {
+    let at = line
+        .find(key)
+        .with_context(|| format!("no `{key}` in `{line}`"))?
+        + key.len();
+    Ok(line[at..].split_whitespace().next().unwrap_or(""))
+}
+
+/// What the driver's outputs must be for these LED colours (LED n at index n − 1).
+fn expected(colours: &[[u8; 3]; 8]) -> Outputs {
+    let mut outputs = [0u16; CHANNELS];
+    for (led, rgb) in (1u8..=8).zip(colours) {
+        if let Some(outs) = led_outputs(led) {
+            for (out, value) in outs.into_iter().zip(rgb) {
+                outputs[usize::from(out)] = gamma(*value);
+            }
+        }
+    }
+    outputs
+}
+
+/// Command received → latched, as analysed: the WCRT of `latch_leds`, whose release jitter budget
+/// covers the command path (can_rx and handle_commands); checked to still cover it.
+fn latch_bound_us(root: &Path) -> Result<u64> {
+    let models = root.join("schedule-analysis").join("models");
+    let built = scenario::build(
+        root,
+        &models.join("thesis-demo.scenario.json"),
+        &scenario::timing_files(root),
+    )?;
+    let system = built.model.validate().map_err(|e| anyhow!("{e}"))?;
+    let analysis = analyse(
+        &system,
+        &Options {
+            frame_cost: FrameCostSpec::default(),
+            horizon: None,
+        },
+    );
+    let board = analysis
+        .boards
+        .iter()
+        .find(|b| b.name == "lightring")
+        .context("the analysis has no lightring board")?;
+    let wcrt_us = |name: &str| -> Result<u64> {
+        let task = board
+            .tasks
+            .iter()
+            .find(|t| t.name == name)
+            .with_context(|| format!("the analysis has no lightring task {name}"))?;
+        Ok(task
+            .wcrt()
+            .with_context(|| format!("{name}: the busy window never closes"))?
+            .as_ns()
+            .div_ceil(1_000))
+    };
+    let handler = wcrt_us("handle_commands")?;
+    let latch = wcrt_us("latch_leds")?;
+    let jitter_budget = 220;
+    ensure!(
+        handler <= jitter_budget,
+        "handle_commands' WCRT {handler} µs exceeds the {jitter_budget} µs release jitter \
+         lightring.timing.json budgets for latch_leds: raise that budget"
+    );
+    Ok(latch)
+}
+
+impl Bounds {
+    /// LightRing's command → latched bound (µs).
+    fn led_latency_us(&self) -> Result<u64> {
+        latch_bound_us(self.root())
+    }
+}
+
+/// The first latch at or after `at` that shows `colours`; its latency from `at`.
+fn latency_until_shown(latches: &[Latch], at: u64, colours: &[[u8; 3]; 8]) -> Result<u64> {
+    let want = expected(colours);
+    latches
+        .iter()
+        .filter(|l| l.at_us >= at)
+        .find(|l| l.outputs == want)
+        .map(|l| l.at_us - at)
+        .with_context(|| format!("no latch after {at} µs shows {colours:?}"))
+}
+
+fn led3(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    const AT: u64 = 10_000;
+    let sets = led_sets(out)?;
+    ensure!(
+        sets.len() == 1 && sets[0].1 == 3 && sets[0].2 == [0xFF, 0x80, 0x20],
+        "expected one led-set for LED 3 = FF8020, got {sets:?}"
+    );
+    let latches = latches(out)?;
+    ensure!(
+        latches.first().is_some_and(|l| l.outputs == [0; CHANNELS]),
+        "the first latch must be all dark (BLANK lifts after it)"
+    );
+    ensure!(
+        out.notes.iter().any(|n| n.contains("BLANK low")),
+        "BLANK never went low"
+    );
+    let mut colours = [[0u8; 3]; 8];
+    colours[2] = [0xFF, 0x80, 0x20];
+    let latency = latency_until_shown(&latches, AT, &colours)?;
+    let bound = bounds.led_latency_us()?;
+    ensure!(
+        latency <= bound,
+        "LED 3 latched {latency} µs after the command, above the analysed {bound} µs"
+    );
+    let after: Vec<&Latch> = latches.iter().filter(|l| l.at_us >= AT + latency).collect();
+    ensure!(
+        after.iter().all(|l| l.outputs == expected(&colours)),
+        "a later refresh lost LED 3's colour"
+    );
+    Ok(format!(
+        "LED 3 (OUT15..17) = FF8020 latched {latency} µs after the command ≤ analysed {bound} µs; {} refreshes keep it",
+        after.len()
+    ))
+}
+
+fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    let commands: [(u64, [u8; 3]); 8] = [
+        (10_000, [0xFF, 0, 0]),
+        (10_500, [0, 0xFF, 0]),
+        (11_000, [0, 0, 0xFF]),
+        (11_500, [0xFF, 0xFF, 0]),
+        (12_000, [0, 0xFF, 0xFF]),
+        (12_500, [0xFF, 0, 0xFF]),
+        (13_000, [0x80, 0x80, 0x80]),
+        (13_500, [0xFF, 0xFF, 0xFF]),
+    ];
+    let sets = led_sets(out)?;
+    let got: Vec<(u8, [u8; 3])> = sets.iter().map(|(_, led, rgb)| (*led, *rgb)).collect();
+    let want: Vec<(u8, [u8; 3])> = (1u8..=8).zip(commands.iter().map(|c| c.1)).collect();
+    ensure!(
+        got == want,
+        "LED commands applied {got:?}, expected {want:?}"
+    );
+    let latches = latches(out)?;
+    let bound = bounds.led_latency_us()?;
+    let mut colours = [[0u8; 3]; 8];
+    let mut worst = 0;
+    for (i, (at, rgb)) in commands.iter().enumerate() {
+        colours[i] = *rgb;
+        // Later commands may already be in the same latch: look for this LED's colour only.
+        let latch = latches
+            .iter()
+            .filter(|l| l.at_us >= *at)
+            .find(|l| {
+                let want = expected(&colours);
+                led_outputs(i as u8 + 1).is_some_and(|outs| {
+                    outs.iter()
+                        .all(|o| l.outputs[usize::from(*o)] == want[usize::from(*o)])
+                })
+            })
+            .with_context(|| format!("LED {} never latched", i + 1))?;
+        worst = worst.max(latch.at_us - at);
+    }
+    ensure!(
+        worst <= bound,
+        "an LED latched {worst} µs after its command, above the analysed {bound} µs"
+    );
+    let last = latches.last().context("no latch at all")?;
+    ensure!(
+        last.outputs == expected(&colours),
+        "the final state does not show all eight colours"
+    );
+    Ok(format!(
+        "8 LEDs applied in order, each latched within {worst} µs ≤ analysed {bound} µs; final state shows all eight"
+    ))
+}
+
+fn other_boards(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let ignored = out.traces("command-ignored").len();
+    ensure!(ignored == 6, "{ignored} frames ignored, expected all 6");
+    ensure!(
+        out.traces("command-rejected").is_empty() && out.traces("command-accepted").is_empty(),
+        "another board's frame was accepted or rejected"
+    );
+    ensure!(led_sets(out)?.is_empty(), "an LED changed");
+    let latches = latches(out)?;
+    ensure!(
+        latches.iter().all(|l| l.outputs == [0; CHANNELS]),
+        "an LED lit up"
+    );
+    ensure!(out.frames.is_empty(), "LightRing sent frames");
+    Ok(format!(
+        "6 frames for other boards ignored; {} latches, all dark",
+        latches.len()
+    ))
+}
+
+fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let reasons: Vec<String> = out
+        .traces("command-rejected")
+        .iter()
+        .map(|line| line.split_whitespace().last().unwrap_or("").to_string())
+        .collect();
+    let want = [
+        "dlc-too-short",
+        "dlc-too-long",
+        "unknown-topic",
+        "dlc-too-short",
+        "dlc-too-long",
+    ];
+    ensure!(reasons == want, "rejections {reasons:?}, expected {want:?}");
+    let sets = led_sets(out)?;
+    ensure!(
+        sets.len() == 1 && sets[0].1 == 5 && sets[0].2 == [0x10, 0x20, 0x30],
+        "only the good LED 5 command may apply, got {sets:?}"
+    );
+    let latches = latches(out)?;
+    ensure!(
+        latches
+            .iter()
+            .filter(|l| l.at_us < 20_000)
+            .all(|l| l.outputs == [0; CHANNELS]),
+        "a malformed frame changed the LEDs"
+    );
+    let mut colours = [[0u8; 3]; 8];
+    colours[4] = [0x10, 0x20, 0x30];
+    latency_until_shown(&latches, 20_000, &colours)?;
+    Ok("5 malformed frames rejected with their reasons, LEDs unchanged; the good command after them applied".into())
+}
+
+fn flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    // The flood as the stimulus sends it (lightring/qemu/flood.log).
+    let sent: Vec<(u8, [u8; 3])> = (0..120u32)
+        .map(|i| {
+            (
+                1 + (i % 8) as u8,
+                [
+                    (i * 37 % 256) as u8,
+                    (i * 91 % 256) as u8,
+                    (i * 53 % 256) as u8,
+                ],
+            )
+        })
+        .collect();
+    let applied: Vec<(u8, [u8; 3])> = led_sets(out)?
+        .iter()
+        .map(|(_, led, rgb)| (*led, *rgb))
+        .collect();
+    let dropped = out.end_field("rx dropped")?;
+    ensure!(
+        out.end_field("rx overruns")? == 0,
+        "receive-FIFO overruns: the receive interrupt fell behind"
+    );
+    ensure!(
+        applied.len() as u64 + dropped == sent.len() as u64,
+        "{} applied + {dropped} dropped != {} sent",
+        applied.len(),
+        sent.len()
+    );
+    ensure!(
+        applied.len() >= 17,
+        "only {} commands applied: the 16-deep queue plus the one in hand must all apply",
+        applied.len()
+    );
+    ensure!(
+        applied[..17] == sent[..17],
+        "the queued burst was not applied in order"
+    );
+    // Every applied command is a sent one, in sending order (drops only remove, never reorder).
+    let mut rest = sent.iter();
+    for a in &applied {
+        if !rest.any(|s| s == a) {
+            bail!("command {a:?} applied out of order");
+        }
+    }
+    let mut colours = [[0u8; 3]; 8];
+    for (led, rgb) in &applied {
+        colours[usize::from(*led - 1)] = *rgb;
+    }
+    let last = latches(out)?.pop().context("no latch at all")?;
+    ensure!(
+        last.outputs == expected(&colours),
+        "the final latch does not show the last applied colour of every LED"
+    );
+    Ok(format!(
+        "{} LED commands applied in order (the whole queued burst), {dropped} dropped and counted; final state = last applied colours",
+        applied.len()
+    ))
+}
+
+fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    const REQUEST: u64 = 30_000;
+    let sets = led_sets(out)?;
+    ensure!(
+        sets.len() == 1 && sets[0].1 == 4,
+        "only the LED 4 command before the request may apply, got {sets:?}"
+    );
+    let dark = out
+        .notes
+        .iter()
+        .position(|n| n.contains("BLANK high"))
+        .context("the LEDs never went dark")?;
+    let sync = out
+        .notes
+        .iter()
+        .position(|n| n.contains("SYS_SYNC_N pulled low"))
+        .context("SYS_SYNC_N was not pulled low")?;
+    let end = out.end_line()?;
+    ensure!(
+        end.starts_with("qemu: shutdown hand-over"),
+        "the run did not end in the hand-over: `{end}`"
+    );
+    let end_at = out.end_field("hand-over at")?;
+    ensure!(
+        (REQUEST..REQUEST + 1_000).contains(&end_at),
+        "hand-over at {end_at} µs, expected within 1 ms of the request"
+    );
+    ensure!(
+        dark < out.notes.len() && sync < out.notes.len(),
+        "dark and SYS_SYNC_N low must come before the end"
+    );
+    ensure!(
+        out.traces("command-")
+            .iter()
+            .all(|l| trace_time(l).is_ok_and(|t| t < REQUEST)),
+        "a command was handled after the shutdown request"
+    );
+    Ok(format!(
+        "LEDs dark, SYS_SYNC_N low, hand-over at {end_at} µs; nothing after"
+    ))
 }

@@ -237,6 +237,11 @@ impl Bounds {
         })
     }
 
+    /// The workspace root the analysis reads its models from.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
     /// Worst-case latency from a publisher's release to its frame in a mailbox, as analysed for
     /// `topic` published alone at CAN priority `level` every `period_us`.
     pub fn publisher_latency_us(&self, topic: &str, level: &str, period_us: u64) -> Result<u64> {

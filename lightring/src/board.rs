@@ -1,0 +1,215 @@
+//! LightRing revision 1-0 as the real chip sees it: the one place that names pins and peripherals.
+//!
+//! Facts from `shared/reference/amiro-boards.md` §0, §1, §6: 8 MHz crystal → 72 MHz (APB1 36 MHz),
+//! CAN1 on PA11/PA12 at 1 Mbit/s, one TLC5947 on SPI1 (SCK PA5, MOSI PA7; MISO PA6 unused) at
+//! 2.25 MHz mode 0 with XLAT on PC4 driven as the chip select (its rising edge at the end of a
+//! transfer latches) and BLANK on PA4 (high = dark, the reset state, until the driver holds a
+//! frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The monotonic is TIM3.
+use amiro_firmware::bxcan::{self, Fifo0, Mmio};
+use amiro_firmware::signals::SystemSignals as SystemSignalLines;
+use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
+use stm32f1xx_hal::afio::AfioExt;
+use stm32f1xx_hal::gpio::{GpioExt, OpenDrain, Output, PinState, PushPull, PA4, PC14, PC4, PD2};
+use stm32f1xx_hal::pac::{self, SPI1};
+use stm32f1xx_hal::prelude::*;
+use stm32f1xx_hal::rcc;
+use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
+
+/// CAN bit timing at 1 Mbit/s from a 36 MHz APB1 (the original firmware's: 18 MHz quanta,
+/// 1 + 14 + 3 tq, sample point 83 %).
+pub const CAN_BTR: u32 = 0x012D_0001;
+/// CAN bit timing at 1 Mbit/s from the 32 MHz APB1 of the internal-oscillator fallback (16 MHz
+/// quanta, 1 + 13 + 2 tq, sample point 87.5 %).
+pub const CAN_BTR_HSI: u32 = 0x001C_0001;
+/// System clock from the crystal.
+pub const SYSCLK_HZ: u32 = 72_000_000;
+/// System clock when the crystal does not start (HSI / 2 × 16).
+pub const SYSCLK_HSI_HZ: u32 = 64_000_000;
+/// The TLC5947's shift clock: 36 MHz / 16, as the original firmware.
+pub const LED_SPI_HZ: u32 = 2_250_000;
+/// EXTI line of SYS_PD_N (PC14).
+const SYS_PD_LINE: u32 = 1 << 14;
+
+/// The TLC5947 on SPI1, XLAT as its chip select.
+pub type LedSpi = ExclusiveDevice<Spi<SPI1, u8>, PC4<Output<PushPull>>, NoDelay>;
+/// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
+pub type CanRxPort = Fifo0<Mmio>;
+/// The board's clock: TIM3 ticks are microseconds.
+pub type Clock = amiro_firmware::mono::TimerClock<rtic_monotonics::stm32::Tim3Backend, 1>;
+
+rtic_monotonics::stm32_tim3_monotonic!(Mono, 1_000_000);
+
+/// Everything `init` hands on to the tasks.
+pub struct Board {
+    /// CAN receive FIFO 0 (command frames only, by hardware filter).
+    pub can_rx: CanRxPort,
+    /// The LED driver's SPI device.
+    pub led_spi: LedSpi,
+    /// BLANK.
+    pub blank: Blank,
+    /// System signals.
+    pub signals: SystemSignals,
+    /// Whether the board runs from the crystal (false: the internal-oscillator fallback).
+    pub on_crystal: bool,
+}
+
+/// TLC5947 BLANK (PA4): high = every output off.
+pub struct Blank(PA4<Output<PushPull>>);
+
+impl Blank {
+    /// Lets the latched colours show.
+    pub fn show(&mut self) {
+        self.0.set_low();
+    }
+}
+
+/// The module's system-bus signals.
+pub struct SystemSignals {
+    sys_sync: PD2<Output<OpenDrain>>,
+    _sys_pd: PC14<Output<OpenDrain>>,
+}
+
+/// Brings the board up: clocks (crystal, or the internal oscillator if the crystal does not start),
+/// pins, SPI1 for the LED driver, CAN.
+pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
+    if let Err(fault) = amiro_firmware::chip::clock_tree_to_reset_state() {
+        amiro_firmware::log!(
+            "clock reset: {:?} (continuing on the clock AMiRo-BLT left)",
+            fault
+        );
+    }
+    // AMiRo-BLT used bxCAN: reset it so nothing of the bootloader's configuration survives.
+    dp.RCC.apb1rstr().modify(|_, w| w.canrst().set_bit());
+    dp.RCC.apb1rstr().modify(|_, w| w.canrst().clear_bit());
+    let on_crystal = amiro_firmware::chip::start_crystal().is_ok();
+    let config = if on_crystal {
+        rcc::Config::hse(8.MHz())
+            .sysclk(SYSCLK_HZ.Hz())
+            .hclk(SYSCLK_HZ.Hz())
+            .pclk1(36.MHz())
+            .pclk2(36.MHz())
+    } else {
+        amiro_firmware::log!("fault: the 8 MHz crystal did not start; running from HSI at 64 MHz");
+        rcc::Config::hsi()
+            .sysclk(SYSCLK_HSI_HZ.Hz())
+            .hclk(SYSCLK_HSI_HZ.Hz())
+            .pclk1(32.MHz())
+            .pclk2(32.MHz())
+    };
+    let mut flash = dp.FLASH.constrain();
+    let mut rcc = dp.RCC.freeze(config, &mut flash.acr);
+
+    let mut afio = dp.AFIO.constrain(&mut rcc);
+    let mut gpioa = dp.GPIOA.split(&mut rcc);
+    let gpiob = dp.GPIOB.split(&mut rcc);
+    let mut gpioc = dp.GPIOC.split(&mut rcc);
+    let mut gpiod = dp.GPIOD.split(&mut rcc);
+
+    // BLANK first: the LEDs stay dark until the driver holds a known frame.
+    let blank = gpioa
+        .pa4
+        .into_push_pull_output_with_state(&mut gpioa.crl, PinState::High);
+    // SYS_SYNC_N stays low (as AMiRo-BLT left it) until the app is initialised.
+    let sys_sync = gpiod
+        .pd2
+        .into_open_drain_output_with_state(&mut gpiod.crl, PinState::Low);
+    // SYS_PD_N: wired-OR open drain, released high; EXTI line 14 (port C) watches its falling edge.
+    let sys_pd = gpioc
+        .pc14
+        .into_open_drain_output_with_state(&mut gpioc.crh, PinState::High);
+    // SAFETY: AFIO's clock is on (constrain above); EXTICR4 bits 8..12 select the port of line 14,
+    // and nothing else in this firmware uses EXTI lines 12..15.
+    unsafe {
+        (*pac::AFIO::ptr())
+            .exticr4()
+            .modify(|r, w| w.bits((r.bits() & !(0xF << 8)) | (0x2 << 8)));
+    }
+    dp.EXTI
+        .ftsr()
+        .modify(|r, w| unsafe { w.bits(r.bits() | SYS_PD_LINE) });
+    dp.EXTI
+        .imr()
+        .modify(|r, w| unsafe { w.bits(r.bits() | SYS_PD_LINE) });
+
+    // JTAG off, SWD kept (as the original firmware).
+    let (_pa15, _pb3, _pb4) = afio.mapr.disable_jtag(gpioa.pa15, gpiob.pb3, gpiob.pb4);
+
+    // SPI1 mode 0 at 2.25 MHz; XLAT idles high, so the end of each transfer is a rising edge.
+    let xlat = gpioc
+        .pc4
+        .into_push_pull_output_with_state(&mut gpioc.crl, PinState::High);
+    let spi = dp.SPI1.spi(
+        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
+        SpiMode {
+            polarity: Polarity::IdleLow,
+            phase: Phase::CaptureOnFirstTransition,
+        },
+        LED_SPI_HZ.Hz(),
+        &mut rcc,
+    );
+    let led_spi =
+        ExclusiveDevice::new_no_delay(spi, xlat).unwrap_or_else(|_| amiro_firmware::fault::halt());
+
+    // CAN1 on PA11 (RX, floating input) and PA12 (TX, alternate push-pull), no remap.
+    let _can_rx_pin = gpioa.pa11.into_floating_input(&mut gpioa.crh);
+    let _can_tx_pin = gpioa.pa12.into_alternate_push_pull(&mut gpioa.crh);
+    // SAFETY: one bit in a register only init touches (the HAL has consumed its RCC handle).
+    unsafe {
+        (*pac::RCC::ptr())
+            .apb1enr()
+            .modify(|_, w| w.canen().set_bit())
+    };
+    // SAFETY: CAN1 is this board's only CAN block; its receive half is owned by `can_rx`.
+    let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
+    let btr = if on_crystal { CAN_BTR } else { CAN_BTR_HSI };
+    if let Err(e) = bxcan::configure(&can, btr) {
+        amiro_firmware::log!("CAN set-up: {:?}", e);
+    }
+
+    Board {
+        can_rx: Fifo0::new(can),
+        led_spi,
+        blank: Blank(blank),
+        signals: SystemSignals {
+            sys_sync,
+            _sys_pd: sys_pd,
+        },
+        on_crystal,
+    }
+}
+
+/// Starts the TIM3 monotonic (APB1 timers run at 2 × PCLK1).
+pub fn start_monotonic(priority: u8, on_crystal: bool) {
+    let timer_hz = if on_crystal { 72_000_000 } else { 64_000_000 };
+    Mono::start(timer_hz, rtic_monotonics::stm32::Priority::new(priority));
+}
+
+/// LightRing's safe state, from any context: BLANK high, every LED dark at once.
+pub fn leds_dark() {
+    // SAFETY: a single write of BSRR (set PA4), racing with nothing that could undo it but the
+    // latch task's `Blank::show`, which the callers of this function pre-empt or have stopped.
+    unsafe { (*pac::GPIOA::ptr()).bsrr().write(|w| w.bs4().set_bit()) };
+}
+
+impl SystemSignalLines for SystemSignals {
+    fn release_sync(&mut self) {
+        self.sys_sync.set_high();
+    }
+
+    fn pull_sync_low(&mut self) {
+        self.sys_sync.set_low();
+    }
+
+    fn shutdown_requested(&self) -> bool {
+        // SAFETY: a read of GPIOC's input data register.
+        unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 14) == 0 }
+    }
+
+    fn clear_shutdown_interrupt(&mut self) {
+        // SAFETY: writing 1 clears only line 14's pending bit.
+        unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(SYS_PD_LINE)) };
+    }
+}
+
+/// Interrupt of the SYS_PD_N line.
+pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI15_10;

@@ -1,0 +1,85 @@
+//! The ring's colour state between the command handler and the latch task, and the latch itself.
+//!
+//! The command handler only records each LED command (fast, in command order); the latch task
+//! shifts the whole state into the TLC5947 and latches it. A burst of commands faster than a latch
+//! takes is therefore applied in order and shown together by the next latch — no command is lost,
+//! and the latch's cost does not grow with the burst.
+use amiro_can::LedCommand;
+use amiro_firmware::mono::Clock;
+use amiro_firmware::telemetry;
+use amiro_sensors::drivers::tlc5947::{LightRing, LEDS};
+use amiro_sensors::trace::{TraceEvent, TraceKind};
+use embedded_hal::spi::SpiDevice;
+
+/// The commanded colours and which LEDs changed since the last latch.
+pub struct LedState {
+    colours: [[u8; 3]; LEDS as usize],
+    changed: u8,
+}
+
+impl LedState {
+    /// Every LED dark, nothing to latch.
+    pub const fn new() -> Self {
+        Self {
+            colours: [[0; 3]; LEDS as usize],
+            changed: 0,
+        }
+    }
+
+    /// Records an LED command (the decoder has checked `led` is 1..=8) and traces it.
+    pub fn apply(&mut self, now: u64, command: &LedCommand) {
+        let rgb = [command.rgb.r, command.rgb.g, command.rgb.b];
+        let index = usize::from(command.led.saturating_sub(1));
+        if let Some(slot) = self.colours.get_mut(index) {
+            if *slot != rgb {
+                *slot = rgb;
+                self.changed |= 1 << index;
+            }
+        }
+        telemetry::trace(&TraceEvent::new(
+            now,
+            TraceKind::LedSet {
+                led: command.led,
+                rgb,
+            },
+        ));
+    }
+
+    /// The colours to latch now, and which LEDs changed since the last call.
+    pub fn take(&mut self) -> ([[u8; 3]; LEDS as usize], u8) {
+        (self.colours, core::mem::take(&mut self.changed))
+    }
+
+    /// Every LED dark (the shutdown path).
+    pub fn clear(&mut self) {
+        self.colours = [[0; 3]; LEDS as usize];
+        self.changed = 0xFF;
+    }
+}
+
+impl Default for LedState {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Shifts `colours` into the driver and latches them; traces the latch with the LEDs that changed.
+/// A failed transfer is logged; the next latch writes the whole state again.
+pub fn latch<C: Clock, SPI: SpiDevice>(
+    ring: &mut LightRing<SPI>,
+    colours: &[[u8; 3]; LEDS as usize],
+    changed: u8,
+) {
+    for (led, [r, g, b]) in (1..=LEDS).zip(colours.iter().copied()) {
+        // `led` is in 1..=LEDS by construction: set_led cannot fail here.
+        let _ = ring.set_led(led, r, g, b);
+    }
+    match ring.flush() {
+        // Stamped when XLAT has risen: the colours are on the LEDs from this moment.
+        Ok(()) => telemetry::trace(&TraceEvent::new(
+            C::now_us(),
+            TraceKind::LedsLatched { changed },
+        )),
+        Err(_) => amiro_firmware::log!("LED driver transfer failed"),
+    }
+}
