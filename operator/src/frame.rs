@@ -277,11 +277,12 @@ impl fmt::Display for FrameTextError {
 
 impl std::error::Error for FrameTextError {}
 
+/// One numbered line from [`text_lines`]: its number, and its text or why it is not text.
+pub type NumberedLine = std::io::Result<(usize, Result<String, FrameTextError>)>;
+
 /// Reads numbered lines (from 1) from `input` without giving up on bytes that are not UTF-8: such a line comes
 /// back as `Err(FrameTextError::NotText)` and reading goes on. Only an I/O error ends the iteration (with `Err`).
-pub fn text_lines<R: std::io::BufRead>(
-    mut input: R,
-) -> impl Iterator<Item = std::io::Result<(usize, Result<String, FrameTextError>)>> {
+pub fn text_lines<R: std::io::BufRead>(mut input: R) -> impl Iterator<Item = NumberedLine> {
     let mut number = 0;
     let mut failed = false;
     std::iter::from_fn(move || {

@@ -259,7 +259,7 @@ mod tests {
 
     #[test]
     fn every_step_form_parses() {
-        assert!(matches!(parse_step("  # comment", false).unwrap(), None));
+        assert!(parse_step("  # comment", false).unwrap().is_none());
         let Some(Step::Send(frames)) = parse_step("205#01840302 204#02", false).unwrap() else {
             panic!()
         };

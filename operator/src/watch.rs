@@ -291,17 +291,16 @@ impl Statistics {
             "id", "topic", "frames", "period", "shortest", "longest", "jitter"
         ));
         for (key, stream) in &self.streams {
-            let (period, shortest, longest, jitter) = if stream.intervals == 0 {
-                ("-".into(), "-".into(), "-".into(), "-".into())
-            } else {
-                let mean = stream.interval_sum / stream.intervals;
-                (
-                    human_micros(mean),
-                    human_micros(stream.interval_min),
-                    human_micros(stream.interval_max),
-                    human_micros(stream.interval_max - stream.interval_min),
-                )
-            };
+            let (period, shortest, longest, jitter) =
+                match stream.interval_sum.checked_div(stream.intervals) {
+                    None => ("-".into(), "-".into(), "-".into(), "-".into()),
+                    Some(mean) => (
+                        human_micros(mean),
+                        human_micros(stream.interval_min),
+                        human_micros(stream.interval_max),
+                        human_micros(stream.interval_max - stream.interval_min),
+                    ),
+                };
             lines.push(format!(
                 "  {:<4} {:<44} {:>7} {:>12} {:>12} {:>12} {:>12}",
                 key.id, stream.label, stream.frames, period, shortest, longest, jitter

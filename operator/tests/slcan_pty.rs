@@ -367,3 +367,262 @@ fn a_monitor_whose_bus_owner_ends_reports_the_lost_bus_and_fails() {
         "it saw frames while connected: {stdout}"
     );
 }
+
+/// Answers every command with `z` and notes when each motor frame arrived, until the stop and the close.
+fn record_motor_frames(adapter: &mut FakeAdapter) -> Vec<(Instant, String)> {
+    let mut motor = Vec::new();
+    loop {
+        let heard = adapter.hear();
+        if heard == "C\r" {
+            adapter.say(b"\r");
+            return motor;
+        }
+        assert!(
+            heard.starts_with("t110"),
+            "only motor frames while driving: {heard:?}"
+        );
+        motor.push((Instant::now(), heard));
+        adapter.say(b"z\r");
+    }
+}
+
+const FORWARD_100: &str = "t1108A086010000000000\r";
+const STOP: &str = "t11080000000000000000\r";
+
+#[test]
+fn drive_repeats_the_motor_command_within_the_deadman_and_ends_with_a_stop() {
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let child = amiro(&[
+        "drive",
+        "--forward",
+        "100mm/s",
+        "--for",
+        "1s",
+        "--bus",
+        &bus,
+    ]);
+    adapter.accept_open();
+    let motor = record_motor_frames(&mut adapter);
+    let output = finish(child);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let (last_at, last) = motor.last().unwrap();
+    assert_eq!(last, STOP);
+    assert!(
+        motor[..motor.len() - 1]
+            .iter()
+            .all(|(_, frame)| frame == FORWARD_100),
+        "{motor:?}"
+    );
+    // Every 200 ms for 1 s: 5 commands and the stop (a slow machine may drop none, only delay).
+    assert_eq!(motor.len(), 6, "{motor:?}");
+    for pair in motor.windows(2) {
+        let gap = pair[1].0 - pair[0].0;
+        assert!(
+            gap < Duration::from_millis(450),
+            "a gap of {gap:?} lets the dead-man stop the robot"
+        );
+    }
+    let total = *last_at - motor[0].0;
+    assert!(total >= Duration::from_millis(950), "drove {total:?}");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        stdout.contains("sent") && stdout.contains("motor: drive at 100000 µm/s"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn ctrl_c_while_driving_stops_the_robot_before_closing() {
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let child = amiro(&[
+        "drive",
+        "--forward",
+        "100mm/s",
+        "--turn",
+        "30deg/s",
+        "--bus",
+        &bus,
+    ]);
+    adapter.accept_open();
+    for _ in 0..3 {
+        assert!(adapter.hear().starts_with("t1108A08601004FFD0700"));
+        adapter.say(b"z\r");
+    }
+    interrupt(&child);
+    let mut rest = record_motor_frames(&mut adapter);
+    let (_, last) = rest.pop().expect("a stop");
+    assert_eq!(last, STOP);
+    let output = finish(child);
+    assert_eq!(output.status.code(), Some(130));
+}
+
+#[test]
+fn a_script_plays_its_steps_in_order_and_prints_what_comes_back() {
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let dir = tempfile::tempdir().unwrap();
+    let script = dir.path().join("short.amiro");
+    std::fs::write(
+        &script,
+        "# a short demo\npublish gyroscope --every 100ms --priority high\nwait 300ms\nled 3 --rgb 0,50,120\n\
+         drive --forward 100mm/s --for 500ms\n",
+    )
+    .unwrap();
+    let child = amiro(&["run", script.to_str().unwrap(), "--bus", &bus]);
+    adapter.accept_open();
+    let gyroscope_published = Instant::now();
+    adapter.expect("t108401640000\r", b"z\rt5086FCFF1E00FBFF\r");
+    adapter.expect("t3133003278\r", b"z\r");
+    assert!(
+        gyroscope_published.elapsed() >= Duration::from_millis(300),
+        "the wait was kept"
+    );
+    let motor = record_motor_frames(&mut adapter);
+    assert_eq!(motor.first().unwrap().1, FORWARD_100);
+    assert_eq!(motor.last().unwrap().1, STOP);
+    let output = finish(child);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    for expected in [
+        "# line 2: publish gyroscope",
+        "sent (",
+        "gyroscope: x -4 dps, y 30 dps, z -5 dps",
+        "led-3: set colour red 0, green 50, blue 120",
+    ] {
+        assert!(stdout.contains(expected), "{expected} in {stdout}");
+    }
+}
+
+#[test]
+fn a_headless_console_sends_drives_and_shares_its_adapter() {
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let mut console = Command::new(assert_cmd::cargo::cargo_bin("amiro"))
+        .args(["console", "--headless", "--linger", "100ms", "--bus", &bus])
+        .env_remove("AMIRO_BUS")
+        .env("AMIRO_RUNTIME_DIR", runtime_dir())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start amiro console");
+    adapter.accept_open();
+    let mut input = console.stdin.take().unwrap();
+    writeln!(input, "publish gyroscope --every 10ms --priority high").unwrap();
+    adapter.expect("t1084010A0000\r", b"z\rt5086FCFF1E00FBFF\r");
+    // Another amiro on the same adapter goes through the console.
+    let led = amiro(&["send", "led", "3", "--rgb", "255,128,0", "--bus", &bus]);
+    adapter.expect("t3133FF8000\r", b"z\r");
+    assert!(finish(led).status.success());
+    writeln!(input, "drive --forward 100mm/s --for 600ms").unwrap();
+    drop(input);
+    let motor = record_motor_frames(&mut adapter);
+    assert_eq!(motor.first().unwrap().1, FORWARD_100);
+    assert_eq!(motor.last().unwrap().1, STOP);
+    assert!((3..=5).contains(&motor.len()), "{motor:?}");
+    let output = finish(console);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    for expected in [
+        "> publish gyroscope",
+        "sent (",
+        "gyroscope: x -4 dps",
+        "313#FF8000",
+    ] {
+        assert!(stdout.contains(expected), "{expected} in {stdout}");
+    }
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("summary:"), "{stderr}");
+}
+
+#[test]
+fn the_console_screen_runs_on_a_terminal_and_ctrl_c_closes_the_channel() {
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let size = nix::pty::Winsize {
+        ws_row: 30,
+        ws_col: 120,
+        ws_xpixel: 0,
+        ws_ypixel: 0,
+    };
+    let terminal = openpty(Some(&size), None).expect("openpty");
+    let slave = File::from(terminal.slave);
+    let mut keyboard = File::from(terminal.master);
+    // The screen must be read, or the console blocks writing it.
+    let mut screen_reader = keyboard.try_clone().unwrap();
+    let screen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let screen_sink = std::sync::Arc::clone(&screen);
+    std::thread::spawn(move || {
+        let mut buffer = [0u8; 4096];
+        while let Ok(count) = screen_reader.read(&mut buffer) {
+            if count == 0 {
+                break;
+            }
+            screen_sink
+                .lock()
+                .unwrap()
+                .extend_from_slice(&buffer[..count]);
+        }
+    });
+    let child = Command::new(assert_cmd::cargo::cargo_bin("amiro"))
+        .args(["console", "--bus", &bus])
+        .env_remove("AMIRO_BUS")
+        .env("AMIRO_RUNTIME_DIR", runtime_dir())
+        .env("TERM", "xterm")
+        .stdin(slave.try_clone().unwrap())
+        .stdout(slave.try_clone().unwrap())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start amiro console");
+    drop(slave);
+    adapter.accept_open();
+    // Type only once the screen is up (the terminal is in raw mode then).
+    let deadline = Instant::now() + PATIENCE;
+    // Cells are drawn with cursor moves in between words, so look for single words of the title.
+    let drawn = |screen: &[u8]| {
+        let text = String::from_utf8_lossy(screen);
+        text.contains("console") && text.contains("F3")
+    };
+    while !drawn(&screen.lock().unwrap()) {
+        assert!(
+            Instant::now() < deadline,
+            "the console never drew its screen"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    keyboard
+        .write_all(b"publish gyroscope --every 10ms --priority high\r")
+        .unwrap();
+    adapter.expect("t1084010A0000\r", b"z\r");
+    while !String::from_utf8_lossy(&screen.lock().unwrap()).contains("108#010A0000") {
+        assert!(
+            Instant::now() < deadline,
+            "the sent frame never appeared on the screen"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    keyboard.write_all(b"\x03").unwrap();
+    adapter.expect("C\r", b"\r");
+    let output = finish(child);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let screen = String::from_utf8_lossy(&screen.lock().unwrap()).into_owned();
+    assert!(screen.contains("\u{1b}[?1049l"), "the terminal is restored");
+}

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 
 use super::{interrupted, Bus, Reception};
-use crate::frame::{parse_line, text_lines, FrameTextError, LoggedFrame, RawFrame, Timestamp};
+use crate::frame::{parse_line, text_lines, LoggedFrame, NumberedLine, RawFrame, Timestamp};
 
 /// Interface name written into log lines, so that `canplayer` can map it (`canplayer can0=vcan0 ...`).
 const LOG_INTERFACE: &str = "can0";
@@ -61,7 +61,7 @@ impl Bus for LogWriter {
 /// Reads frames from a log file, optionally at the pace they were recorded.
 pub struct LogReader {
     path: PathBuf,
-    lines: Box<dyn Iterator<Item = std::io::Result<(usize, Result<String, FrameTextError>)>>>,
+    lines: Box<dyn Iterator<Item = NumberedLine>>,
     realtime: bool,
     /// The first frame's timestamp and the moment it was handed out: the origin of realtime pacing.
     pace_origin: Option<(Timestamp, Instant)>,

@@ -164,6 +164,9 @@ impl Drop for TerminalGuard {
 fn map_key(code: KeyCode, modifiers: KeyModifiers) -> Option<Key> {
     Some(match code {
         KeyCode::Char('c') if modifiers.contains(KeyModifiers::CONTROL) => Key::Interrupt,
+        // Ctrl-J is a line feed: some terminals (and pasted text) end lines with it.
+        KeyCode::Char('j') if modifiers.contains(KeyModifiers::CONTROL) => Key::Enter,
+        KeyCode::Char(_) if modifiers.contains(KeyModifiers::CONTROL) => return None,
         KeyCode::Char(c) => Key::Char(c),
         KeyCode::Enter => Key::Enter,
         KeyCode::Tab => Key::Tab,
