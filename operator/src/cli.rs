@@ -157,6 +157,10 @@ Examples:
     /// Hold an SLCAN adapter and share it with other amiro commands until Ctrl-C
     #[command(long_about = crate::cli_session::RELAY_ABOUT)]
     Relay(crate::cli_session::RelayArgs),
+
+    /// Ask every board for its health over CAN (diagnostics counters) and say what looks wrong
+    #[command(long_about = crate::health::HEALTH_ABOUT, after_help = crate::health::HEALTH_HELP)]
+    Health(crate::health::HealthArgs),
 }
 
 /// `amiro dbc`.

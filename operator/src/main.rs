@@ -14,6 +14,7 @@ mod describe;
 mod drive;
 mod encode;
 mod frame;
+mod health;
 mod period;
 mod script;
 mod session;
@@ -38,6 +39,7 @@ fn main() -> ExitCode {
         CliCommand::Drive(args) => session::drive_command(args),
         CliCommand::Run(args) => session::run(args),
         CliCommand::Relay(args) => session::relay(args),
+        CliCommand::Health(args) => health::health(args),
     };
     match outcome {
         Ok(code) => code,

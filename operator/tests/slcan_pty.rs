@@ -626,3 +626,53 @@ fn the_console_screen_runs_on_a_terminal_and_ctrl_c_closes_the_channel() {
     let screen = String::from_utf8_lossy(&screen.lock().unwrap()).into_owned();
     assert!(screen.contains("\u{1b}[?1049l"), "the terminal is restored");
 }
+
+#[test]
+fn health_asks_each_board_once_and_reports_the_silent_one() {
+    use amiro_can::{Board, Diagnostics, Priority};
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let child = amiro(&[
+        "health",
+        "--board",
+        "diwheeldrive",
+        "--board",
+        "lightring",
+        "--timeout",
+        "1s",
+        "--bus",
+        &bus,
+    ]);
+    adapter.accept_open();
+    // One-shot requests (mode 2) on each board's diagnostics topic, at low priority.
+    adapter.expect("t31A102\r", b"z\r");
+    adapter.expect("t31C102\r", b"z\r");
+    let mut diagnostics = Diagnostics::ZERO;
+    diagnostics.uptime_s = 42;
+    let mut answer = Vec::new();
+    for frame in diagnostics.frames(Board::DiWheelDrive, Priority::Low, 0) {
+        answer.extend_from_slice(
+            format!("t{:03X}{}", frame.id().raw(), frame.data().len()).as_bytes(),
+        );
+        for byte in frame.data() {
+            answer.extend_from_slice(format!("{byte:02X}").as_bytes());
+        }
+        answer.push(b'\r');
+    }
+    adapter.say(&answer);
+    adapter.expect("C\r", b"\r");
+    let output = finish(child);
+    assert_eq!(output.status.code(), Some(1), "LightRing never answered");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("DiWheelDrive: healthy, up 42 s"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("LightRing: no answer"), "{stderr}");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert_eq!(
+        stdout.lines().count(),
+        6,
+        "the six pages are printed: {stdout}"
+    );
+}
