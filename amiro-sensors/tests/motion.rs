@@ -485,3 +485,62 @@ proptest! {
         prop_assert!(odo.heading_nrad() >= 0 && odo.heading_nrad() < TURN_NRAD);
     }
 }
+
+/// The wheel speed limit is a limit: whatever the command (the largest and smallest the wire
+/// carries, full spins, full reversals), neither simulated wheel ever runs faster than
+/// `max_wheel_speed_um_s`, measured on the plant itself every millisecond.
+#[test]
+fn extreme_commands_never_drive_a_wheel_past_the_speed_limit() {
+    let limit = i64::from(DriveConfig::AMIRO.max_wheel_speed_um_s);
+    let command = |velocity_um_s, angular_urad_s| MotorCommand {
+        velocity_um_s,
+        angular_urad_s,
+    };
+    // Each phase is held for 2 s (commands refreshed every 100 ms), back to back.
+    let sequences: [&[MotorCommand]; 5] = [
+        &[command(i32::MAX, 0)],
+        &[
+            command(i32::MIN, 0),
+            command(i32::MAX, 0),
+            command(i32::MIN, 0),
+        ],
+        &[command(0, i32::MAX), command(0, i32::MIN)],
+        &[
+            command(500_000, 0),
+            command(-500_000, 0),
+            command(500_000, 0),
+        ],
+        &[command(i32::MAX, i32::MAX), command(i32::MIN, i32::MIN)],
+    ];
+    let mut findings = Vec::new();
+    for sequence in sequences {
+        let mut drive = DriveController::default();
+        let mut plant = WheelPlant::new();
+        let mut t = 0u64;
+        let mut peak = 0i64;
+        for &phase in sequence {
+            for _ in 0..200 {
+                if t.is_multiple_of(100_000) {
+                    drive.set_target(phase, t);
+                }
+                // 1 ms steps of the plant between 10 ms control updates.
+                for _ in 0..10 {
+                    t += 1_000;
+                    plant.advance_to(t);
+                    peak = peak
+                        .max(plant.left.speed_um_s().abs())
+                        .max(plant.right.speed_um_s().abs());
+                }
+                let (l, r) = plant.counts(t);
+                let out = drive.update(t, l, r);
+                plant.set_power(out.motors_enabled);
+                plant.set_duty(out.duty_left, out.duty_right);
+            }
+        }
+        // Over the limit, or kept far from it by crawling (it must get within 2 %).
+        if peak > limit || peak < limit * 98 / 100 {
+            findings.push(format!("{sequence:?}: peak {peak} µm/s"));
+        }
+    }
+    assert!(findings.is_empty(), "limit {limit} µm/s: {findings:#?}");
+}

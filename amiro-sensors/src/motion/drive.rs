@@ -184,9 +184,20 @@ impl DriveController {
                 .unwrap_or(u32::MAX)
                 .min(self.config.max_step_us);
             let (left_measured, right_measured) = self.wheel_speeds_um_s;
+            let speed_limit = i64::from(self.config.max_wheel_speed_um_s.max(0));
             DriveOutput {
-                duty_left: self.left_speed.update(left_target, left_measured, step),
-                duty_right: self.right_speed.update(right_target, right_measured, step),
+                duty_left: self.left_speed.update_limited(
+                    left_target,
+                    left_measured,
+                    step,
+                    speed_limit,
+                ),
+                duty_right: self.right_speed.update_limited(
+                    right_target,
+                    right_measured,
+                    step,
+                    speed_limit,
+                ),
                 motors_enabled: true,
                 deadman_tripped: false,
             }
