@@ -613,3 +613,101 @@ fn a_period_too_long_to_count_names_the_firmware_limit() {
     assert!(stderr.contains("4294.967295 s"), "{stderr}");
     assert!(!stderr.contains("18446744073709"), "{stderr}");
 }
+
+#[test]
+fn the_motor_help_states_the_deadman() {
+    let stdout = stdout_of(&["encode", "motor", "--help"]);
+    assert!(
+        stdout.contains("500 ms") && stdout.contains("Dead-man"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn the_shipped_demo_script_checks_without_a_bus() {
+    let script = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/standalone-demo.amiro"
+    );
+    let stdout = stdout_of(&["run", script, "--check"]);
+    assert!(stdout.contains("108#01640000"), "{stdout}");
+    assert!(stdout.contains("313#003278"), "{stdout}");
+}
+
+#[test]
+fn send_reads_frames_from_a_file_and_refuses_a_bad_one_before_sending_any() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames.txt");
+    let log = dir.path().join("out.log");
+    std::fs::write(
+        &frames,
+        "# two frames\n205#01840302\n(1700000000.000000) can0 204#02\n",
+    )
+    .unwrap();
+    let bus = format!("file:{}", log.display());
+    let stdout = stdout_of(&["send", "--file", frames.to_str().unwrap(), "--bus", &bus]);
+    assert_eq!(stdout.lines().count(), 2, "{stdout}");
+    assert_eq!(std::fs::read_to_string(&log).unwrap().lines().count(), 2);
+    std::fs::write(&frames, "205#01840302\n205#03\nnonsense\n").unwrap();
+    let (ok, _, stderr) = run(&["send", "--file", frames.to_str().unwrap(), "--bus", &bus]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("line 2")
+            && stderr.contains("line 3")
+            && stderr.contains("nothing was sent"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&log).unwrap().lines().count(),
+        2,
+        "nothing more was sent"
+    );
+    let output = amiro()
+        .args(["send", "--bus", &bus])
+        .write_stdin("313#FF8000\n")
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert_eq!(std::fs::read_to_string(&log).unwrap().lines().count(), 3);
+}
+
+#[test]
+fn monitor_filters_names_positions_and_summarises_a_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ring.log");
+    std::fs::write(
+        &path,
+        "(10.000000) can0 21F#0124F402\n(10.001000) can0 71F#037800\n(10.002000) can0 608#FCFF1E00FBFF\n\
+         (10.063500) can0 71F#037A00\n",
+    )
+    .unwrap();
+    let bus = format!("file:{}", path.display());
+    let (ok, stdout, stderr) = run(&[
+        "monitor",
+        "--bus",
+        &bus,
+        "--board",
+        "powermanagement",
+        "--sensor-data",
+    ]);
+    assert!(ok, "{stderr}");
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 2, "{stdout}");
+    assert!(
+        lines[0].starts_with("(   0.000000) can0 71F#037800"),
+        "{stdout}"
+    );
+    assert!(
+        lines[1].starts_with("(   0.062500)")
+            && lines[1].contains("sensor 3 front-left sees 122 mm"),
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains("summary: 2 frames") && stderr.contains("62.5 ms"),
+        "{stderr}"
+    );
+}

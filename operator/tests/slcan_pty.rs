@@ -418,8 +418,9 @@ fn drive_repeats_the_motor_command_within_the_deadman_and_ends_with_a_stop() {
             .all(|(_, frame)| frame == FORWARD_100),
         "{motor:?}"
     );
-    // Every 200 ms for 1 s: 5 commands and the stop (a slow machine may drop none, only delay).
-    assert_eq!(motor.len(), 6, "{motor:?}");
+    // Every 200 ms for 1 s: 5 commands and the stop. A loaded machine may be late (never bursting to catch
+    // up), so one repeat fewer is tolerated; the gap bound below is what protects the robot.
+    assert!((5..=6).contains(&motor.len()), "{motor:?}");
     for pair in motor.windows(2) {
         let gap = pair[1].0 - pair[0].0;
         assert!(
