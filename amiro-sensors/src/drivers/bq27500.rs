@@ -255,9 +255,18 @@ impl<I2C: I2c, D: DelayNs> Bq27500<I2C, D> {
     }
 
     /// Reads everything [`BatteryStatus`] holds (ten transfers, in command order).
+    ///
+    /// Temperature and voltage both all `0x00` or all `0xFF` (0 K at 0 V, or 6553.5 K at
+    /// 65.5 V: no gauge measures that) are a dead line's pattern; the status is returned only if
+    /// the gauge then still answers DEVICE_TYPE ([`Error::WrongIdentity`] otherwise).
     pub fn read_status(&mut self) -> Result<BatteryStatus, Error<I2C::Error>> {
         let temperature = self.read_u16(cmd::TEMPERATURE)?;
         let voltage_mv = self.read_u16(cmd::VOLTAGE)?;
+        let [t0, t1] = temperature.to_le_bytes();
+        let [v0, v1] = voltage_mv.to_le_bytes();
+        if super::is_bus_pattern(&[t0, t1, v0, v1]) {
+            self.init()?;
+        }
         let flags = Flags(self.read_u16(cmd::FLAGS)?);
         let remaining_capacity_mah = self.read_u16(cmd::REMAINING_CAPACITY)?;
         let full_charge_capacity_mah = self.read_u16(cmd::FULL_CHARGE_CAPACITY)?;

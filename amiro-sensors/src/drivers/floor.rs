@@ -9,7 +9,7 @@ use embedded_hal::i2c::I2c;
 
 use super::pca9544a::{Channel, Pca9544a};
 use super::vcnl4020::{Config, Reading, Vcnl4020};
-use super::Error;
+use super::{Error, IdentitySchedule};
 
 /// Where a floor sensor sits; the discriminant is its index in the protocol's frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -58,6 +58,7 @@ pub struct GroupError<E> {
 pub struct FloorSensors<I2C> {
     mux: Pca9544a<I2C>,
     config: Config,
+    identity: IdentitySchedule,
 }
 
 impl<I2C: I2c> FloorSensors<I2C> {
@@ -71,6 +72,7 @@ impl<I2C: I2c> FloorSensors<I2C> {
         Self {
             mux: Pca9544a::new(i2c),
             config,
+            identity: IdentitySchedule { samples: 0 },
         }
     }
 
@@ -81,6 +83,20 @@ impl<I2C: I2c> FloorSensors<I2C> {
             self.with_sensor(sensor, |vcnl| vcnl.init(&config))?;
         }
         Ok(())
+    }
+
+    /// Reads every sensor's PRODUCT_ID through its mux channel (a mux that does not switch, or a
+    /// sensor that is gone, fails here).
+    pub fn check_identities(&mut self) -> Result<(), GroupError<I2C::Error>> {
+        for sensor in FloorSensor::ALL {
+            self.with_sensor(sensor, |vcnl| vcnl.check_identity())?;
+        }
+        Ok(())
+    }
+
+    /// Counts one sample; true every [`super::IDENTITY_CHECK_EVERY`] samples.
+    pub(crate) fn identity_check_due(&mut self) -> bool {
+        self.identity.due()
     }
 
     /// The four proximity counts in protocol order (front-right, right-wheel, left-wheel,

@@ -190,9 +190,16 @@ impl<I2C: I2c> Hmc5883l<I2C> {
     }
 
     /// Reads the six data bytes in one transfer: raw X, Y, Z digits (reordered from X, Z, Y).
+    ///
+    /// Six bytes of all `0x00` or all `0xFF` (a dead bus, or a part that lost its configuration
+    /// and stopped measuring) are passed on only after the identification registers still read
+    /// "H43" ([`Error::WrongIdentity`] otherwise).
     pub fn read_raw(&mut self) -> Result<[i16; 3], Error<I2C::Error>> {
         let mut out = [0u8; 6];
         self.i2c.write_read(ADDRESS, &[reg::DATA_X_MSB], &mut out)?;
+        if super::is_bus_pattern(&out) {
+            self.check_identity()?;
+        }
         let x = i16::from_be_bytes([out[0], out[1]]);
         let z = i16::from_be_bytes([out[2], out[3]]);
         let y = i16::from_be_bytes([out[4], out[5]]);
@@ -208,6 +215,11 @@ impl<I2C: I2c> Hmc5883l<I2C> {
     pub fn idle(&mut self) -> Result<(), Error<I2C::Error>> {
         self.i2c.write(ADDRESS, &[reg::MODE, MODE_IDLE])?;
         Ok(())
+    }
+
+    /// The bus handle, e.g. for a test to reach a simulator's fault injection.
+    pub fn bus_mut(&mut self) -> &mut I2C {
+        &mut self.i2c
     }
 
     /// Gives the bus back.

@@ -153,7 +153,7 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
 
     /// Reads the six output bytes in one burst: raw X, Y, Z digits.
     pub fn read_raw(&mut self) -> Result<[i16; 3], Error<SPI::Error>> {
-        Ok(st_spi::read_xyz(&mut self.spi, reg::OUT_X_L)?)
+        st_spi::read_xyz(&mut self.spi, reg::OUT_X_L, reg::WHO_AM_I, WHO_AM_I_VALUE)
     }
 
     /// Reads and converts one angular-rate sample.
@@ -172,6 +172,11 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
     pub fn wake(&mut self) -> Result<(), Error<SPI::Error>> {
         st_spi::write(&mut self.spi, reg::CTRL_REG1, &[CTRL_REG1_RUN])?;
         Ok(())
+    }
+
+    /// The bus handle, e.g. for a test to reach a simulator's fault injection.
+    pub fn bus_mut(&mut self) -> &mut SPI {
+        &mut self.spi
     }
 
     /// Gives the SPI device back.

@@ -161,7 +161,7 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
 
     /// Reads the six output bytes in one burst: raw 16-bit X, Y, Z.
     pub fn read_raw(&mut self) -> Result<[i16; 3], Error<SPI::Error>> {
-        Ok(st_spi::read_xyz(&mut self.spi, reg::OUT_X_L)?)
+        st_spi::read_xyz(&mut self.spi, reg::OUT_X_L, reg::WHO_AM_I, WHO_AM_I_VALUE)
     }
 
     /// Reads and converts one acceleration sample.
@@ -173,6 +173,11 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
     pub fn power_down(&mut self) -> Result<(), Error<SPI::Error>> {
         st_spi::write(&mut self.spi, reg::CTRL_REG1, &[CTRL_REG1_POWER_DOWN])?;
         Ok(())
+    }
+
+    /// The bus handle, e.g. for a test to reach a simulator's fault injection.
+    pub fn bus_mut(&mut self) -> &mut SPI {
+        &mut self.spi
     }
 
     /// Gives the SPI device back.

@@ -146,6 +146,53 @@ impl Axis {
     }
 }
 
+/// Whether bytes a device returned are a dead bus's pattern rather than data: all `0x00` (MISO or
+/// SDA held low, a part without power) or all `0xFF` (a floating or pulled-up line nobody drives).
+///
+/// A living part can return such a reading too (a gyroscope at rest reading exactly zero), so the
+/// drivers never reject it on its own: they read the identity register once more and return the
+/// data only if the part still answers with its identity ([`Error::WrongIdentity`] otherwise).
+pub const fn is_bus_pattern(bytes: &[u8]) -> bool {
+    let Some(&first) = bytes.first() else {
+        return false;
+    };
+    if first != 0x00 && first != 0xFF {
+        return false;
+    }
+    let mut i = 1;
+    while i < bytes.len() {
+        if bytes[i] != first {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
+/// How many samples a board suite group takes between two identity checks of its devices
+/// ([`suite`]): a part that reset, lost power or was replaced by a dead line answering plausible
+/// bytes is noticed within this many samples even if its data never looks like a bus pattern.
+pub const IDENTITY_CHECK_EVERY: u16 = 256;
+
+/// Counts samples towards the next periodic identity check.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub(crate) struct IdentitySchedule {
+    pub(crate) samples: u16,
+}
+
+impl IdentitySchedule {
+    /// Counts one sample; true when this sample should check identities first.
+    pub(crate) fn due(&mut self) -> bool {
+        self.samples = self.samples.wrapping_add(1);
+        if self.samples >= IDENTITY_CHECK_EVERY {
+            self.samples = 0;
+            true
+        } else {
+            false
+        }
+    }
+}
+
 /// Compares a read-back register with what was written, on the bits the part lets us write.
 pub(crate) fn check_register<E>(
     register: u8,

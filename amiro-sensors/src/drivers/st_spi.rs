@@ -79,9 +79,21 @@ pub(crate) fn configure<S: SpiDevice>(
 }
 
 /// Reads the six output bytes from `first` in one burst: X, Y, Z as little-endian `i16`.
-pub(crate) fn read_xyz<S: SpiDevice>(spi: &mut S, first: u8) -> Result<[i16; 3], S::Error> {
+///
+/// Six bytes of all `0x00` or all `0xFF` are what a stuck MISO line returns: then the identity
+/// register `who_am_i` is read once more, and only a part that still answers `expected` gets its
+/// reading through (a dead line reads its stuck level there too: [`Error::WrongIdentity`]).
+pub(crate) fn read_xyz<S: SpiDevice>(
+    spi: &mut S,
+    first: u8,
+    who_am_i: u8,
+    expected: u8,
+) -> Result<[i16; 3], Error<S::Error>> {
     let mut out = [0u8; 6];
     read(spi, first, &mut out)?;
+    if super::is_bus_pattern(&out) {
+        check_identity(spi, who_am_i, expected)?;
+    }
     Ok([
         i16::from_le_bytes([out[0], out[1]]),
         i16::from_le_bytes([out[2], out[3]]),

@@ -26,7 +26,7 @@ use super::l3g4200d::{AngularRate, L3g4200d};
 use super::lis331dlh::{Acceleration, Lis331dlh};
 use super::ring::{ProximityRing, RING_SENSORS};
 use super::tlc5947::LightRing;
-use super::{Axis, Error};
+use super::{Axis, Error, IdentitySchedule};
 
 /// Most frames one sample yields (the proximity ring's eight).
 pub const MAX_SAMPLES: usize = 8;
@@ -139,6 +139,7 @@ pub struct InertialSensors<G, A> {
     pub gyroscope: L3g4200d<G>,
     /// The LIS331DLH.
     pub accelerometer: Lis331dlh<A>,
+    identity: IdentitySchedule,
 }
 
 impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
@@ -147,6 +148,7 @@ impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
         Self {
             gyroscope: L3g4200d::new(gyroscope),
             accelerometer: Lis331dlh::new(accelerometer),
+            identity: IdentitySchedule { samples: 0 },
         }
     }
 
@@ -178,6 +180,14 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
     }
 
     fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
+        if self.serves(topic) && self.identity.due() {
+            self.gyroscope
+                .check_identity()
+                .map_err(spi_error(Device::Gyroscope))?;
+            self.accelerometer
+                .check_identity()
+                .map_err(spi_error(Device::Accelerometer))?;
+        }
         match topic {
             Topic::Gyroscope => Ok(one(SensorData::Gyroscope(
                 self.read_gyroscope()?.degrees_per_s(),
@@ -204,6 +214,7 @@ pub struct Compass<I2C> {
     reuse_window_us: u64,
     last: Option<(MagneticField, u64)>,
     delivered: [bool; 3],
+    identity: IdentitySchedule,
 }
 
 /// One output period of the HMC5883L at the AMiRo's 30 Hz, in µs.
@@ -217,6 +228,7 @@ impl<I2C: I2c> Compass<I2C> {
             reuse_window_us: MAGNETOMETER_PERIOD_US,
             last: None,
             delivered: [false; 3],
+            identity: IdentitySchedule { samples: 0 },
         }
     }
 
@@ -245,7 +257,12 @@ impl<I2C: I2c> Compass<I2C> {
     }
 
     fn read_fresh(&mut self, now_us: u64) -> Result<MagneticField, SampleError> {
-        match self.magnetometer.read() {
+        let checked = if self.identity.due() {
+            self.magnetometer.check_identity()
+        } else {
+            Ok(())
+        };
+        match checked.and_then(|()| self.magnetometer.read()) {
             Ok(field) => {
                 self.last = Some((field, now_us));
                 self.delivered = [false; 3];
@@ -311,6 +328,9 @@ impl<I2C: I2c> SensorGroup for FloorSensors<I2C> {
     }
 
     fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
+        if topic == Topic::FloorProximity && self.identity_check_due() {
+            self.check_identities().map_err(floor_error)?;
+        }
         match topic {
             Topic::FloorProximity => Ok(one(SensorData::FloorProximity(
                 self.read_proximity().map_err(floor_error)?,
@@ -486,5 +506,134 @@ impl<SPI: SpiDevice> LightRing<SPI> {
         self.set_led(command.led, rgb.r, rgb.g, rgb.b)
             .and_then(|()| self.flush())
             .map_err(spi_error(Device::LedDriver))
+    }
+}
+
+/// Consecutive failed samples after which a [`Supervised`] group is treated as missing.
+pub const FAILURES_BEFORE_RETRY: u8 = 3;
+/// The first wait before a missing group is initialised again (µs).
+pub const RETRY_FIRST_US: u64 = 1_000_000;
+/// The longest wait between two attempts (µs): the wait doubles after every failed attempt up to
+/// this, so a dead part costs one identity check per 8 s instead of one timeout per sample.
+pub const RETRY_MAX_US: u64 = 8_000_000;
+
+/// A sensor group with its fault policy: a group that failed stops publishing (its samples are
+/// empty, never invented), every failure is counted, and it is initialised again with back-off.
+///
+/// - At construction the group is initialised; if that fails it is *missing*.
+/// - A missing group answers nothing until its retry time; then `init()` runs again (its
+///   transfers count against that sample). A failed attempt doubles the wait, 1 s → 2 → 4 → 8 s,
+///   and stays at [`RETRY_MAX_US`].
+/// - A ready group whose sample fails [`FAILURES_BEFORE_RETRY`] times in a row becomes missing
+///   (retry after the current wait, which then doubles). A successful sample resets the wait to
+///   [`RETRY_FIRST_US`].
+/// - [`faults`](Self::faults) counts every failed sample and every failed (re-)initialisation;
+///   a topic the group does not serve is no fault.
+#[derive(Debug)]
+pub struct Supervised<G> {
+    group: G,
+    ready: bool,
+    faults: u32,
+    consecutive_failures: u8,
+    retry_at_us: u64,
+    backoff_us: u64,
+    last_error: Option<SampleError>,
+}
+
+impl<G: SensorGroup> Supervised<G> {
+    /// Initialises `group` (boot, time 0).
+    pub fn new(mut group: G) -> Self {
+        let result = group.init();
+        let mut supervised = Self {
+            group,
+            ready: result.is_ok(),
+            faults: 0,
+            consecutive_failures: 0,
+            retry_at_us: 0,
+            backoff_us: RETRY_FIRST_US,
+            last_error: None,
+        };
+        if let Err(error) = result {
+            supervised.missing(0, error);
+        }
+        supervised
+    }
+
+    /// Whether the group is initialised and its last samples worked.
+    pub const fn is_ready(&self) -> bool {
+        self.ready
+    }
+
+    /// Failed samples and failed (re-)initialisations since boot (saturating).
+    pub const fn faults(&self) -> u32 {
+        self.faults
+    }
+
+    /// The most recent failure, if any.
+    pub const fn last_error(&self) -> Option<SampleError> {
+        self.last_error
+    }
+
+    /// When a missing group is tried next (µs).
+    pub const fn retry_at_us(&self) -> u64 {
+        self.retry_at_us
+    }
+
+    /// The group, e.g. for a test to inspect its buses.
+    pub fn group_mut(&mut self) -> &mut G {
+        &mut self.group
+    }
+
+    /// One sample of `topic`: its frames, or none while the group is missing or when it failed.
+    pub fn sample(&mut self, topic: Topic, now_us: u64) -> Samples {
+        if !self.group.serves(topic) {
+            return Samples::new();
+        }
+        if !self.ready {
+            if now_us < self.retry_at_us {
+                return Samples::new();
+            }
+            match self.group.init() {
+                Ok(()) => {
+                    self.ready = true;
+                    self.consecutive_failures = 0;
+                }
+                Err(error) => {
+                    self.missing(now_us, error);
+                    return Samples::new();
+                }
+            }
+        }
+        match self.group.sample(topic, now_us) {
+            Ok(samples) => {
+                self.consecutive_failures = 0;
+                self.backoff_us = RETRY_FIRST_US;
+                samples
+            }
+            Err(error) => {
+                self.faults = self.faults.saturating_add(1);
+                self.last_error = Some(error);
+                self.consecutive_failures = self.consecutive_failures.saturating_add(1);
+                if self.consecutive_failures >= FAILURES_BEFORE_RETRY {
+                    self.consecutive_failures = 0;
+                    self.back_off(now_us);
+                }
+                Samples::new()
+            }
+        }
+    }
+
+    /// A failed (re-)initialisation: count it, wait, and double the next wait.
+    fn missing(&mut self, now_us: u64, error: SampleError) {
+        self.faults = self.faults.saturating_add(1);
+        self.last_error = Some(error);
+        self.back_off(now_us);
+    }
+
+    /// Stop sampling until the retry time, and double the wait after that.
+    fn back_off(&mut self, now_us: u64) {
+        self.ready = false;
+        self.retry_at_us = now_us.saturating_add(self.backoff_us);
+        self.backoff_us = self.backoff_us.saturating_mul(2).min(RETRY_MAX_US);
     }
 }

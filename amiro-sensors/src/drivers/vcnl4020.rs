@@ -160,9 +160,14 @@ impl<I2C: I2c> Vcnl4020<I2C> {
         Ok(value[0])
     }
 
+    /// A two-byte result; `0x0000` or `0xFFFF` (a dead line, or a part that reset and stopped
+    /// measuring) only after PRODUCT_ID still answers.
     fn read_result(&mut self, high_register: u8) -> Result<u16, Error<I2C::Error>> {
         let mut value = [0u8; 2];
         self.i2c.write_read(ADDRESS, &[high_register], &mut value)?;
+        if super::is_bus_pattern(&value) {
+            self.check_identity()?;
+        }
         Ok(u16::from_be_bytes(value))
     }
 

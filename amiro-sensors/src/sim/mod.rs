@@ -108,12 +108,22 @@ impl i2c::Error for NoAcknowledge {
 pub struct SimBus<T> {
     /// The device(s) on the bus, for inspection.
     pub target: T,
+    nack: bool,
 }
 
 impl<T> SimBus<T> {
     /// A bus with `target` on it.
     pub const fn with(target: T) -> Self {
-        Self { target }
+        Self {
+            target,
+            nack: false,
+        }
+    }
+
+    /// Fault injection: from now on nobody acknowledges any address (a part that lost power, a
+    /// cut line), until called again with `false`.
+    pub fn set_nack(&mut self, nack: bool) {
+        self.nack = nack;
     }
 }
 
@@ -152,7 +162,7 @@ impl<T: I2cTarget> I2c for SimBus<T> {
         address: u8,
         operations: &mut [Operation<'_>],
     ) -> Result<(), Self::Error> {
-        if !self.target.acknowledges(address) {
+        if self.nack || !self.target.acknowledges(address) {
             return Err(NoAcknowledge { address });
         }
         // Adjacent operations of the same direction are one transfer; a change of direction is a
@@ -263,6 +273,20 @@ pub(crate) fn st_spi_transaction<R: StRegisters>(
         }
     }
     Ok(())
+}
+
+/// Fault injection for the SPI simulators: every byte the host reads is `level` (a MISO line stuck
+/// low or high), whatever the part would have sent. Writes still reach the part.
+pub(crate) fn stick_miso(level: u8, operations: &mut [embedded_hal::spi::Operation<'_, u8>]) {
+    use embedded_hal::spi::Operation as Op;
+    for operation in operations {
+        match operation {
+            Op::Read(buffer) | Op::TransferInPlace(buffer) | Op::Transfer(buffer, _) => {
+                buffer.fill(level)
+            }
+            Op::Write(_) | Op::DelayNs(_) => {}
+        }
+    }
 }
 
 /// A triangle wave through 0 → +amplitude → 0 → −amplitude → 0 over `period` samples.

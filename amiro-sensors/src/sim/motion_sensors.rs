@@ -4,7 +4,7 @@ use core::convert::Infallible;
 
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 
-use super::{st_spi_transaction, triangle, StRegisters};
+use super::{st_spi_transaction, stick_miso, triangle, StRegisters};
 use crate::drivers::{l3g4200d, lis331dlh};
 
 /// A simulated L3G4200D.
@@ -19,6 +19,7 @@ pub struct SimGyroscope {
     samples: u32,
     latched: [i16; 3],
     ignored_writes: u8,
+    stuck_miso: Option<u8>,
 }
 
 impl SimGyroscope {
@@ -29,6 +30,7 @@ impl SimGyroscope {
             samples: 0,
             latched: [0; 3],
             ignored_writes: 0,
+            stuck_miso: None,
         }
     }
 
@@ -42,6 +44,12 @@ impl SimGyroscope {
         self.control[0] == l3g4200d::CTRL_REG1_RUN
             && self.control[2] == l3g4200d::CTRL_REG3_DRDY_INT2
             && self.control[3] == l3g4200d::Range::Dps500.ctrl_reg4()
+    }
+
+    /// Fault injection: `Some(level)` makes every byte the host reads `level` (MISO stuck low
+    /// with 0x00, high with 0xFF) from now on; `None` repairs the line.
+    pub fn set_stuck_miso(&mut self, level: Option<u8>) {
+        self.stuck_miso = level;
     }
 
     /// Burst reads of the outputs so far.
@@ -129,7 +137,11 @@ impl ErrorType for SimGyroscope {
 
 impl SpiDevice for SimGyroscope {
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), Infallible> {
-        st_spi_transaction(self, operations)
+        st_spi_transaction(self, operations)?;
+        if let Some(level) = self.stuck_miso {
+            stick_miso(level, operations);
+        }
+        Ok(())
     }
 }
 
@@ -145,6 +157,7 @@ pub struct SimAccelerometer {
     samples: u32,
     latched: [i16; 3],
     ignored_writes: u8,
+    stuck_miso: Option<u8>,
 }
 
 impl SimAccelerometer {
@@ -155,6 +168,7 @@ impl SimAccelerometer {
             samples: 0,
             latched: [0; 3],
             ignored_writes: 0,
+            stuck_miso: None,
         }
     }
 
@@ -168,6 +182,12 @@ impl SimAccelerometer {
         self.control[0] == lis331dlh::CTRL_REG1_RUN
             && self.control[2] == lis331dlh::CTRL_REG3_DRDY_INT1
             && self.control[3] == lis331dlh::Range::G8.ctrl_reg4()
+    }
+
+    /// Fault injection: `Some(level)` makes every byte the host reads `level` (MISO stuck low
+    /// with 0x00, high with 0xFF) from now on; `None` repairs the line.
+    pub fn set_stuck_miso(&mut self, level: Option<u8>) {
+        self.stuck_miso = level;
     }
 
     /// Burst reads of the outputs so far.
@@ -257,6 +277,10 @@ impl ErrorType for SimAccelerometer {
 
 impl SpiDevice for SimAccelerometer {
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), Infallible> {
-        st_spi_transaction(self, operations)
+        st_spi_transaction(self, operations)?;
+        if let Some(level) = self.stuck_miso {
+            stick_miso(level, operations);
+        }
+        Ok(())
     }
 }

@@ -1,0 +1,254 @@
+//! A dead sensor is noticed (issue 12): a stuck MISO or data line, a part that stopped answering
+//! its identity, an I2C part that NACKs. The drivers return a typed error instead of the stuck
+//! bytes as data, the suite groups check identities periodically, and `Supervised` counts the
+//! faults, stops publishing and retries with back-off (1 s → 2 → 4 → 8 s).
+
+use amiro_can::Topic;
+use amiro_sensors::drivers::floor::FloorSensors;
+use amiro_sensors::drivers::hmc5883l::Hmc5883l;
+use amiro_sensors::drivers::l3g4200d::L3g4200d;
+use amiro_sensors::drivers::suite::{
+    Compass, Device, InertialSensors, SampleError, SensorGroup, Supervised, RETRY_FIRST_US,
+    RETRY_MAX_US,
+};
+use amiro_sensors::drivers::vcnl4020::Vcnl4020;
+use amiro_sensors::drivers::{Error, IDENTITY_CHECK_EVERY};
+use amiro_sensors::sim::*;
+use embedded_hal_mock::eh1::i2c::{Mock as I2cMock, Transaction as I2cT};
+use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as T};
+
+fn read_tx(command: u8, response: &[u8]) -> Vec<T<u8>> {
+    vec![
+        T::transaction_start(),
+        T::write_vec(vec![command]),
+        T::read_vec(response.to_vec()),
+        T::transaction_end(),
+    ]
+}
+
+fn inertial() -> InertialSensors<SimGyroscope, SimAccelerometer> {
+    let mut group = InertialSensors::new(SimGyroscope::new(), SimAccelerometer::new());
+    group.init().unwrap();
+    group
+}
+
+#[test]
+fn a_gyroscope_with_miso_stuck_low_or_high_is_an_error_not_zero_data() {
+    for level in [0x00, 0xFF] {
+        let mut group = inertial();
+        group.sample(Topic::Gyroscope, 0).unwrap();
+        group.gyroscope.bus_mut().set_stuck_miso(Some(level));
+        assert_eq!(
+            group.sample(Topic::Gyroscope, 10_000),
+            Err(SampleError::Device {
+                device: Device::Gyroscope,
+                error: Error::WrongIdentity {
+                    expected: 0xD3,
+                    found: level.into()
+                },
+            }),
+            "MISO stuck at {level:#04x}"
+        );
+        // The accelerometer on its own chip select is unaffected.
+        assert!(group.sample(Topic::Accelerometer, 10_000).is_ok());
+    }
+}
+
+#[test]
+fn an_accelerometer_with_miso_stuck_low_is_an_error() {
+    let mut group = inertial();
+    group.accelerometer.bus_mut().set_stuck_miso(Some(0x00));
+    assert!(matches!(
+        group.sample(Topic::Accelerometer, 0),
+        Err(SampleError::Device {
+            device: Device::Accelerometer,
+            error: Error::WrongIdentity { found: 0, .. }
+        })
+    ));
+}
+
+/// A line stuck at a plausible level (0x5A5A… reads as valid numbers) is caught by the periodic
+/// identity check, within `IDENTITY_CHECK_EVERY` samples.
+#[test]
+fn a_plausible_stuck_pattern_is_caught_by_the_periodic_identity_check() {
+    let mut group = inertial();
+    group.gyroscope.bus_mut().set_stuck_miso(Some(0x5A));
+    let failed_at = (0..2 * u32::from(IDENTITY_CHECK_EVERY)).position(|n| {
+        group
+            .sample(Topic::Gyroscope, u64::from(n) * 2_000)
+            .is_err()
+    });
+    assert!(
+        failed_at.is_some_and(|n| n < usize::from(IDENTITY_CHECK_EVERY)),
+        "{failed_at:?}"
+    );
+}
+
+#[test]
+fn a_real_zero_reading_passes_after_the_identity_check() {
+    // A gyroscope at rest that reads exactly zero: the driver checks WHO_AM_I and returns it.
+    let mut script = read_tx(0xE8, &[0; 6]);
+    script.extend(read_tx(0x8F, &[0xD3]));
+    let mut spi = SpiMock::new(&script);
+    let mut gyro = L3g4200d::new(spi.clone());
+    assert_eq!(gyro.read_raw(), Ok([0, 0, 0]));
+    spi.done();
+}
+
+#[test]
+fn a_magnetometer_reading_all_ones_with_a_wrong_identity_is_an_error() {
+    let mut i2c = I2cMock::new(&[
+        I2cT::write_read(0x1E, vec![0x03], vec![0xFF; 6]),
+        I2cT::write_read(0x1E, vec![0x0A], vec![0xFF; 3]),
+    ]);
+    let mut compass = Hmc5883l::new(i2c.clone());
+    assert_eq!(
+        compass.read_raw(),
+        Err(Error::WrongIdentity {
+            expected: 0x48_3433,
+            found: 0xFF_FFFF
+        })
+    );
+    i2c.done();
+}
+
+#[test]
+fn a_proximity_sensor_reading_zero_with_a_wrong_identity_is_an_error() {
+    let mut i2c = I2cMock::new(&[
+        I2cT::write_read(0x13, vec![0x87], vec![0, 0]),
+        I2cT::write_read(0x13, vec![0x81], vec![0]),
+    ]);
+    let mut vcnl = Vcnl4020::new(i2c.clone());
+    assert_eq!(
+        vcnl.read_proximity(),
+        Err(Error::WrongIdentity {
+            expected: 0x21,
+            found: 0
+        })
+    );
+    i2c.done();
+}
+
+#[test]
+fn a_fuel_gauge_reading_zero_kelvin_at_zero_volts_is_checked() {
+    use amiro_sensors::drivers::bq27500::Bq27500;
+    // Temperature 0, voltage 0, then the DEVICE_TYPE check answers all zeros too.
+    let mut i2c = I2cMock::new(&[
+        I2cT::write_read(0x55, vec![0x06], vec![0, 0]),
+        I2cT::write_read(0x55, vec![0x08], vec![0, 0]),
+        I2cT::write(0x55, vec![0x00, 0x01]),
+        I2cT::write(0x55, vec![0x01, 0x00]),
+        I2cT::write_read(0x55, vec![0x00], vec![0, 0]),
+    ]);
+    let mut gauge = Bq27500::new(i2c.clone(), NoDelay);
+    assert_eq!(
+        gauge.read_status().map(|_| ()),
+        Err(Error::WrongIdentity {
+            expected: 0x0500,
+            found: 0
+        })
+    );
+    i2c.done();
+}
+
+#[test]
+fn floor_sensors_whose_bus_stops_acknowledging_fail_and_the_periodic_check_reads_every_id() {
+    let mut floor = FloorSensors::new(SimFloorBus::new());
+    SensorGroup::init(&mut floor).unwrap();
+    for n in 0..u64::from(IDENTITY_CHECK_EVERY) + 1 {
+        SensorGroup::sample(&mut floor, Topic::FloorProximity, n * 62_500).unwrap();
+    }
+    floor.mux_mut().bus_mut().set_nack(true);
+    assert!(matches!(
+        SensorGroup::sample(&mut floor, Topic::FloorProximity, 0),
+        Err(SampleError::Device {
+            device: Device::FloorSensor(0),
+            error: Error::Bus(_)
+        })
+    ));
+}
+
+/// `Supervised`: a gyroscope whose MISO sticks stops publishing, is counted, and is retried
+/// after 1, 2, 4, 8, 8 s; once repaired it publishes again and the wait is back to 1 s.
+#[test]
+fn a_dead_group_stops_publishing_is_counted_and_retried_with_back_off() {
+    let mut group = Supervised::new(inertial());
+    assert!(group.is_ready());
+    assert_eq!(group.sample(Topic::Gyroscope, 0).len(), 1);
+    group
+        .group_mut()
+        .gyroscope
+        .bus_mut()
+        .set_stuck_miso(Some(0x00));
+    // Three failed samples in a row (one every 2 ms): nothing published, then missing.
+    for n in 1..=3u64 {
+        assert!(group.sample(Topic::Gyroscope, n * 2_000).is_empty());
+    }
+    assert!(!group.is_ready());
+    assert_eq!(group.faults(), 3);
+    let mut now = 6_000;
+    let mut attempts = Vec::new();
+    // Sample every 2 ms for 30 s: record when a (failing) re-initialisation happened.
+    while now < 30_000_000 {
+        now += 2_000;
+        let before = group.faults();
+        assert!(group.sample(Topic::Gyroscope, now).is_empty());
+        if group.faults() != before {
+            attempts.push(now);
+        }
+    }
+    let waits: Vec<u64> = std::iter::once(6_000)
+        .chain(attempts.iter().copied())
+        .collect::<Vec<_>>()
+        .windows(2)
+        .map(|w| (w[1] - w[0]).div_ceil(1_000_000) * 1_000_000)
+        .collect();
+    assert_eq!(
+        waits,
+        [
+            RETRY_FIRST_US,
+            2 * RETRY_FIRST_US,
+            4 * RETRY_FIRST_US,
+            RETRY_MAX_US,
+            RETRY_MAX_US
+        ]
+    );
+    assert_eq!(group.faults(), 3 + 5);
+    assert!(matches!(
+        group.last_error(),
+        Some(SampleError::Device {
+            device: Device::Gyroscope,
+            ..
+        })
+    ));
+    // Repaired: the next attempt brings it back, and it publishes again.
+    group.group_mut().gyroscope.bus_mut().set_stuck_miso(None);
+    let back = group.retry_at_us();
+    assert_eq!(group.sample(Topic::Gyroscope, back).len(), 1);
+    assert!(group.is_ready());
+    // Not served topics are no fault.
+    assert!(group.sample(Topic::PowerStatus, back).is_empty());
+    assert_eq!(group.faults(), 8);
+}
+
+#[test]
+fn a_compass_that_nacks_from_now_on_is_counted_and_taken_out() {
+    let mut compass = Compass::new(SimCompassBus::new());
+    compass.set_reuse_window_us(0);
+    let mut group = Supervised::new(compass);
+    assert_eq!(group.sample(Topic::MagnetometerX, 0).len(), 1);
+    group.group_mut().magnetometer.bus_mut().set_nack(true);
+    for n in 1..=3 {
+        assert!(group.sample(Topic::MagnetometerY, n * 1_000).is_empty());
+    }
+    assert!(!group.is_ready());
+    assert_eq!(group.faults(), 3);
+    group.group_mut().magnetometer.bus_mut().set_nack(false);
+    assert!(group.sample(Topic::MagnetometerZ, 1_000_000).is_empty());
+    assert_eq!(
+        group
+            .sample(Topic::MagnetometerZ, 3_000 + RETRY_FIRST_US)
+            .len(),
+        1
+    );
+}
