@@ -14,6 +14,11 @@ const RCC_CFGR: usize = 0x04;
 #[cfg(feature = "f4")]
 const RCC_CFGR: usize = 0x08;
 const RCC_CR: usize = 0x00;
+/// RCC_CSR offset (reset flags).
+#[cfg(feature = "f1")]
+const RCC_CSR: usize = 0x24;
+#[cfg(feature = "f4")]
+const RCC_CSR: usize = 0x74;
 
 const CR_HSION: u32 = 1 << 0;
 const CR_HSIRDY: u32 = 1 << 1;
@@ -93,4 +98,32 @@ pub fn start_crystal() -> Result<(), ClockFault> {
         || rcc_read(RCC_CR) & CR_HSERDY != 0,
         ClockFault::HseNotReady,
     )
+}
+
+/// Why the chip last reset, from the RCC's reset flags (which it then clears, so the next reset
+/// reports only its own cause). Read once, first thing in `init`. The QEMU machines emulate no RCC:
+/// there it reports nothing.
+pub fn take_reset_cause() -> amiro_can::ResetCause {
+    use amiro_can::ResetCause;
+    if cfg!(feature = "qemu") {
+        return ResetCause::NONE;
+    }
+    let csr = rcc_read(RCC_CSR);
+    let mut cause = ResetCause::NONE;
+    for (bit, flag) in [
+        (31, ResetCause::LOW_POWER),
+        (30, ResetCause::WINDOW_WATCHDOG),
+        (29, ResetCause::INDEPENDENT_WATCHDOG),
+        (28, ResetCause::SOFTWARE),
+        (27, ResetCause::POWER_ON),
+        (26, ResetCause::PIN),
+        (25, ResetCause::BROWN_OUT),
+    ] {
+        if csr & (1 << bit) != 0 {
+            cause = cause.with(flag);
+        }
+    }
+    // RMVF clears the flags.
+    rcc_modify(RCC_CSR, |r| r | (1 << 24));
+    cause
 }

@@ -23,6 +23,8 @@ pub mod chip;
 #[cfg(target_os = "none")]
 pub mod fault;
 #[cfg(target_os = "none")]
+pub mod health;
+#[cfg(target_os = "none")]
 pub mod liveness;
 #[cfg(target_os = "none")]
 pub mod mono;

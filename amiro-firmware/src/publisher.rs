@@ -7,7 +7,7 @@
 //! blocks another only for one device transfer.
 use amiro_can::{Priority, Topic};
 use amiro_sensors::drivers::suite::Samples;
-use amiro_sensors::handler::SensorDataHandler;
+use amiro_sensors::handler::{Release, SensorDataHandler};
 use amiro_sensors::trace::{TraceEvent, TraceKind};
 use amiro_sensors::tx_queue::{PushOutcome, TxQueue};
 use cortex_m::interrupt::InterruptNumber;
@@ -15,7 +15,7 @@ use rtic_core::Mutex;
 use rtic_sync::channel::Receiver;
 
 use crate::mono::Clock;
-use crate::telemetry;
+use crate::{health, telemetry};
 
 /// What a board samples for a topic.
 pub trait Sampler {
@@ -38,10 +38,17 @@ fn trace_push(at: u64, id: u16, outcome: &PushOutcome) {
     }
 }
 
-/// Serves the topics of CAN priority `level` forever; `tx_interrupt` is the board's CAN transmit
-/// interrupt, pended after each sample's frames are queued.
+/// Serves the topics of the CAN priorities `levels` forever (a board with one publisher task per
+/// level passes one; a board that publishes only its diagnostics may serve all four from one task);
+/// `tx_interrupt` is the board's CAN transmit interrupt, pended after each sample's frames are
+/// queued. The board's diagnostics topic is sampled here, from the runtime's health counters; every
+/// other topic by the board's `sampler`.
+///
+/// Deadlines: a release that skipped earlier ones counts those as deadline misses of its level, and
+/// a frame queued after its release's deadline (one period after the release) counts as one too and
+/// is traced as `deadline-missed` with `missed=0` and how late it was.
 pub async fn serve_level<C: Clock, const N: usize>(
-    level: Priority,
+    levels: &[Priority],
     wake: &mut Receiver<'static, (), 1>,
     mut handler: impl Mutex<T = SensorDataHandler>,
     mut tx_queue: impl Mutex<T = TxQueue<N>>,
@@ -49,7 +56,8 @@ pub async fn serve_level<C: Clock, const N: usize>(
     tx_interrupt: impl InterruptNumber,
 ) -> ! {
     loop {
-        match handler.lock(|h| h.next_due(level)) {
+        let due = handler.lock(|h| levels.iter().filter_map(|l| h.next_due(*l)).min());
+        match due {
             Some(due) => {
                 let _ = C::timeout_at_us(due, wake.recv()).await;
             }
@@ -57,29 +65,100 @@ pub async fn serve_level<C: Clock, const N: usize>(
                 let _ = wake.recv().await;
             }
         }
-        let now = C::now_us();
-        // Take the due releases under the handler's lock, sample after releasing it.
-        let releases = handler.lock(|h| h.take_due_releases(level, now));
-        for release in releases {
-            if let Some(missed) = TraceKind::for_release(&release) {
-                telemetry::trace(&TraceEvent::new(now, missed));
-            }
-            let topic = release.topic;
-            let taken = C::now_us();
-            let samples = sampler.sample(topic, taken);
-            telemetry::trace(&TraceEvent::new(
-                taken,
-                TraceKind::SampleTaken {
-                    topic,
-                    release_us: release.release_us,
-                },
-            ));
-            for data in samples {
-                let frame = data.encode(release.priority);
-                let outcome = tx_queue.lock(|q| q.push(frame));
-                trace_push(C::now_us(), frame.id().raw(), &outcome);
-            }
-            cortex_m::peripheral::NVIC::pend(tx_interrupt);
+        for &level in levels {
+            serve_due::<C, N>(
+                level,
+                &mut handler,
+                &mut tx_queue,
+                &mut sampler,
+                tx_interrupt,
+            );
         }
+    }
+}
+
+// Generic over the task's locks (one copy per publisher task): only the locking is here, the
+// work is in the non-generic functions below, so the copies stay small.
+fn serve_due<C: Clock, const N: usize>(
+    level: Priority,
+    handler: &mut impl Mutex<T = SensorDataHandler>,
+    tx_queue: &mut impl Mutex<T = TxQueue<N>>,
+    sampler: &mut impl Sampler,
+    tx_interrupt: impl InterruptNumber,
+) {
+    let now = C::now_us();
+    // Take the due releases under the handler's lock, sample after releasing it.
+    let releases = handler.lock(|h| h.take_due_releases(level, now));
+    for release in releases {
+        note_release(now, level, &release);
+        let topic = release.topic;
+        let taken = C::now_us();
+        let samples = match topic.diagnostics_of() {
+            Some(board) => {
+                let counters = tx_queue.lock(|q| *q.counters());
+                handler.lock(|h| health::sample_now(h, &counters, board, taken))
+            }
+            None => sampler.sample(topic, taken),
+        };
+        let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
+        for data in samples {
+            let frame = data.encode(release.priority);
+            let outcome = tx_queue.lock(|q| q.push(frame));
+            note_push(C::now_us(), level, topic, deadline, frame.id().raw(), &outcome);
+        }
+        cortex_m::peripheral::NVIC::pend(tx_interrupt);
+    }
+}
+
+/// Traces and counts the releases a publisher skipped.
+#[inline(never)]
+fn note_release(now: u64, level: Priority, release: &Release) {
+    if let Some(missed) = TraceKind::for_release(release) {
+        telemetry::trace(&TraceEvent::new(now, missed));
+        health::count_deadline_misses(level, release.missed);
+    }
+}
+
+/// Traces the sample taken; a periodic sample's deadline is its next release (`None` for a
+/// one-shot).
+#[inline(never)]
+fn sample_deadline(handler: &SensorDataHandler, taken: u64, release: &Release) -> Option<u64> {
+    telemetry::trace(&TraceEvent::new(
+        taken,
+        TraceKind::SampleTaken {
+            topic: release.topic,
+            release_us: release.release_us,
+        },
+    ));
+    if release.once {
+        return None;
+    }
+    handler
+        .publisher(release.topic)
+        .map(|p| release.release_us + u64::from(p.period_us()))
+}
+
+/// Traces a frame's push, and counts and traces it as a deadline miss if it was queued after its
+/// release's deadline.
+#[inline(never)]
+fn note_push(
+    queued: u64,
+    level: Priority,
+    topic: Topic,
+    deadline: Option<u64>,
+    id: u16,
+    outcome: &PushOutcome,
+) {
+    trace_push(queued, id, outcome);
+    if let Some(deadline) = deadline.filter(|d| queued > *d) {
+        health::count_late_frame(level);
+        telemetry::trace(&TraceEvent::new(
+            queued,
+            TraceKind::DeadlineMissed {
+                topic,
+                missed: 0,
+                late_us: u32::try_from(queued - deadline).unwrap_or(u32::MAX),
+            },
+        ));
     }
 }

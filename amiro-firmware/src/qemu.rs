@@ -128,6 +128,27 @@ impl CanRx for CanRxPort {
     }
 }
 
+/// The QEMU build's stand-in for the bxCAN error registers: QEMU emulates no bxCAN, so the bus is
+/// always error-active (reads 0) and the status interrupt never fires.
+#[derive(Debug, Clone, Copy)]
+pub struct NoCanRegisters;
+
+impl crate::bxcan::Registers for NoCanRegisters {
+    fn read(&self, _offset: usize) -> u32 {
+        0
+    }
+
+    fn write(&self, _offset: usize, _value: u32) {}
+}
+
+/// The CAN error monitor of the QEMU build (always error-active).
+pub type CanErrors = crate::bxcan::ErrorMonitor<NoCanRegisters>;
+
+/// A CAN error monitor for the QEMU build.
+pub const fn can_errors() -> CanErrors {
+    crate::bxcan::ErrorMonitor::new(NoCanRegisters)
+}
+
 /// Simulated system signals: SYS_PD_N as the stimulus drives it, SYS_SYNC_N edges printed.
 pub struct Signals;
 

@@ -70,6 +70,36 @@ pub fn transmit_pending<C: Clock, const N: usize>(port: &mut impl CanTx, queue: 
     }
 }
 
+/// The CAN status-change (error) interrupt, also polled periodically: reads the controller's error
+/// state, counts error-passive and bus-off episodes for the diagnostics, and traces a change.
+/// Recovery from bus-off is the controller's own (automatic bus-off management).
+pub fn on_can_status<C: Clock, R: crate::bxcan::Registers>(
+    monitor: &mut crate::bxcan::ErrorMonitor<R>,
+) {
+    use crate::bxcan::BusState;
+    if let Some(change) = monitor.poll() {
+        let state = match change.to {
+            BusState::Active => 0,
+            BusState::Warning => 1,
+            BusState::Passive => 2,
+            BusState::BusOff => 3,
+        };
+        telemetry::trace(&TraceEvent::new(
+            C::now_us(),
+            TraceKind::CanBusState {
+                state,
+                tec: change.tec,
+                rec: change.rec,
+            },
+        ));
+    }
+    crate::health::set_can_errors(
+        monitor.passive_episodes(),
+        monitor.bus_off_episodes(),
+        matches!(monitor.state(), BusState::Passive | BusState::BusOff),
+    );
+}
+
 /// Emits the trace event for a command's outcome.
 pub fn trace_outcome(now: u64, id: u16, outcome: &Result<Outcome, Rejection>) {
     telemetry::trace(&TraceEvent::new(now, TraceKind::for_command(id, outcome)));
@@ -77,8 +107,9 @@ pub fn trace_outcome(now: u64, id: u16, outcome: &Result<Outcome, Rejection>) {
 
 /// Handles one command frame: decodes it against the board's publisher table, traces the outcome,
 /// wakes the publisher levels whose schedule changed, and returns an actuator outcome (motor, LED,
-/// …) for the board to apply. While the board shuts down nothing may start again: the frame is
-/// dropped unseen.
+/// …) for the board to apply. `wake_levels` holds one sender per CAN priority level (urgent first),
+/// or a single sender when one publisher task serves every level. While the board shuts down
+/// nothing may start again: the frame is dropped unseen.
 pub fn handle_command<C: Clock>(
     frame: &RxFrame,
     mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
@@ -94,7 +125,12 @@ pub fn handle_command<C: Clock>(
         Ok(Outcome::Sensor { wake, .. }) => {
             // Wake the levels whose schedule changed; each re-reads its next due time.
             for level in wake.iter() {
-                if let Some(sender) = wake_levels.get_mut(level_index(level)) {
+                let index = if wake_levels.len() == 1 {
+                    0
+                } else {
+                    level_index(level)
+                };
+                if let Some(sender) = wake_levels.get_mut(index) {
                     let _ = sender.try_send(());
                 }
             }

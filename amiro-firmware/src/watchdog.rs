@@ -59,6 +59,7 @@ pub fn start(timeout_ms: u32) {
         }
     }
     write(KR, 0xAAAA);
+    crate::health::watchdog_started();
 }
 
 /// Reloads the counter.

@@ -48,6 +48,8 @@ pub type FloorI2c = BlockingI2c<I2C2>;
 pub type CanTxPort = Mailboxes<Mmio>;
 /// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
 pub type CanRxPort = Fifo0<Mmio>;
+/// The CAN controller's error monitor (the runtime's driver).
+pub type CanErrors = amiro_firmware::bxcan::ErrorMonitor<Mmio>;
 /// The board's monotonic clock (TIM5).
 pub type Clock = crate::mono::Clock;
 
@@ -57,6 +59,8 @@ pub struct Board {
     pub can_tx: CanTxPort,
     /// CAN receive FIFO 0 (command frames only, by hardware filter).
     pub can_rx: CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: CanErrors,
     /// Gyroscope SPI device.
     pub gyro_spi: GyroSpi,
     /// Accelerometer SPI device.
@@ -230,6 +234,7 @@ pub fn init(
     }
     let can_tx = Mailboxes::new(can);
     let can_rx = Fifo0::new(can);
+    let can_errors = amiro_firmware::bxcan::ErrorMonitor::new(can);
 
     let signals = SystemSignals {
         sys_sync,
@@ -241,6 +246,7 @@ pub fn init(
         Board {
             can_tx,
             can_rx,
+            can_errors,
             gyro_spi,
             accel_spi,
             compass_i2c,

@@ -5,7 +5,7 @@
 //! `amiro-sensors`; the chip is behind `board` (or `qemu` for the QEMU build of this same app).
 //!
 //! Task priorities (RTIC, higher = more urgent; the mapping of CAN priorities lives in `levels`):
-//! `shutdown`, `can_rx` 7 · `can_tx` 6 · `handle_commands`, `motor_control` 5 ·
+//! `shutdown`, `can_rx`, `can_status` 7 · `can_tx` 6 · `handle_commands`, `motor_control` 5 ·
 //! `publish_urgent` 4 · `publish_high` 3 · `publish_medium` 2 · `publish_low`, `watchdog` 1.
 //! `cargo xtask analyze` reads these tasks, priorities and shared resources from this file.
 #![no_std]
@@ -65,7 +65,7 @@ mod app {
     use amiro_firmware::mono::Clock as _;
     use amiro_firmware::signals::{self, SystemSignals as _};
     use amiro_firmware::watchdog as iwdg;
-    use amiro_firmware::{bootloader, publisher, tasks};
+    use amiro_firmware::{bootloader, health, publisher, tasks};
     use amiro_sensors::drivers::floor::FloorSensors;
     use amiro_sensors::drivers::suite::{self, InertialSensors};
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
@@ -93,6 +93,8 @@ mod app {
         floor: Floor,
         /// Motor control's progress mark for the watchdog.
         alive: Liveness,
+        /// The CAN controller's error state (status interrupt, and polled by the watchdog task).
+        can_errors: platform::CanErrors,
     }
 
     #[local]
@@ -115,6 +117,7 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
         iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
+        health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
         amiro_firmware::telemetry::init();
         let (hw, _nvic) = platform::init(cx.device, cx.core, cx.local.spi_bus);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
@@ -159,6 +162,7 @@ mod app {
                 compass,
                 floor,
                 alive: Liveness::new(),
+                can_errors: hw.can_errors,
             },
             Local {
                 can_rx: hw.can_rx,
@@ -191,6 +195,14 @@ mod app {
         cx.shared
             .tx_queue
             .lock(|queue| tasks::transmit_pending::<Clock, TX_QUEUE_LEN>(port, queue));
+    }
+
+    /// CAN status change (error warning, error-passive, bus-off): counted and traced.
+    #[task(binds = CAN_SCE, priority = 7, shared = [can_errors])]
+    fn can_status(mut cx: can_status::Context) {
+        cx.shared
+            .can_errors
+            .lock(tasks::on_can_status::<Clock, _>);
     }
 
     /// Decodes each command, updates the publisher table or the motor target, and wakes the
@@ -232,7 +244,7 @@ mod app {
         let s = cx.shared;
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
-            Priority::Urgent,
+            &[Priority::Urgent],
             cx.local.wake_urgent,
             s.handler,
             s.tx_queue,
@@ -248,7 +260,7 @@ mod app {
         let s = cx.shared;
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
-            Priority::High,
+            &[Priority::High],
             cx.local.wake_high,
             s.handler,
             s.tx_queue,
@@ -264,7 +276,7 @@ mod app {
         let s = cx.shared;
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
-            Priority::Medium,
+            &[Priority::Medium],
             cx.local.wake_medium,
             s.handler,
             s.tx_queue,
@@ -280,7 +292,7 @@ mod app {
         let s = cx.shared;
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
-            Priority::Low,
+            &[Priority::Low],
             cx.local.wake_low,
             s.handler,
             s.tx_queue,
@@ -292,7 +304,7 @@ mod app {
 
     /// Feeds the independent watchdog — from the least urgent level, and only while motor control
     /// keeps running: a fed dog proves the whole schedule is alive.
-    #[task(priority = 1, shared = [alive])]
+    #[task(priority = 1, shared = [alive, can_errors])]
     async fn watchdog(mut cx: watchdog::Context) {
         iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
         let mut next = Clock::now_us();
@@ -302,6 +314,10 @@ mod app {
             if cx.shared.alive.lock(|a| a.take()) {
                 iwdg::feed();
             }
+            // The controller recovers from bus-off without an interrupt: look at its state.
+            cx.shared
+                .can_errors
+                .lock(tasks::on_can_status::<Clock, _>);
         }
     }
 

@@ -11,7 +11,7 @@ use stm32f1xx_hal::pac::{self, Interrupt};
 
 use amiro_sensors::motion::{Duty, MotorPwm};
 
-pub use amiro_firmware::qemu::{CanRxPort, CanTxPort, Clock, Signals as SystemSignals};
+pub use amiro_firmware::qemu::{CanErrors, CanRxPort, CanTxPort, Clock, Signals as SystemSignals};
 pub use amiro_sensors::sim::{
     SimAccelerometer as AccelSpi, SimCompassBus as CompassI2c, SimFloorBus as FloorI2c,
     SimGyroscope as GyroSpi,
@@ -35,6 +35,8 @@ pub struct Board {
     pub can_tx: CanTxPort,
     /// Virtual receive FIFO.
     pub can_rx: CanRxPort,
+    /// No CAN errors in QEMU.
+    pub can_errors: CanErrors,
     /// Simulated L3G4200D.
     pub gyro_spi: GyroSpi,
     /// Simulated LIS331DLH.
@@ -68,6 +70,7 @@ pub fn init(
         Board {
             can_tx: CanTxPort,
             can_rx: CanRxPort,
+            can_errors: amiro_firmware::qemu::can_errors(),
             gyro_spi: GyroSpi::new(),
             accel_spi: AccelSpi::new(),
             compass_i2c: CompassI2c::new(),

@@ -5,7 +5,7 @@
 //! 2.25 MHz mode 0 with XLAT on PC4 driven as the chip select (its rising edge at the end of a
 //! transfer latches) and BLANK on PA4 (high = dark, the reset state, until the driver holds a
 //! frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The monotonic is TIM3.
-use amiro_firmware::bxcan::{self, Fifo0, Mmio};
+use amiro_firmware::bxcan::{self, ErrorMonitor, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
 use stm32f1xx_hal::afio::AfioExt;
@@ -32,6 +32,12 @@ const SYS_PD_LINE: u32 = 1 << 14;
 
 /// The TLC5947 on SPI1, XLAT as its chip select.
 pub type LedSpi = ExclusiveDevice<Spi<SPI1, u8>, PC4<Output<PushPull>>, NoDelay>;
+/// The CAN controller's transmit mailboxes (the runtime's register-level driver).
+pub type CanTxPort = Mailboxes<Mmio>;
+/// The CAN controller's error monitor.
+pub type CanErrors = amiro_firmware::bxcan::ErrorMonitor<Mmio>;
+/// Interrupt that runs the transmit path.
+pub const CAN_TX_INTERRUPT: pac::Interrupt = pac::Interrupt::USB_HP_CAN_TX;
 /// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
 pub type CanRxPort = Fifo0<Mmio>;
 /// The board's clock: TIM3 ticks are microseconds.
@@ -41,8 +47,12 @@ rtic_monotonics::stm32_tim3_monotonic!(Mono, 1_000_000);
 
 /// Everything `init` hands on to the tasks.
 pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: CanTxPort,
     /// CAN receive FIFO 0 (command frames only, by hardware filter).
     pub can_rx: CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: CanErrors,
     /// The LED driver's SPI device.
     pub led_spi: LedSpi,
     /// BLANK.
@@ -159,7 +169,7 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
             .apb1enr()
             .modify(|_, w| w.canen().set_bit())
     };
-    // SAFETY: CAN1 is this board's only CAN block; its receive half is owned by `can_rx`.
+    // SAFETY: CAN1 is this board's only CAN block; its halves are owned by one task each.
     let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
     let btr = if on_crystal { CAN_BTR } else { CAN_BTR_HSI };
     if let Err(e) = bxcan::configure(&can, btr) {
@@ -167,7 +177,9 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     }
 
     Board {
+        can_tx: Mailboxes::new(can),
         can_rx: Fifo0::new(can),
+        can_errors: ErrorMonitor::new(can),
         led_spi,
         blank: Blank(blank),
         signals: SystemSignals {

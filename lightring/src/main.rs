@@ -6,8 +6,8 @@
 //! runtime's (`amiro-firmware`). The chip is behind `board` (or `qemu` for the QEMU build).
 //!
 //! Task priorities (RTIC, higher = more urgent; the constants live in `levels`):
-//! `shutdown`, `can_rx` 7 · `handle_commands`, `shutdown_sequence` 5 · `latch_leds` 4 ·
-//! `watchdog` 1. `cargo xtask analyze` reads these tasks, priorities and shared resources from this
+//! `shutdown`, `can_rx`, `can_status` 7 · `can_tx` 6 · `handle_commands`, `shutdown_sequence` 5 ·
+//! `latch_leds` 4 · `publish` (diagnostics) 2 · `watchdog` 1. `cargo xtask analyze` reads these tasks, priorities and shared resources from this
 //! file.
 #![no_std]
 #![no_main]
@@ -36,6 +36,8 @@ static BLT_CHECKSUM: u32 = 0xFFFF_FFFF;
 
 /// Depth of the queue between the CAN receive interrupt and command handling.
 pub const RX_QUEUE_LEN: usize = 16;
+/// Depth of the transmit queue (one diagnostics sample is six frames).
+pub const TX_QUEUE_LEN: usize = 8;
 /// The latch task refreshes the driver at least this often (a latch also follows every command),
 /// so a glitch on the shift register never lasts, and the watchdog sees the schedule alive.
 pub const REFRESH_PERIOD_US: u64 = 20_000;
@@ -51,19 +53,21 @@ pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// The clock every task uses (TIM3 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
 
-#[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4, UART5, TIM6, TIM7])]
+#[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4, UART5, TIM6, TIM7, SDIO])]
 mod app {
     use crate::leds::{self, LedState};
-    use crate::{levels, platform, Clock, RX_QUEUE_LEN};
-    use amiro_can::Board as CanBoard;
+    use crate::{levels, platform, Clock, RX_QUEUE_LEN, TX_QUEUE_LEN};
+    use amiro_can::{Board as CanBoard, Priority};
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
     use amiro_firmware::signals::{self, SystemSignals as _};
     use amiro_firmware::watchdog as iwdg;
-    use amiro_firmware::{bootloader, tasks};
+    use amiro_firmware::{bootloader, health, publisher, tasks};
+    use amiro_sensors::drivers::suite::Samples;
     use amiro_sensors::drivers::tlc5947::LightRing;
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
+    use amiro_sensors::tx_queue::TxQueue;
     use rtic_sync::channel::{Receiver, Sender};
     use rtic_sync::make_channel;
 
@@ -75,14 +79,21 @@ mod app {
         leds: LedState,
         /// The latch task's progress mark for the watchdog.
         alive: Liveness,
+        /// Frames waiting for a transmit mailboxes (the diagnostics), most urgent ID first.
+        tx_queue: TxQueue<TX_QUEUE_LEN>,
+        /// The CAN controller's error state (status interrupt, and polled by the watchdog task).
+        can_errors: platform::CanErrors,
     }
 
     #[local]
     struct Local {
         can_rx: platform::CanRxPort,
+        can_tx: platform::CanTxPort,
         rx_frames: Sender<'static, RxFrame, RX_QUEUE_LEN>,
         commands: Receiver<'static, RxFrame, RX_QUEUE_LEN>,
         wake_latch: Sender<'static, (), 1>,
+        wake_publisher: [Sender<'static, (), 1>; 1],
+        publisher_wakeups: Receiver<'static, (), 1>,
         latch_wakeups: Receiver<'static, (), 1>,
         ring: LightRing<platform::LedSpi>,
         blank: platform::Blank,
@@ -93,15 +104,18 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
         iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
+        health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
         amiro_firmware::telemetry::init();
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
         let (wake_latch, latch_wakeups) = make_channel!((), 1);
+        let (wake_publisher, publisher_wakeups) = make_channel!((), 1);
         let mut signals = hw.signals;
 
         platform::start_monotonic(levels::MONOTONIC, hw.on_crystal);
         handle_commands::spawn().ok();
         latch_leds::spawn().ok();
+        publish::spawn().ok();
         watchdog::spawn().ok();
         #[cfg(feature = "qemu")]
         stimulus::spawn().ok();
@@ -117,12 +131,17 @@ mod app {
                 handler: SensorDataHandler::new(CanBoard::LightRing),
                 leds: LedState::new(),
                 alive: Liveness::new(),
+                tx_queue: TxQueue::new(),
+                can_errors: hw.can_errors,
             },
             Local {
                 can_rx: hw.can_rx,
+                can_tx: hw.can_tx,
                 rx_frames,
                 commands,
                 wake_latch,
+                wake_publisher: [wake_publisher],
+                publisher_wakeups,
                 latch_wakeups,
                 ring: LightRing::new(hw.led_spi),
                 blank: hw.blank,
@@ -137,15 +156,35 @@ mod app {
         tasks::receive_frames(cx.local.can_rx, cx.local.rx_frames);
     }
 
-    /// Decodes each command; an LED command sets its LED's colour and wakes the latch. At most one
-    /// command per `COMMAND_MIN_INTERVAL_US`.
-    #[task(priority = 5, shared = [handler, leds], local = [commands, wake_latch])]
+    /// CAN transmit mailboxes: fill them from the priority queue, most urgent first.
+    #[task(binds = USB_HP_CAN_TX, priority = 6, shared = [tx_queue], local = [can_tx])]
+    fn can_tx(mut cx: can_tx::Context) {
+        let port = cx.local.can_tx;
+        cx.shared
+            .tx_queue
+            .lock(|queue| tasks::transmit_pending::<Clock, TX_QUEUE_LEN>(port, queue));
+    }
+
+    /// CAN status change (error warning, error-passive, bus-off): counted and traced.
+    #[task(binds = CAN_SCE, priority = 7, shared = [can_errors])]
+    fn can_status(mut cx: can_status::Context) {
+        cx.shared
+            .can_errors
+            .lock(tasks::on_can_status::<Clock, _>);
+    }
+
+    /// Decodes each command; an LED command sets its LED's colour and wakes the latch, a command to
+    /// the diagnostics topic wakes the publisher. At most one command per `COMMAND_MIN_INTERVAL_US`.
+    #[task(priority = 5, shared = [handler, leds], local = [commands, wake_latch, wake_publisher])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         while let Some(frame) = tasks::next_command(cx.local.commands).await {
             let started = Clock::now_us();
-            if let Some((now, Outcome::Led { command, .. })) =
-                tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
-            {
+            // One publisher task serves every level: one sender wakes it for any of them.
+            if let Some((now, Outcome::Led { command, .. })) = tasks::handle_command::<Clock>(
+                &frame,
+                &mut cx.shared.handler,
+                cx.local.wake_publisher,
+            ) {
                 cx.shared.leds.lock(|l| l.apply(now, &command));
                 let _ = cx.local.wake_latch.try_send(());
             }
@@ -175,9 +214,31 @@ mod app {
         }
     }
 
+    /// LightRing's one publisher: its diagnostics topic, at whichever CAN priority it was asked for.
+    #[task(priority = 2, shared = [handler, tx_queue], local = [publisher_wakeups])]
+    async fn publish(cx: publish::Context) {
+        let s = cx.shared;
+        // The runtime samples the diagnostics topic itself; LightRing has no other sensor topic.
+        let nothing = |_topic, _taken| Samples::new();
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
+            &[
+                Priority::Urgent,
+                Priority::High,
+                Priority::Medium,
+                Priority::Low,
+            ],
+            cx.local.publisher_wakeups,
+            s.handler,
+            s.tx_queue,
+            nothing,
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+    }
+
     /// Feeds the independent watchdog — from the least urgent level, and only while the latch task
     /// keeps running: a fed dog proves the whole schedule is alive.
-    #[task(priority = 1, shared = [alive])]
+    #[task(priority = 1, shared = [alive, can_errors])]
     async fn watchdog(mut cx: watchdog::Context) {
         iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
         let mut next = Clock::now_us();
@@ -187,6 +248,10 @@ mod app {
             if cx.shared.alive.lock(|a| a.take()) {
                 iwdg::feed();
             }
+            // The controller recovers from bus-off without an interrupt: look at its state.
+            cx.shared
+                .can_errors
+                .lock(tasks::on_can_status::<Clock, _>);
         }
     }
 

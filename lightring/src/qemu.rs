@@ -11,10 +11,12 @@ use amiro_sensors::sim::SimLedDriver;
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 use stm32f1xx_hal::pac::{self, Interrupt};
 
-pub use amiro_firmware::qemu::{CanRxPort, Clock, Signals as SystemSignals};
+pub use amiro_firmware::qemu::{CanErrors, CanRxPort, CanTxPort, Clock, Signals as SystemSignals};
 
 /// Interrupt of the (simulated) SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: Interrupt = Interrupt::EXTI15_10;
+/// Interrupt that runs the transmit path.
+pub const CAN_TX_INTERRUPT: Interrupt = Interrupt::USB_HP_CAN_TX;
 /// Interrupt of the CAN receive FIFO 0 (pended by the stimulus replay).
 pub const CAN_RX_INTERRUPT: Interrupt = Interrupt::USB_LP_CAN_RX0;
 
@@ -50,8 +52,12 @@ impl Blank {
 
 /// What `init` hands on to the tasks (same shape as the real board's).
 pub struct Board {
+    /// Virtual transmit mailboxes.
+    pub can_tx: CanTxPort,
     /// Virtual receive FIFO.
     pub can_rx: CanRxPort,
+    /// No CAN errors in QEMU.
+    pub can_errors: CanErrors,
     /// Simulated LED driver.
     pub led_spi: LedSpi,
     /// Simulated BLANK.
@@ -66,7 +72,9 @@ pub struct Board {
 pub fn init(_dp: pac::Peripherals, cp: cortex_m::Peripherals) -> Board {
     amiro_firmware::qemu::init(cp.SYST);
     Board {
+        can_tx: CanTxPort,
         can_rx: CanRxPort,
+        can_errors: amiro_firmware::qemu::can_errors(),
         led_spi: LedSpi(SimLedDriver::new()),
         blank: Blank,
         signals: SystemSignals,

@@ -1,7 +1,7 @@
 //! DiWheelDrive's QEMU scenarios (`diwheeldrive/qemu/*.log`) and what each must show.
 use anyhow::{ensure, Context, Result};
 
-use super::{trace_time, Bounds, RunOutput, Scenario};
+use super::{check_health, trace_time, Bounds, RunOutput, Scenario};
 
 /// Every scenario CI runs.
 pub const SCENARIOS: &[Scenario] = &[
@@ -34,6 +34,11 @@ pub const SCENARIOS: &[Scenario] = &[
         name: "shutdown",
         about: "SYS_PD_N falls: motors off, SYS_SYNC_N low, publishers stop, hand-over",
         check: shutdown,
+    },
+    Scenario {
+        name: "hostile",
+        about: "hostile traffic that hung the QEMU build before the deadlock fix: the run ends, every frame accounted for",
+        check: hostile,
     },
     Scenario {
         name: "flood",
@@ -207,14 +212,22 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "rejection reasons {reasons:?}, expected {expected:?}"
     );
     ensure!(
-        out.frames.iter().all(|f| f.id == 0x608),
-        "a bad frame made the board send something other than the gyroscope's frames"
+        out.frames.iter().all(|f| f.id == 0x608 || f.id == 0x61A),
+        "a bad frame made the board send something other than the gyroscope's frames (and the diagnostics asked for)"
     );
     let gyro = out.periodic_stream(0x608, "gyroscope", 2_000, 0, 150_000)?;
+    let health = check_health(out, amiro_can::Board::DiWheelDrive)?;
+    ensure!(
+        health.rejected == 10,
+        "diagnostics count {} rejections, expected 10",
+        health.rejected
+    );
     Ok(format!(
-        "{rejected} rejected, {ignored} ignored; gyroscope undisturbed: {} frames on its 2 ms grid, worst latency {} µs",
+        "{rejected} rejected, {ignored} ignored; gyroscope undisturbed: {} frames on its 2 ms grid, worst latency {} µs; diagnostics: {} accepted, {} rejected",
         gyro.frames.len(),
-        gyro.worst_latency
+        gyro.worst_latency,
+        health.accepted,
+        health.rejected
     ))
 }
 
@@ -241,10 +254,11 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         "{overruns} receive-FIFO overruns: the receive interrupt fell behind"
     );
     ensure!(
-        handled.len() as u64 + dropped == 2_001,
-        "{} commands handled + {dropped} dropped and counted != the 2001 sent",
+        handled.len() as u64 + dropped == 2_002,
+        "{} commands handled + {dropped} dropped and counted != the 2002 sent",
         handled.len()
     );
+    let health = check_health(out, amiro_can::Board::DiWheelDrive)?;
     if let Some(gap) = handled.windows(2).map(|w| w[1] - w[0]).min() {
         ensure!(
             gap >= COMMAND_MIN_INTERVAL_US,
@@ -252,8 +266,9 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         );
     }
     Ok(format!(
-        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted; gyroscope on its 1 ms grid, worst latency {worst} µs ≤ analysed {bound} µs",
-        handled.len()
+        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted (diagnostics agree: {} dropped); gyroscope on its 1 ms grid, worst latency {worst} µs ≤ analysed {bound} µs",
+        handled.len(),
+        health.rx_dropped
     ))
 }
 
@@ -310,4 +325,25 @@ fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         .find(|n| n.starts_with("qemu: shutdown hand-over"))
         .context("no hand-over to the bootloader")?;
     Ok(format!("48 frames, then motors off at {stop} µs, SYS_SYNC_N low, no frames or commands after; {handover}"))
+}
+
+fn hostile(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    // The stimulus: 7579 frames (diwheeldrive/qemu/hostile.log).
+    const SENT: u64 = 7_579;
+    let end = out.end_line()?;
+    ensure!(
+        end.starts_with("qemu: end of run"),
+        "the run did not reach its end: `{end}`"
+    );
+    let handled = out.traces("command-").len() as u64;
+    let dropped = out.end_field("rx dropped")?;
+    let overruns = out.end_field("rx overruns")?;
+    ensure!(
+        handled + dropped == SENT && overruns == 0,
+        "{handled} handled + {dropped} dropped ({overruns} overruns) != {SENT} sent"
+    );
+    Ok(format!(
+        "ran to its end: {handled} commands handled, {dropped} dropped and counted, {} frames sent",
+        out.frames.len()
+    ))
 }

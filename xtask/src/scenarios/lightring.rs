@@ -12,7 +12,7 @@ use schedule_analysis::scenario;
 
 use amiro_sensors::drivers::tlc5947::{gamma, led_outputs, CHANNELS};
 
-use super::{trace_time, Bounds, RunOutput, Scenario};
+use super::{check_health, trace_time, Bounds, RunOutput, Scenario};
 
 /// Every LightRing scenario CI runs.
 pub const SCENARIOS: &[Scenario] = &[
@@ -160,7 +160,13 @@ fn latch_bound_us(root: &Path) -> Result<u64> {
     };
     let handler = wcrt_us("handle_commands")?;
     let latch = wcrt_us("latch_leds")?;
-    let jitter_budget = 220;
+    let timing = root.join("schedule-analysis/models/lightring.timing.json");
+    let text = std::fs::read_to_string(&timing)
+        .with_context(|| format!("reading {}", timing.display()))?;
+    let json: serde_json::Value = serde_json::from_str(&text)?;
+    let jitter_budget = json["tasks"]["latch_leds"]["jitter_us"]
+        .as_f64()
+        .context("lightring.timing.json: tasks.latch_leds.jitter_us")? as u64;
     ensure!(
         handler <= jitter_budget,
         "handle_commands' WCRT {handler} µs exceeds the {jitter_budget} µs release jitter \
@@ -324,7 +330,16 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let mut colours = [[0u8; 3]; 8];
     colours[4] = [0x10, 0x20, 0x30];
     latency_until_shown(&latches, 20_000, &colours)?;
-    Ok("5 malformed frames rejected with their reasons, LEDs unchanged; the good command after them applied".into())
+    let health = check_health(out, amiro_can::Board::LightRing)?;
+    ensure!(
+        health.rejected == 5,
+        "diagnostics count {} rejections, expected 5",
+        health.rejected
+    );
+    Ok(format!(
+        "5 malformed frames rejected with their reasons, LEDs unchanged; the good command after them applied; diagnostics: {} accepted, {} rejected",
+        health.accepted, health.rejected
+    ))
 }
 
 fn flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
@@ -350,12 +365,20 @@ fn flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         out.end_field("rx overruns")? == 0,
         "receive-FIFO overruns: the receive interrupt fell behind"
     );
+    // The flood, and the diagnostics request after it (handled: the queue has drained by then).
+    let handled = out.traces("command-").len() as u64;
+    ensure!(
+        handled == applied.len() as u64 + 1,
+        "{handled} commands handled, expected the {} applied LED commands and the diagnostics request",
+        applied.len()
+    );
     ensure!(
         applied.len() as u64 + dropped == sent.len() as u64,
         "{} applied + {dropped} dropped != {} sent",
         applied.len(),
         sent.len()
     );
+    let health = check_health(out, amiro_can::Board::LightRing)?;
     ensure!(
         applied.len() >= 17,
         "only {} commands applied: the 16-deep queue plus the one in hand must all apply",
@@ -382,8 +405,9 @@ fn flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "the final latch does not show the last applied colour of every LED"
     );
     Ok(format!(
-        "{} LED commands applied in order (the whole queued burst), {dropped} dropped and counted; final state = last applied colours",
-        applied.len()
+        "{} LED commands applied in order (the whole queued burst), {dropped} dropped and counted (diagnostics agree: {}); final state = last applied colours",
+        applied.len(),
+        health.rx_dropped
     ))
 }
 

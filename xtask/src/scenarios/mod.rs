@@ -107,6 +107,94 @@ impl RunOutput {
     }
 }
 
+/// What a board's last diagnostics sample in a run said (the fields the scenarios check).
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Health {
+    /// Commands accepted.
+    pub accepted: u32,
+    /// Commands rejected, every reason.
+    pub rejected: u32,
+    /// Receive drops (a lower bound on frames lost).
+    pub rx_dropped: u32,
+    /// Receive-FIFO overruns.
+    pub rx_overruns: u32,
+    /// Deadline misses per level, urgent first.
+    pub deadline_misses: [u32; 4],
+}
+
+/// Decodes the last diagnostics sample `board` put on the bus (its six pages, in order).
+pub fn last_health(out: &RunOutput, board: amiro_can::Board) -> Result<Health> {
+    use amiro_can::{DiagnosticsPage, Message, SensorData};
+    let topic = u32::from(board.diagnostics_topic().byte());
+    let frames: Vec<&TimedFrame> = out
+        .frames
+        .iter()
+        .filter(|f| f.id & 0x4FF == 0x400 | topic)
+        .collect();
+    ensure!(
+        frames.len() >= 6,
+        "{} diagnostics frames from {board}, expected a sample of six",
+        frames.len()
+    );
+    let mut health = Health::default();
+    for f in &frames[frames.len() - 6..] {
+        let id = amiro_can::CanId::try_from(f.id as u16).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let frame = amiro_can::Frame::new(id, &f.data).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let Ok(Message::Sample {
+            data: SensorData::Diagnostics { page, .. },
+            ..
+        }) = frame.decode()
+        else {
+            bail!("{id:?}: not a diagnostics page");
+        };
+        match page {
+            DiagnosticsPage::Commands {
+                accepted, rejected, ..
+            } => {
+                health.accepted = accepted.get();
+                health.rejected = rejected.get();
+            }
+            DiagnosticsPage::AdmissionAndReceive {
+                rx_dropped,
+                rx_overruns,
+                ..
+            } => {
+                health.rx_dropped = rx_dropped.get();
+                health.rx_overruns = rx_overruns.get();
+            }
+            DiagnosticsPage::Deadlines { misses } => {
+                health.deadline_misses = misses.map(|m| m.get());
+            }
+            _ => {}
+        }
+    }
+    Ok(health)
+}
+
+/// Checks a board's last diagnostics sample against what the run shows: accepted and rejected
+/// commands as traced (up to the request that asked for the sample), receive drops and overruns as
+/// the end line says.
+pub fn check_health(out: &RunOutput, board: amiro_can::Board) -> Result<Health> {
+    let health = last_health(out, board)?;
+    let accepted = out.traces("command-accepted").len() as u32;
+    let rejected = out.traces("command-rejected").len() as u32;
+    ensure!(
+        health.accepted == accepted && health.rejected == rejected,
+        "diagnostics say {} accepted / {} rejected, the trace shows {accepted} / {rejected}",
+        health.accepted,
+        health.rejected
+    );
+    let dropped = out.end_field("rx dropped")? as u32;
+    let overruns = out.end_field("rx overruns")? as u32;
+    ensure!(
+        health.rx_dropped == dropped.min(0xFFFF) && health.rx_overruns == overruns.min(0xFF),
+        "diagnostics say {} dropped / {} overruns, the end line {dropped} / {overruns}",
+        health.rx_dropped,
+        health.rx_overruns
+    );
+    Ok(health)
+}
+
 /// The `# duration:` header of a stimulus log.
 pub fn duration_of(path: &Path) -> Result<u64> {
     let text =

@@ -1,0 +1,149 @@
+//! The board's health, counted where it happens and answered on the board's diagnostics topic.
+//!
+//! Every board publishes its diagnostics topic (DiWheelDrive `0x1A`, PowerManagement `0x1B`,
+//! LightRing `0x1C`) like any sensor topic: a one-shot or a periodic publisher, six frames per
+//! sample (`amiro_can::Diagnostics`, `docs/protocol.md`). The publisher loop builds the sample here
+//! from the handler's command counters, the transmit queue's counters and the counters below.
+use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
+
+use amiro_can::{Board, Diagnostics, Priority, ResetCause, StatusFlags};
+use amiro_sensors::drivers::suite::Samples;
+use amiro_sensors::handler::SensorDataHandler;
+use amiro_sensors::tx_queue::TxCounters;
+
+static DEADLINE_MISSES: [AtomicU32; 4] = [
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+];
+static LATE_FRAMES: AtomicU32 = AtomicU32::new(0);
+static ADMISSION_REFUSED: AtomicU32 = AtomicU32::new(0);
+static ADMISSION_WARNED: AtomicU32 = AtomicU32::new(0);
+static SENSOR_FAULTS: AtomicU32 = AtomicU32::new(0);
+static SENSOR_FAULT_NOW: AtomicBool = AtomicBool::new(false);
+static ERROR_PASSIVE: AtomicU32 = AtomicU32::new(0);
+static BUS_OFF: AtomicU32 = AtomicU32::new(0);
+static PASSIVE_NOW: AtomicBool = AtomicBool::new(false);
+static WATCHDOG_RUNNING: AtomicBool = AtomicBool::new(false);
+static RESET_CAUSE: AtomicU8 = AtomicU8::new(0);
+static WINDOW: AtomicU8 = AtomicU8::new(0);
+
+/// Counts `n` deadline misses at CAN priority `level`: releases skipped because a publisher fell
+/// a full period behind, or a frame that reached its mailbox after its release's deadline.
+pub fn count_deadline_misses(level: Priority, n: u32) {
+    if let Some(counter) = DEADLINE_MISSES.get(level as usize) {
+        counter.fetch_add(n, Ordering::Relaxed);
+    }
+}
+
+/// Counts a frame that left its publisher after the deadline of its release (also counted as a
+/// deadline miss of its level).
+pub fn count_late_frame(level: Priority) {
+    LATE_FRAMES.fetch_add(1, Ordering::Relaxed);
+    count_deadline_misses(level, 1);
+}
+
+/// Frames that left after their release's deadline.
+pub fn late_frames() -> u32 {
+    LATE_FRAMES.load(Ordering::Relaxed)
+}
+
+/// Counts an admission decision: refused, or accepted with a warning.
+pub fn count_admission(refused: bool) {
+    if refused {
+        ADMISSION_REFUSED.fetch_add(1, Ordering::Relaxed);
+    } else {
+        ADMISSION_WARNED.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// Sets the board's sensor-fault total and whether a sensor is faulty right now.
+pub fn set_sensor_faults(total: u32, faulty_now: bool) {
+    SENSOR_FAULTS.store(total, Ordering::Relaxed);
+    SENSOR_FAULT_NOW.store(faulty_now, Ordering::Relaxed);
+}
+
+/// Records the CAN controller's error episodes (from its `ErrorMonitor`).
+pub fn set_can_errors(passive_episodes: u32, bus_off_episodes: u32, passive_now: bool) {
+    ERROR_PASSIVE.store(passive_episodes, Ordering::Relaxed);
+    BUS_OFF.store(bus_off_episodes, Ordering::Relaxed);
+    PASSIVE_NOW.store(passive_now, Ordering::Relaxed);
+}
+
+/// Notes that the independent watchdog runs.
+pub fn watchdog_started() {
+    WATCHDOG_RUNNING.store(true, Ordering::Relaxed);
+}
+
+/// Records why the chip last reset (read once at boot).
+pub fn set_reset_cause(cause: ResetCause) {
+    RESET_CAUSE.store(cause.bits(), Ordering::Relaxed);
+}
+
+/// The board's health now.
+pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Diagnostics {
+    let counters = handler.counters();
+    let mut flags = StatusFlags::NONE;
+    if handler.admission_policy() == amiro_can::AdmissionPolicy::AcceptAndWarn {
+        flags = flags.with(StatusFlags::ACCEPT_AND_WARN);
+    }
+    if PASSIVE_NOW.load(Ordering::Relaxed) {
+        flags = flags.with(StatusFlags::ERROR_PASSIVE);
+    }
+    if SENSOR_FAULT_NOW.load(Ordering::Relaxed) {
+        flags = flags.with(StatusFlags::SENSOR_FAULT);
+    }
+    if WATCHDOG_RUNNING.load(Ordering::Relaxed) {
+        flags = flags.with(StatusFlags::WATCHDOG);
+    }
+    if crate::signals::shutting_down() {
+        flags = flags.with(StatusFlags::SHUTTING_DOWN);
+    }
+    Diagnostics {
+        uptime_s: u32::try_from(now_us / 1_000_000).unwrap_or(u32::MAX),
+        reset_cause: ResetCause::from_bits(RESET_CAUSE.load(Ordering::Relaxed)),
+        flags,
+        sensor_faults: SENSOR_FAULTS.load(Ordering::Relaxed),
+        accepted: counters.accepted,
+        rejected: counters.rejected,
+        admission_refused: ADMISSION_REFUSED.load(Ordering::Relaxed),
+        admission_warned: ADMISSION_WARNED.load(Ordering::Relaxed),
+        rx_dropped: crate::tasks::rx_dropped(),
+        rx_overruns: crate::tasks::rx_overruns(),
+        tx_dropped: tx.dropped,
+        tx_displaced: tx.requeued,
+        error_passive: ERROR_PASSIVE.load(Ordering::Relaxed),
+        bus_off: BUS_OFF.load(Ordering::Relaxed),
+        deadline_misses: [
+            DEADLINE_MISSES[0].load(Ordering::Relaxed),
+            DEADLINE_MISSES[1].load(Ordering::Relaxed),
+            DEADLINE_MISSES[2].load(Ordering::Relaxed),
+            DEADLINE_MISSES[3].load(Ordering::Relaxed),
+        ],
+    }
+}
+
+/// One sample of `board`'s diagnostics topic, from the health now.
+#[inline(never)]
+pub fn sample_now(
+    handler: &SensorDataHandler,
+    tx: &TxCounters,
+    board: Board,
+    now_us: u64,
+) -> Samples {
+    sample(board, &snapshot(handler, tx, now_us))
+}
+
+/// One sample of `board`'s diagnostics topic: its six pages, the rejection window moving on by
+/// three reasons per sample.
+pub fn sample(board: Board, health: &Diagnostics) -> Samples {
+    let window = WINDOW.load(Ordering::Relaxed);
+    WINDOW.store(Diagnostics::next_window(window), Ordering::Relaxed);
+    let mut samples = Samples::new();
+    for page in health.pages(window) {
+        // Six pages fit the eight samples a release may carry.
+        let _ = samples.push(amiro_can::SensorData::Diagnostics { board, page });
+    }
+    samples
+}
