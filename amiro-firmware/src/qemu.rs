@@ -30,6 +30,7 @@ use crate::signals::SystemSignals;
 /// netduinoplus2's STM32F405 for the F4 board).
 #[cfg(feature = "f1")]
 pub const CORE_CLOCK_HZ: u32 = 120_000_000;
+/// SysTick's clock on the F4 board's QEMU machine (netduinoplus2).
 #[cfg(feature = "f4")]
 pub const CORE_CLOCK_HZ: u32 = 168_000_000;
 

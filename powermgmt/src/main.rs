@@ -1,86 +1,389 @@
-//! PowerManagement firmware (STM32F405xG): the RTIC skeleton — clocks from the 8 MHz crystal to
-//! 168 MHz, the TIM2 microsecond monotonic, RTT and a heartbeat task. The proximity ring, the fuel
-//! gauges and the CAN side come with the PowerManagement issue.
+//! PowerManagement firmware (STM32F405xG, board revision 1-1/1-2): the RTIC app.
+//!
+//! This file is wiring only: resources, bindings, priorities. The proximity ring and the fuel
+//! gauges are sampled through `sensors` (one resource per I2C bus), the power master's decisions
+//! are `power`'s, and everything every board does the same way (CAN, monotonic, telemetry, fault
+//! policy, system signals, AMiRo-BLT hand-over, watchdog, QEMU platform) is the runtime's
+//! (`amiro-firmware`). The chip is behind `board` (or `qemu` for the QEMU build of this same app).
+//!
+//! Task priorities (RTIC, higher = more urgent; the constants live in `levels`):
+//! `shutdown`, `can_rx` 7 · `can_tx` 6 · `handle_commands`, `shutdown_sequence` 5 ·
+//! `publish_urgent` 4 · `publish_high` 3 · `publish_medium` 2 ·
+//! `publish_low`, `power_monitor`, `watchdog` 1.
+//! `cargo xtask analyze` reads these tasks, priorities and shared resources from this file.
 #![no_std]
 #![no_main]
 
-use rtic_monotonics::stm32::prelude::*;
+mod levels;
+mod power;
+mod sensors;
 
-// TIM2 is the original firmware's tick timer on this board and is free for the monotonic.
-stm32_tim2_monotonic!(Mono, 1_000_000);
+#[cfg(not(feature = "qemu"))]
+mod board;
+#[cfg(not(feature = "qemu"))]
+mod i2c;
+#[cfg(not(feature = "qemu"))]
+use board as platform;
+#[cfg(feature = "qemu")]
+mod qemu;
+#[cfg(feature = "qemu")]
+use qemu as platform;
 
-/// Switches the clock tree back to the internal oscillator with the PLL off.
-///
-/// AMiRo-BLT hands over with the PLL already driving SYSCLK; the PLL cannot be reconfigured while
-/// it is the system clock, so start from the reset state before the HAL sets the clocks up.
-fn clock_tree_to_reset_state(rcc: &stm32f4xx_hal::pac::RCC) {
-    rcc.cr().modify(|_, w| w.hsion().set_bit());
-    while rcc.cr().read().hsirdy().bit_is_clear() {}
-    rcc.cfgr().modify(|_, w| w.sw().hsi());
-    while !rcc.cfgr().read().sws().is_hsi() {}
-    rcc.cr().modify(|_, w| w.pllon().clear_bit());
-    while rcc.cr().read().pllrdy().bit_is_set() {}
-}
+// Panic, HardFault and the hand-over switch the chargers off first.
+amiro_firmware::safe_state!(platform::chargers_off);
 
-/// The AMiRo-BLT checksum slot (see `memory.x`): erased flash until the bootloader or
+/// The AMiRo-BLT checksum slot (see `amiro_firmware::layout`): erased flash until the bootloader or
 /// `cargo xtask flash` writes the word that makes the first vector words sum to zero.
-#[cfg(not(feature = "bare-chip"))]
+#[cfg(not(any(feature = "bare-chip", feature = "qemu")))]
 #[link_section = ".blt_checksum"]
 #[used]
 static BLT_CHECKSUM: u32 = 0xFFFF_FFFF;
 
-#[panic_handler]
-fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
-    cortex_m::interrupt::disable();
-    loop {
-        cortex_m::asm::nop();
+/// Depth of the queue between the CAN receive interrupt and command handling.
+pub const RX_QUEUE_LEN: usize = 16;
+/// Depth of the transmit queue (frames waiting for a mailbox): two ring samples.
+pub const TX_QUEUE_LEN: usize = 16;
+/// The power monitor's period: VSYS → chargers every period.
+pub const POWER_MONITOR_PERIOD_US: u64 = 100_000;
+/// The power monitor reads both fuel gauges every this many periods (500 ms).
+pub const BATTERY_CHECK_EVERY: u32 = 5;
+/// Watchdog check period; the IWDG resets the board if it is not fed for `WATCHDOG_TIMEOUT_MS`.
+pub const WATCHDOG_PERIOD_US: u64 = 100_000;
+/// Independent watchdog timeout.
+pub const WATCHDOG_TIMEOUT_MS: u32 = 500;
+/// The watchdog's timeout during the boot (started first thing in `init`).
+pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
+/// The command handler takes at most one command per this interval (`docs/analysis.md`).
+pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
+/// A shutdown this board initiates waits at most this long for another module to take the
+/// request (it pulls SYS_SYNC_N low when it does).
+pub const OTHERS_ACK_TIMEOUT_US: u64 = 100_000;
+/// … and then this long for the modules to stop and hand over to their bootloaders (DiWheelDrive
+/// drains its transmit queue for up to 10 ms).
+pub const OTHERS_SETTLE_US: u64 = 20_000;
+/// Queued frames get up to this long to leave before the hand-over.
+pub const TX_DRAIN_US: u64 = 10_000;
+
+/// The clock every task uses (TIM2 on the robot, SysTick in QEMU).
+type Clock = platform::Clock;
+
+/// Gives the queued frames up to `TX_DRAIN_US` to leave (before a hand-over).
+async fn drain(
+    tx_queue: &mut impl rtic::Mutex<T = amiro_sensors::tx_queue::TxQueue<TX_QUEUE_LEN>>,
+) {
+    use amiro_firmware::mono::Clock as _;
+    let deadline = Clock::now_us() + TX_DRAIN_US;
+    while tx_queue.lock(|q| q.len()) > 0 && Clock::now_us() < deadline {
+        Clock::delay_until_us(Clock::now_us() + 1_000).await;
     }
 }
 
-#[rtic::app(device = stm32f4xx_hal::pac, dispatchers = [UART4])]
+#[rtic::app(device = stm32f4xx_hal::pac, dispatchers = [UART4, UART5, TIM7, SDIO, DMA2_STREAM0, DMA2_STREAM1])]
 mod app {
-    use super::Mono;
-    use rtic_monotonics::stm32::prelude::*;
-    use rtt_target::{rprintln, rtt_init_print};
-    use stm32f4xx_hal::{prelude::*, rcc::Config};
+    use crate::sensors::{self, FrontBus, RearBus};
+    use crate::{levels, platform, power, Clock, RX_QUEUE_LEN, TX_QUEUE_LEN};
+    use amiro_can::{Board as CanBoard, Priority, ShutdownMode};
+    use amiro_firmware::can::RxFrame;
+    use amiro_firmware::liveness::Liveness;
+    use amiro_firmware::mono::Clock as _;
+    use amiro_firmware::signals::{self, SystemSignals as _};
+    use amiro_firmware::watchdog as iwdg;
+    use amiro_firmware::{bootloader, publisher, tasks};
+    use amiro_sensors::drivers::ring::RingBus;
+    use amiro_sensors::handler::{Outcome, SensorDataHandler};
+    use amiro_sensors::tx_queue::TxQueue;
+    use rtic_sync::channel::{Receiver, Sender};
+    use rtic_sync::make_channel;
+
+    /// A wake-up for one publisher level: the publisher table changed.
+    type Wake = Receiver<'static, (), 1>;
 
     #[shared]
-    struct Shared {}
+    struct Shared {
+        /// The sensor-data handler: the publisher table and the command counters.
+        handler: SensorDataHandler,
+        /// Frames waiting for a transmit mailbox, most urgent ID first.
+        tx_queue: TxQueue<TX_QUEUE_LEN>,
+        /// I2C1: ring sensors 0, 1, 2, 7 and the rear fuel gauge.
+        rear_bus: RearBus,
+        /// I2C2: ring sensors 3, 4, 5, 6 and the front fuel gauge.
+        front_bus: FrontBus,
+        /// The chargers, their status lines, the plug and VSYS.
+        charger: platform::Charger,
+        /// SYS_SYNC_N and SYS_PD_N.
+        signals: platform::SystemSignals,
+        /// The power monitor's progress mark for the watchdog.
+        alive: Liveness,
+    }
 
     #[local]
-    struct Local {}
+    struct Local {
+        can_rx: platform::CanRxPort,
+        can_tx: platform::CanTxPort,
+        rx_frames: Sender<'static, RxFrame, RX_QUEUE_LEN>,
+        commands: Receiver<'static, RxFrame, RX_QUEUE_LEN>,
+        wake_levels: [Sender<'static, (), 1>; 4],
+        wake_urgent: Wake,
+        wake_high: Wake,
+        wake_medium: Wake,
+        wake_low: Wake,
+    }
 
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
-        rtt_init_print!();
-        super::clock_tree_to_reset_state(&cx.device.RCC);
-        let mut rcc = cx.device.RCC.freeze(
-            Config::hse(8.MHz())
-                .sysclk(168.MHz())
-                .hclk(168.MHz())
-                .pclk1(42.MHz())
-                .pclk2(84.MHz()),
-        );
-        // Initialised: release SYS_SYNC_N (PC12, open drain, wired-OR) so the robot can come up.
-        // (The pin configuration outlives the HAL handle.)
-        let gpioc = cx.device.GPIOC.split(&mut rcc);
-        let mut sys_sync = gpioc.pc12.into_open_drain_output();
-        sys_sync.set_high();
-        // APB1 timers run at 2 × PCLK1 = 84 MHz.
-        Mono::start(84_000_000, Priority::new(8));
-        heartbeat::spawn().ok();
-        rprintln!("PowerManagement up");
-        (Shared {}, Local {})
+        // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
+        iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
+        amiro_firmware::telemetry::init();
+        let hw = platform::init(cx.device, cx.core);
+        let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
+        let (wake_u, wake_urgent) = make_channel!((), 1);
+        let (wake_h, wake_high) = make_channel!((), 1);
+        let (wake_m, wake_medium) = make_channel!((), 1);
+        let (wake_l, wake_low) = make_channel!((), 1);
+        let rear_bus = RearBus::new(RingBus::I2c1, hw.rear_i2c, platform::GaugeDelay::default());
+        let front_bus =
+            FrontBus::new(RingBus::I2c2, hw.front_i2c, platform::GaugeDelay::default());
+        let mut signals = hw.signals;
+        // The power lines keep their configuration; nothing in the app touches them again.
+        let _power_lines = hw.power_lines;
+
+        platform::start_monotonic(levels::MONOTONIC);
+        publish_urgent::spawn().ok();
+        publish_high::spawn().ok();
+        publish_medium::spawn().ok();
+        publish_low::spawn().ok();
+        handle_commands::spawn().ok();
+        power_monitor::spawn().ok();
+        watchdog::spawn().ok();
+        #[cfg(feature = "qemu")]
+        stimulus::spawn().ok();
+        amiro_firmware::log!("PowerManagement up");
+
+        // Initialised: let the system come up (SYS_SYNC_N is wired-OR; it reads high once every
+        // module has released it).
+        signals.release_sync();
+        // A shutdown requested before we were up has no edge to catch: look at the level.
+        if signals.shutdown_requested() {
+            rtic::pend(platform::SHUTDOWN_INTERRUPT);
+        }
+        (
+            Shared {
+                handler: SensorDataHandler::new(CanBoard::PowerManagement),
+                tx_queue: TxQueue::new(),
+                rear_bus,
+                front_bus,
+                charger: hw.charger,
+                signals,
+                alive: Liveness::new(),
+            },
+            Local {
+                can_rx: hw.can_rx,
+                can_tx: hw.can_tx,
+                rx_frames,
+                commands,
+                wake_levels: [wake_u, wake_h, wake_m, wake_l],
+                wake_urgent,
+                wake_high,
+                wake_medium,
+                wake_low,
+            },
+        )
     }
 
-    #[task(priority = 1)]
-    async fn heartbeat(_cx: heartbeat::Context) {
-        loop {
-            rprintln!(
-                "alive at {} us",
-                rtic_monotonics::rtic_time::monotonic::TimerQueueBasedInstant::ticks(Mono::now())
+    /// CAN receive FIFO 0: move frames into the bounded command queue; a full queue drops and counts.
+    #[task(binds = CAN1_RX0, priority = 7, local = [can_rx, rx_frames])]
+    fn can_rx(cx: can_rx::Context) {
+        tasks::receive_frames(cx.local.can_rx, cx.local.rx_frames);
+    }
+
+    /// CAN transmit mailboxes: fill them from the priority queue, most urgent first.
+    #[task(binds = CAN1_TX, priority = 6, shared = [tx_queue], local = [can_tx])]
+    fn can_tx(mut cx: can_tx::Context) {
+        let port = cx.local.can_tx;
+        cx.shared
+            .tx_queue
+            .lock(|queue| tasks::transmit_pending::<Clock, TX_QUEUE_LEN>(port, queue));
+    }
+
+    /// Decodes each command, updates the publisher table and wakes the levels whose schedule
+    /// changed; the operator's shutdown command starts the robot's shutdown. At most one command
+    /// per `COMMAND_MIN_INTERVAL_US`.
+    #[task(priority = 5, shared = [handler], local = [commands, wake_levels])]
+    async fn handle_commands(mut cx: handle_commands::Context) {
+        while let Some(frame) = tasks::next_command(cx.local.commands).await {
+            let started = Clock::now_us();
+            let outcome = tasks::handle_command::<Clock>(
+                &frame,
+                &mut cx.shared.handler,
+                cx.local.wake_levels,
             );
-            Mono::delay(500u64.millis()).await;
+            if let Some((_, Outcome::Shutdown { mode, .. })) = outcome {
+                shutdown_sequence::spawn(Some(mode)).ok();
+            }
+            Clock::delay_until_us(started + crate::COMMAND_MIN_INTERVAL_US).await;
         }
+    }
+
+    /// Publisher for topics at CAN priority urgent.
+    #[task(priority = 4, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_urgent])]
+    async fn publish_urgent(cx: publish_urgent::Context) {
+        let s = cx.shared;
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
+            &[Priority::Urgent],
+            cx.local.wake_urgent,
+            s.handler,
+            s.tx_queue,
+            sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+    }
+
+    /// Publisher for topics at CAN priority high.
+    #[task(priority = 3, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_high])]
+    async fn publish_high(cx: publish_high::Context) {
+        let s = cx.shared;
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
+            &[Priority::High],
+            cx.local.wake_high,
+            s.handler,
+            s.tx_queue,
+            sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+    }
+
+    /// Publisher for topics at CAN priority medium.
+    #[task(priority = 2, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_medium])]
+    async fn publish_medium(cx: publish_medium::Context) {
+        let s = cx.shared;
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
+            &[Priority::Medium],
+            cx.local.wake_medium,
+            s.handler,
+            s.tx_queue,
+            sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+    }
+
+    /// Publisher for topics at CAN priority low.
+    #[task(priority = 1, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_low])]
+    async fn publish_low(cx: publish_low::Context) {
+        let s = cx.shared;
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
+            &[Priority::Low],
+            cx.local.wake_low,
+            s.handler,
+            s.tx_queue,
+            sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+    }
+
+    /// The power master's periodic duty: the chargers run only while VSYS allows it (every
+    /// period), and a critically low battery shuts the robot down (gauges read every
+    /// `BATTERY_CHECK_EVERY` periods). Marks the watchdog's progress.
+    #[task(priority = 1, shared = [rear_bus, front_bus, charger, alive])]
+    async fn power_monitor(mut cx: power_monitor::Context) {
+        let mut next = Clock::now_us();
+        let mut round = 0u32;
+        loop {
+            next += crate::POWER_MONITOR_PERIOD_US;
+            Clock::delay_until_us(next).await;
+            if signals::shutting_down() {
+                continue;
+            }
+            cx.shared.charger.lock(power::regulate_charging);
+            round = round.wrapping_add(1);
+            if round % crate::BATTERY_CHECK_EVERY == 0 {
+                let (front, rear) =
+                    sensors::read_batteries(&mut cx.shared.rear_bus, &mut cx.shared.front_bus);
+                let lines = cx.shared.charger.lock(|c| c.lines());
+                if power::critically_low(front.as_ref(), rear.as_ref(), &lines) {
+                    amiro_firmware::log!("battery critically low: shutting down");
+                    shutdown_sequence::spawn(Some(power::LOW_BATTERY_MODE)).ok();
+                }
+            }
+            cx.shared.alive.lock(|a| a.mark());
+        }
+    }
+
+    /// Feeds the independent watchdog — from the least urgent level, and only while the power
+    /// monitor keeps running: a fed dog proves the whole schedule is alive.
+    #[task(priority = 1, shared = [alive])]
+    async fn watchdog(mut cx: watchdog::Context) {
+        iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
+        let mut next = Clock::now_us();
+        loop {
+            next += crate::WATCHDOG_PERIOD_US;
+            Clock::delay_until_us(next).await;
+            if cx.shared.alive.lock(|a| a.take()) {
+                iwdg::feed();
+            }
+        }
+    }
+
+    /// SYS_PD_N fell: another module requests shutdown (this board's own request is already
+    /// marked, so its edge does nothing here).
+    #[task(binds = EXTI15_10, priority = 7, shared = [signals])]
+    fn shutdown(mut cx: shutdown::Context) {
+        if cx.shared.signals.lock(signals::on_shutdown_edge) {
+            platform::chargers_off();
+            shutdown_sequence::spawn(None).ok();
+        }
+    }
+
+    /// The shutdown: initiated here (`Some(mode)`: the operator's command or a low battery) or
+    /// requested from outside (`None`). An initiated one drives SYS_PD_N, stops the publishers,
+    /// waits (bounded) for the other modules, writes the reason for AMiRo-BLT and calls the
+    /// callback of the mode; a requested one stops and calls the shutdown-request handler.
+    #[task(priority = 5, shared = [handler, tx_queue, signals])]
+    async fn shutdown_sequence(mut cx: shutdown_sequence::Context, initiated: Option<ShutdownMode>) {
+        let now = Clock::now_us();
+        if let Some(mode) = initiated {
+            if signals::shutting_down() {
+                return;
+            }
+            // Marked first: our own falling edge on SYS_PD_N is then not taken for a request.
+            signals::request_shutdown();
+            cx.shared.signals.lock(|s| s.drive_shutdown_request());
+            cx.shared.handler.lock(|h| h.stop_all());
+            amiro_firmware::log!("shutdown ({}): SYS_PD_N low, publishers stopped", mode.name());
+            let deadline = now + crate::OTHERS_ACK_TIMEOUT_US;
+            while !cx.shared.signals.lock(|s| s.sync_reads_low()) && Clock::now_us() < deadline {
+                Clock::delay_until_us(Clock::now_us() + 1_000).await;
+            }
+            let acknowledged = cx.shared.signals.lock(|s| s.sync_reads_low());
+            amiro_firmware::log!(
+                "shutdown: other modules {}",
+                if acknowledged { "took the request" } else { "silent (timeout)" }
+            );
+            Clock::delay_until_us(Clock::now_us() + crate::OTHERS_SETTLE_US).await;
+            crate::drain(&mut cx.shared.tx_queue).await;
+            cx.shared.signals.lock(|s| s.pull_sync_low());
+            platform::write_shutdown_reason(mode.blt_reason());
+            amiro_firmware::log!("shutdown: hand over to AMiRo-BLT ({})", mode.name());
+            bootloader::hand_over(power::callback(mode));
+        } else {
+            cx.shared.handler.lock(|h| h.stop_all());
+            amiro_firmware::log!("shutdown requested from outside: publishers stopped");
+            crate::drain(&mut cx.shared.tx_queue).await;
+            bootloader::hand_over(bootloader::Callback::HandleShutdownRequest);
+        }
+    }
+
+    /// QEMU only: replays the stimulus log as if its frames arrived on the bus.
+    #[cfg(feature = "qemu")]
+    #[task(priority = 7)]
+    async fn stimulus(_cx: stimulus::Context) {
+        amiro_firmware::qemu::replay_stimulus(
+            platform::CAN_RX_INTERRUPT,
+            platform::SHUTDOWN_INTERRUPT,
+        )
+        .await;
     }
 }

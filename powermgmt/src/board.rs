@@ -1,0 +1,344 @@
+//! PowerManagement revision 1-1/1-2 as the real chip sees it: the one place that names pins and
+//! peripherals.
+//!
+//! Facts from `shared/reference/amiro-boards.md` §0, §1, §2, §5, §7: STM32F405 at 168 MHz from the
+//! 8 MHz crystal (APB1 42 MHz, APB1 timers 84 MHz), CAN1 on PA11/PA12 (AF9) at 1 Mbit/s, I2C1 on
+//! PB8/PB9 ("rear": mux #1, ring sensors 0/1/2/7, rear bq27500) and I2C2 on PB10/PB11 ("front":
+//! mux #2, ring sensors 3/4/5/6, front bq27500) at 400 kHz, POWER_EN PB2 and SYS_REG_EN PA8 kept
+//! high, SYS_WARMRST_N PC14 released, SYS_SYNC_N PC12, SYS_PD_N PC13 (EXTI line 13), chargers
+//! bq24103A EN1_N PC3 / EN2_N PD2 (active low, open drain) with STAT1A PC0 / STAT2A PB4, power plug
+//! PATH_DC PC8 (high = plug in), VSYS on PB1 = ADC1 IN9 (480-cycle sampling). TIM2 is the
+//! monotonic; RTC_BKP0R carries the shutdown reason to AMiRo-BLT.
+use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
+use amiro_firmware::signals::SystemSignals as SystemSignalLines;
+use stm32f4xx_hal::gpio::{GpioExt, Input, OpenDrain, Output, PinState, PushPull};
+use stm32f4xx_hal::gpio::{PA8, PB2, PB4, PC0, PC12, PC13, PC14, PC3, PC8, PD2};
+use stm32f4xx_hal::pac::{self, Interrupt};
+use stm32f4xx_hal::prelude::*;
+use stm32f4xx_hal::rcc::{Config, RccExt};
+
+use crate::i2c::Master;
+use crate::power::{self, ChargeLines};
+
+/// CAN bit timing at 1 Mbit/s from the 42 MHz APB1: the original firmware's BTR (21 MHz quanta,
+/// 1 + 16 + 4 tq, sample point 81 %), reference §3.
+pub const CAN_BTR: u32 = 0x013F_0001;
+/// System clock.
+pub const SYSCLK_HZ: u32 = 168_000_000;
+/// APB1 timer clock (2 × PCLK1): TIM2's input.
+pub const TIM2_CLOCK_HZ: u32 = 84_000_000;
+/// EXTI line of SYS_PD_N (PC13).
+const SYS_PD_LINE: u32 = 1 << 13;
+/// ADC1 channel of VSYS (PB1).
+const VSYS_CHANNEL: u32 = 9;
+/// Polls of the end-of-conversion flag: a conversion takes 492 ADC clocks at 21 MHz (23 µs).
+const ADC_POLLS: u32 = 20_000;
+
+rtic_monotonics::stm32_tim2_monotonic!(Mono, 1_000_000);
+
+/// The board's clock: TIM2 ticks are microseconds.
+pub type Clock = amiro_firmware::mono::TimerClock<rtic_monotonics::stm32::Tim2Backend, 1>;
+/// The CAN controller's transmit mailboxes (the runtime's register-level driver).
+pub type CanTxPort = Mailboxes<Mmio>;
+/// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
+pub type CanRxPort = Fifo0<Mmio>;
+/// I2C1, the rear bus.
+pub type RearI2c = Master;
+/// I2C2, the front bus.
+pub type FrontI2c = Master;
+/// The fuel gauges' bus-free pause: a busy wait (66 µs, a few times per gauge read).
+pub type GaugeDelay = BusyDelay;
+
+/// Interrupt that runs the transmit path.
+pub const CAN_TX_INTERRUPT: Interrupt = Interrupt::CAN1_TX;
+/// Interrupt of the SYS_PD_N line.
+pub const SHUTDOWN_INTERRUPT: Interrupt = Interrupt::EXTI15_10;
+
+/// Everything `init` hands on to the tasks.
+pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: CanTxPort,
+    /// CAN receive FIFO 0 (command frames only, by hardware filter).
+    pub can_rx: CanRxPort,
+    /// I2C1.
+    pub rear_i2c: RearI2c,
+    /// I2C2.
+    pub front_i2c: FrontI2c,
+    /// Chargers, their status, the plug and VSYS.
+    pub charger: Charger,
+    /// System signals.
+    pub signals: SystemSignals,
+    /// The power lines this board keeps on (held so nothing else reconfigures them).
+    pub power_lines: PowerLines,
+}
+
+/// A busy wait on the core clock.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct BusyDelay;
+
+impl embedded_hal::delay::DelayNs for BusyDelay {
+    fn delay_ns(&mut self, ns: u32) {
+        cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(SYSCLK_HZ / 1_000_000));
+    }
+}
+
+/// POWER_EN, SYS_REG_EN, SYS_WARMRST_N: on / released, as AMiRo-BLT left them.
+pub struct PowerLines {
+    _power_en: PB2<Output<PushPull>>,
+    _sys_reg_en: PA8<Output<OpenDrain>>,
+    _sys_warmrst: PC14<Output<OpenDrain>>,
+}
+
+/// The module's system-bus signals.
+pub struct SystemSignals {
+    sys_sync: PC12<Output<OpenDrain>>,
+    sys_pd: PC13<Output<OpenDrain>>,
+}
+
+/// The two bq24103A chargers, their status pins, the plug and the VSYS sense.
+pub struct Charger {
+    en1_n: PC3<Output<OpenDrain>>,
+    en2_n: PD2<Output<OpenDrain>>,
+    stat1a: PC0<Input>,
+    stat2a: PB4<Input>,
+    path_dc: PC8<Input>,
+    enabled: bool,
+}
+
+/// Brings the board up: clocks, power lines, system signals, chargers off, I2C, ADC, CAN.
+pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
+    if let Err(fault) = amiro_firmware::chip::clock_tree_to_reset_state() {
+        amiro_firmware::log!(
+            "clock reset: {:?} (continuing on the clock AMiRo-BLT left)",
+            fault
+        );
+    }
+    // AMiRo-BLT used bxCAN: reset it (and the I2C blocks) so nothing of its set-up survives.
+    dp.RCC.apb1rstr().modify(|_, w| {
+        w.can1rst().set_bit().i2c1rst().set_bit().i2c2rst().set_bit()
+    });
+    dp.RCC.apb1rstr().modify(|_, w| {
+        w.can1rst().clear_bit().i2c1rst().clear_bit().i2c2rst().clear_bit()
+    });
+    // The PLL makes 168 MHz from either oscillator (APB1 stays 42 MHz, so the CAN timing holds);
+    // a crystal that does not start leaves the board on the less precise HSI rather than hung.
+    let config = if amiro_firmware::chip::start_crystal().is_ok() {
+        Config::hse(8.MHz())
+    } else {
+        amiro_firmware::log!("fault: the 8 MHz crystal did not start; PLL from HSI");
+        Config::hsi()
+    };
+    let mut rcc = dp.RCC.freeze(
+        config
+            .sysclk(168.MHz())
+            .hclk(168.MHz())
+            .pclk1(42.MHz())
+            .pclk2(84.MHz()),
+    );
+    // The I2C timeouts count core cycles.
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+
+    let gpioa = dp.GPIOA.split(&mut rcc);
+    let gpiob = dp.GPIOB.split(&mut rcc);
+    let gpioc = dp.GPIOC.split(&mut rcc);
+    let gpiod = dp.GPIOD.split(&mut rcc);
+
+    // Power master lines first, in the state AMiRo-BLT left them (the output latch is written
+    // before the pin becomes an output, so there is no glitch).
+    let power_lines = PowerLines {
+        _power_en: gpiob.pb2.into_push_pull_output_in_state(PinState::High),
+        _sys_reg_en: gpioa.pa8.into_open_drain_output_in_state(PinState::High),
+        _sys_warmrst: gpioc.pc14.into_open_drain_output_in_state(PinState::High),
+    };
+    // Chargers off until VSYS says otherwise.
+    let charger = Charger {
+        en1_n: gpioc.pc3.into_open_drain_output_in_state(PinState::High),
+        en2_n: gpiod.pd2.into_open_drain_output_in_state(PinState::High),
+        stat1a: gpioc.pc0.into_floating_input(),
+        stat2a: gpiob.pb4.into_floating_input(),
+        path_dc: gpioc.pc8.into_floating_input(),
+        enabled: false,
+    };
+    let _vsys = gpiob.pb1.into_analog();
+    adc_init();
+
+    // SYS_SYNC_N stays low (as AMiRo-BLT left it) until the app is initialised; SYS_PD_N is a
+    // wired-OR open-drain line released high, watched for a falling edge on EXTI line 13.
+    let signals = SystemSignals {
+        sys_sync: gpioc.pc12.into_open_drain_output_in_state(PinState::Low),
+        sys_pd: gpioc.pc13.into_open_drain_output_in_state(PinState::High),
+    };
+    // SAFETY: single bits in registers only init touches (the HAL has consumed its RCC handle);
+    // EXTICR4 bits 4..8 select the port of line 13 (C = 2), nothing else uses lines 12..15.
+    unsafe {
+        let rcc = &*pac::RCC::ptr();
+        rcc.apb2enr().modify(|_, w| w.syscfgen().set_bit());
+        rcc.apb1enr()
+            .modify(|_, w| w.can1en().set_bit().i2c1en().set_bit().i2c2en().set_bit());
+        (*pac::SYSCFG::ptr())
+            .exticr4()
+            .modify(|r, w| w.bits((r.bits() & !(0xF << 4)) | (0x2 << 4)));
+        let exti = &*pac::EXTI::ptr();
+        exti.ftsr().modify(|r, w| w.bits(r.bits() | SYS_PD_LINE));
+        exti.imr().modify(|r, w| w.bits(r.bits() | SYS_PD_LINE));
+    }
+
+    // I2C pins: alternate function 4, open drain (the boards have external pull-ups).
+    let _i2c_pins = (
+        gpiob.pb8.into_alternate_open_drain::<4>(),
+        gpiob.pb9.into_alternate_open_drain::<4>(),
+        gpiob.pb10.into_alternate_open_drain::<4>(),
+        gpiob.pb11.into_alternate_open_drain::<4>(),
+    );
+    // SAFETY: I2C1 and I2C2 are used by these two values only.
+    let rear_i2c = unsafe { Master::new(pac::I2C1::ptr()) };
+    let front_i2c = unsafe { Master::new(pac::I2C2::ptr()) };
+
+    // CAN1 on PA11/PA12, AF9. The runtime's driver configures the controller: only command frames
+    // pass the hardware filter; TX mailboxes are served by identifier; automatic bus-off recovery.
+    let _can_pins = (
+        gpioa.pa11.into_alternate::<9>(),
+        gpioa.pa12.into_alternate::<9>(),
+    );
+    // SAFETY: CAN1 is this board's only CAN block; its halves are owned by one task each.
+    let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
+    if let Err(e) = bxcan::configure(&can, CAN_BTR) {
+        amiro_firmware::log!("CAN set-up: {:?}", e);
+    }
+    Board {
+        can_tx: Mailboxes::new(can),
+        can_rx: Fifo0::new(can),
+        rear_i2c,
+        front_i2c,
+        charger,
+        signals,
+        power_lines,
+    }
+}
+
+/// ADC1: clock on, ADCCLK = PCLK2 / 4 = 21 MHz, channel 9 alone with 480-cycle sampling.
+fn adc_init() {
+    // SAFETY: init owns the ADC; documented bit patterns (RM0090 §13.13).
+    unsafe {
+        (*pac::RCC::ptr())
+            .apb2enr()
+            .modify(|_, w| w.adc1en().set_bit());
+        (*pac::ADC_COMMON::ptr())
+            .ccr()
+            .modify(|r, w| w.bits((r.bits() & !(0b11 << 16)) | (0b01 << 16)));
+        let adc = &*pac::ADC1::ptr();
+        adc.smpr2()
+            .modify(|r, w| w.bits(r.bits() | (0b111 << (3 * VSYS_CHANNEL))));
+        adc.sqr1().write(|w| w.bits(0));
+        adc.sqr3().write(|w| w.bits(VSYS_CHANNEL));
+        adc.cr2().write(|w| w.bits(1));
+    }
+}
+
+impl Charger {
+    /// VSYS in mV, or `None` if the conversion did not finish in its bound.
+    pub fn vsys_mv(&mut self) -> Option<u32> {
+        // SAFETY: the ADC belongs to this value (set up once in init); SWSTART, then poll EOC.
+        let adc = unsafe { &*pac::ADC1::ptr() };
+        adc.sr().write(|w| unsafe { w.bits(0) });
+        adc.cr2().modify(|r, w| unsafe { w.bits(r.bits() | (1 << 30)) });
+        (0..ADC_POLLS)
+            .any(|_| adc.sr().read().bits() & (1 << 1) != 0)
+            .then(|| power::vsys_mv(adc.dr().read().bits() as u16))
+    }
+
+    /// Enables or disables both chargers.
+    pub fn set_enabled(&mut self, on: bool) {
+        if on {
+            self.en1_n.set_low();
+            self.en2_n.set_low();
+        } else {
+            self.en1_n.set_high();
+            self.en2_n.set_high();
+        }
+        self.enabled = on;
+    }
+
+    /// The plug, the enables and the chargers' status pins.
+    pub fn lines(&mut self) -> ChargeLines {
+        ChargeLines {
+            plug: self.path_dc.is_high(),
+            enabled: self.enabled,
+            stat: [self.stat1a.is_high(), self.stat2a.is_high()],
+        }
+    }
+
+    /// Whether the chargers are enabled.
+    pub fn enabled(&self) -> bool {
+        self.enabled
+    }
+}
+
+/// PowerManagement's safe state, from any context: both chargers off (EN1_N, EN2_N released high).
+/// A board that faulted cannot supervise VSYS, so it must not charge; the power lines stay as they
+/// are (the watchdog reset goes through AMiRo-BLT, which owns the power sequence, and cutting the
+/// other modules' supply would skip their own shutdown).
+pub fn chargers_off() {
+    // SAFETY: single BSRR writes (set PC3, set PD2), atomic with respect to any other pin writes.
+    unsafe {
+        (*pac::GPIOC::ptr()).bsrr().write(|w| w.bits(1 << 3));
+        (*pac::GPIOD::ptr()).bsrr().write(|w| w.bits(1 << 2));
+    }
+}
+
+/// Writes the shutdown reason to byte 0 of RTC_BKP0R, where AMiRo-BLT reads it (reference §2).
+pub fn write_shutdown_reason(reason: u8) {
+    // SAFETY: PWR clock on and DBP set unlock the backup domain; BKP0R is written read-modify-write
+    // so bytes 1..3 (secondary reason, wake-up flags) keep what AMiRo-BLT put there.
+    unsafe {
+        (*pac::RCC::ptr())
+            .apb1enr()
+            .modify(|_, w| w.pwren().set_bit());
+        (*pac::PWR::ptr()).cr().modify(|r, w| w.bits(r.bits() | (1 << 8)));
+        let rtc = &*pac::RTC::ptr();
+        rtc.bkpr(0)
+            .modify(|r, w| w.bits((r.bits() & !0xFF) | u32::from(reason)));
+    }
+}
+
+impl SystemSignalLines for SystemSignals {
+    fn release_sync(&mut self) {
+        self.sys_sync.set_high();
+    }
+
+    fn pull_sync_low(&mut self) {
+        self.sys_sync.set_low();
+    }
+
+    fn shutdown_requested(&self) -> bool {
+        // SAFETY: a read of GPIOC's input data register.
+        unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 13) == 0 }
+    }
+
+    fn clear_shutdown_interrupt(&mut self) {
+        // SAFETY: writing 1 clears only line 13's pending bit.
+        unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(SYS_PD_LINE)) };
+    }
+}
+
+impl SystemSignals {
+    /// Drives SYS_PD_N low: the power master asks every module to shut down.
+    pub fn drive_shutdown_request(&mut self) {
+        self.sys_pd.set_low();
+    }
+
+    /// Whether SYS_SYNC_N reads low: another module has taken the shutdown request.
+    pub fn sync_reads_low(&self) -> bool {
+        // SAFETY: a read of GPIOC's input data register.
+        unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 12) == 0 }
+    }
+}
+
+/// Starts the TIM2 monotonic.
+pub fn start_monotonic(priority: u8) {
+    Mono::start(
+        TIM2_CLOCK_HZ,
+        rtic_monotonics::stm32::Priority::new(priority),
+    );
+}

@@ -1,0 +1,226 @@
+//! PowerManagement's two I2C buses as RTIC resources, and what the board samples for a topic.
+//!
+//! Each bus is one resource: I2C1 (the "rear" bus: PCA9544A #1 with ring sensors 0, 1, 2, 7 and
+//! the rear bq27500) and I2C2 (the "front" bus: PCA9544A #2 with ring sensors 3, 4, 5, 6 and the
+//! front bq27500). A ring sample locks one bus, reads its four sensors, releases it, then does the
+//! same on the other, so a publisher at another level waits for at most one bus's transfers, and
+//! a failing bus costs bounded time (`i2c::FLAG_TIMEOUT_US` per transfer on the robot) — after
+//! which its missing sensors are skipped until their retry, so they do not delay the other bus's
+//! sensors on every sample. A sensor that does not answer yields no frame for its index, is
+//! counted (`missed`), and is set up again at most once per [`RETRY_US`].
+//!
+//! The devices are amiro-sensors' drivers (`Pca9544a`, `Vcnl4020`, `Bq27500`) with the ring's
+//! wiring table `WIRING`; amiro-sensors' `ProximityRing` holds both buses in one value, which
+//! would make one resource of them, so this module binds the same drivers per bus.
+use amiro_can::{SensorData, Topic};
+use amiro_sensors::drivers::bq27500::{BatteryStatus, Bq27500};
+use amiro_sensors::drivers::pca9544a::{Channel, Pca9544a};
+use amiro_sensors::drivers::proximity::ProximityCalibration;
+use amiro_sensors::drivers::ring::{RingBus, RING_SENSORS, WIRING};
+use amiro_sensors::drivers::suite::Samples;
+use amiro_sensors::drivers::vcnl4020::{Config, Vcnl4020};
+use embedded_hal::delay::DelayNs;
+use embedded_hal::i2c::I2c;
+
+use crate::platform::{Charger, FrontI2c, GaugeDelay, RearI2c};
+use crate::power;
+
+/// How long a sensor or gauge that did not answer is left alone before it is set up again.
+pub const RETRY_US: u64 = 1_000_000;
+/// Ring sensors per bus.
+const PER_BUS: usize = RING_SENSORS / 2;
+
+/// The distances of one ring sample by sensor index; `None` = no reading this time.
+pub type RingSample = [Option<u16>; RING_SENSORS];
+
+#[derive(Debug, Clone, Copy)]
+struct RingSlot {
+    index: u8,
+    channel: Channel,
+    ready: bool,
+    last_try_us: u64,
+    missed: u32,
+}
+
+/// One I2C bus: its multiplexer, its four ring sensors and its fuel gauge.
+pub struct SensorBus<I, D> {
+    bus: RingBus,
+    mux: Pca9544a<I>,
+    delay: D,
+    slots: [RingSlot; PER_BUS],
+    calibration: [ProximityCalibration; PER_BUS],
+    gauge_faults: u32,
+}
+
+impl<I: I2c, D: DelayNs> SensorBus<I, D> {
+    /// The devices of `bus` on `i2c`; sets up the four ring sensors (a sensor that does not answer
+    /// is retried later) and checks the gauge's identity (logged).
+    pub fn new(bus: RingBus, i2c: I, delay: D) -> Self {
+        let mut slots = [RingSlot {
+            index: 0,
+            channel: Channel::Ch0,
+            ready: false,
+            last_try_us: 0,
+            missed: 0,
+        }; PER_BUS];
+        let mut n = 0;
+        for (index, &(on, channel)) in (0u8..).zip(WIRING.iter()) {
+            if on == bus {
+                if let Some(slot) = slots.get_mut(n) {
+                    slot.index = index;
+                    slot.channel = channel;
+                }
+                n += 1;
+            }
+        }
+        let mut this = Self {
+            bus,
+            mux: Pca9544a::new(i2c),
+            delay,
+            slots,
+            calibration: [ProximityCalibration::DEFAULT; PER_BUS],
+            gauge_faults: 0,
+        };
+        for k in 0..PER_BUS {
+            this.set_up(k, 0);
+        }
+        let gauge = Bq27500::new(this.mux.bus_mut(), &mut this.delay).init();
+        if gauge.is_err() {
+            amiro_firmware::log!("{:?}: fuel gauge did not answer its identity check", bus);
+        }
+        this
+    }
+
+    /// Sets sensor slot `k` up; whether it now answers.
+    fn set_up(&mut self, k: usize, now_us: u64) -> bool {
+        let Some(slot) = self.slots.get_mut(k) else {
+            return false;
+        };
+        slot.last_try_us = now_us;
+        let ready = match self.mux.select(slot.channel) {
+            Ok(muxed) => Vcnl4020::new(muxed).init(&Config::AMIRO).is_ok(),
+            Err(_) => false,
+        };
+        if ready != slot.ready {
+            amiro_firmware::log!(
+                "ring sensor {} {}",
+                slot.index,
+                if ready { "ready" } else { "missing" }
+            );
+        }
+        slot.ready = ready;
+        ready
+    }
+
+    /// Reads this bus's four ring sensors into `sample` (by sensor index).
+    #[inline(never)]
+    pub fn sample_ring(&mut self, now_us: u64, sample: &mut RingSample) {
+        for k in 0..PER_BUS {
+            let Some(&slot) = self.slots.get(k) else {
+                continue;
+            };
+            let ready = slot.ready
+                || (now_us.saturating_sub(slot.last_try_us) >= RETRY_US && self.set_up(k, now_us));
+            let reading = if ready {
+                self.mux
+                    .select(slot.channel)
+                    .ok()
+                    .and_then(|muxed| Vcnl4020::new(muxed).read_proximity().ok())
+            } else {
+                None
+            };
+            let cal = self.calibration.get(k).copied().unwrap_or(ProximityCalibration::DEFAULT);
+            match (reading, sample.get_mut(usize::from(slot.index))) {
+                (Some(counts), Some(out)) => *out = Some(cal.counts_to_mm(counts)),
+                _ => self.missed(k, now_us),
+            }
+        }
+    }
+
+    fn missed(&mut self, k: usize, now_us: u64) {
+        if let Some(slot) = self.slots.get_mut(k) {
+            slot.missed = slot.missed.saturating_add(1);
+            if slot.ready {
+                slot.ready = false;
+                slot.last_try_us = now_us;
+                amiro_firmware::log!("ring sensor {} stopped answering", slot.index);
+            }
+        }
+    }
+
+    /// This bus's fuel gauge, or `None` (counted) when it did not answer.
+    #[inline(never)]
+    pub fn read_gauge(&mut self) -> Option<BatteryStatus> {
+        let status = Bq27500::new(self.mux.bus_mut(), &mut self.delay)
+            .read_status()
+            .ok();
+        if status.is_none() {
+            self.gauge_faults = self.gauge_faults.saturating_add(1);
+        }
+        status
+    }
+
+    /// Samples without a frame per ring sensor of this bus: `(index, missed)`.
+    pub fn missed_samples(&self) -> [(u8, u32); PER_BUS] {
+        self.slots.map(|s| (s.index, s.missed))
+    }
+
+    /// Failed gauge reads so far.
+    pub fn gauge_faults(&self) -> u32 {
+        self.gauge_faults
+    }
+
+    /// Which bus this is.
+    pub fn bus(&self) -> RingBus {
+        self.bus
+    }
+}
+
+/// I2C1: ring sensors 0, 1, 2, 7 and the rear fuel gauge (battery B).
+pub type RearBus = SensorBus<RearI2c, GaugeDelay>;
+/// I2C2: ring sensors 3, 4, 5, 6 and the front fuel gauge (battery A).
+pub type FrontBus = SensorBus<FrontI2c, GaugeDelay>;
+
+/// Both batteries' gauges, front then rear, each bus locked on its own.
+pub fn read_batteries(
+    rear: &mut impl rtic::Mutex<T = RearBus>,
+    front: &mut impl rtic::Mutex<T = FrontBus>,
+) -> (Option<BatteryStatus>, Option<BatteryStatus>) {
+    let front_status = front.lock(|b| b.read_gauge());
+    let rear_status = rear.lock(|b| b.read_gauge());
+    (front_status, rear_status)
+}
+
+/// What PowerManagement samples for a topic: the ring locks each bus in turn, power status both
+/// gauges and the charge lines. Every other topic (the diagnostics topic is the runtime's) has no
+/// samples here.
+pub fn sampler(
+    mut rear: impl rtic::Mutex<T = RearBus>,
+    mut front: impl rtic::Mutex<T = FrontBus>,
+    mut charger: impl rtic::Mutex<T = Charger>,
+) -> impl amiro_firmware::publisher::Sampler {
+    move |topic: Topic, taken: u64| {
+        let mut samples = Samples::new();
+        match topic {
+            Topic::ProximityRing => {
+                let mut ring: RingSample = [None; RING_SENSORS];
+                rear.lock(|b| b.sample_ring(taken, &mut ring));
+                front.lock(|b| b.sample_ring(taken, &mut ring));
+                for (sensor, mm) in (0u8..).zip(ring) {
+                    if let Some(mm) = mm {
+                        let _ = samples.push(SensorData::ProximityRing { sensor, mm });
+                    }
+                }
+            }
+            Topic::PowerStatus => {
+                let (f, r) = read_batteries(&mut rear, &mut front);
+                let lines = charger.lock(|c| c.lines());
+                if let Some(status) = power::status(f.as_ref(), r.as_ref(), &lines) {
+                    let _ = samples.push(SensorData::PowerStatus(status));
+                }
+            }
+            _ => {}
+        }
+        samples
+    }
+}
