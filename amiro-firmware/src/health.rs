@@ -6,8 +6,9 @@
 //! from the handler's command counters, the transmit queue's counters and the counters below.
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
 
-use amiro_can::{Board, Diagnostics, Priority, ResetCause, StatusFlags};
-use amiro_sensors::drivers::suite::Samples;
+use amiro_can::{
+    Board, Diagnostics, Frame, Priority, ResetCause, StatusFlags, PAGES_PER_SAMPLE,
+};
 use amiro_sensors::handler::SensorDataHandler;
 use amiro_sensors::tx_queue::TxCounters;
 
@@ -124,26 +125,17 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
     }
 }
 
-/// One sample of `board`'s diagnostics topic, from the health now.
+/// One sample of `board`'s diagnostics topic at `priority`, from the health now: its six frames,
+/// the rejection window moving on by three reasons per sample.
 #[inline(never)]
-pub fn sample_now(
+pub fn frames_now(
     handler: &SensorDataHandler,
     tx: &TxCounters,
     board: Board,
     now_us: u64,
-) -> Samples {
-    sample(board, &snapshot(handler, tx, now_us))
-}
-
-/// One sample of `board`'s diagnostics topic: its six pages, the rejection window moving on by
-/// three reasons per sample.
-pub fn sample(board: Board, health: &Diagnostics) -> Samples {
+    priority: Priority,
+) -> [Frame; PAGES_PER_SAMPLE as usize] {
     let window = WINDOW.load(Ordering::Relaxed);
     WINDOW.store(Diagnostics::next_window(window), Ordering::Relaxed);
-    let mut samples = Samples::new();
-    for page in health.pages(window) {
-        // Six pages fit the eight samples a release may carry.
-        let _ = samples.push(amiro_can::SensorData::Diagnostics { board, page });
-    }
-    samples
+    snapshot(handler, tx, now_us).frames(board, priority, window)
 }

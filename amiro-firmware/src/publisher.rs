@@ -93,18 +93,23 @@ fn serve_due<C: Clock, const N: usize>(
         note_release(now, level, &release);
         let topic = release.topic;
         let taken = C::now_us();
-        let samples = match topic.diagnostics_of() {
-            Some(board) => {
-                let counters = tx_queue.lock(|q| *q.counters());
-                handler.lock(|h| health::sample_now(h, &counters, board, taken))
+        if let Some(board) = topic.diagnostics_of() {
+            // The runtime's own topic: frames straight from the health counters.
+            let counters = tx_queue.lock(|q| *q.counters());
+            let frames = handler.lock(|h| health::frames_now(h, &counters, board, taken, release.priority));
+            let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
+            for frame in frames {
+                let outcome = tx_queue.lock(|q| q.push(frame));
+                note_push(C::now_us(), level, topic, deadline, frame.id().raw(), &outcome);
             }
-            None => sampler.sample(topic, taken),
-        };
-        let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
-        for data in samples {
-            let frame = data.encode(release.priority);
-            let outcome = tx_queue.lock(|q| q.push(frame));
-            note_push(C::now_us(), level, topic, deadline, frame.id().raw(), &outcome);
+        } else {
+            let samples = sampler.sample(topic, taken);
+            let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
+            for data in samples {
+                let frame = data.encode(release.priority);
+                let outcome = tx_queue.lock(|q| q.push(frame));
+                note_push(C::now_us(), level, topic, deadline, frame.id().raw(), &outcome);
+            }
         }
         cortex_m::peripheral::NVIC::pend(tx_interrupt);
     }
