@@ -26,6 +26,14 @@ pub const CAN_BTR: u32 = 0x012D_0001;
 pub const PWM_PERIOD: u16 = 3600;
 /// System clock.
 pub const SYSCLK_HZ: u32 = 72_000_000;
+/// System clock when the crystal does not start (HSI / 2 × 16); the motor PWM then runs at
+/// 17.8 kHz instead of 20 kHz.
+pub const SYSCLK_HSI_HZ: u32 = 64_000_000;
+/// CAN bit timing at 1 Mbit/s from the 32 MHz APB1 of the internal-oscillator fallback (16 MHz
+/// quanta, 1 + 13 + 2 tq, sample point 87.5 %).
+pub const CAN_BTR_HSI: u32 = 0x001C_0001;
+/// The APB1 timer clock (TIM5's input), as `init` set it up.
+static TIMER_CLOCK_HZ: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(SYSCLK_HZ);
 /// I2C timeouts: a byte takes 25 µs at 400 kHz, so 200 µs means the bus is stuck. They bound how
 /// long a dead sensor can hold its bus lock (and so block the publishers sharing it).
 const I2C_START_TIMEOUT_US: u32 = 200;
@@ -103,15 +111,29 @@ pub fn init(
     // mailbox of the bootloader's survives into the application's configuration.
     dp.RCC.apb1rstr().modify(|_, w| w.canrst().set_bit());
     dp.RCC.apb1rstr().modify(|_, w| w.canrst().clear_bit());
-    let mut flash = dp.FLASH.constrain();
-    let mut rcc = dp.RCC.freeze(
+    // The HAL waits for the crystal without a bound: start it ourselves first (bounded) and run
+    // from the internal oscillator if it does not come up.
+    let on_crystal = amiro_firmware::chip::start_crystal().is_ok();
+    let config = if on_crystal {
         rcc::Config::hse(8.MHz())
-            .sysclk(72.MHz())
-            .hclk(72.MHz())
+            .sysclk(SYSCLK_HZ.Hz())
+            .hclk(SYSCLK_HZ.Hz())
             .pclk1(36.MHz())
-            .pclk2(36.MHz()),
-        &mut flash.acr,
+            .pclk2(36.MHz())
+    } else {
+        amiro_firmware::log!("fault: the 8 MHz crystal did not start; running from HSI at 64 MHz");
+        rcc::Config::hsi()
+            .sysclk(SYSCLK_HSI_HZ.Hz())
+            .hclk(SYSCLK_HSI_HZ.Hz())
+            .pclk1(32.MHz())
+            .pclk2(32.MHz())
+    };
+    TIMER_CLOCK_HZ.store(
+        if on_crystal { SYSCLK_HZ } else { SYSCLK_HSI_HZ },
+        core::sync::atomic::Ordering::Relaxed,
     );
+    let mut flash = dp.FLASH.constrain();
+    let mut rcc = dp.RCC.freeze(config, &mut flash.acr);
     // The blocking I2C driver times out on the DWT cycle counter.
     cp.DCB.enable_trace();
     cp.DWT.enable_cycle_counter();
@@ -228,7 +250,8 @@ pub fn init(
     };
     // SAFETY: CAN1 is this board's only CAN block; its halves are owned by one task each.
     let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
-    if let Err(e) = bxcan::configure(&can, CAN_BTR) {
+    let btr = if on_crystal { CAN_BTR } else { CAN_BTR_HSI };
+    if let Err(e) = bxcan::configure(&can, btr) {
         // The controller stays configured and joins once the bus frees; the error is logged.
         amiro_firmware::log!("CAN set-up: {:?}", e);
     }
@@ -438,11 +461,12 @@ impl SystemSignals {
 /// Interrupt that runs the transmit path.
 pub const CAN_TX_INTERRUPT: pac::Interrupt = pac::Interrupt::USB_HP_CAN_TX;
 
-/// Starts the TIM5 monotonic (APB1 timers run at 2 × 36 MHz).
+/// Starts the TIM5 monotonic (APB1 timers run at 2 × PCLK1: 72 MHz, or 64 MHz on the fallback).
 pub fn start_monotonic(priority: u8) {
     // SAFETY: init owns TIM5 and RCC at this point; the monotonic takes TIM5 over for good.
     let (tim5, rcc) = unsafe { (pac::Peripherals::steal().TIM5, &*pac::RCC::ptr()) };
-    crate::mono::Tim5Backend::start(tim5, rcc, SYSCLK_HZ, priority);
+    let timer_clock = TIMER_CLOCK_HZ.load(core::sync::atomic::Ordering::Relaxed);
+    crate::mono::Tim5Backend::start(tim5, rcc, timer_clock, priority);
 }
 
 /// Interrupt of the SYS_PD_N line.
