@@ -138,6 +138,18 @@ pub enum InitError {
     LeaveInitTimeout,
 }
 
+impl InitError {
+    /// The error in words, for the log.
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            InitError::EnterInitTimeout => "the controller did not enter initialisation mode",
+            InitError::LeaveInitTimeout => {
+                "the controller did not leave initialisation mode (bus held dominant?); it joins when the bus frees"
+            }
+        }
+    }
+}
+
 /// How often set-up polls a mode flag before giving up (each poll is one register read).
 pub const INIT_POLLS: u32 = 100_000;
 

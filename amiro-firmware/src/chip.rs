@@ -47,6 +47,18 @@ pub enum ClockFault {
     HseNotReady,
 }
 
+impl ClockFault {
+    /// The fault in words, for the log.
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            ClockFault::HsiNotReady => "the internal oscillator never got ready",
+            ClockFault::SwitchToHsi => "SYSCLK did not switch to the internal oscillator",
+            ClockFault::PllStillRunning => "the PLL did not stop",
+            ClockFault::HseNotReady => "the crystal did not start",
+        }
+    }
+}
+
 fn rcc_read(offset: usize) -> u32 {
     // SAFETY: a register of the RCC block of this chip family.
     unsafe { core::ptr::read_volatile((RCC + offset) as *const u32) }

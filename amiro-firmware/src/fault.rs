@@ -44,8 +44,21 @@ fn panic(info: &core::panic::PanicInfo<'_>) -> ! {
     // The safe state first: nothing below may run before the actuators are off.
     cortex_m::interrupt::disable();
     enter_safe_state();
+    // Where, not what: the message would need `core::fmt`, which the boards' flash budgets leave out
+    // (the QEMU build prints the whole message).
     #[cfg(not(feature = "qemu"))]
-    rtt_target::rprintln!("panic: {}", info);
+    {
+        let mut line = [0u8; 10];
+        match info.location() {
+            Some(at) => crate::log!(
+                "panic at ",
+                at.file(),
+                ":",
+                crate::telemetry::decimal(at.line(), &mut line)
+            ),
+            None => crate::log!("panic"),
+        }
+    }
     #[cfg(feature = "qemu")]
     cortex_m_semihosting::hprintln!("# panic: {}", info);
     halt()

@@ -6,9 +6,7 @@
 //! from the handler's command counters, the transmit queue's counters and the counters below.
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
 
-use amiro_can::{
-    Board, Diagnostics, Frame, Priority, ResetCause, StatusFlags, PAGES_PER_SAMPLE,
-};
+use amiro_can::{Board, Diagnostics, Frame, Priority, ResetCause, StatusFlags, PAGES_PER_SAMPLE};
 use amiro_sensors::handler::SensorDataHandler;
 use amiro_sensors::tx_queue::TxCounters;
 

@@ -96,11 +96,19 @@ fn serve_due<C: Clock, const N: usize>(
         if let Some(board) = topic.diagnostics_of() {
             // The runtime's own topic: frames straight from the health counters.
             let counters = tx_queue.lock(|q| *q.counters());
-            let frames = handler.lock(|h| health::frames_now(h, &counters, board, taken, release.priority));
+            let frames =
+                handler.lock(|h| health::frames_now(h, &counters, board, taken, release.priority));
             let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
             for frame in frames {
                 let outcome = tx_queue.lock(|q| q.push(frame));
-                note_push(C::now_us(), level, topic, deadline, frame.id().raw(), &outcome);
+                note_push(
+                    C::now_us(),
+                    level,
+                    topic,
+                    deadline,
+                    frame.id().raw(),
+                    &outcome,
+                );
             }
         } else {
             let samples = sampler.sample(topic, taken);
@@ -108,7 +116,14 @@ fn serve_due<C: Clock, const N: usize>(
             for data in samples {
                 let frame = data.encode(release.priority);
                 let outcome = tx_queue.lock(|q| q.push(frame));
-                note_push(C::now_us(), level, topic, deadline, frame.id().raw(), &outcome);
+                note_push(
+                    C::now_us(),
+                    level,
+                    topic,
+                    deadline,
+                    frame.id().raw(),
+                    &outcome,
+                );
             }
         }
         cortex_m::peripheral::NVIC::pend(tx_interrupt);

@@ -13,6 +13,7 @@ mod rtt {
     use rtt_target::{rtt_init, ChannelMode, UpChannel};
 
     static TRACE: Mutex<RefCell<Option<UpChannel>>> = Mutex::new(RefCell::new(None));
+    static LOG: Mutex<RefCell<Option<UpChannel>>> = Mutex::new(RefCell::new(None));
 
     /// Sets up the two RTT channels.
     pub fn init() {
@@ -22,8 +23,22 @@ mod rtt {
                 1: { size: 1024, mode: ChannelMode::NoBlockSkip, name: "trace" }
             }
         };
-        rtt_target::set_print_channel(channels.up.0);
-        critical_section::with(|cs| TRACE.borrow_ref_mut(cs).replace(channels.up.1));
+        critical_section::with(|cs| {
+            LOG.borrow_ref_mut(cs).replace(channels.up.0);
+            TRACE.borrow_ref_mut(cs).replace(channels.up.1);
+        });
+    }
+
+    /// Writes one log line made of `parts`.
+    pub fn write_log(parts: &[&str]) {
+        critical_section::with(|cs| {
+            if let Some(channel) = LOG.borrow_ref_mut(cs).as_mut() {
+                for part in parts {
+                    channel.write(part.as_bytes());
+                }
+                channel.write(b"\n");
+            }
+        });
     }
 
     /// Writes one encoded trace event; the critical section lasts one short copy into the ring.
@@ -50,18 +65,43 @@ pub fn trace(event: &TraceEvent) {
     cortex_m_semihosting::hprintln!("# {}", event);
 }
 
-/// Writes a line to the human log (RTT channel 0 on the robot, a `#` line in QEMU).
+/// Writes a line to the human log (RTT channel 0 on the robot, a `#` line in QEMU), made of string
+/// pieces: `log!("CAN set-up: ", error.as_str())`. No formatting machinery: a board's flash budget
+/// has no room for `core::fmt`, and every message is static text.
 #[macro_export]
 macro_rules! log {
-    ($($arg:tt)*) => {
-        $crate::telemetry::log_fmt(format_args!($($arg)*))
+    ($($part:expr),+ $(,)?) => {
+        $crate::telemetry::log_parts(&[$($part),+])
     };
 }
 
 /// The function behind [`log!`].
-pub fn log_fmt(args: core::fmt::Arguments<'_>) {
+pub fn log_parts(parts: &[&str]) {
     #[cfg(not(feature = "qemu"))]
-    rtt_target::rprintln!("{}", args);
+    rtt::write_log(parts);
     #[cfg(feature = "qemu")]
-    cortex_m_semihosting::hprintln!("# {}", args);
+    {
+        if let Ok(mut out) = cortex_m_semihosting::hio::hstdout() {
+            let _ = out.write_all(b"# ");
+            for part in parts {
+                let _ = out.write_all(part.as_bytes());
+            }
+            let _ = out.write_all(b"\n");
+        }
+    }
+}
+
+/// `value` in decimal, into `buffer` (for log lines without `core::fmt`).
+pub fn decimal(value: u32, buffer: &mut [u8; 10]) -> &str {
+    let mut at = buffer.len();
+    let mut rest = value;
+    loop {
+        at -= 1;
+        buffer[at] = b'0' + (rest % 10) as u8;
+        rest /= 10;
+        if rest == 0 || at == 0 {
+            break;
+        }
+    }
+    core::str::from_utf8(&buffer[at..]).unwrap_or("?")
 }

@@ -33,7 +33,8 @@ pub const SYSCLK_HSI_HZ: u32 = 64_000_000;
 /// quanta, 1 + 13 + 2 tq, sample point 87.5 %).
 pub const CAN_BTR_HSI: u32 = 0x001C_0001;
 /// The APB1 timer clock (TIM5's input), as `init` set it up.
-static TIMER_CLOCK_HZ: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(SYSCLK_HZ);
+static TIMER_CLOCK_HZ: core::sync::atomic::AtomicU32 =
+    core::sync::atomic::AtomicU32::new(SYSCLK_HZ);
 /// I2C timeouts: a byte takes 25 µs at 400 kHz, so 200 µs means the bus is stuck. They bound how
 /// long a dead sensor can hold its bus lock (and so block the publishers sharing it).
 const I2C_START_TIMEOUT_US: u32 = 200;
@@ -103,8 +104,9 @@ pub fn init(
 ) -> (Board, cortex_m::peripheral::NVIC) {
     if let Err(fault) = amiro_firmware::chip::clock_tree_to_reset_state() {
         amiro_firmware::log!(
-            "clock reset: {:?} (continuing on the clock AMiRo-BLT left)",
-            fault
+            "clock reset: ",
+            fault.as_str(),
+            " (continuing on the clock AMiRo-BLT left)"
         );
     }
     // AMiRo-BLT used bxCAN: reset it so no filter, mode bit (e.g. TX FIFO priority) or pending
@@ -253,7 +255,7 @@ pub fn init(
     let btr = if on_crystal { CAN_BTR } else { CAN_BTR_HSI };
     if let Err(e) = bxcan::configure(&can, btr) {
         // The controller stays configured and joins once the bus frees; the error is logged.
-        amiro_firmware::log!("CAN set-up: {:?}", e);
+        amiro_firmware::log!("CAN set-up: ", e.as_str());
     }
     let can_tx = Mailboxes::new(can);
     let can_rx = Fifo0::new(can);

@@ -131,7 +131,7 @@ mod app {
         let floor = Floor::new(FloorSensors::new(hw.floor_i2c));
         let mut signals = hw.signals;
         amiro_firmware::log!(
-            "DiWheelDrive: sensors {}",
+            "DiWheelDrive: sensors ",
             sensors::summary(&imu, &compass, &floor)
         );
 
@@ -200,9 +200,7 @@ mod app {
     /// CAN status change (error warning, error-passive, bus-off): counted and traced.
     #[task(binds = CAN_SCE, priority = 7, shared = [can_errors])]
     fn can_status(mut cx: can_status::Context) {
-        cx.shared
-            .can_errors
-            .lock(tasks::on_can_status::<Clock, _>);
+        cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
     }
 
     /// Decodes each command, updates the publisher table or the motor target, and wakes the
@@ -315,9 +313,7 @@ mod app {
                 iwdg::feed();
             }
             // The controller recovers from bus-off without an interrupt: look at its state.
-            cx.shared
-                .can_errors
-                .lock(tasks::on_can_status::<Clock, _>);
+            cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
         }
     }
 

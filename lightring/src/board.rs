@@ -84,8 +84,9 @@ pub struct SystemSignals {
 pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     if let Err(fault) = amiro_firmware::chip::clock_tree_to_reset_state() {
         amiro_firmware::log!(
-            "clock reset: {:?} (continuing on the clock AMiRo-BLT left)",
-            fault
+            "clock reset: ",
+            fault.as_str(),
+            " (continuing on the clock AMiRo-BLT left)"
         );
     }
     // AMiRo-BLT used bxCAN: reset it so nothing of the bootloader's configuration survives.
@@ -173,7 +174,7 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
     let btr = if on_crystal { CAN_BTR } else { CAN_BTR_HSI };
     if let Err(e) = bxcan::configure(&can, btr) {
-        amiro_firmware::log!("CAN set-up: {:?}", e);
+        amiro_firmware::log!("CAN set-up: ", e.as_str());
     }
 
     Board {
