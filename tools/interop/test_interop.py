@@ -203,3 +203,21 @@ def test_can_utils_read_the_log_amiro_writes(sent_log):
     ).stdout
     rows = [line.split() for line in asc.splitlines() if " Rx " in line]
     assert [(int(r[2], 16), bytes.fromhex("".join(r[6:]))) for r in rows] == [split(f) for f in FRAMES]
+
+
+def qemu_bus_logs():
+    root = os.environ.get("AMIRO_QEMU_SCENARIOS")
+    return sorted(Path(root).glob("*/*/bus.log")) if root else []
+
+
+def test_other_tools_read_the_bus_logs_cargo_xtask_qemu_writes():
+    logs = qemu_bus_logs()
+    if not os.environ.get("AMIRO_QEMU_SCENARIOS"):
+        pytest.skip("run by cargo xtask test after the QEMU scenarios")
+    assert logs, "no bus.log from the QEMU scenarios"
+    for path in logs:
+        text_frames = [line.split()[2] for line in path.read_text().splitlines() if line.strip()]
+        messages = list(can.CanutilsLogReader(str(path)))
+        assert [(m.arbitration_id, bytes(m.data)) for m in messages] == [split(f) for f in text_frames], path
+        long = subprocess.run(["log2long"], stdin=path.open(), capture_output=True, text=True, check=True)
+        assert len(long.stdout.splitlines()) == len(text_frames), path

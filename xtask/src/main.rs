@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 mod analyze;
 mod boards;
 mod bounds;
+mod campaign;
 mod elf;
 mod flash;
 mod interop;
@@ -60,6 +61,19 @@ enum Cmd {
         /// How much virtual time to run: e.g. 2s, 500ms, 900us.
         #[arg(long, default_value = "2s")]
         duration: String,
+    },
+    /// The hostile-bus campaign on every board with a QEMU build (part of `test`): seeded random
+    /// and targeted frames, verdicts checked against an independent model of docs/protocol.md.
+    Campaign {
+        /// First seed (each further run adds one).
+        #[arg(long, default_value_t = 12)]
+        seed: u64,
+        /// Spaced frames per run.
+        #[arg(long, default_value_t = 3000)]
+        frames: usize,
+        /// The release campaign: ten runs of 20 000 frames per board.
+        #[arg(long)]
+        long: bool,
     },
     /// Run only the QEMU scenarios CI runs (part of `test`), of every board or of the boards named.
     Scenarios {
@@ -160,6 +174,11 @@ fn run(cmd: Cmd) -> Result<bool> {
             let all_ok = analyze::run(&args, &root)?;
             // An unschedulable set is a verdict, not an error: only `--check` turns it into a failure.
             Ok(all_ok || !args.check)
+        }
+        Cmd::Campaign { seed, frames, long } => {
+            ensure_qemu()?;
+            let (frames, runs) = if long { (20_000, 10) } else { (frames, 1) };
+            campaign::run(&root, seed, frames, runs).map(|()| true)
         }
         Cmd::Scenarios { boards } => run_scenarios(&root, &select_boards(&boards)?).map(|()| true),
         Cmd::Trace { file } => {
@@ -363,8 +382,11 @@ fn test(root: &Path) -> Result<()> {
     let reports = build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), false)?;
     flash::simulated_robot(root)?;
     elf::print_table(&reports);
+    run_scenarios(root, &BOARDS.iter().collect::<Vec<_>>())?;
+    // After the scenarios: their bus logs are among what the other CAN tools must read.
     interop::check(root)?;
-    run_scenarios(root, &BOARDS.iter().collect::<Vec<_>>())
+    // The hostile-bus campaign, one run of 3000 spaced frames per board (issue 12).
+    campaign::run(root, 12, 3000, 1)
 }
 
 /// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets.
@@ -406,7 +428,7 @@ fn analysis_gate(root: &Path) -> Result<()> {
 }
 
 /// Builds a board's QEMU variant (its own target dir: the features differ from the robot build).
-fn build_qemu(root: &Path, board: &Board) -> Result<PathBuf> {
+pub(crate) fn build_qemu(root: &Path, board: &Board) -> Result<PathBuf> {
     let dir = qemu::target_dir(root);
     let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo_bin)
@@ -450,6 +472,9 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
                 let frames = qemu::read_stimulus(&path)?;
                 let duration = scenarios::duration_of(&path)?;
                 let text = qemu::run(&elf, board.qemu_machine, &frames, duration, &work)?;
+                let (bus, trace) = qemu::split_output(&text);
+                std::fs::write(work.join("bus.log"), bus)?;
+                std::fs::write(work.join("trace.log"), trace)?;
                 let out = scenarios::RunOutput::parse(&text)?;
                 let (static_ram, stack) = out.ram_used()?;
                 ram_high_water = ram_high_water.max(static_ram + stack);
