@@ -168,9 +168,7 @@ mod app {
     /// CAN status change (error warning, error-passive, bus-off): counted and traced.
     #[task(binds = CAN_SCE, priority = 7, shared = [can_errors])]
     fn can_status(mut cx: can_status::Context) {
-        cx.shared
-            .can_errors
-            .lock(tasks::on_can_status::<Clock, _>);
+        cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
     }
 
     /// Decodes each command; an LED command sets its LED's colour and wakes the latch, a command to
@@ -249,9 +247,7 @@ mod app {
                 iwdg::feed();
             }
             // The controller recovers from bus-off without an interrupt: look at its state.
-            cx.shared
-                .can_errors
-                .lock(tasks::on_can_status::<Clock, _>);
+            cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
         }
     }
 

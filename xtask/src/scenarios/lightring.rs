@@ -166,7 +166,8 @@ fn latch_bound_us(root: &Path) -> Result<u64> {
     let json: serde_json::Value = serde_json::from_str(&text)?;
     let jitter_budget = json["tasks"]["latch_leds"]["jitter_us"]
         .as_f64()
-        .context("lightring.timing.json: tasks.latch_leds.jitter_us")? as u64;
+        .context("lightring.timing.json: tasks.latch_leds.jitter_us")?
+        as u64;
     ensure!(
         handler <= jitter_budget,
         "handle_commands' WCRT {handler} µs exceeds the {jitter_budget} µs release jitter \

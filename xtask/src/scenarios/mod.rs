@@ -12,6 +12,7 @@ use crate::qemu::{self, TimedFrame};
 
 pub mod diwheeldrive;
 pub mod lightring;
+pub mod powermgmt;
 
 /// The RAM goal of a board in QEMU, static data plus the painted stack's high-water mark (bytes).
 pub fn ram_goal(board: &str) -> u64 {
@@ -26,6 +27,7 @@ pub fn for_board(board: &str) -> &'static [Scenario] {
     match board {
         "diwheeldrive" => diwheeldrive::SCENARIOS,
         "lightring" => lightring::SCENARIOS,
+        "powermgmt" => powermgmt::SCENARIOS,
         _ => &[],
     }
 }
@@ -333,7 +335,7 @@ impl Bounds {
     /// Worst-case latency from a publisher's release to its frame in a mailbox, as analysed for
     /// `topic` published alone at CAN priority `level` every `period_us`.
     pub fn publisher_latency_us(&self, topic: &str, level: &str, period_us: u64) -> Result<u64> {
-        crate::bounds::publisher_bound_us(&self.root, topic, level, period_us)
+        crate::bounds::publisher_bound_us(&self.root, "diwheeldrive", topic, level, period_us)
     }
 }
 
