@@ -115,10 +115,20 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
     }
     // AMiRo-BLT used bxCAN: reset it (and the I2C blocks) so nothing of its set-up survives.
     dp.RCC.apb1rstr().modify(|_, w| {
-        w.can1rst().set_bit().i2c1rst().set_bit().i2c2rst().set_bit()
+        w.can1rst()
+            .set_bit()
+            .i2c1rst()
+            .set_bit()
+            .i2c2rst()
+            .set_bit()
     });
     dp.RCC.apb1rstr().modify(|_, w| {
-        w.can1rst().clear_bit().i2c1rst().clear_bit().i2c2rst().clear_bit()
+        w.can1rst()
+            .clear_bit()
+            .i2c1rst()
+            .clear_bit()
+            .i2c2rst()
+            .clear_bit()
     });
     // The PLL makes 168 MHz from either oscillator (APB1 stays 42 MHz, so the CAN timing holds);
     // a crystal that does not start leaves the board on the less precise HSI rather than hung.
@@ -242,7 +252,8 @@ impl Charger {
         // SAFETY: the ADC belongs to this value (set up once in init); SWSTART, then poll EOC.
         let adc = unsafe { &*pac::ADC1::ptr() };
         adc.sr().write(|w| unsafe { w.bits(0) });
-        adc.cr2().modify(|r, w| unsafe { w.bits(r.bits() | (1 << 30)) });
+        adc.cr2()
+            .modify(|r, w| unsafe { w.bits(r.bits() | (1 << 30)) });
         (0..ADC_POLLS)
             .any(|_| adc.sr().read().bits() & (1 << 1) != 0)
             .then(|| power::vsys_mv(adc.dr().read().bits() as u16))
@@ -295,7 +306,9 @@ pub fn write_shutdown_reason(reason: u8) {
         (*pac::RCC::ptr())
             .apb1enr()
             .modify(|_, w| w.pwren().set_bit());
-        (*pac::PWR::ptr()).cr().modify(|r, w| w.bits(r.bits() | (1 << 8)));
+        (*pac::PWR::ptr())
+            .cr()
+            .modify(|r, w| w.bits(r.bits() | (1 << 8)));
         let rtc = &*pac::RTC::ptr();
         rtc.bkpr(0)
             .modify(|r, w| w.bits((r.bits() & !0xFF) | u32::from(reason)));

@@ -185,7 +185,9 @@ impl Master {
                 for &byte in bytes.iter() {
                     self.wait(SR1_TXE, NoAcknowledgeSource::Data)?;
                     // SAFETY: one data byte.
-                    self.regs().dr().write(|w| unsafe { w.bits(u16::from(byte)) });
+                    self.regs()
+                        .dr()
+                        .write(|w| unsafe { w.bits(u16::from(byte)) });
                 }
             }
         }

@@ -141,8 +141,7 @@ mod app {
         let (wake_m, wake_medium) = make_channel!((), 1);
         let (wake_l, wake_low) = make_channel!((), 1);
         let rear_bus = RearBus::new(RingBus::I2c1, hw.rear_i2c, platform::GaugeDelay::default());
-        let front_bus =
-            FrontBus::new(RingBus::I2c2, hw.front_i2c, platform::GaugeDelay::default());
+        let front_bus = FrontBus::new(RingBus::I2c2, hw.front_i2c, platform::GaugeDelay::default());
         let mut signals = hw.signals;
         // The power lines keep their configuration; nothing in the app touches them again.
         let _power_lines = hw.power_lines;
@@ -342,7 +341,10 @@ mod app {
     /// waits (bounded) for the other modules, writes the reason for AMiRo-BLT and calls the
     /// callback of the mode; a requested one stops and calls the shutdown-request handler.
     #[task(priority = 5, shared = [handler, tx_queue, signals])]
-    async fn shutdown_sequence(mut cx: shutdown_sequence::Context, initiated: Option<ShutdownMode>) {
+    async fn shutdown_sequence(
+        mut cx: shutdown_sequence::Context,
+        initiated: Option<ShutdownMode>,
+    ) {
         let now = Clock::now_us();
         if let Some(mode) = initiated {
             if signals::shutting_down() {
@@ -352,7 +354,10 @@ mod app {
             signals::request_shutdown();
             cx.shared.signals.lock(|s| s.drive_shutdown_request());
             cx.shared.handler.lock(|h| h.stop_all());
-            amiro_firmware::log!("shutdown ({}): SYS_PD_N low, publishers stopped", mode.name());
+            amiro_firmware::log!(
+                "shutdown ({}): SYS_PD_N low, publishers stopped",
+                mode.name()
+            );
             let deadline = now + crate::OTHERS_ACK_TIMEOUT_US;
             while !cx.shared.signals.lock(|s| s.sync_reads_low()) && Clock::now_us() < deadline {
                 Clock::delay_until_us(Clock::now_us() + 1_000).await;
@@ -360,7 +365,11 @@ mod app {
             let acknowledged = cx.shared.signals.lock(|s| s.sync_reads_low());
             amiro_firmware::log!(
                 "shutdown: other modules {}",
-                if acknowledged { "took the request" } else { "silent (timeout)" }
+                if acknowledged {
+                    "took the request"
+                } else {
+                    "silent (timeout)"
+                }
             );
             Clock::delay_until_us(Clock::now_us() + crate::OTHERS_SETTLE_US).await;
             crate::drain(&mut cx.shared.tx_queue).await;

@@ -109,7 +109,8 @@ pub fn critically_low(
     let Some(status) = status(front, rear, lines) else {
         return false;
     };
-    let final_flag = |s: Option<&BatteryStatus>| s.is_none_or(|s| s.flags.contains(Flags::SOC_FINAL));
+    let final_flag =
+        |s: Option<&BatteryStatus>| s.is_none_or(|s| s.flags.contains(Flags::SOC_FINAL));
     status.state_of_charge <= CRITICAL_STATE_OF_CHARGE || (final_flag(front) && final_flag(rear))
 }
 

@@ -70,7 +70,9 @@ impl CanRx for CanRxPort {
     fn receive(&mut self) -> Option<RxEvent> {
         loop {
             match self.0.receive()? {
-                RxEvent::Frame(frame) if frame.id == SIM_CONTROL_ID => apply_control(frame.payload()),
+                RxEvent::Frame(frame) if frame.id == SIM_CONTROL_ID => {
+                    apply_control(frame.payload())
+                }
                 other => return Some(other),
             }
         }
@@ -85,13 +87,18 @@ fn apply_control(data: &[u8]) {
         }
         [2, mask, ..] => {
             CRITICAL_GAUGES.store(mask & 3, Ordering::SeqCst);
-            print(format_args!("# qemu: gauges {mask:#x} report a critically low battery"));
+            print(format_args!(
+                "# qemu: gauges {mask:#x} report a critically low battery"
+            ));
         }
         [3, low, high, plug, ..] => {
             let mv = u32::from(u16::from_le_bytes([low, high]));
             VSYS_MV.store(mv, Ordering::SeqCst);
             PLUG.store(plug != 0, Ordering::SeqCst);
-            print(format_args!("# qemu: VSYS {mv} mV, plug {}", if plug != 0 { "in" } else { "out" }));
+            print(format_args!(
+                "# qemu: VSYS {mv} mV, plug {}",
+                if plug != 0 { "in" } else { "out" }
+            ));
         }
         _ => print(format_args!("# qemu: unknown control frame {data:02X?}")),
     }
@@ -137,7 +144,11 @@ impl ErrorType for SimBus {
 }
 
 impl I2c for SimBus {
-    fn transaction(&mut self, address: u8, operations: &mut [Operation<'_>]) -> Result<(), NoAcknowledge> {
+    fn transaction(
+        &mut self,
+        address: u8,
+        operations: &mut [Operation<'_>],
+    ) -> Result<(), NoAcknowledge> {
         self.bus
             .fuel_gauge_mut()
             .set_charging(CHARGING.load(Ordering::SeqCst));
@@ -154,7 +165,9 @@ impl I2c for SimBus {
             _ => None,
         };
         self.bus.transaction(address, operations)?;
-        if address == bq27500::ADDRESS && CRITICAL_GAUGES.load(Ordering::SeqCst) & self.gauge_bit != 0 {
+        if address == bq27500::ADDRESS
+            && CRITICAL_GAUGES.load(Ordering::SeqCst) & self.gauge_bit != 0
+        {
             let value = match command {
                 Some(cmd::STATE_OF_CHARGE) => Some(1),
                 Some(cmd::REMAINING_CAPACITY) => Some(20),
@@ -191,7 +204,11 @@ impl Charger {
         CHARGING.store(on && PLUG.load(Ordering::SeqCst), Ordering::SeqCst);
         print(format_args!(
             "# qemu: chargers {}",
-            if on { "enabled (EN1_N, EN2_N low)" } else { "disabled" }
+            if on {
+                "enabled (EN1_N, EN2_N low)"
+            } else {
+                "disabled"
+            }
         ));
     }
 

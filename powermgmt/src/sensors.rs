@@ -26,7 +26,7 @@ use crate::platform::{Charger, FrontI2c, GaugeDelay, RearI2c};
 use crate::power;
 
 /// How long a sensor or gauge that did not answer is left alone before it is set up again.
-pub const RETRY_US: u64 = 1_000_000;
+pub const RETRY_US: u64 = 200_000;
 /// Ring sensors per bus.
 const PER_BUS: usize = RING_SENSORS / 2;
 
@@ -101,6 +101,13 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
             Ok(muxed) => Vcnl4020::new(muxed).init(&Config::AMIRO).is_ok(),
             Err(_) => false,
         };
+        if !ready && now_us > 0 {
+            amiro_firmware::log!(
+                "ring sensor {} still missing ({} samples without a frame)",
+                slot.index,
+                slot.missed
+            );
+        }
         if ready != slot.ready {
             amiro_firmware::log!(
                 "ring sensor {} {}",
@@ -129,7 +136,11 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
             } else {
                 None
             };
-            let cal = self.calibration.get(k).copied().unwrap_or(ProximityCalibration::DEFAULT);
+            let cal = self
+                .calibration
+                .get(k)
+                .copied()
+                .unwrap_or(ProximityCalibration::DEFAULT);
             match (reading, sample.get_mut(usize::from(slot.index))) {
                 (Some(counts), Some(out)) => *out = Some(cal.counts_to_mm(counts)),
                 _ => self.missed(k, now_us),

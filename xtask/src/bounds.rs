@@ -1,5 +1,5 @@
 //! Analysed bounds the QEMU scenarios check against: the schedule analysis, run on the
-//! DiWheelDrive app's own source and timing file, for the publisher a scenario starts.
+//! board app's own source and timing file, for the publisher a scenario starts.
 use std::path::Path;
 
 use anyhow::{anyhow, Context, Result};
@@ -8,13 +8,19 @@ use schedule_analysis::model::FrameCostSpec;
 use schedule_analysis::scenario;
 
 /// Worst-case latency from a publisher's release to its frame in a mailbox, as analysed for
-/// `topic` published alone at CAN priority `level` every `period_us`: the worst-case response
+/// `topic` of `board` published alone at CAN priority `level` every `period_us`: the worst-case response
 /// time of the publisher's job (the transmit interrupt pre-empts the job the moment it queues the
 /// frame, so the frame reaches a mailbox before the job completes).
-pub fn publisher_bound_us(root: &Path, topic: &str, level: &str, period_us: u64) -> Result<u64> {
+pub fn publisher_bound_us(
+    root: &Path,
+    board: &str,
+    topic: &str,
+    level: &str,
+    period_us: u64,
+) -> Result<u64> {
     let dir = crate::qemu::target_dir(root).join("bounds");
     std::fs::create_dir_all(&dir)?;
-    let name = format!("qemu-{topic}-{level}-{period_us}us");
+    let name = format!("qemu-{board}-{topic}-{level}-{period_us}us");
     let path = dir.join(format!("{name}.scenario.json"));
     let json = serde_json::json!({
         "name": name,
@@ -41,10 +47,10 @@ pub fn publisher_bound_us(root: &Path, topic: &str, level: &str, period_us: u64)
     let result = analysis
         .boards
         .iter()
-        .filter(|b| b.name == "diwheeldrive")
+        .filter(|b| b.name == board)
         .flat_map(|b| b.tasks.iter())
         .find(|t| t.name == task)
-        .with_context(|| format!("the analysis has no task {task} on diwheeldrive"))?;
+        .with_context(|| format!("the analysis has no task {task} on {board}"))?;
     let wcrt = result
         .wcrt()
         .with_context(|| format!("{task}: the busy window never closes"))?;

@@ -1,0 +1,497 @@
+//! PowerManagement's QEMU scenarios (`powermgmt/qemu/*.log`) and what each must show.
+//!
+//! The QEMU build's control frames on 0x3F0 (a ring sensor stops answering, the gauges report a
+//! critically low battery, VSYS and the plug) are described in `powermgmt/src/qemu.rs`.
+use anyhow::{ensure, Context, Result};
+
+use super::{trace_time, Bounds, RunOutput, Scenario};
+use crate::qemu::TimedFrame;
+
+/// Every scenario CI runs.
+pub const SCENARIOS: &[Scenario] = &[
+    Scenario {
+        name: "thesis-ring",
+        about: "21F#010A0000 → eight frames 0x61F every 10 ms, within the analysed WCRT",
+        check: thesis_ring,
+    },
+    Scenario {
+        name: "power-status",
+        about: "power status one-shot, publisher, charging once the plug is in, stop",
+        check: power_status,
+    },
+    Scenario {
+        name: "priority-move",
+        about: "the ring moves from low to high on the same grid",
+        check: priority_move,
+    },
+    Scenario {
+        name: "sensor-lost",
+        about: "a ring sensor stops answering: seven keep their grid, the eighth is counted",
+        check: sensor_lost,
+    },
+    Scenario {
+        name: "malformed",
+        about: "bad frames and other boards' commands are counted and harmless",
+        check: malformed,
+    },
+    Scenario {
+        name: "flood",
+        about: "commands every 50 µs keep the ring within its bound; the excess is counted",
+        check: flood,
+    },
+    Scenario {
+        name: "shutdown-command",
+        about: "operator's shutdown: SYS_PD_N driven, publishers stopped, reason 3, hand-over",
+        check: shutdown_command,
+    },
+    Scenario {
+        name: "shutdown-low-battery",
+        about: "critically low battery: hibernate shutdown, reason 1, hand-over",
+        check: shutdown_low_battery,
+    },
+    Scenario {
+        name: "shutdown-outside",
+        about: "SYS_PD_N from another module: SYS_SYNC_N low, publishers stopped, hand-over",
+        check: shutdown_outside,
+    },
+];
+
+/// The board's command handler takes at most one command per this interval.
+const COMMAND_MIN_INTERVAL_US: u64 = 400;
+
+/// One ring sample: its release and the sensor indices of its frames, with the last frame's time.
+struct RingSample {
+    release: u64,
+    sensors: Vec<u8>,
+    last_frame: u64,
+}
+
+/// The ring's samples on `id` within `[from, to)`: releases on the exact `period` grid, each
+/// sample's frames after its release and before the next, in index order.
+fn ring_samples(
+    out: &RunOutput,
+    id: u32,
+    period: u64,
+    from: u64,
+    to: u64,
+) -> Result<Vec<RingSample>> {
+    let releases = out.releases("proximity-ring", from, to)?;
+    let first = *releases
+        .first()
+        .with_context(|| format!("no proximity-ring releases in {from}..{to} µs"))?;
+    for (k, r) in releases.iter().enumerate() {
+        let grid = first + k as u64 * period;
+        ensure!(
+            *r == grid,
+            "ring release {k} at {r} µs is off the {period} µs grid ({grid} µs)"
+        );
+    }
+    let expected = (to - first).div_ceil(period);
+    ensure!(
+        releases.len() as u64 == expected,
+        "{} ring releases in {first}..{to} µs, expected {expected} at {period} µs",
+        releases.len()
+    );
+    let frames: Vec<&TimedFrame> = out
+        .frames
+        .iter()
+        .filter(|f| f.id == id && (from..to + period).contains(&f.at_us))
+        .collect();
+    let mut samples = Vec::new();
+    for (k, &release) in releases.iter().enumerate() {
+        let next = releases.get(k + 1).copied().unwrap_or(release + period);
+        let mine: Vec<&&TimedFrame> = frames
+            .iter()
+            .filter(|f| (release..next).contains(&f.at_us))
+            .collect();
+        ensure!(
+            !mine.is_empty(),
+            "no ring frame for the release at {release} µs"
+        );
+        let sensors: Vec<u8> = mine.iter().map(|f| f.data[0]).collect();
+        ensure!(
+            mine.iter().all(|f| f.data.len() == 3),
+            "ring frames carry 3 bytes (release {release} µs)"
+        );
+        ensure!(
+            sensors.windows(2).all(|w| w[0] < w[1]),
+            "ring frames of the release at {release} µs not in index order: {sensors:?}"
+        );
+        samples.push(RingSample {
+            release,
+            sensors,
+            last_frame: mine.last().map(|f| f.at_us).unwrap_or(release),
+        });
+    }
+    Ok(samples)
+}
+
+fn bound(bounds: &Bounds, topic: &str, level: &str, period: u64) -> Result<u64> {
+    crate::bounds::publisher_bound_us(bounds.root(), "powermgmt", topic, level, period)
+}
+
+fn all_eight(samples: &[RingSample]) -> Result<()> {
+    for s in samples {
+        ensure!(
+            s.sensors == (0..8).collect::<Vec<u8>>(),
+            "the release at {} µs has frames for {:?}, expected all eight",
+            s.release,
+            s.sensors
+        );
+    }
+    Ok(())
+}
+
+fn worst_latency(samples: &[RingSample]) -> u64 {
+    samples
+        .iter()
+        .map(|s| s.last_frame - s.release)
+        .max()
+        .unwrap_or(0)
+}
+
+fn thesis_ring(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    ensure!(
+        out.frames.iter().all(|f| f.id == 0x61F),
+        "only proximity-ring frames at medium (0x61F) expected"
+    );
+    let samples = ring_samples(out, 0x61F, 10_000, 10_000, 200_000)?;
+    all_eight(&samples)?;
+    let answered = samples[0].release - 10_000;
+    ensure!(
+        answered < 10_000,
+        "the publisher started {answered} µs after the command"
+    );
+    let worst = worst_latency(&samples);
+    let limit = bound(bounds, "proximity-ring", "medium", 10_000)?;
+    ensure!(
+        worst <= limit,
+        "release to last frame {worst} µs exceeds the analysed WCRT {limit} µs"
+    );
+    Ok(format!(
+        "{} samples × 8 frames 0x61F on the 10 ms grid, worst release → eighth frame {worst} µs ≤ analysed {limit} µs",
+        samples.len()
+    ))
+}
+
+fn power_frames(out: &RunOutput, id: u32) -> Vec<(u64, bool)> {
+    out.frames
+        .iter()
+        .filter(|f| f.id == id && f.data.len() == 6)
+        .map(|f| (f.at_us, f.data[0] == 1))
+        .collect()
+}
+
+fn power_status(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    let once = power_frames(out, 0x71E);
+    ensure!(
+        once.len() == 1,
+        "one one-shot frame 0x71E expected, got {}",
+        once.len()
+    );
+    ensure!(
+        (10_000..20_000).contains(&once[0].0),
+        "one-shot answered at {} µs",
+        once[0].0
+    );
+    ensure!(
+        !once[0].1,
+        "the one-shot says charging before the plug is in"
+    );
+    let stream = out.periodic_stream(0x61E, "power-status", 50_000, 50_000, 310_000)?;
+    ensure!(
+        stream.frames.len() == 6,
+        "{} power-status frames, expected 6",
+        stream.frames.len()
+    );
+    let limit = bound(bounds, "power-status", "medium", 50_000)?;
+    ensure!(
+        stream.worst_latency <= limit,
+        "power-status latency {} µs exceeds the analysed WCRT {limit} µs",
+        stream.worst_latency
+    );
+    let flags = power_frames(out, 0x61E);
+    let enabled = out
+        .notes
+        .iter()
+        .find(|n| n.contains("chargers enabled"))
+        .context("the chargers were never enabled after VSYS rose above 9 V")?;
+    ensure!(
+        flags.iter().filter(|(t, _)| *t < 120_000).all(|(_, c)| !c),
+        "charging before the plug was in: {flags:?}"
+    );
+    ensure!(
+        flags.iter().filter(|(t, _)| *t > 210_000).all(|(_, c)| *c),
+        "not charging after the chargers were enabled: {flags:?}"
+    );
+    ensure!(
+        out.times(0x61E).iter().all(|t| *t < 310_000),
+        "power-status frames after the stop"
+    );
+    Ok(format!(
+        "one-shot at {} µs; {} frames every 50 ms (worst latency {} µs ≤ analysed {limit} µs), `{enabled}`, then charging; silent after the stop",
+        once[0].0,
+        stream.frames.len(),
+        stream.worst_latency
+    ))
+}
+
+fn priority_move(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let low = ring_samples(out, 0x71F, 10_000, 5_000, 57_000)?;
+    all_eight(&low)?;
+    ensure!(
+        out.times(0x71F).iter().all(|t| *t < 57_000),
+        "low-priority ring frames after the move"
+    );
+    ensure!(
+        out.times(0x51F).iter().all(|t| *t >= 57_000),
+        "high-priority ring frames before the move"
+    );
+    let high = ring_samples(out, 0x51F, 10_000, 57_000, 150_000)?;
+    all_eight(&high)?;
+    ensure!(
+        high[0].release == low[0].release + low.len() as u64 * 10_000,
+        "the move changed the grid: first high release at {} µs",
+        high[0].release
+    );
+    Ok(format!(
+        "{} samples at low (0x71F), then {} at high (0x51F) on the same 10 ms grid",
+        low.len(),
+        high.len()
+    ))
+}
+
+fn sensor_lost(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    let before = ring_samples(out, 0x61F, 10_000, 5_000, 55_000)?;
+    all_eight(&before)?;
+    let after = ring_samples(out, 0x61F, 10_000, before[0].release + 50_000, 300_000)?;
+    for s in &after {
+        ensure!(
+            s.sensors == [0, 1, 2, 3, 4, 6, 7],
+            "the release at {} µs has frames for {:?}, expected every index but 5",
+            s.release,
+            s.sensors
+        );
+    }
+    let limit = bound(bounds, "proximity-ring", "medium", 10_000)?;
+    let worst = worst_latency(&after);
+    ensure!(
+        worst <= limit,
+        "latency {worst} µs with a sensor missing exceeds the analysed {limit} µs"
+    );
+    ensure!(
+        out.notes
+            .iter()
+            .filter(|n| n.contains("ring sensor 5 stopped answering"))
+            .count()
+            == 1,
+        "the lost sensor must be reported once"
+    );
+    let counted = out
+        .notes
+        .iter()
+        .find_map(|n| {
+            let rest = n.strip_prefix("ring sensor 5 still missing (")?;
+            rest.split_whitespace().next()?.parse::<u64>().ok()
+        })
+        .context("no `ring sensor 5 still missing (N samples …)` count")?;
+    ensure!(
+        counted >= 15,
+        "only {counted} missed samples counted for sensor 5"
+    );
+    Ok(format!(
+        "{} samples with all eight, then {} with seven on the same grid (worst {worst} µs ≤ {limit} µs); sensor 5 counted {counted} samples without a frame",
+        before.len(),
+        after.len()
+    ))
+}
+
+fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let reasons: Vec<&str> = out
+        .traces("command-rejected")
+        .iter()
+        .filter_map(|line| line.split_whitespace().last())
+        .collect();
+    let expected = [
+        "unknown-topic",
+        "bad-mode",
+        "bad-unit",
+        "dlc-too-short",
+        "dlc-too-long",
+        "zero-sample-time",
+        "dlc-too-short",
+        "bad-shutdown-key",
+        "bad-shutdown-mode",
+        "dlc-too-short",
+    ];
+    ensure!(
+        reasons == expected,
+        "rejection reasons {reasons:?}, expected {expected:?}"
+    );
+    let ignored = out.traces("command-ignored").len();
+    ensure!(
+        ignored == 3,
+        "the three other boards' commands must be ignored, got {ignored}"
+    );
+    ensure!(
+        !out.notes.iter().any(|n| n.contains("SYS_PD_N driven")),
+        "a bad shutdown frame started a shutdown"
+    );
+    ensure!(
+        out.frames.iter().all(|f| f.id == 0x61F),
+        "a bad frame made the board send something other than the ring's frames"
+    );
+    let samples = ring_samples(out, 0x61F, 10_000, 5_000, 150_000)?;
+    all_eight(&samples)?;
+    Ok(format!(
+        "{} rejected with their reasons, {ignored} ignored; ring undisturbed: {} samples × 8 on its grid",
+        reasons.len(),
+        samples.len()
+    ))
+}
+
+fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    let samples = ring_samples(out, 0x61F, 10_000, 5_000, 250_000)?;
+    all_eight(&samples)?;
+    let limit = bound(bounds, "proximity-ring", "medium", 10_000)?;
+    let worst = worst_latency(&samples);
+    ensure!(
+        worst <= limit,
+        "latency {worst} µs under the flood exceeds the analysed bound {limit} µs"
+    );
+    let handled: Vec<u64> = out
+        .traces("command-")
+        .iter()
+        .map(|line| trace_time(line))
+        .collect::<Result<_>>()?;
+    let dropped = out.end_field("rx dropped")?;
+    let overruns = out.end_field("rx overruns")?;
+    ensure!(
+        overruns == 0,
+        "{overruns} receive-FIFO overruns: the receive interrupt fell behind"
+    );
+    ensure!(
+        handled.len() as u64 + dropped == 2_002,
+        "{} commands handled + {dropped} dropped and counted != the 2002 sent",
+        handled.len()
+    );
+    if let Some(gap) = handled.windows(2).map(|w| w[1] - w[0]).min() {
+        ensure!(
+            gap >= COMMAND_MIN_INTERVAL_US,
+            "two commands handled {gap} µs apart (minimum interval {COMMAND_MIN_INTERVAL_US} µs)"
+        );
+    }
+    Ok(format!(
+        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted; ring on its 10 ms grid, worst {worst} µs ≤ analysed {limit} µs",
+        handled.len()
+    ))
+}
+
+fn note_time(out: &RunOutput, text: &str) -> bool {
+    out.notes.iter().any(|n| n.contains(text))
+}
+
+/// Common to every shutdown: publishers stopped by `request` (no ring frame after it but those
+/// already queued), no command accepted after it, and the hand-over.
+fn stopped_and_handed_over(out: &RunOutput, request: u64) -> Result<&str> {
+    let late: Vec<u64> = out
+        .times(0x61F)
+        .into_iter()
+        .filter(|t| *t > request + 1_000)
+        .collect();
+    ensure!(
+        late.is_empty(),
+        "ring frames after the shutdown started: {late:?}"
+    );
+    let accepted_after = out
+        .traces("command-accepted")
+        .iter()
+        .filter_map(|l| trace_time(l).ok())
+        .filter(|t| *t > request + 1_000)
+        .count();
+    ensure!(
+        accepted_after == 0,
+        "{accepted_after} commands accepted after the shutdown started"
+    );
+    out.notes
+        .iter()
+        .find(|n| n.starts_with("qemu: shutdown hand-over"))
+        .map(String::as_str)
+        .context("no hand-over to the bootloader")
+}
+
+fn shutdown_command(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let samples = ring_samples(out, 0x61F, 10_000, 5_000, 100_000)?;
+    all_eight(&samples)?;
+    ensure!(
+        note_time(out, "qemu: SYS_PD_N driven low"),
+        "SYS_PD_N was not driven low"
+    );
+    ensure!(
+        note_time(out, "other modules took the request"),
+        "the other modules' answer was not seen"
+    );
+    ensure!(
+        note_time(out, "qemu: RTC_BKP0R byte 0 = 3"),
+        "reason 3 (transportation) not written"
+    );
+    ensure!(
+        note_time(out, "hand over to AMiRo-BLT (transportation)"),
+        "not handed to the transportation callback"
+    );
+    ensure!(
+        note_time(out, "qemu: safe state: chargers off"),
+        "the chargers were not switched off"
+    );
+    let handover = stopped_and_handed_over(out, 100_000)?;
+    ensure!(
+        out.times(0x51E).is_empty() && out.times(0x71E).is_empty(),
+        "a command after the shutdown was served"
+    );
+    Ok(format!("{} samples, then SYS_PD_N low, publishers stopped, reason 3, transportation callback; {handover}", samples.len()))
+}
+
+fn shutdown_low_battery(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    ensure!(
+        note_time(out, "battery critically low"),
+        "the low battery was not noticed"
+    );
+    ensure!(
+        note_time(out, "qemu: SYS_PD_N driven low"),
+        "SYS_PD_N was not driven low"
+    );
+    ensure!(
+        note_time(out, "qemu: RTC_BKP0R byte 0 = 1"),
+        "reason 1 (hibernate) not written"
+    );
+    ensure!(
+        note_time(out, "hand over to AMiRo-BLT (hibernate)"),
+        "not handed to the hibernate callback"
+    );
+    let handover = stopped_and_handed_over(out, 500_000)?;
+    let samples = ring_samples(out, 0x61F, 10_000, 5_000, 500_000)?;
+    all_eight(&samples)?;
+    Ok(format!("{} ring samples, critical battery seen at the 500 ms check, hibernate with reason 1; {handover}", samples.len()))
+}
+
+fn shutdown_outside(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let samples = ring_samples(out, 0x61F, 10_000, 5_000, 100_000)?;
+    all_eight(&samples)?;
+    ensure!(
+        note_time(out, "SYS_SYNC_N pulled low"),
+        "SYS_SYNC_N was not pulled low"
+    );
+    ensure!(
+        !note_time(out, "SYS_PD_N driven low"),
+        "a passive shutdown must not drive SYS_PD_N"
+    );
+    ensure!(
+        !note_time(out, "RTC_BKP0R"),
+        "a passive shutdown writes no reason"
+    );
+    let handover = stopped_and_handed_over(out, 100_000)?;
+    Ok(format!(
+        "{} samples, then SYS_SYNC_N low, publishers stopped, shutdown-request handler; {handover}",
+        samples.len()
+    ))
+}
