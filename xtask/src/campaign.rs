@@ -1,0 +1,593 @@
+//! The hostile-bus campaign (issue 12): seeded stimulus logs of random and targeted frames run
+//! through every board's QEMU build, checked against an independent model of the verdicts.
+//!
+//! The model is written from `docs/protocol.md` (its topic table, the command rules and the
+//! error names), not from amiro-can's decoder, so the two can disagree and a test catches it.
+//! Every generated frame carries exactly one fault (or none), so its verdict is unambiguous.
+//! Board-specific parts are one row of [`MODELS`]; a board with QEMU scenarios and no row fails.
+//!
+//! Per run: a reference publisher at urgent priority, then frames spaced 450–900 µs apart (more
+//! than the command handler's 400 µs), then a burst 20 µs apart whose excess the handler drops,
+//! then SYS_PD_N. Checks: the run ends; the reference keeps its exact grid; nothing unrequested is
+//! sent; every traced verdict matches the model in order; handled + `rx dropped` = sent; the
+//! stack's high-water mark is reported.
+
+use std::path::Path;
+
+use anyhow::{bail, ensure, Context, Result};
+
+use crate::boards::{Board, BOARDS};
+use crate::qemu::{self, TimedFrame, SIGNAL_SYS_PD_N};
+use crate::scenarios::{self, RunOutput};
+
+/// Whose topic a byte is, from docs/protocol.md's topic table: (byte, board, actuator DLC or 0
+/// for a sensor topic).
+const PROTOCOL_TOPICS: &[(u8, &str, usize)] = &[
+    (0x01, "diwheeldrive", 0),
+    (0x02, "diwheeldrive", 0),
+    (0x04, "diwheeldrive", 0),
+    (0x05, "diwheeldrive", 0),
+    (0x06, "diwheeldrive", 0),
+    (0x07, "diwheeldrive", 0),
+    (0x08, "diwheeldrive", 0),
+    (0x09, "diwheeldrive", 0),
+    (0x10, "diwheeldrive", 8),
+    (0x11, "lightring", 3),
+    (0x12, "lightring", 3),
+    (0x13, "lightring", 3),
+    (0x14, "lightring", 3),
+    (0x15, "lightring", 3),
+    (0x16, "lightring", 3),
+    (0x17, "lightring", 3),
+    (0x18, "lightring", 3),
+    (0x1A, "diwheeldrive", 0),
+    (0x1B, "powermgmt", 0),
+    (0x1C, "lightring", 0),
+    (0x1D, "powermgmt", 3),
+    (0x1E, "powermgmt", 0),
+    (0x1F, "powermgmt", 0),
+];
+
+/// What the campaign must know of a board beyond the protocol table.
+pub struct BoardModel {
+    /// Folder name, as in `boards.rs`.
+    pub board: &'static str,
+    /// The board's diagnostics topic (mode 3 sets the admission policy).
+    pub diagnostics: u8,
+    /// The reference publisher: topic byte, its trace name, period (µs). It runs at urgent
+    /// priority for the whole run and no random frame addresses it.
+    pub reference: (u8, &'static str, u64),
+    /// Actuator topics whose commands are harmless to accept at any value (not shutdown).
+    pub actuators: &'static [u8],
+}
+
+/// One row per board with a QEMU build.
+pub const MODELS: &[BoardModel] = &[
+    BoardModel {
+        board: "diwheeldrive",
+        diagnostics: 0x1A,
+        reference: (0x08, "gyroscope", 10_000),
+        actuators: &[0x10],
+    },
+    BoardModel {
+        board: "lightring",
+        diagnostics: 0x1C,
+        reference: (0x1C, "lightring-diagnostics", 100_000),
+        actuators: &[0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18],
+    },
+];
+
+/// The verdict the model expects for one frame.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Verdict {
+    Accepted,
+    Rejected(&'static str),
+    Ignored,
+}
+
+/// A deterministic generator (xorshift64*), so a seed names a campaign.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n.max(1)
+    }
+    fn range(&mut self, lo: u64, hi: u64) -> u64 {
+        lo + self.below(hi - lo + 1)
+    }
+    fn pick<T: Copy>(&mut self, items: &[T]) -> T {
+        items[self.below(items.len() as u64) as usize]
+    }
+    fn bytes(&mut self, n: usize) -> Vec<u8> {
+        (0..n).map(|_| self.next() as u8).collect()
+    }
+}
+
+/// A generated stimulus with what the model expects of it.
+struct Plan {
+    frames: Vec<TimedFrame>,
+    /// Expected verdicts of the spaced phase, in order.
+    expected: Vec<(u32, Verdict)>,
+    /// Frames in the burst phase (all valid: accepted or dropped).
+    burst: usize,
+    /// Topics the stimulus may legitimately make the board publish (besides the reference).
+    requested: Vec<u8>,
+    /// When SYS_PD_N falls.
+    shutdown_us: u64,
+    /// When the burst starts.
+    burst_us: u64,
+}
+
+fn command_id(priority: u64, topic: u8) -> u32 {
+    ((priority as u32 & 3) << 8) | u32::from(topic)
+}
+
+/// Builds one run's stimulus of `count` spaced frames.
+fn plan(model: &BoardModel, rng: &mut Rng, count: usize) -> Plan {
+    let owner = |byte: u8| PROTOCOL_TOPICS.iter().find(|t| t.0 == byte);
+    let own_sensors: Vec<u8> = PROTOCOL_TOPICS
+        .iter()
+        .filter(|t| {
+            t.1 == model.board && t.2 == 0 && t.0 != model.reference.0 && t.0 != model.diagnostics
+        })
+        .map(|t| t.0)
+        .collect();
+    let others: Vec<u8> = PROTOCOL_TOPICS
+        .iter()
+        .filter(|t| t.1 != model.board)
+        .map(|t| t.0)
+        .collect();
+    let unknown: Vec<u8> = (0u8..=0xFF).filter(|b| owner(*b).is_none()).collect();
+    let mut frames = Vec::new();
+    let mut expected = Vec::new();
+    let mut requested = Vec::new();
+    let (ref_topic, _, ref_period) = model.reference;
+    // The reference publisher, urgent, period in ms.
+    frames.push(TimedFrame {
+        at_us: 1_000,
+        id: command_id(0, ref_topic),
+        data: vec![
+            1,
+            (ref_period / 1000) as u8,
+            (ref_period / 1000 >> 8) as u8,
+            0,
+        ],
+    });
+    expected.push((command_id(0, ref_topic), Verdict::Accepted));
+    let mut t = 5_000u64;
+    let mut push = |t: u64, id: u32, data: Vec<u8>, v: Verdict, exp: &mut Vec<(u32, Verdict)>| {
+        frames.push(TimedFrame { at_us: t, id, data });
+        exp.push((id, v));
+    };
+    let mut n = 0;
+    while n < count {
+        t += rng.range(450, 900);
+        let prio = rng.below(4);
+        let class = rng.below(16);
+        let sensor = if own_sensors.is_empty() {
+            None
+        } else {
+            Some(rng.pick(&own_sensors))
+        };
+        match (class, sensor) {
+            // Unknown topic, any DLC and data.
+            (0 | 1, _) => {
+                let dlc = rng.below(9) as usize;
+                let id = command_id(prio, rng.pick(&unknown));
+                push(
+                    t,
+                    id,
+                    rng.bytes(dlc),
+                    Verdict::Rejected("unknown-topic"),
+                    &mut expected,
+                );
+            }
+            // Another board's topic (also its shutdown): ignored whatever the data.
+            (2 | 3, _) => {
+                let dlc = rng.below(9) as usize;
+                let id = command_id(prio, rng.pick(&others));
+                push(t, id, rng.bytes(dlc), Verdict::Ignored, &mut expected);
+            }
+            // Sensor data (C/S = 1) on any topic byte: ignored.
+            (4, _) => {
+                let dlc = rng.below(9) as usize;
+                let id = 0x400 | command_id(prio, rng.next() as u8);
+                push(t, id, rng.bytes(dlc), Verdict::Ignored, &mut expected);
+            }
+            // Bad mode with DLC 1 (3 only off the diagnostics topic).
+            (5, Some(topic)) => {
+                let mode = loop {
+                    let m = rng.range(3, 255) as u8;
+                    if m != 3 || topic != model.diagnostics {
+                        break m;
+                    }
+                };
+                push(
+                    t,
+                    command_id(prio, topic),
+                    vec![mode],
+                    Verdict::Rejected("bad-mode"),
+                    &mut expected,
+                );
+            }
+            // Bad unit.
+            (6, Some(topic)) => {
+                let time = rng.range(1, 0xFFFF) as u16;
+                let unit = rng.range(3, 255) as u8;
+                let [lo, hi] = time.to_le_bytes();
+                push(
+                    t,
+                    command_id(prio, topic),
+                    vec![1, lo, hi, unit],
+                    Verdict::Rejected("bad-unit"),
+                    &mut expected,
+                );
+            }
+            // Wrong DLC for the mode.
+            (7, Some(topic)) => {
+                let (data, reason) = match rng.below(4) {
+                    0 => (vec![], "dlc-too-short"),
+                    1 => {
+                        let len = rng.range(2, 3) as usize;
+                        let mut d = rng.bytes(len);
+                        d[0] = 1;
+                        (d, "dlc-too-short")
+                    }
+                    2 => {
+                        let len = rng.range(2, 8) as usize;
+                        let mut d = rng.bytes(len);
+                        d[0] = rng.pick(&[0u8, 2]);
+                        (d, "dlc-too-long")
+                    }
+                    _ => {
+                        let len = rng.range(5, 8) as usize;
+                        let mut d = rng.bytes(len);
+                        d[0] = 1;
+                        (d, "dlc-too-long")
+                    }
+                };
+                push(
+                    t,
+                    command_id(prio, topic),
+                    data,
+                    Verdict::Rejected(reason),
+                    &mut expected,
+                );
+            }
+            // Zero sample time in every unit.
+            (8, Some(topic)) => {
+                let unit = rng.below(3) as u8;
+                push(
+                    t,
+                    command_id(prio, topic),
+                    vec![1, 0, 0, unit],
+                    Verdict::Rejected("zero-sample-time"),
+                    &mut expected,
+                );
+            }
+            // Period beyond 2^32 - 1 µs: only seconds reach it.
+            (9, Some(topic)) => {
+                let [lo, hi] = (rng.range(4295, 0xFFFF) as u16).to_le_bytes();
+                push(
+                    t,
+                    command_id(prio, topic),
+                    vec![1, lo, hi, 1],
+                    Verdict::Rejected("period-too-long"),
+                    &mut expected,
+                );
+            }
+            // Huge valid periods (minutes to 71 minutes), low priority: accepted.
+            (10, Some(topic)) => {
+                let (time, unit) = if rng.below(2) == 0 {
+                    (rng.range(600, 4294), 1)
+                } else {
+                    (rng.range(60_000, 0xFFFF), 0)
+                };
+                let [lo, hi] = (time as u16).to_le_bytes();
+                push(
+                    t,
+                    command_id(3, topic),
+                    vec![1, lo, hi, unit],
+                    Verdict::Accepted,
+                    &mut expected,
+                );
+                requested.push(topic);
+            }
+            // Stop, or one sample now, low priority: accepted.
+            (11, Some(topic)) => {
+                let mode = rng.pick(&[0u8, 2]);
+                push(
+                    t,
+                    command_id(3, topic),
+                    vec![mode],
+                    Verdict::Accepted,
+                    &mut expected,
+                );
+                if mode == 2 {
+                    requested.push(topic);
+                }
+            }
+            // A tiny period (500–999 µs) at low priority, stopped again 2–4 frames later.
+            (12, Some(topic)) => {
+                let [lo, hi] = (rng.range(500, 999) as u16).to_le_bytes();
+                push(
+                    t,
+                    command_id(3, topic),
+                    vec![1, lo, hi, 2],
+                    Verdict::Accepted,
+                    &mut expected,
+                );
+                t += rng.range(450, 900);
+                push(
+                    t,
+                    command_id(3, topic),
+                    vec![0],
+                    Verdict::Accepted,
+                    &mut expected,
+                );
+                requested.push(topic);
+                n += 1;
+            }
+            // Actuators: extreme values at the exact DLC (accepted), or a wrong DLC.
+            (13 | 14, _) if !model.actuators.is_empty() => {
+                let topic = rng.pick(model.actuators);
+                let dlc = owner(topic).map_or(0, |t| t.2);
+                let extreme = [0x00u8, 0xFF, 0x7F, 0x80];
+                if class == 13 {
+                    let data = (0..dlc).map(|_| rng.pick(&extreme)).collect();
+                    push(
+                        t,
+                        command_id(prio, topic),
+                        data,
+                        Verdict::Accepted,
+                        &mut expected,
+                    );
+                } else {
+                    let wrong = loop {
+                        let d = rng.below(9) as usize;
+                        if d != dlc {
+                            break d;
+                        }
+                    };
+                    let reason = if wrong < dlc {
+                        "dlc-too-short"
+                    } else {
+                        "dlc-too-long"
+                    };
+                    push(
+                        t,
+                        command_id(prio, topic),
+                        rng.bytes(wrong),
+                        Verdict::Rejected(reason),
+                        &mut expected,
+                    );
+                }
+            }
+            // Admission policy on the diagnostics topic: 0/1 accepted, others bad-policy.
+            _ => {
+                let policy = rng.pick(&[0u8, 1, 2, 0x55, 0xFF]);
+                let v = if policy <= 1 {
+                    Verdict::Accepted
+                } else {
+                    Verdict::Rejected("bad-policy")
+                };
+                push(
+                    t,
+                    command_id(prio, model.diagnostics),
+                    vec![3, policy],
+                    v,
+                    &mut expected,
+                );
+            }
+        }
+        n += 1;
+    }
+    // The burst: 40 valid admission-policy commands (harmless, accepted) 20 µs apart, faster
+    // than one frame time; the handler takes one per 400 µs and drops what its queue cannot hold.
+    let burst_us = t + 20_000;
+    let burst = 40;
+    for k in 0..burst as u64 {
+        frames.push(TimedFrame {
+            at_us: burst_us + 20 * k,
+            id: command_id(3, model.diagnostics),
+            data: vec![3, 0],
+        });
+    }
+    let shutdown_us = burst_us + 40_000 + rng.below(20_000);
+    frames.push(TimedFrame {
+        at_us: shutdown_us,
+        id: SIGNAL_SYS_PD_N,
+        data: vec![],
+    });
+    Plan {
+        frames,
+        expected,
+        burst,
+        requested,
+        shutdown_us,
+        burst_us,
+    }
+}
+
+/// The verdicts the board traced, in order: (identifier, verdict).
+fn traced_verdicts(out: &RunOutput) -> Result<Vec<(u32, String)>> {
+    let mut verdicts = Vec::new();
+    for note in &out.notes {
+        for kind in ["command-accepted", "command-rejected", "command-ignored"] {
+            if let Some(at) = note.find(&format!("trace {kind} ")) {
+                let rest = &note[at + kind.len() + 7..];
+                let mut words = rest.split_whitespace();
+                let id = u32::from_str_radix(words.next().unwrap_or(""), 16)
+                    .with_context(|| format!("bad verdict line `{note}`"))?;
+                let verdict = match kind {
+                    "command-rejected" => format!(
+                        "rejected {}",
+                        words.next().unwrap_or("").trim_start_matches("reason=")
+                    ),
+                    "command-accepted" => "accepted".into(),
+                    _ => "ignored".into(),
+                };
+                verdicts.push((id, verdict));
+            }
+        }
+    }
+    Ok(verdicts)
+}
+
+fn describe(v: &Verdict) -> String {
+    match v {
+        Verdict::Accepted => "accepted".into(),
+        Verdict::Rejected(r) => format!("rejected {r}"),
+        Verdict::Ignored => "ignored".into(),
+    }
+}
+
+/// Checks one run's output against its plan; returns a one-line summary.
+fn check(model: &BoardModel, plan: &Plan, out: &RunOutput) -> Result<String> {
+    out.end_line()?;
+    // Verdicts, in order, for the spaced phase; then the burst's.
+    let traced = traced_verdicts(out)?;
+    let spaced = plan.expected.len();
+    ensure!(
+        traced.len() >= spaced,
+        "{} verdicts traced, the spaced phase alone sent {spaced}",
+        traced.len()
+    );
+    for (k, ((id, want), (got_id, got))) in plan.expected.iter().zip(&traced).enumerate() {
+        ensure!(
+            *id == *got_id && describe(want) == *got,
+            "command {k} ({id:03X}): model says `{}`, board traced `{got}` for {got_id:03X}",
+            describe(want)
+        );
+    }
+    let burst_handled = traced.len() - spaced;
+    ensure!(
+        traced[spaced..].iter().all(|(_, v)| v == "accepted"),
+        "a burst command was not accepted"
+    );
+    let dropped = out.end_field("rx dropped")? as usize;
+    ensure!(
+        spaced + burst_handled + dropped == spaced + plan.burst,
+        "counters: {spaced} + {burst_handled} handled + {dropped} dropped != {} sent",
+        spaced + plan.burst
+    );
+    // The reference publisher's grid, from its first release to a period before SYS_PD_N.
+    let (topic, name, period) = model.reference;
+    let id = 0x400 | u32::from(topic);
+    let first = *out
+        .releases(name, 0, plan.shutdown_us)?
+        .first()
+        .with_context(|| format!("the reference publisher {name} never ran"))?;
+    let stream = out.periodic_stream(id, name, period, first, plan.shutdown_us - period)?;
+    // Nothing unrequested.
+    for frame in &out.frames {
+        let byte = (frame.id & 0xFF) as u8;
+        let ok = frame.id == id || (frame.id & 0x400 != 0 && plan.requested.contains(&byte));
+        ensure!(
+            ok,
+            "unrequested frame {:03X} at {} µs",
+            frame.id,
+            frame.at_us
+        );
+    }
+    let (ram, stack) = out.ram_used()?;
+    Ok(format!(
+        "{} frames sent ({spaced} spaced, {} burst: {burst_handled} handled, {dropped} dropped); \
+         {} reference releases on the {period} µs grid, worst latency {} µs; burst at {} µs; \
+         RAM static {ram} B, stack high-water {stack} B",
+        spaced + plan.burst,
+        plan.burst,
+        stream.releases.len(),
+        stream.worst_latency,
+        plan.burst_us
+    ))
+}
+
+/// Runs the campaign on every board that has QEMU scenarios: `runs` runs of `frames` spaced
+/// frames each, seeds `seed`, `seed + 1`, ….
+pub fn run(root: &Path, seed: u64, frames: usize, runs: usize) -> Result<()> {
+    let boards: Vec<&Board> = BOARDS
+        .iter()
+        .filter(|b| !scenarios::for_board(b.name).is_empty())
+        .collect();
+    for board in boards {
+        let model = MODELS
+            .iter()
+            .find(|m| m.board == board.name)
+            .with_context(|| {
+                format!("board {} has QEMU scenarios but no campaign model (xtask/src/campaign.rs MODELS)", board.name)
+            })?;
+        let elf = crate::build_qemu(root, board)?;
+        for k in 0..runs {
+            let seed = seed.wrapping_add(k as u64);
+            let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+            let plan = plan(model, &mut rng, frames);
+            let work = qemu::fresh_work_dir(root, board.name);
+            let duration = plan.shutdown_us + 100_000;
+            let started = std::time::Instant::now();
+            let text = qemu::run(&elf, board.qemu_machine, &plan.frames, duration, &work)?;
+            let out = RunOutput::parse(&text)?;
+            match check(model, &plan, &out) {
+                Ok(summary) => println!(
+                    "campaign {} seed {seed}: ok in {:.1} s: {summary}",
+                    board.name,
+                    started.elapsed().as_secs_f64()
+                ),
+                Err(e) => bail!(
+                    "campaign {} seed {seed} failed (output in {}): {e:#}",
+                    board.name,
+                    work.display()
+                ),
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plans_are_seeded_spaced_and_single_fault() {
+        let model = &MODELS[0];
+        let a = plan(model, &mut Rng(7), 500);
+        let b = plan(model, &mut Rng(7), 500);
+        assert_eq!(a.frames, b.frames);
+        assert_eq!(a.expected.len(), 501);
+        // The spaced phase keeps the command handler's 400 µs.
+        let spaced: Vec<u64> = a
+            .frames
+            .iter()
+            .take(a.expected.len())
+            .map(|f| f.at_us)
+            .collect();
+        assert!(spaced.windows(2).all(|w| w[1] - w[0] >= 400));
+        assert!(a.frames.iter().all(|f| f.data.len() <= 8));
+    }
+
+    #[test]
+    fn the_model_follows_the_protocol_document() {
+        // Every row of the topic table in docs/protocol.md is in PROTOCOL_TOPICS.
+        let doc = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/protocol.md"),
+        )
+        .unwrap();
+        let rows = doc.lines().filter(|l| l.starts_with("| 0x")).count();
+        assert_eq!(rows, PROTOCOL_TOPICS.len());
+        for (byte, _, dlc) in PROTOCOL_TOPICS {
+            let row = doc
+                .lines()
+                .find(|l| l.starts_with(&format!("| 0x{byte:02X} ")))
+                .unwrap();
+            let actuator = row.contains("| actuator |");
+            assert_eq!(actuator, *dlc > 0, "{row}");
+        }
+    }
+}
