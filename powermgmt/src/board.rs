@@ -109,8 +109,9 @@ pub struct Charger {
 pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
     if let Err(fault) = amiro_firmware::chip::clock_tree_to_reset_state() {
         amiro_firmware::log!(
-            "clock reset: {:?} (continuing on the clock AMiRo-BLT left)",
-            fault
+            "clock reset: ",
+            fault.as_str(),
+            " (continuing on the clock AMiRo-BLT left)"
         );
     }
     // AMiRo-BLT used bxCAN: reset it (and the I2C blocks) so nothing of its set-up survives.
@@ -214,7 +215,7 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
     // SAFETY: CAN1 is this board's only CAN block; its halves are owned by one task each.
     let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
     if let Err(e) = bxcan::configure(&can, CAN_BTR) {
-        amiro_firmware::log!("CAN set-up: {:?}", e);
+        amiro_firmware::log!("CAN set-up: ", e.as_str());
     }
     Board {
         can_tx: Mailboxes::new(can),

@@ -355,8 +355,9 @@ mod app {
             cx.shared.signals.lock(|s| s.drive_shutdown_request());
             cx.shared.handler.lock(|h| h.stop_all());
             amiro_firmware::log!(
-                "shutdown ({}): SYS_PD_N low, publishers stopped",
-                mode.name()
+                "shutdown (",
+                mode.name(),
+                "): SYS_PD_N low, publishers stopped"
             );
             let deadline = now + crate::OTHERS_ACK_TIMEOUT_US;
             while !cx.shared.signals.lock(|s| s.sync_reads_low()) && Clock::now_us() < deadline {
@@ -364,7 +365,7 @@ mod app {
             }
             let acknowledged = cx.shared.signals.lock(|s| s.sync_reads_low());
             amiro_firmware::log!(
-                "shutdown: other modules {}",
+                "shutdown: other modules ",
                 if acknowledged {
                     "took the request"
                 } else {
@@ -375,7 +376,7 @@ mod app {
             crate::drain(&mut cx.shared.tx_queue).await;
             cx.shared.signals.lock(|s| s.pull_sync_low());
             platform::write_shutdown_reason(mode.blt_reason());
-            amiro_firmware::log!("shutdown: hand over to AMiRo-BLT ({})", mode.name());
+            amiro_firmware::log!("shutdown: hand over to AMiRo-BLT (", mode.name(), ")");
             bootloader::hand_over(power::callback(mode));
         } else {
             cx.shared.handler.lock(|h| h.stop_all());

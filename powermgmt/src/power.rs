@@ -131,10 +131,13 @@ pub fn regulate_charging(charger: &mut crate::platform::Charger) {
     let on = charging_allowed(vsys, charger.enabled());
     if on != charger.enabled() {
         charger.set_enabled(on);
+        let mut digits = [0u8; 10];
         amiro_firmware::log!(
-            "chargers {} (VSYS {} mV)",
+            "chargers ",
             if on { "enabled" } else { "disabled" },
-            vsys.unwrap_or(0)
+            " (VSYS ",
+            amiro_firmware::telemetry::decimal(vsys.unwrap_or(0), &mut digits),
+            " mV)"
         );
     }
 }

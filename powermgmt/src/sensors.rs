@@ -86,7 +86,10 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
         }
         let gauge = Bq27500::new(this.mux.bus_mut(), &mut this.delay).init();
         if gauge.is_err() {
-            amiro_firmware::log!("{:?}: fuel gauge did not answer its identity check", bus);
+            amiro_firmware::log!(
+                bus_name(bus),
+                ": fuel gauge did not answer its identity check"
+            );
         }
         this
     }
@@ -101,18 +104,23 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
             Ok(muxed) => Vcnl4020::new(muxed).init(&Config::AMIRO).is_ok(),
             Err(_) => false,
         };
+        let mut index = [0u8; 10];
+        let index = amiro_firmware::telemetry::decimal(u32::from(slot.index), &mut index);
         if !ready && now_us > 0 {
+            let mut missed = [0u8; 10];
             amiro_firmware::log!(
-                "ring sensor {} still missing ({} samples without a frame)",
-                slot.index,
-                slot.missed
+                "ring sensor ",
+                index,
+                " still missing (",
+                amiro_firmware::telemetry::decimal(slot.missed, &mut missed),
+                " samples without a frame)"
             );
         }
         if ready != slot.ready {
             amiro_firmware::log!(
-                "ring sensor {} {}",
-                slot.index,
-                if ready { "ready" } else { "missing" }
+                "ring sensor ",
+                index,
+                if ready { " ready" } else { " missing" }
             );
         }
         slot.ready = ready;
@@ -154,7 +162,12 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
             if slot.ready {
                 slot.ready = false;
                 slot.last_try_us = now_us;
-                amiro_firmware::log!("ring sensor {} stopped answering", slot.index);
+                let mut index = [0u8; 10];
+                amiro_firmware::log!(
+                    "ring sensor ",
+                    amiro_firmware::telemetry::decimal(u32::from(slot.index), &mut index),
+                    " stopped answering"
+                );
             }
         }
     }
@@ -184,6 +197,14 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
     /// Which bus this is.
     pub fn bus(&self) -> RingBus {
         self.bus
+    }
+}
+
+/// The bus's name in the log.
+const fn bus_name(bus: RingBus) -> &'static str {
+    match bus {
+        RingBus::I2c1 => "I2C1 (rear)",
+        RingBus::I2c2 => "I2C2 (front)",
     }
 }
 
