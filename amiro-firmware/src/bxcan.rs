@@ -196,6 +196,35 @@ pub fn configure(regs: &impl Registers, btr: u32) -> Result<(), InitError> {
     wait_for(|| regs.read(reg::MSR) & bit::MSR_INAK == 0).ok_or(InitError::LeaveInitTimeout)
 }
 
+/// CAN1's three halves, each owned by one task: the transmit mailboxes, receive FIFO 0, and the
+/// error monitor.
+pub struct Port {
+    /// Transmit mailboxes (the CAN transmit interrupt).
+    pub tx: Mailboxes<Mmio>,
+    /// Receive FIFO 0 (the CAN receive interrupt).
+    pub rx: Fifo0<Mmio>,
+    /// Error state (the status-change interrupt, and a periodic poll).
+    pub errors: ErrorMonitor<Mmio>,
+}
+
+/// Configures CAN1 (clock on and reset: `chip::reset_and_enable_can1`) with bit timing `btr` and
+/// hands out its halves. A set-up that times out is logged: the controller stays configured and
+/// joins the bus once it frees.
+#[cfg(target_os = "none")]
+pub fn bring_up(btr: u32) -> Port {
+    // SAFETY: CAN1 exists at this address on both chips; each half built on it is owned by one task
+    // (`Port`'s contract) and touches its own registers.
+    let can = unsafe { Mmio::new(CAN1_BASE) };
+    if let Err(e) = configure(&can, btr) {
+        crate::log!("CAN set-up: ", e.as_str());
+    }
+    Port {
+        tx: Mailboxes::new(can),
+        rx: Fifo0::new(can),
+        errors: ErrorMonitor::new(can),
+    }
+}
+
 /// Silences the controller's interrupts (before the hand-over to the bootloader).
 pub fn disable_interrupts(regs: &impl Registers) {
     regs.write(reg::IER, 0);

@@ -20,6 +20,17 @@ const RCC_CSR: usize = 0x24;
 #[cfg(feature = "f4")]
 const RCC_CSR: usize = 0x74;
 
+/// RCC_APB1RSTR / RCC_APB1ENR offsets (CAN1 is bit 25 in both, on both families).
+#[cfg(feature = "f1")]
+const RCC_APB1RSTR: usize = 0x10;
+#[cfg(feature = "f4")]
+const RCC_APB1RSTR: usize = 0x20;
+#[cfg(feature = "f1")]
+const RCC_APB1ENR: usize = 0x1C;
+#[cfg(feature = "f4")]
+const RCC_APB1ENR: usize = 0x40;
+const APB1_CAN1: u32 = 1 << 25;
+
 const CR_HSION: u32 = 1 << 0;
 const CR_HSIRDY: u32 = 1 << 1;
 const CR_HSEON: u32 = 1 << 16;
@@ -138,4 +149,66 @@ pub fn take_reset_cause() -> amiro_can::ResetCause {
     // RMVF clears the flags.
     rcc_modify(RCC_CSR, |r| r | (1 << 24));
     cause
+}
+
+/// Resets CAN1 (nothing of AMiRo-BLT's filters, modes or pending mailboxes survives) and enables its
+/// clock. Every board calls it in `init`, before `bxcan::bring_up`.
+pub fn reset_and_enable_can1() {
+    if cfg!(feature = "qemu") {
+        return;
+    }
+    rcc_modify(RCC_APB1RSTR, |r| r | APB1_CAN1);
+    rcc_modify(RCC_APB1RSTR, |r| r & !APB1_CAN1);
+    rcc_modify(RCC_APB1ENR, |r| r | APB1_CAN1);
+}
+
+/// The clock plan of an F103 board: 72 MHz from the 8 MHz crystal, or 64 MHz from the internal
+/// oscillator when the crystal does not start (bounded wait, logged as a fault), with the CAN bit
+/// timing that gives 1 Mbit/s from either APB1.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct F1ClockPlan {
+    /// Whether the crystal runs.
+    pub on_crystal: bool,
+    /// SYSCLK = HCLK.
+    pub sysclk_hz: u32,
+    /// PCLK1 = PCLK2.
+    pub pclk_hz: u32,
+    /// The APB1 timer clock (2 × PCLK1).
+    pub timer_hz: u32,
+    /// CAN bit timing for this PCLK1.
+    pub can_btr: u32,
+}
+
+/// 36 MHz APB1: 18 MHz quanta, 1 + 14 + 3 tq, sample point 83 % (the original firmware's).
+pub const F1_CAN_BTR: u32 = 0x012D_0001;
+/// 32 MHz APB1: 16 MHz quanta, 1 + 13 + 2 tq, sample point 87.5 %.
+pub const F1_CAN_BTR_HSI: u32 = 0x001C_0001;
+
+/// Resets the clock tree, starts the crystal and chooses the F103 clock plan (logging faults).
+pub fn f1_clock_plan() -> F1ClockPlan {
+    if let Err(fault) = clock_tree_to_reset_state() {
+        crate::log!(
+            "clock reset: ",
+            fault.as_str(),
+            " (continuing on the clock AMiRo-BLT left)"
+        );
+    }
+    if start_crystal().is_ok() {
+        F1ClockPlan {
+            on_crystal: true,
+            sysclk_hz: 72_000_000,
+            pclk_hz: 36_000_000,
+            timer_hz: 72_000_000,
+            can_btr: F1_CAN_BTR,
+        }
+    } else {
+        crate::log!("fault: the 8 MHz crystal did not start; running from HSI at 64 MHz");
+        F1ClockPlan {
+            on_crystal: false,
+            sysclk_hz: 64_000_000,
+            pclk_hz: 32_000_000,
+            timer_hz: 64_000_000,
+            can_btr: F1_CAN_BTR_HSI,
+        }
+    }
 }

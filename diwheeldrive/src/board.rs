@@ -19,19 +19,10 @@ use stm32f1xx_hal::prelude::*;
 use stm32f1xx_hal::rcc;
 use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
 
-/// The board's CAN bit timing at 1 Mbit/s from a 36 MHz APB1: the original firmware's BTR
-/// (18 MHz quanta, 1 + 14 + 3 tq, sample point 83 %).
-pub const CAN_BTR: u32 = 0x012D_0001;
 /// Motor PWM: 72 MHz timer clock, period 3600 → 20 kHz, as the original 1.x firmware.
 pub const PWM_PERIOD: u16 = 3600;
 /// System clock.
 pub const SYSCLK_HZ: u32 = 72_000_000;
-/// System clock when the crystal does not start (HSI / 2 × 16); the motor PWM then runs at
-/// 17.8 kHz instead of 20 kHz.
-pub const SYSCLK_HSI_HZ: u32 = 64_000_000;
-/// CAN bit timing at 1 Mbit/s from the 32 MHz APB1 of the internal-oscillator fallback (16 MHz
-/// quanta, 1 + 13 + 2 tq, sample point 87.5 %).
-pub const CAN_BTR_HSI: u32 = 0x001C_0001;
 /// The APB1 timer clock (TIM5's input), as `init` set it up.
 static TIMER_CLOCK_HZ: core::sync::atomic::AtomicU32 =
     core::sync::atomic::AtomicU32::new(SYSCLK_HZ);
@@ -102,38 +93,20 @@ pub fn init(
     mut cp: cortex_m::Peripherals,
     spi_cell: &'static mut Option<AtomicCell<ImuBus>>,
 ) -> (Board, cortex_m::peripheral::NVIC) {
-    if let Err(fault) = amiro_firmware::chip::clock_tree_to_reset_state() {
-        amiro_firmware::log!(
-            "clock reset: ",
-            fault.as_str(),
-            " (continuing on the clock AMiRo-BLT left)"
-        );
-    }
-    // AMiRo-BLT used bxCAN: reset it so no filter, mode bit (e.g. TX FIFO priority) or pending
-    // mailbox of the bootloader's survives into the application's configuration.
-    dp.RCC.apb1rstr().modify(|_, w| w.canrst().set_bit());
-    dp.RCC.apb1rstr().modify(|_, w| w.canrst().clear_bit());
-    // The HAL waits for the crystal without a bound: start it ourselves first (bounded) and run
-    // from the internal oscillator if it does not come up.
-    let on_crystal = amiro_firmware::chip::start_crystal().is_ok();
-    let config = if on_crystal {
+    // Clock tree reset, crystal start (bounded) or the HSI fallback, and CAN1 reset: the runtime's.
+    let clocks = amiro_firmware::chip::f1_clock_plan();
+    amiro_firmware::chip::reset_and_enable_can1();
+    let base = if clocks.on_crystal {
         rcc::Config::hse(8.MHz())
-            .sysclk(SYSCLK_HZ.Hz())
-            .hclk(SYSCLK_HZ.Hz())
-            .pclk1(36.MHz())
-            .pclk2(36.MHz())
     } else {
-        amiro_firmware::log!("fault: the 8 MHz crystal did not start; running from HSI at 64 MHz");
         rcc::Config::hsi()
-            .sysclk(SYSCLK_HSI_HZ.Hz())
-            .hclk(SYSCLK_HSI_HZ.Hz())
-            .pclk1(32.MHz())
-            .pclk2(32.MHz())
     };
-    TIMER_CLOCK_HZ.store(
-        if on_crystal { SYSCLK_HZ } else { SYSCLK_HSI_HZ },
-        core::sync::atomic::Ordering::Relaxed,
-    );
+    let config = base
+        .sysclk(clocks.sysclk_hz.Hz())
+        .hclk(clocks.sysclk_hz.Hz())
+        .pclk1(clocks.pclk_hz.Hz())
+        .pclk2(clocks.pclk_hz.Hz());
+    TIMER_CLOCK_HZ.store(clocks.timer_hz, core::sync::atomic::Ordering::Relaxed);
     let mut flash = dp.FLASH.constrain();
     let mut rcc = dp.RCC.freeze(config, &mut flash.acr);
     // The blocking I2C driver times out on the DWT cycle counter.
@@ -238,28 +211,11 @@ pub fn init(
         I2C_TIMEOUT_US,
     );
 
-    // CAN1 on PA11/PA12 at 1 Mbit/s (no remap): RX floating input, TX alternate push-pull. The
-    // runtime's driver configures the controller: only command frames (C/S bit 0, standard IDs,
-    // data frames) pass the hardware filter; TX mailboxes are served by identifier, as the analysis
-    // assumes; automatic bus-off recovery.
+    // CAN1 on PA11/PA12 at 1 Mbit/s (no remap): RX floating input, TX alternate push-pull; the
+    // runtime's driver configures the controller.
     let _can_rx_pin = gpioa.pa11.into_floating_input(&mut gpioa.crh);
     let _can_tx_pin = gpioa.pa12.into_alternate_push_pull(&mut gpioa.crh);
-    // SAFETY: one bit in a register only init touches (the HAL has consumed its RCC handle).
-    unsafe {
-        (*pac::RCC::ptr())
-            .apb1enr()
-            .modify(|_, w| w.canen().set_bit())
-    };
-    // SAFETY: CAN1 is this board's only CAN block; its halves are owned by one task each.
-    let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
-    let btr = if on_crystal { CAN_BTR } else { CAN_BTR_HSI };
-    if let Err(e) = bxcan::configure(&can, btr) {
-        // The controller stays configured and joins once the bus frees; the error is logged.
-        amiro_firmware::log!("CAN set-up: ", e.as_str());
-    }
-    let can_tx = Mailboxes::new(can);
-    let can_rx = Fifo0::new(can);
-    let can_errors = amiro_firmware::bxcan::ErrorMonitor::new(can);
+    let can = bxcan::bring_up(clocks.can_btr);
 
     let signals = SystemSignals {
         sys_sync,
@@ -269,9 +225,9 @@ pub fn init(
     let _ = dp.IWDG;
     (
         Board {
-            can_tx,
-            can_rx,
-            can_errors,
+            can_tx: can.tx,
+            can_rx: can.rx,
+            can_errors: can.errors,
             gyro_spi,
             accel_spi,
             compass_i2c,

@@ -5,7 +5,7 @@
 //! 2.25 MHz mode 0 with XLAT on PC4 driven as the chip select (its rising edge at the end of a
 //! transfer latches) and BLANK on PA4 (high = dark, the reset state, until the driver holds a
 //! frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The monotonic is TIM3.
-use amiro_firmware::bxcan::{self, ErrorMonitor, Fifo0, Mailboxes, Mmio};
+use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
 use stm32f1xx_hal::afio::AfioExt;
@@ -15,16 +15,6 @@ use stm32f1xx_hal::prelude::*;
 use stm32f1xx_hal::rcc;
 use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
 
-/// CAN bit timing at 1 Mbit/s from a 36 MHz APB1 (the original firmware's: 18 MHz quanta,
-/// 1 + 14 + 3 tq, sample point 83 %).
-pub const CAN_BTR: u32 = 0x012D_0001;
-/// CAN bit timing at 1 Mbit/s from the 32 MHz APB1 of the internal-oscillator fallback (16 MHz
-/// quanta, 1 + 13 + 2 tq, sample point 87.5 %).
-pub const CAN_BTR_HSI: u32 = 0x001C_0001;
-/// System clock from the crystal.
-pub const SYSCLK_HZ: u32 = 72_000_000;
-/// System clock when the crystal does not start (HSI / 2 × 16).
-pub const SYSCLK_HSI_HZ: u32 = 64_000_000;
 /// The TLC5947's shift clock: 36 MHz / 16, as the original firmware.
 pub const LED_SPI_HZ: u32 = 2_250_000;
 /// EXTI line of SYS_PD_N (PC14).
@@ -59,8 +49,8 @@ pub struct Board {
     pub blank: Blank,
     /// System signals.
     pub signals: SystemSignals,
-    /// Whether the board runs from the crystal (false: the internal-oscillator fallback).
-    pub on_crystal: bool,
+    /// The APB1 timer clock (TIM3's input) of the clock plan in use.
+    pub timer_hz: u32,
 }
 
 /// TLC5947 BLANK (PA4): high = every output off.
@@ -82,31 +72,19 @@ pub struct SystemSignals {
 /// Brings the board up: clocks (crystal, or the internal oscillator if the crystal does not start),
 /// pins, SPI1 for the LED driver, CAN.
 pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
-    if let Err(fault) = amiro_firmware::chip::clock_tree_to_reset_state() {
-        amiro_firmware::log!(
-            "clock reset: ",
-            fault.as_str(),
-            " (continuing on the clock AMiRo-BLT left)"
-        );
-    }
-    // AMiRo-BLT used bxCAN: reset it so nothing of the bootloader's configuration survives.
-    dp.RCC.apb1rstr().modify(|_, w| w.canrst().set_bit());
-    dp.RCC.apb1rstr().modify(|_, w| w.canrst().clear_bit());
-    let on_crystal = amiro_firmware::chip::start_crystal().is_ok();
-    let config = if on_crystal {
+    // Clock tree reset, crystal start (bounded) or the HSI fallback, and CAN1 reset: the runtime's.
+    let clocks = amiro_firmware::chip::f1_clock_plan();
+    amiro_firmware::chip::reset_and_enable_can1();
+    let base = if clocks.on_crystal {
         rcc::Config::hse(8.MHz())
-            .sysclk(SYSCLK_HZ.Hz())
-            .hclk(SYSCLK_HZ.Hz())
-            .pclk1(36.MHz())
-            .pclk2(36.MHz())
     } else {
-        amiro_firmware::log!("fault: the 8 MHz crystal did not start; running from HSI at 64 MHz");
         rcc::Config::hsi()
-            .sysclk(SYSCLK_HSI_HZ.Hz())
-            .hclk(SYSCLK_HSI_HZ.Hz())
-            .pclk1(32.MHz())
-            .pclk2(32.MHz())
     };
+    let config = base
+        .sysclk(clocks.sysclk_hz.Hz())
+        .hclk(clocks.sysclk_hz.Hz())
+        .pclk1(clocks.pclk_hz.Hz())
+        .pclk2(clocks.pclk_hz.Hz());
     let mut flash = dp.FLASH.constrain();
     let mut rcc = dp.RCC.freeze(config, &mut flash.acr);
 
@@ -161,39 +139,28 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     let led_spi =
         ExclusiveDevice::new_no_delay(spi, xlat).unwrap_or_else(|_| amiro_firmware::fault::halt());
 
-    // CAN1 on PA11 (RX, floating input) and PA12 (TX, alternate push-pull), no remap.
+    // CAN1 on PA11 (RX, floating input) and PA12 (TX, alternate push-pull), no remap; the runtime's
+    // driver configures the controller.
     let _can_rx_pin = gpioa.pa11.into_floating_input(&mut gpioa.crh);
     let _can_tx_pin = gpioa.pa12.into_alternate_push_pull(&mut gpioa.crh);
-    // SAFETY: one bit in a register only init touches (the HAL has consumed its RCC handle).
-    unsafe {
-        (*pac::RCC::ptr())
-            .apb1enr()
-            .modify(|_, w| w.canen().set_bit())
-    };
-    // SAFETY: CAN1 is this board's only CAN block; its halves are owned by one task each.
-    let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
-    let btr = if on_crystal { CAN_BTR } else { CAN_BTR_HSI };
-    if let Err(e) = bxcan::configure(&can, btr) {
-        amiro_firmware::log!("CAN set-up: ", e.as_str());
-    }
+    let can = bxcan::bring_up(clocks.can_btr);
 
     Board {
-        can_tx: Mailboxes::new(can),
-        can_rx: Fifo0::new(can),
-        can_errors: ErrorMonitor::new(can),
+        can_tx: can.tx,
+        can_rx: can.rx,
+        can_errors: can.errors,
         led_spi,
         blank: Blank(blank),
         signals: SystemSignals {
             sys_sync,
             _sys_pd: sys_pd,
         },
-        on_crystal,
+        timer_hz: clocks.timer_hz,
     }
 }
 
 /// Starts the TIM3 monotonic (APB1 timers run at 2 × PCLK1).
-pub fn start_monotonic(priority: u8, on_crystal: bool) {
-    let timer_hz = if on_crystal { 72_000_000 } else { 64_000_000 };
+pub fn start_monotonic(priority: u8, timer_hz: u32) {
     Mono::start(timer_hz, rtic_monotonics::stm32::Priority::new(priority));
 }
 

@@ -112,7 +112,7 @@ mod app {
         let (wake_publisher, publisher_wakeups) = make_channel!((), 1);
         let mut signals = hw.signals;
 
-        platform::start_monotonic(levels::MONOTONIC, hw.on_crystal);
+        platform::start_monotonic(levels::MONOTONIC, hw.timer_hz);
         handle_commands::spawn().ok();
         latch_leds::spawn().ok();
         publish::spawn().ok();

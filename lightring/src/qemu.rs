@@ -64,8 +64,8 @@ pub struct Board {
     pub blank: Blank,
     /// Simulated system signals.
     pub signals: SystemSignals,
-    /// QEMU has no crystal to fail.
-    pub on_crystal: bool,
+    /// Unused in QEMU (SysTick runs from the core clock).
+    pub timer_hz: u32,
 }
 
 /// Brings the simulated board up (touches no STM32 peripheral).
@@ -78,12 +78,12 @@ pub fn init(_dp: pac::Peripherals, cp: cortex_m::Peripherals) -> Board {
         led_spi: LedSpi(SimLedDriver::new()),
         blank: Blank,
         signals: SystemSignals,
-        on_crystal: true,
+        timer_hz: 0,
     }
 }
 
 /// The SysTick monotonic already runs (started in `init`).
-pub fn start_monotonic(_priority: u8, _on_crystal: bool) {}
+pub fn start_monotonic(_priority: u8, _timer_hz: u32) {}
 
 /// The safe state: BLANK high (printed).
 pub fn leds_dark() {
