@@ -122,9 +122,7 @@ impl Master {
             let sr1 = self.sr1();
             if sr1 & SR1_ERRORS != 0 {
                 // SAFETY: writing 0 to the rc_w0 error bits clears them.
-                self.regs()
-                    .sr1()
-                    .write(|w| unsafe { w.bits(!SR1_ERRORS & 0xFFFF) });
+                self.regs().sr1().write(|w| unsafe { w.bits(!SR1_ERRORS) });
                 return Err(if sr1 & SR1_AF != 0 {
                     Error::NoAcknowledge(nack)
                 } else if sr1 & SR1_ARLO != 0 {

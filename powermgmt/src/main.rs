@@ -140,8 +140,8 @@ mod app {
         let (wake_h, wake_high) = make_channel!((), 1);
         let (wake_m, wake_medium) = make_channel!((), 1);
         let (wake_l, wake_low) = make_channel!((), 1);
-        let rear_bus = RearBus::new(RingBus::I2c1, hw.rear_i2c, platform::GaugeDelay::default());
-        let front_bus = FrontBus::new(RingBus::I2c2, hw.front_i2c, platform::GaugeDelay::default());
+        let rear_bus = RearBus::new(RingBus::I2c1, hw.rear_i2c, platform::GaugeDelay);
+        let front_bus = FrontBus::new(RingBus::I2c2, hw.front_i2c, platform::GaugeDelay);
         let mut signals = hw.signals;
         // The power lines keep their configuration; nothing in the app touches them again.
         let _power_lines = hw.power_lines;
@@ -298,7 +298,7 @@ mod app {
             }
             cx.shared.charger.lock(power::regulate_charging);
             round = round.wrapping_add(1);
-            if round % crate::BATTERY_CHECK_EVERY == 0 {
+            if round.is_multiple_of(crate::BATTERY_CHECK_EVERY) {
                 let (front, rear) =
                     sensors::read_batteries(&mut cx.shared.rear_bus, &mut cx.shared.front_bus);
                 let lines = cx.shared.charger.lock(|c| c.lines());
