@@ -46,8 +46,6 @@ pub type CanRxPort = Fifo0<Mmio>;
 pub type RearI2c = Master;
 /// I2C2, the front bus.
 pub type FrontI2c = Master;
-/// The fuel gauges' bus-free pause: a busy wait (66 µs, a few times per gauge read).
-pub type GaugeDelay = BusyDelay;
 
 /// Interrupt that runs the transmit path.
 pub const CAN_TX_INTERRUPT: Interrupt = Interrupt::CAN1_TX;
@@ -72,11 +70,11 @@ pub struct Board {
     pub power_lines: PowerLines,
 }
 
-/// A busy wait on the core clock.
+/// The fuel gauges' bus-free pause (66 µs after each transfer): a busy wait on the core clock.
 #[derive(Debug, Default, Clone, Copy)]
-pub struct BusyDelay;
+pub struct GaugeDelay;
 
-impl embedded_hal::delay::DelayNs for BusyDelay {
+impl embedded_hal::delay::DelayNs for GaugeDelay {
     fn delay_ns(&mut self, ns: u32) {
         cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(SYSCLK_HZ / 1_000_000));
     }
