@@ -1,7 +1,9 @@
 //! The one build script of every board crate (`build = "../amiro-firmware/board-build.rs"`):
 //! writes the linker memory map for the board's chip family (from the target triple) and link
 //! (behind AMiRo-BLT by default, feature `bare-chip` or `qemu` otherwise), from
-//! `amiro_firmware::layout`.
+//! `amiro_firmware::layout`; and the board's admission table (`admission_table.rs`, included with
+//! `amiro_firmware::admission_table!()`) from the same app sources and timing files
+//! `cargo xtask analyze` reads — the build fails when they disagree.
 use std::{env, fs, path::PathBuf};
 
 use amiro_firmware::layout::{Family, Link, MemoryMap};
@@ -23,6 +25,17 @@ fn main() {
         .write_memory_x(&mut memory_x)
         .expect("formatting into a String");
     fs::write(out.join("memory.x"), memory_x).expect("write memory.x");
+    let root =
+        PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"))
+            .join("..");
+    let table = amiro_firmware::admission::table_source(&root).unwrap_or_else(|e| {
+        panic!("admission table: the apps and the timing files disagree (as `cargo xtask analyze` would say): {e}")
+    });
+    fs::write(out.join("admission_table.rs"), table).expect("write admission_table.rs");
+    println!("cargo:rerun-if-changed=../schedule-analysis/models");
+    for board in ["diwheeldrive", "powermgmt", "lightring"] {
+        println!("cargo:rerun-if-changed=../{board}/src/main.rs");
+    }
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rustc-link-arg-bins=--nmagic");

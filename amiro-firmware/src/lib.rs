@@ -12,6 +12,7 @@
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 
+pub mod admission;
 pub mod bxcan;
 pub mod can;
 pub mod layout;

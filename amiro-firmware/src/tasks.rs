@@ -141,6 +141,85 @@ pub fn handle_command<C: Clock>(
     }
 }
 
+/// Handles one command frame with admission control (`admission`, `docs/analysis.md`): every
+/// command heard goes through the board's [`crate::admission::Admission`] first, which keeps the
+/// robot's running publishers and decides this board's publish requests. A refused request never
+/// reaches the sensor-data handler (the publisher table and the running grids stay as they are),
+/// is counted, and is answered with the two verdict frames on the board's diagnostics topic
+/// through the transmit queue; accept-and-warn applies it and sends the verdict as a warning.
+/// Otherwise as [`handle_command`]. This is the hook every board's `handle_commands` calls.
+pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q: usize>(
+    frame: &RxFrame,
+    admission: &mut crate::admission::Admission<N, M>,
+    handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
+    tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
+    wake_levels: &mut [Sender<'static, (), 1>],
+) -> Option<(u64, Outcome)> {
+    use crate::admission::Check;
+    if signals::shutting_down() {
+        return None;
+    }
+    #[cfg(feature = "qemu")]
+    let started = C::now_us();
+    let check = admission.on_command(frame.id, frame.payload());
+    #[cfg(feature = "qemu")]
+    note_decision::<C, N, M>(frame.id, &check, admission, started);
+    let (outcome, verdict) = match check {
+        Check::Pass => return handle_command::<C>(frame, handler, wake_levels),
+        Check::Refused(frames) => {
+            crate::health::count_admission(true);
+            (None, frames)
+        }
+        Check::Warned(frames) => {
+            crate::health::count_admission(false);
+            (handle_command::<C>(frame, handler, wake_levels), frames)
+        }
+    };
+    let now = C::now_us();
+    for verdict_frame in verdict {
+        let pushed = tx_queue.lock(|q| q.push(verdict_frame));
+        for kind in TraceKind::for_push(verdict_frame.id().raw(), &pushed) {
+            telemetry::trace(&TraceEvent::new(now, kind));
+        }
+    }
+    cortex_m::peripheral::NVIC::pend(tx_interrupt);
+    outcome
+}
+
+/// QEMU: the cost of each decision that ran an analysis (the benchmark `cargo xtask scenarios`
+/// reads): fixed-point iterations and virtual time (`-icount shift=3`: 8 ns per instruction).
+#[cfg(feature = "qemu")]
+fn note_decision<C: Clock, const N: usize, const M: usize>(
+    id: u16,
+    check: &crate::admission::Check,
+    admission: &crate::admission::Admission<N, M>,
+    started: u64,
+) {
+    use crate::admission::Check;
+    let (last, _) = admission.iterations();
+    if last == 0 {
+        return;
+    }
+    let took = C::now_us().saturating_sub(started);
+    let what = match check {
+        Check::Pass => "pass",
+        Check::Refused(_) => "refused",
+        Check::Warned(_) => "warned",
+    };
+    let (mut a, mut b, mut c) = ([0u8; 10], [0u8; 10], [0u8; 10]);
+    crate::log!(
+        "admission id=",
+        telemetry::decimal(u32::from(id), &mut a),
+        " ",
+        what,
+        " iterations=",
+        telemetry::decimal(u32::try_from(last).unwrap_or(u32::MAX), &mut b),
+        " virtual_us=",
+        telemetry::decimal(u32::try_from(took).unwrap_or(u32::MAX), &mut c)
+    );
+}
+
 /// Index of a CAN priority level in per-level arrays (0 = urgent).
 pub const fn level_index(p: Priority) -> usize {
     p as usize
