@@ -19,8 +19,19 @@ static DEADLINE_MISSES: [AtomicU32; 4] = [
 static LATE_FRAMES: AtomicU32 = AtomicU32::new(0);
 static ADMISSION_REFUSED: AtomicU32 = AtomicU32::new(0);
 static ADMISSION_WARNED: AtomicU32 = AtomicU32::new(0);
-static SENSOR_FAULTS: AtomicU32 = AtomicU32::new(0);
-static SENSOR_FAULT_NOW: AtomicBool = AtomicBool::new(false);
+/// Sensor groups a board may report (one per bus or device group).
+pub const SENSOR_GROUPS: usize = 8;
+static GROUP_FAULTS: [AtomicU32; SENSOR_GROUPS] = [
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+];
+static GROUPS_FAULTY: AtomicU8 = AtomicU8::new(0);
 static ERROR_PASSIVE: AtomicU32 = AtomicU32::new(0);
 static BUS_OFF: AtomicU32 = AtomicU32::new(0);
 static PASSIVE_NOW: AtomicBool = AtomicBool::new(false);
@@ -57,10 +68,24 @@ pub fn count_admission(refused: bool) {
     }
 }
 
-/// Sets the board's sensor-fault total and whether a sensor is faulty right now.
-pub fn set_sensor_faults(total: u32, faulty_now: bool) {
-    SENSOR_FAULTS.store(total, Ordering::Relaxed);
-    SENSOR_FAULT_NOW.store(faulty_now, Ordering::Relaxed);
+/// Reports sensor group `group` (0..[`SENSOR_GROUPS`]): its failures since boot and whether it
+/// is out of service now. Diagnostics page 0 carries the sum and a "sensor fault now" flag.
+pub fn report_sensor_group(group: usize, faults: u32, faulty_now: bool) {
+    if let Some(counter) = GROUP_FAULTS.get(group) {
+        counter.store(faults, Ordering::Relaxed);
+        let bit = 1u8 << group;
+        if faulty_now {
+            GROUPS_FAULTY.fetch_or(bit, Ordering::Relaxed);
+        } else {
+            GROUPS_FAULTY.fetch_and(!bit, Ordering::Relaxed);
+        }
+    }
+}
+
+fn sensor_faults() -> u32 {
+    GROUP_FAULTS
+        .iter()
+        .fold(0u32, |sum, c| sum.saturating_add(c.load(Ordering::Relaxed)))
 }
 
 /// Records the CAN controller's error episodes (from its `ErrorMonitor`).
@@ -90,7 +115,7 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
     if PASSIVE_NOW.load(Ordering::Relaxed) {
         flags = flags.with(StatusFlags::ERROR_PASSIVE);
     }
-    if SENSOR_FAULT_NOW.load(Ordering::Relaxed) {
+    if GROUPS_FAULTY.load(Ordering::Relaxed) != 0 {
         flags = flags.with(StatusFlags::SENSOR_FAULT);
     }
     if WATCHDOG_RUNNING.load(Ordering::Relaxed) {
@@ -103,7 +128,7 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
         uptime_s: u32::try_from(now_us / 1_000_000).unwrap_or(u32::MAX),
         reset_cause: ResetCause::from_bits(RESET_CAUSE.load(Ordering::Relaxed)),
         flags,
-        sensor_faults: SENSOR_FAULTS.load(Ordering::Relaxed),
+        sensor_faults: sensor_faults(),
         accepted: counters.accepted,
         rejected: counters.rejected,
         admission_refused: ADMISSION_REFUSED.load(Ordering::Relaxed),

@@ -126,9 +126,9 @@ mod app {
         let (wake_m, wake_medium) = make_channel!((), 1);
         let (wake_l, wake_low) = make_channel!((), 1);
 
-        let imu = Imu::new(InertialSensors::new(hw.gyro_spi, hw.accel_spi));
-        let compass = Compass::new(suite::Compass::new(hw.compass_i2c));
-        let floor = Floor::new(FloorSensors::new(hw.floor_i2c));
+        let imu = Imu::new(InertialSensors::new(hw.gyro_spi, hw.accel_spi), 0);
+        let compass = Compass::new(suite::Compass::new(hw.compass_i2c), 1);
+        let floor = Floor::new(FloorSensors::new(hw.floor_i2c), 2);
         let mut signals = hw.signals;
         amiro_firmware::log!(
             "DiWheelDrive: sensors ",

@@ -15,30 +15,38 @@ pub use amiro_sensors::drivers::suite::Samples;
 
 /// A sensor group and whether it came up: amiro-sensors' [`suite::Supervised`] (host-tested),
 /// which stops publishing a group whose devices fail (a stuck line, a wrong identity, a NACK),
-/// counts every failure and retries with back-off, 1 s → 2 → 4 → 8 s.
+/// counts every failure and retries with back-off, 1 s → 2 → 4 → 8 s. Its fault count and state go
+/// into the board's diagnostics (page 0).
 pub struct Group<G> {
     supervised: suite::Supervised<G>,
+    /// The group's index in the board's health report.
+    index: usize,
 }
 
 impl<G: SensorGroup> Group<G> {
-    /// Checks and configures the group's devices.
-    pub fn new(group: G) -> Self {
-        Self {
+    /// Checks and configures the group's devices; `index` names the group in the health report.
+    pub fn new(group: G, index: usize) -> Self {
+        let group = Self {
             supervised: suite::Supervised::new(group),
-        }
+            index,
+        };
+        group.report();
+        group
+    }
+
+    /// Puts the group's fault count and state into the board's diagnostics.
+    fn report(&self) {
+        amiro_firmware::health::report_sensor_group(
+            self.index,
+            self.supervised.faults(),
+            !self.supervised.is_ready(),
+        );
     }
 
     /// Whether the group is up: every device answered its identity check and the last samples
     /// worked.
     pub fn is_ready(&self) -> bool {
         self.supervised.is_ready()
-    }
-
-    /// Failed samples and failed (re-)initialisations since boot, for diagnostics (page 0's
-    /// sensor-fault count; not wired into main.rs yet, hence the allow).
-    #[allow(dead_code)]
-    pub fn faults(&self) -> u32 {
-        self.supervised.faults()
     }
 
     /// One sample of `topic`: its frames, or none when the group is missing or the read failed.
@@ -48,7 +56,9 @@ impl<G: SensorGroup> Group<G> {
     // One copy for the four publisher tasks that call it (they are generic over their locks).
     #[inline(never)]
     pub fn sample(&mut self, topic: Topic, now_us: u64) -> Samples {
-        self.supervised.sample(topic, now_us)
+        let samples = self.supervised.sample(topic, now_us);
+        self.report();
+        samples
     }
 }
 

@@ -42,6 +42,8 @@ pub type Clock = amiro_firmware::mono::TimerClock<rtic_monotonics::stm32::Tim2Ba
 pub type CanTxPort = Mailboxes<Mmio>;
 /// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
 pub type CanRxPort = Fifo0<Mmio>;
+/// The CAN controller's error monitor.
+pub type CanErrors = amiro_firmware::bxcan::ErrorMonitor<Mmio>;
 /// I2C1, the rear bus.
 pub type RearI2c = Master;
 /// I2C2, the front bus.
@@ -58,6 +60,8 @@ pub struct Board {
     pub can_tx: CanTxPort,
     /// CAN receive FIFO 0 (command frames only, by hardware filter).
     pub can_rx: CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: CanErrors,
     /// I2C1.
     pub rear_i2c: RearI2c,
     /// I2C2.
@@ -210,14 +214,11 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
         gpioa.pa11.into_alternate::<9>(),
         gpioa.pa12.into_alternate::<9>(),
     );
-    // SAFETY: CAN1 is this board's only CAN block; its halves are owned by one task each.
-    let can = unsafe { Mmio::new(bxcan::CAN1_BASE) };
-    if let Err(e) = bxcan::configure(&can, CAN_BTR) {
-        amiro_firmware::log!("CAN set-up: ", e.as_str());
-    }
+    let can = bxcan::bring_up(CAN_BTR);
     Board {
-        can_tx: Mailboxes::new(can),
-        can_rx: Fifo0::new(can),
+        can_tx: can.tx,
+        can_rx: can.rx,
+        can_errors: can.errors,
         rear_i2c,
         front_i2c,
         charger,

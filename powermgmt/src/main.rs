@@ -114,6 +114,8 @@ mod app {
         signals: platform::SystemSignals,
         /// The power monitor's progress mark for the watchdog.
         alive: Liveness,
+        /// The CAN controller's error state (status interrupt, and polled by the watchdog task).
+        can_errors: platform::CanErrors,
     }
 
     #[local]
@@ -133,6 +135,7 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
         iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
+        amiro_firmware::health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
         amiro_firmware::telemetry::init();
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
@@ -174,6 +177,7 @@ mod app {
                 charger: hw.charger,
                 signals,
                 alive: Liveness::new(),
+                can_errors: hw.can_errors,
             },
             Local {
                 can_rx: hw.can_rx,
@@ -311,9 +315,15 @@ mod app {
         }
     }
 
+    /// CAN status change (error warning, error-passive, bus-off): counted and traced.
+    #[task(binds = CAN1_SCE, priority = 7, shared = [can_errors])]
+    fn can_status(mut cx: can_status::Context) {
+        cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
+    }
+
     /// Feeds the independent watchdog — from the least urgent level, and only while the power
     /// monitor keeps running: a fed dog proves the whole schedule is alive.
-    #[task(priority = 1, shared = [alive])]
+    #[task(priority = 1, shared = [alive, can_errors])]
     async fn watchdog(mut cx: watchdog::Context) {
         iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
         let mut next = Clock::now_us();
@@ -323,6 +333,8 @@ mod app {
             if cx.shared.alive.lock(|a| a.take()) {
                 iwdg::feed();
             }
+            // The controller recovers from bus-off without an interrupt: look at its state.
+            cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
         }
     }
 

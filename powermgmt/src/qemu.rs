@@ -32,7 +32,7 @@ use stm32f4xx_hal::pac::{self, Interrupt};
 
 use crate::power::{self, ChargeLines};
 
-pub use amiro_firmware::qemu::{CanTxPort, Clock};
+pub use amiro_firmware::qemu::{CanErrors, CanTxPort, Clock};
 pub use amiro_sensors::sim::NoDelay as GaugeDelay;
 
 /// Interrupt of the (simulated) SYS_PD_N line.
@@ -277,6 +277,8 @@ pub struct Board {
     pub can_tx: CanTxPort,
     /// Virtual receive FIFO.
     pub can_rx: CanRxPort,
+    /// No CAN errors in QEMU.
+    pub can_errors: CanErrors,
     /// Simulated I2C1.
     pub rear_i2c: RearI2c,
     /// Simulated I2C2.
@@ -295,6 +297,7 @@ pub fn init(_dp: pac::Peripherals, cp: cortex_m::Peripherals) -> Board {
     Board {
         can_tx: CanTxPort,
         can_rx: CanRxPort(amiro_firmware::qemu::CanRxPort),
+        can_errors: amiro_firmware::qemu::can_errors(),
         rear_i2c: SimBus::new(RingBus::I2c1),
         front_i2c: SimBus::new(RingBus::I2c2),
         charger: Charger { enabled: false },

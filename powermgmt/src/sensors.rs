@@ -154,6 +154,7 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
                 _ => self.missed(k, now_us),
             }
         }
+        self.report();
     }
 
     fn missed(&mut self, k: usize, now_us: u64) {
@@ -172,6 +173,20 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
         }
     }
 
+    /// Puts this bus's faults (missed ring samples and failed gauge reads) and whether a sensor is
+    /// out of service now into the board's diagnostics (one sensor group per bus).
+    fn report(&self) {
+        let missed = self
+            .slots
+            .iter()
+            .fold(0u32, |sum, s| sum.saturating_add(s.missed));
+        amiro_firmware::health::report_sensor_group(
+            self.bus as usize,
+            missed.saturating_add(self.gauge_faults),
+            self.slots.iter().any(|s| !s.ready),
+        );
+    }
+
     /// This bus's fuel gauge, or `None` (counted) when it did not answer.
     #[inline(never)]
     pub fn read_gauge(&mut self) -> Option<BatteryStatus> {
@@ -181,6 +196,7 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
         if status.is_none() {
             self.gauge_faults = self.gauge_faults.saturating_add(1);
         }
+        self.report();
         status
     }
 

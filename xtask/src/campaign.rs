@@ -155,7 +155,7 @@ fn plan(model: &BoardModel, rng: &mut Rng, count: usize) -> Plan {
         data: vec![
             1,
             (ref_period / 1000) as u8,
-            (ref_period / 1000 >> 8) as u8,
+            ((ref_period / 1000) >> 8) as u8,
             0,
         ],
     });

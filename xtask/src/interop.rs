@@ -31,7 +31,10 @@ pub fn check(root: &Path) -> Result<()> {
         .env("AMIRO", &amiro)
         .env("AMIRO_INTEROP_DIR", &work)
         // The bus logs of the QEMU scenarios (`bus.log` per run): other tools must read them too.
-        .env("AMIRO_QEMU_SCENARIOS", crate::qemu::target_dir(root).join("scenarios"))
+        .env(
+            "AMIRO_QEMU_SCENARIOS",
+            crate::qemu::target_dir(root).join("scenarios"),
+        )
         .current_dir(root)
         .status()
         .with_context(|| format!("running pytest with {}", python.display()))?;
