@@ -16,7 +16,7 @@ use std::path::Path;
 
 use anyhow::{bail, ensure, Context, Result};
 
-use crate::boards::{Board, BOARDS};
+use crate::boards::Board;
 use crate::qemu::{self, TimedFrame, SIGNAL_SYS_PD_N};
 use crate::scenarios::{self, RunOutput};
 
@@ -57,8 +57,13 @@ pub struct BoardModel {
     /// The reference publisher: topic byte, its trace name, period (µs). It runs at urgent
     /// priority for the whole run and no random frame addresses it.
     pub reference: (u8, &'static str, u64),
+    /// Frames per sample of the reference topic (docs/protocol.md's topic table).
+    pub reference_frames: usize,
     /// Actuator topics whose commands are harmless to accept at any value (not shutdown).
     pub actuators: &'static [u8],
+    /// The identifier the board's QEMU build takes for its simulator's control frames (they never
+    /// reach the app), which the campaign must therefore not send as an unknown topic.
+    pub qemu_control_id: Option<u32>,
 }
 
 /// One row per board with a QEMU build.
@@ -67,13 +72,28 @@ pub const MODELS: &[BoardModel] = &[
         board: "diwheeldrive",
         diagnostics: 0x1A,
         reference: (0x08, "gyroscope", 10_000),
+        reference_frames: 1,
         actuators: &[0x10],
+        qemu_control_id: None,
     },
     BoardModel {
         board: "lightring",
         diagnostics: 0x1C,
         reference: (0x1C, "lightring-diagnostics", 100_000),
+        reference_frames: 6,
         actuators: &[0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18],
+        qemu_control_id: None,
+    },
+    // The shutdown topic (0x1D) is not harmless: no random frame addresses it (it has a DLC, so it
+    // is no sensor topic either); the scenarios test it.
+    BoardModel {
+        board: "powermgmt",
+        diagnostics: 0x1B,
+        reference: (0x1E, "power-status", 50_000),
+        reference_frames: 1,
+        actuators: &[],
+        // powermgmt/src/qemu.rs SIM_CONTROL_ID
+        qemu_control_id: Some(0x3F0),
     },
 ];
 
@@ -179,7 +199,10 @@ fn plan(model: &BoardModel, rng: &mut Rng, count: usize) -> Plan {
             // Unknown topic, any DLC and data.
             (0 | 1, _) => {
                 let dlc = rng.below(9) as usize;
-                let id = command_id(prio, rng.pick(&unknown));
+                let mut id = command_id(prio, rng.pick(&unknown));
+                if Some(id) == model.qemu_control_id {
+                    id ^= 0x100;
+                }
                 push(
                     t,
                     id,
@@ -484,7 +507,14 @@ fn check(model: &BoardModel, plan: &Plan, out: &RunOutput) -> Result<String> {
         .releases(name, 0, plan.shutdown_us)?
         .first()
         .with_context(|| format!("the reference publisher {name} never ran"))?;
-    let stream = out.periodic_stream(id, name, period, first, plan.shutdown_us - period)?;
+    let stream = out.periodic_stream_of(
+        id,
+        name,
+        period,
+        first,
+        plan.shutdown_us - period,
+        model.reference_frames,
+    )?;
     // Nothing unrequested.
     for frame in &out.frames {
         let byte = (frame.id & 0xFF) as u8;
@@ -511,11 +541,10 @@ fn check(model: &BoardModel, plan: &Plan, out: &RunOutput) -> Result<String> {
 
 /// Runs the campaign on every board that has QEMU scenarios: `runs` runs of `frames` spaced
 /// frames each, seeds `seed`, `seed + 1`, ….
-pub fn run(root: &Path, seed: u64, frames: usize, runs: usize) -> Result<()> {
-    let boards: Vec<&Board> = BOARDS
+pub fn run(root: &Path, boards: &[&Board], seed: u64, frames: usize, runs: usize) -> Result<()> {
+    let boards = boards
         .iter()
-        .filter(|b| !scenarios::for_board(b.name).is_empty())
-        .collect();
+        .filter(|b| !scenarios::for_board(b.name).is_empty());
     for board in boards {
         let model = MODELS
             .iter()

@@ -74,6 +74,8 @@ enum Cmd {
         /// The release campaign: ten runs of 20 000 frames per board.
         #[arg(long)]
         long: bool,
+        /// Boards to run (default: every board with QEMU scenarios).
+        boards: Vec<String>,
     },
     /// Run only the QEMU scenarios CI runs (part of `test`), of every board or of the boards named.
     Scenarios {
@@ -175,10 +177,15 @@ fn run(cmd: Cmd) -> Result<bool> {
             // An unschedulable set is a verdict, not an error: only `--check` turns it into a failure.
             Ok(all_ok || !args.check)
         }
-        Cmd::Campaign { seed, frames, long } => {
+        Cmd::Campaign {
+            seed,
+            frames,
+            long,
+            boards,
+        } => {
             ensure_qemu()?;
             let (frames, runs) = if long { (20_000, 10) } else { (frames, 1) };
-            campaign::run(&root, seed, frames, runs).map(|()| true)
+            campaign::run(&root, &select_boards(&boards)?, seed, frames, runs).map(|()| true)
         }
         Cmd::Scenarios { boards } => run_scenarios(&root, &select_boards(&boards)?).map(|()| true),
         Cmd::Trace { file } => {
@@ -386,7 +393,7 @@ fn test(root: &Path) -> Result<()> {
     // After the scenarios: their bus logs are among what the other CAN tools must read.
     interop::check(root)?;
     // The hostile-bus campaign, one run of 3000 spaced frames per board (issue 12).
-    campaign::run(root, 12, 3000, 1)
+    campaign::run(root, &BOARDS.iter().collect::<Vec<_>>(), 12, 3000, 1)
 }
 
 /// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets.
