@@ -97,7 +97,8 @@ fn describe_sample(data: &SensorData) -> String {
         }
         SensorData::Magnetometer { axis, nanotesla } => format!("{} {nanotesla} nT", axis.name()),
         SensorData::FloorProximity([a, b, c, d]) => {
-            format!("sensor 1 {a}, sensor 2 {b}, sensor 3 {c}, sensor 4 {d} (raw proximity counts)")
+            // Numbered from 0 like the ring's sensor index and `amiro monitor`'s named positions.
+            format!("sensor 0 {a}, sensor 1 {b}, sensor 2 {c}, sensor 3 {d} (raw proximity counts)")
         }
         SensorData::Odometry(odometry) => format!(
             "x {} mm, y {} mm, heading {}°",
@@ -460,7 +461,7 @@ mod tests {
             .ends_with("velocity: 100000 µm/s forward, -50000 µrad/s turning"));
         assert!(describe("609#1A00FEFF0E04")
             .ends_with("accelerometer: x 26 milli-g, y -2 milli-g, z 1038 milli-g"));
-        assert!(describe("604#0100020003000400").contains("sensor 4 4 (raw proximity counts)"));
+        assert!(describe("604#0100020003000400").contains("sensor 0 1, sensor 1 2, sensor 2 3, sensor 3 4 (raw proximity counts)"));
     }
 
     #[test]
