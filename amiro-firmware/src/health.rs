@@ -125,7 +125,8 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
         flags = flags.with(StatusFlags::SHUTTING_DOWN);
     }
     Diagnostics {
-        uptime_s: u32::try_from(now_us / 1_000_000).unwrap_or(u32::MAX),
+        uptime_s: u32::try_from(amiro_sensors::clock::div_us(now_us, 1_000_000))
+            .unwrap_or(u32::MAX),
         reset_cause: ResetCause::from_bits(RESET_CAUSE.load(Ordering::Relaxed)),
         flags,
         sensor_faults: sensor_faults(),

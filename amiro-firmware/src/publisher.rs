@@ -7,7 +7,7 @@
 //! blocks another only for one device transfer.
 use amiro_can::{Priority, Topic};
 use amiro_sensors::drivers::suite::Samples;
-use amiro_sensors::handler::{Release, SensorDataHandler};
+use amiro_sensors::handler::{late_by, Release, SensorDataHandler};
 use amiro_sensors::trace::{TraceEvent, TraceKind};
 use amiro_sensors::tx_queue::{PushOutcome, TxQueue};
 use cortex_m::interrupt::InterruptNumber;
@@ -170,14 +170,14 @@ fn note_push(
     outcome: &PushOutcome,
 ) {
     trace_push(queued, id, outcome);
-    if let Some(deadline) = deadline.filter(|d| queued > *d) {
+    if let Some(late_us) = late_by(queued, deadline) {
         health::count_late_frame(level);
         telemetry::trace(&TraceEvent::new(
             queued,
             TraceKind::DeadlineMissed {
                 topic,
                 missed: 0,
-                late_us: u32::try_from(queued - deadline).unwrap_or(u32::MAX),
+                late_us,
             },
         ));
     }

@@ -8,12 +8,26 @@ use amiro_sensors::trace::TraceEvent;
 
 #[cfg(not(feature = "qemu"))]
 mod rtt {
-    use core::cell::RefCell;
-    use critical_section::Mutex;
+    use core::cell::Cell;
+    use critical_section::{CriticalSection, Mutex};
     use rtt_target::{rtt_init, ChannelMode, UpChannel};
 
-    static TRACE: Mutex<RefCell<Option<UpChannel>>> = Mutex::new(RefCell::new(None));
-    static LOG: Mutex<RefCell<Option<UpChannel>>> = Mutex::new(RefCell::new(None));
+    // `Cell`, not `RefCell`: taken out and put back inside one critical section, so there is no
+    // borrow that could fail (and no panic message machinery in the flash).
+    static TRACE: Mutex<Cell<Option<UpChannel>>> = Mutex::new(Cell::new(None));
+    static LOG: Mutex<Cell<Option<UpChannel>>> = Mutex::new(Cell::new(None));
+
+    fn with_channel(
+        cs: CriticalSection<'_>,
+        slot: &Mutex<Cell<Option<UpChannel>>>,
+        f: impl FnOnce(&mut UpChannel),
+    ) {
+        let cell = slot.borrow(cs);
+        if let Some(mut channel) = cell.take() {
+            f(&mut channel);
+            cell.set(Some(channel));
+        }
+    }
 
     /// Sets up the two RTT channels.
     pub fn init() {
@@ -24,29 +38,29 @@ mod rtt {
             }
         };
         critical_section::with(|cs| {
-            LOG.borrow_ref_mut(cs).replace(channels.up.0);
-            TRACE.borrow_ref_mut(cs).replace(channels.up.1);
+            LOG.borrow(cs).set(Some(channels.up.0));
+            TRACE.borrow(cs).set(Some(channels.up.1));
         });
     }
 
     /// Writes one log line made of `parts`.
     pub fn write_log(parts: &[&str]) {
         critical_section::with(|cs| {
-            if let Some(channel) = LOG.borrow_ref_mut(cs).as_mut() {
+            with_channel(cs, &LOG, |channel| {
                 for part in parts {
                     channel.write(part.as_bytes());
                 }
                 channel.write(b"\n");
-            }
+            });
         });
     }
 
     /// Writes one encoded trace event; the critical section lasts one short copy into the ring.
     pub fn write_trace(bytes: &[u8]) {
         critical_section::with(|cs| {
-            if let Some(channel) = TRACE.borrow_ref_mut(cs).as_mut() {
+            with_channel(cs, &TRACE, |channel| {
                 channel.write(bytes);
-            }
+            });
         });
     }
 }

@@ -15,6 +15,10 @@ const SR: usize = 0x0C;
 /// LSI frequency used to compute the reload value (the F1's nominal 40 kHz; the F4's 32 kHz makes
 /// every timeout 25 % longer, still within the boards' margins).
 pub const LSI_HZ: u32 = 40_000;
+const _: () = assert!(
+    LSI_HZ % 4000 == 0,
+    "divider() divides LSI_HZ by 4000 exactly"
+);
 
 fn write(offset: usize, value: u32) {
     // SAFETY: a register of the IWDG; writes are the documented key/prescaler/reload sequence.
@@ -30,7 +34,8 @@ fn read(offset: usize) -> u32 {
 pub const fn divider(timeout_ms: u32) -> (u32, u32) {
     let mut code = 0;
     while code < 6 {
-        let ticks = (LSI_HZ as u64 * timeout_ms as u64) / (1000 * (4u64 << code));
+        // LSI_HZ · t / (1000 · 4 · 2^code) as a shift: no 64-bit division in the flash.
+        let ticks = ((LSI_HZ / 4000) as u64 * timeout_ms as u64) >> code;
         if ticks <= 0x1000 {
             let reload = if ticks == 0 { 0 } else { ticks - 1 };
             return (code, reload as u32);
@@ -74,3 +79,15 @@ pub fn feed() {
 pub fn stretch_to_longest() {
     start(u32::MAX);
 }
+
+// Checked at every firmware build (this module compiles for the chips only): 40 kHz / 4 = 10
+// ticks per ms; 500 ms need 5000 ticks at /4 (over 4096), so /8; beyond /256 × 4096 ticks (≈ 26 s)
+// the longest period.
+const _: () = {
+    assert!(matches!(divider(400), (0, 3_999)));
+    assert!(matches!(divider(500), (1, 2_499)));
+    assert!(matches!(divider(2_000), (3, 2_499)));
+    assert!(matches!(divider(0), (0, 0)));
+    assert!(matches!(divider(26_214), (6, 4_095)));
+    assert!(matches!(divider(u32::MAX), (6, 0xFFF)));
+};

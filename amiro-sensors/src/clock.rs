@@ -58,6 +58,24 @@ impl Clock for FakeClock {
 mod tests {
     use super::*;
 
+    #[test]
+    fn div_us_equals_the_division_on_both_paths() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut values = vec![0, 1, u64::from(u32::MAX), u64::from(u32::MAX) + 1, u64::MAX];
+        for _ in 0..2_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            values.push(x >> (x % 64));
+        }
+        for &n in &values {
+            for d in [1u32, 2, 3, 7, 1_000, 1_000_000, u32::MAX, (n as u32) | 1] {
+                assert_eq!(div_us(n, d), n / u64::from(d), "{n} / {d}");
+            }
+        }
+        assert_eq!(div_us(5, 0), u64::MAX);
+    }
+
     fn read_through_trait(clock: &impl Clock) -> u64 {
         clock.now_us()
     }
@@ -75,4 +93,28 @@ mod tests {
         clock.advance(u64::MAX);
         assert_eq!(clock.now_us(), u64::MAX);
     }
+}
+
+/// `n / d` for microsecond counts, without the 64-bit division routine (about 900 bytes of
+/// compiler-builtins on a Cortex-M3, which has no 64-bit divide): one 32-bit division while `n`
+/// fits in 32 bits (the first 71 minutes of a count), a shift-and-subtract loop after that.
+/// `d == 0` yields `u64::MAX`.
+#[inline(never)]
+pub fn div_us(n: u64, d: u32) -> u64 {
+    if d == 0 {
+        return u64::MAX;
+    }
+    if let Ok(small) = u32::try_from(n) {
+        return u64::from(small / d);
+    }
+    let d = u64::from(d);
+    let (mut quotient, mut rest) = (0u64, 0u64);
+    for bit in (0..64).rev() {
+        rest = (rest << 1) | ((n >> bit) & 1);
+        if rest >= d {
+            rest -= d;
+            quotient |= 1 << bit;
+        }
+    }
+    quotient
 }

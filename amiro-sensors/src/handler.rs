@@ -9,7 +9,7 @@
 //! in tests. The timing rules are written down in `docs/handler.md`.
 
 use core::fmt;
-use core::num::{NonZeroU32, NonZeroU64};
+use core::num::NonZeroU32;
 
 use amiro_can::{
     decode_command, AdmissionPolicy, Board, CanId, Command, DecodeError, Kind, LedCommand,
@@ -146,12 +146,11 @@ impl Publisher {
                 late_us: 0,
             };
         }
-        let period = NonZeroU64::from(self.period_us);
         let behind = now_us.saturating_sub(self.next_due_us);
         // Releases after the due one that have also passed: serving them all now would be a burst
         // of identical samples, so only the latest is served and the older ones count as missed.
-        let skipped = behind / period;
-        let period = period.get();
+        let skipped = crate::clock::div_us(behind, self.period_us.get());
+        let period = u64::from(self.period_us.get());
         let release_us = self
             .next_due_us
             .saturating_add(skipped.saturating_mul(period));
@@ -174,6 +173,14 @@ impl Publisher {
             late_us,
         }
     }
+}
+
+/// How late a frame queued at `queued_us` is for its release's `deadline_us` (`None`: in time, or a
+/// one-shot, which has no deadline). The publisher loop counts and traces a late frame as a
+/// deadline miss.
+pub fn late_by(queued_us: u64, deadline_us: Option<u64>) -> Option<u32> {
+    let deadline = deadline_us.filter(|d| queued_us > *d)?;
+    Some(u32::try_from(queued_us - deadline).unwrap_or(u32::MAX))
 }
 
 /// Clamps a period to the range the table stores: at least 1 µs, at most `u32::MAX` µs (the

@@ -882,3 +882,17 @@ proptest! {
         );
     }
 }
+
+// Issue 12: under a 20 µs flood a gyroscope frame left 2,810 µs after its release and no deadline
+// miss was counted (only skipped releases were). The publisher loop counts a frame as late when
+// `late_by` says so.
+#[test]
+fn a_frame_queued_after_its_release_deadline_is_late() {
+    use amiro_sensors::handler::late_by;
+    let deadline = Some(2_000);
+    assert_eq!(late_by(1_990, deadline), None);
+    assert_eq!(late_by(2_000, deadline), None, "at the deadline is in time");
+    assert_eq!(late_by(4_810, deadline), Some(2_810));
+    assert_eq!(late_by(u64::MAX, Some(0)), Some(u32::MAX), "saturates");
+    assert_eq!(late_by(9_000, None), None, "a one-shot has no deadline");
+}

@@ -461,7 +461,8 @@ mod tests {
             .ends_with("velocity: 100000 µm/s forward, -50000 µrad/s turning"));
         assert!(describe("609#1A00FEFF0E04")
             .ends_with("accelerometer: x 26 milli-g, y -2 milli-g, z 1038 milli-g"));
-        assert!(describe("604#0100020003000400").contains("sensor 0 1, sensor 1 2, sensor 2 3, sensor 3 4 (raw proximity counts)"));
+        assert!(describe("604#0100020003000400")
+            .contains("sensor 0 1, sensor 1 2, sensor 2 3, sensor 3 4 (raw proximity counts)"));
     }
 
     #[test]

@@ -21,6 +21,10 @@ pub struct Board {
     pub checksum_slot: u64,
     /// The QEMU machine its QEMU build (feature `qemu`) runs on.
     pub qemu_machine: &'static str,
+    /// The project's flash budget for the firmware (text + data, bytes): far below the chip, so a
+    /// board keeps room behind AMiRo-BLT and growth is a decision, not an accident. `cargo xtask
+    /// test` fails above it.
+    pub flash_budget: u64,
 }
 
 /// DiWheelDrive, PowerManagement and LightRing.
@@ -35,6 +39,7 @@ pub const BOARDS: [Board; 3] = [
         app_base: 0x0800_6000,
         checksum_slot: 0x150,
         qemu_machine: "netduino2",
+        flash_budget: 40 * 1024,
     },
     Board {
         name: "powermgmt",
@@ -46,6 +51,7 @@ pub const BOARDS: [Board; 3] = [
         app_base: 0x0800_8000,
         checksum_slot: 0x1AC,
         qemu_machine: "netduinoplus2",
+        flash_budget: 48 * 1024,
     },
     Board {
         name: "lightring",
@@ -57,6 +63,7 @@ pub const BOARDS: [Board; 3] = [
         app_base: 0x0800_6000,
         checksum_slot: 0x150,
         qemu_machine: "netduino2",
+        flash_budget: 24 * 1024,
     },
 ];
 

@@ -29,6 +29,8 @@ pub struct SizeReport {
     pub ram_available: u64,
     /// Address of the image's vector table.
     pub vector_table: u64,
+    /// The project's flash budget for this board (`boards::Board::flash_budget`).
+    pub flash_budget: u64,
 }
 
 /// Parses `elf`, checks it against `board` and returns its sizes.
@@ -69,6 +71,7 @@ pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<Siz
         ram_used: 0,
         ram_available: board.ram_bytes,
         vector_table: 0,
+        flash_budget: board.flash_budget,
     };
     let mut vector_end = 0;
     let mut flash_sections = Vec::new();
@@ -200,12 +203,12 @@ pub fn write_checksum(elf: &Path, out: &Path) -> Result<u32> {
 /// Prints the size table.
 pub fn print_table(reports: &[SizeReport]) {
     println!(
-        "{:<14} {:>8} {:>7} {:>7} {:>22} {:>20}",
-        "board", "text", "data", "bss", "flash used", "static RAM used"
+        "{:<14} {:>8} {:>7} {:>7} {:>22} {:>20} {:>16}",
+        "board", "text", "data", "bss", "flash used", "static RAM used", "flash budget"
     );
     for r in reports {
         println!(
-            "{:<14} {:>8} {:>7} {:>7} {:>9} / {:>6} KiB {:>4.1}% {:>7} / {:>4} KiB {:>4.1}%",
+            "{:<14} {:>8} {:>7} {:>7} {:>9} / {:>6} KiB {:>4.1}% {:>7} / {:>4} KiB {:>4.1}% {:>6} KiB {}",
             r.board,
             r.text,
             r.data,
@@ -216,8 +219,31 @@ pub fn print_table(reports: &[SizeReport]) {
             r.ram_used,
             r.ram_available / 1024,
             100.0 * r.ram_used as f64 / r.ram_available as f64,
+            r.flash_budget / 1024,
+            if r.flash_used <= r.flash_budget {
+                "ok"
+            } else {
+                "OVER"
+            },
         );
     }
+}
+
+/// The boards whose flash exceeds their budget, as one message each.
+pub fn over_budget(reports: &[SizeReport]) -> Vec<String> {
+    reports
+        .iter()
+        .filter(|r| r.flash_used > r.flash_budget)
+        .map(|r| {
+            format!(
+                "{} uses {} bytes of flash, {} over its {} KiB budget",
+                r.board,
+                r.flash_used,
+                r.flash_used - r.flash_budget,
+                r.flash_budget / 1024
+            )
+        })
+        .collect()
 }
 
 #[cfg(test)]

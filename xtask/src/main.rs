@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, ensure, Context, Result};
 use clap::{Parser, Subcommand};
 
 mod analyze;
@@ -389,6 +389,8 @@ fn test(root: &Path) -> Result<()> {
     let reports = build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), false)?;
     flash::simulated_robot(root)?;
     elf::print_table(&reports);
+    let over = elf::over_budget(&reports);
+    ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
     run_scenarios(root, &BOARDS.iter().collect::<Vec<_>>())?;
     // After the scenarios: their bus logs are among what the other CAN tools must read.
     interop::check(root)?;
