@@ -16,7 +16,7 @@ const SR: usize = 0x0C;
 /// every timeout 25 % longer, still within the boards' margins).
 pub const LSI_HZ: u32 = 40_000;
 const _: () = assert!(
-    LSI_HZ % 4000 == 0,
+    LSI_HZ.is_multiple_of(4000),
     "divider() divides LSI_HZ by 4000 exactly"
 );
 
