@@ -291,9 +291,34 @@ pub fn fresh_work_dir(root: &Path, board: &str) -> PathBuf {
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_nanos())
         .unwrap_or_default();
-    target_dir(root)
-        .join("runs")
-        .join(format!("{board}-{}-{stamp}", std::process::id()))
+    let runs = target_dir(root).join("runs");
+    prune_runs(&runs, KEEP_RUNS, std::time::Duration::from_secs(3600));
+    runs.join(format!("{board}-{}-{stamp}", std::process::id()))
+}
+
+/// Run folders kept under `target/qemu/runs` (the newest; older ones go once an hour old).
+const KEEP_RUNS: usize = 20;
+
+/// Removes the run folders in `runs` beyond the `keep` newest that are older than `min_age` (a
+/// run another process is still writing is younger than that). Errors only leave folders behind.
+fn prune_runs(runs: &Path, keep: usize, min_age: std::time::Duration) {
+    let Ok(entries) = std::fs::read_dir(runs) else {
+        return;
+    };
+    let mut dirs: Vec<(std::time::SystemTime, PathBuf)> = entries
+        .filter_map(Result::ok)
+        .filter_map(|e| {
+            let modified = e.metadata().ok()?.modified().ok()?;
+            e.file_type().ok()?.is_dir().then(|| (modified, e.path()))
+        })
+        .collect();
+    dirs.sort_by_key(|d| std::cmp::Reverse(d.0));
+    let now = std::time::SystemTime::now();
+    for (modified, dir) in dirs.into_iter().skip(keep) {
+        if now.duration_since(modified).is_ok_and(|age| age >= min_age) {
+            let _ = std::fs::remove_dir_all(dir);
+        }
+    }
 }
 
 /// Where QEMU builds go, apart from the real-hardware builds.
@@ -304,6 +329,20 @@ pub fn target_dir(root: &Path) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn old_runs_beyond_the_newest_are_pruned() {
+        let runs = std::env::temp_dir().join(format!("amiro-prune-{}", std::process::id()));
+        for k in 0..5 {
+            std::fs::create_dir_all(runs.join(format!("run-{k}"))).unwrap();
+        }
+        // Young runs stay whatever their number.
+        prune_runs(&runs, 2, std::time::Duration::from_secs(3600));
+        assert_eq!(std::fs::read_dir(&runs).unwrap().count(), 5);
+        prune_runs(&runs, 2, std::time::Duration::ZERO);
+        assert_eq!(std::fs::read_dir(&runs).unwrap().count(), 2);
+        std::fs::remove_dir_all(&runs).unwrap();
+    }
 
     #[test]
     fn parses_candump_lines() {
