@@ -56,6 +56,7 @@ extern "C" {
 pub fn init(syst: cortex_m::peripheral::SYST) {
     paint_stack();
     Mono::start(syst, CORE_CLOCK_HZ);
+    crate::tracing::start_clock(CORE_CLOCK_HZ);
 }
 
 /// Fills the free stack below the current stack pointer with a pattern, so the end of the run can
@@ -111,6 +112,8 @@ impl CanTx for CanTxPort {
             let _ = write!(line, "{b:02X}");
         }
         hprintln!("{}", line);
+        // On this bus a frame is acknowledged the moment it is offered.
+        crate::tracing::frame_acked(frame.id().raw());
         Transmit::Queued
     }
 

@@ -23,7 +23,7 @@
 //!
 //! | kind | name | payload |
 //! |---:|---|---|
-//! | 0 | `hello` | clock Hz `u32`, board `u8` (amiro-can's board number) |
+//! | 0 | `hello` | trace clock rate in Hz, `u32` (written at boot; again if the clock plan changes) |
 //! | 1 | `task-start` | task `u8` (index in the app's source order) |
 //! | 2 | `task-end` | task `u8`, next release in `u32` µs from now (`u32::MAX`: waits for a message or ends) |
 //! | 3 | `event` | one 18-byte `amiro_sensors::trace` record (handler events: sample taken with its release, frame queued, frame in a mailbox, …) |
@@ -49,12 +49,10 @@ const CHECK_SEED: u8 = 0xA5;
 /// What a record says.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
-    /// The board started: its trace clock's rate and which board it is.
+    /// The board started: its trace clock's rate.
     Hello {
         /// Trace clock rate, Hz.
         clock_hz: u32,
-        /// amiro-can board number.
-        board: u8,
     },
     /// A task (or a bound interrupt) started running: an interrupt's entry, or an async task's
     /// resumption.
@@ -102,7 +100,7 @@ impl Kind {
     /// Payload length of kind `number`, if there is such a kind.
     pub const fn payload_len(number: u8) -> Option<usize> {
         match number {
-            0 => Some(5),
+            0 => Some(4),
             1 => Some(1),
             2 => Some(5),
             3 => Some(EVENT_LEN),
@@ -148,10 +146,9 @@ impl Record {
         body[1..9].copy_from_slice(&self.cycles.to_le_bytes());
         let payload = &mut body[9..];
         let n = match self.kind {
-            Kind::Hello { clock_hz, board } => {
+            Kind::Hello { clock_hz } => {
                 payload[..4].copy_from_slice(&clock_hz.to_le_bytes());
-                payload[4] = board;
-                5
+                4
             }
             Kind::TaskStart { task } => {
                 payload[0] = task;
@@ -234,7 +231,6 @@ impl Record {
         let kind = match number {
             0 => Kind::Hello {
                 clock_hz: u32_at(0),
-                board: p[4],
             },
             1 => Kind::TaskStart { task: p[0] },
             2 => Kind::TaskEnd {

@@ -4,7 +4,7 @@ use proptest::prelude::*;
 
 fn kind() -> impl Strategy<Value = Kind> {
     prop_oneof![
-        (any::<u32>(), any::<u8>()).prop_map(|(clock_hz, board)| Kind::Hello { clock_hz, board }),
+        any::<u32>().prop_map(|clock_hz| Kind::Hello { clock_hz }),
         any::<u8>().prop_map(|task| Kind::TaskStart { task }),
         (any::<u8>(), any::<u32>()).prop_map(|(task, next_release_in_us)| Kind::TaskEnd {
             task,
