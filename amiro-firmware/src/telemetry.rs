@@ -2,9 +2,10 @@
 //!
 //! On the robot both go over RTT (channel 0 `log`: the human log; channel 1 `trace`: records in the
 //! `amiro_trace` format — handler events and, with `task-trace`, the task records of [`crate::tracing`]
-//! — decoded on the host by `cargo xtask trace` and `cargo xtask bench`). In the QEMU build both go
-//! to the semihosting console as text lines starting with `#` (a trace record as `# T` and its bytes
-//! in hex), so a run's output still reads as a candump file.
+//! — decoded on the host by `cargo xtask trace` and `cargo xtask bench`). In the QEMU build the log
+//! and the handler events go to the semihosting console as text lines starting with `#`, so a run's
+//! output still reads as a candump file, and the task records, in the same binary format as on
+//! the robot, into the host file `trace.bin` of the run's work directory.
 use amiro_sensors::trace::TraceEvent;
 
 #[cfg(not(feature = "qemu"))]
@@ -74,10 +75,27 @@ pub fn trace(event: &TraceEvent) {
     #[cfg(not(feature = "qemu"))]
     crate::tracing::event(&event.encode());
     #[cfg(feature = "qemu")]
-    {
-        cortex_m_semihosting::hprintln!("# {}", event);
-        #[cfg(feature = "task-trace")]
-        crate::tracing::event(&event.encode());
+    crate::tracing::event(&event.encode());
+}
+
+/// QEMU: one trace record as a console line, `# T ` and its bytes in hex (without the delimiter:
+/// the line ends it), so a handler event keeps its place among the other lines (`cargo xtask qemu`
+/// prints its text on the host; core::fmt here would cost the task thousands of instructions).
+#[cfg(feature = "qemu")]
+pub(crate) fn write_console_record(bytes: &[u8]) -> bool {
+    const HEX: &[u8; 16] = b"0123456789abcdef";
+    let mut line = [0u8; 4 + 2 * amiro_trace::MAX_WIRE + 1];
+    line[..4].copy_from_slice(b"# T ");
+    let mut at = 4;
+    for &b in bytes.iter().take_while(|&&b| b != 0) {
+        line[at] = HEX[usize::from(b >> 4)];
+        line[at + 1] = HEX[usize::from(b & 15)];
+        at += 2;
+    }
+    line[at] = b'\n';
+    match cortex_m_semihosting::hio::hstdout() {
+        Ok(mut out) => out.write_all(&line[..=at]).is_ok(),
+        Err(_) => false,
     }
 }
 
@@ -87,23 +105,7 @@ pub(crate) fn write_trace(bytes: &[u8]) -> bool {
     #[cfg(not(feature = "qemu"))]
     return rtt::write_trace(bytes);
     #[cfg(feature = "qemu")]
-    {
-        // `# T ` and the record's bytes in hex (without the delimiter: the line ends it).
-        const HEX: &[u8; 16] = b"0123456789abcdef";
-        let mut line = [0u8; 4 + 2 * amiro_trace::MAX_WIRE + 1];
-        line[..4].copy_from_slice(b"# T ");
-        let mut at = 4;
-        for &b in bytes.iter().take_while(|&&b| b != 0) {
-            line[at] = HEX[usize::from(b >> 4)];
-            line[at + 1] = HEX[usize::from(b & 15)];
-            at += 2;
-        }
-        line[at] = b'\n';
-        match cortex_m_semihosting::hio::hstdout() {
-            Ok(mut out) => out.write_all(&line[..=at]).is_ok(),
-            Err(_) => false,
-        }
-    }
+    return crate::qemu::write_trace_file(bytes);
 }
 
 /// Writes a line to the human log (RTT channel 0 on the robot, a `#` line in QEMU), made of string
@@ -130,6 +132,21 @@ pub fn log_parts(parts: &[&str]) {
             let _ = out.write_all(b"\n");
         }
     }
+}
+
+/// `value` in decimal, into `buffer`: its digits.
+pub fn decimal_u64(value: u64, buffer: &mut [u8; 20]) -> &[u8] {
+    let mut at = buffer.len();
+    let mut rest = value;
+    loop {
+        at -= 1;
+        buffer[at] = b'0' + (rest % 10) as u8;
+        rest /= 10;
+        if rest == 0 || at == 0 {
+            break;
+        }
+    }
+    &buffer[at..]
 }
 
 /// `value` in decimal, into `buffer` (for log lines without `core::fmt`).

@@ -35,7 +35,11 @@ struct State {
     high: u32,
     #[cfg(not(feature = "qemu"))]
     last: u32,
+    #[cfg(feature = "qemu")]
+    last: u64,
     lost: u32,
+    /// Tasks whose runs are kept track of but not traced (bit n: task n).
+    quiet: u32,
 }
 
 static STATE: Mutex<RefCell<State>> = Mutex::new(RefCell::new(State {
@@ -45,7 +49,10 @@ static STATE: Mutex<RefCell<State>> = Mutex::new(RefCell::new(State {
     high: 0,
     #[cfg(not(feature = "qemu"))]
     last: 0,
+    #[cfg(feature = "qemu")]
+    last: 0,
     lost: 0,
+    quiet: 0,
 }));
 
 /// The trace clock, widened to 64 bits (robot: DWT CYCCNT).
@@ -62,28 +69,30 @@ fn cycles(state: &mut State) -> u64 {
 }
 
 /// The trace clock in QEMU: SysTick's ticks times its reload, plus how far the current tick has
-/// counted down (a tick whose interrupt is pending but has not run yet is counted).
+/// counted down (a tick whose interrupt is pending but has not run yet is counted). QEMU updates
+/// its SysTick lazily, so around a tick a reading can come up to ~160 cycles (1.3 µs) before the
+/// previous one: the clock is held where it was until it passes (records stay in order).
 #[cfg(feature = "qemu")]
-fn cycles(_state: &mut State) -> u64 {
-    use crate::mono::Clock as _;
-    const ICSR: *const u32 = 0xE000_ED04 as *const u32;
-    const PENDSTSET: u32 = 1 << 26;
+fn cycles(state: &mut State) -> u64 {
+    let now = systick_cycles().max(state.last);
+    state.last = now;
+    now
+}
+
+#[cfg(feature = "qemu")]
+fn systick_cycles() -> u64 {
+    use rtic_monotonics::systick::SystickBackend;
+    use rtic_time::timer_queue::TimerQueueBackend;
     const SYST_CVR: *const u32 = 0xE000_E018 as *const u32;
-    let per_tick = u64::from(crate::qemu::CORE_CLOCK_HZ) * crate::qemu::TICK_US / 1_000_000;
+    const PER_TICK: u64 = crate::qemu::CORE_CLOCK_HZ as u64 * crate::qemu::TICK_US / 1_000_000;
     loop {
-        let before = crate::qemu::Clock::now_us();
-        // SAFETY: reads of the SCB's ICSR and SysTick's current value; neither has side effects
-        // (COUNTFLAG, which the monotonic's interrupt reads, is in SYST_CSR and not touched).
-        let (pending, value, pending_after) = unsafe {
-            (
-                core::ptr::read_volatile(ICSR) & PENDSTSET,
-                core::ptr::read_volatile(SYST_CVR),
-                core::ptr::read_volatile(ICSR) & PENDSTSET,
-            )
-        };
-        if before == crate::qemu::Clock::now_us() && pending == pending_after {
-            let ticks = before / crate::qemu::TICK_US + u64::from(pending != 0);
-            return ticks * per_tick + (per_tick - 1).saturating_sub(u64::from(value));
+        // The backend's `now` counts a wrap it finds (COUNTFLAG) itself: the same count before and
+        // after the read of the current value means no wrap came between.
+        let ticks = SystickBackend::now();
+        // SAFETY: a read of SysTick's current value register, which has no side effects.
+        let value = unsafe { core::ptr::read_volatile(SYST_CVR) };
+        if SystickBackend::now() == ticks {
+            return ticks * PER_TICK + (PER_TICK - 1).saturating_sub(u64::from(value));
         }
     }
 }
@@ -105,29 +114,39 @@ pub fn start_clock(clock_hz: u32) {
 /// Writes the boot record again (the clock plan changed: DiWheelDrive's internal-oscillator
 /// fallback runs at 64 MHz).
 pub fn hello(clock_hz: u32) {
-    emit(|_| Kind::Hello { clock_hz });
+    emit(|_| Some(Kind::Hello { clock_hz }));
 }
 
 /// Stamps and writes one record; `what` may update the running-task state in the same critical
 /// section. A record that does not fit is counted and reported by the next one that does.
 #[inline(never)]
-fn emit(what: impl FnOnce(&mut State) -> Kind) {
+fn emit(what: impl FnOnce(&mut State) -> Option<Kind>) {
+    emit_to(what, crate::telemetry::write_trace);
+}
+
+/// [`emit`] into `sink` (QEMU sends handler events to the console, in order with its other lines).
+#[inline(never)]
+fn emit_to(what: impl FnOnce(&mut State) -> Option<Kind>, sink: fn(&[u8]) -> bool) {
     critical_section::with(|cs| {
         let mut state = STATE.borrow_ref_mut(cs);
         let state = &mut *state;
-        let kind = what(state);
+        let Some(kind) = what(state) else {
+            return;
+        };
         let at = cycles(state);
+        let mut wire = [0u8; amiro_trace::MAX_WIRE];
         if state.lost > 0 {
             let lost = Record {
                 cycles: at,
                 kind: Kind::Lost { count: state.lost },
             };
-            if crate::telemetry::write_trace(lost.encode().as_bytes()) {
+            let n = lost.encode_into(&mut wire);
+            if sink(&wire[..n]) {
                 state.lost = 0;
             }
         }
-        let record = Record { cycles: at, kind };
-        if !crate::telemetry::write_trace(record.encode().as_bytes()) {
+        let n = Record { cycles: at, kind }.encode_into(&mut wire);
+        if !sink(&wire[..n]) {
             state.lost = state.lost.saturating_add(1);
         }
     });
@@ -136,7 +155,10 @@ fn emit(what: impl FnOnce(&mut State) -> Kind) {
 /// A handler event (`amiro_sensors::trace` record), with the trace clock's stamp.
 pub fn event(record: &[u8; amiro_trace::EVENT_LEN]) {
     let record = *record;
-    emit(|_| Kind::Event { record });
+    #[cfg(not(feature = "qemu"))]
+    emit(|_| Some(Kind::Event { record }));
+    #[cfg(feature = "qemu")]
+    emit_to(|_| Some(Kind::Event { record }), crate::telemetry::write_console_record);
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.
@@ -161,6 +183,19 @@ impl Drop for Job {
     }
 }
 
+/// Task `task` starts running but is not traced (QEMU's stimulus replay: it stands for the bus,
+/// which the robot does not spend time on); its waits still hand the running task back correctly.
+#[inline(always)]
+pub fn enter_untraced(task: u8) {
+    #[cfg(feature = "task-trace")]
+    {
+        critical_section::with(|cs| STATE.borrow_ref_mut(cs).quiet |= 1 << (task % 32));
+        start(task);
+    }
+    #[cfg(not(feature = "task-trace"))]
+    let _ = task;
+}
+
 /// Task `task` starts (or resumes) running: an async task's first line.
 #[inline(always)]
 pub fn enter(task: u8) {
@@ -178,7 +213,7 @@ fn start(task: u8) {
             *slot = state.current;
             state.current = task;
         }
-        Kind::TaskStart { task }
+        (state.quiet & 1 << (task % 32) == 0).then_some(Kind::TaskStart { task })
     });
 }
 
@@ -189,10 +224,10 @@ fn end(task: u8, next_release_in_us: u32) {
         if let Some(&before) = state.preempted.get(usize::from(task)) {
             state.current = before;
         }
-        Kind::TaskEnd {
+        (state.quiet & 1 << (task % 32) == 0).then_some(Kind::TaskEnd {
             task,
             next_release_in_us,
-        }
+        })
     });
 }
 
@@ -233,7 +268,7 @@ pub fn resume(task: u8) {
 #[inline(always)]
 pub fn frame_acked(id: u16) {
     #[cfg(feature = "task-trace")]
-    emit(|_| Kind::FrameAcked { id });
+    emit(|_| Some(Kind::FrameAcked { id }));
     #[cfg(not(feature = "task-trace"))]
     let _ = id;
 }

@@ -182,28 +182,34 @@ impl Record {
 
     /// The record as it goes on the wire (COBS, then `0x00`).
     pub fn encode(&self) -> Wire {
-        let (body, len) = self.body();
         let mut wire = Wire {
             bytes: [0; MAX_WIRE],
             len: 0,
         };
+        wire.len = self.encode_into(&mut wire.bytes);
+        wire
+    }
+
+    /// Writes the record as it goes on the wire into `out` and returns its length (one pass over
+    /// the body: the firmware calls this on every task start and end).
+    pub fn encode_into(&self, out: &mut [u8; MAX_WIRE]) -> usize {
+        let (body, len) = self.body();
         // COBS: each group starts with the distance to the next zero (bodies are < 254 bytes, so
         // one code byte per zero and one at the start).
         let mut code_at = 0;
-        let mut out = 1;
+        let mut at = 1;
         for &b in &body[..len] {
             if b == 0 {
-                wire.bytes[code_at] = (out - code_at) as u8;
-                code_at = out;
+                out[code_at] = (at - code_at) as u8;
+                code_at = at;
             } else {
-                wire.bytes[out] = b;
+                out[at] = b;
             }
-            out += 1;
+            at += 1;
         }
-        wire.bytes[code_at] = (out - code_at) as u8;
-        wire.bytes[out] = 0;
-        wire.len = out + 1;
-        wire
+        out[code_at] = (at - code_at) as u8;
+        out[at] = 0;
+        at + 1
     }
 
     /// Reads one body (COBS already undone).

@@ -9,6 +9,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 
 mod analyze;
+mod bench;
 mod boards;
 mod bounds;
 mod campaign;
@@ -87,6 +88,10 @@ enum Cmd {
     },
     /// The response-time report: worst-case response times of the board tasks and the CAN bus.
     Analyze(analyze::AnalyzeArgs),
+    /// Measured timing against the analysis: per task jobs, execution and response times against
+    /// the analysed WCRT, per topic jitter and latency to the queue and the bus; from a capture of
+    /// the trace channel, a QEMU run, or QEMU outputs (docs/bench.md).
+    Bench(bench::BenchArgs),
     /// Build and flash boards: all of them through DiWheelDrive's serial port and AMiRo-BLT
     /// (`--port /dev/ttyUSB0`), or one through probe-rs over SWD (`--probe`, writes the
     /// AMiRo-BLT checksum word and streams RTT).
@@ -196,6 +201,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             }
             Ok(clean)
         }
+        Cmd::Bench(args) => bench::run(&root, &args),
         Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),
         Cmd::FlashElf { board, elf } => {
             let board =
@@ -287,7 +293,7 @@ fn firmware_elf(root: &Path, board: &Board) -> PathBuf {
         .join(board.name)
 }
 
-fn target_dir(root: &Path) -> PathBuf {
+pub(crate) fn target_dir(root: &Path) -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root.join("target"))
@@ -315,7 +321,7 @@ fn check(root: &Path) -> Result<()> {
         "--quiet",
         "--release",
         "--features",
-        "qemu",
+        "qemu,task-trace",
         "--target-dir",
         &qemu_target,
         "--",
@@ -432,7 +438,8 @@ pub(crate) fn build_qemu(root: &Path, board: &Board) -> Result<PathBuf> {
     let dir = qemu::target_dir(root);
     let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo_bin)
-        .args(["build", "--release", "--quiet", "--features", "qemu"])
+        // With the task trace: the bench measures the scenario runs (docs/bench.md).
+        .args(["build", "--release", "--quiet", "--features", "qemu,task-trace"])
         .current_dir(root.join(board.name))
         .env("CARGO_TARGET_DIR", &dir)
         .status()
@@ -459,6 +466,8 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
         }
         let elf = build_qemu(root, board)?;
         let mut ram_high_water = 0;
+        // The runs whose output the bench measures afterwards (no second QEMU run).
+        let mut outputs = Vec::new();
         for scenario in list {
             let path = root
                 .join(board.name)
@@ -475,6 +484,7 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
                 let (bus, trace) = qemu::split_output(&text);
                 std::fs::write(work.join("bus.log"), bus)?;
                 std::fs::write(work.join("trace.log"), trace)?;
+                outputs.push((scenario.name.to_string(), work.clone()));
                 let out = scenarios::RunOutput::parse(&text)?;
                 let (static_ram, stack) = out.ram_used()?;
                 ram_high_water = ram_high_water.max(static_ram + stack);
@@ -507,6 +517,11 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
             failed += 1;
             println!("{} RAM goal missed", board.name);
         }
+        // Measured against analysed, from the same runs (`cargo xtask bench --qemu --check`).
+        if let Err(e) = bench::check_scenario_runs(root, board, &outputs) {
+            failed += 1;
+            println!("{e:#}");
+        }
     }
     println!("scenarios: {passed} passed, {failed} failed");
     if failed > 0 {
@@ -519,7 +534,7 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
 }
 
 /// Installs QEMU where the machine lacks it and we may (root with apt-get); otherwise says how.
-fn ensure_qemu() -> Result<()> {
+pub(crate) fn ensure_qemu() -> Result<()> {
     let found = Command::new("qemu-system-arm")
         .arg("--version")
         .output()
