@@ -144,11 +144,13 @@ impl CanTx for CanTxPort {
             at += 1;
         };
         put(b'(');
-        let mut digits = [0u8; 20];
-        let seconds = crate::telemetry::decimal_u64(now / 1_000_000, &mut digits);
-        seconds.iter().for_each(|&d| put(d));
+        // One 64-bit division; the digits from 32-bit ones (the M3/M4 divide those in hardware).
+        let seconds = now / 1_000_000;
+        let micros = (now - seconds * 1_000_000) as u32;
+        let mut digits = [0u8; 10];
+        let seconds = crate::telemetry::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
+        seconds.bytes().for_each(&mut put);
         put(b'.');
-        let micros = now % 1_000_000;
         let mut scale = 100_000;
         while scale > 0 {
             put(b'0' + ((micros / scale) % 10) as u8);

@@ -134,21 +134,6 @@ pub fn log_parts(parts: &[&str]) {
     }
 }
 
-/// `value` in decimal, into `buffer`: its digits.
-pub fn decimal_u64(value: u64, buffer: &mut [u8; 20]) -> &[u8] {
-    let mut at = buffer.len();
-    let mut rest = value;
-    loop {
-        at -= 1;
-        buffer[at] = b'0' + (rest % 10) as u8;
-        rest /= 10;
-        if rest == 0 || at == 0 {
-            break;
-        }
-    }
-    &buffer[at..]
-}
-
 /// `value` in decimal, into `buffer` (for log lines without `core::fmt`).
 pub fn decimal(value: u32, buffer: &mut [u8; 10]) -> &str {
     let mut at = buffer.len();

@@ -38,8 +38,6 @@ struct State {
     #[cfg(feature = "qemu")]
     last: u64,
     lost: u32,
-    /// Tasks whose runs are kept track of but not traced (bit n: task n).
-    quiet: u32,
 }
 
 static STATE: Mutex<RefCell<State>> = Mutex::new(RefCell::new(State {
@@ -52,7 +50,6 @@ static STATE: Mutex<RefCell<State>> = Mutex::new(RefCell::new(State {
     #[cfg(feature = "qemu")]
     last: 0,
     lost: 0,
-    quiet: 0,
 }));
 
 /// The trace clock, widened to 64 bits (robot: DWT CYCCNT).
@@ -183,19 +180,6 @@ impl Drop for Job {
     }
 }
 
-/// Task `task` starts running but is not traced (QEMU's stimulus replay: it stands for the bus,
-/// which the robot does not spend time on); its waits still hand the running task back correctly.
-#[inline(always)]
-pub fn enter_untraced(task: u8) {
-    #[cfg(feature = "task-trace")]
-    {
-        critical_section::with(|cs| STATE.borrow_ref_mut(cs).quiet |= 1 << (task % 32));
-        start(task);
-    }
-    #[cfg(not(feature = "task-trace"))]
-    let _ = task;
-}
-
 /// Task `task` starts (or resumes) running: an async task's first line.
 #[inline(always)]
 pub fn enter(task: u8) {
@@ -213,7 +197,7 @@ fn start(task: u8) {
             *slot = state.current;
             state.current = task;
         }
-        (state.quiet & 1 << (task % 32) == 0).then_some(Kind::TaskStart { task })
+        Some(Kind::TaskStart { task })
     });
 }
 
@@ -224,7 +208,7 @@ fn end(task: u8, next_release_in_us: u32) {
         if let Some(&before) = state.preempted.get(usize::from(task)) {
             state.current = before;
         }
-        (state.quiet & 1 << (task % 32) == 0).then_some(Kind::TaskEnd {
+        Some(Kind::TaskEnd {
             task,
             next_release_in_us,
         })

@@ -417,7 +417,7 @@ mod app {
     #[cfg(feature = "qemu")]
     #[task(priority = 7)]
     async fn stimulus(_cx: stimulus::Context) {
-        amiro_firmware::tracing::enter_untraced(crate::trace_task::STIMULUS);
+        amiro_firmware::tracing::enter(crate::trace_task::STIMULUS);
         amiro_firmware::qemu::replay_stimulus(
             platform::CAN_RX_INTERRUPT,
             platform::SHUTDOWN_INTERRUPT,

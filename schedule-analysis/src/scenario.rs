@@ -92,6 +92,65 @@ pub struct TraceCost {
     /// Where the figure comes from.
     #[serde(default)]
     pub note: Option<String>,
+    /// The traced QEMU build.
+    #[serde(default)]
+    pub qemu: Option<QemuBuild>,
+}
+
+/// How the traced QEMU build differs from the chip's (`Firmware::Qemu`).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct QemuBuild {
+    /// The trace's cost per job in QEMU, µs (measured: deterministic under `-icount`).
+    pub per_job_us: f64,
+    /// Every budget of the board times this (≥ 1: QEMU is never assumed faster than the chip).
+    #[serde(default = "one")]
+    pub budget_scale: f64,
+    /// Where the figures come from.
+    #[serde(default)]
+    pub note: Option<String>,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl Timing {
+    /// The timing with every execution budget, critical section and overhead times `factor`.
+    fn scaled(&self, factor: f64) -> Timing {
+        let mut t = self.clone();
+        let f = factor.max(1.0);
+        t.overheads.isr_entry_us *= f;
+        t.overheads.isr_exit_us *= f;
+        t.overheads.dispatcher_us *= f;
+        if let Some(m) = &mut t.monotonic {
+            m.timer_isr_us *= f;
+        }
+        for v in t.idle_critical_sections_us.values_mut() {
+            *v *= f;
+        }
+        for task in t.tasks.values_mut() {
+            task.wcet_us = task.wcet_us.map(|w| w * f);
+            task.bcet_us = task.bcet_us.map(|w| w * f);
+            for v in task.critical_sections_us.values_mut() {
+                *v *= f;
+            }
+            if let Some(m) = &mut task.measured {
+                m.wcet_us *= f;
+            }
+        }
+        for topic in t.topics.values_mut() {
+            topic.wcet_us *= f;
+            topic.bcet_us = topic.bcet_us.map(|w| w * f);
+            for v in topic.critical_sections_us.values_mut() {
+                *v *= f;
+            }
+            if let Some(m) = &mut topic.measured {
+                m.wcet_us *= f;
+            }
+        }
+        t
+    }
 }
 
 /// A budget measured on a bench (`cargo xtask bench --calibrate`), kept beside the estimate.
@@ -420,18 +479,29 @@ pub fn build(
     scenario_path: &Path,
     timing_paths: &[PathBuf],
 ) -> Result<Built, BuildError> {
-    build_for(root, scenario_path, timing_paths, false)
+    build_for(root, scenario_path, timing_paths, Firmware::Production)
 }
 
-/// [`build`] for the build with the firmware's task trace (`traced`: each timing file's `trace`
-/// cost is added to every job, as `cargo xtask bench` and the QEMU scenarios need: they measure
-/// that build) or without it (the production build, which the report and the admission table
-/// cover).
+/// Which firmware build a model describes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Firmware {
+    /// The production build (no task trace): what the report and the admission table cover.
+    Production,
+    /// The build with the task trace, on the chip: each timing file's `trace.per_job_us` is added
+    /// to every job (`cargo xtask bench` on a capture).
+    Traced,
+    /// The traced QEMU build: every budget times the timing file's `trace.qemu.budget_scale` (the
+    /// emulator runs at 125 MIPS, slower than the F405 and faster than the F103) and its measured
+    /// `trace.qemu.per_job_us` per job (the QEMU scenarios' bounds, `cargo xtask bench --qemu`).
+    Qemu,
+}
+
+/// [`build`] for the firmware build `firmware`.
 pub fn build_for(
     root: &Path,
     scenario_path: &Path,
     timing_paths: &[PathBuf],
-    traced: bool,
+    firmware: Firmware,
 ) -> Result<Built, BuildError> {
     let scenario_file = display(root, scenario_path);
     let scenario: Scenario = read_json(root, scenario_path)?;
@@ -570,7 +640,7 @@ pub fn build_for(
             &scenario,
             can::shortest_frame_time(bit),
             own_frame,
-            traced,
+            firmware,
             &mut built,
         )?;
         for p in &mine {
@@ -871,9 +941,17 @@ fn build_board(
     scenario: &Scenario,
     bus_frame: Time,
     own_frame: Time,
-    traced: bool,
+    firmware: Firmware,
     built: &mut Built,
 ) -> Result<BoardModel, BuildError> {
+    let scaled;
+    let timing = match (firmware, timing.trace.as_ref().and_then(|t| t.qemu.as_ref())) {
+        (Firmware::Qemu, Some(q)) if q.budget_scale != 1.0 => {
+            scaled = timing.scaled(q.budget_scale);
+            &scaled
+        }
+        _ => timing,
+    };
     let (declared, idle, ceilings) = declared_tasks(root, file, timing, built)?;
     let mut measured: Vec<String> = Vec::new();
     let find = |name: &str| declared.iter().find(|d| d.name == name);
@@ -1118,8 +1196,8 @@ fn build_board(
     });
     // The task trace's start and end records, where every job's entry and exit are counted.
     let mut overheads = timing.overheads;
-    match (&timing.trace, traced) {
-        (Some(trace), true) => {
+    match (&timing.trace, firmware) {
+        (Some(trace), Firmware::Traced) => {
             overheads.isr_entry_us += trace.per_job_us / 2.0;
             overheads.isr_exit_us += trace.per_job_us / 2.0;
             built.sources.push(format!(
@@ -1127,7 +1205,16 @@ fn build_board(
                 timing.board, trace.feature, trace.per_job_us
             ));
         }
-        (Some(trace), false) => built.sources.push(format!(
+        (Some(trace), Firmware::Qemu) => {
+            let q = trace.qemu.as_ref().map_or((trace.per_job_us, 1.0), |q| (q.per_job_us, q.budget_scale));
+            overheads.isr_entry_us += q.0 / 2.0;
+            overheads.isr_exit_us += q.0 / 2.0;
+            built.sources.push(format!(
+                "{}: analysed build is the traced QEMU build (budgets ×{}, {} µs per job for the trace)",
+                timing.board, q.1, q.0
+            ));
+        }
+        (Some(trace), Firmware::Production) => built.sources.push(format!(
             "{}: analysed build is without the task trace (feature `{}` off)",
             timing.board, trace.feature
         )),

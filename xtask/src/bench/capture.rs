@@ -31,6 +31,9 @@ pub struct Run {
     pub end_ns: u64,
     /// Time spent in runs that pre-empted it, ns.
     pub preempted_ns: u64,
+    /// Of that, time in the QEMU platform's stimulus replay (it stands for the bus, which costs the
+    /// robot nothing), ns: left out of the response.
+    pub platform_ns: u64,
     /// Where the release came from.
     pub release_from: ReleaseFrom,
 }
@@ -43,9 +46,11 @@ impl Run {
             .saturating_sub(self.preempted_ns)
     }
 
-    /// Response time from the release, ns.
+    /// Response time from the release, ns (QEMU's stimulus replay left out).
     pub fn response_ns(&self) -> u64 {
-        self.end_ns.saturating_sub(self.release_ns)
+        self.end_ns
+            .saturating_sub(self.release_ns)
+            .saturating_sub(self.platform_ns)
     }
 }
 
@@ -94,6 +99,8 @@ pub struct Capture {
 /// Builds a [`Capture`] from records, events and acknowledgements in time order.
 struct Builder {
     capture: Capture,
+    /// The task number of QEMU's stimulus replay, if the app has one.
+    platform_task: Option<u8>,
     hz: u64,
     base_cycles: u64,
     base_ns: u64,
@@ -108,11 +115,13 @@ struct Open {
     release_ns: u64,
     release_from: ReleaseFrom,
     preempted_ns: u64,
+    platform_ns: u64,
 }
 
 impl Builder {
     fn new(default_hz: u64) -> Self {
         Self {
+            platform_task: None,
             capture: Capture {
                 clock_hz: default_hz,
                 ..Capture::default()
@@ -156,6 +165,7 @@ impl Builder {
                     release_ns,
                     release_from,
                     preempted_ns: 0,
+                    platform_ns: 0,
                 });
             }
             Kind::TaskEnd {
@@ -164,8 +174,14 @@ impl Builder {
             } => {
                 match self.stack.pop() {
                     Some(open) if open.task == task => {
+                        let took = t.saturating_sub(open.start_ns);
                         if let Some(parent) = self.stack.last_mut() {
-                            parent.preempted_ns += t.saturating_sub(open.start_ns);
+                            parent.preempted_ns += took;
+                        }
+                        if Some(task) == self.platform_task {
+                            for run in &mut self.stack {
+                                run.platform_ns += took;
+                            }
                         }
                         self.capture.runs.push(Run {
                             task,
@@ -173,6 +189,7 @@ impl Builder {
                             start_ns: open.start_ns,
                             end_ns: t,
                             preempted_ns: open.preempted_ns,
+                            platform_ns: open.platform_ns,
                             release_from: open.release_from,
                         });
                     }
@@ -281,7 +298,15 @@ pub fn console_record_bytes(text: &str) -> Vec<u8> {
 /// Reads a QEMU run: the task records from its `trace.bin`, the handler events from the `# T`
 /// lines of its console `text` (records in the same format, on the same clock, merged in time
 /// order), and the frames on QEMU's virtual bus, acknowledged when printed (µs).
-pub fn read_qemu(trace_bin: &[u8], text: &str, default_hz: u64) -> Result<Capture> {
+///
+/// `stimulus` is the task number of the app's stimulus replay: its time is left out of the
+/// responses of the runs it pre-empted (it stands for the bus).
+pub fn read_qemu(
+    trace_bin: &[u8],
+    text: &str,
+    default_hz: u64,
+    stimulus: Option<u8>,
+) -> Result<Capture> {
     let mut reader = Reader::new();
     let mut records: Vec<Record> = trace_bin.iter().filter_map(|&b| reader.push(b)).collect();
     let mut console = Reader::new();
@@ -293,6 +318,7 @@ pub fn read_qemu(trace_bin: &[u8], text: &str, default_hz: u64) -> Result<Captur
     // A stable sort: records of one stream stay in their order.
     records.sort_by_key(|r| r.cycles);
     let mut builder = Builder::new(default_hz);
+    builder.platform_task = stimulus;
     for record in records {
         builder.record(record);
     }
@@ -313,12 +339,16 @@ pub fn read_qemu(trace_bin: &[u8], text: &str, default_hz: u64) -> Result<Captur
 }
 
 /// Reads a QEMU run's work directory (`output.log` and `trace.bin`).
-pub fn read_qemu_dir(dir: &std::path::Path, default_hz: u64) -> Result<Capture> {
+pub fn read_qemu_dir(
+    dir: &std::path::Path,
+    default_hz: u64,
+    stimulus: Option<u8>,
+) -> Result<Capture> {
     let text = std::fs::read_to_string(dir.join("output.log"))
         .with_context(|| format!("reading {}", dir.join("output.log").display()))?;
     let bin = std::fs::read(dir.join("trace.bin"))
         .with_context(|| format!("reading {} (a QEMU build without task-trace?)", dir.join("trace.bin").display()))?;
-    read_qemu(&bin, &text, default_hz)
+    read_qemu(&bin, &text, default_hz, stimulus)
 }
 
 #[cfg(test)]
@@ -411,7 +441,7 @@ mod tests {
             line(1_200_000, &taken),
             line(1_206_000, &queued)
         );
-        let c = read_qemu(&bin, &text, 120_000_000).unwrap();
+        let c = read_qemu(&bin, &text, 120_000_000, None).unwrap();
         assert_eq!(c.runs.len(), 1);
         assert_eq!(c.runs[0].execution_ns(), 100_000);
         assert_eq!(c.reader.damaged, 1);

@@ -74,6 +74,15 @@ pub fn default_clock_hz(board: &Board, qemu: bool) -> u64 {
     }
 }
 
+/// The task number of the board's QEMU stimulus replay (`stimulus`), if its app has one.
+fn stimulus_task(root: &Path, board: &Board) -> Option<u8> {
+    amiro_firmware::trace_ids::board_names(root, board.name)
+        .ok()?
+        .iter()
+        .position(|n| n == "stimulus")
+        .and_then(|i| u8::try_from(i).ok())
+}
+
 /// Measured against analysed, for one capture.
 #[derive(Debug, serde::Serialize)]
 pub struct Bench {
@@ -248,6 +257,7 @@ fn analysis_for(
     board: &Board,
     capture: &Capture,
     scenario_name: Option<&str>,
+    qemu: bool,
 ) -> Result<(Analysis, String)> {
     let path = match scenario_name {
         Some(name) => scenario::find_scenario(root, name),
@@ -276,7 +286,12 @@ fn analysis_for(
         }
     };
     // The measured build has the task trace: so has the analysed one.
-    let built = scenario::build_for(root, &path, &scenario::timing_files(root), true)
+    let firmware = if qemu {
+        scenario::Firmware::Qemu
+    } else {
+        scenario::Firmware::Traced
+    };
+    let built = scenario::build_for(root, &path, &scenario::timing_files(root), firmware)
         .map_err(|e| anyhow!("{e}"))
         .with_context(|| format!("building the analysis model from {}", path.display()))?;
     let frame_cost = built.frame_cost;
@@ -310,12 +325,13 @@ pub fn measure(
     let names = amiro_firmware::trace_ids::board_names(root, board.name)
         .map_err(|e| anyhow!("{e}"))
         .context("the board's task numbers")?;
-    let (analysis, model) = analysis_for(root, board, capture, scenario_name)?;
+    let (analysis, model) = analysis_for(root, board, capture, scenario_name, qemu)?;
     let board_result = analysis.boards.iter().find(|b| b.name == board.name);
-    let analysed = |task: &str| -> Option<(f64, f64)> {
+    // (WCRT, deadline) of a task the analysis has; a WCRT of `None`: its busy window never closes.
+    let analysed = |task: &str| -> Option<(Option<f64>, f64)> {
         let tasks = &board_result?.tasks;
         if let Some(t) = tasks.iter().find(|t| t.name == task) {
-            return Some((t.wcrt()?.as_us_f64(), t.deadline.as_us_f64()));
+            return Some((t.wcrt().map(|w| w.as_us_f64()), t.deadline.as_us_f64()));
         }
         // A publisher task's jobs are its topics: the run ends within the largest of their WCRTs.
         let prefix = format!("{task}[");
@@ -326,10 +342,13 @@ pub fn measure(
         if jobs.is_empty() {
             return None;
         }
-        let mut wcrt: f64 = 0.0;
+        let mut wcrt = Some(0.0_f64);
         let mut deadline = f64::INFINITY;
         for j in jobs {
-            wcrt = wcrt.max(j.wcrt()?.as_us_f64());
+            wcrt = match (wcrt, j.wcrt()) {
+                (Some(w), Some(j)) => Some(w.max(j.as_us_f64())),
+                _ => None,
+            };
             deadline = deadline.min(j.deadline.as_us_f64());
         }
         Some((wcrt, deadline))
@@ -352,7 +371,8 @@ pub fn measure(
         let bound = analysed(name);
         let verdict = match bound {
             None => "not analysed".to_string(),
-            Some((wcrt, _)) if response_max > wcrt => "EXCEEDS WCRT".to_string(),
+            Some((None, _)) => "analysis: unbounded".to_string(),
+            Some((Some(wcrt), _)) if response_max > wcrt => "EXCEEDS WCRT".to_string(),
             Some(_) => "ok".to_string(),
         };
         tasks.push(TaskRow {
@@ -363,7 +383,7 @@ pub fn measure(
             exec_mean_us: exec.iter().sum::<f64>() / exec.len() as f64,
             response_max_us: response_max,
             from_release: worst.is_some_and(|r| r.release_from == ReleaseFrom::Timer),
-            wcrt_us: bound.map(|b| b.0),
+            wcrt_us: bound.and_then(|b| b.0),
             deadline_us: bound.map(|b| b.1),
             responses_us: responses,
             verdict,
@@ -490,7 +510,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
             .unwrap_or_else(|| default_clock_hz(board, true));
         inputs.push((
             dir.display().to_string(),
-            capture::read_qemu_dir(dir, hz)?,
+            capture::read_qemu_dir(dir, hz, stimulus_task(root, board))?,
             true,
         ));
     }
@@ -510,7 +530,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
             .unwrap_or_else(|| default_clock_hz(board, true));
         inputs.push((
             format!("QEMU run of {}", stimulus.display()),
-            capture::read_qemu_dir(&work, hz)?,
+            capture::read_qemu_dir(&work, hz, stimulus_task(root, board))?,
             true,
         ));
     }
@@ -565,7 +585,8 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
 pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)]) -> Result<()> {
     let mut failures = Vec::new();
     for (name, work) in runs {
-        let capture = capture::read_qemu_dir(work, default_clock_hz(board, true))?;
+        let capture =
+            capture::read_qemu_dir(work, default_clock_hz(board, true), stimulus_task(root, board))?;
         let bench = measure(root, board, &capture, name, true, None)
             .with_context(|| format!("bench of {} {name}", board.name))?;
         let dir = work.join("bench");

@@ -56,7 +56,7 @@ fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         out.frames.iter().all(|f| f.data.len() == 4),
         "magnetometer frames carry 4 bytes"
     );
-    let stream = // The window ends a period before the run does: the last release's frame must fit in the run.
+    // The window ends a period before the run does: the last release's frame must fit in the run.
     let stream = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, 199_000)?;
     let answered = stream.releases[0] - 10_000;
     let bound = bounds.publisher_latency_us("magnetometer-x", "medium", 900)?;
