@@ -39,10 +39,10 @@ pub mod signals;
 pub mod tasks;
 #[cfg(target_os = "none")]
 pub mod telemetry;
-#[cfg(target_os = "none")]
-pub mod tracing;
 #[cfg(not(target_os = "none"))]
 pub mod trace_ids;
+#[cfg(target_os = "none")]
+pub mod tracing;
 #[cfg(target_os = "none")]
 pub mod watchdog;
 

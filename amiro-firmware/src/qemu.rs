@@ -62,7 +62,8 @@ pub fn init(syst: cortex_m::peripheral::SYST) {
 }
 
 /// The host file the trace records go to (`usize::MAX`: none).
-static TRACE_FILE: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicUsize::new(usize::MAX);
+static TRACE_FILE: core::sync::atomic::AtomicUsize =
+    core::sync::atomic::AtomicUsize::new(usize::MAX);
 
 /// Writes trace record bytes to `trace.bin` (the QEMU build's trace channel); `false` if not all.
 pub fn write_trace_file(bytes: &[u8]) -> bool {
@@ -148,7 +149,8 @@ impl CanTx for CanTxPort {
         let seconds = now / 1_000_000;
         let micros = (now - seconds * 1_000_000) as u32;
         let mut digits = [0u8; 10];
-        let seconds = crate::telemetry::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
+        let seconds =
+            crate::telemetry::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
         seconds.bytes().for_each(&mut put);
         put(b'.');
         let mut scale = 100_000;

@@ -59,6 +59,9 @@ pub fn transmit_pending<C: Clock, const N: usize>(port: &mut impl CanTx, queue: 
         match port.transmit(&frame) {
             Transmit::Queued => {
                 queue.pop();
+                // QEMU prints the frame itself as it enters the (virtual) mailbox: the event would
+                // say it twice, at a cost the robot does not have.
+                #[cfg(not(feature = "qemu"))]
                 telemetry::trace(&TraceEvent::new(
                     C::now_us(),
                     TraceKind::FrameSent {

@@ -23,7 +23,8 @@ pub fn names(source: &str) -> Result<Vec<String>, String> {
 /// The task names of `board`'s app (`<root>/<board>/src/main.rs`).
 pub fn board_names(root: &Path, board: &str) -> Result<Vec<String>, String> {
     let path = root.join(board).join("src").join("main.rs");
-    let source = std::fs::read_to_string(&path).map_err(|e| std::format!("{}: {e}", path.display()))?;
+    let source =
+        std::fs::read_to_string(&path).map_err(|e| std::format!("{}: {e}", path.display()))?;
     names(&source)
 }
 

@@ -155,7 +155,10 @@ pub fn event(record: &[u8; amiro_trace::EVENT_LEN]) {
     #[cfg(not(feature = "qemu"))]
     emit(|_| Some(Kind::Event { record }));
     #[cfg(feature = "qemu")]
-    emit_to(|_| Some(Kind::Event { record }), crate::telemetry::write_console_record);
+    emit_to(
+        |_| Some(Kind::Event { record }),
+        crate::telemetry::write_console_record,
+    );
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.

@@ -945,7 +945,10 @@ fn build_board(
     built: &mut Built,
 ) -> Result<BoardModel, BuildError> {
     let scaled;
-    let timing = match (firmware, timing.trace.as_ref().and_then(|t| t.qemu.as_ref())) {
+    let timing = match (
+        firmware,
+        timing.trace.as_ref().and_then(|t| t.qemu.as_ref()),
+    ) {
         (Firmware::Qemu, Some(q)) if q.budget_scale != 1.0 => {
             scaled = timing.scaled(q.budget_scale);
             &scaled
@@ -1206,7 +1209,10 @@ fn build_board(
             ));
         }
         (Some(trace), Firmware::Qemu) => {
-            let q = trace.qemu.as_ref().map_or((trace.per_job_us, 1.0), |q| (q.per_job_us, q.budget_scale));
+            let q = trace
+                .qemu
+                .as_ref()
+                .map_or((trace.per_job_us, 1.0), |q| (q.per_job_us, q.budget_scale));
             overheads.isr_entry_us += q.0 / 2.0;
             overheads.isr_exit_us += q.0 / 2.0;
             built.sources.push(format!(
@@ -1236,7 +1242,10 @@ fn build_board(
 fn budget(estimate: f64, m: Option<&Measured>, name: &str, measured: &mut Vec<String>) -> f64 {
     match m {
         Some(m) => {
-            measured.push(format!("{name} ({} µs, {}, {})", m.wcet_us, m.build, m.origin));
+            measured.push(format!(
+                "{name} ({} µs, {}, {})",
+                m.wcet_us, m.build, m.origin
+            ));
             m.wcet_us
         }
         None => estimate,

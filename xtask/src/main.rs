@@ -439,7 +439,13 @@ pub(crate) fn build_qemu(root: &Path, board: &Board) -> Result<PathBuf> {
     let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo_bin)
         // With the task trace: the bench measures the scenario runs (docs/bench.md).
-        .args(["build", "--release", "--quiet", "--features", "qemu,task-trace"])
+        .args([
+            "build",
+            "--release",
+            "--quiet",
+            "--features",
+            "qemu,task-trace",
+        ])
         .current_dir(root.join(board.name))
         .env("CARGO_TARGET_DIR", &dir)
         .status()

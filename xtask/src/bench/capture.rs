@@ -249,9 +249,11 @@ impl Builder {
         self.capture.acked.push((id, t));
         // The oldest sample of this topic with frames still unacknowledged (sensor data only).
         let topic = (id & 0xFF) as u8;
-        if let Some(s) = self.capture.samples.iter_mut().find(|s| {
-            id >= 0x400 && s.topic.byte() == topic && s.frames_acked < s.frames_queued
-        }) {
+        if let Some(s) =
+            self.capture.samples.iter_mut().find(|s| {
+                id >= 0x400 && s.topic.byte() == topic && s.frames_acked < s.frames_queued
+            })
+        {
             s.frames_acked += 1;
             if s.frames_acked == s.frames_queued {
                 s.acked_ns = Some(t);
@@ -346,8 +348,12 @@ pub fn read_qemu_dir(
 ) -> Result<Capture> {
     let text = std::fs::read_to_string(dir.join("output.log"))
         .with_context(|| format!("reading {}", dir.join("output.log").display()))?;
-    let bin = std::fs::read(dir.join("trace.bin"))
-        .with_context(|| format!("reading {} (a QEMU build without task-trace?)", dir.join("trace.bin").display()))?;
+    let bin = std::fs::read(dir.join("trace.bin")).with_context(|| {
+        format!(
+            "reading {} (a QEMU build without task-trace?)",
+            dir.join("trace.bin").display()
+        )
+    })?;
     read_qemu(&bin, &text, default_hz, stimulus)
 }
 
@@ -366,19 +372,45 @@ mod tests {
     fn runs_with_preemption_and_timer_releases() {
         // 1 MHz clock: one cycle per µs.
         let bytes = wire(&[
-            (0, Kind::Hello { clock_hz: 1_000_000 }),
+            (
+                0,
+                Kind::Hello {
+                    clock_hz: 1_000_000,
+                },
+            ),
             (10, Kind::TaskStart { task: 4 }),
             (20, Kind::TaskStart { task: 0 }),
-            (25, Kind::TaskEnd { task: 0, next_release_in_us: u32::MAX }),
-            (40, Kind::TaskEnd { task: 4, next_release_in_us: 1_000 }),
+            (
+                25,
+                Kind::TaskEnd {
+                    task: 0,
+                    next_release_in_us: u32::MAX,
+                },
+            ),
+            (
+                40,
+                Kind::TaskEnd {
+                    task: 4,
+                    next_release_in_us: 1_000,
+                },
+            ),
             (1_050, Kind::TaskStart { task: 4 }),
-            (1_070, Kind::TaskEnd { task: 4, next_release_in_us: u32::MAX }),
+            (
+                1_070,
+                Kind::TaskEnd {
+                    task: 4,
+                    next_release_in_us: u32::MAX,
+                },
+            ),
         ]);
         let c = read(&bytes, 72_000_000).unwrap();
         assert_eq!(c.clock_hz, 1_000_000);
         assert_eq!(c.runs.len(), 3);
         let isr = c.runs[0];
-        assert_eq!((isr.task, isr.execution_ns(), isr.response_ns()), (0, 5_000, 5_000));
+        assert_eq!(
+            (isr.task, isr.execution_ns(), isr.response_ns()),
+            (0, 5_000, 5_000)
+        );
         let first = c.runs[1];
         assert_eq!(first.execution_ns(), 25_000);
         assert_eq!(first.release_from, ReleaseFrom::Start);
@@ -400,9 +432,24 @@ mod tests {
         );
         let queued = TraceEvent::new(1_020, TraceKind::FrameQueued { id: 0x605 });
         let bytes = wire(&[
-            (0, Kind::Hello { clock_hz: 1_000_000 }),
-            (1_010, Kind::Event { record: taken.encode() }),
-            (1_020, Kind::Event { record: queued.encode() }),
+            (
+                0,
+                Kind::Hello {
+                    clock_hz: 1_000_000,
+                },
+            ),
+            (
+                1_010,
+                Kind::Event {
+                    record: taken.encode(),
+                },
+            ),
+            (
+                1_020,
+                Kind::Event {
+                    record: queued.encode(),
+                },
+            ),
             (1_150, Kind::FrameAcked { id: 0x605 }),
         ]);
         let c = read(&bytes, 1).unwrap();
@@ -416,9 +463,20 @@ mod tests {
     #[test]
     fn qemu_runs_events_from_console_records_and_frames_as_acknowledgements() {
         let bin = wire(&[
-            (0, Kind::Hello { clock_hz: 120_000_000 }),
+            (
+                0,
+                Kind::Hello {
+                    clock_hz: 120_000_000,
+                },
+            ),
             (1_200_000, Kind::TaskStart { task: 7 }),
-            (1_212_000, Kind::TaskEnd { task: 7, next_release_in_us: 890 }),
+            (
+                1_212_000,
+                Kind::TaskEnd {
+                    task: 7,
+                    next_release_in_us: 890,
+                },
+            ),
         ]);
         let taken = TraceEvent::new(
             10_000,
@@ -429,7 +487,11 @@ mod tests {
         );
         let queued = TraceEvent::new(10_050, TraceKind::FrameQueued { id: 0x605 });
         let line = |cycles: u64, e: &TraceEvent| {
-            let w = Record { cycles, kind: Kind::Event { record: e.encode() } }.encode();
+            let w = Record {
+                cycles,
+                kind: Kind::Event { record: e.encode() },
+            }
+            .encode();
             let hex: String = w.as_bytes()[..w.as_bytes().len() - 1]
                 .iter()
                 .map(|b| format!("{b:02x}"))

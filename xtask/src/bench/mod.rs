@@ -502,7 +502,11 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
         let hz = args
             .clock_hz
             .unwrap_or_else(|| default_clock_hz(board, false));
-        inputs.push((path.display().to_string(), capture::read(&bytes, hz)?, false));
+        inputs.push((
+            path.display().to_string(),
+            capture::read(&bytes, hz)?,
+            false,
+        ));
     }
     for dir in &args.qemu_output {
         let hz = args
@@ -535,11 +539,20 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
         ));
     }
     if inputs.is_empty() {
-        bail!("nothing to measure: give --capture FILE, --qemu --stimulus FILE or --qemu-output FILE");
+        bail!(
+            "nothing to measure: give --capture FILE, --qemu --stimulus FILE or --qemu-output FILE"
+        );
     }
     let mut ok = true;
     for (origin, capture, qemu) in &inputs {
-        let bench = measure(root, board, capture, origin, *qemu, args.scenario.as_deref())?;
+        let bench = measure(
+            root,
+            board,
+            capture,
+            origin,
+            *qemu,
+            args.scenario.as_deref(),
+        )?;
         let stem = Path::new(origin)
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
@@ -585,8 +598,11 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
 pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)]) -> Result<()> {
     let mut failures = Vec::new();
     for (name, work) in runs {
-        let capture =
-            capture::read_qemu_dir(work, default_clock_hz(board, true), stimulus_task(root, board))?;
+        let capture = capture::read_qemu_dir(
+            work,
+            default_clock_hz(board, true),
+            stimulus_task(root, board),
+        )?;
         let bench = measure(root, board, &capture, name, true, None)
             .with_context(|| format!("bench of {} {name}", board.name))?;
         let dir = work.join("bench");

@@ -154,10 +154,14 @@ pub fn svg(b: &Bench) -> String {
         let top = 30.0 + PANEL * i as f64;
         let base = top + PANEL - 22.0;
         let max_resp = t.responses_us.iter().copied().fold(0.0, f64::max);
-        let axis = [Some(max_resp), t.wcrt_us, t.deadline_us.filter(|d| d.is_finite())]
-            .into_iter()
-            .flatten()
-            .fold(1.0_f64, f64::max)
+        let axis = [
+            Some(max_resp),
+            t.wcrt_us,
+            t.deadline_us.filter(|d| d.is_finite()),
+        ]
+        .into_iter()
+        .flatten()
+        .fold(1.0_f64, f64::max)
             * 1.05;
         let mut bins = [0usize; BINS];
         for r in &t.responses_us {
