@@ -2,6 +2,7 @@
 //! `schedule_analysis::rtic_source` reads them. The boards' build script writes them as constants
 //! (`trace_tasks.rs`, included with [`crate::trace_tasks!`]) and `cargo xtask bench` names the
 //! numbers it reads with the same list, so the two cannot disagree.
+#[cfg(not(test))]
 extern crate std;
 
 use std::path::Path;

@@ -67,3 +67,112 @@ pub fn write(path: &Path, bench: &Bench, margin: f64) -> Result<usize> {
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(changed)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use schedule_analysis::scenario;
+
+    #[test]
+    fn calibration_round_trip_on_a_recorded_capture() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let bytes =
+            std::fs::read(root.join("xtask/tests/data/diwheeldrive-thesis-60ms.trace")).unwrap();
+        let capture = super::super::capture::read(&bytes, 72_000_000).unwrap();
+        assert_eq!(
+            capture.clock_hz, 120_000_000,
+            "the boot record sets the clock"
+        );
+        assert_eq!((capture.reader.damaged, capture.unbalanced), (0, 0));
+        let board = crate::boards::by_name("diwheeldrive").unwrap();
+        let bench = super::super::measure(&root, board, &capture, "recorded", false, None).unwrap();
+        assert!(bench
+            .tasks
+            .iter()
+            .any(|t| t.task == "can_rx" && t.jobs == 1));
+        let magnetometer = bench
+            .topics
+            .iter()
+            .find(|t| t.topic == "magnetometer-x")
+            .unwrap();
+        assert!(magnetometer.samples > 50 && magnetometer.bus_max_us.is_some());
+
+        let original_path = root.join("schedule-analysis/models/diwheeldrive.timing.json");
+        let original: scenario::Timing =
+            serde_json::from_str(&std::fs::read_to_string(&original_path).unwrap()).unwrap();
+        let dir = std::env::temp_dir().join(format!("xtask-calibrate-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("diwheeldrive.timing.json");
+        std::fs::copy(&original_path, &path).unwrap();
+        assert!(
+            write(&path, &bench, 0.9).is_err(),
+            "a margin below 1 is refused"
+        );
+        let changed = write(&path, &bench, 1.25).unwrap();
+        let written: scenario::Timing =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+
+        // Every measured task and topic got its measurement, beside the unchanged estimate.
+        let mut seen = 0;
+        for row in &bench.tasks {
+            let (Some(now), Some(before)) =
+                (written.tasks.get(&row.task), original.tasks.get(&row.task))
+            else {
+                continue;
+            };
+            let m = now.measured.as_ref().unwrap();
+            assert_eq!(
+                now.wcet_us, before.wcet_us,
+                "{}: the estimate stays",
+                row.task
+            );
+            assert_eq!(m.wcet_us, tenth_up(row.exec_max_us * 1.25), "{}", row.task);
+            assert!(m.wcet_us >= row.exec_max_us * 1.25 && m.build == "robot");
+            assert_eq!(m.jobs, row.jobs as u64);
+            seen += 1;
+        }
+        let m = written.topics["magnetometer-x"].measured.as_ref().unwrap();
+        assert_eq!(
+            m.wcet_us,
+            tenth_up(magnetometer.work_max_us.unwrap() * 1.25)
+        );
+        assert_eq!(written.topics["magnetometer-x"].wcet_us, 300.0);
+        assert_eq!(changed, seen + 1);
+
+        // The analysis uses the measured budgets and says which they are.
+        let files: Vec<_> = scenario::timing_files(&root)
+            .into_iter()
+            .map(|p| {
+                if p.ends_with("diwheeldrive.timing.json") {
+                    path.clone()
+                } else {
+                    p
+                }
+            })
+            .collect();
+        let built = scenario::build(
+            &root,
+            &scenario::find_scenario(&root, "thesis-magnetometer-900us"),
+            &files,
+        )
+        .unwrap();
+        assert!(built
+            .sources
+            .iter()
+            .any(|s| s.starts_with("diwheeldrive: measured budgets for")
+                && s.contains("magnetometer-x")));
+        let board_model = built
+            .model
+            .boards
+            .iter()
+            .find(|b| b.name == "diwheeldrive")
+            .unwrap();
+        let job = board_model
+            .tasks
+            .iter()
+            .find(|t| t.name == "publish_medium[magnetometer-x]")
+            .unwrap();
+        assert_eq!(job.wcet_us, m.wcet_us);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
