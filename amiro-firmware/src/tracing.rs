@@ -29,7 +29,9 @@ pub const NO_TASK: u8 = u8::MAX;
 pub const MAX_TASKS: usize = 32;
 
 struct State {
+    #[cfg(feature = "task-trace")]
     current: u8,
+    #[cfg(feature = "task-trace")]
     preempted: [u8; MAX_TASKS],
     #[cfg(not(feature = "qemu"))]
     high: u32,
@@ -41,7 +43,9 @@ struct State {
 }
 
 static STATE: Mutex<RefCell<State>> = Mutex::new(RefCell::new(State {
+    #[cfg(feature = "task-trace")]
     current: NO_TASK,
+    #[cfg(feature = "task-trace")]
     preempted: [NO_TASK; MAX_TASKS],
     #[cfg(not(feature = "qemu"))]
     high: 0,

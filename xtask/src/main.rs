@@ -81,7 +81,8 @@ enum Cmd {
         /// Boards whose scenarios to run (default: all).
         boards: Vec<String>,
     },
-    /// Decode a capture of a board's binary trace channel (RTT channel 1, "trace") into text lines.
+    /// Decode a capture of a board's trace channel (RTT channel 1, "trace": `amiro-trace` records)
+    /// into text lines; damaged stretches are skipped and counted.
     Trace {
         /// The raw bytes of RTT channel 1 as captured from the board.
         file: PathBuf,
@@ -92,6 +93,9 @@ enum Cmd {
     /// the analysed WCRT, per topic jitter and latency to the queue and the bus; from a capture of
     /// the trace channel, a QEMU run, or QEMU outputs (docs/bench.md).
     Bench(bench::BenchArgs),
+    /// Several boards' trace captures and a `candump -l` log of the bus on one time base, aligned by
+    /// the frames both saw (docs/bench.md).
+    Timeline(bench::timeline::TimelineArgs),
     /// Build and flash boards: all of them through DiWheelDrive's serial port and AMiRo-BLT
     /// (`--port /dev/ttyUSB0`), or one through probe-rs over SWD (`--probe`, writes the
     /// AMiRo-BLT checksum word and streams RTT).
@@ -189,19 +193,28 @@ fn run(cmd: Cmd) -> Result<bool> {
         Cmd::Trace { file } => {
             let bytes =
                 std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
-            let mut clean = true;
-            for (n, record) in bytes.chunks(amiro_sensors::trace::ENCODED_LEN).enumerate() {
-                match amiro_sensors::trace::TraceEvent::decode(record) {
-                    Ok(event) => println!("{event}"),
-                    Err(e) => {
-                        clean = false;
-                        println!("# record {n}: {e}");
+            // The resynchronising reader: a capture may start mid-record or hold garbage.
+            let mut reader = amiro_trace::Reader::new();
+            for record in bytes.iter().filter_map(|&b| reader.push(b)) {
+                match record.kind {
+                    amiro_trace::Kind::Event { record: event } => {
+                        match amiro_sensors::trace::TraceEvent::decode(&event) {
+                            Ok(event) => println!("{event}"),
+                            Err(e) => println!("# cycle {}: {e}", record.cycles),
+                        }
                     }
+                    other => println!("# cycle {}: {other:?}", record.cycles),
                 }
             }
-            Ok(clean)
+            let stats = reader.stats();
+            eprintln!(
+                "{} records, {} damaged stretches ({} bytes) skipped",
+                stats.records, stats.damaged, stats.skipped_bytes
+            );
+            Ok(stats.damaged == 0)
         }
         Cmd::Bench(args) => bench::run(&root, &args),
+        Cmd::Timeline(args) => bench::timeline::run(&root, &args).map(|()| true),
         Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),
         Cmd::FlashElf { board, elf } => {
             let board =

@@ -9,6 +9,7 @@
 pub mod calibrate;
 pub mod capture;
 pub mod report;
+pub mod timeline;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
