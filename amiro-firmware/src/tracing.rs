@@ -40,6 +40,7 @@ struct State {
     #[cfg(feature = "qemu")]
     last: u64,
     lost: u32,
+    wire: [u8; amiro_trace::MAX_WIRE],
 }
 
 static STATE: Mutex<RefCell<State>> = Mutex::new(RefCell::new(State {
@@ -54,6 +55,7 @@ static STATE: Mutex<RefCell<State>> = Mutex::new(RefCell::new(State {
     #[cfg(feature = "qemu")]
     last: 0,
     lost: 0,
+    wire: [0; amiro_trace::MAX_WIRE],
 }));
 
 /// The trace clock, widened to 64 bits (robot: DWT CYCCNT).
@@ -115,54 +117,58 @@ pub fn start_clock(clock_hz: u32) {
 /// Writes the boot record again (the clock plan changed: DiWheelDrive's internal-oscillator
 /// fallback runs at 64 MHz).
 pub fn hello(clock_hz: u32) {
-    emit(|_| Some(Kind::Hello { clock_hz }));
+    emit(Kind::Hello { clock_hz });
 }
 
-/// Stamps and writes one record; `what` may update the running-task state in the same critical
-/// section. A record that does not fit is counted and reported by the next one that does.
-#[inline(never)]
-fn emit(what: impl FnOnce(&mut State) -> Option<Kind>) {
-    emit_to(what, crate::telemetry::write_trace);
-}
-
-/// [`emit`] into `sink` (QEMU sends handler events to the console, in order with its other lines).
-#[inline(never)]
-fn emit_to(what: impl FnOnce(&mut State) -> Option<Kind>, sink: fn(&[u8]) -> bool) {
+/// Stamps and writes one record into the trace channel.
+fn emit(kind: Kind) {
     critical_section::with(|cs| {
-        let mut state = STATE.borrow_ref_mut(cs);
-        let state = &mut *state;
-        let Some(kind) = what(state) else {
-            return;
-        };
-        let at = cycles(state);
-        let mut wire = [0u8; amiro_trace::MAX_WIRE];
-        if state.lost > 0 {
-            let lost = Record {
-                cycles: at,
-                kind: Kind::Lost { count: state.lost },
-            };
-            let n = lost.encode_into(&mut wire);
-            if sink(&wire[..n]) {
-                state.lost = 0;
-            }
-        }
-        let n = Record { cycles: at, kind }.encode_into(&mut wire);
-        if !sink(&wire[..n]) {
-            state.lost = state.lost.saturating_add(1);
-        }
+        write(
+            &mut STATE.borrow_ref_mut(cs),
+            kind,
+            crate::telemetry::write_trace,
+        )
     });
 }
 
-/// A handler event (`amiro_sensors::trace` record), with the trace clock's stamp.
+/// Stamps and writes one record into `sink`, in the caller's critical section (so a task record's
+/// state change and its record are one step). A record that does not fit is counted and reported
+/// by the next one that does. One copy for every kind (flash).
+#[inline(never)]
+fn write(state: &mut State, kind: Kind, sink: fn(&[u8]) -> bool) {
+    let at = cycles(state);
+    // The buffer lives in the state: a stack array would be cleared on every record.
+    let wire = &mut state.wire;
+    if state.lost > 0 {
+        let lost = Record {
+            cycles: at,
+            kind: Kind::Lost { count: state.lost },
+        };
+        let n = lost.encode_into(wire);
+        if sink(&wire[..n]) {
+            state.lost = 0;
+        }
+    }
+    let n = Record { cycles: at, kind }.encode_into(wire);
+    if !sink(&wire[..n]) {
+        state.lost = state.lost.saturating_add(1);
+    }
+}
+
+/// A handler event (`amiro_sensors::trace` record), with the trace clock's stamp. (QEMU sends it to
+/// the console, in order with the other lines.)
 pub fn event(record: &[u8; amiro_trace::EVENT_LEN]) {
-    let record = *record;
+    let kind = Kind::Event { record: *record };
     #[cfg(not(feature = "qemu"))]
-    emit(|_| Some(Kind::Event { record }));
+    emit(kind);
     #[cfg(feature = "qemu")]
-    emit_to(
-        |_| Some(Kind::Event { record }),
-        crate::telemetry::write_console_record,
-    );
+    critical_section::with(|cs| {
+        write(
+            &mut STATE.borrow_ref_mut(cs),
+            kind,
+            crate::telemetry::write_console_record,
+        )
+    });
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.
@@ -199,26 +205,33 @@ pub fn enter(task: u8) {
 #[cfg(feature = "task-trace")]
 #[inline(never)]
 fn start(task: u8) {
-    emit(|state| {
+    critical_section::with(|cs| {
+        let mut state = STATE.borrow_ref_mut(cs);
         if let Some(slot) = state.preempted.get_mut(usize::from(task)) {
             *slot = state.current;
             state.current = task;
         }
-        Some(Kind::TaskStart { task })
+        write(
+            &mut state,
+            Kind::TaskStart { task },
+            crate::telemetry::write_trace,
+        );
     });
 }
 
 #[cfg(feature = "task-trace")]
 #[inline(never)]
 fn end(task: u8, next_release_in_us: u32) {
-    emit(|state| {
+    critical_section::with(|cs| {
+        let mut state = STATE.borrow_ref_mut(cs);
         if let Some(&before) = state.preempted.get(usize::from(task)) {
             state.current = before;
         }
-        Some(Kind::TaskEnd {
+        let kind = Kind::TaskEnd {
             task,
             next_release_in_us,
-        })
+        };
+        write(&mut state, kind, crate::telemetry::write_trace);
     });
 }
 
@@ -259,7 +272,7 @@ pub fn resume(task: u8) {
 #[inline(always)]
 pub fn frame_acked(id: u16) {
     #[cfg(feature = "task-trace")]
-    emit(|_| Some(Kind::FrameAcked { id }));
+    emit(Kind::FrameAcked { id });
     #[cfg(not(feature = "task-trace"))]
     let _ = id;
 }

@@ -138,48 +138,44 @@ fn check(bytes: &[u8]) -> u8 {
     bytes.iter().fold(CHECK_SEED, |c, &b| c.rotate_left(1) ^ b)
 }
 
-impl Record {
-    /// The record's body (before COBS), and its length.
-    fn body(&self) -> ([u8; MAX_BODY], usize) {
-        let mut body = [0u8; MAX_BODY];
-        body[0] = VERSION << 5 | self.kind.number();
-        body[1..9].copy_from_slice(&self.cycles.to_le_bytes());
-        let payload = &mut body[9..];
-        let n = match self.kind {
-            Kind::Hello { clock_hz } => {
-                payload[..4].copy_from_slice(&clock_hz.to_le_bytes());
-                4
-            }
-            Kind::TaskStart { task } => {
-                payload[0] = task;
-                1
-            }
-            Kind::TaskEnd {
-                task,
-                next_release_in_us,
-            } => {
-                payload[0] = task;
-                payload[1..5].copy_from_slice(&next_release_in_us.to_le_bytes());
-                5
-            }
-            Kind::Event { record } => {
-                payload[..EVENT_LEN].copy_from_slice(&record);
-                EVENT_LEN
-            }
-            Kind::FrameAcked { id } => {
-                payload[..2].copy_from_slice(&id.to_le_bytes());
-                2
-            }
-            Kind::Lost { count } => {
-                payload[..4].copy_from_slice(&count.to_le_bytes());
-                4
-            }
-        };
-        let len = 9 + n;
-        body[len] = check(&body[..len]);
-        (body, len + 1)
+/// COBS and the check byte in one pass, straight into the wire buffer (no body buffer: the
+/// firmware's flash and cycles).
+struct Encoder<'a> {
+    out: &'a mut [u8; MAX_WIRE],
+    code_at: usize,
+    at: usize,
+    check: u8,
+}
+
+impl Encoder<'_> {
+    fn raw(&mut self, b: u8) {
+        // Bodies are < 254 bytes: one code byte per zero and one at the start.
+        if b == 0 {
+            self.out[self.code_at] = (self.at - self.code_at) as u8;
+            self.code_at = self.at;
+        } else {
+            self.out[self.at] = b;
+        }
+        self.at += 1;
     }
 
+    fn put(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.check = self.check.rotate_left(1) ^ b;
+            self.raw(b);
+        }
+    }
+
+    fn finish(mut self) -> usize {
+        let check = self.check;
+        self.raw(check);
+        self.out[self.code_at] = (self.at - self.code_at) as u8;
+        self.out[self.at] = 0;
+        self.at + 1
+    }
+}
+
+impl Record {
     /// The record as it goes on the wire (COBS, then `0x00`).
     pub fn encode(&self) -> Wire {
         let mut wire = Wire {
@@ -190,26 +186,32 @@ impl Record {
         wire
     }
 
-    /// Writes the record as it goes on the wire into `out` and returns its length (one pass over
-    /// the body: the firmware calls this on every task start and end).
+    /// Writes the record as it goes on the wire into `out` and returns its length (one pass: the
+    /// firmware calls this on every task start and end).
     pub fn encode_into(&self, out: &mut [u8; MAX_WIRE]) -> usize {
-        let (body, len) = self.body();
-        // COBS: each group starts with the distance to the next zero (bodies are < 254 bytes, so
-        // one code byte per zero and one at the start).
-        let mut code_at = 0;
-        let mut at = 1;
-        for &b in &body[..len] {
-            if b == 0 {
-                out[code_at] = (at - code_at) as u8;
-                code_at = at;
-            } else {
-                out[at] = b;
+        let mut e = Encoder {
+            out,
+            code_at: 0,
+            at: 1,
+            check: CHECK_SEED,
+        };
+        e.put(&[VERSION << 5 | self.kind.number()]);
+        e.put(&self.cycles.to_le_bytes());
+        match &self.kind {
+            Kind::Hello { clock_hz } => e.put(&clock_hz.to_le_bytes()),
+            Kind::TaskStart { task } => e.put(&[*task]),
+            Kind::TaskEnd {
+                task,
+                next_release_in_us,
+            } => {
+                e.put(&[*task]);
+                e.put(&next_release_in_us.to_le_bytes());
             }
-            at += 1;
+            Kind::Event { record } => e.put(record),
+            Kind::FrameAcked { id } => e.put(&id.to_le_bytes()),
+            Kind::Lost { count } => e.put(&count.to_le_bytes()),
         }
-        out[code_at] = (at - code_at) as u8;
-        out[at] = 0;
-        at + 1
+        e.finish()
     }
 
     /// Reads one body (COBS already undone).
