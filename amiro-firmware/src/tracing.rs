@@ -207,12 +207,13 @@ pub fn enter(task: u8) {
 fn start(task: u8) {
     critical_section::with(|cs| {
         let mut state = STATE.borrow_ref_mut(cs);
+        let state = &mut *state;
         if let Some(slot) = state.preempted.get_mut(usize::from(task)) {
             *slot = state.current;
             state.current = task;
         }
         write(
-            &mut state,
+            state,
             Kind::TaskStart { task },
             crate::telemetry::write_trace,
         );
@@ -224,6 +225,7 @@ fn start(task: u8) {
 fn end(task: u8, next_release_in_us: u32) {
     critical_section::with(|cs| {
         let mut state = STATE.borrow_ref_mut(cs);
+        let state = &mut *state;
         if let Some(&before) = state.preempted.get(usize::from(task)) {
             state.current = before;
         }
@@ -231,7 +233,7 @@ fn end(task: u8, next_release_in_us: u32) {
             task,
             next_release_in_us,
         };
-        write(&mut state, kind, crate::telemetry::write_trace);
+        write(state, kind, crate::telemetry::write_trace);
     });
 }
 
