@@ -384,6 +384,11 @@ fn test(root: &Path) -> Result<()> {
         .with_context(|| format!("amiro-sensors for {target}"))?;
         cargo(
             root,
+            &["build", "--quiet", "--target", target, "-p", "amiro-trace"],
+        )
+        .with_context(|| format!("amiro-trace for {target}"))?;
+        cargo(
+            root,
             &[
                 "build",
                 "--quiet",
