@@ -3,7 +3,8 @@
 //! (behind AMiRo-BLT by default, feature `bare-chip` or `qemu` otherwise), from
 //! `amiro_firmware::layout`; and the board's admission table (`admission_table.rs`, included with
 //! `amiro_firmware::admission_table!()`) from the same app sources and timing files
-//! `cargo xtask analyze` reads — the build fails when they disagree.
+//! `cargo xtask analyze` reads — the build fails when they disagree; and the trace numbers of the
+//! board's tasks (`trace_tasks.rs`, included with `amiro_firmware::trace_tasks!()`).
 use std::{env, fs, path::PathBuf};
 
 use amiro_firmware::layout::{Family, Link, MemoryMap};
@@ -32,6 +33,14 @@ fn main() {
         panic!("admission table: the apps and the timing files disagree (as `cargo xtask analyze` would say): {e}")
     });
     fs::write(out.join("admission_table.rs"), table).expect("write admission_table.rs");
+    let board = env::var("CARGO_PKG_NAME").expect("cargo sets CARGO_PKG_NAME");
+    let tasks = amiro_firmware::trace_ids::board_names(&root, &board)
+        .unwrap_or_else(|e| panic!("trace task numbers of {board}: {e}"));
+    fs::write(
+        out.join("trace_tasks.rs"),
+        amiro_firmware::trace_ids::rust_source(&tasks),
+    )
+    .expect("write trace_tasks.rs");
     println!("cargo:rerun-if-changed=../schedule-analysis/models");
     for board in ["diwheeldrive", "powermgmt", "lightring"] {
         println!("cargo:rerun-if-changed=../{board}/src/main.rs");

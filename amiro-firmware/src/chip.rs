@@ -203,6 +203,7 @@ pub fn f1_clock_plan() -> F1ClockPlan {
         }
     } else {
         crate::log!("fault: the 8 MHz crystal did not start; running from HSI at 64 MHz");
+        crate::tracing::hello(64_000_000);
         F1ClockPlan {
             on_crystal: false,
             sysclk_hz: 64_000_000,

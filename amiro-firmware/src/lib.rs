@@ -39,8 +39,22 @@ pub mod signals;
 pub mod tasks;
 #[cfg(target_os = "none")]
 pub mod telemetry;
+#[cfg(not(target_os = "none"))]
+pub mod trace_ids;
+#[cfg(target_os = "none")]
+pub mod tracing;
 #[cfg(target_os = "none")]
 pub mod watchdog;
+
+/// The trace numbers of the board's tasks (`pub mod trace_task { pub const CAN_RX: u8 = 0; … }`),
+/// written by `board-build.rs` from the app's source into the board crate's `OUT_DIR`
+/// (see [`trace_ids`] on the host, and [`tracing`] on the chip).
+#[macro_export]
+macro_rules! trace_tasks {
+    () => {
+        include!(concat!(env!("OUT_DIR"), "/trace_tasks.rs"));
+    };
+}
 
 #[cfg(all(target_os = "none", not(any(feature = "f1", feature = "f4"))))]
 compile_error!("amiro-firmware: enable the chip family feature `f1` or `f4`");

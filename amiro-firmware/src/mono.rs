@@ -37,14 +37,21 @@ where
         B::timer_queue().now().saturating_mul(TICK_US)
     }
 
+    // The waits end the running task's run in the trace, with its next release, and start it
+    // again when it resumes (`tracing`).
     async fn delay_until_us(at_us: u64) {
-        B::timer_queue().delay_until(at_us.div_ceil(TICK_US)).await
+        let task = crate::tracing::suspend(Some((at_us, Self::now_us())));
+        B::timer_queue().delay_until(at_us.div_ceil(TICK_US)).await;
+        crate::tracing::resume(task);
     }
 
     async fn timeout_at_us<F: Future>(at_us: u64, future: F) -> Option<F::Output> {
-        B::timer_queue()
+        let task = crate::tracing::suspend(Some((at_us, Self::now_us())));
+        let result = B::timer_queue()
             .timeout_at(at_us.div_ceil(TICK_US), future)
             .await
-            .ok()
+            .ok();
+        crate::tracing::resume(task);
+        result
     }
 }

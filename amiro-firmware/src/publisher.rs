@@ -62,7 +62,9 @@ pub async fn serve_level<C: Clock, const N: usize>(
                 let _ = C::timeout_at_us(due, wake.recv()).await;
             }
             None => {
+                let task = crate::tracing::suspend(None);
                 let _ = wake.recv().await;
+                crate::tracing::resume(task);
             }
         }
         for &level in levels {

@@ -14,13 +14,12 @@
 //! Trace events and the human log are printed as lines starting with `#`; the run ends with one
 //! `# qemu: … at N us; …` line (see [`finish`]).
 use core::cell::RefCell;
-use core::fmt::Write as _;
 use core::sync::atomic::{AtomicBool, Ordering};
 
 use cortex_m::interrupt::InterruptNumber;
 use cortex_m_semihosting::{debug, hprintln, syscall};
 use critical_section::Mutex;
-use heapless::{Deque, String};
+use heapless::Deque;
 
 use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
 use crate::mono::{Clock as _, TimerClock};
@@ -56,6 +55,25 @@ extern "C" {
 pub fn init(syst: cortex_m::peripheral::SYST) {
     paint_stack();
     Mono::start(syst, CORE_CLOCK_HZ);
+    if let Some(file) = HostFile::create(b"trace.bin\0") {
+        TRACE_FILE.store(file.0, Ordering::Relaxed);
+    }
+    crate::tracing::start_clock(CORE_CLOCK_HZ);
+}
+
+/// The host file the trace records go to (`usize::MAX`: none).
+static TRACE_FILE: core::sync::atomic::AtomicUsize =
+    core::sync::atomic::AtomicUsize::new(usize::MAX);
+
+/// Writes trace record bytes to `trace.bin` (the QEMU build's trace channel); `false` if not all.
+pub fn write_trace_file(bytes: &[u8]) -> bool {
+    let fd = TRACE_FILE.load(Ordering::Relaxed);
+    if fd == usize::MAX {
+        return false;
+    }
+    // SAFETY: semihosting WRITE from a buffer we own; it returns the number of bytes NOT written.
+    let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
+    left == 0
 }
 
 /// Fills the free stack below the current stack pointer with a pattern, so the end of the run can
@@ -93,28 +111,76 @@ pub fn static_ram() -> usize {
     core::ptr::addr_of_mut!(__sheap) as usize - crate::layout::RAM_BASE as usize
 }
 
-/// Virtual transmit mailboxes: a frame is on the bus the moment it is offered.
+/// Virtual transmit mailboxes: a frame is on the bus the moment it is offered. Like bxCAN's three,
+/// they take at most three frames per transmit interrupt; the next interrupt follows at once (as
+/// the first transmit-complete would), so one job of the transmit task is as long as the robot's.
 pub struct CanTxPort;
+
+static TX_THIS_JOB: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
 
 impl CanTx for CanTxPort {
     fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
-        let mut line: String<64> = String::new();
-        let now = Clock::now_us();
-        let _ = write!(
-            line,
-            "({}.{:06}) can0 {:03X}#",
-            now / 1_000_000,
-            now % 1_000_000,
-            frame.id().raw()
-        );
-        for b in frame.data() {
-            let _ = write!(line, "{b:02X}");
+        if TX_THIS_JOB.fetch_add(1, Ordering::Relaxed) >= 3 {
+            // The mailboxes are full: pend this interrupt again (the transmit-complete).
+            const ICSR: *const u32 = 0xE000_ED04 as *const u32;
+            const NVIC_ISPR: *mut u32 = 0xE000_E200 as *mut u32;
+            // SAFETY: reads the active exception number; writing a set-pending bit of the NVIC
+            // only pends that interrupt (the one running: the board's CAN transmit interrupt).
+            unsafe {
+                let active = core::ptr::read_volatile(ICSR) & 0x1FF;
+                if let Some(irq) = active.checked_sub(16) {
+                    core::ptr::write_volatile(NVIC_ISPR.add((irq / 32) as usize), 1 << (irq % 32));
+                }
+            }
+            return Transmit::Busy;
         }
-        hprintln!("{}", line);
+        // `(s.micros) can0 ID#DATA`, digits by hand: the robot's mailbox write costs a few
+        // instructions, and the emulated transmit task should not cost core::fmt's thousands.
+        const HEX: &[u8; 16] = b"0123456789ABCDEF";
+        let mut line = [0u8; 64];
+        let now = Clock::now_us();
+        let mut at = 0;
+        let mut put = |b: u8| {
+            line[at] = b;
+            at += 1;
+        };
+        put(b'(');
+        // One 64-bit division; the digits from 32-bit ones (the M3/M4 divide those in hardware).
+        let seconds = now / 1_000_000;
+        let micros = (now - seconds * 1_000_000) as u32;
+        let mut digits = [0u8; 10];
+        let seconds =
+            crate::telemetry::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
+        seconds.bytes().for_each(&mut put);
+        put(b'.');
+        let mut scale = 100_000;
+        while scale > 0 {
+            put(b'0' + ((micros / scale) % 10) as u8);
+            scale /= 10;
+        }
+        b") can0 ".iter().for_each(|&b| put(b));
+        let id = frame.id().raw();
+        for shift in [8, 4, 0] {
+            put(HEX[usize::from((id >> shift) & 15)]);
+        }
+        put(b'#');
+        for &b in frame.data() {
+            put(HEX[usize::from(b >> 4)]);
+            put(HEX[usize::from(b & 15)]);
+        }
+        put(b'\n');
+        if let Ok(mut out) = cortex_m_semihosting::hio::hstdout() {
+            let _ = out.write_all(&line[..at]);
+        }
+        // On this bus a frame is acknowledged the moment it is offered: the frame line is its
+        // acknowledgement (the host reads it from there; no second record costs the task time).
         Transmit::Queued
     }
 
-    fn completed(&mut self, _on_completion: &mut dyn FnMut(Completion)) {}
+    fn completed(&mut self, _on_completion: &mut dyn FnMut(Completion)) {
+        // A new transmit interrupt: the three mailboxes are free again.
+        TX_THIS_JOB.store(0, Ordering::Relaxed);
+    }
 }
 
 /// Virtual receive FIFO (three frames deep, like bxCAN's).
@@ -258,6 +324,12 @@ impl HostFile {
     fn open(name_nul: &[u8]) -> Option<Self> {
         // SAFETY: semihosting OPEN with a NUL-terminated name, mode 1 ("rb"), length without the NUL.
         let fd = unsafe { syscall!(OPEN, name_nul.as_ptr(), 1, name_nul.len() - 1) };
+        (fd as isize >= 0).then_some(Self(fd))
+    }
+
+    fn create(name_nul: &[u8]) -> Option<Self> {
+        // SAFETY: semihosting OPEN with a NUL-terminated name, mode 5 ("wb"), length without the NUL.
+        let fd = unsafe { syscall!(OPEN, name_nul.as_ptr(), 5, name_nul.len() - 1) };
         (fd as isize >= 0).then_some(Self(fd))
     }
 

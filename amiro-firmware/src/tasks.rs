@@ -49,15 +49,19 @@ pub fn receive_frames<const N: usize>(
 /// The CAN transmit interrupt: frames whose mailbox was aborted for a more urgent one go back into
 /// the queue; then the mailboxes are filled from the queue, most urgent first.
 pub fn transmit_pending<C: Clock, const N: usize>(port: &mut impl CanTx, queue: &mut TxQueue<N>) {
-    port.completed(&mut |completion| {
-        if let Completion::Aborted(frame) = completion {
+    port.completed(&mut |completion| match completion {
+        Completion::Aborted(frame) => {
             let _ = queue.requeue(frame);
         }
+        Completion::Sent(frame) => crate::tracing::frame_acked(frame.id().raw()),
     });
     while let Some(frame) = queue.peek().copied() {
         match port.transmit(&frame) {
             Transmit::Queued => {
                 queue.pop();
+                // QEMU prints the frame itself as it enters the (virtual) mailbox: the event would
+                // say it twice, at a cost the robot does not have.
+                #[cfg(not(feature = "qemu"))]
                 telemetry::trace(&TraceEvent::new(
                     C::now_us(),
                     TraceKind::FrameSent {
@@ -229,5 +233,8 @@ pub const fn level_index(p: Priority) -> usize {
 pub async fn next_command<const N: usize>(
     commands: &mut Receiver<'static, RxFrame, N>,
 ) -> Option<RxFrame> {
-    commands.recv().await.ok()
+    let task = crate::tracing::suspend(None);
+    let frame = commands.recv().await.ok();
+    crate::tracing::resume(task);
+    frame
 }

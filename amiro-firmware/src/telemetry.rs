@@ -1,9 +1,11 @@
 //! Where a board's words go: trace events and a human log.
 //!
-//! On the robot both go over RTT (channel 0 `log`: the human log; channel 1 `trace`: trace events in
-//! their compact binary form, decoded on the host by `cargo xtask trace`). In the QEMU build both go
-//! to the semihosting console as text lines starting with `#`, so a run's output still reads as a
-//! candump file.
+//! On the robot both go over RTT (channel 0 `log`: the human log; channel 1 `trace`: records in the
+//! `amiro_trace` format — handler events and, with `task-trace`, the task records of [`crate::tracing`]
+//! — decoded on the host by `cargo xtask trace` and `cargo xtask bench`). In the QEMU build the log
+//! and the handler events go to the semihosting console as text lines starting with `#`, so a run's
+//! output still reads as a candump file, and the task records, in the same binary format as on
+//! the robot, into the host file `trace.bin` of the run's work directory.
 use amiro_sensors::trace::TraceEvent;
 
 #[cfg(not(feature = "qemu"))]
@@ -55,28 +57,72 @@ mod rtt {
         });
     }
 
-    /// Writes one encoded trace event; the critical section lasts one short copy into the ring.
-    pub fn write_trace(bytes: &[u8]) {
+    /// Writes one whole trace record, or nothing when the channel has no room for all of it
+    /// (`false`); the critical section lasts one short copy into the ring.
+    pub fn write_trace(bytes: &[u8]) -> bool {
         critical_section::with(|cs| {
+            let mut written = false;
             with_channel(cs, &TRACE, |channel| {
-                channel.write(bytes);
+                written = channel.write(bytes) == bytes.len();
             });
-        });
+            written
+        })
     }
 }
 
-/// Sets up the telemetry channels (RTT on the robot; nothing to do in QEMU).
+/// The core clock a board runs at after its clock set-up, which the trace clock counts (the
+/// F103's internal-oscillator fallback says so again, see `chip::f1_clock_plan`).
+#[cfg(all(not(feature = "qemu"), feature = "f1"))]
+const TRACE_CLOCK_HZ: u32 = 72_000_000;
+#[cfg(all(not(feature = "qemu"), not(feature = "f1")))]
+const TRACE_CLOCK_HZ: u32 = 168_000_000;
+
+/// Sets up the telemetry channels and the trace clock (RTT and the DWT cycle counter on the robot;
+/// in QEMU the clock starts with the monotonic, in `qemu::init`).
 pub fn init() {
     #[cfg(not(feature = "qemu"))]
-    rtt::init();
+    {
+        rtt::init();
+        crate::tracing::start_clock(TRACE_CLOCK_HZ);
+    }
 }
 
 /// Emits one trace event.
 pub fn trace(event: &TraceEvent) {
     #[cfg(not(feature = "qemu"))]
-    rtt::write_trace(&event.encode());
+    crate::tracing::event(&event.encode());
     #[cfg(feature = "qemu")]
-    cortex_m_semihosting::hprintln!("# {}", event);
+    crate::tracing::event(&event.encode());
+}
+
+/// QEMU: one trace record as a console line, `# T ` and its bytes in hex (without the delimiter:
+/// the line ends it), so a handler event keeps its place among the other lines (`cargo xtask qemu`
+/// prints its text on the host; core::fmt here would cost the task thousands of instructions).
+#[cfg(feature = "qemu")]
+pub(crate) fn write_console_record(bytes: &[u8]) -> bool {
+    const HEX: &[u8; 16] = b"0123456789abcdef";
+    let mut line = [0u8; 4 + 2 * amiro_trace::MAX_WIRE + 1];
+    line[..4].copy_from_slice(b"# T ");
+    let mut at = 4;
+    for &b in bytes.iter().take_while(|&&b| b != 0) {
+        line[at] = HEX[usize::from(b >> 4)];
+        line[at + 1] = HEX[usize::from(b & 15)];
+        at += 2;
+    }
+    line[at] = b'\n';
+    match cortex_m_semihosting::hio::hstdout() {
+        Ok(mut out) => out.write_all(&line[..=at]).is_ok(),
+        Err(_) => false,
+    }
+}
+
+/// Writes one encoded trace record (`amiro_trace` wire bytes, delimiter included); `false` when it
+/// did not fit and was dropped whole.
+pub(crate) fn write_trace(bytes: &[u8]) -> bool {
+    #[cfg(not(feature = "qemu"))]
+    return rtt::write_trace(bytes);
+    #[cfg(feature = "qemu")]
+    return crate::qemu::write_trace_file(bytes);
 }
 
 /// Writes a line to the human log (RTT channel 0 on the robot, a `#` line in QEMU), made of string

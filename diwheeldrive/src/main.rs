@@ -26,6 +26,9 @@ mod qemu;
 #[cfg(feature = "qemu")]
 use qemu as platform;
 
+// The trace numbers of the tasks below (`trace_task::CAN_RX`, …), from this file.
+amiro_firmware::trace_tasks!();
+
 // Panic, HardFault and the hand-over stop the motors first.
 amiro_firmware::safe_state!(platform::emergency_motors_off);
 
@@ -184,6 +187,7 @@ mod app {
     /// CAN receive FIFO 0: move frames into the bounded command queue; a full queue drops and counts.
     #[task(binds = USB_LP_CAN_RX0, priority = 7, local = [can_rx, rx_frames])]
     fn can_rx(cx: can_rx::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::CAN_RX);
         tasks::receive_frames(cx.local.can_rx, cx.local.rx_frames);
     }
 
@@ -191,6 +195,7 @@ mod app {
     /// more urgent one displaces from a mailbox goes back into the queue.
     #[task(binds = USB_HP_CAN_TX, priority = 6, shared = [tx_queue], local = [can_tx])]
     fn can_tx(mut cx: can_tx::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::CAN_TX);
         let port = cx.local.can_tx;
         cx.shared
             .tx_queue
@@ -200,6 +205,7 @@ mod app {
     /// CAN status change (error warning, error-passive, bus-off): counted and traced.
     #[task(binds = CAN_SCE, priority = 7, shared = [can_errors])]
     fn can_status(mut cx: can_status::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::CAN_STATUS);
         cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
     }
 
@@ -207,6 +213,7 @@ mod app {
     /// publisher levels whose schedule changed; at most one command per `COMMAND_MIN_INTERVAL_US`.
     #[task(priority = 5, shared = [handler, drive], local = [commands, wake_levels])]
     async fn handle_commands(mut cx: handle_commands::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
         while let Some(frame) = tasks::next_command(cx.local.commands).await {
             let started = Clock::now_us();
             let outcome = tasks::handle_command::<Clock>(
@@ -224,6 +231,7 @@ mod app {
     /// The wheel speed controller at 100 Hz, with the dead-man stop.
     #[task(priority = 5, shared = [drive, alive], local = [motors, encoders])]
     async fn motor_control(mut cx: motor_control::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::MOTOR_CONTROL);
         let mut next = Clock::now_us();
         loop {
             next += crate::MOTOR_PERIOD_US;
@@ -239,6 +247,7 @@ mod app {
     /// Publisher for topics at CAN priority urgent.
     #[task(priority = 4, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_urgent])]
     async fn publish_urgent(cx: publish_urgent::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_URGENT);
         let s = cx.shared;
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
@@ -255,6 +264,7 @@ mod app {
     /// Publisher for topics at CAN priority high.
     #[task(priority = 3, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_high])]
     async fn publish_high(cx: publish_high::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_HIGH);
         let s = cx.shared;
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
@@ -271,6 +281,7 @@ mod app {
     /// Publisher for topics at CAN priority medium.
     #[task(priority = 2, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_medium])]
     async fn publish_medium(cx: publish_medium::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_MEDIUM);
         let s = cx.shared;
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
@@ -287,6 +298,7 @@ mod app {
     /// Publisher for topics at CAN priority low.
     #[task(priority = 1, shared = [handler, tx_queue, drive, imu, compass, floor], local = [wake_low])]
     async fn publish_low(cx: publish_low::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_LOW);
         let s = cx.shared;
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
@@ -304,6 +316,7 @@ mod app {
     /// keeps running: a fed dog proves the whole schedule is alive.
     #[task(priority = 1, shared = [alive, can_errors])]
     async fn watchdog(mut cx: watchdog::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::WATCHDOG);
         iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
         let mut next = Clock::now_us();
         loop {
@@ -320,6 +333,7 @@ mod app {
     /// SYS_PD_N fell: another module requests shutdown. Motors off first, then hand over.
     #[task(binds = EXTI9_5, priority = 7, local = [signals])]
     fn shutdown(cx: shutdown::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::SHUTDOWN);
         if signals::on_shutdown_edge(cx.local.signals) {
             platform::emergency_motors_off();
             shutdown_sequence::spawn().ok();
@@ -329,6 +343,7 @@ mod app {
     /// Stops every publisher, lets the transmit queue drain, then calls AMiRo-BLT's shutdown handler.
     #[task(priority = 5, shared = [handler, tx_queue])]
     async fn shutdown_sequence(mut cx: shutdown_sequence::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::SHUTDOWN_SEQUENCE);
         let now = Clock::now_us();
         cx.shared.handler.lock(|h| h.stop_all());
         // Motor control runs at this priority, so it cannot be half-way through re-enabling them.
@@ -346,6 +361,7 @@ mod app {
     #[cfg(feature = "qemu")]
     #[task(priority = 7)]
     async fn stimulus(_cx: stimulus::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::STIMULUS);
         amiro_firmware::qemu::replay_stimulus(
             platform::CAN_RX_INTERRUPT,
             platform::SHUTDOWN_INTERRUPT,

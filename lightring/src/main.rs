@@ -24,6 +24,9 @@ mod qemu;
 #[cfg(feature = "qemu")]
 use qemu as platform;
 
+// The trace numbers of the tasks below (`trace_task::CAN_RX`, …), from this file.
+amiro_firmware::trace_tasks!();
+
 // Panic, HardFault and the hand-over blank the LEDs first.
 amiro_firmware::safe_state!(platform::leds_dark);
 
@@ -153,12 +156,14 @@ mod app {
     /// CAN receive FIFO 0: move frames into the bounded command queue; a full queue drops and counts.
     #[task(binds = USB_LP_CAN_RX0, priority = 7, local = [can_rx, rx_frames])]
     fn can_rx(cx: can_rx::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::CAN_RX);
         tasks::receive_frames(cx.local.can_rx, cx.local.rx_frames);
     }
 
     /// CAN transmit mailboxes: fill them from the priority queue, most urgent first.
     #[task(binds = USB_HP_CAN_TX, priority = 6, shared = [tx_queue], local = [can_tx])]
     fn can_tx(mut cx: can_tx::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::CAN_TX);
         let port = cx.local.can_tx;
         cx.shared
             .tx_queue
@@ -168,6 +173,7 @@ mod app {
     /// CAN status change (error warning, error-passive, bus-off): counted and traced.
     #[task(binds = CAN_SCE, priority = 7, shared = [can_errors])]
     fn can_status(mut cx: can_status::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::CAN_STATUS);
         cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
     }
 
@@ -175,6 +181,7 @@ mod app {
     /// the diagnostics topic wakes the publisher. At most one command per `COMMAND_MIN_INTERVAL_US`.
     #[task(priority = 5, shared = [handler, leds], local = [commands, wake_latch, wake_publisher])]
     async fn handle_commands(mut cx: handle_commands::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
         while let Some(frame) = tasks::next_command(cx.local.commands).await {
             let started = Clock::now_us();
             // One publisher task serves every level: one sender wakes it for any of them.
@@ -194,6 +201,7 @@ mod app {
     /// `REFRESH_PERIOD_US`. The first latch (all dark) lifts BLANK.
     #[task(priority = 4, shared = [leds, alive], local = [latch_wakeups, ring, blank])]
     async fn latch_leds(mut cx: latch_leds::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::LATCH_LEDS);
         let mut shown = false;
         let mut next = Clock::now_us();
         loop {
@@ -215,6 +223,7 @@ mod app {
     /// LightRing's one publisher: its diagnostics topic, at whichever CAN priority it was asked for.
     #[task(priority = 2, shared = [handler, tx_queue], local = [publisher_wakeups])]
     async fn publish(cx: publish::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::PUBLISH);
         let s = cx.shared;
         // The runtime samples the diagnostics topic itself; LightRing has no other sensor topic.
         let nothing = |_topic, _taken| Samples::new();
@@ -238,6 +247,7 @@ mod app {
     /// keeps running: a fed dog proves the whole schedule is alive.
     #[task(priority = 1, shared = [alive, can_errors])]
     async fn watchdog(mut cx: watchdog::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::WATCHDOG);
         iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
         let mut next = Clock::now_us();
         loop {
@@ -254,6 +264,7 @@ mod app {
     /// SYS_PD_N fell: another module requests shutdown. LEDs dark first, then hand over.
     #[task(binds = EXTI15_10, priority = 7, local = [signals])]
     fn shutdown(cx: shutdown::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::SHUTDOWN);
         if signals::on_shutdown_edge(cx.local.signals) {
             platform::leds_dark();
             shutdown_sequence::spawn().ok();
@@ -263,6 +274,7 @@ mod app {
     /// Stops everything and calls AMiRo-BLT's shutdown handler.
     #[task(priority = 5, shared = [handler, leds])]
     async fn shutdown_sequence(mut cx: shutdown_sequence::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::SHUTDOWN_SEQUENCE);
         cx.shared.handler.lock(|h| h.stop_all());
         cx.shared.leds.lock(|l| l.clear());
         platform::leds_dark();
@@ -273,6 +285,7 @@ mod app {
     #[cfg(feature = "qemu")]
     #[task(priority = 7)]
     async fn stimulus(_cx: stimulus::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::STIMULUS);
         amiro_firmware::qemu::replay_stimulus(
             platform::CAN_RX_INTERRUPT,
             platform::SHUTDOWN_INTERRUPT,

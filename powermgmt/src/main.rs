@@ -29,6 +29,9 @@ mod qemu;
 #[cfg(feature = "qemu")]
 use qemu as platform;
 
+// The trace numbers of the tasks below (`trace_task::CAN_RX`, …), from this file.
+amiro_firmware::trace_tasks!();
+
 // Panic, HardFault and the hand-over switch the chargers off first.
 amiro_firmware::safe_state!(platform::chargers_off);
 
@@ -196,12 +199,14 @@ mod app {
     /// CAN receive FIFO 0: move frames into the bounded command queue; a full queue drops and counts.
     #[task(binds = CAN1_RX0, priority = 7, local = [can_rx, rx_frames])]
     fn can_rx(cx: can_rx::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::CAN_RX);
         tasks::receive_frames(cx.local.can_rx, cx.local.rx_frames);
     }
 
     /// CAN transmit mailboxes: fill them from the priority queue, most urgent first.
     #[task(binds = CAN1_TX, priority = 6, shared = [tx_queue], local = [can_tx])]
     fn can_tx(mut cx: can_tx::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::CAN_TX);
         let port = cx.local.can_tx;
         cx.shared
             .tx_queue
@@ -213,6 +218,7 @@ mod app {
     /// per `COMMAND_MIN_INTERVAL_US`.
     #[task(priority = 5, shared = [handler], local = [commands, wake_levels])]
     async fn handle_commands(mut cx: handle_commands::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
         while let Some(frame) = tasks::next_command(cx.local.commands).await {
             let started = Clock::now_us();
             let outcome = tasks::handle_command::<Clock>(
@@ -230,6 +236,7 @@ mod app {
     /// Publisher for topics at CAN priority urgent.
     #[task(priority = 4, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_urgent])]
     async fn publish_urgent(cx: publish_urgent::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_URGENT);
         let s = cx.shared;
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Urgent],
@@ -245,6 +252,7 @@ mod app {
     /// Publisher for topics at CAN priority high.
     #[task(priority = 3, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_high])]
     async fn publish_high(cx: publish_high::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_HIGH);
         let s = cx.shared;
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::High],
@@ -260,6 +268,7 @@ mod app {
     /// Publisher for topics at CAN priority medium.
     #[task(priority = 2, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_medium])]
     async fn publish_medium(cx: publish_medium::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_MEDIUM);
         let s = cx.shared;
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Medium],
@@ -275,6 +284,7 @@ mod app {
     /// Publisher for topics at CAN priority low.
     #[task(priority = 1, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_low])]
     async fn publish_low(cx: publish_low::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_LOW);
         let s = cx.shared;
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Low],
@@ -292,6 +302,7 @@ mod app {
     /// `BATTERY_CHECK_EVERY` periods). Marks the watchdog's progress.
     #[task(priority = 1, shared = [rear_bus, front_bus, charger, alive])]
     async fn power_monitor(mut cx: power_monitor::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::POWER_MONITOR);
         let mut next = Clock::now_us();
         let mut round = 0u32;
         loop {
@@ -318,6 +329,7 @@ mod app {
     /// CAN status change (error warning, error-passive, bus-off): counted and traced.
     #[task(binds = CAN1_SCE, priority = 7, shared = [can_errors])]
     fn can_status(mut cx: can_status::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::CAN_STATUS);
         cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
     }
 
@@ -325,6 +337,7 @@ mod app {
     /// monitor keeps running: a fed dog proves the whole schedule is alive.
     #[task(priority = 1, shared = [alive, can_errors])]
     async fn watchdog(mut cx: watchdog::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::WATCHDOG);
         iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
         let mut next = Clock::now_us();
         loop {
@@ -342,6 +355,7 @@ mod app {
     /// marked, so its edge does nothing here).
     #[task(binds = EXTI15_10, priority = 7, shared = [signals])]
     fn shutdown(mut cx: shutdown::Context) {
+        let _job = amiro_firmware::tracing::job(crate::trace_task::SHUTDOWN);
         if cx.shared.signals.lock(signals::on_shutdown_edge) {
             platform::chargers_off();
             shutdown_sequence::spawn(None).ok();
@@ -357,6 +371,7 @@ mod app {
         mut cx: shutdown_sequence::Context,
         initiated: Option<ShutdownMode>,
     ) {
+        amiro_firmware::tracing::enter(crate::trace_task::SHUTDOWN_SEQUENCE);
         let now = Clock::now_us();
         if let Some(mode) = initiated {
             if signals::shutting_down() {
@@ -402,6 +417,7 @@ mod app {
     #[cfg(feature = "qemu")]
     #[task(priority = 7)]
     async fn stimulus(_cx: stimulus::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::STIMULUS);
         amiro_firmware::qemu::replay_stimulus(
             platform::CAN_RX_INTERRUPT,
             platform::SHUTDOWN_INTERRUPT,

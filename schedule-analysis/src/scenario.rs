@@ -47,6 +47,10 @@ pub struct Timing {
     /// Interrupt and dispatcher overheads.
     #[serde(default)]
     pub overheads: Overheads,
+    /// What the firmware's task trace costs per job (a start and an end record), when the analysed
+    /// build has it: added to every `hardware` and `software` job as interrupt entry and exit are.
+    #[serde(default)]
+    pub trace: Option<TraceCost>,
     /// The monotonic's timer interrupt, which wakes every timer-released task.
     #[serde(default)]
     pub monotonic: Option<Monotonic>,
@@ -75,6 +79,96 @@ fn default_publishers() -> BTreeMap<String, String> {
         .iter()
         .map(|p| (p.name().to_string(), format!("publish_{}", p.name())))
         .collect()
+}
+
+/// The cost of the firmware's task trace (`amiro_firmware::tracing`, cargo feature `feature`).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TraceCost {
+    /// The cargo feature that compiles the trace in (the analysed build has it).
+    pub feature: String,
+    /// One job's start and end records, µs.
+    pub per_job_us: f64,
+    /// Where the figure comes from.
+    #[serde(default)]
+    pub note: Option<String>,
+    /// The traced QEMU build.
+    #[serde(default)]
+    pub qemu: Option<QemuBuild>,
+}
+
+/// How the traced QEMU build differs from the chip's (`Firmware::Qemu`).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct QemuBuild {
+    /// The trace's cost per job in QEMU, µs (measured: deterministic under `-icount`).
+    pub per_job_us: f64,
+    /// Every budget of the board times this (≥ 1: QEMU is never assumed faster than the chip).
+    #[serde(default = "one")]
+    pub budget_scale: f64,
+    /// Where the figures come from.
+    #[serde(default)]
+    pub note: Option<String>,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl Timing {
+    /// The timing with every execution budget, critical section and overhead times `factor`.
+    fn scaled(&self, factor: f64) -> Timing {
+        let mut t = self.clone();
+        let f = factor.max(1.0);
+        t.overheads.isr_entry_us *= f;
+        t.overheads.isr_exit_us *= f;
+        t.overheads.dispatcher_us *= f;
+        if let Some(m) = &mut t.monotonic {
+            m.timer_isr_us *= f;
+        }
+        for v in t.idle_critical_sections_us.values_mut() {
+            *v *= f;
+        }
+        for task in t.tasks.values_mut() {
+            task.wcet_us = task.wcet_us.map(|w| w * f);
+            task.bcet_us = task.bcet_us.map(|w| w * f);
+            for v in task.critical_sections_us.values_mut() {
+                *v *= f;
+            }
+            if let Some(m) = &mut task.measured {
+                m.wcet_us *= f;
+            }
+        }
+        for topic in t.topics.values_mut() {
+            topic.wcet_us *= f;
+            topic.bcet_us = topic.bcet_us.map(|w| w * f);
+            for v in topic.critical_sections_us.values_mut() {
+                *v *= f;
+            }
+            if let Some(m) = &mut topic.measured {
+                m.wcet_us *= f;
+            }
+        }
+        t
+    }
+}
+
+/// A budget measured on a bench (`cargo xtask bench --calibrate`), kept beside the estimate.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Measured {
+    /// The budget the analysis uses: the largest execution time seen times `margin`, µs.
+    pub wcet_us: f64,
+    /// The largest execution time seen, µs.
+    pub max_us: f64,
+    /// The margin `wcet_us` adds to `max_us`.
+    pub margin: f64,
+    /// Jobs measured.
+    pub jobs: u64,
+    /// The capture it came from.
+    pub origin: String,
+    /// `robot` (the real chip) or `qemu` (the emulator: not the chip's times).
+    pub build: String,
 }
 
 /// Where a board's app is.
@@ -156,6 +250,9 @@ pub struct TimingTask {
     /// Free text: where the budget comes from.
     #[serde(default)]
     pub note: Option<String>,
+    /// A measured budget; when present the analysis uses it instead of `wcet_us` (the estimate).
+    #[serde(default)]
+    pub measured: Option<Measured>,
 }
 
 /// Budgets of one published topic: one job of the publisher task per sample.
@@ -173,6 +270,9 @@ pub struct TopicTiming {
     /// Free text.
     #[serde(default)]
     pub note: Option<String>,
+    /// A measured budget; when present the analysis uses it instead of `wcet_us` (the estimate).
+    #[serde(default)]
+    pub measured: Option<Measured>,
 }
 
 /// A scenario: what runs on the robot.
@@ -379,6 +479,30 @@ pub fn build(
     scenario_path: &Path,
     timing_paths: &[PathBuf],
 ) -> Result<Built, BuildError> {
+    build_for(root, scenario_path, timing_paths, Firmware::Production)
+}
+
+/// Which firmware build a model describes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Firmware {
+    /// The production build (no task trace): what the report and the admission table cover.
+    Production,
+    /// The build with the task trace, on the chip: each timing file's `trace.per_job_us` is added
+    /// to every job (`cargo xtask bench` on a capture).
+    Traced,
+    /// The traced QEMU build: every budget times the timing file's `trace.qemu.budget_scale` (the
+    /// emulator runs at 125 MIPS, slower than the F405 and faster than the F103) and its measured
+    /// `trace.qemu.per_job_us` per job (the QEMU scenarios' bounds, `cargo xtask bench --qemu`).
+    Qemu,
+}
+
+/// [`build`] for the firmware build `firmware`.
+pub fn build_for(
+    root: &Path,
+    scenario_path: &Path,
+    timing_paths: &[PathBuf],
+    firmware: Firmware,
+) -> Result<Built, BuildError> {
     let scenario_file = display(root, scenario_path);
     let scenario: Scenario = read_json(root, scenario_path)?;
     if scenario.bitrate == 0 {
@@ -516,6 +640,7 @@ pub fn build(
             &scenario,
             can::shortest_frame_time(bit),
             own_frame,
+            firmware,
             &mut built,
         )?;
         for p in &mine {
@@ -816,9 +941,22 @@ fn build_board(
     scenario: &Scenario,
     bus_frame: Time,
     own_frame: Time,
+    firmware: Firmware,
     built: &mut Built,
 ) -> Result<BoardModel, BuildError> {
+    let scaled;
+    let timing = match (
+        firmware,
+        timing.trace.as_ref().and_then(|t| t.qemu.as_ref()),
+    ) {
+        (Firmware::Qemu, Some(q)) if q.budget_scale != 1.0 => {
+            scaled = timing.scaled(q.budget_scale);
+            &scaled
+        }
+        _ => timing,
+    };
     let (declared, idle, ceilings) = declared_tasks(root, file, timing, built)?;
+    let mut measured: Vec<String> = Vec::new();
     let find = |name: &str| declared.iter().find(|d| d.name == name);
     for (level, task) in &timing.publishers {
         if Priority::from_name(level).is_none() {
@@ -897,13 +1035,14 @@ fn build_board(
     {
         let p = format!("tasks.{}", d.name);
         let t = timing.tasks.get(&d.name).cloned().unwrap_or_default();
-        let wcet = t.wcet_us.ok_or_else(|| {
+        let estimate = t.wcet_us.ok_or_else(|| {
             fail(
                 file,
                 format!("{p}.wcet_us"),
                 "missing: every task needs a budget",
             )
         })?;
+        let wcet = budget(estimate, t.measured.as_ref(), &d.name, &mut measured);
         let arrival = t.arrival.ok_or_else(|| fail(file, format!("{p}.arrival"), "missing: \"bus_frame\", \"own_frame\", {\"periodic_us\": ..} or {\"sporadic_us\": ..}"))?;
         let (period_us, sporadic) = match arrival {
             Arrival::BusFrame => (bus_frame.as_us_f64(), true),
@@ -916,7 +1055,7 @@ fn build_board(
             file,
             &p,
             &d.shared,
-            &t.critical_sections_us,
+            &within(&t.critical_sections_us, wcet),
             wcet,
             &d.name,
             built,
@@ -994,14 +1133,15 @@ fn build_board(
                 ));
             }
         }
+        let wcet = budget(t.wcet_us, t.measured.as_ref(), name, &mut measured);
         let mut job = TaskModel {
             name: format!("{publisher}[{name}]"),
             priority: d.priority,
-            wcet_us: t.wcet_us,
+            wcet_us: wcet,
             period_us: entry.period_us,
             deadline_us: entry.deadline_us,
             jitter_us: 0.0,
-            critical_sections_us: t.critical_sections_us.clone(),
+            critical_sections_us: within(&t.critical_sections_us, wcet),
             blocking_us: None,
             bcet_us: t.bcet_us,
             kind: TaskKind::Software,
@@ -1042,15 +1182,83 @@ fn build_board(
 
     // Timer jobs first: they are the most urgent and read best at the top of the table.
     timer_jobs.extend(tasks);
+    let source = built.sources.last().cloned();
+    let budgets = timing.tasks.len() + timing.topics.len();
+    built.sources.push(if measured.is_empty() {
+        format!(
+            "{}: budgets are estimates ({budgets}; none measured)",
+            timing.board
+        )
+    } else {
+        format!(
+            "{}: measured budgets for {} ({} of {budgets}), the rest estimates",
+            timing.board,
+            measured.join(", "),
+            measured.len()
+        )
+    });
+    // The task trace's start and end records, where every job's entry and exit are counted.
+    let mut overheads = timing.overheads;
+    match (&timing.trace, firmware) {
+        (Some(trace), Firmware::Traced) => {
+            overheads.isr_entry_us += trace.per_job_us / 2.0;
+            overheads.isr_exit_us += trace.per_job_us / 2.0;
+            built.sources.push(format!(
+                "{}: analysed build has the task trace (feature `{}`, {} µs per job in the overheads)",
+                timing.board, trace.feature, trace.per_job_us
+            ));
+        }
+        (Some(trace), Firmware::Qemu) => {
+            let q = trace
+                .qemu
+                .as_ref()
+                .map_or((trace.per_job_us, 1.0), |q| (q.per_job_us, q.budget_scale));
+            overheads.isr_entry_us += q.0 / 2.0;
+            overheads.isr_exit_us += q.0 / 2.0;
+            built.sources.push(format!(
+                "{}: analysed build is the traced QEMU build (budgets ×{}, {} µs per job for the trace)",
+                timing.board, q.1, q.0
+            ));
+        }
+        (Some(trace), Firmware::Production) => built.sources.push(format!(
+            "{}: analysed build is without the task trace (feature `{}` off)",
+            timing.board, trace.feature
+        )),
+        (None, _) => {}
+    }
     Ok(BoardModel {
         name: timing.board.clone(),
-        source: built.sources.last().cloned(),
-        overheads: timing.overheads,
+        source,
+        overheads,
         idle_critical_sections_us: idle_sections,
         can_tx_task: timing.can_tx_task.clone(),
         ceilings,
         tasks: timer_jobs,
     })
+}
+
+/// The budget a job gets: the measured one when the timing file has it (noted in `measured`), else
+/// the estimate.
+fn budget(estimate: f64, m: Option<&Measured>, name: &str, measured: &mut Vec<String>) -> f64 {
+    match m {
+        Some(m) => {
+            measured.push(format!(
+                "{name} ({} µs, {}, {})",
+                m.wcet_us, m.build, m.origin
+            ));
+            m.wcet_us
+        }
+        None => estimate,
+    }
+}
+
+/// Critical sections no longer than the job: a measured budget below an estimated lock length
+/// bounds the lock too.
+fn within(sections: &BTreeMap<String, f64>, wcet: f64) -> BTreeMap<String, f64> {
+    sections
+        .iter()
+        .map(|(r, &cs)| (r.clone(), cs.min(wcet)))
+        .collect()
 }
 
 /// The critical sections of a task: one per shared resource it declares (its length from the timing file, or

@@ -34,7 +34,13 @@ pub fn publisher_bound_us(
         }],
     });
     std::fs::write(&path, serde_json::to_string_pretty(&json)?)?;
-    let built = scenario::build(root, &path, &scenario::timing_files(root))?;
+    // The QEMU builds have the task trace: the bound is the traced build's.
+    let built = scenario::build_for(
+        root,
+        &path,
+        &scenario::timing_files(root),
+        scenario::Firmware::Qemu,
+    )?;
     let system = built.model.validate().map_err(|e| anyhow!("{name}: {e}"))?;
     let analysis = analyse(
         &system,

@@ -9,6 +9,7 @@ use anyhow::{bail, ensure, Context, Result};
 use clap::{Parser, Subcommand};
 
 mod analyze;
+mod bench;
 mod boards;
 mod bounds;
 mod campaign;
@@ -82,13 +83,21 @@ enum Cmd {
         /// Boards whose scenarios to run (default: all).
         boards: Vec<String>,
     },
-    /// Decode a capture of a board's binary trace channel (RTT channel 1, "trace") into text lines.
+    /// Decode a capture of a board's trace channel (RTT channel 1, "trace": `amiro-trace` records)
+    /// into text lines; damaged stretches are skipped and counted.
     Trace {
         /// The raw bytes of RTT channel 1 as captured from the board.
         file: PathBuf,
     },
     /// The response-time report: worst-case response times of the board tasks and the CAN bus.
     Analyze(analyze::AnalyzeArgs),
+    /// Measured timing against the analysis: per task jobs, execution and response times against
+    /// the analysed WCRT, per topic jitter and latency to the queue and the bus; from a capture of
+    /// the trace channel, a QEMU run, or QEMU outputs (docs/bench.md).
+    Bench(bench::BenchArgs),
+    /// Several boards' trace captures and a `candump -l` log of the bus on one time base, aligned by
+    /// the frames both saw (docs/bench.md).
+    Timeline(bench::timeline::TimelineArgs),
     /// Build and flash boards: all of them through DiWheelDrive's serial port and AMiRo-BLT
     /// (`--port /dev/ttyUSB0`), or one through probe-rs over SWD (`--probe`, writes the
     /// AMiRo-BLT checksum word and streams RTT).
@@ -191,18 +200,28 @@ fn run(cmd: Cmd) -> Result<bool> {
         Cmd::Trace { file } => {
             let bytes =
                 std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
-            let mut clean = true;
-            for (n, record) in bytes.chunks(amiro_sensors::trace::ENCODED_LEN).enumerate() {
-                match amiro_sensors::trace::TraceEvent::decode(record) {
-                    Ok(event) => println!("{event}"),
-                    Err(e) => {
-                        clean = false;
-                        println!("# record {n}: {e}");
+            // The resynchronising reader: a capture may start mid-record or hold garbage.
+            let mut reader = amiro_trace::Reader::new();
+            for record in bytes.iter().filter_map(|&b| reader.push(b)) {
+                match record.kind {
+                    amiro_trace::Kind::Event { record: event } => {
+                        match amiro_sensors::trace::TraceEvent::decode(&event) {
+                            Ok(event) => println!("{event}"),
+                            Err(e) => println!("# cycle {}: {e}", record.cycles),
+                        }
                     }
+                    other => println!("# cycle {}: {other:?}", record.cycles),
                 }
             }
-            Ok(clean)
+            let stats = reader.stats();
+            eprintln!(
+                "{} records, {} damaged stretches ({} bytes) skipped",
+                stats.records, stats.damaged, stats.skipped_bytes
+            );
+            Ok(stats.damaged == 0)
         }
+        Cmd::Bench(args) => bench::run(&root, &args),
+        Cmd::Timeline(args) => bench::timeline::run(&root, &args).map(|()| true),
         Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),
         Cmd::FlashElf { board, elf } => {
             let board =
@@ -294,7 +313,7 @@ fn firmware_elf(root: &Path, board: &Board) -> PathBuf {
         .join(board.name)
 }
 
-fn target_dir(root: &Path) -> PathBuf {
+pub(crate) fn target_dir(root: &Path) -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root.join("target"))
@@ -322,7 +341,7 @@ fn check(root: &Path) -> Result<()> {
         "--quiet",
         "--release",
         "--features",
-        "qemu",
+        "qemu,task-trace",
         "--target-dir",
         &qemu_target,
         "--",
@@ -370,6 +389,11 @@ fn test(root: &Path) -> Result<()> {
             ],
         )
         .with_context(|| format!("amiro-sensors for {target}"))?;
+        cargo(
+            root,
+            &["build", "--quiet", "--target", target, "-p", "amiro-trace"],
+        )
+        .with_context(|| format!("amiro-trace for {target}"))?;
         cargo(
             root,
             &[
@@ -441,7 +465,14 @@ pub(crate) fn build_qemu(root: &Path, board: &Board) -> Result<PathBuf> {
     let dir = qemu::target_dir(root);
     let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo_bin)
-        .args(["build", "--release", "--quiet", "--features", "qemu"])
+        // With the task trace: the bench measures the scenario runs (docs/bench.md).
+        .args([
+            "build",
+            "--release",
+            "--quiet",
+            "--features",
+            "qemu,task-trace",
+        ])
         .current_dir(root.join(board.name))
         .env("CARGO_TARGET_DIR", &dir)
         .status()
@@ -468,6 +499,8 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
         }
         let elf = build_qemu(root, board)?;
         let mut ram_high_water = 0;
+        // The runs whose output the bench measures afterwards (no second QEMU run).
+        let mut outputs = Vec::new();
         for scenario in list {
             let path = root
                 .join(board.name)
@@ -484,6 +517,7 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
                 let (bus, trace) = qemu::split_output(&text);
                 std::fs::write(work.join("bus.log"), bus)?;
                 std::fs::write(work.join("trace.log"), trace)?;
+                outputs.push((scenario.name.to_string(), work.clone()));
                 let out = scenarios::RunOutput::parse(&text)?;
                 let (static_ram, stack) = out.ram_used()?;
                 ram_high_water = ram_high_water.max(static_ram + stack);
@@ -516,6 +550,11 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
             failed += 1;
             println!("{} RAM goal missed", board.name);
         }
+        // Measured against analysed, from the same runs (`cargo xtask bench --qemu --check`).
+        if let Err(e) = bench::check_scenario_runs(root, board, &outputs) {
+            failed += 1;
+            println!("{e:#}");
+        }
     }
     println!("scenarios: {passed} passed, {failed} failed");
     if failed > 0 {
@@ -528,7 +567,7 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
 }
 
 /// Installs QEMU where the machine lacks it and we may (root with apt-get); otherwise says how.
-fn ensure_qemu() -> Result<()> {
+pub(crate) fn ensure_qemu() -> Result<()> {
     let found = Command::new("qemu-system-arm")
         .arg("--version")
         .output()

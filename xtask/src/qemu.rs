@@ -257,8 +257,28 @@ pub fn run(
             log_path.display(),
             tail(&stdout, 20)
         ),
-        Some(_) => Ok(stdout),
+        Some(_) => Ok(with_event_lines(&stdout)),
     }
+}
+
+/// The run's output with the text line of every handler event (`# (t) trace sample-taken …`) in
+/// front of the binary record the board printed for it (`# T …`, kept: the bench reads it).
+pub fn with_event_lines(text: &str) -> String {
+    let mut out = String::with_capacity(text.len() * 2);
+    for line in text.lines() {
+        if line.starts_with("# T ") {
+            for record in amiro_trace::records(&crate::bench::capture::console_record_bytes(line)) {
+                if let amiro_trace::Kind::Event { record } = record.kind {
+                    if let Ok(event) = amiro_sensors::trace::TraceEvent::decode(&record) {
+                        out.push_str(&format!("# {event}\n"));
+                    }
+                }
+            }
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
 }
 
 /// The last `n` lines of `text`.

@@ -56,7 +56,8 @@ fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         out.frames.iter().all(|f| f.data.len() == 4),
         "magnetometer frames carry 4 bytes"
     );
-    let stream = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, 200_000)?;
+    // The window ends a period before the run does: the last release's frame must fit in the run.
+    let stream = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, 199_000)?;
     let answered = stream.releases[0] - 10_000;
     let bound = bounds.publisher_latency_us("magnetometer-x", "medium", 900)?;
     // The first release is the command's handling: it must come well inside one period.

@@ -1,0 +1,516 @@
+//! From trace bytes to runs and samples: decodes `amiro_trace` records (a raw RTT capture, or the
+//! `# T` lines of a QEMU run), rebuilds every task run with its pre-emptions and its release, and
+//! follows every sample from its release to its frames in the queue and on the bus.
+use std::collections::BTreeMap;
+
+use amiro_sensors::trace::{TraceEvent, TraceKind};
+use amiro_trace::{Kind, Reader, ReaderStats, Record};
+use anyhow::{Context, Result};
+
+/// Where the release of a run came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReleaseFrom {
+    /// The timer release the task's previous run announced (exact).
+    Timer,
+    /// The run's own start (interrupts, message wake-ups): the time before the first instruction
+    /// is not seen, so the response is a lower bound.
+    Start,
+}
+
+/// One run of a task: from its start (or resumption) to its end (or suspension).
+#[derive(Debug, Clone, Copy)]
+pub struct Run {
+    /// Task number.
+    pub task: u8,
+    /// Release, start and end, ns of the trace clock.
+    pub release_ns: u64,
+    /// Start.
+    pub start_ns: u64,
+    /// End.
+    pub end_ns: u64,
+    /// Time spent in runs that pre-empted it, ns.
+    pub preempted_ns: u64,
+    /// Of that, time in the QEMU platform's stimulus replay (it stands for the bus, which costs the
+    /// robot nothing), ns: left out of the response.
+    pub platform_ns: u64,
+    /// Where the release came from.
+    pub release_from: ReleaseFrom,
+}
+
+impl Run {
+    /// Execution time (pre-emptions taken out), ns.
+    pub fn execution_ns(&self) -> u64 {
+        self.end_ns
+            .saturating_sub(self.start_ns)
+            .saturating_sub(self.preempted_ns)
+    }
+
+    /// Response time from the release, ns (QEMU's stimulus replay left out).
+    pub fn response_ns(&self) -> u64 {
+        self.end_ns
+            .saturating_sub(self.release_ns)
+            .saturating_sub(self.platform_ns)
+    }
+}
+
+/// One sample of a topic: released, taken, its frames queued and acknowledged.
+#[derive(Debug, Clone)]
+pub struct Sample {
+    /// The topic.
+    pub topic: amiro_can::Topic,
+    /// CAN priority level of its frames (0 urgent … 3 low), once a frame was queued.
+    pub level: Option<u8>,
+    /// Release (ns), and when the sample was taken.
+    pub release_ns: u64,
+    /// Taken.
+    pub taken_ns: u64,
+    /// The last of its frames entered the transmit queue.
+    pub queued_ns: Option<u64>,
+    /// The last of its frames was acknowledged on the bus.
+    pub acked_ns: Option<u64>,
+    frames_queued: u32,
+    frames_acked: u32,
+}
+
+/// Everything read from one capture.
+#[derive(Debug, Default)]
+pub struct Capture {
+    /// The trace clock (from the boot record, else the default given).
+    pub clock_hz: u64,
+    /// Runs in the order they ended.
+    pub runs: Vec<Run>,
+    /// Samples in release order.
+    pub samples: Vec<Sample>,
+    /// Frames acknowledged on the bus: identifier and time (ns).
+    pub acked: Vec<(u16, u64)>,
+    /// Handler events with their record times (ns).
+    pub events: Vec<(u64, TraceEvent)>,
+    /// Reader counts (records, damaged stretches, skipped bytes).
+    pub reader: ReaderStats,
+    /// Records the board reported lost (channel full).
+    pub lost: u64,
+    /// Ends that did not match the running task (a damaged or lossy stream): the run stack was reset.
+    pub unbalanced: u64,
+    /// Time of the last record, ns.
+    pub end_ns: u64,
+}
+
+/// Builds a [`Capture`] from records, events and acknowledgements in time order.
+struct Builder {
+    capture: Capture,
+    /// The task number of QEMU's stimulus replay, if the app has one.
+    platform_task: Option<u8>,
+    hz: u64,
+    base_cycles: u64,
+    base_ns: u64,
+    stack: Vec<Open>,
+    next_release: BTreeMap<u8, u64>,
+    open_samples: BTreeMap<u8, usize>,
+}
+
+struct Open {
+    task: u8,
+    start_ns: u64,
+    release_ns: u64,
+    release_from: ReleaseFrom,
+    preempted_ns: u64,
+    platform_ns: u64,
+}
+
+impl Builder {
+    fn new(default_hz: u64) -> Self {
+        Self {
+            platform_task: None,
+            capture: Capture {
+                clock_hz: default_hz,
+                ..Capture::default()
+            },
+            hz: default_hz.max(1),
+            base_cycles: 0,
+            base_ns: 0,
+            stack: Vec::new(),
+            next_release: BTreeMap::new(),
+            open_samples: BTreeMap::new(),
+        }
+    }
+
+    /// Cycles to ns with the clock in force (a later boot record changes it from there on).
+    fn ns(&self, cycles: u64) -> u64 {
+        self.base_ns
+            + (u128::from(cycles.saturating_sub(self.base_cycles)) * 1_000_000_000
+                / u128::from(self.hz)) as u64
+    }
+
+    fn record(&mut self, record: Record) {
+        let t = self.ns(record.cycles);
+        self.capture.end_ns = self.capture.end_ns.max(t);
+        match record.kind {
+            Kind::Hello { clock_hz } => {
+                if clock_hz > 0 {
+                    self.base_ns = t;
+                    self.base_cycles = record.cycles;
+                    self.hz = u64::from(clock_hz);
+                    self.capture.clock_hz = self.hz;
+                }
+            }
+            Kind::TaskStart { task } => {
+                let (release_ns, release_from) = match self.next_release.remove(&task) {
+                    Some(r) if r <= t => (r, ReleaseFrom::Timer),
+                    _ => (t, ReleaseFrom::Start),
+                };
+                self.stack.push(Open {
+                    task,
+                    start_ns: t,
+                    release_ns,
+                    release_from,
+                    preempted_ns: 0,
+                    platform_ns: 0,
+                });
+            }
+            Kind::TaskEnd {
+                task,
+                next_release_in_us,
+            } => {
+                match self.stack.pop() {
+                    Some(open) if open.task == task => {
+                        let took = t.saturating_sub(open.start_ns);
+                        if let Some(parent) = self.stack.last_mut() {
+                            parent.preempted_ns += took;
+                        }
+                        if Some(task) == self.platform_task {
+                            for run in &mut self.stack {
+                                run.platform_ns += took;
+                            }
+                        }
+                        self.capture.runs.push(Run {
+                            task,
+                            release_ns: open.release_ns,
+                            start_ns: open.start_ns,
+                            end_ns: t,
+                            preempted_ns: open.preempted_ns,
+                            platform_ns: open.platform_ns,
+                            release_from: open.release_from,
+                        });
+                    }
+                    _ => {
+                        self.capture.unbalanced += 1;
+                        self.stack.clear();
+                    }
+                }
+                if next_release_in_us != u32::MAX {
+                    self.next_release
+                        .insert(task, t + u64::from(next_release_in_us) * 1_000);
+                }
+            }
+            Kind::Event { record } => {
+                if let Ok(event) = TraceEvent::decode(&record) {
+                    self.event(t, event);
+                }
+            }
+            Kind::FrameAcked { id } => self.acked(id, t),
+            Kind::Lost { count } => self.capture.lost += u64::from(count),
+        }
+    }
+
+    fn event(&mut self, t: u64, event: TraceEvent) {
+        self.capture.end_ns = self.capture.end_ns.max(t);
+        self.capture.events.push((t, event));
+        match event.kind {
+            TraceKind::SampleTaken { topic, release_us } => {
+                let behind = event.at_us.saturating_sub(release_us) * 1_000;
+                self.open_samples
+                    .insert(topic.byte(), self.capture.samples.len());
+                self.capture.samples.push(Sample {
+                    topic,
+                    level: None,
+                    release_ns: t.saturating_sub(behind),
+                    taken_ns: t,
+                    queued_ns: None,
+                    acked_ns: None,
+                    frames_queued: 0,
+                    frames_acked: 0,
+                });
+            }
+            TraceKind::FrameQueued { id } | TraceKind::FrameReplaced { id } => {
+                if let Some(&i) = self.open_samples.get(&((id & 0xFF) as u8)) {
+                    let s = &mut self.capture.samples[i];
+                    s.level = Some(((id >> 8) & 3) as u8);
+                    s.queued_ns = Some(t);
+                    s.frames_queued += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn acked(&mut self, id: u16, t: u64) {
+        self.capture.end_ns = self.capture.end_ns.max(t);
+        self.capture.acked.push((id, t));
+        // The oldest sample of this topic with frames still unacknowledged (sensor data only).
+        let topic = (id & 0xFF) as u8;
+        if let Some(s) =
+            self.capture.samples.iter_mut().find(|s| {
+                id >= 0x400 && s.topic.byte() == topic && s.frames_acked < s.frames_queued
+            })
+        {
+            s.frames_acked += 1;
+            if s.frames_acked == s.frames_queued {
+                s.acked_ns = Some(t);
+            }
+        }
+    }
+}
+
+/// Reads a capture of the trace channel (robot): `bytes` as captured, the trace clock
+/// `default_hz` unless the capture's boot record says otherwise.
+pub fn read(bytes: &[u8], default_hz: u64) -> Result<Capture> {
+    let mut reader = Reader::new();
+    let mut builder = Builder::new(default_hz);
+    for &b in bytes {
+        if let Some(record) = reader.push(b) {
+            builder.record(record);
+        }
+    }
+    builder.capture.reader = reader.stats();
+    Ok(builder.capture)
+}
+
+/// The bytes of the `# T` lines (binary records printed in hex) of a QEMU console, each record
+/// followed by its delimiter; other lines are left out.
+pub fn console_record_bytes(text: &str) -> Vec<u8> {
+    let mut out = Vec::new();
+    for line in text.lines() {
+        let Some(hex) = line.trim().strip_prefix("# T ") else {
+            continue;
+        };
+        for pair in hex.trim().as_bytes().chunks(2) {
+            // A damaged line decodes to whatever it decodes to; the reader rejects the record.
+            let byte = std::str::from_utf8(pair)
+                .ok()
+                .and_then(|p| u8::from_str_radix(p, 16).ok())
+                .unwrap_or(0);
+            out.push(byte);
+        }
+        out.push(0);
+    }
+    out
+}
+
+/// Reads a QEMU run: the task records from its `trace.bin`, the handler events from the `# T`
+/// lines of its console `text` (records in the same format, on the same clock, merged in time
+/// order), and the frames on QEMU's virtual bus, acknowledged when printed (µs).
+///
+/// `stimulus` is the task number of the app's stimulus replay: its time is left out of the
+/// responses of the runs it pre-empted (it stands for the bus).
+pub fn read_qemu(
+    trace_bin: &[u8],
+    text: &str,
+    default_hz: u64,
+    stimulus: Option<u8>,
+) -> Result<Capture> {
+    let mut reader = Reader::new();
+    let mut records: Vec<Record> = trace_bin.iter().filter_map(|&b| reader.push(b)).collect();
+    let mut console = Reader::new();
+    records.extend(
+        console_record_bytes(text)
+            .iter()
+            .filter_map(|&b| console.push(b)),
+    );
+    // A stable sort: records of one stream stay in their order.
+    records.sort_by_key(|r| r.cycles);
+    let mut builder = Builder::new(default_hz);
+    builder.platform_task = stimulus;
+    for record in records {
+        builder.record(record);
+    }
+    let (a, b) = (reader.stats(), console.stats());
+    builder.capture.reader = ReaderStats {
+        records: a.records + b.records,
+        damaged: a.damaged + b.damaged,
+        skipped_bytes: a.skipped_bytes + b.skipped_bytes,
+    };
+    for line in text.lines() {
+        if let Ok(Some(frame)) = crate::qemu::parse_log_line(line) {
+            if let Ok(id) = u16::try_from(frame.id) {
+                builder.acked(id, frame.at_us * 1_000);
+            }
+        }
+    }
+    Ok(builder.capture)
+}
+
+/// Reads a QEMU run's work directory (`output.log` and `trace.bin`).
+pub fn read_qemu_dir(
+    dir: &std::path::Path,
+    default_hz: u64,
+    stimulus: Option<u8>,
+) -> Result<Capture> {
+    let text = std::fs::read_to_string(dir.join("output.log"))
+        .with_context(|| format!("reading {}", dir.join("output.log").display()))?;
+    let bin = std::fs::read(dir.join("trace.bin")).with_context(|| {
+        format!(
+            "reading {} (a QEMU build without task-trace?)",
+            dir.join("trace.bin").display()
+        )
+    })?;
+    read_qemu(&bin, &text, default_hz, stimulus)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn wire(records: &[(u64, Kind)]) -> Vec<u8> {
+        records
+            .iter()
+            .flat_map(|&(cycles, kind)| Record { cycles, kind }.encode().as_bytes().to_vec())
+            .collect()
+    }
+
+    #[test]
+    fn runs_with_preemption_and_timer_releases() {
+        // 1 MHz clock: one cycle per µs.
+        let bytes = wire(&[
+            (
+                0,
+                Kind::Hello {
+                    clock_hz: 1_000_000,
+                },
+            ),
+            (10, Kind::TaskStart { task: 4 }),
+            (20, Kind::TaskStart { task: 0 }),
+            (
+                25,
+                Kind::TaskEnd {
+                    task: 0,
+                    next_release_in_us: u32::MAX,
+                },
+            ),
+            (
+                40,
+                Kind::TaskEnd {
+                    task: 4,
+                    next_release_in_us: 1_000,
+                },
+            ),
+            (1_050, Kind::TaskStart { task: 4 }),
+            (
+                1_070,
+                Kind::TaskEnd {
+                    task: 4,
+                    next_release_in_us: u32::MAX,
+                },
+            ),
+        ]);
+        let c = read(&bytes, 72_000_000).unwrap();
+        assert_eq!(c.clock_hz, 1_000_000);
+        assert_eq!(c.runs.len(), 3);
+        let isr = c.runs[0];
+        assert_eq!(
+            (isr.task, isr.execution_ns(), isr.response_ns()),
+            (0, 5_000, 5_000)
+        );
+        let first = c.runs[1];
+        assert_eq!(first.execution_ns(), 25_000);
+        assert_eq!(first.release_from, ReleaseFrom::Start);
+        let second = c.runs[2];
+        assert_eq!(second.release_from, ReleaseFrom::Timer);
+        // Due at 40 + 1000 µs, done at 1070 µs.
+        assert_eq!(second.response_ns(), 30_000);
+        assert_eq!(c.unbalanced, 0);
+    }
+
+    #[test]
+    fn samples_from_release_to_the_bus() {
+        let taken = TraceEvent::new(
+            1_010,
+            TraceKind::SampleTaken {
+                topic: amiro_can::Topic::MagnetometerX,
+                release_us: 1_000,
+            },
+        );
+        let queued = TraceEvent::new(1_020, TraceKind::FrameQueued { id: 0x605 });
+        let bytes = wire(&[
+            (
+                0,
+                Kind::Hello {
+                    clock_hz: 1_000_000,
+                },
+            ),
+            (
+                1_010,
+                Kind::Event {
+                    record: taken.encode(),
+                },
+            ),
+            (
+                1_020,
+                Kind::Event {
+                    record: queued.encode(),
+                },
+            ),
+            (1_150, Kind::FrameAcked { id: 0x605 }),
+        ]);
+        let c = read(&bytes, 1).unwrap();
+        let s = &c.samples[0];
+        assert_eq!(s.release_ns, 1_000_000);
+        assert_eq!(s.queued_ns, Some(1_020_000));
+        assert_eq!(s.acked_ns, Some(1_150_000));
+        assert_eq!(s.level, Some(2));
+    }
+
+    #[test]
+    fn qemu_runs_events_from_console_records_and_frames_as_acknowledgements() {
+        let bin = wire(&[
+            (
+                0,
+                Kind::Hello {
+                    clock_hz: 120_000_000,
+                },
+            ),
+            (1_200_000, Kind::TaskStart { task: 7 }),
+            (
+                1_212_000,
+                Kind::TaskEnd {
+                    task: 7,
+                    next_release_in_us: 890,
+                },
+            ),
+        ]);
+        let taken = TraceEvent::new(
+            10_000,
+            TraceKind::SampleTaken {
+                topic: amiro_can::Topic::MagnetometerX,
+                release_us: 10_000,
+            },
+        );
+        let queued = TraceEvent::new(10_050, TraceKind::FrameQueued { id: 0x605 });
+        let line = |cycles: u64, e: &TraceEvent| {
+            let w = Record {
+                cycles,
+                kind: Kind::Event { record: e.encode() },
+            }
+            .encode();
+            let hex: String = w.as_bytes()[..w.as_bytes().len() - 1]
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect();
+            format!("# T {hex}\n")
+        };
+        let text = format!(
+            "{}{}(0.010090) can0 605#204E0000\n# T 7a7a\n# qemu: something else\n",
+            line(1_200_000, &taken),
+            line(1_206_000, &queued)
+        );
+        let c = read_qemu(&bin, &text, 120_000_000, None).unwrap();
+        assert_eq!(c.runs.len(), 1);
+        assert_eq!(c.runs[0].execution_ns(), 100_000);
+        assert_eq!(c.reader.damaged, 1);
+        let s = &c.samples[0];
+        assert_eq!(
+            (s.release_ns, s.queued_ns, s.acked_ns),
+            (10_000_000, Some(10_050_000), Some(10_090_000))
+        );
+    }
+}

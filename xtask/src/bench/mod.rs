@@ -1,0 +1,649 @@
+//! `cargo xtask bench`: measured timing against the analysis, per task and per topic.
+//!
+//! The trace (`amiro_trace` records: task runs, handler events, frames acknowledged) comes from a
+//! saved capture of the trace channel, from a QEMU run (`--qemu --stimulus`), or from the output of
+//! runs already made (`--qemu-output`, what `cargo xtask test` uses after the scenarios). The
+//! analysed bounds come from `schedule_analysis` on the same apps and timing files as
+//! `cargo xtask analyze`, for the publishers the capture shows (each topic at the level and the
+//! period it was seen at) or for a named scenario. docs/bench.md explains every column.
+pub mod calibrate;
+pub mod capture;
+pub mod report;
+pub mod timeline;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+use schedule_analysis::analysis::{analyse, Analysis, Options};
+use schedule_analysis::scenario;
+
+use crate::boards::Board;
+use capture::{Capture, ReleaseFrom};
+
+/// Arguments of `cargo xtask bench`.
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    /// The board: diwheeldrive, lightring or powermgmt.
+    pub board: String,
+    /// A saved capture of the trace channel (RTT channel 1, raw bytes).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["qemu", "qemu_output"])]
+    pub capture: Option<PathBuf>,
+    /// Run the board's QEMU build against `--stimulus` and measure that run.
+    #[arg(long, requires = "stimulus")]
+    pub qemu: bool,
+    /// The stimulus of a QEMU run (a candump -l log).
+    #[arg(long, value_name = "FILE")]
+    pub stimulus: Option<PathBuf>,
+    /// How long the QEMU run lasts (virtual time); default: the stimulus's `# duration:` or 2s.
+    #[arg(long)]
+    pub duration: Option<String>,
+    /// Work directories of QEMU runs already made (`output.log` and `trace.bin`), each measured on
+    /// its own.
+    #[arg(long, value_name = "DIR", num_args = 1..)]
+    pub qemu_output: Vec<PathBuf>,
+    /// Analyse this scenario instead of the publishers the capture shows.
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// The trace clock when the capture has no boot record (default: the board's core clock).
+    #[arg(long)]
+    pub clock_hz: Option<u64>,
+    /// Where the report goes (table.txt, report.md, report.json, <board>.svg); default
+    /// target/bench/<board>/<capture name>.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Fail when an observed response exceeds its analysed WCRT, or a topic its analysed bound.
+    #[arg(long)]
+    pub check: bool,
+    /// Write the measured maxima, times `--margin`, into the board's timing file as measured budgets.
+    #[arg(long)]
+    pub calibrate: bool,
+    /// The margin measured maxima are multiplied by (`--calibrate`).
+    #[arg(long, default_value_t = 1.2)]
+    pub margin: f64,
+    /// Allow `--calibrate` from a QEMU run (its times are the emulator's, not the chip's).
+    #[arg(long)]
+    pub accept_qemu: bool,
+}
+
+/// The core clock of a board's build: what its trace clock counts when no boot record says so.
+pub fn default_clock_hz(board: &Board, qemu: bool) -> u64 {
+    match (board.name, qemu) {
+        ("powermgmt", _) => 168_000_000,
+        (_, true) => 120_000_000,
+        _ => 72_000_000,
+    }
+}
+
+/// The task number of the board's QEMU stimulus replay (`stimulus`), if its app has one.
+fn stimulus_task(root: &Path, board: &Board) -> Option<u8> {
+    amiro_firmware::trace_ids::board_names(root, board.name)
+        .ok()?
+        .iter()
+        .position(|n| n == "stimulus")
+        .and_then(|i| u8::try_from(i).ok())
+}
+
+/// Measured against analysed, for one capture.
+#[derive(Debug, serde::Serialize)]
+pub struct Bench {
+    /// Board.
+    pub board: String,
+    /// Where the capture came from.
+    pub origin: String,
+    /// `qemu` or `robot`.
+    pub build: String,
+    /// The model the bounds come from.
+    pub model: String,
+    /// Trace clock, Hz.
+    pub clock_hz: u64,
+    /// Records read, damaged stretches skipped, records the board lost, unbalanced ends.
+    pub records: u64,
+    /// Damaged stretches skipped.
+    pub damaged: u64,
+    /// Records the board lost (channel full).
+    pub lost: u64,
+    /// Ends without a matching start.
+    pub unbalanced: u64,
+    /// Length of the capture, µs.
+    pub span_us: f64,
+    /// Per task.
+    pub tasks: Vec<TaskRow>,
+    /// Per topic.
+    pub topics: Vec<TopicRow>,
+}
+
+/// One task's figures.
+#[derive(Debug, serde::Serialize)]
+pub struct TaskRow {
+    /// Task name (from the app source).
+    pub task: String,
+    /// Runs seen.
+    pub jobs: usize,
+    /// Execution time per run, µs: max, p99, mean.
+    pub exec_max_us: f64,
+    /// p99.
+    pub exec_p99_us: f64,
+    /// Mean.
+    pub exec_mean_us: f64,
+    /// Largest response, µs.
+    pub response_max_us: f64,
+    /// Whether the largest response was measured from a traced release (else from the run's start:
+    /// a lower bound).
+    pub from_release: bool,
+    /// Analysed WCRT, µs (`None`: the analysis has no such task).
+    pub wcrt_us: Option<f64>,
+    /// Analysed deadline, µs.
+    pub deadline_us: Option<f64>,
+    /// Every response, µs (for the histograms).
+    #[serde(skip)]
+    pub responses_us: Vec<f64>,
+    /// `ok`, `EXCEEDS WCRT`, or `not analysed`.
+    pub verdict: String,
+}
+
+/// One topic's figures.
+#[derive(Debug, serde::Serialize)]
+pub struct TopicRow {
+    /// Topic name.
+    pub topic: String,
+    /// CAN level its frames went at.
+    pub level: String,
+    /// Samples seen.
+    pub samples: usize,
+    /// Period seen (median release spacing), µs.
+    pub period_us: Option<f64>,
+    /// Release to sample taken, µs: max (how late sampling started).
+    pub start_latency_max_us: f64,
+    /// Release to the sample's last frame queued, µs: max.
+    pub queued_max_us: Option<f64>,
+    /// Sample taken to its last frame queued, µs: max (the sample's work, pre-emptions included:
+    /// what `--calibrate` writes as the topic's measured budget).
+    pub work_max_us: Option<f64>,
+    /// Release to the last frame acknowledged on the bus, µs: max.
+    pub bus_max_us: Option<f64>,
+    /// Jitter of the delivery (max − min of release → bus), µs.
+    pub delivery_jitter_us: Option<f64>,
+    /// Analysed: the publisher job's WCRT (release → queued), µs.
+    pub job_wcrt_us: Option<f64>,
+    /// Analysed: the message's WCRT (release → delivered), µs.
+    pub message_wcrt_us: Option<f64>,
+    /// Analysed: the delivery's jitter, µs.
+    pub analysed_jitter_us: Option<f64>,
+    /// `ok`, `EXCEEDS …`, `not analysed`.
+    pub verdict: String,
+}
+
+impl Bench {
+    /// Whether nothing exceeded its analysed bound.
+    pub fn within_bounds(&self) -> bool {
+        self.failures().is_empty()
+    }
+
+    /// What exceeded its bound, one line each.
+    pub fn failures(&self) -> Vec<String> {
+        let mut out: Vec<String> = self
+            .tasks
+            .iter()
+            .filter(|t| t.verdict.starts_with("EXCEEDS"))
+            .map(|t| {
+                format!(
+                    "{}/{}: response {:.1} µs > analysed WCRT {:.1} µs",
+                    self.board,
+                    t.task,
+                    t.response_max_us,
+                    t.wcrt_us.unwrap_or(0.0)
+                )
+            })
+            .collect();
+        out.extend(
+            self.topics
+                .iter()
+                .filter(|t| t.verdict.starts_with("EXCEEDS"))
+                .map(|t| format!("{}/{}: {}", self.board, t.topic, t.verdict)),
+        );
+        out
+    }
+}
+
+fn us(ns: u64) -> f64 {
+    ns as f64 / 1_000.0
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let rank = ((p / 100.0) * sorted.len() as f64).ceil() as usize;
+    sorted[rank.clamp(1, sorted.len()) - 1]
+}
+
+/// The publishers a capture shows: per topic the level it was seen at most and its median period.
+fn seen_publishers(capture: &Capture) -> Vec<(amiro_can::Topic, u8, Option<u64>, usize)> {
+    let mut groups: BTreeMap<(u8, u8), Vec<u64>> = BTreeMap::new();
+    for s in &capture.samples {
+        if let Some(level) = s.level {
+            groups
+                .entry((s.topic.byte(), level))
+                .or_default()
+                .push(s.release_ns);
+        }
+    }
+    let mut best: BTreeMap<u8, (u8, Vec<u64>)> = BTreeMap::new();
+    for ((topic, level), releases) in groups {
+        let take = best
+            .get(&topic)
+            .is_none_or(|(_, r)| releases.len() > r.len());
+        if take {
+            best.insert(topic, (level, releases));
+        }
+    }
+    best.into_iter()
+        .filter_map(|(topic, (level, releases))| {
+            let topic = amiro_can::Topic::from_byte(topic)?;
+            let mut gaps: Vec<u64> = releases.windows(2).map(|w| w[1] - w[0]).collect();
+            gaps.sort_unstable();
+            // Releases are on a µs grid; the period in whole µs.
+            let period = gaps.get(gaps.len() / 2).map(|g| (g + 500) / 1_000);
+            Some((topic, level, period.filter(|p| *p > 0), releases.len()))
+        })
+        .collect()
+}
+
+const LEVELS: [&str; 4] = ["urgent", "high", "medium", "low"];
+
+/// The analysis for what the capture shows (or for `scenario`).
+fn analysis_for(
+    root: &Path,
+    board: &Board,
+    capture: &Capture,
+    scenario_name: Option<&str>,
+    qemu: bool,
+) -> Result<(Analysis, String)> {
+    let path = match scenario_name {
+        Some(name) => scenario::find_scenario(root, name),
+        None => {
+            let dir = crate::target_dir(root).join("bench");
+            std::fs::create_dir_all(&dir)?;
+            let publishers: Vec<serde_json::Value> = seen_publishers(capture)
+                .into_iter()
+                .filter_map(|(topic, level, period, _)| {
+                    Some(serde_json::json!({
+                        "topic": topic.name(),
+                        "priority": LEVELS[usize::from(level)],
+                        "period_us": period?,
+                    }))
+                })
+                .collect();
+            let name = format!("bench-{}-{}", board.name, std::process::id());
+            let path = dir.join(format!("{name}.scenario.json"));
+            let json = serde_json::json!({
+                "name": "the publishers the capture shows",
+                "description": "written by cargo xtask bench",
+                "publishers": publishers,
+            });
+            std::fs::write(&path, serde_json::to_string_pretty(&json)?)?;
+            path
+        }
+    };
+    // The measured build has the task trace: so has the analysed one.
+    let firmware = if qemu {
+        scenario::Firmware::Qemu
+    } else {
+        scenario::Firmware::Traced
+    };
+    let built = scenario::build_for(root, &path, &scenario::timing_files(root), firmware)
+        .map_err(|e| anyhow!("{e}"))
+        .with_context(|| format!("building the analysis model from {}", path.display()))?;
+    let frame_cost = built.frame_cost;
+    let system = built
+        .model
+        .validate()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let analysis = analyse(
+        &system,
+        &Options {
+            frame_cost,
+            horizon: None,
+        },
+    );
+    let label = match scenario_name {
+        Some(name) => format!("scenario {name}"),
+        None => "the publishers the capture shows, at the periods and levels seen".to_string(),
+    };
+    Ok((analysis, label))
+}
+
+/// Measures `capture` of `board` against the analysis.
+pub fn measure(
+    root: &Path,
+    board: &Board,
+    capture: &Capture,
+    origin: &str,
+    qemu: bool,
+    scenario_name: Option<&str>,
+) -> Result<Bench> {
+    let names = amiro_firmware::trace_ids::board_names(root, board.name)
+        .map_err(|e| anyhow!("{e}"))
+        .context("the board's task numbers")?;
+    let (analysis, model) = analysis_for(root, board, capture, scenario_name, qemu)?;
+    let board_result = analysis.boards.iter().find(|b| b.name == board.name);
+    // (WCRT, deadline) of a task the analysis has; a WCRT of `None`: its busy window never closes.
+    let analysed = |task: &str| -> Option<(Option<f64>, f64)> {
+        let tasks = &board_result?.tasks;
+        if let Some(t) = tasks.iter().find(|t| t.name == task) {
+            return Some((t.wcrt().map(|w| w.as_us_f64()), t.deadline.as_us_f64()));
+        }
+        // A publisher task's jobs are its topics: the run ends within the largest of their WCRTs.
+        let prefix = format!("{task}[");
+        let jobs: Vec<_> = tasks
+            .iter()
+            .filter(|t| t.name.starts_with(&prefix))
+            .collect();
+        if jobs.is_empty() {
+            return None;
+        }
+        let mut wcrt = Some(0.0_f64);
+        let mut deadline = f64::INFINITY;
+        for j in jobs {
+            wcrt = match (wcrt, j.wcrt()) {
+                (Some(w), Some(j)) => Some(w.max(j.as_us_f64())),
+                _ => None,
+            };
+            deadline = deadline.min(j.deadline.as_us_f64());
+        }
+        Some((wcrt, deadline))
+    };
+    let mut tasks = Vec::new();
+    for (number, name) in names.iter().enumerate() {
+        let runs: Vec<_> = capture
+            .runs
+            .iter()
+            .filter(|r| usize::from(r.task) == number)
+            .collect();
+        if runs.is_empty() {
+            continue;
+        }
+        let mut exec: Vec<f64> = runs.iter().map(|r| us(r.execution_ns())).collect();
+        exec.sort_by(f64::total_cmp);
+        let responses: Vec<f64> = runs.iter().map(|r| us(r.response_ns())).collect();
+        let worst = runs.iter().max_by_key(|r| r.response_ns());
+        let response_max = worst.map_or(0.0, |r| us(r.response_ns()));
+        let bound = analysed(name);
+        let verdict = match bound {
+            None => "not analysed".to_string(),
+            Some((None, _)) => "analysis: unbounded".to_string(),
+            Some((Some(wcrt), _)) if response_max > wcrt => "EXCEEDS WCRT".to_string(),
+            Some(_) => "ok".to_string(),
+        };
+        tasks.push(TaskRow {
+            task: name.clone(),
+            jobs: runs.len(),
+            exec_max_us: exec.last().copied().unwrap_or(0.0),
+            exec_p99_us: percentile(&exec, 99.0),
+            exec_mean_us: exec.iter().sum::<f64>() / exec.len() as f64,
+            response_max_us: response_max,
+            from_release: worst.is_some_and(|r| r.release_from == ReleaseFrom::Timer),
+            wcrt_us: bound.and_then(|b| b.0),
+            deadline_us: bound.map(|b| b.1),
+            responses_us: responses,
+            verdict,
+        });
+    }
+    let mut topics = Vec::new();
+    for (topic, level, period, count) in seen_publishers(capture) {
+        let samples: Vec<_> = capture
+            .samples
+            .iter()
+            .filter(|s| s.topic == topic && s.level == Some(level))
+            .collect();
+        let max_of = |f: &dyn Fn(&capture::Sample) -> Option<u64>| {
+            samples.iter().filter_map(|s| f(s)).max().map(us)
+        };
+        let start = max_of(&|s| Some(s.taken_ns.saturating_sub(s.release_ns))).unwrap_or(0.0);
+        let queued = max_of(&|s| s.queued_ns.map(|q| q.saturating_sub(s.release_ns)));
+        let work = max_of(&|s| s.queued_ns.map(|q| q.saturating_sub(s.taken_ns)));
+        let bus: Vec<u64> = samples
+            .iter()
+            .filter_map(|s| s.acked_ns.map(|a| a.saturating_sub(s.release_ns)))
+            .collect();
+        let bus_max = bus.iter().max().copied().map(us);
+        let jitter = bus_max.map(|m| m - us(bus.iter().min().copied().unwrap_or(0)));
+        let job = format!("publish_{}[{}]", LEVELS[usize::from(level)], topic.name());
+        let job_wcrt = board_result
+            .and_then(|b| b.tasks.iter().find(|t| t.name == job))
+            .and_then(|t| t.wcrt())
+            .map(|t| t.as_us_f64());
+        let id = 0x400 | u32::from(level) << 8 | u32::from(topic.byte());
+        let message = analysis
+            .bus
+            .as_ref()
+            .and_then(|b| b.messages.iter().find(|m| m.id == id));
+        let message_wcrt = message.and_then(|m| m.wcrt()).map(|t| t.as_us_f64());
+        let analysed_jitter = message
+            .and_then(|m| analysis.topics.iter().find(|t| t.name == m.name))
+            .and_then(|t| t.jitter())
+            .map(|t| t.as_us_f64());
+        let mut problems = Vec::new();
+        if let (Some(q), Some(b)) = (queued, job_wcrt) {
+            if q > b {
+                problems.push(format!("release→queued {q:.1} µs > job WCRT {b:.1} µs"));
+            }
+        }
+        if let (Some(q), Some(b)) = (bus_max, message_wcrt) {
+            if q > b {
+                problems.push(format!("release→bus {q:.1} µs > message WCRT {b:.1} µs"));
+            }
+        }
+        if let (Some(j), Some(b)) = (jitter, analysed_jitter) {
+            if j > b {
+                problems.push(format!("delivery jitter {j:.1} µs > analysed {b:.1} µs"));
+            }
+        }
+        let verdict = if !problems.is_empty() {
+            format!("EXCEEDS: {}", problems.join("; "))
+        } else if job_wcrt.is_none() && message_wcrt.is_none() {
+            "not analysed".to_string()
+        } else {
+            "ok".to_string()
+        };
+        topics.push(TopicRow {
+            topic: topic.name().to_string(),
+            level: LEVELS[usize::from(level)].to_string(),
+            samples: count,
+            period_us: period.map(|p| p as f64),
+            start_latency_max_us: start,
+            queued_max_us: queued,
+            work_max_us: work,
+            bus_max_us: bus_max,
+            delivery_jitter_us: jitter,
+            job_wcrt_us: job_wcrt,
+            message_wcrt_us: message_wcrt,
+            analysed_jitter_us: analysed_jitter,
+            verdict,
+        });
+    }
+    Ok(Bench {
+        board: board.name.to_string(),
+        origin: origin.to_string(),
+        build: if qemu { "qemu" } else { "robot" }.to_string(),
+        model,
+        clock_hz: capture.clock_hz,
+        records: capture.reader.records,
+        damaged: capture.reader.damaged,
+        lost: capture.lost,
+        unbalanced: capture.unbalanced,
+        span_us: us(capture.end_ns),
+        tasks,
+        topics,
+    })
+}
+
+/// Writes the report in every format into `dir` and returns the table.
+pub fn write_reports(bench: &Bench, dir: &Path) -> Result<String> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let table = report::table(bench);
+    std::fs::write(dir.join("table.txt"), &table)?;
+    std::fs::write(dir.join("report.md"), report::markdown(bench))?;
+    std::fs::write(
+        dir.join("report.json"),
+        serde_json::to_string_pretty(bench)? + "\n",
+    )?;
+    std::fs::write(dir.join(format!("{}.svg", bench.board)), report::svg(bench))?;
+    Ok(table)
+}
+
+/// `cargo xtask bench`.
+pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
+    let board = crate::boards::by_name(&args.board)
+        .with_context(|| format!("unknown board `{}`", args.board))?;
+    let mut inputs: Vec<(String, Capture, bool)> = Vec::new();
+    if let Some(path) = &args.capture {
+        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        let hz = args
+            .clock_hz
+            .unwrap_or_else(|| default_clock_hz(board, false));
+        inputs.push((
+            path.display().to_string(),
+            capture::read(&bytes, hz)?,
+            false,
+        ));
+    }
+    for dir in &args.qemu_output {
+        let hz = args
+            .clock_hz
+            .unwrap_or_else(|| default_clock_hz(board, true));
+        inputs.push((
+            dir.display().to_string(),
+            capture::read_qemu_dir(dir, hz, stimulus_task(root, board))?,
+            true,
+        ));
+    }
+    if args.qemu {
+        let stimulus = args.stimulus.as_ref().context("--qemu needs --stimulus")?;
+        crate::ensure_qemu()?;
+        let elf = crate::build_qemu(root, board)?;
+        let frames = crate::qemu::read_stimulus(stimulus)?;
+        let duration = match &args.duration {
+            Some(d) => crate::qemu::parse_duration(d)?,
+            None => crate::scenarios::duration_of(stimulus).unwrap_or(2_000_000),
+        };
+        let work = crate::qemu::fresh_work_dir(root, board.name);
+        crate::qemu::run(&elf, board.qemu_machine, &frames, duration, &work)?;
+        let hz = args
+            .clock_hz
+            .unwrap_or_else(|| default_clock_hz(board, true));
+        inputs.push((
+            format!("QEMU run of {}", stimulus.display()),
+            capture::read_qemu_dir(&work, hz, stimulus_task(root, board))?,
+            true,
+        ));
+    }
+    if inputs.is_empty() {
+        bail!(
+            "nothing to measure: give --capture FILE, --qemu --stimulus FILE or --qemu-output FILE"
+        );
+    }
+    let mut ok = true;
+    for (origin, capture, qemu) in &inputs {
+        let bench = measure(
+            root,
+            board,
+            capture,
+            origin,
+            *qemu,
+            args.scenario.as_deref(),
+        )?;
+        let stem = Path::new(origin)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "capture".into());
+        let dir = args.out.clone().unwrap_or_else(|| {
+            crate::target_dir(root)
+                .join("bench")
+                .join(board.name)
+                .join(&stem)
+        });
+        let table = write_reports(&bench, &dir)?;
+        print!("{table}");
+        println!("report: {}", dir.display());
+        let failures = bench.failures();
+        if !failures.is_empty() {
+            ok = false;
+            eprintln!("!!! OBSERVED TIMING ABOVE THE ANALYSED BOUND: the analysis (or its budgets) is wrong");
+            for f in &failures {
+                eprintln!("!!!   {f}");
+            }
+        }
+        if args.calibrate {
+            if *qemu && !args.accept_qemu {
+                bail!("--calibrate from a QEMU run writes the emulator's times as the chip's budgets: add --accept-qemu to do it anyway");
+            }
+            let path = root
+                .join(scenario::MODELS_DIR)
+                .join(format!("{}.timing.json", board.name));
+            let changed = calibrate::write(&path, &bench, args.margin)?;
+            println!(
+                "calibrated {} budgets of {} (margin ×{})",
+                changed,
+                path.display(),
+                args.margin
+            );
+        }
+    }
+    Ok(ok || !args.check)
+}
+
+/// Measures the outputs of a board's QEMU scenario runs (`cargo xtask test`, after the scenarios):
+/// writes each run's report beside its output and fails when a run exceeds an analysed bound.
+pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)]) -> Result<()> {
+    let mut failures = Vec::new();
+    for (name, work) in runs {
+        let capture = capture::read_qemu_dir(
+            work,
+            default_clock_hz(board, true),
+            stimulus_task(root, board),
+        )?;
+        let bench = measure(root, board, &capture, name, true, None)
+            .with_context(|| format!("bench of {} {name}", board.name))?;
+        let dir = work.join("bench");
+        write_reports(&bench, &dir)?;
+        let tightest = bench
+            .tasks
+            .iter()
+            .filter_map(|t| Some((t.response_max_us / t.wcrt_us?, &t.task)))
+            .max_by(|a, b| a.0.total_cmp(&b.0));
+        println!(
+            "bench {:<12} {:<22} {} runs of {} tasks, {} samples of {} topics; tightest {}{}",
+            board.name,
+            name,
+            bench.tasks.iter().map(|t| t.jobs).sum::<usize>(),
+            bench.tasks.len(),
+            bench.topics.iter().map(|t| t.samples).sum::<usize>(),
+            bench.topics.len(),
+            tightest
+                .map(|(r, t)| format!("{t} at {:.0} % of its WCRT", r * 100.0))
+                .unwrap_or_else(|| "-".into()),
+            if bench.within_bounds() {
+                String::new()
+            } else {
+                format!(" — EXCEEDED: {}", bench.failures().join("; "))
+            }
+        );
+        if bench.lost > 0 || bench.unbalanced > 0 || bench.damaged > 0 {
+            failures.push(format!(
+                "{name}: trace damaged ({} lost, {} unbalanced, {} damaged)",
+                bench.lost, bench.unbalanced, bench.damaged
+            ));
+        }
+        failures.extend(bench.failures());
+    }
+    if !failures.is_empty() {
+        bail!(
+            "bench of the {} QEMU scenarios: {}",
+            board.name,
+            failures.join("\n")
+        );
+    }
+    Ok(())
+}

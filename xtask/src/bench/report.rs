@@ -1,0 +1,237 @@
+//! The bench report as a terminal table, markdown and an SVG of response-time histograms.
+use std::fmt::Write as _;
+
+use super::Bench;
+
+fn opt(v: Option<f64>) -> String {
+    v.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".into())
+}
+
+fn header(b: &Bench) -> String {
+    format!(
+        "{} ({} build) — {}\nbounds: {}\ntrace clock {} Hz, {:.0} µs traced, {} records, {} damaged stretches skipped, {} lost on the board, {} unbalanced ends\n",
+        b.board, b.build, b.origin, b.model, b.clock_hz, b.span_us, b.records, b.damaged, b.lost, b.unbalanced
+    )
+}
+
+/// The plain-text table (also what the terminal shows).
+pub fn table(b: &Bench) -> String {
+    let mut out = header(b);
+    let _ = writeln!(
+        out,
+        "\n{:<20} {:>6} {:>9} {:>9} {:>9} {:>10} {:>9} {:>9}  verdict",
+        "task", "jobs", "exec max", "exec p99", "exec avg", "resp max", "WCRT", "deadline"
+    );
+    for t in &b.tasks {
+        let _ = writeln!(
+            out,
+            "{:<20} {:>6} {:>9.1} {:>9.1} {:>9.1} {:>10} {:>9} {:>9}  {}",
+            t.task,
+            t.jobs,
+            t.exec_max_us,
+            t.exec_p99_us,
+            t.exec_mean_us,
+            format!(
+                "{}{:.1}",
+                if t.from_release { "" } else { "≥" },
+                t.response_max_us
+            ),
+            opt(t.wcrt_us),
+            opt(t.deadline_us),
+            t.verdict
+        );
+    }
+    let _ = writeln!(
+        out,
+        "\n{:<26} {:>6} {:>7} {:>9} {:>10} {:>9} {:>10} {:>9} {:>9} {:>9}  verdict",
+        "topic",
+        "level",
+        "samples",
+        "period",
+        "start max",
+        "→queued",
+        "job WCRT",
+        "→bus",
+        "msg WCRT",
+        "jitter"
+    );
+    for t in &b.topics {
+        let _ = writeln!(
+            out,
+            "{:<26} {:>6} {:>7} {:>9} {:>10.1} {:>9} {:>10} {:>9} {:>9} {:>9}  {}",
+            t.topic,
+            t.level,
+            t.samples,
+            opt(t.period_us),
+            t.start_latency_max_us,
+            opt(t.queued_max_us),
+            opt(t.job_wcrt_us),
+            opt(t.bus_max_us),
+            opt(t.message_wcrt_us),
+            format!(
+                "{}/{}",
+                opt(t.delivery_jitter_us),
+                opt(t.analysed_jitter_us)
+            ),
+            t.verdict
+        );
+    }
+    let _ = writeln!(
+        out,
+        "\nµs; ≥: response from the run's start (no traced release: interrupts, message wake-ups), a lower bound; jitter: observed/analysed"
+    );
+    out
+}
+
+/// Markdown.
+pub fn markdown(b: &Bench) -> String {
+    let mut out = format!("# Bench: {}\n\n", b.board);
+    for line in header(b).lines() {
+        let _ = writeln!(out, "- {line}");
+    }
+    out.push_str("\n| task | jobs | exec max | exec p99 | exec mean | response max | WCRT | deadline | verdict |\n|---|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    for t in &b.tasks {
+        let _ = writeln!(
+            out,
+            "| {} | {} | {:.1} | {:.1} | {:.1} | {}{:.1} | {} | {} | {} |",
+            t.task,
+            t.jobs,
+            t.exec_max_us,
+            t.exec_p99_us,
+            t.exec_mean_us,
+            if t.from_release { "" } else { "≥" },
+            t.response_max_us,
+            opt(t.wcrt_us),
+            opt(t.deadline_us),
+            t.verdict
+        );
+    }
+    out.push_str("\n| topic | level | samples | period | release → taken max | → queued max | job WCRT | → bus max | message WCRT | delivery jitter | analysed jitter | verdict |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    for t in &b.topics {
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} | {} | {:.1} | {} | {} | {} | {} | {} | {} | {} |",
+            t.topic,
+            t.level,
+            t.samples,
+            opt(t.period_us),
+            t.start_latency_max_us,
+            opt(t.queued_max_us),
+            opt(t.job_wcrt_us),
+            opt(t.bus_max_us),
+            opt(t.message_wcrt_us),
+            opt(t.delivery_jitter_us),
+            opt(t.analysed_jitter_us),
+            t.verdict
+        );
+    }
+    out.push_str("\nTimes in µs. ≥: measured from the run's start (no traced release), a lower bound of the response.\n");
+    out
+}
+
+fn escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
+/// One histogram per task: its responses in 40 bins, the analysed WCRT (red) and the deadline
+/// (dashed) drawn in, on an axis that holds all three.
+pub fn svg(b: &Bench) -> String {
+    const W: f64 = 760.0;
+    const PANEL: f64 = 96.0;
+    const LEFT: f64 = 170.0;
+    const BINS: usize = 40;
+    let plot_w = W - LEFT - 20.0;
+    let height = 40.0 + PANEL * b.tasks.len().max(1) as f64;
+    let mut out = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{height}\" font-family=\"sans-serif\" font-size=\"11\">\n\
+         <text x=\"8\" y=\"18\" font-size=\"13\">{} ({} build): response times, WCRT (red) and deadline (dashed)</text>\n",
+        escape(&b.board),
+        escape(&b.build)
+    );
+    for (i, t) in b.tasks.iter().enumerate() {
+        let top = 30.0 + PANEL * i as f64;
+        let base = top + PANEL - 22.0;
+        let max_resp = t.responses_us.iter().copied().fold(0.0, f64::max);
+        let axis = [
+            Some(max_resp),
+            t.wcrt_us,
+            t.deadline_us.filter(|d| d.is_finite()),
+        ]
+        .into_iter()
+        .flatten()
+        .fold(1.0_f64, f64::max)
+            * 1.05;
+        let mut bins = [0usize; BINS];
+        for r in &t.responses_us {
+            let k = ((r / axis) * BINS as f64) as usize;
+            bins[k.min(BINS - 1)] += 1;
+        }
+        let tallest = bins.iter().copied().max().unwrap_or(1).max(1) as f64;
+        let _ = writeln!(
+            out,
+            "<text x=\"8\" y=\"{:.1}\">{}</text><text x=\"8\" y=\"{:.1}\" fill=\"#555\">{} jobs, max {:.1} µs</text>",
+            top + 30.0,
+            escape(&t.task),
+            top + 44.0,
+            t.jobs,
+            max_resp
+        );
+        let _ = writeln!(
+            out,
+            "<line x1=\"{LEFT}\" y1=\"{base:.1}\" x2=\"{:.1}\" y2=\"{base:.1}\" stroke=\"#000\"/>",
+            LEFT + plot_w
+        );
+        let bar_w = plot_w / BINS as f64;
+        for (k, &n) in bins.iter().enumerate() {
+            if n == 0 {
+                continue;
+            }
+            let h = (n as f64 / tallest) * (PANEL - 34.0);
+            let _ = writeln!(
+                out,
+                "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{h:.1}\" fill=\"#4a7ebb\"><title>{n}</title></rect>",
+                LEFT + bar_w * k as f64,
+                base - h,
+                bar_w - 1.0
+            );
+        }
+        let x = |v: f64| LEFT + plot_w * v / axis;
+        if let Some(w) = t.wcrt_us {
+            let _ = writeln!(
+                out,
+                "<line x1=\"{0:.1}\" y1=\"{1:.1}\" x2=\"{0:.1}\" y2=\"{base:.1}\" stroke=\"#c00\" stroke-width=\"2\"/><text x=\"{0:.1}\" y=\"{1:.1}\" fill=\"#c00\">WCRT {w:.1}</text>",
+                x(w),
+                top + 8.0
+            );
+        }
+        if let Some(d) = t.deadline_us.filter(|d| d.is_finite()) {
+            let _ = writeln!(
+                out,
+                "<line x1=\"{0:.1}\" y1=\"{1:.1}\" x2=\"{0:.1}\" y2=\"{base:.1}\" stroke=\"#000\" stroke-dasharray=\"4 3\"/><text x=\"{0:.1}\" y=\"{2:.1}\" text-anchor=\"end\">deadline {d:.0}</text>",
+                x(d),
+                top + 8.0,
+                top + 20.0
+            );
+        }
+        let _ = writeln!(
+            out,
+            "<text x=\"{LEFT}\" y=\"{:.1}\" fill=\"#555\">0</text><text x=\"{:.1}\" y=\"{:.1}\" fill=\"#555\" text-anchor=\"end\">{axis:.1} µs</text>",
+            base + 13.0,
+            LEFT + plot_w,
+            base + 13.0
+        );
+        if t.verdict.starts_with("EXCEEDS") {
+            let _ = writeln!(
+                out,
+                "<rect x=\"2\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"none\" stroke=\"#c00\" stroke-width=\"2\"/>",
+                top + 2.0,
+                W - 4.0,
+                PANEL - 4.0
+            );
+        }
+    }
+    out.push_str("</svg>\n");
+    out
+}
