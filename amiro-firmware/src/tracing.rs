@@ -17,10 +17,10 @@
 //! without it [`job`], [`enter`], [`suspend`], [`resume`] and [`frame_acked`] are empty and only the
 //! handler events and the boot record remain on the channel. Its cost per job is a term of each
 //! board's timing file (`trace` in schedule-analysis/models/*.timing.json).
-use core::cell::RefCell;
+use core::cell::UnsafeCell;
 
 use amiro_trace::{Kind, Record};
-use critical_section::Mutex;
+use critical_section::{CriticalSection, Mutex};
 
 /// The task number of "no task" (init or idle).
 pub const NO_TASK: u8 = u8::MAX;
@@ -43,7 +43,7 @@ struct State {
     wire: [u8; amiro_trace::MAX_WIRE],
 }
 
-static STATE: Mutex<RefCell<State>> = Mutex::new(RefCell::new(State {
+static STATE: Mutex<UnsafeCell<State>> = Mutex::new(UnsafeCell::new(State {
     #[cfg(feature = "task-trace")]
     current: NO_TASK,
     #[cfg(feature = "task-trace")]
@@ -57,6 +57,17 @@ static STATE: Mutex<RefCell<State>> = Mutex::new(RefCell::new(State {
     lost: 0,
     wire: [0; amiro_trace::MAX_WIRE],
 }));
+
+/// The trace state, inside a critical section. Not a `RefCell`: its borrow check would bring a
+/// panic path (and the formatting machinery) into every image for a borrow that cannot fail.
+/// Each critical section below takes it once and nothing it calls takes it again (the sinks write
+/// to RTT or the console), so the reference is unique.
+#[allow(clippy::mut_from_ref)]
+fn state_in(cs: CriticalSection<'_>) -> &mut State {
+    // SAFETY: interrupts are off for `cs`'s lifetime (one core), and every caller takes the state
+    // once per critical section and does not re-enter (see above).
+    unsafe { &mut *STATE.borrow(cs).get() }
+}
 
 /// The trace clock, widened to 64 bits (robot: DWT CYCCNT).
 #[cfg(not(feature = "qemu"))]
@@ -122,13 +133,7 @@ pub fn hello(clock_hz: u32) {
 
 /// Stamps and writes one record into the trace channel.
 fn emit(kind: Kind) {
-    critical_section::with(|cs| {
-        write(
-            &mut STATE.borrow_ref_mut(cs),
-            kind,
-            crate::telemetry::write_trace,
-        )
-    });
+    critical_section::with(|cs| write(state_in(cs), kind, crate::telemetry::write_trace));
 }
 
 /// Stamps and writes one record into `sink`, in the caller's critical section (so a task record's
@@ -162,13 +167,7 @@ pub fn event(record: &[u8; amiro_trace::EVENT_LEN]) {
     #[cfg(not(feature = "qemu"))]
     emit(kind);
     #[cfg(feature = "qemu")]
-    critical_section::with(|cs| {
-        write(
-            &mut STATE.borrow_ref_mut(cs),
-            kind,
-            crate::telemetry::write_console_record,
-        )
-    });
+    critical_section::with(|cs| write(state_in(cs), kind, crate::telemetry::write_console_record));
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.
@@ -206,8 +205,7 @@ pub fn enter(task: u8) {
 #[inline(never)]
 fn start(task: u8) {
     critical_section::with(|cs| {
-        let mut state = STATE.borrow_ref_mut(cs);
-        let state = &mut *state;
+        let state = state_in(cs);
         if let Some(slot) = state.preempted.get_mut(usize::from(task)) {
             *slot = state.current;
             state.current = task;
@@ -224,8 +222,7 @@ fn start(task: u8) {
 #[inline(never)]
 fn end(task: u8, next_release_in_us: u32) {
     critical_section::with(|cs| {
-        let mut state = STATE.borrow_ref_mut(cs);
-        let state = &mut *state;
+        let state = state_in(cs);
         if let Some(&before) = state.preempted.get(usize::from(task)) {
             state.current = before;
         }

@@ -165,25 +165,22 @@ impl<const N: usize> TxQueue<N> {
                 self.counters.dropped = self.counters.dropped.saturating_add(1);
                 return PushOutcome::DroppedNew { dropped: frame };
             }
-            // The frame leaving last sits at index 0: rotate it to the end and take it off.
-            self.frames.rotate_left(1);
-            if let Some(dropped) = self.frames.pop() {
-                self.counters.dropped = self.counters.dropped.saturating_add(1);
-                outcome = PushOutcome::DroppedOther { dropped };
-            }
+            // The frame leaving last sits at index 0 (the queue is full and `first` was some, so
+            // index 0 exists).
+            let dropped = self.frames.remove(0);
+            self.counters.dropped = self.counters.dropped.saturating_add(1);
+            outcome = PushOutcome::DroppedOther { dropped };
         }
         // `at` counted frames before the insertion point; one of them may just have been dropped.
         let at = match outcome {
             PushOutcome::DroppedOther { .. } => at.saturating_sub(1),
             _ => at,
         };
-        if let Err(frame) = self.frames.push(frame) {
+        // `at` ≤ len: it counted queued frames, less the one dropped before it.
+        if let Err(frame) = self.frames.insert(at, frame) {
             // Unreachable: room was made above. Report it as a drop rather than lose it silently.
             self.counters.dropped = self.counters.dropped.saturating_add(1);
             return PushOutcome::DroppedNew { dropped: frame };
-        }
-        if let Some(tail) = self.frames.get_mut(at..) {
-            tail.rotate_right(1);
         }
         let len = u16::try_from(self.frames.len()).unwrap_or(u16::MAX);
         self.counters.high_water = self.counters.high_water.max(len);
