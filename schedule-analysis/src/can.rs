@@ -15,8 +15,9 @@
 //! `(80 + 10s)·τ` for extended ones. The interframe space is inside the 13 bits; adding it again would count it
 //! twice.
 
+use crate::board::LevelLoads;
 use crate::busy_window::{
-    self, Activations, AnalysisError, Counter, Discipline, Limits, Response, Subject,
+    self, Activations, AnalysisError, Counter, Discipline, Limits, Load, Response, Subject,
 };
 use crate::time::Time;
 
@@ -195,6 +196,7 @@ pub fn response_time(
         index,
         blocking,
         (Time::ZERO, Time::ZERO),
+        None,
         bit,
         limits,
         scratch,
@@ -214,6 +216,7 @@ pub fn response_times(
 ) {
     let mut level_start = 0;
     let mut previous_level = 0..0;
+    let mut levels = LevelLoads::default();
     for (i, message) in messages.iter().enumerate() {
         if i > 0 && messages.get(i - 1).is_some_and(|m| m.key != message.key) {
             previous_level = level_start..i;
@@ -234,7 +237,9 @@ pub fn response_times(
                 hints.1 = hints.1.max_of(r.busy_window);
             }
         }
-        let result = response_time_from(messages, i, blocking, hints, bit, limits, scratch);
+        let load = levels.at(messages, i, |a, b| a.key == b.key);
+        let result =
+            response_time_from(messages, i, blocking, hints, Some(load), bit, limits, scratch);
         if let Some(slot) = out.get_mut(i) {
             *slot = result;
         }
@@ -246,6 +251,7 @@ fn response_time_from(
     index: usize,
     blocking: Time,
     hints: (Time, Time),
+    load: Option<Load>,
     bit: Time,
     limits: &Limits,
     scratch: &mut [Counter],
@@ -272,10 +278,12 @@ fn response_time_from(
     subject.known_first_window = hints.0;
     subject.known_busy_period = hints.1;
     let interferers = messages.get(..end).unwrap_or(&[]);
-    busy_window::response_time(
+    let load = load.unwrap_or_else(|| Load::sum(interferers, Some(index)));
+    busy_window::response_time_loaded(
         &subject,
         interferers,
         Some(index),
+        load,
         Discipline::NonPreemptive { bit_time: bit },
         limits,
         scratch,

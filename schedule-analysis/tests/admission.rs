@@ -112,7 +112,7 @@ fn the_table_lowers_and_emits_rust() {
         Some("diwheeldrive")
     );
     let dwd = &robot.boards[0];
-    assert_eq!(dwd.topics.len(), 8, "DiWheelDrive's eight sensor topics");
+    assert_eq!(dwd.topics.len(), 9, "DiWheelDrive's eight sensor topics and its diagnostics");
     assert!(dwd.levels.iter().all(Option::is_some));
     assert!(dwd.monotonic.is_some() && dwd.can_tx.is_some() && dwd.command_handler.is_some());
     let source = robot.to_rust_source("schedule_analysis");
