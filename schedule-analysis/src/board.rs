@@ -95,8 +95,9 @@ pub fn response_times(
 pub trait Results {
     /// Stores task `i`'s result.
     fn put(&mut self, i: usize, result: Result<Response, AnalysisError>);
-    /// Task `k`'s first window (its [`Response::first_window`]), if it has a bound.
-    fn first_window(&self, k: usize) -> Option<Time>;
+    /// Element `k`'s start hints, if it has a bound: its [`Response::first_window`] and
+    /// [`Response::busy_window`].
+    fn windows(&self, k: usize) -> Option<(Time, Time)>;
 }
 
 impl Results for [Result<Response, AnalysisError>] {
@@ -105,8 +106,9 @@ impl Results for [Result<Response, AnalysisError>] {
             *slot = result;
         }
     }
-    fn first_window(&self, k: usize) -> Option<Time> {
-        Some(self.get(k)?.as_ref().ok()?.first_window)
+    fn windows(&self, k: usize) -> Option<(Time, Time)> {
+        let r = self.get(k)?.as_ref().ok()?;
+        Some((r.first_window, r.busy_window))
     }
 }
 
@@ -136,7 +138,7 @@ pub fn response_times_into<R: Results + ?Sized>(
         let hint = previous_level
             .clone()
             .filter_map(|k| {
-                let first = out.first_window(k)?;
+                let (first, _) = out.windows(k)?;
                 (blockings.get(k).copied().unwrap_or(Time::ZERO) <= blocking.plus(task.wcet))
                     .then_some(first)
             })

@@ -15,7 +15,7 @@
 //! `(80 + 10s)·τ` for extended ones. The interframe space is inside the 13 bits; adding it again would count it
 //! twice.
 
-use crate::board::LevelLoads;
+use crate::board::{LevelLoads, Results};
 use crate::busy_window::{
     self, Activations, AnalysisError, Counter, Discipline, Limits, Load, Response, Subject,
 };
@@ -214,6 +214,18 @@ pub fn response_times(
     scratch: &mut [Counter],
     out: &mut [Result<Response, AnalysisError>],
 ) {
+    response_times_into(messages, blockings, bit, limits, scratch, out);
+}
+
+/// [`response_times`] into any [`Results`] (the on-chip admission check keeps only the numbers it needs).
+pub fn response_times_into<R: Results + ?Sized>(
+    messages: &[MessageTiming],
+    blockings: &[Time],
+    bit: Time,
+    limits: &Limits,
+    scratch: &mut [Counter],
+    out: &mut R,
+) {
     let mut level_start = 0;
     let mut previous_level = 0..0;
     let mut levels = LevelLoads::default();
@@ -225,24 +237,23 @@ pub fn response_times(
         let blocking = blockings.get(i).copied().unwrap_or(Time::ZERO);
         let mut hints = (Time::ZERO, Time::ZERO);
         for k in previous_level.clone() {
-            let (Some(Ok(r)), Some(other)) = (out.get(k), messages.get(k)) else {
+            let (Some((first_window, busy_window)), Some(other)) = (out.windows(k), messages.get(k))
+            else {
                 continue;
             };
             let blocking_k = blockings.get(k).copied().unwrap_or(Time::ZERO);
             // Queuing window: f_i ≥ f_k − B_k + B_i + A_k; busy period: the same with the own activation A_i.
             if blocking_k <= blocking.plus(other.activation_cost()) {
-                hints.0 = hints.0.max_of(r.first_window);
+                hints.0 = hints.0.max_of(first_window);
             }
             if blocking_k <= blocking.plus(message.activation_cost()) {
-                hints.1 = hints.1.max_of(r.busy_window);
+                hints.1 = hints.1.max_of(busy_window);
             }
         }
         let load = levels.at(messages, i, |a, b| a.key == b.key);
         let result =
             response_time_from(messages, i, blocking, hints, Some(load), bit, limits, scratch);
-        if let Some(slot) = out.get_mut(i) {
-            *slot = result;
-        }
+        out.put(i, result);
     }
 }
 
