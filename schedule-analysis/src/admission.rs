@@ -20,7 +20,7 @@
 //! deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without jitter budgets
 //! (a property test checks that they agree).
 
-use crate::board::{self, CriticalSection, TaskTiming};
+use crate::board::{self, CriticalSection, LevelLoads, TaskTiming};
 use crate::busy_window::{AnalysisError, Counter, Limits, Response};
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
@@ -553,6 +553,7 @@ fn horizon<const M: usize>(robot: &RobotTable<'_>, streams: &View<'_, M>) -> Tim
     longest.times(1000).max_of(Time::from_us(60_000_000))
 }
 
+#[inline(never)]
 fn evaluate_into<const N: usize, const M: usize>(
     robot: &RobotTable<'_>,
     running: &[Stream],
@@ -594,6 +595,7 @@ fn evaluate_into<const N: usize, const M: usize>(
 }
 
 /// The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al.
+#[inline(never)]
 fn analyse_bus<const M: usize>(
     robot: &RobotTable<'_>,
     streams: &View<'_, M>,
@@ -760,6 +762,7 @@ impl<const N: usize> Jobs<N> {
 /// One board's tasks with the configuration's publishers: writes the first violated deadline (in table order)
 /// into `first` unless one is there, and each of its streams' sender numbers into `senders`.
 #[allow(clippy::too_many_arguments)]
+#[inline(never)]
 fn analyse_board<const N: usize, const M: usize>(
     robot: &RobotTable<'_>,
     b: usize,
@@ -895,26 +898,88 @@ fn analyse_board<const N: usize, const M: usize>(
         *slot = longest;
     }
 
-    // Release jitters to a fixed point: a released job inherits its releaser's WCRT.
+    // Release jitters to a fixed point: a released job inherits its releaser's WCRT. When every releaser is more
+    // urgent than what it releases (the boards' timer jobs and interrupts), a job's jitter is set as its level is
+    // entered, from its releaser's final bound, so one pass reaches the fixed point the report's round-by-round
+    // iteration reaches (it is unique: the releases form a chain from more to less urgent) and a check confirms
+    // it; otherwise jitters change only between passes, exactly as in the report.
     let mut wcrt = [NONE; N];
     let mut first_window = [Time::ZERO; N];
-    let mut busy = [Time::ZERO; N];
     let mut scratch = [Counter::default(); N];
     let chained = jobs.meta.iter().take(len).any(|m| m.released_by != NO_JOB);
+    let in_pass = jobs
+        .meta
+        .iter()
+        .zip(jobs.timings.iter())
+        .take(len)
+        .all(|(meta, timing)| {
+            meta.released_by == NO_JOB
+                || jobs
+                    .timings
+                    .get(usize::from(at(meta.released_by)))
+                    .is_some_and(|releaser| releaser.priority > timing.priority)
+        });
+    // The jitter a released job inherits from its releaser's current bound (`None`: the releaser is unbounded).
+    let inherited = |meta: &JobMeta, wcrt: &[u64; N]| -> Option<Time> {
+        let releaser = wcrt.get(usize::from(at(meta.released_by))).copied().unwrap_or(NONE);
+        bound(releaser).and_then(|r| meta.own_jitter.checked_plus(r))
+    };
     let mut settled = false;
     for _ in 0..MAX_JITTER_ROUNDS {
-        board::response_times_into(
-            jobs.timings.get(..len).unwrap_or(&[]),
-            blocking.get(..len).unwrap_or(&[]),
-            limits,
-            &mut scratch,
-            &mut Bounds {
-                wcrt: &mut wcrt,
-                first: &mut first_window,
-                busy: &mut busy,
-                iterations,
-            },
-        );
+        let mut levels = LevelLoads::default();
+        let mut level_start = 0;
+        let mut previous_level = 0..0;
+        for i in 0..len {
+            let Some(priority) = jobs.timings.get(i).map(|t| t.priority) else {
+                break;
+            };
+            if i == 0 || jobs.timings.get(i - 1).is_some_and(|t| t.priority != priority) {
+                previous_level = level_start..i;
+                level_start = i;
+                if in_pass {
+                    // Entering a level: its released jobs take their (more urgent, done) releasers' bounds.
+                    for p in i..len {
+                        let (Some(meta), Some(timing)) = (jobs.meta.get(p), jobs.timings.get_mut(p)) else {
+                            break;
+                        };
+                        if timing.priority != priority {
+                            break;
+                        }
+                        if meta.released_by != NO_JOB {
+                            if let Some(jitter) = inherited(meta, &wcrt) {
+                                timing.jitter = jitter;
+                            }
+                        }
+                    }
+                }
+            }
+            let (Some(&task), Some(&blocking_i)) = (jobs.timings.get(i), blocking.get(i)) else {
+                break;
+            };
+            // As the report: start from a more urgent level's first window when provably below this one's.
+            let hint = previous_level
+                .clone()
+                .filter(|&k| wcrt.get(k).is_some_and(|&w| w != NONE))
+                .filter(|&k| blocking.get(k).is_some_and(|&b| b <= blocking_i.plus(task.wcet)))
+                .filter_map(|k| first_window.get(k).copied())
+                .max()
+                .unwrap_or(Time::ZERO);
+            let timings = jobs.timings.get(..len).unwrap_or(&[]);
+            let load = levels.at(timings, i, |a, b| a.priority == b.priority);
+            let result =
+                board::response_time_hinted(timings, i, blocking_i, hint, load, limits, &mut scratch);
+            let (w, f) = match result {
+                Ok(r) => {
+                    *iterations += r.iterations;
+                    (r.wcrt.as_ns(), r.first_window)
+                }
+                Err(_) => (NONE, Time::ZERO),
+            };
+            if let (Some(ws), Some(fs)) = (wcrt.get_mut(i), first_window.get_mut(i)) {
+                *ws = w;
+                *fs = f;
+            }
+        }
         if !chained {
             settled = true;
             break;
@@ -927,12 +992,10 @@ fn analyse_board<const N: usize, const M: usize>(
             if meta.released_by == NO_JOB {
                 continue;
             }
-            let releaser = wcrt.get(usize::from(at(meta.released_by))).copied().unwrap_or(NONE);
-            let inherited = bound(releaser).and_then(|r| meta.own_jitter.checked_plus(r));
-            match (inherited, jobs.timings.get_mut(p)) {
-                (Some(inherited), Some(timing)) => {
-                    if timing.jitter != inherited {
-                        timing.jitter = inherited;
+            match (inherited(&meta, &wcrt), jobs.timings.get_mut(p)) {
+                (Some(jitter), Some(timing)) => {
+                    if timing.jitter != jitter {
+                        timing.jitter = jitter;
                         changed = true;
                     }
                 }

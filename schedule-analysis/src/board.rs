@@ -114,6 +114,7 @@ impl Results for [Result<Response, AnalysisError>] {
 
 /// [`response_times`] into any [`Results`]: a caller short of memory (the on-chip admission check) keeps only
 /// the numbers it needs per task instead of a whole [`Response`].
+#[inline(never)]
 pub fn response_times_into<R: Results + ?Sized>(
     tasks: &[TaskTiming],
     blockings: &[Time],
@@ -179,6 +180,22 @@ impl LevelLoads {
         }
         self.prefix.minus(Load::of(me))
     }
+}
+
+/// [`response_time`] with a start hint (a value known not to exceed the first window, e.g. a more urgent task's
+/// first window, see [`response_times`]) and the interferers' load already summed ([`LevelLoads`]): the
+/// building block of a caller that analyses a set in priority order itself (the admission check, which sets a
+/// released task's jitter as soon as its releaser's bound is known).
+pub fn response_time_hinted(
+    tasks: &[TaskTiming],
+    index: usize,
+    blocking: Time,
+    hint: Time,
+    load: Load,
+    limits: &Limits,
+    scratch: &mut [Counter],
+) -> Result<Response, AnalysisError> {
+    response_time_from(tasks, index, blocking, hint, Some(load), limits, scratch)
 }
 
 fn response_time_from(

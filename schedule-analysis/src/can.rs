@@ -218,6 +218,7 @@ pub fn response_times(
 }
 
 /// [`response_times`] into any [`Results`] (the on-chip admission check keeps only the numbers it needs).
+#[inline(never)]
 pub fn response_times_into<R: Results + ?Sized>(
     messages: &[MessageTiming],
     blockings: &[Time],
