@@ -198,7 +198,7 @@ fn note_decision<C: Clock, const N: usize, const M: usize>(
 ) {
     use crate::admission::Check;
     let (last, _) = admission.iterations();
-    if last == 0 {
+    if !admission.analysed() {
         return;
     }
     let took = C::now_us().saturating_sub(started);

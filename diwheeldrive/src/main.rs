@@ -55,6 +55,15 @@ pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// The clock every task uses (TIM5 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
 
+// The robot's admission table, generated from the apps and timing files (`board-build.rs`).
+amiro_firmware::admission_table!();
+
+/// This board's admission state (`docs/analysis.md`, "The on-chip admission check").
+type Admission = amiro_firmware::admission::Admission<
+    { admission_table::MAX_TASKS },
+    { admission_table::MAX_PUBLISHERS },
+>;
+
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4, UART5, TIM6, TIM7, SDIO, DMA2_CHANNEL1])]
 mod app {
     use crate::sensors::{self, Compass, Floor, Imu};
@@ -203,15 +212,31 @@ mod app {
         cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
     }
 
-    /// Decodes each command, updates the publisher table or the motor target, and wakes the
-    /// publisher levels whose schedule changed; at most one command per `COMMAND_MIN_INTERVAL_US`.
-    #[task(priority = 5, shared = [handler, drive], local = [commands, wake_levels])]
+    /// Checks each command against the robot's schedule first (admission control: a refused
+    /// request changes nothing and is answered with a verdict), then decodes it, updates the
+    /// publisher table or the motor target, and wakes the publisher levels whose schedule changed;
+    /// at most one command per `COMMAND_MIN_INTERVAL_US`.
+    #[task(
+        priority = 5,
+        shared = [handler, drive, tx_queue],
+        local = [
+            commands,
+            wake_levels,
+            admission: crate::Admission =
+                crate::Admission::new(&crate::admission_table::ROBOT, CanBoard::DiWheelDrive),
+        ]
+    )]
     async fn handle_commands(mut cx: handle_commands::Context) {
+        // Every board analysed once with nothing running, before the first command.
+        cx.local.admission.prepare();
         while let Some(frame) = tasks::next_command(cx.local.commands).await {
             let started = Clock::now_us();
-            let outcome = tasks::handle_command::<Clock>(
+            let outcome = tasks::handle_command_admitted::<Clock, _, _, TX_QUEUE_LEN>(
                 &frame,
+                cx.local.admission,
                 &mut cx.shared.handler,
+                &mut cx.shared.tx_queue,
+                platform::CAN_TX_INTERRUPT,
                 cx.local.wake_levels,
             );
             if let Some((now, Outcome::Motor { command, .. })) = outcome {

@@ -274,7 +274,7 @@ pub fn evaluate<const N: usize, const M: usize>(
     streams: &[Stream],
 ) -> Evaluation {
     let mut iterations = 0u64;
-    let refusal = evaluate_into::<N, M>(robot, streams, None, &mut iterations);
+    let refusal = evaluate_into::<N, M>(robot, streams, None, &mut iterations, None);
     Evaluation {
         refusal,
         iterations,
@@ -309,6 +309,37 @@ pub fn admit<const N: usize, const M: usize>(
     }
 }
 
+/// [`admit`] without the suggestion search, reusing the analyses of boards whose streams did not change since the
+/// last decision that used `cache` (the on-chip check: one cache per board, kept across commands). The decision
+/// is the one [`admit`] takes on the same inputs. The request's board's new analysis is kept when the request is
+/// admitted, or with `carried_out_anyway` (accept-and-warn: the board starts it although it is refused).
+pub fn admit_cached<const N: usize, const M: usize>(
+    robot: &RobotTable<'_>,
+    streams: &[Stream],
+    request: &Stream,
+    cache: &mut Cache<M>,
+    carried_out_anyway: bool,
+) -> Decision {
+    let mut iterations = 0u64;
+    let refusal = if request.period.is_zero() {
+        Some(Refusal::ZeroPeriod)
+    } else {
+        evaluate_into::<N, M>(
+            robot,
+            streams,
+            Some(request),
+            &mut iterations,
+            Some((cache, carried_out_anyway)),
+        )
+    };
+    Decision {
+        refusal,
+        suggestion: Suggestion::default(),
+        iterations,
+        evaluations: 1,
+    }
+}
+
 /// The CAN identifier of a sensor stream: `0x400 | level << 8 | topic` (amiro-can's layout for sensor data).
 pub const fn sensor_id(level: u8, topic: u8) -> u32 {
     0x400 | ((level as u32 & 0x3) << 8) | topic as u32
@@ -337,7 +368,7 @@ fn check_with<const N: usize, const M: usize>(
     if request.period.is_zero() {
         return Some(Refusal::ZeroPeriod);
     }
-    evaluate_into::<N, M>(robot, streams, Some(request), iterations)
+    evaluate_into::<N, M>(robot, streams, Some(request), iterations, None)
 }
 
 fn shortest_period<const N: usize, const M: usize>(
@@ -559,6 +590,7 @@ fn evaluate_into<const N: usize, const M: usize>(
     running: &[Stream],
     request: Option<&Stream>,
     iterations: &mut u64,
+    mut cache: Option<(&mut Cache<M>, bool)>,
 ) -> Option<Refusal> {
     if robot.boards.len() > usize::from(u8::MAX) || N >= usize::from(NO_JOB) {
         return Some(Refusal::Capacity);
@@ -576,22 +608,206 @@ fn evaluate_into<const N: usize, const M: usize>(
         tx: [NONE; M],
         receiver: [NONE; M],
     };
+    // The request's board: its new analysis replaces the kept one only when the request is carried out.
+    let requesting = request.and_then(|r| r.sender).map(|x| usize::from(x.board));
+    let mut fresh;
+    let mut pending: Option<Summary<M>> = None;
     for (b, table) in robot.boards.iter().enumerate() {
-        if let Err(refusal) = analyse_board::<N, M>(
-            robot,
-            b,
-            table,
-            &streams,
-            &limits,
-            iterations,
-            &mut first,
-            &mut senders,
-        ) {
-            return Some(refusal);
+        let Some(key) = BoardKey::<M>::of(b, &streams, limits.horizon) else {
+            return Some(Refusal::Capacity);
+        };
+        let cached = cache
+            .as_ref()
+            .and_then(|(c, _)| c.boards.get(b))
+            .and_then(|slot| slot.as_ref())
+            .filter(|summary| summary.key == key);
+        let summary = match cached {
+            Some(summary) => summary,
+            None => {
+                fresh = Summary {
+                    key,
+                    ..Summary::EMPTY
+                };
+                if let Err(refusal) = analyse_board::<N, M>(
+                    robot, b, table, &streams, &limits, iterations, &mut fresh,
+                ) {
+                    return Some(refusal);
+                }
+                if requesting == Some(b) {
+                    pending = Some(fresh);
+                } else if let Some(slot) = cache.as_mut().and_then(|(c, _)| c.boards.get_mut(b)) {
+                    *slot = Some(fresh);
+                }
+                &fresh
+            }
+        };
+        if first.is_none() {
+            first = summary.first;
         }
+        summary.apply(b, table, &streams, &mut senders);
     }
     analyse_bus(robot, &streams, &senders, &limits, iterations, &mut first);
+    if let (Some(b), Some(summary), Some((c, keep_refused))) = (requesting, pending, cache) {
+        if first.is_none() || keep_refused {
+            if let Some(slot) = c.boards.get_mut(b) {
+                *slot = Some(summary);
+            }
+        }
+    }
     first
+}
+
+/// Brings `cache` up to date with the running `streams` (analysing only the boards whose streams changed since
+/// their kept analysis) and returns the iterations it took: after boot, so that the first request does not pay
+/// for every board, and after a publisher stops.
+pub fn refresh<const N: usize, const M: usize>(
+    robot: &RobotTable<'_>,
+    streams: &[Stream],
+    cache: &mut Cache<M>,
+) -> u64 {
+    let mut iterations = 0u64;
+    let _ = evaluate_into::<N, M>(robot, streams, None, &mut iterations, Some((cache, true)));
+    iterations
+}
+
+/// Most boards a [`Cache`] keeps (the AMiRo has three; the analyses of further boards are not kept).
+pub const MAX_BOARDS: usize = 3;
+
+/// Each board's last analysis, kept between decisions by a board that decides many requests: a board's tasks
+/// depend only on its own streams (and the horizon), so a request on one board leaves the other boards' results
+/// as they were. A summary is reused only when its inputs are the same — the board's streams in the same order
+/// with the same topic, level, size, period and deadline, and the same horizon — so a decision with the cache is
+/// the decision without it (a test compares them), at a fraction of the cost.
+#[derive(Debug, Clone)]
+pub struct Cache<const M: usize> {
+    boards: [Option<Summary<M>>; MAX_BOARDS],
+}
+
+impl<const M: usize> Cache<M> {
+    /// Nothing analysed yet.
+    pub const fn new() -> Self {
+        Self {
+            boards: [None; MAX_BOARDS],
+        }
+    }
+}
+
+impl<const M: usize> Default for Cache<M> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Everything a board's analysis reads from the configuration: the horizon and, per stream the board sends (in
+/// order), its topic, level, data bytes, period and deadline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct BoardKey<const M: usize> {
+    horizon: Time,
+    len: u8,
+    topic: [u8; M],
+    level: [u8; M],
+    dlc: [u8; M],
+    period: [Time; M],
+    deadline: [u64; M],
+}
+
+impl<const M: usize> BoardKey<M> {
+    fn of(b: usize, streams: &View<'_, M>, horizon: Time) -> Option<Self> {
+        let mut key = BoardKey {
+            horizon,
+            len: 0,
+            topic: [0; M],
+            level: [0; M],
+            dlc: [0; M],
+            period: [Time::ZERO; M],
+            deadline: [0; M],
+        };
+        for (_, s) in streams.iter() {
+            let Some(sender) = s.sender.filter(|x| usize::from(x.board) == b) else {
+                continue;
+            };
+            let i = usize::from(key.len);
+            *key.topic.get_mut(i)? = sender.topic;
+            *key.level.get_mut(i)? = sender.level;
+            *key.dlc.get_mut(i)? = s.dlc;
+            *key.period.get_mut(i)? = s.period;
+            *key.deadline.get_mut(i)? = s.deadline.map_or(NONE, Time::as_ns);
+            key.len += 1;
+        }
+        Some(key)
+    }
+}
+
+/// What one board's analysis gives the rest of the check.
+#[derive(Debug, Clone, Copy)]
+struct Summary<const M: usize> {
+    key: BoardKey<M>,
+    /// The board's first violated deadline, in table order.
+    first: Option<Refusal>,
+    /// Its transmit interrupt's WCRT (0 without one, [`NONE`] unbounded).
+    tx: u64,
+    /// Its command handler's WCRT (0 without one, [`NONE`] unbounded).
+    handler: u64,
+    /// Per stream the board sends (in the key's order): its publisher job's WCRT ([`NONE`]: unbounded or not
+    /// found) and whether the job was found.
+    wcrt: [u64; M],
+    found: [bool; M],
+}
+
+impl<const M: usize> Summary<M> {
+    const EMPTY: Self = Summary {
+        key: BoardKey {
+            horizon: Time::ZERO,
+            len: 0,
+            topic: [0; M],
+            level: [0; M],
+            dlc: [0; M],
+            period: [Time::ZERO; M],
+            deadline: [0; M],
+        },
+        first: None,
+        tx: 0,
+        handler: 0,
+        wcrt: [NONE; M],
+        found: [false; M],
+    };
+
+    /// Writes the board's numbers into the per-stream arrays the bus analysis reads.
+    fn apply(
+        &self,
+        b: usize,
+        table: &BoardTable<'_>,
+        streams: &View<'_, M>,
+        senders: &mut SenderBounds<M>,
+    ) {
+        let mut own = 0usize;
+        for (m, s) in streams.iter() {
+            if let Some(sender) = s.sender.filter(|x| usize::from(x.board) == b) {
+                if self.found.get(own).copied().unwrap_or(false) {
+                    let best = table
+                        .topics
+                        .iter()
+                        .find(|t| t.topic == sender.topic)
+                        .map_or(0, |t| t.bcet.as_ns());
+                    if let (Some(w), Some(bc), Some(t)) = (
+                        senders.wcrt.get_mut(m),
+                        senders.bcrt.get_mut(m),
+                        senders.tx.get_mut(m),
+                    ) {
+                        *w = self.wcrt.get(own).copied().unwrap_or(NONE);
+                        *bc = best;
+                        *t = self.tx;
+                    }
+                }
+                own += 1;
+            }
+            if s.receiver.is_some_and(|r| usize::from(r) == b) {
+                if let Some(slot) = senders.receiver.get_mut(m) {
+                    *slot = self.handler;
+                }
+            }
+        }
+    }
 }
 
 /// The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al.
@@ -680,7 +896,9 @@ fn analyse_bus<const M: usize>(
         let m = usize::from(i);
         let Some(s) = streams.get(m) else { continue };
         let bus = match (offset.get(position), wcrt.get(position)) {
-            (Some(&o), Some(&w)) if o != NONE && w != NONE => Time::from_ns(o).checked_plus(Time::from_ns(w)),
+            (Some(&o), Some(&w)) if o != NONE && w != NONE => {
+                Time::from_ns(o).checked_plus(Time::from_ns(w))
+            }
             _ => None,
         };
         if first.is_none() && bus.is_none_or(|w| w > s.deadline()) {
@@ -759,8 +977,9 @@ impl<const N: usize> Jobs<N> {
     }
 }
 
-/// One board's tasks with the configuration's publishers: writes the first violated deadline (in table order)
-/// into `first` unless one is there, and each of its streams' sender numbers into `senders`.
+/// One board's tasks with the configuration's publishers: writes its first violated deadline (in table order),
+/// its transmit interrupt's and command handler's bounds and each of its streams' sending job's bound into
+/// `summary`.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn analyse_board<const N: usize, const M: usize>(
@@ -770,8 +989,7 @@ fn analyse_board<const N: usize, const M: usize>(
     streams: &View<'_, M>,
     limits: &Limits,
     iterations: &mut u64,
-    first: &mut Option<Refusal>,
-    senders: &mut SenderBounds<M>,
+    summary: &mut Summary<M>,
 ) -> Result<(), Refusal> {
     let mine = || {
         streams
@@ -805,9 +1023,9 @@ fn analyse_board<const N: usize, const M: usize>(
                 id: TaskId::Fixed(u16::try_from(i).map_err(|_| Refusal::Capacity)?),
                 deadline: t.deadline.unwrap_or(period),
                 own_jitter: t.jitter,
-                released_by: t
-                    .released_by
-                    .map_or(Ok(NO_JOB), |r| u8::try_from(r).map_err(|_| Refusal::Capacity))?,
+                released_by: t.released_by.map_or(Ok(NO_JOB), |r| {
+                    u8::try_from(r).map_err(|_| Refusal::Capacity)
+                })?,
                 original: 0,
             },
         )?;
@@ -866,7 +1084,12 @@ fn analyse_board<const N: usize, const M: usize>(
             *slot = p as u8;
         }
     }
-    let at = |original: u8| position.get(usize::from(original)).copied().unwrap_or(NO_JOB);
+    let at = |original: u8| {
+        position
+            .get(usize::from(original))
+            .copied()
+            .unwrap_or(NO_JOB)
+    };
 
     // SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job.
     let mut blocking = [Time::ZERO; N];
@@ -921,7 +1144,10 @@ fn analyse_board<const N: usize, const M: usize>(
         });
     // The jitter a released job inherits from its releaser's current bound (`None`: the releaser is unbounded).
     let inherited = |meta: &JobMeta, wcrt: &[u64; N]| -> Option<Time> {
-        let releaser = wcrt.get(usize::from(at(meta.released_by))).copied().unwrap_or(NONE);
+        let releaser = wcrt
+            .get(usize::from(at(meta.released_by)))
+            .copied()
+            .unwrap_or(NONE);
         bound(releaser).and_then(|r| meta.own_jitter.checked_plus(r))
     };
     let mut settled = false;
@@ -933,13 +1159,20 @@ fn analyse_board<const N: usize, const M: usize>(
             let Some(priority) = jobs.timings.get(i).map(|t| t.priority) else {
                 break;
             };
-            if i == 0 || jobs.timings.get(i - 1).is_some_and(|t| t.priority != priority) {
+            if i == 0
+                || jobs
+                    .timings
+                    .get(i - 1)
+                    .is_some_and(|t| t.priority != priority)
+            {
                 previous_level = level_start..i;
                 level_start = i;
                 if in_pass {
                     // Entering a level: its released jobs take their (more urgent, done) releasers' bounds.
                     for p in i..len {
-                        let (Some(meta), Some(timing)) = (jobs.meta.get(p), jobs.timings.get_mut(p)) else {
+                        let (Some(meta), Some(timing)) =
+                            (jobs.meta.get(p), jobs.timings.get_mut(p))
+                        else {
                             break;
                         };
                         if timing.priority != priority {
@@ -960,14 +1193,25 @@ fn analyse_board<const N: usize, const M: usize>(
             let hint = previous_level
                 .clone()
                 .filter(|&k| wcrt.get(k).is_some_and(|&w| w != NONE))
-                .filter(|&k| blocking.get(k).is_some_and(|&b| b <= blocking_i.plus(task.wcet)))
+                .filter(|&k| {
+                    blocking
+                        .get(k)
+                        .is_some_and(|&b| b <= blocking_i.plus(task.wcet))
+                })
                 .filter_map(|k| first_window.get(k).copied())
                 .max()
                 .unwrap_or(Time::ZERO);
             let timings = jobs.timings.get(..len).unwrap_or(&[]);
             let load = levels.at(timings, i, |a, b| a.priority == b.priority);
-            let result =
-                board::response_time_hinted(timings, i, blocking_i, hint, load, limits, &mut scratch);
+            let result = board::response_time_hinted(
+                timings,
+                i,
+                blocking_i,
+                hint,
+                load,
+                limits,
+                &mut scratch,
+            );
             let (w, f) = match result {
                 Ok(r) => {
                     *iterations += r.iterations;
@@ -1025,8 +1269,8 @@ fn analyse_board<const N: usize, const M: usize>(
         let (Some(meta), Some(&w)) = (jobs.meta.get(p), wcrt.get(p)) else {
             continue;
         };
-        if first.is_none() && (w == NONE || w > meta.deadline.as_ns()) {
-            *first = Some(Refusal::Deadline(Violation {
+        if summary.first.is_none() && (w == NONE || w > meta.deadline.as_ns()) {
+            summary.first = Some(Refusal::Deadline(Violation {
                 culprit: Culprit::Task {
                     board: b as u8,
                     task: meta.id,
@@ -1044,39 +1288,23 @@ fn analyse_board<const N: usize, const M: usize>(
             .and_then(|p| wcrt.get(usize::from(p)).copied())
             .unwrap_or(0)
     };
-    let tx = fixed(table.can_tx);
-    let handler = fixed(table.command_handler);
-    for (m, s) in streams.iter() {
-        if let Some(sender) = s.sender.filter(|x| usize::from(x.board) == b) {
-            // The stream's job: the first of its topic in table order.
-            let job = (0..len)
-                .map(|original| usize::from(at(original as u8)))
-                .find(|&p| {
-                    jobs.meta
-                        .get(p)
-                        .is_some_and(|meta| meta.id == TaskId::Publisher(sender.topic))
-                });
-            if let Some(p) = job {
-                let best = table
-                    .topics
-                    .iter()
-                    .find(|t| t.topic == sender.topic)
-                    .map_or(0, |t| t.bcet.as_ns());
-                if let (Some(w), Some(bc), Some(t)) = (
-                    senders.wcrt.get_mut(m),
-                    senders.bcrt.get_mut(m),
-                    senders.tx.get_mut(m),
-                ) {
-                    *w = wcrt.get(p).copied().unwrap_or(NONE);
-                    *bc = best;
-                    *t = tx;
-                }
-            }
-        }
-        if s.receiver.is_some_and(|r| usize::from(r) == b) {
-            if let Some(slot) = senders.receiver.get_mut(m) {
-                *slot = handler;
-            }
+    summary.tx = fixed(table.can_tx);
+    summary.handler = fixed(table.command_handler);
+    for (own, (_, s)) in mine().enumerate() {
+        let Some(sender) = s.sender else { continue };
+        // The stream's job: the first of its topic in table order.
+        let job = (0..len)
+            .map(|original| usize::from(at(original as u8)))
+            .find(|&p| {
+                jobs.meta
+                    .get(p)
+                    .is_some_and(|meta| meta.id == TaskId::Publisher(sender.topic))
+            });
+        if let (Some(p), Some(w), Some(found)) =
+            (job, summary.wcrt.get_mut(own), summary.found.get_mut(own))
+        {
+            *w = wcrt.get(p).copied().unwrap_or(NONE);
+            *found = true;
         }
     }
     Ok(())

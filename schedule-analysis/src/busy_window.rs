@@ -286,7 +286,9 @@ impl Load {
             .iter()
             .enumerate()
             .filter(|(k, _)| Some(*k) != exclude)
-            .fold(Load::default(), |load, (_, other)| load.plus(Load::of(other)))
+            .fold(Load::default(), |load, (_, other)| {
+                load.plus(Load::of(other))
+            })
     }
 }
 

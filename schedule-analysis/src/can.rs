@@ -238,7 +238,8 @@ pub fn response_times_into<R: Results + ?Sized>(
         let blocking = blockings.get(i).copied().unwrap_or(Time::ZERO);
         let mut hints = (Time::ZERO, Time::ZERO);
         for k in previous_level.clone() {
-            let (Some((first_window, busy_window)), Some(other)) = (out.windows(k), messages.get(k))
+            let (Some((first_window, busy_window)), Some(other)) =
+                (out.windows(k), messages.get(k))
             else {
                 continue;
             };
@@ -252,8 +253,16 @@ pub fn response_times_into<R: Results + ?Sized>(
             }
         }
         let load = levels.at(messages, i, |a, b| a.key == b.key);
-        let result =
-            response_time_from(messages, i, blocking, hints, Some(load), bit, limits, scratch);
+        let result = response_time_from(
+            messages,
+            i,
+            blocking,
+            hints,
+            Some(load),
+            bit,
+            limits,
+            scratch,
+        );
         out.put(i, result);
     }
 }
