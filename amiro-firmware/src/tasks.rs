@@ -112,13 +112,24 @@ pub fn trace_outcome(now: u64, id: u16, outcome: &Result<Outcome, Rejection>) {
 /// nothing may start again: the frame is dropped unseen.
 pub fn handle_command<C: Clock>(
     frame: &RxFrame,
-    mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     wake_levels: &mut [Sender<'static, (), 1>],
 ) -> Option<(u64, Outcome)> {
     if signals::shutting_down() {
         return None;
     }
-    let now = C::now_us();
+    handle_command_at(C::now_us(), frame, handler, wake_levels)
+}
+
+/// [`handle_command`] as of `now`: the instant the handler took the command up (with admission
+/// control, before the check ran), so the command's trace and a new publisher's grid do not move
+/// with the check's duration.
+fn handle_command_at(
+    now: u64,
+    frame: &RxFrame,
+    mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    wake_levels: &mut [Sender<'static, (), 1>],
+) -> Option<(u64, Outcome)> {
     let outcome = handler.lock(|h| h.on_frame(now, frame.id, frame.payload()));
     trace_outcome(now, frame.id, &outcome);
     match outcome {
@@ -141,6 +152,29 @@ pub fn handle_command<C: Clock>(
     }
 }
 
+/// Whether a command belongs to the admission task (`docs/analysis.md`, "The on-chip admission
+/// check"): every board's sensor commands (publish, stop, once) and admission-policy commands, which
+/// the check must see in the order heard to keep the robot's running set. Actuator commands (motor,
+/// LEDs, shutdown) stay with the command handler, which forwards the others with
+/// [`forward_to_admission`] and never runs the check itself.
+pub fn for_admission(frame: &RxFrame) -> bool {
+    matches!(
+        amiro_can::decode_command(frame.id, frame.payload()),
+        Ok(amiro_can::Command::Sensor(_) | amiro_can::Command::Policy { .. })
+    )
+}
+
+/// Queues a command for the admission task; a full queue drops it and counts it as a received
+/// frame dropped (the queue is bounded, as the receive queue is).
+pub fn forward_to_admission<const N: usize>(
+    frame: &RxFrame,
+    requests: &mut Sender<'static, RxFrame, N>,
+) {
+    if requests.try_send(*frame).is_err() {
+        RX_DROPPED.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
 /// Handles one command frame with admission control (`admission`, `docs/analysis.md`): every
 /// command heard goes through the board's [`crate::admission::Admission`] first, which keeps the
 /// robot's running publishers and decides this board's publish requests. A refused request never
@@ -160,20 +194,22 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     if signals::shutting_down() {
         return None;
     }
-    #[cfg(feature = "qemu")]
     let started = C::now_us();
     let check = admission.on_command(frame.id, frame.payload());
     #[cfg(feature = "qemu")]
     note_decision::<C, N, M>(frame.id, &check, admission, started);
     let (outcome, verdict) = match check {
-        Check::Pass => return handle_command::<C>(frame, handler, wake_levels),
+        Check::Pass => return handle_command_at(started, frame, handler, wake_levels),
         Check::Refused(frames) => {
             crate::health::count_admission(true);
             (None, frames)
         }
         Check::Warned(frames) => {
             crate::health::count_admission(false);
-            (handle_command::<C>(frame, handler, wake_levels), frames)
+            (
+                handle_command_at(started, frame, handler, wake_levels),
+                frames,
+            )
         }
     };
     let now = C::now_us();
