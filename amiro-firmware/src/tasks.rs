@@ -121,9 +121,7 @@ pub fn handle_command<C: Clock>(
     handle_command_at(C::now_us(), frame, handler, wake_levels)
 }
 
-/// [`handle_command`] as of `now`: the instant the handler took the command up (with admission
-/// control, before the check ran), so the command's trace and a new publisher's grid do not move
-/// with the check's duration.
+/// [`handle_command`] as of `now`.
 fn handle_command_at(
     now: u64,
     frame: &RxFrame,
@@ -194,12 +192,14 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     if signals::shutting_down() {
         return None;
     }
+    #[cfg(feature = "qemu")]
     let started = C::now_us();
     let check = admission.on_command(frame.id, frame.payload());
     #[cfg(feature = "qemu")]
     note_decision::<C, N, M>(frame.id, &check, admission, started);
     let (outcome, verdict) = match check {
-        Check::Pass => return handle_command_at(started, frame, handler, wake_levels),
+        // As of now (after the check): a new publisher's grid starts when it can start.
+        Check::Pass => return handle_command_at(C::now_us(), frame, handler, wake_levels),
         Check::Refused(frames) => {
             crate::health::count_admission(true);
             (None, frames)
@@ -207,7 +207,7 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
         Check::Warned(frames) => {
             crate::health::count_admission(false);
             (
-                handle_command_at(started, frame, handler, wake_levels),
+                handle_command_at(C::now_us(), frame, handler, wake_levels),
                 frames,
             )
         }
