@@ -242,12 +242,13 @@ mod app {
         }
     }
 
-    /// Admission control at the lowest priority: checks each sensor command against the robot's
+    /// Admission control in the background (priority 0, thread mode: it delays no other task,
+    /// only its locks can block them briefly): checks each sensor command against the robot's
     /// schedule before it changes anything (a refused request is answered with a verdict and
     /// changes nothing), then updates the publisher table and wakes the levels whose schedule
     /// changed; at most one command per `ADMISSION_MIN_INTERVAL_US`.
     #[task(
-        priority = 1,
+        priority = 0,
         shared = [handler, tx_queue],
         local = [
             requests,

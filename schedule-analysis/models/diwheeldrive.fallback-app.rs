@@ -49,7 +49,7 @@ mod app {
     #[task(priority = 5, shared = [handler, drive], local = [commands, to_admission])]
     async fn handle_commands(cx: handle_commands::Context) {}
 
-    #[task(priority = 1, shared = [handler, tx_queue], local = [requests, wake_levels, admission])]
+    #[task(priority = 0, shared = [handler, tx_queue], local = [requests, wake_levels, admission])]
     async fn admit_requests(cx: admit_requests::Context) {}
 
     #[task(priority = 5, shared = [drive, alive], local = [motors, encoders])]
