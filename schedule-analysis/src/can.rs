@@ -267,6 +267,7 @@ pub fn response_times_into<R: Results + ?Sized>(
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn response_time_from(
     messages: &[MessageTiming],
     index: usize,
