@@ -146,7 +146,8 @@ impl<const N: usize, const M: usize> Admission<N, M> {
         self.running.get(..self.len).unwrap_or(&[])
     }
 
-    /// Whether the last command ran an analysis (a publish request, or a stop that changed the set).
+    /// Whether the last command ran an analysis (a publish request): the admission task waits its
+    /// long interval only after those.
     pub fn analysed(&self) -> bool {
         self.analysed
     }
@@ -162,8 +163,7 @@ impl<const N: usize, const M: usize> Admission<N, M> {
         self.refresh();
     }
 
-    /// Brings the kept analyses up to date with the running set (after a publisher stopped: only
-    /// its board is analysed again).
+    /// Brings the kept analyses up to date with the running set.
     fn refresh(&mut self) {
         let running = self.running.get(..self.len).unwrap_or(&[]);
         self.last_iterations = analysis::refresh::<N, M>(self.robot, running, &mut self.cache);
@@ -249,10 +249,9 @@ impl<const N: usize, const M: usize> Admission<N, M> {
         };
         let period = match command.mode {
             SensorMode::Stop | SensorMode::Once => {
-                if self.position(owner_index, command.topic.byte()).is_some() {
-                    self.remove(owner_index, command.topic.byte());
-                    self.refresh();
-                }
+                // Cheap: the board's kept analysis no longer matches and is redone by the next
+                // decision that needs it.
+                self.remove(owner_index, command.topic.byte());
                 return Check::Pass;
             }
             SensorMode::Publish(period) => period,

@@ -244,16 +244,20 @@ fn note_decision<C: Clock, const N: usize, const M: usize>(
         Check::Warned(_) => "warned",
     };
     let (mut a, mut b, mut c) = ([0u8; 10], [0u8; 10], [0u8; 10]);
-    crate::log!(
-        "admission id=",
-        telemetry::decimal(u32::from(id), &mut a),
-        " ",
-        what,
-        " iterations=",
-        telemetry::decimal(u32::try_from(last).unwrap_or(u32::MAX), &mut b),
-        " virtual_us=",
-        telemetry::decimal(u32::try_from(took).unwrap_or(u32::MAX), &mut c)
-    );
+    // The admission task runs at priority 0: one line, written in pieces, must not be split by a
+    // more urgent task's output (QEMU only; a semihosting write takes no virtual time).
+    cortex_m::interrupt::free(|_| {
+        crate::log!(
+            "admission id=",
+            telemetry::decimal(u32::from(id), &mut a),
+            " ",
+            what,
+            " iterations=",
+            telemetry::decimal(u32::try_from(last).unwrap_or(u32::MAX), &mut b),
+            " virtual_us=",
+            telemetry::decimal(u32::try_from(took).unwrap_or(u32::MAX), &mut c)
+        );
+    });
 }
 
 /// Index of a CAN priority level in per-level arrays (0 = urgent).

@@ -55,9 +55,10 @@ pub const WATCHDOG_TIMEOUT_MS: u32 = 500;
 pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
 /// The command handler takes at most one command per this interval (`docs/analysis.md`).
 pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
-/// The admission task takes at most one sensor or policy command per this interval: the check's
+/// The admission task takes at most one publish request per this interval (other sensor and
+/// policy commands, which run no analysis, at most one per `COMMAND_MIN_INTERVAL_US`): the check's
 /// cost (a whole-robot analysis) is bounded in the analysis as a sporadic task of this period.
-pub const ADMISSION_MIN_INTERVAL_US: u64 = 20_000;
+pub const ADMISSION_MIN_INTERVAL_US: u64 = 40_000;
 /// Depth of the queue from the command handler to the admission task.
 pub const ADMISSION_QUEUE_LEN: usize = 4;
 /// A shutdown this board initiates waits at most this long for another module to take the
@@ -250,7 +251,7 @@ mod app {
     /// only its locks can block them briefly): checks each sensor command against the robot's
     /// schedule before it changes anything (a refused request is answered with a verdict and
     /// changes nothing), then updates the publisher table and wakes the levels whose schedule
-    /// changed; at most one command per `ADMISSION_MIN_INTERVAL_US`.
+    /// changed; at most one publish request per `ADMISSION_MIN_INTERVAL_US`.
     #[task(
         priority = 0,
         shared = [handler, tx_queue],
@@ -274,7 +275,12 @@ mod app {
                 platform::CAN_TX_INTERRUPT,
                 cx.local.wake_levels,
             );
-            Clock::delay_until_us(started + crate::ADMISSION_MIN_INTERVAL_US).await;
+            let interval = if cx.local.admission.analysed() {
+                crate::ADMISSION_MIN_INTERVAL_US
+            } else {
+                crate::COMMAND_MIN_INTERVAL_US
+            };
+            Clock::delay_until_us(started + interval).await;
         }
     }
 

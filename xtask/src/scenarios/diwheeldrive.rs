@@ -46,6 +46,11 @@ pub const SCENARIOS: &[Scenario] = &[
         check: admission_starvation,
     },
     Scenario {
+        name: "admission-cost",
+        about: "benchmark: the admission check's instructions and virtual time per decision with every topic of the robot running, against the admission task's budget",
+        check: admission_cost,
+    },
+    Scenario {
         name: "flood",
         about: "commands at full bus rate keep a publisher within its bound; the excess is counted",
         check: flood,
@@ -259,8 +264,9 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         "{overruns} receive-FIFO overruns: the receive interrupt fell behind"
     );
     ensure!(
-        handled.len() as u64 + dropped == 2_002,
-        "{} commands handled + {dropped} dropped and counted != the 2002 sent",
+        // Up to ADMISSION_WAITING sensor commands may still wait for the admission task.
+        (2_002 - ADMISSION_WAITING..=2_002).contains(&(handled.len() as u64 + dropped)),
+        "{} commands handled + {dropped} dropped and counted != the 2002 sent (up to {ADMISSION_WAITING} may wait for the admission task)",
         handled.len()
     );
     let health = check_health(out, amiro_can::Board::DiWheelDrive)?;
@@ -363,6 +369,66 @@ fn hostile(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
+/// Virtual nanoseconds per instruction in the QEMU runs (`-icount shift=3`).
+const NS_PER_INSTRUCTION: u64 = 8;
+/// Cycles per instruction assumed on the F103 at 72 MHz with two flash wait states (an estimate
+/// until a bench measurement replaces it; the same the timing file's budget rests on).
+const F103_CYCLES_PER_INSTRUCTION: f64 = 1.5;
+
+fn admission_cost(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    // `admission id=<id> <what> iterations=<n> virtual_us=<t>`, one per analysis the task ran.
+    let mut decisions = Vec::new();
+    for note in out.notes.iter().filter(|n| n.starts_with("admission id=")) {
+        let field = |name: &str| -> Result<u64> {
+            note.split_whitespace()
+                .find_map(|w| w.strip_prefix(name))
+                .with_context(|| format!("no {name} in `{note}`"))?
+                .parse()
+                .with_context(|| format!("{name} in `{note}`"))
+        };
+        decisions.push((field("iterations=")?, field("virtual_us=")?, note.clone()));
+    }
+    // 13 starts and 6 requests on the full bus (the stop runs no analysis).
+    ensure!(
+        decisions.len() == 19,
+        "{} decisions logged, expected 13 starts and 6 requests",
+        decisions.len()
+    );
+    let verdicts = verdicts(out);
+    ensure!(
+        verdicts
+            .iter()
+            .any(|(_, v)| v.topic == amiro_can::Topic::Accelerometer),
+        "the 1 µs accelerometer request on the full bus was not refused"
+    );
+    let worst = decisions
+        .iter()
+        .max_by_key(|d| d.1)
+        .context("no decision")?;
+    let most_iterations = decisions.iter().map(|d| d.0).max().unwrap_or(0);
+    let instructions = worst.1 * 1000 / NS_PER_INSTRUCTION;
+    let on_f103_us = instructions as f64 * F103_CYCLES_PER_INSTRUCTION / 72.0;
+    let timing: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            crate::workspace_root().join("schedule-analysis/models/diwheeldrive.timing.json"),
+        )
+        .context("diwheeldrive.timing.json")?,
+    )?;
+    let budget = timing["tasks"]["admit_requests"]["wcet_us"]
+        .as_f64()
+        .context("tasks.admit_requests.wcet_us")?;
+    ensure!(
+        on_f103_us <= budget,
+        "the worst decision ({} µs virtual, {instructions} instructions, ≈ {on_f103_us:.0} µs on the F103) exceeds the admission task's budget of {budget} µs",
+        worst.1
+    );
+    Ok(format!(
+        "{} decisions up to a full bus (13 publishers): worst {} µs virtual = {instructions} instructions (≈ {on_f103_us:.0} µs on the F103 at {F103_CYCLES_PER_INSTRUCTION} cycles per instruction, budget {budget} µs); most fixed-point iterations {most_iterations}",
+        decisions.len(),
+        worst.1,
+    ))
+}
+
 /// Commands that may still wait for DiWheelDrive's admission task when a run ends: its queue
 /// (`ADMISSION_QUEUE_LEN` in diwheeldrive/src/main.rs) and the one being decided.
 const ADMISSION_WAITING: u64 = 4 + 1;
@@ -430,18 +496,19 @@ fn admission_starvation(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "an accelerometer frame was sent: the refused request started a publisher"
     );
     // The running publishers keep their grids across every refusal; the low level keeps running.
-    let gyro = out.periodic_stream(0x608, "gyroscope", 2_000, 5_000, 690_000)?;
-    let odometry = out.periodic_stream(0x701, "odometry", 10_000, 6_000, 690_000)?;
-    // The watchdog is fed from the lowest level: the low publisher kept its grid to the end.
+    let gyro = out.periodic_stream(0x608, "gyroscope", 2_000, 5_000, 1_790_000)?;
+    let odometry = out.periodic_stream(0x701, "odometry", 10_000, 6_000, 1_790_000)?;
+    // The watchdog is fed from the lowest level: the low publisher kept its grid to the end (it
+    // starts at about 45 ms: its request waits one admission interval behind the gyroscope's).
     ensure!(
-        odometry.frames.len() >= 68,
+        odometry.frames.len() >= 170,
         "{} odometry frames: the lowest level starved",
         odometry.frames.len()
     );
-    // The 2 ms magnetometer-x request at medium (t = 520 ms) is accepted.
+    // The 2 ms magnetometer-x request at medium (t = 1.7 s) is accepted.
     let mag = out.times(0x605);
     ensure!(
-        mag.len() >= 20 && mag.iter().all(|&t| t >= 520_000),
+        mag.len() >= 20 && mag.iter().all(|&t| t >= 1_700_000),
         "the 2 ms magnetometer-x request was not served ({} frames)",
         mag.len()
     );

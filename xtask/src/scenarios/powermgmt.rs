@@ -58,6 +58,9 @@ pub const SCENARIOS: &[Scenario] = &[
 
 /// The board's command handler takes at most one command per this interval.
 const COMMAND_MIN_INTERVAL_US: u64 = 400;
+/// Commands that may still wait for PowerManagement's admission task when a run ends: its queue
+/// (`ADMISSION_QUEUE_LEN` in powermgmt/src/main.rs) and the one being decided.
+const ADMISSION_WAITING: u64 = 4 + 1;
 
 /// One ring sample: its release and the sensor indices of its frames, with the last frame's time.
 struct RingSample {
@@ -371,8 +374,9 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         "{overruns} receive-FIFO overruns: the receive interrupt fell behind"
     );
     ensure!(
-        handled.len() as u64 + dropped == 2_002,
-        "{} commands handled + {dropped} dropped and counted != the 2002 sent",
+        // Up to ADMISSION_WAITING sensor commands may still wait for the admission task.
+        (2_002 - ADMISSION_WAITING..=2_002).contains(&(handled.len() as u64 + dropped)),
+        "{} commands handled + {dropped} dropped and counted != the 2002 sent (up to {ADMISSION_WAITING} may wait for the admission task)",
         handled.len()
     );
     // Two tasks handle commands, each at most one per its interval (the command handler every
