@@ -46,6 +46,11 @@ pub const SCENARIOS: &[Scenario] = &[
         check: admission_starvation,
     },
     Scenario {
+        name: "admission-warn",
+        about: "accept-and-warn: a refused request (magnetometer-x every 700 µs) is started, counted and answered with a warning",
+        check: admission_warn,
+    },
+    Scenario {
         name: "admission-cost",
         about: "benchmark: the admission check's instructions and virtual time per decision with every topic of the robot running, against the admission task's budget",
         check: admission_cost,
@@ -366,6 +371,44 @@ fn hostile(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     Ok(format!(
         "ran to its end: {handled} commands handled, {refused} refused by admission, {dropped} dropped and counted, {} frames sent",
         out.frames.len()
+    ))
+}
+
+fn admission_warn(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    use amiro_can::{Topic, Verdict};
+    let verdicts = verdicts(out);
+    ensure!(
+        verdicts.len() == 1,
+        "{} verdicts, expected the one warning",
+        verdicts.len()
+    );
+    let (at, v) = &verdicts[0];
+    ensure!(
+        v.verdict == Verdict::AcceptedWithWarning
+            && v.topic == Topic::MagnetometerX
+            && v.requested.as_micros() == 700,
+        "not the warning for magnetometer-x at 700 µs: {v}"
+    );
+    ensure!(
+        v.wcrt_us.get() > v.deadline_us.get(),
+        "a warning whose bound holds: {v}"
+    );
+    let mag = out.times(0x605);
+    ensure!(
+        mag.len() >= 150 && mag.iter().all(|&t| t >= 60_000),
+        "{} magnetometer-x frames after the warned request, expected it running every 700 µs",
+        mag.len()
+    );
+    let gyro = out.times(0x608);
+    ensure!(
+        gyro.len() >= 90,
+        "{} gyroscope frames: the running publisher stopped",
+        gyro.len()
+    );
+    Ok(format!(
+        "warned at {at} µs ({v}); magnetometer-x started ({} frames), gyroscope kept ({} frames)",
+        mag.len(),
+        gyro.len(),
     ))
 }
 
