@@ -151,7 +151,7 @@ impl Checker {
 
 fn micros(t: Time) -> String {
     let us = t.as_ns().div_ceil(1000);
-    if us >= 10_000 && us % 1000 == 0 {
+    if us >= 10_000 && us.is_multiple_of(1000) {
         format!("{} ms", us / 1000)
     } else {
         format!("{us} µs")
