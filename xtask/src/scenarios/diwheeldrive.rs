@@ -51,6 +51,11 @@ pub const SCENARIOS: &[Scenario] = &[
         check: admission_warn,
     },
     Scenario {
+        name: "admission-other-board",
+        about: "a request that breaks only another board's frames (PowerManagement's ring) is refused by the board that would send the new frames",
+        check: admission_other_board,
+    },
+    Scenario {
         name: "admission-cost",
         about: "benchmark: the admission check's instructions and virtual time per decision with every topic of the robot running, against the admission task's budget",
         check: admission_cost,
@@ -409,6 +414,45 @@ fn admission_warn(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "warned at {at} µs ({v}); magnetometer-x started ({} frames), gyroscope kept ({} frames)",
         mag.len(),
         gyro.len(),
+    ))
+}
+
+fn admission_other_board(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    use amiro_can::{CanId, Topic, Verdict, Violation};
+    let verdicts = verdicts(out);
+    ensure!(
+        verdicts.len() == 1,
+        "{} verdicts, expected the one refusal of the velocity request",
+        verdicts.len()
+    );
+    let (_, v) = &verdicts[0];
+    ensure!(
+        v.verdict == Verdict::Refused && v.topic == Topic::Velocity,
+        "not the refusal of velocity: {v}"
+    );
+    let ring = CanId::try_from(0x71Fu16).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    ensure!(
+        v.violation == Violation::Message { id: ring },
+        "the refusal names {:?}, not PowerManagement's ring frames 0x71F: {v}",
+        v.violation
+    );
+    ensure!(
+        v.wcrt_us.get() > v.deadline_us.get(),
+        "a refusal whose bound holds: {v}"
+    );
+    let odometry = out.times(0x401);
+    ensure!(
+        odometry.len() >= 100,
+        "{} odometry frames: the accepted request is not running",
+        odometry.len()
+    );
+    ensure!(
+        out.times(0x402).is_empty(),
+        "velocity frames sent: the refused request started"
+    );
+    Ok(format!(
+        "{v}; odometry runs ({} frames), no velocity frame",
+        odometry.len()
     ))
 }
 
