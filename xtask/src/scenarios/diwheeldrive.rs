@@ -520,39 +520,12 @@ fn admission_cost(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 /// (`ADMISSION_QUEUE_LEN` in diwheeldrive/src/main.rs) and the one being decided.
 const ADMISSION_WAITING: u64 = 4 + 1;
 
-/// The admission verdicts DiWheelDrive sent (pages 0x80 + 0x81 on its diagnostics topic), joined.
+/// The admission verdicts DiWheelDrive sent.
 fn verdicts(out: &RunOutput) -> Vec<(u64, amiro_can::AdmissionVerdict)> {
-    use amiro_can::{decode, DiagnosticsPage, Message, SensorData};
-    let mut joined = Vec::new();
-    let mut request = None;
-    for f in out.frames.iter().filter(|f| f.id & 0x4FF == 0x41A) {
-        let Ok(Message::Sample {
-            data: SensorData::Diagnostics { board, page },
-            ..
-        }) = decode(f.id as u16, &f.data)
-        else {
-            continue;
-        };
-        match page {
-            DiagnosticsPage::VerdictRequest(r) => request = Some(r),
-            DiagnosticsPage::VerdictBound(b) => {
-                if let Some(r) = request.take() {
-                    joined.push((
-                        f.at_us,
-                        amiro_can::AdmissionVerdict::from_pages(board, &r, &b),
-                    ));
-                }
-            }
-            _ => {}
-        }
-    }
-    joined
+    super::admission_verdicts(out, amiro_can::Board::DiWheelDrive)
 }
 
-/// `diwheeldrive/qemu/admission-starvation.log` (issue 11). Not in `SCENARIOS` yet: it passes only with
-/// the admission hook wired into `handle_commands`, which waits until one decision costs far less
-/// than today's ~4 ms of virtual time (docs/analysis.md, "The on-chip admission check").
-#[allow(dead_code)]
+/// `diwheeldrive/qemu/admission-starvation.log` (issue 11).
 fn admission_starvation(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     use amiro_can::{Topic, Verdict, Violation};
     let verdicts = verdicts(out);

@@ -10,6 +10,11 @@ use crate::qemu::TimedFrame;
 /// Every scenario CI runs.
 pub const SCENARIOS: &[Scenario] = &[
     Scenario {
+        name: "admission",
+        about: "issue 11: power status and the ring at 1 µs refused with their reasons; the running ring keeps its grid",
+        check: admission,
+    },
+    Scenario {
         name: "thesis-ring",
         about: "21F#010A0000 → eight frames 0x61F every 10 ms, within the analysed WCRT",
         check: thesis_ring,
@@ -173,6 +178,43 @@ fn thesis_ring(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     );
     Ok(format!(
         "{} samples × 8 frames 0x61F on the 10 ms grid, worst release → eighth frame {worst} µs ≤ analysed {limit} µs",
+        samples.len()
+    ))
+}
+
+fn admission(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    use amiro_can::{Topic, Verdict, Violation};
+    let verdicts = super::admission_verdicts(out, amiro_can::Board::PowerManagement);
+    ensure!(
+        verdicts.len() == 2,
+        "{} verdicts, expected the two refusals",
+        verdicts.len()
+    );
+    for ((_, v), topic) in verdicts
+        .iter()
+        .zip([Topic::PowerStatus, Topic::ProximityRing])
+    {
+        ensure!(
+            v.verdict == Verdict::Refused
+                && v.topic == topic
+                && v.requested.as_micros() == 1
+                && !matches!(v.violation, Violation::Unknown)
+                && v.wcrt_us.get() > v.deadline_us.get(),
+            "not a refusal of {topic} at 1 µs with its reason: {v}"
+        );
+    }
+    ensure!(
+        out.frames
+            .iter()
+            .all(|f| f.id == 0x61F || f.id & 0x4FF == 0x41B),
+        "frames other than the ring's and the verdicts: a refused request started"
+    );
+    let samples = ring_samples(out, 0x61F, 10_000, 5_000, 290_000)?;
+    all_eight(&samples)?;
+    Ok(format!(
+        "{} and {}; the ring kept its 10 ms grid ({} samples × 8)",
+        verdicts[0].1,
+        verdicts[1].1,
         samples.len()
     ))
 }
