@@ -284,6 +284,9 @@ pub struct VerdictRequest {
     pub shortest_period: Option<SampleTime>,
     /// What kind of thing would miss its deadline.
     pub violation: ViolationKind,
+    /// Whether the board searched for what would be accepted; when not (byte 7 bit 7 set), the priority needed
+    /// and the shortest period are empty and say nothing.
+    pub searched: bool,
 }
 
 /// The second frame of an admission verdict (page 0x81): the bound that would break.
@@ -533,8 +536,11 @@ impl DiagnosticsPage {
                     ViolationKind::Message { priority } => (2, priority as u8),
                 };
                 let [s0, s1] = shortest.to_le_bytes();
-                let byte7 =
-                    shortest_unit | (kind << 2) | (message_priority << 4) | (has_shortest << 6);
+                let byte7 = shortest_unit
+                    | (kind << 2)
+                    | (message_priority << 4)
+                    | (has_shortest << 6)
+                    | (u8::from(!r.searched) << 7);
                 [page, r.topic.byte(), q0, q1, byte4, s0, s1, byte7]
             }
             DiagnosticsPage::VerdictBound(b) => {
@@ -600,7 +606,9 @@ impl DiagnosticsPage {
                     n @ 1..=4 => Some(Priority::from_bits_truncate(n - 1)),
                     _ => return Err(reserved(4)),
                 };
-                if b7 & 0x80 != 0 {
+                // Bit 7: the board did not search for what would be accepted; those fields are then empty.
+                let searched = b7 & 0x80 == 0;
+                if !searched && (priority_needed.is_some() || b7 & (1 << 6) != 0) {
                     return Err(reserved(7));
                 }
                 let shortest_period = if b7 & (1 << 6) != 0 {
@@ -630,6 +638,7 @@ impl DiagnosticsPage {
                     priority_needed,
                     shortest_period,
                     violation,
+                    searched,
                 })
             }
             VERDICT_BOUND_PAGE => DiagnosticsPage::VerdictBound(VerdictBound {
@@ -709,6 +718,9 @@ impl fmt::Display for DiagnosticsPage {
                     "verdict: {verdict}: publish {} every {} at {}",
                     r.topic, r.requested, r.priority
                 )?;
+                if !r.searched {
+                    return f.write_str("; what would pass not searched");
+                }
                 match r.shortest_period {
                     Some(time) => write!(f, "; shortest period at {}: {time}", r.priority)?,
                     None => write!(f, "; no period passes at {}", r.priority)?,
@@ -772,6 +784,9 @@ pub struct AdmissionVerdict {
     pub shortest_period: Option<SampleTime>,
     /// The most urgent priority needed for the requested period, `None` when no priority would do.
     pub priority_needed: Option<Priority>,
+    /// Whether the board searched for what would be accepted (`shortest_period` and `priority_needed` are
+    /// meaningful only then; the boards' on-chip check does not search).
+    pub searched: bool,
 }
 
 impl AdmissionVerdict {
@@ -796,6 +811,7 @@ impl AdmissionVerdict {
                 priority_needed: self.priority_needed,
                 shortest_period: self.shortest_period,
                 violation,
+                searched: self.searched,
             }),
             DiagnosticsPage::VerdictBound(VerdictBound {
                 violated,
@@ -839,6 +855,7 @@ impl AdmissionVerdict {
             deadline_us: bound.deadline_us,
             shortest_period: request.shortest_period,
             priority_needed: request.priority_needed,
+            searched: request.searched,
         }
     }
 }
@@ -875,6 +892,9 @@ impl fmt::Display for AdmissionVerdict {
             " (worst-case response {} µs, deadline {} µs).",
             self.wcrt_us, self.deadline_us
         )?;
+        if !self.searched {
+            return f.write_str(" The board did not search for what it would accept.");
+        }
         match self.shortest_period {
             Some(time) => write!(
                 f,

@@ -224,6 +224,7 @@ const DIAGNOSTICS: &[Signal] = &[
         0x80,
     ),
     page(sig("has_shortest_period", 62, 1, false, ""), 0x80),
+    page(sig("not_searched", 63, 1, false, ""), 0x80),
     page(sig("violated", 8, 8, false, ""), 0x81),
     page(sig("wcrt_us", 16, 24, false, "us"), 0x81),
     page(sig("deadline_us", 40, 24, false, "us"), 0x81),

@@ -486,7 +486,7 @@ fn every_decode_error_reason() {
         ),
         (
             0x41A,
-            &[0x80, 0x09, 1, 0, 2, 0, 0, 0x80],
+            &[0x80, 0x09, 1, 0, 0x22, 0, 0, 0x80],
             E::ReservedBits {
                 topic: Topic::DiWheelDriveDiagnostics,
                 byte: 7,
@@ -832,6 +832,7 @@ fn admission_verdict_example_from_the_docs() {
             unit: TimeUnit::Micros,
         }),
         priority_needed: None,
+        searched: true,
     };
     let [a, b] = verdict.frames(Priority::Urgent);
     assert_eq!(a.to_string(), "41A#8009010002FA0046");
@@ -873,6 +874,7 @@ fn admission_verdict_example_from_the_docs() {
             id: Topic::Gyroscope.data_id(Priority::High),
         },
         priority_needed: Some(Priority::Urgent),
+        searched: true,
         verdict: Verdict::AcceptedWithWarning,
         ..verdict
     };

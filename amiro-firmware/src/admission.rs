@@ -24,7 +24,7 @@ use amiro_can::{
 };
 pub use schedule_analysis;
 use schedule_analysis::admission::{
-    self as analysis, Culprit, Decision, Refusal, RobotTable, Sender, Stream, TaskId,
+    self as analysis, Cache, Culprit, Decision, Refusal, RobotTable, Sender, Stream, TaskId,
 };
 use schedule_analysis::time::Time;
 
@@ -74,6 +74,10 @@ pub struct Admission<const N: usize, const M: usize> {
     running: [Stream; M],
     len: usize,
     policies: [AdmissionPolicy; 3],
+    /// Each board's last analysis: a request re-analyses only its own board and the bus.
+    cache: Cache<M>,
+    /// Whether the last command ran an analysis.
+    analysed: bool,
     last_iterations: u64,
     worst_iterations: u64,
 }
@@ -130,6 +134,8 @@ impl<const N: usize, const M: usize> Admission<N, M> {
             running: [EMPTY; M],
             len: 0,
             policies: [AdmissionPolicy::Refuse; 3],
+            cache: Cache::new(),
+            analysed: false,
             last_iterations: 0,
             worst_iterations: 0,
         }
@@ -140,15 +146,45 @@ impl<const N: usize, const M: usize> Admission<N, M> {
         self.running.get(..self.len).unwrap_or(&[])
     }
 
+    /// Whether the last command ran an analysis (a publish request): the admission task waits its
+    /// long interval only after those.
+    pub fn analysed(&self) -> bool {
+        self.analysed
+    }
+
     /// Fixed-point iterations of the last decision and of the most expensive one since boot.
     pub fn iterations(&self) -> (u64, u64) {
         (self.last_iterations, self.worst_iterations)
     }
 
-    /// Decides `request` against the running set (no suggestion search: bounded by one analysis).
-    pub fn decide(&mut self, request: &Stream) -> Decision {
-        let decision = analysis::admit::<N, M>(self.robot, self.running(), request, false);
+    /// Analyses every board once with nothing running, so that the first request re-analyses only
+    /// its own board and the bus (the board calls it when its command handler starts).
+    pub fn prepare(&mut self) {
+        self.refresh();
+    }
+
+    /// Brings the kept analyses up to date with the running set.
+    fn refresh(&mut self) {
+        let running = self.running.get(..self.len).unwrap_or(&[]);
+        self.last_iterations = analysis::refresh::<N, M>(self.robot, running, &mut self.cache);
+        self.analysed = true;
+        self.worst_iterations = self.worst_iterations.max(self.last_iterations);
+    }
+
+    /// Decides `request` against the running set (no suggestion search: bounded by one analysis,
+    /// and the boards whose streams the request leaves alone are not analysed again). With
+    /// `carried_out_anyway` (accept-and-warn) the board starts it even when refused.
+    pub fn decide(&mut self, request: &Stream, carried_out_anyway: bool) -> Decision {
+        let running = self.running.get(..self.len).unwrap_or(&[]);
+        let decision = analysis::admit_cached::<N, M>(
+            self.robot,
+            running,
+            request,
+            &mut self.cache,
+            carried_out_anyway,
+        );
         self.last_iterations = decision.iterations;
+        self.analysed = true;
         self.worst_iterations = self.worst_iterations.max(decision.iterations);
         decision
     }
@@ -161,10 +197,12 @@ impl<const N: usize, const M: usize> Admission<N, M> {
     }
 
     fn remove(&mut self, board: u8, topic: u8) {
+        // In order: the other streams keep their places, so the other boards' kept analyses stay valid.
         if let Some(i) = self.position(board, topic) {
-            let last = self.len - 1;
-            self.running.swap(i, last);
-            self.len = last;
+            if let Some(tail) = self.running.get_mut(i..self.len) {
+                tail.rotate_left(1);
+            }
+            self.len -= 1;
         }
     }
 
@@ -188,8 +226,10 @@ impl<const N: usize, const M: usize> Admission<N, M> {
     /// Every command frame heard on the bus goes through here first, in the order heard (before the
     /// sensor-data handler sees it). Keeps the robot's running set and policies, decides this
     /// board's publish requests, and says what the handler must do. Never panics, on any frame.
+    #[inline(never)]
     pub fn on_command(&mut self, id: u16, data: &[u8]) -> Check {
         self.last_iterations = 0;
+        self.analysed = false;
         let Ok(command) = decode_command(id, data) else {
             return Check::Pass;
         };
@@ -209,22 +249,24 @@ impl<const N: usize, const M: usize> Admission<N, M> {
         };
         let period = match command.mode {
             SensorMode::Stop | SensorMode::Once => {
+                // Cheap: the board's kept analysis no longer matches and is redone by the next
+                // decision that needs it.
                 self.remove(owner_index, command.topic.byte());
                 return Check::Pass;
             }
             SensorMode::Publish(period) => period,
         };
         let request = request_stream(owner_index, &command, period);
-        let decision = self.decide(&request);
-        let Some(refusal) = decision.refusal else {
-            self.upsert(request);
-            return Check::Pass;
-        };
         let policy = self
             .policies
             .get(board_slot(owner))
             .copied()
             .unwrap_or(AdmissionPolicy::Refuse);
+        let decision = self.decide(&request, policy == AdmissionPolicy::AcceptAndWarn);
+        let Some(refusal) = decision.refusal else {
+            self.upsert(request);
+            return Check::Pass;
+        };
         let verdict = match policy {
             AdmissionPolicy::Refuse => Verdict::Refused,
             AdmissionPolicy::AcceptAndWarn => {
@@ -245,8 +287,9 @@ impl<const N: usize, const M: usize> Admission<N, M> {
         }
     }
 
-    /// The verdict for a decided request. The suggestion fields are left empty here (see
-    /// `docs/analysis.md`: the search costs ~50 analyses and does not run in the handler).
+    /// The verdict for a decided request. It says that the board did not search for what would be
+    /// accepted (`docs/analysis.md`: the search costs ~36 analyses; `amiro send` runs it on the host).
+    #[inline(never)]
     fn verdict(
         &self,
         command: &SensorCommand,
@@ -292,6 +335,7 @@ impl<const N: usize, const M: usize> Admission<N, M> {
             deadline_us,
             shortest_period: None,
             priority_needed: None,
+            searched: false,
         }
     }
 

@@ -116,13 +116,22 @@ pub fn trace_outcome(now: u64, id: u16, outcome: &Result<Outcome, Rejection>) {
 /// nothing may start again: the frame is dropped unseen.
 pub fn handle_command<C: Clock>(
     frame: &RxFrame,
-    mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     wake_levels: &mut [Sender<'static, (), 1>],
 ) -> Option<(u64, Outcome)> {
     if signals::shutting_down() {
         return None;
     }
-    let now = C::now_us();
+    handle_command_at(C::now_us(), frame, handler, wake_levels)
+}
+
+/// [`handle_command`] as of `now`.
+fn handle_command_at(
+    now: u64,
+    frame: &RxFrame,
+    mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    wake_levels: &mut [Sender<'static, (), 1>],
+) -> Option<(u64, Outcome)> {
     let outcome = handler.lock(|h| h.on_frame(now, frame.id, frame.payload()));
     trace_outcome(now, frame.id, &outcome);
     match outcome {
@@ -142,6 +151,29 @@ pub fn handle_command<C: Clock>(
         }
         Ok(other) => Some((now, other)),
         Err(_) => None,
+    }
+}
+
+/// Whether a command belongs to the admission task (`docs/analysis.md`, "The on-chip admission
+/// check"): every board's sensor commands (publish, stop, once) and admission-policy commands, which
+/// the check must see in the order heard to keep the robot's running set. Actuator commands (motor,
+/// LEDs, shutdown) stay with the command handler, which forwards the others with
+/// [`forward_to_admission`] and never runs the check itself.
+pub fn for_admission(frame: &RxFrame) -> bool {
+    matches!(
+        amiro_can::decode_command(frame.id, frame.payload()),
+        Ok(amiro_can::Command::Sensor(_) | amiro_can::Command::Policy { .. })
+    )
+}
+
+/// Queues a command for the admission task; a full queue drops it and counts it as a received
+/// frame dropped (the queue is bounded, as the receive queue is).
+pub fn forward_to_admission<const N: usize>(
+    frame: &RxFrame,
+    requests: &mut Sender<'static, RxFrame, N>,
+) {
+    if requests.try_send(*frame).is_err() {
+        RX_DROPPED.fetch_add(1, Ordering::Relaxed);
     }
 }
 
@@ -170,14 +202,18 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     #[cfg(feature = "qemu")]
     note_decision::<C, N, M>(frame.id, &check, admission, started);
     let (outcome, verdict) = match check {
-        Check::Pass => return handle_command::<C>(frame, handler, wake_levels),
+        // As of now (after the check): a new publisher's grid starts when it can start.
+        Check::Pass => return handle_command_at(C::now_us(), frame, handler, wake_levels),
         Check::Refused(frames) => {
             crate::health::count_admission(true);
             (None, frames)
         }
         Check::Warned(frames) => {
             crate::health::count_admission(false);
-            (handle_command::<C>(frame, handler, wake_levels), frames)
+            (
+                handle_command_at(C::now_us(), frame, handler, wake_levels),
+                frames,
+            )
         }
     };
     let now = C::now_us();
@@ -202,7 +238,7 @@ fn note_decision<C: Clock, const N: usize, const M: usize>(
 ) {
     use crate::admission::Check;
     let (last, _) = admission.iterations();
-    if last == 0 {
+    if !admission.analysed() {
         return;
     }
     let took = C::now_us().saturating_sub(started);
@@ -212,16 +248,20 @@ fn note_decision<C: Clock, const N: usize, const M: usize>(
         Check::Warned(_) => "warned",
     };
     let (mut a, mut b, mut c) = ([0u8; 10], [0u8; 10], [0u8; 10]);
-    crate::log!(
-        "admission id=",
-        telemetry::decimal(u32::from(id), &mut a),
-        " ",
-        what,
-        " iterations=",
-        telemetry::decimal(u32::try_from(last).unwrap_or(u32::MAX), &mut b),
-        " virtual_us=",
-        telemetry::decimal(u32::try_from(took).unwrap_or(u32::MAX), &mut c)
-    );
+    // The admission task runs at priority 0: one line, written in pieces, must not be split by a
+    // more urgent task's output (QEMU only; a semihosting write takes no virtual time).
+    cortex_m::interrupt::free(|_| {
+        crate::log!(
+            "admission id=",
+            telemetry::decimal(u32::from(id), &mut a),
+            " ",
+            what,
+            " iterations=",
+            telemetry::decimal(u32::try_from(last).unwrap_or(u32::MAX), &mut b),
+            " virtual_us=",
+            telemetry::decimal(u32::try_from(took).unwrap_or(u32::MAX), &mut c)
+        );
+    });
 }
 
 /// Index of a CAN priority level in per-level arrays (0 = urgent).

@@ -54,14 +54,31 @@ pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
 /// The command handler takes at most one command per this interval (`docs/analysis.md`, "The
 /// command handler"): what command handling can cost is bounded, whatever arrives on the bus.
 pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
+/// The admission task takes at most one publish request per this interval (other sensor and
+/// policy commands, which run no analysis, at most one per `COMMAND_MIN_INTERVAL_US`): the check's
+/// cost (a whole-robot analysis) is bounded in the analysis as a sporadic task of this period.
+pub const ADMISSION_MIN_INTERVAL_US: u64 = 40_000;
+/// Depth of the queue from the command handler to the admission task.
+pub const ADMISSION_QUEUE_LEN: usize = 4;
 
 /// The clock every task uses (TIM5 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
 
+// The robot's admission table, generated from the apps and timing files (`board-build.rs`).
+amiro_firmware::admission_table!();
+
+/// This board's admission state (`docs/analysis.md`, "The on-chip admission check").
+type Admission = amiro_firmware::admission::Admission<
+    { admission_table::MAX_TASKS },
+    { admission_table::MAX_PUBLISHERS },
+>;
+
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4, UART5, TIM6, TIM7, SDIO, DMA2_CHANNEL1])]
 mod app {
     use crate::sensors::{self, Compass, Floor, Imu};
-    use crate::{actuators, levels, platform, Clock, RX_QUEUE_LEN, TX_QUEUE_LEN};
+    use crate::{
+        actuators, levels, platform, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN,
+    };
     use amiro_can::{Board as CanBoard, Priority};
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
@@ -106,6 +123,8 @@ mod app {
         can_tx: platform::CanTxPort,
         rx_frames: Sender<'static, RxFrame, RX_QUEUE_LEN>,
         commands: Receiver<'static, RxFrame, RX_QUEUE_LEN>,
+        to_admission: Sender<'static, RxFrame, ADMISSION_QUEUE_LEN>,
+        requests: Receiver<'static, RxFrame, ADMISSION_QUEUE_LEN>,
         wake_levels: [Sender<'static, (), 1>; 4],
         wake_urgent: Wake,
         wake_high: Wake,
@@ -124,6 +143,7 @@ mod app {
         amiro_firmware::telemetry::init();
         let (hw, _nvic) = platform::init(cx.device, cx.core, cx.local.spi_bus);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
+        let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
         let (wake_u, wake_urgent) = make_channel!((), 1);
         let (wake_h, wake_high) = make_channel!((), 1);
         let (wake_m, wake_medium) = make_channel!((), 1);
@@ -144,6 +164,7 @@ mod app {
         publish_medium::spawn().ok();
         publish_low::spawn().ok();
         handle_commands::spawn().ok();
+        admit_requests::spawn().ok();
         motor_control::spawn().ok();
         watchdog::spawn().ok();
         #[cfg(feature = "qemu")]
@@ -172,6 +193,8 @@ mod app {
                 can_tx: hw.can_tx,
                 rx_frames,
                 commands,
+                to_admission,
+                requests,
                 wake_levels: [wake_u, wake_h, wake_m, wake_l],
                 wake_urgent,
                 wake_high,
@@ -209,22 +232,58 @@ mod app {
         cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
     }
 
-    /// Decodes each command, updates the publisher table or the motor target, and wakes the
-    /// publisher levels whose schedule changed; at most one command per `COMMAND_MIN_INTERVAL_US`.
-    #[task(priority = 5, shared = [handler, drive], local = [commands, wake_levels])]
+    /// Decodes each command and sets the motor target; sensor and admission-policy commands go to
+    /// `admit_requests` in the order heard; at most one command per `COMMAND_MIN_INTERVAL_US`.
+    #[task(priority = 5, shared = [handler, drive], local = [commands, to_admission])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
         while let Some(frame) = tasks::next_command(cx.local.commands).await {
             let started = Clock::now_us();
-            let outcome = tasks::handle_command::<Clock>(
-                &frame,
-                &mut cx.shared.handler,
-                cx.local.wake_levels,
-            );
-            if let Some((now, Outcome::Motor { command, .. })) = outcome {
+            if tasks::for_admission(&frame) {
+                tasks::forward_to_admission(&frame, cx.local.to_admission);
+            } else if let Some((now, Outcome::Motor { command, .. })) =
+                tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
+            {
                 cx.shared.drive.lock(|d| d.set_target(command, now));
             }
             Clock::delay_until_us(started + crate::COMMAND_MIN_INTERVAL_US).await;
+        }
+    }
+
+    /// Admission control in the background (priority 0, thread mode: it delays no other task,
+    /// only its locks can block them briefly): checks each sensor command against the robot's
+    /// schedule before it changes anything (a refused request is answered with a verdict and
+    /// changes nothing), then updates the publisher table and wakes the levels whose schedule
+    /// changed; at most one publish request per `ADMISSION_MIN_INTERVAL_US`.
+    #[task(
+        priority = 0,
+        shared = [handler, tx_queue],
+        local = [
+            requests,
+            wake_levels,
+            admission: crate::Admission =
+                crate::Admission::new(&crate::admission_table::ROBOT, CanBoard::DiWheelDrive),
+        ]
+    )]
+    async fn admit_requests(mut cx: admit_requests::Context) {
+        // Every board analysed once with nothing running, before the first request.
+        cx.local.admission.prepare();
+        while let Some(frame) = tasks::next_command(cx.local.requests).await {
+            let started = Clock::now_us();
+            tasks::handle_command_admitted::<Clock, _, _, TX_QUEUE_LEN>(
+                &frame,
+                cx.local.admission,
+                &mut cx.shared.handler,
+                &mut cx.shared.tx_queue,
+                platform::CAN_TX_INTERRUPT,
+                cx.local.wake_levels,
+            );
+            let interval = if cx.local.admission.analysed() {
+                crate::ADMISSION_MIN_INTERVAL_US
+            } else {
+                crate::COMMAND_MIN_INTERVAL_US
+            };
+            Clock::delay_until_us(started + interval).await;
         }
     }
 

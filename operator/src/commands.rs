@@ -126,6 +126,22 @@ pub fn send(args: &SendArgs) -> Result<ExitCode> {
         }
         None => frames_to_send(args.message.as_ref(), &args.frames, args.raw)?,
     };
+    // Before anything leaves: would the board that owns the topic refuse a publish request?
+    let mut checker = match crate::admission::Checker::load() {
+        Ok(checker) => Some(checker),
+        Err(error) => {
+            eprintln!("note: publish requests are not checked: {error:#}");
+            None
+        }
+    };
+    for frame in &frames {
+        let (Some(checker), Ok(message)) = (checker.as_mut(), decode_frame(frame)) else {
+            continue;
+        };
+        if let Some(warning) = checker.check(&message) {
+            eprintln!("warning: {frame}: {warning}");
+        }
+    }
     let url = bus_url(args.bus.as_deref())?;
     let mut bus = bus::open(&url, Direction::Send)?;
     let mut report = Report::new(io::stdout().lock(), false);

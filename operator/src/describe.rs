@@ -346,6 +346,7 @@ fn diagnostics_json(page: &DiagnosticsPage) -> Value {
                 Verdict::AcceptedWithWarning => "accepted-with-warning",
             },
             "priority_needed": request.priority_needed.map(|p| p.name()),
+            "searched": request.searched,
             "shortest_period_us": request.shortest_period.map(|t| t.as_micros()),
             "shortest_period_value": request.shortest_period.map_or(0, |t| t.value),
             "shortest_period_unit": unit_name(request.shortest_period.map_or(TimeUnit::Millis, |t| t.unit)),

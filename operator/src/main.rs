@@ -4,6 +4,7 @@
 //! robot through a bus (SocketCAN, an SLCAN adapter — shared between `amiro` processes — or a candump log file). The protocol itself lives in `amiro-can`; this binary
 //! adds text formats, transports and words for people.
 
+mod admission;
 mod bus;
 mod cli;
 mod cli_session;

@@ -46,8 +46,11 @@ mod app {
     #[task(binds = USB_HP_CAN_TX, priority = 6, shared = [tx_queue], local = [can_tx])]
     fn can_tx(cx: can_tx::Context) {}
 
-    #[task(priority = 5, shared = [handler, drive], local = [commands, wake_levels])]
+    #[task(priority = 5, shared = [handler, drive], local = [commands, to_admission])]
     async fn handle_commands(cx: handle_commands::Context) {}
+
+    #[task(priority = 0, shared = [handler, tx_queue], local = [requests, wake_levels, admission])]
+    async fn admit_requests(cx: admit_requests::Context) {}
 
     #[task(priority = 5, shared = [drive, alive], local = [motors, encoders])]
     async fn motor_control(cx: motor_control::Context) {}

@@ -20,7 +20,7 @@
 //! deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without jitter budgets
 //! (a property test checks that they agree).
 
-use crate::board::{self, CriticalSection, TaskTiming};
+use crate::board::{self, CriticalSection, LevelLoads, TaskTiming};
 use crate::busy_window::{AnalysisError, Counter, Limits, Response};
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
@@ -274,7 +274,7 @@ pub fn evaluate<const N: usize, const M: usize>(
     streams: &[Stream],
 ) -> Evaluation {
     let mut iterations = 0u64;
-    let refusal = evaluate_into::<N, M>(robot, streams, &mut iterations);
+    let refusal = evaluate_into::<N, M>(robot, streams, None, &mut iterations, None);
     Evaluation {
         refusal,
         iterations,
@@ -309,6 +309,37 @@ pub fn admit<const N: usize, const M: usize>(
     }
 }
 
+/// [`admit`] without the suggestion search, reusing the analyses of boards whose streams did not change since the
+/// last decision that used `cache` (the on-chip check: one cache per board, kept across commands). The decision
+/// is the one [`admit`] takes on the same inputs. The request's board's new analysis is kept when the request is
+/// admitted, or with `carried_out_anyway` (accept-and-warn: the board starts it although it is refused).
+pub fn admit_cached<const N: usize, const M: usize>(
+    robot: &RobotTable<'_>,
+    streams: &[Stream],
+    request: &Stream,
+    cache: &mut Cache<M>,
+    carried_out_anyway: bool,
+) -> Decision {
+    let mut iterations = 0u64;
+    let refusal = if request.period.is_zero() {
+        Some(Refusal::ZeroPeriod)
+    } else {
+        evaluate_into::<N, M>(
+            robot,
+            streams,
+            Some(request),
+            &mut iterations,
+            Some((cache, carried_out_anyway)),
+        )
+    };
+    Decision {
+        refusal,
+        suggestion: Suggestion::default(),
+        iterations,
+        evaluations: 1,
+    }
+}
+
 /// The CAN identifier of a sensor stream: `0x400 | level << 8 | topic` (amiro-can's layout for sensor data).
 pub const fn sensor_id(level: u8, topic: u8) -> u32 {
     0x400 | ((level as u32 & 0x3) << 8) | topic as u32
@@ -337,20 +368,7 @@ fn check_with<const N: usize, const M: usize>(
     if request.period.is_zero() {
         return Some(Refusal::ZeroPeriod);
     }
-    let mut set = [EMPTY_STREAM; M];
-    let mut len = 0;
-    for s in streams
-        .iter()
-        .filter(|s| !s.same_source(request))
-        .chain(core::iter::once(request))
-    {
-        let Some(slot) = set.get_mut(len) else {
-            return Some(Refusal::Capacity);
-        };
-        *slot = *s;
-        len += 1;
-    }
-    evaluate_into::<N, M>(robot, set.get(..len).unwrap_or(&[]), iterations)
+    evaluate_into::<N, M>(robot, streams, Some(request), iterations, None)
 }
 
 fn shortest_period<const N: usize, const M: usize>(
@@ -420,51 +438,137 @@ fn level_needed<const N: usize, const M: usize>(
     None
 }
 
-const EMPTY_STREAM: Stream = Stream {
-    id: 0,
-    extended: false,
-    dlc: 0,
-    frames: 1,
-    period: Time::ZERO,
-    deadline: None,
-    jitter: Time::ZERO,
-    sender: None,
-    receiver: None,
-};
+/// "No bound" in the working arrays (a response of `u64::MAX` ns cannot occur: it is far beyond any horizon).
+const NONE: u64 = u64::MAX;
+/// In a [`View`]'s index: the request.
+const REQUEST: u8 = u8::MAX;
+/// In a job's `released_by`: released by no job.
+const NO_JOB: u8 = u8::MAX;
 
-/// One task of a board as analysed.
-#[derive(Debug, Clone, Copy)]
-struct Job {
-    id: TaskId,
-    priority: u32,
-    cost: Time,
-    bcet: Time,
-    period: Time,
-    deadline: Time,
-    own_jitter: Time,
-    /// Index in the job array of the releaser.
-    released_by: Option<usize>,
+fn bound(ns: u64) -> Option<Time> {
+    (ns != NONE).then_some(Time::from_ns(ns))
 }
 
-const EMPTY_JOB: Job = Job {
-    id: TaskId::Fixed(0),
-    priority: 0,
-    cost: Time::ZERO,
-    bcet: Time::ZERO,
-    period: Time::ZERO,
-    deadline: Time::ZERO,
-    own_jitter: Time::ZERO,
-    released_by: None,
-};
-
-/// One board's results: per job its bound (`None` when unbounded) and its best case.
-struct BoardBounds<const N: usize> {
-    jobs: [Job; N],
-    wcrt: [Option<Time>; N],
+/// The configuration analysed, without copying a stream: the running streams except those of the request's
+/// source, in their order, then the request (indices into `running`, [`REQUEST`] for the request).
+struct View<'s, const M: usize> {
+    running: &'s [Stream],
+    request: Option<&'s Stream>,
+    index: [u8; M],
     len: usize,
 }
 
-fn horizon(robot: &RobotTable<'_>, streams: &[Stream]) -> Time {
+impl<'s, const M: usize> View<'s, M> {
+    fn new(running: &'s [Stream], request: Option<&'s Stream>) -> Option<Self> {
+        let mut view = View {
+            running,
+            request,
+            index: [0; M],
+            len: 0,
+        };
+        for (i, s) in running.iter().enumerate() {
+            if request.is_some_and(|r| s.same_source(r)) {
+                continue;
+            }
+            let i = u8::try_from(i).ok().filter(|&i| i != REQUEST)?;
+            *view.index.get_mut(view.len)? = i;
+            view.len += 1;
+        }
+        if request.is_some() {
+            *view.index.get_mut(view.len)? = REQUEST;
+            view.len += 1;
+        }
+        Some(view)
+    }
+
+    fn get(&self, position: usize) -> Option<&'s Stream> {
+        let &i = self.index.get(..self.len)?.get(position)?;
+        if i == REQUEST {
+            self.request
+        } else {
+            self.running.get(usize::from(i))
+        }
+    }
+
+    fn iter(&self) -> impl Iterator<Item = (usize, &'s Stream)> + '_ {
+        (0..self.len).filter_map(|m| Some((m, self.get(m)?)))
+    }
+}
+
+/// What the analysis keeps of one job besides its [`TaskTiming`].
+#[derive(Debug, Clone, Copy)]
+struct JobMeta {
+    id: TaskId,
+    deadline: Time,
+    own_jitter: Time,
+    /// Original index (table order: fixed tasks, then per stream its timer job and its job) of the releaser.
+    released_by: u8,
+    /// This job's original index.
+    original: u8,
+}
+
+const EMPTY_META: JobMeta = JobMeta {
+    id: TaskId::Fixed(0),
+    deadline: Time::ZERO,
+    own_jitter: Time::ZERO,
+    released_by: NO_JOB,
+    original: 0,
+};
+
+const EMPTY_TIMING: TaskTiming = TaskTiming {
+    priority: 0,
+    wcet: Time::ZERO,
+    period: Time::ZERO,
+    jitter: Time::ZERO,
+};
+
+/// The per-job numbers the analysis keeps of a [`Response`]: the bound (or [`NONE`]), its start hints, and the
+/// iterations summed.
+struct Bounds<'a> {
+    wcrt: &'a mut [u64],
+    first: &'a mut [Time],
+    busy: &'a mut [Time],
+    iterations: &'a mut u64,
+}
+
+impl board::Results for Bounds<'_> {
+    fn put(&mut self, i: usize, result: Result<Response, AnalysisError>) {
+        let (wcrt, first, busy) = match result {
+            Ok(r) => {
+                *self.iterations += r.iterations;
+                (r.wcrt.as_ns(), r.first_window, r.busy_window)
+            }
+            Err(_) => (NONE, Time::ZERO, Time::ZERO),
+        };
+        if let (Some(w), Some(f), Some(b)) = (
+            self.wcrt.get_mut(i),
+            self.first.get_mut(i),
+            self.busy.get_mut(i),
+        ) {
+            *w = wcrt;
+            *f = first;
+            *b = busy;
+        }
+    }
+    fn windows(&self, k: usize) -> Option<(Time, Time)> {
+        let bounded = self.wcrt.get(k).is_some_and(|&w| w != NONE);
+        bounded.then_some((*self.first.get(k)?, *self.busy.get(k)?))
+    }
+}
+
+/// Per stream of the configuration (by position in the [`View`]): what the boards' analyses found for the bus.
+struct SenderBounds<const M: usize> {
+    /// The sending job's WCRT ([`NONE`]: unbounded or not found).
+    wcrt: [u64; M],
+    /// The sending job's best case.
+    bcrt: [u64; M],
+    /// The sender's transmit interrupt's WCRT (0 without one).
+    tx: [u64; M],
+    /// The receiving board's command handler's WCRT (0 without one).
+    receiver: [u64; M],
+}
+
+fn horizon<const M: usize>(robot: &RobotTable<'_>, streams: &View<'_, M>) -> Time {
     // As the host: max(60 s, 1000 × the longest period or deadline of any task or message).
     let mut longest = Time::ZERO;
     for b in robot.boards {
@@ -474,102 +578,257 @@ fn horizon(robot: &RobotTable<'_>, streams: &[Stream]) -> Time {
                 .max_of(t.deadline.unwrap_or(t.period));
         }
     }
-    for s in streams {
+    for (_, s) in streams.iter() {
         longest = longest.max_of(s.period).max_of(s.deadline());
     }
     longest.times(1000).max_of(Time::from_us(60_000_000))
 }
 
+#[inline(never)]
 fn evaluate_into<const N: usize, const M: usize>(
     robot: &RobotTable<'_>,
-    streams: &[Stream],
+    running: &[Stream],
+    request: Option<&Stream>,
     iterations: &mut u64,
+    mut cache: Option<(&mut Cache<M>, bool)>,
 ) -> Option<Refusal> {
-    if streams.len() > M || robot.boards.len() > usize::from(u8::MAX) {
+    if robot.boards.len() > usize::from(u8::MAX) || N >= usize::from(NO_JOB) {
         return Some(Refusal::Capacity);
     }
+    let Some(streams) = View::<M>::new(running, request) else {
+        return Some(Refusal::Capacity);
+    };
     let limits = Limits {
-        horizon: horizon(robot, streams),
+        horizon: horizon(robot, &streams),
     };
     let mut first: Option<Refusal> = None;
-    // Each board's bounds are needed for the bus; keep the transmit task's and each sender's numbers.
-    let mut sender_wcrt = [None::<Time>; M];
-    let mut sender_bcrt = [Time::ZERO; M];
-    let mut tx_wcrt = [None::<Time>; M];
-    let mut receiver_wcrt = [None::<Time>; M];
+    let mut senders = SenderBounds {
+        wcrt: [NONE; M],
+        bcrt: [0; M],
+        tx: [NONE; M],
+        receiver: [NONE; M],
+    };
+    // The request's board: its new analysis replaces the kept one only when the request is carried out.
+    let requesting = request.and_then(|r| r.sender).map(|x| usize::from(x.board));
+    let mut fresh;
+    let mut pending: Option<Summary<M>> = None;
     for (b, table) in robot.boards.iter().enumerate() {
-        let bounds = match analyse_board::<N>(robot, b, table, streams, &limits, iterations) {
-            Ok(bounds) => bounds,
-            Err(refusal) => return Some(refusal),
+        let Some(key) = BoardKey::<M>::of(b, &streams, limits.horizon) else {
+            return Some(Refusal::Capacity);
         };
-        for (j, job) in bounds.jobs.iter().enumerate().take(bounds.len) {
-            let wcrt = bounds.wcrt.get(j).copied().flatten();
-            if first.is_none() && wcrt.is_none_or(|w| w > job.deadline) {
-                first = Some(Refusal::Deadline(Violation {
-                    culprit: Culprit::Task {
-                        board: b as u8,
-                        task: job.id,
-                    },
-                    wcrt,
-                    deadline: job.deadline,
-                }));
+        let cached = cache
+            .as_ref()
+            .and_then(|(c, _)| c.boards.get(b))
+            .and_then(|slot| slot.as_ref())
+            .filter(|summary| summary.key == key);
+        let summary = match cached {
+            Some(summary) => summary,
+            None => {
+                fresh = Summary {
+                    key,
+                    ..Summary::EMPTY
+                };
+                if let Err(refusal) = analyse_board::<N, M>(
+                    robot, b, table, &streams, &limits, iterations, &mut fresh,
+                ) {
+                    return Some(refusal);
+                }
+                if requesting == Some(b) {
+                    pending = Some(fresh);
+                } else if let Some(slot) = cache.as_mut().and_then(|(c, _)| c.boards.get_mut(b)) {
+                    *slot = Some(fresh);
+                }
+                &fresh
+            }
+        };
+        if first.is_none() {
+            first = summary.first;
+        }
+        summary.apply(b, table, &streams, &mut senders);
+    }
+    analyse_bus(robot, &streams, &senders, &limits, iterations, &mut first);
+    if let (Some(b), Some(summary), Some((c, keep_refused))) = (requesting, pending, cache) {
+        if first.is_none() || keep_refused {
+            if let Some(slot) = c.boards.get_mut(b) {
+                *slot = Some(summary);
             }
         }
-        let fixed_wcrt = |index: Option<u16>| -> Option<Option<Time>> {
-            let index = index?;
-            let j = bounds
-                .jobs
-                .iter()
-                .take(bounds.len)
-                .position(|job| job.id == TaskId::Fixed(index))?;
-            Some(bounds.wcrt.get(j).copied().flatten())
+    }
+    first
+}
+
+/// Brings `cache` up to date with the running `streams` (analysing only the boards whose streams changed since
+/// their kept analysis) and returns the iterations it took: after boot, so that the first request does not pay
+/// for every board, and after a publisher stops.
+pub fn refresh<const N: usize, const M: usize>(
+    robot: &RobotTable<'_>,
+    streams: &[Stream],
+    cache: &mut Cache<M>,
+) -> u64 {
+    let mut iterations = 0u64;
+    let _ = evaluate_into::<N, M>(robot, streams, None, &mut iterations, Some((cache, true)));
+    iterations
+}
+
+/// Most boards a [`Cache`] keeps (the AMiRo has three; the analyses of further boards are not kept).
+pub const MAX_BOARDS: usize = 3;
+
+/// Each board's last analysis, kept between decisions by a board that decides many requests: a board's tasks
+/// depend only on its own streams (and the horizon), so a request on one board leaves the other boards' results
+/// as they were. A summary is reused only when its inputs are the same — the board's streams in the same order
+/// with the same topic, level, size, period and deadline, and the same horizon — so a decision with the cache is
+/// the decision without it (a test compares them), at a fraction of the cost.
+#[derive(Debug, Clone)]
+pub struct Cache<const M: usize> {
+    boards: [Option<Summary<M>>; MAX_BOARDS],
+}
+
+impl<const M: usize> Cache<M> {
+    /// Nothing analysed yet.
+    pub const fn new() -> Self {
+        Self {
+            boards: [None; MAX_BOARDS],
+        }
+    }
+}
+
+impl<const M: usize> Default for Cache<M> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Everything a board's analysis reads from the configuration: the horizon and, per stream the board sends (in
+/// order), its topic, level, data bytes, period and deadline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct BoardKey<const M: usize> {
+    horizon: Time,
+    len: u8,
+    topic: [u8; M],
+    level: [u8; M],
+    dlc: [u8; M],
+    period: [Time; M],
+    deadline: [u64; M],
+}
+
+impl<const M: usize> BoardKey<M> {
+    fn of(b: usize, streams: &View<'_, M>, horizon: Time) -> Option<Self> {
+        let mut key = BoardKey {
+            horizon,
+            len: 0,
+            topic: [0; M],
+            level: [0; M],
+            dlc: [0; M],
+            period: [Time::ZERO; M],
+            deadline: [0; M],
         };
-        let tx = fixed_wcrt(table.can_tx);
-        let handler = fixed_wcrt(table.command_handler);
-        for (m, s) in streams.iter().enumerate() {
+        for (_, s) in streams.iter() {
+            let Some(sender) = s.sender.filter(|x| usize::from(x.board) == b) else {
+                continue;
+            };
+            let i = usize::from(key.len);
+            *key.topic.get_mut(i)? = sender.topic;
+            *key.level.get_mut(i)? = sender.level;
+            *key.dlc.get_mut(i)? = s.dlc;
+            *key.period.get_mut(i)? = s.period;
+            *key.deadline.get_mut(i)? = s.deadline.map_or(NONE, Time::as_ns);
+            key.len += 1;
+        }
+        Some(key)
+    }
+}
+
+/// What one board's analysis gives the rest of the check.
+#[derive(Debug, Clone, Copy)]
+struct Summary<const M: usize> {
+    key: BoardKey<M>,
+    /// The board's first violated deadline, in table order.
+    first: Option<Refusal>,
+    /// Its transmit interrupt's WCRT (0 without one, [`NONE`] unbounded).
+    tx: u64,
+    /// Its command handler's WCRT (0 without one, [`NONE`] unbounded).
+    handler: u64,
+    /// Per stream the board sends (in the key's order): its publisher job's WCRT ([`NONE`]: unbounded or not
+    /// found) and whether the job was found.
+    wcrt: [u64; M],
+    found: [bool; M],
+}
+
+impl<const M: usize> Summary<M> {
+    const EMPTY: Self = Summary {
+        key: BoardKey {
+            horizon: Time::ZERO,
+            len: 0,
+            topic: [0; M],
+            level: [0; M],
+            dlc: [0; M],
+            period: [Time::ZERO; M],
+            deadline: [0; M],
+        },
+        first: None,
+        tx: 0,
+        handler: 0,
+        wcrt: [NONE; M],
+        found: [false; M],
+    };
+
+    /// Writes the board's numbers into the per-stream arrays the bus analysis reads.
+    fn apply(
+        &self,
+        b: usize,
+        table: &BoardTable<'_>,
+        streams: &View<'_, M>,
+        senders: &mut SenderBounds<M>,
+    ) {
+        let mut own = 0usize;
+        for (m, s) in streams.iter() {
             if let Some(sender) = s.sender.filter(|x| usize::from(x.board) == b) {
-                let j = bounds
-                    .jobs
-                    .iter()
-                    .take(bounds.len)
-                    .position(|job| job.id == TaskId::Publisher(sender.topic));
-                if let (Some(j), Some(slot), Some(best), Some(txs)) = (
-                    j,
-                    sender_wcrt.get_mut(m),
-                    sender_bcrt.get_mut(m),
-                    tx_wcrt.get_mut(m),
-                ) {
-                    *slot = bounds.wcrt.get(j).copied().flatten();
-                    *best = bounds.jobs.get(j).map_or(Time::ZERO, |job| job.bcet);
-                    // No transmit task: nothing to add (`Some(0)`); an unbounded one: no bound (`None`).
-                    *txs = match tx {
-                        None => Some(Time::ZERO),
-                        Some(w) => w,
-                    };
+                if self.found.get(own).copied().unwrap_or(false) {
+                    let best = table
+                        .topics
+                        .iter()
+                        .find(|t| t.topic == sender.topic)
+                        .map_or(0, |t| t.bcet.as_ns());
+                    if let (Some(w), Some(bc), Some(t)) = (
+                        senders.wcrt.get_mut(m),
+                        senders.bcrt.get_mut(m),
+                        senders.tx.get_mut(m),
+                    ) {
+                        *w = self.wcrt.get(own).copied().unwrap_or(NONE);
+                        *bc = best;
+                        *t = self.tx;
+                    }
                 }
+                own += 1;
             }
             if s.receiver.is_some_and(|r| usize::from(r) == b) {
-                if let Some(slot) = receiver_wcrt.get_mut(m) {
-                    // A board without a command handler ends the path on the bus.
-                    *slot = match handler {
-                        None => Some(Time::ZERO),
-                        Some(w) => w,
-                    };
+                if let Some(slot) = senders.receiver.get_mut(m) {
+                    *slot = self.handler;
                 }
             }
         }
     }
+}
 
-    // The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al.
+/// The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al.
+#[inline(never)]
+fn analyse_bus<const M: usize>(
+    robot: &RobotTable<'_>,
+    streams: &View<'_, M>,
+    senders: &SenderBounds<M>,
+    limits: &Limits,
+    iterations: &mut u64,
+    first: &mut Option<Refusal>,
+) {
     let bit = robot.bit_time;
-    let n = streams.len();
-    let mut order = [0usize; M];
+    let n = streams.len;
+    let mut order = [0u8; M];
     for (i, slot) in order.iter_mut().enumerate().take(n) {
-        *slot = i;
+        *slot = i as u8;
     }
-    let key = |i: usize| {
+    let key = |i: u8| {
         streams
-            .get(i)
+            .get(usize::from(i))
             .map_or(u32::MAX, |s| can::arbitration_key(s.id, s.extended))
     };
     insertion_sort(order.get_mut(..n).unwrap_or(&mut []), |a, b| {
@@ -582,27 +841,24 @@ fn evaluate_into<const N: usize, const M: usize>(
         period: Time::ZERO,
         jitter: Time::ZERO,
     }; M];
-    let mut offset = [Time::ZERO; M];
-    let mut sender_ok = [true; M];
+    // Per sorted position: the sender's best case (offset of the frames), or NONE when the sender is unbounded.
+    let mut offset = [0u64; M];
     for (position, &i) in order.iter().enumerate().take(n) {
-        let Some(s) = streams.get(i) else { continue };
+        let m = usize::from(i);
+        let Some(s) = streams.get(m) else { continue };
         let mut jitter = s.jitter;
-        let mut off = Time::ZERO;
+        let mut off = 0;
         if s.sender.is_some() {
-            match (
-                sender_wcrt.get(i).copied().flatten(),
-                tx_wcrt.get(i).copied().flatten(),
-            ) {
-                (Some(worst), Some(tx)) => {
-                    let best = sender_bcrt.get(i).copied().unwrap_or(Time::ZERO);
-                    jitter = jitter.plus(worst.minus(best)).plus(tx);
-                    off = best;
-                }
-                _ => {
-                    if let Some(ok) = sender_ok.get_mut(position) {
-                        *ok = false;
-                    }
-                }
+            let worst = senders.wcrt.get(m).copied().unwrap_or(NONE);
+            let tx = senders.tx.get(m).copied().unwrap_or(NONE);
+            if worst == NONE || tx == NONE {
+                off = NONE;
+            } else {
+                let best = senders.bcrt.get(m).copied().unwrap_or(0);
+                jitter = jitter
+                    .plus(Time::from_ns(worst.saturating_sub(best)))
+                    .plus(Time::from_ns(tx));
+                off = best;
             }
         }
         if let (Some(t), Some(o)) = (timings.get_mut(position), offset.get_mut(position)) {
@@ -620,39 +876,45 @@ fn evaluate_into<const N: usize, const M: usize>(
     let mut blockings = [Time::ZERO; M];
     can::blockings(timings, &mut blockings);
     let mut scratch = [Counter::default(); M];
-    let mut out = [Err(AnalysisError::NoSuchIndex); M];
-    can::response_times(
+    let mut wcrt = [NONE; M];
+    let mut first_window = [Time::ZERO; M];
+    let mut busy = [Time::ZERO; M];
+    can::response_times_into(
         timings,
         blockings.get(..n).unwrap_or(&[]),
         bit,
-        &limits,
+        limits,
         &mut scratch,
-        out.get_mut(..n).unwrap_or(&mut []),
+        &mut Bounds {
+            wcrt: &mut wcrt,
+            first: &mut first_window,
+            busy: &mut busy,
+            iterations,
+        },
     );
     for (position, &i) in order.iter().enumerate().take(n) {
-        let Some(s) = streams.get(i) else { continue };
-        *iterations += out
-            .get(position)
-            .and_then(|r| r.as_ref().ok())
-            .map_or(0, |r: &Response| r.iterations);
-        let bus = match (sender_ok.get(position), out.get(position)) {
-            (Some(true), Some(Ok(r))) => offset.get(position).and_then(|o| o.checked_plus(r.wcrt)),
+        let m = usize::from(i);
+        let Some(s) = streams.get(m) else { continue };
+        let bus = match (offset.get(position), wcrt.get(position)) {
+            (Some(&o), Some(&w)) if o != NONE && w != NONE => {
+                Time::from_ns(o).checked_plus(Time::from_ns(w))
+            }
             _ => None,
         };
         if first.is_none() && bus.is_none_or(|w| w > s.deadline()) {
-            first = Some(Refusal::Deadline(Violation {
+            *first = Some(Refusal::Deadline(Violation {
                 culprit: Culprit::Frame { id: s.id },
                 wcrt: bus,
                 deadline: s.deadline(),
             }));
         }
         if s.receiver.is_some() {
-            let end = match (bus, receiver_wcrt.get(i).copied().flatten()) {
+            let end = match (bus, senders.receiver.get(m).copied().and_then(bound)) {
                 (Some(w), Some(r)) => w.checked_plus(r),
                 _ => None,
             };
             if first.is_none() && end.is_none_or(|w| w > s.deadline()) {
-                first = Some(Refusal::Deadline(Violation {
+                *first = Some(Refusal::Deadline(Violation {
                     culprit: Culprit::EndToEnd { id: s.id },
                     wcrt: end,
                     deadline: s.deadline(),
@@ -660,11 +922,10 @@ fn evaluate_into<const N: usize, const M: usize>(
             }
         }
     }
-    first
 }
 
 /// Stable insertion sort (small sets; allocation-free): `after(a, b)` says `a` belongs after `b`.
-fn insertion_sort(items: &mut [usize], after: impl Fn(usize, usize) -> bool) {
+fn insertion_sort(items: &mut [u8], after: impl Fn(u8, u8) -> bool) {
     for i in 1..items.len() {
         let mut k = i;
         while k > 0 {
@@ -680,50 +941,96 @@ fn insertion_sort(items: &mut [usize], after: impl Fn(usize, usize) -> bool) {
     }
 }
 
-fn analyse_board<const N: usize>(
+/// One board's jobs, kept sorted by priority (most urgent first, ties in table order) as they are added.
+struct Jobs<const N: usize> {
+    timings: [TaskTiming; N],
+    meta: [JobMeta; N],
+    len: usize,
+}
+
+impl<const N: usize> Jobs<N> {
+    /// Adds a job; its original index is the number of jobs before it.
+    fn push(&mut self, timing: TaskTiming, mut meta: JobMeta) -> Result<u8, Refusal> {
+        let original = u8::try_from(self.len).map_err(|_| Refusal::Capacity)?;
+        if self.len >= N {
+            return Err(Refusal::Capacity);
+        }
+        meta.original = original;
+        let at = self
+            .timings
+            .iter()
+            .take(self.len)
+            .position(|t| t.priority < timing.priority)
+            .unwrap_or(self.len);
+        let mut k = self.len;
+        while k > at {
+            self.timings.swap(k, k - 1);
+            self.meta.swap(k, k - 1);
+            k -= 1;
+        }
+        if let (Some(t), Some(m)) = (self.timings.get_mut(at), self.meta.get_mut(at)) {
+            *t = timing;
+            *m = meta;
+        }
+        self.len += 1;
+        Ok(original)
+    }
+}
+
+/// One board's tasks with the configuration's publishers: writes its first violated deadline (in table order),
+/// its transmit interrupt's and command handler's bounds and each of its streams' sending job's bound into
+/// `summary`.
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+fn analyse_board<const N: usize, const M: usize>(
     robot: &RobotTable<'_>,
     b: usize,
     table: &BoardTable<'_>,
-    streams: &[Stream],
+    streams: &View<'_, M>,
     limits: &Limits,
     iterations: &mut u64,
-) -> Result<BoardBounds<N>, Refusal> {
-    let mut jobs = [EMPTY_JOB; N];
-    let mut len = 0usize;
-    let mut push = |job: Job| -> Result<usize, Refusal> {
-        let slot = jobs.get_mut(len).ok_or(Refusal::Capacity)?;
-        *slot = job;
-        len += 1;
-        Ok(len - 1)
-    };
-    // The shortest frame this board sends (its transmit-complete interrupt's minimum inter-arrival time).
+    summary: &mut Summary<M>,
+) -> Result<(), Refusal> {
     let mine = || {
         streams
             .iter()
-            .filter(|s| s.sender.is_some_and(|x| usize::from(x.board) == b))
+            .filter(move |(_, s)| s.sender.is_some_and(|x| usize::from(x.board) == b))
     };
+    // The shortest frame this board sends (its transmit-complete interrupt's minimum inter-arrival time).
     let own_frame = mine()
-        .map(|s| {
+        .map(|(_, s)| {
             robot
                 .bit_time
                 .times(u64::from(can::frame_bits_best(s.dlc, false)))
         })
         .min()
         .unwrap_or_else(|| can::shortest_frame_time(robot.bit_time));
+    let mut jobs = Jobs::<N> {
+        timings: [EMPTY_TIMING; N],
+        meta: [EMPTY_META; N],
+        len: 0,
+    };
     for (i, t) in table.tasks.iter().enumerate() {
         let period = if t.own_frame { own_frame } else { t.period };
-        push(Job {
-            id: TaskId::Fixed(i as u16),
-            priority: t.priority,
-            cost: t.cost,
-            bcet: t.bcet,
-            period,
-            deadline: t.deadline.unwrap_or(period),
-            own_jitter: t.jitter,
-            released_by: t.released_by.map(usize::from),
-        })?;
+        jobs.push(
+            TaskTiming {
+                priority: t.priority,
+                wcet: t.cost,
+                period,
+                jitter: t.jitter,
+            },
+            JobMeta {
+                id: TaskId::Fixed(u16::try_from(i).map_err(|_| Refusal::Capacity)?),
+                deadline: t.deadline.unwrap_or(period),
+                own_jitter: t.jitter,
+                released_by: t.released_by.map_or(Ok(NO_JOB), |r| {
+                    u8::try_from(r).map_err(|_| Refusal::Capacity)
+                })?,
+                original: 0,
+            },
+        )?;
     }
-    for s in mine() {
+    for (_, s) in mine() {
         let Some(sender) = s.sender else { continue };
         let priority = table
             .levels
@@ -737,36 +1044,59 @@ fn analyse_board<const N: usize>(
             .find(|t| t.topic == sender.topic)
             .ok_or(Refusal::Capacity)?;
         let timer = match table.monotonic {
-            Some(m) => Some(push(Job {
-                id: TaskId::Timer(sender.topic),
-                priority: m.priority,
-                cost: m.cost,
-                bcet: Time::ZERO,
-                period: s.period,
-                deadline: s.period,
-                own_jitter: m.jitter,
-                released_by: None,
-            })?),
-            None => None,
+            Some(m) => jobs.push(
+                TaskTiming {
+                    priority: m.priority,
+                    wcet: m.cost,
+                    period: s.period,
+                    jitter: m.jitter,
+                },
+                JobMeta {
+                    id: TaskId::Timer(sender.topic),
+                    deadline: s.period,
+                    own_jitter: m.jitter,
+                    ..EMPTY_META
+                },
+            )?,
+            None => NO_JOB,
         };
-        push(Job {
-            id: TaskId::Publisher(sender.topic),
-            priority,
-            cost: topic.cost,
-            bcet: topic.bcet,
-            period: s.period,
-            deadline: s.deadline(),
-            own_jitter: Time::ZERO,
-            released_by: timer,
-        })?;
+        jobs.push(
+            TaskTiming {
+                priority,
+                wcet: topic.cost,
+                period: s.period,
+                jitter: Time::ZERO,
+            },
+            JobMeta {
+                id: TaskId::Publisher(sender.topic),
+                deadline: s.deadline(),
+                own_jitter: Time::ZERO,
+                released_by: timer,
+                original: 0,
+            },
+        )?;
     }
+    let len = jobs.len;
+    // Sorted position of each original index; releasers as sorted positions.
+    let mut position = [NO_JOB; N];
+    for (p, meta) in jobs.meta.iter().enumerate().take(len) {
+        if let Some(slot) = position.get_mut(usize::from(meta.original)) {
+            *slot = p as u8;
+        }
+    }
+    let at = |original: u8| {
+        position
+            .get(usize::from(original))
+            .copied()
+            .unwrap_or(NO_JOB)
+    };
 
     // SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job.
     let mut blocking = [Time::ZERO; N];
-    for (j, job) in jobs.iter().enumerate().take(len) {
-        let p = job.priority;
+    for (slot, timing) in blocking.iter_mut().zip(jobs.timings.iter()).take(len) {
+        let p = timing.priority;
         let mut longest = board::srp_blocking(p, table.sections);
-        for s in mine() {
+        for (_, s) in mine() {
             let Some(sender) = s.sender else { continue };
             let holder = table
                 .levels
@@ -788,69 +1118,110 @@ fn analyse_board<const N: usize>(
                 }
             }
         }
-        if let Some(slot) = blocking.get_mut(j) {
-            *slot = longest;
-        }
+        *slot = longest;
     }
 
-    // Highest priority first, ties in table order (as the host).
-    let mut order = [0usize; N];
-    for (i, slot) in order.iter_mut().enumerate().take(len) {
-        *slot = i;
-    }
-    let priority = |i: usize| jobs.get(i).map_or(0, |j| j.priority);
-    insertion_sort(order.get_mut(..len).unwrap_or(&mut []), |a, b| {
-        priority(a) < priority(b)
-    });
-    let mut jitter = [Time::ZERO; N];
-    for (j, job) in jobs.iter().enumerate().take(len) {
-        if let Some(slot) = jitter.get_mut(j) {
-            *slot = job.own_jitter;
-        }
-    }
-    let mut wcrt = [None::<Time>; N];
-    let chained = jobs.iter().take(len).any(|j| j.released_by.is_some());
-    let mut settled = false;
+    // Release jitters to a fixed point: a released job inherits its releaser's WCRT. When every releaser is more
+    // urgent than what it releases (the boards' timer jobs and interrupts), a job's jitter is set as its level is
+    // entered, from its releaser's final bound, so one pass reaches the fixed point the report's round-by-round
+    // iteration reaches (it is unique: the releases form a chain from more to less urgent) and a check confirms
+    // it; otherwise jitters change only between passes, exactly as in the report.
+    let mut wcrt = [NONE; N];
+    let mut first_window = [Time::ZERO; N];
     let mut scratch = [Counter::default(); N];
-    let mut timings = [TaskTiming {
-        priority: 0,
-        wcet: Time::ZERO,
-        period: Time::ZERO,
-        jitter: Time::ZERO,
-    }; N];
-    let mut sorted_blocking = [Time::ZERO; N];
-    let mut out = [Err(AnalysisError::NoSuchIndex); N];
+    let chained = jobs.meta.iter().take(len).any(|m| m.released_by != NO_JOB);
+    let in_pass = jobs
+        .meta
+        .iter()
+        .zip(jobs.timings.iter())
+        .take(len)
+        .all(|(meta, timing)| {
+            meta.released_by == NO_JOB
+                || jobs
+                    .timings
+                    .get(usize::from(at(meta.released_by)))
+                    .is_some_and(|releaser| releaser.priority > timing.priority)
+        });
+    // The jitter a released job inherits from its releaser's current bound (`None`: the releaser is unbounded).
+    let inherited = |meta: &JobMeta, wcrt: &[u64; N]| -> Option<Time> {
+        let releaser = wcrt
+            .get(usize::from(at(meta.released_by)))
+            .copied()
+            .unwrap_or(NONE);
+        bound(releaser).and_then(|r| meta.own_jitter.checked_plus(r))
+    };
+    let mut settled = false;
     for _ in 0..MAX_JITTER_ROUNDS {
-        for (position, &i) in order.iter().enumerate().take(len) {
-            let (Some(job), Some(t), Some(sb)) = (
-                jobs.get(i),
-                timings.get_mut(position),
-                sorted_blocking.get_mut(position),
-            ) else {
-                continue;
+        let mut levels = LevelLoads::default();
+        let mut level_start = 0;
+        let mut previous_level = 0..0;
+        for i in 0..len {
+            let Some(priority) = jobs.timings.get(i).map(|t| t.priority) else {
+                break;
             };
-            *t = TaskTiming {
-                priority: job.priority,
-                wcet: job.cost,
-                period: job.period,
-                jitter: jitter.get(i).copied().unwrap_or(Time::ZERO),
+            if i == 0
+                || jobs
+                    .timings
+                    .get(i - 1)
+                    .is_some_and(|t| t.priority != priority)
+            {
+                previous_level = level_start..i;
+                level_start = i;
+                if in_pass {
+                    // Entering a level: its released jobs take their (more urgent, done) releasers' bounds.
+                    for p in i..len {
+                        let (Some(meta), Some(timing)) =
+                            (jobs.meta.get(p), jobs.timings.get_mut(p))
+                        else {
+                            break;
+                        };
+                        if timing.priority != priority {
+                            break;
+                        }
+                        if meta.released_by != NO_JOB {
+                            if let Some(jitter) = inherited(meta, &wcrt) {
+                                timing.jitter = jitter;
+                            }
+                        }
+                    }
+                }
+            }
+            let (Some(&task), Some(&blocking_i)) = (jobs.timings.get(i), blocking.get(i)) else {
+                break;
             };
-            *sb = blocking.get(i).copied().unwrap_or(Time::ZERO);
-        }
-        board::response_times(
-            timings.get(..len).unwrap_or(&[]),
-            sorted_blocking.get(..len).unwrap_or(&[]),
-            limits,
-            &mut scratch,
-            out.get_mut(..len).unwrap_or(&mut []),
-        );
-        for (position, &i) in order.iter().enumerate().take(len) {
-            let result = out.get(position).copied();
-            *iterations += result
-                .and_then(|r| r.ok())
-                .map_or(0, |r: Response| r.iterations);
-            if let Some(slot) = wcrt.get_mut(i) {
-                *slot = result.and_then(|r| r.ok()).map(|r| r.wcrt);
+            // As the report: start from a more urgent level's first window when provably below this one's.
+            let hint = previous_level
+                .clone()
+                .filter(|&k| wcrt.get(k).is_some_and(|&w| w != NONE))
+                .filter(|&k| {
+                    blocking
+                        .get(k)
+                        .is_some_and(|&b| b <= blocking_i.plus(task.wcet))
+                })
+                .filter_map(|k| first_window.get(k).copied())
+                .max()
+                .unwrap_or(Time::ZERO);
+            let timings = jobs.timings.get(..len).unwrap_or(&[]);
+            let load = levels.at(timings, i, |a, b| a.priority == b.priority);
+            let result = board::response_time_hinted(
+                timings,
+                i,
+                blocking_i,
+                hint,
+                load,
+                limits,
+                &mut scratch,
+            );
+            let (w, f) = match result {
+                Ok(r) => {
+                    *iterations += r.iterations;
+                    (r.wcrt.as_ns(), r.first_window)
+                }
+                Err(_) => (NONE, Time::ZERO),
+            };
+            if let (Some(ws), Some(fs)) = (wcrt.get_mut(i), first_window.get_mut(i)) {
+                *ws = w;
+                *fs = f;
             }
         }
         if !chained {
@@ -858,30 +1229,23 @@ fn analyse_board<const N: usize>(
             break;
         }
         let mut changed = false;
-        for i in 0..len {
-            let Some(job) = jobs.get(i).copied() else {
+        for p in 0..len {
+            let Some(meta) = jobs.meta.get(p).copied() else {
                 continue;
             };
-            let Some(r) = job.released_by else { continue };
-            match wcrt.get(r).copied().flatten() {
-                Some(releaser) => match job.own_jitter.checked_plus(releaser) {
-                    Some(inherited) => {
-                        if jitter.get(i) != Some(&inherited) {
-                            if let Some(slot) = jitter.get_mut(i) {
-                                *slot = inherited;
-                            }
-                            changed = true;
-                        }
+            if meta.released_by == NO_JOB {
+                continue;
+            }
+            match (inherited(&meta, &wcrt), jobs.timings.get_mut(p)) {
+                (Some(jitter), Some(timing)) => {
+                    if timing.jitter != jitter {
+                        timing.jitter = jitter;
+                        changed = true;
                     }
-                    None => {
-                        if let Some(slot) = wcrt.get_mut(i) {
-                            *slot = None;
-                        }
-                    }
-                },
-                None => {
-                    if let Some(slot) = wcrt.get_mut(i) {
-                        *slot = None;
+                }
+                _ => {
+                    if let Some(slot) = wcrt.get_mut(p) {
+                        *slot = NONE;
                     }
                 }
             }
@@ -892,15 +1256,58 @@ fn analyse_board<const N: usize>(
         }
     }
     if !settled {
-        for (i, job) in jobs.iter().enumerate().take(len) {
-            if job.released_by.is_some() {
-                if let Some(slot) = wcrt.get_mut(i) {
-                    *slot = None;
-                }
+        for (slot, meta) in wcrt.iter_mut().zip(jobs.meta.iter()).take(len) {
+            if meta.released_by != NO_JOB {
+                *slot = NONE;
             }
         }
     }
-    Ok(BoardBounds { jobs, wcrt, len })
+
+    // The first violation in table order.
+    for original in 0..len {
+        let p = usize::from(at(original as u8));
+        let (Some(meta), Some(&w)) = (jobs.meta.get(p), wcrt.get(p)) else {
+            continue;
+        };
+        if summary.first.is_none() && (w == NONE || w > meta.deadline.as_ns()) {
+            summary.first = Some(Refusal::Deadline(Violation {
+                culprit: Culprit::Task {
+                    board: b as u8,
+                    task: meta.id,
+                },
+                wcrt: bound(w),
+                deadline: meta.deadline,
+            }));
+        }
+    }
+    let fixed = |index: Option<u16>| -> u64 {
+        // No such task: nothing to add; an unbounded one: no bound.
+        index
+            .and_then(|i| u8::try_from(i).ok())
+            .map(at)
+            .and_then(|p| wcrt.get(usize::from(p)).copied())
+            .unwrap_or(0)
+    };
+    summary.tx = fixed(table.can_tx);
+    summary.handler = fixed(table.command_handler);
+    for (own, (_, s)) in mine().enumerate() {
+        let Some(sender) = s.sender else { continue };
+        // The stream's job: the first of its topic in table order.
+        let job = (0..len)
+            .map(|original| usize::from(at(original as u8)))
+            .find(|&p| {
+                jobs.meta
+                    .get(p)
+                    .is_some_and(|meta| meta.id == TaskId::Publisher(sender.topic))
+            });
+        if let (Some(p), Some(w), Some(found)) =
+            (job, summary.wcrt.get_mut(own), summary.found.get_mut(own))
+        {
+            *w = wcrt.get(p).copied().unwrap_or(NONE);
+            *found = true;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@
 //! equal-priority tasks like higher-priority ones bounds every such order (FIFO, RTIC's poll order).
 
 use crate::busy_window::{
-    self, Activations, AnalysisError, Counter, Discipline, Limits, Response, Subject,
+    self, Activations, AnalysisError, Counter, Discipline, Limits, Load, Response, Subject,
 };
 use crate::time::Time;
 
@@ -73,13 +73,14 @@ pub fn response_time(
     limits: &Limits,
     scratch: &mut [Counter],
 ) -> Result<Response, AnalysisError> {
-    response_time_from(tasks, index, blocking, Time::ZERO, limits, scratch)
+    response_time_from(tasks, index, blocking, Time::ZERO, None, limits, scratch)
 }
 
 /// Every task's worst-case response time: `out[i]` for `tasks[i]` (ordered by descending priority), under
-/// `blockings[i]`. Gives the same results as [`response_time`] one by one, faster: each task's iteration starts from
-/// the first window of a task one priority level up when that is provably below its own (Sjödin and Hansson's
-/// start value: a lower task's interferers include the higher one and all of its interferers).
+/// `blockings[i]`. Gives the same results as [`response_time`] one by one, faster: each priority level's load is
+/// summed once, and each task's iteration starts from the first window of a task one priority level up when that
+/// is provably below its own (Sjödin and Hansson's start value: a lower task's interferers include the higher one
+/// and all of its interferers).
 pub fn response_times(
     tasks: &[TaskTiming],
     blockings: &[Time],
@@ -87,8 +88,43 @@ pub fn response_times(
     scratch: &mut [Counter],
     out: &mut [Result<Response, AnalysisError>],
 ) {
+    response_times_into(tasks, blockings, limits, scratch, out);
+}
+
+/// Where [`response_times_into`] puts each task's result, and where it reads the start hints back from.
+pub trait Results {
+    /// Stores task `i`'s result.
+    fn put(&mut self, i: usize, result: Result<Response, AnalysisError>);
+    /// Element `k`'s start hints, if it has a bound: its [`Response::first_window`] and
+    /// [`Response::busy_window`].
+    fn windows(&self, k: usize) -> Option<(Time, Time)>;
+}
+
+impl Results for [Result<Response, AnalysisError>] {
+    fn put(&mut self, i: usize, result: Result<Response, AnalysisError>) {
+        if let Some(slot) = self.get_mut(i) {
+            *slot = result;
+        }
+    }
+    fn windows(&self, k: usize) -> Option<(Time, Time)> {
+        let r = self.get(k)?.as_ref().ok()?;
+        Some((r.first_window, r.busy_window))
+    }
+}
+
+/// [`response_times`] into any [`Results`]: a caller short of memory (the on-chip admission check) keeps only
+/// the numbers it needs per task instead of a whole [`Response`].
+#[inline(never)]
+pub fn response_times_into<R: Results + ?Sized>(
+    tasks: &[TaskTiming],
+    blockings: &[Time],
+    limits: &Limits,
+    scratch: &mut [Counter],
+    out: &mut R,
+) {
     let mut level_start = 0;
     let mut previous_level = 0..0;
+    let mut levels = LevelLoads::default();
     for (i, task) in tasks.iter().enumerate() {
         if i > 0
             && tasks
@@ -103,17 +139,63 @@ pub fn response_times(
         let hint = previous_level
             .clone()
             .filter_map(|k| {
-                let first = out.get(k)?.as_ref().ok()?.first_window;
+                let (first, _) = out.windows(k)?;
                 (blockings.get(k).copied().unwrap_or(Time::ZERO) <= blocking.plus(task.wcet))
                     .then_some(first)
             })
             .max()
             .unwrap_or(Time::ZERO);
-        let result = response_time_from(tasks, i, blocking, hint, limits, scratch);
-        if let Some(slot) = out.get_mut(i) {
-            *slot = result;
-        }
+        let load = levels.at(tasks, i, |a, b| a.priority == b.priority);
+        let result = response_time_from(tasks, i, blocking, hint, Some(load), limits, scratch);
+        out.put(i, result);
     }
+}
+
+/// The load of each member's interferers in a set ordered by level (every member of its own or a more urgent
+/// level but itself), summing each level once as the walk enters it.
+#[derive(Default)]
+pub(crate) struct LevelLoads {
+    level_end: usize,
+    prefix: Load,
+}
+
+impl LevelLoads {
+    /// The interferers' load of `set[i]`; `i` must not decrease between calls.
+    pub(crate) fn at<A: Activations>(
+        &mut self,
+        set: &[A],
+        i: usize,
+        same_level: impl Fn(&A, &A) -> bool,
+    ) -> Load {
+        let Some(me) = set.get(i) else {
+            return Load::default();
+        };
+        if i >= self.level_end {
+            let mut end = i;
+            while let Some(other) = set.get(end).filter(|other| same_level(other, me)) {
+                self.prefix = self.prefix.plus(Load::of(other));
+                end += 1;
+            }
+            self.level_end = end;
+        }
+        self.prefix.minus(Load::of(me))
+    }
+}
+
+/// [`response_time`] with a start hint (a value known not to exceed the first window, e.g. a more urgent task's
+/// first window, see [`response_times`]) and the interferers' load already summed ([`LevelLoads`]): the
+/// building block of a caller that analyses a set in priority order itself (the admission check, which sets a
+/// released task's jitter as soon as its releaser's bound is known).
+pub fn response_time_hinted(
+    tasks: &[TaskTiming],
+    index: usize,
+    blocking: Time,
+    hint: Time,
+    load: Load,
+    limits: &Limits,
+    scratch: &mut [Counter],
+) -> Result<Response, AnalysisError> {
+    response_time_from(tasks, index, blocking, hint, Some(load), limits, scratch)
 }
 
 fn response_time_from(
@@ -121,6 +203,7 @@ fn response_time_from(
     index: usize,
     blocking: Time,
     hint: Time,
+    load: Option<Load>,
     limits: &Limits,
     scratch: &mut [Counter],
 ) -> Result<Response, AnalysisError> {
@@ -143,10 +226,12 @@ fn response_time_from(
     let mut subject = Subject::new(me.wcet, 1, me.period, me.jitter, blocking);
     subject.known_first_window = hint;
     let interferers = tasks.get(..end).unwrap_or(&[]);
-    busy_window::response_time(
+    let load = load.unwrap_or_else(|| Load::sum(interferers, Some(index)));
+    busy_window::response_time_loaded(
         &subject,
         interferers,
         Some(index),
+        load,
         Discipline::Preemptive,
         limits,
         scratch,

@@ -187,12 +187,18 @@ impl fmt::Display for AnalysisError {
     }
 }
 
-/// Utilisation above this counts as overload (float noise on an exact 1.0 must not).
-const OVERLOAD_MARGIN: f64 = 1e-9;
-/// The utilisation bound is only used to start the iteration when `1 − U` is at least this...
-const MIN_SLACK_FOR_BOUND: f64 = 1e-3;
-/// ...and then shrunk by this factor, so float error can never lift the start above the least fixed point.
-const BOUND_SAFETY: f64 = 1.0 - 1e-6;
+/// Utilisations are fixed-point integers: `1 << UTIL_BITS` is 100 %. No floating point anywhere in the fixed point
+/// (the Cortex-M3 has no FPU: soft-float `f64` cost the chip kilobytes of flash and most of an admission
+/// decision's time), and integer sums are exact, so a load summed once per priority level and one summed per task
+/// are the same number.
+pub const UTIL_BITS: u32 = 24;
+/// 100 % utilisation in [`UTIL_BITS`] fixed point.
+pub const UTIL_ONE: u64 = 1 << UTIL_BITS;
+/// The utilisation bound is only used to start the iteration when `1 − U` is at least 1/this.
+const MIN_SLACK_FOR_BOUND: u64 = 1000;
+/// A product or sum in the start bound larger than this (ns, about 18 min) is left out of it (a smaller start
+/// is still a safe one), so that its fixed-point products never overflow.
+const BOUND_LIMIT: u64 = 1 << 40;
 /// Instances examined in one busy window before giving up.
 const MAX_INSTANCES: u64 = 50_000_000;
 /// Fixed-point iterations (evaluations of the interference sum) one response time may take before it is
@@ -211,9 +217,102 @@ fn mul(a: u64, b: u64) -> Result<u64, AnalysisError> {
 fn ceil_div(a: u64, b: u64) -> u64 {
     if a == 0 {
         0
+    } else if let (Ok(a32), Ok(b32)) = (u32::try_from(a), u32::try_from(b)) {
+        // The common case on the boards (windows and periods below 4.29 s): the Cortex-M3's hardware divide
+        // instead of the 64-bit software routine.
+        u64::from((a32 - 1) / b32 + 1)
     } else {
         (a - 1) / b + 1
     }
+}
+
+/// The load of a set of interferers that starts the fixed point and detects overload: `Σ U_k` and `Σ J_k·U_k`,
+/// each term rounded *down* (so the start derived from it stays at or below the least fixed point, and a load
+/// above 100 % is a real overload). Sums of terms are exact, so a caller that analyses many subjects against
+/// prefixes of one set (every task of a board) sums each level once ([`Load::plus`], [`Load::minus`]) and gets
+/// the very numbers [`response_time`] would sum per subject.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Load {
+    /// `Σ ⌊U_k · 2^UTIL_BITS⌋` (each term at most [`UTIL_ONE`]).
+    pub utilisation: u64,
+    /// `Σ ⌊J_k · U_k⌋` in ns (each term at most 2^40).
+    pub jitter_load: u64,
+    /// Interferers with a cost and a zero period (overload whatever else).
+    pub zero_periods: u64,
+}
+
+impl Load {
+    /// The load of one interferer (nothing when it costs nothing).
+    pub fn of<A: Activations>(other: &A) -> Load {
+        let (c, t) = (other.activation_cost().as_ns(), other.period().as_ns());
+        if c == 0 {
+            return Load::default();
+        }
+        if t == 0 {
+            return Load {
+                zero_periods: 1,
+                ..Load::default()
+            };
+        }
+        let u = utilisation_floor(c, t);
+        Load {
+            utilisation: u,
+            jitter_load: scaled_floor(other.jitter().as_ns(), u).min(BOUND_LIMIT),
+            zero_periods: 0,
+        }
+    }
+
+    /// Both loads together.
+    pub fn plus(self, other: Load) -> Load {
+        Load {
+            utilisation: self.utilisation.saturating_add(other.utilisation),
+            jitter_load: self.jitter_load.saturating_add(other.jitter_load),
+            zero_periods: self.zero_periods.saturating_add(other.zero_periods),
+        }
+    }
+
+    /// This load without `part` (which must be one of its terms).
+    pub fn minus(self, part: Load) -> Load {
+        Load {
+            utilisation: self.utilisation.saturating_sub(part.utilisation),
+            jitter_load: self.jitter_load.saturating_sub(part.jitter_load),
+            zero_periods: self.zero_periods.saturating_sub(part.zero_periods),
+        }
+    }
+
+    /// The load of `others` except `exclude`.
+    pub fn sum<A: Activations>(others: &[A], exclude: Option<usize>) -> Load {
+        others
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| Some(*k) != exclude)
+            .fold(Load::default(), |load, (_, other)| {
+                load.plus(Load::of(other))
+            })
+    }
+}
+
+/// `⌊c/t · 2^UTIL_BITS⌋` rounded down, capped at [`UTIL_ONE`] (one such interferer already overloads any level
+/// with work of its own). `t > 0`.
+fn utilisation_floor(c: u64, t: u64) -> u64 {
+    if c >= t {
+        return UTIL_ONE;
+    }
+    // c < t: shift both until c·2^UTIL_BITS fits; c rounds down and t up, so the quotient stays at most c/t.
+    let shift = (64 - c.leading_zeros()).saturating_sub(64 - UTIL_BITS);
+    let c_scaled = (c >> shift) << UTIL_BITS;
+    let t_scaled = if shift == 0 {
+        t
+    } else {
+        ceil_div(t, 1 << shift)
+    };
+    c_scaled / t_scaled.max(1)
+}
+
+/// `⌊x · u / 2^UTIL_BITS⌋` for a fixed-point utilisation `u ≤ UTIL_ONE`, or 0 when `x` is too large for the
+/// product (leaving a term out only lowers a start bound).
+fn scaled_floor(x: u64, u: u64) -> u64 {
+    x.checked_mul(u).map_or(0, |p| p >> UTIL_BITS)
 }
 
 /// Worst-case response time of `subject`, delayed by every stream in `others` except `exclude`.
@@ -228,38 +327,43 @@ pub fn response_time<A: Activations>(
     limits: &Limits,
     scratch: &mut [Counter],
 ) -> Result<Response, AnalysisError> {
+    let load = Load::sum(others, exclude);
+    response_time_loaded(subject, others, exclude, load, discipline, limits, scratch)
+}
+
+/// [`response_time`] with the load of `others` except `exclude` already summed ([`Load::sum`] of the same
+/// interferers; a caller analysing every member of a set sums each priority level once).
+pub fn response_time_loaded<A: Activations>(
+    subject: &Subject,
+    others: &[A],
+    exclude: Option<usize>,
+    load: Load,
+    discipline: Discipline,
+    limits: &Limits,
+    scratch: &mut [Counter],
+) -> Result<Response, AnalysisError> {
     let t_own = subject.period.as_ns();
-    if t_own == 0 {
+    if t_own == 0 || load.zero_periods > 0 {
         return Err(AnalysisError::Overload);
     }
     let per = u64::from(subject.instances_per_activation.max(1));
     let own_activation = mul(subject.cost.as_ns(), per)?;
-
-    let mut u_hp = 0.0f64;
-    let mut jitter_load = 0.0f64;
-    for (k, other) in others.iter().enumerate() {
-        if Some(k) == exclude {
-            continue;
-        }
-        let (c, t) = (other.activation_cost().as_ns(), other.period().as_ns());
-        if c == 0 {
-            continue;
-        }
-        if t == 0 {
-            return Err(AnalysisError::Overload);
-        }
-        let u = c as f64 / t as f64;
-        u_hp += u;
-        jitter_load += other.jitter().as_ns() as f64 * u;
-    }
-    let u_own = own_activation as f64 / t_own as f64;
-    if u_hp + u_own > 1.0 + OVERLOAD_MARGIN || (u_hp >= 1.0 && own_activation > 0) {
+    let u_own = if own_activation == 0 {
+        0
+    } else {
+        utilisation_floor(own_activation, t_own)
+    };
+    // Rounded down, so above 100 % is a real overload; a level loaded to within rounding of 100 % stops at the
+    // horizon instead.
+    if load.utilisation.saturating_add(u_own) > UTIL_ONE
+        || (load.utilisation >= UTIL_ONE && own_activation > 0)
+    {
         return Err(AnalysisError::Overload);
     }
     let loads = Loads {
-        u_hp,
+        u_hp: load.utilisation,
         u_own,
-        jitter_load,
+        jitter_load: load.jitter_load,
     };
     let mut window = Window::new(others, exclude, scratch, limits.horizon.as_ns());
     match discipline {
@@ -271,9 +375,9 @@ pub fn response_time<A: Activations>(
 }
 
 struct Loads {
-    u_hp: f64,
-    u_own: f64,
-    jitter_load: f64,
+    u_hp: u64,
+    u_own: u64,
+    jitter_load: u64,
 }
 
 /// The interfering streams and their counters.
@@ -393,23 +497,26 @@ fn lower_bound(
     own_jitter: u64,
 ) -> u64 {
     let u = if with_own {
-        loads.u_hp + loads.u_own
+        loads.u_hp.saturating_add(loads.u_own)
     } else {
         loads.u_hp
     };
-    let slack = 1.0 - u;
-    if slack < MIN_SLACK_FOR_BOUND {
+    let slack = UTIL_ONE.saturating_sub(u);
+    if slack == 0 || slack < UTIL_ONE / MIN_SLACK_FOR_BOUND {
         return floor;
     }
-    let mut numerator = constant as f64 + loads.jitter_load + shift as f64 * loads.u_hp;
+    // Every term rounded down and `1 − U` rounded up: the quotient stays at or below the least solution.
+    let mut numerator = Some(constant)
+        .and_then(|n| n.checked_add(loads.jitter_load))
+        .and_then(|n| n.checked_add(scaled_floor(shift.min(BOUND_LIMIT), loads.u_hp)));
     if with_own {
-        numerator += own_jitter as f64 * loads.u_own;
+        numerator = numerator
+            .and_then(|n| n.checked_add(scaled_floor(own_jitter.min(BOUND_LIMIT), loads.u_own)));
     }
-    let bound = numerator / slack * BOUND_SAFETY;
-    if bound >= u64::MAX as f64 {
-        return floor;
+    match numerator {
+        Some(n) if n < BOUND_LIMIT => ((n << UTIL_BITS) / slack).max(floor),
+        _ => floor,
     }
-    (bound as u64).max(floor)
 }
 
 fn preemptive<A: Activations>(

@@ -15,8 +15,9 @@
 //! `(80 + 10s)·τ` for extended ones. The interframe space is inside the 13 bits; adding it again would count it
 //! twice.
 
+use crate::board::{LevelLoads, Results};
 use crate::busy_window::{
-    self, Activations, AnalysisError, Counter, Discipline, Limits, Response, Subject,
+    self, Activations, AnalysisError, Counter, Discipline, Limits, Load, Response, Subject,
 };
 use crate::time::Time;
 
@@ -195,6 +196,7 @@ pub fn response_time(
         index,
         blocking,
         (Time::ZERO, Time::ZERO),
+        None,
         bit,
         limits,
         scratch,
@@ -212,8 +214,22 @@ pub fn response_times(
     scratch: &mut [Counter],
     out: &mut [Result<Response, AnalysisError>],
 ) {
+    response_times_into(messages, blockings, bit, limits, scratch, out);
+}
+
+/// [`response_times`] into any [`Results`] (the on-chip admission check keeps only the numbers it needs).
+#[inline(never)]
+pub fn response_times_into<R: Results + ?Sized>(
+    messages: &[MessageTiming],
+    blockings: &[Time],
+    bit: Time,
+    limits: &Limits,
+    scratch: &mut [Counter],
+    out: &mut R,
+) {
     let mut level_start = 0;
     let mut previous_level = 0..0;
+    let mut levels = LevelLoads::default();
     for (i, message) in messages.iter().enumerate() {
         if i > 0 && messages.get(i - 1).is_some_and(|m| m.key != message.key) {
             previous_level = level_start..i;
@@ -222,30 +238,42 @@ pub fn response_times(
         let blocking = blockings.get(i).copied().unwrap_or(Time::ZERO);
         let mut hints = (Time::ZERO, Time::ZERO);
         for k in previous_level.clone() {
-            let (Some(Ok(r)), Some(other)) = (out.get(k), messages.get(k)) else {
+            let (Some((first_window, busy_window)), Some(other)) =
+                (out.windows(k), messages.get(k))
+            else {
                 continue;
             };
             let blocking_k = blockings.get(k).copied().unwrap_or(Time::ZERO);
             // Queuing window: f_i ≥ f_k − B_k + B_i + A_k; busy period: the same with the own activation A_i.
             if blocking_k <= blocking.plus(other.activation_cost()) {
-                hints.0 = hints.0.max_of(r.first_window);
+                hints.0 = hints.0.max_of(first_window);
             }
             if blocking_k <= blocking.plus(message.activation_cost()) {
-                hints.1 = hints.1.max_of(r.busy_window);
+                hints.1 = hints.1.max_of(busy_window);
             }
         }
-        let result = response_time_from(messages, i, blocking, hints, bit, limits, scratch);
-        if let Some(slot) = out.get_mut(i) {
-            *slot = result;
-        }
+        let load = levels.at(messages, i, |a, b| a.key == b.key);
+        let result = response_time_from(
+            messages,
+            i,
+            blocking,
+            hints,
+            Some(load),
+            bit,
+            limits,
+            scratch,
+        );
+        out.put(i, result);
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn response_time_from(
     messages: &[MessageTiming],
     index: usize,
     blocking: Time,
     hints: (Time, Time),
+    load: Option<Load>,
     bit: Time,
     limits: &Limits,
     scratch: &mut [Counter],
@@ -272,10 +300,12 @@ fn response_time_from(
     subject.known_first_window = hints.0;
     subject.known_busy_period = hints.1;
     let interferers = messages.get(..end).unwrap_or(&[]);
-    busy_window::response_time(
+    let load = load.unwrap_or_else(|| Load::sum(interferers, Some(index)));
+    busy_window::response_time_loaded(
         &subject,
         interferers,
         Some(index),
+        load,
         Discipline::NonPreemptive { bit_time: bit },
         limits,
         scratch,

@@ -115,7 +115,7 @@ fn the_table_lowers_and_emits_rust() {
     assert_eq!(
         dwd.topics.len(),
         9,
-        "DiWheelDrive's eight sensor topics and its diagnostics topic"
+        "DiWheelDrive's eight sensor topics and its diagnostics"
     );
     assert!(dwd.levels.iter().all(Option::is_some));
     assert!(dwd.monotonic.is_some() && dwd.can_tx.is_some() && dwd.command_handler.is_some());
@@ -216,5 +216,45 @@ proptest! {
         let report = report_verdict(&publishers, &commands, case);
         let decision = admitted(&publishers, &commands);
         prop_assert_eq!(decision.admitted(), report, "publishers {:?} commands {:?}: {:?}", publishers, commands, decision);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, .. ProptestConfig::default() })]
+
+    /// The on-chip check keeps each board's last analysis between decisions: a sequence of requests decided with
+    /// the cache gets exactly the decisions (refusal and its reason) of the check without it.
+    #[test]
+    fn the_cache_changes_no_decision(
+        requests in proptest::collection::vec((any::<prop::sample::Index>(), 0usize..4, 0u32..1000, any::<bool>()), 1..24),
+    ) {
+        let robot = robot();
+        let topics = publishable();
+        let mut running: Vec<admission::Stream> = Vec::new();
+        let mut cache = admission::Cache::<32>::new();
+        for (index, level, scale, stop) in requests {
+            let topic = index.get(&topics);
+            if stop {
+                // A stop leaves the set (and changes that board's inputs); sometimes the cache is brought up to date.
+                running.retain(|s| robot.publisher_stream(topic, LEVELS[level], Time::from_us(1000), None)
+                    .is_some_and(|r| r.sender.map(|x| (x.board, x.topic)) != s.sender.map(|x| (x.board, x.topic))));
+                if level % 2 == 0 {
+                    robot.with_table(|t| admission::refresh::<32, 32>(t, &running, &mut cache));
+                }
+                continue;
+            }
+            let period = (100.0 * 1000f64.powf(f64::from(scale) / 1000.0)).round() as u64;
+            let request = robot
+                .publisher_stream(topic, LEVELS[level], Time::from_us(period), None)
+                .expect("stream");
+            let plain = robot.with_table(|t| admission::admit::<32, 32>(t, &running, &request, false));
+            let cached = robot.with_table(|t| admission::admit_cached::<32, 32>(t, &running, &request, &mut cache, false));
+            prop_assert_eq!(plain.refusal, cached.refusal, "{} at {} µs {}", topic, period, LEVELS[level]);
+            prop_assert!(cached.iterations <= plain.iterations);
+            if plain.admitted() {
+                running.retain(|s| s.sender.map(|x| (x.board, x.topic)) != request.sender.map(|x| (x.board, x.topic)));
+                running.push(request);
+            }
+        }
     }
 }

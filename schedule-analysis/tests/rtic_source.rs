@@ -41,6 +41,7 @@ fn reads_the_diwheeldrive_task_list() {
             ("can_rx", 6, true),
             ("can_tx", 6, true),
             ("handle_commands", 5, false),
+            ("admit_requests", 0, false),
             ("motor_control", 5, false),
             ("publish_urgent", 4, false),
             ("publish_high", 3, false),

@@ -64,6 +64,8 @@ pub struct BoardModel {
     /// The identifier the board's QEMU build takes for its simulator's control frames (they never
     /// reach the app), which the campaign must therefore not send as an unknown topic.
     pub qemu_control_id: Option<u32>,
+    /// Whether the board runs admission control (sensor commands go to its admission task).
+    pub admission_task: bool,
 }
 
 /// One row per board with a QEMU build.
@@ -75,6 +77,7 @@ pub const MODELS: &[BoardModel] = &[
         reference_frames: 1,
         actuators: &[0x10],
         qemu_control_id: None,
+        admission_task: true,
     },
     BoardModel {
         board: "lightring",
@@ -83,6 +86,7 @@ pub const MODELS: &[BoardModel] = &[
         reference_frames: 6,
         actuators: &[0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18],
         qemu_control_id: None,
+        admission_task: false,
     },
     // The shutdown topic (0x1D) is not harmless: no random frame addresses it (it has a DLC, so it
     // is no sensor topic either); the scenarios test it.
@@ -94,6 +98,7 @@ pub const MODELS: &[BoardModel] = &[
         actuators: &[],
         // powermgmt/src/qemu.rs SIM_CONTROL_ID
         qemu_control_id: Some(0x3F0),
+        admission_task: true,
     },
 ];
 
@@ -477,28 +482,88 @@ fn check(model: &BoardModel, plan: &Plan, out: &RunOutput) -> Result<String> {
     // Verdicts, in order, for the spaced phase; then the burst's.
     let traced = traced_verdicts(out)?;
     let spaced = plan.expected.len();
+    // On a board with admission control (`admission_task`), valid commands to sensor topics (and
+    // admission-policy commands) go to its admission task, which takes at most one publish request
+    // per 40 ms from a queue of four: they are traced later than the command handler's frames
+    // (each sequence stays in order), or refused with a verdict, or dropped and counted. Every other
+    // frame must be traced in order, as the model says.
+    // Which frames the firmware routes there (a routing rule of the firmware, not a verdict: so
+    // amiro-can's decoder may decide it; the verdicts stay the model's).
+    let routed = |frame: &TimedFrame| {
+        model.admission_task
+            && u16::try_from(frame.id).is_ok_and(|id| {
+                matches!(
+                    amiro_can::decode_command(id, &frame.data),
+                    Ok(amiro_can::Command::Sensor(_) | amiro_can::Command::Policy { .. })
+                )
+            })
+    };
+    let mut handler: Vec<&(u32, Verdict)> = Vec::new();
+    let mut admission: Vec<&(u32, Verdict)> = Vec::new();
+    for (expected, frame) in plan.expected.iter().zip(&plan.frames) {
+        if routed(frame) {
+            admission.push(expected);
+        } else {
+            handler.push(expected);
+        }
+    }
+    let (mut h, mut a, mut burst_handled) = (0usize, 0usize, 0usize);
+    for (k, (got_id, got)) in traced.iter().enumerate() {
+        if let Some((id, want)) = handler.get(h) {
+            if id == got_id && describe(want) == *got {
+                h += 1;
+                continue;
+            }
+        }
+        if let Some(j) = (a..admission.len()).find(|&j| {
+            admission
+                .get(j)
+                .is_some_and(|(id, want)| id == got_id && describe(want) == *got)
+        }) {
+            a = j + 1;
+            continue;
+        }
+        // The burst: valid admission-policy commands, all accepted.
+        ensure!(
+            got == "accepted" && h == handler.len(),
+            "traced verdict {k} ({got_id:03X} `{got}`) matches neither the model's next command ({}) nor a later admitted one",
+            handler
+                .get(h)
+                .map_or("none left".to_string(), |(id, want)| format!("{id:03X} `{}`", describe(want)))
+        );
+        burst_handled += 1;
+    }
     ensure!(
-        traced.len() >= spaced,
+        h == handler.len(),
+        "command {h} of the handler's {} ({}) was never traced",
+        handler.len(),
+        handler.get(h).map_or(String::new(), |(id, want)| format!(
+            "{id:03X}: model says `{}`",
+            describe(want)
+        ))
+    );
+    ensure!(
+        model.admission_task || traced.len() >= spaced,
         "{} verdicts traced, the spaced phase alone sent {spaced}",
         traced.len()
     );
-    for (k, ((id, want), (got_id, got))) in plan.expected.iter().zip(&traced).enumerate() {
-        ensure!(
-            *id == *got_id && describe(want) == *got,
-            "command {k} ({id:03X}): model says `{}`, board traced `{got}` for {got_id:03X}",
-            describe(want)
-        );
-    }
-    let burst_handled = traced.len() - spaced;
-    ensure!(
-        traced[spaced..].iter().all(|(_, v)| v == "accepted"),
-        "a burst command was not accepted"
-    );
+    let refused = out
+        .frames
+        .iter()
+        .filter(|f| {
+            f.id & 0x4FF == 0x400 | u32::from(model.diagnostics) && f.data.first() == Some(&0x80)
+        })
+        // Byte 4 bit 4: accepted with a warning (traced as accepted too), not refused.
+        .filter(|f| f.data.get(4).is_some_and(|b| b & 0x10 == 0))
+        .count();
     let dropped = out.end_field("rx dropped")? as usize;
+    let sent = spaced + plan.burst;
+    let accounted = traced.len() + refused + dropped;
+    // Up to the admission queue and the request being decided may still wait when the run ends.
     ensure!(
-        spaced + burst_handled + dropped == spaced + plan.burst,
-        "counters: {spaced} + {burst_handled} handled + {dropped} dropped != {} sent",
-        spaced + plan.burst
+        accounted <= sent && sent - accounted <= if model.admission_task { 5 } else { 0 },
+        "counters: {} traced + {refused} refused by admission + {dropped} dropped != {sent} sent",
+        traced.len()
     );
     // The reference publisher's grid, from its first release to a period before SYS_PD_N.
     let (topic, name, period) = model.reference;
@@ -518,7 +583,10 @@ fn check(model: &BoardModel, plan: &Plan, out: &RunOutput) -> Result<String> {
     // Nothing unrequested.
     for frame in &out.frames {
         let byte = (frame.id & 0xFF) as u8;
-        let ok = frame.id == id || (frame.id & 0x400 != 0 && plan.requested.contains(&byte));
+        // Admission verdicts (pages 0x80, 0x81 of the board's diagnostics topic) answer refused requests.
+        let verdict = byte == model.diagnostics && matches!(frame.data.first(), Some(0x80 | 0x81));
+        let ok = frame.id == id
+            || (frame.id & 0x400 != 0 && (plan.requested.contains(&byte) || verdict));
         ensure!(
             ok,
             "unrequested frame {:03X} at {} µs",

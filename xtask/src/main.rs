@@ -232,7 +232,7 @@ fn run(cmd: Cmd) -> Result<bool> {
 }
 
 /// The workspace root (the parent of this crate's folder).
-fn workspace_root() -> PathBuf {
+pub(crate) fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
         .map(Path::to_path_buf)

@@ -172,6 +172,7 @@ fn verdict_request(
                     } else {
                         Verdict::Refused
                     },
+                    searched: priority_needed.is_some() || shortest_period.is_some() || warn,
                     priority_needed,
                     shortest_period,
                     violation,

@@ -366,6 +366,40 @@ pub fn trace_time(line: &str) -> Result<u64> {
     parse_seconds(stamp)
 }
 
+/// The admission verdicts `board` sent (pages 0x80 + 0x81 on its diagnostics topic), joined, with
+/// the time of the second frame.
+pub fn admission_verdicts(
+    out: &RunOutput,
+    board: amiro_can::Board,
+) -> Vec<(u64, amiro_can::AdmissionVerdict)> {
+    use amiro_can::{decode, DiagnosticsPage, Message, SensorData};
+    let topic = u32::from(board.diagnostics_topic().byte());
+    let mut joined = Vec::new();
+    let mut request = None;
+    for f in out.frames.iter().filter(|f| f.id & 0x4FF == 0x400 | topic) {
+        let Ok(Message::Sample {
+            data: SensorData::Diagnostics { board, page },
+            ..
+        }) = decode(f.id as u16, &f.data)
+        else {
+            continue;
+        };
+        match page {
+            DiagnosticsPage::VerdictRequest(r) => request = Some(r),
+            DiagnosticsPage::VerdictBound(b) => {
+                if let Some(r) = request.take() {
+                    joined.push((
+                        f.at_us,
+                        amiro_can::AdmissionVerdict::from_pages(board, &r, &b),
+                    ));
+                }
+            }
+            _ => {}
+        }
+    }
+    joined
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
