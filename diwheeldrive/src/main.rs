@@ -266,6 +266,7 @@ mod app {
         ]
     )]
     async fn admit_requests(mut cx: admit_requests::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::ADMIT_REQUESTS);
         // Every board analysed once with nothing running, before the first request.
         cx.local.admission.prepare();
         while let Some(frame) = tasks::next_command(cx.local.requests).await {
