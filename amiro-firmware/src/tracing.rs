@@ -240,7 +240,7 @@ fn end(task: u8, next_release_in_us: u32) {
 pub fn suspend(release: Option<(u64, u64)>) -> u8 {
     #[cfg(feature = "task-trace")]
     {
-        let task = critical_section::with(|cs| STATE.borrow_ref(cs).current);
+        let task = critical_section::with(|cs| state_in(cs).current);
         if task != NO_TASK {
             let next = release.map_or(u32::MAX, |(at, now)| {
                 u32::try_from(at.saturating_sub(now)).map_or(u32::MAX - 1, |d| d.min(u32::MAX - 1))
