@@ -13,7 +13,6 @@ const RCC: usize = 0x4002_3800;
 const RCC_CFGR: usize = 0x04;
 #[cfg(feature = "f4")]
 const RCC_CFGR: usize = 0x08;
-const RCC_CR: usize = 0x00;
 /// RCC_CSR offset (reset flags).
 #[cfg(feature = "f1")]
 const RCC_CSR: usize = 0x24;
@@ -31,43 +30,26 @@ const RCC_APB1ENR: usize = 0x1C;
 const RCC_APB1ENR: usize = 0x40;
 const APB1_CAN1: u32 = 1 << 25;
 
-const CR_HSION: u32 = 1 << 0;
-const CR_HSIRDY: u32 = 1 << 1;
-const CR_HSEON: u32 = 1 << 16;
-const CR_HSERDY: u32 = 1 << 17;
-const CR_PLLON: u32 = 1 << 24;
-const CR_PLLRDY: u32 = 1 << 25;
-const CFGR_SW: u32 = 0b11;
-const CFGR_SWS: u32 = 0b11 << 2;
-
-/// How many times a clock flag is polled before the step is declared failed. HSI and PLL flags
-/// settle within microseconds; the crystal within a few milliseconds (ST's HSE_STARTUP_TIMEOUT is
-/// 100 ms, far more than this many reads take at 8 MHz).
-pub const CLOCK_POLLS: u32 = 200_000;
-
-/// A clock step that did not complete in [`CLOCK_POLLS`] reads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ClockFault {
-    /// The internal oscillator never reported ready.
-    HsiNotReady,
-    /// SYSCLK did not switch to the internal oscillator.
-    SwitchToHsi,
-    /// The PLL did not stop.
-    PllStillRunning,
-    /// The 8 MHz crystal did not start.
-    HseNotReady,
+/// The RCC block of this chip, for the clock-tree routines.
+fn rcc() -> crate::bxcan::Mmio {
+    // SAFETY: the RCC block of this chip family; the clock routines run from `init` only, before
+    // anything else uses the RCC (the `Registers` accesses are volatile single-register ones).
+    unsafe { crate::bxcan::Mmio::new(RCC) }
 }
 
-impl ClockFault {
-    /// The fault in words, for the log.
-    pub const fn as_str(self) -> &'static str {
-        match self {
-            ClockFault::HsiNotReady => "the internal oscillator never got ready",
-            ClockFault::SwitchToHsi => "SYSCLK did not switch to the internal oscillator",
-            ClockFault::PllStillRunning => "the PLL did not stop",
-            ClockFault::HseNotReady => "the crystal did not start",
-        }
-    }
+pub use crate::clock_tree::{ClockFault, CLOCK_POLLS};
+
+/// Switches the clock tree back to the internal oscillator with the PLL off
+/// ([`crate::clock_tree::to_reset_state`] on this chip's RCC). Every wait is bounded.
+pub fn clock_tree_to_reset_state() -> Result<(), ClockFault> {
+    crate::clock_tree::to_reset_state(&rcc(), RCC_CFGR)
+}
+
+/// Starts the crystal oscillator and waits (bounded) for it ([`crate::clock_tree::start_crystal`]
+/// on this chip's RCC). A board whose crystal does not start runs from the internal oscillator
+/// instead (and logs the fault) rather than hang in its HAL's unbounded wait.
+pub fn start_crystal() -> Result<(), ClockFault> {
+    crate::clock_tree::start_crystal(&rcc())
 }
 
 fn rcc_read(offset: usize) -> u32 {
@@ -79,48 +61,6 @@ fn rcc_modify(offset: usize, f: impl FnOnce(u32) -> u32) {
     let value = f(rcc_read(offset));
     // SAFETY: as in `rcc_read`; called from `init` only, before anything else uses the RCC.
     unsafe { core::ptr::write_volatile((RCC + offset) as *mut u32, value) }
-}
-
-fn poll(done: impl Fn() -> bool, fault: ClockFault) -> Result<(), ClockFault> {
-    if (0..CLOCK_POLLS).any(|_| done()) {
-        Ok(())
-    } else {
-        Err(fault)
-    }
-}
-
-/// Switches the clock tree back to the internal oscillator with the PLL off.
-///
-/// AMiRo-BLT hands over with the PLL already driving SYSCLK; the PLL cannot be reconfigured while
-/// it is the system clock, so every board starts from the reset state before its HAL sets the
-/// clocks up. Every wait is bounded.
-pub fn clock_tree_to_reset_state() -> Result<(), ClockFault> {
-    rcc_modify(RCC_CR, |r| r | CR_HSION);
-    poll(
-        || rcc_read(RCC_CR) & CR_HSIRDY != 0,
-        ClockFault::HsiNotReady,
-    )?;
-    rcc_modify(RCC_CFGR, |r| r & !CFGR_SW);
-    poll(
-        || rcc_read(RCC_CFGR) & CFGR_SWS == 0,
-        ClockFault::SwitchToHsi,
-    )?;
-    rcc_modify(RCC_CR, |r| r & !CR_PLLON);
-    poll(
-        || rcc_read(RCC_CR) & CR_PLLRDY == 0,
-        ClockFault::PllStillRunning,
-    )
-}
-
-/// Starts the crystal oscillator and waits (bounded) for it. A board whose crystal does not start
-/// runs from the internal oscillator instead (and logs the fault) rather than hang in its HAL's
-/// unbounded wait.
-pub fn start_crystal() -> Result<(), ClockFault> {
-    rcc_modify(RCC_CR, |r| r | CR_HSEON);
-    poll(
-        || rcc_read(RCC_CR) & CR_HSERDY != 0,
-        ClockFault::HseNotReady,
-    )
 }
 
 /// Why the chip last reset, from the RCC's reset flags (which it then clears, so the next reset

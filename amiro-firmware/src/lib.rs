@@ -15,6 +15,7 @@
 pub mod admission;
 pub mod bxcan;
 pub mod can;
+pub mod clock_tree;
 pub mod layout;
 
 #[cfg(target_os = "none")]
