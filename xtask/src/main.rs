@@ -291,8 +291,6 @@ fn probe_image(board: &Board, elf: &Path) -> Result<PathBuf> {
 /// Flashes `elf` through the probe (probe-rs as a library, the checksum word written), restarts
 /// the board and prints its RTT log until Ctrl-C.
 fn flash_elf(board: &Board, elf: &Path) -> Result<()> {
-    use std::sync::atomic::AtomicBool;
-    use std::sync::Arc;
     let image = probe_image(board, elf)?;
     println!("flashing {} ({}) through the probe", board.name, board.chip);
     let mut session = probe::session(board, None, true)?;
@@ -300,9 +298,7 @@ fn flash_elf(board: &Board, elf: &Path) -> Result<()> {
     println!("flashed and restarted; the RTT log follows (Ctrl-C ends)");
     let bytes = std::fs::read(&image).ok();
     let mut link = probe::RttLink::attach(session, bytes.as_deref())?;
-    let interrupted = Arc::new(AtomicBool::new(false));
-    signal_hook::flag::register(signal_hook::consts::SIGINT, Arc::clone(&interrupted))
-        .context("installing the Ctrl-C handler")?;
+    let interrupted = interrupt_flag()?;
     // The log only: the trace channel's bytes are decoded but nothing is shown or saved.
     let mut pipeline = bench::live::Pipeline::new(1, None)?;
     let stop = bench::live::Stop {
@@ -318,6 +314,17 @@ fn flash_elf(board: &Board, elf: &Path) -> Result<()> {
         |lines| lines.iter().for_each(|l| println!("{l}")),
         |_, _| Ok(()),
     )
+}
+
+/// A flag the first Ctrl-C sets (a live stream then ends cleanly, its report written); a second
+/// Ctrl-C ends the process as usual.
+fn interrupt_flag() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    use signal_hook::consts::SIGINT;
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    signal_hook::flag::register_conditional_shutdown(SIGINT, 130, std::sync::Arc::clone(&flag))
+        .and_then(|_| signal_hook::flag::register(SIGINT, std::sync::Arc::clone(&flag)))
+        .context("installing the Ctrl-C handler")?;
+    Ok(flag)
 }
 
 /// The probe path of `cargo xtask bench`: builds the board's traced firmware (feature

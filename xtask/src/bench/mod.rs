@@ -555,9 +555,6 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
             true,
         ));
     }
-    if inputs.is_empty() && !args.qemu_output.is_empty() {
-        bail!("nothing to measure");
-    }
     if inputs.is_empty() {
         inputs.push(stream_live(root, board, args)?);
     }
@@ -616,8 +613,6 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
 /// Ctrl-C or `--duration`, and returns the capture for the report. The probe's raw trace bytes and
 /// log are saved in `target/bench/<board>/live-<unix time>/` (`trace.bin`: a `--capture` file).
 fn stream_live(root: &Path, board: &Board, args: &BenchArgs) -> Result<(String, Capture, bool)> {
-    use std::sync::atomic::AtomicBool;
-    use std::sync::Arc;
     use std::time::{Duration, Instant};
 
     let hz = args
@@ -627,9 +622,6 @@ fn stream_live(root: &Path, board: &Board, args: &BenchArgs) -> Result<(String, 
         Some(d) => Some(Duration::from_micros(crate::qemu::parse_duration(d)?)),
         None => None,
     };
-    let interrupted = Arc::new(AtomicBool::new(false));
-    signal_hook::flag::register(signal_hook::consts::SIGINT, Arc::clone(&interrupted))
-        .context("installing the Ctrl-C handler")?;
     let (mut source, mut pipeline, origin, idle): (Box<dyn live::Source>, _, _, _) =
         match (&args.capture, args.live) {
             (Some(path), true) => (
@@ -658,6 +650,8 @@ fn stream_live(root: &Path, board: &Board, args: &BenchArgs) -> Result<(String, 
                 )
             }
         };
+    // Only now: Ctrl-C during the build or the flashing stops the command as usual.
+    let interrupted = crate::interrupt_flag()?;
     let started = Instant::now();
     let terminal = std::io::IsTerminal::is_terminal(&std::io::stdout());
     let stop = live::Stop {
