@@ -509,6 +509,41 @@ mod tests {
         assert!(pipeline.trace_bytes() < bytes.len() as u64);
     }
 
+    /// One chunk, then the probe stops answering.
+    struct Failing(bool);
+
+    impl Source for Failing {
+        fn poll(&mut self, out: &mut Vec<Chunk>) -> Result<bool> {
+            if std::mem::replace(&mut self.0, true) {
+                anyhow::bail!("reading RTT up-channel 1: the probe stopped answering");
+            }
+            out.push(Chunk::Trace(recorded()[..100].to_vec()));
+            Ok(true)
+        }
+    }
+
+    #[test]
+    fn a_source_error_ends_the_run_and_keeps_what_arrived() {
+        let mut pipeline = Pipeline::new(120_000_000, None).unwrap();
+        let stop = Stop {
+            after: None,
+            idle: None,
+            refresh: Duration::from_secs(3600),
+        };
+        let err = run(
+            &mut Failing(false),
+            &mut pipeline,
+            stop,
+            &AtomicBool::new(false),
+            |_| {},
+            |_, _| Ok(()),
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("stopped answering"));
+        assert_eq!(pipeline.trace_bytes(), 100);
+        assert!(pipeline.capture().reader.records > 0);
+    }
+
     #[test]
     fn a_growing_file_is_read_as_it_grows() {
         let path = std::env::temp_dir().join(format!("amiro-growing-{}.trace", std::process::id()));

@@ -659,7 +659,9 @@ fn stream_live(root: &Path, board: &Board, args: &BenchArgs) -> Result<(String, 
         idle,
         refresh: Duration::from_secs(1),
     };
-    live::run(
+    // A probe that stops answering (board reset, cable off) ends the stream, not the report:
+    // what arrived is measured and its raw bytes are already saved.
+    let streamed = live::run(
         source.as_mut(),
         &mut pipeline,
         stop,
@@ -689,7 +691,10 @@ fn stream_live(root: &Path, board: &Board, args: &BenchArgs) -> Result<(String, 
             }
             Ok(())
         },
-    )?;
+    );
+    if let Err(e) = streamed {
+        eprintln!("the stream ended early: {e:#}\nthe report covers what arrived before");
+    }
     let saved = pipeline.saved().map(Path::to_path_buf);
     let (capture, rest) = pipeline.finish()?;
     if let Some(rest) = rest {
