@@ -227,6 +227,42 @@ pub fn write_checksum(elf: &Path, out: &Path) -> Result<u32> {
     Ok(checksum)
 }
 
+/// The bytes a probe writes for an image: every loadable segment's file contents at its load
+/// (physical) address, so initialised data goes to flash where the startup code copies it from.
+pub fn load_segments(bytes: &[u8]) -> Result<Vec<(u64, Vec<u8>)>> {
+    use object::read::elf::{ElfFile32, FileHeader, ProgramHeader};
+    let file = ElfFile32::<object::Endianness>::parse(bytes)
+        .context("not a 32-bit ELF image (a firmware build for the board's chip?)")?;
+    let endian = file.endian();
+    let header = file.elf_header();
+    let mut out = Vec::new();
+    for segment in header
+        .program_headers(endian, bytes)
+        .context("reading the ELF program headers")?
+    {
+        if segment.p_type(endian) != object::elf::PT_LOAD || segment.p_filesz(endian) == 0 {
+            continue;
+        }
+        let data = segment
+            .data(endian, bytes)
+            .map_err(|()| anyhow::anyhow!("a loadable segment lies outside the file"))?;
+        out.push((u64::from(segment.p_paddr(endian)), data.to_vec()));
+    }
+    if out.is_empty() {
+        bail!("the ELF image has no loadable contents");
+    }
+    Ok(out)
+}
+
+/// The address of the RTT control block (`_SEGGER_RTT`) in an image, if it has one.
+pub fn rtt_control_block(bytes: &[u8]) -> Option<u64> {
+    use object::ObjectSymbol;
+    let file = object::File::parse(bytes).ok()?;
+    file.symbols()
+        .find(|s| s.name() == Ok("_SEGGER_RTT") && !s.is_undefined())
+        .map(|s| s.address())
+}
+
 /// Prints the size table.
 pub fn print_table(reports: &[SizeReport]) {
     println!(
@@ -352,5 +388,62 @@ mod tests {
         ];
         let c = checksum_word(&words);
         assert_eq!(words.iter().fold(c, |s, w| s.wrapping_add(*w)), 0);
+    }
+
+    /// A minimal little-endian ELF32 with `segments` (load address, contents, file size); the
+    /// symbol table is left out.
+    fn elf32(segments: &[(u32, &[u8], bool)]) -> Vec<u8> {
+        let phoff = 52u32;
+        let data_at = phoff + 32 * segments.len() as u32;
+        let mut out = vec![0x7f, b'E', b'L', b'F', 1, 1, 1];
+        out.resize(16, 0);
+        out.extend_from_slice(&2u16.to_le_bytes()); // e_type EXEC
+        out.extend_from_slice(&40u16.to_le_bytes()); // e_machine ARM
+        out.extend_from_slice(&1u32.to_le_bytes()); // e_version
+        out.extend_from_slice(&0x0800_6000u32.to_le_bytes()); // e_entry
+        out.extend_from_slice(&phoff.to_le_bytes());
+        out.extend_from_slice(&0u32.to_le_bytes()); // e_shoff
+        out.extend_from_slice(&0u32.to_le_bytes()); // e_flags
+        for v in [52u16, 32, segments.len() as u16, 40, 0, 0] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        let mut offset = data_at;
+        for (paddr, contents, load) in segments {
+            let len = contents.len() as u32;
+            let p_type: u32 = if *load { 1 } else { 4 }; // PT_LOAD or PT_NOTE
+                                                         // A RAM address as the virtual one: .data runs in RAM, is stored in flash.
+            for v in [p_type, offset, 0x2000_0000, *paddr, len, len + 8, 6, 4] {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+            offset += len;
+        }
+        for (_, contents, _) in segments {
+            out.extend_from_slice(contents);
+        }
+        out
+    }
+
+    #[test]
+    fn loadable_segments_at_their_load_addresses() {
+        let image = elf32(&[
+            (0x0800_6000, &[1, 2, 3, 4], true),
+            (0x0800_9000, &[9, 9], false),
+            (0x0800_7000, &[5, 6], true),
+        ]);
+        let segments = load_segments(&image).unwrap();
+        assert_eq!(
+            segments,
+            vec![(0x0800_6000, vec![1, 2, 3, 4]), (0x0800_7000, vec![5, 6])]
+        );
+        assert_eq!(rtt_control_block(&image), None);
+    }
+
+    #[test]
+    fn a_damaged_image_is_an_error_not_a_panic() {
+        let image = elf32(&[(0x0800_6000, &[1, 2, 3, 4], true)]);
+        for cut in [0, 10, 60, image.len() - 2] {
+            assert!(load_segments(&image[..cut]).is_err(), "cut at {cut}");
+        }
+        assert!(load_segments(&elf32(&[(0x0800_6000, &[1], false)])).is_err());
     }
 }

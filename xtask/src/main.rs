@@ -17,6 +17,7 @@ mod elf;
 mod flash;
 mod interop;
 mod levels_check;
+mod probe;
 mod qemu;
 mod scenarios;
 
@@ -269,14 +270,14 @@ fn build_boards(root: &Path, boards: &[&Board], bare_chip: bool) -> Result<Vec<e
     Ok(reports)
 }
 
-/// Writes the AMiRo-BLT checksum word into a copy of `elf` (images linked behind the bootloader)
-/// and flashes it with probe-rs, which then streams RTT.
-fn flash_elf(board: &Board, elf: &Path) -> Result<()> {
+/// The image a probe writes: for an ELF linked behind AMiRo-BLT a copy with the bootloader's
+/// checksum word written into its slot (else AMiRo-BLT would not start it), else the ELF as built.
+fn probe_image(board: &Board, elf: &Path) -> Result<PathBuf> {
     let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
     let behind_bootloader = object::read::File::parse(&*bytes)
         .map(|f| object::Object::section_by_name(&f, elf::CHECKSUM_SECTION).is_some())
         .unwrap_or(false);
-    let image = if behind_bootloader {
+    if behind_bootloader {
         let patched = elf.with_extension("blt.elf");
         let word = elf::write_checksum(elf, &patched)?;
         println!(
@@ -284,25 +285,87 @@ fn flash_elf(board: &Board, elf: &Path) -> Result<()> {
             board.name,
             patched.display()
         );
-        patched
+        Ok(patched)
     } else {
         println!(
             "{}: bare-chip image (no AMiRo-BLT slot), flashed as built",
             board.name
         );
-        elf.to_path_buf()
+        Ok(elf.to_path_buf())
+    }
+}
+
+/// Flashes `elf` through the probe (probe-rs as a library, the checksum word written), restarts
+/// the board and prints its RTT log until Ctrl-C.
+fn flash_elf(board: &Board, elf: &Path) -> Result<()> {
+    let image = probe_image(board, elf)?;
+    println!("flashing {} ({}) through the probe", board.name, board.chip);
+    let mut session = probe::session(board, None, true)?;
+    probe::flash(&mut session, &image)?;
+    println!("flashed and restarted; the RTT log follows (Ctrl-C ends)");
+    let bytes = std::fs::read(&image).ok();
+    let mut link = probe::RttLink::attach(session, bytes.as_deref())?;
+    let interrupted = interrupt_flag()?;
+    // The log only: the trace channel's bytes are decoded but nothing is shown or saved.
+    let mut pipeline = bench::live::Pipeline::new(1, None)?;
+    let stop = bench::live::Stop {
+        after: None,
+        idle: None,
+        refresh: std::time::Duration::from_secs(3600),
     };
+    bench::live::run(
+        &mut link,
+        &mut pipeline,
+        stop,
+        &interrupted,
+        |lines| lines.iter().for_each(|l| println!("{l}")),
+        |_, _| Ok(()),
+    )
+}
+
+/// A flag the first Ctrl-C sets (a live stream then ends cleanly, its report written); a second
+/// Ctrl-C ends the process as usual.
+fn interrupt_flag() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    use signal_hook::consts::SIGINT;
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    signal_hook::flag::register_conditional_shutdown(SIGINT, 130, std::sync::Arc::clone(&flag))
+        .and_then(|_| signal_hook::flag::register(SIGINT, std::sync::Arc::clone(&flag)))
+        .context("installing the Ctrl-C handler")?;
+    Ok(flag)
+}
+
+/// The probe path of `cargo xtask bench`: builds the board's traced firmware (feature
+/// `task-trace`) and flashes it, or with `attach` attaches to the running one; then finds its RTT
+/// control block.
+fn probe_link(
+    root: &Path,
+    board: &Board,
+    attach: bool,
+    selector: Option<&str>,
+) -> Result<probe::RttLink> {
+    let elf_path = firmware_elf(root, board);
+    if attach {
+        let session = probe::session(board, selector, false)?;
+        // The last build's ELF locates the RTT block, if it is there; else RAM is scanned.
+        let bytes = std::fs::read(&elf_path).ok();
+        return probe::RttLink::attach(session, bytes.as_deref());
+    }
+    ensure_toolchain(root)?;
+    cargo(
+        &root.join(board.name),
+        &["build", "--release", "--quiet", "--features", "task-trace"],
+    )
+    .with_context(|| format!("building {} with task-trace", board.name))?;
+    elf::inspect(board, &elf_path, true)?;
+    let image = probe_image(board, &elf_path)?;
     println!(
-        "flashing {} ({}) through probe-rs; RTT follows",
+        "flashing the traced build of {} ({}) through the probe",
         board.name, board.chip
     );
-    let mut args = vec!["run", "--chip", board.chip];
-    // DiWheelDrive's original firmware disables the debug pins; connect under reset in any case.
-    args.push("--connect-under-reset");
-    let image_arg = image.to_string_lossy().into_owned();
-    args.push(&image_arg);
-    run_tool(Path::new("."), "probe-rs", &args)
-        .context("probe-rs (install: cargo install probe-rs-tools)")
+    let mut session = probe::session(board, selector, true)?;
+    probe::flash(&mut session, &image)?;
+    let bytes = std::fs::read(&image).with_context(|| format!("reading {}", image.display()))?;
+    probe::RttLink::attach(session, Some(&bytes))
 }
 
 /// Where cargo leaves a board's release ELF.

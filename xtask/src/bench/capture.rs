@@ -262,18 +262,58 @@ impl Builder {
     }
 }
 
+/// A capture of the trace channel read as it arrives (the live bench): bytes in any chunks, the
+/// capture so far at any time. Fed the same bytes, it ends where [`read`] does.
+pub struct Stream {
+    reader: Reader,
+    builder: Builder,
+    bytes: u64,
+}
+
+impl Stream {
+    /// A stream on the trace clock `default_hz` unless a boot record says otherwise.
+    pub fn new(default_hz: u64) -> Self {
+        Self {
+            reader: Reader::new(),
+            builder: Builder::new(default_hz),
+            bytes: 0,
+        }
+    }
+
+    /// Takes the next bytes of the channel.
+    pub fn push(&mut self, bytes: &[u8]) {
+        self.bytes += bytes.len() as u64;
+        for &b in bytes {
+            if let Some(record) = self.reader.push(b) {
+                self.builder.record(record);
+            }
+        }
+    }
+
+    /// Bytes taken so far.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    /// The capture so far.
+    pub fn capture(&mut self) -> &Capture {
+        self.builder.capture.reader = self.reader.stats();
+        &self.builder.capture
+    }
+
+    /// The whole capture.
+    pub fn finish(mut self) -> Capture {
+        self.builder.capture.reader = self.reader.stats();
+        self.builder.capture
+    }
+}
+
 /// Reads a capture of the trace channel (robot): `bytes` as captured, the trace clock
 /// `default_hz` unless the capture's boot record says otherwise.
 pub fn read(bytes: &[u8], default_hz: u64) -> Result<Capture> {
-    let mut reader = Reader::new();
-    let mut builder = Builder::new(default_hz);
-    for &b in bytes {
-        if let Some(record) = reader.push(b) {
-            builder.record(record);
-        }
-    }
-    builder.capture.reader = reader.stats();
-    Ok(builder.capture)
+    let mut stream = Stream::new(default_hz);
+    stream.push(bytes);
+    Ok(stream.finish())
 }
 
 /// The bytes of the `# T` lines (binary records printed in hex) of a QEMU console, each record

@@ -1,6 +1,7 @@
 //! `cargo xtask bench`: measured timing against the analysis, per task and per topic.
 //!
 //! The trace (`amiro_trace` records: task runs, handler events, frames acknowledged) comes from a
+//! debug probe (flashed or attached to, streamed live: `live`, `crate::probe`), from a
 //! saved capture of the trace channel, from a QEMU run (`--qemu --stimulus`), or from the output of
 //! runs already made (`--qemu-output`, what `cargo xtask test` uses after the scenarios). The
 //! analysed bounds come from `schedule_analysis` on the same apps and timing files as
@@ -8,6 +9,7 @@
 //! period it was seen at) or for a named scenario. docs/bench.md explains every column.
 pub mod calibrate;
 pub mod capture;
+pub mod live;
 pub mod report;
 pub mod timeline;
 
@@ -29,13 +31,25 @@ pub struct BenchArgs {
     /// A saved capture of the trace channel (RTT channel 1, raw bytes).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["qemu", "qemu_output"])]
     pub capture: Option<PathBuf>,
+    /// With `--capture`: read the file as it grows (another RTT client writing it) with the live
+    /// view, until Ctrl-C, `--duration` or 2 s without new bytes.
+    #[arg(long, requires = "capture")]
+    pub live: bool,
+    /// Through the probe: attach to the running firmware instead of building and flashing the
+    /// traced build (the ELF of the last build, if there is one, locates the RTT block).
+    #[arg(long, conflicts_with_all = ["capture", "qemu", "qemu_output"])]
+    pub attach: bool,
+    /// Through the probe: which one, `VID:PID[:SERIAL]` (default: the only one attached).
+    #[arg(long, value_name = "SELECTOR")]
+    pub probe: Option<String>,
     /// Run the board's QEMU build against `--stimulus` and measure that run.
     #[arg(long, requires = "stimulus")]
     pub qemu: bool,
     /// The stimulus of a QEMU run (a candump -l log).
     #[arg(long, value_name = "FILE")]
     pub stimulus: Option<PathBuf>,
-    /// How long the QEMU run lasts (virtual time); default: the stimulus's `# duration:` or 2s.
+    /// How long the QEMU run lasts (virtual time; default: the stimulus's `# duration:` or 2s),
+    /// or how long the probe streams (wall clock; default: until Ctrl-C).
     #[arg(long)]
     pub duration: Option<String>,
     /// Work directories of QEMU runs already made (`output.log` and `trace.bin`), each measured on
@@ -498,7 +512,9 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
     let board = crate::boards::by_name(&args.board)
         .with_context(|| format!("unknown board `{}`", args.board))?;
     let mut inputs: Vec<(String, Capture, bool)> = Vec::new();
-    if let Some(path) = &args.capture {
+    if args.live {
+        inputs.push(stream_live(root, board, args)?);
+    } else if let Some(path) = &args.capture {
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         let hz = args
             .clock_hz
@@ -540,9 +556,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
         ));
     }
     if inputs.is_empty() {
-        bail!(
-            "nothing to measure: give --capture FILE, --qemu --stimulus FILE or --qemu-output FILE"
-        );
+        inputs.push(stream_live(root, board, args)?);
     }
     let mut ok = true;
     for (origin, capture, qemu) in &inputs {
@@ -592,6 +606,109 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
         }
     }
     Ok(ok || !args.check)
+}
+
+/// The probe path (`--attach`, or neither `--capture` nor `--qemu`), or `--capture FILE --live`:
+/// streams the channels through the live pipeline with the view redrawn every second, until
+/// Ctrl-C or `--duration`, and returns the capture for the report. The probe's raw trace bytes and
+/// log are saved in `target/bench/<board>/live-<unix time>/` (`trace.bin`: a `--capture` file).
+fn stream_live(root: &Path, board: &Board, args: &BenchArgs) -> Result<(String, Capture, bool)> {
+    use std::time::{Duration, Instant};
+
+    let hz = args
+        .clock_hz
+        .unwrap_or_else(|| default_clock_hz(board, false));
+    let after = match &args.duration {
+        Some(d) => Some(Duration::from_micros(crate::qemu::parse_duration(d)?)),
+        None => None,
+    };
+    let (mut source, mut pipeline, origin, idle): (Box<dyn live::Source>, _, _, _) =
+        match (&args.capture, args.live) {
+            (Some(path), true) => (
+                Box::new(live::GrowingFile::open(path)?),
+                live::Pipeline::new(hz, None)?,
+                path.display().to_string(),
+                Some(Duration::from_secs(2)),
+            ),
+            _ => {
+                let link = crate::probe_link(root, board, args.attach, args.probe.as_deref())?;
+                let stamp = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map(|d| d.as_secs())
+                    .unwrap_or(0);
+                let dir = crate::target_dir(root)
+                    .join("bench")
+                    .join(board.name)
+                    .join(format!("live-{stamp}"));
+                let pipeline = live::Pipeline::new(hz, Some(&dir))?;
+                // The report goes beside the saved capture (the origin's last component names it).
+                (
+                    Box::new(link) as Box<dyn live::Source>,
+                    pipeline,
+                    dir.display().to_string(),
+                    None,
+                )
+            }
+        };
+    // Only now: Ctrl-C during the build or the flashing stops the command as usual.
+    let interrupted = crate::interrupt_flag()?;
+    let started = Instant::now();
+    let terminal = std::io::IsTerminal::is_terminal(&std::io::stdout());
+    let stop = live::Stop {
+        after,
+        idle,
+        refresh: Duration::from_secs(1),
+    };
+    // A probe that stops answering (board reset, cable off) ends the stream, not the report:
+    // what arrived is measured and its raw bytes are already saved.
+    let streamed = live::run(
+        source.as_mut(),
+        &mut pipeline,
+        stop,
+        &interrupted,
+        |lines| {
+            if !terminal {
+                for l in lines {
+                    println!("log: {l}");
+                }
+            }
+        },
+        |pipeline, recent| {
+            let bytes = pipeline.trace_bytes();
+            let bench = measure(
+                root,
+                board,
+                pipeline.capture(),
+                &origin,
+                false,
+                args.scenario.as_deref(),
+            )?;
+            let view = live::view(&bench, bytes, started.elapsed(), recent, terminal);
+            if terminal {
+                print!("{}{view}", live::REDRAW);
+            } else {
+                println!("{view}");
+            }
+            Ok(())
+        },
+    );
+    if let Err(e) = streamed {
+        eprintln!("the stream ended early: {e:#}\nthe report covers what arrived before");
+    }
+    let saved = pipeline.saved().map(Path::to_path_buf);
+    let (capture, rest) = pipeline.finish()?;
+    if let Some(rest) = rest {
+        println!("log: {rest}");
+    }
+    if let Some(saved) = saved {
+        println!(
+            "capture saved: {} (again: cargo xtask bench {} --capture {})",
+            saved.display(),
+            board.name,
+            saved.display()
+        );
+    }
+    Ok((origin, capture, false))
 }
 
 /// Measures the outputs of a board's QEMU scenario runs (`cargo xtask test`, after the scenarios):
