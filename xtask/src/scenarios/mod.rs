@@ -267,14 +267,10 @@ impl RunOutput {
     ) -> Result<Stream> {
         let per_sample = per_sample.max(1);
         let releases = self.releases(topic, from, to)?;
-        // A release's frames leave before the next release, which may fall after `to`: count
-        // frames up to one period after the last release in the window (the next release's frames
-        // cannot come earlier).
-        let frames_end = releases.last().map_or(to, |last| last + period);
         let frames: Vec<u64> = self
             .times(id)
             .into_iter()
-            .filter(|t| (from..frames_end).contains(t))
+            .filter(|t| (from..to).contains(t))
             .collect();
         let first = *releases
             .first()
