@@ -76,8 +76,14 @@ fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         out.frames.iter().all(|f| f.data.len() == 4),
         "magnetometer frames carry 4 bytes"
     );
-    // The window ends a period before the run does: the last release's frame must fit in the run.
-    let stream = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, 199_000)?;
+    // The window ends just after the last frame: every release before it has its frame in the run
+    // (one publisher's frames leave in release order), and no release after it is counted.
+    let end = out
+        .times(0x605)
+        .last()
+        .map(|t| t + 1)
+        .context("no magnetometer-x frame")?;
+    let stream = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, end)?;
     let answered = stream.releases[0] - 10_000;
     let bound = bounds.publisher_latency_us("magnetometer-x", "medium", 900)?;
     // The first release is the command's handling: it must come well inside one period.
