@@ -346,7 +346,8 @@ fn diagnostics_json(page: &DiagnosticsPage) -> Value {
                 Verdict::AcceptedWithWarning => "accepted-with-warning",
             },
             "priority_needed": request.priority_needed.map(|p| p.name()),
-            "searched": request.searched,
+            // As the DBC signal (bit 7 of page 0x80): set when the board did not search.
+            "not_searched": !request.searched,
             "shortest_period_us": request.shortest_period.map(|t| t.as_micros()),
             "shortest_period_value": request.shortest_period.map_or(0, |t| t.value),
             "shortest_period_unit": unit_name(request.shortest_period.map_or(TimeUnit::Millis, |t| t.unit)),
