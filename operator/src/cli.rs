@@ -364,6 +364,15 @@ pub struct SendArgs {
     /// Send frames even if the AMiRo decoder rejects them (testing a board's error handling)
     #[arg(long, global = true)]
     pub raw: bool,
+
+    /// Before a publish request leaves, listen this long to learn what the robot runs (commands and sensor
+    /// data heard), so the admission check sees the robot as it is [default: 1s on a live bus; 0 skips it]
+    #[arg(long, global = true, value_name = "DURATION", value_parser = parse_timeout)]
+    pub listen: Option<std::time::Duration>,
+
+    /// Learn what the robot runs from a log of its bus (candump -l or any form `decode` reads), before listening
+    #[arg(long, global = true, value_name = "FILE")]
+    pub heard: Option<PathBuf>,
 }
 
 /// `amiro monitor`.

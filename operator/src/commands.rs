@@ -5,7 +5,7 @@ use std::io::{self, BufRead, BufReader, IsTerminal, Write};
 use std::path::Path;
 use std::process::ExitCode;
 
-use amiro_can::TOPICS;
+use amiro_can::{Command, Message, SensorCommand, SensorMode, TOPICS};
 use anyhow::{bail, Context, Result};
 
 use crate::bus::{self, BusUrl, Direction};
@@ -126,14 +126,45 @@ pub fn send(args: &SendArgs) -> Result<ExitCode> {
         }
         None => frames_to_send(args.message.as_ref(), &args.frames, args.raw)?,
     };
-    // Before anything leaves: would the board that owns the topic refuse a publish request?
-    let mut checker = match crate::admission::Checker::load() {
-        Ok(checker) => Some(checker),
-        Err(error) => {
-            eprintln!("note: publish requests are not checked: {error:#}");
-            None
+    let url = bus_url(args.bus.as_deref())?;
+    let mut bus = bus::open(&url, Direction::Send)?;
+    // Before anything leaves: would the board that owns the topic refuse a publish request, with
+    // what the robot runs as far as the bus (or a log of it) tells?
+    let requests = frames.iter().any(|frame| {
+        matches!(
+            decode_frame(frame),
+            Ok(Message::Command(Command::Sensor(SensorCommand {
+                mode: SensorMode::Publish(_),
+                ..
+            })))
+        )
+    });
+    let mut checker = None;
+    if requests {
+        match crate::admission::Checker::load() {
+            Ok(mut loaded) => {
+                if let Some(path) = &args.heard {
+                    learn_from_log(&mut loaded, path)?;
+                }
+                let live = !matches!(url, BusUrl::File { .. });
+                match args.listen {
+                    Some(listen) if !live && !listen.is_zero() => {
+                        eprintln!(
+                            "note: {url} is a log file: nothing to listen to (use --heard FILE)"
+                        )
+                    }
+                    _ if live => {
+                        let listen = args.listen.unwrap_or(DEFAULT_LISTEN);
+                        listen_first(bus.as_mut(), &mut loaded, listen)
+                            .with_context(|| format!("listening on {url}"))?;
+                    }
+                    _ => {}
+                }
+                checker = Some(loaded);
+            }
+            Err(error) => eprintln!("note: publish requests are not checked: {error:#}"),
         }
-    };
+    }
     for frame in &frames {
         let (Some(checker), Ok(message)) = (checker.as_mut(), decode_frame(frame)) else {
             continue;
@@ -142,8 +173,6 @@ pub fn send(args: &SendArgs) -> Result<ExitCode> {
             eprintln!("warning: {frame}: {warning}");
         }
     }
-    let url = bus_url(args.bus.as_deref())?;
-    let mut bus = bus::open(&url, Direction::Send)?;
     let mut report = Report::new(io::stdout().lock(), false);
     let mut outcome = Ok(());
     for frame in &frames {
@@ -159,6 +188,49 @@ pub fn send(args: &SendArgs) -> Result<ExitCode> {
     outcome.with_context(|| format!("sending on {url}"))?;
     closed?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// How long `amiro send` listens before a publish request on a live bus, unless `--listen` says.
+const DEFAULT_LISTEN: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Feeds a log of the bus to the admission check (verdicts in it are printed).
+fn learn_from_log(checker: &mut crate::admission::Checker, path: &Path) -> Result<()> {
+    let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+    for line in text_lines(BufReader::new(file)) {
+        let (_, line) = line.with_context(|| format!("cannot read {}", path.display()))?;
+        if let Ok(Some(logged)) = line.and_then(|line| parse_line(&line)) {
+            if let Some(verdict) = checker.heard(&logged) {
+                eprintln!("heard: {verdict}");
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Listens to a live bus for `listen`, teaching the admission check what runs.
+fn listen_first(
+    bus: &mut dyn bus::Bus,
+    checker: &mut crate::admission::Checker,
+    listen: std::time::Duration,
+) -> Result<()> {
+    let until = std::time::Instant::now() + listen;
+    loop {
+        let left = until.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            return Ok(());
+        }
+        match bus.receive(Some(left))? {
+            bus::Reception::Frame(mut logged) => {
+                logged
+                    .timestamp
+                    .get_or_insert_with(crate::frame::Timestamp::now);
+                if let Some(verdict) = checker.heard(&logged) {
+                    eprintln!("heard: {verdict}");
+                }
+            }
+            _ => return Ok(()),
+        }
+    }
 }
 
 /// The frames `send` was asked for, each checked against the decoder unless `raw`.

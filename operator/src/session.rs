@@ -87,6 +87,13 @@ fn watch(
     statistics: &mut Statistics,
 ) -> Result<()> {
     let mut out = io::stdout().lock();
+    // In English, an admission verdict's two pages are followed by the verdict in one sentence, with what would
+    // be accepted as far as the frames heard tell (docs/operator.md).
+    let mut admission = if view.json {
+        None
+    } else {
+        crate::admission::Checker::load().ok()
+    };
     let give_up = args.timeout.map(|timeout| Instant::now() + timeout);
     while args.count.is_none_or(|count| statistics.frames() < count) {
         let left = give_up.map(|give_up| give_up.saturating_duration_since(Instant::now()));
@@ -95,11 +102,19 @@ fn watch(
         }
         match bus.receive(left)? {
             Reception::Frame(logged) => {
+                let verdict = admission.as_mut().and_then(|checker| {
+                    let mut stamped = logged.clone();
+                    stamped.timestamp.get_or_insert_with(Timestamp::now);
+                    checker.heard(&stamped)
+                });
                 if !filter.admits(&logged.frame) {
                     continue;
                 }
                 statistics.record(&logged);
                 writeln!(out, "{}", view.line(&logged))?;
+                if let Some(verdict) = verdict {
+                    writeln!(out, "  → {verdict}")?;
+                }
                 out.flush()?;
             }
             Reception::TimedOut | Reception::Ended | Reception::Interrupted => break,

@@ -711,3 +711,88 @@ fn monitor_filters_names_positions_and_summarises_a_log() {
         "{stderr}"
     );
 }
+
+#[test]
+fn send_warns_from_what_a_log_of_the_bus_shows_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let bus = format!("file:{}", dir.path().join("sent.log").display());
+    // On an idle robot a gyroscope every 2 ms at medium passes without a warning.
+    let (ok, _, stderr) = run(&["send", "208#01020000", "--bus", &bus]);
+    assert!(ok, "{stderr}");
+    assert!(!stderr.contains("warning"), "{stderr}");
+    // A candump -l log in which magnetometer-x data arrive at medium every 900 µs (its command was
+    // never heard): the same request is refused, and the measured period is named.
+    let heard = dir.path().join("heard.log");
+    let lines: String = (0..12)
+        .map(|k| format!("(1700000000.{:06}) can0 605#00000000\n", 1000 + k * 900))
+        .collect();
+    std::fs::write(&heard, lines).unwrap();
+    let (ok, _, stderr) = run(&[
+        "send",
+        "208#01020000",
+        "--bus",
+        &bus,
+        "--heard",
+        heard.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("warning: 208#01020000: DiWheelDrive would refuse"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("magnetometer-x at medium every ~900 µs"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn monitor_explains_an_admission_verdict_in_one_sentence() {
+    use amiro_can::{
+        AdmissionVerdict, Board, Count, Priority, SampleTime, Topic, Verdict, Violation,
+    };
+    let verdict = AdmissionVerdict {
+        board: Board::DiWheelDrive,
+        topic: Topic::Accelerometer,
+        requested: SampleTime::from_micros(1).unwrap(),
+        priority: Priority::Urgent,
+        verdict: Verdict::Refused,
+        violation: Violation::Task { index: 0 },
+        wcrt_us: Count::saturating(u32::MAX),
+        deadline_us: Count::saturating(400),
+        shortest_period: None,
+        priority_needed: None,
+        searched: false,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("verdict.log");
+    let lines: String = verdict
+        .frames(Priority::Urgent)
+        .iter()
+        .enumerate()
+        .map(|(k, frame)| {
+            let data: String = frame.data().iter().map(|b| format!("{b:02X}")).collect();
+            format!(
+                "(1700000000.00000{k}) can0 {:03X}#{data}\n",
+                frame.id().raw()
+            )
+        })
+        .collect();
+    std::fs::write(&log, lines).unwrap();
+    let stdout = stdout_of(&["monitor", "--bus", &format!("file:{}", log.display())]);
+    let sentence = stdout
+        .lines()
+        .find(|l| l.starts_with("  → "))
+        .unwrap_or_else(|| panic!("no verdict sentence in {stdout}"));
+    assert!(
+        sentence.contains(
+            "DiWheelDrive refused \"publish accelerometer every 1 µs at urgent\": its task"
+        ),
+        "{sentence}"
+    );
+    assert!(sentence.contains("deadline 400 µs"), "{sentence}");
+    assert!(
+        sentence.contains("At urgent it would accept every"),
+        "{sentence}"
+    );
+}

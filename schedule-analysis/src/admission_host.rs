@@ -107,8 +107,11 @@ fn build_with(
     label: &str,
     publishers: &[(String, &str)],
 ) -> Result<Model, BuildError> {
+    // Unique per call: two lowerings in one process (threads of a test run) must not share the file.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let path = std::env::temp_dir().join(format!(
-        "schedule-analysis-lower-{}-{label}.scenario.json",
+        "schedule-analysis-lower-{}-{call}-{label}.scenario.json",
         std::process::id()
     ));
     let json = serde_json::json!({

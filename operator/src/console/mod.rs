@@ -44,6 +44,11 @@ pub fn run(args: &ConsoleArgs) -> Result<ExitCode> {
         ..Filter::default()
     };
     let mut console = Console::new(view, filter);
+    // Publish requests are checked against what the console hears (docs/operator.md).
+    match crate::admission::Checker::load() {
+        Ok(checker) => console = console.with_admission(checker),
+        Err(error) => console.status = format!("publish requests are not checked: {error:#}"),
+    }
     let started = Instant::now();
     let outcome = if args.headless {
         let linger = parse_duration(&args.linger).context("--linger")?;

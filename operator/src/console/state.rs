@@ -8,6 +8,8 @@ use std::time::Duration;
 use amiro_can::{MotorCommand, Priority, TOPICS};
 use clap::CommandFactory;
 
+use crate::admission::Checker;
+use crate::describe::decode_frame;
 use crate::drive::{motor_frame, KeepAlive};
 use crate::frame::{LoggedFrame, RawFrame, Timestamp};
 use crate::period::human_micros;
@@ -97,6 +99,8 @@ pub struct Console {
     pub statistics: Statistics,
     /// Set when the console should end.
     pub quit: bool,
+    /// The robot's admission check fed with what the console hears (`None`: requests are not checked).
+    admission: Option<Checker>,
 }
 
 impl Console {
@@ -118,7 +122,15 @@ impl Console {
             filter,
             statistics: Statistics::default(),
             quit: false,
+            admission: None,
         }
+    }
+
+    /// Checks publish requests before they are sent, with what the console hears on the bus, and explains
+    /// the admission verdicts heard.
+    pub fn with_admission(mut self, checker: Checker) -> Self {
+        self.admission = Some(checker);
+        self
     }
 
     /// Every line kept, oldest first.
@@ -162,10 +174,20 @@ impl Console {
 
     /// A frame heard on the bus.
     pub fn heard(&mut self, logged: &LoggedFrame) {
+        // Every frame teaches the admission check what runs; a verdict's second page explains it.
+        let verdict = self.admission.as_mut().and_then(|checker| {
+            let mut stamped = logged.clone();
+            stamped.timestamp.get_or_insert_with(Timestamp::now);
+            checker.heard(&stamped)
+        });
         if self.filter.admits(&logged.frame) {
             self.statistics.record(logged);
             let line = self.view.line(logged);
             self.say(line);
+        }
+        if let Some(verdict) = verdict {
+            self.status = verdict.clone();
+            self.say(format!("! {verdict}"));
         }
     }
 
@@ -341,7 +363,10 @@ impl Console {
             _ => {}
         }
         match parse_step(line, false) {
-            Ok(Some(Step::Send(frames))) => frames,
+            Ok(Some(Step::Send(frames))) => {
+                self.check_requests(&frames);
+                frames
+            }
             Ok(Some(Step::Drive(plan))) => {
                 self.drive_priority = plan.priority;
                 self.keep_alive = KeepAlive::new(plan.every);
@@ -369,6 +394,22 @@ impl Console {
                 self.say(format!("! {error:#}"));
                 Vec::new()
             }
+        }
+    }
+
+    /// Warns (and still sends: the board decides) when a board would refuse a request.
+    fn check_requests(&mut self, frames: &[RawFrame]) {
+        let Some(checker) = self.admission.as_mut() else {
+            return;
+        };
+        let warnings: Vec<String> = frames
+            .iter()
+            .filter_map(|frame| decode_frame(frame).ok())
+            .filter_map(|message| checker.check(&message))
+            .collect();
+        for warning in warnings {
+            self.status = format!("warning: {warning}");
+            self.say(format!("! warning: {warning}"));
         }
     }
 
@@ -763,6 +804,47 @@ mod tests {
         console.key(Key::Down, Duration::ZERO);
         console.key(Key::Down, Duration::ZERO);
         assert_eq!(console.input, "");
+    }
+
+    #[test]
+    fn a_request_the_robot_would_refuse_is_warned_about_from_what_was_heard() {
+        let mut console =
+            console().with_admission(Checker::load().expect("the repository's timing files"));
+        // On an idle robot a 2 ms gyroscope passes without a word.
+        let frames = type_line(
+            &mut console,
+            "publish gyroscope --every 2ms --priority medium",
+            Duration::ZERO,
+        );
+        assert_eq!(texts(&frames), ["208#01020000"]);
+        assert!(!console.status.contains("warning"), "{}", console.status);
+        type_line(
+            &mut console,
+            "stop gyroscope --priority medium",
+            Duration::ZERO,
+        );
+        // Somebody else starts the thesis example: the console hears the command.
+        console.heard(&LoggedFrame {
+            timestamp: None,
+            interface: None,
+            frame: crate::frame::parse_compact("205#01840302").expect("frame"),
+        });
+        let frames = type_line(
+            &mut console,
+            "publish gyroscope --every 2ms --priority medium",
+            Duration::ZERO,
+        );
+        assert_eq!(texts(&frames), ["208#01020000"], "sent all the same");
+        assert!(
+            console.status.contains("DiWheelDrive would refuse"),
+            "{}",
+            console.status
+        );
+        assert!(
+            console.log().iter().any(|l| l.starts_with("! warning:")),
+            "{:?}",
+            console.log()
+        );
     }
 
     #[test]
