@@ -366,6 +366,93 @@ pub fn trace_time(line: &str) -> Result<u64> {
     parse_seconds(stamp)
 }
 
+/// The boards' admission check run on the host (the same code and table, `schedule_analysis::admission`) for the
+/// publish request `request` (a frame such as `21F#01050000`), beside `running`: publish requests in the order
+/// heard, each kept when its owner board admits it — what `cargo xtask analyze --check` decides for the same
+/// configuration. A scenario compares a board's verdict with it.
+pub fn host_admission(
+    root: &Path,
+    running: &[&str],
+    request: &str,
+) -> Result<schedule_analysis::admission::Decision> {
+    use schedule_analysis::{
+        admission, admission_host, model::FrameCostSpec, scenario, time::Time,
+    };
+    let robot = admission_host::lower(
+        root,
+        &scenario::timing_files(root),
+        schedule_analysis::can::DEFAULT_BITRATE,
+        FrameCostSpec::Exact,
+    )
+    .map_err(|e| anyhow::anyhow!("admission table: {e}"))?;
+    let stream = |text: &str| -> Result<admission::Stream> {
+        let (id, data) = text.split_once('#').context("frame without #")?;
+        let id = u16::from_str_radix(id, 16)?;
+        let data = (0..data.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&data[i..i + 2], 16))
+            .collect::<Result<Vec<u8>, _>>()?;
+        let Ok(amiro_can::Command::Sensor(command)) = amiro_can::decode_command(id, &data) else {
+            bail!("{text} is not a sensor command");
+        };
+        let amiro_can::SensorMode::Publish(period) = command.mode else {
+            bail!("{text} is not a publish request");
+        };
+        robot
+            .publisher_stream(
+                command.topic.info().name,
+                command.priority.name(),
+                Time::from_us(period.as_micros().max(1)),
+                None,
+            )
+            .with_context(|| format!("{text}: no stream in the table"))
+    };
+    let mut streams = Vec::new();
+    for text in running {
+        let s = stream(text)?;
+        let decision = robot.with_table(|t| admission::admit::<64, 64>(t, &streams, &s, false));
+        if decision.refusal.is_none() {
+            streams.retain(|r: &admission::Stream| {
+                r.sender.map(|x| (x.board, x.topic)) != s.sender.map(|x| (x.board, x.topic))
+            });
+            streams.push(s);
+        }
+    }
+    let request = stream(request)?;
+    Ok(robot.with_table(|t| admission::admit::<64, 64>(t, &streams, &request, false)))
+}
+
+/// Whether a board's verdict names what the host's check names, with the same bound (µs, rounded up).
+pub fn same_refusal(
+    verdict: &amiro_can::AdmissionVerdict,
+    host: &schedule_analysis::admission::Decision,
+) -> Result<()> {
+    use schedule_analysis::admission::{Culprit, Refusal};
+    let Some(Refusal::Deadline(v)) = host.refusal else {
+        bail!("the host admits what the board answered with {verdict}");
+    };
+    let us = |t: schedule_analysis::time::Time| t.as_ns().div_ceil(1000);
+    let wcrt = v.wcrt.map_or(u64::from(u32::MAX), us).min(0xFF_FFFF);
+    ensure!(
+        u64::from(verdict.wcrt_us.get()) == wcrt
+            && u64::from(verdict.deadline_us.get()) == us(v.deadline).min(0xFF_FFFF),
+        "the board says {} of {} µs, the host {wcrt} of {} µs ({verdict})",
+        verdict.wcrt_us.get(),
+        verdict.deadline_us.get(),
+        us(v.deadline)
+    );
+    if let (Culprit::Frame { id }, amiro_can::Violation::Message { id: named }) =
+        (v.culprit, verdict.violation)
+    {
+        ensure!(
+            u32::from(named.raw()) == id,
+            "the board names frames 0x{:03X}, the host 0x{id:03X}",
+            named.raw()
+        );
+    }
+    Ok(())
+}
+
 /// The admission verdicts `board` sent (pages 0x80 + 0x81 on its diagnostics topic), joined, with
 /// the time of the second frame.
 pub fn admission_verdicts(

@@ -15,6 +15,16 @@ pub const SCENARIOS: &[Scenario] = &[
         check: admission,
     },
     Scenario {
+        name: "admission-decisions",
+        about: "issue 11: ring at 5 ms refused and at 6 ms accepted exactly as the host analysis decides; accept-and-warn starts the power status with a warning",
+        check: admission_decisions,
+    },
+    Scenario {
+        name: "admission-other-board",
+        about: "issue 11: the ring at urgent refused because DiWheelDrive's odometry frames would miss their bus deadline; at low it runs",
+        check: admission_other_board,
+    },
+    Scenario {
         name: "thesis-ring",
         about: "21F#010A0000 → eight frames 0x61F every 10 ms, within the analysed WCRT",
         check: thesis_ring,
@@ -215,6 +225,107 @@ fn admission(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "{} and {}; the ring kept its 10 ms grid ({} samples × 8)",
         verdicts[0].1,
         verdicts[1].1,
+        samples.len()
+    ))
+}
+
+fn admission_decisions(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    use amiro_can::{Topic, Verdict};
+    let verdicts = super::admission_verdicts(out, amiro_can::Board::PowerManagement);
+    ensure!(
+        verdicts.len() == 2,
+        "{} verdicts, expected the refusal at 5 ms and the warning",
+        verdicts.len()
+    );
+    let thesis = "205#01840302";
+    let (_, refused) = &verdicts[0];
+    ensure!(
+        refused.verdict == Verdict::Refused
+            && refused.topic == Topic::ProximityRing
+            && refused.requested.as_micros() == 5_000,
+        "not the refusal of the ring at 5 ms: {refused}"
+    );
+    super::same_refusal(
+        refused,
+        &super::host_admission(bounds.root(), &[thesis], "21F#01050000")?,
+    )?;
+    let host = super::host_admission(bounds.root(), &[thesis], "21F#01060000")?;
+    ensure!(
+        host.refusal.is_none(),
+        "the host refuses the ring at 6 ms: {:?}",
+        host.refusal
+    );
+    let samples = ring_samples(out, 0x61F, 6_000, 60_000, 120_000)?;
+    all_eight(&samples)?;
+    let (_, warned) = &verdicts[1];
+    ensure!(
+        warned.verdict == Verdict::AcceptedWithWarning
+            && warned.topic == Topic::PowerStatus
+            && warned.requested.as_micros() == 20_000,
+        "not the warning for the power status at 20 ms: {warned}"
+    );
+    super::same_refusal(
+        warned,
+        &super::host_admission(bounds.root(), &[thesis, "21F#01060000"], "21E#01140000")?,
+    )?;
+    let power = out.times(0x61E);
+    ensure!(
+        power.len() >= 8 && power.iter().all(|&t| t >= 120_000),
+        "{} power-status frames after the warned request, expected it running every 20 ms",
+        power.len()
+    );
+    let ring_after = out.times(0x61F).iter().filter(|&&t| t >= 120_000).count();
+    ensure!(
+        ring_after >= 8 * 25,
+        "{ring_after} ring frames after the warning: the running ring stopped"
+    );
+    Ok(format!(
+        "{refused}; ring at 6 ms accepted ({} samples × 8 on the grid); {warned}; power status started ({} frames)",
+        samples.len(),
+        power.len()
+    ))
+}
+
+fn admission_other_board(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    use amiro_can::{Topic, Verdict, Violation};
+    let verdicts = super::admission_verdicts(out, amiro_can::Board::PowerManagement);
+    ensure!(
+        verdicts.len() == 1,
+        "{} verdicts, expected the one refusal of the ring at urgent",
+        verdicts.len()
+    );
+    let (_, v) = &verdicts[0];
+    ensure!(
+        v.verdict == Verdict::Refused
+            && v.topic == Topic::ProximityRing
+            && v.priority == amiro_can::Priority::Urgent,
+        "not the refusal of the ring at urgent: {v}"
+    );
+    ensure!(
+        matches!(v.violation, Violation::Message { id } if id.raw() == 0x701),
+        "the refusal names {:?}, not DiWheelDrive's odometry frames 0x701: {v}",
+        v.violation
+    );
+    let odometry = "301#01010000";
+    super::same_refusal(
+        v,
+        &super::host_admission(bounds.root(), &[odometry], "01F#01060000")?,
+    )?;
+    // Alone, the same request breaks nothing of PowerManagement's own.
+    let alone = super::host_admission(bounds.root(), &[], "01F#01060000")?;
+    ensure!(
+        alone.refusal.is_none(),
+        "the ring at urgent every 6 ms is refused even alone: {:?}",
+        alone.refusal
+    );
+    ensure!(
+        out.times(0x41F).is_empty(),
+        "urgent ring frames sent: the refused request started"
+    );
+    let samples = ring_samples(out, 0x71F, 8_000, 100_000, 240_000)?;
+    all_eight(&samples)?;
+    Ok(format!(
+        "{v}; the ring at low every 8 ms runs ({} samples × 8), no urgent ring frame",
         samples.len()
     ))
 }
