@@ -106,10 +106,45 @@ pub struct QemuBuild {
     /// Every budget of the board times this (≥ 1: QEMU is never assumed faster than the chip).
     #[serde(default = "one")]
     pub budget_scale: f64,
+    /// What pends the transmit task in QEMU (absent: the robot's arrival, one job per frame).
+    #[serde(default)]
+    pub transmit: Option<QemuTransmit>,
     /// Where the figures come from.
     #[serde(default)]
     pub note: Option<String>,
 }
+
+/// The transmit task of a QEMU build whose only frames are its publisher's samples.
+///
+/// QEMU's virtual mailboxes put a frame on the bus the moment it is offered: no transmit-complete
+/// interrupt paces the transmit task. It runs when a publisher pends it after queueing a sample's
+/// frames, and again at once while frames remain after three (`amiro_firmware::qemu::CanTxPort`):
+/// ⌈frames / 3⌉ jobs per sample. So the task becomes one job per publisher job of the scenario
+/// (`can_tx[topic]`, released by it) and one for the samples commands request (the task itself):
+/// the command handler (`requests_from`) handles at most one command per its period, a request
+/// wakes the publisher, and requests not yet served for one topic are one release — so in any
+/// window at most one more per requestable topic than the handler's rate allows (the extra release
+/// jitter of one period per topic).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct QemuTransmit {
+    /// The command handler whose commands request one-shot samples.
+    pub requests_from: String,
+    /// What the virtual mailbox costs per frame in QEMU, µs (it prints the frame's candump line),
+    /// added to the transmit task's budget for each frame a job sends.
+    #[serde(default)]
+    pub frame_us: f64,
+    /// Why this holds for the board.
+    #[serde(default)]
+    pub note: Option<String>,
+}
+
+/// The `frame-acked` records one job of the transmit task writes at most on the chip: one per
+/// mailbox whose transmission completed (bxCAN has three).
+pub const ACKS_PER_TRANSMIT_JOB: u64 = 3;
+
+/// The frames one transmit job takes from the queue in QEMU (three virtual mailboxes).
+pub const QEMU_FRAMES_PER_TRANSMIT_JOB: u64 = 3;
 
 fn one() -> f64 {
     1.0
@@ -1207,6 +1242,20 @@ fn build_board(
                 "{}: analysed build has the task trace (feature `{}`, {} µs per job in the overheads)",
                 timing.board, trace.feature, trace.per_job_us
             ));
+            // The transmit task writes a `frame-acked` record per completed mailbox: one record
+            // (half a job's two), up to three per job. (QEMU's mailboxes report no completion.)
+            if let Some(tx) = timing
+                .can_tx_task
+                .as_ref()
+                .and_then(|name| timer_jobs.iter_mut().find(|t| &t.name == name))
+            {
+                let acks = ACKS_PER_TRANSMIT_JOB as f64 * trace.per_job_us / 2.0;
+                tx.wcet_us += acks;
+                built.sources.push(format!(
+                    "{}: `{}` writes up to {ACKS_PER_TRANSMIT_JOB} acknowledgement records per job (+{acks} µs)",
+                    timing.board, tx.name
+                ));
+            }
         }
         (Some(trace), Firmware::Qemu) => {
             let q = trace
@@ -1226,6 +1275,23 @@ fn build_board(
         )),
         (None, _) => {}
     }
+    if firmware == Firmware::Qemu {
+        if let Some(transmit) = timing
+            .trace
+            .as_ref()
+            .and_then(|t| t.qemu.as_ref())
+            .and_then(|q| q.transmit.as_ref())
+        {
+            qemu_transmit_jobs(file, timing, transmit, &overheads, &mut timer_jobs)?;
+            built.sources.push(format!(
+                "{}: in QEMU `{}` is pended by the publisher's samples (⌈frames / 3⌉ jobs each) and \
+                 the samples `{}`'s commands request, not by a transmit-complete",
+                timing.board,
+                timing.can_tx_task.as_deref().unwrap_or("?"),
+                transmit.requests_from
+            ));
+        }
+    }
     Ok(BoardModel {
         name: timing.board.clone(),
         source,
@@ -1235,6 +1301,102 @@ fn build_board(
         ceilings,
         tasks: timer_jobs,
     })
+}
+
+/// QEMU's transmit task ([`QemuTransmit`]): its own arrival (one job per frame on the bus) becomes
+/// ⌈frames / 3⌉ jobs per publisher job of the scenario (`can_tx[topic]`, released by that job) and
+/// per sample a command requests (the task itself, at the command handler's rate, released by it,
+/// with one period of extra jitter per requestable topic).
+fn qemu_transmit_jobs(
+    file: &str,
+    timing: &Timing,
+    transmit: &QemuTransmit,
+    overheads: &Overheads,
+    tasks: &mut Vec<TaskModel>,
+) -> Result<(), BuildError> {
+    let path = "trace.qemu.transmit";
+    let tx_name = timing
+        .can_tx_task
+        .as_deref()
+        .ok_or_else(|| fail(file, path, "the file names no `can_tx_task`"))?;
+    let handler = tasks
+        .iter()
+        .find(|t| t.name == transmit.requests_from)
+        .cloned()
+        .ok_or_else(|| {
+            fail(
+                file,
+                format!("{path}.requests_from"),
+                format!("no task `{}`", transmit.requests_from),
+            )
+        })?;
+    let at = tasks
+        .iter()
+        .position(|t| t.name == tx_name)
+        .ok_or_else(|| fail(file, path, format!("no task `{tx_name}`")))?;
+    let tx = tasks[at].clone();
+    // A job after the first of a burst costs its entry, exit and trace records too (the analysis
+    // adds them once per modelled job).
+    let per_job = match tx.kind {
+        TaskKind::Hardware => overheads.isr_entry_us + overheads.isr_exit_us,
+        TaskKind::Software => {
+            overheads.isr_entry_us + overheads.isr_exit_us + overheads.dispatcher_us
+        }
+        TaskKind::Plain => 0.0,
+    };
+    let burst = |frames: u64| {
+        let jobs = frames.div_ceil(QEMU_FRAMES_PER_TRANSMIT_JOB).max(1) as f64;
+        jobs * tx.wcet_us + (jobs - 1.0) * per_job + frames as f64 * transmit.frame_us
+    };
+    // What a command may request: one sample of a topic the board owns.
+    let requestable: Vec<&TopicInfo> = amiro_can::TOPICS
+        .iter()
+        .filter(|i| i.is_sensor && board_folder(i.board) == timing.board)
+        .collect();
+    let largest = requestable
+        .iter()
+        .map(|i| u64::from(i.frames_per_sample))
+        .max()
+        .unwrap_or(1);
+    let requests = &mut tasks[at];
+    requests.wcet_us = burst(largest);
+    requests.period_us = handler.period_us;
+    requests.sporadic = true;
+    requests.jitter_us = handler.period_us * requestable.len().max(1) as f64;
+    requests.released_by = Some(handler.name.clone());
+    let publisher_jobs: Vec<(String, f64, u64)> = tasks
+        .iter()
+        .filter(|t| {
+            t.job_of
+                .as_ref()
+                .is_some_and(|p| timing.publishers.values().any(|v| v == p))
+        })
+        .filter_map(|t| {
+            let topic = t.name.split_once('[')?.1.strip_suffix(']')?;
+            let info = amiro_can::TOPICS.iter().find(|i| i.name == topic)?;
+            Some((
+                t.name.clone(),
+                t.period_us,
+                u64::from(info.frames_per_sample),
+            ))
+        })
+        .collect();
+    for (job, period_us, frames) in publisher_jobs {
+        let topic = job
+            .split_once('[')
+            .map_or("", |(_, t)| t.trim_end_matches(']'));
+        tasks.push(TaskModel {
+            name: format!("{tx_name}[{topic}]"),
+            wcet_us: burst(frames),
+            period_us,
+            sporadic: false,
+            jitter_us: 0.0,
+            released_by: Some(job),
+            job_of: Some(tx_name.to_string()),
+            ..tx.clone()
+        });
+    }
+    Ok(())
 }
 
 /// The budget a job gets: the measured one when the timing file has it (noted in `measured`), else

@@ -345,14 +345,12 @@ pub fn measure(
     // (WCRT, deadline) of a task the analysis has; a WCRT of `None`: its busy window never closes.
     let analysed = |task: &str| -> Option<(Option<f64>, f64)> {
         let tasks = &board_result?.tasks;
-        if let Some(t) = tasks.iter().find(|t| t.name == task) {
-            return Some((t.wcrt().map(|w| w.as_us_f64()), t.deadline.as_us_f64()));
-        }
-        // A publisher task's jobs are its topics: the run ends within the largest of their WCRTs.
+        // A task's jobs: itself, and `task[…]` — a publisher's topics, QEMU's transmit task per
+        // topic (docs/bench.md). A run ends within the largest of their WCRTs.
         let prefix = format!("{task}[");
         let jobs: Vec<_> = tasks
             .iter()
-            .filter(|t| t.name.starts_with(&prefix))
+            .filter(|t| t.name == task || t.name.starts_with(&prefix))
             .collect();
         if jobs.is_empty() {
             return None;
