@@ -46,6 +46,11 @@ pub const SCENARIOS: &[Scenario] = &[
         check: admission_starvation,
     },
     Scenario {
+        name: "admission-units",
+        about: "issue 11: every topic at every priority every 1 ms and every 1 s, each decided as the host decides; odometry keeps its grid, the low level keeps sending",
+        check: admission_units,
+    },
+    Scenario {
         name: "admission-warn",
         about: "accept-and-warn: a refused request (magnetometer-x every 700 µs) is started, counted and answered with a warning",
         check: admission_warn,
@@ -383,6 +388,69 @@ fn hostile(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     Ok(format!(
         "ran to its end: {handled} commands handled, {refused} refused by admission, {dropped} dropped and counted, {} frames sent",
         out.frames.len()
+    ))
+}
+
+/// `diwheeldrive/qemu/admission-units.log` (issue 11): the shortest period of the ms and s units.
+fn admission_units(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    use amiro_can::Verdict;
+    let path = bounds.root().join("diwheeldrive/qemu/admission-units.log");
+    let text = std::fs::read_to_string(&path)?;
+    let mut host = super::HostAdmission::new(bounds.root())?;
+    let mut expected = Vec::new();
+    let mut requests = 0;
+    for line in text.lines() {
+        let Some(frame) = crate::qemu::parse_log_line(line)? else {
+            continue;
+        };
+        let data: String = frame.data.iter().map(|b| format!("{b:02X}")).collect();
+        let decision = host.request(&format!("{:03X}#{data}", frame.id))?;
+        requests += 1;
+        if decision.refusal.is_some() {
+            expected.push((frame.id, frame.at_us, decision));
+        }
+    }
+    let verdicts = verdicts(out);
+    ensure!(
+        verdicts.len() == expected.len(),
+        "{} verdicts, the host refuses {} of the {requests} requests",
+        verdicts.len(),
+        expected.len()
+    );
+    for ((at, v), (id, sent, decision)) in verdicts.iter().zip(&expected) {
+        ensure!(
+            v.verdict == Verdict::Refused
+                && u32::from(v.topic.byte()) == id & 0xFF
+                && v.priority as u32 == (id >> 8) & 3
+                && *at > *sent,
+            "verdict {v} does not answer the request {id:03X} the host refuses"
+        );
+        super::same_refusal(v, decision)?;
+    }
+    // Odometry at low every 10 ms keeps its grid until it is itself requested (last in the ms round).
+    let odometry_request = text
+        .lines()
+        .filter_map(|l| crate::qemu::parse_log_line(l).ok().flatten())
+        .filter(|f| f.id == 0x001)
+        .map(|f| f.at_us)
+        .next()
+        .context("no odometry request in the stimulus")?;
+    let odometry = out.periodic_stream(0x701, "odometry", 10_000, 6_000, odometry_request)?;
+    // After the last round the low level still sends (where the watchdog is fed).
+    let end = out.frames.last().map_or(0, |f| f.at_us);
+    let low_after = out
+        .frames
+        .iter()
+        .filter(|f| f.id & 0x700 == 0x700 && f.at_us + 400_000 > end)
+        .count();
+    ensure!(
+        low_after > 0,
+        "no low-priority frame in the last 400 ms: the low level starved"
+    );
+    Ok(format!(
+        "{requests} requests, {} refused exactly as the host decides (culprits and bounds equal), the rest accepted; odometry {} frames on its 10 ms grid; low level alive",
+        expected.len(),
+        odometry.frames.len()
     ))
 }
 

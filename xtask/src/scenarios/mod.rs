@@ -366,60 +366,82 @@ pub fn trace_time(line: &str) -> Result<u64> {
     parse_seconds(stamp)
 }
 
-/// The boards' admission check run on the host (the same code and table, `schedule_analysis::admission`) for the
-/// publish request `request` (a frame such as `21F#01050000`), beside `running`: publish requests in the order
-/// heard, each kept when its owner board admits it — what `cargo xtask analyze --check` decides for the same
-/// configuration. A scenario compares a board's verdict with it.
-pub fn host_admission(
-    root: &Path,
-    running: &[&str],
-    request: &str,
-) -> Result<schedule_analysis::admission::Decision> {
-    use schedule_analysis::{
-        admission, admission_host, model::FrameCostSpec, scenario, time::Time,
-    };
-    let robot = admission_host::lower(
-        root,
-        &scenario::timing_files(root),
-        schedule_analysis::can::DEFAULT_BITRATE,
-        FrameCostSpec::Exact,
-    )
-    .map_err(|e| anyhow::anyhow!("admission table: {e}"))?;
-    let stream = |text: &str| -> Result<admission::Stream> {
-        let (id, data) = text.split_once('#').context("frame without #")?;
+/// The boards' admission check run on the host (the same code and table, `schedule_analysis::admission`), fed
+/// with publish requests in the order a board hears them: each is decided beside the streams kept so far and kept
+/// (in place of the topic's stream, as the boards keep them) when admitted — `cargo xtask analyze --check`'s
+/// decision for the same configuration. A scenario compares a board's verdicts with it.
+pub struct HostAdmission {
+    robot: schedule_analysis::admission_host::OwnedRobot,
+    streams: Vec<schedule_analysis::admission::Stream>,
+}
+
+impl HostAdmission {
+    /// The table from the apps and timing files under `root`, nothing running.
+    pub fn new(root: &Path) -> Result<Self> {
+        use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
+        let robot = admission_host::lower(
+            root,
+            &scenario::timing_files(root),
+            schedule_analysis::can::DEFAULT_BITRATE,
+            FrameCostSpec::Exact,
+        )
+        .map_err(|e| anyhow::anyhow!("admission table: {e}"))?;
+        Ok(Self {
+            robot,
+            streams: Vec::new(),
+        })
+    }
+
+    /// Decides the publish request `frame` (`ID#DATA`, e.g. `21F#01050000`) and keeps it when admitted.
+    pub fn request(&mut self, frame: &str) -> Result<schedule_analysis::admission::Decision> {
+        use schedule_analysis::{admission, time::Time};
+        let (id, data) = frame.split_once('#').context("frame without #")?;
         let id = u16::from_str_radix(id, 16)?;
         let data = (0..data.len())
             .step_by(2)
-            .map(|i| u8::from_str_radix(&data[i..i + 2], 16))
+            .map(|i| u8::from_str_radix(data.get(i..i + 2).unwrap_or("x"), 16))
             .collect::<Result<Vec<u8>, _>>()?;
         let Ok(amiro_can::Command::Sensor(command)) = amiro_can::decode_command(id, &data) else {
-            bail!("{text} is not a sensor command");
+            bail!("{frame} is not a sensor command");
         };
         let amiro_can::SensorMode::Publish(period) = command.mode else {
-            bail!("{text} is not a publish request");
+            bail!("{frame} is not a publish request");
         };
-        robot
+        let stream = self
+            .robot
             .publisher_stream(
                 command.topic.info().name,
                 command.priority.name(),
                 Time::from_us(period.as_micros().max(1)),
                 None,
             )
-            .with_context(|| format!("{text}: no stream in the table"))
-    };
-    let mut streams = Vec::new();
-    for text in running {
-        let s = stream(text)?;
-        let decision = robot.with_table(|t| admission::admit::<64, 64>(t, &streams, &s, false));
+            .with_context(|| format!("{frame}: no stream in the table"))?;
+        let streams = &self.streams;
+        let decision = self
+            .robot
+            .with_table(|t| admission::admit::<64, 64>(t, streams, &stream, false));
         if decision.refusal.is_none() {
-            streams.retain(|r: &admission::Stream| {
-                r.sender.map(|x| (x.board, x.topic)) != s.sender.map(|x| (x.board, x.topic))
-            });
-            streams.push(s);
+            let key = |s: &admission::Stream| s.sender.map(|x| (x.board, x.topic));
+            match self.streams.iter().position(|s| key(s) == key(&stream)) {
+                Some(i) => self.streams[i] = stream,
+                None => self.streams.push(stream),
+            }
         }
+        Ok(decision)
     }
-    let request = stream(request)?;
-    Ok(robot.with_table(|t| admission::admit::<64, 64>(t, &streams, &request, false)))
+}
+
+/// [`HostAdmission`] for one request beside `running` (requests in the order heard).
+pub fn host_admission(
+    root: &Path,
+    running: &[&str],
+    request: &str,
+) -> Result<schedule_analysis::admission::Decision> {
+    let mut host = HostAdmission::new(root)?;
+    for frame in running {
+        host.request(frame)?;
+    }
+    host.request(request)
 }
 
 /// Whether a board's verdict names what the host's check names, with the same bound (µs, rounded up).
