@@ -124,6 +124,9 @@ fn expected(colours: &[[u8; 3]; 8]) -> Outputs {
     outputs
 }
 
+/// `LATCH_MIN_INTERVAL_US` of lightring/src/main.rs: a latch may wait this long behind the previous one.
+const LATCH_MIN_INTERVAL_US: u64 = 1_000;
+
 /// Command received → latched, as analysed: the WCRT of `latch_leds`, whose release jitter budget
 /// covers the command path (can_rx and handle_commands); checked to still cover it.
 fn latch_bound_us(root: &Path) -> Result<u64> {
@@ -169,9 +172,9 @@ fn latch_bound_us(root: &Path) -> Result<u64> {
         .context("lightring.timing.json: tasks.latch_leds.jitter_us")?
         as u64;
     ensure!(
-        handler <= jitter_budget,
-        "handle_commands' WCRT {handler} µs exceeds the {jitter_budget} µs release jitter \
-         lightring.timing.json budgets for latch_leds: raise that budget"
+        handler + LATCH_MIN_INTERVAL_US <= jitter_budget,
+        "handle_commands' WCRT {handler} µs plus the {LATCH_MIN_INTERVAL_US} µs latch interval exceed \
+         the {jitter_budget} µs release jitter lightring.timing.json budgets for latch_leds: raise that budget"
     );
     Ok(latch)
 }
