@@ -217,35 +217,13 @@ fn mul(a: u64, b: u64) -> Result<u64, AnalysisError> {
 fn ceil_div(a: u64, b: u64) -> u64 {
     if a == 0 {
         0
+    } else if let (Ok(a32), Ok(b32)) = (u32::try_from(a), u32::try_from(b)) {
+        // The common case on the boards (windows and periods below 4.29 s): the Cortex-M3's hardware divide
+        // instead of the 64-bit software routine.
+        u64::from((a32 - 1) / b32 + 1)
     } else {
-        div(a - 1, b) + 1
+        (a - 1) / b + 1
     }
-}
-
-/// `⌊a / b⌋` (0 when `b` is 0) without the 64-bit software division routine, which no image that runs the check
-/// may hold (ARCHITECTURE.md: no 64-bit division outside the motion code): the common case on the boards
-/// (windows and periods below 4.29 s) is the Cortex-M3's hardware divide; beyond it, one shift and subtract per
-/// bit of the quotient.
-pub fn div(a: u64, b: u64) -> u64 {
-    if let (Ok(a32), Ok(b32)) = (u32::try_from(a), u32::try_from(b)) {
-        return u64::from(a32.checked_div(b32).unwrap_or(0));
-    }
-    if b == 0 || a < b {
-        return 0;
-    }
-    // a ≥ b > 0: align b's top bit with a's, then one quotient bit per step.
-    let shift = b.leading_zeros() - a.leading_zeros();
-    let mut divisor = b << shift;
-    let (mut quotient, mut rest) = (0u64, a);
-    for _ in 0..=shift {
-        quotient <<= 1;
-        if rest >= divisor {
-            rest -= divisor;
-            quotient |= 1;
-        }
-        divisor >>= 1;
-    }
-    quotient
 }
 
 /// The load of a set of interferers that starts the fixed point and detects overload: `Σ U_k` and `Σ J_k·U_k`,
@@ -328,7 +306,7 @@ fn utilisation_floor(c: u64, t: u64) -> u64 {
     } else {
         ceil_div(t, 1 << shift)
     };
-    div(c_scaled, t_scaled.max(1))
+    c_scaled / t_scaled.max(1)
 }
 
 /// `⌊x · u / 2^UTIL_BITS⌋` for a fixed-point utilisation `u ≤ UTIL_ONE`, or 0 when `x` is too large for the
@@ -387,8 +365,7 @@ pub fn response_time_loaded<A: Activations>(
         u_own,
         jitter_load: load.jitter_load,
     };
-    let others = Slice(others);
-    let mut window = Window::new(&others, exclude, scratch, limits.horizon.as_ns());
+    let mut window = Window::new(others, exclude, scratch, limits.horizon.as_ns());
     match discipline {
         Discipline::Preemptive => preemptive(subject, &mut window, &loads),
         Discipline::NonPreemptive { bit_time } => {
@@ -403,35 +380,9 @@ struct Loads {
     jitter_load: u64,
 }
 
-/// The interferers as the fixed point reads them. The [`Window`] holds them as a trait object, so that the board's
-/// tasks and the bus's frames share one copy of the iteration (the on-chip check carries both in flash).
-trait Interferers {
-    /// How many.
-    fn count(&self) -> usize;
-    /// Interferer `k`'s cost per activation, period and jitter, in ns.
-    fn timing(&self, k: usize) -> Option<(u64, u64, u64)>;
-}
-
-/// A slice of [`Activations`] as [`Interferers`].
-struct Slice<'a, A>(&'a [A]);
-
-impl<A: Activations> Interferers for Slice<'_, A> {
-    fn count(&self) -> usize {
-        self.0.len()
-    }
-    fn timing(&self, k: usize) -> Option<(u64, u64, u64)> {
-        let other = self.0.get(k)?;
-        Some((
-            other.activation_cost().as_ns(),
-            other.period().as_ns(),
-            other.jitter().as_ns(),
-        ))
-    }
-}
-
 /// The interfering streams and their counters.
-struct Window<'a, 'b> {
-    others: &'a dyn Interferers,
+struct Window<'a, 'b, A> {
+    others: &'a [A],
     exclude: Option<usize>,
     /// The counters (valid in `heap[..len]`), or empty when the scratch is too small to hold all.
     heap: &'b mut [Counter],
@@ -443,15 +394,15 @@ struct Window<'a, 'b> {
     iterations: u64,
 }
 
-impl<'a, 'b> Window<'a, 'b> {
+impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
     fn new(
-        others: &'a dyn Interferers,
+        others: &'a [A],
         exclude: Option<usize>,
         scratch: &'b mut [Counter],
         horizon: u64,
     ) -> Self {
         // Without room for every interferer, fall back to dividing once per interferer and iteration.
-        let heap = if scratch.len() >= others.count() {
+        let heap = if scratch.len() >= others.len() {
             scratch
         } else {
             &mut []
@@ -467,11 +418,9 @@ impl<'a, 'b> Window<'a, 'b> {
         }
     }
 
-    /// Interferer `k`'s cost, period and jitter, unless it is excluded or costs nothing.
-    fn usable(&self, k: usize) -> Option<(u64, u64, u64)> {
-        self.others
-            .timing(k)
-            .filter(|&(c, t, _)| Some(k) != self.exclude && c != 0 && t != 0)
+    fn usable(&self, k: usize, other: &A) -> Option<(u64, u64, u64)> {
+        let (c, t) = (other.activation_cost().as_ns(), other.period().as_ns());
+        (Some(k) != self.exclude && c != 0 && t != 0).then_some((c, t, other.jitter().as_ns()))
     }
 
     /// Counts every interferer's activations before `x` from scratch: `⌈(x + J_k)/T_k⌉`.
@@ -481,8 +430,8 @@ impl<'a, 'b> Window<'a, 'b> {
         if self.heap.is_empty() {
             return Ok(());
         }
-        for k in 0..self.others.count() {
-            let Some((c, t, j)) = self.usable(k) else {
+        for (k, other) in self.others.iter().enumerate() {
+            let Some((c, t, j)) = self.usable(k, other) else {
                 continue;
             };
             let count = ceil_div(add(x, j)?, t);
@@ -508,8 +457,8 @@ impl<'a, 'b> Window<'a, 'b> {
         }
         if self.heap.is_empty() {
             let mut sum = 0u64;
-            for k in 0..self.others.count() {
-                if let Some((c, t, j)) = self.usable(k) {
+            for (k, other) in self.others.iter().enumerate() {
+                if let Some((c, t, j)) = self.usable(k, other) {
                     sum = add(sum, mul(ceil_div(add(x, j)?, t), c)?)?;
                 }
             }
@@ -518,9 +467,14 @@ impl<'a, 'b> Window<'a, 'b> {
         let others = self.others;
         let counters = self.heap.get_mut(..self.len).unwrap_or(&mut []);
         for counter in counters.iter_mut().filter(|counter| counter.next < x) {
-            let Some((c, t, j)) = others.timing(counter.index) else {
+            let Some(other) = others.get(counter.index) else {
                 continue;
             };
+            let (c, t, j) = (
+                other.activation_cost().as_ns(),
+                other.period().as_ns(),
+                other.jitter().as_ns(),
+            );
             // Jump straight to the count at `x` (one division however many activations the window grew by).
             let count = ceil_div(add(x, j)?, t).max(counter.count + 1);
             self.sum = add(self.sum, mul(count - counter.count, c)?)?;
@@ -560,14 +514,14 @@ fn lower_bound(
             .and_then(|n| n.checked_add(scaled_floor(own_jitter.min(BOUND_LIMIT), loads.u_own)));
     }
     match numerator {
-        Some(n) if n < BOUND_LIMIT => div(n << UTIL_BITS, slack).max(floor),
+        Some(n) if n < BOUND_LIMIT => ((n << UTIL_BITS) / slack).max(floor),
         _ => floor,
     }
 }
 
-fn preemptive(
+fn preemptive<A: Activations>(
     subject: &Subject,
-    window: &mut Window<'_, '_>,
+    window: &mut Window<'_, '_, A>,
     loads: &Loads,
 ) -> Result<Response, AnalysisError> {
     let c = subject.cost.as_ns();
@@ -620,11 +574,11 @@ fn preemptive(
     Ok(response)
 }
 
-fn non_preemptive(
+fn non_preemptive<A: Activations>(
     subject: &Subject,
     per: u64,
     tau: u64,
-    window: &mut Window<'_, '_>,
+    window: &mut Window<'_, '_, A>,
     loads: &Loads,
 ) -> Result<Response, AnalysisError> {
     let c = subject.cost.as_ns();
@@ -671,7 +625,7 @@ fn non_preemptive(
                 return Err(AnalysisError::BeyondHorizon);
             }
         };
-        let activation = div(q, per);
+        let activation = q / per;
         let r = add(add(w, c)?, j)?.saturating_sub(mul(activation, t)?);
         if worst.is_none_or(|best| r > best.wcrt.as_ns()) {
             worst = Some(Response {
@@ -717,35 +671,6 @@ mod tests {
             Time::ZERO,
             Time::ZERO,
         )
-    }
-
-    #[test]
-    fn the_division_is_the_division() {
-        let mut x = 0x9E37_79B9_7F4A_7C15u64;
-        let mut values = vec![
-            0,
-            1,
-            2,
-            3,
-            u64::from(u32::MAX),
-            u64::from(u32::MAX) + 1,
-            u64::MAX,
-        ];
-        for _ in 0..2_000 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            values.push(x >> (x % 64));
-        }
-        for &a in &values {
-            for &b in &values {
-                let expected = a.checked_div(b).unwrap_or(0);
-                assert_eq!(div(a, b), expected, "{a} / {b}");
-            }
-        }
-        assert_eq!(ceil_div(0, 7), 0);
-        assert_eq!(ceil_div(u64::MAX, 1), u64::MAX);
-        assert_eq!(ceil_div(1 << 40, 3), (1u64 << 40).div_ceil(3));
     }
 
     #[test]
