@@ -53,11 +53,12 @@ pub enum Check {
     Warned([Frame; 2]),
 }
 
+/// An unused slot of the running set: all zero bytes, like every part of an empty [`State`].
 const EMPTY: Stream = Stream {
     id: 0,
     extended: false,
     dlc: 0,
-    frames: 1,
+    frames: 0,
     period: Time::ZERO,
     deadline: None,
     jitter: Time::ZERO,
@@ -65,12 +66,14 @@ const EMPTY: Stream = Stream {
     receiver: None,
 };
 
-/// One board's admission state: the robot table, the running publishers of the whole robot
-/// (`M` at most: the protocol's limit, one per publishable topic), every board's policy, and the
-/// cost of the decisions taken (fixed-point iterations). `N` is the most jobs of one board.
-pub struct Admission<const N: usize, const M: usize> {
-    robot: &'static RobotTable<'static>,
-    board: Board,
+/// What a board keeps between commands: the running publishers of the whole robot (`M` at most:
+/// the protocol's limit, one per publishable topic), every board's policy, the kept analyses and
+/// the cost of the decisions taken (fixed-point iterations). `N` is the most jobs of one board.
+///
+/// [`State::new`] is all zero bytes (no stream, every policy `Refuse`, nothing kept), so the
+/// board's `static` holding it is placed in `.bss` and costs no flash; the robot table and the
+/// board's name, which are not zero, live in the [`Admission`] the task builds over it.
+pub struct State<const N: usize, const M: usize> {
     running: [Stream; M],
     len: usize,
     policies: [AdmissionPolicy; 3],
@@ -80,6 +83,34 @@ pub struct Admission<const N: usize, const M: usize> {
     analysed: bool,
     last_iterations: u64,
     worst_iterations: u64,
+}
+
+impl<const N: usize, const M: usize> State<N, M> {
+    /// Nothing running, every board refusing, nothing analysed.
+    pub const fn new() -> Self {
+        Self {
+            running: [EMPTY; M],
+            len: 0,
+            policies: [AdmissionPolicy::Refuse; 3],
+            cache: Cache::new(),
+            analysed: false,
+            last_iterations: 0,
+            worst_iterations: 0,
+        }
+    }
+}
+
+impl<const N: usize, const M: usize> Default for State<N, M> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// One board's admission check: the robot table and the board, over the board's [`State`].
+pub struct Admission<'s, const N: usize, const M: usize> {
+    robot: &'static RobotTable<'static>,
+    board: Board,
+    state: &'s mut State<N, M>,
 }
 
 /// The table's index of an `amiro_can` board (the boards are named by their firmware folder).
@@ -125,36 +156,34 @@ pub fn request_stream(sender_board: u8, command: &SensorCommand, period: SampleT
     }
 }
 
-impl<const N: usize, const M: usize> Admission<N, M> {
-    /// The admission state of `board` on `robot`, nothing running, every board refusing.
-    pub const fn new(robot: &'static RobotTable<'static>, board: Board) -> Self {
+impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
+    /// The admission check of `board` on `robot`, keeping its running set in `state`.
+    pub fn new(
+        robot: &'static RobotTable<'static>,
+        board: Board,
+        state: &'s mut State<N, M>,
+    ) -> Self {
         Self {
             robot,
             board,
-            running: [EMPTY; M],
-            len: 0,
-            policies: [AdmissionPolicy::Refuse; 3],
-            cache: Cache::new(),
-            analysed: false,
-            last_iterations: 0,
-            worst_iterations: 0,
+            state,
         }
     }
 
     /// The running publishers of the whole robot, as this board knows them.
     pub fn running(&self) -> &[Stream] {
-        self.running.get(..self.len).unwrap_or(&[])
+        self.state.running.get(..self.state.len).unwrap_or(&[])
     }
 
     /// Whether the last command ran an analysis (a publish request): the admission task waits its
     /// long interval only after those.
     pub fn analysed(&self) -> bool {
-        self.analysed
+        self.state.analysed
     }
 
     /// Fixed-point iterations of the last decision and of the most expensive one since boot.
     pub fn iterations(&self) -> (u64, u64) {
-        (self.last_iterations, self.worst_iterations)
+        (self.state.last_iterations, self.state.worst_iterations)
     }
 
     /// Analyses every board once with nothing running, so that the first request re-analyses only
@@ -165,27 +194,28 @@ impl<const N: usize, const M: usize> Admission<N, M> {
 
     /// Brings the kept analyses up to date with the running set.
     fn refresh(&mut self) {
-        let running = self.running.get(..self.len).unwrap_or(&[]);
-        self.last_iterations = analysis::refresh::<N, M>(self.robot, running, &mut self.cache);
-        self.analysed = true;
-        self.worst_iterations = self.worst_iterations.max(self.last_iterations);
+        let running = self.state.running.get(..self.state.len).unwrap_or(&[]);
+        self.state.last_iterations =
+            analysis::refresh::<N, M>(self.robot, running, &mut self.state.cache);
+        self.state.analysed = true;
+        self.state.worst_iterations = self.state.worst_iterations.max(self.state.last_iterations);
     }
 
     /// Decides `request` against the running set (no suggestion search: bounded by one analysis,
     /// and the boards whose streams the request leaves alone are not analysed again). With
     /// `carried_out_anyway` (accept-and-warn) the board starts it even when refused.
     pub fn decide(&mut self, request: &Stream, carried_out_anyway: bool) -> Decision {
-        let running = self.running.get(..self.len).unwrap_or(&[]);
+        let running = self.state.running.get(..self.state.len).unwrap_or(&[]);
         let decision = analysis::admit_cached::<N, M>(
             self.robot,
             running,
             request,
-            &mut self.cache,
+            &mut self.state.cache,
             carried_out_anyway,
         );
-        self.last_iterations = decision.iterations;
-        self.analysed = true;
-        self.worst_iterations = self.worst_iterations.max(decision.iterations);
+        self.state.last_iterations = decision.iterations;
+        self.state.analysed = true;
+        self.state.worst_iterations = self.state.worst_iterations.max(decision.iterations);
         decision
     }
 
@@ -199,10 +229,10 @@ impl<const N: usize, const M: usize> Admission<N, M> {
     fn remove(&mut self, board: u8, topic: u8) {
         // In order: the other streams keep their places, so the other boards' kept analyses stay valid.
         if let Some(i) = self.position(board, topic) {
-            if let Some(tail) = self.running.get_mut(i..self.len) {
+            if let Some(tail) = self.state.running.get_mut(i..self.state.len) {
                 tail.rotate_left(1);
             }
-            self.len -= 1;
+            self.state.len -= 1;
         }
     }
 
@@ -210,14 +240,14 @@ impl<const N: usize, const M: usize> Admission<N, M> {
         let Some(sender) = stream.sender else { return };
         match self.position(sender.board, sender.topic) {
             Some(i) => {
-                if let Some(slot) = self.running.get_mut(i) {
+                if let Some(slot) = self.state.running.get_mut(i) {
                     *slot = stream;
                 }
             }
             None => {
-                if let Some(slot) = self.running.get_mut(self.len) {
+                if let Some(slot) = self.state.running.get_mut(self.state.len) {
                     *slot = stream;
-                    self.len += 1;
+                    self.state.len += 1;
                 }
             }
         }
@@ -228,14 +258,14 @@ impl<const N: usize, const M: usize> Admission<N, M> {
     /// board's publish requests, and says what the handler must do. Never panics, on any frame.
     #[inline(never)]
     pub fn on_command(&mut self, id: u16, data: &[u8]) -> Check {
-        self.last_iterations = 0;
-        self.analysed = false;
+        self.state.last_iterations = 0;
+        self.state.analysed = false;
         let Ok(command) = decode_command(id, data) else {
             return Check::Pass;
         };
         let command = match command {
             Command::Policy { board, policy, .. } => {
-                if let Some(slot) = self.policies.get_mut(board_slot(board)) {
+                if let Some(slot) = self.state.policies.get_mut(board_slot(board)) {
                     *slot = policy;
                 }
                 return Check::Pass;
@@ -258,6 +288,7 @@ impl<const N: usize, const M: usize> Admission<N, M> {
         };
         let request = request_stream(owner_index, &command, period);
         let policy = self
+            .state
             .policies
             .get(board_slot(owner))
             .copied()
@@ -299,7 +330,9 @@ impl<const N: usize, const M: usize> Admission<N, M> {
     ) -> AdmissionVerdict {
         let micros = |t: Option<Time>| {
             t.map_or(Count::saturating(u32::MAX), |t| {
-                Count::saturating(u32::try_from(t.as_ns().div_ceil(1000)).unwrap_or(u32::MAX))
+                // Rounded up to whole µs, with the 32-bit divide (no 64-bit division on a board).
+                let us = amiro_sensors::clock::div_us(t.as_ns().saturating_add(999), 1000);
+                Count::saturating(u32::try_from(us).unwrap_or(u32::MAX))
             })
         };
         let (violation, wcrt_us, deadline_us) = match refusal {

@@ -186,7 +186,7 @@ pub fn forward_to_admission<const N: usize>(
 /// Otherwise as [`handle_command`]. This is the hook every board's `handle_commands` calls.
 pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q: usize>(
     frame: &RxFrame,
-    admission: &mut crate::admission::Admission<N, M>,
+    admission: &mut crate::admission::Admission<'_, N, M>,
     handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
     tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
@@ -233,7 +233,7 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
 fn note_decision<C: Clock, const N: usize, const M: usize>(
     id: u16,
     check: &crate::admission::Check,
-    admission: &crate::admission::Admission<N, M>,
+    admission: &crate::admission::Admission<'_, N, M>,
     started: u64,
 ) {
     use crate::admission::Check;

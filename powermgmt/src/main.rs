@@ -79,8 +79,9 @@ type Clock = platform::Clock;
 // The robot's admission table, generated from the apps and timing files (`board-build.rs`).
 amiro_firmware::admission_table!();
 
-/// This board's admission state (`docs/analysis.md`, "The on-chip admission check").
-type Admission = amiro_firmware::admission::Admission<
+/// This board's admission state (`docs/analysis.md`, "The on-chip admission check"): zero bytes
+/// at reset, in `.bss`.
+type AdmissionState = amiro_firmware::admission::State<
     { admission_table::MAX_TASKS },
     { admission_table::MAX_PUBLISHERS },
 >;
@@ -264,25 +265,29 @@ mod app {
         local = [
             requests,
             wake_levels,
-            admission: crate::Admission =
-                crate::Admission::new(&crate::admission_table::ROBOT, CanBoard::PowerManagement),
+            admission: crate::AdmissionState = crate::AdmissionState::new(),
         ]
     )]
     async fn admit_requests(mut cx: admit_requests::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::ADMIT_REQUESTS);
+        let mut admission = amiro_firmware::admission::Admission::new(
+            &crate::admission_table::ROBOT,
+            CanBoard::PowerManagement,
+            cx.local.admission,
+        );
         // Every board analysed once with nothing running, before the first request.
-        cx.local.admission.prepare();
+        admission.prepare();
         while let Some(frame) = tasks::next_command(cx.local.requests).await {
             let started = Clock::now_us();
             tasks::handle_command_admitted::<Clock, _, _, TX_QUEUE_LEN>(
                 &frame,
-                cx.local.admission,
+                &mut admission,
                 &mut cx.shared.handler,
                 &mut cx.shared.tx_queue,
                 platform::CAN_TX_INTERRUPT,
                 cx.local.wake_levels,
             );
-            let interval = if cx.local.admission.analysed() {
+            let interval = if admission.analysed() {
                 crate::ADMISSION_MIN_INTERVAL_US
             } else {
                 crate::COMMAND_MIN_INTERVAL_US

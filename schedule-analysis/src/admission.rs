@@ -20,7 +20,7 @@
 //! deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without jitter budgets
 //! (a property test checks that they agree).
 
-use crate::board::{self, CriticalSection, LevelLoads, TaskTiming};
+use crate::board::{self, LevelLoads, TaskTiming};
 use crate::busy_window::{AnalysisError, Counter, Limits, Response};
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
@@ -32,40 +32,73 @@ const MAX_JITTER_ROUNDS: usize = 100;
 /// The longest period the period search tries (the protocol's 32-bit microsecond span, ≈ 71.6 min).
 pub const MAX_PERIOD: Time = Time::from_ns(4_294_967_295_000);
 
-/// One fixed task of a board (not a publisher job), overheads included.
+/// A time in a table row: whole nanoseconds below [`NO_DEADLINE`] (about 4.29 s). Rows are 32-bit so that the
+/// table a board carries in flash stays small; the lowering (`admission_host::lower`) refuses a model with a
+/// longer time, so the build of a board fails instead of the table being wrong.
+pub type RowTime = u32;
+/// In [`TaskRow::deadline`]: no deadline of its own (the period). Never a row value.
+pub const NO_DEADLINE: RowTime = u32::MAX;
+/// In [`TaskRow::released_by`]: released by no task.
+pub const NO_RELEASER: u8 = u8::MAX;
+/// In a section's ceiling: a global critical section (interrupts disabled), the core's `u32::MAX`.
+pub const INTERRUPTS_DISABLED: u8 = u8::MAX;
+
+/// A row time as a [`Time`].
+pub const fn row_time(ns: RowTime) -> Time {
+    Time::from_ns(ns as u64)
+}
+
+/// A row ceiling as the core's ceiling ([`INTERRUPTS_DISABLED`] is `u32::MAX`).
+pub const fn row_ceiling(ceiling: u8) -> u32 {
+    if ceiling == INTERRUPTS_DISABLED {
+        u32::MAX
+    } else {
+        ceiling as u32
+    }
+}
+
+/// One fixed task of a board (not a publisher job), overheads included; times are [`RowTime`]s.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TaskRow {
-    /// RTIC priority.
-    pub priority: u32,
     /// Worst-case execution time with entry/exit/dispatcher overheads.
-    pub cost: Time,
+    pub cost: RowTime,
     /// Best-case execution time (its best-case response).
-    pub bcet: Time,
+    pub bcet: RowTime,
     /// Period or minimum inter-arrival time (ignored when `own_frame`).
-    pub period: Time,
-    /// Deadline from the release event; `None`: the period.
-    pub deadline: Option<Time>,
+    pub period: RowTime,
+    /// Deadline from the release event; [`NO_DEADLINE`]: the period.
+    pub deadline: RowTime,
     /// Release jitter of its own.
-    pub jitter: Time,
-    /// Index (in the board's `tasks`) of the task whose completion releases this one.
-    pub released_by: Option<u16>,
+    pub jitter: RowTime,
+    /// RTIC priority (below 255).
+    pub priority: u8,
+    /// Index (in the board's `tasks`) of the task whose completion releases this one; [`NO_RELEASER`]: none.
+    pub released_by: u8,
     /// Activated once per frame this board sends: its period is the best-case time of the shortest frame the board's
     /// publishers send (the shortest frame on the bus when it sends nothing).
     pub own_frame: bool,
 }
 
 /// A critical section of a fixed task (or of `idle`, holder priority 0), its ceiling resolved: the core's
-/// [`CriticalSection`].
-pub type SectionRow = CriticalSection;
+/// [`board::CriticalSection`] in a compact row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SectionRow {
+    /// Longest time held.
+    pub length: RowTime,
+    /// Priority of the task that locks (0 for `idle`).
+    pub holder_priority: u8,
+    /// Ceiling of the locked resource ([`INTERRUPTS_DISABLED`]: a global critical section).
+    pub ceiling: u8,
+}
 
 /// A critical section of a publisher job: its holder is the publisher task of the requested level.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TopicSection {
-    /// The resource's static ceiling (`u32::MAX`: interrupts disabled); the effective ceiling is at least the
-    /// holder's priority.
-    pub ceiling: u32,
     /// Longest time held.
-    pub length: Time,
+    pub length: RowTime,
+    /// The resource's static ceiling ([`INTERRUPTS_DISABLED`]: interrupts disabled); the effective ceiling is at
+    /// least the holder's priority.
+    pub ceiling: u8,
 }
 
 /// A topic this board can publish: one job of the level's publisher task per sample.
@@ -74,9 +107,9 @@ pub struct TopicRow<'a> {
     /// Protocol topic byte.
     pub topic: u8,
     /// Worst-case execution time of one sample, software-task overheads included.
-    pub cost: Time,
+    pub cost: RowTime,
     /// Best-case execution time (the earliest its frames can be queued).
-    pub bcet: Time,
+    pub bcet: RowTime,
     /// Its critical sections.
     pub sections: &'a [TopicSection],
 }
@@ -85,11 +118,11 @@ pub struct TopicRow<'a> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct MonotonicRow {
     /// Its priority.
-    pub priority: u32,
+    pub priority: u8,
     /// Cost of one timer interrupt, entry and exit included.
-    pub cost: Time,
+    pub cost: RowTime,
     /// Release jitter (one tick).
-    pub jitter: Time,
+    pub jitter: RowTime,
 }
 
 /// One board's compact task model.
@@ -104,7 +137,7 @@ pub struct BoardTable<'a> {
     /// The topics it can publish, with their budgets.
     pub topics: &'a [TopicRow<'a>],
     /// RTIC priority of the publisher task per CAN priority level (urgent, high, medium, low); `None`: none.
-    pub levels: [Option<u32>; LEVELS],
+    pub levels: [Option<u8>; LEVELS],
     /// The monotonic's timer job, when publishers are timer-released.
     pub monotonic: Option<MonotonicRow>,
     /// Index of the transmit interrupt task (its WCRT is queuing jitter for every frame the board sends).
@@ -573,9 +606,10 @@ fn horizon<const M: usize>(robot: &RobotTable<'_>, streams: &View<'_, M>) -> Tim
     let mut longest = Time::ZERO;
     for b in robot.boards {
         for t in b.tasks {
-            longest = longest
-                .max_of(t.period)
-                .max_of(t.deadline.unwrap_or(t.period));
+            longest = longest.max_of(row_time(t.period));
+            if t.deadline != NO_DEADLINE {
+                longest = longest.max_of(row_time(t.deadline));
+            }
         }
     }
     for (_, s) in streams.iter() {
@@ -610,47 +644,58 @@ fn evaluate_into<const N: usize, const M: usize>(
     };
     // The request's board: its new analysis replaces the kept one only when the request is carried out.
     let requesting = request.and_then(|r| r.sender).map(|x| usize::from(x.board));
-    let mut fresh;
-    let mut pending: Option<Summary<M>> = None;
+    // The request's board's new analysis (kept only when the request is carried out), or any board's without a
+    // cache; with a cache, the other boards are analysed straight into their slots (one summary on the stack).
+    let mut fresh = Summary::EMPTY;
+    // Whose analysis `fresh` holds.
+    let mut fresh_board = None;
     for (b, table) in robot.boards.iter().enumerate() {
         let Some(key) = BoardKey::<M>::of(b, &streams, limits.horizon) else {
             return Some(Refusal::Capacity);
         };
-        let cached = cache
+        let hit = cache
             .as_ref()
             .and_then(|(c, _)| c.boards.get(b))
-            .and_then(|slot| slot.as_ref())
-            .filter(|summary| summary.key == key);
-        let summary = match cached {
-            Some(summary) => summary,
-            None => {
-                fresh = Summary {
-                    key,
-                    ..Summary::EMPTY
-                };
-                if let Err(refusal) = analyse_board::<N, M>(
-                    robot, b, table, &streams, &limits, iterations, &mut fresh,
-                ) {
-                    return Some(refusal);
+            .is_some_and(|summary| summary.kept && summary.key == key);
+        let mut in_fresh = false;
+        if !hit {
+            let slot = cache
+                .as_mut()
+                .filter(|_| requesting != Some(b))
+                .and_then(|(c, _)| c.boards.get_mut(b));
+            let target = match slot {
+                Some(slot) => slot,
+                None => {
+                    in_fresh = true;
+                    fresh_board = Some(b);
+                    &mut fresh
                 }
-                if requesting == Some(b) {
-                    pending = Some(fresh);
-                } else if let Some(slot) = cache.as_mut().and_then(|(c, _)| c.boards.get_mut(b)) {
-                    *slot = Some(fresh);
-                }
-                &fresh
+            };
+            *target = Summary {
+                key,
+                ..Summary::EMPTY
+            };
+            if let Err(refusal) =
+                analyse_board::<N, M>(robot, b, table, &streams, &limits, iterations, target)
+            {
+                return Some(refusal);
             }
+            target.kept = true;
+        }
+        let summary = match cache.as_ref().and_then(|(c, _)| c.boards.get(b)) {
+            Some(slot) if !in_fresh => slot,
+            _ => &fresh,
         };
         if first.is_none() {
-            first = summary.first;
+            first = summary.first(b);
         }
         summary.apply(b, table, &streams, &mut senders);
     }
     analyse_bus(robot, &streams, &senders, &limits, iterations, &mut first);
-    if let (Some(b), Some(summary), Some((c, keep_refused))) = (requesting, pending, cache) {
-        if first.is_none() || keep_refused {
+    if let (Some(b), Some((c, keep_refused))) = (requesting, cache) {
+        if fresh_board == Some(b) && (first.is_none() || keep_refused) {
             if let Some(slot) = c.boards.get_mut(b) {
-                *slot = Some(summary);
+                *slot = fresh;
             }
         }
     }
@@ -678,16 +723,19 @@ pub const MAX_BOARDS: usize = 3;
 /// as they were. A summary is reused only when its inputs are the same — the board's streams in the same order
 /// with the same topic, level, size, period and deadline, and the same horizon — so a decision with the cache is
 /// the decision without it (a test compares them), at a fraction of the cost.
+///
+/// Its empty value is all zero bytes (no summary kept), so a board's admission state, a `static` initialised with
+/// it, is placed in `.bss` and costs no flash.
 #[derive(Debug, Clone)]
 pub struct Cache<const M: usize> {
-    boards: [Option<Summary<M>>; MAX_BOARDS],
+    boards: [Summary<M>; MAX_BOARDS],
 }
 
 impl<const M: usize> Cache<M> {
     /// Nothing analysed yet.
     pub const fn new() -> Self {
         Self {
-            boards: [None; MAX_BOARDS],
+            boards: [Summary::EMPTY; MAX_BOARDS],
         }
     }
 }
@@ -738,24 +786,31 @@ impl<const M: usize> BoardKey<M> {
     }
 }
 
-/// What one board's analysis gives the rest of the check.
+/// What one board's analysis gives the rest of the check. [`Summary::EMPTY`] is all zero bytes (see [`Cache`]).
 #[derive(Debug, Clone, Copy)]
 struct Summary<const M: usize> {
+    /// Whether this is a kept analysis (in a [`Cache`]); the rest is meaningless when not.
+    kept: bool,
     key: BoardKey<M>,
-    /// The board's first violated deadline, in table order.
-    first: Option<Refusal>,
+    /// Whether a deadline of the board is violated: the first in table order is `task`'s, with these numbers.
+    violated: bool,
+    task: TaskId,
+    /// Its WCRT ([`NONE`]: unbounded) and deadline.
+    violation_wcrt: u64,
+    violation_deadline: Time,
     /// Its transmit interrupt's WCRT (0 without one, [`NONE`] unbounded).
     tx: u64,
     /// Its command handler's WCRT (0 without one, [`NONE`] unbounded).
     handler: u64,
-    /// Per stream the board sends (in the key's order): its publisher job's WCRT ([`NONE`]: unbounded or not
-    /// found) and whether the job was found.
+    /// Per stream the board sends (in the key's order): its publisher job's WCRT (meaningful only when found)
+    /// and whether the job was found.
     wcrt: [u64; M],
     found: [bool; M],
 }
 
 impl<const M: usize> Summary<M> {
     const EMPTY: Self = Summary {
+        kept: false,
         key: BoardKey {
             horizon: Time::ZERO,
             len: 0,
@@ -765,12 +820,27 @@ impl<const M: usize> Summary<M> {
             period: [Time::ZERO; M],
             deadline: [0; M],
         },
-        first: None,
+        violated: false,
+        task: TaskId::Fixed(0),
+        violation_wcrt: 0,
+        violation_deadline: Time::ZERO,
         tx: 0,
         handler: 0,
-        wcrt: [NONE; M],
+        wcrt: [0; M],
         found: [false; M],
     };
+
+    /// The board's (index `b`) first violated deadline, in table order.
+    fn first(&self, b: usize) -> Option<Refusal> {
+        self.violated.then_some(Refusal::Deadline(Violation {
+            culprit: Culprit::Task {
+                board: b as u8,
+                task: self.task,
+            },
+            wcrt: bound(self.violation_wcrt),
+            deadline: self.violation_deadline,
+        }))
+    }
 
     /// Writes the board's numbers into the per-stream arrays the bus analysis reads.
     fn apply(
@@ -788,7 +858,7 @@ impl<const M: usize> Summary<M> {
                         .topics
                         .iter()
                         .find(|t| t.topic == sender.topic)
-                        .map_or(0, |t| t.bcet.as_ns());
+                        .map_or(0, |t| u64::from(t.bcet));
                     if let (Some(w), Some(bc), Some(t)) = (
                         senders.wcrt.get_mut(m),
                         senders.bcrt.get_mut(m),
@@ -1011,21 +1081,29 @@ fn analyse_board<const N: usize, const M: usize>(
         len: 0,
     };
     for (i, t) in table.tasks.iter().enumerate() {
-        let period = if t.own_frame { own_frame } else { t.period };
+        let period = if t.own_frame {
+            own_frame
+        } else {
+            row_time(t.period)
+        };
+        let jitter = row_time(t.jitter);
         jobs.push(
             TaskTiming {
-                priority: t.priority,
-                wcet: t.cost,
+                priority: u32::from(t.priority),
+                wcet: row_time(t.cost),
                 period,
-                jitter: t.jitter,
+                jitter,
             },
             JobMeta {
                 id: TaskId::Fixed(u16::try_from(i).map_err(|_| Refusal::Capacity)?),
-                deadline: t.deadline.unwrap_or(period),
-                own_jitter: t.jitter,
-                released_by: t.released_by.map_or(Ok(NO_JOB), |r| {
-                    u8::try_from(r).map_err(|_| Refusal::Capacity)
-                })?,
+                deadline: if t.deadline == NO_DEADLINE {
+                    period
+                } else {
+                    row_time(t.deadline)
+                },
+                own_jitter: jitter,
+                // NO_RELEASER is NO_JOB.
+                released_by: t.released_by,
                 original: 0,
             },
         )?;
@@ -1037,6 +1115,7 @@ fn analyse_board<const N: usize, const M: usize>(
             .get(usize::from(sender.level))
             .copied()
             .flatten()
+            .map(u32::from)
             .ok_or(Refusal::Capacity)?;
         let topic = table
             .topics
@@ -1046,15 +1125,15 @@ fn analyse_board<const N: usize, const M: usize>(
         let timer = match table.monotonic {
             Some(m) => jobs.push(
                 TaskTiming {
-                    priority: m.priority,
-                    wcet: m.cost,
+                    priority: u32::from(m.priority),
+                    wcet: row_time(m.cost),
                     period: s.period,
-                    jitter: m.jitter,
+                    jitter: row_time(m.jitter),
                 },
                 JobMeta {
                     id: TaskId::Timer(sender.topic),
                     deadline: s.period,
-                    own_jitter: m.jitter,
+                    own_jitter: row_time(m.jitter),
                     ..EMPTY_META
                 },
             )?,
@@ -1063,7 +1142,7 @@ fn analyse_board<const N: usize, const M: usize>(
         jobs.push(
             TaskTiming {
                 priority,
-                wcet: topic.cost,
+                wcet: row_time(topic.cost),
                 period: s.period,
                 jitter: Time::ZERO,
             },
@@ -1095,7 +1174,13 @@ fn analyse_board<const N: usize, const M: usize>(
     let mut blocking = [Time::ZERO; N];
     for (slot, timing) in blocking.iter_mut().zip(jobs.timings.iter()).take(len) {
         let p = timing.priority;
-        let mut longest = board::srp_blocking(p, table.sections);
+        // SRP (`board::srp_blocking`): a lower holder's section on a resource whose ceiling reaches `p`.
+        let mut longest = 0;
+        for cs in table.sections {
+            if u32::from(cs.holder_priority) < p && row_ceiling(cs.ceiling) >= p {
+                longest = longest.max(cs.length);
+            }
+        }
         for (_, s) in mine() {
             let Some(sender) = s.sender else { continue };
             let holder = table
@@ -1103,22 +1188,20 @@ fn analyse_board<const N: usize, const M: usize>(
                 .get(usize::from(sender.level))
                 .copied()
                 .flatten()
-                .unwrap_or(0);
+                .map_or(0, u32::from);
             if holder >= p {
                 continue;
             }
             if let Some(topic) = table.topics.iter().find(|t| t.topic == sender.topic) {
                 for cs in topic.sections {
-                    let section = CriticalSection {
-                        holder_priority: holder,
-                        ceiling: cs.ceiling.max(holder),
-                        length: cs.length,
-                    };
-                    longest = longest.max_of(board::srp_blocking(p, &[section]));
+                    // The effective ceiling is at least the holder's priority, which is below `p`.
+                    if row_ceiling(cs.ceiling) >= p {
+                        longest = longest.max(cs.length);
+                    }
                 }
             }
         }
-        *slot = longest;
+        *slot = row_time(longest);
     }
 
     // Release jitters to a fixed point: a released job inherits its releaser's WCRT. When every releaser is more
@@ -1269,15 +1352,11 @@ fn analyse_board<const N: usize, const M: usize>(
         let (Some(meta), Some(&w)) = (jobs.meta.get(p), wcrt.get(p)) else {
             continue;
         };
-        if summary.first.is_none() && (w == NONE || w > meta.deadline.as_ns()) {
-            summary.first = Some(Refusal::Deadline(Violation {
-                culprit: Culprit::Task {
-                    board: b as u8,
-                    task: meta.id,
-                },
-                wcrt: bound(w),
-                deadline: meta.deadline,
-            }));
+        if !summary.violated && (w == NONE || w > meta.deadline.as_ns()) {
+            summary.violated = true;
+            summary.task = meta.id;
+            summary.violation_wcrt = w;
+            summary.violation_deadline = meta.deadline;
         }
     }
     let fixed = |index: Option<u16>| -> u64 {
@@ -1316,22 +1395,22 @@ mod tests {
 
     const SECTIONS: [TopicSection; 1] = [TopicSection {
         ceiling: 3,
-        length: Time::from_us(5),
+        length: 5_000,
     }];
     const TOPICS: [TopicRow<'static>; 1] = [TopicRow {
         topic: 7,
-        cost: Time::from_us(100),
-        bcet: Time::from_us(50),
+        cost: 100_000,
+        bcet: 50_000,
         sections: &SECTIONS,
     }];
     const TASKS: [TaskRow; 1] = [TaskRow {
         priority: 3,
-        cost: Time::from_us(10),
-        bcet: Time::from_us(5),
-        period: Time::from_us(1000),
-        deadline: None,
-        jitter: Time::ZERO,
-        released_by: None,
+        cost: 10_000,
+        bcet: 5_000,
+        period: 1_000_000,
+        deadline: NO_DEADLINE,
+        jitter: 0,
+        released_by: NO_RELEASER,
         own_frame: false,
     }];
     const BOARDS: [BoardTable<'static>; 1] = [BoardTable {

@@ -21,8 +21,8 @@ use std::path::{Path, PathBuf};
 use amiro_can::{CanId, Kind, Priority, Topic};
 
 use crate::admission::{
-    self, BoardTable, MonotonicRow, RobotTable, SectionRow, Sender, Stream, TaskRow, TopicRow,
-    TopicSection, LEVELS,
+    self, BoardTable, MonotonicRow, RobotTable, RowTime, SectionRow, Sender, Stream, TaskRow,
+    TopicRow, TopicSection, INTERRUPTS_DISABLED, LEVELS, NO_DEADLINE, NO_RELEASER,
 };
 use crate::can::{self, FrameCost};
 use crate::model::{FrameCostSpec, Model, OverheadTimes, TaskKind, GLOBAL_CRITICAL_SECTION};
@@ -40,9 +40,9 @@ pub struct OwnedTopic {
     /// Protocol topic byte.
     pub topic: u8,
     /// Cost with overheads.
-    pub cost: Time,
+    pub cost: RowTime,
     /// Best case.
-    pub bcet: Time,
+    pub bcet: RowTime,
     /// Critical sections.
     pub sections: Vec<TopicSection>,
 }
@@ -61,7 +61,7 @@ pub struct OwnedBoard {
     /// Publishable topics.
     pub topics: Vec<OwnedTopic>,
     /// Publisher task priority per level.
-    pub levels: [Option<u32>; LEVELS],
+    pub levels: [Option<u8>; LEVELS],
     /// Timer job.
     pub monotonic: Option<MonotonicRow>,
     /// Transmit task index.
@@ -99,6 +99,63 @@ fn read_timing(root: &Path, path: &Path) -> Result<Timing, BuildError> {
         path: String::new(),
         problem: e.to_string(),
     })
+}
+
+/// The table's compact rows hold what the boards need; a model outside them fails the lowering (and so the
+/// board's build) with the file and field, instead of a wrong table.
+struct Rows<'f> {
+    file: &'f str,
+}
+
+impl Rows<'_> {
+    fn fail(&self, field: &str, problem: String) -> BuildError {
+        BuildError {
+            file: self.file.to_string(),
+            path: field.to_string(),
+            problem,
+        }
+    }
+
+    /// A time as a [`RowTime`]: whole nanoseconds below [`NO_DEADLINE`] (about 4.29 s).
+    fn time(&self, field: &str, time: Time) -> Result<RowTime, BuildError> {
+        u32::try_from(time.as_ns())
+            .ok()
+            .filter(|&ns| ns != NO_DEADLINE)
+            .ok_or_else(|| {
+                self.fail(
+                    field,
+                    format!(
+                        "{} ns does not fit the on-chip admission table's 32-bit rows (at most {} ns, about 4.29 s)",
+                        time.as_ns(),
+                        NO_DEADLINE - 1
+                    ),
+                )
+            })
+    }
+
+    /// An RTIC priority (or a resolved ceiling) as a row byte: below 255 ([`INTERRUPTS_DISABLED`]).
+    fn priority(&self, field: &str, priority: u32) -> Result<u8, BuildError> {
+        u8::try_from(priority)
+            .ok()
+            .filter(|&p| p != INTERRUPTS_DISABLED)
+            .ok_or_else(|| {
+                self.fail(
+                    field,
+                    format!(
+                        "priority {priority} does not fit the on-chip admission table (below 255)"
+                    ),
+                )
+            })
+    }
+
+    /// A resolved ceiling: `u32::MAX` (a global critical section) is [`INTERRUPTS_DISABLED`].
+    fn ceiling(&self, field: &str, ceiling: u32) -> Result<u8, BuildError> {
+        if ceiling == u32::MAX {
+            Ok(INTERRUPTS_DISABLED)
+        } else {
+            self.priority(field, ceiling)
+        }
+    }
 }
 
 fn build_with(
@@ -153,7 +210,13 @@ pub fn lower(
     }
     let base = build_with(root, timing_paths, "base", &[])?;
     let mut boards = Vec::new();
-    for (timing, board) in timings.iter().zip(&base.boards) {
+    for ((timing, board), path) in timings.iter().zip(&base.boards).zip(timing_paths) {
+        let file = path
+            .strip_prefix(root)
+            .unwrap_or(path)
+            .display()
+            .to_string();
+        let rows = Rows { file: &file };
         let overheads = overhead_times(&board.overheads);
         let index_of = |name: &str| {
             board
@@ -188,29 +251,53 @@ pub fn lower(
                 .tasks
                 .get(&t.name)
                 .is_some_and(|b| b.arrival == Some(Arrival::OwnFrame));
+            let field = |name: &str| format!("tasks.{}.{name}", t.name);
+            let released_by = match t.released_by.as_deref().and_then(index_of) {
+                None => NO_RELEASER,
+                Some(i) => u8::try_from(i)
+                    .ok()
+                    .filter(|&i| i != NO_RELEASER)
+                    .ok_or_else(|| {
+                        rows.fail(
+                            &field("released_by"),
+                            "more tasks than the on-chip admission table indexes (255)".to_string(),
+                        )
+                    })?,
+            };
             tasks.push(TaskRow {
-                priority: t.priority,
-                cost: Time::from_us_up(t.wcet_us).plus(overheads.for_kind(t.kind)),
-                bcet: Time::from_us_down(t.bcet_us.unwrap_or(0.0)),
-                period: Time::from_us_down(t.period_us),
-                deadline: t.deadline_us.map(Time::from_us_down),
-                jitter: Time::from_us_up(t.jitter_us),
-                released_by: t.released_by.as_deref().and_then(index_of),
+                priority: rows.priority(&field("priority"), t.priority)?,
+                cost: rows.time(
+                    &field("wcet_us"),
+                    Time::from_us_up(t.wcet_us).plus(overheads.for_kind(t.kind)),
+                )?,
+                bcet: rows.time(
+                    &field("bcet_us"),
+                    Time::from_us_down(t.bcet_us.unwrap_or(0.0)),
+                )?,
+                period: rows.time(&field("period_us"), Time::from_us_down(t.period_us))?,
+                deadline: match t.deadline_us {
+                    Some(d) => rows.time(&field("deadline_us"), Time::from_us_down(d))?,
+                    None => NO_DEADLINE,
+                },
+                jitter: rows.time(&field("jitter_us"), Time::from_us_up(t.jitter_us))?,
+                released_by,
                 own_frame,
             });
             for (r, length) in &t.critical_sections_us {
+                let field = field(&format!("critical_sections_us.{r}"));
                 sections.push(SectionRow {
-                    holder_priority: t.priority,
-                    ceiling: ceiling_of(r),
-                    length: Time::from_us_up(*length),
+                    holder_priority: rows.priority(&field, t.priority)?,
+                    ceiling: rows.ceiling(&field, ceiling_of(r))?,
+                    length: rows.time(&field, Time::from_us_up(*length))?,
                 });
             }
         }
         for (r, length) in &board.idle_critical_sections_us {
+            let field = format!("idle.critical_sections_us.{r}");
             sections.push(SectionRow {
                 holder_priority: 0,
-                ceiling: ceiling_of(r),
-                length: Time::from_us_up(*length),
+                ceiling: rows.ceiling(&field, ceiling_of(r))?,
+                length: rows.time(&field, Time::from_us_up(*length))?,
             });
         }
         // The publishable topics: those the timing file budgets and the protocol gives to this board.
@@ -248,24 +335,33 @@ pub fn lower(
                 let Some(job) = b.tasks.iter().find(|t| t.name == job_name) else {
                     continue;
                 };
+                let field = |name: &str| format!("topics.{}.{name}", info.name);
                 if let Some(slot) = levels.get_mut(l) {
-                    *slot = Some(job.priority);
+                    *slot =
+                        Some(rows.priority(&format!("publishers.{}", level.name()), job.priority)?);
                 }
                 if !topics.iter().any(|t| t.name == info.name) {
+                    let mut topic_sections = Vec::new();
+                    for (r, length) in &job.critical_sections_us {
+                        let field = field(&format!("critical_sections_us.{r}"));
+                        topic_sections.push(TopicSection {
+                            ceiling: rows.ceiling(&field, ceiling_of(r))?,
+                            length: rows.time(&field, Time::from_us_up(*length))?,
+                        });
+                    }
                     topics.push(OwnedTopic {
                         name: info.name.to_string(),
                         topic: info.topic.byte(),
-                        cost: Time::from_us_up(job.wcet_us)
-                            .plus(overheads.for_kind(TaskKind::Software)),
-                        bcet: Time::from_us_down(job.bcet_us.unwrap_or(0.0)),
-                        sections: job
-                            .critical_sections_us
-                            .iter()
-                            .map(|(r, length)| TopicSection {
-                                ceiling: ceiling_of(r),
-                                length: Time::from_us_up(*length),
-                            })
-                            .collect(),
+                        cost: rows.time(
+                            &field("wcet_us"),
+                            Time::from_us_up(job.wcet_us)
+                                .plus(overheads.for_kind(TaskKind::Software)),
+                        )?,
+                        bcet: rows.time(
+                            &field("bcet_us"),
+                            Time::from_us_down(job.bcet_us.unwrap_or(0.0)),
+                        )?,
+                        sections: topic_sections,
                     });
                 }
                 if let Some(timer) = b
@@ -273,11 +369,15 @@ pub fn lower(
                     .iter()
                     .find(|t| t.name == format!("monotonic[{job_name}]"))
                 {
+                    let field = format!("tasks.{}", timer.name);
                     monotonic = Some(MonotonicRow {
-                        priority: timer.priority,
-                        cost: Time::from_us_up(timer.wcet_us)
-                            .plus(overheads.for_kind(TaskKind::Hardware)),
-                        jitter: Time::from_us_up(timer.jitter_us),
+                        priority: rows.priority(&field, timer.priority)?,
+                        cost: rows.time(
+                            &field,
+                            Time::from_us_up(timer.wcet_us)
+                                .plus(overheads.for_kind(TaskKind::Hardware)),
+                        )?,
+                        jitter: rows.time(&field, Time::from_us_up(timer.jitter_us))?,
                     });
                 }
             }
@@ -452,9 +552,6 @@ impl OwnedRobot {
     /// `crate_path` (`schedule_analysis`).
     pub fn to_rust_source(&self, crate_path: &str) -> String {
         let t = |time: Time| format!("{crate_path}::time::Time::from_ns({})", time.as_ns());
-        let opt_t = |time: Option<Time>| {
-            time.map_or_else(|| "None".to_string(), |x| format!("Some({})", t(x)))
-        };
         let opt = |v: Option<u16>| v.map_or_else(|| "None".to_string(), |x| format!("Some({x})"));
         let a = format!("{crate_path}::admission");
         let mut s = String::new();
@@ -499,7 +596,7 @@ impl OwnedRobot {
                 let _ = writeln!(
                     s,
                     "                // {name}\n                {a}::TaskRow {{ priority: {}, cost: {}, bcet: {}, period: {}, deadline: {}, jitter: {}, released_by: {}, own_frame: {} }},",
-                    row.priority, t(row.cost), t(row.bcet), t(row.period), opt_t(row.deadline), t(row.jitter), opt(row.released_by), row.own_frame
+                    row.priority, row.cost, row.bcet, row.period, row.deadline, row.jitter, row.released_by, row.own_frame
                 );
             }
             let _ = writeln!(s, "            ],\n            sections: &[");
@@ -507,7 +604,7 @@ impl OwnedRobot {
                 let _ = writeln!(
                     s,
                     "                {a}::SectionRow {{ holder_priority: {}, ceiling: {}, length: {} }},",
-                    cs.holder_priority, cs.ceiling, t(cs.length)
+                    cs.holder_priority, cs.ceiling, cs.length
                 );
             }
             let _ = writeln!(s, "            ],\n            topics: &[");
@@ -518,15 +615,14 @@ impl OwnedRobot {
                     .map(|cs| {
                         format!(
                             "{a}::TopicSection {{ ceiling: {}, length: {} }}",
-                            cs.ceiling,
-                            t(cs.length)
+                            cs.ceiling, cs.length
                         )
                     })
                     .collect();
                 let _ = writeln!(
                     s,
                     "                // {}\n                {a}::TopicRow {{ topic: {}, cost: {}, bcet: {}, sections: &[{}] }},",
-                    topic.name, topic.topic, t(topic.cost), t(topic.bcet), sections.join(", ")
+                    topic.name, topic.topic, topic.cost, topic.bcet, sections.join(", ")
                 );
             }
             let levels: Vec<String> = b
@@ -546,9 +642,7 @@ impl OwnedRobot {
                     || "None".to_string(),
                     |m| format!(
                         "Some({a}::MonotonicRow {{ priority: {}, cost: {}, jitter: {} }})",
-                        m.priority,
-                        t(m.cost),
-                        t(m.jitter)
+                        m.priority, m.cost, m.jitter
                     )
                 )
             );
