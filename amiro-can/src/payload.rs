@@ -331,7 +331,7 @@ impl SensorData {
             }
             SensorData::Diagnostics { page, .. } => page.to_bytes(),
         };
-        wire::frame(id, topic.info().dlc, data)
+        wire::frame(id, topic.dlc(), data)
     }
 
     /// Checks the fields the decoder checks.

@@ -218,12 +218,28 @@ impl Topic {
 
     /// The owning board.
     pub const fn board(self) -> Board {
-        self.info().board
+        WIRE[self.index()].board
     }
 
     /// True for topics a board publishes, false for actuators (motor, LEDs).
     pub const fn is_sensor(self) -> bool {
-        self.info().is_sensor
+        WIRE[self.index()].is_sensor
+    }
+
+    /// The exact DLC of a data frame (sensors) or of a command frame (actuators): `info().dlc`, without
+    /// linking the topic table's strings into a firmware image.
+    pub const fn dlc(self) -> u8 {
+        WIRE[self.index()].dlc
+    }
+
+    /// Frames per sample: `info().frames_per_sample`, without the table's strings.
+    pub const fn frames_per_sample(self) -> u8 {
+        WIRE[self.index()].frames_per_sample
+    }
+
+    /// The default period in µs (0 for actuators): `info().default_period_us`, without the table's strings.
+    pub const fn default_period_us(self) -> u32 {
+        WIRE[self.index()].default_period_us
     }
 
     /// The identifier of a command to this topic at `priority` (C/S = 0).
@@ -367,7 +383,7 @@ const DIAGNOSTICS_LAYOUT: &str =
 /// Diagnostics are a health signal, not a control input: once a second is plenty.
 const DIAGNOSTICS_PERIOD_US: u32 = 1_000_000;
 
-static TOPIC_TABLE: [TopicInfo; TOPIC_COUNT] = [
+const TOPIC_ROWS: [TopicInfo; TOPIC_COUNT] = [
     sensor(
         Topic::Odometry,
         "odometry",
@@ -511,6 +527,42 @@ static TOPIC_TABLE: [TopicInfo; TOPIC_COUNT] = [
 
 /// The one topic table, in identifier order. Everything else (DLC checks, names, the docs) derives from it.
 pub static TOPICS: &[TopicInfo] = &TOPIC_TABLE;
+
+static TOPIC_TABLE: [TopicInfo; TOPIC_COUNT] = TOPIC_ROWS;
+
+/// What a board needs of a topic on the wire, without the names and layouts (the operator's): the firmware
+/// reads only this table, so its images do not carry the strings of [`TOPICS`].
+#[derive(Clone, Copy)]
+struct Wire {
+    board: Board,
+    is_sensor: bool,
+    frames_per_sample: u8,
+    dlc: u8,
+    default_period_us: u32,
+}
+
+static WIRE: [Wire; TOPIC_COUNT] = {
+    let mut wire = [Wire {
+        board: Board::DiWheelDrive,
+        is_sensor: false,
+        frames_per_sample: 0,
+        dlc: 0,
+        default_period_us: 0,
+    }; TOPIC_COUNT];
+    let mut i = 0;
+    while i < TOPIC_COUNT {
+        let row = &TOPIC_ROWS[i];
+        wire[i] = Wire {
+            board: row.board,
+            is_sensor: row.is_sensor,
+            frames_per_sample: row.frames_per_sample,
+            dlc: row.dlc,
+            default_period_us: row.default_period_us,
+        };
+        i += 1;
+    }
+    wire
+};
 
 // The table must list the topics in the order of `Topic::ALL`/`Topic::index`, or `Topic::info` would return the
 // wrong row; checked when the crate compiles.

@@ -137,12 +137,12 @@ fn board_slot(board: Board) -> usize {
 
 /// The stream a publish command starts, for the table's board `sender_board`.
 pub fn request_stream(sender_board: u8, command: &SensorCommand, period: SampleTime) -> Stream {
-    let info = command.topic.info();
+    let topic = command.topic;
     Stream {
         id: u32::from(CanId::new(Kind::Sensor, command.priority, command.topic.byte()).raw()),
         extended: false,
-        dlc: info.dlc,
-        frames: u32::from(info.frames_per_sample.max(1)),
+        dlc: topic.dlc(),
+        frames: u32::from(topic.frames_per_sample().max(1)),
         // As the handler: the period in µs, at least 1 µs (the decoder rejects zero).
         period: Time::from_us(period.as_micros().max(1)),
         deadline: None,
@@ -229,8 +229,11 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     fn remove(&mut self, board: u8, topic: u8) {
         // In order: the other streams keep their places, so the other boards' kept analyses stay valid.
         if let Some(i) = self.position(board, topic) {
+            // By swaps, not `rotate_left`: no `memmove` is linked into the images for it.
             if let Some(tail) = self.state.running.get_mut(i..self.state.len) {
-                tail.rotate_left(1);
+                for k in 1..tail.len() {
+                    amiro_sensors::tx_queue::swap_with_next(tail, k - 1);
+                }
             }
             self.state.len -= 1;
         }

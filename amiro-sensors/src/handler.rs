@@ -77,7 +77,7 @@ impl Publisher {
     fn idle(topic: Topic) -> Self {
         Self {
             next_due_us: 0,
-            period_us: period_from_micros(u64::from(topic.info().default_period_us)),
+            period_us: period_from_micros(u64::from(topic.default_period_us())),
             missed: 0,
             topic,
             priority: Priority::Low,

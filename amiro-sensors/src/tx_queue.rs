@@ -74,6 +74,14 @@ pub struct TxCounters {
     pub high_water: u16,
 }
 
+/// Swaps `items[i]` and `items[i + 1]` (nothing if either is missing) through two distinct
+/// references, so no `memmove` is linked for it (`slice::swap` allows `i == j` and uses one).
+pub fn swap_with_next<T>(items: &mut [T], i: usize) {
+    if let Some([a, b, ..]) = items.get_mut(i..) {
+        core::mem::swap(a, b);
+    }
+}
+
 /// A bounded queue of frames waiting for a CAN mailbox, lowest identifier first.
 #[derive(Clone, Debug)]
 pub struct TxQueue<const N: usize> {
@@ -167,7 +175,13 @@ impl<const N: usize> TxQueue<N> {
             }
             // The frame leaving last sits at index 0 (the queue is full and `first` was some, so
             // index 0 exists).
-            let dropped = self.frames.remove(0);
+            // Shifted by swaps, not `Vec::remove`: no `memmove` is linked into the images for it.
+            for i in 1..self.frames.len() {
+                swap_with_next(&mut self.frames, i - 1);
+            }
+            let Some(dropped) = self.frames.pop() else {
+                return PushOutcome::DroppedNew { dropped: frame };
+            };
             self.counters.dropped = self.counters.dropped.saturating_add(1);
             outcome = PushOutcome::DroppedOther { dropped };
         }
@@ -177,10 +191,14 @@ impl<const N: usize> TxQueue<N> {
             _ => at,
         };
         // `at` ≤ len: it counted queued frames, less the one dropped before it.
-        if let Err(frame) = self.frames.insert(at, frame) {
+        if let Err(frame) = self.frames.push(frame) {
             // Unreachable: room was made above. Report it as a drop rather than lose it silently.
             self.counters.dropped = self.counters.dropped.saturating_add(1);
             return PushOutcome::DroppedNew { dropped: frame };
+        }
+        // Into its place by swaps, not `Vec::insert` (no `memmove` in the images).
+        for i in (at + 1..self.frames.len()).rev() {
+            swap_with_next(&mut self.frames, i - 1);
         }
         let len = u16::try_from(self.frames.len()).unwrap_or(u16::MAX);
         self.counters.high_water = self.counters.high_water.max(len);
@@ -247,7 +265,7 @@ fn same_sample(queued: &Frame, newer: &Frame) -> bool {
         return false;
     }
     let multi_frame = Topic::from_byte(id.topic_byte())
-        .map(|topic| topic.info().frames_per_sample > 1)
+        .map(|topic| topic.frames_per_sample() > 1)
         .unwrap_or(false);
     // A sample spanning several frames carries the frame's index in its first byte (the proximity
     // ring's sensor number); only the same index is the same thing.
