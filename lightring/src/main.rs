@@ -7,7 +7,7 @@
 //!
 //! Task priorities (RTIC, higher = more urgent; the constants live in `levels`):
 //! `shutdown`, `can_rx`, `can_status` 7 · `can_tx` 6 · `handle_commands`, `shutdown_sequence` 5 ·
-//! `latch_leds` 4 · `publish` (diagnostics) 2 · `watchdog` 1. `cargo xtask analyze` reads these tasks, priorities and shared resources from this
+//! `latch_leds` 4 · `publish` (diagnostics) 2 · `watchdog` 1 · `admit_requests` 0 (thread mode). `cargo xtask analyze` reads these tasks, priorities and shared resources from this
 //! file.
 #![no_std]
 #![no_main]
@@ -57,13 +57,30 @@ pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// per millisecond whatever the bus carries, and a command is latched within about 1.4 ms.
 pub const LATCH_MIN_INTERVAL_US: u64 = 1_000;
 
+/// The admission task takes at most one publish request per this interval (other sensor and
+/// policy commands, which run no analysis, at most one per `COMMAND_MIN_INTERVAL_US`): the check's
+/// cost (a whole-robot analysis) is bounded in the analysis as a sporadic task of this period.
+pub const ADMISSION_MIN_INTERVAL_US: u64 = 40_000;
+/// Depth of the queue from the command handler to the admission task.
+pub const ADMISSION_QUEUE_LEN: usize = 4;
+
 /// The clock every task uses (TIM3 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
+
+// The robot's admission table, generated from the apps and timing files (`board-build.rs`).
+amiro_firmware::admission_table!();
+
+/// This board's admission state (`docs/analysis.md`, "The on-chip admission check"): zero bytes
+/// at reset, in `.bss`.
+type AdmissionState = amiro_firmware::admission::State<
+    { admission_table::MAX_TASKS },
+    { admission_table::MAX_PUBLISHERS },
+>;
 
 #[rtic::app(device = stm32f1xx_hal::pac, dispatchers = [UART4, UART5, TIM6, TIM7, SDIO])]
 mod app {
     use crate::leds::{self, LedState};
-    use crate::{levels, platform, Clock, RX_QUEUE_LEN, TX_QUEUE_LEN};
+    use crate::{levels, platform, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN};
     use amiro_can::{Board as CanBoard, Priority};
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
@@ -98,6 +115,8 @@ mod app {
         can_tx: platform::CanTxPort,
         rx_frames: Sender<'static, RxFrame, RX_QUEUE_LEN>,
         commands: Receiver<'static, RxFrame, RX_QUEUE_LEN>,
+        to_admission: Sender<'static, RxFrame, ADMISSION_QUEUE_LEN>,
+        requests: Receiver<'static, RxFrame, ADMISSION_QUEUE_LEN>,
         wake_latch: Sender<'static, (), 1>,
         wake_publisher: [Sender<'static, (), 1>; 1],
         publisher_wakeups: Receiver<'static, (), 1>,
@@ -115,12 +134,14 @@ mod app {
         amiro_firmware::telemetry::init();
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
+        let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
         let (wake_latch, latch_wakeups) = make_channel!((), 1);
         let (wake_publisher, publisher_wakeups) = make_channel!((), 1);
         let mut signals = hw.signals;
 
         platform::start_monotonic(levels::MONOTONIC, hw.timer_hz);
         handle_commands::spawn().ok();
+        admit_requests::spawn().ok();
         latch_leds::spawn().ok();
         publish::spawn().ok();
         watchdog::spawn().ok();
@@ -146,6 +167,8 @@ mod app {
                 can_tx: hw.can_tx,
                 rx_frames,
                 commands,
+                to_admission,
+                requests,
                 wake_latch,
                 wake_publisher: [wake_publisher],
                 publisher_wakeups,
@@ -181,23 +204,66 @@ mod app {
         cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
     }
 
-    /// Decodes each command; an LED command sets its LED's colour and wakes the latch, a command to
-    /// the diagnostics topic wakes the publisher. At most one command per `COMMAND_MIN_INTERVAL_US`.
-    #[task(priority = 5, shared = [handler, leds], local = [commands, wake_latch, wake_publisher])]
+    /// Decodes each command and records LED colours (waking the latch); sensor and admission-policy
+    /// commands go to `admit_requests` in the order heard; at most one command per
+    /// `COMMAND_MIN_INTERVAL_US`.
+    #[task(priority = 5, shared = [handler, leds], local = [commands, to_admission, wake_latch])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
         while let Some(frame) = tasks::next_command(cx.local.commands).await {
             let started = Clock::now_us();
-            // One publisher task serves every level: one sender wakes it for any of them.
-            if let Some((now, Outcome::Led { command, .. })) = tasks::handle_command::<Clock>(
-                &frame,
-                &mut cx.shared.handler,
-                cx.local.wake_publisher,
-            ) {
+            if tasks::for_admission(&frame) {
+                tasks::forward_to_admission(&frame, cx.local.to_admission);
+            } else if let Some((now, Outcome::Led { command, .. })) =
+                tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
+            {
                 cx.shared.leds.lock(|l| l.apply(now, &command));
                 let _ = cx.local.wake_latch.try_send(());
             }
             Clock::delay_until_us(started + crate::COMMAND_MIN_INTERVAL_US).await;
+        }
+    }
+
+    /// Admission control in the background (priority 0, thread mode: it delays no other task,
+    /// only its locks can block them briefly): checks each sensor command against the robot's
+    /// schedule before it changes anything (a refused request is answered with a verdict and
+    /// changes nothing), then updates the publisher table and wakes the publisher; at most one
+    /// publish request per `ADMISSION_MIN_INTERVAL_US`.
+    #[task(
+        priority = 0,
+        shared = [handler, tx_queue],
+        local = [
+            requests,
+            wake_publisher,
+            admission: crate::AdmissionState = crate::AdmissionState::new(),
+        ]
+    )]
+    async fn admit_requests(mut cx: admit_requests::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::ADMIT_REQUESTS);
+        let mut admission = amiro_firmware::admission::Admission::new(
+            &crate::admission_table::ROBOT,
+            CanBoard::LightRing,
+            cx.local.admission,
+        );
+        // Every board analysed once with nothing running, before the first request.
+        admission.prepare();
+        while let Some(frame) = tasks::next_command(cx.local.requests).await {
+            let started = Clock::now_us();
+            // One publisher task serves every level: one sender wakes it for any of them.
+            tasks::handle_command_admitted::<Clock, _, _, TX_QUEUE_LEN>(
+                &frame,
+                &mut admission,
+                &mut cx.shared.handler,
+                &mut cx.shared.tx_queue,
+                platform::CAN_TX_INTERRUPT,
+                cx.local.wake_publisher,
+            );
+            let interval = if admission.analysed() {
+                crate::ADMISSION_MIN_INTERVAL_US
+            } else {
+                crate::COMMAND_MIN_INTERVAL_US
+            };
+            Clock::delay_until_us(started + interval).await;
         }
     }
 

@@ -86,7 +86,7 @@ pub const MODELS: &[BoardModel] = &[
         reference_frames: 6,
         actuators: &[0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18],
         qemu_control_id: None,
-        admission_task: false,
+        admission_task: true,
     },
     // The shutdown topic (0x1D) is not harmless: no random frame addresses it (it has a DLC, so it
     // is no sensor topic either); the scenarios test it.

@@ -46,6 +46,11 @@ pub const SCENARIOS: &[Scenario] = &[
         about: "SYS_PD_N falls: LEDs dark, SYS_SYNC_N low, hand-over, nothing after",
         check: shutdown,
     },
+    Scenario {
+        name: "admission",
+        about: "issue 11: diagnostics at 1 µs refused, at 2 ms accepted, at urgent refused for DiWheelDrive's frames, then started with a warning; each verdict as the host decides; LEDs keep working",
+        check: admission,
+    },
 ];
 
 type Outputs = [u16; CHANNELS];
@@ -454,5 +459,81 @@ fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     );
     Ok(format!(
         "LEDs dark, SYS_SYNC_N low, hand-over at {end_at} µs; nothing after"
+    ))
+}
+
+/// `lightring/qemu/admission.log` (issue 11).
+fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    use amiro_can::{Topic, Verdict, Violation};
+    let verdicts = super::admission_verdicts(out, amiro_can::Board::LightRing);
+    ensure!(
+        verdicts.len() == 3,
+        "{} verdicts, expected two refusals and a warning",
+        verdicts.len()
+    );
+    let root = bounds.root();
+    let (_, starved) = &verdicts[0];
+    ensure!(
+        starved.verdict == Verdict::Refused
+            && starved.topic == Topic::LightRingDiagnostics
+            && starved.requested.as_micros() == 1,
+        "not the refusal at 1 µs: {starved}"
+    );
+    super::same_refusal(starved, &super::host_admission(root, &[], "01C#01010002")?)?;
+    // LED 3 still latched after the refusal.
+    let latches = latches(out)?;
+    let mut colours = [[0u8; 3]; 8];
+    colours[2] = [0xFF, 0x80, 0x20];
+    let latency = latency_until_shown(&latches, 50_000, &colours)?;
+    // Every 2 ms at medium: accepted (no verdict), six frames per sample until the stop.
+    ensure!(
+        super::host_admission(root, &[], "21C#01020000")?
+            .refusal
+            .is_none(),
+        "the host refuses the diagnostics every 2 ms"
+    );
+    let running = out
+        .times(0x61C)
+        .into_iter()
+        .filter(|t| (60_000..100_000).contains(t))
+        .count();
+    ensure!(
+        running >= 6 * 15,
+        "{running} diagnostics frames between the request and the stop, expected every 2 ms × 6"
+    );
+    ensure!(
+        out.times(0x61C).iter().all(|&t| t < 102_000),
+        "diagnostics frames after the stop"
+    );
+    let (_, other) = &verdicts[1];
+    ensure!(
+        other.verdict == Verdict::Refused
+            && matches!(other.violation, Violation::Message { id } if id.raw() == 0x701),
+        "not the refusal for DiWheelDrive's odometry frames 0x701: {other}"
+    );
+    super::same_refusal(
+        other,
+        &super::host_admission(root, &["301#01010000"], "01C#01640000")?,
+    )?;
+    let (_, warned) = &verdicts[2];
+    ensure!(
+        warned.verdict == Verdict::AcceptedWithWarning && warned.requested.as_micros() == 100_000,
+        "not the warning for the diagnostics every 100 ms: {warned}"
+    );
+    // The health pages (not the verdicts' 0x80/0x81, which share the identifier).
+    let started: Vec<u64> = out
+        .frames
+        .iter()
+        .filter(|f| f.id == 0x41C && f.data.first().is_some_and(|p| *p < 0x80))
+        .map(|f| f.at_us)
+        .collect();
+    ensure!(
+        started.len() >= 6 && started.iter().all(|&t| t >= 220_000),
+        "{} urgent diagnostics frames after the warned request, expected it running",
+        started.len()
+    );
+    Ok(format!(
+        "{starved}; LED 3 latched {latency} µs after its command; 2 ms accepted ({running} frames) and stopped; {other}; then warned and started ({} frames)",
+        started.len()
     ))
 }
