@@ -81,6 +81,8 @@ pub struct State<const N: usize, const M: usize> {
     cache: Cache<M>,
     /// Whether the last command ran an analysis.
     analysed: bool,
+    /// Whether the last command asked this board for a one-shot sample.
+    sampled: bool,
     last_iterations: u64,
     worst_iterations: u64,
 }
@@ -94,6 +96,7 @@ impl<const N: usize, const M: usize> State<N, M> {
             policies: [AdmissionPolicy::Refuse; 3],
             cache: Cache::new(),
             analysed: false,
+            sampled: false,
             last_iterations: 0,
             worst_iterations: 0,
         }
@@ -181,6 +184,14 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         self.state.analysed
     }
 
+    /// Whether the admission task waits its long interval after the last command: after an
+    /// analysis, and after a one-shot sample of this board's (a one-shot is a whole sample job at
+    /// the requested level: at most one per interval, so a flood of valid `once` commands cannot
+    /// keep a publisher level busy; `docs/analysis.md`, "The admission task").
+    pub fn paced(&self) -> bool {
+        self.state.analysed || self.state.sampled
+    }
+
     /// Fixed-point iterations of the last decision and of the most expensive one since boot.
     pub fn iterations(&self) -> (u64, u64) {
         (self.state.last_iterations, self.state.worst_iterations)
@@ -263,6 +274,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     pub fn on_command(&mut self, id: u16, data: &[u8]) -> Check {
         self.state.last_iterations = 0;
         self.state.analysed = false;
+        self.state.sampled = false;
         let Ok(command) = decode_command(id, data) else {
             return Check::Pass;
         };
@@ -285,6 +297,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
                 // Cheap: the board's kept analysis no longer matches and is redone by the next
                 // decision that needs it.
                 self.remove(owner_index, command.topic.byte());
+                self.state.sampled = command.mode == SensorMode::Once && owner == self.board;
                 return Check::Pass;
             }
             SensorMode::Publish(period) => period,

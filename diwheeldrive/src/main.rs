@@ -284,7 +284,7 @@ mod app {
                 platform::CAN_TX_INTERRUPT,
                 cx.local.wake_levels,
             );
-            let interval = if admission.analysed() {
+            let interval = if admission.paced() {
                 crate::ADMISSION_MIN_INTERVAL_US
             } else {
                 crate::COMMAND_MIN_INTERVAL_US

@@ -25,6 +25,11 @@ pub const SCENARIOS: &[Scenario] = &[
         check: admission_other_board,
     },
     Scenario {
+        name: "once-flood",
+        about: "issue 11: 400 valid one-shot requests in 200 ms: at most one sample per 40 ms, the ring keeps its grid",
+        check: once_flood,
+    },
+    Scenario {
         name: "thesis-ring",
         about: "21F#010A0000 → eight frames 0x61F every 10 ms, within the analysed WCRT",
         check: thesis_ring,
@@ -651,6 +656,36 @@ fn shutdown_outside(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let handover = stopped_and_handed_over(out, 100_000)?;
     Ok(format!(
         "{} samples, then SYS_SYNC_N low, publishers stopped, shutdown-request handler; {handover}",
+        samples.len()
+    ))
+}
+
+/// `powermgmt/qemu/once-flood.log`: one-shots paced by the admission task.
+fn once_flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let power = out.times(0x41E);
+    // Requests from 20 ms to 220 ms, one taken per 40 ms (the first at once): at most six, and
+    // the queue's last ones after the flood (at most ADMISSION_WAITING more).
+    let during: Vec<u64> = power.iter().copied().filter(|&t| t < 221_000).collect();
+    ensure!(
+        (4..=6).contains(&during.len()),
+        "{} power-status samples during the 200 ms flood, expected one per 40 ms",
+        during.len()
+    );
+    ensure!(
+        during.windows(2).all(|w| w[1] - w[0] >= 39_000),
+        "two one-shot samples closer than the 40 ms interval: {during:?}"
+    );
+    ensure!(
+        power.len() as u64 <= during.len() as u64 + ADMISSION_WAITING,
+        "{} power-status samples in all: more than the flood's and the queue's",
+        power.len()
+    );
+    let samples = ring_samples(out, 0x71F, 10_000, 10_000, 290_000)?;
+    all_eight(&samples)?;
+    Ok(format!(
+        "400 one-shot requests: {} samples during the flood ({} in all), at least 40 ms apart; the ring kept its 10 ms grid ({} samples × 8)",
+        during.len(),
+        power.len(),
         samples.len()
     ))
 }
