@@ -530,6 +530,59 @@ fn board_name(folder: &str) -> String {
     .map_or_else(|| folder.to_string(), |b| b.to_string())
 }
 
+/// A [`Checker`] made only when it is needed: `amiro monitor` keeps the frames that teach what runs (commands and
+/// sensor data, the newest [`Lazy::HISTORY`]) and lowers the table and replays them when the first admission verdict
+/// completes, so watching a bus starts at once.
+#[derive(Default)]
+pub struct Lazy {
+    history: std::collections::VecDeque<LoggedFrame>,
+    checker: Option<Checker>,
+    unavailable: bool,
+}
+
+impl Lazy {
+    /// Frames kept before the first verdict.
+    pub const HISTORY: usize = 50_000;
+
+    /// A frame heard: the verdict in one sentence when it completes one (see [`Checker::heard`]).
+    pub fn heard(&mut self, logged: &LoggedFrame) -> Option<String> {
+        if let Some(checker) = self.checker.as_mut() {
+            return checker.heard(logged);
+        }
+        if self.unavailable {
+            return None;
+        }
+        let completes_a_verdict = matches!(
+            decode_frame(&logged.frame),
+            Ok(Message::Sample {
+                data: SensorData::Diagnostics {
+                    page: DiagnosticsPage::VerdictBound(_),
+                    ..
+                },
+                ..
+            })
+        );
+        if self.history.len() == Self::HISTORY {
+            self.history.pop_front();
+        }
+        self.history.push_back(logged.clone());
+        if !completes_a_verdict {
+            return None;
+        }
+        let Ok(mut checker) = Checker::load() else {
+            self.unavailable = true;
+            self.history.clear();
+            return None;
+        };
+        let mut said = None;
+        for frame in std::mem::take(&mut self.history) {
+            said = checker.heard(&frame);
+        }
+        self.checker = Some(checker);
+        said
+    }
+}
+
 fn micros(t: Time) -> String {
     let us = t.as_ns().div_ceil(1000);
     if us >= 10_000 && us.is_multiple_of(1000) {
