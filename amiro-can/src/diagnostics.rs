@@ -38,6 +38,9 @@ use crate::topic::{Board, Topic};
 pub const PAGES_PER_SAMPLE: u8 = 6;
 /// Page byte of an admission verdict's first frame ([`VerdictRequest`]).
 pub const VERDICT_PAGE: u8 = 0x80;
+/// The requested-unit value (byte 4, bits 0–1, of [`VERDICT_PAGE`]) that marks a one-shot request: its sample
+/// time is the interval in ms the board analysed it at.
+pub const ONE_SHOT_UNIT: u8 = 3;
 /// Page byte of an admission verdict's second frame ([`VerdictBound`]).
 pub const VERDICT_BOUND_PAGE: u8 = 0x81;
 /// Rejection counters carried by one sample (page 2).
@@ -261,7 +264,8 @@ pub enum ViolationKind {
 /// ```text
 /// byte 1    requested topic
 /// bytes 2–3 requested sample time value, u16
-/// byte 4    bits 0–1 requested unit (0 ms, 1 s, 2 µs); bits 2–3 requested priority; bit 4 verdict (0 refused,
+/// byte 4    bits 0–1 requested unit (0 ms, 1 s, 2 µs; 3: a one-shot request, analysed as a sample every `value`
+///           ms — the board's one-shot interval); bits 2–3 requested priority; bit 4 verdict (0 refused,
 ///           1 accepted with warning); bits 5–7 priority needed at the requested period (0 none, 1 + priority)
 /// bytes 5–6 shortest period accepted at the requested priority: sample time value, u16 (0 when none)
 /// byte 7    bits 0–1 its unit; bits 2–3 violation kind (0 unknown, 1 board task, 2 bus message);
@@ -287,6 +291,8 @@ pub struct VerdictRequest {
     /// Whether the board searched for what would be accepted; when not (byte 7 bit 7 set), the priority needed
     /// and the shortest period are empty and say nothing.
     pub searched: bool,
+    /// A one-shot (`once`) request, analysed as a sample every `requested` (in ms; byte 4 unit 3), not a publisher.
+    pub one_shot: bool,
 }
 
 /// The second frame of an admission verdict (page 0x81): the bound that would break.
@@ -522,7 +528,12 @@ impl DiagnosticsPage {
                     Some(p) => p as u8 + 1,
                     None => 0,
                 };
-                let byte4 = (r.requested.unit as u8)
+                let unit = if r.one_shot {
+                    ONE_SHOT_UNIT
+                } else {
+                    r.requested.unit as u8
+                };
+                let byte4 = unit
                     | ((r.priority as u8) << 2)
                     | (matches!(r.verdict, Verdict::AcceptedWithWarning) as u8) << 4
                     | (needed << 5);
@@ -593,8 +604,13 @@ impl DiagnosticsPage {
             }
             VERDICT_PAGE => {
                 let requested_topic = Topic::try_from(b1)?;
-                let requested =
-                    SampleTime::new(u16::from_le_bytes([b2, b3]), TimeUnit::try_from(b4 & 0b11)?)?;
+                let one_shot = b4 & 0b11 == ONE_SHOT_UNIT;
+                let unit = if one_shot {
+                    TimeUnit::Millis
+                } else {
+                    TimeUnit::try_from(b4 & 0b11)?
+                };
+                let requested = SampleTime::new(u16::from_le_bytes([b2, b3]), unit)?;
                 let priority = Priority::from_bits_truncate(b4 >> 2);
                 let verdict = if b4 & (1 << 4) != 0 {
                     Verdict::AcceptedWithWarning
@@ -639,6 +655,7 @@ impl DiagnosticsPage {
                     shortest_period,
                     violation,
                     searched,
+                    one_shot,
                 })
             }
             VERDICT_BOUND_PAGE => DiagnosticsPage::VerdictBound(VerdictBound {
@@ -713,11 +730,19 @@ impl fmt::Display for DiagnosticsPage {
                     Verdict::Refused => "refused",
                     Verdict::AcceptedWithWarning => "accepted with warning",
                 };
-                write!(
-                    f,
-                    "verdict: {verdict}: publish {} every {} at {}",
-                    r.topic, r.requested, r.priority
-                )?;
+                if r.one_shot {
+                    write!(
+                        f,
+                        "verdict: {verdict}: one-shot of {} at {} (analysed as every {})",
+                        r.topic, r.priority, r.requested
+                    )?;
+                } else {
+                    write!(
+                        f,
+                        "verdict: {verdict}: publish {} every {} at {}",
+                        r.topic, r.requested, r.priority
+                    )?;
+                }
                 if !r.searched {
                     return f.write_str("; what would pass not searched");
                 }
@@ -787,6 +812,8 @@ pub struct AdmissionVerdict {
     /// Whether the board searched for what would be accepted (`shortest_period` and `priority_needed` are
     /// meaningful only then; the boards' on-chip check does not search).
     pub searched: bool,
+    /// A one-shot (`once`) request, analysed as one sample every `requested` (the board's one-shot interval).
+    pub one_shot: bool,
 }
 
 impl AdmissionVerdict {
@@ -812,6 +839,7 @@ impl AdmissionVerdict {
                 shortest_period: self.shortest_period,
                 violation,
                 searched: self.searched,
+                one_shot: self.one_shot,
             }),
             DiagnosticsPage::VerdictBound(VerdictBound {
                 violated,
@@ -856,6 +884,7 @@ impl AdmissionVerdict {
             shortest_period: request.shortest_period,
             priority_needed: request.priority_needed,
             searched: request.searched,
+            one_shot: request.one_shot,
         }
     }
 }
@@ -869,11 +898,19 @@ impl fmt::Display for AdmissionVerdict {
             Verdict::Refused => "refused",
             Verdict::AcceptedWithWarning => "accepted with a warning",
         };
-        write!(
-            f,
-            "{} {decided} \"publish {} every {} at {}\": ",
-            self.board, self.topic, self.requested, self.priority
-        )?;
+        if self.one_shot {
+            write!(
+                f,
+                "{} {decided} \"once {} at {}\" (a sample every {}): ",
+                self.board, self.topic, self.priority, self.requested
+            )?;
+        } else {
+            write!(
+                f,
+                "{} {decided} \"publish {} every {} at {}\": ",
+                self.board, self.topic, self.requested, self.priority
+            )?;
+        }
         match self.violation {
             Violation::Unknown => f.write_str("a deadline would be missed")?,
             Violation::Task { index } => write!(f, "its task #{index} would miss its deadline")?,

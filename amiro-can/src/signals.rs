@@ -80,6 +80,8 @@ const fn selector(mut signal: Signal) -> Signal {
 }
 
 const UNITS: &[(u32, &str)] = &[(0, "ms"), (1, "s"), (2, "us")];
+/// A verdict's requested unit: 3 marks a one-shot request (its value: the interval in ms it was analysed at).
+const REQUESTED_UNITS: &[(u32, &str)] = &[(0, "ms"), (1, "s"), (2, "us"), (3, "one-shot-ms")];
 const PRIORITIES: &[(u32, &str)] = &[(0, "urgent"), (1, "high"), (2, "medium"), (3, "low")];
 const PRIORITY_NEEDED: &[(u32, &str)] = &[
     (0, "none"),
@@ -206,7 +208,10 @@ const DIAGNOSTICS: &[Signal] = &[
     page(sig("deadline_misses_low", 50, 14, false, ""), 5),
     page(named(sig("topic", 8, 8, false, ""), TOPIC_NAMES), 0x80),
     page(sig("requested_value", 16, 16, false, ""), 0x80),
-    page(named(sig("requested_unit", 32, 2, false, ""), UNITS), 0x80),
+    page(
+        named(sig("requested_unit", 32, 2, false, ""), REQUESTED_UNITS),
+        0x80,
+    ),
     page(named(sig("priority", 34, 2, false, ""), PRIORITIES), 0x80),
     page(named(sig("verdict", 36, 1, false, ""), VERDICTS), 0x80),
     page(

@@ -516,7 +516,8 @@ fn every_decode_error_reason() {
         (0x41A, &[0x80, 0x09, 0, 0, 2, 0, 0, 0], E::ZeroSampleTime),
         (
             0x41A,
-            &[0x80, 0x09, 1, 0, 3, 0, 0, 0],
+            // The shortest period's unit (the requested unit's 3 marks a one-shot request).
+            &[0x80, 0x09, 1, 0, 2, 1, 0, 0x43],
             E::BadUnit { unit: 3 },
         ),
         (0x41A, &[0x80, 0x09, 1, 0, 2, 0, 0, 0x40], E::ZeroSampleTime),
@@ -833,6 +834,7 @@ fn admission_verdict_example_from_the_docs() {
         }),
         priority_needed: None,
         searched: true,
+        one_shot: false,
     };
     let [a, b] = verdict.frames(Priority::Urgent);
     assert_eq!(a.to_string(), "41A#8009010002FA0046");
@@ -875,6 +877,7 @@ fn admission_verdict_example_from_the_docs() {
         },
         priority_needed: Some(Priority::Urgent),
         searched: true,
+        one_shot: false,
         verdict: Verdict::AcceptedWithWarning,
         ..verdict
     };

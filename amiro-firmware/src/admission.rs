@@ -42,6 +42,17 @@ macro_rules! admission_table {
     };
 }
 
+/// The interval at which a board takes its one-shot requests (its admission task's pacing,
+/// `ADMISSION_MIN_INTERVAL_US` of every board, checked there), and so the period a one-shot request is
+/// decided at.
+pub const ONE_SHOT_INTERVAL_MS: u16 = 40;
+
+const ONE_SHOT_PERIOD: SampleTime =
+    match SampleTime::new(ONE_SHOT_INTERVAL_MS, amiro_can::TimeUnit::Millis) {
+        Ok(t) => t,
+        Err(_) => panic!("the one-shot interval is a valid sample time"),
+    };
+
 /// What the command handler does with a command after the admission check.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Check {
@@ -250,6 +261,19 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         }
     }
 
+    /// A decided request carried out: a publisher is kept in the running set; a one-shot stops the
+    /// topic's publisher (and paces the admission task when it is this board's).
+    #[inline(never)]
+    fn carry_out(&mut self, request: Stream, one_shot: bool) {
+        let Some(sender) = request.sender else { return };
+        if one_shot {
+            self.remove(sender.board, sender.topic);
+            self.state.sampled = table_index(self.robot, self.board) == Some(sender.board);
+        } else {
+            self.upsert(request);
+        }
+    }
+
     fn upsert(&mut self, stream: Stream) {
         let Some(sender) = stream.sender else { return };
         match self.position(sender.board, sender.topic) {
@@ -293,15 +317,19 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
             return Check::Pass;
         };
         let period = match command.mode {
-            SensorMode::Stop | SensorMode::Once => {
+            SensorMode::Stop => {
                 // Cheap: the board's kept analysis no longer matches and is redone by the next
                 // decision that needs it.
                 self.remove(owner_index, command.topic.byte());
-                self.state.sampled = command.mode == SensorMode::Once && owner == self.board;
                 return Check::Pass;
             }
+            // A one-shot is one sample job at the requested level, at most one per
+            // `ONE_SHOT_INTERVAL_MS` (the admission task's pacing): decided as a stream of that
+            // topic and level at that interval, in place of the topic's publisher (which it stops).
+            SensorMode::Once => ONE_SHOT_PERIOD,
             SensorMode::Publish(period) => period,
         };
+        let one_shot = command.mode == SensorMode::Once;
         let request = request_stream(owner_index, &command, period);
         let policy = self
             .state
@@ -311,13 +339,13 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
             .unwrap_or(AdmissionPolicy::Refuse);
         let decision = self.decide(&request, policy == AdmissionPolicy::AcceptAndWarn);
         let Some(refusal) = decision.refusal else {
-            self.upsert(request);
+            self.carry_out(request, one_shot);
             return Check::Pass;
         };
         let verdict = match policy {
             AdmissionPolicy::Refuse => Verdict::Refused,
             AdmissionPolicy::AcceptAndWarn => {
-                self.upsert(request);
+                self.carry_out(request, one_shot);
                 Verdict::AcceptedWithWarning
             }
         };
@@ -385,6 +413,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
             shortest_period: None,
             priority_needed: None,
             searched: false,
+            one_shot: command.mode == SensorMode::Once,
         }
     }
 

@@ -61,6 +61,10 @@ pub const LATCH_MIN_INTERVAL_US: u64 = 1_000;
 /// policy commands, which run no analysis, at most one per `COMMAND_MIN_INTERVAL_US`): the check's
 /// cost (a whole-robot analysis) is bounded in the analysis as a sporadic task of this period.
 pub const ADMISSION_MIN_INTERVAL_US: u64 = 40_000;
+// One-shot requests are decided at the interval the admission task takes them.
+const _: () = assert!(
+    ADMISSION_MIN_INTERVAL_US == amiro_firmware::admission::ONE_SHOT_INTERVAL_MS as u64 * 1000
+);
 /// Depth of the queue from the command handler to the admission task.
 pub const ADMISSION_QUEUE_LEN: usize = 4;
 
@@ -248,7 +252,6 @@ mod app {
         // Every board analysed once with nothing running, before the first request.
         admission.prepare();
         while let Some(frame) = tasks::next_command(cx.local.requests).await {
-            let started = Clock::now_us();
             // One publisher task serves every level: one sender wakes it for any of them.
             tasks::handle_command_admitted::<Clock, _, _, TX_QUEUE_LEN>(
                 &frame,
@@ -258,12 +261,15 @@ mod app {
                 platform::CAN_TX_INTERRUPT,
                 cx.local.wake_publisher,
             );
+            // From the end of the command: a one-shot's sample (woken before the end) is at least
+            // one interval after the previous one, whatever each decision took.
+            let done = Clock::now_us();
             let interval = if admission.paced() {
                 crate::ADMISSION_MIN_INTERVAL_US
             } else {
                 crate::COMMAND_MIN_INTERVAL_US
             };
-            Clock::delay_until_us(started + interval).await;
+            Clock::delay_until_us(done + interval).await;
         }
     }
 

@@ -30,6 +30,10 @@ use schedule_analysis::time::Time;
 use crate::describe::decode_frame;
 use crate::frame::LoggedFrame;
 
+/// A one-shot request is decided as a sample every this long (the boards' one-shot interval,
+/// `amiro_firmware::admission::ONE_SHOT_INTERVAL_MS`).
+const ONE_SHOT_PERIOD: Time = Time::from_us(40_000);
+
 /// Samples of a publisher heard before its period is taken from their spacing.
 const SAMPLES_FOR_A_PERIOD: u64 = 3;
 
@@ -207,22 +211,24 @@ impl Checker {
             _ => return None,
         };
         let period = match command.mode {
-            SensorMode::Publish(period) => period,
-            SensorMode::Stop | SensorMode::Once => {
+            SensorMode::Publish(period) => Time::from_us(period.as_micros().max(1)),
+            // Decided as the boards decide it: a sample every one-shot interval, in place of the
+            // topic's publisher (which it stops).
+            SensorMode::Once => ONE_SHOT_PERIOD,
+            SensorMode::Stop => {
                 self.remove(command.topic);
                 return None;
             }
         };
-        let request = self.stream(
-            command.topic,
-            command.priority,
-            Time::from_us(period.as_micros().max(1)),
-        )?;
+        let request = self.stream(command.topic, command.priority, period)?;
         let decision = self.decide(&request, suggest);
         let warn =
             self.policies[slot(command.topic.info().board)] == AdmissionPolicy::AcceptAndWarn;
         if decision.refusal.is_none() || warn {
-            self.upsert(request);
+            match command.mode {
+                SensorMode::Once => self.remove(command.topic),
+                _ => self.upsert(request),
+            }
         }
         Some((request, decision))
     }
@@ -238,9 +244,6 @@ impl Checker {
         let Command::Sensor(sensor) = command else {
             return None;
         };
-        let SensorMode::Publish(period) = sensor.mode else {
-            return None;
-        };
         let board = sensor.topic.info().board;
         let topic = sensor.topic.info().name;
         let level = sensor.priority.name();
@@ -248,15 +251,29 @@ impl Checker {
             AdmissionPolicy::Refuse => "would refuse",
             AdmissionPolicy::AcceptAndWarn => "would start, with a warning,",
         };
-        let mut text = format!(
-            "{board} {decided} \"publish {topic} every {period} at {level}\": {}",
-            self.reason(&refusal, &request)
-        );
-        text.push_str(&self.suggestion_text(
-            &decision.suggestion,
-            sensor.priority,
-            &period.to_string(),
-        ));
+        let mut text = match sensor.mode {
+            SensorMode::Publish(period) => {
+                let mut text = format!(
+                    "{board} {decided} \"publish {topic} every {period} at {level}\": {}",
+                    self.reason(&refusal, &request)
+                );
+                text.push_str(&self.suggestion_text(
+                    &decision.suggestion,
+                    sensor.priority,
+                    &period.to_string(),
+                ));
+                text
+            }
+            _ => {
+                let mut text = format!(
+                    "{board} {decided} \"once {topic} at {level}\" (a sample every {}): {}",
+                    micros(ONE_SHOT_PERIOD),
+                    self.reason(&refusal, &request)
+                );
+                text.push_str(&self.level_text(&decision.suggestion));
+                text
+            }
+        };
         text.push_str(&self.measured_note());
         Some(text)
     }
@@ -355,12 +372,20 @@ impl Checker {
                 None => format!("the frames 0x{:03X} on the bus", id.raw()),
             },
         };
+        let request = if verdict.one_shot {
+            format!(
+                "once {} at {}\" (a sample every {})",
+                verdict.topic, verdict.priority, verdict.requested
+            )
+        } else {
+            format!(
+                "publish {} every {} at {}\"",
+                verdict.topic, verdict.requested, verdict.priority
+            )
+        };
         let mut text = format!(
-            "{} {decided} \"publish {} every {} at {}\": {what} would miss its deadline (worst case {}, deadline {}).",
+            "{} {decided} \"{request}: {what} would miss its deadline (worst case {}, deadline {}).",
             verdict.board,
-            verdict.topic,
-            verdict.requested,
-            verdict.priority,
             micros_u24(verdict.wcrt_us.get()),
             micros_u24(verdict.deadline_us.get()),
         );
@@ -385,11 +410,15 @@ impl Checker {
         match searched {
             Some(s) => {
                 text.push_str(" Searched by amiro from what it has heard on the bus:");
-                text.push_str(&self.suggestion_text(
-                    &s,
-                    verdict.priority,
-                    &verdict.requested.to_string(),
-                ));
+                if verdict.one_shot {
+                    text.push_str(&self.level_text(&s));
+                } else {
+                    text.push_str(&self.suggestion_text(
+                        &s,
+                        verdict.priority,
+                        &verdict.requested.to_string(),
+                    ));
+                }
                 text.push_str(&self.measured_note());
             }
             None => text.push_str(" The board did not search for what it would accept."),
@@ -495,6 +524,14 @@ impl Checker {
             },
         );
         text
+    }
+
+    /// What a one-shot would need: the least urgent level that passes.
+    fn level_text(&self, s: &Suggestion) -> String {
+        match s.level.and_then(|l| Priority::ALL.get(usize::from(l))) {
+            Some(p) => format!(" It would accept it at {p} priority."),
+            None => " No priority makes it pass.".to_string(),
+        }
     }
 
     /// Says which running publishers' periods were measured rather than commanded.
@@ -693,6 +730,7 @@ mod tests {
             shortest_period: None,
             priority_needed: None,
             searched: false,
+            one_shot: false,
         };
         let frames = verdict.frames(Priority::Urgent);
         let mut said = Vec::new();

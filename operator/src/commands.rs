@@ -134,7 +134,7 @@ pub fn send(args: &SendArgs) -> Result<ExitCode> {
         matches!(
             decode_frame(frame),
             Ok(Message::Command(Command::Sensor(SensorCommand {
-                mode: SensorMode::Publish(_),
+                mode: SensorMode::Publish(_) | SensorMode::Once,
                 ..
             })))
         )

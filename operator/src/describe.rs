@@ -339,7 +339,9 @@ fn diagnostics_json(page: &DiagnosticsPage) -> Value {
             "topic": request.topic.name(),
             "requested_us": request.requested.as_micros(),
             "requested_value": request.requested.value,
-            "requested_unit": unit_name(request.requested.unit),
+            // As the DBC signal: unit 3 marks a one-shot request analysed at an interval in ms.
+            "requested_unit": if request.one_shot { "one-shot-ms" } else { unit_name(request.requested.unit) },
+            "one_shot": request.one_shot,
             "priority": request.priority.name(),
             "verdict": match request.verdict {
                 Verdict::Refused => "refused",

@@ -763,6 +763,7 @@ fn monitor_explains_an_admission_verdict_in_one_sentence() {
         shortest_period: None,
         priority_needed: None,
         searched: false,
+        one_shot: false,
     };
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("verdict.log");

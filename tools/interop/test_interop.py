@@ -46,6 +46,7 @@ FRAMES = [
     "71A#0401000105000201",  # transmit and bus
     "71A#05" + _PACKED,  # deadlines
     "41A#8009010002FA0046",  # admission verdict: request
+    "41A#8009280003FA0046",  # admission verdict: a one-shot request (unit 3), analysed every 40 ms
     "41A#8106D00700E80300",  # admission verdict: bound
 ]
 

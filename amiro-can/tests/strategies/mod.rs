@@ -147,7 +147,13 @@ fn verdict_request(
     time: fn() -> BoxedStrategy<SampleTime>,
 ) -> impl Strategy<Value = VerdictRequest> {
     (
-        (any_topic(), time(), priority(), any::<bool>()),
+        (
+            any_topic(),
+            time(),
+            priority(),
+            any::<bool>(),
+            any::<bool>(),
+        ),
         (
             prop::option::of(priority()),
             prop::option::of(time()),
@@ -160,10 +166,20 @@ fn verdict_request(
     )
         .prop_map(
             |(
-                (topic, requested, priority, warn),
+                (topic, requested, priority, warn, one_shot),
                 (priority_needed, shortest_period, violation),
             )| {
+                // A one-shot's interval is in ms (its unit bits say "one-shot").
+                let requested = match one_shot {
+                    true => {
+                        amiro_can::SampleTime::new(requested.value, amiro_can::TimeUnit::Millis)
+                            .unwrap_or(requested)
+                    }
+                    false => requested,
+                };
+                let one_shot = one_shot && requested.unit == amiro_can::TimeUnit::Millis;
                 VerdictRequest {
+                    one_shot,
                     topic,
                     requested,
                     priority,

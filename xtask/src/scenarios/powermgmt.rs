@@ -660,15 +660,20 @@ fn shutdown_outside(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-/// `powermgmt/qemu/once-flood.log`: one-shots paced by the admission task.
-fn once_flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
-    let power = out.times(0x41E);
-    // Requests from 20 ms to 220 ms, one taken per 40 ms (the first at once): at most six, and
-    // the queue's last ones after the flood (at most ADMISSION_WAITING more).
-    let during: Vec<u64> = power.iter().copied().filter(|&t| t < 221_000).collect();
+/// `powermgmt/qemu/once-flood.log`: one-shots decided and paced by the admission task.
+fn once_flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    use amiro_can::{Topic, Verdict};
+    // Diagnostics samples (six pages 0..5 on 0x61B), one per one-shot carried out.
+    let samples: Vec<u64> = out
+        .frames
+        .iter()
+        .filter(|f| f.id == 0x61B && f.data.first() == Some(&0))
+        .map(|f| f.at_us)
+        .collect();
+    let during: Vec<u64> = samples.iter().copied().filter(|&t| t < 221_000).collect();
     ensure!(
         (4..=6).contains(&during.len()),
-        "{} power-status samples during the 200 ms flood, expected one per 40 ms",
+        "{} diagnostics samples during the 200 ms flood, expected one per 40 ms",
         during.len()
     );
     ensure!(
@@ -676,16 +681,35 @@ fn once_flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "two one-shot samples closer than the 40 ms interval: {during:?}"
     );
     ensure!(
-        power.len() as u64 <= during.len() as u64 + ADMISSION_WAITING,
-        "{} power-status samples in all: more than the flood's and the queue's",
-        power.len()
-    );
-    let samples = ring_samples(out, 0x71F, 10_000, 10_000, 290_000)?;
-    all_eight(&samples)?;
-    Ok(format!(
-        "400 one-shot requests: {} samples during the flood ({} in all), at least 40 ms apart; the ring kept its 10 ms grid ({} samples × 8)",
-        during.len(),
-        power.len(),
+        samples.len() as u64 <= during.len() as u64 + ADMISSION_WAITING,
+        "{} diagnostics samples in all: more than the flood's and the queue's",
         samples.len()
+    );
+    let verdicts = super::admission_verdicts(out, amiro_can::Board::PowerManagement);
+    ensure!(
+        verdicts.len() == 1,
+        "{} verdicts, expected the refusal of the power-status one-shot",
+        verdicts.len()
+    );
+    let (_, refused) = &verdicts[0];
+    ensure!(
+        refused.verdict == Verdict::Refused
+            && refused.one_shot
+            && refused.topic == Topic::PowerStatus,
+        "not the refusal of the power-status one-shot: {refused}"
+    );
+    let host = super::host_admission(bounds.root(), &["31F#010A0000"], "01E#01280000")?;
+    super::same_refusal(refused, &host)?;
+    ensure!(
+        out.times(0x41E).is_empty(),
+        "a power-status frame: the refused one-shot was carried out"
+    );
+    let ring = ring_samples(out, 0x71F, 10_000, 10_000, 590_000)?;
+    all_eight(&ring)?;
+    Ok(format!(
+        "400 one-shot requests: {} samples during the flood ({} in all), at least 40 ms apart; {refused}; the ring kept its 10 ms grid ({} samples × 8)",
+        during.len(),
+        samples.len(),
+        ring.len()
     ))
 }
