@@ -19,7 +19,7 @@ pub fn ram_goal(board: &str) -> u64 {
     match board {
         // LightRing's own 8 KiB, plus what the on-chip admission analysis needs (its state and the
         // stack of one whole-robot analysis, about 7.4 KB): a stated allowance, as for flash
-        // (`elf::ADMISSION_ALLOWANCE`); the chip has 64 KiB.
+        // (`boards::Board::admission_allowance`); the chip has 64 KiB.
         "lightring" => 8 * 1024 + ADMISSION_RAM_ALLOWANCE,
         _ => 16 * 1024,
     }
