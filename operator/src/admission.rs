@@ -53,6 +53,18 @@ struct Observed {
 }
 
 impl Observed {
+    /// The first frame of a publisher heard at `now`.
+    fn first(topic: Topic, priority: Priority, now: u64) -> Self {
+        Self {
+            topic,
+            priority,
+            frames: 1,
+            first_sample_us: now,
+            last_sample_us: now,
+            last_frame_us: now,
+        }
+    }
+
     fn samples(&self) -> u64 {
         self.frames / u64::from(self.topic.info().frames_per_sample.max(1))
     }
@@ -332,24 +344,8 @@ impl Checker {
                 o.last_frame_us = now;
             }
             // Re-prioritised (or a log that goes back in time): start over.
-            Some(o) => {
-                *o = Observed {
-                    topic,
-                    priority,
-                    frames: 1,
-                    first_sample_us: now,
-                    last_sample_us: now,
-                    last_frame_us: now,
-                }
-            }
-            None => self.observed.push(Observed {
-                topic,
-                priority,
-                frames: 1,
-                first_sample_us: now,
-                last_sample_us: now,
-                last_frame_us: now,
-            }),
+            Some(o) => *o = Observed::first(topic, priority, now),
+            None => self.observed.push(Observed::first(topic, priority, now)),
         }
     }
 
