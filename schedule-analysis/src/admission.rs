@@ -760,7 +760,19 @@ struct BoardKey<const M: usize> {
 }
 
 impl<const M: usize> BoardKey<M> {
+    /// No streams, zero horizon: all zero bytes.
+    const EMPTY: Self = BoardKey {
+        horizon: Time::ZERO,
+        len: 0,
+        topic: [0; M],
+        level: [0; M],
+        dlc: [0; M],
+        period: [Time::ZERO; M],
+        deadline: [0; M],
+    };
+
     fn of(b: usize, streams: &View<'_, M>, horizon: Time) -> Option<Self> {
+        // Field by field, not `..Self::EMPTY`: the zeroes are stores, not a copy of a constant.
         let mut key = BoardKey {
             horizon,
             len: 0,
@@ -811,15 +823,7 @@ struct Summary<const M: usize> {
 impl<const M: usize> Summary<M> {
     const EMPTY: Self = Summary {
         kept: false,
-        key: BoardKey {
-            horizon: Time::ZERO,
-            len: 0,
-            topic: [0; M],
-            level: [0; M],
-            dlc: [0; M],
-            period: [Time::ZERO; M],
-            deadline: [0; M],
-        },
+        key: BoardKey::EMPTY,
         violated: false,
         task: TaskId::Fixed(0),
         violation_wcrt: 0,
