@@ -16,10 +16,15 @@
 //! | 0x80 | verdict | the admission verdict's request: see [`VerdictRequest`] |
 //! | 0x81 | verdict bound | the admission verdict's bound: see [`VerdictBound`] |
 //!
+//! Page 2's reasons `0..REJECT_REASONS` are why a command was rejected as malformed, in [`DecodeError::KINDS`]
+//! order; reasons `REJECT_REASONS..COUNTED_REASONS` are why the admission check refused — or, under
+//! accept-and-warn, warned about — a request, in [`RefusalReason::ALL`] order; [`reason_name`] names any index.
+//!
 //! One sample is pages 0–5 in that order ([`PAGES_PER_SAMPLE`] frames). Counters saturate at their width's
-//! maximum (a [`Count`]). The rejection counters do not fit one sample: each sample carries three of them, and
+//! maximum (a [`Count`]). The per-reason counters do not fit one sample: each sample carries three of them, and
 //! the board moves the window on by three per sample ([`Diagnostics::next_window`]), so a receiver has every
-//! reason after `ceil(reasons / 3)` samples; page 1 carries the total in every sample.
+//! reason after `ceil(COUNTED_REASONS / 3)` samples; page 1 carries the malformed total and page 3 the admission
+//! totals in every sample.
 //!
 //! The verdict pages are not part of a sample: a board sends the pair (0x80, then 0x81, same identifier) when
 //! its admission check refuses a publish or re-prioritisation request, or accepts one with a warning, at the
@@ -47,9 +52,65 @@ pub const VERDICT_BOUND_PAGE: u8 = 0x81;
 pub const REJECTIONS_PER_SAMPLE: usize = 3;
 /// Rejection reasons a board counts: one per [`DecodeError::kind_index`].
 pub const REJECT_REASONS: usize = DecodeError::KINDS.len();
+/// Admission refusal reasons a board counts: one per [`RefusalReason`].
+pub const REFUSAL_REASONS: usize = RefusalReason::ALL.len();
+/// Every reason page 2 carries: the rejection reasons, then the refusal reasons.
+pub const COUNTED_REASONS: usize = REJECT_REASONS + REFUSAL_REASONS;
 
 // Page 1 reports the number of reasons in one byte, page 2 the first index in one byte.
-const _: () = assert!(REJECT_REASONS <= u8::MAX as usize);
+const _: () = assert!(COUNTED_REASONS <= u8::MAX as usize);
+
+/// Why the admission check refused a request (or, under accept-and-warn, warned about one): the reasons a board
+/// counts on page 2 after the rejection reasons (index `REJECT_REASONS + reason as usize`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RefusalReason {
+    /// A task of a board would miss its deadline.
+    TaskDeadline = 0,
+    /// A frame would miss its bus deadline.
+    MessageDeadline = 1,
+    /// A frame would miss its end-to-end deadline (release on its board to the end of its transmission).
+    EndToEndDeadline = 2,
+    /// The board cannot hold the configuration: more publishers, tasks or streams than its tables have room for.
+    Capacity = 3,
+    /// The request's period is zero.
+    ZeroPeriod = 4,
+}
+
+impl RefusalReason {
+    /// Every reason, in counter order.
+    pub const ALL: [RefusalReason; 5] = [
+        RefusalReason::TaskDeadline,
+        RefusalReason::MessageDeadline,
+        RefusalReason::EndToEndDeadline,
+        RefusalReason::Capacity,
+        RefusalReason::ZeroPeriod,
+    ];
+
+    /// A short, stable name: counter and log names.
+    pub const fn name(self) -> &'static str {
+        match self {
+            RefusalReason::TaskDeadline => "admission-task-deadline",
+            RefusalReason::MessageDeadline => "admission-message-deadline",
+            RefusalReason::EndToEndDeadline => "admission-end-to-end-deadline",
+            RefusalReason::Capacity => "admission-capacity",
+            RefusalReason::ZeroPeriod => "admission-zero-period",
+        }
+    }
+
+    /// Its index among the reasons page 2 carries.
+    pub const fn counted_index(self) -> usize {
+        REJECT_REASONS + self as usize
+    }
+}
+
+/// The name of page 2's reason `index`: a [`DecodeError::KINDS`] name, a [`RefusalReason::name`], or `None`
+/// past [`COUNTED_REASONS`].
+pub fn reason_name(index: usize) -> Option<&'static str> {
+    match index.checked_sub(REJECT_REASONS) {
+        None => DecodeError::KINDS.get(index).copied(),
+        Some(i) => RefusalReason::ALL.get(i).map(|r| r.name()),
+    }
+}
 
 /// A counter as it travels on the bus: `BITS` wide, saturating at `2^BITS − 1` instead of wrapping.
 ///
@@ -971,6 +1032,8 @@ pub struct Diagnostics {
     pub admission_refused: u32,
     /// Requests carried out with a warning.
     pub admission_warned: u32,
+    /// Admission verdicts (refused or carried out with a warning), one counter per [`RefusalReason`].
+    pub refusals: [u32; REFUSAL_REASONS],
     /// Received frames dropped (a lower bound).
     pub rx_dropped: u32,
     /// Receive FIFO overruns.
@@ -998,6 +1061,7 @@ impl Diagnostics {
         rejected: [0; REJECT_REASONS],
         admission_refused: 0,
         admission_warned: 0,
+        refusals: [0; REFUSAL_REASONS],
         rx_dropped: 0,
         rx_overruns: 0,
         tx_dropped: 0,
@@ -1017,18 +1081,34 @@ impl Diagnostics {
     /// The rejection window of the sample after one with `window`: three reasons on, back to 0 after the last.
     pub const fn next_window(window: u8) -> u8 {
         let next = window as usize + REJECTIONS_PER_SAMPLE;
-        if next >= REJECT_REASONS {
+        if next >= COUNTED_REASONS {
             0
         } else {
-            // Below REJECT_REASONS, which fits a u8 (checked above).
+            // Below COUNTED_REASONS, which fits a u8 (checked above).
             next as u8
         }
     }
 
-    /// The six pages of one sample; page 2 carries the rejection counters of reasons `window..window + 3`.
+    /// The counter of page 2's reason `index` ([`reason_name`]), `None` past [`COUNTED_REASONS`].
+    pub fn reason_count(&self, index: usize) -> Option<u32> {
+        match index.checked_sub(REJECT_REASONS) {
+            None => self.rejected.get(index).copied(),
+            Some(i) => self.refusals.get(i).copied(),
+        }
+    }
+
+    /// The counter of page 2's reason `index`, to be set (`None` past [`COUNTED_REASONS`]).
+    fn reason_slot(&mut self, index: usize) -> Option<&mut u32> {
+        match index.checked_sub(REJECT_REASONS) {
+            None => self.rejected.get_mut(index),
+            Some(i) => self.refusals.get_mut(i),
+        }
+    }
+
+    /// The six pages of one sample; page 2 carries the counters of reasons `window..window + 3`.
     pub fn pages(&self, window: u8) -> [DiagnosticsPage; PAGES_PER_SAMPLE as usize] {
         let reason = |i: usize| {
-            let count = self.rejected.get(usize::from(window) + i).copied();
+            let count = self.reason_count(usize::from(window) + i);
             Count::saturating(count.unwrap_or(0))
         };
         [
@@ -1042,7 +1122,7 @@ impl Diagnostics {
                 accepted: Count::saturating(self.accepted),
                 rejected: Count::saturating(self.rejected_total()),
                 // Fits: checked above.
-                reasons: REJECT_REASONS as u8,
+                reasons: COUNTED_REASONS as u8,
             },
             DiagnosticsPage::Rejections {
                 first: window,
@@ -1096,7 +1176,7 @@ impl Diagnostics {
             DiagnosticsPage::Commands { accepted, .. } => self.accepted = accepted.get(),
             DiagnosticsPage::Rejections { first, counts } => {
                 for (i, count) in counts.iter().enumerate() {
-                    if let Some(slot) = self.rejected.get_mut(usize::from(first) + i) {
+                    if let Some(slot) = self.reason_slot(usize::from(first) + i) {
                         *slot = count.get();
                     }
                 }
@@ -1147,8 +1227,8 @@ mod tests {
     #[test]
     fn windows_cycle_through_every_reason() {
         let mut window = 0u8;
-        let mut seen = [false; REJECT_REASONS];
-        for _ in 0..REJECT_REASONS.div_ceil(REJECTIONS_PER_SAMPLE) {
+        let mut seen = [false; COUNTED_REASONS];
+        for _ in 0..COUNTED_REASONS.div_ceil(REJECTIONS_PER_SAMPLE) {
             for i in 0..REJECTIONS_PER_SAMPLE {
                 if let Some(s) = seen.get_mut(usize::from(window) + i) {
                     *s = true;
@@ -1158,6 +1238,40 @@ mod tests {
         }
         assert!(seen.iter().all(|s| *s));
         assert_eq!(window, 0, "the window returns to 0 after one cycle");
+    }
+
+    #[test]
+    fn refusal_reasons_follow_the_rejection_reasons_on_page_2() {
+        let mut board = Diagnostics::ZERO;
+        board.rejected[DecodeError::KINDS.len() - 1] = 7;
+        board.refusals[RefusalReason::MessageDeadline as usize] = 3;
+        board.refusals[RefusalReason::ZeroPeriod as usize] = 1;
+        let mut heard = Diagnostics::ZERO;
+        let mut window = 0u8;
+        loop {
+            for page in board.pages(window) {
+                heard.absorb(&page);
+            }
+            window = Diagnostics::next_window(window);
+            if window == 0 {
+                break;
+            }
+        }
+        assert_eq!(heard.rejected, board.rejected);
+        assert_eq!(heard.refusals, board.refusals);
+        let index = RefusalReason::MessageDeadline.counted_index();
+        assert_eq!(reason_name(index), Some("admission-message-deadline"));
+        assert_eq!(reason_name(0), Some(DecodeError::KINDS[0]));
+        assert_eq!(reason_name(COUNTED_REASONS), None);
+        assert_eq!(heard.reason_count(index), Some(3));
+        // Page 1 counts the malformed commands only, and says how many reasons page 2 cycles through.
+        let DiagnosticsPage::Commands {
+            rejected, reasons, ..
+        } = board.pages(0)[1]
+        else {
+            panic!("page 1")
+        };
+        assert_eq!((rejected.get(), usize::from(reasons)), (7, COUNTED_REASONS));
     }
 
     #[test]

@@ -40,9 +40,10 @@ pub use command::{
     ShutdownMode, TimeUnit, MAX_PERIOD_US, POLICY_MODE, SHUTDOWN_KEY,
 };
 pub use diagnostics::{
-    AdmissionVerdict, Count, Diagnostics, DiagnosticsPage, ResetCause, StatusFlags, Verdict,
-    VerdictBound, VerdictRequest, Violation, ViolationKind, PAGES_PER_SAMPLE,
-    REJECTIONS_PER_SAMPLE, REJECT_REASONS, VERDICT_BOUND_PAGE, VERDICT_PAGE,
+    reason_name, AdmissionVerdict, Count, Diagnostics, DiagnosticsPage, RefusalReason, ResetCause,
+    StatusFlags, Verdict, VerdictBound, VerdictRequest, Violation, ViolationKind, COUNTED_REASONS,
+    PAGES_PER_SAMPLE, REFUSAL_REASONS, REJECTIONS_PER_SAMPLE, REJECT_REASONS, VERDICT_BOUND_PAGE,
+    VERDICT_PAGE,
 };
 pub use error::DecodeError;
 pub use frame::Frame;

@@ -20,7 +20,7 @@
 //! boards' own command path is in the table (`can_rx` per bus frame, `handle_commands` rate-limited).
 use amiro_can::{
     decode_command, AdmissionPolicy, AdmissionVerdict, Board, CanId, Command, Count, Frame, Kind,
-    SampleTime, SensorCommand, SensorMode, Verdict, Violation,
+    RefusalReason, SampleTime, SensorCommand, SensorMode, Verdict, Violation,
 };
 pub use schedule_analysis;
 use schedule_analysis::admission::{
@@ -58,10 +58,11 @@ const ONE_SHOT_PERIOD: SampleTime =
 pub enum Check {
     /// Not a request this board decides, or admitted: hand the frame to the sensor-data handler.
     Pass,
-    /// This board refuses it: the handler must not see it; send the verdict's two frames.
-    Refused([Frame; 2]),
-    /// Accept-and-warn: hand it to the handler, then send the verdict's two frames.
-    Warned([Frame; 2]),
+    /// This board refuses it: the handler must not see it; count it by its reason and send the verdict's two
+    /// frames.
+    Refused([Frame; 2], RefusalReason),
+    /// Accept-and-warn: hand it to the handler, count it by its reason, then send the verdict's two frames.
+    Warned([Frame; 2], RefusalReason),
 }
 
 /// An unused slot of the running set: all zero bytes, like every part of an empty [`State`].
@@ -357,8 +358,8 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
             .verdict(&command, period, verdict, &refusal)
             .frames(command.priority);
         match verdict {
-            Verdict::Refused => Check::Refused(frames),
-            Verdict::AcceptedWithWarning => Check::Warned(frames),
+            Verdict::Refused => Check::Refused(frames, reason(&refusal)),
+            Verdict::AcceptedWithWarning => Check::Warned(frames, reason(&refusal)),
         }
     }
 
@@ -437,6 +438,19 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         }
         index += if job { timers } else { 0 };
         u8::try_from(index).map_or(Violation::Unknown, |index| Violation::Task { index })
+    }
+}
+
+/// The counted reason of a refusal (diagnostics page 2, `amiro_can::RefusalReason`).
+fn reason(refusal: &Refusal) -> RefusalReason {
+    match refusal {
+        Refusal::Deadline(v) => match v.culprit {
+            Culprit::Task { .. } => RefusalReason::TaskDeadline,
+            Culprit::Frame { .. } => RefusalReason::MessageDeadline,
+            Culprit::EndToEnd { .. } => RefusalReason::EndToEndDeadline,
+        },
+        Refusal::Capacity => RefusalReason::Capacity,
+        Refusal::ZeroPeriod => RefusalReason::ZeroPeriod,
     }
 }
 

@@ -6,7 +6,10 @@
 //! from the handler's command counters, the transmit queue's counters and the counters below.
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
 
-use amiro_can::{Board, Diagnostics, Frame, Priority, ResetCause, StatusFlags, PAGES_PER_SAMPLE};
+use amiro_can::{
+    Board, Diagnostics, Frame, Priority, RefusalReason, ResetCause, StatusFlags, PAGES_PER_SAMPLE,
+    REFUSAL_REASONS,
+};
 use amiro_sensors::handler::SensorDataHandler;
 use amiro_sensors::tx_queue::TxCounters;
 
@@ -19,6 +22,13 @@ static DEADLINE_MISSES: [AtomicU32; 4] = [
 static LATE_FRAMES: AtomicU32 = AtomicU32::new(0);
 static ADMISSION_REFUSED: AtomicU32 = AtomicU32::new(0);
 static ADMISSION_WARNED: AtomicU32 = AtomicU32::new(0);
+static REFUSALS: [AtomicU32; REFUSAL_REASONS] = [
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+    AtomicU32::new(0),
+];
 /// Sensor groups a board may report (one per bus or device group).
 pub const SENSOR_GROUPS: usize = 8;
 static GROUP_FAULTS: [AtomicU32; SENSOR_GROUPS] = [
@@ -59,12 +69,15 @@ pub fn late_frames() -> u32 {
     LATE_FRAMES.load(Ordering::Relaxed)
 }
 
-/// Counts an admission decision: refused, or accepted with a warning.
-pub fn count_admission(refused: bool) {
+/// Counts an admission verdict: refused, or accepted with a warning, and its reason.
+pub fn count_admission(refused: bool, reason: RefusalReason) {
     if refused {
         ADMISSION_REFUSED.fetch_add(1, Ordering::Relaxed);
     } else {
         ADMISSION_WARNED.fetch_add(1, Ordering::Relaxed);
+    }
+    if let Some(counter) = REFUSALS.get(reason as usize) {
+        counter.fetch_add(1, Ordering::Relaxed);
     }
 }
 
@@ -134,6 +147,13 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
         rejected: counters.rejected,
         admission_refused: ADMISSION_REFUSED.load(Ordering::Relaxed),
         admission_warned: ADMISSION_WARNED.load(Ordering::Relaxed),
+        refusals: [
+            REFUSALS[0].load(Ordering::Relaxed),
+            REFUSALS[1].load(Ordering::Relaxed),
+            REFUSALS[2].load(Ordering::Relaxed),
+            REFUSALS[3].load(Ordering::Relaxed),
+            REFUSALS[4].load(Ordering::Relaxed),
+        ],
         rx_dropped: crate::tasks::rx_dropped(),
         rx_overruns: crate::tasks::rx_overruns(),
         tx_dropped: tx.dropped,

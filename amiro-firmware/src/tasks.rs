@@ -204,12 +204,12 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     let (outcome, verdict) = match check {
         // As of now (after the check): a new publisher's grid starts when it can start.
         Check::Pass => return handle_command_at(C::now_us(), frame, handler, wake_levels),
-        Check::Refused(frames) => {
-            crate::health::count_admission(true);
+        Check::Refused(frames, reason) => {
+            crate::health::count_admission(true, reason);
             (None, frames)
         }
-        Check::Warned(frames) => {
-            crate::health::count_admission(false);
+        Check::Warned(frames, reason) => {
+            crate::health::count_admission(false, reason);
             (
                 handle_command_at(C::now_us(), frame, handler, wake_levels),
                 frames,
@@ -244,8 +244,8 @@ fn note_decision<C: Clock, const N: usize, const M: usize>(
     let took = C::now_us().saturating_sub(started);
     let what = match check {
         Check::Pass => "pass",
-        Check::Refused(_) => "refused",
-        Check::Warned(_) => "warned",
+        Check::Refused(..) => "refused",
+        Check::Warned(..) => "warned",
     };
     let (mut a, mut b, mut c) = ([0u8; 10], [0u8; 10], [0u8; 10]);
     // The admission task runs at priority 0: one line, written in pieces, must not be split by a

@@ -299,8 +299,8 @@ fn diagnostics_json(page: &DiagnosticsPage) -> Value {
             let mut by_reason = Map::new();
             for (i, count) in counts.iter().enumerate() {
                 let index = usize::from(*first) + i;
-                if let Some(name) = DecodeError::KINDS.get(index) {
-                    by_reason.insert((*name).into(), json!(count.get()));
+                if let Some(name) = amiro_can::reason_name(index) {
+                    by_reason.insert(name.into(), json!(count.get()));
                 }
             }
             json!({ "first": first, "counts": counts.map(|c| c.get()), "by_reason": by_reason })

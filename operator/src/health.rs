@@ -8,8 +8,8 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use amiro_can::{
-    Board, Command, DecodeError, Diagnostics, DiagnosticsPage, Message, Priority, ResetCause,
-    SensorCommand, SensorData, SensorMode, PAGES_PER_SAMPLE,
+    reason_name, Board, Command, Diagnostics, DiagnosticsPage, Message, Priority, ResetCause,
+    SensorCommand, SensorData, SensorMode, COUNTED_REASONS, PAGES_PER_SAMPLE, REJECT_REASONS,
 };
 use anyhow::{Context, Result};
 use clap::Args;
@@ -145,22 +145,26 @@ impl BoardHealth {
         if alarming.iter().any(|cause| d.reset_cause.contains(*cause)) {
             findings.push(format!("last reset: {}", d.reset_cause));
         }
-        let rejected: Vec<String> = d
-            .rejected
-            .iter()
-            .enumerate()
-            .filter(|(_, count)| **count > 0)
-            .map(|(index, count)| {
-                format!(
-                    "{} {count}",
-                    DecodeError::KINDS.get(index).copied().unwrap_or("?")
-                )
-            })
-            .collect();
+        let by_reason = |range: std::ops::Range<usize>| -> Vec<String> {
+            range
+                .filter_map(|index| {
+                    let count = d.reason_count(index).filter(|c| *c > 0)?;
+                    Some(format!("{} {count}", reason_name(index).unwrap_or("?")))
+                })
+                .collect()
+        };
+        let rejected = by_reason(0..REJECT_REASONS);
         if !rejected.is_empty() {
             findings.push(format!(
-                "rejected by reason (this sample's window): {}",
+                "rejected by reason (the windows heard): {}",
                 rejected.join(", ")
+            ));
+        }
+        let refused = by_reason(REJECT_REASONS..COUNTED_REASONS);
+        if !refused.is_empty() {
+            findings.push(format!(
+                "admission verdicts by reason (the windows heard): {}",
+                refused.join(", ")
             ));
         }
         let partial = if self.pages.len() < usize::from(PAGES_PER_SAMPLE) {
@@ -260,19 +264,26 @@ fn ask(bus: &mut dyn bus::Bus, args: &HealthArgs, boards: &[Board]) -> Result<Ve
 mod tests {
     use super::*;
 
+    /// What `amiro health` hears from one sample per reason window (every reason once).
     fn heard(diagnostics: &Diagnostics, board: Board) -> BoardHealth {
         let mut health = BoardHealth::default();
-        for frame in diagnostics.frames(board, Priority::Low, 0) {
-            let Ok(Message::Sample {
-                data: SensorData::Diagnostics { page, .. },
-                ..
-            }) = amiro_can::decode(frame.id().raw(), frame.data())
-            else {
-                panic!("a diagnostics frame")
-            };
-            health.absorb(&page);
+        let mut window = 0;
+        loop {
+            for frame in diagnostics.frames(board, Priority::Low, window) {
+                let Ok(Message::Sample {
+                    data: SensorData::Diagnostics { page, .. },
+                    ..
+                }) = amiro_can::decode(frame.id().raw(), frame.data())
+                else {
+                    panic!("a diagnostics frame")
+                };
+                health.absorb(&page);
+            }
+            window = Diagnostics::next_window(window);
+            if window == 0 {
+                return health;
+            }
         }
-        health
     }
 
     #[test]
@@ -287,13 +298,17 @@ mod tests {
         diagnostics.rx_dropped = 7;
         diagnostics.deadline_misses[Priority::High as usize] = 2;
         diagnostics.bus_off = 1;
+        diagnostics.admission_refused = 4;
+        diagnostics.refusals[amiro_can::RefusalReason::MessageDeadline as usize] = 4;
         let verdict = heard(&diagnostics, Board::LightRing).verdict(Board::LightRing);
         for expected in [
             "3 rejected commands",
             "7 received frames dropped",
             "2 high deadline misses",
             "1 bus-off episodes",
-            DecodeError::KINDS[1],
+            &format!("{} 3", amiro_can::DecodeError::KINDS[1]),
+            "4 requests refused by the admission check",
+            "admission verdicts by reason (the windows heard): admission-message-deadline 4",
         ] {
             assert!(verdict.contains(expected), "{expected} in {verdict}");
         }

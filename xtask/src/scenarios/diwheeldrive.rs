@@ -527,8 +527,9 @@ fn admission_other_board(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         out.times(0x402).is_empty(),
         "velocity frames sent: the refused request started"
     );
+    let counted = super::check_refusal_counts(out, amiro_can::Board::DiWheelDrive)?;
     Ok(format!(
-        "{v}; odometry runs ({} frames), no velocity frame",
+        "{v}; odometry runs ({} frames), no velocity frame; {counted}",
         odometry.len()
     ))
 }
@@ -649,8 +650,10 @@ fn admission_starvation(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "the 2 ms magnetometer-x request was not served ({} frames)",
         mag.len()
     );
+    // The diagnostics (every 10 ms from t = 1.742 s) count them by reason.
+    let counted = super::check_refusal_counts(out, amiro_can::Board::DiWheelDrive)?;
     Ok(format!(
-        "{} refusals, each with its reason (first: {first}); gyroscope {} frames on its 2 ms grid, odometry {} on its 10 ms grid (low level alive); 2 ms magnetometer-x accepted ({} frames)",
+        "{} refusals, each with its reason (first: {first}), {counted}; gyroscope {} frames on its 2 ms grid, odometry {} on its 10 ms grid (low level alive); 2 ms magnetometer-x accepted ({} frames)",
         verdicts.len(),
         gyro.frames.len(),
         odometry.frames.len(),

@@ -516,6 +516,83 @@ pub fn admission_verdicts(
     joined
 }
 
+/// Checks `board`'s admission counters by reason (diagnostics page 2, reasons after the malformed
+/// ones) and totals (page 3) against the verdicts it sent: every refusal reason's window must have
+/// been heard after the last verdict, tasks counted as task deadlines, messages as message or
+/// end-to-end deadlines, unnamed ones as capacity or zero period.
+pub fn check_refusal_counts(out: &RunOutput, board: amiro_can::Board) -> Result<String> {
+    use amiro_can::{
+        decode, reason_name, Diagnostics, DiagnosticsPage, Message, RefusalReason, SensorData,
+        Verdict, Violation, REJECTIONS_PER_SAMPLE,
+    };
+    let verdicts = admission_verdicts(out, board);
+    let last_verdict = verdicts.last().map_or(0, |(t, _)| *t);
+    let topic = u32::from(board.diagnostics_topic().byte());
+    let mut heard = Diagnostics::ZERO;
+    let mut covered = std::collections::BTreeSet::new();
+    for f in out
+        .frames
+        .iter()
+        .filter(|f| f.id & 0x4FF == 0x400 | topic && f.at_us > last_verdict)
+    {
+        let Ok(Message::Sample {
+            data: SensorData::Diagnostics { page, .. },
+            ..
+        }) = decode(f.id as u16, &f.data)
+        else {
+            continue;
+        };
+        if let DiagnosticsPage::Rejections { first, .. } = page {
+            covered.extend(usize::from(first)..usize::from(first) + REJECTIONS_PER_SAMPLE);
+        }
+        heard.absorb(&page);
+    }
+    for reason in RefusalReason::ALL {
+        ensure!(
+            covered.contains(&reason.counted_index()),
+            "no diagnostics sample after the last verdict carried {}",
+            reason.name()
+        );
+    }
+    let count = |r: RefusalReason| heard.refusals[r as usize];
+    let kind =
+        |f: fn(&Violation) -> bool| verdicts.iter().filter(|(_, v)| f(&v.violation)).count() as u32;
+    let tasks = kind(|v| matches!(v, Violation::Task { .. }));
+    let messages = kind(|v| matches!(v, Violation::Message { .. }));
+    let unnamed = kind(|v| matches!(v, Violation::Unknown));
+    ensure!(
+        count(RefusalReason::TaskDeadline) == tasks
+            && count(RefusalReason::MessageDeadline) + count(RefusalReason::EndToEndDeadline)
+                == messages
+            && count(RefusalReason::Capacity) + count(RefusalReason::ZeroPeriod) == unnamed,
+        "counted by reason {:?}, the verdicts name {tasks} tasks, {messages} messages, {unnamed} unnamed",
+        heard.refusals
+    );
+    let refused = verdicts
+        .iter()
+        .filter(|(_, v)| v.verdict == Verdict::Refused)
+        .count() as u32;
+    let warned = verdicts.len() as u32 - refused;
+    ensure!(
+        heard.admission_refused == refused && heard.admission_warned == warned,
+        "page 3 says {} refused / {} warned, the verdicts {refused} / {warned}",
+        heard.admission_refused,
+        heard.admission_warned
+    );
+    let named: Vec<String> = RefusalReason::ALL
+        .iter()
+        .filter(|r| count(**r) > 0)
+        .map(|r| {
+            format!(
+                "{} {}",
+                reason_name(r.counted_index()).unwrap_or("?"),
+                count(*r)
+            )
+        })
+        .collect();
+    Ok(format!("counted by reason: {}", named.join(", ")))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
