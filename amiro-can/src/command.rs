@@ -119,6 +119,12 @@ impl fmt::Display for ShutdownMode {
 /// The longest publish period the firmware monotonic accepts, in µs (a 32-bit microsecond timer span, ≈ 71.6 min).
 pub const MAX_PERIOD_US: u64 = u32::MAX as u64;
 
+/// How often a board takes a one-shot (`once`) request at most, in ms: its admission task takes one command per
+/// this interval. So a one-shot is decided — by the boards' admission check, by `amiro` and by the report's
+/// `one_shots` — as a sample of its topic at its priority every this many ms, in place of the topic's publisher
+/// (a one-shot stops it). docs/analysis.md, "The admission task".
+pub const ONE_SHOT_INTERVAL_MS: u16 = 40;
+
 /// The unit byte of a publish command (data\[3\]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u8)]

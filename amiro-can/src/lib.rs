@@ -37,7 +37,7 @@ pub mod embedded_frame;
 
 pub use command::{
     AdmissionPolicy, Command, LedCommand, MotorCommand, Rgb, SampleTime, SensorCommand, SensorMode,
-    ShutdownMode, TimeUnit, MAX_PERIOD_US, POLICY_MODE, SHUTDOWN_KEY,
+    ShutdownMode, TimeUnit, MAX_PERIOD_US, ONE_SHOT_INTERVAL_MS, POLICY_MODE, SHUTDOWN_KEY,
 };
 pub use diagnostics::{
     reason_name, AdmissionVerdict, Count, Diagnostics, DiagnosticsPage, RefusalReason, ResetCause,

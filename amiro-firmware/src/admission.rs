@@ -44,8 +44,8 @@ macro_rules! admission_table {
 
 /// The interval at which a board takes its one-shot requests (its admission task's pacing,
 /// `ADMISSION_MIN_INTERVAL_US` of every board, checked there), and so the period a one-shot request is
-/// decided at.
-pub const ONE_SHOT_INTERVAL_MS: u16 = 40;
+/// decided at: the protocol's [`amiro_can::ONE_SHOT_INTERVAL_MS`].
+pub const ONE_SHOT_INTERVAL_MS: u16 = amiro_can::ONE_SHOT_INTERVAL_MS;
 
 const ONE_SHOT_PERIOD: SampleTime =
     match SampleTime::new(ONE_SHOT_INTERVAL_MS, amiro_can::TimeUnit::Millis) {

@@ -30,9 +30,8 @@ use schedule_analysis::time::Time;
 use crate::describe::decode_frame;
 use crate::frame::LoggedFrame;
 
-/// A one-shot request is decided as a sample every this long (the boards' one-shot interval,
-/// `amiro_firmware::admission::ONE_SHOT_INTERVAL_MS`).
-const ONE_SHOT_PERIOD: Time = Time::from_us(40_000);
+/// A one-shot request is decided as a sample every this long (the boards' one-shot interval).
+const ONE_SHOT_PERIOD: Time = Time::from_us(amiro_can::ONE_SHOT_INTERVAL_MS as u64 * 1000);
 
 /// Samples of a publisher heard before its period is taken from their spacing.
 const SAMPLES_FOR_A_PERIOD: u64 = 3;

@@ -331,6 +331,21 @@ pub struct Scenario {
     /// Commands the operator sends.
     #[serde(default)]
     pub commands: Vec<ScenarioCommand>,
+    /// One-shot requests (`once`) the operator sends: each analysed as a sample of its topic at its priority every
+    /// [`amiro_can::ONE_SHOT_INTERVAL_MS`] (how often a board takes one at most), in place of the topic's publisher —
+    /// what the boards' admission check decides a one-shot as.
+    #[serde(default)]
+    pub one_shots: Vec<ScenarioOneShot>,
+}
+
+/// A one-shot request: a sensor topic's sample at a priority, asked for again and again.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioOneShot {
+    /// Topic name as `amiro_can` spells it.
+    pub topic: String,
+    /// CAN priority.
+    pub priority: String,
 }
 
 fn default_bitrate() -> u32 {
@@ -540,6 +555,7 @@ pub fn build_for(
 ) -> Result<Built, BuildError> {
     let scenario_file = display(root, scenario_path);
     let scenario: Scenario = read_json(root, scenario_path)?;
+    let (scenario, one_shot_notes) = one_shots_as_publishers(scenario, &scenario_file)?;
     if scenario.bitrate == 0 {
         return Err(fail(&scenario_file, "bitrate", "must be greater than 0"));
     }
@@ -652,7 +668,7 @@ pub fn build_for(
         },
         frame_cost: scenario.frame_cost,
         sources: Vec::new(),
-        warnings: Vec::new(),
+        warnings: one_shot_notes,
     };
     let mut senders: BTreeMap<Topic, String> = BTreeMap::new();
     let mut receivers: BTreeMap<String, String> = BTreeMap::new();
@@ -748,6 +764,62 @@ pub fn build_for(
         messages,
     });
     Ok(built)
+}
+
+/// The scenario with each one-shot as a publisher of its topic at its priority every
+/// [`amiro_can::ONE_SHOT_INTERVAL_MS`], and a note per one-shot saying so. A one-shot of a published topic, of an
+/// actuator or listed twice is an error naming its field.
+fn one_shots_as_publishers(
+    mut scenario: Scenario,
+    file: &str,
+) -> Result<(Scenario, Vec<String>), BuildError> {
+    let mut notes = Vec::new();
+    let one_shots = core::mem::take(&mut scenario.one_shots);
+    for (i, o) in one_shots.iter().enumerate() {
+        let path = format!("one_shots[{i}]");
+        let (info, _) = topic_and_priority(file, &path, &o.topic, &o.priority)?;
+        if !info.is_sensor {
+            return Err(fail(
+                file,
+                format!("{path}.topic"),
+                format!(
+                    "`{}` is an actuator: a one-shot asks for a sensor sample",
+                    o.topic
+                ),
+            ));
+        }
+        let listed = |topic: &str| Topic::from_name(topic).is_some_and(|t| t == info.topic);
+        if one_shots[..i].iter().any(|earlier| listed(&earlier.topic)) {
+            return Err(fail(
+                file,
+                format!("{path}.topic"),
+                format!("`{}` is listed twice", o.topic),
+            ));
+        }
+        if scenario.publishers.iter().any(|p| listed(&p.topic)) {
+            return Err(fail(
+                file,
+                format!("{path}.topic"),
+                format!(
+                    "`{}` is also published: a one-shot stops the topic's publisher, list it once",
+                    o.topic
+                ),
+            ));
+        }
+        let interval_us = u64::from(amiro_can::ONE_SHOT_INTERVAL_MS) * 1000;
+        notes.push(format!(
+            "one-shot {} at {}: analysed as a sample every {interval_us} µs (how often a board takes a one-shot at most; docs/analysis.md)",
+            info.name, o.priority
+        ));
+        scenario.publishers.push(ScenarioPublisher {
+            topic: o.topic.clone(),
+            priority: o.priority.clone(),
+            period_us: interval_us as f64,
+            deadline_us: None,
+            jitter_budget_us: None,
+        });
+    }
+    Ok((scenario, notes))
 }
 
 fn check_positive(file: &str, path: &str, value: f64) -> Result<(), BuildError> {

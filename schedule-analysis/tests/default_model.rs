@@ -354,6 +354,28 @@ fn scenario_mistakes_name_the_field() {
             "commands[0].topic",
             "sensor",
         ),
+        (
+            r#"{ "name": "x", "one_shots": [ { "topic": "motor", "priority": "high" } ] }"#,
+            "one_shots[0].topic",
+            "actuator",
+        ),
+        (
+            r#"{ "name": "x", "one_shots": [ { "topic": "odometry", "priority": "soon" } ] }"#,
+            "one_shots[0].priority",
+            "urgent",
+        ),
+        (
+            r#"{ "name": "x", "publishers": [ { "topic": "odometry", "priority": "low", "period_us": 10000 } ],
+                 "one_shots": [ { "topic": "odometry", "priority": "high" } ] }"#,
+            "one_shots[0].topic",
+            "also published",
+        ),
+        (
+            r#"{ "name": "x", "one_shots": [ { "topic": "odometry", "priority": "high" },
+                                            { "topic": "odometry", "priority": "low" } ] }"#,
+            "one_shots[1].topic",
+            "listed twice",
+        ),
     ];
     for (text, path, problem) in cases {
         let file = s.write("x.scenario.json", text);
