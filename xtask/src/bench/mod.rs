@@ -279,22 +279,27 @@ fn analysis_for(
         None => {
             let dir = crate::target_dir(root).join("bench");
             std::fs::create_dir_all(&dir)?;
-            let publishers: Vec<serde_json::Value> = seen_publishers(capture)
-                .into_iter()
-                .filter_map(|(topic, level, period, _)| {
-                    Some(serde_json::json!({
-                        "topic": topic.name(),
-                        "priority": LEVELS[usize::from(level)],
-                        "period_us": period?,
-                    }))
-                })
-                .collect();
+            // A topic sampled once (no period to measure) is a one-shot: analysed as the boards
+            // decide one, a sample every `ONE_SHOT_INTERVAL_MS` at its level.
+            let (mut publishers, mut one_shots) = (Vec::new(), Vec::new());
+            for (topic, level, period, _) in seen_publishers(capture) {
+                let priority = LEVELS[usize::from(level)];
+                match period {
+                    Some(period) => publishers.push(serde_json::json!({
+                        "topic": topic.name(), "priority": priority, "period_us": period,
+                    })),
+                    None => one_shots.push(serde_json::json!({
+                        "topic": topic.name(), "priority": priority,
+                    })),
+                }
+            }
             let name = format!("bench-{}-{}", board.name, std::process::id());
             let path = dir.join(format!("{name}.scenario.json"));
             let json = serde_json::json!({
                 "name": "the publishers the capture shows",
                 "description": "written by cargo xtask bench",
                 "publishers": publishers,
+                "one_shots": one_shots,
             });
             std::fs::write(&path, serde_json::to_string_pretty(&json)?)?;
             path
