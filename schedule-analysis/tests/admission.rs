@@ -36,60 +36,14 @@ fn robot() -> &'static OwnedRobot {
 
 const LEVELS: [&str; 4] = ["urgent", "high", "medium", "low"];
 
-/// The report's `--check` verdict for a scenario with these publishers and commands.
-fn report_verdict(
-    publishers: &[(String, &str, u64)],
-    commands: &[(&str, &str, u64, u64)],
-    case: u64,
-) -> bool {
+/// The report's `--check` verdict for the scenario `json` (written to a temporary file named after `case`), and the
+/// notes the report prints with it.
+fn report_of(json: &serde_json::Value, case: &str) -> (bool, Vec<String>) {
     let root = root();
     let path = std::env::temp_dir().join(format!(
-        "admission-prop-{}-{case}.scenario.json",
+        "admission-{}-{case}.scenario.json",
         std::process::id()
     ));
-    let json = serde_json::json!({
-        "name": "admission-property",
-        "publishers": publishers.iter().map(|(t, l, p)| serde_json::json!({
-            "topic": t, "priority": l, "period_us": p })).collect::<Vec<_>>(),
-        "commands": commands.iter().map(|(t, l, p, j)| serde_json::json!({
-            "topic": t, "priority": l, "period_us": p, "jitter_us": j })).collect::<Vec<_>>(),
-    });
-    std::fs::write(&path, json.to_string()).expect("temp scenario");
-    let built = scenario::build(&root, &path, &scenario::timing_files(&root));
-    let _ = std::fs::remove_file(&path);
-    let system = built
-        .unwrap_or_else(|e| panic!("{e}"))
-        .model
-        .validate()
-        .expect("valid");
-    analyse(
-        &system,
-        &Options {
-            frame_cost: FrameCostSpec::Exact,
-            horizon: None,
-        },
-    )
-    .all_ok()
-}
-
-/// The report's `--check` verdict for publishers and one-shots (`one_shots` of a scenario file).
-fn report_verdict_with_one_shots(
-    publishers: &[(&str, &str, u64)],
-    one_shots: &[(&str, &str)],
-    case: &str,
-) -> (bool, Vec<String>) {
-    let root = root();
-    let path = std::env::temp_dir().join(format!(
-        "admission-once-{}-{case}.scenario.json",
-        std::process::id()
-    ));
-    let json = serde_json::json!({
-        "name": "admission-one-shots",
-        "publishers": publishers.iter().map(|(t, l, p)| serde_json::json!({
-            "topic": t, "priority": l, "period_us": p })).collect::<Vec<_>>(),
-        "one_shots": one_shots.iter().map(|(t, l)| serde_json::json!({
-            "topic": t, "priority": l })).collect::<Vec<_>>(),
-    });
     std::fs::write(&path, json.to_string()).expect("temp scenario");
     let built = scenario::build(&root, &path, &scenario::timing_files(&root));
     let _ = std::fs::remove_file(&path);
@@ -104,6 +58,38 @@ fn report_verdict_with_one_shots(
     )
     .all_ok();
     (ok, built.warnings)
+}
+
+/// The report's `--check` verdict for a scenario with these publishers and commands.
+fn report_verdict(
+    publishers: &[(String, &str, u64)],
+    commands: &[(&str, &str, u64, u64)],
+    case: u64,
+) -> bool {
+    let json = serde_json::json!({
+        "name": "admission-property",
+        "publishers": publishers.iter().map(|(t, l, p)| serde_json::json!({
+            "topic": t, "priority": l, "period_us": p })).collect::<Vec<_>>(),
+        "commands": commands.iter().map(|(t, l, p, j)| serde_json::json!({
+            "topic": t, "priority": l, "period_us": p, "jitter_us": j })).collect::<Vec<_>>(),
+    });
+    report_of(&json, &format!("prop-{case}")).0
+}
+
+/// The report's `--check` verdict for publishers and one-shots (`one_shots` of a scenario file), and its notes.
+fn report_verdict_with_one_shots(
+    publishers: &[(&str, &str, u64)],
+    one_shots: &[(&str, &str)],
+    case: &str,
+) -> (bool, Vec<String>) {
+    let json = serde_json::json!({
+        "name": "admission-one-shots",
+        "publishers": publishers.iter().map(|(t, l, p)| serde_json::json!({
+            "topic": t, "priority": l, "period_us": p })).collect::<Vec<_>>(),
+        "one_shots": one_shots.iter().map(|(t, l)| serde_json::json!({
+            "topic": t, "priority": l })).collect::<Vec<_>>(),
+    });
+    report_of(&json, &format!("once-{case}"))
 }
 
 /// A one-shot is decided on the boards as a sample every `ONE_SHOT_INTERVAL_MS` at its level; the report's
