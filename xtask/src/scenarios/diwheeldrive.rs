@@ -276,11 +276,14 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     // The command handler takes at most one command per COMMAND_MIN_INTERVAL_US: the flood's
     // excess waits in the bounded receive queue and is dropped there, counted. Every frame is
     // accounted for, and the handled ones are at least the interval apart.
-    let handled: Vec<u64> = out
+    let mut handled: Vec<u64> = out
         .traces("command-")
         .iter()
         .map(|line| trace_time(line))
         .collect::<Result<_>>()?;
+    // In time order: a record stamped by the admission task (priority 0) can be written after
+    // one the command handler stamped later, when the handler pre-empts it in between.
+    handled.sort_unstable();
     let dropped = out.end_field("rx dropped")?;
     let overruns = out.end_field("rx overruns")?;
     ensure!(
