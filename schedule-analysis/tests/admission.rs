@@ -103,14 +103,7 @@ fn one_shots_are_decided_as_the_report_analyses_them() {
         ("magnetometer-x", "medium", 900u64),
         ("odometry", "low", 10_000),
     ];
-    let streams: Vec<admission::Stream> = running
-        .iter()
-        .map(|(t, l, p)| {
-            robot
-                .publisher_stream(t, l, Time::from_us(*p), None)
-                .expect("stream")
-        })
-        .collect();
+    let streams = publisher_streams(running.iter().copied());
     let mut refused = 0;
     for topic in publishable() {
         if running.iter().any(|(t, _, _)| *t == topic) {
@@ -147,6 +140,19 @@ fn one_shots_are_decided_as_the_report_analyses_them() {
     assert!(refused > 0, "no one-shot refused: the test shows nothing");
 }
 
+/// The table's streams of these publishers (topic, level, period in µs).
+fn publisher_streams<'a>(
+    publishers: impl Iterator<Item = (&'a str, &'a str, u64)>,
+) -> Vec<admission::Stream> {
+    publishers
+        .map(|(t, l, p)| {
+            robot()
+                .publisher_stream(t, l, Time::from_us(p), None)
+                .expect("stream")
+        })
+        .collect()
+}
+
 fn publishable() -> Vec<String> {
     robot()
         .boards
@@ -160,14 +166,7 @@ fn admitted(
     commands: &[(&str, &str, u64, u64)],
 ) -> admission::Decision {
     let robot = robot();
-    let mut streams: Vec<admission::Stream> = publishers
-        .iter()
-        .map(|(t, l, p)| {
-            robot
-                .publisher_stream(t, l, Time::from_us(*p), None)
-                .expect("stream")
-        })
-        .collect();
+    let mut streams = publisher_streams(publishers.iter().map(|(t, l, p)| (t.as_str(), *l, *p)));
     for (t, l, p, j) in commands {
         streams.push(
             robot
