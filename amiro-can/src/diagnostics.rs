@@ -74,16 +74,20 @@ pub enum RefusalReason {
     Capacity = 3,
     /// The request's period is zero.
     ZeroPeriod = 4,
+    /// The board's admission task already holds as many requests as its queue has room for (requests come faster
+    /// than the check's analysed rate): refused unseen, answered with a verdict, and counted.
+    Busy = 5,
 }
 
 impl RefusalReason {
     /// Every reason, in counter order.
-    pub const ALL: [RefusalReason; 5] = [
+    pub const ALL: [RefusalReason; 6] = [
         RefusalReason::TaskDeadline,
         RefusalReason::MessageDeadline,
         RefusalReason::EndToEndDeadline,
         RefusalReason::Capacity,
         RefusalReason::ZeroPeriod,
+        RefusalReason::Busy,
     ];
 
     /// A short, stable name: counter and log names.
@@ -94,6 +98,7 @@ impl RefusalReason {
             RefusalReason::EndToEndDeadline => "admission-end-to-end-deadline",
             RefusalReason::Capacity => "admission-capacity",
             RefusalReason::ZeroPeriod => "admission-zero-period",
+            RefusalReason::Busy => "admission-busy",
         }
     }
 

@@ -123,7 +123,7 @@ impl<const N: usize, const M: usize> Default for State<N, M> {
 
 /// One board's admission check: the robot table and the board, over the board's [`State`].
 pub struct Admission<'s, const N: usize, const M: usize> {
-    robot: &'static RobotTable<'static>,
+    robot: &'s RobotTable<'s>,
     board: Board,
     state: &'s mut State<N, M>,
 }
@@ -173,11 +173,7 @@ pub fn request_stream(sender_board: u8, command: &SensorCommand, period: SampleT
 
 impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     /// The admission check of `board` on `robot`, keeping its running set in `state`.
-    pub fn new(
-        robot: &'static RobotTable<'static>,
-        board: Board,
-        state: &'s mut State<N, M>,
-    ) -> Self {
+    pub fn new(robot: &'s RobotTable<'s>, board: Board, state: &'s mut State<N, M>) -> Self {
         Self {
             robot,
             board,
@@ -202,6 +198,11 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     /// keep a publisher level busy; `docs/analysis.md`, "The admission task").
     pub fn paced(&self) -> bool {
         self.state.analysed || self.state.sampled
+    }
+
+    /// Whether the last command asked this board for a one-shot sample.
+    pub fn sampled(&self) -> bool {
+        self.state.sampled
     }
 
     /// Fixed-point iterations of the last decision and of the most expensive one since boot.
@@ -339,16 +340,19 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
             .copied()
             .unwrap_or(AdmissionPolicy::Refuse);
         let decision = self.decide(&request, policy == AdmissionPolicy::AcceptAndWarn);
-        let Some(refusal) = decision.refusal else {
+        let Some(first) = decision.refusal else {
             self.carry_out(request, one_shot);
             return Check::Pass;
         };
-        let verdict = match policy {
-            AdmissionPolicy::Refuse => Verdict::Refused,
-            AdmissionPolicy::AcceptAndWarn => {
+        // The hard floor: accept-and-warn starts only requests whose every violation is a bounded deadline
+        // miss of a publisher; anything else is refused whatever the policy, naming what falls below it.
+        let (verdict, refusal) = match (policy, decision.floor) {
+            (AdmissionPolicy::AcceptAndWarn, None) => {
                 self.carry_out(request, one_shot);
-                Verdict::AcceptedWithWarning
+                (Verdict::AcceptedWithWarning, first)
             }
+            (AdmissionPolicy::AcceptAndWarn, Some(floor)) => (Verdict::Refused, floor),
+            (AdmissionPolicy::Refuse, _) => (Verdict::Refused, first),
         };
         if owner != self.board {
             // The owner decides and answers; this board only keeps its view.
@@ -438,6 +442,118 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         }
         index += if job { timers } else { 0 };
         u8::try_from(index).map_or(Violation::Unknown, |index| Violation::Task { index })
+    }
+}
+
+/// The verdict a board sends when its admission queue is full and `frame` is one of its own publish or
+/// one-shot requests (`None` for anything else: other boards answer their own requests, and a stop or
+/// policy command needs no answer): refused unseen, reason [`RefusalReason::Busy`], nothing analysed.
+/// The requester hears at once that it asked faster than the check's analysed rate.
+pub fn busy_verdict(board: Board, id: u16, data: &[u8]) -> Option<[Frame; 2]> {
+    let Ok(Command::Sensor(command)) = decode_command(id, data) else {
+        return None;
+    };
+    if command.topic.board() != board {
+        return None;
+    }
+    let requested = match command.mode {
+        SensorMode::Publish(period) => period,
+        SensorMode::Once => ONE_SHOT_PERIOD,
+        SensorMode::Stop => return None,
+    };
+    let verdict = AdmissionVerdict {
+        board,
+        topic: command.topic,
+        requested,
+        priority: command.priority,
+        verdict: Verdict::Refused,
+        violation: Violation::Unknown,
+        wcrt_us: Count::ZERO,
+        deadline_us: Count::ZERO,
+        shortest_period: None,
+        priority_needed: None,
+        searched: false,
+        one_shot: command.mode == SensorMode::Once,
+    };
+    Some(verdict.frames(command.priority))
+}
+
+/// `now_us` in whole milliseconds, wrapping at 32 bits (`div_us`: no 64-bit division is linked).
+pub fn millis(now_us: u64) -> u32 {
+    amiro_sensors::clock::div_us(now_us, 1000) as u32
+}
+
+/// Whether `frame` is a stop of a sensor topic (of any board). A stop only removes load, so it needs no
+/// analysis: the command handler applies it at once (within its own deadline) and the admission task only
+/// brings its running set up to date, in the order the commands were heard.
+pub fn is_stop(id: u16, data: &[u8]) -> bool {
+    matches!(
+        decode_command(id, data),
+        Ok(Command::Sensor(SensorCommand {
+            mode: SensorMode::Stop,
+            ..
+        }))
+    )
+}
+
+/// The admission task's pacing (`docs/analysis.md`, "The admission task"): at most `K` analysed commands
+/// (publish and one-shot requests of any board: every board decides every request to keep its view) start
+/// in any window of `window_us`, so the task's analysed load is at most `K` decisions per window however
+/// fast requests come, while a burst of up to `K` requests is decided back to back; and this board's own
+/// one-shot samples are at least `one_shot_us` apart (a one-shot is a whole sample job at the requested
+/// level, decided as a stream of that interval). Commands that run no analysis wait `command_us`.
+/// Allocation-free and host-tested; the board's task awaits [`Pacing::next_start`].
+#[derive(Debug, Clone)]
+pub struct Pacing<const K: usize> {
+    /// Start times of the last `K` analysed commands (a ring; 0 = none yet).
+    starts: [u64; K],
+    /// The ring's oldest entry.
+    oldest: usize,
+    window_us: u64,
+    one_shot_us: u64,
+    command_us: u64,
+}
+
+impl<const K: usize> Pacing<K> {
+    /// No command taken yet.
+    pub const fn new(window_us: u64, one_shot_us: u64, command_us: u64) -> Self {
+        Self {
+            starts: [0; K],
+            oldest: 0,
+            window_us,
+            one_shot_us,
+            command_us,
+        }
+    }
+
+    /// The earliest time the next command may start, after a command that started at `started` and ended at
+    /// `ended`; `analysed` and `own_one_shot` as [`Admission::analysed`] and [`Admission::sampled`] said.
+    pub fn next_start(
+        &mut self,
+        started: u64,
+        ended: u64,
+        analysed: bool,
+        own_one_shot: bool,
+    ) -> u64 {
+        let mut next = ended.saturating_add(self.command_us);
+        if analysed && K > 0 {
+            if let Some(slot) = self.starts.get_mut(self.oldest) {
+                *slot = started.max(1);
+            }
+            self.oldest = (self.oldest + 1) % K;
+            // The K-th analysis before the next one started at `starts[oldest]` (0: fewer than K so far).
+            if let Some(&kth) = self.starts.get(self.oldest) {
+                if kth != 0 {
+                    next = next.max(kth.saturating_add(self.window_us));
+                }
+            }
+        }
+        if own_one_shot {
+            // From the end of the command: the next one-shot sample (woken before the end) is at
+            // least one interval after this one, whatever each decision took.
+            next = next.max(ended.saturating_add(self.one_shot_us));
+        }
+        next
     }
 }
 

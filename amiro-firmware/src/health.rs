@@ -28,6 +28,7 @@ static REFUSALS: [AtomicU32; REFUSAL_REASONS] = [
     AtomicU32::new(0),
     AtomicU32::new(0),
     AtomicU32::new(0),
+    AtomicU32::new(0),
 ];
 /// Sensor groups a board may report (one per bus or device group).
 pub const SENSOR_GROUPS: usize = 8;
@@ -79,6 +80,13 @@ pub fn count_admission(refused: bool, reason: RefusalReason) {
     if let Some(counter) = REFUSALS.get(reason as usize) {
         counter.fetch_add(1, Ordering::Relaxed);
     }
+}
+
+/// Requests refused because the admission queue was full ([`RefusalReason::Busy`]), since boot.
+pub fn admission_busy() -> u32 {
+    REFUSALS
+        .get(RefusalReason::Busy as usize)
+        .map_or(0, |c| c.load(Ordering::Relaxed))
 }
 
 /// Reports sensor group `group` (0..[`SENSOR_GROUPS`]): its failures since boot and whether it
@@ -153,6 +161,7 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
             REFUSALS[2].load(Ordering::Relaxed),
             REFUSALS[3].load(Ordering::Relaxed),
             REFUSALS[4].load(Ordering::Relaxed),
+            REFUSALS[5].load(Ordering::Relaxed),
         ],
         rx_dropped: crate::tasks::rx_dropped(),
         rx_overruns: crate::tasks::rx_overruns(),

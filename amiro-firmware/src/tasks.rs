@@ -166,14 +166,100 @@ pub fn for_admission(frame: &RxFrame) -> bool {
     )
 }
 
-/// Queues a command for the admission task; a full queue drops it and counts it as a received
-/// frame dropped (the queue is bounded, as the receive queue is).
-pub fn forward_to_admission<const N: usize>(
+/// When the last busy verdict was sent (ms since boot, 0: never).
+static LAST_BUSY_VERDICT_MS: AtomicU32 = AtomicU32::new(0);
+
+/// The command handler's part of a sensor or admission-policy command (`docs/analysis.md`, "The
+/// admission task"). A **stop** only removes load: it takes effect here, at the handler's priority and
+/// within its deadline, and then goes to the admission task like every such command, which brings its
+/// running set up to date in the order heard (and applies the stop again, in case a request for the
+/// same topic was still waiting there). When the admission queue is full, one of this board's publish or
+/// one-shot requests is refused unseen: counted as [`amiro_can::RefusalReason::Busy`] and answered with
+/// a verdict through the transmit queue; anything else is dropped and counted as a received frame
+/// dropped (the queue is bounded, as the receive queue is).
+#[allow(clippy::too_many_arguments)]
+pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
     frame: &RxFrame,
+    board: amiro_can::Board,
+    handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    wake_levels: &mut [Sender<'static, (), 1>],
     requests: &mut Sender<'static, RxFrame, N>,
+    mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
+    tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
 ) {
-    if requests.try_send(*frame).is_err() {
-        RX_DROPPED.fetch_add(1, Ordering::Relaxed);
+    if crate::admission::is_stop(frame.id, frame.payload()) {
+        let _ = handle_command::<C>(frame, handler, wake_levels);
+    }
+    if requests.try_send(*frame).is_ok() {
+        return;
+    }
+    match crate::admission::busy_verdict(board, frame.id, frame.payload()) {
+        Some(verdict) => {
+            crate::health::count_admission(true, amiro_can::RefusalReason::Busy);
+            let now = C::now_us();
+            // At most one busy verdict per one-shot interval: a flood of requests must not turn into a
+            // flood of verdicts (each refusal is counted all the same).
+            let last = LAST_BUSY_VERDICT_MS.load(Ordering::Relaxed);
+            let now_ms = crate::admission::millis(now);
+            if last != 0
+                && now_ms.wrapping_sub(last) < u32::from(crate::admission::ONE_SHOT_INTERVAL_MS)
+            {
+                return;
+            }
+            LAST_BUSY_VERDICT_MS.store(now_ms.max(1), Ordering::Relaxed);
+            // Not traced as queued frames: no sample was released for them (the bench would take
+            // them for late samples of the diagnostics topic).
+            for verdict_frame in verdict {
+                let _ = tx_queue.lock(|q| q.push(verdict_frame));
+            }
+            cortex_m::peripheral::NVIC::pend(tx_interrupt);
+        }
+        None => {
+            RX_DROPPED.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// The admission task's loop (`docs/analysis.md`, "The admission task"), the same on every board:
+/// analyses every board once before the first request, then takes the commands the handler queued in
+/// the order heard through [`handle_command_admitted`], paced by [`crate::admission::Pacing`]: at most
+/// `K` analysed commands in any window, this board's one-shots at least the one-shot interval apart.
+#[allow(clippy::too_many_arguments)]
+pub async fn serve_admission<
+    C: Clock,
+    const N: usize,
+    const M: usize,
+    const Q: usize,
+    const R: usize,
+    const K: usize,
+>(
+    admission: &mut crate::admission::Admission<'_, N, M>,
+    pacing: &mut crate::admission::Pacing<K>,
+    requests: &mut Receiver<'static, RxFrame, R>,
+    mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
+    tx_interrupt: impl cortex_m::interrupt::InterruptNumber + Copy,
+    wake_levels: &mut [Sender<'static, (), 1>],
+) {
+    // Every board analysed once with nothing running, before the first request.
+    admission.prepare();
+    while let Some(frame) = next_command(requests).await {
+        let started = C::now_us();
+        handle_command_admitted::<C, N, M, Q>(
+            &frame,
+            admission,
+            &mut handler,
+            &mut tx_queue,
+            tx_interrupt,
+            wake_levels,
+        );
+        let next = pacing.next_start(
+            started,
+            C::now_us(),
+            admission.analysed(),
+            admission.sampled(),
+        );
+        C::delay_until_us(next).await;
     }
 }
 

@@ -233,8 +233,10 @@ impl Checker {
         };
         let request = self.stream(command.topic, command.priority, period)?;
         let decision = self.decide(&request, suggest);
-        let warn =
-            self.policies[slot(command.topic.info().board)] == AdmissionPolicy::AcceptAndWarn;
+        // Accept-and-warn starts a refused request only above the hard floor (a bounded publisher miss).
+        let warn = self.policies[slot(command.topic.info().board)]
+            == AdmissionPolicy::AcceptAndWarn
+            && decision.floor.is_none();
         if decision.refusal.is_none() || warn {
             match command.mode {
                 SensorMode::Once => self.remove(command.topic),
@@ -251,16 +253,20 @@ impl Checker {
             return None;
         };
         let (request, decision) = self.apply(command, true)?;
-        let refusal = decision.refusal?;
+        let first = decision.refusal?;
         let Command::Sensor(sensor) = command else {
             return None;
         };
         let board = sensor.topic.info().board;
         let topic = sensor.topic.info().name;
         let level = sensor.priority.name();
-        let decided = match self.policies[slot(board)] {
-            AdmissionPolicy::Refuse => "would refuse",
-            AdmissionPolicy::AcceptAndWarn => "would start, with a warning,",
+        let (decided, refusal) = match (self.policies[slot(board)], decision.floor) {
+            (AdmissionPolicy::AcceptAndWarn, None) => ("would start, with a warning,", first),
+            (AdmissionPolicy::AcceptAndWarn, Some(floor)) => (
+                "would refuse (below the hard floor, whatever the policy)",
+                floor,
+            ),
+            (AdmissionPolicy::Refuse, _) => ("would refuse", first),
         };
         let mut text = match sensor.mode {
             SensorMode::Publish(period) => {

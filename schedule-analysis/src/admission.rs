@@ -267,6 +267,8 @@ pub enum Refusal {
 pub struct Evaluation {
     /// `None`: everything meets its deadline.
     pub refusal: Option<Refusal>,
+    /// The first violation below the hard floor (see [`Decision::floor`]); `None` when there is none.
+    pub floor: Option<Refusal>,
     /// Fixed-point iterations it took (the measure of its cost).
     pub iterations: u64,
 }
@@ -285,6 +287,12 @@ pub struct Suggestion {
 pub struct Decision {
     /// `None`: admitted.
     pub refusal: Option<Refusal>,
+    /// The first violation that no policy may accept (the hard floor, docs/analysis.md): a task or message left
+    /// without a bound, a fixed task of a board (CAN receive and transmit, command handling, the admission task,
+    /// the watchdog, the shutdown path, …) missing its deadline, a command's end-to-end path, a capacity or zero
+    /// period refusal. `None` when every violation is a bounded deadline miss of a publisher (its job, its timer
+    /// job or its frames), which accept-and-warn may start with a warning.
+    pub floor: Option<Refusal>,
     /// On refusal, what would be accepted (searched only when asked for).
     pub suggestion: Suggestion,
     /// Fixed-point iterations of the whole decision, searches included.
@@ -307,9 +315,10 @@ pub fn evaluate<const N: usize, const M: usize>(
     streams: &[Stream],
 ) -> Evaluation {
     let mut iterations = 0u64;
-    let refusal = evaluate_into::<N, M>(robot, streams, None, &mut iterations, None);
+    let found = evaluate_into::<N, M>(robot, streams, None, &mut iterations, None);
     Evaluation {
-        refusal,
+        refusal: found.first,
+        floor: found.floor,
         iterations,
     }
 }
@@ -326,7 +335,8 @@ pub fn admit<const N: usize, const M: usize>(
 ) -> Decision {
     let mut iterations = 0u64;
     let mut evaluations = 1u32;
-    let refusal = check_with::<N, M>(robot, streams, request, &mut iterations);
+    let found = check_with::<N, M>(robot, streams, request, &mut iterations);
+    let refusal = found.first;
     let mut suggestion = Suggestion::default();
     if refusal.is_some() && suggest && request.sender.is_some() && !request.period.is_zero() {
         suggestion.shortest_period =
@@ -336,6 +346,7 @@ pub fn admit<const N: usize, const M: usize>(
     }
     Decision {
         refusal,
+        floor: found.floor,
         suggestion,
         iterations,
         evaluations,
@@ -354,8 +365,8 @@ pub fn admit_cached<const N: usize, const M: usize>(
     carried_out_anyway: bool,
 ) -> Decision {
     let mut iterations = 0u64;
-    let refusal = if request.period.is_zero() {
-        Some(Refusal::ZeroPeriod)
+    let found = if request.period.is_zero() {
+        Found::refused(Refusal::ZeroPeriod)
     } else {
         evaluate_into::<N, M>(
             robot,
@@ -366,7 +377,8 @@ pub fn admit_cached<const N: usize, const M: usize>(
         )
     };
     Decision {
-        refusal,
+        refusal: found.first,
+        floor: found.floor,
         suggestion: Suggestion::default(),
         iterations,
         evaluations: 1,
@@ -397,11 +409,38 @@ fn check_with<const N: usize, const M: usize>(
     streams: &[Stream],
     request: &Stream,
     iterations: &mut u64,
-) -> Option<Refusal> {
+) -> Found {
     if request.period.is_zero() {
-        return Some(Refusal::ZeroPeriod);
+        return Found::refused(Refusal::ZeroPeriod);
     }
     evaluate_into::<N, M>(robot, streams, Some(request), iterations, None)
+}
+
+/// What one analysis found: the first violation (table order, then the bus) and the first below the hard floor.
+#[derive(Debug, Clone, Copy, Default)]
+struct Found {
+    first: Option<Refusal>,
+    floor: Option<Refusal>,
+}
+
+impl Found {
+    /// A refusal that no policy may accept (capacity, zero period).
+    fn refused(refusal: Refusal) -> Found {
+        Found {
+            first: Some(refusal),
+            floor: Some(refusal),
+        }
+    }
+
+    /// Notes a violation; `floor` says whether it is below the hard floor.
+    fn note(&mut self, refusal: Refusal, floor: bool) {
+        if self.first.is_none() {
+            self.first = Some(refusal);
+        }
+        if floor && self.floor.is_none() {
+            self.floor = Some(refusal);
+        }
+    }
 }
 
 fn shortest_period<const N: usize, const M: usize>(
@@ -415,7 +454,9 @@ fn shortest_period<const N: usize, const M: usize>(
         *evaluations += 1;
         let mut candidate = *request;
         candidate.period = period;
-        check_with::<N, M>(robot, streams, &candidate, iterations).is_none()
+        check_with::<N, M>(robot, streams, &candidate, iterations)
+            .first
+            .is_none()
     };
     // Double until one passes (lo fails, hi passes), then bisect to 1 µs and round to an expressible value.
     let mut lo = request.period;
@@ -464,7 +505,10 @@ fn level_needed<const N: usize, const M: usize>(
         if !candidate.extended {
             candidate.id = sensor_id(level, sender.topic);
         }
-        if check_with::<N, M>(robot, streams, &candidate, iterations).is_none() {
+        if check_with::<N, M>(robot, streams, &candidate, iterations)
+            .first
+            .is_none()
+        {
             return Some(level);
         }
     }
@@ -625,17 +669,17 @@ fn evaluate_into<const N: usize, const M: usize>(
     request: Option<&Stream>,
     iterations: &mut u64,
     mut cache: Option<(&mut Cache<M>, bool)>,
-) -> Option<Refusal> {
+) -> Found {
     if robot.boards.len() > usize::from(u8::MAX) || N >= usize::from(NO_JOB) {
-        return Some(Refusal::Capacity);
+        return Found::refused(Refusal::Capacity);
     }
     let Some(streams) = View::<M>::new(running, request) else {
-        return Some(Refusal::Capacity);
+        return Found::refused(Refusal::Capacity);
     };
     let limits = Limits {
         horizon: horizon(robot, &streams),
     };
-    let mut first: Option<Refusal> = None;
+    let mut found = Found::default();
     let mut senders = SenderBounds {
         wcrt: [NONE; M],
         bcrt: [0; M],
@@ -651,7 +695,7 @@ fn evaluate_into<const N: usize, const M: usize>(
     let mut fresh_board = None;
     for (b, table) in robot.boards.iter().enumerate() {
         let Some(key) = BoardKey::<M>::of(b, &streams, limits.horizon) else {
-            return Some(Refusal::Capacity);
+            return Found::refused(Refusal::Capacity);
         };
         let hit = cache
             .as_ref()
@@ -678,7 +722,7 @@ fn evaluate_into<const N: usize, const M: usize>(
             if let Err(refusal) =
                 analyse_board::<N, M>(robot, b, table, &streams, &limits, iterations, target)
             {
-                return Some(refusal);
+                return Found::refused(refusal);
             }
             target.kept = true;
         }
@@ -686,20 +730,20 @@ fn evaluate_into<const N: usize, const M: usize>(
             Some(slot) if !in_fresh => slot,
             _ => &fresh,
         };
-        if first.is_none() {
-            first = summary.first(b);
-        }
+        summary.note_violations(b, &mut found);
         summary.apply(b, table, &streams, &mut senders);
     }
-    analyse_bus(robot, &streams, &senders, &limits, iterations, &mut first);
+    analyse_bus(robot, &streams, &senders, &limits, iterations, &mut found);
+    // Kept when the request is carried out: admitted, or refused above the floor under accept-and-warn.
     if let (Some(b), Some((c, keep_refused))) = (requesting, cache) {
-        if fresh_board == Some(b) && (first.is_none() || keep_refused) {
+        let carried_out = found.first.is_none() || (keep_refused && found.floor.is_none());
+        if fresh_board == Some(b) && carried_out {
             if let Some(slot) = c.boards.get_mut(b) {
                 *slot = fresh;
             }
         }
     }
-    first
+    found
 }
 
 /// Brings `cache` up to date with the running `streams` (analysing only the boards whose streams changed since
@@ -810,6 +854,12 @@ struct Summary<const M: usize> {
     /// Its WCRT ([`NONE`]: unbounded) and deadline.
     violation_wcrt: u64,
     violation_deadline: Time,
+    /// Whether a violation is below the hard floor (a fixed task missing its deadline, or any job without a
+    /// bound): the first in table order, with these numbers.
+    floor_violated: bool,
+    floor_task: TaskId,
+    floor_wcrt: u64,
+    floor_deadline: Time,
     /// Its transmit interrupt's WCRT (0 without one, [`NONE`] unbounded).
     tx: u64,
     /// Its command handler's WCRT (0 without one, [`NONE`] unbounded).
@@ -828,22 +878,40 @@ impl<const M: usize> Summary<M> {
         task: TaskId::Fixed(0),
         violation_wcrt: 0,
         violation_deadline: Time::ZERO,
+        floor_violated: false,
+        floor_task: TaskId::Fixed(0),
+        floor_wcrt: 0,
+        floor_deadline: Time::ZERO,
         tx: 0,
         handler: 0,
         wcrt: [0; M],
         found: [false; M],
     };
 
-    /// The board's (index `b`) first violated deadline, in table order.
-    fn first(&self, b: usize) -> Option<Refusal> {
-        self.violated.then_some(Refusal::Deadline(Violation {
-            culprit: Culprit::Task {
-                board: b as u8,
-                task: self.task,
-            },
-            wcrt: bound(self.violation_wcrt),
-            deadline: self.violation_deadline,
-        }))
+    /// Notes the board's (index `b`) first violated deadline and its first below the floor, in table order.
+    fn note_violations(&self, b: usize, found: &mut Found) {
+        let violation = |task, wcrt, deadline| {
+            Refusal::Deadline(Violation {
+                culprit: Culprit::Task {
+                    board: b as u8,
+                    task,
+                },
+                wcrt: bound(wcrt),
+                deadline,
+            })
+        };
+        if self.violated {
+            found.note(
+                violation(self.task, self.violation_wcrt, self.violation_deadline),
+                false,
+            );
+        }
+        if self.floor_violated {
+            found.note(
+                violation(self.floor_task, self.floor_wcrt, self.floor_deadline),
+                true,
+            );
+        }
     }
 
     /// Writes the board's numbers into the per-stream arrays the bus analysis reads.
@@ -892,7 +960,7 @@ fn analyse_bus<const M: usize>(
     senders: &SenderBounds<M>,
     limits: &Limits,
     iterations: &mut u64,
-    first: &mut Option<Refusal>,
+    found: &mut Found,
 ) {
     let bit = robot.bit_time;
     let n = streams.len;
@@ -975,24 +1043,32 @@ fn analyse_bus<const M: usize>(
             }
             _ => None,
         };
-        if first.is_none() && bus.is_none_or(|w| w > s.deadline()) {
-            *first = Some(Refusal::Deadline(Violation {
-                culprit: Culprit::Frame { id: s.id },
-                wcrt: bus,
-                deadline: s.deadline(),
-            }));
+        if bus.is_none_or(|w| w > s.deadline()) {
+            // Below the floor: frames without a bound, or a command's (not a publisher's) frames late.
+            found.note(
+                Refusal::Deadline(Violation {
+                    culprit: Culprit::Frame { id: s.id },
+                    wcrt: bus,
+                    deadline: s.deadline(),
+                }),
+                bus.is_none() || s.sender.is_none(),
+            );
         }
         if s.receiver.is_some() {
             let end = match (bus, senders.receiver.get(m).copied().and_then(bound)) {
                 (Some(w), Some(r)) => w.checked_plus(r),
                 _ => None,
             };
-            if first.is_none() && end.is_none_or(|w| w > s.deadline()) {
-                *first = Some(Refusal::Deadline(Violation {
-                    culprit: Culprit::EndToEnd { id: s.id },
-                    wcrt: end,
-                    deadline: s.deadline(),
-                }));
+            if end.is_none_or(|w| w > s.deadline()) {
+                // A command's path to its handler: always below the floor.
+                found.note(
+                    Refusal::Deadline(Violation {
+                        culprit: Culprit::EndToEnd { id: s.id },
+                        wcrt: end,
+                        deadline: s.deadline(),
+                    }),
+                    true,
+                );
             }
         }
     }
@@ -1356,11 +1432,20 @@ fn analyse_board<const N: usize, const M: usize>(
         let (Some(meta), Some(&w)) = (jobs.meta.get(p), wcrt.get(p)) else {
             continue;
         };
-        if !summary.violated && (w == NONE || w > meta.deadline.as_ns()) {
+        let missed = w == NONE || w > meta.deadline.as_ns();
+        if !summary.violated && missed {
             summary.violated = true;
             summary.task = meta.id;
             summary.violation_wcrt = w;
             summary.violation_deadline = meta.deadline;
+        }
+        // The floor: no bound at all, or a fixed task (the board's own machinery) late.
+        if !summary.floor_violated && (w == NONE || (missed && matches!(meta.id, TaskId::Fixed(_))))
+        {
+            summary.floor_violated = true;
+            summary.floor_task = meta.id;
+            summary.floor_wcrt = w;
+            summary.floor_deadline = meta.deadline;
         }
     }
     let fixed = |index: Option<u16>| -> u64 {
