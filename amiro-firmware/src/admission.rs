@@ -588,3 +588,36 @@ pub fn table_source(root: &std::path::Path) -> Result<std::string::String, std::
     .map_err(|e| e.to_string())?;
     Ok(robot.to_rust_source("::amiro_firmware::admission::schedule_analysis"))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pacing_decides_a_burst_back_to_back_then_waits_for_the_window() {
+        let mut pacing = Pacing::<3>::new(100_000, 40_000, 2_500);
+        // Three analysed requests 5 ms apart: each may start at once after the previous one.
+        assert_eq!(pacing.next_start(1_000, 2_000, true, false), 4_500);
+        assert_eq!(pacing.next_start(6_000, 7_000, true, false), 9_500);
+        // The third fills the window: the fourth waits until 100 ms after the first started.
+        assert_eq!(pacing.next_start(11_000, 12_000, true, false), 101_000);
+        // A command without analysis waits only the note interval.
+        assert_eq!(pacing.next_start(101_000, 101_100, false, false), 103_600);
+    }
+
+    #[test]
+    fn an_own_one_shot_paces_the_next_command_by_its_interval() {
+        let mut pacing = Pacing::<5>::new(100_000, 40_000, 2_500);
+        assert_eq!(pacing.next_start(0, 2_000, true, true), 42_000);
+    }
+
+    #[test]
+    fn busy_verdicts_answer_only_the_boards_own_requests() {
+        // DiWheelDrive's gyroscope every 10 ms at medium (0x208), then a stop (mode 0).
+        assert!(busy_verdict(Board::DiWheelDrive, 0x208, &[1, 10, 0, 1]).is_some());
+        assert!(busy_verdict(Board::PowerManagement, 0x208, &[1, 10, 0, 1]).is_none());
+        assert!(busy_verdict(Board::DiWheelDrive, 0x208, &[0]).is_none());
+        assert!(is_stop(0x208, &[0]));
+        assert!(!is_stop(0x208, &[1, 10, 0, 1]));
+    }
+}

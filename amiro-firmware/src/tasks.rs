@@ -238,7 +238,7 @@ pub async fn serve_admission<
     requests: &mut Receiver<'static, RxFrame, R>,
     mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
-    tx_interrupt: impl cortex_m::interrupt::InterruptNumber + Copy,
+    tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
     wake_levels: &mut [Sender<'static, (), 1>],
 ) {
     // Every board analysed once with nothing running, before the first request.
