@@ -708,12 +708,21 @@ mod tests {
     fn a_policy_heard_decides_whether_a_refused_request_runs() {
         let mut checker = Checker::load().expect("the repository's timing files");
         checker.heard(&at(0, "21A#0301")); // DiWheelDrive: accept-and-warn
-        let warning = checker.check(&message("009#01010002")).expect("warned");
+                                           // The two-frame attack: below the hard floor, refused whatever the policy.
+        let refusal = checker.check(&message("009#01010002")).expect("refused");
+        assert!(refusal.contains("below the hard floor"), "{refusal}");
+        assert!(checker.known().is_empty(), "not started");
+        // A bounded publisher miss is started with a warning: beside the thesis request, PowerManagement's ring
+        // every 6 ms, then its power status every 20 ms under accept-and-warn (scenario admission-decisions).
+        checker.heard(&at(0, "205#01840302"));
+        assert!(checker.check(&message("21F#01060000")).is_none());
+        checker.heard(&at(0, "21B#0301"));
+        let warning = checker.check(&message("21E#01140000")).expect("warned");
         assert!(
             warning.contains("would start, with a warning,"),
             "{warning}"
         );
-        assert_eq!(checker.known().len(), 1, "started anyway");
+        assert_eq!(checker.known().len(), 3, "started anyway");
     }
 
     #[test]

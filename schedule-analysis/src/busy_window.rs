@@ -214,15 +214,19 @@ fn mul(a: u64, b: u64) -> Result<u64, AnalysisError> {
     a.checked_mul(b).ok_or(AnalysisError::Overflow)
 }
 
+/// `⌈a / b⌉`; total: a zero `b` (which no caller passes: periods are checked first) gives `u64::MAX`, so no
+/// division-by-zero panic is linked into the boards' admission check.
 fn ceil_div(a: u64, b: u64) -> u64 {
     if a == 0 {
         0
     } else if let (Ok(a32), Ok(b32)) = (u32::try_from(a), u32::try_from(b)) {
         // The common case on the boards (windows and periods below 4.29 s): the Cortex-M3's hardware divide
         // instead of the 64-bit software routine.
-        u64::from((a32 - 1) / b32 + 1)
+        (a32 - 1)
+            .checked_div(b32)
+            .map_or(u64::MAX, |q| u64::from(q) + 1)
     } else {
-        (a - 1) / b + 1
+        (a - 1).checked_div(b).map_or(u64::MAX, |q| q + 1)
     }
 }
 

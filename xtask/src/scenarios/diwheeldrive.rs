@@ -66,6 +66,16 @@ pub const SCENARIOS: &[Scenario] = &[
         check: admission_cost,
     },
     Scenario {
+        name: "admission-latency",
+        about: "issue 20: five requests 5 ms apart each take effect (first sample on the bus) within 5 ms of their frame; a stop takes effect within the command handler's 400 µs",
+        check: admission_latency,
+    },
+    Scenario {
+        name: "admission-one-shots",
+        about: "issue 20: beside the thesis example, a gyroscope one-shot at low answered within 2 ms, a floor-sensor one-shot at medium refused with a verdict within 5 ms, the magnetometer's grid untouched",
+        check: admission_one_shots,
+    },
+    Scenario {
         name: "flood",
         about: "commands at full bus rate keep a publisher within its bound; the excess is counted",
         check: flood,
@@ -670,5 +680,106 @@ fn admission_starvation(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         gyro.frames.len(),
         odometry.frames.len(),
         mag.len(),
+    ))
+}
+
+/// `diwheeldrive/qemu/admission-latency.log` (issue 20): each request of a burst takes effect within 5 ms of its
+/// frame, and a stop within the command handler's deadline.
+fn admission_latency(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    const EFFECT_US: u64 = 5_000;
+    let requests = [
+        (0x708, "gyroscope", 10_000),
+        (0x709, "accelerometer", 15_000),
+        (0x705, "magnetometer-x", 20_000),
+        (0x706, "magnetometer-y", 25_000),
+        (0x707, "magnetometer-z", 30_000),
+    ];
+    let mut firsts = Vec::new();
+    for (id, topic, sent) in requests {
+        let first = out
+            .times(id)
+            .into_iter()
+            .next()
+            .with_context(|| format!("{topic}: no sample on the bus"))?;
+        ensure!(
+            first >= sent && first - sent <= EFFECT_US,
+            "{topic}: first sample {} µs after its request, more than {EFFECT_US} µs",
+            first.saturating_sub(sent)
+        );
+        firsts.push(format!("{topic} {} µs", first - sent));
+    }
+    ensure!(
+        verdicts(out).is_empty(),
+        "a verdict: one of the five requests was refused"
+    );
+    // The stop at 100.3 ms: handled by the command handler within its 400 µs deadline, so no
+    // magnetometer-x sample is released later (one already queued may still leave).
+    const STOP: u64 = 100_300;
+    let late: Vec<u64> = out
+        .times(0x705)
+        .into_iter()
+        .filter(|&t| t > STOP + COMMAND_MIN_INTERVAL_US + 1_000)
+        .collect();
+    ensure!(
+        late.is_empty(),
+        "magnetometer-x samples after the stop took effect: {late:?}"
+    );
+    let before = out.times(0x705).into_iter().filter(|&t| t < STOP).count();
+    ensure!(
+        before >= 7,
+        "{before} magnetometer-x samples before the stop, expected it running every 10 ms"
+    );
+    let others = out
+        .times(0x706)
+        .into_iter()
+        .filter(|&t| t > 150_000)
+        .count();
+    ensure!(
+        others >= 4,
+        "magnetometer-y stopped with magnetometer-x ({others} samples after 150 ms)"
+    );
+    Ok(format!(
+        "first samples after their requests: {}; magnetometer-x stopped within the handler's deadline ({before} samples before), magnetometer-y still running",
+        firsts.join(", ")
+    ))
+}
+
+/// `diwheeldrive/qemu/admission-one-shots.log` (issue 20): one-shots beside the thesis example.
+fn admission_one_shots(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    use amiro_can::{Topic, Verdict};
+    const GYRO_ONCE: u64 = 50_000;
+    const FLOOR_ONCE: u64 = 100_000;
+    let gyro = out.times(0x708);
+    ensure!(
+        gyro.len() == 1 && gyro[0] >= GYRO_ONCE && gyro[0] - GYRO_ONCE <= 2_000,
+        "the gyroscope one-shot: samples at {gyro:?}, expected one within 2 ms of {GYRO_ONCE} µs"
+    );
+    let verdicts = verdicts(out);
+    ensure!(
+        verdicts.len() == 1,
+        "{} verdicts, expected the floor-sensor one-shot's refusal",
+        verdicts.len()
+    );
+    let (at, v) = &verdicts[0];
+    ensure!(
+        v.verdict == Verdict::Refused && v.one_shot && v.topic == Topic::FloorProximity,
+        "not the refusal of the floor-sensor one-shot: {v}"
+    );
+    ensure!(
+        *at >= FLOOR_ONCE && at - FLOOR_ONCE <= 5_000,
+        "the floor-sensor one-shot's verdict came {} µs after its frame",
+        at.saturating_sub(FLOOR_ONCE)
+    );
+    ensure!(
+        out.times(0x604).is_empty(),
+        "a floor-sensor sample: the refused one-shot was carried out"
+    );
+    let mag = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, 149_000)?;
+    Ok(format!(
+        "gyroscope one-shot on the bus {} µs after its frame; {v} ({} µs after its frame); magnetometer-x kept its 900 µs grid ({} samples, worst latency {} µs)",
+        gyro[0] - GYRO_ONCE,
+        at - FLOOR_ONCE,
+        mag.frames.len(),
+        mag.worst_latency
     ))
 }
