@@ -4,7 +4,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use super::{fail, BuildError, Built, Timing};
+use super::{fail, AppSource, BuildError, Built, Timing};
 use crate::model::GLOBAL_CRITICAL_SECTION;
 use crate::rtic_source::{self, RticApp, RticTaskKind};
 
@@ -26,47 +26,79 @@ pub(super) fn declared_tasks(
     timing: &Timing,
     built: &mut Built,
 ) -> Result<Declarations, BuildError> {
-    let publishers: BTreeSet<&str> = timing.publishers.values().map(String::as_str).collect();
     let Some(app_source) = &timing.app else {
-        // No app yet: the timing file declares the tasks.
-        let mut tasks = Vec::new();
-        for (name, t) in &timing.tasks {
-            let priority = t.priority.ok_or_else(|| {
-                fail(
-                    file,
-                    format!("tasks.{name}.priority"),
-                    "required while the board has no app (`app` is null)",
-                )
-            })?;
-            let shared = t.shared.clone().unwrap_or_else(|| {
-                t.critical_sections_us
-                    .keys()
-                    .filter(|k| k.as_str() != GLOBAL_CRITICAL_SECTION)
-                    .cloned()
-                    .collect()
-            });
-            tasks.push(Declared {
-                name: name.clone(),
-                priority,
-                hardware: t.binds.is_some(),
-                shared,
-            });
-        }
-        let mut ceilings = BTreeMap::new();
-        for t in &tasks {
-            for r in &t.shared {
-                let c = ceilings.entry(r.clone()).or_insert(0);
-                *c = (*c).max(t.priority);
-            }
-        }
-        built.sources.push(format!(
-            "{}: no app yet — {} tasks declared in {file}",
-            timing.board,
-            tasks.len()
-        ));
-        return Ok((tasks, None, ceilings));
+        return from_timing_file(file, timing, built);
     };
+    let (app, used) = read_app(root, file, timing, app_source, built)?;
+    let (tasks, idle, ceilings) = from_app(&app);
+    check_drift(file, timing, &app, &used)?;
+    built.sources.push(format!(
+        "{}: {} tasks read from {used} (#[rtic::app], dispatchers {})",
+        timing.board,
+        app.tasks.len(),
+        if app.dispatchers.is_empty() {
+            "none".to_string()
+        } else {
+            app.dispatchers.join(", ")
+        }
+    ));
+    Ok((tasks, idle, ceilings))
+}
 
+/// A board without an app yet: the timing file declares the tasks (priority, binding, shared resources).
+fn from_timing_file(
+    file: &str,
+    timing: &Timing,
+    built: &mut Built,
+) -> Result<Declarations, BuildError> {
+    let mut tasks = Vec::new();
+    for (name, t) in &timing.tasks {
+        let priority = t.priority.ok_or_else(|| {
+            fail(
+                file,
+                format!("tasks.{name}.priority"),
+                "required while the board has no app (`app` is null)",
+            )
+        })?;
+        let shared = t.shared.clone().unwrap_or_else(|| {
+            t.critical_sections_us
+                .keys()
+                .filter(|k| k.as_str() != GLOBAL_CRITICAL_SECTION)
+                .cloned()
+                .collect()
+        });
+        tasks.push(Declared {
+            name: name.clone(),
+            priority,
+            hardware: t.binds.is_some(),
+            shared,
+        });
+    }
+    let mut ceilings = BTreeMap::new();
+    for t in &tasks {
+        for r in &t.shared {
+            let c = ceilings.entry(r.clone()).or_insert(0);
+            *c = (*c).max(t.priority);
+        }
+    }
+    built.sources.push(format!(
+        "{}: no app yet — {} tasks declared in {file}",
+        timing.board,
+        tasks.len()
+    ));
+    Ok((tasks, None, ceilings))
+}
+
+/// The app with the analysed build's features, or its fallback (with a warning) when the app declares none of the
+/// budgeted tasks; and the file actually read.
+fn read_app(
+    root: &Path,
+    file: &str,
+    timing: &Timing,
+    app_source: &AppSource,
+    built: &mut Built,
+) -> Result<(RticApp, String), BuildError> {
+    let publishers = publisher_tasks(timing);
     let features: Vec<&str> = app_source.features.iter().map(String::as_str).collect();
     let read = |relative: &str| -> Result<RticApp, BuildError> {
         let path = root.join(relative);
@@ -105,7 +137,11 @@ pub(super) fn declared_tasks(
             }
         }
     }
+    Ok((app, used))
+}
 
+/// The tasks, idle and static ceilings an app declares (`#[lock_free]` resources left out: they never block).
+fn from_app(app: &RticApp) -> Declarations {
     let mut tasks = Vec::new();
     for t in &app.tasks {
         let shared = t
@@ -141,7 +177,12 @@ pub(super) fn declared_tasks(
             .map(|t| u32::from(t.priority));
         ceilings.insert(r.name.clone(), users.max().unwrap_or(0));
     }
-    // Drift checks: every declared task budgeted, every budget declared, nothing the source decides overridden.
+    (tasks, idle, ceilings)
+}
+
+/// Drift checks: every declared task budgeted, every budget declared, nothing the source decides overridden.
+fn check_drift(file: &str, timing: &Timing, app: &RticApp, used: &str) -> Result<(), BuildError> {
+    let publishers = publisher_tasks(timing);
     for t in &app.tasks {
         if !timing.tasks.contains_key(&t.name) && !publishers.contains(t.name.as_str()) {
             return Err(fail(
@@ -176,15 +217,10 @@ pub(super) fn declared_tasks(
             }
         }
     }
-    built.sources.push(format!(
-        "{}: {} tasks read from {used} (#[rtic::app], dispatchers {})",
-        timing.board,
-        app.tasks.len(),
-        if app.dispatchers.is_empty() {
-            "none".to_string()
-        } else {
-            app.dispatchers.join(", ")
-        }
-    ));
-    Ok((tasks, idle, ceilings))
+    Ok(())
+}
+
+/// The timing file's publisher tasks (budgeted per topic, not as tasks).
+fn publisher_tasks(timing: &Timing) -> BTreeSet<&str> {
+    timing.publishers.values().map(String::as_str).collect()
 }
