@@ -27,6 +27,8 @@ pub mod fault;
 #[cfg(target_os = "none")]
 pub mod health;
 #[cfg(target_os = "none")]
+pub mod i2c;
+#[cfg(target_os = "none")]
 pub mod liveness;
 #[cfg(target_os = "none")]
 pub mod mono;

@@ -72,21 +72,13 @@ pub struct SystemSignals {
 /// Brings the board up: clocks (crystal, or the internal oscillator if the crystal does not start),
 /// pins, SPI1 for the LED driver, CAN.
 pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
-    // Clock tree reset, crystal start (bounded) or the HSI fallback, and CAN1 reset: the runtime's.
-    let clocks = amiro_firmware::chip::f1_clock_plan();
+    // The clock tree, every wait bounded (the runtime's `chip::clock_plan`): the PLL from the
+    // crystal (72 MHz), else from the internal oscillator (64 MHz), else the internal oscillator
+    // alone (8 MHz); each fault logged and flagged on the diagnostics. Then CAN1's reset.
+    let clocks = amiro_firmware::chip::clock_plan();
     amiro_firmware::chip::reset_and_enable_can1();
-    let base = if clocks.on_crystal {
-        rcc::Config::hse(8.MHz())
-    } else {
-        rcc::Config::hsi()
-    };
-    let config = base
-        .sysclk(clocks.sysclk_hz.Hz())
-        .hclk(clocks.sysclk_hz.Hz())
-        .pclk1(clocks.pclk_hz.Hz())
-        .pclk2(clocks.pclk_hz.Hz());
     let mut flash = dp.FLASH.constrain();
-    let mut rcc = dp.RCC.freeze(config, &mut flash.acr);
+    let mut rcc = hal_clocks(dp.RCC, &clocks, &mut flash.acr);
 
     let mut afio = dp.AFIO.constrain(&mut rcc);
     let mut gpioa = dp.GPIOA.split(&mut rcc);
@@ -106,6 +98,7 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     let sys_pd = gpioc
         .pc14
         .into_open_drain_output_with_state(&mut gpioc.crh, PinState::High);
+    amiro_firmware::log!("power lines: SYS_SYNC_N held low, SYS_PD_N released, LEDs blanked");
     // SAFETY: AFIO's clock is on (constrain above); EXTICR4 bits 8..12 select the port of line 14,
     // and nothing else in this firmware uses EXTI lines 12..15.
     unsafe {
@@ -193,3 +186,31 @@ impl SystemSignalLines for SystemSignals {
 
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI15_10;
+
+/// The HAL's view of the clock tree `plan` has set up, for the drivers that compute dividers from
+/// it (SPI, I2C). The tree is already running: the HAL's `freeze` only writes what is there again
+/// and returns the frequencies, and its waits (for HSERDY and PLLRDY, without a bound) are entered
+/// only when `chip::clock_plan` has seen those flags set (it started them, bounded, or found
+/// AMiRo-BLT's PLL running from the crystal); on the internal oscillator alone it has neither the
+/// crystal nor the PLL to wait for. (The wait scan of `cargo xtask smoke` lists these two reads.)
+fn hal_clocks(
+    rcc: pac::RCC,
+    plan: &amiro_firmware::chip::ClockPlan,
+    acr: &mut stm32f1xx_hal::flash::ACR,
+) -> rcc::Rcc {
+    use amiro_firmware::chip::ClockSource;
+    let config = match plan.source {
+        ClockSource::Crystal | ClockSource::AsLeft => rcc::Config::hse(8.MHz()),
+        ClockSource::InternalPll => rcc::Config::hsi(),
+        // No `sysclk`: the HAL then uses the oscillator without its PLL.
+        ClockSource::Internal => return rcc.freeze(rcc::Config::hsi(), acr),
+    };
+    rcc.freeze(
+        config
+            .sysclk(plan.sysclk_hz.Hz())
+            .hclk(plan.sysclk_hz.Hz())
+            .pclk1(plan.pclk1_hz.Hz())
+            .pclk2(plan.pclk2_hz.Hz()),
+        acr,
+    )
+}

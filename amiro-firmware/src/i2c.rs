@@ -1,0 +1,300 @@
+//! A polled 400 kHz I2C master at register level for the I2C blocks of both chips (the F103's and
+//! the F405's are the same IP, RM0008 §26 / RM0090 §27, master mode, polling), where every wait is
+//! bounded: a sensor that stops answering costs one NACK, a stuck bus one timeout, never a hang.
+//!
+//! The HALs' blocking I2C drivers poll their flags without a bound (stm32f4xx-hal) or against the
+//! DWT cycle counter only (stm32f1xx-hal's `BlockingI2c`, which spins for ever where the counter
+//! does not run, as in QEMU). Here each wait ends after [`FLAG_TIMEOUT_US`] on the cycle counter
+//! (which the board starts) or after as many polls as that is cycles, whichever comes first. After
+//! a timeout or a bus error the block is reset and set up again, so the next transfer starts clean.
+use embedded_hal::i2c::{ErrorKind, ErrorType, I2c, NoAcknowledgeSource, Operation};
+
+/// I2C1's base address on both chips.
+pub const I2C1: usize = 0x4000_5400;
+/// I2C2's base address on both chips.
+pub const I2C2: usize = 0x4000_5800;
+/// How long one flag may take: a byte at 400 kHz takes 22.5 µs; 200 µs means the bus is stuck.
+pub const FLAG_TIMEOUT_US: u32 = 200;
+
+const CR1: usize = 0x00;
+const CR2: usize = 0x04;
+const DR: usize = 0x10;
+const SR1_REG: usize = 0x14;
+const SR2_REG: usize = 0x18;
+const CCR: usize = 0x1C;
+const TRISE: usize = 0x20;
+
+const CR1_PE: u16 = 1 << 0;
+const CR1_START: u16 = 1 << 8;
+const CR1_STOP: u16 = 1 << 9;
+const CR1_ACK: u16 = 1 << 10;
+const CR1_SWRST: u16 = 1 << 15;
+const SR1_SB: u16 = 1 << 0;
+const SR1_ADDR: u16 = 1 << 1;
+const SR1_BTF: u16 = 1 << 2;
+const SR1_RXNE: u16 = 1 << 6;
+const SR1_TXE: u16 = 1 << 7;
+const SR1_BERR: u16 = 1 << 8;
+const SR1_ARLO: u16 = 1 << 9;
+const SR1_AF: u16 = 1 << 10;
+const SR1_OVR: u16 = 1 << 11;
+const SR1_ERRORS: u16 = SR1_BERR | SR1_ARLO | SR1_AF | SR1_OVR;
+const SR2_BUSY: u16 = 1 << 1;
+
+/// What went wrong on the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Error {
+    /// Nobody acknowledged the address or a data byte.
+    NoAcknowledge(NoAcknowledgeSource),
+    /// Misplaced START/STOP.
+    Bus,
+    /// Another master won the bus.
+    ArbitrationLoss,
+    /// Data lost.
+    Overrun,
+    /// A flag did not come within [`FLAG_TIMEOUT_US`] (bus stuck or device stretching for ever).
+    Timeout,
+}
+
+impl embedded_hal::i2c::Error for Error {
+    fn kind(&self) -> ErrorKind {
+        match *self {
+            Error::NoAcknowledge(source) => ErrorKind::NoAcknowledge(source),
+            Error::Bus => ErrorKind::Bus,
+            Error::ArbitrationLoss => ErrorKind::ArbitrationLoss,
+            Error::Overrun => ErrorKind::Overrun,
+            Error::Timeout => ErrorKind::Other,
+        }
+    }
+}
+
+/// One I2C block (I2C1 or I2C2) as a bounded polled master at 400 kHz.
+pub struct Master {
+    base: usize,
+    /// APB1 in MHz (the block's FREQ field and its timing).
+    pclk1_mhz: u32,
+    /// [`FLAG_TIMEOUT_US`] in core cycles (and the poll bound).
+    timeout_cycles: u32,
+}
+
+fn cycles() -> u32 {
+    cortex_m::peripheral::DWT::cycle_count()
+}
+
+impl Master {
+    /// Takes the block at `base` ([`I2C1`] or [`I2C2`]; its clock on, its pins in open-drain
+    /// alternate function) and sets it up for 400 kHz from a `pclk1_hz` APB1, with its timeouts
+    /// counted in cycles of a `sysclk_hz` core clock.
+    ///
+    /// # Safety
+    /// `base` must be I2C1 or I2C2 and owned by this value alone.
+    pub unsafe fn new(base: usize, pclk1_hz: u32, sysclk_hz: u32) -> Self {
+        let master = Self {
+            base,
+            pclk1_mhz: (pclk1_hz / 1_000_000).clamp(2, 50),
+            timeout_cycles: FLAG_TIMEOUT_US.saturating_mul(sysclk_hz / 1_000_000),
+        };
+        master.setup();
+        master
+    }
+
+    fn read(&self, offset: usize) -> u16 {
+        // SAFETY: `new`'s contract: a register of the I2C block this value owns.
+        unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) as u16 }
+    }
+
+    fn write(&self, offset: usize, value: u16) {
+        // SAFETY: as in `read`; documented bit patterns of the I2C registers.
+        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, u32::from(value)) }
+    }
+
+    fn setup(&self) {
+        // Fast mode, duty 2:1: SCL = PCLK1 / (3 × CCR), rounded so it never exceeds 400 kHz;
+        // TRISE: the 300 ns rise time in PCLK1 cycles, plus one.
+        let ccr = self.pclk1_mhz.saturating_mul(10).div_ceil(12).max(1) as u16;
+        let trise = (self.pclk1_mhz * 300 / 1000 + 1) as u16;
+        self.write(CR1, CR1_SWRST);
+        self.write(CR1, 0);
+        self.write(CR2, self.pclk1_mhz as u16);
+        self.write(CCR, (1 << 15) | ccr);
+        self.write(TRISE, trise);
+        self.write(CR1, CR1_PE);
+    }
+
+    fn sr1(&self) -> u16 {
+        self.read(SR1_REG)
+    }
+
+    fn set_cr1(&self, set: u16, clear: u16) {
+        self.write(CR1, (self.read(CR1) | set) & !clear);
+    }
+
+    /// Waits until `flag` is set in SR1, an error flag appears, or the timeout passes.
+    fn wait(&self, flag: u16, nack: NoAcknowledgeSource) -> Result<(), Error> {
+        let start = cycles();
+        // Also bounded in polls: each takes several core cycles, so on a chip whose cycle counter
+        // runs the cycle timeout comes first; on one where it does not (QEMU has no DWT), this
+        // bound still ends the wait.
+        for _ in 0..self.timeout_cycles {
+            let sr1 = self.sr1();
+            if sr1 & SR1_ERRORS != 0 {
+                // Writing 0 to the rc_w0 error bits clears them.
+                self.write(SR1_REG, !SR1_ERRORS);
+                return Err(if sr1 & SR1_AF != 0 {
+                    Error::NoAcknowledge(nack)
+                } else if sr1 & SR1_ARLO != 0 {
+                    Error::ArbitrationLoss
+                } else if sr1 & SR1_BERR != 0 {
+                    Error::Bus
+                } else {
+                    Error::Overrun
+                });
+            }
+            if sr1 & flag != 0 {
+                return Ok(());
+            }
+            if cycles().wrapping_sub(start) > self.timeout_cycles {
+                return Err(Error::Timeout);
+            }
+        }
+        Err(Error::Timeout)
+    }
+
+    /// Waits (bounded, in cycles and in polls as [`Master::wait`]) until the bus is free.
+    fn wait_idle(&self) -> Result<(), Error> {
+        let start = cycles();
+        for _ in 0..self.timeout_cycles {
+            if self.read(SR2_REG) & SR2_BUSY == 0 && self.read(CR1) & CR1_STOP == 0 {
+                return Ok(());
+            }
+            if cycles().wrapping_sub(start) > self.timeout_cycles {
+                return Err(Error::Timeout);
+            }
+        }
+        Err(Error::Timeout)
+    }
+
+    /// START (or repeated START) and the address byte; the ADDR flag is left set for the caller.
+    fn address(&self, address: u8, read: bool, ack: bool) -> Result<(), Error> {
+        if ack {
+            self.set_cr1(CR1_START | CR1_ACK, 0);
+        } else {
+            self.set_cr1(CR1_START, CR1_ACK);
+        }
+        self.wait(SR1_SB, NoAcknowledgeSource::Unknown)?;
+        let byte = (u16::from(address) << 1) | u16::from(read);
+        self.write(DR, byte);
+        self.wait(SR1_ADDR, NoAcknowledgeSource::Address)
+    }
+
+    fn clear_addr(&self) {
+        // Reading SR1 then SR2 clears ADDR.
+        let _ = self.sr1();
+        let _ = self.read(SR2_REG);
+    }
+
+    fn write_group(&self, address: u8, group: &[Operation<'_>]) -> Result<(), Error> {
+        self.address(address, false, false)?;
+        self.clear_addr();
+        for operation in group {
+            if let Operation::Write(bytes) = operation {
+                for &byte in bytes.iter() {
+                    self.wait(SR1_TXE, NoAcknowledgeSource::Data)?;
+                    self.write(DR, u16::from(byte));
+                }
+            }
+        }
+        self.wait(SR1_BTF, NoAcknowledgeSource::Data)
+    }
+
+    /// Reads every byte of the read operations in `group`; the last byte is not acknowledged and
+    /// the STOP is requested before it arrives (the reference manuals' polling sequence).
+    fn read_group(&self, address: u8, group: &mut [Operation<'_>]) -> Result<(), Error> {
+        let total: usize = group
+            .iter()
+            .map(|o| match o {
+                Operation::Read(b) => b.len(),
+                Operation::Write(_) => 0,
+            })
+            .sum();
+        if total == 0 {
+            return Ok(());
+        }
+        self.address(address, true, total > 1)?;
+        if total == 1 {
+            self.clear_addr();
+            self.set_cr1(CR1_STOP, 0);
+        } else {
+            self.clear_addr();
+        }
+        let mut n = 0;
+        for operation in group.iter_mut() {
+            if let Operation::Read(buffer) = operation {
+                for byte in buffer.iter_mut() {
+                    n += 1;
+                    if n == total && total > 1 {
+                        self.set_cr1(CR1_STOP, CR1_ACK);
+                    }
+                    self.wait(SR1_RXNE, NoAcknowledgeSource::Data)?;
+                    *byte = self.read(DR) as u8;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn run(&mut self, address: u8, operations: &mut [Operation<'_>]) -> Result<(), Error> {
+        self.wait_idle()?;
+        let mut start = 0;
+        while start < operations.len() {
+            let read = matches!(operations[start], Operation::Read(_));
+            let mut end = start + 1;
+            while end < operations.len() && matches!(operations[end], Operation::Read(_)) == read {
+                end += 1;
+            }
+            let last = end == operations.len();
+            let group = &mut operations[start..end];
+            if read {
+                // A read group ends with its own STOP; a read followed by a write is not used by
+                // any AMiRo driver and is done as two transactions.
+                self.read_group(address, group)?;
+                if !last {
+                    self.wait_idle()?;
+                }
+            } else {
+                self.write_group(address, group)?;
+                if last {
+                    self.set_cr1(CR1_STOP, 0);
+                }
+            }
+            start = end;
+        }
+        Ok(())
+    }
+}
+
+impl ErrorType for Master {
+    type Error = Error;
+}
+
+impl I2c for Master {
+    fn transaction(
+        &mut self,
+        address: u8,
+        operations: &mut [Operation<'_>],
+    ) -> Result<(), Self::Error> {
+        let result = self.run(address, operations);
+        match result {
+            Ok(()) => {}
+            Err(Error::NoAcknowledge(_)) => {
+                // Release the bus; the block stays usable.
+                self.set_cr1(CR1_STOP, 0);
+                if self.wait_idle().is_err() {
+                    self.setup();
+                }
+            }
+            Err(_) => self.setup(),
+        }
+        result
+    }
+}
