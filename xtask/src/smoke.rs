@@ -27,6 +27,8 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, ensure, Context, Result};
 use object::{Object, ObjectSymbol};
 
+mod waits;
+
 use crate::boards::Board;
 use crate::qemu::ICOUNT_SHIFT;
 
@@ -625,6 +627,36 @@ pub fn run(root: &Path, boards: &[&'static Board]) -> Result<()> {
     let mut failed = Vec::new();
     for board in boards {
         let elf = crate::firmware_elf(root, board);
+        // Every wait on the boot path and after it bounded: the machine code says so.
+        let found = waits::scan_elf(&elf)?;
+        let (known, new): (Vec<_>, Vec<_>) = found.iter().partition(|w| w.known().is_some());
+        println!(
+            "waits {}: {} unbounded-looking poll loop(s), {} with a stated bound",
+            board.name,
+            found.len(),
+            known.len()
+        );
+        for wait in &known {
+            println!(
+                "waits {}: bounded by design: {} at {:#x} ({})",
+                board.name,
+                wait.function,
+                wait.branch,
+                wait.lines.first().map(String::as_str).unwrap_or("?")
+            );
+        }
+        for wait in &new {
+            println!(
+                "waits {}: UNBOUNDED: {} at {:#x}: {}",
+                board.name,
+                wait.function,
+                wait.branch,
+                wait.lines.join(" | ")
+            );
+        }
+        if !new.is_empty() {
+            failed.push(board.name);
+        }
         let work = work_dir(root, board.name);
         let outcome = run_board(board, &elf, &work)
             .with_context(|| format!("smoke run of {}", board.name))?;
