@@ -7,9 +7,9 @@
 //! word, jump to its reset vector), on the QEMU machine nearest the board's chip: `netduinoplus2`
 //! (STM32F405) for PowerManagement, `netduino2` (STM32F205, whose TIM2..TIM5 and SPI1 sit where
 //! the F103's do) for DiWheelDrive and LightRing. QEMU emulates neither RCC nor bxCAN nor flash
-//! interface nor IWDG on these machines (their registers read as zero), which is what a chip
-//! whose clocks never come up looks like: the run proves that every such wait is bounded and
-//! reported.
+//! interface nor IWDG nor GPIO on these machines (their registers read as zero), which is what a
+//! chip whose clocks never come up looks like: the run shows that the boot's waits on them end
+//! and are reported. Before booting, each ELF is scanned for unbounded waits ([`waits`]).
 //!
 //! The run is steered over QMP (QEMU's JSON monitor) on QEMU's standard input and output: every
 //! [`POLL`] the guest is stopped, its program counter read and its RAM saved (`pmemsave`); the
