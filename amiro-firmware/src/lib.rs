@@ -39,6 +39,8 @@ pub mod qemu;
 #[cfg(target_os = "none")]
 pub mod signals;
 #[cfg(target_os = "none")]
+pub mod spi;
+#[cfg(target_os = "none")]
 pub mod tasks;
 #[cfg(target_os = "none")]
 pub mod telemetry;

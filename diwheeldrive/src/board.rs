@@ -8,17 +8,19 @@
 //! TIM4 (PB6/PB7, right), SYS_SYNC_N PC1, SYS_PD_N PC8, status LED PA1 (active low).
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::i2c::{self, Master};
+use amiro_firmware::spi;
+use embedded_hal::spi::{Mode as SpiMode, Phase, Polarity};
 use embedded_hal_bus::spi::{AtomicDevice, NoDelay};
 use embedded_hal_bus::util::AtomicCell;
 use stm32f1xx_hal::afio::AfioExt;
 use stm32f1xx_hal::gpio::{
     GpioExt, OpenDrain, Output, PinState, PushPull, PA1, PB2, PC1, PC13, PC14, PC8,
 };
-use stm32f1xx_hal::pac::{self, SPI1};
+use stm32f1xx_hal::pac;
 use stm32f1xx_hal::prelude::*;
-use stm32f1xx_hal::rcc;
-use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
 
+/// The IMU bus's fastest rate (the L3G4200D's limit is 10 MHz): PCLK2 / 4 on the crystal.
+pub const IMU_SPI_HZ: u32 = 9_000_000;
 /// Motor PWM: 72 MHz timer clock, period 3600 → 20 kHz, as the original 1.x firmware.
 pub const PWM_PERIOD: u16 = 3600;
 /// System clock.
@@ -30,7 +32,7 @@ static TIMER_CLOCK_HZ: core::sync::atomic::AtomicU32 =
 const SYS_PD_LINE: u32 = 1 << 8;
 
 /// SPI1 shared by the gyroscope and the accelerometer.
-pub type ImuBus = Spi<SPI1, u8>;
+pub type ImuBus = spi::Master;
 /// The gyroscope's SPI device (chip select PC14).
 pub type GyroSpi = AtomicDevice<'static, ImuBus, PC14<Output<PushPull>>, NoDelay>;
 /// The accelerometer's SPI device (chip select PC13).
@@ -94,8 +96,11 @@ pub fn init(
     // alone (8 MHz); each fault logged and flagged on the diagnostics. Then CAN1's reset.
     let clocks = amiro_firmware::chip::clock_plan();
     amiro_firmware::chip::reset_and_enable_can1();
-    let mut flash = dp.FLASH.constrain();
-    let mut rcc = hal_clocks(dp.RCC, &clocks, &mut flash.acr);
+    // The HAL's RCC only constrained, never frozen: its `freeze` waits for the crystal and the PLL
+    // without a bound, and no driver here takes its frequencies from the HAL (they come from the
+    // plan).
+    let mut rcc = dp.RCC.constrain();
+    enable_spi1();
     TIMER_CLOCK_HZ.store(clocks.timer_hz, core::sync::atomic::Ordering::Relaxed);
     // The blocking I2C driver times out on the DWT cycle counter.
     cp.DCB.enable_trace();
@@ -156,23 +161,32 @@ pub fn init(
     let motors = Motors::new(dp.TIM2, power_en);
     let encoders = Encoders::new(dp.TIM3, dp.TIM4);
 
-    // SPI1, mode 0 at PCLK2 / 4 (9 MHz on the crystal; the HAL panics on a rate above PCLK2 / 2,
-    // which the 8 MHz internal-oscillator fallback would be), chip selects idle high.
+    // SPI1, mode 0 at up to 9 MHz (PCLK2 / 4 on the crystal), chip selects idle high; SCK and MOSI
+    // alternate push-pull, MISO floating; the runtime's bounded master.
     let gyro_cs = gpioc
         .pc14
         .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
     let accel_cs = gpioc
         .pc13
         .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
-    let spi = dp.SPI1.spi(
-        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
-        SpiMode {
-            polarity: Polarity::IdleLow,
-            phase: Phase::CaptureOnFirstTransition,
-        },
-        (clocks.pclk2_hz / 4).Hz(),
-        &mut rcc,
+    let _spi_pins = (
+        gpioa.pa5.into_alternate_push_pull(&mut gpioa.crl),
+        gpioa.pa6.into_floating_input(&mut gpioa.crl),
+        gpioa.pa7.into_alternate_push_pull(&mut gpioa.crl),
     );
+    let _ = dp.SPI1;
+    // SAFETY: SPI1 is used by this value only.
+    let spi = unsafe {
+        spi::Master::new(
+            spi::SPI1,
+            clocks.pclk2_hz,
+            IMU_SPI_HZ,
+            SpiMode {
+                polarity: Polarity::IdleLow,
+                phase: Phase::CaptureOnFirstTransition,
+            },
+        )
+    };
     // Both devices live in the one `imu` resource, so the bus is never contended; the atomic
     // cell only makes the shared bus `Sync` without a critical section.
     let bus: &'static AtomicCell<ImuBus> = spi_cell.insert(AtomicCell::new(spi));
@@ -422,30 +436,13 @@ pub fn start_monotonic(priority: u8) {
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI9_5;
 
-/// The HAL's view of the clock tree `plan` has set up, for the drivers that compute dividers from
-/// it (SPI, I2C). The tree is already running: the HAL's `freeze` only writes what is there again
-/// and returns the frequencies, and its waits (for HSERDY and PLLRDY, without a bound) are entered
-/// only when `chip::clock_plan` has seen those flags set (it started them, bounded, or found
-/// AMiRo-BLT's PLL running from the crystal); on the internal oscillator alone it has neither the
-/// crystal nor the PLL to wait for. (The wait scan of `cargo xtask smoke` lists these two reads.)
-fn hal_clocks(
-    rcc: pac::RCC,
-    plan: &amiro_firmware::chip::ClockPlan,
-    acr: &mut stm32f1xx_hal::flash::ACR,
-) -> rcc::Rcc {
-    use amiro_firmware::chip::ClockSource;
-    let config = match plan.source {
-        ClockSource::Crystal | ClockSource::AsLeft => rcc::Config::hse(8.MHz()),
-        ClockSource::InternalPll => rcc::Config::hsi(),
-        // No `sysclk`: the HAL then uses the oscillator without its PLL.
-        ClockSource::Internal => return rcc.freeze(rcc::Config::hsi(), acr),
-    };
-    rcc.freeze(
-        config
-            .sysclk(plan.sysclk_hz.Hz())
-            .hclk(plan.sysclk_hz.Hz())
-            .pclk1(plan.pclk1_hz.Hz())
-            .pclk2(plan.pclk2_hz.Hz()),
-        acr,
-    )
+/// SPI1's clock on and the block reset (the runtime's master takes it from there).
+fn enable_spi1() {
+    // SAFETY: SPI1's reset and clock bits, owned by init.
+    unsafe {
+        let rcc = &*pac::RCC::ptr();
+        rcc.apb2rstr().modify(|_, w| w.spi1rst().set_bit());
+        rcc.apb2rstr().modify(|_, w| w.spi1rst().clear_bit());
+        rcc.apb2enr().modify(|_, w| w.spi1en().set_bit());
+    }
 }

@@ -7,13 +7,13 @@
 //! frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The monotonic is TIM3.
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
+use amiro_firmware::spi;
+use embedded_hal::spi::{Mode as SpiMode, Phase, Polarity};
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
 use stm32f1xx_hal::afio::AfioExt;
 use stm32f1xx_hal::gpio::{GpioExt, OpenDrain, Output, PinState, PushPull, PA4, PC14, PC4, PD2};
-use stm32f1xx_hal::pac::{self, SPI1};
+use stm32f1xx_hal::pac;
 use stm32f1xx_hal::prelude::*;
-use stm32f1xx_hal::rcc;
-use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
 
 /// The TLC5947's shift clock: 36 MHz / 16, as the original firmware.
 pub const LED_SPI_HZ: u32 = 2_250_000;
@@ -21,7 +21,7 @@ pub const LED_SPI_HZ: u32 = 2_250_000;
 const SYS_PD_LINE: u32 = 1 << 14;
 
 /// The TLC5947 on SPI1, XLAT as its chip select.
-pub type LedSpi = ExclusiveDevice<Spi<SPI1, u8>, PC4<Output<PushPull>>, NoDelay>;
+pub type LedSpi = ExclusiveDevice<spi::Master, PC4<Output<PushPull>>, NoDelay>;
 /// The CAN controller's transmit mailboxes (the runtime's register-level driver).
 pub type CanTxPort = Mailboxes<Mmio>;
 /// The CAN controller's error monitor.
@@ -77,8 +77,11 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     // alone (8 MHz); each fault logged and flagged on the diagnostics. Then CAN1's reset.
     let clocks = amiro_firmware::chip::clock_plan();
     amiro_firmware::chip::reset_and_enable_can1();
-    let mut flash = dp.FLASH.constrain();
-    let mut rcc = hal_clocks(dp.RCC, &clocks, &mut flash.acr);
+    // The HAL's RCC only constrained, never frozen: its `freeze` waits for the crystal and the PLL
+    // without a bound, and no driver here takes its frequencies from the HAL (they come from the
+    // plan).
+    let mut rcc = dp.RCC.constrain();
+    enable_spi1();
 
     let mut afio = dp.AFIO.constrain(&mut rcc);
     let mut gpioa = dp.GPIOA.split(&mut rcc);
@@ -120,15 +123,24 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     let xlat = gpioc
         .pc4
         .into_push_pull_output_with_state(&mut gpioc.crl, PinState::High);
-    let spi = dp.SPI1.spi(
-        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
-        SpiMode {
-            polarity: Polarity::IdleLow,
-            phase: Phase::CaptureOnFirstTransition,
-        },
-        LED_SPI_HZ.Hz(),
-        &mut rcc,
+    let _spi_pins = (
+        gpioa.pa5.into_alternate_push_pull(&mut gpioa.crl),
+        gpioa.pa6.into_floating_input(&mut gpioa.crl),
+        gpioa.pa7.into_alternate_push_pull(&mut gpioa.crl),
     );
+    let _ = dp.SPI1;
+    // SAFETY: SPI1 is used by this value only.
+    let spi = unsafe {
+        spi::Master::new(
+            spi::SPI1,
+            clocks.pclk2_hz,
+            LED_SPI_HZ,
+            SpiMode {
+                polarity: Polarity::IdleLow,
+                phase: Phase::CaptureOnFirstTransition,
+            },
+        )
+    };
     let led_spi =
         ExclusiveDevice::new_no_delay(spi, xlat).unwrap_or_else(|_| amiro_firmware::fault::halt());
 
@@ -187,30 +199,13 @@ impl SystemSignalLines for SystemSignals {
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI15_10;
 
-/// The HAL's view of the clock tree `plan` has set up, for the drivers that compute dividers from
-/// it (SPI, I2C). The tree is already running: the HAL's `freeze` only writes what is there again
-/// and returns the frequencies, and its waits (for HSERDY and PLLRDY, without a bound) are entered
-/// only when `chip::clock_plan` has seen those flags set (it started them, bounded, or found
-/// AMiRo-BLT's PLL running from the crystal); on the internal oscillator alone it has neither the
-/// crystal nor the PLL to wait for. (The wait scan of `cargo xtask smoke` lists these two reads.)
-fn hal_clocks(
-    rcc: pac::RCC,
-    plan: &amiro_firmware::chip::ClockPlan,
-    acr: &mut stm32f1xx_hal::flash::ACR,
-) -> rcc::Rcc {
-    use amiro_firmware::chip::ClockSource;
-    let config = match plan.source {
-        ClockSource::Crystal | ClockSource::AsLeft => rcc::Config::hse(8.MHz()),
-        ClockSource::InternalPll => rcc::Config::hsi(),
-        // No `sysclk`: the HAL then uses the oscillator without its PLL.
-        ClockSource::Internal => return rcc.freeze(rcc::Config::hsi(), acr),
-    };
-    rcc.freeze(
-        config
-            .sysclk(plan.sysclk_hz.Hz())
-            .hclk(plan.sysclk_hz.Hz())
-            .pclk1(plan.pclk1_hz.Hz())
-            .pclk2(plan.pclk2_hz.Hz()),
-        acr,
-    )
+/// SPI1's clock on and the block reset (the runtime's master takes it from there).
+fn enable_spi1() {
+    // SAFETY: SPI1's reset and clock bits, owned by init.
+    unsafe {
+        let rcc = &*pac::RCC::ptr();
+        rcc.apb2rstr().modify(|_, w| w.spi1rst().set_bit());
+        rcc.apb2rstr().modify(|_, w| w.spi1rst().clear_bit());
+        rcc.apb2enr().modify(|_, w| w.spi1en().set_bit());
+    }
 }
