@@ -10,6 +10,8 @@
 //! device wrappers' (embedded-hal-bus).
 use embedded_hal::spi::{ErrorKind, ErrorType, Mode, Phase, Polarity, SpiBus};
 
+use crate::bxcan::Registers;
+
 /// SPI1's base address on both chips.
 pub const SPI1: usize = 0x4001_3000;
 /// Status-register reads before a flag counts as lost: a byte at the slowest divider (PCLK / 256)
@@ -63,19 +65,18 @@ pub const fn divider_code(pclk_hz: u32, max_hz: u32) -> u32 {
     code
 }
 
-/// One SPI block as a bounded polled master, 8-bit frames, MSB first.
-pub struct Master {
-    base: usize,
+/// One SPI block as a bounded polled master, 8-bit frames, MSB first, over its registers
+/// ([`crate::bxcan::Mmio`] on the chip — the block at [`SPI1`], its clock on, its pins set up —
+/// a model in `tests/spi.rs`).
+pub struct Master<R> {
+    regs: R,
 }
 
-impl Master {
-    /// Takes the block at `base` (its clock on, its pins set up) as the master in `mode`, at the
-    /// fastest rate from a `pclk_hz` bus clock that is not above `max_hz`.
-    ///
-    /// # Safety
-    /// `base` must be an SPI block owned by this value alone.
-    pub unsafe fn new(base: usize, pclk_hz: u32, max_hz: u32, mode: Mode) -> Self {
-        let master = Self { base };
+impl<R: Registers> Master<R> {
+    /// Takes the block as the master in `mode`, at the fastest rate from a `pclk_hz` bus clock
+    /// that is not above `max_hz`.
+    pub fn new(regs: R, pclk_hz: u32, max_hz: u32, mode: Mode) -> Self {
+        let master = Self { regs };
         let mut cr1 = CR1_MSTR | CR1_SSM | CR1_SSI | divider_code(pclk_hz, max_hz) << 3;
         if mode.polarity == Polarity::IdleHigh {
             cr1 |= CR1_CPOL;
@@ -91,13 +92,11 @@ impl Master {
     }
 
     fn register(&self, offset: usize) -> u32 {
-        // SAFETY: `new`'s contract: a register of the SPI block this value owns.
-        unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) }
+        self.regs.read(offset)
     }
 
     fn set_register(&self, offset: usize, value: u32) {
-        // SAFETY: as in `register`.
-        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, value) }
+        self.regs.write(offset, value);
     }
 
     fn wait(&self, flag: u32) -> Result<(), Error> {
@@ -129,11 +128,11 @@ impl Master {
     }
 }
 
-impl ErrorType for Master {
+impl<R> ErrorType for Master<R> {
     type Error = Error;
 }
 
-impl SpiBus<u8> for Master {
+impl<R: Registers> SpiBus<u8> for Master<R> {
     fn read(&mut self, words: &mut [u8]) -> Result<(), Error> {
         for word in words.iter_mut() {
             *word = self.exchange(0)?;

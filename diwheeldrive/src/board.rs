@@ -32,7 +32,7 @@ static TIMER_CLOCK_HZ: core::sync::atomic::AtomicU32 =
 const SYS_PD_LINE: u32 = 1 << 8;
 
 /// SPI1 shared by the gyroscope and the accelerometer.
-pub type ImuBus = spi::Master;
+pub type ImuBus = spi::Master<Mmio>;
 /// The gyroscope's SPI device (chip select PC14).
 pub type GyroSpi = AtomicDevice<'static, ImuBus, PC14<Output<PushPull>>, NoDelay>;
 /// The accelerometer's SPI device (chip select PC13).
@@ -176,17 +176,15 @@ pub fn init(
     );
     let _ = dp.SPI1;
     // SAFETY: SPI1 is used by this value only.
-    let spi = unsafe {
-        spi::Master::new(
-            spi::SPI1,
-            clocks.pclk2_hz,
-            IMU_SPI_HZ,
-            SpiMode {
-                polarity: Polarity::IdleLow,
-                phase: Phase::CaptureOnFirstTransition,
-            },
-        )
-    };
+    let spi = spi::Master::new(
+        unsafe { Mmio::new(spi::SPI1) },
+        clocks.pclk2_hz,
+        IMU_SPI_HZ,
+        SpiMode {
+            polarity: Polarity::IdleLow,
+            phase: Phase::CaptureOnFirstTransition,
+        },
+    );
     // Both devices live in the one `imu` resource, so the bus is never contended; the atomic
     // cell only makes the shared bus `Sync` without a critical section.
     let bus: &'static AtomicCell<ImuBus> = spi_cell.insert(AtomicCell::new(spi));

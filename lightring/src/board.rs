@@ -21,7 +21,7 @@ pub const LED_SPI_HZ: u32 = 2_250_000;
 const SYS_PD_LINE: u32 = 1 << 14;
 
 /// The TLC5947 on SPI1, XLAT as its chip select.
-pub type LedSpi = ExclusiveDevice<spi::Master, PC4<Output<PushPull>>, NoDelay>;
+pub type LedSpi = ExclusiveDevice<spi::Master<Mmio>, PC4<Output<PushPull>>, NoDelay>;
 /// The CAN controller's transmit mailboxes (the runtime's register-level driver).
 pub type CanTxPort = Mailboxes<Mmio>;
 /// The CAN controller's error monitor.
@@ -130,17 +130,15 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     );
     let _ = dp.SPI1;
     // SAFETY: SPI1 is used by this value only.
-    let spi = unsafe {
-        spi::Master::new(
-            spi::SPI1,
-            clocks.pclk2_hz,
-            LED_SPI_HZ,
-            SpiMode {
-                polarity: Polarity::IdleLow,
-                phase: Phase::CaptureOnFirstTransition,
-            },
-        )
-    };
+    let spi = spi::Master::new(
+        unsafe { Mmio::new(spi::SPI1) },
+        clocks.pclk2_hz,
+        LED_SPI_HZ,
+        SpiMode {
+            polarity: Polarity::IdleLow,
+            phase: Phase::CaptureOnFirstTransition,
+        },
+    );
     let led_spi =
         ExclusiveDevice::new_no_delay(spi, xlat).unwrap_or_else(|_| amiro_firmware::fault::halt());
 
