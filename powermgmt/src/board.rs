@@ -165,10 +165,8 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
         sys_sync: gpioc.pc12.into_open_drain_output_in_state(PinState::Low),
         sys_pd: gpioc.pc13.into_open_drain_output_in_state(PinState::High),
     };
-    amiro_firmware::log!(
-        "power lines: POWER_EN and SYS_REG_EN on, SYS_WARMRST_N released (as AMiRo-BLT left them), ",
-        "chargers off, SYS_SYNC_N held low"
-    );
+    // As AMiRo-BLT left them.
+    amiro_firmware::log!("power lines: POWER_EN, SYS_REG_EN on; SYS_WARMRST_N released; SYS_SYNC_N low; chargers off");
     // SAFETY: single bits in registers only init touches (the HAL has consumed its RCC handle);
     // EXTICR4 bits 4..8 select the port of line 13 (C = 2), nothing else uses lines 12..15.
     unsafe {
