@@ -240,6 +240,9 @@ impl StatusFlags {
     pub const WATCHDOG: StatusFlags = StatusFlags(1 << 3);
     /// The board is shutting down (SYS_PD_N low or a shutdown command).
     pub const SHUTTING_DOWN: StatusFlags = StatusFlags(1 << 4);
+    /// The board does not run on its crystal's PLL (a clock step failed at boot: internal
+    /// oscillator, with or without the PLL, or the clock the bootloader left).
+    pub const CLOCK_FALLBACK: StatusFlags = StatusFlags(1 << 5);
 
     const NAMES: [&'static str; 8] = [
         "accept-and-warn",
@@ -247,7 +250,7 @@ impl StatusFlags {
         "sensor-fault",
         "watchdog",
         "shutting-down",
-        "bit5",
+        "clock-fallback",
         "bit6",
         "bit7",
     ];

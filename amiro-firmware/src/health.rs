@@ -46,6 +46,7 @@ static GROUPS_FAULTY: AtomicU8 = AtomicU8::new(0);
 static ERROR_PASSIVE: AtomicU32 = AtomicU32::new(0);
 static BUS_OFF: AtomicU32 = AtomicU32::new(0);
 static PASSIVE_NOW: AtomicBool = AtomicBool::new(false);
+static CLOCK_FALLBACK: AtomicBool = AtomicBool::new(false);
 static WATCHDOG_RUNNING: AtomicBool = AtomicBool::new(false);
 static RESET_CAUSE: AtomicU8 = AtomicU8::new(0);
 static WINDOW: AtomicU8 = AtomicU8::new(0);
@@ -116,9 +117,23 @@ pub fn set_can_errors(passive_episodes: u32, bus_off_episodes: u32, passive_now:
     PASSIVE_NOW.store(passive_now, Ordering::Relaxed);
 }
 
+/// Records the clock the board runs on (`chip::clock_plan`): anything but the crystal's PLL is a
+/// clock fault, flagged on diagnostics page 0.
+pub fn set_clock_source(source: crate::chip::ClockSource) {
+    CLOCK_FALLBACK.store(
+        source != crate::chip::ClockSource::Crystal,
+        Ordering::Relaxed,
+    );
+}
+
 /// Notes that the independent watchdog runs.
 pub fn watchdog_started() {
     WATCHDOG_RUNNING.store(true, Ordering::Relaxed);
+}
+
+/// Whether the independent watchdog runs (`watchdog::start` was called).
+pub fn watchdog_running() -> bool {
+    WATCHDOG_RUNNING.load(Ordering::Relaxed)
 }
 
 /// Records why the chip last reset (read once at boot).
@@ -138,6 +153,9 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
     }
     if GROUPS_FAULTY.load(Ordering::Relaxed) != 0 {
         flags = flags.with(StatusFlags::SENSOR_FAULT);
+    }
+    if CLOCK_FALLBACK.load(Ordering::Relaxed) {
+        flags = flags.with(StatusFlags::CLOCK_FALLBACK);
     }
     if WATCHDOG_RUNNING.load(Ordering::Relaxed) {
         flags = flags.with(StatusFlags::WATCHDOG);

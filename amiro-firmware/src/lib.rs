@@ -6,7 +6,7 @@
 //! publisher loop, the independent watchdog, the clock-tree reset, and the QEMU platform. A board
 //! crate keeps only its `board.rs` (pins and devices), its sampling and its RTIC app (wiring).
 //!
-//! The portable core ([`can`], [`bxcan`], [`layout`]) builds and is tested on the host; the rest
+//! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`layout`], [`spi`]) builds and is tested on the host; the rest
 //! exists only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
 //! is enabled on a chip build; `qemu` selects the QEMU platform.
 #![cfg_attr(not(test), no_std)]
@@ -17,6 +17,7 @@ pub mod bxcan;
 pub mod can;
 pub mod clock_tree;
 pub mod layout;
+pub mod spi;
 
 #[cfg(target_os = "none")]
 pub mod bootloader;
@@ -27,6 +28,8 @@ pub mod fault;
 #[cfg(target_os = "none")]
 pub mod health;
 #[cfg(target_os = "none")]
+pub mod i2c;
+#[cfg(target_os = "none")]
 pub mod liveness;
 #[cfg(target_os = "none")]
 pub mod mono;
@@ -36,6 +39,7 @@ pub mod publisher;
 pub mod qemu;
 #[cfg(target_os = "none")]
 pub mod signals;
+
 #[cfg(target_os = "none")]
 pub mod tasks;
 #[cfg(target_os = "none")]

@@ -155,6 +155,7 @@ mod app {
         iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
         health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
         amiro_firmware::telemetry::init();
+        amiro_firmware::telemetry::boot_report("DiWheelDrive");
         let (hw, _nvic) = platform::init(cx.device, cx.core, cx.local.spi_bus);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
         let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
@@ -187,6 +188,7 @@ mod app {
         // Initialised: let the system come up (SYS_SYNC_N is wired-OR; it reads high once every
         // module has released it).
         signals.release_sync();
+        amiro_firmware::telemetry::init_done();
         // A shutdown requested before we were up has no edge to catch: look at the level.
         if signals.shutdown_requested() {
             rtic::pend(platform::SHUTDOWN_INTERRUPT);

@@ -145,6 +145,7 @@ mod app {
         iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
         health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
         amiro_firmware::telemetry::init();
+        amiro_firmware::telemetry::boot_report("LightRing");
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
         let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
@@ -163,6 +164,7 @@ mod app {
         amiro_firmware::log!("LightRing up");
 
         signals.release_sync();
+        amiro_firmware::telemetry::init_done();
         // A shutdown requested before we were up has no edge to catch: look at the level.
         if signals.shutdown_requested() {
             rtic::pend(platform::SHUTDOWN_INTERRUPT);

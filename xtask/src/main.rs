@@ -20,6 +20,7 @@ mod levels_check;
 mod probe;
 mod qemu;
 mod scenarios;
+mod smoke;
 
 use boards::{Board, BOARDS};
 
@@ -82,6 +83,12 @@ enum Cmd {
     /// Run only the QEMU scenarios CI runs (part of `test`), of every board or of the boards named.
     Scenarios {
         /// Boards whose scenarios to run (default: all).
+        boards: Vec<String>,
+    },
+    /// Boot the production images (the bytes `cargo xtask flash` writes, behind a stand-in for
+    /// AMiRo-BLT) in QEMU and check the boot from their RTT log (part of `test`; docs/faults.md).
+    Smoke {
+        /// Boards to boot (default: all).
         boards: Vec<String>,
     },
     /// Decode a capture of a board's trace channel (RTT channel 1, "trace": `amiro-trace` records)
@@ -198,6 +205,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             campaign::run(&root, &select_boards(&boards)?, seed, frames, runs).map(|()| true)
         }
         Cmd::Scenarios { boards } => run_scenarios(&root, &select_boards(&boards)?).map(|()| true),
+        Cmd::Smoke { boards } => smoke::run(&root, &select_boards(&boards)?).map(|()| true),
         Cmd::Trace { file } => {
             let bytes =
                 std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
@@ -479,6 +487,8 @@ fn test(root: &Path) -> Result<()> {
     let over = elf::over_budget(&reports);
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
     run_scenarios(root, &BOARDS.iter().collect::<Vec<_>>())?;
+    // The production images booted in QEMU (issue 21).
+    smoke::run(root, &BOARDS.iter().collect::<Vec<_>>())?;
     // After the scenarios: their bus logs are among what the other CAN tools must read.
     interop::check(root)?;
     // The hostile-bus campaign, one run of 3000 spaced frames per board (issue 12).
