@@ -201,6 +201,7 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
             // flood of verdicts (each refusal is counted all the same).
             let last = LAST_BUSY_VERDICT_MS.load(Ordering::Relaxed);
             let now_ms = crate::admission::millis(now);
+            // 1024 µs units: 40 of them are at least the one-shot interval (40 ms).
             if last != 0
                 && now_ms.wrapping_sub(last) < u32::from(crate::admission::ONE_SHOT_INTERVAL_MS)
             {

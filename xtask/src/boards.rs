@@ -57,7 +57,9 @@ pub const BOARDS: [Board; 3] = [
         qemu_machine: "netduinoplus2",
         flash_budget: 48 * 1024,
         // PowerManagement fits its own 48 KiB with the admission check (issue 10).
-        admission_allowance: 0,
+        // Issue 20: the hard floor, the busy verdicts and the paced admission task (≈ 1.5 KB) put
+        // PowerManagement ≈ 1.2 KB over its own 48 KiB; a stated allowance until the check shrinks.
+        admission_allowance: 2 * 1024,
     },
     Board {
         name: "lightring",
