@@ -21,12 +21,12 @@ Ctrl-C or `quit` leaves (a moving robot is stopped first).
 On an SLCAN adapter other amiro commands can run at the same time: they go through this one.";
 
 pub const CONSOLE_HELP: &str = "\
-Command line words (as in `amiro encode`, plus drive):
-  publish gyroscope --every 10ms --priority high
-  once floor-proximity --priority medium
-  stop gyroscope --priority high
-  led 3 --rgb 255,128,0
-  drive --forward 100mm/s --turn 30deg/s --for 3s
+Command line words (as in `amiro encode`, plus drive), with flags or said in words:
+  publish gyroscope --every 10ms --priority high      publish gyroscope every 10ms at high
+  once floor-proximity --priority medium              once floor
+  stop gyroscope --priority high                      stop gyroscope at high
+  led 3 --rgb 255,128,0                               led 3 orange, led 3 #FF8020
+  drive --forward 100mm/s --turn 30deg/s --for 3s     drive 100mm/s turn 30deg/s for 3s
   205#01840302                      a raw frame
   stop-driving, clear, help, quit
 
@@ -89,7 +89,8 @@ pub struct DriveArgs {
 }
 
 pub const RUN_ABOUT: &str = "\
-Play a script: one step per line, in the words of `amiro encode` (publish, stop, once, motor, led), raw frames \
+Play a script: one step per line, in the words of `amiro encode` (publish, stop, once, motor, led) with flags or \
+said in words (`publish gyroscope every 100ms at high`, `led 3 red`, `drive 100mm/s for 2s`), raw frames \
 (205#01840302), `wait DURATION` (watch the bus meanwhile) and `drive --forward SPEED --turn RATE --for DURATION` \
 (kept alive within the dead-man, then stopped). Lines starting with # are comments. The whole script is checked \
 before anything is sent. Everything the robot sends back is printed with the time since the start.

@@ -19,6 +19,7 @@ mod health;
 mod period;
 mod script;
 mod session;
+mod speech;
 mod watch;
 
 use std::process::ExitCode;

@@ -510,7 +510,15 @@ impl Console {
             .filter(|candidate| candidate.starts_with(current))
             .collect();
         match matching.as_slice() {
-            [] => self.status = format!("nothing completes {current:?}"),
+            [] => {
+                let near = crate::speech::closest(
+                    current,
+                    candidates(&words, "").iter().map(String::as_str),
+                )
+                .map(|near| format!(": did you mean {near}?"))
+                .unwrap_or_default();
+                self.status = format!("nothing completes {current:?}{near}");
+            }
             [only] => {
                 let keep = self.input.len() - current.len();
                 self.input.truncate(keep);
@@ -544,8 +552,30 @@ fn common_prefix(words: &[String]) -> String {
     first[..length].to_string()
 }
 
-/// What may come next after `words`, from the same clap definition the scripts are parsed with.
+/// What may come next after `words`: the flag forms from the same clap definition the scripts are parsed with,
+/// and the spoken forms (`publish gyroscope every 100ms at high`) from `speech`.
 pub fn candidates(words: &[&str], current: &str) -> Vec<String> {
+    let spoken = if current.starts_with('-') {
+        Vec::new()
+    } else {
+        crate::speech::candidates(words)
+    };
+    let speaking = words.len() > 2
+        && crate::speech::SPOKEN_COMMANDS.contains(&words[0])
+        && !words.iter().any(|word| word.starts_with("--"));
+    if speaking {
+        return spoken;
+    }
+    let mut all = flag_candidates(words, current);
+    for word in spoken {
+        if !all.contains(&word) {
+            all.push(word);
+        }
+    }
+    all
+}
+
+fn flag_candidates(words: &[&str], current: &str) -> Vec<String> {
     let command = StepLine::command();
     let Some(first) = words.first() else {
         let mut names: Vec<String> = command
@@ -626,15 +656,15 @@ fn hints(id: &str) -> Vec<String> {
 }
 
 const HELP: &[&str] = &[
-    "commands (Tab completes):",
-    "  publish TOPIC --every PERIOD --priority P   start a sensor (e.g. publish gyroscope --every 10ms --priority high)",
-    "  once TOPIC --priority P                     one sample now",
-    "  stop TOPIC --priority P                     stop a sensor",
-    "  led N --rgb R,G,B [--priority P]            colour of LED 1-8",
+    "commands (Tab completes), said as you would say them or with flags:",
+    "  publish gyroscope every 100ms at high       start a sensor (publish TOPIC --every PERIOD --priority P)",
+    "  once floor at urgent                        one sample now (once TOPIC --priority P)",
+    "  stop gyroscope [at high]                    stop a sensor (stop TOPIC --priority P; said: medium)",
+    "  led 3 red, led 3 #FF8020                    colour of LED 1-8 (led N --rgb R,G,B [--priority P])",
     "  motor --velocity UM_S --angular URAD_S      one motor frame (the board stops after 500 ms without one)",
-    "  drive --forward 100mm/s --turn 30deg/s --for 3s   kept alive every 200 ms, then stopped",
+    "  drive 100mm/s turn 30deg/s for 3s           kept alive every 200 ms, then stopped (drive --forward ...)",
     "  stop-driving, ID#DATA (a raw frame), clear, help, quit",
-    "keys: F2 menu, F3 drive with the arrows, PageUp/PageDown scroll, End follows, Ctrl-C quits",
+    "keys: F2 menu, F3 drive with the arrows, F4 dashboard, PageUp/PageDown scroll, End follows, Ctrl-C quits",
 ];
 
 /// A question of the menu.
@@ -882,6 +912,50 @@ mod tests {
         .contains(&"10ms".to_string()));
         assert!(candidates(&["led"], "").contains(&"8".to_string()));
         assert!(candidates(&[], "").contains(&"drive".to_string()));
+    }
+
+    #[test]
+    fn spoken_commands_are_sent_completed_and_corrected() {
+        let mut console = console();
+        let frames = type_line(
+            &mut console,
+            "publish gyroscope every 100ms at high",
+            Duration::ZERO,
+        );
+        assert_eq!(texts(&frames), ["108#01640000"]);
+        assert_eq!(
+            texts(&type_line(&mut console, "led 3 #FF8020", Duration::ZERO)),
+            ["313#FF8020"]
+        );
+        // Tab offers the spoken words beside the flags, and their values.
+        assert!(candidates(&["publish", "gyroscope"], "").contains(&"every".to_string()));
+        assert!(candidates(&["publish", "gyroscope"], "").contains(&"--every".to_string()));
+        assert_eq!(
+            candidates(&["publish", "gyroscope", "every", "100ms", "at"], ""),
+            ["urgent", "high", "medium", "low"]
+        );
+        assert!(candidates(&["once"], "").contains(&"floor".to_string()));
+        assert!(candidates(&["led", "3"], "").contains(&"red".to_string()));
+        assert!(candidates(&["drive", "100mm/s"], "").contains(&"turn".to_string()));
+        for c in "publish gyroscope ev".chars() {
+            console.key(Key::Char(c), Duration::ZERO);
+        }
+        console.key(Key::Tab, Duration::ZERO);
+        assert_eq!(console.input, "publish gyroscope every ");
+        console.input = "stop magnetomter-x".into();
+        console.key(Key::Tab, Duration::ZERO);
+        assert!(
+            console.status.contains("did you mean magnetometer-x?"),
+            "{}",
+            console.status
+        );
+        console.input.clear();
+        assert!(type_line(&mut console, "stop magnetomter-x", Duration::ZERO).is_empty());
+        assert!(
+            console.status.contains("did you mean magnetometer-x?"),
+            "{}",
+            console.status
+        );
     }
 
     #[test]
