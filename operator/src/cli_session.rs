@@ -146,3 +146,37 @@ pub struct RelayArgs {
     #[arg(long, env = "AMIRO_BUS", value_name = "BUS")]
     pub bus: String,
 }
+
+pub const RECORD_ABOUT: &str = "\
+Record a bus into an MCAP file, the format of ROS 2 recordings and of Foxglove. Every frame goes to the channel \
+/amiro/frames (as `amiro decode --json` describes it); each topic's decoded samples go to /amiro/TOPIC (e.g. \
+/amiro/gyroscope with x_dps, y_dps, z_dps: the field names of `decode --json`, in protocol units) and commands to \
+/amiro/TOPIC/command, each channel with a JSON schema. A message's log time is the time its frame was received \
+(or its timestamp in a log file). Ends after --duration, at the end of a log file, or on Ctrl-C; the file is \
+complete in every case.";
+
+pub const RECORD_HELP: &str = "\
+Examples:
+  amiro record --bus slcan:/dev/ttyUSB0 --out run.mcap --duration 30s
+  amiro record --bus socketcan:can0 --out run.mcap                     until Ctrl-C
+  amiro record --bus file:candump.log --out run.mcap                   convert a log (or: amiro decode --mcap)
+Open the file in Foxglove (File > Open local file) and plot /amiro/gyroscope.x_dps.";
+
+/// `amiro record`.
+#[derive(Debug, Args)]
+pub struct RecordArgs {
+    #[arg(long, env = "AMIRO_BUS", value_name = "BUS", help = BUS_HELP)]
+    pub bus: String,
+
+    /// The MCAP file to write (replaced if it exists)
+    #[arg(long, value_name = "FILE.mcap")]
+    pub out: PathBuf,
+
+    /// Stop after this long, e.g. 30s (without it: until Ctrl-C or the end of a log file)
+    #[arg(long, value_name = "DURATION", value_parser = parse_duration_arg)]
+    pub duration: Option<std::time::Duration>,
+}
+
+fn parse_duration_arg(text: &str) -> Result<std::time::Duration, String> {
+    crate::period::parse_duration(text).map_err(|error| error.to_string())
+}

@@ -10,6 +10,7 @@ mod cli;
 mod cli_session;
 mod commands;
 mod console;
+mod dashboard;
 mod dbc;
 mod describe;
 mod drive;
@@ -17,6 +18,7 @@ mod encode;
 mod frame;
 mod health;
 mod period;
+mod record;
 mod script;
 mod session;
 mod speech;
@@ -40,6 +42,7 @@ fn main() -> ExitCode {
         CliCommand::Console(args) => console::run(args),
         CliCommand::Drive(args) => session::drive_command(args),
         CliCommand::Run(args) => session::run(args),
+        CliCommand::Record(args) => session::record(args),
         CliCommand::Relay(args) => session::relay(args),
         CliCommand::Health(args) => health::health(args),
     };
