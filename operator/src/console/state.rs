@@ -9,6 +9,7 @@ use amiro_can::{MotorCommand, Priority, TOPICS};
 use clap::CommandFactory;
 
 use crate::admission::Checker;
+use crate::dashboard::Dashboard;
 use crate::describe::decode_frame;
 use crate::drive::{motor_frame, KeepAlive};
 use crate::frame::{LoggedFrame, RawFrame, Timestamp};
@@ -27,7 +28,7 @@ const MAX_SPEED: i32 = 500_000;
 const MAX_TURN: i32 = 25_132_741;
 
 /// The words the console knows besides the step words of scripts.
-const CONSOLE_WORDS: [&str; 5] = ["clear", "help", "quit", "stop-driving", "menu"];
+const CONSOLE_WORDS: [&str; 6] = ["clear", "dashboard", "help", "quit", "stop-driving", "menu"];
 
 /// A key, as the console understands it (the terminal front end maps crossterm's events to these).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -60,6 +61,8 @@ pub enum Key {
     Menu,
     /// F3: drive mode.
     Drive,
+    /// F4: the dashboard instead of the scrolling log, and back.
+    Dashboard,
     /// Ctrl-C.
     Interrupt,
 }
@@ -101,6 +104,10 @@ pub struct Console {
     pub quit: bool,
     /// The robot's admission check fed with what the console hears (`None`: requests are not checked).
     admission: Option<Checker>,
+    /// The robot's state at a glance, from everything heard and sent.
+    pub dashboard: Dashboard,
+    /// Whether the dashboard is shown instead of the log (F4).
+    pub show_dashboard: bool,
 }
 
 impl Console {
@@ -123,6 +130,8 @@ impl Console {
             statistics: Statistics::default(),
             quit: false,
             admission: None,
+            dashboard: Dashboard::default(),
+            show_dashboard: false,
         }
     }
 
@@ -180,6 +189,9 @@ impl Console {
             stamped.timestamp.get_or_insert_with(Timestamp::now);
             checker.heard(&stamped)
         });
+        let mut stamped = logged.clone();
+        stamped.timestamp.get_or_insert_with(Timestamp::now);
+        self.dashboard.heard(&stamped);
         if self.filter.admits(&logged.frame) {
             self.statistics.record(logged);
             let line = self.view.line(logged);
@@ -200,6 +212,8 @@ impl Console {
                     interface: None,
                     frame: *frame,
                 };
+                // A publish request sent sets the period the dashboard measures against.
+                self.dashboard.heard(&stamped);
                 let line = format!("sent {}", self.view.line(&stamped));
                 self.say(line);
             }
@@ -261,6 +275,10 @@ impl Console {
                 self.scroll = 0;
                 return Vec::new();
             }
+            Key::Dashboard => {
+                self.toggle_dashboard();
+                return Vec::new();
+            }
             _ => {}
         }
         match std::mem::replace(&mut self.mode, Mode::Command) {
@@ -313,6 +331,15 @@ impl Console {
         self.input = at.map(|at| self.history[at].clone()).unwrap_or_default();
     }
 
+    fn toggle_dashboard(&mut self) {
+        self.show_dashboard = !self.show_dashboard;
+        self.status = if self.show_dashboard {
+            "Dashboard: one row per topic heard; F4 shows the bus log again".into()
+        } else {
+            "Bus log; F4 shows the dashboard".into()
+        };
+    }
+
     fn open_menu(&mut self) {
         self.mode = Mode::Menu(Menu::default());
         self.status = "Menu: Up/Down and Enter (or a number), Esc cancels".into();
@@ -353,6 +380,10 @@ impl Console {
             }
             "menu" => {
                 self.open_menu();
+                return Vec::new();
+            }
+            "dashboard" => {
+                self.toggle_dashboard();
                 return Vec::new();
             }
             "stop-driving" => {
@@ -663,7 +694,7 @@ const HELP: &[&str] = &[
     "  led 3 red, led 3 #FF8020                    colour of LED 1-8 (led N --rgb R,G,B [--priority P])",
     "  motor --velocity UM_S --angular URAD_S      one motor frame (the board stops after 500 ms without one)",
     "  drive 100mm/s turn 30deg/s for 3s           kept alive every 200 ms, then stopped (drive --forward ...)",
-    "  stop-driving, ID#DATA (a raw frame), clear, help, quit",
+    "  stop-driving, ID#DATA (a raw frame), dashboard (or F4), clear, help, quit",
     "keys: F2 menu, F3 drive with the arrows, F4 dashboard, PageUp/PageDown scroll, End follows, Ctrl-C quits",
 ];
 
