@@ -1,8 +1,10 @@
 //! Interop with other CAN tools: cantools loads `amiro dbc` and decodes sample frames to the values `amiro decode`
 //! prints; python-can's `CanutilsLogReader` and can-utils' `log2long` / `log2asc` read the candump logs `amiro`
-//! writes (`canplayer` needs a CAN interface, and CI kernels have no vcan, so it is not run here).
+//! writes (`canplayer` needs a CAN interface, and CI kernels have no vcan, so it is not run here); Foxglove's
+//! Python `mcap` reader opens the MCAP recordings of `amiro record` and `amiro decode --mcap` and finds every
+//! topic's channel and JSON schema, the values of `decode --json` and each frame's time as the log time.
 //!
-//! The checks are `tools/interop/test_interop.py`, run with pytest in a venv under the target directory that
+//! The checks are `tools/interop/test_interop.py` and `tools/interop/test_mcap.py`, run with pytest in a venv under the target directory that
 //! holds exactly `tools/requirements-ci.txt`; the venv is rebuilt only when that file changes.
 
 use std::path::{Path, PathBuf};
@@ -24,7 +26,7 @@ pub fn check(root: &Path) -> Result<()> {
     )
     .context("building amiro for the interop checks")?;
     let amiro = super::target_dir(root).join("debug").join("amiro");
-    println!("interop: cantools, python-can and can-utils against amiro");
+    println!("interop: cantools, python-can, can-utils and the mcap reader against amiro");
     let status = Command::new(&python)
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
         .arg(root.join("tools").join("interop"))
