@@ -260,7 +260,12 @@ impl Dashboard {
             };
             self.verdicts
                 .insert(topic.byte(), format!("{word} \"{what}\""));
-            self.row(request.topic).verdict = Some(word);
+            let row = self.row(request.topic);
+            row.verdict = Some(word);
+            if request.verdict == Verdict::Refused && !request.one_shot {
+                // The board kept what ran before; the period asked for is not the one to measure against.
+                row.requested_us = None;
+            }
         }
     }
 
@@ -409,9 +414,12 @@ pub fn buffer_text(buffer: &ratatui::buffer::Buffer) -> String {
     text
 }
 
-/// µs as milliseconds: `100`, `62.5`, `0.9`.
+/// µs as milliseconds: `100`, `62.5`, `0.9`, `0.001`.
 fn milliseconds(micros: u64) -> String {
     let ms = micros as f64 / 1000.0;
+    if micros < 1000 {
+        return format!("{ms:.3}").trim_end_matches('0').to_string();
+    }
     if ms >= 100.0 || (ms - ms.round()).abs() < 0.05 {
         format!("{ms:.0}")
     } else {
@@ -643,6 +651,10 @@ mod tests {
             .find(|l| l.contains("accelerometer"))
             .unwrap_or_else(|| panic!("{text}"));
         assert!(row.contains("refused"), "{row}");
+        assert!(
+            row.contains("-/-"),
+            "a refused request is not measured against: {row}"
+        );
         assert!(text.contains("LightRing: no diagnostics heard"), "{text}");
     }
 }

@@ -172,3 +172,24 @@ fn scripts_take_the_spoken_forms() {
         "{stderr}"
     );
 }
+
+#[test]
+fn the_dashboard_capture_in_the_user_guide_is_what_amiro_prints() {
+    let guide = include_str!("../../docs/operator.md");
+    let section = &guide[guide
+        .find("## The dashboard")
+        .expect("the dashboard section")..];
+    let start = section.find("```text\n").expect("the capture") + "```text\n".len();
+    let capture = &section[start..start + section[start..].find("```").expect("its end")];
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let output = amiro()
+        .args(["monitor", "--dashboard", "--no-summary", "--bus"])
+        .arg(format!(
+            "file:{}",
+            root.join("examples/dashboard-demo.log").display()
+        ))
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{output:?}");
+    assert_eq!(String::from_utf8(output.stdout).unwrap(), capture);
+}
