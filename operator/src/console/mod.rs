@@ -201,8 +201,13 @@ fn interactive(
         .context("cannot take over the terminal (is this a terminal? try --headless)")?;
     let _guard = TerminalGuard;
     let title = format!(" amiro console — {url} ");
+    // On a live bus the dashboard's clock runs on with the host's (a silent publisher owes samples); a log
+    // replayed keeps its own times.
+    let live = !matches!(url, BusUrl::File { .. });
     loop {
-        console.dashboard.tick(Timestamp::now());
+        if live {
+            console.dashboard.tick(Timestamp::now());
+        }
         terminal
             .draw(|frame| draw(frame, console, &title))
             .context("cannot draw")?;

@@ -212,8 +212,9 @@ impl Console {
                     interface: None,
                     frame: *frame,
                 };
-                // A publish request sent sets the period the dashboard measures against.
-                self.dashboard.heard(&stamped);
+                // A publish request sent sets the period the dashboard measures against (its clock is the
+                // bus's: a log replayed has its own times, so the host's time is not given).
+                self.dashboard.heard(&LoggedFrame::bare(*frame));
                 let line = format!("sent {}", self.view.line(&stamped));
                 self.say(line);
             }
