@@ -19,7 +19,7 @@ use serde_json::{json, Map, Value};
 use crate::describe::{
     command_json, decode_frame, json_record, sample_json, value_fields, FieldType,
 };
-use crate::frame::LoggedFrame;
+use crate::frame::{LoggedFrame, Timestamp};
 
 /// The channel every frame is written to.
 pub const FRAMES_CHANNEL: &str = "/amiro/frames";
@@ -125,6 +125,94 @@ pub fn frame_schema() -> Value {
     })
 }
 
+/// A channel as MCAP and Foxglove's WebSocket protocol describe it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChannelSpec {
+    /// The channel's topic (`/amiro/gyroscope`).
+    pub name: String,
+    /// The schema's name (`amiro.gyroscope`).
+    pub schema_name: String,
+    /// The JSON schema.
+    pub schema: Value,
+    /// Channel metadata.
+    pub metadata: BTreeMap<String, String>,
+}
+
+/// `/amiro/frames`.
+pub fn frames_spec() -> ChannelSpec {
+    ChannelSpec {
+        name: FRAMES_CHANNEL.into(),
+        schema_name: "amiro.frame".into(),
+        schema: frame_schema(),
+        metadata: BTreeMap::new(),
+    }
+}
+
+/// `/amiro/<topic>`: the topic's decoded samples.
+pub fn topic_spec(topic: Topic) -> ChannelSpec {
+    let info = TOPICS.iter().find(|info| info.topic == topic);
+    let metadata = [
+        ("topic_byte", format!("0x{:02X}", topic.byte())),
+        (
+            "board",
+            info.map_or(String::new(), |i| i.board.name().into()),
+        ),
+        ("layout", info.map_or(String::new(), |i| i.layout.into())),
+    ];
+    ChannelSpec {
+        name: topic_channel(topic),
+        schema_name: format!("amiro.{}", topic.name()),
+        schema: topic_schema(topic),
+        metadata: metadata
+            .into_iter()
+            .map(|(key, value)| (key.to_string(), value))
+            .collect(),
+    }
+}
+
+/// `/amiro/<topic>/command`: the commands sent to the topic.
+pub fn command_spec(topic: Topic) -> ChannelSpec {
+    ChannelSpec {
+        name: command_channel(topic),
+        schema_name: "amiro.command".into(),
+        schema: command_schema(),
+        metadata: BTreeMap::from([("topic".to_string(), topic.name().to_string())]),
+    }
+}
+
+/// Nanoseconds since the timestamp's origin: the log time of a frame.
+pub fn time_ns(timestamp: Timestamp) -> u64 {
+    timestamp
+        .secs
+        .saturating_mul(1_000_000_000)
+        .saturating_add(u64::from(timestamp.micros) * 1000)
+}
+
+/// What a frame becomes: its record for `/amiro/frames` (as `decode --json` prints it) and, if it decodes, the
+/// message for its topic's channel (`priority` first, then the fields of `decode --json`).
+pub fn messages(logged: &LoggedFrame) -> (Value, Option<(ChannelSpec, Value)>) {
+    let decoded = decode_frame(&logged.frame);
+    let record = json_record(logged, None, &decoded);
+    let Ok(message) = &decoded else {
+        return (record, None);
+    };
+    let (spec, body) = match message {
+        Message::Sample { data, .. } => (topic_spec(data.topic()), sample_json(data)),
+        Message::Command(command) => {
+            let Ok(topic) = message.topic() else {
+                return (record, None);
+            };
+            (command_spec(topic), command_json(command))
+        }
+    };
+    let mut ordered = Map::new();
+    ordered.insert("priority".into(), json!(message.priority().name()));
+    if let Value::Object(mut fields) = body {
+        ordered.append(&mut fields);
+    }
+    (record, Some((spec, Value::Object(ordered))))
+}
+
 /// An MCAP file being written.
 pub struct Recording<W: Write + Seek> {
     writer: mcap::Writer<W>,
@@ -164,34 +252,27 @@ impl<W: Write + Seek> Recording<W> {
             untimed: 0,
             written: 0,
         };
-        recording.frames =
-            recording.channel(FRAMES_CHANNEL, "amiro.frame", &frame_schema(), &[])?;
+        recording.frames = recording.channel(&frames_spec())?;
         Ok(recording)
     }
 
-    fn channel(
-        &mut self,
-        name: &str,
-        schema_name: &str,
-        schema: &Value,
-        metadata: &[(&str, String)],
-    ) -> Result<u16> {
-        if let Some(id) = self.channels.get(name) {
+    fn channel(&mut self, spec: &ChannelSpec) -> Result<u16> {
+        if let Some(id) = self.channels.get(&spec.name) {
             return Ok(*id);
         }
         let schema_id = self
             .writer
-            .add_schema(schema_name, "jsonschema", schema.to_string().as_bytes())
-            .map_err(|error| anyhow!("cannot add the schema {schema_name}: {error}"))?;
-        let metadata: BTreeMap<String, String> = metadata
-            .iter()
-            .map(|(key, value)| ((*key).to_string(), value.clone()))
-            .collect();
+            .add_schema(
+                &spec.schema_name,
+                "jsonschema",
+                spec.schema.to_string().as_bytes(),
+            )
+            .map_err(|error| anyhow!("cannot add the schema {}: {error}", spec.schema_name))?;
         let id = self
             .writer
-            .add_channel(schema_id, name, "json", &metadata)
-            .map_err(|error| anyhow!("cannot add the channel {name}: {error}"))?;
-        self.channels.insert(name.to_string(), id);
+            .add_channel(schema_id, &spec.name, "json", &spec.metadata)
+            .map_err(|error| anyhow!("cannot add the channel {}: {error}", spec.name))?;
+        self.channels.insert(spec.name.clone(), id);
         Ok(id)
     }
 
@@ -212,69 +293,21 @@ impl<W: Write + Seek> Recording<W> {
     /// Records one frame: on `/amiro/frames`, and decoded on its topic's channel.
     pub fn record(&mut self, logged: &LoggedFrame) -> Result<()> {
         let time_ns = match logged.timestamp {
-            Some(timestamp) => timestamp
-                .secs
-                .saturating_mul(1_000_000_000)
-                .saturating_add(u64::from(timestamp.micros) * 1000),
+            Some(timestamp) => time_ns(timestamp),
             None => {
                 self.untimed += 1;
                 self.last_time_ns
             }
         };
         self.last_time_ns = time_ns;
-        let decoded = decode_frame(&logged.frame);
-        let record = json_record(logged, None, &decoded);
+        let (record, decoded) = messages(logged);
         self.write(self.frames, time_ns, &record)?;
-        if let Ok(message) = &decoded {
-            let priority = json!(message.priority().name());
-            let (channel, mut body) = match message {
-                Message::Sample { data, .. } => {
-                    let topic = data.topic();
-                    let channel = self.topic_channel_id(topic)?;
-                    (channel, sample_json(data))
-                }
-                Message::Command(command) => {
-                    let Ok(topic) = message.topic() else {
-                        return Ok(());
-                    };
-                    let channel = self.channel(
-                        &command_channel(topic),
-                        "amiro.command",
-                        &command_schema(),
-                        &[("topic", topic.name().to_string())],
-                    )?;
-                    (channel, command_json(command))
-                }
-            };
-            if let Value::Object(fields) = &mut body {
-                // `priority` first, then the fields in the order of `decode --json`.
-                let mut ordered = Map::new();
-                ordered.insert("priority".into(), priority);
-                ordered.append(fields);
-                body = Value::Object(ordered);
-            }
+        if let Some((spec, body)) = decoded {
+            let channel = self.channel(&spec)?;
             self.write(channel, time_ns, &body)?;
         }
         self.written += 1;
         Ok(())
-    }
-
-    fn topic_channel_id(&mut self, topic: Topic) -> Result<u16> {
-        let info = TOPICS.iter().find(|info| info.topic == topic);
-        let metadata = [
-            ("topic_byte", format!("0x{:02X}", topic.byte())),
-            (
-                "board",
-                info.map_or(String::new(), |i| i.board.name().into()),
-            ),
-            ("layout", info.map_or(String::new(), |i| i.layout.into())),
-        ];
-        self.channel(
-            &topic_channel(topic),
-            &format!("amiro.{}", topic.name()),
-            &topic_schema(topic),
-            &metadata,
-        )
     }
 
     /// Writes the summary and index and flushes; the file is complete after this. Returns the frames written and
