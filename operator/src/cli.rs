@@ -437,6 +437,11 @@ pub struct MonitorArgs {
     /// health (q or Ctrl-C leaves)
     #[arg(long, conflicts_with = "json")]
     pub dashboard: bool,
+
+    /// Serve the bus live to Foxglove over its WebSocket protocol, on HOST:PORT [default: 127.0.0.1:8765]
+    /// (the channels of an MCAP recording; needs the `foxglove` cargo feature)
+    #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    pub foxglove: Option<String>,
 }
 
 fn any_topic_parser() -> impl TypedValueParser<Value = Topic> {

@@ -5,8 +5,7 @@
 //! render it into a buffer (`text`) and read it.
 
 use std::collections::{BTreeMap, VecDeque};
-use std::fs::File;
-use std::io::{self, BufWriter, IsTerminal, Write};
+use std::io::{self, IsTerminal, Write};
 use std::time::{Duration, Instant};
 
 use amiro_can::{
@@ -24,7 +23,7 @@ use crate::cli::MonitorArgs;
 use crate::describe::decode_frame;
 use crate::frame::{LoggedFrame, Timestamp};
 use crate::health::BoardHealth;
-use crate::record::Recording;
+use crate::session::Taps;
 use crate::watch::{Filter, Statistics};
 
 /// Intervals kept per topic for the measured period.
@@ -454,7 +453,7 @@ pub fn monitor(
     args: &MonitorArgs,
     filter: &Filter,
     statistics: &mut Statistics,
-    mut recording: Option<&mut Recording<BufWriter<File>>>,
+    taps: &mut Taps,
 ) -> Result<()> {
     let mut dashboard = Dashboard::default();
     let live = io::stdout().is_terminal();
@@ -482,9 +481,7 @@ pub fn monitor(
             };
             match bus.receive(Some(wait))? {
                 Reception::Frame(mut logged) => {
-                    if let Some(recording) = recording.as_mut() {
-                        recording.record(&logged)?;
-                    }
+                    taps.frame(&logged)?;
                     if filter.admits(&logged.frame) {
                         statistics.record(&logged);
                         logged.timestamp.get_or_insert_with(Timestamp::now);

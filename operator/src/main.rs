@@ -17,6 +17,8 @@ mod drive;
 mod encode;
 mod frame;
 mod health;
+#[cfg(feature = "foxglove")]
+mod live;
 mod period;
 mod record;
 mod script;

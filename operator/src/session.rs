@@ -60,15 +60,16 @@ pub fn monitor(args: &MonitorArgs) -> Result<ExitCode> {
         sensor_data_only: args.sensor_data,
     };
     let mut statistics = Statistics::default();
-    let mut recording = args.record.as_deref().map(Recording::create).transpose()?;
+    let mut taps = Taps {
+        recording: args.record.as_deref().map(Recording::create).transpose()?,
+        #[cfg(feature = "foxglove")]
+        live: None,
+    };
+    if let Some(address) = &args.foxglove {
+        serve_foxglove(&mut taps, address)?;
+    }
     let outcome = if args.dashboard {
-        crate::dashboard::monitor(
-            bus.as_mut(),
-            args,
-            &filter,
-            &mut statistics,
-            recording.as_mut(),
-        )
+        crate::dashboard::monitor(bus.as_mut(), args, &filter, &mut statistics, &mut taps)
     } else {
         watch(
             bus.as_mut(),
@@ -76,11 +77,11 @@ pub fn monitor(args: &MonitorArgs) -> Result<ExitCode> {
             &filter,
             &mut view,
             &mut statistics,
-            recording.as_mut(),
+            &mut taps,
         )
     };
     let closed = bus.close().with_context(|| format!("closing {url}"));
-    if let (Some(recording), Some(path)) = (recording, &args.record) {
+    if let (Some(recording), Some(path)) = (taps.recording.take(), &args.record) {
         let (frames, _) = recording.finish()?;
         eprintln!("recorded {frames} frames into {}", path.display());
     }
@@ -101,6 +102,49 @@ pub fn monitor(args: &MonitorArgs) -> Result<ExitCode> {
     }
 }
 
+/// Where the frames a monitor hears go besides the screen: an MCAP recording, a live Foxglove server.
+pub struct Taps {
+    /// `--record FILE.mcap`.
+    pub recording: Option<Recording<BufWriter<File>>>,
+    /// `--foxglove`.
+    #[cfg(feature = "foxglove")]
+    pub live: Option<crate::live::LiveServer>,
+}
+
+impl Taps {
+    /// Hands a frame heard to each tap.
+    pub fn frame(&mut self, logged: &LoggedFrame) -> Result<()> {
+        if let Some(recording) = self.recording.as_mut() {
+            recording.record(logged)?;
+        }
+        #[cfg(feature = "foxglove")]
+        if let Some(live) = self.live.as_mut() {
+            live.frame(logged)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(feature = "foxglove")]
+fn serve_foxglove(taps: &mut Taps, address: &str) -> Result<()> {
+    let live = crate::live::LiveServer::start(address)?;
+    let host = address.rsplit_once(':').map_or(address, |(host, _)| host);
+    eprintln!(
+        "foxglove: serving on ws://{host}:{} (in Foxglove: Open connection → Foxglove WebSocket)",
+        live.port()
+    );
+    taps.live = Some(live);
+    Ok(())
+}
+
+#[cfg(not(feature = "foxglove"))]
+fn serve_foxglove(_taps: &mut Taps, _address: &str) -> Result<()> {
+    bail!(
+        "this amiro was built without Foxglove's live server: cargo install --path operator --features foxglove \
+         (or record with --record FILE.mcap and open the file in Foxglove)"
+    )
+}
+
 /// Prints admitted frames until the count, the timeout, the end of the log or Ctrl-C.
 fn watch(
     bus: &mut dyn Bus,
@@ -108,7 +152,7 @@ fn watch(
     filter: &Filter,
     view: &mut View,
     statistics: &mut Statistics,
-    mut recording: Option<&mut Recording<BufWriter<File>>>,
+    taps: &mut Taps,
 ) -> Result<()> {
     let mut out = io::stdout().lock();
     // In English, an admission verdict's two pages are followed by the verdict in one sentence, with what would
@@ -122,9 +166,7 @@ fn watch(
         }
         match bus.receive(left)? {
             Reception::Frame(logged) => {
-                if let Some(recording) = recording.as_mut() {
-                    recording.record(&logged)?;
-                }
+                taps.frame(&logged)?;
                 let verdict = admission.as_mut().and_then(|checker| {
                     let mut stamped = logged.clone();
                     stamped.timestamp.get_or_insert_with(Timestamp::now);
