@@ -105,7 +105,7 @@ fn value(words: &[String], at: &mut usize, units: &[&str]) -> Option<String> {
     Some(first)
 }
 
-const TIME_UNITS: [&str; 6] = ["us", "µs", "ms", "s", "min", "h"];
+const TIME_UNITS: [&str; 4] = ["us", "µs", "ms", "s"];
 const SPEED_UNITS: [&str; 5] = ["um/s", "µm/s", "mm/s", "cm/s", "m/s"];
 const TURN_UNITS: [&str; 6] = ["urad/s", "µrad/s", "mrad/s", "rad/s", "deg/s", "°/s"];
 
