@@ -83,6 +83,11 @@ pub fn count_admission(refused: bool, reason: RefusalReason) {
     }
 }
 
+/// Requests refused by the admission check or for a full admission queue (not those warned about), since boot.
+pub fn admission_refused() -> u32 {
+    ADMISSION_REFUSED.load(Ordering::Relaxed)
+}
+
 /// Requests refused because the admission queue was full ([`RefusalReason::Busy`]), since boot.
 pub fn admission_busy() -> u32 {
     REFUSALS

@@ -122,7 +122,7 @@ pub fn handle_command<C: Clock>(
     if signals::shutting_down() {
         return None;
     }
-    handle_command_at(C::now_us(), frame, handler, wake_levels)
+    handle_command_at(C::now_us(), frame, handler, wake_levels, true)
 }
 
 /// [`handle_command`] as of `now`.
@@ -131,9 +131,12 @@ fn handle_command_at(
     frame: &RxFrame,
     mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     wake_levels: &mut [Sender<'static, (), 1>],
+    traced: bool,
 ) -> Option<(u64, Outcome)> {
     let outcome = handler.lock(|h| h.on_frame(now, frame.id, frame.payload()));
-    trace_outcome(now, frame.id, &outcome);
+    if traced {
+        trace_outcome(now, frame.id, &outcome);
+    }
     match outcome {
         Ok(Outcome::Sensor { wake, .. }) => {
             // Wake the levels whose schedule changed; each re-reads its next due time.
@@ -187,10 +190,13 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
     mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
     tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
 ) {
-    if crate::admission::is_stop(frame.id, frame.payload()) {
+    let stop = crate::admission::is_stop(frame.id, frame.payload());
+    if stop {
         let _ = handle_command::<C>(frame, handler, wake_levels);
     }
-    if requests.try_send(*frame).is_ok() {
+    if requests.try_send(*frame).is_ok() || stop {
+        // A stop that finds the queue full has taken effect all the same (and is traced as handled);
+        // only the admission task's view keeps the stream, which errs on the safe side (more load).
         return;
     }
     match crate::admission::busy_verdict(board, frame.id, frame.payload()) {
@@ -290,7 +296,12 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     note_decision::<C, N, M>(frame.id, &check, admission, started);
     let (outcome, verdict) = match check {
         // As of now (after the check): a new publisher's grid starts when it can start.
-        Check::Pass => return handle_command_at(C::now_us(), frame, handler, wake_levels),
+        // A stop took effect (and was traced) in the command handler; applied again here, untraced, in
+        // case a request for the same topic was still waiting in the queue.
+        Check::Pass => {
+            let traced = !crate::admission::is_stop(frame.id, frame.payload());
+            return handle_command_at(C::now_us(), frame, handler, wake_levels, traced);
+        }
         Check::Refused(frames, reason) => {
             crate::health::count_admission(true, reason);
             (None, frames)
@@ -298,7 +309,7 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
         Check::Warned(frames, reason) => {
             crate::health::count_admission(false, reason);
             (
-                handle_command_at(C::now_us(), frame, handler, wake_levels),
+                handle_command_at(C::now_us(), frame, handler, wake_levels, true),
                 frames,
             )
         }
