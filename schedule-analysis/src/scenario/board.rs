@@ -130,6 +130,9 @@ fn build_board(
     all.extend(tasks);
     let source = built.sources.last().cloned();
     built.sources.push(budgets_line(timing, &measured));
+    if let Some(line) = admission_line(timing, &measured) {
+        built.sources.push(line);
+    }
     let overheads = build_overheads(file, timing, firmware, &mut all, built)?;
     Ok(BoardModel {
         name: timing.board.clone(),
@@ -428,6 +431,29 @@ fn idle_sections(
         }
     }
     Ok(idle_sections)
+}
+
+/// The source line of the board's on-chip admission task (`admit_requests`, docs/analysis.md "The admission
+/// task"): the CPU share its budget reserves, and what the budget rests on.
+fn admission_line(timing: &Timing, measured: &[String]) -> Option<String> {
+    let task = timing.tasks.get("admit_requests")?;
+    let wcet = task.wcet_us?;
+    let period = match task.arrival {
+        Some(Arrival::SporadicUs(p)) | Some(Arrival::PeriodicUs(p)) if p > 0.0 => p,
+        _ => return None,
+    };
+    let basis = if measured.iter().any(|m| m == "admit_requests") {
+        "a measured budget"
+    } else {
+        "an estimate from the QEMU benchmark admission-cost (its worst decision in instructions, at an assumed cycles per instruction; the timing file's note has the figures), not a bench measurement"
+    };
+    Some(format!(
+        "{}: admission reserves {:.1} % of the CPU (admit_requests: {:.0} µs per {:.0} µs), {basis}",
+        timing.board,
+        100.0 * wcet / period,
+        wcet,
+        period
+    ))
 }
 
 /// The source line saying which budgets are measured.
