@@ -479,7 +479,7 @@ pub fn busy_verdict(board: Board, id: u16, data: &[u8]) -> Option<[Frame; 2]> {
 }
 
 /// `now_us` in units of 1024 µs, wrapping at 32 bits (a shift: no division is linked for it).
-pub fn millis(now_us: u64) -> u32 {
+pub fn ticks_1024us(now_us: u64) -> u32 {
     (now_us >> 10) as u32
 }
 

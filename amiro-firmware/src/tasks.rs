@@ -206,7 +206,7 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
             // At most one busy verdict per one-shot interval: a flood of requests must not turn into a
             // flood of verdicts (each refusal is counted all the same).
             let last = LAST_BUSY_VERDICT_MS.load(Ordering::Relaxed);
-            let now_ms = crate::admission::millis(now);
+            let now_ms = crate::admission::ticks_1024us(now);
             // 1024 µs units: 40 of them are at least the one-shot interval (40 ms).
             if last != 0
                 && now_ms.wrapping_sub(last) < u32::from(crate::admission::ONE_SHOT_INTERVAL_MS)
