@@ -20,8 +20,8 @@
 //! deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without jitter budgets
 //! (a property test checks that they agree).
 
-use crate::board::{self, LevelLoads, TaskTiming};
-use crate::busy_window::{AnalysisError, Counter, Limits, Response};
+use crate::board::{self, TaskTiming};
+use crate::busy_window::{AnalysisError, Counter, Limits, Load, Response, Share};
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
 
@@ -1251,9 +1251,15 @@ fn analyse_board<const N: usize, const M: usize>(
     };
 
     // SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job.
+    // Jobs of one priority share it: worked out once per level (the jobs are sorted by priority).
     let mut blocking = [Time::ZERO; N];
+    let mut last_level: Option<(u32, Time)> = None;
     for (slot, timing) in blocking.iter_mut().zip(jobs.timings.iter()).take(len) {
         let p = timing.priority;
+        if let Some((_, known)) = last_level.filter(|&(level, _)| level == p) {
+            *slot = known;
+            continue;
+        }
         // SRP (`board::srp_blocking`): a lower holder's section on a resource whose ceiling reaches `p`.
         let mut longest = 0;
         for cs in table.sections {
@@ -1282,6 +1288,25 @@ fn analyse_board<const N: usize, const M: usize>(
             }
         }
         *slot = row_time(longest);
+        last_level = Some((p, *slot));
+    }
+    // Each job's share of the CPU, one division per job (not one per job and level as it is summed).
+    let mut shares = [Share::default(); N];
+    for (share, timing) in shares.iter_mut().zip(jobs.timings.iter()).take(len) {
+        *share = Share::of(timing.wcet, timing.period);
+    }
+    // Where each job's priority level ends (the jobs are sorted by priority).
+    let mut level_end = [0u8; N];
+    let mut end = len;
+    for i in (0..len).rev() {
+        if let (Some(t), Some(next)) = (jobs.timings.get(i), jobs.timings.get(i + 1)) {
+            if t.priority != next.priority {
+                end = i + 1;
+            }
+        }
+        if let Some(slot) = level_end.get_mut(i) {
+            *slot = end as u8;
+        }
     }
 
     // Release jitters to a fixed point: a released job inherits its releaser's WCRT. When every releaser is more
@@ -1315,7 +1340,8 @@ fn analyse_board<const N: usize, const M: usize>(
     };
     let mut settled = false;
     for _ in 0..MAX_JITTER_ROUNDS {
-        let mut levels = LevelLoads::default();
+        // The load of every job of this and the more urgent levels, summed as each level is entered.
+        let mut prefix = Load::default();
         let mut level_start = 0;
         let mut previous_level = 0..0;
         for i in 0..len {
@@ -1348,6 +1374,11 @@ fn analyse_board<const N: usize, const M: usize>(
                         }
                     }
                 }
+                // The level's load, with its jitters as they are now (as `board::LevelLoads` sums it).
+                let end = usize::from(level_end.get(i).copied().unwrap_or(0));
+                for (share, timing) in shares.iter().zip(jobs.timings.iter()).take(end).skip(i) {
+                    prefix = prefix.plus(share.load(timing.jitter));
+                }
             }
             let (Some(&task), Some(&blocking_i)) = (jobs.timings.get(i), blocking.get(i)) else {
                 break;
@@ -1365,13 +1396,16 @@ fn analyse_board<const N: usize, const M: usize>(
                 .max()
                 .unwrap_or(Time::ZERO);
             let timings = jobs.timings.get(..len).unwrap_or(&[]);
-            let load = levels.at(timings, i, |a, b| a.priority == b.priority);
-            let result = board::response_time_hinted(
+            let own = shares.get(i).copied().unwrap_or_default();
+            let load = prefix.minus(own.load(task.jitter));
+            let result = board::response_time_at_level(
                 timings,
                 i,
+                usize::from(level_end.get(i).copied().unwrap_or(0)),
                 blocking_i,
                 hint,
                 load,
+                own,
                 limits,
                 &mut scratch,
             );
