@@ -1112,10 +1112,15 @@ impl<const N: usize> Jobs<N> {
             .take(self.len)
             .position(|t| t.priority < timing.priority)
             .unwrap_or(self.len);
+        // Shift the less urgent jobs up by one, one copy each (a swap costs three).
         let mut k = self.len;
         while k > at {
-            self.timings.swap(k, k - 1);
-            self.meta.swap(k, k - 1);
+            if let (Some(&t), Some(&m)) = (self.timings.get(k - 1), self.meta.get(k - 1)) {
+                if let (Some(ts), Some(ms)) = (self.timings.get_mut(k), self.meta.get_mut(k)) {
+                    *ts = t;
+                    *ms = m;
+                }
+            }
             k -= 1;
         }
         if let (Some(t), Some(m)) = (self.timings.get_mut(at), self.meta.get_mut(at)) {

@@ -368,17 +368,19 @@ fn shifted_quotient(n: u64, d: u64) -> u64 {
         // A remainder is below `d`, so it can be shifted left by `d`'s leading zeros without overflow.
         let step = d32.leading_zeros();
         if d32 != 0 && step > 0 {
-            let mut q = u64::from(n32 / d32);
+            let high = u64::from(n32 / d32);
             let mut r = n32 % d32;
+            // The low UTIL_BITS bits of the quotient, in 32 bits (no 64-bit shifts in the loop).
+            let mut low = 0u32;
             let mut left = UTIL_BITS;
             while left > 0 {
                 let s = step.min(left);
                 let x = r << s;
-                q = (q << s) | u64::from(x / d32);
+                low = (low << s) | (x / d32);
                 r = x % d32;
                 left -= s;
             }
-            return q;
+            return (high << UTIL_BITS) | u64::from(low);
         }
     }
     n.checked_shl(UTIL_BITS)
