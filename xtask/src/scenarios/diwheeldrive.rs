@@ -52,7 +52,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "admission-warn",
-        about: "the hard floor under accept-and-warn: magnetometer-x every 700 µs (the admission task left without a bound) and the two-frame attack (accelerometer every 1 µs at urgent) refused with verdicts; the gyroscope keeps its grid",
+        about: "the hard floor under accept-and-warn: magnetometer-x every 400 µs (the admission task left without a bound) and the two-frame attack (accelerometer every 1 µs at urgent) refused with verdicts; the gyroscope keeps its grid",
         check: admission_warn,
     },
     Scenario {
@@ -486,7 +486,7 @@ fn admission_warn(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     );
     for ((at, v), (topic, micros)) in verdicts
         .iter()
-        .zip([(Topic::MagnetometerX, 700), (Topic::Accelerometer, 1)])
+        .zip([(Topic::MagnetometerX, 400), (Topic::Accelerometer, 1)])
     {
         ensure!(
             v.verdict == Verdict::Refused && v.topic == topic && v.requested.as_micros() == micros,
