@@ -1091,45 +1091,23 @@ fn insertion_sort(items: &mut [u8], after: impl Fn(u8, u8) -> bool) {
     }
 }
 
-/// One board's jobs, kept sorted by priority (most urgent first, ties in table order) as they are added.
+/// One board's jobs, sorted by priority (most urgent first, ties in table order).
 struct Jobs<const N: usize> {
     timings: [TaskTiming; N],
     meta: [JobMeta; N],
     len: usize,
 }
 
-impl<const N: usize> Jobs<N> {
-    /// Adds a job; its original index is the number of jobs before it.
-    fn push(&mut self, timing: TaskTiming, mut meta: JobMeta) -> Result<u8, Refusal> {
-        let original = u8::try_from(self.len).map_err(|_| Refusal::Capacity)?;
-        if self.len >= N {
-            return Err(Refusal::Capacity);
-        }
-        meta.original = original;
-        let at = self
-            .timings
-            .iter()
-            .take(self.len)
-            .position(|t| t.priority < timing.priority)
-            .unwrap_or(self.len);
-        // Shift the less urgent jobs up by one, one copy each (a swap costs three).
-        let mut k = self.len;
-        while k > at {
-            if let (Some(&t), Some(&m)) = (self.timings.get(k - 1), self.meta.get(k - 1)) {
-                if let (Some(ts), Some(ms)) = (self.timings.get_mut(k), self.meta.get_mut(k)) {
-                    *ts = t;
-                    *ms = m;
-                }
-            }
-            k -= 1;
-        }
-        if let (Some(t), Some(m)) = (self.timings.get_mut(at), self.meta.get_mut(at)) {
-            *t = timing;
-            *m = meta;
-        }
-        self.len += 1;
-        Ok(original)
-    }
+/// What a job of a board's analysis is made of (indices are bytes: the working sets are below [`NO_JOB`]).
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    /// A fixed task: its row in the board's `tasks`.
+    Fixed(u8),
+    /// The timer job of the stream at this [`View`] position.
+    Timer { stream: u8 },
+    /// The publisher job of the stream at this [`View`] position: its topic row, and its timer job's original
+    /// index ([`NO_JOB`]: none).
+    Publisher { stream: u8, topic: u8, timer: u8 },
 }
 
 /// One board's tasks with the configuration's publishers: writes its first violated deadline (in table order),
@@ -1160,85 +1138,159 @@ fn analyse_board<const N: usize, const M: usize>(
         })
         .min()
         .unwrap_or_else(|| can::shortest_frame_time(robot.bit_time));
-    let mut jobs = Jobs::<N> {
-        timings: [EMPTY_TIMING; N],
-        meta: [EMPTY_META; N],
-        len: 0,
+    // Every job in original order (table order: the fixed tasks, then per stream its timer job and its job): its
+    // priority and what it is made of. Then the originals are sorted by priority (most urgent first, ties in
+    // original order, a stable sort of bytes) and each job is built once, at its place.
+    let mut priority_of = [0u8; N];
+    let mut source = [Source::Fixed(0); N];
+    let mut count = 0usize;
+    let mut add = |priority: u8, what: Source| -> Result<u8, Refusal> {
+        let original = u8::try_from(count)
+            .ok()
+            .filter(|&o| o != NO_JOB)
+            .ok_or(Refusal::Capacity)?;
+        *priority_of.get_mut(count).ok_or(Refusal::Capacity)? = priority;
+        *source.get_mut(count).ok_or(Refusal::Capacity)? = what;
+        count += 1;
+        Ok(original)
     };
     for (i, t) in table.tasks.iter().enumerate() {
-        let period = if t.own_frame {
-            own_frame
-        } else {
-            row_time(t.period)
-        };
-        let jitter = row_time(t.jitter);
-        jobs.push(
-            TaskTiming {
-                priority: u32::from(t.priority),
-                wcet: row_time(t.cost),
-                period,
-                jitter,
-            },
-            JobMeta {
-                id: TaskId::Fixed(u16::try_from(i).map_err(|_| Refusal::Capacity)?),
-                deadline: if t.deadline == NO_DEADLINE {
-                    period
-                } else {
-                    row_time(t.deadline)
-                },
-                own_jitter: jitter,
-                // NO_RELEASER is NO_JOB.
-                released_by: t.released_by,
-                original: 0,
-            },
+        add(
+            t.priority,
+            Source::Fixed(u8::try_from(i).map_err(|_| Refusal::Capacity)?),
         )?;
     }
-    for (_, s) in mine() {
+    for (m, s) in mine() {
         let Some(sender) = s.sender else { continue };
         let priority = table
             .levels
             .get(usize::from(sender.level))
             .copied()
             .flatten()
-            .map(u32::from)
             .ok_or(Refusal::Capacity)?;
         let topic = table
             .topics
             .iter()
-            .find(|t| t.topic == sender.topic)
+            .position(|t| t.topic == sender.topic)
+            .and_then(|t| u8::try_from(t).ok())
             .ok_or(Refusal::Capacity)?;
+        let stream = u8::try_from(m).map_err(|_| Refusal::Capacity)?;
         let timer = match table.monotonic {
-            Some(m) => jobs.push(
-                TaskTiming {
-                    priority: u32::from(m.priority),
-                    wcet: row_time(m.cost),
-                    period: s.period,
-                    jitter: row_time(m.jitter),
-                },
-                JobMeta {
-                    id: TaskId::Timer(sender.topic),
-                    deadline: s.period,
-                    own_jitter: row_time(m.jitter),
-                    ..EMPTY_META
-                },
-            )?,
+            Some(mono) => add(mono.priority, Source::Timer { stream })?,
             None => NO_JOB,
         };
-        jobs.push(
-            TaskTiming {
-                priority,
-                wcet: row_time(topic.cost),
-                period: s.period,
-                jitter: Time::ZERO,
-            },
-            JobMeta {
-                id: TaskId::Publisher(sender.topic),
-                deadline: s.deadline(),
-                own_jitter: Time::ZERO,
-                released_by: timer,
-                original: 0,
+        add(
+            priority,
+            Source::Publisher {
+                stream,
+                topic,
+                timer,
             },
         )?;
+    }
+    let mut order = [0u8; N];
+    for (i, slot) in order.iter_mut().enumerate().take(count) {
+        *slot = i as u8;
+    }
+    let urgency = |o: u8| priority_of.get(usize::from(o)).copied().unwrap_or(0);
+    insertion_sort(order.get_mut(..count).unwrap_or(&mut []), |a, b| {
+        urgency(a) < urgency(b)
+    });
+    let mut jobs = Jobs::<N> {
+        timings: [EMPTY_TIMING; N],
+        meta: [EMPTY_META; N],
+        len: count,
+    };
+    for ((&original, timing), meta) in order
+        .iter()
+        .zip(jobs.timings.iter_mut())
+        .zip(jobs.meta.iter_mut())
+        .take(count)
+    {
+        let what = source
+            .get(usize::from(original))
+            .copied()
+            .ok_or(Refusal::Capacity)?;
+        let priority = u32::from(urgency(original));
+        let stream_of = |m: u8| streams.get(usize::from(m)).ok_or(Refusal::Capacity);
+        (*timing, *meta) = match what {
+            Source::Fixed(row) => {
+                let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
+                let period = if t.own_frame {
+                    own_frame
+                } else {
+                    row_time(t.period)
+                };
+                let jitter = row_time(t.jitter);
+                (
+                    TaskTiming {
+                        priority,
+                        wcet: row_time(t.cost),
+                        period,
+                        jitter,
+                    },
+                    JobMeta {
+                        id: TaskId::Fixed(u16::from(row)),
+                        deadline: if t.deadline == NO_DEADLINE {
+                            period
+                        } else {
+                            row_time(t.deadline)
+                        },
+                        own_jitter: jitter,
+                        // NO_RELEASER is NO_JOB.
+                        released_by: t.released_by,
+                        original,
+                    },
+                )
+            }
+            Source::Timer { stream } => {
+                let s = stream_of(stream)?;
+                let (Some(mono), Some(sender)) = (table.monotonic, s.sender) else {
+                    return Err(Refusal::Capacity);
+                };
+                (
+                    TaskTiming {
+                        priority,
+                        wcet: row_time(mono.cost),
+                        period: s.period,
+                        jitter: row_time(mono.jitter),
+                    },
+                    JobMeta {
+                        id: TaskId::Timer(sender.topic),
+                        deadline: s.period,
+                        own_jitter: row_time(mono.jitter),
+                        released_by: NO_JOB,
+                        original,
+                    },
+                )
+            }
+            Source::Publisher {
+                stream,
+                topic,
+                timer,
+            } => {
+                let s = stream_of(stream)?;
+                let row = table
+                    .topics
+                    .get(usize::from(topic))
+                    .ok_or(Refusal::Capacity)?;
+                (
+                    TaskTiming {
+                        priority,
+                        wcet: row_time(row.cost),
+                        period: s.period,
+                        jitter: Time::ZERO,
+                    },
+                    JobMeta {
+                        id: TaskId::Publisher(row.topic),
+                        deadline: s.deadline(),
+                        own_jitter: Time::ZERO,
+                        released_by: timer,
+                        original,
+                    },
+                )
+            }
+        };
     }
     let len = jobs.len;
     // Sorted position of each original index; releasers as sorted positions.

@@ -225,6 +225,7 @@ fn mul(a: u64, b: u64) -> Result<u64, AnalysisError> {
 
 /// `⌈a / b⌉`; total: a zero `b` (which no caller passes: periods are checked first) gives `u64::MAX`, so no
 /// division-by-zero panic is linked into the boards' admission check.
+#[inline(always)]
 fn ceil_div(a: u64, b: u64) -> u64 {
     if a == 0 {
         0
@@ -554,8 +555,14 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
                 other.period().as_ns(),
                 other.jitter().as_ns(),
             );
-            // Jump straight to the count at `x` (one division however many activations the window grew by).
-            let count = ceil_div(add(x, j)?, t).max(counter.count + 1);
+            // The window passed one activation (the common case: `next < x ≤ next + T`): the count at `x` is
+            // one more, no division. Otherwise jump straight to the count at `x` (one division however many
+            // activations the window grew by).
+            let count = if x - counter.next <= t {
+                counter.count + 1
+            } else {
+                ceil_div(add(x, j)?, t).max(counter.count + 1)
+            };
             self.sum = add(self.sum, mul(count - counter.count, c)?)?;
             counter.count = count;
             counter.next = mul(count, t)?.saturating_sub(j);
