@@ -575,10 +575,10 @@ fn admission_cost(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         };
         decisions.push((field("iterations=")?, field("virtual_us=")?, note.clone()));
     }
-    // 13 starts and 6 requests on the full bus (the stop runs no analysis).
+    // 13 starts and 7 requests on the full bus (the stops run no analysis), the last after two other boards' stops.
     ensure!(
-        decisions.len() == 19,
-        "{} decisions logged, expected 13 starts and 6 requests",
+        decisions.len() == 20,
+        "{} decisions logged, expected 13 starts and 7 requests",
         decisions.len()
     );
     let verdicts = verdicts(out);
@@ -604,13 +604,15 @@ fn admission_cost(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let budget = timing["tasks"]["admit_requests"]["wcet_us"]
         .as_f64()
         .context("tasks.admit_requests.wcet_us")?;
+    // The window's budget holds ADMISSION_BURST decisions (and the cheap notes): one decision gets at most a fifth.
+    let per_decision = budget / 5.0;
     ensure!(
-        on_f103_us <= budget,
-        "the worst decision ({} µs virtual, {instructions} instructions, ≈ {on_f103_us:.0} µs on the F103) exceeds the admission task's budget of {budget} µs",
+        on_f103_us <= per_decision,
+        "the worst decision ({} µs virtual, {instructions} instructions, ≈ {on_f103_us:.0} µs on the F103) exceeds a fifth of the admission task's budget of {budget} µs per window",
         worst.1
     );
     Ok(format!(
-        "{} decisions up to a full bus (13 publishers): worst {} µs virtual = {instructions} instructions (≈ {on_f103_us:.0} µs on the F103 at {F103_CYCLES_PER_INSTRUCTION} cycles per instruction, budget {budget} µs); most fixed-point iterations {most_iterations}",
+        "{} decisions up to a full bus (13 publishers): worst {} µs virtual = {instructions} instructions (≈ {on_f103_us:.0} µs on the F103 at {F103_CYCLES_PER_INSTRUCTION} cycles per instruction, budget {per_decision:.0} µs per decision of {budget} µs per window); most fixed-point iterations {most_iterations}",
         decisions.len(),
         worst.1,
     ))
