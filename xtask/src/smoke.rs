@@ -16,7 +16,8 @@
 //! RTT log channel is read out of the RAM image at the `_SEGGER_RTT` control block (found by
 //! symbol as `cargo xtask bench` finds it on a probe, or by scanning RAM for its ID), the
 //! monotonic's half-period counter (`amiro_firmware::timer_monotonic`, every board's) at its
-//! symbol. It fails when the board halts (a panic or a HardFault parks the CPU in `fault::halt`),
+//! symbol. The inputs the boot reads and QEMU has no GPIO for are held at the robot's level
+//! ([`environment`]): by the stand-in, or through QEMU's gdbstub ([`gdb`]). It fails when the board halts (a panic or a HardFault parks the CPU in `fault::halt`),
 //! when the monotonic's counter stops while QEMU runs, and when the log misses a step of the boot
 //! ([`check_log`]).
 //!
@@ -30,6 +31,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, ensure, Context, Result};
 use object::{Object, ObjectSymbol};
 
+mod gdb;
 mod waits;
 
 use crate::boards::Board;
@@ -154,6 +156,18 @@ pub struct Input {
     pub stands_for: &'static str,
     /// Which of QEMU's registers makes it work (the reliance, stated).
     pub through: &'static str,
+    /// Who sets it.
+    pub via: Via,
+}
+
+/// How an input of the robot's environment is set in QEMU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Via {
+    /// The stand-in writes it before the hand-over (a register that reads back).
+    StandIn,
+    /// A read watchpoint through QEMU's gdbstub sets the bits in each load's result
+    /// ([`gdb::hold_inputs`]): the port reads zero and drops writes.
+    Watchpoint,
 }
 
 /// The F103's GPIOC (RM0008 §9): its input data register is at offset 8.
@@ -162,16 +176,21 @@ const F103_GPIOC_IDR: u32 = 0x4001_1000 + 0x08;
 /// (offset 8), which QEMU's USART model stores and reads back without side effects.
 const F205_USART1_BRR: u32 = 0x4001_1000 + 0x08;
 
-/// The environment the stand-in sets up before the hand-over on `machine` (the robot's, not the
-/// firmware's doing): the only QEMU register at the address of an input the boot reads that
-/// reads back what is written is on `netduino2`, where the F205's USART1 sits where the F103's
-/// GPIOC does, and its BRR where GPIOC_IDR is. Bits 8 and 14 make SYS_PD_N (PC8 on DiWheelDrive,
+/// The F405's GPIOC input data register (RM0090 §8.4.5), PowerManagement's SYS_PD_N port.
+const F405_GPIOC_IDR: u32 = 0x4002_0800 + 0x10;
+
+/// The environment set up around the image on `machine` (the robot's, not the firmware's
+/// doing). The only QEMU register at the address of an input the boot reads that reads back what
+/// is written is on `netduino2`, where the F205's USART1 sits where the F103's GPIOC does, and its
+/// BRR where GPIOC_IDR is: the stand-in writes it. Bits 8 and 14 make SYS_PD_N (PC8 on DiWheelDrive,
 /// PC14 on LightRing) read released, as the robot's pull-ups hold it. The firmware's writes to
 /// GPIOC's other registers land in USART1's (`docs/faults.md` says why that is harmless); none
 /// writes BRR's offset (IDR is read-only on the F103). The reliance checks itself: if QEMU stopped
 /// reading BRR back, SYS_PD_N would read low, the board would hand over, and its run would fail.
 /// `netduinoplus2` has no GPIO at all (its GPIOC is an unimplemented-device region that reads
-/// zero and drops writes), so PowerManagement sees SYS_PD_N driven low and, rightly, shuts down.
+/// zero and drops writes): there a read watchpoint through the gdbstub sets PC13 (SYS_PD_N) in
+/// every load from GPIOC_IDR, the other pins reading zero as before. Without it PowerManagement
+/// would see SYS_PD_N driven low and, rightly, shut down.
 pub fn environment(machine: &str) -> &'static [Input] {
     const _: () = assert!(F103_GPIOC_IDR == F205_USART1_BRR);
     match machine {
@@ -180,6 +199,14 @@ pub fn environment(machine: &str) -> &'static [Input] {
             value: 1 << 8 | 1 << 14,
             stands_for: "SYS_PD_N released (PC8 / PC14 held high by the robot's pull-ups)",
             through: "netduino2's USART1_BRR, which reads back, at the F103's GPIOC_IDR",
+            via: Via::StandIn,
+        }],
+        "netduinoplus2" => &[Input {
+            address: F405_GPIOC_IDR,
+            value: 1 << 13,
+            stands_for: "SYS_PD_N released (PC13 held high by the robot's pull-up)",
+            through: "a gdbstub read watchpoint on GPIOC_IDR, PC13 set in each load's result",
+            via: Via::Watchpoint,
         }],
         _ => &[],
     }
@@ -191,13 +218,14 @@ pub enum Ending {
     /// The tasks run (the watchdog task has started), the monotonic counts [`HALF_PERIODS`] and
     /// reports the compare events QEMU's timer lacks, and nothing faults.
     Running,
-    /// SYS_PD_N reads low (no GPIO in QEMU): the board's shutdown task hands over to AMiRo-BLT's
-    /// callback, before the monotonic's first interrupt.
+    /// SYS_PD_N reads low (a machine with no way to hold it released): the board's shutdown task
+    /// hands over to AMiRo-BLT's callback, before the monotonic's first interrupt.
     HandOver(&'static str),
 }
 
-/// What QEMU lets each board show (`docs/faults.md`): on a machine where the stand-in can hold
-/// SYS_PD_N released the board runs, else it takes the line's low level for a shutdown request.
+/// What QEMU lets each board show (`docs/faults.md`): on a machine where the run can hold
+/// SYS_PD_N released (stand-in or gdbstub) the board runs, else it takes the line's low level for
+/// a shutdown request.
 pub fn expected_ending(machine: &str) -> Ending {
     if environment(machine).is_empty() {
         Ending::HandOver("handle a shutdown request")
@@ -645,6 +673,8 @@ pub struct Outcome {
     pub handed_over: Option<&'static str>,
     /// The monotonic's half periods counted during the run.
     pub half_periods: u32,
+    /// Loads of a watched input set to the robot's level ([`Via::Watchpoint`]), if any.
+    pub patched_loads: Option<u32>,
     /// Everything that went wrong (empty: passed).
     pub failures: Vec<String>,
 }
@@ -667,6 +697,7 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
             board.app_base as u32,
             &environment(board.qemu_machine)
                 .iter()
+                .filter(|input| input.via == Via::StandIn)
                 .map(|input| (input.address, input.value))
                 .collect::<Vec<_>>(),
         ),
@@ -690,8 +721,30 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
         .args(["-device", &loader(&standin_path, STANDIN_BASE.into())])
         .args(["-device", &loader(&image_path, board.app_base)])
         .current_dir(work);
+    let watched: Vec<(u32, u32)> = environment(board.qemu_machine)
+        .iter()
+        .filter(|input| input.via == Via::Watchpoint)
+        .map(|input| (input.address, input.value))
+        .collect();
+    let gdb_socket = work.join("gdb.sock");
+    if !watched.is_empty() {
+        let _ = std::fs::remove_file(&gdb_socket);
+        // Held at reset until the watchpoints are in; the gdbstub starts the guest.
+        qemu.arg("-chardev")
+            .arg(format!(
+                "socket,id=gdb,path={},server=on,wait=off",
+                gdb_socket.display()
+            ))
+            .args(["-gdb", "chardev:gdb", "-S"]);
+    }
 
     let mut qmp = Qmp::start(&mut qemu)?;
+    let steering = gdb::Steering::default();
+    let patcher = if watched.is_empty() {
+        None
+    } else {
+        Some(gdb::hold_inputs(&gdb_socket, watched, steering.clone())?)
+    };
     let stderr = qmp.child.stderr.take();
     let stderr_file = std::fs::File::create(&stderr_path)?;
     if let Some(mut stderr) = stderr {
@@ -713,10 +766,25 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
             failures.push(format!("QEMU exited ({status})"));
             break;
         }
+        if started.elapsed() > WALL_LIMIT {
+            failures.push(format!(
+                "the run did not end within {WALL_LIMIT:?} (the guest stayed stopped at a \
+                 watched input?)"
+            ));
+            break;
+        }
+        let held = steering.lock().unwrap_or_else(|poison| poison.into_inner());
         qmp.execute("stop", None)?;
+        let status = qmp.execute("query-status", None)?;
+        if status.get("status").and_then(|s| s.as_str()) == Some("debug") {
+            // Stopped at a watched input: the patcher's to resume.
+            drop(held);
+            continue;
+        }
         let pc = qmp.pc()?;
         let ram = qmp.save_ram(board.ram_bytes, &snapshot)?;
         qmp.execute("cont", None)?;
+        drop(held);
         if let Ok(bytes) = rtt_up_channel(&ram, symbols.rtt, 0) {
             log = String::from_utf8_lossy(&bytes).into_owned();
         }
@@ -767,6 +835,14 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
         Ok((before, qmp.words(timer.base, 16)?))
     })();
     drop(qmp);
+    let mut patched_loads = None;
+    if let Some(patcher) = patcher {
+        match patcher.join() {
+            Ok(Ok(patched)) => patched_loads = Some(patched),
+            Ok(Err(error)) => failures.push(format!("holding the inputs: {error:#}")),
+            Err(_) => failures.push("the input patcher panicked".into()),
+        }
+    }
     match timer_state {
         Ok((before, after)) => failures.extend(check_timer(
             &timer,
@@ -796,6 +872,7 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
         log,
         handed_over,
         half_periods,
+        patched_loads,
         failures,
     })
 }
@@ -851,9 +928,18 @@ pub fn run(root: &Path, boards: &[&'static Board]) -> Result<()> {
         );
         for input in environment(board.qemu_machine) {
             println!(
-                "  [stand-in: {} at {:#010x}, through {}]",
-                input.stands_for, input.address, input.through
+                "  [{}: {} at {:#010x}, through {}]",
+                match input.via {
+                    Via::StandIn => "stand-in",
+                    Via::Watchpoint => "gdbstub",
+                },
+                input.stands_for,
+                input.address,
+                input.through
             );
+        }
+        if let Some(patched) = outcome.patched_loads {
+            println!("  [{patched} load(s) of the watched input given the robot's level]");
         }
         for line in outcome.log.lines() {
             println!("  {line}");
@@ -868,7 +954,7 @@ pub fn run(root: &Path, boards: &[&'static Board]) -> Result<()> {
             match outcome.handed_over {
                 Some(callback) => println!(
                     "smoke {}: ok (handed over to AMiRo-BLT's `{callback}` callback: SYS_PD_N \
-                     reads low on {}, which has no GPIO)",
+                     reads low on {}, where nothing holds it released)",
                     board.name, board.qemu_machine
                 ),
                 None => println!(
@@ -1064,16 +1150,22 @@ mod tests {
     }
 
     #[test]
-    fn the_netduino2_environment_is_stated_and_lands_where_the_f103_reads() {
+    fn each_machine_states_how_sys_pd_n_reads_released() {
         let inputs = environment("netduino2");
         assert_eq!(inputs.len(), 1);
         assert_eq!(inputs[0].address, 0x4001_1008, "the F103's GPIOC_IDR");
         assert_eq!(inputs[0].value, 1 << 8 | 1 << 14, "PC8 and PC14");
+        assert_eq!(inputs[0].via, Via::StandIn);
         assert!(inputs[0].through.contains("USART1_BRR"));
-        assert!(environment("netduinoplus2").is_empty());
+        let inputs = environment("netduinoplus2");
+        assert_eq!(inputs.len(), 1);
+        assert_eq!(inputs[0].address, 0x4002_0810, "the F405's GPIOC_IDR");
+        assert_eq!(inputs[0].value, 1 << 13, "PC13");
+        assert_eq!(inputs[0].via, Via::Watchpoint);
         assert_eq!(expected_ending("netduino2"), Ending::Running);
+        assert_eq!(expected_ending("netduinoplus2"), Ending::Running);
         assert_eq!(
-            expected_ending("netduinoplus2"),
+            expected_ending("stm32vldiscovery"),
             Ending::HandOver("handle a shutdown request")
         );
     }
