@@ -133,10 +133,9 @@ fn hex_bytes(text: &str) -> Result<Vec<u8>> {
 /// halfword). `None` for anything else.
 pub fn load_target(first: u16, second: u16) -> Option<u32> {
     let rt16 = u32::from(first & 7);
-    match first >> 9 {
-        // 0101 1xx / 0101 011: register offset (LDR, LDRH, LDRB, LDRSH; LDRSB).
-        0b0101_100 | 0b0101_101 | 0b0101_110 | 0b0101_111 | 0b0101_011 => return Some(rt16),
-        _ => {}
+    // 0101 011 … 0101 111: the register-offset loads (LDRSB, LDR, LDRH, LDRB, LDRSH).
+    if (0b010_1011..=0b010_1111).contains(&(first >> 9)) {
+        return Some(rt16);
     }
     match first >> 11 {
         0b01101 | 0b01111 | 0b10001 => return Some(rt16), // LDR, LDRB, LDRH (immediate)
