@@ -2,7 +2,7 @@
 //! the same registers at the same offsets on the F103 and the F405) counting 16 bits, extended to
 //! 64 bits by a half-period counter (rtic-time's race-free scheme: the compare on channel 1 at
 //! `0x8000` ends the lower half of a period, the update at the wrap ends the upper half); channel 2
-//! is the timer queue's compare. A board picks its timer with [`timer_monotonic!`]:
+//! is the timer queue's compare. A board picks its timer with `timer_monotonic!`:
 //! DiWheelDrive TIM5 (TIM2–TIM4 drive its motors and count its encoders), LightRing TIM3,
 //! PowerManagement TIM2. The timer claims no pin: its channels only compare, their outputs stay off.
 //!
