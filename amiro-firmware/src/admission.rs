@@ -425,7 +425,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
                 };
                 (violation, micros(v.wcrt), micros(Some(v.deadline)))
             }
-            Refusal::Capacity | Refusal::ZeroPeriod => {
+            Refusal::Capacity | Refusal::ZeroPeriod | Refusal::Budget => {
                 (Violation::Unknown, Count::ZERO, Count::ZERO)
             }
         };
@@ -588,7 +588,8 @@ fn reason(refusal: &Refusal) -> RefusalReason {
             Culprit::Frame { .. } => RefusalReason::MessageDeadline,
             Culprit::EndToEnd { .. } => RefusalReason::EndToEndDeadline,
         },
-        Refusal::Capacity => RefusalReason::Capacity,
+        // The check's capacity: its tables, or its iterations per decision (`DECISION_ITERATIONS`).
+        Refusal::Capacity | Refusal::Budget => RefusalReason::Capacity,
         Refusal::ZeroPeriod => RefusalReason::ZeroPeriod,
     }
 }

@@ -29,6 +29,11 @@ use crate::time::Time;
 pub const LEVELS: usize = 4;
 /// Rounds of the per-board release-jitter iteration (as the host analysis).
 const MAX_JITTER_ROUNDS: usize = 100;
+/// Fixed-point iterations one board's analysis may take, and the bus's (split evenly over its messages)
+/// ([`Refusal::Budget`] beyond): what bounds a decision's cost on the chip, which analyses one board and the bus. A configuration loaded close to 100 % can need a hundred thousand iterations (a
+/// search found one: 217 ms of a board's CPU for one decision, docs/analysis.md); the requests the scenarios and
+/// the thesis make take at most a few hundred.
+pub const DECISION_ITERATIONS: u64 = 250;
 /// The longest period the period search tries (the protocol's 32-bit microsecond span, ≈ 71.6 min).
 pub const MAX_PERIOD: Time = Time::from_ns(4_294_967_295_000);
 
@@ -260,6 +265,10 @@ pub enum Refusal {
     Capacity,
     /// The request's period is zero.
     ZeroPeriod,
+    /// A board's analysis, or the bus's, needed more than [`DECISION_ITERATIONS`] fixed-point iterations: refused
+    /// without a verdict on
+    /// its deadlines (the check's cost stays bounded; refusing never breaks a deadline). Below the hard floor.
+    Budget,
 }
 
 /// What one analysis of a configuration found.
@@ -606,6 +615,8 @@ struct Bounds<'a> {
     first: &'a mut [Time],
     busy: &'a mut [Time],
     iterations: &'a mut u64,
+    /// Whether a response ran out of its iterations ([`Refusal::Budget`]).
+    limited: bool,
 }
 
 impl board::Results for Bounds<'_> {
@@ -615,7 +626,10 @@ impl board::Results for Bounds<'_> {
                 *self.iterations += r.iterations;
                 (r.wcrt.as_ns(), r.first_window, r.busy_window)
             }
-            Err(_) => (NONE, Time::ZERO, Time::ZERO),
+            Err(e) => {
+                self.limited |= e == AnalysisError::IterationLimit;
+                (NONE, Time::ZERO, Time::ZERO)
+            }
         };
         if let (Some(w), Some(f), Some(b)) = (
             self.wcrt.get_mut(i),
@@ -678,6 +692,7 @@ fn evaluate_into<const N: usize, const M: usize>(
     };
     let limits = Limits {
         horizon: horizon(robot, &streams),
+        iterations: DECISION_ITERATIONS,
     };
     let mut found = Found::default();
     let mut senders = SenderBounds {
@@ -719,6 +734,8 @@ fn evaluate_into<const N: usize, const M: usize>(
                 key,
                 ..Summary::EMPTY
             };
+            // Each board's analysis has its own budget (not what the boards before it left over): its outcome
+            // depends on its own inputs only, so a kept analysis is the one a fresh decision would compute.
             if let Err(refusal) =
                 analyse_board::<N, M>(robot, b, table, &streams, &limits, iterations, target)
             {
@@ -733,7 +750,17 @@ fn evaluate_into<const N: usize, const M: usize>(
         summary.note_violations(b, &mut found);
         summary.apply(b, table, &streams, &mut senders);
     }
-    analyse_bus(robot, &streams, &senders, &limits, iterations, &mut found);
+    if !analyse_bus(
+        robot,
+        &streams,
+        &senders,
+        &limits,
+        DECISION_ITERATIONS,
+        iterations,
+        &mut found,
+    ) {
+        return Found::refused(Refusal::Budget);
+    }
     // Kept when the request is carried out: admitted, or refused above the floor under accept-and-warn.
     if let (Some(b), Some((c, keep_refused))) = (requesting, cache) {
         let carried_out = found.first.is_none() || (keep_refused && found.floor.is_none());
@@ -952,16 +979,19 @@ impl<const M: usize> Summary<M> {
     }
 }
 
-/// The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al.
+/// The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al. `left`:
+/// the analysis's iterations left, split evenly over the messages; `false` when a message ran out of its share
+/// ([`Refusal::Budget`]).
 #[inline(never)]
 fn analyse_bus<const M: usize>(
     robot: &RobotTable<'_>,
     streams: &View<'_, M>,
     senders: &SenderBounds<M>,
     limits: &Limits,
+    left: u64,
     iterations: &mut u64,
     found: &mut Found,
-) {
+) -> bool {
     let bit = robot.bit_time;
     let n = streams.len;
     let mut order = [0u8; M];
@@ -1021,19 +1051,28 @@ fn analyse_bus<const M: usize>(
     let mut wcrt = [NONE; M];
     let mut first_window = [Time::ZERO; M];
     let mut busy = [Time::ZERO; M];
+    let share = Limits {
+        iterations: left / (n.max(1) as u64),
+        ..*limits
+    };
+    let mut bounds = Bounds {
+        wcrt: &mut wcrt,
+        first: &mut first_window,
+        busy: &mut busy,
+        iterations,
+        limited: false,
+    };
     can::response_times_into(
         timings,
         blockings.get(..n).unwrap_or(&[]),
         bit,
-        limits,
+        &share,
         &mut scratch,
-        &mut Bounds {
-            wcrt: &mut wcrt,
-            first: &mut first_window,
-            busy: &mut busy,
-            iterations,
-        },
+        &mut bounds,
     );
+    if bounds.limited {
+        return false;
+    }
     for (position, &i) in order.iter().enumerate().take(n) {
         let m = usize::from(i);
         let Some(s) = streams.get(m) else { continue };
@@ -1072,6 +1111,7 @@ fn analyse_bus<const M: usize>(
             }
         }
     }
+    true
 }
 
 /// Stable insertion sort (small sets; allocation-free): `after(a, b)` says `a` belongs after `b`.
@@ -1124,6 +1164,8 @@ fn analyse_board<const N: usize, const M: usize>(
     iterations: &mut u64,
     summary: &mut Summary<M>,
 ) -> Result<(), Refusal> {
+    // `limits.iterations` is what this board's analysis may spend, counted from here.
+    let spent_before = *iterations;
     let mine = || {
         streams
             .iter()
@@ -1463,7 +1505,10 @@ fn analyse_board<const N: usize, const M: usize>(
                 hint,
                 load,
                 own,
-                limits,
+                &Limits {
+                    iterations: limits.iterations.saturating_sub(*iterations - spent_before),
+                    ..*limits
+                },
                 &mut scratch,
             );
             let (w, f) = match result {
@@ -1471,6 +1516,8 @@ fn analyse_board<const N: usize, const M: usize>(
                     *iterations += r.iterations;
                     (r.wcrt.as_ns(), r.first_window)
                 }
+                // Out of the analysis's iterations: no verdict on the deadlines ([`Refusal::Budget`]).
+                Err(AnalysisError::IterationLimit) => return Err(Refusal::Budget),
                 Err(_) => (NONE, Time::ZERO),
             };
             if let (Some(ws), Some(fs)) = (wcrt.get_mut(i), first_window.get_mut(i)) {

@@ -106,6 +106,10 @@ pub enum Discipline {
 pub struct Limits {
     /// A busy window longer than this is reported as unbounded.
     pub horizon: Time,
+    /// Fixed-point iterations one response may take ([`AnalysisError::IterationLimit`] beyond):
+    /// [`MAX_ITERATIONS`] by default; the admission check gives each response what is left of its per-decision
+    /// budget.
+    pub iterations: u64,
 }
 
 impl Default for Limits {
@@ -113,6 +117,7 @@ impl Default for Limits {
     fn default() -> Self {
         Limits {
             horizon: Time::from_us(60_000_000),
+            iterations: MAX_ITERATIONS,
         }
     }
 }
@@ -445,7 +450,7 @@ pub fn response_time_loaded<A: Activations>(
         u_own,
         jitter_load: load.jitter_load,
     };
-    let mut window = Window::new(others, exclude, scratch, limits.horizon.as_ns());
+    let mut window = Window::new(others, exclude, scratch, limits);
     match discipline {
         Discipline::Preemptive => preemptive(subject, &mut window, &loads),
         Discipline::NonPreemptive { bit_time } => {
@@ -470,6 +475,8 @@ struct Window<'a, 'b, A> {
     /// Σ count·C over the heap.
     sum: u64,
     horizon: u64,
+    /// Evaluations of the interference sum allowed ([`Limits::iterations`]).
+    max_iterations: u64,
     /// Evaluations of the interference sum so far.
     iterations: u64,
 }
@@ -479,7 +486,7 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
         others: &'a [A],
         exclude: Option<usize>,
         scratch: &'b mut [Counter],
-        horizon: u64,
+        limits: &Limits,
     ) -> Self {
         // Without room for every interferer, fall back to dividing once per interferer and iteration.
         let heap = if scratch.len() >= others.len() {
@@ -493,7 +500,8 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
             heap,
             len: 0,
             sum: 0,
-            horizon,
+            horizon: limits.horizon.as_ns(),
+            max_iterations: limits.iterations.min(MAX_ITERATIONS),
             iterations: 0,
         }
     }
@@ -532,7 +540,7 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
     /// a counter is only touched (one division) when the window passed its next activation.
     fn demand(&mut self, x: u64) -> Result<u64, AnalysisError> {
         self.iterations += 1;
-        if self.iterations > MAX_ITERATIONS {
+        if self.iterations > self.max_iterations {
             return Err(AnalysisError::IterationLimit);
         }
         if self.heap.is_empty() {

@@ -66,6 +66,11 @@ pub const SCENARIOS: &[Scenario] = &[
         check: admission_cost,
     },
     Scenario {
+        name: "admission-search",
+        about: "issue 20: the costliest command sequence a search found (amiro-firmware/examples/admission_search.rs), replayed: every step within the admission task's budget per step; the costliest reaches the check's iteration budget per decision",
+        check: admission_search,
+    },
+    Scenario {
         name: "admission-latency",
         about: "issue 20: five requests 5 ms apart each take effect (first sample on the bus) within 5 ms of their frame; a stop takes effect within the command handler's 400 µs",
         check: admission_latency,
@@ -562,10 +567,11 @@ const NS_PER_INSTRUCTION: u64 = 8;
 /// until a bench measurement replaces it; the same the timing file's budget rests on).
 const F103_CYCLES_PER_INSTRUCTION: f64 = 1.5;
 
-fn admission_cost(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
-    // `admission id=<id> <what> iterations=<n> virtual_us=<t>`, one per analysis the task ran.
-    let mut decisions = Vec::new();
-    for note in out.notes.iter().filter(|n| n.starts_with("admission id=")) {
+/// The admission task's analysed steps of a run, `(iterations, virtual µs, line)`: its decisions (`admission id=<id>
+/// <what> iterations=<n> virtual_us=<t>`) and its refresh steps (`admission refresh iterations=<n> virtual_us=<t>`).
+fn admission_steps(out: &RunOutput, prefix: &str) -> Result<Vec<(u64, u64, String)>> {
+    let mut steps = Vec::new();
+    for note in out.notes.iter().filter(|n| n.starts_with(prefix)) {
         let field = |name: &str| -> Result<u64> {
             note.split_whitespace()
                 .find_map(|w| w.strip_prefix(name))
@@ -573,49 +579,16 @@ fn admission_cost(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
                 .parse()
                 .with_context(|| format!("{name} in `{note}`"))
         };
-        decisions.push((field("iterations=")?, field("virtual_us=")?, note.clone()));
+        steps.push((field("iterations=")?, field("virtual_us=")?, note.clone()));
     }
-    // 13 starts and 7 requests on the full bus, the last after two other boards' stops.
-    ensure!(
-        decisions.len() == 20,
-        "{} decisions logged, expected 13 starts and 7 requests",
-        decisions.len()
-    );
-    // The three stops each leave a board's kept analysis stale: the admission task refreshes it as a step of its
-    // own (so no decision re-analyses more than its own board and the bus); its cost counts like a decision's.
-    let mut refreshes = Vec::new();
-    for note in out
-        .notes
-        .iter()
-        .filter(|n| n.starts_with("admission refresh "))
-    {
-        let field = |name: &str| -> Result<u64> {
-            note.split_whitespace()
-                .find_map(|w| w.strip_prefix(name))
-                .with_context(|| format!("no {name} in `{note}`"))?
-                .parse()
-                .with_context(|| format!("{name} in `{note}`"))
-        };
-        refreshes.push((field("iterations=")?, field("virtual_us=")?, note.clone()));
-    }
-    ensure!(
-        refreshes.len() == 3,
-        "{} refresh steps logged, expected one after each of the three stops",
-        refreshes.len()
-    );
-    decisions.extend(refreshes);
-    let verdicts = verdicts(out);
-    ensure!(
-        verdicts
-            .iter()
-            .any(|(_, v)| v.topic == amiro_can::Topic::Accelerometer),
-        "the 1 µs accelerometer request on the full bus was not refused"
-    );
-    let worst = decisions
-        .iter()
-        .max_by_key(|d| d.1)
-        .context("no decision")?;
-    let most_iterations = decisions.iter().map(|d| d.0).max().unwrap_or(0);
+    Ok(steps)
+}
+
+/// The worst step of `steps` against the admission task's budget per step (a fifth of its budget per window: the
+/// window holds ADMISSION_BURST = 5 decisions or refresh steps, and the cheap notes), at the stated cycles per
+/// instruction: `(worst µs virtual, instructions, µs on the F103, µs per step)`.
+fn against_budget(steps: &[(u64, u64, String)]) -> Result<(u64, u64, f64, f64)> {
+    let worst = steps.iter().max_by_key(|d| d.1).context("no decision")?;
     let instructions = worst.1 * 1000 / NS_PER_INSTRUCTION;
     let on_f103_us = instructions as f64 * F103_CYCLES_PER_INSTRUCTION / 72.0;
     let timing: serde_json::Value = serde_json::from_str(
@@ -627,17 +600,64 @@ fn admission_cost(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let budget = timing["tasks"]["admit_requests"]["wcet_us"]
         .as_f64()
         .context("tasks.admit_requests.wcet_us")?;
-    // The window's budget holds ADMISSION_BURST decisions (and the cheap notes): one decision gets at most a fifth.
-    let per_decision = budget / 5.0;
+    let per_step = budget / 5.0;
     ensure!(
-        on_f103_us <= per_decision,
-        "the worst decision ({} µs virtual, {instructions} instructions, ≈ {on_f103_us:.0} µs on the F103) exceeds a fifth of the admission task's budget of {budget} µs per window",
+        on_f103_us <= per_step,
+        "the worst step (`{}`: {} µs virtual, {instructions} instructions, ≈ {on_f103_us:.0} µs on the F103) exceeds a fifth of the admission task's budget of {budget} µs per window",
+        worst.2,
         worst.1
     );
+    Ok((worst.1, instructions, on_f103_us, per_step))
+}
+
+fn admission_cost(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let mut steps = admission_steps(out, "admission id=")?;
+    // 13 starts and 7 requests on the full bus, the last after two other boards' stops.
+    ensure!(
+        steps.len() == 20,
+        "{} decisions logged, expected 13 starts and 7 requests",
+        steps.len()
+    );
+    // The three stops each leave a board's kept analysis stale: the admission task refreshes it as a step of its
+    // own (so no decision re-analyses more than its own board and the bus); its cost counts like a decision's.
+    let refreshes = admission_steps(out, "admission refresh ")?;
+    ensure!(
+        refreshes.len() == 3,
+        "{} refresh steps logged, expected one after each of the three stops",
+        refreshes.len()
+    );
+    steps.extend(refreshes);
+    let verdicts = verdicts(out);
+    ensure!(
+        verdicts
+            .iter()
+            .any(|(_, v)| v.topic == amiro_can::Topic::Accelerometer),
+        "the 1 µs accelerometer request on the full bus was not refused"
+    );
+    let most_iterations = steps.iter().map(|d| d.0).max().unwrap_or(0);
+    let (worst, instructions, on_f103_us, per_step) = against_budget(&steps)?;
     Ok(format!(
-        "{} steps (20 decisions, 3 refreshes) up to a full bus (13 publishers): worst {} µs virtual = {instructions} instructions (≈ {on_f103_us:.0} µs on the F103 at {F103_CYCLES_PER_INSTRUCTION} cycles per instruction, budget {per_decision:.0} µs per decision of {budget} µs per window); most fixed-point iterations {most_iterations}",
-        decisions.len(),
-        worst.1,
+        "{} steps (20 decisions, 3 refreshes) up to a full bus (13 publishers): worst {worst} µs virtual = {instructions} instructions (≈ {on_f103_us:.0} µs on the F103 at {F103_CYCLES_PER_INSTRUCTION} cycles per instruction, budget {per_step:.0} µs per step); most fixed-point iterations {most_iterations}",
+        steps.len(),
+    ))
+}
+
+fn admission_search(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let mut steps = admission_steps(out, "admission id=")?;
+    steps.extend(admission_steps(out, "admission refresh ")?);
+    // The sequence was chosen for the most fixed-point iterations in one step: it must reach the check's
+    // per-decision iteration budget (schedule_analysis::admission::DECISION_ITERATIONS), or it no longer
+    // exercises the worst case and must be searched again.
+    let most_iterations = steps.iter().map(|d| d.0).max().unwrap_or(0);
+    let cap = schedule_analysis::admission::DECISION_ITERATIONS;
+    ensure!(
+        most_iterations * 10 >= cap * 9,
+        "the searched sequence's costliest step took {most_iterations} fixed-point iterations, below 90 % of the check's budget of {cap}: search again (amiro-firmware/examples/admission_search.rs)"
+    );
+    let (worst, instructions, on_f103_us, per_step) = against_budget(&steps)?;
+    Ok(format!(
+        "{} steps; worst {worst} µs virtual = {instructions} instructions (≈ {on_f103_us:.0} µs on the F103, budget {per_step:.0} µs per step); most fixed-point iterations {most_iterations} (a board's analysis and the bus's may take {cap} each)",
+        steps.len(),
     ))
 }
 
