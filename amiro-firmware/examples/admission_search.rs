@@ -1,12 +1,12 @@
 //! A search for the on-chip admission check's costliest step (issue 20): random command sequences (publish
-//! requests of every topic of the robot at every level and a spread of periods, stops, one-shots, policy
-//! changes), each replayed through a board's [`Admission`] on the host exactly as the admission task runs it
+//! requests of every topic of the robot at every level and a spread of periods, stops, one-shots, and with
+//! `policies` policy changes), each replayed through a board's [`Admission`] on the host exactly as the admission task runs it
 //! (a refresh step after a command that leaves a kept analysis stale), then hill-climbed by mutating single
 //! commands of the best sequence. The objective is a step's fixed-point iterations (what the host can count the
 //! same as the chip); the instructions the chip spends on the winner are measured by replaying its `candump -l`
 //! log in QEMU (scenario `admission-search`, which checks them against the admission task's budget).
 //!
-//! `cargo run --release -p amiro-firmware --example admission_search -- [SEED] [ROUNDS] > admission-search.log`
+//! `cargo run --release -p amiro-firmware --example admission_search -- [SEED] [ROUNDS] [policies] > admission-search.log`
 use amiro_firmware::admission::{Admission, State};
 use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
 
@@ -58,10 +58,10 @@ impl Rng {
     }
 }
 
-fn random_command(rng: &mut Rng) -> Command {
+fn random_command(rng: &mut Rng, policies: bool) -> Command {
     let level = rng.below(4) as u16;
     let topic = TOPICS[rng.below(TOPICS.len())] as u16;
-    match rng.below(10) {
+    match rng.below(if policies { 10 } else { 9 }) {
         // Mostly publish requests: they are what the check analyses.
         0..=5 => {
             let (value, unit) = PERIODS[rng.below(PERIODS.len())];
@@ -118,6 +118,9 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let seed: u64 = args.next().map_or(20, |s| s.parse().expect("a seed"));
     let rounds: usize = args.next().map_or(3000, |s| s.parse().expect("rounds"));
+    // Policy changes only when asked (`policies`): accept-and-warn starts requests that miss deadlines by design,
+    // which the QEMU scenarios' bench does not hold to the analysis (diwheeldrive/qemu/known/).
+    let policies = args.next().as_deref() == Some("policies");
     let robot = admission_host::lower(
         &root,
         &scenario::timing_files(&root),
@@ -127,17 +130,17 @@ fn main() {
     .expect("table");
     robot.with_table(|table| {
         let mut rng = Rng(seed.max(1));
-        let mut best: Vec<Command> = (0..LENGTH).map(|_| random_command(&mut rng)).collect();
+        let mut best: Vec<Command> = (0..LENGTH).map(|_| random_command(&mut rng, policies)).collect();
         let mut best_cost = worst_step(table, &best);
         for round in 0..rounds {
             // Half the rounds a fresh random sequence, half a mutation of the best one.
             let candidate: Vec<Command> = if round % 2 == 0 {
-                (0..LENGTH).map(|_| random_command(&mut rng)).collect()
+                (0..LENGTH).map(|_| random_command(&mut rng, policies)).collect()
             } else {
                 let mut c = best.clone();
                 for _ in 0..1 + rng.below(3) {
                     let at = rng.below(LENGTH);
-                    c[at] = random_command(&mut rng);
+                    c[at] = random_command(&mut rng, policies);
                 }
                 c
             };

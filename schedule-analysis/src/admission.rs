@@ -29,7 +29,7 @@ use crate::time::Time;
 pub const LEVELS: usize = 4;
 /// Rounds of the per-board release-jitter iteration (as the host analysis).
 const MAX_JITTER_ROUNDS: usize = 100;
-/// Fixed-point iterations one board's analysis may take, and the bus's (split evenly over its messages)
+/// Fixed-point iterations one board's analysis may take, and the bus's (all its messages together)
 /// ([`Refusal::Budget`] beyond): what bounds a decision's cost on the chip, which analyses one board and the bus. A configuration loaded close to 100 % can need a hundred thousand iterations (a
 /// search found one: 217 ms of a board's CPU for one decision, docs/analysis.md); the requests the scenarios and
 /// the thesis make take at most a few hundred.
@@ -617,6 +617,9 @@ struct Bounds<'a> {
     iterations: &'a mut u64,
     /// Whether a response ran out of its iterations ([`Refusal::Budget`]).
     limited: bool,
+    /// Iterations the whole set may take ([`DECISION_ITERATIONS`]), and spent so far.
+    budget: u64,
+    spent: u64,
 }
 
 impl board::Results for Bounds<'_> {
@@ -624,6 +627,7 @@ impl board::Results for Bounds<'_> {
         let (wcrt, first, busy) = match result {
             Ok(r) => {
                 *self.iterations += r.iterations;
+                self.spent += r.iterations;
                 (r.wcrt.as_ns(), r.first_window, r.busy_window)
             }
             Err(e) => {
@@ -644,6 +648,9 @@ impl board::Results for Bounds<'_> {
     fn windows(&self, k: usize) -> Option<(Time, Time)> {
         let bounded = self.wcrt.get(k).is_some_and(|&w| w != NONE);
         bounded.then_some((*self.first.get(k)?, *self.busy.get(k)?))
+    }
+    fn iterations_left(&self) -> Option<u64> {
+        Some(self.budget.saturating_sub(self.spent))
     }
 }
 
@@ -980,8 +987,7 @@ impl<const M: usize> Summary<M> {
 }
 
 /// The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al. `left`:
-/// the analysis's iterations left, split evenly over the messages; `false` when a message ran out of its share
-/// ([`Refusal::Budget`]).
+/// the fixed-point iterations all its messages together may take; `false` when they ran out ([`Refusal::Budget`]).
 #[inline(never)]
 fn analyse_bus<const M: usize>(
     robot: &RobotTable<'_>,
@@ -1051,22 +1057,20 @@ fn analyse_bus<const M: usize>(
     let mut wcrt = [NONE; M];
     let mut first_window = [Time::ZERO; M];
     let mut busy = [Time::ZERO; M];
-    let share = Limits {
-        iterations: left / (n.max(1) as u64),
-        ..*limits
-    };
     let mut bounds = Bounds {
         wcrt: &mut wcrt,
         first: &mut first_window,
         busy: &mut busy,
         iterations,
         limited: false,
+        budget: left,
+        spent: 0,
     };
     can::response_times_into(
         timings,
         blockings.get(..n).unwrap_or(&[]),
         bit,
-        &share,
+        limits,
         &mut scratch,
         &mut bounds,
     );

@@ -98,6 +98,11 @@ pub trait Results {
     /// Element `k`'s start hints, if it has a bound: its [`Response::first_window`] and
     /// [`Response::busy_window`].
     fn windows(&self, k: usize) -> Option<(Time, Time)>;
+    /// Fixed-point iterations the next element may still take, when the caller budgets the whole set (the
+    /// admission check); `None`: [`Limits::iterations`] per element.
+    fn iterations_left(&self) -> Option<u64> {
+        None
+    }
 }
 
 impl Results for [Result<Response, AnalysisError>] {

@@ -253,6 +253,12 @@ pub fn response_times_into<R: Results + ?Sized>(
             }
         }
         let load = levels.at(messages, i, |a, b| a.key == b.key);
+        let limits = Limits {
+            iterations: out
+                .iterations_left()
+                .map_or(limits.iterations, |left| left.min(limits.iterations)),
+            ..*limits
+        };
         let result = response_time_from(
             messages,
             i,
@@ -260,7 +266,7 @@ pub fn response_times_into<R: Results + ?Sized>(
             hints,
             Some(load),
             bit,
-            limits,
+            &limits,
             scratch,
         );
         out.put(i, result);

@@ -235,6 +235,12 @@ impl Builder {
             TraceKind::FrameQueued { id } | TraceKind::FrameReplaced { id } => {
                 if let Some(&i) = self.open_samples.get(&((id & 0xFF) as u8)) {
                     let s = &mut self.capture.samples[i];
+                    // A sample has its topic's frames; a frame beyond them on the same identifier is not the
+                    // sample's: an admission verdict on the board's diagnostics topic (two frames after a
+                    // refusal or a warning, queued by the admission task whenever it decides).
+                    if s.frames_queued >= u32::from(s.topic.frames_per_sample()) {
+                        return;
+                    }
                     s.level = Some(((id >> 8) & 3) as u8);
                     s.queued_ns = Some(t);
                     s.frames_queued += 1;
@@ -498,6 +504,50 @@ mod tests {
         assert_eq!(s.queued_ns, Some(1_020_000));
         assert_eq!(s.acked_ns, Some(1_150_000));
         assert_eq!(s.level, Some(2));
+    }
+
+    #[test]
+    fn a_verdict_on_the_topic_is_not_the_samples_frame() {
+        // Magnetometer-x has one frame per sample; a second frame on 0x605 later (as an admission verdict on a
+        // diagnostics topic is) does not move the sample's queued time.
+        let taken = TraceEvent::new(
+            1_010,
+            TraceKind::SampleTaken {
+                topic: amiro_can::Topic::MagnetometerX,
+                release_us: 1_000,
+            },
+        );
+        let queued = TraceEvent::new(1_020, TraceKind::FrameQueued { id: 0x605 });
+        let verdict = TraceEvent::new(270_000, TraceKind::FrameQueued { id: 0x605 });
+        let bytes = wire(&[
+            (
+                0,
+                Kind::Hello {
+                    clock_hz: 1_000_000,
+                },
+            ),
+            (
+                1_010,
+                Kind::Event {
+                    record: taken.encode(),
+                },
+            ),
+            (
+                1_020,
+                Kind::Event {
+                    record: queued.encode(),
+                },
+            ),
+            (
+                270_000,
+                Kind::Event {
+                    record: verdict.encode(),
+                },
+            ),
+        ]);
+        let c = read(&bytes, 1).unwrap();
+        let s = &c.samples[0];
+        assert_eq!((s.queued_ns, s.frames_queued), (Some(1_020_000), 1));
     }
 
     #[test]
