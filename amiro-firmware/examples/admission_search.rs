@@ -118,8 +118,7 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let seed: u64 = args.next().map_or(20, |s| s.parse().expect("a seed"));
     let rounds: usize = args.next().map_or(3000, |s| s.parse().expect("rounds"));
-    // Policy changes only when asked (`policies`): accept-and-warn starts requests that miss deadlines by design,
-    // which the QEMU scenarios' bench does not hold to the analysis (diwheeldrive/qemu/known/).
+    // Policy changes only when asked (`policies`); scenario admission-search's sequence was searched without them.
     let policies = args.next().as_deref() == Some("policies");
     let robot = admission_host::lower(
         &root,
