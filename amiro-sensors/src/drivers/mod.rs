@@ -7,7 +7,7 @@
 //! `&mut` borrow of the bus for the length of one call.
 //!
 //! Device drivers (one module per part): [`l3g4200d`] gyroscope, [`lis331dlh`] accelerometer,
-//! [`hmc5883l`] magnetometer, [`vcnl4020`] proximity and ambient light, [`pca9544a`] I2C
+//! [`hmc5883l`] magnetometer, [`bno055`] nine-axis IMU (DiWheelDrive 1-2), [`vcnl4020`] proximity and ambient light, [`pca9544a`] I2C
 //! multiplexer, [`bq27500`] fuel gauge, [`tlc5947`] LED driver. Sensor groups as the boards wire
 //! them: [`floor`] (DiWheelDrive's four floor sensors), [`ring`] (PowerManagement's eight ring
 //! sensors); [`proximity`] turns proximity counts into millimetres; [`suite`] bundles a board's
@@ -15,6 +15,7 @@
 
 use core::fmt;
 
+pub mod bno055;
 pub mod bq27500;
 pub mod floor;
 pub mod hmc5883l;
@@ -60,6 +61,12 @@ pub enum Error<E> {
         /// The axis that overflowed.
         axis: Axis,
     },
+    /// A part's own self-test failed (BNO055: ST_RESULT; one bit per sensor and the MCU, set when
+    /// it passed).
+    SelfTest {
+        /// The result bits as read.
+        result: u8,
+    },
     /// An index argument (LED number, output channel, sensor number) is outside what the part has.
     OutOfRange {
         /// The value that was given.
@@ -92,6 +99,7 @@ impl<E> Error<E> {
                 found,
             },
             Error::Overflow { axis } => Error::Overflow { axis },
+            Error::SelfTest { result } => Error::SelfTest { result },
             Error::OutOfRange { value, max } => Error::OutOfRange { value, max },
         }
     }
@@ -116,6 +124,7 @@ impl<E: fmt::Debug> fmt::Display for Error<E> {
                 "register {register:#04x} reads back {found:#04x} after writing {expected:#04x}"
             ),
             Error::Overflow { axis } => write!(f, "{axis:?} axis overflowed its range"),
+            Error::SelfTest { result } => write!(f, "self-test failed: result {result:#04x}"),
             Error::OutOfRange { value, max } => write!(f, "index {value} out of range 0..={max}"),
         }
     }

@@ -14,6 +14,7 @@
 //! | [`SimGyroscope`] | L3G4200D | `SpiDevice` |
 //! | [`SimAccelerometer`] | LIS331DLH | `SpiDevice` |
 //! | [`SimCompassBus`] | HMC5883L at 0x1E | `I2c` |
+//! | [`SimImuBus`] | BNO055 at 0x28 (DiWheelDrive 1-2) | `I2c` |
 //! | [`SimFloorBus`] | PCA9544A at 0x77 + 4 × VCNL4020 | `I2c` |
 //! | [`SimPowerBus`] | PCA9544A + 4 × VCNL4020 + bq27500 at 0x55 | `I2c` |
 //! | [`SimLedDriver`] | TLC5947 | `SpiDevice` |
@@ -24,6 +25,7 @@ use core::convert::Infallible;
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::{self, ErrorType, I2c, Operation};
 
+mod bno055;
 mod compass;
 mod fuel_gauge;
 mod leds;
@@ -31,6 +33,10 @@ mod motion_sensors;
 mod plant;
 mod proximity;
 
+pub use bno055::{
+    Bno055Fault, SimBno055, SimImuBus, FIELD_DOWN_NT, FIELD_HORIZONTAL_NT, FIELD_TOTAL_NT,
+    GRAVITY_MG, GYRO_OFFSET_DIGITS,
+};
 pub use compass::SimHmc5883l;
 pub use fuel_gauge::SimBq27500;
 pub use leds::SimLedDriver;
