@@ -1,22 +1,26 @@
-//! DiWheelDrive revision 1-1 as the real chip sees it: the one place that names pins and peripherals.
+//! DiWheelDrive revisions 1-1 and 1-2 as the real chip sees them: the one place that names pins and
+//! peripherals.
 //!
 //! Facts from `shared/reference/amiro-boards.md` §0, §4: 8 MHz crystal → 72 MHz, CAN1 on PA11/PA12
-//! at 1 Mbit/s, SPI1 (PA5/6/7) with the L3G4200D (CS PC14) and LIS331DLH (CS PC13), I2C1 remapped to
-//! PB8/PB9 with the HMC5883L, I2C2 (PB10/PB11) with the PCA9544A mux and the four VCNL4020 floor
+//! at 1 Mbit/s; revision 1-1: SPI1 (PA5/6/7) with the L3G4200D (CS PC14) and LIS331DLH (CS PC13),
+//! I2C1 remapped to PB8/PB9 with the HMC5883L; revision 1-2: I2C1 remapped to PB8/PB9 with the
+//! BNO055 (0x28), IMU_RESET_N PC2 (pulsed at boot), IMU_BOOT_LOAD_N PC12 (held high); both: I2C2 (PB10/PB11) with the PCA9544A mux and the four VCNL4020 floor
 //! sensors, motor PWM on TIM2 partial remap 1 (PA15 left fwd, PB3 left back, PA2 right fwd,
 //! PA3 right back) into an A3906, POWER_EN PB2, encoders on TIM3 full remap (PC6/PC7, left) and
 //! TIM4 (PB6/PB7, right), SYS_SYNC_N PC1, SYS_PD_N PC8, status LED PA1 (active low).
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
+#[cfg(feature = "rev-1-1")]
 use embedded_hal_bus::spi::{AtomicDevice, NoDelay};
 use embedded_hal_bus::util::AtomicCell;
 use stm32f1xx_hal::afio::AfioExt;
-use stm32f1xx_hal::gpio::{
-    GpioExt, OpenDrain, Output, PinState, PushPull, PA1, PB2, PC1, PC13, PC14, PC8,
-};
+use stm32f1xx_hal::gpio::{GpioExt, OpenDrain, Output, PinState, PushPull, PA1, PB2, PC1, PC8};
+#[cfg(feature = "rev-1-1")]
+use stm32f1xx_hal::gpio::{PC13, PC14};
 use stm32f1xx_hal::i2c::{BlockingI2c, DutyCycle, Mode as I2cMode};
-use stm32f1xx_hal::pac::{self, I2C1, I2C2, SPI1};
+use stm32f1xx_hal::pac::{self, I2C1, I2C2};
 use stm32f1xx_hal::prelude::*;
 use stm32f1xx_hal::rcc;
+#[cfg(feature = "rev-1-1")]
 use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
 
 /// Motor PWM: 72 MHz timer clock, period 3600 → 20 kHz, as the original 1.x firmware.
@@ -34,14 +38,24 @@ const I2C_TIMEOUT_US: u32 = 200;
 /// EXTI line of SYS_PD_N (PC8).
 const SYS_PD_LINE: u32 = 1 << 8;
 
-/// SPI1 shared by the gyroscope and the accelerometer.
-pub type ImuBus = Spi<SPI1, u8>;
+/// SPI1 shared by the gyroscope and the accelerometer (1-1).
+#[cfg(feature = "rev-1-1")]
+pub type ImuBus = Spi<pac::SPI1, u8>;
+/// No shared IMU bus object on 1-2 (the BNO055 owns I2C1 alone).
+#[cfg(feature = "rev-1-2")]
+pub type ImuBus = ();
 /// The gyroscope's SPI device (chip select PC14).
+#[cfg(feature = "rev-1-1")]
 pub type GyroSpi = AtomicDevice<'static, ImuBus, PC14<Output<PushPull>>, NoDelay>;
 /// The accelerometer's SPI device (chip select PC13).
+#[cfg(feature = "rev-1-1")]
 pub type AccelSpi = AtomicDevice<'static, ImuBus, PC13<Output<PushPull>>, NoDelay>;
 /// I2C1 (remapped to PB8/PB9): the HMC5883L.
+#[cfg(feature = "rev-1-1")]
 pub type CompassI2c = BlockingI2c<I2C1>;
+/// I2C1 (remapped to PB8/PB9): the BNO055.
+#[cfg(feature = "rev-1-2")]
+pub type ImuI2c = BlockingI2c<I2C1>;
 /// I2C2: the PCA9544A multiplexer and the floor sensors.
 pub type FloorI2c = BlockingI2c<I2C2>;
 /// The CAN controller's transmit mailboxes (the runtime's register-level driver).
@@ -53,14 +67,22 @@ pub type CanErrors = amiro_firmware::bxcan::ErrorMonitor<Mmio>;
 /// The board's monotonic clock (TIM5).
 pub type Clock = crate::mono::Clock;
 
-/// Everything `init` hands on to the tasks.
-pub struct Board {
-    /// CAN transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// CAN receive FIFO 0 (command frames only, by hardware filter).
-    pub can_rx: CanRxPort,
-    /// CAN error-state monitor.
-    pub can_errors: CanErrors,
+/// The BNO055's mode-switch and boot waits: a busy wait on the core clock (at most 800 ms at boot,
+/// 26 ms per (re-)initialisation).
+#[cfg(feature = "rev-1-2")]
+#[derive(Debug, Default, Clone, Copy)]
+pub struct ImuDelay;
+
+#[cfg(feature = "rev-1-2")]
+impl embedded_hal::delay::DelayNs for ImuDelay {
+    fn delay_ns(&mut self, ns: u32) {
+        cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(SYSCLK_HZ / 1_000_000));
+    }
+}
+
+/// The sensor buses `init` hands to `sensors::groups` (revision 1-1).
+#[cfg(feature = "rev-1-1")]
+pub struct SensorBuses {
     /// Gyroscope SPI device.
     pub gyro_spi: GyroSpi,
     /// Accelerometer SPI device.
@@ -69,6 +91,29 @@ pub struct Board {
     pub compass_i2c: CompassI2c,
     /// Floor-sensor bus.
     pub floor_i2c: FloorI2c,
+}
+
+/// The sensor buses `init` hands to `sensors::groups` (revision 1-2).
+#[cfg(feature = "rev-1-2")]
+pub struct SensorBuses {
+    /// The BNO055's bus (I2C1), its reset already pulsed.
+    pub imu_i2c: ImuI2c,
+    /// Its waits.
+    pub imu_delay: ImuDelay,
+    /// Floor-sensor bus.
+    pub floor_i2c: FloorI2c,
+}
+
+/// Everything `init` hands on to the tasks.
+pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: CanTxPort,
+    /// CAN receive FIFO 0 (command frames only, by hardware filter).
+    pub can_rx: CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: CanErrors,
+    /// The sensors' buses.
+    pub sensors: SensorBuses,
     /// Motor PWM and POWER_EN.
     pub motors: Motors,
     /// Wheel encoders.
@@ -87,7 +132,7 @@ pub struct SystemSignals {
     pub led: PA1<Output<OpenDrain>>,
 }
 
-/// Brings the board up. `spi_cell` is the static home of the SPI bus the two IMU devices share.
+/// Brings the board up. `spi_cell` is the static home of the SPI bus the two IMU devices of 1-1 share.
 pub fn init(
     dp: pac::Peripherals,
     mut cp: cortex_m::Peripherals,
@@ -167,13 +212,16 @@ pub fn init(
     let motors = Motors::new(dp.TIM2, power_en);
     let encoders = Encoders::new(dp.TIM3, dp.TIM4);
 
-    // SPI1, mode 0 at 9 MHz (PCLK2 / 4), chip selects idle high.
+    // Revision 1-1: SPI1, mode 0 at 9 MHz (PCLK2 / 4), chip selects idle high.
+    #[cfg(feature = "rev-1-1")]
     let gyro_cs = gpioc
         .pc14
         .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+    #[cfg(feature = "rev-1-1")]
     let accel_cs = gpioc
         .pc13
         .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+    #[cfg(feature = "rev-1-1")]
     let spi = dp.SPI1.spi(
         (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
         SpiMode {
@@ -185,12 +233,32 @@ pub fn init(
     );
     // Both devices live in the one `imu` resource, so the bus is never contended; the atomic
     // cell only makes the shared bus `Sync` without a critical section.
+    #[cfg(feature = "rev-1-1")]
     let bus: &'static AtomicCell<ImuBus> = spi_cell.insert(AtomicCell::new(spi));
+    #[cfg(feature = "rev-1-1")]
     let gyro_spi = AtomicDevice::new_no_delay(bus, gyro_cs).unwrap_or_else(|_| unreachable_pin());
+    #[cfg(feature = "rev-1-1")]
     let accel_spi = AtomicDevice::new_no_delay(bus, accel_cs).unwrap_or_else(|_| unreachable_pin());
+    #[cfg(feature = "rev-1-2")]
+    let _ = spi_cell;
+
+    // Revision 1-2: the BNO055 starts its application (IMU_BOOT_LOAD_N high) out of a reset pulse
+    // on IMU_RESET_N (held low 1 ms; the datasheet asks for far less); `sensors::groups` waits for
+    // it to answer. The pins keep their state after these handles are dropped.
+    #[cfg(feature = "rev-1-2")]
+    {
+        let _boot_load = gpioc
+            .pc12
+            .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+        let mut reset = gpioc
+            .pc2
+            .into_push_pull_output_with_state(&mut gpioc.crl, PinState::Low);
+        cortex_m::asm::delay(SYSCLK_HZ / 1_000);
+        reset.set_high();
+    }
 
     // I2C1 remapped to PB8/PB9 and I2C2 on PB10/PB11, both 400 kHz.
-    let compass_i2c = BlockingI2c::new(
+    let i2c1 = BlockingI2c::new(
         dp.I2C1.remap(&mut afio.mapr),
         (gpiob.pb8, gpiob.pb9),
         I2cMode::fast(400.kHz(), DutyCycle::Ratio2to1),
@@ -228,10 +296,19 @@ pub fn init(
             can_tx: can.tx,
             can_rx: can.rx,
             can_errors: can.errors,
-            gyro_spi,
-            accel_spi,
-            compass_i2c,
-            floor_i2c,
+            #[cfg(feature = "rev-1-1")]
+            sensors: SensorBuses {
+                gyro_spi,
+                accel_spi,
+                compass_i2c: i2c1,
+                floor_i2c,
+            },
+            #[cfg(feature = "rev-1-2")]
+            sensors: SensorBuses {
+                imu_i2c: i2c1,
+                imu_delay: ImuDelay,
+                floor_i2c,
+            },
             motors,
             encoders,
             signals,
@@ -241,6 +318,7 @@ pub fn init(
 }
 
 /// Setting a push-pull chip select high cannot fail on this chip.
+#[cfg(feature = "rev-1-1")]
 fn unreachable_pin() -> ! {
     amiro_firmware::fault::halt()
 }
