@@ -190,6 +190,28 @@ fn wait_for_boot_polls_until_the_part_answers() {
     i2c.done();
 }
 
+#[test]
+fn a_verified_read_checks_the_operating_mode_after_the_data() {
+    let mut i2c = I2cMock::new(&[
+        T::write_read(A, vec![0x14], vec![16, 0, 0, 0, 0, 0]),
+        T::write_read(A, vec![0x3D], vec![0x07]),
+        // A part that reset is back in configuration mode, its data zero.
+        T::write_read(A, vec![0x14], vec![0; 6]),
+        T::write_read(A, vec![0x3D], vec![0x00]),
+    ]);
+    let mut imu = Bno055::new(i2c.clone());
+    assert_eq!(imu.read_verified(0x14).unwrap(), [16, 0, 0]);
+    assert_eq!(
+        imu.read_verified(0x14),
+        Err(Error::ConfigMismatch {
+            register: 0x3D,
+            expected: 0x07,
+            found: 0x00
+        })
+    );
+    i2c.done();
+}
+
 // ---------------------------------------------------------------- simulator
 
 #[test]
@@ -380,4 +402,39 @@ fn a_dead_bno055_stops_its_topics_and_is_counted() {
     group.group_mut().imu.bus_mut().set_nack(false);
     assert_eq!(group.sample(Topic::Gyroscope, 2_000_000).len(), 1);
     assert!(group.is_ready());
+}
+
+#[test]
+fn a_bno055_that_reset_is_noticed_on_its_next_sample_and_configured_again() {
+    use embedded_hal::i2c::I2c;
+    let mut group = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
+    assert_eq!(group.sample(Topic::Accelerometer, 0).len(), 1);
+    // SYS_TRIGGER RST_SYS: the part is back in configuration mode (data zero).
+    group
+        .group_mut()
+        .imu
+        .bus_mut()
+        .write(A, &[0x3F, 0x20])
+        .unwrap();
+    for t in 1..=3 {
+        assert!(group.sample(Topic::Accelerometer, t * 10_000).is_empty());
+    }
+    assert!(matches!(
+        group.last_error(),
+        Some(SampleError::Device {
+            device: Device::Imu,
+            error: Error::ConfigMismatch { register: 0x3D, .. }
+        })
+    ));
+    // After the back-off the supervisor initialises it again and it publishes 1 g.
+    let samples = group.sample(Topic::Accelerometer, 2_000_000);
+    assert!(
+        matches!(samples[..], [SensorData::Accelerometer([_, _, z])] if (998..=1002).contains(&z))
+    );
+    assert!(group
+        .group_mut()
+        .imu
+        .bus_mut()
+        .imu()
+        .is_configured_for_amiro());
 }

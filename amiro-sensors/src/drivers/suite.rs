@@ -19,7 +19,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::{self, I2c};
 use embedded_hal::spi::{self, SpiDevice};
 
-use super::bno055::Bno055;
+use super::bno055::{self, Bno055};
 use super::bq27500::{BatteryStatus, Bq27500, PowerSummary};
 use super::floor::{FloorSensors, GroupError};
 use super::hmc5883l::{Hmc5883l, MagneticField};
@@ -349,10 +349,13 @@ fn floor_error<E: i2c::Error>(e: GroupError<E>) -> SampleError {
 
 /// DiWheelDrive 1-2's BNO055 on I2C1: gyroscope, accelerometer and the three magnetometer topics.
 ///
-/// Each topic reads its own sensor's six bytes in one burst (about 225 µs at 400 kHz); the three
-/// magnetometer axes share one reading as [`Compass`] does (the part's magnetometer runs at 30 Hz,
-/// so a reading serves the other axes for [`MAGNETOMETER_PERIOD_US`]). `delay` paces the part's
-/// mode switches in `init` (26 ms of busy waiting, on every (re-)initialisation).
+/// Each topic reads its own sensor's six bytes in one burst and then OPR_MODE
+/// ([`Bno055::read_verified`]: about 310 µs at 400 kHz, the same on every sample, so the
+/// analysis sees no execution-time jitter from a periodic check, and a part that reset or died is
+/// caught on the sample it happens); the three magnetometer axes share one reading as [`Compass`]
+/// does (the part's magnetometer runs at 30 Hz, so a reading serves the other axes for
+/// [`MAGNETOMETER_PERIOD_US`]). `delay` paces the part's mode switches in `init` (26 ms of busy
+/// waiting, on every (re-)initialisation).
 #[derive(Debug)]
 pub struct ImuSensors<I2C, D> {
     /// The BNO055.
@@ -361,7 +364,6 @@ pub struct ImuSensors<I2C, D> {
     reuse_window_us: u64,
     last_field: Option<([i32; 3], u64)>,
     delivered: [bool; 3],
-    identity: IdentitySchedule,
 }
 
 impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
@@ -373,7 +375,6 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
             reuse_window_us: MAGNETOMETER_PERIOD_US,
             last_field: None,
             delivered: [false; 3],
-            identity: IdentitySchedule { samples: 0 },
         }
     }
 
@@ -381,6 +382,12 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
     pub fn wait_for_boot(&mut self, timeout_ms: u32) -> Result<(), SampleError> {
         self.imu
             .wait_for_boot(&mut self.delay, timeout_ms)
+            .map_err(i2c_error(Device::Imu))
+    }
+
+    fn read(&mut self, first: u8) -> Result<[i16; 3], SampleError> {
+        self.imu
+            .read_verified(first)
             .map_err(i2c_error(Device::Imu))
     }
 
@@ -392,15 +399,16 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
             {
                 Ok(field)
             }
-            _ => match self.imu.read_magnetometer() {
-                Ok(field) => {
+            _ => match self.read(bno055::reg::MAG_DATA_X_LSB) {
+                Ok(raw) => {
+                    let field = bno055::nanotesla(raw);
                     self.last_field = Some((field, now_us));
                     self.delivered = [false; 3];
                     Ok(field)
                 }
                 Err(error) => {
                     self.last_field = None;
-                    Err(i2c_error(Device::Imu)(error))
+                    Err(error)
                 }
             },
         }
@@ -426,19 +434,13 @@ impl<I2C: I2c, D: DelayNs> SensorGroup for ImuSensors<I2C, D> {
     }
 
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
-        if self.serves(topic) && self.identity.due() {
-            self.imu.check_identity().map_err(i2c_error(Device::Imu))?;
-        }
         let axis = match topic {
             Topic::Gyroscope => {
-                let rate = self.imu.read_gyroscope().map_err(i2c_error(Device::Imu))?;
-                return Ok(one(SensorData::Gyroscope(rate)));
+                let raw = self.read(bno055::reg::GYR_DATA_X_LSB)?;
+                return Ok(one(SensorData::Gyroscope(bno055::degrees_per_s(raw))));
             }
             Topic::Accelerometer => {
-                let mg = self
-                    .imu
-                    .read_accelerometer()
-                    .map_err(i2c_error(Device::Imu))?;
+                let mg = self.read(bno055::reg::ACC_DATA_X_LSB)?;
                 return Ok(one(SensorData::Accelerometer(mg)));
             }
             Topic::MagnetometerX => Axis::X,
