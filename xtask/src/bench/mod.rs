@@ -541,7 +541,14 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
     if args.qemu {
         let stimulus = args.stimulus.as_ref().context("--qemu needs --stimulus")?;
         crate::ensure_qemu()?;
-        let elf = crate::build_qemu(root, board)?;
+        // The board's newest revision (its default build).
+        let elf = crate::build_qemu(
+            root,
+            &crate::revision::Build {
+                board,
+                revision: board.newest(),
+            },
+        )?;
         let frames = crate::qemu::read_stimulus(stimulus)?;
         let duration = match &args.duration {
             Some(d) => crate::qemu::parse_duration(d)?,

@@ -212,7 +212,7 @@ fn motor_deadman(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+pub(super) fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let rejected = out.traces("command-rejected").len();
     ensure!(
         rejected == 10,
@@ -265,7 +265,7 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+pub(super) fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let gyro = out.periodic_stream(0x608, "gyroscope", 1_000, 0, 250_000)?;
     let bound = bounds.publisher_latency_us("gyroscope", "medium", 1_000)?;
     let worst = gyro.worst_latency;
