@@ -135,7 +135,11 @@ pub fn run_elf(board: &'static Board, elf: &Path) -> Result<()> {
             let id_set = ids(&std::env::var("AMIRO_IDS").unwrap_or_else(|_| "1-2".into()))?;
             serial(&port, &[board], &[elf.to_path_buf()], &opts, id_set).map(|_| ())
         }
-        _ => crate::flash_elf(board, elf),
+        _ => {
+            let image = revision::of_elf(board, elf)?;
+            println!("{} {} image", board.name, image.name);
+            crate::flash_elf(board, elf)
+        }
     }
 }
 

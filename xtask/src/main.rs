@@ -389,10 +389,11 @@ fn interrupt_flag() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
 /// control block.
 fn probe_link(
     root: &Path,
-    board: &Board,
+    build: &revision::Build,
     attach: bool,
     selector: Option<&str>,
 ) -> Result<probe::RttLink> {
+    let board = build.board;
     let elf_path = firmware_elf(root, board);
     if attach {
         let session = probe::session(board, selector, false)?;
@@ -401,11 +402,12 @@ fn probe_link(
         return probe::RttLink::attach(session, bytes.as_deref());
     }
     ensure_toolchain(root)?;
-    cargo(
-        &root.join(board.name),
-        &["build", "--release", "--quiet", "--features", "task-trace"],
-    )
-    .with_context(|| format!("building {} with task-trace", board.name))?;
+    build.select_models();
+    let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
+    args.extend(build.feature_args(&["task-trace"]));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    cargo(&root.join(board.name), &args)
+        .with_context(|| format!("building {} with task-trace", build.stem()))?;
     elf::inspect(board, &elf_path, true)?;
     let image = probe_image(board, &elf_path)?;
     println!(
@@ -441,32 +443,27 @@ fn check(root: &Path) -> Result<()> {
         &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
     )
     .context("clippy on the host crates")?;
-    for board in BOARDS {
-        cargo(
-            &root.join(board.name),
-            &["clippy", "--quiet", "--release", "--", "-D", "warnings"],
-        )
-        .with_context(|| format!("clippy on {}", board.name))?;
-    }
+    // Every revision of every board, for the chip and (where it has scenarios) for QEMU.
+    let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &revision::Choice::All)?;
     let qemu_target = qemu::target_dir(root).to_string_lossy().into_owned();
-    let args = [
-        "clippy",
-        "--quiet",
-        "--release",
-        "--features",
-        "qemu,task-trace",
-        "--target-dir",
-        &qemu_target,
-        "--",
-        "-D",
-        "warnings",
-    ];
-    for board in BOARDS
-        .iter()
-        .filter(|b| !scenarios::for_board(b.name).is_empty())
-    {
+    for build in &every {
+        let board = build.board;
+        build.select_models();
+        let mut args = vec!["clippy".to_string(), "--quiet".into(), "--release".into()];
+        args.extend(build.feature_args(&[]));
+        args.extend(["--", "-D", "warnings"].map(String::from));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
         cargo(&root.join(board.name), &args)
-            .with_context(|| format!("clippy on the QEMU build of {}", board.name))?;
+            .with_context(|| format!("clippy on {}", build.stem()))?;
+        if scenarios::for_revision(board.name, build.revision.name).is_empty() {
+            continue;
+        }
+        let mut args = vec!["clippy".to_string(), "--quiet".into(), "--release".into()];
+        args.extend(build.feature_args(&["qemu", "task-trace"]));
+        args.extend(["--target-dir", &qemu_target, "--", "-D", "warnings"].map(String::from));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        cargo(&root.join(board.name), &args)
+            .with_context(|| format!("clippy on the QEMU build of {}", build.stem()))?;
     }
     Ok(())
 }
