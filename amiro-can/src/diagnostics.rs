@@ -74,16 +74,20 @@ pub enum RefusalReason {
     Capacity = 3,
     /// The request's period is zero.
     ZeroPeriod = 4,
+    /// The board's admission task already holds as many requests as its queue has room for (requests come faster
+    /// than the check's analysed rate): refused unseen, answered with a verdict, and counted.
+    Busy = 5,
 }
 
 impl RefusalReason {
     /// Every reason, in counter order.
-    pub const ALL: [RefusalReason; 5] = [
+    pub const ALL: [RefusalReason; 6] = [
         RefusalReason::TaskDeadline,
         RefusalReason::MessageDeadline,
         RefusalReason::EndToEndDeadline,
         RefusalReason::Capacity,
         RefusalReason::ZeroPeriod,
+        RefusalReason::Busy,
     ];
 
     /// A short, stable name: counter and log names.
@@ -94,6 +98,7 @@ impl RefusalReason {
             RefusalReason::EndToEndDeadline => "admission-end-to-end-deadline",
             RefusalReason::Capacity => "admission-capacity",
             RefusalReason::ZeroPeriod => "admission-zero-period",
+            RefusalReason::Busy => "admission-busy",
         }
     }
 
@@ -235,6 +240,9 @@ impl StatusFlags {
     pub const WATCHDOG: StatusFlags = StatusFlags(1 << 3);
     /// The board is shutting down (SYS_PD_N low or a shutdown command).
     pub const SHUTTING_DOWN: StatusFlags = StatusFlags(1 << 4);
+    /// The board does not run on its crystal's PLL (a clock step failed at boot: internal
+    /// oscillator, with or without the PLL, or the clock the bootloader left).
+    pub const CLOCK_FALLBACK: StatusFlags = StatusFlags(1 << 5);
 
     const NAMES: [&'static str; 8] = [
         "accept-and-warn",
@@ -242,7 +250,7 @@ impl StatusFlags {
         "sensor-fault",
         "watchdog",
         "shutting-down",
-        "bit5",
+        "clock-fallback",
         "bit6",
         "bit7",
     ];

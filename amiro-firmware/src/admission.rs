@@ -95,6 +95,9 @@ pub struct State<const N: usize, const M: usize> {
     analysed: bool,
     /// Whether the last command asked this board for a one-shot sample.
     sampled: bool,
+    /// Whether a stream left the running set (a stop, a one-shot) since the kept analyses were brought up to
+    /// date: the admission task refreshes them as a step of its own ([`Admission::refresh_stale`]).
+    stale: bool,
     last_iterations: u64,
     worst_iterations: u64,
 }
@@ -109,6 +112,7 @@ impl<const N: usize, const M: usize> State<N, M> {
             cache: Cache::new(),
             analysed: false,
             sampled: false,
+            stale: false,
             last_iterations: 0,
             worst_iterations: 0,
         }
@@ -123,7 +127,7 @@ impl<const N: usize, const M: usize> Default for State<N, M> {
 
 /// One board's admission check: the robot table and the board, over the board's [`State`].
 pub struct Admission<'s, const N: usize, const M: usize> {
-    robot: &'static RobotTable<'static>,
+    robot: &'s RobotTable<'s>,
     board: Board,
     state: &'s mut State<N, M>,
 }
@@ -173,11 +177,7 @@ pub fn request_stream(sender_board: u8, command: &SensorCommand, period: SampleT
 
 impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     /// The admission check of `board` on `robot`, keeping its running set in `state`.
-    pub fn new(
-        robot: &'static RobotTable<'static>,
-        board: Board,
-        state: &'s mut State<N, M>,
-    ) -> Self {
+    pub fn new(robot: &'s RobotTable<'s>, board: Board, state: &'s mut State<N, M>) -> Self {
         Self {
             robot,
             board,
@@ -204,6 +204,11 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         self.state.analysed || self.state.sampled
     }
 
+    /// Whether the last command asked this board for a one-shot sample.
+    pub fn sampled(&self) -> bool {
+        self.state.sampled
+    }
+
     /// Fixed-point iterations of the last decision and of the most expensive one since boot.
     pub fn iterations(&self) -> (u64, u64) {
         (self.state.last_iterations, self.state.worst_iterations)
@@ -215,12 +220,30 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         self.refresh();
     }
 
+    /// Whether a kept analysis is stale: a stream left the running set since the last refresh.
+    pub fn stale(&self) -> bool {
+        self.state.stale
+    }
+
+    /// Re-analyses the boards whose streams left the running set (a stop, a one-shot): the admission task runs
+    /// it as a paced step of its own right after such a command, so that no decision re-analyses more than the
+    /// requesting board and the bus (`docs/analysis.md`, "The admission task"). Nothing when nothing is stale.
+    pub fn refresh_stale(&mut self) {
+        self.state.last_iterations = 0;
+        self.state.analysed = false;
+        self.state.sampled = false;
+        if self.state.stale {
+            self.refresh();
+        }
+    }
+
     /// Brings the kept analyses up to date with the running set.
     fn refresh(&mut self) {
         let running = self.state.running.get(..self.state.len).unwrap_or(&[]);
         self.state.last_iterations =
             analysis::refresh::<N, M>(self.robot, running, &mut self.state.cache);
         self.state.analysed = true;
+        self.state.stale = false;
         self.state.worst_iterations = self.state.worst_iterations.max(self.state.last_iterations);
     }
 
@@ -259,6 +282,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
                 }
             }
             self.state.len -= 1;
+            self.state.stale = true;
         }
     }
 
@@ -319,8 +343,8 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         };
         let period = match command.mode {
             SensorMode::Stop => {
-                // Cheap: the board's kept analysis no longer matches and is redone by the next
-                // decision that needs it.
+                // Cheap here: the board's kept analysis no longer matches and is redone by the
+                // admission task's next step (`refresh_stale`, paced like a decision).
                 self.remove(owner_index, command.topic.byte());
                 return Check::Pass;
             }
@@ -339,16 +363,19 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
             .copied()
             .unwrap_or(AdmissionPolicy::Refuse);
         let decision = self.decide(&request, policy == AdmissionPolicy::AcceptAndWarn);
-        let Some(refusal) = decision.refusal else {
+        let Some(first) = decision.refusal else {
             self.carry_out(request, one_shot);
             return Check::Pass;
         };
-        let verdict = match policy {
-            AdmissionPolicy::Refuse => Verdict::Refused,
-            AdmissionPolicy::AcceptAndWarn => {
+        // The hard floor: accept-and-warn starts only requests whose every violation is a bounded deadline
+        // miss of a publisher; anything else is refused whatever the policy, naming what falls below it.
+        let (verdict, refusal) = match (policy, decision.floor) {
+            (AdmissionPolicy::AcceptAndWarn, None) => {
                 self.carry_out(request, one_shot);
-                Verdict::AcceptedWithWarning
+                (Verdict::AcceptedWithWarning, first)
             }
+            (AdmissionPolicy::AcceptAndWarn, Some(floor)) => (Verdict::Refused, floor),
+            (AdmissionPolicy::Refuse, _) => (Verdict::Refused, first),
         };
         if owner != self.board {
             // The owner decides and answers; this board only keeps its view.
@@ -441,6 +468,118 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     }
 }
 
+/// The verdict a board sends when its admission queue is full and `frame` is one of its own publish or
+/// one-shot requests (`None` for anything else: other boards answer their own requests, and a stop or
+/// policy command needs no answer): refused unseen, reason [`RefusalReason::Busy`], nothing analysed.
+/// The requester hears at once that it asked faster than the check's analysed rate.
+pub fn busy_verdict(board: Board, id: u16, data: &[u8]) -> Option<[Frame; 2]> {
+    let Ok(Command::Sensor(command)) = decode_command(id, data) else {
+        return None;
+    };
+    if command.topic.board() != board {
+        return None;
+    }
+    let requested = match command.mode {
+        SensorMode::Publish(period) => period,
+        SensorMode::Once => ONE_SHOT_PERIOD,
+        SensorMode::Stop => return None,
+    };
+    let verdict = AdmissionVerdict {
+        board,
+        topic: command.topic,
+        requested,
+        priority: command.priority,
+        verdict: Verdict::Refused,
+        violation: Violation::Unknown,
+        wcrt_us: Count::ZERO,
+        deadline_us: Count::ZERO,
+        shortest_period: None,
+        priority_needed: None,
+        searched: false,
+        one_shot: command.mode == SensorMode::Once,
+    };
+    Some(verdict.frames(command.priority))
+}
+
+/// `now_us` in units of 1024 µs, wrapping at 32 bits (a shift: no division is linked for it).
+pub fn ticks_1024us(now_us: u64) -> u32 {
+    (now_us >> 10) as u32
+}
+
+/// Whether `frame` is a stop of a sensor topic (of any board). A stop only removes load, so it needs no
+/// analysis: the command handler applies it at once (within its own deadline) and the admission task only
+/// brings its running set up to date, in the order the commands were heard.
+pub fn is_stop(id: u16, data: &[u8]) -> bool {
+    matches!(
+        decode_command(id, data),
+        Ok(Command::Sensor(SensorCommand {
+            mode: SensorMode::Stop,
+            ..
+        }))
+    )
+}
+
+/// The admission task's pacing (`docs/analysis.md`, "The admission task"): at most `K` analysed commands
+/// (publish and one-shot requests of any board: every board decides every request to keep its view) start
+/// in any window of `window_us`, so the task's analysed load is at most `K` decisions per window however
+/// fast requests come, while a burst of up to `K` requests is decided back to back; and this board's own
+/// one-shot samples are at least `one_shot_us` apart (a one-shot is a whole sample job at the requested
+/// level, decided as a stream of that interval). Commands that run no analysis wait `command_us`.
+/// Allocation-free and host-tested; the board's task awaits [`Pacing::next_start`].
+#[derive(Debug, Clone)]
+pub struct Pacing<const K: usize> {
+    /// Start times of the last `K` analysed commands (a ring; 0 = none yet).
+    starts: [u64; K],
+    /// The ring's oldest entry.
+    oldest: usize,
+    window_us: u64,
+    one_shot_us: u64,
+    command_us: u64,
+}
+
+impl<const K: usize> Pacing<K> {
+    /// No command taken yet.
+    pub const fn new(window_us: u64, one_shot_us: u64, command_us: u64) -> Self {
+        Self {
+            starts: [0; K],
+            oldest: 0,
+            window_us,
+            one_shot_us,
+            command_us,
+        }
+    }
+
+    /// The earliest time the next command may start, after a command that started at `started` and ended at
+    /// `ended`; `analysed` and `own_one_shot` as [`Admission::analysed`] and [`Admission::sampled`] said.
+    pub fn next_start(
+        &mut self,
+        started: u64,
+        ended: u64,
+        analysed: bool,
+        own_one_shot: bool,
+    ) -> u64 {
+        let mut next = ended.saturating_add(self.command_us);
+        if analysed && K > 0 {
+            if let Some(slot) = self.starts.get_mut(self.oldest) {
+                *slot = started.max(1);
+            }
+            self.oldest = (self.oldest + 1) % K;
+            // The K-th analysis before the next one started at `starts[oldest]` (0: fewer than K so far).
+            if let Some(&kth) = self.starts.get(self.oldest) {
+                if kth != 0 {
+                    next = next.max(kth.saturating_add(self.window_us));
+                }
+            }
+        }
+        if own_one_shot {
+            // From the end of the command: the next one-shot sample (woken before the end) is at
+            // least one interval after this one, whatever each decision took.
+            next = next.max(ended.saturating_add(self.one_shot_us));
+        }
+        next
+    }
+}
+
 /// The counted reason of a refusal (diagnostics page 2, `amiro_can::RefusalReason`).
 fn reason(refusal: &Refusal) -> RefusalReason {
     match refusal {
@@ -471,4 +610,37 @@ pub fn table_source(root: &std::path::Path) -> Result<std::string::String, std::
     )
     .map_err(|e| e.to_string())?;
     Ok(robot.to_rust_source("::amiro_firmware::admission::schedule_analysis"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pacing_decides_a_burst_back_to_back_then_waits_for_the_window() {
+        let mut pacing = Pacing::<3>::new(100_000, 40_000, 2_500);
+        // Three analysed requests 5 ms apart: each may start at once after the previous one.
+        assert_eq!(pacing.next_start(1_000, 2_000, true, false), 4_500);
+        assert_eq!(pacing.next_start(6_000, 7_000, true, false), 9_500);
+        // The third fills the window: the fourth waits until 100 ms after the first started.
+        assert_eq!(pacing.next_start(11_000, 12_000, true, false), 101_000);
+        // A command without analysis waits only the note interval.
+        assert_eq!(pacing.next_start(101_000, 101_100, false, false), 103_600);
+    }
+
+    #[test]
+    fn an_own_one_shot_paces_the_next_command_by_its_interval() {
+        let mut pacing = Pacing::<5>::new(100_000, 40_000, 2_500);
+        assert_eq!(pacing.next_start(0, 2_000, true, true), 42_000);
+    }
+
+    #[test]
+    fn busy_verdicts_answer_only_the_boards_own_requests() {
+        // DiWheelDrive's gyroscope every 10 ms at medium (0x208), then a stop (mode 0).
+        assert!(busy_verdict(Board::DiWheelDrive, 0x208, &[1, 10, 0, 1]).is_some());
+        assert!(busy_verdict(Board::PowerManagement, 0x208, &[1, 10, 0, 1]).is_none());
+        assert!(busy_verdict(Board::DiWheelDrive, 0x208, &[0]).is_none());
+        assert!(is_stop(0x208, &[0]));
+        assert!(!is_stop(0x208, &[1, 10, 0, 1]));
+    }
 }

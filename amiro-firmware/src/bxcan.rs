@@ -215,8 +215,12 @@ pub fn bring_up(btr: u32) -> Port {
     // SAFETY: CAN1 exists at this address on both chips; each half built on it is owned by one task
     // (`Port`'s contract) and touches its own registers.
     let can = unsafe { Mmio::new(CAN1_BASE) };
-    if let Err(e) = configure(&can, btr) {
-        crate::log!("CAN set-up: ", e.as_str());
+    match configure(&can, btr) {
+        Ok(()) => crate::log!("CAN: on the bus"),
+        Err(InitError::EnterInitTimeout) => {
+            crate::log!("CAN: silent: ", InitError::EnterInitTimeout.as_str())
+        }
+        Err(e) => crate::log!("CAN: ", e.as_str()),
     }
     Port {
         tx: Mailboxes::new(can),

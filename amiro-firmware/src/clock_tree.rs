@@ -32,6 +32,12 @@ pub enum ClockFault {
     PllStillRunning,
     /// The 8 MHz crystal did not start.
     HseNotReady,
+    /// The flash did not take the wait states the faster clock needs.
+    FlashLatency,
+    /// The PLL did not lock.
+    PllNotReady,
+    /// SYSCLK did not switch to the PLL.
+    SwitchToPll,
 }
 
 impl ClockFault {
@@ -42,6 +48,9 @@ impl ClockFault {
             ClockFault::SwitchToHsi => "SYSCLK did not switch to the internal oscillator",
             ClockFault::PllStillRunning => "the PLL did not stop",
             ClockFault::HseNotReady => "the crystal did not start",
+            ClockFault::FlashLatency => "the flash did not take its wait states",
+            ClockFault::PllNotReady => "the PLL did not lock",
+            ClockFault::SwitchToPll => "SYSCLK did not switch to the PLL",
         }
     }
 }
@@ -79,11 +88,102 @@ pub fn to_reset_state(rcc: &impl Registers, cfgr: usize) -> Result<(), ClockFaul
     )
 }
 
+/// Whether the tree is in the state [`to_reset_state`] leads to, whatever its ready flags said:
+/// SYSCLK from the internal oscillator and the PLL off. A tree whose reset step failed but that
+/// reads so (an RCC that never reports HSIRDY, as in QEMU) can still try the crystal and the PLL;
+/// one that does not (SYSCLK still on the PLL) must not touch the PLL.
+pub fn in_reset_state(rcc: &impl Registers, cfgr: usize) -> bool {
+    rcc.read(cfgr) & CFGR_SWS == 0 && rcc.read(RCC_CR) & (CR_PLLON | CR_PLLRDY) == 0
+}
+
+/// Whether SYSCLK runs from a locked PLL with the crystal ready (as AMiRo-BLT hands over): a tree
+/// whose reset failed can still be used as it is when this holds.
+pub fn running_on_crystal_pll(rcc: &impl Registers, cfgr: usize) -> bool {
+    let cr = rcc.read(RCC_CR);
+    rcc.read(cfgr) & CFGR_SWS == 0b10 << 2 && cr & CR_PLLRDY != 0 && cr & CR_HSERDY != 0
+}
+
 /// Starts the crystal oscillator and waits (bounded) for it to report ready.
 pub fn start_crystal(rcc: &impl Registers) -> Result<(), ClockFault> {
     modify(rcc, RCC_CR, |r| r | CR_HSEON);
     poll(
         || rcc.read(RCC_CR) & CR_HSERDY != 0,
         ClockFault::HseNotReady,
+    )
+}
+
+/// What [`start_pll`] writes: the PLL's source and factors, the bus prescalers and the flash wait
+/// states of the faster clock. Each is a (mask, value) pair over one register.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PllSetup {
+    /// The offset of the RCC register that holds the PLL's source and factors (F1: CFGR 0x04,
+    /// F4: PLLCFGR 0x04).
+    pub pll_register: usize,
+    /// The PLL source and factor bits in it, and their value.
+    pub pll: (u32, u32),
+    /// The AHB/APB prescaler bits in RCC_CFGR, and their value.
+    pub prescalers: (u32, u32),
+    /// The offset of FLASH_ACR in the flash interface's block (0 on both families).
+    pub flash_acr: usize,
+    /// The latency bits in FLASH_ACR, and the value the PLL's SYSCLK needs.
+    pub latency: (u32, u32),
+}
+
+fn set_field(rcc: &impl Registers, offset: usize, (mask, value): (u32, u32)) {
+    modify(rcc, offset, |r| r & !mask | value & mask);
+}
+
+/// Starts the PLL and makes it SYSCLK, every wait bounded. Runs from the reset state
+/// ([`to_reset_state`], and [`start_crystal`] first when the PLL runs from the crystal).
+///
+/// On a fault the clock tree is left on the internal oscillator with the PLL off and the bus
+/// prescalers at 1 (so every bus runs at the oscillator's frequency, which the caller's fallback
+/// plan assumes); the higher flash latency stays, which is safe at any slower clock.
+pub fn start_pll(
+    rcc: &impl Registers,
+    flash: &impl Registers,
+    cfgr: usize,
+    setup: &PllSetup,
+) -> Result<(), ClockFault> {
+    let result = try_start_pll(rcc, flash, cfgr, setup);
+    if result.is_err() {
+        modify(rcc, cfgr, |r| r & !CFGR_SW);
+        set_field(rcc, cfgr, (setup.prescalers.0, 0));
+        modify(rcc, RCC_CR, |r| r & !CR_PLLON);
+        // Bounded as every other wait; if SYSCLK did not even come back the first fault is
+        // still the one to report.
+        let _ = poll(|| rcc.read(cfgr) & CFGR_SWS == 0, ClockFault::SwitchToHsi);
+    }
+    result
+}
+
+fn try_start_pll(
+    rcc: &impl Registers,
+    flash: &impl Registers,
+    cfgr: usize,
+    setup: &PllSetup,
+) -> Result<(), ClockFault> {
+    // The PLL's factors can only be written while it is off.
+    if rcc.read(RCC_CR) & (CR_PLLON | CR_PLLRDY) != 0 {
+        return Err(ClockFault::PllStillRunning);
+    }
+    set_field(rcc, setup.pll_register, setup.pll);
+    // Slow buses first, then the wait states, then the fast clock.
+    set_field(rcc, cfgr, setup.prescalers);
+    set_field(flash, setup.flash_acr, setup.latency);
+    let (mask, value) = setup.latency;
+    poll(
+        || flash.read(setup.flash_acr) & mask == value & mask,
+        ClockFault::FlashLatency,
+    )?;
+    modify(rcc, RCC_CR, |r| r | CR_PLLON);
+    poll(
+        || rcc.read(RCC_CR) & CR_PLLRDY != 0,
+        ClockFault::PllNotReady,
+    )?;
+    modify(rcc, cfgr, |r| r & !CFGR_SW | 0b10);
+    poll(
+        || rcc.read(cfgr) & CFGR_SWS == 0b10 << 2,
+        ClockFault::SwitchToPll,
     )
 }

@@ -28,6 +28,7 @@ static REFUSALS: [AtomicU32; REFUSAL_REASONS] = [
     AtomicU32::new(0),
     AtomicU32::new(0),
     AtomicU32::new(0),
+    AtomicU32::new(0),
 ];
 /// Sensor groups a board may report (one per bus or device group).
 pub const SENSOR_GROUPS: usize = 8;
@@ -45,6 +46,7 @@ static GROUPS_FAULTY: AtomicU8 = AtomicU8::new(0);
 static ERROR_PASSIVE: AtomicU32 = AtomicU32::new(0);
 static BUS_OFF: AtomicU32 = AtomicU32::new(0);
 static PASSIVE_NOW: AtomicBool = AtomicBool::new(false);
+static CLOCK_FALLBACK: AtomicBool = AtomicBool::new(false);
 static WATCHDOG_RUNNING: AtomicBool = AtomicBool::new(false);
 static RESET_CAUSE: AtomicU8 = AtomicU8::new(0);
 static WINDOW: AtomicU8 = AtomicU8::new(0);
@@ -81,6 +83,18 @@ pub fn count_admission(refused: bool, reason: RefusalReason) {
     }
 }
 
+/// Requests refused by the admission check or for a full admission queue (not those warned about), since boot.
+pub fn admission_refused() -> u32 {
+    ADMISSION_REFUSED.load(Ordering::Relaxed)
+}
+
+/// Requests refused because the admission queue was full ([`RefusalReason::Busy`]), since boot.
+pub fn admission_busy() -> u32 {
+    REFUSALS
+        .get(RefusalReason::Busy as usize)
+        .map_or(0, |c| c.load(Ordering::Relaxed))
+}
+
 /// Reports sensor group `group` (0..[`SENSOR_GROUPS`]): its failures since boot and whether it
 /// is out of service now. Diagnostics page 0 carries the sum and a "sensor fault now" flag.
 pub fn report_sensor_group(group: usize, faults: u32, faulty_now: bool) {
@@ -108,9 +122,23 @@ pub fn set_can_errors(passive_episodes: u32, bus_off_episodes: u32, passive_now:
     PASSIVE_NOW.store(passive_now, Ordering::Relaxed);
 }
 
+/// Records the clock the board runs on (`chip::clock_plan`): anything but the crystal's PLL is a
+/// clock fault, flagged on diagnostics page 0.
+pub fn set_clock_source(source: crate::chip::ClockSource) {
+    CLOCK_FALLBACK.store(
+        source != crate::chip::ClockSource::Crystal,
+        Ordering::Relaxed,
+    );
+}
+
 /// Notes that the independent watchdog runs.
 pub fn watchdog_started() {
     WATCHDOG_RUNNING.store(true, Ordering::Relaxed);
+}
+
+/// Whether the independent watchdog runs (`watchdog::start` was called).
+pub fn watchdog_running() -> bool {
+    WATCHDOG_RUNNING.load(Ordering::Relaxed)
 }
 
 /// Records why the chip last reset (read once at boot).
@@ -130,6 +158,9 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
     }
     if GROUPS_FAULTY.load(Ordering::Relaxed) != 0 {
         flags = flags.with(StatusFlags::SENSOR_FAULT);
+    }
+    if CLOCK_FALLBACK.load(Ordering::Relaxed) {
+        flags = flags.with(StatusFlags::CLOCK_FALLBACK);
     }
     if WATCHDOG_RUNNING.load(Ordering::Relaxed) {
         flags = flags.with(StatusFlags::WATCHDOG);
@@ -153,6 +184,7 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
             REFUSALS[2].load(Ordering::Relaxed),
             REFUSALS[3].load(Ordering::Relaxed),
             REFUSALS[4].load(Ordering::Relaxed),
+            REFUSALS[5].load(Ordering::Relaxed),
         ],
         rx_dropped: crate::tasks::rx_dropped(),
         rx_overruns: crate::tasks::rx_overruns(),

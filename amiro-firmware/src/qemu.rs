@@ -293,11 +293,13 @@ fn le_u64(bytes: &[u8]) -> u64 {
 /// the run successfully.
 pub fn finish(why: &str) {
     hprintln!(
-        "# qemu: {} at {} us; rx dropped {}; rx overruns {}; ram static {} stack {}",
+        "# qemu: {} at {} us; rx dropped {}; rx overruns {}; admission refused {}; admission busy {}; ram static {} stack {}",
         why,
         Clock::now_us(),
         crate::tasks::rx_dropped(),
         crate::tasks::rx_overruns(),
+        crate::health::admission_refused(),
+        crate::health::admission_busy(),
         static_ram(),
         stack_high_water()
     );

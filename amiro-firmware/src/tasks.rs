@@ -122,7 +122,7 @@ pub fn handle_command<C: Clock>(
     if signals::shutting_down() {
         return None;
     }
-    handle_command_at(C::now_us(), frame, handler, wake_levels)
+    handle_command_at(C::now_us(), frame, handler, wake_levels, true)
 }
 
 /// [`handle_command`] as of `now`.
@@ -131,9 +131,12 @@ fn handle_command_at(
     frame: &RxFrame,
     mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     wake_levels: &mut [Sender<'static, (), 1>],
+    traced: bool,
 ) -> Option<(u64, Outcome)> {
     let outcome = handler.lock(|h| h.on_frame(now, frame.id, frame.payload()));
-    trace_outcome(now, frame.id, &outcome);
+    if traced {
+        trace_outcome(now, frame.id, &outcome);
+    }
     match outcome {
         Ok(Outcome::Sensor { wake, .. }) => {
             // Wake the levels whose schedule changed; each re-reads its next due time.
@@ -166,15 +169,134 @@ pub fn for_admission(frame: &RxFrame) -> bool {
     )
 }
 
-/// Queues a command for the admission task; a full queue drops it and counts it as a received
-/// frame dropped (the queue is bounded, as the receive queue is).
-pub fn forward_to_admission<const N: usize>(
+/// When the last busy verdict was sent (ms since boot, 0: never).
+static LAST_BUSY_VERDICT_MS: AtomicU32 = AtomicU32::new(0);
+
+/// The command handler's part of a sensor or admission-policy command (`docs/analysis.md`, "The
+/// admission task"). A **stop** only removes load: it takes effect here, at the handler's priority and
+/// within its deadline, and then goes to the admission task like every such command, which brings its
+/// running set up to date in the order heard (and applies the stop again, in case a request for the
+/// same topic was still waiting there). When the admission queue is full, one of this board's publish or
+/// one-shot requests is refused unseen: counted as [`amiro_can::RefusalReason::Busy`] and answered with
+/// a verdict through the transmit queue; anything else is dropped and counted as a received frame
+/// dropped (the queue is bounded, as the receive queue is).
+#[allow(clippy::too_many_arguments)]
+pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
     frame: &RxFrame,
+    board: amiro_can::Board,
+    handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    wake_levels: &mut [Sender<'static, (), 1>],
     requests: &mut Sender<'static, RxFrame, N>,
+    mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
+    tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
 ) {
-    if requests.try_send(*frame).is_err() {
-        RX_DROPPED.fetch_add(1, Ordering::Relaxed);
+    let stop = crate::admission::is_stop(frame.id, frame.payload());
+    if stop {
+        let _ = handle_command::<C>(frame, handler, wake_levels);
     }
+    if requests.try_send(*frame).is_ok() || stop {
+        // A stop that finds the queue full has taken effect all the same (and is traced as handled);
+        // only the admission task's view keeps the stream, which errs on the safe side (more load).
+        return;
+    }
+    match crate::admission::busy_verdict(board, frame.id, frame.payload()) {
+        Some(verdict) => {
+            crate::health::count_admission(true, amiro_can::RefusalReason::Busy);
+            let now = C::now_us();
+            // At most one busy verdict per one-shot interval: a flood of requests must not turn into a
+            // flood of verdicts (each refusal is counted all the same).
+            let last = LAST_BUSY_VERDICT_MS.load(Ordering::Relaxed);
+            let now_ms = crate::admission::ticks_1024us(now);
+            // 1024 µs units: 40 of them are at least the one-shot interval (40 ms).
+            if last != 0
+                && now_ms.wrapping_sub(last) < u32::from(crate::admission::ONE_SHOT_INTERVAL_MS)
+            {
+                return;
+            }
+            LAST_BUSY_VERDICT_MS.store(now_ms.max(1), Ordering::Relaxed);
+            // Not traced as queued frames: no sample was released for them (the bench would take
+            // them for late samples of the diagnostics topic).
+            for verdict_frame in verdict {
+                let _ = tx_queue.lock(|q| q.push(verdict_frame));
+            }
+            cortex_m::peripheral::NVIC::pend(tx_interrupt);
+        }
+        None => {
+            RX_DROPPED.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// The admission task's loop (`docs/analysis.md`, "The admission task"), the same on every board:
+/// analyses every board once before the first request, then takes the commands the handler queued in
+/// the order heard through [`handle_command_admitted`], paced by [`crate::admission::Pacing`]: at most
+/// `K` analysed commands in any window, this board's one-shots at least the one-shot interval apart.
+#[allow(clippy::too_many_arguments)]
+pub async fn serve_admission<
+    C: Clock,
+    const N: usize,
+    const M: usize,
+    const Q: usize,
+    const R: usize,
+    const K: usize,
+>(
+    admission: &mut crate::admission::Admission<'_, N, M>,
+    pacing: &mut crate::admission::Pacing<K>,
+    requests: &mut Receiver<'static, RxFrame, R>,
+    mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
+    mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
+    tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
+    wake_levels: &mut [Sender<'static, (), 1>],
+) {
+    // Every board analysed once with nothing running, before the first request.
+    admission.prepare();
+    while let Some(frame) = next_command(requests).await {
+        let started = C::now_us();
+        handle_command_admitted::<C, N, M, Q>(
+            &frame,
+            admission,
+            &mut handler,
+            &mut tx_queue,
+            tx_interrupt,
+            wake_levels,
+        );
+        let next = pacing.next_start(
+            started,
+            C::now_us(),
+            admission.analysed(),
+            admission.sampled(),
+        );
+        C::delay_until_us(next).await;
+        if admission.stale() {
+            // A stream left the running set (a stop, a one-shot): its board's kept analysis is redone now, as a
+            // paced step of its own, so that no decision re-analyses more than its own board and the bus.
+            let started = C::now_us();
+            admission.refresh_stale();
+            #[cfg(feature = "qemu")]
+            note_refresh::<C, N, M>(admission, started);
+            let next = pacing.next_start(started, C::now_us(), admission.analysed(), false);
+            C::delay_until_us(next).await;
+        }
+    }
+}
+
+/// QEMU: the cost of a refresh step, as [`note_decision`] logs a decision's.
+#[cfg(feature = "qemu")]
+fn note_refresh<C: Clock, const N: usize, const M: usize>(
+    admission: &crate::admission::Admission<'_, N, M>,
+    started: u64,
+) {
+    let (last, _) = admission.iterations();
+    let took = C::now_us().saturating_sub(started);
+    let (mut b, mut c) = ([0u8; 10], [0u8; 10]);
+    cortex_m::interrupt::free(|_| {
+        crate::log!(
+            "admission refresh iterations=",
+            telemetry::decimal(u32::try_from(last).unwrap_or(u32::MAX), &mut b),
+            " virtual_us=",
+            telemetry::decimal(u32::try_from(took).unwrap_or(u32::MAX), &mut c)
+        );
+    });
 }
 
 /// Handles one command frame with admission control (`admission`, `docs/analysis.md`): every
@@ -203,7 +325,12 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     note_decision::<C, N, M>(frame.id, &check, admission, started);
     let (outcome, verdict) = match check {
         // As of now (after the check): a new publisher's grid starts when it can start.
-        Check::Pass => return handle_command_at(C::now_us(), frame, handler, wake_levels),
+        // A stop took effect (and was traced) in the command handler; applied again here, untraced, in
+        // case a request for the same topic was still waiting in the queue.
+        Check::Pass => {
+            let traced = !crate::admission::is_stop(frame.id, frame.payload());
+            return handle_command_at(C::now_us(), frame, handler, wake_levels, traced);
+        }
         Check::Refused(frames, reason) => {
             crate::health::count_admission(true, reason);
             (None, frames)
@@ -211,7 +338,7 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
         Check::Warned(frames, reason) => {
             crate::health::count_admission(false, reason);
             (
-                handle_command_at(C::now_us(), frame, handler, wake_levels),
+                handle_command_at(C::now_us(), frame, handler, wake_levels, true),
                 frames,
             )
         }

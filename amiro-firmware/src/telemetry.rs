@@ -35,7 +35,7 @@ mod rtt {
     pub fn init() {
         let channels = rtt_init! {
             up: {
-                0: { size: 512, mode: ChannelMode::NoBlockSkip, name: "log" }
+                0: { size: 1024, mode: ChannelMode::NoBlockSkip, name: "log" }
                 1: { size: 1024, mode: ChannelMode::NoBlockSkip, name: "trace" }
             }
         };
@@ -85,6 +85,30 @@ pub fn init() {
         rtt::init();
         crate::tracing::start_clock(TRACE_CLOCK_HZ);
     }
+}
+
+/// The robot's first log line, right after [`init`]: the board, and whether the watchdog already
+/// runs (every board starts it before anything that could spin). `cargo xtask smoke` checks the
+/// boot's order from these lines. The QEMU build has no watchdog and prints nothing here.
+pub fn boot_report(board: &str) {
+    #[cfg(not(feature = "qemu"))]
+    crate::log!(
+        "boot: ",
+        board,
+        if crate::health::watchdog_running() {
+            ", watchdog running"
+        } else {
+            ", watchdog NOT running"
+        }
+    );
+    #[cfg(feature = "qemu")]
+    let _ = board;
+}
+
+/// The robot's log line at the end of `init`: the tasks start next.
+pub fn init_done() {
+    #[cfg(not(feature = "qemu"))]
+    crate::log!("init: done; RTIC starts the tasks");
 }
 
 /// Emits one trace event.

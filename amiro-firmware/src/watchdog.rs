@@ -64,15 +64,28 @@ pub fn start(timeout_ms: u32) {
         }
     }
     write(KR, 0xAAAA);
+    // Logged only once the log runs (the boot's first start comes before it; `boot_report` says
+    // that one ran): the running tasks' start, and the hand-over's stretch.
+    let mut digits = [0u8; 10];
+    crate::log!(
+        "watchdog: reset after ",
+        crate::telemetry::decimal(timeout_ms.min(26_214), &mut digits),
+        " ms without a feed"
+    );
     crate::health::watchdog_started();
 }
 
-/// Reloads the counter.
+/// Reloads the counter. The first feed is logged: the tasks and the monotonic run.
 pub fn feed() {
+    use core::sync::atomic::{AtomicBool, Ordering};
+    static FED: AtomicBool = AtomicBool::new(false);
     if cfg!(feature = "qemu") {
         return;
     }
     write(KR, 0xAAAA);
+    if !FED.swap(true, Ordering::Relaxed) {
+        crate::log!("watchdog: first feed (the tasks and the monotonic run)");
+    }
 }
 
 /// The longest period (~26 s at 40 kHz), before handing over to the bootloader.

@@ -4,7 +4,7 @@ use std::cell::{Cell, RefCell};
 use std::collections::HashMap;
 
 use amiro_firmware::bxcan::Registers;
-use amiro_firmware::clock_tree::{self, ClockFault, CLOCK_POLLS};
+use amiro_firmware::clock_tree::{self, ClockFault, PllSetup, CLOCK_POLLS};
 
 const CR: usize = 0x00;
 const CFGR_F1: usize = 0x04;
@@ -20,6 +20,8 @@ struct Rcc {
     pll_stuck: bool,
     /// SYSCLK stays on the PLL.
     switch_stuck: bool,
+    /// The PLL never locks.
+    pll_never_locks: bool,
 }
 
 impl Rcc {
@@ -52,6 +54,9 @@ impl Registers for &Rcc {
             }
             if self.pll_stuck {
                 value |= 1 << 25;
+            }
+            if self.pll_never_locks {
+                value &= !(1 << 25);
             }
         }
         if offset == CFGR_F1 && !self.switch_stuck {
@@ -105,4 +110,118 @@ fn a_pll_that_never_stops_or_a_switch_that_never_happens_is_a_fault() {
         Err(ClockFault::SwitchToHsi)
     );
     assert!(rcc.reads.get() <= 3 + 2 * CLOCK_POLLS);
+}
+
+/// A flash interface whose latency field takes what is written, unless it is stuck.
+#[derive(Default)]
+struct Flash {
+    acr: Cell<u32>,
+    stuck: bool,
+}
+
+impl Registers for &Flash {
+    fn read(&self, _offset: usize) -> u32 {
+        self.acr.get()
+    }
+
+    fn write(&self, _offset: usize, value: u32) {
+        if !self.stuck {
+            self.acr.set(value);
+        }
+    }
+}
+
+/// The F103's plan: HSE × 9, APB1 and APB2 / 2, two wait states.
+const F1_PLL: PllSetup = PllSetup {
+    pll_register: CFGR_F1,
+    pll: (0x003F_0000, 1 << 16 | 0b0111 << 18),
+    prescalers: (0x3FF0, 0b100 << 8 | 0b100 << 11),
+    flash_acr: 0,
+    latency: (0b111, 2),
+};
+
+fn started_from_reset(rcc: &Rcc) {
+    assert_eq!(clock_tree::to_reset_state(&rcc, CFGR_F1), Ok(()));
+    assert!(clock_tree::in_reset_state(&rcc, CFGR_F1));
+}
+
+#[test]
+fn the_pll_starts_and_becomes_sysclk_with_its_factors_prescalers_and_wait_states() {
+    let rcc = Rcc::handed_over_by_bootloader();
+    started_from_reset(&rcc);
+    assert_eq!(clock_tree::start_crystal(&&rcc), Ok(()));
+    let flash = Flash::default();
+    assert_eq!(
+        clock_tree::start_pll(&&rcc, &&flash, CFGR_F1, &F1_PLL),
+        Ok(())
+    );
+    let cfgr = rcc.regs.borrow()[&CFGR_F1];
+    assert_eq!(cfgr & 0x003F_0000, 1 << 16 | 0b0111 << 18, "HSE × 9");
+    assert_eq!(cfgr & 0x3FF0, 0b100 << 8 | 0b100 << 11, "APBs / 2");
+    assert_eq!(cfgr & 0b1111, 0b1010, "SW = SWS = PLL");
+    assert_eq!(flash.acr.get() & 0b111, 2);
+    assert!(clock_tree::running_on_crystal_pll(&&rcc, CFGR_F1));
+}
+
+#[test]
+fn a_pll_that_never_locks_leaves_the_internal_oscillator_with_undivided_buses() {
+    let rcc = Rcc {
+        pll_never_locks: true,
+        ..Rcc::handed_over_by_bootloader()
+    };
+    started_from_reset(&rcc);
+    let flash = Flash::default();
+    let before = rcc.reads.get();
+    assert_eq!(
+        clock_tree::start_pll(&&rcc, &&flash, CFGR_F1, &F1_PLL),
+        Err(ClockFault::PllNotReady)
+    );
+    assert!(rcc.reads.get() - before <= 8 + 2 * CLOCK_POLLS, "bounded");
+    let cr = rcc.regs.borrow()[&CR];
+    let cfgr = rcc.regs.borrow()[&CFGR_F1];
+    assert_eq!(cr & 1 << 24, 0, "PLL off again");
+    assert_eq!(cfgr & 0b1111, 0, "SYSCLK from HSI");
+    assert_eq!(cfgr & 0x3FF0, 0, "every bus at the oscillator's frequency");
+    assert!(clock_tree::in_reset_state(&&rcc, CFGR_F1));
+}
+
+#[test]
+fn flash_that_keeps_its_wait_states_or_a_switch_that_never_happens_is_a_fault() {
+    let rcc = Rcc::default();
+    let flash = Flash {
+        stuck: true,
+        ..Flash::default()
+    };
+    assert_eq!(
+        clock_tree::start_pll(&&rcc, &&flash, CFGR_F1, &F1_PLL),
+        Err(ClockFault::FlashLatency)
+    );
+    assert_eq!(rcc.regs.borrow()[&CR] & 1 << 24, 0, "the PLL never started");
+    let rcc = Rcc {
+        switch_stuck: true,
+        ..Rcc::default()
+    };
+    assert_eq!(
+        clock_tree::start_pll(&&rcc, &&Flash::default(), CFGR_F1, &F1_PLL),
+        Err(ClockFault::SwitchToPll)
+    );
+}
+
+#[test]
+fn a_running_pll_is_never_reconfigured_and_an_unreadable_tree_is_recognised() {
+    let rcc = Rcc::handed_over_by_bootloader();
+    assert!(clock_tree::running_on_crystal_pll(&&rcc, CFGR_F1));
+    assert!(!clock_tree::in_reset_state(&&rcc, CFGR_F1));
+    assert_eq!(
+        clock_tree::start_pll(&&rcc, &&Flash::default(), CFGR_F1, &F1_PLL),
+        Err(ClockFault::PllStillRunning)
+    );
+    // An RCC that reads zero everywhere (QEMU): the reset step fails, but the tree reads as reset.
+    let zero = Rcc {
+        dead_crystal: true,
+        pll_never_locks: true,
+        ..Rcc::default()
+    };
+    assert!(clock_tree::in_reset_state(&&zero, CFGR_F1));
+    assert!(!clock_tree::running_on_crystal_pll(&&zero, CFGR_F1));
 }

@@ -9,6 +9,11 @@
 //! PA3 right back) into an A3906, POWER_EN PB2, encoders on TIM3 full remap (PC6/PC7, left) and
 //! TIM4 (PB6/PB7, right), SYS_SYNC_N PC1, SYS_PD_N PC8, status LED PA1 (active low).
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
+use amiro_firmware::i2c::{self, Master};
+#[cfg(feature = "rev-1-1")]
+use amiro_firmware::spi;
+#[cfg(feature = "rev-1-1")]
+use embedded_hal::spi::{Mode as SpiMode, Phase, Polarity};
 #[cfg(feature = "rev-1-1")]
 use embedded_hal_bus::spi::{AtomicDevice, NoDelay};
 use embedded_hal_bus::util::AtomicCell;
@@ -16,13 +21,12 @@ use stm32f1xx_hal::afio::AfioExt;
 use stm32f1xx_hal::gpio::{GpioExt, OpenDrain, Output, PinState, PushPull, PA1, PB2, PC1, PC8};
 #[cfg(feature = "rev-1-1")]
 use stm32f1xx_hal::gpio::{PC13, PC14};
-use stm32f1xx_hal::i2c::{BlockingI2c, DutyCycle, Mode as I2cMode};
-use stm32f1xx_hal::pac::{self, I2C1, I2C2};
+use stm32f1xx_hal::pac;
 use stm32f1xx_hal::prelude::*;
-use stm32f1xx_hal::rcc;
-#[cfg(feature = "rev-1-1")]
-use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
 
+/// The IMU bus's fastest rate (the L3G4200D's limit is 10 MHz): PCLK2 / 4 on the crystal.
+#[cfg(feature = "rev-1-1")]
+pub const IMU_SPI_HZ: u32 = 9_000_000;
 /// Motor PWM: 72 MHz timer clock, period 3600 → 20 kHz, as the original 1.x firmware.
 pub const PWM_PERIOD: u16 = 3600;
 /// System clock.
@@ -30,17 +34,12 @@ pub const SYSCLK_HZ: u32 = 72_000_000;
 /// The APB1 timer clock (TIM5's input), as `init` set it up.
 static TIMER_CLOCK_HZ: core::sync::atomic::AtomicU32 =
     core::sync::atomic::AtomicU32::new(SYSCLK_HZ);
-/// I2C timeouts: a byte takes 25 µs at 400 kHz, so 200 µs means the bus is stuck. They bound how
-/// long a dead sensor can hold its bus lock (and so block the publishers sharing it).
-const I2C_START_TIMEOUT_US: u32 = 200;
-const I2C_START_RETRIES: u8 = 1;
-const I2C_TIMEOUT_US: u32 = 200;
 /// EXTI line of SYS_PD_N (PC8).
 const SYS_PD_LINE: u32 = 1 << 8;
 
 /// SPI1 shared by the gyroscope and the accelerometer (1-1).
 #[cfg(feature = "rev-1-1")]
-pub type ImuBus = Spi<pac::SPI1, u8>;
+pub type ImuBus = spi::Master<Mmio>;
 /// No shared IMU bus object on 1-2 (the BNO055 owns I2C1 alone).
 #[cfg(feature = "rev-1-2")]
 pub type ImuBus = ();
@@ -50,14 +49,15 @@ pub type GyroSpi = AtomicDevice<'static, ImuBus, PC14<Output<PushPull>>, NoDelay
 /// The accelerometer's SPI device (chip select PC13).
 #[cfg(feature = "rev-1-1")]
 pub type AccelSpi = AtomicDevice<'static, ImuBus, PC13<Output<PushPull>>, NoDelay>;
-/// I2C1 (remapped to PB8/PB9): the HMC5883L.
+/// I2C1 (remapped to PB8/PB9): the HMC5883L (the runtime's bounded master: a dead sensor holds
+/// its bus lock, and so the publishers sharing it, for at most one 200 µs timeout per flag).
 #[cfg(feature = "rev-1-1")]
-pub type CompassI2c = BlockingI2c<I2C1>;
-/// I2C1 (remapped to PB8/PB9): the BNO055.
+pub type CompassI2c = Master;
+/// I2C1 (remapped to PB8/PB9): the BNO055 (the runtime's bounded master, as the 1-1 compass).
 #[cfg(feature = "rev-1-2")]
-pub type ImuI2c = BlockingI2c<I2C1>;
+pub type ImuI2c = Master;
 /// I2C2: the PCA9544A multiplexer and the floor sensors.
-pub type FloorI2c = BlockingI2c<I2C2>;
+pub type FloorI2c = Master;
 /// The CAN controller's transmit mailboxes (the runtime's register-level driver).
 pub type CanTxPort = Mailboxes<Mmio>;
 /// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
@@ -138,22 +138,17 @@ pub fn init(
     mut cp: cortex_m::Peripherals,
     spi_cell: &'static mut Option<AtomicCell<ImuBus>>,
 ) -> (Board, cortex_m::peripheral::NVIC) {
-    // Clock tree reset, crystal start (bounded) or the HSI fallback, and CAN1 reset: the runtime's.
-    let clocks = amiro_firmware::chip::f1_clock_plan();
+    // The clock tree, every wait bounded (the runtime's `chip::clock_plan`): the PLL from the
+    // crystal (72 MHz), else from the internal oscillator (64 MHz), else the internal oscillator
+    // alone (8 MHz); each fault logged and flagged on the diagnostics. Then CAN1's reset.
+    let clocks = amiro_firmware::chip::clock_plan();
     amiro_firmware::chip::reset_and_enable_can1();
-    let base = if clocks.on_crystal {
-        rcc::Config::hse(8.MHz())
-    } else {
-        rcc::Config::hsi()
-    };
-    let config = base
-        .sysclk(clocks.sysclk_hz.Hz())
-        .hclk(clocks.sysclk_hz.Hz())
-        .pclk1(clocks.pclk_hz.Hz())
-        .pclk2(clocks.pclk_hz.Hz());
+    // The HAL's RCC only constrained, never frozen: its `freeze` waits for the crystal and the PLL
+    // without a bound, and no driver here takes its frequencies from the HAL (they come from the
+    // plan).
+    let mut rcc = dp.RCC.constrain();
+    enable_spi1();
     TIMER_CLOCK_HZ.store(clocks.timer_hz, core::sync::atomic::Ordering::Relaxed);
-    let mut flash = dp.FLASH.constrain();
-    let mut rcc = dp.RCC.freeze(config, &mut flash.acr);
     // The blocking I2C driver times out on the DWT cycle counter.
     cp.DCB.enable_trace();
     cp.DWT.enable_cycle_counter();
@@ -192,6 +187,7 @@ pub fn init(
     let power_en = gpiob
         .pb2
         .into_push_pull_output_with_state(&mut gpiob.crl, PinState::Low);
+    amiro_firmware::log!("power lines: SYS_SYNC_N held low, SYS_PD_N released, motor power off");
 
     // JTAG off (its pins carry motor PWM), SWD kept for probe-rs; TIM2 partial remap 1, TIM3 full remap.
     let (pa15, pb3, _pb4) = afio.mapr.disable_jtag(gpioa.pa15, gpiob.pb3, gpiob.pb4);
@@ -212,7 +208,8 @@ pub fn init(
     let motors = Motors::new(dp.TIM2, power_en);
     let encoders = Encoders::new(dp.TIM3, dp.TIM4);
 
-    // Revision 1-1: SPI1, mode 0 at 9 MHz (PCLK2 / 4), chip selects idle high.
+    // Revision 1-1: SPI1, mode 0 at up to 9 MHz (PCLK2 / 4 on the crystal), chip selects idle
+    // high; SCK and MOSI alternate push-pull, MISO floating; the runtime's bounded master.
     #[cfg(feature = "rev-1-1")]
     let gyro_cs = gpioc
         .pc14
@@ -222,14 +219,22 @@ pub fn init(
         .pc13
         .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
     #[cfg(feature = "rev-1-1")]
-    let spi = dp.SPI1.spi(
-        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
+    let _spi_pins = (
+        gpioa.pa5.into_alternate_push_pull(&mut gpioa.crl),
+        gpioa.pa6.into_floating_input(&mut gpioa.crl),
+        gpioa.pa7.into_alternate_push_pull(&mut gpioa.crl),
+    );
+    let _ = dp.SPI1;
+    #[cfg(feature = "rev-1-1")]
+    // SAFETY: SPI1 is used by this value only.
+    let spi = spi::Master::new(
+        unsafe { Mmio::new(spi::SPI1) },
+        clocks.pclk2_hz,
+        IMU_SPI_HZ,
         SpiMode {
             polarity: Polarity::IdleLow,
             phase: Phase::CaptureOnFirstTransition,
         },
-        9.MHz(),
-        &mut rcc,
     );
     // Both devices live in the one `imu` resource, so the bus is never contended; the atomic
     // cell only makes the shared bus `Sync` without a critical section.
@@ -257,27 +262,29 @@ pub fn init(
         reset.set_high();
     }
 
-    // I2C1 remapped to PB8/PB9 and I2C2 on PB10/PB11, both 400 kHz.
-    let i2c1 = BlockingI2c::new(
-        dp.I2C1.remap(&mut afio.mapr),
-        (gpiob.pb8, gpiob.pb9),
-        I2cMode::fast(400.kHz(), DutyCycle::Ratio2to1),
-        &mut rcc,
-        I2C_START_TIMEOUT_US,
-        I2C_START_RETRIES,
-        I2C_TIMEOUT_US,
-        I2C_TIMEOUT_US,
+    // I2C1 remapped to PB8/PB9 and I2C2 on PB10/PB11, both 400 kHz: pins alternate open drain
+    // (the board has pull-ups), the blocks reset and clocked, then the runtime's bounded master.
+    afio.mapr.modify_mapr(|_, w| w.i2c1_remap().set_bit());
+    let _i2c_pins = (
+        gpiob.pb8.into_alternate_open_drain(&mut gpiob.crh),
+        gpiob.pb9.into_alternate_open_drain(&mut gpiob.crh),
+        gpiob.pb10.into_alternate_open_drain(&mut gpiob.crh),
+        gpiob.pb11.into_alternate_open_drain(&mut gpiob.crh),
     );
-    let floor_i2c = BlockingI2c::new(
-        dp.I2C2,
-        (gpiob.pb10, gpiob.pb11),
-        I2cMode::fast(400.kHz(), DutyCycle::Ratio2to1),
-        &mut rcc,
-        I2C_START_TIMEOUT_US,
-        I2C_START_RETRIES,
-        I2C_TIMEOUT_US,
-        I2C_TIMEOUT_US,
-    );
+    // SAFETY: I2C1/I2C2 reset and clock bits, owned by init.
+    unsafe {
+        let rcc = &*pac::RCC::ptr();
+        rcc.apb1rstr()
+            .modify(|_, w| w.i2c1rst().set_bit().i2c2rst().set_bit());
+        rcc.apb1rstr()
+            .modify(|_, w| w.i2c1rst().clear_bit().i2c2rst().clear_bit());
+        rcc.apb1enr()
+            .modify(|_, w| w.i2c1en().set_bit().i2c2en().set_bit());
+    }
+    let _ = (dp.I2C1, dp.I2C2);
+    // SAFETY: I2C1 and I2C2 are used by these two values only.
+    let i2c1 = unsafe { Master::new(i2c::I2C1, clocks.pclk1_hz, clocks.sysclk_hz) };
+    let floor_i2c = unsafe { Master::new(i2c::I2C2, clocks.pclk1_hz, clocks.sysclk_hz) };
 
     // CAN1 on PA11/PA12 at 1 Mbit/s (no remap): RX floating input, TX alternate push-pull; the
     // runtime's driver configures the controller.
@@ -499,11 +506,23 @@ pub const CAN_TX_INTERRUPT: pac::Interrupt = pac::Interrupt::USB_HP_CAN_TX;
 
 /// Starts the TIM5 monotonic (APB1 timers run at 2 × PCLK1: 72 MHz, or 64 MHz on the fallback).
 pub fn start_monotonic(priority: u8) {
-    // SAFETY: init owns TIM5 and RCC at this point; the monotonic takes TIM5 over for good.
-    let (tim5, rcc) = unsafe { (pac::Peripherals::steal().TIM5, &*pac::RCC::ptr()) };
+    // SAFETY: init owns RCC at this point (only TIM5's enable and reset bits change); the
+    // monotonic takes TIM5 over for good.
+    let rcc = unsafe { &*pac::RCC::ptr() };
     let timer_clock = TIMER_CLOCK_HZ.load(core::sync::atomic::Ordering::Relaxed);
-    crate::mono::Tim5Backend::start(tim5, rcc, timer_clock, priority);
+    crate::mono::start(rcc, timer_clock, priority);
 }
 
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI9_5;
+
+/// SPI1's clock on and the block reset (the runtime's master takes it from there).
+fn enable_spi1() {
+    // SAFETY: SPI1's reset and clock bits, owned by init.
+    unsafe {
+        let rcc = &*pac::RCC::ptr();
+        rcc.apb2rstr().modify(|_, w| w.spi1rst().set_bit());
+        rcc.apb2rstr().modify(|_, w| w.spi1rst().clear_bit());
+        rcc.apb2enr().modify(|_, w| w.spi1en().set_bit());
+    }
+}

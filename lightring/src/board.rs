@@ -4,16 +4,17 @@
 //! CAN1 on PA11/PA12 at 1 Mbit/s, one TLC5947 on SPI1 (SCK PA5, MOSI PA7; MISO PA6 unused) at
 //! 2.25 MHz mode 0 with XLAT on PC4 driven as the chip select (its rising edge at the end of a
 //! transfer latches) and BLANK on PA4 (high = dark, the reset state, until the driver holds a
-//! frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The monotonic is TIM3.
+//! frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The monotonic is TIM3 (the runtime's half-period
+//! timer backend; it claims no pin — its channels only compare — so PA6/PA7 stay SPI1's).
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
+use amiro_firmware::spi;
+use embedded_hal::spi::{Mode as SpiMode, Phase, Polarity};
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
 use stm32f1xx_hal::afio::AfioExt;
 use stm32f1xx_hal::gpio::{GpioExt, OpenDrain, Output, PinState, PushPull, PA4, PC14, PC4, PD2};
-use stm32f1xx_hal::pac::{self, SPI1};
+use stm32f1xx_hal::pac;
 use stm32f1xx_hal::prelude::*;
-use stm32f1xx_hal::rcc;
-use stm32f1xx_hal::spi::{Mode as SpiMode, Phase, Polarity, Spi};
 
 /// The TLC5947's shift clock: 36 MHz / 16, as the original firmware.
 pub const LED_SPI_HZ: u32 = 2_250_000;
@@ -21,7 +22,7 @@ pub const LED_SPI_HZ: u32 = 2_250_000;
 const SYS_PD_LINE: u32 = 1 << 14;
 
 /// The TLC5947 on SPI1, XLAT as its chip select.
-pub type LedSpi = ExclusiveDevice<Spi<SPI1, u8>, PC4<Output<PushPull>>, NoDelay>;
+pub type LedSpi = ExclusiveDevice<spi::Master<Mmio>, PC4<Output<PushPull>>, NoDelay>;
 /// The CAN controller's transmit mailboxes (the runtime's register-level driver).
 pub type CanTxPort = Mailboxes<Mmio>;
 /// The CAN controller's error monitor.
@@ -31,9 +32,12 @@ pub const CAN_TX_INTERRUPT: pac::Interrupt = pac::Interrupt::USB_HP_CAN_TX;
 /// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
 pub type CanRxPort = Fifo0<Mmio>;
 /// The board's clock: TIM3 ticks are microseconds.
-pub type Clock = amiro_firmware::mono::TimerClock<rtic_monotonics::stm32::Tim3Backend, 1>;
+pub type Clock = amiro_firmware::mono::TimerClock<Tim3Backend, 1>;
 
-rtic_monotonics::stm32_tim3_monotonic!(Mono, 1_000_000);
+/// TIM3's registers: the same address and interrupt (29) on the F103 and on QEMU's `netduino2`.
+const TIM3_BASE: usize = 0x4000_0400;
+
+amiro_firmware::timer_monotonic!(Tim3Backend, TIM3_BASE, pac::Interrupt::TIM3, TIM3);
 
 /// Everything `init` hands on to the tasks.
 pub struct Board {
@@ -72,21 +76,16 @@ pub struct SystemSignals {
 /// Brings the board up: clocks (crystal, or the internal oscillator if the crystal does not start),
 /// pins, SPI1 for the LED driver, CAN.
 pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
-    // Clock tree reset, crystal start (bounded) or the HSI fallback, and CAN1 reset: the runtime's.
-    let clocks = amiro_firmware::chip::f1_clock_plan();
+    // The clock tree, every wait bounded (the runtime's `chip::clock_plan`): the PLL from the
+    // crystal (72 MHz), else from the internal oscillator (64 MHz), else the internal oscillator
+    // alone (8 MHz); each fault logged and flagged on the diagnostics. Then CAN1's reset.
+    let clocks = amiro_firmware::chip::clock_plan();
     amiro_firmware::chip::reset_and_enable_can1();
-    let base = if clocks.on_crystal {
-        rcc::Config::hse(8.MHz())
-    } else {
-        rcc::Config::hsi()
-    };
-    let config = base
-        .sysclk(clocks.sysclk_hz.Hz())
-        .hclk(clocks.sysclk_hz.Hz())
-        .pclk1(clocks.pclk_hz.Hz())
-        .pclk2(clocks.pclk_hz.Hz());
-    let mut flash = dp.FLASH.constrain();
-    let mut rcc = dp.RCC.freeze(config, &mut flash.acr);
+    // The HAL's RCC only constrained, never frozen: its `freeze` waits for the crystal and the PLL
+    // without a bound, and no driver here takes its frequencies from the HAL (they come from the
+    // plan).
+    let mut rcc = dp.RCC.constrain();
+    enable_spi1();
 
     let mut afio = dp.AFIO.constrain(&mut rcc);
     let mut gpioa = dp.GPIOA.split(&mut rcc);
@@ -106,6 +105,7 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     let sys_pd = gpioc
         .pc14
         .into_open_drain_output_with_state(&mut gpioc.crh, PinState::High);
+    amiro_firmware::log!("power lines: SYS_SYNC_N held low, SYS_PD_N released, LEDs blanked");
     // SAFETY: AFIO's clock is on (constrain above); EXTICR4 bits 8..12 select the port of line 14,
     // and nothing else in this firmware uses EXTI lines 12..15.
     unsafe {
@@ -127,14 +127,21 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     let xlat = gpioc
         .pc4
         .into_push_pull_output_with_state(&mut gpioc.crl, PinState::High);
-    let spi = dp.SPI1.spi(
-        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
+    let _spi_pins = (
+        gpioa.pa5.into_alternate_push_pull(&mut gpioa.crl),
+        gpioa.pa6.into_floating_input(&mut gpioa.crl),
+        gpioa.pa7.into_alternate_push_pull(&mut gpioa.crl),
+    );
+    let _ = dp.SPI1;
+    // SAFETY: SPI1 is used by this value only.
+    let spi = spi::Master::new(
+        unsafe { Mmio::new(spi::SPI1) },
+        clocks.pclk2_hz,
+        LED_SPI_HZ,
         SpiMode {
             polarity: Polarity::IdleLow,
             phase: Phase::CaptureOnFirstTransition,
         },
-        LED_SPI_HZ.Hz(),
-        &mut rcc,
     );
     let led_spi =
         ExclusiveDevice::new_no_delay(spi, xlat).unwrap_or_else(|_| amiro_firmware::fault::halt());
@@ -161,7 +168,12 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
 
 /// Starts the TIM3 monotonic (APB1 timers run at 2 × PCLK1).
 pub fn start_monotonic(priority: u8, timer_hz: u32) {
-    Mono::start(timer_hz, rtic_monotonics::stm32::Priority::new(priority));
+    // SAFETY: init owns RCC at this point; only TIM3's enable and reset bits change.
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    rcc.apb1enr().modify(|_, w| w.tim3en().set_bit());
+    rcc.apb1rstr().modify(|_, w| w.tim3rst().set_bit());
+    rcc.apb1rstr().modify(|_, w| w.tim3rst().clear_bit());
+    Tim3Backend::start(timer_hz, priority);
 }
 
 /// LightRing's safe state, from any context: BLANK high, every LED dark at once.
@@ -193,3 +205,14 @@ impl SystemSignalLines for SystemSignals {
 
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI15_10;
+
+/// SPI1's clock on and the block reset (the runtime's master takes it from there).
+fn enable_spi1() {
+    // SAFETY: SPI1's reset and clock bits, owned by init.
+    unsafe {
+        let rcc = &*pac::RCC::ptr();
+        rcc.apb2rstr().modify(|_, w| w.spi1rst().set_bit());
+        rcc.apb2rstr().modify(|_, w| w.spi1rst().clear_bit());
+        rcc.apb2enr().modify(|_, w| w.spi1en().set_bit());
+    }
+}

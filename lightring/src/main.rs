@@ -57,16 +57,24 @@ pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// per millisecond whatever the bus carries, and a command is latched within about 1.4 ms.
 pub const LATCH_MIN_INTERVAL_US: u64 = 1_000;
 
-/// The admission task takes at most one publish request per this interval (other sensor and
-/// policy commands, which run no analysis, at most one per `COMMAND_MIN_INTERVAL_US`): the check's
-/// cost (a whole-robot analysis) is bounded in the analysis as a sporadic task of this period.
-pub const ADMISSION_MIN_INTERVAL_US: u64 = 40_000;
-// One-shot requests are decided at the interval the admission task takes them.
-const _: () = assert!(
-    ADMISSION_MIN_INTERVAL_US == amiro_firmware::admission::ONE_SHOT_INTERVAL_MS as u64 * 1000
-);
-/// Depth of the queue from the command handler to the admission task.
-pub const ADMISSION_QUEUE_LEN: usize = 4;
+/// The admission task starts at most `ADMISSION_BURST` analysed commands (publish and one-shot
+/// requests of any board) in any window of `ADMISSION_WINDOW_US` (`amiro_firmware::admission::Pacing`):
+/// a burst of requests is decided back to back, and the check's cost is bounded in the analysis as
+/// `ADMISSION_BURST` decisions per window. Other commands (stops, policies: no analysis) wait
+/// `ADMISSION_NOTE_INTERVAL_US`.
+pub const ADMISSION_BURST: usize = 5;
+/// See `ADMISSION_BURST`.
+pub const ADMISSION_WINDOW_US: u64 = 220_000;
+/// After a command that ran no analysis (a stop, which the command handler has already applied, or a
+/// policy command) the admission task waits this long: their cost stays a small part of its budget.
+pub const ADMISSION_NOTE_INTERVAL_US: u64 = 2_500;
+/// This board's one-shot samples are at least this far apart (the interval a one-shot is decided at).
+pub const ONE_SHOT_INTERVAL_US: u64 = amiro_firmware::admission::ONE_SHOT_INTERVAL_MS as u64 * 1000;
+/// Depth of the queue from the command handler to the admission task (a burst waits here; a full
+/// queue refuses this board's requests with a verdict, `RefusalReason::Busy`).
+pub const ADMISSION_QUEUE_LEN: usize = 8;
+/// The admission task's pacing state type.
+pub type AdmissionPacing = amiro_firmware::admission::Pacing<ADMISSION_BURST>;
 
 /// The clock every task uses (TIM3 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
@@ -123,6 +131,7 @@ mod app {
         requests: Receiver<'static, RxFrame, ADMISSION_QUEUE_LEN>,
         wake_latch: Sender<'static, (), 1>,
         wake_publisher: [Sender<'static, (), 1>; 1],
+        wake_commands: [Sender<'static, (), 1>; 1],
         publisher_wakeups: Receiver<'static, (), 1>,
         latch_wakeups: Receiver<'static, (), 1>,
         ring: LightRing<platform::LedSpi>,
@@ -136,6 +145,7 @@ mod app {
         iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
         health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
         amiro_firmware::telemetry::init();
+        amiro_firmware::telemetry::boot_report("LightRing");
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
         let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
@@ -154,6 +164,7 @@ mod app {
         amiro_firmware::log!("LightRing up");
 
         signals.release_sync();
+        amiro_firmware::telemetry::init_done();
         // A shutdown requested before we were up has no edge to catch: look at the level.
         if signals.shutdown_requested() {
             rtic::pend(platform::SHUTDOWN_INTERRUPT);
@@ -174,6 +185,7 @@ mod app {
                 to_admission,
                 requests,
                 wake_latch,
+                wake_commands: [wake_publisher.clone()],
                 wake_publisher: [wake_publisher],
                 publisher_wakeups,
                 latch_wakeups,
@@ -211,13 +223,21 @@ mod app {
     /// Decodes each command and records LED colours (waking the latch); sensor and admission-policy
     /// commands go to `admit_requests` in the order heard; at most one command per
     /// `COMMAND_MIN_INTERVAL_US`.
-    #[task(priority = 5, shared = [handler, leds], local = [commands, to_admission, wake_latch])]
+    #[task(priority = 5, shared = [handler, leds, tx_queue], local = [commands, to_admission, wake_latch, wake_commands])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
         while let Some(frame) = tasks::next_command(cx.local.commands).await {
             let started = Clock::now_us();
             if tasks::for_admission(&frame) {
-                tasks::forward_to_admission(&frame, cx.local.to_admission);
+                tasks::route_to_admission::<Clock, ADMISSION_QUEUE_LEN, TX_QUEUE_LEN>(
+                    &frame,
+                    CanBoard::LightRing,
+                    &mut cx.shared.handler,
+                    cx.local.wake_commands,
+                    cx.local.to_admission,
+                    &mut cx.shared.tx_queue,
+                    platform::CAN_TX_INTERRUPT,
+                );
             } else if let Some((now, Outcome::Led { command, .. })) =
                 tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
             {
@@ -229,10 +249,10 @@ mod app {
     }
 
     /// Admission control in the background (priority 0, thread mode: it delays no other task,
-    /// only its locks can block them briefly): checks each sensor command against the robot's
-    /// schedule before it changes anything (a refused request is answered with a verdict and
-    /// changes nothing), then updates the publisher table and wakes the publisher; at most one
-    /// publish request per `ADMISSION_MIN_INTERVAL_US`.
+    /// only its locks can block them briefly): checks each publish and one-shot request against the
+    /// robot's schedule before it changes anything (a refused request is answered with a verdict and
+    /// changes nothing), then updates the publisher table and wakes the levels whose schedule
+    /// changed; at most `ADMISSION_BURST` analysed requests per `ADMISSION_WINDOW_US`.
     #[task(
         priority = 0,
         shared = [handler, tx_queue],
@@ -240,37 +260,37 @@ mod app {
             requests,
             wake_publisher,
             admission: crate::AdmissionState = crate::AdmissionState::new(),
+            pacing: crate::AdmissionPacing = crate::AdmissionPacing::new(
+                crate::ADMISSION_WINDOW_US,
+                crate::ONE_SHOT_INTERVAL_US,
+                crate::ADMISSION_NOTE_INTERVAL_US,
+            ),
         ]
     )]
-    async fn admit_requests(mut cx: admit_requests::Context) {
+    async fn admit_requests(cx: admit_requests::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::ADMIT_REQUESTS);
         let mut admission = amiro_firmware::admission::Admission::new(
             &crate::admission_table::ROBOT,
             CanBoard::LightRing,
             cx.local.admission,
         );
-        // Every board analysed once with nothing running, before the first request.
-        admission.prepare();
-        while let Some(frame) = tasks::next_command(cx.local.requests).await {
-            // One publisher task serves every level: one sender wakes it for any of them.
-            tasks::handle_command_admitted::<Clock, _, _, TX_QUEUE_LEN>(
-                &frame,
-                &mut admission,
-                &mut cx.shared.handler,
-                &mut cx.shared.tx_queue,
-                platform::CAN_TX_INTERRUPT,
-                cx.local.wake_publisher,
-            );
-            // From the end of the command: a one-shot's sample (woken before the end) is at least
-            // one interval after the previous one, whatever each decision took.
-            let done = Clock::now_us();
-            let interval = if admission.paced() {
-                crate::ADMISSION_MIN_INTERVAL_US
-            } else {
-                crate::COMMAND_MIN_INTERVAL_US
-            };
-            Clock::delay_until_us(done + interval).await;
-        }
+        tasks::serve_admission::<
+            Clock,
+            _,
+            _,
+            TX_QUEUE_LEN,
+            ADMISSION_QUEUE_LEN,
+            { crate::ADMISSION_BURST },
+        >(
+            &mut admission,
+            cx.local.pacing,
+            cx.local.requests,
+            cx.shared.handler,
+            cx.shared.tx_queue,
+            platform::CAN_TX_INTERRUPT,
+            cx.local.wake_publisher,
+        )
+        .await;
     }
 
     /// Shifts the colours into the TLC5947 and latches them: after every change (at most one latch

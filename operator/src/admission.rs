@@ -233,8 +233,10 @@ impl Checker {
         };
         let request = self.stream(command.topic, command.priority, period)?;
         let decision = self.decide(&request, suggest);
-        let warn =
-            self.policies[slot(command.topic.info().board)] == AdmissionPolicy::AcceptAndWarn;
+        // Accept-and-warn starts a refused request only above the hard floor (a bounded publisher miss).
+        let warn = self.policies[slot(command.topic.info().board)]
+            == AdmissionPolicy::AcceptAndWarn
+            && decision.floor.is_none();
         if decision.refusal.is_none() || warn {
             match command.mode {
                 SensorMode::Once => self.remove(command.topic),
@@ -251,16 +253,20 @@ impl Checker {
             return None;
         };
         let (request, decision) = self.apply(command, true)?;
-        let refusal = decision.refusal?;
+        let first = decision.refusal?;
         let Command::Sensor(sensor) = command else {
             return None;
         };
         let board = sensor.topic.info().board;
         let topic = sensor.topic.info().name;
         let level = sensor.priority.name();
-        let decided = match self.policies[slot(board)] {
-            AdmissionPolicy::Refuse => "would refuse",
-            AdmissionPolicy::AcceptAndWarn => "would start, with a warning,",
+        let (decided, refusal) = match (self.policies[slot(board)], decision.floor) {
+            (AdmissionPolicy::AcceptAndWarn, None) => ("would start, with a warning,", first),
+            (AdmissionPolicy::AcceptAndWarn, Some(floor)) => (
+                "would refuse (below the hard floor, whatever the policy)",
+                floor,
+            ),
+            (AdmissionPolicy::Refuse, _) => ("would refuse", first),
         };
         let mut text = match sensor.mode {
             SensorMode::Publish(period) => {
@@ -702,12 +708,21 @@ mod tests {
     fn a_policy_heard_decides_whether_a_refused_request_runs() {
         let mut checker = Checker::load().expect("the repository's timing files");
         checker.heard(&at(0, "21A#0301")); // DiWheelDrive: accept-and-warn
-        let warning = checker.check(&message("009#01010002")).expect("warned");
+                                           // The two-frame attack: below the hard floor, refused whatever the policy.
+        let refusal = checker.check(&message("009#01010002")).expect("refused");
+        assert!(refusal.contains("below the hard floor"), "{refusal}");
+        assert!(checker.known().is_empty(), "not started");
+        // A bounded publisher miss is started with a warning: beside the thesis request, PowerManagement's ring
+        // every 6 ms, then its power status every 20 ms under accept-and-warn (scenario admission-decisions).
+        checker.heard(&at(0, "205#01840302"));
+        assert!(checker.check(&message("21F#01060000")).is_none());
+        checker.heard(&at(0, "21B#0301"));
+        let warning = checker.check(&message("21E#01140000")).expect("warned");
         assert!(
             warning.contains("would start, with a warning,"),
             "{warning}"
         );
-        assert_eq!(checker.known().len(), 1, "started anyway");
+        assert_eq!(checker.known().len(), 3, "started anyway");
     }
 
     #[test]

@@ -65,6 +65,7 @@ Examples:
       says: medium command magnetometer-x: publish every 900 µs (samples arrive on 605)
   amiro decode 608#FCFF1E00FBFF --json
   amiro decode --file candump-2024-01-01_120000.log
+  amiro decode --file candump-2024-01-01_120000.log --mcap run.mcap     the same frames for Foxglove
   candump -L can0 | amiro decode"
     )]
     Decode(DecodeArgs),
@@ -122,7 +123,9 @@ Bus URLs (--bus, or the AMIRO_BUS environment variable):
 Examples:
   amiro monitor --bus socketcan:can0
   amiro monitor --bus slcan:/dev/ttyUSB0 --count 8 --timeout 2s --json
-  amiro monitor --bus file:candump-2024-01-01_120000.log --realtime"
+  amiro monitor --bus file:candump-2024-01-01_120000.log --realtime
+  amiro monitor --bus socketcan:can0 --dashboard                 one live row per topic
+  amiro monitor --bus slcan:/dev/ttyUSB0 --record run.mcap       and keep it for Foxglove"
     )]
     Monitor(MonitorArgs),
 
@@ -153,6 +156,10 @@ Examples:
     /// Play a script: timed commands, waits and drives, printing what comes back
     #[command(long_about = crate::cli_session::RUN_ABOUT, after_help = crate::cli_session::RUN_HELP)]
     Run(crate::cli_session::RunArgs),
+
+    /// Record a bus into an MCAP file for Foxglove: one channel per topic, raw frames, log time = frame time
+    #[command(long_about = crate::cli_session::RECORD_ABOUT, after_help = crate::cli_session::RECORD_HELP)]
+    Record(crate::cli_session::RecordArgs),
 
     /// Hold an SLCAN adapter and share it with other amiro commands until Ctrl-C
     #[command(long_about = crate::cli_session::RELAY_ABOUT)]
@@ -185,6 +192,10 @@ pub struct DecodeArgs {
     /// Print one JSON object per line instead of English (schema in docs/operator.md)
     #[arg(long)]
     pub json: bool,
+
+    /// Also write the frames into this MCAP file (for Foxglove): one channel per topic, log time = frame time
+    #[arg(long, value_name = "FILE.mcap")]
+    pub mcap: Option<PathBuf>,
 }
 
 /// `amiro encode`.
@@ -417,6 +428,20 @@ pub struct MonitorArgs {
     /// Do not print the summary (frames, period and jitter per topic) on exit
     #[arg(long)]
     pub no_summary: bool,
+
+    /// Also record every frame heard into this MCAP file (for Foxglove; filters only choose what is printed)
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
+
+    /// Show a live dashboard instead of lines: one row per topic heard with its latest values, period and
+    /// health (q or Ctrl-C leaves)
+    #[arg(long, conflicts_with = "json")]
+    pub dashboard: bool,
+
+    /// Serve the bus live to Foxglove over its WebSocket protocol, on HOST:PORT [default: 127.0.0.1:8765]
+    /// (the channels of an MCAP recording; needs the `foxglove` cargo feature)
+    #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    pub foxglove: Option<String>,
 }
 
 fn any_topic_parser() -> impl TypedValueParser<Value = Topic> {

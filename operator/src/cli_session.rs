@@ -21,12 +21,12 @@ Ctrl-C or `quit` leaves (a moving robot is stopped first).
 On an SLCAN adapter other amiro commands can run at the same time: they go through this one.";
 
 pub const CONSOLE_HELP: &str = "\
-Command line words (as in `amiro encode`, plus drive):
-  publish gyroscope --every 10ms --priority high
-  once floor-proximity --priority medium
-  stop gyroscope --priority high
-  led 3 --rgb 255,128,0
-  drive --forward 100mm/s --turn 30deg/s --for 3s
+Command line words (as in `amiro encode`, plus drive), with flags or said in words:
+  publish gyroscope --every 10ms --priority high      publish gyroscope every 10ms at high
+  once floor-proximity --priority medium              once floor
+  stop gyroscope --priority high                      stop gyroscope at high
+  led 3 --rgb 255,128,0                               led 3 orange, led 3 #FF8020
+  drive --forward 100mm/s --turn 30deg/s --for 3s     drive 100mm/s turn 30deg/s for 3s
   205#01840302                      a raw frame
   stop-driving, clear, help, quit
 
@@ -89,7 +89,8 @@ pub struct DriveArgs {
 }
 
 pub const RUN_ABOUT: &str = "\
-Play a script: one step per line, in the words of `amiro encode` (publish, stop, once, motor, led), raw frames \
+Play a script: one step per line, in the words of `amiro encode` (publish, stop, once, motor, led) with flags or \
+said in words (`publish gyroscope every 100ms at high`, `led 3 red`, `drive 100mm/s for 2s`), raw frames \
 (205#01840302), `wait DURATION` (watch the bus meanwhile) and `drive --forward SPEED --turn RATE --for DURATION` \
 (kept alive within the dead-man, then stopped). Lines starting with # are comments. The whole script is checked \
 before anything is sent. Everything the robot sends back is printed with the time since the start.
@@ -144,4 +145,38 @@ pub struct RelayArgs {
     /// The adapter: slcan:DEVICE[@BAUD]
     #[arg(long, env = "AMIRO_BUS", value_name = "BUS")]
     pub bus: String,
+}
+
+pub const RECORD_ABOUT: &str = "\
+Record a bus into an MCAP file, the format of ROS 2 recordings and of Foxglove. Every frame goes to the channel \
+/amiro/frames (as `amiro decode --json` describes it); each topic's decoded samples go to /amiro/TOPIC (e.g. \
+/amiro/gyroscope with x_dps, y_dps, z_dps: the field names of `decode --json`, in protocol units) and commands to \
+/amiro/TOPIC/command, each channel with a JSON schema. A message's log time is the time its frame was received \
+(or its timestamp in a log file). Ends after --duration, at the end of a log file, or on Ctrl-C; the file is \
+complete in every case.";
+
+pub const RECORD_HELP: &str = "\
+Examples:
+  amiro record --bus slcan:/dev/ttyUSB0 --out run.mcap --duration 30s
+  amiro record --bus socketcan:can0 --out run.mcap                     until Ctrl-C
+  amiro record --bus file:candump.log --out run.mcap                   convert a log (or: amiro decode --mcap)
+Open the file in Foxglove (File > Open local file) and plot /amiro/gyroscope.x_dps.";
+
+/// `amiro record`.
+#[derive(Debug, Args)]
+pub struct RecordArgs {
+    #[arg(long, env = "AMIRO_BUS", value_name = "BUS", help = BUS_HELP)]
+    pub bus: String,
+
+    /// The MCAP file to write (replaced if it exists)
+    #[arg(long, value_name = "FILE.mcap")]
+    pub out: PathBuf,
+
+    /// Stop after this long, e.g. 30s (without it: until Ctrl-C or the end of a log file)
+    #[arg(long, value_name = "DURATION", value_parser = parse_duration_arg)]
+    pub duration: Option<std::time::Duration>,
+}
+
+fn parse_duration_arg(text: &str) -> Result<std::time::Duration, String> {
+    crate::period::parse_duration(text).map_err(|error| error.to_string())
 }

@@ -20,6 +20,8 @@ struct Report<W: Write> {
     out: W,
     json: bool,
     all_decoded: bool,
+    /// `decode --mcap`: every frame also goes into this recording.
+    recording: Option<crate::record::Recording<io::BufWriter<File>>>,
 }
 
 impl<W: Write> Report<W> {
@@ -28,10 +30,14 @@ impl<W: Write> Report<W> {
             out,
             json,
             all_decoded: true,
+            recording: None,
         }
     }
 
     fn frame(&mut self, logged: &LoggedFrame, line: Option<usize>) -> io::Result<()> {
+        if let Some(recording) = self.recording.as_mut() {
+            recording.record(logged).map_err(io::Error::other)?;
+        }
         let decoded = decode_frame(&logged.frame);
         self.all_decoded &= decoded.is_ok();
         if self.json {
@@ -55,6 +61,19 @@ impl<W: Write> Report<W> {
         }
     }
 
+    /// Completes the MCAP file, if one is written.
+    fn finish(&mut self, path: Option<&Path>) -> Result<()> {
+        if let (Some(recording), Some(path)) = (self.recording.take(), path) {
+            let untimed = recording.untimed;
+            let (frames, _) = recording.finish()?;
+            eprintln!("recorded {frames} frames into {}", path.display());
+            if untimed > 0 {
+                eprintln!("note: {untimed} frames had no time; each took the previous frame's (0 at the start)");
+            }
+        }
+        Ok(())
+    }
+
     fn exit_code(&self) -> ExitCode {
         if self.all_decoded {
             ExitCode::SUCCESS
@@ -67,6 +86,15 @@ impl<W: Write> Report<W> {
 /// `amiro decode`.
 pub fn decode(args: &DecodeArgs) -> Result<ExitCode> {
     let mut report = Report::new(io::stdout().lock(), args.json);
+    if let Some(path) = &args.mcap {
+        report.recording = Some(crate::record::Recording::create(path)?);
+    }
+    let outcome = decode_into(args, &mut report);
+    report.finish(args.mcap.as_deref())?;
+    outcome
+}
+
+fn decode_into<W: Write>(args: &DecodeArgs, report: &mut Report<W>) -> Result<ExitCode> {
     if !args.frames.is_empty() {
         for text in &args.frames {
             match parse_line(text) {

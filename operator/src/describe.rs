@@ -6,7 +6,7 @@
 
 use amiro_can::{
     AdmissionPolicy, Command, DecodeError, DiagnosticsPage, Kind, Message, SensorData, SensorMode,
-    TimeUnit, Verdict, ViolationKind,
+    TimeUnit, Topic, Verdict, ViolationKind,
 };
 use serde_json::{json, Map, Value};
 
@@ -231,7 +231,8 @@ fn unit_name(unit: TimeUnit) -> &'static str {
     }
 }
 
-fn command_json(command: &Command) -> Value {
+/// The command as `decode --json` prints it under `command`.
+pub fn command_json(command: &Command) -> Value {
     match command {
         Command::Sensor(sensor) => {
             let reply_id = sensor.reply_id().to_string();
@@ -376,7 +377,8 @@ fn diagnostics_json(page: &DiagnosticsPage) -> Value {
     fields
 }
 
-fn sample_json(data: &SensorData) -> Value {
+/// The values of a sample as `decode --json` prints them under `values` (and MCAP recordings carry them).
+pub fn sample_json(data: &SensorData) -> Value {
     match data {
         SensorData::Gyroscope([x, y, z]) => json!({ "x_dps": x, "y_dps": y, "z_dps": z }),
         SensorData::Accelerometer([x, y, z]) => {
@@ -407,10 +409,103 @@ fn sample_json(data: &SensorData) -> Value {
     }
 }
 
+/// The JSON type of a value field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FieldType {
+    /// A whole number.
+    Integer,
+    /// true or false.
+    Boolean,
+    /// Text.
+    Text,
+    /// An array of this many whole numbers.
+    Integers(usize),
+}
+
+/// One field of a sample's values: its name in `sample_json`, its type and its unit (empty: none).
+pub type ValueField = (&'static str, FieldType, &'static str);
+
+/// The fields `sample_json` writes for a sensor topic's data, in order; `None` for topics whose fields depend on
+/// the frame (the diagnostics pages) and for actuators. Checked against `sample_json` by the tests.
+pub fn value_fields(topic: Topic) -> Option<&'static [ValueField]> {
+    use FieldType::{Boolean, Integer, Integers, Text};
+    Some(match topic {
+        Topic::Gyroscope => &[
+            ("x_dps", Integer, "deg/s"),
+            ("y_dps", Integer, "deg/s"),
+            ("z_dps", Integer, "deg/s"),
+        ],
+        Topic::Accelerometer => &[
+            ("x_milli_g", Integer, "milli-g"),
+            ("y_milli_g", Integer, "milli-g"),
+            ("z_milli_g", Integer, "milli-g"),
+        ],
+        Topic::MagnetometerX | Topic::MagnetometerY | Topic::MagnetometerZ => {
+            &[("axis", Text, ""), ("nanotesla", Integer, "nT")]
+        }
+        Topic::FloorProximity => &[("counts", Integers(4), "raw proximity counts")],
+        Topic::Odometry => &[
+            ("x_um", Integer, "um"),
+            ("y_um", Integer, "um"),
+            ("heading_urad", Integer, "urad"),
+            ("heading_counts", Integer, "1/65536 turn"),
+        ],
+        Topic::Velocity => &[
+            ("velocity_um_s", Integer, "um/s"),
+            ("angular_urad_s", Integer, "urad/s"),
+        ],
+        Topic::PowerStatus => &[
+            ("charging", Boolean, ""),
+            ("state_of_charge_percent", Integer, "%"),
+            ("minutes", Integer, "min"),
+            ("power_mw", Integer, "mW"),
+        ],
+        Topic::ProximityRing => &[("sensor", Integer, "index 0-7"), ("mm", Integer, "mm")],
+        _ => return None,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::frame::{parse_compact, parse_line};
+
+    #[test]
+    fn the_value_fields_are_what_sample_json_writes() {
+        for text in [
+            "701#393000FDFFFF0040",
+            "502#A0860100B03CFFFF",
+            "404#360127010C00D403",
+            "605#08520000",
+            "706#F8ADFFFF",
+            "407#10270000",
+            "508#FCFF1E000500",
+            "609#1A00FEFF0E04",
+            "71E#003E4701720C",
+            "71F#037800",
+        ] {
+            let Ok(Message::Sample { data, .. }) = decode_frame(&parse_compact(text).unwrap())
+            else {
+                panic!("{text}")
+            };
+            let Value::Object(values) = sample_json(&data) else {
+                panic!("{text}")
+            };
+            let fields = value_fields(data.topic()).expect(text);
+            let names: Vec<&str> = fields.iter().map(|(name, _, _)| *name).collect();
+            assert_eq!(values.keys().map(String::as_str).collect::<Vec<_>>(), names);
+            for (name, kind, _) in fields {
+                let value = &values[*name];
+                let fits = match kind {
+                    FieldType::Integer => value.is_i64() || value.is_u64(),
+                    FieldType::Boolean => value.is_boolean(),
+                    FieldType::Text => value.is_string(),
+                    FieldType::Integers(n) => value.as_array().is_some_and(|a| a.len() == *n),
+                };
+                assert!(fits, "{text}: {name} = {value}");
+            }
+        }
+    }
 
     fn describe(text: &str) -> String {
         let logged = parse_line(text).unwrap().unwrap();

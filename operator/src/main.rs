@@ -10,15 +10,20 @@ mod cli;
 mod cli_session;
 mod commands;
 mod console;
+mod dashboard;
 mod dbc;
 mod describe;
 mod drive;
 mod encode;
 mod frame;
 mod health;
+#[cfg(feature = "foxglove")]
+mod live;
 mod period;
+mod record;
 mod script;
 mod session;
+mod speech;
 mod watch;
 
 use std::process::ExitCode;
@@ -39,6 +44,7 @@ fn main() -> ExitCode {
         CliCommand::Console(args) => console::run(args),
         CliCommand::Drive(args) => session::drive_command(args),
         CliCommand::Run(args) => session::run(args),
+        CliCommand::Record(args) => session::record(args),
         CliCommand::Relay(args) => session::relay(args),
         CliCommand::Health(args) => health::health(args),
     };

@@ -4,7 +4,8 @@
 //! One step per line; `#` starts a comment. A step is a raw frame (`205#01840302`), any `encode` command
 //! (`publish gyroscope --every 100ms --priority high`, `stop …`, `once …`, `motor …`, `led …`), `wait 500ms`
 //! (watch the bus for that long), or `drive --forward 100mm/s --turn 0deg/s --for 2s` (a kept-alive motor command
-//! ending in a stop). A whole script is parsed before anything is sent, so a typo on line 9 does not leave the
+//! ending in a stop). The spoken forms of `speech` (`publish gyroscope every 100ms at high`, `led 3 red`,
+//! `drive 100mm/s turn 30deg/s for 3s`) are rewritten into these flag forms first. A whole script is parsed before anything is sent, so a typo on line 9 does not leave the
 //! robot half-configured.
 
 use std::time::Duration;
@@ -122,8 +123,22 @@ pub enum Step {
 }
 
 /// Splits a line into words as a shell would (quotes allowed, so `led 3 --rgb '#FF8000'` works).
+/// A `#` that begins a word is a colour (`led 3 #FF8020`), not a comment, so it is escaped before splitting.
 pub fn words(line: &str) -> Result<Vec<String>> {
-    shlex::split(line).ok_or_else(|| anyhow!("unbalanced quotes"))
+    let mut escaped = String::with_capacity(line.len() + 4);
+    let mut quote = None;
+    let mut previous = ' ';
+    for c in line.chars() {
+        match (quote, c) {
+            (None, '\'' | '"') => quote = Some(c),
+            (Some(open), _) if c == open => quote = None,
+            (None, '#') if previous.is_whitespace() => escaped.push('\\'),
+            _ => {}
+        }
+        escaped.push(c);
+        previous = c;
+    }
+    shlex::split(&escaped).ok_or_else(|| anyhow!("unbalanced quotes"))
 }
 
 /// Parses one step; `Ok(None)` for a blank line or a comment. Raw frames are checked by the decoder unless `raw`.
@@ -152,8 +167,18 @@ pub fn parse_step(line: &str, raw: bool) -> Result<Option<Step>> {
         }
         return Ok(Some(Step::Send(frames)));
     }
-    let parsed =
-        StepLine::try_parse_from(&words).map_err(|error| anyhow!("{}", clap_message(&error)))?;
+    // A spoken line (`publish gyroscope every 100ms at high`) becomes its flag form first.
+    let words = match crate::speech::translate(&words) {
+        Some(flags) => flags?,
+        None => words,
+    };
+    let parsed = StepLine::try_parse_from(&words).map_err(|error| {
+        let mut message = clap_message(&error);
+        if let Some(suggestion) = crate::speech::suggestion(&words) {
+            message.push_str(&format!(" ({suggestion})"));
+        }
+        anyhow!("{message}")
+    })?;
     Ok(Some(match parsed.step {
         StepArgs::Message(message) => Step::Send(vec![encode::frame(&encode::message(&message)?)?]),
         StepArgs::Wait { duration } => Step::Wait(parse_duration(&duration)?),

@@ -3,7 +3,7 @@
 //! every path, so an SLCAN channel is never left open and a shared adapter's users are told when it goes away.
 
 use std::fs::File;
-use std::io::{self, BufRead, BufReader, IsTerminal, Write};
+use std::io::{self, BufRead, BufReader, BufWriter, IsTerminal, Write};
 use std::path::Path;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -12,10 +12,11 @@ use anyhow::{bail, Context, Result};
 
 use crate::bus::{self, Bus, BusUrl, Direction, Reception};
 use crate::cli::MonitorArgs;
-use crate::cli_session::{DriveArgs, RelayArgs, RunArgs};
+use crate::cli_session::{DriveArgs, RecordArgs, RelayArgs, RunArgs};
 use crate::describe::decode_frame;
 use crate::drive::{drive, DriveEnd, HostClock};
 use crate::frame::{parse_line, text_lines, LoggedFrame, RawFrame, Timestamp};
+use crate::record::Recording;
 use crate::script::{parse_script, planned_duration, Step};
 use crate::watch::{Filter, Statistics, TimeBase, View};
 
@@ -59,8 +60,31 @@ pub fn monitor(args: &MonitorArgs) -> Result<ExitCode> {
         sensor_data_only: args.sensor_data,
     };
     let mut statistics = Statistics::default();
-    let outcome = watch(bus.as_mut(), args, &filter, &mut view, &mut statistics);
+    let mut taps = Taps {
+        recording: args.record.as_deref().map(Recording::create).transpose()?,
+        #[cfg(feature = "foxglove")]
+        live: None,
+    };
+    if let Some(address) = &args.foxglove {
+        serve_foxglove(&mut taps, address)?;
+    }
+    let outcome = if args.dashboard {
+        crate::dashboard::monitor(bus.as_mut(), args, &filter, &mut statistics, &mut taps)
+    } else {
+        watch(
+            bus.as_mut(),
+            args,
+            &filter,
+            &mut view,
+            &mut statistics,
+            &mut taps,
+        )
+    };
     let closed = bus.close().with_context(|| format!("closing {url}"));
+    if let (Some(recording), Some(path)) = (taps.recording.take(), &args.record) {
+        let (frames, _) = recording.finish()?;
+        eprintln!("recorded {frames} frames into {}", path.display());
+    }
     if !args.no_summary {
         for line in statistics.summary() {
             eprintln!("{line}");
@@ -78,6 +102,49 @@ pub fn monitor(args: &MonitorArgs) -> Result<ExitCode> {
     }
 }
 
+/// Where the frames a monitor hears go besides the screen: an MCAP recording, a live Foxglove server.
+pub struct Taps {
+    /// `--record FILE.mcap`.
+    pub recording: Option<Recording<BufWriter<File>>>,
+    /// `--foxglove`.
+    #[cfg(feature = "foxglove")]
+    pub live: Option<crate::live::LiveServer>,
+}
+
+impl Taps {
+    /// Hands a frame heard to each tap.
+    pub fn frame(&mut self, logged: &LoggedFrame) -> Result<()> {
+        if let Some(recording) = self.recording.as_mut() {
+            recording.record(logged)?;
+        }
+        #[cfg(feature = "foxglove")]
+        if let Some(live) = self.live.as_mut() {
+            live.frame(logged)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(feature = "foxglove")]
+fn serve_foxglove(taps: &mut Taps, address: &str) -> Result<()> {
+    let live = crate::live::LiveServer::start(address)?;
+    let host = address.rsplit_once(':').map_or(address, |(host, _)| host);
+    eprintln!(
+        "foxglove: serving on ws://{host}:{} (in Foxglove: Open connection → Foxglove WebSocket)",
+        live.port()
+    );
+    taps.live = Some(live);
+    Ok(())
+}
+
+#[cfg(not(feature = "foxglove"))]
+fn serve_foxglove(_taps: &mut Taps, _address: &str) -> Result<()> {
+    bail!(
+        "this amiro was built without Foxglove's live server: cargo install --path operator --features foxglove \
+         (or record with --record FILE.mcap and open the file in Foxglove)"
+    )
+}
+
 /// Prints admitted frames until the count, the timeout, the end of the log or Ctrl-C.
 fn watch(
     bus: &mut dyn Bus,
@@ -85,6 +152,7 @@ fn watch(
     filter: &Filter,
     view: &mut View,
     statistics: &mut Statistics,
+    taps: &mut Taps,
 ) -> Result<()> {
     let mut out = io::stdout().lock();
     // In English, an admission verdict's two pages are followed by the verdict in one sentence, with what would
@@ -98,6 +166,7 @@ fn watch(
         }
         match bus.receive(left)? {
             Reception::Frame(logged) => {
+                taps.frame(&logged)?;
                 let verdict = admission.as_mut().and_then(|checker| {
                     let mut stamped = logged.clone();
                     stamped.timestamp.get_or_insert_with(Timestamp::now);
@@ -353,6 +422,41 @@ pub fn relay(args: &RelayArgs) -> Result<ExitCode> {
     };
     let closed = bus.close().with_context(|| format!("closing {url}"));
     outcome?;
+    closed?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `amiro record`: every frame of a bus into an MCAP file, until the duration, the end of a log or Ctrl-C.
+pub fn record(args: &RecordArgs) -> Result<ExitCode> {
+    let url = BusUrl::parse(&args.bus)?;
+    bus::catch_interrupts()?;
+    let mut bus = bus::open(&url, Direction::Receive { realtime: false })?;
+    let mut recording = Recording::create(&args.out)?;
+    let until = args.duration.map(|duration| Instant::now() + duration);
+    if io::stderr().is_terminal() {
+        eprintln!("recording {url} into {} (Ctrl-C ends)", args.out.display());
+    }
+    let outcome = (|| -> Result<()> {
+        loop {
+            let left = until.map(|until| until.saturating_duration_since(Instant::now()));
+            if left.is_some_and(|left| left.is_zero()) {
+                return Ok(());
+            }
+            match bus.receive(left)? {
+                Reception::Frame(logged) => recording.record(&logged)?,
+                Reception::TimedOut | Reception::Ended | Reception::Interrupted => return Ok(()),
+            }
+        }
+    })();
+    let closed = bus.close().with_context(|| format!("closing {url}"));
+    // The file is finished whatever ended the recording, so what was heard is kept.
+    let untimed = recording.untimed;
+    let (frames, _) = recording.finish()?;
+    eprintln!("recorded {frames} frames into {}", args.out.display());
+    if untimed > 0 {
+        eprintln!("note: {untimed} frames had no time; each took the previous frame's");
+    }
+    outcome.with_context(|| format!("recording {url}"))?;
     closed?;
     Ok(ExitCode::SUCCESS)
 }

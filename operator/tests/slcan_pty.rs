@@ -677,3 +677,90 @@ fn health_asks_each_board_once_and_reports_the_silent_one() {
         "the six pages are printed: {stdout}"
     );
 }
+
+/// (channel, log time) of every message of an MCAP file.
+fn mcap_messages(path: &Path) -> Vec<(String, u64)> {
+    let bytes = std::fs::read(path).expect("the MCAP file");
+    mcap::MessageStream::new(&bytes)
+        .expect("a complete MCAP file")
+        .map(|message| {
+            let message = message.expect("a message");
+            (message.channel.topic.clone(), message.log_time)
+        })
+        .collect()
+}
+
+#[test]
+fn record_writes_what_the_adapter_hears_stamped_on_arrival_and_stops_after_its_duration() {
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("live.mcap");
+    let out_text = out.display().to_string();
+    let before = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as u64;
+    let started = Instant::now();
+    let child = amiro(&[
+        "record",
+        "--bus",
+        &bus,
+        "--out",
+        &out_text,
+        "--duration",
+        "700ms",
+    ]);
+    adapter.accept_open();
+    adapter.say(b"t6086FCFF1E00FBFF\r");
+    std::thread::sleep(Duration::from_millis(200));
+    adapter.say(b"t6086FDFF1E00FBFF\r");
+    adapter.expect("C\r", b"\r");
+    let output = finish(child);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(started.elapsed() < Duration::from_secs(5));
+    assert_eq!(adapter.heard, b"C\rS8\rO\rC\r");
+    let messages = mcap_messages(&out);
+    let gyroscope: Vec<u64> = messages
+        .iter()
+        .filter(|(channel, _)| channel == "/amiro/gyroscope")
+        .map(|(_, time)| *time)
+        .collect();
+    assert_eq!(gyroscope.len(), 2, "{messages:?}");
+    // Host reception times: after the start, about 200 ms apart.
+    assert!(gyroscope[0] >= before, "{gyroscope:?} before {before}");
+    let apart = gyroscope[1] - gyroscope[0];
+    assert!((150_000_000..1_000_000_000).contains(&apart), "{apart}");
+}
+
+#[test]
+fn ctrl_c_ends_a_recording_with_a_complete_file() {
+    let mut adapter = FakeAdapter::new();
+    let bus = adapter.bus();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("interrupted.mcap");
+    let out_text = out.display().to_string();
+    let child = amiro(&["monitor", "--bus", &bus, "--record", &out_text]);
+    adapter.accept_open();
+    adapter.say(b"t71F3037800\r");
+    std::thread::sleep(Duration::from_millis(200));
+    interrupt(&child);
+    adapter.expect("C\r", b"\r");
+    let output = finish(child);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let messages = mcap_messages(&out);
+    assert!(
+        messages
+            .iter()
+            .any(|(channel, _)| channel == "/amiro/proximity-ring"),
+        "{messages:?}"
+    );
+}

@@ -14,19 +14,17 @@ use amiro_firmware::signals::SystemSignals as SystemSignalLines;
 use stm32f4xx_hal::gpio::{GpioExt, Input, OpenDrain, Output, PinState, PushPull};
 use stm32f4xx_hal::gpio::{PA8, PB2, PB4, PC0, PC12, PC13, PC14, PC3, PC8, PD2};
 use stm32f4xx_hal::pac::{self, Interrupt};
-use stm32f4xx_hal::prelude::*;
-use stm32f4xx_hal::rcc::{Config, RccExt};
+use stm32f4xx_hal::rcc::RccExt;
 
-use crate::i2c::Master;
 use crate::power::{self, ChargeLines};
+use amiro_firmware::i2c::{self, Master};
 
-/// CAN bit timing at 1 Mbit/s from the 42 MHz APB1: the original firmware's BTR (21 MHz quanta,
-/// 1 + 16 + 4 tq, sample point 81 %), reference §3.
-pub const CAN_BTR: u32 = 0x013F_0001;
-/// System clock.
+/// System clock of the design clock plan (the runtime's `chip::clock_plan` has the CAN bit timing).
 pub const SYSCLK_HZ: u32 = 168_000_000;
-/// APB1 timer clock (2 × PCLK1): TIM2's input.
-pub const TIM2_CLOCK_HZ: u32 = 84_000_000;
+/// APB1 timer clock (2 × PCLK1): TIM2's input, as `init`'s clock plan set it up (84 MHz, or 16 MHz
+/// on the internal oscillator).
+static TIMER_CLOCK_HZ: core::sync::atomic::AtomicU32 =
+    core::sync::atomic::AtomicU32::new(84_000_000);
 /// EXTI line of SYS_PD_N (PC13).
 const SYS_PD_LINE: u32 = 1 << 13;
 /// ADC1 channel of VSYS (PB1).
@@ -34,10 +32,14 @@ const VSYS_CHANNEL: u32 = 9;
 /// Polls of the end-of-conversion flag: a conversion takes 492 ADC clocks at 21 MHz (23 µs).
 const ADC_POLLS: u32 = 20_000;
 
-rtic_monotonics::stm32_tim2_monotonic!(Mono, 1_000_000);
+/// TIM2's registers (a 32-bit timer on the F405; the runtime's backend counts 16 bits on it as on
+/// the F103's timers).
+const TIM2_BASE: usize = 0x4000_0000;
+
+amiro_firmware::timer_monotonic!(Tim2Backend, TIM2_BASE, Interrupt::TIM2, TIM2);
 
 /// The board's clock: TIM2 ticks are microseconds.
-pub type Clock = amiro_firmware::mono::TimerClock<rtic_monotonics::stm32::Tim2Backend, 1>;
+pub type Clock = amiro_firmware::mono::TimerClock<Tim2Backend, 1>;
 /// The CAN controller's transmit mailboxes (the runtime's register-level driver).
 pub type CanTxPort = Mailboxes<Mmio>;
 /// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
@@ -109,13 +111,12 @@ pub struct Charger {
 
 /// Brings the board up: clocks, power lines, system signals, chargers off, I2C, ADC, CAN.
 pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
-    if let Err(fault) = amiro_firmware::chip::clock_tree_to_reset_state() {
-        amiro_firmware::log!(
-            "clock reset: ",
-            fault.as_str(),
-            " (continuing on the clock AMiRo-BLT left)"
-        );
-    }
+    // The clock tree, every wait bounded: the PLL from the crystal, else from the internal
+    // oscillator (168 MHz either way), else the internal oscillator alone at 16 MHz (logged, and
+    // flagged on the diagnostics). The HAL is only constrained, never frozen: its `freeze` waits
+    // for the PLL without a bound, and nothing here takes its frequencies from it.
+    let clocks = amiro_firmware::chip::clock_plan();
+    TIMER_CLOCK_HZ.store(clocks.timer_hz, core::sync::atomic::Ordering::Relaxed);
     // AMiRo-BLT used bxCAN: reset it (and the I2C blocks) so nothing of its set-up survives.
     dp.RCC.apb1rstr().modify(|_, w| {
         w.can1rst()
@@ -133,21 +134,7 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
             .i2c2rst()
             .clear_bit()
     });
-    // The PLL makes 168 MHz from either oscillator (APB1 stays 42 MHz, so the CAN timing holds);
-    // a crystal that does not start leaves the board on the less precise HSI rather than hung.
-    let config = if amiro_firmware::chip::start_crystal().is_ok() {
-        Config::hse(8.MHz())
-    } else {
-        amiro_firmware::log!("fault: the 8 MHz crystal did not start; PLL from HSI");
-        Config::hsi()
-    };
-    let mut rcc = dp.RCC.freeze(
-        config
-            .sysclk(168.MHz())
-            .hclk(168.MHz())
-            .pclk1(42.MHz())
-            .pclk2(84.MHz()),
-    );
+    let mut rcc = dp.RCC.constrain();
     // The I2C timeouts count core cycles.
     cp.DCB.enable_trace();
     cp.DWT.enable_cycle_counter();
@@ -182,6 +169,8 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
         sys_sync: gpioc.pc12.into_open_drain_output_in_state(PinState::Low),
         sys_pd: gpioc.pc13.into_open_drain_output_in_state(PinState::High),
     };
+    // As AMiRo-BLT left them.
+    amiro_firmware::log!("power lines: POWER_EN, SYS_REG_EN on; SYS_WARMRST_N released; SYS_SYNC_N low; chargers off");
     // SAFETY: single bits in registers only init touches (the HAL has consumed its RCC handle);
     // EXTICR4 bits 4..8 select the port of line 13 (C = 2), nothing else uses lines 12..15.
     unsafe {
@@ -205,8 +194,8 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
         gpiob.pb11.into_alternate_open_drain::<4>(),
     );
     // SAFETY: I2C1 and I2C2 are used by these two values only.
-    let rear_i2c = unsafe { Master::new(pac::I2C1::ptr()) };
-    let front_i2c = unsafe { Master::new(pac::I2C2::ptr()) };
+    let rear_i2c = unsafe { Master::new(i2c::I2C1, clocks.pclk1_hz, clocks.sysclk_hz) };
+    let front_i2c = unsafe { Master::new(i2c::I2C2, clocks.pclk1_hz, clocks.sysclk_hz) };
 
     // CAN1 on PA11/PA12, AF9. The runtime's driver configures the controller: only command frames
     // pass the hardware filter; TX mailboxes are served by identifier; automatic bus-off recovery.
@@ -214,7 +203,7 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
         gpioa.pa11.into_alternate::<9>(),
         gpioa.pa12.into_alternate::<9>(),
     );
-    let can = bxcan::bring_up(CAN_BTR);
+    let can = bxcan::bring_up(clocks.can_btr);
     Board {
         can_tx: can.tx,
         can_rx: can.rx,
@@ -348,10 +337,15 @@ impl SystemSignals {
     }
 }
 
-/// Starts the TIM2 monotonic.
+/// Starts the TIM2 monotonic (the runtime's half-period timer backend).
 pub fn start_monotonic(priority: u8) {
-    Mono::start(
-        TIM2_CLOCK_HZ,
-        rtic_monotonics::stm32::Priority::new(priority),
+    // SAFETY: init owns RCC at this point; only TIM2's enable and reset bits change.
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    rcc.apb1enr().modify(|_, w| w.tim2en().set_bit());
+    rcc.apb1rstr().modify(|_, w| w.tim2rst().set_bit());
+    rcc.apb1rstr().modify(|_, w| w.tim2rst().clear_bit());
+    Tim2Backend::start(
+        TIMER_CLOCK_HZ.load(core::sync::atomic::Ordering::Relaxed),
+        priority,
     );
 }

@@ -4,7 +4,7 @@
 //! the rear bq27500) and I2C2 (the "front" bus: PCA9544A #2 with ring sensors 3, 4, 5, 6 and the
 //! front bq27500). A ring sample locks one bus, reads its four sensors, releases it, then does the
 //! same on the other, so a publisher at another level waits for at most one bus's transfers, and
-//! a failing bus costs bounded time (`i2c::FLAG_TIMEOUT_US` per transfer on the robot) — after
+//! a failing bus costs bounded time (`amiro_firmware::i2c::FLAG_TIMEOUT_US` per transfer on the robot) — after
 //! which its missing sensors are skipped until their retry, so they do not delay the other bus's
 //! sensors on every sample. A sensor that does not answer yields no frame for its index, is
 //! counted (`missed`), and is set up again at most once per [`RETRY_US`].

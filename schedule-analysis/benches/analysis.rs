@@ -1,8 +1,12 @@
 //! `cargo bench -p schedule-analysis`: how long the analysis takes for 10 … 10,000 tasks and messages.
 //!
-//! First, small sets (10, 20, 40 tasks): the host's `analyse_board` (names, ceilings, blocking, results), the
-//! allocation-free core call the on-chip admission check makes (`board::response_times` on prepared arrays), and
-//! the textbook first-job iteration (what the `response-time-analysis` crate computes) as the baseline.
+//! First, against the `response-time-analysis` crate (crates.io, Brandenburg's Rust transcription of the
+//! Coq-verified abstract RTA of Bozhko & Brandenburg, ECRTS 2020): both analyse the same sporadic task sets
+//! (distinct deadline-monotonic priorities, constrained deadlines, no jitter or blocking, every job of the busy
+//! window), and the bench asserts that every response time agrees before it times them. Ours is the
+//! allocation-free core call the on-chip admission check makes (`board::response_times` on prepared arrays); the
+//! crate's is `fixed_priority::fully_preemptive::dedicated_uniproc_rta` per task on its prepared request-bound
+//! functions. The host's whole `analyse_board` (names, ceilings, blocking, result records) is shown beside them.
 //!
 //! Board sets: random priorities (with ties), log-uniform periods 1 ms … 1 s, 85 % utilisation, release jitter up
 //! to 10 % of the period, every task locking up to two of eight shared resources (SRP ceilings and blocking are
@@ -22,6 +26,9 @@ use schedule_analysis::model::{
     BoardSystem, BusSystem, FrameCostSpec, MessageSpec, OverheadTimes, System, TaskKind, TaskSpec,
 };
 use schedule_analysis::time::Time;
+
+use response_time_analysis::time as rta_time;
+use response_time_analysis::{arrival, demand, fixed_priority, wcet};
 
 /// xorshift64*: deterministic sets, no dependency.
 struct Rng(u64);
@@ -162,31 +169,68 @@ fn bus(n: usize, seed: u64) -> System {
     }
 }
 
-/// The textbook iteration (Joseph & Pandya; what the `response-time-analysis` crate computes): per task
-/// `w = C + Σ_hp ⌈w/T⌉·C` from `w = C`, first job only, no jitter or blocking — the baseline for small sets.
-fn textbook(tasks: &[TaskTiming]) -> usize {
-    let mut bounded = 0;
-    for (i, me) in tasks.iter().enumerate() {
-        let c = me.wcet.as_ns();
-        let mut w = c;
-        let ok = loop {
-            let mut next = c;
-            for (k, other) in tasks.iter().enumerate() {
-                if k != i && other.priority >= me.priority {
-                    next += w.div_ceil(other.period.as_ns()) * other.wcet.as_ns();
-                }
-            }
-            if next == w {
-                break true;
-            }
-            if next > 60_000_000_000 {
-                break false;
-            }
-            w = next;
-        };
-        bounded += usize::from(ok);
+/// The `response-time-analysis` crate's request-bound function of a sporadic task without jitter.
+type Rbf = demand::RBF<arrival::Sporadic, wcet::Scalar>;
+
+/// The crate's model of `tasks` (ordered by descending priority, distinct priorities): one RBF per task.
+fn crate_model(tasks: &[TaskTiming]) -> Vec<Rbf> {
+    tasks
+        .iter()
+        .map(|t| {
+            demand::RBF::new(
+                arrival::Sporadic::new_zero_jitter(rta_time::Duration::from(t.period.as_ns())),
+                wcet::Scalar::new(rta_time::Service::from(t.wcet.as_ns())),
+            )
+        })
+        .collect()
+}
+
+/// The crate's fully-preemptive fixed-priority RTA of every task against the more urgent ones: the response
+/// times in ns, `None` where it finds no fixed point below `limit`.
+fn crate_response_times(rbfs: &[Rbf], limit: Time, out: &mut Vec<Option<u64>>) {
+    out.clear();
+    let limit = rta_time::Duration::from(limit.as_ns());
+    for (i, tua) in rbfs.iter().enumerate() {
+        let bound = fixed_priority::fully_preemptive::dedicated_uniproc_rta(
+            tua,
+            rbfs.get(..i).unwrap_or(&[]),
+            limit,
+        );
+        out.push(bound.ok().map(u64::from));
     }
-    bounded
+}
+
+/// Batches of `batch` calls of `ours` and of `theirs`, alternating so that both see the same load on a shared
+/// machine: the median time of one call of each and the median of the per-round ratios.
+fn paired(
+    mut ours: impl FnMut() -> usize,
+    mut theirs: impl FnMut() -> usize,
+    batch: usize,
+    rounds: usize,
+) -> (Duration, Duration, f64) {
+    let time = |f: &mut dyn FnMut() -> usize| {
+        let start = Instant::now();
+        let mut n = 0;
+        for _ in 0..batch {
+            n += black_box(f());
+        }
+        black_box(n);
+        start.elapsed() / batch as u32
+    };
+    let mut a = Vec::with_capacity(rounds);
+    let mut b = Vec::with_capacity(rounds);
+    let mut ratios = Vec::with_capacity(rounds);
+    for _ in 0..rounds {
+        let x = time(&mut ours);
+        let y = time(&mut theirs);
+        ratios.push(x.as_secs_f64() / y.as_secs_f64());
+        a.push(x);
+        b.push(y);
+    }
+    a.sort();
+    b.sort();
+    ratios.sort_by(f64::total_cmp);
+    (a[rounds / 2], b[rounds / 2], ratios[rounds / 2])
 }
 
 /// Median time of one call, from batches of `batch` calls.
@@ -204,25 +248,33 @@ fn per_call(mut f: impl FnMut() -> usize, batch: usize) -> Duration {
     t / batch as u32
 }
 
-fn small_sets() {
-    println!("small sets (median per call, DM priorities, distinct levels): whole host board analysis, the");
-    println!("allocation-free core the on-chip check uses, and the textbook first-job iteration as the baseline");
+/// A board set as the crate models it: distinct priorities, shortest period most urgent, no jitter or locks,
+/// deadline = period.
+fn crate_comparable(n: usize) -> BoardSystem {
+    let mut system = board(n, 0xC0FFEE + n as u64, Priorities::DeadlineMonotonic);
+    system.tasks.sort_by_key(|t| t.period);
+    for (i, t) in system.tasks.iter_mut().enumerate() {
+        t.priority = (n - i) as u32;
+        t.jitter = Time::ZERO;
+        t.sections.clear();
+        t.deadline = t.period;
+    }
+    system
+}
+
+fn against_crate() {
+    println!("against the response-time-analysis crate (median per call, the two alternating; the ratio is the");
+    println!("median of the rounds' ratios; DM priorities, distinct levels, D = T,");
+    println!("no jitter or blocking; response times asserted equal): the allocation-free core the on-chip check");
+    println!("uses, the crate's dedicated_uniproc_rta per task, their ratio, and the host's whole analyse_board");
     println!();
     println!(
-        "{:>4}  {:>16}  {:>16}  {:>16}  {:>10}",
-        "n", "analyse_board", "core", "textbook", "core/text"
+        "{:>5}  {:>14}  {:>14}  {:>11}  {:>14}",
+        "n", "core", "crate", "core/crate", "analyse_board"
     );
     let limits = Limits::default();
-    for n in [10usize, 20, 40] {
-        let mut system = board(n, 0xC0FFEE + n as u64, Priorities::DeadlineMonotonic);
-        // Distinct priorities, shortest period most urgent, no jitter or locks: the baseline's own model.
-        system.tasks.sort_by_key(|t| t.period);
-        for (i, t) in system.tasks.iter_mut().enumerate() {
-            t.priority = (n - i) as u32;
-            t.jitter = Time::ZERO;
-            t.sections.clear();
-            t.deadline = t.period;
-        }
+    for n in [10usize, 20, 40, 100, 1_000] {
+        let system = crate_comparable(n);
         let timings: Vec<TaskTiming> = system
             .tasks
             .iter()
@@ -236,17 +288,23 @@ fn small_sets() {
         let blockings = vec![Time::ZERO; n];
         let mut scratch = vec![Counter::default(); n];
         let mut out = vec![Err(AnalysisError::NoSuchIndex); n];
-        let host = per_call(
-            || {
-                analyse_board(black_box(&system), &limits)
-                    .tasks
-                    .iter()
-                    .filter(|t| t.bound.is_ok())
-                    .count()
-            },
-            200,
-        );
-        let core = per_call(
+        let rbfs = crate_model(&timings);
+        let mut theirs = Vec::with_capacity(n);
+
+        // The same problem, the same answers: every response time agrees (both bounded, equal), or the
+        // comparison is void.
+        board_core::response_times(&timings, &blockings, &limits, &mut scratch, &mut out);
+        crate_response_times(&rbfs, limits.horizon, &mut theirs);
+        for (i, (ours, theirs)) in out.iter().zip(&theirs).enumerate() {
+            let ours = ours.as_ref().ok().map(|r| r.wcrt.as_ns());
+            assert!(
+                ours.is_some() && ours == *theirs,
+                "n = {n}, task {i}: ours {ours:?} ns, the crate's {theirs:?} ns"
+            );
+        }
+
+        let batch = (20_000 / n).clamp(1, 2_000);
+        let (core, reference, ratio) = paired(
             || {
                 board_core::response_times(
                     black_box(&timings),
@@ -257,18 +315,44 @@ fn small_sets() {
                 );
                 out.iter().filter(|r| r.is_ok()).count()
             },
-            200,
+            || {
+                crate_response_times(black_box(&rbfs), limits.horizon, &mut theirs);
+                theirs.iter().filter(|r| r.is_some()).count()
+            },
+            batch,
+            if n >= 1_000 { 9 } else { 31 },
         );
-        let text = per_call(|| textbook(black_box(&timings)), 200);
+        let host = per_call(
+            || {
+                analyse_board(black_box(&system), &limits)
+                    .tasks
+                    .iter()
+                    .filter(|t| t.bound.is_ok())
+                    .count()
+            },
+            batch,
+        );
         println!(
-            "{n:>4}  {:>13.2} µs  {:>13.2} µs  {:>13.2} µs  {:>9.2}×",
-            host.as_secs_f64() * 1e6,
-            core.as_secs_f64() * 1e6,
-            text.as_secs_f64() * 1e6,
-            core.as_secs_f64() / text.as_secs_f64()
+            "{n:>5}  {:>11}  {:>11}  {:>10.2}×  {:>11}",
+            micros(core),
+            micros(reference),
+            ratio,
+            micros(host),
         );
     }
     println!();
+}
+
+/// A duration in µs, three significant digits' worth.
+fn micros(d: Duration) -> String {
+    let us = d.as_secs_f64() * 1e6;
+    if us < 10.0 {
+        format!("{us:.2} µs")
+    } else if us < 100.0 {
+        format!("{us:.1} µs")
+    } else {
+        format!("{us:.0} µs")
+    }
 }
 
 fn median(mut f: impl FnMut() -> usize, runs: usize) -> (Duration, usize) {
@@ -292,7 +376,7 @@ fn main() {
     };
     println!("schedule-analysis benchmark (median of runs; whole analysis, no parsing)");
     println!();
-    small_sets();
+    against_crate();
     println!(
         "{:>7}  {:>20}  {:>11}  {:>20}  {:>11}  {:>20}  {:>11}",
         "n",

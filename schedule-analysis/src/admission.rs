@@ -20,8 +20,8 @@
 //! deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without jitter budgets
 //! (a property test checks that they agree).
 
-use crate::board::{self, LevelLoads, TaskTiming};
-use crate::busy_window::{AnalysisError, Counter, Limits, Response};
+use crate::board::{self, TaskTiming};
+use crate::busy_window::{AnalysisError, Counter, Limits, Load, Response, Share};
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
 
@@ -267,6 +267,8 @@ pub enum Refusal {
 pub struct Evaluation {
     /// `None`: everything meets its deadline.
     pub refusal: Option<Refusal>,
+    /// The first violation below the hard floor (see [`Decision::floor`]); `None` when there is none.
+    pub floor: Option<Refusal>,
     /// Fixed-point iterations it took (the measure of its cost).
     pub iterations: u64,
 }
@@ -285,6 +287,12 @@ pub struct Suggestion {
 pub struct Decision {
     /// `None`: admitted.
     pub refusal: Option<Refusal>,
+    /// The first violation that no policy may accept (the hard floor, docs/analysis.md): a task or message left
+    /// without a bound, a fixed task of a board (CAN receive and transmit, command handling, the admission task,
+    /// the watchdog, the shutdown path, …) missing its deadline, a command's end-to-end path, a capacity or zero
+    /// period refusal. `None` when every violation is a bounded deadline miss of a publisher (its job, its timer
+    /// job or its frames), which accept-and-warn may start with a warning.
+    pub floor: Option<Refusal>,
     /// On refusal, what would be accepted (searched only when asked for).
     pub suggestion: Suggestion,
     /// Fixed-point iterations of the whole decision, searches included.
@@ -307,9 +315,10 @@ pub fn evaluate<const N: usize, const M: usize>(
     streams: &[Stream],
 ) -> Evaluation {
     let mut iterations = 0u64;
-    let refusal = evaluate_into::<N, M>(robot, streams, None, &mut iterations, None);
+    let found = evaluate_into::<N, M>(robot, streams, None, &mut iterations, None);
     Evaluation {
-        refusal,
+        refusal: found.first,
+        floor: found.floor,
         iterations,
     }
 }
@@ -326,7 +335,8 @@ pub fn admit<const N: usize, const M: usize>(
 ) -> Decision {
     let mut iterations = 0u64;
     let mut evaluations = 1u32;
-    let refusal = check_with::<N, M>(robot, streams, request, &mut iterations);
+    let found = check_with::<N, M>(robot, streams, request, &mut iterations);
+    let refusal = found.first;
     let mut suggestion = Suggestion::default();
     if refusal.is_some() && suggest && request.sender.is_some() && !request.period.is_zero() {
         suggestion.shortest_period =
@@ -336,6 +346,7 @@ pub fn admit<const N: usize, const M: usize>(
     }
     Decision {
         refusal,
+        floor: found.floor,
         suggestion,
         iterations,
         evaluations,
@@ -354,8 +365,8 @@ pub fn admit_cached<const N: usize, const M: usize>(
     carried_out_anyway: bool,
 ) -> Decision {
     let mut iterations = 0u64;
-    let refusal = if request.period.is_zero() {
-        Some(Refusal::ZeroPeriod)
+    let found = if request.period.is_zero() {
+        Found::refused(Refusal::ZeroPeriod)
     } else {
         evaluate_into::<N, M>(
             robot,
@@ -366,7 +377,8 @@ pub fn admit_cached<const N: usize, const M: usize>(
         )
     };
     Decision {
-        refusal,
+        refusal: found.first,
+        floor: found.floor,
         suggestion: Suggestion::default(),
         iterations,
         evaluations: 1,
@@ -397,11 +409,38 @@ fn check_with<const N: usize, const M: usize>(
     streams: &[Stream],
     request: &Stream,
     iterations: &mut u64,
-) -> Option<Refusal> {
+) -> Found {
     if request.period.is_zero() {
-        return Some(Refusal::ZeroPeriod);
+        return Found::refused(Refusal::ZeroPeriod);
     }
     evaluate_into::<N, M>(robot, streams, Some(request), iterations, None)
+}
+
+/// What one analysis found: the first violation (table order, then the bus) and the first below the hard floor.
+#[derive(Debug, Clone, Copy, Default)]
+struct Found {
+    first: Option<Refusal>,
+    floor: Option<Refusal>,
+}
+
+impl Found {
+    /// A refusal that no policy may accept (capacity, zero period).
+    fn refused(refusal: Refusal) -> Found {
+        Found {
+            first: Some(refusal),
+            floor: Some(refusal),
+        }
+    }
+
+    /// Notes a violation; `floor` says whether it is below the hard floor.
+    fn note(&mut self, refusal: Refusal, floor: bool) {
+        if self.first.is_none() {
+            self.first = Some(refusal);
+        }
+        if floor && self.floor.is_none() {
+            self.floor = Some(refusal);
+        }
+    }
 }
 
 fn shortest_period<const N: usize, const M: usize>(
@@ -415,7 +454,9 @@ fn shortest_period<const N: usize, const M: usize>(
         *evaluations += 1;
         let mut candidate = *request;
         candidate.period = period;
-        check_with::<N, M>(robot, streams, &candidate, iterations).is_none()
+        check_with::<N, M>(robot, streams, &candidate, iterations)
+            .first
+            .is_none()
     };
     // Double until one passes (lo fails, hi passes), then bisect to 1 µs and round to an expressible value.
     let mut lo = request.period;
@@ -464,7 +505,10 @@ fn level_needed<const N: usize, const M: usize>(
         if !candidate.extended {
             candidate.id = sensor_id(level, sender.topic);
         }
-        if check_with::<N, M>(robot, streams, &candidate, iterations).is_none() {
+        if check_with::<N, M>(robot, streams, &candidate, iterations)
+            .first
+            .is_none()
+        {
             return Some(level);
         }
     }
@@ -625,17 +669,17 @@ fn evaluate_into<const N: usize, const M: usize>(
     request: Option<&Stream>,
     iterations: &mut u64,
     mut cache: Option<(&mut Cache<M>, bool)>,
-) -> Option<Refusal> {
+) -> Found {
     if robot.boards.len() > usize::from(u8::MAX) || N >= usize::from(NO_JOB) {
-        return Some(Refusal::Capacity);
+        return Found::refused(Refusal::Capacity);
     }
     let Some(streams) = View::<M>::new(running, request) else {
-        return Some(Refusal::Capacity);
+        return Found::refused(Refusal::Capacity);
     };
     let limits = Limits {
         horizon: horizon(robot, &streams),
     };
-    let mut first: Option<Refusal> = None;
+    let mut found = Found::default();
     let mut senders = SenderBounds {
         wcrt: [NONE; M],
         bcrt: [0; M],
@@ -651,7 +695,7 @@ fn evaluate_into<const N: usize, const M: usize>(
     let mut fresh_board = None;
     for (b, table) in robot.boards.iter().enumerate() {
         let Some(key) = BoardKey::<M>::of(b, &streams, limits.horizon) else {
-            return Some(Refusal::Capacity);
+            return Found::refused(Refusal::Capacity);
         };
         let hit = cache
             .as_ref()
@@ -678,7 +722,7 @@ fn evaluate_into<const N: usize, const M: usize>(
             if let Err(refusal) =
                 analyse_board::<N, M>(robot, b, table, &streams, &limits, iterations, target)
             {
-                return Some(refusal);
+                return Found::refused(refusal);
             }
             target.kept = true;
         }
@@ -686,20 +730,20 @@ fn evaluate_into<const N: usize, const M: usize>(
             Some(slot) if !in_fresh => slot,
             _ => &fresh,
         };
-        if first.is_none() {
-            first = summary.first(b);
-        }
+        summary.note_violations(b, &mut found);
         summary.apply(b, table, &streams, &mut senders);
     }
-    analyse_bus(robot, &streams, &senders, &limits, iterations, &mut first);
+    analyse_bus(robot, &streams, &senders, &limits, iterations, &mut found);
+    // Kept when the request is carried out: admitted, or refused above the floor under accept-and-warn.
     if let (Some(b), Some((c, keep_refused))) = (requesting, cache) {
-        if fresh_board == Some(b) && (first.is_none() || keep_refused) {
+        let carried_out = found.first.is_none() || (keep_refused && found.floor.is_none());
+        if fresh_board == Some(b) && carried_out {
             if let Some(slot) = c.boards.get_mut(b) {
                 *slot = fresh;
             }
         }
     }
-    first
+    found
 }
 
 /// Brings `cache` up to date with the running `streams` (analysing only the boards whose streams changed since
@@ -810,6 +854,12 @@ struct Summary<const M: usize> {
     /// Its WCRT ([`NONE`]: unbounded) and deadline.
     violation_wcrt: u64,
     violation_deadline: Time,
+    /// Whether a violation is below the hard floor (a fixed task missing its deadline, or any job without a
+    /// bound): the first in table order, with these numbers.
+    floor_violated: bool,
+    floor_task: TaskId,
+    floor_wcrt: u64,
+    floor_deadline: Time,
     /// Its transmit interrupt's WCRT (0 without one, [`NONE`] unbounded).
     tx: u64,
     /// Its command handler's WCRT (0 without one, [`NONE`] unbounded).
@@ -828,22 +878,40 @@ impl<const M: usize> Summary<M> {
         task: TaskId::Fixed(0),
         violation_wcrt: 0,
         violation_deadline: Time::ZERO,
+        floor_violated: false,
+        floor_task: TaskId::Fixed(0),
+        floor_wcrt: 0,
+        floor_deadline: Time::ZERO,
         tx: 0,
         handler: 0,
         wcrt: [0; M],
         found: [false; M],
     };
 
-    /// The board's (index `b`) first violated deadline, in table order.
-    fn first(&self, b: usize) -> Option<Refusal> {
-        self.violated.then_some(Refusal::Deadline(Violation {
-            culprit: Culprit::Task {
-                board: b as u8,
-                task: self.task,
-            },
-            wcrt: bound(self.violation_wcrt),
-            deadline: self.violation_deadline,
-        }))
+    /// Notes the board's (index `b`) first violated deadline and its first below the floor, in table order.
+    fn note_violations(&self, b: usize, found: &mut Found) {
+        let violation = |task, wcrt, deadline| {
+            Refusal::Deadline(Violation {
+                culprit: Culprit::Task {
+                    board: b as u8,
+                    task,
+                },
+                wcrt: bound(wcrt),
+                deadline,
+            })
+        };
+        if self.violated {
+            found.note(
+                violation(self.task, self.violation_wcrt, self.violation_deadline),
+                false,
+            );
+        }
+        if self.floor_violated {
+            found.note(
+                violation(self.floor_task, self.floor_wcrt, self.floor_deadline),
+                true,
+            );
+        }
     }
 
     /// Writes the board's numbers into the per-stream arrays the bus analysis reads.
@@ -892,7 +960,7 @@ fn analyse_bus<const M: usize>(
     senders: &SenderBounds<M>,
     limits: &Limits,
     iterations: &mut u64,
-    first: &mut Option<Refusal>,
+    found: &mut Found,
 ) {
     let bit = robot.bit_time;
     let n = streams.len;
@@ -975,24 +1043,32 @@ fn analyse_bus<const M: usize>(
             }
             _ => None,
         };
-        if first.is_none() && bus.is_none_or(|w| w > s.deadline()) {
-            *first = Some(Refusal::Deadline(Violation {
-                culprit: Culprit::Frame { id: s.id },
-                wcrt: bus,
-                deadline: s.deadline(),
-            }));
+        if bus.is_none_or(|w| w > s.deadline()) {
+            // Below the floor: frames without a bound, or a command's (not a publisher's) frames late.
+            found.note(
+                Refusal::Deadline(Violation {
+                    culprit: Culprit::Frame { id: s.id },
+                    wcrt: bus,
+                    deadline: s.deadline(),
+                }),
+                bus.is_none() || s.sender.is_none(),
+            );
         }
         if s.receiver.is_some() {
             let end = match (bus, senders.receiver.get(m).copied().and_then(bound)) {
                 (Some(w), Some(r)) => w.checked_plus(r),
                 _ => None,
             };
-            if first.is_none() && end.is_none_or(|w| w > s.deadline()) {
-                *first = Some(Refusal::Deadline(Violation {
-                    culprit: Culprit::EndToEnd { id: s.id },
-                    wcrt: end,
-                    deadline: s.deadline(),
-                }));
+            if end.is_none_or(|w| w > s.deadline()) {
+                // A command's path to its handler: always below the floor.
+                found.note(
+                    Refusal::Deadline(Violation {
+                        culprit: Culprit::EndToEnd { id: s.id },
+                        wcrt: end,
+                        deadline: s.deadline(),
+                    }),
+                    true,
+                );
             }
         }
     }
@@ -1015,40 +1091,23 @@ fn insertion_sort(items: &mut [u8], after: impl Fn(u8, u8) -> bool) {
     }
 }
 
-/// One board's jobs, kept sorted by priority (most urgent first, ties in table order) as they are added.
+/// One board's jobs, sorted by priority (most urgent first, ties in table order).
 struct Jobs<const N: usize> {
     timings: [TaskTiming; N],
     meta: [JobMeta; N],
     len: usize,
 }
 
-impl<const N: usize> Jobs<N> {
-    /// Adds a job; its original index is the number of jobs before it.
-    fn push(&mut self, timing: TaskTiming, mut meta: JobMeta) -> Result<u8, Refusal> {
-        let original = u8::try_from(self.len).map_err(|_| Refusal::Capacity)?;
-        if self.len >= N {
-            return Err(Refusal::Capacity);
-        }
-        meta.original = original;
-        let at = self
-            .timings
-            .iter()
-            .take(self.len)
-            .position(|t| t.priority < timing.priority)
-            .unwrap_or(self.len);
-        let mut k = self.len;
-        while k > at {
-            self.timings.swap(k, k - 1);
-            self.meta.swap(k, k - 1);
-            k -= 1;
-        }
-        if let (Some(t), Some(m)) = (self.timings.get_mut(at), self.meta.get_mut(at)) {
-            *t = timing;
-            *m = meta;
-        }
-        self.len += 1;
-        Ok(original)
-    }
+/// What a job of a board's analysis is made of (indices are bytes: the working sets are below [`NO_JOB`]).
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    /// A fixed task: its row in the board's `tasks`.
+    Fixed(u8),
+    /// The timer job of the stream at this [`View`] position.
+    Timer { stream: u8 },
+    /// The publisher job of the stream at this [`View`] position: its topic row, and its timer job's original
+    /// index ([`NO_JOB`]: none).
+    Publisher { stream: u8, topic: u8, timer: u8 },
 }
 
 /// One board's tasks with the configuration's publishers: writes its first violated deadline (in table order),
@@ -1079,85 +1138,159 @@ fn analyse_board<const N: usize, const M: usize>(
         })
         .min()
         .unwrap_or_else(|| can::shortest_frame_time(robot.bit_time));
-    let mut jobs = Jobs::<N> {
-        timings: [EMPTY_TIMING; N],
-        meta: [EMPTY_META; N],
-        len: 0,
+    // Every job in original order (table order: the fixed tasks, then per stream its timer job and its job): its
+    // priority and what it is made of. Then the originals are sorted by priority (most urgent first, ties in
+    // original order, a stable sort of bytes) and each job is built once, at its place.
+    let mut priority_of = [0u8; N];
+    let mut source = [Source::Fixed(0); N];
+    let mut count = 0usize;
+    let mut add = |priority: u8, what: Source| -> Result<u8, Refusal> {
+        let original = u8::try_from(count)
+            .ok()
+            .filter(|&o| o != NO_JOB)
+            .ok_or(Refusal::Capacity)?;
+        *priority_of.get_mut(count).ok_or(Refusal::Capacity)? = priority;
+        *source.get_mut(count).ok_or(Refusal::Capacity)? = what;
+        count += 1;
+        Ok(original)
     };
     for (i, t) in table.tasks.iter().enumerate() {
-        let period = if t.own_frame {
-            own_frame
-        } else {
-            row_time(t.period)
-        };
-        let jitter = row_time(t.jitter);
-        jobs.push(
-            TaskTiming {
-                priority: u32::from(t.priority),
-                wcet: row_time(t.cost),
-                period,
-                jitter,
-            },
-            JobMeta {
-                id: TaskId::Fixed(u16::try_from(i).map_err(|_| Refusal::Capacity)?),
-                deadline: if t.deadline == NO_DEADLINE {
-                    period
-                } else {
-                    row_time(t.deadline)
-                },
-                own_jitter: jitter,
-                // NO_RELEASER is NO_JOB.
-                released_by: t.released_by,
-                original: 0,
-            },
+        add(
+            t.priority,
+            Source::Fixed(u8::try_from(i).map_err(|_| Refusal::Capacity)?),
         )?;
     }
-    for (_, s) in mine() {
+    for (m, s) in mine() {
         let Some(sender) = s.sender else { continue };
         let priority = table
             .levels
             .get(usize::from(sender.level))
             .copied()
             .flatten()
-            .map(u32::from)
             .ok_or(Refusal::Capacity)?;
         let topic = table
             .topics
             .iter()
-            .find(|t| t.topic == sender.topic)
+            .position(|t| t.topic == sender.topic)
+            .and_then(|t| u8::try_from(t).ok())
             .ok_or(Refusal::Capacity)?;
+        let stream = u8::try_from(m).map_err(|_| Refusal::Capacity)?;
         let timer = match table.monotonic {
-            Some(m) => jobs.push(
-                TaskTiming {
-                    priority: u32::from(m.priority),
-                    wcet: row_time(m.cost),
-                    period: s.period,
-                    jitter: row_time(m.jitter),
-                },
-                JobMeta {
-                    id: TaskId::Timer(sender.topic),
-                    deadline: s.period,
-                    own_jitter: row_time(m.jitter),
-                    ..EMPTY_META
-                },
-            )?,
+            Some(mono) => add(mono.priority, Source::Timer { stream })?,
             None => NO_JOB,
         };
-        jobs.push(
-            TaskTiming {
-                priority,
-                wcet: row_time(topic.cost),
-                period: s.period,
-                jitter: Time::ZERO,
-            },
-            JobMeta {
-                id: TaskId::Publisher(sender.topic),
-                deadline: s.deadline(),
-                own_jitter: Time::ZERO,
-                released_by: timer,
-                original: 0,
+        add(
+            priority,
+            Source::Publisher {
+                stream,
+                topic,
+                timer,
             },
         )?;
+    }
+    let mut order = [0u8; N];
+    for (i, slot) in order.iter_mut().enumerate().take(count) {
+        *slot = i as u8;
+    }
+    let urgency = |o: u8| priority_of.get(usize::from(o)).copied().unwrap_or(0);
+    insertion_sort(order.get_mut(..count).unwrap_or(&mut []), |a, b| {
+        urgency(a) < urgency(b)
+    });
+    let mut jobs = Jobs::<N> {
+        timings: [EMPTY_TIMING; N],
+        meta: [EMPTY_META; N],
+        len: count,
+    };
+    for ((&original, timing), meta) in order
+        .iter()
+        .zip(jobs.timings.iter_mut())
+        .zip(jobs.meta.iter_mut())
+        .take(count)
+    {
+        let what = source
+            .get(usize::from(original))
+            .copied()
+            .ok_or(Refusal::Capacity)?;
+        let priority = u32::from(urgency(original));
+        let stream_of = |m: u8| streams.get(usize::from(m)).ok_or(Refusal::Capacity);
+        (*timing, *meta) = match what {
+            Source::Fixed(row) => {
+                let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
+                let period = if t.own_frame {
+                    own_frame
+                } else {
+                    row_time(t.period)
+                };
+                let jitter = row_time(t.jitter);
+                (
+                    TaskTiming {
+                        priority,
+                        wcet: row_time(t.cost),
+                        period,
+                        jitter,
+                    },
+                    JobMeta {
+                        id: TaskId::Fixed(u16::from(row)),
+                        deadline: if t.deadline == NO_DEADLINE {
+                            period
+                        } else {
+                            row_time(t.deadline)
+                        },
+                        own_jitter: jitter,
+                        // NO_RELEASER is NO_JOB.
+                        released_by: t.released_by,
+                        original,
+                    },
+                )
+            }
+            Source::Timer { stream } => {
+                let s = stream_of(stream)?;
+                let (Some(mono), Some(sender)) = (table.monotonic, s.sender) else {
+                    return Err(Refusal::Capacity);
+                };
+                (
+                    TaskTiming {
+                        priority,
+                        wcet: row_time(mono.cost),
+                        period: s.period,
+                        jitter: row_time(mono.jitter),
+                    },
+                    JobMeta {
+                        id: TaskId::Timer(sender.topic),
+                        deadline: s.period,
+                        own_jitter: row_time(mono.jitter),
+                        released_by: NO_JOB,
+                        original,
+                    },
+                )
+            }
+            Source::Publisher {
+                stream,
+                topic,
+                timer,
+            } => {
+                let s = stream_of(stream)?;
+                let row = table
+                    .topics
+                    .get(usize::from(topic))
+                    .ok_or(Refusal::Capacity)?;
+                (
+                    TaskTiming {
+                        priority,
+                        wcet: row_time(row.cost),
+                        period: s.period,
+                        jitter: Time::ZERO,
+                    },
+                    JobMeta {
+                        id: TaskId::Publisher(row.topic),
+                        deadline: s.deadline(),
+                        own_jitter: Time::ZERO,
+                        released_by: timer,
+                        original,
+                    },
+                )
+            }
+        };
     }
     let len = jobs.len;
     // Sorted position of each original index; releasers as sorted positions.
@@ -1175,9 +1308,15 @@ fn analyse_board<const N: usize, const M: usize>(
     };
 
     // SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job.
+    // Jobs of one priority share it: worked out once per level (the jobs are sorted by priority).
     let mut blocking = [Time::ZERO; N];
+    let mut last_level: Option<(u32, Time)> = None;
     for (slot, timing) in blocking.iter_mut().zip(jobs.timings.iter()).take(len) {
         let p = timing.priority;
+        if let Some((_, known)) = last_level.filter(|&(level, _)| level == p) {
+            *slot = known;
+            continue;
+        }
         // SRP (`board::srp_blocking`): a lower holder's section on a resource whose ceiling reaches `p`.
         let mut longest = 0;
         for cs in table.sections {
@@ -1206,6 +1345,25 @@ fn analyse_board<const N: usize, const M: usize>(
             }
         }
         *slot = row_time(longest);
+        last_level = Some((p, *slot));
+    }
+    // Each job's share of the CPU, one division per job (not one per job and level as it is summed).
+    let mut shares = [Share::default(); N];
+    for (share, timing) in shares.iter_mut().zip(jobs.timings.iter()).take(len) {
+        *share = Share::of(timing.wcet, timing.period);
+    }
+    // Where each job's priority level ends (the jobs are sorted by priority).
+    let mut level_end = [0u8; N];
+    let mut end = len;
+    for i in (0..len).rev() {
+        if let (Some(t), Some(next)) = (jobs.timings.get(i), jobs.timings.get(i + 1)) {
+            if t.priority != next.priority {
+                end = i + 1;
+            }
+        }
+        if let Some(slot) = level_end.get_mut(i) {
+            *slot = end as u8;
+        }
     }
 
     // Release jitters to a fixed point: a released job inherits its releaser's WCRT. When every releaser is more
@@ -1239,7 +1397,8 @@ fn analyse_board<const N: usize, const M: usize>(
     };
     let mut settled = false;
     for _ in 0..MAX_JITTER_ROUNDS {
-        let mut levels = LevelLoads::default();
+        // The load of every job of this and the more urgent levels, summed as each level is entered.
+        let mut prefix = Load::default();
         let mut level_start = 0;
         let mut previous_level = 0..0;
         for i in 0..len {
@@ -1272,6 +1431,11 @@ fn analyse_board<const N: usize, const M: usize>(
                         }
                     }
                 }
+                // The level's load, with its jitters as they are now (as `board::LevelLoads` sums it).
+                let end = usize::from(level_end.get(i).copied().unwrap_or(0));
+                for (share, timing) in shares.iter().zip(jobs.timings.iter()).take(end).skip(i) {
+                    prefix = prefix.plus(share.load(timing.jitter));
+                }
             }
             let (Some(&task), Some(&blocking_i)) = (jobs.timings.get(i), blocking.get(i)) else {
                 break;
@@ -1289,13 +1453,16 @@ fn analyse_board<const N: usize, const M: usize>(
                 .max()
                 .unwrap_or(Time::ZERO);
             let timings = jobs.timings.get(..len).unwrap_or(&[]);
-            let load = levels.at(timings, i, |a, b| a.priority == b.priority);
-            let result = board::response_time_hinted(
+            let own = shares.get(i).copied().unwrap_or_default();
+            let load = prefix.minus(own.load(task.jitter));
+            let result = board::response_time_at_level(
                 timings,
                 i,
+                usize::from(level_end.get(i).copied().unwrap_or(0)),
                 blocking_i,
                 hint,
                 load,
+                own,
                 limits,
                 &mut scratch,
             );
@@ -1356,11 +1523,20 @@ fn analyse_board<const N: usize, const M: usize>(
         let (Some(meta), Some(&w)) = (jobs.meta.get(p), wcrt.get(p)) else {
             continue;
         };
-        if !summary.violated && (w == NONE || w > meta.deadline.as_ns()) {
+        let missed = w == NONE || w > meta.deadline.as_ns();
+        if !summary.violated && missed {
             summary.violated = true;
             summary.task = meta.id;
             summary.violation_wcrt = w;
             summary.violation_deadline = meta.deadline;
+        }
+        // The floor: no bound at all, or a fixed task (the board's own machinery) late.
+        if !summary.floor_violated && (w == NONE || (missed && matches!(meta.id, TaskId::Fixed(_))))
+        {
+            summary.floor_violated = true;
+            summary.floor_task = meta.id;
+            summary.floor_wcrt = w;
+            summary.floor_deadline = meta.deadline;
         }
     }
     let fixed = |index: Option<u16>| -> u64 {

@@ -25,7 +25,9 @@ use crate::admission::{
     TopicRow, TopicSection, INTERRUPTS_DISABLED, LEVELS, NO_DEADLINE, NO_RELEASER,
 };
 use crate::can::{self, FrameCost};
-use crate::model::{FrameCostSpec, Model, OverheadTimes, TaskKind, GLOBAL_CRITICAL_SECTION};
+use crate::model::{
+    BoardModel, FrameCostSpec, Model, OverheadTimes, TaskKind, TaskModel, GLOBAL_CRITICAL_SECTION,
+};
 use crate::scenario::{self, Arrival, BuildError, Timing};
 use crate::time::Time;
 
@@ -198,6 +200,12 @@ fn overhead_times(o: &crate::model::Overheads) -> OverheadTimes {
 /// Lowers every board of the timing files to the admission table, for the bus at `bitrate` under `frame_cost`.
 /// Fails exactly where `cargo xtask analyze` fails on the same files (an app task without a budget, a budget
 /// for a task the app does not declare, …).
+///
+/// The steps: read the timing files; build every board without publishers (the fixed tasks); per board, resolve
+/// the resource ceilings ([`Lowering::new`]), lower the fixed tasks and critical sections
+/// ([`Lowering::task_rows`], [`Lowering::idle_rows`]), then, per CAN level with a publisher task, build the board
+/// with every publishable topic at that level and lower its publisher jobs and timer job
+/// ([`Lowering::publisher_rows`]).
 pub fn lower(
     root: &Path,
     timing_paths: &[PathBuf],
@@ -211,21 +219,65 @@ pub fn lower(
     let base = build_with(root, timing_paths, "base", &[])?;
     let mut boards = Vec::new();
     for ((timing, board), path) in timings.iter().zip(&base.boards).zip(timing_paths) {
-        let file = path
-            .strip_prefix(root)
-            .unwrap_or(path)
-            .display()
-            .to_string();
-        let rows = Rows { file: &file };
-        let overheads = overhead_times(&board.overheads);
-        let index_of = |name: &str| {
-            board
-                .tasks
-                .iter()
-                .position(|t| t.name == name)
-                .map(|i| i as u16)
-        };
-        // Ceilings as the analysis computes them: the static ones, raised by every user's priority.
+        let file = relative(root, path);
+        let lowering = Lowering::new(Rows { file: &file }, timing, board);
+        let (mut sections, tasks) = lowering.task_rows()?;
+        sections.extend(lowering.idle_rows()?);
+        let publishers = lowering.publisher_rows(root, timing_paths)?;
+        boards.push(OwnedBoard {
+            name: timing.board.clone(),
+            task_names: board.tasks.iter().map(|t| t.name.clone()).collect(),
+            tasks,
+            sections,
+            topics: publishers.topics,
+            levels: publishers.levels,
+            monotonic: publishers.monotonic,
+            can_tx: timing
+                .can_tx_task
+                .as_deref()
+                .and_then(|n| lowering.index_of(n)),
+            command_handler: timing
+                .command_handler
+                .as_deref()
+                .and_then(|n| lowering.index_of(n)),
+        });
+    }
+    Ok(OwnedRobot {
+        boards,
+        bitrate,
+        frame_cost: frame_cost.cost(),
+        sources: timing_paths.iter().map(|p| relative(root, p)).collect(),
+    })
+}
+
+/// `path` relative to `root`, as the messages and the generated source name files.
+fn relative(root: &Path, path: &Path) -> String {
+    path.strip_prefix(root)
+        .unwrap_or(path)
+        .display()
+        .to_string()
+}
+
+/// One board's lowering: its fixed-task model (built without publishers), timing file, overheads and resolved
+/// ceilings.
+struct Lowering<'a> {
+    rows: Rows<'a>,
+    timing: &'a Timing,
+    board: &'a BoardModel,
+    overheads: OverheadTimes,
+    /// Ceilings as the analysis computes them: the static ones, raised by every user's priority.
+    ceilings: BTreeMap<&'a str, u32>,
+}
+
+/// What the publisher jobs lower to.
+struct PublisherRows {
+    topics: Vec<OwnedTopic>,
+    levels: [Option<u8>; LEVELS],
+    monotonic: Option<MonotonicRow>,
+}
+
+impl<'a> Lowering<'a> {
+    fn new(rows: Rows<'a>, timing: &'a Timing, board: &'a BoardModel) -> Self {
         let mut ceilings: BTreeMap<&str, u32> = board
             .ceilings
             .iter()
@@ -237,22 +289,46 @@ pub fn lower(
                 *c = (*c).max(t.priority);
             }
         }
-        let ceiling_of = |r: &str| {
-            if r == GLOBAL_CRITICAL_SECTION {
-                u32::MAX
-            } else {
-                ceilings.get(r).copied().unwrap_or(0)
-            }
-        };
+        Lowering {
+            rows,
+            timing,
+            board,
+            overheads: overhead_times(&board.overheads),
+            ceilings,
+        }
+    }
+
+    /// A task's index in the board's fixed tasks.
+    fn index_of(&self, name: &str) -> Option<u16> {
+        self.board
+            .tasks
+            .iter()
+            .position(|t| t.name == name)
+            .map(|i| i as u16)
+    }
+
+    /// A resource's resolved ceiling (`u32::MAX` for the global critical section).
+    fn ceiling_of(&self, r: &str) -> u32 {
+        if r == GLOBAL_CRITICAL_SECTION {
+            u32::MAX
+        } else {
+            self.ceilings.get(r).copied().unwrap_or(0)
+        }
+    }
+
+    /// The fixed tasks' critical sections and rows, in the board model's order.
+    fn task_rows(&self) -> Result<(Vec<SectionRow>, Vec<TaskRow>), BuildError> {
+        let rows = &self.rows;
         let mut tasks = Vec::new();
         let mut sections = Vec::new();
-        for t in &board.tasks {
-            let own_frame = timing
+        for t in &self.board.tasks {
+            let own_frame = self
+                .timing
                 .tasks
                 .get(&t.name)
                 .is_some_and(|b| b.arrival == Some(Arrival::OwnFrame));
             let field = |name: &str| format!("tasks.{}.{name}", t.name);
-            let released_by = match t.released_by.as_deref().and_then(index_of) {
+            let released_by = match t.released_by.as_deref().and_then(|n| self.index_of(n)) {
                 None => NO_RELEASER,
                 Some(i) => u8::try_from(i)
                     .ok()
@@ -268,7 +344,7 @@ pub fn lower(
                 priority: rows.priority(&field("priority"), t.priority)?,
                 cost: rows.time(
                     &field("wcet_us"),
-                    Time::from_us_up(t.wcet_us).plus(overheads.for_kind(t.kind)),
+                    Time::from_us_up(t.wcet_us).plus(self.overheads.for_kind(t.kind)),
                 )?,
                 bcet: rows.time(
                     &field("bcet_us"),
@@ -287,29 +363,55 @@ pub fn lower(
                 let field = field(&format!("critical_sections_us.{r}"));
                 sections.push(SectionRow {
                     holder_priority: rows.priority(&field, t.priority)?,
-                    ceiling: rows.ceiling(&field, ceiling_of(r))?,
+                    ceiling: rows.ceiling(&field, self.ceiling_of(r))?,
                     length: rows.time(&field, Time::from_us_up(*length))?,
                 });
             }
         }
-        for (r, length) in &board.idle_critical_sections_us {
+        Ok((sections, tasks))
+    }
+
+    /// Idle's critical sections (holder priority 0).
+    fn idle_rows(&self) -> Result<Vec<SectionRow>, BuildError> {
+        let mut sections = Vec::new();
+        for (r, length) in &self.board.idle_critical_sections_us {
             let field = format!("idle.critical_sections_us.{r}");
             sections.push(SectionRow {
                 holder_priority: 0,
-                ceiling: rows.ceiling(&field, ceiling_of(r))?,
-                length: rows.time(&field, Time::from_us_up(*length))?,
+                ceiling: self.rows.ceiling(&field, self.ceiling_of(r))?,
+                length: self.rows.time(&field, Time::from_us_up(*length))?,
             });
         }
-        // The publishable topics: those the timing file budgets and the protocol gives to this board.
-        let owned: Vec<&'static amiro_can::TopicInfo> = timing
+        Ok(sections)
+    }
+
+    /// The publishable topics: those the timing file budgets and the protocol gives to this board.
+    fn publishable(&self) -> Vec<&'static amiro_can::TopicInfo> {
+        self.timing
             .topics
             .keys()
             .filter_map(|name| Topic::from_name(name).map(|t| t.info()))
-            .filter(|info| info.is_sensor && scenario::board_folder(info.board) == timing.board)
-            .collect();
-        let mut levels = [None; LEVELS];
-        let mut topics: Vec<OwnedTopic> = Vec::new();
-        let mut monotonic = None;
+            .filter(|info| {
+                info.is_sensor && scenario::board_folder(info.board) == self.timing.board
+            })
+            .collect()
+    }
+
+    /// Per CAN level with a publisher task: the board built with every publishable topic at that level, whose
+    /// publisher jobs give the level's priority and (once per topic) the topic's row, and whose timer job gives
+    /// the monotonic's row.
+    fn publisher_rows(
+        &self,
+        root: &Path,
+        timing_paths: &[PathBuf],
+    ) -> Result<PublisherRows, BuildError> {
+        let timing = self.timing;
+        let owned = self.publishable();
+        let mut out = PublisherRows {
+            topics: Vec::new(),
+            levels: [None; LEVELS],
+            monotonic: None,
+        };
         for (l, level) in Priority::ALL.iter().enumerate() {
             let Some(publisher) = timing.publishers.get(level.name()) else {
                 continue;
@@ -335,74 +437,70 @@ pub fn lower(
                 let Some(job) = b.tasks.iter().find(|t| t.name == job_name) else {
                     continue;
                 };
-                let field = |name: &str| format!("topics.{}.{name}", info.name);
-                if let Some(slot) = levels.get_mut(l) {
-                    *slot =
-                        Some(rows.priority(&format!("publishers.{}", level.name()), job.priority)?);
+                if let Some(slot) = out.levels.get_mut(l) {
+                    *slot = Some(
+                        self.rows
+                            .priority(&format!("publishers.{}", level.name()), job.priority)?,
+                    );
                 }
-                if !topics.iter().any(|t| t.name == info.name) {
-                    let mut topic_sections = Vec::new();
-                    for (r, length) in &job.critical_sections_us {
-                        let field = field(&format!("critical_sections_us.{r}"));
-                        topic_sections.push(TopicSection {
-                            ceiling: rows.ceiling(&field, ceiling_of(r))?,
-                            length: rows.time(&field, Time::from_us_up(*length))?,
-                        });
-                    }
-                    topics.push(OwnedTopic {
-                        name: info.name.to_string(),
-                        topic: info.topic.byte(),
-                        cost: rows.time(
-                            &field("wcet_us"),
-                            Time::from_us_up(job.wcet_us)
-                                .plus(overheads.for_kind(TaskKind::Software)),
-                        )?,
-                        bcet: rows.time(
-                            &field("bcet_us"),
-                            Time::from_us_down(job.bcet_us.unwrap_or(0.0)),
-                        )?,
-                        sections: topic_sections,
-                    });
+                if !out.topics.iter().any(|t| t.name == info.name) {
+                    out.topics.push(self.topic_row(info, job)?);
                 }
                 if let Some(timer) = b
                     .tasks
                     .iter()
                     .find(|t| t.name == format!("monotonic[{job_name}]"))
                 {
-                    let field = format!("tasks.{}", timer.name);
-                    monotonic = Some(MonotonicRow {
-                        priority: rows.priority(&field, timer.priority)?,
-                        cost: rows.time(
-                            &field,
-                            Time::from_us_up(timer.wcet_us)
-                                .plus(overheads.for_kind(TaskKind::Hardware)),
-                        )?,
-                        jitter: rows.time(&field, Time::from_us_up(timer.jitter_us))?,
-                    });
+                    out.monotonic = Some(self.monotonic_row(timer)?);
                 }
             }
         }
-        boards.push(OwnedBoard {
-            name: timing.board.clone(),
-            task_names: board.tasks.iter().map(|t| t.name.clone()).collect(),
-            tasks,
-            sections,
-            topics,
-            levels,
-            monotonic,
-            can_tx: timing.can_tx_task.as_deref().and_then(index_of),
-            command_handler: timing.command_handler.as_deref().and_then(index_of),
-        });
+        Ok(out)
     }
-    Ok(OwnedRobot {
-        boards,
-        bitrate,
-        frame_cost: frame_cost.cost(),
-        sources: timing_paths
-            .iter()
-            .map(|p| p.strip_prefix(root).unwrap_or(p).display().to_string())
-            .collect(),
-    })
+
+    /// A topic's row from its publisher job.
+    fn topic_row(
+        &self,
+        info: &amiro_can::TopicInfo,
+        job: &TaskModel,
+    ) -> Result<OwnedTopic, BuildError> {
+        let rows = &self.rows;
+        let field = |name: &str| format!("topics.{}.{name}", info.name);
+        let mut topic_sections = Vec::new();
+        for (r, length) in &job.critical_sections_us {
+            let field = field(&format!("critical_sections_us.{r}"));
+            topic_sections.push(TopicSection {
+                ceiling: rows.ceiling(&field, self.ceiling_of(r))?,
+                length: rows.time(&field, Time::from_us_up(*length))?,
+            });
+        }
+        Ok(OwnedTopic {
+            name: info.name.to_string(),
+            topic: info.topic.byte(),
+            cost: rows.time(
+                &field("wcet_us"),
+                Time::from_us_up(job.wcet_us).plus(self.overheads.for_kind(TaskKind::Software)),
+            )?,
+            bcet: rows.time(
+                &field("bcet_us"),
+                Time::from_us_down(job.bcet_us.unwrap_or(0.0)),
+            )?,
+            sections: topic_sections,
+        })
+    }
+
+    /// The monotonic's row from the timer job that releases a publisher job.
+    fn monotonic_row(&self, timer: &TaskModel) -> Result<MonotonicRow, BuildError> {
+        let field = format!("tasks.{}", timer.name);
+        Ok(MonotonicRow {
+            priority: self.rows.priority(&field, timer.priority)?,
+            cost: self.rows.time(
+                &field,
+                Time::from_us_up(timer.wcet_us).plus(self.overheads.for_kind(TaskKind::Hardware)),
+            )?,
+            jitter: self.rows.time(&field, Time::from_us_up(timer.jitter_us))?,
+        })
+    }
 }
 
 impl OwnedRobot {

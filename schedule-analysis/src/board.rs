@@ -123,8 +123,14 @@ pub fn response_times_into<R: Results + ?Sized>(
     out: &mut R,
 ) {
     let mut level_start = 0;
+    let mut level_end = 0;
     let mut previous_level = 0..0;
     let mut levels = LevelLoads::default();
+    // The set's order checked once (not once per task, which made a large set's set-up quadratic): a task's
+    // prefix up to the end of its level is ordered exactly when the first out-of-order pair lies beyond it.
+    let first_unsorted = tasks
+        .windows(2)
+        .position(|pair| pair[0].priority < pair[1].priority);
     for (i, task) in tasks.iter().enumerate() {
         if i > 0
             && tasks
@@ -133,6 +139,15 @@ pub fn response_times_into<R: Results + ?Sized>(
         {
             previous_level = level_start..i;
             level_start = i;
+        }
+        if i >= level_end {
+            level_end = i + 1;
+            while tasks
+                .get(level_end)
+                .is_some_and(|t| t.priority == task.priority)
+            {
+                level_end += 1;
+            }
         }
         let blocking = blockings.get(i).copied().unwrap_or(Time::ZERO);
         // f_i(w) ≥ f_k(w) − B_k + B_i + C_i, so w_i ≥ w_k whenever B_k ≤ B_i + C_i.
@@ -146,7 +161,11 @@ pub fn response_times_into<R: Results + ?Sized>(
             .max()
             .unwrap_or(Time::ZERO);
         let load = levels.at(tasks, i, |a, b| a.priority == b.priority);
-        let result = response_time_from(tasks, i, blocking, hint, Some(load), limits, scratch);
+        let result = if first_unsorted.is_some_and(|k| k < level_end) {
+            Err(AnalysisError::NotSorted)
+        } else {
+            response_time_in(tasks, i, level_end, blocking, hint, load, limits, scratch)
+        };
         out.put(i, result);
     }
 }
@@ -223,13 +242,60 @@ fn response_time_from(
     if !sorted {
         return Err(AnalysisError::NotSorted);
     }
+    let load = load.unwrap_or_else(|| Load::sum(tasks.get(..end).unwrap_or(&[]), Some(index)));
+    response_time_in(tasks, index, end, blocking, hint, load, limits, scratch)
+}
+
+/// [`response_time_hinted`] for a caller that keeps its set ordered itself and knows more: `end` is where
+/// `tasks[index]`'s priority level ends and `tasks[..end]` must be ordered by priority (not checked: the
+/// admission check builds its jobs sorted), and `own` is the subject's [`Share`](busy_window::Share), worked out
+/// once. The same result as [`response_time_hinted`] on such a set, without its per-call ordering scan and
+/// division.
+#[allow(clippy::too_many_arguments)]
+pub fn response_time_at_level(
+    tasks: &[TaskTiming],
+    index: usize,
+    end: usize,
+    blocking: Time,
+    hint: Time,
+    load: Load,
+    own: busy_window::Share,
+    limits: &Limits,
+    scratch: &mut [Counter],
+) -> Result<Response, AnalysisError> {
+    let me = *tasks.get(index).ok_or(AnalysisError::NoSuchIndex)?;
     let mut subject = Subject::new(me.wcet, 1, me.period, me.jitter, blocking);
     subject.known_first_window = hint;
-    let interferers = tasks.get(..end).unwrap_or(&[]);
-    let load = load.unwrap_or_else(|| Load::sum(interferers, Some(index)));
+    subject.known_utilisation = Some(own.utilisation());
     busy_window::response_time_loaded(
         &subject,
-        interferers,
+        tasks.get(..end).unwrap_or(&[]),
+        Some(index),
+        load,
+        Discipline::Preemptive,
+        limits,
+        scratch,
+    )
+}
+
+/// The response time of `tasks[index]` whose level ends at `end`, the prefix `tasks[..end]` known to be ordered.
+#[allow(clippy::too_many_arguments)]
+fn response_time_in(
+    tasks: &[TaskTiming],
+    index: usize,
+    end: usize,
+    blocking: Time,
+    hint: Time,
+    load: Load,
+    limits: &Limits,
+    scratch: &mut [Counter],
+) -> Result<Response, AnalysisError> {
+    let me = *tasks.get(index).ok_or(AnalysisError::NoSuchIndex)?;
+    let mut subject = Subject::new(me.wcet, 1, me.period, me.jitter, blocking);
+    subject.known_first_window = hint;
+    busy_window::response_time_loaded(
+        &subject,
+        tasks.get(..end).unwrap_or(&[]),
         Some(index),
         load,
         Discipline::Preemptive,
@@ -305,6 +371,50 @@ mod tests {
             response_time(&tasks, 5, Time::ZERO, &Limits::default(), &mut []),
             Err(AnalysisError::NoSuchIndex)
         );
+    }
+
+    #[test]
+    fn response_times_equal_response_time_one_by_one_on_unsorted_sets() {
+        // The set's order is checked once per call: every task whose prefix (to the end of its level) is ordered
+        // gets its bound, every other task `NotSorted`, as `response_time` gives them one by one.
+        let sets = [
+            vec![task(3, 1, 10), task(2, 2, 20), task(1, 3, 40)],
+            vec![task(3, 1, 10), task(1, 2, 20), task(2, 3, 40)],
+            vec![
+                task(3, 1, 10),
+                task(3, 2, 20),
+                task(4, 1, 40),
+                task(1, 3, 80),
+            ],
+            vec![
+                task(2, 1, 10),
+                task(2, 1, 20),
+                task(2, 1, 40),
+                task(3, 1, 80),
+            ],
+            vec![task(1, 1, 10), task(2, 1, 20)],
+        ];
+        for tasks in sets {
+            let n = tasks.len();
+            let blockings = [Time::ZERO; 4];
+            let mut out = [Err(AnalysisError::NoSuchIndex); 4];
+            let mut scratch = [Counter::default(); 4];
+            response_times(
+                &tasks,
+                &blockings,
+                &Limits::default(),
+                &mut scratch,
+                &mut out[..n],
+            );
+            for (i, got) in out[..n].iter().enumerate() {
+                let one = response_time(&tasks, i, Time::ZERO, &Limits::default(), &mut []);
+                assert_eq!(
+                    got.map(|r| r.wcrt),
+                    one.map(|r| r.wcrt),
+                    "{tasks:?}, task {i}"
+                );
+            }
+        }
     }
 
     #[test]

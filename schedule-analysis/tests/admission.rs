@@ -324,6 +324,7 @@ proptest! {
             let plain = robot.with_table(|t| admission::admit::<32, 32>(t, &running, &request, false));
             let cached = robot.with_table(|t| admission::admit_cached::<32, 32>(t, &running, &request, &mut cache, false));
             prop_assert_eq!(plain.refusal, cached.refusal, "{} at {} µs {}", topic, period, LEVELS[level]);
+            prop_assert_eq!(plain.floor, cached.floor, "the hard floor: {} at {} µs {}", topic, period, LEVELS[level]);
             prop_assert!(cached.iterations <= plain.iterations);
             if plain.admitted() {
                 running.retain(|s| s.sender.map(|x| (x.board, x.topic)) != request.sender.map(|x| (x.board, x.topic)));

@@ -76,12 +76,13 @@ fn every_scenario_is_schedulable_on_both_revisions() {
                 analysis.failures()
             );
             if !expected_ok {
-                // What breaks is the board's CPU (the admission task starves), not the bus.
+                // What breaks is the 1-2 board's 390 µs read every 900 µs: its own CPU (the
+                // admission task starves) or the magnetometer-x frames' end-to-end deadline (their
+                // queueing jitter is that publisher's response time), never another topic.
                 assert!(
-                    analysis
-                        .failures()
-                        .iter()
-                        .all(|f| f.contains("diwheeldrive/admit_requests")),
+                    analysis.failures().iter().all(|f| {
+                        f.contains("diwheeldrive/admit_requests") || f.contains("magnetometer-x")
+                    }),
                     "{:?}",
                     analysis.failures()
                 );

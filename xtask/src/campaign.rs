@@ -493,10 +493,12 @@ fn check(model: &BoardModel, plan: &Plan, out: &RunOutput) -> Result<String> {
     let routed = |frame: &TimedFrame| {
         model.admission_task
             && u16::try_from(frame.id).is_ok_and(|id| {
-                matches!(
-                    amiro_can::decode_command(id, &frame.data),
-                    Ok(amiro_can::Command::Sensor(_) | amiro_can::Command::Policy { .. })
-                )
+                // A stop is applied (and traced) by the command handler itself (issue 20).
+                !amiro_firmware::admission::is_stop(id, &frame.data)
+                    && matches!(
+                        amiro_can::decode_command(id, &frame.data),
+                        Ok(amiro_can::Command::Sensor(_) | amiro_can::Command::Policy { .. })
+                    )
             })
     };
     let mut handler: Vec<&(u32, Verdict)> = Vec::new();
@@ -548,21 +550,27 @@ fn check(model: &BoardModel, plan: &Plan, out: &RunOutput) -> Result<String> {
         "{} verdicts traced, the spaced phase alone sent {spaced}",
         traced.len()
     );
-    let refused = out
+    // Refused by the check or for a full admission queue (issue 20: busy refusals are counted, their
+    // verdicts sent at most one per 40 ms), as the board counts them; a warning is traced as accepted.
+    let verdicts = out
         .frames
         .iter()
         .filter(|f| {
             f.id & 0x4FF == 0x400 | u32::from(model.diagnostics) && f.data.first() == Some(&0x80)
         })
-        // Byte 4 bit 4: accepted with a warning (traced as accepted too), not refused.
         .filter(|f| f.data.get(4).is_some_and(|b| b & 0x10 == 0))
         .count();
+    let refused = if model.admission_task {
+        out.end_field("admission refused")? as usize
+    } else {
+        verdicts
+    };
     let dropped = out.end_field("rx dropped")? as usize;
     let sent = spaced + plan.burst;
     let accounted = traced.len() + refused + dropped;
     // Up to the admission queue and the request being decided may still wait when the run ends.
     ensure!(
-        accounted <= sent && sent - accounted <= if model.admission_task { 5 } else { 0 },
+        accounted <= sent && sent - accounted <= if model.admission_task { 9 } else { 0 },
         "counters: {} traced + {refused} refused by admission + {dropped} dropped != {sent} sent",
         traced.len()
     );

@@ -1,9 +1,14 @@
 //! Interop with other CAN tools: cantools loads `amiro dbc` and decodes sample frames to the values `amiro decode`
 //! prints; python-can's `CanutilsLogReader` and can-utils' `log2long` / `log2asc` read the candump logs `amiro`
-//! writes (`canplayer` needs a CAN interface, and CI kernels have no vcan, so it is not run here).
+//! writes (`canplayer` needs a CAN interface, and CI kernels have no vcan, so it is not run here); Foxglove's
+//! Python `mcap` reader opens the MCAP recordings of `amiro record` and `amiro decode --mcap` and finds every
+//! topic's channel and JSON schema, the values of `decode --json` and each frame's time as the log time.
 //!
-//! The checks are `tools/interop/test_interop.py`, run with pytest in a venv under the target directory that
-//! holds exactly `tools/requirements-ci.txt`; the venv is rebuilt only when that file changes.
+//! Foxglove's own WebSocket client (`@foxglove/ws-protocol`, run with node) subscribes to `amiro monitor --foxglove`.
+//!
+//! The checks are `tools/interop/test_interop.py`, `test_mcap.py` and `test_foxglove.py`, run with pytest in a
+//! venv under the target directory that holds exactly `tools/requirements-ci.txt`; the venv is rebuilt only when
+//! that file changes.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -18,13 +23,24 @@ pub fn check(root: &Path) -> Result<()> {
     let work = super::target_dir(root).join("interop");
     let python = venv(root, &work)?;
     ensure_can_utils()?;
+    ensure_node()?;
+    // With the live Foxglove server, which Foxglove's own WebSocket client checks (tools/interop/test_foxglove.py).
     super::cargo(
         root,
-        &["build", "--quiet", "-p", "operator", "--bin", "amiro"],
+        &[
+            "build",
+            "--quiet",
+            "-p",
+            "operator",
+            "--bin",
+            "amiro",
+            "--features",
+            "foxglove",
+        ],
     )
     .context("building amiro for the interop checks")?;
     let amiro = super::target_dir(root).join("debug").join("amiro");
-    println!("interop: cantools, python-can and can-utils against amiro");
+    println!("interop: cantools, python-can, can-utils, the mcap reader and the Foxglove client against amiro");
     let status = Command::new(&python)
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
         .arg(root.join("tools").join("interop"))
@@ -84,6 +100,35 @@ fn venv(root: &Path, work: &Path) -> Result<PathBuf> {
     .context("installing tools/requirements-ci.txt")?;
     std::fs::write(&stamp, pinned).with_context(|| format!("writing {}", stamp.display()))?;
     Ok(python)
+}
+
+/// Node and npm for Foxglove's WebSocket client (`@foxglove/ws-protocol`, pinned in
+/// tools/interop/foxglove-client/package-lock.json); installed with apt when running as root, like can-utils.
+fn ensure_node() -> Result<()> {
+    let found = |tool: &str| {
+        Command::new(tool)
+            .arg("--version")
+            .stdin(std::process::Stdio::null())
+            .output()
+            .map(|o| o.status.success())
+            .unwrap_or(false)
+    };
+    if found("node") && found("npm") {
+        return Ok(());
+    }
+    let is_root = super::output(Path::new("."), "id", &["-u"])
+        .map(|u| u.trim() == "0")
+        .unwrap_or(false);
+    if is_root {
+        super::run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
+        super::run_tool(
+            Path::new("."),
+            "apt-get",
+            &["install", "-y", "-qq", "nodejs", "npm"],
+        )?;
+        return Ok(());
+    }
+    bail!("node and npm are missing: install them (Debian/Ubuntu: sudo apt-get install nodejs npm)")
 }
 
 /// can-utils' log converters; installed with apt when running as root (as CI does), like QEMU.

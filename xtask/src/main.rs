@@ -21,6 +21,7 @@ mod probe;
 mod qemu;
 mod revision;
 mod scenarios;
+mod smoke;
 
 use boards::{Board, BOARDS};
 
@@ -92,6 +93,15 @@ enum Cmd {
         /// Boards whose scenarios to run (default: all).
         boards: Vec<String>,
         /// Only the scenarios of this robot revision (1-2, 1-1). Default: every revision's.
+        #[arg(long, value_name = "1-2|1-1")]
+        revision: Option<String>,
+    },
+    /// Boot the production images (the bytes `cargo xtask flash` writes, behind a stand-in for
+    /// AMiRo-BLT) in QEMU and check the boot from their RTT log (part of `test`; docs/faults.md).
+    Smoke {
+        /// Boards to boot (default: all).
+        boards: Vec<String>,
+        /// Only the production image of this robot revision (1-2, 1-1). Default: every revision's.
         #[arg(long, value_name = "1-2|1-1")]
         revision: Option<String>,
     },
@@ -228,6 +238,14 @@ fn run(cmd: Cmd) -> Result<bool> {
             };
             let plan = revision::plan(&select_boards(&boards)?, &choice)?;
             run_scenarios(&root, &plan).map(|()| true)
+        }
+        Cmd::Smoke { boards, revision } => {
+            let choice = match revision.as_deref() {
+                None => revision::Choice::All,
+                some => revision::Choice::parse(some)?,
+            };
+            let plan = revision::plan(&select_boards(&boards)?, &choice)?;
+            smoke::run(&root, &plan, false).map(|()| true)
         }
         Cmd::Trace { file } => {
             let bytes =
@@ -528,6 +546,8 @@ fn test(root: &Path) -> Result<()> {
     let over = elf::over_budget(&reports);
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
     run_scenarios(root, &every)?;
+    // The production images booted in QEMU (issue 21): every revision's, as built above.
+    smoke::run(root, &every, true)?;
     // After the scenarios: their bus logs are among what the other CAN tools must read.
     interop::check(root)?;
     // The hostile-bus campaign, one run of 3000 spaced frames per board (issue 12).

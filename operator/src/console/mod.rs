@@ -186,6 +186,7 @@ fn map_key(code: KeyCode, modifiers: KeyModifiers) -> Option<Key> {
         KeyCode::Esc => Key::Esc,
         KeyCode::F(2) => Key::Menu,
         KeyCode::F(3) => Key::Drive,
+        KeyCode::F(4) => Key::Dashboard,
         _ => return None,
     })
 }
@@ -200,7 +201,13 @@ fn interactive(
         .context("cannot take over the terminal (is this a terminal? try --headless)")?;
     let _guard = TerminalGuard;
     let title = format!(" amiro console — {url} ");
+    // On a live bus the dashboard's clock runs on with the host's (a silent publisher owes samples); a log
+    // replayed keeps its own times.
+    let live = !matches!(url, BusUrl::File { .. });
     loop {
+        if live {
+            console.dashboard.tick(Timestamp::now());
+        }
         terminal
             .draw(|frame| draw(frame, console, &title))
             .context("cannot draw")?;
@@ -222,22 +229,12 @@ fn interactive(
     }
 }
 
-fn draw(frame: &mut ratatui::Frame<'_>, console: &Console, title: &str) {
-    let menu_height = match &console.mode {
-        Mode::Menu(menu) => match menu.question() {
-            Some(Question::Choose { choices, .. }) => choices.len() as u16 + 2,
-            _ => 3,
-        },
-        _ => 0,
-    };
-    let [log_area, menu_area, status_area, input_area] = Layout::vertical([
-        Constraint::Min(3),
-        Constraint::Length(menu_height),
-        Constraint::Length(1),
-        Constraint::Length(3),
-    ])
-    .areas(frame.area());
-
+fn draw_log(
+    frame: &mut ratatui::Frame<'_>,
+    console: &Console,
+    title: &str,
+    log_area: ratatui::layout::Rect,
+) {
     let height = log_area.height.saturating_sub(2) as usize;
     let log = console.log();
     let end = log.len().saturating_sub(console.scroll);
@@ -258,6 +255,29 @@ fn draw(frame: &mut ratatui::Frame<'_>, console: &Console, title: &str) {
         Paragraph::new(lines).block(Block::default().borders(Borders::ALL).title(scrolled)),
         log_area,
     );
+}
+
+fn draw(frame: &mut ratatui::Frame<'_>, console: &Console, title: &str) {
+    let menu_height = match &console.mode {
+        Mode::Menu(menu) => match menu.question() {
+            Some(Question::Choose { choices, .. }) => choices.len() as u16 + 2,
+            _ => 3,
+        },
+        _ => 0,
+    };
+    let [log_area, menu_area, status_area, input_area] = Layout::vertical([
+        Constraint::Min(3),
+        Constraint::Length(menu_height),
+        Constraint::Length(1),
+        Constraint::Length(3),
+    ])
+    .areas(frame.area());
+
+    if console.show_dashboard {
+        console.dashboard.render(frame, log_area);
+    } else {
+        draw_log(frame, console, title, log_area);
+    }
 
     if let Mode::Menu(menu) = &console.mode {
         match menu.question() {
@@ -306,7 +326,7 @@ fn draw(frame: &mut ratatui::Frame<'_>, console: &Console, title: &str) {
     let (label, text) = match console.mode {
         Mode::Drive => (" drive (arrows, Space stops, Esc leaves) ", String::new()),
         _ => (
-            " command (Tab completes, F2 menu, F3 drive) ",
+            " command (Tab completes, F2 menu, F3 drive, F4 dashboard) ",
             format!("{}▏", console.input),
         ),
     };
@@ -314,4 +334,71 @@ fn draw(frame: &mut ratatui::Frame<'_>, console: &Console, title: &str) {
         Paragraph::new(text).block(Block::default().borders(Borders::ALL).title(label)),
         input_area,
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dashboard::buffer_text;
+    use crate::frame::parse_line;
+    use crate::watch::Filter;
+
+    fn screen(console: &Console) -> String {
+        let mut terminal =
+            ratatui::Terminal::new(ratatui::backend::TestBackend::new(80, 24)).expect("terminal");
+        terminal
+            .draw(|frame| draw(frame, console, " amiro console — test "))
+            .expect("draw");
+        buffer_text(terminal.backend().buffer())
+    }
+
+    #[test]
+    fn f4_shows_the_dashboard_in_place_of_the_log_on_an_80_by_24_screen() {
+        let mut console = Console::new(
+            View {
+                time: TimeBase::Relative { origin: None },
+                json: false,
+            },
+            Filter::default(),
+        );
+        let now = Duration::ZERO;
+        for c in "publish gyroscope every 100ms at high".chars() {
+            console.key(Key::Char(c), now);
+        }
+        let frames = console.key(Key::Enter, now);
+        console.sent(&frames[0], Ok(()));
+        for line in [
+            "(1700000000.100000) can0 508#FCFF1E00FBFF",
+            "(1700000000.200000) can0 508#FDFF1F00FBFF",
+            "(1700000000.300000) can0 508#FEFF2000FBFF",
+        ] {
+            console.heard(&parse_line(line).unwrap().unwrap());
+        }
+        let log = screen(&console);
+        assert!(log.contains("gyroscope: x -2 dps"), "{log}");
+        assert!(!log.contains("period ms"), "{log}");
+
+        console.key(Key::Dashboard, now);
+        let dashboard = screen(&console);
+        let gyro = dashboard
+            .lines()
+            .find(|line| line.contains("gyroscope"))
+            .unwrap_or_else(|| panic!("{dashboard}"));
+        assert!(
+            gyro.contains("-2 32 -5 dps") && gyro.contains("100/100"),
+            "{gyro}"
+        );
+        assert!(
+            dashboard.contains("F4 dashboard"),
+            "the command line stays: {dashboard}"
+        );
+        assert!(
+            dashboard.contains("DiWheelDrive: no diagnostics heard"),
+            "{dashboard}"
+        );
+        assert_eq!(dashboard.lines().count(), 24);
+
+        console.key(Key::Dashboard, now);
+        assert!(screen(&console).contains("gyroscope: x -2 dps"));
+    }
 }

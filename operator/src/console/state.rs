@@ -9,6 +9,7 @@ use amiro_can::{MotorCommand, Priority, TOPICS};
 use clap::CommandFactory;
 
 use crate::admission::Checker;
+use crate::dashboard::Dashboard;
 use crate::describe::decode_frame;
 use crate::drive::{motor_frame, KeepAlive};
 use crate::frame::{LoggedFrame, RawFrame, Timestamp};
@@ -27,7 +28,7 @@ const MAX_SPEED: i32 = 500_000;
 const MAX_TURN: i32 = 25_132_741;
 
 /// The words the console knows besides the step words of scripts.
-const CONSOLE_WORDS: [&str; 5] = ["clear", "help", "quit", "stop-driving", "menu"];
+const CONSOLE_WORDS: [&str; 6] = ["clear", "dashboard", "help", "quit", "stop-driving", "menu"];
 
 /// A key, as the console understands it (the terminal front end maps crossterm's events to these).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -60,6 +61,8 @@ pub enum Key {
     Menu,
     /// F3: drive mode.
     Drive,
+    /// F4: the dashboard instead of the scrolling log, and back.
+    Dashboard,
     /// Ctrl-C.
     Interrupt,
 }
@@ -101,6 +104,10 @@ pub struct Console {
     pub quit: bool,
     /// The robot's admission check fed with what the console hears (`None`: requests are not checked).
     admission: Option<Checker>,
+    /// The robot's state at a glance, from everything heard and sent.
+    pub dashboard: Dashboard,
+    /// Whether the dashboard is shown instead of the log (F4).
+    pub show_dashboard: bool,
 }
 
 impl Console {
@@ -123,6 +130,8 @@ impl Console {
             statistics: Statistics::default(),
             quit: false,
             admission: None,
+            dashboard: Dashboard::default(),
+            show_dashboard: false,
         }
     }
 
@@ -180,6 +189,9 @@ impl Console {
             stamped.timestamp.get_or_insert_with(Timestamp::now);
             checker.heard(&stamped)
         });
+        let mut stamped = logged.clone();
+        stamped.timestamp.get_or_insert_with(Timestamp::now);
+        self.dashboard.heard(&stamped);
         if self.filter.admits(&logged.frame) {
             self.statistics.record(logged);
             let line = self.view.line(logged);
@@ -200,6 +212,9 @@ impl Console {
                     interface: None,
                     frame: *frame,
                 };
+                // A publish request sent sets the period the dashboard measures against (its clock is the
+                // bus's: a log replayed has its own times, so the host's time is not given).
+                self.dashboard.heard(&LoggedFrame::bare(*frame));
                 let line = format!("sent {}", self.view.line(&stamped));
                 self.say(line);
             }
@@ -261,6 +276,10 @@ impl Console {
                 self.scroll = 0;
                 return Vec::new();
             }
+            Key::Dashboard => {
+                self.toggle_dashboard();
+                return Vec::new();
+            }
             _ => {}
         }
         match std::mem::replace(&mut self.mode, Mode::Command) {
@@ -313,6 +332,15 @@ impl Console {
         self.input = at.map(|at| self.history[at].clone()).unwrap_or_default();
     }
 
+    fn toggle_dashboard(&mut self) {
+        self.show_dashboard = !self.show_dashboard;
+        self.status = if self.show_dashboard {
+            "Dashboard: one row per topic heard; F4 shows the bus log again".into()
+        } else {
+            "Bus log; F4 shows the dashboard".into()
+        };
+    }
+
     fn open_menu(&mut self) {
         self.mode = Mode::Menu(Menu::default());
         self.status = "Menu: Up/Down and Enter (or a number), Esc cancels".into();
@@ -353,6 +381,10 @@ impl Console {
             }
             "menu" => {
                 self.open_menu();
+                return Vec::new();
+            }
+            "dashboard" => {
+                self.toggle_dashboard();
                 return Vec::new();
             }
             "stop-driving" => {
@@ -510,7 +542,15 @@ impl Console {
             .filter(|candidate| candidate.starts_with(current))
             .collect();
         match matching.as_slice() {
-            [] => self.status = format!("nothing completes {current:?}"),
+            [] => {
+                let near = crate::speech::closest(
+                    current,
+                    candidates(&words, "").iter().map(String::as_str),
+                )
+                .map(|near| format!(": did you mean {near}?"))
+                .unwrap_or_default();
+                self.status = format!("nothing completes {current:?}{near}");
+            }
             [only] => {
                 let keep = self.input.len() - current.len();
                 self.input.truncate(keep);
@@ -544,8 +584,30 @@ fn common_prefix(words: &[String]) -> String {
     first[..length].to_string()
 }
 
-/// What may come next after `words`, from the same clap definition the scripts are parsed with.
+/// What may come next after `words`: the flag forms from the same clap definition the scripts are parsed with,
+/// and the spoken forms (`publish gyroscope every 100ms at high`) from `speech`.
 pub fn candidates(words: &[&str], current: &str) -> Vec<String> {
+    let spoken = if current.starts_with('-') {
+        Vec::new()
+    } else {
+        crate::speech::candidates(words)
+    };
+    let speaking = words.len() > 2
+        && crate::speech::SPOKEN_COMMANDS.contains(&words[0])
+        && !words.iter().any(|word| word.starts_with("--"));
+    if speaking {
+        return spoken;
+    }
+    let mut all = flag_candidates(words, current);
+    for word in spoken {
+        if !all.contains(&word) {
+            all.push(word);
+        }
+    }
+    all
+}
+
+fn flag_candidates(words: &[&str], current: &str) -> Vec<String> {
     let command = StepLine::command();
     let Some(first) = words.first() else {
         let mut names: Vec<String> = command
@@ -626,15 +688,15 @@ fn hints(id: &str) -> Vec<String> {
 }
 
 const HELP: &[&str] = &[
-    "commands (Tab completes):",
-    "  publish TOPIC --every PERIOD --priority P   start a sensor (e.g. publish gyroscope --every 10ms --priority high)",
-    "  once TOPIC --priority P                     one sample now",
-    "  stop TOPIC --priority P                     stop a sensor",
-    "  led N --rgb R,G,B [--priority P]            colour of LED 1-8",
+    "commands (Tab completes), said as you would say them or with flags:",
+    "  publish gyroscope every 100ms at high       start a sensor (publish TOPIC --every PERIOD --priority P)",
+    "  once floor at urgent                        one sample now (once TOPIC --priority P)",
+    "  stop gyroscope [at high]                    stop a sensor (stop TOPIC --priority P; said: medium)",
+    "  led 3 red, led 3 #FF8020                    colour of LED 1-8 (led N --rgb R,G,B [--priority P])",
     "  motor --velocity UM_S --angular URAD_S      one motor frame (the board stops after 500 ms without one)",
-    "  drive --forward 100mm/s --turn 30deg/s --for 3s   kept alive every 200 ms, then stopped",
-    "  stop-driving, ID#DATA (a raw frame), clear, help, quit",
-    "keys: F2 menu, F3 drive with the arrows, PageUp/PageDown scroll, End follows, Ctrl-C quits",
+    "  drive 100mm/s turn 30deg/s for 3s           kept alive every 200 ms, then stopped (drive --forward ...)",
+    "  stop-driving, ID#DATA (a raw frame), dashboard (or F4), clear, help, quit",
+    "keys: F2 menu, F3 drive with the arrows, F4 dashboard, PageUp/PageDown scroll, End follows, Ctrl-C quits",
 ];
 
 /// A question of the menu.
@@ -882,6 +944,50 @@ mod tests {
         .contains(&"10ms".to_string()));
         assert!(candidates(&["led"], "").contains(&"8".to_string()));
         assert!(candidates(&[], "").contains(&"drive".to_string()));
+    }
+
+    #[test]
+    fn spoken_commands_are_sent_completed_and_corrected() {
+        let mut console = console();
+        let frames = type_line(
+            &mut console,
+            "publish gyroscope every 100ms at high",
+            Duration::ZERO,
+        );
+        assert_eq!(texts(&frames), ["108#01640000"]);
+        assert_eq!(
+            texts(&type_line(&mut console, "led 3 #FF8020", Duration::ZERO)),
+            ["313#FF8020"]
+        );
+        // Tab offers the spoken words beside the flags, and their values.
+        assert!(candidates(&["publish", "gyroscope"], "").contains(&"every".to_string()));
+        assert!(candidates(&["publish", "gyroscope"], "").contains(&"--every".to_string()));
+        assert_eq!(
+            candidates(&["publish", "gyroscope", "every", "100ms", "at"], ""),
+            ["urgent", "high", "medium", "low"]
+        );
+        assert!(candidates(&["once"], "").contains(&"floor".to_string()));
+        assert!(candidates(&["led", "3"], "").contains(&"red".to_string()));
+        assert!(candidates(&["drive", "100mm/s"], "").contains(&"turn".to_string()));
+        for c in "publish gyroscope ev".chars() {
+            console.key(Key::Char(c), Duration::ZERO);
+        }
+        console.key(Key::Tab, Duration::ZERO);
+        assert_eq!(console.input, "publish gyroscope every ");
+        console.input = "stop magnetomter-x".into();
+        console.key(Key::Tab, Duration::ZERO);
+        assert!(
+            console.status.contains("did you mean magnetometer-x?"),
+            "{}",
+            console.status
+        );
+        console.input.clear();
+        assert!(type_line(&mut console, "stop magnetomter-x", Duration::ZERO).is_empty());
+        assert!(
+            console.status.contains("did you mean magnetometer-x?"),
+            "{}",
+            console.status
+        );
     }
 
     #[test]

@@ -591,7 +591,10 @@ pub fn check_refusal_counts(out: &RunOutput, board: amiro_can::Board) -> Result<
         count(RefusalReason::TaskDeadline) == tasks
             && count(RefusalReason::MessageDeadline) + count(RefusalReason::EndToEndDeadline)
                 == messages
-            && count(RefusalReason::Capacity) + count(RefusalReason::ZeroPeriod) == unnamed,
+            && count(RefusalReason::Capacity)
+                + count(RefusalReason::ZeroPeriod)
+                + count(RefusalReason::Busy)
+                == unnamed,
         "counted by reason {:?}, the verdicts name {tasks} tasks, {messages} messages, {unnamed} unnamed",
         heard.refusals
     );

@@ -80,7 +80,7 @@ pub const SCENARIOS: &[Scenario] = &[
 const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// Commands that may still wait for PowerManagement's admission task when a run ends: its queue
 /// (`ADMISSION_QUEUE_LEN` in powermgmt/src/main.rs) and the one being decided.
-const ADMISSION_WAITING: u64 = 4 + 1;
+const ADMISSION_WAITING: u64 = 8 + 1;
 
 /// One ring sample: its release and the sensor indices of its frames, with the last frame's time.
 struct RingSample {
@@ -688,10 +688,23 @@ fn once_flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         "{} diagnostics samples in all: more than the flood's and the queue's",
         samples.len()
     );
-    let verdicts = super::admission_verdicts(out, amiro_can::Board::PowerManagement);
+    // The flood outruns the admission queue: the one-shots that find it full are refused unseen
+    // (`admission-busy`, no analysis), with at most one such verdict per 40 ms (no verdict flood).
+    let all = super::admission_verdicts(out, amiro_can::Board::PowerManagement);
+    let (busy, verdicts): (Vec<_>, Vec<_>) = all.into_iter().partition(|(_, v)| {
+        v.verdict == Verdict::Refused
+            && v.one_shot
+            && v.topic == Topic::PowerManagementDiagnostics
+            && v.violation == amiro_can::Violation::Unknown
+    });
+    ensure!(
+        !busy.is_empty() && busy.windows(2).all(|w| w[1].0 - w[0].0 >= 39_000),
+        "busy verdicts {:?}: expected some, at most one per 40 ms",
+        busy.iter().map(|(t, _)| *t).collect::<Vec<_>>()
+    );
     ensure!(
         verdicts.len() == 1,
-        "{} verdicts, expected the refusal of the power-status one-shot",
+        "{} verdicts besides the busy ones, expected the refusal of the power-status one-shot",
         verdicts.len()
     );
     let (_, refused) = &verdicts[0];

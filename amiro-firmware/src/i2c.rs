@@ -1,23 +1,28 @@
-//! A polled I2C master for the F405's two I2C blocks, at register level, where every wait is
+//! A polled 400 kHz I2C master at register level for the I2C blocks of both chips (the F103's and
+//! the F405's are the same IP, RM0008 §26 / RM0090 §27, master mode, polling), where every wait is
 //! bounded: a sensor that stops answering costs one NACK, a stuck bus one timeout, never a hang.
 //!
-//! stm32f4xx-hal's blocking I2C polls its status flags without a bound (a bus held low would stall
-//! the publisher that holds it until the watchdog resets the board), so this board drives the
-//! peripheral itself (RM0090 §27.3.3, master mode, polling). Time is measured on the DWT cycle
-//! counter, which `board::init` starts. After a timeout or a bus error the block is reset and set
-//! up again, so the next transfer starts clean.
+//! The HALs' blocking I2C drivers poll their flags without a bound (stm32f4xx-hal) or against the
+//! DWT cycle counter only (stm32f1xx-hal's `BlockingI2c`, which spins for ever where the counter
+//! does not run, as in QEMU). Here each wait ends after [`FLAG_TIMEOUT_US`] on the cycle counter
+//! (which the board starts) or after as many polls as that is cycles, whichever comes first. After
+//! a timeout or a bus error the block is reset and set up again, so the next transfer starts clean.
 use embedded_hal::i2c::{ErrorKind, ErrorType, I2c, NoAcknowledgeSource, Operation};
-use stm32f4xx_hal::pac::i2c1::RegisterBlock;
 
-/// APB1 clock the timing is computed from (MHz).
-const PCLK1_MHZ: u16 = 42;
-/// Fast mode, duty 2:1: 42 MHz / (3 × 35) = 400 kHz.
-const CCR_FAST_400K: u16 = (1 << 15) | 35;
-/// Maximum rise time in fast mode (300 ns) in PCLK1 cycles, plus one.
-const TRISE_FAST: u16 = PCLK1_MHZ * 300 / 1000 + 1;
+/// I2C1's base address on both chips.
+pub const I2C1: usize = 0x4000_5400;
+/// I2C2's base address on both chips.
+pub const I2C2: usize = 0x4000_5800;
 /// How long one flag may take: a byte at 400 kHz takes 22.5 µs; 200 µs means the bus is stuck.
 pub const FLAG_TIMEOUT_US: u32 = 200;
-const TIMEOUT_CYCLES: u32 = FLAG_TIMEOUT_US * 168;
+
+const CR1: usize = 0x00;
+const CR2: usize = 0x04;
+const DR: usize = 0x10;
+const SR1_REG: usize = 0x14;
+const SR2_REG: usize = 0x18;
+const CCR: usize = 0x1C;
+const TRISE: usize = 0x20;
 
 const CR1_PE: u16 = 1 << 0;
 const CR1_START: u16 = 1 << 8;
@@ -65,64 +70,76 @@ impl embedded_hal::i2c::Error for Error {
 
 /// One I2C block (I2C1 or I2C2) as a bounded polled master at 400 kHz.
 pub struct Master {
-    block: *const RegisterBlock,
+    base: usize,
+    /// APB1 in MHz (the block's FREQ field and its timing).
+    pclk1_mhz: u32,
+    /// [`FLAG_TIMEOUT_US`] in core cycles (and the poll bound).
+    timeout_cycles: u32,
 }
-
-// SAFETY: the block is owned by this value alone (see `Master::new`); moving it to the task that
-// owns the bus moves that ownership.
-unsafe impl Send for Master {}
 
 fn cycles() -> u32 {
     cortex_m::peripheral::DWT::cycle_count()
 }
 
 impl Master {
-    /// Takes the block at `regs` (its clock on, its pins in open-drain AF4) and sets it up.
+    /// Takes the block at `base` ([`I2C1`] or [`I2C2`]; its clock on, its pins in open-drain
+    /// alternate function) and sets it up for 400 kHz from a `pclk1_hz` APB1, with its timeouts
+    /// counted in cycles of a `sysclk_hz` core clock.
     ///
     /// # Safety
-    /// `regs` must be I2C1 or I2C2 and owned by this value alone.
-    pub unsafe fn new(regs: *const RegisterBlock) -> Self {
-        // SAFETY: the caller hands over exclusive use of a valid I2C block.
-        let master = Self { block: regs };
+    /// `base` must be I2C1 or I2C2 and owned by this value alone.
+    pub unsafe fn new(base: usize, pclk1_hz: u32, sysclk_hz: u32) -> Self {
+        let master = Self {
+            base,
+            pclk1_mhz: (pclk1_hz / 1_000_000).clamp(2, 50),
+            timeout_cycles: FLAG_TIMEOUT_US.saturating_mul(sysclk_hz / 1_000_000),
+        };
         master.setup();
         master
     }
 
-    fn regs(&self) -> &RegisterBlock {
-        // SAFETY: `new`'s caller handed over a valid block that lives for the whole program.
-        unsafe { &*self.block }
+    fn read(&self, offset: usize) -> u16 {
+        // SAFETY: `new`'s contract: a register of the I2C block this value owns.
+        unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) as u16 }
+    }
+
+    fn write(&self, offset: usize, value: u16) {
+        // SAFETY: as in `read`; documented bit patterns of the I2C registers.
+        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, u32::from(value)) }
     }
 
     fn setup(&self) {
-        let r = self.regs();
-        // SAFETY (all writes): documented bit patterns of RM0090's I2C registers.
-        r.cr1().write(|w| unsafe { w.bits(CR1_SWRST) });
-        r.cr1().write(|w| unsafe { w.bits(0) });
-        r.cr2().write(|w| unsafe { w.bits(PCLK1_MHZ) });
-        r.ccr().write(|w| unsafe { w.bits(CCR_FAST_400K) });
-        r.trise().write(|w| unsafe { w.bits(TRISE_FAST) });
-        r.cr1().write(|w| unsafe { w.bits(CR1_PE) });
+        // Fast mode, duty 2:1: SCL = PCLK1 / (3 × CCR), rounded so it never exceeds 400 kHz;
+        // TRISE: the 300 ns rise time in PCLK1 cycles, plus one.
+        let ccr = self.pclk1_mhz.saturating_mul(10).div_ceil(12).max(1) as u16;
+        let trise = (self.pclk1_mhz * 300 / 1000 + 1) as u16;
+        self.write(CR1, CR1_SWRST);
+        self.write(CR1, 0);
+        self.write(CR2, self.pclk1_mhz as u16);
+        self.write(CCR, (1 << 15) | ccr);
+        self.write(TRISE, trise);
+        self.write(CR1, CR1_PE);
     }
 
     fn sr1(&self) -> u16 {
-        self.regs().sr1().read().bits()
+        self.read(SR1_REG)
     }
 
     fn set_cr1(&self, set: u16, clear: u16) {
-        // SAFETY: read-modify-write of control bits of this block.
-        self.regs()
-            .cr1()
-            .modify(|r, w| unsafe { w.bits((r.bits() | set) & !clear) });
+        self.write(CR1, (self.read(CR1) | set) & !clear);
     }
 
     /// Waits until `flag` is set in SR1, an error flag appears, or the timeout passes.
     fn wait(&self, flag: u16, nack: NoAcknowledgeSource) -> Result<(), Error> {
         let start = cycles();
-        loop {
+        // Also bounded in polls: each takes several core cycles, so on a chip whose cycle counter
+        // runs the cycle timeout comes first; on one where it does not (QEMU has no DWT), this
+        // bound still ends the wait.
+        for _ in 0..self.timeout_cycles {
             let sr1 = self.sr1();
             if sr1 & SR1_ERRORS != 0 {
-                // SAFETY: writing 0 to the rc_w0 error bits clears them.
-                self.regs().sr1().write(|w| unsafe { w.bits(!SR1_ERRORS) });
+                // Writing 0 to the rc_w0 error bits clears them.
+                self.write(SR1_REG, !SR1_ERRORS);
                 return Err(if sr1 & SR1_AF != 0 {
                     Error::NoAcknowledge(nack)
                 } else if sr1 & SR1_ARLO != 0 {
@@ -136,23 +153,25 @@ impl Master {
             if sr1 & flag != 0 {
                 return Ok(());
             }
-            if cycles().wrapping_sub(start) > TIMEOUT_CYCLES {
+            if cycles().wrapping_sub(start) > self.timeout_cycles {
                 return Err(Error::Timeout);
             }
         }
+        Err(Error::Timeout)
     }
 
-    /// Waits (bounded) until the bus is free.
+    /// Waits (bounded, in cycles and in polls as [`Master::wait`]) until the bus is free.
     fn wait_idle(&self) -> Result<(), Error> {
         let start = cycles();
-        while self.regs().sr2().read().bits() & SR2_BUSY != 0
-            || self.regs().cr1().read().bits() & CR1_STOP != 0
-        {
-            if cycles().wrapping_sub(start) > TIMEOUT_CYCLES {
+        for _ in 0..self.timeout_cycles {
+            if self.read(SR2_REG) & SR2_BUSY == 0 && self.read(CR1) & CR1_STOP == 0 {
+                return Ok(());
+            }
+            if cycles().wrapping_sub(start) > self.timeout_cycles {
                 return Err(Error::Timeout);
             }
         }
-        Ok(())
+        Err(Error::Timeout)
     }
 
     /// START (or repeated START) and the address byte; the ADDR flag is left set for the caller.
@@ -164,15 +183,14 @@ impl Master {
         }
         self.wait(SR1_SB, NoAcknowledgeSource::Unknown)?;
         let byte = (u16::from(address) << 1) | u16::from(read);
-        // SAFETY: the address byte into the data register.
-        self.regs().dr().write(|w| unsafe { w.bits(byte) });
+        self.write(DR, byte);
         self.wait(SR1_ADDR, NoAcknowledgeSource::Address)
     }
 
     fn clear_addr(&self) {
         // Reading SR1 then SR2 clears ADDR.
         let _ = self.sr1();
-        let _ = self.regs().sr2().read().bits();
+        let _ = self.read(SR2_REG);
     }
 
     fn write_group(&self, address: u8, group: &[Operation<'_>]) -> Result<(), Error> {
@@ -182,10 +200,7 @@ impl Master {
             if let Operation::Write(bytes) = operation {
                 for &byte in bytes.iter() {
                     self.wait(SR1_TXE, NoAcknowledgeSource::Data)?;
-                    // SAFETY: one data byte.
-                    self.regs()
-                        .dr()
-                        .write(|w| unsafe { w.bits(u16::from(byte)) });
+                    self.write(DR, u16::from(byte));
                 }
             }
         }
@@ -193,7 +208,7 @@ impl Master {
     }
 
     /// Reads every byte of the read operations in `group`; the last byte is not acknowledged and
-    /// the STOP is requested before it arrives (RM0090's polling sequence).
+    /// the STOP is requested before it arrives (the reference manuals' polling sequence).
     fn read_group(&self, address: u8, group: &mut [Operation<'_>]) -> Result<(), Error> {
         let total: usize = group
             .iter()
@@ -221,7 +236,7 @@ impl Master {
                         self.set_cr1(CR1_STOP, CR1_ACK);
                     }
                     self.wait(SR1_RXNE, NoAcknowledgeSource::Data)?;
-                    *byte = self.regs().dr().read().bits() as u8;
+                    *byte = self.read(DR) as u8;
                 }
             }
         }

@@ -1,0 +1,54 @@
+//! The admission check's cost on the host: replays a `candump -l` stimulus (a QEMU scenario's log) through a
+//! board's [`Admission`] and prints each analysed command's fixed-point iterations. Run under
+//! `valgrind --tool=callgrind` to see where the instructions go.
+//!
+//! `cargo run --release -p amiro-firmware --example admission_cost -- diwheeldrive/qemu/admission-cost.log`
+use amiro_firmware::admission::{Admission, Check, State};
+use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
+
+fn main() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let path = std::env::args().nth(1).expect("a stimulus log");
+    let board = match std::env::args().nth(2).as_deref() {
+        Some("powermgmt") => amiro_can::Board::PowerManagement,
+        Some("lightring") => amiro_can::Board::LightRing,
+        _ => amiro_can::Board::DiWheelDrive,
+    };
+    let robot = admission_host::lower(
+        &root,
+        &scenario::timing_files(&root),
+        1_000_000,
+        FrameCostSpec::Exact,
+    )
+    .expect("table");
+    let text = std::fs::read_to_string(&path).expect("log");
+    robot.with_table(|table| {
+        let mut state = Box::new(State::<48, 32>::new());
+        let mut admission = Admission::new(table, board, &mut state);
+        admission.prepare();
+        println!("prepare: {} iterations", admission.iterations().0);
+        for line in text
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        {
+            let frame = line.split_whitespace().nth(2).expect("id#data");
+            let (id, data) = frame.split_once('#').expect("#");
+            let id = u16::from_str_radix(id, 16).expect("id");
+            let data: Vec<u8> = (0..data.len() / 2)
+                .map(|i| u8::from_str_radix(&data[2 * i..2 * i + 2], 16).expect("hex"))
+                .collect();
+            let check = admission.on_command(id, &data);
+            let what = match check {
+                Check::Pass => "pass",
+                Check::Refused(..) => "refused",
+                Check::Warned(..) => "warned",
+            };
+            if admission.analysed() {
+                println!("{line}: {what}, {} iterations", admission.iterations().0);
+            }
+            if let Check::Refused(frames, reason) | Check::Warned(frames, reason) = check {
+                println!("    {reason:?} {:?}", frames.map(|f| f.data().to_vec()));
+            }
+        }
+    });
+}

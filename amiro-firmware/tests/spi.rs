@@ -1,0 +1,146 @@
+//! The SPI master against a model SPI block: set-up, full-duplex exchange, and a block whose flags
+//! never come (not clocked, as in a chip whose clock tree failed) ending in a bounded timeout.
+use std::cell::{Cell, RefCell};
+use std::collections::VecDeque;
+
+use amiro_firmware::bxcan::Registers;
+use amiro_firmware::spi::{self, divider_code, Error, Master, POLLS};
+use embedded_hal::spi::{Mode, Phase, Polarity, SpiBus, MODE_0, MODE_3};
+
+const CR1: usize = 0x00;
+const SR: usize = 0x08;
+const DR: usize = 0x0C;
+
+/// A block that answers each byte with the next one of `replies` (or the byte inverted), unless dead.
+#[derive(Default)]
+struct Block {
+    cr1: Cell<u32>,
+    sent: RefCell<Vec<u8>>,
+    replies: RefCell<VecDeque<u8>>,
+    rx: Cell<Option<u8>>,
+    dead: bool,
+    overrun: Cell<bool>,
+    sr_reads: Cell<u32>,
+}
+
+impl Registers for &Block {
+    fn read(&self, offset: usize) -> u32 {
+        match offset {
+            SR => {
+                self.sr_reads.set(self.sr_reads.get() + 1);
+                if self.dead {
+                    return 0;
+                }
+                let mut sr = 1 << 1; // TXE
+                if self.rx.get().is_some() {
+                    sr |= 1;
+                }
+                if self.overrun.get() {
+                    sr |= 1 << 6;
+                }
+                sr
+            }
+            DR => {
+                self.overrun.set(false);
+                self.rx.take().map(u32::from).unwrap_or(0)
+            }
+            CR1 => self.cr1.get(),
+            _ => 0,
+        }
+    }
+
+    fn write(&self, offset: usize, value: u32) {
+        match offset {
+            CR1 => self.cr1.set(value),
+            DR if !self.dead => {
+                let byte = value as u8;
+                self.sent.borrow_mut().push(byte);
+                let reply = self.replies.borrow_mut().pop_front().unwrap_or(!byte);
+                self.rx.set(Some(reply));
+            }
+            _ => {}
+        }
+    }
+}
+
+#[test]
+fn set_up_as_master_with_software_slave_select_at_the_fastest_allowed_rate() {
+    let block = Block::default();
+    let _bus = Master::new(&block, 36_000_000, 9_000_000, MODE_0);
+    let cr1 = block.cr1.get();
+    assert_eq!(cr1 & 0b100, 0b100, "MSTR");
+    assert_eq!(cr1 & (0b11 << 8), 0b11 << 8, "SSM and SSI");
+    assert_eq!(cr1 & 1 << 6, 1 << 6, "enabled");
+    assert_eq!(cr1 >> 3 & 0b111, 1, "36 MHz / 4 = 9 MHz");
+    assert_eq!(cr1 & 0b11, 0, "mode 0");
+    let block = Block::default();
+    let _bus = Master::new(&block, 8_000_000, 9_000_000, MODE_3);
+    assert_eq!(block.cr1.get() & 0b11, 0b11, "mode 3: CPOL and CPHA");
+    assert_eq!(
+        block.cr1.get() >> 3 & 0b111,
+        0,
+        "8 MHz / 2 is the fastest there is"
+    );
+    let mode = Mode {
+        polarity: Polarity::IdleLow,
+        phase: Phase::CaptureOnSecondTransition,
+    };
+    let block = Block::default();
+    let _bus = Master::new(&block, 36_000_000, 2_250_000, mode);
+    assert_eq!(block.cr1.get() & 0b11, 0b01);
+    assert_eq!(block.cr1.get() >> 3 & 0b111, 3, "36 MHz / 16 = 2.25 MHz");
+    assert_eq!(
+        divider_code(72_000_000, 100_000),
+        7,
+        "the slowest divider at most"
+    );
+}
+
+#[test]
+fn bytes_are_exchanged_in_order_in_every_form() {
+    let block = Block::default();
+    block.replies.borrow_mut().extend([0xD3, 0x32, 0x11]);
+    let mut bus = Master::new(&block, 36_000_000, 9_000_000, MODE_0);
+    let mut read = [0u8; 2];
+    bus.transfer(&mut read, &[0x8F, 0x00, 0x55]).unwrap();
+    assert_eq!(read, [0xD3, 0x32]);
+    assert_eq!(*block.sent.borrow(), [0x8F, 0x00, 0x55]);
+    let mut words = [0x01, 0x02];
+    bus.transfer_in_place(&mut words).unwrap();
+    assert_eq!(words, [0xFE, 0xFD]);
+    bus.write(&[0xAA]).unwrap();
+    let mut one = [0u8; 1];
+    bus.read(&mut one).unwrap();
+    assert_eq!(one, [0xFF], "a read clocks out zeros");
+    bus.flush().unwrap();
+}
+
+#[test]
+fn a_block_whose_flags_never_come_times_out_after_the_bound() {
+    let block = Block {
+        dead: true,
+        ..Block::default()
+    };
+    let mut bus = Master::new(&block, 36_000_000, 9_000_000, MODE_0);
+    assert_eq!(bus.write(&[1, 2, 3]), Err(Error::Timeout));
+    assert_eq!(
+        block.sr_reads.get(),
+        POLLS,
+        "one byte's wait, then the error"
+    );
+    block.sr_reads.set(0);
+    let mut read = [0u8; 4];
+    assert_eq!(bus.read(&mut read), Err(Error::Timeout));
+    assert_eq!(block.sr_reads.get(), POLLS);
+}
+
+#[test]
+fn an_overrun_is_reported_and_cleared() {
+    let block = Block::default();
+    let mut bus = Master::new(&block, 36_000_000, 9_000_000, MODE_0);
+    block.overrun.set(true);
+    assert_eq!(bus.write(&[1]), Err(Error::Overrun));
+    assert!(!block.overrun.get(), "reading DR then SR cleared it");
+    assert_eq!(bus.write(&[1]), Ok(()));
+    let _ = spi::SPI1;
+}

@@ -1,0 +1,369 @@
+//! The files a model is built from: a board's timing file ([`Timing`]) and a scenario ([`Scenario`]), as serde
+//! reads them (unknown fields refused).
+
+use std::collections::BTreeMap;
+
+use amiro_can::Priority;
+use serde::Deserialize;
+
+use crate::can;
+use crate::model::{FrameCostSpec, Overheads};
+
+/// A board's timing file.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Timing {
+    /// Board name (the firmware folder: `diwheeldrive`, `powermgmt`, `lightring`).
+    pub board: String,
+    /// Free text.
+    #[serde(default)]
+    pub note: Option<String>,
+    /// The RTIC app to read; `null` while the board has none (tasks are then declared here).
+    #[serde(default)]
+    pub app: Option<AppSource>,
+    /// Interrupt and dispatcher overheads.
+    #[serde(default)]
+    pub overheads: Overheads,
+    /// What the firmware's task trace costs per job (a start and an end record), when the analysed
+    /// build has it: added to every `hardware` and `software` job as interrupt entry and exit are.
+    #[serde(default)]
+    pub trace: Option<TraceCost>,
+    /// The monotonic's timer interrupt, which wakes every timer-released task.
+    #[serde(default)]
+    pub monotonic: Option<Monotonic>,
+    /// Publisher task per CAN priority (`urgent` … `low`); defaults to `publish_<level>`.
+    #[serde(default = "default_publishers")]
+    pub publishers: BTreeMap<String, String>,
+    /// The task that acts on received commands (the end of a command's path).
+    #[serde(default)]
+    pub command_handler: Option<String>,
+    /// The task that moves queued frames into the CAN controller.
+    #[serde(default)]
+    pub can_tx_task: Option<String>,
+    /// Critical sections of `idle`, µs.
+    #[serde(default)]
+    pub idle_critical_sections_us: BTreeMap<String, f64>,
+    /// Budgets per task (not the publisher tasks: their jobs are the topics).
+    #[serde(default)]
+    pub tasks: BTreeMap<String, TimingTask>,
+    /// Budgets per published topic (one job of the publisher task per sample).
+    #[serde(default)]
+    pub topics: BTreeMap<String, TopicTiming>,
+}
+
+fn default_publishers() -> BTreeMap<String, String> {
+    Priority::ALL
+        .iter()
+        .map(|p| (p.name().to_string(), format!("publish_{}", p.name())))
+        .collect()
+}
+
+/// The cost of the firmware's task trace (`amiro_firmware::tracing`, cargo feature `feature`).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TraceCost {
+    /// The cargo feature that compiles the trace in (the analysed build has it).
+    pub feature: String,
+    /// One job's start and end records, µs.
+    pub per_job_us: f64,
+    /// Where the figure comes from.
+    #[serde(default)]
+    pub note: Option<String>,
+    /// The traced QEMU build.
+    #[serde(default)]
+    pub qemu: Option<QemuBuild>,
+}
+
+/// How the traced QEMU build differs from the chip's (`Firmware::Qemu`).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct QemuBuild {
+    /// The trace's cost per job in QEMU, µs (measured: deterministic under `-icount`).
+    pub per_job_us: f64,
+    /// Every budget of the board times this (≥ 1: QEMU is never assumed faster than the chip).
+    #[serde(default = "one")]
+    pub budget_scale: f64,
+    /// What pends the transmit task in QEMU (absent: the robot's arrival, one job per frame).
+    #[serde(default)]
+    pub transmit: Option<QemuTransmit>,
+    /// Where the figures come from.
+    #[serde(default)]
+    pub note: Option<String>,
+}
+
+/// The transmit task of a QEMU build whose only frames are its publisher's samples.
+///
+/// QEMU's virtual mailboxes put a frame on the bus the moment it is offered: no transmit-complete
+/// interrupt paces the transmit task. It runs when a publisher pends it after queueing a sample's
+/// frames, and again at once while frames remain after three (`amiro_firmware::qemu::CanTxPort`):
+/// ⌈frames / 3⌉ jobs per sample. So the task becomes one job per publisher job of the scenario
+/// (`can_tx[topic]`, released by it) and one for the samples commands request (the task itself):
+/// the command handler (`requests_from`) handles at most one command per its period, a request
+/// wakes the publisher, and requests not yet served for one topic are one release — so in any
+/// window at most one more per requestable topic than the handler's rate allows (the extra release
+/// jitter of one period per topic).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct QemuTransmit {
+    /// The command handler whose commands request one-shot samples.
+    pub requests_from: String,
+    /// What the virtual mailbox costs per frame in QEMU, µs (it prints the frame's candump line),
+    /// added to the transmit task's budget for each frame a job sends.
+    #[serde(default)]
+    pub frame_us: f64,
+    /// Why this holds for the board.
+    #[serde(default)]
+    pub note: Option<String>,
+}
+
+/// The `frame-acked` records one job of the transmit task writes at most on the chip: one per
+/// mailbox whose transmission completed (bxCAN has three).
+pub const ACKS_PER_TRANSMIT_JOB: u64 = 3;
+
+/// The frames one transmit job takes from the queue in QEMU (three virtual mailboxes).
+pub const QEMU_FRAMES_PER_TRANSMIT_JOB: u64 = 3;
+
+fn one() -> f64 {
+    1.0
+}
+
+impl Timing {
+    /// The timing with every execution budget, critical section and overhead times `factor`.
+    pub(super) fn scaled(&self, factor: f64) -> Timing {
+        let mut t = self.clone();
+        let f = factor.max(1.0);
+        t.overheads.isr_entry_us *= f;
+        t.overheads.isr_exit_us *= f;
+        t.overheads.dispatcher_us *= f;
+        if let Some(m) = &mut t.monotonic {
+            m.timer_isr_us *= f;
+        }
+        for v in t.idle_critical_sections_us.values_mut() {
+            *v *= f;
+        }
+        for task in t.tasks.values_mut() {
+            task.wcet_us = task.wcet_us.map(|w| w * f);
+            task.bcet_us = task.bcet_us.map(|w| w * f);
+            for v in task.critical_sections_us.values_mut() {
+                *v *= f;
+            }
+            if let Some(m) = &mut task.measured {
+                m.wcet_us *= f;
+            }
+        }
+        for topic in t.topics.values_mut() {
+            topic.wcet_us *= f;
+            topic.bcet_us = topic.bcet_us.map(|w| w * f);
+            for v in topic.critical_sections_us.values_mut() {
+                *v *= f;
+            }
+            if let Some(m) = &mut topic.measured {
+                m.wcet_us *= f;
+            }
+        }
+        t
+    }
+}
+
+/// A budget measured on a bench (`cargo xtask bench --calibrate`), kept beside the estimate.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Measured {
+    /// The budget the analysis uses: the largest execution time seen times `margin`, µs.
+    pub wcet_us: f64,
+    /// The largest execution time seen, µs.
+    pub max_us: f64,
+    /// The margin `wcet_us` adds to `max_us`.
+    pub margin: f64,
+    /// Jobs measured.
+    pub jobs: u64,
+    /// The capture it came from.
+    pub origin: String,
+    /// `robot` (the real chip) or `qemu` (the emulator: not the chip's times).
+    pub build: String,
+}
+
+/// Where a board's app is.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AppSource {
+    /// The file with `#[rtic::app]`, relative to the workspace root.
+    pub source: String,
+    /// A stand-in app description used while `source` is still a skeleton without any budgeted task.
+    #[serde(default)]
+    pub fallback: Option<String>,
+    /// Cargo features the analysed build has (for `#[cfg(feature = ..)]` on tasks); none = the real board.
+    #[serde(default)]
+    pub features: Vec<String>,
+}
+
+/// The monotonic's timer interrupt.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Monotonic {
+    /// Its RTIC/NVIC logical priority.
+    pub priority: u32,
+    /// Execution time of one timer interrupt (timer queue, waking one task), µs, entry/exit overheads excluded.
+    pub timer_isr_us: f64,
+    /// Tick length, µs: a wake-up comes up to one tick late.
+    #[serde(default)]
+    pub tick_us: f64,
+}
+
+/// How often a task is activated.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(rename_all = "snake_case")]
+pub enum Arrival {
+    /// At most once per frame on the bus: the shortest frame (47 bit times) apart.
+    BusFrame,
+    /// At most once per frame this board sends: the shortest of its frames apart (its transmit-complete
+    /// interrupt); the shortest frame on the bus when it sends nothing.
+    OwnFrame,
+    /// Periodically, µs.
+    PeriodicUs(f64),
+    /// At most once per this many µs.
+    SporadicUs(f64),
+}
+
+/// Budgets of one task.
+#[derive(Debug, Clone, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct TimingTask {
+    /// Priority — only for a board without an app (an app's priorities come from its source).
+    #[serde(default)]
+    pub priority: Option<u32>,
+    /// Interrupt the task is bound to — only without an app; a task without one is a software task.
+    #[serde(default)]
+    pub binds: Option<String>,
+    /// Shared resources — only without an app; defaults to the keys of `critical_sections_us`.
+    #[serde(default)]
+    pub shared: Option<Vec<String>>,
+    /// Worst-case execution time, µs.
+    #[serde(default)]
+    pub wcet_us: Option<f64>,
+    /// Best-case execution time, µs.
+    #[serde(default)]
+    pub bcet_us: Option<f64>,
+    /// Activation pattern.
+    #[serde(default)]
+    pub arrival: Option<Arrival>,
+    /// `"timer"` (woken by the monotonic) or the task that releases it.
+    #[serde(default)]
+    pub released_by: Option<String>,
+    /// Release jitter of its own, µs.
+    #[serde(default)]
+    pub jitter_us: f64,
+    /// Deadline, µs (default: the period).
+    #[serde(default)]
+    pub deadline_us: Option<f64>,
+    /// Longest critical section per resource, µs.
+    #[serde(default)]
+    pub critical_sections_us: BTreeMap<String, f64>,
+    /// Free text: where the budget comes from.
+    #[serde(default)]
+    pub note: Option<String>,
+    /// A measured budget; when present the analysis uses it instead of `wcet_us` (the estimate).
+    #[serde(default)]
+    pub measured: Option<Measured>,
+}
+
+/// Budgets of one published topic: one job of the publisher task per sample.
+#[derive(Debug, Clone, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct TopicTiming {
+    /// Worst-case execution time of one sample (read, encode, queue every frame), µs.
+    pub wcet_us: f64,
+    /// Best-case execution time, µs (the earliest the frame can be queued).
+    #[serde(default)]
+    pub bcet_us: Option<f64>,
+    /// Longest critical section per resource, µs.
+    #[serde(default)]
+    pub critical_sections_us: BTreeMap<String, f64>,
+    /// Free text.
+    #[serde(default)]
+    pub note: Option<String>,
+    /// A measured budget; when present the analysis uses it instead of `wcet_us` (the estimate).
+    #[serde(default)]
+    pub measured: Option<Measured>,
+}
+
+/// A scenario: what runs on the robot.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Name.
+    pub name: String,
+    /// Free text.
+    #[serde(default)]
+    pub description: Option<String>,
+    /// Bus bit rate (default 1 Mbit/s).
+    #[serde(default = "default_bitrate")]
+    pub bitrate: u32,
+    /// Frame-cost model that decides the verdict (default exact).
+    #[serde(default)]
+    pub frame_cost: FrameCostSpec,
+    /// Running sensor publishers.
+    #[serde(default)]
+    pub publishers: Vec<ScenarioPublisher>,
+    /// Commands the operator sends.
+    #[serde(default)]
+    pub commands: Vec<ScenarioCommand>,
+    /// One-shot requests (`once`) the operator sends: each analysed as a sample of its topic at its priority every
+    /// [`amiro_can::ONE_SHOT_INTERVAL_MS`] (how often a board takes one at most), in place of the topic's publisher —
+    /// what the boards' admission check decides a one-shot as.
+    #[serde(default)]
+    pub one_shots: Vec<ScenarioOneShot>,
+}
+
+/// A one-shot request: a sensor topic's sample at a priority, asked for again and again.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioOneShot {
+    /// Topic name as `amiro_can` spells it.
+    pub topic: String,
+    /// CAN priority.
+    pub priority: String,
+}
+
+fn default_bitrate() -> u32 {
+    can::DEFAULT_BITRATE
+}
+
+/// A sensor topic being published.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioPublisher {
+    /// Topic name as `amiro_can` spells it (`gyroscope`, `proximity-ring`).
+    pub topic: String,
+    /// CAN priority: `urgent`, `high`, `medium` (or `normal`), `low`.
+    pub priority: String,
+    /// Sample period, µs.
+    pub period_us: f64,
+    /// Deadline from the sample's due time to its last frame on the bus, µs (default: the period).
+    #[serde(default)]
+    pub deadline_us: Option<f64>,
+    /// Budget for the delivery jitter, µs.
+    #[serde(default)]
+    pub jitter_budget_us: Option<f64>,
+}
+
+/// A command stream from the operator.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioCommand {
+    /// Actuator topic (`motor`, `led-3`).
+    pub topic: String,
+    /// CAN priority.
+    pub priority: String,
+    /// Shortest time between two commands, µs.
+    pub period_us: f64,
+    /// The operator's queuing jitter, µs.
+    #[serde(default)]
+    pub jitter_us: f64,
+    /// Deadline from sending to the board having acted, µs (default: the period).
+    #[serde(default)]
+    pub deadline_us: Option<f64>,
+    /// Budget for the jitter, µs.
+    #[serde(default)]
+    pub jitter_budget_us: Option<f64>,
+}
