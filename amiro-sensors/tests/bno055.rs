@@ -398,10 +398,41 @@ fn a_dead_bno055_stops_its_topics_and_is_counted() {
     }
     assert!(!group.is_ready());
     assert_eq!(group.faults(), 3);
-    // It comes back: the retry after the back-off initialises it again.
+    // It comes back: the retry after the back-off initialises it again, in three steps whose
+    // waits (19 ms into configuration mode, 7 ms into AMG mode) pass between the calls, outside
+    // the bus lock; no step counts as a fault.
     group.group_mut().imu.bus_mut().set_nack(false);
-    assert_eq!(group.sample(Topic::Gyroscope, 2_000_000).len(), 1);
+    assert!(group.sample(Topic::Gyroscope, 2_000_000).is_empty());
+    assert_eq!(group.retry_at_us(), 2_019_000);
+    assert!(group.sample(Topic::Gyroscope, 2_010_000).is_empty());
+    assert!(group.sample(Topic::Gyroscope, 2_019_000).is_empty());
+    assert_eq!(group.retry_at_us(), 2_026_000);
+    assert!(!group.is_ready());
+    assert_eq!(group.sample(Topic::Gyroscope, 2_026_000).len(), 1);
     assert!(group.is_ready());
+    assert_eq!(group.faults(), 3);
+}
+
+#[test]
+fn a_step_of_the_re_initialisation_that_fails_starts_the_back_off_again() {
+    let mut group = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
+    group.group_mut().imu.bus_mut().set_nack(true);
+    for t in 1..=3 {
+        assert!(group.sample(Topic::Gyroscope, t * 10_000).is_empty());
+    }
+    // Step 1 answers, then the part is gone again before step 2.
+    group.group_mut().imu.bus_mut().set_nack(false);
+    assert!(group.sample(Topic::Gyroscope, 2_000_000).is_empty());
+    group.group_mut().imu.bus_mut().set_nack(true);
+    assert!(group.sample(Topic::Gyroscope, 2_019_000).is_empty());
+    assert_eq!(group.faults(), 4);
+    assert!(group.retry_at_us() > 2_019_000 + 1_000_000);
+    // Back: the next retry starts at step 1.
+    group.group_mut().imu.bus_mut().set_nack(false);
+    let retry = group.retry_at_us();
+    assert!(group.sample(Topic::Gyroscope, retry).is_empty());
+    assert!(group.sample(Topic::Gyroscope, retry + 19_000).is_empty());
+    assert_eq!(group.sample(Topic::Gyroscope, retry + 26_000).len(), 1);
 }
 
 #[test]
@@ -426,8 +457,11 @@ fn a_bno055_that_reset_is_noticed_on_its_next_sample_and_configured_again() {
             error: Error::ConfigMismatch { register: 0x3D, .. }
         })
     ));
-    // After the back-off the supervisor initialises it again and it publishes 1 g.
-    let samples = group.sample(Topic::Accelerometer, 2_000_000);
+    // After the back-off the supervisor initialises it again (three steps, the mode switches
+    // waited between them) and it publishes 1 g.
+    assert!(group.sample(Topic::Accelerometer, 2_000_000).is_empty());
+    assert!(group.sample(Topic::Accelerometer, 2_019_000).is_empty());
+    let samples = group.sample(Topic::Accelerometer, 2_026_000);
     assert!(
         matches!(samples[..], [SensorData::Accelerometer([_, _, z])] if (998..=1002).contains(&z))
     );
