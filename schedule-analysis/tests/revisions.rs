@@ -109,3 +109,49 @@ fn the_1_2_budgets_put_every_motion_topic_on_the_imu_lock() {
         assert!(cs.get("compass").is_none(), "{topic}");
     }
 }
+
+/// PowerManagement's one image serves both robots and carries the admission table of a 1-2 robot
+/// (docs/boards.md, "PowerManagement"): safe on a 1-1 robot only if the 1-2 DiWheelDrive model is
+/// at least as demanding as the 1-1 model — every task's and topic's WCET and every critical
+/// section no shorter, the 1-1 compass lock's sections carried by 1-2's imu lock (whose ceiling is
+/// at least both 1-1 locks'), the same tasks, topics and arrivals.
+#[test]
+fn the_1_2_diwheeldrive_model_dominates_the_1_1_model() {
+    let read = |path: &str| -> serde_json::Value {
+        let text = std::fs::read_to_string(root().join(path)).expect("timing file");
+        serde_json::from_str(&text).expect("json")
+    };
+    let old = read("schedule-analysis/models/diwheeldrive.timing.json");
+    let new = read("schedule-analysis/models/rev-1-2/diwheeldrive.timing.json");
+    for section in ["tasks", "topics"] {
+        let (Some(old), Some(new)) = (old[section].as_object(), new[section].as_object()) else {
+            continue;
+        };
+        let mut old_names: Vec<_> = old.keys().collect();
+        let mut new_names: Vec<_> = new.keys().collect();
+        old_names.sort();
+        new_names.sort();
+        assert_eq!(old_names, new_names, "{section}");
+        for (name, o) in old {
+            let n = &new[name];
+            let wcet = |v: &serde_json::Value| v["wcet_us"].as_f64().unwrap_or(0.0);
+            assert!(wcet(n) >= wcet(o), "{section}/{name}: WCET");
+            assert_eq!(o["arrival"], n["arrival"], "{section}/{name}: arrival");
+            let empty = serde_json::Map::new();
+            let old_cs = o["critical_sections_us"].as_object().unwrap_or(&empty);
+            let new_cs = n["critical_sections_us"].as_object().unwrap_or(&empty);
+            for (lock, us) in old_cs {
+                let lock = if lock == "compass" {
+                    "imu"
+                } else {
+                    lock.as_str()
+                };
+                let new_us = new_cs.get(lock).and_then(|v| v.as_f64()).unwrap_or(0.0);
+                assert!(
+                    new_us >= us.as_f64().unwrap_or(0.0),
+                    "{section}/{name}: lock {lock}"
+                );
+            }
+        }
+    }
+}
