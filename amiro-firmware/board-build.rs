@@ -29,6 +29,16 @@ fn main() {
     let root =
         PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"))
             .join("..");
+    // The robot's board revision (the board's `rev-*` feature) selects its timing files
+    // (`schedule_analysis::scenario::REVISION_ENV`) for the admission table below.
+    let revision = env::vars().find_map(|(k, _)| {
+        k.strip_prefix("CARGO_FEATURE_REV_")
+            .map(|r| r.replace('_', "-"))
+    });
+    if let Some(revision) = revision {
+        env::set_var("AMIRO_REVISION", revision);
+    }
+    println!("cargo:rerun-if-env-changed=AMIRO_REVISION");
     let table = amiro_firmware::admission::table_source(&root).unwrap_or_else(|e| {
         panic!("admission table: the apps and the timing files disagree (as `cargo xtask analyze` would say): {e}")
     });

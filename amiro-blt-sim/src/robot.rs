@@ -84,6 +84,31 @@ pub struct BoardSpec {
 }
 
 impl BoardSpec {
+    /// A revision 1-1 robot: DiWheelDrive 1-1 (main, on the serial port), PowerManagement 1-1 and
+    /// LightRing 1-0, whose bootloaders also answer to the legacy one-byte ids 1, 2 and 3.
+    pub fn robot_1_1() -> Vec<BoardSpec> {
+        vec![
+            BoardSpec {
+                name: "diwheeldrive".into(),
+                device_id: 0x0100_0101,
+                legacy_id: Some(1),
+                chip: SimChip::F103,
+            },
+            BoardSpec {
+                name: "powermgmt".into(),
+                device_id: 0x0101_0101,
+                legacy_id: Some(2),
+                chip: SimChip::F405,
+            },
+            BoardSpec {
+                name: "lightring".into(),
+                device_id: 0x017F_0100,
+                legacy_id: Some(3),
+                chip: SimChip::F103,
+            },
+        ]
+    }
+
     /// The three revision 1-2 boards: DiWheelDrive (main, on the serial port), PowerManagement,
     /// LightRing.
     pub fn robot_1_2() -> Vec<BoardSpec> {

@@ -190,6 +190,28 @@ fn wait_for_boot_polls_until_the_part_answers() {
     i2c.done();
 }
 
+#[test]
+fn a_verified_read_checks_the_operating_mode_after_the_data() {
+    let mut i2c = I2cMock::new(&[
+        T::write_read(A, vec![0x14], vec![16, 0, 0, 0, 0, 0]),
+        T::write_read(A, vec![0x3D], vec![0x07]),
+        // A part that reset is back in configuration mode, its data zero.
+        T::write_read(A, vec![0x14], vec![0; 6]),
+        T::write_read(A, vec![0x3D], vec![0x00]),
+    ]);
+    let mut imu = Bno055::new(i2c.clone());
+    assert_eq!(imu.read_verified(0x14).unwrap(), [16, 0, 0]);
+    assert_eq!(
+        imu.read_verified(0x14),
+        Err(Error::ConfigMismatch {
+            register: 0x3D,
+            expected: 0x07,
+            found: 0x00
+        })
+    );
+    i2c.done();
+}
+
 // ---------------------------------------------------------------- simulator
 
 #[test]
@@ -376,8 +398,77 @@ fn a_dead_bno055_stops_its_topics_and_is_counted() {
     }
     assert!(!group.is_ready());
     assert_eq!(group.faults(), 3);
-    // It comes back: the retry after the back-off initialises it again.
+    // It comes back: the retry after the back-off initialises it again, in three steps whose
+    // waits (19 ms into configuration mode, 7 ms into AMG mode) pass between the calls, outside
+    // the bus lock; no step counts as a fault.
     group.group_mut().imu.bus_mut().set_nack(false);
-    assert_eq!(group.sample(Topic::Gyroscope, 2_000_000).len(), 1);
+    assert!(group.sample(Topic::Gyroscope, 2_000_000).is_empty());
+    assert_eq!(group.retry_at_us(), 2_019_000);
+    assert!(group.sample(Topic::Gyroscope, 2_010_000).is_empty());
+    assert!(group.sample(Topic::Gyroscope, 2_019_000).is_empty());
+    assert_eq!(group.retry_at_us(), 2_026_000);
+    assert!(!group.is_ready());
+    assert_eq!(group.sample(Topic::Gyroscope, 2_026_000).len(), 1);
     assert!(group.is_ready());
+    assert_eq!(group.faults(), 3);
+}
+
+#[test]
+fn a_step_of_the_re_initialisation_that_fails_starts_the_back_off_again() {
+    let mut group = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
+    group.group_mut().imu.bus_mut().set_nack(true);
+    for t in 1..=3 {
+        assert!(group.sample(Topic::Gyroscope, t * 10_000).is_empty());
+    }
+    // Step 1 answers, then the part is gone again before step 2.
+    group.group_mut().imu.bus_mut().set_nack(false);
+    assert!(group.sample(Topic::Gyroscope, 2_000_000).is_empty());
+    group.group_mut().imu.bus_mut().set_nack(true);
+    assert!(group.sample(Topic::Gyroscope, 2_019_000).is_empty());
+    assert_eq!(group.faults(), 4);
+    assert!(group.retry_at_us() > 2_019_000 + 1_000_000);
+    // Back: the next retry starts at step 1.
+    group.group_mut().imu.bus_mut().set_nack(false);
+    let retry = group.retry_at_us();
+    assert!(group.sample(Topic::Gyroscope, retry).is_empty());
+    assert!(group.sample(Topic::Gyroscope, retry + 19_000).is_empty());
+    assert_eq!(group.sample(Topic::Gyroscope, retry + 26_000).len(), 1);
+}
+
+#[test]
+fn a_bno055_that_reset_is_noticed_on_its_next_sample_and_configured_again() {
+    use embedded_hal::i2c::I2c;
+    let mut group = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
+    assert_eq!(group.sample(Topic::Accelerometer, 0).len(), 1);
+    // SYS_TRIGGER RST_SYS: the part is back in configuration mode (data zero).
+    group
+        .group_mut()
+        .imu
+        .bus_mut()
+        .write(A, &[0x3F, 0x20])
+        .unwrap();
+    for t in 1..=3 {
+        assert!(group.sample(Topic::Accelerometer, t * 10_000).is_empty());
+    }
+    assert!(matches!(
+        group.last_error(),
+        Some(SampleError::Device {
+            device: Device::Imu,
+            error: Error::ConfigMismatch { register: 0x3D, .. }
+        })
+    ));
+    // After the back-off the supervisor initialises it again (three steps, the mode switches
+    // waited between them) and it publishes 1 g.
+    assert!(group.sample(Topic::Accelerometer, 2_000_000).is_empty());
+    assert!(group.sample(Topic::Accelerometer, 2_019_000).is_empty());
+    let samples = group.sample(Topic::Accelerometer, 2_026_000);
+    assert!(
+        matches!(samples[..], [SensorData::Accelerometer([_, _, z])] if (998..=1002).contains(&z))
+    );
+    assert!(group
+        .group_mut()
+        .imu
+        .bus_mut()
+        .imu()
+        .is_configured_for_amiro());
 }

@@ -1,25 +1,31 @@
-//! DiWheelDrive revision 1-1 as the real chip sees it: the one place that names pins and peripherals.
+//! DiWheelDrive revisions 1-1 and 1-2 as the real chip sees them: the one place that names pins and
+//! peripherals.
 //!
 //! Facts from `shared/reference/amiro-boards.md` §0, §4: 8 MHz crystal → 72 MHz, CAN1 on PA11/PA12
-//! at 1 Mbit/s, SPI1 (PA5/6/7) with the L3G4200D (CS PC14) and LIS331DLH (CS PC13), I2C1 remapped to
-//! PB8/PB9 with the HMC5883L, I2C2 (PB10/PB11) with the PCA9544A mux and the four VCNL4020 floor
+//! at 1 Mbit/s; revision 1-1: SPI1 (PA5/6/7) with the L3G4200D (CS PC14) and LIS331DLH (CS PC13),
+//! I2C1 remapped to PB8/PB9 with the HMC5883L; revision 1-2: I2C1 remapped to PB8/PB9 with the
+//! BNO055 (0x28), IMU_RESET_N PC2 (pulsed at boot), IMU_BOOT_LOAD_N PC12 (held high); both: I2C2 (PB10/PB11) with the PCA9544A mux and the four VCNL4020 floor
 //! sensors, motor PWM on TIM2 partial remap 1 (PA15 left fwd, PB3 left back, PA2 right fwd,
 //! PA3 right back) into an A3906, POWER_EN PB2, encoders on TIM3 full remap (PC6/PC7, left) and
 //! TIM4 (PB6/PB7, right), SYS_SYNC_N PC1, SYS_PD_N PC8, status LED PA1 (active low).
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::i2c::{self, Master};
+#[cfg(feature = "rev-1-1")]
 use amiro_firmware::spi;
+#[cfg(feature = "rev-1-1")]
 use embedded_hal::spi::{Mode as SpiMode, Phase, Polarity};
+#[cfg(feature = "rev-1-1")]
 use embedded_hal_bus::spi::{AtomicDevice, NoDelay};
 use embedded_hal_bus::util::AtomicCell;
 use stm32f1xx_hal::afio::AfioExt;
-use stm32f1xx_hal::gpio::{
-    GpioExt, OpenDrain, Output, PinState, PushPull, PA1, PB2, PC1, PC13, PC14, PC8,
-};
+use stm32f1xx_hal::gpio::{GpioExt, OpenDrain, Output, PinState, PushPull, PA1, PB2, PC1, PC8};
+#[cfg(feature = "rev-1-1")]
+use stm32f1xx_hal::gpio::{PC13, PC14};
 use stm32f1xx_hal::pac;
 use stm32f1xx_hal::prelude::*;
 
 /// The IMU bus's fastest rate (the L3G4200D's limit is 10 MHz): PCLK2 / 4 on the crystal.
+#[cfg(feature = "rev-1-1")]
 pub const IMU_SPI_HZ: u32 = 9_000_000;
 /// Motor PWM: 72 MHz timer clock, period 3600 → 20 kHz, as the original 1.x firmware.
 pub const PWM_PERIOD: u16 = 3600;
@@ -31,15 +37,25 @@ static TIMER_CLOCK_HZ: core::sync::atomic::AtomicU32 =
 /// EXTI line of SYS_PD_N (PC8).
 const SYS_PD_LINE: u32 = 1 << 8;
 
-/// SPI1 shared by the gyroscope and the accelerometer.
+/// SPI1 shared by the gyroscope and the accelerometer (1-1).
+#[cfg(feature = "rev-1-1")]
 pub type ImuBus = spi::Master<Mmio>;
+/// No shared IMU bus object on 1-2 (the BNO055 owns I2C1 alone).
+#[cfg(feature = "rev-1-2")]
+pub type ImuBus = ();
 /// The gyroscope's SPI device (chip select PC14).
+#[cfg(feature = "rev-1-1")]
 pub type GyroSpi = AtomicDevice<'static, ImuBus, PC14<Output<PushPull>>, NoDelay>;
 /// The accelerometer's SPI device (chip select PC13).
+#[cfg(feature = "rev-1-1")]
 pub type AccelSpi = AtomicDevice<'static, ImuBus, PC13<Output<PushPull>>, NoDelay>;
 /// I2C1 (remapped to PB8/PB9): the HMC5883L (the runtime's bounded master: a dead sensor holds
 /// its bus lock, and so the publishers sharing it, for at most one 200 µs timeout per flag).
+#[cfg(feature = "rev-1-1")]
 pub type CompassI2c = Master;
+/// I2C1 (remapped to PB8/PB9): the BNO055 (the runtime's bounded master, as the 1-1 compass).
+#[cfg(feature = "rev-1-2")]
+pub type ImuI2c = Master;
 /// I2C2: the PCA9544A multiplexer and the floor sensors.
 pub type FloorI2c = Master;
 /// The CAN controller's transmit mailboxes (the runtime's register-level driver).
@@ -51,14 +67,22 @@ pub type CanErrors = amiro_firmware::bxcan::ErrorMonitor<Mmio>;
 /// The board's monotonic clock (TIM5).
 pub type Clock = crate::mono::Clock;
 
-/// Everything `init` hands on to the tasks.
-pub struct Board {
-    /// CAN transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// CAN receive FIFO 0 (command frames only, by hardware filter).
-    pub can_rx: CanRxPort,
-    /// CAN error-state monitor.
-    pub can_errors: CanErrors,
+/// The BNO055's mode-switch and boot waits: a busy wait on the core clock (at most 800 ms at boot,
+/// 26 ms per (re-)initialisation).
+#[cfg(feature = "rev-1-2")]
+#[derive(Debug, Default, Clone, Copy)]
+pub struct ImuDelay;
+
+#[cfg(feature = "rev-1-2")]
+impl embedded_hal::delay::DelayNs for ImuDelay {
+    fn delay_ns(&mut self, ns: u32) {
+        cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(SYSCLK_HZ / 1_000_000));
+    }
+}
+
+/// The sensor buses `init` hands to `sensors::groups` (revision 1-1).
+#[cfg(feature = "rev-1-1")]
+pub struct SensorBuses {
     /// Gyroscope SPI device.
     pub gyro_spi: GyroSpi,
     /// Accelerometer SPI device.
@@ -67,6 +91,29 @@ pub struct Board {
     pub compass_i2c: CompassI2c,
     /// Floor-sensor bus.
     pub floor_i2c: FloorI2c,
+}
+
+/// The sensor buses `init` hands to `sensors::groups` (revision 1-2).
+#[cfg(feature = "rev-1-2")]
+pub struct SensorBuses {
+    /// The BNO055's bus (I2C1), its reset already pulsed.
+    pub imu_i2c: ImuI2c,
+    /// Its waits.
+    pub imu_delay: ImuDelay,
+    /// Floor-sensor bus.
+    pub floor_i2c: FloorI2c,
+}
+
+/// Everything `init` hands on to the tasks.
+pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: CanTxPort,
+    /// CAN receive FIFO 0 (command frames only, by hardware filter).
+    pub can_rx: CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: CanErrors,
+    /// The sensors' buses.
+    pub sensors: SensorBuses,
     /// Motor PWM and POWER_EN.
     pub motors: Motors,
     /// Wheel encoders.
@@ -85,7 +132,7 @@ pub struct SystemSignals {
     pub led: PA1<Output<OpenDrain>>,
 }
 
-/// Brings the board up. `spi_cell` is the static home of the SPI bus the two IMU devices share.
+/// Brings the board up. `spi_cell` is the static home of the SPI bus the two IMU devices of 1-1 share.
 pub fn init(
     dp: pac::Peripherals,
     mut cp: cortex_m::Peripherals,
@@ -161,20 +208,24 @@ pub fn init(
     let motors = Motors::new(dp.TIM2, power_en);
     let encoders = Encoders::new(dp.TIM3, dp.TIM4);
 
-    // SPI1, mode 0 at up to 9 MHz (PCLK2 / 4 on the crystal), chip selects idle high; SCK and MOSI
-    // alternate push-pull, MISO floating; the runtime's bounded master.
+    // Revision 1-1: SPI1, mode 0 at up to 9 MHz (PCLK2 / 4 on the crystal), chip selects idle
+    // high; SCK and MOSI alternate push-pull, MISO floating; the runtime's bounded master.
+    #[cfg(feature = "rev-1-1")]
     let gyro_cs = gpioc
         .pc14
         .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+    #[cfg(feature = "rev-1-1")]
     let accel_cs = gpioc
         .pc13
         .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+    #[cfg(feature = "rev-1-1")]
     let _spi_pins = (
         gpioa.pa5.into_alternate_push_pull(&mut gpioa.crl),
         gpioa.pa6.into_floating_input(&mut gpioa.crl),
         gpioa.pa7.into_alternate_push_pull(&mut gpioa.crl),
     );
     let _ = dp.SPI1;
+    #[cfg(feature = "rev-1-1")]
     // SAFETY: SPI1 is used by this value only.
     let spi = spi::Master::new(
         unsafe { Mmio::new(spi::SPI1) },
@@ -187,9 +238,29 @@ pub fn init(
     );
     // Both devices live in the one `imu` resource, so the bus is never contended; the atomic
     // cell only makes the shared bus `Sync` without a critical section.
+    #[cfg(feature = "rev-1-1")]
     let bus: &'static AtomicCell<ImuBus> = spi_cell.insert(AtomicCell::new(spi));
+    #[cfg(feature = "rev-1-1")]
     let gyro_spi = AtomicDevice::new_no_delay(bus, gyro_cs).unwrap_or_else(|_| unreachable_pin());
+    #[cfg(feature = "rev-1-1")]
     let accel_spi = AtomicDevice::new_no_delay(bus, accel_cs).unwrap_or_else(|_| unreachable_pin());
+    #[cfg(feature = "rev-1-2")]
+    let _ = spi_cell;
+
+    // Revision 1-2: the BNO055 starts its application (IMU_BOOT_LOAD_N high) out of a reset pulse
+    // on IMU_RESET_N (held low 1 ms; the datasheet asks for far less); `sensors::groups` waits for
+    // it to answer. The pins keep their state after these handles are dropped.
+    #[cfg(feature = "rev-1-2")]
+    {
+        let _boot_load = gpioc
+            .pc12
+            .into_push_pull_output_with_state(&mut gpioc.crh, PinState::High);
+        let mut reset = gpioc
+            .pc2
+            .into_push_pull_output_with_state(&mut gpioc.crl, PinState::Low);
+        cortex_m::asm::delay(SYSCLK_HZ / 1_000);
+        reset.set_high();
+    }
 
     // I2C1 remapped to PB8/PB9 and I2C2 on PB10/PB11, both 400 kHz: pins alternate open drain
     // (the board has pull-ups), the blocks reset and clocked, then the runtime's bounded master.
@@ -212,7 +283,7 @@ pub fn init(
     }
     let _ = (dp.I2C1, dp.I2C2);
     // SAFETY: I2C1 and I2C2 are used by these two values only.
-    let compass_i2c = unsafe { Master::new(i2c::I2C1, clocks.pclk1_hz, clocks.sysclk_hz) };
+    let i2c1 = unsafe { Master::new(i2c::I2C1, clocks.pclk1_hz, clocks.sysclk_hz) };
     let floor_i2c = unsafe { Master::new(i2c::I2C2, clocks.pclk1_hz, clocks.sysclk_hz) };
 
     // CAN1 on PA11/PA12 at 1 Mbit/s (no remap): RX floating input, TX alternate push-pull; the
@@ -232,10 +303,19 @@ pub fn init(
             can_tx: can.tx,
             can_rx: can.rx,
             can_errors: can.errors,
-            gyro_spi,
-            accel_spi,
-            compass_i2c,
-            floor_i2c,
+            #[cfg(feature = "rev-1-1")]
+            sensors: SensorBuses {
+                gyro_spi,
+                accel_spi,
+                compass_i2c: i2c1,
+                floor_i2c,
+            },
+            #[cfg(feature = "rev-1-2")]
+            sensors: SensorBuses {
+                imu_i2c: i2c1,
+                imu_delay: ImuDelay,
+                floor_i2c,
+            },
             motors,
             encoders,
             signals,
@@ -245,6 +325,7 @@ pub fn init(
 }
 
 /// Setting a push-pull chip select high cannot fail on this chip.
+#[cfg(feature = "rev-1-1")]
 fn unreachable_pin() -> ! {
     amiro_firmware::fault::halt()
 }

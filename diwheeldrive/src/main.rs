@@ -1,4 +1,5 @@
-//! DiWheelDrive firmware (STM32F103xE, board revision 1-1): the RTIC app.
+//! DiWheelDrive firmware (STM32F103xE, board revisions 1-1 and 1-2, one per build: feature
+//! `rev-1-1` or `rev-1-2`, the default): the RTIC app.
 //!
 //! This file is wiring only: resources, bindings, priorities. Every task body locks what it needs
 //! and calls the runtime (`amiro-firmware`) or host-tested code from `amiro-can` and
@@ -26,6 +27,13 @@ mod qemu;
 #[cfg(feature = "qemu")]
 use qemu as platform;
 
+#[cfg(all(feature = "rev-1-1", feature = "rev-1-2"))]
+compile_error!(
+    "choose one board revision: `rev-1-1` or `rev-1-2` (with --no-default-features for 1-1)"
+);
+#[cfg(not(any(feature = "rev-1-1", feature = "rev-1-2")))]
+compile_error!("choose a board revision: feature `rev-1-1` or `rev-1-2`");
+
 // The trace numbers of the tasks below (`trace_task::CAN_RX`, …), from this file.
 amiro_firmware::trace_tasks!();
 
@@ -38,6 +46,17 @@ amiro_firmware::safe_state!(platform::emergency_motors_off);
 #[link_section = ".blt_checksum"]
 #[used]
 static BLT_CHECKSUM: u32 = 0xFFFF_FFFF;
+
+/// The board revision this image is for, as its AMiRo-BLT device id (`shared/reference` §2):
+/// `cargo xtask flash` reads this symbol and refuses to write the image into a board whose
+/// bootloader answers with another revision's id.
+#[no_mangle]
+#[used]
+pub static AMIRO_DEVICE_ID: u32 = if cfg!(feature = "rev-1-1") {
+    0x0100_0101
+} else {
+    0x0100_0102
+};
 
 /// Depth of the queue between the CAN receive interrupt and command handling.
 pub const RX_QUEUE_LEN: usize = 16;
@@ -99,8 +118,6 @@ mod app {
     use amiro_firmware::signals::{self, SystemSignals as _};
     use amiro_firmware::watchdog as iwdg;
     use amiro_firmware::{bootloader, health, publisher, tasks};
-    use amiro_sensors::drivers::floor::FloorSensors;
-    use amiro_sensors::drivers::suite::{self, InertialSensors};
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
     use amiro_sensors::motion::DriveController;
     use amiro_sensors::tx_queue::TxQueue;
@@ -118,9 +135,9 @@ mod app {
         tx_queue: TxQueue<TX_QUEUE_LEN>,
         /// Wheel speed control, odometry and velocity.
         drive: DriveController,
-        /// Gyroscope and accelerometer on SPI1.
+        /// Gyroscope and accelerometer (1-1: on SPI1; 1-2: the BNO055 on I2C1, magnetometer too).
         imu: Imu,
-        /// Magnetometer on I2C1.
+        /// 1-1: the magnetometer on I2C1 (1-2: empty, its magnetometer is in `imu`).
         compass: Compass,
         /// Floor sensors behind the I2C2 multiplexer.
         floor: Floor,
@@ -164,9 +181,7 @@ mod app {
         let (wake_m, wake_medium) = make_channel!((), 1);
         let (wake_l, wake_low) = make_channel!((), 1);
 
-        let imu = Imu::new(InertialSensors::new(hw.gyro_spi, hw.accel_spi), 0);
-        let compass = Compass::new(suite::Compass::new(hw.compass_i2c), 1);
-        let floor = Floor::new(FloorSensors::new(hw.floor_i2c), 2);
+        let (imu, compass, floor) = sensors::groups(hw.sensors);
         let mut signals = hw.signals;
         amiro_firmware::log!(
             "DiWheelDrive: sensors ",

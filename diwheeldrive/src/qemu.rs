@@ -2,20 +2,135 @@
 //!
 //! The platform (SysTick clock, virtual CAN, stimulus replay, stack painting, the end line,
 //! simulated system signals) is the runtime's `amiro_firmware::qemu`; this file adds only what is
-//! DiWheelDrive's own: amiro-sensors' register-level simulators behind the real drivers, and a
+//! DiWheelDrive's own: amiro-sensors' register-level simulators behind the real drivers (1-1: the
+//! L3G4200D, LIS331DLH and HMC5883L; 1-2: the BNO055 of a robot at rest in Bielefeld), and a
 //! simulated wheel plant for the motors and encoders.
+//!
+//! **QEMU-only control frames** (revision 1-2), as on PowerManagement: command frames on
+//! [`SIM_CONTROL_ID`] (`0x3F0`, topic 0xF0, which the protocol leaves free) are taken out by the
+//! receive port before the command queue:
+//!
+//! | data | effect |
+//! |---|---|
+//! | `01` | the BNO055 stops answering (its address is not acknowledged: a dead or absent part) |
+//! | `02` | the BNO055 answers again (a part that came back; the supervisor's retry finds it) |
 use core::cell::RefCell;
+use core::sync::atomic::{AtomicBool, Ordering};
 
+use amiro_firmware::can::{CanRx, RxEvent};
 use critical_section::Mutex;
 use stm32f1xx_hal::pac::{self, Interrupt};
 
 use amiro_sensors::motion::{Duty, MotorPwm};
 
-pub use amiro_firmware::qemu::{CanErrors, CanRxPort, CanTxPort, Clock, Signals as SystemSignals};
+pub use amiro_firmware::qemu::{CanErrors, CanTxPort, Clock, Signals as SystemSignals};
+/// The simulated parts need no time between transfers.
+#[cfg(feature = "rev-1-2")]
+pub use amiro_sensors::sim::NoDelay as ImuDelay;
+pub use amiro_sensors::sim::SimFloorBus as FloorI2c;
+#[cfg(feature = "rev-1-1")]
 pub use amiro_sensors::sim::{
-    SimAccelerometer as AccelSpi, SimCompassBus as CompassI2c, SimFloorBus as FloorI2c,
-    SimGyroscope as GyroSpi,
+    SimAccelerometer as AccelSpi, SimCompassBus as CompassI2c, SimGyroscope as GyroSpi,
 };
+
+/// The identifier of the QEMU-only control frames (see the module documentation).
+pub const SIM_CONTROL_ID: u16 = 0x3F0;
+/// Whether the simulated BNO055 has stopped answering (control frame `01`).
+static IMU_DEAD: AtomicBool = AtomicBool::new(false);
+
+/// The virtual receive FIFO, with the QEMU-only control frames taken out.
+pub struct CanRxPort(amiro_firmware::qemu::CanRxPort);
+
+impl CanRx for CanRxPort {
+    fn receive(&mut self) -> Option<RxEvent> {
+        loop {
+            match self.0.receive()? {
+                RxEvent::Frame(frame) if frame.id == SIM_CONTROL_ID => {
+                    apply_control(frame.payload())
+                }
+                other => return Some(other),
+            }
+        }
+    }
+}
+
+fn apply_control(data: &[u8]) {
+    match data.first() {
+        Some(1) if cfg!(feature = "rev-1-2") => {
+            IMU_DEAD.store(true, Ordering::SeqCst);
+            amiro_firmware::qemu::print_line("# qemu: the BNO055 stops answering");
+        }
+        Some(2) if cfg!(feature = "rev-1-2") => {
+            IMU_DEAD.store(false, Ordering::SeqCst);
+            amiro_firmware::qemu::print_line("# qemu: the BNO055 answers again");
+        }
+        _ => amiro_firmware::qemu::print_line("# qemu: unknown control frame"),
+    }
+}
+
+/// Revision 1-2's I2C1: the simulated BNO055, which stops answering on a control frame.
+#[cfg(feature = "rev-1-2")]
+pub struct ImuI2c(amiro_sensors::sim::SimImuBus);
+
+#[cfg(feature = "rev-1-2")]
+impl embedded_hal::i2c::ErrorType for ImuI2c {
+    type Error = amiro_sensors::sim::NoAcknowledge;
+}
+
+#[cfg(feature = "rev-1-2")]
+impl embedded_hal::i2c::I2c for ImuI2c {
+    fn transaction(
+        &mut self,
+        address: u8,
+        operations: &mut [embedded_hal::i2c::Operation<'_>],
+    ) -> Result<(), Self::Error> {
+        self.0.set_nack(IMU_DEAD.load(Ordering::SeqCst));
+        self.0.transaction(address, operations)
+    }
+}
+
+/// The sensor buses `init` hands to `sensors::groups` (revision 1-1).
+#[cfg(feature = "rev-1-1")]
+pub struct SensorBuses {
+    /// Simulated L3G4200D.
+    pub gyro_spi: GyroSpi,
+    /// Simulated LIS331DLH.
+    pub accel_spi: AccelSpi,
+    /// Simulated HMC5883L bus.
+    pub compass_i2c: CompassI2c,
+    /// Simulated PCA9544A + floor sensors bus.
+    pub floor_i2c: FloorI2c,
+}
+
+/// The sensor buses `init` hands to `sensors::groups` (revision 1-2).
+#[cfg(feature = "rev-1-2")]
+pub struct SensorBuses {
+    /// Simulated BNO055 bus.
+    pub imu_i2c: ImuI2c,
+    /// Its mode-switch waits (none in the simulation).
+    pub imu_delay: ImuDelay,
+    /// Simulated PCA9544A + floor sensors bus.
+    pub floor_i2c: FloorI2c,
+}
+
+#[cfg(feature = "rev-1-1")]
+fn sensor_buses() -> SensorBuses {
+    SensorBuses {
+        gyro_spi: GyroSpi::new(),
+        accel_spi: AccelSpi::new(),
+        compass_i2c: CompassI2c::new(),
+        floor_i2c: FloorI2c::new(),
+    }
+}
+
+#[cfg(feature = "rev-1-2")]
+fn sensor_buses() -> SensorBuses {
+    SensorBuses {
+        imu_i2c: ImuI2c(amiro_sensors::sim::SimImuBus::new()),
+        imu_delay: ImuDelay,
+        floor_i2c: FloorI2c::new(),
+    }
+}
 
 /// The QEMU build has no SPI bus object: each simulated device is its own `SpiDevice`.
 pub type ImuBus = ();
@@ -37,14 +152,8 @@ pub struct Board {
     pub can_rx: CanRxPort,
     /// No CAN errors in QEMU.
     pub can_errors: CanErrors,
-    /// Simulated L3G4200D.
-    pub gyro_spi: GyroSpi,
-    /// Simulated LIS331DLH.
-    pub accel_spi: AccelSpi,
-    /// Simulated HMC5883L bus.
-    pub compass_i2c: CompassI2c,
-    /// Simulated PCA9544A + floor sensors bus.
-    pub floor_i2c: FloorI2c,
+    /// The simulated sensors' buses.
+    pub sensors: SensorBuses,
     /// Simulated motors.
     pub motors: Motors,
     /// Simulated encoders.
@@ -69,12 +178,9 @@ pub fn init(
     (
         Board {
             can_tx: CanTxPort,
-            can_rx: CanRxPort,
+            can_rx: CanRxPort(amiro_firmware::qemu::CanRxPort),
             can_errors: amiro_firmware::qemu::can_errors(),
-            gyro_spi: GyroSpi::new(),
-            accel_spi: AccelSpi::new(),
-            compass_i2c: CompassI2c::new(),
-            floor_i2c: FloorI2c::new(),
+            sensors: sensor_buses(),
             motors: Motors,
             encoders: Encoders,
             signals: SystemSignals,

@@ -2,14 +2,16 @@
 //! block each other only for the bus they share.
 //!
 //! The groups themselves (drivers, conversions, which topic reads what) are amiro-sensors'; this
-//! module only binds them to this board's buses and keeps a group that failed its identity check
+//! module only binds them to this board's buses (per revision: 1-1's SPI1 gyroscope and
+//! accelerometer and I2C1 magnetometer, or 1-2's BNO055 on I2C1; both revisions publish the same
+//! topics in the same units) and keeps a group that failed its identity check
 //! from being read again (its topics then publish nothing, and the fault is counted).
 use amiro_can::Topic;
 use amiro_sensors::drivers::floor::FloorSensors;
-use amiro_sensors::drivers::suite::{self, InertialSensors, SensorGroup};
+use amiro_sensors::drivers::suite::{self, SensorGroup};
 use amiro_sensors::motion::DriveController;
 
-use crate::platform::{AccelSpi, CompassI2c, FloorI2c, GyroSpi};
+use crate::platform::{FloorI2c, SensorBuses};
 
 pub use amiro_sensors::drivers::suite::Samples;
 
@@ -62,12 +64,76 @@ impl<G: SensorGroup> Group<G> {
     }
 }
 
-/// Gyroscope and accelerometer on SPI1.
-pub type Imu = Group<InertialSensors<GyroSpi, AccelSpi>>;
-/// Magnetometer on I2C1.
-pub type Compass = Group<suite::Compass<CompassI2c>>;
-/// Floor sensors behind the PCA9544A on I2C2.
+/// Floor sensors behind the PCA9544A on I2C2 (both revisions).
 pub type Floor = Group<FloorSensors<FloorI2c>>;
+
+#[cfg(feature = "rev-1-1")]
+mod revision {
+    use super::{suite, Group};
+    use crate::platform::{AccelSpi, CompassI2c, GyroSpi};
+    use amiro_sensors::drivers::suite::InertialSensors;
+
+    /// Gyroscope and accelerometer on SPI1.
+    pub type Imu = Group<InertialSensors<GyroSpi, AccelSpi>>;
+    /// Magnetometer on I2C1.
+    pub type Compass = Group<suite::Compass<CompassI2c>>;
+    /// Whether the magnetometer topics are sampled from `imu` (1-2) or from `compass` (1-1).
+    pub const MAGNETOMETER_IN_IMU: bool = false;
+}
+
+#[cfg(feature = "rev-1-2")]
+mod revision {
+    use super::{suite, Group};
+    use crate::platform::{ImuDelay, ImuI2c};
+    use amiro_sensors::drivers::suite::ImuSensors;
+
+    /// The BNO055 on I2C1: gyroscope, accelerometer and magnetometer.
+    pub type Imu = Group<ImuSensors<ImuI2c, ImuDelay>>;
+    /// Nothing: 1-2's magnetometer is the BNO055's (in `imu`); the slot keeps the app's resources
+    /// (and so its analysis model) the same on both revisions.
+    pub type Compass = Group<suite::NoSensors>;
+    /// Whether the magnetometer topics are sampled from `imu` (1-2) or from `compass` (1-1).
+    pub const MAGNETOMETER_IN_IMU: bool = true;
+    /// How long the BNO055 may take from its reset (IMU_RESET_N released by the board) to answer:
+    /// the datasheet's 650 ms and a margin, inside the boot watchdog's 2 s.
+    pub const IMU_BOOT_TIMEOUT_MS: u32 = 800;
+
+    /// The BNO055 group: waits for the part's boot, then checks and configures it. A part that
+    /// never answered is *missing* (reported, retried with back-off) like any failed group.
+    pub fn imu(i2c: ImuI2c, delay: ImuDelay) -> Imu {
+        let mut group = ImuSensors::new(i2c, delay);
+        // Its failure is the init's failure just after; the group reports that one.
+        let _ = group.wait_for_boot(IMU_BOOT_TIMEOUT_MS);
+        Imu::new(group, 0)
+    }
+
+    /// The empty slot.
+    pub fn compass() -> Compass {
+        Compass::new(suite::NoSensors, 1)
+    }
+}
+
+pub use revision::{Compass, Imu, MAGNETOMETER_IN_IMU};
+
+/// Brings every sensor group up on its bus: the motion sensors (per revision) and the floor.
+pub fn groups(buses: SensorBuses) -> (Imu, Compass, Floor) {
+    #[cfg(feature = "rev-1-1")]
+    let (imu, compass, floor_i2c) = (
+        Imu::new(
+            suite::InertialSensors::new(buses.gyro_spi, buses.accel_spi),
+            0,
+        ),
+        Compass::new(suite::Compass::new(buses.compass_i2c), 1),
+        buses.floor_i2c,
+    );
+    #[cfg(feature = "rev-1-2")]
+    let (imu, compass, floor_i2c) = (
+        revision::imu(buses.imu_i2c, buses.imu_delay),
+        revision::compass(),
+        buses.floor_i2c,
+    );
+    (imu, compass, Floor::new(FloorSensors::new(floor_i2c), 2))
+}
 
 /// One word on the groups for the boot log.
 pub fn summary(imu: &Imu, compass: &Compass, floor: &Floor) -> &'static str {
@@ -98,7 +164,11 @@ pub fn sampler(
     move |topic: Topic, taken: u64| match topic {
         Topic::Gyroscope | Topic::Accelerometer => imu.lock(|d| d.sample(topic, taken)),
         Topic::MagnetometerX | Topic::MagnetometerY | Topic::MagnetometerZ => {
-            compass.lock(|d| d.sample(topic, taken))
+            if MAGNETOMETER_IN_IMU {
+                imu.lock(|d| d.sample(topic, taken))
+            } else {
+                compass.lock(|d| d.sample(topic, taken))
+            }
         }
         Topic::FloorProximity => floor.lock(|d| d.sample(topic, taken)),
         Topic::Odometry | Topic::Velocity => drive.lock(|d| sample_drive(d, topic)),

@@ -37,6 +37,10 @@ pub struct AnalyzeArgs {
     /// Also write the combined model (scenario + timing files + apps) in the JSON model format to FILE.
     #[arg(long, value_name = "FILE")]
     pub emit_model: Option<PathBuf>,
+    /// The robot revision whose timing files to read (1-2, 1-1; docs/boards.md "Revisions"). Default:
+    /// `AMIRO_REVISION` if set, else the models folder's files (1-1 budgets for DiWheelDrive).
+    #[arg(long, value_name = "1-2|1-1")]
+    pub revision: Option<String>,
 }
 
 fn parse_frame_cost(text: &str) -> Result<FrameCostSpec, String> {
@@ -51,6 +55,12 @@ fn parse_format(text: &str) -> Result<Format, String> {
 /// Runs the analysis and prints (or writes) the report. `Ok(true)`: everything is schedulable and within its
 /// jitter budget under the frame-cost model that decides the verdict.
 pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
+    if let Some(revision) = &args.revision {
+        match crate::revision::Choice::parse(Some(revision))? {
+            crate::revision::Choice::Robot(robot) => crate::revision::select_models(robot),
+            _ => anyhow::bail!("--revision {revision}: analyse one revision at a time"),
+        }
+    }
     let mut robot = None;
     let (model, title, sources, warnings, origin) = match &args.model {
         Some(path) => {

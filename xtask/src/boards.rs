@@ -28,6 +28,55 @@ pub struct Board {
     /// What the on-chip admission analysis (issue 11) may add to `flash_budget` where it is built in:
     /// a stated allowance, not a target (0: the board's own budget holds with it).
     pub admission_allowance: u64,
+    /// The hardware revisions its firmware is built for, newest first (docs/boards.md).
+    pub revisions: &'static [Revision],
+}
+
+/// One hardware revision of a board, and how its image is built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Revision {
+    /// The board's revision as printed on it (`1-2`), or the revisions one image serves (`1-1/1-2`).
+    pub name: &'static str,
+    /// The robot revisions (`--revision`: the DiWheelDrive's and PowerManagement's) this image is for.
+    pub robots: &'static [&'static str],
+    /// The cargo feature that selects it (built with `--no-default-features`); `None` for a board
+    /// with one image.
+    pub feature: Option<&'static str>,
+    /// The AMiRo-BLT device ids its bootloaders answer to (`shared/reference` §2; legacy ids
+    /// included where the bootloader defines them).
+    pub device_ids: &'static [u32],
+}
+
+/// The robot revisions `--revision` names, newest (the default) first.
+pub const ROBOT_REVISIONS: [&str; 2] = ["1-2", "1-1"];
+
+/// The newest robot revision: what `cargo xtask build` builds unless told otherwise.
+pub const NEWEST: &str = ROBOT_REVISIONS[0];
+
+impl Board {
+    /// The board's revision on a robot of revision `robot`, if it has an image for it.
+    pub fn revision_for(&self, robot: &str) -> Option<&'static Revision> {
+        self.revisions.iter().find(|r| r.robots.contains(&robot))
+    }
+
+    /// The board's newest revision (its first).
+    pub fn newest(&self) -> &'static Revision {
+        &self.revisions[0]
+    }
+
+    /// The revision whose bootloader answers to `device_id`, if the board has one.
+    pub fn revision_of_id(&self, device_id: u32) -> Option<&'static Revision> {
+        self.revisions
+            .iter()
+            .find(|r| r.device_ids.contains(&device_id))
+    }
+}
+
+impl Revision {
+    /// The robot revision its admission table is built for (`AMIRO_REVISION`): the newest it serves.
+    pub fn robot(&self) -> &'static str {
+        self.robots.first().copied().unwrap_or(NEWEST)
+    }
 }
 
 /// DiWheelDrive, PowerManagement and LightRing.
@@ -44,6 +93,20 @@ pub const BOARDS: [Board; 3] = [
         qemu_machine: "netduino2",
         flash_budget: 40 * 1024,
         admission_allowance: 28 * 1024,
+        revisions: &[
+            Revision {
+                name: "1-2",
+                robots: &["1-2"],
+                feature: Some("rev-1-2"),
+                device_ids: &[0x0100_0102],
+            },
+            Revision {
+                name: "1-1",
+                robots: &["1-1"],
+                feature: Some("rev-1-1"),
+                device_ids: &[0x0100_0101, 1],
+            },
+        ],
     },
     Board {
         name: "powermgmt",
@@ -61,6 +124,14 @@ pub const BOARDS: [Board; 3] = [
         // PowerManagement ≈ 3.3 KB over its own 48 KiB (the check, issue 20's cost work +0.7 KB, issue 21's bounded waits and
         // timer monotonic): a stated allowance until the check shrinks.
         admission_allowance: 4 * 1024,
+        // 1-1 and 1-2 differ only in PA1 (1-2's battery switch input), which the firmware leaves
+        // alone: one image for both (docs/boards.md).
+        revisions: &[Revision {
+            name: "1-1/1-2",
+            robots: &["1-2", "1-1"],
+            feature: None,
+            device_ids: &[0x0101_0102, 0x0101_0101, 2],
+        }],
     },
     Board {
         name: "lightring",
@@ -74,6 +145,13 @@ pub const BOARDS: [Board; 3] = [
         qemu_machine: "netduino2",
         flash_budget: 24 * 1024,
         admission_allowance: 28 * 1024,
+        // The 1-0 ring (eight LEDs) of a 1-1 robot; LightRing 1-2 (24 LEDs) has no image yet.
+        revisions: &[Revision {
+            name: "1-0",
+            robots: &["1-1"],
+            feature: None,
+            device_ids: &[0x017F_0100, 3],
+        }],
     },
 ];
 

@@ -76,7 +76,8 @@ pub const MODELS: &[BoardModel] = &[
         reference: (0x08, "gyroscope", 10_000),
         reference_frames: 1,
         actuators: &[0x10],
-        qemu_control_id: None,
+        // diwheeldrive/src/qemu.rs SIM_CONTROL_ID (revision 1-2's dead BNO055)
+        qemu_control_id: Some(0x3F0),
         admission_task: true,
     },
     BoardModel {
@@ -617,7 +618,13 @@ fn check(model: &BoardModel, plan: &Plan, out: &RunOutput) -> Result<String> {
 
 /// Runs the campaign on every board that has QEMU scenarios: `runs` runs of `frames` spaced
 /// frames each, seeds `seed`, `seed + 1`, ….
-pub fn run(root: &Path, boards: &[&Board], seed: u64, frames: usize, runs: usize) -> Result<()> {
+pub fn run(
+    root: &Path,
+    boards: &[&'static Board],
+    seed: u64,
+    frames: usize,
+    runs: usize,
+) -> Result<()> {
     let boards = boards
         .iter()
         .filter(|b| !scenarios::for_board(b.name).is_empty());
@@ -628,7 +635,14 @@ pub fn run(root: &Path, boards: &[&Board], seed: u64, frames: usize, runs: usize
             .with_context(|| {
                 format!("board {} has QEMU scenarios but no campaign model (xtask/src/campaign.rs MODELS)", board.name)
             })?;
-        let elf = crate::build_qemu(root, board)?;
+        // The board's newest revision (its default build).
+        let elf = crate::build_qemu(
+            root,
+            &crate::revision::Build {
+                board,
+                revision: board.newest(),
+            },
+        )?;
         for k in 0..runs {
             let seed = seed.wrapping_add(k as u64);
             let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);

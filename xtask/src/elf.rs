@@ -13,6 +13,12 @@ use crate::boards::Board;
 pub struct SizeReport {
     /// Board name.
     pub board: String,
+    /// The board revision the image is for (`boards::Revision::name`; set by the build).
+    pub revision: String,
+    /// The image's ELF (a copy per revision, `target/firmware/<board>-<revision>.elf`; set by the build).
+    pub elf: std::path::PathBuf,
+    /// The AMiRo-BLT device id the image declares (its `AMIRO_DEVICE_ID` symbol), if it has one.
+    pub device_id: Option<u32>,
     /// Code and read-only data in flash (vector table, .text, .rodata).
     pub text: u64,
     /// Initialised data (stored in flash, copied to RAM).
@@ -72,6 +78,9 @@ pub fn inspect(board: &Board, elf: &Path, behind_bootloader: bool) -> Result<Siz
 
     let mut report = SizeReport {
         board: board.name.to_string(),
+        revision: String::new(),
+        elf: elf.to_path_buf(),
+        device_id: declared_device_id(&file),
         text: 0,
         data: 0,
         bss: 0,
@@ -259,11 +268,35 @@ pub fn rtt_control_block(bytes: &[u8]) -> Option<u64> {
         .map(|s| s.address())
 }
 
+/// The symbol an image declares its board revision with (its AMiRo-BLT device id, a `u32`).
+pub const DEVICE_ID_SYMBOL: &str = "AMIRO_DEVICE_ID";
+
+/// The device id an image declares in [`DEVICE_ID_SYMBOL`], read from its section data.
+pub fn declared_device_id(file: &object::File<'_>) -> Option<u32> {
+    let symbol = file
+        .symbols()
+        .find(|s| s.name() == Ok(DEVICE_ID_SYMBOL) && !s.is_undefined())?;
+    let section = file.section_by_index(symbol.section_index()?).ok()?;
+    let data = section.data().ok()?;
+    let offset = usize::try_from(symbol.address().checked_sub(section.address())?).ok()?;
+    let bytes: [u8; 4] = data.get(offset..offset + 4)?.try_into().ok()?;
+    Some(u32::from_le_bytes(bytes))
+}
+
+/// The device id the ELF at `path` declares (see [`declared_device_id`]).
+pub fn device_id_of(path: &Path) -> Result<Option<u32>> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let file =
+        object::File::parse(&*bytes).with_context(|| format!("parsing {}", path.display()))?;
+    Ok(declared_device_id(&file))
+}
+
 /// Prints the size table.
 pub fn print_table(reports: &[SizeReport]) {
     println!(
-        "{:<14} {:>8} {:>7} {:>7} {:>22} {:>20} {:>16} {:>12}",
+        "{:<14} {:<8} {:>8} {:>7} {:>7} {:>22} {:>20} {:>16} {:>12}",
         "board",
+        "revision",
         "text",
         "data",
         "bss",
@@ -274,8 +307,9 @@ pub fn print_table(reports: &[SizeReport]) {
     );
     for r in reports {
         println!(
-            "{:<14} {:>8} {:>7} {:>7} {:>9} / {:>6} KiB {:>4.1}% {:>7} / {:>4} KiB {:>4.1}% {:>6} KiB {:<4} {:>12}",
+            "{:<14} {:<8} {:>8} {:>7} {:>7} {:>9} / {:>6} KiB {:>4.1}% {:>7} / {:>4} KiB {:>4.1}% {:>6} KiB {:<4} {:>12}",
             r.board,
+            r.revision,
             r.text,
             r.data,
             r.bss,

@@ -7,11 +7,12 @@ use std::time::{Duration, Instant};
 
 use amiro_blt::target::{robot, IdSet};
 use amiro_blt::{Event, Flasher, Image, Observer, Options, Phase, RestartOutcome, Target};
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, ensure, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serialport::SerialPort;
 
 use crate::boards::{self, Board, BOARDS};
+use crate::revision::{self, Choice};
 
 /// The serial line's speed on every AMiRo-BLT.
 const BAUD: u32 = 115_200;
@@ -30,9 +31,15 @@ pub struct FlashArgs {
     /// Flash one board through probe-rs over SWD (a probe on that board's pins).
     #[arg(long)]
     pub probe: bool,
-    /// The device ids the robot's bootloaders answer to: 1-2, 1-1 or legacy.
+    /// The device ids the robot's bootloaders answer to: 1-2, 1-1 or legacy. They name the robot's
+    /// revision, and so which image of each board is built and written (1-1 and legacy: the 1-1
+    /// images); a board without an image for it, or an image of the other revision, is refused
+    /// before anything is erased.
     #[arg(long, default_value = "1-2")]
     pub ids: String,
+    /// Over SWD (`--probe`): the revision of the board on the probe (1-2, 1-1). Default: its newest.
+    #[arg(long, value_name = "1-2|1-1", requires = "probe")]
+    pub revision: Option<String>,
     /// Reset the robot through the cable's RTS line instead of asking for the reset button.
     #[arg(long)]
     pub reset_line: bool,
@@ -43,12 +50,19 @@ pub fn run(root: &Path, args: &FlashArgs) -> Result<()> {
     let selected = select(&args.boards)?;
     match &args.port {
         Some(port) => {
-            crate::build_boards(root, &selected, false)?;
-            let elfs: Vec<PathBuf> = selected
-                .iter()
-                .map(|b| crate::firmware_elf(root, b))
-                .collect();
-            serial(port, &selected, &elfs, &options(args), ids(&args.ids)?).map(|_| ())
+            let id_set = ids(&args.ids)?;
+            // Which image of each board this robot takes: refused here, before the port is
+            // opened, when a board has none for its revision.
+            let plan = revision::plan(&selected, &Choice::Robot(robot_revision(id_set)))
+                .with_context(|| {
+                    format!(
+                        "the robot answers to the {} ids; nothing was erased",
+                        args.ids
+                    )
+                })?;
+            let reports = crate::build_boards(root, &plan, false)?;
+            let elfs: Vec<PathBuf> = reports.iter().map(|r| r.elf.clone()).collect();
+            serial(port, &selected, &elfs, &options(args), id_set).map(|_| ())
         }
         None => {
             let [board] = selected[..] else {
@@ -57,10 +71,57 @@ pub fn run(root: &Path, args: &FlashArgs) -> Result<()> {
                      use --port with DiWheelDrive's programming cable"
                 );
             };
-            crate::build_boards(root, &[board], false)?;
-            crate::flash_elf(board, &crate::firmware_elf(root, board))
+            let choice = Choice::parse(args.revision.as_deref())?;
+            ensure!(choice != Choice::All, "one revision over SWD");
+            let plan = revision::plan(&[board], &choice)?;
+            let reports = crate::build_boards(root, &plan, false)?;
+            let report = reports.first().context("one image built")?;
+            println!("{} {} image", board.name, report.revision);
+            crate::flash_elf(board, &report.elf)
         }
     }
+}
+
+/// The robot revision whose images a robot answering to `ids` takes.
+pub fn robot_revision(ids: IdSet) -> &'static str {
+    match ids {
+        IdSet::Rev12 => "1-2",
+        IdSet::Rev11 | IdSet::Legacy => "1-1",
+    }
+}
+
+/// Refuses an image for a board whose bootloader answers to `target`'s id unless the image is for
+/// that board's revision: the id names the revision (`boards::Revision::device_ids`), the ELF
+/// declares its own (`AMIRO_DEVICE_ID`; an image without it is the board's only revision).
+pub fn check_revision(board: &Board, target: &Target, elf: &Path) -> Result<()> {
+    let Some(wanted) = board.revision_of_id(target.device_id) else {
+        bail!(
+            "{}: the robot's {} answers to device id {:#010x}, a revision this firmware has no image for \
+             (its revisions: {}); nothing was erased",
+            board.name,
+            board.name,
+            target.device_id,
+            revision::names(board)
+        );
+    };
+    let image = revision::of_elf(board, elf)?;
+    if image != wanted {
+        bail!(
+            "{}: {} is the {} {} image, but the robot's {} answers to device id {:#010x} ({} {}); \
+             nothing was erased (build that revision: cargo xtask build {} --revision {})",
+            board.name,
+            elf.display(),
+            board.name,
+            image.name,
+            board.name,
+            target.device_id,
+            board.name,
+            wanted.name,
+            board.name,
+            wanted.robot()
+        );
+    }
+    Ok(())
 }
 
 /// The boards' `cargo run --release` runner: serial when `AMIRO_PORT` names a port, else SWD.
@@ -74,7 +135,11 @@ pub fn run_elf(board: &'static Board, elf: &Path) -> Result<()> {
             let id_set = ids(&std::env::var("AMIRO_IDS").unwrap_or_else(|_| "1-2".into()))?;
             serial(&port, &[board], &[elf.to_path_buf()], &opts, id_set).map(|_| ())
         }
-        _ => crate::flash_elf(board, elf),
+        _ => {
+            let image = revision::of_elf(board, elf)?;
+            println!("{} {} image", board.name, image.name);
+            crate::flash_elf(board, elf)
+        }
     }
 }
 
@@ -151,7 +216,9 @@ pub fn serial(
 ) -> Result<usize> {
     let mut jobs = Vec::new();
     for (board, elf) in boards.iter().zip(elfs) {
-        jobs.push((*board, target_of(board, ids)?, image_of(board, elf)?));
+        let target = target_of(board, ids)?;
+        check_revision(board, &target, elf)?;
+        jobs.push((*board, target, image_of(board, elf)?));
     }
     let link = SerialLink::open(port)?;
     let mut flasher = Flasher::new(link, opts.clone());
@@ -349,30 +416,140 @@ impl amiro_blt::Transport for SerialLink {
     }
 }
 
-/// CI: `cargo xtask flash all --port <pty>` against a simulated robot (all three boards behind
-/// DiWheelDrive's bootloader), then every board's simulated flash compared with its ELF as the
-/// probe path would write it (`elf::write_checksum`), byte for byte, and the robot started.
-pub fn simulated_robot(root: &Path) -> Result<()> {
-    use amiro_blt_sim::{pty::PtyRobot, BoardSpec, Faults, Robot, Timing};
+/// CI: `cargo xtask flash … --port <pty>` against simulated robots of both revisions (each board
+/// behind DiWheelDrive's bootloader): each robot gets its revision's images, each board's simulated
+/// flash is compared with its ELF as the probe path would write it (`elf::write_checksum`), byte
+/// for byte, and the robot started; a board without an image for the robot's revision and an image
+/// of the other revision are refused before the port is opened (the robot's flash untouched).
+/// `reports`: the images `cargo xtask build --revision all` built.
+pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Result<()> {
+    use amiro_blt_sim::BoardSpec;
+    let elf = |board: &str, revision: &str| -> Result<PathBuf> {
+        reports
+            .iter()
+            .find(|r| r.board == board && r.revision == revision)
+            .map(|r| r.elf.clone())
+            .with_context(|| format!("no {board} {revision} image was built"))
+    };
+    let by = |name: &str| boards::by_name(name).context("board");
+    // A 1-2 robot: DiWheelDrive 1-2 and PowerManagement (LightRing 1-2 has no image yet).
+    let dwd = by("diwheeldrive")?;
+    let pm = by("powermgmt")?;
+    let lr = by("lightring")?;
+    flash_simulated(
+        root,
+        BoardSpec::robot_1_2(),
+        IdSet::Rev12,
+        &[
+            (dwd, elf("diwheeldrive", "1-2")?),
+            (pm, elf("powermgmt", "1-1/1-2")?),
+        ],
+    )?;
+    // A 1-1 robot: every board, through the 32-bit ids.
+    flash_simulated(
+        root,
+        BoardSpec::robot_1_1(),
+        IdSet::Rev11,
+        &[
+            (dwd, elf("diwheeldrive", "1-1")?),
+            (pm, elf("powermgmt", "1-1/1-2")?),
+            (lr, elf("lightring", "1-0")?),
+        ],
+    )?;
+    // Refusals, before anything is erased.
+    let refused = [
+        (
+            "the 1-1 DiWheelDrive image for a 1-2 robot",
+            BoardSpec::robot_1_2(),
+            IdSet::Rev12,
+            (dwd, elf("diwheeldrive", "1-1")?),
+            "is the diwheeldrive 1-1 image, but the robot's diwheeldrive answers to device id 0x01000102",
+        ),
+        (
+            "the 1-2 DiWheelDrive image for a 1-1 robot",
+            BoardSpec::robot_1_1(),
+            IdSet::Rev11,
+            (dwd, elf("diwheeldrive", "1-2")?),
+            "is the diwheeldrive 1-2 image, but the robot's diwheeldrive answers to device id 0x01000101",
+        ),
+        (
+            "a LightRing for a 1-2 robot",
+            BoardSpec::robot_1_2(),
+            IdSet::Rev12,
+            (lr, elf("lightring", "1-0")?),
+            "answers to device id 0x017f0102, a revision this firmware has no image for",
+        ),
+    ];
+    for (what, spec, ids, job, message) in refused {
+        let error = match flash_simulated(root, spec, ids, &[job]) {
+            Ok(()) => bail!("{what} was written"),
+            Err(e) => format!("{e:#}"),
+        };
+        ensure!(
+            error.contains(message) && error.contains("nothing was erased"),
+            "{what}: refused with `{error}`, expected it to say `{message}`"
+        );
+        println!("flash through a simulated robot: {what} refused: {error}");
+    }
+    // And `cargo xtask flash all` on a 1-2 robot says which board has no image before building.
+    let all: Vec<&'static Board> = BOARDS.iter().collect();
+    let e = revision::plan(&all, &Choice::Robot(robot_revision(IdSet::Rev12)))
+        .err()
+        .context("flash all on a 1-2 robot must refuse the LightRing")?;
+    ensure!(e
+        .to_string()
+        .contains("lightring has no image for a revision-1-2 robot"));
+    Ok(())
+}
+
+/// Flashes `jobs` into a simulated robot of `spec` answering to `ids`, through a pty, and checks
+/// every board's flash against its ELF. On a refusal the robot must be untouched.
+fn flash_simulated(
+    root: &Path,
+    spec: Vec<amiro_blt_sim::BoardSpec>,
+    ids: IdSet,
+    jobs: &[(&'static Board, PathBuf)],
+) -> Result<()> {
+    use amiro_blt_sim::{pty::PtyRobot, Faults, Robot, Timing};
     let started = Instant::now();
-    let sim = Robot::new(BoardSpec::robot_1_2(), Timing::instant(), Faults::default());
+    let sim = Robot::new(spec, Timing::instant(), Faults::default());
     let served = PtyRobot::serve(sim).context("starting the simulated robot on a pty")?;
     let port = served.path().to_string_lossy().into_owned();
-    let boards: Vec<&'static Board> = BOARDS.iter().collect();
-    let elfs: Vec<PathBuf> = boards
-        .iter()
-        .map(|b| crate::firmware_elf(root, b))
-        .collect();
+    let boards: Vec<&'static Board> = jobs.iter().map(|(b, _)| *b).collect();
+    let elfs: Vec<PathBuf> = jobs.iter().map(|(_, e)| e.clone()).collect();
     let opts = Options {
         window_patience: Duration::from_secs(10),
         ..Options::default()
     };
-    let flashed = serial(&port, &boards, &elfs, &opts, IdSet::Rev12);
+    let flashed = serial(&port, &boards, &elfs, &opts, ids);
     let robot = served.stop();
-    let bytes = flashed
-        .with_context(|| format!("flashing the simulated robot; its log: {:#?}", robot.log))?;
-    for (board, elf) in boards.iter().zip(&elfs) {
-        let target = target_of(board, IdSet::Rev12)?;
+    let bytes = match flashed {
+        Ok(bytes) => bytes,
+        Err(e) => {
+            // Refused or failed: a refusal must not have touched the robot.
+            if robot.log.is_empty() {
+                for (board, _) in jobs {
+                    let target = target_of(board, ids)?;
+                    let flash = robot.flash(target.device_id);
+                    let end = target.app_origin + 4096;
+                    ensure!(
+                        flash
+                            .bytes(target.app_origin, end)
+                            .iter()
+                            .all(|b| *b == 0xFF),
+                        "{}: refused, but its application region was written",
+                        board.name
+                    );
+                }
+            }
+            if robot.log.is_empty() {
+                return Err(e);
+            }
+            return Err(e.context(format!("the simulated robot's log: {:#?}", robot.log)));
+        }
+    };
+    for (board, elf) in jobs {
+        let target = target_of(board, ids)?;
         let patched = crate::target_dir(root).join(format!("{}.sim-check.elf", board.name));
         crate::elf::write_checksum(elf, &patched)?;
         let image = Image::from_elf(&std::fs::read(&patched)?)?;
@@ -395,8 +572,12 @@ pub fn simulated_robot(root: &Path) -> Result<()> {
         }
     }
     println!(
-        "flash through the simulated robot: {} boards, {bytes} bytes, byte-for-byte equal to their ELFs, started ({:.1} s)",
-        boards.len(),
+        "flash through a simulated {} robot: {} ({bytes} bytes) byte-for-byte equal to their ELFs, started ({:.1} s)",
+        robot_revision(ids),
+        jobs.iter()
+            .map(|(b, e)| format!("{} {}", b.name, e.file_name().and_then(|n| n.to_str()).unwrap_or("")))
+            .collect::<Vec<_>>()
+            .join(", "),
         started.elapsed().as_secs_f64()
     );
     Ok(())

@@ -19,6 +19,7 @@ mod interop;
 mod levels_check;
 mod probe;
 mod qemu;
+mod revision;
 mod scenarios;
 mod smoke;
 
@@ -46,6 +47,10 @@ enum Cmd {
         /// Link for a bare chip at 0x08000000 instead of behind the AMiRo-BLT bootloader.
         #[arg(long)]
         bare_chip: bool,
+        /// The robot revision to build for: 1-2, 1-1, or all (every revision of every board).
+        /// Default: each board's newest.
+        #[arg(long, value_name = "1-2|1-1|all")]
+        revision: Option<String>,
     },
     /// rustfmt check, and clippy with warnings denied on the host crates and each firmware.
     Check,
@@ -64,6 +69,9 @@ enum Cmd {
         /// How much virtual time to run: e.g. 2s, 500ms, 900us.
         #[arg(long, default_value = "2s")]
         duration: String,
+        /// The robot revision of the board (1-2, 1-1). Default: the board's newest.
+        #[arg(long, value_name = "1-2|1-1")]
+        revision: Option<String>,
     },
     /// The hostile-bus campaign on every board with a QEMU build (part of `test`): seeded random
     /// and targeted frames, verdicts checked against an independent model of docs/protocol.md.
@@ -84,12 +92,18 @@ enum Cmd {
     Scenarios {
         /// Boards whose scenarios to run (default: all).
         boards: Vec<String>,
+        /// Only the scenarios of this robot revision (1-2, 1-1). Default: every revision's.
+        #[arg(long, value_name = "1-2|1-1")]
+        revision: Option<String>,
     },
     /// Boot the production images (the bytes `cargo xtask flash` writes, behind a stand-in for
     /// AMiRo-BLT) in QEMU and check the boot from their RTT log (part of `test`; docs/faults.md).
     Smoke {
         /// Boards to boot (default: all).
         boards: Vec<String>,
+        /// Only the production image of this robot revision (1-2, 1-1). Default: every revision's.
+        #[arg(long, value_name = "1-2|1-1")]
+        revision: Option<String>,
     },
     /// Decode a capture of a board's trace channel (RTT channel 1, "trace": `amiro-trace` records)
     /// into text lines; damaged stretches are skipped and counted.
@@ -110,6 +124,9 @@ enum Cmd {
     /// (`--port /dev/ttyUSB0`), or one through probe-rs over SWD (`--probe`, writes the
     /// AMiRo-BLT checksum word and streams RTT).
     Flash(flash::FlashArgs),
+    /// The flashing tests of `test` alone: every revision's images into simulated 1-1 and 1-2 robots
+    /// through a pty, and the refusals (docs/flashing.md).
+    FlashSim,
     /// Flash an already built ELF (the boards' `cargo run` runner): through AMiRo-BLT when
     /// `AMIRO_PORT` names the serial port, else through probe-rs with the checksum word written
     /// into a copy.
@@ -140,9 +157,13 @@ fn run(cmd: Cmd) -> Result<bool> {
             boards,
             json,
             bare_chip,
+            revision,
         } => {
-            let selected = select_boards(&boards)?;
-            let reports = build_boards(&root, &selected, bare_chip)?;
+            let plan = revision::plan(
+                &select_boards(&boards)?,
+                &revision::Choice::parse(revision.as_deref())?,
+            )?;
+            let reports = build_boards(&root, &plan, bare_chip)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&reports)?);
             } else {
@@ -162,11 +183,17 @@ fn run(cmd: Cmd) -> Result<bool> {
             board,
             stimulus,
             duration,
+            revision,
         } => {
             let board =
                 boards::by_name(&board).with_context(|| format!("unknown board `{board}`"))?;
+            let choice = revision::Choice::parse(revision.as_deref())?;
+            ensure!(choice != revision::Choice::All, "qemu runs one revision");
+            let [build] = revision::plan(&[board], &choice)?[..] else {
+                bail!("one image expected");
+            };
             ensure_qemu()?;
-            let elf = build_qemu(&root, board)?;
+            let elf = build_qemu(&root, &build)?;
             let frames = qemu::read_stimulus(&stimulus)?;
             let work = qemu::fresh_work_dir(&root, board.name);
             let out = qemu::run(
@@ -204,8 +231,22 @@ fn run(cmd: Cmd) -> Result<bool> {
             let (frames, runs) = if long { (20_000, 10) } else { (frames, 1) };
             campaign::run(&root, &select_boards(&boards)?, seed, frames, runs).map(|()| true)
         }
-        Cmd::Scenarios { boards } => run_scenarios(&root, &select_boards(&boards)?).map(|()| true),
-        Cmd::Smoke { boards } => smoke::run(&root, &select_boards(&boards)?).map(|()| true),
+        Cmd::Scenarios { boards, revision } => {
+            let choice = match revision.as_deref() {
+                None => revision::Choice::All,
+                some => revision::Choice::parse(some)?,
+            };
+            let plan = revision::plan(&select_boards(&boards)?, &choice)?;
+            run_scenarios(&root, &plan).map(|()| true)
+        }
+        Cmd::Smoke { boards, revision } => {
+            let choice = match revision.as_deref() {
+                None => revision::Choice::All,
+                some => revision::Choice::parse(some)?,
+            };
+            let plan = revision::plan(&select_boards(&boards)?, &choice)?;
+            smoke::run(&root, &plan, false).map(|()| true)
+        }
         Cmd::Trace { file } => {
             let bytes =
                 std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
@@ -232,6 +273,11 @@ fn run(cmd: Cmd) -> Result<bool> {
         Cmd::Bench(args) => bench::run(&root, &args),
         Cmd::Timeline(args) => bench::timeline::run(&root, &args).map(|()| true),
         Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),
+        Cmd::FlashSim => {
+            let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &revision::Choice::All)?;
+            let reports = build_boards(&root, &every, false)?;
+            flash::simulated_robot(&root, &reports).map(|()| true)
+        }
         Cmd::FlashElf { board, elf } => {
             let board =
                 boards::by_name(&board).with_context(|| format!("unknown board `{board}`"))?;
@@ -262,18 +308,32 @@ fn select_boards(names: &[String]) -> Result<Vec<&'static Board>> {
         .collect()
 }
 
-/// Builds each board in its own cargo invocation (chip features must never unify) and inspects the ELF.
-fn build_boards(root: &Path, boards: &[&Board], bare_chip: bool) -> Result<Vec<elf::SizeReport>> {
+/// Builds each image in its own cargo invocation (chip features must never unify), keeps a copy of
+/// its ELF per revision (`target/firmware/`) and inspects it.
+fn build_boards(
+    root: &Path,
+    builds: &[revision::Build],
+    bare_chip: bool,
+) -> Result<Vec<elf::SizeReport>> {
     ensure_toolchain(root)?;
     let mut reports = Vec::new();
-    for board in boards {
-        let mut args = vec!["build", "--release", "--quiet"];
-        if bare_chip {
-            args.extend(["--features", "bare-chip"]);
+    for build in builds {
+        let board = build.board;
+        build.select_models();
+        let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
+        args.extend(build.feature_args(if bare_chip { &["bare-chip"] } else { &[] }));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        cargo(&root.join(board.name), &args)
+            .with_context(|| format!("building {} {}", board.name, build.revision.name))?;
+        let kept = revision::kept_elf(root, build, bare_chip);
+        if let Some(dir) = kept.parent() {
+            std::fs::create_dir_all(dir)?;
         }
-        cargo(&root.join(board.name), &args).with_context(|| format!("building {}", board.name))?;
-        let elf_path = firmware_elf(root, board);
-        reports.push(elf::inspect(board, &elf_path, !bare_chip)?);
+        std::fs::copy(firmware_elf(root, board), &kept)
+            .with_context(|| format!("keeping {}", kept.display()))?;
+        let mut report = elf::inspect(board, &kept, !bare_chip)?;
+        report.revision = build.revision.name.to_string();
+        reports.push(report);
     }
     Ok(reports)
 }
@@ -347,10 +407,11 @@ fn interrupt_flag() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
 /// control block.
 fn probe_link(
     root: &Path,
-    board: &Board,
+    build: &revision::Build,
     attach: bool,
     selector: Option<&str>,
 ) -> Result<probe::RttLink> {
+    let board = build.board;
     let elf_path = firmware_elf(root, board);
     if attach {
         let session = probe::session(board, selector, false)?;
@@ -359,11 +420,12 @@ fn probe_link(
         return probe::RttLink::attach(session, bytes.as_deref());
     }
     ensure_toolchain(root)?;
-    cargo(
-        &root.join(board.name),
-        &["build", "--release", "--quiet", "--features", "task-trace"],
-    )
-    .with_context(|| format!("building {} with task-trace", board.name))?;
+    build.select_models();
+    let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
+    args.extend(build.feature_args(&["task-trace"]));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    cargo(&root.join(board.name), &args)
+        .with_context(|| format!("building {} with task-trace", build.stem()))?;
     elf::inspect(board, &elf_path, true)?;
     let image = probe_image(board, &elf_path)?;
     println!(
@@ -399,32 +461,27 @@ fn check(root: &Path) -> Result<()> {
         &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
     )
     .context("clippy on the host crates")?;
-    for board in BOARDS {
-        cargo(
-            &root.join(board.name),
-            &["clippy", "--quiet", "--release", "--", "-D", "warnings"],
-        )
-        .with_context(|| format!("clippy on {}", board.name))?;
-    }
+    // Every revision of every board, for the chip and (where it has scenarios) for QEMU.
+    let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &revision::Choice::All)?;
     let qemu_target = qemu::target_dir(root).to_string_lossy().into_owned();
-    let args = [
-        "clippy",
-        "--quiet",
-        "--release",
-        "--features",
-        "qemu,task-trace",
-        "--target-dir",
-        &qemu_target,
-        "--",
-        "-D",
-        "warnings",
-    ];
-    for board in BOARDS
-        .iter()
-        .filter(|b| !scenarios::for_board(b.name).is_empty())
-    {
+    for build in &every {
+        let board = build.board;
+        build.select_models();
+        let mut args = vec!["clippy".to_string(), "--quiet".into(), "--release".into()];
+        args.extend(build.feature_args(&[]));
+        args.extend(["--", "-D", "warnings"].map(String::from));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
         cargo(&root.join(board.name), &args)
-            .with_context(|| format!("clippy on the QEMU build of {}", board.name))?;
+            .with_context(|| format!("clippy on {}", build.stem()))?;
+        if scenarios::for_revision(board.name, build.revision.name).is_empty() {
+            continue;
+        }
+        let mut args = vec!["clippy".to_string(), "--quiet".into(), "--release".into()];
+        args.extend(build.feature_args(&["qemu", "task-trace"]));
+        args.extend(["--target-dir", &qemu_target, "--", "-D", "warnings"].map(String::from));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        cargo(&root.join(board.name), &args)
+            .with_context(|| format!("clippy on the QEMU build of {}", build.stem()))?;
     }
     Ok(())
 }
@@ -479,23 +536,27 @@ fn test(root: &Path) -> Result<()> {
         )
         .with_context(|| format!("the no_std core of schedule-analysis for {target}"))?;
     }
+    // Every revision of every board (docs/boards.md).
+    let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &revision::Choice::All)?;
     // The bare-chip layout must keep linking (it is the documented switch for development chips).
-    build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), true)?;
-    let reports = build_boards(root, &BOARDS.iter().collect::<Vec<_>>(), false)?;
-    flash::simulated_robot(root)?;
+    build_boards(root, &every, true)?;
+    let reports = build_boards(root, &every, false)?;
+    flash::simulated_robot(root, &reports)?;
     elf::print_table(&reports);
     let over = elf::over_budget(&reports);
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
-    run_scenarios(root, &BOARDS.iter().collect::<Vec<_>>())?;
-    // The production images booted in QEMU (issue 21).
-    smoke::run(root, &BOARDS.iter().collect::<Vec<_>>())?;
+    run_scenarios(root, &every)?;
+    // The production images booted in QEMU (issue 21): every revision's, as built above.
+    smoke::run(root, &every, true)?;
     // After the scenarios: their bus logs are among what the other CAN tools must read.
     interop::check(root)?;
     // The hostile-bus campaign, one run of 3000 spaced frames per board (issue 12).
     campaign::run(root, &BOARDS.iter().collect::<Vec<_>>(), 12, 3000, 1)
 }
 
-/// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets.
+/// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets, on a
+/// robot of each revision — but the thesis's 900 µs magnetometer on 1-2, which is shown not to fit
+/// (docs/boards.md, `schedule-analysis/tests/revisions.rs`).
 fn analysis_gate(root: &Path) -> Result<()> {
     let models = root.join("schedule-analysis").join("models");
     let mut scenarios: Vec<String> = std::fs::read_dir(&models)
@@ -509,43 +570,51 @@ fn analysis_gate(root: &Path) -> Result<()> {
         })
         .collect();
     scenarios.sort();
-    for name in scenarios {
-        let args = analyze::AnalyzeArgs {
-            scenario: Some(name.clone()),
-            model: None,
-            frame_cost: None,
-            format: schedule_analysis::report::Format::Table,
-            output: Some(target_dir(root).join(format!("analysis-{name}.txt"))),
-            check: true,
-            emit_model: None,
-        };
-        if !analyze::run(&args, root)? {
-            bail!(
-                "scenario {name} is not schedulable (see {})",
-                args.output
-                    .as_ref()
-                    .map(|p| p.display().to_string())
-                    .unwrap_or_default()
-            );
+    for robot in boards::ROBOT_REVISIONS {
+        for name in &scenarios {
+            if robot == "1-2" && name == "thesis-magnetometer-900us" {
+                println!(
+                    "analysis gate: scenario {name} not gated on a 1-2 robot (the BNO055's reads do not fit 900 µs; docs/boards.md)"
+                );
+                continue;
+            }
+            let args = analyze::AnalyzeArgs {
+                scenario: Some(name.clone()),
+                model: None,
+                frame_cost: None,
+                format: schedule_analysis::report::Format::Table,
+                output: Some(target_dir(root).join(format!("analysis-{name}-{robot}.txt"))),
+                check: true,
+                emit_model: None,
+                revision: Some(robot.to_string()),
+            };
+            if !analyze::run(&args, root)? {
+                bail!(
+                    "scenario {name} is not schedulable on a {robot} robot (see {})",
+                    args.output
+                        .as_ref()
+                        .map(|p| p.display().to_string())
+                        .unwrap_or_default()
+                );
+            }
+            println!("analysis gate: scenario {name} schedulable on a {robot} robot");
         }
-        println!("analysis gate: scenario {name} schedulable");
     }
     Ok(())
 }
 
-/// Builds a board's QEMU variant (its own target dir: the features differ from the robot build).
-pub(crate) fn build_qemu(root: &Path, board: &Board) -> Result<PathBuf> {
+/// Builds a board revision's QEMU variant (its own target dir: the features differ from the robot
+/// build) and keeps its ELF apart from the other revision's (`target/qemu/firmware/`).
+pub(crate) fn build_qemu(root: &Path, build: &revision::Build) -> Result<PathBuf> {
+    let board = build.board;
     let dir = qemu::target_dir(root);
     let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    build.select_models();
+    let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
+    // With the task trace: the bench measures the scenario runs (docs/bench.md).
+    args.extend(build.feature_args(&["qemu", "task-trace"]));
     let status = Command::new(cargo_bin)
-        // With the task trace: the bench measures the scenario runs (docs/bench.md).
-        .args([
-            "build",
-            "--release",
-            "--quiet",
-            "--features",
-            "qemu,task-trace",
-        ])
+        .args(&args)
         .current_dir(root.join(board.name))
         .env("CARGO_TARGET_DIR", &dir)
         .status()
@@ -556,32 +625,39 @@ pub(crate) fn build_qemu(root: &Path, board: &Board) -> Result<PathBuf> {
             board.name
         );
     }
-    Ok(dir.join(board.target).join("release").join(board.name))
+    let kept = dir.join("firmware").join(build.stem());
+    std::fs::create_dir_all(dir.join("firmware"))?;
+    std::fs::copy(
+        dir.join(board.target).join("release").join(board.name),
+        &kept,
+    )
+    .with_context(|| format!("keeping {}", kept.display()))?;
+    Ok(kept)
 }
 
 /// Runs every board's QEMU scenarios and checks their output.
-fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
+fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
     ensure_qemu()?;
     let bounds = scenarios::Bounds::from_analysis(root)?;
     let mut passed = 0;
     let mut failed = 0;
-    for board in boards {
-        let list = scenarios::for_board(board.name);
+    for build in builds {
+        let board = build.board;
+        let list = scenarios::for_revision(board.name, build.revision.name);
         if list.is_empty() {
             continue;
         }
-        let elf = build_qemu(root, board)?;
+        // One QEMU build per board revision, shared by its scenarios; the analysis bounds of that
+        // revision's timing files (`build_qemu` selects them).
+        let elf = build_qemu(root, build)?;
         let mut ram_high_water = 0;
         // The runs whose output the bench measures afterwards (no second QEMU run).
         let mut outputs = Vec::new();
         for scenario in list {
-            let path = root
-                .join(board.name)
-                .join("qemu")
-                .join(format!("{}.log", scenario.name));
+            let path = scenarios::log_path(root, board.name, build.revision.name, scenario.name);
             let work = qemu::target_dir(root)
                 .join("scenarios")
-                .join(board.name)
+                .join(build.stem())
                 .join(scenario.name);
             let result = (|| {
                 let frames = qemu::read_stimulus(&path)?;
@@ -600,15 +676,18 @@ fn run_scenarios(root: &Path, boards: &[&Board]) -> Result<()> {
                 Ok(summary) => {
                     passed += 1;
                     println!(
-                        "qemu {:<12} {:<16} ok: {summary}",
-                        board.name, scenario.name
+                        "qemu {:<16} {:<16} ok: {summary}",
+                        build.stem(),
+                        scenario.name
                     );
                 }
                 Err(e) => {
                     failed += 1;
                     println!(
-                        "qemu {:<12} {:<16} FAILED ({}): {e:#}",
-                        board.name, scenario.name, scenario.about
+                        "qemu {:<16} {:<16} FAILED ({}): {e:#}",
+                        build.stem(),
+                        scenario.name,
+                        scenario.about
                     );
                 }
             }

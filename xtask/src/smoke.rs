@@ -881,27 +881,32 @@ fn loader(file: &Path, addr: u64) -> String {
     format!("loader,file={},addr={addr:#x},force-raw=on", file.display())
 }
 
-/// `cargo xtask smoke`: builds the production images of `boards` and boots each in QEMU; fails
-/// unless every board passes.
-pub fn run(root: &Path, boards: &[&'static Board]) -> Result<()> {
+/// `cargo xtask smoke`: boots the production image of each board revision in `builds` in QEMU
+/// (built here unless `built` says the caller built them: then their kept ELFs are booted, nothing
+/// is rebuilt); fails unless every one passes.
+pub fn run(root: &Path, builds: &[crate::revision::Build], built: bool) -> Result<()> {
     crate::ensure_qemu()?;
-    crate::build_boards(root, boards, false)?;
+    if !built {
+        crate::build_boards(root, builds, false)?;
+    }
     let mut failed = Vec::new();
-    for board in boards {
-        let elf = crate::firmware_elf(root, board);
+    for build in builds {
+        let board = build.board;
+        let elf = crate::revision::kept_elf(root, build, false);
+        let name = format!("{} {}", board.name, build.revision.name);
         // Every wait on the boot path and after it bounded: the machine code says so.
         let found = waits::scan_elf(&elf)?;
         let (known, new): (Vec<_>, Vec<_>) = found.iter().partition(|w| w.known().is_some());
         println!(
             "waits {}: {} unbounded-looking poll loop(s), {} with a stated bound",
-            board.name,
+            name,
             found.len(),
             known.len()
         );
         for wait in &known {
             println!(
                 "waits {}: bounded by design: {} at {:#x} ({})",
-                board.name,
+                name,
                 wait.function,
                 wait.branch,
                 wait.lines.first().map(String::as_str).unwrap_or("?")
@@ -910,21 +915,21 @@ pub fn run(root: &Path, boards: &[&'static Board]) -> Result<()> {
         for wait in &new {
             println!(
                 "waits {}: UNBOUNDED: {} at {:#x}: {}",
-                board.name,
+                name,
                 wait.function,
                 wait.branch,
                 wait.lines.join(" | ")
             );
         }
         if !new.is_empty() {
-            failed.push(board.name);
+            failed.push(name.clone());
         }
-        let work = work_dir(root, board.name);
-        let outcome = run_board(board, &elf, &work)
-            .with_context(|| format!("smoke run of {}", board.name))?;
+        let work = work_dir(root, &build.stem());
+        let outcome =
+            run_board(board, &elf, &work).with_context(|| format!("smoke run of {name}"))?;
         println!(
             "── {} on {} (production image behind an AMiRo-BLT stand-in) ──",
-            board.name, board.qemu_machine
+            name, board.qemu_machine
         );
         for input in environment(board.qemu_machine) {
             println!(
@@ -955,22 +960,22 @@ pub fn run(root: &Path, boards: &[&'static Board]) -> Result<()> {
                 Some(callback) => println!(
                     "smoke {}: ok (handed over to AMiRo-BLT's `{callback}` callback: SYS_PD_N \
                      reads low on {}, where nothing holds it released)",
-                    board.name, board.qemu_machine
+                    name, board.qemu_machine
                 ),
                 None => println!(
                     "smoke {}: ok ({} half periods of the monotonic)",
-                    board.name, outcome.half_periods
+                    name, outcome.half_periods
                 ),
             }
         } else {
             for failure in &outcome.failures {
-                println!("smoke {}: FAILED: {failure}", board.name);
+                println!("smoke {name}: FAILED: {failure}");
             }
             println!(
                 "  (images, RAM snapshot and QEMU's stderr: {})",
                 work.display()
             );
-            failed.push(board.name);
+            failed.push(name.clone());
         }
     }
     ensure!(failed.is_empty(), "smoke run failed: {}", failed.join(", "));

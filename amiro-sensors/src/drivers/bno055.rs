@@ -205,13 +205,36 @@ impl<I2C: I2c> Bno055<I2C> {
     /// Checks identities and the power-on self-test, configures the sensors and starts AMG mode.
     ///
     /// Busy-waits the datasheet's mode switching times on `delay` (19 ms into configuration mode,
-    /// 7 ms out of it).
+    /// 7 ms out of it): the boot's path. A caller that must not wait (a re-initialisation inside a
+    /// bus lock) runs the three steps itself — [`init_enter_config`], then after
+    /// [`OPERATING_TO_CONFIG_MS`] [`init_configure`], then after [`CONFIG_TO_OPERATING_MS`]
+    /// [`init_check_running`] — and waits between them outside.
+    ///
+    /// [`init_enter_config`]: Self::init_enter_config
+    /// [`init_configure`]: Self::init_configure
+    /// [`init_check_running`]: Self::init_check_running
     pub fn init(&mut self, delay: &mut impl DelayNs) -> Result<(), Error<I2C::Error>> {
+        self.init_enter_config()?;
+        delay.delay_ms(OPERATING_TO_CONFIG_MS);
+        self.init_configure()?;
+        delay.delay_ms(CONFIG_TO_OPERATING_MS);
+        self.init_check_running()
+    }
+
+    /// Initialisation, step 1: identities and self-test checked, page 0, configuration mode
+    /// requested (the part takes [`OPERATING_TO_CONFIG_MS`] to get there).
+    pub fn init_enter_config(&mut self) -> Result<(), Error<I2C::Error>> {
         self.check_identity()?;
         self.check_self_test()?;
         self.i2c.write(ADDRESS, &[reg::PAGE_ID, 0])?;
         self.i2c.write(ADDRESS, &[reg::OPR_MODE, mode::CONFIG])?;
-        delay.delay_ms(OPERATING_TO_CONFIG_MS);
+        Ok(())
+    }
+
+    /// Initialisation, step 2 (in configuration mode): power mode, units and the four sensor
+    /// configurations written and read back, AMG mode requested (the part takes
+    /// [`CONFIG_TO_OPERATING_MS`] to get there).
+    pub fn init_configure(&mut self) -> Result<(), Error<I2C::Error>> {
         self.i2c.write(ADDRESS, &[reg::PWR_MODE, 0x00])?;
         self.i2c.write(ADDRESS, &[reg::UNIT_SEL, UNIT_SEL_AMIRO])?;
         // Page 1: the four sensor configuration registers in one burst, read back in one.
@@ -239,7 +262,11 @@ impl<I2C: I2c> Bno055<I2C> {
         self.i2c.write_read(ADDRESS, &[reg::UNIT_SEL], &mut units)?;
         check_register(reg::UNIT_SEL, UNIT_SEL_AMIRO, units[0], 0x97)?;
         self.i2c.write(ADDRESS, &[reg::OPR_MODE, mode::AMG])?;
-        delay.delay_ms(CONFIG_TO_OPERATING_MS);
+        Ok(())
+    }
+
+    /// Initialisation, step 3: the part runs AMG mode.
+    pub fn init_check_running(&mut self) -> Result<(), Error<I2C::Error>> {
         let mut opr = [0u8; 1];
         self.i2c.write_read(ADDRESS, &[reg::OPR_MODE], &mut opr)?;
         check_register(reg::OPR_MODE, mode::AMG, opr[0], 0x0F)
@@ -280,6 +307,27 @@ impl<I2C: I2c> Bno055<I2C> {
         if super::is_bus_pattern(&out) {
             self.check_identity()?;
         }
+        Ok(le3(&out))
+    }
+
+    /// Checks that the part still runs the AMG mode `init` started (OPR_MODE, one byte): a part that
+    /// reset (configuration mode, its data reading zero), a dead line (0x00 or 0xFF) or no answer
+    /// (a bus error) fails here.
+    pub fn check_running(&mut self) -> Result<(), Error<I2C::Error>> {
+        let mut opr = [0u8; 1];
+        self.i2c.write_read(ADDRESS, &[reg::OPR_MODE], &mut opr)?;
+        check_register(reg::OPR_MODE, mode::AMG, opr[0], 0xFF)
+    }
+
+    /// One sensor's X, Y, Z digits (one 6-byte burst at `first`), then [`check_running`]: the
+    /// board suite's read, the same two transfers on every sample (no periodic identity check, no
+    /// second look at a dead-bus pattern), so its time does not vary and a fault is seen at once.
+    ///
+    /// [`check_running`]: Self::check_running
+    pub fn read_verified(&mut self, first: u8) -> Result<[i16; 3], Error<I2C::Error>> {
+        let mut out = [0u8; 6];
+        self.i2c.write_read(ADDRESS, &[first], &mut out)?;
+        self.check_running()?;
         Ok(le3(&out))
     }
 

@@ -19,7 +19,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::{self, I2c};
 use embedded_hal::spi::{self, SpiDevice};
 
-use super::bno055::Bno055;
+use super::bno055::{self, Bno055};
 use super::bq27500::{BatteryStatus, Bq27500, PowerSummary};
 use super::floor::{FloorSensors, GroupError};
 use super::hmc5883l::{Hmc5883l, MagneticField};
@@ -126,6 +126,20 @@ pub trait SensorGroup {
     /// Checks identities and configures every device of the group.
     fn init(&mut self) -> Result<(), SampleError>;
 
+    /// One step of a re-initialisation at `now_us` (the retry of a missing group, inside its bus
+    /// lock): a group whose parts need a wait between steps returns [`InitStep::Pending`] and
+    /// is called again at that time, so no wait happens inside the lock. Default: [`init`] at
+    /// once.
+    ///
+    /// [`init`]: Self::init
+    fn init_step(&mut self, now_us: u64) -> InitStep {
+        let _ = now_us;
+        match self.init() {
+            Ok(()) => InitStep::Done,
+            Err(error) => InitStep::Failed(error),
+        }
+    }
+
     /// Reads one sample of `topic`, taken at `now_us` (groups that reuse a recent reading use it).
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError>;
 
@@ -133,6 +147,20 @@ pub trait SensorGroup {
     fn serves(&self, topic: Topic) -> bool {
         self.topics().contains(&topic)
     }
+}
+
+/// Where a stepwise (re-)initialisation stands ([`SensorGroup::init_step`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InitStep {
+    /// The group is configured and may be sampled.
+    Done,
+    /// A step was taken; call again at `next_us` (µs) for the next.
+    Pending {
+        /// When the next step may run.
+        next_us: u64,
+    },
+    /// A step failed.
+    Failed(SampleError),
 }
 
 /// DiWheelDrive 1-1's gyroscope and accelerometer (SPI1, each with its own chip select).
@@ -349,10 +377,14 @@ fn floor_error<E: i2c::Error>(e: GroupError<E>) -> SampleError {
 
 /// DiWheelDrive 1-2's BNO055 on I2C1: gyroscope, accelerometer and the three magnetometer topics.
 ///
-/// Each topic reads its own sensor's six bytes in one burst (about 225 µs at 400 kHz); the three
-/// magnetometer axes share one reading as [`Compass`] does (the part's magnetometer runs at 30 Hz,
-/// so a reading serves the other axes for [`MAGNETOMETER_PERIOD_US`]). `delay` paces the part's
-/// mode switches in `init` (26 ms of busy waiting, on every (re-)initialisation).
+/// Each topic reads its own sensor's six bytes in one burst and then OPR_MODE
+/// ([`Bno055::read_verified`]: about 310 µs at 400 kHz, the same on every sample, so the
+/// analysis sees no execution-time jitter from a periodic check, and a part that reset or died is
+/// caught on the sample it happens); the three magnetometer axes share one reading as [`Compass`]
+/// does (the part's magnetometer runs at 30 Hz, so a reading serves the other axes for
+/// [`MAGNETOMETER_PERIOD_US`]). `delay` paces the part's mode switches in `init` (26 ms of busy
+/// waiting, at boot only); a re-initialisation runs in steps (`init_step`), the waits between
+/// them outside the bus lock.
 #[derive(Debug)]
 pub struct ImuSensors<I2C, D> {
     /// The BNO055.
@@ -361,7 +393,18 @@ pub struct ImuSensors<I2C, D> {
     reuse_window_us: u64,
     last_field: Option<([i32; 3], u64)>,
     delivered: [bool; 3],
-    identity: IdentitySchedule,
+    reinit: ImuReinit,
+}
+
+/// Where a stepwise re-initialisation of the BNO055 stands ([`ImuSensors`]'s `init_step`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ImuReinit {
+    /// No re-initialisation under way: the next step enters configuration mode.
+    Idle,
+    /// Configuration mode requested: configure once the part is there.
+    EnteringConfig,
+    /// AMG mode requested: check it once the part is there.
+    EnteringAmg,
 }
 
 impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
@@ -373,7 +416,7 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
             reuse_window_us: MAGNETOMETER_PERIOD_US,
             last_field: None,
             delivered: [false; 3],
-            identity: IdentitySchedule { samples: 0 },
+            reinit: ImuReinit::Idle,
         }
     }
 
@@ -381,6 +424,12 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
     pub fn wait_for_boot(&mut self, timeout_ms: u32) -> Result<(), SampleError> {
         self.imu
             .wait_for_boot(&mut self.delay, timeout_ms)
+            .map_err(i2c_error(Device::Imu))
+    }
+
+    fn read(&mut self, first: u8) -> Result<[i16; 3], SampleError> {
+        self.imu
+            .read_verified(first)
             .map_err(i2c_error(Device::Imu))
     }
 
@@ -392,15 +441,16 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
             {
                 Ok(field)
             }
-            _ => match self.imu.read_magnetometer() {
-                Ok(field) => {
+            _ => match self.read(bno055::reg::MAG_DATA_X_LSB) {
+                Ok(raw) => {
+                    let field = bno055::nanotesla(raw);
                     self.last_field = Some((field, now_us));
                     self.delivered = [false; 3];
                     Ok(field)
                 }
                 Err(error) => {
                     self.last_field = None;
-                    Err(i2c_error(Device::Imu)(error))
+                    Err(error)
                 }
             },
         }
@@ -420,25 +470,53 @@ impl<I2C: I2c, D: DelayNs> SensorGroup for ImuSensors<I2C, D> {
 
     fn init(&mut self) -> Result<(), SampleError> {
         self.last_field = None;
+        self.reinit = ImuReinit::Idle;
         self.imu
             .init(&mut self.delay)
             .map_err(i2c_error(Device::Imu))
     }
 
-    fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
-        if self.serves(topic) && self.identity.due() {
-            self.imu.check_identity().map_err(i2c_error(Device::Imu))?;
+    /// The re-initialisation without a busy wait: the three steps of [`Bno055::init`], the
+    /// part's two mode switches (19 ms and 7 ms) waited between calls, outside the bus lock.
+    fn init_step(&mut self, now_us: u64) -> InitStep {
+        self.last_field = None;
+        let (result, next) = match self.reinit {
+            ImuReinit::Idle => (
+                self.imu.init_enter_config(),
+                Some((ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)),
+            ),
+            ImuReinit::EnteringConfig => (
+                self.imu.init_configure(),
+                Some((ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS)),
+            ),
+            ImuReinit::EnteringAmg => (self.imu.init_check_running(), None),
+        };
+        match (result, next) {
+            (Err(error), _) => {
+                self.reinit = ImuReinit::Idle;
+                InitStep::Failed(i2c_error(Device::Imu)(error))
+            }
+            (Ok(()), Some((state, wait_ms))) => {
+                self.reinit = state;
+                InitStep::Pending {
+                    next_us: now_us.saturating_add(u64::from(wait_ms) * 1_000),
+                }
+            }
+            (Ok(()), None) => {
+                self.reinit = ImuReinit::Idle;
+                InitStep::Done
+            }
         }
+    }
+
+    fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
         let axis = match topic {
             Topic::Gyroscope => {
-                let rate = self.imu.read_gyroscope().map_err(i2c_error(Device::Imu))?;
-                return Ok(one(SensorData::Gyroscope(rate)));
+                let raw = self.read(bno055::reg::GYR_DATA_X_LSB)?;
+                return Ok(one(SensorData::Gyroscope(bno055::degrees_per_s(raw))));
             }
             Topic::Accelerometer => {
-                let mg = self
-                    .imu
-                    .read_accelerometer()
-                    .map_err(i2c_error(Device::Imu))?;
+                let mg = self.read(bno055::reg::ACC_DATA_X_LSB)?;
                 return Ok(one(SensorData::Accelerometer(mg)));
             }
             Topic::MagnetometerX => Axis::X,
@@ -729,12 +807,18 @@ impl<G: SensorGroup> Supervised<G> {
             if now_us < self.retry_at_us {
                 return Samples::new();
             }
-            match self.group.init() {
-                Ok(()) => {
+            match self.group.init_step(now_us) {
+                InitStep::Done => {
                     self.ready = true;
                     self.consecutive_failures = 0;
                 }
-                Err(error) => {
+                InitStep::Pending { next_us } => {
+                    // Not a fault: the group's parts are switching modes; the next step at
+                    // `next_us` (the back-off is left as it is).
+                    self.retry_at_us = next_us;
+                    return Samples::new();
+                }
+                InitStep::Failed(error) => {
                     self.missing(now_us, error);
                     return Samples::new();
                 }

@@ -139,8 +139,39 @@ pub fn find_scenario(root: &Path, name_or_path: &str) -> PathBuf {
         .join(format!("{name_or_path}.scenario.json"))
 }
 
-/// The timing files in the models folder, in the order of `amiro_can::Board::ALL`, then by name.
+/// The environment variable naming the board revision of the robot analysed (`1-2`, `1-1`): the timing
+/// files in `models/rev-<revision>/` replace the models folder's files of the same name (DiWheelDrive 1-2's
+/// BNO055 budgets). Unset, or a revision without its own files: the models folder's files alone (the
+/// revision they describe is each file's `note`). `cargo xtask` sets it per build and analysis; the boards'
+/// build script sets it from the board's revision feature.
+pub const REVISION_ENV: &str = "AMIRO_REVISION";
+
+/// The timing files in the models folder, in the order of `amiro_can::Board::ALL`, then by name, for the
+/// revision [`REVISION_ENV`] names (see [`timing_files_for`]).
 pub fn timing_files(root: &Path) -> Vec<PathBuf> {
+    let revision = std::env::var(REVISION_ENV).ok();
+    timing_files_for(root, revision.as_deref().filter(|r| !r.is_empty()))
+}
+
+/// The timing files of a robot of board revision `revision`: the models folder's, each replaced by its
+/// namesake in `models/rev-<revision>/` where that exists; in the order of [`timing_files`].
+pub fn timing_files_for(root: &Path, revision: Option<&str>) -> Vec<PathBuf> {
+    let mut files = base_timing_files(root);
+    if let Some(revision) = revision {
+        let dir = root.join(MODELS_DIR).join(format!("rev-{revision}"));
+        for file in &mut files {
+            if let Some(name) = file.file_name() {
+                let own = dir.join(name);
+                if own.is_file() {
+                    *file = own;
+                }
+            }
+        }
+    }
+    files
+}
+
+fn base_timing_files(root: &Path) -> Vec<PathBuf> {
     let dir = root.join(MODELS_DIR);
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .map(|entries| {

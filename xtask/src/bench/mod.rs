@@ -78,6 +78,10 @@ pub struct BenchArgs {
     /// Allow `--calibrate` from a QEMU run (its times are the emulator's, not the chip's).
     #[arg(long)]
     pub accept_qemu: bool,
+    /// The board's revision on a robot of this revision (1-2, 1-1): the build flashed or run in QEMU
+    /// and the timing files the bounds come from. Default: the board's newest.
+    #[arg(long, value_name = "1-2|1-1")]
+    pub revision: Option<String>,
 }
 
 /// The core clock of a board's build: what its trace clock counts when no boot record says so.
@@ -514,6 +518,8 @@ pub fn write_reports(bench: &Bench, dir: &Path) -> Result<String> {
 pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
     let board = crate::boards::by_name(&args.board)
         .with_context(|| format!("unknown board `{}`", args.board))?;
+    let build = revision_build(board, args.revision.as_deref())?;
+    build.select_models();
     let mut inputs: Vec<(String, Capture, bool)> = Vec::new();
     if args.live {
         inputs.push(stream_live(root, board, args)?);
@@ -541,7 +547,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
     if args.qemu {
         let stimulus = args.stimulus.as_ref().context("--qemu needs --stimulus")?;
         crate::ensure_qemu()?;
-        let elf = crate::build_qemu(root, board)?;
+        let elf = crate::build_qemu(root, &build)?;
         let frames = crate::qemu::read_stimulus(stimulus)?;
         let duration = match &args.duration {
             Some(d) => crate::qemu::parse_duration(d)?,
@@ -596,9 +602,15 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
             if *qemu && !args.accept_qemu {
                 bail!("--calibrate from a QEMU run writes the emulator's times as the chip's budgets: add --accept-qemu to do it anyway");
             }
-            let path = root
-                .join(scenario::MODELS_DIR)
-                .join(format!("{}.timing.json", board.name));
+            // The timing file of the revision benched (models/rev-<revision>/ where it has its own).
+            let name = format!("{}.timing.json", board.name);
+            let path = scenario::timing_files(root)
+                .into_iter()
+                .find(|p| {
+                    p.file_name()
+                        .is_some_and(|n| n.to_str() == Some(name.as_str()))
+                })
+                .unwrap_or_else(|| root.join(scenario::MODELS_DIR).join(&name));
             let changed = calibrate::write(&path, &bench, args.margin)?;
             println!(
                 "calibrated {} budgets of {} (margin ×{})",
@@ -611,11 +623,31 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
     Ok(ok || !args.check)
 }
 
+/// The image `--revision` names (default: the board's newest).
+pub(crate) fn revision_build(
+    board: &'static Board,
+    revision: Option<&str>,
+) -> Result<crate::revision::Build> {
+    let choice = crate::revision::Choice::parse(revision)?;
+    anyhow::ensure!(
+        choice != crate::revision::Choice::All,
+        "one revision at a time"
+    );
+    crate::revision::plan(&[board], &choice)?
+        .into_iter()
+        .next()
+        .context("one image")
+}
+
 /// The probe path (`--attach`, or neither `--capture` nor `--qemu`), or `--capture FILE --live`:
 /// streams the channels through the live pipeline with the view redrawn every second, until
 /// Ctrl-C or `--duration`, and returns the capture for the report. The probe's raw trace bytes and
 /// log are saved in `target/bench/<board>/live-<unix time>/` (`trace.bin`: a `--capture` file).
-fn stream_live(root: &Path, board: &Board, args: &BenchArgs) -> Result<(String, Capture, bool)> {
+fn stream_live(
+    root: &Path,
+    board: &'static Board,
+    args: &BenchArgs,
+) -> Result<(String, Capture, bool)> {
     use std::time::{Duration, Instant};
 
     let hz = args
@@ -634,7 +666,8 @@ fn stream_live(root: &Path, board: &Board, args: &BenchArgs) -> Result<(String, 
                 Some(Duration::from_secs(2)),
             ),
             _ => {
-                let link = crate::probe_link(root, board, args.attach, args.probe.as_deref())?;
+                let build = revision_build(board, args.revision.as_deref())?;
+                let link = crate::probe_link(root, &build, args.attach, args.probe.as_deref())?;
                 let stamp = std::time::SystemTime::now()
                     .duration_since(std::time::UNIX_EPOCH)
                     .map(|d| d.as_secs())

@@ -227,7 +227,7 @@ fn motor_deadman(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+pub(super) fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let rejected = out.traces("command-rejected").len();
     ensure!(
         rejected == 10,
@@ -281,8 +281,13 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 }
 
 fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    let gyro = out.periodic_stream(0x608, "gyroscope", 1_000, 0, 250_000)?;
-    let bound = bounds.publisher_latency_us("gyroscope", "medium", 1_000)?;
+    flood_at(out, bounds, 1_000)
+}
+
+/// The flood check with the gyroscope publisher every `period` µs (1 ms on 1-1, 2 ms on 1-2).
+pub(super) fn flood_at(out: &RunOutput, bounds: &Bounds, period: u64) -> Result<String> {
+    let gyro = out.periodic_stream(0x608, "gyroscope", period, 0, 250_000)?;
+    let bound = bounds.publisher_latency_us("gyroscope", "medium", period)?;
     let worst = gyro.worst_latency;
     ensure!(
         worst <= bound,
@@ -322,9 +327,10 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         );
     }
     Ok(format!(
-        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted (diagnostics agree: {} dropped); gyroscope on its 1 ms grid, worst latency {worst} µs ≤ analysed {bound} µs",
+        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted (diagnostics agree: {} dropped); gyroscope on its {} ms grid, worst latency {worst} µs ≤ analysed {bound} µs",
         handled.len(),
-        health.rx_dropped
+        health.rx_dropped,
+        period / 1000
     ))
 }
 

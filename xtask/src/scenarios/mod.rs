@@ -4,13 +4,14 @@
 //! run lasts); the checks live in one module per board. The firmware's output — every frame it put on the bus, stamped with virtual time,
 //! and its trace events — is parsed here and checked against the behaviour the protocol promises
 //! and against the analysed response-time bound.
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, ensure, Context, Result};
 
 use crate::qemu::{self, TimedFrame};
 
 pub mod diwheeldrive;
+pub mod diwheeldrive_1_2;
 pub mod lightring;
 pub mod powermgmt;
 
@@ -30,6 +31,32 @@ pub fn ram_goal(board: &str) -> u64 {
 pub const ADMISSION_RAM_ALLOWANCE: u64 = 4 * 1024;
 
 /// The scenarios of `board` (empty for a board without a QEMU build).
+/// The scenarios of one board revision (`boards::Revision::name`): DiWheelDrive 1-1's are the
+/// board's original set (`diwheeldrive/qemu/`), 1-2's its own (`diwheeldrive/qemu/rev-1-2/`); a board
+/// with one image has one set.
+pub fn for_revision(board: &str, revision: &str) -> &'static [Scenario] {
+    match (board, revision) {
+        ("diwheeldrive", "1-2") => diwheeldrive_1_2::SCENARIOS,
+        ("diwheeldrive", _) => diwheeldrive::SCENARIOS,
+        _ => for_board(board),
+    }
+}
+
+/// The stimulus log of a board revision's scenario: in the revision's folder
+/// (`diwheeldrive/qemu/rev-1-2/`) if it has its own, else the board's shared one (`<board>/qemu/`).
+pub fn log_path(root: &Path, board: &str, revision: &str, scenario: &str) -> PathBuf {
+    let base = root.join(board).join("qemu");
+    let own = base
+        .join(format!("rev-{revision}"))
+        .join(format!("{scenario}.log"));
+    if own.is_file() {
+        own
+    } else {
+        base.join(format!("{scenario}.log"))
+    }
+}
+
+/// The scenarios of a board's original set (for DiWheelDrive the 1-1 ones; see [`for_revision`]).
 pub fn for_board(board: &str) -> &'static [Scenario] {
     match board {
         "diwheeldrive" => diwheeldrive::SCENARIOS,
