@@ -13,6 +13,9 @@
 //!
 //! Trace events and the human log are printed as lines starting with `#`; the run ends with one
 //! `# qemu: … at N us; …` line (see [`finish`]).
+//!
+//! Run by `cargo xtask robot`, the board is instead one of three on the host's bus model, in
+//! lock-step ([`robot`]).
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -24,6 +27,8 @@ use heapless::Deque;
 use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
 use crate::mono::{Clock as _, TimerClock};
 use crate::signals::SystemSignals;
+
+pub mod robot;
 
 /// SysTick's clock: the core clock of the QEMU machine (netduino2's STM32F205 for the F1 boards,
 /// netduinoplus2's STM32F405 for the F4 board).
@@ -55,6 +60,7 @@ extern "C" {
 pub fn init(syst: cortex_m::peripheral::SYST) {
     paint_stack();
     Mono::start(syst, CORE_CLOCK_HZ);
+    robot::connect();
     if let Some(file) = HostFile::create(b"trace.bin\0") {
         TRACE_FILE.store(file.0, Ordering::Relaxed);
     }
@@ -120,6 +126,9 @@ static TX_THIS_JOB: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8:
 
 impl CanTx for CanTxPort {
     fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
+        if robot::active() {
+            return robot::transmit(frame);
+        }
         if TX_THIS_JOB.fetch_add(1, Ordering::Relaxed) >= 3 {
             // The mailboxes are full: pend this interrupt again (the transmit-complete).
             const ICSR: *const u32 = 0xE000_ED04 as *const u32;
@@ -177,7 +186,11 @@ impl CanTx for CanTxPort {
         Transmit::Queued
     }
 
-    fn completed(&mut self, _on_completion: &mut dyn FnMut(Completion)) {
+    fn completed(&mut self, on_completion: &mut dyn FnMut(Completion)) {
+        if robot::active() {
+            robot::completed(on_completion);
+            return;
+        }
         // A new transmit interrupt: the three mailboxes are free again.
         TX_THIS_JOB.store(0, Ordering::Relaxed);
     }
@@ -221,10 +234,12 @@ pub struct Signals;
 
 impl SystemSignals for Signals {
     fn release_sync(&mut self) {
+        robot::drive_sync(false);
         hprintln!("# qemu: SYS_SYNC_N released");
     }
 
     fn pull_sync_low(&mut self) {
+        robot::drive_sync(true);
         hprintln!("# qemu: SYS_SYNC_N pulled low");
     }
 
@@ -240,7 +255,12 @@ const RECORD: usize = 20;
 
 /// Replays `stimulus.bin` from the host into the virtual receive FIFO (pending the board's CAN
 /// receive interrupt `rx_irq`, and `shutdown_irq` for a SYS_PD_N record), then ends the run.
+/// In a robot run the board trades with the host's bus instead ([`robot`]).
 pub async fn replay_stimulus(rx_irq: impl InterruptNumber, shutdown_irq: impl InterruptNumber) {
+    if robot::active() {
+        robot::run(rx_irq, shutdown_irq).await;
+        return;
+    }
     let Some(file) = HostFile::open(b"stimulus.bin\0") else {
         hprintln!("# qemu: cannot open stimulus.bin");
         exit(false);
@@ -272,15 +292,20 @@ pub async fn replay_stimulus(rx_irq: impl InterruptNumber, shutdown_irq: impl In
             data: [0; 8],
         };
         frame.data.copy_from_slice(&record[12..20]);
-        critical_section::with(|cs| {
-            if RX_FIFO.borrow_ref_mut(cs).push_back(frame).is_err() {
-                RX_OVERRUN.store(true, Ordering::SeqCst);
-            }
-        });
-        cortex_m::peripheral::NVIC::pend(rx_irq);
+        deliver(frame, rx_irq);
     }
     Clock::delay_until_us(duration).await;
     finish("end of run");
+}
+
+/// A frame arrives: into the receive FIFO (an overrun if it is full), and the receive interrupt.
+fn deliver(frame: RxFrame, rx_irq: impl InterruptNumber) {
+    critical_section::with(|cs| {
+        if RX_FIFO.borrow_ref_mut(cs).push_back(frame).is_err() {
+            RX_OVERRUN.store(true, Ordering::SeqCst);
+        }
+    });
+    cortex_m::peripheral::NVIC::pend(rx_irq);
 }
 
 fn le_u64(bytes: &[u8]) -> u64 {
@@ -335,9 +360,24 @@ impl HostFile {
         (fd as isize >= 0).then_some(Self(fd))
     }
 
+    /// Reads all of `buf`; a pipe may hand it over in parts.
     fn read_exact(&self, buf: &mut [u8]) -> bool {
-        // SAFETY: semihosting READ into a buffer we own; it returns the number of bytes NOT read.
-        let left = unsafe { syscall!(READ, self.0, buf.as_mut_ptr(), buf.len()) };
+        let mut at = 0;
+        while at < buf.len() {
+            let want = buf.len() - at;
+            // SAFETY: semihosting READ into a buffer we own; it returns the number of bytes NOT read.
+            let left = unsafe { syscall!(READ, self.0, buf[at..].as_mut_ptr(), want) };
+            if left >= want {
+                return false;
+            }
+            at += want - left;
+        }
+        true
+    }
+
+    fn write_all(&self, bytes: &[u8]) -> bool {
+        // SAFETY: semihosting WRITE from a buffer we own; it returns the number of bytes NOT written.
+        let left = unsafe { syscall!(WRITE, self.0, bytes.as_ptr(), bytes.len()) };
         left == 0
     }
 }

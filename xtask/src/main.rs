@@ -19,6 +19,7 @@ mod interop;
 mod levels_check;
 mod probe;
 mod qemu;
+mod robot;
 mod scenarios;
 mod smoke;
 
@@ -85,6 +86,9 @@ enum Cmd {
         /// Boards whose scenarios to run (default: all).
         boards: Vec<String>,
     },
+    /// The whole robot: the three boards' QEMU builds on one simulated CAN bus with the system
+    /// lines between them, in lock-step virtual time (docs/qemu.md, "The whole robot").
+    Robot(robot::cli::RobotArgs),
     /// Boot the production images (the bytes `cargo xtask flash` writes, behind a stand-in for
     /// AMiRo-BLT) in QEMU and check the boot from their RTT log (part of `test`; docs/faults.md).
     Smoke {
@@ -205,6 +209,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             campaign::run(&root, &select_boards(&boards)?, seed, frames, runs).map(|()| true)
         }
         Cmd::Scenarios { boards } => run_scenarios(&root, &select_boards(&boards)?).map(|()| true),
+        Cmd::Robot(args) => robot::cli::command(&root, &args),
         Cmd::Smoke { boards } => smoke::run(&root, &select_boards(&boards)?).map(|()| true),
         Cmd::Trace { file } => {
             let bytes =

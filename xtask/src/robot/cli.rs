@@ -1,0 +1,70 @@
+//! The `cargo xtask robot` command: builds the three QEMU builds, runs them on one bus, prints
+//! the run as it goes and says where the bus log is and how fast it ran.
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+
+use super::{stimulus, Firmware};
+
+/// `cargo xtask robot` options.
+#[derive(clap::Args, Debug)]
+pub struct RobotArgs {
+    /// A stimulus: `candump -l` frames the operator's adapter sends, plus `(t) signal SYS_PD_N`,
+    /// `(t) reset BOARD`, `(t) unplug BOARD`, `(t) plug BOARD`, `(t) bit-error ID|any`.
+    #[arg(long)]
+    pub stimulus: Option<PathBuf>,
+    /// How much virtual time to run (e.g. 10s, 500ms); default: the stimulus's `# duration:`, or 2s.
+    #[arg(long)]
+    pub duration: Option<String>,
+}
+
+/// Builds the boards' QEMU builds (one cargo invocation each) in node order.
+pub fn firmware(root: &Path) -> Result<[Firmware; 3]> {
+    let mut out = Vec::new();
+    for name in stimulus::BOARDS {
+        let board = crate::boards::by_name(name).with_context(|| format!("no board {name}"))?;
+        out.push(Firmware {
+            elf: crate::build_qemu(root, board)?,
+            machine: board.qemu_machine,
+        });
+    }
+    out.try_into()
+        .map_err(|_| anyhow::anyhow!("three boards expected"))
+}
+
+struct Print;
+
+impl super::Sink for Print {
+    fn line(&mut self, line: &str) {
+        println!("{line}");
+    }
+}
+
+/// Runs `cargo xtask robot`.
+pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
+    crate::ensure_qemu()?;
+    let (actions, header) = match &args.stimulus {
+        Some(path) => stimulus::read(path)?,
+        None => (Vec::new(), None),
+    };
+    let duration = match &args.duration {
+        Some(d) => crate::qemu::parse_duration(d)?,
+        None => header.unwrap_or(2_000_000),
+    };
+    let firmware = firmware(root)?;
+    let work = crate::qemu::fresh_work_dir(root, "robot");
+    let started = Instant::now();
+    let outcome = super::run(&firmware, &actions, duration, &work, &mut Print)?;
+    let wall = started.elapsed().as_secs_f64();
+    std::fs::write(work.join("output.log"), &outcome.text)?;
+    let (bus, _) = crate::qemu::split_output(&outcome.text);
+    std::fs::write(work.join("bus.log"), bus)?;
+    let virtual_s = duration as f64 / 1e6;
+    eprintln!(
+        "robot: {virtual_s:.3} s of virtual time in {wall:.1} s of wall time ({:.2} s wall per virtual s)",
+        wall / virtual_s.max(1e-9)
+    );
+    eprintln!("bus log (candump -l): {}", work.join("bus.log").display());
+    Ok(true)
+}
