@@ -208,6 +208,15 @@ fn run(cmd: Cmd) -> Result<bool> {
             let (frames, runs) = if long { (20_000, 10) } else { (frames, 1) };
             campaign::run(&root, &select_boards(&boards)?, seed, frames, runs).map(|()| true)
         }
+        // `robot` names the whole robot's scenarios (robot/scenarios/, docs/qemu.md).
+        Cmd::Scenarios { boards } if boards.iter().any(|b| b == "robot") => {
+            robot::scenarios::run_all(&root)?;
+            let rest: Vec<String> = boards.into_iter().filter(|b| b != "robot").collect();
+            if !rest.is_empty() {
+                run_scenarios(&root, &select_boards(&rest)?)?;
+            }
+            Ok(true)
+        }
         Cmd::Scenarios { boards } => run_scenarios(&root, &select_boards(&boards)?).map(|()| true),
         Cmd::Robot(args) => robot::cli::command(&root, &args),
         Cmd::Smoke { boards } => smoke::run(&root, &select_boards(&boards)?).map(|()| true),
@@ -492,6 +501,8 @@ fn test(root: &Path) -> Result<()> {
     let over = elf::over_budget(&reports);
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
     run_scenarios(root, &BOARDS.iter().collect::<Vec<_>>())?;
+    // The whole robot on one bus (issue 23), with its bus report against the analysis.
+    robot::scenarios::run_all(root)?;
     // The production images booted in QEMU (issue 21).
     smoke::run(root, &BOARDS.iter().collect::<Vec<_>>())?;
     // After the scenarios: their bus logs are among what the other CAN tools must read.

@@ -26,6 +26,7 @@ use anyhow::{bail, Context, Result};
 
 pub mod cli;
 pub mod report;
+pub mod scenarios;
 pub mod stimulus;
 
 use stimulus::{Action, Timed, BOARDS};
