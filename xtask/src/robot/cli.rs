@@ -17,6 +17,9 @@ pub struct RobotArgs {
     /// How much virtual time to run (e.g. 10s, 500ms); default: the stimulus's `# duration:`, or 2s.
     #[arg(long)]
     pub duration: Option<String>,
+    /// Fail when a message's observed worst response exceeds its Davis bound (the bus report).
+    #[arg(long)]
+    pub check: bool,
 }
 
 /// Builds the boards' QEMU builds (one cargo invocation each) in node order.
@@ -60,11 +63,19 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
     std::fs::write(work.join("output.log"), &outcome.text)?;
     let (bus, _) = crate::qemu::split_output(&outcome.text);
     std::fs::write(work.join("bus.log"), bus)?;
+    let report = super::report::analyse(&outcome.transfers, duration);
+    let table = super::report::render(&report);
+    print!("{table}");
+    std::fs::write(work.join("bus-report.txt"), &table)?;
+    let exceeded = report.iter().filter(|l| l.exceeds()).count();
     let virtual_s = duration as f64 / 1e6;
     eprintln!(
         "robot: {virtual_s:.3} s of virtual time in {wall:.1} s of wall time ({:.2} s wall per virtual s)",
         wall / virtual_s.max(1e-9)
     );
     eprintln!("bus log (candump -l): {}", work.join("bus.log").display());
-    Ok(true)
+    if exceeded > 0 {
+        eprintln!("bus report: {exceeded} message(s) beyond their Davis bound");
+    }
+    Ok(!(args.check && exceeded > 0))
 }

@@ -16,6 +16,9 @@ pub struct Scenario {
     pub about: &'static str,
     /// The check.
     pub check: fn(&Run) -> Result<String>,
+    /// Whether every observed response must be within the analysis's bound (not with injected
+    /// faults: error frames are outside the analysis).
+    pub bus_bounds: bool,
 }
 
 /// The scenarios CI runs.
@@ -24,36 +27,43 @@ pub const SCENARIOS: &[Scenario] = &[
         name: "thesis-demo",
         about: "the thesis demo on three boards at once",
         check: thesis_demo,
+        bus_bounds: true,
     },
     Scenario {
         name: "startup-sync",
         about: "SYS_SYNC_N rises once every module is up",
         check: startup_sync,
+        bus_bounds: true,
     },
     Scenario {
         name: "shutdown",
         about: "the shutdown command reaches every board",
         check: shutdown,
+        bus_bounds: true,
     },
     Scenario {
         name: "admission-other-board",
         about: "a request refused for another board's frames on the bus",
         check: admission_other_board,
+        bus_bounds: true,
     },
     Scenario {
         name: "adapter-flood",
         about: "one node floods, the boards keep their grids",
         check: adapter_flood,
+        bus_bounds: true,
     },
     Scenario {
         name: "reset",
         about: "a board reset mid-run rejoins",
         check: reset,
+        bus_bounds: true,
     },
     Scenario {
         name: "bus-fault",
         about: "bit errors and an unplugged board survived",
         check: bus_fault,
+        bus_bounds: false,
     },
 ];
 
@@ -485,7 +495,31 @@ pub fn run_all(root: &Path) -> Result<()> {
             std::fs::write(work.join("output.log"), &outcome.text)?;
             let (bus, _) = crate::qemu::split_output(&outcome.text);
             std::fs::write(work.join("bus.log"), bus)?;
-            (scenario.check)(&Run { outcome })
+            let report = super::report::analyse(&outcome.transfers, duration);
+            std::fs::write(work.join("bus-report.txt"), super::report::render(&report))?;
+            let summary = (scenario.check)(&Run { outcome })?;
+            let exceeded: Vec<String> = report
+                .iter()
+                .filter(|l| l.exceeds())
+                .map(|l| format!("{:03X} {} µs > {:?}", l.id, l.observed_us, l.bound_us))
+                .collect();
+            if scenario.bus_bounds {
+                ensure!(
+                    exceeded.is_empty(),
+                    "observed responses beyond the Davis bound: {}",
+                    exceeded.join(", ")
+                );
+                Ok(format!(
+                    "{summary}; bus: {} streams within their Davis bounds",
+                    report.len()
+                ))
+            } else {
+                Ok(format!(
+                    "{summary}; bus: {} of {} streams beyond their Davis bounds (fault episode)",
+                    exceeded.len(),
+                    report.len()
+                ))
+            }
         })();
         match result {
             Ok(summary) => {
