@@ -17,6 +17,10 @@ pub struct RobotArgs {
     /// How much virtual time to run (e.g. 10s, 500ms); default: the stimulus's `# duration:`, or 2s.
     #[arg(long)]
     pub duration: Option<String>,
+    /// Paced to the wall clock, with a pseudo-terminal that speaks SLCAN as the operator's adapter
+    /// (printed as `slcan: /dev/pts/N`); runs until Ctrl-C or `--duration`.
+    #[arg(long)]
+    pub slcan: bool,
     /// Fail when a message's observed worst response exceeds its Davis bound (the bus report).
     #[arg(long)]
     pub check: bool,
@@ -53,12 +57,32 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
     };
     let duration = match &args.duration {
         Some(d) => crate::qemu::parse_duration(d)?,
+        // Live, the run lasts until Ctrl-C.
+        None if args.slcan => u64::MAX / 2,
         None => header.unwrap_or(2_000_000),
     };
     let firmware = firmware(root)?;
     let work = crate::qemu::fresh_work_dir(root, "robot");
+    let mut live = if args.slcan {
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        signal_hook::flag::register(signal_hook::consts::SIGINT, stop.clone())?;
+        let slcan = super::slcan::Slcan::new()?;
+        println!("slcan: {}", slcan.path());
+        std::io::Write::flush(&mut std::io::stdout())?;
+        Some(super::Live { slcan, stop })
+    } else {
+        None
+    };
     let started = Instant::now();
-    let outcome = super::run(&firmware, &actions, duration, &work, &mut Print)?;
+    let outcome = super::run(
+        &firmware,
+        &actions,
+        duration,
+        &work,
+        &mut Print,
+        live.as_mut(),
+    )?;
+    let duration = outcome.ended_at;
     let wall = started.elapsed().as_secs_f64();
     std::fs::write(work.join("output.log"), &outcome.text)?;
     let (bus, _) = crate::qemu::split_output(&outcome.text);

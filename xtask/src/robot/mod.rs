@@ -27,6 +27,7 @@ use anyhow::{bail, Context, Result};
 pub mod cli;
 pub mod report;
 pub mod scenarios;
+pub mod slcan;
 pub mod stimulus;
 
 use stimulus::{Action, Timed, BOARDS};
@@ -82,6 +83,8 @@ pub struct Outcome {
     pub transfers: Vec<Transfer>,
     /// Error frames on the bus.
     pub error_frames: usize,
+    /// The virtual time the run ended at (µs).
+    pub ended_at: u64,
 }
 
 struct Board {
@@ -340,14 +343,25 @@ impl Sink for Vec<String> {
     }
 }
 
-/// Runs the robot for `duration_us` of virtual time against `actions`, in `work`.
+/// A live run (`--slcan`): paced to the wall clock, the adapter a client drives, stopped by Ctrl-C.
+pub struct Live {
+    /// The SLCAN pseudo-terminal.
+    pub slcan: slcan::Slcan,
+    /// Set by Ctrl-C.
+    pub stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+/// Runs the robot for `duration_us` of virtual time against `actions`, in `work`; with `live`,
+/// paced to the wall clock with a client's adapter on the bus.
 pub fn run(
     firmware: &[Firmware; 3],
     actions: &[Timed],
     duration_us: u64,
     work: &Path,
     sink: &mut dyn Sink,
+    mut live: Option<&mut Live>,
 ) -> Result<Outcome> {
+    let wall_start = Instant::now();
     std::fs::create_dir_all(work)?;
     let mut bus = Bus::new();
     let mut boards: Vec<Board> = (0..3)
@@ -462,6 +476,16 @@ pub fn run(
                 }),
             }
         }
+        if let Some(live) = live.as_deref_mut() {
+            for frame in live.slcan.poll() {
+                operator.push_back((t, frame));
+            }
+            // Never ahead of the wall clock (behind it when the host is too slow).
+            let ahead = Duration::from_micros(t).saturating_sub(wall_start.elapsed());
+            if ahead > Duration::from_millis(2) {
+                std::thread::sleep(ahead);
+            }
+        }
         // The adapter's three mailboxes, filled in the order the stimulus gives.
         for mailbox in 0..3 {
             if bus.mailboxes(nodes[OPERATOR])[mailbox].is_none() {
@@ -553,13 +577,21 @@ pub fn run(
                 }
             ));
         }
-        let end = t >= duration_us;
+        let end = t >= duration_us
+            || live
+                .as_deref()
+                .is_some_and(|l| l.stop.load(std::sync::atomic::Ordering::Relaxed));
         let now = deliveries
             .front()
             .copied()
             .filter(|d| d.end < t + QUANTUM_US);
-        if now.is_some() {
+        if let Some(d) = now {
             deliveries.pop_front();
+            if d.node != OPERATOR {
+                if let Some(live) = live.as_deref_mut() {
+                    live.slcan.deliver(d.end, &d.frame);
+                }
+            }
         }
         for b in boards.iter_mut().filter(|b| b.alive) {
             let mut message = [0u8; DOWN_LEN];
@@ -603,6 +635,7 @@ pub fn run(
             emit(&mut outcome, sink, candump_line(d.end, &d.frame));
         }
         if end {
+            outcome.ended_at = t;
             return Ok(());
         }
     })();

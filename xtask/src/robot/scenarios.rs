@@ -491,7 +491,7 @@ pub fn run_all(root: &Path) -> Result<()> {
             let duration =
                 duration.with_context(|| format!("{}: no `# duration:`", path.display()))?;
             let mut lines: Vec<String> = Vec::new();
-            let outcome = super::run(&firmware, &actions, duration, &work, &mut lines)?;
+            let outcome = super::run(&firmware, &actions, duration, &work, &mut lines, None)?;
             std::fs::write(work.join("output.log"), &outcome.text)?;
             let (bus, _) = crate::qemu::split_output(&outcome.text);
             std::fs::write(work.join("bus.log"), bus)?;
