@@ -45,6 +45,13 @@ rtic_monotonics::systick_monotonic!(Mono, 100_000);
 /// The QEMU build's clock.
 pub type Clock = TimerClock<rtic_monotonics::systick::SystickBackend, TICK_US>;
 
+/// Microseconds of virtual time since the monotonic started (the platform's own reading, without
+/// the trace hooks of [`Clock`]).
+pub fn now_us() -> u64 {
+    use rtic_time::timer_queue::TimerQueueBackend;
+    rtic_monotonics::systick::SystickBackend::now().saturating_mul(TICK_US)
+}
+
 static RX_FIFO: Mutex<RefCell<Deque<RxFrame, 3>>> = Mutex::new(RefCell::new(Deque::new()));
 static RX_OVERRUN: AtomicBool = AtomicBool::new(false);
 static SYS_PD_LOW: AtomicBool = AtomicBool::new(false);
@@ -147,7 +154,7 @@ impl CanTx for CanTxPort {
         // instructions, and the emulated transmit task should not cost core::fmt's thousands.
         const HEX: &[u8; 16] = b"0123456789ABCDEF";
         let mut line = [0u8; 64];
-        let now = Clock::now_us();
+        let now = now_us();
         let mut at = 0;
         let mut put = |b: u8| {
             line[at] = b;
@@ -159,7 +166,7 @@ impl CanTx for CanTxPort {
         let micros = (now - seconds * 1_000_000) as u32;
         let mut digits = [0u8; 10];
         let seconds =
-            crate::telemetry::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
+            crate::digits::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
         seconds.bytes().for_each(&mut put);
         put(b'.');
         let mut scale = 100_000;
@@ -320,9 +327,9 @@ pub fn finish(why: &str) {
     hprintln!(
         "# qemu: {} at {} us; rx dropped {}; rx overruns {}; admission refused {}; admission busy {}; ram static {} stack {}",
         why,
-        Clock::now_us(),
-        crate::tasks::rx_dropped(),
-        crate::tasks::rx_overruns(),
+        now_us(),
+        crate::health::rx_dropped(),
+        crate::health::rx_overruns(),
         crate::health::admission_refused(),
         crate::health::admission_busy(),
         static_ram(),

@@ -21,7 +21,6 @@ use rtic_time::timer_queue::TimerQueueBackend;
 
 use super::{HostFile, TICK_US};
 use crate::can::{Completion, RxFrame, Transmit};
-use crate::mono::Clock as _;
 
 /// The exchange period: a multiple of the 10 µs tick below the shortest frame (44 bit times from
 /// start of frame to completion at 1 Mbit/s).
@@ -109,7 +108,7 @@ pub fn sync_reads_low() -> bool {
 /// Puts `frame` into a free mailbox (the host queues it on the bus at the next exchange).
 pub(super) fn transmit(frame: &amiro_can::Frame) -> Transmit {
     remember_tx_interrupt();
-    let now = super::Clock::now_us();
+    let now = super::now_us();
     critical_section::with(|cs| {
         let mut boxes = MAILBOXES.borrow_ref_mut(cs);
         match boxes.iter_mut().find(|m| m.is_none()) {
@@ -184,7 +183,7 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         boundary += QUANTUM_US;
         wait_until(boundary).await;
         let mut message = [0u8; UP_LEN];
-        message[..8].copy_from_slice(&super::Clock::now_us().to_le_bytes());
+        message[..8].copy_from_slice(&super::now_us().to_le_bytes());
         let mut count = 0u8;
         critical_section::with(|cs| {
             for (k, slot) in MAILBOXES.borrow_ref_mut(cs).iter_mut().enumerate() {

@@ -131,16 +131,12 @@ impl Run {
 
 /// Every board reached its end (end of run or hand-over) without receive-FIFO overruns.
 fn every_board_ended(run: &Run) -> Result<()> {
-    for board in 0..3 {
+    for (board, name) in NODES.iter().enumerate().take(3) {
         let view = run.view(board);
         let overruns = view
             .end_field("rx overruns")
-            .with_context(|| format!("{}", NODES[board]))?;
-        ensure!(
-            overruns == 0,
-            "{}: {overruns} receive-FIFO overruns",
-            NODES[board]
-        );
+            .with_context(|| name.to_string())?;
+        ensure!(overruns == 0, "{}: {overruns} receive-FIFO overruns", name);
     }
     Ok(())
 }
@@ -210,8 +206,7 @@ fn thesis_demo(run: &Run) -> Result<String> {
     let latched = run
         .notes(2)
         .into_iter()
-        .filter(|n| n.starts_with("tlc5947 latched"))
-        .last()
+        .rfind(|n| n.starts_with("tlc5947 latched"))
         .context("LightRing latched nothing")?
         .to_string();
     // LED 3 is on OUT 15..17 (channel order n → 3(8−n)); the others dark.
@@ -252,14 +247,14 @@ fn startup_sync(run: &Run) -> Result<String> {
     // It rises in the quantum after the last module released it, not before.
     let text = &run.outcome.text;
     let rise = text.find("SYS_SYNC_N high").context("no rise")?;
-    for board in 0..3 {
+    for name in NODES.iter().take(3) {
         let released = text
-            .find(&format!("{}: # qemu: SYS_SYNC_N released", NODES[board]))
-            .with_context(|| format!("{} never released SYS_SYNC_N", NODES[board]))?;
+            .find(&format!("{}: # qemu: SYS_SYNC_N released", name))
+            .with_context(|| format!("{} never released SYS_SYNC_N", name))?;
         ensure!(
             released < rise,
             "{} released SYS_SYNC_N after the line rose",
-            NODES[board]
+            name
         );
     }
     Ok(format!(
@@ -281,20 +276,20 @@ fn shutdown(run: &Run) -> Result<String> {
         .context("PowerManagement never drove SYS_PD_N")?
         .to_string();
     let mut summary = Vec::new();
-    for board in 0..3 {
+    for (board, name) in NODES.iter().enumerate().take(3) {
         let view = run.view(board);
-        let end = view.end_line().with_context(|| NODES[board])?;
+        let end = view.end_line().with_context(|| name)?;
         ensure!(
             end.starts_with("qemu: shutdown hand-over"),
             "{} did not hand over: `{end}`",
-            NODES[board]
+            name
         );
         let at = end_time(end).with_context(|| format!("`{end}`"))?;
         let after: Vec<&TimedFrame> = view.frames.iter().filter(|f| f.at_us > at).collect();
         ensure!(
             after.is_empty(),
             "{}: {} frames after its hand-over at {at} µs",
-            NODES[board],
+            name,
             after.len()
         );
         ensure!(
@@ -302,9 +297,9 @@ fn shutdown(run: &Run) -> Result<String> {
                 .iter()
                 .all(|n| !n.contains("214")),
             "{} accepted the command after the request",
-            NODES[board]
+            name
         );
-        summary.push(format!("{} at {at} µs", NODES[board]));
+        summary.push(format!("{} at {at} µs", name));
     }
     let last_board_frame = run
         .outcome
@@ -406,8 +401,7 @@ fn reset(run: &Run) -> Result<String> {
     let latched = run
         .notes(2)
         .into_iter()
-        .filter(|n| n.starts_with("tlc5947 latched"))
-        .last()
+        .rfind(|n| n.starts_with("tlc5947 latched"))
         .context("no latch")?
         .to_string();
     let outputs: Vec<&str> = latched.split_whitespace().skip(2).collect();
