@@ -465,6 +465,35 @@ fn bus_fault(run: &Run) -> Result<String> {
     ))
 }
 
+/// Runs scenario `name` twice and compares everything both runs printed.
+fn same_bytes_twice(root: &Path, firmware: &[super::Firmware; 3], name: &str) -> Result<usize> {
+    let path = root
+        .join("robot")
+        .join("scenarios")
+        .join(format!("{name}.log"));
+    let (actions, duration) = super::stimulus::read(&path)?;
+    let duration = duration.context("no `# duration:`")?;
+    let mut texts = Vec::new();
+    for k in 0..2 {
+        let work = crate::qemu::target_dir(root)
+            .join("scenarios")
+            .join("robot")
+            .join(format!("{name}-determinism-{k}"));
+        let _ = std::fs::remove_dir_all(&work);
+        let mut lines: Vec<String> = Vec::new();
+        texts.push(super::run(firmware, &actions, duration, &work, &mut lines, None)?.text);
+    }
+    if let Some(line) = texts[0]
+        .lines()
+        .zip(texts[1].lines())
+        .position(|(a, b)| a != b)
+    {
+        bail!("the two runs differ from line {}", line + 1);
+    }
+    ensure!(texts[0] == texts[1], "the two runs differ in length");
+    Ok(texts[0].len())
+}
+
 /// Runs every robot scenario; fails if any check fails.
 pub fn run_all(root: &Path) -> Result<()> {
     crate::ensure_qemu()?;
@@ -527,6 +556,20 @@ pub fn run_all(root: &Path) -> Result<()> {
                     scenario.name, scenario.about
                 );
             }
+        }
+    }
+    // Determinism: the same stimulus again prints the same bytes.
+    match same_bytes_twice(root, &firmware, "thesis-demo") {
+        Ok(bytes) => {
+            passed += 1;
+            println!(
+                "robot {:<22} ok: thesis-demo twice, {bytes} bytes identical",
+                "determinism"
+            );
+        }
+        Err(e) => {
+            failed += 1;
+            println!("robot {:<22} FAILED: {e:#}", "determinism");
         }
     }
     println!("robot scenarios: {passed} passed, {failed} failed");
