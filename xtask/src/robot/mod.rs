@@ -606,8 +606,9 @@ pub fn run(
                 flags |= DOWN_END;
             }
             if let Some(d) = now {
-                let own = d.node == b.index;
-                let heard = bus.plugged(nodes[b.index]);
+                // A frame that started before the board's last reset is no longer in its mailboxes.
+                let own = d.node == b.index && d.start >= b.offset;
+                let heard = d.node != b.index && bus.plugged(nodes[b.index]);
                 if own || heard {
                     flags |= DOWN_FRAME | if own { DOWN_OWN } else { 0 };
                     let local = d.end.saturating_sub(b.offset);
