@@ -11,6 +11,7 @@ use super::{stimulus, Firmware};
 #[derive(clap::Args, Debug)]
 pub struct RobotArgs {
     /// A stimulus: `candump -l` frames the operator's adapter sends, plus `(t) signal SYS_PD_N`,
+    /// `(t) signal SYS_WARMRST_N` (restarts LightRing),
     /// `(t) reset BOARD`, `(t) unplug BOARD`, `(t) plug BOARD`, `(t) bit-error ID|any`.
     #[arg(long)]
     pub stimulus: Option<PathBuf>,

@@ -1,6 +1,6 @@
 //! What a robot run's stimulus may say: `candump -l` frames the operator's adapter sends, and the
-//! world's events — SYS_PD_N pulled from outside, a board reset, a board unplugged and plugged
-//! back, a bit error on the bus.
+//! world's events — SYS_PD_N pulled from outside, a SYS_WARMRST_N pulse or a board reset, a board
+//! unplugged and plugged back, a bit error on the bus.
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
@@ -65,7 +65,10 @@ pub fn parse_line(line: &str) -> Result<Option<Timed>> {
     };
     let action = match (verb, object) {
         ("signal", Some("SYS_PD_N")) => Action::PowerDown,
-        ("signal", _) => bail!("`{line}`: the one signal a stimulus pulls is SYS_PD_N"),
+        // A warm-reset pulse: LightRing is held in reset by SYS_WARMRST_N (DiWheelDrive only reads
+        // the line at its start-up, PowerManagement drives it), so the pulse restarts LightRing.
+        ("signal", Some("SYS_WARMRST_N")) => Action::Reset(2),
+        ("signal", _) => bail!("`{line}`: a stimulus pulls SYS_PD_N or pulses SYS_WARMRST_N"),
         ("reset", Some(board)) => Action::Reset(board_index(board, line)?),
         ("unplug", Some(board)) => Action::Unplug(board_index(board, line)?),
         ("plug", Some(board)) => Action::Plug(board_index(board, line)?),
@@ -142,11 +145,8 @@ mod tests {
                 .action,
             Action::Reset(2)
         );
-        assert_eq!(
-            parse_line("(0.5) unplug diwheeldrive").ok(),
-            None,
-            "the fraction needs six digits"
-        );
+        // The fraction needs six digits.
+        assert!(parse_line("(0.5) unplug diwheeldrive").is_err());
         assert_eq!(
             parse_line("(0.100000) bit-error 605")
                 .unwrap()
@@ -161,6 +161,14 @@ mod tests {
                 action: Action::PowerDown
             }
         );
+        assert_eq!(
+            parse_line("(0.200000) signal SYS_WARMRST_N")
+                .unwrap()
+                .unwrap()
+                .action,
+            Action::Reset(2)
+        );
+        assert!(parse_line("(0.200000) signal SYS_SYNC_N").is_err());
         assert!(parse_line("(0.100000) reset operator").is_err());
         assert!(parse_line("(0.100000) bit-error 800").is_err());
         assert!(parse_line("(0.100000) can0 12345#00").is_err());
