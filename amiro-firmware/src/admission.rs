@@ -95,6 +95,9 @@ pub struct State<const N: usize, const M: usize> {
     analysed: bool,
     /// Whether the last command asked this board for a one-shot sample.
     sampled: bool,
+    /// Whether a stream left the running set (a stop, a one-shot) since the kept analyses were brought up to
+    /// date: the admission task refreshes them as a step of its own ([`Admission::refresh_stale`]).
+    stale: bool,
     last_iterations: u64,
     worst_iterations: u64,
 }
@@ -109,6 +112,7 @@ impl<const N: usize, const M: usize> State<N, M> {
             cache: Cache::new(),
             analysed: false,
             sampled: false,
+            stale: false,
             last_iterations: 0,
             worst_iterations: 0,
         }
@@ -216,12 +220,30 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         self.refresh();
     }
 
+    /// Whether a kept analysis is stale: a stream left the running set since the last refresh.
+    pub fn stale(&self) -> bool {
+        self.state.stale
+    }
+
+    /// Re-analyses the boards whose streams left the running set (a stop, a one-shot): the admission task runs
+    /// it as a paced step of its own right after such a command, so that no decision re-analyses more than the
+    /// requesting board and the bus (`docs/analysis.md`, "The admission task"). Nothing when nothing is stale.
+    pub fn refresh_stale(&mut self) {
+        self.state.last_iterations = 0;
+        self.state.analysed = false;
+        self.state.sampled = false;
+        if self.state.stale {
+            self.refresh();
+        }
+    }
+
     /// Brings the kept analyses up to date with the running set.
     fn refresh(&mut self) {
         let running = self.state.running.get(..self.state.len).unwrap_or(&[]);
         self.state.last_iterations =
             analysis::refresh::<N, M>(self.robot, running, &mut self.state.cache);
         self.state.analysed = true;
+        self.state.stale = false;
         self.state.worst_iterations = self.state.worst_iterations.max(self.state.last_iterations);
     }
 
@@ -260,6 +282,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
                 }
             }
             self.state.len -= 1;
+            self.state.stale = true;
         }
     }
 
@@ -320,8 +343,8 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         };
         let period = match command.mode {
             SensorMode::Stop => {
-                // Cheap: the board's kept analysis no longer matches and is redone by the next
-                // decision that needs it.
+                // Cheap here: the board's kept analysis no longer matches and is redone by the
+                // admission task's next step (`refresh_stale`, paced like a decision).
                 self.remove(owner_index, command.topic.byte());
                 return Check::Pass;
             }
@@ -402,7 +425,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
                 };
                 (violation, micros(v.wcrt), micros(Some(v.deadline)))
             }
-            Refusal::Capacity | Refusal::ZeroPeriod => {
+            Refusal::Capacity | Refusal::ZeroPeriod | Refusal::Budget => {
                 (Violation::Unknown, Count::ZERO, Count::ZERO)
             }
         };
@@ -565,7 +588,8 @@ fn reason(refusal: &Refusal) -> RefusalReason {
             Culprit::Frame { .. } => RefusalReason::MessageDeadline,
             Culprit::EndToEnd { .. } => RefusalReason::EndToEndDeadline,
         },
-        Refusal::Capacity => RefusalReason::Capacity,
+        // The check's capacity: its tables, or its iterations per decision (`DECISION_ITERATIONS`).
+        Refusal::Capacity | Refusal::Budget => RefusalReason::Capacity,
         Refusal::ZeroPeriod => RefusalReason::ZeroPeriod,
     }
 }

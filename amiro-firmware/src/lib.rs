@@ -6,7 +6,7 @@
 //! publisher loop, the independent watchdog, the clock-tree reset, and the QEMU platform. A board
 //! crate keeps only its `board.rs` (pins and devices), its sampling and its RTIC app (wiring).
 //!
-//! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`layout`], [`spi`]) builds and is tested on the host; the rest
+//! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`layout`], [`spi`], [`timer_monotonic`]) builds and is tested on the host; the rest
 //! exists only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
 //! is enabled on a chip build; `qemu` selects the QEMU platform.
 #![cfg_attr(not(test), no_std)]
@@ -19,6 +19,7 @@ pub mod clock_tree;
 pub mod digits;
 pub mod layout;
 pub mod spi;
+pub mod timer_monotonic;
 
 #[cfg(target_os = "none")]
 pub mod bootloader;
@@ -61,6 +62,14 @@ macro_rules! trace_tasks {
         include!(concat!(env!("OUT_DIR"), "/trace_tasks.rs"));
     };
 }
+
+// For `timer_monotonic!` in the board crates.
+#[cfg(target_os = "none")]
+#[doc(hidden)]
+pub use cortex_m as __cortex_m;
+#[cfg(target_os = "none")]
+#[doc(hidden)]
+pub use rtic_time as __rtic_time;
 
 #[cfg(all(target_os = "none", not(any(feature = "f1", feature = "f4"))))]
 compile_error!("amiro-firmware: enable the chip family feature `f1` or `f4`");

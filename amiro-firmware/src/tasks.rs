@@ -264,7 +264,36 @@ pub async fn serve_admission<
             admission.sampled(),
         );
         C::delay_until_us(next).await;
+        if admission.stale() {
+            // A stream left the running set (a stop, a one-shot): its board's kept analysis is redone now, as a
+            // paced step of its own, so that no decision re-analyses more than its own board and the bus.
+            let started = C::now_us();
+            admission.refresh_stale();
+            #[cfg(feature = "qemu")]
+            note_refresh::<C, N, M>(admission, started);
+            let next = pacing.next_start(started, C::now_us(), admission.analysed(), false);
+            C::delay_until_us(next).await;
+        }
     }
+}
+
+/// QEMU: the cost of a refresh step, as [`note_decision`] logs a decision's.
+#[cfg(feature = "qemu")]
+fn note_refresh<C: Clock, const N: usize, const M: usize>(
+    admission: &crate::admission::Admission<'_, N, M>,
+    started: u64,
+) {
+    let (last, _) = admission.iterations();
+    let took = C::now_us().saturating_sub(started);
+    let (mut b, mut c) = ([0u8; 10], [0u8; 10]);
+    cortex_m::interrupt::free(|_| {
+        crate::log!(
+            "admission refresh iterations=",
+            telemetry::decimal(u32::try_from(last).unwrap_or(u32::MAX), &mut b),
+            " virtual_us=",
+            telemetry::decimal(u32::try_from(took).unwrap_or(u32::MAX), &mut c)
+        );
+    });
 }
 
 /// Handles one command frame with admission control (`admission`, `docs/analysis.md`): every

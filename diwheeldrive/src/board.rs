@@ -425,10 +425,11 @@ pub const CAN_TX_INTERRUPT: pac::Interrupt = pac::Interrupt::USB_HP_CAN_TX;
 
 /// Starts the TIM5 monotonic (APB1 timers run at 2 × PCLK1: 72 MHz, or 64 MHz on the fallback).
 pub fn start_monotonic(priority: u8) {
-    // SAFETY: init owns TIM5 and RCC at this point; the monotonic takes TIM5 over for good.
-    let (tim5, rcc) = unsafe { (pac::Peripherals::steal().TIM5, &*pac::RCC::ptr()) };
+    // SAFETY: init owns RCC at this point (only TIM5's enable and reset bits change); the
+    // monotonic takes TIM5 over for good.
+    let rcc = unsafe { &*pac::RCC::ptr() };
     let timer_clock = TIMER_CLOCK_HZ.load(core::sync::atomic::Ordering::Relaxed);
-    crate::mono::Tim5Backend::start(tim5, rcc, timer_clock, priority);
+    crate::mono::start(rcc, timer_clock, priority);
 }
 
 /// Interrupt of the SYS_PD_N line.

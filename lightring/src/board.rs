@@ -4,7 +4,8 @@
 //! CAN1 on PA11/PA12 at 1 Mbit/s, one TLC5947 on SPI1 (SCK PA5, MOSI PA7; MISO PA6 unused) at
 //! 2.25 MHz mode 0 with XLAT on PC4 driven as the chip select (its rising edge at the end of a
 //! transfer latches) and BLANK on PA4 (high = dark, the reset state, until the driver holds a
-//! frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The monotonic is TIM3.
+//! frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The monotonic is TIM3 (the runtime's half-period
+//! timer backend; it claims no pin — its channels only compare — so PA6/PA7 stay SPI1's).
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
 use amiro_firmware::spi;
@@ -31,9 +32,12 @@ pub const CAN_TX_INTERRUPT: pac::Interrupt = pac::Interrupt::USB_HP_CAN_TX;
 /// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
 pub type CanRxPort = Fifo0<Mmio>;
 /// The board's clock: TIM3 ticks are microseconds.
-pub type Clock = amiro_firmware::mono::TimerClock<rtic_monotonics::stm32::Tim3Backend, 1>;
+pub type Clock = amiro_firmware::mono::TimerClock<Tim3Backend, 1>;
 
-rtic_monotonics::stm32_tim3_monotonic!(Mono, 1_000_000);
+/// TIM3's registers: the same address and interrupt (29) on the F103 and on QEMU's `netduino2`.
+const TIM3_BASE: usize = 0x4000_0400;
+
+amiro_firmware::timer_monotonic!(Tim3Backend, TIM3_BASE, pac::Interrupt::TIM3, TIM3);
 
 /// Everything `init` hands on to the tasks.
 pub struct Board {
@@ -164,7 +168,12 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
 
 /// Starts the TIM3 monotonic (APB1 timers run at 2 × PCLK1).
 pub fn start_monotonic(priority: u8, timer_hz: u32) {
-    Mono::start(timer_hz, rtic_monotonics::stm32::Priority::new(priority));
+    // SAFETY: init owns RCC at this point; only TIM3's enable and reset bits change.
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    rcc.apb1enr().modify(|_, w| w.tim3en().set_bit());
+    rcc.apb1rstr().modify(|_, w| w.tim3rst().set_bit());
+    rcc.apb1rstr().modify(|_, w| w.tim3rst().clear_bit());
+    Tim3Backend::start(timer_hz, priority);
 }
 
 /// LightRing's safe state, from any context: BLANK high, every LED dark at once.

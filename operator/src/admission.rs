@@ -509,6 +509,10 @@ impl Checker {
             }
             Refusal::Capacity => "the robot's table cannot hold another publisher.".to_string(),
             Refusal::ZeroPeriod => format!("a zero period (frames 0x{:03X}).", request.id),
+            Refusal::Budget => format!(
+                "its analysis needs more than the boards' {} fixed-point iterations per decision (a load this close to 100 % is refused without a verdict on its deadlines).",
+                schedule_analysis::admission::DECISION_ITERATIONS
+            ),
         }
     }
 

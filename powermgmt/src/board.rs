@@ -32,10 +32,14 @@ const VSYS_CHANNEL: u32 = 9;
 /// Polls of the end-of-conversion flag: a conversion takes 492 ADC clocks at 21 MHz (23 µs).
 const ADC_POLLS: u32 = 20_000;
 
-rtic_monotonics::stm32_tim2_monotonic!(Mono, 1_000_000);
+/// TIM2's registers (a 32-bit timer on the F405; the runtime's backend counts 16 bits on it as on
+/// the F103's timers).
+const TIM2_BASE: usize = 0x4000_0000;
+
+amiro_firmware::timer_monotonic!(Tim2Backend, TIM2_BASE, Interrupt::TIM2, TIM2);
 
 /// The board's clock: TIM2 ticks are microseconds.
-pub type Clock = amiro_firmware::mono::TimerClock<rtic_monotonics::stm32::Tim2Backend, 1>;
+pub type Clock = amiro_firmware::mono::TimerClock<Tim2Backend, 1>;
 /// The CAN controller's transmit mailboxes (the runtime's register-level driver).
 pub type CanTxPort = Mailboxes<Mmio>;
 /// The CAN controller's receive FIFO 0 (the runtime's register-level driver).
@@ -333,10 +337,15 @@ impl SystemSignals {
     }
 }
 
-/// Starts the TIM2 monotonic.
+/// Starts the TIM2 monotonic (the runtime's half-period timer backend).
 pub fn start_monotonic(priority: u8) {
-    Mono::start(
+    // SAFETY: init owns RCC at this point; only TIM2's enable and reset bits change.
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    rcc.apb1enr().modify(|_, w| w.tim2en().set_bit());
+    rcc.apb1rstr().modify(|_, w| w.tim2rst().set_bit());
+    rcc.apb1rstr().modify(|_, w| w.tim2rst().clear_bit());
+    Tim2Backend::start(
         TIMER_CLOCK_HZ.load(core::sync::atomic::Ordering::Relaxed),
-        rtic_monotonics::stm32::Priority::new(priority),
+        priority,
     );
 }

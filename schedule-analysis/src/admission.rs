@@ -20,8 +20,8 @@
 //! deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without jitter budgets
 //! (a property test checks that they agree).
 
-use crate::board::{self, LevelLoads, TaskTiming};
-use crate::busy_window::{AnalysisError, Counter, Limits, Response};
+use crate::board::{self, TaskTiming};
+use crate::busy_window::{AnalysisError, Counter, Limits, Load, Response, Share};
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
 
@@ -29,6 +29,11 @@ use crate::time::Time;
 pub const LEVELS: usize = 4;
 /// Rounds of the per-board release-jitter iteration (as the host analysis).
 const MAX_JITTER_ROUNDS: usize = 100;
+/// Fixed-point iterations one board's analysis may take, and the bus's (split evenly over its messages)
+/// ([`Refusal::Budget`] beyond): what bounds a decision's cost on the chip, which analyses one board and the bus. A configuration loaded close to 100 % can need a hundred thousand iterations (a
+/// search found one: 217 ms of a board's CPU for one decision, docs/analysis.md); the requests the scenarios and
+/// the thesis make take at most a few hundred.
+pub const DECISION_ITERATIONS: u64 = 250;
 /// The longest period the period search tries (the protocol's 32-bit microsecond span, ≈ 71.6 min).
 pub const MAX_PERIOD: Time = Time::from_ns(4_294_967_295_000);
 
@@ -260,6 +265,10 @@ pub enum Refusal {
     Capacity,
     /// The request's period is zero.
     ZeroPeriod,
+    /// A board's analysis, or the bus's, needed more than [`DECISION_ITERATIONS`] fixed-point iterations: refused
+    /// without a verdict on
+    /// its deadlines (the check's cost stays bounded; refusing never breaks a deadline). Below the hard floor.
+    Budget,
 }
 
 /// What one analysis of a configuration found.
@@ -606,6 +615,8 @@ struct Bounds<'a> {
     first: &'a mut [Time],
     busy: &'a mut [Time],
     iterations: &'a mut u64,
+    /// Whether a response ran out of its iterations ([`Refusal::Budget`]).
+    limited: bool,
 }
 
 impl board::Results for Bounds<'_> {
@@ -615,7 +626,10 @@ impl board::Results for Bounds<'_> {
                 *self.iterations += r.iterations;
                 (r.wcrt.as_ns(), r.first_window, r.busy_window)
             }
-            Err(_) => (NONE, Time::ZERO, Time::ZERO),
+            Err(e) => {
+                self.limited |= e == AnalysisError::IterationLimit;
+                (NONE, Time::ZERO, Time::ZERO)
+            }
         };
         if let (Some(w), Some(f), Some(b)) = (
             self.wcrt.get_mut(i),
@@ -678,6 +692,7 @@ fn evaluate_into<const N: usize, const M: usize>(
     };
     let limits = Limits {
         horizon: horizon(robot, &streams),
+        iterations: DECISION_ITERATIONS,
     };
     let mut found = Found::default();
     let mut senders = SenderBounds {
@@ -719,6 +734,8 @@ fn evaluate_into<const N: usize, const M: usize>(
                 key,
                 ..Summary::EMPTY
             };
+            // Each board's analysis has its own budget (not what the boards before it left over): its outcome
+            // depends on its own inputs only, so a kept analysis is the one a fresh decision would compute.
             if let Err(refusal) =
                 analyse_board::<N, M>(robot, b, table, &streams, &limits, iterations, target)
             {
@@ -733,7 +750,17 @@ fn evaluate_into<const N: usize, const M: usize>(
         summary.note_violations(b, &mut found);
         summary.apply(b, table, &streams, &mut senders);
     }
-    analyse_bus(robot, &streams, &senders, &limits, iterations, &mut found);
+    if !analyse_bus(
+        robot,
+        &streams,
+        &senders,
+        &limits,
+        DECISION_ITERATIONS,
+        iterations,
+        &mut found,
+    ) {
+        return Found::refused(Refusal::Budget);
+    }
     // Kept when the request is carried out: admitted, or refused above the floor under accept-and-warn.
     if let (Some(b), Some((c, keep_refused))) = (requesting, cache) {
         let carried_out = found.first.is_none() || (keep_refused && found.floor.is_none());
@@ -952,16 +979,19 @@ impl<const M: usize> Summary<M> {
     }
 }
 
-/// The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al.
+/// The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al. `left`:
+/// the analysis's iterations left, split evenly over the messages; `false` when a message ran out of its share
+/// ([`Refusal::Budget`]).
 #[inline(never)]
 fn analyse_bus<const M: usize>(
     robot: &RobotTable<'_>,
     streams: &View<'_, M>,
     senders: &SenderBounds<M>,
     limits: &Limits,
+    left: u64,
     iterations: &mut u64,
     found: &mut Found,
-) {
+) -> bool {
     let bit = robot.bit_time;
     let n = streams.len;
     let mut order = [0u8; M];
@@ -1021,19 +1051,28 @@ fn analyse_bus<const M: usize>(
     let mut wcrt = [NONE; M];
     let mut first_window = [Time::ZERO; M];
     let mut busy = [Time::ZERO; M];
+    let share = Limits {
+        iterations: left / (n.max(1) as u64),
+        ..*limits
+    };
+    let mut bounds = Bounds {
+        wcrt: &mut wcrt,
+        first: &mut first_window,
+        busy: &mut busy,
+        iterations,
+        limited: false,
+    };
     can::response_times_into(
         timings,
         blockings.get(..n).unwrap_or(&[]),
         bit,
-        limits,
+        &share,
         &mut scratch,
-        &mut Bounds {
-            wcrt: &mut wcrt,
-            first: &mut first_window,
-            busy: &mut busy,
-            iterations,
-        },
+        &mut bounds,
     );
+    if bounds.limited {
+        return false;
+    }
     for (position, &i) in order.iter().enumerate().take(n) {
         let m = usize::from(i);
         let Some(s) = streams.get(m) else { continue };
@@ -1072,6 +1111,7 @@ fn analyse_bus<const M: usize>(
             }
         }
     }
+    true
 }
 
 /// Stable insertion sort (small sets; allocation-free): `after(a, b)` says `a` belongs after `b`.
@@ -1091,40 +1131,23 @@ fn insertion_sort(items: &mut [u8], after: impl Fn(u8, u8) -> bool) {
     }
 }
 
-/// One board's jobs, kept sorted by priority (most urgent first, ties in table order) as they are added.
+/// One board's jobs, sorted by priority (most urgent first, ties in table order).
 struct Jobs<const N: usize> {
     timings: [TaskTiming; N],
     meta: [JobMeta; N],
     len: usize,
 }
 
-impl<const N: usize> Jobs<N> {
-    /// Adds a job; its original index is the number of jobs before it.
-    fn push(&mut self, timing: TaskTiming, mut meta: JobMeta) -> Result<u8, Refusal> {
-        let original = u8::try_from(self.len).map_err(|_| Refusal::Capacity)?;
-        if self.len >= N {
-            return Err(Refusal::Capacity);
-        }
-        meta.original = original;
-        let at = self
-            .timings
-            .iter()
-            .take(self.len)
-            .position(|t| t.priority < timing.priority)
-            .unwrap_or(self.len);
-        let mut k = self.len;
-        while k > at {
-            self.timings.swap(k, k - 1);
-            self.meta.swap(k, k - 1);
-            k -= 1;
-        }
-        if let (Some(t), Some(m)) = (self.timings.get_mut(at), self.meta.get_mut(at)) {
-            *t = timing;
-            *m = meta;
-        }
-        self.len += 1;
-        Ok(original)
-    }
+/// What a job of a board's analysis is made of (indices are bytes: the working sets are below [`NO_JOB`]).
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    /// A fixed task: its row in the board's `tasks`.
+    Fixed(u8),
+    /// The timer job of the stream at this [`View`] position.
+    Timer { stream: u8 },
+    /// The publisher job of the stream at this [`View`] position: its topic row, and its timer job's original
+    /// index ([`NO_JOB`]: none).
+    Publisher { stream: u8, topic: u8, timer: u8 },
 }
 
 /// One board's tasks with the configuration's publishers: writes its first violated deadline (in table order),
@@ -1141,6 +1164,8 @@ fn analyse_board<const N: usize, const M: usize>(
     iterations: &mut u64,
     summary: &mut Summary<M>,
 ) -> Result<(), Refusal> {
+    // `limits.iterations` is what this board's analysis may spend, counted from here.
+    let spent_before = *iterations;
     let mine = || {
         streams
             .iter()
@@ -1155,85 +1180,159 @@ fn analyse_board<const N: usize, const M: usize>(
         })
         .min()
         .unwrap_or_else(|| can::shortest_frame_time(robot.bit_time));
-    let mut jobs = Jobs::<N> {
-        timings: [EMPTY_TIMING; N],
-        meta: [EMPTY_META; N],
-        len: 0,
+    // Every job in original order (table order: the fixed tasks, then per stream its timer job and its job): its
+    // priority and what it is made of. Then the originals are sorted by priority (most urgent first, ties in
+    // original order, a stable sort of bytes) and each job is built once, at its place.
+    let mut priority_of = [0u8; N];
+    let mut source = [Source::Fixed(0); N];
+    let mut count = 0usize;
+    let mut add = |priority: u8, what: Source| -> Result<u8, Refusal> {
+        let original = u8::try_from(count)
+            .ok()
+            .filter(|&o| o != NO_JOB)
+            .ok_or(Refusal::Capacity)?;
+        *priority_of.get_mut(count).ok_or(Refusal::Capacity)? = priority;
+        *source.get_mut(count).ok_or(Refusal::Capacity)? = what;
+        count += 1;
+        Ok(original)
     };
     for (i, t) in table.tasks.iter().enumerate() {
-        let period = if t.own_frame {
-            own_frame
-        } else {
-            row_time(t.period)
-        };
-        let jitter = row_time(t.jitter);
-        jobs.push(
-            TaskTiming {
-                priority: u32::from(t.priority),
-                wcet: row_time(t.cost),
-                period,
-                jitter,
-            },
-            JobMeta {
-                id: TaskId::Fixed(u16::try_from(i).map_err(|_| Refusal::Capacity)?),
-                deadline: if t.deadline == NO_DEADLINE {
-                    period
-                } else {
-                    row_time(t.deadline)
-                },
-                own_jitter: jitter,
-                // NO_RELEASER is NO_JOB.
-                released_by: t.released_by,
-                original: 0,
-            },
+        add(
+            t.priority,
+            Source::Fixed(u8::try_from(i).map_err(|_| Refusal::Capacity)?),
         )?;
     }
-    for (_, s) in mine() {
+    for (m, s) in mine() {
         let Some(sender) = s.sender else { continue };
         let priority = table
             .levels
             .get(usize::from(sender.level))
             .copied()
             .flatten()
-            .map(u32::from)
             .ok_or(Refusal::Capacity)?;
         let topic = table
             .topics
             .iter()
-            .find(|t| t.topic == sender.topic)
+            .position(|t| t.topic == sender.topic)
+            .and_then(|t| u8::try_from(t).ok())
             .ok_or(Refusal::Capacity)?;
+        let stream = u8::try_from(m).map_err(|_| Refusal::Capacity)?;
         let timer = match table.monotonic {
-            Some(m) => jobs.push(
-                TaskTiming {
-                    priority: u32::from(m.priority),
-                    wcet: row_time(m.cost),
-                    period: s.period,
-                    jitter: row_time(m.jitter),
-                },
-                JobMeta {
-                    id: TaskId::Timer(sender.topic),
-                    deadline: s.period,
-                    own_jitter: row_time(m.jitter),
-                    ..EMPTY_META
-                },
-            )?,
+            Some(mono) => add(mono.priority, Source::Timer { stream })?,
             None => NO_JOB,
         };
-        jobs.push(
-            TaskTiming {
-                priority,
-                wcet: row_time(topic.cost),
-                period: s.period,
-                jitter: Time::ZERO,
-            },
-            JobMeta {
-                id: TaskId::Publisher(sender.topic),
-                deadline: s.deadline(),
-                own_jitter: Time::ZERO,
-                released_by: timer,
-                original: 0,
+        add(
+            priority,
+            Source::Publisher {
+                stream,
+                topic,
+                timer,
             },
         )?;
+    }
+    let mut order = [0u8; N];
+    for (i, slot) in order.iter_mut().enumerate().take(count) {
+        *slot = i as u8;
+    }
+    let urgency = |o: u8| priority_of.get(usize::from(o)).copied().unwrap_or(0);
+    insertion_sort(order.get_mut(..count).unwrap_or(&mut []), |a, b| {
+        urgency(a) < urgency(b)
+    });
+    let mut jobs = Jobs::<N> {
+        timings: [EMPTY_TIMING; N],
+        meta: [EMPTY_META; N],
+        len: count,
+    };
+    for ((&original, timing), meta) in order
+        .iter()
+        .zip(jobs.timings.iter_mut())
+        .zip(jobs.meta.iter_mut())
+        .take(count)
+    {
+        let what = source
+            .get(usize::from(original))
+            .copied()
+            .ok_or(Refusal::Capacity)?;
+        let priority = u32::from(urgency(original));
+        let stream_of = |m: u8| streams.get(usize::from(m)).ok_or(Refusal::Capacity);
+        (*timing, *meta) = match what {
+            Source::Fixed(row) => {
+                let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
+                let period = if t.own_frame {
+                    own_frame
+                } else {
+                    row_time(t.period)
+                };
+                let jitter = row_time(t.jitter);
+                (
+                    TaskTiming {
+                        priority,
+                        wcet: row_time(t.cost),
+                        period,
+                        jitter,
+                    },
+                    JobMeta {
+                        id: TaskId::Fixed(u16::from(row)),
+                        deadline: if t.deadline == NO_DEADLINE {
+                            period
+                        } else {
+                            row_time(t.deadline)
+                        },
+                        own_jitter: jitter,
+                        // NO_RELEASER is NO_JOB.
+                        released_by: t.released_by,
+                        original,
+                    },
+                )
+            }
+            Source::Timer { stream } => {
+                let s = stream_of(stream)?;
+                let (Some(mono), Some(sender)) = (table.monotonic, s.sender) else {
+                    return Err(Refusal::Capacity);
+                };
+                (
+                    TaskTiming {
+                        priority,
+                        wcet: row_time(mono.cost),
+                        period: s.period,
+                        jitter: row_time(mono.jitter),
+                    },
+                    JobMeta {
+                        id: TaskId::Timer(sender.topic),
+                        deadline: s.period,
+                        own_jitter: row_time(mono.jitter),
+                        released_by: NO_JOB,
+                        original,
+                    },
+                )
+            }
+            Source::Publisher {
+                stream,
+                topic,
+                timer,
+            } => {
+                let s = stream_of(stream)?;
+                let row = table
+                    .topics
+                    .get(usize::from(topic))
+                    .ok_or(Refusal::Capacity)?;
+                (
+                    TaskTiming {
+                        priority,
+                        wcet: row_time(row.cost),
+                        period: s.period,
+                        jitter: Time::ZERO,
+                    },
+                    JobMeta {
+                        id: TaskId::Publisher(row.topic),
+                        deadline: s.deadline(),
+                        own_jitter: Time::ZERO,
+                        released_by: timer,
+                        original,
+                    },
+                )
+            }
+        };
     }
     let len = jobs.len;
     // Sorted position of each original index; releasers as sorted positions.
@@ -1251,9 +1350,15 @@ fn analyse_board<const N: usize, const M: usize>(
     };
 
     // SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job.
+    // Jobs of one priority share it: worked out once per level (the jobs are sorted by priority).
     let mut blocking = [Time::ZERO; N];
+    let mut last_level: Option<(u32, Time)> = None;
     for (slot, timing) in blocking.iter_mut().zip(jobs.timings.iter()).take(len) {
         let p = timing.priority;
+        if let Some((_, known)) = last_level.filter(|&(level, _)| level == p) {
+            *slot = known;
+            continue;
+        }
         // SRP (`board::srp_blocking`): a lower holder's section on a resource whose ceiling reaches `p`.
         let mut longest = 0;
         for cs in table.sections {
@@ -1282,6 +1387,25 @@ fn analyse_board<const N: usize, const M: usize>(
             }
         }
         *slot = row_time(longest);
+        last_level = Some((p, *slot));
+    }
+    // Each job's share of the CPU, one division per job (not one per job and level as it is summed).
+    let mut shares = [Share::default(); N];
+    for (share, timing) in shares.iter_mut().zip(jobs.timings.iter()).take(len) {
+        *share = Share::of(timing.wcet, timing.period);
+    }
+    // Where each job's priority level ends (the jobs are sorted by priority).
+    let mut level_end = [0u8; N];
+    let mut end = len;
+    for i in (0..len).rev() {
+        if let (Some(t), Some(next)) = (jobs.timings.get(i), jobs.timings.get(i + 1)) {
+            if t.priority != next.priority {
+                end = i + 1;
+            }
+        }
+        if let Some(slot) = level_end.get_mut(i) {
+            *slot = end as u8;
+        }
     }
 
     // Release jitters to a fixed point: a released job inherits its releaser's WCRT. When every releaser is more
@@ -1315,7 +1439,8 @@ fn analyse_board<const N: usize, const M: usize>(
     };
     let mut settled = false;
     for _ in 0..MAX_JITTER_ROUNDS {
-        let mut levels = LevelLoads::default();
+        // The load of every job of this and the more urgent levels, summed as each level is entered.
+        let mut prefix = Load::default();
         let mut level_start = 0;
         let mut previous_level = 0..0;
         for i in 0..len {
@@ -1348,6 +1473,11 @@ fn analyse_board<const N: usize, const M: usize>(
                         }
                     }
                 }
+                // The level's load, with its jitters as they are now (as `board::LevelLoads` sums it).
+                let end = usize::from(level_end.get(i).copied().unwrap_or(0));
+                for (share, timing) in shares.iter().zip(jobs.timings.iter()).take(end).skip(i) {
+                    prefix = prefix.plus(share.load(timing.jitter));
+                }
             }
             let (Some(&task), Some(&blocking_i)) = (jobs.timings.get(i), blocking.get(i)) else {
                 break;
@@ -1365,14 +1495,20 @@ fn analyse_board<const N: usize, const M: usize>(
                 .max()
                 .unwrap_or(Time::ZERO);
             let timings = jobs.timings.get(..len).unwrap_or(&[]);
-            let load = levels.at(timings, i, |a, b| a.priority == b.priority);
-            let result = board::response_time_hinted(
+            let own = shares.get(i).copied().unwrap_or_default();
+            let load = prefix.minus(own.load(task.jitter));
+            let result = board::response_time_at_level(
                 timings,
                 i,
+                usize::from(level_end.get(i).copied().unwrap_or(0)),
                 blocking_i,
                 hint,
                 load,
-                limits,
+                own,
+                &Limits {
+                    iterations: limits.iterations.saturating_sub(*iterations - spent_before),
+                    ..*limits
+                },
                 &mut scratch,
             );
             let (w, f) = match result {
@@ -1380,6 +1516,8 @@ fn analyse_board<const N: usize, const M: usize>(
                     *iterations += r.iterations;
                     (r.wcrt.as_ns(), r.first_window)
                 }
+                // Out of the analysis's iterations: no verdict on the deadlines ([`Refusal::Budget`]).
+                Err(AnalysisError::IterationLimit) => return Err(Refusal::Budget),
                 Err(_) => (NONE, Time::ZERO),
             };
             if let (Some(ws), Some(fs)) = (wcrt.get_mut(i), first_window.get_mut(i)) {

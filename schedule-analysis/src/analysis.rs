@@ -309,6 +309,7 @@ pub fn analyse_with_progress(
 ) -> Analysis {
     let limits = Limits {
         horizon: options.horizon.unwrap_or_else(|| default_horizon(system)),
+        ..Limits::default()
     };
     let boards: Vec<BoardResult> = system
         .boards

@@ -62,6 +62,9 @@ pub struct Subject {
     pub known_first_window: Time,
     /// The same for the non-preemptive level busy period.
     pub known_busy_period: Time,
+    /// Its own utilisation when the caller has it already ([`Share::utilisation`] of `cost × instances` per
+    /// `period`); `None`: worked out here.
+    pub known_utilisation: Option<u64>,
 }
 
 impl Subject {
@@ -81,6 +84,7 @@ impl Subject {
             blocking,
             known_first_window: Time::ZERO,
             known_busy_period: Time::ZERO,
+            known_utilisation: None,
         }
     }
 }
@@ -102,6 +106,10 @@ pub enum Discipline {
 pub struct Limits {
     /// A busy window longer than this is reported as unbounded.
     pub horizon: Time,
+    /// Fixed-point iterations one response may take ([`AnalysisError::IterationLimit`] beyond):
+    /// [`MAX_ITERATIONS`] by default; the admission check gives each response what is left of its per-decision
+    /// budget.
+    pub iterations: u64,
 }
 
 impl Default for Limits {
@@ -109,6 +117,7 @@ impl Default for Limits {
     fn default() -> Self {
         Limits {
             horizon: Time::from_us(60_000_000),
+            iterations: MAX_ITERATIONS,
         }
     }
 }
@@ -211,11 +220,17 @@ fn add(a: u64, b: u64) -> Result<u64, AnalysisError> {
 }
 
 fn mul(a: u64, b: u64) -> Result<u64, AnalysisError> {
+    if (a | b) >> 32 == 0 {
+        // Both below 2^32 (the boards' common case): one 32 × 32 → 64-bit multiply, which cannot overflow,
+        // instead of the Cortex-M3's checked 64 × 64 sequence.
+        return Ok(u64::from(a as u32) * u64::from(b as u32));
+    }
     a.checked_mul(b).ok_or(AnalysisError::Overflow)
 }
 
 /// `⌈a / b⌉`; total: a zero `b` (which no caller passes: periods are checked first) gives `u64::MAX`, so no
 /// division-by-zero panic is linked into the boards' admission check.
+#[inline(always)]
 fn ceil_div(a: u64, b: u64) -> u64 {
     if a == 0 {
         0
@@ -245,25 +260,59 @@ pub struct Load {
     pub zero_periods: u64,
 }
 
-impl Load {
-    /// The load of one interferer (nothing when it costs nothing).
-    pub fn of<A: Activations>(other: &A) -> Load {
-        let (c, t) = (other.activation_cost().as_ns(), other.period().as_ns());
+/// An activation source's share of the processor or bus: its utilisation, worked out once (one division) so that
+/// a caller that needs it again — as an interferer's [`Load`] with a changing jitter, as the subject's own
+/// utilisation ([`Subject::known_utilisation`]) — does not divide again.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Share {
+    utilisation: u64,
+    zero_period: bool,
+}
+
+impl Share {
+    /// The share of work `cost` every `period` (nothing when it costs nothing; a zero period overloads).
+    pub fn of(cost: Time, period: Time) -> Share {
+        let (c, t) = (cost.as_ns(), period.as_ns());
         if c == 0 {
-            return Load::default();
+            Share::default()
+        } else if t == 0 {
+            Share {
+                utilisation: 0,
+                zero_period: true,
+            }
+        } else {
+            Share {
+                utilisation: utilisation_floor(c, t),
+                zero_period: false,
+            }
         }
-        if t == 0 {
+    }
+
+    /// Its utilisation, `⌊c/t · 2^UTIL_BITS⌋` capped at [`UTIL_ONE`] (0 for a zero period).
+    pub fn utilisation(self) -> u64 {
+        self.utilisation
+    }
+
+    /// Its load as an interferer with release jitter `jitter`: exactly [`Load::of`].
+    pub fn load(self, jitter: Time) -> Load {
+        if self.zero_period {
             return Load {
                 zero_periods: 1,
                 ..Load::default()
             };
         }
-        let u = utilisation_floor(c, t);
         Load {
-            utilisation: u,
-            jitter_load: scaled_floor(other.jitter().as_ns(), u).min(BOUND_LIMIT),
+            utilisation: self.utilisation,
+            jitter_load: scaled_floor(jitter.as_ns(), self.utilisation).min(BOUND_LIMIT),
             zero_periods: 0,
         }
+    }
+}
+
+impl Load {
+    /// The load of one interferer (nothing when it costs nothing).
+    pub fn of<A: Activations>(other: &A) -> Load {
+        Share::of(other.activation_cost(), other.period()).load(other.jitter())
     }
 
     /// Both loads together.
@@ -302,6 +351,10 @@ fn utilisation_floor(c: u64, t: u64) -> u64 {
     if c >= t {
         return UTIL_ONE;
     }
+    if t >> 32 == 0 {
+        // c < t < 2^32: exactly ⌊c · 2^UTIL_BITS / t⌋, by 32-bit divisions.
+        return shifted_quotient(c, t);
+    }
     // c < t: shift both until c·2^UTIL_BITS fits; c rounds down and t up, so the quotient stays at most c/t.
     let shift = (64 - c.leading_zeros()).saturating_sub(64 - UTIL_BITS);
     let c_scaled = (c >> shift) << UTIL_BITS;
@@ -311,6 +364,34 @@ fn utilisation_floor(c: u64, t: u64) -> u64 {
         ceil_div(t, 1 << shift)
     };
     c_scaled / t_scaled.max(1)
+}
+
+/// `⌊n · 2^UTIL_BITS / d⌋` for `n < 2^(64 − UTIL_BITS)` and `d > 0`. When both fit in 32 bits this is a long
+/// division by the Cortex-M3's 32-bit hardware divide, a few bits per step (as many as `d` leaves free in a 32-bit
+/// remainder), instead of the 64-bit software division (≈ 150 instructions a call on the chip): the same quotient.
+fn shifted_quotient(n: u64, d: u64) -> u64 {
+    if let (Ok(n32), Ok(d32)) = (u32::try_from(n), u32::try_from(d)) {
+        // A remainder is below `d`, so it can be shifted left by `d`'s leading zeros without overflow.
+        let step = d32.leading_zeros();
+        if d32 != 0 && step > 0 {
+            let high = u64::from(n32 / d32);
+            let mut r = n32 % d32;
+            // The low UTIL_BITS bits of the quotient, in 32 bits (no 64-bit shifts in the loop).
+            let mut low = 0u32;
+            let mut left = UTIL_BITS;
+            while left > 0 {
+                let s = step.min(left);
+                let x = r << s;
+                low = (low << s) | (x / d32);
+                r = x % d32;
+                left -= s;
+            }
+            return (high << UTIL_BITS) | u64::from(low);
+        }
+    }
+    n.checked_shl(UTIL_BITS)
+        .and_then(|x| x.checked_div(d))
+        .unwrap_or(u64::MAX)
 }
 
 /// `⌊x · u / 2^UTIL_BITS⌋` for a fixed-point utilisation `u ≤ UTIL_ONE`, or 0 when `x` is too large for the
@@ -352,10 +433,10 @@ pub fn response_time_loaded<A: Activations>(
     }
     let per = u64::from(subject.instances_per_activation.max(1));
     let own_activation = mul(subject.cost.as_ns(), per)?;
-    let u_own = if own_activation == 0 {
-        0
-    } else {
-        utilisation_floor(own_activation, t_own)
+    let u_own = match subject.known_utilisation {
+        Some(u) => u,
+        None if own_activation == 0 => 0,
+        None => utilisation_floor(own_activation, t_own),
     };
     // Rounded down, so above 100 % is a real overload; a level loaded to within rounding of 100 % stops at the
     // horizon instead.
@@ -369,7 +450,7 @@ pub fn response_time_loaded<A: Activations>(
         u_own,
         jitter_load: load.jitter_load,
     };
-    let mut window = Window::new(others, exclude, scratch, limits.horizon.as_ns());
+    let mut window = Window::new(others, exclude, scratch, limits);
     match discipline {
         Discipline::Preemptive => preemptive(subject, &mut window, &loads),
         Discipline::NonPreemptive { bit_time } => {
@@ -394,6 +475,8 @@ struct Window<'a, 'b, A> {
     /// Σ count·C over the heap.
     sum: u64,
     horizon: u64,
+    /// Evaluations of the interference sum allowed ([`Limits::iterations`]).
+    max_iterations: u64,
     /// Evaluations of the interference sum so far.
     iterations: u64,
 }
@@ -403,7 +486,7 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
         others: &'a [A],
         exclude: Option<usize>,
         scratch: &'b mut [Counter],
-        horizon: u64,
+        limits: &Limits,
     ) -> Self {
         // Without room for every interferer, fall back to dividing once per interferer and iteration.
         let heap = if scratch.len() >= others.len() {
@@ -417,7 +500,8 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
             heap,
             len: 0,
             sum: 0,
-            horizon,
+            horizon: limits.horizon.as_ns(),
+            max_iterations: limits.iterations.min(MAX_ITERATIONS),
             iterations: 0,
         }
     }
@@ -456,7 +540,7 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
     /// a counter is only touched (one division) when the window passed its next activation.
     fn demand(&mut self, x: u64) -> Result<u64, AnalysisError> {
         self.iterations += 1;
-        if self.iterations > MAX_ITERATIONS {
+        if self.iterations > self.max_iterations {
             return Err(AnalysisError::IterationLimit);
         }
         if self.heap.is_empty() {
@@ -479,8 +563,14 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
                 other.period().as_ns(),
                 other.jitter().as_ns(),
             );
-            // Jump straight to the count at `x` (one division however many activations the window grew by).
-            let count = ceil_div(add(x, j)?, t).max(counter.count + 1);
+            // The window passed one activation (the common case: `next < x ≤ next + T`): the count at `x` is
+            // one more, no division. Otherwise jump straight to the count at `x` (one division however many
+            // activations the window grew by).
+            let count = if x - counter.next <= t {
+                counter.count + 1
+            } else {
+                ceil_div(add(x, j)?, t).max(counter.count + 1)
+            };
             self.sum = add(self.sum, mul(count - counter.count, c)?)?;
             counter.count = count;
             counter.next = mul(count, t)?.saturating_sub(j);
@@ -518,7 +608,7 @@ fn lower_bound(
             .and_then(|n| n.checked_add(scaled_floor(own_jitter.min(BOUND_LIMIT), loads.u_own)));
     }
     match numerator {
-        Some(n) if n < BOUND_LIMIT => ((n << UTIL_BITS) / slack).max(floor),
+        Some(n) if n < BOUND_LIMIT => shifted_quotient(n, slack).max(floor),
         _ => floor,
     }
 }
@@ -629,7 +719,8 @@ fn non_preemptive<A: Activations>(
                 return Err(AnalysisError::BeyondHorizon);
             }
         };
-        let activation = q / per;
+        // Frames per activation are almost always 1: no 64-bit division then.
+        let activation = if per == 1 { q } else { q / per };
         let r = add(add(w, c)?, j)?.saturating_sub(mul(activation, t)?);
         if worst.is_none_or(|best| r > best.wcrt.as_ns()) {
             worst = Some(Response {
@@ -675,6 +766,62 @@ mod tests {
             Time::ZERO,
             Time::ZERO,
         )
+    }
+
+    #[test]
+    fn the_long_division_is_the_64_bit_one() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let edges = [
+            1,
+            2,
+            3,
+            255,
+            256,
+            65_535,
+            1 << 24,
+            (1 << 24) + 1,
+            u32::MAX as u64 - 1,
+            u32::MAX as u64,
+        ];
+        for _ in 0..200_000 {
+            let n = next() >> (next() % 64).max(UTIL_BITS as u64);
+            let d = (next() >> (next() % 64)).max(1);
+            let d = if next() % 8 == 0 {
+                edges[(next() % edges.len() as u64) as usize]
+            } else {
+                d
+            };
+            assert_eq!(shifted_quotient(n, d), (n << UTIL_BITS) / d, "{n} {d}");
+        }
+        for &n in &edges {
+            for &d in &edges {
+                assert_eq!(shifted_quotient(n, d), (n << UTIL_BITS) / d, "{n} {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_share_is_the_load_it_stands_for() {
+        for (c, t, j) in [
+            (0, 0, 5),
+            (3, 0, 1),
+            (3, 7, 2),
+            (700_000, 900_000, 12_000),
+            (5, 3, 0),
+            (1, 1 << 40, 9),
+        ] {
+            let stream = Stream(c, t, j);
+            assert_eq!(
+                Share::of(Time::from_ns(c), Time::from_ns(t)).load(Time::from_ns(j)),
+                Load::of(&stream)
+            );
+        }
     }
 
     #[test]

@@ -58,8 +58,9 @@ pub const BOARDS: [Board; 3] = [
         flash_budget: 48 * 1024,
         // PowerManagement fits its own 48 KiB with the admission check (issue 10).
         // Issue 20: the hard floor, the busy verdicts and the paced admission task (≈ 1.5 KB) put
-        // PowerManagement ≈ 1.2 KB over its own 48 KiB; a stated allowance until the check shrinks.
-        admission_allowance: 2 * 1024,
+        // PowerManagement ≈ 3.3 KB over its own 48 KiB (the check, issue 20's cost work +0.7 KB, issue 21's bounded waits and
+        // timer monotonic): a stated allowance until the check shrinks.
+        admission_allowance: 4 * 1024,
     },
     Board {
         name: "lightring",

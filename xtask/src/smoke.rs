@@ -15,9 +15,13 @@
 //! [`POLL`] the guest is stopped, its program counter read and its RAM saved (`pmemsave`); the
 //! RTT log channel is read out of the RAM image at the `_SEGGER_RTT` control block (found by
 //! symbol as `cargo xtask bench` finds it on a probe, or by scanning RAM for its ID), the
-//! monotonic's interrupt counter at its symbol. It fails when the board halts (a panic or a
-//! HardFault parks the CPU in `fault::halt`), when the monotonic's interrupts stop while QEMU runs,
-//! and when the log misses a step of the boot ([`check_log`]).
+//! monotonic's half-period counter (`amiro_firmware::timer_monotonic`, every board's) at its
+//! symbol. The inputs the boot reads and QEMU has no GPIO for are held at the robot's level
+//! ([`environment`]): by the stand-in, or through QEMU's gdbstub ([`gdb`]). It fails when the board halts (a panic or a HardFault parks the CPU in `fault::halt`),
+//! when the monotonic's counter stops while QEMU runs, and when the log misses a step of the boot
+//! ([`check_log`]).
+//!
+//! [`run_board`] takes one board and its ELF, so a caller can run it once per board revision.
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -27,6 +31,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, ensure, Context, Result};
 use object::{Object, ObjectSymbol};
 
+mod gdb;
 mod waits;
 
 use crate::boards::Board;
@@ -38,11 +43,10 @@ pub const STANDIN_BASE: u32 = 0x0800_0000;
 const RAM_BASE: u32 = 0x2000_0000;
 /// How often the guest is stopped and looked at (wall time).
 const POLL: Duration = Duration::from_millis(250);
-/// How many of the monotonic's interrupts make a run: in QEMU only the timers' update
-/// (overflow) interrupt fires, one per 65.536 ms of the board's microsecond clock, so this is
-/// about two seconds of the board's time.
-pub const INTERRUPTS: u32 = 32;
-/// How long the monotonic's interrupt counter may stand still (wall time) before the run fails.
+/// How many half periods of the monotonic make a run: QEMU's timer model has no compare events,
+/// so each of its update interrupts counts two (`timer_monotonic::advance`): 32 interrupts.
+pub const HALF_PERIODS: u32 = 64;
+/// How long the monotonic's counter may stand still (wall time) before the run fails.
 const STALL: Duration = Duration::from_secs(15);
 /// The wall-time guard of one board's run.
 const WALL_LIMIT: Duration = Duration::from_secs(120);
@@ -140,16 +144,70 @@ pub fn callback_at(pc: u32) -> Option<&'static str> {
     CALLBACKS.get((offset / 2) as usize).copied()
 }
 
-/// What the stand-in sets up before the hand-over, where a QEMU machine has a writable register
-/// at the address of a chip input the boot reads (the robot's environment, not the firmware's
-/// doing). On `netduino2` the F205's USART1 sits where the F103's GPIOC does, and GPIOC_IDR
-/// (0x4001_1008) is its baud-rate register, which reads back what was written: bits 8 and 14 make
-/// SYS_PD_N (PC8 on DiWheelDrive, PC14 on LightRing) read released, as the robot's pull-ups hold
-/// it. `netduinoplus2` has no GPIO at all (its GPIOC reads zero), so PowerManagement sees SYS_PD_N
-/// driven low and, rightly, shuts down.
-pub fn environment(machine: &str) -> &'static [(u32, u32)] {
+/// One input of the robot's environment that the stand-in sets before the hand-over, through a
+/// register QEMU's machine happens to have at the address the firmware reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Input {
+    /// The address the firmware reads.
+    pub address: u32,
+    /// What the stand-in writes there.
+    pub value: u32,
+    /// What it stands for on the robot.
+    pub stands_for: &'static str,
+    /// Which of QEMU's registers makes it work (the reliance, stated).
+    pub through: &'static str,
+    /// Who sets it.
+    pub via: Via,
+}
+
+/// How an input of the robot's environment is set in QEMU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Via {
+    /// The stand-in writes it before the hand-over (a register that reads back).
+    StandIn,
+    /// A read watchpoint through QEMU's gdbstub sets the bits in each load's result
+    /// ([`gdb::hold_inputs`]): the port reads zero and drops writes.
+    Watchpoint,
+}
+
+/// The F103's GPIOC (RM0008 §9): its input data register is at offset 8.
+const F103_GPIOC_IDR: u32 = 0x4001_1000 + 0x08;
+/// The F205's USART1 on `netduino2` (QEMU's `stm32f205_soc.c`) and its baud-rate register
+/// (offset 8), which QEMU's USART model stores and reads back without side effects.
+const F205_USART1_BRR: u32 = 0x4001_1000 + 0x08;
+
+/// The F405's GPIOC input data register (RM0090 §8.4.5), PowerManagement's SYS_PD_N port.
+const F405_GPIOC_IDR: u32 = 0x4002_0800 + 0x10;
+
+/// The environment set up around the image on `machine` (the robot's, not the firmware's
+/// doing). The only QEMU register at the address of an input the boot reads that reads back what
+/// is written is on `netduino2`, where the F205's USART1 sits where the F103's GPIOC does, and its
+/// BRR where GPIOC_IDR is: the stand-in writes it. Bits 8 and 14 make SYS_PD_N (PC8 on DiWheelDrive,
+/// PC14 on LightRing) read released, as the robot's pull-ups hold it. The firmware's writes to
+/// GPIOC's other registers land in USART1's (`docs/faults.md` says why that is harmless); none
+/// writes BRR's offset (IDR is read-only on the F103). The reliance checks itself: if QEMU stopped
+/// reading BRR back, SYS_PD_N would read low, the board would hand over, and its run would fail.
+/// `netduinoplus2` has no GPIO at all (its GPIOC is an unimplemented-device region that reads
+/// zero and drops writes): there a read watchpoint through the gdbstub sets PC13 (SYS_PD_N) in
+/// every load from GPIOC_IDR, the other pins reading zero as before. Without it PowerManagement
+/// would see SYS_PD_N driven low and, rightly, shut down.
+pub fn environment(machine: &str) -> &'static [Input] {
+    const _: () = assert!(F103_GPIOC_IDR == F205_USART1_BRR);
     match machine {
-        "netduino2" => &[(0x4001_1008, 1 << 8 | 1 << 14)],
+        "netduino2" => &[Input {
+            address: F103_GPIOC_IDR,
+            value: 1 << 8 | 1 << 14,
+            stands_for: "SYS_PD_N released (PC8 / PC14 held high by the robot's pull-ups)",
+            through: "netduino2's USART1_BRR, which reads back, at the F103's GPIOC_IDR",
+            via: Via::StandIn,
+        }],
+        "netduinoplus2" => &[Input {
+            address: F405_GPIOC_IDR,
+            value: 1 << 13,
+            stands_for: "SYS_PD_N released (PC13 held high by the robot's pull-up)",
+            through: "a gdbstub read watchpoint on GPIOC_IDR, PC13 set in each load's result",
+            via: Via::Watchpoint,
+        }],
         _ => &[],
     }
 }
@@ -157,31 +215,22 @@ pub fn environment(machine: &str) -> &'static [(u32, u32)] {
 /// How a board's boot must end in QEMU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Ending {
-    /// The tasks run (the watchdog task has started) and nothing faults; with `ticks`, the
-    /// monotonic takes [`INTERRUPTS`] interrupts, else the run lasts [`QUIET_POLLS`] looks.
-    Running {
-        /// Whether QEMU's timer model runs this board's monotonic.
-        ticks: bool,
-    },
-    /// SYS_PD_N reads low (no GPIO in QEMU): the board hands over to AMiRo-BLT's callback.
+    /// The tasks run (the watchdog task has started), the monotonic counts [`HALF_PERIODS`] and
+    /// reports the compare events QEMU's timer lacks, and nothing faults.
+    Running,
+    /// SYS_PD_N reads low (a machine with no way to hold it released): the board's shutdown task
+    /// hands over to AMiRo-BLT's callback, before the monotonic's first interrupt.
     HandOver(&'static str),
 }
 
-/// Looks at a board whose monotonic QEMU cannot run, before its run counts as done.
-pub const QUIET_POLLS: u32 = 12;
-
-/// What QEMU lets each board show (`docs/faults.md`): DiWheelDrive's own TIM5 backend writes
-/// ARR, which arms QEMU's STM32 timer, and needs nothing but its update interrupt to count;
-/// rtic-monotonics' TIM3 (LightRing) never writes ARR (the reset value is right on a chip), so
-/// QEMU never arms the timer — and it asserts on the compare interrupts QEMU's timer lacks.
-/// PowerManagement's machine has no GPIO for the stand-in to set SYS_PD_N on.
-pub fn expected_ending(board: &str, machine: &str) -> Ending {
+/// What QEMU lets each board show (`docs/faults.md`): on a machine where the run can hold
+/// SYS_PD_N released (stand-in or gdbstub) the board runs, else it takes the line's low level for
+/// a shutdown request.
+pub fn expected_ending(machine: &str) -> Ending {
     if environment(machine).is_empty() {
         Ending::HandOver("handle a shutdown request")
     } else {
-        Ending::Running {
-            ticks: board == "diwheeldrive",
-        }
+        Ending::Running
     }
 }
 
@@ -271,6 +320,13 @@ pub fn rtt_up_channel(ram: &[u8], control: Option<u32>, channel: u32) -> Result<
     Ok(out)
 }
 
+/// The monotonic's report of a timer without compare events (`amiro_firmware::timer_monotonic`).
+pub const MISSED_COMPARE: &str = "monotonic: a half-period compare event went missing";
+
+/// The watchdog task's first feed: the board's periodic work ran and the watchdog task woke on
+/// the monotonic (`amiro_firmware::watchdog::feed`).
+pub const FIRST_FEED: &str = "watchdog: first feed";
+
 /// What the production boot must have logged, in this order (`docs/faults.md`, "The production
 /// image in QEMU"). QEMU emulates no clock tree and no bxCAN: the log must say so.
 pub fn check_log(log: &str, ending: Ending) -> Vec<String> {
@@ -309,14 +365,20 @@ pub fn check_log(log: &str, ending: Ending) -> Vec<String> {
         ("init: done", "the end of init"),
     ];
     match ending {
-        Ending::Running { .. } => steps.push((
+        Ending::Running => steps.push((
             "watchdog: reset after 500 ms",
             "the watchdog task's start (RTIC runs the tasks)",
         )),
-        Ending::HandOver(_) => steps.push((
-            "watchdog: reset after 26214 ms",
-            "the watchdog stretched to its longest before the hand-over",
-        )),
+        Ending::HandOver(_) => steps.extend([
+            (
+                "shutdown requested from outside",
+                "the shutdown task (RTIC runs the tasks)",
+            ),
+            (
+                "watchdog: reset after 26214 ms",
+                "the watchdog stretched to its longest before the hand-over",
+            ),
+        ]),
     }
     let mut after = 0;
     for (prefix, meaning) in steps {
@@ -336,14 +398,119 @@ pub fn check_log(log: &str, ending: Ending) -> Vec<String> {
             failures.push("the power lines were set before the clock tree".into());
         }
     }
+    // The monotonic's interrupt ran and its event accounting saw what QEMU's timer lacks (its
+    // first interrupt may come before or after the watchdog task's start).
+    let init = find("init: done");
+    let missed = find(MISSED_COMPARE);
+    match ending {
+        Ending::Running if !matches!((init, missed), (Some(i), Some(m)) if i < m) => {
+            failures.push(format!(
+                "missing the monotonic's report of QEMU's missing compare events after init: no \
+                 line `{MISSED_COMPARE}…`"
+            ))
+        }
+        Ending::Running if find(FIRST_FEED).is_none() => failures.push(format!(
+            "no `{FIRST_FEED}`: the watchdog task never saw its periodic work done, so tasks did \
+             not wake on the monotonic (in QEMU a wake can also be lost to its timer model, see \
+             docs/faults.md)"
+        )),
+        Ending::HandOver(_) if missed.is_some() => failures.push(
+            "the monotonic ticked before the hand-over (the shutdown path should be immediate)"
+                .into(),
+        ),
+        _ => {}
+    }
+    failures
+}
+
+/// A board's monotonic timer (its `board.rs` / `mono.rs`: `amiro_firmware::timer_monotonic!`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MonotonicTimer {
+    /// Its name on the chip.
+    pub name: &'static str,
+    /// Its registers' base address (the same on the chip and on the board's QEMU machine).
+    pub base: u32,
+}
+
+/// Which timer each board's monotonic runs on: DiWheelDrive TIM5 (TIM2–TIM4 drive its motors and
+/// count its encoders), LightRing TIM3, PowerManagement TIM2 — all where QEMU's machines model
+/// them (TIM2–TIM5 at the F103's and the F405's addresses).
+pub fn monotonic_timer(board: &str) -> MonotonicTimer {
+    match board {
+        "diwheeldrive" => MonotonicTimer {
+            name: "TIM5",
+            base: 0x4000_0C00,
+        },
+        "lightring" => MonotonicTimer {
+            name: "TIM3",
+            base: 0x4000_0400,
+        },
+        _ => MonotonicTimer {
+            name: "TIM2",
+            base: 0x4000_0000,
+        },
+    }
+}
+
+/// The internal oscillator of the chip a machine stands for: the clock the boards fall back to
+/// in QEMU, whose RCC reads as reset (F103 8 MHz, F405 16 MHz; every bus undivided, so the timers'
+/// input too).
+pub fn internal_oscillator_hz(machine: &str) -> u32 {
+    if machine == "netduinoplus2" {
+        16_000_000
+    } else {
+        8_000_000
+    }
+}
+
+/// What the monotonic's timer registers (`before`, and `after` a moment of running) must show:
+/// counting microseconds of `timer_clock_hz` (PSC), a 16-bit period (ARR), the half-period compare
+/// (CCR1 at 0x8000), the update and compare-1 interrupts (DIER), enabled (CR1.CEN), and counting.
+pub fn check_timer(
+    timer: &MonotonicTimer,
+    before: &[u32],
+    after: &[u32],
+    timer_clock_hz: u32,
+) -> Vec<String> {
+    const CR1: usize = 0;
+    const DIER: usize = 0x0C / 4;
+    const CNT: usize = 0x24 / 4;
+    const PSC: usize = 0x28 / 4;
+    const ARR: usize = 0x2C / 4;
+    const CCR1: usize = 0x34 / 4;
+    let mut failures = Vec::new();
+    if before.len() < 16 || after.len() < 16 {
+        return vec![format!("{}: too few registers read", timer.name)];
+    }
+    let psc = timer_clock_hz / 1_000_000 - 1;
+    for (what, index, mask, expected) in [
+        ("CR1.CEN (enabled)", CR1, 1, 1),
+        ("DIER (update and compare-1 interrupts)", DIER, 0b11, 0b11),
+        ("PSC (1 MHz from the clock in use)", PSC, 0xFFFF, psc),
+        ("ARR (a 16-bit period)", ARR, 0xFFFF_FFFF, 0xFFFF),
+        ("CCR1 (the half-period compare)", CCR1, 0xFFFF_FFFF, 0x8000),
+    ] {
+        let value = after[index] & mask;
+        if value != expected {
+            failures.push(format!(
+                "the monotonic's {} at {:#010x}: {what} is {value:#x}, not {expected:#x}",
+                timer.name, timer.base
+            ));
+        }
+    }
+    if before[CNT] == after[CNT] {
+        failures.push(format!(
+            "the monotonic's {} does not count (CNT stays {:#x})",
+            timer.name, after[CNT]
+        ));
+    }
     failures
 }
 
 /// The symbols the run needs from the ELF.
 struct Symbols {
     rtt: Option<u32>,
-    /// The monotonic's interrupt counter (DiWheelDrive's TIM5 half periods, rtic-monotonics'
-    /// overflow counters).
+    /// The monotonic's half-period counter (`timer_monotonic::HalfPeriods`, its count first).
     counter: u32,
     /// `amiro_firmware::fault::halt`, where a panic or a HardFault parks the CPU.
     halt: std::ops::Range<u32>,
@@ -355,8 +522,8 @@ fn symbols(elf: &[u8]) -> Result<Symbols> {
         file.symbols()
             .find(|s| !s.is_undefined() && s.name().map(pred).unwrap_or(false) && s.address() != 0)
     };
-    let counter = find(&|n| n.contains("HALF_PERIODS") || n.contains("OVERFLOWS"))
-        .context("no monotonic interrupt counter (HALF_PERIODS / …OVERFLOWS) in the ELF")?;
+    let counter = find(&|n| n.contains("HALF_PERIODS"))
+        .context("no monotonic half-period counter (HALF_PERIODS) in the ELF")?;
     let halt = find(&|n| n.contains("14amiro_firmware5fault4halt"))
         .context("no amiro_firmware::fault::halt in the ELF")?;
     let start = (halt.address() & !1) as u32;
@@ -440,6 +607,30 @@ impl Qmp {
         Ok(reply.get("return").cloned().unwrap_or_default())
     }
 
+    /// `count` words of the guest's physical memory from `address` (device registers too: the
+    /// human monitor's `xp` reads through the machine's bus).
+    fn words(&mut self, address: u32, count: usize) -> Result<Vec<u32>> {
+        let dump = self.execute(
+            "human-monitor-command",
+            Some(serde_json::json!({ "command-line": format!("xp /{count}wx {address:#x}") })),
+        )?;
+        let words: Vec<u32> = dump
+            .as_str()
+            .unwrap_or_default()
+            .lines()
+            .filter_map(|line| line.split_once(": ").map(|(_, rest)| rest))
+            .flat_map(|rest| rest.split_whitespace())
+            .map(|word| u32::from_str_radix(word.trim_start_matches("0x"), 16))
+            .collect::<Result<_, _>>()
+            .context("QEMU's `xp` answered something other than hex words")?;
+        ensure!(
+            words.len() == count,
+            "QEMU's `xp` gave {} words, not {count}",
+            words.len()
+        );
+        Ok(words)
+    }
+
     /// The guest's program counter, from the human monitor's register dump.
     fn pc(&mut self) -> Result<u32> {
         let dump = self.execute(
@@ -480,8 +671,10 @@ pub struct Outcome {
     pub log: String,
     /// The AMiRo-BLT callback the board handed over to, if it did.
     pub handed_over: Option<&'static str>,
-    /// The monotonic's interrupts counted during the run.
-    pub interrupts: u32,
+    /// The monotonic's half periods counted during the run.
+    pub half_periods: u32,
+    /// Loads of a watched input set to the robot's level ([`Via::Watchpoint`]), if any.
+    pub patched_loads: Option<u32>,
     /// Everything that went wrong (empty: passed).
     pub failures: Vec<String>,
 }
@@ -500,7 +693,14 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
     let standin_path = work.join("amiro-blt-standin.bin");
     std::fs::write(
         &standin_path,
-        standin(board.app_base as u32, environment(board.qemu_machine)),
+        standin(
+            board.app_base as u32,
+            &environment(board.qemu_machine)
+                .iter()
+                .filter(|input| input.via == Via::StandIn)
+                .map(|input| (input.address, input.value))
+                .collect::<Vec<_>>(),
+        ),
     )?;
     let symbols = symbols(&elf)?;
     let stderr_path = work.join("qemu-stderr.log");
@@ -521,8 +721,30 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
         .args(["-device", &loader(&standin_path, STANDIN_BASE.into())])
         .args(["-device", &loader(&image_path, board.app_base)])
         .current_dir(work);
+    let watched: Vec<(u32, u32)> = environment(board.qemu_machine)
+        .iter()
+        .filter(|input| input.via == Via::Watchpoint)
+        .map(|input| (input.address, input.value))
+        .collect();
+    let gdb_socket = work.join("gdb.sock");
+    if !watched.is_empty() {
+        let _ = std::fs::remove_file(&gdb_socket);
+        // Held at reset until the watchpoints are in; the gdbstub starts the guest.
+        qemu.arg("-chardev")
+            .arg(format!(
+                "socket,id=gdb,path={},server=on,wait=off",
+                gdb_socket.display()
+            ))
+            .args(["-gdb", "chardev:gdb", "-S"]);
+    }
 
     let mut qmp = Qmp::start(&mut qemu)?;
+    let steering = gdb::Steering::default();
+    let patcher = if watched.is_empty() {
+        None
+    } else {
+        Some(gdb::hold_inputs(&gdb_socket, watched, steering.clone())?)
+    };
     let stderr = qmp.child.stderr.take();
     let stderr_file = std::fs::File::create(&stderr_path)?;
     if let Some(mut stderr) = stderr {
@@ -537,18 +759,32 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
     let mut log = String::new();
     let mut failures = Vec::new();
     let mut handed_over = None;
-    let mut polls = 0;
-    let ending = expected_ending(board.name, board.qemu_machine);
+    let ending = expected_ending(board.qemu_machine);
     loop {
         std::thread::sleep(POLL);
         if let Some(status) = qmp.child.try_wait()? {
             failures.push(format!("QEMU exited ({status})"));
             break;
         }
+        if started.elapsed() > WALL_LIMIT {
+            failures.push(format!(
+                "the run did not end within {WALL_LIMIT:?} (the guest stayed stopped at a \
+                 watched input?)"
+            ));
+            break;
+        }
+        let held = steering.lock().unwrap_or_else(|poison| poison.into_inner());
         qmp.execute("stop", None)?;
+        let status = qmp.execute("query-status", None)?;
+        if status.get("status").and_then(|s| s.as_str()) == Some("debug") {
+            // Stopped at a watched input: the patcher's to resume.
+            drop(held);
+            continue;
+        }
         let pc = qmp.pc()?;
         let ram = qmp.save_ram(board.ram_bytes, &snapshot)?;
         qmp.execute("cont", None)?;
+        drop(held);
         if let Ok(bytes) = rtt_up_channel(&ram, symbols.rtt, 0) {
             log = String::from_utf8_lossy(&bytes).into_owned();
         }
@@ -571,31 +807,56 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
         if counter != last.0 {
             last = (counter, Instant::now());
         }
-        polls += 1;
-        match ending {
-            Ending::Running { ticks: true } if counter.wrapping_sub(base) >= INTERRUPTS => break,
-            Ending::Running { ticks: false } if polls >= QUIET_POLLS => break,
-            _ => {}
+        if ending == Ending::Running && counter.wrapping_sub(base) >= HALF_PERIODS {
+            break;
         }
-        if ending != (Ending::Running { ticks: false }) && last.1.elapsed() > STALL {
+        if last.1.elapsed() > STALL {
             failures.push(format!(
-                "no progress: the monotonic's interrupt counter stayed at {counter} for {STALL:?} \
-                 (pc {pc:#010x})"
+                "no progress: the monotonic's half-period counter stayed at {counter} for \
+                 {STALL:?} (pc {pc:#010x})"
             ));
             break;
         }
         if started.elapsed() > WALL_LIMIT {
             failures.push(format!(
-                "only {} of {INTERRUPTS} monotonic interrupts in {WALL_LIMIT:?}",
+                "only {} of {HALF_PERIODS} half periods of the monotonic in {WALL_LIMIT:?}",
                 counter.wrapping_sub(base)
             ));
             break;
         }
     }
-    let interrupts = last.0.wrapping_sub(first.unwrap_or(last.0));
+    let half_periods = last.0.wrapping_sub(first.unwrap_or(last.0));
+    // The monotonic's timer as the board left it (after a hand-over too: AMiRo-BLT's hand-over
+    // masks the interrupts, it does not stop the timer).
+    let timer = monotonic_timer(board.name);
+    let timer_state = (|| -> Result<_> {
+        let before = qmp.words(timer.base, 16)?;
+        std::thread::sleep(Duration::from_millis(20));
+        Ok((before, qmp.words(timer.base, 16)?))
+    })();
     drop(qmp);
+    let mut patched_loads = None;
+    if let Some(patcher) = patcher {
+        match patcher.join() {
+            Ok(Ok(patched)) => patched_loads = Some(patched),
+            Ok(Err(error)) => failures.push(format!("holding the inputs: {error:#}")),
+            Err(_) => failures.push("the input patcher panicked".into()),
+        }
+    }
+    match timer_state {
+        Ok((before, after)) => failures.extend(check_timer(
+            &timer,
+            &before,
+            &after,
+            internal_oscillator_hz(board.qemu_machine),
+        )),
+        Err(error) => failures.push(format!(
+            "could not read the monotonic's timer {} at {:#010x}: {error:#}",
+            timer.name, timer.base
+        )),
+    }
     match (ending, handed_over) {
-        (Ending::Running { .. }, Some(callback)) => failures.push(format!(
+        (Ending::Running, Some(callback)) => failures.push(format!(
             "the board handed over to AMiRo-BLT's `{callback}` callback instead of running on"
         )),
         (Ending::HandOver(expected), None) => failures.push(format!(
@@ -610,7 +871,8 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
     Ok(Outcome {
         log,
         handed_over,
-        interrupts,
+        half_periods,
+        patched_loads,
         failures,
     })
 }
@@ -664,24 +926,40 @@ pub fn run(root: &Path, boards: &[&'static Board]) -> Result<()> {
             "── {} on {} (production image behind an AMiRo-BLT stand-in) ──",
             board.name, board.qemu_machine
         );
+        for input in environment(board.qemu_machine) {
+            println!(
+                "  [{}: {} at {:#010x}, through {}]",
+                match input.via {
+                    Via::StandIn => "stand-in",
+                    Via::Watchpoint => "gdbstub",
+                },
+                input.stands_for,
+                input.address,
+                input.through
+            );
+        }
+        if let Some(patched) = outcome.patched_loads {
+            println!("  [{patched} load(s) of the watched input given the robot's level]");
+        }
         for line in outcome.log.lines() {
             println!("  {line}");
         }
         if outcome.failures.is_empty() {
+            let timer = monotonic_timer(board.name);
+            println!(
+                "  [monotonic: {} at {:#010x} counts 1 MHz of the internal oscillator, 16-bit \
+                 period, half-period compare set, interrupts enabled]",
+                timer.name, timer.base
+            );
             match outcome.handed_over {
                 Some(callback) => println!(
                     "smoke {}: ok (handed over to AMiRo-BLT's `{callback}` callback: SYS_PD_N \
-                     reads low on {}, which has no GPIO)",
+                     reads low on {}, where nothing holds it released)",
                     board.name, board.qemu_machine
                 ),
-                None if outcome.interrupts > 0 => println!(
-                    "smoke {}: ok ({} monotonic interrupts)",
-                    board.name, outcome.interrupts
-                ),
                 None => println!(
-                    "smoke {}: ok (running, no fault; its monotonic does not run on QEMU's timer \
-                     model, see docs/faults.md)",
-                    board.name
+                    "smoke {}: ok ({} half periods of the monotonic)",
+                    board.name, outcome.half_periods
                 ),
             }
         } else {
@@ -806,18 +1084,21 @@ mod tests {
         CAN: silent: the controller did not enter initialisation mode\n\
         init: done; RTIC starts the tasks\n\
         watchdog: reset after 500 ms without a feed\n\
+        monotonic: a half-period compare event went missing; time goes on from the updates\n\
         watchdog: first feed (the tasks and the monotonic run)\n";
 
     #[test]
     fn a_complete_boot_log_passes() {
-        assert_eq!(
-            check_log(GOOD, Ending::Running { ticks: true }),
-            Vec::<String>::new()
-        );
+        assert_eq!(check_log(GOOD, Ending::Running), Vec::<String>::new());
         let handed_over = GOOD
             .replace(
-                "watchdog: reset after 500 ms",
-                "watchdog: reset after 26214 ms",
+                "watchdog: reset after 500 ms without a feed\n",
+                "shutdown requested from outside: publishers stopped\n\
+                 watchdog: reset after 26214 ms without a feed\n",
+            )
+            .replace(
+                &format!("{MISSED_COMPARE}; time goes on from the updates\n"),
+                "",
             )
             .replace(
                 "watchdog: first feed (the tasks and the monotonic run)\n",
@@ -827,12 +1108,19 @@ mod tests {
             check_log(&handed_over, Ending::HandOver("restart")),
             Vec::<String>::new()
         );
-        assert!(!check_log(&handed_over, Ending::Running { ticks: true }).is_empty());
+        let ticked_first = format!("{handed_over}{MISSED_COMPARE}\n");
+        assert_eq!(
+            check_log(&ticked_first, Ending::HandOver("restart")).len(),
+            1
+        );
+        let without_task = handed_over.replace("shutdown requested from outside", "shutdown");
+        assert!(!check_log(&without_task, Ending::HandOver("restart")).is_empty());
+        assert!(!check_log(&handed_over, Ending::Running).is_empty());
     }
 
     #[test]
     fn each_missing_or_misplaced_step_fails() {
-        let steps: [&[usize]; 7] = [&[0], &[1, 2, 3], &[4], &[5], &[6], &[7], &[8]];
+        let steps: [&[usize]; 9] = [&[0], &[1, 2, 3], &[4], &[5], &[6], &[7], &[8], &[9], &[10]];
         for drop in steps {
             let log: String = GOOD
                 .lines()
@@ -841,23 +1129,69 @@ mod tests {
                 .map(|(_, l)| format!("{l}\n"))
                 .collect();
             assert!(
-                !check_log(&log, Ending::Running { ticks: true }).is_empty(),
+                !check_log(&log, Ending::Running).is_empty(),
                 "without lines {drop:?}:\n{log}"
             );
         }
         let late_watchdog = GOOD.replace(", watchdog running", ", watchdog NOT running");
-        assert!(!check_log(&late_watchdog, Ending::Running { ticks: true }).is_empty());
+        assert!(!check_log(&late_watchdog, Ending::Running).is_empty());
         let panicked = format!("{GOOD}panic at src/main.rs:12\n");
-        assert_eq!(
-            check_log(&panicked, Ending::Running { ticks: true }).len(),
-            1
-        );
+        assert_eq!(check_log(&panicked, Ending::Running).len(), 1);
         let swapped = GOOD
             .replace("power lines: SYS_SYNC_N held low\n", "")
             .replace(
                 "boot: LightRing, watchdog running\n",
                 "boot: LightRing, watchdog running\npower lines: early\n",
             );
-        assert!(!check_log(&swapped, Ending::Running { ticks: true }).is_empty());
+        assert!(!check_log(&swapped, Ending::Running).is_empty());
+        let tick_before_init =
+            GOOD.replace("init: done; RTIC starts the tasks\n", "") + "init: done\n";
+        assert!(!check_log(&tick_before_init, Ending::Running).is_empty());
+    }
+
+    #[test]
+    fn each_machine_states_how_sys_pd_n_reads_released() {
+        let inputs = environment("netduino2");
+        assert_eq!(inputs.len(), 1);
+        assert_eq!(inputs[0].address, 0x4001_1008, "the F103's GPIOC_IDR");
+        assert_eq!(inputs[0].value, 1 << 8 | 1 << 14, "PC8 and PC14");
+        assert_eq!(inputs[0].via, Via::StandIn);
+        assert!(inputs[0].through.contains("USART1_BRR"));
+        let inputs = environment("netduinoplus2");
+        assert_eq!(inputs.len(), 1);
+        assert_eq!(inputs[0].address, 0x4002_0810, "the F405's GPIOC_IDR");
+        assert_eq!(inputs[0].value, 1 << 13, "PC13");
+        assert_eq!(inputs[0].via, Via::Watchpoint);
+        assert_eq!(expected_ending("netduino2"), Ending::Running);
+        assert_eq!(expected_ending("netduinoplus2"), Ending::Running);
+        assert_eq!(
+            expected_ending("stm32vldiscovery"),
+            Ending::HandOver("handle a shutdown request")
+        );
+    }
+
+    #[test]
+    fn the_monotonic_timer_must_be_set_up_and_counting() {
+        let timer = monotonic_timer("powermgmt");
+        let mut regs = vec![0u32; 16];
+        regs[0] = 1;
+        regs[3] = 0b11;
+        regs[9] = 0x1234;
+        regs[10] = 15;
+        regs[11] = 0xFFFF;
+        regs[13] = 0x8000;
+        let mut later = regs.clone();
+        later[9] = 0x2345;
+        assert_eq!(
+            check_timer(&timer, &regs, &later, 16_000_000),
+            Vec::<String>::new()
+        );
+        assert_eq!(check_timer(&timer, &regs, &regs, 16_000_000).len(), 1);
+        assert_eq!(check_timer(&timer, &regs, &later, 8_000_000).len(), 1);
+        let mut unarmed = later.clone();
+        unarmed[11] = 0;
+        assert_eq!(check_timer(&timer, &regs, &unarmed, 16_000_000).len(), 1);
+        assert_eq!(monotonic_timer("lightring").base, 0x4000_0400);
+        assert_eq!(monotonic_timer("diwheeldrive").base, 0x4000_0C00);
     }
 }

@@ -1,0 +1,182 @@
+//! A search for the on-chip admission check's costliest step (issue 20): random command sequences (publish
+//! requests of every topic of the robot at every level and a spread of periods, stops, one-shots, policy
+//! changes), each replayed through a board's [`Admission`] on the host exactly as the admission task runs it
+//! (a refresh step after a command that leaves a kept analysis stale), then hill-climbed by mutating single
+//! commands of the best sequence. The objective is a step's fixed-point iterations (what the host can count the
+//! same as the chip); the instructions the chip spends on the winner are measured by replaying its `candump -l`
+//! log in QEMU (scenario `admission-search`, which checks them against the admission task's budget).
+//!
+//! `cargo run --release -p amiro-firmware --example admission_search -- [SEED] [ROUNDS] > admission-search.log`
+use amiro_firmware::admission::{Admission, State};
+use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
+
+/// Every sensor topic of the robot: DiWheelDrive's nine, PowerManagement's three, LightRing's one.
+const TOPICS: [u8; 13] = [
+    0x01, 0x02, 0x04, 0x05, 0x06, 0x07, 0x08, 0x09, 0x1A, 0x1B, 0x1E, 0x1F, 0x1C,
+];
+/// The boards' diagnostics topics (where a policy command goes).
+const DIAGNOSTICS: [u8; 3] = [0x1A, 0x1B, 0x1C];
+/// Periods tried: (value, unit byte: 0 ms, 1 s, 2 µs).
+const PERIODS: [(u16, u8); 14] = [
+    (1, 2),
+    (100, 2),
+    (400, 2),
+    (700, 2),
+    (900, 2),
+    (1, 0),
+    (2, 0),
+    (5, 0),
+    (10, 0),
+    (20, 0),
+    (50, 0),
+    (100, 0),
+    (500, 0),
+    (1, 1),
+];
+/// Commands per sequence (the protocol's 13 publishers fit several times over).
+const LENGTH: usize = 40;
+
+#[derive(Clone, Copy, Debug)]
+struct Command {
+    id: u16,
+    data: [u8; 4],
+    len: usize,
+}
+
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        // xorshift64*
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+}
+
+fn random_command(rng: &mut Rng) -> Command {
+    let level = rng.below(4) as u16;
+    let topic = TOPICS[rng.below(TOPICS.len())] as u16;
+    match rng.below(10) {
+        // Mostly publish requests: they are what the check analyses.
+        0..=5 => {
+            let (value, unit) = PERIODS[rng.below(PERIODS.len())];
+            let [lo, hi] = value.to_le_bytes();
+            Command {
+                id: level << 8 | topic,
+                data: [1, lo, hi, unit],
+                len: 4,
+            }
+        }
+        6 | 7 => Command {
+            id: level << 8 | topic,
+            data: [0, 0, 0, 0],
+            len: 1,
+        },
+        8 => Command {
+            id: level << 8 | topic,
+            data: [2, 0, 0, 0],
+            len: 1,
+        },
+        _ => Command {
+            id: DIAGNOSTICS[rng.below(3)] as u16,
+            data: [3, rng.below(2) as u8, 0, 0],
+            len: 2,
+        },
+    }
+}
+
+/// The costliest step of `commands` replayed from a fresh state: (iterations, index of the command, whether it
+/// was the refresh after it).
+fn worst_step(
+    table: &schedule_analysis::admission::RobotTable<'_>,
+    commands: &[Command],
+) -> (u64, usize, bool) {
+    let mut state = Box::new(State::<48, 32>::new());
+    let mut admission = Admission::new(table, amiro_can::Board::DiWheelDrive, &mut state);
+    admission.prepare();
+    let mut worst = (0, 0, false);
+    for (i, c) in commands.iter().enumerate() {
+        let _ = admission.on_command(c.id, &c.data[..c.len]);
+        if admission.analysed() {
+            worst = worst.max((admission.iterations().0, i, false));
+        }
+        if admission.stale() {
+            admission.refresh_stale();
+            worst = worst.max((admission.iterations().0, i, true));
+        }
+    }
+    worst
+}
+
+fn main() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut args = std::env::args().skip(1);
+    let seed: u64 = args.next().map_or(20, |s| s.parse().expect("a seed"));
+    let rounds: usize = args.next().map_or(3000, |s| s.parse().expect("rounds"));
+    let robot = admission_host::lower(
+        &root,
+        &scenario::timing_files(&root),
+        1_000_000,
+        FrameCostSpec::Exact,
+    )
+    .expect("table");
+    robot.with_table(|table| {
+        let mut rng = Rng(seed.max(1));
+        let mut best: Vec<Command> = (0..LENGTH).map(|_| random_command(&mut rng)).collect();
+        let mut best_cost = worst_step(table, &best);
+        for round in 0..rounds {
+            // Half the rounds a fresh random sequence, half a mutation of the best one.
+            let candidate: Vec<Command> = if round % 2 == 0 {
+                (0..LENGTH).map(|_| random_command(&mut rng)).collect()
+            } else {
+                let mut c = best.clone();
+                for _ in 0..1 + rng.below(3) {
+                    let at = rng.below(LENGTH);
+                    c[at] = random_command(&mut rng);
+                }
+                c
+            };
+            let cost = worst_step(table, &candidate);
+            if cost.0 > best_cost.0 {
+                best = candidate;
+                best_cost = cost;
+                eprintln!(
+                    "round {round}: {} iterations at command {}{}",
+                    cost.0,
+                    cost.1,
+                    if cost.2 { " (its refresh)" } else { "" }
+                );
+            }
+        }
+        // The winner, cut after its costliest step, as a stimulus log (one command per 45 ms: the admission
+        // task's sustained pace, so none waits for the pacing or finds the queue full).
+        let end = best_cost.1 + 1;
+        println!(
+            "# Found by amiro-firmware/examples/admission_search.rs (seed {seed}, {rounds} rounds): the command sequence whose"
+        );
+        println!(
+            "# costliest admission step took the most fixed-point iterations on the host ({} at command {}{}).",
+            best_cost.0,
+            best_cost.1 + 1,
+            if best_cost.2 { ", its refresh step" } else { "" }
+        );
+        println!(
+            "# Replayed in QEMU by scenario admission-search: every step within the admission task's budget per step."
+        );
+        println!("# duration: {}ms", end * 45 + 60);
+        for (i, c) in best[..end].iter().enumerate() {
+            let data: String = c.data[..c.len].iter().map(|b| format!("{b:02X}")).collect();
+            println!(
+                "({}.{:06}) can0 {:03X}#{data}",
+                (5_000 + i * 45_000) / 1_000_000,
+                (5_000 + i * 45_000) % 1_000_000,
+                c.id
+            );
+        }
+    });
+}

@@ -1,0 +1,306 @@
+//! The microsecond monotonic of every board on the real chips: one general-purpose timer (TIM2–TIM5,
+//! the same registers at the same offsets on the F103 and the F405) counting 16 bits, extended to
+//! 64 bits by a half-period counter (rtic-time's race-free scheme: the compare on channel 1 at
+//! `0x8000` ends the lower half of a period, the update at the wrap ends the upper half); channel 2
+//! is the timer queue's compare. A board picks its timer with `timer_monotonic!`:
+//! DiWheelDrive TIM5 (TIM2–TIM4 drive its motors and count its encoders), LightRing TIM3,
+//! PowerManagement TIM2. The timer claims no pin: its channels only compare, their outputs stay off.
+//!
+//! Why not rtic-monotonics' STM32 backends: they leave ARR at its reset value (`0xFFFF` on a chip,
+//! `0` in QEMU's timer model, which then never runs), and they panic on an update that does not
+//! alternate with the half-period compare ("Monotonic must have missed an interrupt!"). Here an
+//! event that goes missing — on a chip only if the monotonic's interrupt is held off for half a
+//! period (32.8 ms at 1 MHz), in QEMU always, as its timer model has no compare channels — is
+//! counted, reported once on the log, and the time goes on from the events that did come
+//! ([`advance`]); a fault is reported, not turned into a reset loop.
+//!
+//! The event accounting and the register sequences are plain functions over
+//! [`crate::bxcan::Registers`], tested on the host against a model timer
+//! (`tests/timer_monotonic.rs`); the chip glue is the macro.
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use crate::bxcan::Registers;
+
+/// Monotonic tick rate: one tick per microsecond.
+pub const TICK_HZ: u32 = 1_000_000;
+
+const CR1: usize = 0x00;
+const DIER: usize = 0x0C;
+const SR: usize = 0x10;
+const EGR: usize = 0x14;
+const CNT: usize = 0x24;
+const PSC: usize = 0x28;
+const ARR: usize = 0x2C;
+const CCR1: usize = 0x34;
+const CCR2: usize = 0x38;
+const CR1_CEN: u32 = 1 << 0;
+const DIER_UIE: u32 = 1 << 0;
+const DIER_CC1IE: u32 = 1 << 1;
+const DIER_CC2IE: u32 = 1 << 2;
+const SR_UIF: u32 = 1 << 0;
+const SR_CC1IF: u32 = 1 << 1;
+const SR_CC2IF: u32 = 1 << 2;
+const EGR_UG: u32 = 1 << 0;
+/// Where channel 1 marks the half period.
+const HALF_PERIOD: u32 = 0x8000;
+
+/// The half periods counted so far, and the events that went missing. `repr(C)`: the count is the
+/// first word, where `cargo xtask smoke` reads it out of the emulated RAM.
+#[repr(C)]
+pub struct HalfPeriods {
+    count: AtomicU32,
+    missed: AtomicU32,
+}
+
+impl HalfPeriods {
+    /// None yet.
+    pub const fn new() -> Self {
+        Self {
+            count: AtomicU32::new(0),
+            missed: AtomicU32::new(0),
+        }
+    }
+
+    /// Half periods since the start (even: the counter is in the lower half of its period).
+    pub fn count(&self) -> u32 {
+        self.count.load(Ordering::Relaxed)
+    }
+
+    /// Timer events that went missing since the start.
+    pub fn missed(&self) -> u32 {
+        self.missed.load(Ordering::Relaxed)
+    }
+}
+
+impl Default for HalfPeriods {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Which event of a period did not come.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Missed {
+    /// The half-period compare (channel 1) before an update.
+    HalfPeriodCompare,
+    /// The update (the wrap) before a half-period compare.
+    Update,
+}
+
+impl Missed {
+    /// The log line that reports it.
+    pub const fn report(self) -> &'static str {
+        match self {
+            Missed::HalfPeriodCompare => {
+                "monotonic: a half-period compare event went missing; time goes on from the updates"
+            }
+            Missed::Update => {
+                "monotonic: an update event went missing; time goes on from the half-period compares"
+            }
+        }
+    }
+}
+
+/// The half-period count after the events `update` (the wrap) and `half` (the compare at
+/// `0x8000`) seen in one interrupt, from `count`, and the first event that went missing. An even
+/// count waits for the compare, an odd one for the update; both pending are taken in that order.
+/// An event that comes where the other was due means the other went missing: the count skips it
+/// (two half periods), so the parity keeps telling the counter's half.
+pub fn advance(count: u32, update: bool, half: bool) -> (u32, Option<Missed>) {
+    let (mut count, mut update, mut half) = (count, update, half);
+    let mut missed = None;
+    while update || half {
+        let due_is_half = count % 2 == 0;
+        let (due, other) = if due_is_half {
+            (&mut half, &mut update)
+        } else {
+            (&mut update, &mut half)
+        };
+        if *due {
+            *due = false;
+            count = count.wrapping_add(1);
+        } else {
+            *other = false;
+            count = count.wrapping_add(2);
+            missed.get_or_insert(if due_is_half {
+                Missed::HalfPeriodCompare
+            } else {
+                Missed::Update
+            });
+        }
+    }
+    (count, missed)
+}
+
+/// Starts the timer at [`TICK_HZ`] from a `timer_clock_hz` input (its bus clock on, its interrupt
+/// not yet unmasked): prescaler, a 16-bit period (ARR written: the chip's reset value, but a
+/// 32-bit TIM2/TIM5 on the F405 would otherwise count 32 bits, and QEMU's model starts at 0), the
+/// half-period compare, the update and compare-1 interrupts, counter at 1 (so the first event is
+/// the compare), flags cleared, then enabled.
+pub fn start<R: Registers>(regs: &R, counter: &HalfPeriods, timer_clock_hz: u32) {
+    regs.write(CR1, 0);
+    let psc = (timer_clock_hz / TICK_HZ).saturating_sub(1).min(0xFFFF);
+    regs.write(PSC, psc);
+    regs.write(ARR, 0xFFFF);
+    regs.write(CCR1, HALF_PERIOD);
+    regs.write(DIER, DIER_UIE | DIER_CC1IE);
+    regs.write(EGR, EGR_UG);
+    regs.write(CNT, 1);
+    regs.write(SR, 0);
+    counter.count.store(0, Ordering::SeqCst);
+    counter.missed.store(0, Ordering::SeqCst);
+    regs.write(CR1, CR1_CEN);
+}
+
+/// The timer's interrupt: takes the update and half-period flags (clearing only those: the status
+/// bits are write-0-to-clear) and counts them; returns the event that went missing if this is the
+/// first time one did (to be reported once).
+pub fn on_interrupt<R: Registers>(regs: &R, counter: &HalfPeriods) -> Option<Missed> {
+    let sr = regs.read(SR);
+    let taken = sr & (SR_UIF | SR_CC1IF);
+    if taken == 0 {
+        return None;
+    }
+    regs.write(SR, !taken & 0xFFFF);
+    let (count, missed) = advance(counter.count(), taken & SR_UIF != 0, taken & SR_CC1IF != 0);
+    counter.count.store(count, Ordering::Relaxed);
+    let missed = missed?;
+    (counter.missed.fetch_add(1, Ordering::Relaxed) == 0).then_some(missed)
+}
+
+/// The counter's 16 bits.
+pub fn counter<R: Registers>(regs: &R) -> u16 {
+    regs.read(CNT) as u16
+}
+
+/// Sets the timer-queue compare (channel 2) for `instant` as seen at `now`: a target more than one
+/// counter period away (or past) fires at the next wrap, where the queue looks again.
+pub fn set_compare<R: Registers>(regs: &R, instant: u64, now: u64) {
+    let value = if instant.wrapping_sub(now) <= 0xFFFF {
+        instant as u16
+    } else {
+        0
+    };
+    regs.write(CCR2, value.into());
+}
+
+/// Clears the timer-queue compare flag.
+pub fn clear_compare_flag<R: Registers>(regs: &R) {
+    regs.write(SR, !SR_CC2IF & 0xFFFF);
+}
+
+/// Turns the timer-queue compare interrupt on or off.
+pub fn set_compare_interrupt<R: Registers>(regs: &R, on: bool) {
+    let dier = regs.read(DIER);
+    regs.write(
+        DIER,
+        if on {
+            dier | DIER_CC2IE
+        } else {
+            dier & !DIER_CC2IE
+        },
+    );
+}
+
+/// Declares `$backend`, the timer-queue backend of the general-purpose timer at `$base` whose
+/// interrupt is `$interrupt` (a PAC `Interrupt` variant whose vector is named `$vector`), with its
+/// half-period counter in a static named `HALF_PERIODS`, and binds the vector. The board turns the
+/// timer's bus clock on, then calls `$backend::start(timer_clock_hz, priority)`.
+#[cfg(target_os = "none")]
+#[macro_export]
+macro_rules! timer_monotonic {
+    ($backend:ident, $base:expr, $interrupt:expr, $vector:ident) => {
+        /// The timer-queue backend of this board's monotonic timer.
+        pub struct $backend;
+
+        static HALF_PERIODS: $crate::timer_monotonic::HalfPeriods =
+            $crate::timer_monotonic::HalfPeriods::new();
+        static QUEUE: $crate::__rtic_time::timer_queue::TimerQueue<$backend> =
+            $crate::__rtic_time::timer_queue::TimerQueue::new();
+
+        impl $backend {
+            fn regs() -> $crate::bxcan::Mmio {
+                // SAFETY: the timer at `$base` belongs to this backend from `start` on; nothing
+                // else touches its registers.
+                unsafe { $crate::bxcan::Mmio::new($base) }
+            }
+
+            /// Starts the timer from a `timer_clock_hz` input (its bus clock already on) and
+            /// unmasks its interrupt at RTIC `priority` (the highest in the system).
+            pub fn start(timer_clock_hz: u32, priority: u8) {
+                $crate::timer_monotonic::start(&Self::regs(), &HALF_PERIODS, timer_clock_hz);
+                QUEUE.initialize($backend);
+                // SAFETY: only this interrupt's priority changes, before any task uses the clock.
+                unsafe {
+                    let mut core = $crate::__cortex_m::Peripherals::steal();
+                    core.NVIC
+                        .set_priority($interrupt, $crate::timer_monotonic::nvic_priority(priority));
+                    $crate::__cortex_m::peripheral::NVIC::unmask($interrupt);
+                }
+            }
+
+            /// Half periods and missed events so far.
+            pub fn half_periods() -> &'static $crate::timer_monotonic::HalfPeriods {
+                &HALF_PERIODS
+            }
+        }
+
+        impl $crate::__rtic_time::timer_queue::TimerQueueBackend for $backend {
+            type Ticks = u64;
+
+            fn now() -> u64 {
+                $crate::__rtic_time::half_period_counter::calculate_now(
+                    || HALF_PERIODS.count(),
+                    || $crate::timer_monotonic::counter(&Self::regs()),
+                )
+            }
+
+            fn set_compare(instant: u64) {
+                $crate::timer_monotonic::set_compare(&Self::regs(), instant, Self::now());
+            }
+
+            fn clear_compare_flag() {
+                $crate::timer_monotonic::clear_compare_flag(&Self::regs());
+            }
+
+            fn pend_interrupt() {
+                $crate::__cortex_m::peripheral::NVIC::pend($interrupt);
+            }
+
+            fn enable_timer() {
+                $crate::timer_monotonic::set_compare_interrupt(&Self::regs(), true);
+            }
+
+            fn disable_timer() {
+                $crate::timer_monotonic::set_compare_interrupt(&Self::regs(), false);
+            }
+
+            fn on_interrupt() {
+                if let Some(missed) =
+                    $crate::timer_monotonic::on_interrupt(&Self::regs(), &HALF_PERIODS)
+                {
+                    $crate::log!(missed.report());
+                }
+            }
+
+            fn timer_queue() -> &'static $crate::__rtic_time::timer_queue::TimerQueue<Self> {
+                &QUEUE
+            }
+        }
+
+        #[allow(non_snake_case)]
+        #[no_mangle]
+        unsafe extern "C" fn $vector() {
+            use $crate::__rtic_time::timer_queue::TimerQueueBackend as _;
+            // SAFETY: called only from this timer's vector, as the timer queue requires.
+            unsafe { $backend::timer_queue().on_monotonic_interrupt() };
+        }
+    };
+}
+
+/// The NVIC's encoding of RTIC's logical `priority` (1 = least urgent) on both chips, which
+/// implement 4 priority bits.
+pub const fn nvic_priority(priority: u8) -> u8 {
+    const BITS: u8 = 4;
+    ((1 << BITS) - priority) << (8 - BITS)
+}
