@@ -88,6 +88,29 @@ pub fn admission_refused() -> u32 {
     ADMISSION_REFUSED.load(Ordering::Relaxed)
 }
 
+static RX_DROPPED: AtomicU32 = AtomicU32::new(0);
+static RX_OVERRUNS: AtomicU32 = AtomicU32::new(0);
+
+/// Counts a received frame the board could not queue for the command handler.
+pub fn count_rx_dropped() {
+    RX_DROPPED.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Counts a receive-FIFO overrun event.
+pub fn count_rx_overrun() {
+    RX_OVERRUNS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Frames the board received but could not queue for the command handler (queue full).
+pub fn rx_dropped() -> u32 {
+    RX_DROPPED.load(Ordering::Relaxed)
+}
+
+/// Receive-FIFO overrun events: each lost at least one frame (a lower bound on frames lost).
+pub fn rx_overruns() -> u32 {
+    RX_OVERRUNS.load(Ordering::Relaxed)
+}
+
 /// Requests refused because the admission queue was full ([`RefusalReason::Busy`]), since boot.
 pub fn admission_busy() -> u32 {
     REFUSALS
@@ -186,8 +209,8 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
             REFUSALS[4].load(Ordering::Relaxed),
             REFUSALS[5].load(Ordering::Relaxed),
         ],
-        rx_dropped: crate::tasks::rx_dropped(),
-        rx_overruns: crate::tasks::rx_overruns(),
+        rx_dropped: rx_dropped(),
+        rx_overruns: rx_overruns(),
         tx_dropped: tx.dropped,
         tx_displaced: tx.requeued,
         error_passive: ERROR_PASSIVE.load(Ordering::Relaxed),

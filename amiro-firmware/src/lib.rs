@@ -16,6 +16,7 @@ pub mod admission;
 pub mod bxcan;
 pub mod can;
 pub mod clock_tree;
+pub mod digits;
 pub mod layout;
 pub mod spi;
 pub mod timer_monotonic;

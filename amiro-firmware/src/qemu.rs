@@ -13,6 +13,9 @@
 //!
 //! Trace events and the human log are printed as lines starting with `#`; the run ends with one
 //! `# qemu: … at N us; …` line (see [`finish`]).
+//!
+//! Run by `cargo xtask robot`, the board is instead one of three on the host's bus model, in
+//! lock-step ([`robot`]).
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -24,6 +27,8 @@ use heapless::Deque;
 use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
 use crate::mono::{Clock as _, TimerClock};
 use crate::signals::SystemSignals;
+
+pub mod robot;
 
 /// SysTick's clock: the core clock of the QEMU machine (netduino2's STM32F205 for the F1 boards,
 /// netduinoplus2's STM32F405 for the F4 board).
@@ -40,6 +45,13 @@ rtic_monotonics::systick_monotonic!(Mono, 100_000);
 /// The QEMU build's clock.
 pub type Clock = TimerClock<rtic_monotonics::systick::SystickBackend, TICK_US>;
 
+/// Microseconds of virtual time since the monotonic started (the platform's own reading, without
+/// the trace hooks of [`Clock`]).
+pub fn now_us() -> u64 {
+    use rtic_time::timer_queue::TimerQueueBackend;
+    rtic_monotonics::systick::SystickBackend::now().saturating_mul(TICK_US)
+}
+
 static RX_FIFO: Mutex<RefCell<Deque<RxFrame, 3>>> = Mutex::new(RefCell::new(Deque::new()));
 static RX_OVERRUN: AtomicBool = AtomicBool::new(false);
 static SYS_PD_LOW: AtomicBool = AtomicBool::new(false);
@@ -55,6 +67,7 @@ extern "C" {
 pub fn init(syst: cortex_m::peripheral::SYST) {
     paint_stack();
     Mono::start(syst, CORE_CLOCK_HZ);
+    robot::connect();
     if let Some(file) = HostFile::create(b"trace.bin\0") {
         TRACE_FILE.store(file.0, Ordering::Relaxed);
     }
@@ -120,6 +133,9 @@ static TX_THIS_JOB: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8:
 
 impl CanTx for CanTxPort {
     fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
+        if robot::active() {
+            return robot::transmit(frame);
+        }
         if TX_THIS_JOB.fetch_add(1, Ordering::Relaxed) >= 3 {
             // The mailboxes are full: pend this interrupt again (the transmit-complete).
             const ICSR: *const u32 = 0xE000_ED04 as *const u32;
@@ -138,7 +154,7 @@ impl CanTx for CanTxPort {
         // instructions, and the emulated transmit task should not cost core::fmt's thousands.
         const HEX: &[u8; 16] = b"0123456789ABCDEF";
         let mut line = [0u8; 64];
-        let now = Clock::now_us();
+        let now = now_us();
         let mut at = 0;
         let mut put = |b: u8| {
             line[at] = b;
@@ -150,7 +166,7 @@ impl CanTx for CanTxPort {
         let micros = (now - seconds * 1_000_000) as u32;
         let mut digits = [0u8; 10];
         let seconds =
-            crate::telemetry::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
+            crate::digits::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
         seconds.bytes().for_each(&mut put);
         put(b'.');
         let mut scale = 100_000;
@@ -177,7 +193,11 @@ impl CanTx for CanTxPort {
         Transmit::Queued
     }
 
-    fn completed(&mut self, _on_completion: &mut dyn FnMut(Completion)) {
+    fn completed(&mut self, on_completion: &mut dyn FnMut(Completion)) {
+        if robot::active() {
+            robot::completed(on_completion);
+            return;
+        }
         // A new transmit interrupt: the three mailboxes are free again.
         TX_THIS_JOB.store(0, Ordering::Relaxed);
     }
@@ -221,10 +241,12 @@ pub struct Signals;
 
 impl SystemSignals for Signals {
     fn release_sync(&mut self) {
+        robot::drive_sync(false);
         hprintln!("# qemu: SYS_SYNC_N released");
     }
 
     fn pull_sync_low(&mut self) {
+        robot::drive_sync(true);
         hprintln!("# qemu: SYS_SYNC_N pulled low");
     }
 
@@ -240,7 +262,12 @@ const RECORD: usize = 20;
 
 /// Replays `stimulus.bin` from the host into the virtual receive FIFO (pending the board's CAN
 /// receive interrupt `rx_irq`, and `shutdown_irq` for a SYS_PD_N record), then ends the run.
+/// In a robot run the board trades with the host's bus instead ([`robot`]).
 pub async fn replay_stimulus(rx_irq: impl InterruptNumber, shutdown_irq: impl InterruptNumber) {
+    if robot::active() {
+        robot::run(rx_irq, shutdown_irq).await;
+        return;
+    }
     let Some(file) = HostFile::open(b"stimulus.bin\0") else {
         hprintln!("# qemu: cannot open stimulus.bin");
         exit(false);
@@ -272,15 +299,20 @@ pub async fn replay_stimulus(rx_irq: impl InterruptNumber, shutdown_irq: impl In
             data: [0; 8],
         };
         frame.data.copy_from_slice(&record[12..20]);
-        critical_section::with(|cs| {
-            if RX_FIFO.borrow_ref_mut(cs).push_back(frame).is_err() {
-                RX_OVERRUN.store(true, Ordering::SeqCst);
-            }
-        });
-        cortex_m::peripheral::NVIC::pend(rx_irq);
+        deliver(frame, rx_irq);
     }
     Clock::delay_until_us(duration).await;
     finish("end of run");
+}
+
+/// A frame arrives: into the receive FIFO (an overrun if it is full), and the receive interrupt.
+fn deliver(frame: RxFrame, rx_irq: impl InterruptNumber) {
+    critical_section::with(|cs| {
+        if RX_FIFO.borrow_ref_mut(cs).push_back(frame).is_err() {
+            RX_OVERRUN.store(true, Ordering::SeqCst);
+        }
+    });
+    cortex_m::peripheral::NVIC::pend(rx_irq);
 }
 
 fn le_u64(bytes: &[u8]) -> u64 {
@@ -295,9 +327,9 @@ pub fn finish(why: &str) {
     hprintln!(
         "# qemu: {} at {} us; rx dropped {}; rx overruns {}; admission refused {}; admission busy {}; ram static {} stack {}",
         why,
-        Clock::now_us(),
-        crate::tasks::rx_dropped(),
-        crate::tasks::rx_overruns(),
+        now_us(),
+        crate::health::rx_dropped(),
+        crate::health::rx_overruns(),
         crate::health::admission_refused(),
         crate::health::admission_busy(),
         static_ram(),
@@ -335,9 +367,24 @@ impl HostFile {
         (fd as isize >= 0).then_some(Self(fd))
     }
 
+    /// Reads all of `buf`; a pipe may hand it over in parts.
     fn read_exact(&self, buf: &mut [u8]) -> bool {
-        // SAFETY: semihosting READ into a buffer we own; it returns the number of bytes NOT read.
-        let left = unsafe { syscall!(READ, self.0, buf.as_mut_ptr(), buf.len()) };
+        let mut at = 0;
+        while at < buf.len() {
+            let want = buf.len() - at;
+            // SAFETY: semihosting READ into a buffer we own; it returns the number of bytes NOT read.
+            let left = unsafe { syscall!(READ, self.0, buf[at..].as_mut_ptr(), want) };
+            if left >= want {
+                return false;
+            }
+            at += want - left;
+        }
+        true
+    }
+
+    fn write_all(&self, bytes: &[u8]) -> bool {
+        // SAFETY: semihosting WRITE from a buffer we own; it returns the number of bytes NOT written.
+        let left = unsafe { syscall!(WRITE, self.0, bytes.as_ptr(), bytes.len()) };
         left == 0
     }
 }

@@ -13,17 +13,14 @@ use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
 use crate::mono::Clock;
 use crate::{signals, telemetry};
 
-static RX_DROPPED: AtomicU32 = AtomicU32::new(0);
-static RX_OVERRUNS: AtomicU32 = AtomicU32::new(0);
-
 /// Frames the board received but could not queue for the command handler (queue full).
 pub fn rx_dropped() -> u32 {
-    RX_DROPPED.load(Ordering::Relaxed)
+    crate::health::rx_dropped()
 }
 
 /// Receive-FIFO overrun events: each lost at least one frame (a lower bound on frames lost).
 pub fn rx_overruns() -> u32 {
-    RX_OVERRUNS.load(Ordering::Relaxed)
+    crate::health::rx_overruns()
 }
 
 /// The CAN receive interrupt: moves every frame from the FIFO into the bounded command queue; a
@@ -36,11 +33,11 @@ pub fn receive_frames<const N: usize>(
         match event {
             RxEvent::Frame(frame) => {
                 if queue.try_send(frame).is_err() {
-                    RX_DROPPED.fetch_add(1, Ordering::Relaxed);
+                    crate::health::count_rx_dropped();
                 }
             }
             RxEvent::Overrun => {
-                RX_OVERRUNS.fetch_add(1, Ordering::Relaxed);
+                crate::health::count_rx_overrun();
             }
         }
     }
@@ -222,7 +219,7 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
             cortex_m::peripheral::NVIC::pend(tx_interrupt);
         }
         None => {
-            RX_DROPPED.fetch_add(1, Ordering::Relaxed);
+            crate::health::count_rx_dropped();
         }
     }
 }

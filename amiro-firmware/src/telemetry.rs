@@ -176,16 +176,4 @@ pub fn log_parts(parts: &[&str]) {
 }
 
 /// `value` in decimal, into `buffer` (for log lines without `core::fmt`).
-pub fn decimal(value: u32, buffer: &mut [u8; 10]) -> &str {
-    let mut at = buffer.len();
-    let mut rest = value;
-    loop {
-        at -= 1;
-        buffer[at] = b'0' + (rest % 10) as u8;
-        rest /= 10;
-        if rest == 0 || at == 0 {
-            break;
-        }
-    }
-    core::str::from_utf8(&buffer[at..]).unwrap_or("?")
-}
+pub use crate::digits::decimal;

@@ -259,11 +259,16 @@ impl SystemSignals {
     pub fn drive_shutdown_request(&mut self) {
         let now = Clock::now_us();
         PD_DRIVEN_AT.store(now as u32 + 1, Ordering::SeqCst);
+        amiro_firmware::qemu::robot::drive_power_down();
         amiro_firmware::qemu::print_line("# qemu: SYS_PD_N driven low");
     }
 
     /// Whether SYS_SYNC_N reads low: the other modules react [`OTHERS_REACT_US`] after SYS_PD_N.
+    /// In a robot run (`cargo xtask robot`) the line is the robot's: the other boards' answer.
     pub fn sync_reads_low(&self) -> bool {
+        if amiro_firmware::qemu::robot::active() {
+            return amiro_firmware::qemu::robot::sync_reads_low();
+        }
         match PD_DRIVEN_AT.load(Ordering::SeqCst) {
             0 => false,
             at => Clock::now_us() >= u64::from(at - 1) + OTHERS_REACT_US,

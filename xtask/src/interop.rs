@@ -46,6 +46,8 @@ pub fn check(root: &Path) -> Result<()> {
         .arg(root.join("tools").join("interop"))
         .env("AMIRO", &amiro)
         .env("AMIRO_INTEROP_DIR", &work)
+        // `cargo xtask robot --slcan` for tools/interop/test_robot_slcan.py.
+        .env("AMIRO_XTASK", std::env::current_exe()?)
         // The bus logs of the QEMU scenarios (`bus.log` per run): other tools must read them too.
         .env(
             "AMIRO_QEMU_SCENARIOS",

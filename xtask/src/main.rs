@@ -20,6 +20,7 @@ mod levels_check;
 mod probe;
 mod qemu;
 mod revision;
+mod robot;
 mod scenarios;
 mod smoke;
 
@@ -96,6 +97,9 @@ enum Cmd {
         #[arg(long, value_name = "1-2|1-1")]
         revision: Option<String>,
     },
+    /// The whole robot: the three boards' QEMU builds on one simulated CAN bus with the system
+    /// lines between them, in lock-step virtual time (docs/qemu.md, "The whole robot").
+    Robot(robot::cli::RobotArgs),
     /// Boot the production images (the bytes `cargo xtask flash` writes, behind a stand-in for
     /// AMiRo-BLT) in QEMU and check the boot from their RTT log (part of `test`; docs/faults.md).
     Smoke {
@@ -231,6 +235,20 @@ fn run(cmd: Cmd) -> Result<bool> {
             let (frames, runs) = if long { (20_000, 10) } else { (frames, 1) };
             campaign::run(&root, &select_boards(&boards)?, seed, frames, runs).map(|()| true)
         }
+        // `robot` names the whole robot's scenarios (robot/scenarios/, docs/qemu.md).
+        Cmd::Scenarios { boards, revision } if boards.iter().any(|b| b == "robot") => {
+            robot::scenarios::run_all(&root)?;
+            let rest: Vec<String> = boards.into_iter().filter(|b| b != "robot").collect();
+            if !rest.is_empty() {
+                let choice = match revision.as_deref() {
+                    None => revision::Choice::All,
+                    some => revision::Choice::parse(some)?,
+                };
+                let plan = revision::plan(&select_boards(&rest)?, &choice)?;
+                run_scenarios(&root, &plan)?;
+            }
+            Ok(true)
+        }
         Cmd::Scenarios { boards, revision } => {
             let choice = match revision.as_deref() {
                 None => revision::Choice::All,
@@ -239,6 +257,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             let plan = revision::plan(&select_boards(&boards)?, &choice)?;
             run_scenarios(&root, &plan).map(|()| true)
         }
+        Cmd::Robot(args) => robot::cli::command(&root, &args),
         Cmd::Smoke { boards, revision } => {
             let choice = match revision.as_deref() {
                 None => revision::Choice::All,
@@ -546,6 +565,8 @@ fn test(root: &Path) -> Result<()> {
     let over = elf::over_budget(&reports);
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
     run_scenarios(root, &every)?;
+    // The whole robot on one bus (issue 23), with its bus report against the analysis.
+    robot::scenarios::run_all(root)?;
     // The production images booted in QEMU (issue 21): every revision's, as built above.
     smoke::run(root, &every, true)?;
     // After the scenarios: their bus logs are among what the other CAN tools must read.

@@ -1,0 +1,585 @@
+//! `cargo xtask scenarios robot`: the whole robot's CI scenarios (`robot/scenarios/*.log`), each
+//! checked on what a user would see on the bus and in the boards' logs.
+use std::path::Path;
+
+use anyhow::{bail, ensure, Context, Result};
+
+use super::{Outcome, Transfer, NODES, OPERATOR};
+use crate::qemu::TimedFrame;
+use crate::scenarios::RunOutput;
+
+/// One robot scenario.
+pub struct Scenario {
+    /// File stem in `robot/scenarios/`.
+    pub name: &'static str,
+    /// What it shows.
+    pub about: &'static str,
+    /// The check.
+    pub check: fn(&Run) -> Result<String>,
+    /// Whether every observed response must be within the analysis's bound (not with injected
+    /// faults: error frames are outside the analysis).
+    pub bus_bounds: bool,
+}
+
+/// The scenarios CI runs.
+pub const SCENARIOS: &[Scenario] = &[
+    Scenario {
+        name: "thesis-demo",
+        about: "the thesis demo on three boards at once",
+        check: thesis_demo,
+        bus_bounds: true,
+    },
+    Scenario {
+        name: "startup-sync",
+        about: "SYS_SYNC_N rises once every module is up",
+        check: startup_sync,
+        bus_bounds: true,
+    },
+    Scenario {
+        name: "shutdown",
+        about: "the shutdown command reaches every board",
+        check: shutdown,
+        bus_bounds: true,
+    },
+    Scenario {
+        name: "admission-other-board",
+        about: "a request refused for another board's frames on the bus",
+        check: admission_other_board,
+        bus_bounds: true,
+    },
+    Scenario {
+        name: "adapter-flood",
+        about: "one node floods, the boards keep their grids",
+        check: adapter_flood,
+        bus_bounds: true,
+    },
+    Scenario {
+        name: "reset",
+        about: "a board reset mid-run rejoins",
+        check: reset,
+        bus_bounds: true,
+    },
+    Scenario {
+        name: "bus-fault",
+        about: "bit errors and an unplugged board survived",
+        check: bus_fault,
+        bus_bounds: false,
+    },
+];
+
+/// A finished robot run, as the checks read it.
+pub struct Run {
+    /// What the run produced.
+    pub outcome: Outcome,
+}
+
+impl Run {
+    /// Frames with identifier `id`, in order.
+    pub fn frames(&self, id: u16) -> Vec<&Transfer> {
+        self.outcome
+            .transfers
+            .iter()
+            .filter(|t| t.frame.id == id)
+            .collect()
+    }
+
+    /// Completion times of the frames with identifier `id`.
+    pub fn ends(&self, id: u16) -> Vec<u64> {
+        self.frames(id).iter().map(|t| t.end).collect()
+    }
+
+    /// A board's `#` lines (without `NAME: # `), in order.
+    pub fn notes(&self, board: usize) -> Vec<&str> {
+        let prefix = format!("{}: #", NODES[board]);
+        self.outcome
+            .text
+            .lines()
+            .filter_map(|l| l.strip_prefix(prefix.as_str()))
+            .map(str::trim)
+            .collect()
+    }
+
+    /// The bus's own notes (error frames, line levels, boards leaving).
+    pub fn bus_notes(&self) -> Vec<&str> {
+        self.outcome
+            .text
+            .lines()
+            .filter_map(|l| l.strip_prefix("bus: #"))
+            .map(str::trim)
+            .collect()
+    }
+
+    /// One board's view as the single-board checks read it: the frames it sent (at their
+    /// completion) and its `#` lines.
+    pub fn view(&self, board: usize) -> RunOutput {
+        RunOutput {
+            frames: self
+                .outcome
+                .transfers
+                .iter()
+                .filter(|t| t.node == board)
+                .map(|t| TimedFrame {
+                    at_us: t.end,
+                    id: u32::from(t.frame.id),
+                    data: t.frame.payload().to_vec(),
+                })
+                .collect(),
+            notes: self.notes(board).into_iter().map(String::from).collect(),
+        }
+    }
+}
+
+/// Every board reached its end (end of run or hand-over) without receive-FIFO overruns.
+fn every_board_ended(run: &Run) -> Result<()> {
+    for (board, name) in NODES.iter().enumerate().take(3) {
+        let view = run.view(board);
+        let overruns = view
+            .end_field("rx overruns")
+            .with_context(|| name.to_string())?;
+        ensure!(overruns == 0, "{}: {overruns} receive-FIFO overruns", name);
+    }
+    Ok(())
+}
+
+/// `times` lie on a grid of `period` from the first, each at most `slack` late.
+fn on_grid(what: &str, times: &[u64], period: u64, slack: u64) -> Result<()> {
+    let Some(&first) = times.first() else {
+        bail!("no {what} frame");
+    };
+    // The first frame may itself be late: the grid is the earliest it could have started on.
+    let origin = times
+        .iter()
+        .enumerate()
+        .map(|(k, &t)| t - (k as u64 * period).min(t))
+        .min()
+        .unwrap_or(first);
+    for (k, &t) in times.iter().enumerate() {
+        let due = origin + k as u64 * period;
+        ensure!(
+            t >= due && t - due <= slack,
+            "{what} frame {k} at {t} µs, due on the {period} µs grid at {due} µs (+{slack} µs at most)"
+        );
+    }
+    Ok(())
+}
+
+/// The proximity ring's samples: bursts of eight frames `id`, one burst per period (the run's end
+/// may cut the last burst short).
+fn ring_samples(run: &Run, id: u16, period: u64) -> Result<usize> {
+    let ends = run.ends(id);
+    let mut bursts: Vec<Vec<u64>> = Vec::new();
+    for &t in &ends {
+        match bursts.last_mut() {
+            Some(b) if t - b[b.len() - 1] < 2_000 => b.push(t),
+            _ => bursts.push(vec![t]),
+        }
+    }
+    if bursts.last().is_some_and(|b| b.len() < 8) {
+        bursts.pop();
+    }
+    ensure!(!bursts.is_empty(), "no whole ring sample {id:03X}");
+    for b in &bursts {
+        ensure!(
+            b.len() == 8,
+            "a ring sample of {} frames {id:03X} at {} µs",
+            b.len(),
+            b[0]
+        );
+    }
+    let firsts: Vec<u64> = bursts.iter().map(|b| b[0]).collect();
+    on_grid("ring sample", &firsts, period, 1_000)?;
+    Ok(firsts.len())
+}
+
+fn thesis_demo(run: &Run) -> Result<String> {
+    every_board_ended(run)?;
+    let magnetometer = run.ends(0x605);
+    // Commanded at 10 ms: a release every 900 µs until 200 ms.
+    ensure!(
+        magnetometer.len() >= 210,
+        "{} magnetometer frames, expected one per 900 µs from 10 ms",
+        magnetometer.len()
+    );
+    on_grid("magnetometer", &magnetometer, 900, 300)?;
+    let samples = ring_samples(run, 0x61F, 10_000)?;
+    ensure!(samples >= 18, "{samples} ring samples in 188 ms");
+    let latched = run
+        .notes(2)
+        .into_iter()
+        .rfind(|n| n.starts_with("tlc5947 latched"))
+        .context("LightRing latched nothing")?
+        .to_string();
+    // LED 3 is on OUT 15..17 (channel order n → 3(8−n)); the others dark.
+    let outputs: Vec<&str> = latched.split_whitespace().skip(2).collect();
+    ensure!(outputs.len() == 24, "`{latched}`");
+    let lit: Vec<usize> = (0..24).filter(|&k| outputs[k] != "000").collect();
+    ensure!(
+        !lit.is_empty() && lit.iter().all(|k| (15..18).contains(k)),
+        "LED 3 only should be lit: `{latched}`"
+    );
+    let others = run
+        .outcome
+        .transfers
+        .iter()
+        .filter(|t| t.node != OPERATOR && ![0x605, 0x61F].contains(&t.frame.id))
+        .count();
+    ensure!(
+        others == 0,
+        "{others} frames besides the magnetometer and the ring"
+    );
+    Ok(format!(
+        "{} magnetometer frames on the 900 µs grid, {samples} ring samples × 8 on the 10 ms grid, LED 3 latched, all on one bus",
+        magnetometer.len()
+    ))
+}
+
+fn startup_sync(run: &Run) -> Result<String> {
+    every_board_ended(run)?;
+    let sync: Vec<&str> = run
+        .bus_notes()
+        .into_iter()
+        .filter(|n| n.contains("SYS_SYNC_N"))
+        .collect();
+    ensure!(
+        sync.len() == 1 && sync[0].contains("SYS_SYNC_N high"),
+        "expected one rise of SYS_SYNC_N and nothing after: {sync:?}"
+    );
+    // It rises in the quantum after the last module released it, not before.
+    let text = &run.outcome.text;
+    let rise = text.find("SYS_SYNC_N high").context("no rise")?;
+    for name in NODES.iter().take(3) {
+        let released = text
+            .find(&format!("{}: # qemu: SYS_SYNC_N released", name))
+            .with_context(|| format!("{} never released SYS_SYNC_N", name))?;
+        ensure!(
+            released < rise,
+            "{} released SYS_SYNC_N after the line rose",
+            name
+        );
+    }
+    Ok(format!(
+        "SYS_SYNC_N rose once ({}) after all three modules released it",
+        sync[0]
+    ))
+}
+
+fn end_time(note: &str) -> Option<u64> {
+    let at = note.find(" at ")? + 4;
+    note[at..].split_whitespace().next()?.parse().ok()
+}
+
+fn shutdown(run: &Run) -> Result<String> {
+    let pd = run
+        .bus_notes()
+        .into_iter()
+        .find(|n| n.contains("SYS_PD_N low (driven by powermgmt)"))
+        .context("PowerManagement never drove SYS_PD_N")?
+        .to_string();
+    let mut summary = Vec::new();
+    for (board, name) in NODES.iter().enumerate().take(3) {
+        let view = run.view(board);
+        let end = view.end_line().with_context(|| name)?;
+        ensure!(
+            end.starts_with("qemu: shutdown hand-over"),
+            "{} did not hand over: `{end}`",
+            name
+        );
+        let at = end_time(end).with_context(|| format!("`{end}`"))?;
+        let after: Vec<&TimedFrame> = view.frames.iter().filter(|f| f.at_us > at).collect();
+        ensure!(
+            after.is_empty(),
+            "{}: {} frames after its hand-over at {at} µs",
+            name,
+            after.len()
+        );
+        ensure!(
+            view.traces("command-accepted")
+                .iter()
+                .all(|n| !n.contains("214")),
+            "{} accepted the command after the request",
+            name
+        );
+        summary.push(format!("{} at {at} µs", name));
+    }
+    let last_board_frame = run
+        .outcome
+        .transfers
+        .iter()
+        .filter(|t| t.node != OPERATOR)
+        .map(|t| t.end)
+        .max()
+        .unwrap_or(0);
+    ensure!(
+        last_board_frame < 120_000,
+        "a board's frame at {last_board_frame} µs, long after the shutdown command"
+    );
+    Ok(format!(
+        "{pd}; hand-over: {}; no board's frame after its hand-over",
+        summary.join(", ")
+    ))
+}
+
+fn admission_other_board(run: &Run) -> Result<String> {
+    use amiro_can::{Topic, Verdict, Violation};
+    every_board_ended(run)?;
+    let odometry = run.ends(0x701);
+    let before = odometry.iter().filter(|&&t| t < 50_000).count();
+    ensure!(
+        before >= 40,
+        "{before} odometry frames on the bus before the request (one per ms expected)"
+    );
+    let verdicts =
+        crate::scenarios::admission_verdicts(&run.view(1), amiro_can::Board::PowerManagement);
+    ensure!(
+        verdicts.len() == 1,
+        "{} verdicts from PowerManagement, expected one refusal",
+        verdicts.len()
+    );
+    let v = &verdicts[0].1;
+    ensure!(
+        v.verdict == Verdict::Refused
+            && v.topic == Topic::ProximityRing
+            && v.priority == amiro_can::Priority::Urgent,
+        "not the refusal of the ring at urgent: {v}"
+    );
+    ensure!(
+        matches!(v.violation, Violation::Message { id } if id.raw() == 0x701),
+        "the refusal names {:?}, not DiWheelDrive's odometry 0x701 on the bus",
+        v.violation
+    );
+    ensure!(
+        run.ends(0x41F).is_empty(),
+        "urgent ring frames on the bus: the refused request ran"
+    );
+    let samples = ring_samples(run, 0x71F, 8_000)?;
+    Ok(format!("{v}; {before} odometry frames on the bus before it; the ring at low runs ({samples} samples)"))
+}
+
+fn adapter_flood(run: &Run) -> Result<String> {
+    every_board_ended(run)?;
+    let flood = run.ends(0x3F1).len();
+    ensure!(
+        flood == 400,
+        "{flood} of the adapter's 400 frames on the bus"
+    );
+    let magnetometer = run.ends(0x605);
+    ensure!(
+        magnetometer.len() >= 160,
+        "{} magnetometer frames",
+        magnetometer.len()
+    );
+    on_grid("magnetometer", &magnetometer, 900, 400)?;
+    let samples = ring_samples(run, 0x61F, 10_000)?;
+    Ok(format!(
+        "400 flood frames; {} magnetometer frames on the 900 µs grid, {samples} ring samples on the 10 ms grid",
+        magnetometer.len()
+    ))
+}
+
+fn reset(run: &Run) -> Result<String> {
+    every_board_ended(run)?;
+    let ups = run
+        .notes(2)
+        .iter()
+        .filter(|n| n.starts_with("LightRing up"))
+        .count();
+    ensure!(ups == 2, "LightRing came up {ups} times, expected twice");
+    let sync: Vec<&str> = run
+        .bus_notes()
+        .into_iter()
+        .filter(|n| n.contains("SYS_SYNC_N"))
+        .collect();
+    ensure!(
+        sync.len() == 3 && sync[1].contains("low (held by lightring)") && sync[2].contains("high"),
+        "SYS_SYNC_N should rise, fall while LightRing boots, and rise again: {sync:?}"
+    );
+    let led_sets = run.view(2).traces("led-set").len();
+    ensure!(
+        led_sets == 2,
+        "{led_sets} LED commands applied, expected one before and one after the reset"
+    );
+    let latched = run
+        .notes(2)
+        .into_iter()
+        .rfind(|n| n.starts_with("tlc5947 latched"))
+        .context("no latch")?
+        .to_string();
+    let outputs: Vec<&str> = latched.split_whitespace().skip(2).collect();
+    // After the reset LED 3 is dark again; LED 4 (OUT 12..14) carries the new colour.
+    let lit: Vec<usize> = (0..outputs.len())
+        .filter(|&k| outputs[k] != "000")
+        .collect();
+    ensure!(
+        !lit.is_empty() && lit.iter().all(|k| (12..15).contains(k)),
+        "only LED 4 should be lit after the reset: `{latched}`"
+    );
+    let magnetometer = run.ends(0x605);
+    on_grid("magnetometer", &magnetometer, 900, 300)?;
+    Ok(format!(
+        "LightRing rebooted ({}), took LED 4 after; DiWheelDrive's {} frames stayed on their grid",
+        sync[1],
+        magnetometer.len()
+    ))
+}
+
+fn bus_fault(run: &Run) -> Result<String> {
+    every_board_ended(run)?;
+    let errors: Vec<&str> = run
+        .bus_notes()
+        .into_iter()
+        .filter(|n| n.contains("error frame") && n.contains("605"))
+        .collect();
+    ensure!(
+        errors.len() == 3,
+        "{} error frames on 0x605, expected 3",
+        errors.len()
+    );
+    let magnetometer = run.frames(0x605);
+    // Before and after the unplugged stretch the grid holds; during it the frames wait.
+    let before: Vec<u64> = magnetometer
+        .iter()
+        .filter(|t| t.end < 100_000)
+        .map(|t| t.end)
+        .collect();
+    let after: Vec<u64> = magnetometer
+        .iter()
+        .filter(|t| t.queued_at > 121_000)
+        .map(|t| t.end)
+        .collect();
+    on_grid("magnetometer before the unplug", &before, 900, 300)?;
+    on_grid("magnetometer after the plug", &after, 900, 300)?;
+    let held = magnetometer
+        .iter()
+        .filter(|t| t.queued_at < 120_000 && t.end > 120_000)
+        .count();
+    ensure!(held >= 1, "no frame held over the unplugged stretch");
+    ensure!(
+        run.ends(0x605)
+            .iter()
+            .all(|&t| !(100_100..120_000).contains(&t)),
+        "a magnetometer frame on the bus while DiWheelDrive was unplugged"
+    );
+    let samples = ring_samples(run, 0x61F, 10_000)?;
+    Ok(format!(
+        "3 error frames on 0x605 and retransmission; {held} frames held while unplugged; grid before and after; the ring ran on ({samples} samples)"
+    ))
+}
+
+/// Runs scenario `name` twice and compares everything both runs printed.
+fn same_bytes_twice(root: &Path, firmware: &[super::Firmware; 3], name: &str) -> Result<usize> {
+    let path = root
+        .join("robot")
+        .join("scenarios")
+        .join(format!("{name}.log"));
+    let (actions, duration) = super::stimulus::read(&path)?;
+    let duration = duration.context("no `# duration:`")?;
+    let mut texts = Vec::new();
+    for k in 0..2 {
+        let work = crate::qemu::target_dir(root)
+            .join("scenarios")
+            .join("robot")
+            .join(format!("{name}-determinism-{k}"));
+        let _ = std::fs::remove_dir_all(&work);
+        let mut lines: Vec<String> = Vec::new();
+        texts.push(super::run(firmware, &actions, duration, &work, &mut lines, None)?.text);
+    }
+    if let Some(line) = texts[0]
+        .lines()
+        .zip(texts[1].lines())
+        .position(|(a, b)| a != b)
+    {
+        bail!("the two runs differ from line {}", line + 1);
+    }
+    ensure!(texts[0] == texts[1], "the two runs differ in length");
+    Ok(texts[0].len())
+}
+
+/// Runs every robot scenario; fails if any check fails.
+pub fn run_all(root: &Path) -> Result<()> {
+    crate::ensure_qemu()?;
+    let firmware = super::cli::firmware(root)?;
+    let (mut passed, mut failed) = (0, 0);
+    for scenario in SCENARIOS {
+        let path = root
+            .join("robot")
+            .join("scenarios")
+            .join(format!("{}.log", scenario.name));
+        let work = crate::qemu::target_dir(root)
+            .join("scenarios")
+            .join("robot")
+            .join(scenario.name);
+        let _ = std::fs::remove_dir_all(&work);
+        let result = (|| {
+            let (actions, duration) = super::stimulus::read(&path)?;
+            let duration =
+                duration.with_context(|| format!("{}: no `# duration:`", path.display()))?;
+            let mut lines: Vec<String> = Vec::new();
+            let outcome = super::run(&firmware, &actions, duration, &work, &mut lines, None)?;
+            std::fs::write(work.join("output.log"), &outcome.text)?;
+            let (bus, _) = crate::qemu::split_output(&outcome.text);
+            std::fs::write(work.join("bus.log"), bus)?;
+            let report = super::report::analyse(&outcome.transfers, duration);
+            std::fs::write(work.join("bus-report.txt"), super::report::render(&report))?;
+            let summary = (scenario.check)(&Run { outcome })?;
+            let exceeded: Vec<String> = report
+                .iter()
+                .filter(|l| l.exceeds())
+                .map(|l| format!("{:03X} {} µs > {:?}", l.id, l.observed_us, l.bound_us))
+                .collect();
+            if scenario.bus_bounds {
+                ensure!(
+                    exceeded.is_empty(),
+                    "observed responses beyond the Davis bound: {}",
+                    exceeded.join(", ")
+                );
+                Ok(format!(
+                    "{summary}; bus: {} streams within their Davis bounds",
+                    report.len()
+                ))
+            } else {
+                Ok(format!(
+                    "{summary}; bus: {} of {} streams beyond their Davis bounds (fault episode)",
+                    exceeded.len(),
+                    report.len()
+                ))
+            }
+        })();
+        match result {
+            Ok(summary) => {
+                passed += 1;
+                println!("robot {:<22} ok: {summary}", scenario.name);
+            }
+            Err(e) => {
+                failed += 1;
+                println!(
+                    "robot {:<22} FAILED ({}): {e:#}",
+                    scenario.name, scenario.about
+                );
+            }
+        }
+    }
+    // Determinism: the same stimulus again prints the same bytes.
+    match same_bytes_twice(root, &firmware, "thesis-demo") {
+        Ok(bytes) => {
+            passed += 1;
+            println!(
+                "robot {:<22} ok: thesis-demo twice, {bytes} bytes identical",
+                "determinism"
+            );
+        }
+        Err(e) => {
+            failed += 1;
+            println!("robot {:<22} FAILED: {e:#}", "determinism");
+        }
+    }
+    println!("robot scenarios: {passed} passed, {failed} failed");
+    ensure!(
+        failed == 0,
+        "{failed} robot scenario(s) failed (outputs in {})",
+        crate::qemu::target_dir(root)
+            .join("scenarios")
+            .join("robot")
+            .display()
+    );
+    Ok(())
+}

@@ -1,0 +1,216 @@
+//! `cargo xtask robot --slcan`: the robot's bus behind a pseudo-terminal that speaks SLCAN (the
+//! Lawicel ASCII protocol of USB-CAN adapters), so `amiro console --bus slcan:/dev/pts/N`,
+//! python-can and `slcand` talk to the emulated robot as to a real one through an adapter.
+//!
+//! The adapter is the bus's fourth node (the operator's): frames the client sends (`tIIILDD…`) are
+//! queued on the bus at the current virtual time; every frame a board completes is sent to the
+//! client (`tIIILDD…[TTTT]`) while the channel is open. Extended and remote frames are refused
+//! (BEL): the robot's bus carries neither. Output the client does not read is dropped, never
+//! buffered without bound.
+use std::fs::File;
+use std::io::{Read, Write};
+use std::os::fd::{AsRawFd, FromRawFd};
+
+use amiro_bus_sim::Frame;
+use anyhow::{bail, Result};
+
+const BELL: &[u8] = b"\x07";
+/// Longest command worth reading (`T` + 8 + 1 + 16 digits + slack); longer without `\r` is garbage.
+const MAX_COMMAND: usize = 64;
+
+/// The pseudo-terminal and the adapter's state.
+pub struct Slcan {
+    master: File,
+    /// Kept open so the terminal stays usable while no client has it open.
+    _slave: File,
+    path: String,
+    partial: Vec<u8>,
+    open: bool,
+    timestamps: bool,
+}
+
+impl Slcan {
+    /// Opens a pseudo-terminal in raw mode.
+    pub fn new() -> Result<Self> {
+        let (mut master, mut slave) = (0, 0);
+        // SAFETY: openpty writes two descriptors and, with a buffer, the slave's name.
+        let mut name = [0 as libc::c_char; 128];
+        let ok = unsafe {
+            libc::openpty(
+                &mut master,
+                &mut slave,
+                name.as_mut_ptr(),
+                std::ptr::null(),
+                std::ptr::null(),
+            )
+        };
+        if ok != 0 {
+            bail!("openpty: {}", std::io::Error::last_os_error());
+        }
+        // SAFETY: descriptors openpty just returned, owned from here on.
+        let (master, slave) = unsafe { (File::from_raw_fd(master), File::from_raw_fd(slave)) };
+        // SAFETY: termios of a terminal we own, made raw (no echo, no line discipline).
+        unsafe {
+            let mut t: libc::termios = std::mem::zeroed();
+            if libc::tcgetattr(slave.as_raw_fd(), &mut t) == 0 {
+                libc::cfmakeraw(&mut t);
+                libc::tcsetattr(slave.as_raw_fd(), libc::TCSANOW, &t);
+            }
+        }
+        super::set_nonblocking(master.as_raw_fd());
+        // SAFETY: `name` is NUL-terminated by openpty.
+        let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
+            .to_string_lossy()
+            .into_owned();
+        Ok(Self {
+            master,
+            _slave: slave,
+            path,
+            partial: Vec::new(),
+            open: false,
+            timestamps: false,
+        })
+    }
+
+    /// The terminal's path (`/dev/pts/N`).
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    fn reply(&mut self, bytes: &[u8]) {
+        // A client that does not read loses its answers, not our memory.
+        let _ = self.master.write(bytes);
+    }
+
+    /// Reads what the client sent and answers it; returns the frames to put on the bus.
+    pub fn poll(&mut self) -> Vec<Frame> {
+        let mut frames = Vec::new();
+        let mut chunk = [0u8; 512];
+        while let Ok(n) = self.master.read(&mut chunk) {
+            if n == 0 {
+                break;
+            }
+            for &b in &chunk[..n] {
+                if b == b'\r' || b == b'\n' {
+                    let command = std::mem::take(&mut self.partial);
+                    if b == b'\r' || !command.is_empty() {
+                        if let Some(frame) = self.command(&command) {
+                            frames.push(frame);
+                        }
+                    }
+                } else if self.partial.len() < MAX_COMMAND {
+                    self.partial.push(b);
+                } else {
+                    self.partial.clear();
+                }
+            }
+        }
+        frames
+    }
+
+    fn command(&mut self, command: &[u8]) -> Option<Frame> {
+        let Some((&verb, rest)) = command.split_first() else {
+            self.reply(b"\r");
+            return None;
+        };
+        match verb {
+            b'O' | b'L' => {
+                self.open = true;
+                self.reply(b"\r");
+            }
+            b'C' => {
+                self.open = false;
+                self.reply(b"\r");
+            }
+            b'S' | b's' | b'M' | b'm' | b'X' | b'W' | b'Q' => self.reply(b"\r"),
+            b'Z' => {
+                self.timestamps = rest.first() == Some(&b'1');
+                self.reply(b"\r");
+            }
+            b'V' => self.reply(b"V1013\r"),
+            b'v' => self.reply(b"vAMiRo\r"),
+            b'N' => self.reply(b"NA123\r"),
+            b'F' => self.reply(b"F00\r"),
+            b't' if self.open => match parse_frame(rest) {
+                Some(frame) => {
+                    self.reply(b"z\r");
+                    return Some(frame);
+                }
+                None => self.reply(BELL),
+            },
+            _ => self.reply(BELL),
+        }
+        None
+    }
+
+    /// Hands a frame that completed on the bus at `end_us` to the client, if its channel is open.
+    pub fn deliver(&mut self, end_us: u64, frame: &Frame) {
+        if !self.open {
+            return;
+        }
+        let mut text = format!("t{:03X}{}", frame.id, frame.len);
+        for b in frame.payload() {
+            text.push_str(&format!("{b:02X}"));
+        }
+        if self.timestamps {
+            text.push_str(&format!("{:04X}", (end_us / 1000) % 60_000));
+        }
+        text.push('\r');
+        self.reply(text.as_bytes());
+    }
+}
+
+/// `IIILDD…` of a standard frame.
+fn parse_frame(text: &[u8]) -> Option<Frame> {
+    let text = std::str::from_utf8(text).ok()?;
+    let id = u16::from_str_radix(text.get(..3)?, 16).ok()?;
+    let len = usize::from(text.as_bytes().get(3)?.checked_sub(b'0')?);
+    let data = text.get(4..4 + 2 * len)?;
+    if len > 8 || text.len() != 4 + 2 * len {
+        return None;
+    }
+    let bytes: Option<Vec<u8>> = (0..len)
+        .map(|k| u8::from_str_radix(&data[2 * k..2 * k + 2], 16).ok())
+        .collect();
+    Frame::new(id, &bytes?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_and_refusals() {
+        assert_eq!(parse_frame(b"2054018403 02"), None);
+        assert_eq!(
+            parse_frame(b"205401840302"),
+            Frame::new(0x205, &[1, 0x84, 3, 2])
+        );
+        assert_eq!(parse_frame(b"6050"), Frame::new(0x605, &[]));
+        assert_eq!(parse_frame(b"8000"), None);
+        assert_eq!(parse_frame(b"20590000000000000000000"), None);
+        assert_eq!(parse_frame(b"2052011"), None);
+    }
+
+    #[test]
+    fn a_client_on_the_terminal() {
+        let mut adapter = Slcan::new().unwrap();
+        let mut client = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(adapter.path())
+            .unwrap();
+        // Not open yet: a frame is refused; then the slcand sequence, a frame, an extended frame.
+        client
+            .write_all(b"t6050\rC\rS8\rO\rt205401840302\rT123456780\r")
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        let frames = adapter.poll();
+        assert_eq!(frames, vec![Frame::new(0x205, &[1, 0x84, 3, 2]).unwrap()]);
+        adapter.deliver(1_234_567, &Frame::new(0x605, &[0xAB]).unwrap());
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        let mut got = [0u8; 64];
+        let n = client.read(&mut got).unwrap();
+        assert_eq!(&got[..n], b"\x07\r\r\rz\r\x07t6051AB\r");
+    }
+}
