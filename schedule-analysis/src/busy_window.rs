@@ -916,6 +916,7 @@ mod tests {
         let s = subject(501, 1002);
         let limits = Limits {
             horizon: Time::from_ns(100_000),
+            ..Limits::default()
         };
         let r = response_time(&s, &others, None, Discipline::Preemptive, &limits, &mut []);
         assert!(
@@ -945,7 +946,10 @@ mod tests {
                 &[Stream(1, 1_000_000, 0)],
                 None,
                 discipline,
-                &Limits { horizon: Time::MAX },
+                &Limits {
+                    horizon: Time::MAX,
+                    ..Limits::default()
+                },
                 &mut [Counter::default(); 1],
             );
             assert!(
@@ -966,7 +970,10 @@ mod tests {
             &[Stream(1, 100, u64::MAX - 1)],
             None,
             Discipline::Preemptive,
-            &Limits { horizon: Time::MAX },
+            &Limits {
+                horizon: Time::MAX,
+                ..Limits::default()
+            },
             &mut [Counter::default(); 1],
         );
         assert_eq!(r, Err(AnalysisError::Overflow));

@@ -182,7 +182,7 @@ proptest! {
             })
             .collect();
         let limit = 1_000_000_000;
-        let limits = Limits { horizon: Time::from_ns(limit) };
+        let limits = Limits { horizon: Time::from_ns(limit), ..Limits::default() };
         let blockings = vec![Time::ZERO; n];
         let mut scratch = vec![Counter::default(); n];
         let mut ours = vec![Err(schedule_analysis::AnalysisError::NoSuchIndex); n];
@@ -204,7 +204,7 @@ proptest! {
         utilisation in 100u64..=990,
     ) {
         let (set, blockings) = tasks(&raw, utilisation);
-        let limits = Limits { horizon: Time::from_ns(1_000_000_000) };
+        let limits = Limits { horizon: Time::from_ns(1_000_000_000), ..Limits::default() };
         let mut scratch = vec![Counter::default(); set.len()];
         let mut batched = vec![Err(schedule_analysis::AnalysisError::NoSuchIndex); set.len()];
         board::response_times(&set, &blockings, &limits, &mut scratch, &mut batched);
@@ -249,7 +249,7 @@ proptest! {
             .collect();
         let mut blockings = vec![Time::ZERO; set.len()];
         can::blockings(&set, &mut blockings);
-        let limits = Limits { horizon: Time::from_ns(1_000_000_000) };
+        let limits = Limits { horizon: Time::from_ns(1_000_000_000), ..Limits::default() };
         let mut scratch = vec![Counter::default(); set.len()];
         let mut batched = vec![Err(schedule_analysis::AnalysisError::NoSuchIndex); set.len()];
         can::response_times(&set, &blockings, bit, &limits, &mut scratch, &mut batched);

@@ -114,6 +114,7 @@ fn analyse_board(set: &BoardSet, with_blocking: bool) -> Vec<Option<Response>> {
                 b,
                 &Limits {
                     horizon: Time::from_us(10_000_000),
+                    ..Limits::default()
                 },
                 &mut scratch,
             )
@@ -331,6 +332,7 @@ fn analyse_bus(set: &[MessageTiming], with_blocking: bool) -> Vec<Option<Respons
                 bit,
                 &Limits {
                     horizon: Time::from_us(10_000_000),
+                    ..Limits::default()
                 },
                 &mut scratch,
             )
@@ -433,7 +435,7 @@ proptest! {
             })
             .collect();
         let blockings: Vec<Time> = set.timings.iter().map(|t| board::srp_blocking(t.priority, &sections)).collect();
-        let limits = Limits { horizon: Time::from_us(10_000_000) };
+        let limits = Limits { horizon: Time::from_us(10_000_000), ..Limits::default() };
         let mut scratch = vec![Counter::default(); set.timings.len()];
         let mut batched = vec![Err(schedule_analysis::AnalysisError::NoSuchIndex); set.timings.len()];
         board::response_times(&set.timings, &blockings, &limits, &mut scratch, &mut batched);
