@@ -169,7 +169,9 @@ pub fn response_times_into<R: Results + ?Sized>(
         let result = if first_unsorted.is_some_and(|k| k < level_end) {
             Err(AnalysisError::NotSorted)
         } else {
-            response_time_in(tasks, i, level_end, blocking, hint, load, limits, scratch)
+            response_time_in(
+                tasks, i, level_end, blocking, hint, load, None, limits, scratch,
+            )
         };
         out.put(i, result);
     }
@@ -248,7 +250,9 @@ fn response_time_from(
         return Err(AnalysisError::NotSorted);
     }
     let load = load.unwrap_or_else(|| Load::sum(tasks.get(..end).unwrap_or(&[]), Some(index)));
-    response_time_in(tasks, index, end, blocking, hint, load, limits, scratch)
+    response_time_in(
+        tasks, index, end, blocking, hint, load, None, limits, scratch,
+    )
 }
 
 /// [`response_time_hinted`] for a caller that keeps its set ordered itself and knows more: `end` is where
@@ -268,22 +272,21 @@ pub fn response_time_at_level(
     limits: &Limits,
     scratch: &mut [Counter],
 ) -> Result<Response, AnalysisError> {
-    let me = *tasks.get(index).ok_or(AnalysisError::NoSuchIndex)?;
-    let mut subject = Subject::new(me.wcet, 1, me.period, me.jitter, blocking);
-    subject.known_first_window = hint;
-    subject.known_utilisation = Some(own.utilisation());
-    busy_window::response_time_loaded(
-        &subject,
-        tasks.get(..end).unwrap_or(&[]),
-        Some(index),
+    response_time_in(
+        tasks,
+        index,
+        end,
+        blocking,
+        hint,
         load,
-        Discipline::Preemptive,
+        Some(own),
         limits,
         scratch,
     )
 }
 
-/// The response time of `tasks[index]` whose level ends at `end`, the prefix `tasks[..end]` known to be ordered.
+/// The response time of `tasks[index]` whose level ends at `end`, the prefix `tasks[..end]` known to be ordered;
+/// `own`: its CPU share when the caller has worked it out.
 #[allow(clippy::too_many_arguments)]
 fn response_time_in(
     tasks: &[TaskTiming],
@@ -292,12 +295,14 @@ fn response_time_in(
     blocking: Time,
     hint: Time,
     load: Load,
+    own: Option<busy_window::Share>,
     limits: &Limits,
     scratch: &mut [Counter],
 ) -> Result<Response, AnalysisError> {
     let me = *tasks.get(index).ok_or(AnalysisError::NoSuchIndex)?;
     let mut subject = Subject::new(me.wcet, 1, me.period, me.jitter, blocking);
     subject.known_first_window = hint;
+    subject.known_utilisation = own.map(busy_window::Share::utilisation);
     busy_window::response_time_loaded(
         &subject,
         tasks.get(..end).unwrap_or(&[]),
