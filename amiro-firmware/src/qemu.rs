@@ -29,6 +29,7 @@ use crate::mono::{Clock as _, TimerClock};
 use crate::signals::SystemSignals;
 
 pub mod robot;
+pub mod timer;
 
 /// SysTick's clock: the core clock of the QEMU machine (netduino2's STM32F205 for the F1 boards,
 /// netduinoplus2's STM32F405 for the F4 board).
@@ -40,10 +41,9 @@ pub const CORE_CLOCK_HZ: u32 = 168_000_000;
 
 /// SysTick ticks every 10 µs: a 1 µs tick would interrupt the emulated CPU every microsecond.
 pub const TICK_US: u64 = 10;
-rtic_monotonics::systick_monotonic!(Mono, 100_000);
 
-/// The QEMU build's clock.
-pub type Clock = TimerClock<rtic_monotonics::systick::SystickBackend, TICK_US>;
+/// The QEMU build's clock: the apps' timer queue over SysTick ([`timer`]).
+pub type Clock = TimerClock<timer::AppTimer, TICK_US>;
 
 /// Microseconds of virtual time since the monotonic started (the platform's own reading, without
 /// the trace hooks of [`Clock`]).
@@ -66,7 +66,7 @@ extern "C" {
 /// Paints the free RAM, starts the SysTick monotonic. Call first thing in `init`.
 pub fn init(syst: cortex_m::peripheral::SYST) {
     paint_stack();
-    Mono::start(syst, CORE_CLOCK_HZ);
+    timer::start(syst, CORE_CLOCK_HZ);
     robot::connect();
     if let Some(file) = HostFile::create(b"trace.bin\0") {
         TRACE_FILE.store(file.0, Ordering::Relaxed);

@@ -247,7 +247,7 @@ pub async fn serve_admission<
 ) {
     // Every board analysed once with nothing running, before the first request.
     admission.prepare();
-    while let Some(frame) = next_command(requests).await {
+    while let Some(frame) = parked(next_command(requests)).await {
         let started = C::now_us();
         handle_command_admitted::<C, N, M, Q>(
             &frame,
@@ -263,7 +263,7 @@ pub async fn serve_admission<
             admission.analysed(),
             admission.sampled(),
         );
-        C::delay_until_us(next).await;
+        parked(C::delay_until_us(next)).await;
         if admission.stale() {
             // A stream left the running set (a stop, a one-shot): its board's kept analysis is redone now, as a
             // paced step of its own, so that no decision re-analyses more than its own board and the bus.
@@ -272,9 +272,18 @@ pub async fn serve_admission<
             #[cfg(feature = "qemu")]
             note_refresh::<C, N, M>(admission, started);
             let next = pacing.next_start(started, C::now_us(), admission.analysed(), false);
-            C::delay_until_us(next).await;
+            parked(C::delay_until_us(next)).await;
         }
     }
+}
+
+/// The robot mode's idle mark around the admission task's waits (`qemu::robot::parked`); elsewhere
+/// the wait itself.
+#[cfg(feature = "qemu")]
+use crate::qemu::robot::parked;
+#[cfg(not(feature = "qemu"))]
+async fn parked<F: core::future::Future>(future: F) -> F::Output {
+    future.await
 }
 
 /// QEMU: the cost of a refresh step, as [`note_decision`] logs a decision's.

@@ -25,11 +25,12 @@ use crate::can::{Completion, RxFrame, Transmit};
 /// The exchange period: a multiple of the 10 µs tick below the shortest frame (44 bit times from
 /// start of frame to completion at 1 Mbit/s).
 pub const QUANTUM_US: u64 = 40;
-/// Board → host: `u64` now, `u8` new frames, `u8` lines driven, 6 reserved, three 20-byte records
-/// (`u64` queued at, `u16` id, `u8` length, `u8` mailbox, 8 data bytes).
+/// Board → host: `u64` now, `u8` new frames, `u8` lines driven, 2 reserved, `u32` µs the board
+/// sleeps from now (0: it has work; `u32::MAX`: no deadline), three 20-byte records (`u64` queued
+/// at, `u16` id, `u8` length, `u8` mailbox, 8 data bytes).
 const UP_LEN: usize = 16 + 3 * 20;
 /// Host → board: `u64` completion time, `u8` flags, `u8` mailbox, `u16` id, `u8` length, 3
-/// reserved, 8 data bytes, 8 reserved.
+/// reserved, 8 data bytes, `u64` time of the next exchange (0: one quantum on).
 const DOWN_LEN: usize = 32;
 
 /// Up: this board pulls SYS_SYNC_N low.
@@ -171,6 +172,47 @@ async fn wait_until(at_us: u64) {
         .await;
 }
 
+/// How long this board will do nothing, in µs from now: until the apps' earliest deadline, or 0
+/// if an interrupt is pending, a task other than the exchange is running (pre-empted) or the
+/// background task is not [`parked`]. Nothing
+/// else wakes a board in a robot run but a frame or a line level from the host, which the host
+/// sees coming. `u32::MAX`: no deadline.
+fn sleeps_for() -> u32 {
+    const ICSR: *const u32 = 0xE000_ED04 as *const u32;
+    const ISPR: *const u32 = 0xE000_E200 as *const u32;
+    const IABR: *const u32 = 0xE000_E300 as *const u32;
+    const PENDSTSET: u32 = 1 << 26;
+    // SAFETY: reads of the SCB's and NVIC's status registers.
+    let icsr = unsafe { core::ptr::read_volatile(ICSR) };
+    if icsr & PENDSTSET != 0 {
+        return 0;
+    }
+    let own = (icsr & 0x1FF).checked_sub(16);
+    for word in 0..3 {
+        // SAFETY: as above (the first 96 interrupts cover both chips).
+        let (pending, mut active) = unsafe {
+            (
+                core::ptr::read_volatile(ISPR.add(word)),
+                core::ptr::read_volatile(IABR.add(word)),
+            )
+        };
+        if let Some(own) = own.filter(|&n| n as usize / 32 == word) {
+            active &= !(1 << (own % 32));
+        }
+        if pending != 0 || active != 0 {
+            return 0;
+        }
+    }
+    if !PARKED.load(Ordering::SeqCst) {
+        return 0;
+    }
+    let (next, now) = (super::timer::next_deadline_us(), super::now_us());
+    if next == u64::MAX {
+        return u32::MAX;
+    }
+    u32::try_from(next.saturating_sub(now)).unwrap_or(u32::MAX - 1)
+}
+
 /// The exchange loop (in place of the stimulus replay): until the host ends the run.
 pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl InterruptNumber) {
     let (up, down) = (
@@ -204,6 +246,7 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         });
         message[8] = count;
         message[9] = DRIVES.load(Ordering::SeqCst);
+        message[12..16].copy_from_slice(&sleeps_for().to_le_bytes());
         let mut answer = [0u8; DOWN_LEN];
         if !up.write_all(&message) || !down.read_exact(&mut answer) {
             super::print_line("# qemu: the robot's bus is gone");
@@ -211,6 +254,10 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             return;
         }
         let flags = answer[8];
+        let mut next = [0u8; 8];
+        next.copy_from_slice(&answer[24..32]);
+        // The host skips quanta in which no board can act: the next exchange is further on.
+        boundary = boundary.max(u64::from_le_bytes(next).saturating_sub(QUANTUM_US));
         SYNC_READS_LOW.store(flags & DOWN_SYNC_LOW != 0, Ordering::SeqCst);
         if flags & DOWN_PD_LOW != 0 && !pd_seen {
             // SYS_PD_N falls: the same interrupt the real pin raises.
@@ -253,4 +300,50 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             super::deliver(frame, rx_irq);
         }
     }
+}
+
+/// Whether the board's background task (priority 0, thread mode, which no NVIC bit shows) waits
+/// in [`parked`]; `false` from its wake-up until it waits again.
+static PARKED: AtomicBool = AtomicBool::new(false);
+/// The background task's own waker while it is parked.
+static PARKED_WAKER: Mutex<RefCell<Option<core::task::Waker>>> = Mutex::new(RefCell::new(None));
+
+fn parked_wake() {
+    PARKED.store(false, Ordering::SeqCst);
+    if let Some(waker) = critical_section::with(|cs| PARKED_WAKER.borrow_ref_mut(cs).take()) {
+        waker.wake();
+    }
+}
+
+static PARKED_VTABLE: core::task::RawWakerVTable = core::task::RawWakerVTable::new(
+    |_| core::task::RawWaker::new(core::ptr::null(), &PARKED_VTABLE),
+    |_| parked_wake(),
+    |_| parked_wake(),
+    |_| {},
+);
+
+/// Runs `future`, a wait of the board's one priority-0 task, marking the task idle while it is
+/// pending: a wake-up clears the mark before the task runs, so an exchange between the two sees a
+/// board with work ([`sleeps_for`]).
+pub async fn parked<F: core::future::Future>(future: F) -> F::Output {
+    let mut future = core::pin::pin!(future);
+    core::future::poll_fn(|cx| {
+        critical_section::with(|cs| *PARKED_WAKER.borrow_ref_mut(cs) = Some(cx.waker().clone()));
+        PARKED.store(true, Ordering::SeqCst);
+        // SAFETY: the vtable's functions ignore the data pointer.
+        let waker = unsafe {
+            core::task::Waker::from_raw(core::task::RawWaker::new(
+                core::ptr::null(),
+                &PARKED_VTABLE,
+            ))
+        };
+        let result = future
+            .as_mut()
+            .poll(&mut core::task::Context::from_waker(&waker));
+        if result.is_ready() {
+            PARKED.store(false, Ordering::SeqCst);
+        }
+        result
+    })
+    .await
 }

@@ -108,6 +108,12 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         "robot: {virtual_s:.3} s of virtual time in {wall:.1} s of wall time ({:.2} s wall per virtual s)",
         wall / virtual_s.max(1e-9)
     );
+    eprintln!(
+        "robot: {} exchanges for {} quanta of {} µs (the rest skipped: no board could act)",
+        outcome.exchanges,
+        duration / super::QUANTUM_US,
+        super::QUANTUM_US
+    );
     eprintln!("bus log (candump -l): {}", work.join("bus.log").display());
     if exceeded > 0 {
         eprintln!("bus report: {exceeded} message(s) beyond their Davis bound");

@@ -85,6 +85,8 @@ pub struct Outcome {
     pub error_frames: usize,
     /// The virtual time the run ended at (µs).
     pub ended_at: u64,
+    /// Exchanges with the boards (quanta in which nothing could happen are skipped).
+    pub exchanges: u64,
 }
 
 struct Board {
@@ -101,6 +103,8 @@ struct Board {
     offset: u64,
     alive: bool,
     drives: u8,
+    /// Global virtual time before which the board does nothing of its own (its last report).
+    wakes_at: u64,
 }
 
 fn make_fifo(path: &Path) -> Result<()> {
@@ -180,6 +184,7 @@ impl Board {
         self.alive = true;
         // A module holds SYS_SYNC_N low until it is initialised.
         self.drives = DRIVES_SYNC_LOW;
+        self.wakes_at = at;
         Ok(())
     }
 
@@ -351,6 +356,47 @@ pub struct Live {
     pub stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
+/// When the next exchange is due after the one at `t`: one quantum on, or, while the bus is idle
+/// (no frame queued, none on its way to a board, none heard in the coming quantum: `busy`
+/// otherwise, as in a live run) and no board has work, the quantum in which the
+/// first board's next deadline, the next stimulus action or the run's end falls. No board acts
+/// before its deadline but on a frame or a line level from the bus, and the bus has none to give,
+/// so every frame and line change lands in the same quantum as it would quantum by quantum.
+#[allow(clippy::too_many_arguments)]
+fn next_exchange(
+    t: u64,
+    duration_us: u64,
+    boards: &[Board],
+    bus: &Bus,
+    nodes: &[NodeId],
+    operator: &VecDeque<(u64, Frame)>,
+    deliveries: &VecDeque<Transfer>,
+    next_action: Option<u64>,
+    busy: bool,
+) -> u64 {
+    let step = t + QUANTUM_US;
+    let bus_idle = operator.is_empty()
+        && deliveries.is_empty()
+        && nodes
+            .iter()
+            .all(|&n| bus.mailboxes(n).iter().all(Option::is_none));
+    if busy || !bus_idle {
+        return step;
+    }
+    // An action at `a` is taken at the first boundary after it; a deadline at `w` is seen at the
+    // first boundary at or after it; the run ends at the first boundary at or after its duration.
+    let after = |a: u64| (a / QUANTUM_US + 1) * QUANTUM_US;
+    let at_or_after = |w: u64| w.div_ceil(QUANTUM_US) * QUANTUM_US;
+    let mut until = at_or_after(duration_us);
+    if let Some(a) = next_action {
+        until = until.min(after(a));
+    }
+    for b in boards.iter().filter(|b| b.alive) {
+        until = until.min(at_or_after(b.wakes_at));
+    }
+    until.max(step)
+}
+
 /// Runs the robot for `duration_us` of virtual time against `actions`, in `work`; with `live`,
 /// paced to the wall clock with a client's adapter on the bus.
 pub fn run(
@@ -378,6 +424,7 @@ pub fn run(
             offset: 0,
             alive: false,
             drives: DRIVES_SYNC_LOW,
+            wakes_at: 0,
         })
         .collect();
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
@@ -399,11 +446,17 @@ pub fn run(
     let mut t = 0;
     let result: Result<()> = (|| loop {
         t += QUANTUM_US;
+        outcome.exchanges += 1;
         let mut notes: Vec<String> = Vec::new();
         for b in boards.iter_mut().filter(|b| b.alive) {
             match b.receive(Instant::now(), limit)? {
                 Some(message) => {
                     b.drives = message[9];
+                    let sleeps = u32::from_le_bytes(message[12..16].try_into()?);
+                    b.wakes_at = match sleeps {
+                        u32::MAX => u64::MAX,
+                        us => t.saturating_add(u64::from(us)),
+                    };
                     for k in 0..usize::from(message[8].min(3)) {
                         let r = &message[16 + 20 * k..36 + 20 * k];
                         let queued = u64::from_le_bytes(r[..8].try_into()?) + b.offset;
@@ -593,8 +646,26 @@ pub fn run(
                 }
             }
         }
-        for b in boards.iter_mut().filter(|b| b.alive) {
+        let next = if end {
+            t + QUANTUM_US
+        } else {
+            next_exchange(
+                t,
+                duration_us,
+                &boards,
+                &bus,
+                &nodes,
+                &operator,
+                &deliveries,
+                pending.peek().map(|a| a.at_us),
+                // Boards that hear a frame in the coming quantum act on it.
+                live.is_some() || now.is_some(),
+            )
+        };
+        // A board restarted at this boundary has not traded yet: its first answer is the next one.
+        for b in boards.iter_mut().filter(|b| b.alive && b.offset != t) {
             let mut message = [0u8; DOWN_LEN];
+            message[24..32].copy_from_slice(&(next - b.offset).to_le_bytes());
             let mut flags = 0;
             if pd_low {
                 flags |= DOWN_PD_LOW;
@@ -639,6 +710,7 @@ pub fn run(
             outcome.ended_at = t;
             return Ok(());
         }
+        t = next - QUANTUM_US;
     })();
     // The boards print their end lines and exit; whatever they still say is kept.
     for b in &mut boards {
