@@ -75,8 +75,9 @@ pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
 pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// The admission task starts at most `ADMISSION_BURST` analysed commands (publish and one-shot
 /// requests of any board) in any window of `ADMISSION_WINDOW_US` (`amiro_firmware::admission::Pacing`):
-/// a burst of requests is decided back to back, and the check's cost is bounded in the analysis as
-/// `ADMISSION_BURST` decisions per window. Other commands (stops, policies: no analysis) wait
+/// a burst of requests is decided back to back, and the pacing bounds how often the check runs. The
+/// analysis needs no rate: it bounds each step from its start (docs/analysis.md, "What the analysis
+/// reserves"). Other commands (stops, policies: no analysis) wait
 /// `ADMISSION_NOTE_INTERVAL_US`.
 pub const ADMISSION_BURST: usize = 5;
 /// See `ADMISSION_BURST`.

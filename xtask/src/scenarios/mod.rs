@@ -23,13 +23,21 @@ pub fn ram_goal(board: &str) -> u64 {
         // issue 23 added the robot platform: 12 368 B measured): a stated allowance, as for flash
         // (`boards::Board::admission_allowance`); the chip has 64 KiB.
         "lightring" => 8 * 1024 + ADMISSION_RAM_ALLOWANCE,
+        // DiWheelDrive's 16 KiB had 56 B left with the admission check (16 328 B in `admission-search`, the
+        // admission task's deepest analysis with every priority nested on it); a shift in timing moves where the
+        // interrupts nest on that analysis (16 640 B after issue 20's reservation change, the same decisions):
+        // a stated 1 KiB allowance instead of a goal met by luck.
+        "diwheeldrive" => 16 * 1024 + DIWHEELDRIVE_ADMISSION_RAM_ALLOWANCE,
         _ => 16 * 1024,
     }
 }
 
 /// What the on-chip admission analysis may add to LightRing's RAM goal (docs/analysis.md, "The on-chip
-/// admission check"); DiWheelDrive and PowerManagement keep 16 KiB with it.
+/// admission check"); PowerManagement keeps 16 KiB with it.
 pub const ADMISSION_RAM_ALLOWANCE: u64 = 4 * 1024 + 512;
+
+/// What the on-chip admission analysis may add to DiWheelDrive's 16 KiB RAM goal (docs/analysis.md).
+pub const DIWHEELDRIVE_ADMISSION_RAM_ALLOWANCE: u64 = 1024;
 
 /// The scenarios of `board` (empty for a board without a QEMU build).
 /// The scenarios of one board revision (`boards::Revision::name`): DiWheelDrive 1-1's are the
