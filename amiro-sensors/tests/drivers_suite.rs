@@ -339,7 +339,10 @@ fn led_command_on_the_24_led_ring_sets_the_leds_group_and_latches() {
     assert_eq!(sim.latches(), 1);
     // LED 3 = RGB LEDs 6..=8 = chain channels 18..=26.
     for red in [18, 21, 24] {
-        assert_eq!(sim.outputs()[red..red + 3], [10, 20, 30].map(tlc5947::gamma));
+        assert_eq!(
+            sim.outputs()[red..red + 3],
+            [10, 20, 30].map(tlc5947::gamma)
+        );
     }
     assert_eq!(sim.outputs().iter().filter(|&&v| v != 0).count(), 9);
 }

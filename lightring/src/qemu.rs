@@ -2,12 +2,13 @@
 //!
 //! The platform (SysTick clock, virtual CAN, stimulus replay, stack painting, the end line,
 //! simulated system signals) is the runtime's `amiro_firmware::qemu`; this file adds only the
-//! LightRing's own device: amiro-sensors' `SimLedDriver` behind the real TLC5947 driver. After each
-//! latch the simulator's latched outputs are printed (`# tlc5947 OUT0..23 = …`), so a scenario
-//! checks what the driver really shifted out, channel order included.
-use core::fmt::Write as _;
+//! LightRing's own device: amiro-sensors' `SimLedChain` (one TLC5947 on 1-0, three chained on 1-2)
+//! behind the real driver. After each latch the simulator's latched outputs of the whole chain are
+//! printed (`# tlc5947 latched` and every channel, chain channel 0 — part 0's OUT0 — first: 24 or
+//! 72 values), so a scenario checks what the driver really shifted out, channel order included.
+use core::fmt::{self, Write as _};
 
-use amiro_sensors::sim::SimLedDriver;
+use amiro_sensors::sim::SimLedChain;
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 use stm32f1xx_hal::pac::{self, Interrupt};
 
@@ -20,8 +21,27 @@ pub const CAN_TX_INTERRUPT: Interrupt = Interrupt::USB_HP_CAN_TX;
 /// Interrupt of the CAN receive FIFO 0 (pended by the stimulus replay).
 pub const CAN_RX_INTERRUPT: Interrupt = Interrupt::USB_LP_CAN_RX0;
 
-/// The simulated TLC5947, printing its outputs after each latch.
-pub struct LedSpi(SimLedDriver);
+/// The simulated TLC5947 chain, printing its outputs after each latch.
+pub struct LedSpi(SimLedChain<{ crate::leds::CHIPS }>);
+
+/// The latch line: `tlc5947 latched` and each output in three hex digits.
+struct Latched<'a>(&'a [u16]);
+
+impl fmt::Display for Latched<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("# tlc5947 latched")?;
+        // Three hex digits by hand: core's integer formatting takes a 128-byte buffer, and this
+        // runs in the latch task, which may pre-empt the admission task's deepest stack.
+        for &value in self.0 {
+            f.write_char(' ')?;
+            for shift in [8, 4, 0] {
+                let digit = char::from_digit(u32::from(value >> shift & 0xF), 16).unwrap_or('?');
+                f.write_char(digit.to_ascii_uppercase())?;
+            }
+        }
+        Ok(())
+    }
+}
 
 impl ErrorType for LedSpi {
     type Error = core::convert::Infallible;
@@ -30,12 +50,7 @@ impl ErrorType for LedSpi {
 impl SpiDevice for LedSpi {
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), Self::Error> {
         self.0.transaction(operations)?;
-        let mut line: heapless::String<160> = heapless::String::new();
-        let _ = write!(line, "# tlc5947 latched");
-        for value in self.0.outputs() {
-            let _ = write!(line, " {value:03X}");
-        }
-        amiro_firmware::qemu::print_line(&line);
+        amiro_firmware::qemu::print_line_args(format_args!("{}", Latched(self.0.outputs())));
         Ok(())
     }
 }
@@ -75,7 +90,7 @@ pub fn init(_dp: pac::Peripherals, cp: cortex_m::Peripherals) -> Board {
         can_tx: CanTxPort,
         can_rx: CanRxPort,
         can_errors: amiro_firmware::qemu::can_errors(),
-        led_spi: LedSpi(SimLedDriver::new()),
+        led_spi: LedSpi(SimLedChain::new()),
         blank: Blank,
         signals: SystemSignals,
         timer_hz: 0,

@@ -133,10 +133,14 @@ pub fn pack_frame(channels: &[u16; CHANNELS]) -> [u8; FRAME_BYTES] {
 }
 
 /// `CHIPS` chained TLC5947 holding the `24 × CHIPS` values they will shift out next.
+///
+/// The values are kept packed in shift order (the frame [`pack_chain`] would make), so a flush
+/// writes them as they are: no second copy on the stack, and 1.5 bytes per channel instead of 2
+/// (LightRing's RAM is tight: docs/boards.md).
 #[derive(Debug)]
 pub struct Tlc5947Chain<SPI, const CHIPS: usize> {
     spi: SPI,
-    channels: [[u16; CHANNELS]; CHIPS],
+    frame: [[u8; FRAME_BYTES]; CHIPS],
 }
 
 /// One TLC5947 (LightRing 1-0).
@@ -152,16 +156,35 @@ impl<SPI: SpiDevice, const CHIPS: usize> Tlc5947Chain<SPI, CHIPS> {
     pub const fn new(spi: SPI) -> Self {
         Self {
             spi,
-            channels: [[0; CHANNELS]; CHIPS],
+            frame: [[0; FRAME_BYTES]; CHIPS],
         }
+    }
+
+    /// Where chain channel `out` sits in the frame: its first byte, and whether it is the first
+    /// (upper) value of its three-byte pair (shifted first: the pair's higher channel).
+    fn place(out: usize) -> Option<(usize, bool)> {
+        let from_top = Self::OUTPUTS.checked_sub(out + 1)?;
+        Some((from_top * 3 / 2, from_top % 2 == 0))
     }
 
     /// Sets chain channel `out` (0..24 × `CHIPS`) to `value` (clamped to 4095) for the next
     /// [`flush`](Self::flush).
     pub fn set_channel(&mut self, out: u8, value: u16) -> Result<(), Error<SPI::Error>> {
-        match self.channels.as_flattened_mut().get_mut(usize::from(out)) {
-            Some(slot) => {
-                *slot = value.min(MAX_VALUE);
+        let value = value.min(MAX_VALUE);
+        let frame = self.frame.as_flattened_mut();
+        match Self::place(usize::from(out)) {
+            Some((at, true)) => {
+                if let [first, second, ..] = &mut frame[at..] {
+                    *first = (value >> 4) as u8;
+                    *second = (*second & 0x0F) | ((value & 0x0F) << 4) as u8;
+                }
+                Ok(())
+            }
+            Some((at, false)) => {
+                if let [first, second, ..] = &mut frame[at..] {
+                    *first = (*first & 0xF0) | (value >> 8) as u8;
+                    *second = (value & 0xFF) as u8;
+                }
                 Ok(())
             }
             None => Err(Error::OutOfRange {
@@ -171,20 +194,31 @@ impl<SPI: SpiDevice, const CHIPS: usize> Tlc5947Chain<SPI, CHIPS> {
         }
     }
 
+    /// The pending value of chain channel `out`, `None` past the chain's end.
+    pub fn channel(&self, out: usize) -> Option<u16> {
+        let (at, upper) = Self::place(out)?;
+        let frame = self.frame.as_flattened();
+        let (first, second) = (u16::from(*frame.get(at)?), u16::from(*frame.get(at + 1)?));
+        Some(if upper {
+            first << 4 | second >> 4
+        } else {
+            (first & 0x0F) << 8 | second
+        })
+    }
+
     /// The pending values, chain channel 0 first.
-    pub fn channels(&self) -> &[u16] {
-        self.channels.as_flattened()
+    pub fn channels(&self) -> impl Iterator<Item = u16> + '_ {
+        (0..Self::OUTPUTS).filter_map(|out| self.channel(out))
     }
 
     /// Sets every output to 0 (for the next flush).
     pub fn clear(&mut self) {
-        self.channels = [[0; CHANNELS]; CHIPS];
+        self.frame = [[0; FRAME_BYTES]; CHIPS];
     }
 
     /// Shifts the pending values out and latches them (one write of `36 × CHIPS` bytes).
     pub fn flush(&mut self) -> Result<(), Error<SPI::Error>> {
-        let frame = pack_chain(&self.channels);
-        self.spi.write(frame.as_flattened())?;
+        self.spi.write(self.frame.as_flattened())?;
         Ok(())
     }
 
