@@ -551,8 +551,8 @@ fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 }
 
 /// `admission.log` on a ring of `chips`, whose accepted request is the diagnostics every
-/// `every_ms` at medium (2 ms on 1-0; the 1-2 ring's log asks for 5 ms: its 530 µs latches make
-/// 2 ms miss on a 1-2 robot, which the check refuses).
+/// `every_ms` at medium (2 ms on 1-0; the 1-2 ring's log asks for 5 ms: the 1-2 image on a 1-2
+/// robot refuses 2 ms).
 pub(super) fn admission_on(
     out: &RunOutput,
     bounds: &Bounds,
