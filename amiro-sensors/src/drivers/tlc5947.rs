@@ -174,14 +174,14 @@ impl<SPI: SpiDevice, const CHIPS: usize> Tlc5947Chain<SPI, CHIPS> {
         let frame = self.frame.as_flattened_mut();
         match Self::place(usize::from(out)) {
             Some((at, true)) => {
-                if let [first, second, ..] = &mut frame[at..] {
+                if let Some([first, second, ..]) = frame.get_mut(at..) {
                     *first = (value >> 4) as u8;
                     *second = (*second & 0x0F) | ((value & 0x0F) << 4) as u8;
                 }
                 Ok(())
             }
             Some((at, false)) => {
-                if let [first, second, ..] = &mut frame[at..] {
+                if let Some([first, second, ..]) = frame.get_mut(at..) {
                     *first = (*first & 0xF0) | (value >> 8) as u8;
                     *second = (value & 0xFF) as u8;
                 }
