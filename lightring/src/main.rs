@@ -75,7 +75,7 @@ pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// The latch task starts at most one latch per this interval: LED commands handled meanwhile are
 /// latched together (each LED shows its newest colour), so the latch costs at most about 175 µs
 /// per millisecond whatever the bus carries. 1-0: one latch (36 bytes, 175 µs) per 1 ms, a command
-/// latched within about 1.7 ms. 1-2: one latch (108 bytes, 525 µs) per 3 ms — the same share of
+/// latched within about 1.7 ms. 1-2: one latch (108 bytes, 530 µs) per 3 ms — the same share of
 /// the CPU (1 ms would take 53 % and leave the admission task none: docs/boards.md) —, a command
 /// latched within about 4.2 ms.
 pub const LATCH_MIN_INTERVAL_US: u64 = if cfg!(feature = "rev-1-2") {
