@@ -343,13 +343,6 @@ pub fn print_line(line: &str) {
     hprintln!("{}", line);
 }
 
-/// Prints one line formatted from `args`, without a buffer (a device report longer than one is
-/// worth on the stack: LightRing 1-2's 72 channels). Written under a critical section, as
-/// [`print_line`], so no other line splits it.
-pub fn print_line_args(args: core::fmt::Arguments<'_>) {
-    hprintln!("{}", args);
-}
-
 /// Ends the QEMU run.
 pub fn exit(success: bool) {
     debug::exit(if success {

@@ -6,8 +6,6 @@
 //! behind the real driver. After each latch the simulator's latched outputs of the whole chain are
 //! printed (`# tlc5947 latched` and every channel, chain channel 0 — part 0's OUT0 — first: 24 or
 //! 72 values), so a scenario checks what the driver really shifted out, channel order included.
-use core::fmt::{self, Write as _};
-
 use amiro_sensors::sim::SimLedChain;
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 use stm32f1xx_hal::pac::{self, Interrupt};
@@ -24,23 +22,24 @@ pub const CAN_RX_INTERRUPT: Interrupt = Interrupt::USB_LP_CAN_RX0;
 /// The simulated TLC5947 chain, printing its outputs after each latch.
 pub struct LedSpi(SimLedChain<{ crate::leds::CHIPS }>);
 
-/// The latch line: `tlc5947 latched` and each output in three hex digits.
-struct Latched<'a>(&'a [u16]);
+/// The latch line's length: `# tlc5947 latched` and ` XXX` per chain channel.
+const LATCH_LINE: usize = 17 + 4 * amiro_sensors::drivers::tlc5947::CHANNELS * crate::leds::CHIPS;
 
-impl fmt::Display for Latched<'_> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("# tlc5947 latched")?;
-        // Three hex digits by hand: core's integer formatting takes a 128-byte buffer, and this
-        // runs in the latch task, which may pre-empt the admission task's deepest stack.
-        for &value in self.0 {
-            f.write_char(' ')?;
-            for shift in [8, 4, 0] {
-                let digit = char::from_digit(u32::from(value >> shift & 0xF), 16).unwrap_or('?');
-                f.write_char(digit.to_ascii_uppercase())?;
-            }
+/// The latch line: `# tlc5947 latched` and each output in three hex digits, written by hand into a
+/// buffer of exactly its length (core's integer formatting would add a 128-byte buffer to the
+/// latch task's stack, and printing piecewise would hold the semihosting lock, interrupts off,
+/// for the whole line), then printed in one write as before.
+fn latch_line(outputs: &[u16]) -> heapless::String<LATCH_LINE> {
+    let mut line = heapless::String::new();
+    let _ = line.push_str("# tlc5947 latched");
+    for &value in outputs {
+        let _ = line.push(' ');
+        for shift in [8, 4, 0] {
+            let digit = char::from_digit(u32::from(value >> shift & 0xF), 16).unwrap_or('?');
+            let _ = line.push(digit.to_ascii_uppercase());
         }
-        Ok(())
     }
+    line
 }
 
 impl ErrorType for LedSpi {
@@ -50,7 +49,7 @@ impl ErrorType for LedSpi {
 impl SpiDevice for LedSpi {
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), Self::Error> {
         self.0.transaction(operations)?;
-        amiro_firmware::qemu::print_line_args(format_args!("{}", Latched(self.0.outputs())));
+        amiro_firmware::qemu::print_line(&latch_line(self.0.outputs()));
         Ok(())
     }
 }
