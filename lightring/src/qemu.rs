@@ -22,24 +22,27 @@ pub const CAN_RX_INTERRUPT: Interrupt = Interrupt::USB_LP_CAN_RX0;
 /// The simulated TLC5947 chain, printing its outputs after each latch.
 pub struct LedSpi(SimLedChain<{ crate::leds::CHIPS }>);
 
-/// The latch line's length: `# tlc5947 latched` and ` XXX` per chain channel.
-const LATCH_LINE: usize = 17 + 4 * amiro_sensors::drivers::tlc5947::CHANNELS * crate::leds::CHIPS;
-
-/// The latch line: `# tlc5947 latched` and each output in three hex digits, written by hand into a
-/// buffer of exactly its length (core's integer formatting would add a 128-byte buffer to the
-/// latch task's stack, and printing piecewise would hold the semihosting lock, interrupts off,
-/// for the whole line), then printed in one write as before.
-fn latch_line(outputs: &[u16]) -> heapless::String<LATCH_LINE> {
-    let mut line = heapless::String::new();
-    let _ = line.push_str("# tlc5947 latched");
-    for &value in outputs {
-        let _ = line.push(' ');
-        for shift in [8, 4, 0] {
-            let digit = char::from_digit(u32::from(value >> shift & 0xF), 16).unwrap_or('?');
-            let _ = line.push(digit.to_ascii_uppercase());
+/// Prints the latch line, `# tlc5947 latched` and each output in three hex digits, in pieces of
+/// eight values from a 32-byte buffer, under one critical section (`print_line_pieces`): a buffer
+/// for the whole line (305 bytes on 1-2) or core's integer formatting (a 128-byte buffer) would
+/// deepen the latch task's stack, which may pre-empt the admission task's deepest.
+fn print_latch(outputs: &[u16]) {
+    const HEX: &[u8; 16] = b"0123456789ABCDEF";
+    amiro_firmware::qemu::print_line_pieces(|put| {
+        put(b"# tlc5947 latched");
+        for values in outputs.chunks(8) {
+            let mut piece = [0u8; 32];
+            for (text, &value) in piece.chunks_exact_mut(4).zip(values) {
+                text.copy_from_slice(&[
+                    b' ',
+                    HEX[usize::from(value >> 8 & 0xF)],
+                    HEX[usize::from(value >> 4 & 0xF)],
+                    HEX[usize::from(value & 0xF)],
+                ]);
+            }
+            put(piece.get(..4 * values.len()).unwrap_or(&[]));
         }
-    }
-    line
+    });
 }
 
 impl ErrorType for LedSpi {
@@ -49,7 +52,7 @@ impl ErrorType for LedSpi {
 impl SpiDevice for LedSpi {
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), Self::Error> {
         self.0.transaction(operations)?;
-        amiro_firmware::qemu::print_line(&latch_line(self.0.outputs()));
+        print_latch(self.0.outputs());
         Ok(())
     }
 }
