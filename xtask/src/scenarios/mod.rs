@@ -22,14 +22,13 @@ pub fn ram_goal(board: &str, revision: &str) -> u64 {
     match (board, revision) {
         // LightRing 1-2: 1-0's goal plus a stated 256 B. Its scenarios measure 12 656 B, but the
         // same image deciding (and refusing) the shared admission log's 2 ms request reached
-        // 12 928 B against 1-0's 12 488 B: its 108-byte frame where 1-0 keeps 36 (+72 B, on the
-        // chip too), the QEMU build's simulator of three TLC5947 (+168 B, not on the chip), and the
-        // admission analysis of a 1-2 robot, whose DiWheelDrive model is 1-2's (+200 B of stack in
-        // that run, on the chip too).
+        // 12 904 B against 1-0's 12 416 B: its 108-byte frame where 1-0 keeps 36 (+72 B, on the
+        // chip too), the QEMU build's simulator of three TLC5947 (+168 B, not on the chip), and that
+        // decision's analysis of a 1-2 robot (+248 B of stack, on the chip too).
         ("lightring", "1-2") => 8 * 1024 + ADMISSION_RAM_ALLOWANCE + LIGHTRING_1_2_RAM_ALLOWANCE,
         // LightRing's own 8 KiB, plus what the on-chip admission analysis needs (its state and the
         // stack of one whole-robot analysis, about 7.4 KB; 4.5 KiB since issue 20 bounded the decisions and
-        // issue 23 added the robot platform: 12 368 B measured then, 12 488 B with issue 22's
+        // issue 23 added the robot platform: 12 368 B measured then, 12 416 B with issue 22's
         // revisions): a stated allowance, as for flash (`boards::Board::admission_allowance`); the
         // chip has 64 KiB.
         ("lightring", _) => 8 * 1024 + ADMISSION_RAM_ALLOWANCE,
