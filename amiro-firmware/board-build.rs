@@ -30,10 +30,13 @@ fn main() {
         PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"))
             .join("..");
     // The robot's board revision (the board's `rev-*` feature) selects its timing files
-    // (`schedule_analysis::scenario::REVISION_ENV`) for the admission table below.
+    // (`schedule_analysis::scenario::REVISION_ENV`) for the admission table below. A board revision
+    // names its robot's, but LightRing 1-0, which sits on 1-1 robots (docs/boards.md, "Revisions").
     let revision = env::vars().find_map(|(k, _)| {
-        k.strip_prefix("CARGO_FEATURE_REV_")
-            .map(|r| r.replace('_', "-"))
+        k.strip_prefix("CARGO_FEATURE_REV_").map(|r| match r {
+            "1_0" => "1-1".to_string(),
+            r => r.replace('_', "-"),
+        })
     });
     if let Some(revision) = revision {
         env::set_var("AMIRO_REVISION", revision);

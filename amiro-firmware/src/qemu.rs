@@ -343,6 +343,22 @@ pub fn print_line(line: &str) {
     hprintln!("{}", line);
 }
 
+/// Prints one line given in pieces (`pieces` calls its sink once per piece), under one critical
+/// section so no other line splits it, without a buffer for the whole line: a device report longer
+/// than is worth holding on the stack (LightRing 1-2's 72 channels). Keep the pieces cheap to make:
+/// interrupts are off meanwhile.
+pub fn print_line_pieces(pieces: impl FnOnce(&mut dyn FnMut(&[u8]))) {
+    critical_section::with(|_| {
+        if let Ok(mut out) = cortex_m_semihosting::hio::hstdout() {
+            let mut sink = |bytes: &[u8]| {
+                let _ = out.write_all(bytes);
+            };
+            pieces(&mut sink);
+            let _ = out.write_all(b"\n");
+        }
+    });
+}
+
 /// Ends the QEMU run.
 pub fn exit(success: bool) {
     debug::exit(if success {

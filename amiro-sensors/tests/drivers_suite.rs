@@ -11,7 +11,7 @@ use amiro_sensors::drivers::suite::{
     Battery, BusFault, Compass, Device, DiWheelDriveSensors, PowerManagementSensors, SampleError,
     SensorGroup,
 };
-use amiro_sensors::drivers::tlc5947::{self, LightRing};
+use amiro_sensors::drivers::tlc5947::{self, LightRing, LightRing24};
 use amiro_sensors::drivers::Error;
 use amiro_sensors::sim::*;
 use embedded_hal::i2c::{ErrorKind, NoAcknowledgeSource};
@@ -320,6 +320,31 @@ fn led_command_sets_and_latches_the_ring() {
     assert_eq!(sim.latches(), 1);
     // LED 3 = triple 5 = OUT15..17.
     assert_eq!(sim.outputs()[15..18], [10, 20, 30].map(tlc5947::gamma));
+}
+
+#[test]
+fn led_command_on_the_24_led_ring_sets_the_leds_group_and_latches() {
+    let mut ring = LightRing24::new(SimLedChain::<3>::new());
+    let command = LedCommand::new(
+        3,
+        Rgb {
+            r: 10,
+            g: 20,
+            b: 30,
+        },
+    )
+    .unwrap();
+    ring.apply(&command).unwrap();
+    let sim = ring.release();
+    assert_eq!(sim.latches(), 1);
+    // LED 3 = RGB LEDs 6..=8 = chain channels 18..=26.
+    for red in [18, 21, 24] {
+        assert_eq!(
+            sim.outputs()[red..red + 3],
+            [10, 20, 30].map(tlc5947::gamma)
+        );
+    }
+    assert_eq!(sim.outputs().iter().filter(|&&v| v != 0).count(), 9);
 }
 
 #[test]

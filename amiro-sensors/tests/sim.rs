@@ -7,7 +7,7 @@ use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::hmc5883l::{Gain, Hmc5883l};
 use amiro_sensors::drivers::l3g4200d::{self, L3g4200d};
 use amiro_sensors::drivers::lis331dlh::Lis331dlh;
-use amiro_sensors::drivers::tlc5947::{self, LightRing};
+use amiro_sensors::drivers::tlc5947::{self, LightRing, LightRing24};
 use amiro_sensors::drivers::vcnl4020::{self, Vcnl4020};
 use amiro_sensors::drivers::Error;
 use amiro_sensors::sim::*;
@@ -31,6 +31,7 @@ fn simulators_fit_a_few_hundred_bytes() {
         "PowerManagement simulators take {power_management} bytes"
     );
     assert!(size_of::<SimLedDriver>() <= 96);
+    assert!(size_of::<SimLedChain<3>>() <= 3 * 96);
 }
 
 // ---------------------------------------------------------------- gyroscope
@@ -255,6 +256,27 @@ fn light_ring_shifts_frames_the_simulator_decodes() {
     assert_eq!(sim.output(23), Some(0));
     assert_eq!(sim.output(2), Some(tlc5947::gamma(10)));
     assert_eq!(sim.outputs().iter().filter(|&&v| v != 0).count(), 3);
+}
+
+#[test]
+fn a_24_led_ring_shifts_frames_a_simulated_chain_of_three_decodes() {
+    let mut ring = LightRing24::new(SimLedChain::<3>::new());
+    ring.set_led(1, 255, 128, 0).unwrap();
+    ring.set_led(8, 0, 0, 10).unwrap();
+    ring.flush().unwrap();
+    let sim = ring.release();
+    assert_eq!(sim.latches(), 1);
+    assert_eq!(sim.outputs().len(), 72);
+    // LED 1 is triples 0..=2 (chain channels 0..=8), LED 8 triples 21..=23 (63..=71).
+    for red in [0, 3, 6] {
+        assert_eq!(sim.output(red), Some(4095));
+        assert_eq!(sim.output(red + 1), Some(tlc5947::gamma(128)));
+        assert_eq!(sim.output(red + 2), Some(0));
+    }
+    for blue in [65, 68, 71] {
+        assert_eq!(sim.output(blue), Some(tlc5947::gamma(10)));
+    }
+    assert_eq!(sim.outputs().iter().filter(|&&v| v != 0).count(), 9);
 }
 
 // ---------------------------------------------------------------- determinism

@@ -1,11 +1,20 @@
-//! LightRing revision 1-0 as the real chip sees it: the one place that names pins and peripherals.
+//! LightRing revisions 1-0 and 1-2 as the real chip sees them: the one place that names pins and
+//! peripherals.
 //!
 //! Facts from `shared/reference/amiro-boards.md` §0, §1, §6: 8 MHz crystal → 72 MHz (APB1 36 MHz),
-//! CAN1 on PA11/PA12 at 1 Mbit/s, one TLC5947 on SPI1 (SCK PA5, MOSI PA7; MISO PA6 unused) at
-//! 2.25 MHz mode 0 with XLAT on PC4 driven as the chip select (its rising edge at the end of a
-//! transfer latches) and BLANK on PA4 (high = dark, the reset state, until the driver holds a
-//! frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The monotonic is TIM3 (the runtime's half-period
-//! timer backend; it claims no pin — its channels only compare — so PA6/PA7 stay SPI1's).
+//! CAN1 on PA11/PA12 at 1 Mbit/s, the TLC5947 (1-0: one; 1-2: three chained) on SPI1 (SCK PA5,
+//! MOSI PA7; MISO PA6 unused) at 2.25 MHz mode 0 with XLAT on PC4 driven as the chip select (its
+//! rising edge at the end of a transfer latches) and BLANK on PA4 (high = dark, the reset state,
+//! until the driver holds a frame), JTAG off and SWD kept, SYS_SYNC_N PD2, SYS_PD_N PC14. The
+//! monotonic is TIM3 (the runtime's half-period timer backend; it claims no pin — its channels only
+//! compare — so PA6/PA7 stay SPI1's).
+//!
+//! Revision 1-2 only (`rev-1-2`): the status LED PC3 (open drain, active low: lit while the
+//! application runs, as DiWheelDrive's), SYS_UART_UP PC7 (open drain, released), and the breakout
+//! connector's power switches (MIC9404x, active high) V1.8 PC5, V3.3 PB0, V4.2 PB1, V5.0 PB2,
+//! VSYS PC6, driven low (off) at boot: this firmware drives no breakout module. On 1-0 these pins
+//! are other things (PB2 is the laser scanner's LASER_EN) or nothing; the 1-0 image leaves them
+//! in their reset state, as it always has.
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
 use amiro_firmware::spi;
@@ -89,7 +98,8 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
 
     let mut afio = dp.AFIO.constrain(&mut rcc);
     let mut gpioa = dp.GPIOA.split(&mut rcc);
-    let gpiob = dp.GPIOB.split(&mut rcc);
+    #[cfg_attr(not(feature = "rev-1-2"), allow(unused_mut))]
+    let mut gpiob = dp.GPIOB.split(&mut rcc);
     let mut gpioc = dp.GPIOC.split(&mut rcc);
     let mut gpiod = dp.GPIOD.split(&mut rcc);
 
@@ -105,7 +115,42 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     let sys_pd = gpioc
         .pc14
         .into_open_drain_output_with_state(&mut gpioc.crh, PinState::High);
+    #[cfg(not(feature = "rev-1-2"))]
     amiro_firmware::log!("power lines: SYS_SYNC_N held low, SYS_PD_N released, LEDs blanked");
+    // Revision 1-2: the breakout connector's supplies off (no breakout module is driven), the
+    // status LED lit, SYS_UART_UP released (wired-OR: another module may pull it). Set once here;
+    // nothing else in the firmware names these pins (their pin values are zero-sized: the
+    // configuration stays when they go out of scope).
+    #[cfg(feature = "rev-1-2")]
+    {
+        let _breakout_power_off = (
+            gpioc
+                .pc5
+                .into_push_pull_output_with_state(&mut gpioc.crl, PinState::Low),
+            gpiob
+                .pb0
+                .into_push_pull_output_with_state(&mut gpiob.crl, PinState::Low),
+            gpiob
+                .pb1
+                .into_push_pull_output_with_state(&mut gpiob.crl, PinState::Low),
+            gpiob
+                .pb2
+                .into_push_pull_output_with_state(&mut gpiob.crl, PinState::Low),
+            gpioc
+                .pc6
+                .into_push_pull_output_with_state(&mut gpioc.crl, PinState::Low),
+        );
+        let _status_led_lit = gpioc
+            .pc3
+            .into_open_drain_output_with_state(&mut gpioc.crl, PinState::Low);
+        let _sys_uart_up_released = gpioc
+            .pc7
+            .into_open_drain_output_with_state(&mut gpioc.crl, PinState::High);
+    }
+    #[cfg(feature = "rev-1-2")]
+    amiro_firmware::log!(
+        "power lines: SYS_SYNC_N held low, SYS_PD_N released, LEDs blanked, breakout power off"
+    );
     // SAFETY: AFIO's clock is on (constrain above); EXTICR4 bits 8..12 select the port of line 14,
     // and nothing else in this firmware uses EXTI lines 12..15.
     unsafe {

@@ -1,5 +1,8 @@
 //! The ring's colour state between the command handler and the latch task, and the latch itself.
 //!
+//! The state is the protocol's eight LEDs on either revision; [`Ring`] is the revision's driver
+//! (1-0: one TLC5947; 1-2: three chained, each protocol LED lighting its group of three).
+//!
 //! The command handler only records each LED command (fast, in command order); the latch task
 //! shifts the whole state into the TLC5947 and latches it. A burst of commands faster than a latch
 //! takes is therefore applied in order and shown together by the next latch — no command is lost,
@@ -7,9 +10,15 @@
 use amiro_can::LedCommand;
 use amiro_firmware::mono::Clock;
 use amiro_firmware::telemetry;
-use amiro_sensors::drivers::tlc5947::{LightRing, LEDS};
+use amiro_sensors::drivers::tlc5947::{LedRing, LEDS};
 use amiro_sensors::trace::{TraceEvent, TraceKind};
 use embedded_hal::spi::SpiDevice;
+
+/// TLC5947 parts chained on this revision's ring.
+pub const CHIPS: usize = if cfg!(feature = "rev-1-2") { 3 } else { 1 };
+
+/// This revision's ring: protocol LEDs onto its chain (`amiro_sensors::drivers::tlc5947`).
+pub type Ring<SPI> = LedRing<SPI, CHIPS>;
 
 /// The commanded colours and which LEDs changed since the last latch.
 pub struct LedState {
@@ -66,7 +75,7 @@ impl Default for LedState {
 /// Shifts `colours` into the driver and latches them; traces the latch with the LEDs that changed.
 /// A failed transfer is logged; the next latch writes the whole state again.
 pub fn latch<C: Clock, SPI: SpiDevice>(
-    ring: &mut LightRing<SPI>,
+    ring: &mut Ring<SPI>,
     colours: &[[u8; 3]; LEDS as usize],
     changed: u8,
 ) {

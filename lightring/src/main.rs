@@ -1,4 +1,6 @@
-//! LightRing firmware (STM32F103xE, board revision 1-0: one TLC5947, eight RGB LEDs): the RTIC app.
+//! LightRing firmware (STM32F103xE, board revisions 1-0 — one TLC5947, eight RGB LEDs — and 1-2 —
+//! three chained TLC5947, 24 RGB LEDs —, one per build: feature `rev-1-0` or `rev-1-2`, the
+//! default): the RTIC app.
 //!
 //! This file is wiring only: resources, bindings, priorities. LED commands from the bus set the
 //! colours (`leds`), the latch task shifts them into the TLC5947; everything else (CAN, monotonic,
@@ -24,6 +26,13 @@ mod qemu;
 #[cfg(feature = "qemu")]
 use qemu as platform;
 
+#[cfg(all(feature = "rev-1-0", feature = "rev-1-2"))]
+compile_error!(
+    "choose one board revision: `rev-1-0` or `rev-1-2` (with --no-default-features for 1-0)"
+);
+#[cfg(not(any(feature = "rev-1-0", feature = "rev-1-2")))]
+compile_error!("choose a board revision: feature `rev-1-0` or `rev-1-2`");
+
 // The trace numbers of the tasks below (`trace_task::CAN_RX`, …), from this file.
 amiro_firmware::trace_tasks!();
 
@@ -36,6 +45,17 @@ amiro_firmware::safe_state!(platform::leds_dark);
 #[link_section = ".blt_checksum"]
 #[used]
 static BLT_CHECKSUM: u32 = 0xFFFF_FFFF;
+
+/// The board revision this image is for, as its AMiRo-BLT device id (`shared/reference` §2):
+/// `cargo xtask flash` reads this symbol and refuses to write the image into a board whose
+/// bootloader answers with another revision's id.
+#[no_mangle]
+#[used]
+pub static AMIRO_DEVICE_ID: u32 = if cfg!(feature = "rev-1-0") {
+    0x017F_0100
+} else {
+    0x017F_0102
+};
 
 /// Depth of the queue between the CAN receive interrupt and command handling.
 pub const RX_QUEUE_LEN: usize = 16;
@@ -53,9 +73,16 @@ pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
 /// The command handler takes at most one command per this interval (`docs/analysis.md`).
 pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// The latch task starts at most one latch per this interval: LED commands handled meanwhile are
-/// latched together (each LED shows its newest colour), so the SPI transfer costs at most 175 µs
-/// per millisecond whatever the bus carries, and a command is latched within about 1.4 ms.
-pub const LATCH_MIN_INTERVAL_US: u64 = 1_000;
+/// latched together (each LED shows its newest colour), so the latch costs at most about 175 µs
+/// per millisecond whatever the bus carries. 1-0: one latch (36 bytes, 175 µs) per 1 ms, a command
+/// latched within about 1.7 ms. 1-2: one latch (108 bytes, 530 µs) per 3 ms — the same share of
+/// the CPU (1 ms would take 53 % and leave the admission task none: docs/boards.md) —, a command
+/// latched within about 4.2 ms.
+pub const LATCH_MIN_INTERVAL_US: u64 = if cfg!(feature = "rev-1-2") {
+    3_000
+} else {
+    1_000
+};
 
 /// The admission task starts at most `ADMISSION_BURST` analysed commands (publish and one-shot
 /// requests of any board) in any window of `ADMISSION_WINDOW_US` (`amiro_firmware::admission::Pacing`):
@@ -102,7 +129,6 @@ mod app {
     use amiro_firmware::watchdog as iwdg;
     use amiro_firmware::{bootloader, health, publisher, tasks};
     use amiro_sensors::drivers::suite::Samples;
-    use amiro_sensors::drivers::tlc5947::LightRing;
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
     use amiro_sensors::tx_queue::TxQueue;
     use rtic_sync::channel::{Receiver, Sender};
@@ -135,7 +161,7 @@ mod app {
         wake_commands: [Sender<'static, (), 1>; 1],
         publisher_wakeups: Receiver<'static, (), 1>,
         latch_wakeups: Receiver<'static, (), 1>,
-        ring: LightRing<platform::LedSpi>,
+        ring: leds::Ring<platform::LedSpi>,
         blank: platform::Blank,
         signals: platform::SystemSignals,
     }
@@ -190,7 +216,7 @@ mod app {
                 wake_publisher: [wake_publisher],
                 publisher_wakeups,
                 latch_wakeups,
-                ring: LightRing::new(hw.led_spi),
+                ring: leds::Ring::new(hw.led_spi),
                 blank: hw.blank,
                 signals,
             },

@@ -16,18 +16,15 @@ fn root() -> PathBuf {
 }
 
 #[test]
-fn revision_1_2_replaces_only_the_diwheeldrive_timing() {
+fn revision_1_2_replaces_the_diwheeldrive_and_lightring_timing() {
     let root = root();
     let base = scenario::timing_files_for(&root, None);
     let rev = scenario::timing_files_for(&root, Some("1-2"));
     assert_eq!(base.len(), rev.len());
     for (b, r) in base.iter().zip(&rev) {
         let name = b.file_name().and_then(|n| n.to_str()).unwrap_or("");
-        if name == "diwheeldrive.timing.json" {
-            assert!(
-                r.ends_with("models/rev-1-2/diwheeldrive.timing.json"),
-                "{r:?}"
-            );
+        if name == "diwheeldrive.timing.json" || name == "lightring.timing.json" {
+            assert!(r.ends_with(format!("models/rev-1-2/{name}")), "{r:?}");
         } else {
             assert_eq!(b, r);
         }
@@ -153,5 +150,71 @@ fn the_1_2_diwheeldrive_model_dominates_the_1_1_model() {
                 );
             }
         }
+    }
+}
+
+/// PowerManagement's one image carries the table of a 1-2 robot, whose LightRing is a 1-2 (three
+/// TLC5947): safe on a 1-1 robot (LightRing 1-0) only if the 1-2 LightRing model demands at least
+/// as much of its board in every window as the 1-0 model. They differ only in the latch task: one
+/// 108-byte latch per 3 ms against one 36-byte latch per 1 ms (docs/boards.md). Every other task and
+/// topic is the same; the latch's demand in any window (ceil((w + J) / T) jobs of C plus the
+/// dispatch overheads) is at least the 1-0 latch's, its critical sections no shorter.
+#[test]
+fn the_1_2_lightring_model_dominates_the_1_0_model() {
+    let read = |path: &str| -> serde_json::Value {
+        let text = std::fs::read_to_string(root().join(path)).expect("timing file");
+        serde_json::from_str(&text).expect("json")
+    };
+    let old = read("schedule-analysis/models/lightring.timing.json");
+    let new = read("schedule-analysis/models/rev-1-2/lightring.timing.json");
+    assert_eq!(old["overheads"], new["overheads"]);
+    assert_eq!(old["topics"], new["topics"]);
+    let (Some(old_tasks), Some(new_tasks)) = (old["tasks"].as_object(), new["tasks"].as_object())
+    else {
+        panic!("tasks");
+    };
+    let mut old_names: Vec<_> = old_tasks.keys().collect();
+    let mut new_names: Vec<_> = new_tasks.keys().collect();
+    old_names.sort();
+    new_names.sort();
+    assert_eq!(old_names, new_names);
+    for (name, o) in old_tasks {
+        if name != "latch_leds" {
+            assert_eq!(o, &new_tasks[name], "{name}");
+        }
+    }
+    let overhead = ["isr_entry_us", "isr_exit_us", "dispatcher_us"]
+        .iter()
+        .map(|k| old["overheads"][k].as_f64().unwrap_or(0.0))
+        .sum::<f64>();
+    let latch = |v: &serde_json::Value| {
+        let t = &v["tasks"]["latch_leds"];
+        let us = |k: &str| t[k].as_f64().unwrap_or(0.0);
+        (
+            us("wcet_us") + overhead,
+            t["arrival"]["sporadic_us"]
+                .as_f64()
+                .expect("sporadic latch"),
+            us("jitter_us"),
+        )
+    };
+    let ((c0, t0, j0), (c2, t2, j2)) = (latch(&old), latch(&new));
+    for w in 0..=200_000u32 {
+        let w = f64::from(w);
+        let demand = |c: f64, t: f64, j: f64| ((w + j) / t).ceil() * c;
+        assert!(
+            demand(c2, t2, j2) >= demand(c0, t0, j0),
+            "window {w} µs: 1-2 latch demand {} < 1-0's {}",
+            demand(c2, t2, j2),
+            demand(c0, t0, j0)
+        );
+    }
+    let sections = |v: &serde_json::Value| v["tasks"]["latch_leds"]["critical_sections_us"].clone();
+    let (old_cs, new_cs) = (sections(&old), sections(&new));
+    for (lock, us) in old_cs.as_object().expect("sections") {
+        assert!(
+            new_cs[lock].as_f64().unwrap_or(0.0) >= us.as_f64().unwrap_or(0.0),
+            "{lock}"
+        );
     }
 }

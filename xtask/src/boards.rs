@@ -145,13 +145,22 @@ pub const BOARDS: [Board; 3] = [
         qemu_machine: "netduino2",
         flash_budget: 24 * 1024,
         admission_allowance: 28 * 1024,
-        // The 1-0 ring (eight LEDs) of a 1-1 robot; LightRing 1-2 (24 LEDs) has no image yet.
-        revisions: &[Revision {
-            name: "1-0",
-            robots: &["1-1"],
-            feature: None,
-            device_ids: &[0x017F_0100, 3],
-        }],
+        // The 1-2 ring (three TLC5947, 24 LEDs) of a 1-2 robot; the 1-0 ring (one TLC5947, eight
+        // LEDs) of a 1-1 robot (docs/boards.md).
+        revisions: &[
+            Revision {
+                name: "1-2",
+                robots: &["1-2"],
+                feature: Some("rev-1-2"),
+                device_ids: &[0x017F_0102],
+            },
+            Revision {
+                name: "1-0",
+                robots: &["1-1"],
+                feature: Some("rev-1-0"),
+                device_ids: &[0x017F_0100, 3],
+            },
+        ],
     },
 ];
 

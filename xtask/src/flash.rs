@@ -432,7 +432,7 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
             .with_context(|| format!("no {board} {revision} image was built"))
     };
     let by = |name: &str| boards::by_name(name).context("board");
-    // A 1-2 robot: DiWheelDrive 1-2 and PowerManagement (LightRing 1-2 has no image yet).
+    // A 1-2 robot: every board's 1-2 image.
     let dwd = by("diwheeldrive")?;
     let pm = by("powermgmt")?;
     let lr = by("lightring")?;
@@ -443,6 +443,7 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
         &[
             (dwd, elf("diwheeldrive", "1-2")?),
             (pm, elf("powermgmt", "1-1/1-2")?),
+            (lr, elf("lightring", "1-2")?),
         ],
     )?;
     // A 1-1 robot: every board, through the 32-bit ids.
@@ -473,11 +474,18 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
             "is the diwheeldrive 1-2 image, but the robot's diwheeldrive answers to device id 0x01000101",
         ),
         (
-            "a LightRing for a 1-2 robot",
+            "the 1-0 LightRing image for a 1-2 robot",
             BoardSpec::robot_1_2(),
             IdSet::Rev12,
             (lr, elf("lightring", "1-0")?),
-            "answers to device id 0x017f0102, a revision this firmware has no image for",
+            "is the lightring 1-0 image, but the robot's lightring answers to device id 0x017f0102",
+        ),
+        (
+            "the 1-2 LightRing image for a 1-1 robot",
+            BoardSpec::robot_1_1(),
+            IdSet::Rev11,
+            (lr, elf("lightring", "1-2")?),
+            "is the lightring 1-2 image, but the robot's lightring answers to device id 0x017f0100",
         ),
     ];
     for (what, spec, ids, job, message) in refused {
@@ -491,14 +499,18 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
         );
         println!("flash through a simulated robot: {what} refused: {error}");
     }
-    // And `cargo xtask flash all` on a 1-2 robot says which board has no image before building.
+    // And `cargo xtask flash all` picks each board's image of the robot's revision.
     let all: Vec<&'static Board> = BOARDS.iter().collect();
-    let e = revision::plan(&all, &Choice::Robot(robot_revision(IdSet::Rev12)))
-        .err()
-        .context("flash all on a 1-2 robot must refuse the LightRing")?;
-    ensure!(e
-        .to_string()
-        .contains("lightring has no image for a revision-1-2 robot"));
+    for ids in [IdSet::Rev12, IdSet::Rev11] {
+        let plan = revision::plan(&all, &Choice::Robot(robot_revision(ids)))?;
+        let stems: Vec<String> = plan.iter().map(revision::Build::stem).collect();
+        let lightring = if ids == IdSet::Rev12 { "1-2" } else { "1-0" };
+        ensure!(
+            stems.contains(&format!("lightring-{lightring}")),
+            "flash all for a {} robot plans {stems:?}",
+            robot_revision(ids)
+        );
+    }
     Ok(())
 }
 

@@ -714,7 +714,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
             }
         }
         // The board's RAM goal (including the stack), measured by stack painting in QEMU.
-        let goal = scenarios::ram_goal(board.name);
+        let goal = scenarios::ram_goal(board.name, build.revision.name);
         println!(
             "{} RAM in QEMU (static + deepest stack): {ram_high_water} bytes of a {goal}-byte goal",
             board.name

@@ -176,7 +176,7 @@ mod tests {
         let names: Vec<String> = plan.iter().map(Build::stem).collect();
         assert_eq!(
             names,
-            ["diwheeldrive-1-2", "powermgmt-1-1+1-2", "lightring-1-0"]
+            ["diwheeldrive-1-2", "powermgmt-1-1+1-2", "lightring-1-2"]
         );
     }
 
@@ -196,18 +196,35 @@ mod tests {
             one[1].feature_args(&["bare-chip"]),
             ["--features", "bare-chip"]
         );
+        // LightRing: 1-0 on a 1-1 robot, 1-2 on a 1-2 robot.
         let lr = by_name("lightring").unwrap();
-        let e = plan(&[lr], &Choice::parse(Some("1-2")).unwrap()).unwrap_err();
-        assert!(e
-            .to_string()
-            .contains("lightring has no image for a revision-1-2 robot"));
+        let old = plan(&[lr], &Choice::parse(Some("1-1")).unwrap()).unwrap();
+        assert_eq!(old[0].stem(), "lightring-1-0");
+        assert_eq!(old[0].robot(), "1-1");
+        assert_eq!(
+            old[0].feature_args(&["qemu"]),
+            ["--no-default-features", "--features", "rev-1-0,qemu"]
+        );
+        let new = plan(&[lr], &Choice::parse(Some("1-2")).unwrap()).unwrap();
+        assert_eq!(new[0].stem(), "lightring-1-2");
+        assert_eq!(new[0].robot(), "1-2");
         assert!(Choice::parse(Some("1-3")).is_err());
     }
 
     #[test]
     fn all_builds_every_revision() {
         let plan = plan(&all(), &Choice::All).unwrap();
-        assert_eq!(plan.len(), 4);
+        let names: Vec<String> = plan.iter().map(Build::stem).collect();
+        assert_eq!(
+            names,
+            [
+                "diwheeldrive-1-2",
+                "diwheeldrive-1-1",
+                "powermgmt-1-1+1-2",
+                "lightring-1-2",
+                "lightring-1-0"
+            ]
+        );
         assert_eq!(plan[0].robot(), "1-2");
         assert_eq!(plan[1].robot(), "1-1");
     }
@@ -218,5 +235,9 @@ mod tests {
         assert_eq!(dwd.revision_of_id(0x0100_0102).unwrap().name, "1-2");
         assert_eq!(dwd.revision_of_id(0x0100_0101).unwrap().name, "1-1");
         assert!(dwd.revision_of_id(0x017F_0102).is_none());
+        let lr = by_name("lightring").unwrap();
+        assert_eq!(lr.revision_of_id(0x017F_0102).unwrap().name, "1-2");
+        assert_eq!(lr.revision_of_id(0x017F_0100).unwrap().name, "1-0");
+        assert_eq!(lr.revision_of_id(3).unwrap().name, "1-0");
     }
 }

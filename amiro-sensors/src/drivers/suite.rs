@@ -26,7 +26,7 @@ use super::hmc5883l::{Hmc5883l, MagneticField};
 use super::l3g4200d::{AngularRate, L3g4200d};
 use super::lis331dlh::{Acceleration, Lis331dlh};
 use super::ring::{ProximityRing, RING_SENSORS};
-use super::tlc5947::LightRing;
+use super::tlc5947::LedRing;
 use super::{Axis, Error, IdentitySchedule};
 
 /// Most frames one sample yields (the proximity ring's eight).
@@ -713,8 +713,9 @@ impl<I1: I2c, I2: I2c, D: DelayNs> SensorGroup for PowerManagementSensors<I1, I2
     }
 }
 
-impl<SPI: SpiDevice> LightRing<SPI> {
-    /// Applies an LED command from the protocol: sets the LED's colour and latches the whole ring.
+impl<SPI: SpiDevice, const CHIPS: usize> LedRing<SPI, CHIPS> {
+    /// Applies an LED command from the protocol: sets the LED's colour (its whole group on a
+    /// 24-LED ring) and latches the whole ring.
     pub fn apply(&mut self, command: &LedCommand) -> Result<(), SampleError> {
         let rgb = command.rgb;
         self.set_led(command.led, rgb.r, rgb.g, rgb.b)

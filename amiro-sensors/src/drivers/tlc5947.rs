@@ -1,15 +1,26 @@
-//! Texas Instruments TLC5947 24-channel, 12-bit PWM LED driver: the LightRing's eight RGB LEDs.
+//! Texas Instruments TLC5947 24-channel, 12-bit PWM LED driver, alone or chained: the LightRing's
+//! RGB LEDs (revision 1-0: one part, eight LEDs; revision 1-2: three parts, 24 LEDs).
 //!
 //! The part is a 288-bit shift register: 24 values of 12 bits, MSB first, the first value shifted
-//! in ending up on OUT23. A rising edge on XLAT copies the shift register to the outputs. On the
-//! LightRing XLAT (PC4) is driven as the SPI chip select, so one `SpiDevice::write` of the 36-byte
-//! frame shifts the data in while the line is low and latches it when the device releases the line
-//! at the end of the transfer. (BLANK, PA4, is the firmware's: it must go low to light the LEDs.)
+//! in ending up on OUT23. A rising edge on XLAT copies the shift register to the outputs. Chained
+//! parts (SOUT of one into SIN of the next) are one longer register: with `CHIPS` parts the frame
+//! is `36 × CHIPS` bytes, the first value shifted in lands on the last part's OUT23, the last value
+//! on the first part's OUT0. Here the chain's outputs are numbered as one: chain channel
+//! `24 k + j` is OUT`j` of part `k`, part 0 the one whose SIN the MCU drives (AMiRo-LLD's
+//! `TLC5947_LLD_CHAINED` numbering). On the LightRing XLAT (PC4) is driven as the SPI chip select,
+//! so one `SpiDevice::write` of the whole frame shifts the data in while the line is low and
+//! latches every part when the device releases the line at the end of the transfer. (BLANK, PA4,
+//! is the firmware's: it must go low to light the LEDs.)
 //!
-//! LED wiring (amiro-boards.md §6): each LED is one output triple, OUT3k = red, OUT3k+1 = green,
-//! OUT3k+2 = blue, and triple k is the 1.x LED index 7 − k. The protocol's LED number n (1..=8, the
-//! `Led1..Led8` topics) is the 1.x index n − 1, so LED n is triple 8 − n: LED 1 is front-right
-//! (NNE, OUT21..23), LED 8 is front-left (NNW, OUT0..2).
+//! LED wiring (docs/boards.md, docs/protocol.md): each RGB LED is one output triple, chain channels
+//! `3t` = red, `3t + 1` = green, `3t + 2` = blue. Which triples a protocol LED n (1..=8, the
+//! `Led1..Led8` topics) lights depends on the ring, [`led_triples`]:
+//! - one TLC5947 (1-0): triple k is the 1.x LED index 7 − k, and LED n is the 1.x index n − 1, so
+//!   LED n is triple 8 − n: LED 1 is front-right (NNE, OUT21..23), LED 8 front-left (NNW, OUT0..2);
+//! - three TLC5947 (1-2): the 24 LEDs run clockwise (seen from above) from just right of the
+//!   front, LED t centred 7.5° + 15° t from straight ahead; protocol LED n lights its own group of
+//!   three neighbours, triples 3(n − 1) .. 3n − 1, centred where the 1-0 ring's LED n sits (LED 1
+//!   NNE on triples 0..2, chain channels 0..8; LED 8 NNW on triples 21..23, channels 63..71).
 //!
 //! Colours come in as 8-bit sRGB-like values and go out through [`GAMMA`], a table computed at
 //! compile time from the CIE 1931 lightness formula, so equal steps in the 8-bit value look like
@@ -21,12 +32,14 @@ use super::Error;
 
 /// Output channels of one TLC5947.
 pub const CHANNELS: usize = 24;
-/// Bytes shifted per frame (24 × 12 bits).
+/// Bytes shifted per part (24 × 12 bits).
 pub const FRAME_BYTES: usize = 36;
 /// Largest 12-bit output value.
 pub const MAX_VALUE: u16 = 4095;
-/// RGB LEDs on the ring (board revision 1-0/1-1, one TLC5947).
+/// The protocol's LEDs (topics `Led1..Led8`), on either ring.
 pub const LEDS: u8 = 8;
+/// RGB LEDs one TLC5947 drives (24 outputs, three per LED).
+pub const RGB_PER_CHIP: usize = CHANNELS / 3;
 
 /// Perceived lightness (CIE L*, 0..=100) to relative luminance (0..=1), CIE 1931.
 const fn lightness_to_luminance(lightness: f64) -> f64 {
@@ -62,22 +75,45 @@ pub const fn gamma(value: u8) -> u16 {
     GAMMA[value as usize]
 }
 
-/// The outputs (red, green, blue) of protocol LED `led` (1..=8), `None` outside 1..=8.
-pub const fn led_outputs(led: u8) -> Option<[u8; 3]> {
+/// The chain's RGB LEDs (output triples: triple t is chain channels 3t, 3t + 1, 3t + 2) that
+/// protocol LED `led` (1..=8) lights on a ring of `chips` chained TLC5947; `None` outside 1..=8 or
+/// for a chain length no LightRing has. One part (revision 1-0): the one triple 8 − `led`. Three
+/// parts (revision 1-2): the three neighbouring triples 3(`led` − 1) .. 3 `led` − 1 (see the module
+/// documentation for where they sit).
+pub const fn led_triples(chips: usize, led: u8) -> Option<core::ops::Range<u8>> {
     if led == 0 || led > LEDS {
         return None;
     }
-    let triple = LEDS - led;
-    Some([3 * triple, 3 * triple + 1, 3 * triple + 2])
+    match chips {
+        1 => Some(LEDS - led..LEDS - led + 1),
+        3 => Some(3 * (led - 1)..3 * led),
+        _ => None,
+    }
 }
 
-/// Packs 24 channel values into the 36-byte shift order (OUT23 first, MSB first).
-pub fn pack_frame(channels: &[u16; CHANNELS]) -> [u8; FRAME_BYTES] {
-    let mut frame = [0u8; FRAME_BYTES];
-    // Channel pairs from the top: (OUT23, OUT22), (OUT21, OUT20), ... each fills three bytes.
+/// The outputs (red, green, blue) of protocol LED `led` (1..=8) on the one-part ring (1-0),
+/// `None` outside 1..=8.
+pub const fn led_outputs(led: u8) -> Option<[u8; 3]> {
+    match led_triples(1, led) {
+        Some(triples) => {
+            let t = triples.start;
+            Some([3 * t, 3 * t + 1, 3 * t + 2])
+        }
+        None => None,
+    }
+}
+
+/// Packs the chain's channel values (part 0's first, OUT0 first) into the shift order: the last
+/// part's OUT23 first, MSB first, part 0's OUT0 last.
+pub fn pack_chain<const CHIPS: usize>(
+    channels: &[[u16; CHANNELS]; CHIPS],
+) -> [[u8; FRAME_BYTES]; CHIPS] {
+    let mut frame = [[0u8; FRAME_BYTES]; CHIPS];
+    // Channel pairs from the top of the chain: (71, 70), (69, 68), ... each fills three bytes.
     for (bytes, pair) in frame
+        .as_flattened_mut()
         .chunks_exact_mut(3)
-        .zip(channels.chunks_exact(2).rev())
+        .zip(channels.as_flattened().chunks_exact(2).rev())
     {
         if let ([b0, b1, b2], [low, high]) = (bytes, pair) {
             let high = high & MAX_VALUE;
@@ -90,50 +126,99 @@ pub fn pack_frame(channels: &[u16; CHANNELS]) -> [u8; FRAME_BYTES] {
     frame
 }
 
-/// One TLC5947 holding the 24 values it will shift out next.
-#[derive(Debug)]
-pub struct Tlc5947<SPI> {
-    spi: SPI,
-    channels: [u16; CHANNELS],
+/// Packs one part's 24 channel values into its 36-byte shift order (OUT23 first, MSB first).
+pub fn pack_frame(channels: &[u16; CHANNELS]) -> [u8; FRAME_BYTES] {
+    let [frame] = pack_chain(&[*channels]);
+    frame
 }
 
-impl<SPI: SpiDevice> Tlc5947<SPI> {
+/// `CHIPS` chained TLC5947 holding the `24 × CHIPS` values they will shift out next.
+///
+/// The values are kept packed in shift order (the frame [`pack_chain`] would make), so a flush
+/// writes them as they are: no second copy on the stack, and 1.5 bytes per channel instead of 2
+/// (LightRing's RAM is tight: docs/boards.md).
+#[derive(Debug)]
+pub struct Tlc5947Chain<SPI, const CHIPS: usize> {
+    spi: SPI,
+    frame: [[u8; FRAME_BYTES]; CHIPS],
+}
+
+/// One TLC5947 (LightRing 1-0).
+pub type Tlc5947<SPI> = Tlc5947Chain<SPI, 1>;
+
+impl<SPI: SpiDevice, const CHIPS: usize> Tlc5947Chain<SPI, CHIPS> {
+    /// Output channels of the chain.
+    pub const OUTPUTS: usize = CHANNELS * CHIPS;
+    /// Bytes one flush shifts.
+    pub const FRAME_BYTES: usize = FRAME_BYTES * CHIPS;
+
     /// A driver with every output at 0. Does no I/O.
     pub const fn new(spi: SPI) -> Self {
         Self {
             spi,
-            channels: [0; CHANNELS],
+            frame: [[0; FRAME_BYTES]; CHIPS],
         }
     }
 
-    /// Sets output `out` (0..=23) to `value` (clamped to 4095) for the next [`flush`](Self::flush).
+    /// Where chain channel `out` sits in the frame: its first byte, and whether it is the first
+    /// (upper) value of its three-byte pair (shifted first: the pair's higher channel).
+    fn place(out: usize) -> Option<(usize, bool)> {
+        let from_top = Self::OUTPUTS.checked_sub(out + 1)?;
+        Some((from_top * 3 / 2, from_top % 2 == 0))
+    }
+
+    /// Sets chain channel `out` (0..24 × `CHIPS`) to `value` (clamped to 4095) for the next
+    /// [`flush`](Self::flush).
     pub fn set_channel(&mut self, out: u8, value: u16) -> Result<(), Error<SPI::Error>> {
-        match self.channels.get_mut(usize::from(out)) {
-            Some(slot) => {
-                *slot = value.min(MAX_VALUE);
+        let value = value.min(MAX_VALUE);
+        let frame = self.frame.as_flattened_mut();
+        match Self::place(usize::from(out)) {
+            Some((at, true)) => {
+                if let Some([first, second, ..]) = frame.get_mut(at..) {
+                    *first = (value >> 4) as u8;
+                    *second = (*second & 0x0F) | ((value & 0x0F) << 4) as u8;
+                }
+                Ok(())
+            }
+            Some((at, false)) => {
+                if let Some([first, second, ..]) = frame.get_mut(at..) {
+                    *first = (*first & 0xF0) | (value >> 8) as u8;
+                    *second = (value & 0xFF) as u8;
+                }
                 Ok(())
             }
             None => Err(Error::OutOfRange {
                 value: out.into(),
-                max: (CHANNELS - 1) as u16,
+                max: (Self::OUTPUTS - 1) as u16,
             }),
         }
     }
 
-    /// The pending values, OUT0 first.
-    pub const fn channels(&self) -> &[u16; CHANNELS] {
-        &self.channels
+    /// The pending value of chain channel `out`, `None` past the chain's end.
+    pub fn channel(&self, out: usize) -> Option<u16> {
+        let (at, upper) = Self::place(out)?;
+        let frame = self.frame.as_flattened();
+        let (first, second) = (u16::from(*frame.get(at)?), u16::from(*frame.get(at + 1)?));
+        Some(if upper {
+            first << 4 | second >> 4
+        } else {
+            (first & 0x0F) << 8 | second
+        })
+    }
+
+    /// The pending values, chain channel 0 first.
+    pub fn channels(&self) -> impl Iterator<Item = u16> + '_ {
+        (0..Self::OUTPUTS).filter_map(|out| self.channel(out))
     }
 
     /// Sets every output to 0 (for the next flush).
     pub fn clear(&mut self) {
-        self.channels = [0; CHANNELS];
+        self.frame = [[0; FRAME_BYTES]; CHIPS];
     }
 
-    /// Shifts the pending values out and latches them (one 36-byte write).
+    /// Shifts the pending values out and latches them (one write of `36 × CHIPS` bytes).
     pub fn flush(&mut self) -> Result<(), Error<SPI::Error>> {
-        let frame = pack_frame(&self.channels);
-        self.spi.write(&frame)?;
+        self.spi.write(self.frame.as_flattened())?;
         Ok(())
     }
 
@@ -143,21 +228,37 @@ impl<SPI: SpiDevice> Tlc5947<SPI> {
     }
 }
 
-/// The LightRing's eight RGB LEDs on one TLC5947.
+/// The LightRing's RGB LEDs on `CHIPS` chained TLC5947, addressed by the protocol's eight LEDs
+/// ([`led_triples`]): [`LightRing`] (1-0) or [`LightRing24`] (1-2).
 #[derive(Debug)]
-pub struct LightRing<SPI> {
-    driver: Tlc5947<SPI>,
+pub struct LedRing<SPI, const CHIPS: usize> {
+    driver: Tlc5947Chain<SPI, CHIPS>,
 }
 
-impl<SPI: SpiDevice> LightRing<SPI> {
+/// LightRing 1-0: eight RGB LEDs on one TLC5947.
+pub type LightRing<SPI> = LedRing<SPI, 1>;
+/// LightRing 1-2: 24 RGB LEDs on three chained TLC5947, three per protocol LED.
+pub type LightRing24<SPI> = LedRing<SPI, 3>;
+
+impl<SPI: SpiDevice, const CHIPS: usize> LedRing<SPI, CHIPS> {
+    /// RGB LEDs on the ring.
+    pub const RGB_LEDS: usize = RGB_PER_CHIP * CHIPS;
+    /// A chain length no LightRing has does not build.
+    const KNOWN: () = assert!(
+        led_triples(CHIPS, 1).is_some(),
+        "no LightRing revision has this many TLC5947"
+    );
+
     /// A ring with every LED off. Does no I/O.
     pub const fn new(spi: SPI) -> Self {
+        let () = Self::KNOWN;
         Self {
-            driver: Tlc5947::new(spi),
+            driver: Tlc5947Chain::new(spi),
         }
     }
 
-    /// Sets protocol LED `led` (1..=8) to an 8-bit colour (gamma-corrected) for the next flush.
+    /// Sets protocol LED `led` (1..=8) to an 8-bit colour (gamma-corrected) for the next flush:
+    /// every RGB LED of its group.
     pub fn set_led(
         &mut self,
         led: u8,
@@ -165,14 +266,17 @@ impl<SPI: SpiDevice> LightRing<SPI> {
         green: u8,
         blue: u8,
     ) -> Result<(), Error<SPI::Error>> {
-        let Some(outputs) = led_outputs(led) else {
+        let Some(triples) = led_triples(CHIPS, led) else {
             return Err(Error::OutOfRange {
                 value: led.into(),
                 max: LEDS.into(),
             });
         };
-        for (out, value) in outputs.into_iter().zip([red, green, blue]) {
-            self.driver.set_channel(out, gamma(value))?;
+        let values = [gamma(red), gamma(green), gamma(blue)];
+        for triple in triples {
+            for (out, value) in (3 * triple..).zip(values) {
+                self.driver.set_channel(out, value)?;
+            }
         }
         Ok(())
     }
@@ -188,7 +292,7 @@ impl<SPI: SpiDevice> LightRing<SPI> {
     }
 
     /// The driver underneath, e.g. to read the pending channel values.
-    pub fn driver(&self) -> &Tlc5947<SPI> {
+    pub fn driver(&self) -> &Tlc5947Chain<SPI, CHIPS> {
         &self.driver
     }
 

@@ -1,4 +1,5 @@
-//! Simulated TLC5947 LED driver: a 288-bit shift register latched at the end of each transfer.
+//! Simulated TLC5947 LED drivers, alone or chained: one shift register of 288 bits per part,
+//! latched at the end of each transfer.
 
 use core::convert::Infallible;
 
@@ -6,36 +7,40 @@ use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 
 use crate::drivers::tlc5947::{CHANNELS, FRAME_BYTES, MAX_VALUE};
 
-/// A simulated TLC5947 on its `SpiDevice`, chip select wired to XLAT.
+/// `CHIPS` simulated TLC5947 in a chain on one `SpiDevice`, chip select wired to every XLAT.
 ///
-/// Bytes shift through a 36-byte register (the oldest falls out, as on the part); when the
-/// transaction ends the select line rises, XLAT latches, and [`SimLedDriver::output`] shows the
-/// new values: the last 288 bits shifted in, the first of them on OUT23.
+/// Bytes shift through the chain's `36 × CHIPS`-byte register (the oldest falls out of the last
+/// part, as on the parts); when the transaction ends the select line rises, XLAT latches, and
+/// [`SimLedChain::outputs`] shows the new values: the last `288 × CHIPS` bits shifted in, the first
+/// of them on the last part's OUT23, the last on part 0's OUT0 (chain channel 0).
 #[derive(Debug, Clone)]
-pub struct SimLedDriver {
-    shift: [u8; FRAME_BYTES],
+pub struct SimLedChain<const CHIPS: usize> {
+    shift: [[u8; FRAME_BYTES]; CHIPS],
     latches: u32,
-    outputs: [u16; CHANNELS],
+    outputs: [[u16; CHANNELS]; CHIPS],
 }
 
-impl SimLedDriver {
+/// One simulated TLC5947 (LightRing 1-0).
+pub type SimLedDriver = SimLedChain<1>;
+
+impl<const CHIPS: usize> SimLedChain<CHIPS> {
     /// Every output at 0, nothing latched yet.
     pub const fn new() -> Self {
         Self {
-            shift: [0; FRAME_BYTES],
+            shift: [[0; FRAME_BYTES]; CHIPS],
             latches: 0,
-            outputs: [0; CHANNELS],
+            outputs: [[0; CHANNELS]; CHIPS],
         }
     }
 
-    /// The latched value of OUT`out` (0..=23).
+    /// The latched value of chain channel `out` (0..24 × `CHIPS`).
     pub fn output(&self, out: usize) -> Option<u16> {
-        self.outputs.get(out).copied()
+        self.outputs.as_flattened().get(out).copied()
     }
 
-    /// All latched values, OUT0 first.
-    pub const fn outputs(&self) -> &[u16; CHANNELS] {
-        &self.outputs
+    /// All latched values, chain channel 0 (part 0's OUT0) first.
+    pub fn outputs(&self) -> &[u16] {
+        self.outputs.as_flattened()
     }
 
     /// Latch pulses so far.
@@ -44,23 +49,26 @@ impl SimLedDriver {
     }
 
     fn shift_in(&mut self, byte: u8) {
-        self.shift.copy_within(1.., 0);
-        if let Some(last) = self.shift.last_mut() {
+        let register = self.shift.as_flattened_mut();
+        register.copy_within(1.., 0);
+        if let Some(last) = register.last_mut() {
             *last = byte;
         }
     }
 
     fn latch(&mut self) {
-        // Byte triple t holds OUT(23 - 2t) then OUT(22 - 2t), 12 bits each, MSB first.
-        for (t, triple) in self.shift.chunks_exact(3).enumerate() {
+        let top = CHANNELS * CHIPS - 1;
+        let outputs = self.outputs.as_flattened_mut();
+        // Byte triple t holds chain channels top − 2t then top − 2t − 1, 12 bits each, MSB first.
+        for (t, triple) in self.shift.as_flattened().chunks_exact(3).enumerate() {
             if let [b0, b1, b2] = *triple {
                 let high = (u16::from(b0) << 4 | u16::from(b1) >> 4) & MAX_VALUE;
                 let low = (u16::from(b1 & 0x0F) << 8 | u16::from(b2)) & MAX_VALUE;
-                let top = CHANNELS - 1 - 2 * t;
-                if let Some(slot) = self.outputs.get_mut(top) {
+                let channel = top - 2 * t;
+                if let Some(slot) = outputs.get_mut(channel) {
                     *slot = high;
                 }
-                if let Some(slot) = self.outputs.get_mut(top.wrapping_sub(1)) {
+                if let Some(slot) = outputs.get_mut(channel.wrapping_sub(1)) {
                     *slot = low;
                 }
             }
@@ -69,23 +77,23 @@ impl SimLedDriver {
     }
 }
 
-impl Default for SimLedDriver {
+impl<const CHIPS: usize> Default for SimLedChain<CHIPS> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl ErrorType for SimLedDriver {
+impl<const CHIPS: usize> ErrorType for SimLedChain<CHIPS> {
     type Error = Infallible;
 }
 
-impl SpiDevice for SimLedDriver {
+impl<const CHIPS: usize> SpiDevice for SimLedChain<CHIPS> {
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), Infallible> {
         for operation in operations {
             match operation {
                 Operation::Write(bytes) => bytes.iter().for_each(|&b| self.shift_in(b)),
                 Operation::Transfer(read, write) => {
-                    // The part's SOUT is not wired on the ring; reads see zeros.
+                    // The parts' SOUT is not wired back on the ring; reads see zeros.
                     read.fill(0);
                     write.iter().for_each(|&b| self.shift_in(b));
                 }

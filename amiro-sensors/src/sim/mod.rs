@@ -17,7 +17,7 @@
 //! | [`SimImuBus`] | BNO055 at 0x28 (DiWheelDrive 1-2) | `I2c` |
 //! | [`SimFloorBus`] | PCA9544A at 0x77 + 4 × VCNL4020 | `I2c` |
 //! | [`SimPowerBus`] | PCA9544A + 4 × VCNL4020 + bq27500 at 0x55 | `I2c` |
-//! | [`SimLedDriver`] | TLC5947 | `SpiDevice` |
+//! | [`SimLedDriver`], [`SimLedChain`] | TLC5947, or a chain of them (LightRing 1-2: three) | `SpiDevice` |
 //! | [`WheelPlant`] | motors, gears, encoders | [`crate::motion::MotorPwm`], counts |
 
 use core::convert::Infallible;
@@ -39,7 +39,7 @@ pub use bno055::{
 };
 pub use compass::SimHmc5883l;
 pub use fuel_gauge::SimBq27500;
-pub use leds::SimLedDriver;
+pub use leds::{SimLedChain, SimLedDriver};
 pub use motion_sensors::{SimAccelerometer, SimGyroscope};
 pub use plant::{MotorModel, SimWheel, WheelPlant};
 pub use proximity::{SimMuxedProximity, SimVcnl4020};

@@ -1,8 +1,11 @@
-//! LightRing's QEMU scenarios (`lightring/qemu/*.log`) and what each must show.
+//! LightRing 1-0's QEMU scenarios (`lightring/qemu/*.log`) and what each must show, and the helpers
+//! 1-2's (`super::lightring_1_2`) share: every check takes the ring's chain length (`chips`: one
+//! TLC5947 on 1-0, three on 1-2).
 //!
-//! The QEMU build prints what the simulated TLC5947 really latched (`tlc5947 latched` followed by
-//! its 24 output values, OUT0 first) right before each `leds-latched` trace event, so these checks
-//! see the driver's channel order and gamma table at work, not only the firmware's intentions.
+//! The QEMU build prints what the simulated TLC5947 chain really latched (`tlc5947 latched`
+//! followed by its 24 × `chips` output values, chain channel 0 first) right before each
+//! `leds-latched` trace event, so these checks see the driver's channel order and gamma table at
+//! work, not only the firmware's intentions.
 use std::path::Path;
 
 use anyhow::{anyhow, bail, ensure, Context, Result};
@@ -10,7 +13,7 @@ use schedule_analysis::analysis::{analyse, Options};
 use schedule_analysis::model::FrameCostSpec;
 use schedule_analysis::scenario;
 
-use amiro_sensors::drivers::tlc5947::{gamma, led_outputs, CHANNELS};
+use amiro_sensors::drivers::tlc5947::{gamma, led_triples, CHANNELS};
 
 use super::{check_health, trace_time, Bounds, RunOutput, Scenario};
 
@@ -53,16 +56,26 @@ pub const SCENARIOS: &[Scenario] = &[
     },
 ];
 
-type Outputs = [u16; CHANNELS];
+/// The ring's chain length on 1-0.
+const CHIPS: usize = 1;
+
+/// The latched outputs of the whole chain, chain channel 0 first.
+pub(super) type Outputs = Vec<u16>;
 
 /// One latch: when XLAT rose and what the driver's outputs showed.
-struct Latch {
-    at_us: u64,
-    outputs: Outputs,
+pub(super) struct Latch {
+    pub(super) at_us: u64,
+    pub(super) outputs: Outputs,
 }
 
-/// The latches of a run, in order.
-fn latches(out: &RunOutput) -> Result<Vec<Latch>> {
+/// Every output dark.
+pub(super) fn dark(chips: usize) -> Outputs {
+    vec![0; CHANNELS * chips]
+}
+
+/// The latches of a run, in order; each line must carry the whole chain of `chips` parts.
+pub(super) fn latches(out: &RunOutput, chips: usize) -> Result<Vec<Latch>> {
+    let channels = CHANNELS * chips;
     let mut pending: Option<Outputs> = None;
     let mut latches = Vec::new();
     for note in &out.notes {
@@ -72,10 +85,12 @@ fn latches(out: &RunOutput) -> Result<Vec<Latch>> {
                 .map(|v| u16::from_str_radix(v, 16))
                 .collect::<Result<_, _>>()
                 .with_context(|| format!("bad latch line `{note}`"))?;
-            let outputs: Outputs = parsed
-                .try_into()
-                .map_err(|_| anyhow!("`{note}`: expected {CHANNELS} outputs"))?;
-            pending = Some(outputs);
+            ensure!(
+                parsed.len() == channels,
+                "`{note}`: {} outputs, expected {channels}",
+                parsed.len()
+            );
+            pending = Some(parsed);
         } else if note.contains("trace leds-latched") {
             let outputs = pending
                 .take()
@@ -90,7 +105,7 @@ fn latches(out: &RunOutput) -> Result<Vec<Latch>> {
 }
 
 /// The LED commands the board applied: (time, LED, colour).
-fn led_sets(out: &RunOutput) -> Result<Vec<(u64, u8, [u8; 3])>> {
+pub(super) fn led_sets(out: &RunOutput) -> Result<Vec<(u64, u8, [u8; 3])>> {
     out.traces("trace led-set")
         .into_iter()
         .map(|line| {
@@ -116,25 +131,48 @@ fn field<'a>(line: &'a str, key: &str) -> Result<&'a str> {
     Ok(line[at..].split_whitespace().next().unwrap_or(""))
 }
 
+/// The chain channels (red, green, blue) of protocol LED `led`'s RGB LEDs on a ring of `chips`.
+pub(super) fn led_channels(chips: usize, led: u8) -> Vec<[usize; 3]> {
+    led_triples(chips, led)
+        .map(|triples| {
+            triples
+                .map(|t| {
+                    let red = 3 * usize::from(t);
+                    [red, red + 1, red + 2]
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
 /// What the driver's outputs must be for these LED colours (LED n at index n − 1).
-fn expected(colours: &[[u8; 3]; 8]) -> Outputs {
-    let mut outputs = [0u16; CHANNELS];
+pub(super) fn expected(chips: usize, colours: &[[u8; 3]; 8]) -> Outputs {
+    let mut outputs = dark(chips);
     for (led, rgb) in (1u8..=8).zip(colours) {
-        if let Some(outs) = led_outputs(led) {
+        for outs in led_channels(chips, led) {
             for (out, value) in outs.into_iter().zip(rgb) {
-                outputs[usize::from(out)] = gamma(*value);
+                outputs[out] = gamma(*value);
             }
         }
     }
     outputs
 }
 
-/// `LATCH_MIN_INTERVAL_US` of lightring/src/main.rs: a latch may wait this long behind the previous one.
-const LATCH_MIN_INTERVAL_US: u64 = 1_000;
+/// `LATCH_MIN_INTERVAL_US` of lightring/src/main.rs: a latch may wait this long behind the previous
+/// one (1-0: 1 ms; 1-2, whose latch shifts three times the bytes: 3 ms).
+pub(super) fn latch_interval_us(chips: usize) -> u64 {
+    if chips == 3 {
+        3_000
+    } else {
+        1_000
+    }
+}
 
-/// Command received → latched, as analysed: the WCRT of `latch_leds`, whose release jitter budget
-/// covers the command path (can_rx and handle_commands); checked to still cover it.
-fn latch_bound_us(root: &Path) -> Result<u64> {
+/// Command received → latched, as analysed (the revision's timing files, which `build_qemu`
+/// selected): the WCRT of `latch_leds`, whose release jitter budget covers the command path
+/// (can_rx and handle_commands); checked to still cover it, and the timing file's latch interval
+/// checked against the firmware's.
+pub(super) fn latch_bound_us(root: &Path, chips: usize) -> Result<u64> {
     let models = root.join("schedule-analysis").join("models");
     let built = scenario::build(
         root,
@@ -168,32 +206,51 @@ fn latch_bound_us(root: &Path) -> Result<u64> {
     };
     let handler = wcrt_us("handle_commands")?;
     let latch = wcrt_us("latch_leds")?;
-    let timing = root.join("schedule-analysis/models/lightring.timing.json");
+    let timing = scenario::timing_files(root)
+        .into_iter()
+        .find(|p| p.ends_with("lightring.timing.json"))
+        .context("no lightring timing file")?;
     let text = std::fs::read_to_string(&timing)
         .with_context(|| format!("reading {}", timing.display()))?;
     let json: serde_json::Value = serde_json::from_str(&text)?;
-    let jitter_budget = json["tasks"]["latch_leds"]["jitter_us"]
+    let interval = latch_interval_us(chips);
+    let modelled = json["tasks"]["latch_leds"]["arrival"]["sporadic_us"]
         .as_f64()
-        .context("lightring.timing.json: tasks.latch_leds.jitter_us")?
+        .context("lightring timing file: tasks.latch_leds.arrival.sporadic_us")?
         as u64;
     ensure!(
-        handler + LATCH_MIN_INTERVAL_US <= jitter_budget,
-        "handle_commands' WCRT {handler} µs plus the {LATCH_MIN_INTERVAL_US} µs latch interval exceed \
-         the {jitter_budget} µs release jitter lightring.timing.json budgets for latch_leds: raise that budget"
+        modelled == interval,
+        "{} models a latch per {modelled} µs, the firmware latches at most once per {interval} µs",
+        timing.display()
+    );
+    let jitter_budget = json["tasks"]["latch_leds"]["jitter_us"]
+        .as_f64()
+        .context("lightring timing file: tasks.latch_leds.jitter_us")?
+        as u64;
+    ensure!(
+        handler + interval <= jitter_budget,
+        "handle_commands' WCRT {handler} µs plus the {interval} µs latch interval exceed \
+         the {jitter_budget} µs release jitter {} budgets for latch_leds: raise that budget",
+        timing.display()
     );
     Ok(latch)
 }
 
 impl Bounds {
-    /// LightRing's command → latched bound (µs).
-    fn led_latency_us(&self) -> Result<u64> {
-        latch_bound_us(self.root())
+    /// LightRing's command → latched bound (µs) on a ring of `chips`.
+    pub(super) fn led_latency_us(&self, chips: usize) -> Result<u64> {
+        latch_bound_us(self.root(), chips)
     }
 }
 
 /// The first latch at or after `at` that shows `colours`; its latency from `at`.
-fn latency_until_shown(latches: &[Latch], at: u64, colours: &[[u8; 3]; 8]) -> Result<u64> {
-    let want = expected(colours);
+pub(super) fn latency_until_shown(
+    latches: &[Latch],
+    at: u64,
+    chips: usize,
+    colours: &[[u8; 3]; 8],
+) -> Result<u64> {
+    let want = expected(chips, colours);
     latches
         .iter()
         .filter(|l| l.at_us >= at)
@@ -203,15 +260,20 @@ fn latency_until_shown(latches: &[Latch], at: u64, colours: &[[u8; 3]; 8]) -> Re
 }
 
 fn led3(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    led3_on(out, bounds, CHIPS)
+}
+
+/// `led3.log` on a ring of `chips`.
+pub(super) fn led3_on(out: &RunOutput, bounds: &Bounds, chips: usize) -> Result<String> {
     const AT: u64 = 10_000;
     let sets = led_sets(out)?;
     ensure!(
         sets.len() == 1 && sets[0].1 == 3 && sets[0].2 == [0xFF, 0x80, 0x20],
         "expected one led-set for LED 3 = FF8020, got {sets:?}"
     );
-    let latches = latches(out)?;
+    let latches = latches(out, chips)?;
     ensure!(
-        latches.first().is_some_and(|l| l.outputs == [0; CHANNELS]),
+        latches.first().is_some_and(|l| l.outputs == dark(chips)),
         "the first latch must be all dark (BLANK lifts after it)"
     );
     ensure!(
@@ -220,19 +282,20 @@ fn led3(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     );
     let mut colours = [[0u8; 3]; 8];
     colours[2] = [0xFF, 0x80, 0x20];
-    let latency = latency_until_shown(&latches, AT, &colours)?;
-    let bound = bounds.led_latency_us()?;
+    let latency = latency_until_shown(&latches, AT, chips, &colours)?;
+    let bound = bounds.led_latency_us(chips)?;
     ensure!(
         latency <= bound,
         "LED 3 latched {latency} µs after the command, above the analysed {bound} µs"
     );
     let after: Vec<&Latch> = latches.iter().filter(|l| l.at_us >= AT + latency).collect();
     ensure!(
-        after.iter().all(|l| l.outputs == expected(&colours)),
+        after.iter().all(|l| l.outputs == expected(chips, &colours)),
         "a later refresh lost LED 3's colour"
     );
     Ok(format!(
-        "LED 3 (OUT15..17) = FF8020 latched {latency} µs after the command ≤ analysed {bound} µs; {} refreshes keep it",
+        "LED 3 (channels {:?}) = FF8020 latched {latency} µs after the command ≤ analysed {bound} µs; {} refreshes keep it",
+        led_channels(chips, 3),
         after.len()
     ))
 }
@@ -248,6 +311,17 @@ fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         (13_000, [0x80, 0x80, 0x80]),
         (13_500, [0xFF, 0xFF, 0xFF]),
     ];
+    all_eight_on(out, bounds, CHIPS, &commands)
+}
+
+/// The eight LED commands `commands` (LED 1 first: time, colour) on a ring of `chips`: applied in
+/// order, each LED's channels latched within the analysed bound, the final latch showing all.
+pub(super) fn all_eight_on(
+    out: &RunOutput,
+    bounds: &Bounds,
+    chips: usize,
+    commands: &[(u64, [u8; 3]); 8],
+) -> Result<String> {
     let sets = led_sets(out)?;
     let got: Vec<(u8, [u8; 3])> = sets.iter().map(|(_, led, rgb)| (*led, *rgb)).collect();
     let want: Vec<(u8, [u8; 3])> = (1u8..=8).zip(commands.iter().map(|c| c.1)).collect();
@@ -255,8 +329,8 @@ fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         got == want,
         "LED commands applied {got:?}, expected {want:?}"
     );
-    let latches = latches(out)?;
-    let bound = bounds.led_latency_us()?;
+    let latches = latches(out, chips)?;
+    let bound = bounds.led_latency_us(chips)?;
     let mut colours = [[0u8; 3]; 8];
     let mut worst = 0;
     for (i, (at, rgb)) in commands.iter().enumerate() {
@@ -266,11 +340,9 @@ fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
             .iter()
             .filter(|l| l.at_us >= *at)
             .find(|l| {
-                let want = expected(&colours);
-                led_outputs(i as u8 + 1).is_some_and(|outs| {
-                    outs.iter()
-                        .all(|o| l.outputs[usize::from(*o)] == want[usize::from(*o)])
-                })
+                let want = expected(chips, &colours);
+                let outs = led_channels(chips, i as u8 + 1);
+                !outs.is_empty() && outs.iter().flatten().all(|&o| l.outputs[o] == want[o])
             })
             .with_context(|| format!("LED {} never latched", i + 1))?;
         worst = worst.max(latch.at_us - at);
@@ -281,7 +353,7 @@ fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     );
     let last = latches.last().context("no latch at all")?;
     ensure!(
-        last.outputs == expected(&colours),
+        last.outputs == expected(chips, &colours),
         "the final state does not show all eight colours"
     );
     Ok(format!(
@@ -290,6 +362,7 @@ fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 }
 
 fn other_boards(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    let chips = CHIPS;
     let ignored = out.traces("command-ignored").len();
     ensure!(ignored == 6, "{ignored} frames ignored, expected all 6");
     ensure!(
@@ -297,9 +370,9 @@ fn other_boards(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "another board's frame was accepted or rejected"
     );
     ensure!(led_sets(out)?.is_empty(), "an LED changed");
-    let latches = latches(out)?;
+    let latches = latches(out, chips)?;
     ensure!(
-        latches.iter().all(|l| l.outputs == [0; CHANNELS]),
+        latches.iter().all(|l| l.outputs == dark(chips)),
         "an LED lit up"
     );
     ensure!(out.frames.is_empty(), "LightRing sent frames");
@@ -309,7 +382,12 @@ fn other_boards(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+fn malformed(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    malformed_on(out, bounds, CHIPS)
+}
+
+/// `malformed.log` on a ring of `chips`.
+pub(super) fn malformed_on(out: &RunOutput, _bounds: &Bounds, chips: usize) -> Result<String> {
     let reasons: Vec<String> = out
         .traces("command-rejected")
         .iter()
@@ -328,17 +406,17 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         sets.len() == 1 && sets[0].1 == 5 && sets[0].2 == [0x10, 0x20, 0x30],
         "only the good LED 5 command may apply, got {sets:?}"
     );
-    let latches = latches(out)?;
+    let latches = latches(out, chips)?;
     ensure!(
         latches
             .iter()
             .filter(|l| l.at_us < 20_000)
-            .all(|l| l.outputs == [0; CHANNELS]),
+            .all(|l| l.outputs == dark(chips)),
         "a malformed frame changed the LEDs"
     );
     let mut colours = [[0u8; 3]; 8];
     colours[4] = [0x10, 0x20, 0x30];
-    latency_until_shown(&latches, 20_000, &colours)?;
+    latency_until_shown(&latches, 20_000, chips, &colours)?;
     let health = check_health(out, amiro_can::Board::LightRing)?;
     ensure!(
         health.rejected == 5,
@@ -351,7 +429,12 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-fn flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    flood_on(out, bounds, CHIPS)
+}
+
+/// `flood.log` on a ring of `chips`.
+pub(super) fn flood_on(out: &RunOutput, _bounds: &Bounds, chips: usize) -> Result<String> {
     // The flood as the stimulus sends it (lightring/qemu/flood.log).
     let sent: Vec<(u8, [u8; 3])> = (0..120u32)
         .map(|i| {
@@ -408,9 +491,9 @@ fn flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     for (led, rgb) in &applied {
         colours[usize::from(*led - 1)] = *rgb;
     }
-    let last = latches(out)?.pop().context("no latch at all")?;
+    let last = latches(out, chips)?.pop().context("no latch at all")?;
     ensure!(
-        last.outputs == expected(&colours),
+        last.outputs == expected(chips, &colours),
         "the final latch does not show the last applied colour of every LED"
     );
     Ok(format!(
@@ -420,7 +503,7 @@ fn flood(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+pub(super) fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     const REQUEST: u64 = 30_000;
     let sets = led_sets(out)?;
     ensure!(
@@ -464,6 +547,18 @@ fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 
 /// `lightring/qemu/admission.log` (issue 11).
 fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    admission_on(out, bounds, CHIPS, 2)
+}
+
+/// `admission.log` on a ring of `chips`, whose accepted request is the diagnostics every
+/// `every_ms` at medium (2 ms on 1-0; the 1-2 ring's log asks for 5 ms: the 1-2 image on a 1-2
+/// robot refuses 2 ms).
+pub(super) fn admission_on(
+    out: &RunOutput,
+    bounds: &Bounds,
+    chips: usize,
+    every_ms: u64,
+) -> Result<String> {
     use amiro_can::{Topic, Verdict, Violation};
     let verdicts = super::admission_verdicts(out, amiro_can::Board::LightRing);
     ensure!(
@@ -481,16 +576,16 @@ fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     );
     super::same_refusal(starved, &super::host_admission(root, &[], "01C#01010002")?)?;
     // LED 3 still latched after the refusal.
-    let latches = latches(out)?;
+    let latches = latches(out, chips)?;
     let mut colours = [[0u8; 3]; 8];
     colours[2] = [0xFF, 0x80, 0x20];
-    let latency = latency_until_shown(&latches, 50_000, &colours)?;
-    // Every 2 ms at medium: accepted (no verdict), six frames per sample until the stop.
+    let latency = latency_until_shown(&latches, 50_000, chips, &colours)?;
+    // Every `every_ms` at medium: accepted (no verdict), six frames per sample until the stop.
     ensure!(
-        super::host_admission(root, &[], "21C#01020000")?
+        super::host_admission(root, &[], &format!("21C#01{every_ms:02X}0000"))?
             .refusal
             .is_none(),
-        "the host refuses the diagnostics every 2 ms"
+        "the host refuses the diagnostics every {every_ms} ms"
     );
     let running = out
         .times(0x61C)
@@ -498,8 +593,8 @@ fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         .filter(|t| (60_000..100_000).contains(t))
         .count();
     ensure!(
-        running >= 6 * 15,
-        "{running} diagnostics frames between the request and the stop, expected every 2 ms × 6"
+        running as u64 >= 6 * (40 / every_ms * 3 / 4),
+        "{running} diagnostics frames between the request and the stop, expected every {every_ms} ms × 6"
     );
     ensure!(
         out.times(0x61C).iter().all(|&t| t < 102_000),
@@ -533,7 +628,7 @@ fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         started.len()
     );
     Ok(format!(
-        "{starved}; LED 3 latched {latency} µs after its command; 2 ms accepted ({running} frames) and stopped; {other}; then warned and started ({} frames)",
+        "{starved}; LED 3 latched {latency} µs after its command; {every_ms} ms accepted ({running} frames) and stopped; {other}; then warned and started ({} frames)",
         started.len()
     ))
 }
