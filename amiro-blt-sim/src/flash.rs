@@ -297,7 +297,9 @@ impl Flash {
         // Three call sites in the code, past the vector and callback tables.
         for site in [0x0B14usize, 0x1F3C, 0x2A80] {
             match encoding {
-                IdInCode::LiteralPool => self.mem[site..site + 4].copy_from_slice(&id.to_le_bytes()),
+                IdInCode::LiteralPool => {
+                    self.mem[site..site + 4].copy_from_slice(&id.to_le_bytes())
+                }
                 IdInCode::MovwMovt => {
                     // r3 = id: MOVW r3, #low; MOVT r3, #high (Thumb-2, encoding T3/T1).
                     let movw = thumb_mov_imm16(0xF240, 3, id as u16);

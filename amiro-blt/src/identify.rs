@@ -97,7 +97,8 @@ pub fn ids_in_code(code: &[u8]) -> Identification {
 /// the next 16 bytes, as an instruction scheduler may move it).
 fn constants_in(code: &[u8]) -> Vec<u32> {
     let half = |at: usize| -> Option<u16> {
-        code.get(at..at + 2).map(|b| u16::from_le_bytes([b[0], b[1]]))
+        code.get(at..at + 2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]))
     };
     let mut found: Vec<u32> = code
         .chunks_exact(4)
@@ -161,7 +162,9 @@ mod tests {
     #[test]
     fn a_movw_movt_pair_names_the_main_board() {
         // MOVW r3, #0x0102; (one other instruction); MOVT r3, #0x0100.
-        let pair = [0x40, 0xF2, 0x02, 0x13, 0x00, 0xBF, 0x00, 0xBF, 0xC0, 0xF2, 0x00, 0x13];
+        let pair = [
+            0x40, 0xF2, 0x02, 0x13, 0x00, 0xBF, 0x00, 0xBF, 0xC0, 0xF2, 0x00, 0x13,
+        ];
         let code = code_with(&[(0x202, &pair)]);
         let id = ids_in_code(&code).main_board().unwrap();
         assert_eq!((id.id, id.robot), (0x0100_0102, IdSet::Rev12));

@@ -288,8 +288,12 @@ impl<T: Transport> Flasher<T> {
     pub fn greet(&mut self, target: &Target) -> Result<(), Error> {
         self.connect(target)?;
         self.check_identity(target)?;
-        self.plain(&Command::Disconnect, self.opts.command_timeout, &target.name)
-            .map_err(|t| self.lost(&target.name, 0, 0, t))?;
+        self.plain(
+            &Command::Disconnect,
+            self.opts.command_timeout,
+            &target.name,
+        )
+        .map_err(|t| self.lost(&target.name, 0, 0, t))?;
         Ok(())
     }
 
