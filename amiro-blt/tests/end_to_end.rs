@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use amiro_blt::target::{robot, IdSet};
 use amiro_blt::xcp::ErrorCode;
-use amiro_blt::{Error, Flasher, Options, RestartOutcome};
+use amiro_blt::{Error, Flasher, Options, RestartOutcome, Transport};
 use amiro_blt_sim::{BoardSpec, Faults, IdInCode, Mode, Nak, Robot, SimChip, Timing};
 use common::*;
 
@@ -64,7 +64,11 @@ fn identify(boards: Vec<BoardSpec>) -> (amiro_blt::Identification, Flasher<SimLi
     let sim = Robot::new(boards, Timing::robot(), Faults::default());
     let mut flasher = Flasher::new(SimLink::new(sim, 115_200), opts());
     flasher.enter_flash_mode(&mut ()).unwrap();
+    let before = flasher.link().clock();
     let seen = flasher.identify_main_board().unwrap();
+    // 24 KiB read back at 115200 baud: about 2 s.
+    let took = flasher.link().clock() - before;
+    assert!(took < Duration::from_millis(2600), "{took:?}");
     let robot = &flasher.link().robot;
     assert_eq!(*robot.mode(), Mode::Flashing, "{:?}", robot.log);
     for id in ids {
@@ -100,6 +104,33 @@ fn the_main_boards_bootloader_names_the_robots_revision_without_a_module_connect
     let (seen, _) = identify(boards);
     assert_eq!(seen.main_board(), None);
     assert_eq!(seen.describe(), "none of the known main-board ids");
+}
+
+#[test]
+fn a_module_of_the_other_revision_hangs_the_greeting_before_anything_is_erased() {
+    // A 1-2 main board with a 1-1 PowerManagement: its inferred id 0x01010102 is no one's.
+    let mut boards = BoardSpec::robot_1_2();
+    boards[1].device_id = 0x0101_0101;
+    let (seen, mut flasher) = identify(boards);
+    let targets = robot(seen.main_board().unwrap().robot);
+    flasher.greet(&targets[0]).unwrap();
+    let err = flasher.greet(&targets[1]).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            Error::NoAnswerFromBoard {
+                id: 0x0101_0102,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("reset the robot"));
+    let robot = &flasher.link().robot;
+    assert!(matches!(robot.mode(), Mode::Hung(_)));
+    for id in [0x0100_0102, 0x0101_0101, 0x017F_0102] {
+        assert_eq!(robot.flash(id).erases, 0);
+    }
 }
 
 #[test]
