@@ -604,17 +604,23 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
     let pm = by("powermgmt")?;
     let lr = by("lightring")?;
     // Every image built, as `cargo xtask flash … --port` offers them without --ids.
-    let dwd_all = vec![elf("diwheeldrive", "1-2")?, elf("diwheeldrive", "1-1")?];
-    let pm_all = vec![elf("powermgmt", "1-1/1-2")?];
-    let lr_all = vec![elf("lightring", "1-0")?];
-    // A 1-2 robot: DiWheelDrive 1-2 and PowerManagement (LightRing 1-2 has no image yet).
-    flash_simulated(
-        root,
-        BoardSpec::robot_1_2(),
-        None,
-        &[(dwd, dwd_all.clone()), (pm, pm_all.clone())],
-        &[("diwheeldrive", "1-2"), ("powermgmt", "1-1/1-2")],
-    )?;
+    let all_of = |board: &Board| -> Vec<PathBuf> {
+        reports
+            .iter()
+            .filter(|r| r.board == board.name)
+            .map(|r| r.elf.clone())
+            .collect()
+    };
+    let (dwd_all, pm_all, lr_all) = (all_of(dwd), all_of(pm), all_of(lr));
+    let revision_on = |board: &Board, robot: &str| board.revision_for(robot).map(|r| r.name);
+    // A 1-2 robot: DiWheelDrive 1-2, PowerManagement, and LightRing once it has a 1-2 image.
+    let mut jobs = vec![(dwd, dwd_all.clone()), (pm, pm_all.clone())];
+    let mut expected = vec![("diwheeldrive", "1-2"), ("powermgmt", "1-1/1-2")];
+    if let Some(name) = revision_on(lr, "1-2") {
+        jobs.push((lr, lr_all.clone()));
+        expected.push(("lightring", name));
+    }
+    flash_simulated(root, BoardSpec::robot_1_2(), None, &jobs, &expected)?;
     // A 1-1 robot: every board.
     flash_simulated(
         root,
@@ -628,7 +634,10 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
         &[
             ("diwheeldrive", "1-1"),
             ("powermgmt", "1-1/1-2"),
-            ("lightring", "1-0"),
+            (
+                "lightring",
+                revision_on(lr, "1-1").context("lightring on a 1-1 robot")?,
+            ),
         ],
     )?;
     // The same with the ids stated, as they agree with the bootloader's.
@@ -644,15 +653,7 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
     unreadable[0].id_in_code = IdInCode::Absent;
     // What is refused: the robot, the ids stated, the jobs, and what the refusal must say.
     type Refusal<'a> = (&'a str, Vec<BoardSpec>, Option<IdSet>, Vec<Job>, &'a str);
-    let refused: [Refusal<'_>; 5] = [
-        (
-            "flash all on a 1-2 robot (no LightRing 1-2 image)",
-            BoardSpec::robot_1_2(),
-            None,
-            vec![(dwd, dwd_all.clone()), (pm, pm_all.clone()), (lr, lr_all)],
-            "so its lightring has device id 0x017f0102, a revision this firmware has no image for",
-        ),
-        (
+    let mut refused: Vec<Refusal<'_>> = vec![(
             "the runner's 1-1 DiWheelDrive image on a 1-2 robot",
             BoardSpec::robot_1_2(),
             None,
@@ -682,11 +683,21 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
             "a main board whose bootloader's id cannot be read",
             unreadable,
             None,
-            vec![(dwd, dwd_all)],
+            vec![(dwd, dwd_all.clone())],
             "cannot tell the robot's revision: the main board's bootloader holds none of the known \
              main-board ids",
         ),
     ];
+    // A board whose revision has no image: LightRing on a 1-2 robot, while it has none.
+    if revision_on(lr, "1-2").is_none() {
+        refused.push((
+            "flash all on a 1-2 robot (no LightRing 1-2 image)",
+            BoardSpec::robot_1_2(),
+            None,
+            vec![(dwd, dwd_all.clone()), (pm, pm_all.clone()), (lr, lr_all)],
+            "so its lightring has device id 0x017f0102, a revision this firmware has no image for",
+        ));
+    }
     for (what, spec, stated, jobs, message) in refused {
         let error = match flash_simulated(root, spec, stated, &jobs, &[]) {
             Ok(()) => bail!("{what} was written"),
