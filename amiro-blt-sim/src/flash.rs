@@ -109,6 +109,8 @@ pub struct Flash {
     pub last_cost_ns: u64,
     /// Erase operations that touched the bootloader region (must stay 0).
     pub protected_hits: u32,
+    /// Erase operations asked for (PROGRAM_CLEAR), refused ones included.
+    pub erases: u32,
 }
 
 impl Flash {
@@ -136,6 +138,7 @@ impl Flash {
             block: None,
             last_cost_ns: 0,
             protected_hits: 0,
+            erases: 0,
         }
     }
 
@@ -174,6 +177,7 @@ impl Flash {
     /// Erases every unit overlapping `[address, address + len)`; refuses the bootloader's.
     pub fn erase(&mut self, address: u32, len: u32) -> Result<(), FlashError> {
         self.last_cost_ns = 0;
+        self.erases += 1;
         if len == 0 {
             return Ok(());
         }
@@ -285,11 +289,56 @@ impl Flash {
         sum == 0 && word(&v, 0) != 0xFFFF_FFFF
     }
 
+    /// Puts the bootloader's own device id into its code the way a compiler does for the id
+    /// comparisons in `xcp.c` (CONNECT) and `can.c` (the CAN receiver, twice): three sites, each
+    /// either a literal-pool word or a MOVW/MOVT pair, or none at all ([`IdInCode::Absent`], a
+    /// bootloader in which a host cannot find its id).
+    pub fn compile_device_id(&mut self, id: u32, encoding: IdInCode) {
+        // Three call sites in the code, past the vector and callback tables.
+        for site in [0x0B14usize, 0x1F3C, 0x2A80] {
+            match encoding {
+                IdInCode::LiteralPool => {
+                    self.mem[site..site + 4].copy_from_slice(&id.to_le_bytes())
+                }
+                IdInCode::MovwMovt => {
+                    // r3 = id: MOVW r3, #low; MOVT r3, #high (Thumb-2, encoding T3/T1).
+                    let movw = thumb_mov_imm16(0xF240, 3, id as u16);
+                    let movt = thumb_mov_imm16(0xF2C0, 3, (id >> 16) as u16);
+                    self.mem[site..site + 4].copy_from_slice(&movw);
+                    self.mem[site + 4..site + 8].copy_from_slice(&movt);
+                }
+                IdInCode::Absent => {}
+            }
+        }
+    }
+
     /// Writes bytes straight into flash, as a probe would (for setting up a robot with an app).
     pub fn install(&mut self, address: u32, data: &[u8]) {
         let o = (address - FLASH_BASE) as usize;
         self.mem[o..o + data.len()].copy_from_slice(data);
     }
+}
+
+/// How a bootloader's compiled code holds its device id (AMiRo-BLT is built with GCC `-O1` for
+/// Cortex-M: a MOVW/MOVT pair; `-Os` builds load constants from a literal pool).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IdInCode {
+    /// A 32-bit word in a literal pool, loaded PC-relative.
+    LiteralPool,
+    /// A MOVW (low half) and MOVT (high half) into one register.
+    MovwMovt,
+    /// Not findable (e.g. a bootloader built otherwise, or computing its id).
+    Absent,
+}
+
+/// A 32-bit Thumb-2 MOVW/MOVT (`base` 0xF240 or 0xF2C0) of `imm` into register `rd`, as the
+/// four bytes in flash (two little-endian halfwords).
+fn thumb_mov_imm16(base: u16, rd: u16, imm: u16) -> [u8; 4] {
+    let first = base | ((imm >> 11) & 1) << 10 | (imm >> 12);
+    let second = ((imm >> 8) & 7) << 12 | rd << 8 | (imm & 0xFF);
+    let [a, b] = first.to_le_bytes();
+    let [c, d] = second.to_le_bytes();
+    [a, b, c, d]
 }
 
 #[cfg(test)]
@@ -313,6 +362,15 @@ mod tests {
         assert!(f.app_valid());
         assert_eq!(f.bytes(0x0800_6200, 0x0800_6203), [1, 2, 3]);
         assert_eq!(f.bytes(FLASH_BASE, 0x0800_6000), &blt[..]);
+    }
+
+    #[test]
+    fn movw_and_movt_are_encoded_as_the_architecture_manual_says() {
+        // MOVW r3, #0x0102 = F240 1302; MOVT r3, #0x0100 = F2C0 1300.
+        assert_eq!(thumb_mov_imm16(0xF240, 3, 0x0102), [0x40, 0xF2, 0x02, 0x13]);
+        assert_eq!(thumb_mov_imm16(0xF2C0, 3, 0x0100), [0xC0, 0xF2, 0x00, 0x13]);
+        // imm4:i:imm3:imm8 all used: MOVW r0, #0xFFFF = F64F 70FF.
+        assert_eq!(thumb_mov_imm16(0xF240, 0, 0xFFFF), [0x4F, 0xF6, 0xFF, 0x70]);
     }
 
     #[test]

@@ -12,5 +12,5 @@ pub mod flash;
 pub mod pty;
 pub mod robot;
 
-pub use flash::{Flash, SimChip};
+pub use flash::{Flash, IdInCode, SimChip};
 pub use robot::{BoardSpec, Faults, Mode, Nak, Robot, Timing};

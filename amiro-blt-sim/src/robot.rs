@@ -2,7 +2,7 @@
 //! modules behind it on a CAN link, in virtual time.
 use std::collections::VecDeque;
 
-use crate::flash::{Flash, SimChip};
+use crate::flash::{Flash, IdInCode, SimChip};
 
 const CONNECT: u8 = 0xFF;
 const DISCONNECT: u8 = 0xFE;
@@ -81,11 +81,15 @@ pub struct BoardSpec {
     pub legacy_id: Option<u8>,
     /// Chip.
     pub chip: SimChip,
+    /// How its bootloader's code holds `device_id` (what a host can find by reading it).
+    pub id_in_code: IdInCode,
 }
 
 impl BoardSpec {
     /// A revision 1-1 robot: DiWheelDrive 1-1 (main, on the serial port), PowerManagement 1-1 and
-    /// LightRing 1-0, whose bootloaders also answer to the legacy one-byte ids 1, 2 and 3.
+    /// LightRing 1-0, whose bootloaders also answer to the legacy one-byte ids 1, 2 and 3. Their
+    /// code holds the device id in literal pools (the 1-2 robot's as MOVW/MOVT pairs), so the
+    /// two robots exercise both ways a host can find it.
     pub fn robot_1_1() -> Vec<BoardSpec> {
         vec![
             BoardSpec {
@@ -93,18 +97,21 @@ impl BoardSpec {
                 device_id: 0x0100_0101,
                 legacy_id: Some(1),
                 chip: SimChip::F103,
+                id_in_code: IdInCode::LiteralPool,
             },
             BoardSpec {
                 name: "powermgmt".into(),
                 device_id: 0x0101_0101,
                 legacy_id: Some(2),
                 chip: SimChip::F405,
+                id_in_code: IdInCode::LiteralPool,
             },
             BoardSpec {
                 name: "lightring".into(),
                 device_id: 0x017F_0100,
                 legacy_id: Some(3),
                 chip: SimChip::F103,
+                id_in_code: IdInCode::LiteralPool,
             },
         ]
     }
@@ -118,18 +125,21 @@ impl BoardSpec {
                 device_id: 0x0100_0102,
                 legacy_id: None,
                 chip: SimChip::F103,
+                id_in_code: IdInCode::MovwMovt,
             },
             BoardSpec {
                 name: "powermgmt".into(),
                 device_id: 0x0101_0102,
                 legacy_id: None,
                 chip: SimChip::F405,
+                id_in_code: IdInCode::MovwMovt,
             },
             BoardSpec {
                 name: "lightring".into(),
                 device_id: 0x017F_0102,
                 legacy_id: None,
                 chip: SimChip::F103,
+                id_in_code: IdInCode::MovwMovt,
             },
         ]
     }
@@ -194,7 +204,11 @@ struct Module {
 impl Module {
     fn new(spec: BoardSpec) -> Self {
         Module {
-            flash: Flash::new(spec.chip),
+            flash: {
+                let mut flash = Flash::new(spec.chip);
+                flash.compile_device_id(spec.device_id, spec.id_in_code);
+                flash
+            },
             spec,
             connected: false,
             mta: 0,
@@ -779,5 +793,22 @@ mod tests {
         assert!(matches!(r.mode(), Mode::Hung(_)));
         r.reset();
         assert_eq!(send(&mut r, &mut t, &[0xFF, 0])[..2], [8, 0xFF]);
+    }
+
+    #[test]
+    fn no_connect_to_a_module_id_is_safe_on_both_robots() {
+        // A 1-2 robot knows no legacy ids, and neither robot owns the other's 32-bit ids: each
+        // such CONNECT goes to the gateway and hangs the main board (why the host reads the
+        // main board's own id from its bootloader instead of trying ids).
+        for (robot, connect) in [
+            (BoardSpec::robot_1_2(), vec![0xFF, 1]),
+            (BoardSpec::robot_1_2(), vec![0xFF, 0x01, 0x01, 0x00, 0x01]),
+            (BoardSpec::robot_1_1(), vec![0xFF, 0x02, 0x01, 0x00, 0x01]),
+        ] {
+            let mut r = Robot::new(robot, Timing::instant(), Faults::default());
+            let mut t = 0;
+            assert!(send(&mut r, &mut t, &connect).is_empty());
+            assert!(matches!(r.mode(), Mode::Hung(_)), "{connect:x?}");
+        }
     }
 }

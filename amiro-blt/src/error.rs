@@ -19,9 +19,9 @@ pub enum Error {
     },
     /// A board selected through the gateway never answered.
     #[error(
-        "{board} (device id {id:#010x}) does not answer: is it in the robot, and do its board \
-         revisions match --ids? The main board now waits for it forever: reset the robot (it \
-         stays in its bootloaders) and run again with the right ids"
+        "{board} (device id {id:#010x}) does not answer: is it in the robot, and is it of the \
+         revision its main board's bootloader (or --ids) names? The main board now waits for it \
+         forever: reset the robot (it stays in its bootloaders) and run again"
     )]
     NoAnswerFromBoard {
         /// Board name.

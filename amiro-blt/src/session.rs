@@ -13,6 +13,7 @@ use std::time::Duration;
 use crate::error::Error;
 use crate::frame::{self, Deframer};
 use crate::gateway;
+use crate::identify::{self, Identification};
 use crate::image::Image;
 use crate::target::Target;
 use crate::transport::Transport;
@@ -249,6 +250,53 @@ impl<T: Transport> Flasher<T> {
         Ok(())
     }
 
+    /// Learns which board is on the serial port, and so the robot's revision, without a CONNECT
+    /// to any module: CONNECT(0) (always answered by the main board itself), UPLOAD of the
+    /// first 24 KiB of its flash (its bootloader on either chip) and DISCONNECT; then looks
+    /// for the known main boards' ids in that code ([`crate::identify`]). Call after
+    /// [`Self::enter_flash_mode`]; it erases and writes nothing.
+    pub fn identify_main_board(&mut self) -> Result<Identification, Error> {
+        self.connect_serial_board()?;
+        let (start, end) = identify::BOOTLOADER_SCAN;
+        let limit = self.upload_limit();
+        let mut code = Vec::with_capacity((end - start) as usize);
+        let mut address = start;
+        for size in upload_chunks((end - start) as usize, limit) {
+            let body = self
+                .at(
+                    address,
+                    &Command::Upload(size as u8),
+                    self.opts.command_timeout,
+                    "main board",
+                )
+                .map_err(|t| self.lost("the main board", 0, 0, t))?;
+            code.extend_from_slice(&body[..size]);
+            address += size as u32;
+        }
+        self.plain(
+            &Command::Disconnect,
+            self.opts.command_timeout,
+            "main board",
+        )
+        .map_err(|t| self.lost("the main board", 0, 0, t))?;
+        Ok(identify::ids_in_code(&code))
+    }
+
+    /// Connects and checks a board through the gateway, then disconnects: nothing is erased.
+    /// A session calls this for every board of a run before flashing any, so a board that does
+    /// not answer to its id stops the run while every board is still untouched.
+    pub fn greet(&mut self, target: &Target) -> Result<(), Error> {
+        self.connect(target)?;
+        self.check_identity(target)?;
+        self.plain(
+            &Command::Disconnect,
+            self.opts.command_timeout,
+            &target.name,
+        )
+        .map_err(|t| self.lost(&target.name, 0, 0, t))?;
+        Ok(())
+    }
+
     /// Flashes one board: refuses an image that does not fit before anything is sent, then
     /// connects through the gateway, checks the board, erases, programs, finishes (the
     /// bootloader writes the checksum), reads everything back and disconnects.
@@ -286,27 +334,7 @@ impl<T: Transport> Flasher<T> {
 
     /// Restarts the robot: CONNECT to the serial board and PROGRAM_RESET.
     pub fn restart(&mut self) -> Result<RestartOutcome, Error> {
-        let mut connected = false;
-        for _ in 0..self.opts.connect_tries {
-            match self.exchange(
-                &Command::Connect(Select::SerialBoard),
-                self.opts.connect_reply,
-            ) {
-                Ok(Reply::Ok(body)) => {
-                    self.learn(&body);
-                    connected = true;
-                    break;
-                }
-                Err(Trouble::Io(e)) => return Err(e.into()),
-                _ => self.link.pause(self.opts.knock_interval),
-            }
-        }
-        if !connected {
-            return Err(Error::NoAnswerFromBoard {
-                board: "the main board".into(),
-                id: 0,
-            });
-        }
+        self.connect_serial_board()?;
         match self.exchange(&Command::ProgramReset, Duration::from_secs(1)) {
             Err(Trouble::Timeout) => Ok(RestartOutcome::Started),
             Ok(Reply::Ok(_)) => Ok(RestartOutcome::StayedInBootloader),
@@ -402,6 +430,35 @@ impl<T: Transport> Flasher<T> {
         Ok(())
     }
 
+    /// CONNECT(0): the board on the serial port answers itself, never the gateway.
+    fn connect_serial_board(&mut self) -> Result<(), Error> {
+        for _ in 0..self.opts.connect_tries {
+            match self.exchange(
+                &Command::Connect(Select::SerialBoard),
+                self.opts.connect_reply,
+            ) {
+                Ok(Reply::Ok(body)) => {
+                    self.learn(&body);
+                    return Ok(());
+                }
+                Err(Trouble::Io(e)) => return Err(e.into()),
+                _ => self.link.pause(self.opts.knock_interval),
+            }
+        }
+        Err(Error::NoAnswerFromBoard {
+            board: "the main board".into(),
+            id: 0,
+        })
+    }
+
+    /// The largest UPLOAD the connected board's CTO and DTO allow (at most 254 bytes).
+    fn upload_limit(&self) -> usize {
+        usize::from(self.max_cto)
+            .min(usize::from(self.max_dto))
+            .saturating_sub(1)
+            .clamp(1, 254)
+    }
+
     fn connect(&mut self, target: &Target) -> Result<(), Error> {
         let command = Command::Connect(Select::Device(target.device_id));
         for _ in 0..self.opts.connect_tries {
@@ -475,10 +532,7 @@ impl<T: Transport> Flasher<T> {
     ) -> Result<(), Error> {
         let name = target.name.as_str();
         let total = image.len();
-        let limit = usize::from(self.max_cto)
-            .min(usize::from(self.max_dto))
-            .saturating_sub(1)
-            .clamp(1, 254);
+        let limit = self.upload_limit();
         let mut done = 0;
         for segment in image.expected_flash(target) {
             let mut address = segment.address;

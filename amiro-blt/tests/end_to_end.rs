@@ -5,8 +5,8 @@ use std::time::Duration;
 
 use amiro_blt::target::{robot, IdSet};
 use amiro_blt::xcp::ErrorCode;
-use amiro_blt::{Error, Flasher, Options, RestartOutcome};
-use amiro_blt_sim::{BoardSpec, Faults, Flash, Mode, Nak, Robot, SimChip, Timing};
+use amiro_blt::{Error, Flasher, Options, RestartOutcome, Transport};
+use amiro_blt_sim::{BoardSpec, Faults, IdInCode, Mode, Nak, Robot, SimChip, Timing};
 use common::*;
 
 fn opts() -> Options {
@@ -29,7 +29,15 @@ fn images() -> Vec<amiro_blt::Image> {
 fn all_three_boards_are_flashed_byte_for_byte_and_the_robot_starts() {
     let targets = targets();
     let images = images();
-    let mut flasher = Flasher::new(SimLink::new(sim_robot(Faults::default()), 115_200), opts());
+    let sim = sim_robot(Faults::default());
+    let bootloaders: Vec<Vec<u8>> = targets
+        .iter()
+        .map(|t| {
+            let flash = sim.flash(t.device_id);
+            flash.bytes(0x0800_0000, flash.chip().app_origin()).to_vec()
+        })
+        .collect();
+    let mut flasher = Flasher::new(SimLink::new(sim, 115_200), opts());
     flasher.enter_flash_mode(&mut ()).unwrap();
     for (t, img) in targets.iter().zip(&images) {
         let report = flasher.flash(t, img, &mut ()).unwrap();
@@ -37,20 +45,92 @@ fn all_three_boards_are_flashed_byte_for_byte_and_the_robot_starts() {
     }
     assert_eq!(flasher.restart().unwrap(), RestartOutcome::Started);
     let robot = &flasher.link().robot;
-    for (t, img) in targets.iter().zip(&images) {
+    for ((t, img), bootloader) in targets.iter().zip(&images).zip(&bootloaders) {
         let flash = robot.flash(t.device_id);
         assert!(holds(flash, t, img), "{}", t.name);
         assert!(flash.app_valid(), "{}", t.name);
         assert!(robot.app_started(t.device_id), "{}", t.name);
-        let fresh = Flash::new(flash.chip());
         let origin = flash.chip().app_origin();
-        assert_eq!(
-            flash.bytes(0x0800_0000, origin),
-            fresh.bytes(0x0800_0000, origin)
-        );
+        assert_eq!(flash.bytes(0x0800_0000, origin), &bootloader[..]);
         assert_eq!(flash.protected_hits, 0);
     }
     assert_eq!(*robot.mode(), Mode::Application);
+}
+
+/// Identifies the main board of `boards` the way `cargo xtask flash` does, then checks that
+/// the robot was neither hung nor erased.
+fn identify(boards: Vec<BoardSpec>) -> (amiro_blt::Identification, Flasher<SimLink>) {
+    let ids: Vec<u32> = boards.iter().map(|b| b.device_id).collect();
+    let sim = Robot::new(boards, Timing::robot(), Faults::default());
+    let mut flasher = Flasher::new(SimLink::new(sim, 115_200), opts());
+    flasher.enter_flash_mode(&mut ()).unwrap();
+    let before = flasher.link().clock();
+    let seen = flasher.identify_main_board().unwrap();
+    // 24 KiB read back at 115200 baud: about 2 s.
+    let took = flasher.link().clock() - before;
+    assert!(took < Duration::from_millis(2600), "{took:?}");
+    let robot = &flasher.link().robot;
+    assert_eq!(*robot.mode(), Mode::Flashing, "{:?}", robot.log);
+    for id in ids {
+        assert_eq!(robot.flash(id).erases, 0);
+    }
+    (seen, flasher)
+}
+
+#[test]
+fn the_main_boards_bootloader_names_the_robots_revision_without_a_module_connect() {
+    // 1-1: the id in literal pools; 1-2: built by MOVW/MOVT.
+    for (boards, id, ids) in [
+        (BoardSpec::robot_1_1(), 0x0100_0101, IdSet::Rev11),
+        (BoardSpec::robot_1_2(), 0x0100_0102, IdSet::Rev12),
+    ] {
+        let (seen, mut flasher) = identify(boards);
+        let main = seen.main_board().unwrap();
+        assert_eq!((main.board, main.id, main.robot), ("diwheeldrive", id, ids));
+        // And the robot it names is then flashed through its ids, every board greeted first.
+        let targets = robot(ids);
+        for t in &targets {
+            flasher.greet(t).unwrap();
+        }
+        for t in &targets {
+            let img = firmware(t, 2000, 7);
+            flasher.flash(t, &img, &mut ()).unwrap();
+            assert!(holds(flasher.link().robot.flash(t.device_id), t, &img));
+        }
+    }
+    // A bootloader in which no known id can be found leaves the revision unknown.
+    let mut boards = BoardSpec::robot_1_2();
+    boards[0].id_in_code = IdInCode::Absent;
+    let (seen, _) = identify(boards);
+    assert_eq!(seen.main_board(), None);
+    assert_eq!(seen.describe(), "none of the known main-board ids");
+}
+
+#[test]
+fn a_module_of_the_other_revision_hangs_the_greeting_before_anything_is_erased() {
+    // A 1-2 main board with a 1-1 PowerManagement: its inferred id 0x01010102 is no one's.
+    let mut boards = BoardSpec::robot_1_2();
+    boards[1].device_id = 0x0101_0101;
+    let (seen, mut flasher) = identify(boards);
+    let targets = robot(seen.main_board().unwrap().robot);
+    flasher.greet(&targets[0]).unwrap();
+    let err = flasher.greet(&targets[1]).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            Error::NoAnswerFromBoard {
+                id: 0x0101_0102,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("reset the robot"));
+    let robot = &flasher.link().robot;
+    assert!(matches!(robot.mode(), Mode::Hung(_)));
+    for id in [0x0100_0102, 0x0101_0101, 0x017F_0102] {
+        assert_eq!(robot.flash(id).erases, 0);
+    }
 }
 
 #[test]

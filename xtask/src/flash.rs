@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use amiro_blt::target::{robot, IdSet};
-use amiro_blt::{Event, Flasher, Image, Observer, Options, Phase, RestartOutcome, Target};
+use amiro_blt::{
+    Event, Flasher, Identification, Image, MainBoardId, Observer, Options, Phase, RestartOutcome,
+    Target,
+};
 use anyhow::{bail, ensure, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serialport::SerialPort;
@@ -31,12 +34,14 @@ pub struct FlashArgs {
     /// Flash one board through probe-rs over SWD (a probe on that board's pins).
     #[arg(long)]
     pub probe: bool,
-    /// The device ids the robot's bootloaders answer to: 1-2, 1-1 or legacy. They name the robot's
-    /// revision, and so which image of each board is built and written (1-1 and legacy: the 1-1
-    /// images); a board without an image for it, or an image of the other revision, is refused
-    /// before anything is erased.
-    #[arg(long, default_value = "1-2")]
-    pub ids: String,
+    /// The device ids the robot's bootloaders answer to (1-2, 1-1 or legacy), stated instead of
+    /// learnt. Without it the robot's revision is read from the main board's bootloader; with it
+    /// a main board of the other revision is refused, and a bootloader whose id cannot be read
+    /// is trusted to be the one stated. Either way the images of that revision are written, and
+    /// a board without one, or an image of the other revision, is refused before anything is
+    /// erased.
+    #[arg(long, value_name = "1-2|1-1|legacy")]
+    pub ids: Option<String>,
     /// Over SWD (`--probe`): the revision of the board on the probe (1-2, 1-1). Default: its newest.
     #[arg(long, value_name = "1-2|1-1", requires = "probe")]
     pub revision: Option<String>,
@@ -45,24 +50,44 @@ pub struct FlashArgs {
     pub reset_line: bool,
 }
 
+/// A board to flash with the images it may take: one per revision built (the serial path picks
+/// the robot's) or the one ELF a runner was given.
+pub type Job = (&'static Board, Vec<PathBuf>);
+
 /// `cargo xtask flash …`.
 pub fn run(root: &Path, args: &FlashArgs) -> Result<()> {
     let selected = select(&args.boards)?;
     match &args.port {
         Some(port) => {
-            let id_set = ids(&args.ids)?;
-            // Which image of each board this robot takes: refused here, before the port is
-            // opened, when a board has none for its revision.
-            let plan = revision::plan(&selected, &Choice::Robot(robot_revision(id_set)))
-                .with_context(|| {
-                    format!(
-                        "the robot answers to the {} ids; nothing was erased",
-                        args.ids
-                    )
-                })?;
+            let stated = args.ids.as_deref().map(ids).transpose()?;
+            let choice = match stated {
+                // Stated: only that revision's images, and a board without one is refused here,
+                // before the port is opened.
+                Some(id_set) => Choice::Robot(robot_revision(id_set)),
+                // Learnt from the robot: every revision of each board, so the images are ready
+                // when the main board has told which one (it leaves flashing mode 30 s after the
+                // host falls silent, too soon for a build).
+                None => Choice::All,
+            };
+            let plan = revision::plan(&selected, &choice).with_context(|| {
+                format!(
+                    "the robot answers to the {} ids (--ids); nothing was erased",
+                    args.ids.as_deref().unwrap_or("")
+                )
+            })?;
             let reports = crate::build_boards(root, &plan, false)?;
-            let elfs: Vec<PathBuf> = reports.iter().map(|r| r.elf.clone()).collect();
-            serial(port, &selected, &elfs, &options(args), id_set).map(|_| ())
+            let jobs: Vec<Job> = selected
+                .iter()
+                .map(|board| {
+                    let elfs = reports
+                        .iter()
+                        .filter(|r| r.board == board.name)
+                        .map(|r| r.elf.clone())
+                        .collect();
+                    (*board, elfs)
+                })
+                .collect();
+            serial(port, &jobs, &options(args), stated).map(|_| ())
         }
         None => {
             let [board] = selected[..] else {
@@ -90,38 +115,83 @@ pub fn robot_revision(ids: IdSet) -> &'static str {
     }
 }
 
-/// Refuses an image for a board whose bootloader answers to `target`'s id unless the image is for
-/// that board's revision: the id names the revision (`boards::Revision::device_ids`), the ELF
-/// declares its own (`AMIRO_DEVICE_ID`; an image without it is the board's only revision).
-pub fn check_revision(board: &Board, target: &Target, elf: &Path) -> Result<()> {
+/// How the robot's ids became known, for messages.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// Stated with `--ids` (or `AMIRO_IDS`).
+    Stated(String),
+    /// Read from the main board's bootloader: its board and id.
+    MainBoard(MainBoardId),
+}
+
+impl std::fmt::Display for Source {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Source::Stated(text) => write!(f, "stated with --ids {text}"),
+            Source::MainBoard(m) => write!(
+                f,
+                "its main board's bootloader is {} with device id {:#010x}",
+                m.board, m.id
+            ),
+        }
+    }
+}
+
+/// Of `elfs`, the image for the board whose bootloader has `target`'s id. Refuses, naming the
+/// board, its id and revision and each image's revision, when the board's revision has no
+/// image or every image given is of another revision: the id names the revision
+/// (`boards::Revision::device_ids`), the ELF declares its own (`AMIRO_DEVICE_ID`; an image
+/// without it is the board's only revision).
+pub fn choose_image(
+    board: &Board,
+    target: &Target,
+    elfs: &[PathBuf],
+    source: &Source,
+) -> Result<PathBuf> {
+    let robot = robot_revision_of(target);
     let Some(wanted) = board.revision_of_id(target.device_id) else {
         bail!(
-            "{}: the robot's {} answers to device id {:#010x}, a revision this firmware has no image for \
-             (its revisions: {}); nothing was erased",
+            "{}: this is a revision-{robot} robot ({source}), so its {} has device id {:#010x}, \
+             a revision this firmware has no image for (its revisions: {}); nothing was erased",
             board.name,
             board.name,
             target.device_id,
             revision::names(board)
         );
     };
-    let image = revision::of_elf(board, elf)?;
-    if image != wanted {
-        bail!(
-            "{}: {} is the {} {} image, but the robot's {} answers to device id {:#010x} ({} {}); \
-             nothing was erased (build that revision: cargo xtask build {} --revision {})",
-            board.name,
+    let mut others = Vec::new();
+    for elf in elfs {
+        let image = revision::of_elf(board, elf)?;
+        if image == wanted {
+            return Ok(elf.clone());
+        }
+        others.push(format!(
+            "{} is the {} {} image",
             elf.display(),
             board.name,
-            image.name,
-            board.name,
-            target.device_id,
-            board.name,
-            wanted.name,
-            board.name,
-            wanted.robot()
-        );
+            image.name
+        ));
     }
-    Ok(())
+    bail!(
+        "{}: {}, but this is a revision-{robot} robot ({source}), so its {} has device id {:#010x} \
+         ({} {}); nothing was erased (build that revision: cargo xtask build {} --revision {})",
+        board.name,
+        if others.is_empty() { "no image".to_string() } else { others.join("; ") },
+        board.name,
+        target.device_id,
+        board.name,
+        wanted.name,
+        board.name,
+        wanted.robot()
+    )
+}
+
+/// The robot revision a target's id belongs to (for messages).
+fn robot_revision_of(target: &Target) -> &'static str {
+    [IdSet::Rev12, IdSet::Rev11, IdSet::Legacy]
+        .into_iter()
+        .find(|set| robot(*set).iter().any(|t| t.device_id == target.device_id))
+        .map_or("?", robot_revision)
 }
 
 /// The boards' `cargo run --release` runner: serial when `AMIRO_PORT` names a port, else SWD.
@@ -132,14 +202,77 @@ pub fn run_elf(board: &'static Board, elf: &Path) -> Result<()> {
                 reset_line: std::env::var("AMIRO_RESET_LINE").is_ok_and(|v| v == "1"),
                 ..Options::default()
             };
-            let id_set = ids(&std::env::var("AMIRO_IDS").unwrap_or_else(|_| "1-2".into()))?;
-            serial(&port, &[board], &[elf.to_path_buf()], &opts, id_set).map(|_| ())
+            let stated = match std::env::var("AMIRO_IDS") {
+                Ok(text) if !text.is_empty() => Some(ids(&text)?),
+                _ => None,
+            };
+            let image = revision::of_elf(board, elf)?;
+            println!("{} {} image", board.name, image.name);
+            serial(&port, &[(board, vec![elf.to_path_buf()])], &opts, stated).map(|_| ())
         }
         _ => {
             let image = revision::of_elf(board, elf)?;
             println!("{} {} image", board.name, image.name);
             crate::flash_elf(board, elf)
         }
+    }
+}
+
+/// The robot's ids: the main board's revision as read from its bootloader, checked against
+/// `stated`; a stated set where the bootloader's id could not be read; else a refusal.
+fn robot_ids(seen: &Identification, stated: Option<IdSet>) -> Result<(IdSet, Source)> {
+    match (seen.main_board(), stated) {
+        (Some(main), None) => {
+            println!(
+                "main board: {} with device id {:#010x}: a revision-{} robot",
+                main.board,
+                main.id,
+                robot_revision(main.robot)
+            );
+            Ok((main.robot, Source::MainBoard(main)))
+        }
+        (Some(main), Some(id_set)) => {
+            ensure!(
+                robot_revision(id_set) == robot_revision(main.robot),
+                "--ids {} names a revision-{} robot, but the main board's bootloader is {} with \
+                 device id {:#010x} (revision {}); nothing was erased (drop --ids, or pass --ids {})",
+                id_set_name(id_set),
+                robot_revision(id_set),
+                main.board,
+                main.id,
+                robot_revision(main.robot),
+                robot_revision(main.robot)
+            );
+            println!(
+                "main board: {} with device id {:#010x}, as --ids {} states",
+                main.board,
+                main.id,
+                id_set_name(id_set)
+            );
+            Ok((id_set, Source::MainBoard(main)))
+        }
+        (None, Some(id_set)) => {
+            println!(
+                "main board: its bootloader holds {}; trusting --ids {}",
+                seen.describe(),
+                id_set_name(id_set)
+            );
+            Ok((id_set, Source::Stated(id_set_name(id_set).into())))
+        }
+        (None, None) => bail!(
+            "cannot tell the robot's revision: the main board's bootloader holds {} (one of \
+             DiWheelDrive 0x01000101/0x01000102 or PowerManagement 0x01010101/0x01010102 was \
+             expected); nothing was erased. State it: --ids 1-2 or --ids 1-1",
+            seen.describe()
+        ),
+    }
+}
+
+fn id_set_name(ids: IdSet) -> &'static str {
+    match ids {
+        IdSet::Rev12 => "1-2",
+        IdSet::Rev11 => "1-1",
+        IdSet::Legacy => "legacy",
     }
 }
 
@@ -205,26 +338,59 @@ struct Outcome {
     result: std::result::Result<String, String>,
 }
 
-/// Flashes `boards` (with their ELFs) through AMiRo-BLT on `port`, restarts the robot and prints
-/// a summary. Fails unless every board was flashed and verified.
-pub fn serial(
-    port: &str,
-    boards: &[&'static Board],
-    elfs: &[PathBuf],
-    opts: &Options,
-    ids: IdSet,
-) -> Result<usize> {
-    let mut jobs = Vec::new();
-    for (board, elf) in boards.iter().zip(elfs) {
-        let target = target_of(board, ids)?;
-        check_revision(board, &target, elf)?;
-        jobs.push((*board, target, image_of(board, elf)?));
+/// Flashes `jobs` through AMiRo-BLT on `port`, restarts the robot and prints a summary. The
+/// robot's ids are read from the main board's bootloader (or `stated`; both, and they must
+/// agree); each board then gets the image of its revision, every board answers to its id before
+/// any is erased. Fails unless every board was flashed and verified.
+pub fn serial(port: &str, jobs: &[Job], opts: &Options, stated: Option<IdSet>) -> Result<usize> {
+    // Every image's layout, and with stated ids every board's revision, before the port opens.
+    let mut images = Vec::new();
+    for (board, elfs) in jobs {
+        for elf in elfs {
+            images.push((elf.clone(), image_of(board, elf)?));
+        }
+        if let Some(id_set) = stated {
+            let source = Source::Stated(id_set_name(id_set).into());
+            choose_image(board, &target_of(board, id_set)?, elfs, &source)?;
+        }
     }
     let link = SerialLink::open(port)?;
     let mut flasher = Flasher::new(link, opts.clone());
     let mut show = Progress::default();
     println!("waiting for the main board's bootloader on {port} …");
     flasher.enter_flash_mode(&mut show)?;
+    println!("reading the main board's bootloader for its device id …");
+    let seen = flasher.identify_main_board()?;
+    let (id_set, source) = robot_ids(&seen, stated)?;
+    // Which image each board takes: every refusal before any board is connected to.
+    let mut plan = Vec::new();
+    for (board, elfs) in jobs {
+        let target = target_of(board, id_set)?;
+        let elf = choose_image(board, &target, elfs, &source)?;
+        let image = images
+            .iter()
+            .find(|(e, _)| *e == elf)
+            .map(|(_, i)| i.clone())
+            .context("checked image")?;
+        println!(
+            "{:<13} device id {:#010x} (revision {}): {}",
+            board.name,
+            target.device_id,
+            board
+                .revision_of_id(target.device_id)
+                .map_or("?", |r| r.name),
+            elf.display()
+        );
+        plan.push((*board, target, image));
+    }
+    // Every board answers to its id (and is the chip its image is for) before any is erased.
+    for (board, target, _) in &plan {
+        flasher
+            .greet(target)
+            .with_context(|| format!("{}: nothing was erased", board.name))?;
+        println!("{:<13} answers to {:#010x}", board.name, target.device_id);
+    }
+    let jobs = plan;
     let mut outcomes = Vec::new();
     let mut failed = false;
     for (board, target, image) in &jobs {
@@ -417,13 +583,15 @@ impl amiro_blt::Transport for SerialLink {
 }
 
 /// CI: `cargo xtask flash … --port <pty>` against simulated robots of both revisions (each board
-/// behind DiWheelDrive's bootloader): each robot gets its revision's images, each board's simulated
-/// flash is compared with its ELF as the probe path would write it (`elf::write_checksum`), byte
-/// for byte, and the robot started; a board without an image for the robot's revision and an image
-/// of the other revision are refused before the port is opened (the robot's flash untouched).
-/// `reports`: the images `cargo xtask build --revision all` built.
+/// behind DiWheelDrive's bootloader), the robot's revision read from its main board's bootloader
+/// as on a real robot: each robot gets its revision's images, each board's simulated flash is
+/// compared with its ELF as the probe path would write it (`elf::write_checksum`), byte for
+/// byte, and the robot started. Then the refusals, each with nothing erased on any board and the
+/// robot not hung: a board without an image for the robot's revision, an image of the other
+/// revision (both ways), `--ids` naming the other revision, and a bootloader whose id cannot be
+/// read. `reports`: the images `cargo xtask build --revision all` built.
 pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Result<()> {
-    use amiro_blt_sim::BoardSpec;
+    use amiro_blt_sim::{BoardSpec, IdInCode};
     let elf = |board: &str, revision: &str| -> Result<PathBuf> {
         reports
             .iter()
@@ -432,64 +600,124 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
             .with_context(|| format!("no {board} {revision} image was built"))
     };
     let by = |name: &str| boards::by_name(name).context("board");
-    // A 1-2 robot: every board's 1-2 image.
     let dwd = by("diwheeldrive")?;
     let pm = by("powermgmt")?;
     let lr = by("lightring")?;
-    flash_simulated(
-        root,
-        BoardSpec::robot_1_2(),
-        IdSet::Rev12,
-        &[
-            (dwd, elf("diwheeldrive", "1-2")?),
-            (pm, elf("powermgmt", "1-1/1-2")?),
-            (lr, elf("lightring", "1-2")?),
-        ],
-    )?;
-    // A 1-1 robot: every board, through the 32-bit ids.
+    // Every image built, as `cargo xtask flash … --port` offers them without --ids.
+    let all_of = |board: &Board| -> Vec<PathBuf> {
+        reports
+            .iter()
+            .filter(|r| r.board == board.name)
+            .map(|r| r.elf.clone())
+            .collect()
+    };
+    let (dwd_all, pm_all, lr_all) = (all_of(dwd), all_of(pm), all_of(lr));
+    let revision_on = |board: &Board, robot: &str| board.revision_for(robot).map(|r| r.name);
+    // A 1-2 robot: DiWheelDrive 1-2, PowerManagement, and LightRing once it has a 1-2 image.
+    let mut jobs = vec![(dwd, dwd_all.clone()), (pm, pm_all.clone())];
+    let mut expected = vec![("diwheeldrive", "1-2"), ("powermgmt", "1-1/1-2")];
+    if let Some(name) = revision_on(lr, "1-2") {
+        jobs.push((lr, lr_all.clone()));
+        expected.push(("lightring", name));
+    }
+    flash_simulated(root, BoardSpec::robot_1_2(), None, &jobs, &expected)?;
+    // A 1-1 robot: every board.
     flash_simulated(
         root,
         BoardSpec::robot_1_1(),
-        IdSet::Rev11,
+        None,
         &[
-            (dwd, elf("diwheeldrive", "1-1")?),
-            (pm, elf("powermgmt", "1-1/1-2")?),
-            (lr, elf("lightring", "1-0")?),
+            (dwd, dwd_all.clone()),
+            (pm, pm_all.clone()),
+            (lr, lr_all.clone()),
+        ],
+        &[
+            ("diwheeldrive", "1-1"),
+            ("powermgmt", "1-1/1-2"),
+            (
+                "lightring",
+                revision_on(lr, "1-1").context("lightring on a 1-1 robot")?,
+            ),
         ],
     )?;
+    // The same with the ids stated, as they agree with the bootloader's.
+    flash_simulated(
+        root,
+        BoardSpec::robot_1_1(),
+        Some(IdSet::Rev11),
+        &[(dwd, vec![elf("diwheeldrive", "1-1")?])],
+        &[("diwheeldrive", "1-1")],
+    )?;
     // Refusals, before anything is erased.
-    let refused = [
-        (
-            "the 1-1 DiWheelDrive image for a 1-2 robot",
+    let mut unreadable = BoardSpec::robot_1_2();
+    unreadable[0].id_in_code = IdInCode::Absent;
+    // What is refused: the robot, the ids stated, the jobs, and what the refusal must say.
+    type Refusal<'a> = (&'a str, Vec<BoardSpec>, Option<IdSet>, Vec<Job>, &'a str);
+    let mut refused: Vec<Refusal<'_>> = vec![(
+            "the runner's 1-1 DiWheelDrive image on a 1-2 robot",
             BoardSpec::robot_1_2(),
-            IdSet::Rev12,
-            (dwd, elf("diwheeldrive", "1-1")?),
-            "is the diwheeldrive 1-1 image, but the robot's diwheeldrive answers to device id 0x01000102",
+            None,
+            vec![(dwd, vec![elf("diwheeldrive", "1-1")?])],
+            "is the diwheeldrive 1-1 image, but this is a revision-1-2 robot (its main board's \
+             bootloader is diwheeldrive with device id 0x01000102), so its diwheeldrive has \
+             device id 0x01000102 (diwheeldrive 1-2)",
         ),
         (
-            "the 1-2 DiWheelDrive image for a 1-1 robot",
+            "the runner's 1-2 DiWheelDrive image on a 1-1 robot",
             BoardSpec::robot_1_1(),
-            IdSet::Rev11,
-            (dwd, elf("diwheeldrive", "1-2")?),
-            "is the diwheeldrive 1-2 image, but the robot's diwheeldrive answers to device id 0x01000101",
+            None,
+            vec![(dwd, vec![elf("diwheeldrive", "1-2")?])],
+            "is the diwheeldrive 1-2 image, but this is a revision-1-1 robot (its main board's \
+             bootloader is diwheeldrive with device id 0x01000101), so its diwheeldrive has \
+             device id 0x01000101 (diwheeldrive 1-1)",
         ),
         (
-            "the 1-0 LightRing image for a 1-2 robot",
+            "the 1-0 LightRing image on a 1-2 robot",
             BoardSpec::robot_1_2(),
-            IdSet::Rev12,
-            (lr, elf("lightring", "1-0")?),
-            "is the lightring 1-0 image, but the robot's lightring answers to device id 0x017f0102",
+            None,
+            vec![(lr, vec![elf("lightring", "1-0")?])],
+            "is the lightring 1-0 image, but this is a revision-1-2 robot (its main board's \
+             bootloader is diwheeldrive with device id 0x01000102), so its lightring has \
+             device id 0x017f0102 (lightring 1-2)",
         ),
         (
-            "the 1-2 LightRing image for a 1-1 robot",
+            "the 1-2 LightRing image on a 1-1 robot",
             BoardSpec::robot_1_1(),
-            IdSet::Rev11,
-            (lr, elf("lightring", "1-2")?),
-            "is the lightring 1-2 image, but the robot's lightring answers to device id 0x017f0100",
+            None,
+            vec![(lr, vec![elf("lightring", "1-2")?])],
+            "is the lightring 1-2 image, but this is a revision-1-1 robot (its main board's \
+             bootloader is diwheeldrive with device id 0x01000101), so its lightring has \
+             device id 0x017f0100 (lightring 1-0)",
+        ),
+        (
+            "--ids 1-1 on a 1-2 robot",
+            BoardSpec::robot_1_2(),
+            Some(IdSet::Rev11),
+            vec![(dwd, vec![elf("diwheeldrive", "1-1")?])],
+            "--ids 1-1 names a revision-1-1 robot, but the main board's bootloader is diwheeldrive \
+             with device id 0x01000102 (revision 1-2)",
+        ),
+        (
+            "a main board whose bootloader's id cannot be read",
+            unreadable,
+            None,
+            vec![(dwd, dwd_all.clone())],
+            "cannot tell the robot's revision: the main board's bootloader holds none of the known \
+             main-board ids",
         ),
     ];
-    for (what, spec, ids, job, message) in refused {
-        let error = match flash_simulated(root, spec, ids, &[job]) {
+    // A board whose revision has no image: LightRing on a 1-2 robot, while it has none.
+    if revision_on(lr, "1-2").is_none() {
+        refused.push((
+            "flash all on a 1-2 robot (no LightRing 1-2 image)",
+            BoardSpec::robot_1_2(),
+            None,
+            vec![(dwd, dwd_all.clone()), (pm, pm_all.clone()), (lr, lr_all)],
+            "so its lightring has device id 0x017f0102, a revision this firmware has no image for",
+        ));
+    }
+    for (what, spec, stated, jobs, message) in refused {
+        let error = match flash_simulated(root, spec, stated, &jobs, &[]) {
             Ok(()) => bail!("{what} was written"),
             Err(e) => format!("{e:#}"),
         };
@@ -514,83 +742,127 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
     Ok(())
 }
 
-/// Flashes `jobs` into a simulated robot of `spec` answering to `ids`, through a pty, and checks
-/// every board's flash against its ELF. On a refusal the robot must be untouched.
+/// Flashes `jobs` into a simulated robot of `spec` through a pty, its ids read from the main
+/// board's bootloader (and `stated`), and checks that each board got the image of `expected`
+/// revision, byte for byte. On a refusal the robot must be neither erased nor hung.
 fn flash_simulated(
     root: &Path,
     spec: Vec<amiro_blt_sim::BoardSpec>,
-    ids: IdSet,
-    jobs: &[(&'static Board, PathBuf)],
+    stated: Option<IdSet>,
+    jobs: &[Job],
+    expected: &[(&str, &str)],
 ) -> Result<()> {
-    use amiro_blt_sim::{pty::PtyRobot, Faults, Robot, Timing};
+    use amiro_blt_sim::{pty::PtyRobot, Faults, Mode, Robot, Timing};
     let started = Instant::now();
+    let ids: Vec<(String, u32)> = spec.iter().map(|b| (b.name.clone(), b.device_id)).collect();
     let sim = Robot::new(spec, Timing::instant(), Faults::default());
     let served = PtyRobot::serve(sim).context("starting the simulated robot on a pty")?;
     let port = served.path().to_string_lossy().into_owned();
-    let boards: Vec<&'static Board> = jobs.iter().map(|(b, _)| *b).collect();
-    let elfs: Vec<PathBuf> = jobs.iter().map(|(_, e)| e.clone()).collect();
     let opts = Options {
         window_patience: Duration::from_secs(10),
         ..Options::default()
     };
-    let flashed = serial(&port, &boards, &elfs, &opts, ids);
+    let flashed = serial(&port, jobs, &opts, stated);
     let robot = served.stop();
     let bytes = match flashed {
         Ok(bytes) => bytes,
         Err(e) => {
-            // Refused or failed: a refusal must not have touched the robot.
-            if robot.log.is_empty() {
-                for (board, _) in jobs {
-                    let target = target_of(board, ids)?;
-                    let flash = robot.flash(target.device_id);
-                    let end = target.app_origin + 4096;
-                    ensure!(
-                        flash
-                            .bytes(target.app_origin, end)
-                            .iter()
-                            .all(|b| *b == 0xFF),
-                        "{}: refused, but its application region was written",
-                        board.name
-                    );
-                }
+            // Refused or failed: a refusal must not have erased anything, nor hung the robot.
+            for (name, id) in &ids {
+                let flash = robot.flash(*id);
+                let origin = flash.chip().app_origin();
+                let end = amiro_blt_sim::flash::FLASH_BASE + flash.chip().flash_size();
+                ensure!(
+                    flash.erases == 0 && flash.bytes(origin, end).iter().all(|b| *b == 0xFF),
+                    "{name}: refused, but it was erased or written: {e:#}"
+                );
             }
-            if robot.log.is_empty() {
-                return Err(e);
-            }
-            return Err(e.context(format!("the simulated robot's log: {:#?}", robot.log)));
+            ensure!(
+                !matches!(robot.mode(), Mode::Hung(_)),
+                "the refusal hung the main board: {:#?}",
+                robot.log
+            );
+            return Err(e);
         }
     };
-    for (board, elf) in jobs {
-        let target = target_of(board, ids)?;
-        let patched = crate::target_dir(root).join(format!("{}.sim-check.elf", board.name));
+    for ((board, elfs), (name, revision)) in jobs.iter().zip(expected) {
+        ensure!(board.name == *name, "expected boards in the jobs' order");
+        let elf = elfs
+            .iter()
+            .find(|e| revision::of_elf(board, e).is_ok_and(|r| r.name == *revision))
+            .with_context(|| format!("no {name} {revision} image"))?;
+        let id = ids
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, id)| *id)
+            .context("board in the robot")?;
+        let patched = crate::target_dir(root).join(format!("{name}.sim-check.elf"));
         crate::elf::write_checksum(elf, &patched)?;
         let image = Image::from_elf(&std::fs::read(&patched)?)?;
-        let flash = robot.flash(target.device_id);
+        let flash = robot.flash(id);
         for segment in image.segments() {
             let got = flash.read(segment.address, segment.data.len());
             if let Some(i) = (0..got.len()).find(|&i| got[i] != segment.data[i]) {
                 bail!(
-                    "{}: simulated flash differs from the ELF at {:#010x}",
-                    board.name,
+                    "{name}: simulated flash differs from its {revision} image at {:#010x}",
                     segment.address + i as u32
                 );
             }
         }
-        if !flash.app_valid() || !robot.app_started(target.device_id) {
-            bail!(
-                "{}: the simulated bootloader did not start the application",
-                board.name
-            );
+        if !flash.app_valid() || !robot.app_started(id) {
+            bail!("{name}: the simulated bootloader did not start the application");
         }
     }
     println!(
-        "flash through a simulated {} robot: {} ({bytes} bytes) byte-for-byte equal to their ELFs, started ({:.1} s)",
-        robot_revision(ids),
-        jobs.iter()
-            .map(|(b, e)| format!("{} {}", b.name, e.file_name().and_then(|n| n.to_str()).unwrap_or("")))
+        "flash through a simulated robot ({}): {} ({bytes} bytes) byte-for-byte equal to their ELFs, started ({:.1} s)",
+        ids.iter()
+            .map(|(n, id)| format!("{n} {id:#010x}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        expected
+            .iter()
+            .map(|(b, r)| format!("{b} {r}"))
             .collect::<Vec<_>>()
             .join(", "),
         started.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use amiro_blt::identify::MAIN_BOARD_IDS;
+
+    fn seen(found: &[MainBoardId]) -> Identification {
+        Identification {
+            found: found.to_vec(),
+        }
+    }
+
+    #[test]
+    fn the_main_boards_id_names_the_robot_and_a_stated_set_must_agree() {
+        let dwd_1_2 = MAIN_BOARD_IDS[1];
+        let (ids, _) = robot_ids(&seen(&[dwd_1_2]), None).unwrap();
+        assert_eq!(ids, IdSet::Rev12);
+        let e = robot_ids(&seen(&[dwd_1_2]), Some(IdSet::Rev11)).unwrap_err();
+        assert!(e.to_string().contains(
+            "--ids 1-1 names a revision-1-1 robot, but the main board's bootloader is \
+             diwheeldrive with device id 0x01000102 (revision 1-2); nothing was erased"
+        ));
+        // Legacy ids are the 1-1 robot's.
+        let (ids, _) = robot_ids(&seen(&[MAIN_BOARD_IDS[0]]), Some(IdSet::Legacy)).unwrap();
+        assert_eq!(ids, IdSet::Legacy);
+    }
+
+    #[test]
+    fn an_unreadable_id_is_refused_unless_stated() {
+        let e = robot_ids(&seen(&[]), None).unwrap_err();
+        assert!(e.to_string().contains("cannot tell the robot's revision"));
+        assert!(e.to_string().contains("nothing was erased"));
+        let both = seen(&MAIN_BOARD_IDS[..2]);
+        assert!(robot_ids(&both, None).is_err());
+        let (ids, _) = robot_ids(&seen(&[]), Some(IdSet::Rev12)).unwrap();
+        assert_eq!(ids, IdSet::Rev12);
+    }
 }
