@@ -1,7 +1,8 @@
 //! A model of the robot's CAN bus at bit-time resolution, for `cargo xtask robot`: every board's
 //! transmit mailboxes, arbitration by identifier, each frame on the bus for its real length (bit
 //! stuffing computed from its bits, CRC included), acknowledgement, error frames and
-//! retransmission, error counters, and boards unplugged and plugged back.
+//! retransmission, error counters, boards unplugged and plugged back, and a babbling controller
+//! (a "babbling idiot" that keeps one frame pending and sends it back to back).
 //!
 //! Time is in bit times, which at the robot's 1 Mbit/s are microseconds. The model is driven from
 //! outside: the caller puts frames into a node's mailboxes with the time they were queued
@@ -36,6 +37,9 @@ pub const SUSPEND_TRANSMISSION_BITS: u32 = 8;
 pub const BUS_OFF_RECOVERY_BITS: u64 = 128 * 11;
 /// Transmit mailboxes per controller (bxCAN's three).
 pub const MAILBOXES: usize = 3;
+/// The `mailbox` a babbling controller's frames are reported from ([`Bus::babble`]): none of
+/// its three, which the board's software fills, but the fault itself.
+pub const BABBLE_MAILBOX: usize = MAILBOXES;
 
 /// A standard data frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -167,6 +171,16 @@ struct Node {
     /// Not before this time may the node start a frame (suspend transmission, bus-off recovery).
     hold_until: u64,
     bus_off: bool,
+    babble: Option<Babble>,
+}
+
+/// A babbling controller's frame: pending from `pending_since` (its start, then each completion)
+/// until the fault ends.
+#[derive(Debug, Clone, Copy)]
+struct Babble {
+    frame: Frame,
+    pending_since: u64,
+    until: u64,
 }
 
 impl Node {
@@ -188,14 +202,32 @@ impl Node {
             .enumerate()
             .filter_map(|(k, m)| m.map(|p| (k, p)))
             .filter(|(_, p)| p.queued_at <= ready_by)
+            .chain(
+                self.babble
+                    .filter(|b| b.pending_since <= ready_by && ready_by < b.until)
+                    .map(|b| {
+                        let pending = Pending {
+                            frame: b.frame,
+                            queued_at: b.pending_since,
+                            failed_attempts: 0,
+                        };
+                        (BABBLE_MAILBOX, pending)
+                    }),
+            )
             .min_by_key(|(k, p)| (p.frame.id, *k))
     }
 
-    fn earliest_ready(&self) -> Option<u64> {
+    /// When the node next has a frame to offer, the bus being idle from `idle_from`.
+    fn earliest_ready(&self, idle_from: u64) -> Option<u64> {
+        let babble = self.babble.and_then(|b| {
+            let ready = b.pending_since.max(self.hold_until).max(idle_from);
+            (ready < b.until).then_some(ready)
+        });
         self.mailboxes
             .iter()
             .flatten()
-            .map(|p| p.queued_at.max(self.hold_until))
+            .map(|p| p.queued_at.max(self.hold_until).max(idle_from))
+            .chain(babble)
             .min()
     }
 }
@@ -302,6 +334,7 @@ impl Bus {
             rec: 0,
             hold_until: 0,
             bus_off: false,
+            babble: None,
         });
         self.nodes.len() - 1
     }
@@ -360,6 +393,38 @@ impl Bus {
         self.nodes.get(node).is_some_and(|n| n.plugged)
     }
 
+    /// Makes `node`'s controller babble from `from` until `until` (exclusive; `u64::MAX`: for
+    /// good): a fault that keeps `frame` pending beside its mailboxes and, each time it completes,
+    /// pending again at once, so the node offers it at every arbitration and sends it back to
+    /// back whenever it wins. It arbitrates as any frame of the node does: a lower identifier on
+    /// the bus (or in the node's own mailboxes) still wins, a higher one waits until the fault
+    /// ends. Its transmissions are reported with [`BABBLE_MAILBOX`]. A later call replaces the
+    /// fault.
+    pub fn babble(&mut self, node: NodeId, frame: Frame, from: u64, until: u64) {
+        if let Some(n) = self.nodes.get_mut(node) {
+            n.babble = Some(Babble {
+                frame,
+                pending_since: from,
+                until,
+            });
+        }
+    }
+
+    /// Ends `node`'s babbling from `at` on (a frame already started still completes).
+    pub fn stop_babbling(&mut self, node: NodeId, at: u64) {
+        if let Some(b) = self.nodes.get_mut(node).and_then(|n| n.babble.as_mut()) {
+            b.until = b.until.min(at);
+        }
+    }
+
+    /// Whether `node`'s controller will still babble at or after `at`.
+    pub fn babbling(&self, node: NodeId, at: u64) -> bool {
+        self.nodes
+            .get(node)
+            .and_then(|n| n.babble)
+            .is_some_and(|b| b.until > at)
+    }
+
     /// Arranges a bit error (see [`BitFault`]).
     pub fn inject(&mut self, fault: BitFault) {
         self.faults.push(fault);
@@ -400,9 +465,8 @@ impl Bus {
                 .nodes
                 .iter()
                 .filter(|n| n.plugged)
-                .filter_map(|n| n.earliest_ready())
-                .min()
-                .map(|ready| ready.max(self.idle_from));
+                .filter_map(|n| n.earliest_ready(self.idle_from))
+                .min();
             let Some(start) = start else { break };
             if start >= t {
                 break;
@@ -480,7 +544,15 @@ impl Bus {
                 let end = start + u64::from(length);
                 self.idle_from = end + u64::from(INTERMISSION_BITS);
                 let sender = &mut self.nodes[node];
-                sender.mailboxes[mailbox] = None;
+                match sender.mailboxes.get_mut(mailbox) {
+                    Some(slot) => *slot = None,
+                    // The babbling frame is pending again the moment it completes.
+                    None => {
+                        if let Some(b) = sender.babble.as_mut() {
+                            b.pending_since = end;
+                        }
+                    }
+                }
                 sender.tec = sender.tec.saturating_sub(1);
                 if sender.state() == ErrorState::Passive {
                     sender.hold_until = self.idle_from + u64::from(SUSPEND_TRANSMISSION_BITS);
@@ -507,7 +579,7 @@ impl Bus {
                 self.idle_from = idle_at;
                 let passive = self.nodes[node].state() == ErrorState::Passive;
                 let sender = &mut self.nodes[node];
-                if let Some(p) = sender.mailboxes[mailbox].as_mut() {
+                if let Some(p) = sender.mailboxes.get_mut(mailbox).and_then(Option::as_mut) {
                     p.failed_attempts += 1;
                 }
                 // ISO 11898-1: an error-passive transmitter's ACK error does not count.

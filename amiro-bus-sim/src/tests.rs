@@ -280,3 +280,85 @@ fn a_completion_is_never_sooner_than_the_look_ahead() {
     }
     assert!(count > 500, "{count} frames");
 }
+
+#[test]
+fn a_babbling_node_sends_back_to_back_and_lower_identifiers_still_win() {
+    // Node b babbles 0x400 from 1000 to 3000; node a queues 0x100 (lower: wins the next
+    // arbitration) and 0x500 (higher: waits until the babbling stops); node c only listens.
+    let mut bus = Bus::new();
+    let (a, b, c) = (bus.add_node(), bus.add_node(), bus.add_node());
+    let babble = frame(0x400, &[0xA5; 8]);
+    let l = u64::from(frame_bits(&babble));
+    let l1 = u64::from(frame_bits(&frame(0x100, &[1])));
+    let l5 = u64::from(frame_bits(&frame(0x500, &[5])));
+    bus.babble(b, babble, 1000, 3000);
+    assert!(bus.babbling(b, 2999) && !bus.babbling(b, 3000) && !bus.babbling(a, 0));
+    bus.queue(a, 0, frame(0x500, &[5]), 1100).unwrap();
+    bus.queue(a, 1, frame(0x100, &[1]), 1100).unwrap();
+    let events = bus.run_until(10_000);
+    let got = sent(&events);
+    // First babble at 1000; 0x100 takes the next arbitration; then babble back to back (each
+    // start one intermission after the last completion) up to the last start before 3000.
+    let mut want = vec![(0x400, b, 1000, 1000 + l)];
+    let s = 1000 + l + 3;
+    want.push((0x100, a, s, s + l1));
+    let mut s = s + l1 + 3;
+    while s < 3000 {
+        want.push((0x400, b, s, s + l));
+        s += l + 3;
+    }
+    want.push((0x500, a, s, s + l5));
+    assert_eq!(got, want);
+    // Every babbling frame was pending from the previous completion (or the fault's start),
+    // reported from no mailbox of the node's, and heard by the others.
+    for e in &events {
+        if let Event::Sent {
+            node,
+            mailbox,
+            queued_at,
+            start,
+            receivers,
+            ..
+        } = *e
+        {
+            if node == b {
+                assert_eq!(mailbox, BABBLE_MAILBOX);
+                assert!(
+                    queued_at <= start && start - queued_at <= 3 + l1 + 3,
+                    "{e:?}"
+                );
+                assert_eq!(receivers, 1 << a | 1 << c);
+            }
+        }
+    }
+    assert_eq!(bus.mailboxes(b), [None; MAILBOXES]);
+}
+
+#[test]
+fn a_babbling_node_with_the_lowest_identifier_holds_the_bus_until_stopped() {
+    let mut bus = Bus::new();
+    let (a, b) = (bus.add_node(), bus.add_node());
+    let babble = frame(0x001, &[]);
+    let l = u64::from(frame_bits(&babble));
+    bus.babble(b, babble, 0, u64::MAX);
+    bus.queue(a, 0, frame(0x100, &[]), 0).unwrap();
+    let events = bus.run_until(2000);
+    assert!(sent(&events).iter().all(|&(id, ..)| id == 0x001));
+    assert_eq!(sent(&events).len() as u64, 2000_u64.div_ceil(l + 3));
+    // Stopped at 2500: the frame that started before completes; then 0x100 goes out.
+    bus.stop_babbling(b, 2500);
+    let events = bus.run_until(5000);
+    let got = sent(&events);
+    let last = got.iter().rposition(|&(id, ..)| id == 0x001).unwrap();
+    assert!(got[last].2 < 2500);
+    assert_eq!(
+        got[last + 1],
+        (
+            0x100,
+            a,
+            got[last].3 + 3,
+            got[last].3 + 3 + u64::from(frame_bits(&frame(0x100, &[])))
+        )
+    );
+    assert_eq!(got.len(), last + 2);
+}

@@ -227,7 +227,7 @@ mod family {
 /// Resets the clock tree and starts the best clock this chip has, every wait bounded
 /// ([`crate::clock_tree`]): the PLL from the crystal; from the internal oscillator when the crystal
 /// does not start; the internal oscillator alone when the PLL does not lock. Every fault is
-/// logged and counted for the diagnostics ([`crate::health::set_clock_source`]); the board goes on
+/// logged and counted for the diagnostics ([`crate::health::set_clock_fallback`]); the board goes on
 /// with the plan's frequencies (bus prescalers, timer clock, CAN bit timing).
 pub fn clock_plan() -> ClockPlan {
     use crate::clock_tree;
@@ -271,7 +271,7 @@ pub fn clock_plan() -> ClockPlan {
     if plan.sysclk_hz != family::CRYSTAL.sysclk_hz {
         crate::tracing::hello(plan.sysclk_hz);
     }
-    crate::health::set_clock_source(plan.source);
+    crate::health::set_clock_fallback(plan.source != ClockSource::Crystal);
     plan
 }
 

@@ -145,13 +145,10 @@ pub fn set_can_errors(passive_episodes: u32, bus_off_episodes: u32, passive_now:
     PASSIVE_NOW.store(passive_now, Ordering::Relaxed);
 }
 
-/// Records the clock the board runs on (`chip::clock_plan`): anything but the crystal's PLL is a
+/// Records whether the board runs on anything but the crystal's PLL (`chip::clock_plan`): a
 /// clock fault, flagged on diagnostics page 0.
-pub fn set_clock_source(source: crate::chip::ClockSource) {
-    CLOCK_FALLBACK.store(
-        source != crate::chip::ClockSource::Crystal,
-        Ordering::Relaxed,
-    );
+pub fn set_clock_fallback(fallback: bool) {
+    CLOCK_FALLBACK.store(fallback, Ordering::Relaxed);
 }
 
 /// Notes that the independent watchdog runs.

@@ -24,6 +24,8 @@ pub mod timer_monotonic;
 #[cfg(target_os = "none")]
 pub mod bootloader;
 #[cfg(target_os = "none")]
+pub mod channels;
+#[cfg(target_os = "none")]
 pub mod chip;
 #[cfg(target_os = "none")]
 pub mod fault;

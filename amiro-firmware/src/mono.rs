@@ -16,6 +16,18 @@ use core::marker::PhantomData;
 
 use rtic_time::timer_queue::TimerQueueBackend;
 
+/// The QEMU build's clock: the apps' timer queue over the platform's SysTick (`qemu::timer`).
+#[cfg(feature = "qemu")]
+pub type QemuClock = TimerClock<crate::qemu::timer::AppTimer, { crate::qemu::TICK_US }>;
+
+/// Brings the QEMU platform up (`qemu::init`: painted RAM, SysTick, the trace file) and starts the
+/// trace clock over its SysTick. Call first thing in the QEMU build's board set-up.
+#[cfg(feature = "qemu")]
+pub fn start_qemu(syst: cortex_m::peripheral::SYST) {
+    crate::qemu::init(syst);
+    crate::tracing::start_clock(crate::qemu::CORE_CLOCK_HZ);
+}
+
 /// Time as the tasks see it: microseconds since the monotonic started.
 pub trait Clock {
     /// Microseconds since the monotonic started.

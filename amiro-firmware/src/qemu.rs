@@ -3,8 +3,8 @@
 //!
 //! QEMU emulates neither the STM32 clock tree nor bxCAN, so a QEMU build sets up no clock and no
 //! CAN hardware. Instead:
-//! - the monotonic is SysTick with a 10 µs tick ([`Clock`]), in deterministic virtual time under
-//!   `-icount`;
+//! - the monotonic is SysTick with a 10 µs tick ([`timer`]; `mono::QemuClock` is the tasks'
+//!   clock over it), in deterministic virtual time under `-icount`;
 //! - the CAN bus is a stimulus log replayed from the host (read through semihosting) into a virtual
 //!   3-frame receive FIFO that raises the board's real CAN receive interrupt, and virtual transmit
 //!   mailboxes that print every frame in `candump -l` format with its virtual-time stamp;
@@ -25,7 +25,6 @@ use critical_section::Mutex;
 use heapless::Deque;
 
 use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
-use crate::mono::{Clock as _, TimerClock};
 use crate::signals::SystemSignals;
 
 pub mod robot;
@@ -42,11 +41,8 @@ pub const CORE_CLOCK_HZ: u32 = 168_000_000;
 /// SysTick ticks every 10 µs: a 1 µs tick would interrupt the emulated CPU every microsecond.
 pub const TICK_US: u64 = 10;
 
-/// The QEMU build's clock: the apps' timer queue over SysTick ([`timer`]).
-pub type Clock = TimerClock<timer::AppTimer, TICK_US>;
-
 /// Microseconds of virtual time since the monotonic started (the platform's own reading, without
-/// the trace hooks of [`Clock`]).
+/// the trace hooks of `mono::QemuClock`).
 pub fn now_us() -> u64 {
     use rtic_time::timer_queue::TimerQueueBackend;
     rtic_monotonics::systick::SystickBackend::now().saturating_mul(TICK_US)
@@ -63,7 +59,9 @@ extern "C" {
     static _stack_start: u32;
 }
 
-/// Paints the free RAM, starts the SysTick monotonic. Call first thing in `init`.
+/// Paints the free RAM, starts the SysTick monotonic and opens `trace.bin`. Called by
+/// `mono::start_qemu`, which starts the trace clock over it (the platform is the layer below
+/// tracing: it calls nothing of it).
 pub fn init(syst: cortex_m::peripheral::SYST) {
     paint_stack();
     timer::start(syst, CORE_CLOCK_HZ);
@@ -71,7 +69,6 @@ pub fn init(syst: cortex_m::peripheral::SYST) {
     if let Some(file) = HostFile::create(b"trace.bin\0") {
         TRACE_FILE.store(file.0, Ordering::Relaxed);
     }
-    crate::tracing::start_clock(CORE_CLOCK_HZ);
 }
 
 /// The host file the trace records go to (`usize::MAX`: none).
@@ -262,8 +259,14 @@ const RECORD: usize = 20;
 
 /// Replays `stimulus.bin` from the host into the virtual receive FIFO (pending the board's CAN
 /// receive interrupt `rx_irq`, and `shutdown_irq` for a SYS_PD_N record), then ends the run.
-/// In a robot run the board trades with the host's bus instead ([`robot`]).
-pub async fn replay_stimulus(rx_irq: impl InterruptNumber, shutdown_irq: impl InterruptNumber) {
+/// In a robot run the board trades with the host's bus instead ([`robot`]). It waits for each
+/// record with `delay_until_us` (the board's traced clock, `mono::QemuClock::delay_until_us`:
+/// passed in, the platform being below the tracing).
+pub async fn replay_stimulus<W: core::future::Future<Output = ()>>(
+    rx_irq: impl InterruptNumber,
+    shutdown_irq: impl InterruptNumber,
+    delay_until_us: impl Fn(u64) -> W,
+) {
     if robot::active() {
         robot::run(rx_irq, shutdown_irq).await;
         return;
@@ -286,7 +289,7 @@ pub async fn replay_stimulus(rx_irq: impl InterruptNumber, shutdown_irq: impl In
         if at > duration {
             break;
         }
-        Clock::delay_until_us(at).await;
+        delay_until_us(at).await;
         if record[11] & 2 != 0 {
             // SYS_PD_N falls: the same interrupt the real pin raises.
             SYS_PD_LOW.store(true, Ordering::SeqCst);
@@ -301,7 +304,7 @@ pub async fn replay_stimulus(rx_irq: impl InterruptNumber, shutdown_irq: impl In
         frame.data.copy_from_slice(&record[12..20]);
         deliver(frame, rx_irq);
     }
-    Clock::delay_until_us(duration).await;
+    delay_until_us(duration).await;
     finish("end of run");
 }
 

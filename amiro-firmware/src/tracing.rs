@@ -133,7 +133,7 @@ pub fn hello(clock_hz: u32) {
 
 /// Stamps and writes one record into the trace channel.
 fn emit(kind: Kind) {
-    critical_section::with(|cs| write(state_in(cs), kind, crate::telemetry::write_trace));
+    critical_section::with(|cs| write(state_in(cs), kind, crate::channels::write_trace));
 }
 
 /// Stamps and writes one record into `sink`, in the caller's critical section (so a task record's
@@ -167,7 +167,7 @@ pub fn event(record: &[u8; amiro_trace::EVENT_LEN]) {
     #[cfg(not(feature = "qemu"))]
     emit(kind);
     #[cfg(feature = "qemu")]
-    critical_section::with(|cs| write(state_in(cs), kind, crate::telemetry::write_console_record));
+    critical_section::with(|cs| write(state_in(cs), kind, crate::channels::write_console_record));
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.
@@ -213,7 +213,7 @@ fn start(task: u8) {
         write(
             state,
             Kind::TaskStart { task },
-            crate::telemetry::write_trace,
+            crate::channels::write_trace,
         );
     });
 }
@@ -230,7 +230,7 @@ fn end(task: u8, next_release_in_us: u32) {
             task,
             next_release_in_us,
         };
-        write(state, kind, crate::telemetry::write_trace);
+        write(state, kind, crate::channels::write_trace);
     });
 }
 

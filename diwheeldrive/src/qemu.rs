@@ -23,7 +23,8 @@ use stm32f1xx_hal::pac::{self, Interrupt};
 
 use amiro_sensors::motion::{Duty, MotorPwm};
 
-pub use amiro_firmware::qemu::{CanErrors, CanTxPort, Clock, Signals as SystemSignals};
+pub use amiro_firmware::mono::QemuClock as Clock;
+pub use amiro_firmware::qemu::{CanErrors, CanTxPort, Signals as SystemSignals};
 /// The simulated parts need no time between transfers.
 #[cfg(feature = "rev-1-2")]
 pub use amiro_sensors::sim::NoDelay as ImuDelay;
@@ -169,7 +170,7 @@ pub fn init(
     _spi_cell: &'static mut Option<embedded_hal_bus::util::AtomicCell<ImuBus>>,
 ) -> (Board, cortex_m::peripheral::NVIC) {
     // Paint the free RAM before anything runs deep, and start SysTick.
-    amiro_firmware::qemu::init(cp.SYST);
+    amiro_firmware::mono::start_qemu(cp.SYST);
     critical_section::with(|cs| {
         PLANT
             .borrow_ref_mut(cs)

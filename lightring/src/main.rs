@@ -416,6 +416,7 @@ mod app {
         amiro_firmware::qemu::replay_stimulus(
             platform::CAN_RX_INTERRUPT,
             platform::SHUTDOWN_INTERRUPT,
+            <platform::Clock as amiro_firmware::mono::Clock>::delay_until_us,
         )
         .await;
     }

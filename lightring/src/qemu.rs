@@ -10,7 +10,8 @@ use amiro_sensors::sim::SimLedChain;
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 use stm32f1xx_hal::pac::{self, Interrupt};
 
-pub use amiro_firmware::qemu::{CanErrors, CanRxPort, CanTxPort, Clock, Signals as SystemSignals};
+pub use amiro_firmware::mono::QemuClock as Clock;
+pub use amiro_firmware::qemu::{CanErrors, CanRxPort, CanTxPort, Signals as SystemSignals};
 
 /// Interrupt of the (simulated) SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: Interrupt = Interrupt::EXTI15_10;
@@ -87,7 +88,7 @@ pub struct Board {
 
 /// Brings the simulated board up (touches no STM32 peripheral).
 pub fn init(_dp: pac::Peripherals, cp: cortex_m::Peripherals) -> Board {
-    amiro_firmware::qemu::init(cp.SYST);
+    amiro_firmware::mono::start_qemu(cp.SYST);
     Board {
         can_tx: CanTxPort,
         can_rx: CanRxPort,

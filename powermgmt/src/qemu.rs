@@ -32,7 +32,8 @@ use stm32f4xx_hal::pac::{self, Interrupt};
 
 use crate::power::{self, ChargeLines};
 
-pub use amiro_firmware::qemu::{CanErrors, CanTxPort, Clock};
+pub use amiro_firmware::mono::QemuClock as Clock;
+pub use amiro_firmware::qemu::{CanErrors, CanTxPort};
 pub use amiro_sensors::sim::NoDelay as GaugeDelay;
 
 /// Interrupt of the (simulated) SYS_PD_N line.
@@ -298,7 +299,7 @@ pub struct Board {
 
 /// Brings the simulated board up (touches no STM32 peripheral but SysTick).
 pub fn init(_dp: pac::Peripherals, cp: cortex_m::Peripherals) -> Board {
-    amiro_firmware::qemu::init(cp.SYST);
+    amiro_firmware::mono::start_qemu(cp.SYST);
     Board {
         can_tx: CanTxPort,
         can_rx: CanRxPort(amiro_firmware::qemu::CanRxPort),

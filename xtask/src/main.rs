@@ -16,6 +16,7 @@ mod campaign;
 mod elf;
 mod flash;
 mod interop;
+mod layers;
 mod levels_check;
 mod probe;
 mod qemu;
@@ -53,7 +54,8 @@ enum Cmd {
         #[arg(long, value_name = "1-2|1-1|all")]
         revision: Option<String>,
     },
-    /// rustfmt check, and clippy with warnings denied on the host crates and each firmware.
+    /// The firmware runtime's layers, rustfmt check, and clippy with warnings denied on the host
+    /// crates and each firmware.
     Check,
     /// Host tests, firmware builds and the QEMU scenarios.
     Test,
@@ -473,6 +475,7 @@ pub(crate) fn target_dir(root: &Path) -> PathBuf {
 
 fn check(root: &Path) -> Result<()> {
     ensure_toolchain(root)?;
+    layers::check(root)?;
     cargo(root, &["fmt", "--all", "--", "--check"])
         .context("rustfmt found unformatted code (run `cargo fmt --all`)")?;
     cargo(

@@ -1,6 +1,6 @@
 //! The QEMU build's timers: SysTick ticking every [`TICK_US`] µs drives two timer queues.
 //!
-//! - The apps' ([`AppTimer`], behind [`super::Clock`]): every task's delay and timeout. Its
+//! - The apps' ([`AppTimer`], behind `mono::QemuClock`): every task's delay and timeout. Its
 //!   earliest deadline is known ([`next_deadline_us`]), so a robot run can tell the host how long
 //!   the board will sleep.
 //! - The platform's own (rtic-monotonics' `SystickBackend` queue): the robot exchange and the

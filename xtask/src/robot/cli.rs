@@ -12,7 +12,8 @@ use super::{stimulus, Firmware};
 pub struct RobotArgs {
     /// A stimulus: `candump -l` frames the operator's adapter sends, plus `(t) signal SYS_PD_N`,
     /// `(t) signal SYS_WARMRST_N` (restarts LightRing),
-    /// `(t) reset BOARD`, `(t) unplug BOARD`, `(t) plug BOARD`, `(t) bit-error ID|any`.
+    /// `(t) reset BOARD`, `(t) unplug BOARD`, `(t) plug BOARD`, `(t) bit-error ID|any`,
+    /// `(t) babble BOARD ID#DATA`, `(t) babble BOARD off`.
     #[arg(long)]
     pub stimulus: Option<PathBuf>,
     /// How much virtual time to run (e.g. 10s, 500ms); default: the stimulus's `# duration:`, or 2s.

@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use amiro_bus_sim::{BitFault, Bus, ErrorState, Event, Frame, NodeId};
+use amiro_bus_sim::{BitFault, Bus, ErrorState, Event, Frame, NodeId, MAILBOXES};
 use anyhow::{bail, Context, Result};
 
 pub mod cli;
@@ -379,7 +379,7 @@ fn next_exchange(
         && deliveries.is_empty()
         && nodes
             .iter()
-            .all(|&n| bus.mailboxes(n).iter().all(Option::is_none));
+            .all(|&n| bus.mailboxes(n).iter().all(Option::is_none) && !bus.babbling(n, t));
     if busy || !bus_idle {
         return step;
     }
@@ -520,6 +520,25 @@ pub fn run(
                         "bus: # {} {} plugged back in",
                         stamp(a.at_us),
                         NODES[*k]
+                    ));
+                }
+                Action::Babble { board, id, data } => {
+                    if let Some(frame) = Frame::new(*id, data) {
+                        bus.babble(nodes[*board], frame, a.at_us, u64::MAX);
+                        notes.push(format!(
+                            "bus: # {} {}'s CAN controller babbles {:03X} back to back",
+                            stamp(a.at_us),
+                            NODES[*board],
+                            id
+                        ));
+                    }
+                }
+                Action::Quiet(board) => {
+                    bus.stop_babbling(nodes[*board], a.at_us);
+                    notes.push(format!(
+                        "bus: # {} {}'s CAN controller stops babbling",
+                        stamp(a.at_us),
+                        NODES[*board]
                     ));
                 }
                 Action::BitError(id) => bus.inject(BitFault {
@@ -678,7 +697,9 @@ pub fn run(
             }
             if let Some(d) = now {
                 // A frame that started before the board's last reset is no longer in its mailboxes.
-                let own = d.node == b.index && d.start >= b.offset;
+                // A babbling controller's frame is the fault's, not the board's: it hears
+                // nothing of it (a controller does not receive its own frames).
+                let own = d.node == b.index && d.start >= b.offset && d.mailbox < MAILBOXES;
                 let heard = d.node != b.index && bus.plugged(nodes[b.index]);
                 if own || heard {
                     flags |= DOWN_FRAME | if own { DOWN_OWN } else { 0 };

@@ -54,6 +54,14 @@ pub const SCENARIOS: &[Scenario] = &[
         bus_bounds: true,
     },
     Scenario {
+        name: "babbling-board",
+        about: "one board's controller babbles, the winning identifiers keep their grids",
+        check: babbling_board,
+        // The report reads the babbling as what it is on the bus, one burst of back-to-back
+        // frames (each queued as the last completes), so even the ring's long wait has a bound.
+        bus_bounds: true,
+    },
+    Scenario {
         name: "reset",
         about: "a board reset mid-run rejoins",
         check: reset,
@@ -166,9 +174,13 @@ fn on_grid(what: &str, times: &[u64], period: u64, slack: u64) -> Result<()> {
 /// The proximity ring's samples: bursts of eight frames `id`, one burst per period (the run's end
 /// may cut the last burst short).
 fn ring_samples(run: &Run, id: u16, period: u64) -> Result<usize> {
-    let ends = run.ends(id);
+    ring_samples_of(&run.ends(id), id, period)
+}
+
+/// [`ring_samples`] of the completions `ends` of the frames `id`.
+fn ring_samples_of(ends: &[u64], id: u16, period: u64) -> Result<usize> {
     let mut bursts: Vec<Vec<u64>> = Vec::new();
-    for &t in &ends {
+    for &t in ends {
         match bursts.last_mut() {
             Some(b) if t - b[b.len() - 1] < 2_000 => b.push(t),
             _ => bursts.push(vec![t]),
@@ -373,6 +385,111 @@ fn adapter_flood(run: &Run) -> Result<String> {
     Ok(format!(
         "400 flood frames; {} magnetometer frames on the 900 µs grid, {samples} ring samples on the 10 ms grid",
         magnetometer.len()
+    ))
+}
+
+fn babbling_board(run: &Run) -> Result<String> {
+    const BABBLE: u16 = 0x610;
+    const FROM: u64 = 40_000;
+    const UNTIL: u64 = 90_000;
+    every_board_ended(run)?;
+    let babble = run.frames(BABBLE);
+    ensure!(
+        babble
+            .iter()
+            .all(|t| t.node == 2 && t.mailbox == amiro_bus_sim::BABBLE_MAILBOX),
+        "{BABBLE:03X} from another node than LightRing's babbling controller"
+    );
+    let (Some(first), Some(last)) = (babble.first(), babble.last()) else {
+        bail!("LightRing's controller sent no {BABBLE:03X}");
+    };
+    ensure!(
+        first.start >= FROM && last.start < UNTIL,
+        "babbling from {} to {} µs, outside {FROM}..{UNTIL}",
+        first.start,
+        last.start
+    );
+    // Back to back: the bus is never idle between two babbling frames but for a frame that won
+    // against them (the magnetometer), each followed by its intermission.
+    let on_bus: u64 = run
+        .outcome
+        .transfers
+        .iter()
+        .filter(|t| t.start >= first.start && t.start <= last.start)
+        .map(|t| t.end - t.start + u64::from(amiro_bus_sim::INTERMISSION_BITS))
+        .sum();
+    ensure!(
+        on_bus == last.end + u64::from(amiro_bus_sim::INTERMISSION_BITS) - first.start,
+        "the bus idled while LightRing babbled"
+    );
+    let babble_bits: u64 = babble.iter().map(|t| t.end - t.start).sum();
+    let share = babble_bits * 100 / (last.end - first.start);
+    // The winner: DiWheelDrive's magnetometer keeps its grid through the babbling, and its
+    // worst response stays within the Davis bound of the traffic as it was (the babbling frame
+    // counts as lower-priority blocking).
+    let magnetometer = run.ends(0x605);
+    ensure!(
+        magnetometer.len() >= 150,
+        "{} magnetometer frames",
+        magnetometer.len()
+    );
+    on_grid("magnetometer", &magnetometer, 900, 400)?;
+    let report = super::report::analyse(&run.outcome.transfers, run.outcome.ended_at);
+    let line = report
+        .iter()
+        .find(|l| l.id == 0x605)
+        .context("no 0x605 in the bus report")?;
+    ensure!(
+        !line.exceeds(),
+        "0x605's worst response {} µs against its bound {:?}",
+        line.observed_us,
+        line.bound_us
+    );
+    let during = run
+        .frames(0x605)
+        .iter()
+        .filter(|t| t.start >= first.start && t.start <= last.start)
+        .count();
+    // The loser: the ring's 0x61F waits while the babbling lasts, and its samples are back on
+    // their 10 ms grid after it (frames that waited in PowerManagement's mailboxes go first).
+    let ring = run.frames(0x61F);
+    let starved = ring
+        .iter()
+        .filter(|t| t.start > first.start && t.start < last.end)
+        .count();
+    ensure!(
+        starved == 0,
+        "{starved} ring frames won against the babbling {BABBLE:03X}"
+    );
+    let waited = ring
+        .iter()
+        .filter(|t| t.queued_at < last.end && t.end > last.end)
+        .map(|t| t.end - t.queued_at)
+        .max()
+        .unwrap_or(0);
+    let before: Vec<u64> = ring
+        .iter()
+        .filter(|t| t.end < FROM)
+        .map(|t| t.end)
+        .collect();
+    let after: Vec<u64> = ring
+        .iter()
+        .filter(|t| t.end > last.end + 5_000)
+        .map(|t| t.end)
+        .collect();
+    let samples_before = ring_samples_of(&before, 0x61F, 10_000)?;
+    let samples_after = ring_samples_of(&after, 0x61F, 10_000)?;
+    Ok(format!(
+        "LightRing's controller babbled {} × {BABBLE:03X} from {} to {} µs ({share} % of the bus); \
+         {during} magnetometer frames won against it, {} in all on the 900 µs grid, worst {} µs \
+         (bound {} µs); the ring lost every arbitration (longest wait {waited} µs), \
+         {samples_before} samples on its grid before, {samples_after} after",
+        babble.len(),
+        first.start,
+        last.end,
+        magnetometer.len(),
+        line.observed_us,
+        line.bound_us.as_ref().map_or(0, |b| *b),
     ))
 }
 

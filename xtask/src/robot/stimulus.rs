@@ -1,6 +1,6 @@
 //! What a robot run's stimulus may say: `candump -l` frames the operator's adapter sends, and the
 //! world's events — SYS_PD_N pulled from outside, a SYS_WARMRST_N pulse or a board reset, a board
-//! unplugged and plugged back, a bit error on the bus.
+//! unplugged and plugged back, a bit error on the bus, a board's CAN controller babbling.
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
@@ -30,6 +30,17 @@ pub enum Action {
     Plug(usize),
     /// The next transmission (of this identifier, or any) starting from here reads a bit wrong.
     BitError(Option<u16>),
+    /// A board's CAN controller starts babbling this frame back to back (a "babbling idiot").
+    Babble {
+        /// The board.
+        board: usize,
+        /// Identifier (11-bit).
+        id: u16,
+        /// Payload.
+        data: Vec<u8>,
+    },
+    /// … and stops.
+    Quiet(usize),
 }
 
 /// An action and when (µs from the start of the run).
@@ -72,6 +83,25 @@ pub fn parse_line(line: &str) -> Result<Option<Timed>> {
         ("reset", Some(board)) => Action::Reset(board_index(board, line)?),
         ("unplug", Some(board)) => Action::Unplug(board_index(board, line)?),
         ("plug", Some(board)) => Action::Plug(board_index(board, line)?),
+        ("babble", Some(board)) => {
+            let board = board_index(board, line)?;
+            match fields.next() {
+                Some("off") => Action::Quiet(board),
+                Some(frame) => {
+                    let frame = qemu::parse_log_line(&format!("{stamp} can0 {frame}"))?
+                        .with_context(|| format!("`{line}`: no frame"))?;
+                    if frame.id > 0x7FF {
+                        bail!("`{line}`: the robot's bus carries 11-bit identifiers only");
+                    }
+                    Action::Babble {
+                        board,
+                        id: frame.id as u16,
+                        data: frame.data,
+                    }
+                }
+                None => bail!("`{line}`: babble BOARD ID#DATA or babble BOARD off"),
+            }
+        }
         ("bit-error", Some("any")) => Action::BitError(None),
         ("bit-error", Some(id)) => Action::BitError(Some(
             u16::from_str_radix(id, 16)
@@ -168,6 +198,28 @@ mod tests {
                 .action,
             Action::Reset(2)
         );
+        assert_eq!(
+            parse_line("(0.020000) babble lightring 610#A5A5")
+                .unwrap()
+                .unwrap(),
+            Timed {
+                at_us: 20_000,
+                action: Action::Babble {
+                    board: 2,
+                    id: 0x610,
+                    data: vec![0xA5, 0xA5]
+                }
+            }
+        );
+        assert_eq!(
+            parse_line("(0.050000) babble lightring off")
+                .unwrap()
+                .unwrap()
+                .action,
+            Action::Quiet(2)
+        );
+        assert!(parse_line("(0.050000) babble lightring").is_err());
+        assert!(parse_line("(0.050000) babble operator 610#00").is_err());
         assert!(parse_line("(0.200000) signal SYS_SYNC_N").is_err());
         assert!(parse_line("(0.100000) reset operator").is_err());
         assert!(parse_line("(0.100000) bit-error 800").is_err());
