@@ -32,6 +32,8 @@
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 
+pub mod robot_link;
+
 /// The record format's version (in every record's first byte).
 pub const VERSION: u8 = 1;
 

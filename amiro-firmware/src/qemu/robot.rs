@@ -22,31 +22,11 @@ use rtic_time::timer_queue::TimerQueueBackend;
 use super::{HostFile, TICK_US};
 use crate::can::{Completion, RxFrame, Transmit};
 
-/// The exchange period: a multiple of the 10 µs tick below the shortest frame (44 bit times from
-/// start of frame to completion at 1 Mbit/s).
-pub const QUANTUM_US: u64 = 40;
-/// Board → host: `u64` now, `u8` new frames, `u8` lines driven, 2 reserved, `u32` µs the board
-/// sleeps from now (0: it has work; `u32::MAX`: no deadline), three 20-byte records (`u64` queued
-/// at, `u16` id, `u8` length, `u8` mailbox, 8 data bytes).
-const UP_LEN: usize = 16 + 3 * 20;
-/// Host → board: `u64` completion time, `u8` flags, `u8` mailbox, `u16` id, `u8` length, 3
-/// reserved, 8 data bytes, `u64` time of the next exchange (0: one quantum on).
-const DOWN_LEN: usize = 32;
-
-/// Up: this board pulls SYS_SYNC_N low.
-const DRIVES_SYNC_LOW: u8 = 1;
-/// Up: this board drives SYS_PD_N low.
-const DRIVES_PD_LOW: u8 = 2;
-/// Down: a frame completes in this quantum.
-const DOWN_FRAME: u8 = 1;
-/// Down: the frame is this board's own (its mailbox is free at the completion time).
-const DOWN_OWN: u8 = 2;
-/// Down: SYS_PD_N reads low.
-const DOWN_PD_LOW: u8 = 4;
-/// Down: SYS_SYNC_N reads low.
-const DOWN_SYNC_LOW: u8 = 8;
-/// Down: the run is over.
-const DOWN_END: u8 = 16;
+pub use amiro_trace::robot_link::QUANTUM_US;
+use amiro_trace::robot_link::{
+    DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW, DRIVES_PD_LOW,
+    DRIVES_SYNC_LOW, UP_LEN,
+};
 
 const NO_FILE: usize = usize::MAX;
 static DOWN: AtomicUsize = AtomicUsize::new(NO_FILE);

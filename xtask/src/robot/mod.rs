@@ -32,17 +32,11 @@ pub mod stimulus;
 
 use stimulus::{Action, Timed, BOARDS};
 
-/// The exchange period in virtual µs (the firmware's `qemu::robot::QUANTUM_US`).
-pub const QUANTUM_US: u64 = 40;
-const UP_LEN: usize = 16 + 3 * 20;
-const DOWN_LEN: usize = 32;
-const DRIVES_SYNC_LOW: u8 = 1;
-const DRIVES_PD_LOW: u8 = 2;
-const DOWN_FRAME: u8 = 1;
-const DOWN_OWN: u8 = 2;
-const DOWN_PD_LOW: u8 = 4;
-const DOWN_SYNC_LOW: u8 = 8;
-const DOWN_END: u8 = 16;
+pub use amiro_trace::robot_link::QUANTUM_US;
+use amiro_trace::robot_link::{
+    DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW, DRIVES_PD_LOW,
+    DRIVES_SYNC_LOW, UP_LEN,
+};
 /// The operator's adapter: the fourth node, after the boards.
 pub const OPERATOR: usize = 3;
 /// Names of the bus's nodes, in order.
