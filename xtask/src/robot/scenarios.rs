@@ -171,6 +171,19 @@ fn on_grid(what: &str, times: &[u64], period: u64, slack: u64) -> Result<()> {
     Ok(())
 }
 
+/// DiWheelDrive's magnetometer-x frames (0x605, every 900 µs in every robot scenario that runs it):
+/// at least `at_least` of them, each on the grid within `slack` µs.
+fn magnetometer_on_grid(run: &Run, at_least: usize, slack: u64) -> Result<Vec<u64>> {
+    let magnetometer = run.ends(0x605);
+    ensure!(
+        magnetometer.len() >= at_least,
+        "{} magnetometer frames, expected at least {at_least} (one per 900 µs)",
+        magnetometer.len()
+    );
+    on_grid("magnetometer", &magnetometer, 900, slack)?;
+    Ok(magnetometer)
+}
+
 /// The proximity ring's samples: bursts of eight frames `id`, one burst per period (the run's end
 /// may cut the last burst short).
 fn ring_samples(run: &Run, id: u16, period: u64) -> Result<usize> {
@@ -205,14 +218,8 @@ fn ring_samples_of(ends: &[u64], id: u16, period: u64) -> Result<usize> {
 
 fn thesis_demo(run: &Run) -> Result<String> {
     every_board_ended(run)?;
-    let magnetometer = run.ends(0x605);
     // Commanded at 10 ms: a release every 900 µs until 200 ms.
-    ensure!(
-        magnetometer.len() >= 210,
-        "{} magnetometer frames, expected one per 900 µs from 10 ms",
-        magnetometer.len()
-    );
-    on_grid("magnetometer", &magnetometer, 900, 300)?;
+    let magnetometer = magnetometer_on_grid(run, 210, 300)?;
     let samples = ring_samples(run, 0x61F, 10_000)?;
     ensure!(samples >= 18, "{samples} ring samples in 188 ms");
     let latched = run
@@ -374,13 +381,7 @@ fn adapter_flood(run: &Run) -> Result<String> {
         flood == 400,
         "{flood} of the adapter's 400 frames on the bus"
     );
-    let magnetometer = run.ends(0x605);
-    ensure!(
-        magnetometer.len() >= 160,
-        "{} magnetometer frames",
-        magnetometer.len()
-    );
-    on_grid("magnetometer", &magnetometer, 900, 400)?;
+    let magnetometer = magnetometer_on_grid(run, 160, 400)?;
     let samples = ring_samples(run, 0x61F, 10_000)?;
     Ok(format!(
         "400 flood frames; {} magnetometer frames on the 900 µs grid, {samples} ring samples on the 10 ms grid",
@@ -427,13 +428,7 @@ fn babbling_board(run: &Run) -> Result<String> {
     // The winner: DiWheelDrive's magnetometer keeps its grid through the babbling, and its
     // worst response stays within the Davis bound of the traffic as it was (the babbling frame
     // counts as lower-priority blocking).
-    let magnetometer = run.ends(0x605);
-    ensure!(
-        magnetometer.len() >= 150,
-        "{} magnetometer frames",
-        magnetometer.len()
-    );
-    on_grid("magnetometer", &magnetometer, 900, 400)?;
+    let magnetometer = magnetometer_on_grid(run, 150, 400)?;
     let report = super::report::analyse(&run.outcome.transfers, run.outcome.ended_at);
     let line = report
         .iter()
@@ -530,8 +525,7 @@ fn reset(run: &Run) -> Result<String> {
         !lit.is_empty() && lit.iter().all(|k| (12..15).contains(k)),
         "only LED 4 should be lit after the reset: `{latched}`"
     );
-    let magnetometer = run.ends(0x605);
-    on_grid("magnetometer", &magnetometer, 900, 300)?;
+    let magnetometer = magnetometer_on_grid(run, 1, 300)?;
     Ok(format!(
         "LightRing rebooted ({}), took LED 4 after; DiWheelDrive's {} frames stayed on their grid",
         sync[1],
