@@ -308,6 +308,10 @@ pub struct Decision {
     pub iterations: u64,
     /// Whole-robot analyses run (1 without a search).
     pub evaluations: u32,
+    /// Board analyses the check ran (the searches not counted): with a [`Cache`], the boards whose kept analysis
+    /// did not hold — the request's board, and any other whose streams changed since its analysis was kept;
+    /// without one, every board.
+    pub boards: u32,
 }
 
 impl Decision {
@@ -359,6 +363,7 @@ pub fn admit<const N: usize, const M: usize>(
         suggestion,
         iterations,
         evaluations,
+        boards: found.boards,
     }
 }
 
@@ -391,6 +396,7 @@ pub fn admit_cached<const N: usize, const M: usize>(
         suggestion: Suggestion::default(),
         iterations,
         evaluations: 1,
+        boards: found.boards,
     }
 }
 
@@ -430,6 +436,8 @@ fn check_with<const N: usize, const M: usize>(
 struct Found {
     first: Option<Refusal>,
     floor: Option<Refusal>,
+    /// Board analyses run.
+    boards: u32,
 }
 
 impl Found {
@@ -438,6 +446,7 @@ impl Found {
         Found {
             first: Some(refusal),
             floor: Some(refusal),
+            boards: 0,
         }
     }
 
@@ -535,8 +544,8 @@ fn bound(ns: u64) -> Option<Time> {
     (ns != NONE).then_some(Time::from_ns(ns))
 }
 
-/// The configuration analysed, without copying a stream: the running streams except those of the request's
-/// source, in their order, then the request (indices into `running`, [`REQUEST`] for the request).
+/// The configuration analysed, without copying a stream: the running streams in their order, the request in the
+/// place of the stream of its source or, without one, last (indices into `running`, [`REQUEST`] for the request).
 struct View<'s, const M: usize> {
     running: &'s [Stream],
     request: Option<&'s Stream>,
@@ -552,15 +561,24 @@ impl<'s, const M: usize> View<'s, M> {
             index: [0; M],
             len: 0,
         };
+        let mut placed = false;
         for (i, s) in running.iter().enumerate() {
-            if request.is_some_and(|r| s.same_source(r)) {
-                continue;
-            }
-            let i = u8::try_from(i).ok().filter(|&i| i != REQUEST)?;
+            // A replaced stream's place is the request's: the order a board keeps its running set in
+            // (`Admission::upsert`), so that the analysis kept for the request's board is found again by the
+            // next decision instead of being redone for a different order.
+            let i = if request.is_some_and(|r| s.same_source(r)) {
+                if placed {
+                    continue;
+                }
+                placed = true;
+                REQUEST
+            } else {
+                u8::try_from(i).ok().filter(|&i| i != REQUEST)?
+            };
             *view.index.get_mut(view.len)? = i;
             view.len += 1;
         }
-        if request.is_some() {
+        if request.is_some() && !placed {
             *view.index.get_mut(view.len)? = REQUEST;
             view.len += 1;
         }
@@ -722,7 +740,7 @@ fn evaluate_into<const N: usize, const M: usize>(
         let hit = cache
             .as_ref()
             .and_then(|(c, _)| c.boards.get(b))
-            .is_some_and(|summary| summary.kept && summary.key == key);
+            .is_some_and(|summary| summary.holds_for(&key));
         let mut in_fresh = false;
         if !hit {
             let slot = cache
@@ -749,6 +767,7 @@ fn evaluate_into<const N: usize, const M: usize>(
                 return Found::refused(refusal);
             }
             target.kept = true;
+            found.boards += 1;
         }
         let summary = match cache.as_ref().and_then(|(c, _)| c.boards.get(b)) {
             Some(slot) if !in_fresh => slot,
@@ -902,9 +921,27 @@ struct Summary<const M: usize> {
     /// and whether the job was found.
     wcrt: [u64; M],
     found: [bool; M],
+    /// The longest window any of its fixed points reached (ns), and whether one ran beyond the horizon: a kept
+    /// analysis holds for another horizon when none did and it reached no further than the new one
+    /// ([`Summary::holds_for`]), since the horizon only stops windows that grow past it.
+    reach: u64,
+    beyond: bool,
 }
 
 impl<const M: usize> Summary<M> {
+    /// Whether this kept analysis is the one `key` would get: the same streams, and the same horizon or one that
+    /// stops none of its windows (a request with a long period moves the horizon, and so the key, of every board).
+    fn holds_for(&self, key: &BoardKey<M>) -> bool {
+        let same_streams = BoardKey {
+            horizon: key.horizon,
+            ..self.key
+        } == *key;
+        self.kept
+            && same_streams
+            && (self.key.horizon == key.horizon
+                || (!self.beyond && self.reach <= key.horizon.as_ns()))
+    }
+
     const EMPTY: Self = Summary {
         kept: false,
         key: BoardKey::EMPTY,
@@ -920,6 +957,8 @@ impl<const M: usize> Summary<M> {
         handler: 0,
         wcrt: [0; M],
         found: [false; M],
+        reach: 0,
+        beyond: false,
     };
 
     /// Notes the board's (index `b`) first violated deadline and its first below the floor, in table order.
@@ -1518,11 +1557,16 @@ fn analyse_board<const N: usize, const M: usize>(
             let (w, f) = match result {
                 Ok(r) => {
                     *iterations += r.iterations;
+                    summary.reach = summary.reach.max(r.busy_window.as_ns());
                     (r.wcrt.as_ns(), r.first_window)
                 }
                 // Out of the analysis's iterations: no verdict on the deadlines ([`Refusal::Budget`]).
                 Err(AnalysisError::IterationLimit) => return Err(Refusal::Budget),
-                Err(_) => (NONE, Time::ZERO),
+                Err(e) => {
+                    // Any unbounded response but an overload may depend on the horizon.
+                    summary.beyond |= e != AnalysisError::Overload;
+                    (NONE, Time::ZERO)
+                }
             };
             if let (Some(ws), Some(fs)) = (wcrt.get_mut(i), first_window.get_mut(i)) {
                 *ws = w;

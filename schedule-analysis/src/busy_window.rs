@@ -706,7 +706,14 @@ fn non_preemptive<A: Activations>(
     let mut w = lower_bound(b, b, tau, loads, false, 0).max(subject.known_first_window.as_ns());
     window.start(add(w, tau)?)?;
     let mut worst: Option<Response> = None;
-    for q in 0..instances {
+    // The instances analysed: the first (its window is the first window other messages start from), then the
+    // last of each activation. Within an activation the queuing windows grow with the instance (each is the least
+    // fixed point of `w = B + q·C + I(w + τ)`, increasing in `q`) and the activation's release is the same, so
+    // its last instance has its worst response: the others cannot be the worst and are skipped (the window of
+    // the last one is reached from the first one's, as the windows only grow). One instance per activation when
+    // a sample is one frame.
+    let mut q = 0;
+    while q < instances {
         let own = add(b, mul(q, c)?)?;
         let interference = loop {
             let interference = window.demand(add(w, tau)?)?;
@@ -733,6 +740,9 @@ fn non_preemptive<A: Activations>(
                 iterations: 0,
             });
         }
+        // The next activation's last instance (or this one's, after its first).
+        let last = add(mul(activation, per)?, per - 1)?;
+        q = if q < last { last } else { add(q, per)? };
     }
     let mut response = worst.ok_or(AnalysisError::BeyondHorizon)?;
     response.iterations = window.iterations;

@@ -178,6 +178,50 @@ fn admitted(
     robot.with_table(|table| admission::admit::<32, 32>(table, &streams, &request, false))
 }
 
+/// A kept analysis is found again: after a request replaced a running stream of its board (which a board keeps in
+/// that stream's place), and after a request that moves the analysis horizon (a period above 60 ms), the next
+/// decision analyses only its own board — and decides as the check without a cache does.
+#[test]
+fn a_decision_redoes_only_its_own_board() {
+    let robot = robot();
+    let mut running = publisher_streams(
+        [("odometry", "low", 10_000), ("gyroscope", "medium", 5_000)].into_iter(),
+    );
+    let mut cache = admission::Cache::<32>::new();
+    robot.with_table(|t| admission::refresh::<32, 32>(t, &running, &mut cache));
+    let mut decide =
+        |running: &mut Vec<admission::Stream>, topic: &str, level: &str, period_us: u64| {
+            let request = robot
+                .publisher_stream(topic, level, Time::from_us(period_us), None)
+                .expect("stream");
+            let plain =
+                robot.with_table(|t| admission::admit::<32, 32>(t, running, &request, false));
+            let cached = robot.with_table(|t| {
+                admission::admit_cached::<32, 32>(t, running, &request, &mut cache, false)
+            });
+            assert_eq!(plain.refusal, cached.refusal, "{topic}");
+            assert!(cached.admitted(), "{topic}: {:?}", cached.refusal);
+            // Carried out as a board does (`Admission::upsert`): in the place of the stream it replaces.
+            match running.iter().position(|s| {
+                s.sender.map(|x| (x.board, x.topic)) == request.sender.map(|x| (x.board, x.topic))
+            }) {
+                Some(i) => running[i] = request,
+                None => running.push(request),
+            }
+            (plain.boards, cached.boards)
+        };
+    // Odometry replaced in place on DiWheelDrive: its own board only.
+    assert_eq!(decide(&mut running, "odometry", "low", 5_000), (3, 1));
+    // A PowerManagement request next: DiWheelDrive's analysis of the replaced set holds.
+    assert_eq!(
+        decide(&mut running, "proximity-ring", "low", 20_000),
+        (3, 1)
+    );
+    // The power status every 500 ms moves the horizon from 60 s to 500 s: no kept window reaches either.
+    assert_eq!(decide(&mut running, "power-status", "low", 500_000), (3, 1));
+    assert_eq!(decide(&mut running, "gyroscope", "medium", 4_000), (3, 1));
+}
+
 #[test]
 fn the_table_lowers_and_emits_rust() {
     let robot = robot();
