@@ -932,14 +932,15 @@ impl<const M: usize> Summary<M> {
     /// Whether this kept analysis is the one `key` would get: the same streams, and the same horizon or one that
     /// stops none of its windows (a request with a long period moves the horizon, and so the key, of every board).
     fn holds_for(&self, key: &BoardKey<M>) -> bool {
-        let same_streams = BoardKey {
-            horizon: key.horizon,
-            ..self.key
-        } == *key;
+        let (kept, new) = (&self.key, key);
         self.kept
-            && same_streams
-            && (self.key.horizon == key.horizon
-                || (!self.beyond && self.reach <= key.horizon.as_ns()))
+            && kept.len == new.len
+            && kept.topic == new.topic
+            && kept.level == new.level
+            && kept.dlc == new.dlc
+            && kept.period == new.period
+            && kept.deadline == new.deadline
+            && (kept.horizon == new.horizon || (!self.beyond && self.reach <= new.horizon.as_ns()))
     }
 
     const EMPTY: Self = Summary {

@@ -567,8 +567,8 @@ fn admission_other_board(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-/// Virtual nanoseconds per instruction in the QEMU runs (`-icount shift=3`).
-const NS_PER_INSTRUCTION: u64 = 8;
+/// Virtual nanoseconds per instruction in the QEMU runs (`-icount shift=N`: 2^N ns).
+const NS_PER_INSTRUCTION: u64 = 1 << crate::qemu::ICOUNT_SHIFT;
 /// Cycles per instruction assumed on the F103 at 72 MHz with two flash wait states (an estimate
 /// until a bench measurement replaces it; the same the timing file's budget rests on).
 const F103_CYCLES_PER_INSTRUCTION: f64 = 1.5;
