@@ -77,17 +77,21 @@ pub enum RefusalReason {
     /// The board's admission task already holds as many requests as its queue has room for (requests come faster
     /// than the check's analysed rate): refused unseen, answered with a verdict, and counted.
     Busy = 5,
+    /// The check ran out of the fixed-point iterations a decision may take (a configuration loaded close to
+    /// 100 %): refused without a verdict on its deadlines, which bounds the check's cost.
+    Budget = 6,
 }
 
 impl RefusalReason {
     /// Every reason, in counter order.
-    pub const ALL: [RefusalReason; 6] = [
+    pub const ALL: [RefusalReason; 7] = [
         RefusalReason::TaskDeadline,
         RefusalReason::MessageDeadline,
         RefusalReason::EndToEndDeadline,
         RefusalReason::Capacity,
         RefusalReason::ZeroPeriod,
         RefusalReason::Busy,
+        RefusalReason::Budget,
     ];
 
     /// A short, stable name: counter and log names.
@@ -99,6 +103,7 @@ impl RefusalReason {
             RefusalReason::Capacity => "admission-capacity",
             RefusalReason::ZeroPeriod => "admission-zero-period",
             RefusalReason::Busy => "admission-busy",
+            RefusalReason::Budget => "admission-iteration-budget",
         }
     }
 

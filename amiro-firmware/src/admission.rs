@@ -589,7 +589,8 @@ fn reason(refusal: &Refusal) -> RefusalReason {
             Culprit::EndToEnd { .. } => RefusalReason::EndToEndDeadline,
         },
         // The check's capacity: its tables, or its iterations per decision (`DECISION_ITERATIONS`).
-        Refusal::Capacity | Refusal::Budget => RefusalReason::Capacity,
+        Refusal::Capacity => RefusalReason::Capacity,
+        Refusal::Budget => RefusalReason::Budget,
         Refusal::ZeroPeriod => RefusalReason::ZeroPeriod,
     }
 }
@@ -643,5 +644,16 @@ mod tests {
         assert!(busy_verdict(Board::DiWheelDrive, 0x208, &[0]).is_none());
         assert!(is_stop(0x208, &[0]));
         assert!(!is_stop(0x208, &[1, 10, 0, 1]));
+    }
+
+    #[test]
+    fn a_refusal_for_the_iteration_budget_is_counted_as_such() {
+        assert_eq!(reason(&Refusal::Budget), RefusalReason::Budget);
+        assert_eq!(reason(&Refusal::Capacity), RefusalReason::Capacity);
+        assert_eq!(reason(&Refusal::ZeroPeriod), RefusalReason::ZeroPeriod);
+        assert_eq!(
+            amiro_can::reason_name(RefusalReason::Budget.counted_index()),
+            Some("admission-iteration-budget")
+        );
     }
 }

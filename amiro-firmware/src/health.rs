@@ -29,6 +29,7 @@ static REFUSALS: [AtomicU32; REFUSAL_REASONS] = [
     AtomicU32::new(0),
     AtomicU32::new(0),
     AtomicU32::new(0),
+    AtomicU32::new(0),
 ];
 /// Sensor groups a board may report (one per bus or device group).
 pub const SENSOR_GROUPS: usize = 8;
@@ -205,6 +206,7 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
             REFUSALS[3].load(Ordering::Relaxed),
             REFUSALS[4].load(Ordering::Relaxed),
             REFUSALS[5].load(Ordering::Relaxed),
+            REFUSALS[6].load(Ordering::Relaxed),
         ],
         rx_dropped: rx_dropped(),
         rx_overruns: rx_overruns(),
