@@ -35,7 +35,9 @@ pub fn ram_goal(board: &str, revision: &str) -> u64 {
         // DiWheelDrive's 16 KiB had 56 B left with the admission check (16 328 B in `admission-search`, the
         // admission task's deepest analysis with every priority nested on it); a shift in timing moves where the
         // interrupts nest on that analysis (16 640 B after issue 20's reservation change, the same decisions):
-        // a stated 1 KiB allowance instead of a goal met by luck.
+        // a stated allowance instead of a goal met by luck: 1 KiB, then 2 KiB when the costliest sequence a search
+        // with policy changes found (accept-and-warn starts publishers the check refuses, so more priority levels
+        // run at once) nested them deeper: 17 792 B (a stack of 11 736 B).
         ("diwheeldrive", _) => 16 * 1024 + DIWHEELDRIVE_ADMISSION_RAM_ALLOWANCE,
         _ => 16 * 1024,
     }
@@ -49,7 +51,7 @@ pub const LIGHTRING_1_2_RAM_ALLOWANCE: u64 = 256;
 pub const ADMISSION_RAM_ALLOWANCE: u64 = 4 * 1024 + 512;
 
 /// What the on-chip admission analysis may add to DiWheelDrive's 16 KiB RAM goal (docs/analysis.md).
-pub const DIWHEELDRIVE_ADMISSION_RAM_ALLOWANCE: u64 = 1024;
+pub const DIWHEELDRIVE_ADMISSION_RAM_ALLOWANCE: u64 = 2 * 1024;
 
 /// The scenarios of one board revision (`boards::Revision::name`): DiWheelDrive 1-1's and LightRing
 /// 1-0's are the board's original set (`<board>/qemu/`), the 1-2 boards' their own
