@@ -53,6 +53,21 @@ fn documented_channels(led: u8) -> [usize; 9] {
     core::array::from_fn(|k| first + k)
 }
 
+/// Protocol LED `led` (1-based) in `colour`, the other seven dark.
+fn only_led(led: usize, colour: [u8; 3]) -> [[u8; 3]; 8] {
+    let mut colours = [[0u8; 3]; 8];
+    if let Some(slot) = colours.get_mut(led.wrapping_sub(1)) {
+        *slot = colour;
+    }
+    colours
+}
+
+/// Checks the run's last latch against colours per protocol LED with the documented table.
+fn last_latch_shows(out: &RunOutput, colours: &[[u8; 3]; 8]) -> Result<()> {
+    let last = latches(out, CHIPS)?.pop().context("no latch at all")?;
+    shows_as_documented(&last.outputs, colours)
+}
+
 /// Checks a latch against colours per protocol LED with the documented table.
 fn shows_as_documented(outputs: &[u16], colours: &[[u8; 3]; 8]) -> Result<()> {
     ensure!(
@@ -88,9 +103,7 @@ fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         )
     });
     let summary = lightring::all_eight_on(out, bounds, CHIPS, &commands)?;
-    let last = latches(out, CHIPS)?.pop().context("no latch at all")?;
-    let colours = commands.map(|(_, rgb)| rgb);
-    shows_as_documented(&last.outputs, &colours)?;
+    last_latch_shows(out, &commands.map(|(_, rgb)| rgb))?;
     Ok(format!(
         "{summary}; the 72 channels as docs/protocol.md's table says (LED n on channels 9(n-1)..9n-1)"
     ))
@@ -98,30 +111,19 @@ fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 
 fn led3(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let summary = lightring::led3_on(out, bounds, CHIPS)?;
-    let last = latches(out, CHIPS)?.pop().context("no latch at all")?;
-    let mut colours = [[0u8; 3]; 8];
-    colours[2] = [0xFF, 0x80, 0x20];
-    shows_as_documented(&last.outputs, &colours)?;
+    last_latch_shows(out, &only_led(3, [0xFF, 0x80, 0x20]))?;
     Ok(summary)
 }
 
 fn malformed(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let summary = lightring::malformed_on(out, bounds, CHIPS)?;
-    let last = latches(out, CHIPS)?.pop().context("no latch at all")?;
-    let mut colours = [[0u8; 3]; 8];
-    colours[4] = [0x10, 0x20, 0x30];
-    shows_as_documented(&last.outputs, &colours)?;
+    last_latch_shows(out, &only_led(5, [0x10, 0x20, 0x30]))?;
     Ok(format!("{summary}; LED 5 on channels 36..44 only"))
 }
 
 fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let summary = lightring::admission_on(out, bounds, CHIPS, 5)?;
-    let mut colours = [[0u8; 3]; 8];
-    colours[2] = [0xFF, 0x80, 0x20];
-    shows_as_documented(
-        &latches(out, CHIPS)?.pop().context("no latch")?.outputs,
-        &colours,
-    )?;
+    last_latch_shows(out, &only_led(3, [0xFF, 0x80, 0x20]))?;
     Ok(summary)
 }
 
