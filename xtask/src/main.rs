@@ -691,7 +691,8 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
                 std::fs::write(work.join("bus.log"), bus)?;
                 std::fs::write(work.join("trace.log"), trace)?;
                 outputs.push((scenario.name.to_string(), work.clone()));
-                let out = scenarios::RunOutput::parse(&text)?;
+                let mut out = scenarios::RunOutput::parse(&text)?;
+                out.work = Some(work.clone());
                 let (static_ram, stack) = out.ram_used()?;
                 ram_high_water = ram_high_water.max(static_ram + stack);
                 (scenario.check)(&out, &bounds)

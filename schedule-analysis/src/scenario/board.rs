@@ -445,7 +445,7 @@ fn admission_line(timing: &Timing, measured: &[String]) -> Option<String> {
     let basis = if measured.iter().any(|m| m == "admit_requests") {
         "a measured budget"
     } else {
-        "one step's budget, an estimate from the QEMU scenario admission-search (the costliest step a search found, in instructions, at an assumed cycles per instruction; the timing file's note has the figures), not a bench measurement"
+        "one step's budget, an estimate from the QEMU scenario admission-search (the costliest step a search found: its own execution in instructions, pre-emptions taken out, at an assumed cycles per instruction; the timing file's note has the figures), not a bench measurement"
     };
     Some(format!(
         "{}: admission reserves {:.1} % of the CPU (admit_requests: {:.0} µs per {:.0} µs), {basis}",

@@ -133,6 +133,7 @@ impl Run {
                 })
                 .collect(),
             notes: self.notes(board).into_iter().map(String::from).collect(),
+            work: None,
         }
     }
 }

@@ -98,6 +98,9 @@ pub struct RunOutput {
     pub frames: Vec<TimedFrame>,
     /// Trace and log lines (without the leading `# `).
     pub notes: Vec<String>,
+    /// The QEMU run's work directory (its `output.log` and `trace.bin`), when the run kept one: what
+    /// [`RunOutput::own_execution_us`] reads.
+    pub work: Option<std::path::PathBuf>,
 }
 
 impl RunOutput {
@@ -280,6 +283,40 @@ pub struct Stream {
 }
 
 impl RunOutput {
+    /// The longest own execution (pre-emptions taken out: the bench's `exec max`) of any run of `board`'s task
+    /// `task` in this QEMU run, virtual µs, and how many runs it had; read from the run's task trace.
+    pub fn own_execution_us(&self, board: &str, task: &str) -> Result<(f64, usize)> {
+        let work = self
+            .work
+            .as_deref()
+            .context("the run kept no work directory (no task trace to read)")?;
+        let root = crate::workspace_root();
+        let spec = crate::boards::by_name(board).with_context(|| format!("no board {board}"))?;
+        let names = amiro_firmware::trace_ids::board_names(&root, board)
+            .map_err(|e| anyhow::anyhow!("{e}"))
+            .context("the board's task numbers")?;
+        let number = names
+            .iter()
+            .position(|n| n == task)
+            .with_context(|| format!("{board} has no task {task}"))?;
+        let stimulus = names
+            .iter()
+            .position(|n| n == "stimulus")
+            .and_then(|i| u8::try_from(i).ok());
+        let capture = crate::bench::capture::read_qemu_dir(
+            work,
+            crate::bench::default_clock_hz(spec, true),
+            stimulus,
+        )?;
+        let runs: Vec<_> = capture
+            .runs
+            .iter()
+            .filter(|r| usize::from(r.task) == number)
+            .collect();
+        let most = runs.iter().map(|r| r.execution_ns()).max().unwrap_or(0);
+        Ok((most as f64 / 1000.0, runs.len()))
+    }
+
     /// Releases traced for `topic` (`sample-taken <topic> release=s.micros`) within `[from, to)`.
     pub fn releases(&self, topic: &str, from: u64, to: u64) -> Result<Vec<u64>> {
         let key = format!("sample-taken {topic} release=");
