@@ -12,6 +12,7 @@ mod analyze;
 mod bench;
 mod boards;
 mod bounds;
+mod callgraph;
 mod campaign;
 mod elf;
 mod flash;
@@ -174,6 +175,7 @@ fn run(cmd: Cmd) -> Result<bool> {
                 println!("{}", serde_json::to_string_pretty(&reports)?);
             } else {
                 elf::print_table(&reports);
+                admission_panic_free(&reports)?;
             }
             Ok(true)
         }
@@ -567,6 +569,7 @@ fn test(root: &Path) -> Result<()> {
     elf::print_table(&reports);
     let over = elf::over_budget(&reports);
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
+    admission_panic_free(&reports)?;
     run_scenarios(root, &every)?;
     // The whole robot on one bus (issue 23), with its bus report against the analysis.
     robot::scenarios::run_all(root)?;
@@ -576,6 +579,31 @@ fn test(root: &Path) -> Result<()> {
     interop::check(root)?;
     // The hostile-bus campaign, one run of 3000 spaced frames per board (issue 12).
     campaign::run(root, &BOARDS.iter().collect::<Vec<_>>(), 12, 3000, 1)
+}
+
+/// No image's admission check can reach a panic (`callgraph`): it decides on data from the bus.
+fn admission_panic_free(reports: &[elf::SizeReport]) -> Result<()> {
+    let mut failures = Vec::new();
+    for r in reports.iter().filter(|r| r.analysis_symbols > 0) {
+        let found = callgraph::admission_panics(&r.elf)?;
+        println!(
+            "{} {}: the admission check ({} functions, {} reachable from them) reaches {} panic path(s)",
+            r.board,
+            r.revision,
+            found.check_functions,
+            found.reachable,
+            found.paths.len()
+        );
+        for path in found.paths {
+            failures.push(format!("{} {}: {}", r.board, r.revision, path.join(" → ")));
+        }
+    }
+    ensure!(
+        failures.is_empty(),
+        "the admission check can panic:\n{}",
+        failures.join("\n")
+    );
+    Ok(())
 }
 
 /// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets, on a
