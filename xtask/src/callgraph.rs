@@ -71,7 +71,8 @@ fn branch_targets(code: &[u8], base: u64) -> Vec<u64> {
             let (j1, j2) = ((hw2 >> 13) & 1, (hw2 >> 11) & 1);
             let imm11 = hw2 & 0x7ff;
             let link_or_t4 = (hw2 >> 12) & 1 == 1;
-            if hw2 >> 14 == 0b11 && link_or_t4 || hw2 >> 14 == 0b10 && link_or_t4 {
+            // Bit 15 of the second half is set: BL and B.W (T4) have bit 12 set too, B<cond>.W (T3) has 14 and 12 clear.
+            if link_or_t4 {
                 // BL (T1) and B.W (T4): S:I1:I2:imm10:imm11:0.
                 let (i1, i2) = (!(j1 ^ s) & 1, !(j2 ^ s) & 1);
                 let imm10 = hw1 & 0x3ff;
