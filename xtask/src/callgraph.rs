@@ -14,12 +14,113 @@ use std::path::Path;
 
 /// One function of the image.
 #[derive(Debug, Clone)]
-struct Function {
+pub struct Function {
     /// Its address (the Thumb bit cleared) and size.
-    start: u64,
-    size: u64,
+    pub start: u64,
+    pub size: u64,
     /// Its demangled name.
-    name: String,
+    pub name: String,
+    /// Its machine code.
+    pub code: Vec<u8>,
+}
+
+/// A firmware image's functions, and what its call graph needs to know about them.
+pub struct Image {
+    /// Every named function, by start address.
+    pub functions: BTreeMap<u64, Function>,
+    /// The vector table's entries (index, handler address, Thumb bit cleared), the initial stack pointer left out.
+    pub vectors: Vec<(usize, u64)>,
+    /// Functions whose address is stored anywhere outside the vector table (literal pools, vtables, tables): what a
+    /// call through a register may reach.
+    pub address_taken: BTreeSet<u64>,
+}
+
+impl Image {
+    /// Reads `elf`'s symbols, code, vector table and stored function addresses.
+    pub fn read(elf: &Path) -> Result<Image> {
+        let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+        let file =
+            object::File::parse(&*bytes).with_context(|| format!("parsing {}", elf.display()))?;
+        let mut functions = BTreeMap::new();
+        for symbol in file.symbols() {
+            if symbol.kind() != SymbolKind::Text || symbol.size() == 0 {
+                continue;
+            }
+            let Ok(raw) = symbol.name() else { continue };
+            let start = symbol.address() & !1;
+            if functions.contains_key(&start) {
+                continue;
+            }
+            let code = file
+                .sections()
+                .find(|s| s.address() <= start && start + symbol.size() <= s.address() + s.size())
+                .and_then(|s| {
+                    let data = s.data().ok()?;
+                    let from = usize::try_from(start - s.address()).ok()?;
+                    data.get(from..from + usize::try_from(symbol.size()).ok()?)
+                        .map(<[u8]>::to_vec)
+                })
+                .unwrap_or_default();
+            functions.insert(
+                start,
+                Function {
+                    start,
+                    size: symbol.size(),
+                    name: format!("{:#}", rustc_demangle::demangle(raw)),
+                    code,
+                },
+            );
+        }
+        let mut vectors = Vec::new();
+        let mut address_taken = BTreeSet::new();
+        for section in file.sections() {
+            // Only what the chip holds (the debug sections name every function).
+            let alloc = match section.flags() {
+                object::SectionFlags::Elf { sh_flags } => {
+                    sh_flags & u64::from(object::elf::SHF_ALLOC) != 0
+                }
+                _ => false,
+            };
+            let Ok(data) = section.data() else { continue };
+            if !alloc {
+                continue;
+            }
+            let is_vectors = section.name().is_ok_and(|n| n == ".vector_table");
+            for (i, word) in data.chunks_exact(4).enumerate() {
+                let value = u64::from(u32::from_le_bytes([word[0], word[1], word[2], word[3]]));
+                if value & 1 == 0 || !functions.contains_key(&(value & !1)) {
+                    continue;
+                }
+                if is_vectors {
+                    if i > 0 {
+                        vectors.push((i, value & !1));
+                    }
+                } else {
+                    address_taken.insert(value & !1);
+                }
+            }
+        }
+        Ok(Image {
+            functions,
+            vectors,
+            address_taken,
+        })
+    }
+
+    /// The functions `f` calls or tail-calls directly (the first instruction of another function).
+    pub fn callees(&self, f: &Function) -> BTreeSet<u64> {
+        branch_targets(&f.code, f.start)
+            .into_iter()
+            .filter(|t| !(f.start..f.start + f.size).contains(t) && self.functions.contains_key(t))
+            .collect()
+    }
+
+    /// A function's name, or its address when it has none.
+    pub fn name(&self, at: u64) -> String {
+        self.functions
+            .get(&at)
+            .map_or_else(|| format!("{at:#x}"), |f| f.name.clone())
+    }
 }
 
 /// Whether a function belongs to the on-chip admission check: the core analysis, the firmware's admission state and
@@ -95,24 +196,6 @@ fn sign_extend(value: u32, bits: u32) -> i64 {
     i64::from(((value << shift) as i32) >> shift)
 }
 
-/// The image's functions, by start address.
-fn functions(file: &object::File<'_>) -> BTreeMap<u64, Function> {
-    let mut out = BTreeMap::new();
-    for symbol in file.symbols() {
-        if symbol.kind() != SymbolKind::Text || symbol.size() == 0 {
-            continue;
-        }
-        let Ok(raw) = symbol.name() else { continue };
-        let start = symbol.address() & !1;
-        out.entry(start).or_insert_with(|| Function {
-            start,
-            size: symbol.size(),
-            name: format!("{:#}", rustc_demangle::demangle(raw)),
-        });
-    }
-    out
-}
-
 /// What [`admission_panics`] found in one image.
 #[derive(Debug)]
 pub struct PanicPaths {
@@ -128,19 +211,9 @@ pub struct PanicPaths {
 /// The panic paths of the admission check in `elf`. An error when the image has no function of the check at all
 /// (nothing to inspect would pass silently).
 pub fn admission_panics(elf: &Path) -> Result<PanicPaths> {
-    let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
-    let file =
-        object::File::parse(&*bytes).with_context(|| format!("parsing {}", elf.display()))?;
-    let functions = functions(&file);
-    let code_of = |f: &Function| -> Option<&[u8]> {
-        let section = file
-            .sections()
-            .find(|s| s.address() <= f.start && f.start + f.size <= s.address() + s.size())?;
-        let data = section.data().ok()?;
-        let from = usize::try_from(f.start - section.address()).ok()?;
-        data.get(from..from + usize::try_from(f.size).ok()?)
-    };
-    let roots: Vec<u64> = functions
+    let image = Image::read(elf)?;
+    let roots: Vec<u64> = image
+        .functions
         .values()
         .filter(|f| is_check(&f.name))
         .map(|f| f.start)
@@ -157,17 +230,15 @@ pub fn admission_panics(elf: &Path) -> Result<PanicPaths> {
     let mut queue: VecDeque<u64> = roots.into_iter().collect();
     let mut reached_panics = BTreeSet::new();
     while let Some(at) = queue.pop_front() {
-        let Some(f) = functions.get(&at) else {
+        let Some(f) = image.functions.get(&at) else {
             continue;
         };
         if is_panic(&f.name) {
             reached_panics.insert(at);
             continue;
         }
-        let Some(code) = code_of(f) else { continue };
-        for target in branch_targets(code, f.start) {
-            let inside = (f.start..f.start + f.size).contains(&target);
-            if inside || !functions.contains_key(&target) || caller.contains_key(&target) {
+        for target in image.callees(f) {
+            if caller.contains_key(&target) {
                 continue;
             }
             caller.insert(target, Some(at));
@@ -179,11 +250,7 @@ pub fn admission_panics(elf: &Path) -> Result<PanicPaths> {
         let mut path = Vec::new();
         let mut at = Some(panic);
         while let Some(a) = at {
-            path.push(
-                functions
-                    .get(&a)
-                    .map_or_else(|| format!("{a:#x}"), |f| f.name.clone()),
-            );
+            path.push(image.name(a));
             at = caller.get(&a).copied().flatten();
         }
         path.reverse();

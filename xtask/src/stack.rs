@@ -1,0 +1,308 @@
+//! A static bound on a firmware image's stack, from its machine code: what QEMU's painted stack can only sample.
+//!
+//! Per function, its frame is every instruction that moves the stack pointer down (`PUSH`, `SUB SP`, `VPUSH`, a
+//! pre-indexed store to `SP`), summed over the whole body, so a frame set up on several paths is counted on each: an
+//! upper bound. A function's depth is its frame plus the deepest of its callees (direct calls and tail calls, from
+//! [`callgraph`](crate::callgraph)); a call through a register may reach any function whose address the image stores
+//! outside its vector table (waker vtables, function pointers), so it counts the deepest of those. Recursion has no
+//! bound and is an error.
+//!
+//! The image's stack is then thread mode (the reset handler: `main`, `init`, `idle` and the priority-0 tasks polled
+//! there, the admission check among them) plus the interrupts nested on it. An exception handler cannot preempt
+//! itself and the NVIC nests at most one handler per priority level, so at most `levels` distinct handlers are on the
+//! stack at once: the bound adds the `levels` deepest handlers of the vector table, each with its exception frame
+//! (the basic frame, or the extended one with the FPU's registers). That is sound without knowing which handler has
+//! which priority, and loose by as much as the deepest handlers share a level.
+use anyhow::{bail, Result};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use crate::callgraph::Image;
+
+/// Bytes the Cortex-M pushes on exception entry: the basic frame (r0-r3, r12, lr, pc, xPSR) and, with the FPU
+/// active, the extended frame (s0-s15, FPSCR and a reserved word besides), plus the alignment word the core may add.
+const BASIC_FRAME: u64 = 32 + 4;
+const EXTENDED_FRAME: u64 = 104 + 4;
+
+/// `ThumbExpandImm` of a 12-bit modified immediate (the `SUB.W SP, SP, #const` encoding).
+fn thumb_expand_imm(imm12: u32) -> u32 {
+    let imm8 = imm12 & 0xff;
+    if imm12 >> 10 == 0 {
+        match (imm12 >> 8) & 0b11 {
+            0b00 => imm8,
+            0b01 => (imm8 << 16) | imm8,
+            0b10 => (imm8 << 24) | (imm8 << 8),
+            _ => (imm8 << 24) | (imm8 << 16) | (imm8 << 8) | imm8,
+        }
+    } else {
+        (0x80 | (imm12 & 0x7f)).rotate_right(imm12 >> 7)
+    }
+}
+
+/// What one function's code does to the stack: the bytes its instructions move the stack pointer down (summed over
+/// the body), and how many calls or tail calls go through a register.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct FrameFacts {
+    /// Bytes pushed or reserved.
+    pub frame: u64,
+    /// `BLX Rm`, and `BX Rm` other than a return through `LR`.
+    pub indirect: usize,
+}
+
+/// Decodes `code` (Thumb-2) for its stack use and its calls through a register.
+pub fn frame_facts(code: &[u8]) -> FrameFacts {
+    let half = |i: usize| -> Option<u32> {
+        Some(u32::from(u16::from_le_bytes([
+            *code.get(i)?,
+            *code.get(i + 1)?,
+        ])))
+    };
+    let mut facts = FrameFacts::default();
+    let mut i = 0;
+    while let Some(hw1) = half(i) {
+        if !matches!(hw1 >> 11, 0b11101..=0b11111) {
+            if hw1 & 0xfe00 == 0xb400 {
+                // PUSH {registers[, LR]}.
+                facts.frame += 4 * u64::from((hw1 & 0x1ff).count_ones());
+            } else if hw1 & 0xff80 == 0xb080 {
+                // SUB SP, SP, #imm7 × 4.
+                facts.frame += 4 * u64::from(hw1 & 0x7f);
+            } else if hw1 & 0xff87 == 0x4780 {
+                // BLX Rm.
+                facts.indirect += 1;
+            } else if hw1 & 0xff87 == 0x4700 && (hw1 >> 3) & 0xf != 14 {
+                // BX Rm, Rm not LR: a jump to a computed address, a tail call through a register.
+                facts.indirect += 1;
+            }
+            i += 2;
+            continue;
+        }
+        let Some(hw2) = half(i + 2) else { break };
+        if hw1 == 0xe92d {
+            // PUSH.W (STMDB SP!, {registers}).
+            facts.frame += 4 * u64::from((hw2 & 0x5fff).count_ones());
+        } else if hw1 == 0xf84d && hw2 & 0x0f00 == 0x0d00 {
+            // STR.W Rt, [SP, #-imm8]! (a single register's PUSH).
+            facts.frame += u64::from(hw2 & 0xff);
+        } else if hw1 & 0xfbef == 0xf1ad && hw2 & 0x8f00 == 0x0d00 {
+            // SUB.W SP, SP, #const.
+            let imm12 = ((hw1 >> 10) & 1) << 11 | ((hw2 >> 12) & 0b111) << 8 | (hw2 & 0xff);
+            facts.frame += u64::from(thumb_expand_imm(imm12));
+        } else if hw1 & 0xfbff == 0xf2ad && hw2 & 0x8f00 == 0x0d00 {
+            // SUBW SP, SP, #imm12.
+            let imm12 = ((hw1 >> 10) & 1) << 11 | ((hw2 >> 12) & 0b111) << 8 | (hw2 & 0xff);
+            facts.frame += u64::from(imm12);
+        } else if hw1 & 0xffbf == 0xed2d && hw2 & 0x0e00 == 0x0a00 {
+            // VPUSH {s or d registers}: imm8 words.
+            facts.frame += 4 * u64::from(hw2 & 0xff);
+        }
+        i += 4;
+    }
+    facts
+}
+
+/// A function's deepest stack, and the chain of calls that reaches it.
+#[derive(Debug, Clone)]
+pub struct Depth {
+    /// Bytes.
+    pub bytes: u64,
+    /// The functions on the deepest chain, from the one asked about.
+    pub chain: Vec<u64>,
+}
+
+/// Depths of an image's functions, worked out once each.
+struct Depths<'a> {
+    image: &'a Image,
+    known: BTreeMap<u64, Depth>,
+    /// The deepest function whose address is taken: what a call through a register may reach.
+    indirect: Option<Depth>,
+    /// The functions being worked out (a call back to one of them is recursion).
+    open: Vec<u64>,
+    /// Targets of calls through a register left out so far because they were on the chain: a depth worked out
+    /// while one was left out depends on its chain and is not kept.
+    skipped: usize,
+}
+
+impl Depths<'_> {
+    fn of(&mut self, at: u64) -> Result<Depth> {
+        if let Some(known) = self.known.get(&at) {
+            return Ok(known.clone());
+        }
+        if self.open.contains(&at) {
+            let cycle: Vec<String> = self.open.iter().map(|&a| self.image.name(a)).collect();
+            bail!(
+                "recursion through {} → {}: the stack has no static bound",
+                cycle.join(" → "),
+                self.image.name(at)
+            );
+        }
+        let Some(f) = self.image.functions.get(&at) else {
+            return Ok(Depth {
+                bytes: 0,
+                chain: vec![at],
+            });
+        };
+        self.open.push(at);
+        let skipped_before = self.skipped;
+        let facts = frame_facts(&f.code);
+        let mut deepest = Depth {
+            bytes: 0,
+            chain: Vec::new(),
+        };
+        for callee in self.image.callees(f) {
+            let d = self.of(callee)?;
+            if d.bytes > deepest.bytes || deepest.chain.is_empty() {
+                deepest = d;
+            }
+        }
+        if facts.indirect > 0 {
+            let d = self.through_register()?;
+            if d.bytes > deepest.bytes || deepest.chain.is_empty() {
+                deepest = d;
+            }
+        }
+        self.open.pop();
+        let mut chain = vec![at];
+        chain.extend(deepest.chain);
+        let depth = Depth {
+            bytes: facts.frame + deepest.bytes,
+            chain,
+        };
+        if self.skipped == skipped_before {
+            self.known.insert(at, depth.clone());
+        }
+        Ok(depth)
+    }
+
+    /// The deepest function a call through a register may reach, but the ones already on the chain: a call through
+    /// a register is taken not to re-enter the chain (the firmware has no recursion; a waker's `wake`, itself in a
+    /// vtable, calls the task's pend function through a register, which the conservative target set would
+    /// otherwise turn into a cycle). Worked out once, from the first chain that needs it, so it is not cached when a
+    /// target was left out.
+    fn through_register(&mut self) -> Result<Depth> {
+        if let Some(d) = &self.indirect {
+            return Ok(d.clone());
+        }
+        let mut deepest = Depth {
+            bytes: 0,
+            chain: Vec::new(),
+        };
+        let mut skipped = false;
+        for &target in &self.image.address_taken {
+            if self.open.contains(&target) {
+                skipped = true;
+                self.skipped += 1;
+                continue;
+            }
+            let d = self.of(target)?;
+            if d.bytes > deepest.bytes || deepest.chain.is_empty() {
+                deepest = d;
+            }
+        }
+        if !skipped {
+            self.indirect = Some(deepest.clone());
+        }
+        Ok(deepest)
+    }
+}
+
+/// The stack bound of one image.
+#[derive(Debug)]
+pub struct StackBound {
+    /// Thread mode's deepest chain (from the reset handler).
+    pub thread: Depth,
+    /// The handlers counted as nested on it, deepest first: (vector index, depth).
+    pub handlers: Vec<(usize, Depth)>,
+    /// Bytes of one exception frame.
+    pub exception_frame: u64,
+    /// The bound: thread mode, plus each counted handler and its exception frame.
+    pub bytes: u64,
+}
+
+/// The stack bound of `elf` with at most `levels` handlers nested (the number of distinct exception priorities the
+/// image can use, the fault handlers' included), `fpu` for the extended exception frame.
+pub fn bound(elf: &Path, levels: usize, fpu: bool) -> Result<StackBound> {
+    let image = Image::read(elf)?;
+    let Some(&(_, reset)) = image.vectors.iter().find(|(i, _)| *i == 1) else {
+        bail!("{}: no reset vector", elf.display());
+    };
+    let mut depths = Depths {
+        image: &image,
+        known: BTreeMap::new(),
+        indirect: None,
+        open: Vec::new(),
+        skipped: 0,
+    };
+    let thread = depths.of(reset)?;
+    // Every distinct handler once (a handler shared by several vectors cannot nest on itself either).
+    let mut handlers: BTreeMap<u64, usize> = BTreeMap::new();
+    for &(index, handler) in image.vectors.iter().filter(|(i, _)| *i > 1) {
+        handlers.entry(handler).or_insert(index);
+    }
+    let mut nested = Vec::new();
+    for (handler, index) in handlers {
+        nested.push((index, depths.of(handler)?));
+    }
+    nested.sort_by_key(|n| std::cmp::Reverse(n.1.bytes));
+    nested.truncate(levels);
+    let exception_frame = if fpu { EXTENDED_FRAME } else { BASIC_FRAME };
+    let bytes = thread.bytes
+        + nested
+            .iter()
+            .map(|(_, d)| d.bytes + exception_frame)
+            .sum::<u64>();
+    Ok(StackBound {
+        thread,
+        handlers: nested,
+        exception_frame,
+        bytes,
+    })
+}
+
+/// Names of a chain's functions, for a report.
+pub fn chain_names(elf: &Path, chain: &[u64]) -> Result<Vec<String>> {
+    let image = Image::read(elf)?;
+    Ok(chain.iter().map(|&a| image.name(a)).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn thumb(halves: &[u16]) -> Vec<u8> {
+        halves.iter().flat_map(|h| h.to_le_bytes()).collect()
+    }
+
+    #[test]
+    fn counts_what_moves_the_stack_pointer_down() {
+        // Encodings as llvm-objdump shows them in the boards' images.
+        let code = thumb(&[
+            0xb5f0, // push {r4, r5, r6, r7, lr}: 20
+            0xe92d, 0x0f00, // push.w {r8, r9, r10, r11}: 16
+            0xb085, // sub sp, #20: 20
+            0xf5ad, 0x6d80, // sub.w sp, sp, #1024: 1024
+            0xf2ad, 0x4d0c, // subw sp, sp, #1036: 1036
+            0xf84d, 0x4d04, // str r4, [sp, #-4]!: 4
+            0xed2d, 0x8b10, // vpush {d8-d15}: 64
+            0xb005, // add sp, #20: nothing
+            0x4780, // blx r0
+            0x4770, // bx lr: a return
+            0x4718, // bx r3
+        ]);
+        assert_eq!(
+            frame_facts(&code),
+            FrameFacts {
+                frame: 20 + 16 + 20 + 1024 + 1036 + 4 + 64,
+                indirect: 2
+            }
+        );
+    }
+
+    #[test]
+    fn modified_immediates() {
+        assert_eq!(thumb_expand_imm(0x0ff), 0xff);
+        assert_eq!(thumb_expand_imm(0x1ab), 0x00ab_00ab);
+        assert_eq!(thumb_expand_imm(0xe80), 1024); // 0x80 rotated right by 29
+        assert_eq!(thumb_expand_imm(0x4ff), 0x7f80_0000);
+    }
+}
