@@ -26,7 +26,10 @@ fn main() {
         let mut state = Box::new(State::<48, 32>::new());
         let mut admission = Admission::new(table, board, &mut state);
         admission.prepare();
-        println!("prepare: {} iterations", admission.iterations().0);
+        println!(
+            "prepare: the costliest step {} iterations",
+            admission.iterations().1
+        );
         for line in text
             .lines()
             .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
@@ -37,14 +40,15 @@ fn main() {
             let data: Vec<u8> = (0..data.len() / 2)
                 .map(|i| u8::from_str_radix(&data[2 * i..2 * i + 2], 16).expect("hex"))
                 .collect();
-            let check = admission.on_command(id, &data);
+            let mut steps = Vec::new();
+            let check = admission.replay(id, &data, |iterations| steps.push(iterations));
             let what = match check {
                 Check::Pass => "pass",
                 Check::Refused(..) => "refused",
                 Check::Warned(..) => "warned",
             };
-            if admission.analysed() {
-                println!("{line}: {what}, {} iterations", admission.iterations().0);
+            if !steps.is_empty() {
+                println!("{line}: {what}, steps of {steps:?} iterations");
             }
             if let Check::Refused(frames, reason) | Check::Warned(frames, reason) = check {
                 println!("    {reason:?} {:?}", frames.map(|f| f.data().to_vec()));

@@ -101,14 +101,11 @@ fn worst_step(
     admission.prepare();
     let mut worst = (0, 0, false);
     for (i, c) in commands.iter().enumerate() {
-        let _ = admission.on_command(c.id, &c.data[..c.len]);
-        if admission.analysed() {
-            worst = worst.max((admission.iterations().0, i, false));
-        }
-        if admission.stale() {
-            admission.refresh_stale();
-            worst = worst.max((admission.iterations().0, i, true));
-        }
+        let mut steps = 0;
+        let _ = admission.replay(c.id, &c.data[..c.len], |iterations| {
+            worst = worst.max((iterations, i, steps > 0));
+            steps += 1;
+        });
     }
     worst
 }

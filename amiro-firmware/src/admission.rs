@@ -215,9 +215,20 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     }
 
     /// Analyses every board once with nothing running, so that the first request re-analyses only
-    /// its own board and the bus (the board calls it when its command handler starts).
+    /// its own board and the bus: the admission task's first refresh steps, back to back (a host
+    /// replay's start; the task paces each step).
     pub fn prepare(&mut self) {
-        self.refresh();
+        self.refresh_steps(|_| {});
+    }
+
+    /// [`Admission::refresh_step`] until every board's kept analysis holds (each board at most once);
+    /// `step` gets each step's iterations.
+    fn refresh_steps(&mut self, mut step: impl FnMut(u64)) {
+        let mut from = 0;
+        while let Some(board) = self.refresh_step(from) {
+            step(self.state.last_iterations);
+            from = board + 1;
+        }
     }
 
     /// Whether a kept analysis is stale: a stream left the running set since the last refresh.
@@ -233,18 +244,99 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         self.state.analysed = false;
         self.state.sampled = false;
         if self.state.stale {
-            self.refresh();
+            self.refresh_steps(|_| {});
         }
     }
 
-    /// Brings the kept analyses up to date with the running set.
-    fn refresh(&mut self) {
+    /// One step of bringing the kept analyses up to date with the running set (after boot, after a stop): analyses
+    /// the first board from index `from` on whose kept analysis does not hold, and returns it; `None` when every
+    /// board's holds (then nothing is stale any more). The admission task runs these steps one board at a time,
+    /// paced like a decision, `from` one past the board of the step before (so a board whose analysis runs out of
+    /// its iterations is tried once, not for ever).
+    pub fn refresh_step(&mut self, from: usize) -> Option<usize> {
+        self.state.sampled = false;
         let running = self.state.running.get(..self.state.len).unwrap_or(&[]);
-        self.state.last_iterations =
-            analysis::refresh::<N, M>(self.robot, running, &mut self.state.cache);
+        let step =
+            analysis::refresh_one::<N, M>(self.robot, running, None, &mut self.state.cache, from);
+        let board = self.note_step(step);
+        if board.is_none() {
+            self.state.stale = false;
+        }
+        board
+    }
+
+    /// One step of preparing the decision of the command `id`/`data`: when it is a publish or one-shot request whose
+    /// streams change another board's key (a period longer than 60 ms moves the analysis horizon), analyses the
+    /// first such board from index `from` on and returns it; `None` when the decision needs no other board's
+    /// analysis (or the command is not a request). So a decision analyses only its own board and the bus; the
+    /// decision is the one taken without these steps.
+    pub fn prepare_step(&mut self, id: u16, data: &[u8], from: usize) -> Option<usize> {
+        self.state.sampled = false;
+        let request = self.request_of(id, data)?;
+        let running = self.state.running.get(..self.state.len).unwrap_or(&[]);
+        let step = analysis::refresh_one::<N, M>(
+            self.robot,
+            running,
+            Some(&request),
+            &mut self.state.cache,
+            from,
+        );
+        self.note_step(step)
+    }
+
+    /// Records a refresh or preparation step's cost.
+    fn note_step(&mut self, step: Option<(usize, u64)>) -> Option<usize> {
+        let (board, iterations) = match step {
+            Some(done) => done,
+            None => {
+                self.state.analysed = false;
+                self.state.last_iterations = 0;
+                return None;
+            }
+        };
         self.state.analysed = true;
-        self.state.stale = false;
-        self.state.worst_iterations = self.state.worst_iterations.max(self.state.last_iterations);
+        self.state.last_iterations = iterations;
+        self.state.worst_iterations = self.state.worst_iterations.max(iterations);
+        Some(board)
+    }
+
+    /// The admission task's steps for one command run back to back, as `tasks::serve_admission` runs them between
+    /// its waits: the preparation steps, the decision, the refresh steps after a stop. `step` gets each analysed
+    /// step's fixed-point iterations. For host replays (the cost search and its examples).
+    pub fn replay(&mut self, id: u16, data: &[u8], mut step: impl FnMut(u64)) -> Check {
+        let mut from = 0;
+        while let Some(board) = self.prepare_step(id, data, from) {
+            step(self.state.last_iterations);
+            from = board + 1;
+        }
+        let check = self.on_command(id, data);
+        if self.state.analysed {
+            step(self.state.last_iterations);
+        }
+        let analysed = self.state.analysed;
+        let sampled = self.state.sampled;
+        if self.state.stale {
+            self.refresh_steps(&mut step);
+        }
+        // What the command itself did, as the task's pacing reads it.
+        self.state.analysed = analysed;
+        self.state.sampled = sampled;
+        check
+    }
+
+    /// The stream a publish or one-shot command asks for (its owner's table index), or `None` for any other
+    /// command (and for a board the table does not have).
+    fn request_of(&self, id: u16, data: &[u8]) -> Option<Stream> {
+        let Ok(Command::Sensor(command)) = decode_command(id, data) else {
+            return None;
+        };
+        let owner_index = table_index(self.robot, command.topic.board())?;
+        let period = match command.mode {
+            SensorMode::Stop => return None,
+            SensorMode::Once => ONE_SHOT_PERIOD,
+            SensorMode::Publish(period) => period,
+        };
+        Some(request_stream(owner_index, &command, period))
     }
 
     /// Decides `request` against the running set (no suggestion search: bounded by one analysis,

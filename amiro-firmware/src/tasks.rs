@@ -245,9 +245,13 @@ pub async fn serve_admission<
     tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
     wake_levels: &mut [Sender<'static, (), 1>],
 ) {
-    // Every board analysed once with nothing running, before the first request.
+    // Every board analysed once with nothing running, before the first request (cheap: no stream runs yet, so
+    // back to back, as one activation).
     admission.prepare();
     while let Some(frame) = parked(next_command(requests)).await {
+        // A request whose period moves the analysis horizon changes every board's key: the other boards are
+        // analysed first, one per step, so that the decision analyses only its own board and the bus.
+        refresh_steps::<C, N, M, K>(admission, pacing, Some(&frame), false).await;
         let started = C::now_us();
         handle_command_admitted::<C, N, M, Q>(
             &frame,
@@ -267,13 +271,34 @@ pub async fn serve_admission<
         if admission.stale() {
             // A stream left the running set (a stop, a one-shot): its board's kept analysis is redone now, as a
             // paced step of its own, so that no decision re-analyses more than its own board and the bus.
-            let started = C::now_us();
-            admission.refresh_stale();
-            #[cfg(feature = "qemu")]
-            note_refresh::<C, N, M>(admission, started);
-            let next = pacing.next_start(started, C::now_us(), admission.analysed(), false);
-            parked(C::delay_until_us(next)).await;
+            refresh_steps::<C, N, M, K>(admission, pacing, None, true).await;
         }
+    }
+}
+
+/// The admission task's refresh steps (`Admission::refresh_step`, or `prepare_step` for the command `before`): one
+/// board analysed per step, each board at most once. With `counted` each step counts in the pacing's window like a
+/// decision (the refresh after a stop, as before it was split); the steps preparing a decision wait only the
+/// pacing's interval after a note (the decision they prepare is counted).
+async fn refresh_steps<C: Clock, const N: usize, const M: usize, const K: usize>(
+    admission: &mut crate::admission::Admission<'_, N, M>,
+    pacing: &mut crate::admission::Pacing<K>,
+    before: Option<&RxFrame>,
+    counted: bool,
+) {
+    let mut from = 0;
+    loop {
+        let started = C::now_us();
+        let step = match before {
+            Some(frame) => admission.prepare_step(frame.id, frame.payload(), from),
+            None => admission.refresh_step(from),
+        };
+        let Some(board) = step else { break };
+        from = board + 1;
+        #[cfg(feature = "qemu")]
+        note_refresh::<C, N, M>(admission, started);
+        let next = pacing.next_start(started, C::now_us(), counted, false);
+        parked(C::delay_until_us(next)).await;
     }
 }
 

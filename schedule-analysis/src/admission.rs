@@ -812,6 +812,53 @@ pub fn refresh<const N: usize, const M: usize>(
     iterations
 }
 
+/// One step of bringing `cache` up to date, so that a decision analyses no board but the request's own: the first
+/// board from index `from` on (other than `request`'s sender's) whose kept analysis does not hold for the `running`
+/// streams with `request` in its place is analysed and kept. Returns that board and the iterations it took (kept
+/// only when the analysis completed within its budget); `None` when every such board's analysis holds. The admission
+/// task runs it as a paced step of its own before a decision whose request moves the horizon (a long period: every
+/// board's key changes), and after a stop (`request` `None`), so that no step analyses more than one board, and a
+/// decision its own board and the bus. A decision after these steps is the decision without them: a kept analysis is
+/// the one a fresh decision computes for the same key.
+pub fn refresh_one<const N: usize, const M: usize>(
+    robot: &RobotTable<'_>,
+    running: &[Stream],
+    request: Option<&Stream>,
+    cache: &mut Cache<M>,
+    from: usize,
+) -> Option<(usize, u64)> {
+    let streams = View::<M>::new(running, request)?;
+    let limits = Limits {
+        horizon: horizon(robot, &streams),
+        iterations: DECISION_ITERATIONS,
+    };
+    let requesting = request.and_then(|r| r.sender).map(|x| usize::from(x.board));
+    for (b, table) in robot.boards.iter().enumerate().skip(from) {
+        if requesting == Some(b) {
+            continue;
+        }
+        let key = BoardKey::<M>::of(b, &streams, limits.horizon)?;
+        let Some(slot) = cache.boards.get_mut(b) else {
+            // Boards beyond the cache's are analysed in each decision.
+            return None;
+        };
+        if slot.holds_for(&key) {
+            continue;
+        }
+        *slot = Summary {
+            key,
+            ..Summary::EMPTY
+        };
+        let mut iterations = 0;
+        if analyse_board::<N, M>(robot, b, table, &streams, &limits, &mut iterations, slot).is_ok()
+        {
+            slot.kept = true;
+        }
+        return Some((b, iterations));
+    }
+    None
+}
+
 /// Most boards a [`Cache`] keeps (the AMiRo has three; the analyses of further boards are not kept).
 pub const MAX_BOARDS: usize = 3;
 

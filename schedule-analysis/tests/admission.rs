@@ -223,6 +223,59 @@ fn a_decision_redoes_only_its_own_board() {
 }
 
 #[test]
+fn preparation_steps_leave_a_decision_its_own_board_and_the_same_verdict() {
+    let robot = robot();
+    let running = publisher_streams(
+        [
+            ("odometry", "urgent", 800),
+            ("gyroscope", "high", 1_000),
+            ("proximity-ring", "low", 8_000),
+        ]
+        .into_iter(),
+    );
+    // Nothing kept yet (as after boot without `prepare`, or when a request moves the horizon past what the kept
+    // windows allow): every board but the request's own is analysed first, one per step, each once.
+    let mut cache = admission::Cache::<32>::new();
+    let power = robot
+        .boards
+        .iter()
+        .position(|b| b.name == "powermgmt")
+        .expect("powermgmt");
+    for (topic, period_us) in [("power-status", 90_000_000), ("power-status", 5_000)] {
+        let request = robot
+            .publisher_stream(topic, "low", Time::from_us(period_us), None)
+            .expect("stream");
+        let mut prepared = Vec::new();
+        let mut from = 0;
+        while let Some((board, iterations)) = robot.with_table(|t| {
+            admission::refresh_one::<32, 32>(t, &running, Some(&request), &mut cache, from)
+        }) {
+            assert!(iterations <= admission::DECISION_ITERATIONS);
+            assert!(
+                !prepared.contains(&board) && board != power,
+                "{prepared:?} then {board}"
+            );
+            prepared.push(board);
+            from = board + 1;
+        }
+        if period_us == 90_000_000 {
+            assert_eq!(
+                prepared.len(),
+                robot.boards.len() - 1,
+                "every other board, once"
+            );
+        }
+        let cached = robot.with_table(|t| {
+            admission::admit_cached::<32, 32>(t, &running, &request, &mut cache, false)
+        });
+        let plain = robot.with_table(|t| admission::admit::<32, 32>(t, &running, &request, false));
+        assert_eq!(cached.refusal, plain.refusal, "{period_us} µs");
+        assert_eq!(cached.floor, plain.floor, "{period_us} µs");
+        assert_eq!(cached.boards, 1, "{period_us} µs: prepared {prepared:?}");
+    }
+}
+
+#[test]
 fn the_table_lowers_and_emits_rust() {
     let robot = robot();
     assert_eq!(

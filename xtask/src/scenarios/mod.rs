@@ -363,14 +363,17 @@ impl RunOutput {
     ) -> Result<Stream> {
         let per_sample = per_sample.max(1);
         let releases = self.releases(topic, from, to)?;
-        let frames: Vec<u64> = self
-            .times(id)
-            .into_iter()
-            .filter(|t| (from..to).contains(t))
-            .collect();
         let first = *releases
             .first()
             .with_context(|| format!("no {topic} releases in {from}..{to} µs"))?;
+        let last = *releases.last().unwrap_or(&first);
+        // The frames of these releases: from the first release to a period after the last (a sample's frames are on
+        // the bus within its period, checked below), not the window's end, which a last frame may fall just past.
+        let frames: Vec<u64> = self
+            .times(id)
+            .into_iter()
+            .filter(|t| (first..last + period).contains(t))
+            .collect();
         for (k, r) in releases.iter().enumerate() {
             let grid = first + k as u64 * period;
             ensure!(
