@@ -330,13 +330,22 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         let Ok(Command::Sensor(command)) = decode_command(id, data) else {
             return None;
         };
+        self.sensor_request(&command).map(|(_, stream)| stream)
+    }
+
+    /// The period and stream a publish or one-shot command asks for; `None` for a stop or a board the table does
+    /// not have.
+    fn sensor_request(&self, command: &SensorCommand) -> Option<(SampleTime, Stream)> {
         let owner_index = table_index(self.robot, command.topic.board())?;
         let period = match command.mode {
             SensorMode::Stop => return None,
+            // A one-shot is one sample job at the requested level, at most one per
+            // `ONE_SHOT_INTERVAL_MS` (the admission task's pacing): decided as a stream of that
+            // topic and level at that interval, in place of the topic's publisher (which it stops).
             SensorMode::Once => ONE_SHOT_PERIOD,
             SensorMode::Publish(period) => period,
         };
-        Some(request_stream(owner_index, &command, period))
+        Some((period, request_stream(owner_index, command, period)))
     }
 
     /// Decides `request` against the running set (no suggestion search: bounded by one analysis,
@@ -430,24 +439,18 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
             _ => return Check::Pass,
         };
         let owner = command.topic.board();
-        let Some(owner_index) = table_index(self.robot, owner) else {
+        if command.mode == SensorMode::Stop {
+            // Cheap here: the board's kept analysis no longer matches and is redone by the
+            // admission task's next steps (`refresh_step`, paced like a decision).
+            if let Some(owner_index) = table_index(self.robot, owner) {
+                self.remove(owner_index, command.topic.byte());
+            }
+            return Check::Pass;
+        }
+        let Some((period, request)) = self.sensor_request(&command) else {
             return Check::Pass;
         };
-        let period = match command.mode {
-            SensorMode::Stop => {
-                // Cheap here: the board's kept analysis no longer matches and is redone by the
-                // admission task's next step (`refresh_stale`, paced like a decision).
-                self.remove(owner_index, command.topic.byte());
-                return Check::Pass;
-            }
-            // A one-shot is one sample job at the requested level, at most one per
-            // `ONE_SHOT_INTERVAL_MS` (the admission task's pacing): decided as a stream of that
-            // topic and level at that interval, in place of the topic's publisher (which it stops).
-            SensorMode::Once => ONE_SHOT_PERIOD,
-            SensorMode::Publish(period) => period,
-        };
         let one_shot = command.mode == SensorMode::Once;
-        let request = request_stream(owner_index, &command, period);
         let policy = self
             .state
             .policies

@@ -122,8 +122,10 @@ pub const BOARDS: [Board; 3] = [
         // PowerManagement fits its own 48 KiB with the admission check (issue 10).
         // Issue 20: the hard floor, the busy verdicts and the paced admission task (≈ 1.5 KB) put
         // PowerManagement ≈ 3.3 KB over its own 48 KiB (the check, issue 20's cost work +0.7 KB, issue 21's bounded waits and
-        // timer monotonic): a stated allowance until the check shrinks.
-        admission_allowance: 4 * 1024,
+        // timer monotonic): a stated allowance until the check shrinks. Issue 20's one board per step
+        // (the preparation and refresh steps, ≈ 0.9 KB) put it at 54 056 B, over 48 + 4 KiB: 6 KiB, still
+        // within issue 20's 12 KiB.
+        admission_allowance: 6 * 1024,
         // 1-1 and 1-2 differ only in PA1 (1-2's battery switch input), which the firmware leaves
         // alone: one image for both (docs/boards.md).
         revisions: &[Revision {
