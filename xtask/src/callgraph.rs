@@ -4,9 +4,9 @@
 //! check to `core::panicking` — the firmware rule "no panic on data from the bus" kept by the build, not by reading.
 //!
 //! What it cannot see: calls through a function pointer or a trait object (`BLX` to a register), which the check
-//! does not use, and code the linker did not name. Literal pools decoded as instructions can only add an edge that is
-//! not there (a false alarm), never hide one that is, and an edge counts only when it lands on a function's first
-//! instruction.
+//! does not use, and code the linker did not name. Literal pools are skipped (the ELF's `$d` mapping symbols mark
+//! them); a word of data read as an instruction could only add an edge that is not there (a false alarm), never
+//! hide one, and an edge counts only when it lands on a function's first instruction.
 use anyhow::{bail, Context, Result};
 use object::{Object, ObjectSection, ObjectSymbol, SymbolKind};
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -70,6 +70,33 @@ impl Image {
                     code,
                 },
             );
+        }
+        // Literal pools and tables inside functions (the ARM ELF mapping symbols: `$d` starts data, `$t` code
+        // again) are blanked, so that a word of data is not read as a branch.
+        let mut marks: Vec<(u64, bool)> = file
+            .symbols()
+            .filter_map(|symbol| {
+                let name = symbol.name().ok()?;
+                let data = name == "$d" || name.starts_with("$d.");
+                let code = name == "$t" || name.starts_with("$t.");
+                (data || code).then_some((symbol.address(), data))
+            })
+            .collect();
+        marks.sort_unstable();
+        for (k, &(at, data)) in marks.iter().enumerate() {
+            if !data {
+                continue;
+            }
+            let end = marks.get(k + 1).map_or(u64::MAX, |&(next, _)| next);
+            for f in functions.values_mut() {
+                let (from, to) = (at.max(f.start), end.min(f.start + f.size));
+                if from < to {
+                    let (a, b) = ((from - f.start) as usize, (to - f.start) as usize);
+                    if let Some(bytes) = f.code.get_mut(a..b) {
+                        bytes.fill(0);
+                    }
+                }
+            }
         }
         let mut vectors = Vec::new();
         let mut address_taken = BTreeSet::new();
