@@ -290,13 +290,15 @@ pub fn admission_panics(elf: &Path) -> Result<PanicPaths> {
     })
 }
 
+/// Thumb halfwords as the bytes of an image (for tests of the decoders).
+#[cfg(test)]
+pub(crate) fn thumb(halves: &[u16]) -> Vec<u8> {
+    halves.iter().flat_map(|h| h.to_le_bytes()).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn thumb(halves: &[u16]) -> Vec<u8> {
-        halves.iter().flat_map(|h| h.to_le_bytes()).collect()
-    }
 
     #[test]
     fn decodes_calls_and_branches_both_ways() {

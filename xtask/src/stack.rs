@@ -268,10 +268,7 @@ pub fn chain_names(elf: &Path, chain: &[u64]) -> Result<Vec<String>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn thumb(halves: &[u16]) -> Vec<u8> {
-        halves.iter().flat_map(|h| h.to_le_bytes()).collect()
-    }
+    use crate::callgraph::thumb;
 
     #[test]
     fn counts_what_moves_the_stack_pointer_down() {
