@@ -147,6 +147,8 @@ pub fn init(
     // without a bound, and no driver here takes its frequencies from the HAL (they come from the
     // plan).
     let mut rcc = dp.RCC.constrain();
+    // Only 1-1 has the SPI sensors; 1-2 leaves SPI1 off (its clock and the block's reset untouched).
+    #[cfg(feature = "rev-1-1")]
     enable_spi1();
     TIMER_CLOCK_HZ.store(clocks.timer_hz, core::sync::atomic::Ordering::Relaxed);
     // The blocking I2C driver times out on the DWT cycle counter.
@@ -517,6 +519,7 @@ pub fn start_monotonic(priority: u8) {
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI9_5;
 
 /// SPI1's clock on and the block reset (the runtime's master takes it from there).
+#[cfg(feature = "rev-1-1")]
 fn enable_spi1() {
     // SAFETY: SPI1's reset and clock bits, owned by init.
     unsafe {
