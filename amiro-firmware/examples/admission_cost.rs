@@ -1,5 +1,6 @@
 //! The admission check's cost on the host: replays a `candump -l` stimulus (a QEMU scenario's log) through a
-//! board's [`Admission`] and prints each analysed command's fixed-point iterations. Run under
+//! board's [`Admission`] step by step, as the admission task runs them ([`Admission::replay`]), and prints each
+//! command's analysed steps with their fixed-point iterations. Run under
 //! `valgrind --tool=callgrind` to see where the instructions go.
 //!
 //! `cargo run --release -p amiro-firmware --example admission_cost -- diwheeldrive/qemu/admission-cost.log`

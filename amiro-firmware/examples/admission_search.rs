@@ -1,7 +1,8 @@
 //! A search for the on-chip admission check's costliest step (issue 20): random command sequences (publish
 //! requests of every topic of the robot at every level and a spread of periods, stops, one-shots, and with
-//! `policies` policy changes), each replayed through a board's [`Admission`] on the host exactly as the admission task runs it
-//! (a refresh step after a command that leaves a kept analysis stale), then hill-climbed by mutating single
+//! `policies` policy changes), each replayed through a board's [`Admission`] on the host step by step, as the admission
+//! task runs them ([`Admission::replay`]: the preparation steps, the decision, the refresh steps after a stop; each
+//! analyses at most one board and the bus), then hill-climbed by mutating single
 //! commands of the best sequence. The objective is a step's fixed-point iterations (what the host can count the
 //! same as the chip); the instructions the chip spends on the winner are measured by replaying its `candump -l`
 //! log in QEMU (scenario `admission-search`, which checks them against the admission task's budget).
