@@ -389,3 +389,38 @@ fn scenario_mistakes_name_the_field() {
         );
     }
 }
+
+#[test]
+fn every_admission_budget_covers_its_recorded_worst_step() {
+    let models = root().join(scenario::MODELS_DIR);
+    let mut checked = 0;
+    for dir in [models.clone(), models.join("rev-1-2")] {
+        for entry in std::fs::read_dir(&dir).expect("models") {
+            let path = entry.expect("entry").path();
+            if !path.to_string_lossy().ends_with(".timing.json") {
+                continue;
+            }
+            let text = std::fs::read_to_string(&path).expect("timing file");
+            let timing: scenario::Timing = serde_json::from_str(&text).expect("a timing file");
+            let Some(task) = timing.tasks.get("admit_requests") else {
+                continue;
+            };
+            let step = task
+                .worst_step
+                .as_ref()
+                .unwrap_or_else(|| panic!("{}: no worst_step for admit_requests", path.display()));
+            let budget = task.wcet_us.expect("a budget");
+            assert!(
+                step.on_chip_us() <= budget,
+                "{}: the recorded worst step takes {:.0} µs, over the {budget} µs budget",
+                path.display(),
+                step.on_chip_us()
+            );
+            checked += 1;
+        }
+    }
+    assert_eq!(
+        checked, 5,
+        "DiWheelDrive and LightRing (both revisions) and PowerManagement"
+    );
+}

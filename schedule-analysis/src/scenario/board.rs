@@ -443,9 +443,21 @@ fn admission_line(timing: &Timing, measured: &[String]) -> Option<String> {
         _ => return None,
     };
     let basis = if measured.iter().any(|m| m == "admit_requests") {
-        "a measured budget"
+        "a measured budget".to_string()
+    } else if let Some(step) = &task.worst_step {
+        format!(
+            "one step's budget, an estimate: the costliest step measured, {} instructions of its own ({} fixed-point iterations; {}), at an assumed {} cycles per instruction and {} MHz = {:.0} µs, the budget {:.0} % above it; not a bench measurement",
+            step.instructions,
+            step.iterations,
+            step.measured_in,
+            step.cycles_per_instruction,
+            step.clock_mhz,
+            step.on_chip_us(),
+            100.0 * (wcet / step.on_chip_us() - 1.0)
+        )
     } else {
-        "one step's budget, an estimate from the QEMU scenario admission-search (the costliest step a search found: its own execution in instructions, pre-emptions taken out, at an assumed cycles per instruction; the timing file's note has the figures), not a bench measurement"
+        "one step's budget, an estimate (no measured step recorded in the timing file), not a bench measurement"
+            .to_string()
     };
     Some(format!(
         "{}: admission reserves {:.1} % of the CPU (admit_requests: {:.0} µs per {:.0} µs), {basis}",

@@ -183,6 +183,31 @@ pub struct Measured {
     pub build: String,
 }
 
+/// The admission task's costliest step as measured in QEMU (`admit_requests`' budget rests on it): what
+/// `cargo xtask analyze` prints beside the reservation, and what scenario `admission-search` holds its replay to (the
+/// replay may not cost more than this record says).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct WorstStep {
+    /// Instructions the step executes of its own (pre-emptions taken out).
+    pub instructions: u64,
+    /// Its fixed-point iterations.
+    pub iterations: u64,
+    /// Where it was measured: the scenario and the image.
+    pub measured_in: String,
+    /// The chip's core clock the budget is for, MHz.
+    pub clock_mhz: f64,
+    /// The cycles per instruction assumed on that chip (an estimate until a robot measures it).
+    pub cycles_per_instruction: f64,
+}
+
+impl WorstStep {
+    /// The step's time on the chip, µs.
+    pub fn on_chip_us(&self) -> f64 {
+        self.instructions as f64 * self.cycles_per_instruction / self.clock_mhz
+    }
+}
+
 /// Where a board's app is.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -265,6 +290,9 @@ pub struct TimingTask {
     /// A measured budget; when present the analysis uses it instead of `wcet_us` (the estimate).
     #[serde(default)]
     pub measured: Option<Measured>,
+    /// The admission task only: the costliest step measured in QEMU, which its estimate rests on.
+    #[serde(default)]
+    pub worst_step: Option<WorstStep>,
 }
 
 /// Budgets of one published topic: one job of the publisher task per sample.

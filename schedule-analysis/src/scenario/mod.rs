@@ -34,7 +34,7 @@ mod qemu;
 
 pub use files::{
     AppSource, Arrival, Measured, Monotonic, QemuBuild, QemuTransmit, Scenario, ScenarioCommand,
-    ScenarioOneShot, ScenarioPublisher, Timing, TimingTask, TopicTiming, TraceCost,
+    ScenarioOneShot, ScenarioPublisher, Timing, TimingTask, TopicTiming, TraceCost, WorstStep,
     ACKS_PER_TRANSMIT_JOB, QEMU_FRAMES_PER_TRANSMIT_JOB,
 };
 
