@@ -204,13 +204,37 @@ mod tests {
         client
             .write_all(b"t6050\rC\rS8\rO\rt205401840302\rT123456780\r")
             .unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(50));
-        let frames = adapter.poll();
+        // Polled until the terminal has passed everything on both ways (a fixed 50 ms wait failed on a loaded
+        // machine): the client's end reads without blocking.
+        // SAFETY: the client's descriptor, open for the whole test.
+        unsafe {
+            let fd = std::os::fd::AsRawFd::as_raw_fd(&client);
+            libc::fcntl(
+                fd,
+                libc::F_SETFL,
+                libc::fcntl(fd, libc::F_GETFL) | libc::O_NONBLOCK,
+            );
+        }
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        let mut frames = Vec::new();
+        let mut got = Vec::new();
+        let mut exchange = |adapter: &mut Slcan, frames: &mut Vec<Frame>, until: &[u8]| {
+            while !got.ends_with(until) && std::time::Instant::now() < deadline {
+                frames.extend(adapter.poll());
+                let mut buffer = [0u8; 64];
+                if let Ok(n) = client.read(&mut buffer) {
+                    got.extend_from_slice(&buffer[..n]);
+                }
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+            std::mem::take(&mut got)
+        };
+        // Refused (not open), C, S8, O, the frame, the extended frame refused.
+        let answers = exchange(&mut adapter, &mut frames, b"z\r\x07");
+        assert_eq!(&answers[..], b"\x07\r\r\rz\r\x07");
         assert_eq!(frames, vec![Frame::new(0x205, &[1, 0x84, 3, 2]).unwrap()]);
         adapter.deliver(1_234_567, &Frame::new(0x605, &[0xAB]).unwrap());
-        std::thread::sleep(std::time::Duration::from_millis(50));
-        let mut got = [0u8; 64];
-        let n = client.read(&mut got).unwrap();
-        assert_eq!(&got[..n], b"\x07\r\r\rz\r\x07t6051AB\r");
+        let delivered = exchange(&mut adapter, &mut frames, b"t6051AB\r");
+        assert_eq!(&delivered[..], b"t6051AB\r");
     }
 }
