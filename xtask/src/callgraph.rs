@@ -7,7 +7,7 @@
 //! does not use, and code the linker did not name. Literal pools are skipped (the ELF's `$d` mapping symbols mark
 //! them); a word of data read as an instruction could only add an edge that is not there (a false alarm), never
 //! hide one, and an edge counts only when it lands on a function's first instruction.
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, ensure, Context, Result};
 use object::{Object, ObjectSection, ObjectSymbol, SymbolKind};
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::Path;
@@ -291,6 +291,31 @@ pub fn admission_panics(elf: &Path) -> Result<PanicPaths> {
 }
 
 /// Thumb halfwords as the bytes of an image (for tests of the decoders).
+/// No image's admission check can reach a panic: it decides on data from the bus. Prints each image's figures.
+pub fn check_images(reports: &[crate::elf::SizeReport]) -> Result<()> {
+    let mut failures = Vec::new();
+    for r in reports.iter().filter(|r| r.analysis_symbols > 0) {
+        let found = admission_panics(&r.elf)?;
+        println!(
+            "{} {}: the admission check ({} functions, {} reachable from them) reaches {} panic path(s)",
+            r.board,
+            r.revision,
+            found.check_functions,
+            found.reachable,
+            found.paths.len()
+        );
+        for path in found.paths {
+            failures.push(format!("{} {}: {}", r.board, r.revision, path.join(" → ")));
+        }
+    }
+    ensure!(
+        failures.is_empty(),
+        "the admission check can panic:\n{}",
+        failures.join("\n")
+    );
+    Ok(())
+}
+
 #[cfg(test)]
 pub(crate) fn thumb(halves: &[u16]) -> Vec<u8> {
     halves.iter().flat_map(|h| h.to_le_bytes()).collect()

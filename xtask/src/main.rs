@@ -176,8 +176,8 @@ fn run(cmd: Cmd) -> Result<bool> {
                 println!("{}", serde_json::to_string_pretty(&reports)?);
             } else {
                 elf::print_table(&reports);
-                admission_panic_free(&reports)?;
-                stack_bounds(&root, &reports)?;
+                callgraph::check_images(&reports)?;
+                stack::check_images(&root, &reports)?;
             }
             Ok(true)
         }
@@ -571,8 +571,8 @@ fn test(root: &Path) -> Result<()> {
     elf::print_table(&reports);
     let over = elf::over_budget(&reports);
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
-    admission_panic_free(&reports)?;
-    stack_bounds(root, &reports)?;
+    callgraph::check_images(&reports)?;
+    stack::check_images(root, &reports)?;
     run_scenarios(root, &every)?;
     // The whole robot on one bus (issue 23), with its bus report against the analysis.
     robot::scenarios::run_all(root)?;
@@ -582,94 +582,6 @@ fn test(root: &Path) -> Result<()> {
     interop::check(root)?;
     // The hostile-bus campaign, one run of 3000 spaced frames per board (issue 12).
     campaign::run(root, &BOARDS.iter().collect::<Vec<_>>(), 12, 3000, 1)
-}
-
-/// No image's admission check can reach a panic (`callgraph`): it decides on data from the bus.
-fn admission_panic_free(reports: &[elf::SizeReport]) -> Result<()> {
-    let mut failures = Vec::new();
-    for r in reports.iter().filter(|r| r.analysis_symbols > 0) {
-        let found = callgraph::admission_panics(&r.elf)?;
-        println!(
-            "{} {}: the admission check ({} functions, {} reachable from them) reaches {} panic path(s)",
-            r.board,
-            r.revision,
-            found.check_functions,
-            found.reachable,
-            found.paths.len()
-        );
-        for path in found.paths {
-            failures.push(format!("{} {}: {}", r.board, r.revision, path.join(" → ")));
-        }
-    }
-    ensure!(
-        failures.is_empty(),
-        "the admission check can panic:\n{}",
-        failures.join("\n")
-    );
-    Ok(())
-}
-
-/// Every image's static stack bound (`stack`), and the check that its static RAM and that bound fit the chip's RAM:
-/// a stack that cannot overflow into the statics, whatever QEMU's painted stack happened to see.
-fn stack_bounds(root: &Path, reports: &[elf::SizeReport]) -> Result<()> {
-    let mut failures = Vec::new();
-    for r in reports {
-        let source = std::fs::read_to_string(root.join(&r.board).join("src").join("main.rs"))
-            .with_context(|| format!("{}'s app source", r.board))?;
-        let app = schedule_analysis::rtic_source::parse_app(&source)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", r.board))?;
-        let mut priorities: Vec<u8> = app
-            .tasks
-            .iter()
-            .map(|t| t.priority)
-            .filter(|&p| p > 0)
-            .collect();
-        priorities.sort_unstable();
-        priorities.dedup();
-        // Each distinct task priority, the monotonic's timer interrupt, HardFault and NMI.
-        let levels = priorities.len() + 3;
-        let board = boards::by_name(&r.board).with_context(|| format!("no board {}", r.board))?;
-        let found = stack::bound(&r.elf, levels, board.hard_float)?;
-        let total = r.ram_used + found.bytes;
-        let deepest = stack::chain_names(&r.elf, &found.thread.chain)?;
-        println!(
-            "{} {}: stack ≤ {} B (thread mode {} B, {} nested handlers of {} levels with {}-byte exception frames); static RAM {} B + stack = {} B of {} B; thread mode's deepest: {}",
-            r.board,
-            r.revision,
-            found.bytes,
-            found.thread.bytes,
-            found.handlers.len(),
-            levels,
-            found.exception_frame,
-            r.ram_used,
-            total,
-            r.ram_available,
-            deepest.iter().map(|n| short(n)).collect::<Vec<_>>().join(" → ")
-        );
-        if total > r.ram_available {
-            failures.push(format!(
-                "{} {}: static RAM {} B and a stack bound of {} B exceed the chip's {} B",
-                r.board, r.revision, r.ram_used, found.bytes, r.ram_available
-            ));
-        }
-    }
-    ensure!(failures.is_empty(), "{}", failures.join("\n"));
-    Ok(())
-}
-
-/// A demangled name without its hash and generic arguments, for a one-line chain.
-fn short(name: &str) -> String {
-    let mut out = String::new();
-    let mut depth = 0;
-    for c in name.chars() {
-        match c {
-            '<' => depth += 1,
-            '>' => depth -= 1,
-            _ if depth == 0 => out.push(c),
-            _ => {}
-        }
-    }
-    out
 }
 
 /// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets, on a

@@ -13,7 +13,7 @@
 //! stack at once: the bound adds the `levels` deepest handlers of the vector table, each with its exception frame
 //! (the basic frame, or the extended one with the FPU's registers). That is sound without knowing which handler has
 //! which priority, and loose by as much as the deepest handlers share a level.
-use anyhow::{bail, Result};
+use anyhow::{bail, ensure, Context, Result};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -263,6 +263,70 @@ pub fn bound(elf: &Path, levels: usize, fpu: bool) -> Result<StackBound> {
 pub fn chain_names(elf: &Path, chain: &[u64]) -> Result<Vec<String>> {
     let image = Image::read(elf)?;
     Ok(chain.iter().map(|&a| image.name(a)).collect())
+}
+
+/// Every image's static stack bound, and the check that its static RAM and that bound fit the chip's RAM:
+/// a stack that cannot overflow into the statics, whatever QEMU's painted stack happened to see.
+pub fn check_images(root: &Path, reports: &[crate::elf::SizeReport]) -> Result<()> {
+    let mut failures = Vec::new();
+    for r in reports {
+        let source = std::fs::read_to_string(root.join(&r.board).join("src").join("main.rs"))
+            .with_context(|| format!("{}'s app source", r.board))?;
+        let app = schedule_analysis::rtic_source::parse_app(&source)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", r.board))?;
+        let mut priorities: Vec<u8> = app
+            .tasks
+            .iter()
+            .map(|t| t.priority)
+            .filter(|&p| p > 0)
+            .collect();
+        priorities.sort_unstable();
+        priorities.dedup();
+        // Each distinct task priority, the monotonic's timer interrupt, HardFault and NMI.
+        let levels = priorities.len() + 3;
+        let board =
+            crate::boards::by_name(&r.board).with_context(|| format!("no board {}", r.board))?;
+        let found = bound(&r.elf, levels, board.hard_float)?;
+        let total = r.ram_used + found.bytes;
+        let deepest = chain_names(&r.elf, &found.thread.chain)?;
+        println!(
+            "{} {}: stack ≤ {} B (thread mode {} B, {} nested handlers of {} levels with {}-byte exception frames); static RAM {} B + stack = {} B of {} B; thread mode's deepest: {}",
+            r.board,
+            r.revision,
+            found.bytes,
+            found.thread.bytes,
+            found.handlers.len(),
+            levels,
+            found.exception_frame,
+            r.ram_used,
+            total,
+            r.ram_available,
+            deepest.iter().map(|n| short(n)).collect::<Vec<_>>().join(" → ")
+        );
+        if total > r.ram_available {
+            failures.push(format!(
+                "{} {}: static RAM {} B and a stack bound of {} B exceed the chip's {} B",
+                r.board, r.revision, r.ram_used, found.bytes, r.ram_available
+            ));
+        }
+    }
+    ensure!(failures.is_empty(), "{}", failures.join("\n"));
+    Ok(())
+}
+
+/// A demangled name without its hash and generic arguments, for a one-line chain.
+fn short(name: &str) -> String {
+    let mut out = String::new();
+    let mut depth = 0;
+    for c in name.chars() {
+        match c {
+            '<' => depth += 1,
+            '>' => depth -= 1,
+            _ if depth == 0 => out.push(c),
+            _ => {}
+        }
+    }
+    out
 }
 
 #[cfg(test)]
