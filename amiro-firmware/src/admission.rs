@@ -96,7 +96,7 @@ pub struct State<const N: usize, const M: usize> {
     /// Whether the last command asked this board for a one-shot sample.
     sampled: bool,
     /// Whether a stream left the running set (a stop, a one-shot) since the kept analyses were brought up to
-    /// date: the admission task refreshes them as a step of its own ([`Admission::refresh_stale`]).
+    /// date: the admission task refreshes them one board per step ([`Admission::refresh_step`]).
     stale: bool,
     last_iterations: u64,
     worst_iterations: u64,
@@ -234,18 +234,6 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     /// Whether a kept analysis is stale: a stream left the running set since the last refresh.
     pub fn stale(&self) -> bool {
         self.state.stale
-    }
-
-    /// Re-analyses the boards whose streams left the running set (a stop, a one-shot): the admission task runs
-    /// it as a paced step of its own right after such a command, so that no decision re-analyses more than the
-    /// requesting board and the bus (`docs/analysis.md`, "The admission task"). Nothing when nothing is stale.
-    pub fn refresh_stale(&mut self) {
-        self.state.last_iterations = 0;
-        self.state.analysed = false;
-        self.state.sampled = false;
-        if self.state.stale {
-            self.refresh_steps(|_| {});
-        }
     }
 
     /// One step of bringing the kept analyses up to date with the running set (after boot, after a stop): analyses

@@ -799,16 +799,18 @@ fn evaluate_into<const N: usize, const M: usize>(
     found
 }
 
-/// Brings `cache` up to date with the running `streams` (analysing only the boards whose streams changed since
-/// their kept analysis) and returns the iterations it took: after boot, so that the first request does not pay
-/// for every board, and after a publisher stops.
+/// Brings `cache` up to date with the running `streams` (analysing only the boards whose kept analysis does not
+/// hold, each once) and returns the iterations it took: [`refresh_one`]'s steps back to back.
 pub fn refresh<const N: usize, const M: usize>(
     robot: &RobotTable<'_>,
     streams: &[Stream],
     cache: &mut Cache<M>,
 ) -> u64 {
-    let mut iterations = 0u64;
-    let _ = evaluate_into::<N, M>(robot, streams, None, &mut iterations, Some((cache, true)));
+    let (mut iterations, mut from) = (0u64, 0);
+    while let Some((board, spent)) = refresh_one::<N, M>(robot, streams, None, cache, from) {
+        iterations += spent;
+        from = board + 1;
+    }
     iterations
 }
 

@@ -93,6 +93,15 @@ pub fn default_clock_hz(board: &Board, qemu: bool) -> u64 {
     }
 }
 
+/// A QEMU scenario run's capture (from its work directory), as the bench reads it.
+pub fn read_scenario_run(root: &Path, board: &Board, work: &Path) -> Result<capture::Capture> {
+    capture::read_qemu_dir(
+        work,
+        default_clock_hz(board, true),
+        stimulus_task(root, board),
+    )
+}
+
 /// The task number of the board's QEMU stimulus replay (`stimulus`), if its app has one.
 fn stimulus_task(root: &Path, board: &Board) -> Option<u8> {
     amiro_firmware::trace_ids::board_names(root, board.name)
@@ -752,11 +761,7 @@ fn stream_live(
 pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)]) -> Result<()> {
     let mut failures = Vec::new();
     for (name, work) in runs {
-        let capture = capture::read_qemu_dir(
-            work,
-            default_clock_hz(board, true),
-            stimulus_task(root, board),
-        )?;
+        let capture = read_scenario_run(root, board, work)?;
         let bench = measure(root, board, &capture, name, true, None)
             .with_context(|| format!("bench of {} {name}", board.name))?;
         let dir = work.join("bench");

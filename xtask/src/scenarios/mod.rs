@@ -299,15 +299,7 @@ impl RunOutput {
             .iter()
             .position(|n| n == task)
             .with_context(|| format!("{board} has no task {task}"))?;
-        let stimulus = names
-            .iter()
-            .position(|n| n == "stimulus")
-            .and_then(|i| u8::try_from(i).ok());
-        let capture = crate::bench::capture::read_qemu_dir(
-            work,
-            crate::bench::default_clock_hz(spec, true),
-            stimulus,
-        )?;
+        let capture = crate::bench::read_scenario_run(&root, spec, work)?;
         let runs: Vec<_> = capture
             .runs
             .iter()
