@@ -32,15 +32,19 @@ pub trait Activations {
 }
 
 /// Incremental count of one interferer's activations: an iteration compares the grown window with each
-/// interferer's next activation and divides only for those it passed.
+/// interferer's next activation and divides only for those it passed. 32-bit fields: windows, periods, costs and
+/// jitters below 4.29 s (the boards' case) cost the Cortex-M3 single instructions; a window with anything larger
+/// is summed by dividing instead (the same numbers).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Counter {
-    /// Nominal instant of the next activation not yet counted: `count·T − J`.
-    next: u64,
+    /// Nominal instant of the next activation not yet counted, `count·T − J`, or `u32::MAX` when at or beyond it.
+    next: u32,
     /// Activations counted so far.
-    count: u64,
-    /// Which interferer.
-    index: usize,
+    count: u32,
+    /// The interferer's cost per activation, period and jitter, copied at the start of the window.
+    cost: u32,
+    period: u32,
+    jitter: u32,
 }
 
 /// What is analysed: one task (or one CAN message) against the streams that may delay it.
@@ -215,6 +219,7 @@ const MAX_INSTANCES: u64 = 50_000_000;
 /// task), it bounds the running time of the analysis on any input.
 pub const MAX_ITERATIONS: u64 = 10_000_000;
 
+#[inline(always)]
 fn add(a: u64, b: u64) -> Result<u64, AnalysisError> {
     a.checked_add(b).ok_or(AnalysisError::Overflow)
 }
@@ -483,6 +488,10 @@ struct Window<'a, 'b, A> {
     len: usize,
     /// Σ count·C over the heap.
     sum: u64,
+    /// The window the counters were last brought to: every counter's next activation is at or beyond it, so a
+    /// window that has not grown past it changes no count (the first evaluation after [`Window::start`], the next
+    /// instance's first evaluation) and needs no pass over the counters.
+    reached: u32,
     horizon: u64,
     /// Evaluations of the interference sum allowed ([`Limits::iterations`]).
     max_iterations: u64,
@@ -509,6 +518,7 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
             heap,
             len: 0,
             sum: 0,
+            reached: 0,
             horizon: limits.horizon.as_ns(),
             max_iterations: limits.iterations.min(MAX_ITERATIONS),
             iterations: 0,
@@ -527,65 +537,117 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
         if self.heap.is_empty() {
             return Ok(());
         }
+        let Ok(x32) = u32::try_from(x) else {
+            // A window beyond 32 bits: summed by dividing (`demand`).
+            self.heap = &mut [];
+            return Ok(());
+        };
+        self.reached = x32;
         for (k, other) in self.others.iter().enumerate() {
             let Some((c, t, j)) = self.usable(k, other) else {
                 continue;
             };
-            let count = ceil_div(add(x, j)?, t);
-            if let Some(slot) = self.heap.get_mut(self.len) {
-                *slot = Counter {
-                    next: mul(count, t)?.saturating_sub(j),
+            let counted = (|| {
+                let (c, t, j) = (
+                    u32::try_from(c).ok()?,
+                    u32::try_from(t).ok()?,
+                    u32::try_from(j).ok()?,
+                );
+                let count = ceil32(x32.checked_add(j)?, t)?;
+                Some(Counter {
+                    next: next_activation(count, t, j),
                     count,
-                    index: k,
-                };
-                self.len += 1;
-            }
-            self.sum = add(self.sum, mul(count, c)?)?;
+                    cost: c,
+                    period: t,
+                    jitter: j,
+                })
+            })();
+            let (Some(counter), Some(slot)) = (counted, self.heap.get_mut(self.len)) else {
+                // Outside 32 bits: this window is summed by dividing.
+                self.heap = &mut [];
+                self.len = 0;
+                return Ok(());
+            };
+            *slot = counter;
+            self.len += 1;
+            self.sum = add(self.sum, u64::from(counter.count) * u64::from(counter.cost))?;
         }
         Ok(())
     }
 
     /// Σ_k ⌈(x + J_k)/T_k⌉·C_k. With counters, `x` must not decrease between calls after [`Window::start`]:
-    /// a counter is only touched (one division) when the window passed its next activation.
+    /// a counter is only touched (one division at most) when the window passed its next activation.
     fn demand(&mut self, x: u64) -> Result<u64, AnalysisError> {
         self.iterations += 1;
         if self.iterations > self.max_iterations {
             return Err(AnalysisError::IterationLimit);
         }
-        if self.heap.is_empty() {
-            let mut sum = 0u64;
-            for (k, other) in self.others.iter().enumerate() {
-                if let Some((c, t, j)) = self.usable(k, other) {
-                    sum = add(sum, mul(ceil_div(add(x, j)?, t), c)?)?;
+        if let Ok(x32) = u32::try_from(x) {
+            if !self.heap.is_empty() {
+                if let Some(sum) = self.count_to(x32) {
+                    return Ok(sum);
                 }
+                // A count outside 32 bits: the rest of this window is summed by dividing.
+                self.heap = &mut [];
             }
-            return Ok(sum);
+        } else {
+            self.heap = &mut [];
         }
-        let others = self.others;
+        let mut sum = 0u64;
+        for (k, other) in self.others.iter().enumerate() {
+            if let Some((c, t, j)) = self.usable(k, other) {
+                sum = add(sum, mul(ceil_div(add(x, j)?, t), c)?)?;
+            }
+        }
+        Ok(sum)
+    }
+
+    /// The counters brought to `x` (`None`: a count left 32 bits).
+    fn count_to(&mut self, x: u32) -> Option<u64> {
+        if x <= self.reached {
+            return Some(self.sum);
+        }
         let counters = self.heap.get_mut(..self.len).unwrap_or(&mut []);
+        let mut sum = self.sum;
         for counter in counters.iter_mut().filter(|counter| counter.next < x) {
-            let Some(other) = others.get(counter.index) else {
-                continue;
-            };
-            let (c, t, j) = (
-                other.activation_cost().as_ns(),
-                other.period().as_ns(),
-                other.jitter().as_ns(),
-            );
+            let (c, t, j) = (counter.cost, counter.period, counter.jitter);
             // The window passed one activation (the common case: `next < x ≤ next + T`): the count at `x` is
             // one more, no division. Otherwise jump straight to the count at `x` (one division however many
             // activations the window grew by).
-            let count = if x - counter.next <= t {
-                counter.count + 1
+            if x - counter.next <= t && counter.next != 0 {
+                // One more activation: the next one a period later (`next` is `count·T − J` itself, not
+                // clamped at 0; saturating at `u32::MAX`, which no 32-bit window passes).
+                counter.count = counter.count.checked_add(1)?;
+                counter.next = counter.next.saturating_add(t);
+                sum = sum.checked_add(u64::from(c))?;
             } else {
-                ceil_div(add(x, j)?, t).max(counter.count + 1)
-            };
-            self.sum = add(self.sum, mul(count - counter.count, c)?)?;
-            counter.count = count;
-            counter.next = mul(count, t)?.saturating_sub(j);
+                let count = ceil32(x.checked_add(j)?, t)?.max(counter.count.checked_add(1)?);
+                sum = sum.checked_add(u64::from(count - counter.count) * u64::from(c))?;
+                counter.count = count;
+                counter.next = next_activation(count, t, j);
+            }
         }
-        Ok(self.sum)
+        self.sum = sum;
+        self.reached = x;
+        Some(sum)
     }
+}
+
+/// `⌈a / b⌉` in 32 bits (`None` for a zero `b`).
+#[inline(always)]
+fn ceil32(a: u32, b: u32) -> Option<u32> {
+    if a == 0 {
+        Some(0)
+    } else {
+        (a - 1).checked_div(b).map(|q| q + 1)
+    }
+}
+
+/// `count·T − J`, saturated at `u32::MAX` (no 32-bit window passes it).
+#[inline(always)]
+fn next_activation(count: u32, t: u32, j: u32) -> u32 {
+    let next = (u64::from(count) * u64::from(t)).saturating_sub(u64::from(j));
+    u32::try_from(next).unwrap_or(u32::MAX)
 }
 
 /// A start for the fixed point of `x = constant + Σ ⌈(x + shift + J_k)/T_k⌉·C_k` (plus the subject's own
@@ -762,7 +824,7 @@ fn non_preemptive<A: Activations>(
 mod tests {
     use super::*;
 
-    #[derive(Clone, Copy)]
+    #[derive(Clone, Copy, Debug)]
     struct Stream(u64, u64, u64);
 
     impl Activations for Stream {
@@ -867,6 +929,62 @@ mod tests {
         );
         assert_eq!(with, without);
         assert!(with.is_ok());
+    }
+
+    #[test]
+    fn windows_beyond_32_bits_are_counted_as_below() {
+        // Counters keep 32-bit nanoseconds; a window that grows past 4.29 s, or an interferer whose period,
+        // cost or jitter does not fit, is summed by dividing. Either way the answer is the division's, in both
+        // disciplines: a heavily loaded level (windows of seconds) and a period beyond 32 bits.
+        let second = 1_000_000_000u64;
+        let sets: [(&[Stream], Subject); 3] = [
+            (
+                &[
+                    Stream(700_000_000, second, 0),
+                    Stream(500_000_000, 2 * second, 7),
+                ],
+                subject(300_000_000, 60 * second),
+            ),
+            (
+                &[Stream(3, 7, 2), Stream(1_000, 5 * second, 4 * second)],
+                subject(5, 80),
+            ),
+            (
+                &[Stream(400_000_000, second, 5_000_000_000), Stream(2, 9, 1)],
+                subject(1_000_000, 10 * second),
+            ),
+        ];
+        for (others, s) in sets {
+            for discipline in [
+                Discipline::Preemptive,
+                Discipline::NonPreemptive {
+                    bit_time: Time::from_ns(1),
+                },
+            ] {
+                let mut scratch = [Counter::default(); 2];
+                let limits = Limits {
+                    horizon: Time::from_ns(1_000 * second),
+                    ..Limits::default()
+                };
+                let with = response_time(&s, others, None, discipline, &limits, &mut scratch);
+                let without = response_time(&s, others, None, discipline, &limits, &mut []);
+                assert_eq!(with, without, "{others:?} {discipline:?}");
+            }
+        }
+        // The first set's window does pass 2^32 ns.
+        let (others, s) = sets[0];
+        let r = response_time(
+            &s,
+            others,
+            None,
+            Discipline::Preemptive,
+            &Limits::default(),
+            &mut [Counter::default(); 2],
+        );
+        assert!(
+            r.is_ok_and(|r| r.busy_window.as_ns() > u64::from(u32::MAX)),
+            "{r:?}"
+        );
     }
 
     #[test]
