@@ -47,6 +47,27 @@ pub struct Counter {
     jitter: u32,
 }
 
+impl Counter {
+    /// The counter of an interferer (cost `c`, period `t`, jitter `j`) at window `x`: `⌈(x + J)/T⌉` activations
+    /// (`None` outside 32 bits).
+    #[inline(always)]
+    fn at(x: u32, c: u64, t: u64, j: u64) -> Option<Counter> {
+        let (c, t, j) = (
+            u32::try_from(c).ok()?,
+            u32::try_from(t).ok()?,
+            u32::try_from(j).ok()?,
+        );
+        let count = ceil32(x.checked_add(j)?, t)?;
+        Some(Counter {
+            next: next_activation(count, t, j),
+            count,
+            cost: c,
+            period: t,
+            jitter: j,
+        })
+    }
+}
+
 /// What is analysed: one task (or one CAN message) against the streams that may delay it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Subject {
@@ -547,21 +568,7 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
             let Some((c, t, j)) = self.usable(k, other) else {
                 continue;
             };
-            let counted = (|| {
-                let (c, t, j) = (
-                    u32::try_from(c).ok()?,
-                    u32::try_from(t).ok()?,
-                    u32::try_from(j).ok()?,
-                );
-                let count = ceil32(x32.checked_add(j)?, t)?;
-                Some(Counter {
-                    next: next_activation(count, t, j),
-                    count,
-                    cost: c,
-                    period: t,
-                    jitter: j,
-                })
-            })();
+            let counted = Counter::at(x32, c, t, j);
             let (Some(counter), Some(slot)) = (counted, self.heap.get_mut(self.len)) else {
                 // Outside 32 bits: this window is summed by dividing.
                 self.heap = &mut [];
@@ -609,7 +616,10 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
         }
         let counters = self.heap.get_mut(..self.len).unwrap_or(&mut []);
         let mut sum = self.sum;
-        for counter in counters.iter_mut().filter(|counter| counter.next < x) {
+        for counter in counters.iter_mut() {
+            if counter.next >= x {
+                continue;
+            }
             let (c, t, j) = (counter.cost, counter.period, counter.jitter);
             // The window passed one activation (the common case: `next < x ≤ next + T`): the count at `x` is
             // one more, no division. Otherwise jump straight to the count at `x` (one division however many
