@@ -982,13 +982,18 @@ impl<const M: usize> Summary<M> {
     /// stops none of its windows (a request with a long period moves the horizon, and so the key, of every board).
     fn holds_for(&self, key: &BoardKey<M>) -> bool {
         let (kept, new) = (&self.key, key);
+        // Only the first `len` streams: the rest are zero in both (a whole-array comparison is a `memcmp` of
+        // every capacity slot, five times per board and decision).
+        let same = |i: usize| {
+            kept.topic.get(i) == new.topic.get(i)
+                && kept.level.get(i) == new.level.get(i)
+                && kept.dlc.get(i) == new.dlc.get(i)
+                && kept.period.get(i) == new.period.get(i)
+                && kept.deadline.get(i) == new.deadline.get(i)
+        };
         self.kept
             && kept.len == new.len
-            && kept.topic == new.topic
-            && kept.level == new.level
-            && kept.dlc == new.dlc
-            && kept.period == new.period
-            && kept.deadline == new.deadline
+            && (0..usize::from(new.len)).all(same)
             && (kept.horizon == new.horizon || (!self.beyond && self.reach <= new.horizon.as_ns()))
     }
 
