@@ -684,15 +684,29 @@ struct SenderBounds<const M: usize> {
     receiver: [u64; M],
 }
 
-fn horizon<const M: usize>(robot: &RobotTable<'_>, streams: &View<'_, M>) -> Time {
-    // As the host: max(60 s, 1000 × the longest period or deadline of any task or message).
-    let mut longest = Time::ZERO;
-    for b in robot.boards {
-        for t in b.tasks {
-            longest = longest.max_of(row_time(t.period));
-            if t.deadline != NO_DEADLINE {
-                longest = longest.max_of(row_time(t.deadline));
+fn horizon<const M: usize>(
+    robot: &RobotTable<'_>,
+    streams: &View<'_, M>,
+    known: Option<&mut Time>,
+) -> Time {
+    // As the host: max(60 s, 1000 × the longest period or deadline of any task or message). The fixed tasks' part
+    // is the same for every configuration: a cache keeps it (zero: not yet worked out), so a decision walks only
+    // its streams.
+    let mut longest = match known.as_deref() {
+        Some(&kept) if kept != Time::ZERO => kept,
+        _ => Time::ZERO,
+    };
+    if longest == Time::ZERO {
+        for b in robot.boards {
+            for t in b.tasks {
+                longest = longest.max_of(row_time(t.period));
+                if t.deadline != NO_DEADLINE {
+                    longest = longest.max_of(row_time(t.deadline));
+                }
             }
+        }
+        if let Some(slot) = known {
+            *slot = longest;
         }
     }
     for (_, s) in streams.iter() {
@@ -716,7 +730,11 @@ fn evaluate_into<const N: usize, const M: usize>(
         return Found::refused(Refusal::Capacity);
     };
     let limits = Limits {
-        horizon: horizon(robot, &streams),
+        horizon: horizon(
+            robot,
+            &streams,
+            cache.as_mut().map(|(c, _)| &mut c.fixed_longest),
+        ),
         iterations: DECISION_ITERATIONS,
     };
     let mut found = Found::default();
@@ -831,7 +849,7 @@ pub fn refresh_one<const N: usize, const M: usize>(
 ) -> Option<(usize, u64)> {
     let streams = View::<M>::new(running, request)?;
     let limits = Limits {
-        horizon: horizon(robot, &streams),
+        horizon: horizon(robot, &streams, Some(&mut cache.fixed_longest)),
         iterations: DECISION_ITERATIONS,
     };
     let requesting = request.and_then(|r| r.sender).map(|x| usize::from(x.board));
@@ -875,6 +893,9 @@ pub const MAX_BOARDS: usize = 3;
 #[derive(Debug, Clone)]
 pub struct Cache<const M: usize> {
     boards: [Summary<M>; MAX_BOARDS],
+    /// The longest period or deadline of the robot's fixed tasks (the table's part of the horizon), once worked
+    /// out; zero before. A cache belongs to one robot table.
+    fixed_longest: Time,
 }
 
 impl<const M: usize> Cache<M> {
@@ -882,6 +903,7 @@ impl<const M: usize> Cache<M> {
     pub const fn new() -> Self {
         Self {
             boards: [Summary::EMPTY; MAX_BOARDS],
+            fixed_longest: Time::ZERO,
         }
     }
 }
@@ -1231,13 +1253,6 @@ fn insertion_sort(items: &mut [u8], after: impl Fn(u8, u8) -> bool) {
     }
 }
 
-/// One board's jobs, sorted by priority (most urgent first, ties in table order).
-struct Jobs<const N: usize> {
-    timings: [TaskTiming; N],
-    meta: [JobMeta; N],
-    len: usize,
-}
-
 /// What a job of a board's analysis is made of (indices are bytes: the working sets are below [`NO_JOB`]).
 #[derive(Debug, Clone, Copy)]
 enum Source {
@@ -1338,15 +1353,14 @@ fn analyse_board<const N: usize, const M: usize>(
     insertion_sort(order.get_mut(..count).unwrap_or(&mut []), |a, b| {
         urgency(a) < urgency(b)
     });
-    let mut jobs = Jobs::<N> {
-        timings: [EMPTY_TIMING; N],
-        meta: [EMPTY_META; N],
-        len: count,
-    };
+    // One board's jobs, sorted by priority (most urgent first, ties in table order): two arrays built in place
+    // (a struct of them was built and then copied, 1.7 KB a board analysis).
+    let mut timings = [EMPTY_TIMING; N];
+    let mut metas = [EMPTY_META; N];
     for ((&original, timing), meta) in order
         .iter()
-        .zip(jobs.timings.iter_mut())
-        .zip(jobs.meta.iter_mut())
+        .zip(timings.iter_mut())
+        .zip(metas.iter_mut())
         .take(count)
     {
         let what = source
@@ -1434,10 +1448,10 @@ fn analyse_board<const N: usize, const M: usize>(
             }
         };
     }
-    let len = jobs.len;
+    let len = count;
     // Sorted position of each original index; releasers as sorted positions.
     let mut position = [NO_JOB; N];
-    for (p, meta) in jobs.meta.iter().enumerate().take(len) {
+    for (p, meta) in metas.iter().enumerate().take(len) {
         if let Some(slot) = position.get_mut(usize::from(meta.original)) {
             *slot = p as u8;
         }
@@ -1453,7 +1467,7 @@ fn analyse_board<const N: usize, const M: usize>(
     // Jobs of one priority share it: worked out once per level (the jobs are sorted by priority).
     let mut blocking = [Time::ZERO; N];
     let mut last_level: Option<(u32, Time)> = None;
-    for (slot, timing) in blocking.iter_mut().zip(jobs.timings.iter()).take(len) {
+    for (slot, timing) in blocking.iter_mut().zip(timings.iter()).take(len) {
         let p = timing.priority;
         if let Some((_, known)) = last_level.filter(|&(level, _)| level == p) {
             *slot = known;
@@ -1491,14 +1505,14 @@ fn analyse_board<const N: usize, const M: usize>(
     }
     // Each job's share of the CPU, one division per job (not one per job and level as it is summed).
     let mut shares = [Share::default(); N];
-    for (share, timing) in shares.iter_mut().zip(jobs.timings.iter()).take(len) {
+    for (share, timing) in shares.iter_mut().zip(timings.iter()).take(len) {
         *share = Share::of(timing.wcet, timing.period);
     }
     // Where each job's priority level ends (the jobs are sorted by priority).
     let mut level_end = [0u8; N];
     let mut end = len;
     for i in (0..len).rev() {
-        if let (Some(t), Some(next)) = (jobs.timings.get(i), jobs.timings.get(i + 1)) {
+        if let (Some(t), Some(next)) = (timings.get(i), timings.get(i + 1)) {
             if t.priority != next.priority {
                 end = i + 1;
             }
@@ -1516,16 +1530,14 @@ fn analyse_board<const N: usize, const M: usize>(
     let mut wcrt = [NONE; N];
     let mut first_window = [Time::ZERO; N];
     let mut scratch = [Counter::default(); N];
-    let chained = jobs.meta.iter().take(len).any(|m| m.released_by != NO_JOB);
-    let in_pass = jobs
-        .meta
+    let chained = metas.iter().take(len).any(|m| m.released_by != NO_JOB);
+    let in_pass = metas
         .iter()
-        .zip(jobs.timings.iter())
+        .zip(timings.iter())
         .take(len)
         .all(|(meta, timing)| {
             meta.released_by == NO_JOB
-                || jobs
-                    .timings
+                || timings
                     .get(usize::from(at(meta.released_by)))
                     .is_some_and(|releaser| releaser.priority > timing.priority)
         });
@@ -1544,23 +1556,16 @@ fn analyse_board<const N: usize, const M: usize>(
         let mut level_start = 0;
         let mut previous_level = 0..0;
         for i in 0..len {
-            let Some(priority) = jobs.timings.get(i).map(|t| t.priority) else {
+            let Some(priority) = timings.get(i).map(|t| t.priority) else {
                 break;
             };
-            if i == 0
-                || jobs
-                    .timings
-                    .get(i - 1)
-                    .is_some_and(|t| t.priority != priority)
-            {
+            if i == 0 || timings.get(i - 1).is_some_and(|t| t.priority != priority) {
                 previous_level = level_start..i;
                 level_start = i;
                 if in_pass {
                     // Entering a level: its released jobs take their (more urgent, done) releasers' bounds.
                     for p in i..len {
-                        let (Some(meta), Some(timing)) =
-                            (jobs.meta.get(p), jobs.timings.get_mut(p))
-                        else {
+                        let (Some(meta), Some(timing)) = (metas.get(p), timings.get_mut(p)) else {
                             break;
                         };
                         if timing.priority != priority {
@@ -1575,11 +1580,11 @@ fn analyse_board<const N: usize, const M: usize>(
                 }
                 // The level's load, with its jitters as they are now (as `board::LevelLoads` sums it).
                 let end = usize::from(level_end.get(i).copied().unwrap_or(0));
-                for (share, timing) in shares.iter().zip(jobs.timings.iter()).take(end).skip(i) {
+                for (share, timing) in shares.iter().zip(timings.iter()).take(end).skip(i) {
                     prefix = prefix.plus(share.load(timing.jitter));
                 }
             }
-            let (Some(&task), Some(&blocking_i)) = (jobs.timings.get(i), blocking.get(i)) else {
+            let (Some(&task), Some(&blocking_i)) = (timings.get(i), blocking.get(i)) else {
                 break;
             };
             // As the report: start from a more urgent level's first window when provably below this one's.
@@ -1594,7 +1599,7 @@ fn analyse_board<const N: usize, const M: usize>(
                 .filter_map(|k| first_window.get(k).copied())
                 .max()
                 .unwrap_or(Time::ZERO);
-            let timings = jobs.timings.get(..len).unwrap_or(&[]);
+            let timings = timings.get(..len).unwrap_or(&[]);
             let own = shares.get(i).copied().unwrap_or_default();
             let load = prefix.minus(own.load(task.jitter));
             let result = board::response_time_at_level(
@@ -1636,13 +1641,13 @@ fn analyse_board<const N: usize, const M: usize>(
         }
         let mut changed = false;
         for p in 0..len {
-            let Some(meta) = jobs.meta.get(p).copied() else {
+            let Some(meta) = metas.get(p).copied() else {
                 continue;
             };
             if meta.released_by == NO_JOB {
                 continue;
             }
-            match (inherited(&meta, &wcrt), jobs.timings.get_mut(p)) {
+            match (inherited(&meta, &wcrt), timings.get_mut(p)) {
                 (Some(jitter), Some(timing)) => {
                     if timing.jitter != jitter {
                         timing.jitter = jitter;
@@ -1662,7 +1667,7 @@ fn analyse_board<const N: usize, const M: usize>(
         }
     }
     if !settled {
-        for (slot, meta) in wcrt.iter_mut().zip(jobs.meta.iter()).take(len) {
+        for (slot, meta) in wcrt.iter_mut().zip(metas.iter()).take(len) {
             if meta.released_by != NO_JOB {
                 *slot = NONE;
             }
@@ -1672,7 +1677,7 @@ fn analyse_board<const N: usize, const M: usize>(
     // The first violation in table order.
     for original in 0..len {
         let p = usize::from(at(original as u8));
-        let (Some(meta), Some(&w)) = (jobs.meta.get(p), wcrt.get(p)) else {
+        let (Some(meta), Some(&w)) = (metas.get(p), wcrt.get(p)) else {
             continue;
         };
         let missed = w == NONE || w > meta.deadline.as_ns();
@@ -1707,7 +1712,7 @@ fn analyse_board<const N: usize, const M: usize>(
         let job = (0..len)
             .map(|original| usize::from(at(original as u8)))
             .find(|&p| {
-                jobs.meta
+                metas
                     .get(p)
                     .is_some_and(|meta| meta.id == TaskId::Publisher(sender.topic))
             });
