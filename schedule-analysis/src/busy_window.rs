@@ -57,9 +57,9 @@ impl Counter {
             u32::try_from(t).ok()?,
             u32::try_from(j).ok()?,
         );
-        let count = ceil32(x.checked_add(j)?, t)?;
+        let (count, next) = count_at(x, t, j)?;
         Some(Counter {
-            next: next_activation(count, t, j),
+            next,
             count,
             cost: c,
             period: t,
@@ -631,10 +631,14 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
                 counter.next = counter.next.saturating_add(t);
                 sum = sum.checked_add(u64::from(c))?;
             } else {
-                let count = ceil32(x.checked_add(j)?, t)?.max(counter.count.checked_add(1)?);
+                let (mut count, mut next) = count_at(x, t, j)?;
+                if count <= counter.count {
+                    count = counter.count.checked_add(1)?;
+                    next = next_activation(count, t, j);
+                }
                 sum = sum.checked_add(u64::from(count - counter.count) * u64::from(c))?;
                 counter.count = count;
-                counter.next = next_activation(count, t, j);
+                counter.next = next;
             }
         }
         self.sum = sum;
@@ -643,14 +647,19 @@ impl<'a, 'b, A: Activations> Window<'a, 'b, A> {
     }
 }
 
-/// `⌈a / b⌉` in 32 bits (`None` for a zero `b`).
+/// An interferer's activations before `x`, `count = ⌈(x + J)/T⌉`, and its next activation `count·T − J` (saturated
+/// at `u32::MAX`, which no 32-bit window passes), from one division: with `q, r` the quotient and remainder of
+/// `x + J − 1` by `T`, `count = q + 1` and `count·T − J = x + (T − 1 − r)` — no 64-bit multiply. `None` for a zero `T`
+/// or `x + J` beyond 32 bits.
 #[inline(always)]
-fn ceil32(a: u32, b: u32) -> Option<u32> {
+fn count_at(x: u32, t: u32, j: u32) -> Option<(u32, u32)> {
+    let a = x.checked_add(j)?;
     if a == 0 {
-        Some(0)
-    } else {
-        (a - 1).checked_div(b).map(|q| q + 1)
+        return Some((0, 0));
     }
+    let q = (a - 1).checked_div(t)?;
+    let r = (a - 1) - q * t;
+    Some((q + 1, x.saturating_add(t - 1 - r)))
 }
 
 /// `count·T − J`, saturated at `u32::MAX` (no 32-bit window passes it).
