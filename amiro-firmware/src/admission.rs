@@ -218,14 +218,24 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     /// its own board and the bus: the admission task's first refresh steps, back to back (a host
     /// replay's start; the task paces each step).
     pub fn prepare(&mut self) {
-        self.refresh_steps(|_| {});
+        self.steps(None, |_| {});
     }
 
-    /// [`Admission::refresh_step`] until every board's kept analysis holds (each board at most once);
-    /// `step` gets each step's iterations.
-    fn refresh_steps(&mut self, mut step: impl FnMut(u64)) {
+    /// One board's step: [`Admission::prepare_step`] for the command `before` (`id`, `data`), else
+    /// [`Admission::refresh_step`]. The admission task runs them from `from` 0 on, `from` one past the board of the
+    /// step before, until `None`, waiting between them; [`Admission::steps`] runs them back to back.
+    pub fn step(&mut self, before: Option<(u16, &[u8])>, from: usize) -> Option<usize> {
+        match before {
+            Some((id, data)) => self.prepare_step(id, data, from),
+            None => self.refresh_step(from),
+        }
+    }
+
+    /// [`Admission::step`] back to back until every board it concerns is done (each at most once); `step` gets each
+    /// step's iterations.
+    fn steps(&mut self, before: Option<(u16, &[u8])>, mut step: impl FnMut(u64)) {
         let mut from = 0;
-        while let Some(board) = self.refresh_step(from) {
+        while let Some(board) = self.step(before, from) {
             step(self.state.last_iterations);
             from = board + 1;
         }
@@ -292,11 +302,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
     /// its waits: the preparation steps, the decision, the refresh steps after a stop. `step` gets each analysed
     /// step's fixed-point iterations. For host replays (the cost search and its examples).
     pub fn replay(&mut self, id: u16, data: &[u8], mut step: impl FnMut(u64)) -> Check {
-        let mut from = 0;
-        while let Some(board) = self.prepare_step(id, data, from) {
-            step(self.state.last_iterations);
-            from = board + 1;
-        }
+        self.steps(Some((id, data)), &mut step);
         let check = self.on_command(id, data);
         if self.state.analysed {
             step(self.state.last_iterations);
@@ -304,7 +310,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         let analysed = self.state.analysed;
         let sampled = self.state.sampled;
         if self.state.stale {
-            self.refresh_steps(&mut step);
+            self.steps(None, &mut step);
         }
         // What the command itself did, as the task's pacing reads it.
         self.state.analysed = analysed;

@@ -276,24 +276,23 @@ pub async fn serve_admission<
     }
 }
 
-/// The admission task's refresh steps (`Admission::refresh_step`, or `prepare_step` for the command `before`): one
-/// board analysed per step, each board at most once. With `counted` each step counts in the pacing's window like a
-/// decision (the refresh after a stop, as before it was split); the steps preparing a decision wait only the
-/// pacing's interval after a note (the decision they prepare is counted).
+/// The admission task's refresh steps (`Admission::step`: `prepare_step` for the command `before`, else
+/// `refresh_step`): one board analysed per step, each board at most once, paced. With `counted` each step counts in
+/// the pacing's window like a decision (the refresh after a stop, as before it was split); the steps preparing a
+/// decision wait only the pacing's interval after a note (the decision they prepare is counted).
 async fn refresh_steps<C: Clock, const N: usize, const M: usize, const K: usize>(
     admission: &mut crate::admission::Admission<'_, N, M>,
     pacing: &mut crate::admission::Pacing<K>,
     before: Option<&RxFrame>,
     counted: bool,
 ) {
+    let before = before.map(|frame| (frame.id, frame.payload()));
     let mut from = 0;
     loop {
         let started = C::now_us();
-        let step = match before {
-            Some(frame) => admission.prepare_step(frame.id, frame.payload(), from),
-            None => admission.refresh_step(from),
+        let Some(board) = admission.step(before, from) else {
+            break;
         };
-        let Some(board) = step else { break };
         from = board + 1;
         #[cfg(feature = "qemu")]
         note_refresh::<C, N, M>(admission, started);

@@ -692,10 +692,7 @@ fn horizon<const M: usize>(
     // As the host: max(60 s, 1000 × the longest period or deadline of any task or message). The fixed tasks' part
     // is the same for every configuration: a cache keeps it (zero: not yet worked out), so a decision walks only
     // its streams.
-    let mut longest = match known.as_deref() {
-        Some(&kept) if kept != Time::ZERO => kept,
-        _ => Time::ZERO,
-    };
+    let mut longest = known.as_deref().copied().unwrap_or(Time::ZERO);
     if longest == Time::ZERO {
         for b in robot.boards {
             for t in b.tasks {

@@ -570,14 +570,37 @@ fn admission_other_board(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 /// Virtual nanoseconds per instruction in the QEMU runs (`-icount shift=N`: 2^N ns).
 const NS_PER_INSTRUCTION: u64 = 1 << crate::qemu::ICOUNT_SHIFT;
 
-/// A QEMU latency at the F103's speed (72 MHz, the 1.5 cycles per instruction the admission budget assumes), every
-/// microsecond of it scaled as if it were instructions: frames on the bus and the sensors' transfers, which do not
-/// scale, are over-estimated and the transfers QEMU's simulated sensors do not take are missing, so an estimate of
-/// what a robot would show, not a bound (issue 20's 2 ms and 5 ms are the robot's, the scenarios check QEMU's).
-fn on_f103_us(virtual_us: u64) -> u64 {
-    const F103_NS_PER_INSTRUCTION: f64 = 1.5 * 1000.0 / 72.0;
-    (virtual_us as f64 * F103_NS_PER_INSTRUCTION / NS_PER_INSTRUCTION as f64).round() as u64
+/// A QEMU latency at the F103's speed (the clock and cycles per instruction DiWheelDrive's timing file states for its
+/// admission budget, `worst_step`), every microsecond of it scaled as if it were instructions: frames on the bus and
+/// the sensors' transfers, which do not scale, are over-estimated and the transfers QEMU's simulated sensors do not
+/// take are missing, so an estimate of what a robot would show, not a bound (issue 20's 2 ms and 5 ms are the
+/// robot's, the scenarios check QEMU's).
+fn on_f103_us(virtual_us: u64) -> Result<u64> {
+    let (_, step) = admission_budget(ADMISSION_BUDGETS[0])?;
+    let ns_per_instruction = step.cycles_per_instruction * 1000.0 / step.clock_mhz;
+    Ok((virtual_us as f64 * ns_per_instruction / NS_PER_INSTRUCTION as f64).round() as u64)
 }
+
+/// The admission task's budget and recorded worst step in the timing file `path`.
+fn admission_budget(path: &str) -> Result<(f64, schedule_analysis::scenario::WorstStep)> {
+    let text = std::fs::read_to_string(crate::workspace_root().join(path))
+        .with_context(|| path.to_string())?;
+    let timing: schedule_analysis::scenario::Timing =
+        serde_json::from_str(&text).with_context(|| path.to_string())?;
+    let task = timing
+        .tasks
+        .get("admit_requests")
+        .with_context(|| format!("{path}: no admit_requests"))?;
+    let budget = task
+        .wcet_us
+        .with_context(|| format!("{path}: admit_requests has no wcet_us"))?;
+    let step = task
+        .worst_step
+        .clone()
+        .with_context(|| format!("{path}: admit_requests records no worst_step"))?;
+    Ok((budget, step))
+}
+
 /// Every timing file that budgets the admission task (each records the costliest step measured and the chip's clock
 /// and cycles per instruction: `worst_step`).
 const ADMISSION_BUDGETS: [&str; 5] = [
@@ -620,21 +643,7 @@ fn against_budget(out: &RunOutput, steps: &[(u64, u64, String)]) -> Result<Strin
     let instructions = (own_us * 1000.0) as u64 / NS_PER_INSTRUCTION;
     let mut figures = Vec::new();
     for path in ADMISSION_BUDGETS {
-        let text = std::fs::read_to_string(crate::workspace_root().join(path))
-            .with_context(|| path.to_string())?;
-        let timing: schedule_analysis::scenario::Timing =
-            serde_json::from_str(&text).with_context(|| path.to_string())?;
-        let task = timing
-            .tasks
-            .get("admit_requests")
-            .with_context(|| format!("{path}: no admit_requests"))?;
-        let budget = task
-            .wcet_us
-            .with_context(|| format!("{path}: admit_requests has no wcet_us"))?;
-        let step = task
-            .worst_step
-            .as_ref()
-            .with_context(|| format!("{path}: admit_requests records no worst_step"))?;
+        let (budget, step) = admission_budget(path)?;
         let this_run_us = instructions as f64 * step.cycles_per_instruction / step.clock_mhz;
         ensure!(
             this_run_us <= budget,
@@ -818,7 +827,7 @@ fn admission_latency(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         firsts.push(format!(
             "{topic} {} µs (≈ {} µs at the F103's speed)",
             first - sent,
-            on_f103_us(first - sent)
+            on_f103_us(first - sent)?
         ));
     }
     ensure!(
@@ -904,7 +913,7 @@ fn admission_one_shots(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     Ok(format!(
         "gyroscope one-shot on the bus {} µs after its frame (≈ {} µs at the F103's speed, every µs scaled: an estimate, not a bound); {v} ({} µs after its frame); magnetometer-x kept its 900 µs grid ({} samples, worst latency {} µs); the accelerometer every 5 ms at low admitted beside it, first sample {} µs after its frame ({} samples)",
         gyro[0] - GYRO_ONCE,
-        on_f103_us(gyro[0] - GYRO_ONCE),
+        on_f103_us(gyro[0] - GYRO_ONCE)?,
         at - FLOOR_ONCE,
         mag.frames.len(),
         mag.worst_latency,
