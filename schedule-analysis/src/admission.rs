@@ -21,7 +21,9 @@
 //! (a property test checks that they agree).
 
 use crate::board::{self, TaskTiming};
-use crate::busy_window::{AnalysisError, Counter, Limits, Load, Response, Share};
+use crate::busy_window::{
+    linear_bound, AnalysisError, Counter, Limits, LinearTerms, Load, Response, Share, UTIL_ONE,
+};
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
 
@@ -611,11 +613,13 @@ struct JobMeta {
     original: u8,
 }
 
+/// The working arrays' placeholder (every entry the analysis reads is written first): all zero bytes, so that a
+/// `const` array of it is cleared in one go rather than copied from flash.
 const EMPTY_META: JobMeta = JobMeta {
     id: TaskId::Fixed(0),
     deadline: Time::ZERO,
     own_jitter: Time::ZERO,
-    released_by: NO_JOB,
+    released_by: 0,
     original: 0,
 };
 
@@ -1166,7 +1170,7 @@ fn analyse_bus<const M: usize>(
     let timings = timings.get(..n).unwrap_or(&[]);
     let mut blockings = [Time::ZERO; M];
     can::blockings(timings, &mut blockings);
-    let mut scratch = [Counter::default(); M];
+    let mut scratch = const { [Counter::ZERO; M] };
     let mut wcrt = [NONE; M];
     let mut first_window = [Time::ZERO; M];
     let mut busy = [Time::ZERO; M];
@@ -1352,8 +1356,8 @@ fn analyse_board<const N: usize, const M: usize>(
     });
     // One board's jobs, sorted by priority (most urgent first, ties in table order): two arrays built in place
     // (a struct of them was built and then copied, 1.7 KB a board analysis).
-    let mut timings = [EMPTY_TIMING; N];
-    let mut metas = [EMPTY_META; N];
+    let mut timings = const { [EMPTY_TIMING; N] };
+    let mut metas = const { [EMPTY_META; N] };
     for ((&original, timing), meta) in order
         .iter()
         .zip(timings.iter_mut())
@@ -1460,6 +1464,22 @@ fn analyse_board<const N: usize, const M: usize>(
             .unwrap_or(NO_JOB)
     };
 
+    // The jobs whose bound nothing else reads: a fixed task that releases no job and is neither the transmit
+    // interrupt nor the command handler (whose bounds the bus and the end-to-end paths read). Such a job only has
+    // to meet its deadline, so a closed-form bound that meets it settles it without a fixed point (below).
+    let mut settles = [false; N];
+    for (p, meta) in metas.iter().enumerate().take(len) {
+        if let (TaskId::Fixed(row), Some(slot)) = (meta.id, settles.get_mut(p)) {
+            let row = Some(row);
+            *slot = table.can_tx != row && table.command_handler != row;
+        }
+    }
+    for meta in metas.iter().take(len) {
+        if let Some(slot) = settles.get_mut(usize::from(at(meta.released_by))) {
+            *slot = false;
+        }
+    }
+
     // SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job.
     // Jobs of one priority share it: worked out once per level (the jobs are sorted by priority).
     let mut blocking = [Time::ZERO; N];
@@ -1526,7 +1546,7 @@ fn analyse_board<const N: usize, const M: usize>(
     // it; otherwise jitters change only between passes, exactly as in the report.
     let mut wcrt = [NONE; N];
     let mut first_window = [Time::ZERO; N];
-    let mut scratch = [Counter::default(); N];
+    let mut scratch = const { [Counter::ZERO; N] };
     let chained = metas.iter().take(len).any(|m| m.released_by != NO_JOB);
     let in_pass = metas
         .iter()
@@ -1548,8 +1568,10 @@ fn analyse_board<const N: usize, const M: usize>(
     };
     let mut settled = false;
     for _ in 0..MAX_JITTER_ROUNDS {
-        // The load of every job of this and the more urgent levels, summed as each level is entered.
+        // The load of every job of this and the more urgent levels, summed as each level is entered, and its
+        // closed-form terms.
         let mut prefix = Load::default();
+        let mut linear = LinearTerms::default();
         let mut level_start = 0;
         let mut previous_level = 0..0;
         for i in 0..len {
@@ -1579,11 +1601,48 @@ fn analyse_board<const N: usize, const M: usize>(
                 let end = usize::from(level_end.get(i).copied().unwrap_or(0));
                 for (share, timing) in shares.iter().zip(timings.iter()).take(end).skip(i) {
                     prefix = prefix.plus(share.load(timing.jitter));
+                    let (c, t, j) = (
+                        timing.wcet.as_ns(),
+                        timing.period.as_ns(),
+                        timing.jitter.as_ns(),
+                    );
+                    linear = linear.plus(LinearTerms::of(*share, c, t, j));
                 }
             }
             let (Some(&task), Some(&blocking_i)) = (timings.get(i), blocking.get(i)) else {
                 break;
             };
+            let own = shares.get(i).copied().unwrap_or_default();
+            // A job whose bound nothing reads, settled in closed form when the linear bound meets its deadline: one
+            // instance in its window (`w̄ + J ≤ T`), so its response is at most `w̄ + J`, and the level's shares
+            // rounded up within 100 % (so the exact analysis's, rounded down, are no overload). Otherwise, and for
+            // every other job, the exact fixed point.
+            let (c, t, j) = (task.wcet.as_ns(), task.period.as_ns(), task.jitter.as_ns());
+            let settled_here = settles
+                .get(i)
+                .is_some_and(|&s| s && linear.utilisation <= UTIL_ONE)
+                .then(|| {
+                    linear_bound(
+                        c,
+                        blocking_i.as_ns(),
+                        linear.minus(LinearTerms::of(own, c, t, j)),
+                    )
+                })
+                .flatten()
+                .map(|w| (w, w.saturating_add(j)))
+                .filter(|&(w, r)| {
+                    let deadline = metas.get(i).map_or(0, |m| m.deadline.as_ns());
+                    r <= t && r <= deadline && w <= limits.horizon.as_ns()
+                });
+            if let Some((w, r)) = settled_here {
+                if let (Some(ws), Some(fs)) = (wcrt.get_mut(i), first_window.get_mut(i)) {
+                    // An upper bound, read only by the deadline check; no start hint for the levels below.
+                    *ws = r;
+                    *fs = Time::ZERO;
+                }
+                summary.reach = summary.reach.max(w);
+                continue;
+            }
             // As the report: start from a more urgent level's first window when provably below this one's.
             let hint = previous_level
                 .clone()
@@ -1597,7 +1656,6 @@ fn analyse_board<const N: usize, const M: usize>(
                 .max()
                 .unwrap_or(Time::ZERO);
             let timings = timings.get(..len).unwrap_or(&[]);
-            let own = shares.get(i).copied().unwrap_or_default();
             let load = prefix.minus(own.load(task.jitter));
             let result = board::response_time_at_level(
                 timings,
@@ -1824,6 +1882,56 @@ mod tests {
         assert_eq!(d.refusal, Some(Refusal::Capacity));
         // Replacing the running publisher of the same topic needs no extra room.
         assert!(admit::<8, 1>(&ROBOT, &running, &request(2, 5000), false).admitted());
+    }
+
+    /// A fixed task whose bound nothing reads (no transmit interrupt, no command handler, it releases nothing)
+    /// needs no fixed point when the closed-form bound meets its deadline; when the bound does not but the exact
+    /// response does, the exact analysis settles it, and the verdict is the exact one either way.
+    #[test]
+    fn a_job_nothing_reads_is_settled_in_closed_form_when_its_bound_meets_its_deadline() {
+        // Alone, the 10 µs task every 1 ms: no iteration at all (the exact analysis took one).
+        let alone = evaluate::<8, 8>(&ROBOT, &[]);
+        assert_eq!((alone.refusal, alone.iterations), (None, 0));
+        // Below a publisher of 100 µs every 300 µs: exactly 10 + 100 = 110 µs, in closed form
+        // (10 + 100) / (1 − 1/3) ≈ 165 µs. With its 1 ms deadline the bound settles it; with 150 µs the exact
+        // analysis does (admitted), and with 100 µs it is refused, naming the exact 110 µs.
+        let above = request(0, 300);
+        let loose = evaluate::<8, 8>(&ROBOT, &[above]);
+        assert_eq!(loose.refusal, None);
+        for (deadline_us, refused) in [(150, false), (100, true)] {
+            let tasks = [TaskRow {
+                deadline: deadline_us * 1000,
+                ..TASKS[0]
+            }];
+            let boards = [BoardTable {
+                tasks: &tasks,
+                ..BOARDS[0]
+            }];
+            let robot = RobotTable {
+                boards: &boards,
+                ..ROBOT
+            };
+            let tight = evaluate::<8, 8>(&robot, &[above]);
+            assert!(
+                tight.iterations > loose.iterations,
+                "{deadline_us} µs: {tight:?}"
+            );
+            match tight.refusal {
+                None => assert!(!refused, "{deadline_us} µs"),
+                Some(Refusal::Deadline(v)) => {
+                    assert!(refused, "{deadline_us} µs");
+                    assert_eq!(
+                        v.culprit,
+                        Culprit::Task {
+                            board: 0,
+                            task: TaskId::Fixed(0)
+                        }
+                    );
+                    assert_eq!(v.wcrt, Some(Time::from_us(110)));
+                }
+                other => panic!("{deadline_us} µs: {other:?}"),
+            }
+        }
     }
 
     #[test]
