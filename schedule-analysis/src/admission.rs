@@ -1600,19 +1600,21 @@ fn analyse_board<const N: usize, const M: usize>(
                 // The level's load, with its jitters as they are now (as `board::LevelLoads` sums it).
                 let end = usize::from(level_end.get(i).copied().unwrap_or(0));
                 for (share, timing) in shares.iter().zip(timings.iter()).take(end).skip(i) {
-                    prefix = prefix.plus(share.load(timing.jitter));
+                    let load = share.load(timing.jitter);
+                    prefix = prefix.plus(load);
                     let (c, t, j) = (
                         timing.wcet.as_ns(),
                         timing.period.as_ns(),
                         timing.jitter.as_ns(),
                     );
-                    linear = linear.plus(LinearTerms::of(*share, c, t, j));
+                    linear = linear.plus(LinearTerms::of(load, c, t, j));
                 }
             }
             let (Some(&task), Some(&blocking_i)) = (timings.get(i), blocking.get(i)) else {
                 break;
             };
             let own = shares.get(i).copied().unwrap_or_default();
+            let own_load = own.load(task.jitter);
             // A job whose bound nothing reads, settled in closed form when the linear bound meets its deadline: one
             // instance in its window (`w̄ + J ≤ T`), so its response is at most `w̄ + J`, and the level's shares
             // rounded up within 100 % (so the exact analysis's, rounded down, are no overload). Otherwise, and for
@@ -1625,7 +1627,7 @@ fn analyse_board<const N: usize, const M: usize>(
                     linear_bound(
                         c,
                         blocking_i.as_ns(),
-                        linear.minus(LinearTerms::of(own, c, t, j)),
+                        linear.minus(LinearTerms::of(own_load, c, t, j)),
                     )
                 })
                 .flatten()
@@ -1656,7 +1658,7 @@ fn analyse_board<const N: usize, const M: usize>(
                 .max()
                 .unwrap_or(Time::ZERO);
             let timings = timings.get(..len).unwrap_or(&[]);
-            let load = prefix.minus(own.load(task.jitter));
+            let load = prefix.minus(own_load);
             let result = board::response_time_at_level(
                 timings,
                 i,

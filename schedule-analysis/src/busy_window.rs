@@ -304,27 +304,36 @@ pub struct LinearTerms {
 }
 
 impl LinearTerms {
-    /// The terms of a job of cost `c`, period `t` and release jitter `j` (ns) whose [`Share`] is `share` (its
-    /// utilisation rounded down, worked out once), with no division: nothing for one that costs nothing (the exact
-    /// analysis skips it too); a utilisation of 100 % for one the bound cannot take (a zero period, or a cost of a
-    /// whole period), so that no bound is found beside it.
-    pub fn of(share: Share, c: u64, t: u64, j: u64) -> LinearTerms {
+    /// The terms of a job of cost `c`, period `t` and release jitter `j` (ns) whose [`Load`] as an interferer is
+    /// `load` ([`Share::load`]: its utilisation and jitter's share rounded down, worked out for the exact analysis
+    /// anyway), mostly without a multiply: nothing for one that costs nothing (the exact analysis skips it too); a
+    /// utilisation of 100 % for one the bound cannot take (a zero period, or a cost of a whole period), so that no
+    /// bound is found beside it.
+    #[inline]
+    pub fn of(load: Load, c: u64, t: u64, j: u64) -> LinearTerms {
         if c == 0 {
             return LinearTerms::default();
         }
-        let utilisation = if t >> 32 != 0 {
-            // `c · 2^24 / t ≤ c / 2^8` for periods beyond 2^32 ns (where the share is not the exact floor).
+        // Below 2^32 ns the load's terms are the exact floors (the 32-bit long division; `J·u` within 64 bits for
+        // jitters below 2^40 ns): `⌈U⌉ ≤ u + 1`, and `J·⌈U⌉ ≤ J·u + J` rounds up to at most
+        // `⌊J·u⌋ + ⌊J/2^24⌋ + 2`. Beyond, `c · 2^24 / t ≤ c / 2^8` bounds the utilisation, and a multiply the rest.
+        let exact = t >> 32 == 0;
+        let utilisation = if !exact {
             (c >> (32 - UTIL_BITS)).saturating_add(1)
         } else if c < t {
-            // The share is the exact floor here (the 32-bit long division): the ceiling is at most one more.
-            share.utilisation() + 1
+            load.utilisation + 1
         } else {
             UTIL_ONE
+        };
+        let jitter_load = if exact && j >> 40 == 0 {
+            load.jitter_load + (j >> UTIL_BITS) + 2
+        } else {
+            (j.saturating_mul(utilisation) >> UTIL_BITS).saturating_add(1)
         };
         LinearTerms {
             cost: c,
             utilisation,
-            jitter_load: (j.saturating_mul(utilisation) >> UTIL_BITS).saturating_add(1),
+            jitter_load,
         }
     }
 
@@ -1020,8 +1029,9 @@ mod tests {
             let t = 1 + next(scale * 4);
             let (c, b, j) = (1 + next(t / 4 + 1), next(t / 8 + 1), next(t / 2 + 1));
             let terms = others.iter().fold(LinearTerms::default(), |sum, o| {
-                let share = Share::of(Time::from_ns(o.0), Time::from_ns(o.1));
-                sum.plus(LinearTerms::of(share, o.0, o.1, o.2))
+                let load =
+                    Share::of(Time::from_ns(o.0), Time::from_ns(o.1)).load(Time::from_ns(o.2));
+                sum.plus(LinearTerms::of(load, o.0, o.1, o.2))
             });
             let Some(bound) = linear_bound(c, b, terms) else {
                 continue;
@@ -1070,7 +1080,8 @@ mod tests {
         ));
         // 100 % of interferers: no bound; a zero period or an interferer at 100 %: no terms.
         for (c, t) in [(5, 0), (5, 5)] {
-            let unusable = LinearTerms::of(Share::of(Time::from_ns(c), Time::from_ns(t)), c, t, 0);
+            let load = Share::of(Time::from_ns(c), Time::from_ns(t)).load(Time::ZERO);
+            let unusable = LinearTerms::of(load, c, t, 0);
             assert_eq!(linear_bound(1, 0, unusable), None, "{c} every {t}");
         }
         assert_eq!(
