@@ -753,13 +753,10 @@ fn evaluate_into<const N: usize, const M: usize>(
     // Whose analysis `fresh` holds.
     let mut fresh_board = None;
     for (b, table) in robot.boards.iter().enumerate() {
-        let Some(key) = BoardKey::<M>::of(b, &streams, limits.horizon) else {
-            return Found::refused(Refusal::Capacity);
-        };
         let hit = cache
             .as_ref()
             .and_then(|(c, _)| c.boards.get(b))
-            .is_some_and(|summary| summary.holds_for(&key));
+            .is_some_and(|summary| summary.holds_for(b, &streams, limits.horizon));
         let mut in_fresh = false;
         if !hit {
             let slot = cache
@@ -774,10 +771,10 @@ fn evaluate_into<const N: usize, const M: usize>(
                     &mut fresh
                 }
             };
-            *target = Summary {
-                key,
-                ..Summary::EMPTY
-            };
+            *target = Summary::EMPTY;
+            if target.key.fill(b, &streams, limits.horizon).is_none() {
+                return Found::refused(Refusal::Capacity);
+            }
             // Each board's analysis has its own budget (not what the boards before it left over): its outcome
             // depends on its own inputs only, so a kept analysis is the one a fresh decision would compute.
             if let Err(refusal) =
@@ -858,18 +855,15 @@ pub fn refresh_one<const N: usize, const M: usize>(
         if requesting == Some(b) {
             continue;
         }
-        let key = BoardKey::<M>::of(b, &streams, limits.horizon)?;
         let Some(slot) = cache.boards.get_mut(b) else {
             // Boards beyond the cache's are analysed in each decision.
             return None;
         };
-        if slot.holds_for(&key) {
+        if slot.holds_for(b, &streams, limits.horizon) {
             continue;
         }
-        *slot = Summary {
-            key,
-            ..Summary::EMPTY
-        };
+        *slot = Summary::EMPTY;
+        slot.key.fill(b, &streams, limits.horizon)?;
         let mut iterations = 0;
         if analyse_board::<N, M>(robot, b, table, &streams, &limits, &mut iterations, slot).is_ok()
         {
@@ -940,30 +934,24 @@ impl<const M: usize> BoardKey<M> {
         deadline: [0; M],
     };
 
-    fn of(b: usize, streams: &View<'_, M>, horizon: Time) -> Option<Self> {
-        // Field by field, not `..Self::EMPTY`: the zeroes are stores, not a copy of a constant.
-        let mut key = BoardKey {
-            horizon,
-            len: 0,
-            topic: [0; M],
-            level: [0; M],
-            dlc: [0; M],
-            period: [Time::ZERO; M],
-            deadline: [0; M],
-        };
+    /// Writes the key of board `b`'s streams in `streams` with `horizon` into `self` (in place: a key is a few
+    /// hundred bytes, and built and copied it was one `memcpy` per copy); `None` when the board sends more than `M`.
+    fn fill(&mut self, b: usize, streams: &View<'_, M>, horizon: Time) -> Option<()> {
+        self.horizon = horizon;
+        self.len = 0;
         for (_, s) in streams.iter() {
             let Some(sender) = s.sender.filter(|x| usize::from(x.board) == b) else {
                 continue;
             };
-            let i = usize::from(key.len);
-            *key.topic.get_mut(i)? = sender.topic;
-            *key.level.get_mut(i)? = sender.level;
-            *key.dlc.get_mut(i)? = s.dlc;
-            *key.period.get_mut(i)? = s.period;
-            *key.deadline.get_mut(i)? = s.deadline.map_or(NONE, Time::as_ns);
-            key.len += 1;
+            let i = usize::from(self.len);
+            *self.topic.get_mut(i)? = sender.topic;
+            *self.level.get_mut(i)? = sender.level;
+            *self.dlc.get_mut(i)? = s.dlc;
+            *self.period.get_mut(i)? = s.period;
+            *self.deadline.get_mut(i)? = s.deadline.map_or(NONE, Time::as_ns);
+            self.len += 1;
         }
-        Some(key)
+        Some(())
     }
 }
 
@@ -1001,23 +989,30 @@ struct Summary<const M: usize> {
 }
 
 impl<const M: usize> Summary<M> {
-    /// Whether this kept analysis is the one `key` would get: the same streams, and the same horizon or one that
-    /// stops none of its windows (a request with a long period moves the horizon, and so the key, of every board).
-    fn holds_for(&self, key: &BoardKey<M>) -> bool {
-        let (kept, new) = (&self.key, key);
-        // Only the first `len` streams: the rest are zero in both (a whole-array comparison is a `memcmp` of
-        // every capacity slot, five times per board and decision).
-        let same = |i: usize| {
-            kept.topic.get(i) == new.topic.get(i)
-                && kept.level.get(i) == new.level.get(i)
-                && kept.dlc.get(i) == new.dlc.get(i)
-                && kept.period.get(i) == new.period.get(i)
-                && kept.deadline.get(i) == new.deadline.get(i)
-        };
+    /// Whether this kept analysis is the one board `b` would get for `streams` at `horizon` (its key, compared with
+    /// the view as it is read: no key is built for a board whose analysis is kept): the same streams in the same
+    /// order, and the same horizon or one that stops none of its windows (a request with a long period moves the
+    /// horizon, and so the key, of every board).
+    fn holds_for(&self, b: usize, streams: &View<'_, M>, horizon: Time) -> bool {
+        let kept = &self.key;
+        let mut n = 0usize;
+        for (_, s) in streams.iter() {
+            let Some(sender) = s.sender.filter(|x| usize::from(x.board) == b) else {
+                continue;
+            };
+            let same = kept.topic.get(n) == Some(&sender.topic)
+                && kept.level.get(n) == Some(&sender.level)
+                && kept.dlc.get(n) == Some(&s.dlc)
+                && kept.period.get(n) == Some(&s.period)
+                && kept.deadline.get(n) == Some(&s.deadline.map_or(NONE, Time::as_ns));
+            if !same {
+                return false;
+            }
+            n += 1;
+        }
         self.kept
-            && kept.len == new.len
-            && (0..usize::from(new.len)).all(same)
-            && (kept.horizon == new.horizon || (!self.beyond && self.reach <= new.horizon.as_ns()))
+            && usize::from(kept.len) == n
+            && (kept.horizon == horizon || (!self.beyond && self.reach <= horizon.as_ns()))
     }
 
     const EMPTY: Self = Summary {
