@@ -22,7 +22,8 @@
 
 use crate::board::{self, TaskTiming};
 use crate::busy_window::{
-    linear_bound, AnalysisError, Counter, Limits, LinearTerms, Load, Response, Share, UTIL_ONE,
+    self, linear_bound, AnalysisError, Counter, Limits, LinearTerms, Load, Response, Share,
+    UTIL_ONE,
 };
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
@@ -69,8 +70,6 @@ pub const fn row_ceiling(ceiling: u8) -> u32 {
 pub struct TaskRow {
     /// Worst-case execution time with entry/exit/dispatcher overheads.
     pub cost: RowTime,
-    /// Best-case execution time (its best-case response).
-    pub bcet: RowTime,
     /// Period or minimum inter-arrival time (ignored when `own_frame`).
     pub period: RowTime,
     /// Deadline from the release event; [`NO_DEADLINE`]: the period.
@@ -84,6 +83,41 @@ pub struct TaskRow {
     /// Activated once per frame this board sends: its period is the best-case time of the shortest frame the board's
     /// publishers send (the shortest frame on the bus when it sends nothing).
     pub own_frame: bool,
+    /// Its share of the CPU, [`row_share`]`(cost, period)`, worked out when the table is built so that a decision
+    /// divides only for its streams' jobs; [`SHARE_AT_RUNTIME`]: worked out by the check (an `own_frame` task, whose
+    /// period depends on the streams, or a zero period).
+    pub share: u32,
+}
+
+/// The longest of `sections` that blocks a job of priority `p` under SRP (`board::srp_blocking`): a section of a
+/// lower-priority holder on a resource whose ceiling reaches `p` (0 when none does). [`BoardTable::blocking`] holds
+/// it per priority.
+pub fn fixed_blocking(sections: &[SectionRow], p: u32) -> RowTime {
+    let mut longest = 0;
+    for cs in sections {
+        if u32::from(cs.holder_priority) < p && row_ceiling(cs.ceiling) >= p {
+            longest = longest.max(cs.length);
+        }
+    }
+    longest
+}
+
+/// In [`TaskRow::share`]: the check works the share out itself.
+pub const SHARE_AT_RUNTIME: u32 = u32::MAX;
+
+/// A fixed task's share of the CPU, `⌊cost/period · 2^UTIL_BITS⌋` capped at 100 % — exactly
+/// [`busy_window::Share::of`]'s for row times (below 2^32 ns) — for [`TaskRow::share`]; [`SHARE_AT_RUNTIME`] for a
+/// zero period. `const`, so a table can be checked against it.
+pub const fn row_share(cost: RowTime, period: RowTime) -> u32 {
+    if cost == 0 {
+        0
+    } else if period == 0 {
+        SHARE_AT_RUNTIME
+    } else if cost >= period {
+        UTIL_ONE as u32
+    } else {
+        (((cost as u64) << busy_window::UTIL_BITS) / period as u64) as u32
+    }
 }
 
 /// A critical section of a fixed task (or of `idle`, holder priority 0), its ceiling resolved: the core's
@@ -141,6 +175,9 @@ pub struct BoardTable<'a> {
     pub tasks: &'a [TaskRow],
     /// Critical sections of the fixed tasks and of `idle`.
     pub sections: &'a [SectionRow],
+    /// Per priority (the index), the longest of `sections` that blocks a job of that priority
+    /// ([`fixed_blocking`]), worked out when the table is built; a priority beyond it is worked out by the check.
+    pub blocking: &'a [RowTime],
     /// The topics it can publish, with their budgets.
     pub topics: &'a [TopicRow<'a>],
     /// RTIC priority of the publisher task per CAN priority level (urgent, high, medium, low); `None`: none.
@@ -1485,13 +1522,13 @@ fn analyse_board<const N: usize, const M: usize>(
             *slot = known;
             continue;
         }
-        // SRP (`board::srp_blocking`): a lower holder's section on a resource whose ceiling reaches `p`.
-        let mut longest = 0;
-        for cs in table.sections {
-            if u32::from(cs.holder_priority) < p && row_ceiling(cs.ceiling) >= p {
-                longest = longest.max(cs.length);
-            }
-        }
+        // SRP (`board::srp_blocking`): a lower holder's section on a resource whose ceiling reaches `p`; the fixed
+        // tasks' from the table.
+        let mut longest = usize::try_from(p)
+            .ok()
+            .and_then(|p| table.blocking.get(p))
+            .copied()
+            .unwrap_or_else(|| fixed_blocking(table.sections, p));
         for (_, s) in mine() {
             let Some(sender) = s.sender else { continue };
             let holder = table
@@ -1515,10 +1552,24 @@ fn analyse_board<const N: usize, const M: usize>(
         *slot = row_time(longest);
         last_level = Some((p, *slot));
     }
-    // Each job's share of the CPU, one division per job (not one per job and level as it is summed).
+    // Each job's share of the CPU: a fixed task's from its row (worked out when the table was built), the others'
+    // by one division each (not one per job and level as it is summed).
     let mut shares = [Share::default(); N];
-    for (share, timing) in shares.iter_mut().zip(timings.iter()).take(len) {
-        *share = Share::of(timing.wcet, timing.period);
+    for ((share, timing), meta) in shares
+        .iter_mut()
+        .zip(timings.iter())
+        .zip(metas.iter())
+        .take(len)
+    {
+        let known = match meta.id {
+            TaskId::Fixed(row) => table
+                .tasks
+                .get(usize::from(row))
+                .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
+                .map(|t| Share::with_utilisation(u64::from(t.share))),
+            _ => None,
+        };
+        *share = known.unwrap_or_else(|| Share::of(timing.wcet, timing.period));
     }
     // Where each job's priority level ends (the jobs are sorted by priority).
     let mut level_end = [0u8; N];
@@ -1795,17 +1846,18 @@ mod tests {
     const TASKS: [TaskRow; 1] = [TaskRow {
         priority: 3,
         cost: 10_000,
-        bcet: 5_000,
         period: 1_000_000,
         deadline: NO_DEADLINE,
         jitter: 0,
         released_by: NO_RELEASER,
         own_frame: false,
+        share: row_share(10_000, 1_000_000),
     }];
     const BOARDS: [BoardTable<'static>; 1] = [BoardTable {
         name: "test",
         tasks: &TASKS,
         sections: &[],
+        blocking: &[],
         topics: &TOPICS,
         levels: [Some(4), Some(3), Some(2), Some(1)],
         monotonic: None,

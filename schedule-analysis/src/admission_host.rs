@@ -60,6 +60,8 @@ pub struct OwnedBoard {
     pub tasks: Vec<TaskRow>,
     /// Their and idle's critical sections.
     pub sections: Vec<SectionRow>,
+    /// The longest of `sections` blocking each priority up to the board's highest job priority.
+    pub blocking: Vec<RowTime>,
     /// Publishable topics.
     pub topics: Vec<OwnedTopic>,
     /// Publisher task priority per level.
@@ -224,11 +226,23 @@ pub fn lower(
         let (mut sections, tasks) = lowering.task_rows()?;
         sections.extend(lowering.idle_rows()?);
         let publishers = lowering.publisher_rows(root, timing_paths)?;
+        // Every priority a job of the board can have: its tasks', its publisher levels' and its monotonic's.
+        let highest = tasks
+            .iter()
+            .map(|t| t.priority)
+            .chain(publishers.levels.iter().flatten().copied())
+            .chain(publishers.monotonic.map(|m| m.priority))
+            .max()
+            .unwrap_or(0);
+        let blocking = (0..=u32::from(highest))
+            .map(|p| admission::fixed_blocking(&sections, p))
+            .collect();
         boards.push(OwnedBoard {
             name: timing.board.clone(),
             task_names: board.tasks.iter().map(|t| t.name.clone()).collect(),
             tasks,
             sections,
+            blocking,
             topics: publishers.topics,
             levels: publishers.levels,
             monotonic: publishers.monotonic,
@@ -340,15 +354,11 @@ impl<'a> Lowering<'a> {
                         )
                     })?,
             };
-            tasks.push(TaskRow {
+            let mut row = TaskRow {
                 priority: rows.priority(&field("priority"), t.priority)?,
                 cost: rows.time(
                     &field("wcet_us"),
                     Time::from_us_up(t.wcet_us).plus(self.overheads.for_kind(t.kind)),
-                )?,
-                bcet: rows.time(
-                    &field("bcet_us"),
-                    Time::from_us_down(t.bcet_us.unwrap_or(0.0)),
                 )?,
                 period: rows.time(&field("period_us"), Time::from_us_down(t.period_us))?,
                 deadline: match t.deadline_us {
@@ -358,7 +368,12 @@ impl<'a> Lowering<'a> {
                 jitter: rows.time(&field("jitter_us"), Time::from_us_up(t.jitter_us))?,
                 released_by,
                 own_frame,
-            });
+                share: admission::SHARE_AT_RUNTIME,
+            };
+            if !own_frame {
+                row.share = admission::row_share(row.cost, row.period);
+            }
+            tasks.push(row);
             for (r, length) in &t.critical_sections_us {
                 let field = field(&format!("critical_sections_us.{r}"));
                 sections.push(SectionRow {
@@ -529,6 +544,7 @@ impl OwnedRobot {
                 name: &b.name,
                 tasks: &b.tasks,
                 sections: &b.sections,
+                blocking: &b.blocking,
                 topics,
                 levels: b.levels,
                 monotonic: b.monotonic,
@@ -693,8 +709,8 @@ impl OwnedRobot {
             for (row, name) in b.tasks.iter().zip(&b.task_names) {
                 let _ = writeln!(
                     s,
-                    "                // {name}\n                {a}::TaskRow {{ priority: {}, cost: {}, bcet: {}, period: {}, deadline: {}, jitter: {}, released_by: {}, own_frame: {} }},",
-                    row.priority, row.cost, row.bcet, row.period, row.deadline, row.jitter, row.released_by, row.own_frame
+                    "                // {name}\n                {a}::TaskRow {{ priority: {}, cost: {}, period: {}, deadline: {}, jitter: {}, released_by: {}, own_frame: {}, share: {} }},",
+                    row.priority, row.cost, row.period, row.deadline, row.jitter, row.released_by, row.own_frame, row.share
                 );
             }
             let _ = writeln!(s, "            ],\n            sections: &[");
@@ -705,7 +721,12 @@ impl OwnedRobot {
                     cs.holder_priority, cs.ceiling, cs.length
                 );
             }
-            let _ = writeln!(s, "            ],\n            topics: &[");
+            let blocking: Vec<String> = b.blocking.iter().map(u32::to_string).collect();
+            let _ = writeln!(
+                s,
+                "            ],\n            blocking: &[{}],\n            topics: &[",
+                blocking.join(", ")
+            );
             for topic in &b.topics {
                 let sections: Vec<String> = topic
                     .sections

@@ -421,6 +421,15 @@ impl Share {
         }
     }
 
+    /// The share whose utilisation `utilisation` was worked out before, as [`Share::of`] works it out (a table's,
+    /// built on the host): no division.
+    pub fn with_utilisation(utilisation: u64) -> Share {
+        Share {
+            utilisation,
+            zero_period: false,
+        }
+    }
+
     /// Its utilisation, `⌊c/t · 2^UTIL_BITS⌋` capped at [`UTIL_ONE`] (0 for a zero period).
     pub fn utilisation(self) -> u64 {
         self.utilisation

@@ -9,6 +9,7 @@ use proptest::prelude::*;
 use schedule_analysis::admission::{self, Culprit, Refusal};
 use schedule_analysis::admission_host::{self, OwnedRobot};
 use schedule_analysis::analysis::{analyse, Options};
+use schedule_analysis::busy_window::Share;
 use schedule_analysis::model::FrameCostSpec;
 use schedule_analysis::scenario;
 use schedule_analysis::time::Time;
@@ -295,6 +296,74 @@ fn the_table_lowers_and_emits_rust() {
         .unwrap_or_else(|e| panic!("generated source does not parse: {e}\n{source}"));
     assert!(source.contains("pub static ROBOT: schedule_analysis::admission::RobotTable<'static>"));
     assert!(source.contains("pub const BOARD_DIWHEELDRIVE: u8 = 0;"));
+    // Every fixed task's share, worked out when the table is built, is the one the check would work out itself.
+    let mut precomputed = 0;
+    for board in &robot.boards {
+        for row in &board.tasks {
+            if row.own_frame || row.share == admission::SHARE_AT_RUNTIME {
+                assert!(row.own_frame || row.period == 0, "{}: {row:?}", board.name);
+                continue;
+            }
+            let exact = Share::of(
+                admission::row_time(row.cost),
+                admission::row_time(row.period),
+            );
+            assert_eq!(
+                u64::from(row.share),
+                exact.utilisation(),
+                "{}: {row:?}",
+                board.name
+            );
+            precomputed += 1;
+        }
+    }
+    assert!(precomputed > 20, "{precomputed}");
+    // And so is every priority's blocking by the fixed tasks' sections, for every priority a job of the board has.
+    for board in &robot.boards {
+        for (p, &b) in board.blocking.iter().enumerate() {
+            assert_eq!(
+                b,
+                admission::fixed_blocking(&board.sections, p as u32),
+                "{} at {p}",
+                board.name
+            );
+        }
+        let highest = board
+            .tasks
+            .iter()
+            .map(|t| t.priority)
+            .chain(board.levels.iter().flatten().copied())
+            .chain(board.monotonic.map(|m| m.priority));
+        for p in highest {
+            assert!(
+                usize::from(p) < board.blocking.len(),
+                "{}: priority {p}",
+                board.name
+            );
+        }
+        assert!(board.blocking.iter().any(|&b| b > 0), "{}", board.name);
+    }
+    for (cost, period) in [
+        (0, 0),
+        (0, 5),
+        (1, 1),
+        (7, 3),
+        (1, u32::MAX),
+        (u32::MAX - 1, u32::MAX),
+        (3_500, 400_000),
+    ] {
+        let share = admission::row_share(cost, period);
+        if period == 0 && cost > 0 {
+            assert_eq!(share, admission::SHARE_AT_RUNTIME);
+        } else {
+            let exact = Share::of(admission::row_time(cost), admission::row_time(period));
+            assert_eq!(
+                u64::from(share),
+                exact.utilisation(),
+                "{cost} every {period}"
+            );
+        }
+    }
 }
 
 #[test]
