@@ -709,7 +709,7 @@ fn admission_cost(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-fn admission_search(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+pub(super) fn admission_search(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let mut steps = admission_steps(out, "admission id=")?;
     steps.extend(admission_steps(out, "admission refresh ")?);
     // A step analyses at most one board and the bus, each within the check's iteration budget

@@ -22,6 +22,11 @@ pub const SCENARIOS: &[Scenario] = &[
         check: diwheeldrive::malformed,
     },
     Scenario {
+        name: "admission-search",
+        about: "issue 20: the costliest command sequence 28 searches found on a 1-2 robot's tables, replayed on the 1-2 image: every step within the admission task's budget per step; the costliest reaches the check's iteration budget per decision",
+        check: diwheeldrive::admission_search,
+    },
+    Scenario {
         name: "flood",
         about: "commands at full bus rate keep a 2 ms gyroscope within its bound",
         check: flood,
