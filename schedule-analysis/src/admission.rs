@@ -22,8 +22,7 @@
 
 use crate::board::{self, TaskTiming};
 use crate::busy_window::{
-    self, linear_bound, AnalysisError, Counter, Limits, LinearTerms, Load, Response, Share,
-    UTIL_ONE,
+    linear_bound, AnalysisError, Counter, Limits, LinearTerms, Load, Response, Share, UTIL_ONE,
 };
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
@@ -105,19 +104,14 @@ pub fn fixed_blocking(sections: &[SectionRow], p: u32) -> RowTime {
 /// In [`TaskRow::share`]: the check works the share out itself.
 pub const SHARE_AT_RUNTIME: u32 = u32::MAX;
 
-/// A fixed task's share of the CPU, `⌊cost/period · 2^UTIL_BITS⌋` capped at 100 % — exactly
-/// [`busy_window::Share::of`]'s for row times (below 2^32 ns) — for [`TaskRow::share`]; [`SHARE_AT_RUNTIME`] for a
-/// zero period. `const`, so a table can be checked against it.
-pub const fn row_share(cost: RowTime, period: RowTime) -> u32 {
-    if cost == 0 {
-        0
-    } else if period == 0 {
-        SHARE_AT_RUNTIME
-    } else if cost >= period {
-        UTIL_ONE as u32
-    } else {
-        (((cost as u64) << busy_window::UTIL_BITS) / period as u64) as u32
+/// A fixed task's share of the CPU for [`TaskRow::share`]: [`Share::of`]'s utilisation (the table builder's; the
+/// check would work out the same), or [`SHARE_AT_RUNTIME`] for a zero period (an overload the check must see).
+pub fn row_share(cost: RowTime, period: RowTime) -> u32 {
+    if period == 0 && cost > 0 {
+        return SHARE_AT_RUNTIME;
     }
+    u32::try_from(Share::of(row_time(cost), row_time(period)).utilisation())
+        .unwrap_or(SHARE_AT_RUNTIME)
 }
 
 /// A critical section of a fixed task (or of `idle`, holder priority 0), its ceiling resolved: the core's
@@ -1667,10 +1661,6 @@ fn analyse_board<const N: usize, const M: usize>(
             };
             let own = shares.get(i).copied().unwrap_or_default();
             let own_load = own.load(task.jitter);
-            // A job whose bound nothing reads, settled in closed form when the linear bound meets its deadline: one
-            // instance in its window (`w̄ + J ≤ T`), so its response is at most `w̄ + J`, and the level's shares
-            // rounded up within 100 % (so the exact analysis's, rounded down, are no overload). Otherwise, and for
-            // every other job, the exact fixed point.
             let (c, t, j) = (task.wcet.as_ns(), task.period.as_ns(), task.jitter.as_ns());
             let load = prefix.minus(own_load);
             // Exactly, without a fixed point: when `w = B + C + Σ C_k` (every job of this and the more urgent levels
@@ -1695,6 +1685,10 @@ fn analyse_board<const N: usize, const M: usize>(
                 summary.reach = summary.reach.max(once);
                 continue;
             }
+            // A job whose bound nothing reads, settled in closed form when the linear bound meets its deadline: one
+            // instance in its window (`w̄ + J ≤ T`), so its response is at most `w̄ + J`, and the level's shares
+            // rounded up within 100 % (so the exact analysis's, rounded down, are no overload). Otherwise, and for
+            // every other job, the exact fixed point.
             let settled_here = settles
                 .get(i)
                 .is_some_and(|&s| s && linear.utilisation <= UTIL_ONE)
@@ -1879,7 +1873,7 @@ mod tests {
         jitter: 0,
         released_by: NO_RELEASER,
         own_frame: false,
-        share: row_share(10_000, 1_000_000),
+        share: SHARE_AT_RUNTIME,
     }];
     const BOARDS: [BoardTable<'static>; 1] = [BoardTable {
         name: "test",
@@ -1979,7 +1973,7 @@ mod tests {
             let tasks = [TaskRow {
                 cost: 250_000,
                 deadline: deadline_us * 1000,
-                share: row_share(250_000, 1_000_000),
+                share: SHARE_AT_RUNTIME,
                 ..TASKS[0]
             }];
             let boards = [BoardTable {

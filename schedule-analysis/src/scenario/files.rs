@@ -204,7 +204,12 @@ pub struct WorstStep {
 impl WorstStep {
     /// The step's time on the chip, µs.
     pub fn on_chip_us(&self) -> f64 {
-        self.instructions as f64 * self.cycles_per_instruction / self.clock_mhz
+        self.us_for(self.instructions)
+    }
+
+    /// The time `instructions` take on this chip (its clock and cycles per instruction), µs.
+    pub fn us_for(&self, instructions: u64) -> f64 {
+        instructions as f64 * self.cycles_per_instruction / self.clock_mhz
     }
 }
 

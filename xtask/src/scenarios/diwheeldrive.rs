@@ -577,8 +577,7 @@ const NS_PER_INSTRUCTION: u64 = 1 << crate::qemu::ICOUNT_SHIFT;
 /// robot's, the scenarios check QEMU's).
 fn on_f103_us(virtual_us: u64) -> Result<u64> {
     let (_, step) = admission_budget(ADMISSION_BUDGETS[0])?;
-    let ns_per_instruction = step.cycles_per_instruction * 1000.0 / step.clock_mhz;
-    Ok((virtual_us as f64 * ns_per_instruction / NS_PER_INSTRUCTION as f64).round() as u64)
+    Ok(step.us_for(virtual_us * 1000 / NS_PER_INSTRUCTION).round() as u64)
 }
 
 /// The admission task's budget and recorded worst step in the timing file `path`.
@@ -644,7 +643,7 @@ fn against_budget(out: &RunOutput, steps: &[(u64, u64, String)]) -> Result<Strin
     let mut figures = Vec::new();
     for path in ADMISSION_BUDGETS {
         let (budget, step) = admission_budget(path)?;
-        let this_run_us = instructions as f64 * step.cycles_per_instruction / step.clock_mhz;
+        let this_run_us = step.us_for(instructions);
         ensure!(
             this_run_us <= budget,
             "the admission task's costliest activation ({own_us:.1} µs virtual of its own execution, {instructions} instructions, ≈ {this_run_us:.0} µs at {} MHz and {} cycles per instruction) exceeds the budget of {budget} µs per step in {path}",
