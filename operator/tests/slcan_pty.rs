@@ -5,7 +5,7 @@ use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::{AsFd, AsRawFd, OwnedFd};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, ChildStdout, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
@@ -106,6 +106,64 @@ fn amiro(args: &[&str]) -> Child {
         .stderr(Stdio::piped())
         .spawn()
         .expect("start amiro")
+}
+
+/// `amiro`'s standard output, read as it is written: a test waits for what `amiro` must have printed before it
+/// acts (an interrupt, say) instead of sleeping and hoping a loaded machine kept up.
+struct Watched {
+    stdout: ChildStdout,
+    seen: Vec<u8>,
+}
+
+impl Watched {
+    /// Takes over `child`'s piped standard output ([`finish`]'s output then has none).
+    fn of(child: &mut Child) -> Self {
+        Self {
+            stdout: child.stdout.take().expect("amiro's stdout is piped"),
+            seen: Vec::new(),
+        }
+    }
+
+    /// Reads until `needle` has been printed, failing the test after [`PATIENCE`].
+    fn wait_for(&mut self, needle: &str) {
+        assert!(
+            self.within(needle, PATIENCE),
+            "amiro never printed {needle:?}; it printed: {}",
+            String::from_utf8_lossy(&self.seen)
+        );
+    }
+
+    /// Reads until `needle` has been printed (`true`) or `patience` has passed (`false`).
+    fn within(&mut self, needle: &str, patience: Duration) -> bool {
+        let deadline = Instant::now() + patience;
+        while !String::from_utf8_lossy(&self.seen).contains(needle) {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            let mut fds = [PollFd::new(self.stdout.as_fd(), PollFlags::POLLIN)];
+            if poll(&mut fds, PollTimeout::try_from(left).unwrap()).expect("poll") == 0 {
+                continue;
+            }
+            let mut chunk = [0u8; 512];
+            let count = self.stdout.read(&mut chunk).expect("read amiro's stdout");
+            assert!(
+                count > 0,
+                "amiro closed its stdout before printing {needle:?}: {}",
+                String::from_utf8_lossy(&self.seen)
+            );
+            self.seen.extend_from_slice(&chunk[..count]);
+        }
+        true
+    }
+
+    /// Everything `amiro` printed, once it has exited.
+    fn all(mut self) -> String {
+        self.stdout
+            .read_to_end(&mut self.seen)
+            .expect("read amiro's stdout");
+        String::from_utf8(self.seen).expect("UTF-8 output")
+    }
 }
 
 /// Waits for `amiro` to exit, failing the test instead of hanging if it does not.
@@ -222,13 +280,13 @@ fn monitor_reads_frames_split_across_writes_and_closes_the_channel() {
 fn ctrl_c_closes_the_channel_before_exit() {
     let mut adapter = FakeAdapter::new();
     let bus = adapter.bus();
-    let child = amiro(&["monitor", "--bus", &bus]);
+    let mut child = amiro(&["monitor", "--bus", &bus]);
+    let mut printed = Watched::of(&mut child);
     adapter.accept_open();
     adapter.say(b"t71F3037800\r");
-    // Give amiro time to print the frame, then interrupt it as a user would.
-    std::thread::sleep(Duration::from_millis(200));
-    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
-    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).expect("SIGINT");
+    // Once amiro has printed the frame, interrupt it as a user would.
+    printed.wait_for("front-left sees 120 mm");
+    interrupt(&child);
     adapter.expect("C\r", b"\r");
     let output = finish(child);
     assert!(
@@ -236,7 +294,7 @@ fn ctrl_c_closes_the_channel_before_exit() {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    let stdout = String::from_utf8(output.stdout).unwrap();
+    let stdout = printed.all();
     assert!(
         stdout.contains("71F#037800")
             && stdout.contains("proximity-ring: sensor 3 front-left sees 120 mm"),
@@ -302,7 +360,8 @@ fn interrupt(child: &Child) {
 fn a_second_amiro_sends_through_the_first_without_closing_its_channel() {
     let mut adapter = FakeAdapter::new();
     let bus = adapter.bus();
-    let monitor = amiro(&["monitor", "--bus", &bus, "--absolute"]);
+    let mut monitor = amiro(&["monitor", "--bus", &bus, "--absolute"]);
+    let mut printed = Watched::of(&mut monitor);
     adapter.accept_open();
     // The thesis's workflow: one terminal watches, another sends.
     let sender = amiro(&["send", "205#01840302", "--bus", &bus]);
@@ -314,7 +373,7 @@ fn a_second_amiro_sends_through_the_first_without_closing_its_channel() {
         String::from_utf8_lossy(&sent.stderr)
     );
     assert!(String::from_utf8_lossy(&sent.stdout).starts_with("sent 205#01840302"));
-    std::thread::sleep(Duration::from_millis(200));
+    printed.wait_for("605#D8ADFFFF");
     interrupt(&monitor);
     adapter.expect("C\r", b"\r");
     let watched = finish(monitor);
@@ -325,7 +384,7 @@ fn a_second_amiro_sends_through_the_first_without_closing_its_channel() {
     );
     // Only the owner opened and closed the channel; the sender's frame went through it.
     assert_eq!(adapter.heard, b"C\rS8\rO\rt205401840302\rC\r");
-    let stdout = String::from_utf8(watched.stdout).unwrap();
+    let stdout = printed.all();
     let sent_at = stdout.find("205#01840302").expect(&stdout);
     let answer_at = stdout.find("605#D8ADFFFF").expect(&stdout);
     assert!(
@@ -341,10 +400,18 @@ fn a_monitor_whose_bus_owner_ends_reports_the_lost_bus_and_fails() {
     let owner = amiro(&["monitor", "--bus", &bus]);
     adapter.accept_open();
     let mut user = amiro(&["monitor", "--bus", &bus]);
+    let mut printed = Watched::of(&mut user);
     // Frames keep coming while the second monitor connects; once connected it prints them.
-    for _ in 0..6 {
+    let deadline = Instant::now() + PATIENCE;
+    loop {
         adapter.say(b"t71F3037800\r");
-        std::thread::sleep(Duration::from_millis(100));
+        if printed.within("71F#037800", Duration::from_millis(100)) {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the second monitor never printed a frame"
+        );
     }
     assert!(
         user.try_wait().unwrap().is_none(),
@@ -361,7 +428,7 @@ fn a_monitor_whose_bus_owner_ends_reports_the_lost_bus_and_fails() {
         stderr.contains("lost the bus") && stderr.contains("amiro monitor"),
         "{stderr}"
     );
-    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stdout = printed.all();
     assert!(
         stdout.contains("71F#037800"),
         "it saw frames while connected: {stdout}"
@@ -744,10 +811,12 @@ fn ctrl_c_ends_a_recording_with_a_complete_file() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("interrupted.mcap");
     let out_text = out.display().to_string();
-    let child = amiro(&["monitor", "--bus", &bus, "--record", &out_text]);
+    let mut child = amiro(&["monitor", "--bus", &bus, "--record", &out_text]);
+    let mut printed = Watched::of(&mut child);
     adapter.accept_open();
     adapter.say(b"t71F3037800\r");
-    std::thread::sleep(Duration::from_millis(200));
+    // Interrupted once the frame is in (printed, so it has been recorded).
+    printed.wait_for("71F#037800");
     interrupt(&child);
     adapter.expect("C\r", b"\r");
     let output = finish(child);
