@@ -363,6 +363,16 @@ impl Bus {
         Ok(())
     }
 
+    /// Aborts the frame in `node`'s `mailbox` (bxCAN's ABRQ) and returns it, if it is still there: a
+    /// frame whose transmission started (in a [`Bus::run_until`] so far) has left its mailbox, and a
+    /// frame retried after an error frame is aborted between two attempts.
+    pub fn abort(&mut self, node: NodeId, mailbox: usize) -> Option<Pending> {
+        self.nodes
+            .get_mut(node)
+            .and_then(|n| n.mailboxes.get_mut(mailbox))
+            .and_then(Option::take)
+    }
+
     /// Empties `node`'s mailboxes (a controller reset): what they held is returned.
     pub fn reset_node(&mut self, node: NodeId, at: u64) -> Vec<Pending> {
         let Some(n) = self.nodes.get_mut(node) else {

@@ -362,3 +362,30 @@ fn a_babbling_node_with_the_lowest_identifier_holds_the_bus_until_stopped() {
     );
     assert_eq!(got.len(), last + 2);
 }
+
+#[test]
+fn an_abort_takes_a_waiting_frame_back_but_not_one_already_sent() {
+    // Node b babbles 0x400 from 0; node a's 0x500 waits behind it in mailbox 0 and is aborted at
+    // 2000, its mailbox then free for 0x100, which wins the next arbitration. Node a's 0x050, sent
+    // at once, is gone from its mailbox: aborting it afterwards finds nothing.
+    let mut bus = Bus::new();
+    let (a, b) = (bus.add_node(), bus.add_node());
+    bus.babble(b, frame(0x400, &[0xA5; 8]), 0, 5000);
+    bus.queue(a, 1, frame(0x050, &[]), 0).unwrap();
+    bus.queue(a, 0, frame(0x500, &[5]), 100).unwrap();
+    let before = sent(&bus.run_until(2000));
+    assert_eq!(before[0].0, 0x050);
+    assert!(before[1..].iter().all(|s| s.0 == 0x400), "{before:?}");
+    assert_eq!(bus.abort(a, 1), None, "0x050 went out: nothing to abort");
+    let aborted = bus.abort(a, 0).expect("0x500 still waits");
+    assert_eq!((aborted.frame.id, aborted.queued_at), (0x500, 100));
+    assert_eq!(bus.mailboxes(a), [None; MAILBOXES]);
+    assert_eq!(bus.abort(a, 0), None, "an empty mailbox");
+    assert_eq!(bus.abort(a, 7), None, "no such mailbox");
+    bus.queue(a, 0, frame(0x100, &[1]), 2000).unwrap();
+    let after = sent(&bus.run_until(10_000));
+    let first_after = after.iter().position(|s| s.0 == 0x100).expect("0x100 sent");
+    // At most the babbling frame already on the bus goes before it; 0x500 never goes out.
+    assert!(first_after <= 1, "{after:?}");
+    assert!(after.iter().all(|s| s.0 != 0x500), "{after:?}");
+}

@@ -24,8 +24,8 @@ use crate::can::{Completion, RxFrame, Transmit};
 
 pub use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::robot_link::{
-    DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW, DRIVES_PD_LOW,
-    DRIVES_SYNC_LOW, UP_LEN,
+    DOWN_ABORTED, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW,
+    DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_ABORTS, UP_LEN,
 };
 
 const NO_FILE: usize = usize::MAX;
@@ -43,6 +43,17 @@ struct Mailbox {
     queued_us: u64,
     handed_over: bool,
     done: bool,
+    /// Its abort: asked for by [`transmit`] (bxCAN's ABRQ), passed to the host at the next exchange,
+    /// confirmed by the host ([`completed`] hands the frame back).
+    abort: Abort,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Abort {
+    None,
+    Requested,
+    Sent,
+    Done,
 }
 
 static MAILBOXES: Mutex<RefCell<[Option<Mailbox>; 3]>> = Mutex::new(RefCell::new([None; 3]));
@@ -99,27 +110,46 @@ pub(super) fn transmit(frame: &amiro_can::Frame) -> Transmit {
                     queued_us: now,
                     handed_over: false,
                     done: false,
+                    abort: Abort::None,
                 });
                 Transmit::Queued
             }
-            // All three hold frames: the transmit-complete interrupt of one of them comes back.
-            None => Transmit::Busy,
+            // All three hold frames: as the robot's driver (`bxcan::Mailboxes`), the least urgent
+            // is aborted if this frame beats it (one abort at a time); the transmit-complete
+            // interrupt of a sent or aborted one comes back. The host takes the request at the
+            // next exchange, so an abort here lands up to a quantum later than on the chip.
+            None => {
+                let least = boxes
+                    .iter_mut()
+                    .flatten()
+                    .filter(|m| !m.done)
+                    .max_by_key(|m| m.frame.id().raw());
+                if let Some(m) = least {
+                    if frame.id().raw() < m.frame.id().raw() && m.abort == Abort::None {
+                        m.abort = Abort::Requested;
+                    }
+                }
+                Transmit::Busy
+            }
         }
     })
 }
 
 /// Reports the mailboxes whose frame went out and frees them.
 pub(super) fn completed(on_completion: &mut dyn FnMut(Completion)) {
-    let mut sent: [Option<amiro_can::Frame>; 3] = [None; 3];
+    let mut ended: [Option<Completion>; 3] = [None; 3];
     critical_section::with(|cs| {
-        for (slot, out) in MAILBOXES.borrow_ref_mut(cs).iter_mut().zip(&mut sent) {
-            if slot.is_some_and(|m| m.done) {
-                *out = slot.take().map(|m| m.frame);
-            }
+        for (slot, out) in MAILBOXES.borrow_ref_mut(cs).iter_mut().zip(&mut ended) {
+            *out = match slot {
+                Some(m) if m.done => Some(Completion::Sent(m.frame)),
+                Some(m) if m.abort == Abort::Done => Some(Completion::Aborted(m.frame)),
+                _ => continue,
+            };
+            *slot = None;
         }
     });
-    for frame in sent.into_iter().flatten() {
-        on_completion(Completion::Sent(frame));
+    for completion in ended.into_iter().flatten() {
+        on_completion(completion);
     }
 }
 
@@ -208,6 +238,12 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         message[..8].copy_from_slice(&super::now_us().to_le_bytes());
         let mut count = 0u8;
         critical_section::with(|cs| {
+            for (k, m) in MAILBOXES.borrow_ref_mut(cs).iter_mut().enumerate() {
+                if let Some(m) = m.as_mut().filter(|m| m.abort == Abort::Requested) {
+                    m.abort = Abort::Sent;
+                    message[UP_ABORTS] |= 1 << k;
+                }
+            }
             for (k, slot) in MAILBOXES.borrow_ref_mut(cs).iter_mut().enumerate() {
                 let Some(m) = slot.as_mut().filter(|m| !m.handed_over) else {
                     continue;
@@ -248,6 +284,20 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         if flags & DOWN_END != 0 {
             super::finish("end of run");
             return;
+        }
+        let aborted = answer[DOWN_ABORTED];
+        if aborted != 0 {
+            critical_section::with(|cs| {
+                for (k, m) in MAILBOXES.borrow_ref_mut(cs).iter_mut().enumerate() {
+                    if let Some(m) = m.as_mut().filter(|_| aborted & 1 << k != 0) {
+                        m.abort = Abort::Done;
+                    }
+                }
+            });
+            let irq = TX_IRQ.load(Ordering::Relaxed);
+            if irq != u16::MAX {
+                cortex_m::peripheral::NVIC::pend(Irq(irq));
+            }
         }
         if flags & DOWN_FRAME == 0 {
             continue;

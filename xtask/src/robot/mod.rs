@@ -34,8 +34,8 @@ use stimulus::{Action, Timed, BOARDS};
 
 pub use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::robot_link::{
-    DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW, DRIVES_PD_LOW,
-    DRIVES_SYNC_LOW, UP_LEN,
+    DOWN_ABORTED, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW,
+    DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_ABORTS, UP_LEN,
 };
 /// The operator's adapter: the fourth node, after the boards.
 pub const OPERATOR: usize = 3;
@@ -99,6 +99,10 @@ struct Board {
     drives: u8,
     /// Global virtual time before which the board does nothing of its own (its last report).
     wakes_at: u64,
+    /// Mailboxes (bit per mailbox) whose abort it asked for in its last report, and those whose
+    /// frame the bus gave back (the answer tells it).
+    aborts: u8,
+    aborted: u8,
 }
 
 fn make_fifo(path: &Path) -> Result<()> {
@@ -179,6 +183,8 @@ impl Board {
         // A module holds SYS_SYNC_N low until it is initialised.
         self.drives = DRIVES_SYNC_LOW;
         self.wakes_at = at;
+        self.aborts = 0;
+        self.aborted = 0;
         Ok(())
     }
 
@@ -419,6 +425,8 @@ pub fn run(
             alive: false,
             drives: DRIVES_SYNC_LOW,
             wakes_at: 0,
+            aborts: 0,
+            aborted: 0,
         })
         .collect();
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
@@ -446,6 +454,7 @@ pub fn run(
             match b.receive(Instant::now(), limit)? {
                 Some(message) => {
                     b.drives = message[9];
+                    b.aborts = message[UP_ABORTS] & 0b111;
                     let sleeps = u32::from_le_bytes(message[12..16].try_into()?);
                     b.wakes_at = match sleeps {
                         u32::MAX => u64::MAX,
@@ -609,6 +618,22 @@ pub fn run(
                 )),
             }
         }
+        // Aborts take what has not started by this boundary (a frame that did, completes): the
+        // request is as late as the exchange that carried it.
+        for b in boards.iter_mut().filter(|b| b.alive) {
+            for mailbox in (0..MAILBOXES).filter(|&k| b.aborts & 1 << k != 0) {
+                if let Some(p) = bus.abort(nodes[b.index], mailbox) {
+                    b.aborted |= 1 << mailbox;
+                    notes.push(format!(
+                        "bus: # {} {} aborts {:03X} in mailbox {mailbox} for a more urgent frame",
+                        stamp(t),
+                        NODES[b.index],
+                        p.frame.id
+                    ));
+                }
+            }
+            b.aborts = 0;
+        }
         let now_sync_low = boards.iter().any(|b| b.drives & DRIVES_SYNC_LOW != 0);
         if now_sync_low != sync_low {
             sync_low = now_sync_low;
@@ -671,8 +696,9 @@ pub fn run(
                 &operator,
                 &deliveries,
                 pending.peek().map(|a| a.at_us),
-                // Boards that hear a frame in the coming quantum act on it.
-                live.is_some() || now.is_some(),
+                // Boards that hear a frame in the coming quantum act on it, as do those whose
+                // aborted frame comes back.
+                live.is_some() || now.is_some() || boards.iter().any(|b| b.aborted != 0),
             )
         };
         // A board restarted at this boundary has not traded yet: its first answer is the next one.
@@ -706,6 +732,8 @@ pub fn run(
                 }
             }
             message[8] = flags;
+            message[DOWN_ABORTED] = b.aborted;
+            b.aborted = 0;
             b.send(&message)?;
         }
         // What the boards printed in the quantum that ended, what the bus saw at its boundary, and

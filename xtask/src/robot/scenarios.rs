@@ -62,6 +62,12 @@ pub const SCENARIOS: &[Scenario] = &[
         bus_bounds: true,
     },
     Scenario {
+        name: "mailbox-abort",
+        about: "a more urgent frame displaces a waiting one from full mailboxes",
+        check: mailbox_abort,
+        bus_bounds: true,
+    },
+    Scenario {
         name: "reset",
         about: "a board reset mid-run rejoins",
         check: reset,
@@ -486,6 +492,56 @@ fn babbling_board(run: &Run) -> Result<String> {
         magnetometer.len(),
         line.observed_us,
         line.bound_us.as_ref().map_or(0, |b| *b),
+    ))
+}
+
+fn mailbox_abort(run: &Run) -> Result<String> {
+    const FROM: u64 = 40_000;
+    every_board_ended(run)?;
+    let babble = run.frames(0x610);
+    let last = babble
+        .last()
+        .context("LightRing's controller did not babble")?;
+    // PowerManagement's power status, started during the babbling: each frame queued then goes out
+    // during it, within a few frame times of its queuing (an abort is carried to the bus at the next
+    // 40 µs exchange, then a babbling frame already on the wire finishes first).
+    let during: Vec<&Transfer> = run
+        .frames(0x51E)
+        .into_iter()
+        .filter(|t| t.queued_at >= FROM && t.queued_at < last.start)
+        .collect();
+    ensure!(
+        during.len() >= 2,
+        "{} power-status frames queued during the babbling",
+        during.len()
+    );
+    let worst = during
+        .iter()
+        .map(|t| t.end - t.queued_at)
+        .max()
+        .unwrap_or(0);
+    ensure!(
+        during.iter().all(|t| t.end < last.end) && worst <= 1_000,
+        "power-status frames waited for the babbling to end (worst {worst} µs from queued to sent)"
+    );
+    // What made room: PowerManagement aborted waiting ring frames, each of which went out later.
+    let aborts: Vec<&str> = run
+        .bus_notes()
+        .into_iter()
+        .filter(|n| n.contains("powermgmt aborts 61F"))
+        .collect();
+    ensure!(!aborts.is_empty(), "PowerManagement aborted no ring frame");
+    let ring_after = run
+        .frames(0x61F)
+        .iter()
+        .filter(|t| t.end > last.end)
+        .count();
+    ensure!(ring_after > 0, "no ring frame after the babbling");
+    Ok(format!(
+        "{} power-status frames queued while LightRing babbled went out within {worst} µs each \
+         (PowerManagement aborted {} waiting ring frames for them, sent again after the babbling)",
+        during.len(),
+        aborts.len()
     ))
 }
 
