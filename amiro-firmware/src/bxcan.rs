@@ -150,6 +150,16 @@ impl InitError {
     }
 }
 
+/// The identifier bits filter bank 0 compares (the C/S bit): a frame passes when they are clear.
+pub const COMMAND_FILTER_MASK: u16 = 0x400;
+
+/// Whether the receive filter [`configure`] sets up passes a standard data frame with identifier
+/// `id` to FIFO 0: command frames only; sensor frames, the other boards' and its own, never reach
+/// the software.
+pub const fn passes_filter(id: u16) -> bool {
+    id & COMMAND_FILTER_MASK == 0
+}
+
 /// How often set-up polls a mode flag before giving up (each poll is one register read).
 pub const INIT_POLLS: u32 = 100_000;
 
@@ -179,7 +189,10 @@ pub fn configure(regs: &impl Registers, btr: u32) -> Result<(), InitError> {
     regs.write(reg::FM1R, regs.read(reg::FM1R) & !1);
     regs.write(reg::FFA1R, regs.read(reg::FFA1R) & !1);
     regs.write(reg::F0R1, 0);
-    regs.write(reg::F0R2, (0x400 << 21) | bit::RIR_IDE | bit::RIR_RTR);
+    regs.write(
+        reg::F0R2,
+        (u32::from(COMMAND_FILTER_MASK) << 21) | bit::RIR_IDE | bit::RIR_RTR,
+    );
     regs.write(reg::FA1R, regs.read(reg::FA1R) | 1);
     regs.write(reg::FMR, regs.read(reg::FMR) & !bit::FMR_FINIT);
     regs.write(

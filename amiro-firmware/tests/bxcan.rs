@@ -236,6 +236,19 @@ fn configure_sets_timing_filter_interrupts_and_auto_recovery() {
         "mask: C/S, IDE, RTR"
     );
     assert_eq!(f[(0x240 - 0x200) / 4], 0);
+    // The filter the QEMU robot applies to what it delivers is the one these registers make: a
+    // standard data frame passes bank 0 in mask mode when its RIR bits agree with F0R1 wherever
+    // F0R2 has a one.
+    let (id_bits, mask) = (f[(0x240 - 0x200) / 4], f[(0x244 - 0x200) / 4]);
+    for id in 0..0x800u16 {
+        let rir = u32::from(id) << 21;
+        assert_eq!(
+            (rir ^ id_bits) & mask == 0,
+            bxcan::passes_filter(id),
+            "{id:03X}"
+        );
+    }
+    assert!(bxcan::passes_filter(0x205) && !bxcan::passes_filter(0x610));
     let ier = model.ier.get();
     for (bit, what) in [
         (0, "TMEIE"),

@@ -9,8 +9,9 @@
 //! times, so no two complete within 40 µs) and the levels of SYS_SYNC_N and SYS_PD_N. The read
 //! blocks, and a blocked QEMU's virtual clock stands still, so no board runs ahead of the others.
 //!
-//! The frame is delivered at its completion time: into the 3-frame receive FIFO (an overrun if the
-//! board has not emptied it, as on bxCAN), or, for the board's own frame, as a free mailbox and a
+//! The frame is delivered at its completion time: a command frame (the one kind bxCAN's filter
+//! passes, `bxcan::passes_filter`) into the 3-frame receive FIFO (an overrun if the board has not
+//! emptied it, as on bxCAN), or, for the board's own frame, as a free mailbox and a
 //! transmit-complete interrupt.
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU8, AtomicUsize, Ordering};
@@ -320,7 +321,9 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             if irq != u16::MAX {
                 cortex_m::peripheral::NVIC::pend(Irq(irq));
             }
-        } else {
+        } else if crate::bxcan::passes_filter(u16::from_le_bytes([answer[10], answer[11]])) {
+            // As bxCAN's filter on the robot: only command frames reach the receive FIFO, so a
+            // flood of sensor frames on the bus costs the board nothing.
             let mut frame = RxFrame {
                 id: u16::from_le_bytes([answer[10], answer[11]]),
                 len: answer[12].min(8),

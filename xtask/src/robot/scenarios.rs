@@ -156,6 +156,19 @@ fn every_board_ended(run: &Run) -> Result<()> {
     Ok(())
 }
 
+/// No board dropped a received frame: a flood of sensor frames (a babbling controller's) stays out
+/// of every board's software, as bxCAN's filter keeps it out on the robot.
+fn nothing_dropped(run: &Run) -> Result<()> {
+    for (board, name) in NODES.iter().enumerate().take(3) {
+        let dropped = run
+            .view(board)
+            .end_field("rx dropped")
+            .with_context(|| name.to_string())?;
+        ensure!(dropped == 0, "{name} dropped {dropped} received frames");
+    }
+    Ok(())
+}
+
 /// `times` lie on a grid of `period` from the first, each at most `slack` late.
 fn on_grid(what: &str, times: &[u64], period: u64, slack: u64) -> Result<()> {
     let Some(&first) = times.first() else {
@@ -401,6 +414,7 @@ fn babbling_board(run: &Run) -> Result<String> {
     const FROM: u64 = 40_000;
     const UNTIL: u64 = 90_000;
     every_board_ended(run)?;
+    nothing_dropped(run)?;
     let babble = run.frames(BABBLE);
     ensure!(
         babble
@@ -498,6 +512,7 @@ fn babbling_board(run: &Run) -> Result<String> {
 fn mailbox_abort(run: &Run) -> Result<String> {
     const FROM: u64 = 40_000;
     every_board_ended(run)?;
+    nothing_dropped(run)?;
     let babble = run.frames(0x610);
     let last = babble
         .last()
