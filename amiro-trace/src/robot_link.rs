@@ -1,25 +1,20 @@
 //! The robot link: what a board's QEMU build and `cargo xtask robot`'s host exchange every quantum
-//! over the board's semihosting files (docs/qemu.md, "The whole robot"). Both sides take the
-//! layout from here, so they cannot drift apart.
+//! over the board's semihosting files (docs/qemu.md, "The whole robot"). Both sides encode and
+//! decode the messages here ([`Up`], [`Down`]), so they cannot drift apart.
 
 /// The exchange period in virtual µs: a multiple of the 10 µs tick below the shortest frame (44 bit
 /// times from start of frame to completion at 1 Mbit/s).
 pub const QUANTUM_US: u64 = 40;
-/// Board → host: `u64` now, `u8` new frames, `u8` lines driven, `u8` abort requests ([`UP_ABORTS`]),
-/// 1 reserved, `u32` µs the board sleeps from now (0: it has work; `u32::MAX`: no deadline), three
-/// 20-byte records (`u64` queued at, `u16` id, `u8` length, `u8` mailbox, 8 data bytes).
-pub const UP_LEN: usize = 16 + 3 * 20;
-/// Host → board: `u64` completion time, `u8` flags, `u8` mailbox, `u16` id, `u8` length, `u8`
-/// aborted mailboxes ([`DOWN_ABORTED`]), 2 reserved, 8 data bytes, `u64` time of the next exchange
-/// (0: one quantum on).
+/// Board → host, [`Up`]: `u64` now, `u8` new frames, `u8` lines driven, `u8` abort requests, 1
+/// reserved, `u32` µs the board sleeps from now, three 20-byte records (`u64` queued at, `u16` id,
+/// `u8` length, `u8` mailbox, 8 data bytes).
+pub const UP_LEN: usize = 16 + MAILBOXES * RECORD_LEN;
+/// Host → board, [`Down`]: `u64` completion time, `u8` flags, `u8` mailbox, `u16` id, `u8` length,
+/// `u8` aborted mailboxes, 2 reserved, 8 data bytes, `u64` time of the next exchange.
 pub const DOWN_LEN: usize = 32;
-/// Up, the byte at this offset: bit `k` asks the host to abort mailbox `k`'s frame (bxCAN's ABRQ: the
-/// driver displaces its least urgent frame for a more urgent one when all three mailboxes are full).
-pub const UP_ABORTS: usize = 10;
-/// Down, the byte at this offset: bit `k`, mailbox `k`'s frame was aborted before its transmission
-/// started (it is free now, and the board's transmit interrupt hands the frame back); an abort that
-/// comes too late is not answered (the frame completes as it would have).
-pub const DOWN_ABORTED: usize = 13;
+/// A board's transmit mailboxes (bxCAN's three).
+pub const MAILBOXES: usize = 3;
+const RECORD_LEN: usize = 20;
 
 /// Up: this board pulls SYS_SYNC_N low.
 pub const DRIVES_SYNC_LOW: u8 = 1;
@@ -35,3 +30,220 @@ pub const DOWN_PD_LOW: u8 = 4;
 pub const DOWN_SYNC_LOW: u8 = 8;
 /// Down: the run is over.
 pub const DOWN_END: u8 = 16;
+
+/// A frame a board put into one of its mailboxes since its last report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Queued {
+    /// When (the board's virtual µs).
+    pub at_us: u64,
+    /// Standard identifier.
+    pub id: u16,
+    /// Data length (0..=8).
+    pub len: u8,
+    /// The mailbox (0..3).
+    pub mailbox: u8,
+    /// Data, `len` bytes of it used.
+    pub data: [u8; 8],
+}
+
+impl Queued {
+    /// The data bytes in use.
+    pub fn payload(&self) -> &[u8] {
+        &self.data[..usize::from(self.len.min(8))]
+    }
+}
+
+/// A board's report at the end of a quantum.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Up {
+    /// The board's virtual time, µs.
+    pub now_us: u64,
+    /// The system lines it drives ([`DRIVES_SYNC_LOW`], [`DRIVES_PD_LOW`]).
+    pub drives: u8,
+    /// Bit `k`: abort mailbox `k`'s frame (bxCAN's ABRQ: the driver displaces its least urgent
+    /// frame for a more urgent one when all three mailboxes are full).
+    pub aborts: u8,
+    /// How long it will do nothing, µs from now (0: it has work; `u32::MAX`: no deadline).
+    pub sleeps_us: u32,
+    /// Frames it queued since its last report: the first `count` of `frames`.
+    pub count: u8,
+    /// The frames.
+    pub frames: [Queued; MAILBOXES],
+}
+
+impl Up {
+    /// The frames queued since the last report.
+    pub fn queued(&self) -> &[Queued] {
+        &self.frames[..usize::from(self.count).min(MAILBOXES)]
+    }
+
+    /// Adds a queued frame (`false`: already three).
+    pub fn push(&mut self, frame: Queued) -> bool {
+        let Some(slot) = self.frames.get_mut(usize::from(self.count)) else {
+            return false;
+        };
+        *slot = frame;
+        self.count += 1;
+        true
+    }
+
+    /// The message's bytes.
+    pub fn encode(&self) -> [u8; UP_LEN] {
+        let mut m = [0u8; UP_LEN];
+        m[..8].copy_from_slice(&self.now_us.to_le_bytes());
+        m[8] = self.count.min(MAILBOXES as u8);
+        m[9] = self.drives;
+        m[10] = self.aborts;
+        m[12..16].copy_from_slice(&self.sleeps_us.to_le_bytes());
+        for (k, q) in self.queued().iter().enumerate() {
+            let r = &mut m[16 + RECORD_LEN * k..16 + RECORD_LEN * (k + 1)];
+            r[..8].copy_from_slice(&q.at_us.to_le_bytes());
+            r[8..10].copy_from_slice(&q.id.to_le_bytes());
+            r[10] = q.len.min(8);
+            r[11] = q.mailbox;
+            r[12..20].copy_from_slice(&q.data);
+        }
+        m
+    }
+
+    /// The message in `m` (a count above three is read as three, a length above 8 as 8).
+    pub fn decode(m: &[u8; UP_LEN]) -> Up {
+        let mut up = Up {
+            now_us: le_u64(&m[..8]),
+            drives: m[9],
+            aborts: m[10],
+            sleeps_us: u32::from_le_bytes([m[12], m[13], m[14], m[15]]),
+            count: m[8].min(MAILBOXES as u8),
+            frames: [Queued::default(); MAILBOXES],
+        };
+        for (k, q) in up.frames.iter_mut().enumerate().take(usize::from(up.count)) {
+            let r = &m[16 + RECORD_LEN * k..16 + RECORD_LEN * (k + 1)];
+            let mut data = [0u8; 8];
+            data.copy_from_slice(&r[12..20]);
+            *q = Queued {
+                at_us: le_u64(&r[..8]),
+                id: u16::from_le_bytes([r[8], r[9]]),
+                len: r[10].min(8),
+                mailbox: r[11],
+                data,
+            };
+        }
+        up
+    }
+}
+
+/// The host's answer to a report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Down {
+    /// [`DOWN_FRAME`], [`DOWN_OWN`], [`DOWN_PD_LOW`], [`DOWN_SYNC_LOW`], [`DOWN_END`].
+    pub flags: u8,
+    /// With [`DOWN_FRAME`]: when the frame completes (the board's virtual µs).
+    pub at_us: u64,
+    /// With [`DOWN_OWN`]: the mailbox it left.
+    pub mailbox: u8,
+    /// With [`DOWN_FRAME`]: the frame's identifier, length and data.
+    pub id: u16,
+    /// Its length (0..=8).
+    pub len: u8,
+    /// Its data, `len` bytes of it used.
+    pub data: [u8; 8],
+    /// Bit `k`: mailbox `k`'s frame was aborted before its transmission started (it is free now,
+    /// and the board's transmit interrupt hands the frame back). An abort that comes too late is
+    /// not answered: the frame completes as it would have.
+    pub aborted: u8,
+    /// The board's virtual time of the next exchange (0: one quantum on).
+    pub next_us: u64,
+}
+
+impl Down {
+    /// The message's bytes.
+    pub fn encode(&self) -> [u8; DOWN_LEN] {
+        let mut m = [0u8; DOWN_LEN];
+        m[..8].copy_from_slice(&self.at_us.to_le_bytes());
+        m[8] = self.flags;
+        m[9] = self.mailbox;
+        m[10..12].copy_from_slice(&self.id.to_le_bytes());
+        m[12] = self.len.min(8);
+        m[13] = self.aborted;
+        m[16..24].copy_from_slice(&self.data);
+        m[24..32].copy_from_slice(&self.next_us.to_le_bytes());
+        m
+    }
+
+    /// The message in `m` (a length above 8 is read as 8).
+    pub fn decode(m: &[u8; DOWN_LEN]) -> Down {
+        let mut data = [0u8; 8];
+        data.copy_from_slice(&m[16..24]);
+        Down {
+            flags: m[8],
+            at_us: le_u64(&m[..8]),
+            mailbox: m[9],
+            id: u16::from_le_bytes([m[10], m[11]]),
+            len: m[12].min(8),
+            data,
+            aborted: m[13],
+            next_us: le_u64(&m[24..32]),
+        }
+    }
+}
+
+fn le_u64(bytes: &[u8]) -> u64 {
+    let mut b = [0u8; 8];
+    b.copy_from_slice(&bytes[..8]);
+    u64::from_le_bytes(b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_report_survives_the_link() {
+        let mut up = Up {
+            now_us: 123_456_789,
+            drives: DRIVES_SYNC_LOW | DRIVES_PD_LOW,
+            aborts: 0b100,
+            sleeps_us: u32::MAX,
+            ..Up::default()
+        };
+        for k in 0..MAILBOXES as u8 {
+            assert!(up.push(Queued {
+                at_us: 1_000 + u64::from(k),
+                id: 0x61F - u16::from(k),
+                len: 2 + k,
+                mailbox: 2 - k,
+                data: [k; 8],
+            }));
+        }
+        assert!(!up.push(Queued::default()), "three at most");
+        let bytes = up.encode();
+        assert_eq!(Up::decode(&bytes), up);
+        // The layout both sides read: count, lines, aborts, then the records.
+        assert_eq!(&bytes[8..11], &[3, 3, 0b100]);
+        assert_eq!(&bytes[16 + 8..16 + 12], &[0x1F, 0x06, 2, 2]);
+        assert_eq!(up.queued()[1].payload(), &[1, 1, 1]);
+    }
+
+    #[test]
+    fn an_answer_survives_the_link() {
+        let down = Down {
+            flags: DOWN_FRAME | DOWN_OWN | DOWN_SYNC_LOW,
+            at_us: 987_654,
+            mailbox: 1,
+            id: 0x605,
+            len: 4,
+            data: [1, 2, 3, 4, 0, 0, 0, 0],
+            aborted: 0b011,
+            next_us: 1_000_040,
+        };
+        assert_eq!(Down::decode(&down.encode()), down);
+    }
+
+    #[test]
+    fn garbage_decodes_within_bounds() {
+        let up = Up::decode(&[0xFF; UP_LEN]);
+        assert_eq!(up.queued().len(), MAILBOXES);
+        assert!(up.queued().iter().all(|q| q.payload().len() == 8));
+        assert_eq!(Down::decode(&[0xFF; DOWN_LEN]).len, 8);
+    }
+}

@@ -25,8 +25,8 @@ use crate::can::{Completion, RxFrame, Transmit};
 
 pub use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::robot_link::{
-    DOWN_ABORTED, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW,
-    DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_ABORTS, UP_LEN,
+    Down, Queued, Up, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW,
+    DRIVES_PD_LOW, DRIVES_SYNC_LOW,
 };
 
 const NO_FILE: usize = usize::MAX;
@@ -235,46 +235,45 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
     loop {
         boundary += QUANTUM_US;
         wait_until(boundary).await;
-        let mut message = [0u8; UP_LEN];
-        message[..8].copy_from_slice(&super::now_us().to_le_bytes());
-        let mut count = 0u8;
+        let mut report = Up {
+            now_us: super::now_us(),
+            ..Up::default()
+        };
         critical_section::with(|cs| {
-            for (k, m) in MAILBOXES.borrow_ref_mut(cs).iter_mut().enumerate() {
-                if let Some(m) = m.as_mut().filter(|m| m.abort == Abort::Requested) {
-                    m.abort = Abort::Sent;
-                    message[UP_ABORTS] |= 1 << k;
-                }
-            }
             for (k, slot) in MAILBOXES.borrow_ref_mut(cs).iter_mut().enumerate() {
-                let Some(m) = slot.as_mut().filter(|m| !m.handed_over) else {
+                let Some(m) = slot.as_mut() else { continue };
+                if m.abort == Abort::Requested {
+                    m.abort = Abort::Sent;
+                    report.aborts |= 1 << k;
+                }
+                if m.handed_over {
                     continue;
-                };
+                }
                 m.handed_over = true;
-                let at = 16 + 20 * usize::from(count);
-                let record = &mut message[at..at + 20];
-                record[..8].copy_from_slice(&m.queued_us.to_le_bytes());
-                record[8..10].copy_from_slice(&m.frame.id().raw().to_le_bytes());
-                let data = m.frame.data();
-                record[10] = data.len() as u8;
-                record[11] = k as u8;
-                record[12..12 + data.len()].copy_from_slice(data);
-                count += 1;
+                let payload = m.frame.data();
+                let mut data = [0u8; 8];
+                data[..payload.len()].copy_from_slice(payload);
+                report.push(Queued {
+                    at_us: m.queued_us,
+                    id: m.frame.id().raw(),
+                    len: payload.len() as u8,
+                    mailbox: k as u8,
+                    data,
+                });
             }
         });
-        message[8] = count;
-        message[9] = DRIVES.load(Ordering::SeqCst);
-        message[12..16].copy_from_slice(&sleeps_for().to_le_bytes());
+        report.drives = DRIVES.load(Ordering::SeqCst);
+        report.sleeps_us = sleeps_for();
         let mut answer = [0u8; DOWN_LEN];
-        if !up.write_all(&message) || !down.read_exact(&mut answer) {
+        if !up.write_all(&report.encode()) || !down.read_exact(&mut answer) {
             super::print_line("# qemu: the robot's bus is gone");
             super::exit(false);
             return;
         }
-        let flags = answer[8];
-        let mut next = [0u8; 8];
-        next.copy_from_slice(&answer[24..32]);
+        let answer = Down::decode(&answer);
+        let flags = answer.flags;
         // The host skips quanta in which no board can act: the next exchange is further on.
-        boundary = boundary.max(u64::from_le_bytes(next).saturating_sub(QUANTUM_US));
+        boundary = boundary.max(answer.next_us.saturating_sub(QUANTUM_US));
         SYNC_READS_LOW.store(flags & DOWN_SYNC_LOW != 0, Ordering::SeqCst);
         if flags & DOWN_PD_LOW != 0 && !pd_seen {
             // SYS_PD_N falls: the same interrupt the real pin raises.
@@ -286,52 +285,51 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             super::finish("end of run");
             return;
         }
-        let aborted = answer[DOWN_ABORTED];
-        if aborted != 0 {
+        if answer.aborted != 0 {
             critical_section::with(|cs| {
                 for (k, m) in MAILBOXES.borrow_ref_mut(cs).iter_mut().enumerate() {
-                    if let Some(m) = m.as_mut().filter(|_| aborted & 1 << k != 0) {
+                    if let Some(m) = m.as_mut().filter(|_| answer.aborted & 1 << k != 0) {
                         m.abort = Abort::Done;
                     }
                 }
             });
-            let irq = TX_IRQ.load(Ordering::Relaxed);
-            if irq != u16::MAX {
-                cortex_m::peripheral::NVIC::pend(Irq(irq));
-            }
+            pend_tx_interrupt();
         }
         if flags & DOWN_FRAME == 0 {
             continue;
         }
-        let mut at = [0u8; 8];
-        at.copy_from_slice(&answer[..8]);
-        wait_until(u64::from_le_bytes(at)).await;
+        wait_until(answer.at_us).await;
         if flags & DOWN_OWN != 0 {
-            let mailbox = usize::from(answer[9]);
             critical_section::with(|cs| {
                 if let Some(m) = MAILBOXES
                     .borrow_ref_mut(cs)
-                    .get_mut(mailbox)
+                    .get_mut(usize::from(answer.mailbox))
                     .and_then(Option::as_mut)
                 {
                     m.done = true;
                 }
             });
-            let irq = TX_IRQ.load(Ordering::Relaxed);
-            if irq != u16::MAX {
-                cortex_m::peripheral::NVIC::pend(Irq(irq));
-            }
-        } else if crate::bxcan::passes_filter(u16::from_le_bytes([answer[10], answer[11]])) {
+            pend_tx_interrupt();
+        } else if crate::bxcan::passes_filter(answer.id) {
             // As bxCAN's filter on the robot: only command frames reach the receive FIFO, so a
             // flood of sensor frames on the bus costs the board nothing.
-            let mut frame = RxFrame {
-                id: u16::from_le_bytes([answer[10], answer[11]]),
-                len: answer[12].min(8),
-                data: [0; 8],
-            };
-            frame.data.copy_from_slice(&answer[16..24]);
-            super::deliver(frame, rx_irq);
+            super::deliver(
+                RxFrame {
+                    id: answer.id,
+                    len: answer.len,
+                    data: answer.data,
+                },
+                rx_irq,
+            );
         }
+    }
+}
+
+/// Pends the transmit interrupt (the exception that last called [`transmit`]), once it is known.
+fn pend_tx_interrupt() {
+    let irq = TX_IRQ.load(Ordering::Relaxed);
+    if irq != u16::MAX {
+        cortex_m::peripheral::NVIC::pend(Irq(irq));
     }
 }
 

@@ -34,8 +34,8 @@ use stimulus::{Action, Timed, BOARDS};
 
 pub use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::robot_link::{
-    DOWN_ABORTED, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW,
-    DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_ABORTS, UP_LEN,
+    Down, Up, DOWN_END, DOWN_FRAME, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW, DRIVES_PD_LOW,
+    DRIVES_SYNC_LOW, UP_LEN,
 };
 /// The operator's adapter: the fourth node, after the boards.
 pub const OPERATOR: usize = 3;
@@ -228,7 +228,7 @@ impl Board {
     }
 
     /// Waits for the board's next exchange; `None` if the board has ended (its QEMU exited).
-    fn receive(&mut self, guard: Instant, limit: Duration) -> Result<Option<[u8; UP_LEN]>> {
+    fn receive(&mut self, guard: Instant, limit: Duration) -> Result<Option<Up>> {
         let mut message = [0u8; UP_LEN];
         let mut got = 0;
         let up_fd = self.up.as_ref().context("no pipe")?.as_raw_fd();
@@ -261,7 +261,7 @@ impl Board {
                 if got == UP_LEN {
                     // Everything the board printed before this exchange is in its pipe by now.
                     self.drain();
-                    return Ok(Some(message));
+                    return Ok(Some(Up::decode(&message)));
                 }
                 continue;
             }
@@ -290,9 +290,9 @@ impl Board {
         }
     }
 
-    fn send(&mut self, message: &[u8; DOWN_LEN]) -> Result<()> {
+    fn send(&mut self, answer: &Down) -> Result<()> {
         if let Some(down) = self.down.as_mut() {
-            down.write_all(message)?;
+            down.write_all(&answer.encode())?;
         }
         Ok(())
     }
@@ -452,20 +452,16 @@ pub fn run(
         let mut notes: Vec<String> = Vec::new();
         for b in boards.iter_mut().filter(|b| b.alive) {
             match b.receive(Instant::now(), limit)? {
-                Some(message) => {
-                    b.drives = message[9];
-                    b.aborts = message[UP_ABORTS] & 0b111;
-                    let sleeps = u32::from_le_bytes(message[12..16].try_into()?);
-                    b.wakes_at = match sleeps {
+                Some(report) => {
+                    b.drives = report.drives;
+                    b.aborts = report.aborts & 0b111;
+                    b.wakes_at = match report.sleeps_us {
                         u32::MAX => u64::MAX,
                         us => t.saturating_add(u64::from(us)),
                     };
-                    for k in 0..usize::from(message[8].min(3)) {
-                        let r = &message[16 + 20 * k..36 + 20 * k];
-                        let queued = u64::from_le_bytes(r[..8].try_into()?) + b.offset;
-                        let id = u16::from_le_bytes([r[8], r[9]]);
-                        let len = usize::from(r[10].min(8));
-                        let Some(frame) = Frame::new(id, &r[12..12 + len]) else {
+                    for q in report.queued() {
+                        let queued = q.at_us + b.offset;
+                        let Some(frame) = Frame::new(q.id, q.payload()) else {
                             notes.push(format!(
                                 "bus: # {} {} queued an invalid frame",
                                 stamp(t),
@@ -473,13 +469,14 @@ pub fn run(
                             ));
                             continue;
                         };
-                        if let Err(e) = bus.queue(nodes[b.index], usize::from(r[11]), frame, queued)
+                        if let Err(e) =
+                            bus.queue(nodes[b.index], usize::from(q.mailbox), frame, queued)
                         {
                             notes.push(format!(
                                 "bus: # {} {}: mailbox {}: {e:?}",
                                 stamp(t),
                                 NODES[b.index],
-                                r[11]
+                                q.mailbox
                             ));
                         }
                     }
@@ -703,17 +700,20 @@ pub fn run(
         };
         // A board restarted at this boundary has not traded yet: its first answer is the next one.
         for b in boards.iter_mut().filter(|b| b.alive && b.offset != t) {
-            let mut message = [0u8; DOWN_LEN];
-            message[24..32].copy_from_slice(&(next - b.offset).to_le_bytes());
-            let mut flags = 0;
+            let mut answer = Down {
+                next_us: next - b.offset,
+                aborted: b.aborted,
+                ..Down::default()
+            };
+            b.aborted = 0;
             if pd_low {
-                flags |= DOWN_PD_LOW;
+                answer.flags |= DOWN_PD_LOW;
             }
             if sync_low {
-                flags |= DOWN_SYNC_LOW;
+                answer.flags |= DOWN_SYNC_LOW;
             }
             if end {
-                flags |= DOWN_END;
+                answer.flags |= DOWN_END;
             }
             if let Some(d) = now {
                 // A frame that started before the board's last reset is no longer in its mailboxes.
@@ -722,19 +722,15 @@ pub fn run(
                 let own = d.node == b.index && d.start >= b.offset && d.mailbox < MAILBOXES;
                 let heard = d.node != b.index && bus.plugged(nodes[b.index]);
                 if own || heard {
-                    flags |= DOWN_FRAME | if own { DOWN_OWN } else { 0 };
-                    let local = d.end.saturating_sub(b.offset);
-                    message[..8].copy_from_slice(&local.to_le_bytes());
-                    message[9] = d.mailbox as u8;
-                    message[10..12].copy_from_slice(&d.frame.id.to_le_bytes());
-                    message[12] = d.frame.len;
-                    message[16..24].copy_from_slice(&d.frame.data);
+                    answer.flags |= DOWN_FRAME | if own { DOWN_OWN } else { 0 };
+                    answer.at_us = d.end.saturating_sub(b.offset);
+                    answer.mailbox = d.mailbox as u8;
+                    answer.id = d.frame.id;
+                    answer.len = d.frame.len;
+                    answer.data = d.frame.data;
                 }
             }
-            message[8] = flags;
-            message[DOWN_ABORTED] = b.aborted;
-            b.aborted = 0;
-            b.send(&message)?;
+            b.send(&answer)?;
         }
         // What the boards printed in the quantum that ended, what the bus saw at its boundary, and
         // the frame that completes in the next one.
