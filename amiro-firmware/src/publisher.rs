@@ -102,7 +102,7 @@ fn serve_due<C: Clock, const N: usize>(
                 handler.lock(|h| health::frames_now(h, &counters, board, taken, release.priority));
             let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
             for frame in frames {
-                let outcome = tx_queue.lock(|q| q.push(frame));
+                let outcome = tx_queue.lock(|q| crate::tasks::enqueue(q, frame));
                 note_push(
                     C::now_us(),
                     level,
@@ -117,7 +117,7 @@ fn serve_due<C: Clock, const N: usize>(
             let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
             for data in samples {
                 let frame = data.encode(release.priority);
-                let outcome = tx_queue.lock(|q| q.push(frame));
+                let outcome = tx_queue.lock(|q| crate::tasks::enqueue(q, frame));
                 note_push(
                     C::now_us(),
                     level,

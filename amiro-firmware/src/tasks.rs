@@ -6,7 +6,7 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use amiro_can::Priority;
 use amiro_sensors::handler::{Outcome, Rejection, SensorDataHandler};
 use amiro_sensors::trace::{TraceEvent, TraceKind};
-use amiro_sensors::tx_queue::TxQueue;
+use amiro_sensors::tx_queue::{PushOutcome, TxQueue};
 use rtic_sync::channel::{Receiver, Sender};
 
 use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
@@ -41,6 +41,14 @@ pub fn receive_frames<const N: usize>(
             }
         }
     }
+}
+
+/// Puts `frame` into the transmit queue: every frame a board sends goes in here (a sample's, a
+/// verdict's). The QEMU robot notes when, so its bus report counts the frame's response from here.
+pub fn enqueue<const N: usize>(queue: &mut TxQueue<N>, frame: amiro_can::Frame) -> PushOutcome {
+    #[cfg(feature = "qemu")]
+    crate::qemu::robot::released(&frame);
+    queue.push(frame)
 }
 
 /// The CAN transmit interrupt: frames whose mailbox was aborted for a more urgent one go back into
@@ -214,7 +222,7 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
             // Not traced as queued frames: no sample was released for them (the bench would take
             // them for late samples of the diagnostics topic).
             for verdict_frame in verdict {
-                let _ = tx_queue.lock(|q| q.push(verdict_frame));
+                let _ = tx_queue.lock(|q| enqueue(q, verdict_frame));
             }
             cortex_m::peripheral::NVIC::pend(tx_interrupt);
         }
@@ -375,7 +383,7 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     };
     let now = C::now_us();
     for verdict_frame in verdict {
-        let pushed = tx_queue.lock(|q| q.push(verdict_frame));
+        let pushed = tx_queue.lock(|q| enqueue(q, verdict_frame));
         for kind in TraceKind::for_push(verdict_frame.id().raw(), &pushed) {
             telemetry::trace(&TraceEvent::new(now, kind));
         }

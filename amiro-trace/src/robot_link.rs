@@ -6,15 +6,15 @@
 /// times from start of frame to completion at 1 Mbit/s).
 pub const QUANTUM_US: u64 = 40;
 /// Board → host, [`Up`]: `u64` now, `u8` new frames, `u8` lines driven, `u8` abort requests, 1
-/// reserved, `u32` µs the board sleeps from now, three 20-byte records (`u64` queued at, `u16` id,
-/// `u8` length, `u8` mailbox, 8 data bytes).
+/// reserved, `u32` µs the board sleeps from now, three 28-byte records (`u64` queued at, `u16` id,
+/// `u8` length, `u8` mailbox, 8 data bytes, `u64` released at).
 pub const UP_LEN: usize = 16 + MAILBOXES * RECORD_LEN;
 /// Host → board, [`Down`]: `u64` completion time, `u8` flags, `u8` mailbox, `u16` id, `u8` length,
 /// `u8` aborted mailboxes, 2 reserved, 8 data bytes, `u64` time of the next exchange.
 pub const DOWN_LEN: usize = 32;
 /// A board's transmit mailboxes (bxCAN's three).
 pub const MAILBOXES: usize = 3;
-const RECORD_LEN: usize = 20;
+const RECORD_LEN: usize = 28;
 
 /// Up: this board pulls SYS_SYNC_N low.
 pub const DRIVES_SYNC_LOW: u8 = 1;
@@ -34,8 +34,11 @@ pub const DOWN_END: u8 = 16;
 /// A frame a board put into one of its mailboxes since its last report.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Queued {
-    /// When (the board's virtual µs).
+    /// When it entered the mailbox (the board's virtual µs).
     pub at_us: u64,
+    /// When it entered the board's transmit queue, before it waited for a mailbox (the driver gives
+    /// one frame of an identifier a mailbox at a time): where its response starts.
+    pub released_us: u64,
     /// Standard identifier.
     pub id: u16,
     /// Data length (0..=8).
@@ -102,6 +105,7 @@ impl Up {
             r[10] = q.len.min(8);
             r[11] = q.mailbox;
             r[12..20].copy_from_slice(&q.data);
+            r[20..28].copy_from_slice(&q.released_us.to_le_bytes());
         }
         m
     }
@@ -122,6 +126,7 @@ impl Up {
             data.copy_from_slice(&r[12..20]);
             *q = Queued {
                 at_us: le_u64(&r[..8]),
+                released_us: le_u64(&r[20..28]),
                 id: u16::from_le_bytes([r[8], r[9]]),
                 len: r[10].min(8),
                 mailbox: r[11],
@@ -209,6 +214,7 @@ mod tests {
         for k in 0..MAILBOXES as u8 {
             assert!(up.push(Queued {
                 at_us: 1_000 + u64::from(k),
+                released_us: 900 + u64::from(k),
                 id: 0x61F - u16::from(k),
                 len: 2 + k,
                 mailbox: 2 - k,

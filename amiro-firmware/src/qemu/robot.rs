@@ -41,6 +41,8 @@ static TX_IRQ: AtomicU16 = AtomicU16::new(u16::MAX);
 #[derive(Clone, Copy)]
 struct Mailbox {
     frame: amiro_can::Frame,
+    /// When its sample was released into the board's transmit queue ([`released`]).
+    released_us: u64,
     queued_us: u64,
     handed_over: bool,
     done: bool,
@@ -58,6 +60,50 @@ enum Abort {
 }
 
 static MAILBOXES: Mutex<RefCell<[Option<Mailbox>; 3]>> = Mutex::new(RefCell::new([None; 3]));
+
+/// Frames waiting in the board's transmit queue, with the time each was put there: what the host's
+/// bus report counts a frame's response from (the analysis's queuing), since the driver hands a
+/// mailbox one frame of an identifier at a time. More than the queue holds (a frame it replaced or
+/// dropped stays until overwritten, oldest first).
+const RELEASES: usize = 32;
+static RELEASED: Mutex<RefCell<Releases>> = Mutex::new(RefCell::new(Releases {
+    entries: [None; RELEASES],
+    next: 0,
+}));
+
+struct Releases {
+    entries: [Option<(amiro_can::Frame, u64)>; RELEASES],
+    next: usize,
+}
+
+impl Releases {
+    fn note(&mut self, frame: amiro_can::Frame, at_us: u64) {
+        if let Some(slot) = self.entries.get_mut(self.next) {
+            *slot = Some((frame, at_us));
+        }
+        self.next = (self.next + 1) % RELEASES;
+    }
+
+    /// The latest release of a frame with these bytes (a newer sample replaced an older one with
+    /// the same bytes in the queue), taken out; `None` if there is none.
+    fn take(&mut self, frame: &amiro_can::Frame) -> Option<u64> {
+        let latest = self
+            .entries
+            .iter_mut()
+            .filter(|e| e.is_some_and(|(f, _)| f == *frame))
+            .max_by_key(|e| e.map_or(0, |(_, at)| at))?;
+        latest.take().map(|(_, at)| at)
+    }
+}
+
+/// Notes that `frame` entered the board's transmit queue now (robot mode only).
+pub fn released(frame: &amiro_can::Frame) {
+    if !active() {
+        return;
+    }
+    let now = super::now_us();
+    critical_section::with(|cs| RELEASED.borrow_ref_mut(cs).note(*frame, now));
+}
 
 /// Opens the pipes to the host's bus if this run has them (`init` calls it); `true` in robot mode.
 pub(super) fn connect() -> bool {
@@ -98,16 +144,28 @@ pub fn sync_reads_low() -> bool {
     SYNC_READS_LOW.load(Ordering::SeqCst)
 }
 
-/// Puts `frame` into a free mailbox (the host queues it on the bus at the next exchange).
+/// Puts `frame` into a free mailbox (the host queues it on the bus at the next exchange), by the
+/// robot driver's rules (`bxcan::Mailboxes`).
 pub(super) fn transmit(frame: &amiro_can::Frame) -> Transmit {
     remember_tx_interrupt();
     let now = super::now_us();
     critical_section::with(|cs| {
         let mut boxes = MAILBOXES.borrow_ref_mut(cs);
+        // One frame of an identifier in the mailboxes at a time: the controller sends by identifier
+        // and breaks ties by mailbox number, which would reorder a sample's frames (the ring's eight).
+        if boxes
+            .iter()
+            .flatten()
+            .any(|m| !m.done && m.frame.id() == frame.id())
+        {
+            return Transmit::Busy;
+        }
         match boxes.iter_mut().find(|m| m.is_none()) {
             Some(slot) => {
+                let released_us = RELEASED.borrow_ref_mut(cs).take(frame).unwrap_or(now);
                 *slot = Some(Mailbox {
                     frame: *frame,
+                    released_us,
                     queued_us: now,
                     handed_over: false,
                     done: false,
@@ -143,7 +201,11 @@ pub(super) fn completed(on_completion: &mut dyn FnMut(Completion)) {
         for (slot, out) in MAILBOXES.borrow_ref_mut(cs).iter_mut().zip(&mut ended) {
             *out = match slot {
                 Some(m) if m.done => Some(Completion::Sent(m.frame)),
-                Some(m) if m.abort == Abort::Done => Some(Completion::Aborted(m.frame)),
+                Some(m) if m.abort == Abort::Done => {
+                    // Back into the queue: it keeps its release time.
+                    RELEASED.borrow_ref_mut(cs).note(m.frame, m.released_us);
+                    Some(Completion::Aborted(m.frame))
+                }
                 _ => continue,
             };
             *slot = None;
@@ -254,6 +316,7 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
                 let mut data = [0u8; 8];
                 data[..payload.len()].copy_from_slice(payload);
                 report.push(Queued {
+                    released_us: m.released_us,
                     at_us: m.queued_us,
                     id: m.frame.id().raw(),
                     len: payload.len() as u8,

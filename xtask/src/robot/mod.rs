@@ -62,6 +62,10 @@ pub struct Transfer {
     pub frame: Frame,
     /// When its node queued it (put it into a mailbox).
     pub queued_at: u64,
+    /// When it entered its node's transmit queue (a board's driver gives one frame of an
+    /// identifier a mailbox at a time, so a sample's later frames wait there): where its response
+    /// starts. The adapter's and a babbling controller's frames: when queued.
+    pub released_at: u64,
     /// Start of frame of the attempt that succeeded.
     pub start: u64,
     /// Completion.
@@ -103,6 +107,8 @@ struct Board {
     /// frame the bus gave back (the answer tells it).
     aborts: u8,
     aborted: u8,
+    /// Per mailbox, when the frame in it was released into the board's transmit queue.
+    released: [u64; MAILBOXES],
 }
 
 fn make_fifo(path: &Path) -> Result<()> {
@@ -185,6 +191,7 @@ impl Board {
         self.wakes_at = at;
         self.aborts = 0;
         self.aborted = 0;
+        self.released = [at; MAILBOXES];
         Ok(())
     }
 
@@ -427,6 +434,7 @@ pub fn run(
             wakes_at: 0,
             aborts: 0,
             aborted: 0,
+            released: [0; MAILBOXES],
         })
         .collect();
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
@@ -461,6 +469,9 @@ pub fn run(
                     };
                     for q in report.queued() {
                         let queued = q.at_us + b.offset;
+                        if let Some(slot) = b.released.get_mut(usize::from(q.mailbox)) {
+                            *slot = q.released_us.min(q.at_us) + b.offset;
+                        }
                         let Some(frame) = Frame::new(q.id, q.payload()) else {
                             notes.push(format!(
                                 "bus: # {} {} queued an invalid frame",
@@ -577,11 +588,17 @@ pub fn run(
                     end,
                     ..
                 } => {
+                    let released_at = boards
+                        .get(node)
+                        .and_then(|b| b.released.get(mailbox))
+                        .copied()
+                        .unwrap_or(queued_at);
                     let transfer = Transfer {
                         node,
                         mailbox,
                         frame,
                         queued_at,
+                        released_at,
                         start,
                         end,
                     };

@@ -1,13 +1,15 @@
 //! The bus report of a robot run: per message, the worst response observed on the simulated bus
-//! (queued into a mailbox → completed) beside the Davis et al. (2007) bound schedule-analysis
-//! computes for the same traffic.
+//! (released into its node's transmit queue → completed) beside the Davis et al. (2007) bound
+//! schedule-analysis computes for the same traffic.
 //!
 //! "The same traffic" is read off the run: each identifier is one stream, its frame length the
 //! longest seen (worst-case stuffing, the analysis's `exact` cost), its frames per activation the
-//! largest burst (frames queued while an earlier one of the burst was still on its way), its period the shortest time
+//! largest burst (frames released while an earlier one of the burst was still on its way), its period the shortest time
 //! between two bursts (a single burst: the run's length). Frames are counted from the moment they
-//! entered a mailbox, as the analysis counts from queuing, with no queuing jitter. Error frames
-//! are outside the analysis: a run with a fault episode is reported, not checked.
+//! entered their node's transmit queue (a board's driver gives one frame of an identifier a mailbox
+//! at a time, so a sample's later frames wait there), as the analysis counts from queuing, with no
+//! queuing jitter. Error frames are outside the analysis: a run with a fault episode is reported,
+//! not checked.
 use std::collections::BTreeMap;
 
 use schedule_analysis::busy_window::{AnalysisError, Counter, Limits};
@@ -31,7 +33,7 @@ pub struct Line {
     pub per_activation: u32,
     /// Shortest time between two activations (µs).
     pub period_us: u64,
-    /// Worst observed response, queued → completed (µs).
+    /// Worst observed response, released → completed (µs).
     pub observed_us: u64,
     /// The analysis's bound (µs), or why there is none.
     pub bound_us: Result<u64, String>,
@@ -55,7 +57,8 @@ pub fn analyse(transfers: &[Transfer], duration_us: u64) -> Vec<Line> {
     let mut lines: Vec<Line> = streams
         .iter()
         .map(|(&id, frames)| {
-            let mut queued: Vec<(u64, u64)> = frames.iter().map(|t| (t.queued_at, t.end)).collect();
+            let mut queued: Vec<(u64, u64)> =
+                frames.iter().map(|t| (t.released_at, t.end)).collect();
             queued.sort_unstable();
             // (first queued, frames, last completion)
             let mut bursts: Vec<(u64, u32, u64)> = Vec::new();
@@ -82,7 +85,7 @@ pub fn analyse(transfers: &[Transfer], duration_us: u64) -> Vec<Line> {
                 period_us,
                 observed_us: frames
                     .iter()
-                    .map(|t| t.end - t.queued_at)
+                    .map(|t| t.end - t.released_at)
                     .max()
                     .unwrap_or(0),
                 bound_us: Err(String::new()),
@@ -125,7 +128,7 @@ pub fn analyse(transfers: &[Transfer], duration_us: u64) -> Vec<Line> {
 /// The report as a table.
 pub fn render(lines: &[Line]) -> String {
     let mut text = String::from(
-        "bus report: observed worst response (queued → completed) against the Davis analysis of the same traffic\n\
+        "bus report: observed worst response (released → completed) against the Davis analysis of the same traffic\n\
          id   sender        frames  dlc  burst  period µs  observed µs  bound µs\n",
     );
     for l in lines {
@@ -160,6 +163,7 @@ mod tests {
             mailbox: 0,
             frame: Frame::new(id, &[0x55; 8][..len]).unwrap(),
             queued_at,
+            released_at: queued_at,
             start: end - 50,
             end,
         }
@@ -192,6 +196,15 @@ mod tests {
         let lower = can::frame_time(FrameCost::Exact, 8, false, bit).as_ns() / 1000;
         assert_eq!(lines[0].bound_us, Ok(own + lower));
         assert!(!lines[0].exceeds() && !lines[1].exceeds());
+        // A burst counts from its release, not from the mailbox: the driver gives an identifier one
+        // mailbox at a time, so a sample's second frame enters its mailbox as the first completes.
+        let mut later = transfer(1, 0x200, 8, 5_205, 5_335);
+        later.released_at = 5_011;
+        let mut u = t.clone();
+        u[13] = later;
+        let lines = analyse(&u, 10_000);
+        assert_eq!((lines[1].per_activation, lines[1].period_us), (2, 5000));
+        assert_eq!(lines[1].observed_us, 5_335 - 5_011);
         // A frame that waited far longer than any bound is flagged.
         t.push(transfer(0, 0x100, 2, 20_000, 25_000));
         let lines = analyse(&t, 30_000);

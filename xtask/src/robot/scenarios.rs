@@ -242,6 +242,20 @@ fn thesis_demo(run: &Run) -> Result<String> {
     let magnetometer = magnetometer_on_grid(run, 210, 300)?;
     let samples = ring_samples(run, 0x61F, 10_000)?;
     ensure!(samples >= 18, "{samples} ring samples in 188 ms");
+    // Each sample's eight frames in sensor order, as the robot's driver sends them (one frame of an
+    // identifier in the mailboxes at a time; the controller would break ties by mailbox number).
+    let order: Vec<u8> = run
+        .frames(0x61F)
+        .iter()
+        .filter_map(|t| t.frame.payload().first().copied())
+        .collect();
+    ensure!(
+        order
+            .iter()
+            .enumerate()
+            .all(|(k, &i)| usize::from(i) == k % 8),
+        "ring frames out of sensor order: {order:?}"
+    );
     let latched = run
         .notes(2)
         .into_iter()
@@ -267,7 +281,7 @@ fn thesis_demo(run: &Run) -> Result<String> {
         "{others} frames besides the magnetometer and the ring"
     );
     Ok(format!(
-        "{} magnetometer frames on the 900 µs grid, {samples} ring samples × 8 on the 10 ms grid, LED 3 latched, all on one bus",
+        "{} magnetometer frames on the 900 µs grid, {samples} ring samples × 8 (in sensor order) on the 10 ms grid, LED 3 latched, all on one bus",
         magnetometer.len()
     ))
 }
@@ -479,8 +493,8 @@ fn babbling_board(run: &Run) -> Result<String> {
     );
     let waited = ring
         .iter()
-        .filter(|t| t.queued_at < last.end && t.end > last.end)
-        .map(|t| t.end - t.queued_at)
+        .filter(|t| t.released_at < last.end && t.end > last.end)
+        .map(|t| t.end - t.released_at)
         .max()
         .unwrap_or(0);
     let before: Vec<u64> = ring
@@ -517,46 +531,53 @@ fn mailbox_abort(run: &Run) -> Result<String> {
     let last = babble
         .last()
         .context("LightRing's controller did not babble")?;
-    // PowerManagement's power status, started during the babbling: each frame queued then goes out
-    // during it, within a few frame times of its queuing (an abort is carried to the bus at the next
+    // PowerManagement's power status at high, released during the babbling: each frame goes out
+    // during it, within a few frame times of its release (an abort is carried to the bus at the next
     // 40 µs exchange, then a babbling frame already on the wire finishes first).
     let during: Vec<&Transfer> = run
         .frames(0x51E)
         .into_iter()
-        .filter(|t| t.queued_at >= FROM && t.queued_at < last.start)
+        .filter(|t| t.released_at >= FROM && t.released_at < last.start)
         .collect();
     ensure!(
         during.len() >= 2,
-        "{} power-status frames queued during the babbling",
+        "{} power-status frames at high released during the babbling",
         during.len()
     );
     let worst = during
         .iter()
-        .map(|t| t.end - t.queued_at)
+        .map(|t| t.end - t.released_at)
         .max()
         .unwrap_or(0);
     ensure!(
         during.iter().all(|t| t.end < last.end) && worst <= 1_000,
-        "power-status frames waited for the babbling to end (worst {worst} µs from queued to sent)"
+        "power-status frames waited for the babbling to end (worst {worst} µs from release to sent)"
     );
-    // What made room: PowerManagement aborted waiting ring frames, each of which went out later.
+    // What made room: PowerManagement aborted a waiting, less urgent frame, which went out later.
     let aborts: Vec<&str> = run
         .bus_notes()
         .into_iter()
-        .filter(|n| n.contains("powermgmt aborts 61F"))
+        .filter(|n| n.contains("powermgmt aborts"))
         .collect();
-    ensure!(!aborts.is_empty(), "PowerManagement aborted no ring frame");
-    let ring_after = run
-        .frames(0x61F)
+    ensure!(
+        !aborts.is_empty(),
+        "PowerManagement aborted no waiting frame"
+    );
+    let low_after = run
+        .frames(0x71E)
         .iter()
         .filter(|t| t.end > last.end)
         .count();
-    ensure!(ring_after > 0, "no ring frame after the babbling");
+    ensure!(
+        low_after > 0,
+        "the aborted power-status frame at low never went out"
+    );
     Ok(format!(
-        "{} power-status frames queued while LightRing babbled went out within {worst} µs each \
-         (PowerManagement aborted {} waiting ring frames for them, sent again after the babbling)",
+        "{} power-status frames at high released while LightRing babbled went out within {worst} µs each \
+         (PowerManagement aborted a less urgent waiting frame {} time(s): {}; sent after the babbling)",
         during.len(),
-        aborts.len()
+        aborts.len(),
+        aborts.join("; ")
     ))
 }
 
