@@ -63,36 +63,68 @@ static MAILBOXES: Mutex<RefCell<[Option<Mailbox>; 3]>> = Mutex::new(RefCell::new
 
 /// Frames waiting in the board's transmit queue, with the time each was put there: what the host's
 /// bus report counts a frame's response from (the analysis's queuing), since the driver hands a
-/// mailbox one frame of an identifier at a time. More than the queue holds (a frame it replaced or
-/// dropped stays until overwritten, oldest first).
+/// mailbox one frame of an identifier at a time. A frame is known by its identifier and first data
+/// byte (a multi-frame sample's index byte), and the latest release of that key is its own (the
+/// queue keeps only the newest sample of a topic). More entries than the queue holds, overwritten
+/// oldest first (a frame the queue replaced or dropped leaves its entry behind); 8 bytes each, in
+/// the QEMU build only.
 const RELEASES: usize = 32;
 static RELEASED: Mutex<RefCell<Releases>> = Mutex::new(RefCell::new(Releases {
-    entries: [None; RELEASES],
+    entries: [Release::NONE; RELEASES],
     next: 0,
 }));
 
+#[derive(Clone, Copy)]
+struct Release {
+    id: u16,
+    first: u8,
+    /// Virtual µs, the low 32 bits ([`Releases::take`] widens it from now).
+    at: u32,
+}
+
+impl Release {
+    /// No entry (no standard identifier is `u16::MAX`).
+    const NONE: Release = Release {
+        id: u16::MAX,
+        first: 0,
+        at: 0,
+    };
+
+    fn key(frame: &amiro_can::Frame) -> (u16, u8) {
+        (frame.id().raw(), frame.data().first().copied().unwrap_or(0))
+    }
+}
+
 struct Releases {
-    entries: [Option<(amiro_can::Frame, u64)>; RELEASES],
+    entries: [Release; RELEASES],
     next: usize,
 }
 
 impl Releases {
-    fn note(&mut self, frame: amiro_can::Frame, at_us: u64) {
+    fn note(&mut self, frame: &amiro_can::Frame, at_us: u64) {
+        let (id, first) = Release::key(frame);
         if let Some(slot) = self.entries.get_mut(self.next) {
-            *slot = Some((frame, at_us));
+            *slot = Release {
+                id,
+                first,
+                at: at_us as u32,
+            };
         }
         self.next = (self.next + 1) % RELEASES;
     }
 
-    /// The latest release of a frame with these bytes (a newer sample replaced an older one with
-    /// the same bytes in the queue), taken out; `None` if there is none.
-    fn take(&mut self, frame: &amiro_can::Frame) -> Option<u64> {
+    /// The latest release of `frame`'s key before `now_us`, taken out; `None` if there is none.
+    fn take(&mut self, frame: &amiro_can::Frame, now_us: u64) -> Option<u64> {
+        let key = Release::key(frame);
+        let age = |r: &Release| (now_us as u32).wrapping_sub(r.at);
         let latest = self
             .entries
             .iter_mut()
-            .filter(|e| e.is_some_and(|(f, _)| f == *frame))
-            .max_by_key(|e| e.map_or(0, |(_, at)| at))?;
-        latest.take().map(|(_, at)| at)
+            .filter(|r| (r.id, r.first) == key)
+            .min_by_key(|r| age(r))?;
+        let released = now_us.saturating_sub(u64::from(age(latest)));
+        *latest = Release::NONE;
+        Some(released)
     }
 }
 
@@ -102,7 +134,7 @@ pub fn released(frame: &amiro_can::Frame) {
         return;
     }
     let now = super::now_us();
-    critical_section::with(|cs| RELEASED.borrow_ref_mut(cs).note(*frame, now));
+    critical_section::with(|cs| RELEASED.borrow_ref_mut(cs).note(frame, now));
 }
 
 /// Opens the pipes to the host's bus if this run has them (`init` calls it); `true` in robot mode.
@@ -162,7 +194,7 @@ pub(super) fn transmit(frame: &amiro_can::Frame) -> Transmit {
         }
         match boxes.iter_mut().find(|m| m.is_none()) {
             Some(slot) => {
-                let released_us = RELEASED.borrow_ref_mut(cs).take(frame).unwrap_or(now);
+                let released_us = RELEASED.borrow_ref_mut(cs).take(frame, now).unwrap_or(now);
                 *slot = Some(Mailbox {
                     frame: *frame,
                     released_us,
@@ -203,7 +235,7 @@ pub(super) fn completed(on_completion: &mut dyn FnMut(Completion)) {
                 Some(m) if m.done => Some(Completion::Sent(m.frame)),
                 Some(m) if m.abort == Abort::Done => {
                     // Back into the queue: it keeps its release time.
-                    RELEASED.borrow_ref_mut(cs).note(m.frame, m.released_us);
+                    RELEASED.borrow_ref_mut(cs).note(&m.frame, m.released_us);
                     Some(Completion::Aborted(m.frame))
                 }
                 _ => continue,
