@@ -344,14 +344,15 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
                     continue;
                 }
                 m.handed_over = true;
-                let payload = m.frame.data();
                 let mut data = [0u8; 8];
-                data[..payload.len()].copy_from_slice(payload);
+                for (to, from) in data.iter_mut().zip(m.frame.data()) {
+                    *to = *from;
+                }
                 report.push(Queued {
                     released_us: m.released_us,
                     at_us: m.queued_us,
                     id: m.frame.id().raw(),
-                    len: payload.len() as u8,
+                    len: m.frame.dlc(),
                     mailbox: k as u8,
                     data,
                 });

@@ -146,25 +146,23 @@ impl Run {
 
 /// Every board reached its end (end of run or hand-over) without receive-FIFO overruns.
 fn every_board_ended(run: &Run) -> Result<()> {
-    for (board, name) in NODES.iter().enumerate().take(3) {
-        let view = run.view(board);
-        let overruns = view
-            .end_field("rx overruns")
-            .with_context(|| name.to_string())?;
-        ensure!(overruns == 0, "{}: {overruns} receive-FIFO overruns", name);
-    }
-    Ok(())
+    zero_on_every_board(run, "rx overruns", "receive-FIFO overruns")
 }
 
 /// No board dropped a received frame: a flood of sensor frames (a babbling controller's) stays out
 /// of every board's software, as bxCAN's filter keeps it out on the robot.
 fn nothing_dropped(run: &Run) -> Result<()> {
+    zero_on_every_board(run, "rx dropped", "received frames dropped")
+}
+
+/// Every board's end line has `field` at zero (`what` names it in the failure).
+fn zero_on_every_board(run: &Run, field: &str, what: &str) -> Result<()> {
     for (board, name) in NODES.iter().enumerate().take(3) {
-        let dropped = run
+        let count = run
             .view(board)
-            .end_field("rx dropped")
+            .end_field(field)
             .with_context(|| name.to_string())?;
-        ensure!(dropped == 0, "{name} dropped {dropped} received frames");
+        ensure!(count == 0, "{name}: {count} {what}");
     }
     Ok(())
 }
