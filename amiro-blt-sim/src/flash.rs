@@ -9,6 +9,11 @@ pub const BLOCK: u32 = 512;
 /// Where the bootloader keeps its callback table, and its magic.
 pub const CALLBACK_TABLE: u32 = 0x0800_01C0;
 const MAGIC: u32 = 0x412D_424C;
+/// The version fields after the magic (`amiroblt.h`, `Boot/main.c`): the bootloader's (release
+/// 1.1.5), the shutdown protocol's (1.1.0) and the compiler's (GCC 12.2.1), four bytes each
+/// (identifier, major, minor, patch). Bytes 9..13 of the table, 01 01 00 01, read as a word are
+/// DiWheelDrive 1-1's device id, unaligned, in every board's bootloader.
+const VERSIONS: [u8; 12] = [5, 1, 1, 5, 1, 1, 1, 0, 1, 12, 2, 1];
 
 /// The two chips of the robot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -131,6 +136,7 @@ impl Flash {
         mem[4..8].copy_from_slice(&(FLASH_BASE + 0x1E1).to_le_bytes());
         let t = (CALLBACK_TABLE - FLASH_BASE) as usize;
         mem[t..t + 4].copy_from_slice(&MAGIC.to_le_bytes());
+        mem[t + 4..t + 16].copy_from_slice(&VERSIONS);
         Flash {
             chip,
             mem,
@@ -291,11 +297,12 @@ impl Flash {
 
     /// Puts the bootloader's own device id into its code the way a compiler does for the id
     /// comparisons in `xcp.c` (CONNECT) and `can.c` (the CAN receiver, twice): three sites, each
-    /// either a literal-pool word or a MOVW/MOVT pair, or none at all ([`IdInCode::Absent`], a
-    /// bootloader in which a host cannot find its id).
+    /// a literal-pool word, a MOVW/MOVT pair or a CMP.W/CMN.W, or none at all
+    /// ([`IdInCode::Absent`], a bootloader in which a host cannot find its id).
     pub fn compile_device_id(&mut self, id: u32, encoding: IdInCode) {
-        // Three call sites in the code, past the vector and callback tables.
-        for site in [0x0B14usize, 0x1F3C, 0x2A80] {
+        // Three call sites in the code, past the vector and callback tables, each comparing
+        // another register.
+        for (site, rn) in [(0x0B14usize, 7u16), (0x1F3C, 1), (0x2A80, 3)] {
             match encoding {
                 IdInCode::LiteralPool => {
                     self.mem[site..site + 4].copy_from_slice(&id.to_le_bytes())
@@ -306,6 +313,11 @@ impl Flash {
                     let movt = thumb_mov_imm16(0xF2C0, 3, (id >> 16) as u16);
                     self.mem[site..site + 4].copy_from_slice(&movw);
                     self.mem[site + 4..site + 8].copy_from_slice(&movt);
+                }
+                IdInCode::CompareImmediate => {
+                    if let Some(compare) = thumb_compare_imm(rn, id) {
+                        self.mem[site..site + 4].copy_from_slice(&compare);
+                    }
                 }
                 IdInCode::Absent => {}
             }
@@ -327,6 +339,12 @@ pub enum IdInCode {
     LiteralPool,
     /// A MOVW (low half) and MOVT (high half) into one register.
     MovwMovt,
+    /// No data at all: `CMP.W Rn, #id` when the id is a Thumb-2 modified immediate
+    /// (PowerManagement 1-1's 0x01010101), else `CMN.W Rn, #-id` when its negation is one
+    /// (1-2's 0x01010102, compared as CMN #0xFEFEFEFE), as GCC builds PowerManagement's
+    /// bootloaders. An id that is neither cannot be compiled so and is left out (as
+    /// [`IdInCode::Absent`]); a compiler would load it (`LiteralPool`, `MovwMovt`).
+    CompareImmediate,
     /// Not findable (e.g. a bootloader built otherwise, or computing its id).
     Absent,
 }
@@ -339,6 +357,42 @@ fn thumb_mov_imm16(base: u16, rd: u16, imm: u16) -> [u8; 4] {
     let [a, b] = first.to_le_bytes();
     let [c, d] = second.to_le_bytes();
     [a, b, c, d]
+}
+
+/// A 32-bit Thumb-2 compare of register `rn` with `value` as the four bytes in flash:
+/// `CMP.W Rn, #value` (encoding T2) if `value` is a modified immediate, else `CMN.W Rn, #-value`
+/// (T1) if its negation is one, else `None`.
+fn thumb_compare_imm(rn: u16, value: u32) -> Option<[u8; 4]> {
+    let (base, imm12) = match modified_immediate(value) {
+        Some(imm12) => (0xF1B0, imm12),
+        None => (0xF110, modified_immediate(value.wrapping_neg())?),
+    };
+    let first = base | (imm12 >> 11) << 10 | (rn & 0xF);
+    let second = ((imm12 >> 8) & 7) << 12 | 0x0F00 | (imm12 & 0xFF);
+    let [a, b] = first.to_le_bytes();
+    let [c, d] = second.to_le_bytes();
+    Some([a, b, c, d])
+}
+
+/// The 12-bit `i:imm3:imm8` whose Thumb-2 expansion (ThumbExpandImm, ARMv7-M manual §A5.3.2) is
+/// `value`: a byte, the byte patterns 0x00XY00XY, 0xXY00XY00, 0xXYXYXYXY, or `1bcdefgh` rotated
+/// right by 8 to 31 bits.
+fn modified_immediate(value: u32) -> Option<u16> {
+    let byte = value & 0xFF;
+    if value == byte {
+        return Some(byte as u16);
+    }
+    for (kind, pattern) in [(1u16, 0x0001_0001), (2, 0x0100_0100), (3, 0x0101_0101)] {
+        let b = if kind == 2 { value >> 8 & 0xFF } else { byte };
+        if b != 0 && value == b * pattern {
+            return Some(kind << 8 | b as u16);
+        }
+    }
+    (8..32u32).find_map(|rotation| {
+        let unrotated = value.rotate_left(rotation);
+        (unrotated & !0xFF == 0 && unrotated & 0x80 != 0)
+            .then_some((rotation as u16) << 7 | (unrotated & 0x7F) as u16)
+    })
 }
 
 #[cfg(test)]
@@ -371,6 +425,43 @@ mod tests {
         assert_eq!(thumb_mov_imm16(0xF2C0, 3, 0x0100), [0xC0, 0xF2, 0x00, 0x13]);
         // imm4:i:imm3:imm8 all used: MOVW r0, #0xFFFF = F64F 70FF.
         assert_eq!(thumb_mov_imm16(0xF240, 0, 0xFFFF), [0x4F, 0xF6, 0xFF, 0x70]);
+    }
+
+    #[test]
+    fn compares_are_encoded_as_the_architecture_manual_says() {
+        // As arm-none-eabi-as 2.40 assembles them (and GCC 12.2 emits the first two for
+        // PowerManagement 1-1 and 1-2).
+        for (rn, value, bytes) in [
+            (7, 0x0101_0101, [0xB7, 0xF1, 0x01, 0x3F]), // cmp.w r7, #0x01010101
+            (1, 0x0101_0102, [0x11, 0xF1, 0xFE, 0x3F]), // cmn.w r1, #0xfefefefe
+            (0, 0x3F80_0000, [0xB0, 0xF1, 0x7E, 0x5F]), // cmp.w r0, #0x3f800000
+            (2, 0x00AB_00AB, [0xB2, 0xF1, 0xAB, 0x1F]), // cmp.w r2, #0x00ab00ab
+            (12, 0x54FF_5500, [0x1C, 0xF1, 0xAB, 0x2F]), // cmn.w ip, #0xab00ab00
+            (4, 0xFF, [0xB4, 0xF1, 0xFF, 0x0F]),        // cmp.w r4, #0xff
+        ] {
+            assert_eq!(thumb_compare_imm(rn, value), Some(bytes), "{value:#x}");
+        }
+        // DiWheelDrive's and LightRing's ids are no modified immediates, nor their negations.
+        for id in [0x0100_0101, 0x0100_0102, 0x017F_0100, 0x017F_0102] {
+            assert_eq!(thumb_compare_imm(3, id), None, "{id:#x}");
+        }
+        // So their bootloaders compiled so hold no id at all; PowerManagement's hold three compares.
+        let mut f = Flash::new(SimChip::F103);
+        let before = f.bytes(FLASH_BASE, 0x0800_6000).to_vec();
+        f.compile_device_id(0x0100_0102, IdInCode::CompareImmediate);
+        assert_eq!(f.bytes(FLASH_BASE, 0x0800_6000), &before[..]);
+        let mut f = Flash::new(SimChip::F405);
+        f.compile_device_id(0x0101_0102, IdInCode::CompareImmediate);
+        assert_eq!(f.read(0x0800_1F3C, 4), [0x11, 0xF1, 0xFE, 0x3F]);
+    }
+
+    #[test]
+    fn the_callback_table_holds_the_magic_and_the_versions() {
+        let f = Flash::new(SimChip::F405);
+        let table = f.read(CALLBACK_TABLE, 16);
+        assert_eq!(table[..4], *b"LB-A");
+        // The unaligned bytes a scan must not take for DiWheelDrive 1-1's id.
+        assert_eq!(table[9..13], 0x0100_0101u32.to_le_bytes());
     }
 
     #[test]

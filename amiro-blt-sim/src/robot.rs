@@ -87,9 +87,11 @@ pub struct BoardSpec {
 
 impl BoardSpec {
     /// A revision 1-1 robot: DiWheelDrive 1-1 (main, on the serial port), PowerManagement 1-1 and
-    /// LightRing 1-0, whose bootloaders also answer to the legacy one-byte ids 1, 2 and 3. Their
-    /// code holds the device id in literal pools (the 1-2 robot's as MOVW/MOVT pairs), so the
-    /// two robots exercise both ways a host can find it.
+    /// LightRing 1-0, whose bootloaders also answer to the legacy one-byte ids 1, 2 and 3.
+    /// DiWheelDrive's and LightRing's code holds the device id in literal pools (the 1-2 robot's
+    /// as MOVW/MOVT pairs), PowerManagement's only in compares (CMP.W #0x01010101; the 1-2
+    /// robot's CMN.W #0xFEFEFEFE), as GCC builds them: the two robots, with either main board
+    /// on the cable ([`BoardSpec::with_main`]), exercise every way a host can find it.
     pub fn robot_1_1() -> Vec<BoardSpec> {
         vec![
             BoardSpec {
@@ -104,7 +106,7 @@ impl BoardSpec {
                 device_id: 0x0101_0101,
                 legacy_id: Some(2),
                 chip: SimChip::F405,
-                id_in_code: IdInCode::LiteralPool,
+                id_in_code: IdInCode::CompareImmediate,
             },
             BoardSpec {
                 name: "lightring".into(),
@@ -132,7 +134,7 @@ impl BoardSpec {
                 device_id: 0x0101_0102,
                 legacy_id: None,
                 chip: SimChip::F405,
-                id_in_code: IdInCode::MovwMovt,
+                id_in_code: IdInCode::CompareImmediate,
             },
             BoardSpec {
                 name: "lightring".into(),
@@ -142,6 +144,16 @@ impl BoardSpec {
                 id_in_code: IdInCode::MovwMovt,
             },
         ]
+    }
+
+    /// `boards` with the cable on `main`'s serial port instead (that board moved first, the
+    /// others' order kept): PowerManagement is a main board too, with its own UART gateway.
+    /// `None` when no board is called `main`.
+    pub fn with_main(mut boards: Vec<BoardSpec>, main: &str) -> Option<Vec<BoardSpec>> {
+        let at = boards.iter().position(|b| b.name == main)?;
+        let board = boards.remove(at);
+        boards.insert(0, board);
+        Some(boards)
     }
 }
 

@@ -107,6 +107,37 @@ fn the_main_boards_bootloader_names_the_robots_revision_without_a_module_connect
 }
 
 #[test]
+fn powermanagement_on_the_cable_is_identified_from_its_compares_alone() {
+    // Its simulated bootloaders hold the id only as GCC compiles it: CMP.W #0x01010101 (1-1),
+    // CMN.W #0xFEFEFEFE (1-2); no literal word, no MOVW/MOVT, and the callback table's
+    // unaligned 01 01 00 01 (DiWheelDrive 1-1's id) in both.
+    for (boards, id, ids) in [
+        (BoardSpec::robot_1_1(), 0x0101_0101, IdSet::Rev11),
+        (BoardSpec::robot_1_2(), 0x0101_0102, IdSet::Rev12),
+    ] {
+        let boards = BoardSpec::with_main(boards, "powermgmt").unwrap();
+        let (seen, mut flasher) = identify(boards);
+        let main = seen.main_board().unwrap();
+        assert_eq!(
+            (main.board, main.id, main.robot),
+            ("powermgmt", id, ids),
+            "{}",
+            seen.describe()
+        );
+        // And the robot it names is flashed through PowerManagement's gateway.
+        let targets = robot(ids);
+        for t in &targets {
+            flasher.greet(t).unwrap();
+        }
+        for t in &targets {
+            let img = firmware(t, 1500, 5);
+            flasher.flash(t, &img, &mut ()).unwrap();
+            assert!(holds(flasher.link().robot.flash(t.device_id), t, &img));
+        }
+    }
+}
+
+#[test]
 fn a_module_of_the_other_revision_hangs_the_greeting_before_anything_is_erased() {
     // A 1-2 main board with a 1-1 PowerManagement: its inferred id 0x01010102 is no one's.
     let mut boards = BoardSpec::robot_1_2();

@@ -583,13 +583,14 @@ impl amiro_blt::Transport for SerialLink {
 }
 
 /// CI: `cargo xtask flash … --port <pty>` against simulated robots of both revisions (each board
-/// behind DiWheelDrive's bootloader), the robot's revision read from its main board's bootloader
-/// as on a real robot: each robot gets its revision's images, each board's simulated flash is
-/// compared with its ELF as the probe path would write it (`elf::write_checksum`), byte for
-/// byte, and the robot started. Then the refusals, each with nothing erased on any board and the
-/// robot not hung: a board without an image for the robot's revision, an image of the other
-/// revision (both ways), `--ids` naming the other revision, and a bootloader whose id cannot be
-/// read. `reports`: the images `cargo xtask build --revision all` built.
+/// behind DiWheelDrive's bootloader, then behind PowerManagement's, whose code holds its id only
+/// in compares), the robot's revision read from its main board's bootloader as on a real robot:
+/// each robot gets its revision's images, each board's simulated flash is compared with its ELF
+/// as the probe path would write it (`elf::write_checksum`), byte for byte, and the robot
+/// started. Then the refusals, each with nothing erased on any board and the robot not hung: a
+/// board without an image for the robot's revision, an image of the other revision (both ways,
+/// and with PowerManagement on the cable), `--ids` naming the other revision, and a bootloader
+/// whose id cannot be read. `reports`: the images `cargo xtask build --revision all` built.
 pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Result<()> {
     use amiro_blt_sim::{BoardSpec, IdInCode};
     let elf = |board: &str, revision: &str| -> Result<PathBuf> {
@@ -640,6 +641,20 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
             ),
         ],
     )?;
+    // Both robots with PowerManagement on the cable: its bootloaders hold the id only in
+    // compares (CMP.W #0x01010101, CMN.W #0xFEFEFEFE), as GCC builds them.
+    for (robot, revision) in [
+        (BoardSpec::robot_1_1(), "1-1"),
+        (BoardSpec::robot_1_2(), "1-2"),
+    ] {
+        flash_simulated(
+            root,
+            BoardSpec::with_main(robot, "powermgmt").context("powermgmt in the robot")?,
+            None,
+            &[(pm, pm_all.clone()), (dwd, dwd_all.clone())],
+            &[("powermgmt", "1-1/1-2"), ("diwheeldrive", revision)],
+        )?;
+    }
     // The same with the ids stated, as they agree with the bootloader's.
     flash_simulated(
         root,
@@ -688,6 +703,16 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
             "is the lightring 1-2 image, but this is a revision-1-1 robot (its main board's \
              bootloader is diwheeldrive with device id 0x01000101), so its lightring has \
              device id 0x017f0100 (lightring 1-0)",
+        ),
+        (
+            "the runner's 1-1 DiWheelDrive image on a 1-2 robot, PowerManagement on the cable",
+            BoardSpec::with_main(BoardSpec::robot_1_2(), "powermgmt")
+                .context("powermgmt in the robot")?,
+            None,
+            vec![(dwd, vec![elf("diwheeldrive", "1-1")?])],
+            "is the diwheeldrive 1-1 image, but this is a revision-1-2 robot (its main board's \
+             bootloader is powermgmt with device id 0x01010102), so its diwheeldrive has \
+             device id 0x01000102 (diwheeldrive 1-2)",
         ),
         (
             "--ids 1-1 on a 1-2 robot",
@@ -853,6 +878,53 @@ mod tests {
         // Legacy ids are the 1-1 robot's.
         let (ids, _) = robot_ids(&seen(&[MAIN_BOARD_IDS[0]]), Some(IdSet::Legacy)).unwrap();
         assert_eq!(ids, IdSet::Legacy);
+    }
+
+    #[test]
+    fn powermanagement_on_the_cable_names_the_robot_through_the_serial_port() {
+        use amiro_blt_sim::{pty::PtyRobot, BoardSpec, Faults, Robot, Timing};
+        // Its simulated bootloaders hold the id only as CMP.W/CMN.W with a modified immediate.
+        // No images: identify, check --ids against it, restart. `refusal`: what a refusal names.
+        for (robot, stated, refusal) in [
+            (BoardSpec::robot_1_2(), None, None),
+            (BoardSpec::robot_1_1(), Some(IdSet::Rev11), None),
+            (
+                BoardSpec::robot_1_1(),
+                Some(IdSet::Rev12),
+                Some("bootloader is powermgmt with device id 0x01010101 (revision 1-1)"),
+            ),
+            (
+                BoardSpec::robot_1_2(),
+                Some(IdSet::Rev11),
+                Some("bootloader is powermgmt with device id 0x01010102 (revision 1-2)"),
+            ),
+        ] {
+            let spec = BoardSpec::with_main(robot, "powermgmt").unwrap();
+            let ids: Vec<u32> = spec.iter().map(|b| b.device_id).collect();
+            let sim = Robot::new(spec, Timing::instant(), Faults::default());
+            let served = PtyRobot::serve(sim).unwrap();
+            let port = served.path().to_string_lossy().into_owned();
+            let opts = Options {
+                window_patience: Duration::from_secs(10),
+                ..Options::default()
+            };
+            let result = serial(&port, &[], &opts, stated);
+            let robot = served.stop();
+            match (result, refusal) {
+                (Ok(bytes), None) => assert_eq!(bytes, 0),
+                (Err(e), Some(refusal)) => {
+                    let e = format!("{e:#}");
+                    assert!(
+                        e.contains(refusal) && e.contains("nothing was erased"),
+                        "{e}"
+                    );
+                }
+                (result, _) => panic!("{stated:?}: {result:?}, expected {refusal:?}"),
+            }
+            for id in ids {
+                assert_eq!(robot.flash(id).erases, 0);
+            }
+        }
     }
 
     #[test]
