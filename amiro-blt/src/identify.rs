@@ -99,8 +99,8 @@ pub fn ids_in_code(code: &[u8]) -> Identification {
     }
 }
 
-/// How far (in bytes past the MOVW) a MOVT may complete it: an instruction scheduler may put a
-/// few instructions between the two.
+/// How far (in bytes past the instruction that sets the low half) a MOVT may complete it: an
+/// instruction scheduler may put a few instructions between the two.
 const MOVT_REACH: usize = 16;
 
 /// How many instructions after a MOV.W/MVN.W may hold the CMP that uses the moved register.
