@@ -331,8 +331,9 @@ impl Flash {
     }
 }
 
-/// How a bootloader's compiled code holds its device id (AMiRo-BLT is built with GCC `-O1` for
-/// Cortex-M: a MOVW/MOVT pair; `-Os` builds load constants from a literal pool).
+/// How a bootloader's compiled code holds its device id. AMiRo-BLT built with GCC 12.2 `-O1`
+/// loads DiWheelDrive's and LightRing's from literal pools (MOVW/MOVT where literal pools are
+/// avoided) and compares PowerManagement's as an immediate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum IdInCode {
     /// A 32-bit word in a literal pool, loaded PC-relative.
