@@ -73,6 +73,11 @@ impl RawFrame {
         self.len
     }
 
+    /// Whether the data length code is zero.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
     /// The data bytes (empty for a remote frame).
     pub fn data(&self) -> &[u8] {
         if self.remote {

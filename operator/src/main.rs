@@ -4,33 +4,12 @@
 //! robot through a bus (SocketCAN, an SLCAN adapter — shared between `amiro` processes — or a candump log file). The protocol itself lives in `amiro-can`; this binary
 //! adds text formats, transports and words for people.
 
-mod admission;
-mod bus;
-mod cli;
-mod cli_session;
-mod commands;
-mod console;
-mod dashboard;
-mod dbc;
-mod describe;
-mod drive;
-mod encode;
-mod frame;
-mod health;
-#[cfg(feature = "foxglove")]
-mod live;
-mod period;
-mod record;
-mod script;
-mod session;
-mod speech;
-mod watch;
-
 use std::process::ExitCode;
 
 use clap::Parser;
 
-use crate::cli::{Cli, CliCommand};
+use operator::cli::{Cli, CliCommand};
+use operator::{commands, console, health, session};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
