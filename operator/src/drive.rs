@@ -37,10 +37,18 @@ pub fn parse_speed(text: &str) -> Result<i32> {
     parse_rate(text, &units, "a speed such as 100mm/s, 0.1m/s or -50mm/s")
 }
 
+/// µrad/s in one °/s: the one conversion between the wire's turning rate and the degrees people read.
+pub const URAD_S_PER_DEG_S: f64 = std::f64::consts::PI / 180.0 * 1e6;
+
+/// A turning rate on the wire (µrad/s) in °/s.
+pub fn degrees_per_second(urad_s: i32) -> f64 {
+    f64::from(urad_s) / URAD_S_PER_DEG_S
+}
+
 /// Parses a turning rate: `30deg/s` (or `°/s`), `0.5rad/s`, `500mrad/s`, `500000urad/s`; positive is
 /// counter-clockwise seen from above. Rounded to the wire's 1 µrad/s.
 pub fn parse_turn(text: &str) -> Result<i32> {
-    let per_degree = std::f64::consts::PI / 180.0 * 1e6;
+    let per_degree = URAD_S_PER_DEG_S;
     let units = [
         ("urad/s", 1.0),
         ("µrad/s", 1.0),
@@ -309,6 +317,24 @@ pub mod tests {
     }
 
     pub struct SimulatedClock(pub Rc<Cell<Duration>>);
+
+    #[test]
+    fn degrees_per_second_is_the_inverse_of_parsing_degrees() {
+        for text in ["30deg/s", "-90°/s", "0.5deg/s", "360deg/s"] {
+            let urad_s = parse_turn(text).unwrap();
+            let degrees: f64 = text
+                .trim_end_matches("deg/s")
+                .trim_end_matches("°/s")
+                .parse()
+                .unwrap();
+            // The wire rounds to 1 µrad/s, about 5.7e-5 °/s.
+            assert!(
+                (degrees_per_second(urad_s) - degrees).abs() < 1e-4,
+                "{text}: {urad_s}"
+            );
+        }
+        assert_eq!(degrees_per_second(1_000_000).round(), 57.0);
+    }
 
     impl Clock for SimulatedClock {
         fn now(&self) -> Duration {

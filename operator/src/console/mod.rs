@@ -314,7 +314,7 @@ fn draw(frame: &mut ratatui::Frame<'_>, console: &Console, title: &str) {
         format!(
             "  | driving {} mm/s {:.0}°/s",
             motor.velocity_um_s / 1000,
-            f64::from(motor.angular_urad_s) * 180.0 / std::f64::consts::PI / 1e6
+            crate::drive::degrees_per_second(motor.angular_urad_s)
         )
     } else {
         String::new()

@@ -480,7 +480,7 @@ impl Console {
         self.status = format!(
             "Drive: {} mm/s, {:.0} °/s (Space stops, Esc leaves)",
             command.velocity_um_s / 1000,
-            f64::from(command.angular_urad_s) * 180.0 / std::f64::consts::PI / 1e6
+            crate::drive::degrees_per_second(command.angular_urad_s)
         );
         self.due_frames(now)
     }

@@ -100,7 +100,7 @@ fn compact(data: &SensorData) -> (String, Option<f64>) {
             format!(
                 "{:.0} mm/s {:.0}°/s",
                 f64::from(velocity.velocity_um_s) / 1000.0,
-                f64::from(velocity.angular_urad_s).to_degrees() / 1e6
+                crate::drive::degrees_per_second(velocity.angular_urad_s)
             ),
             Some(f64::from(velocity.velocity_um_s) / 1000.0),
         ),
@@ -168,7 +168,7 @@ impl Dashboard {
                     Command::Motor { command, .. } => format!(
                         "{:.0} mm/s {:.0}°/s",
                         f64::from(command.velocity_um_s) / 1000.0,
-                        f64::from(command.angular_urad_s).to_degrees() / 1e6
+                        crate::drive::degrees_per_second(command.angular_urad_s)
                     ),
                     Command::Led { command, .. } => format!(
                         "#{:02X}{:02X}{:02X}",
