@@ -2,6 +2,8 @@
 //! together). `state` decides everything; this module only carries events between the bus, the terminal
 //! (ratatui + crossterm) or, with `--headless`, standard input and output.
 
+pub mod complete;
+pub mod menu;
 pub mod state;
 
 use std::io::{self, BufRead, Write};
@@ -21,7 +23,8 @@ use crate::cli_session::ConsoleArgs;
 use crate::frame::{RawFrame, Timestamp};
 use crate::period::parse_duration;
 use crate::watch::{Filter, TimeBase, View};
-use state::{Console, Key, Mode, Question};
+use menu::Question;
+use state::{Console, Key, Mode};
 
 /// How long one pass waits for the bus before looking at the keyboard again.
 const BUS_SLICE: Duration = Duration::from_millis(15);

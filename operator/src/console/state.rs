@@ -5,17 +5,18 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use amiro_can::{MotorCommand, Priority, TOPICS};
-use clap::CommandFactory;
+use amiro_can::{MotorCommand, Priority};
 
 use crate::admission::Checker;
 use crate::dashboard::Dashboard;
 use crate::describe::decode_frame;
 use crate::drive::{motor_frame, KeepAlive};
 use crate::frame::{LoggedFrame, RawFrame, Timestamp};
-use crate::period::human_micros;
-use crate::script::{parse_step, Step, StepLine, CONSOLE_EVERY};
+use crate::script::{parse_step, Step, CONSOLE_EVERY};
 use crate::watch::{Filter, Statistics, View};
+
+use super::complete;
+use super::menu::{Menu, Question};
 
 /// Lines kept for scrolling back.
 const LOG_LINES: usize = 5000;
@@ -26,9 +27,6 @@ const TURN_STEP: i32 = 523_599;
 const MAX_SPEED: i32 = 500_000;
 /// About 4 turns per second: more than the robot can do.
 const MAX_TURN: i32 = 25_132_741;
-
-/// The words the console knows besides the step words of scripts.
-const CONSOLE_WORDS: [&str; 6] = ["clear", "dashboard", "help", "quit", "stop-driving", "menu"];
 
 /// A key, as the console understands it (the terminal front end maps crossterm's events to these).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -532,159 +530,12 @@ impl Console {
 
     /// Tab: completes the word at the end of the command line, or lists the choices.
     pub fn complete(&mut self) {
-        let (before, current) = match self.input.rfind(' ') {
-            Some(space) => (&self.input[..space], &self.input[space + 1..]),
-            None => ("", self.input.as_str()),
-        };
-        let words: Vec<&str> = before.split_whitespace().collect();
-        let matching: Vec<String> = candidates(&words, current)
-            .into_iter()
-            .filter(|candidate| candidate.starts_with(current))
-            .collect();
-        match matching.as_slice() {
-            [] => {
-                let near = crate::speech::closest(
-                    current,
-                    candidates(&words, "").iter().map(String::as_str),
-                )
-                .map(|near| format!(": did you mean {near}?"))
-                .unwrap_or_default();
-                self.status = format!("nothing completes {current:?}{near}");
-            }
-            [only] => {
-                let keep = self.input.len() - current.len();
-                self.input.truncate(keep);
-                self.input.push_str(only);
-                self.input.push(' ');
-            }
-            many => {
-                let common = common_prefix(many);
-                let keep = self.input.len() - current.len();
-                self.input.truncate(keep);
-                self.input.push_str(&common);
-                self.status = many.join("  ");
-            }
+        let completion = complete::complete(&self.input);
+        self.input = completion.input;
+        if let Some(status) = completion.status {
+            self.status = status;
         }
     }
-}
-
-fn common_prefix(words: &[String]) -> String {
-    let first = &words[0];
-    let mut length = first.len();
-    for word in &words[1..] {
-        length = first
-            .char_indices()
-            .zip(word.chars())
-            .take_while(|((_, a), b)| a == b)
-            .map(|((index, a), _)| index + a.len_utf8())
-            .last()
-            .unwrap_or(0)
-            .min(length);
-    }
-    first[..length].to_string()
-}
-
-/// What may come next after `words`: the flag forms from the same clap definition the scripts are parsed with,
-/// and the spoken forms (`publish gyroscope every 100ms at high`) from `speech`.
-pub fn candidates(words: &[&str], current: &str) -> Vec<String> {
-    let spoken = if current.starts_with('-') {
-        Vec::new()
-    } else {
-        crate::speech::candidates(words)
-    };
-    let speaking = words.len() > 2
-        && crate::speech::SPOKEN_COMMANDS.contains(&words[0])
-        && !words.iter().any(|word| word.starts_with("--"));
-    if speaking {
-        return spoken;
-    }
-    let mut all = flag_candidates(words, current);
-    for word in spoken {
-        if !all.contains(&word) {
-            all.push(word);
-        }
-    }
-    all
-}
-
-fn flag_candidates(words: &[&str], current: &str) -> Vec<String> {
-    let command = StepLine::command();
-    let Some(first) = words.first() else {
-        let mut names: Vec<String> = command
-            .get_subcommands()
-            .map(|sub| sub.get_name().to_string())
-            .collect();
-        names.extend(CONSOLE_WORDS.iter().map(|word| word.to_string()));
-        names.sort();
-        return names;
-    };
-    let Some(sub) = command.find_subcommand(first) else {
-        return Vec::new();
-    };
-    let values_of = |arg: &clap::Arg| -> Vec<String> {
-        let mut values: Vec<String> = arg
-            .get_possible_values()
-            .iter()
-            .map(|value| value.get_name().to_string())
-            .collect();
-        if values.is_empty() {
-            values = hints(arg.get_id().as_str());
-        }
-        values
-    };
-    // The value of the option just typed.
-    if let Some(option) = words.last().and_then(|word| word.strip_prefix("--")) {
-        if let Some(arg) = sub
-            .get_arguments()
-            .find(|arg| arg.get_long() == Some(option))
-        {
-            if arg.get_action().takes_values() {
-                return values_of(arg);
-            }
-        }
-    }
-    let flags = || -> Vec<String> {
-        sub.get_arguments()
-            .filter_map(|arg| arg.get_long())
-            .map(|long| format!("--{long}"))
-            .filter(|flag| !words.contains(&flag.as_str()))
-            .collect()
-    };
-    if current.starts_with('-') {
-        return flags();
-    }
-    // Positionals fill in order; options with a value take the word after them.
-    let mut filled = 0;
-    let mut skip_value = false;
-    for word in &words[1..] {
-        if skip_value {
-            skip_value = false;
-        } else if word.starts_with("--") {
-            skip_value = true;
-        } else {
-            filled += 1;
-        }
-    }
-    let values = match sub.get_positionals().nth(filled) {
-        Some(positional) => values_of(positional),
-        None => flags(),
-    };
-    values
-}
-
-/// Suggestions for values clap cannot list (free text with a unit).
-fn hints(id: &str) -> Vec<String> {
-    let words: &[&str] = match id {
-        "every" => &["10ms", "50ms", "62500us", "100ms", "250ms", "1s"],
-        "forward" => &["50mm/s", "100mm/s", "-50mm/s", "0mm/s"],
-        "turn" => &["30deg/s", "-30deg/s", "90deg/s", "0deg/s"],
-        "duration" => &["1s", "2s", "3s"],
-        "rgb" => &["255,0,0", "0,255,0", "0,0,255", "255,255,255", "0,0,0"],
-        "priority" => &["urgent", "high", "medium", "low"],
-        "led" => &["1", "2", "3", "4", "5", "6", "7", "8"],
-        _ => &[],
-    };
-    words.iter().map(|word| word.to_string()).collect()
 }
 
 const HELP: &[&str] = &[
@@ -699,115 +550,10 @@ const HELP: &[&str] = &[
     "keys: F2 menu, F3 drive with the arrows, F4 dashboard, PageUp/PageDown scroll, End follows, Ctrl-C quits",
 ];
 
-/// A question of the menu.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum Question {
-    /// Pick one of these.
-    Choose {
-        /// What is asked.
-        prompt: &'static str,
-        /// The answers to pick from.
-        choices: Vec<String>,
-    },
-    /// Type a value (Enter alone takes the default).
-    Type {
-        /// What is asked.
-        prompt: &'static str,
-        /// Taken when nothing is typed.
-        default: String,
-    },
-}
-
-/// The thesis's Demo Sender as a menu: actuator or sensor, mode, topic, period, priority — building a command
-/// line the operator can read, edit and send.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct Menu {
-    answers: Vec<String>,
-    /// The highlighted choice.
-    pub selected: usize,
-    /// Text typed for a `Type` question.
-    pub text: String,
-}
-
-fn priorities() -> Vec<String> {
-    Priority::ALL
-        .iter()
-        .map(|priority| priority.name().to_string())
-        .collect()
-}
-
-impl Menu {
-    fn answer(&mut self, answer: String) {
-        self.answers.push(answer);
-        self.selected = 0;
-        self.text.clear();
-    }
-
-    /// The next question, or `None` when the command is complete.
-    pub fn question(&self) -> Option<Question> {
-        let answers: Vec<&str> = self.answers.iter().map(String::as_str).collect();
-        let choose = |prompt, choices: Vec<String>| Some(Question::Choose { prompt, choices });
-        let ask = |prompt, default: &str| {
-            Some(Question::Type {
-                prompt,
-                default: default.to_string(),
-            })
-        };
-        match answers.as_slice() {
-            [] => choose(
-                "Send a command to",
-                vec!["sensor".into(), "motor".into(), "led".into()],
-            ),
-            ["sensor"] => choose("Mode", vec!["publish".into(), "once".into(), "stop".into()]),
-            ["sensor", _] => choose(
-                "Topic",
-                TOPICS
-                    .iter()
-                    .filter(|info| info.is_sensor)
-                    .map(|info| info.name.to_string())
-                    .collect(),
-            ),
-            ["sensor", "publish", topic] => {
-                let default = TOPICS
-                    .iter()
-                    .find(|info| info.name == *topic)
-                    .map(|info| {
-                        human_micros(u64::from(info.default_period_us)).replace([' ', 'µ'], "")
-                    })
-                    .unwrap_or_else(|| "50ms".into());
-                ask("Period (e.g. 10ms, 900us, 1s)", &default)
-            }
-            ["sensor", "publish", _, _] | ["sensor", _, _] => choose("Priority", priorities()),
-            ["motor"] => ask("Forward speed (e.g. 100mm/s, -50mm/s)", "100mm/s"),
-            ["motor", _] => ask("Turn rate (e.g. 30deg/s, positive = left)", "0deg/s"),
-            ["motor", _, _] => ask("For how long", "2s"),
-            ["led"] => choose("LED", (1..=8).map(|led| led.to_string()).collect()),
-            ["led", _] => ask("Colour R,G,B (0-255) or #RRGGBB", "255,0,0"),
-            ["led", _, _] => choose("Priority", priorities()),
-            _ => None,
-        }
-    }
-
-    /// The command line the answers make.
-    pub fn command(&self) -> String {
-        let answers: Vec<&str> = self.answers.iter().map(String::as_str).collect();
-        match answers.as_slice() {
-            ["sensor", "publish", topic, every, priority] => {
-                format!("publish {topic} --every {every} --priority {priority}")
-            }
-            ["sensor", mode, topic, priority] => format!("{mode} {topic} --priority {priority}"),
-            ["motor", forward, turn, duration] => {
-                format!("drive --forward {forward} --turn {turn} --for {duration}")
-            }
-            ["led", led, rgb, priority] => format!("led {led} --rgb '{rgb}' --priority {priority}"),
-            _ => String::new(),
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::console::complete::candidates;
     use crate::watch::TimeBase;
 
     fn console() -> Console {
