@@ -1,0 +1,551 @@
+//! Execution-time bounds from the machine code: per function a control-flow graph, its natural
+//! loops bounded (counted loops found, the rest stated in a [`BoundsFile`]), calls composed bottom
+//! up, and the longest path on the graph with each loop collapsed ([`path`]); cycles from the
+//! [`Chip`]'s model. docs/analysis.md ("Execution-time bounds from the machine code") states the
+//! model, its sources and why the bound is safe.
+//!
+//! A path that ends in a trap (`UDF`) or in a call of a function that cannot return (a panic, the
+//! fault handler's halt) does not complete the job: the board halts and the watchdog resets it
+//! (docs/faults.md). The bound is of the jobs that complete.
+pub mod bounds;
+pub mod cfg;
+pub mod chip;
+pub mod counted;
+pub mod path;
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use serde::Serialize;
+
+use crate::callgraph::is_panic;
+use crate::decode::Insn;
+use crate::image::Function;
+use crate::{Error, Image};
+use bounds::BoundsFile;
+use cfg::{Call, Cfg};
+use chip::Chip;
+use path::{Cost, LoopCount, LoopNodes, Node, PathError};
+
+/// One loop on the way, and where its bound came from.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct LoopInfo {
+    /// The function it is in (demangled, without hash).
+    pub function: String,
+    /// Its header's source file and line (the line table's), when the image has them.
+    pub file: Option<String>,
+    pub line: Option<u32>,
+    /// The most times its header runs per entry (for a wait: 1, the wait is stated apart).
+    pub bound: u64,
+    /// Where the bound came from: `counted: …`, `bounds file: <reason>`, `wait: <source>`.
+    pub source: String,
+}
+
+/// A function's bound.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Bound {
+    /// Cycles of the longest path (machine code: core and memory system).
+    pub cycles: u64,
+    /// The most instructions any path runs.
+    pub instructions: u64,
+    /// Stated peripheral waits on the longest path, nanoseconds (apart from the cycles).
+    pub bus_wait_ns: u64,
+    /// The loops of the function and everything it calls, with their bounds.
+    pub loops: Vec<LoopInfo>,
+    /// Why there is no bound (then the figures are 0 and mean nothing).
+    pub declined: Option<String>,
+}
+
+impl Bound {
+    /// The stated waits in µs.
+    pub fn bus_wait_us(&self) -> f64 {
+        self.bus_wait_ns as f64 / 1000.0
+    }
+
+    /// Cycles and waits as µs at `chip`'s clock.
+    pub fn us(&self, chip: Chip) -> f64 {
+        (chip.cycles_to_ns(self.cycles) + self.bus_wait_ns) as f64 / 1000.0
+    }
+}
+
+/// Where a task starts.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum TaskEntry {
+    /// A function, by demangled name or symbol.
+    Symbol(String),
+    /// The handler of a vector-table entry (the word index: 16 + IRQ number for an interrupt).
+    Vector(usize),
+}
+
+/// A task to bound.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Task {
+    pub name: String,
+    pub entry: TaskEntry,
+    /// An exception handler: its entry and exit (and lazy FPU stacking on the M4F) are added.
+    pub handler: bool,
+}
+
+/// One task's bound, as `cargo xtask wcet` prints it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TaskBound {
+    pub task: String,
+    /// The function bounded.
+    pub function: Option<String>,
+    pub cycles: u64,
+    pub us: f64,
+    pub instructions: u64,
+    pub bus_wait_us: f64,
+    pub loops: Vec<LoopInfo>,
+    pub declined: Option<String>,
+}
+
+/// A function's longest paths: by time and by instruction count, with the loops on the way.
+#[derive(Debug, Clone)]
+struct Summary {
+    time: Cost,
+    count: Cost,
+    loops: Vec<LoopInfo>,
+}
+
+/// Bounds one function of `image` with everything it calls.
+pub fn bound_function(
+    image: &Image,
+    symbol: &str,
+    chip: Chip,
+    bounds: &BoundsFile,
+) -> Result<Bound, Error> {
+    let f = image.function_named(symbol)?;
+    f.instructions()?;
+    let mut analysis = Analysis::new(image, chip, bounds);
+    let outcome = analysis.summary(f.start)?;
+    Ok(to_bound(outcome))
+}
+
+fn to_bound(outcome: Result<Summary, String>) -> Bound {
+    match outcome {
+        Ok(s) => Bound {
+            cycles: s.time.cycles,
+            instructions: s.count.instructions,
+            bus_wait_ns: s.time.wait_ns,
+            loops: s.loops,
+            declined: None,
+        },
+        Err(reason) => Bound {
+            cycles: 0,
+            instructions: 0,
+            bus_wait_ns: 0,
+            loops: Vec::new(),
+            declined: Some(reason),
+        },
+    }
+}
+
+/// Bounds every task: a row each, declined with its reason where no bound can be given (an error
+/// of the image is a declined row too, naming the error).
+pub fn bound_tasks(
+    image: &Image,
+    tasks: &[Task],
+    chip: Chip,
+    bounds: &BoundsFile,
+) -> Vec<TaskBound> {
+    let mut analysis = Analysis::new(image, chip, bounds);
+    tasks
+        .iter()
+        .map(|task| {
+            let start = match &task.entry {
+                TaskEntry::Symbol(s) => image.function_named(s).map(|f| f.start),
+                TaskEntry::Vector(i) => image
+                    .vectors
+                    .iter()
+                    .find(|(k, _)| k == i)
+                    .map(|&(_, at)| at)
+                    .ok_or_else(|| Error::Other(format!("no handler at vector {i}"))),
+            };
+            let (function, bound) = match start {
+                Ok(at) => (
+                    Some(image.name(at)),
+                    match analysis.summary(at) {
+                        Ok(outcome) => to_bound(outcome),
+                        Err(e) => to_bound(Err(e.to_string())),
+                    },
+                ),
+                Err(e) => (None, to_bound(Err(e.to_string()))),
+            };
+            let extra = if task.handler && bound.declined.is_none() {
+                chip.exception_cycles()
+            } else {
+                0
+            };
+            let cycles = bound.cycles + extra;
+            let instructions = bound.instructions;
+            TaskBound {
+                task: task.name.clone(),
+                function,
+                cycles,
+                us: if bound.declined.is_some() {
+                    0.0
+                } else {
+                    (chip.cycles_to_ns(cycles) + bound.bus_wait_ns) as f64 / 1000.0
+                },
+                instructions,
+                bus_wait_us: bound.bus_wait_us(),
+                loops: bound.loops,
+                declined: bound.declined,
+            }
+        })
+        .collect()
+}
+
+/// The analysis of one image: function summaries worked out once each.
+struct Analysis<'a> {
+    image: &'a Image,
+    chip: Chip,
+    bounds: &'a BoundsFile,
+    known: BTreeMap<u64, Result<Summary, String>>,
+    returns: BTreeMap<u64, bool>,
+    open: Vec<u64>,
+}
+
+/// Where an address is in the source, for messages and keys.
+fn place(image: &Image, at: u64) -> (Option<String>, Option<u32>, String) {
+    match image.line(at) {
+        Some((file, line)) => {
+            let text = format!("{file}:{line}");
+            (Some(file), Some(line), text)
+        }
+        None => (None, None, format!("{at:#010x} (no line information)")),
+    }
+}
+
+impl<'a> Analysis<'a> {
+    fn new(image: &'a Image, chip: Chip, bounds: &'a BoundsFile) -> Analysis<'a> {
+        Analysis {
+            image,
+            chip,
+            bounds,
+            known: BTreeMap::new(),
+            returns: BTreeMap::new(),
+            open: Vec::new(),
+        }
+    }
+
+    /// Whether the function at `at` can return: a return or a tail call of a function that can
+    /// is reachable in its graph. A panic cannot; a function being worked out is taken to.
+    fn can_return(&mut self, at: u64) -> bool {
+        if let Some(&known) = self.returns.get(&at) {
+            return known;
+        }
+        let Some(f) = self.image.function_at(at) else {
+            return true;
+        };
+        if is_panic(&f.name) {
+            self.returns.insert(at, false);
+            return false;
+        }
+        self.returns.insert(at, true);
+        let image = self.image;
+        let read = |address: u64, size: u64| read_entry(image, address, size);
+        let Ok(graph) = Cfg::build(f, &read, &|_| true) else {
+            return true;
+        };
+        let mut seen = BTreeSet::from([0usize]);
+        let mut work = vec![0usize];
+        let mut returns = false;
+        while let Some(b) = work.pop() {
+            let block = &graph.blocks[b];
+            if block.exit {
+                let tail_ok = match block.call {
+                    Some(Call::Direct { target, tail: true }) if target != at => {
+                        self.can_return(target)
+                    }
+                    _ => true,
+                };
+                if tail_ok {
+                    returns = true;
+                    break;
+                }
+            }
+            for e in &block.succs {
+                if seen.insert(e.to) {
+                    work.push(e.to);
+                }
+            }
+        }
+        self.returns.insert(at, returns);
+        returns
+    }
+
+    /// The summary of the function at `at`: `Err(Error)` for an image that cannot be analysed,
+    /// `Ok(Err(reason))` for a declined bound.
+    fn summary(&mut self, at: u64) -> Result<Result<Summary, String>, Error> {
+        if let Some(known) = self.known.get(&at) {
+            return Ok(known.clone());
+        }
+        if self.open.contains(&at) {
+            let chain: Vec<String> = self.open.iter().map(|&a| self.image.name(a)).collect();
+            return Ok(Err(format!(
+                "recursion through {} → {}",
+                chain.join(" → "),
+                self.image.name(at)
+            )));
+        }
+        let image = self.image;
+        let f = image.function_at(at).ok_or_else(|| {
+            Error::Other(format!("a call to {at:#010x}, where no function starts"))
+        })?;
+        self.open.push(at);
+        let outcome = self.work_out(f);
+        self.open.pop();
+        let outcome = outcome?;
+        self.known.insert(at, outcome.clone());
+        Ok(outcome)
+    }
+
+    fn work_out(&mut self, f: &'a Function) -> Result<Result<Summary, String>, Error> {
+        let insns = f.instructions()?;
+        let image = self.image;
+        let read = |address: u64, size: u64| read_entry(image, address, size);
+        // Which callees return (worked out before the graph, which leaves out what follows a call
+        // that does not).
+        let callees: Vec<u64> = insns
+            .iter()
+            .filter_map(|i| match i.flow() {
+                crate::decode::Flow::Call(t) => Some(t),
+                _ => None,
+            })
+            .collect();
+        let mut returning = BTreeMap::new();
+        for t in callees {
+            let r = self.can_return(t);
+            returning.insert(t, r);
+        }
+        let graph = Cfg::build(f, &read, &|t| returning.get(&t).copied().unwrap_or(true))?;
+        let chip = self.chip;
+        let mut loops_info = Vec::new();
+        // Loops and their counts.
+        let natural = match graph.loops() {
+            Ok(l) => l,
+            Err(b) => {
+                let (_, _, text) = place(image, insns[graph.blocks[b].first].addr);
+                return Ok(Err(format!(
+                    "irreducible control flow in {} at {text}: no natural loop to bound",
+                    f.name
+                )));
+            }
+        };
+        let mut loop_nodes = Vec::new();
+        for l in &natural {
+            let leaves = l.body.iter().any(|&b| {
+                let blk = &graph.blocks[b];
+                blk.exit || blk.succs.iter().any(|e| !l.body.contains(&e.to))
+            });
+            let header_at = insns[graph.blocks[l.header].first].addr;
+            let (file, line, text) = (l.body.iter())
+                .flat_map(|&b| insns[graph.blocks[b].first..=graph.blocks[b].last].iter())
+                .find_map(|i| image.line(i.addr).map(|_| place(image, i.addr)))
+                .filter(|_| image.line(header_at).is_none())
+                .unwrap_or_else(|| place(image, header_at));
+            let count = if !leaves {
+                LoopCount::Endless
+            } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: n,
+                    source: how,
+                });
+                LoopCount::Passes(n)
+            } else if let Some(stated) = file
+                .as_deref()
+                .zip(line)
+                .and_then(|(file, line)| self.bounds.loop_bound(&f.name, file, line))
+            {
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: stated.bound,
+                    source: format!("bounds file: {}", stated.reason),
+                });
+                LoopCount::Passes(stated.bound)
+            } else if let Some(wait) = file
+                .as_deref()
+                .zip(line)
+                .and_then(|(file, line)| self.bounds.wait(&f.name, file, line))
+            {
+                let ns = (wait.wait_us * 1000.0).ceil() as u64;
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: 1,
+                    source: format!("wait: {} µs ({})", wait.wait_us, wait.source),
+                });
+                LoopCount::Wait {
+                    ns,
+                    cycles: chip.ns_to_cycles(ns),
+                }
+            } else {
+                return Ok(Err(format!(
+                    "the loop in {} at {text} has no bound (not a counted loop, not in the bounds file)",
+                    f.name
+                )));
+            };
+            loop_nodes.push(LoopNodes {
+                header: l.header,
+                body: l.body.clone(),
+                count,
+            });
+        }
+        // Node costs: the block's instructions, and what it calls.
+        let mut time_nodes = Vec::with_capacity(graph.blocks.len());
+        let mut count_nodes = Vec::with_capacity(graph.blocks.len());
+        for block in &graph.blocks {
+            let own = self.block_cost(&insns[block.first..=block.last]);
+            let (mut time, mut count) = (own, own);
+            let mut exit = block.exit;
+            match block.call {
+                // A call of a function that cannot return ends the path (the graph has no edge on
+                // from it); a tail call of one is no return either.
+                Some(Call::Direct { target, tail }) if !self.can_return(target) => exit &= !tail,
+                Some(Call::Direct { target, .. }) => match self.summary(target)? {
+                    Ok(s) => {
+                        time = time.plus(s.time);
+                        count = count.plus(s.count);
+                        loops_info.extend(s.loops);
+                    }
+                    Err(reason) => {
+                        return Ok(Err(if reason.starts_with("via ") {
+                            reason
+                        } else {
+                            format!("via {}: {reason}", image.name(target))
+                        }))
+                    }
+                },
+                Some(Call::Indirect { at, .. }) => {
+                    let (file, line, text) = place(image, at);
+                    let stated = file
+                        .as_deref()
+                        .zip(line)
+                        .and_then(|(file, line)| self.bounds.indirect(&f.name, file, line));
+                    let Some(stated) = stated else {
+                        return Ok(Err(format!(
+                            "the call through a register in {} at {text} has no stated targets",
+                            f.name
+                        )));
+                    };
+                    let (mut worst_time, mut worst_count) = (Cost::default(), Cost::default());
+                    for name in &stated.targets {
+                        let target = image.function_named(name).map_err(|_| {
+                            Error::Bounds(format!(
+                                "the indirect call at {text} names `{name}`, which is not in the image"
+                            ))
+                        })?;
+                        match self.summary(target.start)? {
+                            Ok(s) => {
+                                if time_key(chip)(s.time) > time_key(chip)(worst_time) {
+                                    worst_time = s.time;
+                                }
+                                if s.count.instructions > worst_count.instructions {
+                                    worst_count = s.count;
+                                }
+                                loops_info.extend(s.loops);
+                            }
+                            Err(reason) => return Ok(Err(format!("via {name}: {reason}"))),
+                        }
+                    }
+                    time = time.plus(worst_time);
+                    count = count.plus(worst_count);
+                }
+                None => {}
+            }
+            let taken = Cost {
+                cycles: chip.taken_cycles(),
+                ..Cost::default()
+            };
+            let succs: Vec<(usize, Cost)> = block
+                .succs
+                .iter()
+                .map(|e| {
+                    (
+                        e.to,
+                        if e.taken && insns[block.last].conditional {
+                            taken
+                        } else {
+                            Cost::default()
+                        },
+                    )
+                })
+                .collect();
+            time_nodes.push(Node {
+                cost: time,
+                succs: succs.clone(),
+                exit,
+            });
+            count_nodes.push(Node {
+                cost: count,
+                succs,
+                exit,
+            });
+        }
+        let by_time = path::longest(time_nodes, &loop_nodes, &time_key(chip));
+        let by_count = path::longest(count_nodes, &loop_nodes, &|c: Cost| c.instructions);
+        let (time, count) = match (by_time, by_count) {
+            (Ok(t), Ok(c)) => (t, c),
+            (Err(PathError::NoExit), _) | (_, Err(PathError::NoExit)) => {
+                return Ok(Err(format!("{} never returns", f.name)))
+            }
+            (Err(PathError::Irreducible(b)), _) | (_, Err(PathError::Irreducible(b))) => {
+                let (_, _, text) = place(image, insns[graph.blocks[b].first].addr);
+                return Ok(Err(format!(
+                    "irreducible control flow in {} at {text}: no natural loop to bound",
+                    f.name
+                )));
+            }
+        };
+        let mut seen = BTreeSet::new();
+        loops_info.retain(|l| {
+            seen.insert((l.function.clone(), l.file.clone(), l.line, l.source.clone()))
+        });
+        Ok(Ok(Summary {
+            time,
+            count,
+            loops: loops_info,
+        }))
+    }
+
+    /// A straight run of instructions: each one's core and memory cycles, at least the cycles
+    /// fetching its bytes from flash takes.
+    fn block_cost(&self, insns: &[Insn]) -> Cost {
+        let chip = self.chip;
+        let mut known = [None; 16];
+        let mut cycles = 0;
+        for insn in insns {
+            let base = insn.memory_base().and_then(|r| known[usize::from(r)]);
+            cycles += chip.core_cycles(insn) + chip.memory_cycles(insn, base);
+            crate::waits::step_constants(self.image, insn, &mut known);
+        }
+        let bytes: u64 = insns.iter().map(|i| u64::from(i.len)).sum();
+        Cost {
+            cycles: cycles.max(chip.fetch_cycles(bytes)),
+            instructions: insns.len() as u64,
+            wait_ns: 0,
+        }
+    }
+}
+
+/// The key the time path is longest by: cycles plus the stated waits as cycles.
+fn time_key(chip: Chip) -> impl Fn(Cost) -> u64 {
+    move |c: Cost| c.cycles + chip.ns_to_cycles(c.wait_ns)
+}
+
+/// A jump-table entry (1 or 2 bytes) of the image.
+fn read_entry(image: &Image, address: u64, size: u64) -> Option<u64> {
+    let bytes = image.bytes(address, size)?;
+    Some(match bytes[..] {
+        [b] => u64::from(b),
+        [lo, hi] => u64::from(u16::from_le_bytes([lo, hi])),
+        _ => return None,
+    })
+}
