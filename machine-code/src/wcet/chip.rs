@@ -250,10 +250,15 @@ impl Chip {
         P + self.wait_states()
     }
 
-    /// The cycles fetching `bytes` of sequential code takes at least: one flash line per
-    /// `line_bytes`, each its wait states plus one.
-    pub fn fetch_cycles(self, bytes: u64) -> u64 {
-        bytes.div_ceil(self.line_bytes()) * (self.wait_states() + 1)
+    /// The cycles fetching the code at `start..end` takes at least: every flash line it spans,
+    /// each its wait states plus one (the prefetch fetches the next line while one executes, but
+    /// no faster than that).
+    pub fn fetch_cycles(self, start: u64, end: u64) -> u64 {
+        if end <= start {
+            return 0;
+        }
+        let line = self.line_bytes();
+        ((end - 1) / line - start / line + 1) * (self.wait_states() + 1)
     }
 
     /// The memory cycles an instruction adds, given what is known of its base register's value.

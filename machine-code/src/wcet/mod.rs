@@ -339,12 +339,7 @@ impl<'a> Analysis<'a> {
                 let blk = &graph.blocks[b];
                 blk.exit || blk.succs.iter().any(|e| !l.body.contains(&e.to))
             });
-            let header_at = insns[graph.blocks[l.header].first].addr;
-            let (file, line, text) = (l.body.iter())
-                .flat_map(|&b| insns[graph.blocks[b].first..=graph.blocks[b].last].iter())
-                .find_map(|i| image.line(i.addr).map(|_| place(image, i.addr)))
-                .filter(|_| image.line(header_at).is_none())
-                .unwrap_or_else(|| place(image, header_at));
+            let (file, line, text) = loop_place(image, insns, &graph, l);
             let count = if !leaves {
                 LoopCount::Endless
             } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
@@ -516,7 +511,7 @@ impl<'a> Analysis<'a> {
     }
 
     /// A straight run of instructions: each one's core and memory cycles, at least the cycles
-    /// fetching its bytes from flash takes.
+    /// fetching the flash lines it spans takes.
     fn block_cost(&self, insns: &[Insn]) -> Cost {
         let chip = self.chip;
         let mut known = [None; 16];
@@ -526,13 +521,53 @@ impl<'a> Analysis<'a> {
             cycles += chip.core_cycles(insn) + chip.memory_cycles(insn, base);
             crate::waits::step_constants(self.image, insn, &mut known);
         }
-        let bytes: u64 = insns.iter().map(|i| u64::from(i.len)).sum();
+        let fetch = match (insns.first(), insns.last()) {
+            (Some(first), Some(last)) => chip.fetch_cycles(first.addr, last.next()),
+            _ => 0,
+        };
         Cost {
-            cycles: cycles.max(chip.fetch_cycles(bytes)),
+            cycles: cycles.max(fetch),
             instructions: insns.len() as u64,
             wait_ns: 0,
         }
     }
+}
+
+/// Where a loop is named: the first line of the project's own code (not the core library's) in it,
+/// from its header on; else the header's line; else its address.
+fn loop_place(
+    image: &Image,
+    insns: &[Insn],
+    graph: &Cfg,
+    l: &cfg::Loop,
+) -> (Option<String>, Option<u32>, String) {
+    let header = &graph.blocks[l.header];
+    let in_order = std::iter::once(header)
+        .chain(
+            l.body
+                .iter()
+                .filter(|&&b| b != l.header)
+                .map(|&b| &graph.blocks[b]),
+        )
+        .flat_map(|b| insns[b.first..=b.last].iter());
+    let own = in_order
+        .filter_map(|i| image.line(i.addr).map(|(file, _)| (i.addr, file)))
+        .find(|(_, file)| !is_library(file));
+    match own {
+        Some((at, _)) => place(image, at),
+        None => {
+            let first_with_line = insns[header.first..=header.last]
+                .iter()
+                .find(|i| image.line(i.addr).is_some())
+                .map_or(insns[header.first].addr, |i| i.addr);
+            place(image, first_with_line)
+        }
+    }
+}
+
+/// Whether a source path is the Rust toolchain's own library (core, alloc, compiler-builtins).
+fn is_library(file: &str) -> bool {
+    file.contains("/rustlib/src/rust/library/") || file.starts_with("/rustc/")
 }
 
 /// The key the time path is longest by: cycles plus the stated waits as cycles.
@@ -549,3 +584,6 @@ fn read_entry(image: &Image, address: u64, size: u64) -> Option<u64> {
         _ => return None,
     })
 }
+
+#[cfg(test)]
+mod tests;
