@@ -88,6 +88,13 @@ pub fn check_stacks(root: &Path, reports: &[crate::elf::SizeReport]) -> Result<(
 /// Arguments of `cargo xtask wcet`.
 #[derive(clap::Args, Debug)]
 pub struct WcetArgs {
+    /// Boards whose built release images to bound per task (default: all; build them first with
+    /// `cargo xtask build --revision …`).
+    #[arg(conflicts_with = "elf")]
+    pub boards: Vec<String>,
+    /// The robot revision of the images: 1-2, 1-1, or all. Default: each board's newest.
+    #[arg(long, value_name = "1-2|1-1|all", conflicts_with = "elf")]
+    pub revision: Option<String>,
     /// Any ELF: bound one function of it (with `--function` and `--chip`).
     #[arg(long, value_name = "FILE", requires_all = ["function", "chip"])]
     pub elf: Option<PathBuf>,
@@ -100,7 +107,8 @@ pub struct WcetArgs {
     /// Flash wait states (default: the chip's at its board clock: F103 2, F405 5).
     #[arg(long, value_name = "N")]
     pub wait_states: Option<u32>,
-    /// A bounds file (JSON; docs/analysis.md) for the loops and calls the machine code cannot bound.
+    /// A bounds file (JSON; docs/analysis.md) for the loops and calls the machine code cannot
+    /// bound (default with a board: schedule-analysis/models/<board>.bounds.json).
     #[arg(long, value_name = "FILE")]
     pub bounds: Option<PathBuf>,
     /// Print JSON.
@@ -108,13 +116,162 @@ pub struct WcetArgs {
     pub json: bool,
 }
 
+/// `cargo xtask wcet`: one function of any ELF (`--elf`), else every task of the boards' images.
+pub fn wcet(root: &Path, args: &WcetArgs) -> Result<bool> {
+    if args.elf.is_none() {
+        return wcet_boards(root, args);
+    }
+    wcet_function(args)
+}
+
+/// The chip a board's image runs on, at its board clock's wait states unless overridden.
+fn chip_of(board: &crate::boards::Board, wait_states: Option<u32>) -> Result<Chip> {
+    let name = if board.chip.starts_with("STM32F103") {
+        "stm32f103"
+    } else if board.chip.starts_with("STM32F405") {
+        "stm32f405"
+    } else {
+        anyhow::bail!("{}: no cycle model for {}", board.name, board.chip)
+    };
+    Ok(Chip::parse(name, wait_states)?)
+}
+
+/// One row of the per-task table.
+#[derive(serde::Serialize)]
+struct Row<'a> {
+    board: &'a str,
+    revision: &'a str,
+    task: String,
+    function: Option<String>,
+    cycles: u64,
+    us: f64,
+    instructions: u64,
+    bus_wait_us: f64,
+    loops: Vec<machine_code::LoopInfo>,
+    declined: Option<String>,
+}
+
+/// Every task of each board's release image: its hardware tasks (the handler of the interrupt it
+/// binds), its dispatchers (the interrupt handlers that poll the software tasks of one priority,
+/// their bodies inlined into them), and the tasks the bounds file adds (the monotonic's interrupt).
+fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
+    let boards = crate::select_boards(&args.boards)?;
+    let plan = crate::revision::plan(
+        &boards,
+        &crate::revision::Choice::parse(args.revision.as_deref())?,
+    )?;
+    let mut rows = Vec::new();
+    for build in &plan {
+        let board = build.board;
+        let elf = crate::revision::kept_elf(root, build, false);
+        ensure!(
+            elf.exists(),
+            "{} is not built: cargo xtask build {} --revision {}",
+            elf.display(),
+            board.name,
+            build.revision.name
+        );
+        let chip = chip_of(board, args.wait_states)?;
+        let default_bounds = root
+            .join("schedule-analysis")
+            .join("models")
+            .join(format!("{}.bounds.json", board.name));
+        let bounds = match args
+            .bounds
+            .as_ref()
+            .or(Some(&default_bounds).filter(|p| p.exists()))
+        {
+            Some(path) => BoundsFile::read(path)?,
+            None => BoundsFile::default(),
+        };
+        let source = std::fs::read_to_string(root.join(board.name).join("src").join("main.rs"))
+            .with_context(|| format!("{}'s app source", board.name))?;
+        let app = schedule_analysis::rtic_source::parse_app(&source)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", board.name))?;
+        let mut tasks = Vec::new();
+        for task in &app.tasks {
+            if let schedule_analysis::rtic_source::RticTaskKind::Hardware { binds } = &task.kind {
+                tasks.push(machine_code::Task {
+                    name: task.name.clone(),
+                    entry: machine_code::TaskEntry::Symbol(binds.clone()),
+                    handler: true,
+                });
+            }
+        }
+        for dispatcher in &app.dispatchers {
+            tasks.push(machine_code::Task {
+                name: format!("dispatcher {dispatcher}"),
+                entry: machine_code::TaskEntry::Symbol(dispatcher.clone()),
+                handler: true,
+            });
+        }
+        for extra in &bounds.tasks {
+            tasks.push(machine_code::Task {
+                name: extra.name.clone(),
+                entry: machine_code::TaskEntry::Symbol(extra.symbol.clone()),
+                handler: extra.handler,
+            });
+        }
+        let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
+        for t in machine_code::bound_tasks(&image, &tasks, chip, &bounds) {
+            rows.push(Row {
+                board: board.name,
+                revision: build.revision.name,
+                task: t.task,
+                function: t.function,
+                cycles: t.cycles,
+                us: t.us,
+                instructions: t.instructions,
+                bus_wait_us: t.bus_wait_us,
+                loops: t.loops,
+                declined: t.declined,
+            });
+        }
+        if !args.json {
+            println!(
+                "{} {}: {} at {} MHz, {} flash wait states",
+                board.name,
+                build.revision.name,
+                chip.name(),
+                chip.clock_hz() / 1_000_000,
+                chip.wait_states()
+            );
+        }
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        for r in &rows {
+            match &r.declined {
+                Some(reason) => println!(
+                    "{:<13} {:<8} {:<28} DECLINED: {reason}",
+                    r.board, r.revision, r.task
+                ),
+                None => println!(
+                    "{:<13} {:<8} {:<28} ≤ {:>7} cycles {:>9.2} µs {:>6} instructions, bus waits {:.2} µs, {} loop(s)",
+                    r.board,
+                    r.revision,
+                    r.task,
+                    r.cycles,
+                    r.us,
+                    r.instructions,
+                    r.bus_wait_us,
+                    r.loops.len()
+                ),
+            }
+        }
+        let bounded = rows.iter().filter(|r| r.declined.is_none()).count();
+        println!("{bounded} of {} tasks bounded", rows.len());
+    }
+    Ok(true)
+}
+
 /// `cargo xtask wcet --elf FILE --function SYMBOL --chip CHIP`: one function's bound. `Ok(false)`
 /// when it was declined.
-pub fn wcet(args: &WcetArgs) -> Result<bool> {
+fn wcet_function(args: &WcetArgs) -> Result<bool> {
     let (Some(elf), Some(function), Some(chip)) = (&args.elf, &args.function, &args.chip) else {
         anyhow::bail!(
-            "cargo xtask wcet needs --elf FILE --function SYMBOL --chip stm32f103|stm32f405 \
-             (the per-board task table is not built yet)"
+            "cargo xtask wcet --elf FILE needs --function SYMBOL --chip stm32f103|stm32f405"
         );
     };
     let chip = Chip::parse(chip, args.wait_states)?;

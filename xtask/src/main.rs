@@ -120,8 +120,9 @@ enum Cmd {
     },
     /// The response-time report: worst-case response times of the board tasks and the CAN bus.
     Analyze(analyze::AnalyzeArgs),
-    /// Execution-time bounds from the machine code: one function of any ELF in cycles on its chip
-    /// (docs/analysis.md, "Execution-time bounds from the machine code").
+    /// Execution-time bounds from the machine code: every task of the boards' built images, or one
+    /// function of any ELF, in cycles on its chip (docs/analysis.md, "Execution-time bounds from the
+    /// machine code").
     Wcet(machine::WcetArgs),
     /// Measured timing against the analysis: per task jobs, execution and response times against
     /// the analysed WCRT, per topic jitter and latency to the queue and the bus; from a capture of
@@ -297,7 +298,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             );
             Ok(stats.damaged == 0)
         }
-        Cmd::Wcet(args) => machine::wcet(&args),
+        Cmd::Wcet(args) => machine::wcet(&root, &args),
         Cmd::Bench(args) => bench::run(&root, &args),
         Cmd::Timeline(args) => bench::timeline::run(&root, &args).map(|()| true),
         Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),
@@ -322,7 +323,7 @@ pub(crate) fn workspace_root() -> PathBuf {
         .unwrap_or_default()
 }
 
-fn select_boards(names: &[String]) -> Result<Vec<&'static Board>> {
+pub(crate) fn select_boards(names: &[String]) -> Result<Vec<&'static Board>> {
     if names.is_empty() {
         return Ok(BOARDS.iter().collect());
     }

@@ -9,7 +9,9 @@
 //!   "waits": [{ "function": "…", "file": "src/i2c.rs", "line": 120, "wait_us": 25.0,
 //!               "source": "one I2C byte at 400 kHz: 9 bit times (UM10204 §3.1)" }],
 //!   "indirect": [{ "function": "…", "file": "src/waker.rs", "line": 7,
-//!                  "targets": ["…::wake"], "reason": "the only waker vtable in the image" }]
+//!                  "targets": ["…::wake"], "reason": "the only waker vtable in the image" }],
+//!   "tasks": [{ "name": "monotonic", "symbol": "TIM5", "handler": true,
+//!               "reason": "the TIM5 monotonic's compare interrupt (board.rs)" }]
 //! }
 //! ```
 //!
@@ -55,6 +57,18 @@ pub struct IndirectTargets {
     pub reason: String,
 }
 
+/// A task the image's RTIC app does not declare as one (the monotonic's timer interrupt): its name,
+/// the function it runs, and whether that is an exception handler.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskSpec {
+    pub name: String,
+    pub symbol: String,
+    #[serde(default)]
+    pub handler: bool,
+    pub reason: String,
+}
+
 /// The stated bounds of one image (see the module documentation).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -65,6 +79,9 @@ pub struct BoundsFile {
     pub waits: Vec<WaitBound>,
     #[serde(default)]
     pub indirect: Vec<IndirectTargets>,
+    /// Tasks besides the app's own (for `cargo xtask wcet BOARD`).
+    #[serde(default)]
+    pub tasks: Vec<TaskSpec>,
 }
 
 /// Whether a line-table path is the stated `file`.

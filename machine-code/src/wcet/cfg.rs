@@ -40,7 +40,7 @@ pub struct Cfg {
     pub blocks: Vec<Block>,
 }
 
-/// The entries of a table branch: the table follows the instruction up to the next code, its
+/// The entries of a table branch, and where its data ends: the table follows the instruction up to the next code, its
 /// entries limited by a `CMP Rm, #n` on the index before it (n + 1 entries).
 fn table_targets(
     f: &Function,
@@ -48,7 +48,7 @@ fn table_targets(
     at: usize,
     halfwords: bool,
     index: u8,
-) -> Result<Vec<u64>, Error> {
+) -> Result<(Vec<u64>, u64), Error> {
     let insn = &insns[at];
     let table = insn.next();
     let unfollowable = |what: &str| Error::Unfollowable {
@@ -73,7 +73,7 @@ fn table_targets(
         entries = entries.min(u64::from(limit) + 1);
     }
     // The entries' addresses (their bytes are data, zeroed in `code`: read from the image).
-    Ok((0..entries).map(|k| table + k * size).collect())
+    Ok(((0..entries).map(|k| table + k * size).collect(), end))
 }
 
 impl Cfg {
@@ -116,11 +116,17 @@ impl Cfg {
                     index: rm,
                 } => {
                     let mut targets = Vec::new();
-                    for entry in table_targets(f, insns, k, halfwords, rm)? {
+                    let (entries, table_end) = table_targets(f, insns, k, halfwords, rm)?;
+                    for entry in entries {
                         let size = if halfwords { 2 } else { 1 };
                         let offset = read(entry, size)
                             .ok_or_else(|| unfollowable(insn, "a jump table outside the image"))?;
                         let target = insn.next() + 2 * offset;
+                        // An entry into the table itself is its padding byte (a table of an odd
+                        // number of bytes is padded to the next halfword): never a target.
+                        if target < table_end {
+                            continue;
+                        }
                         let to = inside(target).ok_or_else(|| {
                             unfollowable(insn, "a jump table entry that is not an instruction")
                         })?;

@@ -542,26 +542,26 @@ fn loop_place(
     l: &cfg::Loop,
 ) -> (Option<String>, Option<u32>, String) {
     let header = &graph.blocks[l.header];
-    let in_order = std::iter::once(header)
-        .chain(
-            l.body
-                .iter()
-                .filter(|&&b| b != l.header)
-                .map(|&b| &graph.blocks[b]),
-        )
-        .flat_map(|b| insns[b.first..=b.last].iter());
-    let own = in_order
+    let in_order = || {
+        std::iter::once(header)
+            .chain(
+                l.body
+                    .iter()
+                    .filter(|&&b| b != l.header)
+                    .map(|&b| &graph.blocks[b]),
+            )
+            .flat_map(|b| insns[b.first..=b.last].iter())
+    };
+    let lines: Vec<(u64, String)> = in_order()
         .filter_map(|i| image.line(i.addr).map(|(file, _)| (i.addr, file)))
-        .find(|(_, file)| !is_library(file));
-    match own {
-        Some((at, _)) => place(image, at),
-        None => {
-            let first_with_line = insns[header.first..=header.last]
-                .iter()
-                .find(|i| image.line(i.addr).is_some())
-                .map_or(insns[header.first].addr, |i| i.addr);
-            place(image, first_with_line)
-        }
+        .collect();
+    match lines
+        .iter()
+        .find(|(_, file)| !is_library(file))
+        .or(lines.first())
+    {
+        Some((at, _)) => place(image, *at),
+        None => place(image, insns[header.first].addr),
     }
 }
 
