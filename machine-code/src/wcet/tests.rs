@@ -304,3 +304,119 @@ fn a_stated_wait_is_kept_apart_from_the_cycles() {
     let c = longest(nodes, &passes, &|c: Cost| c.cycles).unwrap();
     assert_eq!((c.cycles, c.instructions), (31, 16));
 }
+
+/// `spin` of [`a_loop_without_a_bound_is_declined_by_name`], its loop at src/spin.rs:7, its
+/// return at line 9.
+fn spin_with_lines() -> Image {
+    let code = thumb(&[
+        0x6801, // 0x00 ldr r1, [r0]: 2 + 5 (an unknown base: APB1, the slowest)
+        0x2900, // 0x02 cmp r1, #0: 1
+        0xd1fc, // 0x04 bne 0x00: 1, taken + P
+        0x4770, // 0x06 bx lr: 1 + P
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("spin", 0, 8)],
+        "firmware/src/spin.rs",
+        &[(0, 7), (6, 9)],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+#[test]
+fn the_line_table_names_the_loop() {
+    let img = spin_with_lines();
+    assert_eq!(
+        img.line(4),
+        Some(("/work/firmware/src/spin.rs".to_string(), 7))
+    );
+    let reason = bound(&img, "spin", F103_0WS).declined.expect("declined");
+    assert!(reason.contains("spin.rs:7"), "{reason}");
+}
+
+#[test]
+fn a_stated_loop_bound_is_used() {
+    let img = spin_with_lines();
+    let bounds = BoundsFile::parse(
+        r#"{"loops":[{"function":"spin","file":"src/spin.rs","line":7,"bound":10,"reason":"ten polls at most"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "spin", F103_0WS, &bounds).unwrap();
+    // A pass: 7 + 1 + 1 = 9; 9 passes back (9 + P each) and one out (9), then bx lr (4):
+    // 9 × 12 + 9 + 4 = 121 cycles; 10 × 3 + 1 = 31 instructions.
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (121, 31, None)
+    );
+    assert_eq!(b.loops[0].bound, 10);
+    assert_eq!(b.loops[0].line, Some(7));
+    assert_eq!(b.loops[0].source, "bounds file: ten polls at most");
+    // A line that is not the loop's is no bound for it.
+    let elsewhere = BoundsFile::parse(
+        r#"{"loops":[{"function":"spin","file":"src/spin.rs","line":9,"bound":10,"reason":"x"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "spin", F103_0WS, &elsewhere).unwrap();
+    assert!(b.declined.is_some());
+}
+
+#[test]
+fn a_stated_peripheral_wait_is_kept_apart() {
+    let img = spin_with_lines();
+    let bounds = BoundsFile::parse(
+        r#"{"waits":[{"function":"spin","file":"src/spin.rs","line":7,"wait_us":22.5,"source":"one I2C byte at 400 kHz"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "spin", F103_0WS, &bounds).unwrap();
+    // One pass out (9) and the return (4) in cycles; 22.5 µs stated apart; instructions: the pass
+    // (3), at most one a cycle of the wait (22.5 µs × 72 MHz = 1620), the return (1).
+    assert_eq!(
+        (b.cycles, b.bus_wait_ns, b.instructions),
+        (13, 22_500, 1624)
+    );
+    assert!((b.us(F103_0WS) - (13.0 / 72.0 + 22.5)).abs() < 0.01);
+}
+
+#[test]
+fn stated_targets_resolve_an_indirect_call() {
+    let code = thumb(&[
+        0xb580, // 0x00 push {r7, lr}: 3
+        0x4798, // 0x02 blx r3: 1 + P
+        0xbd80, // 0x04 pop {r7, pc}: 1 + 2 + P
+        0xbf00, // 0x06
+        0x2005, // 0x08 movs r0, #5: 1 (one target)
+        0x4770, // 0x0a bx lr: 4
+        0x3001, // 0x0c adds r0, #1: 1 (the other, longer)
+        0x3001, // 0x0e adds r0, #1: 1
+        0x4770, // 0x10 bx lr: 4
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("through_register", 0, 6),
+            Sym::function("short", 8, 4),
+            Sym::function("long", 0x0c, 6),
+        ],
+        "firmware/src/call.rs",
+        &[(0, 2), (2, 3), (4, 4)],
+    );
+    let img = Image::parse(&bytes).unwrap();
+    let bounds = BoundsFile::parse(
+        r#"{"indirect":[{"function":"through_register","file":"src/call.rs","line":3,"targets":["short","long"],"reason":"the two handlers of the table"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "through_register", F103_0WS, &bounds).unwrap();
+    // 3 + 4 + (the longer target: 6) + 6 = 19 cycles; 3 + 3 instructions.
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (19, 6, None)
+    );
+    let unknown = BoundsFile::parse(
+        r#"{"indirect":[{"function":"through_register","file":"src/call.rs","line":3,"targets":["gone"],"reason":"x"}]}"#,
+    )
+    .unwrap();
+    assert!(matches!(
+        bound_function(&img, "through_register", F103_0WS, &unknown),
+        Err(Error::Bounds(_))
+    ));
+}
