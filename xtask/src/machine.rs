@@ -148,6 +148,7 @@ struct Row<'a> {
     instructions: u64,
     bus_wait_us: f64,
     loops: Vec<machine_code::LoopInfo>,
+    preemption_retry_cycles: u64,
     declined: Option<String>,
 }
 
@@ -224,6 +225,7 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
                 instructions: t.instructions,
                 bus_wait_us: t.bus_wait_us,
                 loops: t.loops,
+                preemption_retry_cycles: t.preemption_retry_cycles,
                 declined: t.declined,
             });
         }
@@ -295,6 +297,8 @@ fn wcet_function(args: &WcetArgs) -> Result<bool> {
             "instructions": bound.instructions,
             "bus_wait_us": bound.bus_wait_us(),
             "loops": bound.loops,
+            "retry_cycles": bound.retry_cycles,
+            "retry_instructions": bound.retry_instructions,
             "declined": bound.declined,
         });
         println!("{}", serde_json::to_string_pretty(&json)?);

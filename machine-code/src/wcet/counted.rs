@@ -173,6 +173,78 @@ pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
     Some((most, how))
 }
 
+/// Whether the loop is an exclusive-access retry: it holds one `STREX` (any width) and an `LDREX`,
+/// and its one branch back is taken only when that `STREX` failed (`CBNZ` on its status register,
+/// or `CMP` of it with 0 and `BNE`). On a single Cortex-M3/M4 (no global monitor on the STM32) a
+/// `STREX` fails only when the local monitor was cleared since the `LDREX`, which exception entry
+/// and return do: each retry needs a preemption inside the sequence.
+pub fn exclusive_retry(insns: &[Insn], cfg: &Cfg, l: &Loop) -> bool {
+    let [latch] = l.latches[..] else { return false };
+    let all: Vec<&Insn> = l
+        .body
+        .iter()
+        .flat_map(|&b| insns[cfg.blocks[b].first..=cfg.blocks[b].last].iter())
+        .collect();
+    let is_strex = |i: &Insn| {
+        matches!(
+            i.inst.opcode,
+            Opcode::STREX | Opcode::STREXB | Opcode::STREXH | Opcode::STREXD
+        )
+    };
+    let is_ldrex = |i: &Insn| {
+        matches!(
+            i.inst.opcode,
+            Opcode::LDREX | Opcode::LDREXB | Opcode::LDREXH | Opcode::LDREXD
+        )
+    };
+    let stores: Vec<&&Insn> = all.iter().filter(|i| is_strex(i)).collect();
+    let [strex] = stores[..] else { return false };
+    if !all.iter().any(|i| is_ldrex(i)) {
+        return false;
+    }
+    let Some(Operand::Reg(status)) = strex.inst.operands.first() else {
+        return false;
+    };
+    let status = status.number();
+    let block = &cfg.blocks[latch];
+    if !block.succs.iter().any(|e| e.to == l.header && e.taken) {
+        return false;
+    }
+    let branch = &insns[block.last];
+    // The status must not change between the STREX and the branch.
+    let strex_at = insns
+        .iter()
+        .position(|i| i.addr == strex.addr)
+        .unwrap_or(usize::MAX);
+    if strex_at < block.first || strex_at > block.last {
+        return false;
+    }
+    if insns[strex_at + 1..block.last]
+        .iter()
+        .any(|i| i.writes().contains(status))
+    {
+        return false;
+    }
+    match branch.inst.opcode {
+        Opcode::CBNZ => matches!(branch.inst.operands[0], Operand::Reg(r) if r.number() == status),
+        Opcode::B => {
+            let Some(1) = branch_condition(branch) else {
+                return false;
+            };
+            insns[strex_at + 1..block.last]
+                .iter()
+                .rev()
+                .find(|i| sets_flags(i))
+                .is_some_and(|cmp| {
+                    cmp.inst.opcode == Opcode::CMP
+                        && cmp.registers() == [status]
+                        && cmp.immediate() == Some(0)
+                })
+        }
+        _ => false,
+    }
+}
+
 /// The counter's constant value at the end of `block`: its last write there must be `MOV rX, #c`.
 fn initial(block: &[Insn], r: u8) -> Option<u32> {
     let last = block.iter().rev().find(|i| i.writes().contains(r))?;

@@ -51,6 +51,11 @@ pub struct Bound {
     pub bus_wait_ns: u64,
     /// The loops of the function and everything it calls, with their bounds.
     pub loops: Vec<LoopInfo>,
+    /// What one preemption inside an exclusive-access sequence (`LDREX` … `STREX`) adds: one more
+    /// iteration of the longest retry loop it may be in (cycles, instructions). Not in `cycles`:
+    /// [`bound_tasks`] charges it to every handler, which is what preempts.
+    pub retry_cycles: u64,
+    pub retry_instructions: u64,
     /// Why there is no bound (then the figures are 0 and mean nothing).
     pub declined: Option<String>,
 }
@@ -96,6 +101,10 @@ pub struct TaskBound {
     pub instructions: u64,
     pub bus_wait_us: f64,
     pub loops: Vec<LoopInfo>,
+    /// Included in `cycles` and `instructions` of a handler: one retry iteration of the longest
+    /// exclusive-access loop of any task it may preempt (each preemption can cost the preempted job
+    /// one).
+    pub preemption_retry_cycles: u64,
     pub declined: Option<String>,
 }
 
@@ -104,6 +113,10 @@ pub struct TaskBound {
 struct Summary {
     time: Cost,
     count: Cost,
+    /// The longest iteration of an exclusive-access retry loop this function or a callee may be
+    /// in (by time, and by instruction count): what one preemption can add.
+    retry_time: Cost,
+    retry_count: Cost,
     loops: Vec<LoopInfo>,
 }
 
@@ -128,6 +141,8 @@ fn to_bound(outcome: Result<Summary, String>) -> Bound {
             instructions: s.count.instructions,
             bus_wait_ns: s.time.wait_ns,
             loops: s.loops,
+            retry_cycles: s.retry_time.cycles,
+            retry_instructions: s.retry_count.instructions,
             declined: None,
         },
         Err(reason) => Bound {
@@ -135,6 +150,8 @@ fn to_bound(outcome: Result<Summary, String>) -> Bound {
             instructions: 0,
             bus_wait_ns: 0,
             loops: Vec::new(),
+            retry_cycles: 0,
+            retry_instructions: 0,
             declined: Some(reason),
         },
     }
@@ -149,7 +166,7 @@ pub fn bound_tasks(
     bounds: &BoundsFile,
 ) -> Vec<TaskBound> {
     let mut analysis = Analysis::new(image, chip, bounds);
-    tasks
+    let found: Vec<(Option<String>, Bound)> = tasks
         .iter()
         .map(|task| {
             let start = match &task.entry {
@@ -161,7 +178,7 @@ pub fn bound_tasks(
                     .map(|&(_, at)| at)
                     .ok_or_else(|| Error::Other(format!("no handler at vector {i}"))),
             };
-            let (function, bound) = match start {
+            match start {
                 Ok(at) => (
                     Some(image.name(at)),
                     match analysis.summary(at) {
@@ -170,14 +187,28 @@ pub fn bound_tasks(
                     },
                 ),
                 Err(e) => (None, to_bound(Err(e.to_string()))),
-            };
-            let extra = if task.handler && bound.declined.is_none() {
-                chip.exception_cycles()
+            }
+        })
+        .collect();
+    // What one preemption can cost the job it preempts: one retry of the longest exclusive-access
+    // loop of any task (charged to the preempting handler).
+    let retry_cycles = found.iter().map(|(_, b)| b.retry_cycles).max().unwrap_or(0);
+    let retry_instructions = found
+        .iter()
+        .map(|(_, b)| b.retry_instructions)
+        .max()
+        .unwrap_or(0);
+    tasks
+        .iter()
+        .zip(found)
+        .map(|(task, (function, bound))| {
+            let handler = task.handler && bound.declined.is_none();
+            let (extra, retry, retry_insns) = if handler {
+                (chip.exception_cycles(), retry_cycles, retry_instructions)
             } else {
-                0
+                (0, 0, 0)
             };
-            let cycles = bound.cycles + extra;
-            let instructions = bound.instructions;
+            let cycles = bound.cycles + extra + retry;
             TaskBound {
                 task: task.name.clone(),
                 function,
@@ -187,9 +218,10 @@ pub fn bound_tasks(
                 } else {
                     (chip.cycles_to_ns(cycles) + bound.bus_wait_ns) as f64 / 1000.0
                 },
-                instructions,
+                instructions: bound.instructions + retry_insns,
                 bus_wait_us: bound.bus_wait_us(),
                 loops: bound.loops,
+                preemption_retry_cycles: retry,
                 declined: bound.declined,
             }
         })
@@ -334,6 +366,7 @@ impl<'a> Analysis<'a> {
             }
         };
         let mut loop_nodes = Vec::new();
+        let (mut retry_time, mut retry_count) = (Cost::default(), Cost::default());
         for l in &natural {
             let leaves = l.body.iter().any(|&b| {
                 let blk = &graph.blocks[b];
@@ -342,6 +375,17 @@ impl<'a> Analysis<'a> {
             let (file, line, text) = loop_place(image, insns, &graph, l);
             let count = if !leaves {
                 LoopCount::Endless
+            } else if counted::exclusive_retry(insns, &graph, l) {
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: 1,
+                    source: "exclusive retry: one pass, one more per preemption inside it \
+                             (exception entry and return clear the local monitor)"
+                        .to_string(),
+                });
+                LoopCount::Retry
             } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),
@@ -442,6 +486,12 @@ impl<'a> Analysis<'a> {
                                 if time_key(chip)(s.time) > time_key(chip)(worst_time) {
                                     worst_time = s.time;
                                 }
+                                if time_key(chip)(s.retry_time) > time_key(chip)(retry_time) {
+                                    retry_time = s.retry_time;
+                                }
+                                if s.retry_count.instructions > retry_count.instructions {
+                                    retry_count = s.retry_count;
+                                }
                                 if s.count.instructions > worst_count.instructions {
                                     worst_count = s.count;
                                 }
@@ -487,7 +537,15 @@ impl<'a> Analysis<'a> {
         let by_time = path::longest(time_nodes, &loop_nodes, &time_key(chip));
         let by_count = path::longest(count_nodes, &loop_nodes, &|c: Cost| c.instructions);
         let (time, count) = match (by_time, by_count) {
-            (Ok(t), Ok(c)) => (t, c),
+            (Ok(t), Ok(c)) => {
+                if time_key(chip)(t.retry) > time_key(chip)(retry_time) {
+                    retry_time = t.retry;
+                }
+                if c.retry.instructions > retry_count.instructions {
+                    retry_count = c.retry;
+                }
+                (t.path, c.path)
+            }
             (Err(PathError::NoExit), _) | (_, Err(PathError::NoExit)) => {
                 return Ok(Err(format!("{} never returns", f.name)))
             }
@@ -506,6 +564,8 @@ impl<'a> Analysis<'a> {
         Ok(Ok(Summary {
             time,
             count,
+            retry_time,
+            retry_count,
             loops: loops_info,
         }))
     }

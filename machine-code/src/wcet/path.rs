@@ -47,8 +47,20 @@ pub enum LoopCount {
     /// A wait: the loop spins for at most this long (ns, and as cycles at the clock); it costs its
     /// way out plus the wait, and at most one instruction per cycle of the wait.
     Wait { ns: u64, cycles: u64 },
+    /// An exclusive-access retry loop (`LDREX` … `STREX`, back while the store fails): one pass
+    /// per job; each preemption inside it costs one more iteration, returned apart
+    /// ([`Longest::retry`]).
+    Retry,
     /// No exit: no path through it completes.
     Endless,
+}
+
+/// The longest path, and the longest iteration of an exclusive-access retry loop on any path (what
+/// one preemption can add).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Longest {
+    pub path: Cost,
+    pub retry: Cost,
 }
 
 /// One node: a block, or a loop collapsed.
@@ -148,8 +160,9 @@ pub fn longest(
     mut nodes: Vec<Node>,
     loops: &[LoopNodes],
     key: &dyn Fn(Cost) -> u64,
-) -> Result<Cost, PathError> {
+) -> Result<Longest, PathError> {
     let n = nodes.len();
+    let mut retry: Option<Cost> = None;
     // Each original node's representative (itself, or the header of the loop it was collapsed into).
     let mut rep: Vec<usize> = (0..n).collect();
     for l in loops {
@@ -181,6 +194,10 @@ pub fn longest(
             (_, None) | (LoopCount::Endless, _) => None,
             (LoopCount::Passes(passes), Some(out)) => {
                 Some(iteration.times(passes.max(1) - 1).plus(out))
+            }
+            (LoopCount::Retry, Some(out)) => {
+                retry = better(retry, iteration, key);
+                Some(out)
             }
             (LoopCount::Wait { ns, cycles }, Some(out)) => Some(out.plus(Cost {
                 cycles: 0,
@@ -224,5 +241,8 @@ pub fn longest(
             }
         }
     }
-    best.ok_or(PathError::NoExit)
+    Ok(Longest {
+        path: best.ok_or(PathError::NoExit)?,
+        retry: retry.unwrap_or_default(),
+    })
 }

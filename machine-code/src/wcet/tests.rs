@@ -284,7 +284,9 @@ fn a_stated_wait_is_kept_apart_from_the_cycles() {
             cycles: 1800,
         },
     }];
-    let c = longest(nodes.clone(), &wait, &|c: Cost| c.cycles).unwrap();
+    let c = longest(nodes.clone(), &wait, &|c: Cost| c.cycles)
+        .unwrap()
+        .path;
     // One pass out (3) and the return (4); the 25 µs stated apart, at most one instruction per
     // cycle of it.
     assert_eq!(
@@ -301,7 +303,7 @@ fn a_stated_wait_is_kept_apart_from_the_cycles() {
         count: LoopCount::Passes(5),
     }];
     // Four passes back (3 + 3 each) and one out (3), then the return: 24 + 3 + 4.
-    let c = longest(nodes, &passes, &|c: Cost| c.cycles).unwrap();
+    let c = longest(nodes, &passes, &|c: Cost| c.cycles).unwrap().path;
     assert_eq!((c.cycles, c.instructions), (31, 16));
 }
 
@@ -419,4 +421,62 @@ fn stated_targets_resolve_an_indirect_call() {
         bound_function(&img, "through_register", F103_0WS, &unknown),
         Err(Error::Bounds(_))
     ));
+}
+
+#[test]
+fn an_exclusive_retry_costs_one_pass_and_one_iteration_per_preemption() {
+    let img = image(
+        &[
+            0xe850, 0x1f00, // 0x00 ldrex r1, [r0]: 2 + 5 (an unknown base: APB1)
+            0x3101, // 0x04 adds r1, #1: 1
+            0xe840, 0x1200, // 0x06 strex r2, r1, [r0]: 2 + 5
+            0x2a00, // 0x0a cmp r2, #0: 1
+            0xd1f8, // 0x0c bne 0x00: 1 (+ P back, when the store failed)
+            0x4770, // 0x0e bx lr: 4
+        ],
+        &[Sym::function("fetch_add", 0, 16)],
+    );
+    let b = bound(&img, "fetch_add", F103_0WS);
+    // One pass (17) and the return (4); a preemption inside adds one iteration (17 + P).
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (21, 6, None)
+    );
+    assert_eq!((b.retry_cycles, b.retry_instructions), (20, 5));
+    assert!(b.loops[0].source.starts_with("exclusive retry"));
+    // As a hardware task: entry 12, return 10, and the retry it may cause a preempted job (the
+    // largest of any task's: its own here).
+    let rows = bound_tasks(
+        &img,
+        &[Task {
+            name: "h".into(),
+            entry: TaskEntry::Symbol("fetch_add".into()),
+            handler: true,
+        }],
+        F103_0WS,
+        &BoundsFile::default(),
+    );
+    assert_eq!(
+        (
+            rows[0].cycles,
+            rows[0].instructions,
+            rows[0].preemption_retry_cycles
+        ),
+        (21 + 22 + 20, 6 + 5, 20)
+    );
+    // A missing handler is a declined row, not an error.
+    let rows = bound_tasks(
+        &img,
+        &[Task {
+            name: "gone".into(),
+            entry: TaskEntry::Vector(40),
+            handler: true,
+        }],
+        F103_0WS,
+        &BoundsFile::default(),
+    );
+    assert!(rows[0]
+        .declined
+        .as_deref()
+        .is_some_and(|r| r.contains("vector 40")));
 }
