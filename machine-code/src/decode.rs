@@ -92,7 +92,10 @@ pub fn decode(
                 .map_or(0, |b| u16::from_le_bytes([b[0], b[1]]))
         };
         let raw = [half(offset), if len == 4 { half(offset + 2) } else { 0 }];
-        let conditional = it_left > 0 || inst.condition != ConditionCode::AL;
+        // `CBZ`/`CBNZ` carry no condition code but branch only on their register's value.
+        let conditional = it_left > 0
+            || inst.condition != ConditionCode::AL
+            || matches!(inst.opcode, Opcode::CBZ | Opcode::CBNZ);
         it_left = it_left.saturating_sub(1);
         if inst.opcode == Opcode::IT {
             // The mask's lowest set bit ends the block: 1 to 4 instructions.

@@ -30,9 +30,12 @@
 //!   included), `instructions` (the largest instruction count of any path, bounded loops unrolled to
 //!   their bound), `bus_wait_ns` (stated peripheral waits on the longest path, apart from the
 //!   cycles), `loops` ([`LoopInfo`]: function, file:line, bound, where the bound came from),
-//!   `declined`.
+//!   `retry_cycles`/`retry_instructions` (what one preemption inside an exclusive-access sequence
+//!   adds), `declined`.
 //! - [`bound_tasks`] bounds a list of [`Task`]s (a name and an entry: a symbol, or an interrupt's
-//!   vector index) into [`TaskBound`] rows; a hardware task adds the exception entry and exit.
+//!   vector index) into [`TaskBound`] rows (`cycles`, `us`, `instructions`, `bus_wait_us`, `loops`,
+//!   `preemption_retry_cycles`, `declined`); a handler adds the exception entry and exit (and lazy
+//!   FPU stacking on the M4F) and the longest retry iteration of any task it may preempt.
 //!
 //! Every error is an [`Error`]; nothing here panics on a malformed image.
 pub mod callgraph;

@@ -480,3 +480,20 @@ fn an_exclusive_retry_costs_one_pass_and_one_iteration_per_preemption() {
         .as_deref()
         .is_some_and(|r| r.contains("vector 40")));
 }
+
+#[test]
+fn cbz_has_both_ways_and_each_figure_its_own_longest_path() {
+    let img = image(
+        &[
+            0xb108, // 0x00 cbz r0, 0x06: 1 (+ P taken)
+            0x2001, // 0x02 movs r0, #1: 1
+            0x3002, // 0x04 adds r0, #2: 1
+            0x4770, // 0x06 bx lr: 1 + P
+        ],
+        &[Sym::function("maybe", 0, 8)],
+    );
+    let b = bound(&img, "maybe", F103_0WS);
+    // Taken: 1 + P + 4 = 8 cycles (3 instructions); not taken: 1 + 1 + 1 + 4 = 7 cycles (4
+    // instructions). Each figure is the largest of any path.
+    assert_eq!((b.cycles, b.instructions), (8, 4));
+}
