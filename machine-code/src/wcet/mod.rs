@@ -443,6 +443,22 @@ impl<'a> Analysis<'a> {
         for block in &graph.blocks {
             let own = self.block_cost(&insns[block.first..=block.last]);
             let (mut time, mut count) = (own, own);
+            // What a tail call adds is paid only on the way out through it; a conditional one
+            // (`B<c>` out of the function) also pays its refill there.
+            let tail = matches!(
+                block.call,
+                Some(Call::Direct { tail: true, .. } | Call::Indirect { tail: true, .. })
+            );
+            let (mut exit_time, mut exit_count) = (Cost::default(), Cost::default());
+            if tail && insns[block.last].conditional {
+                exit_time.cycles += chip.taken_cycles();
+                exit_count.cycles += chip.taken_cycles();
+            }
+            let (time_ref, count_ref) = if tail {
+                (&mut exit_time, &mut exit_count)
+            } else {
+                (&mut time, &mut count)
+            };
             let mut exit = block.exit;
             match block.call {
                 // A call of a function that cannot return ends the path (the graph has no edge on
@@ -450,8 +466,8 @@ impl<'a> Analysis<'a> {
                 Some(Call::Direct { target, tail }) if !self.can_return(target) => exit &= !tail,
                 Some(Call::Direct { target, .. }) => match self.summary(target)? {
                     Ok(s) => {
-                        time = time.plus(s.time);
-                        count = count.plus(s.count);
+                        *time_ref = time_ref.plus(s.time);
+                        *count_ref = count_ref.plus(s.count);
                         loops_info.extend(s.loops);
                     }
                     Err(reason) => {
@@ -500,8 +516,8 @@ impl<'a> Analysis<'a> {
                             Err(reason) => return Ok(Err(format!("via {name}: {reason}"))),
                         }
                     }
-                    time = time.plus(worst_time);
-                    count = count.plus(worst_count);
+                    *time_ref = time_ref.plus(worst_time);
+                    *count_ref = count_ref.plus(worst_count);
                 }
                 None => {}
             }
@@ -527,11 +543,13 @@ impl<'a> Analysis<'a> {
                 cost: time,
                 succs: succs.clone(),
                 exit,
+                exit_cost: exit_time,
             });
             count_nodes.push(Node {
                 cost: count,
                 succs,
                 exit,
+                exit_cost: exit_count,
             });
         }
         let by_time = path::longest(time_nodes, &loop_nodes, &time_key(chip));

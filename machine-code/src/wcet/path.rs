@@ -71,6 +71,8 @@ pub struct Node {
     pub succs: Vec<(usize, Cost)>,
     /// The function may return from here.
     pub exit: bool,
+    /// What returning from here adds (a tail call's callee), not paid by the ways on.
+    pub exit_cost: Cost,
 }
 
 /// A loop to collapse: its header and body (node indices of the original graph).
@@ -177,7 +179,7 @@ pub fn longest(
         for &m in &members {
             let Some(d) = dist[m] else { continue };
             if nodes[m].exit {
-                way_out = better(way_out, d, key);
+                way_out = better(way_out, d.plus(nodes[m].exit_cost), key);
                 exit_here = true;
             }
             for &(to, edge) in &nodes[m].succs {
@@ -212,6 +214,7 @@ pub fn longest(
                 nodes[m].succs.clear();
                 nodes[m].exit = false;
             }
+            nodes[m].exit_cost = Cost::default();
         }
         match collapsed {
             Some(cost) => {
@@ -237,7 +240,7 @@ pub fn longest(
     for (v, node) in nodes.iter().enumerate() {
         if node.exit {
             if let Some(d) = dist[v] {
-                best = better(best, d, key);
+                best = better(best, d.plus(node.exit_cost), key);
             }
         }
     }

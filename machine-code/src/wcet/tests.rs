@@ -265,6 +265,7 @@ fn a_stated_wait_is_kept_apart_from_the_cycles() {
                 (1, Cost::default()),
             ],
             exit: false,
+            exit_cost: Cost::default(),
         },
         Node {
             cost: Cost {
@@ -274,6 +275,7 @@ fn a_stated_wait_is_kept_apart_from_the_cycles() {
             },
             succs: vec![],
             exit: true,
+            exit_cost: Cost::default(),
         },
     ];
     let wait = [LoopNodes {
@@ -496,4 +498,22 @@ fn cbz_has_both_ways_and_each_figure_its_own_longest_path() {
     // Taken: 1 + P + 4 = 8 cycles (3 instructions); not taken: 1 + 1 + 1 + 4 = 7 cycles (4
     // instructions). Each figure is the largest of any path.
     assert_eq!((b.cycles, b.instructions), (8, 4));
+}
+
+#[test]
+fn a_conditional_tail_call_pays_its_refill() {
+    let img = image(
+        &[
+            0x2800, // 0x00 cmp r0, #0: 1
+            0xd001, // 0x02 beq 0x08 (the other function): 1, + P taken
+            0x4770, // 0x04 bx lr: 4
+            0xbf00, // 0x06
+            0x2005, // 0x08 movs r0, #5: 1
+            0x4770, // 0x0a bx lr: 4
+        ],
+        &[Sym::function("early", 0, 6), Sym::function("late", 8, 4)],
+    );
+    // Into `late`: 1 + 1 + P + (1 + 4) = 10 cycles, 4 instructions.
+    let b = bound(&img, "early", F103_0WS);
+    assert_eq!((b.cycles, b.instructions), (10, 4));
 }
