@@ -16,7 +16,8 @@
 //! ```
 //!
 //! `file` matches the end of the line table's path (`src/tasks.rs` matches
-//! `/work/amiro-firmware/src/tasks.rs`).
+//! `/work/amiro-firmware/src/tasks.rs`). A target of an indirect call stands for every function of
+//! that name.
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};

@@ -491,13 +491,26 @@ impl<'a> Analysis<'a> {
                         )));
                     };
                     let (mut worst_time, mut worst_count) = (Cost::default(), Cost::default());
+                    // A name stands for every function of that name (monomorphs and closures
+                    // share theirs once the hash is gone).
+                    let mut targets = Vec::new();
                     for name in &stated.targets {
-                        let target = image.function_named(name).map_err(|_| {
-                            Error::Bounds(format!(
+                        let before = targets.len();
+                        targets.extend(
+                            image
+                                .functions
+                                .values()
+                                .filter(|f| &f.name == name || &f.symbol == name)
+                                .map(|f| (name, f.start)),
+                        );
+                        if targets.len() == before {
+                            return Err(Error::Bounds(format!(
                                 "the indirect call at {text} names `{name}`, which is not in the image"
-                            ))
-                        })?;
-                        match self.summary(target.start)? {
+                            )));
+                        }
+                    }
+                    for (name, start) in targets {
+                        match self.summary(start)? {
                             Ok(s) => {
                                 if time_key(chip)(s.time) > time_key(chip)(worst_time) {
                                     worst_time = s.time;
