@@ -140,6 +140,10 @@ pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
     if step_block != latch || step_at > block.first + at {
         return None;
     }
+    // An `IT` block's step or compare may not run: not a count.
+    if insns[step_at].conditional || setter.conditional {
+        return None;
+    }
     let step = as_step(&insns[step_at], counter)?;
     if compare.is_none() && !(step.flags && step_at == block.first + at) {
         return None;
@@ -249,7 +253,7 @@ pub fn exclusive_retry(insns: &[Insn], cfg: &Cfg, l: &Loop) -> bool {
 fn initial(block: &[Insn], r: u8) -> Option<u32> {
     let last = block.iter().rev().find(|i| i.writes().contains(r))?;
     let regs = last.registers();
-    (last.inst.opcode == Opcode::MOV && regs == [r])
+    (last.inst.opcode == Opcode::MOV && regs == [r] && !last.conditional)
         .then(|| last.immediate())
         .flatten()
 }

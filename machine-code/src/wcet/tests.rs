@@ -519,3 +519,23 @@ fn a_conditional_tail_call_pays_its_refill() {
     let b = bound(&img, "early", F103_0WS);
     assert_eq!((b.cycles, b.instructions), (10, 4));
 }
+
+#[test]
+fn a_step_inside_an_it_block_is_no_count() {
+    let img = image(
+        &[
+            0x2300, // 0x00 movs r3, #0
+            0x2900, // 0x02 cmp r1, #0   (the loop)
+            0xbf18, // 0x04 it ne
+            0x3301, // 0x06 addne r3, #1: may not run
+            0x2b08, // 0x08 cmp r3, #8
+            0xd1fa, // 0x0a bne 0x02
+            0x4770, // 0x0c bx lr
+        ],
+        &[Sym::function("maybe_count", 0, 14)],
+    );
+    let reason = bound(&img, "maybe_count", F103_0WS)
+        .declined
+        .expect("declined");
+    assert!(reason.contains("no bound"), "{reason}");
+}
