@@ -232,64 +232,10 @@ pub fn write_checksum(elf: &Path, out: &Path) -> Result<u32> {
     Ok(checksum)
 }
 
-/// The bytes a probe writes for an image: every loadable segment's file contents at its load
-/// (physical) address, so initialised data goes to flash where the startup code copies it from.
-pub fn load_segments(bytes: &[u8]) -> Result<Vec<(u64, Vec<u8>)>> {
-    use object::read::elf::{ElfFile32, FileHeader, ProgramHeader};
-    let file = ElfFile32::<object::Endianness>::parse(bytes)
-        .context("not a 32-bit ELF image (a firmware build for the board's chip?)")?;
-    let endian = file.endian();
-    let header = file.elf_header();
-    let mut out = Vec::new();
-    for segment in header
-        .program_headers(endian, bytes)
-        .context("reading the ELF program headers")?
-    {
-        if segment.p_type(endian) != object::elf::PT_LOAD || segment.p_filesz(endian) == 0 {
-            continue;
-        }
-        let data = segment
-            .data(endian, bytes)
-            .map_err(|()| anyhow::anyhow!("a loadable segment lies outside the file"))?;
-        out.push((u64::from(segment.p_paddr(endian)), data.to_vec()));
-    }
-    if out.is_empty() {
-        bail!("the ELF image has no loadable contents");
-    }
-    Ok(out)
-}
-
-/// The address of the RTT control block (`_SEGGER_RTT`) in an image, if it has one.
-pub fn rtt_control_block(bytes: &[u8]) -> Option<u64> {
-    use object::ObjectSymbol;
-    let file = object::File::parse(bytes).ok()?;
-    file.symbols()
-        .find(|s| s.name() == Ok("_SEGGER_RTT") && !s.is_undefined())
-        .map(|s| s.address())
-}
-
-/// The symbol an image declares its board revision with (its AMiRo-BLT device id, a `u32`).
-pub const DEVICE_ID_SYMBOL: &str = "AMIRO_DEVICE_ID";
-
-/// The device id an image declares in [`DEVICE_ID_SYMBOL`], read from its section data.
-pub fn declared_device_id(file: &object::File<'_>) -> Option<u32> {
-    let symbol = file
-        .symbols()
-        .find(|s| s.name() == Ok(DEVICE_ID_SYMBOL) && !s.is_undefined())?;
-    let section = file.section_by_index(symbol.section_index()?).ok()?;
-    let data = section.data().ok()?;
-    let offset = usize::try_from(symbol.address().checked_sub(section.address())?).ok()?;
-    let bytes: [u8; 4] = data.get(offset..offset + 4)?.try_into().ok()?;
-    Some(u32::from_le_bytes(bytes))
-}
-
-/// The device id the ELF at `path` declares (see [`declared_device_id`]).
-pub fn device_id_of(path: &Path) -> Result<Option<u32>> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let file =
-        object::File::parse(&*bytes).with_context(|| format!("parsing {}", path.display()))?;
-    Ok(declared_device_id(&file))
-}
+// What a probe and the revision check read of an image: in the machine-code crate.
+pub use machine_code::elf::{
+    declared_device_id, device_id_of, load_segments, rtt_control_block, DEVICE_ID_SYMBOL,
+};
 
 /// Prints the size table.
 pub fn print_table(reports: &[SizeReport]) {

@@ -12,20 +12,19 @@ mod analyze;
 mod bench;
 mod boards;
 mod bounds;
-mod callgraph;
 mod campaign;
 mod elf;
 mod flash;
 mod interop;
 mod layers;
 mod levels_check;
+mod machine;
 mod probe;
 mod qemu;
 mod revision;
 mod robot;
 mod scenarios;
 mod smoke;
-mod stack;
 
 use boards::{Board, BOARDS};
 
@@ -121,6 +120,10 @@ enum Cmd {
     },
     /// The response-time report: worst-case response times of the board tasks and the CAN bus.
     Analyze(analyze::AnalyzeArgs),
+    /// Execution-time bounds from the machine code: every task of the boards' built images, or one
+    /// function of any ELF, in cycles on its chip (docs/analysis.md, "Execution-time bounds from the
+    /// machine code").
+    Wcet(machine::WcetArgs),
     /// Measured timing against the analysis: per task jobs, execution and response times against
     /// the analysed WCRT, per topic jitter and latency to the queue and the bus; from a capture of
     /// the trace channel, a QEMU run, or QEMU outputs (docs/bench.md).
@@ -176,8 +179,8 @@ fn run(cmd: Cmd) -> Result<bool> {
                 println!("{}", serde_json::to_string_pretty(&reports)?);
             } else {
                 elf::print_table(&reports);
-                callgraph::check_images(&reports)?;
-                stack::check_images(&root, &reports)?;
+                machine::check_panics(&reports)?;
+                machine::check_stacks(&root, &reports)?;
             }
             Ok(true)
         }
@@ -295,6 +298,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             );
             Ok(stats.damaged == 0)
         }
+        Cmd::Wcet(args) => machine::wcet(&root, &args),
         Cmd::Bench(args) => bench::run(&root, &args),
         Cmd::Timeline(args) => bench::timeline::run(&root, &args).map(|()| true),
         Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),
@@ -319,7 +323,7 @@ pub(crate) fn workspace_root() -> PathBuf {
         .unwrap_or_default()
 }
 
-fn select_boards(names: &[String]) -> Result<Vec<&'static Board>> {
+pub(crate) fn select_boards(names: &[String]) -> Result<Vec<&'static Board>> {
     if names.is_empty() {
         return Ok(BOARDS.iter().collect());
     }
@@ -571,8 +575,8 @@ fn test(root: &Path) -> Result<()> {
     elf::print_table(&reports);
     let over = elf::over_budget(&reports);
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
-    callgraph::check_images(&reports)?;
-    stack::check_images(root, &reports)?;
+    machine::check_panics(&reports)?;
+    machine::check_stacks(root, &reports)?;
     run_scenarios(root, &every)?;
     // The whole robot on one bus (issue 23), with its bus report against the analysis.
     robot::scenarios::run_all(root)?;

@@ -32,7 +32,6 @@ use anyhow::{bail, ensure, Context, Result};
 use object::{Object, ObjectSymbol};
 
 mod gdb;
-mod waits;
 
 use crate::boards::Board;
 use crate::qemu::ICOUNT_SHIFT;
@@ -895,7 +894,7 @@ pub fn run(root: &Path, builds: &[crate::revision::Build], built: bool) -> Resul
         let elf = crate::revision::kept_elf(root, build, false);
         let name = format!("{} {}", board.name, build.revision.name);
         // Every wait on the boot path and after it bounded: the machine code says so.
-        let found = waits::scan_elf(&elf)?;
+        let found = machine_code::waits::scan_elf(&elf)?;
         let (known, new): (Vec<_>, Vec<_>) = found.iter().partition(|w| w.known().is_some());
         println!(
             "waits {}: {} unbounded-looking poll loop(s), {} with a stated bound",

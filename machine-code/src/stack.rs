@@ -3,7 +3,7 @@
 //! Per function, its frame is every instruction that moves the stack pointer down (`PUSH`, `SUB SP`, `VPUSH`, a
 //! pre-indexed store to `SP`), summed over the whole body, so a frame set up on several paths is counted on each: an
 //! upper bound. A function's depth is its frame plus the deepest of its callees (direct calls and tail calls, from
-//! [`callgraph`](crate::callgraph)); a call through a register may reach any function whose address the image stores
+//! [`Image::callees`]); a call through a register may reach any function whose address the image stores
 //! outside its vector table (waker vtables, function pointers), so it counts the deepest of those. Recursion has no
 //! bound and is an error.
 //!
@@ -13,31 +13,16 @@
 //! stack at once: the bound adds the `levels` deepest handlers of the vector table, each with its exception frame
 //! (the basic frame, or the extended one with the FPU's registers). That is sound without knowing which handler has
 //! which priority, and loose by as much as the deepest handlers share a level.
-use anyhow::{bail, ensure, Context, Result};
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::callgraph::Image;
+use crate::decode::{Insn, Opcode, Operand, SP};
+use crate::{Error, Image};
 
 /// Bytes the Cortex-M pushes on exception entry: the basic frame (r0-r3, r12, lr, pc, xPSR) and, with the FPU
 /// active, the extended frame (s0-s15, FPSCR and a reserved word besides), plus the alignment word the core may add.
 const BASIC_FRAME: u64 = 32 + 4;
 const EXTENDED_FRAME: u64 = 104 + 4;
-
-/// `ThumbExpandImm` of a 12-bit modified immediate (the `SUB.W SP, SP, #const` encoding).
-fn thumb_expand_imm(imm12: u32) -> u32 {
-    let imm8 = imm12 & 0xff;
-    if imm12 >> 10 == 0 {
-        match (imm12 >> 8) & 0b11 {
-            0b00 => imm8,
-            0b01 => (imm8 << 16) | imm8,
-            0b10 => (imm8 << 24) | (imm8 << 8),
-            _ => (imm8 << 24) | (imm8 << 16) | (imm8 << 8) | imm8,
-        }
-    } else {
-        (0x80 | (imm12 & 0x7f)).rotate_right(imm12 >> 7)
-    }
-}
 
 /// What one function's code does to the stack: the bytes its instructions move the stack pointer down (summed over
 /// the body), and how many calls or tail calls go through a register.
@@ -49,54 +34,53 @@ pub struct FrameFacts {
     pub indirect: usize,
 }
 
-/// Decodes `code` (Thumb-2) for its stack use and its calls through a register.
-pub fn frame_facts(code: &[u8]) -> FrameFacts {
-    let half = |i: usize| -> Option<u32> {
-        Some(u32::from(u16::from_le_bytes([
-            *code.get(i)?,
-            *code.get(i + 1)?,
-        ])))
-    };
+/// What `insns` do to the stack and how many of them call or jump through a register.
+pub fn frame_facts(insns: &[Insn]) -> FrameFacts {
     let mut facts = FrameFacts::default();
-    let mut i = 0;
-    while let Some(hw1) = half(i) {
-        if !matches!(hw1 >> 11, 0b11101..=0b11111) {
-            if hw1 & 0xfe00 == 0xb400 {
-                // PUSH {registers[, LR]}.
-                facts.frame += 4 * u64::from((hw1 & 0x1ff).count_ones());
-            } else if hw1 & 0xff80 == 0xb080 {
-                // SUB SP, SP, #imm7 × 4.
-                facts.frame += 4 * u64::from(hw1 & 0x7f);
-            } else if hw1 & 0xff87 == 0x4780 {
-                // BLX Rm.
-                facts.indirect += 1;
-            } else if hw1 & 0xff87 == 0x4700 && (hw1 >> 3) & 0xf != 14 {
-                // BX Rm, Rm not LR: a jump to a computed address, a tail call through a register.
-                facts.indirect += 1;
+    for insn in insns {
+        let ops = &insn.inst.operands;
+        match insn.inst.opcode {
+            // PUSH {registers} (16- and 32-bit; STMDB SP! decodes as PUSH).
+            Opcode::PUSH => {
+                let words = match ops[0] {
+                    Operand::RegList(list) => list.count_ones(),
+                    _ => 1,
+                };
+                facts.frame += 4 * u64::from(words);
             }
-            i += 2;
-            continue;
+            Opcode::STM(false, true, _, _) if insn.memory_base_wback() == Some(SP) => {
+                facts.frame += 4 * u64::from(insn.register_list().unwrap_or(0).count_ones());
+            }
+            // SUB SP, SP, #imm (SUB, SUB.W, SUBW).
+            Opcode::SUB if insn.registers().first() == Some(&SP) => {
+                if let Some(imm) = insn.immediate() {
+                    facts.frame += u64::from(imm);
+                }
+            }
+            // STR Rt, [SP, #-imm]! (a single register's PUSH).
+            Opcode::STR | Opcode::STRB | Opcode::STRH | Opcode::STRD => {
+                if let Some(Operand::RegDerefPreindexOffset(base, offset, false, true)) = ops
+                    .iter()
+                    .find(|o| matches!(o, Operand::RegDerefPreindexOffset(..)))
+                {
+                    if base.number() == SP {
+                        facts.frame += u64::from(*offset);
+                    }
+                }
+            }
+            _ => {}
         }
-        let Some(hw2) = half(i + 2) else { break };
-        if hw1 == 0xe92d {
-            // PUSH.W (STMDB SP!, {registers}).
-            facts.frame += 4 * u64::from((hw2 & 0x5fff).count_ones());
-        } else if hw1 == 0xf84d && hw2 & 0x0f00 == 0x0d00 {
-            // STR.W Rt, [SP, #-imm8]! (a single register's PUSH).
-            facts.frame += u64::from(hw2 & 0xff);
-        } else if hw1 & 0xfbef == 0xf1ad && hw2 & 0x8f00 == 0x0d00 {
-            // SUB.W SP, SP, #const.
-            let imm12 = ((hw1 >> 10) & 1) << 11 | ((hw2 >> 12) & 0b111) << 8 | (hw2 & 0xff);
-            facts.frame += u64::from(thumb_expand_imm(imm12));
-        } else if hw1 & 0xfbff == 0xf2ad && hw2 & 0x8f00 == 0x0d00 {
-            // SUBW SP, SP, #imm12.
-            let imm12 = ((hw1 >> 10) & 1) << 11 | ((hw2 >> 12) & 0b111) << 8 | (hw2 & 0xff);
-            facts.frame += u64::from(imm12);
-        } else if hw1 & 0xffbf == 0xed2d && hw2 & 0x0e00 == 0x0a00 {
-            // VPUSH {s or d registers}: imm8 words.
-            facts.frame += 4 * u64::from(hw2 & 0xff);
+        // VPUSH {s or d registers}: a store to coprocessor 10 or 11 through SP with writeback, its
+        // immediate the words pushed.
+        if let Some(words) = insn.vpush_words() {
+            facts.frame += 4 * u64::from(words);
         }
-        i += 4;
+        match insn.flow() {
+            crate::decode::Flow::IndirectCall(_) | crate::decode::Flow::IndirectJump => {
+                facts.indirect += 1
+            }
+            _ => {}
+        }
     }
     facts
 }
@@ -124,17 +108,17 @@ struct Depths<'a> {
 }
 
 impl Depths<'_> {
-    fn of(&mut self, at: u64) -> Result<Depth> {
+    fn of(&mut self, at: u64) -> Result<Depth, Error> {
         if let Some(known) = self.known.get(&at) {
             return Ok(known.clone());
         }
         if self.open.contains(&at) {
             let cycle: Vec<String> = self.open.iter().map(|&a| self.image.name(a)).collect();
-            bail!(
+            return Err(Error::Other(format!(
                 "recursion through {} → {}: the stack has no static bound",
                 cycle.join(" → "),
                 self.image.name(at)
-            );
+            )));
         }
         let Some(f) = self.image.functions.get(&at) else {
             return Ok(Depth {
@@ -144,12 +128,12 @@ impl Depths<'_> {
         };
         self.open.push(at);
         let skipped_before = self.skipped;
-        let facts = frame_facts(&f.code);
+        let facts = frame_facts(f.instructions()?);
         let mut deepest = Depth {
             bytes: 0,
             chain: Vec::new(),
         };
-        for callee in self.image.callees(f) {
+        for callee in self.image.callees(f)? {
             let d = self.of(callee)?;
             if d.bytes > deepest.bytes || deepest.chain.is_empty() {
                 deepest = d;
@@ -179,7 +163,7 @@ impl Depths<'_> {
     /// vtable, calls the task's pend function through a register, which the conservative target set would
     /// otherwise turn into a cycle). Worked out once, from the first chain that needs it, so it is not cached when a
     /// target was left out.
-    fn through_register(&mut self) -> Result<Depth> {
+    fn through_register(&mut self) -> Result<Depth, Error> {
         if let Some(d) = &self.indirect {
             return Ok(d.clone());
         }
@@ -221,13 +205,17 @@ pub struct StackBound {
 
 /// The stack bound of `elf` with at most `levels` handlers nested (the number of distinct exception priorities the
 /// image can use, the fault handlers' included), `fpu` for the extended exception frame.
-pub fn bound(elf: &Path, levels: usize, fpu: bool) -> Result<StackBound> {
-    let image = Image::read(elf)?;
+pub fn bound(elf: &Path, levels: usize, fpu: bool) -> Result<StackBound, Error> {
+    bound_in(&Image::read(elf)?, levels, fpu)
+}
+
+/// [`bound`] of an image already read.
+pub fn bound_in(image: &Image, levels: usize, fpu: bool) -> Result<StackBound, Error> {
     let Some(&(_, reset)) = image.vectors.iter().find(|(i, _)| *i == 1) else {
-        bail!("{}: no reset vector", elf.display());
+        return Err(Error::Other("no reset vector".into()));
     };
     let mut depths = Depths {
-        image: &image,
+        image,
         known: BTreeMap::new(),
         indirect: None,
         open: Vec::new(),
@@ -260,62 +248,12 @@ pub fn bound(elf: &Path, levels: usize, fpu: bool) -> Result<StackBound> {
 }
 
 /// Names of a chain's functions, for a report.
-pub fn chain_names(elf: &Path, chain: &[u64]) -> Result<Vec<String>> {
-    let image = Image::read(elf)?;
-    Ok(chain.iter().map(|&a| image.name(a)).collect())
-}
-
-/// Every image's static stack bound, and the check that its static RAM and that bound fit the chip's RAM:
-/// a stack that cannot overflow into the statics, whatever QEMU's painted stack happened to see.
-pub fn check_images(root: &Path, reports: &[crate::elf::SizeReport]) -> Result<()> {
-    let mut failures = Vec::new();
-    for r in reports {
-        let source = std::fs::read_to_string(root.join(&r.board).join("src").join("main.rs"))
-            .with_context(|| format!("{}'s app source", r.board))?;
-        let app = schedule_analysis::rtic_source::parse_app(&source)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", r.board))?;
-        let mut priorities: Vec<u8> = app
-            .tasks
-            .iter()
-            .map(|t| t.priority)
-            .filter(|&p| p > 0)
-            .collect();
-        priorities.sort_unstable();
-        priorities.dedup();
-        // Each distinct task priority, the monotonic's timer interrupt, HardFault and NMI.
-        let levels = priorities.len() + 3;
-        let board =
-            crate::boards::by_name(&r.board).with_context(|| format!("no board {}", r.board))?;
-        let found = bound(&r.elf, levels, board.hard_float)?;
-        let total = r.ram_used + found.bytes;
-        let deepest = chain_names(&r.elf, &found.thread.chain)?;
-        println!(
-            "{} {}: stack ≤ {} B (thread mode {} B, {} nested handlers of {} levels with {}-byte exception frames); static RAM {} B + stack = {} B of {} B; thread mode's deepest: {}",
-            r.board,
-            r.revision,
-            found.bytes,
-            found.thread.bytes,
-            found.handlers.len(),
-            levels,
-            found.exception_frame,
-            r.ram_used,
-            total,
-            r.ram_available,
-            deepest.iter().map(|n| short(n)).collect::<Vec<_>>().join(" → ")
-        );
-        if total > r.ram_available {
-            failures.push(format!(
-                "{} {}: static RAM {} B and a stack bound of {} B exceed the chip's {} B",
-                r.board, r.revision, r.ram_used, found.bytes, r.ram_available
-            ));
-        }
-    }
-    ensure!(failures.is_empty(), "{}", failures.join("\n"));
-    Ok(())
+pub fn chain_names(image: &Image, chain: &[u64]) -> Vec<String> {
+    chain.iter().map(|&a| image.name(a)).collect()
 }
 
 /// A demangled name without its hash and generic arguments, for a one-line chain.
-fn short(name: &str) -> String {
+pub fn short(name: &str) -> String {
     let mut out = String::new();
     let mut depth = 0;
     for c in name.chars() {
@@ -332,7 +270,8 @@ fn short(name: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::callgraph::thumb;
+    use crate::decode::decode;
+    use crate::thumb;
 
     #[test]
     fn counts_what_moves_the_stack_pointer_down() {
@@ -350,20 +289,13 @@ mod tests {
             0x4770, // bx lr: a return
             0x4718, // bx r3
         ]);
+        let insns = decode("f", 0x1000, &code, &[]).unwrap();
         assert_eq!(
-            frame_facts(&code),
+            frame_facts(&insns),
             FrameFacts {
                 frame: 20 + 16 + 20 + 1024 + 1036 + 4 + 64,
                 indirect: 2
             }
         );
-    }
-
-    #[test]
-    fn modified_immediates() {
-        assert_eq!(thumb_expand_imm(0x0ff), 0xff);
-        assert_eq!(thumb_expand_imm(0x1ab), 0x00ab_00ab);
-        assert_eq!(thumb_expand_imm(0xe80), 1024); // 0x80 rotated right by 29
-        assert_eq!(thumb_expand_imm(0x4ff), 0x7f80_0000);
     }
 }

@@ -1,0 +1,256 @@
+//! A firmware image read once: its named functions with their decoded code, the vector table, the
+//! functions whose address is stored, the flash contents and the DWARF line table.
+use std::borrow::Cow;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+use std::rc::Rc;
+
+use object::{Object, ObjectSection, ObjectSymbol, SymbolKind};
+
+use crate::decode::{self, Insn};
+use crate::Error;
+
+/// The DWARF reader the line table is read through.
+type Reader = gimli::EndianRcSlice<gimli::RunTimeEndian>;
+
+/// One named function of the image.
+#[derive(Debug, Clone)]
+pub struct Function {
+    /// Its address (the Thumb bit cleared) and size in bytes.
+    pub start: u64,
+    pub size: u64,
+    /// Its demangled name without the hash (`{:#}` of `rustc_demangle`).
+    pub name: String,
+    /// Its symbol as the linker wrote it.
+    pub symbol: String,
+    /// Its machine code, data inside it (literal pools, jump tables) zeroed.
+    pub code: Vec<u8>,
+    /// The stretches of data inside it (from the `$d` mapping symbols), as address ranges.
+    pub data: Vec<(u64, u64)>,
+    /// Its instructions, or why they could not be decoded.
+    pub insns: Result<Vec<Insn>, Error>,
+}
+
+impl Function {
+    /// Its decoded instructions, or the decoder's error.
+    pub fn instructions(&self) -> Result<&[Insn], Error> {
+        self.insns.as_deref().map_err(Clone::clone)
+    }
+
+    /// Whether `address` lies inside it.
+    pub fn contains(&self, address: u64) -> bool {
+        (self.start..self.start + self.size).contains(&address)
+    }
+}
+
+/// A firmware image's functions, and what the analyses need to know about them.
+pub struct Image {
+    /// Every named function, by start address.
+    pub functions: BTreeMap<u64, Function>,
+    /// The vector table's entries (index, handler address, Thumb bit cleared), the initial stack
+    /// pointer left out.
+    pub vectors: Vec<(usize, u64)>,
+    /// Functions whose address is stored anywhere outside the vector table (literal pools, vtables,
+    /// tables): what a call through a register may reach.
+    pub address_taken: BTreeSet<u64>,
+    /// The contents of the allocated sections with file data (address, bytes): flash, and the
+    /// initial values of RAM.
+    sections: Vec<(u64, Vec<u8>)>,
+    /// The DWARF line table, when the image has one.
+    lines: Option<addr2line::Context<Reader>>,
+}
+
+/// Whether a section is loaded on the chip (the debug sections are not).
+fn allocated(section: &object::Section<'_, '_>) -> bool {
+    match section.flags() {
+        object::SectionFlags::Elf { sh_flags } => sh_flags & u64::from(object::elf::SHF_ALLOC) != 0,
+        _ => false,
+    }
+}
+
+impl Image {
+    /// Reads and parses the ELF at `path`.
+    pub fn read(path: &Path) -> Result<Image, Error> {
+        let bytes = std::fs::read(path).map_err(|e| Error::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        Image::parse(&bytes)
+    }
+
+    /// Parses an ELF image held in memory.
+    pub fn parse(bytes: &[u8]) -> Result<Image, Error> {
+        let file = object::File::parse(bytes).map_err(|e| Error::Malformed(e.to_string()))?;
+        if file.architecture() != object::Architecture::Arm {
+            return Err(Error::NotArm(format!("{:?}", file.architecture())));
+        }
+        let sections: Vec<(u64, Vec<u8>)> = file
+            .sections()
+            .filter(|s| allocated(s))
+            .filter_map(|s| Some((s.address(), s.data().ok()?.to_vec())))
+            .filter(|(_, d)| !d.is_empty())
+            .collect();
+        // Literal pools and tables inside functions (the ARM ELF mapping symbols: `$d` starts data,
+        // `$t` code again).
+        let mut marks: Vec<(u64, bool)> = file
+            .symbols()
+            .filter_map(|symbol| {
+                let name = symbol.name().ok()?;
+                let data = name == "$d" || name.starts_with("$d.");
+                let code = name == "$t" || name.starts_with("$t.");
+                (data || code).then_some((symbol.address(), data))
+            })
+            .collect();
+        marks.sort_unstable();
+        let data_ranges: Vec<(u64, u64)> = marks
+            .iter()
+            .enumerate()
+            .filter(|(_, (_, data))| *data)
+            .map(|(k, &(at, _))| (at, marks.get(k + 1).map_or(u64::MAX, |&(next, _)| next)))
+            .collect();
+        let mut functions = BTreeMap::new();
+        for symbol in file.symbols() {
+            if symbol.kind() != SymbolKind::Text || symbol.size() == 0 {
+                continue;
+            }
+            let Ok(raw) = symbol.name() else { continue };
+            let start = symbol.address() & !1;
+            if functions.contains_key(&start) {
+                continue;
+            }
+            let size = symbol.size();
+            let mut code = read_from(&sections, start, size).unwrap_or_default();
+            let data: Vec<(u64, u64)> = data_ranges
+                .iter()
+                .map(|&(from, to)| (from.max(start), to.min(start + size)))
+                .filter(|(from, to)| from < to)
+                .collect();
+            for &(from, to) in &data {
+                let (a, b) = ((from - start) as usize, (to - start) as usize);
+                if let Some(bytes) = code.get_mut(a..b) {
+                    bytes.fill(0);
+                }
+            }
+            let name = format!("{:#}", rustc_demangle::demangle(raw));
+            let insns = if code.len() as u64 == size {
+                decode::decode(&name, start, &code, &data)
+            } else {
+                Err(Error::Other(format!(
+                    "{name}: its code at {start:#010x} is not in the image's sections"
+                )))
+            };
+            functions.insert(
+                start,
+                Function {
+                    start,
+                    size,
+                    name,
+                    symbol: raw.to_string(),
+                    code,
+                    data,
+                    insns,
+                },
+            );
+        }
+        let mut vectors = Vec::new();
+        let mut address_taken = BTreeSet::new();
+        for section in file.sections().filter(|s| allocated(s)) {
+            let Ok(data) = section.data() else { continue };
+            let is_vectors = section.name().is_ok_and(|n| n == ".vector_table");
+            for (i, word) in data.chunks_exact(4).enumerate() {
+                let value = u64::from(u32::from_le_bytes([word[0], word[1], word[2], word[3]]));
+                if value & 1 == 0 || !functions.contains_key(&(value & !1)) {
+                    continue;
+                }
+                if is_vectors {
+                    if i > 0 {
+                        vectors.push((i, value & !1));
+                    }
+                } else {
+                    address_taken.insert(value & !1);
+                }
+            }
+        }
+        Ok(Image {
+            functions,
+            vectors,
+            address_taken,
+            sections,
+            lines: line_table(&file),
+        })
+    }
+
+    /// The function named `name`: its demangled name without hash, or its symbol. The first of
+    /// several of the same name (monomorphs differing in their hash).
+    pub fn function_named(&self, name: &str) -> Result<&Function, Error> {
+        self.functions
+            .values()
+            .find(|f| f.name == name || f.symbol == name)
+            .ok_or_else(|| Error::MissingSymbol(name.to_string()))
+    }
+
+    /// The function starting at `address`.
+    pub fn function_at(&self, address: u64) -> Option<&Function> {
+        self.functions.get(&address)
+    }
+
+    /// A function's name, or its address when it has none.
+    pub fn name(&self, at: u64) -> String {
+        self.functions
+            .get(&at)
+            .map_or_else(|| format!("{at:#x}"), |f| f.name.clone())
+    }
+
+    /// The functions `f` calls or tail-calls directly (the first instruction of another function).
+    pub fn callees(&self, f: &Function) -> Result<BTreeSet<u64>, Error> {
+        Ok(f.instructions()?
+            .iter()
+            .filter_map(|i| i.direct_target())
+            .filter(|t| !f.contains(*t) && self.functions.contains_key(t))
+            .collect())
+    }
+
+    /// A 32-bit word of the image's contents at `address`, if a loaded section holds it.
+    pub fn word(&self, address: u64) -> Option<u32> {
+        let bytes = read_from(&self.sections, address, 4)?;
+        Some(u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]))
+    }
+
+    /// `len` bytes of the image's contents at `address`, if one loaded section holds them.
+    pub fn bytes(&self, address: u64, len: u64) -> Option<Vec<u8>> {
+        read_from(&self.sections, address, len)
+    }
+
+    /// The source file and line of `address` (the line table's row: inlined code is named where it
+    /// was written), when the image has DWARF line information for it.
+    pub fn line(&self, address: u64) -> Option<(String, u32)> {
+        let location = self.lines.as_ref()?.find_location(address).ok()??;
+        Some((location.file?.to_string(), location.line?))
+    }
+}
+
+fn read_from(sections: &[(u64, Vec<u8>)], address: u64, len: u64) -> Option<Vec<u8>> {
+    sections.iter().find_map(|(start, data)| {
+        let from = usize::try_from(address.checked_sub(*start)?).ok()?;
+        let to = from.checked_add(usize::try_from(len).ok()?)?;
+        data.get(from..to).map(<[u8]>::to_vec)
+    })
+}
+
+fn line_table(file: &object::File<'_>) -> Option<addr2line::Context<Reader>> {
+    file.section_by_name(".debug_line")?;
+    let endian = if file.is_little_endian() {
+        gimli::RunTimeEndian::Little
+    } else {
+        gimli::RunTimeEndian::Big
+    };
+    let load = |id: gimli::SectionId| -> Result<Reader, gimli::Error> {
+        let data = file
+            .section_by_name(id.name())
+            .and_then(|s| s.uncompressed_data().ok())
+            .unwrap_or(Cow::Borrowed(&[]));
+        Ok(gimli::EndianRcSlice::new(Rc::from(&*data), endian))
+    };
+    let dwarf = gimli::Dwarf::load(load).ok()?;
+    addr2line::Context::from_dwarf(dwarf).ok()
+}

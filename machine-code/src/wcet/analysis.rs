@@ -1,0 +1,474 @@
+//! The analysis of one image: each function's graph, loops, costs and longest paths, worked out
+//! once and composed bottom up ([`super`] states the method).
+use std::collections::{BTreeMap, BTreeSet};
+
+use super::bounds::BoundsFile;
+use super::cfg::{self, Call, Cfg};
+use super::chip::Chip;
+use super::counted;
+use super::path::{self, Cost, LoopCount, LoopNodes, Node, PathError};
+use super::LoopInfo;
+use crate::callgraph::is_panic;
+use crate::decode::Insn;
+use crate::image::Function;
+use crate::{Error, Image};
+
+/// A function's longest paths: by time and by instruction count, with the loops on the way.
+#[derive(Debug, Clone)]
+pub(super) struct Summary {
+    pub(super) time: Cost,
+    pub(super) count: Cost,
+    /// The longest iteration of an exclusive-access retry loop this function or a callee may be
+    /// in (by time, and by instruction count): what one preemption can add.
+    pub(super) retry_time: Cost,
+    pub(super) retry_count: Cost,
+    pub(super) loops: Vec<LoopInfo>,
+}
+
+/// The analysis of one image: function summaries worked out once each.
+pub(super) struct Analysis<'a> {
+    image: &'a Image,
+    chip: Chip,
+    bounds: &'a BoundsFile,
+    known: BTreeMap<u64, Result<Summary, String>>,
+    returns: BTreeMap<u64, bool>,
+    open: Vec<u64>,
+}
+
+/// Where an address is in the source, for messages and keys.
+fn place(image: &Image, at: u64) -> (Option<String>, Option<u32>, String) {
+    match image.line(at) {
+        Some((file, line)) => {
+            let text = format!("{file}:{line}");
+            (Some(file), Some(line), text)
+        }
+        None => (None, None, format!("{at:#010x} (no line information)")),
+    }
+}
+
+impl<'a> Analysis<'a> {
+    pub(super) fn new(image: &'a Image, chip: Chip, bounds: &'a BoundsFile) -> Analysis<'a> {
+        Analysis {
+            image,
+            chip,
+            bounds,
+            known: BTreeMap::new(),
+            returns: BTreeMap::new(),
+            open: Vec::new(),
+        }
+    }
+
+    /// Whether the function at `at` can return: a return or a tail call of a function that can
+    /// is reachable in its graph. A panic cannot; a function being worked out is taken to.
+    fn can_return(&mut self, at: u64) -> bool {
+        if let Some(&known) = self.returns.get(&at) {
+            return known;
+        }
+        let Some(f) = self.image.function_at(at) else {
+            return true;
+        };
+        if is_panic(&f.name) {
+            self.returns.insert(at, false);
+            return false;
+        }
+        self.returns.insert(at, true);
+        let image = self.image;
+        let read = |address: u64, size: u64| read_entry(image, address, size);
+        let Ok(graph) = Cfg::build(f, &read, &|_| true) else {
+            return true;
+        };
+        let mut seen = BTreeSet::from([0usize]);
+        let mut work = vec![0usize];
+        let mut returns = false;
+        while let Some(b) = work.pop() {
+            let block = &graph.blocks[b];
+            if block.exit {
+                let tail_ok = match block.call {
+                    Some(Call::Direct { target, tail: true }) if target != at => {
+                        self.can_return(target)
+                    }
+                    _ => true,
+                };
+                if tail_ok {
+                    returns = true;
+                    break;
+                }
+            }
+            for e in &block.succs {
+                if seen.insert(e.to) {
+                    work.push(e.to);
+                }
+            }
+        }
+        self.returns.insert(at, returns);
+        returns
+    }
+
+    /// The summary of the function at `at`: `Err(Error)` for an image that cannot be analysed,
+    /// `Ok(Err(reason))` for a declined bound.
+    pub(super) fn summary(&mut self, at: u64) -> Result<Result<Summary, String>, Error> {
+        if let Some(known) = self.known.get(&at) {
+            return Ok(known.clone());
+        }
+        if self.open.contains(&at) {
+            let chain: Vec<String> = self.open.iter().map(|&a| self.image.name(a)).collect();
+            return Ok(Err(format!(
+                "recursion through {} → {}",
+                chain.join(" → "),
+                self.image.name(at)
+            )));
+        }
+        let image = self.image;
+        let f = image.function_at(at).ok_or_else(|| {
+            Error::Other(format!("a call to {at:#010x}, where no function starts"))
+        })?;
+        self.open.push(at);
+        let outcome = self.work_out(f);
+        self.open.pop();
+        let outcome = outcome?;
+        self.known.insert(at, outcome.clone());
+        Ok(outcome)
+    }
+
+    fn work_out(&mut self, f: &'a Function) -> Result<Result<Summary, String>, Error> {
+        let insns = f.instructions()?;
+        let image = self.image;
+        let read = |address: u64, size: u64| read_entry(image, address, size);
+        // Which callees return (worked out before the graph, which leaves out what follows a call
+        // that does not).
+        let callees: Vec<u64> = insns
+            .iter()
+            .filter_map(|i| match i.flow() {
+                crate::decode::Flow::Call(t) => Some(t),
+                _ => None,
+            })
+            .collect();
+        let mut returning = BTreeMap::new();
+        for t in callees {
+            let r = self.can_return(t);
+            returning.insert(t, r);
+        }
+        let graph = Cfg::build(f, &read, &|t| returning.get(&t).copied().unwrap_or(true))?;
+        let chip = self.chip;
+        let mut loops_info = Vec::new();
+        // Loops and their counts.
+        let natural = match graph.loops() {
+            Ok(l) => l,
+            Err(b) => {
+                let (_, _, text) = place(image, insns[graph.blocks[b].first].addr);
+                return Ok(Err(format!(
+                    "irreducible control flow in {} at {text}: no natural loop to bound",
+                    f.name
+                )));
+            }
+        };
+        let mut loop_nodes = Vec::new();
+        let (mut retry_time, mut retry_count) = (Cost::default(), Cost::default());
+        for l in &natural {
+            let leaves = l.body.iter().any(|&b| {
+                let blk = &graph.blocks[b];
+                blk.exit || blk.succs.iter().any(|e| !l.body.contains(&e.to))
+            });
+            let (file, line, text) = loop_place(image, insns, &graph, l);
+            let count = if !leaves {
+                LoopCount::Endless
+            } else if counted::exclusive_retry(insns, &graph, l) {
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: 1,
+                    source: "exclusive retry: one pass, one more per preemption inside it \
+                             (exception entry and return clear the local monitor)"
+                        .to_string(),
+                });
+                LoopCount::Retry
+            } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: n,
+                    source: how,
+                });
+                LoopCount::Passes(n)
+            } else if let Some(stated) = file
+                .as_deref()
+                .zip(line)
+                .and_then(|(file, line)| self.bounds.loop_bound(&f.name, file, line))
+            {
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: stated.bound,
+                    source: format!("bounds file: {}", stated.reason),
+                });
+                LoopCount::Passes(stated.bound)
+            } else if let Some(wait) = file
+                .as_deref()
+                .zip(line)
+                .and_then(|(file, line)| self.bounds.wait(&f.name, file, line))
+            {
+                let ns = (wait.wait_us * 1000.0).ceil() as u64;
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: 1,
+                    source: format!("wait: {} µs ({})", wait.wait_us, wait.source),
+                });
+                LoopCount::Wait {
+                    ns,
+                    cycles: chip.ns_to_cycles(ns),
+                }
+            } else {
+                return Ok(Err(format!(
+                    "the loop in {} at {text} has no bound (not a counted loop, not in the bounds file)",
+                    f.name
+                )));
+            };
+            loop_nodes.push(LoopNodes {
+                header: l.header,
+                body: l.body.clone(),
+                count,
+            });
+        }
+        // Node costs: the block's instructions, and what it calls.
+        let mut time_nodes = Vec::with_capacity(graph.blocks.len());
+        let mut count_nodes = Vec::with_capacity(graph.blocks.len());
+        for block in &graph.blocks {
+            let own = self.block_cost(&insns[block.first..=block.last]);
+            let (mut time, mut count) = (own, own);
+            // What a tail call adds is paid only on the way out through it; a conditional one
+            // (`B<c>` out of the function) also pays its refill there.
+            let tail = matches!(
+                block.call,
+                Some(Call::Direct { tail: true, .. } | Call::Indirect { tail: true, .. })
+            );
+            let (mut exit_time, mut exit_count) = (Cost::default(), Cost::default());
+            if tail && insns[block.last].conditional {
+                exit_time.cycles += chip.taken_cycles();
+                exit_count.cycles += chip.taken_cycles();
+            }
+            let (time_ref, count_ref) = if tail {
+                (&mut exit_time, &mut exit_count)
+            } else {
+                (&mut time, &mut count)
+            };
+            let mut exit = block.exit;
+            match block.call {
+                // A call of a function that cannot return ends the path (the graph has no edge on
+                // from it); a tail call of one is no return either.
+                Some(Call::Direct { target, tail }) if !self.can_return(target) => exit &= !tail,
+                Some(Call::Direct { target, .. }) => match self.summary(target)? {
+                    Ok(s) => {
+                        *time_ref = time_ref.plus(s.time);
+                        *count_ref = count_ref.plus(s.count);
+                        loops_info.extend(s.loops);
+                    }
+                    Err(reason) => {
+                        return Ok(Err(if reason.starts_with("via ") {
+                            reason
+                        } else {
+                            format!("via {}: {reason}", image.name(target))
+                        }))
+                    }
+                },
+                Some(Call::Indirect { at, .. }) => {
+                    let (file, line, text) = place(image, at);
+                    let stated = file
+                        .as_deref()
+                        .zip(line)
+                        .and_then(|(file, line)| self.bounds.indirect(&f.name, file, line));
+                    let Some(stated) = stated else {
+                        return Ok(Err(format!(
+                            "the call through a register in {} at {text} has no stated targets",
+                            f.name
+                        )));
+                    };
+                    let (mut worst_time, mut worst_count) = (Cost::default(), Cost::default());
+                    // A name stands for every function of that name (monomorphs and closures
+                    // share theirs once the hash is gone).
+                    let mut targets = Vec::new();
+                    for name in &stated.targets {
+                        let before = targets.len();
+                        targets.extend(
+                            image
+                                .functions
+                                .values()
+                                .filter(|f| &f.name == name || &f.symbol == name)
+                                .map(|f| (name, f.start)),
+                        );
+                        if targets.len() == before {
+                            return Err(Error::Bounds(format!(
+                                "the indirect call at {text} names `{name}`, which is not in the image"
+                            )));
+                        }
+                    }
+                    for (name, start) in targets {
+                        match self.summary(start)? {
+                            Ok(s) => {
+                                if time_key(chip)(s.time) > time_key(chip)(worst_time) {
+                                    worst_time = s.time;
+                                }
+                                if time_key(chip)(s.retry_time) > time_key(chip)(retry_time) {
+                                    retry_time = s.retry_time;
+                                }
+                                if s.retry_count.instructions > retry_count.instructions {
+                                    retry_count = s.retry_count;
+                                }
+                                if s.count.instructions > worst_count.instructions {
+                                    worst_count = s.count;
+                                }
+                                loops_info.extend(s.loops);
+                            }
+                            Err(reason) => return Ok(Err(format!("via {name}: {reason}"))),
+                        }
+                    }
+                    *time_ref = time_ref.plus(worst_time);
+                    *count_ref = count_ref.plus(worst_count);
+                }
+                None => {}
+            }
+            let taken = Cost {
+                cycles: chip.taken_cycles(),
+                ..Cost::default()
+            };
+            let succs: Vec<(usize, Cost)> = block
+                .succs
+                .iter()
+                .map(|e| {
+                    (
+                        e.to,
+                        if e.taken && insns[block.last].conditional {
+                            taken
+                        } else {
+                            Cost::default()
+                        },
+                    )
+                })
+                .collect();
+            time_nodes.push(Node {
+                cost: time,
+                succs: succs.clone(),
+                exit,
+                exit_cost: exit_time,
+            });
+            count_nodes.push(Node {
+                cost: count,
+                succs,
+                exit,
+                exit_cost: exit_count,
+            });
+        }
+        let by_time = path::longest(time_nodes, &loop_nodes, &time_key(chip));
+        let by_count = path::longest(count_nodes, &loop_nodes, &|c: Cost| c.instructions);
+        let (time, count) = match (by_time, by_count) {
+            (Ok(t), Ok(c)) => {
+                if time_key(chip)(t.retry) > time_key(chip)(retry_time) {
+                    retry_time = t.retry;
+                }
+                if c.retry.instructions > retry_count.instructions {
+                    retry_count = c.retry;
+                }
+                (t.path, c.path)
+            }
+            (Err(PathError::NoExit), _) | (_, Err(PathError::NoExit)) => {
+                return Ok(Err(format!("{} never returns", f.name)))
+            }
+            (Err(PathError::Irreducible(b)), _) | (_, Err(PathError::Irreducible(b))) => {
+                let (_, _, text) = place(image, insns[graph.blocks[b].first].addr);
+                return Ok(Err(format!(
+                    "irreducible control flow in {} at {text}: no natural loop to bound",
+                    f.name
+                )));
+            }
+        };
+        let mut seen = BTreeSet::new();
+        loops_info.retain(|l| {
+            seen.insert((l.function.clone(), l.file.clone(), l.line, l.source.clone()))
+        });
+        Ok(Ok(Summary {
+            time,
+            count,
+            retry_time,
+            retry_count,
+            loops: loops_info,
+        }))
+    }
+
+    /// A straight run of instructions: each one's core and memory cycles, at least the cycles
+    /// fetching the flash lines it spans takes.
+    fn block_cost(&self, insns: &[Insn]) -> Cost {
+        let chip = self.chip;
+        let mut known = [None; 16];
+        let mut cycles = 0;
+        for insn in insns {
+            let base = insn.memory_base().and_then(|r| known[usize::from(r)]);
+            cycles += chip.core_cycles(insn) + chip.memory_cycles(insn, base);
+            crate::waits::step_constants(self.image, insn, &mut known);
+        }
+        let fetch = match (insns.first(), insns.last()) {
+            (Some(first), Some(last)) => chip.fetch_cycles(first.addr, last.next()),
+            _ => 0,
+        };
+        Cost {
+            cycles: cycles.max(fetch),
+            instructions: insns.len() as u64,
+            wait_ns: 0,
+        }
+    }
+}
+
+/// Where a loop is named: the first line of the project's own code (not the core library's) in it,
+/// from its header on; else the header's line; else its address.
+fn loop_place(
+    image: &Image,
+    insns: &[Insn],
+    graph: &Cfg,
+    l: &cfg::Loop,
+) -> (Option<String>, Option<u32>, String) {
+    let header = &graph.blocks[l.header];
+    let in_order = || {
+        std::iter::once(header)
+            .chain(
+                l.body
+                    .iter()
+                    .filter(|&&b| b != l.header)
+                    .map(|&b| &graph.blocks[b]),
+            )
+            .flat_map(|b| insns[b.first..=b.last].iter())
+    };
+    let lines: Vec<(u64, String)> = in_order()
+        .filter_map(|i| image.line(i.addr).map(|(file, _)| (i.addr, file)))
+        .collect();
+    match lines
+        .iter()
+        .find(|(_, file)| !is_library(file))
+        .or(lines.first())
+    {
+        Some((at, _)) => place(image, *at),
+        None => place(image, insns[header.first].addr),
+    }
+}
+
+/// Whether a source path is the Rust toolchain's own library (core, alloc, compiler-builtins).
+fn is_library(file: &str) -> bool {
+    file.contains("/rustlib/src/rust/library/") || file.starts_with("/rustc/")
+}
+
+/// The key the time path is longest by: cycles plus the stated waits as cycles.
+fn time_key(chip: Chip) -> impl Fn(Cost) -> u64 {
+    move |c: Cost| c.cycles + chip.ns_to_cycles(c.wait_ns)
+}
+
+/// A jump-table entry (1 or 2 bytes) of the image.
+fn read_entry(image: &Image, address: u64, size: u64) -> Option<u64> {
+    let bytes = image.bytes(address, size)?;
+    Some(match bytes[..] {
+        [b] => u64::from(b),
+        [lo, hi] => u64::from(u16::from_le_bytes([lo, hi])),
+        _ => return None,
+    })
+}

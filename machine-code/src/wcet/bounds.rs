@@ -1,0 +1,187 @@
+//! The bounds file: what the machine code cannot tell, stated with a reason. Keyed by the function
+//! (demangled name without hash, as the analysis names it) and the source file and line the DWARF
+//! line table gives for the loop or call — never an address, which changes with every build.
+//!
+//! ```json
+//! {
+//!   "loops": [{ "function": "…", "file": "src/tasks.rs", "line": 42, "bound": 8,
+//!               "reason": "the heapless::Vec holds at most 8 frames" }],
+//!   "waits": [{ "function": "…", "file": "src/i2c.rs", "line": 120, "wait_us": 25.0,
+//!               "source": "one I2C byte at 400 kHz: 9 bit times (UM10204 §3.1)" }],
+//!   "indirect": [{ "function": "…", "file": "src/waker.rs", "line": 7,
+//!                  "targets": ["…::wake"], "reason": "the only waker vtable in the image" }],
+//!   "tasks": [{ "name": "monotonic", "symbol": "TIM5", "handler": true,
+//!               "reason": "the TIM5 monotonic's compare interrupt (board.rs)" }]
+//! }
+//! ```
+//!
+//! `file` matches the end of the line table's path (`src/tasks.rs` matches
+//! `/work/amiro-firmware/src/tasks.rs`). A target of an indirect call stands for every function of
+//! that name.
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::Error;
+
+/// A loop's stated bound: the most times its header runs per entry.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoopBound {
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    pub bound: u64,
+    pub reason: String,
+}
+
+/// A wait on a peripheral: the loop polls for at most `wait_us`, the peripheral's stated
+/// worst-case latency (not the timeout: that is the fault path).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WaitBound {
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    pub wait_us: f64,
+    pub source: String,
+}
+
+/// The functions a call through a register at a place may reach.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IndirectTargets {
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    pub targets: Vec<String>,
+    pub reason: String,
+}
+
+/// A task the image's RTIC app does not declare as one (the monotonic's timer interrupt): its name,
+/// the function it runs, and whether that is an exception handler.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskSpec {
+    pub name: String,
+    pub symbol: String,
+    #[serde(default)]
+    pub handler: bool,
+    pub reason: String,
+}
+
+/// The stated bounds of one image (see the module documentation).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoundsFile {
+    #[serde(default)]
+    pub loops: Vec<LoopBound>,
+    #[serde(default)]
+    pub waits: Vec<WaitBound>,
+    #[serde(default)]
+    pub indirect: Vec<IndirectTargets>,
+    /// Tasks besides the app's own (for `cargo xtask wcet BOARD`).
+    #[serde(default)]
+    pub tasks: Vec<TaskSpec>,
+}
+
+/// Whether a line-table path is the stated `file`.
+fn same_file(path: &str, file: &str) -> bool {
+    let file = file.trim_start_matches("./");
+    path == file || path.ends_with(&format!("/{file}"))
+}
+
+impl BoundsFile {
+    /// Parses the JSON of a bounds file and checks every entry has a reason and a usable figure.
+    pub fn parse(json: &str) -> Result<BoundsFile, Error> {
+        let file: BoundsFile =
+            serde_json::from_str(json).map_err(|e| Error::Bounds(e.to_string()))?;
+        for l in &file.loops {
+            if l.bound == 0 || l.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the loop at {}:{} in {} needs a bound of at least 1 and a reason",
+                    l.file, l.line, l.function
+                )));
+            }
+        }
+        for w in &file.waits {
+            if !(w.wait_us.is_finite() && w.wait_us > 0.0) || w.source.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the wait at {}:{} in {} needs a positive wait_us and its source",
+                    w.file, w.line, w.function
+                )));
+            }
+        }
+        for i in &file.indirect {
+            if i.targets.is_empty() || i.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the indirect call at {}:{} in {} needs its targets and a reason",
+                    i.file, i.line, i.function
+                )));
+            }
+        }
+        Ok(file)
+    }
+
+    /// Reads and parses a bounds file.
+    pub fn read(path: &Path) -> Result<BoundsFile, Error> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        BoundsFile::parse(&text).map_err(|e| Error::Bounds(format!("{}: {e}", path.display())))
+    }
+
+    /// The stated bound of the loop at `file:line` in `function`.
+    pub fn loop_bound(&self, function: &str, file: &str, line: u32) -> Option<&LoopBound> {
+        self.loops
+            .iter()
+            .find(|l| l.function == function && l.line == line && same_file(file, &l.file))
+    }
+
+    /// The stated wait of the loop at `file:line` in `function`.
+    pub fn wait(&self, function: &str, file: &str, line: u32) -> Option<&WaitBound> {
+        self.waits
+            .iter()
+            .find(|w| w.function == function && w.line == line && same_file(file, &w.file))
+    }
+
+    /// The stated targets of the call through a register at `file:line` in `function`.
+    pub fn indirect(&self, function: &str, file: &str, line: u32) -> Option<&IndirectTargets> {
+        self.indirect
+            .iter()
+            .find(|i| i.function == function && i.line == line && same_file(file, &i.file))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn entries_need_a_reason_and_a_figure() {
+        let ok = r#"{"loops":[{"function":"f","file":"src/a.rs","line":3,"bound":8,"reason":"capacity 8"}]}"#;
+        let file = BoundsFile::parse(ok).unwrap();
+        assert_eq!(
+            file.loop_bound("f", "/work/x/src/a.rs", 3).map(|l| l.bound),
+            Some(8)
+        );
+        assert!(file.loop_bound("f", "/work/x/src/ba.rs", 3).is_none());
+        assert!(file.loop_bound("g", "/work/x/src/a.rs", 3).is_none());
+        let no_reason =
+            r#"{"loops":[{"function":"f","file":"a.rs","line":3,"bound":8,"reason":" "}]}"#;
+        assert!(matches!(
+            BoundsFile::parse(no_reason),
+            Err(Error::Bounds(_))
+        ));
+        let zero =
+            r#"{"waits":[{"function":"f","file":"a.rs","line":3,"wait_us":0,"source":"x"}]}"#;
+        assert!(matches!(BoundsFile::parse(zero), Err(Error::Bounds(_))));
+        let address = r#"{"loops":[{"address":134242304,"bound":8}]}"#;
+        assert!(matches!(BoundsFile::parse(address), Err(Error::Bounds(_))));
+        assert!(matches!(
+            BoundsFile::parse("not json"),
+            Err(Error::Bounds(_))
+        ));
+    }
+}

@@ -1,0 +1,380 @@
+//! A function's control-flow graph from its decoded instructions: basic blocks, their edges (taken
+//! or fallen through), calls and exits; dominators and natural loops.
+use std::collections::{BTreeMap, BTreeSet};
+
+use crate::decode::{Flow, Insn, Opcode, Operand};
+use crate::image::Function;
+use crate::Error;
+
+/// An edge to another block of the function.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Edge {
+    pub to: usize,
+    /// A taken branch (pays the pipeline refill), not a fall-through.
+    pub taken: bool,
+}
+
+/// What a block's last instruction calls.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Call {
+    /// `BL`, or a `B` out of the function (a tail call; `tail`).
+    Direct { target: u64, tail: bool },
+    /// `BLX Rm`, or `BX Rm` not a return (`tail`), at the instruction's address.
+    Indirect { at: u64, tail: bool },
+}
+
+/// A basic block: instructions `first..=last` (indices into the function's instructions).
+#[derive(Debug, Clone)]
+pub struct Block {
+    pub first: usize,
+    pub last: usize,
+    pub succs: Vec<Edge>,
+    pub call: Option<Call>,
+    /// Control may leave the function here (a return, a tail call, the end of its code).
+    pub exit: bool,
+}
+
+/// A function's control-flow graph.
+#[derive(Debug, Clone)]
+pub struct Cfg {
+    pub blocks: Vec<Block>,
+}
+
+/// The entries of a table branch, and where its data ends: the table follows the instruction up to the next code, its
+/// entries limited by a `CMP Rm, #n` on the index before it (n + 1 entries).
+fn table_targets(
+    f: &Function,
+    insns: &[Insn],
+    at: usize,
+    halfwords: bool,
+    index: u8,
+) -> Result<(Vec<u64>, u64), Error> {
+    let insn = &insns[at];
+    let table = insn.next();
+    let unfollowable = |what: &str| Error::Unfollowable {
+        function: f.name.clone(),
+        address: insn.addr,
+        what: what.to_string(),
+    };
+    let &(_, end) = f
+        .data
+        .iter()
+        .find(|(from, _)| *from == table)
+        .ok_or_else(|| unfollowable("a table branch without its table"))?;
+    let size = if halfwords { 2 } else { 1 };
+    let mut entries = (end - table) / size;
+    // The bound check on the index: `cmp Rm, #n` (then `bhi` to the default) shortly before.
+    if let Some(limit) = insns[at.saturating_sub(6)..at].iter().rev().find_map(|i| {
+        (i.inst.opcode == Opcode::CMP
+            && matches!(i.inst.operands[0], Operand::Reg(r) if r.number() == index))
+        .then(|| i.immediate())
+        .flatten()
+    }) {
+        entries = entries.min(u64::from(limit) + 1);
+    }
+    // The entries' addresses (their bytes are data, zeroed in `code`: read from the image).
+    Ok(((0..entries).map(|k| table + k * size).collect(), end))
+}
+
+impl Cfg {
+    /// Builds the graph of `f`; `read` reads a jump table's entry from the image (address, entry
+    /// size in bytes) and `returns` says whether a called function can return.
+    pub fn build(
+        f: &Function,
+        read: &dyn Fn(u64, u64) -> Option<u64>,
+        returns: &dyn Fn(u64) -> bool,
+    ) -> Result<Cfg, Error> {
+        let insns = f.instructions()?;
+        if insns.is_empty() {
+            return Err(Error::Other(format!("{}: no instructions", f.name)));
+        }
+        let index: BTreeMap<u64, usize> =
+            insns.iter().enumerate().map(|(k, i)| (i.addr, k)).collect();
+        let inside = |t: u64| index.get(&t).copied();
+        let unfollowable = |i: &Insn, what: &str| Error::Unfollowable {
+            function: f.name.clone(),
+            address: i.addr,
+            what: what.to_string(),
+        };
+        // Successor instructions of each instruction: (index, taken), plus calls and exits.
+        let mut tables: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        let mut leaders = BTreeSet::from([0usize]);
+        for (k, insn) in insns.iter().enumerate() {
+            let flow = insn.flow();
+            if flow != Flow::Next {
+                leaders.insert(k + 1);
+            }
+            match flow {
+                Flow::Branch(t) if f.contains(t) => {
+                    let to = inside(t).ok_or_else(|| {
+                        unfollowable(insn, "a branch into the middle of an instruction")
+                    })?;
+                    leaders.insert(to);
+                }
+                Flow::Table {
+                    halfwords,
+                    index: rm,
+                } => {
+                    let mut targets = Vec::new();
+                    let (entries, table_end) = table_targets(f, insns, k, halfwords, rm)?;
+                    for entry in entries {
+                        let size = if halfwords { 2 } else { 1 };
+                        let offset = read(entry, size)
+                            .ok_or_else(|| unfollowable(insn, "a jump table outside the image"))?;
+                        let target = insn.next() + 2 * offset;
+                        // An entry into the table itself is its padding byte (a table of an odd
+                        // number of bytes is padded to the next halfword): never a target.
+                        if target < table_end {
+                            continue;
+                        }
+                        let to = inside(target).ok_or_else(|| {
+                            unfollowable(insn, "a jump table entry that is not an instruction")
+                        })?;
+                        leaders.insert(to);
+                        targets.push(to);
+                    }
+                    targets.sort_unstable();
+                    targets.dedup();
+                    tables.insert(k, targets);
+                }
+                _ => {}
+            }
+        }
+        let starts: Vec<usize> = leaders.into_iter().filter(|&k| k < insns.len()).collect();
+        let block_of: BTreeMap<usize, usize> =
+            starts.iter().enumerate().map(|(b, &k)| (k, b)).collect();
+        let mut blocks = Vec::with_capacity(starts.len());
+        for (b, &first) in starts.iter().enumerate() {
+            let last = starts.get(b + 1).map_or(insns.len() - 1, |&next| next - 1);
+            let insn = &insns[last];
+            let mut block = Block {
+                first,
+                last,
+                succs: Vec::new(),
+                call: None,
+                exit: false,
+            };
+            // The next instruction, when it follows directly (not behind a literal pool).
+            let fall = (last + 1 < insns.len() && insns[last + 1].addr == insn.next())
+                .then(|| block_of[&(last + 1)]);
+            let fall_through = |block: &mut Block| match fall {
+                Some(to) => block.succs.push(Edge { to, taken: false }),
+                None => block.exit = true,
+            };
+            match insn.flow() {
+                Flow::Next => fall_through(&mut block),
+                Flow::Branch(t) => {
+                    if f.contains(t) {
+                        block.succs.push(Edge {
+                            to: block_of[&inside(t).unwrap_or(0)],
+                            taken: true,
+                        });
+                    } else {
+                        block.call = Some(Call::Direct {
+                            target: t,
+                            tail: true,
+                        });
+                        block.exit = true;
+                    }
+                    if insn.conditional {
+                        fall_through(&mut block);
+                    }
+                }
+                Flow::Call(t) => {
+                    block.call = Some(Call::Direct {
+                        target: t,
+                        tail: false,
+                    });
+                    if returns(t) {
+                        fall_through(&mut block);
+                    }
+                }
+                Flow::IndirectCall(_) => {
+                    block.call = Some(Call::Indirect {
+                        at: insn.addr,
+                        tail: false,
+                    });
+                    fall_through(&mut block);
+                }
+                Flow::Return => {
+                    block.exit = true;
+                    if insn.conditional {
+                        fall_through(&mut block);
+                    }
+                }
+                Flow::IndirectJump => {
+                    block.call = Some(Call::Indirect {
+                        at: insn.addr,
+                        tail: true,
+                    });
+                    block.exit = true;
+                    if insn.conditional {
+                        fall_through(&mut block);
+                    }
+                }
+                Flow::Table { .. } => {
+                    for &to in tables.get(&last).map(Vec::as_slice).unwrap_or(&[]) {
+                        block.succs.push(Edge {
+                            to: block_of[&to],
+                            taken: true,
+                        });
+                    }
+                }
+                Flow::Stop => {
+                    if insn.conditional {
+                        fall_through(&mut block);
+                    }
+                }
+            }
+            blocks.push(block);
+        }
+        Ok(Cfg { blocks })
+    }
+
+    /// The blocks reachable from the entry, in reverse postorder.
+    pub fn reverse_postorder(&self) -> Vec<usize> {
+        let n = self.blocks.len();
+        let mut seen = vec![false; n];
+        let mut order = Vec::with_capacity(n);
+        // Iterative depth-first search: (block, next successor to visit).
+        let mut stack = vec![(0usize, 0usize)];
+        seen[0] = true;
+        while let Some(&mut (b, ref mut next)) = stack.last_mut() {
+            if let Some(edge) = self.blocks[b].succs.get(*next) {
+                *next += 1;
+                if !seen[edge.to] {
+                    seen[edge.to] = true;
+                    stack.push((edge.to, 0));
+                }
+            } else {
+                order.push(b);
+                stack.pop();
+            }
+        }
+        order.reverse();
+        order
+    }
+
+    /// The immediate dominator of each reachable block (the entry's is itself; unreachable: None).
+    pub fn dominators(&self) -> Vec<Option<usize>> {
+        let order = self.reverse_postorder();
+        let n = self.blocks.len();
+        let mut rank = vec![usize::MAX; n];
+        for (r, &b) in order.iter().enumerate() {
+            rank[b] = r;
+        }
+        let mut preds = vec![Vec::new(); n];
+        for (b, block) in self.blocks.iter().enumerate() {
+            for e in &block.succs {
+                preds[e.to].push(b);
+            }
+        }
+        let mut idom: Vec<Option<usize>> = vec![None; n];
+        idom[0] = Some(0);
+        let intersect = |idom: &[Option<usize>], mut a: usize, mut b: usize| {
+            while a != b {
+                while rank[a] > rank[b] {
+                    a = idom[a].unwrap_or(0);
+                }
+                while rank[b] > rank[a] {
+                    b = idom[b].unwrap_or(0);
+                }
+            }
+            a
+        };
+        let mut changed = true;
+        while changed {
+            changed = false;
+            for &b in order.iter().skip(1) {
+                let mut new: Option<usize> = None;
+                for &p in &preds[b] {
+                    if idom[p].is_none() {
+                        continue;
+                    }
+                    new = Some(match new {
+                        None => p,
+                        Some(n) => intersect(&idom, p, n),
+                    });
+                }
+                if new.is_some() && idom[b] != new {
+                    idom[b] = new;
+                    changed = true;
+                }
+            }
+        }
+        idom
+    }
+
+    /// Whether `a` dominates `b`.
+    pub fn dominates(idom: &[Option<usize>], a: usize, mut b: usize) -> bool {
+        loop {
+            if a == b {
+                return true;
+            }
+            match idom[b] {
+                Some(d) if d != b => b = d,
+                _ => return false,
+            }
+        }
+    }
+
+    /// The natural loops: (header, body blocks, latches), one per header, innermost (smallest)
+    /// first. `Err(block)` names a block entered by a retreating edge its target does not dominate
+    /// (irreducible flow, which has no natural loop to bound).
+    pub fn loops(&self) -> Result<Vec<Loop>, usize> {
+        let idom = self.dominators();
+        let mut preds = vec![Vec::new(); self.blocks.len()];
+        for (b, block) in self.blocks.iter().enumerate() {
+            for e in &block.succs {
+                preds[e.to].push(b);
+            }
+        }
+        let mut by_header: BTreeMap<usize, Loop> = BTreeMap::new();
+        for (b, block) in self.blocks.iter().enumerate() {
+            if idom[b].is_none() {
+                continue;
+            }
+            for e in &block.succs {
+                if Cfg::dominates(&idom, e.to, b) {
+                    let l = by_header.entry(e.to).or_insert_with(|| Loop {
+                        header: e.to,
+                        body: BTreeSet::from([e.to]),
+                        latches: Vec::new(),
+                    });
+                    l.latches.push(b);
+                    let mut work = vec![b];
+                    while let Some(x) = work.pop() {
+                        if l.body.insert(x) {
+                            work.extend(preds[x].iter().copied().filter(|p| idom[*p].is_some()));
+                        }
+                    }
+                }
+            }
+        }
+        // A cycle left that is no natural loop: irreducible.
+        let order = self.reverse_postorder();
+        let mut rank = vec![usize::MAX; self.blocks.len()];
+        for (r, &b) in order.iter().enumerate() {
+            rank[b] = r;
+        }
+        for &b in &order {
+            for e in &self.blocks[b].succs {
+                if rank[e.to] <= rank[b] && !Cfg::dominates(&idom, e.to, b) {
+                    return Err(e.to);
+                }
+            }
+        }
+        let mut loops: Vec<Loop> = by_header.into_values().collect();
+        loops.sort_by_key(|l| l.body.len());
+        Ok(loops)
+    }
+}
+
+/// A natural loop.
+#[derive(Debug, Clone)]
+pub struct Loop {
+    pub header: usize,
+    pub body: BTreeSet<usize>,
+    /// The blocks with an edge back to the header.
+    pub latches: Vec<usize>,
+}

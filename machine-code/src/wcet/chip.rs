@@ -1,0 +1,304 @@
+//! The cycle model: what one instruction costs on the core, and what the memory system adds, for the
+//! two chips of the robot. Every figure is stated with its source in docs/analysis.md
+//! ("Execution-time bounds from the machine code").
+use serde::Serialize;
+
+use crate::decode::{Flow, Insn, Opcode, PC, SP};
+use crate::Error;
+
+/// The pipeline refill after a taken branch: the TRMs give P as 1 to 3 cycles; taken at its
+/// maximum.
+pub const P: u64 = 3;
+/// Integer division: 2 to 12 cycles (M3 and M4 TRMs), taken at 12.
+pub const DIVIDE: u64 = 12;
+/// Exception entry (12 cycles) and return (10 cycles) on both cores, tail-chaining not assumed.
+pub const EXCEPTION_ENTRY: u64 = 12;
+pub const EXCEPTION_EXIT: u64 = 10;
+/// Lazy FPU state preservation on the M4F: the 17 extended-frame words (s0-s15, FPSCR) pushed when
+/// a handler first uses the FPU, one cycle each.
+pub const LAZY_FPU_STACKING: u64 = 17;
+/// Barriers (`DMB`, `DSB`, `ISB`): 1 + B; B taken as a pipeline refill (an `ISB` flushes it).
+pub const BARRIER: u64 = 1 + P;
+
+/// The chip an image runs on, with its flash wait states.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum Chip {
+    /// STM32F103 (Cortex-M3) at 72 MHz; flash behind a 2 × 64-bit prefetch buffer (2 wait states
+    /// at 72 MHz, RM0008 §3.3.3).
+    Stm32f103 { wait_states: u32 },
+    /// STM32F405 (Cortex-M4F) at 168 MHz; flash behind the ART accelerator's 128-bit lines (5 wait
+    /// states at 168 MHz and 3.3 V, RM0090 §3.5.1).
+    Stm32f405 { wait_states: u32 },
+}
+
+/// Where a load or store goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Region {
+    /// Flash (the code region, 0x0000_0000..0x2000_0000; the STM32 maps flash at 0x0800_0000 and
+    /// aliases it at 0).
+    Flash,
+    /// SRAM (0x2000_0000..0x4000_0000) and the stack.
+    Ram,
+    /// A peripheral on APB1, APB2 or AHB (0x4000_0000..0x6000_0000).
+    Apb1,
+    Apb2,
+    Ahb,
+    /// The core's private peripherals (NVIC, SysTick, DWT: 0xE000_0000..).
+    Private,
+    /// Not known from the machine code: charged the worst of the others.
+    Unknown,
+}
+
+impl Chip {
+    /// The chip of a `--chip` name (`stm32f103`, `stm32f405`), with its default wait states unless
+    /// `wait_states` overrides them.
+    pub fn parse(name: &str, wait_states: Option<u32>) -> Result<Chip, Error> {
+        match name.to_ascii_lowercase().as_str() {
+            "stm32f103" | "f103" => Ok(Chip::Stm32f103 {
+                wait_states: wait_states.unwrap_or(2),
+            }),
+            "stm32f405" | "f405" => Ok(Chip::Stm32f405 {
+                wait_states: wait_states.unwrap_or(5),
+            }),
+            other => Err(Error::Other(format!(
+                "unknown chip `{other}` (known: stm32f103, stm32f405)"
+            ))),
+        }
+    }
+
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Chip::Stm32f103 { .. } => "STM32F103",
+            Chip::Stm32f405 { .. } => "STM32F405",
+        }
+    }
+
+    /// The core clock the boards run it at.
+    pub fn clock_hz(self) -> u64 {
+        match self {
+            Chip::Stm32f103 { .. } => 72_000_000,
+            Chip::Stm32f405 { .. } => 168_000_000,
+        }
+    }
+
+    /// Flash wait states.
+    pub fn wait_states(self) -> u64 {
+        match self {
+            Chip::Stm32f103 { wait_states } | Chip::Stm32f405 { wait_states } => {
+                u64::from(wait_states)
+            }
+        }
+    }
+
+    /// Bytes of one flash line the core's fetch reads at once (prefetch buffer: 64 bits; ART: 128).
+    pub fn line_bytes(self) -> u64 {
+        match self {
+            Chip::Stm32f103 { .. } => 8,
+            Chip::Stm32f405 { .. } => 16,
+        }
+    }
+
+    /// Whether the core is a Cortex-M4 (single-cycle long multiply and multiply-accumulate, FPU).
+    pub fn m4(self) -> bool {
+        matches!(self, Chip::Stm32f405 { .. })
+    }
+
+    /// Exception entry and exit of a handler, with lazy FPU stacking on the M4F.
+    pub fn exception_cycles(self) -> u64 {
+        EXCEPTION_ENTRY + EXCEPTION_EXIT + if self.m4() { LAZY_FPU_STACKING } else { 0 }
+    }
+
+    /// Cycles as nanoseconds at the chip's clock, rounded up.
+    pub fn cycles_to_ns(self, cycles: u64) -> u64 {
+        (cycles * 1_000_000_000).div_ceil(self.clock_hz())
+    }
+
+    /// Nanoseconds as cycles at the chip's clock, rounded up.
+    pub fn ns_to_cycles(self, ns: u64) -> u64 {
+        (ns * self.clock_hz()).div_ceil(1_000_000_000)
+    }
+
+    /// Which region an address is in (the STM32F1/F4 memory maps, RM0008 §3.3 and RM0090 §2.3).
+    pub fn region(self, address: u32) -> Region {
+        match address {
+            0..=0x1fff_ffff => Region::Flash,
+            0x2000_0000..=0x3fff_ffff => Region::Ram,
+            0x4000_0000..=0x4000_ffff => Region::Apb1,
+            0x4001_0000..=0x4001_7fff => Region::Apb2,
+            0x4001_8000..=0x4001_ffff => match self {
+                Chip::Stm32f103 { .. } => Region::Ahb,
+                Chip::Stm32f405 { .. } => Region::Apb2,
+            },
+            0x4002_0000..=0x5fff_ffff => Region::Ahb,
+            0xe000_0000..=0xe00f_ffff => Region::Private,
+            _ => Region::Unknown,
+        }
+    }
+
+    /// Cycles one access to `region` adds to the instruction's own: flash wait states for a data
+    /// read from flash; for a peripheral, the bus's stated latency (docs/analysis.md: two clocks of
+    /// the APB bus per transfer, AMBA APB protocol, plus one cycle of the bridge, at the chip's
+    /// prescalers: F103 APB1 = HCLK/2, APB2 = HCLK; F405 APB1 = HCLK/4, APB2 = HCLK/2).
+    pub fn access_cycles(self, region: Region) -> u64 {
+        let (apb1, apb2) = match self {
+            Chip::Stm32f103 { .. } => (2 * 2 + 1, 2 + 1),
+            Chip::Stm32f405 { .. } => (2 * 4 + 1, 2 * 2 + 1),
+        };
+        match region {
+            Region::Flash => self.wait_states(),
+            Region::Ram => 0,
+            Region::Apb1 => apb1,
+            Region::Apb2 => apb2,
+            Region::Ahb | Region::Private => 1,
+            Region::Unknown => apb1.max(self.wait_states()),
+        }
+    }
+
+    /// The cycles of one instruction on the core (pipeline refill of an always-taken branch and the
+    /// refill of its first flash line included; a conditional branch's taken cost is
+    /// [`Chip::taken_cycles`], on its edge), without its memory accesses.
+    pub fn core_cycles(self, insn: &Insn) -> u64 {
+        let refill = P + self.wait_states();
+        let list = u64::from(insn.register_list().unwrap_or(0).count_ones());
+        let m4 = self.m4();
+        let flow = insn.flow();
+        let transfer = match flow {
+            Flow::Call(_) | Flow::IndirectCall(_) | Flow::Return | Flow::IndirectJump => refill,
+            Flow::Branch(_) if !insn.conditional => refill,
+            Flow::Table { .. } => refill,
+            _ => 0,
+        };
+        let own = match insn.inst.opcode {
+            Opcode::LDM(..) | Opcode::STM(..) | Opcode::PUSH | Opcode::POP => 1 + list.max(1),
+            Opcode::LDRD | Opcode::STRD => 3,
+            Opcode::LDR
+            | Opcode::LDRB
+            | Opcode::LDRH
+            | Opcode::LDRSB
+            | Opcode::LDRSH
+            | Opcode::LDRT
+            | Opcode::LDRBT
+            | Opcode::LDRHT
+            | Opcode::LDRSBT
+            | Opcode::LDRSHT
+            | Opcode::LDREX
+            | Opcode::LDREXB
+            | Opcode::LDREXH => 2,
+            Opcode::STR
+            | Opcode::STRB
+            | Opcode::STRH
+            | Opcode::STRT
+            | Opcode::STRBT
+            | Opcode::STRHT
+            | Opcode::STREX
+            | Opcode::STREXB
+            | Opcode::STREXH => 2,
+            Opcode::TBB | Opcode::TBH => 2,
+            Opcode::UDIV | Opcode::SDIV => DIVIDE,
+            Opcode::MLA | Opcode::MLS => {
+                if m4 {
+                    1
+                } else {
+                    2
+                }
+            }
+            Opcode::UMULL | Opcode::SMULL => {
+                if m4 {
+                    1
+                } else {
+                    5
+                }
+            }
+            Opcode::UMLAL | Opcode::SMLAL | Opcode::UMAAL => {
+                if m4 {
+                    1
+                } else {
+                    7
+                }
+            }
+            Opcode::MSR | Opcode::MRS => 2,
+            Opcode::DMB | Opcode::DSB | Opcode::ISB => BARRIER,
+            _ => self.coprocessor_cycles(insn).unwrap_or(1),
+        };
+        own + transfer
+    }
+
+    /// Cycles of a floating-point instruction (the M4's FPU, coprocessors 10 and 11): `VLDR`/`VSTR`
+    /// 2, `VLDM`/`VSTM`/`VPUSH`/`VPOP` 1 + N words, register moves 1 (2 for a pair), data processing
+    /// at the slowest (`VDIV`, `VSQRT`: 14).
+    fn coprocessor_cycles(self, insn: &Insn) -> Option<u64> {
+        match insn.inst.opcode {
+            Opcode::LDC(c, _) | Opcode::LDCL(c, _) | Opcode::STC(c, _) | Opcode::STCL(c, _)
+                if c == 10 || c == 11 =>
+            {
+                let words = u64::from(insn.raw[1] & 0xff);
+                // VLDR/VSTR (P = 1, W = 0) move one or two words in 2 cycles.
+                let single = insn.raw[0] & 0x0120 == 0x0100;
+                Some(if single { 2 } else { 1 + words.max(1) })
+            }
+            Opcode::MCRR(c, _, _) | Opcode::MRRC(c, _, _) if c == 10 || c == 11 => Some(2),
+            Opcode::MCR(c, ..) | Opcode::MRC(c, ..) if c == 10 || c == 11 => Some(1),
+            Opcode::CDP(c, ..) if c == 10 || c == 11 => Some(14),
+            _ => None,
+        }
+    }
+
+    /// What a conditional branch adds when it is taken: the pipeline refill and its first flash
+    /// line.
+    pub fn taken_cycles(self) -> u64 {
+        P + self.wait_states()
+    }
+
+    /// The cycles fetching the code at `start..end` takes at least: every flash line it spans,
+    /// each its wait states plus one (the prefetch fetches the next line while one executes, but
+    /// no faster than that).
+    pub fn fetch_cycles(self, start: u64, end: u64) -> u64 {
+        if end <= start {
+            return 0;
+        }
+        let line = self.line_bytes();
+        ((end - 1) / line - start / line + 1) * (self.wait_states() + 1)
+    }
+
+    /// The memory cycles an instruction adds, given what is known of its base register's value.
+    pub fn memory_cycles(self, insn: &Insn, base_value: Option<u32>) -> u64 {
+        if !(insn.is_load() || insn.is_store()) {
+            return 0;
+        }
+        let words = match insn.inst.opcode {
+            Opcode::LDM(..) | Opcode::STM(..) | Opcode::PUSH | Opcode::POP => {
+                u64::from(insn.register_list().unwrap_or(0).count_ones()).max(1)
+            }
+            Opcode::LDRD | Opcode::STRD => 2,
+            _ => 1,
+        };
+        let base = match insn.inst.opcode {
+            Opcode::PUSH | Opcode::POP => Some(SP),
+            _ => insn.memory_base().or_else(|| insn.memory_base_wback()),
+        };
+        let region = match base {
+            Some(SP) => Region::Ram,
+            Some(PC) => Region::Flash,
+            _ => match base_value {
+                Some(value) => {
+                    let offset = insn.memory_offset().unwrap_or(0);
+                    self.region(u32::try_from(i64::from(value) + offset).unwrap_or(value))
+                }
+                None => Region::Unknown,
+            },
+        };
+        // Stores never go to flash in running code: an unknown store is a peripheral's at worst.
+        let region = if insn.is_store() && region == Region::Flash {
+            Region::Unknown
+        } else {
+            region
+        };
+        let region = if insn.is_store() && region == Region::Unknown {
+            Region::Apb1
+        } else {
+            region
+        };
+        words * self.access_cycles(region)
+    }
+}

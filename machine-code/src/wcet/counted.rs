@@ -1,0 +1,315 @@
+//! Counted loops: a register set to a constant before the loop, stepped by a constant once per
+//! iteration on the way back, and compared with a constant (or stepped with flags) to decide the
+//! branch back. The bound is found by running that register's values through the branch's
+//! condition, exactly as the core evaluates it.
+use crate::decode::{Flow, Insn, Opcode, Operand};
+use crate::wcet::cfg::{Cfg, Loop};
+
+/// The most iterations the count is run for: a loop counted higher than this is not taken as
+/// counted (a stated bound is needed).
+const MAX_COUNT: u64 = 1 << 20;
+
+/// The flags `a - b` sets (`CMP`, `SUBS`): N, Z, C, V.
+fn sub_flags(a: u32, b: u32) -> [bool; 4] {
+    let r = a.wrapping_sub(b);
+    [r >> 31 == 1, r == 0, a >= b, ((a ^ b) & (a ^ r)) >> 31 == 1]
+}
+
+/// The flags `a + b` sets (`ADDS`, `CMN`).
+fn add_flags(a: u32, b: u32) -> [bool; 4] {
+    let (r, carry) = a.overflowing_add(b);
+    [r >> 31 == 1, r == 0, carry, (!(a ^ b) & (a ^ r)) >> 31 == 1]
+}
+
+/// Whether condition `code` (the ARM encoding, 0 = EQ … 13 = LE) holds under `flags`.
+fn holds(code: u8, [n, z, c, v]: [bool; 4]) -> bool {
+    match code {
+        0 => z,
+        1 => !z,
+        2 => c,
+        3 => !c,
+        4 => n,
+        5 => !n,
+        6 => v,
+        7 => !v,
+        8 => c && !z,
+        9 => !c || z,
+        10 => n == v,
+        11 => n != v,
+        12 => !z && n == v,
+        13 => z || n != v,
+        _ => true,
+    }
+}
+
+/// The condition code of a conditional branch (`B<c>`; for `CBZ`/`CBNZ` none: not counted here).
+fn branch_condition(insn: &Insn) -> Option<u8> {
+    if insn.inst.opcode != Opcode::B || !insn.conditional {
+        return None;
+    }
+    // B<c> T1: 1101 cond imm8; B<c>.W T3: 11110 S cond imm6 | 10 J1 0 J2 imm11.
+    if insn.len == 2 {
+        Some(((insn.raw[0] >> 8) & 0xf) as u8)
+    } else {
+        Some(((insn.raw[0] >> 6) & 0xf) as u8)
+    }
+}
+
+/// How the counter steps: by `+k` or `-k`, and whether the step sets the flags the branch reads.
+struct Step {
+    add: bool,
+    k: u32,
+    flags: bool,
+}
+
+fn as_step(insn: &Insn, r: u8) -> Option<Step> {
+    let add = match insn.inst.opcode {
+        Opcode::ADD => true,
+        Opcode::SUB => false,
+        _ => return None,
+    };
+    let regs = insn.registers();
+    // `adds rX, #k` or `adds rX, rX, #k`.
+    if regs.first() != Some(&r) || regs.iter().any(|&x| x != r) {
+        return None;
+    }
+    let k = insn.immediate().filter(|&k| k > 0)?;
+    Some(Step {
+        add,
+        k,
+        flags: insn.inst.s,
+    })
+}
+
+/// Whether an instruction sets the condition flags.
+fn sets_flags(insn: &Insn) -> bool {
+    matches!(
+        insn.inst.opcode,
+        Opcode::CMP | Opcode::CMN | Opcode::TST | Opcode::TEQ | Opcode::MSR
+    ) || insn.inst.s
+}
+
+/// The most times the loop's header runs per entry when it is a counted loop, with how it was
+/// found.
+pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
+    let [latch] = l.latches[..] else { return None };
+    let block = &cfg.blocks[latch];
+    let branch = &insns[block.last];
+    let Flow::Branch(_) = branch.flow() else {
+        return None;
+    };
+    // The branch back is the taken edge to the header.
+    if !block.succs.iter().any(|e| e.to == l.header && e.taken) {
+        return None;
+    }
+    let code = branch_condition(branch)?;
+    // The last instruction before the branch that sets the flags.
+    let latch_insns = &insns[block.first..block.last];
+    let (at, setter) = latch_insns
+        .iter()
+        .enumerate()
+        .rev()
+        .find(|(_, i)| sets_flags(i))?;
+    let (counter, compare) = match setter.inst.opcode {
+        Opcode::CMP => {
+            let Operand::Reg(r) = setter.inst.operands[0] else {
+                return None;
+            };
+            if setter.registers().len() != 1 {
+                return None;
+            }
+            (r.number(), Some(setter.immediate()?))
+        }
+        Opcode::ADD | Opcode::SUB => (*setter.registers().first()?, None),
+        _ => return None,
+    };
+    // Exactly one write of the counter in the whole loop: the step, in the latch before the flags
+    // are set (or the flag-setting step itself).
+    let mut writes = Vec::new();
+    for &b in &l.body {
+        let blk = &cfg.blocks[b];
+        for (k, i) in insns[blk.first..=blk.last].iter().enumerate() {
+            if i.writes().contains(counter) {
+                writes.push((b, blk.first + k));
+            }
+        }
+    }
+    let [(step_block, step_at)] = writes[..] else {
+        return None;
+    };
+    if step_block != latch || step_at > block.first + at {
+        return None;
+    }
+    // An `IT` block's step or compare may not run: not a count.
+    if insns[step_at].conditional || setter.conditional {
+        return None;
+    }
+    let step = as_step(&insns[step_at], counter)?;
+    if compare.is_none() && !(step.flags && step_at == block.first + at) {
+        return None;
+    }
+    // The counter's value on entry, from every predecessor of the header outside the loop.
+    let mut most = 0;
+    let mut found_entry = false;
+    for (b, blk) in cfg.blocks.iter().enumerate() {
+        if l.body.contains(&b) || !blk.succs.iter().any(|e| e.to == l.header) {
+            continue;
+        }
+        let start = initial(&insns[blk.first..=blk.last], counter)?;
+        most = most.max(run(start, &step, compare, code)?);
+        found_entry = true;
+    }
+    if !found_entry {
+        return None;
+    }
+    let how = match compare {
+        Some(limit) => format!(
+            "counted: r{counter} from its entry value by {}{} to the compare with #{limit}",
+            if step.add { '+' } else { '-' },
+            step.k
+        ),
+        None => format!(
+            "counted: r{counter} from its entry value by {}{} until the flags end it",
+            if step.add { '+' } else { '-' },
+            step.k
+        ),
+    };
+    Some((most, how))
+}
+
+/// Whether the loop is an exclusive-access retry: it holds one `STREX` (any width) and an `LDREX`,
+/// and its one branch back is taken only when that `STREX` failed (`CBNZ` on its status register,
+/// or `CMP` of it with 0 and `BNE`). On a single Cortex-M3/M4 (no global monitor on the STM32) a
+/// `STREX` fails only when the local monitor was cleared since the `LDREX`, which exception entry
+/// and return do: each retry needs a preemption inside the sequence.
+pub fn exclusive_retry(insns: &[Insn], cfg: &Cfg, l: &Loop) -> bool {
+    let [latch] = l.latches[..] else { return false };
+    let all: Vec<&Insn> = l
+        .body
+        .iter()
+        .flat_map(|&b| insns[cfg.blocks[b].first..=cfg.blocks[b].last].iter())
+        .collect();
+    let is_strex = |i: &Insn| {
+        matches!(
+            i.inst.opcode,
+            Opcode::STREX | Opcode::STREXB | Opcode::STREXH | Opcode::STREXD
+        )
+    };
+    let is_ldrex = |i: &Insn| {
+        matches!(
+            i.inst.opcode,
+            Opcode::LDREX | Opcode::LDREXB | Opcode::LDREXH | Opcode::LDREXD
+        )
+    };
+    let stores: Vec<&&Insn> = all.iter().filter(|i| is_strex(i)).collect();
+    let [strex] = stores[..] else { return false };
+    if !all.iter().any(|i| is_ldrex(i)) {
+        return false;
+    }
+    let Some(Operand::Reg(status)) = strex.inst.operands.first() else {
+        return false;
+    };
+    let status = status.number();
+    let block = &cfg.blocks[latch];
+    if !block.succs.iter().any(|e| e.to == l.header && e.taken) {
+        return false;
+    }
+    let branch = &insns[block.last];
+    // The status must not change between the STREX and the branch.
+    let strex_at = insns
+        .iter()
+        .position(|i| i.addr == strex.addr)
+        .unwrap_or(usize::MAX);
+    if strex_at < block.first || strex_at > block.last {
+        return false;
+    }
+    if insns[strex_at + 1..block.last]
+        .iter()
+        .any(|i| i.writes().contains(status))
+    {
+        return false;
+    }
+    match branch.inst.opcode {
+        Opcode::CBNZ => matches!(branch.inst.operands[0], Operand::Reg(r) if r.number() == status),
+        Opcode::B => {
+            let Some(1) = branch_condition(branch) else {
+                return false;
+            };
+            insns[strex_at + 1..block.last]
+                .iter()
+                .rev()
+                .find(|i| sets_flags(i))
+                .is_some_and(|cmp| {
+                    cmp.inst.opcode == Opcode::CMP
+                        && cmp.registers() == [status]
+                        && cmp.immediate() == Some(0)
+                })
+        }
+        _ => false,
+    }
+}
+
+/// The counter's constant value at the end of `block`: its last write there must be `MOV rX, #c`.
+fn initial(block: &[Insn], r: u8) -> Option<u32> {
+    let last = block.iter().rev().find(|i| i.writes().contains(r))?;
+    let regs = last.registers();
+    (last.inst.opcode == Opcode::MOV && regs == [r] && !last.conditional)
+        .then(|| last.immediate())
+        .flatten()
+}
+
+/// The header's executions: each pass steps the counter and branches back while the condition
+/// holds.
+fn run(start: u32, step: &Step, compare: Option<u32>, code: u8) -> Option<u64> {
+    let mut v = start;
+    for n in 1..=MAX_COUNT {
+        let before = v;
+        v = if step.add {
+            v.wrapping_add(step.k)
+        } else {
+            v.wrapping_sub(step.k)
+        };
+        let flags = match compare {
+            Some(limit) => sub_flags(v, limit),
+            None if step.add => add_flags(before, step.k),
+            None => sub_flags(before, step.k),
+        };
+        if !holds(code, flags) {
+            return Some(n);
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn conditions_as_the_core_evaluates_them() {
+        let step_up = Step {
+            add: true,
+            k: 1,
+            flags: false,
+        };
+        // for i in 0..8: cmp r, #8; bne → 8 passes.
+        assert_eq!(run(0, &step_up, Some(8), 1), Some(8));
+        // cmp r, #8; blo: 8 passes; bls: the pass that reaches 8 branches back too, 9.
+        assert_eq!(run(0, &step_up, Some(8), 3), Some(8));
+        assert_eq!(run(0, &step_up, Some(8), 9), Some(9));
+        // Down from 5 by subs #1, bne: 5 passes.
+        let step_down = Step {
+            add: false,
+            k: 1,
+            flags: true,
+        };
+        assert_eq!(run(5, &step_down, None, 1), Some(5));
+        // A step that misses the limit with bne never ends within the count.
+        let by_three = Step {
+            add: true,
+            k: 3,
+            flags: false,
+        };
+        assert_eq!(run(0, &by_three, Some(8), 1), None);
+    }
+}

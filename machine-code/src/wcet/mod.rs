@@ -1,0 +1,217 @@
+//! Execution-time bounds from the machine code: per function a control-flow graph, its natural
+//! loops bounded (counted loops found, the rest stated in a [`BoundsFile`]), calls composed bottom
+//! up, and the longest path on the graph with each loop collapsed ([`path`]); cycles from the
+//! [`Chip`]'s model. docs/analysis.md ("Execution-time bounds from the machine code") states the
+//! model, its sources and why the bound is safe.
+//!
+//! A path that ends in a trap (`UDF`) or in a call of a function that cannot return (a panic, the
+//! fault handler's halt) does not complete the job: the board halts and the watchdog resets it
+//! (docs/faults.md). The bound is of the jobs that complete.
+mod analysis;
+pub mod bounds;
+pub mod cfg;
+pub mod chip;
+pub mod counted;
+pub mod path;
+
+use serde::Serialize;
+
+use crate::{Error, Image};
+use analysis::{Analysis, Summary};
+use bounds::BoundsFile;
+use chip::Chip;
+#[cfg(test)]
+use path::{Cost, LoopCount};
+
+/// One loop on the way, and where its bound came from.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct LoopInfo {
+    /// The function it is in (demangled, without hash).
+    pub function: String,
+    /// Its header's source file and line (the line table's), when the image has them.
+    pub file: Option<String>,
+    pub line: Option<u32>,
+    /// The most times its header runs per entry (for a wait: 1, the wait is stated apart).
+    pub bound: u64,
+    /// Where the bound came from: `counted: …`, `bounds file: <reason>`, `wait: <source>`.
+    pub source: String,
+}
+
+/// A function's bound.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Bound {
+    /// Cycles of the longest path (machine code: core and memory system).
+    pub cycles: u64,
+    /// The most instructions any path runs.
+    pub instructions: u64,
+    /// Stated peripheral waits on the longest path, nanoseconds (apart from the cycles).
+    pub bus_wait_ns: u64,
+    /// The loops of the function and everything it calls, with their bounds.
+    pub loops: Vec<LoopInfo>,
+    /// What one preemption inside an exclusive-access sequence (`LDREX` … `STREX`) adds: one more
+    /// iteration of the longest retry loop it may be in (cycles, instructions). Not in `cycles`:
+    /// [`bound_tasks`] charges it to every handler, which is what preempts.
+    pub retry_cycles: u64,
+    pub retry_instructions: u64,
+    /// Why there is no bound (then the figures are 0 and mean nothing).
+    pub declined: Option<String>,
+}
+
+impl Bound {
+    /// The stated waits in µs.
+    pub fn bus_wait_us(&self) -> f64 {
+        self.bus_wait_ns as f64 / 1000.0
+    }
+
+    /// Cycles and waits as µs at `chip`'s clock.
+    pub fn us(&self, chip: Chip) -> f64 {
+        (chip.cycles_to_ns(self.cycles) + self.bus_wait_ns) as f64 / 1000.0
+    }
+}
+
+/// Where a task starts.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum TaskEntry {
+    /// A function, by demangled name or symbol.
+    Symbol(String),
+    /// The handler of a vector-table entry (the word index: 16 + IRQ number for an interrupt).
+    Vector(usize),
+}
+
+/// A task to bound.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Task {
+    pub name: String,
+    pub entry: TaskEntry,
+    /// An exception handler: its entry and exit (and lazy FPU stacking on the M4F) are added.
+    pub handler: bool,
+}
+
+/// One task's bound, as `cargo xtask wcet` prints it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TaskBound {
+    pub task: String,
+    /// The function bounded.
+    pub function: Option<String>,
+    pub cycles: u64,
+    pub us: f64,
+    pub instructions: u64,
+    pub bus_wait_us: f64,
+    pub loops: Vec<LoopInfo>,
+    /// Included in `cycles` and `instructions` of a handler: one retry iteration of the longest
+    /// exclusive-access loop of any task it may preempt (each preemption can cost the preempted job
+    /// one).
+    pub preemption_retry_cycles: u64,
+    pub declined: Option<String>,
+}
+
+/// Bounds one function of `image` with everything it calls.
+pub fn bound_function(
+    image: &Image,
+    symbol: &str,
+    chip: Chip,
+    bounds: &BoundsFile,
+) -> Result<Bound, Error> {
+    let f = image.function_named(symbol)?;
+    f.instructions()?;
+    let mut analysis = Analysis::new(image, chip, bounds);
+    let outcome = analysis.summary(f.start)?;
+    Ok(to_bound(outcome))
+}
+
+fn to_bound(outcome: Result<Summary, String>) -> Bound {
+    match outcome {
+        Ok(s) => Bound {
+            cycles: s.time.cycles,
+            instructions: s.count.instructions,
+            bus_wait_ns: s.time.wait_ns,
+            loops: s.loops,
+            retry_cycles: s.retry_time.cycles,
+            retry_instructions: s.retry_count.instructions,
+            declined: None,
+        },
+        Err(reason) => Bound {
+            cycles: 0,
+            instructions: 0,
+            bus_wait_ns: 0,
+            loops: Vec::new(),
+            retry_cycles: 0,
+            retry_instructions: 0,
+            declined: Some(reason),
+        },
+    }
+}
+
+/// Bounds every task: a row each, declined with its reason where no bound can be given (an error
+/// of the image is a declined row too, naming the error).
+pub fn bound_tasks(
+    image: &Image,
+    tasks: &[Task],
+    chip: Chip,
+    bounds: &BoundsFile,
+) -> Vec<TaskBound> {
+    let mut analysis = Analysis::new(image, chip, bounds);
+    let found: Vec<(Option<String>, Bound)> = tasks
+        .iter()
+        .map(|task| {
+            let start = match &task.entry {
+                TaskEntry::Symbol(s) => image.function_named(s).map(|f| f.start),
+                TaskEntry::Vector(i) => image
+                    .vectors
+                    .iter()
+                    .find(|(k, _)| k == i)
+                    .map(|&(_, at)| at)
+                    .ok_or_else(|| Error::Other(format!("no handler at vector {i}"))),
+            };
+            match start {
+                Ok(at) => (
+                    Some(image.name(at)),
+                    match analysis.summary(at) {
+                        Ok(outcome) => to_bound(outcome),
+                        Err(e) => to_bound(Err(e.to_string())),
+                    },
+                ),
+                Err(e) => (None, to_bound(Err(e.to_string()))),
+            }
+        })
+        .collect();
+    // What one preemption can cost the job it preempts: one retry of the longest exclusive-access
+    // loop of any task (charged to the preempting handler).
+    let retry_cycles = found.iter().map(|(_, b)| b.retry_cycles).max().unwrap_or(0);
+    let retry_instructions = found
+        .iter()
+        .map(|(_, b)| b.retry_instructions)
+        .max()
+        .unwrap_or(0);
+    tasks
+        .iter()
+        .zip(found)
+        .map(|(task, (function, bound))| {
+            let handler = task.handler && bound.declined.is_none();
+            let (extra, retry, retry_insns) = if handler {
+                (chip.exception_cycles(), retry_cycles, retry_instructions)
+            } else {
+                (0, 0, 0)
+            };
+            let cycles = bound.cycles + extra + retry;
+            TaskBound {
+                task: task.name.clone(),
+                function,
+                cycles,
+                us: if bound.declined.is_some() {
+                    0.0
+                } else {
+                    (chip.cycles_to_ns(cycles) + bound.bus_wait_ns) as f64 / 1000.0
+                },
+                instructions: bound.instructions + retry_insns,
+                bus_wait_us: bound.bus_wait_us(),
+                loops: bound.loops,
+                preemption_retry_cycles: retry,
+                declined: bound.declined,
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests;

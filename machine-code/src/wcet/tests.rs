@@ -1,0 +1,541 @@
+//! Known answers: hand-assembled Thumb-2 in small ELF images, each bound worked out from the
+//! Cortex-M3 TRM's cycle table (ARM DDI 0337, table 18-1: data processing 1, LDR 2, STR 2,
+//! LDM/STM/PUSH/POP 1 + N, a taken branch 1 + P with P = 3 here, BL 1 + P, TBB 2 + P) and the memory
+//! system of the F103 (flash lines of 8 bytes at `w` wait states: a line costs w + 1 cycles, a data
+//! read from flash w more, a taken branch w more for its first line; an AHB peripheral access 1
+//! more).
+use super::*;
+use crate::testelf::{elf, Sym};
+use crate::thumb;
+
+const F103_0WS: Chip = Chip::Stm32f103 { wait_states: 0 };
+const F103_2WS: Chip = Chip::Stm32f103 { wait_states: 2 };
+
+fn image(code: &[u16], symbols: &[Sym]) -> Image {
+    Image::parse(&elf(&thumb(code), symbols)).expect("the test image parses")
+}
+
+fn bound(image: &Image, f: &str, chip: Chip) -> Bound {
+    bound_function(image, f, chip, &BoundsFile::default()).expect("the function is analysed")
+}
+
+#[test]
+fn straight_line_code() {
+    let img = image(
+        &[
+            0x4801, // 0x00 ldr r0, [pc, #4]: the literal at 0x08, from flash: 2 + w
+            0x6801, // 0x02 ldr r1, [r0]: RCC (0x4002_1000, AHB): 2 + 1
+            0x9100, // 0x04 str r1, [sp]: the stack, RAM: 2
+            0x4770, // 0x06 bx lr: 1 + P + w
+            0x1000, 0x4002, // 0x08 .word 0x40021000
+        ],
+        &[Sym::function("straight", 0, 12), Sym::data(8)],
+    );
+    // 0 wait states: 2 + 3 + 2 + 4 = 11 (one flash line fetched: 1 cycle, hidden).
+    let b = bound(&img, "straight", F103_0WS);
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (11, 4, None)
+    );
+    // 2 wait states: (2 + 2) + 3 + 2 + (4 + 2) = 15; the line costs 3, hidden.
+    let b = bound(&img, "straight", F103_2WS);
+    assert_eq!((b.cycles, b.instructions), (15, 4));
+    assert_eq!(b.bus_wait_ns, 0);
+}
+
+#[test]
+fn a_counted_loop_runs_exactly_its_count() {
+    let img = image(
+        &[
+            0x2000, // 0x00 movs r0, #0: 1
+            0x2300, // 0x02 movs r3, #0: 1
+            0x18c0, // 0x04 adds r0, r0, r3: 1   (the loop: 8 passes)
+            0x3301, // 0x06 adds r3, #1: 1
+            0x2b08, // 0x08 cmp r3, #8: 1
+            0xd1fb, // 0x0a bne 0x04: 1, taken + P
+            0x4770, // 0x0c bx lr: 1 + P
+        ],
+        &[Sym::function("sum8", 0, 14)],
+    );
+    let b = bound(&img, "sum8", F103_0WS);
+    // Instructions: 2 + 8 × 4 + 1 = 35, exactly what runs.
+    assert_eq!(b.instructions, 35);
+    // Cycles: 2 before; 8 passes of 4 and 7 branches back of P = 3; bx lr 4: 2 + 32 + 21 + 4 = 59.
+    assert_eq!(b.cycles, 59);
+    assert_eq!(b.loops.len(), 1);
+    assert_eq!(b.loops[0].bound, 8);
+    assert!(b.loops[0].source.starts_with("counted"), "{:?}", b.loops[0]);
+}
+
+#[test]
+fn a_call_adds_the_callee() {
+    let img = image(
+        &[
+            0xb580, // 0x00 push {r7, lr}: 1 + 2
+            0xf000, 0xf803, // 0x02 bl 0x0c: 1 + P
+            0xbd80, // 0x06 pop {r7, pc}: 1 + 2 + P
+            0xbf00, 0xbf00, // 0x08 (no function)
+            0x2005, // 0x0c movs r0, #5: 1
+            0x4770, // 0x0e bx lr: 1 + P
+        ],
+        &[
+            Sym::function("caller", 0, 8),
+            Sym::function("callee", 0x0c, 4),
+        ],
+    );
+    let callee = bound(&img, "callee", F103_0WS);
+    assert_eq!((callee.cycles, callee.instructions), (5, 2));
+    // 3 + 4 + (callee 5) + 6 = 18 cycles; 3 + 2 instructions.
+    let b = bound(&img, "caller", F103_0WS);
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (18, 5, None)
+    );
+}
+
+#[test]
+fn a_jump_table_takes_its_longest_case() {
+    let img = image(
+        &[
+            0x2802, // 0x00 cmp r0, #2: 1
+            0xd80b, // 0x02 bhi 0x1c: 1 (taken: + P)
+            0xe8df, 0xf000, // 0x04 tbb [pc, r0]: 2 + P
+            0x0402, 0x0008, // 0x08 the table: 2, 4, 8 (and a byte of padding)
+            0x200a, // 0x0c case 0: movs r0, #10
+            0x4770, // 0x0e bx lr
+            0x2014, // 0x10 case 1: movs r0, #20
+            0x3001, // 0x12 adds r0, #1
+            0x3001, // 0x14 adds r0, #1
+            0x4770, // 0x16 bx lr
+            0x201e, // 0x18 case 2: movs r0, #30
+            0x4770, // 0x1a bx lr
+            0x2000, // 0x1c default: movs r0, #0
+            0x4770, // 0x1e bx lr
+        ],
+        &[
+            Sym::function("dispatch", 0, 0x20),
+            Sym::data(0x08),
+            Sym::code(0x0c),
+        ],
+    );
+    let b = bound(&img, "dispatch", F103_0WS);
+    // Case 1 is the longest: 2 (cmp, bhi not taken) + 5 (tbb) + 1 + 1 + 1 + 4 = 14 cycles, 7
+    // instructions; the default costs 2 + 3 + 1 + 4 = 10.
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (14, 7, None)
+    );
+}
+
+#[test]
+fn a_loop_without_a_bound_is_declined_by_name() {
+    let img = image(
+        &[
+            0x6801, // 0x00 ldr r1, [r0]
+            0x2900, // 0x02 cmp r1, #0
+            0xd1fc, // 0x04 bne 0x00
+            0x4770, // 0x06 bx lr
+        ],
+        &[Sym::function("spin", 0, 8)],
+    );
+    let b = bound(&img, "spin", F103_2WS);
+    let reason = b.declined.expect("declined");
+    assert!(
+        reason.contains("loop in spin") && reason.contains("no bound"),
+        "{reason}"
+    );
+    assert_eq!((b.cycles, b.instructions), (0, 0));
+}
+
+#[test]
+fn an_indirect_call_is_declined_and_so_is_its_caller() {
+    let img = image(
+        &[
+            0xb580, // 0x00 push {r7, lr}
+            0x4798, // 0x02 blx r3
+            0xbd80, // 0x04 pop {r7, pc}
+            0xbf00, // 0x06
+            0xb580, // 0x08 push {r7, lr}
+            0xf7ff, 0xfff9, // 0x0a bl 0x00
+            0xbd80, // 0x0e pop {r7, pc}
+        ],
+        &[
+            Sym::function("through_register", 0, 6),
+            Sym::function("outer", 8, 8),
+        ],
+    );
+    let b = bound(&img, "through_register", F103_0WS);
+    let reason = b.declined.expect("declined");
+    assert!(reason.contains("call through a register"), "{reason}");
+    let outer = bound(&img, "outer", F103_0WS);
+    assert!(outer
+        .declined
+        .expect("declined")
+        .starts_with("via through_register"));
+}
+
+#[test]
+fn recursion_is_declined() {
+    let img = image(
+        &[
+            0xb580, // 0x00 push {r7, lr}
+            0xf7ff, 0xfffd, // 0x02 bl 0x00
+            0xbd80, // 0x06 pop {r7, pc}
+        ],
+        &[Sym::function("again", 0, 8)],
+    );
+    let reason = bound(&img, "again", F103_0WS).declined.expect("declined");
+    assert!(reason.contains("recursion"), "{reason}");
+}
+
+#[test]
+fn a_path_into_a_panic_does_not_complete_the_job() {
+    let img = image(
+        &[
+            0x2800, // 0x00 cmp r0, #0: 1
+            0xd001, // 0x02 beq 0x08: 1 (+ P)
+            0xf000, 0xf803, // 0x04 bl 0x0e (the panic)
+            0x2001, // 0x08 movs r0, #1: 1
+            0x4770, // 0x0a bx lr: 4
+            0xbf00, // 0x0c
+            0xe7fe, // 0x0e b 0x0e: the panic spins for ever
+        ],
+        &[
+            Sym::function("checked", 0, 0x0c),
+            Sym::function("core::panicking::panic_bounds_check", 0x0e, 2),
+        ],
+    );
+    // Only the path that returns: 1 + 1 + P + 1 + 4 = 10.
+    let b = bound(&img, "checked", F103_0WS);
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (10, 4, None)
+    );
+}
+
+#[test]
+fn bad_input_is_a_typed_error() {
+    assert!(matches!(
+        Image::parse(b"not an elf"),
+        Err(Error::Malformed(_))
+    ));
+    assert!(matches!(
+        Image::parse(&[0x7f, b'E', b'L', b'F', 1, 1, 1]),
+        Err(Error::Malformed(_))
+    ));
+    let img = image(&[0x4770], &[Sym::function("ret", 0, 2)]);
+    assert!(matches!(
+        bound_function(&img, "missing", F103_0WS, &BoundsFile::default()),
+        Err(Error::MissingSymbol(_))
+    ));
+    // The first half of a BL with nothing behind it.
+    let cut = image(&[0x4770, 0xf000], &[Sym::function("cut", 0, 4)]);
+    assert!(matches!(
+        bound_function(&cut, "cut", F103_0WS, &BoundsFile::default()),
+        Err(Error::Undecodable { address: 2, .. })
+    ));
+    // A table branch without its table.
+    let table = image(&[0xe8df, 0xf000, 0x4770], &[Sym::function("tbl", 0, 6)]);
+    assert!(matches!(
+        bound_function(&table, "tbl", F103_0WS, &BoundsFile::default()),
+        Err(Error::Unfollowable { .. })
+    ));
+    assert!(matches!(Chip::parse("stm32f7", None), Err(Error::Other(_))));
+}
+
+#[test]
+fn a_stated_wait_is_kept_apart_from_the_cycles() {
+    use path::{longest, LoopNodes, Node};
+    // A header (3 cycles, 3 instructions) that loops on itself and leaves to a return (4, 1).
+    let nodes = vec![
+        Node {
+            cost: Cost {
+                cycles: 3,
+                instructions: 3,
+                wait_ns: 0,
+            },
+            succs: vec![
+                (
+                    0,
+                    Cost {
+                        cycles: 3,
+                        ..Cost::default()
+                    },
+                ),
+                (1, Cost::default()),
+            ],
+            exit: false,
+            exit_cost: Cost::default(),
+        },
+        Node {
+            cost: Cost {
+                cycles: 4,
+                instructions: 1,
+                wait_ns: 0,
+            },
+            succs: vec![],
+            exit: true,
+            exit_cost: Cost::default(),
+        },
+    ];
+    let wait = [LoopNodes {
+        header: 0,
+        body: [0].into(),
+        count: LoopCount::Wait {
+            ns: 25_000,
+            cycles: 1800,
+        },
+    }];
+    let c = longest(nodes.clone(), &wait, &|c: Cost| c.cycles)
+        .unwrap()
+        .path;
+    // One pass out (3) and the return (4); the 25 µs stated apart, at most one instruction per
+    // cycle of it.
+    assert_eq!(
+        c,
+        Cost {
+            cycles: 7,
+            instructions: 1 + 3 + 1800,
+            wait_ns: 25_000
+        }
+    );
+    let passes = [LoopNodes {
+        header: 0,
+        body: [0].into(),
+        count: LoopCount::Passes(5),
+    }];
+    // Four passes back (3 + 3 each) and one out (3), then the return: 24 + 3 + 4.
+    let c = longest(nodes, &passes, &|c: Cost| c.cycles).unwrap().path;
+    assert_eq!((c.cycles, c.instructions), (31, 16));
+}
+
+/// `spin` of [`a_loop_without_a_bound_is_declined_by_name`], its loop at src/spin.rs:7, its
+/// return at line 9.
+fn spin_with_lines() -> Image {
+    let code = thumb(&[
+        0x6801, // 0x00 ldr r1, [r0]: 2 + 5 (an unknown base: APB1, the slowest)
+        0x2900, // 0x02 cmp r1, #0: 1
+        0xd1fc, // 0x04 bne 0x00: 1, taken + P
+        0x4770, // 0x06 bx lr: 1 + P
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("spin", 0, 8)],
+        "firmware/src/spin.rs",
+        &[(0, 7), (6, 9)],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+#[test]
+fn the_line_table_names_the_loop() {
+    let img = spin_with_lines();
+    assert_eq!(
+        img.line(4),
+        Some(("/work/firmware/src/spin.rs".to_string(), 7))
+    );
+    let reason = bound(&img, "spin", F103_0WS).declined.expect("declined");
+    assert!(reason.contains("spin.rs:7"), "{reason}");
+}
+
+#[test]
+fn a_stated_loop_bound_is_used() {
+    let img = spin_with_lines();
+    let bounds = BoundsFile::parse(
+        r#"{"loops":[{"function":"spin","file":"src/spin.rs","line":7,"bound":10,"reason":"ten polls at most"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "spin", F103_0WS, &bounds).unwrap();
+    // A pass: 7 + 1 + 1 = 9; 9 passes back (9 + P each) and one out (9), then bx lr (4):
+    // 9 × 12 + 9 + 4 = 121 cycles; 10 × 3 + 1 = 31 instructions.
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (121, 31, None)
+    );
+    assert_eq!(b.loops[0].bound, 10);
+    assert_eq!(b.loops[0].line, Some(7));
+    assert_eq!(b.loops[0].source, "bounds file: ten polls at most");
+    // A line that is not the loop's is no bound for it.
+    let elsewhere = BoundsFile::parse(
+        r#"{"loops":[{"function":"spin","file":"src/spin.rs","line":9,"bound":10,"reason":"x"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "spin", F103_0WS, &elsewhere).unwrap();
+    assert!(b.declined.is_some());
+}
+
+#[test]
+fn a_stated_peripheral_wait_is_kept_apart() {
+    let img = spin_with_lines();
+    let bounds = BoundsFile::parse(
+        r#"{"waits":[{"function":"spin","file":"src/spin.rs","line":7,"wait_us":22.5,"source":"one I2C byte at 400 kHz"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "spin", F103_0WS, &bounds).unwrap();
+    // One pass out (9) and the return (4) in cycles; 22.5 µs stated apart; instructions: the pass
+    // (3), at most one a cycle of the wait (22.5 µs × 72 MHz = 1620), the return (1).
+    assert_eq!(
+        (b.cycles, b.bus_wait_ns, b.instructions),
+        (13, 22_500, 1624)
+    );
+    assert!((b.us(F103_0WS) - (13.0 / 72.0 + 22.5)).abs() < 0.01);
+}
+
+#[test]
+fn stated_targets_resolve_an_indirect_call() {
+    let code = thumb(&[
+        0xb580, // 0x00 push {r7, lr}: 3
+        0x4798, // 0x02 blx r3: 1 + P
+        0xbd80, // 0x04 pop {r7, pc}: 1 + 2 + P
+        0xbf00, // 0x06
+        0x2005, // 0x08 movs r0, #5: 1 (one target)
+        0x4770, // 0x0a bx lr: 4
+        0x3001, // 0x0c adds r0, #1: 1 (the other, longer)
+        0x3001, // 0x0e adds r0, #1: 1
+        0x4770, // 0x10 bx lr: 4
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("through_register", 0, 6),
+            // Two functions of one name (as closures' shims are once the hash is gone).
+            Sym::function("handler", 8, 4),
+            Sym::function("handler", 0x0c, 6),
+        ],
+        "firmware/src/call.rs",
+        &[(0, 2), (2, 3), (4, 4)],
+    );
+    let img = Image::parse(&bytes).unwrap();
+    let bounds = BoundsFile::parse(
+        r#"{"indirect":[{"function":"through_register","file":"src/call.rs","line":3,"targets":["handler"],"reason":"both functions named handler"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "through_register", F103_0WS, &bounds).unwrap();
+    // A name stands for every function of it: 3 + 4 + (the longer: 6) + 6 = 19 cycles; 3 + 3
+    // instructions.
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (19, 6, None)
+    );
+    let unknown = BoundsFile::parse(
+        r#"{"indirect":[{"function":"through_register","file":"src/call.rs","line":3,"targets":["gone"],"reason":"x"}]}"#,
+    )
+    .unwrap();
+    assert!(matches!(
+        bound_function(&img, "through_register", F103_0WS, &unknown),
+        Err(Error::Bounds(_))
+    ));
+}
+
+#[test]
+fn an_exclusive_retry_costs_one_pass_and_one_iteration_per_preemption() {
+    let img = image(
+        &[
+            0xe850, 0x1f00, // 0x00 ldrex r1, [r0]: 2 + 5 (an unknown base: APB1)
+            0x3101, // 0x04 adds r1, #1: 1
+            0xe840, 0x1200, // 0x06 strex r2, r1, [r0]: 2 + 5
+            0x2a00, // 0x0a cmp r2, #0: 1
+            0xd1f8, // 0x0c bne 0x00: 1 (+ P back, when the store failed)
+            0x4770, // 0x0e bx lr: 4
+        ],
+        &[Sym::function("fetch_add", 0, 16)],
+    );
+    let b = bound(&img, "fetch_add", F103_0WS);
+    // One pass (17) and the return (4); a preemption inside adds one iteration (17 + P).
+    assert_eq!(
+        (b.cycles, b.instructions, b.declined.as_deref()),
+        (21, 6, None)
+    );
+    assert_eq!((b.retry_cycles, b.retry_instructions), (20, 5));
+    assert!(b.loops[0].source.starts_with("exclusive retry"));
+    // As a hardware task: entry 12, return 10, and the retry it may cause a preempted job (the
+    // largest of any task's: its own here).
+    let rows = bound_tasks(
+        &img,
+        &[Task {
+            name: "h".into(),
+            entry: TaskEntry::Symbol("fetch_add".into()),
+            handler: true,
+        }],
+        F103_0WS,
+        &BoundsFile::default(),
+    );
+    assert_eq!(
+        (
+            rows[0].cycles,
+            rows[0].instructions,
+            rows[0].preemption_retry_cycles
+        ),
+        (21 + 22 + 20, 6 + 5, 20)
+    );
+    // A missing handler is a declined row, not an error.
+    let rows = bound_tasks(
+        &img,
+        &[Task {
+            name: "gone".into(),
+            entry: TaskEntry::Vector(40),
+            handler: true,
+        }],
+        F103_0WS,
+        &BoundsFile::default(),
+    );
+    assert!(rows[0]
+        .declined
+        .as_deref()
+        .is_some_and(|r| r.contains("vector 40")));
+}
+
+#[test]
+fn cbz_has_both_ways_and_each_figure_its_own_longest_path() {
+    let img = image(
+        &[
+            0xb108, // 0x00 cbz r0, 0x06: 1 (+ P taken)
+            0x2001, // 0x02 movs r0, #1: 1
+            0x3002, // 0x04 adds r0, #2: 1
+            0x4770, // 0x06 bx lr: 1 + P
+        ],
+        &[Sym::function("maybe", 0, 8)],
+    );
+    let b = bound(&img, "maybe", F103_0WS);
+    // Taken: 1 + P + 4 = 8 cycles (3 instructions); not taken: 1 + 1 + 1 + 4 = 7 cycles (4
+    // instructions). Each figure is the largest of any path.
+    assert_eq!((b.cycles, b.instructions), (8, 4));
+}
+
+#[test]
+fn a_conditional_tail_call_pays_its_refill() {
+    let img = image(
+        &[
+            0x2800, // 0x00 cmp r0, #0: 1
+            0xd001, // 0x02 beq 0x08 (the other function): 1, + P taken
+            0x4770, // 0x04 bx lr: 4
+            0xbf00, // 0x06
+            0x2005, // 0x08 movs r0, #5: 1
+            0x4770, // 0x0a bx lr: 4
+        ],
+        &[Sym::function("early", 0, 6), Sym::function("late", 8, 4)],
+    );
+    // Into `late`: 1 + 1 + P + (1 + 4) = 10 cycles, 4 instructions.
+    let b = bound(&img, "early", F103_0WS);
+    assert_eq!((b.cycles, b.instructions), (10, 4));
+}
+
+#[test]
+fn a_step_inside_an_it_block_is_no_count() {
+    let img = image(
+        &[
+            0x2300, // 0x00 movs r3, #0
+            0x2900, // 0x02 cmp r1, #0   (the loop)
+            0xbf18, // 0x04 it ne
+            0x3301, // 0x06 addne r3, #1: may not run
+            0x2b08, // 0x08 cmp r3, #8
+            0xd1fa, // 0x0a bne 0x02
+            0x4770, // 0x0c bx lr
+        ],
+        &[Sym::function("maybe_count", 0, 14)],
+    );
+    let reason = bound(&img, "maybe_count", F103_0WS)
+        .declined
+        .expect("declined");
+    assert!(reason.contains("no bound"), "{reason}");
+}

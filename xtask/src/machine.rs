@@ -1,0 +1,331 @@
+//! The build's checks of the machine code and `cargo xtask wcet`: thin callers of the
+//! `machine-code` crate (the panic check, the stack bound, the execution-time bounds), printing
+//! what it finds.
+use std::path::{Path, PathBuf};
+
+use anyhow::{ensure, Context, Result};
+use machine_code::stack::short;
+use machine_code::{BoundsFile, Chip, Image};
+
+/// No image's admission check can reach a panic: it decides on data from the bus. Prints each
+/// image's figures.
+pub fn check_panics(reports: &[crate::elf::SizeReport]) -> Result<()> {
+    let mut failures = Vec::new();
+    for r in reports.iter().filter(|r| r.analysis_symbols > 0) {
+        let found = machine_code::callgraph::admission_panics(&r.elf)?;
+        println!(
+            "{} {}: the admission check ({} functions, {} reachable from them) reaches {} panic path(s)",
+            r.board,
+            r.revision,
+            found.check_functions,
+            found.reachable,
+            found.paths.len()
+        );
+        for path in found.paths {
+            failures.push(format!("{} {}: {}", r.board, r.revision, path.join(" → ")));
+        }
+    }
+    ensure!(
+        failures.is_empty(),
+        "the admission check can panic:\n{}",
+        failures.join("\n")
+    );
+    Ok(())
+}
+
+/// Every image's static stack bound, and the check that its static RAM and that bound fit the
+/// chip's RAM: a stack that cannot overflow into the statics, whatever QEMU's painted stack
+/// happened to see.
+pub fn check_stacks(root: &Path, reports: &[crate::elf::SizeReport]) -> Result<()> {
+    let mut failures = Vec::new();
+    for r in reports {
+        let source = std::fs::read_to_string(root.join(&r.board).join("src").join("main.rs"))
+            .with_context(|| format!("{}'s app source", r.board))?;
+        let app = schedule_analysis::rtic_source::parse_app(&source)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", r.board))?;
+        let mut priorities: Vec<u8> = app
+            .tasks
+            .iter()
+            .map(|t| t.priority)
+            .filter(|&p| p > 0)
+            .collect();
+        priorities.sort_unstable();
+        priorities.dedup();
+        // Each distinct task priority, the monotonic's timer interrupt, HardFault and NMI.
+        let levels = priorities.len() + 3;
+        let board =
+            crate::boards::by_name(&r.board).with_context(|| format!("no board {}", r.board))?;
+        let image = Image::read(&r.elf)?;
+        let found = machine_code::stack::bound_in(&image, levels, board.hard_float)
+            .with_context(|| format!("{}", r.elf.display()))?;
+        let total = r.ram_used + found.bytes;
+        let deepest = machine_code::stack::chain_names(&image, &found.thread.chain);
+        println!(
+            "{} {}: stack ≤ {} B (thread mode {} B, {} nested handlers of {} levels with {}-byte exception frames); static RAM {} B + stack = {} B of {} B; thread mode's deepest: {}",
+            r.board,
+            r.revision,
+            found.bytes,
+            found.thread.bytes,
+            found.handlers.len(),
+            levels,
+            found.exception_frame,
+            r.ram_used,
+            total,
+            r.ram_available,
+            deepest.iter().map(|n| short(n)).collect::<Vec<_>>().join(" → ")
+        );
+        if total > r.ram_available {
+            failures.push(format!(
+                "{} {}: static RAM {} B and a stack bound of {} B exceed the chip's {} B",
+                r.board, r.revision, r.ram_used, found.bytes, r.ram_available
+            ));
+        }
+    }
+    ensure!(failures.is_empty(), "{}", failures.join("\n"));
+    Ok(())
+}
+
+/// Arguments of `cargo xtask wcet`.
+#[derive(clap::Args, Debug)]
+pub struct WcetArgs {
+    /// Boards whose built release images to bound per task (default: all; build them first with
+    /// `cargo xtask build --revision …`).
+    #[arg(conflicts_with = "elf")]
+    pub boards: Vec<String>,
+    /// The robot revision of the images: 1-2, 1-1, or all. Default: each board's newest.
+    #[arg(long, value_name = "1-2|1-1|all", conflicts_with = "elf")]
+    pub revision: Option<String>,
+    /// Any ELF: bound one function of it (with `--function` and `--chip`).
+    #[arg(long, value_name = "FILE", requires_all = ["function", "chip"])]
+    pub elf: Option<PathBuf>,
+    /// The function to bound: its demangled name without hash, or its symbol.
+    #[arg(long, value_name = "SYMBOL")]
+    pub function: Option<String>,
+    /// The chip the ELF runs on.
+    #[arg(long, value_name = "stm32f103|stm32f405")]
+    pub chip: Option<String>,
+    /// Flash wait states (default: the chip's at its board clock: F103 2, F405 5).
+    #[arg(long, value_name = "N")]
+    pub wait_states: Option<u32>,
+    /// A bounds file (JSON; docs/analysis.md) for the loops and calls the machine code cannot
+    /// bound (default with a board: schedule-analysis/models/<board>.bounds.json).
+    #[arg(long, value_name = "FILE")]
+    pub bounds: Option<PathBuf>,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `cargo xtask wcet`: one function of any ELF (`--elf`), else every task of the boards' images.
+pub fn wcet(root: &Path, args: &WcetArgs) -> Result<bool> {
+    if args.elf.is_none() {
+        return wcet_boards(root, args);
+    }
+    wcet_function(args)
+}
+
+/// The chip a board's image runs on, at its board clock's wait states unless overridden.
+fn chip_of(board: &crate::boards::Board, wait_states: Option<u32>) -> Result<Chip> {
+    let name = if board.chip.starts_with("STM32F103") {
+        "stm32f103"
+    } else if board.chip.starts_with("STM32F405") {
+        "stm32f405"
+    } else {
+        anyhow::bail!("{}: no cycle model for {}", board.name, board.chip)
+    };
+    Ok(Chip::parse(name, wait_states)?)
+}
+
+/// One row of the per-task table.
+#[derive(serde::Serialize)]
+struct Row<'a> {
+    board: &'a str,
+    revision: &'a str,
+    task: String,
+    function: Option<String>,
+    cycles: u64,
+    us: f64,
+    instructions: u64,
+    bus_wait_us: f64,
+    loops: Vec<machine_code::LoopInfo>,
+    preemption_retry_cycles: u64,
+    declined: Option<String>,
+}
+
+/// Every task of each board's release image: its hardware tasks (the handler of the interrupt it
+/// binds), its dispatchers (the interrupt handlers that poll the software tasks of one priority,
+/// their bodies inlined into them), and the tasks the bounds file adds (the monotonic's interrupt).
+fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
+    let boards = crate::select_boards(&args.boards)?;
+    let plan = crate::revision::plan(
+        &boards,
+        &crate::revision::Choice::parse(args.revision.as_deref())?,
+    )?;
+    let mut rows = Vec::new();
+    for build in &plan {
+        let board = build.board;
+        let elf = crate::revision::kept_elf(root, build, false);
+        ensure!(
+            elf.exists(),
+            "{} is not built: cargo xtask build {} --revision {}",
+            elf.display(),
+            board.name,
+            build.revision.name
+        );
+        let chip = chip_of(board, args.wait_states)?;
+        let default_bounds = root
+            .join("schedule-analysis")
+            .join("models")
+            .join(format!("{}.bounds.json", board.name));
+        let bounds = match args
+            .bounds
+            .as_ref()
+            .or(Some(&default_bounds).filter(|p| p.exists()))
+        {
+            Some(path) => BoundsFile::read(path)?,
+            None => BoundsFile::default(),
+        };
+        let source = std::fs::read_to_string(root.join(board.name).join("src").join("main.rs"))
+            .with_context(|| format!("{}'s app source", board.name))?;
+        let app = schedule_analysis::rtic_source::parse_app(&source)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", board.name))?;
+        let mut tasks = Vec::new();
+        for task in &app.tasks {
+            if let schedule_analysis::rtic_source::RticTaskKind::Hardware { binds } = &task.kind {
+                tasks.push(machine_code::Task {
+                    name: task.name.clone(),
+                    entry: machine_code::TaskEntry::Symbol(binds.clone()),
+                    handler: true,
+                });
+            }
+        }
+        for dispatcher in &app.dispatchers {
+            tasks.push(machine_code::Task {
+                name: format!("dispatcher {dispatcher}"),
+                entry: machine_code::TaskEntry::Symbol(dispatcher.clone()),
+                handler: true,
+            });
+        }
+        for extra in &bounds.tasks {
+            tasks.push(machine_code::Task {
+                name: extra.name.clone(),
+                entry: machine_code::TaskEntry::Symbol(extra.symbol.clone()),
+                handler: extra.handler,
+            });
+        }
+        let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
+        for t in machine_code::bound_tasks(&image, &tasks, chip, &bounds) {
+            rows.push(Row {
+                board: board.name,
+                revision: build.revision.name,
+                task: t.task,
+                function: t.function,
+                cycles: t.cycles,
+                us: t.us,
+                instructions: t.instructions,
+                bus_wait_us: t.bus_wait_us,
+                loops: t.loops,
+                preemption_retry_cycles: t.preemption_retry_cycles,
+                declined: t.declined,
+            });
+        }
+        if !args.json {
+            println!(
+                "{} {}: {} at {} MHz, {} flash wait states",
+                board.name,
+                build.revision.name,
+                chip.name(),
+                chip.clock_hz() / 1_000_000,
+                chip.wait_states()
+            );
+        }
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        for r in &rows {
+            match &r.declined {
+                Some(reason) => println!(
+                    "{:<13} {:<8} {:<28} DECLINED: {reason}",
+                    r.board, r.revision, r.task
+                ),
+                None => println!(
+                    "{:<13} {:<8} {:<28} ≤ {:>7} cycles {:>9.2} µs {:>6} instructions, bus waits {:.2} µs, {} loop(s)",
+                    r.board,
+                    r.revision,
+                    r.task,
+                    r.cycles,
+                    r.us,
+                    r.instructions,
+                    r.bus_wait_us,
+                    r.loops.len()
+                ),
+            }
+        }
+        let bounded = rows.iter().filter(|r| r.declined.is_none()).count();
+        println!("{bounded} of {} tasks bounded", rows.len());
+    }
+    Ok(true)
+}
+
+/// `cargo xtask wcet --elf FILE --function SYMBOL --chip CHIP`: one function's bound. `Ok(false)`
+/// when it was declined.
+fn wcet_function(args: &WcetArgs) -> Result<bool> {
+    let (Some(elf), Some(function), Some(chip)) = (&args.elf, &args.function, &args.chip) else {
+        anyhow::bail!(
+            "cargo xtask wcet --elf FILE needs --function SYMBOL --chip stm32f103|stm32f405"
+        );
+    };
+    let chip = Chip::parse(chip, args.wait_states)?;
+    let bounds = match &args.bounds {
+        Some(path) => BoundsFile::read(path)?,
+        None => BoundsFile::default(),
+    };
+    let image = Image::read(elf).with_context(|| format!("{}", elf.display()))?;
+    let bound = machine_code::bound_function(&image, function, chip, &bounds)
+        .with_context(|| format!("{}", elf.display()))?;
+    let declined = bound.declined.is_some();
+    if args.json {
+        let json = serde_json::json!({
+            "elf": elf,
+            "function": function,
+            "chip": chip.name(),
+            "clock_hz": chip.clock_hz(),
+            "wait_states": chip.wait_states(),
+            "cycles": bound.cycles,
+            "us": if declined { None } else { Some(bound.us(chip)) },
+            "instructions": bound.instructions,
+            "bus_wait_us": bound.bus_wait_us(),
+            "loops": bound.loops,
+            "retry_cycles": bound.retry_cycles,
+            "retry_instructions": bound.retry_instructions,
+            "declined": bound.declined,
+        });
+        println!("{}", serde_json::to_string_pretty(&json)?);
+    } else {
+        match &bound.declined {
+            Some(reason) => println!("{function}: DECLINED: {reason}"),
+            None => println!(
+                "{function}: ≤ {} cycles ({:.2} µs on {} at {} MHz, {} wait states), ≤ {} instructions, stated bus waits {:.2} µs",
+                bound.cycles,
+                bound.us(chip),
+                chip.name(),
+                chip.clock_hz() / 1_000_000,
+                chip.wait_states(),
+                bound.instructions,
+                bound.bus_wait_us()
+            ),
+        }
+        for l in &bound.loops {
+            println!(
+                "  loop in {} at {}:{}: ≤ {} ({})",
+                short(&l.function),
+                l.file.as_deref().unwrap_or("?"),
+                l.line.map_or_else(|| "?".to_string(), |n| n.to_string()),
+                l.bound,
+                l.source
+            );
+        }
+    }
+    Ok(!declined)
+}
