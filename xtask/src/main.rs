@@ -26,6 +26,7 @@ mod robot;
 mod scenarios;
 mod smoke;
 mod stack;
+mod wcet_gate;
 
 use boards::{Board, BOARDS};
 
@@ -573,6 +574,8 @@ fn test(root: &Path) -> Result<()> {
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
     callgraph::check_images(&reports)?;
     stack::check_images(root, &reports)?;
+    // The generated bounds files must be computed from these images (docs/analysis.md).
+    wcet_gate::check_bounds_current(root)?;
     run_scenarios(root, &every)?;
     // The whole robot on one bus (issue 23), with its bus report against the analysis.
     robot::scenarios::run_all(root)?;

@@ -96,6 +96,9 @@ fn build_board(
     firmware: Firmware,
     built: &mut Built,
 ) -> Result<BoardModel, BuildError> {
+    // The machine-code bounds replace the stated budgets (before any QEMU scaling: they are the chip's).
+    let (bounded_timing, budgets) = super::bounded::apply(root, file, timing, &mut built.warnings)?;
+    let timing = &bounded_timing;
     let scaled;
     let timing = match (
         firmware,
@@ -129,10 +132,13 @@ fn build_board(
     let mut all = timer_jobs.jobs;
     all.extend(tasks);
     let source = built.sources.last().cloned();
-    built.sources.push(budgets_line(timing, &measured));
-    if let Some(line) = admission_line(timing, &measured) {
+    built
+        .sources
+        .push(super::bounded::budgets_line(&budgets, &measured));
+    if let Some(line) = admission_line(timing, &measured, &budgets) {
         built.sources.push(line);
     }
+    built.budgets.push(budgets);
     let overheads = build_overheads(file, timing, firmware, &mut all, built)?;
     Ok(BoardModel {
         name: timing.board.clone(),
@@ -434,30 +440,53 @@ fn idle_sections(
 }
 
 /// The source line of the board's on-chip admission task (`admit_requests`, docs/analysis.md "The admission
-/// task"): the CPU share its budget reserves, and what the budget rests on.
-fn admission_line(timing: &Timing, measured: &[String]) -> Option<String> {
+/// task"): the CPU share its budget reserves, what the budget rests on, and — beside the costliest step measured —
+/// the machine-code bound from its iteration caps, saying which of the two the analysis uses.
+fn admission_line(
+    timing: &Timing,
+    measured: &[String],
+    budgets: &super::BoardBudgets,
+) -> Option<String> {
     let task = timing.tasks.get("admit_requests")?;
     let wcet = task.wcet_us?;
     let period = match task.arrival {
         Some(Arrival::SporadicUs(p)) | Some(Arrival::PeriodicUs(p)) if p > 0.0 => p,
         _ => return None,
     };
-    let basis = if measured.iter().any(|m| m == "admit_requests") {
-        "a measured budget".to_string()
-    } else if let Some(step) = &task.worst_step {
+    let step = task.worst_step.as_ref().map(|step| {
         format!(
-            "one step's budget, an estimate: the costliest step measured, {} instructions of its own ({} fixed-point iterations; {}), at an assumed {} cycles per instruction and {} MHz = {:.0} µs, the budget {:.0} % above it; not a bench measurement",
+            "the costliest step measured, {} instructions of its own ({} fixed-point iterations; {}), at an assumed {} cycles per instruction and {} MHz = {:.0} µs",
             step.instructions,
             step.iterations,
             step.measured_in,
             step.cycles_per_instruction,
             step.clock_mhz,
             step.on_chip_us(),
-            100.0 * (wcet / step.on_chip_us() - 1.0)
         )
-    } else {
-        "one step's budget, an estimate (no measured step recorded in the timing file), not a bench measurement"
-            .to_string()
+    });
+    let basis = match budgets.rows.get("admit_requests") {
+        Some(super::BudgetFrom::Bound { us, stated_us, .. }) => format!(
+            "one step's bound from the machine code (its iteration caps): {us:.0} µs; beside it the stated budget {stated_us:.0} µs{}; the analysis uses the bound",
+            step.map(|s| format!(" rests on {s}")).unwrap_or_default()
+        ),
+        other => {
+            let why = match other {
+                Some(super::BudgetFrom::Stated { why }) => why.clone(),
+                _ => "no bound".to_string(),
+            };
+            let stated = if measured.iter().any(|m| m.starts_with("admit_requests ")) {
+                "a measured budget".to_string()
+            } else if let (Some(s), Some(st)) = (&step, &task.worst_step) {
+                format!(
+                    "one step's budget, an estimate: {s}, the budget {:.0} % above it; not a bench measurement",
+                    100.0 * (wcet / st.on_chip_us() - 1.0)
+                )
+            } else {
+                "one step's budget, an estimate (no measured step recorded in the timing file), not a bench measurement"
+                    .to_string()
+            };
+            format!("{stated}; the bound from its iteration caps is not used ({why}): the analysis uses the stated budget")
+        }
     };
     Some(format!(
         "{}: admission reserves {:.1} % of the CPU (admit_requests: {:.0} µs per {:.0} µs), {basis}",
@@ -466,24 +495,6 @@ fn admission_line(timing: &Timing, measured: &[String]) -> Option<String> {
         wcet,
         period
     ))
-}
-
-/// The source line saying which budgets are measured.
-fn budgets_line(timing: &Timing, measured: &[String]) -> String {
-    let budgets = timing.tasks.len() + timing.topics.len();
-    if measured.is_empty() {
-        format!(
-            "{}: budgets are estimates ({budgets}; none measured)",
-            timing.board
-        )
-    } else {
-        format!(
-            "{}: measured budgets for {} ({} of {budgets}), the rest estimates",
-            timing.board,
-            measured.join(", "),
-            measured.len()
-        )
-    }
 }
 
 /// The board's overheads in the firmware build `firmware`: the task trace's start and end records where every
@@ -496,13 +507,12 @@ fn build_overheads(
     tasks: &mut Vec<TaskModel>,
     built: &mut Built,
 ) -> Result<Overheads, BuildError> {
-    let mut overheads = timing.overheads;
+    let overheads = timing.overheads;
     match (&timing.trace, firmware) {
         (Some(trace), Firmware::Traced) => {
-            overheads.isr_entry_us += trace.per_job_us / 2.0;
-            overheads.isr_exit_us += trace.per_job_us / 2.0;
+            charge_trace(tasks, trace.per_job_us);
             built.sources.push(format!(
-                "{}: analysed build has the task trace (feature `{}`, {} µs per job in the overheads)",
+                "{}: analysed build has the task trace (feature `{}`, {} µs per traced job; the monotonic's interrupt writes no record)",
                 timing.board, trace.feature, trace.per_job_us
             ));
             // The transmit task writes a `frame-acked` record per completed mailbox: one record
@@ -525,10 +535,9 @@ fn build_overheads(
                 .qemu
                 .as_ref()
                 .map_or((trace.per_job_us, 1.0), |q| (q.per_job_us, q.budget_scale));
-            overheads.isr_entry_us += q.0 / 2.0;
-            overheads.isr_exit_us += q.0 / 2.0;
+            charge_trace(tasks, q.0);
             built.sources.push(format!(
-                "{}: analysed build is the traced QEMU build (budgets ×{}, {} µs per job for the trace)",
+                "{}: analysed build is the traced QEMU build (budgets ×{}, {} µs per traced job for the trace; the monotonic's interrupt writes no record)",
                 timing.board, q.1, q.0
             ));
         }
@@ -556,6 +565,18 @@ fn build_overheads(
         }
     }
     Ok(overheads)
+}
+
+/// Adds the task trace's start and end records, `per_job_us`, to every job that writes them: each job of an
+/// RTIC task (hardware or software: one guard line per task, docs/bench.md). The monotonic's timer interrupt is
+/// no traced task (`monotonic[…]` jobs write no record), and a `plain` job has no overheads at all.
+fn charge_trace(tasks: &mut [TaskModel], per_job_us: f64) {
+    for t in tasks
+        .iter_mut()
+        .filter(|t| t.kind != TaskKind::Plain && t.job_of.as_deref() != Some("monotonic"))
+    {
+        t.wcet_us += per_job_us;
+    }
 }
 
 /// The budget a job gets: the measured one when the timing file has it (noted in `measured`), else

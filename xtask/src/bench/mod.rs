@@ -10,6 +10,7 @@
 pub mod calibrate;
 pub mod capture;
 pub mod live;
+pub mod machine;
 pub mod report;
 pub mod timeline;
 
@@ -138,6 +139,11 @@ pub struct Bench {
     pub tasks: Vec<TaskRow>,
     /// Per topic.
     pub topics: Vec<TopicRow>,
+    /// Which machine-code bounds the observed executions are held to (the board's generated bounds file), or
+    /// why none.
+    pub machine_bounds: String,
+    /// Per task with a bound: the largest execution observed against it.
+    pub machine: Vec<machine::MachineRow>,
 }
 
 /// One task's figures.
@@ -202,33 +208,58 @@ pub struct TopicRow {
 }
 
 impl Bench {
+    /// The jobs above their machine-code bound, one line each.
+    pub fn bound_failures(&self) -> Vec<String> {
+        self.machine
+            .iter()
+            .filter(|m| m.verdict == machine::EXCEEDS)
+            .map(|m| {
+                format!(
+                    "{}/{}: {} {} observed ({} of them the trace records) > bound {} {}",
+                    self.board,
+                    m.task,
+                    m.observed,
+                    m.unit,
+                    m.trace_allowance,
+                    m.bound.unwrap_or(0),
+                    m.unit
+                )
+            })
+            .collect()
+    }
+
     /// Whether nothing exceeded its analysed bound.
     pub fn within_bounds(&self) -> bool {
         self.failures().is_empty()
     }
 
-    /// What exceeded its bound, one line each.
+    /// What exceeded its bound, and what the analysis could not bound (nothing to check an observation
+    /// against is a failure, not a pass), one line each.
     pub fn failures(&self) -> Vec<String> {
-        let mut out: Vec<String> = self
-            .tasks
-            .iter()
-            .filter(|t| t.verdict.starts_with("EXCEEDS"))
-            .map(|t| {
-                format!(
+        let mut out: Vec<String> = Vec::new();
+        for t in &self.tasks {
+            if t.verdict.starts_with("EXCEEDS") {
+                out.push(format!(
                     "{}/{}: response {:.1} µs > analysed WCRT {:.1} µs",
                     self.board,
                     t.task,
                     t.response_max_us,
                     t.wcrt_us.unwrap_or(0.0)
-                )
-            })
-            .collect();
+                ));
+            } else if t.verdict == UNBOUNDED {
+                out.push(format!(
+                    "{}/{}: the analysis has no bound for it (its busy window never closes): {} jobs observed, nothing to check them against",
+                    self.board, t.task, t.jobs
+                ));
+            }
+        }
         out.extend(
             self.topics
                 .iter()
-                .filter(|t| t.verdict.starts_with("EXCEEDS"))
+                .filter(|t| t.verdict.starts_with("EXCEEDS") || t.verdict == UNBOUNDED)
                 .map(|t| format!("{}/{}: {}", self.board, t.topic, t.verdict)),
         );
+        out.extend(self.bound_failures());
         out
     }
 }
@@ -279,6 +310,57 @@ fn seen_publishers(capture: &Capture) -> Vec<(amiro_can::Topic, u8, Option<u64>,
 
 const LEVELS: [&str; 4] = ["urgent", "high", "medium", "low"];
 
+/// The verdict of a task or topic the analysis has but cannot bound (`--check` fails on it).
+pub const UNBOUNDED: &str = "analysis: unbounded";
+
+/// The scenario the bench analyses for what a capture shows: each topic at the level and period it was seen
+/// at; a topic sampled once (no period to measure) is a one-shot, analysed as the boards decide one (a sample
+/// every `ONE_SHOT_INTERVAL_MS` at its level).
+fn seen_scenario(seen: &[(amiro_can::Topic, u8, Option<u64>, usize)]) -> serde_json::Value {
+    let (mut publishers, mut one_shots) = (Vec::new(), Vec::new());
+    for (topic, level, period, _) in seen {
+        let priority = LEVELS[usize::from(*level)];
+        match period {
+            Some(period) => publishers.push(serde_json::json!({
+                "topic": topic.name(), "priority": priority, "period_us": period,
+            })),
+            None => one_shots.push(serde_json::json!({
+                "topic": topic.name(), "priority": priority,
+            })),
+        }
+    }
+    serde_json::json!({
+        "name": "the publishers the capture shows",
+        "description": "written by cargo xtask bench",
+        "publishers": publishers,
+        "one_shots": one_shots,
+    })
+}
+
+/// The analysis of the scenario at `path` for the firmware build `firmware`, from `timings`.
+fn analyse_scenario(
+    root: &Path,
+    path: &Path,
+    timings: &[PathBuf],
+    firmware: scenario::Firmware,
+) -> Result<Analysis> {
+    let built = scenario::build_for(root, path, timings, firmware)
+        .map_err(|e| anyhow!("{e}"))
+        .with_context(|| format!("building the analysis model from {}", path.display()))?;
+    let frame_cost = built.frame_cost;
+    let system = built
+        .model
+        .validate()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    Ok(analyse(
+        &system,
+        &Options {
+            frame_cost,
+            horizon: None,
+        },
+    ))
+}
+
 /// The analysis for what the capture shows (or for `scenario`).
 fn analysis_for(
     root: &Path,
@@ -292,28 +374,9 @@ fn analysis_for(
         None => {
             let dir = crate::target_dir(root).join("bench");
             std::fs::create_dir_all(&dir)?;
-            // A topic sampled once (no period to measure) is a one-shot: analysed as the boards
-            // decide one, a sample every `ONE_SHOT_INTERVAL_MS` at its level.
-            let (mut publishers, mut one_shots) = (Vec::new(), Vec::new());
-            for (topic, level, period, _) in seen_publishers(capture) {
-                let priority = LEVELS[usize::from(level)];
-                match period {
-                    Some(period) => publishers.push(serde_json::json!({
-                        "topic": topic.name(), "priority": priority, "period_us": period,
-                    })),
-                    None => one_shots.push(serde_json::json!({
-                        "topic": topic.name(), "priority": priority,
-                    })),
-                }
-            }
             let name = format!("bench-{}-{}", board.name, std::process::id());
             let path = dir.join(format!("{name}.scenario.json"));
-            let json = serde_json::json!({
-                "name": "the publishers the capture shows",
-                "description": "written by cargo xtask bench",
-                "publishers": publishers,
-                "one_shots": one_shots,
-            });
+            let json = seen_scenario(&seen_publishers(capture));
             std::fs::write(&path, serde_json::to_string_pretty(&json)?)?;
             path
         }
@@ -324,21 +387,7 @@ fn analysis_for(
     } else {
         scenario::Firmware::Traced
     };
-    let built = scenario::build_for(root, &path, &scenario::timing_files(root), firmware)
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("building the analysis model from {}", path.display()))?;
-    let frame_cost = built.frame_cost;
-    let system = built
-        .model
-        .validate()
-        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let analysis = analyse(
-        &system,
-        &Options {
-            frame_cost,
-            horizon: None,
-        },
-    );
+    let analysis = analyse_scenario(root, &path, &scenario::timing_files(root), firmware)?;
     let label = match scenario_name {
         Some(name) => format!("scenario {name}"),
         None => "the publishers the capture shows, at the periods and levels seen".to_string(),
@@ -402,7 +451,7 @@ pub fn measure(
         let bound = analysed(name);
         let verdict = match bound {
             None => "not analysed".to_string(),
-            Some((None, _)) => "analysis: unbounded".to_string(),
+            Some((None, _)) => UNBOUNDED.to_string(),
             Some((Some(wcrt), _)) if response_max > wcrt => "EXCEEDS WCRT".to_string(),
             Some(_) => "ok".to_string(),
         };
@@ -420,6 +469,34 @@ pub fn measure(
             verdict,
         });
     }
+    // The machine-code bounds of the release image, against the largest execution of each task.
+    let board_bounds = scenario::board_bounds(root, &scenario::timing_files(root), board.name)
+        .map_err(|e| anyhow!("{e}"))?;
+    let (machine_bounds, machine) = match &board_bounds {
+        Some(b) => {
+            let executions: Vec<(String, f64)> = tasks
+                .iter()
+                .map(|t: &TaskRow| (t.task.clone(), t.exec_max_us))
+                .collect();
+            let rows = machine::rows(b, &executions, board_result, qemu, capture.clock_hz);
+            let line = match &b.bounds {
+                Some(f) => format!(
+                    "{} ({}, {} MHz, {} wait states; image code SHA-256 {}…)",
+                    b.file,
+                    f.chip.short(),
+                    f.clock_hz as f64 / 1e6,
+                    f.wait_states,
+                    &f.image.code_sha256[..12]
+                ),
+                None => format!("none ({} not generated yet)", b.file),
+            };
+            (line, rows)
+        }
+        None => (
+            "none (no timing file for the board)".to_string(),
+            Vec::new(),
+        ),
+    };
     let mut topics = Vec::new();
     for (topic, level, period, count) in seen_publishers(capture) {
         let samples: Vec<_> = capture
@@ -440,10 +517,8 @@ pub fn measure(
         let bus_max = bus.iter().max().copied().map(us);
         let jitter = bus_max.map(|m| m - us(bus.iter().min().copied().unwrap_or(0)));
         let job = format!("publish_{}[{}]", LEVELS[usize::from(level)], topic.name());
-        let job_wcrt = board_result
-            .and_then(|b| b.tasks.iter().find(|t| t.name == job))
-            .and_then(|t| t.wcrt())
-            .map(|t| t.as_us_f64());
+        let job_result = board_result.and_then(|b| b.tasks.iter().find(|t| t.name == job));
+        let job_wcrt = job_result.and_then(|t| t.wcrt()).map(|t| t.as_us_f64());
         let id = 0x400 | u32::from(level) << 8 | u32::from(topic.byte());
         let message = analysis
             .bus
@@ -470,8 +545,13 @@ pub fn measure(
                 problems.push(format!("delivery jitter {j:.1} µs > analysed {b:.1} µs"));
             }
         }
+        // A job or message the analysis has but cannot bound.
+        let unbounded = (job_result.is_some() && job_wcrt.is_none())
+            || (message.is_some() && message_wcrt.is_none());
         let verdict = if !problems.is_empty() {
             format!("EXCEEDS: {}", problems.join("; "))
+        } else if unbounded {
+            UNBOUNDED.to_string()
         } else if job_wcrt.is_none() && message_wcrt.is_none() {
             "not analysed".to_string()
         } else {
@@ -506,6 +586,8 @@ pub fn measure(
         span_us: us(capture.end_ns),
         tasks,
         topics,
+        machine_bounds,
+        machine,
     })
 }
 
@@ -804,4 +886,55 @@ pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use amiro_can::Topic;
+
+    /// What the QEMU capture of `diwheeldrive/qemu/admission-one-shots.log` on a 1-1 robot shows: the thesis's
+    /// magnetometer-x every 900 µs at medium, the accelerometer every 5 ms at low and one gyroscope sample at low
+    /// (the floor one-shot was refused: no sample).
+    fn thesis_one_shots(root: &Path) -> PathBuf {
+        let seen = [
+            (Topic::MagnetometerX, 2, Some(900), 189),
+            (Topic::Accelerometer, 3, Some(5000), 12),
+            (Topic::Gyroscope, 3, None, 1),
+        ];
+        let dir = std::env::temp_dir().join(format!("bench-one-model-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("seen.scenario.json");
+        std::fs::write(&path, seen_scenario(&seen).to_string()).unwrap();
+        let _ = root;
+        path
+    }
+
+    #[test]
+    fn what_the_board_admitted_the_bench_bounds() {
+        let root = crate::workspace_root();
+        let path = thesis_one_shots(&root);
+        let timings = scenario::timing_files_for(&root, Some("1-1"));
+        // The board's own admission decides on the production model: it admits the set.
+        let production =
+            analyse_scenario(&root, &path, &timings, scenario::Firmware::Production).unwrap();
+        assert!(production.all_ok(), "the board admitted this set");
+        // The bench measures the traced QEMU build: every task of the board must have a bound there too.
+        let traced = analyse_scenario(&root, &path, &timings, scenario::Firmware::Qemu).unwrap();
+        let board = traced
+            .boards
+            .iter()
+            .find(|b| b.name == "diwheeldrive")
+            .unwrap();
+        let unbounded: Vec<&str> = board
+            .tasks
+            .iter()
+            .filter(|t| t.wcrt().is_none())
+            .map(|t| t.name.as_str())
+            .collect();
+        assert!(
+            unbounded.is_empty(),
+            "unbounded in the bench's model: {unbounded:?}"
+        );
+    }
 }
