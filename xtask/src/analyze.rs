@@ -99,11 +99,17 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
                 args.frame_cost.unwrap_or(built.frame_cost),
             )?);
             let title = built.model.name.clone().unwrap_or_else(|| name.to_string());
+            // A set the machine-code bounds break: which bound, and that the analysis keeps it.
+            let mut warnings = built.warnings.clone();
+            warnings.extend(scenario::breaking_bounds(
+                &built,
+                args.frame_cost.unwrap_or(built.frame_cost),
+            ));
             let parts = (
                 built.model.clone(),
                 title,
                 built.sources.clone(),
-                built.warnings.clone(),
+                warnings,
                 "the built model".to_string(),
             );
             from_timing = Some(built);

@@ -73,17 +73,26 @@ impl BoardBudgets {
     /// (`publish_high[gyroscope]`) by its topic's row, a timer job by the monotonic's, a QEMU transmit job by its
     /// task's.
     pub fn of_job(&self, task: &str) -> Option<&BudgetFrom> {
-        if let Some(from) = self.rows.get(task) {
-            return Some(from);
+        self.rows.get(self.row_of_job(task)?)
+    }
+
+    /// The row whose budget the model's job `task` has ([`BoardBudgets::of_job`]).
+    pub fn row_of_job(&self, task: &str) -> Option<&str> {
+        if let Some((row, _)) = self.rows.get_key_value(task) {
+            return Some(row);
         }
         if task.starts_with("monotonic[") {
-            return self.rows.get("monotonic");
+            return self
+                .rows
+                .get_key_value("monotonic")
+                .map(|(r, _)| r.as_str());
         }
         let (base, rest) = task.split_once('[')?;
         let inner = rest.strip_suffix(']')?;
         self.rows
-            .get(&bounds::publisher_row(inner))
-            .or_else(|| self.rows.get(base))
+            .get_key_value(&bounds::publisher_row(inner))
+            .or_else(|| self.rows.get_key_value(base))
+            .map(|(r, _)| r.as_str())
     }
 }
 
@@ -304,4 +313,85 @@ pub(super) fn budgets_line(b: &BoardBudgets, measured: &[String]) -> String {
         b.board,
         total - bounded
     )
+}
+
+/// Which machine-code bounds break a set that fails: for each bound above the timing file's stated budget, the set
+/// analysed again with that one bound replaced by the stated budget (every job whose budget is that row's); a
+/// bound whose replacement makes everything pass breaks the set alone. When none does alone, but all of them
+/// replaced together pass, they break it together. One line each, for the report's warnings; empty when the set
+/// passes, when no bound is above its estimate, or when the set fails with the estimates too.
+pub fn breaking_bounds(
+    built: &super::Built,
+    frame_cost: crate::model::FrameCostSpec,
+) -> Vec<String> {
+    use crate::analysis::{analyse, Options};
+    let passes = |model: &crate::model::Model| {
+        model.validate().is_ok_and(|system| {
+            analyse(
+                &system,
+                &Options {
+                    frame_cost,
+                    horizon: None,
+                },
+            )
+            .all_ok()
+        })
+    };
+    if passes(&built.model) {
+        return Vec::new();
+    }
+    // (board, row, bound, stated) of every bound above its estimate.
+    let above: Vec<(&str, &str, f64, f64)> = built
+        .budgets
+        .iter()
+        .flat_map(|b| {
+            b.rows.iter().filter_map(move |(row, from)| match from {
+                BudgetFrom::Bound { us, stated_us, .. } if us > stated_us => {
+                    Some((b.board.as_str(), row.as_str(), *us, *stated_us))
+                }
+                _ => None,
+            })
+        })
+        .collect();
+    let reverted = |which: &[(&str, &str, f64, f64)]| {
+        let mut model = built.model.clone();
+        for board in &mut model.boards {
+            let Some(budgets) = built.budgets.iter().find(|b| b.board == board.name) else {
+                continue;
+            };
+            for t in &mut board.tasks {
+                let row = budgets.row_of_job(&t.name);
+                if let Some((_, _, us, stated)) = which
+                    .iter()
+                    .find(|(b, r, _, _)| *b == board.name && Some(*r) == row)
+                {
+                    t.wcet_us += stated - us;
+                }
+            }
+        }
+        model
+    };
+    let describe = |(board, row, us, stated): &(&str, &str, f64, f64)| {
+        format!("{board}/{row} (bound {us} µs from the machine code, stated {stated} µs)")
+    };
+    let alone: Vec<String> = above
+        .iter()
+        .filter(|one| passes(&reverted(std::slice::from_ref(*one))))
+        .map(|one| {
+            format!(
+                "the bound of {} breaks the set: with its stated budget everything passes; the analysis keeps the bound",
+                describe(one)
+            )
+        })
+        .collect();
+    if !alone.is_empty() {
+        return alone;
+    }
+    if !above.is_empty() && passes(&reverted(&above)) {
+        return vec![format!(
+            "the bounds of {} break the set together: with their stated budgets everything passes; the analysis keeps the bounds",
+            above.iter().map(describe).collect::<Vec<_>>().join(", ")
+        )];
+    }
+    Vec::new()
 }

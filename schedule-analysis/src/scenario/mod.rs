@@ -35,7 +35,7 @@ mod messages;
 mod plan;
 mod qemu;
 
-pub use bounded::{bounds_file, BoardBudgets, BudgetFrom};
+pub use bounded::{bounds_file, breaking_bounds, BoardBudgets, BudgetFrom};
 pub use files::{
     AppSource, Arrival, Measured, Monotonic, QemuBuild, QemuTransmit, Scenario, ScenarioCommand,
     ScenarioOneShot, ScenarioPublisher, Timing, TimingTask, TopicTiming, TraceCost, WorstStep,
