@@ -30,7 +30,8 @@ pub struct MachineRow {
     pub trace_allowance: u64,
     /// The bound, in `unit` (`None`: declined).
     pub bound: Option<u64>,
-    /// `observed / bound`.
+    /// `(observed − trace_allowance) / bound`: at most 1 within the bound; below 0.5 the bound is more than twice
+    /// what ran.
     pub ratio: Option<f64>,
     /// `ok`, `EXCEEDS BOUND`, or `declined: …`.
     pub verdict: String,
@@ -112,8 +113,9 @@ pub fn rows(
         let observed = (exec_max_us * per_us).round() as u64;
         let (bound, ratio, verdict) = match bound {
             Ok(b) => {
-                let ratio = (b > 0).then(|| observed as f64 / b as f64);
-                let verdict = if observed.saturating_sub(trace_allowance) > b {
+                let own = observed.saturating_sub(trace_allowance);
+                let ratio = (b > 0).then(|| own as f64 / b as f64);
+                let verdict = if own > b {
                     EXCEEDS.to_string()
                 } else {
                     "ok".to_string()
@@ -192,7 +194,7 @@ mod tests {
         assert_eq!(rows[0].trace_allowance, 1500);
         assert_eq!(rows[0].bound, Some(500));
         assert_eq!(rows[0].verdict, "ok");
-        assert_eq!(rows[0].ratio, Some(4.0));
+        assert_eq!(rows[0].ratio, Some(1.0));
         assert!(rows[1].verdict.starts_with("declined: a loop"));
         // One instruction more than the bound and the trace: above it.
         let over = super::rows(
