@@ -27,7 +27,9 @@ pub(super) struct Ends {
     pub(super) receivers: BTreeMap<String, String>,
 }
 
-/// Every board of the timing files, with the scenario's topics it owns, into `built.model.boards`.
+/// Every board of the timing files, with the scenario's topics it owns, into `built.model.boards`; `received`: the
+/// run's received frames no closer than this ([`super::build_for_run`]).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn build_boards(
     root: &Path,
     timings: &[(String, Timing)],
@@ -35,6 +37,7 @@ pub(super) fn build_boards(
     scenario: &Scenario,
     bit: Time,
     firmware: Firmware,
+    received: Option<Time>,
     built: &mut Built,
 ) -> Result<Ends, BuildError> {
     let mut ends = Ends::default();
@@ -49,8 +52,10 @@ pub(super) fn build_boards(
             .map(|p| bit.times(u64::from(can::frame_bits_best(p.info.dlc, false))))
             .min()
             .unwrap_or_else(|| can::shortest_frame_time(bit));
+        // A run whose received frames are known (a QEMU stimulus) receives them no closer than they come.
+        let bus_frame = can::shortest_frame_time(bit);
         let arrivals = Arrivals {
-            bus_frame: can::shortest_frame_time(bit),
+            bus_frame: received.map_or(bus_frame, |gap| gap.max(bus_frame)),
             own_frame,
         };
         let board = build_board(
@@ -507,12 +512,13 @@ fn build_overheads(
     tasks: &mut Vec<TaskModel>,
     built: &mut Built,
 ) -> Result<Overheads, BuildError> {
-    let overheads = timing.overheads;
+    let mut overheads = timing.overheads;
     match (&timing.trace, firmware) {
         (Some(trace), Firmware::Traced) => {
-            charge_trace(tasks, trace.per_job_us);
+            overheads.isr_entry_us += trace.per_job_us / 2.0;
+            overheads.isr_exit_us += trace.per_job_us / 2.0;
             built.sources.push(format!(
-                "{}: analysed build has the task trace (feature `{}`, {} µs per traced job; the monotonic's interrupt writes no record)",
+                "{}: analysed build has the task trace (feature `{}`, {} µs per job in the overheads)",
                 timing.board, trace.feature, trace.per_job_us
             ));
             // The transmit task writes a `frame-acked` record per completed mailbox: one record
@@ -535,9 +541,10 @@ fn build_overheads(
                 .qemu
                 .as_ref()
                 .map_or((trace.per_job_us, 1.0), |q| (q.per_job_us, q.budget_scale));
-            charge_trace(tasks, q.0);
+            overheads.isr_entry_us += q.0 / 2.0;
+            overheads.isr_exit_us += q.0 / 2.0;
             built.sources.push(format!(
-                "{}: analysed build is the traced QEMU build (budgets ×{}, {} µs per traced job for the trace; the monotonic's interrupt writes no record)",
+                "{}: analysed build is the traced QEMU build (budgets ×{}, {} µs per job for the trace)",
                 timing.board, q.1, q.0
             ));
         }
@@ -565,18 +572,6 @@ fn build_overheads(
         }
     }
     Ok(overheads)
-}
-
-/// Adds the task trace's start and end records, `per_job_us`, to every job that writes them: each job of an
-/// RTIC task (hardware or software: one guard line per task, docs/bench.md). The monotonic's timer interrupt is
-/// no traced task (`monotonic[…]` jobs write no record), and a `plain` job has no overheads at all.
-fn charge_trace(tasks: &mut [TaskModel], per_job_us: f64) {
-    for t in tasks
-        .iter_mut()
-        .filter(|t| t.kind != TaskKind::Plain && t.job_of.as_deref() != Some("monotonic"))
-    {
-        t.wcet_us += per_job_us;
-    }
 }
 
 /// The budget a job gets: the measured one when the timing file has it (noted in `measured`), else

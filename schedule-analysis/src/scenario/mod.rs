@@ -165,6 +165,25 @@ pub fn board_bounds(
     Ok(None)
 }
 
+/// The tasks of `board` among `timing_paths` that arrive once per frame on the bus (`"arrival": "bus_frame"`: the
+/// receive interrupt), whose arrivals [`build_for_run`] takes from a run's received frames.
+pub fn bus_frame_tasks(
+    root: &Path,
+    timing_paths: &[PathBuf],
+    board: &str,
+) -> Result<Vec<String>, BuildError> {
+    Ok(plan::read_timings(root, timing_paths)?
+        .into_iter()
+        .filter(|(_, t)| t.board == board)
+        .flat_map(|(_, t)| {
+            t.tasks
+                .into_iter()
+                .filter(|(_, task)| matches!(task.arrival, Some(Arrival::BusFrame)))
+                .map(|(name, _)| name)
+        })
+        .collect())
+}
+
 /// Finds a scenario by path, or by name in the models folder (`thesis-demo` → `models/thesis-demo.scenario.json`).
 pub fn find_scenario(root: &Path, name_or_path: &str) -> PathBuf {
     let direct = PathBuf::from(name_or_path);
@@ -274,6 +293,21 @@ pub fn build_for(
     timing_paths: &[PathBuf],
     firmware: Firmware,
 ) -> Result<Built, BuildError> {
+    build_for_run(root, scenario_path, timing_paths, firmware, None)
+}
+
+/// [`build_for`] for one run whose received frames are known: `received_gap_us` is the shortest time between two
+/// frames the boards receive in it (a QEMU run's stimulus, which is the only source of received frames there), and
+/// a task that arrives once per frame on the bus (`"bus_frame"`: the receive interrupt) arrives no more often than
+/// that — never more often than the shortest frame on the bus either. `None`: a command flood at full bus rate, as
+/// the report assumes.
+pub fn build_for_run(
+    root: &Path,
+    scenario_path: &Path,
+    timing_paths: &[PathBuf],
+    firmware: Firmware,
+    received_gap_us: Option<f64>,
+) -> Result<Built, BuildError> {
     let scenario_file = display(root, scenario_path);
     let scenario: Scenario = read_json(root, scenario_path)?;
     let (scenario, one_shot_notes) = plan::one_shots_as_publishers(scenario, &scenario_file)?;
@@ -302,6 +336,7 @@ pub fn build_for(
         &scenario,
         bit,
         firmware,
+        received_gap_us.map(crate::time::Time::from_us_down),
         &mut built,
     )?;
     let messages = messages::messages(&scenario, &plan, &ends, &mut built.warnings);

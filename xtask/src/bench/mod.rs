@@ -15,6 +15,7 @@ pub mod report;
 pub mod timeline;
 
 use std::collections::BTreeMap;
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -144,6 +145,10 @@ pub struct Bench {
     pub machine_bounds: String,
     /// Per task with a bound: the largest execution observed against it.
     pub machine: Vec<machine::MachineRow>,
+    /// Whether the board's own admission analysis (the production build at a full-rate bus, as the on-chip
+    /// check decides) admits the analysed set: where it does not (a set started under accept-and-warn), a task the
+    /// bench's analysis cannot bound is no failure — the two agree that nothing is promised.
+    pub admitted: bool,
 }
 
 /// One task's figures.
@@ -246,7 +251,7 @@ impl Bench {
                     t.response_max_us,
                     t.wcrt_us.unwrap_or(0.0)
                 ));
-            } else if t.verdict == UNBOUNDED {
+            } else if t.verdict == UNBOUNDED && self.admitted {
                 out.push(format!(
                     "{}/{}: the analysis has no bound for it (its busy window never closes): {} jobs observed, nothing to check them against",
                     self.board, t.task, t.jobs
@@ -256,7 +261,9 @@ impl Bench {
         out.extend(
             self.topics
                 .iter()
-                .filter(|t| t.verdict.starts_with("EXCEEDS") || t.verdict == UNBOUNDED)
+                .filter(|t| {
+                    t.verdict.starts_with("EXCEEDS") || (t.verdict == UNBOUNDED && self.admitted)
+                })
                 .map(|t| format!("{}/{}: {}", self.board, t.topic, t.verdict)),
         );
         out.extend(self.bound_failures());
@@ -337,14 +344,16 @@ fn seen_scenario(seen: &[(amiro_can::Topic, u8, Option<u64>, usize)]) -> serde_j
     })
 }
 
-/// The analysis of the scenario at `path` for the firmware build `firmware`, from `timings`.
+/// The analysis of the scenario at `path` for the firmware build `firmware`, from `timings`; `received_gap_us`:
+/// the run's received frames no closer than this (a QEMU stimulus), else a full-rate bus.
 fn analyse_scenario(
     root: &Path,
     path: &Path,
     timings: &[PathBuf],
     firmware: scenario::Firmware,
+    received_gap_us: Option<f64>,
 ) -> Result<Analysis> {
-    let built = scenario::build_for(root, path, timings, firmware)
+    let built = scenario::build_for_run(root, path, timings, firmware, received_gap_us)
         .map_err(|e| anyhow!("{e}"))
         .with_context(|| format!("building the analysis model from {}", path.display()))?;
     let frame_cost = built.frame_cost;
@@ -368,13 +377,17 @@ fn analysis_for(
     capture: &Capture,
     scenario_name: Option<&str>,
     qemu: bool,
-) -> Result<(Analysis, String)> {
+    received_gap_us: Option<f64>,
+) -> Result<(Analysis, String, bool)> {
     let path = match scenario_name {
         Some(name) => scenario::find_scenario(root, name),
         None => {
             let dir = crate::target_dir(root).join("bench");
             std::fs::create_dir_all(&dir)?;
-            let name = format!("bench-{}-{}", board.name, std::process::id());
+            // One file per call: measurements run side by side (tests, the live view).
+            static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+            let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let name = format!("bench-{}-{}-{call}", board.name, std::process::id());
             let path = dir.join(format!("{name}.scenario.json"));
             let json = seen_scenario(&seen_publishers(capture));
             std::fs::write(&path, serde_json::to_string_pretty(&json)?)?;
@@ -387,12 +400,61 @@ fn analysis_for(
     } else {
         scenario::Firmware::Traced
     };
-    let analysis = analyse_scenario(root, &path, &scenario::timing_files(root), firmware)?;
-    let label = match scenario_name {
+    let timings = scenario::timing_files(root);
+    // The run's received frames as they came: the receive interrupt no more often than that.
+    let analysis = analyse_scenario(root, &path, &timings, firmware, received_gap_us)?;
+    // The board's own admission decides on the production build at a full-rate bus: whether it admits the set.
+    let admitted =
+        analyse_scenario(root, &path, &timings, scenario::Firmware::Production, None)?.all_ok();
+    let mut label = match scenario_name {
         Some(name) => format!("scenario {name}"),
         None => "the publishers the capture shows, at the periods and levels seen".to_string(),
     };
-    Ok((analysis, label))
+    match (capture.received_gap_us, received_gap_us) {
+        (Some(gap), _) => {
+            let _ = write!(
+                label,
+                "; received frames as the run's stimulus replays them (at least {gap} µs apart)"
+            );
+        }
+        (None, Some(gap)) => {
+            let _ = write!(
+                label,
+                "; received frames as the capture shows them (the receive interrupt's runs at least {gap} µs apart)"
+            );
+        }
+        (None, None) => label.push_str("; a command flood at full bus rate"),
+    }
+    Ok((analysis, label, admitted))
+}
+
+/// The shortest time between the starts of two runs of the receive tasks `receivers` in `capture`, µs (the
+/// capture's length when fewer than two ran): the received frames as the capture shows them. A run starts after
+/// its frame arrived, so two starts can be closer than their frames were: never an overestimate of how close they
+/// came, except by a start's latency, which the capture cannot see.
+fn observed_gap_us(capture: &Capture, names: &[String], receivers: &[String]) -> Option<f64> {
+    let numbers: Vec<u8> = names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| receivers.contains(n))
+        .filter_map(|(i, _)| u8::try_from(i).ok())
+        .collect();
+    if numbers.is_empty() {
+        return None;
+    }
+    let mut starts: Vec<u64> = capture
+        .runs
+        .iter()
+        .filter(|r| numbers.contains(&r.task))
+        .map(|r| r.start_ns)
+        .collect();
+    starts.sort_unstable();
+    let gap = starts
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .min()
+        .unwrap_or(capture.end_ns.max(1_000));
+    Some(us(gap))
 }
 
 /// Measures `capture` of `board` against the analysis.
@@ -407,7 +469,18 @@ pub fn measure(
     let names = amiro_firmware::trace_ids::board_names(root, board.name)
         .map_err(|e| anyhow!("{e}"))
         .context("the board's task numbers")?;
-    let (analysis, model) = analysis_for(root, board, capture, scenario_name, qemu)?;
+    // The run's received frames: a QEMU run's stimulus, else the capture's runs of the receive interrupt.
+    let received_gap_us = match capture.received_gap_us {
+        Some(gap) => Some(gap),
+        None => {
+            let receivers =
+                scenario::bus_frame_tasks(root, &scenario::timing_files(root), board.name)
+                    .map_err(|e| anyhow!("{e}"))?;
+            observed_gap_us(capture, &names, &receivers)
+        }
+    };
+    let (analysis, model, admitted) =
+        analysis_for(root, board, capture, scenario_name, qemu, received_gap_us)?;
     let board_result = analysis.boards.iter().find(|b| b.name == board.name);
     // (WCRT, deadline) of a task the analysis has; a WCRT of `None`: its busy window never closes.
     let analysed = |task: &str| -> Option<(Option<f64>, f64)> {
@@ -588,6 +661,7 @@ pub fn measure(
         topics,
         machine_bounds,
         machine,
+        admitted,
     })
 }
 
@@ -910,6 +984,23 @@ mod tests {
         path
     }
 
+    /// The shortest gap between the frames of `admission-one-shots.log` (its requests at 10, 50, 100 and
+    /// 120 ms), as `qemu::received_gap_us` reads it from the run's stimulus.
+    const RECEIVED_GAP_US: f64 = 20_000.0;
+
+    #[test]
+    fn the_stimulus_of_the_thesis_one_shots_is_read_as_it_is_replayed() {
+        let root = crate::workspace_root();
+        let frames =
+            crate::qemu::read_stimulus(&root.join("diwheeldrive/qemu/admission-one-shots.log"))
+                .unwrap();
+        let bin = crate::qemu::encode_stimulus(&frames, 180_000);
+        assert_eq!(
+            crate::qemu::received_gap_us(&bin).unwrap() as f64,
+            RECEIVED_GAP_US
+        );
+    }
+
     #[test]
     fn what_the_board_admitted_the_bench_bounds() {
         let root = crate::workspace_root();
@@ -917,10 +1008,17 @@ mod tests {
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         // The board's own admission decides on the production model: it admits the set.
         let production =
-            analyse_scenario(&root, &path, &timings, scenario::Firmware::Production).unwrap();
+            analyse_scenario(&root, &path, &timings, scenario::Firmware::Production, None).unwrap();
         assert!(production.all_ok(), "the board admitted this set");
         // The bench measures the traced QEMU build: every task of the board must have a bound there too.
-        let traced = analyse_scenario(&root, &path, &timings, scenario::Firmware::Qemu).unwrap();
+        let traced = analyse_scenario(
+            &root,
+            &path,
+            &timings,
+            scenario::Firmware::Qemu,
+            Some(RECEIVED_GAP_US),
+        )
+        .unwrap();
         let board = traced
             .boards
             .iter()

@@ -9,8 +9,22 @@ fn opt(v: Option<f64>) -> String {
 
 fn header(b: &Bench) -> String {
     format!(
-        "{} ({} build) — {}\nbounds: {}\ntrace clock {} Hz, {:.0} µs traced, {} records, {} damaged stretches skipped, {} lost on the board, {} unbalanced ends\n",
-        b.board, b.build, b.origin, b.model, b.clock_hz, b.span_us, b.records, b.damaged, b.lost, b.unbalanced
+        "{} ({} build) — {}\nbounds: {}\nthe board's own admission (production build, full-rate bus): {}\ntrace clock {} Hz, {:.0} µs traced, {} records, {} damaged stretches skipped, {} lost on the board, {} unbalanced ends\n",
+        b.board,
+        b.build,
+        b.origin,
+        b.model,
+        if b.admitted {
+            "admits this set"
+        } else {
+            "refuses this set (nothing is promised: a task the bench cannot bound is no failure)"
+        },
+        b.clock_hz,
+        b.span_us,
+        b.records,
+        b.damaged,
+        b.lost,
+        b.unbalanced
     )
 }
 
