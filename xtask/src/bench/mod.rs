@@ -912,14 +912,35 @@ fn stream_live(
     Ok((origin, capture, false))
 }
 
+/// Scenario runs whose stimulus loads the traced QEMU build beyond what its analysis can bound, each with the
+/// reason: there the tasks below the load are reported `analysis: unbounded` and not failed (every other bound is
+/// checked). Stated here, one by one, so that no other run's unbounded task passes unseen.
+pub const BEYOND_THE_TRACED_BUILD: &[(&str, &str, &str)] = &[(
+    "powermgmt",
+    "flood",
+    "command frames 50 µs apart: with QEMU's ×2 budgets and the trace's 8 µs per job, the receive and transmit \
+     interrupts, the command handler and their timer jobs take the whole CPU below priority 5 (the production build, \
+     which the board's admission covers, takes a full-rate flood)",
+)];
+
 /// Measures the outputs of a board's QEMU scenario runs (`cargo xtask test`, after the scenarios):
 /// writes each run's report beside its output and fails when a run exceeds an analysed bound.
 pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)]) -> Result<()> {
     let mut failures = Vec::new();
     for (name, work) in runs {
         let capture = read_scenario_run(root, board, work)?;
-        let bench = measure(root, board, &capture, name, true, None)
+        let mut bench = measure(root, board, &capture, name, true, None)
             .with_context(|| format!("bench of {} {name}", board.name))?;
+        if let Some((_, _, why)) = BEYOND_THE_TRACED_BUILD
+            .iter()
+            .find(|(b, run, _)| *b == board.name && run == name)
+        {
+            for t in &mut bench.tasks {
+                if t.verdict == UNBOUNDED {
+                    t.verdict = format!("{UNBOUNDED} (beyond the traced build: {why})");
+                }
+            }
+        }
         let dir = work.join("bench");
         write_reports(&bench, &dir)?;
         let tightest = bench
