@@ -758,7 +758,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
         let failures = bench.failures();
         if !failures.is_empty() {
             ok = false;
-            eprintln!("!!! OBSERVED TIMING ABOVE THE ANALYSED BOUND: the analysis (or its budgets) is wrong");
+            eprintln!("!!! OBSERVED TIMING ABOVE THE ANALYSED BOUND (the analysis or its budgets are wrong), OR NO BOUND TO HOLD IT TO");
             for f in &failures {
                 eprintln!("!!!   {f}");
             }
