@@ -7,6 +7,7 @@
 //! analysed bounds come from `schedule_analysis` on the same apps and timing files as
 //! `cargo xtask analyze`, for the publishers the capture shows (each topic at the level and the
 //! period it was seen at) or for a named scenario. docs/bench.md explains every column.
+pub mod analysed;
 pub mod calibrate;
 pub mod capture;
 pub mod live;
@@ -15,11 +16,9 @@ pub mod report;
 pub mod timeline;
 
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
-use schedule_analysis::analysis::{analyse, Analysis, Options};
 use schedule_analysis::scenario;
 
 use crate::boards::Board;
@@ -320,143 +319,6 @@ const LEVELS: [&str; 4] = ["urgent", "high", "medium", "low"];
 /// The verdict of a task or topic the analysis has but cannot bound (`--check` fails on it).
 pub const UNBOUNDED: &str = "analysis: unbounded";
 
-/// The scenario the bench analyses for what a capture shows: each topic at the level and period it was seen
-/// at; a topic sampled once (no period to measure) is a one-shot, analysed as the boards decide one (a sample
-/// every `ONE_SHOT_INTERVAL_MS` at its level).
-fn seen_scenario(seen: &[(amiro_can::Topic, u8, Option<u64>, usize)]) -> serde_json::Value {
-    let (mut publishers, mut one_shots) = (Vec::new(), Vec::new());
-    for (topic, level, period, _) in seen {
-        let priority = LEVELS[usize::from(*level)];
-        match period {
-            Some(period) => publishers.push(serde_json::json!({
-                "topic": topic.name(), "priority": priority, "period_us": period,
-            })),
-            None => one_shots.push(serde_json::json!({
-                "topic": topic.name(), "priority": priority,
-            })),
-        }
-    }
-    serde_json::json!({
-        "name": "the publishers the capture shows",
-        "description": "written by cargo xtask bench",
-        "publishers": publishers,
-        "one_shots": one_shots,
-    })
-}
-
-/// The analysis of the scenario at `path` for the firmware build `firmware`, from `timings`; `received_gap_us`:
-/// the run's received frames no closer than this (a QEMU stimulus), else a full-rate bus.
-fn analyse_scenario(
-    root: &Path,
-    path: &Path,
-    timings: &[PathBuf],
-    firmware: scenario::Firmware,
-    received_gap_us: Option<f64>,
-) -> Result<Analysis> {
-    let built = scenario::build_for_run(root, path, timings, firmware, received_gap_us)
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("building the analysis model from {}", path.display()))?;
-    let frame_cost = built.frame_cost;
-    let system = built
-        .model
-        .validate()
-        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    Ok(analyse(
-        &system,
-        &Options {
-            frame_cost,
-            horizon: None,
-        },
-    ))
-}
-
-/// The analysis for what the capture shows (or for `scenario`).
-fn analysis_for(
-    root: &Path,
-    board: &Board,
-    capture: &Capture,
-    scenario_name: Option<&str>,
-    qemu: bool,
-    received_gap_us: Option<f64>,
-) -> Result<(Analysis, String, bool)> {
-    let path = match scenario_name {
-        Some(name) => scenario::find_scenario(root, name),
-        None => {
-            let dir = crate::target_dir(root).join("bench");
-            std::fs::create_dir_all(&dir)?;
-            // One file per call: measurements run side by side (tests, the live view).
-            static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-            let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            let name = format!("bench-{}-{}-{call}", board.name, std::process::id());
-            let path = dir.join(format!("{name}.scenario.json"));
-            let json = seen_scenario(&seen_publishers(capture));
-            std::fs::write(&path, serde_json::to_string_pretty(&json)?)?;
-            path
-        }
-    };
-    // The measured build has the task trace: so has the analysed one.
-    let firmware = if qemu {
-        scenario::Firmware::Qemu
-    } else {
-        scenario::Firmware::Traced
-    };
-    let timings = scenario::timing_files(root);
-    // The run's received frames as they came: the receive interrupt no more often than that.
-    let analysis = analyse_scenario(root, &path, &timings, firmware, received_gap_us)?;
-    // The board's own admission decides on the production build at a full-rate bus: whether it admits the set.
-    let admitted =
-        analyse_scenario(root, &path, &timings, scenario::Firmware::Production, None)?.all_ok();
-    let mut label = match scenario_name {
-        Some(name) => format!("scenario {name}"),
-        None => "the publishers the capture shows, at the periods and levels seen".to_string(),
-    };
-    match (capture.received_gap_us, received_gap_us) {
-        (Some(gap), _) => {
-            let _ = write!(
-                label,
-                "; received frames as the run's stimulus replays them (at least {gap} µs apart)"
-            );
-        }
-        (None, Some(gap)) => {
-            let _ = write!(
-                label,
-                "; received frames as the capture shows them (the receive interrupt's runs at least {gap} µs apart)"
-            );
-        }
-        (None, None) => label.push_str("; a command flood at full bus rate"),
-    }
-    Ok((analysis, label, admitted))
-}
-
-/// The shortest time between the starts of two runs of the receive tasks `receivers` in `capture`, µs (the
-/// capture's length when fewer than two ran): the received frames as the capture shows them. A run starts after
-/// its frame arrived, so two starts can be closer than their frames were: never an overestimate of how close they
-/// came, except by a start's latency, which the capture cannot see.
-fn observed_gap_us(capture: &Capture, names: &[String], receivers: &[String]) -> Option<f64> {
-    let numbers: Vec<u8> = names
-        .iter()
-        .enumerate()
-        .filter(|(_, n)| receivers.contains(n))
-        .filter_map(|(i, _)| u8::try_from(i).ok())
-        .collect();
-    if numbers.is_empty() {
-        return None;
-    }
-    let mut starts: Vec<u64> = capture
-        .runs
-        .iter()
-        .filter(|r| numbers.contains(&r.task))
-        .map(|r| r.start_ns)
-        .collect();
-    starts.sort_unstable();
-    let gap = starts
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .min()
-        .unwrap_or(capture.end_ns.max(1_000));
-    Some(us(gap))
-}
-
 /// Measures `capture` of `board` against the analysis.
 pub fn measure(
     root: &Path,
@@ -476,11 +338,11 @@ pub fn measure(
             let receivers =
                 scenario::bus_frame_tasks(root, &scenario::timing_files(root), board.name)
                     .map_err(|e| anyhow!("{e}"))?;
-            observed_gap_us(capture, &names, &receivers)
+            analysed::observed_gap_us(capture, &names, &receivers)
         }
     };
     let (analysis, model, admitted) =
-        analysis_for(root, board, capture, scenario_name, qemu, received_gap_us)?;
+        analysed::analysis_for(root, board, capture, scenario_name, qemu, received_gap_us)?;
     let board_result = analysis.boards.iter().find(|b| b.name == board.name);
     // (WCRT, deadline) of a task the analysis has; a WCRT of `None`: its busy window never closes.
     let analysed = |task: &str| -> Option<(Option<f64>, f64)> {
@@ -981,79 +843,4 @@ pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)
         );
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use amiro_can::Topic;
-
-    /// What the QEMU capture of `diwheeldrive/qemu/admission-one-shots.log` on a 1-1 robot shows: the thesis's
-    /// magnetometer-x every 900 µs at medium, the accelerometer every 5 ms at low and one gyroscope sample at low
-    /// (the floor one-shot was refused: no sample).
-    fn thesis_one_shots(root: &Path) -> PathBuf {
-        let seen = [
-            (Topic::MagnetometerX, 2, Some(900), 189),
-            (Topic::Accelerometer, 3, Some(5000), 12),
-            (Topic::Gyroscope, 3, None, 1),
-        ];
-        let dir = std::env::temp_dir().join(format!("bench-one-model-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("seen.scenario.json");
-        std::fs::write(&path, seen_scenario(&seen).to_string()).unwrap();
-        let _ = root;
-        path
-    }
-
-    /// The shortest gap between the frames of `admission-one-shots.log` (its requests at 10, 50, 100 and
-    /// 120 ms), as `qemu::received_gap_us` reads it from the run's stimulus.
-    const RECEIVED_GAP_US: f64 = 20_000.0;
-
-    #[test]
-    fn the_stimulus_of_the_thesis_one_shots_is_read_as_it_is_replayed() {
-        let root = crate::workspace_root();
-        let frames =
-            crate::qemu::read_stimulus(&root.join("diwheeldrive/qemu/admission-one-shots.log"))
-                .unwrap();
-        let bin = crate::qemu::encode_stimulus(&frames, 180_000);
-        assert_eq!(
-            crate::qemu::received_gap_us(&bin).unwrap() as f64,
-            RECEIVED_GAP_US
-        );
-    }
-
-    #[test]
-    fn what_the_board_admitted_the_bench_bounds() {
-        let root = crate::workspace_root();
-        let path = thesis_one_shots(&root);
-        let timings = scenario::timing_files_for(&root, Some("1-1"));
-        // The board's own admission decides on the production model: it admits the set.
-        let production =
-            analyse_scenario(&root, &path, &timings, scenario::Firmware::Production, None).unwrap();
-        assert!(production.all_ok(), "the board admitted this set");
-        // The bench measures the traced QEMU build: every task of the board must have a bound there too.
-        let traced = analyse_scenario(
-            &root,
-            &path,
-            &timings,
-            scenario::Firmware::Qemu,
-            Some(RECEIVED_GAP_US),
-        )
-        .unwrap();
-        let board = traced
-            .boards
-            .iter()
-            .find(|b| b.name == "diwheeldrive")
-            .unwrap();
-        let unbounded: Vec<&str> = board
-            .tasks
-            .iter()
-            .filter(|t| t.wcrt().is_none())
-            .map(|t| t.name.as_str())
-            .collect();
-        assert!(
-            unbounded.is_empty(),
-            "unbounded in the bench's model: {unbounded:?}"
-        );
-    }
 }
