@@ -5,7 +5,7 @@
 //! * the **core** — [`time`], [`busy_window`], [`board`], [`can`] and [`admission`] — is `no_std` and
 //!   allocation-free (build with `--no-default-features`): [`admission`] is the check a board runs before it
 //!   starts a publisher, on a table [`admission_host`] lowers from the same apps and timing files;
-//! * the **host layer** (feature `std`, on by default) reads models ([`model`]), RTIC apps ([`rtic_source`]),
+//! * the **host layer** (feature `std`, on by default) reads models ([`model`]), the generated bounds files ([`bounds`]), RTIC apps ([`rtic_source`]),
 //!   timing files and scenarios ([`scenario`]), runs the whole system ([`analysis`], [`sensitivity`]) and renders
 //!   the report ([`report`]). `cargo xtask analyze` is a thin front end over it.
 //!
@@ -23,6 +23,8 @@ pub mod time;
 pub mod admission_host;
 #[cfg(feature = "std")]
 pub mod analysis;
+#[cfg(feature = "std")]
+pub mod bounds;
 #[cfg(feature = "std")]
 pub mod model;
 #[cfg(feature = "std")]

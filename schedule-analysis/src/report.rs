@@ -1,6 +1,7 @@
 //! The report in four forms: a terminal table, markdown, JSON for tools and an SVG chart (every task's and
 //! message's worst-case response against its deadline).
 
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use serde_json::{json, Value};
@@ -30,6 +31,9 @@ pub struct Report {
     pub sensitivity: Option<Sensitivity>,
     /// The on-chip admission check's cost per board (empty unless [`Report::with_admission_cost`] added it).
     pub admission: Vec<(String, CheckCost)>,
+    /// Per board and task, where its budget came from (`bound`: the machine code's, `stated`: the timing
+    /// file's), when the model was built from timing files ([`Report::with_budget_sources`]).
+    pub budget_from: BTreeMap<(String, String), String>,
 }
 
 /// Publishers beyond this many skip the sensitivity search (each costs about twenty whole-system analyses).
@@ -100,6 +104,7 @@ impl Report {
             comparison,
             sensitivity,
             admission: Vec::new(),
+            budget_from: BTreeMap::new(),
         }
     }
 
@@ -112,6 +117,20 @@ impl Report {
             .enumerate()
             .filter_map(|(i, b)| Some((b.name.clone(), robot.worst_case_cost(i)?)))
             .collect();
+        self
+    }
+
+    /// Records where each task's budget came from (the built model's [`crate::scenario::Built::budget_from`]),
+    /// for the JSON report's `budget_from`.
+    pub fn with_budget_sources(mut self, built: &crate::scenario::Built) -> Report {
+        for b in &self.primary.boards {
+            for t in &b.tasks {
+                if let Some(from) = built.budget_from(&b.name, &t.name) {
+                    self.budget_from
+                        .insert((b.name.clone(), t.name.clone()), from.label().to_string());
+                }
+            }
+        }
         self
     }
 
@@ -684,8 +703,10 @@ fn to_json(report: &Report) -> Value {
         .iter()
         .flat_map(|b| {
             b.tasks.iter().map(move |t| {
+                let budget_from = report.budget_from.get(&(b.name.clone(), t.name.clone()));
                 json!({
                     "board": b.name, "name": t.name, "job_of": t.job_of, "priority": t.priority,
+                    "budget_from": budget_from,
                     "kind": kind_label(t.kind), "sporadic": t.sporadic, "period_us": t.period.as_us_f64(),
                     "deadline_us": t.deadline.as_us_f64(), "wcet_us": t.wcet.as_us_f64(),
                     "overhead_us": t.overhead.as_us_f64(), "bcrt_us": t.bcrt.as_us_f64(),

@@ -62,6 +62,7 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
         }
     }
     let mut robot = None;
+    let mut from_timing = None;
     let (model, title, sources, warnings, origin) = match &args.model {
         Some(path) => {
             let text = std::fs::read_to_string(path)
@@ -98,13 +99,21 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
                 args.frame_cost.unwrap_or(built.frame_cost),
             )?);
             let title = built.model.name.clone().unwrap_or_else(|| name.to_string());
-            (
-                built.model,
+            // A set the machine-code bounds break: which bound, and that the analysis keeps it.
+            let mut warnings = built.warnings.clone();
+            warnings.extend(scenario::breaking_bounds(
+                &built,
+                args.frame_cost.unwrap_or(built.frame_cost),
+            ));
+            let parts = (
+                built.model.clone(),
                 title,
-                built.sources,
-                built.warnings,
+                built.sources.clone(),
+                warnings,
                 "the built model".to_string(),
-            )
+            );
+            from_timing = Some(built);
+            parts
         }
     };
     if let Some(path) = &args.emit_model {
@@ -132,6 +141,10 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
         args.frame_cost,
         &mut progress,
     );
+    let report = match &from_timing {
+        Some(built) => report.with_budget_sources(built),
+        None => report,
+    };
     let report = match &robot {
         Some(robot) => {
             progress("on-chip admission check cost");

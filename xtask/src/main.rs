@@ -25,6 +25,7 @@ mod revision;
 mod robot;
 mod scenarios;
 mod smoke;
+mod wcet_gate;
 
 use boards::{Board, BOARDS};
 
@@ -577,6 +578,8 @@ fn test(root: &Path) -> Result<()> {
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
     machine::check_panics(&reports)?;
     machine::check_stacks(root, &reports)?;
+    // The generated bounds files must be computed from these images (docs/analysis.md).
+    wcet_gate::check_bounds_current(root)?;
     run_scenarios(root, &every)?;
     // The whole robot on one bus (issue 23), with its bus report against the analysis.
     robot::scenarios::run_all(root)?;

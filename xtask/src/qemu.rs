@@ -123,6 +123,41 @@ pub fn encode_stimulus(frames: &[TimedFrame], duration_us: u64) -> Vec<u8> {
     out
 }
 
+/// The shortest time between two received frames a stimulus replays (records after its duration are not
+/// replayed, a SYS_PD_N record is no frame), µs; the whole duration (at least 1 µs) when it has fewer than two.
+/// An encoded stimulus that is cut or has no header is an error.
+pub fn received_gap_us(encoded: &[u8]) -> Result<u64> {
+    let (header, records) = encoded
+        .split_at_checked(16)
+        .filter(|(h, _)| &h[..8] == b"AMSTIM1\0")
+        .context("no AMSTIM1 header")?;
+    let mut duration = [0u8; 8];
+    duration.copy_from_slice(&header[8..16]);
+    let duration = u64::from_le_bytes(duration);
+    if records.len() % 20 != 0 {
+        bail!(
+            "{} bytes of records: not whole 20-byte records",
+            records.len()
+        );
+    }
+    let mut times: Vec<u64> = records
+        .chunks_exact(20)
+        .filter(|r| r[11] & 2 == 0)
+        .map(|r| {
+            let mut at = [0u8; 8];
+            at.copy_from_slice(&r[..8]);
+            u64::from_le_bytes(at)
+        })
+        .filter(|&at| at <= duration)
+        .collect();
+    times.sort_unstable();
+    Ok(times
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .min()
+        .unwrap_or(duration.max(1)))
+}
+
 /// Parses a duration like `2s`, `1500ms` or `900us`.
 pub fn parse_duration(text: &str) -> Result<u64> {
     let (digits, scale) = if let Some(d) = text.strip_suffix("us") {
@@ -420,6 +455,34 @@ mod tests {
             &[5, 0, 0, 0, 0, 0, 0, 0, 0x05, 0x02, 2, 0, 1, 2]
         );
         assert_eq!(&bin[44..48], &[0xFF, 0xFF, 0, 1]);
+    }
+
+    #[test]
+    fn the_shortest_gap_between_received_frames() {
+        let frame = |at_us, id| TimedFrame {
+            at_us,
+            id,
+            data: vec![],
+        };
+        let frames = [
+            frame(5, 0x205),
+            frame(100, 0x205),
+            frame(130, 0x9999),          // an extended frame reaches the FIFO too
+            frame(131, SIGNAL_SYS_PD_N), // no frame
+            frame(2_000_001, 0x205),     // after the run
+        ];
+        assert_eq!(
+            received_gap_us(&encode_stimulus(&frames, 2_000_000)).unwrap(),
+            30
+        );
+        // Fewer than two frames: the whole run.
+        assert_eq!(
+            received_gap_us(&encode_stimulus(&frames[..1], 200_000)).unwrap(),
+            200_000
+        );
+        let bin = encode_stimulus(&frames, 2_000_000);
+        assert!(received_gap_us(&bin[..bin.len() - 1]).is_err());
+        assert!(received_gap_us(b"AMSTIM").is_err());
     }
 
     #[test]

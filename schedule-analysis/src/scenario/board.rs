@@ -27,7 +27,9 @@ pub(super) struct Ends {
     pub(super) receivers: BTreeMap<String, String>,
 }
 
-/// Every board of the timing files, with the scenario's topics it owns, into `built.model.boards`.
+/// Every board of the timing files, with the scenario's topics it owns, into `built.model.boards`; `received`: the
+/// run's received frames no closer than this ([`super::build_for_run`]).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn build_boards(
     root: &Path,
     timings: &[(String, Timing)],
@@ -35,6 +37,7 @@ pub(super) fn build_boards(
     scenario: &Scenario,
     bit: Time,
     firmware: Firmware,
+    received: Option<Time>,
     built: &mut Built,
 ) -> Result<Ends, BuildError> {
     let mut ends = Ends::default();
@@ -49,8 +52,10 @@ pub(super) fn build_boards(
             .map(|p| bit.times(u64::from(can::frame_bits_best(p.info.dlc, false))))
             .min()
             .unwrap_or_else(|| can::shortest_frame_time(bit));
+        // A run whose received frames are known (a QEMU stimulus) receives them no closer than they come.
+        let bus_frame = can::shortest_frame_time(bit);
         let arrivals = Arrivals {
-            bus_frame: can::shortest_frame_time(bit),
+            bus_frame: received.map_or(bus_frame, |gap| gap.max(bus_frame)),
             own_frame,
         };
         let board = build_board(
@@ -96,6 +101,9 @@ fn build_board(
     firmware: Firmware,
     built: &mut Built,
 ) -> Result<BoardModel, BuildError> {
+    // The machine-code bounds replace the stated budgets (before any QEMU scaling: they are the chip's).
+    let (bounded_timing, budgets) = super::bounded::apply(root, file, timing, &mut built.warnings)?;
+    let timing = &bounded_timing;
     let scaled;
     let timing = match (
         firmware,
@@ -129,10 +137,13 @@ fn build_board(
     let mut all = timer_jobs.jobs;
     all.extend(tasks);
     let source = built.sources.last().cloned();
-    built.sources.push(budgets_line(timing, &measured));
-    if let Some(line) = admission_line(timing, &measured) {
+    built
+        .sources
+        .push(super::bounded::budgets_line(&budgets, &measured));
+    if let Some(line) = admission_line(timing, &measured, &budgets) {
         built.sources.push(line);
     }
+    built.budgets.push(budgets);
     let overheads = build_overheads(file, timing, firmware, &mut all, built)?;
     Ok(BoardModel {
         name: timing.board.clone(),
@@ -434,30 +445,53 @@ fn idle_sections(
 }
 
 /// The source line of the board's on-chip admission task (`admit_requests`, docs/analysis.md "The admission
-/// task"): the CPU share its budget reserves, and what the budget rests on.
-fn admission_line(timing: &Timing, measured: &[String]) -> Option<String> {
+/// task"): the CPU share its budget reserves, what the budget rests on, and — beside the costliest step measured —
+/// the machine-code bound from its iteration caps, saying which of the two the analysis uses.
+fn admission_line(
+    timing: &Timing,
+    measured: &[String],
+    budgets: &super::BoardBudgets,
+) -> Option<String> {
     let task = timing.tasks.get("admit_requests")?;
     let wcet = task.wcet_us?;
     let period = match task.arrival {
         Some(Arrival::SporadicUs(p)) | Some(Arrival::PeriodicUs(p)) if p > 0.0 => p,
         _ => return None,
     };
-    let basis = if measured.iter().any(|m| m == "admit_requests") {
-        "a measured budget".to_string()
-    } else if let Some(step) = &task.worst_step {
+    let step = task.worst_step.as_ref().map(|step| {
         format!(
-            "one step's budget, an estimate: the costliest step measured, {} instructions of its own ({} fixed-point iterations; {}), at an assumed {} cycles per instruction and {} MHz = {:.0} µs, the budget {:.0} % above it; not a bench measurement",
+            "the costliest step measured, {} instructions of its own ({} fixed-point iterations; {}), at an assumed {} cycles per instruction and {} MHz = {:.0} µs",
             step.instructions,
             step.iterations,
             step.measured_in,
             step.cycles_per_instruction,
             step.clock_mhz,
             step.on_chip_us(),
-            100.0 * (wcet / step.on_chip_us() - 1.0)
         )
-    } else {
-        "one step's budget, an estimate (no measured step recorded in the timing file), not a bench measurement"
-            .to_string()
+    });
+    let basis = match budgets.rows.get("admit_requests") {
+        Some(super::BudgetFrom::Bound { us, stated_us, .. }) => format!(
+            "one step's bound from the machine code (its iteration caps): {us:.0} µs; beside it the stated budget {stated_us:.0} µs{}; the analysis uses the bound",
+            step.map(|s| format!(" rests on {s}")).unwrap_or_default()
+        ),
+        other => {
+            let why = match other {
+                Some(super::BudgetFrom::Stated { why }) => why.clone(),
+                _ => "no bound".to_string(),
+            };
+            let stated = if measured.iter().any(|m| m.starts_with("admit_requests ")) {
+                "a measured budget".to_string()
+            } else if let (Some(s), Some(st)) = (&step, &task.worst_step) {
+                format!(
+                    "one step's budget, an estimate: {s}, the budget {:.0} % above it; not a bench measurement",
+                    100.0 * (wcet / st.on_chip_us() - 1.0)
+                )
+            } else {
+                "one step's budget, an estimate (no measured step recorded in the timing file), not a bench measurement"
+                    .to_string()
+            };
+            format!("{stated}; the bound from its iteration caps is not used ({why}): the analysis uses the stated budget")
+        }
     };
     Some(format!(
         "{}: admission reserves {:.1} % of the CPU (admit_requests: {:.0} µs per {:.0} µs), {basis}",
@@ -466,24 +500,6 @@ fn admission_line(timing: &Timing, measured: &[String]) -> Option<String> {
         wcet,
         period
     ))
-}
-
-/// The source line saying which budgets are measured.
-fn budgets_line(timing: &Timing, measured: &[String]) -> String {
-    let budgets = timing.tasks.len() + timing.topics.len();
-    if measured.is_empty() {
-        format!(
-            "{}: budgets are estimates ({budgets}; none measured)",
-            timing.board
-        )
-    } else {
-        format!(
-            "{}: measured budgets for {} ({} of {budgets}), the rest estimates",
-            timing.board,
-            measured.join(", "),
-            measured.len()
-        )
-    }
 }
 
 /// The board's overheads in the firmware build `firmware`: the task trace's start and end records where every

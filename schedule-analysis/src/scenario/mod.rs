@@ -4,6 +4,8 @@
 //!    bindings and shared resources (for a board without an app yet, its timing file declares them);
 //! 2. each board's **timing file** (`models/<board>.timing.json`): execution-time budgets per task and per
 //!    published topic, critical-section lengths, overheads, arrivals;
+//!    Where a board's generated bounds file (`models/<board>[-<revision>].wcet.json`, [`crate::bounds`]) has a
+//!    bound for a job, the bound replaces the stated budget (`bounded`);
 //! 3. a **scenario** (`models/<name>.scenario.json`): which topics run at which period and CAN priority, the
 //!    operator's commands, deadlines and jitter budgets.
 //!
@@ -13,7 +15,7 @@
 //! Every task the app declares must have a budget and every budget must name a declared task, or the build fails.
 //!
 //! The steps, one module each: `files` (the timing file and scenario formats), `plan` (reading the scenario and
-//! planning its topics onto the boards), `declared` (the tasks an app or timing file declares), `board` (a
+//! planning its topics onto the boards), `bounded` (the machine-code bounds in place of stated budgets), `declared` (the tasks an app or timing file declares), `board` (a
 //! board's tasks, publisher and timer jobs, idle, overheads), `qemu` (the traced QEMU build's transmit jobs) and
 //! `messages` (the bus's messages).
 
@@ -26,12 +28,14 @@ use crate::can;
 use crate::model::{CanModel, FrameCostSpec, Model};
 
 mod board;
+mod bounded;
 mod declared;
 mod files;
 mod messages;
 mod plan;
 mod qemu;
 
+pub use bounded::{bounds_file, breaking_bounds, BoardBudgets, BudgetFrom};
 pub use files::{
     AppSource, Arrival, Measured, Monotonic, QemuBuild, QemuTransmit, Scenario, ScenarioCommand,
     ScenarioOneShot, ScenarioPublisher, Timing, TimingTask, TopicTiming, TraceCost, WorstStep,
@@ -53,6 +57,16 @@ pub struct Built {
     pub sources: Vec<String>,
     /// Things the reader should know (fallbacks, assumed lengths).
     pub warnings: Vec<String>,
+    /// Per board, where each budget came from: the machine-code bound of its generated bounds file, or the
+    /// timing file's stated budget and why ([`BoardBudgets`]).
+    pub budgets: Vec<BoardBudgets>,
+}
+
+impl Built {
+    /// Where the budget of `board`'s job `task` came from, as the JSON report says it: `bound` or `stated`.
+    pub fn budget_from(&self, board: &str, task: &str) -> Option<&BudgetFrom> {
+        self.budgets.iter().find(|b| b.board == board)?.of_job(task)
+    }
 }
 
 /// A file that cannot be used, with the field it is about.
@@ -117,6 +131,57 @@ fn read_json<T: for<'de> Deserialize<'de>>(root: &Path, path: &Path) -> Result<T
     })?;
     de.end().map_err(|e| fail(&file, "", e.to_string()))?;
     Ok(value)
+}
+
+/// A board's bounds file as the bench reads it: where it is, the file when there is one, and the task trace's
+/// cost from the board's timing file (what the traced build's jobs execute beyond the release image's).
+#[derive(Debug, Clone)]
+pub struct BoardBounds {
+    /// The bounds file's path, relative to the workspace root.
+    pub file: String,
+    /// The file, `None` while it has not been generated.
+    pub bounds: Option<crate::bounds::BoundsFile>,
+    /// The timing file's `trace`.
+    pub trace: Option<TraceCost>,
+}
+
+/// The bounds of the board `board` among `timing_paths` (its image's `models/<board>[-<revision>].wcet.json`);
+/// `Ok(None)` when no timing file is the board's.
+pub fn board_bounds(
+    root: &Path,
+    timing_paths: &[PathBuf],
+    board: &str,
+) -> Result<Option<BoardBounds>, BuildError> {
+    for (_, timing) in plan::read_timings(root, timing_paths)? {
+        if timing.board == board {
+            let (file, bounds) = bounds_file(root, &timing)?;
+            return Ok(Some(BoardBounds {
+                file,
+                bounds,
+                trace: timing.trace.clone(),
+            }));
+        }
+    }
+    Ok(None)
+}
+
+/// The tasks of `board` among `timing_paths` that arrive once per frame on the bus (`"arrival": "bus_frame"`: the
+/// receive interrupt), whose arrivals [`build_for_run`] takes from a run's received frames.
+pub fn bus_frame_tasks(
+    root: &Path,
+    timing_paths: &[PathBuf],
+    board: &str,
+) -> Result<Vec<String>, BuildError> {
+    Ok(plan::read_timings(root, timing_paths)?
+        .into_iter()
+        .filter(|(_, t)| t.board == board)
+        .flat_map(|(_, t)| {
+            t.tasks
+                .into_iter()
+                .filter(|(_, task)| matches!(task.arrival, Some(Arrival::BusFrame)))
+                .map(|(name, _)| name)
+        })
+        .collect())
 }
 
 /// Finds a scenario by path, or by name in the models folder (`thesis-demo` → `models/thesis-demo.scenario.json`).
@@ -228,6 +293,21 @@ pub fn build_for(
     timing_paths: &[PathBuf],
     firmware: Firmware,
 ) -> Result<Built, BuildError> {
+    build_for_run(root, scenario_path, timing_paths, firmware, None)
+}
+
+/// [`build_for`] for one run whose received frames are known: `received_gap_us` is the shortest time between two
+/// frames the boards receive in it (a QEMU run's stimulus, which is the only source of received frames there), and
+/// a task that arrives once per frame on the bus (`"bus_frame"`: the receive interrupt) arrives no more often than
+/// that — never more often than the shortest frame on the bus either. `None`: a command flood at full bus rate, as
+/// the report assumes.
+pub fn build_for_run(
+    root: &Path,
+    scenario_path: &Path,
+    timing_paths: &[PathBuf],
+    firmware: Firmware,
+    received_gap_us: Option<f64>,
+) -> Result<Built, BuildError> {
     let scenario_file = display(root, scenario_path);
     let scenario: Scenario = read_json(root, scenario_path)?;
     let (scenario, one_shot_notes) = plan::one_shots_as_publishers(scenario, &scenario_file)?;
@@ -247,6 +327,7 @@ pub fn build_for(
         frame_cost: scenario.frame_cost,
         sources: Vec::new(),
         warnings: one_shot_notes,
+        budgets: Vec::new(),
     };
     let ends = board::build_boards(
         root,
@@ -255,6 +336,7 @@ pub fn build_for(
         &scenario,
         bit,
         firmware,
+        received_gap_us.map(crate::time::Time::from_us_down),
         &mut built,
     )?;
     let messages = messages::messages(&scenario, &plan, &ends, &mut built.warnings);

@@ -159,7 +159,8 @@ mod tests {
         assert!(built
             .sources
             .iter()
-            .any(|s| s.starts_with("diwheeldrive: measured budgets for")
+            .any(|s| s.starts_with("diwheeldrive: budgets: ")
+                && s.contains("measured for")
                 && s.contains("magnetometer-x")));
         let board_model = built
             .model

@@ -94,6 +94,9 @@ pub struct Capture {
     pub unbalanced: u64,
     /// Time of the last record, ns.
     pub end_ns: u64,
+    /// A QEMU run's received frames, as its stimulus replays them: the shortest time between two of them, µs
+    /// (the whole run when it has fewer than two). `None`: not known (a capture from a robot).
+    pub received_gap_us: Option<f64>,
 }
 
 /// Builds a [`Capture`] from records, events and acknowledgements in time order.
@@ -400,7 +403,16 @@ pub fn read_qemu_dir(
             dir.join("trace.bin").display()
         )
     })?;
-    read_qemu(&bin, &text, default_hz, stimulus)
+    let mut capture = read_qemu(&bin, &text, default_hz, stimulus)?;
+    // The stimulus the run replayed (its only received frames), when the directory keeps it.
+    if let Ok(stimulus) = std::fs::read(dir.join("stimulus.bin")) {
+        capture.received_gap_us = Some(
+            crate::qemu::received_gap_us(&stimulus)
+                .with_context(|| format!("reading {}", dir.join("stimulus.bin").display()))?
+                as f64,
+        );
+    }
+    Ok(capture)
 }
 
 #[cfg(test)]

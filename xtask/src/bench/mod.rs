@@ -7,9 +7,11 @@
 //! analysed bounds come from `schedule_analysis` on the same apps and timing files as
 //! `cargo xtask analyze`, for the publishers the capture shows (each topic at the level and the
 //! period it was seen at) or for a named scenario. docs/bench.md explains every column.
+pub mod analysed;
 pub mod calibrate;
 pub mod capture;
 pub mod live;
+pub mod machine;
 pub mod report;
 pub mod timeline;
 
@@ -17,7 +19,6 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
-use schedule_analysis::analysis::{analyse, Analysis, Options};
 use schedule_analysis::scenario;
 
 use crate::boards::Board;
@@ -138,6 +139,15 @@ pub struct Bench {
     pub tasks: Vec<TaskRow>,
     /// Per topic.
     pub topics: Vec<TopicRow>,
+    /// Which machine-code bounds the observed executions are held to (the board's generated bounds file), or
+    /// why none.
+    pub machine_bounds: String,
+    /// Per task with a bound: the largest execution observed against it.
+    pub machine: Vec<machine::MachineRow>,
+    /// Whether the board's own admission analysis (the production build at a full-rate bus, as the on-chip
+    /// check decides) admits the analysed set: where it does not (a set started under accept-and-warn), a task the
+    /// bench's analysis cannot bound is no failure — the two agree that nothing is promised.
+    pub admitted: bool,
 }
 
 /// One task's figures.
@@ -202,33 +212,60 @@ pub struct TopicRow {
 }
 
 impl Bench {
+    /// The jobs above their machine-code bound, one line each.
+    pub fn bound_failures(&self) -> Vec<String> {
+        self.machine
+            .iter()
+            .filter(|m| m.verdict == machine::EXCEEDS)
+            .map(|m| {
+                format!(
+                    "{}/{}: {} {} observed ({} of them the trace records) > bound {} {}",
+                    self.board,
+                    m.task,
+                    m.observed,
+                    m.unit,
+                    m.trace_allowance,
+                    m.bound.unwrap_or(0),
+                    m.unit
+                )
+            })
+            .collect()
+    }
+
     /// Whether nothing exceeded its analysed bound.
     pub fn within_bounds(&self) -> bool {
         self.failures().is_empty()
     }
 
-    /// What exceeded its bound, one line each.
+    /// What exceeded its bound, and what the analysis could not bound (nothing to check an observation
+    /// against is a failure, not a pass), one line each.
     pub fn failures(&self) -> Vec<String> {
-        let mut out: Vec<String> = self
-            .tasks
-            .iter()
-            .filter(|t| t.verdict.starts_with("EXCEEDS"))
-            .map(|t| {
-                format!(
+        let mut out: Vec<String> = Vec::new();
+        for t in &self.tasks {
+            if t.verdict.starts_with("EXCEEDS") {
+                out.push(format!(
                     "{}/{}: response {:.1} µs > analysed WCRT {:.1} µs",
                     self.board,
                     t.task,
                     t.response_max_us,
                     t.wcrt_us.unwrap_or(0.0)
-                )
-            })
-            .collect();
+                ));
+            } else if t.verdict == UNBOUNDED && self.admitted {
+                out.push(format!(
+                    "{}/{}: the analysis has no bound for it (its busy window never closes): {} jobs observed, nothing to check them against",
+                    self.board, t.task, t.jobs
+                ));
+            }
+        }
         out.extend(
             self.topics
                 .iter()
-                .filter(|t| t.verdict.starts_with("EXCEEDS"))
+                .filter(|t| {
+                    t.verdict.starts_with("EXCEEDS") || (t.verdict == UNBOUNDED && self.admitted)
+                })
                 .map(|t| format!("{}/{}: {}", self.board, t.topic, t.verdict)),
         );
+        out.extend(self.bound_failures());
         out
     }
 }
@@ -279,72 +316,8 @@ fn seen_publishers(capture: &Capture) -> Vec<(amiro_can::Topic, u8, Option<u64>,
 
 const LEVELS: [&str; 4] = ["urgent", "high", "medium", "low"];
 
-/// The analysis for what the capture shows (or for `scenario`).
-fn analysis_for(
-    root: &Path,
-    board: &Board,
-    capture: &Capture,
-    scenario_name: Option<&str>,
-    qemu: bool,
-) -> Result<(Analysis, String)> {
-    let path = match scenario_name {
-        Some(name) => scenario::find_scenario(root, name),
-        None => {
-            let dir = crate::target_dir(root).join("bench");
-            std::fs::create_dir_all(&dir)?;
-            // A topic sampled once (no period to measure) is a one-shot: analysed as the boards
-            // decide one, a sample every `ONE_SHOT_INTERVAL_MS` at its level.
-            let (mut publishers, mut one_shots) = (Vec::new(), Vec::new());
-            for (topic, level, period, _) in seen_publishers(capture) {
-                let priority = LEVELS[usize::from(level)];
-                match period {
-                    Some(period) => publishers.push(serde_json::json!({
-                        "topic": topic.name(), "priority": priority, "period_us": period,
-                    })),
-                    None => one_shots.push(serde_json::json!({
-                        "topic": topic.name(), "priority": priority,
-                    })),
-                }
-            }
-            let name = format!("bench-{}-{}", board.name, std::process::id());
-            let path = dir.join(format!("{name}.scenario.json"));
-            let json = serde_json::json!({
-                "name": "the publishers the capture shows",
-                "description": "written by cargo xtask bench",
-                "publishers": publishers,
-                "one_shots": one_shots,
-            });
-            std::fs::write(&path, serde_json::to_string_pretty(&json)?)?;
-            path
-        }
-    };
-    // The measured build has the task trace: so has the analysed one.
-    let firmware = if qemu {
-        scenario::Firmware::Qemu
-    } else {
-        scenario::Firmware::Traced
-    };
-    let built = scenario::build_for(root, &path, &scenario::timing_files(root), firmware)
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("building the analysis model from {}", path.display()))?;
-    let frame_cost = built.frame_cost;
-    let system = built
-        .model
-        .validate()
-        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let analysis = analyse(
-        &system,
-        &Options {
-            frame_cost,
-            horizon: None,
-        },
-    );
-    let label = match scenario_name {
-        Some(name) => format!("scenario {name}"),
-        None => "the publishers the capture shows, at the periods and levels seen".to_string(),
-    };
-    Ok((analysis, label))
-}
+/// The verdict of a task or topic the analysis has but cannot bound (`--check` fails on it).
+pub const UNBOUNDED: &str = "analysis: unbounded";
 
 /// Measures `capture` of `board` against the analysis.
 pub fn measure(
@@ -358,7 +331,18 @@ pub fn measure(
     let names = amiro_firmware::trace_ids::board_names(root, board.name)
         .map_err(|e| anyhow!("{e}"))
         .context("the board's task numbers")?;
-    let (analysis, model) = analysis_for(root, board, capture, scenario_name, qemu)?;
+    // The run's received frames: a QEMU run's stimulus, else the capture's runs of the receive interrupt.
+    let received_gap_us = match capture.received_gap_us {
+        Some(gap) => Some(gap),
+        None => {
+            let receivers =
+                scenario::bus_frame_tasks(root, &scenario::timing_files(root), board.name)
+                    .map_err(|e| anyhow!("{e}"))?;
+            analysed::observed_gap_us(capture, &names, &receivers)
+        }
+    };
+    let (analysis, model, admitted) =
+        analysed::analysis_for(root, board, capture, scenario_name, qemu, received_gap_us)?;
     let board_result = analysis.boards.iter().find(|b| b.name == board.name);
     // (WCRT, deadline) of a task the analysis has; a WCRT of `None`: its busy window never closes.
     let analysed = |task: &str| -> Option<(Option<f64>, f64)> {
@@ -402,7 +386,7 @@ pub fn measure(
         let bound = analysed(name);
         let verdict = match bound {
             None => "not analysed".to_string(),
-            Some((None, _)) => "analysis: unbounded".to_string(),
+            Some((None, _)) => UNBOUNDED.to_string(),
             Some((Some(wcrt), _)) if response_max > wcrt => "EXCEEDS WCRT".to_string(),
             Some(_) => "ok".to_string(),
         };
@@ -420,6 +404,34 @@ pub fn measure(
             verdict,
         });
     }
+    // The machine-code bounds of the release image, against the largest execution of each task.
+    let board_bounds = scenario::board_bounds(root, &scenario::timing_files(root), board.name)
+        .map_err(|e| anyhow!("{e}"))?;
+    let (machine_bounds, machine) = match &board_bounds {
+        Some(b) => {
+            let executions: Vec<(String, f64)> = tasks
+                .iter()
+                .map(|t: &TaskRow| (t.task.clone(), t.exec_max_us))
+                .collect();
+            let rows = machine::rows(b, &executions, board_result, qemu, capture.clock_hz);
+            let line = match &b.bounds {
+                Some(f) => format!(
+                    "{} ({}, {} MHz, {} wait states; image code SHA-256 {}…)",
+                    b.file,
+                    f.chip.short(),
+                    f.clock_hz as f64 / 1e6,
+                    f.wait_states,
+                    &f.image.code_sha256[..12]
+                ),
+                None => format!("none ({} not generated yet)", b.file),
+            };
+            (line, rows)
+        }
+        None => (
+            "none (no timing file for the board)".to_string(),
+            Vec::new(),
+        ),
+    };
     let mut topics = Vec::new();
     for (topic, level, period, count) in seen_publishers(capture) {
         let samples: Vec<_> = capture
@@ -440,10 +452,8 @@ pub fn measure(
         let bus_max = bus.iter().max().copied().map(us);
         let jitter = bus_max.map(|m| m - us(bus.iter().min().copied().unwrap_or(0)));
         let job = format!("publish_{}[{}]", LEVELS[usize::from(level)], topic.name());
-        let job_wcrt = board_result
-            .and_then(|b| b.tasks.iter().find(|t| t.name == job))
-            .and_then(|t| t.wcrt())
-            .map(|t| t.as_us_f64());
+        let job_result = board_result.and_then(|b| b.tasks.iter().find(|t| t.name == job));
+        let job_wcrt = job_result.and_then(|t| t.wcrt()).map(|t| t.as_us_f64());
         let id = 0x400 | u32::from(level) << 8 | u32::from(topic.byte());
         let message = analysis
             .bus
@@ -470,8 +480,13 @@ pub fn measure(
                 problems.push(format!("delivery jitter {j:.1} µs > analysed {b:.1} µs"));
             }
         }
+        // A job or message the analysis has but cannot bound.
+        let unbounded = (job_result.is_some() && job_wcrt.is_none())
+            || (message.is_some() && message_wcrt.is_none());
         let verdict = if !problems.is_empty() {
             format!("EXCEEDS: {}", problems.join("; "))
+        } else if unbounded {
+            UNBOUNDED.to_string()
         } else if job_wcrt.is_none() && message_wcrt.is_none() {
             "not analysed".to_string()
         } else {
@@ -506,6 +521,9 @@ pub fn measure(
         span_us: us(capture.end_ns),
         tasks,
         topics,
+        machine_bounds,
+        machine,
+        admitted,
     })
 }
 
@@ -602,7 +620,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
         let failures = bench.failures();
         if !failures.is_empty() {
             ok = false;
-            eprintln!("!!! OBSERVED TIMING ABOVE THE ANALYSED BOUND: the analysis (or its budgets) is wrong");
+            eprintln!("!!! OBSERVED TIMING ABOVE THE ANALYSED BOUND (the analysis or its budgets are wrong), OR NO BOUND TO HOLD IT TO");
             for f in &failures {
                 eprintln!("!!!   {f}");
             }
@@ -756,14 +774,35 @@ fn stream_live(
     Ok((origin, capture, false))
 }
 
+/// Scenario runs whose stimulus loads the traced QEMU build beyond what its analysis can bound, each with the
+/// reason: there the tasks below the load are reported `analysis: unbounded` and not failed (every other bound is
+/// checked). Stated here, one by one, so that no other run's unbounded task passes unseen.
+pub const BEYOND_THE_TRACED_BUILD: &[(&str, &str, &str)] = &[(
+    "powermgmt",
+    "flood",
+    "command frames 50 µs apart: with QEMU's ×2 budgets and the trace's 8 µs per job, the receive and transmit \
+     interrupts, the command handler and their timer jobs take the whole CPU below priority 5 (the production build, \
+     which the board's admission covers, takes a full-rate flood)",
+)];
+
 /// Measures the outputs of a board's QEMU scenario runs (`cargo xtask test`, after the scenarios):
 /// writes each run's report beside its output and fails when a run exceeds an analysed bound.
 pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)]) -> Result<()> {
     let mut failures = Vec::new();
     for (name, work) in runs {
         let capture = read_scenario_run(root, board, work)?;
-        let bench = measure(root, board, &capture, name, true, None)
+        let mut bench = measure(root, board, &capture, name, true, None)
             .with_context(|| format!("bench of {} {name}", board.name))?;
+        if let Some((_, _, why)) = BEYOND_THE_TRACED_BUILD
+            .iter()
+            .find(|(b, run, _)| *b == board.name && run == name)
+        {
+            for t in &mut bench.tasks {
+                if t.verdict == UNBOUNDED {
+                    t.verdict = format!("{UNBOUNDED} (beyond the traced build: {why})");
+                }
+            }
+        }
         let dir = work.join("bench");
         write_reports(&bench, &dir)?;
         let tightest = bench

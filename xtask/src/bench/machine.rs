@@ -1,0 +1,242 @@
+//! Observed execution against the machine-code bounds: per task with a bound in the board's generated bounds
+//! file (`schedule-analysis/models/<board>[-<rev>].wcet.json`), the largest execution observed beside the
+//! bound, in instructions for a QEMU run (QEMU under `-icount` executes one instruction per 8 ns of virtual time)
+//! or in cycles for a robot capture (the DWT cycle counter is the trace clock), and their ratio.
+//!
+//! The bounds are the release image's; the measured build is the traced one. A run's measured execution holds the
+//! task trace's records (its start and end records, docs/bench.md), which the release image does not execute:
+//! they are accounted for explicitly, as the timing file's `trace` cost per job (`trace.qemu.per_job_us` in QEMU,
+//! `trace.per_job_us` on the chip), subtracted from the observation before it is held to the bound. Nothing else
+//! is subtracted: what the QEMU build executes beyond the release image otherwise (its platform's console lines,
+//! SysTick's ticks counted to the task they interrupt) makes an observation larger, never smaller, so a run within
+//! its bound is within it.
+use schedule_analysis::analysis::BoardResult;
+use schedule_analysis::bounds::{self, BoundsFile};
+use schedule_analysis::scenario::BoardBounds;
+
+/// QEMU's virtual time per instruction (`-icount shift=3`), ns.
+pub const QEMU_NS_PER_INSTRUCTION: f64 = 8.0;
+
+/// One task's observed execution against its bound.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct MachineRow {
+    /// The RTIC task.
+    pub task: String,
+    /// `instructions` (a QEMU run) or `cycles` (a robot capture).
+    pub unit: &'static str,
+    /// The largest execution observed, in `unit`, the trace records included.
+    pub observed: u64,
+    /// The trace records' part of it, per job, in `unit` (subtracted before the comparison).
+    pub trace_allowance: u64,
+    /// The bound, in `unit` (`None`: declined).
+    pub bound: Option<u64>,
+    /// `(observed − trace_allowance) / bound`: at most 1 within the bound; below 0.5 the bound is more than twice
+    /// what ran.
+    pub ratio: Option<f64>,
+    /// `ok`, `EXCEEDS BOUND`, or `declined: …`.
+    pub verdict: String,
+}
+
+/// The verdict of a job above its bound (`--check` fails on it).
+pub const EXCEEDS: &str = "EXCEEDS BOUND";
+
+/// A task's bound in the file, in `unit`: its own row, or — for a publisher task, whose run takes one sample of
+/// each topic due — the sum of the rows of the topics the analysis has as its jobs (`publish_medium[magnetometer-x]`
+/// → `publisher[magnetometer-x]`). `Some(Err(reason))` when a row is declined; `None` when the file has none.
+fn bound_of(
+    file: &BoundsFile,
+    task: &str,
+    analysed: Option<&BoardResult>,
+    qemu: bool,
+) -> Option<Result<u64, String>> {
+    let value = |row: &bounds::TaskBound| match (qemu, row.instructions, row.cycles) {
+        (true, Some(i), _) => Ok(i),
+        (false, _, Some(c)) => Ok(c),
+        _ => Err(row
+            .declined
+            .clone()
+            .unwrap_or_else(|| "no bound".to_string())),
+    };
+    if let Some(row) = file.task(task) {
+        return Some(value(row));
+    }
+    let prefix = format!("{task}[");
+    let topics: Vec<&str> = analysed?
+        .tasks
+        .iter()
+        .filter(|t| t.job_of.as_deref() == Some(task))
+        .filter_map(|t| t.name.strip_prefix(&prefix)?.strip_suffix(']'))
+        .collect();
+    let rows: Vec<&bounds::TaskBound> = topics
+        .iter()
+        .filter_map(|topic| file.task(&bounds::publisher_row(topic)))
+        .collect();
+    if rows.is_empty() {
+        return None;
+    }
+    if rows.len() < topics.len() {
+        return Some(Err("a topic of the task has no row".into()));
+    }
+    Some(rows.iter().map(|r| value(r)).sum())
+}
+
+/// The rows of `tasks` (task name, largest execution in µs) against the board's bounds, for a QEMU run (`qemu`)
+/// or a robot capture at `clock_hz`.
+pub fn rows(
+    bounds: &BoardBounds,
+    tasks: &[(String, f64)],
+    analysed: Option<&BoardResult>,
+    qemu: bool,
+    clock_hz: u64,
+) -> Vec<MachineRow> {
+    let Some(file) = &bounds.bounds else {
+        return Vec::new();
+    };
+    let (unit, per_us) = if qemu {
+        ("instructions", 1_000.0 / QEMU_NS_PER_INSTRUCTION)
+    } else {
+        ("cycles", clock_hz as f64 / 1e6)
+    };
+    let trace_us = bounds.trace.as_ref().map_or(0.0, |t| {
+        if qemu {
+            t.qemu.as_ref().map_or(t.per_job_us, |q| q.per_job_us)
+        } else {
+            t.per_job_us
+        }
+    });
+    let trace_allowance = (trace_us * per_us).floor() as u64;
+    let mut out = Vec::new();
+    for (task, exec_max_us) in tasks {
+        let Some(bound) = bound_of(file, task, analysed, qemu) else {
+            continue;
+        };
+        let observed = (exec_max_us * per_us).round() as u64;
+        let (bound, ratio, verdict) = match bound {
+            Ok(b) => {
+                let own = observed.saturating_sub(trace_allowance);
+                let ratio = (b > 0).then(|| own as f64 / b as f64);
+                let verdict = if own > b {
+                    EXCEEDS.to_string()
+                } else {
+                    "ok".to_string()
+                };
+                (Some(b), ratio, verdict)
+            }
+            Err(reason) => (None, None, format!("declined: {reason}")),
+        };
+        out.push(MachineRow {
+            task: task.clone(),
+            unit,
+            observed,
+            trace_allowance,
+            bound,
+            ratio,
+            verdict,
+        });
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use schedule_analysis::scenario::TraceCost;
+
+    fn file() -> BoundsFile {
+        BoundsFile::from_json(
+            "t.wcet.json",
+            &serde_json::json!({
+                "generated": format!("{} for a test", bounds::GENERATED_PREFIX),
+                "board": "diwheeldrive", "revision": "1-1", "chip": "stm32f103",
+                "clock_hz": 72_000_000, "wait_states": 2,
+                "image": { "code_sha256": "0".repeat(64), "code_bytes": 4 },
+                "tasks": [
+                    { "task": "can_rx", "cycles": 720, "us": 10.0, "instructions": 500, "declined": null },
+                    { "task": "publisher[gyroscope]", "cycles": 1440, "us": 20.0, "instructions": 1000, "declined": null },
+                    { "task": "admit_requests", "cycles": null, "us": null, "instructions": null,
+                      "declined": "a loop without a bound" }
+                ]
+            })
+            .to_string(),
+        )
+        .unwrap()
+    }
+
+    fn board_bounds() -> BoardBounds {
+        BoardBounds {
+            file: "t.wcet.json".into(),
+            bounds: Some(file()),
+            trace: Some(TraceCost {
+                feature: "task-trace".into(),
+                per_job_us: 12.0,
+                note: None,
+                qemu: None,
+            }),
+        }
+    }
+
+    #[test]
+    fn observed_instructions_are_held_to_the_bound_after_the_trace_records() {
+        // 12 µs of trace per job = 1500 instructions at 8 ns.
+        let rows = rows(
+            &board_bounds(),
+            &[
+                ("can_rx".into(), 16.0), // 2000 instructions: 500 once the trace is out
+                ("admit_requests".into(), 100.0), // declined
+                ("stimulus".into(), 5.0), // no row: not listed
+            ],
+            None,
+            true,
+            120_000_000,
+        );
+        assert_eq!(rows.len(), 2);
+        assert_eq!(rows[0].observed, 2000);
+        assert_eq!(rows[0].trace_allowance, 1500);
+        assert_eq!(rows[0].bound, Some(500));
+        assert_eq!(rows[0].verdict, "ok");
+        assert_eq!(rows[0].ratio, Some(1.0));
+        assert!(rows[1].verdict.starts_with("declined: a loop"));
+        // One instruction more than the bound and the trace: above it.
+        let over = super::rows(
+            &board_bounds(),
+            &[("can_rx".into(), 16.008)],
+            None,
+            true,
+            120_000_000,
+        );
+        assert_eq!(over[0].observed, 2001);
+        assert_eq!(over[0].verdict, EXCEEDS);
+    }
+
+    #[test]
+    fn a_robot_capture_is_held_to_the_cycles() {
+        // 72 MHz: 12 µs of trace = 864 cycles; 20 µs observed = 1440 cycles, 576 once the trace is out.
+        let rows = rows(
+            &board_bounds(),
+            &[("can_rx".into(), 20.0)],
+            None,
+            false,
+            72_000_000,
+        );
+        assert_eq!((rows[0].unit, rows[0].observed), ("cycles", 1440));
+        assert_eq!(rows[0].bound, Some(720));
+        assert_eq!(rows[0].verdict, "ok");
+        let rows = super::rows(
+            &board_bounds(),
+            &[("can_rx".into(), 22.1)],
+            None,
+            false,
+            72_000_000,
+        );
+        assert_eq!(rows[0].verdict, EXCEEDS);
+    }
+
+    #[test]
+    fn without_a_file_there_is_nothing_to_compare() {
+        let none = BoardBounds {
+            bounds: None,
+            ..board_bounds()
+        };
+        assert!(rows(&none, &[("can_rx".into(), 1.0)], None, true, 1).is_empty());
+    }
+}

@@ -1,0 +1,259 @@
+//! The bounds files' staleness gate: each board's generated `schedule-analysis/models/<board>[-<rev>].wcet.json`
+//! must have been computed from the release image CI has just built, as a lock file must match its manifest.
+//!
+//! An image's identity is the SHA-256 of its executable section bytes (`SHF_EXECINSTR`, in address order):
+//! what the bounds are computed from. Read-only data is left out on purpose: the admission table the bounds
+//! feed into is read-only data, so writing new bounds does not by itself make them stale (docs/analysis.md,
+//! "Budgets from the machine code").
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use object::{Object, ObjectSection, SectionFlags};
+use schedule_analysis::bounds::{self, BoundsFile, ImageIdentity};
+use sha2::{Digest, Sha256};
+
+use crate::boards::BOARDS;
+use crate::revision::{self, Build, Choice};
+
+/// `SHF_EXECINSTR`: the section holds machine code.
+const SHF_EXECINSTR: u64 = 0x4;
+
+/// The identity of an ELF image: the SHA-256 of its executable sections' bytes, in address order, and how many
+/// bytes that is. An ELF without executable bytes, or one `object` cannot read, is an error.
+pub fn image_identity(elf: &[u8]) -> Result<ImageIdentity> {
+    let file = object::File::parse(elf).context("not an ELF image `object` can read")?;
+    let mut sections: Vec<_> = file
+        .sections()
+        .filter(|s| match s.flags() {
+            SectionFlags::Elf { sh_flags } => sh_flags & SHF_EXECINSTR != 0,
+            _ => false,
+        })
+        .collect();
+    sections.sort_by_key(|s| s.address());
+    let mut hash = Sha256::new();
+    let mut bytes = 0u64;
+    for s in &sections {
+        let data = s
+            .data()
+            .with_context(|| format!("reading section {}", s.name().unwrap_or("?")))?;
+        hash.update(data);
+        bytes += data.len() as u64;
+    }
+    if bytes == 0 {
+        bail!("the image has no executable bytes");
+    }
+    let code_sha256 = hash.finalize().iter().map(|b| format!("{b:02x}")).collect();
+    Ok(ImageIdentity {
+        code_sha256,
+        code_bytes: bytes,
+    })
+}
+
+/// The bounds file of a build, relative to the workspace root.
+pub fn bounds_path(root: &Path, build: &Build) -> std::path::PathBuf {
+    let revision = build.revision.feature.and_then(|f| f.strip_prefix("rev-"));
+    bounds::path_for(
+        &root.join(schedule_analysis::scenario::MODELS_DIR),
+        build.board.name,
+        revision,
+    )
+}
+
+/// What the gate found for one image.
+#[derive(Debug, PartialEq)]
+pub enum Gate {
+    /// The file matches the image.
+    Current,
+    /// No bounds file yet (skipped).
+    NoFile,
+}
+
+/// Checks one build's bounds file against its release ELF `elf`.
+pub fn check_one(root: &Path, build: &Build, elf: &Path) -> Result<Gate> {
+    let path = bounds_path(root, build);
+    let name = path
+        .strip_prefix(root)
+        .unwrap_or(&path)
+        .display()
+        .to_string();
+    let Some(file) = BoundsFile::read(&path, &name)? else {
+        return Ok(Gate::NoFile);
+    };
+    let revision = build.revision.feature.and_then(|f| f.strip_prefix("rev-"));
+    file.check_image(&name, build.board.name, revision)?;
+    let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+    let built = image_identity(&bytes).with_context(|| elf.display().to_string())?;
+    if built != file.image {
+        bail!(
+            "{name} is out of date with the image {} (its code: {} bytes, SHA-256 {}; the file's: {} bytes, {}): \
+             run `cargo xtask wcet --write` and commit the file",
+            elf.display(),
+            built.code_bytes,
+            built.code_sha256,
+            file.image.code_bytes,
+            file.image.code_sha256
+        );
+    }
+    Ok(Gate::Current)
+}
+
+/// The CI gate: every board revision's bounds file must match its release image as built
+/// (`target/firmware/<stem>.elf`, after `cargo xtask test` built them). A board without a bounds file is
+/// skipped, and said so.
+pub fn check_bounds_current(root: &Path) -> Result<()> {
+    let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &Choice::All)?;
+    let mut skipped = Vec::new();
+    for build in &every {
+        let elf = revision::kept_elf(root, build, false);
+        match check_one(root, build, &elf)? {
+            Gate::Current => println!(
+                "bounds gate: {} matches {}",
+                bounds_path(root, build)
+                    .strip_prefix(root)
+                    .unwrap_or(&bounds_path(root, build))
+                    .display(),
+                build.stem()
+            ),
+            Gate::NoFile => skipped.push(build.stem()),
+        }
+    }
+    if !skipped.is_empty() {
+        println!(
+            "bounds gate: skipped {} (no generated bounds file yet: `cargo xtask wcet --write`)",
+            skipped.join(", ")
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A minimal little-endian ELF32 with a code section (`.text`, alloc + exec) at 0x0800_6000 and a read-only
+    /// data section (`.rodata`, alloc) after it; no segments, no symbols.
+    fn elf(code: &[u8], rodata: &[u8]) -> Vec<u8> {
+        let names = b"\0.text\0.rodata\0.shstrtab\0";
+        let text_at = 52u32;
+        let rodata_at = text_at + code.len() as u32;
+        let names_at = rodata_at + rodata.len() as u32;
+        let shoff = (names_at + names.len() as u32 + 3) & !3;
+        let mut out = vec![0x7f, b'E', b'L', b'F', 1, 1, 1];
+        out.resize(16, 0);
+        out.extend_from_slice(&2u16.to_le_bytes()); // e_type EXEC
+        out.extend_from_slice(&40u16.to_le_bytes()); // e_machine ARM
+        out.extend_from_slice(&1u32.to_le_bytes()); // e_version
+        out.extend_from_slice(&0x0800_6000u32.to_le_bytes()); // e_entry
+        out.extend_from_slice(&0u32.to_le_bytes()); // e_phoff
+        out.extend_from_slice(&shoff.to_le_bytes());
+        out.extend_from_slice(&0u32.to_le_bytes()); // e_flags
+        for v in [52u16, 32, 0, 40, 4, 3] {
+            out.extend_from_slice(&v.to_le_bytes()); // ehsize, phentsize, phnum, shentsize, shnum, shstrndx
+        }
+        out.extend_from_slice(code);
+        out.extend_from_slice(rodata);
+        out.extend_from_slice(names);
+        out.resize(shoff as usize, 0);
+        let rodata_addr = 0x0800_6000 + code.len() as u32;
+        // name, type, flags, addr, offset, size, link, info, addralign, entsize
+        let headers: [[u32; 10]; 4] = [
+            [0; 10],
+            [
+                1,
+                1,
+                0x6,
+                0x0800_6000,
+                text_at,
+                code.len() as u32,
+                0,
+                0,
+                2,
+                0,
+            ],
+            [
+                7,
+                1,
+                0x2,
+                rodata_addr,
+                rodata_at,
+                rodata.len() as u32,
+                0,
+                0,
+                1,
+                0,
+            ],
+            [15, 3, 0, 0, names_at, names.len() as u32, 0, 0, 1, 0],
+        ];
+        for h in headers {
+            for v in h {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn the_identity_is_the_code_and_only_the_code() {
+        let a = image_identity(&elf(&[0x70, 0x47, 0x00, 0xbf], b"table")).unwrap();
+        assert_eq!(a.code_bytes, 4);
+        assert_eq!(a.code_sha256.len(), 64);
+        // SHA-256 of 70 47 00 bf, as `sha256sum` gives it.
+        assert_eq!(
+            a.code_sha256,
+            "0c302d771ae76f031fe8c4a87c6f54f6b1e93bbf4552d26a8ea553f2a89c0530"
+        );
+        // Other read-only data: the same identity; one code byte changed: another.
+        assert_eq!(
+            image_identity(&elf(&[0x70, 0x47, 0x00, 0xbf], b"other")).unwrap(),
+            a
+        );
+        assert_ne!(
+            image_identity(&elf(&[0x70, 0x47, 0x01, 0xbf], b"table")).unwrap(),
+            a
+        );
+    }
+
+    #[test]
+    fn not_an_image_is_an_error() {
+        assert!(image_identity(b"not an elf").is_err());
+        assert!(image_identity(&elf(&[], b"data only")).is_err());
+    }
+
+    fn bounds_for(identity: &ImageIdentity) -> String {
+        serde_json::json!({
+            "generated": format!("{} from a test image", bounds::GENERATED_PREFIX),
+            "board": "powermgmt", "revision": null, "chip": "stm32f405",
+            "clock_hz": 168_000_000, "wait_states": 5,
+            "image": identity,
+            "tasks": [ { "task": "can_rx", "cycles": 168, "us": 1.0, "instructions": 100, "declined": null } ]
+        })
+        .to_string()
+    }
+
+    #[test]
+    fn the_gate_passes_a_current_file_fails_a_stale_one_and_skips_a_missing_one() {
+        let root = std::env::temp_dir().join(format!("wcet-gate-{}", std::process::id()));
+        let models = root.join(schedule_analysis::scenario::MODELS_DIR);
+        std::fs::create_dir_all(&models).unwrap();
+        let build = revision::plan(
+            &[crate::boards::by_name("powermgmt").unwrap()],
+            &Choice::Newest,
+        )
+        .unwrap()
+        .remove(0);
+        let image = root.join("powermgmt.elf");
+        std::fs::write(&image, elf(&[0x70, 0x47, 0x00, 0xbf], b"")).unwrap();
+        assert_eq!(check_one(&root, &build, &image).unwrap(), Gate::NoFile);
+        let current = image_identity(&std::fs::read(&image).unwrap()).unwrap();
+        std::fs::write(bounds_path(&root, &build), bounds_for(&current)).unwrap();
+        assert_eq!(check_one(&root, &build, &image).unwrap(), Gate::Current);
+        // The image is rebuilt with other code: the file is stale.
+        std::fs::write(&image, elf(&[0x70, 0x47, 0x00, 0x00], b"")).unwrap();
+        let e = check_one(&root, &build, &image).unwrap_err().to_string();
+        assert!(
+            e.contains("out of date") && e.contains("powermgmt.wcet.json"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+}
