@@ -17,9 +17,11 @@
 //! | [`world`] | the three together: [`World`], [`Readings`], [`Summary`] (the end line) |
 //! | [`output`] | trajectory CSV and SVG |
 //! | [`controller`] | the controller protocol |
+//! | [`feed`] | the robot link's world messages: wheel reports in, each board's readings out |
 //! | [`kinematic`] | a closed loop without firmware: behaviours against the world alone |
 
 pub mod controller;
+pub mod feed;
 pub mod file;
 pub mod floor;
 pub mod geometry;
