@@ -104,3 +104,35 @@ fn floor_sensors_read_fed_counts_by_channel() {
     assert_eq!(counts[1], SimVcnl4020::proximity_at(1, 0));
     assert_eq!(counts[2], SimVcnl4020::proximity_at(2, 0));
 }
+
+#[test]
+fn the_ring_reads_fed_counts_by_protocol_index_across_both_buses() {
+    use amiro_sensors::drivers::ring::ProximityRing;
+    // Index k gets 2000 + 1e6 / (20 + 10 k)² counts: 20 mm, 30 mm, … 90 mm on the default
+    // calibration, whichever bus and channel the index is wired to.
+    let counts: [u16; 8] = core::array::from_fn(|k| {
+        let mm = 20 + 10 * k as u32;
+        (2000 + 1_000_000 / (mm * mm)) as u16
+    });
+    let mut i2c1 = SimPowerBus::new(0, false);
+    let mut i2c2 = SimPowerBus::new(4, false);
+    feed_ring(&mut i2c1.target.0, &mut i2c2.target.0, Some(counts));
+    {
+        let mut ring = ProximityRing::new(&mut i2c1, &mut i2c2);
+        ring.init().unwrap();
+        assert_eq!(ring.read_counts().unwrap(), counts);
+        assert_eq!(ring.read_mm().unwrap(), [20, 30, 40, 50, 60, 70, 80, 90]);
+    }
+    feed_ring(&mut i2c1.target.0, &mut i2c2.target.0, None);
+    let mut ring = ProximityRing::new(&mut i2c1, &mut i2c2);
+    assert_ne!(ring.read_counts().unwrap(), counts, "the patterns are back");
+}
+
+#[test]
+fn feed_floor_follows_the_protocol_order() {
+    let mut bus = SimFloorBus::new();
+    feed_floor(bus.proximity_mut(), Some([1, 2, 3, 4]));
+    let mut floor = FloorSensors::new(&mut bus);
+    floor.init().unwrap();
+    assert_eq!(floor.read_proximity().unwrap(), [1, 2, 3, 4]);
+}
