@@ -16,6 +16,7 @@
 //! | [`noise`] | the seeded generator |
 //! | [`world`] | the three together: [`World`], [`Readings`], [`Summary`] (the end line) |
 //! | [`output`] | trajectory CSV and SVG |
+//! | [`foxglove`] | the pose and the arena for Foxglove's 3D panel, in an MCAP file |
 //! | [`controller`] | the controller protocol |
 //! | [`feed`] | the robot link's world messages: wheel reports in, each board's readings out |
 //! | [`kinematic`] | a closed loop without firmware: behaviours against the world alone |
@@ -24,6 +25,7 @@ pub mod controller;
 pub mod feed;
 pub mod file;
 pub mod floor;
+pub mod foxglove;
 pub mod geometry;
 pub mod imu;
 pub mod kinematic;

@@ -12,6 +12,7 @@ Run by `cargo xtask test` (xtask/src/interop.rs: AMIRO_WORLD_LOOP is the world-l
 """
 
 import csv
+import json
 import math
 import os
 import struct
@@ -73,6 +74,28 @@ def test_line_following_completes_a_lap_over_the_line(tmp_path):
             turned += (a - previous + math.pi) % (2 * math.pi) - math.pi
         previous = a
     assert turned >= 2 * math.pi, f"{turned / (2 * math.pi):.2f} laps"
+
+
+def test_the_world_mcap_opens_with_foxglove_schemas(tmp_path):
+    from mcap.reader import make_reader
+    if not WORLD_LOOP:
+        pytest.skip("AMIRO_WORLD_LOOP names no world-loop binary")
+    out = tmp_path / "world.mcap"
+    subprocess.run(
+        [WORLD_LOOP, str(ROOT / "robot" / "worlds" / "arena.json"),
+         "--controller", f"{sys.executable} {ROOT / 'examples' / 'obstacle_avoidance.py'}",
+         "--duration-s", "1", "--mcap", str(out)],
+        capture_output=True, text=True, timeout=600, check=True,
+    )
+    seen = {}
+    with open(out, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            seen.setdefault(channel.topic, (schema.name, []))[1].append(json.loads(message.data))
+    assert seen["/world/arena"][0] == "foxglove.SceneUpdate"
+    assert len(seen["/world/arena"][1]) == 1
+    assert seen["/world/pose"][0] == "foxglove.PoseInFrame"
+    poses = seen["/world/pose"][1]
+    assert len(poses) == 101 and poses[0]["pose"]["position"] == {"x": 0.3, "y": 0.75, "z": 0.0}
 
 
 def test_runs_are_deterministic(tmp_path):

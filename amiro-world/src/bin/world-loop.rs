@@ -37,6 +37,9 @@ struct Args {
     /// Write the arena with the path here (SVG).
     #[arg(long)]
     svg: Option<PathBuf>,
+    /// Write the pose and the arena here for Foxglove's 3D panel (MCAP).
+    #[arg(long)]
+    mcap: Option<PathBuf>,
 }
 
 fn main() -> Result<()> {
@@ -63,6 +66,13 @@ fn main() -> Result<()> {
     if let Some(path) = &args.svg {
         std::fs::write(path, outcome.trajectory.svg(world.arena()))
             .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &args.mcap {
+        let file = std::io::BufWriter::new(
+            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
+        );
+        let mut file = amiro_world::foxglove::write_mcap(file, world.arena(), &outcome.trajectory)?;
+        std::io::Write::flush(&mut file).with_context(|| format!("writing {}", path.display()))?;
     }
     let dark = if outcome.ticks == 0 {
         0.0
