@@ -116,12 +116,12 @@ pub enum LineProblem {
 #[derive(Debug, thiserror::Error)]
 pub enum ControllerError {
     /// The program could not be started.
-    #[error("controller `{program}` could not be started: {source}")]
+    #[error("controller `{program}` could not be started: {error}")]
     Spawn {
         /// The command line.
         program: String,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The program exited or closed its stdout.
     #[error("controller `{program}` ended at {} s of virtual time ({})", seconds(*at_us), describe(status))]
@@ -182,9 +182,9 @@ impl Controller {
     /// the rest its arguments) with piped stdin and stdout.
     pub fn spawn(program: &str, timeout: Duration) -> Result<Controller, ControllerError> {
         let mut words = program.split_whitespace();
-        let spawn_error = |source| ControllerError::Spawn {
+        let spawn_error = |error| ControllerError::Spawn {
             program: program.to_string(),
-            source,
+            error,
         };
         let executable = words.next().ok_or_else(|| {
             spawn_error(std::io::Error::new(
@@ -207,9 +207,9 @@ impl Controller {
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .spawn()
-            .map_err(|source| ControllerError::Spawn {
+            .map_err(|error| ControllerError::Spawn {
                 program: name.to_string(),
-                source,
+                error,
             })?;
         let stdin = child.stdin.take().map(BufWriter::new);
         let stdout = child.stdout.take();

@@ -30,16 +30,16 @@ use crate::geometry::{Circle, Segment, Vec2};
 #[derive(Debug, thiserror::Error)]
 pub enum WorldError {
     /// The file could not be read.
-    #[error("reading the world {path}: {source}")]
+    #[error("reading the world {path}: {error}")]
     Read {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// Not JSON, or not the world's shape (serde says where: line, column and the field).
     #[error("world file: {0}")]
-    Json(#[from] serde_json::Error),
+    Json(serde_json::Error),
     /// A field with a value the world cannot use.
     #[error("{field}: {problem}")]
     Field {
@@ -85,6 +85,8 @@ pub enum Problem {
     FloorShape,
     /// An obstacle that is neither a `polygon` nor a `circle`, or both.
     ObstacleShape,
+    /// A wall that is neither a list of points nor `{ "points", "reflectance" }`.
+    WallShape,
 }
 
 impl fmt::Display for Problem {
@@ -102,6 +104,10 @@ impl fmt::Display for Problem {
             ),
             Problem::FloorShape => write!(f, "needs exactly one of `polygon` or `line`"),
             Problem::ObstacleShape => write!(f, "needs exactly one of `polygon` or `circle`"),
+            Problem::WallShape => write!(
+                f,
+                "a wall is a list of [x, y] points or {{ \"points\": [...], \"reflectance\": r }}"
+            ),
         }
     }
 }
@@ -119,8 +125,9 @@ struct RawWorld {
     #[serde(default)]
     seed: u64,
     robot: RawPose,
+    /// Read one by one, so a malformed wall is named by its index.
     #[serde(default)]
-    walls: Vec<RawWall>,
+    walls: Vec<serde_json::Value>,
     #[serde(default)]
     obstacles: Vec<RawObstacle>,
     #[serde(default)]
@@ -141,11 +148,15 @@ struct RawPose {
 #[serde(untagged)]
 enum RawWall {
     Points(Vec<[f64; 2]>),
-    Material {
-        points: Vec<[f64; 2]>,
-        #[serde(default)]
-        reflectance: Option<f64>,
-    },
+    Material(RawMaterialWall),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMaterialWall {
+    points: Vec<[f64; 2]>,
+    #[serde(default)]
+    reflectance: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -265,31 +276,30 @@ const MAX_REFLECTANCE: f64 = 10.0;
 impl Arena {
     /// Reads and checks a world file.
     pub fn load(path: &Path) -> Result<Arena, WorldError> {
-        let text = std::fs::read_to_string(path).map_err(|source| WorldError::Read {
+        let text = std::fs::read_to_string(path).map_err(|error| WorldError::Read {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
         Arena::parse(&text)
     }
 
     /// Checks a world given as JSON text.
     pub fn parse(text: &str) -> Result<Arena, WorldError> {
-        let raw: RawWorld = serde_json::from_str(text)?;
+        let raw: RawWorld = serde_json::from_str(text).map_err(WorldError::Json)?;
         let start = Pose {
             position: Vec2::new(raw.robot.x, raw.robot.y),
             heading: raw.robot.heading_deg.to_radians(),
         };
         let mut segments = Vec::new();
-        for (i, wall) in raw.walls.iter().enumerate() {
+        for (i, wall) in raw.walls.into_iter().enumerate() {
+            let wall: RawWall = serde_json::from_value(wall)
+                .map_err(|_| field(format!("walls[{i}]"), Problem::WallShape))?;
             let (points, reflectance, name) = match wall {
                 RawWall::Points(p) => (p, None, format!("walls[{i}]")),
-                RawWall::Material {
-                    points,
-                    reflectance,
-                } => (points, *reflectance, format!("walls[{i}].points")),
+                RawWall::Material(m) => (m.points, m.reflectance, format!("walls[{i}].points")),
             };
             let reflectance = check_reflectance(&format!("walls[{i}].reflectance"), reflectance)?;
-            let points = check_points(&name, points, 2)?;
+            let points = check_points(&name, &points, 2)?;
             segments.extend(polyline(&points, false, reflectance));
         }
         let wall_segments = segments.len();
@@ -540,6 +550,30 @@ mod tests {
         );
         let e = world(r#", "lab": { "inclination_deg": 91 }"#).unwrap_err();
         assert_eq!(e.to_string(), "lab.inclination_deg: 91 is above 90");
+        let e = Arena::parse(
+            r#"{ "robot": { "x": 1, "y": 1, "heading_deg": 0 },
+                 "walls": [ [[0, 0], [2, 0]], { "points": [[0, 2], [2, 2]], "reflectance": 0.5 }, 5 ] }"#,
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().starts_with("walls[2]: a wall is a list"),
+            "{e}"
+        );
+        let e = Arena::parse(
+            r#"{ "robot": { "x": 1, "y": 1, "heading_deg": 0 },
+                 "walls": [ { "points": [[0, 2], [2, 2]], "reflectanc": 0.5 } ] }"#,
+        )
+        .unwrap_err();
+        assert!(e.to_string().starts_with("walls[0]:"), "{e}");
+        let e = Arena::parse(
+            r#"{ "robot": { "x": 1, "y": 1, "heading_deg": 0 },
+                 "walls": [ { "points": [[0, 2]], "reflectance": 0.5 } ] }"#,
+        )
+        .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "walls[0].points: 1 points, at least 2 needed"
+        );
     }
 
     #[test]
