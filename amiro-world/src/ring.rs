@@ -141,6 +141,35 @@ pub fn read(
     RingReading { hits, counts }
 }
 
+/// What the firmware reports for sensor `index` from the robot at `position`, `heading`, without
+/// noise: the response's mean counts through the driver's default calibration
+/// (`ProximityCalibration::DEFAULT::counts_to_mm`), 200 for nothing within range. A scenario that
+/// checks the ring's frames against the trajectory compares them with this, within
+/// [`tolerance_mm`].
+pub fn expected_mm(
+    arena: &Arena,
+    position: Vec2,
+    heading: f64,
+    response: &Response,
+    index: usize,
+) -> u16 {
+    let counts = response
+        .mean_counts(sense(arena, position, heading, index))
+        .round()
+        .clamp(0.0, 65535.0) as u16;
+    amiro_sensors::drivers::proximity::ProximityCalibration::DEFAULT.counts_to_mm(counts)
+}
+
+/// How far a noisy reading may lie from [`expected_mm`]: three standard deviations of the noise
+/// carried through the inverse square (`σ_mm ≈ d / 2 · σ_counts / reflected`), plus a millimetre
+/// of rounding. On the reference surface 1.6 mm at 20 mm, 8.5 mm at 100 mm, 43 mm at 200 mm.
+pub fn tolerance_mm(expected_mm: u16, response: &Response) -> f64 {
+    let d = f64::from(expected_mm.max(1));
+    let reflected = response.k_counts_mm2 / (d * d);
+    let sd_counts = response.noise_counts + response.noise_fraction * reflected;
+    3.0 * d / 2.0 * sd_counts / reflected + 1.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -200,6 +229,48 @@ mod tests {
         // Touching: clamped at the model's 2 mm and at the register's 16 bits.
         let mut n = Noise::new(1);
         assert_eq!(r.counts(Some((0.0, 1.0)), &mut n), 65535);
+    }
+
+    #[test]
+    fn noisy_frames_lie_within_the_tolerance_of_the_trajectorys_distances() {
+        // The check a robot scenario makes: along a path through the example arena, every ring
+        // reading the firmware would report (noisy counts through its calibration) lies within
+        // `tolerance_mm` of the distance worked out from the pose.
+        let a = Arena::load(std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../robot/worlds/arena.json"
+        )))
+        .unwrap();
+        let r = Response::AMIRO;
+        let calibration = ProximityCalibration::DEFAULT;
+        let mut n = Noise::new(9);
+        let (mut checked, mut near, mut outside) = (0, 0, 0);
+        for step in 0..2000 {
+            let t = f64::from(step) / 2000.0;
+            let position = Vec2::new(0.15 + 1.7 * t, 0.75 + 0.55 * (t * 13.0).sin());
+            let heading = t * 40.0;
+            if crate::motion::clearance(&a, position) < crate::motion::BODY_RADIUS_M {
+                continue;
+            }
+            for i in 0..SENSORS {
+                let expected = expected_mm(&a, position, heading, &r, i);
+                let got =
+                    calibration.counts_to_mm(r.counts(sense(&a, position, heading, i), &mut n));
+                checked += 1;
+                near += usize::from(expected < 200);
+                if (f64::from(got) - f64::from(expected)).abs() > tolerance_mm(expected, &r) {
+                    outside += 1;
+                }
+            }
+        }
+        assert!(
+            near > 1000,
+            "the path passes walls and obstacles: {near} of {checked}"
+        );
+        // Three standard deviations: about 0.3 % outside.
+        assert!(outside * 100 < checked, "{outside} of {checked} outside");
+        assert!((tolerance_mm(100, &r) - 8.5).abs() < 1e-9);
+        assert!((tolerance_mm(200, &r) - 43.0).abs() < 1e-9);
     }
 
     #[test]
