@@ -63,7 +63,7 @@ pub fn run(
     let axle = world.motion().wheels.axle_m;
     let mut ring: Option<Publisher> = None;
     let mut floor: Option<Publisher> = None;
-    let mut once: Vec<Topic> = Vec::new();
+    let mut once: Vec<(Topic, Priority)> = Vec::new();
     let mut velocity = (0.0f64, 0.0f64);
     let mut last_motor_us: Option<u64> = None;
     let mut outcome = Outcome {
@@ -101,8 +101,8 @@ pub fn run(
                 }
             }
         }
-        for topic in once.drain(..) {
-            due.push((t, topic, Priority::Low));
+        for (topic, priority) in once.drain(..) {
+            due.push((t, topic, priority));
         }
         due.sort_by_key(|&(at, topic, _)| (at, topic as u8));
         for (at, topic, priority) in due {
@@ -157,7 +157,7 @@ pub fn run(
                         SensorMode::Stop => *target = None,
                         SensorMode::Once => {
                             *target = None;
-                            once.push(c.topic);
+                            once.push((c.topic, c.priority));
                         }
                     }
                 }
