@@ -19,6 +19,7 @@ SLOW_MM = 160         # ahead within this: slow down
 CRUISE_M_S = 0.15
 TURN_RAD_S = 2.0
 MOTOR_EVERY_S = 0.05  # keep-alive well inside the drive's 500 ms dead-man
+LIGHTS_EVERY_S = 0.1  # the LEDs change at most ten times a second (each change is up to 8 frames)
 
 
 class ObstacleAvoidance:
@@ -27,6 +28,7 @@ class ObstacleAvoidance:
         self.turning = 0          # +1 left, -1 right while escaping, 0 cruising
         self.last_motor = None
         self.shown = None         # the LED picture last sent
+        self.last_lights = None
 
     def start(self):
         return [publish(PROXIMITY_RING, 50)]
@@ -67,8 +69,11 @@ class ObstacleAvoidance:
         if self.last_motor is None or t - self.last_motor >= MOTOR_EVERY_S - 1e-9:
             out.append(motor(*self.decide()))
             self.last_motor = t
+        if self.last_lights is not None and t - self.last_lights < LIGHTS_EVERY_S - 1e-9:
+            return out
         picture = self.lights()
         if picture != self.shown:
+            self.last_lights = t
             for number, rgb in enumerate(picture, start=1):
                 if self.shown is None or self.shown[number - 1] != rgb:
                     out.append(led(number, rgb))
