@@ -5,7 +5,8 @@ Asks for the ring every 50 ms, drives forward at up to 0.15 m/s and turns away f
 front half of the ring sees (a Braitenberg-style rule: the closer side pushes harder); when
 something is close ahead it turns on the spot, always the same way until the way is clear, so it
 does not dither in a corner. The LED nearest the closest obstacle glows red, brighter the closer
-it is; with nothing within 200 mm the ring is dim green.
+it is; with nothing within 200 mm the ring is dark. Only LEDs that change are sent, at most ten times a
+second, so a change is one or two frames on the bus.
 
 Lock-step (the emulated robot starts it):  --controller "python3 examples/obstacle_avoidance.py"
 Live:  python3 examples/obstacle_avoidance.py --slcan /dev/pts/N
@@ -19,7 +20,7 @@ SLOW_MM = 160         # ahead within this: slow down
 CRUISE_M_S = 0.15
 TURN_RAD_S = 2.0
 MOTOR_EVERY_S = 0.05  # keep-alive well inside the drive's 500 ms dead-man
-LIGHTS_EVERY_S = 0.1  # the LEDs change at most ten times a second (each change is up to 8 frames)
+LIGHTS_EVERY_S = 0.1  # the LEDs change at most ten times a second
 
 
 class ObstacleAvoidance:
@@ -27,7 +28,7 @@ class ObstacleAvoidance:
         self.mm = [FAR_MM] * 8
         self.turning = 0          # +1 left, -1 right while escaping, 0 cruising
         self.last_motor = None
-        self.shown = None         # the LED picture last sent
+        self.shown = ((0, 0, 0),) * 8  # the LED picture last sent (the LightRing starts dark)
         self.last_lights = None
 
     def start(self):
@@ -58,7 +59,7 @@ class ObstacleAvoidance:
     def lights(self):
         nearest = min(range(8), key=lambda i: self.mm[i])
         if self.mm[nearest] >= FAR_MM:
-            return tuple((0, 8, 0) for _ in range(8))
+            return ((0, 0, 0),) * 8
         glow = 64 + int(191 * (FAR_MM - self.mm[nearest]) / FAR_MM)
         picture = [(0, 0, 0)] * 8
         picture[RING_TO_LED[nearest] - 1] = (glow, 0, 0)
@@ -75,7 +76,7 @@ class ObstacleAvoidance:
         if picture != self.shown:
             self.last_lights = t
             for number, rgb in enumerate(picture, start=1):
-                if self.shown is None or self.shown[number - 1] != rgb:
+                if self.shown[number - 1] != rgb:
                     out.append(led(number, rgb))
             self.shown = picture
         return out
