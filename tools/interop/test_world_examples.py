@@ -147,3 +147,21 @@ def test_line_following_steers_towards_the_line():
     b.on_message(floor(37000, 37000))    # lost: turn towards where it was seen last (right)
     v, w = struct.unpack("<ii", bytes(b.tick(0.1)[0].data))
     assert v == 0 and w < 0
+
+
+def test_the_lockstep_transport_speaks_the_controller_protocol():
+    """run_lockstep on text streams: frames in, the publish request and motor command at the first tick, `ok`."""
+    import io
+    stdin = io.StringIO(
+        "(0.005000) can0 71F#032800\n"          # sensor 3 (front-left) at 40 mm
+        "(0.010000) tick\n"
+        "(0.020000) tick\n"
+    )
+    stdout = io.StringIO()
+    amiro_behaviour.run_lockstep(ObstacleAvoidance(), stdin, stdout)
+    lines = stdout.getvalue().splitlines()
+    first = lines[: lines.index("ok")]
+    assert first[0] == "31F#01320000"
+    assert first[1] == "110#00000000807BE1FF", first    # on the spot, −2 rad/s: away from the left
+    assert "318#D80000" in first, first                 # led-8 red: 64 + 191 · 160 / 200 = 216
+    assert lines[lines.index("ok") + 1:] == ["ok"], "nothing new 10 ms later"
