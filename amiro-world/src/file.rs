@@ -87,6 +87,8 @@ pub enum Problem {
     ObstacleShape,
     /// A wall that is neither a list of points nor `{ "points", "reflectance" }`.
     WallShape,
+    /// A `path` on something other than a round obstacle.
+    OnlyCirclesMove,
 }
 
 impl fmt::Display for Problem {
@@ -104,6 +106,7 @@ impl fmt::Display for Problem {
             ),
             Problem::FloorShape => write!(f, "needs exactly one of `polygon` or `line`"),
             Problem::ObstacleShape => write!(f, "needs exactly one of `polygon` or `circle`"),
+            Problem::OnlyCirclesMove => write!(f, "only a round obstacle (`circle`) moves"),
             Problem::WallShape => write!(
                 f,
                 "a wall is a list of [x, y] points or {{ \"points\": [...], \"reflectance\": r }}"
@@ -170,6 +173,10 @@ struct RawObstacle {
     radius: Option<f64>,
     #[serde(default)]
     reflectance: Option<f64>,
+    #[serde(default)]
+    path: Option<Vec<[f64; 2]>>,
+    #[serde(default)]
+    speed: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -250,6 +257,43 @@ impl LabField {
     };
 }
 
+/// A round obstacle that moves: from its start round the closed loop start → `waypoints` → start,
+/// at a constant speed, for ever.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mover {
+    /// Which of [`Arena::circles`] moves.
+    pub circle: usize,
+    /// The loop: the start first, then the waypoints.
+    pub route: Vec<Vec2>,
+    /// Speed along the loop, m/s.
+    pub speed: f64,
+}
+
+impl Mover {
+    /// Where it is `t_s` seconds after the start.
+    pub fn position_at(&self, t_s: f64) -> Option<Vec2> {
+        let first = *self.route.first()?;
+        let legs = || {
+            self.route
+                .iter()
+                .zip(self.route.iter().skip(1).chain(std::iter::once(&first)))
+        };
+        let length: f64 = legs().map(|(a, b)| b.minus(*a).length()).sum();
+        if length <= 0.0 {
+            return Some(first);
+        }
+        let mut s = (self.speed * t_s).rem_euclid(length);
+        for (a, b) in legs() {
+            let leg = b.minus(*a).length();
+            if s <= leg && leg > 0.0 {
+                return Some(a.plus(b.minus(*a).scale(s / leg)));
+            }
+            s -= leg;
+        }
+        Some(first)
+    }
+}
+
 /// A checked world.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Arena {
@@ -259,8 +303,10 @@ pub struct Arena {
     pub start: Pose,
     /// Walls and the polygon obstacles' edges.
     pub segments: Vec<Segment>,
-    /// Round obstacles.
+    /// Round obstacles, where they are now.
     pub circles: Vec<Circle>,
+    /// The round obstacles that move.
+    pub movers: Vec<Mover>,
     /// Floor patches, in drawing order.
     pub floor: Vec<FloorPatch>,
     /// The magnetic field.
@@ -272,6 +318,8 @@ pub struct Arena {
 /// Reflectance accepted: a matt black surface reflects almost nothing, a mirror-like one up to
 /// a few times the reference grey card.
 const MAX_REFLECTANCE: f64 = 10.0;
+/// The fastest a moving obstacle may go, m/s (ten times the robot's top speed).
+const MAX_SPEED_M_S: f64 = 5.0;
 
 impl Arena {
     /// Reads and checks a world file.
@@ -304,20 +352,44 @@ impl Arena {
         }
         let wall_segments = segments.len();
         let mut circles = Vec::new();
+        let mut movers = Vec::new();
         for (i, obstacle) in raw.obstacles.iter().enumerate() {
             let name = format!("obstacles[{i}]");
             let reflectance =
                 check_reflectance(&format!("{name}.reflectance"), obstacle.reflectance)?;
             match (&obstacle.polygon, obstacle.circle) {
                 (Some(polygon), None) => {
+                    if obstacle.path.is_some() || obstacle.speed.is_some() {
+                        return Err(field(format!("{name}.path"), Problem::OnlyCirclesMove));
+                    }
                     let points = check_points(&format!("{name}.polygon"), polygon, 3)?;
                     segments.extend(polyline(&points, true, reflectance));
                 }
                 (None, Some([x, y])) => {
                     let radius = obstacle.radius.unwrap_or(0.0);
                     at_least(&format!("{name}.radius"), radius, 0.001)?;
+                    let centre = Vec2::new(x, y);
+                    if let Some(path) = &obstacle.path {
+                        let waypoints = check_points(&format!("{name}.path"), path, 1)?;
+                        let speed = obstacle.speed.unwrap_or(0.0);
+                        at_least(&format!("{name}.speed"), speed, 0.0)?;
+                        at_most(&format!("{name}.speed"), speed, MAX_SPEED_M_S)?;
+                        movers.push(Mover {
+                            circle: circles.len(),
+                            route: std::iter::once(centre).chain(waypoints).collect(),
+                            speed,
+                        });
+                    } else if obstacle.speed.is_some() {
+                        return Err(field(
+                            format!("{name}.path"),
+                            Problem::TooFewPoints {
+                                found: 0,
+                                needed: 1,
+                            },
+                        ));
+                    }
                     circles.push(Circle {
-                        centre: Vec2::new(x, y),
+                        centre,
                         radius,
                         reflectance,
                     });
@@ -373,6 +445,7 @@ impl Arena {
             start,
             segments,
             circles,
+            movers,
             floor,
             lab,
             wall_segments,
@@ -415,6 +488,16 @@ impl Arena {
             }
         }
         Ok(())
+    }
+
+    /// Puts the moving obstacles where they are `t_s` seconds after the start.
+    pub fn move_obstacles(&mut self, t_s: f64) {
+        for mover in &self.movers {
+            if let (Some(p), Some(c)) = (mover.position_at(t_s), self.circles.get_mut(mover.circle))
+            {
+                c.centre = p;
+            }
+        }
     }
 
     /// The grey level under `p`: the last patch that covers it, or white.
@@ -525,6 +608,36 @@ mod tests {
         assert_eq!(a.grey_at(Vec2::new(0.53, 1.5)), 255);
         assert_eq!(a.grey_at(Vec2::new(1.5, 0.5)), 255);
         assert_eq!(a.lab, LabField::BIELEFELD);
+    }
+
+    #[test]
+    fn an_obstacle_moves_round_its_loop() {
+        let mut a = world(
+            r#", "obstacles": [ { "circle": [0.5, 0.5], "radius": 0.05, "path": [[1.5, 0.5]], "speed": 0.5 } ]"#,
+        )
+        .unwrap();
+        // Out along 1 m and back: a 2 m loop at 0.5 m/s, 4 s a lap.
+        for (t, x) in [
+            (0.0, 0.5),
+            (1.0, 1.0),
+            (2.0, 1.5),
+            (3.0, 1.0),
+            (4.0, 0.5),
+            (5.0, 1.0),
+        ] {
+            a.move_obstacles(t);
+            assert!((a.circles[0].centre.x - x).abs() < 1e-12, "t = {t}");
+            assert!((a.circles[0].centre.y - 0.5).abs() < 1e-12);
+        }
+        let e = world(r#", "obstacles": [ { "polygon": [[0.1,0.1],[0.2,0.1],[0.2,0.2]], "path": [[1, 1]] } ]"#)
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "obstacles[0].path: only a round obstacle (`circle`) moves"
+        );
+        let e = world(r#", "obstacles": [ { "circle": [0.5, 0.5], "radius": 0.05, "path": [[1, 1]], "speed": 9 } ]"#)
+            .unwrap_err();
+        assert_eq!(e.to_string(), "obstacles[0].speed: 9 is above 5");
     }
 
     #[test]

@@ -87,6 +87,17 @@ impl Motion {
         }
     }
 
+    /// Something moved into the body (a moving obstacle): a contact if it touches now.
+    pub fn touch_check(&mut self, arena: &Arena) {
+        let c = clearance(arena, self.pose.position);
+        if c < BODY_RADIUS_M && !self.in_contact {
+            self.contacts += 1;
+            self.in_contact = true;
+        } else if c > BODY_RADIUS_M + CONTACT_RELEASE_M {
+            self.in_contact = false;
+        }
+    }
+
     /// The wheels turned by `left_ticks` and `right_ticks` encoder ticks in `dt_s` seconds.
     pub fn advance_ticks(&mut self, arena: &Arena, dt_s: f64, left_ticks: i64, right_ticks: i64) {
         let k = self.wheels.metres_per_tick;

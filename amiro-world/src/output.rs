@@ -63,6 +63,9 @@ impl Trajectory {
             points.push(c.centre.plus(Vec2::new(c.radius, c.radius)));
             points.push(c.centre.minus(Vec2::new(c.radius, c.radius)));
         }
+        for mover in &arena.movers {
+            points.extend(&mover.route);
+        }
         for patch in &arena.floor {
             match &patch.shape {
                 FloorShape::Polygon(p) => points.extend(p),
@@ -131,6 +134,14 @@ impl Trajectory {
                 s,
                 r#"<circle cx="{:.4}" cy="{:.4}" r="{:.4}" fill="dimgrey"/>"#,
                 c.centre.x, c.centre.y, c.radius
+            );
+        }
+        // A moving obstacle's loop, dashed (the obstacle is drawn where the run left it).
+        for mover in &arena.movers {
+            let _ = writeln!(
+                s,
+                r#"<polygon points="{}" fill="none" stroke="dimgrey" stroke-width="0.003" stroke-dasharray="0.02 0.02"/>"#,
+                path(mover.route.iter().copied())
             );
         }
         let _ = writeln!(

@@ -33,6 +33,8 @@ pub struct Readings {
 #[derive(Debug, Clone)]
 pub struct World {
     arena: Arena,
+    /// Virtual time since the start, s (the moving obstacles' clock).
+    time_s: f64,
     motion: Motion,
     response: Response,
     ring_noise: Noise,
@@ -52,6 +54,7 @@ impl World {
         World {
             motion: Motion::new(arena.start, Wheels::amiro()),
             arena,
+            time_s: 0.0,
             response: Response::AMIRO,
             ring_noise: Noise::stream(seed, RING_STREAM),
             floor_noise: Noise::stream(seed, FLOOR_STREAM),
@@ -77,12 +80,25 @@ impl World {
     /// The wheels turned `left` and `right` encoder ticks in `dt_s` seconds (the DiWheelDrive
     /// plant's counts since the last call).
     pub fn advance_ticks(&mut self, dt_s: f64, left: i64, right: i64) {
+        self.move_obstacles(dt_s);
         self.motion.advance_ticks(&self.arena, dt_s, left, right);
     }
 
     /// The wheels travelled `left_m` and `right_m` in `dt_s` seconds.
     pub fn advance(&mut self, dt_s: f64, left_m: f64, right_m: f64) {
+        self.move_obstacles(dt_s);
         self.motion.advance(&self.arena, dt_s, left_m, right_m);
+    }
+
+    /// The moving obstacles go on by `dt_s` (before the body moves: an obstacle that runs into
+    /// the robot is a contact too).
+    fn move_obstacles(&mut self, dt_s: f64) {
+        if self.arena.movers.is_empty() {
+            return;
+        }
+        self.time_s += dt_s.max(0.0);
+        self.arena.move_obstacles(self.time_s);
+        self.motion.touch_check(&self.arena);
     }
 
     /// The sensors' readings now, each with its next noise sample.
@@ -197,6 +213,26 @@ mod tests {
         let c = run(&mut World::with_seed(12, arena));
         assert_ne!(a, c);
         assert_eq!(a.last(), c.last());
+    }
+
+    #[test]
+    fn an_obstacle_that_runs_into_the_robot_is_a_contact() {
+        // A post crossing the robot's place from left to right at 0.2 m/s; the robot stands still.
+        let mut w = World::new(
+            Arena::parse(
+                r#"{ "robot": { "x": 1, "y": 1, "heading_deg": 90 },
+                     "obstacles": [ { "circle": [0.5, 1.0], "radius": 0.05, "path": [[1.5, 1.0]], "speed": 0.2 } ] }"#,
+            )
+            .unwrap(),
+        );
+        let mut seen = false;
+        for _ in 0..300 {
+            w.advance(0.01, 0.0, 0.0);
+            seen |= w.ring().hits.iter().any(Option::is_some);
+        }
+        assert!(seen, "the ring saw it coming");
+        assert_eq!(w.summary().contacts, 1);
+        assert_eq!(w.summary().travelled_m, 0.0);
     }
 
     #[test]
