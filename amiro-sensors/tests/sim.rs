@@ -21,13 +21,15 @@ fn simulators_fit_a_few_hundred_bytes() {
         + size_of::<SimCompassBus>()
         + size_of::<SimFloorBus>()
         + size_of::<WheelPlant>();
+    // 200 B with the patterns alone; the world feed (`set_rate`, `set_acceleration`, `set_field`,
+    // `set_proximity`: docs/world.md) adds 80 B.
     assert!(
-        diwheeldrive <= 256,
+        diwheeldrive <= 288,
         "DiWheelDrive simulators take {diwheeldrive} bytes"
     );
     let power_management = 2 * size_of::<SimPowerBus>();
     assert!(
-        power_management <= 128,
+        power_management <= 160,
         "PowerManagement simulators take {power_management} bytes"
     );
     assert!(size_of::<SimLedDriver>() <= 96);

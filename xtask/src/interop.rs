@@ -6,7 +6,9 @@
 //!
 //! Foxglove's own WebSocket client (`@foxglove/ws-protocol`, run with node) subscribes to `amiro monitor --foxglove`.
 //!
-//! The checks are `tools/interop/test_interop.py`, `test_mcap.py` and `test_foxglove.py`, run with pytest in a
+//! The example behaviours in `examples/` close the loop against amiro-world's `world-loop` (`test_world_examples.py`).
+//!
+//! The checks are `tools/interop/test_interop.py`, `test_mcap.py`, `test_foxglove.py` and the others there, run with pytest in a
 //! venv under the target directory that holds exactly `tools/requirements-ci.txt`; the venv is rebuilt only when
 //! that file changes.
 
@@ -39,12 +41,27 @@ pub fn check(root: &Path) -> Result<()> {
         ],
     )
     .context("building amiro for the interop checks")?;
+    // amiro-world's kinematic loop, for the example behaviours (tools/interop/test_world_examples.py).
+    super::cargo(
+        root,
+        &[
+            "build",
+            "--quiet",
+            "-p",
+            "amiro-world",
+            "--bin",
+            "world-loop",
+        ],
+    )
+    .context("building world-loop for the interop checks")?;
     let amiro = super::target_dir(root).join("debug").join("amiro");
+    let world_loop = super::target_dir(root).join("debug").join("world-loop");
     println!("interop: cantools, python-can, can-utils, the mcap reader and the Foxglove client against amiro");
     let status = Command::new(&python)
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
         .arg(root.join("tools").join("interop"))
         .env("AMIRO", &amiro)
+        .env("AMIRO_WORLD_LOOP", &world_loop)
         .env("AMIRO_INTEROP_DIR", &work)
         // `cargo xtask robot --slcan` for tools/interop/test_robot_slcan.py.
         .env("AMIRO_XTASK", std::env::current_exe()?)

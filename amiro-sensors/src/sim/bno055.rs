@@ -30,6 +30,18 @@ pub enum Bno055Fault {
     SelfTestFailed,
 }
 
+/// What the BNO055 measures when it is fed from outside ([`SimBno055::set_motion`]), in the units
+/// of [`SimBno055::physical_at`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Bno055Motion {
+    /// Acceleration including gravity, mg, x y z.
+    pub accel_mg: [i32; 3],
+    /// Magnetic field, nT, x y z.
+    pub field_nt: [i32; 3],
+    /// Angular rate, 1/16 °/s digits, x y z.
+    pub rate_digits: [i32; 3],
+}
+
 /// A simulated BNO055.
 ///
 /// The robot stands still, level, facing magnetic north, the part flat and face up (its Z axis
@@ -44,7 +56,8 @@ pub enum Bno055Fault {
 /// page-1 sensor configuration and UNIT_SEL take writes only in configuration mode (as on the
 /// part), so a driver that skips configuration mode reads back the defaults; data registers read
 /// zero in configuration mode; the identities, ST_RESULT and SYS_STATUS answer as the datasheet
-/// says. A burst that starts in the data registers latches a new sample.
+/// says. A burst that starts in the data registers latches a new sample. [`SimBno055::set_motion`]
+/// replaces the robot at rest with a motion from outside (a world's robot driving).
 #[derive(Debug, Clone)]
 pub struct SimBno055 {
     page: u8,
@@ -59,6 +72,7 @@ pub struct SimBno055 {
     latched: [u8; 18],
     fault: Bno055Fault,
     mode_switches: u32,
+    input: Option<Bno055Motion>,
 }
 
 impl SimBno055 {
@@ -76,7 +90,14 @@ impl SimBno055 {
             latched: [0; 18],
             fault: Bno055Fault::None,
             mode_switches: 0,
+            input: None,
         }
+    }
+
+    /// From now on the part measures `motion` (each burst encodes it as the pattern would be);
+    /// `None` goes back to the robot at rest.
+    pub fn set_motion(&mut self, motion: Option<Bno055Motion>) {
+        self.input = motion;
     }
 
     /// Fault injection from now on.
@@ -153,7 +174,10 @@ impl SimBno055 {
             self.latched = [0; 18];
             return;
         }
-        let (accel, field, rate) = Self::physical_at(self.samples);
+        let (accel, field, rate) = match self.input {
+            Some(m) => (m.accel_mg, m.field_nt, m.rate_digits),
+            None => Self::physical_at(self.samples),
+        };
         let clamp = |v: i64| v.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i16;
         let mut words = [0i16; 9];
         for axis in 0..3 {
@@ -252,9 +276,12 @@ impl SimBno055 {
                 // System reset: back to the power-on state (faults stay injected).
                 let fault = self.fault;
                 let switches = self.mode_switches;
+                let input = self.input;
                 *self = Self::new();
                 self.fault = fault;
                 self.mode_switches = switches;
+                // The world outside does not reset with the part.
+                self.input = input;
             }
             _ => {}
         }

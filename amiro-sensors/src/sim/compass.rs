@@ -11,7 +11,8 @@ use crate::motion::trig::{sin_cos, ONE, TURN_NRAD};
 /// the X MSB register while the part is in continuous or single mode (single mode then drops to
 /// idle, as the part does). Encoded at the gain in CRB; an axis beyond ±2047 digits reads −4096.
 /// The register pointer behaves as the datasheet says: it auto-increments, wraps from 0x08 to
-/// 0x03 and from 0x0C to 0x00.
+/// 0x03 and from 0x0C to 0x00. [`SimHmc5883l::set_field`] replaces the pattern with a field from
+/// outside (a world's robot turning in the lab's field).
 #[derive(Debug, Clone)]
 pub struct SimHmc5883l {
     config_a: u8,
@@ -22,6 +23,7 @@ pub struct SimHmc5883l {
     samples: u32,
     /// X, Z, Y digits, register order.
     latched: [i16; 3],
+    input_nt: Option<[i32; 3]>,
 }
 
 impl SimHmc5883l {
@@ -35,7 +37,14 @@ impl SimHmc5883l {
             expect_pointer: false,
             samples: 0,
             latched: [0; 3],
+            input_nt: None,
         }
+    }
+
+    /// From now on the part measures this field (nanotesla, x y z); `None` goes back to the
+    /// pattern.
+    pub fn set_field(&mut self, nanotesla: Option<[i32; 3]>) {
+        self.input_nt = nanotesla;
     }
 
     /// CRA, CRB, MODE as the host last wrote them.
@@ -83,7 +92,10 @@ impl SimHmc5883l {
         if self.mode & 0x02 != 0 {
             return; // idle: the data registers keep the last measurement
         }
-        let [x, y, z] = Self::field_at(self.samples);
+        let [x, y, z] = match self.input_nt {
+            Some(field) => field,
+            None => Self::field_at(self.samples),
+        };
         let gain = self.lsb_per_gauss();
         let encode = |nanotesla: i32| {
             let digits = crate::drivers::div_round(i64::from(nanotesla) * gain, 100_000);
@@ -167,5 +179,10 @@ impl SimBus<SimHmc5883l> {
     /// The simulated magnetometer.
     pub const fn magnetometer(&self) -> &SimHmc5883l {
         &self.target
+    }
+
+    /// The simulated magnetometer, to feed it a field.
+    pub fn magnetometer_mut(&mut self) -> &mut SimHmc5883l {
+        &mut self.target
     }
 }

@@ -9,6 +9,13 @@
 //! with whatever range the driver configured, so a driver that set the wrong range reads the
 //! wrong number. All state is a few bytes per device; nothing allocates.
 //!
+//! **Fed from outside.** Each measuring simulator also takes its physical input from outside
+//! instead of its pattern — `SimGyroscope::set_rate`, `SimAccelerometer::set_acceleration`,
+//! `SimHmc5883l::set_field`, `SimBno055::set_motion`, `SimVcnl4020::set_proximity` (and
+//! `SimMuxedProximity::set_proximity` by channel, `feed_ring` and `feed_floor` by protocol index) — encoded exactly as the pattern would be. This
+//! is how a world (amiro-world, docs/world.md) reaches the real drivers: the robot host sends
+//! the readings over the robot link and the board's QEMU build hands them to these setters.
+//!
 //! | simulator | part | bus |
 //! |---|---|---|
 //! | [`SimGyroscope`] | L3G4200D | `SpiDevice` |
@@ -27,6 +34,7 @@ use embedded_hal::i2c::{self, ErrorType, I2c, Operation};
 
 mod bno055;
 mod compass;
+mod feed;
 mod fuel_gauge;
 mod leds;
 mod motion_sensors;
@@ -34,10 +42,11 @@ mod plant;
 mod proximity;
 
 pub use bno055::{
-    Bno055Fault, SimBno055, SimImuBus, FIELD_DOWN_NT, FIELD_HORIZONTAL_NT, FIELD_TOTAL_NT,
-    GRAVITY_MG, GYRO_OFFSET_DIGITS,
+    Bno055Fault, Bno055Motion, SimBno055, SimImuBus, FIELD_DOWN_NT, FIELD_HORIZONTAL_NT,
+    FIELD_TOTAL_NT, GRAVITY_MG, GYRO_OFFSET_DIGITS,
 };
 pub use compass::SimHmc5883l;
+pub use feed::{feed_floor, feed_ring};
 pub use fuel_gauge::SimBq27500;
 pub use leds::{SimLedChain, SimLedDriver};
 pub use motion_sensors::{SimAccelerometer, SimGyroscope};

@@ -12,7 +12,8 @@ use crate::drivers::{l3g4200d, lis331dlh};
 /// Pattern (millidegrees per second, one step per burst read of the outputs): X a ±30 dps
 /// triangle over 400 samples, Y 5 dps plus a ±2 dps triangle over 100, Z a ±90 dps triangle over
 /// 1000 — a slow yaw. Outputs read zero while the part is powered down or an axis is disabled, and
-/// are encoded at the full scale CTRL_REG4 selects.
+/// are encoded at the full scale CTRL_REG4 selects. [`SimGyroscope::set_rate`] replaces the pattern
+/// with a rate from outside (a world's robot turning).
 #[derive(Debug, Clone)]
 pub struct SimGyroscope {
     control: [u8; 5],
@@ -20,6 +21,7 @@ pub struct SimGyroscope {
     latched: [i16; 3],
     ignored_writes: u8,
     stuck_miso: Option<u8>,
+    input_mdps: Option<[i32; 3]>,
 }
 
 impl SimGyroscope {
@@ -31,7 +33,14 @@ impl SimGyroscope {
             latched: [0; 3],
             ignored_writes: 0,
             stuck_miso: None,
+            input_mdps: None,
         }
+    }
+
+    /// From now on the part measures this angular rate (millidegrees per second, x y z), encoded
+    /// as the pattern would be; `None` goes back to the pattern.
+    pub fn set_rate(&mut self, mdps: Option<[i32; 3]>) {
+        self.input_mdps = mdps;
     }
 
     /// CTRL_REG1..5 as the host last wrote them.
@@ -82,7 +91,10 @@ impl SimGyroscope {
     fn latch(&mut self) {
         let ctrl1 = self.control[0];
         let powered = ctrl1 & 0x08 != 0;
-        let rate = Self::rate_at(self.samples);
+        let rate = match self.input_mdps {
+            Some(rate) => rate,
+            None => Self::rate_at(self.samples),
+        };
         let s = self.micro_dps_per_digit();
         for (axis, (out, mdps)) in self.latched.iter_mut().zip(rate).enumerate() {
             let enabled = ctrl1 & (1 << axis) != 0;
@@ -150,7 +162,8 @@ impl SpiDevice for SimGyroscope {
 /// Pattern (micro-g, one step per burst read of the outputs): the robot standing level with a
 /// little vibration — X a ±50 mg triangle over 200 samples, Y ±30 mg over 300, Z 1 g plus ±20 mg
 /// over 50. Encoded as 12 bits left-justified at the full scale CTRL_REG4 selects; outputs read
-/// zero while powered down.
+/// zero while powered down. [`SimAccelerometer::set_acceleration`] replaces the pattern with an
+/// acceleration from outside.
 #[derive(Debug, Clone)]
 pub struct SimAccelerometer {
     control: [u8; 5],
@@ -158,6 +171,7 @@ pub struct SimAccelerometer {
     latched: [i16; 3],
     ignored_writes: u8,
     stuck_miso: Option<u8>,
+    input_ug: Option<[i32; 3]>,
 }
 
 impl SimAccelerometer {
@@ -169,7 +183,14 @@ impl SimAccelerometer {
             latched: [0; 3],
             ignored_writes: 0,
             stuck_miso: None,
+            input_ug: None,
         }
+    }
+
+    /// From now on the part measures this acceleration (micro-g, x y z, gravity included);
+    /// `None` goes back to the pattern.
+    pub fn set_acceleration(&mut self, ug: Option<[i32; 3]>) {
+        self.input_ug = ug;
     }
 
     /// CTRL_REG1..5 as the host last wrote them.
@@ -220,7 +241,10 @@ impl SimAccelerometer {
     fn latch(&mut self) {
         let ctrl1 = self.control[0];
         let powered = ctrl1 & 0xE0 != 0;
-        let accel = Self::acceleration_at(self.samples);
+        let accel = match self.input_ug {
+            Some(accel) => accel,
+            None => Self::acceleration_at(self.samples),
+        };
         let s = self.micro_g_per_digit();
         for (axis, (out, ug)) in self.latched.iter_mut().zip(accel).enumerate() {
             let enabled = ctrl1 & (1 << axis) != 0;

@@ -12,7 +12,8 @@ use crate::drivers::vcnl4020::{self, reg};
 /// self-timed measurement with the respective enable is on. As on the part, the proximity rate
 /// register only takes writes while self-timed measurement is off, the LED register's top two bits
 /// are a read-only fuse ID (here 01), and COMMAND reads back with the config-lock bit and the
-/// data-ready flags set.
+/// data-ready flags set. [`SimVcnl4020::set_proximity`] replaces the proximity pattern with counts
+/// from outside (what a world's wall or floor reflects).
 #[derive(Debug, Clone)]
 pub struct SimVcnl4020 {
     index: u8,
@@ -24,6 +25,7 @@ pub struct SimVcnl4020 {
     expect_pointer: bool,
     samples: u16,
     rejected_writes: u8,
+    input_counts: Option<u16>,
 }
 
 /// COMMAND bit 7: config lock, always reads 1.
@@ -46,7 +48,13 @@ impl SimVcnl4020 {
             expect_pointer: false,
             samples: 0,
             rejected_writes: 0,
+            input_counts: None,
         }
+    }
+
+    /// From now on the proximity result reads `counts`; `None` goes back to the pattern.
+    pub fn set_proximity(&mut self, counts: Option<u16>) {
+        self.input_counts = counts;
     }
 
     /// COMMAND (enable bits), PROX_RATE, LED_CURRENT, AMBIENT_PARAMETER as stored.
@@ -96,7 +104,10 @@ impl SimVcnl4020 {
     fn result(&self, register: u8) -> u8 {
         let value = match register {
             0x85 | 0x86 if self.measuring(0x04) => Self::ambient_at(self.index, self.samples),
-            0x87 | 0x88 if self.measuring(0x02) => Self::proximity_at(self.index, self.samples),
+            0x87 | 0x88 if self.measuring(0x02) => match self.input_counts {
+                Some(counts) => counts,
+                None => Self::proximity_at(self.index, self.samples),
+            },
             _ => 0,
         };
         let [high, low] = value.to_be_bytes();
@@ -198,6 +209,18 @@ impl SimMuxedProximity {
         self.sensors.get(channel)
     }
 
+    /// Feeds the sensor on `channel` (see [`SimVcnl4020::set_proximity`]); `false` if there is
+    /// no such channel.
+    pub fn set_proximity(&mut self, channel: usize, counts: Option<u16>) -> bool {
+        match self.sensors.get_mut(channel) {
+            Some(sensor) => {
+                sensor.set_proximity(counts);
+                true
+            }
+            None => false,
+        }
+    }
+
     fn selected(&mut self) -> Option<&mut SimVcnl4020> {
         if self.control & pca9544a::ENABLE == 0 {
             return None;
@@ -243,5 +266,10 @@ impl SimBus<SimMuxedProximity> {
     /// The simulated mux and sensors.
     pub const fn proximity(&self) -> &SimMuxedProximity {
         &self.target
+    }
+
+    /// The simulated mux and sensors, to feed them.
+    pub fn proximity_mut(&mut self) -> &mut SimMuxedProximity {
+        &mut self.target
     }
 }
