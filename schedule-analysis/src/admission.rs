@@ -21,16 +21,15 @@
 //! (a property test checks that they agree).
 
 use crate::board::{self, TaskTiming};
-use crate::busy_window::{
-    linear_bound, AnalysisError, Counter, Limits, LinearTerms, Load, Response, Share, UTIL_ONE,
-};
+use crate::board_analysis;
+use crate::bus_analysis;
+use crate::busy_window::{AnalysisError, Counter, Limits, Response, Share};
 use crate::can::{self, FrameCost, MessageTiming};
 use crate::time::Time;
 
 /// CAN priority levels of the protocol: urgent, high, medium, low (index 0 is the most urgent).
 pub const LEVELS: usize = 4;
 /// Rounds of the per-board release-jitter iteration (as the host analysis).
-const MAX_JITTER_ROUNDS: usize = 100;
 /// Fixed-point iterations one board's analysis may take, and the bus's (all its messages together)
 /// ([`Refusal::Budget`] beyond): what bounds a decision's cost on the chip, which analyses one board and the bus. A configuration loaded close to 100 % can need a hundred thousand iterations (a
 /// search found one: 217 ms of a board's CPU for one decision, docs/analysis.md); the requests the scenarios and
@@ -808,9 +807,11 @@ fn evaluate_into<const N: usize, const M: usize>(
             }
             // Each board's analysis has its own budget (not what the boards before it left over): its outcome
             // depends on its own inputs only, so a kept analysis is the one a fresh decision would compute.
-            if let Err(refusal) =
-                analyse_board::<N, M>(robot, b, table, &streams, &limits, iterations, target)
-            {
+            if let Err(refusal) = analyse_board::<N, M>(
+                &board_input(robot, b, table, &streams, &limits),
+                iterations,
+                target,
+            ) {
                 return Found::refused(refusal);
             }
             target.kept = true;
@@ -896,8 +897,8 @@ pub fn refresh_one<const N: usize, const M: usize>(
         *slot = Summary::EMPTY;
         slot.key.fill(b, &streams, limits.horizon)?;
         let mut iterations = 0;
-        if analyse_board::<N, M>(robot, b, table, &streams, &limits, &mut iterations, slot).is_ok()
-        {
+        let input = board_input(robot, b, table, &streams, &limits);
+        if analyse_board::<N, M>(&input, &mut iterations, slot).is_ok() {
             slot.kept = true;
         }
         return Some((b, iterations));
@@ -1129,8 +1130,8 @@ impl<const M: usize> Summary<M> {
     }
 }
 
-/// The bus: queuing jitter from the sender's variation and the transmit interrupt, then Davis et al. `left`:
-/// the fixed-point iterations all its messages together may take; `false` when they ran out ([`Refusal::Budget`]).
+/// The bus ([`bus_analysis::analyse`]) with the senders' bounds the boards' analyses found; `left`: the
+/// fixed-point iterations all its messages together may take; `false` when they ran out ([`Refusal::Budget`]).
 #[inline(never)]
 fn analyse_bus<const M: usize>(
     robot: &RobotTable<'_>,
@@ -1141,7 +1142,6 @@ fn analyse_bus<const M: usize>(
     iterations: &mut u64,
     found: &mut Found,
 ) -> bool {
-    let bit = robot.bit_time;
     let n = streams.len;
     let mut order = [0u8; M];
     for (i, slot) in order.iter_mut().enumerate().take(n) {
@@ -1152,9 +1152,8 @@ fn analyse_bus<const M: usize>(
             .get(usize::from(i))
             .map_or(u32::MAX, |s| can::arbitration_key(s.id, s.extended))
     };
-    insertion_sort(order.get_mut(..n).unwrap_or(&mut []), |a, b| {
-        key(a) > key(b)
-    });
+    let order = order.get_mut(..n).unwrap_or(&mut []);
+    insertion_sort(order, |a, b| key(a) > key(b));
     let mut timings = [MessageTiming {
         key: 0,
         frame_time: Time::ZERO,
@@ -1162,40 +1161,8 @@ fn analyse_bus<const M: usize>(
         period: Time::ZERO,
         jitter: Time::ZERO,
     }; M];
-    // Per sorted position: the sender's best case (offset of the frames), or NONE when the sender is unbounded.
-    let mut offset = [0u64; M];
-    for (position, &i) in order.iter().enumerate().take(n) {
-        let m = usize::from(i);
-        let Some(s) = streams.get(m) else { continue };
-        let mut jitter = s.jitter;
-        let mut off = 0;
-        if s.sender.is_some() {
-            let worst = senders.wcrt.get(m).copied().unwrap_or(NONE);
-            let tx = senders.tx.get(m).copied().unwrap_or(NONE);
-            if worst == NONE || tx == NONE {
-                off = NONE;
-            } else {
-                let best = senders.bcrt.get(m).copied().unwrap_or(0);
-                jitter = jitter
-                    .plus(Time::from_ns(worst.saturating_sub(best)))
-                    .plus(Time::from_ns(tx));
-                off = best;
-            }
-        }
-        if let (Some(t), Some(o)) = (timings.get_mut(position), offset.get_mut(position)) {
-            *t = MessageTiming {
-                key: can::arbitration_key(s.id, s.extended),
-                frame_time: can::frame_time(robot.frame_cost, s.dlc, s.extended, bit),
-                frames: s.frames,
-                period: s.period,
-                jitter,
-            };
-            *o = off;
-        }
-    }
-    let timings = timings.get(..n).unwrap_or(&[]);
+    let mut offsets = [None; M];
     let mut blockings = [Time::ZERO; M];
-    can::blockings(timings, &mut blockings);
     let mut scratch = const { [Counter::ZERO; M] };
     let mut wcrt = [NONE; M];
     let mut first_window = [Time::ZERO; M];
@@ -1209,56 +1176,102 @@ fn analyse_bus<const M: usize>(
         budget: left,
         spent: 0,
     };
-    can::response_times_into(
-        timings,
-        blockings.get(..n).unwrap_or(&[]),
-        bit,
+    let work = bus_analysis::BusWork {
+        order,
+        timings: &mut timings,
+        offsets: &mut offsets,
+        blockings: &mut blockings,
+        scratch: &mut scratch,
+    };
+    let message = |m: usize| bus_message(streams.get(m)?, senders, m);
+    bus_analysis::analyse(
+        message,
+        work,
+        robot.frame_cost,
+        robot.bit_time,
         limits,
-        &mut scratch,
         &mut bounds,
     );
     if bounds.limited {
         return false;
     }
-    for (position, &i) in order.iter().enumerate().take(n) {
+    for (position, &i) in order.iter().enumerate() {
         let m = usize::from(i);
         let Some(s) = streams.get(m) else { continue };
-        let bus = match (offset.get(position), wcrt.get(position)) {
-            (Some(&o), Some(&w)) if o != NONE && w != NONE => {
-                Time::from_ns(o).checked_plus(Time::from_ns(w))
-            }
-            _ => None,
-        };
-        if bus.is_none_or(|w| w > s.deadline()) {
-            // Below the floor: frames without a bound, or a command's (not a publisher's) frames late.
-            found.note(
-                Refusal::Deadline(Violation {
-                    culprit: Culprit::Frame { id: s.id },
-                    wcrt: bus,
-                    deadline: s.deadline(),
-                }),
-                bus.is_none() || s.sender.is_none(),
-            );
-        }
-        if s.receiver.is_some() {
-            let end = match (bus, senders.receiver.get(m).copied().and_then(bound)) {
-                (Some(w), Some(r)) => w.checked_plus(r),
-                _ => None,
-            };
-            if end.is_none_or(|w| w > s.deadline()) {
-                // A command's path to its handler: always below the floor.
-                found.note(
-                    Refusal::Deadline(Violation {
-                        culprit: Culprit::EndToEnd { id: s.id },
-                        wcrt: end,
-                        deadline: s.deadline(),
-                    }),
-                    true,
-                );
-            }
-        }
+        let response = wcrt.get(position).copied().and_then(bound);
+        let bus = bus_analysis::delivery(offsets.get(position).copied().flatten(), response);
+        note_stream(
+            s,
+            bus,
+            senders.receiver.get(m).copied().and_then(bound),
+            found,
+        );
     }
     true
+}
+
+/// Stream `m` of the configuration as the bus analysis reads it, with its sender's bounds.
+fn bus_message<const M: usize>(
+    s: &Stream,
+    senders: &SenderBounds<M>,
+    m: usize,
+) -> Option<bus_analysis::Message> {
+    let sender = if s.sender.is_none() {
+        bus_analysis::Sender::Outside
+    } else {
+        let worst = senders.wcrt.get(m).copied().and_then(bound);
+        let tx = senders.tx.get(m).copied().and_then(bound);
+        match (worst, tx) {
+            (Some(worst), Some(tx)) => bus_analysis::Sender::Bounded {
+                worst,
+                best: Time::from_ns(senders.bcrt.get(m).copied().unwrap_or(0)),
+                tx,
+            },
+            _ => bus_analysis::Sender::Unbounded,
+        }
+    };
+    Some(bus_analysis::Message {
+        id: s.id,
+        extended: s.extended,
+        dlc: s.dlc,
+        frames: s.frames,
+        period: s.period,
+        jitter: s.jitter,
+        sender,
+    })
+}
+
+/// Notes a stream's violations: its frames' delivery `bus` (from the sender's activation) against its deadline
+/// and, for a command, its path to the receiver's handler (whose bound is `handler`).
+fn note_stream(s: &Stream, bus: Option<Time>, handler: Option<Time>, found: &mut Found) {
+    if bus.is_none_or(|w| w > s.deadline()) {
+        // Below the floor: frames without a bound, or a command's (not a publisher's) frames late.
+        found.note(
+            Refusal::Deadline(Violation {
+                culprit: Culprit::Frame { id: s.id },
+                wcrt: bus,
+                deadline: s.deadline(),
+            }),
+            bus.is_none() || s.sender.is_none(),
+        );
+    }
+    if s.receiver.is_some() {
+        let end = match (bus, handler) {
+            (Some(w), Some(r)) => w.checked_plus(r),
+            _ => None,
+        };
+        if end.is_none_or(|w| w > s.deadline()) {
+            // A command's path to its handler: always below the floor.
+            found.note(
+                Refusal::Deadline(Violation {
+                    culprit: Culprit::EndToEnd { id: s.id },
+                    wcrt: end,
+                    deadline: s.deadline(),
+                }),
+                true,
+            );
+        }
+    }
 }
 
 /// Stable insertion sort (small sets; allocation-free): `after(a, b)` says `a` belongs after `b`.
@@ -1292,563 +1305,543 @@ enum Source {
     Publisher { stream: u8, topic: u8, timer: u8 },
 }
 
-/// One board's tasks with the configuration's publishers: writes its first violated deadline (in table order),
-/// its transmit interrupt's and command handler's bounds and each of its streams' sending job's bound into
-/// `summary`.
-#[allow(clippy::too_many_arguments)]
-#[inline(never)]
-fn analyse_board<const N: usize, const M: usize>(
+/// What one board's analysis reads: the board (index `b` of the robot's table), the configuration and the limits.
+struct BoardInput<'a, const M: usize> {
+    bit_time: Time,
+    b: usize,
+    table: &'a BoardTable<'a>,
+    streams: &'a View<'a, M>,
+    limits: &'a Limits,
+}
+
+fn board_input<'a, const M: usize>(
     robot: &RobotTable<'_>,
     b: usize,
-    table: &BoardTable<'_>,
-    streams: &View<'_, M>,
-    limits: &Limits,
-    iterations: &mut u64,
-    summary: &mut Summary<M>,
-) -> Result<(), Refusal> {
-    // `limits.iterations` is what this board's analysis may spend, counted from here.
-    let spent_before = *iterations;
-    let mine = || {
-        streams
+    table: &'a BoardTable<'a>,
+    streams: &'a View<'a, M>,
+    limits: &'a Limits,
+) -> BoardInput<'a, M> {
+    BoardInput {
+        bit_time: robot.bit_time,
+        b,
+        table,
+        streams,
+        limits,
+    }
+}
+
+impl<'a, const M: usize> BoardInput<'a, M> {
+    /// The streams this board sends, with their [`View`] positions.
+    fn mine(&self) -> impl Iterator<Item = (usize, &'a Stream)> + '_ {
+        let b = self.b;
+        self.streams
             .iter()
             .filter(move |(_, s)| s.sender.is_some_and(|x| usize::from(x.board) == b))
-    };
-    // The shortest frame this board sends (its transmit-complete interrupt's minimum inter-arrival time).
-    let own_frame = mine()
-        .map(|(_, s)| {
-            robot
-                .bit_time
-                .times(u64::from(can::frame_bits_best(s.dlc, false)))
-        })
-        .min()
-        .unwrap_or_else(|| can::shortest_frame_time(robot.bit_time));
-    // Every job in original order (table order: the fixed tasks, then per stream its timer job and its job): its
-    // priority and what it is made of. Then the originals are sorted by priority (most urgent first, ties in
-    // original order, a stable sort of bytes) and each job is built once, at its place.
-    let mut priority_of = [0u8; N];
-    let mut source = [Source::Fixed(0); N];
-    let mut count = 0usize;
-    let mut add = |priority: u8, what: Source| -> Result<u8, Refusal> {
-        let original = u8::try_from(count)
+    }
+
+    /// The RTIC priority of the publisher task of `level`.
+    fn level_priority(&self, level: u8) -> Option<u8> {
+        self.table.levels.get(usize::from(level)).copied().flatten()
+    }
+
+    /// The shortest frame this board sends (its transmit-complete interrupt's minimum inter-arrival time).
+    fn own_frame(&self) -> Time {
+        self.mine()
+            .map(|(_, s)| {
+                self.bit_time
+                    .times(u64::from(can::frame_bits_best(s.dlc, false)))
+            })
+            .min()
+            .unwrap_or_else(|| can::shortest_frame_time(self.bit_time))
+    }
+}
+
+/// A board's jobs in original order (table order: the fixed tasks, then per stream its timer job and its job):
+/// each one's priority and what it is made of.
+struct Originals<const N: usize> {
+    priority: [u8; N],
+    source: [Source; N],
+    count: usize,
+}
+
+impl<const N: usize> Originals<N> {
+    fn add(&mut self, priority: u8, what: Source) -> Result<u8, Refusal> {
+        let original = u8::try_from(self.count)
             .ok()
             .filter(|&o| o != NO_JOB)
             .ok_or(Refusal::Capacity)?;
-        *priority_of.get_mut(count).ok_or(Refusal::Capacity)? = priority;
-        *source.get_mut(count).ok_or(Refusal::Capacity)? = what;
-        count += 1;
+        *self.priority.get_mut(self.count).ok_or(Refusal::Capacity)? = priority;
+        *self.source.get_mut(self.count).ok_or(Refusal::Capacity)? = what;
+        self.count += 1;
         Ok(original)
-    };
-    for (i, t) in table.tasks.iter().enumerate() {
-        add(
-            t.priority,
-            Source::Fixed(u8::try_from(i).map_err(|_| Refusal::Capacity)?),
-        )?;
     }
-    for (m, s) in mine() {
-        let Some(sender) = s.sender else { continue };
-        let priority = table
-            .levels
-            .get(usize::from(sender.level))
-            .copied()
-            .flatten()
-            .ok_or(Refusal::Capacity)?;
-        let topic = table
-            .topics
-            .iter()
-            .position(|t| t.topic == sender.topic)
-            .and_then(|t| u8::try_from(t).ok())
-            .ok_or(Refusal::Capacity)?;
-        let stream = u8::try_from(m).map_err(|_| Refusal::Capacity)?;
-        let timer = match table.monotonic {
-            Some(mono) => add(mono.priority, Source::Timer { stream })?,
-            None => NO_JOB,
-        };
-        add(
-            priority,
-            Source::Publisher {
-                stream,
-                topic,
-                timer,
-            },
-        )?;
-    }
-    let mut order = [0u8; N];
-    for (i, slot) in order.iter_mut().enumerate().take(count) {
-        *slot = i as u8;
-    }
-    let urgency = |o: u8| priority_of.get(usize::from(o)).copied().unwrap_or(0);
-    insertion_sort(order.get_mut(..count).unwrap_or(&mut []), |a, b| {
-        urgency(a) < urgency(b)
-    });
-    // One board's jobs, sorted by priority (most urgent first, ties in table order): two arrays built in place
-    // (a struct of them was built and then copied, 1.7 KB a board analysis).
-    let mut timings = const { [EMPTY_TIMING; N] };
-    let mut metas = const { [EMPTY_META; N] };
-    for ((&original, timing), meta) in order
-        .iter()
-        .zip(timings.iter_mut())
-        .zip(metas.iter_mut())
-        .take(count)
-    {
-        let what = source
+
+    fn urgency(&self, original: u8) -> u8 {
+        self.priority
             .get(usize::from(original))
             .copied()
-            .ok_or(Refusal::Capacity)?;
-        let priority = u32::from(urgency(original));
-        let stream_of = |m: u8| streams.get(usize::from(m)).ok_or(Refusal::Capacity);
-        (*timing, *meta) = match what {
-            Source::Fixed(row) => {
-                let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
-                let period = if t.own_frame {
-                    own_frame
-                } else {
-                    row_time(t.period)
-                };
-                let jitter = row_time(t.jitter);
-                (
-                    TaskTiming {
-                        priority,
-                        wcet: row_time(t.cost),
-                        period,
-                        jitter,
-                    },
-                    JobMeta {
-                        id: TaskId::Fixed(u16::from(row)),
-                        deadline: if t.deadline == NO_DEADLINE {
-                            period
-                        } else {
-                            row_time(t.deadline)
-                        },
-                        own_jitter: jitter,
-                        // NO_RELEASER is NO_JOB.
-                        released_by: t.released_by,
-                        original,
-                    },
-                )
-            }
-            Source::Timer { stream } => {
-                let s = stream_of(stream)?;
-                let (Some(mono), Some(sender)) = (table.monotonic, s.sender) else {
-                    return Err(Refusal::Capacity);
-                };
-                (
-                    TaskTiming {
-                        priority,
-                        wcet: row_time(mono.cost),
-                        period: s.period,
-                        jitter: row_time(mono.jitter),
-                    },
-                    JobMeta {
-                        id: TaskId::Timer(sender.topic),
-                        deadline: s.period,
-                        own_jitter: row_time(mono.jitter),
-                        released_by: NO_JOB,
-                        original,
-                    },
-                )
-            }
-            Source::Publisher {
-                stream,
-                topic,
-                timer,
-            } => {
-                let s = stream_of(stream)?;
-                let row = table
-                    .topics
-                    .get(usize::from(topic))
-                    .ok_or(Refusal::Capacity)?;
-                (
-                    TaskTiming {
-                        priority,
-                        wcet: row_time(row.cost),
-                        period: s.period,
-                        jitter: Time::ZERO,
-                    },
-                    JobMeta {
-                        id: TaskId::Publisher(row.topic),
-                        deadline: s.deadline(),
-                        own_jitter: Time::ZERO,
-                        released_by: timer,
-                        original,
-                    },
-                )
-            }
-        };
+            .unwrap_or(0)
     }
-    let len = count;
-    // Sorted position of each original index; releasers as sorted positions.
-    let mut position = [NO_JOB; N];
-    for (p, meta) in metas.iter().enumerate().take(len) {
-        if let Some(slot) = position.get_mut(usize::from(meta.original)) {
-            *slot = p as u8;
+
+    /// The fixed tasks, then per stream of the board its timer job and its publisher job.
+    fn collect<const M: usize>(input: &BoardInput<'_, M>) -> Result<Self, Refusal> {
+        let table = input.table;
+        let mut jobs = Originals {
+            priority: [0; N],
+            source: [Source::Fixed(0); N],
+            count: 0,
+        };
+        for (i, t) in table.tasks.iter().enumerate() {
+            let row = u8::try_from(i).map_err(|_| Refusal::Capacity)?;
+            jobs.add(t.priority, Source::Fixed(row))?;
+        }
+        for (m, s) in input.mine() {
+            let Some(sender) = s.sender else { continue };
+            let priority = input
+                .level_priority(sender.level)
+                .ok_or(Refusal::Capacity)?;
+            let topic = table
+                .topics
+                .iter()
+                .position(|t| t.topic == sender.topic)
+                .and_then(|t| u8::try_from(t).ok())
+                .ok_or(Refusal::Capacity)?;
+            let stream = u8::try_from(m).map_err(|_| Refusal::Capacity)?;
+            let timer = match table.monotonic {
+                Some(mono) => jobs.add(mono.priority, Source::Timer { stream })?,
+                None => NO_JOB,
+            };
+            jobs.add(
+                priority,
+                Source::Publisher {
+                    stream,
+                    topic,
+                    timer,
+                },
+            )?;
+        }
+        Ok(jobs)
+    }
+
+    /// The originals sorted by priority (most urgent first, ties in original order: a stable sort of bytes).
+    fn sorted(&self) -> [u8; N] {
+        let mut order = [0u8; N];
+        for (i, slot) in order.iter_mut().enumerate().take(self.count) {
+            *slot = i as u8;
+        }
+        insertion_sort(order.get_mut(..self.count).unwrap_or(&mut []), |a, b| {
+            self.urgency(a) < self.urgency(b)
+        });
+        order
+    }
+}
+
+/// Job `original`'s timing and meta, built from what it is made of.
+fn build_job<const M: usize>(
+    input: &BoardInput<'_, M>,
+    what: Source,
+    priority: u32,
+    original: u8,
+    own_frame: Time,
+) -> Result<(TaskTiming, JobMeta), Refusal> {
+    let table = input.table;
+    let stream_of = |m: u8| input.streams.get(usize::from(m)).ok_or(Refusal::Capacity);
+    let job = |wcet, period, jitter, id, deadline, released_by| {
+        (
+            TaskTiming {
+                priority,
+                wcet,
+                period,
+                jitter,
+            },
+            JobMeta {
+                id,
+                deadline,
+                own_jitter: jitter,
+                released_by,
+                original,
+            },
+        )
+    };
+    Ok(match what {
+        Source::Fixed(row) => {
+            let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
+            let period = if t.own_frame {
+                own_frame
+            } else {
+                row_time(t.period)
+            };
+            let deadline = if t.deadline == NO_DEADLINE {
+                period
+            } else {
+                row_time(t.deadline)
+            };
+            // NO_RELEASER is NO_JOB.
+            let id = TaskId::Fixed(u16::from(row));
+            job(
+                row_time(t.cost),
+                period,
+                row_time(t.jitter),
+                id,
+                deadline,
+                t.released_by,
+            )
+        }
+        Source::Timer { stream } => {
+            let s = stream_of(stream)?;
+            let (Some(mono), Some(sender)) = (table.monotonic, s.sender) else {
+                return Err(Refusal::Capacity);
+            };
+            let id = TaskId::Timer(sender.topic);
+            job(
+                row_time(mono.cost),
+                s.period,
+                row_time(mono.jitter),
+                id,
+                s.period,
+                NO_JOB,
+            )
+        }
+        Source::Publisher {
+            stream,
+            topic,
+            timer,
+        } => {
+            let s = stream_of(stream)?;
+            let row = table
+                .topics
+                .get(usize::from(topic))
+                .ok_or(Refusal::Capacity)?;
+            let id = TaskId::Publisher(row.topic);
+            job(
+                row_time(row.cost),
+                s.period,
+                Time::ZERO,
+                id,
+                s.deadline(),
+                timer,
+            )
+        }
+    })
+}
+
+/// One board's jobs sorted by priority: their timings, and what else the analysis reads of each.
+struct BoardSet<const N: usize> {
+    timings: [TaskTiming; N],
+    jobs: JobIndex<N>,
+}
+
+/// What the analysis reads of a board's sorted jobs besides their timings ([`board_analysis::Jobs`]).
+struct JobIndex<const N: usize> {
+    len: usize,
+    metas: [JobMeta; N],
+    /// Sorted position of each original index.
+    position: [u8; N],
+    /// Where each job's priority level ends.
+    level_end: [u8; N],
+    /// The jobs whose bound nothing else reads: a fixed task that releases no job and is neither the transmit
+    /// interrupt nor the command handler (whose bounds the bus and the end-to-end paths read). Such a job only has
+    /// to meet its deadline.
+    verdict_only: [bool; N],
+}
+
+impl<const N: usize> BoardSet<N> {
+    /// Builds each job once, at its sorted place: arrays built in place (a struct of them was built and then
+    /// copied, 1.7 KB a board analysis).
+    fn build<const M: usize>(input: &BoardInput<'_, M>) -> Result<Self, Refusal> {
+        let originals = Originals::<N>::collect(input)?;
+        let order = originals.sorted();
+        let own_frame = input.own_frame();
+        let mut set = BoardSet {
+            timings: const { [EMPTY_TIMING; N] },
+            jobs: JobIndex {
+                len: originals.count,
+                metas: const { [EMPTY_META; N] },
+                position: [NO_JOB; N],
+                level_end: [0; N],
+                verdict_only: [false; N],
+            },
+        };
+        for ((&original, timing), meta) in order
+            .iter()
+            .zip(set.timings.iter_mut())
+            .zip(set.jobs.metas.iter_mut())
+            .take(originals.count)
+        {
+            let what = originals
+                .source
+                .get(usize::from(original))
+                .copied()
+                .ok_or(Refusal::Capacity)?;
+            let priority = u32::from(originals.urgency(original));
+            (*timing, *meta) = build_job(input, what, priority, original, own_frame)?;
+        }
+        set.jobs.index(&set.timings, input.table);
+        Ok(set)
+    }
+
+    /// SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job (the
+    /// fixed tasks' from the table, the publisher jobs' from their topics). Jobs of one priority share it: worked
+    /// out once per level (the jobs are sorted by priority).
+    fn blockings<const M: usize>(&self, input: &BoardInput<'_, M>) -> [Time; N] {
+        let table = input.table;
+        let mut blocking = [Time::ZERO; N];
+        let mut last_level: Option<(u32, Time)> = None;
+        for (slot, timing) in blocking
+            .iter_mut()
+            .zip(self.timings.iter())
+            .take(self.jobs.len)
+        {
+            let p = timing.priority;
+            if let Some((_, known)) = last_level.filter(|&(level, _)| level == p) {
+                *slot = known;
+                continue;
+            }
+            let mut longest = usize::try_from(p)
+                .ok()
+                .and_then(|p| table.blocking.get(p))
+                .copied()
+                .unwrap_or_else(|| fixed_blocking(table.sections, p));
+            for (_, s) in input.mine() {
+                let Some(sender) = s.sender else { continue };
+                let holder = input.level_priority(sender.level).map_or(0, u32::from);
+                if holder >= p {
+                    continue;
+                }
+                if let Some(topic) = table.topics.iter().find(|t| t.topic == sender.topic) {
+                    for cs in topic.sections {
+                        // The effective ceiling is at least the holder's priority, which is below `p`.
+                        if row_ceiling(cs.ceiling) >= p {
+                            longest = longest.max(cs.length);
+                        }
+                    }
+                }
+            }
+            *slot = row_time(longest);
+            last_level = Some((p, *slot));
+        }
+        blocking
+    }
+
+    /// Each job's share of the CPU: a fixed task's from its row (worked out when the table was built), the others'
+    /// by one division each (not one per job and level as it is summed).
+    fn shares(&self, table: &BoardTable<'_>) -> [Share; N] {
+        let mut shares = [Share::default(); N];
+        for ((share, timing), meta) in shares
+            .iter_mut()
+            .zip(self.timings.iter())
+            .zip(self.jobs.metas.iter())
+            .take(self.jobs.len)
+        {
+            let known = match meta.id {
+                TaskId::Fixed(row) => table
+                    .tasks
+                    .get(usize::from(row))
+                    .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
+                    .map(|t| Share::with_utilisation(u64::from(t.share))),
+                _ => None,
+            };
+            *share = known.unwrap_or_else(|| Share::of(timing.wcet, timing.period));
+        }
+        shares
+    }
+}
+
+impl<const N: usize> JobIndex<N> {
+    /// Positions, level ends and the jobs only a deadline check reads.
+    fn index(&mut self, timings: &[TaskTiming; N], table: &BoardTable<'_>) {
+        let len = self.len;
+        for (p, meta) in self.metas.iter().enumerate().take(len) {
+            if let Some(slot) = self.position.get_mut(usize::from(meta.original)) {
+                *slot = p as u8;
+            }
+            if let (TaskId::Fixed(row), Some(slot)) = (meta.id, self.verdict_only.get_mut(p)) {
+                let row = Some(row);
+                *slot = table.can_tx != row && table.command_handler != row;
+            }
+        }
+        for k in 0..len {
+            let Some(releaser) = self.metas.get(k).map(|m| m.released_by) else {
+                break;
+            };
+            let at = usize::from(self.at(releaser));
+            if let Some(slot) = self.verdict_only.get_mut(at) {
+                *slot = false;
+            }
+        }
+        let mut end = len;
+        for i in (0..len).rev() {
+            if let (Some(t), Some(next)) = (timings.get(i), timings.get(i + 1)) {
+                if t.priority != next.priority {
+                    end = i + 1;
+                }
+            }
+            if let Some(slot) = self.level_end.get_mut(i) {
+                *slot = end as u8;
+            }
         }
     }
-    let at = |original: u8| {
-        position
+
+    /// The sorted position of the job with this original index ([`NO_JOB`]: none).
+    fn at(&self, original: u8) -> u8 {
+        self.position
             .get(usize::from(original))
             .copied()
             .unwrap_or(NO_JOB)
-    };
-
-    // The jobs whose bound nothing else reads: a fixed task that releases no job and is neither the transmit
-    // interrupt nor the command handler (whose bounds the bus and the end-to-end paths read). Such a job only has
-    // to meet its deadline, so a closed-form bound that meets it settles it without a fixed point (below).
-    let mut settles = [false; N];
-    for (p, meta) in metas.iter().enumerate().take(len) {
-        if let (TaskId::Fixed(row), Some(slot)) = (meta.id, settles.get_mut(p)) {
-            let row = Some(row);
-            *slot = table.can_tx != row && table.command_handler != row;
-        }
     }
-    for meta in metas.iter().take(len) {
-        if let Some(slot) = settles.get_mut(usize::from(at(meta.released_by))) {
-            *slot = false;
-        }
-    }
+}
 
-    // SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job.
-    // Jobs of one priority share it: worked out once per level (the jobs are sorted by priority).
-    let mut blocking = [Time::ZERO; N];
-    let mut last_level: Option<(u32, Time)> = None;
-    for (slot, timing) in blocking.iter_mut().zip(timings.iter()).take(len) {
-        let p = timing.priority;
-        if let Some((_, known)) = last_level.filter(|&(level, _)| level == p) {
-            *slot = known;
-            continue;
-        }
-        // SRP (`board::srp_blocking`): a lower holder's section on a resource whose ceiling reaches `p`; the fixed
-        // tasks' from the table.
-        let mut longest = usize::try_from(p)
-            .ok()
-            .and_then(|p| table.blocking.get(p))
+impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
+    fn releaser(&self, p: usize) -> Option<usize> {
+        let released_by = self.metas.get(p)?.released_by;
+        (released_by != NO_JOB).then(|| usize::from(self.at(released_by)))
+    }
+    fn own_jitter(&self, p: usize) -> Time {
+        self.metas.get(p).map_or(Time::ZERO, |m| m.own_jitter)
+    }
+    fn level_end(&self, p: usize) -> usize {
+        usize::from(self.level_end.get(p).copied().unwrap_or(0))
+    }
+    fn verdict_only(&self, p: usize) -> Option<Time> {
+        let meta = self.metas.get(p)?;
+        self.verdict_only
+            .get(p)
             .copied()
-            .unwrap_or_else(|| fixed_blocking(table.sections, p));
-        for (_, s) in mine() {
-            let Some(sender) = s.sender else { continue };
-            let holder = table
-                .levels
-                .get(usize::from(sender.level))
-                .copied()
-                .flatten()
-                .map_or(0, u32::from);
-            if holder >= p {
-                continue;
-            }
-            if let Some(topic) = table.topics.iter().find(|t| t.topic == sender.topic) {
-                for cs in topic.sections {
-                    // The effective ceiling is at least the holder's priority, which is below `p`.
-                    if row_ceiling(cs.ceiling) >= p {
-                        longest = longest.max(cs.length);
-                    }
-                }
-            }
-        }
-        *slot = row_time(longest);
-        last_level = Some((p, *slot));
+            .unwrap_or(false)
+            .then_some(meta.deadline)
     }
-    // Each job's share of the CPU: a fixed task's from its row (worked out when the table was built), the others'
-    // by one division each (not one per job and level as it is summed).
-    let mut shares = [Share::default(); N];
-    for ((share, timing), meta) in shares
-        .iter_mut()
-        .zip(timings.iter())
-        .zip(metas.iter())
-        .take(len)
-    {
-        let known = match meta.id {
-            TaskId::Fixed(row) => table
-                .tasks
-                .get(usize::from(row))
-                .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
-                .map(|t| Share::with_utilisation(u64::from(t.share))),
-            _ => None,
-        };
-        *share = known.unwrap_or_else(|| Share::of(timing.wcet, timing.period));
-    }
-    // Where each job's priority level ends (the jobs are sorted by priority).
-    let mut level_end = [0u8; N];
-    let mut end = len;
-    for i in (0..len).rev() {
-        if let (Some(t), Some(next)) = (timings.get(i), timings.get(i + 1)) {
-            if t.priority != next.priority {
-                end = i + 1;
-            }
-        }
-        if let Some(slot) = level_end.get_mut(i) {
-            *slot = end as u8;
-        }
-    }
+}
 
-    // Release jitters to a fixed point: a released job inherits its releaser's WCRT. When every releaser is more
-    // urgent than what it releases (the boards' timer jobs and interrupts), a job's jitter is set as its level is
-    // entered, from its releaser's final bound, so one pass reaches the fixed point the report's round-by-round
-    // iteration reaches (it is unique: the releases form a chain from more to less urgent) and a check confirms
-    // it; otherwise jitters change only between passes, exactly as in the report.
-    let mut wcrt = [NONE; N];
-    let mut first_window = [Time::ZERO; N];
+/// A board's bounds as the check keeps them: per sorted job its response ([`NONE`]: unbounded) and first window.
+struct JobWcrt<const N: usize> {
+    wcrt: [u64; N],
+    first_window: [Time; N],
+}
+
+impl<const N: usize> board_analysis::JobBounds for JobWcrt<N> {
+    const WHOLE_RECORDS: bool = false;
+    fn put(&mut self, p: usize, result: Result<Response, AnalysisError>) {
+        let (w, f) = result.map_or((NONE, Time::ZERO), |r| (r.wcrt.as_ns(), r.first_window));
+        self.put_closed_form(p, Time::from_ns(w), f);
+    }
+    fn put_closed_form(&mut self, p: usize, wcrt: Time, first_window: Time) {
+        if let (Some(ws), Some(fs)) = (self.wcrt.get_mut(p), self.first_window.get_mut(p)) {
+            *ws = wcrt.as_ns();
+            *fs = first_window;
+        }
+    }
+    fn put_unbound(&mut self, p: usize, _: board_analysis::Unbound) {
+        if let Some(slot) = self.wcrt.get_mut(p) {
+            *slot = NONE;
+        }
+    }
+    fn wcrt(&self, p: usize) -> Option<Time> {
+        bound(self.wcrt.get(p).copied().unwrap_or(NONE))
+    }
+    fn first_window(&self, p: usize) -> Option<Time> {
+        let bounded = self.wcrt.get(p).is_some_and(|&w| w != NONE);
+        bounded.then(|| self.first_window.get(p).copied())?
+    }
+}
+
+/// One board's tasks with the configuration's publishers ([`board_analysis::analyse`] under the board's budget of
+/// iterations): writes its first violated deadline (in table order), its transmit interrupt's and command
+/// handler's bounds and each of its streams' sending job's bound into `summary`.
+#[inline(never)]
+fn analyse_board<const N: usize, const M: usize>(
+    input: &BoardInput<'_, M>,
+    iterations: &mut u64,
+    summary: &mut Summary<M>,
+) -> Result<(), Refusal> {
+    let mut set = BoardSet::<N>::build(input)?;
+    let blocking = set.blockings(input);
+    let shares = set.shares(input.table);
+    let mut bounds = JobWcrt {
+        wcrt: [NONE; N],
+        first_window: [Time::ZERO; N],
+    };
     let mut scratch = const { [Counter::ZERO; N] };
-    let chained = metas.iter().take(len).any(|m| m.released_by != NO_JOB);
-    let in_pass = metas
-        .iter()
-        .zip(timings.iter())
-        .take(len)
-        .all(|(meta, timing)| {
-            meta.released_by == NO_JOB
-                || timings
-                    .get(usize::from(at(meta.released_by)))
-                    .is_some_and(|releaser| releaser.priority > timing.priority)
-        });
-    // The jitter a released job inherits from its releaser's current bound (`None`: the releaser is unbounded).
-    let inherited = |meta: &JobMeta, wcrt: &[u64; N]| -> Option<Time> {
-        let releaser = wcrt
-            .get(usize::from(at(meta.released_by)))
-            .copied()
-            .unwrap_or(NONE);
-        bound(releaser).and_then(|r| meta.own_jitter.checked_plus(r))
+    let len = set.jobs.len;
+    let jobs = board_analysis::BoardJobs {
+        timings: set.timings.get_mut(..len).unwrap_or(&mut []),
+        blocking: blocking.get(..len).unwrap_or(&[]),
+        shares: shares.get(..len).unwrap_or(&[]),
+        scratch: &mut scratch,
     };
-    let mut settled = false;
-    for _ in 0..MAX_JITTER_ROUNDS {
-        // The load of every job of this and the more urgent levels, summed as each level is entered, and its
-        // closed-form terms.
-        let mut prefix = Load::default();
-        let mut linear = LinearTerms::default();
-        // The least `T − J` of the jobs summed (that cost anything): a window no longer than it holds one activation
-        // of each.
-        let mut once_gap = u64::MAX;
-        let mut level_start = 0;
-        let mut previous_level = 0..0;
-        for i in 0..len {
-            let Some(priority) = timings.get(i).map(|t| t.priority) else {
-                break;
-            };
-            if i == 0 || timings.get(i - 1).is_some_and(|t| t.priority != priority) {
-                previous_level = level_start..i;
-                level_start = i;
-                if in_pass {
-                    // Entering a level: its released jobs take their (more urgent, done) releasers' bounds.
-                    for p in i..len {
-                        let (Some(meta), Some(timing)) = (metas.get(p), timings.get_mut(p)) else {
-                            break;
-                        };
-                        if timing.priority != priority {
-                            break;
-                        }
-                        if meta.released_by != NO_JOB {
-                            if let Some(jitter) = inherited(meta, &wcrt) {
-                                timing.jitter = jitter;
-                            }
-                        }
-                    }
-                }
-                // The level's load, with its jitters as they are now (as `board::LevelLoads` sums it).
-                let end = usize::from(level_end.get(i).copied().unwrap_or(0));
-                for (share, timing) in shares.iter().zip(timings.iter()).take(end).skip(i) {
-                    let load = share.load(timing.jitter);
-                    prefix = prefix.plus(load);
-                    let (c, t, j) = (
-                        timing.wcet.as_ns(),
-                        timing.period.as_ns(),
-                        timing.jitter.as_ns(),
-                    );
-                    linear = linear.plus(LinearTerms::of(load, c, t, j));
-                    if c > 0 {
-                        once_gap = once_gap.min(t.saturating_sub(j));
-                    }
-                }
-            }
-            let (Some(&task), Some(&blocking_i)) = (timings.get(i), blocking.get(i)) else {
-                break;
-            };
-            let own = shares.get(i).copied().unwrap_or_default();
-            let own_load = own.load(task.jitter);
-            let (c, t, j) = (task.wcet.as_ns(), task.period.as_ns(), task.jitter.as_ns());
-            let load = prefix.minus(own_load);
-            // Exactly, without a fixed point: when `w = B + C + Σ C_k` (every job of this and the more urgent levels
-            // once) leaves each of them, this one included, its next activation outside the window (`w + J_k ≤ T_k`),
-            // the window's demand is `w` there and at least `w` anywhere below it, so `w` is the least fixed point
-            // and the job's response is `w + J` (one instance) — the exact analysis's numbers, first window and busy
-            // window included. Not when the exact analysis reports an overload, or beyond the horizon.
-            let overload = load.utilisation.saturating_add(own.utilisation()) > UTIL_ONE
-                || (load.utilisation >= UTIL_ONE && c > 0);
-            let once = blocking_i.as_ns().saturating_add(linear.cost);
-            if c > 0
-                && t > 0
-                && prefix.zero_periods == 0
-                && !overload
-                && once <= once_gap
-                && once <= limits.horizon.as_ns()
-            {
-                if let (Some(ws), Some(fs)) = (wcrt.get_mut(i), first_window.get_mut(i)) {
-                    *ws = once.saturating_add(j);
-                    *fs = Time::from_ns(once);
-                }
-                summary.reach = summary.reach.max(once);
-                continue;
-            }
-            // A job whose bound nothing reads, settled in closed form when the linear bound meets its deadline: one
-            // instance in its window (`w̄ + J ≤ T`), so its response is at most `w̄ + J`, and the level's shares
-            // rounded up within 100 % (so the exact analysis's, rounded down, are no overload). Otherwise, and for
-            // every other job, the exact fixed point.
-            let settled_here = settles
-                .get(i)
-                .is_some_and(|&s| s && linear.utilisation <= UTIL_ONE)
-                .then(|| {
-                    linear_bound(
-                        c,
-                        blocking_i.as_ns(),
-                        linear.minus(LinearTerms::of(own_load, c, t, j)),
-                    )
-                })
-                .flatten()
-                .map(|w| (w, w.saturating_add(j)))
-                .filter(|&(w, r)| {
-                    let deadline = metas.get(i).map_or(0, |m| m.deadline.as_ns());
-                    r <= t && r <= deadline && w <= limits.horizon.as_ns()
-                });
-            if let Some((w, r)) = settled_here {
-                if let (Some(ws), Some(fs)) = (wcrt.get_mut(i), first_window.get_mut(i)) {
-                    // An upper bound, read only by the deadline check; no start hint for the levels below.
-                    *ws = r;
-                    *fs = Time::ZERO;
-                }
-                summary.reach = summary.reach.max(w);
-                continue;
-            }
-            // As the report: start from a more urgent level's first window when provably below this one's.
-            let hint = previous_level
-                .clone()
-                .filter(|&k| wcrt.get(k).is_some_and(|&w| w != NONE))
-                .filter(|&k| {
-                    blocking
-                        .get(k)
-                        .is_some_and(|&b| b <= blocking_i.plus(task.wcet))
-                })
-                .filter_map(|k| first_window.get(k).copied())
-                .max()
-                .unwrap_or(Time::ZERO);
-            let timings = timings.get(..len).unwrap_or(&[]);
-            let result = board::response_time_at_level(
-                timings,
-                i,
-                usize::from(level_end.get(i).copied().unwrap_or(0)),
-                blocking_i,
-                hint,
-                load,
-                own,
-                &Limits {
-                    iterations: limits.iterations.saturating_sub(*iterations - spent_before),
-                    ..*limits
-                },
-                &mut scratch,
-            );
-            let (w, f) = match result {
-                Ok(r) => {
-                    *iterations += r.iterations;
-                    summary.reach = summary.reach.max(r.busy_window.as_ns());
-                    (r.wcrt.as_ns(), r.first_window)
-                }
-                // Out of the analysis's iterations: no verdict on the deadlines ([`Refusal::Budget`]).
-                Err(AnalysisError::IterationLimit) => return Err(Refusal::Budget),
-                Err(e) => {
-                    // Any unbounded response but an overload may depend on the horizon.
-                    summary.beyond |= e != AnalysisError::Overload;
-                    (NONE, Time::ZERO)
-                }
-            };
-            if let (Some(ws), Some(fs)) = (wcrt.get_mut(i), first_window.get_mut(i)) {
-                *ws = w;
-                *fs = f;
-            }
-        }
-        if !chained {
-            settled = true;
-            break;
-        }
-        let mut changed = false;
-        for p in 0..len {
-            let Some(meta) = metas.get(p).copied() else {
-                continue;
-            };
-            if meta.released_by == NO_JOB {
-                continue;
-            }
-            match (inherited(&meta, &wcrt), timings.get_mut(p)) {
-                (Some(jitter), Some(timing)) => {
-                    if timing.jitter != jitter {
-                        timing.jitter = jitter;
-                        changed = true;
-                    }
-                }
-                _ => {
-                    if let Some(slot) = wcrt.get_mut(p) {
-                        *slot = NONE;
-                    }
-                }
-            }
-        }
-        if !changed {
-            settled = true;
-            break;
-        }
-    }
-    if !settled {
-        for (slot, meta) in wcrt.iter_mut().zip(metas.iter()).take(len) {
-            if meta.released_by != NO_JOB {
-                *slot = NONE;
-            }
-        }
-    }
+    let outcome = board_analysis::analyse(
+        jobs,
+        &set.jobs,
+        &mut bounds,
+        input.limits,
+        board_analysis::IterationBudget::Board,
+    )
+    .map_err(|_| Refusal::Budget)?;
+    *iterations += outcome.iterations;
+    summary.reach = summary.reach.max(outcome.reach);
+    summary.beyond |= outcome.beyond;
+    summary.note_board(input, &set.jobs, &bounds.wcrt);
+    Ok(())
+}
 
-    // The first violation in table order.
-    for original in 0..len {
-        let p = usize::from(at(original as u8));
-        let (Some(meta), Some(&w)) = (metas.get(p), wcrt.get(p)) else {
-            continue;
-        };
-        let missed = w == NONE || w > meta.deadline.as_ns();
-        if !summary.violated && missed {
-            summary.violated = true;
-            summary.task = meta.id;
-            summary.violation_wcrt = w;
-            summary.violation_deadline = meta.deadline;
+impl<const M: usize> Summary<M> {
+    /// Writes the board's analysis into the summary: its first violation in table order and its first below the
+    /// floor (no bound at all, or a fixed task — the board's own machinery — late), its transmit interrupt's and
+    /// command handler's bounds and its streams' publisher jobs' bounds.
+    fn note_board<const N: usize>(
+        &mut self,
+        input: &BoardInput<'_, M>,
+        set: &JobIndex<N>,
+        wcrt: &[u64; N],
+    ) {
+        let len = set.len;
+        let at = |original: usize| usize::from(set.at(original as u8));
+        for original in 0..len {
+            let p = at(original);
+            let (Some(meta), Some(&w)) = (set.metas.get(p), wcrt.get(p)) else {
+                continue;
+            };
+            let missed = w == NONE || w > meta.deadline.as_ns();
+            if !self.violated && missed {
+                self.violated = true;
+                self.task = meta.id;
+                self.violation_wcrt = w;
+                self.violation_deadline = meta.deadline;
+            }
+            if !self.floor_violated
+                && (w == NONE || (missed && matches!(meta.id, TaskId::Fixed(_))))
+            {
+                self.floor_violated = true;
+                self.floor_task = meta.id;
+                self.floor_wcrt = w;
+                self.floor_deadline = meta.deadline;
+            }
         }
-        // The floor: no bound at all, or a fixed task (the board's own machinery) late.
-        if !summary.floor_violated && (w == NONE || (missed && matches!(meta.id, TaskId::Fixed(_))))
-        {
-            summary.floor_violated = true;
-            summary.floor_task = meta.id;
-            summary.floor_wcrt = w;
-            summary.floor_deadline = meta.deadline;
-        }
-    }
-    let fixed = |index: Option<u16>| -> u64 {
         // No such task: nothing to add; an unbounded one: no bound.
-        index
-            .and_then(|i| u8::try_from(i).ok())
-            .map(at)
-            .and_then(|p| wcrt.get(usize::from(p)).copied())
-            .unwrap_or(0)
-    };
-    summary.tx = fixed(table.can_tx);
-    summary.handler = fixed(table.command_handler);
-    for (own, (_, s)) in mine().enumerate() {
-        let Some(sender) = s.sender else { continue };
-        // The stream's job: the first of its topic in table order.
-        let job = (0..len)
-            .map(|original| usize::from(at(original as u8)))
-            .find(|&p| {
-                metas
+        let fixed = |index: Option<u16>| -> u64 {
+            index
+                .and_then(|i| u8::try_from(i).ok())
+                .map(|i| set.at(i))
+                .and_then(|p| wcrt.get(usize::from(p)).copied())
+                .unwrap_or(0)
+        };
+        self.tx = fixed(input.table.can_tx);
+        self.handler = fixed(input.table.command_handler);
+        for (own, (_, s)) in input.mine().enumerate() {
+            let Some(sender) = s.sender else { continue };
+            // The stream's job: the first of its topic in table order.
+            let job = (0..len).map(at).find(|&p| {
+                set.metas
                     .get(p)
                     .is_some_and(|meta| meta.id == TaskId::Publisher(sender.topic))
             });
-        if let (Some(p), Some(w), Some(found)) =
-            (job, summary.wcrt.get_mut(own), summary.found.get_mut(own))
-        {
-            *w = wcrt.get(p).copied().unwrap_or(NONE);
-            *found = true;
+            if let (Some(p), Some(w), Some(found)) =
+                (job, self.wcrt.get_mut(own), self.found.get_mut(own))
+            {
+                *w = wcrt.get(p).copied().unwrap_or(NONE);
+                *found = true;
+            }
         }
     }
-    Ok(())
 }
 
 #[cfg(test)]

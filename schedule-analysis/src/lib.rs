@@ -15,6 +15,8 @@
 
 pub mod admission;
 pub mod board;
+pub mod board_analysis;
+pub mod bus_analysis;
 pub mod busy_window;
 pub mod can;
 pub mod time;
