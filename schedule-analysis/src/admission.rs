@@ -637,10 +637,16 @@ struct JobMeta {
     id: TaskId,
     deadline: Time,
     own_jitter: Time,
-    /// Original index (table order: fixed tasks, then per stream its timer job and its job) of the releaser.
+    /// The releaser ([`NO_JOB`]: none): its original index (table order: fixed tasks, then per stream its timer
+    /// job and its job) as built, its sorted position once [`JobIndex::index`] has run.
     released_by: u8,
     /// This job's original index.
     original: u8,
+    /// Where its priority level ends (a sorted position).
+    level_end: u8,
+    /// Whether nothing reads its bound but its deadline check: a fixed task that releases no job and is neither
+    /// the transmit interrupt nor the command handler (whose bounds the bus and the end-to-end paths read).
+    verdict_only: bool,
 }
 
 /// The working arrays' placeholder (every entry the analysis reads is written first): all zero bytes, so that a
@@ -651,6 +657,8 @@ const EMPTY_META: JobMeta = JobMeta {
     own_jitter: Time::ZERO,
     released_by: 0,
     original: 0,
+    level_end: 0,
+    verdict_only: false,
 };
 
 const EMPTY_TIMING: TaskTiming = TaskTiming {
@@ -1384,16 +1392,11 @@ impl<const N: usize> Originals<N> {
     }
 
     /// The fixed tasks, then per stream of the board its timer job and its publisher job.
-    fn collect<const M: usize>(input: &BoardInput<'_, M>) -> Result<Self, Refusal> {
+    fn collect<const M: usize>(&mut self, input: &BoardInput<'_, M>) -> Result<(), Refusal> {
         let table = input.table;
-        let mut jobs = Originals {
-            priority: [0; N],
-            source: [Source::Fixed(0); N],
-            count: 0,
-        };
         for (i, t) in table.tasks.iter().enumerate() {
             let row = u8::try_from(i).map_err(|_| Refusal::Capacity)?;
-            jobs.add(t.priority, Source::Fixed(row))?;
+            self.add(t.priority, Source::Fixed(row))?;
         }
         for (m, s) in input.mine() {
             let Some(sender) = s.sender else { continue };
@@ -1408,10 +1411,10 @@ impl<const N: usize> Originals<N> {
                 .ok_or(Refusal::Capacity)?;
             let stream = u8::try_from(m).map_err(|_| Refusal::Capacity)?;
             let timer = match table.monotonic {
-                Some(mono) => jobs.add(mono.priority, Source::Timer { stream })?,
+                Some(mono) => self.add(mono.priority, Source::Timer { stream })?,
                 None => NO_JOB,
             };
-            jobs.add(
+            self.add(
                 priority,
                 Source::Publisher {
                     stream,
@@ -1420,7 +1423,7 @@ impl<const N: usize> Originals<N> {
                 },
             )?;
         }
-        Ok(jobs)
+        Ok(())
     }
 
     /// The originals sorted by priority (most urgent first, ties in original order: a stable sort of bytes).
@@ -1460,6 +1463,9 @@ fn build_job<const M: usize>(
                 own_jitter: jitter,
                 released_by,
                 original,
+                // Set by `JobIndex::index`.
+                level_end: 0,
+                verdict_only: false,
             },
         )
     };
@@ -1537,35 +1543,25 @@ struct JobIndex<const N: usize> {
     metas: [JobMeta; N],
     /// Sorted position of each original index.
     position: [u8; N],
-    /// Where each job's priority level ends.
-    level_end: [u8; N],
-    /// The jobs whose bound nothing else reads: a fixed task that releases no job and is neither the transmit
-    /// interrupt nor the command handler (whose bounds the bus and the end-to-end paths read). Such a job only has
-    /// to meet its deadline.
-    verdict_only: [bool; N],
 }
 
 impl<const N: usize> BoardSet<N> {
-    /// Builds each job once, at its sorted place: arrays built in place (a struct of them was built and then
-    /// copied, 1.7 KB a board analysis).
-    fn build<const M: usize>(input: &BoardInput<'_, M>) -> Result<Self, Refusal> {
-        let originals = Originals::<N>::collect(input)?;
+    /// Builds each job once, at its sorted place, in place (a set built and then returned or copied was a copy
+    /// of 2.5 KB a board analysis).
+    fn fill<const M: usize>(&mut self, input: &BoardInput<'_, M>) -> Result<(), Refusal> {
+        let mut originals = Originals {
+            priority: [0; N],
+            source: [Source::Fixed(0); N],
+            count: 0,
+        };
+        originals.collect(input)?;
         let order = originals.sorted();
         let own_frame = input.own_frame();
-        let mut set = BoardSet {
-            timings: const { [EMPTY_TIMING; N] },
-            jobs: JobIndex {
-                len: originals.count,
-                metas: const { [EMPTY_META; N] },
-                position: [NO_JOB; N],
-                level_end: [0; N],
-                verdict_only: [false; N],
-            },
-        };
+        self.jobs.len = originals.count;
         for ((&original, timing), meta) in order
             .iter()
-            .zip(set.timings.iter_mut())
-            .zip(set.jobs.metas.iter_mut())
+            .zip(self.timings.iter_mut())
+            .zip(self.jobs.metas.iter_mut())
             .take(originals.count)
         {
             let what = originals
@@ -1576,16 +1572,15 @@ impl<const N: usize> BoardSet<N> {
             let priority = u32::from(originals.urgency(original));
             (*timing, *meta) = build_job(input, what, priority, original, own_frame)?;
         }
-        set.jobs.index(&set.timings, input.table);
-        Ok(set)
+        self.jobs.index(&self.timings, input.table);
+        Ok(())
     }
 
     /// SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job (the
     /// fixed tasks' from the table, the publisher jobs' from their topics). Jobs of one priority share it: worked
     /// out once per level (the jobs are sorted by priority).
-    fn blockings<const M: usize>(&self, input: &BoardInput<'_, M>) -> [Time; N] {
+    fn blockings<const M: usize>(&self, input: &BoardInput<'_, M>, blocking: &mut [Time; N]) {
         let table = input.table;
-        let mut blocking = [Time::ZERO; N];
         let mut last_level: Option<(u32, Time)> = None;
         for (slot, timing) in blocking
             .iter_mut()
@@ -1620,13 +1615,11 @@ impl<const N: usize> BoardSet<N> {
             *slot = row_time(longest);
             last_level = Some((p, *slot));
         }
-        blocking
     }
 
     /// Each job's share of the CPU: a fixed task's from its row (worked out when the table was built), the others'
     /// by one division each (not one per job and level as it is summed).
-    fn shares(&self, table: &BoardTable<'_>) -> [Share; N] {
-        let mut shares = [Share::default(); N];
+    fn shares(&self, table: &BoardTable<'_>, shares: &mut [Share; N]) {
         for ((share, timing), meta) in shares
             .iter_mut()
             .zip(self.timings.iter())
@@ -1643,41 +1636,39 @@ impl<const N: usize> BoardSet<N> {
             };
             *share = known.unwrap_or_else(|| Share::of(timing.wcet, timing.period));
         }
-        shares
     }
 }
 
 impl<const N: usize> JobIndex<N> {
-    /// Positions, level ends and the jobs only a deadline check reads.
+    /// Positions, releasers as positions, level ends and the jobs only a deadline check reads.
     fn index(&mut self, timings: &[TaskTiming; N], table: &BoardTable<'_>) {
         let len = self.len;
-        for (p, meta) in self.metas.iter().enumerate().take(len) {
+        for (p, meta) in self.metas.iter_mut().enumerate().take(len) {
             if let Some(slot) = self.position.get_mut(usize::from(meta.original)) {
                 *slot = p as u8;
             }
-            if let (TaskId::Fixed(row), Some(slot)) = (meta.id, self.verdict_only.get_mut(p)) {
+            if let TaskId::Fixed(row) = meta.id {
                 let row = Some(row);
-                *slot = table.can_tx != row && table.command_handler != row;
-            }
-        }
-        for k in 0..len {
-            let Some(releaser) = self.metas.get(k).map(|m| m.released_by) else {
-                break;
-            };
-            let at = usize::from(self.at(releaser));
-            if let Some(slot) = self.verdict_only.get_mut(at) {
-                *slot = false;
+                meta.verdict_only = table.can_tx != row && table.command_handler != row;
             }
         }
         let mut end = len;
-        for i in (0..len).rev() {
-            if let (Some(t), Some(next)) = (timings.get(i), timings.get(i + 1)) {
+        for p in (0..len).rev() {
+            if let (Some(t), Some(next)) = (timings.get(p), timings.get(p + 1)) {
                 if t.priority != next.priority {
-                    end = i + 1;
+                    end = p + 1;
                 }
             }
-            if let Some(slot) = self.level_end.get_mut(i) {
-                *slot = end as u8;
+            let Some(releaser) = self.metas.get(p).map(|m| self.at(m.released_by)) else {
+                break;
+            };
+            if let Some(meta) = self.metas.get_mut(p) {
+                meta.level_end = end as u8;
+                // NO_JOB stays NO_JOB.
+                meta.released_by = releaser;
+            }
+            if let Some(releasing) = self.metas.get_mut(usize::from(releaser)) {
+                releasing.verdict_only = false;
             }
         }
     }
@@ -1693,22 +1684,18 @@ impl<const N: usize> JobIndex<N> {
 
 impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
     fn releaser(&self, p: usize) -> Option<usize> {
-        let released_by = self.metas.get(p)?.released_by;
-        (released_by != NO_JOB).then(|| usize::from(self.at(released_by)))
+        let releaser = self.metas.get(p)?.released_by;
+        (releaser != NO_JOB).then_some(usize::from(releaser))
     }
     fn own_jitter(&self, p: usize) -> Time {
         self.metas.get(p).map_or(Time::ZERO, |m| m.own_jitter)
     }
     fn level_end(&self, p: usize) -> usize {
-        usize::from(self.level_end.get(p).copied().unwrap_or(0))
+        self.metas.get(p).map_or(0, |m| usize::from(m.level_end))
     }
     fn verdict_only(&self, p: usize) -> Option<Time> {
         let meta = self.metas.get(p)?;
-        self.verdict_only
-            .get(p)
-            .copied()
-            .unwrap_or(false)
-            .then_some(meta.deadline)
+        meta.verdict_only.then_some(meta.deadline)
     }
 }
 
@@ -1753,9 +1740,21 @@ fn analyse_board<const N: usize, const M: usize>(
     iterations: &mut u64,
     summary: &mut Summary<M>,
 ) -> Result<(), Refusal> {
-    let mut set = BoardSet::<N>::build(input)?;
-    let blocking = set.blockings(input);
-    let shares = set.shares(input.table);
+    // Built in place, field by field: cleared in one go each rather than copied from flash (a `const` set is
+    // not all zero bytes).
+    let mut set = BoardSet {
+        timings: const { [EMPTY_TIMING; N] },
+        jobs: JobIndex {
+            len: 0,
+            metas: const { [EMPTY_META; N] },
+            position: [NO_JOB; N],
+        },
+    };
+    set.fill(input)?;
+    let mut blocking = [Time::ZERO; N];
+    set.blockings(input, &mut blocking);
+    let mut shares = [Share::default(); N];
+    set.shares(input.table, &mut shares);
     let mut bounds = JobWcrt {
         wcrt: [NONE; N],
         first_window: [Time::ZERO; N],
@@ -1794,9 +1793,8 @@ impl<const M: usize> Summary<M> {
         wcrt: &[u64; N],
     ) {
         let len = set.len;
-        let at = |original: usize| usize::from(set.at(original as u8));
         for original in 0..len {
-            let p = at(original);
+            let p = usize::from(set.at(original as u8));
             let (Some(meta), Some(&w)) = (set.metas.get(p), wcrt.get(p)) else {
                 continue;
             };
@@ -1829,11 +1827,13 @@ impl<const M: usize> Summary<M> {
         for (own, (_, s)) in input.mine().enumerate() {
             let Some(sender) = s.sender else { continue };
             // The stream's job: the first of its topic in table order.
-            let job = (0..len).map(at).find(|&p| {
-                set.metas
-                    .get(p)
-                    .is_some_and(|meta| meta.id == TaskId::Publisher(sender.topic))
-            });
+            let job = (0..len)
+                .map(|original| usize::from(set.at(original as u8)))
+                .find(|&p| {
+                    set.metas
+                        .get(p)
+                        .is_some_and(|meta| meta.id == TaskId::Publisher(sender.topic))
+                });
             if let (Some(p), Some(w), Some(found)) =
                 (job, self.wcrt.get_mut(own), self.found.get_mut(own))
             {

@@ -126,13 +126,16 @@ pub fn analyse<J: Jobs, B: JobBounds>(
         scratch,
     } = jobs;
     let len = timings.len();
-    let chained = (0..len).any(|p| meta.releaser(p).is_some());
-    let in_pass = (0..len).all(|p| {
-        meta.releaser(p).is_none_or(|r| {
-            let urgency = |k: usize| timings.get(k).map(|t| t.priority);
-            urgency(r) > urgency(p)
-        })
-    });
+    // Whether any job is released by another, and whether every releaser is more urgent than what it releases.
+    let (mut chained, mut in_pass) = (false, true);
+    for (p, timing) in timings.iter().enumerate() {
+        if let Some(r) = meta.releaser(p) {
+            chained = true;
+            in_pass &= timings
+                .get(r)
+                .is_some_and(|releaser| releaser.priority > timing.priority);
+        }
+    }
     let mut pass = Pass {
         meta,
         blocking,
@@ -208,6 +211,16 @@ struct Entered {
     once_gap: u64,
 }
 
+/// One job as a pass reaches it: its timing, blocking and share, and its interferers' load.
+struct Job {
+    at: usize,
+    task: TaskTiming,
+    blocking: Time,
+    own: Share,
+    /// The load of every job of its own and the more urgent levels but itself.
+    load: Load,
+}
+
 impl<J: Jobs> Pass<'_, J> {
     fn run<B: JobBounds>(
         &mut self,
@@ -230,17 +243,21 @@ impl<J: Jobs> Pass<'_, J> {
                 level_start = i;
                 self.enter_level(timings, i, bounds, &mut entered);
             }
-            if !B::WHOLE_RECORDS && self.closed_form(timings, i, &entered, bounds) {
+            let (Some(&task), Some(&blocking)) = (timings.get(i), self.blocking.get(i)) else {
+                break;
+            };
+            let own = self.shares.get(i).copied().unwrap_or_default();
+            let job = Job {
+                at: i,
+                task,
+                blocking,
+                own,
+                load: entered.prefix.minus(own.load(task.jitter)),
+            };
+            if !B::WHOLE_RECORDS && self.closed_form(&job, &entered, bounds) {
                 continue;
             }
-            self.fixed_point(
-                timings,
-                i,
-                &entered,
-                previous_level.clone(),
-                bounds,
-                scratch,
-            )?;
+            self.fixed_point(timings, &job, previous_level.clone(), bounds, scratch)?;
         }
         Ok(())
     }
@@ -290,20 +307,16 @@ impl<J: Jobs> Pass<'_, J> {
     /// An upper bound, for a job only a deadline check reads ([`Jobs::verdict_only`]), when the linear bound meets
     /// its deadline: one instance in its window (`w̄ + J ≤ T`), so its response is at most `w̄ + J`, and the level's
     /// shares rounded up within 100 % (so the fixed point's, rounded down, are no overload).
-    fn closed_form<B: JobBounds>(
-        &mut self,
-        timings: &[TaskTiming],
-        i: usize,
-        entered: &Entered,
-        bounds: &mut B,
-    ) -> bool {
-        let (Some(task), Some(&blocking)) = (timings.get(i), self.blocking.get(i)) else {
-            return false;
-        };
-        let own = self.shares.get(i).copied().unwrap_or_default();
+    fn closed_form<B: JobBounds>(&mut self, job: &Job, entered: &Entered, bounds: &mut B) -> bool {
+        let Job {
+            at: i,
+            task,
+            blocking,
+            own,
+            load,
+        } = *job;
         let own_load = own.load(task.jitter);
         let (c, t, j) = (task.wcet.as_ns(), task.period.as_ns(), task.jitter.as_ns());
-        let load = entered.prefix.minus(own_load);
         let horizon = self.limits.horizon.as_ns();
         let overload = load.utilisation.saturating_add(own.utilisation()) > UTIL_ONE
             || (load.utilisation >= UTIL_ONE && c > 0);
@@ -348,17 +361,18 @@ impl<J: Jobs> Pass<'_, J> {
     fn fixed_point<B: JobBounds>(
         &mut self,
         timings: &[TaskTiming],
-        i: usize,
-        entered: &Entered,
+        job: &Job,
         previous_level: Range<usize>,
         bounds: &mut B,
         scratch: &mut [Counter],
     ) -> Result<(), OutOfIterations> {
-        let (Some(task), Some(&blocking)) = (timings.get(i), self.blocking.get(i)) else {
-            return Ok(());
-        };
-        let own = self.shares.get(i).copied().unwrap_or_default();
-        let load = entered.prefix.minus(own.load(task.jitter));
+        let Job {
+            at: i,
+            task,
+            blocking,
+            own,
+            load,
+        } = *job;
         // f_i(w) ≥ f_k(w) − B_k + B_i + C_i, so w_i ≥ w_k whenever B_k ≤ B_i + C_i.
         let hint = previous_level
             .filter(|&k| {
