@@ -13,12 +13,11 @@
 //!   period, frames per sample, DLC), the same every board keeps from the commands it hears;
 //! * the request: one stream to add, or to replace the stream of the same sender and topic.
 //!
-//! The analysis is the report's, step by step: per board, publisher jobs and their timer jobs are added to the
-//! fixed tasks, SRP blockings computed, release jitters iterated to a fixed point (at most 100 rounds) with
-//! [`board::response_times`]; then every message's queuing jitter from its sender's response variation and the
-//! board's transmit interrupt, and [`can::response_times`]. The verdict is "no task and no frame misses its
-//! deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without jitter budgets
-//! (a property test checks that they agree).
+//! The analysis is the report's own: per board, publisher jobs and their timer jobs are added to the fixed tasks
+//! and their SRP blockings worked out from the table, then [`board_analysis::analyse`] (release jitters to a fixed
+//! point); then [`bus_analysis::analyse`] with every message's sender's bounds. The verdict is "no task and no
+//! frame misses its deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without
+//! jitter budgets (a property test checks that they agree).
 
 use crate::board::{self, TaskTiming};
 use crate::board_analysis;
@@ -1252,33 +1251,27 @@ fn bus_message<const M: usize>(
 /// Notes a stream's violations: its frames' delivery `bus` (from the sender's activation) against its deadline
 /// and, for a command, its path to the receiver's handler (whose bound is `handler`).
 fn note_stream(s: &Stream, bus: Option<Time>, handler: Option<Time>, found: &mut Found) {
-    if bus.is_none_or(|w| w > s.deadline()) {
-        // Below the floor: frames without a bound, or a command's (not a publisher's) frames late.
-        found.note(
-            Refusal::Deadline(Violation {
-                culprit: Culprit::Frame { id: s.id },
-                wcrt: bus,
-                deadline: s.deadline(),
-            }),
-            bus.is_none() || s.sender.is_none(),
-        );
-    }
+    let mut late = |culprit, wcrt: Option<Time>, floor| {
+        if wcrt.is_none_or(|w| w > s.deadline()) {
+            let deadline = s.deadline();
+            let violation = Violation {
+                culprit,
+                wcrt,
+                deadline,
+            };
+            found.note(Refusal::Deadline(violation), floor);
+        }
+    };
+    // Below the floor: frames without a bound, or a command's (not a publisher's) frames late.
+    let floor = bus.is_none() || s.sender.is_none();
+    late(Culprit::Frame { id: s.id }, bus, floor);
     if s.receiver.is_some() {
         let end = match (bus, handler) {
             (Some(w), Some(r)) => w.checked_plus(r),
             _ => None,
         };
-        if end.is_none_or(|w| w > s.deadline()) {
-            // A command's path to its handler: always below the floor.
-            found.note(
-                Refusal::Deadline(Violation {
-                    culprit: Culprit::EndToEnd { id: s.id },
-                    wcrt: end,
-                    deadline: s.deadline(),
-                }),
-                true,
-            );
-        }
+        // A command's path to its handler: always below the floor.
+        late(Culprit::EndToEnd { id: s.id }, end, true);
     }
 }
 

@@ -1,9 +1,11 @@
-//! The whole system at once: every board (overheads, SRP ceilings, release chains), then the bus (sender response
-//! variation as queuing jitter), then every topic end to end with its jitter budget.
+//! The whole system at once, as the report shows it: every board (overheads, SRP ceilings, release chains), then
+//! the bus (sender response variation as queuing jitter), then every topic end to end with its jitter budget.
 //!
-//! Order of the holistic iteration: a board's tasks are analysed repeatedly until the release jitters inherited
-//! through `released_by` stop growing (they only grow, so this either settles or is reported as unbounded); the bus
-//! depends on the boards but never the other way round, so it is analysed once afterwards.
+//! The analysis itself is the core's, the one the boards' admission check runs: [`board_analysis::analyse`] per
+//! board (release jitters iterated to a fixed point, every job's whole busy-window record kept) and
+//! [`bus_analysis::analyse`] for the bus, which depends on the boards but never the other way round, so it runs
+//! once afterwards. This module adds what only the host needs: names, resource ceilings from who uses what,
+//! overheads, why a bound is missing, utilisations and the end-to-end paths.
 
 use std::collections::{BinaryHeap, HashMap};
 use std::fmt;

@@ -370,8 +370,7 @@ impl<J: Jobs> Pass<'_, J> {
             at: i,
             task,
             blocking,
-            own,
-            load,
+            ..
         } = *job;
         // f_i(w) ≥ f_k(w) − B_k + B_i + C_i, so w_i ≥ w_k whenever B_k ≤ B_i + C_i.
         let hint = previous_level
@@ -399,8 +398,8 @@ impl<J: Jobs> Pass<'_, J> {
             self.meta.level_end(i),
             blocking,
             hint,
-            load,
-            own,
+            job.load,
+            job.own,
             &limits,
             scratch,
         );
