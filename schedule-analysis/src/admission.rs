@@ -1676,12 +1676,12 @@ impl<const N: usize> JobIndex<N> {
 }
 
 impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
-    fn releaser(&self, p: usize) -> Option<usize> {
-        let releaser = self.metas.get(p)?.released_by;
-        (releaser != NO_JOB).then_some(usize::from(releaser))
-    }
-    fn own_jitter(&self, p: usize) -> Time {
-        self.metas.get(p).map_or(Time::ZERO, |m| m.own_jitter)
+    fn release(&self, p: usize) -> Option<board_analysis::Release> {
+        let meta = self.metas.get(p)?;
+        (meta.released_by != NO_JOB).then_some(board_analysis::Release {
+            by: usize::from(meta.released_by),
+            own_jitter: meta.own_jitter,
+        })
     }
     fn level_end(&self, p: usize) -> usize {
         self.metas.get(p).map_or(0, |m| usize::from(m.level_end))

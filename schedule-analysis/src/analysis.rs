@@ -457,19 +457,15 @@ fn task_blockings(board: &BoardSystem) -> Vec<Time> {
 struct SortedTasks {
     /// Model index per sorted position.
     order: Vec<usize>,
-    /// Per sorted position: the sorted position of the releaser (`usize::MAX` when the model names none that
-    /// exists), its own jitter, where its level ends.
-    releaser: Vec<Option<usize>>,
-    own_jitter: Vec<Time>,
+    /// Per sorted position: how it is released (the releaser at `usize::MAX` when the model names none that
+    /// exists), and where its level ends.
+    release: Vec<Option<board_analysis::Release>>,
     level_end: Vec<usize>,
 }
 
 impl board_analysis::Jobs for SortedTasks {
-    fn releaser(&self, p: usize) -> Option<usize> {
-        self.releaser.get(p).copied().flatten()
-    }
-    fn own_jitter(&self, p: usize) -> Time {
-        self.own_jitter.get(p).copied().unwrap_or(Time::ZERO)
+    fn release(&self, p: usize) -> Option<board_analysis::Release> {
+        self.release.get(p).copied().flatten()
     }
     fn level_end(&self, p: usize) -> usize {
         self.level_end.get(p).copied().unwrap_or(0)
@@ -617,16 +613,16 @@ fn sort_tasks(board: &BoardSystem) -> SortedTasks {
             *slot = p;
         }
     }
-    let releaser = order
+    let release = order
         .iter()
         .map(|&i| {
-            let r = board.tasks.get(i)?.released_by?;
-            Some(position.get(r).copied().unwrap_or(usize::MAX))
+            let task = board.tasks.get(i)?;
+            let r = task.released_by?;
+            Some(board_analysis::Release {
+                by: position.get(r).copied().unwrap_or(usize::MAX),
+                own_jitter: task.jitter,
+            })
         })
-        .collect();
-    let own_jitter = order
-        .iter()
-        .map(|&i| board.tasks.get(i).map_or(Time::ZERO, |t| t.jitter))
         .collect();
     let mut level_end = vec![n; n];
     let mut end = n;
@@ -642,8 +638,7 @@ fn sort_tasks(board: &BoardSystem) -> SortedTasks {
     }
     SortedTasks {
         order,
-        releaser,
-        own_jitter,
+        release,
         level_end,
     }
 }

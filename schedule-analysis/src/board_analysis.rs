@@ -27,15 +27,22 @@ pub const MAX_JITTER_ROUNDS: usize = 100;
 /// What the analysis reads of a board's jobs besides their [`TaskTiming`]s, per sorted position (most urgent
 /// first, ties in the caller's order).
 pub trait Jobs {
-    /// The sorted position of the job whose completion releases job `p`; `None`: released by no job.
-    fn releaser(&self, p: usize) -> Option<usize>;
-    /// Job `p`'s release jitter of its own (its releaser's response is added to it).
-    fn own_jitter(&self, p: usize) -> Time;
+    /// How job `p` is released by another job; `None`: by none.
+    fn release(&self, p: usize) -> Option<Release>;
     /// Where job `p`'s priority level ends (one past its last job).
     fn level_end(&self, p: usize) -> usize;
     /// `Some(deadline)` when nothing reads job `p`'s bound but a check against this deadline, so that a
     /// closed-form bound that meets it may settle the job without a fixed point; `None`: its bound is read.
     fn verdict_only(&self, p: usize) -> Option<Time>;
+}
+
+/// A job released by the completion of another.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Release {
+    /// The sorted position of the job whose completion releases it.
+    pub by: usize,
+    /// Its release jitter of its own, to which the releaser's response is added.
+    pub own_jitter: Time,
 }
 
 /// Why a released job has no bound although its own analysis may have found one.
@@ -129,7 +136,7 @@ pub fn analyse<J: Jobs, B: JobBounds>(
     // Whether any job is released by another, and whether every releaser is more urgent than what it releases.
     let (mut chained, mut in_pass) = (false, true);
     for (p, timing) in timings.iter().enumerate() {
-        if let Some(r) = meta.releaser(p) {
+        if let Some(Release { by: r, .. }) = meta.release(p) {
             chained = true;
             in_pass &= timings
                 .get(r)
@@ -152,7 +159,7 @@ pub fn analyse<J: Jobs, B: JobBounds>(
         }
     }
     for p in 0..len {
-        if meta.releaser(p).is_some() {
+        if meta.release(p).is_some() {
             bounds.put_unbound(p, Unbound::NoConvergence);
         }
     }
@@ -160,15 +167,16 @@ pub fn analyse<J: Jobs, B: JobBounds>(
 }
 
 /// The jitter job `p` inherits from its releaser's current bound, or why it has none.
+#[inline(always)]
 fn inherited<J: Jobs, B: JobBounds>(
     meta: &J,
     bounds: &B,
     p: usize,
 ) -> Option<Result<Time, Unbound>> {
-    let releaser = meta.releaser(p)?;
-    Some(match bounds.wcrt(releaser) {
+    let release = meta.release(p)?;
+    Some(match bounds.wcrt(release.by) {
         None => Err(Unbound::Releaser),
-        Some(r) => meta.own_jitter(p).checked_plus(r).ok_or(Unbound::Overflow),
+        Some(r) => release.own_jitter.checked_plus(r).ok_or(Unbound::Overflow),
     })
 }
 
