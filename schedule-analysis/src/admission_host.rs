@@ -204,10 +204,10 @@ fn overhead_times(o: &crate::model::Overheads) -> OverheadTimes {
 /// for a task the app does not declare, …).
 ///
 /// The steps: read the timing files; build every board without publishers (the fixed tasks); per board, resolve
-/// the resource ceilings ([`Lowering::new`]), lower the fixed tasks and critical sections
-/// ([`Lowering::task_rows`], [`Lowering::idle_rows`]), then, per CAN level with a publisher task, build the board
+/// the resource ceilings (`Lowering::new`), lower the fixed tasks and critical sections
+/// (`Lowering::task_rows`, `Lowering::idle_rows`), then, per CAN level with a publisher task, build the board
 /// with every publishable topic at that level and lower its publisher jobs and timer job
-/// ([`Lowering::publisher_rows`]).
+/// (`Lowering::publisher_rows`).
 pub fn lower(
     root: &Path,
     timing_paths: &[PathBuf],

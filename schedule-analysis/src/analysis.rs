@@ -1,23 +1,24 @@
-//! The whole system at once: every board (overheads, SRP ceilings, release chains), then the bus (sender response
-//! variation as queuing jitter), then every topic end to end with its jitter budget.
+//! The whole system at once, as the report shows it: every board (overheads, SRP ceilings, release chains), then
+//! the bus (sender response variation as queuing jitter), then every topic end to end with its jitter budget.
 //!
-//! Order of the holistic iteration: a board's tasks are analysed repeatedly until the release jitters inherited
-//! through `released_by` stop growing (they only grow, so this either settles or is reported as unbounded); the bus
-//! depends on the boards but never the other way round, so it is analysed once afterwards.
+//! The analysis itself is the core's, the one the boards' admission check runs: [`board_analysis::analyse`] per
+//! board (release jitters iterated to a fixed point, every job's whole busy-window record kept) and
+//! [`bus_analysis::analyse`] for the bus, which depends on the boards but never the other way round, so it runs
+//! once afterwards. This module adds what only the host needs: names, resource ceilings from who uses what,
+//! overheads, why a bound is missing, utilisations and the end-to-end paths.
 
 use std::collections::{BinaryHeap, HashMap};
 use std::fmt;
 
 use crate::board::{self, CriticalSection, TaskTiming};
-use crate::busy_window::{AnalysisError, Counter, Limits, Response};
+use crate::board_analysis;
+use crate::bus_analysis;
+use crate::busy_window::{AnalysisError, Counter, Limits, Response, Share};
 use crate::can::{self, MessageTiming};
 use crate::model::{
     BoardSystem, BusSystem, FrameCostSpec, System, TaskKind, TaskRef, GLOBAL_CRITICAL_SECTION,
 };
 use crate::time::Time;
-
-/// Rounds of the per-board jitter iteration before it is declared divergent.
-const MAX_JITTER_ROUNDS: usize = 100;
 
 /// Why a response time is unbounded.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -356,151 +357,16 @@ fn default_horizon(system: &System) -> Time {
     longest.times(1000).max_of(Time::from_us(60_000_000))
 }
 
-/// Analyses one board on its own.
+/// Analyses one board on its own: the model's tasks with their overheads, SRP blockings and release chains, by
+/// [`board_analysis::analyse`] (the analysis the boards' admission check runs), every task's whole record kept.
 pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
-    let n = board.tasks.len();
     let costs: Vec<Time> = board
         .tasks
         .iter()
         .map(|t| t.wcet.plus(board.overheads.for_kind(t.kind)))
         .collect();
-
-    // Ceilings from who uses what; "interrupts disabled" is above everyone. A sorted vector, not a hash map:
-    // the per-call set-up dominates small boards (docs/analysis.md, benchmark).
-    let mut ceilings: Vec<(&str, u32)> = board
-        .static_ceilings
-        .iter()
-        .map(|(r, c)| (r.as_str(), *c))
-        .chain(board.tasks.iter().flat_map(|t| {
-            t.sections
-                .iter()
-                .map(move |(r, _)| (r.as_str(), t.priority))
-        }))
-        .collect();
-    ceilings.sort_unstable();
-    let ceiling_of = |resource: &str| -> u32 {
-        if resource == GLOBAL_CRITICAL_SECTION {
-            return u32::MAX;
-        }
-        // The last entry of the resource's run holds its largest value.
-        let end = ceilings.partition_point(|(r, _)| *r <= resource);
-        match end.checked_sub(1).and_then(|i| ceilings.get(i)) {
-            Some((r, c)) if *r == resource => *c,
-            _ => 0,
-        }
-    };
-    let mut sections = Vec::new();
-    for task in &board.tasks {
-        for (resource, length) in &task.sections {
-            sections.push(CriticalSection {
-                holder_priority: task.priority,
-                ceiling: ceiling_of(resource),
-                length: *length,
-            });
-        }
-    }
-    for (resource, length) in &board.idle_sections {
-        sections.push(CriticalSection {
-            holder_priority: 0,
-            ceiling: ceiling_of(resource),
-            length: *length,
-        });
-    }
-    let srp = srp_blockings(
-        &board.tasks.iter().map(|t| t.priority).collect::<Vec<_>>(),
-        &sections,
-    );
-    let blocking: Vec<Time> = board
-        .tasks
-        .iter()
-        .zip(&srp)
-        .map(|(t, computed)| t.blocking.unwrap_or(*computed))
-        .collect();
-
-    // Highest priority first; ties keep model order.
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| {
-        let (pa, pb) = (
-            board.tasks.get(a).map_or(0, |t| t.priority),
-            board.tasks.get(b).map_or(0, |t| t.priority),
-        );
-        pb.cmp(&pa)
-    });
-    let mut jitter: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
-    let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
-    let mut scratch = vec![Counter::default(); n];
-    let chained = board.tasks.iter().any(|t| t.released_by.is_some());
-    let mut settled = false;
-    let mut timings: Vec<TaskTiming> = order
-        .iter()
-        .map(|&i| TaskTiming {
-            priority: board.tasks.get(i).map_or(0, |t| t.priority),
-            wcet: costs.get(i).copied().unwrap_or(Time::ZERO),
-            period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
-            jitter: Time::ZERO,
-        })
-        .collect();
-    let sorted_blocking: Vec<Time> = order
-        .iter()
-        .map(|&i| blocking.get(i).copied().unwrap_or(Time::ZERO))
-        .collect();
-    let mut out = vec![Err(AnalysisError::NoSuchIndex); n];
-    for _ in 0..MAX_JITTER_ROUNDS {
-        for (timing, &i) in timings.iter_mut().zip(&order) {
-            timing.jitter = jitter.get(i).copied().unwrap_or(Time::ZERO);
-        }
-        board::response_times(&timings, &sorted_blocking, limits, &mut scratch, &mut out);
-        for (position, &i) in order.iter().enumerate() {
-            if let (Some(slot), Some(result)) = (bounds.get_mut(i), out.get(position)) {
-                *slot = result.map_err(Unbounded::Analysis);
-            }
-        }
-        if !chained {
-            settled = true;
-            break;
-        }
-        // Inherit the releasers' worst responses as release jitter.
-        let mut changed = false;
-        for (i, task) in board.tasks.iter().enumerate() {
-            let Some(r) = task.released_by else { continue };
-            let releaser = board.tasks.get(r).map_or("?", |t| t.name.as_str());
-            match bounds.get(r).cloned() {
-                Some(Ok(response)) => {
-                    let Some(inherited) = task.jitter.checked_plus(response.wcrt) else {
-                        if let Some(slot) = bounds.get_mut(i) {
-                            *slot = Err(Unbounded::Analysis(AnalysisError::Overflow));
-                        }
-                        continue;
-                    };
-                    if jitter.get(i) != Some(&inherited) {
-                        if let Some(j) = jitter.get_mut(i) {
-                            *j = inherited;
-                        }
-                        changed = true;
-                    }
-                }
-                _ => {
-                    if let Some(slot) = bounds.get_mut(i) {
-                        *slot = Err(Unbounded::Releaser(releaser.to_string()));
-                    }
-                }
-            }
-        }
-        if !changed {
-            settled = true;
-            break;
-        }
-    }
-    if !settled {
-        for (i, task) in board.tasks.iter().enumerate() {
-            if task.released_by.is_some() {
-                if let Some(slot) = bounds.get_mut(i) {
-                    *slot = Err(Unbounded::NoConvergence);
-                }
-            }
-        }
-    }
-
+    let blocking = task_blockings(board);
+    let (bounds, jitter) = task_bounds(board, &costs, &blocking, limits);
     let utilisation = board
         .tasks
         .iter()
@@ -534,6 +400,246 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
         name: board.name.clone(),
         utilisation,
         tasks,
+    }
+}
+
+/// Each task's blocking (model order): its own from the model, or SRP's from the critical sections, with the
+/// ceilings resolved from who uses what ("interrupts disabled" is above everyone).
+fn task_blockings(board: &BoardSystem) -> Vec<Time> {
+    // A sorted vector, not a hash map: the per-call set-up dominates small boards (docs/analysis.md, benchmark).
+    let mut ceilings: Vec<(&str, u32)> = board
+        .static_ceilings
+        .iter()
+        .map(|(r, c)| (r.as_str(), *c))
+        .chain(board.tasks.iter().flat_map(|t| {
+            t.sections
+                .iter()
+                .map(move |(r, _)| (r.as_str(), t.priority))
+        }))
+        .collect();
+    ceilings.sort_unstable();
+    let ceiling_of = |resource: &str| -> u32 {
+        if resource == GLOBAL_CRITICAL_SECTION {
+            return u32::MAX;
+        }
+        // The last entry of the resource's run holds its largest value.
+        let end = ceilings.partition_point(|(r, _)| *r <= resource);
+        match end.checked_sub(1).and_then(|i| ceilings.get(i)) {
+            Some((r, c)) if *r == resource => *c,
+            _ => 0,
+        }
+    };
+    let held = board
+        .tasks
+        .iter()
+        .flat_map(|t| t.sections.iter().map(move |s| (t.priority, s)))
+        .chain(board.idle_sections.iter().map(|s| (0, s)));
+    let sections: Vec<CriticalSection> = held
+        .map(|(holder_priority, (resource, length))| CriticalSection {
+            holder_priority,
+            ceiling: ceiling_of(resource),
+            length: *length,
+        })
+        .collect();
+    let srp = srp_blockings(
+        &board.tasks.iter().map(|t| t.priority).collect::<Vec<_>>(),
+        &sections,
+    );
+    board
+        .tasks
+        .iter()
+        .zip(&srp)
+        .map(|(t, computed)| t.blocking.unwrap_or(*computed))
+        .collect()
+}
+
+/// A board's tasks as [`board_analysis`] reads them: in priority order (highest first, ties in model order).
+struct SortedTasks {
+    /// Model index per sorted position.
+    order: Vec<usize>,
+    /// Per sorted position: how it is released (the releaser at `usize::MAX` when the model names none that
+    /// exists), and where its level ends.
+    release: Vec<Option<board_analysis::Release>>,
+    level_end: Vec<usize>,
+}
+
+impl board_analysis::Jobs for SortedTasks {
+    fn release(&self, p: usize) -> Option<board_analysis::Release> {
+        self.release.get(p).copied().flatten()
+    }
+    fn level_end(&self, p: usize) -> usize {
+        self.level_end.get(p).copied().unwrap_or(0)
+    }
+    fn verdict_only(&self, _: usize) -> Option<Time> {
+        // The report reads every task's bound.
+        None
+    }
+}
+
+/// Why a task has no bound, as [`board_analysis`] says it (the report names the releaser afterwards).
+#[derive(Debug, Clone, Copy)]
+enum NoBound {
+    Analysis(AnalysisError),
+    Inherited(board_analysis::Unbound),
+}
+
+/// Per sorted position: the task's whole record, or why it has none.
+struct Records(Vec<Result<Response, NoBound>>);
+
+impl board_analysis::JobBounds for Records {
+    const WHOLE_RECORDS: bool = true;
+    fn put(&mut self, p: usize, result: Result<Response, AnalysisError>) {
+        if let Some(slot) = self.0.get_mut(p) {
+            *slot = result.map_err(NoBound::Analysis);
+        }
+    }
+    fn put_closed_form(&mut self, p: usize, wcrt: Time, first_window: Time) {
+        // Not called for whole records; kept as the one-instance record a closed form stands for.
+        self.put(
+            p,
+            Ok(Response {
+                wcrt,
+                worst_instance: 0,
+                instances: 1,
+                busy_window: first_window,
+                interference: Time::ZERO,
+                first_window,
+                iterations: 0,
+            }),
+        );
+    }
+    fn put_unbound(&mut self, p: usize, why: board_analysis::Unbound) {
+        if let Some(slot) = self.0.get_mut(p) {
+            *slot = Err(NoBound::Inherited(why));
+        }
+    }
+    fn wcrt(&self, p: usize) -> Option<Time> {
+        self.0.get(p)?.as_ref().ok().map(|r| r.wcrt)
+    }
+    fn first_window(&self, p: usize) -> Option<Time> {
+        self.0.get(p)?.as_ref().ok().map(|r| r.first_window)
+    }
+}
+
+/// Every task's bound and the release jitter it was found with (own plus inherited), in model order.
+fn task_bounds(
+    board: &BoardSystem,
+    costs: &[Time],
+    blocking: &[Time],
+    limits: &Limits,
+) -> (Vec<Bound>, Vec<Time>) {
+    let n = board.tasks.len();
+    let sorted = sort_tasks(board);
+    let mut timings: Vec<TaskTiming> = sorted
+        .order
+        .iter()
+        .map(|&i| TaskTiming {
+            priority: board.tasks.get(i).map_or(0, |t| t.priority),
+            wcet: costs.get(i).copied().unwrap_or(Time::ZERO),
+            period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
+            jitter: board.tasks.get(i).map_or(Time::ZERO, |t| t.jitter),
+        })
+        .collect();
+    let sorted_blocking: Vec<Time> = sorted
+        .order
+        .iter()
+        .map(|&i| blocking.get(i).copied().unwrap_or(Time::ZERO))
+        .collect();
+    let shares: Vec<Share> = timings
+        .iter()
+        .map(|t| Share::of(t.wcet, t.period))
+        .collect();
+    let mut scratch = vec![Counter::default(); n];
+    let mut records = Records(vec![
+        Err(NoBound::Inherited(
+            board_analysis::Unbound::NoConvergence
+        ));
+        n
+    ]);
+    let jobs = board_analysis::BoardJobs {
+        timings: &mut timings,
+        blocking: &sorted_blocking,
+        shares: &shares,
+        scratch: &mut scratch,
+    };
+    // Per job, never out of a board's budget.
+    let _ = board_analysis::analyse(
+        jobs,
+        &sorted,
+        &mut records,
+        limits,
+        board_analysis::IterationBudget::PerJob,
+    );
+    let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
+    let mut jitter: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
+    for (p, &i) in sorted.order.iter().enumerate() {
+        let (Some(slot), Some(record), Some(j), Some(timing)) = (
+            bounds.get_mut(i),
+            records.0.get(p),
+            jitter.get_mut(i),
+            timings.get(p),
+        ) else {
+            continue;
+        };
+        *j = timing.jitter;
+        *slot = (*record).map_err(|why| match why {
+            NoBound::Analysis(e) => Unbounded::Analysis(e),
+            NoBound::Inherited(board_analysis::Unbound::Overflow) => {
+                Unbounded::Analysis(AnalysisError::Overflow)
+            }
+            NoBound::Inherited(board_analysis::Unbound::NoConvergence) => Unbounded::NoConvergence,
+            NoBound::Inherited(board_analysis::Unbound::Releaser) => {
+                let releaser = board.tasks.get(i).and_then(|t| t.released_by);
+                let name = releaser
+                    .and_then(|r| board.tasks.get(r))
+                    .map_or("?", |t| t.name.as_str());
+                Unbounded::Releaser(name.to_string())
+            }
+        });
+    }
+    (bounds, jitter)
+}
+
+/// The board's tasks in priority order (highest first; ties keep model order), with what the analysis reads of
+/// each.
+fn sort_tasks(board: &BoardSystem) -> SortedTasks {
+    let n = board.tasks.len();
+    let priority = |i: usize| board.tasks.get(i).map_or(0, |t| t.priority);
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(priority(i)));
+    let mut position = vec![usize::MAX; n];
+    for (p, &i) in order.iter().enumerate() {
+        if let Some(slot) = position.get_mut(i) {
+            *slot = p;
+        }
+    }
+    let release = order
+        .iter()
+        .map(|&i| {
+            let task = board.tasks.get(i)?;
+            let r = task.released_by?;
+            Some(board_analysis::Release {
+                by: position.get(r).copied().unwrap_or(usize::MAX),
+                own_jitter: task.jitter,
+            })
+        })
+        .collect();
+    let mut level_end = vec![n; n];
+    let mut end = n;
+    for p in (0..n).rev() {
+        let here = order.get(p).map(|&i| priority(i));
+        let next = order.get(p + 1).map(|&i| priority(i));
+        if next.is_some() && here != next {
+            end = p + 1;
+        }
+        if let Some(slot) = level_end.get_mut(p) {
+            *slot = end;
+        }
+    }
+    SortedTasks {
+        order,
+        release,
+        level_end,
     }
 }
 
@@ -592,6 +698,41 @@ fn task_result(boards: &[BoardResult], r: TaskRef) -> Option<&TaskResult> {
     boards.get(r.board).and_then(|b| b.tasks.get(r.task))
 }
 
+/// What the bus analysis reads of message `m`'s sender: its sending task's bounds and its board's transmit
+/// interrupt's, or the name of the one that has no bound.
+fn sender_of(
+    system: &System,
+    boards: &[BoardResult],
+    m: &crate::model::MessageSpec,
+) -> Result<bus_analysis::Sender, String> {
+    let Some(s) = m.sender else {
+        return Ok(bus_analysis::Sender::Outside);
+    };
+    // An unbounded sender is named before its transmit interrupt.
+    let sender = task_result(boards, s);
+    let (worst, best) = sender
+        .and_then(|r| r.wcrt().map(|w| (w, r.bcrt)))
+        .ok_or_else(|| task_name(system, s))?;
+    let tx = system
+        .boards
+        .get(s.board)
+        .and_then(|b| b.can_tx_task)
+        .filter(|&t| t != s.task)
+        .map(|t| TaskRef {
+            board: s.board,
+            task: t,
+        });
+    let tx = match tx {
+        None => Time::ZERO,
+        Some(t) => task_result(boards, t)
+            .and_then(|r| r.wcrt())
+            .ok_or_else(|| task_name(system, t))?,
+    };
+    Ok(bus_analysis::Sender::Bounded { worst, best, tx })
+}
+
+/// The bus, by [`bus_analysis::analyse`] (the analysis the boards' admission check runs), with the senders' bounds
+/// from `boards`.
 fn analyse_bus(
     system: &System,
     bus: &BusSystem,
@@ -602,129 +743,92 @@ fn analyse_bus(
     let cost = frame_cost.cost();
     let bit = bus.bit_time;
     let n = bus.messages.len();
-    // Queuing jitter and earliest queuing instant from the sender (and the board's transmit path).
-    let mut jitter = Vec::with_capacity(n);
-    let mut offset = Vec::with_capacity(n);
-    let mut sender_problem: Vec<Option<Unbounded>> = Vec::with_capacity(n);
-    for m in &bus.messages {
-        let Some(s) = m.sender else {
-            jitter.push(m.jitter);
-            offset.push(Time::ZERO);
-            sender_problem.push(None);
-            continue;
-        };
-        let sender = task_result(boards, s);
-        let tx = system
-            .boards
-            .get(s.board)
-            .and_then(|b| b.can_tx_task)
-            .filter(|&t| t != s.task)
-            .map(|t| TaskRef {
-                board: s.board,
-                task: t,
-            });
-        let tx_wcrt = match tx {
-            None => Ok(Time::ZERO),
-            Some(t) => task_result(boards, t)
-                .and_then(|r| r.wcrt())
-                .ok_or_else(|| task_name(system, t)),
-        };
-        match (sender.and_then(|r| r.wcrt().map(|w| (w, r.bcrt))), tx_wcrt) {
-            (Some((worst, best)), Ok(tx)) => {
-                jitter.push(m.jitter.plus(worst.minus(best)).plus(tx));
-                offset.push(best);
-                sender_problem.push(None);
-            }
-            (None, _) => {
-                jitter.push(m.jitter);
-                offset.push(Time::ZERO);
-                sender_problem.push(Some(Unbounded::Sender(task_name(system, s))));
-            }
-            (_, Err(name)) => {
-                jitter.push(m.jitter);
-                offset.push(Time::ZERO);
-                sender_problem.push(Some(Unbounded::Sender(name)));
-            }
-        }
-    }
-    let frame_times: Vec<Time> = bus
+    let senders: Vec<Result<bus_analysis::Sender, String>> = bus
         .messages
         .iter()
-        .map(|m| can::frame_time(cost, m.dlc, m.extended, bit))
+        .map(|m| sender_of(system, boards, m))
         .collect();
+    let message = |i: usize| {
+        let m = bus.messages.get(i)?;
+        Some(bus_analysis::Message {
+            id: m.id,
+            extended: m.extended,
+            dlc: m.dlc,
+            frames: m.frames,
+            period: m.period,
+            jitter: m.jitter,
+            sender: match senders.get(i)? {
+                Ok(sender) => *sender,
+                Err(_) => bus_analysis::Sender::Unbounded,
+            },
+        })
+    };
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by_key(|&i| {
         bus.messages
             .get(i)
             .map_or(u32::MAX, |m| can::arbitration_key(m.id, m.extended))
     });
-    let timings: Vec<MessageTiming> = order
-        .iter()
-        .map(|&i| {
-            let m = bus.messages.get(i);
-            MessageTiming {
-                key: m.map_or(u32::MAX, |m| can::arbitration_key(m.id, m.extended)),
-                frame_time: frame_times.get(i).copied().unwrap_or(Time::ZERO),
-                frames: m.map_or(1, |m| m.frames),
-                period: m.map_or(Time::ZERO, |m| m.period),
-                jitter: jitter.get(i).copied().unwrap_or(Time::ZERO),
-            }
-        })
-        .collect();
-    let mut scratch = vec![Counter::default(); n];
+    let mut timings = vec![
+        MessageTiming {
+            key: u32::MAX,
+            frame_time: Time::ZERO,
+            frames: 1,
+            period: Time::ZERO,
+            jitter: Time::ZERO,
+        };
+        n
+    ];
+    let mut offsets = vec![None; n];
     let mut sorted_blocking = vec![Time::ZERO; n];
-    can::blockings(&timings, &mut sorted_blocking);
+    let mut scratch = vec![Counter::default(); n];
     let mut out = vec![Err(AnalysisError::NoSuchIndex); n];
-    can::response_times(
-        &timings,
-        &sorted_blocking,
-        bit,
-        limits,
-        &mut scratch,
-        &mut out,
-    );
-    let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
-    let mut blockings = vec![Time::ZERO; n];
-    for (position, &i) in order.iter().enumerate() {
-        if let (Some(slot), Some(result)) = (bounds.get_mut(i), out.get(position)) {
-            *slot = match sender_problem.get(i).cloned().flatten() {
-                Some(problem) => Err(problem),
-                None => result.map_err(Unbounded::Analysis),
-            };
-        }
-        if let (Some(slot), Some(b)) = (blockings.get_mut(i), sorted_blocking.get(position)) {
-            *slot = *b;
+    let work = bus_analysis::BusWork {
+        order: &order,
+        timings: &mut timings,
+        offsets: &mut offsets,
+        blockings: &mut sorted_blocking,
+        scratch: &mut scratch,
+    };
+    bus_analysis::analyse(message, work, cost, bit, limits, out.as_mut_slice());
+    let mut messages: Vec<MessageResult> = Vec::with_capacity(n);
+    let mut position = vec![0; n];
+    for (p, &i) in order.iter().enumerate() {
+        if let Some(slot) = position.get_mut(i) {
+            *slot = p;
         }
     }
-    let messages = bus
-        .messages
-        .iter()
-        .enumerate()
-        .map(|(i, m)| {
-            let best = can::frame_time_best(cost, m.dlc, m.extended, bit);
-            let off = offset.get(i).copied().unwrap_or(Time::ZERO);
-            MessageResult {
-                name: m.name.clone(),
-                id: m.id,
-                extended: m.extended,
-                dlc: m.dlc,
-                frames: m.frames,
-                period: m.period,
-                deadline: m.deadline,
-                frame_time: frame_times.get(i).copied().unwrap_or(Time::ZERO),
-                frame_time_best: best,
-                blocking: blockings.get(i).copied().unwrap_or(Time::ZERO),
-                jitter: jitter.get(i).copied().unwrap_or(m.jitter),
-                offset: off,
-                sender: m.sender.map(|s| task_name(system, s)),
-                bound: bounds
-                    .get(i)
-                    .cloned()
-                    .unwrap_or(Err(Unbounded::NoConvergence)),
-                bcrt: off.plus(best.times(u64::from(m.frames))),
-            }
-        })
-        .collect();
+    for (i, m) in bus.messages.iter().enumerate() {
+        let p = position.get(i).copied().unwrap_or(0);
+        let timing = timings.get(p);
+        let best = can::frame_time_best(cost, m.dlc, m.extended, bit);
+        let off = offsets.get(p).copied().flatten().unwrap_or(Time::ZERO);
+        let bound = match senders.get(i) {
+            Some(Err(name)) => Err(Unbounded::Sender(name.clone())),
+            _ => out
+                .get(p)
+                .copied()
+                .unwrap_or(Err(AnalysisError::NoSuchIndex))
+                .map_err(Unbounded::Analysis),
+        };
+        messages.push(MessageResult {
+            name: m.name.clone(),
+            id: m.id,
+            extended: m.extended,
+            dlc: m.dlc,
+            frames: m.frames,
+            period: m.period,
+            deadline: m.deadline,
+            frame_time: timing.map_or(Time::ZERO, |t| t.frame_time),
+            frame_time_best: best,
+            blocking: sorted_blocking.get(p).copied().unwrap_or(Time::ZERO),
+            jitter: timing.map_or(m.jitter, |t| t.jitter),
+            offset: off,
+            sender: m.sender.map(|s| task_name(system, s)),
+            bound,
+            bcrt: off.plus(best.times(u64::from(m.frames))),
+        });
+    }
     BusResult {
         bitrate: bus.bitrate,
         utilisation: can::utilisation(&timings),

@@ -209,7 +209,7 @@ impl LevelLoads {
 }
 
 /// [`response_time`] with a start hint (a value known not to exceed the first window, e.g. a more urgent task's
-/// first window, see [`response_times`]) and the interferers' load already summed ([`LevelLoads`]): the
+/// first window, see [`response_times`]) and the interferers' load already summed (`LevelLoads`): the
 /// building block of a caller that analyses a set in priority order itself (the admission check, which sets a
 /// released task's jitter as soon as its releaser's bound is known).
 pub fn response_time_hinted(

@@ -1,13 +1,16 @@
 //! Worst-case response-time analysis of the AMiRo board tasks and the CAN bus, end to end.
 //!
-//! Two layers:
+//! One analysis, two layers around it:
 //!
-//! * the **core** — [`time`], [`busy_window`], [`board`], [`can`] and [`admission`] — is `no_std` and
-//!   allocation-free (build with `--no-default-features`): [`admission`] is the check a board runs before it
-//!   starts a publisher, on a table [`admission_host`] lowers from the same apps and timing files;
-//! * the **host layer** (feature `std`, on by default) reads models ([`model`]), the generated bounds files ([`bounds`]), RTIC apps ([`rtic_source`]),
-//!   timing files and scenarios ([`scenario`]), runs the whole system ([`analysis`], [`sensitivity`]) and renders
-//!   the report ([`report`]). `cargo xtask analyze` is a thin front end over it.
+//! * the **core** — [`time`], [`busy_window`], [`board`], [`can`], [`board_analysis`], [`bus_analysis`] and
+//!   [`admission`] — is `no_std` and allocation-free (build with `--no-default-features`).
+//!   [`board_analysis::analyse`] analyses one board and [`bus_analysis::analyse`] the bus, for the report and for
+//!   the chip alike; [`admission`] is the check a board runs with them before it starts a publisher, on a table
+//!   [`admission_host`] lowers from the same apps and timing files;
+//! * the **host layer** (feature `std`, on by default) reads models ([`model`]), the generated bounds files
+//!   ([`bounds`]), RTIC apps ([`rtic_source`]), timing files and scenarios ([`scenario`]), runs the whole system ([`analysis`]: names, ceilings and overheads
+//!   around the core's board and bus analyses, then the end-to-end paths; [`sensitivity`]) and renders the report
+//!   ([`report`]). `cargo xtask analyze` is a thin front end over it.
 //!
 //! docs/analysis.md documents the model format, the equations and how to read the report.
 #![cfg_attr(not(feature = "std"), no_std)]
@@ -15,6 +18,8 @@
 
 pub mod admission;
 pub mod board;
+pub mod board_analysis;
+pub mod bus_analysis;
 pub mod busy_window;
 pub mod can;
 pub mod time;

@@ -1,0 +1,585 @@
+//! One board's part of the check: its jobs (the fixed tasks of the table, and per stream it sends its publisher job
+//! and timer job) built into byte-indexed fixed-capacity arrays, their SRP blockings from the table, then
+//! [`board_analysis::analyse`] and what the rest of the check reads of it (a [`Summary`]).
+
+use super::*;
+
+/// What the analysis keeps of one job besides its [`TaskTiming`].
+#[derive(Debug, Clone, Copy)]
+struct JobMeta {
+    id: TaskId,
+    deadline: Time,
+    own_jitter: Time,
+    /// The releaser ([`NO_JOB`]: none): its original index (table order: fixed tasks, then per stream its timer
+    /// job and its job) as built, its sorted position once [`JobIndex::index`] has run.
+    released_by: u8,
+    /// This job's original index.
+    original: u8,
+    /// Where its priority level ends (a sorted position).
+    level_end: u8,
+    /// Whether nothing reads its bound but its deadline check: a fixed task that releases no job and is neither
+    /// the transmit interrupt nor the command handler (whose bounds the bus and the end-to-end paths read).
+    verdict_only: bool,
+}
+
+/// The working arrays' placeholder (every entry the analysis reads is written first): all zero bytes, so that a
+/// `const` array of it is cleared in one go rather than copied from flash.
+const EMPTY_META: JobMeta = JobMeta {
+    id: TaskId::Fixed(0),
+    deadline: Time::ZERO,
+    own_jitter: Time::ZERO,
+    released_by: 0,
+    original: 0,
+    level_end: 0,
+    verdict_only: false,
+};
+
+const EMPTY_TIMING: TaskTiming = TaskTiming {
+    priority: 0,
+    wcet: Time::ZERO,
+    period: Time::ZERO,
+    jitter: Time::ZERO,
+};
+
+/// What a job of a board's analysis is made of (indices are bytes: the working sets are below [`NO_JOB`]).
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    /// A fixed task: its row in the board's `tasks`.
+    Fixed(u8),
+    /// The timer job of the stream at this [`View`] position.
+    Timer { stream: u8 },
+    /// The publisher job of the stream at this [`View`] position: its topic row, and its timer job's original
+    /// index ([`NO_JOB`]: none).
+    Publisher { stream: u8, topic: u8, timer: u8 },
+}
+
+/// What one board's analysis reads: the board (index `b` of the robot's table), the configuration and the limits.
+pub(super) struct BoardInput<'a, const M: usize> {
+    bit_time: Time,
+    b: usize,
+    table: &'a BoardTable<'a>,
+    streams: &'a View<'a, M>,
+    limits: &'a Limits,
+}
+
+pub(super) fn board_input<'a, const M: usize>(
+    robot: &RobotTable<'_>,
+    b: usize,
+    table: &'a BoardTable<'a>,
+    streams: &'a View<'a, M>,
+    limits: &'a Limits,
+) -> BoardInput<'a, M> {
+    BoardInput {
+        bit_time: robot.bit_time,
+        b,
+        table,
+        streams,
+        limits,
+    }
+}
+
+impl<'a, const M: usize> BoardInput<'a, M> {
+    /// The streams this board sends, with their [`View`] positions.
+    fn mine(&self) -> impl Iterator<Item = (usize, &'a Stream)> + '_ {
+        let b = self.b;
+        self.streams
+            .iter()
+            .filter(move |(_, s)| s.sender.is_some_and(|x| usize::from(x.board) == b))
+    }
+
+    /// The RTIC priority of the publisher task of `level`.
+    fn level_priority(&self, level: u8) -> Option<u8> {
+        self.table.levels.get(usize::from(level)).copied().flatten()
+    }
+
+    /// The shortest frame this board sends (its transmit-complete interrupt's minimum inter-arrival time).
+    fn own_frame(&self) -> Time {
+        self.mine()
+            .map(|(_, s)| {
+                self.bit_time
+                    .times(u64::from(can::frame_bits_best(s.dlc, false)))
+            })
+            .min()
+            .unwrap_or_else(|| can::shortest_frame_time(self.bit_time))
+    }
+}
+
+/// A board's jobs in original order (table order: the fixed tasks, then per stream its timer job and its job):
+/// each one's priority and what it is made of.
+struct Originals<const N: usize> {
+    priority: [u8; N],
+    source: [Source; N],
+    count: usize,
+}
+
+impl<const N: usize> Originals<N> {
+    fn add(&mut self, priority: u8, what: Source) -> Result<u8, Refusal> {
+        let original = u8::try_from(self.count)
+            .ok()
+            .filter(|&o| o != NO_JOB)
+            .ok_or(Refusal::Capacity)?;
+        *self.priority.get_mut(self.count).ok_or(Refusal::Capacity)? = priority;
+        *self.source.get_mut(self.count).ok_or(Refusal::Capacity)? = what;
+        self.count += 1;
+        Ok(original)
+    }
+
+    fn urgency(&self, original: u8) -> u8 {
+        self.priority
+            .get(usize::from(original))
+            .copied()
+            .unwrap_or(0)
+    }
+
+    /// The fixed tasks, then per stream of the board its timer job and its publisher job.
+    fn collect<const M: usize>(&mut self, input: &BoardInput<'_, M>) -> Result<(), Refusal> {
+        let table = input.table;
+        for (i, t) in table.tasks.iter().enumerate() {
+            let row = u8::try_from(i).map_err(|_| Refusal::Capacity)?;
+            self.add(t.priority, Source::Fixed(row))?;
+        }
+        for (m, s) in input.mine() {
+            let Some(sender) = s.sender else { continue };
+            let priority = input
+                .level_priority(sender.level)
+                .ok_or(Refusal::Capacity)?;
+            let topic = table
+                .topics
+                .iter()
+                .position(|t| t.topic == sender.topic)
+                .and_then(|t| u8::try_from(t).ok())
+                .ok_or(Refusal::Capacity)?;
+            let stream = u8::try_from(m).map_err(|_| Refusal::Capacity)?;
+            let timer = match table.monotonic {
+                Some(mono) => self.add(mono.priority, Source::Timer { stream })?,
+                None => NO_JOB,
+            };
+            self.add(
+                priority,
+                Source::Publisher {
+                    stream,
+                    topic,
+                    timer,
+                },
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The originals sorted by priority (most urgent first, ties in original order: a stable sort of bytes).
+    fn sorted(&self) -> [u8; N] {
+        let mut order = [0u8; N];
+        for (i, slot) in order.iter_mut().enumerate().take(self.count) {
+            *slot = i as u8;
+        }
+        insertion_sort(order.get_mut(..self.count).unwrap_or(&mut []), |a, b| {
+            self.urgency(a) < self.urgency(b)
+        });
+        order
+    }
+}
+
+/// Job `original`'s timing and meta, built from what it is made of.
+fn build_job<const M: usize>(
+    input: &BoardInput<'_, M>,
+    what: Source,
+    priority: u32,
+    original: u8,
+    own_frame: Time,
+) -> Result<(TaskTiming, JobMeta), Refusal> {
+    let table = input.table;
+    let stream_of = |m: u8| input.streams.get(usize::from(m)).ok_or(Refusal::Capacity);
+    let job = |wcet, period, jitter, id, deadline, released_by| {
+        (
+            TaskTiming {
+                priority,
+                wcet,
+                period,
+                jitter,
+            },
+            JobMeta {
+                id,
+                deadline,
+                own_jitter: jitter,
+                released_by,
+                original,
+                // Set by `JobIndex::index`.
+                level_end: 0,
+                verdict_only: false,
+            },
+        )
+    };
+    Ok(match what {
+        Source::Fixed(row) => {
+            let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
+            let period = if t.own_frame {
+                own_frame
+            } else {
+                row_time(t.period)
+            };
+            let deadline = if t.deadline == NO_DEADLINE {
+                period
+            } else {
+                row_time(t.deadline)
+            };
+            // NO_RELEASER is NO_JOB.
+            let id = TaskId::Fixed(u16::from(row));
+            job(
+                row_time(t.cost),
+                period,
+                row_time(t.jitter),
+                id,
+                deadline,
+                t.released_by,
+            )
+        }
+        Source::Timer { stream } => {
+            let s = stream_of(stream)?;
+            let (Some(mono), Some(sender)) = (table.monotonic, s.sender) else {
+                return Err(Refusal::Capacity);
+            };
+            let id = TaskId::Timer(sender.topic);
+            job(
+                row_time(mono.cost),
+                s.period,
+                row_time(mono.jitter),
+                id,
+                s.period,
+                NO_JOB,
+            )
+        }
+        Source::Publisher {
+            stream,
+            topic,
+            timer,
+        } => {
+            let s = stream_of(stream)?;
+            let row = table
+                .topics
+                .get(usize::from(topic))
+                .ok_or(Refusal::Capacity)?;
+            let id = TaskId::Publisher(row.topic);
+            job(
+                row_time(row.cost),
+                s.period,
+                Time::ZERO,
+                id,
+                s.deadline(),
+                timer,
+            )
+        }
+    })
+}
+
+/// One board's jobs sorted by priority: their timings, and what else the analysis reads of each.
+struct BoardSet<const N: usize> {
+    timings: [TaskTiming; N],
+    jobs: JobIndex<N>,
+}
+
+/// What the analysis reads of a board's sorted jobs besides their timings ([`board_analysis::Jobs`]).
+struct JobIndex<const N: usize> {
+    len: usize,
+    metas: [JobMeta; N],
+    /// Sorted position of each original index.
+    position: [u8; N],
+}
+
+impl<const N: usize> BoardSet<N> {
+    /// Builds each job once, at its sorted place, in place (a set built and then returned or copied was a copy
+    /// of 2.5 KB a board analysis).
+    fn fill<const M: usize>(&mut self, input: &BoardInput<'_, M>) -> Result<(), Refusal> {
+        let mut originals = Originals {
+            priority: [0; N],
+            source: [Source::Fixed(0); N],
+            count: 0,
+        };
+        originals.collect(input)?;
+        let order = originals.sorted();
+        let own_frame = input.own_frame();
+        self.jobs.len = originals.count;
+        for ((&original, timing), meta) in order
+            .iter()
+            .zip(self.timings.iter_mut())
+            .zip(self.jobs.metas.iter_mut())
+            .take(originals.count)
+        {
+            let what = originals
+                .source
+                .get(usize::from(original))
+                .copied()
+                .ok_or(Refusal::Capacity)?;
+            let priority = u32::from(originals.urgency(original));
+            (*timing, *meta) = build_job(input, what, priority, original, own_frame)?;
+        }
+        self.jobs.index(&self.timings, input.table);
+        Ok(())
+    }
+
+    /// SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job (the
+    /// fixed tasks' from the table, the publisher jobs' from their topics). Jobs of one priority share it: worked
+    /// out once per level (the jobs are sorted by priority).
+    fn blockings<const M: usize>(&self, input: &BoardInput<'_, M>, blocking: &mut [Time; N]) {
+        let table = input.table;
+        let mut last_level: Option<(u32, Time)> = None;
+        for (slot, timing) in blocking
+            .iter_mut()
+            .zip(self.timings.iter())
+            .take(self.jobs.len)
+        {
+            let p = timing.priority;
+            if let Some((_, known)) = last_level.filter(|&(level, _)| level == p) {
+                *slot = known;
+                continue;
+            }
+            let mut longest = usize::try_from(p)
+                .ok()
+                .and_then(|p| table.blocking.get(p))
+                .copied()
+                .unwrap_or_else(|| fixed_blocking(table.sections, p));
+            for (_, s) in input.mine() {
+                let Some(sender) = s.sender else { continue };
+                let holder = input.level_priority(sender.level).map_or(0, u32::from);
+                if holder >= p {
+                    continue;
+                }
+                if let Some(topic) = table.topics.iter().find(|t| t.topic == sender.topic) {
+                    for cs in topic.sections {
+                        // The effective ceiling is at least the holder's priority, which is below `p`.
+                        if row_ceiling(cs.ceiling) >= p {
+                            longest = longest.max(cs.length);
+                        }
+                    }
+                }
+            }
+            *slot = row_time(longest);
+            last_level = Some((p, *slot));
+        }
+    }
+
+    /// Each job's share of the CPU: a fixed task's from its row (worked out when the table was built), the others'
+    /// by one division each (not one per job and level as it is summed).
+    fn shares(&self, table: &BoardTable<'_>, shares: &mut [Share; N]) {
+        for ((share, timing), meta) in shares
+            .iter_mut()
+            .zip(self.timings.iter())
+            .zip(self.jobs.metas.iter())
+            .take(self.jobs.len)
+        {
+            let known = match meta.id {
+                TaskId::Fixed(row) => table
+                    .tasks
+                    .get(usize::from(row))
+                    .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
+                    .map(|t| Share::with_utilisation(u64::from(t.share))),
+                _ => None,
+            };
+            *share = known.unwrap_or_else(|| Share::of(timing.wcet, timing.period));
+        }
+    }
+}
+
+impl<const N: usize> JobIndex<N> {
+    /// Positions, releasers as positions, level ends and the jobs only a deadline check reads.
+    fn index(&mut self, timings: &[TaskTiming; N], table: &BoardTable<'_>) {
+        let len = self.len;
+        for (p, meta) in self.metas.iter_mut().enumerate().take(len) {
+            if let Some(slot) = self.position.get_mut(usize::from(meta.original)) {
+                *slot = p as u8;
+            }
+            if let TaskId::Fixed(row) = meta.id {
+                let row = Some(row);
+                meta.verdict_only = table.can_tx != row && table.command_handler != row;
+            }
+        }
+        let mut end = len;
+        for p in (0..len).rev() {
+            if let (Some(t), Some(next)) = (timings.get(p), timings.get(p + 1)) {
+                if t.priority != next.priority {
+                    end = p + 1;
+                }
+            }
+            let Some(releaser) = self.metas.get(p).map(|m| self.at(m.released_by)) else {
+                break;
+            };
+            if let Some(meta) = self.metas.get_mut(p) {
+                meta.level_end = end as u8;
+                // NO_JOB stays NO_JOB.
+                meta.released_by = releaser;
+            }
+            if let Some(releasing) = self.metas.get_mut(usize::from(releaser)) {
+                releasing.verdict_only = false;
+            }
+        }
+    }
+
+    /// The sorted position of the job with this original index ([`NO_JOB`]: none).
+    fn at(&self, original: u8) -> u8 {
+        self.position
+            .get(usize::from(original))
+            .copied()
+            .unwrap_or(NO_JOB)
+    }
+}
+
+impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
+    fn release(&self, p: usize) -> Option<board_analysis::Release> {
+        let meta = self.metas.get(p)?;
+        (meta.released_by != NO_JOB).then_some(board_analysis::Release {
+            by: usize::from(meta.released_by),
+            own_jitter: meta.own_jitter,
+        })
+    }
+    fn level_end(&self, p: usize) -> usize {
+        self.metas.get(p).map_or(0, |m| usize::from(m.level_end))
+    }
+    fn verdict_only(&self, p: usize) -> Option<Time> {
+        let meta = self.metas.get(p)?;
+        meta.verdict_only.then_some(meta.deadline)
+    }
+}
+
+/// A board's bounds as the check keeps them: per sorted job its response ([`NONE`]: unbounded) and first window.
+struct JobWcrt<const N: usize> {
+    wcrt: [u64; N],
+    first_window: [Time; N],
+}
+
+impl<const N: usize> board_analysis::JobBounds for JobWcrt<N> {
+    const WHOLE_RECORDS: bool = false;
+    fn put(&mut self, p: usize, result: Result<Response, AnalysisError>) {
+        let (w, f) = result.map_or((NONE, Time::ZERO), |r| (r.wcrt.as_ns(), r.first_window));
+        self.put_closed_form(p, Time::from_ns(w), f);
+    }
+    fn put_closed_form(&mut self, p: usize, wcrt: Time, first_window: Time) {
+        if let (Some(ws), Some(fs)) = (self.wcrt.get_mut(p), self.first_window.get_mut(p)) {
+            *ws = wcrt.as_ns();
+            *fs = first_window;
+        }
+    }
+    fn put_unbound(&mut self, p: usize, _: board_analysis::Unbound) {
+        if let Some(slot) = self.wcrt.get_mut(p) {
+            *slot = NONE;
+        }
+    }
+    fn wcrt(&self, p: usize) -> Option<Time> {
+        bound(self.wcrt.get(p).copied().unwrap_or(NONE))
+    }
+    fn first_window(&self, p: usize) -> Option<Time> {
+        let bounded = self.wcrt.get(p).is_some_and(|&w| w != NONE);
+        bounded.then(|| self.first_window.get(p).copied())?
+    }
+}
+
+/// One board's tasks with the configuration's publishers ([`board_analysis::analyse`] under the board's budget of
+/// iterations): writes its first violated deadline (in table order), its transmit interrupt's and command
+/// handler's bounds and each of its streams' sending job's bound into `summary`.
+#[inline(never)]
+pub(super) fn analyse_board<const N: usize, const M: usize>(
+    input: &BoardInput<'_, M>,
+    iterations: &mut u64,
+    summary: &mut Summary<M>,
+) -> Result<(), Refusal> {
+    // Built in place, field by field: cleared in one go each rather than copied from flash (a `const` set is
+    // not all zero bytes).
+    let mut set = BoardSet {
+        timings: const { [EMPTY_TIMING; N] },
+        jobs: JobIndex {
+            len: 0,
+            metas: const { [EMPTY_META; N] },
+            position: [NO_JOB; N],
+        },
+    };
+    set.fill(input)?;
+    let mut blocking = [Time::ZERO; N];
+    set.blockings(input, &mut blocking);
+    let mut shares = [Share::default(); N];
+    set.shares(input.table, &mut shares);
+    let mut bounds = JobWcrt {
+        wcrt: [NONE; N],
+        first_window: [Time::ZERO; N],
+    };
+    let mut scratch = const { [Counter::ZERO; N] };
+    let len = set.jobs.len;
+    let jobs = board_analysis::BoardJobs {
+        timings: set.timings.get_mut(..len).unwrap_or(&mut []),
+        blocking: blocking.get(..len).unwrap_or(&[]),
+        shares: shares.get(..len).unwrap_or(&[]),
+        scratch: &mut scratch,
+    };
+    let outcome = board_analysis::analyse(
+        jobs,
+        &set.jobs,
+        &mut bounds,
+        input.limits,
+        board_analysis::IterationBudget::Board,
+    )
+    .map_err(|_| Refusal::Budget)?;
+    *iterations += outcome.iterations;
+    summary.reach = summary.reach.max(outcome.reach);
+    summary.beyond |= outcome.beyond;
+    summary.note_board(input, &set.jobs, &bounds.wcrt);
+    Ok(())
+}
+
+impl<const M: usize> Summary<M> {
+    /// Writes the board's analysis into the summary: its first violation in table order and its first below the
+    /// floor (no bound at all, or a fixed task — the board's own machinery — late), its transmit interrupt's and
+    /// command handler's bounds and its streams' publisher jobs' bounds.
+    fn note_board<const N: usize>(
+        &mut self,
+        input: &BoardInput<'_, M>,
+        set: &JobIndex<N>,
+        wcrt: &[u64; N],
+    ) {
+        let len = set.len;
+        for original in 0..len {
+            let p = usize::from(set.at(original as u8));
+            let (Some(meta), Some(&w)) = (set.metas.get(p), wcrt.get(p)) else {
+                continue;
+            };
+            let missed = w == NONE || w > meta.deadline.as_ns();
+            if !self.violated && missed {
+                self.violated = true;
+                self.task = meta.id;
+                self.violation_wcrt = w;
+                self.violation_deadline = meta.deadline;
+            }
+            if !self.floor_violated
+                && (w == NONE || (missed && matches!(meta.id, TaskId::Fixed(_))))
+            {
+                self.floor_violated = true;
+                self.floor_task = meta.id;
+                self.floor_wcrt = w;
+                self.floor_deadline = meta.deadline;
+            }
+        }
+        // No such task: nothing to add; an unbounded one: no bound.
+        let fixed = |index: Option<u16>| -> u64 {
+            index
+                .and_then(|i| u8::try_from(i).ok())
+                .map(|i| set.at(i))
+                .and_then(|p| wcrt.get(usize::from(p)).copied())
+                .unwrap_or(0)
+        };
+        self.tx = fixed(input.table.can_tx);
+        self.handler = fixed(input.table.command_handler);
+        for (own, (_, s)) in input.mine().enumerate() {
+            let Some(sender) = s.sender else { continue };
+            // The stream's job: the first of its topic in table order.
+            let job = (0..len)
+                .map(|original| usize::from(set.at(original as u8)))
+                .find(|&p| {
+                    set.metas
+                        .get(p)
+                        .is_some_and(|meta| meta.id == TaskId::Publisher(sender.topic))
+                });
+            if let (Some(p), Some(w), Some(found)) =
+                (job, self.wcrt.get_mut(own), self.found.get_mut(own))
+            {
+                *w = wcrt.get(p).copied().unwrap_or(NONE);
+                *found = true;
+            }
+        }
+    }
+}

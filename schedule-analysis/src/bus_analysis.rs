@@ -1,0 +1,131 @@
+//! The bus's analysis, the one both the report ([`crate::analysis`]) and the on-chip admission check
+//! ([`crate::admission`]) run: every message's queuing jitter from its sender's response variation and its
+//! board's transmit interrupt, then non-preemptive fixed-priority response times by arbitration
+//! ([`can::response_times_into`], Davis, Burns, Bril & Lukkien 2007).
+//!
+//! `no_std` and allocation-free: the caller owns the working memory (the chip fixed-capacity arrays, the host
+//! vectors) and sorts the messages by arbitration itself (the chip by an insertion sort of bytes, the host by the
+//! standard library's stable sort), and each puts the responses where it keeps them ([`Results`]).
+
+use crate::board::Results;
+use crate::busy_window::{Counter, Limits};
+use crate::can::{self, FrameCost, MessageTiming};
+use crate::time::Time;
+
+/// What a message's sender contributes to its queuing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sender {
+    /// No sending task in the analysis (a command stream): its own queuing jitter only.
+    Outside,
+    /// The sending job's worst and best response, and its board's transmit interrupt's worst response (zero
+    /// without one).
+    Bounded {
+        /// The sending job's worst-case response.
+        worst: Time,
+        /// Its best case: the earliest its frames are queued after its activation.
+        best: Time,
+        /// The transmit interrupt's worst-case response.
+        tx: Time,
+    },
+    /// The sending job, or its board's transmit interrupt, has no bound: neither has the message.
+    Unbounded,
+}
+
+/// One message stream as the bus analysis reads it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Message {
+    /// Identifier.
+    pub id: u32,
+    /// 29-bit identifier.
+    pub extended: bool,
+    /// Data bytes per frame.
+    pub dlc: u8,
+    /// Frames queued together per activation.
+    pub frames: u32,
+    /// Period or minimum inter-arrival time.
+    pub period: Time,
+    /// Queuing jitter of its own.
+    pub jitter: Time,
+    /// Its sender.
+    pub sender: Sender,
+}
+
+impl Message {
+    /// Its timing on the bus and the earliest its frames are queued after the sender's activation (`None` when the
+    /// sender has no bound). The queuing jitter is its own plus, for a sent message, the sender's response
+    /// variation and the transmit interrupt's response.
+    pub fn timing(&self, cost: FrameCost, bit: Time) -> (MessageTiming, Option<Time>) {
+        let (jitter, offset) = match self.sender {
+            Sender::Outside => (self.jitter, Some(Time::ZERO)),
+            Sender::Bounded { worst, best, tx } => {
+                (self.jitter.plus(worst.minus(best)).plus(tx), Some(best))
+            }
+            Sender::Unbounded => (self.jitter, None),
+        };
+        let timing = MessageTiming {
+            key: can::arbitration_key(self.id, self.extended),
+            frame_time: can::frame_time(cost, self.dlc, self.extended, bit),
+            frames: self.frames,
+            period: self.period,
+            jitter,
+        };
+        (timing, offset)
+    }
+}
+
+/// The bus analysis's working memory, one entry per message in arbitration order.
+pub struct BusWork<'a, I> {
+    /// The messages' indices sorted by [`can::arbitration_key`] (equal keys in index order).
+    pub order: &'a [I],
+    /// Each message's timing (queuing jitter included).
+    pub timings: &'a mut [MessageTiming],
+    /// The earliest its frames are queued after its sender's activation; `None`: the sender has no bound.
+    pub offsets: &'a mut [Option<Time>],
+    /// Its blocking: the longest lower-priority frame.
+    pub blockings: &'a mut [Time],
+    /// The busy-window analysis's working memory.
+    pub scratch: &'a mut [Counter],
+}
+
+/// Analyses the bus: `message(i)` is message `i`; `out.put(k, …)` gets the response of the message at arbitration
+/// position `k` (`work.order[k]`), from its queuing. Its delivery after the sender's activation is
+/// [`delivery`]`(offsets[k], response)`.
+pub fn analyse<I, R>(
+    message: impl Fn(usize) -> Option<Message>,
+    work: BusWork<'_, I>,
+    cost: FrameCost,
+    bit: Time,
+    limits: &Limits,
+    out: &mut R,
+) where
+    I: Copy + Into<usize>,
+    R: Results + ?Sized,
+{
+    let n = work.order.len();
+    for ((&i, timing), offset) in work
+        .order
+        .iter()
+        .zip(work.timings.iter_mut())
+        .zip(work.offsets.iter_mut())
+    {
+        if let Some(m) = message(i.into()) {
+            (*timing, *offset) = m.timing(cost, bit);
+        }
+    }
+    let timings = work.timings.get(..n).unwrap_or(&[]);
+    can::blockings(timings, work.blockings);
+    can::response_times_into(
+        timings,
+        work.blockings.get(..n).unwrap_or(&[]),
+        bit,
+        limits,
+        work.scratch,
+        out,
+    );
+}
+
+/// A message's delivery after its sender's activation: its queuing offset plus its response on the bus (`None`
+/// when either has no bound, or the sum does not fit: never a saturated bound).
+pub fn delivery(offset: Option<Time>, response: Option<Time>) -> Option<Time> {
+    offset?.checked_plus(response?)
+}
