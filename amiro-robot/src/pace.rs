@@ -10,6 +10,9 @@ const AHEAD: Duration = Duration::from_micros(500);
 pub const LAG_LIMIT: Duration = Duration::from_millis(5);
 /// How often the factor and lag are printed.
 const EVERY: Duration = Duration::from_secs(2);
+/// A run that keeps falling behind is said to at once the first time, then at most this often
+/// (the periodic line counts every time).
+const AGAIN: Duration = Duration::from_secs(10);
 
 /// What a live run's pacing came to.
 #[derive(Debug, Clone, Copy, Default)]
@@ -30,6 +33,8 @@ pub struct Pace {
     worst_lag: Duration,
     behind: bool,
     episodes: u64,
+    window_episodes: u64,
+    said: Option<Instant>,
     last_virtual: u64,
 }
 
@@ -43,6 +48,8 @@ impl Pace {
             worst_lag: Duration::ZERO,
             behind: false,
             episodes: 0,
+            window_episodes: 0,
+            said: None,
             last_virtual: 0,
         }
     }
@@ -66,29 +73,32 @@ impl Pace {
         if lag > LAG_LIMIT && !self.behind {
             self.behind = true;
             self.episodes += 1;
-            eprintln!(
-                "robot: cannot keep pace: {:.1} ms behind the wall clock (real-time factor {:.2} so far, {:.2} over the last window); this machine is too slow or too busy for a live robot",
-                lag.as_secs_f64() * 1e3,
-                factor(t_us, wall),
-                self.window_factor(t_us),
-            );
+            self.window_episodes += 1;
+            if self.said.is_none_or(|at| at.elapsed() >= AGAIN) {
+                self.said = Some(Instant::now());
+                eprintln!(
+                    "robot: cannot keep pace: {:.1} ms behind the wall clock (real-time factor {:.2} so far, {:.2} over the last window); this machine is too slow or too busy for a live robot",
+                    lag.as_secs_f64() * 1e3,
+                    factor(t_us, wall),
+                    self.window_factor(t_us),
+                );
+            }
         } else if self.behind && lag < LAG_LIMIT / 2 {
             self.behind = false;
-            eprintln!(
-                "robot: back in pace ({:.1} ms behind the wall clock)",
-                lag.as_secs_f64() * 1e3
-            );
         }
         if self.window_start.0.elapsed() >= EVERY {
             eprintln!(
-                "robot: live at {:.1} s: real-time factor {:.3} over the last {:.0} s, worst lag {:.1} ms",
+                "robot: live at {:.1} s: real-time factor {:.3} over the last {:.0} s, worst lag {:.1} ms, {} time(s) behind by more than {} ms",
                 t_us as f64 / 1e6,
                 self.window_factor(t_us),
                 self.window_start.0.elapsed().as_secs_f64(),
-                self.window_worst_lag.as_secs_f64() * 1e3
+                self.window_worst_lag.as_secs_f64() * 1e3,
+                self.window_episodes,
+                LAG_LIMIT.as_millis()
             );
             self.window_start = (Instant::now(), t_us);
             self.window_worst_lag = Duration::ZERO;
+            self.window_episodes = 0;
         }
         slept
     }
