@@ -164,7 +164,7 @@ fn prune_runs(runs: &Path, keep: usize, min_age: std::time::Duration) {
 
 /// Where QEMU builds go, apart from the real-hardware builds.
 pub fn target_dir(root: &Path) -> PathBuf {
-    crate::target_dir(root).join("qemu")
+    crate::workspace::target_dir(root).join("qemu")
 }
 
 #[cfg(test)]

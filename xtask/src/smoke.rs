@@ -919,9 +919,9 @@ fn loader(file: &Path, addr: u64) -> String {
 /// (built here unless `built` says the caller built them: then their kept ELFs are booted, nothing
 /// is rebuilt); fails unless every one passes.
 pub fn run(root: &Path, builds: &[crate::revision::Build], built: bool) -> Result<()> {
-    crate::ensure_qemu()?;
+    crate::workspace::ensure_qemu()?;
     if !built {
-        crate::build_boards(root, builds, false)?;
+        crate::workspace::build_boards(root, builds, false)?;
     }
     let mut failed = Vec::new();
     for build in builds {
@@ -1017,7 +1017,7 @@ pub fn run(root: &Path, builds: &[crate::revision::Build], built: bool) -> Resul
 }
 
 fn work_dir(root: &Path, board: &str) -> PathBuf {
-    crate::target_dir(root).join("smoke").join(board)
+    crate::workspace::target_dir(root).join("smoke").join(board)
 }
 
 #[cfg(test)]

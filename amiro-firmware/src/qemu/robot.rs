@@ -509,13 +509,36 @@ pub async fn parked<F: core::future::Future>(future: F) -> F::Output {
                 &PARKED_VTABLE,
             ))
         };
-        let result = future
-            .as_mut()
-            .poll(&mut core::task::Context::from_waker(&waker));
-        if result.is_ready() {
-            PARKED.store(false, Ordering::SeqCst);
+        loop {
+            let result = future
+                .as_mut()
+                .poll(&mut core::task::Context::from_waker(&waker));
+            if result.is_ready() {
+                PARKED.store(false, Ordering::SeqCst);
+                return result;
+            }
+            if !active() {
+                return result;
+            }
+            // In a robot run the core sleeps here until the wait ends. RTIC's priority-0 executor
+            // would otherwise spin in thread mode, and QEMU would emulate that spin for every
+            // virtual µs of the board's idle time (the most of its wall time in a robot run); this
+            // task is the board's only one at priority 0, so there is nothing else to poll. An
+            // interrupt that ends the wait (its waker clears PARKED) ends the sleep; the check and
+            // the WFI are under PRIMASK so no wake-up falls between them.
+            loop {
+                cortex_m::interrupt::disable();
+                if !PARKED.load(Ordering::SeqCst) {
+                    // SAFETY: re-enables what the line above disabled, outside any critical section.
+                    unsafe { cortex_m::interrupt::enable() };
+                    break;
+                }
+                cortex_m::asm::wfi();
+                // SAFETY: as above; the pending interrupt that ended the WFI runs now.
+                unsafe { cortex_m::interrupt::enable() };
+            }
+            PARKED.store(true, Ordering::SeqCst);
         }
-        result
     })
     .await
 }

@@ -52,7 +52,7 @@ impl amiro_robot::Sink for Print {
 
 /// Runs `cargo xtask robot`.
 pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
-    crate::ensure_qemu()?;
+    crate::workspace::ensure_qemu()?;
     if args.bench {
         return super::bench::command(root, args.duration.as_deref()).map(|()| true);
     }

@@ -21,7 +21,7 @@ pub fn firmware(root: &Path) -> Result<[Firmware; 3]> {
                 .next()
                 .with_context(|| format!("no revision-{ROBOT_REVISION} image of {name}"))?;
         out.push(Firmware {
-            elf: crate::build_qemu(root, &build)?,
+            elf: crate::workspace::build_qemu(root, &build)?,
             machine: board.qemu_machine,
         });
     }

@@ -290,7 +290,7 @@ impl RunOutput {
             .work
             .as_deref()
             .context("the run kept no work directory (no task trace to read)")?;
-        let root = crate::workspace_root();
+        let root = crate::workspace::workspace_root();
         let spec = crate::boards::by_name(board).with_context(|| format!("no board {board}"))?;
         let names = amiro_firmware::trace_ids::board_names(&root, board)
             .map_err(|e| anyhow::anyhow!("{e}"))
