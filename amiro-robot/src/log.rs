@@ -210,6 +210,18 @@ pub fn split_output(text: &str) -> (String, String) {
     (bus, trace)
 }
 
+/// The `# duration:` header of a stimulus log.
+pub fn duration_of(path: &Path) -> Result<u64> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    for line in text.lines() {
+        if let Some(d) = line.trim().strip_prefix("# duration:") {
+            return parse_duration(d.trim());
+        }
+    }
+    bail!("{} has no `# duration:` header", path.display())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -12,8 +12,8 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 
 pub use amiro_robot::log::{
-    encode_stimulus, parse_duration, parse_log_line, read_stimulus, split_output, with_event_lines,
-    TimedFrame, ICOUNT_SHIFT, SIGNAL_SYS_PD_N,
+    duration_of, encode_stimulus, parse_duration, parse_log_line, read_stimulus, split_output,
+    with_event_lines, TimedFrame, ICOUNT_SHIFT, SIGNAL_SYS_PD_N,
 };
 
 /// Runs `elf` on QEMU's `machine` with `stimulus` for `duration_us` of virtual time and returns its

@@ -560,7 +560,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
         let frames = crate::qemu::read_stimulus(stimulus)?;
         let duration = match &args.duration {
             Some(d) => crate::qemu::parse_duration(d)?,
-            None => crate::scenarios::duration_of(stimulus).unwrap_or(2_000_000),
+            None => crate::qemu::duration_of(stimulus).unwrap_or(2_000_000),
         };
         let work = crate::qemu::fresh_work_dir(root, board.name);
         crate::qemu::run(&elf, board.qemu_machine, &frames, duration, &work)?;

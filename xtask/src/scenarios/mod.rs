@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, ensure, Context, Result};
 
 use crate::qemu::{self, TimedFrame};
+pub use amiro_robot::log::duration_of;
 
 pub mod diwheeldrive;
 pub mod diwheeldrive_1_2;
@@ -257,18 +258,6 @@ pub fn check_health(out: &RunOutput, board: amiro_can::Board) -> Result<Health> 
         health.rx_overruns
     );
     Ok(health)
-}
-
-/// The `# duration:` header of a stimulus log.
-pub fn duration_of(path: &Path) -> Result<u64> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    for line in text.lines() {
-        if let Some(d) = line.trim().strip_prefix("# duration:") {
-            return qemu::parse_duration(d.trim());
-        }
-    }
-    bail!("{} has no `# duration:` header", path.display())
 }
 
 /// How a published topic behaved: its release grid and each frame's latency from its release.
