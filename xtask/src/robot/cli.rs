@@ -26,8 +26,8 @@ pub struct RobotArgs {
     /// Fail when a message's observed worst response exceeds its Davis bound (the bus report).
     #[arg(long)]
     pub check: bool,
-    /// Live (`--slcan`): print the boards' lines and the frames on stdout too (off by default:
-    /// printing them costs pace; everything is in the run's output.log either way).
+    /// Live (`--slcan`): print the boards' trace and log lines and the frames on stdout too (off by
+    /// default: printing them costs pace; everything is in the run's output.log either way).
     #[arg(long)]
     pub trace: bool,
     /// Measure instead: an idle robot, the thesis demo and a babbling board, each for
@@ -37,14 +37,16 @@ pub struct RobotArgs {
     pub bench: bool,
 }
 
-/// Prints a run's lines as they come; a live run without `--trace` only the bus's own notes.
+/// Prints a run's lines as they come; a live run without `--trace` only the bus's and the platforms' notes.
 struct Print {
     all: bool,
 }
 
 impl amiro_robot::Sink for Print {
     fn line(&mut self, line: &str) {
-        if self.all || line.starts_with("bus:") {
+        // A live run without `--trace` still says what the bus and the platforms say (`bus:` notes,
+        // each board's `# qemu:` lines: its start, its end line with its receive losses).
+        if self.all || line.starts_with("bus:") || line.contains(": # qemu:") {
             println!("{line}");
         }
     }
