@@ -14,14 +14,18 @@
 //! 24-bit reload, ≈ 100–140 ms, on). Under `-icount` an idle board then costs QEMU one interrupt per
 //! deadline instead of 100 000 per virtual second (docs/qemu.md, "Speed").
 //!
-//! The clock is read as cycles: the start of the running period plus how far SysTick has counted
-//! down in it. A wrap is seen by COUNTFLAG (reading it clears it: only [`cycles`] reads it), so a
+//! Periodic, the tick count is one per wrap (COUNTFLAG, as rtic-monotonics' SysTick counts it: the
+//! cheapest reading, which the scenarios' cost figures were measured with). Tickless, the clock is
+//! the tick and the cycles into it where the running period started, plus how far SysTick has
+//! counted down; a wrap is seen by COUNTFLAG (reading it clears it: only this module reads it), so a
 //! wrap whose interrupt has not run yet is counted. A restart costs the few cycles between the read
 //! and the write of the counter (the board's clock runs that much behind QEMU's), the same each
-//! time: the run stays deterministic. No reading goes below the one before (QEMU updates SysTick
-//! lazily around a wrap: a reading there can come out a little early).
+//! time: the run stays deterministic. No tickless reading goes below the one before (QEMU updates
+//! SysTick lazily around a wrap: a reading there can come out a little early).
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};
+
+use portable_atomic::AtomicU64;
 
 use critical_section::{CriticalSection, Mutex};
 use rtic_time::timer_queue::{TimerQueue, TimerQueueBackend};
@@ -50,10 +54,6 @@ struct Clock {
     /// below.
     last_cycles: u64,
     last_tick: u64,
-    /// The apps' earliest deadline in ticks (`u64::MAX`: none).
-    app: u64,
-    /// The platform's earliest deadline in ticks (`u64::MAX`: none).
-    platform: u64,
 }
 
 static CLOCK: Mutex<RefCell<Clock>> = Mutex::new(RefCell::new(Clock {
@@ -62,9 +62,15 @@ static CLOCK: Mutex<RefCell<Clock>> = Mutex::new(RefCell::new(Clock {
     reload: CYCLES_PER_TICK as u32 - 1,
     last_cycles: 0,
     last_tick: 0,
-    app: u64::MAX,
-    platform: u64::MAX,
 }));
+/// The tick count of periodic mode: one per wrap, as rtic-monotonics' SysTick counts (the apps read
+/// the clock often, and every instruction here is virtual time they lose; the scenarios' cost
+/// figures were measured with that count).
+static PERIODIC: AtomicU64 = AtomicU64::new(0);
+/// The apps' earliest deadline in ticks (`u64::MAX`: none).
+static APP_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
+/// The platform's earliest deadline in ticks (`u64::MAX`: none).
+static PLATFORM_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
 static TICKLESS: AtomicBool = AtomicBool::new(false);
 const PER_TICK: u32 = CYCLES_PER_TICK as u32;
 
@@ -102,8 +108,26 @@ fn position(_cs: CriticalSection<'_>, clock: &mut Clock) -> (u64, u32) {
     (clock.tick + u64::from(cycles / PER_TICK), cycles % PER_TICK)
 }
 
+/// Whether SysTick has wrapped since the last look (reading the status clears COUNTFLAG).
+fn has_wrapped() -> bool {
+    // SAFETY: a read of SysTick's status register.
+    unsafe { core::ptr::read_volatile(SYST_CSR) & CSR_COUNTFLAG != 0 }
+}
+
 /// Core cycles since the clock started (the trace clock).
 pub fn now_cycles() -> u64 {
+    if !TICKLESS.load(Ordering::Relaxed) {
+        loop {
+            // The same count before and after the read of the counter: no wrap came between.
+            let ticks = now_ticks();
+            // SAFETY: a read of SysTick's current value, which has no side effects.
+            let value = unsafe { core::ptr::read_volatile(SYST_CVR) };
+            if now_ticks() == ticks {
+                return ticks * CYCLES_PER_TICK
+                    + (CYCLES_PER_TICK - 1).saturating_sub(u64::from(value));
+            }
+        }
+    }
     critical_section::with(|cs| {
         let clock = &mut *CLOCK.borrow_ref_mut(cs);
         let (tick, into) = position(cs, clock);
@@ -113,32 +137,44 @@ pub fn now_cycles() -> u64 {
     })
 }
 
-/// Ticks since the clock started. Periodic, a tick is a wrap (no need to read the counter: the
-/// apps read the clock often, and every instruction here is virtual time they lose).
+/// Ticks since the clock started.
 pub fn now_ticks() -> u64 {
+    if !TICKLESS.load(Ordering::Relaxed) {
+        if has_wrapped() {
+            PERIODIC.fetch_add(1, Ordering::AcqRel);
+        }
+        return PERIODIC.load(Ordering::Relaxed);
+    }
     critical_section::with(|cs| {
         let clock = &mut *CLOCK.borrow_ref_mut(cs);
-        if TICKLESS.load(Ordering::Relaxed) {
-            let tick = position(cs, clock).0.max(clock.last_tick);
-            clock.last_tick = tick;
-            tick
-        } else {
-            count_wrap(clock);
-            clock.tick
-        }
+        let tick = position(cs, clock).0.max(clock.last_tick);
+        clock.last_tick = tick;
+        tick
     })
 }
 
 /// Makes SysTick interrupt only when a deadline is due (robot runs); takes effect at once.
 pub(super) fn set_tickless() {
-    TICKLESS.store(true, Ordering::SeqCst);
+    critical_section::with(|cs| {
+        let clock = &mut *CLOCK.borrow_ref_mut(cs);
+        if has_wrapped() {
+            PERIODIC.fetch_add(1, Ordering::AcqRel);
+        }
+        // The running period is a periodic one: one tick from the count's last wrap.
+        clock.tick = PERIODIC.load(Ordering::Relaxed);
+        clock.offset = 0;
+        clock.reload = PER_TICK - 1;
+        TICKLESS.store(true, Ordering::SeqCst);
+    });
     cortex_m::peripheral::SCB::set_pendst();
 }
 
 /// Restarts SysTick to wrap at the earlier queue deadline (or a full reload on).
 fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     let (tick, into) = position(cs, clock);
-    let due = clock.app.min(clock.platform);
+    let due = APP_DUE
+        .load(Ordering::Relaxed)
+        .min(PLATFORM_DUE.load(Ordering::Relaxed));
     let period = due
         .saturating_sub(tick)
         .saturating_mul(CYCLES_PER_TICK)
@@ -170,7 +206,7 @@ impl TimerQueueBackend for AppTimer {
     }
 
     fn set_compare(at: u64) {
-        critical_section::with(|cs| CLOCK.borrow_ref_mut(cs).app = at);
+        APP_DUE.store(at, Ordering::Relaxed);
     }
 
     fn clear_compare_flag() {}
@@ -184,7 +220,7 @@ impl TimerQueueBackend for AppTimer {
     fn enable_timer() {}
 
     fn disable_timer() {
-        critical_section::with(|cs| CLOCK.borrow_ref_mut(cs).app = u64::MAX);
+        APP_DUE.store(u64::MAX, Ordering::Relaxed);
     }
 
     fn timer_queue() -> &'static TimerQueue<Self> {
@@ -205,7 +241,7 @@ impl TimerQueueBackend for PlatformTimer {
     }
 
     fn set_compare(at: u64) {
-        critical_section::with(|cs| CLOCK.borrow_ref_mut(cs).platform = at);
+        PLATFORM_DUE.store(at, Ordering::Relaxed);
     }
 
     fn clear_compare_flag() {}
@@ -219,7 +255,7 @@ impl TimerQueueBackend for PlatformTimer {
     fn enable_timer() {}
 
     fn disable_timer() {
-        critical_section::with(|cs| CLOCK.borrow_ref_mut(cs).platform = u64::MAX);
+        PLATFORM_DUE.store(u64::MAX, Ordering::Relaxed);
     }
 
     fn timer_queue() -> &'static TimerQueue<Self> {
@@ -248,7 +284,7 @@ pub(super) fn start(mut syst: cortex_m::peripheral::SYST) {
 /// The apps' earliest deadline in µs (`u64::MAX`: none). A queue whose head changed pends SysTick,
 /// which updates it, so it is current unless SysTick is pending.
 pub(super) fn next_deadline_us() -> u64 {
-    critical_section::with(|cs| CLOCK.borrow_ref(cs).app).saturating_mul(TICK_US)
+    APP_DUE.load(Ordering::Relaxed).saturating_mul(TICK_US)
 }
 
 #[no_mangle]
