@@ -4,7 +4,7 @@
 //! QEMU emulates neither the STM32 clock tree nor bxCAN, so a QEMU build sets up no clock and no
 //! CAN hardware. Instead:
 //! - the monotonic is SysTick with a 10 µs tick ([`timer`]; `mono::QemuClock` is the tasks'
-//!   clock over it), in deterministic virtual time under `-icount`;
+//!   clock over it), in deterministic virtual time under `-icount`, tickless in a robot run;
 //! - the CAN bus is a stimulus log replayed from the host (read through semihosting) into a virtual
 //!   3-frame receive FIFO that raises the board's real CAN receive interrupt, and virtual transmit
 //!   mailboxes that print every frame in `candump -l` format with its virtual-time stamp;
@@ -44,8 +44,7 @@ pub const TICK_US: u64 = 10;
 /// Microseconds of virtual time since the monotonic started (the platform's own reading, without
 /// the trace hooks of `mono::QemuClock`).
 pub fn now_us() -> u64 {
-    use rtic_time::timer_queue::TimerQueueBackend;
-    rtic_monotonics::systick::SystickBackend::now().saturating_mul(TICK_US)
+    timer::now_ticks().saturating_mul(TICK_US)
 }
 
 static RX_FIFO: Mutex<RefCell<Deque<RxFrame, 3>>> = Mutex::new(RefCell::new(Deque::new()));
@@ -64,7 +63,7 @@ extern "C" {
 /// tracing: it calls nothing of it).
 pub fn init(syst: cortex_m::peripheral::SYST) {
     paint_stack();
-    timer::start(syst, CORE_CLOCK_HZ);
+    timer::start(syst);
     robot::connect();
     if let Some(file) = HostFile::create(b"trace.bin\0") {
         TRACE_FILE.store(file.0, Ordering::Relaxed);

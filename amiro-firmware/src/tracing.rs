@@ -82,33 +82,15 @@ fn cycles(state: &mut State) -> u64 {
     u64::from(state.high) << 32 | u64::from(now)
 }
 
-/// The trace clock in QEMU: SysTick's ticks times its reload, plus how far the current tick has
-/// counted down (a tick whose interrupt is pending but has not run yet is counted). QEMU updates
-/// its SysTick lazily, so around a tick a reading can come up to ~160 cycles (1.3 µs) before the
-/// previous one: the clock is held where it was until it passes (records stay in order).
+/// The trace clock in QEMU: the platform clock's cycles (`qemu::timer`: the start of SysTick's
+/// running period plus how far it has counted down). QEMU updates its SysTick lazily, so around a
+/// wrap a reading can come out a little early: the clock holds every reading at or above the one
+/// before, so the records stay in order.
 #[cfg(feature = "qemu")]
 fn cycles(state: &mut State) -> u64 {
-    let now = systick_cycles().max(state.last);
+    let now = crate::qemu::timer::now_cycles().max(state.last);
     state.last = now;
     now
-}
-
-#[cfg(feature = "qemu")]
-fn systick_cycles() -> u64 {
-    use rtic_monotonics::systick::SystickBackend;
-    use rtic_time::timer_queue::TimerQueueBackend;
-    const SYST_CVR: *const u32 = 0xE000_E018 as *const u32;
-    const PER_TICK: u64 = crate::qemu::CORE_CLOCK_HZ as u64 * crate::qemu::TICK_US / 1_000_000;
-    loop {
-        // The backend's `now` counts a wrap it finds (COUNTFLAG) itself: the same count before and
-        // after the read of the current value means no wrap came between.
-        let ticks = SystickBackend::now();
-        // SAFETY: a read of SysTick's current value register, which has no side effects.
-        let value = unsafe { core::ptr::read_volatile(SYST_CVR) };
-        if SystickBackend::now() == ticks {
-            return ticks * PER_TICK + (PER_TICK - 1).saturating_sub(u64::from(value));
-        }
-    }
 }
 
 /// Enables the DWT cycle counter (robot) and writes the boot record with the clock's rate.

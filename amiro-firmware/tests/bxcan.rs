@@ -247,6 +247,12 @@ fn configure_sets_timing_filter_interrupts_and_auto_recovery() {
             bxcan::passes_filter(id),
             "{id:03X}"
         );
+        // The robot host's lookahead reads the same rule off the link (amiro-trace::robot_link).
+        assert_eq!(
+            amiro_trace::robot_link::reaches_software(id),
+            bxcan::passes_filter(id),
+            "{id:03X}"
+        );
     }
     assert!(bxcan::passes_filter(0x205) && !bxcan::passes_filter(0x610));
     let ier = model.ier.get();

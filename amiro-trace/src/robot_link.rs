@@ -7,8 +7,8 @@
 pub const QUANTUM_US: u64 = 40;
 /// Board → host, [`Up`]: `u64` now, `u8` new frames, `u8` lines driven, `u8` abort requests, 1
 /// reserved, `u32` µs the board sleeps from now, three 28-byte records (`u64` queued at, `u16` id,
-/// `u8` length, `u8` mailbox, 8 data bytes, `u64` released at).
-pub const UP_LEN: usize = 16 + MAILBOXES * RECORD_LEN;
+/// `u8` length, `u8` mailbox, 8 data bytes, `u64` released at), `u64` the boundary it reports at.
+pub const UP_LEN: usize = 16 + MAILBOXES * RECORD_LEN + 8;
 /// Host → board, [`Down`]: `u64` completion time, `u8` flags, `u8` mailbox, `u16` id, `u8` length,
 /// `u8` aborted mailboxes, 2 reserved, 8 data bytes, `u64` time of the next exchange.
 pub const DOWN_LEN: usize = 32;
@@ -30,6 +30,20 @@ pub const DOWN_PD_LOW: u8 = 4;
 pub const DOWN_SYNC_LOW: u8 = 8;
 /// Down: the run is over.
 pub const DOWN_END: u8 = 16;
+/// Down: run ahead to `next_us`, but report at the first boundary after the board puts a frame
+/// into a mailbox, asks for an abort or changes a line it drives (the host sends the one board
+/// with work ahead this way while everything else is quiet; docs/qemu.md, "Lookahead").
+pub const DOWN_EARLY: u8 = 32;
+
+/// Whether a board's software ever sees a frame with identifier `id` that another node sent: the
+/// boards' bxCAN receive filter passes only command frames (bit 10, C/S, clear;
+/// `amiro_firmware::bxcan::passes_filter`, whose test holds the two equal). The host relies on it
+/// to leave a sleeping board out of an exchange while sensor frames go over the bus (docs/qemu.md,
+/// "Lookahead"): such a board is only brought to a boundary for a frame that passes, for its own
+/// frame's completion, an abort, a line level or the end of the run.
+pub const fn reaches_software(id: u16) -> bool {
+    id & 0x400 == 0
+}
 
 /// A frame a board put into one of its mailboxes since its last report.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -68,6 +82,9 @@ pub struct Up {
     pub aborts: u8,
     /// How long it will do nothing, µs from now (0: it has work; `u32::MAX`: no deadline).
     pub sleeps_us: u32,
+    /// The boundary this report is for (the board's virtual µs, a multiple of [`QUANTUM_US`]):
+    /// the one the host sent it to, or an earlier one after [`DOWN_EARLY`].
+    pub at_us: u64,
     /// Frames it queued since its last report: the first `count` of `frames`.
     pub count: u8,
     /// The frames.
@@ -107,6 +124,7 @@ impl Up {
             r[12..20].copy_from_slice(&q.data);
             r[20..28].copy_from_slice(&q.released_us.to_le_bytes());
         }
+        m[UP_LEN - 8..].copy_from_slice(&self.at_us.to_le_bytes());
         m
     }
 
@@ -117,6 +135,7 @@ impl Up {
             drives: m[9],
             aborts: m[10],
             sleeps_us: u32::from_le_bytes([m[12], m[13], m[14], m[15]]),
+            at_us: le_u64(&m[UP_LEN - 8..]),
             count: m[8].min(MAILBOXES as u8),
             frames: [Queued::default(); MAILBOXES],
         };
@@ -156,7 +175,11 @@ pub struct Down {
     /// and the board's transmit interrupt hands the frame back). An abort that comes too late is
     /// not answered: the frame completes as it would have.
     pub aborted: u8,
-    /// The board's virtual time of the next exchange (0: one quantum on).
+    /// The board's virtual time of the next exchange (0: one quantum on). A sleeping board may be
+    /// sent several quanta on (it does nothing before its deadline but on a frame or a line level,
+    /// which come only through an exchange), and its answer may come late: the host keeps a board
+    /// that sleeps past the next boundary waiting in its read until it is needed, then answers with
+    /// the boundary it must run to (it runs there idle and reports again, then gets what is due).
     pub next_us: u64,
 }
 
@@ -209,6 +232,7 @@ mod tests {
             drives: DRIVES_SYNC_LOW | DRIVES_PD_LOW,
             aborts: 0b100,
             sleeps_us: u32::MAX,
+            at_us: 123_456_760,
             ..Up::default()
         };
         for k in 0..MAILBOXES as u8 {
@@ -228,12 +252,13 @@ mod tests {
         assert_eq!(&bytes[8..11], &[3, 3, 0b100]);
         assert_eq!(&bytes[16 + 8..16 + 12], &[0x1F, 0x06, 2, 2]);
         assert_eq!(up.queued()[1].payload(), &[1, 1, 1]);
+        assert_eq!(&bytes[UP_LEN - 8..], &123_456_760u64.to_le_bytes());
     }
 
     #[test]
     fn an_answer_survives_the_link() {
         let down = Down {
-            flags: DOWN_FRAME | DOWN_OWN | DOWN_SYNC_LOW,
+            flags: DOWN_FRAME | DOWN_OWN | DOWN_SYNC_LOW | DOWN_EARLY,
             at_us: 987_654,
             mailbox: 1,
             id: 0x605,

@@ -1,5 +1,7 @@
 //! The three AMiRo boards as the build knows them: folder, target, chip, memory and the AMiRo-BLT layout.
 
+use anyhow::{Context, Result};
+
 /// One firmware crate and the chip it runs on.
 #[derive(Debug, Clone, Copy)]
 pub struct Board {
@@ -169,4 +171,19 @@ pub const BOARDS: [Board; 3] = [
 /// Looks a board up by name.
 pub fn by_name(name: &str) -> Option<&'static Board> {
     BOARDS.iter().find(|b| b.name == name)
+}
+
+/// The boards named (all of them when none is).
+pub fn select_boards(names: &[String]) -> Result<Vec<&'static Board>> {
+    if names.is_empty() {
+        return Ok(BOARDS.iter().collect());
+    }
+    names
+        .iter()
+        .map(|n| {
+            by_name(n).with_context(|| {
+                format!("unknown board `{n}` (known: diwheeldrive, powermgmt, lightring)")
+            })
+        })
+        .collect()
 }

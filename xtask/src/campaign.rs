@@ -636,7 +636,7 @@ pub fn run(
                 format!("board {} has QEMU scenarios but no campaign model (xtask/src/campaign.rs MODELS)", board.name)
             })?;
         // The board's newest revision (its default build).
-        let elf = crate::build_qemu(
+        let elf = crate::workspace::build_qemu(
             root,
             &crate::revision::Build {
                 board,

@@ -75,7 +75,7 @@ pub fn run(root: &Path, args: &FlashArgs) -> Result<()> {
                     args.ids.as_deref().unwrap_or("")
                 )
             })?;
-            let reports = crate::build_boards(root, &plan, false)?;
+            let reports = crate::workspace::build_boards(root, &plan, false)?;
             let jobs: Vec<Job> = selected
                 .iter()
                 .map(|board| {
@@ -99,10 +99,10 @@ pub fn run(root: &Path, args: &FlashArgs) -> Result<()> {
             let choice = Choice::parse(args.revision.as_deref())?;
             ensure!(choice != Choice::All, "one revision over SWD");
             let plan = revision::plan(&[board], &choice)?;
-            let reports = crate::build_boards(root, &plan, false)?;
+            let reports = crate::workspace::build_boards(root, &plan, false)?;
             let report = reports.first().context("one image built")?;
             println!("{} {} image", board.name, report.revision);
-            crate::flash_elf(board, &report.elf)
+            flash_elf(board, &report.elf)
         }
     }
 }
@@ -213,7 +213,7 @@ pub fn run_elf(board: &'static Board, elf: &Path) -> Result<()> {
         _ => {
             let image = revision::of_elf(board, elf)?;
             println!("{} {} image", board.name, image.name);
-            crate::flash_elf(board, elf)
+            flash_elf(board, elf)
         }
     }
 }
@@ -821,7 +821,7 @@ fn flash_simulated(
             .find(|(n, _)| n == name)
             .map(|(_, id)| *id)
             .context("board in the robot")?;
-        let patched = crate::target_dir(root).join(format!("{name}.sim-check.elf"));
+        let patched = crate::workspace::target_dir(root).join(format!("{name}.sim-check.elf"));
         crate::elf::write_checksum(elf, &patched)?;
         let image = Image::from_elf(&std::fs::read(&patched)?)?;
         let flash = robot.flash(id);
@@ -852,6 +852,34 @@ fn flash_simulated(
         started.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// Flashes `elf` through the probe (probe-rs as a library, the checksum word written), restarts
+/// the board and prints its RTT log until Ctrl-C.
+pub fn flash_elf(board: &Board, elf: &Path) -> Result<()> {
+    let image = crate::probe::probe_image(board, elf)?;
+    println!("flashing {} ({}) through the probe", board.name, board.chip);
+    let mut session = crate::probe::session(board, None, true)?;
+    crate::probe::flash(&mut session, &image)?;
+    println!("flashed and restarted; the RTT log follows (Ctrl-C ends)");
+    let bytes = std::fs::read(&image).ok();
+    let mut link = crate::probe::RttLink::attach(session, bytes.as_deref())?;
+    let interrupted = crate::bench::live::interrupt_flag()?;
+    // The log only: the trace channel's bytes are decoded but nothing is shown or saved.
+    let mut pipeline = crate::bench::live::Pipeline::new(1, None)?;
+    let stop = crate::bench::live::Stop {
+        after: None,
+        idle: None,
+        refresh: std::time::Duration::from_secs(3600),
+    };
+    crate::bench::live::run(
+        &mut link,
+        &mut pipeline,
+        stop,
+        &interrupted,
+        |lines| lines.iter().for_each(|l| println!("{l}")),
+        |_, _| Ok(()),
+    )
 }
 
 #[cfg(test)]

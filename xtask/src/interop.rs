@@ -22,12 +22,12 @@ const PYTEST_NO_TESTS: i32 = 5;
 
 /// Sets up the pinned tools (and can-utils), builds `amiro`, and runs the interop checks.
 pub fn check(root: &Path) -> Result<()> {
-    let work = super::target_dir(root).join("interop");
+    let work = crate::workspace::target_dir(root).join("interop");
     let python = venv(root, &work)?;
     ensure_can_utils()?;
     ensure_node()?;
     // With the live Foxglove server, which Foxglove's own WebSocket client checks (tools/interop/test_foxglove.py).
-    super::cargo(
+    crate::workspace::cargo(
         root,
         &[
             "build",
@@ -42,7 +42,7 @@ pub fn check(root: &Path) -> Result<()> {
     )
     .context("building amiro for the interop checks")?;
     // amiro-world's kinematic loop, for the example behaviours (tools/interop/test_world_examples.py).
-    super::cargo(
+    crate::workspace::cargo(
         root,
         &[
             "build",
@@ -54,8 +54,12 @@ pub fn check(root: &Path) -> Result<()> {
         ],
     )
     .context("building world-loop for the interop checks")?;
-    let amiro = super::target_dir(root).join("debug").join("amiro");
-    let world_loop = super::target_dir(root).join("debug").join("world-loop");
+    let amiro = crate::workspace::target_dir(root)
+        .join("debug")
+        .join("amiro");
+    let world_loop = crate::workspace::target_dir(root)
+        .join("debug")
+        .join("world-loop");
     println!("interop: cantools, python-can, can-utils, the mcap reader and the Foxglove client against amiro");
     let status = Command::new(&python)
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
@@ -97,12 +101,12 @@ fn venv(root: &Path, work: &Path) -> Result<PathBuf> {
     }
     std::fs::create_dir_all(work).with_context(|| format!("creating {}", work.display()))?;
     let venv_text = venv.to_string_lossy();
-    super::run_tool(root, "python3", &["-m", "venv", venv_text.as_ref()]).context(
+    crate::workspace::run_tool(root, "python3", &["-m", "venv", venv_text.as_ref()]).context(
         "creating the interop venv (needs python3 with venv; Debian: apt-get install python3-venv)",
     )?;
     let requirements_text = requirements.to_string_lossy();
     let python_text = python.to_string_lossy();
-    super::run_tool(
+    crate::workspace::run_tool(
         root,
         python_text.as_ref(),
         &[
@@ -135,12 +139,12 @@ fn ensure_node() -> Result<()> {
     if found("node") && found("npm") {
         return Ok(());
     }
-    let is_root = super::output(Path::new("."), "id", &["-u"])
+    let is_root = crate::workspace::output(Path::new("."), "id", &["-u"])
         .map(|u| u.trim() == "0")
         .unwrap_or(false);
     if is_root {
-        super::run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
-        super::run_tool(
+        crate::workspace::run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
+        crate::workspace::run_tool(
             Path::new("."),
             "apt-get",
             &["install", "-y", "-qq", "nodejs", "npm"],
@@ -160,12 +164,12 @@ fn ensure_can_utils() -> Result<()> {
     if found {
         return Ok(());
     }
-    let is_root = super::output(Path::new("."), "id", &["-u"])
+    let is_root = crate::workspace::output(Path::new("."), "id", &["-u"])
         .map(|u| u.trim() == "0")
         .unwrap_or(false);
     if is_root {
-        super::run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
-        super::run_tool(
+        crate::workspace::run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
+        crate::workspace::run_tool(
             Path::new("."),
             "apt-get",
             &["install", "-y", "-qq", "can-utils"],

@@ -156,7 +156,7 @@ struct Row<'a> {
 /// binds), its dispatchers (the interrupt handlers that poll the software tasks of one priority,
 /// their bodies inlined into them), and the tasks the bounds file adds (the monotonic's interrupt).
 fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
-    let boards = crate::select_boards(&args.boards)?;
+    let boards = crate::boards::select_boards(&args.boards)?;
     let plan = crate::revision::plan(
         &boards,
         &crate::revision::Choice::parse(args.revision.as_deref())?,

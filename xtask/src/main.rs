@@ -3,7 +3,7 @@
 //! CI calls only `cargo xtask ...`; everything a fresh machine lacks (thumb targets, llvm-tools,
 //! QEMU) is installed from here, so the README's two commands are the whole set-up.
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitCode};
+use std::process::ExitCode;
 
 use anyhow::{bail, ensure, Context, Result};
 use clap::{Parser, Subcommand};
@@ -26,8 +26,12 @@ mod robot;
 mod scenarios;
 mod smoke;
 mod wcet_gate;
+mod workspace;
 
-use boards::{Board, BOARDS};
+use boards::{select_boards, BOARDS};
+use workspace::{
+    build_boards, build_qemu, cargo, ensure_qemu, ensure_toolchain, target_dir, workspace_root,
+};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -316,172 +320,6 @@ fn run(cmd: Cmd) -> Result<bool> {
     }
 }
 
-/// The workspace root (the parent of this crate's folder).
-pub(crate) fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .map(Path::to_path_buf)
-        .unwrap_or_default()
-}
-
-pub(crate) fn select_boards(names: &[String]) -> Result<Vec<&'static Board>> {
-    if names.is_empty() {
-        return Ok(BOARDS.iter().collect());
-    }
-    names
-        .iter()
-        .map(|n| {
-            boards::by_name(n).with_context(|| {
-                format!("unknown board `{n}` (known: diwheeldrive, powermgmt, lightring)")
-            })
-        })
-        .collect()
-}
-
-/// Builds each image in its own cargo invocation (chip features must never unify), keeps a copy of
-/// its ELF per revision (`target/firmware/`) and inspects it.
-fn build_boards(
-    root: &Path,
-    builds: &[revision::Build],
-    bare_chip: bool,
-) -> Result<Vec<elf::SizeReport>> {
-    ensure_toolchain(root)?;
-    let mut reports = Vec::new();
-    for build in builds {
-        let board = build.board;
-        build.select_models();
-        let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
-        args.extend(build.feature_args(if bare_chip { &["bare-chip"] } else { &[] }));
-        let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        cargo(&root.join(board.name), &args)
-            .with_context(|| format!("building {} {}", board.name, build.revision.name))?;
-        let kept = revision::kept_elf(root, build, bare_chip);
-        if let Some(dir) = kept.parent() {
-            std::fs::create_dir_all(dir)?;
-        }
-        std::fs::copy(firmware_elf(root, board), &kept)
-            .with_context(|| format!("keeping {}", kept.display()))?;
-        let mut report = elf::inspect(board, &kept, !bare_chip)?;
-        report.revision = build.revision.name.to_string();
-        reports.push(report);
-    }
-    Ok(reports)
-}
-
-/// The image a probe writes: for an ELF linked behind AMiRo-BLT a copy with the bootloader's
-/// checksum word written into its slot (else AMiRo-BLT would not start it), else the ELF as built.
-fn probe_image(board: &Board, elf: &Path) -> Result<PathBuf> {
-    let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
-    let behind_bootloader = object::read::File::parse(&*bytes)
-        .map(|f| object::Object::section_by_name(&f, elf::CHECKSUM_SECTION).is_some())
-        .unwrap_or(false);
-    if behind_bootloader {
-        let patched = elf.with_extension("blt.elf");
-        let word = elf::write_checksum(elf, &patched)?;
-        println!(
-            "{}: AMiRo-BLT checksum word {word:#010x} written into {}",
-            board.name,
-            patched.display()
-        );
-        Ok(patched)
-    } else {
-        println!(
-            "{}: bare-chip image (no AMiRo-BLT slot), flashed as built",
-            board.name
-        );
-        Ok(elf.to_path_buf())
-    }
-}
-
-/// Flashes `elf` through the probe (probe-rs as a library, the checksum word written), restarts
-/// the board and prints its RTT log until Ctrl-C.
-fn flash_elf(board: &Board, elf: &Path) -> Result<()> {
-    let image = probe_image(board, elf)?;
-    println!("flashing {} ({}) through the probe", board.name, board.chip);
-    let mut session = probe::session(board, None, true)?;
-    probe::flash(&mut session, &image)?;
-    println!("flashed and restarted; the RTT log follows (Ctrl-C ends)");
-    let bytes = std::fs::read(&image).ok();
-    let mut link = probe::RttLink::attach(session, bytes.as_deref())?;
-    let interrupted = interrupt_flag()?;
-    // The log only: the trace channel's bytes are decoded but nothing is shown or saved.
-    let mut pipeline = bench::live::Pipeline::new(1, None)?;
-    let stop = bench::live::Stop {
-        after: None,
-        idle: None,
-        refresh: std::time::Duration::from_secs(3600),
-    };
-    bench::live::run(
-        &mut link,
-        &mut pipeline,
-        stop,
-        &interrupted,
-        |lines| lines.iter().for_each(|l| println!("{l}")),
-        |_, _| Ok(()),
-    )
-}
-
-/// A flag the first Ctrl-C sets (a live stream then ends cleanly, its report written); a second
-/// Ctrl-C ends the process as usual.
-fn interrupt_flag() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
-    use signal_hook::consts::SIGINT;
-    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    signal_hook::flag::register_conditional_shutdown(SIGINT, 130, std::sync::Arc::clone(&flag))
-        .and_then(|_| signal_hook::flag::register(SIGINT, std::sync::Arc::clone(&flag)))
-        .context("installing the Ctrl-C handler")?;
-    Ok(flag)
-}
-
-/// The probe path of `cargo xtask bench`: builds the board's traced firmware (feature
-/// `task-trace`) and flashes it, or with `attach` attaches to the running one; then finds its RTT
-/// control block.
-fn probe_link(
-    root: &Path,
-    build: &revision::Build,
-    attach: bool,
-    selector: Option<&str>,
-) -> Result<probe::RttLink> {
-    let board = build.board;
-    let elf_path = firmware_elf(root, board);
-    if attach {
-        let session = probe::session(board, selector, false)?;
-        // The last build's ELF locates the RTT block, if it is there; else RAM is scanned.
-        let bytes = std::fs::read(&elf_path).ok();
-        return probe::RttLink::attach(session, bytes.as_deref());
-    }
-    ensure_toolchain(root)?;
-    build.select_models();
-    let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
-    args.extend(build.feature_args(&["task-trace"]));
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    cargo(&root.join(board.name), &args)
-        .with_context(|| format!("building {} with task-trace", build.stem()))?;
-    elf::inspect(board, &elf_path, true)?;
-    let image = probe_image(board, &elf_path)?;
-    println!(
-        "flashing the traced build of {} ({}) through the probe",
-        board.name, board.chip
-    );
-    let mut session = probe::session(board, selector, true)?;
-    probe::flash(&mut session, &image)?;
-    let bytes = std::fs::read(&image).with_context(|| format!("reading {}", image.display()))?;
-    probe::RttLink::attach(session, Some(&bytes))
-}
-
-/// Where cargo leaves a board's release ELF.
-fn firmware_elf(root: &Path, board: &Board) -> PathBuf {
-    target_dir(root)
-        .join(board.target)
-        .join("release")
-        .join(board.name)
-}
-
-pub(crate) fn target_dir(root: &Path) -> PathBuf {
-    std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("target"))
-}
-
 fn check(root: &Path) -> Result<()> {
     ensure_toolchain(root)?;
     layers::check(root)?;
@@ -640,38 +478,6 @@ fn analysis_gate(root: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Builds a board revision's QEMU variant (its own target dir: the features differ from the robot
-/// build) and keeps its ELF apart from the other revision's (`target/qemu/firmware/`).
-pub(crate) fn build_qemu(root: &Path, build: &revision::Build) -> Result<PathBuf> {
-    let board = build.board;
-    let dir = qemu::target_dir(root);
-    let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    build.select_models();
-    let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
-    // With the task trace: the bench measures the scenario runs (docs/bench.md).
-    args.extend(build.feature_args(&["qemu", "task-trace"]));
-    let status = Command::new(cargo_bin)
-        .args(&args)
-        .current_dir(root.join(board.name))
-        .env("CARGO_TARGET_DIR", &dir)
-        .status()
-        .with_context(|| format!("building the QEMU variant of {}", board.name))?;
-    if !status.success() {
-        bail!(
-            "building the QEMU variant of {} failed ({status})",
-            board.name
-        );
-    }
-    let kept = dir.join("firmware").join(build.stem());
-    std::fs::create_dir_all(dir.join("firmware"))?;
-    std::fs::copy(
-        dir.join(board.target).join("release").join(board.name),
-        &kept,
-    )
-    .with_context(|| format!("keeping {}", kept.display()))?;
-    Ok(kept)
-}
-
 /// Runs every board's QEMU scenarios and checks their output.
 fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
     ensure_qemu()?;
@@ -752,99 +558,6 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
             "{failed} QEMU scenario(s) failed (outputs in {})",
             qemu::target_dir(root).join("scenarios").display()
         );
-    }
-    Ok(())
-}
-
-/// Installs QEMU where the machine lacks it and we may (root with apt-get); otherwise says how.
-pub(crate) fn ensure_qemu() -> Result<()> {
-    let found = Command::new("qemu-system-arm")
-        .arg("--version")
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if found {
-        return Ok(());
-    }
-    let is_root = output(Path::new("."), "id", &["-u"])
-        .map(|u| u.trim() == "0")
-        .unwrap_or(false);
-    if is_root {
-        run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
-        run_tool(
-            Path::new("."),
-            "apt-get",
-            &["install", "-y", "-qq", "qemu-system-arm"],
-        )?;
-        return Ok(());
-    }
-    bail!("qemu-system-arm is missing: install it (Debian/Ubuntu: sudo apt-get install qemu-system-arm)")
-}
-
-/// Runs cargo in `dir` and fails unless it succeeds.
-fn cargo(dir: &Path, args: &[&str]) -> Result<()> {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(&cargo)
-        .args(args)
-        .current_dir(dir)
-        // The firmware folders pick their target from their own .cargo/config.toml.
-        .env_remove("CARGO_BUILD_TARGET")
-        .status()
-        .with_context(|| format!("running `cargo {}`", args.join(" ")))?;
-    if !status.success() {
-        bail!(
-            "`cargo {}` in {} failed ({status})",
-            args.join(" "),
-            dir.display()
-        );
-    }
-    Ok(())
-}
-
-/// Installs the thumb targets and components `rust-toolchain.toml` names when the pinned toolchain
-/// was already present without them (rustup only adds them when it installs the toolchain itself).
-fn ensure_toolchain(root: &Path) -> Result<()> {
-    let Ok(installed) = output(root, "rustup", &["target", "list", "--installed"]) else {
-        // No rustup: the toolchain is managed some other way; cargo reports anything missing.
-        return Ok(());
-    };
-    let missing: Vec<&str> = ["thumbv7m-none-eabi", "thumbv7em-none-eabihf"]
-        .into_iter()
-        .filter(|t| !installed.lines().any(|l| l.trim() == *t))
-        .collect();
-    if !missing.is_empty() {
-        let mut args = vec!["target", "add"];
-        args.extend(&missing);
-        run_tool(root, "rustup", &args)?;
-    }
-    let components =
-        output(root, "rustup", &["component", "list", "--installed"]).unwrap_or_default();
-    let wanted = ["llvm-tools", "rust-src", "clippy", "rustfmt"];
-    let lacking: Vec<&str> = wanted
-        .into_iter()
-        .filter(|c| !components.lines().any(|l| l.starts_with(c)))
-        .collect();
-    if !lacking.is_empty() {
-        let mut args = vec!["component", "add"];
-        args.extend(&lacking);
-        run_tool(root, "rustup", &args)?;
-    }
-    Ok(())
-}
-
-fn output(dir: &Path, tool: &str, args: &[&str]) -> Result<String> {
-    let out = Command::new(tool).args(args).current_dir(dir).output()?;
-    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
-}
-
-fn run_tool(dir: &Path, tool: &str, args: &[&str]) -> Result<()> {
-    let status = Command::new(tool)
-        .args(args)
-        .current_dir(dir)
-        .status()
-        .with_context(|| format!("running `{tool} {}`", args.join(" ")))?;
-    if !status.success() {
-        bail!("`{tool} {}` failed ({status})", args.join(" "));
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! running board and read its RTT up-channels. Thin on purpose: nothing here can run without a
 //! probe, so everything else (demultiplexing, decoding, the live view) lives in `bench::live` and
 //! is tested on the host; this module only moves bytes.
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
@@ -165,5 +165,30 @@ impl Source for RttLink {
             }
         }
         Ok(true)
+    }
+}
+
+/// The image a probe writes: for an ELF linked behind AMiRo-BLT a copy with the bootloader's
+/// checksum word written into its slot (else AMiRo-BLT would not start it), else the ELF as built.
+pub fn probe_image(board: &Board, elf: &Path) -> Result<PathBuf> {
+    let bytes = std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?;
+    let behind_bootloader = object::read::File::parse(&*bytes)
+        .map(|f| object::Object::section_by_name(&f, crate::elf::CHECKSUM_SECTION).is_some())
+        .unwrap_or(false);
+    if behind_bootloader {
+        let patched = elf.with_extension("blt.elf");
+        let word = crate::elf::write_checksum(elf, &patched)?;
+        println!(
+            "{}: AMiRo-BLT checksum word {word:#010x} written into {}",
+            board.name,
+            patched.display()
+        );
+        Ok(patched)
+    } else {
+        println!(
+            "{}: bare-chip image (no AMiRo-BLT slot), flashed as built",
+            board.name
+        );
+        Ok(elf.to_path_buf())
     }
 }

@@ -154,11 +154,13 @@ pub fn of_elf(board: &Board, elf: &Path) -> Result<&'static Revision> {
 /// Where a built image of `build` is kept (the cargo output is overwritten by the next revision's
 /// build): `target/firmware/<board>-<revision>.elf`.
 pub fn kept_elf(root: &Path, build: &Build, bare_chip: bool) -> PathBuf {
-    crate::target_dir(root).join("firmware").join(format!(
-        "{}{}.elf",
-        build.stem(),
-        if bare_chip { "-bare" } else { "" }
-    ))
+    crate::workspace::target_dir(root)
+        .join("firmware")
+        .join(format!(
+            "{}{}.elf",
+            build.stem(),
+            if bare_chip { "-bare" } else { "" }
+        ))
 }
 
 #[cfg(test)]

@@ -45,10 +45,30 @@ const POLL: Duration = Duration::from_millis(250);
 /// How many half periods of the monotonic make a run: QEMU's timer model has no compare events,
 /// so each of its update interrupts counts two (`timer_monotonic::advance`): 32 interrupts.
 pub const HALF_PERIODS: u32 = 64;
-/// How long the monotonic's counter may stand still (wall time) before the run fails.
+/// How long the monotonic's counter may stand still, counted in CPU time QEMU got meanwhile (not
+/// wall time: on a loaded machine a correct image's QEMU may wait for a core far longer than it
+/// runs; issue 34).
 const STALL: Duration = Duration::from_secs(15);
-/// The wall-time guard of one board's run.
-const WALL_LIMIT: Duration = Duration::from_secs(120);
+/// The CPU-time guard of one board's run (QEMU's own CPU time, as [`STALL`]).
+const CPU_LIMIT: Duration = Duration::from_secs(120);
+/// The wall-time guard of last resort (a QEMU that gets no CPU at all for this long is not
+/// waited for): far beyond any correct run on a busy 2-core machine.
+const WALL_LIMIT: Duration = Duration::from_secs(900);
+/// How long QEMU's monitor may take to answer one command (wall time).
+const MONITOR_WAIT: Duration = Duration::from_secs(60);
+
+/// The CPU time (user + system) process `pid` has had so far, from `/proc/PID/stat`; `None`
+/// where that cannot be read (then the wall-time guards alone apply).
+fn cpu_time(pid: u32) -> Option<Duration> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name (field 2) is in parentheses and may hold spaces: count from after it.
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks = fields.get(11)?.parse::<u64>().ok()? + fields.get(12)?.parse::<u64>().ok()?;
+    // SAFETY: sysconf has no preconditions.
+    let per_second = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    let per_second = u64::try_from(per_second).ok().filter(|&n| n > 0)?;
+    Some(Duration::from_millis(ticks * 1000 / per_second))
+}
 
 /// Where the stand-in's callbacks start (one `b .` each), right behind its vector table.
 const CALLBACK_CODE: u32 = STANDIN_BASE + 8;
@@ -576,10 +596,12 @@ impl Qmp {
             self.input.flush()?;
         }
         loop {
-            let line = self
-                .lines
-                .recv_timeout(Duration::from_secs(20))
-                .context("QEMU's monitor did not answer (did QEMU exit?)")?;
+            let line = self.lines.recv_timeout(MONITOR_WAIT).with_context(|| {
+                format!(
+                    "QEMU's monitor did not answer {} within {MONITOR_WAIT:?} of wall time (did QEMU exit?)",
+                    send.map_or_else(|| "its greeting".to_string(), |m| format!("`{m}`"))
+                )
+            })?;
             let Ok(value) = serde_json::from_str::<serde_json::Value>(&line) else {
                 continue;
             };
@@ -754,7 +776,10 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
     let snapshot = work.join("ram.bin");
     let started = Instant::now();
     let mut first: Option<u32> = None;
-    let mut last = (0u32, Instant::now());
+    let pid = qmp.child.id();
+    let cpu = || cpu_time(pid).unwrap_or_default();
+    // The counter's last change: its value, the wall time and QEMU's CPU time then.
+    let mut last = (0u32, Instant::now(), cpu());
     let mut log = String::new();
     let mut failures = Vec::new();
     let mut handed_over = None;
@@ -767,8 +792,9 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
         }
         if started.elapsed() > WALL_LIMIT {
             failures.push(format!(
-                "the run did not end within {WALL_LIMIT:?} (the guest stayed stopped at a \
-                 watched input?)"
+                "the run did not end within the wall-time guard of {WALL_LIMIT:?} (QEMU had \
+                 {:.1} s of CPU; the guest stayed stopped at a watched input?)",
+                cpu().as_secs_f64()
             ));
             break;
         }
@@ -804,22 +830,30 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
         }
         let base = *first.get_or_insert(counter);
         if counter != last.0 {
-            last = (counter, Instant::now());
+            last = (counter, Instant::now(), cpu());
         }
         if ending == Ending::Running && counter.wrapping_sub(base) >= HALF_PERIODS {
             break;
         }
-        if last.1.elapsed() > STALL {
+        let stalled_cpu = cpu().saturating_sub(last.2);
+        if stalled_cpu > STALL {
             failures.push(format!(
-                "no progress: the monotonic's half-period counter stayed at {counter} for \
-                 {STALL:?} (pc {pc:#010x})"
+                "no progress: the monotonic's half-period counter stayed at {counter} while QEMU \
+                 ran {:.1} s of CPU (the stall guard is {STALL:?} of QEMU's CPU; {:.1} s of wall \
+                 time; pc {pc:#010x})",
+                stalled_cpu.as_secs_f64(),
+                last.1.elapsed().as_secs_f64()
             ));
             break;
         }
-        if started.elapsed() > WALL_LIMIT {
+        if cpu() > CPU_LIMIT || started.elapsed() > WALL_LIMIT {
             failures.push(format!(
-                "only {} of {HALF_PERIODS} half periods of the monotonic in {WALL_LIMIT:?}",
-                counter.wrapping_sub(base)
+                "only {} of {HALF_PERIODS} half periods of the monotonic when the run's guard \
+                 ended it: {:.1} s of QEMU's CPU (guard {CPU_LIMIT:?}), {:.1} s of wall time \
+                 (guard {WALL_LIMIT:?})",
+                counter.wrapping_sub(base),
+                cpu().as_secs_f64(),
+                started.elapsed().as_secs_f64()
             ));
             break;
         }
@@ -884,9 +918,9 @@ fn loader(file: &Path, addr: u64) -> String {
 /// (built here unless `built` says the caller built them: then their kept ELFs are booted, nothing
 /// is rebuilt); fails unless every one passes.
 pub fn run(root: &Path, builds: &[crate::revision::Build], built: bool) -> Result<()> {
-    crate::ensure_qemu()?;
+    crate::workspace::ensure_qemu()?;
     if !built {
-        crate::build_boards(root, builds, false)?;
+        crate::workspace::build_boards(root, builds, false)?;
     }
     let mut failed = Vec::new();
     for build in builds {
@@ -982,12 +1016,26 @@ pub fn run(root: &Path, builds: &[crate::revision::Build], built: bool) -> Resul
 }
 
 fn work_dir(root: &Path, board: &str) -> PathBuf {
-    crate::target_dir(root).join("smoke").join(board)
+    crate::workspace::target_dir(root).join("smoke").join(board)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_guards_read_a_process_cpu_time() {
+        // This process has run (it is running this test); a process that does not exist has none.
+        let mine = cpu_time(std::process::id()).expect("own /proc/PID/stat");
+        let spin = Instant::now();
+        let mut x = 0u64;
+        while spin.elapsed() < Duration::from_millis(60) {
+            x = x.wrapping_add(std::hint::black_box(1));
+        }
+        assert!(x > 0);
+        assert!(cpu_time(std::process::id()).expect("again") >= mine);
+        assert_eq!(cpu_time(u32::MAX), None);
+    }
 
     #[test]
     fn the_standin_loads_vtor_stack_and_reset_vector_of_the_application() {

@@ -18,15 +18,14 @@ use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU8, AtomicUsize, Ordering}
 
 use cortex_m::interrupt::InterruptNumber;
 use critical_section::Mutex;
-use rtic_time::timer_queue::TimerQueueBackend;
 
 use super::{HostFile, TICK_US};
 use crate::can::{Completion, RxFrame, Transmit};
 
 pub use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::robot_link::{
-    Down, Queued, Up, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW,
-    DRIVES_PD_LOW, DRIVES_SYNC_LOW,
+    Down, Queued, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW,
+    DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW,
 };
 
 const NO_FILE: usize = usize::MAX;
@@ -148,6 +147,8 @@ pub(super) fn connect() -> bool {
     };
     DOWN.store(down.0, Ordering::Relaxed);
     UP.store(up.0, Ordering::Relaxed);
+    // The host's exchange says when the board next trades: no tick needed in between.
+    super::timer::set_tickless();
     true
 }
 
@@ -158,16 +159,49 @@ pub fn active() -> bool {
 
 /// Records what this board drives on SYS_SYNC_N (`true`: pulled low).
 pub(super) fn drive_sync(low: bool) {
-    if low {
-        DRIVES.fetch_or(DRIVES_SYNC_LOW, Ordering::SeqCst);
+    let before = if low {
+        DRIVES.fetch_or(DRIVES_SYNC_LOW, Ordering::SeqCst)
     } else {
-        DRIVES.fetch_and(!DRIVES_SYNC_LOW, Ordering::SeqCst);
+        DRIVES.fetch_and(!DRIVES_SYNC_LOW, Ordering::SeqCst)
+    };
+    if (before & DRIVES_SYNC_LOW != 0) != low {
+        to_report();
     }
 }
 
 /// Drives SYS_PD_N low (PowerManagement's shutdown request); it stays low.
 pub fn drive_power_down() {
-    DRIVES.fetch_or(DRIVES_PD_LOW, Ordering::SeqCst);
+    if DRIVES.fetch_or(DRIVES_PD_LOW, Ordering::SeqCst) & DRIVES_PD_LOW == 0 {
+        to_report();
+    }
+}
+
+/// Something the host must hear of at the next boundary happened (a frame into a mailbox, an
+/// abort request, a line driven): a board sent ahead ([`DOWN_EARLY`]) reports there.
+static TO_REPORT: AtomicBool = AtomicBool::new(false);
+/// The exchange's waker while it waits ahead.
+static REPORT_WAKER: Mutex<RefCell<Option<core::task::Waker>>> = Mutex::new(RefCell::new(None));
+
+fn to_report() {
+    TO_REPORT.store(true, Ordering::SeqCst);
+    if let Some(waker) = critical_section::with(|cs| REPORT_WAKER.borrow_ref_mut(cs).take()) {
+        waker.wake();
+    }
+}
+
+/// Waits until `at_us`, or until there is something [`to_report`].
+async fn wait_until_or_report(at_us: u64) {
+    use core::future::Future;
+    let mut delay = core::pin::pin!(super::timer::platform_delay_until(at_us.div_ceil(TICK_US)));
+    core::future::poll_fn(|cx| {
+        critical_section::with(|cs| *REPORT_WAKER.borrow_ref_mut(cs) = Some(cx.waker().clone()));
+        if TO_REPORT.load(Ordering::SeqCst) {
+            return core::task::Poll::Ready(());
+        }
+        delay.as_mut().poll(cx)
+    })
+    .await;
+    critical_section::with(|cs| REPORT_WAKER.borrow_ref_mut(cs).take());
 }
 
 /// Whether SYS_SYNC_N reads low on the robot's line (the wired-AND of every module), as of the
@@ -203,6 +237,7 @@ pub(super) fn transmit(frame: &amiro_can::Frame) -> Transmit {
                     done: false,
                     abort: Abort::None,
                 });
+                to_report();
                 Transmit::Queued
             }
             // All three hold frames: as the robot's driver (`bxcan::Mailboxes`), the least urgent
@@ -218,6 +253,7 @@ pub(super) fn transmit(frame: &amiro_can::Frame) -> Transmit {
                 if let Some(m) = least {
                     if frame.id().raw() < m.frame.id().raw() && m.abort == Abort::None {
                         m.abort = Abort::Requested;
+                        to_report();
                     }
                 }
                 Transmit::Busy
@@ -271,10 +307,7 @@ unsafe impl InterruptNumber for Irq {
 /// Waits for the tick at `at_us` without a trace record: the exchange is the platform's, not a
 /// task of the app's.
 async fn wait_until(at_us: u64) {
-    use rtic_monotonics::systick::SystickBackend;
-    SystickBackend::timer_queue()
-        .delay_until(at_us.div_ceil(TICK_US))
-        .await;
+    super::timer::platform_delay_until(at_us.div_ceil(TICK_US)).await;
 }
 
 /// How long this board will do nothing, in µs from now: until the apps' earliest deadline, or 0
@@ -326,11 +359,22 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
     );
     let mut boundary = 0;
     let mut pd_seen = false;
+    let mut early = false;
     loop {
         boundary += QUANTUM_US;
+        if early {
+            // Sent ahead: back at the first boundary after something to report.
+            wait_until_or_report(boundary).await;
+            if TO_REPORT.load(Ordering::SeqCst) {
+                let first = (super::now_us() / QUANTUM_US + 1) * QUANTUM_US;
+                boundary = boundary.min(first);
+            }
+        }
         wait_until(boundary).await;
+        TO_REPORT.store(false, Ordering::SeqCst);
         let mut report = Up {
             now_us: super::now_us(),
+            at_us: boundary,
             ..Up::default()
         };
         critical_section::with(|cs| {
@@ -368,6 +412,7 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         }
         let answer = Down::decode(&answer);
         let flags = answer.flags;
+        early = flags & DOWN_EARLY != 0;
         // The host skips quanta in which no board can act: the next exchange is further on.
         boundary = boundary.max(answer.next_us.saturating_sub(QUANTUM_US));
         SYNC_READS_LOW.store(flags & DOWN_SYNC_LOW != 0, Ordering::SeqCst);
@@ -464,13 +509,36 @@ pub async fn parked<F: core::future::Future>(future: F) -> F::Output {
                 &PARKED_VTABLE,
             ))
         };
-        let result = future
-            .as_mut()
-            .poll(&mut core::task::Context::from_waker(&waker));
-        if result.is_ready() {
-            PARKED.store(false, Ordering::SeqCst);
+        loop {
+            let result = future
+                .as_mut()
+                .poll(&mut core::task::Context::from_waker(&waker));
+            if result.is_ready() {
+                PARKED.store(false, Ordering::SeqCst);
+                return result;
+            }
+            if !active() {
+                return result;
+            }
+            // In a robot run the core sleeps here until the wait ends. RTIC's priority-0 executor
+            // would otherwise spin in thread mode, and QEMU would emulate that spin for every
+            // virtual µs of the board's idle time (the most of its wall time in a robot run); this
+            // task is the board's only one at priority 0, so there is nothing else to poll. An
+            // interrupt that ends the wait (its waker clears PARKED) ends the sleep; the check and
+            // the WFI are under PRIMASK so no wake-up falls between them.
+            loop {
+                cortex_m::interrupt::disable();
+                if !PARKED.load(Ordering::SeqCst) {
+                    // SAFETY: re-enables what the line above disabled, outside any critical section.
+                    unsafe { cortex_m::interrupt::enable() };
+                    break;
+                }
+                cortex_m::asm::wfi();
+                // SAFETY: as above; the pending interrupt that ended the WFI runs now.
+                unsafe { cortex_m::interrupt::enable() };
+            }
+            PARKED.store(true, Ordering::SeqCst);
         }
-        result
     })
     .await
 }

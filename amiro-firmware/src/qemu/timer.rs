@@ -1,34 +1,212 @@
-//! The QEMU build's timers: SysTick ticking every [`TICK_US`] µs drives two timer queues.
+//! The QEMU build's clock and timers: SysTick counts core cycles, and a tick is [`TICK_US`] µs of
+//! them; two timer queues run over the tick count.
 //!
 //! - The apps' ([`AppTimer`], behind `mono::QemuClock`): every task's delay and timeout. Its
 //!   earliest deadline is known ([`next_deadline_us`]), so a robot run can tell the host how long
 //!   the board will sleep.
-//! - The platform's own (rtic-monotonics' `SystickBackend` queue): the robot exchange and the
-//!   stimulus replay wait in it, so their waits never hide the apps' next deadline.
-use core::cell::Cell;
+//! - The platform's own ([`PlatformTimer`]): the robot exchange and the stimulus replay wait in
+//!   it, so their waits never hide the apps' next deadline.
+//!
+//! **Periodic or tickless.** A single-board run interrupts every tick (SysTick's reload is one
+//! tick), as it always did: the scenarios' cost figures include that interrupt. A robot run
+//! ([`set_tickless`], from `robot::connect`) interrupts only when something is due: after every
+//! interrupt SysTick is restarted to end at the earlier of the two queues' deadlines (at most one
+//! 24-bit reload, ≈ 100–140 ms, on). Under `-icount` an idle board then costs QEMU one interrupt per
+//! deadline instead of 100 000 per virtual second (docs/qemu.md, "Speed").
+//!
+//! Periodic, the tick count is one per wrap (COUNTFLAG, as rtic-monotonics' SysTick counts it: the
+//! cheapest reading, which the scenarios' cost figures were measured with). Tickless, the clock is
+//! the tick and the cycles into it where the running period started, plus how far SysTick has
+//! counted down; a wrap is seen by COUNTFLAG (reading it clears it: only this module reads it), so a
+//! wrap whose interrupt has not run yet is counted. A restart costs the few cycles between the read
+//! and the write of the counter (the board's clock runs that much behind QEMU's), the same each
+//! time: the run stays deterministic. No tickless reading goes below the one before (QEMU updates
+//! SysTick lazily around a wrap: a reading there can come out a little early).
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicBool, Ordering};
 
-use critical_section::Mutex;
-use rtic_monotonics::systick::{SystClkSource, SystickBackend, SYST};
+use portable_atomic::AtomicU64;
+
+use critical_section::{CriticalSection, Mutex};
 use rtic_time::timer_queue::{TimerQueue, TimerQueueBackend};
 
-use super::TICK_US;
+use super::{CORE_CLOCK_HZ, TICK_US};
 
-/// The apps' timer queue over SysTick's tick count.
+/// Core cycles per tick.
+pub const CYCLES_PER_TICK: u64 = CORE_CLOCK_HZ as u64 * TICK_US / 1_000_000;
+/// The longest period SysTick's 24-bit reload allows, in cycles.
+const MAX_PERIOD: u64 = 0x0100_0000;
+
+const SYST_CSR: *mut u32 = 0xE000_E010 as *mut u32;
+const SYST_RVR: *mut u32 = 0xE000_E014 as *mut u32;
+const SYST_CVR: *mut u32 = 0xE000_E018 as *mut u32;
+const CSR_COUNTFLAG: u32 = 1 << 16;
+
+struct Clock {
+    /// The tick the running period started in …
+    tick: u64,
+    /// … and how many cycles into it (0 in periodic mode: every period is one whole tick).
+    offset: u32,
+    /// The running period's reload: it wraps `reload + 1` cycles after its start (SysTick's RVR
+    /// holds the same value).
+    reload: u32,
+    /// The latest readings in cycles (the trace clock's) and in ticks, which no later one goes
+    /// below.
+    last_cycles: u64,
+    last_tick: u64,
+}
+
+static CLOCK: Mutex<RefCell<Clock>> = Mutex::new(RefCell::new(Clock {
+    tick: 0,
+    offset: 0,
+    reload: CYCLES_PER_TICK as u32 - 1,
+    last_cycles: 0,
+    last_tick: 0,
+}));
+/// The tick count of periodic mode: one per wrap, as rtic-monotonics' SysTick counts (the apps read
+/// the clock often, and every instruction here is virtual time they lose; the scenarios' cost
+/// figures were measured with that count).
+static PERIODIC: AtomicU64 = AtomicU64::new(0);
+/// The apps' earliest deadline in ticks (`u64::MAX`: none).
+static APP_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
+/// The platform's earliest deadline in ticks (`u64::MAX`: none).
+static PLATFORM_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
+static TICKLESS: AtomicBool = AtomicBool::new(false);
+const PER_TICK: u32 = CYCLES_PER_TICK as u32;
+
+/// Counts a wrap if SysTick has wrapped since the last look (reading the status clears
+/// COUNTFLAG, which nothing but this function reads); `true` if it had.
+fn count_wrap(clock: &mut Clock) -> bool {
+    // SAFETY: a read of SysTick's status register.
+    let csr = unsafe { core::ptr::read_volatile(SYST_CSR) };
+    if csr & CSR_COUNTFLAG == 0 {
+        return false;
+    }
+    if clock.offset == 0 && clock.reload == PER_TICK - 1 {
+        clock.tick += 1;
+    } else {
+        let total = u64::from(clock.offset) + u64::from(clock.reload) + 1;
+        clock.tick += total / CYCLES_PER_TICK;
+        clock.offset = (total % CYCLES_PER_TICK) as u32;
+    }
+    true
+}
+
+/// Where the clock is: the tick and the cycles into it.
+fn position(_cs: CriticalSection<'_>, clock: &mut Clock) -> (u64, u32) {
+    let wrapped = count_wrap(clock);
+    // SAFETY: a read of SysTick's current value, which has no side effects.
+    let value = unsafe { core::ptr::read_volatile(SYST_CVR) };
+    // The counter reads 0 for one cycle after a wrap (then reloads), and also once its period has
+    // ended but QEMU has not yet run the wrap: then the period is at its last cycle.
+    let into = match value {
+        0 if wrapped => 0,
+        0 => clock.reload,
+        v => clock.reload.saturating_sub(v) + 1,
+    };
+    let cycles = clock.offset + into;
+    (clock.tick + u64::from(cycles / PER_TICK), cycles % PER_TICK)
+}
+
+/// Whether SysTick has wrapped since the last look (reading the status clears COUNTFLAG).
+fn has_wrapped() -> bool {
+    // SAFETY: a read of SysTick's status register.
+    unsafe { core::ptr::read_volatile(SYST_CSR) & CSR_COUNTFLAG != 0 }
+}
+
+/// Core cycles since the clock started (the trace clock).
+pub fn now_cycles() -> u64 {
+    if !TICKLESS.load(Ordering::Relaxed) {
+        loop {
+            // The same count before and after the read of the counter: no wrap came between.
+            let ticks = now_ticks();
+            // SAFETY: a read of SysTick's current value, which has no side effects.
+            let value = unsafe { core::ptr::read_volatile(SYST_CVR) };
+            if now_ticks() == ticks {
+                return ticks * CYCLES_PER_TICK
+                    + (CYCLES_PER_TICK - 1).saturating_sub(u64::from(value));
+            }
+        }
+    }
+    critical_section::with(|cs| {
+        let clock = &mut *CLOCK.borrow_ref_mut(cs);
+        let (tick, into) = position(cs, clock);
+        let now = (tick * CYCLES_PER_TICK + u64::from(into)).max(clock.last_cycles);
+        clock.last_cycles = now;
+        now
+    })
+}
+
+/// Ticks since the clock started.
+pub fn now_ticks() -> u64 {
+    if !TICKLESS.load(Ordering::Relaxed) {
+        if has_wrapped() {
+            PERIODIC.fetch_add(1, Ordering::AcqRel);
+        }
+        return PERIODIC.load(Ordering::Relaxed);
+    }
+    critical_section::with(|cs| {
+        let clock = &mut *CLOCK.borrow_ref_mut(cs);
+        let tick = position(cs, clock).0.max(clock.last_tick);
+        clock.last_tick = tick;
+        tick
+    })
+}
+
+/// Makes SysTick interrupt only when a deadline is due (robot runs); takes effect at once.
+pub(super) fn set_tickless() {
+    critical_section::with(|cs| {
+        let clock = &mut *CLOCK.borrow_ref_mut(cs);
+        if has_wrapped() {
+            PERIODIC.fetch_add(1, Ordering::AcqRel);
+        }
+        // The running period is a periodic one: one tick from the count's last wrap.
+        clock.tick = PERIODIC.load(Ordering::Relaxed);
+        clock.offset = 0;
+        clock.reload = PER_TICK - 1;
+        TICKLESS.store(true, Ordering::SeqCst);
+    });
+    cortex_m::peripheral::SCB::set_pendst();
+}
+
+/// Restarts SysTick to wrap at the earlier queue deadline (or a full reload on).
+fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
+    let (tick, into) = position(cs, clock);
+    let due = APP_DUE
+        .load(Ordering::Relaxed)
+        .min(PLATFORM_DUE.load(Ordering::Relaxed));
+    let period = due
+        .saturating_sub(tick)
+        .saturating_mul(CYCLES_PER_TICK)
+        .saturating_sub(u64::from(into))
+        .clamp(2, MAX_PERIOD);
+    let reload = (period - 1) as u32;
+    // SAFETY: SysTick's reload and current value; writing the current value clears it and
+    // COUNTFLAG, and the counter reloads from RVR on the next cycle. The position was read before:
+    // the cycles in between are the restart's cost (module docs).
+    unsafe {
+        core::ptr::write_volatile(SYST_RVR, reload);
+        core::ptr::write_volatile(SYST_CVR, 0);
+    }
+    clock.tick = tick;
+    clock.offset = into;
+    clock.reload = reload;
+}
+
+/// The apps' timer queue over the tick count.
 pub struct AppTimer;
 
 static APP_QUEUE: TimerQueue<AppTimer> = TimerQueue::new();
-/// The tick of the apps' earliest deadline (`u64::MAX`: none queued).
-static NEXT_TICK: Mutex<Cell<u64>> = Mutex::new(Cell::new(u64::MAX));
 
 impl TimerQueueBackend for AppTimer {
     type Ticks = u64;
 
     fn now() -> u64 {
-        SystickBackend::now()
+        now_ticks()
     }
 
     fn set_compare(at: u64) {
-        critical_section::with(|cs| NEXT_TICK.borrow(cs).set(at));
+        APP_DUE.store(at, Ordering::Relaxed);
     }
 
     fn clear_compare_flag() {}
@@ -42,7 +220,7 @@ impl TimerQueueBackend for AppTimer {
     fn enable_timer() {}
 
     fn disable_timer() {
-        critical_section::with(|cs| NEXT_TICK.borrow(cs).set(u64::MAX));
+        APP_DUE.store(u64::MAX, Ordering::Relaxed);
     }
 
     fn timer_queue() -> &'static TimerQueue<Self> {
@@ -50,21 +228,63 @@ impl TimerQueueBackend for AppTimer {
     }
 }
 
-/// Starts SysTick at one tick per [`TICK_US`] and both queues.
-pub(super) fn start(syst: SYST, core_clock_hz: u32) {
-    SystickBackend::_start(
-        syst,
-        core_clock_hz,
-        (1_000_000 / TICK_US) as u32,
-        SystClkSource::Core,
-    );
+/// The platform's timer queue (the robot exchange, the stimulus replay) over the tick count.
+pub struct PlatformTimer;
+
+static PLATFORM_QUEUE: TimerQueue<PlatformTimer> = TimerQueue::new();
+
+impl TimerQueueBackend for PlatformTimer {
+    type Ticks = u64;
+
+    fn now() -> u64 {
+        now_ticks()
+    }
+
+    fn set_compare(at: u64) {
+        PLATFORM_DUE.store(at, Ordering::Relaxed);
+    }
+
+    fn clear_compare_flag() {}
+
+    fn pend_interrupt() {
+        cortex_m::peripheral::SCB::set_pendst();
+    }
+
+    fn on_interrupt() {}
+
+    fn enable_timer() {}
+
+    fn disable_timer() {
+        PLATFORM_DUE.store(u64::MAX, Ordering::Relaxed);
+    }
+
+    fn timer_queue() -> &'static TimerQueue<Self> {
+        &PLATFORM_QUEUE
+    }
+}
+
+/// Waits on the platform's queue until tick `at` (no trace record: the platform's wait, not a
+/// task of the app's).
+pub(super) async fn platform_delay_until(at: u64) {
+    PLATFORM_QUEUE.delay_until(at).await;
+}
+
+/// Starts SysTick at one tick per [`TICK_US`] (periodic) and both queues.
+pub(super) fn start(mut syst: cortex_m::peripheral::SYST) {
+    use cortex_m::peripheral::syst::SystClkSource;
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(PER_TICK - 1);
+    syst.clear_current();
+    syst.enable_interrupt();
+    syst.enable_counter();
+    PLATFORM_QUEUE.initialize(PlatformTimer);
     APP_QUEUE.initialize(AppTimer);
 }
 
 /// The apps' earliest deadline in µs (`u64::MAX`: none). A queue whose head changed pends SysTick,
 /// which updates it, so it is current unless SysTick is pending.
 pub(super) fn next_deadline_us() -> u64 {
-    critical_section::with(|cs| NEXT_TICK.borrow(cs).get()).saturating_mul(TICK_US)
+    APP_DUE.load(Ordering::Relaxed).saturating_mul(TICK_US)
 }
 
 #[no_mangle]
@@ -72,7 +292,10 @@ pub(super) fn next_deadline_us() -> u64 {
 unsafe extern "C" fn SysTick() {
     // SAFETY: called only from the SysTick exception, which drives both queues.
     unsafe {
-        SystickBackend::timer_queue().on_monotonic_interrupt();
+        PLATFORM_QUEUE.on_monotonic_interrupt();
         APP_QUEUE.on_monotonic_interrupt();
+    }
+    if TICKLESS.load(Ordering::Relaxed) {
+        critical_section::with(|cs| restart(cs, &mut CLOCK.borrow_ref_mut(cs)));
     }
 }

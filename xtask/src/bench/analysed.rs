@@ -77,7 +77,7 @@ pub(super) fn analysis_for(
     let path = match scenario_name {
         Some(name) => scenario::find_scenario(root, name),
         None => {
-            let dir = crate::target_dir(root).join("bench");
+            let dir = crate::workspace::target_dir(root).join("bench");
             std::fs::create_dir_all(&dir)?;
             // One file per call: measurements run side by side (tests, the live view).
             static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
@@ -185,7 +185,7 @@ mod tests {
 
     #[test]
     fn the_stimulus_of_the_thesis_one_shots_is_read_as_it_is_replayed() {
-        let root = crate::workspace_root();
+        let root = crate::workspace::workspace_root();
         let frames =
             crate::qemu::read_stimulus(&root.join("diwheeldrive/qemu/admission-one-shots.log"))
                 .unwrap();
@@ -198,7 +198,7 @@ mod tests {
 
     #[test]
     fn what_the_board_admitted_the_bench_bounds() {
-        let root = crate::workspace_root();
+        let root = crate::workspace::workspace_root();
         let path = thesis_one_shots(&root);
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         // The board's own admission decides on the production model: it admits the set.
@@ -245,7 +245,7 @@ mod tests {
 
     #[test]
     fn a_publisher_run_is_held_to_the_sum_of_its_topics_bounds() {
-        let root = crate::workspace_root();
+        let root = crate::workspace::workspace_root();
         let path = thesis_one_shots(&root);
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         let traced = analyse_scenario(

@@ -325,26 +325,7 @@ pub fn read(bytes: &[u8], default_hz: u64) -> Result<Capture> {
     Ok(stream.finish())
 }
 
-/// The bytes of the `# T` lines (binary records printed in hex) of a QEMU console, each record
-/// followed by its delimiter; other lines are left out.
-pub fn console_record_bytes(text: &str) -> Vec<u8> {
-    let mut out = Vec::new();
-    for line in text.lines() {
-        let Some(hex) = line.trim().strip_prefix("# T ") else {
-            continue;
-        };
-        for pair in hex.trim().as_bytes().chunks(2) {
-            // A damaged line decodes to whatever it decodes to; the reader rejects the record.
-            let byte = std::str::from_utf8(pair)
-                .ok()
-                .and_then(|p| u8::from_str_radix(p, 16).ok())
-                .unwrap_or(0);
-            out.push(byte);
-        }
-        out.push(0);
-    }
-    out
-}
+pub use amiro_robot::log::console_record_bytes;
 
 /// Reads a QEMU run: the task records from its `trace.bin`, the handler events from the `# T`
 /// lines of its console `text` (records in the same format, on the same clock, merged in time

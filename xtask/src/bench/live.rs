@@ -340,6 +340,17 @@ pub fn view(
 /// Clears the terminal and puts the cursor home: the next view replaces the last.
 pub const REDRAW: &str = "\x1b[H\x1b[2J";
 
+/// A flag the first Ctrl-C sets (a live stream then ends cleanly, its report written); a second
+/// Ctrl-C ends the process as usual.
+pub fn interrupt_flag() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    use signal_hook::consts::SIGINT;
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    signal_hook::flag::register_conditional_shutdown(SIGINT, 130, std::sync::Arc::clone(&flag))
+        .and_then(|_| signal_hook::flag::register(SIGINT, std::sync::Arc::clone(&flag)))
+        .context("installing the Ctrl-C handler")?;
+    Ok(flag)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

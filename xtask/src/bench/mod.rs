@@ -573,12 +573,12 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
     }
     if args.qemu {
         let stimulus = args.stimulus.as_ref().context("--qemu needs --stimulus")?;
-        crate::ensure_qemu()?;
-        let elf = crate::build_qemu(root, &build)?;
+        crate::workspace::ensure_qemu()?;
+        let elf = crate::workspace::build_qemu(root, &build)?;
         let frames = crate::qemu::read_stimulus(stimulus)?;
         let duration = match &args.duration {
             Some(d) => crate::qemu::parse_duration(d)?,
-            None => crate::scenarios::duration_of(stimulus).unwrap_or(2_000_000),
+            None => crate::qemu::duration_of(stimulus).unwrap_or(2_000_000),
         };
         let work = crate::qemu::fresh_work_dir(root, board.name);
         crate::qemu::run(&elf, board.qemu_machine, &frames, duration, &work)?;
@@ -609,7 +609,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "capture".into());
         let dir = args.out.clone().unwrap_or_else(|| {
-            crate::target_dir(root)
+            crate::workspace::target_dir(root)
                 .join("bench")
                 .join(board.name)
                 .join(&stem)
@@ -694,12 +694,12 @@ fn stream_live(
             ),
             _ => {
                 let build = revision_build(board, args.revision.as_deref())?;
-                let link = crate::probe_link(root, &build, args.attach, args.probe.as_deref())?;
+                let link = probe_link(root, &build, args.attach, args.probe.as_deref())?;
                 let stamp = std::time::SystemTime::now()
                     .duration_since(std::time::UNIX_EPOCH)
                     .map(|d| d.as_secs())
                     .unwrap_or(0);
-                let dir = crate::target_dir(root)
+                let dir = crate::workspace::target_dir(root)
                     .join("bench")
                     .join(board.name)
                     .join(format!("live-{stamp}"));
@@ -714,7 +714,7 @@ fn stream_live(
             }
         };
     // Only now: Ctrl-C during the build or the flashing stops the command as usual.
-    let interrupted = crate::interrupt_flag()?;
+    let interrupted = live::interrupt_flag()?;
     let started = Instant::now();
     let terminal = std::io::IsTerminal::is_terminal(&std::io::stdout());
     let stop = live::Stop {
@@ -843,4 +843,40 @@ pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)
         );
     }
     Ok(())
+}
+
+/// The probe path of `cargo xtask bench`: builds the board's traced firmware (feature
+/// `task-trace`) and flashes it, or with `attach` attaches to the running one; then finds its RTT
+/// control block.
+pub fn probe_link(
+    root: &Path,
+    build: &crate::revision::Build,
+    attach: bool,
+    selector: Option<&str>,
+) -> Result<crate::probe::RttLink> {
+    let board = build.board;
+    let elf_path = crate::workspace::firmware_elf(root, board);
+    if attach {
+        let session = crate::probe::session(board, selector, false)?;
+        // The last build's ELF locates the RTT block, if it is there; else RAM is scanned.
+        let bytes = std::fs::read(&elf_path).ok();
+        return crate::probe::RttLink::attach(session, bytes.as_deref());
+    }
+    crate::workspace::ensure_toolchain(root)?;
+    build.select_models();
+    let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
+    args.extend(build.feature_args(&["task-trace"]));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    crate::workspace::cargo(&root.join(board.name), &args)
+        .with_context(|| format!("building {} with task-trace", build.stem()))?;
+    crate::elf::inspect(board, &elf_path, true)?;
+    let image = crate::probe::probe_image(board, &elf_path)?;
+    println!(
+        "flashing the traced build of {} ({}) through the probe",
+        board.name, board.chip
+    );
+    let mut session = crate::probe::session(board, selector, true)?;
+    crate::probe::flash(&mut session, &image)?;
+    let bytes = std::fs::read(&image).with_context(|| format!("reading {}", image.display()))?;
+    crate::probe::RttLink::attach(session, Some(&bytes))
 }

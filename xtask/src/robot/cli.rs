@@ -3,9 +3,9 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
-use super::{stimulus, Firmware};
+use amiro_robot::stimulus;
 
 /// `cargo xtask robot` options.
 #[derive(clap::Args, Debug)]
@@ -26,43 +26,38 @@ pub struct RobotArgs {
     /// Fail when a message's observed worst response exceeds its Davis bound (the bus report).
     #[arg(long)]
     pub check: bool,
+    /// Live (`--slcan`): print the boards' trace and log lines and the frames on stdout too (off by
+    /// default: printing them costs pace; everything is in the run's output.log either way).
+    #[arg(long)]
+    pub trace: bool,
+    /// Measure instead: an idle robot, the thesis demo and a babbling board, each for
+    /// `--duration` (default 2s) of virtual time; prints exchanges per virtual second, wall
+    /// seconds per virtual second and where the wall time goes.
+    #[arg(long, conflicts_with_all = ["slcan", "stimulus", "check"])]
+    pub bench: bool,
 }
 
-/// The robot revision `cargo xtask robot` emulates.
-pub const ROBOT_REVISION: &str = "1-1";
-
-/// Builds the boards' QEMU builds (one cargo invocation each) in node order.
-pub fn firmware(root: &Path) -> Result<[Firmware; 3]> {
-    let mut out = Vec::new();
-    for name in stimulus::BOARDS {
-        let board = crate::boards::by_name(name).with_context(|| format!("no board {name}"))?;
-        // The robot runs revision 1-1 (DiWheelDrive 1-1 with its L3G4200D, LIS331DLH and HMC5883L; the
-        // robot scenarios' thesis demo is not schedulable on DiWheelDrive 1-2's BNO055, docs/analysis.md).
-        let build =
-            crate::revision::plan(&[board], &crate::revision::Choice::Robot(ROBOT_REVISION))?
-                .into_iter()
-                .next()
-                .with_context(|| format!("no revision-{ROBOT_REVISION} image of {name}"))?;
-        out.push(Firmware {
-            elf: crate::build_qemu(root, &build)?,
-            machine: board.qemu_machine,
-        });
-    }
-    out.try_into()
-        .map_err(|_| anyhow::anyhow!("three boards expected"))
+/// Prints a run's lines as they come; a live run without `--trace` only the bus's and the platforms' notes.
+struct Print {
+    all: bool,
 }
 
-struct Print;
-
-impl super::Sink for Print {
+impl amiro_robot::Sink for Print {
     fn line(&mut self, line: &str) {
-        println!("{line}");
+        // A live run without `--trace` still says what the bus and the platforms say (`bus:` notes,
+        // each board's `# qemu:` lines: its start, its end line with its receive losses).
+        if self.all || line.starts_with("bus:") || line.contains(": # qemu:") {
+            println!("{line}");
+        }
     }
 }
 
 /// Runs `cargo xtask robot`.
 pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
-    crate::ensure_qemu()?;
+    crate::workspace::ensure_qemu()?;
+    if args.bench {
+        return super::bench::command(root, args.duration.as_deref()).map(|()| true);
+    }
     let (actions, header) = match &args.stimulus {
         Some(path) => stimulus::read(path)?,
         None => (Vec::new(), None),
@@ -73,25 +68,27 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         None if args.slcan => u64::MAX / 2,
         None => header.unwrap_or(2_000_000),
     };
-    let firmware = firmware(root)?;
+    let firmware = super::firmware::firmware(root)?;
     let work = crate::qemu::fresh_work_dir(root, "robot");
     let mut live = if args.slcan {
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         signal_hook::flag::register(signal_hook::consts::SIGINT, stop.clone())?;
-        let slcan = super::slcan::Slcan::new()?;
+        let slcan = amiro_robot::slcan::Slcan::new()?;
         println!("slcan: {}", slcan.path());
         std::io::Write::flush(&mut std::io::stdout())?;
-        Some(super::Live { slcan, stop })
+        Some(amiro_robot::Live { slcan, stop })
     } else {
         None
     };
     let started = Instant::now();
-    let outcome = super::run(
+    let outcome = amiro_robot::run(
         &firmware,
         &actions,
         duration,
         &work,
-        &mut Print,
+        &mut Print {
+            all: !args.slcan || args.trace,
+        },
         live.as_mut(),
     )?;
     let duration = outcome.ended_at;
@@ -99,8 +96,8 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
     std::fs::write(work.join("output.log"), &outcome.text)?;
     let (bus, _) = crate::qemu::split_output(&outcome.text);
     std::fs::write(work.join("bus.log"), bus)?;
-    let report = super::report::analyse(&outcome.transfers, duration);
-    let table = super::report::render(&report);
+    let report = amiro_robot::report::analyse(&outcome.transfers, duration);
+    let table = amiro_robot::report::render(&report);
     print!("{table}");
     std::fs::write(work.join("bus-report.txt"), &table)?;
     let exceeded = report.iter().filter(|l| l.exceeds()).count();
@@ -110,11 +107,24 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         wall / virtual_s.max(1e-9)
     );
     eprintln!(
-        "robot: {} exchanges for {} quanta of {} µs (the rest skipped: no board could act)",
-        outcome.exchanges,
-        duration / super::QUANTUM_US,
-        super::QUANTUM_US
+        "robot: {} board exchanges ({:?} per board, {} caught up from a wait) at {} of {} boundaries of {} µs; {:.1} s waiting for the boards' emulation",
+        outcome.work.exchanges,
+        outcome.work.per_board,
+        outcome.work.catch_ups,
+        outcome.work.steps,
+        duration / amiro_robot::QUANTUM_US,
+        amiro_robot::QUANTUM_US,
+        outcome.work.waiting_us as f64 / 1e6
     );
+    if let Some(pace) = outcome.pace {
+        eprintln!(
+            "robot: live: real-time factor {:.3}, worst lag {:.1} ms, {} time(s) behind by more than {} ms",
+            pace.factor,
+            pace.worst_lag_us as f64 / 1e3,
+            pace.behind_episodes,
+            amiro_robot::pace::LAG_LIMIT.as_millis()
+        );
+    }
     eprintln!("bus log (candump -l): {}", work.join("bus.log").display());
     if exceeded > 0 {
         eprintln!("bus report: {exceeded} message(s) beyond their Davis bound");

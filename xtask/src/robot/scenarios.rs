@@ -4,9 +4,9 @@ use std::path::Path;
 
 use anyhow::{bail, ensure, Context, Result};
 
-use super::{Outcome, Transfer, NODES, OPERATOR};
 use crate::qemu::TimedFrame;
 use crate::scenarios::RunOutput;
+use amiro_robot::{Outcome, Transfer, NODES, OPERATOR};
 
 /// One robot scenario.
 pub struct Scenario {
@@ -413,7 +413,17 @@ fn adapter_flood(run: &Run) -> Result<String> {
         flood == 400,
         "{flood} of the adapter's 400 frames on the bus"
     );
-    let magnetometer = magnetometer_on_grid(run, 160, 400)?;
+    // The slack is the spread between the earliest and the latest completion on the grid: well
+    // under 900 µs, so a skipped or an extra sample still fails. The latest: the flood command
+    // DiWheelDrive is handling when its sample is due (one per 400 µs at most, ≈ 200 µs each with
+    // its trace), the sample itself (≈ 240 µs), a frame already on the bus and the next flood frame,
+    // which wins against 0x605 (≈ 111 µs each), then 0x605 (≈ 80 µs): ≈ 740 µs after the release;
+    // the earliest ≈ 240 µs. Measured: under 400 µs while every board also spent time on a 10 µs
+    // tick, on an exchange for every frame on the bus and on spinning in RTIC's priority-0
+    // executor; ≈ 500 µs without them (issue 34: tickless, lookahead, the idle core asleep, as on
+    // the chip), where DiWheelDrive meets the flood at other phases. Each frame's response is held
+    // to its Davis bound as well (`bus_bounds`).
+    let magnetometer = magnetometer_on_grid(run, 160, 600)?;
     let samples = ring_samples(run, 0x61F, 10_000)?;
     Ok(format!(
         "400 flood frames; {} magnetometer frames on the 900 µs grid, {samples} ring samples on the 10 ms grid",
@@ -462,7 +472,7 @@ fn babbling_board(run: &Run) -> Result<String> {
     // worst response stays within the Davis bound of the traffic as it was (the babbling frame
     // counts as lower-priority blocking).
     let magnetometer = magnetometer_on_grid(run, 150, 400)?;
-    let report = super::report::analyse(&run.outcome.transfers, run.outcome.ended_at);
+    let report = amiro_robot::report::analyse(&run.outcome.transfers, run.outcome.ended_at);
     let line = report
         .iter()
         .find(|l| l.id == 0x605)
@@ -706,12 +716,16 @@ fn bus_fault(run: &Run) -> Result<String> {
 }
 
 /// Runs scenario `name` twice and compares everything both runs printed.
-fn same_bytes_twice(root: &Path, firmware: &[super::Firmware; 3], name: &str) -> Result<usize> {
+fn same_bytes_twice(
+    root: &Path,
+    firmware: &[amiro_robot::Firmware; 3],
+    name: &str,
+) -> Result<usize> {
     let path = root
         .join("robot")
         .join("scenarios")
         .join(format!("{name}.log"));
-    let (actions, duration) = super::stimulus::read(&path)?;
+    let (actions, duration) = amiro_robot::stimulus::read(&path)?;
     let duration = duration.context("no `# duration:`")?;
     let mut texts = Vec::new();
     for k in 0..2 {
@@ -721,7 +735,7 @@ fn same_bytes_twice(root: &Path, firmware: &[super::Firmware; 3], name: &str) ->
             .join(format!("{name}-determinism-{k}"));
         let _ = std::fs::remove_dir_all(&work);
         let mut lines: Vec<String> = Vec::new();
-        texts.push(super::run(firmware, &actions, duration, &work, &mut lines, None)?.text);
+        texts.push(amiro_robot::run(firmware, &actions, duration, &work, &mut lines, None)?.text);
     }
     if let Some(line) = texts[0]
         .lines()
@@ -736,8 +750,8 @@ fn same_bytes_twice(root: &Path, firmware: &[super::Firmware; 3], name: &str) ->
 
 /// Runs every robot scenario; fails if any check fails.
 pub fn run_all(root: &Path) -> Result<()> {
-    crate::ensure_qemu()?;
-    let firmware = super::cli::firmware(root)?;
+    crate::workspace::ensure_qemu()?;
+    let firmware = super::firmware::firmware(root)?;
     let (mut passed, mut failed) = (0, 0);
     for scenario in SCENARIOS {
         let path = root
@@ -750,16 +764,19 @@ pub fn run_all(root: &Path) -> Result<()> {
             .join(scenario.name);
         let _ = std::fs::remove_dir_all(&work);
         let result = (|| {
-            let (actions, duration) = super::stimulus::read(&path)?;
+            let (actions, duration) = amiro_robot::stimulus::read(&path)?;
             let duration =
                 duration.with_context(|| format!("{}: no `# duration:`", path.display()))?;
             let mut lines: Vec<String> = Vec::new();
-            let outcome = super::run(&firmware, &actions, duration, &work, &mut lines, None)?;
+            let outcome = amiro_robot::run(&firmware, &actions, duration, &work, &mut lines, None)?;
             std::fs::write(work.join("output.log"), &outcome.text)?;
             let (bus, _) = crate::qemu::split_output(&outcome.text);
             std::fs::write(work.join("bus.log"), bus)?;
-            let report = super::report::analyse(&outcome.transfers, duration);
-            std::fs::write(work.join("bus-report.txt"), super::report::render(&report))?;
+            let report = amiro_robot::report::analyse(&outcome.transfers, duration);
+            std::fs::write(
+                work.join("bus-report.txt"),
+                amiro_robot::report::render(&report),
+            )?;
             let summary = (scenario.check)(&Run { outcome })?;
             let exceeded: Vec<String> = report
                 .iter()

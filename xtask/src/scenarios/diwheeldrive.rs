@@ -582,7 +582,7 @@ fn on_f103_us(virtual_us: u64) -> Result<u64> {
 
 /// The admission task's budget and recorded worst step in the timing file `path`.
 fn admission_budget(path: &str) -> Result<(f64, schedule_analysis::scenario::WorstStep)> {
-    let text = std::fs::read_to_string(crate::workspace_root().join(path))
+    let text = std::fs::read_to_string(crate::workspace::workspace_root().join(path))
         .with_context(|| path.to_string())?;
     let timing: schedule_analysis::scenario::Timing =
         serde_json::from_str(&text).with_context(|| path.to_string())?;

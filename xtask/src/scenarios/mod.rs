@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, ensure, Context, Result};
 
 use crate::qemu::{self, TimedFrame};
+pub use amiro_robot::log::duration_of;
 
 pub mod diwheeldrive;
 pub mod diwheeldrive_1_2;
@@ -259,18 +260,6 @@ pub fn check_health(out: &RunOutput, board: amiro_can::Board) -> Result<Health> 
     Ok(health)
 }
 
-/// The `# duration:` header of a stimulus log.
-pub fn duration_of(path: &Path) -> Result<u64> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    for line in text.lines() {
-        if let Some(d) = line.trim().strip_prefix("# duration:") {
-            return qemu::parse_duration(d.trim());
-        }
-    }
-    bail!("{} has no `# duration:` header", path.display())
-}
-
 /// How a published topic behaved: its release grid and each frame's latency from its release.
 #[derive(Debug)]
 pub struct Stream {
@@ -290,7 +279,7 @@ impl RunOutput {
             .work
             .as_deref()
             .context("the run kept no work directory (no task trace to read)")?;
-        let root = crate::workspace_root();
+        let root = crate::workspace::workspace_root();
         let spec = crate::boards::by_name(board).with_context(|| format!("no board {board}"))?;
         let names = amiro_firmware::trace_ids::board_names(&root, board)
             .map_err(|e| anyhow::anyhow!("{e}"))

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 
-use crate::qemu;
+use crate::log as qemu;
 
 /// The three boards of the robot, in node order on the bus (the operator's adapter is the fourth).
 pub const BOARDS: [&str; 3] = ["diwheeldrive", "powermgmt", "lightring"];

@@ -57,7 +57,7 @@ impl Slcan {
                 libc::tcsetattr(slave.as_raw_fd(), libc::TCSANOW, &t);
             }
         }
-        super::set_nonblocking(master.as_raw_fd());
+        crate::board::set_nonblocking(master.as_raw_fd());
         // SAFETY: `name` is NUL-terminated by openpty.
         let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
             .to_string_lossy()

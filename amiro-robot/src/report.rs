@@ -16,7 +16,7 @@ use schedule_analysis::busy_window::{AnalysisError, Counter, Limits};
 use schedule_analysis::can::{self, FrameCost, MessageTiming};
 use schedule_analysis::time::Time;
 
-use super::{Transfer, NODES};
+use crate::{Transfer, NODES};
 
 /// One message stream of the run.
 #[derive(Debug, Clone, PartialEq)]

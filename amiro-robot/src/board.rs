@@ -1,0 +1,281 @@
+//! One board of the robot: its QEMU process (the board's QEMU build under `-icount`, the console
+//! on a pipe), the two named pipes it trades over with the coordinator, and what it printed. The
+//! one place a board's exchange happens: [`Board::receive`] takes its report, [`Board::send`] gives
+//! its answer (the messages are `amiro_trace::robot_link`'s).
+use std::fs::File;
+use std::io::{Read, Write};
+use std::os::fd::AsRawFd;
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdout, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use amiro_bus_sim::MAILBOXES;
+use amiro_trace::robot_link::{Down, Up, DRIVES_SYNC_LOW, QUANTUM_US, UP_LEN};
+use anyhow::{bail, Context, Result};
+
+use crate::{Firmware, NODES};
+
+/// A board's process and the coordinator's view of it.
+pub(crate) struct Board {
+    pub(crate) index: usize,
+    pub(crate) firmware: Firmware,
+    pub(crate) dir: PathBuf,
+    pub(crate) child: Option<Child>,
+    pub(crate) up: Option<File>,
+    pub(crate) down: Option<File>,
+    pub(crate) out: Option<ChildStdout>,
+    pub(crate) partial: Vec<u8>,
+    pub(crate) lines: Vec<String>,
+    /// Global virtual time of the board's clock zero (its last start).
+    pub(crate) offset: u64,
+    pub(crate) alive: bool,
+    pub(crate) drives: u8,
+    /// Global virtual time before which the board does nothing of its own (its last report).
+    pub(crate) wakes_at: u64,
+    /// Mailboxes (bit per mailbox) whose abort it asked for in its last report, and those whose
+    /// frame the bus gave back (the answer tells it).
+    pub(crate) aborts: u8,
+    pub(crate) aborted: u8,
+    /// Per mailbox, when the frame in it was released into the board's transmit queue.
+    pub(crate) released: [u64; MAILBOXES],
+    /// The boundary the board reported at last (global virtual time).
+    pub(crate) at: u64,
+    /// The boundary it was sent on to and reports at next; `None` while it waits for its answer
+    /// (it reported at `at` and sleeps past the next boundary: it is left waiting until needed).
+    pub(crate) next: Option<u64>,
+    /// The boundary it wants its next exchange at (from its last report).
+    pub(crate) wants: u64,
+    /// The line flags of its last answer.
+    pub(crate) flags: u8,
+    /// Lines it printed up to its last report (those after it are still in `lines`).
+    pub(crate) ready: Vec<String>,
+}
+
+fn make_fifo(path: &Path) -> Result<()> {
+    let _ = std::fs::remove_file(path);
+    let name = std::ffi::CString::new(path.as_os_str().as_encoded_bytes())?;
+    // SAFETY: a NUL-terminated path we own.
+    if unsafe { libc::mkfifo(name.as_ptr(), 0o600) } != 0 {
+        bail!(
+            "mkfifo {}: {}",
+            path.display(),
+            std::io::Error::last_os_error()
+        );
+    }
+    Ok(())
+}
+
+/// Makes a descriptor non-blocking.
+pub(crate) fn set_nonblocking(fd: i32) {
+    // SAFETY: fcntl on a descriptor we own.
+    unsafe {
+        let flags = libc::fcntl(fd, libc::F_GETFL);
+        libc::fcntl(fd, libc::F_SETFL, flags | libc::O_NONBLOCK);
+    }
+}
+
+impl Board {
+    pub(crate) fn start(&mut self, at: u64) -> Result<()> {
+        std::fs::create_dir_all(&self.dir)?;
+        let (up, down) = (self.dir.join("robot-up"), self.dir.join("robot-down"));
+        make_fifo(&up)?;
+        make_fifo(&down)?;
+        // Read and write: opening never blocks and the pipe never reads as closed while the board
+        // restarts; the board's end shows as its process ending.
+        let open = |p: &Path| {
+            std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(p)
+                .with_context(|| format!("opening {}", p.display()))
+        };
+        self.up = Some(open(&up)?);
+        self.down = Some(open(&down)?);
+        // The single-board stimulus the firmware would read is never opened in a robot run; the
+        // header keeps a board started by hand in this folder from misreading it.
+        std::fs::write(
+            self.dir.join("stimulus.bin"),
+            crate::log::encode_stimulus(&[], 0),
+        )?;
+        let stderr = File::create(self.dir.join("qemu-stderr.log"))?;
+        let mut child = Command::new("qemu-system-arm")
+            .args(["-machine", self.firmware.machine, "-nographic"])
+            .args(["-monitor", "none", "-serial", "none"])
+            // The console as a chardev on stdout: every semihosting write is a write(2) that has
+            // happened when the board's next exchange arrives (lines are assigned to quanta).
+            .args(["-chardev", "stdio,id=console,signal=off"])
+            .args([
+                "-semihosting-config",
+                "enable=on,target=native,chardev=console",
+            ])
+            .args([
+                "-icount",
+                &format!("shift={},align=off,sleep=off", crate::log::ICOUNT_SHIFT),
+            ])
+            .arg("-kernel")
+            .arg(&self.firmware.elf)
+            .current_dir(&self.dir)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(stderr)
+            .spawn()
+            .context("starting qemu-system-arm (install it: apt-get install qemu-system-arm)")?;
+        let out = child.stdout.take().context("QEMU stdout")?;
+        set_nonblocking(out.as_raw_fd());
+        self.out = Some(out);
+        self.child = Some(child);
+        self.partial.clear();
+        self.offset = at;
+        self.alive = true;
+        // A module holds SYS_SYNC_N low until it is initialised.
+        self.drives = DRIVES_SYNC_LOW;
+        self.wakes_at = at;
+        self.aborts = 0;
+        self.aborted = 0;
+        self.released = [at; MAILBOXES];
+        // Its first exchange is at its own first boundary.
+        self.at = at;
+        self.next = Some(at + QUANTUM_US);
+        self.wants = at + QUANTUM_US;
+        self.flags = 0;
+        self.lines.clear();
+        self.ready.clear();
+        Ok(())
+    }
+
+    /// Reads what the board printed so far (never blocks); `false` once its output has closed.
+    pub(crate) fn drain(&mut self) -> bool {
+        let Some(out) = self.out.as_mut() else {
+            return false;
+        };
+        let mut chunk = [0u8; 4096];
+        loop {
+            match out.read(&mut chunk) {
+                Ok(0) => {
+                    self.out = None;
+                    self.flush_partial();
+                    return false;
+                }
+                Ok(n) => {
+                    self.partial.extend_from_slice(&chunk[..n]);
+                    while let Some(at) = self.partial.iter().position(|&b| b == b'\n') {
+                        let line: Vec<u8> = self.partial.drain(..=at).collect();
+                        self.lines
+                            .push(String::from_utf8_lossy(&line[..at]).into_owned());
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return true,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(_) => {
+                    self.out = None;
+                    return false;
+                }
+            }
+        }
+    }
+
+    fn flush_partial(&mut self) {
+        if !self.partial.is_empty() {
+            let line = String::from_utf8_lossy(&self.partial).into_owned();
+            self.lines.push(line);
+            self.partial.clear();
+        }
+    }
+
+    /// Waits for the board's next exchange; `None` if the board has ended (its QEMU exited).
+    pub(crate) fn receive(&mut self, guard: Instant, limit: Duration) -> Result<Option<Up>> {
+        let mut message = [0u8; UP_LEN];
+        let mut got = 0;
+        let up_fd = self.up.as_ref().context("no pipe")?.as_raw_fd();
+        loop {
+            let out_fd = self.out.as_ref().map_or(-1, AsRawFd::as_raw_fd);
+            let mut fds = [
+                libc::pollfd {
+                    fd: up_fd,
+                    events: libc::POLLIN,
+                    revents: 0,
+                },
+                libc::pollfd {
+                    fd: out_fd,
+                    events: libc::POLLIN,
+                    revents: 0,
+                },
+            ];
+            // SAFETY: two pollfd structures we own; a negative fd is ignored by poll.
+            let ready = unsafe { libc::poll(fds.as_mut_ptr(), 2, 100) };
+            if fds[1].revents != 0 {
+                self.drain();
+            }
+            if fds[0].revents & libc::POLLIN != 0 {
+                let n = self
+                    .up
+                    .as_mut()
+                    .context("no pipe")?
+                    .read(&mut message[got..])?;
+                got += n;
+                if got == UP_LEN {
+                    // Everything the board printed before this exchange is in its pipe by now.
+                    self.drain();
+                    self.ready.append(&mut self.lines);
+                    return Ok(Some(Up::decode(&message)));
+                }
+                continue;
+            }
+            if ready <= 0 || self.out.is_none() {
+                if let Some(child) = self.child.as_mut() {
+                    if child.try_wait()?.is_some() {
+                        while self.drain() {}
+                        self.flush_partial();
+                        self.ready.append(&mut self.lines);
+                        return Ok(None);
+                    }
+                }
+            }
+            if guard.elapsed() > limit {
+                bail!(
+                    "{} did not answer within {limit:?} of wall time (a hang?); last lines:\n{}",
+                    NODES[self.index],
+                    self.lines
+                        .iter()
+                        .rev()
+                        .take(10)
+                        .rev()
+                        .map(|l| format!("  {l}\n"))
+                        .collect::<String>()
+                );
+            }
+        }
+    }
+
+    pub(crate) fn send(&mut self, answer: &Down) -> Result<()> {
+        if let Some(down) = self.down.as_mut() {
+            down.write_all(&answer.encode())?;
+        }
+        Ok(())
+    }
+
+    pub(crate) fn stop(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+        while self.drain() {}
+        self.flush_partial();
+        self.ready.append(&mut self.lines);
+        self.alive = false;
+        self.next = None;
+    }
+}
+
+/// A board's new lines behind its name, each handler event's text line before its `# T` record
+/// (as the single-board runner prints them).
+pub(crate) fn board_lines(b: &mut Board) -> Vec<String> {
+    let lines = std::mem::take(&mut b.ready);
+    if lines.is_empty() {
+        return Vec::new();
+    }
+    let text = crate::log::with_event_lines(&(lines.join("\n") + "\n"));
+    text.lines()
+        .map(|l| format!("{}: {l}", NODES[b.index]))
+        .collect()
+}

@@ -1,0 +1,127 @@
+//! The whole robot in emulation: the QEMU builds of DiWheelDrive, PowerManagement and LightRing on
+//! one simulated CAN bus (`amiro-bus-sim`), with the system lines between them, in lock-step
+//! virtual time — the host side of `cargo xtask robot` (docs/qemu.md, "The whole robot").
+//!
+//! - [`board`]: one board's QEMU process, its two named pipes and its console: the one place a
+//!   board's exchange happens ([`amiro_trace::robot_link`] is the message both sides encode).
+//! - [`run()`]: the coordinator — steps from boundary to boundary, runs the bus model, answers the
+//!   boards, with lookahead (a sleeping board is left waiting, the one busy board is sent ahead).
+//! - [`report`]: the bus report (observed responses against the Davis bound).
+//! - [`slcan`]: the operator's adapter as a pseudo-terminal that speaks SLCAN (live runs), paced
+//!   to the wall clock by [`pace`].
+//! - [`stimulus`]: what a robot run's stimulus may say; [`log`]: `candump -l` lines, durations, the
+//!   boards' console records.
+//!
+//! Each board's QEMU trades with the coordinator at boundaries [`QUANTUM_US`] apart in virtual
+//! time (`amiro-firmware/src/qemu/robot.rs` is the other side). A board blocked in that read
+//! stands still in virtual time, so the coordinator decides when each quantum ends: once every
+//! board that can have queued a frame before the boundary has handed it over, the bus model runs
+//! every transmission that starts before it, and each board that needs it gets the frame that
+//! completes in its next quantum (at most one: a frame takes at least 44 bit times) with the
+//! levels of SYS_SYNC_N (wired-AND) and SYS_PD_N. Everything happens at fixed virtual times, so a
+//! run is a function of its stimulus: two runs print the same bytes.
+//!
+//! The output is the single-board runner's: every frame on the bus as a `candump -l` line stamped
+//! with the virtual time it completed, each board's `#` lines behind its name, and the bus's own
+//! notes (error frames, line levels) behind `bus:`.
+use std::path::PathBuf;
+
+use amiro_bus_sim::Frame;
+
+pub mod board;
+pub mod log;
+pub mod pace;
+pub mod report;
+mod run;
+pub mod slcan;
+pub mod stimulus;
+
+pub use amiro_trace::robot_link::QUANTUM_US;
+pub use run::{run, Work};
+
+/// The operator's adapter: the fourth node, after the boards.
+pub const OPERATOR: usize = 3;
+/// Names of the bus's nodes, in order.
+pub const NODES: [&str; 4] = ["diwheeldrive", "powermgmt", "lightring", "operator"];
+
+/// A board's QEMU build and machine.
+#[derive(Debug, Clone)]
+pub struct Firmware {
+    /// The ELF.
+    pub elf: PathBuf,
+    /// The QEMU machine.
+    pub machine: &'static str,
+}
+
+/// A frame as it went over the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Transfer {
+    /// The transmitter (an index into [`NODES`]).
+    pub node: usize,
+    /// Its mailbox.
+    pub mailbox: usize,
+    /// The frame.
+    pub frame: Frame,
+    /// When its node queued it (put it into a mailbox).
+    pub queued_at: u64,
+    /// When it entered its node's transmit queue (a board's driver gives one frame of an
+    /// identifier a mailbox at a time, so a sample's later frames wait there): where its response
+    /// starts. The adapter's and a babbling controller's frames: when queued.
+    pub released_at: u64,
+    /// Start of frame of the attempt that succeeded.
+    pub start: u64,
+    /// Completion.
+    pub end: u64,
+}
+
+/// What a robot run produced.
+#[derive(Debug, Default)]
+pub struct Outcome {
+    /// Everything printed, in order.
+    pub text: String,
+    /// Every frame that went over the bus, in order.
+    pub transfers: Vec<Transfer>,
+    /// Error frames on the bus.
+    pub error_frames: usize,
+    /// The virtual time the run ended at (µs).
+    pub ended_at: u64,
+    /// What the run cost: boundaries, exchanges, waits.
+    pub work: Work,
+    /// A live run's pacing: its real-time factor and lag.
+    pub pace: Option<pace::Summary>,
+}
+
+/// Formats a completed frame as a `candump -l` line.
+pub fn candump_line(end: u64, frame: &Frame) -> String {
+    let data: String = frame.payload().iter().map(|b| format!("{b:02X}")).collect();
+    format!(
+        "({}.{:06}) can0 {:03X}#{data}",
+        end / 1_000_000,
+        end % 1_000_000,
+        frame.id
+    )
+}
+
+pub(crate) fn stamp(t: u64) -> String {
+    format!("({}.{:06})", t / 1_000_000, t % 1_000_000)
+}
+
+/// What the coordinator's output goes to as it is produced.
+pub trait Sink {
+    /// One output line (without its newline).
+    fn line(&mut self, line: &str);
+}
+
+impl Sink for Vec<String> {
+    fn line(&mut self, line: &str) {
+        self.push(line.to_string());
+    }
+}
+
+/// A live run (`--slcan`): paced to the wall clock, the adapter a client drives, stopped by Ctrl-C.
+pub struct Live {
+    /// The SLCAN pseudo-terminal.
+    pub slcan: slcan::Slcan,
+    /// Set by Ctrl-C.
+    pub stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}

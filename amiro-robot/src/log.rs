@@ -1,0 +1,294 @@
+//! The text the robot and the single-board runner share: `candump -l` lines (the stimulus and the
+//! bus log), durations, the single-board stimulus's records, and the boards' console (`# T` trace
+//! records, each handler event's text line in front of its record).
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+
+/// `-icount shift=3`: one instruction per 8 virtual nanoseconds (125 MIPS, within 2× of a 72 MHz
+/// F103), deterministic; the QEMU build's SysTick ticks every 10 µs so its interrupt costs little.
+pub const ICOUNT_SHIFT: u32 = 3;
+
+/// The pseudo-identifier of a SYS_PD_N shutdown request in a stimulus.
+pub const SIGNAL_SYS_PD_N: u32 = u32::MAX;
+
+/// One timed frame of a stimulus.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TimedFrame {
+    /// Microseconds from the start of the run.
+    pub at_us: u64,
+    /// Identifier (11-bit, or larger for an extended frame the board must ignore).
+    pub id: u32,
+    /// Payload (up to 8 bytes; longer payloads are kept to test the board's rejection).
+    pub data: Vec<u8>,
+}
+
+/// Parses a `candump -l` line: `(seconds.micros) iface ID#DATA`. Blank lines and `#` comments give `None`.
+pub fn parse_log_line(line: &str) -> Result<Option<TimedFrame>> {
+    let line = line.trim();
+    if line.is_empty() || line.starts_with('#') {
+        return Ok(None);
+    }
+    let rest = line
+        .strip_prefix('(')
+        .with_context(|| format!("`{line}`: expected `(seconds.micros)`"))?;
+    let (stamp, rest) = rest
+        .split_once(')')
+        .with_context(|| format!("`{line}`: unclosed timestamp"))?;
+    let (secs, micros) = stamp
+        .split_once('.')
+        .with_context(|| format!("`{line}`: timestamp needs a fraction"))?;
+    let secs: u64 = secs
+        .trim()
+        .parse()
+        .with_context(|| format!("`{line}`: bad seconds"))?;
+    if micros.len() != 6 {
+        bail!("`{line}`: the fraction must have six digits (microseconds)");
+    }
+    let micros: u64 = micros
+        .parse()
+        .with_context(|| format!("`{line}`: bad microseconds"))?;
+    let mut fields = rest.split_whitespace();
+    let iface = fields
+        .next()
+        .with_context(|| format!("`{line}`: missing interface"))?;
+    let frame = fields
+        .next()
+        .with_context(|| format!("`{line}`: missing frame"))?;
+    let at_us = secs
+        .checked_mul(1_000_000)
+        .and_then(|us| us.checked_add(micros))
+        .with_context(|| format!("`{line}`: timestamp beyond u64 microseconds"))?;
+    // Not a frame: a system signal for the board (`(t) signal SYS_PD_N`), stimulus only.
+    if iface == "signal" {
+        if frame != "SYS_PD_N" {
+            bail!("`{line}`: the only signal is SYS_PD_N (a shutdown request)");
+        }
+        return Ok(Some(TimedFrame {
+            at_us,
+            id: SIGNAL_SYS_PD_N,
+            data: Vec::new(),
+        }));
+    }
+    let (id, data) = frame
+        .split_once('#')
+        .with_context(|| format!("`{line}`: frame needs `ID#DATA`"))?;
+    let id = u32::from_str_radix(id, 16).with_context(|| format!("`{line}`: bad ID"))?;
+    if !data.is_ascii() {
+        bail!("`{line}`: identifier and data must be hex digits");
+    }
+    if data.len() % 2 != 0 {
+        bail!("`{line}`: odd number of hex digits in data");
+    }
+    let data = (0..data.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&data[i..i + 2], 16))
+        .collect::<Result<Vec<u8>, _>>()
+        .with_context(|| format!("`{line}`: bad data"))?;
+    if data.len() > 8 {
+        bail!("`{line}`: a CAN frame carries at most 8 bytes");
+    }
+    Ok(Some(TimedFrame { at_us, id, data }))
+}
+
+/// Encodes a stimulus for the firmware.
+pub fn encode_stimulus(frames: &[TimedFrame], duration_us: u64) -> Vec<u8> {
+    let mut out = Vec::with_capacity(16 + 20 * frames.len());
+    out.extend_from_slice(b"AMSTIM1\0");
+    out.extend_from_slice(&duration_us.to_le_bytes());
+    for f in frames {
+        out.extend_from_slice(&f.at_us.to_le_bytes());
+        // Flags: bit 0 = a frame the protocol cannot carry (extended ID), bit 1 = SYS_PD_N falls.
+        let (id, flags) = if f.id == SIGNAL_SYS_PD_N {
+            (0xFFFF, 2u8)
+        } else if f.id <= 0x7FF {
+            (f.id as u16, 0u8)
+        } else {
+            (0xFFFF, 1u8)
+        };
+        out.extend_from_slice(&id.to_le_bytes());
+        out.push(f.data.len().min(255) as u8);
+        out.push(flags);
+        let mut data = [0u8; 8];
+        let n = f.data.len().min(8);
+        data[..n].copy_from_slice(&f.data[..n]);
+        out.extend_from_slice(&data);
+    }
+    out
+}
+
+/// Parses a duration like `2s`, `1500ms` or `900us`.
+pub fn parse_duration(text: &str) -> Result<u64> {
+    let (digits, scale) = if let Some(d) = text.strip_suffix("us") {
+        (d, 1)
+    } else if let Some(d) = text.strip_suffix("ms") {
+        (d, 1_000)
+    } else if let Some(d) = text.strip_suffix('s') {
+        (d, 1_000_000)
+    } else {
+        bail!("duration `{text}` needs a unit: us, ms or s")
+    };
+    let value: u64 = digits
+        .parse()
+        .with_context(|| format!("bad duration `{text}`"))?;
+    value
+        .checked_mul(scale)
+        .with_context(|| format!("duration `{text}` too long"))
+}
+
+/// Reads a stimulus log file.
+pub fn read_stimulus(path: &Path) -> Result<Vec<TimedFrame>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut frames = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        if let Some(f) =
+            parse_log_line(line).with_context(|| format!("{}:{}", path.display(), n + 1))?
+        {
+            frames.push(f);
+        }
+    }
+    frames.sort_by_key(|f| f.at_us);
+    Ok(frames)
+}
+
+/// The run's output with the text line of every handler event (`# (t) trace sample-taken …`) in
+/// front of the binary record the board printed for it (`# T …`, kept: the bench reads it).
+pub fn with_event_lines(text: &str) -> String {
+    let mut out = String::with_capacity(text.len() * 2);
+    for line in text.lines() {
+        if line.starts_with("# T ") {
+            for record in amiro_trace::records(&console_record_bytes(line)) {
+                if let amiro_trace::Kind::Event { record } = record.kind {
+                    if let Ok(event) = amiro_sensors::trace::TraceEvent::decode(&record) {
+                        out.push_str(&format!("# {event}\n"));
+                    }
+                }
+            }
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+/// The bytes of the `# T` lines (binary records printed in hex) of a QEMU console, each record
+/// followed by its delimiter; other lines are left out.
+pub fn console_record_bytes(text: &str) -> Vec<u8> {
+    let mut out = Vec::new();
+    for line in text.lines() {
+        let Some(hex) = line.trim().strip_prefix("# T ") else {
+            continue;
+        };
+        for pair in hex.trim().as_bytes().chunks(2) {
+            // A damaged line decodes to whatever it decodes to; the reader rejects the record.
+            let byte = std::str::from_utf8(pair)
+                .ok()
+                .and_then(|p| u8::from_str_radix(p, 16).ok())
+                .unwrap_or(0);
+            out.push(byte);
+        }
+        out.push(0);
+    }
+    out
+}
+
+/// Splits a run's output into the bus (frame lines: a plain `candump -l` log) and the rest
+/// (trace and log lines).
+pub fn split_output(text: &str) -> (String, String) {
+    let mut bus = String::new();
+    let mut trace = String::new();
+    for line in text.lines() {
+        let target = if line.starts_with('(') {
+            &mut bus
+        } else {
+            &mut trace
+        };
+        target.push_str(line);
+        target.push('\n');
+    }
+    (bus, trace)
+}
+
+/// The `# duration:` header of a stimulus log.
+pub fn duration_of(path: &Path) -> Result<u64> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    for line in text.lines() {
+        if let Some(d) = line.trim().strip_prefix("# duration:") {
+            return parse_duration(d.trim());
+        }
+    }
+    bail!("{} has no `# duration:` header", path.display())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_candump_lines() {
+        let f = parse_log_line("(0.010000) can0 205#01840302")
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            f,
+            TimedFrame {
+                at_us: 10_000,
+                id: 0x205,
+                data: vec![1, 0x84, 3, 2]
+            }
+        );
+        assert_eq!(parse_log_line("# comment").unwrap(), None);
+        assert_eq!(
+            parse_log_line("(1.000001) can0 7FF#")
+                .unwrap()
+                .unwrap()
+                .at_us,
+            1_000_001
+        );
+        assert!(parse_log_line("(0.01) can0 205#01").is_err());
+        assert!(parse_log_line("205#01").is_err());
+        assert!(parse_log_line("(0.000000) can0 205#0").is_err());
+        // Hostile input is an error, never a panic.
+        assert!(parse_log_line("(18446744073710.000000) can0 205#01").is_err());
+        assert!(parse_log_line("(0.000001) can0 205#é1").is_err());
+        assert!(parse_log_line("(0.000001) can0 2é#01").is_err());
+    }
+
+    #[test]
+    fn encodes_records() {
+        let frames = vec![
+            TimedFrame {
+                at_us: 5,
+                id: 0x205,
+                data: vec![1, 2],
+            },
+            TimedFrame {
+                at_us: 6,
+                id: 0x1234_5678,
+                data: vec![],
+            },
+        ];
+        let bin = encode_stimulus(&frames, 2_000_000);
+        assert_eq!(bin.len(), 16 + 40);
+        assert_eq!(&bin[..8], b"AMSTIM1\0");
+        assert_eq!(
+            u64::from_le_bytes(bin[8..16].try_into().unwrap()),
+            2_000_000
+        );
+        assert_eq!(
+            &bin[16..30],
+            &[5, 0, 0, 0, 0, 0, 0, 0, 0x05, 0x02, 2, 0, 1, 2]
+        );
+        assert_eq!(&bin[44..48], &[0xFF, 0xFF, 0, 1]);
+    }
+
+    #[test]
+    fn durations() {
+        assert_eq!(parse_duration("2s").unwrap(), 2_000_000);
+        assert_eq!(parse_duration("1500ms").unwrap(), 1_500_000);
+        assert_eq!(parse_duration("900us").unwrap(), 900);
+        assert!(parse_duration("2").is_err());
+    }
+}

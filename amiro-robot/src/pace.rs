@@ -1,0 +1,152 @@
+//! A live run's pacing (`--slcan`): virtual time held at or behind the wall clock, the real-time
+//! factor and the lag reported every few seconds on stderr, and a run that falls behind said so at
+//! once, with its factor.
+use std::time::{Duration, Instant};
+
+/// How far virtual time may run ahead of the wall clock before the host sleeps (a frame reaches
+/// the client at most this early).
+const AHEAD: Duration = Duration::from_micros(500);
+/// Behind the wall clock by more than this, the run is not keeping pace.
+pub const LAG_LIMIT: Duration = Duration::from_millis(5);
+/// How often the factor and lag are printed.
+const EVERY: Duration = Duration::from_secs(2);
+/// A run that keeps falling behind is said to at once the first time, then at most this often
+/// (the periodic line counts every time).
+const AGAIN: Duration = Duration::from_secs(10);
+
+/// What a live run's pacing came to.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Summary {
+    /// Virtual over wall time, whole run.
+    pub factor: f64,
+    /// Worst lag behind the wall clock (µs).
+    pub worst_lag_us: u64,
+    /// Reports that said the run fell behind.
+    pub behind_episodes: u64,
+}
+
+/// The wall clock a live run keeps pace with.
+pub struct Pace {
+    start: Instant,
+    window_start: (Instant, u64),
+    window_worst_lag: Duration,
+    worst_lag: Duration,
+    behind: bool,
+    episodes: u64,
+    window_episodes: u64,
+    said: Option<Instant>,
+    last_virtual: u64,
+}
+
+impl Pace {
+    /// Pacing from `start` (virtual time 0).
+    pub fn new(start: Instant) -> Self {
+        Self {
+            start,
+            window_start: (start, 0),
+            window_worst_lag: Duration::ZERO,
+            worst_lag: Duration::ZERO,
+            behind: false,
+            episodes: 0,
+            window_episodes: 0,
+            said: None,
+            last_virtual: 0,
+        }
+    }
+
+    /// Holds virtual time `t_us` until the wall clock has reached it; returns the µs slept. Prints
+    /// the factor and lag every few seconds, and at once when the run falls behind by more than
+    /// [`LAG_LIMIT`] (and when it has caught up again).
+    pub fn hold(&mut self, t_us: u64) -> u64 {
+        self.last_virtual = t_us;
+        let virtual_now = Duration::from_micros(t_us);
+        let wall = self.start.elapsed();
+        let mut slept = 0;
+        if virtual_now > wall + AHEAD {
+            let ahead = virtual_now - wall;
+            std::thread::sleep(ahead);
+            slept = ahead.as_micros() as u64;
+        }
+        let lag = wall.saturating_sub(virtual_now);
+        self.window_worst_lag = self.window_worst_lag.max(lag);
+        self.worst_lag = self.worst_lag.max(lag);
+        if lag > LAG_LIMIT && !self.behind {
+            self.behind = true;
+            self.episodes += 1;
+            self.window_episodes += 1;
+            if self.said.is_none_or(|at| at.elapsed() >= AGAIN) {
+                self.said = Some(Instant::now());
+                eprintln!(
+                    "robot: cannot keep pace: {:.1} ms behind the wall clock (real-time factor {:.2} so far, {:.2} over the last window); this machine is too slow or too busy for a live robot",
+                    lag.as_secs_f64() * 1e3,
+                    factor(t_us, wall),
+                    self.window_factor(t_us),
+                );
+            }
+        } else if self.behind && lag < LAG_LIMIT / 2 {
+            self.behind = false;
+        }
+        if self.window_start.0.elapsed() >= EVERY {
+            eprintln!(
+                "robot: live at {:.1} s: real-time factor {:.3} over the last {:.0} s, worst lag {:.1} ms, {} time(s) behind by more than {} ms",
+                t_us as f64 / 1e6,
+                self.window_factor(t_us),
+                self.window_start.0.elapsed().as_secs_f64(),
+                self.window_worst_lag.as_secs_f64() * 1e3,
+                self.window_episodes,
+                LAG_LIMIT.as_millis()
+            );
+            self.window_start = (Instant::now(), t_us);
+            self.window_worst_lag = Duration::ZERO;
+            self.window_episodes = 0;
+        }
+        slept
+    }
+
+    fn window_factor(&self, t_us: u64) -> f64 {
+        factor(
+            t_us.saturating_sub(self.window_start.1),
+            self.window_start.0.elapsed(),
+        )
+    }
+
+    /// The whole run's figures.
+    pub fn summary(&self) -> Summary {
+        Summary {
+            factor: factor(self.last_virtual, self.start.elapsed()),
+            worst_lag_us: self.worst_lag.as_micros() as u64,
+            behind_episodes: self.episodes,
+        }
+    }
+}
+
+/// Virtual µs over a wall duration (1.0: real time).
+fn factor(virtual_us: u64, wall: Duration) -> f64 {
+    virtual_us as f64 / 1e6 / wall.as_secs_f64().max(1e-9)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_ahead_of_the_wall_clock_is_held_back() {
+        let mut pace = Pace::new(Instant::now());
+        let slept = pace.hold(20_000);
+        assert!(slept >= 19_000, "slept {slept} µs");
+        assert!(pace.start.elapsed() >= Duration::from_millis(20));
+        assert!(!pace.behind);
+    }
+
+    #[test]
+    fn a_run_behind_the_wall_clock_is_said_to_be() {
+        let start = Instant::now() - Duration::from_millis(50);
+        let mut pace = Pace::new(start);
+        assert_eq!(pace.hold(10_000), 0);
+        assert!(pace.behind);
+        let summary = pace.summary();
+        assert_eq!(summary.behind_episodes, 1);
+        assert!(summary.worst_lag_us >= 40_000);
+        assert!(summary.factor < 0.25);
+    }
+}

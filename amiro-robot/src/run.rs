@@ -1,0 +1,635 @@
+//! The coordinator: steps the robot from boundary to boundary, with lookahead.
+use std::collections::VecDeque;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use amiro_bus_sim::{BitFault, Bus, ErrorState, Event, Frame, NodeId, MAILBOXES};
+use amiro_trace::robot_link::{
+    reaches_software, Down, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW,
+    DRIVES_PD_LOW, DRIVES_SYNC_LOW, QUANTUM_US,
+};
+use anyhow::{bail, Result};
+
+use crate::board::{board_lines, Board};
+use crate::stimulus::{Action, Timed, BOARDS};
+use crate::{candump_line, pace, stamp, Firmware, Live, Outcome, Sink, Transfer, NODES, OPERATOR};
+
+/// How far a live run's host steps without a board's exchange at most: the adapter's frames are
+/// queued at the boundary the host is at, so this is how late one can come on (virtual time).
+const LIVE_STEP_US: u64 = 1_000;
+
+/// Counts of a run's work, for `--bench` and the closing line.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Work {
+    /// Boundaries the host stepped through (the bus model run to each).
+    pub steps: u64,
+    /// Board exchanges (a board's report and its answer).
+    pub exchanges: u64,
+    /// Of those, each board's.
+    pub per_board: [u64; 3],
+    /// Of those, boards brought to a boundary from a wait (a frame, a line, the end was due).
+    pub catch_ups: u64,
+    /// Wall time spent waiting for boards' reports (their emulation), µs.
+    pub waiting_us: u64,
+    /// Wall time live runs slept to stay behind the wall clock, µs.
+    pub pacing_us: u64,
+}
+
+/// What a board must get at boundary `t`: the frame that completes in the coming quantum if it is
+/// the board's own or passes its receive filter, an abort answer, a new line level, the end.
+fn due(b: &Board, d: Option<&Transfer>, bus: &Bus, node: NodeId, flags: u8, end: bool) -> bool {
+    end || b.aborted != 0 || flags != b.flags || d.is_some_and(|d| meant_for(b, d, bus, node))
+}
+
+/// Whether `d` is given to board `b`: its own frame (not one from before its last reset, nor its
+/// babbling controller's), or another node's while it is plugged in.
+fn given(b: &Board, d: &Transfer, bus: &Bus, node: NodeId) -> (bool, bool) {
+    let own = d.node == b.index && d.start >= b.offset && d.mailbox < MAILBOXES;
+    let heard = d.node != b.index && bus.plugged(node);
+    (own, heard)
+}
+
+/// Whether `d` makes board `b` act: its own completion, or a frame its filter passes.
+fn meant_for(b: &Board, d: &Transfer, bus: &Bus, node: NodeId) -> bool {
+    let (own, heard) = given(b, d, bus, node);
+    own || (heard && reaches_software(d.frame.id))
+}
+
+/// Runs the robot for `duration_us` of virtual time against `actions`, in `work`; with `live`,
+/// paced to the wall clock with a client's adapter on the bus.
+///
+/// The host steps from boundary to boundary (multiples of [`QUANTUM_US`]); at each it takes the
+/// reports of the boards due there, runs the bus model to it and answers. A board that sleeps past
+/// the next boundary (lookahead: it reported its next timer deadline, and nothing but a frame its
+/// filter passes, its own frame's completion, an abort or a line level can wake it) is left
+/// waiting in its read, its answer held back: when something is due for it the host sends it on
+/// to that boundary first (it runs there idle and reports nothing new), then answers as it would
+/// have. Every board therefore sees every input at the same boundary as in plain lock-step, and
+/// the exchanges stay at fixed virtual instants: a run is a function of its stimulus.
+pub fn run(
+    firmware: &[Firmware; 3],
+    actions: &[Timed],
+    duration_us: u64,
+    work: &Path,
+    sink: &mut dyn Sink,
+    mut live: Option<&mut Live>,
+) -> Result<Outcome> {
+    std::fs::create_dir_all(work)?;
+    let mut bus = Bus::new();
+    let mut boards: Vec<Board> = (0..3)
+        .map(|k| Board {
+            index: k,
+            firmware: firmware[k].clone(),
+            dir: work.join(BOARDS[k]),
+            child: None,
+            up: None,
+            down: None,
+            out: None,
+            partial: Vec::new(),
+            lines: Vec::new(),
+            offset: 0,
+            alive: false,
+            drives: DRIVES_SYNC_LOW,
+            wakes_at: 0,
+            aborts: 0,
+            aborted: 0,
+            released: [0; MAILBOXES],
+            at: 0,
+            next: None,
+            wants: 0,
+            flags: 0,
+            ready: Vec::new(),
+        })
+        .collect();
+    let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
+    for b in &mut boards {
+        b.start(0)?;
+    }
+    let mut outcome = Outcome::default();
+    let emit = |outcome: &mut Outcome, sink: &mut dyn Sink, line: String| {
+        sink.line(&line);
+        outcome.text.push_str(&line);
+        outcome.text.push('\n');
+    };
+    let mut pending = actions.iter().peekable();
+    let mut operator: VecDeque<(u64, Frame)> = VecDeque::new();
+    let mut deliveries: VecDeque<Transfer> = VecDeque::new();
+    let mut pd_from_outside = false;
+    let (mut sync_low, mut pd_low) = (true, false);
+    let limit = Duration::from_secs(30);
+    let mut pace = live.as_ref().map(|_| pace::Pace::new(Instant::now()));
+    let mut t = QUANTUM_US;
+    // The board sent ahead at the last boundary (the only one with work, everything else quiet):
+    // it reports at the first boundary after it queued a frame, asked for an abort or changed a
+    // line, at the latest at `t`.
+    let mut ahead: Option<(usize, u64)> = None;
+    let result: Result<()> = (|| loop {
+        outcome.work.steps += 1;
+        let mut notes: Vec<String> = Vec::new();
+        if let Some((k, from)) = ahead.take() {
+            t = exchange(
+                &mut boards[k],
+                from + QUANTUM_US..=t,
+                &mut bus,
+                &nodes,
+                &mut notes,
+                limit,
+                &mut outcome.work,
+            )?;
+        }
+        // The boards due at this boundary report (those sent on to it at the last answer), and
+        // those left waiting whose deadline falls here are sent on to it first.
+        for b in boards.iter_mut() {
+            if b.alive && b.next.is_none() && b.at < t && b.wants <= t {
+                let on = Down {
+                    next_us: t - b.offset,
+                    flags: b.flags,
+                    ..Down::default()
+                };
+                b.send(&on)?;
+                b.next = Some(t);
+                outcome.work.catch_ups += 1;
+            }
+            if b.alive && b.next == Some(t) {
+                exchange(
+                    b,
+                    t..=t,
+                    &mut bus,
+                    &nodes,
+                    &mut notes,
+                    limit,
+                    &mut outcome.work,
+                )?;
+            }
+        }
+        while let Some(a) = pending.next_if(|a| a.at_us < t) {
+            match &a.action {
+                Action::Frame { id, data } => {
+                    if let Some(frame) = Frame::new(*id, data) {
+                        operator.push_back((a.at_us, frame));
+                    }
+                }
+                Action::PowerDown => pd_from_outside = true,
+                Action::Reset(k) => {
+                    let b = &mut boards[*k];
+                    b.stop();
+                    bus.reset_node(nodes[*k], t);
+                    notes.push(format!("bus: # {} {} reset", stamp(t), NODES[*k]));
+                    b.start(t)?;
+                }
+                Action::Unplug(k) => {
+                    bus.set_plugged(nodes[*k], false, a.at_us);
+                    notes.push(format!("bus: # {} {} unplugged", stamp(a.at_us), NODES[*k]));
+                }
+                Action::Plug(k) => {
+                    bus.set_plugged(nodes[*k], true, a.at_us);
+                    notes.push(format!(
+                        "bus: # {} {} plugged back in",
+                        stamp(a.at_us),
+                        NODES[*k]
+                    ));
+                }
+                Action::Babble { board, id, data } => {
+                    if let Some(frame) = Frame::new(*id, data) {
+                        bus.babble(nodes[*board], frame, a.at_us, u64::MAX);
+                        notes.push(format!(
+                            "bus: # {} {}'s CAN controller babbles {:03X} back to back",
+                            stamp(a.at_us),
+                            NODES[*board],
+                            id
+                        ));
+                    }
+                }
+                Action::Quiet(board) => {
+                    bus.stop_babbling(nodes[*board], a.at_us);
+                    notes.push(format!(
+                        "bus: # {} {}'s CAN controller stops babbling",
+                        stamp(a.at_us),
+                        NODES[*board]
+                    ));
+                }
+                Action::BitError(id) => bus.inject(BitFault {
+                    id: *id,
+                    not_before: a.at_us,
+                    at_bit: 20,
+                }),
+            }
+        }
+        if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
+            // Never ahead of the wall clock (behind it when the host is too slow: said at once).
+            outcome.work.pacing_us += pace.hold(t);
+            for frame in live.slcan.poll() {
+                operator.push_back((t, frame));
+            }
+        }
+        // The adapter's three mailboxes, filled in the order the stimulus gives.
+        for mailbox in 0..3 {
+            if bus.mailboxes(nodes[OPERATOR])[mailbox].is_none() {
+                if let Some((at, frame)) = operator.pop_front() {
+                    let _ = bus.queue(nodes[OPERATOR], mailbox, frame, at);
+                }
+            }
+        }
+        for event in bus.run_until(t) {
+            match event {
+                Event::Sent {
+                    node,
+                    mailbox,
+                    frame,
+                    queued_at,
+                    start,
+                    end,
+                    ..
+                } => {
+                    let released_at = boards
+                        .get(node)
+                        .and_then(|b| b.released.get(mailbox))
+                        .copied()
+                        .unwrap_or(queued_at);
+                    let transfer = Transfer {
+                        node,
+                        mailbox,
+                        frame,
+                        queued_at,
+                        released_at,
+                        start,
+                        end,
+                    };
+                    deliveries.push_back(transfer);
+                    outcome.transfers.push(transfer);
+                }
+                Event::ErrorFrame {
+                    node,
+                    frame,
+                    at,
+                    kind,
+                    ..
+                } => {
+                    outcome.error_frames += 1;
+                    notes.push(format!(
+                        "bus: # {} error frame: {kind:?} error in {:03X} from {}",
+                        stamp(at),
+                        frame.id,
+                        NODES[node]
+                    ));
+                }
+                Event::StateChange { node, at, state } => notes.push(format!(
+                    "bus: # {} {} is {}",
+                    stamp(at),
+                    NODES[node],
+                    match state {
+                        ErrorState::Active => "error-active",
+                        ErrorState::Passive => "error-passive",
+                        ErrorState::BusOff => "bus-off",
+                    }
+                )),
+            }
+        }
+        // Aborts take what has not started by this boundary (a frame that did, completes): the
+        // request is as late as the exchange that carried it.
+        for b in boards.iter_mut().filter(|b| b.alive) {
+            for mailbox in (0..MAILBOXES).filter(|&k| b.aborts & 1 << k != 0) {
+                if let Some(p) = bus.abort(nodes[b.index], mailbox) {
+                    b.aborted |= 1 << mailbox;
+                    notes.push(format!(
+                        "bus: # {} {} aborts {:03X} in mailbox {mailbox} for a more urgent frame",
+                        stamp(t),
+                        NODES[b.index],
+                        p.frame.id
+                    ));
+                }
+            }
+            b.aborts = 0;
+        }
+        let now_sync_low = boards.iter().any(|b| b.drives & DRIVES_SYNC_LOW != 0);
+        if now_sync_low != sync_low {
+            sync_low = now_sync_low;
+            notes.push(if sync_low {
+                let holders: Vec<&str> = boards
+                    .iter()
+                    .filter(|b| b.drives & DRIVES_SYNC_LOW != 0)
+                    .map(|b| NODES[b.index])
+                    .collect();
+                format!(
+                    "bus: # {} SYS_SYNC_N low (held by {})",
+                    stamp(t),
+                    holders.join(", ")
+                )
+            } else {
+                format!(
+                    "bus: # {} SYS_SYNC_N high (every module released it)",
+                    stamp(t)
+                )
+            });
+        }
+        let pm_drives = boards[1].drives & DRIVES_PD_LOW != 0;
+        if !pd_low && (pd_from_outside || pm_drives) {
+            pd_low = true;
+            notes.push(format!(
+                "bus: # {} SYS_PD_N low (driven by {})",
+                stamp(t),
+                if pm_drives {
+                    "powermgmt"
+                } else {
+                    "the stimulus"
+                }
+            ));
+        }
+        let end = t >= duration_us
+            || live
+                .as_deref()
+                .is_some_and(|l| l.stop.load(std::sync::atomic::Ordering::Relaxed));
+        let now = deliveries
+            .front()
+            .copied()
+            .filter(|d| d.end < t + QUANTUM_US);
+        if let Some(d) = now {
+            deliveries.pop_front();
+            if d.node != OPERATOR {
+                if let Some(live) = live.as_deref_mut() {
+                    live.slcan.deliver(d.end, &d.frame);
+                }
+            }
+        }
+        let mut flags = 0;
+        if pd_low {
+            flags |= DOWN_PD_LOW;
+        }
+        if sync_low {
+            flags |= DOWN_SYNC_LOW;
+        }
+        // Boards left waiting at an earlier boundary that must get something at this one: sent on
+        // to it first (they run there idle and report).
+        for k in 0..boards.len() {
+            let b = &boards[k];
+            if b.alive
+                && b.next.is_none()
+                && b.at < t
+                && due(b, now.as_ref(), &bus, nodes[k], flags, end)
+            {
+                let on = Down {
+                    next_us: t - b.offset,
+                    flags: b.flags,
+                    ..Down::default()
+                };
+                boards[k].send(&on)?;
+                outcome.work.catch_ups += 1;
+                exchange(
+                    &mut boards[k],
+                    t..=t,
+                    &mut bus,
+                    &nodes,
+                    &mut notes,
+                    limit,
+                    &mut outcome.work,
+                )?;
+            }
+        }
+        // What each board at this boundary wants next: the coming quantum if it has work or gets
+        // something now, else the boundary of its deadline.
+        for k in 0..boards.len() {
+            let b = &boards[k];
+            if b.alive && b.next.is_none() && b.at == t {
+                let busy = b.wakes_at <= t || due(b, now.as_ref(), &bus, nodes[k], flags, end);
+                boards[k].wants = if busy {
+                    t + QUANTUM_US
+                } else {
+                    at_or_after(b.wakes_at)
+                };
+            }
+        }
+        let next = if end {
+            t + QUANTUM_US
+        } else {
+            let bus_idle = operator.is_empty()
+                && deliveries.is_empty()
+                && nodes
+                    .iter()
+                    .all(|&n| bus.mailboxes(n).iter().all(Option::is_none) && !bus.babbling(n, t));
+            let mut until = at_or_after(duration_us);
+            if let Some(a) = pending.peek() {
+                until = until.min(after(a.at_us));
+            }
+            for b in boards.iter().filter(|b| b.alive) {
+                until = until.min(b.next.unwrap_or(b.wants));
+            }
+            if !bus_idle {
+                // The bus model runs quantum by quantum while it has work (no board needs to).
+                until = t + QUANTUM_US;
+            }
+            if live.is_some() {
+                until = until.min(t + LIVE_STEP_US);
+            }
+            until.max(t + QUANTUM_US)
+        };
+        // Lookahead for a busy board: when it is the only one with work and the bus is quiet
+        // (nothing queued, nothing on its way, no babbling), nothing can reach it before it
+        // queues a frame, asks for an abort or changes a line itself, nor reach another board
+        // before that or before the next deadline of theirs: it is sent ahead to that deadline
+        // (or the next stimulus action, the run's end) and reports early if it does one of those.
+        let busy: Vec<usize> = (0..boards.len())
+            .filter(|&k| {
+                let b = &boards[k];
+                b.alive && b.next.is_none() && b.at == t && b.wants == t + QUANTUM_US
+            })
+            .collect();
+        let quiet = operator.is_empty()
+            && deliveries.is_empty()
+            && nodes
+                .iter()
+                .all(|&n| bus.mailboxes(n).iter().all(Option::is_none) && !bus.babbling(n, t));
+        let mut next = next;
+        if let (false, true, &[k]) = (end, quiet, busy.as_slice()) {
+            let mut horizon = at_or_after(duration_us);
+            if let Some(a) = pending.peek() {
+                horizon = horizon.min(after(a.at_us));
+            }
+            for b in boards.iter().filter(|b| b.alive && b.index != k) {
+                horizon = horizon.min(b.next.unwrap_or(b.wants));
+            }
+            if live.is_some() {
+                horizon = horizon.min(t + LIVE_STEP_US);
+            }
+            if horizon > t + QUANTUM_US {
+                next = horizon;
+                ahead = Some((k, t));
+            }
+        }
+        // Answers: every board at this boundary that wants the next one gets what is due; one
+        // that sleeps past it waits (its answer held back); one waiting from before whose
+        // deadline is the next boundary is sent on to it.
+        for k in 0..boards.len() {
+            let node = nodes[k];
+            let b = &mut boards[k];
+            if !b.alive || b.next.is_some() {
+                continue;
+            }
+            let sent_ahead = ahead.is_some_and(|(a, _)| a == k);
+            if b.at == t && (b.wants <= next || end || sent_ahead) {
+                let mut answer = Down {
+                    next_us: next - b.offset,
+                    aborted: b.aborted,
+                    flags,
+                    ..Down::default()
+                };
+                b.aborted = 0;
+                if end {
+                    answer.flags |= DOWN_END;
+                }
+                if sent_ahead {
+                    answer.flags |= DOWN_EARLY;
+                }
+                if let Some(d) = now {
+                    let (own, heard) = given(b, &d, &bus, node);
+                    if own || heard {
+                        answer.flags |= DOWN_FRAME | if own { DOWN_OWN } else { 0 };
+                        answer.at_us = d.end.saturating_sub(b.offset);
+                        answer.mailbox = d.mailbox as u8;
+                        answer.id = d.frame.id;
+                        answer.len = d.frame.len;
+                        answer.data = d.frame.data;
+                    }
+                }
+                b.flags = flags;
+                b.next = Some(next);
+                b.send(&answer)?;
+            } else if b.at < t && b.wants == next && ahead.is_none() {
+                let on = Down {
+                    next_us: next - b.offset,
+                    flags: b.flags,
+                    ..Down::default()
+                };
+                b.next = Some(next);
+                b.send(&on)?;
+            }
+        }
+        // What the boards printed up to their reports, what the bus saw at this boundary, and
+        // the frame that completes in the next quantum.
+        for b in &mut boards {
+            for line in board_lines(b) {
+                emit(&mut outcome, sink, line);
+            }
+        }
+        for note in notes {
+            emit(&mut outcome, sink, note);
+        }
+        if let Some(d) = now {
+            emit(&mut outcome, sink, candump_line(d.end, &d.frame));
+        }
+        if end {
+            outcome.ended_at = t;
+            return Ok(());
+        }
+        t = next;
+    })();
+    // The boards print their end lines and exit; whatever they still say is kept.
+    for b in &mut boards {
+        let started = Instant::now();
+        while b
+            .child
+            .as_mut()
+            .is_some_and(|c| c.try_wait().ok().flatten().is_none())
+            && started.elapsed() < Duration::from_secs(10)
+        {
+            b.drain();
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        b.stop();
+        for line in board_lines(b) {
+            emit(&mut outcome, sink, line);
+        }
+    }
+    if let Some(pace) = pace {
+        outcome.pace = Some(pace.summary());
+    }
+    result?;
+    Ok(outcome)
+}
+
+/// The first boundary after `a` (where an action at `a` is taken).
+fn after(a: u64) -> u64 {
+    (a / QUANTUM_US + 1) * QUANTUM_US
+}
+
+/// The first boundary at or after `w` (where a deadline at `w` is seen).
+fn at_or_after(w: u64) -> u64 {
+    w.div_ceil(QUANTUM_US).saturating_mul(QUANTUM_US)
+}
+
+/// Takes board `b`'s report at boundary `t`: its frames onto the bus, its lines, its deadline.
+///
+/// `within`: the boundaries it may report at (one, unless it was sent ahead); returns the one it
+/// reported at (the last, if its run ended).
+fn exchange(
+    b: &mut Board,
+    within: std::ops::RangeInclusive<u64>,
+    bus: &mut Bus,
+    nodes: &[NodeId],
+    notes: &mut Vec<String>,
+    limit: Duration,
+    work: &mut Work,
+) -> Result<u64> {
+    let waited = Instant::now();
+    let report = b.receive(waited, limit)?;
+    work.waiting_us += waited.elapsed().as_micros() as u64;
+    let t = match &report {
+        Some(r) => r.at_us.saturating_add(b.offset),
+        None => *within.end(),
+    };
+    if !within.contains(&t) {
+        bail!(
+            "{} reported for the boundary at {t} µs, expected {} to {} µs (the board and the host disagree on the robot link)",
+            NODES[b.index],
+            within.start(),
+            within.end()
+        );
+    }
+    work.exchanges += 1;
+    if let Some(n) = work.per_board.get_mut(b.index) {
+        *n += 1;
+    }
+    b.at = t;
+    b.next = None;
+    let Some(report) = report else {
+        // The board ended (its hand-over, or a failure): off the bus from here on.
+        b.alive = false;
+        b.drives = 0;
+        bus.reset_node(nodes[b.index], t);
+        bus.set_plugged(nodes[b.index], false, t);
+        notes.push(format!(
+            "bus: # {} {} left the bus (its run ended)",
+            stamp(t),
+            NODES[b.index]
+        ));
+        return Ok(t);
+    };
+    b.drives = report.drives;
+    b.aborts = report.aborts & 0b111;
+    b.wakes_at = match report.sleeps_us {
+        u32::MAX => u64::MAX,
+        us => t.saturating_add(u64::from(us)),
+    };
+    for q in report.queued() {
+        let queued = q.at_us + b.offset;
+        if let Some(slot) = b.released.get_mut(usize::from(q.mailbox)) {
+            *slot = q.released_us.min(q.at_us) + b.offset;
+        }
+        let Some(frame) = Frame::new(q.id, q.payload()) else {
+            notes.push(format!(
+                "bus: # {} {} queued an invalid frame",
+                stamp(t),
+                NODES[b.index]
+            ));
+            continue;
+        };
+        if let Err(e) = bus.queue(nodes[b.index], usize::from(q.mailbox), frame, queued) {
+            notes.push(format!(
+                "bus: # {} {}: mailbox {}: {e:?}",
+                stamp(t),
+                NODES[b.index],
+                q.mailbox
+            ));
+        }
+    }
+    Ok(t)
+}

@@ -1,0 +1,187 @@
+//! The workspace and its builds, for every command: where the workspace and its target directory are, running
+//! cargo and other tools, building the boards' images (for the chip and for QEMU), and QEMU itself. Below every
+//! other module of xtask (they call it; it calls none of them but the board, revision and ELF tables).
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{bail, Context, Result};
+
+use crate::boards::Board;
+use crate::{elf, qemu, revision};
+
+/// The workspace root (the parent of this crate's folder).
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default()
+}
+
+pub fn target_dir(root: &Path) -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target"))
+}
+
+/// Builds each image in its own cargo invocation (chip features must never unify), keeps a copy of
+/// its ELF per revision (`target/firmware/`) and inspects it.
+pub fn build_boards(
+    root: &Path,
+    builds: &[revision::Build],
+    bare_chip: bool,
+) -> Result<Vec<elf::SizeReport>> {
+    ensure_toolchain(root)?;
+    let mut reports = Vec::new();
+    for build in builds {
+        let board = build.board;
+        build.select_models();
+        let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
+        args.extend(build.feature_args(if bare_chip { &["bare-chip"] } else { &[] }));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        cargo(&root.join(board.name), &args)
+            .with_context(|| format!("building {} {}", board.name, build.revision.name))?;
+        let kept = revision::kept_elf(root, build, bare_chip);
+        if let Some(dir) = kept.parent() {
+            std::fs::create_dir_all(dir)?;
+        }
+        std::fs::copy(firmware_elf(root, board), &kept)
+            .with_context(|| format!("keeping {}", kept.display()))?;
+        let mut report = elf::inspect(board, &kept, !bare_chip)?;
+        report.revision = build.revision.name.to_string();
+        reports.push(report);
+    }
+    Ok(reports)
+}
+
+/// Where cargo leaves a board's release ELF.
+pub fn firmware_elf(root: &Path, board: &Board) -> PathBuf {
+    target_dir(root)
+        .join(board.target)
+        .join("release")
+        .join(board.name)
+}
+
+/// Builds a board revision's QEMU variant (its own target dir: the features differ from the robot
+/// build) and keeps its ELF apart from the other revision's (`target/qemu/firmware/`).
+pub fn build_qemu(root: &Path, build: &revision::Build) -> Result<PathBuf> {
+    let board = build.board;
+    let dir = qemu::target_dir(root);
+    let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    build.select_models();
+    let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
+    // With the task trace: the bench measures the scenario runs (docs/bench.md).
+    args.extend(build.feature_args(&["qemu", "task-trace"]));
+    let status = Command::new(cargo_bin)
+        .args(&args)
+        .current_dir(root.join(board.name))
+        .env("CARGO_TARGET_DIR", &dir)
+        .status()
+        .with_context(|| format!("building the QEMU variant of {}", board.name))?;
+    if !status.success() {
+        bail!(
+            "building the QEMU variant of {} failed ({status})",
+            board.name
+        );
+    }
+    let kept = dir.join("firmware").join(build.stem());
+    std::fs::create_dir_all(dir.join("firmware"))?;
+    std::fs::copy(
+        dir.join(board.target).join("release").join(board.name),
+        &kept,
+    )
+    .with_context(|| format!("keeping {}", kept.display()))?;
+    Ok(kept)
+}
+
+/// Installs QEMU where the machine lacks it and we may (root with apt-get); otherwise says how.
+pub fn ensure_qemu() -> Result<()> {
+    let found = Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if found {
+        return Ok(());
+    }
+    let is_root = output(Path::new("."), "id", &["-u"])
+        .map(|u| u.trim() == "0")
+        .unwrap_or(false);
+    if is_root {
+        run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
+        run_tool(
+            Path::new("."),
+            "apt-get",
+            &["install", "-y", "-qq", "qemu-system-arm"],
+        )?;
+        return Ok(());
+    }
+    bail!("qemu-system-arm is missing: install it (Debian/Ubuntu: sudo apt-get install qemu-system-arm)")
+}
+
+/// Runs cargo in `dir` and fails unless it succeeds.
+pub fn cargo(dir: &Path, args: &[&str]) -> Result<()> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(&cargo)
+        .args(args)
+        .current_dir(dir)
+        // The firmware folders pick their target from their own .cargo/config.toml.
+        .env_remove("CARGO_BUILD_TARGET")
+        .status()
+        .with_context(|| format!("running `cargo {}`", args.join(" ")))?;
+    if !status.success() {
+        bail!(
+            "`cargo {}` in {} failed ({status})",
+            args.join(" "),
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+/// Installs the thumb targets and components `rust-toolchain.toml` names when the pinned toolchain
+/// was already present without them (rustup only adds them when it installs the toolchain itself).
+pub fn ensure_toolchain(root: &Path) -> Result<()> {
+    let Ok(installed) = output(root, "rustup", &["target", "list", "--installed"]) else {
+        // No rustup: the toolchain is managed some other way; cargo reports anything missing.
+        return Ok(());
+    };
+    let missing: Vec<&str> = ["thumbv7m-none-eabi", "thumbv7em-none-eabihf"]
+        .into_iter()
+        .filter(|t| !installed.lines().any(|l| l.trim() == *t))
+        .collect();
+    if !missing.is_empty() {
+        let mut args = vec!["target", "add"];
+        args.extend(&missing);
+        run_tool(root, "rustup", &args)?;
+    }
+    let components =
+        output(root, "rustup", &["component", "list", "--installed"]).unwrap_or_default();
+    let wanted = ["llvm-tools", "rust-src", "clippy", "rustfmt"];
+    let lacking: Vec<&str> = wanted
+        .into_iter()
+        .filter(|c| !components.lines().any(|l| l.starts_with(c)))
+        .collect();
+    if !lacking.is_empty() {
+        let mut args = vec!["component", "add"];
+        args.extend(&lacking);
+        run_tool(root, "rustup", &args)?;
+    }
+    Ok(())
+}
+
+pub fn output(dir: &Path, tool: &str, args: &[&str]) -> Result<String> {
+    let out = Command::new(tool).args(args).current_dir(dir).output()?;
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+pub fn run_tool(dir: &Path, tool: &str, args: &[&str]) -> Result<()> {
+    let status = Command::new(tool)
+        .args(args)
+        .current_dir(dir)
+        .status()
+        .with_context(|| format!("running `{tool} {}`", args.join(" ")))?;
+    if !status.success() {
+        bail!("`{tool} {}` failed ({status})", args.join(" "));
+    }
+    Ok(())
+}
