@@ -26,6 +26,7 @@ mod robot;
 mod scenarios;
 mod smoke;
 mod wcet_gate;
+mod wcet_write;
 
 use boards::{Board, BOARDS};
 
