@@ -829,6 +829,24 @@ pub fn run_all(root: &Path) -> Result<()> {
             println!("robot {:<22} FAILED: {e:#}", "determinism");
         }
     }
+    // The robot in a world: its ring against the trajectory, twice the same.
+    match super::world_scenario::run(root, &firmware) {
+        Ok(summary) => {
+            passed += 1;
+            println!(
+                "robot {:<22} ok: {summary}",
+                super::world_scenario::STIMULUS
+            );
+        }
+        Err(e) => {
+            failed += 1;
+            println!(
+                "robot {:<22} FAILED (the ring in {}.json against the trajectory): {e:#}",
+                super::world_scenario::STIMULUS,
+                super::world_scenario::WORLD
+            );
+        }
+    }
     println!("robot scenarios: {passed} passed, {failed} failed");
     ensure!(
         failed == 0,
