@@ -231,6 +231,10 @@ pub fn run_in_world(
                 }),
             }
         }
+        if let Some(w) = world.as_deref_mut() {
+            // The controller's ticks up to here: its frames go on the bus now.
+            operator.extend(w.ticks(t)?.into_iter().map(|f| (t, f)));
+        }
         if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
             // Never ahead of the wall clock (behind it when the host is too slow: said at once).
             outcome.work.pacing_us += pace.hold(t);
@@ -442,6 +446,9 @@ pub fn run_in_world(
             if live.is_some() {
                 until = until.min(t + LIVE_STEP_US);
             }
+            if let Some(tick) = world.as_deref().and_then(WorldRun::next_tick) {
+                until = until.min(tick);
+            }
             until.max(t + QUANTUM_US)
         };
         // Lookahead for a busy board: when it is the only one with work and the bus is quiet
@@ -471,6 +478,9 @@ pub fn run_in_world(
             }
             if live.is_some() {
                 horizon = horizon.min(t + LIVE_STEP_US);
+            }
+            if let Some(tick) = world.as_deref().and_then(WorldRun::next_tick) {
+                horizon = horizon.min(tick);
             }
             if horizon > t + QUANTUM_US {
                 next = horizon;
@@ -540,6 +550,9 @@ pub fn run_in_world(
         }
         if let Some(d) = now {
             emit(&mut outcome, sink, candump_line(d.end, &d.frame));
+            if let Some(w) = world.as_deref_mut() {
+                w.frame(d.end, &d.frame)?;
+            }
         }
         if end {
             outcome.ended_at = t;

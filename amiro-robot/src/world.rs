@@ -19,6 +19,7 @@ use std::path::Path;
 
 use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::world_link::{self, Wheels};
+use amiro_world::controller::{self, Controller};
 use amiro_world::feed::{self, ImuRevision, WheelFeed};
 use amiro_world::output::Trajectory;
 use amiro_world::world::{Readings, Summary, World};
@@ -48,6 +49,18 @@ pub struct WorldRun {
     sent: [Option<u64>; 2],
     trajectory: Trajectory,
     next_row: u64,
+    /// The trajectory's row period: the controller's, or [`ROW_PERIOD_US`].
+    row_period: u64,
+    /// The operator-side behaviour in lock-step (`--controller`), its period and next tick.
+    controller: Option<Control>,
+    /// Wall time the world's hooks took (motion, readings, rows; not the controller's wait).
+    pub wall: std::time::Duration,
+}
+
+struct Control {
+    program: Controller,
+    period: u64,
+    next: u64,
 }
 
 impl WorldRun {
@@ -64,6 +77,66 @@ impl WorldRun {
             sent: [None; 2],
             trajectory: Trajectory::default(),
             next_row: 0,
+            row_period: ROW_PERIOD_US,
+            controller: None,
+            wall: std::time::Duration::ZERO,
+        }
+    }
+
+    /// Closes the loop with `program` (the controller protocol, `amiro_world::controller`): every
+    /// frame on the bus to its stdin, a tick every `period_us` (a multiple of the quantum, the
+    /// first at `period_us`), its frames queued on the bus at the tick; the trajectory gets a
+    /// row at every tick.
+    pub fn with_controller(&mut self, program: &str, period_us: u64) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            period_us >= QUANTUM_US && period_us.is_multiple_of(QUANTUM_US),
+            "--controller-period: {period_us} µs is not a multiple of the {QUANTUM_US} µs quantum"
+        );
+        let program = Controller::spawn(program, controller::DEFAULT_TIMEOUT)?;
+        self.controller = Some(Control {
+            program,
+            period: period_us,
+            next: period_us,
+        });
+        self.row_period = period_us;
+        Ok(())
+    }
+
+    /// The next controller tick (a boundary the coordinator must stop at), if there is a
+    /// controller.
+    pub(crate) fn next_tick(&self) -> Option<u64> {
+        self.controller.as_ref().map(|c| c.next)
+    }
+
+    /// The controller's ticks due by boundary `t`: the frames it sends, to queue at `t`.
+    pub(crate) fn ticks(&mut self, t: u64) -> anyhow::Result<Vec<amiro_bus_sim::Frame>> {
+        let mut out = Vec::new();
+        let Some(c) = self.controller.as_mut() else {
+            return Ok(out);
+        };
+        while c.next <= t {
+            for f in c.program.tick(c.next)? {
+                out.extend(amiro_bus_sim::Frame::new(f.id, f.payload()));
+            }
+            c.next += c.period;
+        }
+        Ok(out)
+    }
+
+    /// A frame completed on the bus at `end`: to the controller's stdin.
+    pub(crate) fn frame(&mut self, end: u64, frame: &amiro_bus_sim::Frame) -> anyhow::Result<()> {
+        if let Some(c) = self.controller.as_mut() {
+            if let Some(f) = controller::Frame::new(frame.id, frame.payload()) {
+                c.program.frame(end, &f)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends the controller (closes its stdin, stops it if it does not finish).
+    pub fn finish(&mut self) {
+        if let Some(c) = self.controller.take() {
+            c.program.finish();
         }
     }
 
@@ -77,12 +150,14 @@ impl WorldRun {
     /// latest wheel ticks move the robot (they are cumulative, so the last report of a step is
     /// all it needs), and the trajectory gets its rows up to `t`.
     pub(crate) fn step(&mut self, t: u64, boards: &mut [crate::board::Board]) {
+        let started = std::time::Instant::now();
         if let Some(b) = boards.get_mut(DIWHEELDRIVE) {
             if let Some(w) = b.wheels.take() {
                 self.wheels(b.offset, w);
             }
         }
         self.at(t);
+        self.wall += started.elapsed();
     }
 
     /// The DiWheelDrive (clock zero at global `offset`) reported `wheels`.
@@ -99,7 +174,7 @@ impl WorldRun {
     pub(crate) fn at(&mut self, t: u64) {
         while self.next_row <= t {
             self.trajectory.record(self.next_row, self.world.pose());
-            self.next_row += ROW_PERIOD_US;
+            self.next_row += self.row_period;
         }
     }
 
@@ -119,7 +194,9 @@ impl WorldRun {
             .as_ref()
             .is_none_or(|(at, _)| t >= at + FEED_PERIOD_US);
         if stale {
+            let started = std::time::Instant::now();
             self.readings = Some((t, self.world.readings()));
+            self.wall += started.elapsed();
         }
         let (at, readings) = self.readings.as_ref()?;
         if self.sent[k] == Some(*at) {

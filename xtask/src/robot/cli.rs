@@ -44,6 +44,15 @@ pub struct RobotArgs {
     /// With `--world`: write the trajectory (`t_s,x_m,y_m,heading_deg`, a row every 10 ms).
     #[arg(long, value_name = "OUT.csv", requires = "world")]
     pub trajectory: Option<PathBuf>,
+    /// With `--world`: an operator-side behaviour in lock-step (the controller protocol,
+    /// docs/world.md): every bus frame to its stdin as a `candump -l` line, `(T) tick` every
+    /// `--controller-period`, its `ID#DATA` lines until `ok` sent on the bus at T. A command line,
+    /// e.g. "python3 examples/obstacle_avoidance.py".
+    #[arg(long, value_name = "PROGRAM", requires = "world")]
+    pub controller: Option<String>,
+    /// The controller's tick period (a multiple of 40 µs).
+    #[arg(long, default_value = "10ms", requires = "controller")]
+    pub controller_period: String,
     /// Measure instead: an idle robot, the thesis demo and a babbling board, each for
     /// `--duration` (default 2s) of virtual time; prints exchanges per virtual second, wall
     /// seconds per virtual second and where the wall time goes.
@@ -99,6 +108,10 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         Some(path) => Some(WorldRun::load(path, args.seed, ImuRevision::Rev1_1)?),
         None => None,
     };
+    if let (Some(world), Some(program)) = (world.as_mut(), &args.controller) {
+        let period = crate::qemu::parse_duration(&args.controller_period)?;
+        world.with_controller(program, period)?;
+    }
     let started = Instant::now();
     let outcome = amiro_robot::run_in_world(
         &firmware,
@@ -110,7 +123,11 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         },
         live.as_mut(),
         world.as_mut(),
-    )?;
+    );
+    if let Some(world) = world.as_mut() {
+        world.finish();
+    }
+    let outcome = outcome?;
     let duration = outcome.ended_at;
     let wall = started.elapsed().as_secs_f64();
     std::fs::write(work.join("output.log"), &outcome.text)?;
@@ -159,6 +176,11 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
             std::io::Write::flush(&mut out)?;
             eprintln!("world: trajectory: {}", path.display());
         }
+        eprintln!(
+            "world: its hooks took {:.3} s of the {wall:.1} s of wall time ({:.1} %)",
+            world.wall.as_secs_f64(),
+            100.0 * world.wall.as_secs_f64() / wall.max(1e-9)
+        );
         println!("{}", world.summary());
     }
     Ok(!(args.check && exceeded > 0))
