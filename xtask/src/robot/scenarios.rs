@@ -847,6 +847,23 @@ pub fn run_all(root: &Path) -> Result<()> {
             );
         }
     }
+    // A behaviour closes the loop: the obstacle-avoidance example in the arena.
+    match super::world_scenario::avoidance(root, &firmware) {
+        Ok(summary) => {
+            passed += 1;
+            println!(
+                "robot {:<22} ok: {summary}",
+                super::world_scenario::AVOIDANCE
+            );
+        }
+        Err(e) => {
+            failed += 1;
+            println!(
+                "robot {:<22} FAILED (examples/obstacle_avoidance.py in arena.json): {e:#}",
+                super::world_scenario::AVOIDANCE
+            );
+        }
+    }
     println!("robot scenarios: {passed} passed, {failed} failed");
     ensure!(
         failed == 0,

@@ -171,3 +171,69 @@ fn pose_at(trajectory: &Trajectory, t_us: u64) -> Option<(Vec2, f64)> {
         a.pose.heading + turn * f,
     ))
 }
+
+/// The obstacle-avoidance example's scenario: `examples/obstacle_avoidance.py` as the controller
+/// against the real firmware in `robot/worlds/arena.json`.
+pub const AVOIDANCE: &str = "world-avoidance";
+/// Its virtual duration.
+const AVOIDANCE_US: u64 = 60_000_000;
+
+/// Runs `examples/obstacle_avoidance.py` (python from the interop venv) in lock-step in the arena
+/// for [`AVOIDANCE_US`]: no contact and at least 3 m travelled.
+pub fn avoidance(root: &Path, firmware: &[amiro_robot::Firmware; 3]) -> Result<String> {
+    let python = crate::interop::venv(root, &crate::workspace::target_dir(root).join("interop"))?;
+    let work = crate::qemu::target_dir(root)
+        .join("scenarios")
+        .join("robot")
+        .join(AVOIDANCE);
+    let _ = std::fs::remove_dir_all(&work);
+    let arena = root.join("robot").join("worlds").join("arena.json");
+    let mut world = WorldRun::load(&arena, None, ImuRevision::Rev1_1)?;
+    let program = format!(
+        "{} {}",
+        python.display(),
+        root.join("examples")
+            .join("obstacle_avoidance.py")
+            .display()
+    );
+    world.with_controller(&program, amiro_world::controller::DEFAULT_PERIOD_US)?;
+    let started = std::time::Instant::now();
+    let mut lines: Vec<String> = Vec::new();
+    let outcome = amiro_robot::run_in_world(
+        firmware,
+        &[],
+        AVOIDANCE_US,
+        &work,
+        &mut lines,
+        None,
+        Some(&mut world),
+    );
+    world.finish();
+    let outcome = outcome?;
+    let wall = started.elapsed().as_secs_f64();
+    std::fs::write(work.join("output.log"), &outcome.text)?;
+    let mut csv = Vec::new();
+    world.trajectory().write_csv(&mut csv)?;
+    std::fs::write(work.join("trajectory.csv"), &csv)?;
+    std::fs::write(
+        work.join("world.svg"),
+        world.trajectory().svg(world.world().arena()),
+    )?;
+    let summary = world.summary();
+    ensure!(summary.contacts == 0, "{summary}: a contact");
+    ensure!(
+        summary.travelled_m >= 3.0,
+        "{summary}: less than 3 m in {} s",
+        AVOIDANCE_US / 1_000_000
+    );
+    let motor = outcome
+        .transfers
+        .iter()
+        .filter(|t| t.frame.id == 0x110)
+        .count();
+    Ok(format!(
+        "obstacle_avoidance.py drove the firmware for {} s ({motor} motor commands): {summary}; {wall:.1} s of wall time, the world's hooks {:.1} % of it",
+        AVOIDANCE_US / 1_000_000,
+        100.0 * world.wall.as_secs_f64() / wall.max(1e-9)
+    ))
+}
