@@ -142,7 +142,16 @@ impl WorldRun {
 
     /// The world file at `path` (a `WorldError` naming the field if it is malformed).
     pub fn load(path: &Path, seed: Option<u64>, revision: ImuRevision) -> anyhow::Result<WorldRun> {
-        let arena = Arena::load(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let arena = Arena::load(path).map_err(|e| {
+            let text = e.to_string();
+            let shown = path.display().to_string();
+            // A file that cannot be read names itself; a field error gets the file in front.
+            if text.contains(&shown) {
+                anyhow::anyhow!("{text}")
+            } else {
+                anyhow::anyhow!("{shown}: {text}")
+            }
+        })?;
         Ok(WorldRun::new(arena, seed, revision))
     }
 
@@ -304,6 +313,43 @@ mod tests {
             },
         );
         assert!((w.world().pose().position.x - x).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_controller_ticks_at_its_period_and_its_frames_come_back() {
+        let dir = std::env::temp_dir().join(format!("amiro-robot-world-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("a temp dir");
+        let script = dir.join("controller.sh");
+        // Echoes the frames it sees as a count, sends a motor frame at every tick.
+        std::fs::write(
+            &script,
+            "#!/bin/sh\nn=0\nwhile read -r l; do case \"$l\" in *tick) echo 110#0$n; echo ok; n=0;; *) n=$((n+1));; esac; done\n",
+        )
+        .expect("the script");
+        let mut w = run();
+        assert!(
+            w.with_controller("/bin/sh x", 30).is_err(),
+            "not a multiple of 40 µs"
+        );
+        w.with_controller(&format!("/bin/sh {}", script.display()), 10_000)
+            .expect("the controller");
+        assert_eq!(w.next_tick(), Some(10_000));
+        assert!(w.ticks(9_960).expect("no tick yet").is_empty());
+        let frame = amiro_bus_sim::Frame::new(0x61F, &[0, 200, 0]).expect("a frame");
+        w.frame(9_990, &frame).expect("written");
+        w.frame(9_995, &frame).expect("written");
+        let sent = w.ticks(20_000).expect("two ticks");
+        let data: Vec<&[u8]> = sent.iter().map(|f| f.payload()).collect();
+        assert_eq!(
+            data,
+            [&[0x02][..], &[0x00][..]],
+            "two frames before the first tick, none before the second"
+        );
+        assert_eq!(w.next_tick(), Some(30_000));
+        w.at(20_000);
+        assert_eq!(w.trajectory().samples.len(), 3, "a row at every tick");
+        w.finish();
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
