@@ -172,7 +172,40 @@ pub fn report_wheels(ticks: WheelTicks) {
 
 /// The world's latest readings for this board: its simulators take them before each read.
 pub fn readings() -> Option<Readings> {
+    // Without a world, one load and no critical section: a single-board run's sensor reads
+    // block nothing more than before (the hostile scenario's can_tx sits at its bound).
+    if !WORLD.load(Ordering::Relaxed) {
+        return None;
+    }
     critical_section::with(|cs| READINGS.borrow(cs).get())
+}
+
+/// The wheels to report after this exchange's report: only in a run with a world.
+#[inline(never)]
+fn world_wheels(now_us: u64) -> Option<Wheels> {
+    if !WORLD.load(Ordering::Relaxed) {
+        return None;
+    }
+    let ticks = critical_section::with(|cs| WHEELS.borrow(cs).get())?;
+    let (left_ticks, right_ticks) = ticks(now_us);
+    Some(Wheels {
+        now_us,
+        left_ticks,
+        right_ticks,
+    })
+}
+
+/// Reads the world's readings that follow an answer and keeps them; `false` if the pipe failed.
+#[inline(never)]
+fn take_readings(down: &HostFile) -> bool {
+    let mut readings = [0u8; READINGS_LEN];
+    if !down.read_exact(&mut readings) {
+        return false;
+    }
+    WORLD.store(true, Ordering::Relaxed);
+    let r = Readings::decode(&readings);
+    critical_section::with(|cs| READINGS.borrow(cs).set(Some(r)));
+    true
 }
 
 /// Whether this board runs as part of the robot.
@@ -427,16 +460,7 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         });
         report.drives = DRIVES.load(Ordering::SeqCst);
         report.sleeps_us = sleeps_for();
-        let wheels = critical_section::with(|cs| WHEELS.borrow(cs).get())
-            .filter(|_| WORLD.load(Ordering::Relaxed))
-            .map(|ticks| {
-                let (left_ticks, right_ticks) = ticks(report.now_us);
-                Wheels {
-                    now_us: report.now_us,
-                    left_ticks,
-                    right_ticks,
-                }
-            });
+        let wheels = world_wheels(report.now_us);
         if wheels.is_some() {
             report.flags |= UP_WHEELS;
         }
@@ -446,16 +470,10 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             && down.read_exact(&mut answer);
         let answer = Down::decode(&answer);
         let flags = answer.flags;
-        let mut readings = [0u8; READINGS_LEN];
-        if !sent || (flags & DOWN_READINGS != 0 && !down.read_exact(&mut readings)) {
+        if !sent || (flags & DOWN_READINGS != 0 && !take_readings(&down)) {
             super::print_line("# qemu: the robot's bus is gone");
             super::exit(false);
             return;
-        }
-        if flags & DOWN_READINGS != 0 {
-            WORLD.store(true, Ordering::Relaxed);
-            let r = Readings::decode(&readings);
-            critical_section::with(|cs| READINGS.borrow(cs).set(Some(r)));
         }
         early = flags & DOWN_EARLY != 0;
         // The host skips quanta in which no board can act: the next exchange is further on.
