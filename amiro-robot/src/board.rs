@@ -10,7 +10,10 @@ use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use amiro_bus_sim::MAILBOXES;
-use amiro_trace::robot_link::{Down, Up, DRIVES_SYNC_LOW, QUANTUM_US, UP_LEN};
+use amiro_trace::robot_link::{
+    Down, Up, DOWN_READINGS, DRIVES_SYNC_LOW, QUANTUM_US, UP_LEN, UP_WHEELS,
+};
+use amiro_trace::world_link::{Readings, Wheels, WHEELS_LEN};
 use anyhow::{bail, Context, Result};
 
 use crate::{Firmware, NODES};
@@ -49,6 +52,8 @@ pub(crate) struct Board {
     pub(crate) flags: u8,
     /// Lines it printed up to its last report (those after it are still in `lines`).
     pub(crate) ready: Vec<String>,
+    /// The wheel ticks that followed its last report (the DiWheelDrive in a run with a world).
+    pub(crate) wheels: Option<Wheels>,
 }
 
 fn make_fifo(path: &Path) -> Result<()> {
@@ -184,8 +189,8 @@ impl Board {
 
     /// Waits for the board's next exchange; `None` if the board has ended (its QEMU exited).
     pub(crate) fn receive(&mut self, guard: Instant, limit: Duration) -> Result<Option<Up>> {
-        let mut message = [0u8; UP_LEN];
-        let mut got = 0;
+        let mut message = [0u8; UP_LEN + WHEELS_LEN];
+        let (mut got, mut want) = (0, UP_LEN);
         let up_fd = self.up.as_ref().context("no pipe")?.as_raw_fd();
         loop {
             let out_fd = self.out.as_ref().map_or(-1, AsRawFd::as_raw_fd);
@@ -211,13 +216,23 @@ impl Board {
                     .up
                     .as_mut()
                     .context("no pipe")?
-                    .read(&mut message[got..])?;
+                    .read(&mut message[got..want])?;
                 got += n;
-                if got == UP_LEN {
+                if got == UP_LEN && Up::decode(message[..UP_LEN].try_into()?).flags & UP_WHEELS != 0
+                {
+                    want = UP_LEN + WHEELS_LEN;
+                }
+                if got == want {
                     // Everything the board printed before this exchange is in its pipe by now.
                     self.drain();
                     self.ready.append(&mut self.lines);
-                    return Ok(Some(Up::decode(&message)));
+                    let up = Up::decode(message[..UP_LEN].try_into()?);
+                    self.wheels = if want > UP_LEN {
+                        Some(Wheels::decode(message[UP_LEN..].try_into()?))
+                    } else {
+                        None
+                    };
+                    return Ok(Some(up));
                 }
                 continue;
             }
@@ -248,8 +263,24 @@ impl Board {
     }
 
     pub(crate) fn send(&mut self, answer: &Down) -> Result<()> {
+        self.send_with(answer, None)
+    }
+
+    /// Sends `answer`, with the world's `readings` after it if there are any.
+    pub(crate) fn send_with(&mut self, answer: &Down, readings: Option<Readings>) -> Result<()> {
         if let Some(down) = self.down.as_mut() {
-            down.write_all(&answer.encode())?;
+            match readings {
+                Some(r) => {
+                    let flagged = Down {
+                        flags: answer.flags | DOWN_READINGS,
+                        ..*answer
+                    };
+                    let mut m = flagged.encode().to_vec();
+                    m.extend_from_slice(&r.encode());
+                    down.write_all(&m)?;
+                }
+                None => down.write_all(&answer.encode())?,
+            }
         }
         Ok(())
     }

@@ -35,9 +35,10 @@ pub mod report;
 mod run;
 pub mod slcan;
 pub mod stimulus;
+pub mod world;
 
 pub use amiro_trace::robot_link::QUANTUM_US;
-pub use run::{run, Work};
+pub use run::{run, run_in_world, Work};
 
 /// The operator's adapter: the fourth node, after the boards.
 pub const OPERATOR: usize = 3;

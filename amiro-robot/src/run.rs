@@ -12,6 +12,7 @@ use anyhow::{bail, Result};
 
 use crate::board::{board_lines, Board};
 use crate::stimulus::{Action, Timed, BOARDS};
+use crate::world::WorldRun;
 use crate::{candump_line, pace, stamp, Firmware, Live, Outcome, Sink, Transfer, NODES, OPERATOR};
 
 /// How far a live run's host steps without a board's exchange at most: the adapter's frames are
@@ -72,7 +73,21 @@ pub fn run(
     duration_us: u64,
     work: &Path,
     sink: &mut dyn Sink,
+    live: Option<&mut Live>,
+) -> Result<Outcome> {
+    run_in_world(firmware, actions, duration_us, work, sink, live, None)
+}
+
+/// As [`run`], with the robot in `world` when there is one: the DiWheelDrive's wheel ticks move
+/// it and the sensor boards get its readings with their answers (`crate::world`).
+pub fn run_in_world(
+    firmware: &[Firmware; 3],
+    actions: &[Timed],
+    duration_us: u64,
+    work: &Path,
+    sink: &mut dyn Sink,
     mut live: Option<&mut Live>,
+    mut world: Option<&mut WorldRun>,
 ) -> Result<Outcome> {
     std::fs::create_dir_all(work)?;
     let mut bus = Bus::new();
@@ -99,6 +114,7 @@ pub fn run(
             wants: 0,
             flags: 0,
             ready: Vec::new(),
+            wheels: None,
         })
         .collect();
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
@@ -214,6 +230,10 @@ pub fn run(
                     at_bit: 20,
                 }),
             }
+        }
+        if let Some(w) = world.as_deref_mut() {
+            // The controller's ticks up to here: its frames go on the bus now.
+            operator.extend(w.ticks(t)?.into_iter().map(|f| (t, f)));
         }
         if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
             // Never ahead of the wall clock (behind it when the host is too slow: said at once).
@@ -385,14 +405,20 @@ pub fn run(
                 )?;
             }
         }
+        if let Some(w) = world.as_deref_mut() {
+            w.step(t, &mut boards);
+        }
         // What each board at this boundary wants next: the coming quantum if it has work or gets
-        // something now, else the boundary of its deadline.
+        // something now, else the boundary of its deadline (with a world, a sensor board's last
+        // boundary before it: `WorldRun::wake_boundary`).
         for k in 0..boards.len() {
             let b = &boards[k];
             if b.alive && b.next.is_none() && b.at == t {
                 let busy = b.wakes_at <= t || due(b, now.as_ref(), &bus, nodes[k], flags, end);
                 boards[k].wants = if busy {
                     t + QUANTUM_US
+                } else if world.is_some() {
+                    WorldRun::wake_boundary(k, t, b.wakes_at)
                 } else {
                     at_or_after(b.wakes_at)
                 };
@@ -419,6 +445,9 @@ pub fn run(
             }
             if live.is_some() {
                 until = until.min(t + LIVE_STEP_US);
+            }
+            if let Some(tick) = world.as_deref().and_then(WorldRun::next_tick) {
+                until = until.min(tick);
             }
             until.max(t + QUANTUM_US)
         };
@@ -449,6 +478,9 @@ pub fn run(
             }
             if live.is_some() {
                 horizon = horizon.min(t + LIVE_STEP_US);
+            }
+            if let Some(tick) = world.as_deref().and_then(WorldRun::next_tick) {
+                horizon = horizon.min(tick);
             }
             if horizon > t + QUANTUM_US {
                 next = horizon;
@@ -492,7 +524,10 @@ pub fn run(
                 }
                 b.flags = flags;
                 b.next = Some(next);
-                b.send(&answer)?;
+                let readings = world
+                    .as_deref_mut()
+                    .and_then(|w| w.readings_for(k, t, b.offset));
+                b.send_with(&answer, readings)?;
             } else if b.at < t && b.wants == next && ahead.is_none() {
                 let on = Down {
                     next_us: next - b.offset,
@@ -515,6 +550,9 @@ pub fn run(
         }
         if let Some(d) = now {
             emit(&mut outcome, sink, candump_line(d.end, &d.frame));
+            if let Some(w) = world.as_deref_mut() {
+                w.frame(d.end, &d.frame)?;
+            }
         }
         if end {
             outcome.ended_at = t;

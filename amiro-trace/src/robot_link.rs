@@ -5,8 +5,8 @@
 /// The exchange period in virtual µs: a multiple of the 10 µs tick below the shortest frame (44 bit
 /// times from start of frame to completion at 1 Mbit/s).
 pub const QUANTUM_US: u64 = 40;
-/// Board → host, [`Up`]: `u64` now, `u8` new frames, `u8` lines driven, `u8` abort requests, 1
-/// reserved, `u32` µs the board sleeps from now, three 28-byte records (`u64` queued at, `u16` id,
+/// Board → host, [`Up`]: `u64` now, `u8` new frames, `u8` lines driven, `u8` abort requests, `u8`
+/// flags ([`UP_WHEELS`]), `u32` µs the board sleeps from now, three 28-byte records (`u64` queued at, `u16` id,
 /// `u8` length, `u8` mailbox, 8 data bytes, `u64` released at), `u64` the boundary it reports at.
 pub const UP_LEN: usize = 16 + MAILBOXES * RECORD_LEN + 8;
 /// Host → board, [`Down`]: `u64` completion time, `u8` flags, `u8` mailbox, `u16` id, `u8` length,
@@ -20,6 +20,9 @@ const RECORD_LEN: usize = 28;
 pub const DRIVES_SYNC_LOW: u8 = 1;
 /// Up: this board drives SYS_PD_N low.
 pub const DRIVES_PD_LOW: u8 = 2;
+/// Up flag: the board's wheel ticks follow this report (`world_link::Wheels`, `WHEELS_LEN`
+/// bytes): the DiWheelDrive in a run with a world (docs/world.md).
+pub const UP_WHEELS: u8 = 1;
 /// Down: a frame completes in this quantum.
 pub const DOWN_FRAME: u8 = 1;
 /// Down: the frame is this board's own (its mailbox is free at the completion time).
@@ -34,6 +37,9 @@ pub const DOWN_END: u8 = 16;
 /// into a mailbox, asks for an abort or changes a line it drives (the host sends the one board
 /// with work ahead this way while everything else is quiet; docs/qemu.md, "Lookahead").
 pub const DOWN_EARLY: u8 = 32;
+/// Down: the world's readings for this board follow the answer (`world_link::Readings`,
+/// `READINGS_LEN` bytes); its simulators take them before the drivers next read.
+pub const DOWN_READINGS: u8 = 64;
 
 /// Whether a board's software ever sees a frame with identifier `id` that another node sent: the
 /// boards' bxCAN receive filter passes only command frames (bit 10, C/S, clear;
@@ -82,6 +88,8 @@ pub struct Up {
     pub aborts: u8,
     /// How long it will do nothing, µs from now (0: it has work; `u32::MAX`: no deadline).
     pub sleeps_us: u32,
+    /// [`UP_WHEELS`]: what follows the report.
+    pub flags: u8,
     /// The boundary this report is for (the board's virtual µs, a multiple of [`QUANTUM_US`]):
     /// the one the host sent it to, or an earlier one after [`DOWN_EARLY`].
     pub at_us: u64,
@@ -114,6 +122,7 @@ impl Up {
         m[8] = self.count.min(MAILBOXES as u8);
         m[9] = self.drives;
         m[10] = self.aborts;
+        m[11] = self.flags;
         m[12..16].copy_from_slice(&self.sleeps_us.to_le_bytes());
         for (k, q) in self.queued().iter().enumerate() {
             let r = &mut m[16 + RECORD_LEN * k..16 + RECORD_LEN * (k + 1)];
@@ -134,6 +143,7 @@ impl Up {
             now_us: le_u64(&m[..8]),
             drives: m[9],
             aborts: m[10],
+            flags: m[11],
             sleeps_us: u32::from_le_bytes([m[12], m[13], m[14], m[15]]),
             at_us: le_u64(&m[UP_LEN - 8..]),
             count: m[8].min(MAILBOXES as u8),
@@ -232,6 +242,7 @@ mod tests {
             drives: DRIVES_SYNC_LOW | DRIVES_PD_LOW,
             aborts: 0b100,
             sleeps_us: u32::MAX,
+            flags: UP_WHEELS,
             at_us: 123_456_760,
             ..Up::default()
         };
@@ -258,7 +269,7 @@ mod tests {
     #[test]
     fn an_answer_survives_the_link() {
         let down = Down {
-            flags: DOWN_FRAME | DOWN_OWN | DOWN_SYNC_LOW | DOWN_EARLY,
+            flags: DOWN_FRAME | DOWN_OWN | DOWN_SYNC_LOW | DOWN_EARLY | DOWN_READINGS,
             at_us: 987_654,
             mailbox: 1,
             id: 0x605,

@@ -24,15 +24,124 @@ use stm32f1xx_hal::pac::{self, Interrupt};
 use amiro_sensors::motion::{Duty, MotorPwm};
 
 pub use amiro_firmware::mono::QemuClock as Clock;
+use amiro_firmware::qemu::robot;
 pub use amiro_firmware::qemu::{CanErrors, CanTxPort, Signals as SystemSignals};
 /// The simulated parts need no time between transfers.
 #[cfg(feature = "rev-1-2")]
 pub use amiro_sensors::sim::NoDelay as ImuDelay;
-pub use amiro_sensors::sim::SimFloorBus as FloorI2c;
+use amiro_sensors::sim::SimFloorBus;
 #[cfg(feature = "rev-1-1")]
-pub use amiro_sensors::sim::{
-    SimAccelerometer as AccelSpi, SimCompassBus as CompassI2c, SimGyroscope as GyroSpi,
-};
+use amiro_sensors::sim::{SimAccelerometer, SimCompassBus, SimGyroscope};
+use robot::world_link::{Readings, FLOOR};
+
+/// The floor sensors' bus, fed from the world in a robot run with one.
+pub type FloorI2c = Fed<SimFloorBus>;
+/// The L3G4200D, fed from the world in a robot run with one.
+#[cfg(feature = "rev-1-1")]
+pub type GyroSpi = Fed<SimGyroscope>;
+/// The LIS331DLH, fed from the world in a robot run with one.
+#[cfg(feature = "rev-1-1")]
+pub type AccelSpi = Fed<SimAccelerometer>;
+/// The HMC5883L's bus, fed from the world in a robot run with one.
+#[cfg(feature = "rev-1-1")]
+pub type CompassI2c = Fed<SimCompassBus>;
+
+/// A simulated device that takes the world's latest readings (`robot::readings`, docs/world.md)
+/// before each transfer; without a world it keeps its own pattern.
+pub struct Fed<T>(T);
+
+/// A simulator's part of the world's readings.
+pub trait TakeReadings {
+    /// Hands the simulator its values from `r` (if `r` carries its group).
+    fn take(&mut self, r: &Readings);
+}
+
+impl<T: TakeReadings> Fed<T> {
+    fn fed(&mut self) -> &mut T {
+        if let Some(r) = robot::readings() {
+            self.0.take(&r);
+        }
+        &mut self.0
+    }
+}
+
+impl<T: embedded_hal::i2c::ErrorType> embedded_hal::i2c::ErrorType for Fed<T> {
+    type Error = T::Error;
+}
+
+impl<T: embedded_hal::i2c::I2c + TakeReadings> embedded_hal::i2c::I2c for Fed<T> {
+    fn transaction(
+        &mut self,
+        address: u8,
+        operations: &mut [embedded_hal::i2c::Operation<'_>],
+    ) -> Result<(), Self::Error> {
+        self.fed().transaction(address, operations)
+    }
+}
+
+#[cfg(feature = "rev-1-1")]
+impl<T: embedded_hal::spi::ErrorType> embedded_hal::spi::ErrorType for Fed<T> {
+    type Error = T::Error;
+}
+
+#[cfg(feature = "rev-1-1")]
+impl<T: embedded_hal::spi::SpiDevice + TakeReadings> embedded_hal::spi::SpiDevice for Fed<T> {
+    fn transaction(
+        &mut self,
+        operations: &mut [embedded_hal::spi::Operation<'_, u8>],
+    ) -> Result<(), Self::Error> {
+        self.fed().transaction(operations)
+    }
+}
+
+impl TakeReadings for SimFloorBus {
+    fn take(&mut self, r: &Readings) {
+        if r.has(FLOOR) {
+            amiro_sensors::sim::feed_floor(&mut self.target, Some(r.floor));
+        }
+    }
+}
+
+#[cfg(feature = "rev-1-1")]
+impl TakeReadings for SimGyroscope {
+    fn take(&mut self, r: &Readings) {
+        if r.has(robot::world_link::IMU_1_1) {
+            self.set_rate(Some(r.rate));
+        }
+    }
+}
+
+#[cfg(feature = "rev-1-1")]
+impl TakeReadings for SimAccelerometer {
+    fn take(&mut self, r: &Readings) {
+        if r.has(robot::world_link::IMU_1_1) {
+            self.set_acceleration(Some(r.accel));
+        }
+    }
+}
+
+#[cfg(feature = "rev-1-1")]
+impl TakeReadings for SimCompassBus {
+    fn take(&mut self, r: &Readings) {
+        if r.has(robot::world_link::IMU_1_1) {
+            self.target.set_field(Some(r.field_nt));
+        }
+    }
+}
+
+#[cfg(feature = "rev-1-2")]
+impl TakeReadings for amiro_sensors::sim::SimImuBus {
+    fn take(&mut self, r: &Readings) {
+        if r.has(robot::world_link::IMU_1_2) {
+            self.imu_mut()
+                .set_motion(Some(amiro_sensors::sim::Bno055Motion {
+                    accel_mg: r.accel,
+                    field_nt: r.field_nt,
+                    rate_digits: r.rate,
+                }));
+        }
+    }
+}
 
 /// The identifier of the QEMU-only control frames (see the module documentation).
 pub const SIM_CONTROL_ID: u16 = 0x3F0;
@@ -85,6 +194,9 @@ impl embedded_hal::i2c::I2c for ImuI2c {
         address: u8,
         operations: &mut [embedded_hal::i2c::Operation<'_>],
     ) -> Result<(), Self::Error> {
+        if let Some(r) = robot::readings() {
+            self.0.take(&r);
+        }
         self.0.set_nack(IMU_DEAD.load(Ordering::SeqCst));
         self.0.transaction(address, operations)
     }
@@ -117,10 +229,10 @@ pub struct SensorBuses {
 #[cfg(feature = "rev-1-1")]
 fn sensor_buses() -> SensorBuses {
     SensorBuses {
-        gyro_spi: GyroSpi::new(),
-        accel_spi: AccelSpi::new(),
-        compass_i2c: CompassI2c::new(),
-        floor_i2c: FloorI2c::new(),
+        gyro_spi: Fed(SimGyroscope::new()),
+        accel_spi: Fed(SimAccelerometer::new()),
+        compass_i2c: Fed(SimCompassBus::new()),
+        floor_i2c: Fed(SimFloorBus::new()),
     }
 }
 
@@ -129,7 +241,7 @@ fn sensor_buses() -> SensorBuses {
     SensorBuses {
         imu_i2c: ImuI2c(amiro_sensors::sim::SimImuBus::new()),
         imu_delay: ImuDelay,
-        floor_i2c: FloorI2c::new(),
+        floor_i2c: Fed(SimFloorBus::new()),
     }
 }
 
@@ -176,6 +288,7 @@ pub fn init(
             .borrow_ref_mut(cs)
             .replace(amiro_sensors::sim::WheelPlant::new());
     });
+    robot::report_wheels(wheel_ticks);
     (
         Board {
             can_tx: CanTxPort,
@@ -227,6 +340,16 @@ pub fn emergency_motors_off() {
             plant.set_duty(Duty::ZERO, Duty::ZERO);
         }
     });
+}
+
+/// The plant's whole ticks (left, right) at `now_us`, for the world (robot runs with one).
+fn wheel_ticks(now_us: u64) -> (i64, i64) {
+    critical_section::with(|cs| {
+        PLANT.borrow_ref_mut(cs).as_mut().map_or((0, 0), |p| {
+            p.advance_to(now_us);
+            (p.left.ticks(), p.right.ticks())
+        })
+    })
 }
 
 /// Simulated encoders: the plant integrated up to now.

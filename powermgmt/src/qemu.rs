@@ -21,6 +21,7 @@ use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
 
 use amiro_firmware::can::{CanRx, RxEvent};
 use amiro_firmware::mono::Clock as _;
+use amiro_firmware::qemu::robot;
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
 use amiro_sensors::drivers::bq27500::{self, cmd, Flags};
 use amiro_sensors::drivers::pca9544a;
@@ -153,6 +154,16 @@ impl I2c for SimBus {
         self.bus
             .fuel_gauge_mut()
             .set_charging(CHARGING.load(Ordering::SeqCst));
+        if let Some(r) = robot::readings().filter(|r| r.has(robot::world_link::RING)) {
+            // The world's counts for this bus's four sensors (docs/world.md), by the wiring.
+            for (index, &(bus, channel)) in WIRING.iter().enumerate() {
+                if bus == self.which {
+                    let counts = r.ring.get(index).copied();
+                    let _ =
+                        (self.bus.target.0).set_proximity(usize::from(channel.number()), counts);
+                }
+            }
+        }
         if address == pca9544a::AMIRO_ADDRESS {
             if let Some(Operation::Write([control, ..])) = operations.first() {
                 self.channel = (control & pca9544a::ENABLE != 0).then_some(control & 3);

@@ -86,7 +86,7 @@ pub fn check(root: &Path) -> Result<()> {
 }
 
 /// The venv's python, with `tools/requirements-ci.txt` installed; reuses the venv while the file is unchanged.
-fn venv(root: &Path, work: &Path) -> Result<PathBuf> {
+pub(crate) fn venv(root: &Path, work: &Path) -> Result<PathBuf> {
     let requirements = root.join("tools").join("requirements-ci.txt");
     let pinned = std::fs::read_to_string(&requirements)
         .with_context(|| format!("reading {}", requirements.display()))?;

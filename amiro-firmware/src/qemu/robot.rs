@@ -13,7 +13,7 @@
 //! passes, `bxcan::passes_filter`) into the 3-frame receive FIFO (an overrun if the board has not
 //! emptied it, as on bxCAN), or, for the board's own frame, as a free mailbox and a
 //! transmit-complete interrupt.
-use core::cell::RefCell;
+use core::cell::{Cell, RefCell};
 use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU8, AtomicUsize, Ordering};
 
 use cortex_m::interrupt::InterruptNumber;
@@ -25,8 +25,10 @@ use crate::can::{Completion, RxFrame, Transmit};
 pub use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::robot_link::{
     Down, Queued, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW,
-    DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW,
+    DOWN_READINGS, DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_WHEELS,
 };
+pub use amiro_trace::world_link;
+use world_link::{Readings, Wheels, READINGS_LEN};
 
 const NO_FILE: usize = usize::MAX;
 static DOWN: AtomicUsize = AtomicUsize::new(NO_FILE);
@@ -149,6 +151,60 @@ pub(super) fn connect() -> bool {
     UP.store(up.0, Ordering::Relaxed);
     // The host's exchange says when the board next trades: no tick needed in between.
     super::timer::set_tickless();
+    true
+}
+
+/// The board's wheels: whole ticks (left, right) at the given virtual µs.
+type WheelTicks = fn(u64) -> (i64, i64);
+/// The board's wheels in a run with a world ([`report_wheels`]).
+static WHEELS: Mutex<Cell<Option<WheelTicks>>> = Mutex::new(Cell::new(None));
+/// The world's latest readings for this board (`None` without a world, or before the first).
+static READINGS: Mutex<Cell<Option<Readings>>> = Mutex::new(Cell::new(None));
+/// Whether the host runs a world (it sent readings once): only then the wheels go up, so a run
+/// without a world trades not a byte more.
+static WORLD: AtomicBool = AtomicBool::new(false);
+
+/// Registers the board's wheel ticks (the DiWheelDrive's plant), reported at every exchange of
+/// a run with a world (docs/world.md, "How the readings reach the boards").
+pub fn report_wheels(ticks: WheelTicks) {
+    critical_section::with(|cs| WHEELS.borrow(cs).set(Some(ticks)));
+}
+
+/// The world's latest readings for this board: its simulators take them before each read.
+pub fn readings() -> Option<Readings> {
+    // Without a world, one load and no critical section: a single-board run's sensor reads
+    // block nothing more than before (the hostile scenario's can_tx sits at its bound).
+    if !WORLD.load(Ordering::Relaxed) {
+        return None;
+    }
+    critical_section::with(|cs| READINGS.borrow(cs).get())
+}
+
+/// The wheels to report after this exchange's report: only in a run with a world.
+#[inline(never)]
+fn world_wheels(now_us: u64) -> Option<Wheels> {
+    if !WORLD.load(Ordering::Relaxed) {
+        return None;
+    }
+    let ticks = critical_section::with(|cs| WHEELS.borrow(cs).get())?;
+    let (left_ticks, right_ticks) = ticks(now_us);
+    Some(Wheels {
+        now_us,
+        left_ticks,
+        right_ticks,
+    })
+}
+
+/// Reads the world's readings that follow an answer and keeps them; `false` if the pipe failed.
+#[inline(never)]
+fn take_readings(down: &HostFile) -> bool {
+    let mut readings = [0u8; READINGS_LEN];
+    if !down.read_exact(&mut readings) {
+        return false;
+    }
+    WORLD.store(true, Ordering::Relaxed);
+    let r = Readings::decode(&readings);
+    critical_section::with(|cs| READINGS.borrow(cs).set(Some(r)));
     true
 }
 
@@ -404,14 +460,21 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         });
         report.drives = DRIVES.load(Ordering::SeqCst);
         report.sleeps_us = sleeps_for();
+        let wheels = world_wheels(report.now_us);
+        if wheels.is_some() {
+            report.flags |= UP_WHEELS;
+        }
         let mut answer = [0u8; DOWN_LEN];
-        if !up.write_all(&report.encode()) || !down.read_exact(&mut answer) {
+        let sent = up.write_all(&report.encode())
+            && wheels.is_none_or(|w| up.write_all(&w.encode()))
+            && down.read_exact(&mut answer);
+        let answer = Down::decode(&answer);
+        let flags = answer.flags;
+        if !sent || (flags & DOWN_READINGS != 0 && !take_readings(&down)) {
             super::print_line("# qemu: the robot's bus is gone");
             super::exit(false);
             return;
         }
-        let answer = Down::decode(&answer);
-        let flags = answer.flags;
         early = flags & DOWN_EARLY != 0;
         // The host skips quanta in which no board can act: the next exchange is further on.
         boundary = boundary.max(answer.next_us.saturating_sub(QUANTUM_US));

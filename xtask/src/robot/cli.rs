@@ -6,6 +6,8 @@ use std::time::Instant;
 use anyhow::Result;
 
 use amiro_robot::stimulus;
+use amiro_robot::world::WorldRun;
+use amiro_world::feed::ImuRevision;
 
 /// `cargo xtask robot` options.
 #[derive(clap::Args, Debug)]
@@ -30,6 +32,27 @@ pub struct RobotArgs {
     /// default: printing them costs pace; everything is in the run's output.log either way).
     #[arg(long)]
     pub trace: bool,
+    /// Put the robot in a world (JSON: walls, obstacles, floor, the robot's start; docs/world.md):
+    /// the DiWheelDrive's wheels move it, the ring, floor and IMU read it. Ends with the line
+    /// `world: travelled X m, contacts N, pose X Y HEADING`; the arena's SVG with the path goes
+    /// beside the bus log.
+    #[arg(long, value_name = "FILE", conflicts_with = "bench")]
+    pub world: Option<PathBuf>,
+    /// With `--world`: the noise seed (default: the world file's).
+    #[arg(long, requires = "world")]
+    pub seed: Option<u64>,
+    /// With `--world`: write the trajectory (`t_s,x_m,y_m,heading_deg`, a row every 10 ms).
+    #[arg(long, value_name = "OUT.csv", requires = "world")]
+    pub trajectory: Option<PathBuf>,
+    /// With `--world`: an operator-side behaviour in lock-step (the controller protocol,
+    /// docs/world.md): every bus frame to its stdin as a `candump -l` line, `(T) tick` every
+    /// `--controller-period`, its `ID#DATA` lines until `ok` sent on the bus at T. A command line,
+    /// e.g. "python3 examples/obstacle_avoidance.py".
+    #[arg(long, value_name = "PROGRAM", requires = "world")]
+    pub controller: Option<String>,
+    /// The controller's tick period (a multiple of 40 µs).
+    #[arg(long, default_value = "10ms", requires = "controller")]
+    pub controller_period: String,
     /// Measure instead: an idle robot, the thesis demo and a babbling board, each for
     /// `--duration` (default 2s) of virtual time; prints exchanges per virtual second, wall
     /// seconds per virtual second and where the wall time goes.
@@ -80,8 +103,17 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
     } else {
         None
     };
+    // The robot's DiWheelDrive is revision 1-1 (`super::firmware::ROBOT_REVISION`).
+    let mut world = match &args.world {
+        Some(path) => Some(WorldRun::load(path, args.seed, ImuRevision::Rev1_1)?),
+        None => None,
+    };
+    if let (Some(world), Some(program)) = (world.as_mut(), &args.controller) {
+        let period = crate::qemu::parse_duration(&args.controller_period)?;
+        world.with_controller(program, period)?;
+    }
     let started = Instant::now();
-    let outcome = amiro_robot::run(
+    let outcome = amiro_robot::run_in_world(
         &firmware,
         &actions,
         duration,
@@ -90,7 +122,12 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
             all: !args.slcan || args.trace,
         },
         live.as_mut(),
-    )?;
+        world.as_mut(),
+    );
+    if let Some(world) = world.as_mut() {
+        world.finish();
+    }
+    let outcome = outcome?;
     let duration = outcome.ended_at;
     let wall = started.elapsed().as_secs_f64();
     std::fs::write(work.join("output.log"), &outcome.text)?;
@@ -128,6 +165,23 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
     eprintln!("bus log (candump -l): {}", work.join("bus.log").display());
     if exceeded > 0 {
         eprintln!("bus report: {exceeded} message(s) beyond their Davis bound");
+    }
+    if let Some(world) = &world {
+        let svg = work.join("world.svg");
+        std::fs::write(&svg, world.trajectory().svg(world.world().arena()))?;
+        eprintln!("world: arena and path: {}", svg.display());
+        if let Some(path) = &args.trajectory {
+            let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+            world.trajectory().write_csv(&mut out)?;
+            std::io::Write::flush(&mut out)?;
+            eprintln!("world: trajectory: {}", path.display());
+        }
+        eprintln!(
+            "world: its hooks took {:.3} s of the {wall:.1} s of wall time ({:.1} %)",
+            world.wall.as_secs_f64(),
+            100.0 * world.wall.as_secs_f64() / wall.max(1e-9)
+        );
+        println!("{}", world.summary());
     }
     Ok(!(args.check && exceeded > 0))
 }

@@ -6,3 +6,4 @@ pub mod bench;
 pub mod cli;
 pub mod firmware;
 pub mod scenarios;
+pub mod world_scenario;

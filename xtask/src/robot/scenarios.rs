@@ -829,6 +829,41 @@ pub fn run_all(root: &Path) -> Result<()> {
             println!("robot {:<22} FAILED: {e:#}", "determinism");
         }
     }
+    // The robot in a world: its ring against the trajectory, twice the same.
+    match super::world_scenario::run(root, &firmware) {
+        Ok(summary) => {
+            passed += 1;
+            println!(
+                "robot {:<22} ok: {summary}",
+                super::world_scenario::STIMULUS
+            );
+        }
+        Err(e) => {
+            failed += 1;
+            println!(
+                "robot {:<22} FAILED (the ring in {}.json against the trajectory): {e:#}",
+                super::world_scenario::STIMULUS,
+                super::world_scenario::WORLD
+            );
+        }
+    }
+    // A behaviour closes the loop: the obstacle-avoidance example in the arena.
+    match super::world_scenario::avoidance(root, &firmware) {
+        Ok(summary) => {
+            passed += 1;
+            println!(
+                "robot {:<22} ok: {summary}",
+                super::world_scenario::AVOIDANCE
+            );
+        }
+        Err(e) => {
+            failed += 1;
+            println!(
+                "robot {:<22} FAILED (examples/obstacle_avoidance.py in arena.json): {e:#}",
+                super::world_scenario::AVOIDANCE
+            );
+        }
+    }
     println!("robot scenarios: {passed} passed, {failed} failed");
     ensure!(
         failed == 0,
