@@ -26,7 +26,6 @@ mod robot;
 mod scenarios;
 mod smoke;
 mod wcet_gate;
-mod wcet_write;
 mod workspace;
 
 use boards::{select_boards, BOARDS};
