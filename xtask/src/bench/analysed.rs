@@ -165,17 +165,19 @@ mod tests {
     /// What the QEMU capture of `diwheeldrive/qemu/admission-one-shots.log` on a 1-1 robot shows: the thesis's
     /// magnetometer-x every 900 µs at medium, the accelerometer every 5 ms at low and one gyroscope sample at low
     /// (the floor one-shot was refused: no sample).
-    fn thesis_one_shots(root: &Path) -> PathBuf {
+    /// The thesis one-shots' scenario, written to a folder of `test`'s own: tests run in parallel in one process,
+    /// and a shared file was read half-written by one test while another wrote it.
+    fn thesis_one_shots(test: &str) -> PathBuf {
         let seen = [
             (Topic::MagnetometerX, 2, Some(900), 189),
             (Topic::Accelerometer, 3, Some(5000), 12),
             (Topic::Gyroscope, 3, None, 1),
         ];
-        let dir = std::env::temp_dir().join(format!("bench-one-model-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("bench-one-model-{}-{test}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("seen.scenario.json");
         std::fs::write(&path, seen_scenario(&seen).to_string()).unwrap();
-        let _ = root;
         path
     }
 
@@ -199,7 +201,7 @@ mod tests {
     #[test]
     fn what_the_board_admitted_the_bench_bounds() {
         let root = crate::workspace::workspace_root();
-        let path = thesis_one_shots(&root);
+        let path = thesis_one_shots("admitted");
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         // The board's own admission decides on the production model: it admits the set.
         let production =
@@ -246,7 +248,7 @@ mod tests {
     #[test]
     fn a_publisher_run_is_held_to_the_sum_of_its_topics_bounds() {
         let root = crate::workspace::workspace_root();
-        let path = thesis_one_shots(&root);
+        let path = thesis_one_shots("publisher-sum");
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         let traced = analyse_scenario(
             &root,
