@@ -114,6 +114,11 @@ pub struct WcetArgs {
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
+    /// Build the images, bound them and write each image's generated bounds file
+    /// (`schedule-analysis/models/<board>[-<rev>].wcet.json`), repeating until the images built from
+    /// the files are the images bounded (default: every revision).
+    #[arg(long, conflicts_with = "elf")]
+    pub write: bool,
 }
 
 /// `cargo xtask wcet`: one function of any ELF (`--elf`), else every task of the boards' images.
@@ -152,69 +157,103 @@ struct Row<'a> {
     declined: Option<String>,
 }
 
-/// Every task of each board's release image: its hardware tasks (the handler of the interrupt it
-/// binds), its dispatchers (the interrupt handlers that poll the software tasks of one priority,
-/// their bodies inlined into them), and the tasks the bounds file adds (the monotonic's interrupt).
-fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
-    let boards = crate::boards::select_boards(&args.boards)?;
-    let plan = crate::revision::plan(
-        &boards,
-        &crate::revision::Choice::parse(args.revision.as_deref())?,
-    )?;
-    let mut rows = Vec::new();
-    for build in &plan {
-        let board = build.board;
-        let elf = crate::revision::kept_elf(root, build, false);
-        ensure!(
-            elf.exists(),
-            "{} is not built: cargo xtask build {} --revision {}",
-            elf.display(),
-            board.name,
-            build.revision.name
-        );
-        let chip = chip_of(board, args.wait_states)?;
-        let default_bounds = root
-            .join("schedule-analysis")
-            .join("models")
-            .join(format!("{}.bounds.json", board.name));
-        let bounds = match args
-            .bounds
-            .as_ref()
-            .or(Some(&default_bounds).filter(|p| p.exists()))
-        {
-            Some(path) => BoundsFile::read(path)?,
-            None => BoundsFile::default(),
-        };
-        let source = std::fs::read_to_string(root.join(board.name).join("src").join("main.rs"))
-            .with_context(|| format!("{}'s app source", board.name))?;
-        let app = schedule_analysis::rtic_source::parse_app(&source)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", board.name))?;
-        let mut tasks = Vec::new();
-        for task in &app.tasks {
-            if let schedule_analysis::rtic_source::RticTaskKind::Hardware { binds } = &task.kind {
-                tasks.push(machine_code::Task {
-                    name: task.name.clone(),
-                    entry: machine_code::TaskEntry::Symbol(binds.clone()),
-                    handler: true,
-                });
-            }
-        }
-        for dispatcher in &app.dispatchers {
+/// The tasks of one board's image to bound: its hardware tasks (the handler of the interrupt each
+/// binds, named by the task), its dispatchers (`dispatcher <interrupt>`: the interrupt handlers that
+/// poll the software tasks of one priority, their bodies inlined into them), and the tasks the
+/// bounds file adds (the monotonic's interrupt).
+pub fn tasks_of(
+    app: &schedule_analysis::rtic_source::RticApp,
+    bounds: &BoundsFile,
+) -> Vec<machine_code::Task> {
+    let mut tasks = Vec::new();
+    for task in &app.tasks {
+        if let schedule_analysis::rtic_source::RticTaskKind::Hardware { binds } = &task.kind {
             tasks.push(machine_code::Task {
-                name: format!("dispatcher {dispatcher}"),
-                entry: machine_code::TaskEntry::Symbol(dispatcher.clone()),
+                name: task.name.clone(),
+                entry: machine_code::TaskEntry::Symbol(binds.clone()),
                 handler: true,
             });
         }
-        for extra in &bounds.tasks {
-            tasks.push(machine_code::Task {
-                name: extra.name.clone(),
-                entry: machine_code::TaskEntry::Symbol(extra.symbol.clone()),
-                handler: extra.handler,
-            });
-        }
-        let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
-        for t in machine_code::bound_tasks(&image, &tasks, chip, &bounds) {
+    }
+    for dispatcher in &app.dispatchers {
+        tasks.push(machine_code::Task {
+            name: format!("dispatcher {dispatcher}"),
+            entry: machine_code::TaskEntry::Symbol(dispatcher.clone()),
+            handler: true,
+        });
+    }
+    for extra in &bounds.tasks {
+        tasks.push(machine_code::Task {
+            name: extra.name.clone(),
+            entry: machine_code::TaskEntry::Symbol(extra.symbol.clone()),
+            handler: extra.handler,
+        });
+    }
+    tasks
+}
+
+/// One image's task bounds, with what they were computed from.
+pub struct Bounded {
+    pub chip: Chip,
+    pub app: schedule_analysis::rtic_source::RticApp,
+    pub tasks: Vec<machine_code::TaskBound>,
+}
+
+/// Bounds every task of `build`'s kept release image (it must be built) with the board's input
+/// bounds file (`bounds`, else `schedule-analysis/models/<board>.bounds.json` if there is one).
+pub fn bound_build(
+    root: &Path,
+    build: &crate::revision::Build,
+    wait_states: Option<u32>,
+    bounds: Option<&Path>,
+) -> Result<Bounded> {
+    let board = build.board;
+    let elf = crate::revision::kept_elf(root, build, false);
+    ensure!(
+        elf.exists(),
+        "{} is not built: cargo xtask build {} --revision {}",
+        elf.display(),
+        board.name,
+        build.revision.name
+    );
+    let chip = chip_of(board, wait_states)?;
+    let default_bounds = root
+        .join("schedule-analysis")
+        .join("models")
+        .join(format!("{}.bounds.json", board.name));
+    let bounds = match bounds.or(Some(default_bounds.as_path()).filter(|p| p.exists())) {
+        Some(path) => BoundsFile::read(path)?,
+        None => BoundsFile::default(),
+    };
+    let source = std::fs::read_to_string(root.join(board.name).join("src").join("main.rs"))
+        .with_context(|| format!("{}'s app source", board.name))?;
+    let app = schedule_analysis::rtic_source::parse_app(&source)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", board.name))?;
+    let tasks = tasks_of(&app, &bounds);
+    let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
+    let tasks = machine_code::bound_tasks(&image, &tasks, chip, &bounds);
+    Ok(Bounded { chip, app, tasks })
+}
+
+/// Every task of each board's release image ([`tasks_of`]); with `--write`, the generated bounds
+/// file of each image too ([`crate::wcet_write`]).
+fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
+    let boards = crate::boards::select_boards(&args.boards)?;
+    // `--write` without `--revision` writes every revision's file.
+    let choice = match (&args.revision, args.write) {
+        (None, true) => crate::revision::Choice::All,
+        (revision, _) => crate::revision::Choice::parse(revision.as_deref())?,
+    };
+    let plan = crate::revision::plan(&boards, &choice)?;
+    if args.write {
+        crate::wcet_write::write(root, &plan, args.wait_states, args.bounds.as_deref())?;
+    }
+    let mut rows = Vec::new();
+    for build in &plan {
+        let board = build.board;
+        let found = bound_build(root, build, args.wait_states, args.bounds.as_deref())?;
+        let chip = found.chip;
+        for t in found.tasks {
             rows.push(Row {
                 board: board.name,
                 revision: build.revision.name,

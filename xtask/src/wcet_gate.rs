@@ -64,7 +64,7 @@ pub fn bounds_path(root: &Path, build: &Build) -> std::path::PathBuf {
 pub enum Gate {
     /// The file matches the image.
     Current,
-    /// No bounds file yet (skipped).
+    /// No bounds file (the CI gate fails on it).
     NoFile,
 }
 
@@ -97,30 +97,28 @@ pub fn check_one(root: &Path, build: &Build, elf: &Path) -> Result<Gate> {
     Ok(Gate::Current)
 }
 
-/// The CI gate: every board revision's bounds file must match its release image as built
-/// (`target/firmware/<stem>.elf`, after `cargo xtask test` built them). A board without a bounds file is
-/// skipped, and said so.
+/// The CI gate: every board revision's bounds file must exist and match its release image as built
+/// (`target/firmware/<stem>.elf`, after `cargo xtask test` built them).
 pub fn check_bounds_current(root: &Path) -> Result<()> {
     let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &Choice::All)?;
-    let mut skipped = Vec::new();
+    let mut missing = Vec::new();
     for build in &every {
         let elf = revision::kept_elf(root, build, false);
+        let path = bounds_path(root, build);
+        let name = path
+            .strip_prefix(root)
+            .unwrap_or(&path)
+            .display()
+            .to_string();
         match check_one(root, build, &elf)? {
-            Gate::Current => println!(
-                "bounds gate: {} matches {}",
-                bounds_path(root, build)
-                    .strip_prefix(root)
-                    .unwrap_or(&bounds_path(root, build))
-                    .display(),
-                build.stem()
-            ),
-            Gate::NoFile => skipped.push(build.stem()),
+            Gate::Current => println!("bounds gate: {name} matches {}", build.stem()),
+            Gate::NoFile => missing.push(name),
         }
     }
-    if !skipped.is_empty() {
-        println!(
-            "bounds gate: skipped {} (no generated bounds file yet: `cargo xtask wcet --write`)",
-            skipped.join(", ")
+    if !missing.is_empty() {
+        bail!(
+            "no generated bounds file {}: run `cargo xtask wcet --write` and commit them",
+            missing.join(", ")
         );
     }
     Ok(())
@@ -255,5 +253,30 @@ mod tests {
             "{e}"
         );
         std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    /// The committed files: one per image, each for its image, and each refuses an image with other code.
+    #[test]
+    fn every_image_has_its_committed_bounds_file_and_another_image_fails_it() {
+        let root = crate::workspace::workspace_root();
+        let dir = std::env::temp_dir().join(format!("wcet-gate-real-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let other = dir.join("other.elf");
+        std::fs::write(&other, elf(&[0x70, 0x47, 0x00, 0xbf], b"")).unwrap();
+        let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &Choice::All).unwrap();
+        assert_eq!(every.len(), 5);
+        for build in &every {
+            let path = bounds_path(&root, build);
+            let file = BoundsFile::read(&path, "f")
+                .unwrap()
+                .unwrap_or_else(|| panic!("{} is not committed", path.display()));
+            assert_eq!(file.board, build.board.name);
+            let e = check_one(&root, build, &other).unwrap_err().to_string();
+            assert!(
+                e.contains("out of date") && e.contains(&file.image.code_sha256),
+                "{e}"
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

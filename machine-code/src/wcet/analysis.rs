@@ -9,7 +9,7 @@ use super::counted;
 use super::path::{self, Cost, LoopCount, LoopNodes, Node, PathError};
 use super::LoopInfo;
 use crate::callgraph::is_panic;
-use crate::decode::Insn;
+use crate::decode::{Flow, Insn, Opcode, PC, SP};
 use crate::image::Function;
 use crate::{Error, Image};
 
@@ -172,7 +172,7 @@ impl<'a> Analysis<'a> {
             let (file, line, text) = loop_place(image, insns, &graph, l);
             let count = if !leaves {
                 LoopCount::Endless
-            } else if counted::exclusive_retry(insns, &graph, l) {
+            } else if counted::exclusive_retry(insns, &graph, l, &|at| leaf_body(image, at)) {
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),
                     file: file.clone(),
@@ -471,4 +471,17 @@ fn read_entry(image: &Image, address: u64, size: u64) -> Option<u64> {
         [lo, hi] => u64::from(u16::from_le_bytes([lo, hi])),
         _ => return None,
     })
+}
+
+/// The body of the function at `at` when it is a leaf helper: straight-line code (no branch, call
+/// or write of SP or PC) ending in `BX LR`; the body without the `BX LR`.
+pub(super) fn leaf_body(image: &Image, at: u64) -> Option<Vec<Insn>> {
+    let f = image.function_at(at).filter(|f| f.start == at)?;
+    let insns = f.instructions().ok()?;
+    let (last, body) = insns.split_last()?;
+    let straight = body
+        .iter()
+        .all(|i| i.flow() == Flow::Next && !i.writes().contains(SP) && !i.writes().contains(PC));
+    (straight && last.flow() == Flow::Return && last.inst.opcode == Opcode::BX)
+        .then(|| body.to_vec())
 }

@@ -182,13 +182,33 @@ pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
 /// or `CMP` of it with 0 and `BNE`). On a single Cortex-M3/M4 (no global monitor on the STM32) a
 /// `STREX` fails only when the local monitor was cleared since the `LDREX`, which exception entry
 /// and return do: each retry needs a preemption inside the sequence.
-pub fn exclusive_retry(insns: &[Insn], cfg: &Cfg, l: &Loop) -> bool {
+///
+/// The machine outliner may move parts of the sequence into helpers (`OUTLINED_FUNCTION_*`:
+/// `LDREXB; CMP; BX LR`, `STREXB; CMP; BX LR`): `leaf` gives the body of a called function that is
+/// straight-line code ending in `BX LR` (without it), and such a call is read as its body, so the
+/// `STREX`, its status and the flags the branch back tests may be in one.
+pub fn exclusive_retry(
+    insns: &[Insn],
+    cfg: &Cfg,
+    l: &Loop,
+    leaf: &dyn Fn(u64) -> Option<Vec<Insn>>,
+) -> bool {
     let [latch] = l.latches[..] else { return false };
-    let all: Vec<&Insn> = l
-        .body
-        .iter()
-        .flat_map(|&b| insns[cfg.blocks[b].first..=cfg.blocks[b].last].iter())
-        .collect();
+    // A block's instructions with every call of a leaf helper replaced by the helper's body.
+    let expanded = |b: usize| -> Vec<Insn> {
+        let mut out = Vec::new();
+        for i in &insns[cfg.blocks[b].first..=cfg.blocks[b].last] {
+            match i.flow() {
+                Flow::Call(target) => match leaf(target) {
+                    Some(body) => out.extend(body),
+                    None => out.push(i.clone()),
+                },
+                _ => out.push(i.clone()),
+            }
+        }
+        out
+    };
+    let all: Vec<Insn> = l.body.iter().flat_map(|&b| expanded(b)).collect();
     let is_strex = |i: &Insn| {
         matches!(
             i.inst.opcode,
@@ -201,9 +221,9 @@ pub fn exclusive_retry(insns: &[Insn], cfg: &Cfg, l: &Loop) -> bool {
             Opcode::LDREX | Opcode::LDREXB | Opcode::LDREXH | Opcode::LDREXD
         )
     };
-    let stores: Vec<&&Insn> = all.iter().filter(|i| is_strex(i)).collect();
+    let stores: Vec<&Insn> = all.iter().filter(|i| is_strex(i)).collect();
     let [strex] = stores[..] else { return false };
-    if !all.iter().any(|i| is_ldrex(i)) {
+    if !all.iter().any(is_ldrex) {
         return false;
     }
     let Some(Operand::Reg(status)) = strex.inst.operands.first() else {
@@ -214,19 +234,36 @@ pub fn exclusive_retry(insns: &[Insn], cfg: &Cfg, l: &Loop) -> bool {
     if !block.succs.iter().any(|e| e.to == l.header && e.taken) {
         return false;
     }
-    let branch = &insns[block.last];
-    // The status must not change between the STREX and the branch.
-    let strex_at = insns
-        .iter()
-        .position(|i| i.addr == strex.addr)
-        .unwrap_or(usize::MAX);
-    if strex_at < block.first || strex_at > block.last {
-        return false;
+    // The latch block, preceded by the blocks that only fall into it from a call (a call ends a
+    // block): the straight run of code that ends in the branch back.
+    let mut run = vec![latch];
+    loop {
+        let first = run[0];
+        let into: Vec<usize> = l
+            .body
+            .iter()
+            .copied()
+            .filter(|&b| cfg.blocks[b].succs.iter().any(|e| e.to == first))
+            .collect();
+        let [before] = into[..] else { break };
+        let blk = &cfg.blocks[before];
+        if first == l.header || blk.call.is_none() || blk.succs.len() != 1 || run.contains(&before)
+        {
+            break;
+        }
+        run.insert(0, before);
     }
-    if insns[strex_at + 1..block.last]
-        .iter()
-        .any(|i| i.writes().contains(status))
-    {
+    let latch_insns: Vec<Insn> = run.iter().flat_map(|&b| expanded(b)).collect();
+    let Some((branch, before)) = latch_insns.split_last() else {
+        return false;
+    };
+    // The STREX is in that run (or a helper it calls), and its status does not change between it
+    // and the branch.
+    let Some(strex_at) = before.iter().position(|i| i.addr == strex.addr) else {
+        return false;
+    };
+    let after = &before[strex_at + 1..];
+    if after.iter().any(|i| i.writes().contains(status)) {
         return false;
     }
     match branch.inst.opcode {
@@ -235,7 +272,7 @@ pub fn exclusive_retry(insns: &[Insn], cfg: &Cfg, l: &Loop) -> bool {
             let Some(1) = branch_condition(branch) else {
                 return false;
             };
-            insns[strex_at + 1..block.last]
+            after
                 .iter()
                 .rev()
                 .find(|i| sets_flags(i))

@@ -539,3 +539,58 @@ fn a_step_inside_an_it_block_is_no_count() {
         .expect("declined");
     assert!(reason.contains("no bound"), "{reason}");
 }
+
+/// An exclusive-access sequence the machine outliner split into two leaf helpers, as in the boards'
+/// dispatchers (`LDREXB; CMP r2, #1; BX LR` and `STREXB; CMP r2, #0; BX LR`): still a retry.
+fn outlined_retry(store_compare: u16) -> Image {
+    image(
+        &[
+            0xb580, // 0x00 push {r7, lr}
+            0x2100, // 0x02 movs r1, #0
+            0xf000,
+            0xf808, // 0x04 bl 0x18 (the load helper)
+            0xd103, // 0x08 bne 0x12: the flag is not 1, give up
+            0xf000,
+            0xf809, // 0x0a bl 0x20 (the store helper)
+            0xd1f9, // 0x0e bne 0x04: the store failed, again
+            0xbd80, // 0x10 pop {r7, pc}
+            0xf3bf,
+            0x8f2f, // 0x12 clrex
+            0xbd80, // 0x16 pop {r7, pc}
+            0xe8d0,
+            0x2f4f, // 0x18 ldrexb r2, [r0]
+            0x2a01, // 0x1c cmp r2, #1
+            0x4770, // 0x1e bx lr
+            0xe8c0,
+            0x1f42,        // 0x20 strexb r2, r1, [r0]
+            store_compare, // 0x24 cmp r2, #0 (or another register)
+            0x4770,        // 0x26 bx lr
+        ],
+        &[
+            Sym::function("take_flag", 0, 0x18),
+            Sym::function("OUTLINED_FUNCTION_0", 0x18, 8),
+            Sym::function("OUTLINED_FUNCTION_1", 0x20, 8),
+        ],
+    )
+}
+
+#[test]
+fn an_outlined_exclusive_retry_is_still_a_retry() {
+    let b = bound(&outlined_retry(0x2a00), "take_flag", F103_0WS);
+    assert_eq!(b.declined, None);
+    // push, movs; the loop collapsed to one whole pass (bl, 3 of the load helper, bne, bl, 3 of the
+    // store helper, bne); then its longest way out (clrex, pop): 2 + 10 + 2.
+    assert_eq!(b.instructions, 14);
+    assert!(b.loops[0].source.starts_with("exclusive retry"));
+    // A preemption inside costs one more iteration: bl, 3, bne, bl, 3, bne.
+    assert_eq!(b.retry_instructions, 10);
+    // The branch back tests another register than the store's status: not a retry, no bound.
+    let other = bound(&outlined_retry(0x2900), "take_flag", F103_0WS);
+    assert!(
+        other
+            .declined
+            .as_deref()
+            .is_some_and(|d| d.contains("has no bound")),
+        "{other:?}"
+    );
+}

@@ -1,0 +1,484 @@
+//! `cargo xtask wcet --write`: the machine code's bounds of each image written into its generated bounds file
+//! (`schedule-analysis/models/<board>[-<rev>].wcet.json`, [`schedule_analysis::bounds`]), under the rows the
+//! analysis reads: the RTIC tasks of the board's timing file, `publisher[<topic>]` per topic, and the overheads.
+//!
+//! How the machine code's rows map onto them (docs/analysis.md, "Budgets from the machine code"):
+//! - a hardware task's row is the bound of the handler of the interrupt it binds;
+//! - a software task's row is the bound of the dispatcher of its priority (with LTO the task bodies are inlined
+//!   into it): one invocation polls every pending task of that priority once, so its bound covers one job of
+//!   each of them, and is a sound (if pessimistic) bound of any one of them;
+//! - `publisher[<topic>]` is the largest bound of the dispatchers of the publisher tasks (a topic may be
+//!   published at any level), declined if any of them is;
+//! - `monotonic` is the bound of the monotonic's interrupt (the task the input bounds file adds);
+//! - `exception_entry` and `exception_exit` are the core's (the TRM's 12 and 10 cycles, the entry with lazy FPU
+//!   stacking on the M4F), each with one flash access's wait states (the vector read; the interrupted code's
+//!   refetch): counted once more on top of every handler's bound, which includes the TRM's figures already;
+//! - `dispatcher` is not written: each software task's bound already contains its dispatcher's code, and the
+//!   timing file's stated figure, counted on top, is pessimism, not a gap.
+//!
+//! The bounds feed the admission tables compiled into the images (read-only data), so writing them can change
+//! the images; the gate hashes the executable sections only, and `--write` rebuilds and repeats until the files
+//! it writes are the files it finds (a fixed point), or fails.
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use anyhow::{bail, ensure, Context, Result};
+use machine_code::Chip;
+use schedule_analysis::bounds::{self, BoundsFile, TaskBound};
+use schedule_analysis::rtic_source::{RticApp, RticTaskKind};
+
+use crate::revision::{self, Build};
+use crate::wcet_gate;
+
+/// How often `--write` builds and bounds before it gives up on a fixed point.
+const ROUNDS: usize = 3;
+
+/// Builds the images of `plan`, bounds them and writes their bounds files; repeats (rebuilding with the files
+/// just written) until no file changes.
+pub fn write(
+    root: &Path,
+    plan: &[Build],
+    wait_states: Option<u32>,
+    input: Option<&Path>,
+) -> Result<()> {
+    for round in 1..=ROUNDS {
+        crate::workspace::build_boards(root, plan, false)?;
+        let mut changed = Vec::new();
+        for build in plan {
+            let file = generate(root, build, wait_states, input)?;
+            let path = wcet_gate::bounds_path(root, build);
+            let text = file.to_json();
+            if std::fs::read_to_string(&path).ok().as_deref() != Some(text.as_str()) {
+                std::fs::write(&path, &text)
+                    .with_context(|| format!("writing {}", path.display()))?;
+                changed.push(
+                    path.strip_prefix(root)
+                        .unwrap_or(&path)
+                        .display()
+                        .to_string(),
+                );
+            }
+        }
+        if changed.is_empty() {
+            // What CI's gate will find: each file matches its image as just rebuilt.
+            for build in plan {
+                let elf = revision::kept_elf(root, build, false);
+                ensure!(
+                    wcet_gate::check_one(root, build, &elf)? == wcet_gate::Gate::Current,
+                    "{}: no bounds file after writing it",
+                    build.stem()
+                );
+            }
+            println!(
+                "bounds files: current with the images built from them (round {round}: rebuilt, nothing changed)"
+            );
+            return Ok(());
+        }
+        println!(
+            "bounds files: wrote {} (round {round}); rebuilding with them",
+            changed.join(", ")
+        );
+    }
+    bail!(
+        "the bounds files did not settle in {ROUNDS} rounds: each image built with them has other code than the \
+         one bounded (docs/analysis.md, \"Budgets from the machine code\")"
+    )
+}
+
+/// The names a board's timing file gives budgets: its tasks, its topics, its publisher tasks.
+#[derive(Debug, Default)]
+pub struct Budgets {
+    pub tasks: Vec<String>,
+    pub topics: Vec<String>,
+    pub publishers: BTreeSet<String>,
+}
+
+/// Reads the timing file of `build`'s board at its robot revision.
+fn budgets_of(root: &Path, build: &Build) -> Result<Budgets> {
+    let wanted = format!("{}.timing.json", build.board.name);
+    let path = schedule_analysis::scenario::timing_files_for(root, Some(build.robot()))
+        .into_iter()
+        .find(|p| p.file_name().and_then(|n| n.to_str()) == Some(wanted.as_str()))
+        .with_context(|| format!("no {wanted} for a {} robot", build.robot()))?;
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let json: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
+    let keys = |field: &str| -> Vec<String> {
+        json.get(field)
+            .and_then(|v| v.as_object())
+            .map(|o| o.keys().cloned().collect())
+            .unwrap_or_default()
+    };
+    let publishers = json
+        .get("publishers")
+        .and_then(|v| v.as_object())
+        .map(|o| {
+            o.values()
+                .filter_map(|v| v.as_str().map(str::to_string))
+                .collect()
+        })
+        .unwrap_or_default();
+    Ok(Budgets {
+        tasks: keys("tasks"),
+        topics: keys("topics"),
+        publishers,
+    })
+}
+
+/// The bounds file of `build`'s kept image.
+fn generate(
+    root: &Path,
+    build: &Build,
+    wait_states: Option<u32>,
+    input: Option<&Path>,
+) -> Result<BoundsFile> {
+    let found = crate::machine::bound_build(root, build, wait_states, input)?;
+    let elf = revision::kept_elf(root, build, false);
+    let bytes = std::fs::read(&elf).with_context(|| format!("reading {}", elf.display()))?;
+    let image = wcet_gate::image_identity(&bytes).with_context(|| elf.display().to_string())?;
+    let budgets = budgets_of(root, build)?;
+    let features: Vec<&str> = build.revision.feature.into_iter().collect();
+    let mut rows = rows(
+        &found.app.with_features(&features),
+        &found.app,
+        &budgets,
+        &found.tasks,
+        found.chip,
+    );
+    // The workspace's own files by their path in it, not this checkout's.
+    let here = format!("{}/", root.display());
+    for r in &mut rows {
+        if let Some(reason) = &mut r.declined {
+            *reason = reason.replace(&here, "");
+        }
+    }
+    let chip = if found.chip.m4() {
+        bounds::Chip::Stm32f405
+    } else {
+        bounds::Chip::Stm32f103
+    };
+    Ok(BoundsFile {
+        generated: format!(
+            "{} from target/firmware/{}.elf; do not edit (docs/analysis.md)",
+            bounds::GENERATED_PREFIX,
+            build.stem()
+        ),
+        board: build.board.name.to_string(),
+        revision: build
+            .revision
+            .feature
+            .and_then(|f| f.strip_prefix("rev-"))
+            .map(str::to_string),
+        chip,
+        clock_hz: found.chip.clock_hz(),
+        wait_states: found.chip.wait_states() as u32,
+        image,
+        tasks: rows,
+        idle_critical_sections: BTreeMap::new(),
+    })
+}
+
+/// The dispatcher of each software-task priority, as RTIC's code generation assigns them: the priorities of
+/// every software task (whatever its `cfg`: RTIC counts them before `cfg` removes any) from the highest down,
+/// each taking the last dispatcher not yet taken.
+pub fn dispatcher_of(app: &RticApp) -> BTreeMap<u8, String> {
+    let priorities: BTreeSet<u8> = app
+        .tasks
+        .iter()
+        .filter(|t| t.kind == RticTaskKind::Software && t.priority > 0)
+        .map(|t| t.priority)
+        .collect();
+    let mut available = app.dispatchers.clone();
+    priorities
+        .iter()
+        .rev()
+        .filter_map(|&p| available.pop().map(|d| (p, d)))
+        .collect()
+}
+
+/// `cycles` at `chip`'s clock in µs, rounded up to the file's 0.001 µs.
+fn us(cycles: u64, clock_hz: u64) -> f64 {
+    ((cycles as f64 * 1e9 / clock_hz as f64).ceil() / 1000.0).max(0.0)
+}
+
+fn declined(task: &str, reason: String) -> TaskBound {
+    TaskBound {
+        task: task.to_string(),
+        cycles: None,
+        us: None,
+        instructions: None,
+        bus_wait_us: 0.0,
+        declined: Some(reason),
+        critical_sections: BTreeMap::new(),
+    }
+}
+
+fn bounded(task: &str, cycles: u64, instructions: u64, bus_wait_us: f64, clock: u64) -> TaskBound {
+    TaskBound {
+        task: task.to_string(),
+        cycles: Some(cycles),
+        us: Some(us(cycles, clock)),
+        instructions: Some(instructions),
+        bus_wait_us,
+        declined: None,
+        critical_sections: BTreeMap::new(),
+    }
+}
+
+/// The row `task` from the machine code's bound `found` (named `what` in a reason).
+fn from_found(
+    task: &str,
+    what: &str,
+    found: Option<&machine_code::TaskBound>,
+    clock: u64,
+) -> TaskBound {
+    match found {
+        None => declined(
+            task,
+            format!("{what}: not bounded (no such handler in the image)"),
+        ),
+        Some(f) => match &f.declined {
+            Some(reason) => declined(task, format!("{what}: {reason}")),
+            None => bounded(task, f.cycles, f.instructions, f.bus_wait_us, clock),
+        },
+    }
+}
+
+/// The rows of one image: `built` is the app as built (its `cfg`s applied), `app` as written (for RTIC's
+/// dispatcher assignment), `found` the machine code's bounds by task ([`crate::machine::tasks_of`]).
+pub fn rows(
+    built: &RticApp,
+    app: &RticApp,
+    budgets: &Budgets,
+    found: &[machine_code::TaskBound],
+    chip: Chip,
+) -> Vec<TaskBound> {
+    let clock = chip.clock_hz();
+    let by_name: BTreeMap<&str, &machine_code::TaskBound> =
+        found.iter().map(|t| (t.task.as_str(), t)).collect();
+    let dispatchers = dispatcher_of(app);
+    // The machine-code row a task's job is bounded by, and what to call it.
+    let source = |name: &str| -> Option<(String, Option<&machine_code::TaskBound>)> {
+        let task = built.tasks.iter().find(|t| t.name == name)?;
+        match &task.kind {
+            RticTaskKind::Hardware { binds } => Some((
+                format!("{name} (handler {binds})"),
+                by_name.get(name).copied(),
+            )),
+            RticTaskKind::Software => {
+                let d = dispatchers.get(&task.priority)?;
+                let key = format!("dispatcher {d}");
+                Some((
+                    format!("{name} (polled by {d}, priority {})", task.priority),
+                    by_name.get(key.as_str()).copied(),
+                ))
+            }
+            RticTaskKind::Idle => None,
+        }
+    };
+    let mut out = Vec::new();
+    for task in &budgets.tasks {
+        out.push(match source(task) {
+            Some((what, f)) => from_found(task, &what, f, clock),
+            None => declined(
+                task,
+                format!("{task}: not an interrupt-driven task of the image as built (thread mode, or not in the app)"),
+            ),
+        });
+    }
+    // One sample of a topic: a job of whichever publisher task publishes it.
+    let publishers: Vec<TaskBound> = budgets
+        .publishers
+        .iter()
+        .map(|p| match source(p) {
+            Some((what, f)) => from_found(p, &what, f, clock),
+            None => declined(
+                p,
+                format!("publisher {p}: not a task of the image as built"),
+            ),
+        })
+        .collect();
+    for topic in &budgets.topics {
+        let row = bounds::publisher_row(topic);
+        let refused = publishers.iter().find_map(|p| p.declined.clone());
+        out.push(match (refused, publishers.is_empty()) {
+            (_, true) => declined(&row, "the timing file names no publisher task".into()),
+            (Some(reason), _) => declined(&row, reason),
+            (None, false) => {
+                let max = |f: fn(&TaskBound) -> u64| publishers.iter().map(f).max().unwrap_or(0);
+                let cycles = max(|p| p.cycles.unwrap_or(0));
+                let instructions = max(|p| p.instructions.unwrap_or(0));
+                let wait = publishers.iter().map(|p| p.bus_wait_us).fold(0.0, f64::max);
+                bounded(&row, cycles, instructions, wait, clock)
+            }
+        });
+    }
+    out.push(from_found(
+        "monotonic",
+        "the monotonic's interrupt",
+        by_name.get("monotonic").copied(),
+        clock,
+    ));
+    // The TRM's figures assume zero-wait-state memory; the vector is read from flash and the return refetches
+    // the interrupted code from flash: each one flash access's wait states more.
+    let exit = machine_code::wcet::chip::EXCEPTION_EXIT;
+    let entry = chip.exception_cycles() - exit + chip.wait_states();
+    out.push(bounded("exception_entry", entry, 0, 0.0, clock));
+    out.push(bounded(
+        "exception_exit",
+        exit + chip.wait_states(),
+        0,
+        0.0,
+        clock,
+    ));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use schedule_analysis::rtic_source::parse_app;
+
+    /// Priorities 3 (one task only in the QEMU build), 2 (two tasks) and 1 (the publisher); a hardware task.
+    const APP: &str = r#"
+#[rtic::app(device = pac, dispatchers = [SPARE, LOW, MID, HIGH])]
+mod app {
+    #[shared] struct Shared {}
+    #[local] struct Local {}
+    #[init] fn init(_: init::Context) -> (Shared, Local) { (Shared {}, Local {}) }
+    #[task(binds = CAN_RX, priority = 4)] fn can_rx(_: can_rx::Context) {}
+    #[cfg(feature = "qemu")]
+    #[task(priority = 3)] async fn stimulus(_: stimulus::Context) {}
+    #[task(priority = 2)] async fn handle(_: handle::Context) {}
+    #[task(priority = 2)] async fn drive(_: drive::Context) {}
+    #[task(priority = 1)] async fn publish(_: publish::Context) {}
+}
+"#;
+
+    fn found(task: &str, cycles: u64, declined: Option<&str>) -> machine_code::TaskBound {
+        machine_code::TaskBound {
+            task: task.into(),
+            function: None,
+            cycles,
+            us: 0.0,
+            instructions: cycles / 2,
+            bus_wait_us: 0.5,
+            loops: Vec::new(),
+            preemption_retry_cycles: 0,
+            declined: declined.map(str::to_string),
+        }
+    }
+
+    #[test]
+    fn rtic_assigns_the_last_dispatchers_to_the_highest_priorities_cfg_or_not() {
+        let app = parse_app(APP).unwrap();
+        let d = dispatcher_of(&app);
+        assert_eq!(d[&3], "HIGH");
+        assert_eq!(d[&2], "MID");
+        assert_eq!(d[&1], "LOW");
+        assert_eq!(d.len(), 3);
+    }
+
+    #[test]
+    fn tasks_take_their_handlers_or_dispatchers_bound_and_topics_the_publishers() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: vec![
+                "can_rx".into(),
+                "handle".into(),
+                "drive".into(),
+                "admit".into(),
+            ],
+            topics: vec!["gyro".into()],
+            publishers: ["publish".to_string()].into(),
+        };
+        let machine = [
+            found("can_rx", 720, None),
+            found("dispatcher MID", 144, None),
+            found("dispatcher LOW", 7200, None),
+            found("monotonic", 0, Some("the loop in TIM3 has no bound")),
+        ];
+        let rows = rows(&built, &app, &budgets, &machine, chip);
+        let row = |n: &str| rows.iter().find(|r| r.task == n).unwrap();
+        assert_eq!(row("can_rx").cycles, Some(720));
+        assert_eq!(row("can_rx").us, Some(10.0));
+        assert_eq!(row("can_rx").bus_wait_us, 0.5);
+        // Both priority-2 tasks: the one dispatcher's bound.
+        assert_eq!(row("handle").cycles, Some(144));
+        assert_eq!(row("drive").instructions, Some(72));
+        assert_eq!(row("publisher[gyro]").cycles, Some(7200));
+        assert!(row("admit")
+            .declined
+            .as_deref()
+            .unwrap()
+            .contains("not an interrupt-driven task"));
+        assert!(row("monotonic")
+            .declined
+            .as_deref()
+            .unwrap()
+            .contains("TIM3"));
+        // The TRM's 12 and 10 cycles, each with one flash access's 2 wait states.
+        assert_eq!(row("exception_entry").cycles, Some(14));
+        assert_eq!(row("exception_exit").cycles, Some(12));
+        // What the writer writes, the loader reads.
+        let file = BoundsFile {
+            generated: bounds::GENERATED_PREFIX.into(),
+            board: "b".into(),
+            revision: None,
+            chip: bounds::Chip::Stm32f103,
+            clock_hz: chip.clock_hz(),
+            wait_states: 2,
+            image: schedule_analysis::bounds::ImageIdentity {
+                code_sha256: "0".repeat(64),
+                code_bytes: 4,
+            },
+            tasks: rows.clone(),
+            idle_critical_sections: BTreeMap::new(),
+        };
+        assert_eq!(BoundsFile::from_json("t", &file.to_json()).unwrap(), file);
+    }
+
+    #[test]
+    fn a_declined_publisher_declines_every_topic_and_a_missing_dispatcher_is_named() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f405", None).unwrap();
+        let budgets = Budgets {
+            tasks: vec!["handle".into()],
+            topics: vec!["a".into(), "b".into()],
+            publishers: ["publish".to_string()].into(),
+        };
+        let machine = [found(
+            "dispatcher LOW",
+            0,
+            Some("irreducible control flow in LOW"),
+        )];
+        let rows = rows(&built, &app, &budgets, &machine, chip);
+        for topic in ["publisher[a]", "publisher[b]"] {
+            let r = rows.iter().find(|r| r.task == topic).unwrap();
+            assert!(
+                r.declined.as_deref().unwrap().contains("irreducible"),
+                "{r:?}"
+            );
+        }
+        let handle = rows.iter().find(|r| r.task == "handle").unwrap();
+        assert!(handle
+            .declined
+            .as_deref()
+            .unwrap()
+            .contains("polled by MID"));
+        // Lazy FPU stacking on the M4F's entry, and its 5 wait states.
+        let entry = rows.iter().find(|r| r.task == "exception_entry").unwrap();
+        assert_eq!(entry.cycles, Some(12 + 17 + 5));
+    }
+
+    #[test]
+    fn microseconds_round_up() {
+        assert_eq!(us(72, 72_000_000), 1.0);
+        assert_eq!(us(1, 72_000_000), 0.014);
+        assert_eq!(us(0, 72_000_000), 0.0);
+    }
+}
