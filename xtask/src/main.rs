@@ -450,7 +450,7 @@ fn analysis_gate(root: &Path) -> Result<()> {
         for name in &scenarios {
             if robot == "1-2" && name == "thesis-magnetometer-900us" {
                 println!(
-                    "analysis gate: scenario {name} not gated on a 1-2 robot (the BNO055's reads do not fit 900 µs; docs/boards.md)"
+                    "analysis gate: scenario {name} not gated on a 1-2 robot (the BNO055's reads leave its frames under 1 µs of slack; docs/boards.md)"
                 );
                 continue;
             }
