@@ -515,6 +515,8 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
                 out.work = Some(work.clone());
                 let (static_ram, stack) = out.ram_used()?;
                 ram_high_water = ram_high_water.max(static_ram + stack);
+                // The analysed bounds of this run: its received frames as its stimulus replays them.
+                let bounds = bounds.for_run(&std::fs::read(work.join("stimulus.bin"))?)?;
                 (scenario.check)(&out, &bounds)
             })();
             match result {

@@ -81,6 +81,34 @@ pub(super) fn build_boards(
     Ok(ends)
 }
 
+/// QEMU's stimulus replay ([`super::QemuReplay`]) as a task: one job per received frame.
+fn replay_task(
+    root: &Path,
+    file: &str,
+    timing: &Timing,
+    replay: &super::QemuReplay,
+    arrivals: Arrivals,
+) -> Result<TaskModel, BuildError> {
+    super::plan::check_positive(file, "trace.qemu.replay.per_frame_us", replay.per_frame_us)?;
+    Ok(TaskModel {
+        name: replay.task.clone(),
+        priority: qemu::replay_priority(root, file, timing, replay)?,
+        wcet_us: replay.per_frame_us,
+        period_us: arrivals.bus_frame.as_us_f64(),
+        deadline_us: None,
+        jitter_us: 0.0,
+        critical_sections_us: BTreeMap::new(),
+        blocking_us: None,
+        bcet_us: None,
+        // Its entry, exit and trace records as every job's; the dispatch and the monotonic interrupt
+        // that wake it are in `per_frame_us` (one wake-up per frame, nothing else shares it).
+        kind: TaskKind::Hardware,
+        released_by: None,
+        sporadic: true,
+        job_of: None,
+    })
+}
+
 /// The inter-arrival times of the bus-driven arrivals ([`Arrival::BusFrame`], [`Arrival::OwnFrame`]).
 #[derive(Clone, Copy)]
 struct Arrivals {
@@ -131,6 +159,22 @@ fn build_board(
     };
     let mut tasks = board.fixed_tasks(arrivals, &mut timer_jobs, &mut measured, built)?;
     board.publisher_jobs(topics, scenario, &mut timer_jobs, &mut measured, &mut tasks)?;
+    if firmware == Firmware::Qemu {
+        if let Some(replay) = timing
+            .trace
+            .as_ref()
+            .and_then(|t| t.qemu.as_ref())
+            .and_then(|q| q.replay.as_ref())
+        {
+            let task = replay_task(root, file, timing, replay, arrivals)?;
+            built.sources.push(format!(
+                "{}: in QEMU `{}` replays the stimulus: one job of {} µs per received frame (every {:.1} µs at most), \
+                 at priority {} (its wake-up and dispatch included)",
+                timing.board, task.name, task.wcet_us, task.period_us, task.priority
+            ));
+            tasks.push(task);
+        }
+    }
     let idle_sections = idle_sections(file, timing, idle.as_ref())?;
 
     // Timer jobs first: they are the most urgent and read best at the top of the table.

@@ -86,7 +86,27 @@ pub struct QemuBuild {
     /// What pends the transmit task in QEMU (absent: the robot's arrival, one job per frame).
     #[serde(default)]
     pub transmit: Option<QemuTransmit>,
+    /// The QEMU build's stand-in for the bus: the task that replays the stimulus (absent: none).
+    #[serde(default)]
+    pub replay: Option<QemuReplay>,
     /// Where the figures come from.
+    #[serde(default)]
+    pub note: Option<String>,
+}
+
+/// The task of the traced QEMU build that replays a run's stimulus: woken by the monotonic at each
+/// received frame's time, it puts the frame into the virtual receive FIFO and pends the receive
+/// interrupt. It exists only in QEMU (feature `qemu`), where it preempts the board's tasks once per
+/// received frame, so the QEMU model has it as a job per received frame at its priority (read from the
+/// app with the `qemu` feature), with the trace's and the dispatcher's cost per job like every task.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct QemuReplay {
+    /// The replay task's name in the app.
+    pub task: String,
+    /// One job (one frame delivered), µs in QEMU; not scaled by `budget_scale` (a QEMU figure).
+    pub per_frame_us: f64,
+    /// Where the figure comes from.
     #[serde(default)]
     pub note: Option<String>,
 }

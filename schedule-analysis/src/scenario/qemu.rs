@@ -2,7 +2,9 @@
 
 use amiro_can::TopicInfo;
 
-use super::{board_folder, fail, BuildError, QemuTransmit, Timing, QEMU_FRAMES_PER_TRANSMIT_JOB};
+use super::{
+    board_folder, fail, BuildError, QemuReplay, QemuTransmit, Timing, QEMU_FRAMES_PER_TRANSMIT_JOB,
+};
 use crate::model::{Overheads, TaskKind, TaskModel};
 
 /// QEMU's transmit task ([`QemuTransmit`]): its own arrival (one job per frame on the bus) becomes
@@ -99,4 +101,41 @@ pub(super) fn transmit_jobs(
         });
     }
     Ok(())
+}
+
+/// The priority of QEMU's stimulus replay task ([`QemuReplay`]): the app read with its features and `qemu`
+/// (the task exists only in the QEMU build).
+pub(super) fn replay_priority(
+    root: &std::path::Path,
+    file: &str,
+    timing: &Timing,
+    replay: &QemuReplay,
+) -> Result<u32, BuildError> {
+    let path = "trace.qemu.replay.task";
+    let app = timing
+        .app
+        .as_ref()
+        .ok_or_else(|| fail(file, path, "the board has no app to read the task from"))?;
+    let text = std::fs::read_to_string(root.join(&app.source))
+        .map_err(|e| fail(file, path, format!("cannot read {}: {e}", app.source)))?;
+    let parsed =
+        crate::rtic_source::parse_app(&text).map_err(|e| fail(&app.source, "", e.to_string()))?;
+    let mut features: Vec<&str> = app.features.iter().map(String::as_str).collect();
+    features.push("qemu");
+    parsed
+        .with_features(&features)
+        .tasks
+        .iter()
+        .find(|t| t.name == replay.task)
+        .map(|t| u32::from(t.priority))
+        .ok_or_else(|| {
+            fail(
+                file,
+                path,
+                format!(
+                    "no task `{}` in {} with the `qemu` feature",
+                    replay.task, app.source
+                ),
+            )
+        })
 }

@@ -31,9 +31,6 @@ pub struct Run {
     pub end_ns: u64,
     /// Time spent in runs that pre-empted it, ns.
     pub preempted_ns: u64,
-    /// Of that, time in the QEMU platform's stimulus replay (it stands for the bus, which costs the
-    /// robot nothing), ns: left out of the response.
-    pub platform_ns: u64,
     /// Where the release came from.
     pub release_from: ReleaseFrom,
 }
@@ -46,11 +43,10 @@ impl Run {
             .saturating_sub(self.preempted_ns)
     }
 
-    /// Response time from the release, ns (QEMU's stimulus replay left out).
+    /// Response time from the release, ns (everything that pre-empted it included: in QEMU the
+    /// stimulus replay too, which the QEMU model has as a task of its own).
     pub fn response_ns(&self) -> u64 {
-        self.end_ns
-            .saturating_sub(self.release_ns)
-            .saturating_sub(self.platform_ns)
+        self.end_ns.saturating_sub(self.release_ns)
     }
 }
 
@@ -102,8 +98,6 @@ pub struct Capture {
 /// Builds a [`Capture`] from records, events and acknowledgements in time order.
 struct Builder {
     capture: Capture,
-    /// The task number of QEMU's stimulus replay, if the app has one.
-    platform_task: Option<u8>,
     hz: u64,
     base_cycles: u64,
     base_ns: u64,
@@ -118,13 +112,11 @@ struct Open {
     release_ns: u64,
     release_from: ReleaseFrom,
     preempted_ns: u64,
-    platform_ns: u64,
 }
 
 impl Builder {
     fn new(default_hz: u64) -> Self {
         Self {
-            platform_task: None,
             capture: Capture {
                 clock_hz: default_hz,
                 ..Capture::default()
@@ -168,7 +160,6 @@ impl Builder {
                     release_ns,
                     release_from,
                     preempted_ns: 0,
-                    platform_ns: 0,
                 });
             }
             Kind::TaskEnd {
@@ -181,18 +172,12 @@ impl Builder {
                         if let Some(parent) = self.stack.last_mut() {
                             parent.preempted_ns += took;
                         }
-                        if Some(task) == self.platform_task {
-                            for run in &mut self.stack {
-                                run.platform_ns += took;
-                            }
-                        }
                         self.capture.runs.push(Run {
                             task,
                             release_ns: open.release_ns,
                             start_ns: open.start_ns,
                             end_ns: t,
                             preempted_ns: open.preempted_ns,
-                            platform_ns: open.platform_ns,
                             release_from: open.release_from,
                         });
                     }
@@ -330,15 +315,7 @@ pub use amiro_robot::log::console_record_bytes;
 /// Reads a QEMU run: the task records from its `trace.bin`, the handler events from the `# T`
 /// lines of its console `text` (records in the same format, on the same clock, merged in time
 /// order), and the frames on QEMU's virtual bus, acknowledged when printed (µs).
-///
-/// `stimulus` is the task number of the app's stimulus replay: its time is left out of the
-/// responses of the runs it pre-empted (it stands for the bus).
-pub fn read_qemu(
-    trace_bin: &[u8],
-    text: &str,
-    default_hz: u64,
-    stimulus: Option<u8>,
-) -> Result<Capture> {
+pub fn read_qemu(trace_bin: &[u8], text: &str, default_hz: u64) -> Result<Capture> {
     let mut reader = Reader::new();
     let mut records: Vec<Record> = trace_bin.iter().filter_map(|&b| reader.push(b)).collect();
     let mut console = Reader::new();
@@ -350,7 +327,6 @@ pub fn read_qemu(
     // A stable sort: records of one stream stay in their order.
     records.sort_by_key(|r| r.cycles);
     let mut builder = Builder::new(default_hz);
-    builder.platform_task = stimulus;
     for record in records {
         builder.record(record);
     }
@@ -371,11 +347,7 @@ pub fn read_qemu(
 }
 
 /// Reads a QEMU run's work directory (`output.log` and `trace.bin`).
-pub fn read_qemu_dir(
-    dir: &std::path::Path,
-    default_hz: u64,
-    stimulus: Option<u8>,
-) -> Result<Capture> {
+pub fn read_qemu_dir(dir: &std::path::Path, default_hz: u64) -> Result<Capture> {
     let text = std::fs::read_to_string(dir.join("output.log"))
         .with_context(|| format!("reading {}", dir.join("output.log").display()))?;
     let bin = std::fs::read(dir.join("trace.bin")).with_context(|| {
@@ -384,7 +356,7 @@ pub fn read_qemu_dir(
             dir.join("trace.bin").display()
         )
     })?;
-    let mut capture = read_qemu(&bin, &text, default_hz, stimulus)?;
+    let mut capture = read_qemu(&bin, &text, default_hz)?;
     // The stimulus the run replayed (its only received frames), when the directory keeps it.
     if let Ok(stimulus) = std::fs::read(dir.join("stimulus.bin")) {
         capture.received_gap_us = Some(
@@ -586,7 +558,7 @@ mod tests {
             line(1_200_000, &taken),
             line(1_206_000, &queued)
         );
-        let c = read_qemu(&bin, &text, 120_000_000, None).unwrap();
+        let c = read_qemu(&bin, &text, 120_000_000).unwrap();
         assert_eq!(c.runs.len(), 1);
         assert_eq!(c.runs[0].execution_ns(), 100_000);
         assert_eq!(c.reader.damaged, 1);

@@ -288,7 +288,7 @@ impl RunOutput {
             .iter()
             .position(|n| n == task)
             .with_context(|| format!("{board} has no task {task}"))?;
-        let capture = crate::bench::read_scenario_run(&root, spec, work)?;
+        let capture = crate::bench::read_scenario_run(spec, work)?;
         let runs: Vec<_> = capture
             .runs
             .iter()
@@ -414,6 +414,8 @@ pub struct Scenario {
 /// Response-time bounds from the analysis, per published topic of the scenarios.
 pub struct Bounds {
     root: std::path::PathBuf,
+    /// The run's received frames no closer than this, µs (its stimulus); `None`: a full-rate bus.
+    received_gap_us: Option<f64>,
 }
 
 impl Bounds {
@@ -421,7 +423,22 @@ impl Bounds {
     pub fn from_analysis(root: &Path) -> Result<Self> {
         Ok(Self {
             root: root.to_path_buf(),
+            received_gap_us: None,
         })
+    }
+
+    /// The bounds of one run whose stimulus (`stimulus.bin`, as QEMU replayed it) is `encoded`: its received
+    /// frames no closer than they came.
+    pub fn for_run(&self, encoded: &[u8]) -> Result<Self> {
+        Ok(Self {
+            root: self.root.clone(),
+            received_gap_us: Some(crate::qemu::received_gap_us(encoded)? as f64),
+        })
+    }
+
+    /// The run's received frames no closer than this, µs (`None`: a full-rate bus).
+    pub fn received_gap_us(&self) -> Option<f64> {
+        self.received_gap_us
     }
 
     /// The workspace root the analysis reads its models from.
@@ -432,7 +449,25 @@ impl Bounds {
     /// Worst-case latency from a publisher's release to its frame in a mailbox, as analysed for
     /// `topic` published alone at CAN priority `level` every `period_us`.
     pub fn publisher_latency_us(&self, topic: &str, level: &str, period_us: u64) -> Result<u64> {
-        crate::bounds::publisher_bound_us(&self.root, "diwheeldrive", topic, level, period_us)
+        self.publisher_latency_bound_us(topic, level, period_us)?
+            .with_context(|| {
+                format!("publish_{level}[{topic}]: the analysis bounds nothing (its busy window never closes)")
+            })
+    }
+
+    /// [`Self::publisher_latency_us`], `None` where the analysis bounds nothing (its busy window never closes).
+    pub fn publisher_latency_bound_us(
+        &self,
+        topic: &str,
+        level: &str,
+        period_us: u64,
+    ) -> Result<Option<u64>> {
+        crate::bounds::publisher_bound_us(
+            &self.root,
+            "diwheeldrive",
+            (topic, level, period_us),
+            self.received_gap_us,
+        )
     }
 }
 

@@ -150,7 +150,17 @@ fn ring_samples(
 }
 
 fn bound(bounds: &Bounds, topic: &str, level: &str, period: u64) -> Result<u64> {
-    crate::bounds::publisher_bound_us(bounds.root(), "powermgmt", topic, level, period)
+    crate::bounds::publisher_bound_us(
+        bounds.root(),
+        "powermgmt",
+        (topic, level, period),
+        bounds.received_gap_us(),
+    )?
+    .with_context(|| {
+        format!(
+            "publish_{level}[{topic}]: the analysis bounds nothing (its busy window never closes)"
+        )
+    })
 }
 
 fn all_eight(samples: &[RingSample]) -> Result<()> {
