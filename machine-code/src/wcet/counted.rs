@@ -90,8 +90,145 @@ fn sets_flags(insn: &Insn) -> bool {
 }
 
 /// The most times the loop's header runs per entry when it is a counted loop, with how it was
-/// found.
+/// found: tested at the bottom (the branch back decides) or at the top (the header's branch out
+/// decides, as `for i in 0..n` compiles).
 pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
+    counted_at_bottom(insns, cfg, l).or_else(|| counted_at_top(insns, cfg, l))
+}
+
+/// A loop whose header ends in a conditional branch out of the loop on a `CMP rX, #c`, with rX stepped
+/// by a constant exactly once on every way around (in one block every way back passes) and set to a
+/// constant on every way in. Other exits only end it sooner.
+fn counted_at_top(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
+    let header = &cfg.blocks[l.header];
+    let branch = &insns[header.last];
+    let code = branch_condition(branch)?;
+    // One edge out of the loop, one in: whether taking the branch leaves.
+    let [a, b] = header.succs[..] else {
+        return None;
+    };
+    let taken_leaves = match (l.body.contains(&a.to), l.body.contains(&b.to)) {
+        (true, false) => b.taken,
+        (false, true) => a.taken,
+        _ => return None,
+    };
+    let head = &insns[header.first..header.last];
+    let (at, setter) = head.iter().enumerate().rev().find(|(_, i)| sets_flags(i))?;
+    if setter.inst.opcode != Opcode::CMP || setter.conditional || setter.registers().len() != 1 {
+        return None;
+    }
+    let Operand::Reg(r) = setter.inst.operands[0] else {
+        return None;
+    };
+    let counter = r.number();
+    let limit = setter.immediate()?;
+    // Exactly one write of the counter in the loop: the step.
+    let mut writes = Vec::new();
+    for &blk in &l.body {
+        let block = &cfg.blocks[blk];
+        for (k, i) in insns[block.first..=block.last].iter().enumerate() {
+            if i.writes().contains(counter) {
+                writes.push((blk, block.first + k));
+            }
+        }
+    }
+    let [(step_block, step_at)] = writes[..] else {
+        return None;
+    };
+    if insns[step_at].conditional {
+        return None;
+    }
+    let step = as_step(&insns[step_at], counter)?;
+    // Before the compare in the header: each pass compares the stepped value.
+    let stepped_first = step_block == l.header && step_at < header.first + at;
+    // Elsewhere, every way from the header back to it passes the step's block.
+    if step_block != l.header && reaches_latch_avoiding(cfg, l, step_block) {
+        return None;
+    }
+    let mut most = 0;
+    let mut found_entry = false;
+    for (blk, block) in cfg.blocks.iter().enumerate() {
+        if l.body.contains(&blk) || !block.succs.iter().any(|e| e.to == l.header) {
+            continue;
+        }
+        let start = initial(&insns[block.first..=block.last], counter)?;
+        most = most.max(run_top(
+            start,
+            &step,
+            limit,
+            code,
+            taken_leaves,
+            stepped_first,
+        )?);
+        found_entry = true;
+    }
+    if !found_entry {
+        return None;
+    }
+    Some((
+        most,
+        format!(
+            "counted: r{counter} from its entry value by {}{}, compared with #{limit} at the loop's top",
+            if step.add { '+' } else { '-' },
+            step.k
+        ),
+    ))
+}
+
+/// Whether a block with an edge back to the header is reached from the header without `avoid`.
+fn reaches_latch_avoiding(cfg: &Cfg, l: &Loop, avoid: usize) -> bool {
+    let mut seen = std::collections::BTreeSet::new();
+    let mut stack = vec![l.header];
+    while let Some(b) = stack.pop() {
+        if b == avoid || !seen.insert(b) {
+            continue;
+        }
+        for e in &cfg.blocks[b].succs {
+            if e.to == l.header {
+                return true;
+            }
+            if l.body.contains(&e.to) {
+                stack.push(e.to);
+            }
+        }
+    }
+    false
+}
+
+/// The header's executions of a loop tested at its top: each pass compares the counter (stepped
+/// first when `stepped_first`) and leaves when the branch says so.
+fn run_top(
+    start: u32,
+    step: &Step,
+    limit: u32,
+    code: u8,
+    taken_leaves: bool,
+    stepped_first: bool,
+) -> Option<u64> {
+    let next = |v: u32| {
+        if step.add {
+            v.wrapping_add(step.k)
+        } else {
+            v.wrapping_sub(step.k)
+        }
+    };
+    let mut v = start;
+    for n in 1..=MAX_COUNT {
+        if stepped_first {
+            v = next(v);
+        }
+        if holds(code, sub_flags(v, limit)) == taken_leaves {
+            return Some(n);
+        }
+        if !stepped_first {
+            v = next(v);
+        }
+    }
+    None
+}
+
+/// A loop tested at its bottom: the latch's conditional branch back on the counter.
+fn counted_at_bottom(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
     let [latch] = l.latches[..] else { return None };
     let block = &cfg.blocks[latch];
     let branch = &insns[block.last];
@@ -341,6 +478,19 @@ mod tests {
             flags: true,
         };
         assert_eq!(run(5, &step_down, None, 1), Some(5));
+        // Tested at the top: `for i in 0..3` as `cmp r, #3; beq out` … `adds r, #1; b top`: three
+        // passes and the one that leaves, 4; from -1 stepped after `cmp r, #2; beq out`: 4.
+        assert_eq!(run_top(0, &step_up, 3, 0, true, false), Some(4));
+        assert_eq!(run_top(u32::MAX, &step_up, 2, 0, true, false), Some(4));
+        // By 8 to 24 (`bit::rqcp(i)` shifts): 4 passes; `cmp r, #24; bne body` (the fall-through
+        // leaves): the same.
+        let by_eight = Step {
+            add: true,
+            k: 8,
+            flags: false,
+        };
+        assert_eq!(run_top(0, &by_eight, 24, 0, true, false), Some(4));
+        assert_eq!(run_top(0, &by_eight, 24, 1, false, false), Some(4));
         // A step that misses the limit with bne never ends within the count.
         let by_three = Step {
             add: true,

@@ -781,6 +781,13 @@ pub const BEYOND_THE_TRACED_BUILD: &[(&str, &str, &str)] = &[
          bounds nothing (bursts end, so the run does; the production build has no replay)",
     ),
     (
+        "lightring",
+        "flood",
+        "command frames 50 µs apart: in QEMU each costs its replay job and the receive interrupt with the trace's \
+         records, which with the command handler takes the whole CPU below priority 7 in the traced QEMU build's model \
+         (the production build has no replay)",
+    ),
+    (
     "powermgmt",
     "flood",
     "command frames 50 µs apart: with QEMU's ×2 budgets and the trace's 8 µs per job, the receive and transmit \

@@ -287,22 +287,11 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 /// The flood check with the gyroscope publisher every `period` µs (1 ms on 1-1, 2 ms on 1-2).
 pub(super) fn flood_at(out: &RunOutput, bounds: &Bounds, period: u64) -> Result<String> {
     let gyro = out.periodic_stream(0x608, "gyroscope", period, 0, 250_000)?;
-    let worst = gyro.worst_latency;
-    // In QEMU every received frame costs its replay job beside the receive interrupt (the model has
-    // both): at this rate the traced QEMU build's model is overloaded and bounds nothing, so the run
-    // is held to its grid (`periodic_stream`) and the chip's bound is `cargo xtask analyze`'s. Where
-    // the QEMU model bounds the publisher, the run is held to that bound.
-    let bound = bounds.publisher_latency_bound_us("gyroscope", "medium", period)?;
-    if let Some(bound) = bound {
-        ensure!(
-            worst <= bound,
-            "latency {worst} µs under the flood exceeds the analysed bound {bound} µs"
-        );
-    }
-    let bound = bound.map_or_else(
-        || "the QEMU model overloaded by the replay at this rate (no bound)".to_string(),
-        |b| format!("analysed {b} µs"),
-    );
+    // Held to its grid by `periodic_stream`, and to the QEMU model's bound where it has one.
+    let latency = super::within_flood_bound(
+        gyro.worst_latency,
+        bounds.publisher_latency_bound_us("gyroscope", "medium", period)?,
+    )?;
     // The command handler takes at most one command per COMMAND_MIN_INTERVAL_US: the flood's
     // excess waits in the bounded receive queue and is dropped there, counted. Every frame is
     // accounted for, and the handled ones are at least the interval apart.
@@ -337,7 +326,7 @@ pub(super) fn flood_at(out: &RunOutput, bounds: &Bounds, period: u64) -> Result<
         );
     }
     Ok(format!(
-        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted (diagnostics agree: {} dropped); gyroscope on its {} ms grid, worst latency {worst} µs (bound: {bound})",
+        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted (diagnostics agree: {} dropped); gyroscope on its {} ms grid, {latency}",
         handled.len(),
         health.rx_dropped,
         period / 1000

@@ -471,6 +471,25 @@ impl Bounds {
     }
 }
 
+/// A flood run's worst latency held to its analysed `bound`, and how it reads. In QEMU every received frame
+/// costs its replay job beside the receive interrupt (the QEMU model has both): at a flood's rate the traced QEMU
+/// build's model can be overloaded and bound nothing (`None`); then the run is held to its grid only (checked by
+/// the caller) and the chip's bound is `cargo xtask analyze`'s, which has no replay.
+pub fn within_flood_bound(worst: u64, bound: Option<u64>) -> Result<String> {
+    match bound {
+        Some(bound) => {
+            ensure!(
+                worst <= bound,
+                "latency {worst} µs under the flood exceeds the analysed bound {bound} µs"
+            );
+            Ok(format!("worst latency {worst} µs ≤ analysed {bound} µs"))
+        }
+        None => Ok(format!(
+            "worst latency {worst} µs (no bound: the replay of frames at this rate overloads the traced QEMU build's model)"
+        )),
+    }
+}
+
 /// The time of a trace line `(s.micros) ...`.
 pub fn trace_time(line: &str) -> Result<u64> {
     let stamp = line

@@ -150,17 +150,21 @@ fn ring_samples(
 }
 
 fn bound(bounds: &Bounds, topic: &str, level: &str, period: u64) -> Result<u64> {
+    bound_if_any(bounds, topic, level, period)?.with_context(|| {
+        format!(
+            "publish_{level}[{topic}]: the analysis bounds nothing (its busy window never closes)"
+        )
+    })
+}
+
+/// [`bound`], `None` where the analysis bounds nothing.
+fn bound_if_any(bounds: &Bounds, topic: &str, level: &str, period: u64) -> Result<Option<u64>> {
     crate::bounds::publisher_bound_us(
         bounds.root(),
         "powermgmt",
         (topic, level, period),
         bounds.received_gap_us(),
-    )?
-    .with_context(|| {
-        format!(
-            "publish_{level}[{topic}]: the analysis bounds nothing (its busy window never closes)"
-        )
-    })
+    )
 }
 
 fn all_eight(samples: &[RingSample]) -> Result<()> {
@@ -530,12 +534,11 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let samples = ring_samples(out, 0x61F, 10_000, 5_000, 250_000)?;
     all_eight(&samples)?;
-    let limit = bound(bounds, "proximity-ring", "medium", 10_000)?;
-    let worst = worst_latency(&samples);
-    ensure!(
-        worst <= limit,
-        "latency {worst} µs under the flood exceeds the analysed bound {limit} µs"
-    );
+    // Held to its grid by `ring_samples`, and to the QEMU model's bound where it has one.
+    let latency = super::within_flood_bound(
+        worst_latency(&samples),
+        bound_if_any(bounds, "proximity-ring", "medium", 10_000)?,
+    )?;
     let mut handled: Vec<u64> = out
         .traces("command-")
         .iter()
@@ -565,7 +568,7 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         );
     }
     Ok(format!(
-        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted; ring on its 10 ms grid, worst {worst} µs ≤ analysed {limit} µs",
+        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted; ring on its 10 ms grid, {latency}",
         handled.len()
     ))
 }
