@@ -6,6 +6,7 @@ use super::bounds::BoundsFile;
 use super::cfg::{self, Call, Cfg};
 use super::chip::Chip;
 use super::counted;
+use super::length::{self, Args, LENGTH_UNKNOWN, NO_ARGS};
 use super::path::{self, Cost, LoopCount, LoopNodes, Node, PathError};
 use super::LoopInfo;
 use crate::callgraph::is_panic;
@@ -30,7 +31,7 @@ pub(super) struct Analysis<'a> {
     image: &'a Image,
     chip: Chip,
     bounds: &'a BoundsFile,
-    known: BTreeMap<u64, Result<Summary, String>>,
+    known: BTreeMap<(u64, Args), Result<Summary, String>>,
     returns: BTreeMap<u64, bool>,
     open: Vec<u64>,
 }
@@ -107,7 +108,12 @@ impl<'a> Analysis<'a> {
     /// The summary of the function at `at`: `Err(Error)` for an image that cannot be analysed,
     /// `Ok(Err(reason))` for a declined bound.
     pub(super) fn summary(&mut self, at: u64) -> Result<Result<Summary, String>, Error> {
-        if let Some(known) = self.known.get(&at) {
+        self.summary_with(at, NO_ARGS)
+    }
+
+    /// [`Self::summary`] of a call whose argument registers are bounded by `args` ([`length`]).
+    fn summary_with(&mut self, at: u64, args: Args) -> Result<Result<Summary, String>, Error> {
+        if let Some(known) = self.known.get(&(at, args)) {
             return Ok(known.clone());
         }
         if self.open.contains(&at) {
@@ -123,14 +129,14 @@ impl<'a> Analysis<'a> {
             Error::Other(format!("a call to {at:#010x}, where no function starts"))
         })?;
         self.open.push(at);
-        let outcome = self.work_out(f);
+        let outcome = self.work_out(f, args);
         self.open.pop();
         let outcome = outcome?;
-        self.known.insert(at, outcome.clone());
+        self.known.insert((at, args), outcome.clone());
         Ok(outcome)
     }
 
-    fn work_out(&mut self, f: &'a Function) -> Result<Result<Summary, String>, Error> {
+    fn work_out(&mut self, f: &'a Function, args: Args) -> Result<Result<Summary, String>, Error> {
         let insns = f.instructions()?;
         let image = self.image;
         let read = |address: u64, size: u64| read_entry(image, address, size);
@@ -163,6 +169,8 @@ impl<'a> Analysis<'a> {
             }
         };
         let mut loop_nodes = Vec::new();
+        // The count the function's `Shared` loops iterate at most, all together.
+        let mut shared_count: Option<u64> = None;
         let (mut retry_time, mut retry_count) = (Cost::default(), Cost::default());
         for l in &natural {
             let leaves = l.body.iter().any(|&b| {
@@ -222,6 +230,27 @@ impl<'a> Analysis<'a> {
                     ns,
                     cycles: chip.ns_to_cycles(ns),
                 }
+            } else if let Some(r) = length::length_register(&f.name)
+                .or_else(|| self.bounds.per_element(&f.name).map(|p| p.register))
+            {
+                let Some(n) = args[usize::from(r)] else {
+                    return Ok(Err(format!(
+                        "the loop in {} at {text} {LENGTH_UNKNOWN}",
+                        f.name
+                    )));
+                };
+                shared_count = Some(u64::from(n));
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: u64::from(n) + 1,
+                    source: format!(
+                        "length: at most {n} bytes at the call (r{r}); each pass of any of the \
+                         function's loops moves at least one, so all of them together iterate at most {n} times"
+                    ),
+                });
+                LoopCount::Shared
             } else {
                 return Ok(Err(format!(
                     "the loop in {} at {text} has no bound (not a counted loop, not in the bounds file)",
@@ -237,7 +266,7 @@ impl<'a> Analysis<'a> {
         // Node costs: the block's instructions, and what it calls.
         let mut time_nodes = Vec::with_capacity(graph.blocks.len());
         let mut count_nodes = Vec::with_capacity(graph.blocks.len());
-        for block in &graph.blocks {
+        for (index, block) in graph.blocks.iter().enumerate() {
             let own = self.block_cost(&insns[block.first..=block.last]);
             let (mut time, mut count) = (own, own);
             // What a tail call adds is paid only on the way out through it; a conditional one
@@ -261,20 +290,39 @@ impl<'a> Analysis<'a> {
                 // A call of a function that cannot return ends the path (the graph has no edge on
                 // from it); a tail call of one is no return either.
                 Some(Call::Direct { target, tail }) if !self.can_return(target) => exit &= !tail,
-                Some(Call::Direct { target, .. }) => match self.summary(target)? {
+                Some(Call::Direct { target, .. }) => match self
+                    .call_summary(target, &f.name, insns, &graph, index, &args)?
+                {
                     Ok(s) => {
                         *time_ref = time_ref.plus(s.time);
                         *count_ref = count_ref.plus(s.count);
                         loops_info.extend(s.loops);
                     }
-                    Err(reason) => {
-                        return Ok(Err(if reason.starts_with("via ") {
-                            reason
-                        } else {
-                            format!("via {}: {reason}", image.name(target))
-                        }))
-                    }
+                    Err(reason) => return Ok(Err(format!("via {}: {reason}", image.name(target)))),
                 },
+                Some(Call::Indirect { .. })
+                    if length::constant_target(image, insns, &graph, index)
+                        .is_some_and(|t| image.function_at(t).is_some()) =>
+                {
+                    // A register that holds one function's address: a direct call in effect.
+                    let target = length::constant_target(image, insns, &graph, index).unwrap_or(0);
+                    match self.call_summary(target, &f.name, insns, &graph, index, &args)? {
+                        Ok(s) => {
+                            *time_ref = time_ref.plus(s.time);
+                            *count_ref = count_ref.plus(s.count);
+                            if time_key(chip)(s.retry_time) > time_key(chip)(retry_time) {
+                                retry_time = s.retry_time;
+                            }
+                            if s.retry_count.instructions > retry_count.instructions {
+                                retry_count = s.retry_count;
+                            }
+                            loops_info.extend(s.loops);
+                        }
+                        Err(reason) => {
+                            return Ok(Err(format!("via {}: {reason}", image.name(target))))
+                        }
+                    }
+                }
                 Some(Call::Indirect { at, .. }) => {
                     let (file, line, text) = place(image, at);
                     let stated = file
@@ -372,7 +420,11 @@ impl<'a> Analysis<'a> {
                 if c.retry.instructions > retry_count.instructions {
                     retry_count = c.retry;
                 }
-                (t.path, c.path)
+                let n = shared_count.unwrap_or(0);
+                (
+                    t.path.plus(t.shared.times(n)),
+                    c.path.plus(c.shared.times(n)),
+                )
             }
             (Err(PathError::NoExit), _) | (_, Err(PathError::NoExit)) => {
                 return Ok(Err(format!("{} never returns", f.name)))
@@ -396,6 +448,60 @@ impl<'a> Analysis<'a> {
             retry_count,
             loops: loops_info,
         }))
+    }
+
+    /// The summary of the call ending block `index`: without its arguments, or, where a memory function's
+    /// length is what it lacks, with the bounds the call's machine code gives them ([`length`]).
+    fn call_summary(
+        &mut self,
+        target: u64,
+        caller: &str,
+        insns: &[Insn],
+        graph: &Cfg,
+        index: usize,
+        entry: &Args,
+    ) -> Result<Result<Summary, String>, Error> {
+        let plain = self.summary(target)?;
+        if !matches!(&plain, Err(reason) if reason.contains(LENGTH_UNKNOWN)) {
+            return Ok(plain);
+        }
+        let mut args = length::call_args(insns, graph, index, entry);
+        // A length the bounds file states for this call (its machine code does not fix it).
+        let call = insns[graph.blocks[index].last].addr;
+        let mut stated_info = None;
+        if let Some((file, line)) = self.image.line(call) {
+            if let Some(stated) = self.bounds.length(caller, &file, line) {
+                let r = usize::from(stated.register);
+                let from_argument = stated
+                    .argument
+                    .and_then(|a| entry.get(usize::from(a)).copied().flatten());
+                let most = match (stated.bytes, from_argument) {
+                    (Some(a), Some(b)) => Some(a.min(b)),
+                    (a, b) => a.or(b),
+                };
+                if let Some(most) = most {
+                    args[r] = Some(args[r].map_or(most, |n| n.min(most)));
+                    stated_info = Some(LoopInfo {
+                        function: caller.to_string(),
+                        file: Some(file),
+                        line: Some(line),
+                        bound: u64::from(most),
+                        source: format!(
+                            "bounds file: a length of at most {most} bytes in r{r}: {}",
+                            stated.reason
+                        ),
+                    });
+                }
+            }
+        }
+        if args == NO_ARGS {
+            return Ok(plain);
+        }
+        let mut outcome = self.summary_with(target, args)?;
+        if let (Ok(s), Some(info)) = (&mut outcome, stated_info) {
+            s.loops.push(info);
+        }
+        Ok(outcome)
     }
 
     /// A straight run of instructions: each one's core and memory cycles, at least the cycles

@@ -10,6 +10,12 @@
 //!               "source": "one I2C byte at 400 kHz: 9 bit times (UM10204 §3.1)" }],
 //!   "indirect": [{ "function": "…", "file": "src/waker.rs", "line": 7,
 //!                  "targets": ["…::wake"], "reason": "the only waker vtable in the image" }],
+//!   "lengths": [{ "function": "…", "file": "heapless/src/vec/mod.rs", "line": 728, "register": 2,
+//!                 "bytes": 180, "reason": "shifts at most 15 frames of 12 bytes" },
+//!               { "function": "…::write", "file": "…", "line": 547, "register": 2, "argument": 2,
+//!                 "reason": "copies at most the slice it was passed" }],
+//!   "per_element": [{ "function": "…::Encoder::put", "register": 2,
+//!                     "reason": "one pass per byte of its slice argument" }],
 //!   "tasks": [{ "name": "monotonic", "symbol": "TIM5", "handler": true,
 //!               "reason": "the TIM5 monotonic's compare interrupt (board.rs)" }]
 //! }
@@ -58,6 +64,34 @@ pub struct IndirectTargets {
     pub reason: String,
 }
 
+/// The most bytes a call of a memory function (`memcpy`, `memset`, …) at a place moves, where its
+/// machine code does not fix the length: the argument `register` is at most `bytes`, or at most what
+/// the calling function was itself passed in its argument register `argument` (`min` of a length and
+/// the room left), or the smaller of both.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LengthBound {
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    pub register: u8,
+    #[serde(default)]
+    pub bytes: Option<u32>,
+    #[serde(default)]
+    pub argument: Option<u8>,
+    pub reason: String,
+}
+
+/// A function whose every loop passes at most once per element of a slice argument, whose length is in
+/// `register` (0-3): bounded per call by the length its caller passes (as the memory functions are).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PerElement {
+    pub function: String,
+    pub register: u8,
+    pub reason: String,
+}
+
 /// A task the image's RTIC app does not declare as one (the monotonic's timer interrupt): its name,
 /// the function it runs, and whether that is an exception handler.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -80,6 +114,10 @@ pub struct BoundsFile {
     pub waits: Vec<WaitBound>,
     #[serde(default)]
     pub indirect: Vec<IndirectTargets>,
+    #[serde(default)]
+    pub lengths: Vec<LengthBound>,
+    #[serde(default)]
+    pub per_element: Vec<PerElement>,
     /// Tasks besides the app's own (for `cargo xtask wcet BOARD`).
     #[serde(default)]
     pub tasks: Vec<TaskSpec>,
@@ -120,6 +158,23 @@ impl BoundsFile {
                 )));
             }
         }
+        for l in &file.lengths {
+            let figure = l.bytes.is_some() || l.argument.is_some_and(|a| a <= 3);
+            if l.register > 3 || !figure || l.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the length at {}:{} in {} needs an argument register (0-3), `bytes` or an `argument` (0-3), and a reason",
+                    l.file, l.line, l.function
+                )));
+            }
+        }
+        for p in &file.per_element {
+            if p.register > 3 || p.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the per-element function {} needs its length register (0-3) and a reason",
+                    p.function
+                )));
+            }
+        }
         Ok(file)
     }
 
@@ -144,6 +199,18 @@ impl BoundsFile {
         self.waits
             .iter()
             .find(|w| w.function == function && w.line == line && same_file(file, &w.file))
+    }
+
+    /// The stated slice-length register of `function`, if its loops pass once per element.
+    pub fn per_element(&self, function: &str) -> Option<&PerElement> {
+        self.per_element.iter().find(|p| p.function == function)
+    }
+
+    /// The stated length of the memory-function call at `file:line` in `function`.
+    pub fn length(&self, function: &str, file: &str, line: u32) -> Option<&LengthBound> {
+        self.lengths
+            .iter()
+            .find(|l| l.function == function && l.line == line && same_file(file, &l.file))
     }
 
     /// The stated targets of the call through a register at `file:line` in `function`.

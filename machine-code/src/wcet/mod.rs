@@ -12,6 +12,7 @@ pub mod bounds;
 pub mod cfg;
 pub mod chip;
 pub mod counted;
+pub mod length;
 pub mod path;
 
 use serde::Serialize;

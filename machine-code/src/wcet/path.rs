@@ -51,6 +51,10 @@ pub enum LoopCount {
     /// per job; each preemption inside it costs one more iteration, returned apart
     /// ([`Longest::retry`]).
     Retry,
+    /// One of several loops that share one count between them (a memory function's loops, each pass
+    /// moving at least one of its `n` bytes): collapsed to its way out, its longest iteration returned
+    /// apart ([`Longest::shared`]) for the caller to charge `n` times.
+    Shared,
     /// No exit: no path through it completes.
     Endless,
 }
@@ -61,6 +65,8 @@ pub enum LoopCount {
 pub struct Longest {
     pub path: Cost,
     pub retry: Cost,
+    /// The longest iteration of a [`LoopCount::Shared`] loop.
+    pub shared: Cost,
 }
 
 /// One node: a block, or a loop collapsed.
@@ -165,6 +171,7 @@ pub fn longest(
 ) -> Result<Longest, PathError> {
     let n = nodes.len();
     let mut retry: Option<Cost> = None;
+    let mut shared: Option<Cost> = None;
     // Each original node's representative (itself, or the header of the loop it was collapsed into).
     let mut rep: Vec<usize> = (0..n).collect();
     for l in loops {
@@ -199,6 +206,10 @@ pub fn longest(
             }
             (LoopCount::Retry, Some(out)) => {
                 retry = better(retry, iteration, key);
+                Some(out)
+            }
+            (LoopCount::Shared, Some(out)) => {
+                shared = better(shared, iteration, key);
                 Some(out)
             }
             (LoopCount::Wait { ns, cycles }, Some(out)) => Some(out.plus(Cost {
@@ -247,5 +258,6 @@ pub fn longest(
     Ok(Longest {
         path: best.ok_or(PathError::NoExit)?,
         retry: retry.unwrap_or_default(),
+        shared: shared.unwrap_or_default(),
     })
 }

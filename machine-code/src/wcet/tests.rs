@@ -594,3 +594,96 @@ fn an_outlined_exclusive_retry_is_still_a_retry() {
         "{other:?}"
     );
 }
+
+#[test]
+fn a_loop_tested_at_its_top_is_counted() {
+    // for i in 0..3 as rustc compiles it: the header compares and leaves, the latch steps and
+    // branches back unconditionally.
+    let img = image(
+        &[
+            0x2300, // 0x00 movs r3, #0
+            0x2b03, // 0x02 cmp r3, #3      (header: 4 passes)
+            0xd002, // 0x04 beq 0x0c
+            0x3001, // 0x06 adds r0, #1     (3 iterations)
+            0x3301, // 0x08 adds r3, #1
+            0xe7fa, // 0x0a b 0x02
+            0x4770, // 0x0c bx lr
+        ],
+        &[Sym::function("three", 0, 14)],
+    );
+    let b = bound(&img, "three", F103_0WS);
+    // 1 + 4 × (cmp, beq) + 3 × (adds, adds, b) + bx lr = 1 + 8 + 9 + 1: exactly what runs.
+    assert_eq!((b.instructions, b.declined.as_deref()), (19, None));
+    assert_eq!(b.loops.len(), 1);
+    assert_eq!(b.loops[0].bound, 4);
+    assert!(b.loops[0].source.starts_with("counted"), "{:?}", b.loops[0]);
+}
+
+/// A caller that clears `n` bytes through `__aeabi_memclr` (a byte loop on its length in r1).
+fn clears(n: u16) -> Image {
+    image(
+        &[
+            0xb580,     // 0x00 push {r7, lr}
+            0x2100 | n, // 0x02 movs r1, #n
+            0xf000,
+            0xf802, // 0x04 bl 0x0c
+            0xbd80, // 0x08 pop {r7, pc}
+            0xbf00, // 0x0a
+            0x2200, // 0x0c movs r2, #0   (__aeabi_memclr)
+            0x2900, // 0x0e cmp r1, #0    (header)
+            0xd003, // 0x10 beq 0x1a
+            0x7002, // 0x12 strb r2, [r0]
+            0x3001, // 0x14 adds r0, #1
+            0x3901, // 0x16 subs r1, #1
+            0xe7f9, // 0x18 b 0x0e
+            0x4770, // 0x1a bx lr
+        ],
+        &[
+            Sym::function("clear_some", 0, 10),
+            Sym::function("__aeabi_memclr", 0x0c, 0x10),
+        ],
+    )
+}
+
+#[test]
+fn a_memory_function_is_bounded_by_the_length_its_call_passes() {
+    // Alone, its loop runs once per byte of a length nothing fixes: declined.
+    let alone = bound(&clears(16), "__aeabi_memclr", F103_0WS);
+    assert!(
+        alone
+            .declined
+            .as_deref()
+            .is_some_and(|r| r.contains(length::LENGTH_UNKNOWN)),
+        "{alone:?}"
+    );
+    // Called with 16: push, movs, bl; the callee's movs and its way out (cmp, beq, bx lr) and 16
+    // iterations of (cmp, beq, strb, adds, subs, b); pop: 3 + 4 + 96 + 1.
+    let b = bound(&clears(16), "clear_some", F103_0WS);
+    assert_eq!((b.instructions, b.declined.as_deref()), (104, None));
+    // Twice the length, sixteen more iterations.
+    let b = bound(&clears(32), "clear_some", F103_0WS);
+    assert_eq!(b.instructions, 104 + 16 * 6);
+}
+
+#[test]
+fn a_register_loaded_with_one_function_address_is_a_direct_call() {
+    let img = image(
+        &[
+            0xb580, // 0x00 push {r7, lr}
+            0x4b02, // 0x02 ldr r3, [pc, #8]: the literal at 0x0c
+            0x4798, // 0x04 blx r3
+            0xbd80, // 0x06 pop {r7, pc}
+            0x2005, // 0x08 movs r0, #5   (five)
+            0x4770, // 0x0a bx lr
+            0x0009, 0x0000, // 0x0c .word five | 1
+        ],
+        &[
+            Sym::function("caller", 0, 8),
+            Sym::function("five", 8, 4),
+            Sym::data(0x0c),
+        ],
+    );
+    let b = bound(&img, "caller", F103_0WS);
+    // push, ldr, blx, the callee's movs and bx lr, pop.
+    assert_eq!((b.instructions, b.declined.as_deref()), (6, None));
+}

@@ -1,0 +1,260 @@
+//! Loops that run once per byte of a length argument: the memory functions of `compiler-builtins`
+//! (`memcpy`, `memset`, `__aeabi_memclr8`, …) and core's `ptr::swap_nonoverlapping_bytes`. Such a loop has no bound of its own; a call of one
+//! with a length the machine code fixes (a constant, or the smaller of a value and a constant) bounds
+//! each of its loops by that length: every pass moves or compares at least one byte, so a loop of a
+//! call with at most `n` bytes passes its header at most `n + 1` times. The bound is worked out per
+//! call: the callee is bounded again with the lengths its caller passes ([`Args`]), and a call whose
+//! length the machine code does not fix declines with [`LENGTH_UNKNOWN`] in its reason.
+use crate::decode::{Insn, Opcode, Operand};
+use crate::wcet::cfg::Cfg;
+
+/// Upper bounds of the argument registers r0–r3 at a call (unsigned), where the machine code fixes them.
+pub type Args = [Option<u32>; 4];
+
+/// No argument known.
+pub const NO_ARGS: Args = [None; 4];
+
+/// In a declined reason: a memory function's loop whose length the call does not fix (a caller may).
+pub const LENGTH_UNKNOWN: &str = "runs once per byte of a length the call does not fix";
+
+/// The register that holds the length of a memory function of `compiler-builtins` (by its name as the
+/// analysis names functions), if `name` is one.
+pub fn length_register(name: &str) -> Option<u8> {
+    let name = name
+        .strip_prefix("compiler_builtins::mem::")
+        .unwrap_or(name);
+    match name {
+        // (dest, src, n), (dest, c, n), (a, b, n)
+        "memcpy" | "memmove" | "memset" | "memcmp" | "bcmp" | "__aeabi_memcpy"
+        | "__aeabi_memcpy4" | "__aeabi_memcpy8" | "__aeabi_memmove" | "__aeabi_memmove4"
+        | "__aeabi_memmove8" => Some(2),
+        // core's byte-wise swap (x, y, bytes), behind `slice::swap` of types without a word layout.
+        "core::ptr::swap_nonoverlapping_bytes" => Some(2),
+        // (dest, n, c), (dest, n)
+        "__aeabi_memset" | "__aeabi_memset4" | "__aeabi_memset8" | "__aeabi_memclr"
+        | "__aeabi_memclr4" | "__aeabi_memclr8" => Some(1),
+        _ => None,
+    }
+}
+
+/// The argument registers' bounds at the call that ends block `block` of `graph`: from the last write of
+/// each on every way into the call (the function's `entry` arguments where a way starts at its entry
+/// without one).
+pub fn call_args(insns: &[Insn], graph: &Cfg, block: usize, entry: &Args) -> Args {
+    let b = &graph.blocks[block];
+    let run = &insns[b.first..b.last];
+    // A call made under an `IT` block whose every instruction has the same condition: the
+    // conditional moves of that block ran whenever the call is made.
+    let call = &insns[b.last];
+    let call_it = if call.conditional {
+        run.iter()
+            .rposition(|i| i.inst.opcode == Opcode::IT)
+            .filter(|&it| all_then(&run[it]) && it_slots(&run[it]) >= run.len() - it)
+            .map(|it| b.first + it)
+    } else {
+        None
+    };
+    let ways = Ways {
+        insns,
+        graph,
+        entry,
+        call_block: block,
+        call_it,
+    };
+    let mut args = NO_ARGS;
+    for (r, arg) in args.iter_mut().enumerate() {
+        *arg = ways.bound(
+            block,
+            b.last,
+            r as u8,
+            &mut std::collections::BTreeSet::new(),
+        );
+    }
+    args
+}
+
+/// The ways into a call, for [`call_args`].
+struct Ways<'a> {
+    insns: &'a [Insn],
+    graph: &'a Cfg,
+    entry: &'a Args,
+    call_block: usize,
+    /// The `IT` (its index in `insns`) the call is in, when its conditional moves ran with it.
+    call_it: Option<usize>,
+}
+
+impl Ways<'_> {
+    /// The bound of register `r` before `insns[upto]` in block `block`: its last write there, else the
+    /// largest at the end of every predecessor (`None` through a loop, or from an unknown entry).
+    fn bound(
+        &self,
+        block: usize,
+        upto: usize,
+        r: u8,
+        visiting: &mut std::collections::BTreeSet<usize>,
+    ) -> Option<u32> {
+        let first = self.graph.blocks[block].first;
+        let run = &self.insns[first..upto];
+        let Some(at) = run.iter().rposition(|i| i.writes().contains(r)) else {
+            if block == 0 {
+                return self.entry.get(usize::from(r)).copied().flatten();
+            }
+            let preds: Vec<usize> = self
+                .graph
+                .blocks
+                .iter()
+                .enumerate()
+                .filter(|(_, blk)| blk.succs.iter().any(|e| e.to == block))
+                .map(|(p, _)| p)
+                .collect();
+            if preds.is_empty() {
+                return None;
+            }
+            let mut most = 0;
+            for p in preds {
+                if !visiting.insert(p) {
+                    return None;
+                }
+                let end = self.graph.blocks[p].last + 1;
+                let v = self.bound(p, end, r, visiting);
+                visiting.remove(&p);
+                most = most.max(v?);
+            }
+            return Some(most);
+        };
+        let insn = &run[at];
+        if insn.inst.opcode != Opcode::MOV {
+            return None;
+        }
+        let regs = insn.registers();
+        let ran = !insn.conditional
+            || (block == self.call_block
+                && self.call_it.is_some_and(|it| {
+                    run[..at].iter().rposition(|i| i.inst.opcode == Opcode::IT) == Some(it - first)
+                }));
+        match (ran, &regs[..]) {
+            // mov rN, #c
+            (true, [d]) if *d == r => insn.immediate(),
+            // mov rN, rM
+            (true, [d, m]) if *d == r => self.bound(block, first + at, *m, visiting),
+            // cmp rM, #c; mov rN, rM; it cs|hi; movcs|movhi rN, #c: the smaller of rM and c.
+            (false, [d]) if *d == r => smaller_of(run, at, r),
+            _ => None,
+        }
+    }
+}
+
+/// `cmp rM, #c; mov rN, rM; it cs|hi; movcs|movhi rN, #c` ending at `run[at]`: rN is at most c.
+fn smaller_of(run: &[Insn], at: usize, r: u8) -> Option<u32> {
+    let c = run[at].immediate()?;
+    let it = run[..at]
+        .iter()
+        .rposition(|i| i.inst.opcode == Opcode::IT)?;
+    let first_condition = (run[it].raw[0] >> 4) & 0xF;
+    if !matches!(first_condition, 2 | 8) {
+        return None;
+    }
+    let before = run[..it].iter().rposition(|i| i.writes().contains(r))?;
+    let [d2, m] = run[before].registers()[..] else {
+        return None;
+    };
+    if run[before].inst.opcode != Opcode::MOV || run[before].conditional || d2 != r {
+        return None;
+    }
+    let cmp = run[..it].iter().rposition(|i| {
+        matches!(i.inst.opcode, Opcode::CMP | Opcode::CMN | Opcode::TST) || i.inst.s
+    })?;
+    let compared = &run[cmp];
+    let same = compared.inst.opcode == Opcode::CMP
+        && matches!(compared.inst.operands[0], Operand::Reg(x) if x.number() == m)
+        && compared.immediate() == Some(c);
+    // Nothing between the compare and the conditional move writes rM.
+    let untouched = run[cmp + 1..at].iter().all(|i| !i.writes().contains(m));
+    (same && untouched).then_some(c)
+}
+
+/// How many instructions an `IT` instruction covers (1–4), from its mask.
+fn it_slots(it: &Insn) -> usize {
+    let mask = it.raw[0] & 0xF;
+    4 - mask.trailing_zeros().min(3) as usize
+}
+
+/// Whether every instruction an `IT` covers runs under its first condition (`IT`, `ITT`, `ITTT`, `ITTTT`).
+fn all_then(it: &Insn) -> bool {
+    let (first, mask) = ((it.raw[0] >> 4) & 1, it.raw[0] & 0xF);
+    let slots = it_slots(it);
+    (1..slots).all(|k| (mask >> (4 - k)) & 1 == first)
+}
+
+/// The function a call through a register at the end of block `block` reaches when the register holds a
+/// constant address: its only write in the function is a literal load (`LDR rX, [PC, #k]`) or a
+/// `MOVW`/`MOVT` pair, in a block that dominates the call (or before it in the call's block). The
+/// address with its Thumb bit cleared.
+pub fn constant_target(
+    image: &crate::Image,
+    insns: &[Insn],
+    graph: &Cfg,
+    block: usize,
+) -> Option<u64> {
+    let b = &graph.blocks[block];
+    let call = &insns[b.last];
+    let [r] = call.registers()[..] else {
+        return None;
+    };
+    // The last write of the register on every way into the call: each must load the same address.
+    let preds = |x: usize| {
+        graph
+            .blocks
+            .iter()
+            .enumerate()
+            .filter(move |(_, blk)| blk.succs.iter().any(|e| e.to == x))
+            .map(|(p, _)| p)
+    };
+    let mut value = None;
+    let mut seen = std::collections::BTreeSet::new();
+    let mut work = vec![(block, b.last)];
+    while let Some((x, end)) = work.pop() {
+        let blk = &graph.blocks[x];
+        let run = &insns[blk.first..end];
+        match run.iter().rposition(|i| i.writes().contains(r)) {
+            Some(at) => {
+                let v = loaded_address(image, run, at, r)?;
+                if value.is_some_and(|known| known != v) {
+                    return None;
+                }
+                value = Some(v);
+            }
+            // The register as the function was entered: not known.
+            None if x == 0 => return None,
+            None => {
+                for p in preds(x) {
+                    if seen.insert(p) {
+                        work.push((p, graph.blocks[p].last + 1));
+                    }
+                }
+            }
+        }
+    }
+    value.map(|v| u64::from(v & !1))
+}
+
+/// The address the write of `r` at `run[at]` puts there: a literal load, or the high half of a `MOVW`/`MOVT`
+/// pair.
+fn loaded_address(image: &crate::Image, run: &[Insn], at: usize, r: u8) -> Option<u32> {
+    let w = &run[at];
+    if w.conditional {
+        return None;
+    }
+    match w.inst.opcode {
+        Opcode::LDR => image.word(w.literal_address()?),
+        Opcode::MOVT => {
+            let low = run[..at].iter().rposition(|i| i.writes().contains(r))?;
+            let low = &run[low];
+            if low.inst.opcode != Opcode::MOV || low.conditional || low.registers() != [r] {
+                return None;
+            }
+            Some((low.immediate()? & 0xFFFF) | (w.immediate()? << 16))
+        }
+        _ => None,
+    }
+}
