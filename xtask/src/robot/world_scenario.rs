@@ -332,11 +332,12 @@ pub fn line_following(root: &Path, firmware: &[amiro_robot::Firmware; 3]) -> Res
         "{summary}: a floor sensor over the line at only {over:.1} % of the ticks"
     );
     Ok(format!(
-        "line_following.py drove the firmware round the lap in {lap_s:.2} s ({} motor commands), a floor sensor over the line at {over:.1} % of {} ticks: {summary}; {:.1} s of wall time for {} s",
+        "line_following.py drove the firmware round the lap in {lap_s:.2} s ({} motor commands), a floor sensor over the line at {over:.1} % of {} ticks: {summary}; {:.1} s of wall time for {} s, the world's hooks {:.1} % of it",
         run.motor_commands(),
         trajectory.samples.len(),
         run.wall_s,
-        LINE_US / 1_000_000
+        LINE_US / 1_000_000,
+        100.0 * run.world.wall.as_secs_f64() / run.wall_s.max(1e-9)
     ))
 }
 
