@@ -417,7 +417,7 @@ pub fn run_in_world(
                 let busy = b.wakes_at <= t || due(b, now.as_ref(), &bus, nodes[k], flags, end);
                 boards[k].wants = if busy {
                     t + QUANTUM_US
-                } else if world.is_some() {
+                } else if world.as_deref().is_some_and(WorldRun::feeds) {
                     WorldRun::wake_boundary(k, t, b.wakes_at)
                 } else {
                     at_or_after(b.wakes_at)

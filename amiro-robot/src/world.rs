@@ -39,6 +39,9 @@ const POWERMGMT: usize = 1;
 /// A world carried on the robot link for one run.
 pub struct WorldRun {
     world: World,
+    /// Whether the sensor boards read the world (false: a controller without a world, the
+    /// boards' own simulators answer and the robot moves in an empty plane).
+    feeds: bool,
     wheels: WheelFeed,
     /// The DiWheelDrive's clock zero the wheel feed follows (a restart begins a new feed).
     wheels_offset: u64,
@@ -70,6 +73,7 @@ impl WorldRun {
         let seed = seed.unwrap_or(arena.seed);
         WorldRun {
             world: World::with_seed(seed, arena),
+            feeds: true,
             wheels: WheelFeed::new(),
             wheels_offset: 0,
             revision,
@@ -81,6 +85,34 @@ impl WorldRun {
             controller: None,
             wall: std::time::Duration::ZERO,
         }
+    }
+
+    /// No world: the sensor boards keep reading their own simulators, as without `--world`,
+    /// and the robot moves in an empty plane from the origin (the trajectory still follows the
+    /// wheels). What a controller (`--controller`) needs on its own.
+    pub fn without_world() -> WorldRun {
+        let arena = Arena {
+            seed: 0,
+            start: amiro_world::Pose {
+                position: amiro_world::geometry::Vec2::new(0.0, 0.0),
+                heading: 0.0,
+            },
+            segments: Vec::new(),
+            circles: Vec::new(),
+            movers: Vec::new(),
+            floor: Vec::new(),
+            lab: amiro_world::file::LabField::BIELEFELD,
+            wall_segments: 0,
+        };
+        WorldRun {
+            feeds: false,
+            ..WorldRun::new(arena, None, ImuRevision::Rev1_1)
+        }
+    }
+
+    /// Whether the sensor boards read the world (there is one).
+    pub fn feeds(&self) -> bool {
+        self.feeds
     }
 
     /// Closes the loop with `program` (the controller protocol, `amiro_world::controller`): every
@@ -195,7 +227,7 @@ impl WorldRun {
         t: u64,
         offset: u64,
     ) -> Option<world_link::Readings> {
-        if k != DIWHEELDRIVE && k != POWERMGMT {
+        if !self.feeds || (k != DIWHEELDRIVE && k != POWERMGMT) {
             return None;
         }
         let stale = self
@@ -350,6 +382,26 @@ mod tests {
         assert_eq!(w.trajectory().samples.len(), 3, "a row at every tick");
         w.finish();
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn without_a_world_the_boards_keep_their_simulators_and_the_wheels_still_move_it() {
+        let mut w = WorldRun::without_world();
+        assert!(!w.feeds());
+        assert!(w.readings_for(0, 40, 0).is_none());
+        assert!(w.readings_for(1, 40, 0).is_none());
+        w.wheels(
+            0,
+            Wheels {
+                now_us: 1_000_000,
+                left_ticks: 1408,
+                right_ticks: 1408,
+            },
+        );
+        w.at(1_000_000);
+        let x = w.world().pose().position.x;
+        assert!((x - 0.175).abs() < 0.001, "{x}");
+        assert_eq!(w.summary().contacts, 0);
     }
 
     #[test]

@@ -1,16 +1,13 @@
 //! The world for Foxglove's 3D panel: the robot's pose over time (`foxglove.PoseInFrame` on
 //! `/world/pose`) and the arena once (`foxglove.SceneUpdate` on `/world/arena`: walls and polygon
-//! obstacles as line segments, round obstacles as cylinders, the floor's dark patches as lines on
-//! the ground), JSON-encoded in an MCAP file like `amiro record`'s, log time = virtual time.
-//! Foxglove recognises the schemas by these names; the JSON schemas describe the fields sent.
-
-use std::collections::BTreeMap;
-use std::io::{Seek, Write};
+//! obstacles as line segments, round obstacles as cylinders, the floor's patches as lines on
+//! the ground), as JSON messages. Foxglove recognises the schemas by these names; the JSON
+//! schemas describe the fields sent. The MCAP file they go into is `amiro record`'s
+//! (`operator::record`, `amiro record --world --trajectory`): one writer for the format.
 
 use serde_json::{json, Value};
 
 use crate::file::{Arena, FloorShape, Pose};
-use crate::output::Trajectory;
 
 /// The frame everything is drawn in.
 pub const FRAME: &str = "world";
@@ -18,11 +15,10 @@ pub const FRAME: &str = "world";
 pub const POSE_TOPIC: &str = "/world/pose";
 /// The arena channel.
 pub const ARENA_TOPIC: &str = "/world/arena";
-
-/// Why the MCAP file could not be written.
-#[derive(Debug, thiserror::Error)]
-#[error("writing the world's MCAP: {0}")]
-pub struct McapError(String);
+/// The pose messages' schema name, as Foxglove knows it.
+pub const POSE_SCHEMA: &str = "foxglove.PoseInFrame";
+/// The arena messages' schema name, as Foxglove knows it.
+pub const SCENE_SCHEMA: &str = "foxglove.SceneUpdate";
 
 fn time(t_us: u64) -> Value {
     json!({ "sec": t_us / 1_000_000, "nsec": (t_us % 1_000_000) * 1000 })
@@ -152,63 +148,6 @@ pub fn scene_schema() -> Value {
     }))
 }
 
-/// Writes the arena (at time 0) and every trajectory sample's pose into an MCAP file.
-pub fn write_mcap<W: Write + Seek>(
-    out: W,
-    arena: &Arena,
-    trajectory: &Trajectory,
-) -> Result<W, McapError> {
-    let e = |error: mcap::McapError| McapError(error.to_string());
-    let mut writer = mcap::WriteOptions::new()
-        .library(format!("amiro-world {}", env!("CARGO_PKG_VERSION")))
-        .create(out)
-        .map_err(e)?;
-    let metadata = BTreeMap::new();
-    let scene_schema_id = writer
-        .add_schema(
-            "foxglove.SceneUpdate",
-            "jsonschema",
-            scene_schema().to_string().as_bytes(),
-        )
-        .map_err(e)?;
-    let scene = writer
-        .add_channel(scene_schema_id, ARENA_TOPIC, "json", &metadata)
-        .map_err(e)?;
-    let pose_schema_id = writer
-        .add_schema(
-            "foxglove.PoseInFrame",
-            "jsonschema",
-            pose_schema().to_string().as_bytes(),
-        )
-        .map_err(e)?;
-    let pose = writer
-        .add_channel(pose_schema_id, POSE_TOPIC, "json", &metadata)
-        .map_err(e)?;
-    let header = |channel_id, sequence, t_us: u64| mcap::records::MessageHeader {
-        channel_id,
-        sequence,
-        log_time: t_us * 1000,
-        publish_time: t_us * 1000,
-    };
-    writer
-        .write_to_known_channel(
-            &header(scene, 1, 0),
-            scene_update(arena).to_string().as_bytes(),
-        )
-        .map_err(e)?;
-    for (k, s) in trajectory.samples.iter().enumerate() {
-        let sequence = u32::try_from(k + 1).unwrap_or(u32::MAX);
-        writer
-            .write_to_known_channel(
-                &header(pose, sequence, s.t_us),
-                pose_in_frame(s.t_us, &s.pose).to_string().as_bytes(),
-            )
-            .map_err(e)?;
-    }
-    writer.finish().map_err(e)?;
-    Ok(writer.into_inner())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -254,35 +193,5 @@ mod tests {
         assert_eq!(lines[2]["points"].as_array().unwrap().len(), 2);
         assert_eq!(lines[2]["thickness"], 0.03);
         assert_eq!(entity["cylinders"][0]["size"]["x"], 0.1);
-    }
-
-    #[test]
-    fn the_mcap_file_holds_one_scene_and_every_pose() {
-        let arena = Arena::parse(r#"{ "robot": { "x": 0, "y": 0, "heading_deg": 0 } }"#).unwrap();
-        let mut t = Trajectory::default();
-        for k in 0..5u64 {
-            t.record(k * 10_000, arena.start);
-        }
-        let bytes = write_mcap(std::io::Cursor::new(Vec::new()), &arena, &t)
-            .unwrap()
-            .into_inner();
-        let mut poses = 0;
-        let mut scenes = 0;
-        for message in mcap::MessageStream::new(&bytes).unwrap() {
-            let message = message.unwrap();
-            match message.channel.topic.as_str() {
-                POSE_TOPIC => {
-                    assert_eq!(
-                        message.channel.schema.as_ref().unwrap().name,
-                        "foxglove.PoseInFrame"
-                    );
-                    assert_eq!(message.log_time, poses * 10_000_000);
-                    poses += 1;
-                }
-                ARENA_TOPIC => scenes += 1,
-                other => panic!("{other}"),
-            }
-        }
-        assert_eq!((poses, scenes), (5, 1));
     }
 }

@@ -41,6 +41,9 @@ pub struct Outcome {
     /// Frames the behaviour sent that were not protocol commands the stand-in knows (counted,
     /// not fatal: a real board would ignore them too).
     pub ignored_frames: u64,
+    /// Every frame of the loop, both ways, in time order, as `candump -l` lines (the bus log
+    /// a robot run writes).
+    pub bus_log: Vec<String>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -73,6 +76,7 @@ pub fn run(
         ticks_over_dark: 0,
         leds: [[0; 3]; 8],
         ignored_frames: 0,
+        bus_log: Vec::new(),
     };
     let mut t = 0u64;
     outcome.trajectory.record(t, world.pose());
@@ -110,6 +114,7 @@ pub fn run(
                 let encoded = data.encode(priority);
                 // A protocol frame always has an 11-bit identifier and at most 8 bytes.
                 if let Some(frame) = Frame::new(encoded.id().raw(), encoded.data()) {
+                    outcome.bus_log.push(candump_line(at, &frame));
                     controller.frame(at, &frame)?;
                 }
             }
@@ -120,6 +125,7 @@ pub fn run(
         outcome.ticks += 1;
 
         for frame in controller.tick(t)? {
+            outcome.bus_log.push(candump_line(t, &frame));
             match amiro_can::decode_command(frame.id, frame.payload()) {
                 Ok(Command::Motor { command, .. }) => {
                     velocity = (
@@ -167,6 +173,15 @@ pub fn run(
     }
     outcome.summary = world.summary();
     Ok(outcome)
+}
+
+/// A frame at `t_us` as `candump -l` writes it.
+fn candump_line(t_us: u64, frame: &Frame) -> String {
+    format!(
+        "{} can0 {}",
+        crate::controller::timestamp(t_us),
+        frame.to_cansend()
+    )
 }
 
 /// One sample of `topic` as the boards would publish it.

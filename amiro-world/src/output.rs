@@ -27,6 +27,42 @@ pub struct Trajectory {
 /// The CSV header row.
 pub const CSV_HEADER: &str = "t_s,x_m,y_m,heading_deg";
 
+/// Why a trajectory CSV could not be read back.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum CsvError {
+    /// The first line is not [`CSV_HEADER`].
+    #[error("line 1: the header is {0:?}, expected \"{CSV_HEADER}\"")]
+    Header(String),
+    /// A row that is not four numbers of the written form.
+    #[error("line {line}: {reason}")]
+    Row {
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// `S.UUUUUU` (up to six decimals, non-negative) as µs.
+fn parse_time_us(text: &str) -> Option<u64> {
+    let (whole, fraction) = text.split_once('.').unwrap_or((text, ""));
+    if whole.is_empty()
+        || fraction.len() > 6
+        || !whole
+            .bytes()
+            .chain(fraction.bytes())
+            .all(|b| b.is_ascii_digit())
+    {
+        return None;
+    }
+    let micros = format!("{fraction:0<6}").parse::<u64>().ok()?;
+    whole
+        .parse::<u64>()
+        .ok()?
+        .checked_mul(1_000_000)?
+        .checked_add(micros)
+}
+
 impl Trajectory {
     /// Adds the pose at `t_us`.
     pub fn record(&mut self, t_us: u64, pose: Pose) {
@@ -44,6 +80,48 @@ impl Trajectory {
             sample.pose.position.y,
             wrap(sample.pose.heading).to_degrees()
         )
+    }
+
+    /// Reads back what [`Trajectory::write_csv`] wrote (rows in time order; blank lines
+    /// ignored).
+    pub fn read_csv(text: &str) -> Result<Trajectory, CsvError> {
+        let mut lines = text.lines().enumerate();
+        let header = lines.next().map_or("", |(_, l)| l.trim());
+        if header != CSV_HEADER {
+            return Err(CsvError::Header(header.to_string()));
+        }
+        let mut trajectory = Trajectory::default();
+        for (k, line) in lines {
+            let row = |reason: String| CsvError::Row {
+                line: k + 1,
+                reason,
+            };
+            let line = line.trim();
+            if line.is_empty() {
+                continue;
+            }
+            let fields: Vec<&str> = line.split(',').collect();
+            let [t, x, y, heading] = fields[..] else {
+                return Err(row(format!("{} fields, expected 4", fields.len())));
+            };
+            let t_us = parse_time_us(t)
+                .ok_or_else(|| row(format!("t_s {t:?} is not a time in seconds")))?;
+            let number = |name: &str, text: &str| {
+                text.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| row(format!("{name} {text:?} is not a number")))
+            };
+            let pose = Pose {
+                position: Vec2::new(number("x_m", x)?, number("y_m", y)?),
+                heading: number("heading_deg", heading)?.to_radians(),
+            };
+            if trajectory.samples.last().is_some_and(|s| s.t_us > t_us) {
+                return Err(row(format!("t_s {t} is before the row above")));
+            }
+            trajectory.record(t_us, pose);
+        }
+        Ok(trajectory)
     }
 
     /// The whole trajectory as CSV, header first.
@@ -182,6 +260,39 @@ mod tests {
             position: Vec2::new(x, y),
             heading: deg.to_radians(),
         }
+    }
+
+    #[test]
+    fn a_written_trajectory_reads_back_and_bad_rows_are_named() {
+        let mut t = Trajectory::default();
+        t.record(0, pose(1.0, 0.5, 0.0));
+        t.record(1_230_010, pose(-0.25, 0.125, 90.0));
+        let mut csv = Vec::new();
+        t.write_csv(&mut csv).unwrap();
+        let back = Trajectory::read_csv(std::str::from_utf8(&csv).unwrap()).unwrap();
+        assert_eq!(back.samples.len(), 2);
+        assert_eq!(back.samples[1].t_us, 1_230_010);
+        assert_eq!(back.samples[1].pose.position, Vec2::new(-0.25, 0.125));
+        assert!((back.samples[1].pose.heading - std::f64::consts::FRAC_PI_2).abs() < 1e-9);
+        assert_eq!(
+            Trajectory::read_csv("t,x,y,h\n"),
+            Err(CsvError::Header("t,x,y,h".into()))
+        );
+        let bad = |rows: &str| {
+            Trajectory::read_csv(&format!("{CSV_HEADER}\n{rows}"))
+                .unwrap_err()
+                .to_string()
+        };
+        assert_eq!(bad("0.5,1,2"), "line 2: 3 fields, expected 4");
+        assert_eq!(
+            bad("0.1,1,2,3\n-1,1,2,3"),
+            "line 3: t_s \"-1\" is not a time in seconds"
+        );
+        assert_eq!(bad("0.1,1,x,3"), "line 2: y_m \"x\" is not a number");
+        assert_eq!(
+            bad("0.2,1,2,3\n0.1,1,2,3"),
+            "line 3: t_s 0.1 is before the row above"
+        );
     }
 
     #[test]

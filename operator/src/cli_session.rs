@@ -175,6 +175,16 @@ pub struct RecordArgs {
     /// Stop after this long, e.g. 30s (without it: until Ctrl-C or the end of a log file)
     #[arg(long, value_name = "DURATION", value_parser = parse_duration_arg)]
     pub duration: Option<std::time::Duration>,
+
+    /// A virtual robot's world (`cargo xtask robot --world FILE`): its walls, obstacles and floor go on
+    /// `/world/arena` for Foxglove's 3D panel
+    #[arg(long, value_name = "FILE.json")]
+    pub world: Option<PathBuf>,
+
+    /// That run's trajectory (`--trajectory OUT.csv`): the robot's pose at every row on `/world/pose`. Record
+    /// the run's own bus log (`--bus file:…/bus.log`): its times are the trajectory's virtual time
+    #[arg(long, value_name = "FILE.csv")]
+    pub trajectory: Option<PathBuf>,
 }
 
 fn parse_duration_arg(text: &str) -> Result<std::time::Duration, String> {

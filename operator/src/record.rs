@@ -6,13 +6,21 @@
 //! `/amiro/gyroscope.x_dps` with no set-up; a decoded command goes to `/amiro/<topic>/command`. Every channel has a
 //! JSON schema generated from amiro-can's topic table and `describe::value_fields`. A message's log time (and
 //! publish time) is its frame's time in nanoseconds: the bus's reception time, or the log line's timestamp.
+//!
+//! A virtual robot's run in a world (`cargo xtask robot --world`, docs/world.md) adds its arena once on
+//! `/world/arena` (`foxglove.SceneUpdate`: walls, obstacles, floor) and its pose at every trajectory row on
+//! `/world/pose` (`foxglove.PoseInFrame`), in the frame `world`, so Foxglove's 3D panel shows the robot moving;
+//! the messages are amiro-world's (`amiro_world::foxglove`), the poses interleaved with the frames by time.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
 use std::path::Path;
 
 use amiro_can::{Message, Priority, Topic, TOPICS};
+use amiro_world::foxglove;
+use amiro_world::output::Sample;
+use amiro_world::{Arena, Trajectory};
 use anyhow::{anyhow, Context, Result};
 use serde_json::{json, Map, Value};
 
@@ -180,6 +188,26 @@ pub fn command_spec(topic: Topic) -> ChannelSpec {
     }
 }
 
+/// `/world/arena`: a world's walls, obstacles and floor.
+pub fn arena_spec() -> ChannelSpec {
+    ChannelSpec {
+        name: foxglove::ARENA_TOPIC.into(),
+        schema_name: foxglove::SCENE_SCHEMA.into(),
+        schema: foxglove::scene_schema(),
+        metadata: BTreeMap::new(),
+    }
+}
+
+/// `/world/pose`: the robot's pose in its world.
+pub fn pose_spec() -> ChannelSpec {
+    ChannelSpec {
+        name: foxglove::POSE_TOPIC.into(),
+        schema_name: foxglove::POSE_SCHEMA.into(),
+        schema: foxglove::pose_schema(),
+        metadata: BTreeMap::new(),
+    }
+}
+
 /// Nanoseconds since the timestamp's origin: the log time of a frame.
 pub fn time_ns(timestamp: Timestamp) -> u64 {
     timestamp
@@ -225,6 +253,10 @@ pub struct Recording<W: Write + Seek> {
     pub untimed: u64,
     /// Frames written.
     pub written: u64,
+    /// A world run's poses not yet written: each goes in before the first frame after it.
+    poses: VecDeque<Sample>,
+    /// Poses written.
+    pub poses_written: u64,
 }
 
 impl Recording<BufWriter<File>> {
@@ -251,6 +283,8 @@ impl<W: Write + Seek> Recording<W> {
             last_time_ns: 0,
             untimed: 0,
             written: 0,
+            poses: VecDeque::new(),
+            poses_written: 0,
         };
         recording.frames = recording.channel(&frames_spec())?;
         Ok(recording)
@@ -290,6 +324,36 @@ impl<W: Write + Seek> Recording<W> {
             .map_err(|error| anyhow!("cannot write to the MCAP file: {error}"))
     }
 
+    /// Adds a world run: its arena on `/world/arena` (once, at time 0: the run's start) and the trajectory's
+    /// poses on `/world/pose`, each written before the first frame after it (the rest at the end). The
+    /// trajectory's times are the run's virtual time, as its bus log's.
+    pub fn world(&mut self, arena: Option<&Arena>, trajectory: Option<Trajectory>) -> Result<()> {
+        if let Some(arena) = arena {
+            let channel = self.channel(&arena_spec())?;
+            self.write(channel, 0, &foxglove::scene_update(arena))?;
+        }
+        if let Some(trajectory) = trajectory {
+            self.poses.extend(trajectory.samples);
+        }
+        Ok(())
+    }
+
+    /// Writes the poses up to `time_ns` (all of them with `None`).
+    fn poses_until(&mut self, time_ns: Option<u64>) -> Result<()> {
+        while let Some(sample) = self.poses.front() {
+            let at = sample.t_us.saturating_mul(1000);
+            if time_ns.is_some_and(|t| at > t) {
+                break;
+            }
+            let message = foxglove::pose_in_frame(sample.t_us, &sample.pose);
+            self.poses.pop_front();
+            let channel = self.channel(&pose_spec())?;
+            self.write(channel, at, &message)?;
+            self.poses_written += 1;
+        }
+        Ok(())
+    }
+
     /// Records one frame: on `/amiro/frames`, and decoded on its topic's channel.
     pub fn record(&mut self, logged: &LoggedFrame) -> Result<()> {
         let time_ns = match logged.timestamp {
@@ -300,6 +364,7 @@ impl<W: Write + Seek> Recording<W> {
             }
         };
         self.last_time_ns = time_ns;
+        self.poses_until(Some(time_ns))?;
         let (record, decoded) = messages(logged);
         self.write(self.frames, time_ns, &record)?;
         if let Some((spec, body)) = decoded {
@@ -313,6 +378,7 @@ impl<W: Write + Seek> Recording<W> {
     /// Writes the summary and index and flushes; the file is complete after this. Returns the frames written and
     /// the output.
     pub fn finish(mut self) -> Result<(u64, W)> {
+        self.poses_until(None)?;
         self.writer
             .finish()
             .map_err(|error| anyhow!("cannot finish the MCAP file: {error}"))?;
@@ -431,6 +497,83 @@ mod tests {
                 assert_eq!(schema["additionalProperties"], json!(true), "{}", info.name);
             }
         }
+    }
+
+    #[test]
+    fn a_world_run_adds_its_arena_once_and_its_poses_between_the_frames() {
+        let arena = Arena::parse(
+            r#"{ "robot": { "x": 0.5, "y": 0.5, "heading_deg": 90 },
+                 "walls": [[[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]]] }"#,
+        )
+        .unwrap();
+        let mut trajectory = Trajectory::default();
+        for k in 0..4u64 {
+            trajectory.record(k * 10_000, arena.start);
+        }
+        let mut recording = Recording::new(std::io::Cursor::new(Vec::new())).unwrap();
+        recording.world(Some(&arena), Some(trajectory)).unwrap();
+        for line in [
+            "(0.015000) can0 608#FCFF1E00FBFF",
+            "(0.020000) can0 608#FCFF1E00FBFF",
+        ] {
+            recording
+                .record(&parse_line(line).unwrap().unwrap())
+                .unwrap();
+        }
+        assert_eq!(recording.poses_written, 3, "the poses up to the last frame");
+        let (_, out) = recording.finish().unwrap();
+        let bytes = out.into_inner();
+        let order: Vec<(String, u64)> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| {
+                let m = m.unwrap();
+                (m.channel.topic.clone(), m.log_time / 1_000_000)
+            })
+            .filter(|(topic, _)| topic != "/amiro/gyroscope")
+            .collect();
+        let topic = |t: &str, ms: u64| (t.to_string(), ms);
+        assert_eq!(
+            order,
+            [
+                topic("/world/arena", 0),
+                topic("/world/pose", 0),
+                topic("/world/pose", 10),
+                topic(FRAMES_CHANNEL, 15),
+                topic("/world/pose", 20),
+                topic(FRAMES_CHANNEL, 20),
+                topic("/world/pose", 30),
+            ]
+        );
+        let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+        let schema = |name: &str| {
+            summary
+                .channels
+                .values()
+                .find(|c| c.topic == name)
+                .and_then(|c| c.schema.as_ref())
+                .map(|s| s.name.clone())
+        };
+        assert_eq!(
+            schema("/world/pose").as_deref(),
+            Some("foxglove.PoseInFrame")
+        );
+        assert_eq!(
+            schema("/world/arena").as_deref(),
+            Some("foxglove.SceneUpdate")
+        );
+        let pose: Value = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| m.unwrap())
+            .find(|m| m.channel.topic == "/world/pose")
+            .map(|m| serde_json::from_slice(&m.data).unwrap())
+            .unwrap();
+        assert_eq!(pose["frame_id"], json!("world"));
+        assert_eq!(
+            pose["pose"]["position"],
+            json!({ "x": 0.5, "y": 0.5, "z": 0.0 })
+        );
+        let w = pose["pose"]["orientation"]["w"].as_f64().unwrap();
+        assert!((w - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-9, "{w}");
     }
 
     #[test]

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 
 use crate::bus::{self, Bus, BusUrl, Direction, Reception};
 use crate::cli::MonitorArgs;
@@ -428,10 +428,35 @@ pub fn relay(args: &RelayArgs) -> Result<ExitCode> {
 
 /// `amiro record`: every frame of a bus into an MCAP file, until the duration, the end of a log or Ctrl-C.
 pub fn record(args: &RecordArgs) -> Result<ExitCode> {
+    let arena = match &args.world {
+        Some(path) => Some(amiro_world::Arena::load(path).map_err(|error| {
+            let text = error.to_string();
+            let shown = path.display().to_string();
+            if text.contains(&shown) {
+                anyhow!("--world: {text}")
+            } else {
+                anyhow!("--world {shown}: {text}")
+            }
+        })?),
+        None => None,
+    };
+    let trajectory = match &args.trajectory {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("--trajectory: cannot read {}", path.display()))?;
+            Some(
+                amiro_world::Trajectory::read_csv(&text)
+                    .with_context(|| format!("--trajectory {}", path.display()))?,
+            )
+        }
+        None => None,
+    };
     let url = BusUrl::parse(&args.bus)?;
     bus::catch_interrupts()?;
     let mut bus = bus::open(&url, Direction::Receive { realtime: false })?;
     let mut recording = Recording::create(&args.out)?;
+    let poses = trajectory.as_ref().map(|t| t.samples.len());
+    recording.world(arena.as_ref(), trajectory)?;
     let until = args.duration.map(|duration| Instant::now() + duration);
     if io::stderr().is_terminal() {
         eprintln!("recording {url} into {} (Ctrl-C ends)", args.out.display());
@@ -452,7 +477,13 @@ pub fn record(args: &RecordArgs) -> Result<ExitCode> {
     // The file is finished whatever ended the recording, so what was heard is kept.
     let untimed = recording.untimed;
     let (frames, _) = recording.finish()?;
-    eprintln!("recorded {frames} frames into {}", args.out.display());
+    match poses {
+        Some(poses) => eprintln!(
+            "recorded {frames} frames and {poses} poses into {}",
+            args.out.display()
+        ),
+        None => eprintln!("recorded {frames} frames into {}", args.out.display()),
+    }
     if untimed > 0 {
         eprintln!("note: {untimed} frames had no time; each took the previous frame's");
     }

@@ -111,6 +111,80 @@ fn record_monitor_and_decode_write_the_same_recording() {
 }
 
 #[test]
+fn record_adds_a_virtual_robots_world_and_refuses_a_malformed_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = log(dir.path());
+    let bus = format!("file:{}", log.display());
+    let world = dir.path().join("world.json");
+    std::fs::write(
+        &world,
+        r#"{ "robot": { "x": 0.5, "y": 0.5, "heading_deg": 0 },
+             "walls": [[[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]]] }"#,
+    )
+    .unwrap();
+    // Rows in the log's time: two before its frames, one among them, one after.
+    let trajectory = dir.path().join("path.csv");
+    std::fs::write(
+        &trajectory,
+        "t_s,x_m,y_m,heading_deg\n1699999999.000000,0.5,0.5,0\n1699999999.500000,0.6,0.5,0\n\
+         1700000000.250000,0.7,0.5,10\n1700000001.000000,0.8,0.5,20\n",
+    )
+    .unwrap();
+    let out = dir.path().join("world.mcap");
+    let output = amiro()
+        .args(["record", "--bus", &bus, "--out"])
+        .arg(&out)
+        .arg("--world")
+        .arg(&world)
+        .arg("--trajectory")
+        .arg(&trajectory)
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{output:?}");
+    assert!(String::from_utf8_lossy(&output.stderr).contains("recorded 9 frames and 4 poses"));
+    let all = messages(&out);
+    check_recording(&out);
+    let topics: Vec<&str> = all
+        .iter()
+        .filter(|(c, _, _)| c.starts_with("/world/"))
+        .map(|(c, _, _)| c.as_str())
+        .collect();
+    assert_eq!(
+        topics,
+        [
+            "/world/arena",
+            "/world/pose",
+            "/world/pose",
+            "/world/pose",
+            "/world/pose"
+        ]
+    );
+    let times: Vec<u64> = all.iter().map(|(_, t, _)| *t).skip(1).collect();
+    assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
+
+    std::fs::write(
+        &world,
+        r#"{ "robot": { "x": 0.5, "y": 0.5, "heading_deg": 0 }, "floor": [ { "polygon": [[0, 0], [1, 0]], "grey": 0 } ] }"#,
+    )
+    .unwrap();
+    let refused = dir.path().join("refused.mcap");
+    let output = amiro()
+        .args(["record", "--bus", &bus, "--out"])
+        .arg(&refused)
+        .arg("--world")
+        .arg(&world)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("floor[0].polygon: 2 points, at least 3 needed"),
+        "{stderr}"
+    );
+    assert!(!refused.exists(), "nothing written for a malformed world");
+}
+
+#[test]
 fn the_dashboard_of_a_log_is_printed_when_output_is_not_a_terminal() {
     let dir = tempfile::tempdir().unwrap();
     let log = log(dir.path());

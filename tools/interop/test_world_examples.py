@@ -4,7 +4,7 @@ Lock-step: `world-loop` (amiro-world's kinematic loop: the world, and a thin sta
 publish requests and motor commands through amiro-can) runs each example unchanged through the controller
 protocol on its stdin/stdout. Live: the same behaviour objects on a python-can bus (the `virtual` interface here;
 `slcan` on `cargo xtask robot --slcan`'s port is the same code path), fed ring and floor frames as a robot sends
-them. The end-to-end runs against the emulated firmware come with the robot host's `--world` (docs/world.md).
+them. The same examples against the emulated firmware are robot scenarios (world-avoidance, world-line: docs/world.md).
 
 Run by `cargo xtask test` (xtask/src/interop.rs: AMIRO_WORLD_LOOP is the world-loop binary); by hand:
     cargo build -p amiro-world --bin world-loop
@@ -76,26 +76,49 @@ def test_line_following_completes_a_lap_over_the_line(tmp_path):
     assert turned >= 2 * math.pi, f"{turned / (2 * math.pi):.2f} laps"
 
 
-def test_the_world_mcap_opens_with_foxglove_schemas(tmp_path):
+def test_amiro_record_adds_the_world_for_foxglove(tmp_path):
+    """A run's bus log and trajectory through `amiro record --world --trajectory` (the one MCAP writer), read back
+    with Foxglove's reader: the bus's channels, the arena once, a pose per trajectory row in time order."""
     from mcap.reader import make_reader
     if not WORLD_LOOP:
         pytest.skip("AMIRO_WORLD_LOOP names no world-loop binary")
-    out = tmp_path / "world.mcap"
+    amiro = os.environ.get("AMIRO", "amiro")
+    world = ROOT / "robot" / "worlds" / "arena.json"
+    log, trajectory, out = tmp_path / "bus.log", tmp_path / "trajectory.csv", tmp_path / "world.mcap"
     subprocess.run(
-        [WORLD_LOOP, str(ROOT / "robot" / "worlds" / "arena.json"),
+        [WORLD_LOOP, str(world),
          "--controller", f"{sys.executable} {ROOT / 'examples' / 'obstacle_avoidance.py'}",
-         "--duration-s", "1", "--mcap", str(out)],
+         "--duration-s", "1", "--bus-log", str(log), "--trajectory", str(trajectory)],
         capture_output=True, text=True, timeout=600, check=True,
     )
-    seen = {}
+    recorded = subprocess.run(
+        [amiro, "record", "--bus", f"file:{log}", "--out", str(out), "--world", str(world),
+         "--trajectory", str(trajectory)],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert recorded.returncode == 0, recorded.stderr
+    frames = len(log.read_text().splitlines())
+    assert f"recorded {frames} frames and 101 poses" in recorded.stderr
+    seen, times = {}, []
     with open(out, "rb") as f:
-        for schema, channel, message in make_reader(f).iter_messages():
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
             seen.setdefault(channel.topic, (schema.name, []))[1].append(json.loads(message.data))
+            times.append(message.log_time)
+    assert times == sorted(times), "the poses go in between the frames, in time order"
     assert seen["/world/arena"][0] == "foxglove.SceneUpdate"
     assert len(seen["/world/arena"][1]) == 1
     assert seen["/world/pose"][0] == "foxglove.PoseInFrame"
     poses = seen["/world/pose"][1]
     assert len(poses) == 101 and poses[0]["pose"]["position"] == {"x": 0.3, "y": 0.75, "z": 0.0}
+    assert len(seen["/amiro/frames"][1]) == frames
+    assert "/amiro/motor/command" in seen and "/amiro/proximity-ring" in seen
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t_s,x_m,y_m,heading_deg\n0.0,1,2\n")
+    refused = subprocess.run(
+        [amiro, "record", "--bus", f"file:{log}", "--out", str(tmp_path / "x.mcap"), "--trajectory", str(bad)],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert refused.returncode != 0 and "line 2: 3 fields, expected 4" in refused.stderr, refused.stderr
 
 
 def test_runs_are_deterministic(tmp_path):

@@ -1,6 +1,7 @@
 //! `world-loop`: a behaviour in a world without the firmware (amiro_world::kinematic), for
 //! trying a behaviour and for the examples' CI checks. Prints the end line and the figures the
-//! checks read; writes the trajectory CSV and the arena's SVG on request.
+//! checks read; writes the trajectory CSV, the arena's SVG and the bus log on request (the last
+//! two make a Foxglove recording with `amiro record --world --trajectory`).
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -37,9 +38,9 @@ struct Args {
     /// Write the arena with the path here (SVG).
     #[arg(long)]
     svg: Option<PathBuf>,
-    /// Write the pose and the arena here for Foxglove's 3D panel (MCAP).
+    /// Write every frame of the loop here (`candump -l`, virtual time), as a robot run's bus log.
     #[arg(long)]
-    mcap: Option<PathBuf>,
+    bus_log: Option<PathBuf>,
 }
 
 fn main() -> Result<()> {
@@ -67,12 +68,10 @@ fn main() -> Result<()> {
         std::fs::write(path, outcome.trajectory.svg(world.arena()))
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    if let Some(path) = &args.mcap {
-        let file = std::io::BufWriter::new(
-            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
-        );
-        let mut file = amiro_world::foxglove::write_mcap(file, world.arena(), &outcome.trajectory)?;
-        std::io::Write::flush(&mut file).with_context(|| format!("writing {}", path.display()))?;
+    if let Some(path) = &args.bus_log {
+        let mut text = outcome.bus_log.join("\n");
+        text.push('\n');
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
     }
     let dark = if outcome.ticks == 0 {
         0.0

@@ -44,11 +44,12 @@ pub struct RobotArgs {
     /// With `--world`: write the trajectory (`t_s,x_m,y_m,heading_deg`, a row every 10 ms).
     #[arg(long, value_name = "OUT.csv", requires = "world")]
     pub trajectory: Option<PathBuf>,
-    /// With `--world`: an operator-side behaviour in lock-step (the controller protocol,
-    /// docs/world.md): every bus frame to its stdin as a `candump -l` line, `(T) tick` every
-    /// `--controller-period`, its `ID#DATA` lines until `ok` sent on the bus at T. A command line,
-    /// e.g. "python3 examples/obstacle_avoidance.py".
-    #[arg(long, value_name = "PROGRAM", requires = "world")]
+    /// An operator-side behaviour in lock-step (the controller protocol, docs/world.md): every
+    /// bus frame to its stdin as a `candump -l` line, `(T) tick` every `--controller-period`,
+    /// its `ID#DATA` lines until `ok` sent on the bus at T. A command line, e.g.
+    /// "python3 examples/obstacle_avoidance.py". Without `--world` the sensors read their
+    /// simulators as in any run.
+    #[arg(long, value_name = "PROGRAM", conflicts_with = "bench")]
     pub controller: Option<String>,
     /// The controller's tick period (a multiple of 40 µs).
     #[arg(long, default_value = "10ms", requires = "controller")]
@@ -104,9 +105,11 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         None
     };
     // The robot's DiWheelDrive is revision 1-1 (`super::firmware::ROBOT_REVISION`).
-    let mut world = match &args.world {
-        Some(path) => Some(WorldRun::load(path, args.seed, ImuRevision::Rev1_1)?),
-        None => None,
+    let mut world = match (&args.world, &args.controller) {
+        (Some(path), _) => Some(WorldRun::load(path, args.seed, ImuRevision::Rev1_1)?),
+        // A controller alone: the robot link carries its ticks, no world.
+        (None, Some(_)) => Some(WorldRun::without_world()),
+        (None, None) => None,
     };
     if let (Some(world), Some(program)) = (world.as_mut(), &args.controller) {
         let period = crate::qemu::parse_duration(&args.controller_period)?;
@@ -166,7 +169,7 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
     if exceeded > 0 {
         eprintln!("bus report: {exceeded} message(s) beyond their Davis bound");
     }
-    if let Some(world) = &world {
+    if let Some(world) = world.as_ref().filter(|w| w.feeds()) {
         let svg = work.join("world.svg");
         std::fs::write(&svg, world.trajectory().svg(world.world().arena()))?;
         eprintln!("world: arena and path: {}", svg.display());

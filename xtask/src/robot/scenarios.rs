@@ -864,6 +864,20 @@ pub fn run_all(root: &Path) -> Result<()> {
             );
         }
     }
+    // The line-following example round a closed line.
+    match super::world_scenario::line_following(root, &firmware) {
+        Ok(summary) => {
+            passed += 1;
+            println!("robot {:<22} ok: {summary}", super::world_scenario::LINE);
+        }
+        Err(e) => {
+            failed += 1;
+            println!(
+                "robot {:<22} FAILED (examples/line_following.py in line-lap.json): {e:#}",
+                super::world_scenario::LINE
+            );
+        }
+    }
     println!("robot scenarios: {passed} passed, {failed} failed");
     ensure!(
         failed == 0,
