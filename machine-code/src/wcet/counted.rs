@@ -123,18 +123,7 @@ fn counted_at_top(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> 
     let counter = r.number();
     let limit = setter.immediate()?;
     // Exactly one write of the counter in the loop: the step.
-    let mut writes = Vec::new();
-    for &blk in &l.body {
-        let block = &cfg.blocks[blk];
-        for (k, i) in insns[block.first..=block.last].iter().enumerate() {
-            if i.writes().contains(counter) {
-                writes.push((blk, block.first + k));
-            }
-        }
-    }
-    let [(step_block, step_at)] = writes[..] else {
-        return None;
-    };
+    let (step_block, step_at) = only_write(insns, cfg, l, counter)?;
     if insns[step_at].conditional {
         return None;
     }
@@ -173,6 +162,18 @@ fn counted_at_top(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> 
             step.k
         ),
     ))
+}
+
+/// The loop's one write of register `r` (its block and index), if it has exactly one.
+fn only_write(insns: &[Insn], cfg: &Cfg, l: &Loop, r: u8) -> Option<(usize, usize)> {
+    let mut writes = l.body.iter().flat_map(|&b| {
+        let block = &cfg.blocks[b];
+        (block.first..=block.last)
+            .filter(move |&at| insns[at].writes().contains(r))
+            .map(move |at| (b, at))
+    });
+    let first = writes.next()?;
+    writes.next().is_none().then_some(first)
 }
 
 /// Whether a block with an edge back to the header is reached from the header without `avoid`.
@@ -262,18 +263,7 @@ fn counted_at_bottom(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String
     };
     // Exactly one write of the counter in the whole loop: the step, in the latch before the flags
     // are set (or the flag-setting step itself).
-    let mut writes = Vec::new();
-    for &b in &l.body {
-        let blk = &cfg.blocks[b];
-        for (k, i) in insns[blk.first..=blk.last].iter().enumerate() {
-            if i.writes().contains(counter) {
-                writes.push((b, blk.first + k));
-            }
-        }
-    }
-    let [(step_block, step_at)] = writes[..] else {
-        return None;
-    };
+    let (step_block, step_at) = only_write(insns, cfg, l, counter)?;
     if step_block != latch || step_at > block.first + at {
         return None;
     }
