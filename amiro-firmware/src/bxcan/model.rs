@@ -1,0 +1,652 @@
+//! A register-level model of one bxCAN block: what the controller does with what the driver writes,
+//! and what the bus does to it. The driver's tests run [`super::Mailboxes`], [`super::Fifo0`],
+//! [`super::ErrorMonitor`] and [`super::configure`] over it (`tests/bxcan.rs`), and the QEMU build
+//! runs the boards' CAN path over it (`qemu::can`), with the robot's bus on the other side: one
+//! model, so the emulation runs the driver the robot runs.
+//!
+//! Modelled as RM0008 §24 and RM0090 §32 describe the block:
+//! - MCR/MSR: the initialisation and sleep handshake (INRQ/INAK, SLEEP/SLAK, RESET), TXFP, NART, RFLM;
+//!   BTR is writable only in initialisation mode; ERRI and its acknowledgement.
+//! - The three transmit mailboxes (TIxR, TDTxR, TDLxR, TDHxR, write-protected while pending) and
+//!   TSR: RQCP, TXOK, ALST, TERR and ABRQ per mailbox, CODE, TME and LOW. The controller offers the
+//!   pending mailbox of the lowest identifier, ties to the lower mailbox number (TXFP clear), or in
+//!   request order (TXFP set). An abort request ends a mailbox that is not on the bus; one on the bus
+//!   ends as its transmission does (sent, or aborted instead of retried).
+//! - Receive FIFO 0: three mailboxes (RIxR, RDTxR, RDLxR, RDHxR of the oldest), FMP, FULL, FOVR and
+//!   RFOM; on an overrun the newest frame is overwritten (RFLM clear) or the incoming one is
+//!   discarded (RFLM set). Filter bank 0 (the one the driver uses) in 32-bit mask or list mode, its
+//!   FIFO assignment and activation, FINIT.
+//! - IER and the lines of the transmit, FIFO 0 and status-change interrupts.
+//! - ESR: the error counters and the warning, passive and bus-off flags they imply.
+//!
+//! Not modelled: FIFO 1, filter banks 1–27 and the 16-bit filter scale (they match nothing),
+//! time-triggered mode, the last-error code, the wake-up and sleep interrupts, loop-back and silent
+//! modes. Nothing here allocates or panics: an access the hardware ignores (a write to a pending
+//! mailbox, a register the model does not hold) is ignored and counted ([`Model::ignored_writes`]).
+
+use super::{bit, reg};
+
+/// MCR bits the model adds to the driver's.
+const MCR_RFLM: u32 = 1 << 3;
+/// MSR: sleep acknowledge.
+const MSR_SLAK: u32 = 1 << 1;
+/// TSR: arbitration lost, transmission error (per mailbox, shifted by 8 × mailbox).
+const TSR_ALST: u32 = 1 << 2;
+const TSR_TERR: u32 = 1 << 3;
+/// RF0R: FIFO full.
+const RF_FULL: u32 = 1 << 3;
+/// IER: FIFO 0 full interrupt enable.
+const IER_FFIE0: u32 = 1 << 2;
+/// The reset values of MCR and MSR (RM0008 §24.9.2): sleep mode requested and acknowledged.
+const MCR_RESET_VALUE: u32 = 0x0001_0002;
+
+/// One transmit mailbox's registers and status.
+#[derive(Debug, Clone, Copy, Default)]
+struct TxMailbox {
+    /// TIxR (identifier, IDE, RTR, TXRQ: TXRQ set means pending).
+    tir: u32,
+    tdtr: u32,
+    tdlr: u32,
+    tdhr: u32,
+    /// This mailbox's TSR byte (RQCP, TXOK, ALST, TERR, ABRQ).
+    status: u32,
+    /// When its request was made, in requests counted (the order TXFP sends in).
+    requested: u32,
+}
+
+impl TxMailbox {
+    fn pending(&self) -> bool {
+        self.tir & bit::TIR_TXRQ != 0
+    }
+}
+
+/// A frame a transmit mailbox holds for the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TxRequest {
+    /// The identifier: 11 bits, or 29 with `extended`.
+    pub id: u32,
+    /// IDE: an extended identifier.
+    pub extended: bool,
+    /// RTR: a remote frame.
+    pub remote: bool,
+    /// The data length code (0–15; 9–15 mean 8 bytes).
+    pub dlc: u8,
+    /// The data bytes (as many as the length code says are sent).
+    pub data: [u8; 8],
+    /// ABRQ: software asked for the transmission to be aborted.
+    pub abort_requested: bool,
+}
+
+impl TxRequest {
+    /// The data bytes the frame carries.
+    pub fn payload(&self) -> &[u8] {
+        &self.data[..usize::from(self.dlc.min(8))]
+    }
+}
+
+/// A frame arriving from the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RxRequest {
+    /// The identifier: 11 bits, or 29 with `extended`.
+    pub id: u32,
+    /// IDE.
+    pub extended: bool,
+    /// RTR.
+    pub remote: bool,
+    /// The data length code as received (0–15).
+    pub dlc: u8,
+    /// The data bytes.
+    pub data: [u8; 8],
+}
+
+impl RxRequest {
+    /// A standard data frame.
+    pub fn standard(id: u16, dlc: u8, data: [u8; 8]) -> Self {
+        Self {
+            id: u32::from(id & 0x7FF),
+            extended: false,
+            remote: false,
+            dlc: dlc.min(15),
+            data,
+        }
+    }
+
+    /// The frame's identifier register as the FIFO and the filters see it (RIxR without its
+    /// reserved bit 0).
+    fn rir(&self) -> u32 {
+        let id = if self.extended {
+            (self.id & 0x1FFF_FFFF) << 3
+        } else {
+            (self.id & 0x7FF) << 21
+        };
+        id | if self.extended { bit::RIR_IDE } else { 0 }
+            | if self.remote { bit::RIR_RTR } else { 0 }
+    }
+}
+
+/// What became of a frame from the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reception {
+    /// It is in FIFO 0.
+    Stored,
+    /// FIFO 0 was full: FOVR is set and a frame was lost (the newest stored one or this one, as
+    /// RFLM says).
+    Overrun,
+    /// No filter passed it to FIFO 0 (or the controller is not on the bus): the software never sees
+    /// it.
+    Filtered,
+}
+
+/// Why a transmission did not complete.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Failure {
+    /// Another node's frame won the arbitration (ALST).
+    ArbitrationLost,
+    /// A bus error ended it (TERR).
+    Error,
+}
+
+/// A register write's effect the bus side must act on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Written {
+    /// The mailboxes whose transmission this write requested (TXRQ), one bit each.
+    pub requested: u8,
+    /// The mailboxes for which this write asked for an abort (ABRQ on a pending one), one bit each.
+    pub abort_requested: u8,
+}
+
+/// One bxCAN block (see the module's notes for what is modelled).
+#[derive(Debug, Clone)]
+pub struct Model {
+    mcr: u32,
+    msr: u32,
+    btr: u32,
+    ier: u32,
+    tec: u8,
+    rec: u8,
+    bus_off: bool,
+    tx: [TxMailbox; 3],
+    requests: u32,
+    fifo: [[u32; 4]; 3],
+    fifo_len: u8,
+    fifo_full: bool,
+    fifo_overrun: bool,
+    fmr: u32,
+    fm1r: u32,
+    fs1r: u32,
+    ffa1r: u32,
+    fa1r: u32,
+    bank0: [u32; 2],
+    ignored_writes: u32,
+    /// The block gets no clock: it never acknowledges a mode request.
+    pub unclocked: bool,
+    /// The bus is held dominant (or CAN_RX is open): the controller never sees the 11 recessive
+    /// bits it needs to leave initialisation mode.
+    pub bus_held_dominant: bool,
+}
+
+impl Default for Model {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Model {
+    /// A block at reset (sleep mode, every register at its reset value).
+    pub const fn new() -> Self {
+        Self {
+            mcr: MCR_RESET_VALUE,
+            msr: MSR_SLAK,
+            btr: 0x0123_0000,
+            ier: 0,
+            tec: 0,
+            rec: 0,
+            bus_off: false,
+            tx: [TxMailbox {
+                tir: 0,
+                tdtr: 0,
+                tdlr: 0,
+                tdhr: 0,
+                status: 0,
+                requested: 0,
+            }; 3],
+            requests: 0,
+            fifo: [[0; 4]; 3],
+            fifo_len: 0,
+            fifo_full: false,
+            fifo_overrun: false,
+            fmr: 0x2A1C_0E01,
+            fm1r: 0,
+            fs1r: 0,
+            ffa1r: 0,
+            fa1r: 0,
+            bank0: [0; 2],
+            ignored_writes: 0,
+            unclocked: false,
+            bus_held_dominant: false,
+        }
+    }
+
+    /// Reads the register at `offset` (0 for one the model does not hold).
+    pub fn read(&self, offset: usize) -> u32 {
+        match offset {
+            reg::MCR => self.mcr,
+            reg::MSR => self.msr,
+            reg::TSR => self.tsr(),
+            reg::RF0R => self.rf0r(),
+            reg::IER => self.ier,
+            reg::ESR => self.esr(),
+            reg::BTR => self.btr,
+            0x180..=0x1AC => {
+                self.tx
+                    .get((offset - 0x180) / 0x10)
+                    .map_or(0, |m| match (offset - 0x180) % 0x10 {
+                        0x0 => m.tir,
+                        0x4 => m.tdtr,
+                        0x8 => m.tdlr,
+                        _ => m.tdhr,
+                    })
+            }
+            reg::RI0R..=reg::RDH0R if self.fifo_len > 0 => self.fifo[0]
+                .get((offset - reg::RI0R) / 4)
+                .copied()
+                .unwrap_or(0),
+            reg::FMR => self.fmr,
+            reg::FM1R => self.fm1r,
+            reg::FS1R => self.fs1r,
+            reg::FFA1R => self.ffa1r,
+            reg::FA1R => self.fa1r,
+            reg::F0R1 => self.bank0[0],
+            reg::F0R2 => self.bank0[1],
+            _ => 0,
+        }
+    }
+
+    /// Writes the register at `offset` as the block would take it; says what the bus side must act
+    /// on.
+    pub fn write(&mut self, offset: usize, value: u32) -> Written {
+        let mut written = Written::default();
+        match offset {
+            reg::MCR => self.write_mcr(value),
+            // ERRI is write-1-to-clear; the wake-up and sleep flags are not modelled.
+            reg::MSR if value & bit::MSR_ERRI != 0 => self.msr &= !bit::MSR_ERRI,
+            reg::MSR => {}
+            reg::TSR => written.abort_requested = self.write_tsr(value),
+            reg::RF0R => self.write_rf0r(value),
+            reg::IER => self.ier = value,
+            // The last-error code is the one writable field: not modelled.
+            reg::ESR => {}
+            reg::BTR if self.in_init() => self.btr = value,
+            0x180..=0x1AC => {
+                let (i, r) = ((offset - 0x180) / 0x10, (offset - 0x180) % 0x10);
+                if self.write_mailbox(i, r, value) {
+                    written.requested = 1 << i;
+                }
+            }
+            reg::FMR => self.fmr = value,
+            reg::FA1R => self.fa1r = value & 0x0FFF_FFFF,
+            // The other filter registers are writable only with FINIT set (bank 0's also while it
+            // is inactive).
+            reg::FM1R if self.filter_init() => self.fm1r = value & 0x0FFF_FFFF,
+            reg::FS1R if self.filter_init() => self.fs1r = value & 0x0FFF_FFFF,
+            reg::FFA1R if self.filter_init() => self.ffa1r = value & 0x0FFF_FFFF,
+            reg::F0R1 if self.fa1r & 1 == 0 || self.filter_init() => self.bank0[0] = value,
+            reg::F0R2 if self.fa1r & 1 == 0 || self.filter_init() => self.bank0[1] = value,
+            _ => self.ignored_writes = self.ignored_writes.saturating_add(1),
+        }
+        written
+    }
+
+    /// Writes the model ignored as the hardware would (a pending mailbox, BTR outside
+    /// initialisation mode, a filter register outside filter initialisation, a register it does not
+    /// hold): a driver that runs clean has none.
+    pub fn ignored_writes(&self) -> u32 {
+        self.ignored_writes
+    }
+
+    fn in_init(&self) -> bool {
+        self.msr & bit::MSR_INAK != 0
+    }
+
+    fn filter_init(&self) -> bool {
+        self.fmr & bit::FMR_FINIT != 0
+    }
+
+    /// Whether the controller takes part in bus activity: out of initialisation and sleep mode and
+    /// not bus-off.
+    pub fn on_bus(&self) -> bool {
+        self.msr & (bit::MSR_INAK | MSR_SLAK) == 0 && !self.bus_off
+    }
+
+    fn write_mcr(&mut self, value: u32) {
+        if value & bit::MCR_RESET != 0 {
+            // A master reset: every register back to its reset value, sleep mode.
+            *self = Self {
+                unclocked: self.unclocked,
+                bus_held_dominant: self.bus_held_dominant,
+                ignored_writes: self.ignored_writes,
+                ..Self::new()
+            };
+            return;
+        }
+        self.mcr = value & 0x0001_00FF;
+        if self.unclocked {
+            return;
+        }
+        let leaving_init = value & bit::MCR_INRQ == 0 && self.in_init();
+        if value & bit::MCR_INRQ != 0 {
+            self.msr = (self.msr | bit::MSR_INAK) & !MSR_SLAK;
+        } else if value & bit::MCR_SLEEP != 0 {
+            self.msr = (self.msr | MSR_SLAK) & !bit::MSR_INAK;
+        } else if !(leaving_init && self.bus_held_dominant) {
+            self.msr &= !(bit::MSR_INAK | MSR_SLAK);
+        }
+    }
+
+    /// TSR's write-1 bits: RQCP clears the mailbox's completion flags, ABRQ asks for an abort.
+    /// Returns the mailboxes whose abort was newly requested.
+    fn write_tsr(&mut self, value: u32) -> u8 {
+        let mut aborts = 0;
+        for (i, m) in self.tx.iter_mut().enumerate() {
+            let byte = value >> (8 * i);
+            if byte & bit::rqcp(0) != 0 {
+                m.status &= !(bit::rqcp(0) | bit::txok(0) | TSR_ALST | TSR_TERR);
+            }
+            // Setting ABRQ has no effect on a mailbox that is not pending.
+            if byte & bit::abrq(0) != 0 && m.pending() && m.status & bit::abrq(0) == 0 {
+                m.status |= bit::abrq(0);
+                aborts |= 1 << i;
+            }
+        }
+        aborts
+    }
+
+    /// A write to mailbox `i`'s register `r` (byte offset in the mailbox); `true` if it requested
+    /// a transmission.
+    fn write_mailbox(&mut self, i: usize, r: usize, value: u32) -> bool {
+        let requests = self.requests;
+        let Some(m) = self.tx.get_mut(i) else {
+            return false;
+        };
+        if m.pending() {
+            self.ignored_writes = self.ignored_writes.saturating_add(1);
+            return false;
+        }
+        match r {
+            0x0 => {
+                m.tir = value;
+                if value & bit::TIR_TXRQ != 0 {
+                    m.requested = requests;
+                    self.requests = requests.wrapping_add(1);
+                    return true;
+                }
+            }
+            0x4 => m.tdtr = value & 0xFFFF_810F,
+            0x8 => m.tdlr = value,
+            _ => m.tdhr = value,
+        }
+        false
+    }
+
+    fn write_rf0r(&mut self, value: u32) {
+        if value & RF_FULL != 0 {
+            self.fifo_full = false;
+        }
+        if value & bit::RF_FOVR != 0 {
+            self.fifo_overrun = false;
+        }
+        if value & bit::RF_RFOM != 0 && self.fifo_len > 0 {
+            self.fifo.rotate_left(1);
+            self.fifo_len -= 1;
+        }
+    }
+
+    fn tsr(&self) -> u32 {
+        let mut tsr = 0;
+        for (i, m) in self.tx.iter().enumerate() {
+            tsr |= m.status << (8 * i);
+            if !m.pending() {
+                tsr |= bit::TSR_TME0 << i;
+            }
+        }
+        // CODE: the next free mailbox (the lowest numbered).
+        if let Some(free) = self.tx.iter().position(|m| !m.pending()) {
+            tsr |= (free as u32) << 24;
+        }
+        // LOW: with more than one pending, the one the controller would offer last.
+        if self.tx.iter().filter(|m| m.pending()).count() > 1 {
+            let pending = (0..3).filter(|&i| self.tx.get(i).is_some_and(TxMailbox::pending));
+            if let Some(last) = pending.max_by_key(|&i| self.priority(i)) {
+                tsr |= 1 << (29 + last);
+            }
+        }
+        tsr
+    }
+
+    fn rf0r(&self) -> u32 {
+        u32::from(self.fifo_len)
+            | if self.fifo_full { RF_FULL } else { 0 }
+            | if self.fifo_overrun { bit::RF_FOVR } else { 0 }
+    }
+
+    fn esr(&self) -> u32 {
+        let warning = self.tec >= 96 || self.rec >= 96;
+        let passive = self.tec > 127 || self.rec > 127;
+        (u32::from(self.rec) << 24)
+            | (u32::from(self.tec) << 16)
+            | if self.bus_off { bit::ESR_BOFF } else { 0 }
+            | if passive || self.bus_off {
+                bit::ESR_EPVF
+            } else {
+                0
+            }
+            | if warning || self.bus_off {
+                bit::ESR_EWGF
+            } else {
+                0
+            }
+    }
+
+    /// The order the controller offers mailbox `i` in (lower first); pending ones only matter.
+    fn priority(&self, i: usize) -> (u64, usize) {
+        let Some(m) = self.tx.get(i).filter(|m| m.pending()) else {
+            return (u64::MAX, i);
+        };
+        if self.mcr & bit::MCR_TXFP != 0 {
+            // Request order: how long ago, in requests, counted back from the newest.
+            let age = self.requests.wrapping_sub(m.requested);
+            (u64::from(u32::MAX - age), i)
+        } else {
+            // Identifier order: the identifier bits as they go on the wire (IDE and RTR after the
+            // 11 base bits, so a standard data frame beats the others with its base identifier).
+            let base = u64::from(m.tir >> 21);
+            let extension = if m.tir & bit::RIR_IDE != 0 {
+                (1 << 31) | (u64::from((m.tir >> 3) & 0x3_FFFF) << 1)
+            } else {
+                0
+            };
+            let remote = u64::from(m.tir & bit::RIR_RTR != 0);
+            ((base << 32) | extension | remote, i)
+        }
+    }
+
+    // ---- The bus side ----
+
+    /// The mailbox the controller offers to the next arbitration: the pending one of the lowest
+    /// identifier (ties: the lower number), or the oldest request with TXFP set. `None` if none is
+    /// pending or the controller is not on the bus.
+    pub fn offered(&self) -> Option<usize> {
+        if !self.on_bus() {
+            return None;
+        }
+        (0..3)
+            .filter(|&i| self.tx.get(i).is_some_and(TxMailbox::pending))
+            .min_by_key(|&i| self.priority(i))
+    }
+
+    /// The frame mailbox `i` holds for the bus, if it is pending.
+    pub fn request(&self, i: usize) -> Option<TxRequest> {
+        let m = self.tx.get(i).filter(|m| m.pending())?;
+        let extended = m.tir & bit::RIR_IDE != 0;
+        let mut data = [0u8; 8];
+        data[..4].copy_from_slice(&m.tdlr.to_le_bytes());
+        data[4..].copy_from_slice(&m.tdhr.to_le_bytes());
+        Some(TxRequest {
+            id: if extended { m.tir >> 3 } else { m.tir >> 21 },
+            extended,
+            remote: m.tir & bit::RIR_RTR != 0,
+            dlc: (m.tdtr & 0xF) as u8,
+            data,
+            abort_requested: m.status & bit::abrq(0) != 0,
+        })
+    }
+
+    /// Mailbox `i`'s frame was acknowledged on the bus: RQCP and TXOK set, the mailbox empty.
+    /// `false` (and nothing changes) if it was not pending.
+    pub fn transmitted(&mut self, i: usize) -> bool {
+        self.complete(i, bit::rqcp(0) | bit::txok(0))
+    }
+
+    /// Mailbox `i`'s transmission did not complete. With automatic retransmission (NART clear) and
+    /// no abort requested the mailbox stays pending for the next arbitration, with ALST or TERR
+    /// set; otherwise it ends there (RQCP set, TXOK clear). `false` if it was not pending.
+    pub fn failed(&mut self, i: usize, why: Failure) -> bool {
+        let flag = match why {
+            Failure::ArbitrationLost => TSR_ALST,
+            Failure::Error => TSR_TERR,
+        };
+        let retry = self.mcr & bit::MCR_NART == 0;
+        let Some(m) = self.tx.get_mut(i).filter(|m| m.pending()) else {
+            return false;
+        };
+        if retry && m.status & bit::abrq(0) == 0 {
+            m.status |= flag;
+            return true;
+        }
+        self.complete(i, bit::rqcp(0) | flag)
+    }
+
+    /// The controller honours mailbox `i`'s abort request while its frame is not on the bus: RQCP
+    /// set, TXOK clear, the mailbox empty. `false` (and nothing changes) if no abort was requested.
+    pub fn abort(&mut self, i: usize) -> bool {
+        let requested = self
+            .tx
+            .get(i)
+            .is_some_and(|m| m.pending() && m.status & bit::abrq(0) != 0);
+        requested && self.complete(i, bit::rqcp(0))
+    }
+
+    fn complete(&mut self, i: usize, flags: u32) -> bool {
+        let Some(m) = self.tx.get_mut(i).filter(|m| m.pending()) else {
+            return false;
+        };
+        m.tir &= !bit::TIR_TXRQ;
+        m.status = (m.status & (TSR_ALST | TSR_TERR)) | flags;
+        true
+    }
+
+    /// A frame from the bus, through filter bank 0 into FIFO 0.
+    pub fn receive(&mut self, frame: &RxRequest) -> Reception {
+        if !self.on_bus() || !self.passes_filters(frame.rir()) {
+            return Reception::Filtered;
+        }
+        self.store(frame)
+    }
+
+    /// A frame straight into FIFO 0, as if the filters were open: what a single-board QEMU run's
+    /// stimulus is (the frames that reached the FIFO).
+    pub fn store(&mut self, frame: &RxRequest) -> Reception {
+        let entry = [
+            frame.rir(),
+            // FMI 0 (filter bank 0's one filter), no time stamp.
+            u32::from(frame.dlc & 0xF),
+            u32::from_le_bytes([frame.data[0], frame.data[1], frame.data[2], frame.data[3]]),
+            u32::from_le_bytes([frame.data[4], frame.data[5], frame.data[6], frame.data[7]]),
+        ];
+        if usize::from(self.fifo_len) == self.fifo.len() {
+            self.fifo_overrun = true;
+            if self.mcr & MCR_RFLM == 0 {
+                if let Some(newest) = self.fifo.last_mut() {
+                    *newest = entry;
+                }
+            }
+            return Reception::Overrun;
+        }
+        if let Some(slot) = self.fifo.get_mut(usize::from(self.fifo_len)) {
+            *slot = entry;
+        }
+        self.fifo_len += 1;
+        if usize::from(self.fifo_len) == self.fifo.len() {
+            self.fifo_full = true;
+        }
+        Reception::Stored
+    }
+
+    /// Whether filter bank 0 passes a frame with identifier register `rir` into FIFO 0 (the model
+    /// holds no other bank; a frame no active filter passes is dropped, as on the chip).
+    fn passes_filters(&self, rir: u32) -> bool {
+        let active = self.fa1r & 1 != 0 && !self.filter_init();
+        let fifo0 = self.ffa1r & 1 == 0;
+        let scale32 = self.fs1r & 1 != 0;
+        if !(active && fifo0 && scale32) {
+            return false;
+        }
+        let [r1, r2] = self.bank0;
+        if self.fm1r & 1 == 0 {
+            (rir ^ r1) & r2 & !1 == 0
+        } else {
+            rir == r1 & !1 || rir == r2 & !1
+        }
+    }
+
+    /// The bus side's error counters: the warning, passive and bus-off flags follow from them
+    /// (bus-off until `bus_off` is cleared: the recovery sequence is the bus's). A change of state
+    /// sets ERRI where IER enables it.
+    pub fn set_error_counters(&mut self, tec: u8, rec: u8, bus_off: bool) {
+        let before = self.esr() & (bit::ESR_EWGF | bit::ESR_EPVF | bit::ESR_BOFF);
+        (self.tec, self.rec, self.bus_off) = (tec, rec, bus_off);
+        let now = self.esr() & (bit::ESR_EWGF | bit::ESR_EPVF | bit::ESR_BOFF);
+        let enabled = [
+            (bit::ESR_EWGF, bit::IER_EWGIE),
+            (bit::ESR_EPVF, bit::IER_EPVIE),
+            (bit::ESR_BOFF, bit::IER_BOFIE),
+        ]
+        .iter()
+        .any(|&(flag, enable)| (before ^ now) & flag != 0 && self.ier & enable != 0);
+        if enabled && self.ier & bit::IER_ERRIE != 0 {
+            self.msr |= bit::MSR_ERRI;
+        }
+    }
+
+    /// The transmit interrupt's line: a completed mailbox (RQCP) with TMEIE set.
+    pub fn tx_interrupt(&self) -> bool {
+        self.ier & bit::IER_TMEIE != 0 && self.tx.iter().any(|m| m.status & bit::rqcp(0) != 0)
+    }
+
+    /// FIFO 0's interrupt line: a message pending (FMPIE0), the FIFO full (FFIE0) or overrun
+    /// (FOVIE0).
+    pub fn rx0_interrupt(&self) -> bool {
+        (self.ier & bit::IER_FMPIE0 != 0 && self.fifo_len > 0)
+            || (self.ier & IER_FFIE0 != 0 && self.fifo_full)
+            || (self.ier & bit::IER_FOVIE0 != 0 && self.fifo_overrun)
+    }
+
+    /// The status-change interrupt's line: ERRI.
+    pub fn sce_interrupt(&self) -> bool {
+        self.msr & bit::MSR_ERRI != 0
+    }
+}
+
+/// The model as the driver's tests share it: the driver's halves and the test's bus side each hold a
+/// reference. A re-entrant access (none in a test) reads 0 and is not written.
+impl super::Registers for &core::cell::RefCell<Model> {
+    fn read(&self, offset: usize) -> u32 {
+        self.try_borrow().map_or(0, |m| m.read(offset))
+    }
+
+    fn write(&self, offset: usize, value: u32) {
+        if let Ok(mut m) = self.try_borrow_mut() {
+            m.write(offset, value);
+        }
+    }
+}
