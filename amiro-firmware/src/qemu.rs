@@ -203,7 +203,7 @@ pub struct CanRxPort;
 
 impl CanRx for CanRxPort {
     fn receive(&mut self) -> Option<RxEvent> {
-        crate::bxcan::Fifo0::new(can::Controller).receive()
+        can::receive()
     }
 }
 

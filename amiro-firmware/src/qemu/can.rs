@@ -25,7 +25,7 @@ use critical_section::Mutex;
 
 use crate::bxcan::model::{Model, RxRequest};
 use crate::bxcan::{self, Mailboxes};
-use crate::can::{Completion, Transmit};
+use crate::can::{CanRx, Completion, RxEvent, Transmit};
 use amiro_trace::robot_link::{Queued, Up};
 
 use super::robot;
@@ -95,6 +95,13 @@ pub(super) fn completed(on_completion: &mut dyn FnMut(Completion)) {
     for completion in ended.into_iter().flatten() {
         on_completion(completion);
     }
+}
+
+/// Takes the next frame or overrun from FIFO 0: the driver's `bxcan::Fifo0` over the model, its
+/// register accesses under one critical section (the receive interrupt's cost stays near the
+/// chip's: six register accesses, not six critical sections).
+pub(super) fn receive() -> Option<RxEvent> {
+    critical_section::with(|cs| bxcan::Fifo0::new(MODEL.borrow(cs)).receive())
 }
 
 /// A frame of a single-board run's stimulus: into FIFO 0 as it came, and the receive interrupt.
