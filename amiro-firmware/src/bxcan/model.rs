@@ -320,13 +320,7 @@ impl Model {
 
     fn write_mcr(&mut self, value: u32) {
         if value & bit::MCR_RESET != 0 {
-            // A master reset: every register back to its reset value, sleep mode.
-            *self = Self {
-                unclocked: self.unclocked,
-                bus_held_dominant: self.bus_held_dominant,
-                ignored_writes: self.ignored_writes,
-                ..Self::new()
-            };
+            self.master_reset();
             return;
         }
         self.mcr = value & 0x0001_00FF;
@@ -341,6 +335,14 @@ impl Model {
         } else if !(leaving_init && self.bus_held_dominant) {
             self.msr &= !(bit::MSR_INAK | MSR_SLAK);
         }
+    }
+
+    /// A master reset: every register back to its reset value, sleep mode. (Copied over from the
+    /// reset block, not built beside it: a block-sized temporary costs the stack of whoever resets.)
+    fn master_reset(&mut self) {
+        let kept = (self.unclocked, self.bus_held_dominant, self.ignored_writes);
+        *self = const { Self::new() };
+        (self.unclocked, self.bus_held_dominant, self.ignored_writes) = kept;
     }
 
     /// TSR's write-1 bits: RQCP clears the mailbox's completion flags, ABRQ asks for an abort.
@@ -396,29 +398,38 @@ impl Model {
             self.fifo_overrun = false;
         }
         if value & bit::RF_RFOM != 0 && self.fifo_len > 0 {
-            self.fifo.rotate_left(1);
+            // The next frame moves up (by hand: `rotate_left` takes a buffer on the stack).
+            let [first, second, third] = &mut self.fifo;
+            *first = *second;
+            *second = *third;
             self.fifo_len -= 1;
         }
     }
 
     fn tsr(&self) -> u32 {
         let mut tsr = 0;
+        let (mut pending, mut code, mut last) = (0, None, None);
         for (i, m) in self.tx.iter().enumerate() {
             tsr |= m.status << (8 * i);
-            if !m.pending() {
+            if m.pending() {
+                pending += 1;
+                // Ties go to the lower number first, so the higher one goes last.
+                let key = self.priority(m);
+                if last.is_none_or(|(k, _)| key >= k) {
+                    last = Some((key, i));
+                }
+            } else {
                 tsr |= bit::TSR_TME0 << i;
+                // CODE: the next free mailbox (the lowest numbered).
+                code = code.or(Some(i));
             }
         }
-        // CODE: the next free mailbox (the lowest numbered).
-        if let Some(free) = self.tx.iter().position(|m| !m.pending()) {
+        if let Some(free) = code {
             tsr |= (free as u32) << 24;
         }
         // LOW: with more than one pending, the one the controller would offer last.
-        if self.tx.iter().filter(|m| m.pending()).count() > 1 {
-            let pending = (0..3).filter(|&i| self.tx.get(i).is_some_and(TxMailbox::pending));
-            if let Some(last) = pending.max_by_key(|&i| self.priority(i)) {
-                tsr |= 1 << (29 + last);
-            }
+        if let Some((_, i)) = last.filter(|_| pending > 1) {
+            tsr |= 1 << (29 + i);
         }
         tsr
     }
@@ -447,26 +458,21 @@ impl Model {
             }
     }
 
-    /// The order the controller offers mailbox `i` in (lower first); pending ones only matter.
-    fn priority(&self, i: usize) -> (u64, usize) {
-        let Some(m) = self.tx.get(i).filter(|m| m.pending()) else {
-            return (u64::MAX, i);
-        };
+    /// The order the controller offers a pending mailbox in (lower first; ties: the lower number).
+    fn priority(&self, m: &TxMailbox) -> u32 {
         if self.mcr & bit::MCR_TXFP != 0 {
             // Request order: how long ago, in requests, counted back from the newest.
-            let age = self.requests.wrapping_sub(m.requested);
-            (u64::from(u32::MAX - age), i)
+            u32::MAX - self.requests.wrapping_sub(m.requested)
+        } else if m.tir & bit::RIR_IDE == 0 {
+            // Identifier order, as the bits go on the wire: the 11 base bits, then RTR (a data
+            // frame beats a remote one), then IDE (a standard frame beats an extended one).
+            (m.tir & 0xFFE0_0000) | (m.tir & bit::RIR_RTR) << 19
         } else {
-            // Identifier order: the identifier bits as they go on the wire (IDE and RTR after the
-            // 11 base bits, so a standard data frame beats the others with its base identifier).
-            let base = u64::from(m.tir >> 21);
-            let extension = if m.tir & bit::RIR_IDE != 0 {
-                (1 << 31) | (u64::from((m.tir >> 3) & 0x3_FFFF) << 1)
-            } else {
-                0
-            };
-            let remote = u64::from(m.tir & bit::RIR_RTR != 0);
-            ((base << 32) | extension | remote, i)
+            // Extended: the base bits, SRR and IDE recessive, the 18 extension bits, RTR.
+            (m.tir & 0xFFE0_0000)
+                | (0b11 << 19)
+                | (m.tir & 0x001F_FFF8) >> 2
+                | (m.tir & bit::RIR_RTR) >> 1
         }
     }
 
@@ -479,9 +485,14 @@ impl Model {
         if !self.on_bus() {
             return None;
         }
-        (0..3)
-            .filter(|&i| self.tx.get(i).is_some_and(TxMailbox::pending))
-            .min_by_key(|&i| self.priority(i))
+        let mut first: Option<(u32, usize)> = None;
+        for (i, m) in self.tx.iter().enumerate() {
+            let key = self.priority(m);
+            if m.pending() && first.is_none_or(|(k, _)| key < k) {
+                first = Some((key, i));
+            }
+        }
+        first.map(|(_, i)| i)
     }
 
     /// The frame mailbox `i` holds for the bus, if it is pending.
