@@ -39,10 +39,12 @@ static MODEL: Mutex<RefCell<Model>> = Mutex::new(RefCell::new(Model::new()));
 pub struct Controller;
 
 impl bxcan::Registers for Controller {
+    #[inline(always)]
     fn read(&self, offset: usize) -> u32 {
         critical_section::with(|cs| MODEL.borrow_ref(cs).read(offset))
     }
 
+    #[inline(always)]
     fn write(&self, offset: usize, value: u32) {
         critical_section::with(|cs| {
             let mut model = MODEL.borrow_ref_mut(cs);
