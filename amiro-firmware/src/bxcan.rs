@@ -3,13 +3,17 @@
 //!
 //! The STM32F103 and the STM32F405 carry the same bxCAN IP at the same address (CAN1 at
 //! `0x4000_6400`) with the same register map, so this is one driver over a [`Registers`] accessor:
-//! [`Mmio`] on the chips, a register-level model in the tests. Nothing here depends on a HAL.
+//! [`Mmio`] on the chips, the register-level [`model`] in the tests and the QEMU build. Nothing here
+//! depends on a HAL.
 //!
 //! Why not the `bxcan` crate: its receive path panics on a frame whose length code is 9–15 (legal
 //! on the wire, it means 8 bytes) and its transmit displacement busy-waits for the abort (up to a
 //! frame time inside an interrupt). See `docs/boards.md`.
 
 use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
+
+#[cfg(any(not(target_os = "none"), feature = "qemu"))]
+pub mod model;
 
 /// CAN1's base address on both chips.
 pub const CAN1_BASE: usize = 0x4000_6400;
@@ -256,6 +260,10 @@ fn wait_for(mut done: impl FnMut() -> bool) -> Option<()> {
 /// A more urgent frame requests the abort of the least urgent pending one and returns at once;
 /// the mailbox's completion (RQCP with TXOK clear) hands the aborted frame back from `shadow`.
 /// Frames with equal identifiers leave in queue order: a second one waits until the first is gone.
+/// A mailbox is reused only once [`CanTx::completed`] has collected its completion: the controller
+/// may empty it between that call and [`CanTx::transmit`] (the interrupt that frees a mailbox
+/// comes at any time), and a frame written there before its completion is read would be reported
+/// as the old one's.
 pub struct Mailboxes<R> {
     regs: R,
     shadow: [Option<amiro_can::Frame>; 3],
@@ -280,19 +288,13 @@ impl<R: Registers> CanTx for Mailboxes<R> {
     fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
         let tsr = self.regs.read(reg::TSR);
         let pending = |i: usize| tsr & (bit::TSR_TME0 << i) == 0;
-        let same_id_pending = (0..3).any(|i| {
-            pending(i)
-                && self
-                    .shadow
-                    .get(i)
-                    .copied()
-                    .flatten()
-                    .is_some_and(|f| f.id() == frame.id())
-        });
-        if same_id_pending {
+        // The frame a pending mailbox holds (one whose completion is not collected yet holds none).
+        let held = |i: usize| self.shadow.get(i).copied().flatten().filter(|_| pending(i));
+        if (0..3).any(|i| held(i).is_some_and(|f| f.id() == frame.id())) {
             return Transmit::Busy;
         }
-        if let Some(free) = (0..3).find(|&i| !pending(i)) {
+        let empty = |i: usize| !pending(i) && self.shadow.get(i).is_some_and(Option::is_none);
+        if let Some(free) = (0..3).find(|&i| empty(i)) {
             let mut data = [0u8; 8];
             let n = frame.data().len().min(8);
             data[..n].copy_from_slice(&frame.data()[..n]);
@@ -315,16 +317,10 @@ impl<R: Registers> CanTx for Mailboxes<R> {
             }
             return Transmit::Queued;
         }
-        // All three pending: abort the least urgent one if this frame beats it (and no abort is
+        // All three taken: abort the least urgent pending one if this frame beats it (and no abort is
         // already under way for it), without waiting.
         let least = (0..3)
-            .filter_map(|i| {
-                self.shadow
-                    .get(i)
-                    .copied()
-                    .flatten()
-                    .map(|f| (i, f.id().raw()))
-            })
+            .filter_map(|i| held(i).map(|f| (i, f.id().raw())))
             .max_by_key(|&(_, id)| id);
         if let Some((i, id)) = least {
             if frame.id().raw() < id && tsr & bit::abrq(i) == 0 {

@@ -5,9 +5,11 @@
 //! CAN hardware. Instead:
 //! - the monotonic is SysTick with a 10 µs tick ([`timer`]; `mono::QemuClock` is the tasks'
 //!   clock over it), in deterministic virtual time under `-icount`, tickless in a robot run;
-//! - the CAN bus is a stimulus log replayed from the host (read through semihosting) into a virtual
-//!   3-frame receive FIFO that raises the board's real CAN receive interrupt, and virtual transmit
-//!   mailboxes that print every frame in `candump -l` format with its virtual-time stamp;
+//! - the CAN controller is a register-level bxCAN model ([`can`]) under the robot's driver: its
+//!   receive FIFO 0 (`bxcan::Fifo0`) is filled from a stimulus log replayed from the host (read
+//!   through semihosting) and raises the board's real CAN receive interrupt; its transmit side is
+//!   virtual mailboxes that print every frame in `candump -l` format with its virtual-time stamp
+//!   (in a robot run, the driver's `bxcan::Mailboxes` over the model);
 //! - SYS_PD_N is a stimulus signal; SYS_SYNC_N edges are printed;
 //! - the free RAM is painted at boot so the end-of-run line reports the stack's high-water mark.
 //!
@@ -16,17 +18,15 @@
 //!
 //! Run by `cargo xtask robot`, the board is instead one of three on the host's bus model, in
 //! lock-step ([`robot`]).
-use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
 use cortex_m::interrupt::InterruptNumber;
 use cortex_m_semihosting::{debug, hprintln, syscall};
-use critical_section::Mutex;
-use heapless::Deque;
 
-use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
+use crate::can::{CanRx, CanTx, Completion, RxEvent, Transmit};
 use crate::signals::SystemSignals;
 
+pub mod can;
 pub mod robot;
 pub mod timer;
 
@@ -47,8 +47,6 @@ pub fn now_us() -> u64 {
     timer::now_ticks().saturating_mul(TICK_US)
 }
 
-static RX_FIFO: Mutex<RefCell<Deque<RxFrame, 3>>> = Mutex::new(RefCell::new(Deque::new()));
-static RX_OVERRUN: AtomicBool = AtomicBool::new(false);
 static SYS_PD_LOW: AtomicBool = AtomicBool::new(false);
 
 const STACK_PAINT: u32 = 0x5A5A_A5A5;
@@ -64,6 +62,7 @@ extern "C" {
 pub fn init(syst: cortex_m::peripheral::SYST) {
     paint_stack();
     timer::start(syst);
+    can::init();
     robot::connect();
     if let Some(file) = HostFile::create(b"trace.bin\0") {
         TRACE_FILE.store(file.0, Ordering::Relaxed);
@@ -130,7 +129,7 @@ static TX_THIS_JOB: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8:
 impl CanTx for CanTxPort {
     fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
         if robot::active() {
-            return robot::transmit(frame);
+            return can::transmit(frame);
         }
         if TX_THIS_JOB.fetch_add(1, Ordering::Relaxed) >= 3 {
             // The mailboxes are full: pend this interrupt again (the transmit-complete).
@@ -191,7 +190,7 @@ impl CanTx for CanTxPort {
 
     fn completed(&mut self, on_completion: &mut dyn FnMut(Completion)) {
         if robot::active() {
-            robot::completed(on_completion);
+            can::completed(on_completion);
             return;
         }
         // A new transmit interrupt: the three mailboxes are free again.
@@ -199,37 +198,22 @@ impl CanTx for CanTxPort {
     }
 }
 
-/// Virtual receive FIFO (three frames deep, like bxCAN's).
+/// The receive FIFO: the driver's `bxcan::Fifo0` over the controller model.
 pub struct CanRxPort;
 
 impl CanRx for CanRxPort {
     fn receive(&mut self) -> Option<RxEvent> {
-        if RX_OVERRUN.swap(false, Ordering::SeqCst) {
-            return Some(RxEvent::Overrun);
-        }
-        critical_section::with(|cs| RX_FIFO.borrow_ref_mut(cs).pop_front().map(RxEvent::Frame))
+        can::receive()
     }
 }
 
-/// The QEMU build's stand-in for the bxCAN error registers: QEMU emulates no bxCAN, so the bus is
-/// always error-active (reads 0) and the status interrupt never fires.
-#[derive(Debug, Clone, Copy)]
-pub struct NoCanRegisters;
-
-impl crate::bxcan::Registers for NoCanRegisters {
-    fn read(&self, _offset: usize) -> u32 {
-        0
-    }
-
-    fn write(&self, _offset: usize, _value: u32) {}
-}
-
-/// The CAN error monitor of the QEMU build (always error-active).
-pub type CanErrors = crate::bxcan::ErrorMonitor<NoCanRegisters>;
+/// The CAN error monitor of the QEMU build: the driver's over the controller model (whose bus
+/// side reports no errors, so it stays error-active).
+pub type CanErrors = crate::bxcan::ErrorMonitor<can::Controller>;
 
 /// A CAN error monitor for the QEMU build.
 pub const fn can_errors() -> CanErrors {
-    crate::bxcan::ErrorMonitor::new(NoCanRegisters)
+    crate::bxcan::ErrorMonitor::new(can::Controller)
 }
 
 /// Simulated system signals: SYS_PD_N as the stimulus drives it, SYS_SYNC_N edges printed.
@@ -256,7 +240,7 @@ impl SystemSignals for Signals {
 /// A stimulus record's size: `u64` µs, `u16` ID, `u8` length, `u8` flags, 8 data bytes.
 const RECORD: usize = 20;
 
-/// Replays `stimulus.bin` from the host into the virtual receive FIFO (pending the board's CAN
+/// Replays `stimulus.bin` from the host into the receive FIFO (pending the board's CAN
 /// receive interrupt `rx_irq`, and `shutdown_irq` for a SYS_PD_N record), then ends the run.
 /// In a robot run the board trades with the host's bus instead ([`robot`]). It waits for each
 /// record with `delay_until_us` (the board's traced clock, `mono::QemuClock::delay_until_us`:
@@ -295,26 +279,13 @@ pub async fn replay_stimulus<W: core::future::Future<Output = ()>>(
             cortex_m::peripheral::NVIC::pend(shutdown_irq);
             continue;
         }
-        let mut frame = RxFrame {
-            id: u16::from_le_bytes([record[8], record[9]]),
-            len: record[10].min(8),
-            data: [0; 8],
-        };
-        frame.data.copy_from_slice(&record[12..20]);
-        deliver(frame, rx_irq);
+        let mut data = [0; 8];
+        data.copy_from_slice(&record[12..20]);
+        let id = u16::from_le_bytes([record[8], record[9]]);
+        can::stimulus_frame(id, record[11] & 1 != 0, record[10], data, rx_irq);
     }
     delay_until_us(duration).await;
     finish("end of run");
-}
-
-/// A frame arrives: into the receive FIFO (an overrun if it is full), and the receive interrupt.
-fn deliver(frame: RxFrame, rx_irq: impl InterruptNumber) {
-    critical_section::with(|cs| {
-        if RX_FIFO.borrow_ref_mut(cs).push_back(frame).is_err() {
-            RX_OVERRUN.store(true, Ordering::SeqCst);
-        }
-    });
-    cortex_m::peripheral::NVIC::pend(rx_irq);
 }
 
 fn le_u64(bytes: &[u8]) -> u64 {

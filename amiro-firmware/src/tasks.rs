@@ -47,7 +47,7 @@ pub fn receive_frames<const N: usize>(
 /// verdict's). The QEMU robot notes when, so its bus report counts the frame's response from here.
 pub fn enqueue<const N: usize>(queue: &mut TxQueue<N>, frame: amiro_can::Frame) -> PushOutcome {
     #[cfg(feature = "qemu")]
-    crate::qemu::robot::released(&frame);
+    crate::qemu::can::released(&frame);
     queue.push(frame)
 }
 

@@ -1,208 +1,51 @@
 //! The bxCAN driver against a register-level model of the controller: set-up, ID-ordered
 //! mailboxes with non-blocking displacement, equal-ID order, FIFO reads with DLC and frame-type
 //! checks, overruns, and the error-state monitor.
-use std::cell::{Cell, RefCell};
-use std::collections::VecDeque;
+use std::cell::RefCell;
 
 use amiro_can::{CanId, Frame, Kind};
-use amiro_firmware::bxcan::{self, BusState, ErrorMonitor, Fifo0, InitError, Mailboxes, Registers};
+use amiro_firmware::bxcan::model::{Failure, Model, Reception, RxRequest};
+use amiro_firmware::bxcan::{self, BusState, ErrorMonitor, Fifo0, InitError, Mailboxes};
 use amiro_firmware::can::{CanRx, CanTx, Completion, RxEvent, Transmit};
 
-/// The parts of a bxCAN block the driver uses, with the hardware's side effects.
-#[derive(Default)]
-struct Model {
-    mcr: Cell<u32>,
-    init_mode: Cell<bool>,
-    /// The controller never leaves init mode (bus held dominant).
-    stuck_in_init: Cell<bool>,
-    /// The controller never enters init mode (no clock).
-    dead: Cell<bool>,
-    btr: Cell<u32>,
-    ier: Cell<u32>,
-    esr: Cell<u32>,
-    msr_erri: Cell<bool>,
-    filters: RefCell<Vec<u32>>,
-    /// Per mailbox: (TIR, TDTR, TDLR, TDHR), pending, and completion flags.
-    tx: RefCell<[[u32; 4]; 3]>,
-    pending: Cell<[bool; 3]>,
-    rqcp: Cell<[bool; 3]>,
-    txok: Cell<[bool; 3]>,
-    abrq: Cell<[bool; 3]>,
-    /// Frames the bus delivered: (RIR, RDTR, RDLR, RDHR).
-    fifo: RefCell<VecDeque<[u32; 4]>>,
-    overrun: Cell<bool>,
-    /// Every frame the controller put on the bus, as (id, data).
-    sent: RefCell<Vec<(u16, Vec<u8>)>>,
+/// The driver's register model (`bxcan::model`, the one the QEMU build runs), shared between the
+/// driver's halves and the test, which plays the bus.
+type Can = RefCell<Model>;
+
+/// A configured controller on the bus.
+fn configured() -> Can {
+    let can = RefCell::new(Model::new());
+    bxcan::configure(&&can, 0x012D_0001).unwrap();
+    can
 }
 
-impl Model {
-    fn tsr(&self) -> u32 {
-        let mut v = 0;
-        for i in 0..3 {
-            if !self.pending.get()[i] {
-                v |= 1 << (26 + i);
-            }
-            if self.rqcp.get()[i] {
-                v |= 1 << (8 * i);
-            }
-            if self.txok.get()[i] {
-                v |= 1 << (8 * i + 1);
-            }
-            if self.abrq.get()[i] {
-                v |= 1 << (8 * i + 7);
-            }
-        }
-        v
-    }
-
-    /// The bus takes the most urgent pending mailbox (lowest ID) and acknowledges it.
-    fn bus_sends_one(&self) -> Option<u16> {
-        let tx = self.tx.borrow();
-        let i = (0..3)
-            .filter(|&i| self.pending.get()[i])
-            .min_by_key(|&i| (tx[i][0] >> 21, i))?;
-        let id = (tx[i][0] >> 21) as u16;
-        let len = (tx[i][1] & 0xF) as usize;
-        let mut bytes = tx[i][2].to_le_bytes().to_vec();
-        bytes.extend_from_slice(&tx[i][3].to_le_bytes());
-        bytes.truncate(len);
-        self.sent.borrow_mut().push((id, bytes));
-        self.finish(i, true);
-        Some(id)
-    }
-
-    fn finish(&self, i: usize, ok: bool) {
-        let mut p = self.pending.get();
-        p[i] = false;
-        self.pending.set(p);
-        let mut r = self.rqcp.get();
-        r[i] = true;
-        self.rqcp.set(r);
-        let mut t = self.txok.get();
-        t[i] = ok;
-        self.txok.set(t);
-        let mut a = self.abrq.get();
-        a[i] = false;
-        self.abrq.set(a);
-    }
-
-    fn deliver(&self, rir: u32, dlc: u32, data: [u8; 8]) {
-        let mut fifo = self.fifo.borrow_mut();
-        if fifo.len() == 3 {
-            self.overrun.set(true);
-            return;
-        }
-        fifo.push_back([
-            rir,
-            dlc,
-            u32::from_le_bytes([data[0], data[1], data[2], data[3]]),
-            u32::from_le_bytes([data[4], data[5], data[6], data[7]]),
-        ]);
-    }
+/// The bus takes the mailbox the controller offers (lowest ID) and acknowledges it: its (id, data).
+fn bus_sends_one(can: &Can) -> Option<(u16, Vec<u8>)> {
+    let mut model = can.borrow_mut();
+    let i = model.offered()?;
+    let request = model.request(i)?;
+    assert!(model.transmitted(i));
+    Some((request.id as u16, request.payload().to_vec()))
 }
 
-impl Registers for &Model {
-    fn read(&self, offset: usize) -> u32 {
-        match offset {
-            0x000 => self.mcr.get(),
-            0x004 => u32::from(self.init_mode.get()) | (u32::from(self.msr_erri.get()) << 2),
-            0x008 => self.tsr(),
-            0x00C => {
-                let fifo = self.fifo.borrow();
-                fifo.len() as u32
-                    | (u32::from(fifo.len() == 3) << 3)
-                    | (u32::from(self.overrun.get()) << 4)
-            }
-            0x014 => self.ier.get(),
-            0x018 => self.esr.get(),
-            0x01C => self.btr.get(),
-            0x1B0..=0x1BC => self
-                .fifo
-                .borrow()
-                .front()
-                .map(|m| m[(offset - 0x1B0) / 4])
-                .unwrap_or(0),
-            0x200..=0x2FC => self
-                .filters
-                .borrow()
-                .get((offset - 0x200) / 4)
-                .copied()
-                .unwrap_or(0),
-            _ => 0,
-        }
-    }
+/// A raw frame from the bus: (RIR identifier bits, DLC, data) straight into FIFO 0.
+fn deliver(can: &Can, rir: u32, dlc: u8, data: [u8; 8]) -> Reception {
+    can.borrow_mut().store(&RxRequest {
+        id: if rir & 0b100 != 0 {
+            rir >> 3
+        } else {
+            rir >> 21
+        },
+        extended: rir & 0b100 != 0,
+        remote: rir & 0b010 != 0,
+        dlc,
+        data,
+    })
+}
 
-    fn write(&self, offset: usize, value: u32) {
-        match offset {
-            0x000 => {
-                self.mcr.set(value & !(1 << 15));
-                if value & (1 << 15) != 0 {
-                    // Master reset: sleep mode, registers at reset value.
-                    self.mcr.set(0x0001_0002);
-                    return;
-                }
-                if self.dead.get() {
-                    return;
-                }
-                if value & 1 != 0 {
-                    self.init_mode.set(true);
-                } else if !self.stuck_in_init.get() {
-                    self.init_mode.set(false);
-                }
-            }
-            0x004 if value & (1 << 2) != 0 => self.msr_erri.set(false),
-            0x008 => {
-                for i in 0..3 {
-                    if value & (1 << (8 * i)) != 0 {
-                        let mut r = self.rqcp.get();
-                        r[i] = false;
-                        self.rqcp.set(r);
-                        let mut t = self.txok.get();
-                        t[i] = false;
-                        self.txok.set(t);
-                    }
-                    if value & (1 << (8 * i + 7)) != 0 && self.pending.get()[i] {
-                        let mut a = self.abrq.get();
-                        a[i] = true;
-                        self.abrq.set(a);
-                    }
-                }
-            }
-            0x00C => {
-                if value & (1 << 4) != 0 {
-                    self.overrun.set(false);
-                }
-                if value & (1 << 5) != 0 {
-                    self.fifo.borrow_mut().pop_front();
-                }
-            }
-            0x014 => self.ier.set(value),
-            0x01C => {
-                assert!(self.init_mode.get(), "BTR is writable only in init mode");
-                self.btr.set(value)
-            }
-            0x180..=0x1AC => {
-                let i = (offset - 0x180) / 0x10;
-                let r = (offset - 0x180) % 0x10 / 4;
-                assert!(!self.pending.get()[i], "writing a pending mailbox");
-                self.tx.borrow_mut()[i][r] = value;
-                if r == 0 && value & 1 != 0 {
-                    let mut p = self.pending.get();
-                    p[i] = true;
-                    self.pending.set(p);
-                }
-            }
-            0x200..=0x2FC => {
-                let mut f = self.filters.borrow_mut();
-                let i = (offset - 0x200) / 4;
-                if f.len() <= i {
-                    f.resize(i + 1, 0);
-                }
-                f[i] = value;
-            }
-            _ => {}
-        }
-    }
+/// Whether the driver asked for mailbox `i`'s abort (TSR.ABRQx).
+fn abort_requested(can: &Can, i: usize) -> bool {
+    can.borrow().read(0x008) & (1 << (8 * i + 7)) != 0
 }
 
 fn frame(id: u16, data: &[u8]) -> Frame {
@@ -211,7 +54,7 @@ fn frame(id: u16, data: &[u8]) -> Frame {
     Frame::new(id, data).unwrap()
 }
 
-fn drain_completions(tx: &mut Mailboxes<&Model>) -> Vec<Completion> {
+fn drain_completions(tx: &mut Mailboxes<&Can>) -> Vec<Completion> {
     let mut out = Vec::new();
     tx.completed(&mut |c| out.push(c));
     out
@@ -219,43 +62,56 @@ fn drain_completions(tx: &mut Mailboxes<&Model>) -> Vec<Completion> {
 
 #[test]
 fn configure_sets_timing_filter_interrupts_and_auto_recovery() {
-    let model = Model::default();
-    bxcan::configure(&&model, 0x012D_0001).unwrap();
-    assert_eq!(model.btr.get(), 0x012D_0001);
-    let mcr = model.mcr.get();
+    let can = configured();
+    let model = can.borrow();
+    assert_eq!(model.read(0x01C), 0x012D_0001);
+    let mcr = model.read(0x000);
     assert_ne!(mcr & (1 << 6), 0, "automatic bus-off management");
     assert_eq!(mcr & (1 << 2), 0, "transmit order by identifier, not FIFO");
     assert_eq!(mcr & (1 << 4), 0, "automatic retransmission");
     assert_eq!(mcr & 0b11, 0, "left init and sleep");
-    assert!(!model.init_mode.get());
-    let f = model.filters.borrow();
-    assert_eq!(f[(0x21C - 0x200) / 4] & 1, 1, "bank 0 active");
+    assert_eq!(model.read(0x004) & 0b11, 0, "INAK and SLAK clear");
+    assert!(model.on_bus());
+    assert_eq!(model.read(0x21C) & 1, 1, "bank 0 active");
     assert_eq!(
-        f[(0x244 - 0x200) / 4],
+        model.read(0x244),
         (0x400 << 21) | 0b110,
         "mask: C/S, IDE, RTR"
     );
-    assert_eq!(f[(0x240 - 0x200) / 4], 0);
-    // The filter the QEMU robot applies to what it delivers is the one these registers make: a
-    // standard data frame passes bank 0 in mask mode when its RIR bits agree with F0R1 wherever
-    // F0R2 has a one.
-    let (id_bits, mask) = (f[(0x240 - 0x200) / 4], f[(0x244 - 0x200) / 4]);
+    assert_eq!(model.read(0x240), 0);
+    assert_eq!(model.read(0x200) & 1, 0, "filters out of initialisation");
+    assert_eq!(model.ignored_writes(), 0, "every write landed");
+    drop(model);
+    // What the registers `configure` wrote let through (the model's bank 0) is `passes_filter`:
+    // the rule the robot host's lookahead reads off the link too (amiro-trace::robot_link).
     for id in 0..0x800u16 {
-        let rir = u32::from(id) << 21;
+        let passed = can
+            .borrow_mut()
+            .receive(&RxRequest::standard(id, 0, [0; 8]));
         assert_eq!(
-            (rir ^ id_bits) & mask == 0,
+            passed == Reception::Stored,
             bxcan::passes_filter(id),
             "{id:03X}"
         );
-        // The robot host's lookahead reads the same rule off the link (amiro-trace::robot_link).
         assert_eq!(
             amiro_trace::robot_link::reaches_software(id),
             bxcan::passes_filter(id),
             "{id:03X}"
         );
+        let _ = Fifo0::new(&can).receive();
     }
     assert!(bxcan::passes_filter(0x205) && !bxcan::passes_filter(0x610));
-    let ier = model.ier.get();
+    // Extended and remote frames never reach FIFO 0.
+    let mut model = can.borrow_mut();
+    for (extended, remote) in [(true, false), (false, true)] {
+        let frame = RxRequest {
+            extended,
+            remote,
+            ..RxRequest::standard(0x205, 0, [0; 8])
+        };
+        assert_eq!(model.receive(&frame), Reception::Filtered);
+    }
+    let ier = model.read(0x014);
     for (bit, what) in [
         (0, "TMEIE"),
         (1, "FMPIE0"),
@@ -270,90 +126,213 @@ fn configure_sets_timing_filter_interrupts_and_auto_recovery() {
 
 #[test]
 fn configure_never_waits_for_ever() {
-    let dead = Model::default();
-    dead.dead.set(true);
+    let mut dead = Model::new();
+    dead.unclocked = true;
+    let dead = RefCell::new(dead);
     assert_eq!(
         bxcan::configure(&&dead, 1),
         Err(InitError::EnterInitTimeout)
     );
-    let stuck = Model::default();
-    stuck.stuck_in_init.set(true);
+    let mut stuck = Model::new();
+    stuck.bus_held_dominant = true;
+    let stuck = RefCell::new(stuck);
     assert_eq!(
         bxcan::configure(&&stuck, 1),
         Err(InitError::LeaveInitTimeout)
     );
+    // Configured but not on the bus: nothing is offered, nothing received.
+    let stuck = stuck.into_inner();
+    assert!(!stuck.on_bus());
 }
 
 #[test]
 fn frames_leave_most_urgent_first_and_are_reported_sent() {
-    let model = Model::default();
-    let mut tx = Mailboxes::new(&model);
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
     for id in [0x630u16, 0x610, 0x620] {
         assert_eq!(tx.transmit(&frame(id, &[1, 2, 3])), Transmit::Queued);
     }
     assert_eq!(tx.pending(), 3);
-    assert_eq!(model.bus_sends_one(), Some(0x610));
+    assert_eq!(can.borrow().read(0x008) >> 26 & 0b111, 0, "no TME bit");
+    assert_eq!(bus_sends_one(&can), Some((0x610, vec![1, 2, 3])));
+    assert!(
+        can.borrow().tx_interrupt(),
+        "RQCP raises the transmit interrupt"
+    );
     let done = drain_completions(&mut tx);
     assert_eq!(done, vec![Completion::Sent(frame(0x610, &[1, 2, 3]))]);
-    assert_eq!(model.sent.borrow()[0], (0x610, vec![1, 2, 3]));
+    assert!(!can.borrow().tx_interrupt(), "acknowledged");
+    assert_eq!(bus_sends_one(&can).map(|(id, _)| id), Some(0x620));
+    assert_eq!(bus_sends_one(&can).map(|(id, _)| id), Some(0x630));
+    assert_eq!(bus_sends_one(&can), None);
+    assert_eq!(can.borrow().ignored_writes(), 0);
 }
 
 #[test]
 fn an_urgent_frame_displaces_the_least_urgent_without_waiting() {
-    let model = Model::default();
-    let mut tx = Mailboxes::new(&model);
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
     for id in [0x630u16, 0x640, 0x620] {
         tx.transmit(&frame(id, &[0]));
     }
     // Full: the urgent frame asks for an abort of 0x640 and returns at once.
     assert_eq!(tx.transmit(&frame(0x508, &[9])), Transmit::Busy);
     assert!(
-        model.abrq.get()[1],
+        abort_requested(&can, 1),
         "abort requested on the least urgent mailbox"
     );
+    assert!(can.borrow().request(1).unwrap().abort_requested);
     // A second offer does not request a second abort of a mailbox already aborting.
     assert_eq!(tx.transmit(&frame(0x509, &[9])), Transmit::Busy);
+    assert!(!abort_requested(&can, 0) && !abort_requested(&can, 2));
     // The controller completes the abort: the aborted frame comes back for the queue.
-    model.finish(1, false);
+    assert!(can.borrow_mut().abort(1));
+    assert!(!abort_requested(&can, 1), "ABRQ clears with the mailbox");
     assert_eq!(
         drain_completions(&mut tx),
         vec![Completion::Aborted(frame(0x640, &[0]))]
     );
     assert_eq!(tx.transmit(&frame(0x508, &[9])), Transmit::Queued);
-    assert_eq!(model.bus_sends_one(), Some(0x508));
+    assert_eq!(bus_sends_one(&can).map(|(id, _)| id), Some(0x508));
+}
+
+#[test]
+fn an_abort_of_a_frame_on_the_bus_ends_as_its_transmission_does() {
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
+    for id in [0x630u16, 0x640, 0x620] {
+        tx.transmit(&frame(id, &[0]));
+    }
+    tx.transmit(&frame(0x508, &[9]));
+    // 0x640 was on the bus when the abort came: it is acknowledged all the same.
+    assert!(can.borrow_mut().transmitted(1));
+    assert!(!can.borrow_mut().abort(1), "nothing left to abort");
+    assert_eq!(
+        drain_completions(&mut tx),
+        vec![Completion::Sent(frame(0x640, &[0]))]
+    );
+    // 0x630 asked to abort, then loses an arbitration: it ends aborted instead of being retried.
+    tx.transmit(&frame(0x508, &[9]));
+    tx.transmit(&frame(0x509, &[9]));
+    assert!(abort_requested(&can, 0));
+    assert!(can.borrow_mut().failed(0, Failure::ArbitrationLost));
+    let tsr = can.borrow().read(0x008);
+    assert_eq!(tsr & 0b111, 0b101, "RQCP and ALST, no TXOK");
+    assert_eq!(
+        drain_completions(&mut tx),
+        vec![Completion::Aborted(frame(0x630, &[0]))]
+    );
+}
+
+#[test]
+fn a_lost_arbitration_is_retried_automatically() {
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
+    tx.transmit(&frame(0x630, &[1]));
+    assert!(can.borrow_mut().failed(0, Failure::ArbitrationLost));
+    assert!(can.borrow_mut().failed(0, Failure::Error));
+    assert_eq!(
+        can.borrow().read(0x008) & 0b1111,
+        0b1100,
+        "ALST, TERR, still pending"
+    );
+    assert!(drain_completions(&mut tx).is_empty());
+    assert_eq!(bus_sends_one(&can), Some((0x630, vec![1])));
+    assert_eq!(
+        drain_completions(&mut tx),
+        vec![Completion::Sent(frame(0x630, &[1]))]
+    );
+    assert_eq!(
+        can.borrow().read(0x008) & 0b1111,
+        0,
+        "RQCP cleared the flags"
+    );
+}
+
+#[test]
+fn a_mailbox_is_reused_only_after_its_completion_is_collected() {
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
+    for id in [0x630u16, 0x610, 0x620] {
+        tx.transmit(&frame(id, &[1]));
+    }
+    // The controller empties mailbox 1 after the interrupt collected the completions and before
+    // it fills the mailboxes: the frame after must not go into the mailbox whose completion is
+    // unread, or the next interrupt would report it sent.
+    assert_eq!(bus_sends_one(&can).map(|(id, _)| id), Some(0x610));
+    assert_eq!(tx.transmit(&frame(0x640, &[2])), Transmit::Busy);
+    assert_eq!(tx.pending(), 3);
+    assert_eq!(
+        drain_completions(&mut tx),
+        vec![Completion::Sent(frame(0x610, &[1]))]
+    );
+    assert_eq!(tx.transmit(&frame(0x640, &[2])), Transmit::Queued);
+    assert_eq!(bus_sends_one(&can).map(|(id, _)| id), Some(0x620));
+    assert_eq!(
+        drain_completions(&mut tx),
+        vec![Completion::Sent(frame(0x620, &[1]))]
+    );
+    // A frame of the identifier that just completed may go in at once.
+    assert_eq!(bus_sends_one(&can).map(|(id, _)| id), Some(0x630));
+    assert_eq!(tx.transmit(&frame(0x630, &[3])), Transmit::Queued);
+    assert_eq!(can.borrow().ignored_writes(), 0);
 }
 
 #[test]
 fn a_less_urgent_frame_never_displaces() {
-    let model = Model::default();
-    let mut tx = Mailboxes::new(&model);
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
     for id in [0x610u16, 0x611, 0x612] {
         tx.transmit(&frame(id, &[0]));
     }
     assert_eq!(tx.transmit(&frame(0x700, &[0])), Transmit::Busy);
-    assert_eq!(model.abrq.get(), [false; 3]);
+    assert!((0..3).all(|i| !abort_requested(&can, i)));
 }
 
 #[test]
 fn equal_identifiers_leave_in_queue_order() {
-    let model = Model::default();
-    let mut tx = Mailboxes::new(&model);
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
     assert_eq!(tx.transmit(&frame(0x61F, &[0, 1, 2])), Transmit::Queued);
     // The second sample of the same topic must wait: mailboxes with equal IDs go by number.
     assert_eq!(tx.transmit(&frame(0x61F, &[1, 1, 2])), Transmit::Busy);
-    model.bus_sends_one();
+    bus_sends_one(&can);
     drain_completions(&mut tx);
     assert_eq!(tx.transmit(&frame(0x61F, &[1, 1, 2])), Transmit::Queued);
 }
 
 #[test]
+fn the_controller_offers_by_identifier_then_mailbox_number_or_in_request_order() {
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
+    for id in [0x630u16, 0x610, 0x620] {
+        tx.transmit(&frame(id, &[0]));
+    }
+    let model = can.borrow();
+    assert_eq!(model.offered(), Some(1));
+    // CODE: no mailbox free; LOW: mailbox 0 (0x630) goes last.
+    assert_eq!(model.read(0x008) >> 29, 0b001);
+    drop(model);
+    // TXFP set: the oldest request first.
+    let txfp = can.borrow().read(0x000) | (1 << 2);
+    can.borrow_mut().write(0x000, txfp);
+    assert_eq!(can.borrow().offered(), Some(0));
+    assert_eq!(can.borrow().read(0x008) >> 29, 0b100, "LOW: the newest");
+    // A write to a pending mailbox is ignored, as on the chip.
+    can.borrow_mut().write(0x188, 0xFFFF_FFFF);
+    assert_eq!(can.borrow().ignored_writes(), 1);
+    assert_eq!(can.borrow().request(0).unwrap().data, [0; 8]);
+}
+
+#[test]
 fn fifo_clamps_long_length_codes_and_marks_foreign_frames() {
-    let model = Model::default();
-    let mut rx = Fifo0::new(&model);
+    let can = configured();
+    let mut rx = Fifo0::new(&can);
     assert_eq!(rx.receive(), None);
-    model.deliver(0x205 << 21, 15, [1, 2, 3, 4, 5, 6, 7, 8]);
-    model.deliver((0x205 << 21) | 0b100, 2, [0; 8]); // extended
-    model.deliver((0x205 << 21) | 0b010, 0, [0; 8]); // remote
+    deliver(&can, 0x205 << 21, 15, [1, 2, 3, 4, 5, 6, 7, 8]);
+    deliver(&can, (0x205 << 21) | 0b100, 2, [0; 8]); // extended
+    deliver(&can, (0x205 << 21) | 0b010, 0, [0; 8]); // remote
+    assert!(can.borrow().rx0_interrupt());
     match rx.receive() {
         Some(RxEvent::Frame(f)) => {
             assert_eq!(f.id, 0x205);
@@ -368,51 +347,61 @@ fn fifo_clamps_long_length_codes_and_marks_foreign_frames() {
         }
     }
     assert_eq!(rx.receive(), None);
+    assert!(!can.borrow().rx0_interrupt(), "FIFO empty");
 }
 
 #[test]
 fn an_overrun_is_reported_once_per_event_and_cleared() {
-    let model = Model::default();
-    let mut rx = Fifo0::new(&model);
+    let can = configured();
+    let mut rx = Fifo0::new(&can);
     for i in 0..5u8 {
-        model.deliver(0x205 << 21, 1, [i, 0, 0, 0, 0, 0, 0, 0]);
+        let stored = deliver(&can, 0x205 << 21, 1, [i, 0, 0, 0, 0, 0, 0, 0]);
+        assert_eq!(stored == Reception::Stored, i < 3, "frame {i}");
     }
     assert_eq!(rx.receive(), Some(RxEvent::Overrun));
-    let mut frames = 0;
+    let mut first_bytes = Vec::new();
     while let Some(event) = rx.receive() {
-        assert!(matches!(event, RxEvent::Frame(_)));
-        frames += 1;
+        match event {
+            RxEvent::Frame(f) => first_bytes.push(f.data[0]),
+            other => panic!("{other:?}"),
+        }
     }
-    assert_eq!(frames, 3, "the three frames that fitted are still read");
-    assert!(!model.overrun.get());
+    // FIFO lock mode is off (`configure` leaves RFLM clear): each frame that found the FIFO full
+    // overwrote the newest one, so the last frame is read and frame 2 and 3 are lost.
+    assert_eq!(first_bytes, vec![0, 1, 4]);
+    assert_eq!(can.borrow().read(0x00C) & (1 << 4), 0, "FOVR cleared");
 }
 
 #[test]
 fn error_monitor_counts_passive_and_bus_off_episodes() {
-    let model = Model::default();
-    let mut monitor = ErrorMonitor::new(&model);
+    let can = configured();
+    let mut monitor = ErrorMonitor::new(&can);
+    let set = |tec, rec, bus_off| can.borrow_mut().set_error_counters(tec, rec, bus_off);
     assert_eq!(monitor.poll(), None);
-    model.esr.set((100 << 16) | 0b001);
+    set(100, 0, false);
+    assert!(
+        can.borrow().sce_interrupt(),
+        "a change of state raises ERRI"
+    );
     assert_eq!(monitor.poll().map(|c| c.to), Some(BusState::Warning));
-    model.esr.set((130 << 16) | 0b011);
+    assert!(!can.borrow().sce_interrupt(), "acknowledged");
+    set(130, 0, false);
     let change = monitor.poll().unwrap();
     assert_eq!(
         (change.from, change.to, change.tec),
         (BusState::Warning, BusState::Passive, 130)
     );
-    model.esr.set((255 << 16) | 0b111);
+    set(255, 0, true);
     assert_eq!(monitor.poll().map(|c| c.to), Some(BusState::BusOff));
     // Hardware recovery: back through passive to active; that passive is not a new episode.
-    model.esr.set((120 << 16) | 0b011);
+    set(128, 0, false);
     assert_eq!(monitor.poll().map(|c| c.to), Some(BusState::Passive));
-    model.esr.set(0);
+    set(0, 0, false);
     assert_eq!(monitor.poll().map(|c| c.to), Some(BusState::Active));
     assert_eq!(monitor.passive_episodes(), 1);
     assert_eq!(monitor.bus_off_episodes(), 1);
-    model.msr_erri.set(true);
-    monitor.poll();
-    assert!(
-        !model.msr_erri.get(),
-        "the status-change interrupt is acknowledged"
-    );
+    // A receive counter alone makes the controller error-passive too.
+    set(0, 200, false);
+    let change = monitor.poll().unwrap();
+    assert_eq!((change.to, change.rec), (BusState::Passive, 200));
 }

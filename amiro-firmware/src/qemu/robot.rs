@@ -9,23 +9,23 @@
 //! times, so no two complete within 40 µs) and the levels of SYS_SYNC_N and SYS_PD_N. The read
 //! blocks, and a blocked QEMU's virtual clock stands still, so no board runs ahead of the others.
 //!
-//! The frame is delivered at its completion time: a command frame (the one kind bxCAN's filter
-//! passes, `bxcan::passes_filter`) into the 3-frame receive FIFO (an overrun if the board has not
-//! emptied it, as on bxCAN), or, for the board's own frame, as a free mailbox and a
+//! The mailboxes, the receive FIFO and the filter are the bxCAN model's under the robot's driver
+//! (`qemu::can`): the exchange hands the model's requests to the host and its answers back to the
+//! model. A frame is delivered at its completion time: another node's through the filter into FIFO
+//! 0 (command frames only, as on the robot), the board's own as a completed mailbox and a
 //! transmit-complete interrupt.
 use core::cell::{Cell, RefCell};
-use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU8, AtomicUsize, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
 
 use cortex_m::interrupt::InterruptNumber;
 use critical_section::Mutex;
 
 use super::{HostFile, TICK_US};
-use crate::can::{Completion, RxFrame, Transmit};
 
 pub use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::robot_link::{
-    Down, Queued, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW,
-    DOWN_READINGS, DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_WHEELS,
+    Down, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_READINGS,
+    DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_WHEELS,
 };
 pub use amiro_trace::world_link;
 use world_link::{Readings, Wheels, READINGS_LEN};
@@ -36,107 +36,6 @@ static UP: AtomicUsize = AtomicUsize::new(NO_FILE);
 /// The lines this board drives (a module holds SYS_SYNC_N low until it is initialised).
 static DRIVES: AtomicU8 = AtomicU8::new(DRIVES_SYNC_LOW);
 static SYNC_READS_LOW: AtomicBool = AtomicBool::new(true);
-/// The transmit interrupt (the exception that called [`transmit`]), `u16::MAX` until known.
-static TX_IRQ: AtomicU16 = AtomicU16::new(u16::MAX);
-
-#[derive(Clone, Copy)]
-struct Mailbox {
-    frame: amiro_can::Frame,
-    /// When its sample was released into the board's transmit queue ([`released`]).
-    released_us: u64,
-    queued_us: u64,
-    handed_over: bool,
-    done: bool,
-    /// Its abort: asked for by [`transmit`] (bxCAN's ABRQ), passed to the host at the next exchange,
-    /// confirmed by the host ([`completed`] hands the frame back).
-    abort: Abort,
-}
-
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Abort {
-    None,
-    Requested,
-    Sent,
-    Done,
-}
-
-static MAILBOXES: Mutex<RefCell<[Option<Mailbox>; 3]>> = Mutex::new(RefCell::new([None; 3]));
-
-/// Frames waiting in the board's transmit queue, with the time each was put there: what the host's
-/// bus report counts a frame's response from (the analysis's queuing), since the driver hands a
-/// mailbox one frame of an identifier at a time. A frame is known by its identifier and first data
-/// byte (a multi-frame sample's index byte), and the latest release of that key is its own (the
-/// queue keeps only the newest sample of a topic). More entries than the queue holds, overwritten
-/// oldest first (a frame the queue replaced or dropped leaves its entry behind); 8 bytes each, in
-/// the QEMU build only.
-const RELEASES: usize = 32;
-static RELEASED: Mutex<RefCell<Releases>> = Mutex::new(RefCell::new(Releases {
-    entries: [Release::NONE; RELEASES],
-    next: 0,
-}));
-
-#[derive(Clone, Copy)]
-struct Release {
-    id: u16,
-    first: u8,
-    /// Virtual µs, the low 32 bits ([`Releases::take`] widens it from now).
-    at: u32,
-}
-
-impl Release {
-    /// No entry (no standard identifier is `u16::MAX`).
-    const NONE: Release = Release {
-        id: u16::MAX,
-        first: 0,
-        at: 0,
-    };
-
-    fn key(frame: &amiro_can::Frame) -> (u16, u8) {
-        (frame.id().raw(), frame.data().first().copied().unwrap_or(0))
-    }
-}
-
-struct Releases {
-    entries: [Release; RELEASES],
-    next: usize,
-}
-
-impl Releases {
-    fn note(&mut self, frame: &amiro_can::Frame, at_us: u64) {
-        let (id, first) = Release::key(frame);
-        if let Some(slot) = self.entries.get_mut(self.next) {
-            *slot = Release {
-                id,
-                first,
-                at: at_us as u32,
-            };
-        }
-        self.next = (self.next + 1) % RELEASES;
-    }
-
-    /// The latest release of `frame`'s key before `now_us`, taken out; `None` if there is none.
-    fn take(&mut self, frame: &amiro_can::Frame, now_us: u64) -> Option<u64> {
-        let key = Release::key(frame);
-        let age = |r: &Release| (now_us as u32).wrapping_sub(r.at);
-        let latest = self
-            .entries
-            .iter_mut()
-            .filter(|r| (r.id, r.first) == key)
-            .min_by_key(|r| age(r))?;
-        let released = now_us.saturating_sub(u64::from(age(latest)));
-        *latest = Release::NONE;
-        Some(released)
-    }
-}
-
-/// Notes that `frame` entered the board's transmit queue now (robot mode only).
-pub fn released(frame: &amiro_can::Frame) {
-    if !active() {
-        return;
-    }
-    let now = super::now_us();
-    critical_section::with(|cs| RELEASED.borrow_ref_mut(cs).note(frame, now));
-}
 
 /// Opens the pipes to the host's bus if this run has them (`init` calls it); `true` in robot mode.
 pub(super) fn connect() -> bool {
@@ -238,7 +137,7 @@ static TO_REPORT: AtomicBool = AtomicBool::new(false);
 /// The exchange's waker while it waits ahead.
 static REPORT_WAKER: Mutex<RefCell<Option<core::task::Waker>>> = Mutex::new(RefCell::new(None));
 
-fn to_report() {
+pub(super) fn to_report() {
     TO_REPORT.store(true, Ordering::SeqCst);
     if let Some(waker) = critical_section::with(|cs| REPORT_WAKER.borrow_ref_mut(cs).take()) {
         waker.wake();
@@ -264,100 +163,6 @@ async fn wait_until_or_report(at_us: u64) {
 /// last exchange.
 pub fn sync_reads_low() -> bool {
     SYNC_READS_LOW.load(Ordering::SeqCst)
-}
-
-/// Puts `frame` into a free mailbox (the host queues it on the bus at the next exchange), by the
-/// robot driver's rules (`bxcan::Mailboxes`).
-pub(super) fn transmit(frame: &amiro_can::Frame) -> Transmit {
-    remember_tx_interrupt();
-    let now = super::now_us();
-    critical_section::with(|cs| {
-        let mut boxes = MAILBOXES.borrow_ref_mut(cs);
-        // One frame of an identifier in the mailboxes at a time: the controller sends by identifier
-        // and breaks ties by mailbox number, which would reorder a sample's frames (the ring's eight).
-        if boxes
-            .iter()
-            .flatten()
-            .any(|m| !m.done && m.frame.id() == frame.id())
-        {
-            return Transmit::Busy;
-        }
-        match boxes.iter_mut().find(|m| m.is_none()) {
-            Some(slot) => {
-                let released_us = RELEASED.borrow_ref_mut(cs).take(frame, now).unwrap_or(now);
-                *slot = Some(Mailbox {
-                    frame: *frame,
-                    released_us,
-                    queued_us: now,
-                    handed_over: false,
-                    done: false,
-                    abort: Abort::None,
-                });
-                to_report();
-                Transmit::Queued
-            }
-            // All three hold frames: as the robot's driver (`bxcan::Mailboxes`), the least urgent
-            // is aborted if this frame beats it (one abort at a time); the transmit-complete
-            // interrupt of a sent or aborted one comes back. The host takes the request at the
-            // next exchange, so an abort here lands up to a quantum later than on the chip.
-            None => {
-                let least = boxes
-                    .iter_mut()
-                    .flatten()
-                    .filter(|m| !m.done)
-                    .max_by_key(|m| m.frame.id().raw());
-                if let Some(m) = least {
-                    if frame.id().raw() < m.frame.id().raw() && m.abort == Abort::None {
-                        m.abort = Abort::Requested;
-                        to_report();
-                    }
-                }
-                Transmit::Busy
-            }
-        }
-    })
-}
-
-/// Reports the mailboxes whose frame went out and frees them.
-pub(super) fn completed(on_completion: &mut dyn FnMut(Completion)) {
-    let mut ended: [Option<Completion>; 3] = [None; 3];
-    critical_section::with(|cs| {
-        for (slot, out) in MAILBOXES.borrow_ref_mut(cs).iter_mut().zip(&mut ended) {
-            *out = match slot {
-                Some(m) if m.done => Some(Completion::Sent(m.frame)),
-                Some(m) if m.abort == Abort::Done => {
-                    // Back into the queue: it keeps its release time.
-                    RELEASED.borrow_ref_mut(cs).note(&m.frame, m.released_us);
-                    Some(Completion::Aborted(m.frame))
-                }
-                _ => continue,
-            };
-            *slot = None;
-        }
-    });
-    for completion in ended.into_iter().flatten() {
-        on_completion(completion);
-    }
-}
-
-fn remember_tx_interrupt() {
-    const ICSR: *const u32 = 0xE000_ED04 as *const u32;
-    // SAFETY: reads the number of the active exception (a read-only field of the SCB).
-    let active = unsafe { core::ptr::read_volatile(ICSR) } & 0x1FF;
-    if let Some(irq) = active.checked_sub(16) {
-        TX_IRQ.store(irq as u16, Ordering::Relaxed);
-    }
-}
-
-/// The interrupt number the transmit path ran in.
-#[derive(Clone, Copy)]
-struct Irq(u16);
-
-// SAFETY: the number was read from the NVIC's active exception, so it is a valid interrupt.
-unsafe impl InterruptNumber for Irq {
-    fn number(self) -> u16 {
-        self.0
-    }
 }
 
 /// Waits for the tick at `at_us` without a trace record: the exchange is the platform's, not a
@@ -433,31 +238,7 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             at_us: boundary,
             ..Up::default()
         };
-        critical_section::with(|cs| {
-            for (k, slot) in MAILBOXES.borrow_ref_mut(cs).iter_mut().enumerate() {
-                let Some(m) = slot.as_mut() else { continue };
-                if m.abort == Abort::Requested {
-                    m.abort = Abort::Sent;
-                    report.aborts |= 1 << k;
-                }
-                if m.handed_over {
-                    continue;
-                }
-                m.handed_over = true;
-                let mut data = [0u8; 8];
-                for (to, from) in data.iter_mut().zip(m.frame.data()) {
-                    *to = *from;
-                }
-                report.push(Queued {
-                    released_us: m.released_us,
-                    at_us: m.queued_us,
-                    id: m.frame.id().raw(),
-                    len: m.frame.dlc(),
-                    mailbox: k as u8,
-                    data,
-                });
-            }
-        });
+        super::can::report(&mut report);
         report.drives = DRIVES.load(Ordering::SeqCst);
         report.sleeps_us = sleeps_for();
         let wheels = world_wheels(report.now_us);
@@ -490,50 +271,17 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             return;
         }
         if answer.aborted != 0 {
-            critical_section::with(|cs| {
-                for (k, m) in MAILBOXES.borrow_ref_mut(cs).iter_mut().enumerate() {
-                    if let Some(m) = m.as_mut().filter(|_| answer.aborted & 1 << k != 0) {
-                        m.abort = Abort::Done;
-                    }
-                }
-            });
-            pend_tx_interrupt();
+            super::can::aborts_done(answer.aborted);
         }
         if flags & DOWN_FRAME == 0 {
             continue;
         }
         wait_until(answer.at_us).await;
         if flags & DOWN_OWN != 0 {
-            critical_section::with(|cs| {
-                if let Some(m) = MAILBOXES
-                    .borrow_ref_mut(cs)
-                    .get_mut(usize::from(answer.mailbox))
-                    .and_then(Option::as_mut)
-                {
-                    m.done = true;
-                }
-            });
-            pend_tx_interrupt();
-        } else if crate::bxcan::passes_filter(answer.id) {
-            // As bxCAN's filter on the robot: only command frames reach the receive FIFO, so a
-            // flood of sensor frames on the bus costs the board nothing.
-            super::deliver(
-                RxFrame {
-                    id: answer.id,
-                    len: answer.len,
-                    data: answer.data,
-                },
-                rx_irq,
-            );
+            super::can::own_frame_sent(answer.mailbox);
+        } else {
+            super::can::bus_frame(answer.id, answer.len, answer.data, rx_irq);
         }
-    }
-}
-
-/// Pends the transmit interrupt (the exception that last called [`transmit`]), once it is known.
-fn pend_tx_interrupt() {
-    let irq = TX_IRQ.load(Ordering::Relaxed);
-    if irq != u16::MAX {
-        cortex_m::peripheral::NVIC::pend(Irq(irq));
     }
 }
 
