@@ -173,8 +173,10 @@ mod tests {
             (Topic::Accelerometer, 3, Some(5000), 12),
             (Topic::Gyroscope, 3, None, 1),
         ];
-        let dir =
-            std::env::temp_dir().join(format!("bench-one-model-{}-{test}", std::process::id()));
+        // Under the workspace's target folder (not the system's temporary one, which it would litter).
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../target/tmp")
+            .join(format!("bench-one-model-{}-{test}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("seen.scenario.json");
         std::fs::write(&path, seen_scenario(&seen).to_string()).unwrap();
