@@ -127,6 +127,11 @@ impl Board {
             .context("starting qemu-system-arm (install it: apt-get install qemu-system-arm)")?;
         let out = child.stdout.take().context("QEMU stdout")?;
         set_nonblocking(out.as_raw_fd());
+        // Room for what a board prints between two of its exchanges, which is when the host reads
+        // it (a full pipe would hold the board up until the next read); the default is kept if
+        // the system refuses.
+        // SAFETY: fcntl on a descriptor we own.
+        unsafe { libc::fcntl(out.as_raw_fd(), libc::F_SETPIPE_SZ, 1 << 20) };
         self.out = Some(out);
         self.child = Some(child);
         self.partial.clear();
@@ -193,22 +198,18 @@ impl Board {
         let (mut got, mut want) = (0, UP_LEN);
         let up_fd = self.up.as_ref().context("no pipe")?.as_raw_fd();
         loop {
-            let out_fd = self.out.as_ref().map_or(-1, AsRawFd::as_raw_fd);
-            let mut fds = [
-                libc::pollfd {
-                    fd: up_fd,
-                    events: libc::POLLIN,
-                    revents: 0,
-                },
-                libc::pollfd {
-                    fd: out_fd,
-                    events: libc::POLLIN,
-                    revents: 0,
-                },
-            ];
-            // SAFETY: two pollfd structures we own; a negative fd is ignored by poll.
-            let ready = unsafe { libc::poll(fds.as_mut_ptr(), 2, 100) };
-            if fds[1].revents != 0 {
+            // Only the report wakes the host: the console is read when the report is in (a board's
+            // lines belong to the quantum they were printed in, and they are all in the pipe by
+            // then), or when the wait is long (a board printing much, a board that ended). Waking
+            // for every console write as well cost the host a task switch per line.
+            let mut fds = [libc::pollfd {
+                fd: up_fd,
+                events: libc::POLLIN,
+                revents: 0,
+            }];
+            // SAFETY: one pollfd structure we own.
+            let ready = unsafe { libc::poll(fds.as_mut_ptr(), 1, 10) };
+            if ready <= 0 {
                 self.drain();
             }
             if fds[0].revents & libc::POLLIN != 0 {
@@ -236,7 +237,7 @@ impl Board {
                 }
                 continue;
             }
-            if ready <= 0 || self.out.is_none() {
+            if ready <= 0 {
                 if let Some(child) = self.child.as_mut() {
                     if child.try_wait()?.is_some() {
                         while self.drain() {}

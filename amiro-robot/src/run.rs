@@ -462,27 +462,64 @@ pub fn run_in_world(
                 b.alive && b.next.is_none() && b.at == t && b.wants == t + QUANTUM_US
             })
             .collect();
-        let quiet = operator.is_empty()
-            && deliveries.is_empty()
+        // The horizon a board `k` may be sent ahead to: the run's end, the next stimulus action,
+        // every other board's next boundary, a live run's step, the world's next tick.
+        let limits = Limits {
+            end: at_or_after(duration_us),
+            action: pending.peek().map(|a| after(a.at_us)),
+            live: live.is_some().then_some(t + LIVE_STEP_US),
+            tick: world.as_deref().and_then(WorldRun::next_tick),
+        };
+        let mailboxes_empty = operator.is_empty()
             && nodes
                 .iter()
                 .all(|&n| bus.mailboxes(n).iter().all(Option::is_none) && !bus.babbling(n, t));
         let mut next = next;
+        let mut now = now;
+        let mut busy = busy;
+        // Lookahead through a board's own frame: when the one thing on the bus is a frame of a
+        // board that reported here, already started (nothing can pre-empt it, nothing else
+        // completes before it) and no other board has work, its completion is answered now
+        // rather than at the boundary it falls in, and the board is sent ahead (below). It
+        // delivers the completion at its time, as it would have a quantum later; if it has
+        // something to report first, it reports and keeps the completion (its report says it
+        // wakes then). Outside a world (the controller hears the bus frame by frame, tick by tick).
+        if let (false, None, true, true, [d]) = (
+            end,
+            now,
+            mailboxes_empty,
+            world.is_none(),
+            deliveries.make_contiguous(),
+        ) {
+            let d = *d;
+            let own_waiting = boards.get(d.node).is_some_and(|b| {
+                b.alive
+                    && b.next.is_none()
+                    && b.at == t
+                    && b.aborted == 0
+                    && b.flags == flags
+                    && !reaches_software(d.frame.id)
+                    && given(b, &d, &bus, nodes[d.node]).0
+            });
+            if own_waiting
+                && busy.iter().all(|&k| k == d.node)
+                && limits.horizon(&boards, d.node) > d.end
+                && d.end >= t + QUANTUM_US
+            {
+                deliveries.pop_front();
+                if let Some(live) = live.as_deref_mut() {
+                    live.slcan.deliver(d.end, &d.frame);
+                }
+                now = Some(d);
+                boards[d.node].wants = t + QUANTUM_US;
+                busy = vec![d.node];
+            }
+        }
+        let quiet = mailboxes_empty && deliveries.is_empty();
         if let (false, true, &[k]) = (end, quiet, busy.as_slice()) {
-            let mut horizon = at_or_after(duration_us);
-            if let Some(a) = pending.peek() {
-                horizon = horizon.min(after(a.at_us));
-            }
-            for b in boards.iter().filter(|b| b.alive && b.index != k) {
-                horizon = horizon.min(b.next.unwrap_or(b.wants));
-            }
-            if live.is_some() {
-                horizon = horizon.min(t + LIVE_STEP_US);
-            }
-            if let Some(tick) = world.as_deref().and_then(WorldRun::next_tick) {
-                horizon = horizon.min(tick);
-            }
-            if horizon > t + QUANTUM_US {
+            let horizon = limits.horizon(&boards, k);
+            // A frame answered now completes before the board's next boundary.
+            if horizon > t + QUANTUM_US && now.is_none_or(|d| d.end < horizon) {
                 next = horizon;
                 ahead = Some((k, t));
             }
@@ -582,6 +619,33 @@ pub fn run_in_world(
     }
     result?;
     Ok(outcome)
+}
+
+/// What bounds how far ahead a board may be sent, besides the other boards.
+struct Limits {
+    /// The run's last boundary.
+    end: u64,
+    /// The boundary the next stimulus action is taken at.
+    action: Option<u64>,
+    /// A live run's longest step from here.
+    live: Option<u64>,
+    /// The world's next controller tick.
+    tick: Option<u64>,
+}
+
+impl Limits {
+    /// The latest boundary board `k` may run to alone: nothing reaches it from elsewhere before.
+    fn horizon(&self, boards: &[Board], k: usize) -> u64 {
+        let others = boards
+            .iter()
+            .filter(|b| b.alive && b.index != k)
+            .map(|b| b.next.unwrap_or(b.wants));
+        [self.action, self.live, self.tick]
+            .into_iter()
+            .flatten()
+            .chain(others)
+            .fold(self.end, u64::min)
+    }
 }
 
 /// The first boundary after `a` (where an action at `a` is taken).

@@ -416,17 +416,34 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
     let mut boundary = 0;
     let mut pd_seen = false;
     let mut early = false;
+    // The frame of the last answer, delivered at its completion time: before the next boundary,
+    // or (the host answered its own frame's completion ahead, docs/qemu.md) after an earlier
+    // report if the board has something to report before it completes.
+    let mut pending: Option<Down> = None;
     loop {
         boundary += QUANTUM_US;
-        if early {
-            // Sent ahead: back at the first boundary after something to report.
-            wait_until_or_report(boundary).await;
-            if TO_REPORT.load(Ordering::SeqCst) {
-                let first = (super::now_us() / QUANTUM_US + 1) * QUANTUM_US;
-                boundary = boundary.min(first);
+        loop {
+            let deliver_at = pending.map(|p| p.at_us).filter(|&at| at < boundary);
+            let until = deliver_at.unwrap_or(boundary);
+            if early && !TO_REPORT.load(Ordering::SeqCst) {
+                // Sent ahead: back at the first boundary after something to report.
+                wait_until_or_report(until).await;
+                if TO_REPORT.load(Ordering::SeqCst) {
+                    let first = (super::now_us() / QUANTUM_US + 1) * QUANTUM_US;
+                    boundary = boundary.min(first);
+                    continue;
+                }
+            } else {
+                wait_until(until).await;
+            }
+            match (deliver_at, pending.take()) {
+                (Some(_), Some(answer)) => deliver(&answer, rx_irq),
+                (_, kept) => {
+                    pending = kept;
+                    break;
+                }
             }
         }
-        wait_until(boundary).await;
         TO_REPORT.store(false, Ordering::SeqCst);
         let mut report = Up {
             now_us: super::now_us(),
@@ -459,7 +476,11 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             }
         });
         report.drives = DRIVES.load(Ordering::SeqCst);
-        report.sleeps_us = sleeps_for();
+        // A frame still to be delivered wakes the board at its completion time.
+        let delivery = pending.map_or(u32::MAX, |p| {
+            u32::try_from(p.at_us.saturating_sub(report.now_us)).unwrap_or(u32::MAX - 1)
+        });
+        report.sleeps_us = sleeps_for().min(delivery);
         let wheels = world_wheels(report.now_us);
         if wheels.is_some() {
             report.flags |= UP_WHEELS;
@@ -499,33 +520,41 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             });
             pend_tx_interrupt();
         }
-        if flags & DOWN_FRAME == 0 {
-            continue;
+        if flags & DOWN_FRAME != 0 {
+            // One frame completes at a time on the bus: one still held is due before this one.
+            if let Some(held) = pending.replace(answer) {
+                deliver(&held, rx_irq);
+            }
         }
-        wait_until(answer.at_us).await;
-        if flags & DOWN_OWN != 0 {
-            critical_section::with(|cs| {
-                if let Some(m) = MAILBOXES
-                    .borrow_ref_mut(cs)
-                    .get_mut(usize::from(answer.mailbox))
-                    .and_then(Option::as_mut)
-                {
-                    m.done = true;
-                }
-            });
-            pend_tx_interrupt();
-        } else if crate::bxcan::passes_filter(answer.id) {
-            // As bxCAN's filter on the robot: only command frames reach the receive FIFO, so a
-            // flood of sensor frames on the bus costs the board nothing.
-            super::deliver(
-                RxFrame {
-                    id: answer.id,
-                    len: answer.len,
-                    data: answer.data,
-                },
-                rx_irq,
-            );
-        }
+    }
+}
+
+/// Delivers the answer's frame at its completion time (now): the board's own frame's mailbox is
+/// free and its transmit interrupt pended, another node's frame goes into the receive FIFO if the
+/// filter passes it.
+fn deliver(answer: &Down, rx_irq: impl InterruptNumber) {
+    if answer.flags & DOWN_OWN != 0 {
+        critical_section::with(|cs| {
+            if let Some(m) = MAILBOXES
+                .borrow_ref_mut(cs)
+                .get_mut(usize::from(answer.mailbox))
+                .and_then(Option::as_mut)
+            {
+                m.done = true;
+            }
+        });
+        pend_tx_interrupt();
+    } else if crate::bxcan::passes_filter(answer.id) {
+        // As bxCAN's filter on the robot: only command frames reach the receive FIFO, so a
+        // flood of sensor frames on the bus costs the board nothing.
+        super::deliver(
+            RxFrame {
+                id: answer.id,
+                len: answer.len,
+                data: answer.data,
+            },
+            rx_irq,
+        );
     }
 }
 
