@@ -54,6 +54,10 @@ pub(crate) struct Board {
     pub(crate) ready: Vec<String>,
     /// The wheel ticks that followed its last report (the DiWheelDrive in a run with a world).
     pub(crate) wheels: Option<Wheels>,
+    /// A report taken ahead of the host's boundary, with the boundary it is for: a board sent
+    /// ahead together with another reported later than the other (`None` inside: its run
+    /// ended). The host takes it when it reaches that boundary.
+    pub(crate) held: Option<(u64, Option<Up>)>,
 }
 
 fn make_fifo(path: &Path) -> Result<()> {
@@ -150,6 +154,7 @@ impl Board {
         self.flags = 0;
         self.lines.clear();
         self.ready.clear();
+        self.held = None;
         Ok(())
     }
 

@@ -5,8 +5,8 @@ use std::time::{Duration, Instant};
 
 use amiro_bus_sim::{BitFault, Bus, ErrorState, Event, Frame, NodeId, MAILBOXES};
 use amiro_trace::robot_link::{
-    reaches_software, Down, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW,
-    DRIVES_PD_LOW, DRIVES_SYNC_LOW, QUANTUM_US,
+    reaches_software, Down, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_OWN, DOWN_PD_LOW,
+    DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, QUANTUM_US,
 };
 use anyhow::{bail, Result};
 
@@ -115,6 +115,7 @@ pub fn run_in_world(
             flags: 0,
             ready: Vec::new(),
             wheels: None,
+            held: None,
         })
         .collect();
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
@@ -135,23 +136,31 @@ pub fn run_in_world(
     let limit = Duration::from_secs(30);
     let mut pace = live.as_ref().map(|_| pace::Pace::new(Instant::now()));
     let mut t = QUANTUM_US;
-    // The board sent ahead at the last boundary (the only one with work, everything else quiet):
-    // it reports at the first boundary after it queued a frame, asked for an abort or changed a
-    // line, at the latest at `t`.
-    let mut ahead: Option<(usize, u64)> = None;
+    // The boards sent ahead at the last boundary `from` (the only ones with work, everything else
+    // quiet): each reports at the first boundary after it queued a frame, asked for an abort or
+    // changed a line, at the latest at `t`. The host goes on from the earliest report; a later
+    // one is held until the host reaches its boundary.
+    let mut ahead: Vec<usize> = Vec::new();
+    let mut from = 0;
     let result: Result<()> = (|| loop {
         outcome.work.steps += 1;
         let mut notes: Vec<String> = Vec::new();
-        if let Some((k, from)) = ahead.take() {
-            t = exchange(
-                &mut boards[k],
-                from + QUANTUM_US..=t,
-                &mut bus,
-                &nodes,
-                &mut notes,
-                limit,
-                &mut outcome.work,
-            )?;
+        if !ahead.is_empty() {
+            for &k in &ahead {
+                let b = &mut boards[k];
+                b.held = Some(take_report(
+                    b,
+                    from + QUANTUM_US..=t,
+                    limit,
+                    &mut outcome.work,
+                )?);
+                b.next = b.held.as_ref().map(|&(at, _)| at);
+            }
+            t = ahead
+                .drain(..)
+                .filter_map(|k| boards[k].next)
+                .min()
+                .unwrap_or(t);
         }
         // The boards due at this boundary report (those sent on to it at the last answer), and
         // those left waiting whose deadline falls here are sent on to it first.
@@ -405,6 +414,20 @@ pub fn run_in_world(
                 )?;
             }
         }
+        // A board sent ahead together with others and still ahead of this boundary gets what is
+        // due for it here only at its report (never silently).
+        for b in boards.iter().filter(|b| b.alive && b.held.is_some()) {
+            if let Some(at) = b.next.filter(|&at| at > t) {
+                if due(b, now.as_ref(), &bus, nodes[b.index], flags, end) {
+                    notes.push(format!(
+                        "bus: # {} {} was sent ahead with another board: what is due for it here reaches it at {}",
+                        stamp(t),
+                        NODES[b.index],
+                        stamp(at)
+                    ));
+                }
+            }
+        }
         if let Some(w) = world.as_deref_mut() {
             w.step(t, &mut boards);
         }
@@ -503,7 +526,7 @@ pub fn run_in_world(
             });
             if own_waiting
                 && busy.iter().all(|&k| k == d.node)
-                && limits.horizon(&boards, d.node) > d.end
+                && limits.horizon(&boards, &[d.node]) > d.end
                 && d.end >= t + QUANTUM_US
             {
                 deliveries.pop_front();
@@ -516,12 +539,28 @@ pub fn run_in_world(
             }
         }
         let quiet = mailboxes_empty && deliveries.is_empty();
-        if let (false, true, &[k]) = (end, quiet, busy.as_slice()) {
-            let horizon = limits.horizon(&boards, k);
-            // A frame answered now completes before the board's next boundary.
-            if horizon > t + QUANTUM_US && now.is_none_or(|d| d.end < horizon) {
+        // Several boards with work, in the steady state (every module has released SYS_SYNC_N,
+        // nobody drives SYS_PD_N, no world, not live): they are sent ahead together. The boards
+        // send sensor frames only, which no other board's filter passes, so one's report cannot
+        // concern another but through the bus, which the host runs after the reports; a line
+        // change or a command frame from one of them reaches the others at their own next report
+        // (a bus note says so when it happens).
+        let together = busy.len() > 1
+            && flags == 0
+            && live.is_none()
+            && world.is_none()
+            && boards.iter().all(|b| b.drives == 0 && b.aborted == 0);
+        if !end && quiet && (busy.len() == 1 || together) {
+            let horizon = limits.horizon(&boards, &busy);
+            // A frame answered now completes before the boards' next boundary; boards sent ahead
+            // together report before the run's end.
+            if horizon > t + QUANTUM_US
+                && now.is_none_or(|d| d.end < horizon)
+                && (busy.len() == 1 || horizon < duration_us)
+            {
                 next = horizon;
-                ahead = Some((k, t));
+                ahead = busy.clone();
+                from = t;
             }
         }
         // Answers: every board at this boundary that wants the next one gets what is due; one
@@ -533,7 +572,7 @@ pub fn run_in_world(
             if !b.alive || b.next.is_some() {
                 continue;
             }
-            let sent_ahead = ahead.is_some_and(|(a, _)| a == k);
+            let sent_ahead = ahead.contains(&k);
             if b.at == t && (b.wants <= next || end || sent_ahead) {
                 let mut answer = Down {
                     next_us: next - b.offset,
@@ -565,7 +604,7 @@ pub fn run_in_world(
                     .as_deref_mut()
                     .and_then(|w| w.readings_for(k, t, b.offset));
                 b.send_with(&answer, readings)?;
-            } else if b.at < t && b.wants == next && ahead.is_none() {
+            } else if b.at < t && b.wants == next && ahead.is_empty() {
                 let on = Down {
                     next_us: next - b.offset,
                     flags: b.flags,
@@ -634,11 +673,12 @@ struct Limits {
 }
 
 impl Limits {
-    /// The latest boundary board `k` may run to alone: nothing reaches it from elsewhere before.
-    fn horizon(&self, boards: &[Board], k: usize) -> u64 {
+    /// The latest boundary the boards `group` may run to without the others: nothing reaches
+    /// them from elsewhere before.
+    fn horizon(&self, boards: &[Board], group: &[usize]) -> u64 {
         let others = boards
             .iter()
-            .filter(|b| b.alive && b.index != k)
+            .filter(|b| b.alive && !group.contains(&b.index))
             .map(|b| b.next.unwrap_or(b.wants));
         [self.action, self.live, self.tick]
             .into_iter()
@@ -671,6 +711,21 @@ fn exchange(
     limit: Duration,
     work: &mut Work,
 ) -> Result<u64> {
+    let (t, report) = match b.held.take() {
+        Some(held) => held,
+        None => take_report(b, within, limit, work)?,
+    };
+    apply(b, t, report, bus, nodes, notes);
+    Ok(t)
+}
+
+/// Waits for board `b`'s report at one of the boundaries `within` (the last, if its run ended).
+fn take_report(
+    b: &mut Board,
+    within: std::ops::RangeInclusive<u64>,
+    limit: Duration,
+    work: &mut Work,
+) -> Result<(u64, Option<Up>)> {
     let waited = Instant::now();
     let report = b.receive(waited, limit)?;
     work.waiting_us += waited.elapsed().as_micros() as u64;
@@ -690,6 +745,18 @@ fn exchange(
     if let Some(n) = work.per_board.get_mut(b.index) {
         *n += 1;
     }
+    Ok((t, report))
+}
+
+/// Takes board `b`'s report at boundary `t` (`None`: its run ended).
+fn apply(
+    b: &mut Board,
+    t: u64,
+    report: Option<Up>,
+    bus: &mut Bus,
+    nodes: &[NodeId],
+    notes: &mut Vec<String>,
+) {
     b.at = t;
     b.next = None;
     let Some(report) = report else {
@@ -703,7 +770,7 @@ fn exchange(
             stamp(t),
             NODES[b.index]
         ));
-        return Ok(t);
+        return;
     };
     b.drives = report.drives;
     b.aborts = report.aborts & 0b111;
@@ -733,5 +800,4 @@ fn exchange(
             ));
         }
     }
-    Ok(t)
 }
