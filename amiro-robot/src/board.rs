@@ -58,6 +58,9 @@ pub(crate) struct Board {
     /// ahead together with another reported later than the other (`None` inside: its run
     /// ended). The host takes it when it reaches that boundary.
     pub(crate) held: Option<(u64, Option<Up>)>,
+    /// It was given a command frame and has not slept since: it may drive a line (a shutdown
+    /// command), so it is not sent ahead together with another board meanwhile.
+    pub(crate) commanded: bool,
 }
 
 fn make_fifo(path: &Path) -> Result<()> {
@@ -155,6 +158,7 @@ impl Board {
         self.lines.clear();
         self.ready.clear();
         self.held = None;
+        self.commanded = false;
         Ok(())
     }
 

@@ -116,6 +116,7 @@ pub fn run_in_world(
             ready: Vec::new(),
             wheels: None,
             held: None,
+            commanded: false,
         })
         .collect();
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
@@ -500,10 +501,21 @@ pub fn run_in_world(
         let mut next = next;
         let mut now = now;
         let mut busy = busy;
+        // The steady state, in which several boards with work may be sent ahead together (below):
+        // every module has released SYS_SYNC_N, nobody drives SYS_PD_N, no board is busy with a
+        // command or gets one now, no world, not live.
+        let steady = flags == 0
+            && now.is_none_or(|d| !reaches_software(d.frame.id))
+            && live.is_none()
+            && world.is_none()
+            && boards
+                .iter()
+                .all(|b| b.drives == 0 && b.aborted == 0 && !b.commanded);
         // Lookahead through a board's own frame: when the one thing on the bus is a frame of a
         // board that reported here, already started (nothing can pre-empt it, nothing else
-        // completes before it) and no other board has work, its completion is answered now
-        // rather than at the boundary it falls in, and the board is sent ahead (below). It
+        // completes before it) and no other board has work (in the steady state: the boards with
+        // work go ahead with it), its completion is answered now rather than at the boundary it
+        // falls in, and the board is sent ahead (below). It
         // delivers the completion at its time, as it would have a quantum later; if it has
         // something to report first, it reports and keeps the completion (its report says it
         // wakes then). Outside a world (the controller hears the bus frame by frame, tick by tick).
@@ -524,9 +536,14 @@ pub fn run_in_world(
                     && !reaches_software(d.frame.id)
                     && given(b, &d, &bus, nodes[d.node]).0
             });
+            let mut group = busy.clone();
+            if !group.contains(&d.node) {
+                group.push(d.node);
+            }
+            let horizon = limits.horizon(&boards, &group);
             if own_waiting
-                && busy.iter().all(|&k| k == d.node)
-                && limits.horizon(&boards, &[d.node]) > d.end
+                && (group.len() == 1 || (steady && horizon < duration_us))
+                && horizon > d.end
                 && d.end >= t + QUANTUM_US
             {
                 deliveries.pop_front();
@@ -535,22 +552,19 @@ pub fn run_in_world(
                 }
                 now = Some(d);
                 boards[d.node].wants = t + QUANTUM_US;
-                busy = vec![d.node];
+                busy = group;
             }
         }
         let quiet = mailboxes_empty && deliveries.is_empty();
         // Several boards with work, in the steady state (every module has released SYS_SYNC_N,
-        // nobody drives SYS_PD_N, no world, not live): they are sent ahead together. The boards
-        // send sensor frames only, which no other board's filter passes, so one's report cannot
-        // concern another but through the bus, which the host runs after the reports; a line
-        // change or a command frame from one of them reaches the others at their own next report
-        // (a bus note says so when it happens).
-        let together = busy.len() > 1
-            && flags == 0
-            && live.is_none()
-            && world.is_none()
-            && boards.iter().all(|b| b.drives == 0 && b.aborted == 0);
-        if !end && quiet && (busy.len() == 1 || together) {
+        // nobody drives SYS_PD_N, no board is busy with a command, no world, not live): they are
+        // sent ahead together. The boards send sensor frames only, which no other board's filter
+        // passes, so one's report cannot concern another but through the bus, which the host runs
+        // after the reports. A line is driven in the steady state only by a shutdown, which a
+        // command starts (or PowerManagement's low battery): a line change or a command frame
+        // from a board sent ahead with others reaches them at their own next report, and a bus
+        // note says so.
+        if !end && quiet && (busy.len() == 1 || (busy.len() > 1 && steady)) {
             let horizon = limits.horizon(&boards, &busy);
             // A frame answered now completes before the boards' next boundary; boards sent ahead
             // together report before the run's end.
@@ -590,6 +604,7 @@ pub fn run_in_world(
                 if let Some(d) = now {
                     let (own, heard) = given(b, &d, &bus, node);
                     if own || heard {
+                        b.commanded |= heard && reaches_software(d.frame.id);
                         answer.flags |= DOWN_FRAME | if own { DOWN_OWN } else { 0 };
                         answer.at_us = d.end.saturating_sub(b.offset);
                         answer.mailbox = d.mailbox as u8;
@@ -778,6 +793,8 @@ fn apply(
         u32::MAX => u64::MAX,
         us => t.saturating_add(u64::from(us)),
     };
+    // A board that sleeps has done what a command asked of it.
+    b.commanded &= b.wakes_at <= t;
     for q in report.queued() {
         let queued = q.at_us + b.offset;
         if let Some(slot) = b.released.get_mut(usize::from(q.mailbox)) {
