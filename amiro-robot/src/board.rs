@@ -18,6 +18,9 @@ use anyhow::{bail, Context, Result};
 
 use crate::{Firmware, NODES};
 
+/// The nice value of a live run's QEMUs and host (the default is 0).
+pub(crate) const LIVE_NICE: i32 = -10;
+
 /// A board's process and the coordinator's view of it.
 pub(crate) struct Board {
     pub(crate) index: usize,
@@ -58,6 +61,8 @@ pub(crate) struct Board {
     /// ahead together with another reported later than the other (`None` inside: its run
     /// ended). The host takes it when it reaches that boundary.
     pub(crate) held: Option<(u64, Option<Up>)>,
+    /// Part of a live run (its QEMU runs at [`LIVE_NICE`]).
+    pub(crate) live: bool,
     /// It was given a command frame and has not slept since: it may drive a line (a shutdown
     /// command), so it is not sent ahead together with another board meanwhile.
     pub(crate) commanded: bool,
@@ -117,16 +122,25 @@ impl Board {
         // run side by side. Halved the thesis demo's wall time on the 2-core machine at load 9
         // (docs/qemu.md, "Speed"). Virtual time does not depend on it.
         let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        if cores > 1 {
-            let cpu = self.index % cores;
+        let cpu = (cores > 1).then_some(self.index % cores);
+        // A live run's boards (and host, `run`) at a raised priority: the wall clock is theirs
+        // to keep up with, other work on the machine can wait (needs the privilege; a refusal
+        // keeps the default priority, which the run's first line says).
+        let nice = self.live.then_some(LIVE_NICE);
+        {
             use std::os::unix::process::CommandExt;
-            // SAFETY: sched_setaffinity on the child between fork and exec (async-signal-safe);
-            // a refusal leaves the child where it was.
+            // SAFETY: sched_setaffinity and setpriority on the child between fork and exec (both
+            // async-signal-safe); a refusal leaves the child as it was.
             unsafe {
                 command.pre_exec(move || {
-                    let mut set: libc::cpu_set_t = std::mem::zeroed();
-                    libc::CPU_SET(cpu, &mut set);
-                    libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+                    if let Some(cpu) = cpu {
+                        let mut set: libc::cpu_set_t = std::mem::zeroed();
+                        libc::CPU_SET(cpu, &mut set);
+                        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+                    }
+                    if let Some(nice) = nice {
+                        libc::setpriority(libc::PRIO_PROCESS, 0, nice);
+                    }
                     Ok(())
                 });
             }

@@ -117,8 +117,19 @@ pub fn run_in_world(
             wheels: None,
             held: None,
             commanded: false,
+            live: live.is_some(),
         })
         .collect();
+    if live.is_some() {
+        // The host's thread too (see `board::LIVE_NICE`).
+        // SAFETY: setpriority on the calling thread.
+        if unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, crate::board::LIVE_NICE) } != 0 {
+            eprintln!(
+                "robot: live: the host and the boards keep the default priority ({}): other work on the machine can hold them up",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
     for b in &mut boards {
         b.start(0)?;
