@@ -6,7 +6,9 @@
 //! a stimulus: it hands over the frames it put into its three mailboxes since the last exchange
 //! (with the time it queued them) and what it drives on the system lines, and gets back the one
 //! frame, if any, that completes on the bus in the coming quantum (a frame needs at least 44 bit
-//! times, so no two complete within 40 µs) and the levels of SYS_SYNC_N and SYS_PD_N. The read
+//! times, so no two complete within 40 µs; the board's own frame, which the host may answer when it
+//! starts, possibly later: the board keeps it until its time) and the levels of SYS_SYNC_N and
+//! SYS_PD_N. The read
 //! blocks, and a blocked QEMU's virtual clock stands still, so no board runs ahead of the others.
 //!
 //! The frame is delivered at its completion time: a command frame (the one kind bxCAN's filter
