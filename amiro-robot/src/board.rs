@@ -92,6 +92,37 @@ pub(crate) fn set_nonblocking(fd: i32) {
 }
 
 impl Board {
+    /// Board `index` of the robot (not started): its build, its folder, whether the run is live.
+    pub(crate) fn new(index: usize, firmware: Firmware, dir: PathBuf, live: bool) -> Self {
+        Self {
+            index,
+            firmware,
+            dir,
+            child: None,
+            up: None,
+            down: None,
+            out: None,
+            partial: Vec::new(),
+            lines: Vec::new(),
+            offset: 0,
+            alive: false,
+            drives: DRIVES_SYNC_LOW,
+            wakes_at: 0,
+            aborts: 0,
+            aborted: 0,
+            released: [0; MAILBOXES],
+            at: 0,
+            next: None,
+            wants: 0,
+            flags: 0,
+            ready: Vec::new(),
+            wheels: None,
+            held: None,
+            commanded: false,
+            live,
+        }
+    }
+
     pub(crate) fn start(&mut self, at: u64) -> Result<()> {
         std::fs::create_dir_all(&self.dir)?;
         let (up, down) = (self.dir.join("robot-up"), self.dir.join("robot-down"));

@@ -92,33 +92,7 @@ pub fn run_in_world(
     std::fs::create_dir_all(work)?;
     let mut bus = Bus::new();
     let mut boards: Vec<Board> = (0..3)
-        .map(|k| Board {
-            index: k,
-            firmware: firmware[k].clone(),
-            dir: work.join(BOARDS[k]),
-            child: None,
-            up: None,
-            down: None,
-            out: None,
-            partial: Vec::new(),
-            lines: Vec::new(),
-            offset: 0,
-            alive: false,
-            drives: DRIVES_SYNC_LOW,
-            wakes_at: 0,
-            aborts: 0,
-            aborted: 0,
-            released: [0; MAILBOXES],
-            at: 0,
-            next: None,
-            wants: 0,
-            flags: 0,
-            ready: Vec::new(),
-            wheels: None,
-            held: None,
-            commanded: false,
-            live: live.is_some(),
-        })
+        .map(|k| Board::new(k, firmware[k].clone(), work.join(BOARDS[k]), live.is_some()))
         .collect();
     if live.is_some() {
         // The host's thread too (see `board::LIVE_NICE`).
@@ -827,5 +801,51 @@ fn apply(
                 q.mailbox
             ));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn boards() -> Vec<Board> {
+        (0..3)
+            .map(|k| {
+                let firmware = Firmware {
+                    elf: "none.elf".into(),
+                    machine: "netduino2",
+                };
+                let mut b = Board::new(k, firmware, format!("board-{k}").into(), false);
+                b.alive = true;
+                b
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_horizon_is_the_earliest_boundary_outside_the_group() {
+        let limits = Limits {
+            end: 10_000,
+            action: None,
+            live: None,
+            tick: None,
+        };
+        let mut b = boards();
+        b[0].wants = 400;
+        b[1].next = Some(800);
+        b[2].wants = 1_200;
+        // Board 0 alone runs to board 1's next boundary; with board 1, to board 2's deadline.
+        assert_eq!(limits.horizon(&b, &[0]), 800);
+        assert_eq!(limits.horizon(&b, &[0, 1]), 1_200);
+        assert_eq!(limits.horizon(&b, &[0, 1, 2]), 10_000);
+        // A board that has ended bounds nothing; a stimulus action, a live step or a tick does.
+        b[2].alive = false;
+        assert_eq!(limits.horizon(&b, &[0, 1]), 10_000);
+        let sooner = Limits {
+            action: Some(2_000),
+            tick: Some(1_600),
+            ..limits
+        };
+        assert_eq!(sooner.horizon(&b, &[0, 1]), 1_600);
     }
 }
