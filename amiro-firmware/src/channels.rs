@@ -87,10 +87,7 @@ pub fn write_console_record(bytes: &[u8]) -> bool {
         at += 2;
     }
     line[at] = b'\n';
-    match cortex_m_semihosting::hio::hstdout() {
-        Ok(mut out) => out.write_all(&line[..=at]).is_ok(),
-        Err(_) => false,
-    }
+    crate::qemu::console_write(&line[..=at])
 }
 
 /// Writes one encoded trace record (`amiro_trace` wire bytes, delimiter included); `false` when it
@@ -109,12 +106,10 @@ pub fn write_log(parts: &[&str]) {
     rtt::write_log(parts);
     #[cfg(feature = "qemu")]
     {
-        if let Ok(mut out) = cortex_m_semihosting::hio::hstdout() {
-            let _ = out.write_all(b"# ");
-            for part in parts {
-                let _ = out.write_all(part.as_bytes());
-            }
-            let _ = out.write_all(b"\n");
+        crate::qemu::console_write(b"# ");
+        for part in parts {
+            crate::qemu::console_write(part.as_bytes());
         }
+        crate::qemu::console_write(b"\n");
     }
 }

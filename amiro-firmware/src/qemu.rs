@@ -180,9 +180,7 @@ impl CanTx for CanTxPort {
             put(HEX[usize::from(b & 15)]);
         }
         put(b'\n');
-        if let Ok(mut out) = cortex_m_semihosting::hio::hstdout() {
-            let _ = out.write_all(&line[..at]);
-        }
+        console_write(&line[..at]);
         // On this bus a frame is acknowledged the moment it is offered: the frame line is its
         // acknowledgement (the host reads it from there; no second record costs the task time).
         Transmit::Queued
@@ -322,14 +320,35 @@ pub fn print_line(line: &str) {
 /// interrupts are off meanwhile.
 pub fn print_line_pieces(pieces: impl FnOnce(&mut dyn FnMut(&[u8]))) {
     critical_section::with(|_| {
-        if let Ok(mut out) = cortex_m_semihosting::hio::hstdout() {
-            let mut sink = |bytes: &[u8]| {
-                let _ = out.write_all(bytes);
-            };
-            pieces(&mut sink);
-            let _ = out.write_all(b"\n");
-        }
+        let mut sink = |bytes: &[u8]| {
+            console_write(bytes);
+        };
+        pieces(&mut sink);
+        console_write(b"\n");
     });
+}
+
+/// The console's semihosting handle, opened at the first write (`usize::MAX`: not yet).
+/// `cortex_m_semihosting::hio::hstdout` opens a new one at every call, which QEMU never frees: its
+/// table of handles grew by one per printed line and was searched at each open.
+static CONSOLE: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicUsize::new(usize::MAX);
+
+/// Writes `bytes` to the console (semihosting's `:tt`, QEMU's stdout); `false` if not all.
+pub fn console_write(bytes: &[u8]) -> bool {
+    let mut fd = CONSOLE.load(Ordering::Relaxed);
+    if fd == usize::MAX {
+        // SAFETY: semihosting OPEN of the console with a NUL-terminated name, mode 4 ("w"),
+        // length without the NUL. Two contexts racing here open two handles; one is kept.
+        let opened = unsafe { syscall!(OPEN, c":tt".as_ptr(), 4, 3) };
+        if opened as isize == -1 {
+            return false;
+        }
+        fd = opened;
+        CONSOLE.store(fd, Ordering::Relaxed);
+    }
+    // SAFETY: semihosting WRITE from a buffer we own; it returns the number of bytes NOT written.
+    let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
+    left == 0
 }
 
 /// Ends the QEMU run.

@@ -18,6 +18,9 @@ use anyhow::{bail, Context, Result};
 
 use crate::{Firmware, NODES};
 
+/// The nice value of a live run's QEMUs and host (the default is 0).
+pub(crate) const LIVE_NICE: i32 = -10;
+
 /// A board's process and the coordinator's view of it.
 pub(crate) struct Board {
     pub(crate) index: usize,
@@ -54,6 +57,15 @@ pub(crate) struct Board {
     pub(crate) ready: Vec<String>,
     /// The wheel ticks that followed its last report (the DiWheelDrive in a run with a world).
     pub(crate) wheels: Option<Wheels>,
+    /// A report taken ahead of the host's boundary, with the boundary it is for: a board sent
+    /// ahead together with another reported later than the other (`None` inside: its run
+    /// ended). The host takes it when it reaches that boundary.
+    pub(crate) held: Option<(u64, Option<Up>)>,
+    /// Part of a live run (its QEMU runs at [`LIVE_NICE`]).
+    pub(crate) live: bool,
+    /// It was given a command frame and has not slept since: it may drive a line (a shutdown
+    /// command), so it is not sent ahead together with another board meanwhile.
+    pub(crate) commanded: bool,
 }
 
 fn make_fifo(path: &Path) -> Result<()> {
@@ -80,6 +92,37 @@ pub(crate) fn set_nonblocking(fd: i32) {
 }
 
 impl Board {
+    /// Board `index` of the robot (not started): its build, its folder, whether the run is live.
+    pub(crate) fn new(index: usize, firmware: Firmware, dir: PathBuf, live: bool) -> Self {
+        Self {
+            index,
+            firmware,
+            dir,
+            child: None,
+            up: None,
+            down: None,
+            out: None,
+            partial: Vec::new(),
+            lines: Vec::new(),
+            offset: 0,
+            alive: false,
+            drives: DRIVES_SYNC_LOW,
+            wakes_at: 0,
+            aborts: 0,
+            aborted: 0,
+            released: [0; MAILBOXES],
+            at: 0,
+            next: None,
+            wants: 0,
+            flags: 0,
+            ready: Vec::new(),
+            wheels: None,
+            held: None,
+            commanded: false,
+            live,
+        }
+    }
+
     pub(crate) fn start(&mut self, at: u64) -> Result<()> {
         std::fs::create_dir_all(&self.dir)?;
         let (up, down) = (self.dir.join("robot-up"), self.dir.join("robot-down"));
@@ -103,7 +146,37 @@ impl Board {
             crate::log::encode_stimulus(&[], 0),
         )?;
         let stderr = File::create(self.dir.join("qemu-stderr.log"))?;
-        let mut child = Command::new("qemu-system-arm")
+        let mut command = Command::new("qemu-system-arm");
+        // Each board's QEMU on one core of its own (modulo the cores there are): its vCPU thread
+        // and its main loop hand QEMU's global lock and the timer notifications to each other at
+        // every exchange, and on one core that costs no wake-up across cores; the boards still
+        // run side by side. Halved the thesis demo's wall time on the 2-core machine at load 9
+        // (docs/qemu.md, "Speed"). Virtual time does not depend on it.
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        let cpu = (cores > 1).then_some(self.index % cores);
+        // A live run's boards (and host, `run`) at a raised priority: the wall clock is theirs
+        // to keep up with, other work on the machine can wait (needs the privilege; a refusal
+        // keeps the default priority, which the run's first line says).
+        let nice = self.live.then_some(LIVE_NICE);
+        {
+            use std::os::unix::process::CommandExt;
+            // SAFETY: sched_setaffinity and setpriority on the child between fork and exec (both
+            // async-signal-safe); a refusal leaves the child as it was.
+            unsafe {
+                command.pre_exec(move || {
+                    if let Some(cpu) = cpu {
+                        let mut set: libc::cpu_set_t = std::mem::zeroed();
+                        libc::CPU_SET(cpu, &mut set);
+                        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+                    }
+                    if let Some(nice) = nice {
+                        libc::setpriority(libc::PRIO_PROCESS, 0, nice);
+                    }
+                    Ok(())
+                });
+            }
+        }
+        let mut child = command
             .args(["-machine", self.firmware.machine, "-nographic"])
             .args(["-monitor", "none", "-serial", "none"])
             // The console as a chardev on stdout: every semihosting write is a write(2) that has
@@ -127,6 +200,11 @@ impl Board {
             .context("starting qemu-system-arm (install it: apt-get install qemu-system-arm)")?;
         let out = child.stdout.take().context("QEMU stdout")?;
         set_nonblocking(out.as_raw_fd());
+        // Room for what a board prints between two of its exchanges, which is when the host reads
+        // it (a full pipe would hold the board up until the next read); the default is kept if
+        // the system refuses.
+        // SAFETY: fcntl on a descriptor we own.
+        unsafe { libc::fcntl(out.as_raw_fd(), libc::F_SETPIPE_SZ, 1 << 20) };
         self.out = Some(out);
         self.child = Some(child);
         self.partial.clear();
@@ -145,6 +223,8 @@ impl Board {
         self.flags = 0;
         self.lines.clear();
         self.ready.clear();
+        self.held = None;
+        self.commanded = false;
         Ok(())
     }
 
@@ -193,22 +273,18 @@ impl Board {
         let (mut got, mut want) = (0, UP_LEN);
         let up_fd = self.up.as_ref().context("no pipe")?.as_raw_fd();
         loop {
-            let out_fd = self.out.as_ref().map_or(-1, AsRawFd::as_raw_fd);
-            let mut fds = [
-                libc::pollfd {
-                    fd: up_fd,
-                    events: libc::POLLIN,
-                    revents: 0,
-                },
-                libc::pollfd {
-                    fd: out_fd,
-                    events: libc::POLLIN,
-                    revents: 0,
-                },
-            ];
-            // SAFETY: two pollfd structures we own; a negative fd is ignored by poll.
-            let ready = unsafe { libc::poll(fds.as_mut_ptr(), 2, 100) };
-            if fds[1].revents != 0 {
+            // Only the report wakes the host: the console is read when the report is in (a board's
+            // lines belong to the quantum they were printed in, and they are all in the pipe by
+            // then), or when the wait is long (a board printing much, a board that ended). Waking
+            // for every console write as well cost the host a task switch per line.
+            let mut fds = [libc::pollfd {
+                fd: up_fd,
+                events: libc::POLLIN,
+                revents: 0,
+            }];
+            // SAFETY: one pollfd structure we own.
+            let ready = unsafe { libc::poll(fds.as_mut_ptr(), 1, 10) };
+            if ready <= 0 {
                 self.drain();
             }
             if fds[0].revents & libc::POLLIN != 0 {
@@ -236,7 +312,7 @@ impl Board {
                 }
                 continue;
             }
-            if ready <= 0 || self.out.is_none() {
+            if ready <= 0 {
                 if let Some(child) = self.child.as_mut() {
                     if child.try_wait()?.is_some() {
                         while self.drain() {}

@@ -5,7 +5,8 @@
 //! - [`board`]: one board's QEMU process, its two named pipes and its console: the one place a
 //!   board's exchange happens ([`amiro_trace::robot_link`] is the message both sides encode).
 //! - [`run()`]: the coordinator — steps from boundary to boundary, runs the bus model, answers the
-//!   boards, with lookahead (a sleeping board is left waiting, the one busy board is sent ahead).
+//!   boards, with lookahead (a sleeping board is left waiting, a busy board is sent ahead — in the
+//!   steady state several together — and a board's own frame is answered when it starts).
 //! - [`report`]: the bus report (observed responses against the Davis bound).
 //! - [`slcan`]: the operator's adapter as a pseudo-terminal that speaks SLCAN (live runs), paced
 //!   to the wall clock by [`pace`].

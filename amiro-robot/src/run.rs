@@ -5,8 +5,8 @@ use std::time::{Duration, Instant};
 
 use amiro_bus_sim::{BitFault, Bus, ErrorState, Event, Frame, NodeId, MAILBOXES};
 use amiro_trace::robot_link::{
-    reaches_software, Down, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_OWN, DOWN_PD_LOW, DOWN_SYNC_LOW,
-    DRIVES_PD_LOW, DRIVES_SYNC_LOW, QUANTUM_US,
+    reaches_software, Down, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_OWN, DOWN_PD_LOW,
+    DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, QUANTUM_US,
 };
 use anyhow::{bail, Result};
 
@@ -92,31 +92,18 @@ pub fn run_in_world(
     std::fs::create_dir_all(work)?;
     let mut bus = Bus::new();
     let mut boards: Vec<Board> = (0..3)
-        .map(|k| Board {
-            index: k,
-            firmware: firmware[k].clone(),
-            dir: work.join(BOARDS[k]),
-            child: None,
-            up: None,
-            down: None,
-            out: None,
-            partial: Vec::new(),
-            lines: Vec::new(),
-            offset: 0,
-            alive: false,
-            drives: DRIVES_SYNC_LOW,
-            wakes_at: 0,
-            aborts: 0,
-            aborted: 0,
-            released: [0; MAILBOXES],
-            at: 0,
-            next: None,
-            wants: 0,
-            flags: 0,
-            ready: Vec::new(),
-            wheels: None,
-        })
+        .map(|k| Board::new(k, firmware[k].clone(), work.join(BOARDS[k]), live.is_some()))
         .collect();
+    if live.is_some() {
+        // The host's thread too (see `board::LIVE_NICE`).
+        // SAFETY: setpriority on the calling thread.
+        if unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, crate::board::LIVE_NICE) } != 0 {
+            eprintln!(
+                "robot: live: the host and the boards keep the default priority ({}): other work on the machine can hold them up",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
     for b in &mut boards {
         b.start(0)?;
@@ -135,23 +122,31 @@ pub fn run_in_world(
     let limit = Duration::from_secs(30);
     let mut pace = live.as_ref().map(|_| pace::Pace::new(Instant::now()));
     let mut t = QUANTUM_US;
-    // The board sent ahead at the last boundary (the only one with work, everything else quiet):
-    // it reports at the first boundary after it queued a frame, asked for an abort or changed a
-    // line, at the latest at `t`.
-    let mut ahead: Option<(usize, u64)> = None;
+    // The boards sent ahead at the last boundary `from` (the only ones with work, everything else
+    // quiet): each reports at the first boundary after it queued a frame, asked for an abort or
+    // changed a line, at the latest at `t`. The host goes on from the earliest report; a later
+    // one is held until the host reaches its boundary.
+    let mut ahead: Vec<usize> = Vec::new();
+    let mut from = 0;
     let result: Result<()> = (|| loop {
         outcome.work.steps += 1;
         let mut notes: Vec<String> = Vec::new();
-        if let Some((k, from)) = ahead.take() {
-            t = exchange(
-                &mut boards[k],
-                from + QUANTUM_US..=t,
-                &mut bus,
-                &nodes,
-                &mut notes,
-                limit,
-                &mut outcome.work,
-            )?;
+        if !ahead.is_empty() {
+            for &k in &ahead {
+                let b = &mut boards[k];
+                b.held = Some(take_report(
+                    b,
+                    from + QUANTUM_US..=t,
+                    limit,
+                    &mut outcome.work,
+                )?);
+                b.next = b.held.as_ref().map(|&(at, _)| at);
+            }
+            t = ahead
+                .drain(..)
+                .filter_map(|k| boards[k].next)
+                .min()
+                .unwrap_or(t);
         }
         // The boards due at this boundary report (those sent on to it at the last answer), and
         // those left waiting whose deadline falls here are sent on to it first.
@@ -405,6 +400,20 @@ pub fn run_in_world(
                 )?;
             }
         }
+        // A board sent ahead together with others and still ahead of this boundary gets what is
+        // due for it here only at its report (never silently).
+        for b in boards.iter().filter(|b| b.alive && b.held.is_some()) {
+            if let Some(at) = b.next.filter(|&at| at > t) {
+                if due(b, now.as_ref(), &bus, nodes[b.index], flags, end) {
+                    notes.push(format!(
+                        "bus: # {} {} was sent ahead with another board: what is due for it here reaches it at {}",
+                        stamp(t),
+                        NODES[b.index],
+                        stamp(at)
+                    ));
+                }
+            }
+        }
         if let Some(w) = world.as_deref_mut() {
             w.step(t, &mut boards);
         }
@@ -462,29 +471,95 @@ pub fn run_in_world(
                 b.alive && b.next.is_none() && b.at == t && b.wants == t + QUANTUM_US
             })
             .collect();
-        let quiet = operator.is_empty()
-            && deliveries.is_empty()
+        // The horizon a board `k` may be sent ahead to: the run's end, the next stimulus action,
+        // every other board's next boundary, a live run's step, the world's next tick.
+        let limits = Limits {
+            end: at_or_after(duration_us),
+            action: pending.peek().map(|a| after(a.at_us)),
+            live: live.is_some().then_some(t + LIVE_STEP_US),
+            tick: world.as_deref().and_then(WorldRun::next_tick),
+        };
+        let mailboxes_empty = operator.is_empty()
             && nodes
                 .iter()
                 .all(|&n| bus.mailboxes(n).iter().all(Option::is_none) && !bus.babbling(n, t));
         let mut next = next;
-        if let (false, true, &[k]) = (end, quiet, busy.as_slice()) {
-            let mut horizon = at_or_after(duration_us);
-            if let Some(a) = pending.peek() {
-                horizon = horizon.min(after(a.at_us));
+        let mut now = now;
+        let mut busy = busy;
+        // The steady state, in which several boards with work may be sent ahead together (below):
+        // every module has released SYS_SYNC_N, nobody drives SYS_PD_N, no board is busy with a
+        // command or gets one now, no world, not live.
+        let steady = flags == 0
+            && now.is_none_or(|d| !reaches_software(d.frame.id))
+            && live.is_none()
+            && world.is_none()
+            && boards
+                .iter()
+                .all(|b| b.drives == 0 && b.aborted == 0 && !b.commanded);
+        // Lookahead through a board's own frame: when the one thing on the bus is a frame of a
+        // board that reported here, already started (nothing can pre-empt it, nothing else
+        // completes before it) and no other board has work (in the steady state: the boards with
+        // work go ahead with it), its completion is answered now rather than at the boundary it
+        // falls in, and the board is sent ahead (below). It
+        // delivers the completion at its time, as it would have a quantum later; if it has
+        // something to report first, it reports and keeps the completion (its report says it
+        // wakes then). Outside a world (the controller hears the bus frame by frame, tick by tick).
+        if let (false, None, true, true, [d]) = (
+            end,
+            now,
+            mailboxes_empty,
+            world.is_none(),
+            deliveries.make_contiguous(),
+        ) {
+            let d = *d;
+            let own_waiting = boards.get(d.node).is_some_and(|b| {
+                b.alive
+                    && b.next.is_none()
+                    && b.at == t
+                    && b.aborted == 0
+                    && b.flags == flags
+                    && !reaches_software(d.frame.id)
+                    && given(b, &d, &bus, nodes[d.node]).0
+            });
+            let mut group = busy.clone();
+            if !group.contains(&d.node) {
+                group.push(d.node);
             }
-            for b in boards.iter().filter(|b| b.alive && b.index != k) {
-                horizon = horizon.min(b.next.unwrap_or(b.wants));
+            let horizon = limits.horizon(&boards, &group);
+            if own_waiting
+                && (group.len() == 1 || (steady && horizon < duration_us))
+                && horizon > d.end
+                && d.end >= t + QUANTUM_US
+            {
+                deliveries.pop_front();
+                if let Some(live) = live.as_deref_mut() {
+                    live.slcan.deliver(d.end, &d.frame);
+                }
+                now = Some(d);
+                boards[d.node].wants = t + QUANTUM_US;
+                busy = group;
             }
-            if live.is_some() {
-                horizon = horizon.min(t + LIVE_STEP_US);
-            }
-            if let Some(tick) = world.as_deref().and_then(WorldRun::next_tick) {
-                horizon = horizon.min(tick);
-            }
-            if horizon > t + QUANTUM_US {
+        }
+        let quiet = mailboxes_empty && deliveries.is_empty();
+        // Several boards with work, in the steady state (every module has released SYS_SYNC_N,
+        // nobody drives SYS_PD_N, no board is busy with a command, no world, not live): they are
+        // sent ahead together. The boards send sensor frames only, which no other board's filter
+        // passes, so one's report cannot concern another but through the bus, which the host runs
+        // after the reports. A line is driven in the steady state only by a shutdown, which a
+        // command starts (or PowerManagement's low battery): a line change or a command frame
+        // from a board sent ahead with others reaches them at their own next report, and a bus
+        // note says so.
+        if !end && quiet && (busy.len() == 1 || (busy.len() > 1 && steady)) {
+            let horizon = limits.horizon(&boards, &busy);
+            // A frame answered now completes before the boards' next boundary; boards sent ahead
+            // together report before the run's end.
+            if horizon > t + QUANTUM_US
+                && now.is_none_or(|d| d.end < horizon)
+                && (busy.len() == 1 || horizon < duration_us)
+            {
                 next = horizon;
-                ahead = Some((k, t));
+                ahead = busy.clone();
+                from = t;
             }
         }
         // Answers: every board at this boundary that wants the next one gets what is due; one
@@ -496,7 +571,7 @@ pub fn run_in_world(
             if !b.alive || b.next.is_some() {
                 continue;
             }
-            let sent_ahead = ahead.is_some_and(|(a, _)| a == k);
+            let sent_ahead = ahead.contains(&k);
             if b.at == t && (b.wants <= next || end || sent_ahead) {
                 let mut answer = Down {
                     next_us: next - b.offset,
@@ -514,6 +589,7 @@ pub fn run_in_world(
                 if let Some(d) = now {
                     let (own, heard) = given(b, &d, &bus, node);
                     if own || heard {
+                        b.commanded |= heard && reaches_software(d.frame.id);
                         answer.flags |= DOWN_FRAME | if own { DOWN_OWN } else { 0 };
                         answer.at_us = d.end.saturating_sub(b.offset);
                         answer.mailbox = d.mailbox as u8;
@@ -528,7 +604,7 @@ pub fn run_in_world(
                     .as_deref_mut()
                     .and_then(|w| w.readings_for(k, t, b.offset));
                 b.send_with(&answer, readings)?;
-            } else if b.at < t && b.wants == next && ahead.is_none() {
+            } else if b.at < t && b.wants == next && ahead.is_empty() {
                 let on = Down {
                     next_us: next - b.offset,
                     flags: b.flags,
@@ -584,6 +660,34 @@ pub fn run_in_world(
     Ok(outcome)
 }
 
+/// What bounds how far ahead a board may be sent, besides the other boards.
+struct Limits {
+    /// The run's last boundary.
+    end: u64,
+    /// The boundary the next stimulus action is taken at.
+    action: Option<u64>,
+    /// A live run's longest step from here.
+    live: Option<u64>,
+    /// The world's next controller tick.
+    tick: Option<u64>,
+}
+
+impl Limits {
+    /// The latest boundary the boards `group` may run to without the others: nothing reaches
+    /// them from elsewhere before.
+    fn horizon(&self, boards: &[Board], group: &[usize]) -> u64 {
+        let others = boards
+            .iter()
+            .filter(|b| b.alive && !group.contains(&b.index))
+            .map(|b| b.next.unwrap_or(b.wants));
+        [self.action, self.live, self.tick]
+            .into_iter()
+            .flatten()
+            .chain(others)
+            .fold(self.end, u64::min)
+    }
+}
+
 /// The first boundary after `a` (where an action at `a` is taken).
 fn after(a: u64) -> u64 {
     (a / QUANTUM_US + 1) * QUANTUM_US
@@ -607,6 +711,21 @@ fn exchange(
     limit: Duration,
     work: &mut Work,
 ) -> Result<u64> {
+    let (t, report) = match b.held.take() {
+        Some(held) => held,
+        None => take_report(b, within, limit, work)?,
+    };
+    apply(b, t, report, bus, nodes, notes);
+    Ok(t)
+}
+
+/// Waits for board `b`'s report at one of the boundaries `within` (the last, if its run ended).
+fn take_report(
+    b: &mut Board,
+    within: std::ops::RangeInclusive<u64>,
+    limit: Duration,
+    work: &mut Work,
+) -> Result<(u64, Option<Up>)> {
     let waited = Instant::now();
     let report = b.receive(waited, limit)?;
     work.waiting_us += waited.elapsed().as_micros() as u64;
@@ -626,6 +745,18 @@ fn exchange(
     if let Some(n) = work.per_board.get_mut(b.index) {
         *n += 1;
     }
+    Ok((t, report))
+}
+
+/// Takes board `b`'s report at boundary `t` (`None`: its run ended).
+fn apply(
+    b: &mut Board,
+    t: u64,
+    report: Option<Up>,
+    bus: &mut Bus,
+    nodes: &[NodeId],
+    notes: &mut Vec<String>,
+) {
     b.at = t;
     b.next = None;
     let Some(report) = report else {
@@ -639,7 +770,7 @@ fn exchange(
             stamp(t),
             NODES[b.index]
         ));
-        return Ok(t);
+        return;
     };
     b.drives = report.drives;
     b.aborts = report.aborts & 0b111;
@@ -647,6 +778,8 @@ fn exchange(
         u32::MAX => u64::MAX,
         us => t.saturating_add(u64::from(us)),
     };
+    // A board that sleeps has done what a command asked of it.
+    b.commanded &= b.wakes_at <= t;
     for q in report.queued() {
         let queued = q.at_us + b.offset;
         if let Some(slot) = b.released.get_mut(usize::from(q.mailbox)) {
@@ -669,5 +802,50 @@ fn exchange(
             ));
         }
     }
-    Ok(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn boards() -> Vec<Board> {
+        (0..3)
+            .map(|k| {
+                let firmware = Firmware {
+                    elf: "none.elf".into(),
+                    machine: "netduino2",
+                };
+                let mut b = Board::new(k, firmware, format!("board-{k}").into(), false);
+                b.alive = true;
+                b
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_horizon_is_the_earliest_boundary_outside_the_group() {
+        let limits = Limits {
+            end: 10_000,
+            action: None,
+            live: None,
+            tick: None,
+        };
+        let mut b = boards();
+        b[0].wants = 400;
+        b[1].next = Some(800);
+        b[2].wants = 1_200;
+        // Board 0 alone runs to board 1's next boundary; with board 1, to board 2's deadline.
+        assert_eq!(limits.horizon(&b, &[0]), 800);
+        assert_eq!(limits.horizon(&b, &[0, 1]), 1_200);
+        assert_eq!(limits.horizon(&b, &[0, 1, 2]), 10_000);
+        // A board that has ended bounds nothing; a stimulus action, a live step or a tick does.
+        b[2].alive = false;
+        assert_eq!(limits.horizon(&b, &[0, 1]), 10_000);
+        let sooner = Limits {
+            action: Some(2_000),
+            tick: Some(1_600),
+            ..limits
+        };
+        assert_eq!(sooner.horizon(&b, &[0, 1]), 1_600);
+    }
 }

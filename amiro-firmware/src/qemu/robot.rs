@@ -6,7 +6,9 @@
 //! a stimulus: it hands over the frames it put into its three mailboxes since the last exchange
 //! (with the time it queued them) and what it drives on the system lines, and gets back the one
 //! frame, if any, that completes on the bus in the coming quantum (a frame needs at least 44 bit
-//! times, so no two complete within 40 µs) and the levels of SYS_SYNC_N and SYS_PD_N. The read
+//! times, so no two complete within 40 µs; the board's own frame, which the host may answer when it
+//! starts, possibly later: the board keeps it until its time) and the levels of SYS_SYNC_N and
+//! SYS_PD_N. The read
 //! blocks, and a blocked QEMU's virtual clock stands still, so no board runs ahead of the others.
 //!
 //! The mailboxes, the receive FIFO and the filter are the bxCAN model's under the robot's driver
@@ -221,17 +223,34 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
     let mut boundary = 0;
     let mut pd_seen = false;
     let mut early = false;
+    // The frame of the last answer, delivered at its completion time: before the next boundary,
+    // or (the host answered its own frame's completion ahead, docs/qemu.md) after an earlier
+    // report if the board has something to report before it completes.
+    let mut pending: Option<Down> = None;
     loop {
         boundary += QUANTUM_US;
-        if early {
-            // Sent ahead: back at the first boundary after something to report.
-            wait_until_or_report(boundary).await;
-            if TO_REPORT.load(Ordering::SeqCst) {
-                let first = (super::now_us() / QUANTUM_US + 1) * QUANTUM_US;
-                boundary = boundary.min(first);
+        loop {
+            let deliver_at = pending.map(|p| p.at_us).filter(|&at| at < boundary);
+            let until = deliver_at.unwrap_or(boundary);
+            if early && !TO_REPORT.load(Ordering::SeqCst) {
+                // Sent ahead: back at the first boundary after something to report.
+                wait_until_or_report(until).await;
+                if TO_REPORT.load(Ordering::SeqCst) {
+                    let first = (super::now_us() / QUANTUM_US + 1) * QUANTUM_US;
+                    boundary = boundary.min(first);
+                    continue;
+                }
+            } else {
+                wait_until(until).await;
+            }
+            match (deliver_at, pending.take()) {
+                (Some(_), Some(answer)) => deliver(&answer, rx_irq),
+                (_, kept) => {
+                    pending = kept;
+                    break;
+                }
             }
         }
-        wait_until(boundary).await;
         TO_REPORT.store(false, Ordering::SeqCst);
         let mut report = Up {
             now_us: super::now_us(),
@@ -240,7 +259,11 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         };
         super::can::report(&mut report);
         report.drives = DRIVES.load(Ordering::SeqCst);
-        report.sleeps_us = sleeps_for();
+        // A frame still to be delivered wakes the board at its completion time.
+        let delivery = pending.map_or(u32::MAX, |p| {
+            u32::try_from(p.at_us.saturating_sub(report.now_us)).unwrap_or(u32::MAX - 1)
+        });
+        report.sleeps_us = sleeps_for().min(delivery);
         let wheels = world_wheels(report.now_us);
         if wheels.is_some() {
             report.flags |= UP_WHEELS;
@@ -273,15 +296,23 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         if answer.aborted != 0 {
             super::can::aborts_done(answer.aborted);
         }
-        if flags & DOWN_FRAME == 0 {
-            continue;
+        if flags & DOWN_FRAME != 0 {
+            // One frame completes at a time on the bus: one still held is due before this one.
+            if let Some(held) = pending.replace(answer) {
+                deliver(&held, rx_irq);
+            }
         }
-        wait_until(answer.at_us).await;
-        if flags & DOWN_OWN != 0 {
-            super::can::own_frame_sent(answer.mailbox);
-        } else {
-            super::can::bus_frame(answer.id, answer.len, answer.data, rx_irq);
-        }
+    }
+}
+
+/// Delivers the answer's frame at its completion time (now): the board's own frame's mailbox
+/// completes (the register model raises the transmit interrupt), another node's frame goes to the
+/// model's receive side, through the filter `configure` set.
+fn deliver(answer: &Down, rx_irq: impl InterruptNumber) {
+    if answer.flags & DOWN_OWN != 0 {
+        super::can::own_frame_sent(answer.mailbox);
+    } else {
+        super::can::bus_frame(answer.id, answer.len, answer.data, rx_irq);
     }
 }
 
