@@ -27,6 +27,7 @@ mod id;
 mod message;
 mod payload;
 pub mod signals;
+pub mod timing;
 mod topic;
 mod wire;
 
