@@ -24,6 +24,8 @@ use cortex_m_semihosting::{debug, hprintln, syscall};
 use critical_section::Mutex;
 use heapless::Deque;
 
+use amiro_trace::stimulus;
+
 use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
 use crate::signals::SystemSignals;
 
@@ -253,9 +255,6 @@ impl SystemSignals for Signals {
     fn clear_shutdown_interrupt(&mut self) {}
 }
 
-/// A stimulus record's size: `u64` µs, `u16` ID, `u8` length, `u8` flags, 8 data bytes.
-const RECORD: usize = 20;
-
 /// Replays `stimulus.bin` from the host into the virtual receive FIFO (pending the board's CAN
 /// receive interrupt `rx_irq`, and `shutdown_irq` for a SYS_PD_N record), then ends the run.
 /// In a robot run the board trades with the host's bus instead ([`robot`]). It waits for each
@@ -275,33 +274,43 @@ pub async fn replay_stimulus<W: core::future::Future<Output = ()>>(
         exit(false);
         return;
     };
-    let mut header = [0u8; 16];
-    if !file.read_exact(&mut header) || &header[..8] != b"AMSTIM1\0" {
-        hprintln!("# qemu: stimulus.bin has no AMSTIM1 header");
-        exit(false);
-        return;
-    }
-    let duration = le_u64(&header[8..16]);
-    let mut record = [0u8; RECORD];
-    while file.read_exact(&mut record) {
-        let at = le_u64(&record[0..8]);
-        if at > duration {
+    // The records are `amiro_trace::stimulus`'s, which the host encodes.
+    let mut header = [0u8; stimulus::HEADER_LEN];
+    let decoded = if file.read_exact(&mut header) {
+        stimulus::decode_header(&header)
+    } else {
+        Err(stimulus::StimulusError::NoHeader)
+    };
+    let duration = match decoded {
+        Ok(duration) => duration,
+        Err(e) => {
+            hprintln!("# qemu: stimulus.bin: {}", e);
+            exit(false);
+            return;
+        }
+    };
+    let mut bytes = [0u8; stimulus::RECORD_LEN];
+    while file.read_exact(&mut bytes) {
+        let record = match stimulus::Record::decode(&bytes) {
+            Ok(record) => record,
+            Err(e) => {
+                hprintln!("# qemu: stimulus.bin: {}", e);
+                exit(false);
+                return;
+            }
+        };
+        if record.at_us > duration {
             break;
         }
-        delay_until_us(at).await;
-        if record[11] & 2 != 0 {
-            // SYS_PD_N falls: the same interrupt the real pin raises.
-            SYS_PD_LOW.store(true, Ordering::SeqCst);
-            cortex_m::peripheral::NVIC::pend(shutdown_irq);
-            continue;
+        delay_until_us(record.at_us).await;
+        match record.event {
+            stimulus::Event::ShutdownRequest => {
+                // SYS_PD_N falls: the same interrupt the real pin raises.
+                SYS_PD_LOW.store(true, Ordering::SeqCst);
+                cortex_m::peripheral::NVIC::pend(shutdown_irq);
+            }
+            stimulus::Event::Frame { id, len, data } => deliver(RxFrame { id, len, data }, rx_irq),
         }
-        let mut frame = RxFrame {
-            id: u16::from_le_bytes([record[8], record[9]]),
-            len: record[10].min(8),
-            data: [0; 8],
-        };
-        frame.data.copy_from_slice(&record[12..20]);
-        deliver(frame, rx_irq);
     }
     delay_until_us(duration).await;
     finish("end of run");
@@ -315,12 +324,6 @@ fn deliver(frame: RxFrame, rx_irq: impl InterruptNumber) {
         }
     });
     cortex_m::peripheral::NVIC::pend(rx_irq);
-}
-
-fn le_u64(bytes: &[u8]) -> u64 {
-    let mut b = [0u8; 8];
-    b.copy_from_slice(&bytes[..8]);
-    u64::from_le_bytes(b)
 }
 
 /// Prints the run's last line (receive losses, static RAM, the stack's high-water mark) and ends

@@ -91,28 +91,23 @@ pub fn parse_log_line(line: &str) -> Result<Option<TimedFrame>> {
     Ok(Some(TimedFrame { at_us, id, data }))
 }
 
-/// Encodes a stimulus for the firmware.
+/// Encodes a stimulus for the firmware (`amiro_trace::stimulus`'s header and records).
 pub fn encode_stimulus(frames: &[TimedFrame], duration_us: u64) -> Vec<u8> {
-    let mut out = Vec::with_capacity(16 + 20 * frames.len());
-    out.extend_from_slice(b"AMSTIM1\0");
-    out.extend_from_slice(&duration_us.to_le_bytes());
+    use amiro_trace::stimulus::{encode_header, Event, Record};
+    let mut out = encode_header(duration_us).to_vec();
     for f in frames {
-        out.extend_from_slice(&f.at_us.to_le_bytes());
-        // Flags: bit 0 = a frame the protocol cannot carry (extended ID), bit 1 = SYS_PD_N falls.
-        let (id, flags) = if f.id == SIGNAL_SYS_PD_N {
-            (0xFFFF, 2u8)
-        } else if f.id <= 0x7FF {
-            (f.id as u16, 0u8)
+        let event = if f.id == SIGNAL_SYS_PD_N {
+            Event::ShutdownRequest
         } else {
-            (0xFFFF, 1u8)
+            Event::frame(f.id, &f.data)
         };
-        out.extend_from_slice(&id.to_le_bytes());
-        out.push(f.data.len().min(255) as u8);
-        out.push(flags);
-        let mut data = [0u8; 8];
-        let n = f.data.len().min(8);
-        data[..n].copy_from_slice(&f.data[..n]);
-        out.extend_from_slice(&data);
+        out.extend_from_slice(
+            &Record {
+                at_us: f.at_us,
+                event,
+            }
+            .encode(),
+        );
     }
     out
 }
@@ -266,22 +261,21 @@ mod tests {
             },
             TimedFrame {
                 at_us: 6,
-                id: 0x1234_5678,
+                id: SIGNAL_SYS_PD_N,
                 data: vec![],
             },
         ];
         let bin = encode_stimulus(&frames, 2_000_000);
-        assert_eq!(bin.len(), 16 + 40);
-        assert_eq!(&bin[..8], b"AMSTIM1\0");
+        let (duration, records) = amiro_trace::stimulus::decode(&bin).unwrap();
+        assert_eq!(duration, 2_000_000);
+        let events: Vec<_> = records.map(|r| r.unwrap().event).collect();
         assert_eq!(
-            u64::from_le_bytes(bin[8..16].try_into().unwrap()),
-            2_000_000
+            events,
+            [
+                amiro_trace::stimulus::Event::frame(0x205, &[1, 2]),
+                amiro_trace::stimulus::Event::ShutdownRequest
+            ]
         );
-        assert_eq!(
-            &bin[16..30],
-            &[5, 0, 0, 0, 0, 0, 0, 0, 0x05, 0x02, 2, 0, 1, 2]
-        );
-        assert_eq!(&bin[44..48], &[0xFF, 0xFF, 0, 1]);
     }
 
     #[test]
