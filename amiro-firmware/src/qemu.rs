@@ -148,41 +148,14 @@ impl CanTx for CanTxPort {
             }
             return Transmit::Busy;
         }
-        // `(s.micros) can0 ID#DATA`, digits by hand: the robot's mailbox write costs a few
-        // instructions, and the emulated transmit task should not cost core::fmt's thousands.
-        const HEX: &[u8; 16] = b"0123456789ABCDEF";
-        let mut line = [0u8; 64];
-        let now = now_us();
-        let mut at = 0;
-        let mut put = |b: u8| {
-            line[at] = b;
-            at += 1;
-        };
-        put(b'(');
-        // One 64-bit division; the digits from 32-bit ones (the M3/M4 divide those in hardware).
-        let seconds = now / 1_000_000;
-        let micros = (now - seconds * 1_000_000) as u32;
-        let mut digits = [0u8; 10];
-        let seconds =
-            crate::digits::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
-        seconds.bytes().for_each(&mut put);
-        put(b'.');
-        let mut scale = 100_000;
-        while scale > 0 {
-            put(b'0' + ((micros / scale) % 10) as u8);
-            scale /= 10;
-        }
-        b") can0 ".iter().for_each(|&b| put(b));
-        let id = frame.id().raw();
-        for shift in [8, 4, 0] {
-            put(HEX[usize::from((id >> shift) & 15)]);
-        }
-        put(b'#');
-        for &b in frame.data() {
-            put(HEX[usize::from(b >> 4)]);
-            put(HEX[usize::from(b & 15)]);
-        }
-        put(b'\n');
+        // `(s.micros) can0 ID#DATA`, `amiro_can::candump`'s encoder: digits by hand, so the
+        // emulated transmit task does not cost core::fmt's thousands of instructions.
+        use amiro_can::candump::{encode_log_line, FrameId, RawFrame, Timestamp, MAX_LOG_LINE};
+        let mut line = [0u8; MAX_LOG_LINE];
+        let at = RawFrame::data_frame(FrameId::Standard(frame.id().raw()), frame.data())
+            .map_or(0, |raw| {
+                encode_log_line(Timestamp::from_micros(now_us()), "can0", &raw, &mut line)
+            });
         if let Ok(mut out) = cortex_m_semihosting::hio::hstdout() {
             let _ = out.write_all(&line[..at]);
         }

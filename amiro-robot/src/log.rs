@@ -23,72 +23,47 @@ pub struct TimedFrame {
     pub data: Vec<u8>,
 }
 
-/// Parses a `candump -l` line: `(seconds.micros) iface ID#DATA`. Blank lines and `#` comments give `None`.
+/// Parses a `candump -l` line `(seconds.micros) iface ID#DATA` (`amiro_can::candump`'s decoder), or
+/// a stimulus's `(seconds.micros) signal SYS_PD_N`. Blank lines and `#` comments give `None`.
 pub fn parse_log_line(line: &str) -> Result<Option<TimedFrame>> {
-    let line = line.trim();
-    if line.is_empty() || line.starts_with('#') {
-        return Ok(None);
-    }
-    let rest = line
-        .strip_prefix('(')
-        .with_context(|| format!("`{line}`: expected `(seconds.micros)`"))?;
-    let (stamp, rest) = rest
-        .split_once(')')
-        .with_context(|| format!("`{line}`: unclosed timestamp"))?;
-    let (secs, micros) = stamp
-        .split_once('.')
-        .with_context(|| format!("`{line}`: timestamp needs a fraction"))?;
-    let secs: u64 = secs
-        .trim()
-        .parse()
-        .with_context(|| format!("`{line}`: bad seconds"))?;
-    if micros.len() != 6 {
-        bail!("`{line}`: the fraction must have six digits (microseconds)");
-    }
-    let micros: u64 = micros
-        .parse()
-        .with_context(|| format!("`{line}`: bad microseconds"))?;
-    let mut fields = rest.split_whitespace();
-    let iface = fields
-        .next()
-        .with_context(|| format!("`{line}`: missing interface"))?;
-    let frame = fields
-        .next()
-        .with_context(|| format!("`{line}`: missing frame"))?;
-    let at_us = secs
-        .checked_mul(1_000_000)
-        .and_then(|us| us.checked_add(micros))
-        .with_context(|| format!("`{line}`: timestamp beyond u64 microseconds"))?;
+    use amiro_can::candump;
+    let fail = |e: candump::CandumpError<'_>| anyhow::anyhow!("`{}`: {e}", line.trim());
+    let mut fields = line.split_whitespace();
     // Not a frame: a system signal for the board (`(t) signal SYS_PD_N`), stimulus only.
-    if iface == "signal" {
-        if frame != "SYS_PD_N" {
-            bail!("`{line}`: the only signal is SYS_PD_N (a shutdown request)");
+    if let (Some(stamp), Some("signal")) = (fields.next(), fields.next()) {
+        if fields.next() != Some("SYS_PD_N") || fields.next().is_some() {
+            bail!(
+                "`{}`: the only signal is SYS_PD_N (a shutdown request)",
+                line.trim()
+            );
         }
         return Ok(Some(TimedFrame {
-            at_us,
+            at_us: micros_of(candump::parse_timestamp(stamp).map_err(fail)?, line)?,
             id: SIGNAL_SYS_PD_N,
             data: Vec::new(),
         }));
     }
-    let (id, data) = frame
-        .split_once('#')
-        .with_context(|| format!("`{line}`: frame needs `ID#DATA`"))?;
-    let id = u32::from_str_radix(id, 16).with_context(|| format!("`{line}`: bad ID"))?;
-    if !data.is_ascii() {
-        bail!("`{line}`: identifier and data must be hex digits");
+    let Some(logged) = candump::parse_log_line(line).map_err(fail)? else {
+        return Ok(None);
+    };
+    if logged.frame.is_remote() {
+        bail!(
+            "`{}`: a stimulus carries data frames, not remote frames",
+            line.trim()
+        );
     }
-    if data.len() % 2 != 0 {
-        bail!("`{line}`: odd number of hex digits in data");
-    }
-    let data = (0..data.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(&data[i..i + 2], 16))
-        .collect::<Result<Vec<u8>, _>>()
-        .with_context(|| format!("`{line}`: bad data"))?;
-    if data.len() > 8 {
-        bail!("`{line}`: a CAN frame carries at most 8 bytes");
-    }
-    Ok(Some(TimedFrame { at_us, id, data }))
+    Ok(Some(TimedFrame {
+        at_us: micros_of(logged.timestamp, line)?,
+        id: logged.frame.id().raw(),
+        data: logged.frame.data().to_vec(),
+    }))
+}
+
+/// A log line's timestamp in µs; beyond a `u64` count is an error.
+pub fn micros_of(stamp: amiro_can::candump::Timestamp, line: &str) -> Result<u64> {
+    stamp
+        .checked_micros()
+        .with_context(|| format!("`{}`: timestamp beyond u64 microseconds", line.trim()))
 }
 
 /// Encodes a stimulus for the firmware (`amiro_trace::stimulus`'s header and records).
@@ -242,8 +217,21 @@ mod tests {
                 .at_us,
             1_000_001
         );
-        assert!(parse_log_line("(0.01) can0 205#01").is_err());
+        // A short fraction is a decimal fraction of a second (as python-can reads it).
+        assert_eq!(
+            parse_log_line("(0.01) can0 205#01").unwrap().unwrap().at_us,
+            10_000
+        );
         assert!(parse_log_line("205#01").is_err());
+        assert!(parse_log_line("(0.000000) can0 205#R").is_err());
+        assert!(parse_log_line("(0.000000) signal SYS_SYNC_N").is_err());
+        assert_eq!(
+            parse_log_line("(0.000002) signal SYS_PD_N")
+                .unwrap()
+                .unwrap()
+                .id,
+            SIGNAL_SYS_PD_N
+        );
         assert!(parse_log_line("(0.000000) can0 205#0").is_err());
         // Hostile input is an error, never a panic.
         assert!(parse_log_line("(18446744073710.000000) can0 205#01").is_err());
