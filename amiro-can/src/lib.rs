@@ -22,6 +22,7 @@
 pub mod candump;
 mod command;
 mod diagnostics;
+pub mod duration;
 mod error;
 mod frame;
 mod id;

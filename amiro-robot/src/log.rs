@@ -87,23 +87,12 @@ pub fn encode_stimulus(frames: &[TimedFrame], duration_us: u64) -> Vec<u8> {
     out
 }
 
-/// Parses a duration like `2s`, `1500ms` or `900us`.
+/// Parses a duration like `2s`, `1500ms`, `900us` or `1.5s` into µs (`amiro_can::duration`'s decoder,
+/// the operator tool's too).
 pub fn parse_duration(text: &str) -> Result<u64> {
-    let (digits, scale) = if let Some(d) = text.strip_suffix("us") {
-        (d, 1)
-    } else if let Some(d) = text.strip_suffix("ms") {
-        (d, 1_000)
-    } else if let Some(d) = text.strip_suffix('s') {
-        (d, 1_000_000)
-    } else {
-        bail!("duration `{text}` needs a unit: us, ms or s")
-    };
-    let value: u64 = digits
-        .parse()
-        .with_context(|| format!("bad duration `{text}`"))?;
-    value
-        .checked_mul(scale)
-        .with_context(|| format!("duration `{text}` too long"))
+    amiro_can::duration::parse(text)
+        .map(|(micros, _)| micros)
+        .map_err(|e| anyhow::anyhow!("duration: {e}"))
 }
 
 /// Reads a stimulus log file.
@@ -271,6 +260,8 @@ mod tests {
         assert_eq!(parse_duration("2s").unwrap(), 2_000_000);
         assert_eq!(parse_duration("1500ms").unwrap(), 1_500_000);
         assert_eq!(parse_duration("900us").unwrap(), 900);
+        assert_eq!(parse_duration("1.5s").unwrap(), 1_500_000);
         assert!(parse_duration("2").is_err());
+        assert!(parse_duration("2h").is_err());
     }
 }
