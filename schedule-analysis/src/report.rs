@@ -1123,7 +1123,7 @@ fn svg_header(report: &Report, height: f64, s: &mut String) {
 fn svg_row(bar: &Bar, row: usize, y: f64, scale: Scale, s: &mut String) {
     let x_of = |ratio: f64| scale.x_of(ratio);
     let scale_max = scale.max;
-    if row % 2 == 0 {
+    if row.is_multiple_of(2) {
         let _ = writeln!(
             s,
             r##"<rect x="{LABEL_X}" y="{y}" width="{}" height="{ROW_H}" fill="#f4f6f8"/>"##,
