@@ -13,6 +13,8 @@
 //! `0xFFFF`, which the boards' decoder rejects as it must), bit 1 a SYS_PD_N shutdown request (no
 //! frame). Records come in time order; those after the duration are not replayed.
 
+use crate::robot_link::le_u64;
+
 /// The header's first eight bytes.
 pub const MAGIC: [u8; 8] = *b"AMSTIM1\0";
 /// The header's size.
@@ -188,12 +190,6 @@ impl Iterator for Records<'_> {
         self.0 = rest;
         Some(Record::decode(record))
     }
-}
-
-fn le_u64(bytes: &[u8]) -> u64 {
-    let mut b = [0u8; 8];
-    b.copy_from_slice(&bytes[..8]);
-    u64::from_le_bytes(b)
 }
 
 #[cfg(test)]
