@@ -408,15 +408,21 @@ pub fn parse_id(text: &str) -> Result<FrameId, CandumpError<'_>> {
     }
 }
 
-/// Parses a `(seconds.fraction)` token; the fraction is decimal (a short one is padded, digits past
-/// the sixth are dropped), and may be absent.
+/// Parses a `(seconds.fraction)` token ([`parse_seconds`] inside the parentheses).
 pub fn parse_timestamp(token: &str) -> Result<Timestamp, CandumpError<'_>> {
-    let bad = CandumpError::BadTimestamp(token);
-    let inner = token
+    token
         .strip_prefix('(')
         .and_then(|t| t.strip_suffix(')'))
-        .ok_or(bad)?;
-    let (secs_text, fraction) = inner.split_once('.').unwrap_or((inner, ""));
+        .and_then(|inner| parse_seconds(inner).ok())
+        .ok_or(CandumpError::BadTimestamp(token))
+}
+
+/// Parses `seconds.fraction` (a timestamp without its parentheses, as trace lines print a release):
+/// the fraction is decimal (a short one is padded, digits past the sixth are dropped) and may be
+/// absent.
+pub fn parse_seconds(text: &str) -> Result<Timestamp, CandumpError<'_>> {
+    let bad = CandumpError::BadTimestamp(text);
+    let (secs_text, fraction) = text.split_once('.').unwrap_or((text, ""));
     if secs_text.is_empty()
         || !secs_text.bytes().all(|c| c.is_ascii_digit())
         || !fraction.bytes().all(|c| c.is_ascii_digit())

@@ -101,7 +101,7 @@ fn since(origin: Timestamp, at: Timestamp) -> u64 {
 
 /// `12.345678`: seconds with six decimals.
 pub fn seconds(micros: u64) -> String {
-    format!("{}.{:06}", micros / 1_000_000, micros % 1_000_000)
+    Timestamp::from_micros(micros).to_string()
 }
 
 /// Formats frames for people or programs.
