@@ -194,9 +194,11 @@ pub struct Timestamp {
 impl Timestamp {
     /// A timestamp `micros` microseconds after its origin.
     pub const fn from_micros(micros: u64) -> Self {
+        // One 64-bit division (a library call on the boards' cores), the remainder by a multiply.
+        let secs = micros / 1_000_000;
         Self {
-            secs: micros / 1_000_000,
-            micros: (micros % 1_000_000) as u32,
+            secs,
+            micros: (micros - secs * 1_000_000) as u32,
         }
     }
 
@@ -502,10 +504,19 @@ impl<'a> Cursor<'a> {
         }
     }
 
+    /// `value` in decimal. Digits come from 32-bit divisions while the value fits 32 bits (the M3
+    /// and M4 divide those in hardware; a 64-bit division is a library call of hundreds of
+    /// instructions, and the emulated transmit task prints a line per frame).
     fn decimal(&mut self, value: u64) {
         let mut digits = [0u8; 20];
         let mut at = digits.len();
-        let mut rest = value;
+        let mut wide = value;
+        while wide > u64::from(u32::MAX) {
+            at -= 1;
+            digits[at] = b'0' + (wide % 10) as u8;
+            wide /= 10;
+        }
+        let mut rest = wide as u32;
         loop {
             at -= 1;
             digits[at] = b'0' + (rest % 10) as u8;
