@@ -17,13 +17,12 @@
 //! (only the board knows when it empties its FIFO).
 #![deny(missing_docs)]
 
-/// Bits from start of frame to the end of the CRC that bit stuffing applies to, without data.
-pub const STUFFABLE_BITS: u32 = 34;
-/// Bits after the CRC that are never stuffed, up to the end of frame: CRC delimiter, ACK slot, ACK
-/// delimiter, seven bits of end of frame.
-pub const TAIL_BITS: u32 = 10;
-/// The interframe space (intermission) every frame is followed by before the next may start.
-pub const INTERMISSION_BITS: u32 = 3;
+/// The frame layout's bit counts are the CAN protocol crate's (`amiro_can::timing`, which the
+/// schedule analysis counts with too): the stuffable bits of a standard frame without data, the
+/// never-stuffed tail up to the end of frame, the interframe space.
+pub use amiro_can::timing::{
+    INTERMISSION_BITS, STUFFABLE_BITS_STANDARD as STUFFABLE_BITS, TAIL_BITS,
+};
 /// The shortest frame from start of frame to its completion (end of frame): no data, no stuff bit.
 pub const MIN_FRAME_BITS: u32 = STUFFABLE_BITS + TAIL_BITS;
 /// An error flag (active or passive).

@@ -16,17 +16,21 @@
 //! assert_eq!(message, expected);
 //! assert_eq!(message.encode().data(), &[0x01, 0x84, 0x03, 0x02]);
 //! ```
-#![cfg_attr(not(test), no_std)]
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![deny(missing_docs)]
 
+pub mod candump;
 mod command;
 mod diagnostics;
+pub mod duration;
 mod error;
 mod frame;
 mod id;
 mod message;
 mod payload;
 pub mod signals;
+pub mod slcan;
+pub mod timing;
 mod topic;
 mod wire;
 

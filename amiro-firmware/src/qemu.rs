@@ -23,6 +23,8 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use cortex_m::interrupt::InterruptNumber;
 use cortex_m_semihosting::{debug, hprintln, syscall};
 
+use amiro_trace::stimulus;
+
 use crate::can::{CanRx, CanTx, Completion, RxEvent, Transmit};
 use crate::signals::SystemSignals;
 
@@ -145,41 +147,14 @@ impl CanTx for CanTxPort {
             }
             return Transmit::Busy;
         }
-        // `(s.micros) can0 ID#DATA`, digits by hand: the robot's mailbox write costs a few
-        // instructions, and the emulated transmit task should not cost core::fmt's thousands.
-        const HEX: &[u8; 16] = b"0123456789ABCDEF";
-        let mut line = [0u8; 64];
-        let now = now_us();
-        let mut at = 0;
-        let mut put = |b: u8| {
-            line[at] = b;
-            at += 1;
-        };
-        put(b'(');
-        // One 64-bit division; the digits from 32-bit ones (the M3/M4 divide those in hardware).
-        let seconds = now / 1_000_000;
-        let micros = (now - seconds * 1_000_000) as u32;
-        let mut digits = [0u8; 10];
-        let seconds =
-            crate::digits::decimal(u32::try_from(seconds).unwrap_or(u32::MAX), &mut digits);
-        seconds.bytes().for_each(&mut put);
-        put(b'.');
-        let mut scale = 100_000;
-        while scale > 0 {
-            put(b'0' + ((micros / scale) % 10) as u8);
-            scale /= 10;
-        }
-        b") can0 ".iter().for_each(|&b| put(b));
-        let id = frame.id().raw();
-        for shift in [8, 4, 0] {
-            put(HEX[usize::from((id >> shift) & 15)]);
-        }
-        put(b'#');
-        for &b in frame.data() {
-            put(HEX[usize::from(b >> 4)]);
-            put(HEX[usize::from(b & 15)]);
-        }
-        put(b'\n');
+        // `(s.micros) can0 ID#DATA`, `amiro_can::candump`'s encoder: digits by hand, so the
+        // emulated transmit task does not cost core::fmt's thousands of instructions.
+        use amiro_can::candump::{encode_log_line, FrameId, RawFrame, Timestamp, MAX_LOG_LINE};
+        let mut line = [0u8; MAX_LOG_LINE];
+        let at = RawFrame::data_frame(FrameId::Standard(frame.id().raw()), frame.data())
+            .map_or(0, |raw| {
+                encode_log_line(Timestamp::from_micros(now_us()), "can0", &raw, &mut line)
+            });
         console_write(&line[..at]);
         // On this bus a frame is acknowledged the moment it is offered: the frame line is its
         // acknowledgement (the host reads it from there; no second record costs the task time).
@@ -235,9 +210,6 @@ impl SystemSignals for Signals {
     fn clear_shutdown_interrupt(&mut self) {}
 }
 
-/// A stimulus record's size: `u64` µs, `u16` ID, `u8` length, `u8` flags, 8 data bytes.
-const RECORD: usize = 20;
-
 /// Replays `stimulus.bin` from the host into the receive FIFO (pending the board's CAN
 /// receive interrupt `rx_irq`, and `shutdown_irq` for a SYS_PD_N record), then ends the run.
 /// In a robot run the board trades with the host's bus instead ([`robot`]). It waits for each
@@ -257,40 +229,50 @@ pub async fn replay_stimulus<W: core::future::Future<Output = ()>>(
         exit(false);
         return;
     };
-    let mut header = [0u8; 16];
-    if !file.read_exact(&mut header) || &header[..8] != b"AMSTIM1\0" {
-        hprintln!("# qemu: stimulus.bin has no AMSTIM1 header");
-        exit(false);
-        return;
-    }
-    let duration = le_u64(&header[8..16]);
-    let mut record = [0u8; RECORD];
-    while file.read_exact(&mut record) {
-        let at = le_u64(&record[0..8]);
-        if at > duration {
+    // The records are `amiro_trace::stimulus`'s, which the host encodes.
+    let mut header = [0u8; stimulus::HEADER_LEN];
+    let decoded = if file.read_exact(&mut header) {
+        stimulus::decode_header(&header)
+    } else {
+        Err(stimulus::StimulusError::NoHeader)
+    };
+    let duration = match decoded {
+        Ok(duration) => duration,
+        Err(e) => {
+            hprintln!("# qemu: stimulus.bin: {}", e);
+            exit(false);
+            return;
+        }
+    };
+    let mut bytes = [0u8; stimulus::RECORD_LEN];
+    while file.read_exact(&mut bytes) {
+        let record = match stimulus::Record::decode(&bytes) {
+            Ok(record) => record,
+            Err(e) => {
+                hprintln!("# qemu: stimulus.bin: {}", e);
+                exit(false);
+                return;
+            }
+        };
+        if record.at_us > duration {
             break;
         }
-        delay_until_us(at).await;
-        if record[11] & 2 != 0 {
-            // SYS_PD_N falls: the same interrupt the real pin raises.
-            SYS_PD_LOW.store(true, Ordering::SeqCst);
-            cortex_m::peripheral::NVIC::pend(shutdown_irq);
-            continue;
+        delay_until_us(record.at_us).await;
+        match record.event {
+            stimulus::Event::ShutdownRequest => {
+                // SYS_PD_N falls: the same interrupt the real pin raises.
+                SYS_PD_LOW.store(true, Ordering::SeqCst);
+                cortex_m::peripheral::NVIC::pend(shutdown_irq);
+            }
+            stimulus::Event::Frame { id, len, data } => {
+                can::stimulus_frame(id, id == stimulus::UNCARRIED_ID, len, data, rx_irq)
+            }
         }
-        let mut data = [0; 8];
-        data.copy_from_slice(&record[12..20]);
-        let id = u16::from_le_bytes([record[8], record[9]]);
-        can::stimulus_frame(id, record[11] & 1 != 0, record[10], data, rx_irq);
     }
     delay_until_us(duration).await;
     finish("end of run");
 }
 
-fn le_u64(bytes: &[u8]) -> u64 {
-    let mut b = [0u8; 8];
-    b.copy_from_slice(&bytes[..8]);
-    u64::from_le_bytes(b)
-}
 
 /// Prints the run's last line (receive losses, static RAM, the stack's high-water mark) and ends
 /// the run successfully.

@@ -95,17 +95,18 @@ pub struct Outcome {
 
 /// Formats a completed frame as a `candump -l` line.
 pub fn candump_line(end: u64, frame: &Frame) -> String {
-    let data: String = frame.payload().iter().map(|b| format!("{b:02X}")).collect();
-    format!(
-        "({}.{:06}) can0 {:03X}#{data}",
-        end / 1_000_000,
-        end % 1_000_000,
-        frame.id
-    )
+    use amiro_can::candump::{encode_log_line, FrameId, RawFrame, Timestamp, MAX_LOG_LINE};
+    let Some(raw) = RawFrame::data_frame(FrameId::Standard(frame.id), frame.payload()) else {
+        // The bus model's frames are standard data frames of at most 8 bytes.
+        return format!("# no frame: {frame:?}");
+    };
+    let mut out = [0u8; MAX_LOG_LINE];
+    let n = encode_log_line(Timestamp::from_micros(end), "can0", &raw, &mut out);
+    String::from_utf8_lossy(&out[..n.saturating_sub(1)]).into_owned()
 }
 
 pub(crate) fn stamp(t: u64) -> String {
-    format!("({}.{:06})", t / 1_000_000, t % 1_000_000)
+    format!("({})", amiro_can::candump::Timestamp::from_micros(t))
 }
 
 /// What the coordinator's output goes to as it is produced.

@@ -23,117 +23,76 @@ pub struct TimedFrame {
     pub data: Vec<u8>,
 }
 
-/// Parses a `candump -l` line: `(seconds.micros) iface ID#DATA`. Blank lines and `#` comments give `None`.
+/// Parses a `candump -l` line `(seconds.micros) iface ID#DATA` (`amiro_can::candump`'s decoder), or
+/// a stimulus's `(seconds.micros) signal SYS_PD_N`. Blank lines and `#` comments give `None`.
 pub fn parse_log_line(line: &str) -> Result<Option<TimedFrame>> {
-    let line = line.trim();
-    if line.is_empty() || line.starts_with('#') {
-        return Ok(None);
-    }
-    let rest = line
-        .strip_prefix('(')
-        .with_context(|| format!("`{line}`: expected `(seconds.micros)`"))?;
-    let (stamp, rest) = rest
-        .split_once(')')
-        .with_context(|| format!("`{line}`: unclosed timestamp"))?;
-    let (secs, micros) = stamp
-        .split_once('.')
-        .with_context(|| format!("`{line}`: timestamp needs a fraction"))?;
-    let secs: u64 = secs
-        .trim()
-        .parse()
-        .with_context(|| format!("`{line}`: bad seconds"))?;
-    if micros.len() != 6 {
-        bail!("`{line}`: the fraction must have six digits (microseconds)");
-    }
-    let micros: u64 = micros
-        .parse()
-        .with_context(|| format!("`{line}`: bad microseconds"))?;
-    let mut fields = rest.split_whitespace();
-    let iface = fields
-        .next()
-        .with_context(|| format!("`{line}`: missing interface"))?;
-    let frame = fields
-        .next()
-        .with_context(|| format!("`{line}`: missing frame"))?;
-    let at_us = secs
-        .checked_mul(1_000_000)
-        .and_then(|us| us.checked_add(micros))
-        .with_context(|| format!("`{line}`: timestamp beyond u64 microseconds"))?;
+    use amiro_can::candump;
+    let fail = |e: candump::CandumpError<'_>| anyhow::anyhow!("`{}`: {e}", line.trim());
+    let mut fields = line.split_whitespace();
     // Not a frame: a system signal for the board (`(t) signal SYS_PD_N`), stimulus only.
-    if iface == "signal" {
-        if frame != "SYS_PD_N" {
-            bail!("`{line}`: the only signal is SYS_PD_N (a shutdown request)");
+    if let (Some(stamp), Some("signal")) = (fields.next(), fields.next()) {
+        if fields.next() != Some("SYS_PD_N") || fields.next().is_some() {
+            bail!(
+                "`{}`: the only signal is SYS_PD_N (a shutdown request)",
+                line.trim()
+            );
         }
         return Ok(Some(TimedFrame {
-            at_us,
+            at_us: micros_of(candump::parse_timestamp(stamp).map_err(fail)?, line)?,
             id: SIGNAL_SYS_PD_N,
             data: Vec::new(),
         }));
     }
-    let (id, data) = frame
-        .split_once('#')
-        .with_context(|| format!("`{line}`: frame needs `ID#DATA`"))?;
-    let id = u32::from_str_radix(id, 16).with_context(|| format!("`{line}`: bad ID"))?;
-    if !data.is_ascii() {
-        bail!("`{line}`: identifier and data must be hex digits");
+    let Some(logged) = candump::parse_log_line(line).map_err(fail)? else {
+        return Ok(None);
+    };
+    if logged.frame.is_remote() {
+        bail!(
+            "`{}`: a stimulus carries data frames, not remote frames",
+            line.trim()
+        );
     }
-    if data.len() % 2 != 0 {
-        bail!("`{line}`: odd number of hex digits in data");
-    }
-    let data = (0..data.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(&data[i..i + 2], 16))
-        .collect::<Result<Vec<u8>, _>>()
-        .with_context(|| format!("`{line}`: bad data"))?;
-    if data.len() > 8 {
-        bail!("`{line}`: a CAN frame carries at most 8 bytes");
-    }
-    Ok(Some(TimedFrame { at_us, id, data }))
+    Ok(Some(TimedFrame {
+        at_us: micros_of(logged.timestamp, line)?,
+        id: logged.frame.id().raw(),
+        data: logged.frame.data().to_vec(),
+    }))
 }
 
-/// Encodes a stimulus for the firmware.
+/// A log line's timestamp in µs; beyond a `u64` count is an error.
+pub fn micros_of(stamp: amiro_can::candump::Timestamp, line: &str) -> Result<u64> {
+    stamp
+        .checked_micros()
+        .with_context(|| format!("`{}`: timestamp beyond u64 microseconds", line.trim()))
+}
+
+/// Encodes a stimulus for the firmware (`amiro_trace::stimulus`'s header and records).
 pub fn encode_stimulus(frames: &[TimedFrame], duration_us: u64) -> Vec<u8> {
-    let mut out = Vec::with_capacity(16 + 20 * frames.len());
-    out.extend_from_slice(b"AMSTIM1\0");
-    out.extend_from_slice(&duration_us.to_le_bytes());
+    use amiro_trace::stimulus::{encode_header, Event, Record};
+    let mut out = encode_header(duration_us).to_vec();
     for f in frames {
-        out.extend_from_slice(&f.at_us.to_le_bytes());
-        // Flags: bit 0 = a frame the protocol cannot carry (extended ID), bit 1 = SYS_PD_N falls.
-        let (id, flags) = if f.id == SIGNAL_SYS_PD_N {
-            (0xFFFF, 2u8)
-        } else if f.id <= 0x7FF {
-            (f.id as u16, 0u8)
+        let event = if f.id == SIGNAL_SYS_PD_N {
+            Event::ShutdownRequest
         } else {
-            (0xFFFF, 1u8)
+            Event::frame(f.id, &f.data)
         };
-        out.extend_from_slice(&id.to_le_bytes());
-        out.push(f.data.len().min(255) as u8);
-        out.push(flags);
-        let mut data = [0u8; 8];
-        let n = f.data.len().min(8);
-        data[..n].copy_from_slice(&f.data[..n]);
-        out.extend_from_slice(&data);
+        out.extend_from_slice(
+            &Record {
+                at_us: f.at_us,
+                event,
+            }
+            .encode(),
+        );
     }
     out
 }
 
-/// Parses a duration like `2s`, `1500ms` or `900us`.
+/// Parses a duration like `2s`, `1500ms`, `900us` or `1.5s` into µs (`amiro_can::duration`'s decoder,
+/// the operator tool's too).
 pub fn parse_duration(text: &str) -> Result<u64> {
-    let (digits, scale) = if let Some(d) = text.strip_suffix("us") {
-        (d, 1)
-    } else if let Some(d) = text.strip_suffix("ms") {
-        (d, 1_000)
-    } else if let Some(d) = text.strip_suffix('s') {
-        (d, 1_000_000)
-    } else {
-        bail!("duration `{text}` needs a unit: us, ms or s")
-    };
-    let value: u64 = digits
-        .parse()
-        .with_context(|| format!("bad duration `{text}`"))?;
-    value
-        .checked_mul(scale)
-        .with_context(|| format!("duration `{text}` too long"))
+    amiro_can::duration::parse(text)
+        .map(|(micros, _)| micros)
+        .map_err(|e| anyhow::anyhow!("duration: {e}"))
 }
 
 /// Reads a stimulus log file.
@@ -247,8 +206,21 @@ mod tests {
                 .at_us,
             1_000_001
         );
-        assert!(parse_log_line("(0.01) can0 205#01").is_err());
+        // A short fraction is a decimal fraction of a second (as python-can reads it).
+        assert_eq!(
+            parse_log_line("(0.01) can0 205#01").unwrap().unwrap().at_us,
+            10_000
+        );
         assert!(parse_log_line("205#01").is_err());
+        assert!(parse_log_line("(0.000000) can0 205#R").is_err());
+        assert!(parse_log_line("(0.000000) signal SYS_SYNC_N").is_err());
+        assert_eq!(
+            parse_log_line("(0.000002) signal SYS_PD_N")
+                .unwrap()
+                .unwrap()
+                .id,
+            SIGNAL_SYS_PD_N
+        );
         assert!(parse_log_line("(0.000000) can0 205#0").is_err());
         // Hostile input is an error, never a panic.
         assert!(parse_log_line("(18446744073710.000000) can0 205#01").is_err());
@@ -266,22 +238,21 @@ mod tests {
             },
             TimedFrame {
                 at_us: 6,
-                id: 0x1234_5678,
+                id: SIGNAL_SYS_PD_N,
                 data: vec![],
             },
         ];
         let bin = encode_stimulus(&frames, 2_000_000);
-        assert_eq!(bin.len(), 16 + 40);
-        assert_eq!(&bin[..8], b"AMSTIM1\0");
+        let (duration, records) = amiro_trace::stimulus::decode(&bin).unwrap();
+        assert_eq!(duration, 2_000_000);
+        let events: Vec<_> = records.map(|r| r.unwrap().event).collect();
         assert_eq!(
-            u64::from_le_bytes(bin[8..16].try_into().unwrap()),
-            2_000_000
+            events,
+            [
+                amiro_trace::stimulus::Event::frame(0x205, &[1, 2]),
+                amiro_trace::stimulus::Event::ShutdownRequest
+            ]
         );
-        assert_eq!(
-            &bin[16..30],
-            &[5, 0, 0, 0, 0, 0, 0, 0, 0x05, 0x02, 2, 0, 1, 2]
-        );
-        assert_eq!(&bin[44..48], &[0xFF, 0xFF, 0, 1]);
     }
 
     #[test]
@@ -289,6 +260,8 @@ mod tests {
         assert_eq!(parse_duration("2s").unwrap(), 2_000_000);
         assert_eq!(parse_duration("1500ms").unwrap(), 1_500_000);
         assert_eq!(parse_duration("900us").unwrap(), 900);
+        assert_eq!(parse_duration("1.5s").unwrap(), 1_500_000);
         assert!(parse_duration("2").is_err());
+        assert!(parse_duration("2h").is_err());
     }
 }

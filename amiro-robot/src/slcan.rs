@@ -131,7 +131,7 @@ impl Slcan {
             b'v' => self.reply(b"vAMiRo\r"),
             b'N' => self.reply(b"NA123\r"),
             b'F' => self.reply(b"F00\r"),
-            b't' if self.open => match parse_frame(rest) {
+            b't' if self.open => match parse_frame(command) {
                 Some(frame) => {
                     self.reply(b"z\r");
                     return Some(frame);
@@ -148,31 +148,28 @@ impl Slcan {
         if !self.open {
             return;
         }
-        let mut text = format!("t{:03X}{}", frame.id, frame.len);
-        for b in frame.payload() {
-            text.push_str(&format!("{b:02X}"));
-        }
-        if self.timestamps {
-            text.push_str(&format!("{:04X}", (end_us / 1000) % 60_000));
-        }
-        text.push('\r');
-        self.reply(text.as_bytes());
+        use amiro_can::candump::{FrameId, RawFrame};
+        use amiro_can::slcan::{encode_frame, MAX_FRAME_MESSAGE};
+        // The bus model's frames are standard data frames of at most 8 bytes.
+        let Some(raw) = RawFrame::data_frame(FrameId::Standard(frame.id), frame.payload()) else {
+            return;
+        };
+        let mut text = [0u8; MAX_FRAME_MESSAGE];
+        let stamp = self.timestamps.then_some(((end_us / 1000) % 60_000) as u16);
+        let n = encode_frame(&raw, stamp, &mut text);
+        self.reply(&text[..n]);
     }
 }
 
-/// `IIILDD…` of a standard frame.
-fn parse_frame(text: &[u8]) -> Option<Frame> {
-    let text = std::str::from_utf8(text).ok()?;
-    let id = u16::from_str_radix(text.get(..3)?, 16).ok()?;
-    let len = usize::from(text.as_bytes().get(3)?.checked_sub(b'0')?);
-    let data = text.get(4..4 + 2 * len)?;
-    if len > 8 || text.len() != 4 + 2 * len {
-        return None;
+/// A standard data frame the client sends (`tIIILDD…`, `amiro_can::slcan`'s decoder); `None` for
+/// anything the robot's bus does not carry or the decoder refuses.
+fn parse_frame(message: &[u8]) -> Option<Frame> {
+    use amiro_can::candump::FrameId;
+    let (frame, _) = amiro_can::slcan::decode_frame(message).ok()?;
+    match frame.id() {
+        FrameId::Standard(id) if !frame.is_remote() => Frame::new(id, frame.data()),
+        _ => None,
     }
-    let bytes: Option<Vec<u8>> = (0..len)
-        .map(|k| u8::from_str_radix(&data[2 * k..2 * k + 2], 16).ok())
-        .collect();
-    Frame::new(id, &bytes?)
 }
 
 #[cfg(test)]
@@ -181,15 +178,17 @@ mod tests {
 
     #[test]
     fn frames_and_refusals() {
-        assert_eq!(parse_frame(b"2054018403 02"), None);
+        assert_eq!(parse_frame(b"t2054018403 02"), None);
         assert_eq!(
-            parse_frame(b"205401840302"),
+            parse_frame(b"t205401840302"),
             Frame::new(0x205, &[1, 0x84, 3, 2])
         );
-        assert_eq!(parse_frame(b"6050"), Frame::new(0x605, &[]));
-        assert_eq!(parse_frame(b"8000"), None);
-        assert_eq!(parse_frame(b"20590000000000000000000"), None);
-        assert_eq!(parse_frame(b"2052011"), None);
+        assert_eq!(parse_frame(b"t6050"), Frame::new(0x605, &[]));
+        assert_eq!(parse_frame(b"t8000"), None);
+        assert_eq!(parse_frame(b"t20590000000000000000000"), None);
+        assert_eq!(parse_frame(b"t2052011"), None);
+        assert_eq!(parse_frame(b"r2050"), None);
+        assert_eq!(parse_frame(b"T000002050"), None);
     }
 
     #[test]

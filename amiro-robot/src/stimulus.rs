@@ -69,10 +69,9 @@ pub fn parse_line(line: &str) -> Result<Option<Timed>> {
     let verb = fields.next().unwrap_or_default();
     let object = fields.next();
     let at = |s: &str| -> Result<u64> {
-        // The timestamp's parsing is the single-board stimulus's (a frame line with a dummy frame).
-        Ok(qemu::parse_log_line(&format!("{s} can0 000#"))?
-            .with_context(|| format!("`{line}`: no timestamp"))?
-            .at_us)
+        let stamp =
+            amiro_can::candump::parse_timestamp(s).map_err(|e| anyhow::anyhow!("`{line}`: {e}"))?;
+        qemu::micros_of(stamp, line)
     };
     let action = match (verb, object) {
         ("signal", Some("SYS_PD_N")) => Action::PowerDown,
@@ -88,15 +87,18 @@ pub fn parse_line(line: &str) -> Result<Option<Timed>> {
             match fields.next() {
                 Some("off") => Action::Quiet(board),
                 Some(frame) => {
-                    let frame = qemu::parse_log_line(&format!("{stamp} can0 {frame}"))?
-                        .with_context(|| format!("`{line}`: no frame"))?;
-                    if frame.id > 0x7FF {
+                    let frame = amiro_can::candump::parse_compact(frame)
+                        .map_err(|e| anyhow::anyhow!("`{line}`: {e}"))?;
+                    let amiro_can::candump::FrameId::Standard(id) = frame.id() else {
                         bail!("`{line}`: the robot's bus carries 11-bit identifiers only");
+                    };
+                    if frame.is_remote() {
+                        bail!("`{line}`: the robot's bus carries no remote frames");
                     }
                     Action::Babble {
                         board,
-                        id: frame.id as u16,
-                        data: frame.data,
+                        id,
+                        data: frame.data().to_vec(),
                     }
                 }
                 None => bail!("`{line}`: babble BOARD ID#DATA or babble BOARD off"),
@@ -175,8 +177,15 @@ mod tests {
                 .action,
             Action::Reset(2)
         );
-        // The fraction needs six digits.
-        assert!(parse_line("(0.5) unplug diwheeldrive").is_err());
+        // A fraction is a decimal fraction of a second.
+        assert_eq!(
+            parse_line("(0.5) unplug diwheeldrive")
+                .unwrap()
+                .unwrap()
+                .at_us,
+            500_000
+        );
+        assert!(parse_line("(0.5x) unplug diwheeldrive").is_err());
         assert_eq!(
             parse_line("(0.100000) bit-error 605")
                 .unwrap()

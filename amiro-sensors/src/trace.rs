@@ -506,7 +506,8 @@ struct Seconds(u64);
 
 impl fmt::Display for Seconds {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}.{:06}", self.0 / 1_000_000, self.0 % 1_000_000)
+        // The timestamp's text is `amiro_can::candump`'s, which the log readers parse.
+        fmt::Display::fmt(&amiro_can::candump::Timestamp::from_micros(self.0), f)
     }
 }
 

@@ -33,6 +33,7 @@
 #![deny(missing_docs)]
 
 pub mod robot_link;
+pub mod stimulus;
 pub mod world_link;
 
 /// The record format's version (in every record's first byte).

@@ -181,8 +181,8 @@ pub fn json_record(
         record.insert("interface".into(), json!(interface));
     }
     record.insert("frame".into(), json!(logged.frame.to_string()));
-    record.insert("id".into(), json!(logged.frame.id_hex()));
-    record.insert("data".into(), json!(logged.frame.data_hex()));
+    record.insert("id".into(), json!(logged.frame.id_hex().to_string()));
+    record.insert("data".into(), json!(logged.frame.data_hex().to_string()));
     match decoded {
         Ok(message) => {
             record.insert("ok".into(), json!(true));

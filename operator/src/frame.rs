@@ -6,158 +6,10 @@
 
 use std::fmt;
 
-/// Largest standard (11-bit) identifier.
-const MAX_STANDARD_ID: u32 = 0x7FF;
-/// Largest extended (29-bit) identifier.
-const MAX_EXTENDED_ID: u32 = 0x1FFF_FFFF;
-
-/// A CAN identifier as it appears on the wire.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FrameId {
-    /// 11-bit base-format identifier: the only kind the AMiRo protocol uses.
-    Standard(u16),
-    /// 29-bit extended identifier.
-    Extended(u32),
-}
-
-/// One classic CAN frame (up to 8 data bytes), before anyone has decided what it means.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct RawFrame {
-    id: FrameId,
-    remote: bool,
-    len: u8,
-    data: [u8; 8],
-}
-
-impl RawFrame {
-    /// A data frame. `None` if the identifier is out of range or there are more than 8 bytes.
-    pub fn data_frame(id: FrameId, bytes: &[u8]) -> Option<Self> {
-        if !id_in_range(id) || bytes.len() > 8 {
-            return None;
-        }
-        let mut data = [0; 8];
-        data[..bytes.len()].copy_from_slice(bytes);
-        Some(Self {
-            id,
-            remote: false,
-            len: bytes.len() as u8,
-            data,
-        })
-    }
-
-    /// A remote (RTR) frame asking for `len` bytes. `None` if out of range.
-    pub fn remote_frame(id: FrameId, len: u8) -> Option<Self> {
-        if !id_in_range(id) || len > 8 {
-            return None;
-        }
-        Some(Self {
-            id,
-            remote: true,
-            len,
-            data: [0; 8],
-        })
-    }
-
-    /// The identifier.
-    pub fn id(&self) -> FrameId {
-        self.id
-    }
-
-    /// Whether this is a remote (RTR) frame, which carries a length but no data.
-    pub fn is_remote(&self) -> bool {
-        self.remote
-    }
-
-    /// The data length code.
-    pub fn len(&self) -> u8 {
-        self.len
-    }
-
-    /// Whether the data length code is zero.
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
-    }
-
-    /// The data bytes (empty for a remote frame).
-    pub fn data(&self) -> &[u8] {
-        if self.remote {
-            &[]
-        } else {
-            &self.data[..usize::from(self.len)]
-        }
-    }
-
-    /// The data bytes as uppercase hex without separators, as can-utils writes them.
-    pub fn data_hex(&self) -> String {
-        self.data().iter().map(|b| format!("{b:02X}")).collect()
-    }
-
-    /// The identifier as can-utils writes it: 3 hex digits (standard) or 8 (extended).
-    pub fn id_hex(&self) -> String {
-        match self.id {
-            FrameId::Standard(id) => format!("{id:03X}"),
-            FrameId::Extended(id) => format!("{id:08X}"),
-        }
-    }
-}
-
-fn id_in_range(id: FrameId) -> bool {
-    match id {
-        FrameId::Standard(id) => u32::from(id) <= MAX_STANDARD_ID,
-        FrameId::Extended(id) => id <= MAX_EXTENDED_ID,
-    }
-}
-
-/// can-utils compact form: `205#01840302`, `12345678#00`, `205#R`, `205#R4`.
-impl fmt::Display for RawFrame {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}#", self.id_hex())?;
-        if self.remote {
-            f.write_str("R")?;
-            if self.len > 0 {
-                write!(f, "{}", self.len)?;
-            }
-            Ok(())
-        } else {
-            f.write_str(&self.data_hex())
-        }
-    }
-}
-
-/// Seconds and microseconds, as candump writes `(1700000000.123456)`; kept as integers so nothing is rounded.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub struct Timestamp {
-    /// Whole seconds (since the epoch for `candump -l`, since the start for relative logs).
-    pub secs: u64,
-    /// Microseconds, 0..1_000_000.
-    pub micros: u32,
-}
-
-impl Timestamp {
-    /// The current wall-clock time.
-    pub fn now() -> Self {
-        let since_epoch = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap_or_default();
-        Self {
-            secs: since_epoch.as_secs(),
-            micros: since_epoch.subsec_micros(),
-        }
-    }
-
-    /// Microseconds since the timestamp's origin (saturating, far beyond any log's range).
-    pub fn as_micros(&self) -> u64 {
-        self.secs
-            .saturating_mul(1_000_000)
-            .saturating_add(u64::from(self.micros))
-    }
-}
-
-impl fmt::Display for Timestamp {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{:010}.{:06}", self.secs, self.micros)
-    }
-}
+use amiro_can::candump::{self, CandumpError};
+/// The frame, its identifier and a log line's timestamp are `amiro_can::candump`'s: one codec for
+/// `ID#DATA` and `candump -l` text, which the firmware's QEMU build, the robot host and xtask use too.
+pub use amiro_can::candump::{FrameId, RawFrame, Timestamp};
 
 /// A frame with what a log line or a live bus adds to it: when and on which interface it was seen.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -182,10 +34,13 @@ impl LoggedFrame {
 
     /// The line as `candump -l` writes it: `(1700000000.123456) can0 205#01840302`.
     /// Missing parts are filled with the current time and `can0`, so the line always replays with `canplayer`.
+    /// The line is `amiro_can::candump`'s encoder's (an interface name is cut to 16 bytes, as Linux's are).
     pub fn to_log_line(&self) -> String {
         let timestamp = self.timestamp.unwrap_or_else(Timestamp::now);
         let interface = self.interface.as_deref().unwrap_or("can0");
-        format!("({timestamp}) {interface} {}", self.frame)
+        let mut line = [0u8; candump::MAX_LOG_LINE];
+        let n = candump::encode_log_line(timestamp, interface, &self.frame, &mut line);
+        String::from_utf8_lossy(&line[..n.saturating_sub(1)]).into_owned()
     }
 
     /// The prefix shown before a frame in human-readable output: `(ts) can0 ` or nothing.
@@ -282,6 +137,23 @@ impl fmt::Display for FrameTextError {
 
 impl std::error::Error for FrameTextError {}
 
+impl From<CandumpError<'_>> for FrameTextError {
+    fn from(error: CandumpError<'_>) -> Self {
+        match error {
+            CandumpError::NotAFrame(text) => Self::NotAFrame(text.to_string()),
+            CandumpError::BadTimestamp(text) => Self::BadTimestamp(text.to_string()),
+            CandumpError::BadIdentifier(text) => Self::BadIdentifier(text.to_string()),
+            CandumpError::IdentifierOutOfRange(text) => {
+                Self::IdentifierOutOfRange(text.to_uppercase())
+            }
+            CandumpError::BadData(text) => Self::BadData(text.to_string()),
+            CandumpError::TooManyBytes(n) => Self::TooManyBytes(n),
+            CandumpError::CanFd => Self::CanFd,
+            CandumpError::TrailingText(text) => Self::TrailingText(text.to_string()),
+        }
+    }
+}
+
 /// One numbered line from [`text_lines`]: its number, and its text or why it is not text.
 pub type NumberedLine = std::io::Result<(usize, Result<String, FrameTextError>)>;
 
@@ -323,16 +195,16 @@ pub fn text_lines<R: std::io::BufRead>(mut input: R) -> impl Iterator<Item = Num
 ///
 /// Blank lines and comments (starting with `#` or `//`) give `Ok(None)`.
 pub fn parse_line(line: &str) -> Result<Option<LoggedFrame>, FrameTextError> {
-    let line = line.trim();
-    if line.is_empty() || line.starts_with('#') || line.starts_with("//") {
+    if candump::is_blank_or_comment(line) {
         return Ok(None);
     }
+    let line = line.trim();
     let mut tokens: Vec<&str> = line.split_whitespace().collect();
 
     let mut timestamp = None;
     if let Some(first) = tokens.first() {
         if first.starts_with('(') {
-            timestamp = Some(parse_timestamp(first)?);
+            timestamp = Some(candump::parse_timestamp(first)?);
             tokens.remove(0);
         }
     }
@@ -345,12 +217,8 @@ pub fn parse_line(line: &str) -> Result<Option<LoggedFrame>, FrameTextError> {
             _ => return Err(FrameTextError::NotAFrame(line.to_string())),
         };
         let frame = parse_compact(tokens[at])?;
-        let rest = &tokens[at + 1..];
         // Newer candump versions may log the direction (R = received, T = transmitted) after the frame.
-        let rest_is_direction = matches!(rest, [] | ["R"] | ["T"]);
-        if !rest_is_direction {
-            return Err(FrameTextError::TrailingText(rest.join(" ")));
-        }
+        candump::check_direction(line, tokens[at + 1..].iter().copied())?;
         return Ok(Some(LoggedFrame {
             timestamp,
             interface,
@@ -369,33 +237,7 @@ pub fn parse_line(line: &str) -> Result<Option<LoggedFrame>, FrameTextError> {
 
 /// Parses just a compact frame `ID#DATA` (a command-line argument).
 pub fn parse_compact(text: &str) -> Result<RawFrame, FrameTextError> {
-    let Some((id_text, data_text)) = text.split_once('#') else {
-        return Err(FrameTextError::NotAFrame(text.to_string()));
-    };
-    if data_text.starts_with('#') {
-        return Err(FrameTextError::CanFd);
-    }
-    let id = parse_id(id_text)?;
-    if let Some(len_text) = data_text.strip_prefix(['R', 'r']) {
-        let len = match len_text {
-            "" => 0,
-            digit => digit
-                .parse::<u8>()
-                .ok()
-                .filter(|len| *len <= 8)
-                .ok_or_else(|| FrameTextError::BadData(data_text.to_string()))?,
-        };
-        return RawFrame::remote_frame(id, len)
-            .ok_or_else(|| FrameTextError::BadData(data_text.to_string()));
-    }
-    // can-utils allows a '.' between bytes for readability.
-    let digits: String = data_text.chars().filter(|c| *c != '.').collect();
-    let bytes =
-        parse_hex_bytes(&digits).ok_or_else(|| FrameTextError::BadData(data_text.to_string()))?;
-    if bytes.len() > 8 {
-        return Err(FrameTextError::TooManyBytes(bytes.len()));
-    }
-    RawFrame::data_frame(id, &bytes).ok_or_else(|| FrameTextError::BadData(data_text.to_string()))
+    Ok(candump::parse_compact(text)?)
 }
 
 /// candump's screen form: `[iface] ID [n] b0 b1 ...` or `[iface] ID [n] remote request`.
@@ -410,7 +252,7 @@ fn parse_screen(tokens: &[&str], line: &str) -> Result<(Option<String>, RawFrame
         2 => (Some(tokens[0].to_string()), tokens[1]),
         _ => return Err(not_a_frame()),
     };
-    let id = parse_id(id_text)?;
+    let id = candump::parse_id(id_text)?;
     let len_text = &tokens[bracket][1..tokens[bracket].len() - 1];
     let declared: usize = len_text.parse().map_err(|_| not_a_frame())?;
     if declared > 8 {
@@ -444,47 +286,6 @@ fn parse_screen(tokens: &[&str], line: &str) -> Result<(Option<String>, RawFrame
     Ok((interface, frame))
 }
 
-fn parse_id(text: &str) -> Result<FrameId, FrameTextError> {
-    let bad = || FrameTextError::BadIdentifier(text.to_string());
-    if !text.chars().all(|c| c.is_ascii_hexdigit()) {
-        return Err(bad());
-    }
-    let value = u32::from_str_radix(text, 16).map_err(|_| bad())?;
-    // can-utils tells standard from extended by the number of digits, not by the value.
-    match text.len() {
-        3 if value <= MAX_STANDARD_ID => Ok(FrameId::Standard(value as u16)),
-        8 if value <= MAX_EXTENDED_ID => Ok(FrameId::Extended(value)),
-        3 | 8 => Err(FrameTextError::IdentifierOutOfRange(text.to_uppercase())),
-        _ => Err(bad()),
-    }
-}
-
-fn parse_timestamp(token: &str) -> Result<Timestamp, FrameTextError> {
-    let bad = || FrameTextError::BadTimestamp(token.to_string());
-    let inner = token
-        .strip_prefix('(')
-        .and_then(|t| t.strip_suffix(')'))
-        .ok_or_else(bad)?;
-    let (secs_text, fraction) = inner.split_once('.').unwrap_or((inner, ""));
-    if secs_text.is_empty() || !secs_text.chars().all(|c| c.is_ascii_digit()) {
-        return Err(bad());
-    }
-    if !fraction.chars().all(|c| c.is_ascii_digit()) {
-        return Err(bad());
-    }
-    let secs = secs_text.parse().map_err(|_| bad())?;
-    // Keep microseconds: pad a short fraction, drop digits beyond the sixth (nanosecond logs).
-    let mut micros: u32 = 0;
-    for position in 0..6 {
-        let digit = fraction
-            .as_bytes()
-            .get(position)
-            .map_or(0, |d| u32::from(*d - b'0'));
-        micros = micros * 10 + digit;
-    }
-    Ok(Timestamp { secs, micros })
-}
-
 /// Hex pairs to bytes; `None` if the count is odd or a character is not hex.
 pub fn parse_hex_bytes(text: &str) -> Option<Vec<u8>> {
     if !text.len().is_multiple_of(2) || !text.is_ascii() {
@@ -502,27 +303,6 @@ mod tests {
 
     fn standard(id: u16, bytes: &[u8]) -> RawFrame {
         RawFrame::data_frame(FrameId::Standard(id), bytes).unwrap()
-    }
-
-    #[test]
-    fn compact_frame_round_trips_through_text() {
-        let frame = parse_compact("205#01840302").unwrap();
-        assert_eq!(frame, standard(0x205, &[0x01, 0x84, 0x03, 0x02]));
-        assert_eq!(frame.to_string(), "205#01840302");
-        assert_eq!(parse_compact("61e#ff.00").unwrap().to_string(), "61E#FF00");
-        assert_eq!(parse_compact("205#").unwrap().data(), &[] as &[u8]);
-    }
-
-    #[test]
-    fn extended_and_remote_frames_are_read() {
-        let frame = parse_compact("12345678#AA").unwrap();
-        assert_eq!(frame.id(), FrameId::Extended(0x1234_5678));
-        assert_eq!(frame.to_string(), "12345678#AA");
-        let remote = parse_compact("205#R4").unwrap();
-        assert!(remote.is_remote());
-        assert_eq!(remote.len(), 4);
-        assert_eq!(remote.to_string(), "205#R4");
-        assert_eq!(parse_compact("205#R").unwrap().to_string(), "205#R");
     }
 
     #[test]
@@ -643,25 +423,6 @@ mod tests {
         use super::*;
         use proptest::prelude::*;
 
-        fn any_frame() -> impl Strategy<Value = RawFrame> {
-            let id = prop_oneof![
-                (0u16..=0x7FF).prop_map(FrameId::Standard),
-                (0u32..=0x1FFF_FFFF).prop_map(FrameId::Extended),
-            ];
-            (
-                id,
-                proptest::collection::vec(any::<u8>(), 0..=8),
-                any::<bool>(),
-            )
-                .prop_map(|(id, bytes, remote)| {
-                    if remote {
-                        RawFrame::remote_frame(id, bytes.len() as u8).unwrap()
-                    } else {
-                        RawFrame::data_frame(id, &bytes).unwrap()
-                    }
-                })
-        }
-
         proptest! {
             #[test]
             fn any_text_is_a_frame_a_skip_or_an_error_never_a_panic(line in "\\PC{0,60}") {
@@ -672,13 +433,6 @@ mod tests {
             #[test]
             fn frame_like_text_never_panics(line in "[ (]{0,2}[0-9.]{0,12}[) ]{0,2}[a-z0-9]{0,5} [0-9A-Fa-f]{0,9}[#R\\[\\] ]{0,3}[0-9A-Fa-f. ]{0,20}") {
                 let _ = parse_line(&line);
-            }
-
-            #[test]
-            fn every_frame_survives_its_text_and_log_line(frame in any_frame(), secs in 0u64..10_000_000_000, micros in 0u32..1_000_000) {
-                prop_assert_eq!(parse_compact(&frame.to_string()), Ok(frame));
-                let logged = LoggedFrame { timestamp: Some(Timestamp { secs, micros }), interface: Some("can0".into()), frame };
-                prop_assert_eq!(parse_line(&logged.to_log_line()), Ok(Some(logged)));
             }
         }
     }

@@ -125,56 +125,25 @@ impl fmt::Display for PeriodError {
 
 impl std::error::Error for PeriodError {}
 
-/// Parses `900us`, `900µs`, `50ms`, `1.5s`, `2 s` into whole microseconds.
+/// Parses `900us`, `900µs`, `50ms`, `1.5s`, `2 s` into whole microseconds (`amiro_can::duration`'s
+/// decoder, which the emulation's tools read durations with too).
 pub fn parse_period(text: &str) -> Result<Period, PeriodError> {
-    let trimmed = text.trim();
-    let number_end = trimmed
-        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .unwrap_or(trimmed.len());
-    let (number, unit_text) = trimmed.split_at(number_end);
-    let unit_text = unit_text.trim();
-    if number.is_empty() {
-        return Err(PeriodError::Malformed(text.to_string()));
-    }
-    let unit = match unit_text {
-        "" => return Err(PeriodError::MissingUnit(number.to_string())),
-        "us" | "µs" | "μs" => PeriodUnit::Micros,
-        "ms" => PeriodUnit::Millis,
-        "s" => PeriodUnit::Seconds,
-        other => return Err(PeriodError::UnknownUnit(other.to_string())),
+    use amiro_can::duration::DurationError;
+    let (micros, unit) = amiro_can::duration::parse(text).map_err(|error| match error {
+        DurationError::Malformed(text) => PeriodError::Malformed(text.to_string()),
+        DurationError::MissingUnit(text) => PeriodError::MissingUnit(text.to_string()),
+        DurationError::UnknownUnit(text) => PeriodError::UnknownUnit(text.to_string()),
+        DurationError::BelowResolution(text) => PeriodError::BelowResolution(text.to_string()),
+        DurationError::Huge(text) => PeriodError::Huge(text.to_string()),
+    })?;
+    let written_unit = match unit {
+        amiro_can::TimeUnit::Micros => PeriodUnit::Micros,
+        amiro_can::TimeUnit::Millis => PeriodUnit::Millis,
+        amiro_can::TimeUnit::Seconds => PeriodUnit::Seconds,
     };
-    let (whole, fraction) = number.split_once('.').unwrap_or((number, ""));
-    if whole.is_empty() && fraction.is_empty() || fraction.contains('.') {
-        return Err(PeriodError::Malformed(text.to_string()));
-    }
-    // The true limit is the caller's; here we only know the number cannot be counted at all.
-    let too_long = || PeriodError::Huge(trimmed.to_string());
-    let whole_value: u64 = if whole.is_empty() {
-        0
-    } else {
-        whole.parse().map_err(|_| too_long())?
-    };
-    let mut micros = whole_value
-        .checked_mul(unit.micros())
-        .ok_or_else(too_long)?;
-    // Fractional digits, exactly: each digit is worth a tenth of the previous one.
-    let mut digit_worth = unit.micros();
-    for digit in fraction.bytes().map(|d| u64::from(d - b'0')) {
-        if digit == 0 {
-            digit_worth /= 10;
-            continue;
-        }
-        if digit_worth < 10 {
-            return Err(PeriodError::BelowResolution(trimmed.to_string()));
-        }
-        digit_worth /= 10;
-        micros = micros
-            .checked_add(digit * digit_worth)
-            .ok_or_else(too_long)?;
-    }
     Ok(Period {
         micros,
-        written_unit: unit,
+        written_unit,
     })
 }
 

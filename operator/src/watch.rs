@@ -101,7 +101,7 @@ fn since(origin: Timestamp, at: Timestamp) -> u64 {
 
 /// `12.345678`: seconds with six decimals.
 pub fn seconds(micros: u64) -> String {
-    format!("{}.{:06}", micros / 1_000_000, micros % 1_000_000)
+    Timestamp::from_micros(micros).to_string()
 }
 
 /// Formats frames for people or programs.
@@ -243,7 +243,7 @@ impl Statistics {
             Err(error) => format!("invalid: {}", error.kind_name()),
         };
         let key = StreamKey {
-            id: logged.frame.id_hex(),
+            id: logged.frame.id_hex().to_string(),
             ring_sensor,
         };
         let stream = self.streams.entry(key).or_insert_with(|| Stream {
@@ -342,7 +342,7 @@ mod tests {
         let record: Value =
             serde_json::from_str(&json.line(&logged("(5.000000) can0 205#00"))).unwrap();
         assert_eq!(record["elapsed"], "0.000000");
-        assert_eq!(record["timestamp"], "0000000005.000000");
+        assert_eq!(record["timestamp"], "5.000000");
     }
 
     #[test]

@@ -2,7 +2,8 @@
 //! Bril and Lukkien, "Controller Area Network (CAN) schedulability analysis: refuted, revisited and revised"
 //! (Real-Time Systems 35(3), 2007), with the frame-cost models the project uses.
 //!
-//! Frame length of a data frame with `s` data bytes, in bits:
+//! Frame length of a data frame with `s` data bytes, in bits (counted by `amiro_can::timing`, the one place the
+//! frame layout's bit counts live; the bus model counts with it too):
 //!
 //! * stuffable part `g + 8s`: `g = 34` for an 11-bit identifier (SOF 1, identifier 11, RTR 1, IDE 1, r0 1,
 //!   DLC 4, CRC 15), `g = 54` for a 29-bit one (SOF 1, base 11, SRR 1, IDE 1, extension 18, RTR 1, r1 1, r0 1,
@@ -21,12 +22,8 @@ use crate::busy_window::{
 };
 use crate::time::Time;
 
-/// Bits of a standard data frame that are subject to stuffing, without data (SOF … CRC).
-pub const STUFFABLE_BITS_STANDARD: u32 = 34;
-/// Bits of an extended data frame that are subject to stuffing, without data.
-pub const STUFFABLE_BITS_EXTENDED: u32 = 54;
-/// Bits never stuffed: CRC delimiter, ACK slot and delimiter, end of frame, and the 3-bit interframe space.
-pub const UNSTUFFED_TAIL_BITS: u32 = 13;
+pub use amiro_can::timing::{frame_bits_best, frame_bits_worst};
+
 /// The fields the thesis lists (SOF, ID, RTR, IDE, RES, DLC, 64 data bits, CRC, DELIM, ACK, DELIM, EOF) add up to
 /// 108 bits.
 pub const THESIS_LISTED_BITS: u32 = 108;
@@ -57,26 +54,6 @@ pub fn bit_time(bitrate: u32) -> Time {
     let ns = 1_000_000_000u64;
     let b = u64::from(bitrate);
     Time::from_ns(ns.div_ceil(b))
-}
-
-/// Worst-case length in bits of a data frame with `dlc` data bytes (clamped to 8), interframe space included.
-pub fn frame_bits_worst(dlc: u8, extended: bool) -> u32 {
-    let stuffable = stuffable_bits(dlc, extended);
-    stuffable + UNSTUFFED_TAIL_BITS + (stuffable - 1) / 4
-}
-
-/// Length in bits of the same frame without a single stuff bit: the best case.
-pub fn frame_bits_best(dlc: u8, extended: bool) -> u32 {
-    stuffable_bits(dlc, extended) + UNSTUFFED_TAIL_BITS
-}
-
-fn stuffable_bits(dlc: u8, extended: bool) -> u32 {
-    let g = if extended {
-        STUFFABLE_BITS_EXTENDED
-    } else {
-        STUFFABLE_BITS_STANDARD
-    };
-    g + 8 * u32::from(dlc.min(8))
 }
 
 /// Time one frame occupies the bus under `cost`, at bit time `bit`.

@@ -472,6 +472,22 @@ fn topic_table(primary: &Analysis, comparison: Option<&Analysis>) -> Table {
 
 fn text(report: &Report, markdown: bool) -> String {
     let mut out = String::new();
+    text_header(report, markdown, &mut out);
+    text_boards(&report.primary, markdown, &mut out);
+    text_bus(
+        &report.primary,
+        report.comparison.as_ref(),
+        markdown,
+        &mut out,
+    );
+    text_sensitivity(report, markdown, &mut out);
+    text_admission(report, markdown, &mut out);
+    text_verdict(report, markdown, &mut out);
+    out
+}
+
+/// The title, the frame costs, the sources and the warnings.
+fn text_header(report: &Report, markdown: bool, out: &mut String) {
     let primary = &report.primary;
     let comparison = report.comparison.as_ref();
     let cost_line = match comparison {
@@ -483,7 +499,7 @@ fn text(report: &Report, markdown: bool) -> String {
         None => format!("frame cost {}", primary.frame_cost.label()),
     };
     heading(
-        &mut out,
+        out,
         markdown,
         1,
         &format!("Schedule analysis: {}", report.title),
@@ -500,7 +516,10 @@ fn text(report: &Report, markdown: bool) -> String {
         let _ = writeln!(out, "{}warning: {w}", if markdown { "- " } else { "  " });
     }
     out.push('\n');
+}
 
+/// One table per board: its tasks' response times.
+fn text_boards(primary: &Analysis, markdown: bool, out: &mut String) {
     for board in &primary.boards {
         let tight = tightest(
             board
@@ -509,7 +528,7 @@ fn text(report: &Report, markdown: bool) -> String {
                 .map(|t| (t.name.as_str(), t.wcrt(), t.deadline)),
         );
         heading(
-            &mut out,
+            out,
             markdown,
             2,
             &format!(
@@ -519,8 +538,12 @@ fn text(report: &Report, markdown: bool) -> String {
                 tight.map_or_else(String::new, |t| format!("; tightest: {t}"))
             ),
         );
-        board_table(board).render(markdown, &mut out);
+        board_table(board).render(markdown, out);
     }
+}
+
+/// The bus's messages and the end-to-end paths per topic.
+fn text_bus(primary: &Analysis, comparison: Option<&Analysis>, markdown: bool, out: &mut String) {
     if let (Some(bus), Some(table)) = (&primary.bus, bus_table(primary, comparison)) {
         let alt = comparison.and_then(|c| {
             c.bus
@@ -533,7 +556,7 @@ fn text(report: &Report, markdown: bool) -> String {
                 .map(|m| (m.name.as_str(), m.wcrt(), m.deadline)),
         );
         heading(
-            &mut out,
+            out,
             markdown,
             2,
             &format!(
@@ -548,18 +571,23 @@ fn text(report: &Report, markdown: bool) -> String {
                 tight.map_or_else(String::new, |t| format!("; tightest: {t}"))
             ),
         );
-        table.render(markdown, &mut out);
+        table.render(markdown, out);
         heading(
-            &mut out,
+            out,
             markdown,
             2,
             "End to end per topic (sample due → last frame delivered → receiver done)",
         );
-        topic_table(primary, comparison).render(markdown, &mut out);
+        topic_table(primary, comparison).render(markdown, out);
     }
+}
+
+/// The shortest period each publisher could have.
+fn text_sensitivity(report: &Report, markdown: bool, out: &mut String) {
+    let primary = &report.primary;
     if let Some(s) = &report.sensitivity {
         heading(
-            &mut out,
+            out,
             markdown,
             2,
             &format!(
@@ -590,12 +618,16 @@ fn text(report: &Report, markdown: bool) -> String {
                     p.limited_by.join(", "),
                 ]);
             }
-            table.render(markdown, &mut out);
+            table.render(markdown, out);
         }
     }
+}
+
+/// What the on-chip admission check costs per decision.
+fn text_admission(report: &Report, markdown: bool, out: &mut String) {
     if !report.admission.is_empty() {
         heading(
-            &mut out,
+            out,
             markdown,
             2,
             "On-chip admission check: worst-case cost per decision (fixed-point iterations)",
@@ -618,8 +650,14 @@ fn text(report: &Report, markdown: bool) -> String {
                 cost.analyses_with_search.to_string(),
             ]);
         }
-        table.render(markdown, &mut out);
+        table.render(markdown, out);
     }
+}
+
+/// The verdict, and the comparison's.
+fn text_verdict(report: &Report, markdown: bool, out: &mut String) {
+    let primary = &report.primary;
+    let comparison = report.comparison.as_ref();
     let failures = primary.failures();
     let verdict = if failures.is_empty() {
         format!(
@@ -653,7 +691,6 @@ fn text(report: &Report, markdown: bool) -> String {
             }
         );
     }
-    out
 }
 
 fn json_time(t: Option<Time>) -> Value {
@@ -831,139 +868,16 @@ fn svg(report: &Report) -> String {
     let a = &report.primary;
     let mut sections: Vec<(String, Vec<Bar>)> = Vec::new();
     for board in &a.boards {
-        let mut tasks: Vec<&TaskResult> = board.tasks.iter().collect();
-        tasks.sort_by_key(|t| std::cmp::Reverse(t.priority));
-        let bars = tasks
-            .iter()
-            .map(|t| {
-                let (j, b, c) = (
-                    t.jitter.as_us_f64(),
-                    t.blocking.as_us_f64(),
-                    t.wcet.as_us_f64(),
-                );
-                let total = t.wcrt().map(Time::as_us_f64);
-                let rest = total.map_or(0.0, |r| (r - j - b - c).max(0.0));
-                Bar {
-                    label: format!("{} (p{})", t.name, t.priority),
-                    segments: vec![
-                        (j, COLOR_JITTER),
-                        (b, COLOR_BLOCKING),
-                        (c, COLOR_OWN),
-                        (rest, COLOR_INTERFERENCE),
-                    ],
-                    deadline: t.deadline.as_us_f64(),
-                    total,
-                    ok: t.schedulable(),
-                    note: match &t.bound {
-                        Ok(r) => format!("{} / {} µs", us(r.wcrt), us(t.deadline)),
-                        Err(why) => format!("unbounded: {why}"),
-                    },
-                    tick: None,
-                }
-            })
-            .collect();
         sections.push((
             format!("Board {} — CPU {}", board.name, percent(board.utilisation)),
-            bars,
+            board_bars(board),
         ));
     }
     if let Some(bus) = &a.bus {
-        let other = report
-            .comparison
-            .as_ref()
-            .and_then(|c| c.bus.as_ref().map(|b| (c.frame_cost.label(), b)));
-        let mut order: Vec<usize> = (0..bus.messages.len()).collect();
-        order.sort_by_key(|&i| {
-            bus.messages
-                .get(i)
-                .map_or(u32::MAX, |m| crate::can::arbitration_key(m.id, m.extended))
-        });
-        let bars = order
-            .iter()
-            .filter_map(|&i| bus.messages.get(i).map(|m| (i, m)))
-            .map(|(i, m)| {
-                let total = m.wcrt().map(Time::as_us_f64);
-                let (o, j, b) = (
-                    m.offset.as_us_f64(),
-                    m.jitter.as_us_f64(),
-                    m.blocking.as_us_f64(),
-                );
-                let own = m.frame_time.as_us_f64() * f64::from(m.frames);
-                let rest = total.map_or(0.0, |r| (r - o - j - b - own).max(0.0));
-                Bar {
-                    label: format!("{} ({:#05x})", m.name, m.id),
-                    segments: vec![
-                        (o, COLOR_OFFSET),
-                        (j, COLOR_JITTER),
-                        (b, COLOR_BLOCKING),
-                        (own, COLOR_OWN),
-                        (rest, COLOR_INTERFERENCE),
-                    ],
-                    deadline: m.deadline.as_us_f64(),
-                    total,
-                    ok: m.schedulable(),
-                    note: match m.wcrt() {
-                        Some(w) => format!("{} / {} µs", us(w), us(m.deadline)),
-                        None => "unbounded".into(),
-                    },
-                    tick: other
-                        .as_ref()
-                        .and_then(|(_, ob)| ob.messages.get(i))
-                        .map(|om| (om.wcrt().map_or(f64::INFINITY, Time::as_us_f64), "#222222")),
-                }
-            })
-            .collect();
-        let alt = other.map_or_else(String::new, |(label, b)| {
-            format!("; black tick: {label} ({})", percent(b.utilisation))
-        });
-        sections.push((
-            format!(
-                "CAN bus — {} ({}){alt}",
-                percent(bus.utilisation),
-                a.frame_cost.label()
-            ),
-            bars,
-        ));
-        let bars = a
-            .topics
-            .iter()
-            .map(|t| {
-                let best = t.best.as_us_f64();
-                let worst = t.worst.map(Time::as_us_f64);
-                Bar {
-                    label: format!("{} end to end", t.name),
-                    segments: vec![
-                        (best, COLOR_OFFSET),
-                        (worst.map_or(0.0, |w| w - best), COLOR_OWN),
-                    ],
-                    deadline: t.deadline.as_us_f64(),
-                    total: worst,
-                    ok: t.ok(),
-                    note: match (t.worst, t.jitter_budget) {
-                        (Some(w), Some(b)) => format!(
-                            "{} / {} µs · jitter {} / {}",
-                            us(w),
-                            us(t.deadline),
-                            opt(t.jitter()),
-                            us(b)
-                        ),
-                        (Some(w), None) => format!(
-                            "{} / {} µs · jitter {}",
-                            us(w),
-                            us(t.deadline),
-                            opt(t.jitter())
-                        ),
-                        (None, _) => "unbounded".into(),
-                    },
-                    tick: t
-                        .jitter_budget
-                        .map(|b| (best + b.as_us_f64(), COLOR_BLOCKING)),
-                }
-            })
-            .collect();
+        sections.push(bus_section(report, bus));
         sections.push((
             "End to end: best (green) to worst (blue); orange tick: best + jitter budget".into(),
-            bars,
+            topic_bars(a),
         ));
     }
 
@@ -978,11 +892,184 @@ fn svg(report: &Report) -> String {
     } else {
         (max_ratio * 1.1).min(3.0)
     };
-    let x_of = |ratio: f64| BAR_X + BAR_W * (ratio / scale_max).clamp(0.0, 1.0);
-
+    let scale = Scale { max: scale_max };
     let rows: usize = sections.iter().map(|(_, b)| b.len() + 2).sum();
     let height = 110.0 + rows as f64 * ROW_H + 20.0;
     let mut s = String::new();
+    svg_header(report, height, &mut s);
+    let mut y = 110.0;
+    for (title, bars) in &sections {
+        let _ = writeln!(
+            s,
+            r#"<text x="{LABEL_X}" y="{}" font-size="14" font-weight="bold">{}</text>"#,
+            y + 14.0,
+            esc(title)
+        );
+        y += ROW_H + 4.0;
+        let top = y;
+        for (row, bar) in bars.iter().enumerate() {
+            svg_row(bar, row, y, scale, &mut s);
+            y += ROW_H;
+        }
+        svg_axis(top, y, scale, &mut s);
+        y += ROW_H;
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// A chart's horizontal scale: a ratio of a row's deadline to its x coordinate.
+#[derive(Clone, Copy)]
+struct Scale {
+    /// The largest ratio shown.
+    max: f64,
+}
+
+impl Scale {
+    fn x_of(self, ratio: f64) -> f64 {
+        BAR_X + BAR_W * (ratio / self.max).clamp(0.0, 1.0)
+    }
+}
+
+/// A board's tasks, highest priority first.
+fn board_bars(board: &BoardResult) -> Vec<Bar> {
+    let mut tasks: Vec<&TaskResult> = board.tasks.iter().collect();
+    tasks.sort_by_key(|t| std::cmp::Reverse(t.priority));
+    tasks
+        .iter()
+        .map(|t| {
+            let (j, b, c) = (
+                t.jitter.as_us_f64(),
+                t.blocking.as_us_f64(),
+                t.wcet.as_us_f64(),
+            );
+            let total = t.wcrt().map(Time::as_us_f64);
+            let rest = total.map_or(0.0, |r| (r - j - b - c).max(0.0));
+            Bar {
+                label: format!("{} (p{})", t.name, t.priority),
+                segments: vec![
+                    (j, COLOR_JITTER),
+                    (b, COLOR_BLOCKING),
+                    (c, COLOR_OWN),
+                    (rest, COLOR_INTERFERENCE),
+                ],
+                deadline: t.deadline.as_us_f64(),
+                total,
+                ok: t.schedulable(),
+                note: match &t.bound {
+                    Ok(r) => format!("{} / {} µs", us(r.wcrt), us(t.deadline)),
+                    Err(why) => format!("unbounded: {why}"),
+                },
+                tick: None,
+            }
+        })
+        .collect()
+}
+
+/// The bus's messages in arbitration order, with the comparison's WCRT as a tick.
+fn bus_section(report: &Report, bus: &crate::analysis::BusResult) -> (String, Vec<Bar>) {
+    let a = &report.primary;
+    let other = report
+        .comparison
+        .as_ref()
+        .and_then(|c| c.bus.as_ref().map(|b| (c.frame_cost.label(), b)));
+    let mut order: Vec<usize> = (0..bus.messages.len()).collect();
+    order.sort_by_key(|&i| {
+        bus.messages
+            .get(i)
+            .map_or(u32::MAX, |m| crate::can::arbitration_key(m.id, m.extended))
+    });
+    let bars = order
+        .iter()
+        .filter_map(|&i| bus.messages.get(i).map(|m| (i, m)))
+        .map(|(i, m)| {
+            let total = m.wcrt().map(Time::as_us_f64);
+            let (o, j, b) = (
+                m.offset.as_us_f64(),
+                m.jitter.as_us_f64(),
+                m.blocking.as_us_f64(),
+            );
+            let own = m.frame_time.as_us_f64() * f64::from(m.frames);
+            let rest = total.map_or(0.0, |r| (r - o - j - b - own).max(0.0));
+            Bar {
+                label: format!("{} ({:#05x})", m.name, m.id),
+                segments: vec![
+                    (o, COLOR_OFFSET),
+                    (j, COLOR_JITTER),
+                    (b, COLOR_BLOCKING),
+                    (own, COLOR_OWN),
+                    (rest, COLOR_INTERFERENCE),
+                ],
+                deadline: m.deadline.as_us_f64(),
+                total,
+                ok: m.schedulable(),
+                note: match m.wcrt() {
+                    Some(w) => format!("{} / {} µs", us(w), us(m.deadline)),
+                    None => "unbounded".into(),
+                },
+                tick: other
+                    .as_ref()
+                    .and_then(|(_, ob)| ob.messages.get(i))
+                    .map(|om| (om.wcrt().map_or(f64::INFINITY, Time::as_us_f64), "#222222")),
+            }
+        })
+        .collect();
+    let alt = other.map_or_else(String::new, |(label, b)| {
+        format!("; black tick: {label} ({})", percent(b.utilisation))
+    });
+    (
+        format!(
+            "CAN bus — {} ({}){alt}",
+            percent(bus.utilisation),
+            a.frame_cost.label()
+        ),
+        bars,
+    )
+}
+
+/// The end-to-end paths per topic, best to worst, with the jitter budget as a tick.
+fn topic_bars(a: &Analysis) -> Vec<Bar> {
+    a.topics
+        .iter()
+        .map(|t| {
+            let best = t.best.as_us_f64();
+            let worst = t.worst.map(Time::as_us_f64);
+            Bar {
+                label: format!("{} end to end", t.name),
+                segments: vec![
+                    (best, COLOR_OFFSET),
+                    (worst.map_or(0.0, |w| w - best), COLOR_OWN),
+                ],
+                deadline: t.deadline.as_us_f64(),
+                total: worst,
+                ok: t.ok(),
+                note: match (t.worst, t.jitter_budget) {
+                    (Some(w), Some(b)) => format!(
+                        "{} / {} µs · jitter {} / {}",
+                        us(w),
+                        us(t.deadline),
+                        opt(t.jitter()),
+                        us(b)
+                    ),
+                    (Some(w), None) => format!(
+                        "{} / {} µs · jitter {}",
+                        us(w),
+                        us(t.deadline),
+                        opt(t.jitter())
+                    ),
+                    (None, _) => "unbounded".into(),
+                },
+                tick: t
+                    .jitter_budget
+                    .map(|b| (best + b.as_us_f64(), COLOR_BLOCKING)),
+            }
+        })
+        .collect()
+}
+
+/// The SVG's opening, its title and verdict, and the legend.
+fn svg_header(report: &Report, height: f64, s: &mut String) {
+    let a = &report.primary;
     let _ = writeln!(
         s,
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{SVG_WIDTH}" height="{height}" viewBox="0 0 {SVG_WIDTH} {height}" font-family="DejaVu Sans, Helvetica, Arial, sans-serif" font-size="12">"#
@@ -1030,120 +1117,113 @@ fn svg(report: &Report) -> String {
         s,
         r##"<text x="{LABEL_X}" y="92" fill="#555555">Bars in % of each row's own deadline (dashed line = 100 %); right: WCRT / deadline.</text>"##
     );
+}
 
-    let mut y = 110.0;
-    for (title, bars) in &sections {
+/// One bar's row (`row` counts from 0 within its section) at `y`.
+fn svg_row(bar: &Bar, row: usize, y: f64, scale: Scale, s: &mut String) {
+    let x_of = |ratio: f64| scale.x_of(ratio);
+    let scale_max = scale.max;
+    if row.is_multiple_of(2) {
         let _ = writeln!(
             s,
-            r#"<text x="{LABEL_X}" y="{}" font-size="14" font-weight="bold">{}</text>"#,
-            y + 14.0,
-            esc(title)
+            r##"<rect x="{LABEL_X}" y="{y}" width="{}" height="{ROW_H}" fill="#f4f6f8"/>"##,
+            SVG_WIDTH - 2.0 * LABEL_X
         );
-        y += ROW_H + 4.0;
-        let top = y;
-        for (row, bar) in bars.iter().enumerate() {
-            if row % 2 == 0 {
+    }
+    let _ = writeln!(
+        s,
+        r#"<text x="{}" y="{}">{}</text>"#,
+        LABEL_X + 4.0,
+        y + 15.0,
+        esc(&shorten(&bar.label, 46))
+    );
+    let d = bar.deadline.max(1e-9);
+    match bar.total {
+        Some(_) => {
+            let mut at = 0.0;
+            for &(value, color) in &bar.segments {
+                if value <= 0.0 {
+                    continue;
+                }
+                let (x0, x1) = (x_of(at / d), x_of((at + value) / d));
                 let _ = writeln!(
                     s,
-                    r##"<rect x="{LABEL_X}" y="{y}" width="{}" height="{ROW_H}" fill="#f4f6f8"/>"##,
-                    SVG_WIDTH - 2.0 * LABEL_X
+                    r#"<rect x="{x0:.1}" y="{:.1}" width="{:.1}" height="14" fill="{color}"/>"#,
+                    y + 4.0,
+                    (x1 - x0).max(0.8)
+                );
+                at += value;
+            }
+            if !bar.ok {
+                let _ = writeln!(
+                    s,
+                    r#"<rect x="{BAR_X}" y="{:.1}" width="{:.1}" height="14" fill="none" stroke="{COLOR_MISS}" stroke-width="2"/>"#,
+                    y + 4.0,
+                    x_of(at / d) - BAR_X
                 );
             }
-            let _ = writeln!(
-                s,
-                r#"<text x="{}" y="{}">{}</text>"#,
-                LABEL_X + 4.0,
-                y + 15.0,
-                esc(&shorten(&bar.label, 46))
-            );
-            let d = bar.deadline.max(1e-9);
-            match bar.total {
-                Some(_) => {
-                    let mut at = 0.0;
-                    for &(value, color) in &bar.segments {
-                        if value <= 0.0 {
-                            continue;
-                        }
-                        let (x0, x1) = (x_of(at / d), x_of((at + value) / d));
-                        let _ = writeln!(
-                            s,
-                            r#"<rect x="{x0:.1}" y="{:.1}" width="{:.1}" height="14" fill="{color}"/>"#,
-                            y + 4.0,
-                            (x1 - x0).max(0.8)
-                        );
-                        at += value;
-                    }
-                    if !bar.ok {
-                        let _ = writeln!(
-                            s,
-                            r#"<rect x="{BAR_X}" y="{:.1}" width="{:.1}" height="14" fill="none" stroke="{COLOR_MISS}" stroke-width="2"/>"#,
-                            y + 4.0,
-                            x_of(at / d) - BAR_X
-                        );
-                    }
-                    if at / d > scale_max {
-                        let _ = writeln!(
-                            s,
-                            r#"<text x="{:.1}" y="{}" fill="{COLOR_MISS}" font-weight="bold">»</text>"#,
-                            BAR_X + BAR_W + 2.0,
-                            y + 15.0
-                        );
-                    }
-                }
-                None => {
-                    let _ = writeln!(
-                        s,
-                        r#"<rect x="{BAR_X}" y="{:.1}" width="{BAR_W}" height="14" fill="url(#hatch)" stroke="{COLOR_MISS}"/>"#,
-                        y + 4.0
-                    );
-                }
+            if at / d > scale_max {
+                let _ = writeln!(
+                    s,
+                    r#"<text x="{:.1}" y="{}" fill="{COLOR_MISS}" font-weight="bold">»</text>"#,
+                    BAR_X + BAR_W + 2.0,
+                    y + 15.0
+                );
             }
-            if let Some((value, color)) = bar.tick {
-                if value.is_finite() {
-                    let x = x_of(value / d);
-                    let _ = writeln!(
-                        s,
-                        r#"<line x1="{x:.1}" x2="{x:.1}" y1="{:.1}" y2="{:.1}" stroke="{color}" stroke-width="2"/>"#,
-                        y + 1.0,
-                        y + ROW_H - 1.0
-                    );
-                }
-            }
-            let color = if bar.ok { "#333333" } else { COLOR_MISS };
+        }
+        None => {
             let _ = writeln!(
                 s,
-                r#"<text x="{:.1}" y="{}" fill="{color}" font-size="11">{}</text>"#,
-                BAR_X + BAR_W + 14.0,
-                y + 15.0,
-                esc(&bar.note)
+                r#"<rect x="{BAR_X}" y="{:.1}" width="{BAR_W}" height="14" fill="url(#hatch)" stroke="{COLOR_MISS}"/>"#,
+                y + 4.0
             );
-            y += ROW_H;
         }
-        // The deadline line and the axis.
-        let x100 = x_of(1.0);
-        let _ = writeln!(
-            s,
-            r##"<line x1="{x100:.1}" x2="{x100:.1}" y1="{top}" y2="{y}" stroke="#444444" stroke-dasharray="4 3"/>"##
-        );
-        let _ = writeln!(
-            s,
-            r##"<line x1="{BAR_X}" x2="{}" y1="{y}" y2="{y}" stroke="#999999"/>"##,
-            BAR_X + BAR_W
-        );
-        let mut tick = 0.0;
-        while tick <= scale_max + 1e-9 {
-            let x = x_of(tick);
-            let _ = writeln!(
-                s,
-                r##"<line x1="{x:.1}" x2="{x:.1}" y1="{y}" y2="{}" stroke="#999999"/><text x="{x:.1}" y="{}" font-size="10" text-anchor="middle" fill="#666666">{:.0} %</text>"##,
-                y + 4.0,
-                y + 14.0,
-                tick * 100.0
-            );
-            tick += if scale_max > 2.0 { 0.5 } else { 0.25 };
-        }
-        y += ROW_H;
     }
-    s.push_str("</svg>\n");
-    s
+    if let Some((value, color)) = bar.tick {
+        if value.is_finite() {
+            let x = x_of(value / d);
+            let _ = writeln!(
+                s,
+                r#"<line x1="{x:.1}" x2="{x:.1}" y1="{:.1}" y2="{:.1}" stroke="{color}" stroke-width="2"/>"#,
+                y + 1.0,
+                y + ROW_H - 1.0
+            );
+        }
+    }
+    let color = if bar.ok { "#333333" } else { COLOR_MISS };
+    let _ = writeln!(
+        s,
+        r#"<text x="{:.1}" y="{}" fill="{color}" font-size="11">{}</text>"#,
+        BAR_X + BAR_W + 14.0,
+        y + 15.0,
+        esc(&bar.note)
+    );
+}
+
+/// A section's deadline line and its axis, from `top` to `y`.
+fn svg_axis(top: f64, y: f64, scale: Scale, s: &mut String) {
+    let x_of = |ratio: f64| scale.x_of(ratio);
+    let scale_max = scale.max;
+    let x100 = x_of(1.0);
+    let _ = writeln!(
+        s,
+        r##"<line x1="{x100:.1}" x2="{x100:.1}" y1="{top}" y2="{y}" stroke="#444444" stroke-dasharray="4 3"/>"##
+    );
+    let _ = writeln!(
+        s,
+        r##"<line x1="{BAR_X}" x2="{}" y1="{y}" y2="{y}" stroke="#999999"/>"##,
+        BAR_X + BAR_W
+    );
+    let mut tick = 0.0;
+    while tick <= scale_max + 1e-9 {
+        let x = x_of(tick);
+        let _ = writeln!(
+            s,
+            r##"<line x1="{x:.1}" x2="{x:.1}" y1="{y}" y2="{}" stroke="#999999"/><text x="{x:.1}" y="{}" font-size="10" text-anchor="middle" fill="#666666">{:.0} %</text>"##,
+            y + 4.0,
+            y + 14.0,
+            tick * 100.0
+        );
+        tick += if scale_max > 2.0 { 0.5 } else { 0.25 };
+    }
 }

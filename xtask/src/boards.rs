@@ -2,6 +2,8 @@
 
 use anyhow::{Context, Result};
 
+use crate::smoke::environment::{self, Input};
+
 /// One firmware crate and the chip it runs on.
 #[derive(Debug, Clone, Copy)]
 pub struct Board {
@@ -23,6 +25,14 @@ pub struct Board {
     pub checksum_slot: u64,
     /// The QEMU machine its QEMU build (feature `qemu`) runs on.
     pub qemu_machine: &'static str,
+    /// The inputs of the robot's environment its production image reads and its QEMU machine has
+    /// no model for, held at the robot's level in `cargo xtask smoke` (its machine's table).
+    pub qemu_inputs: &'static [Input],
+    /// The timer its monotonic runs on (its `board.rs` / `mono.rs`: `timer_monotonic!`).
+    pub monotonic_timer: MonotonicTimer,
+    /// The chip's internal oscillator: the clock the board falls back to in QEMU, whose RCC reads as
+    /// reset (every bus undivided, so the timers' input too).
+    pub internal_oscillator_hz: u32,
     /// The project's flash budget for the firmware (text + data, bytes): far below the chip, so a
     /// board keeps room behind AMiRo-BLT and growth is a decision, not an accident. `cargo xtask
     /// test` fails above it.
@@ -32,6 +42,15 @@ pub struct Board {
     pub admission_allowance: u64,
     /// The hardware revisions its firmware is built for, newest first (docs/boards.md).
     pub revisions: &'static [Revision],
+}
+
+/// A board's monotonic timer (its `board.rs` / `mono.rs`: `amiro_firmware::timer_monotonic!`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MonotonicTimer {
+    /// Its name on the chip.
+    pub name: &'static str,
+    /// Its registers' base address (the same on the chip and on the board's QEMU machine).
+    pub base: u32,
 }
 
 /// One hardware revision of a board, and how its image is built.
@@ -93,6 +112,13 @@ pub const BOARDS: [Board; 3] = [
         app_base: 0x0800_6000,
         checksum_slot: 0x150,
         qemu_machine: "netduino2",
+        qemu_inputs: environment::NETDUINO2,
+        // TIM2–TIM4 drive its motors and count its encoders; QEMU models TIM5 at the F103's address.
+        monotonic_timer: MonotonicTimer {
+            name: "TIM5",
+            base: 0x4000_0C00,
+        },
+        internal_oscillator_hz: 8_000_000,
         flash_budget: 40 * 1024,
         admission_allowance: 28 * 1024,
         revisions: &[
@@ -120,6 +146,13 @@ pub const BOARDS: [Board; 3] = [
         app_base: 0x0800_8000,
         checksum_slot: 0x1AC,
         qemu_machine: "netduinoplus2",
+        qemu_inputs: environment::NETDUINOPLUS2,
+        // Where QEMU's F405 models it.
+        monotonic_timer: MonotonicTimer {
+            name: "TIM2",
+            base: 0x4000_0000,
+        },
+        internal_oscillator_hz: 16_000_000,
         flash_budget: 48 * 1024,
         // PowerManagement fits its own 48 KiB with the admission check (issue 10).
         // Issue 20: the hard floor, the busy verdicts and the paced admission task (≈ 1.5 KB) put
@@ -147,6 +180,13 @@ pub const BOARDS: [Board; 3] = [
         app_base: 0x0800_6000,
         checksum_slot: 0x150,
         qemu_machine: "netduino2",
+        qemu_inputs: environment::NETDUINO2,
+        // Where QEMU's F205 models it at the F103's address.
+        monotonic_timer: MonotonicTimer {
+            name: "TIM3",
+            base: 0x4000_0400,
+        },
+        internal_oscillator_hz: 8_000_000,
         flash_budget: 24 * 1024,
         admission_allowance: 28 * 1024,
         // The 1-2 ring (three TLC5947, 24 LEDs) of a 1-2 robot; the 1-0 ring (one TLC5947, eight

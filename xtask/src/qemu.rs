@@ -1,9 +1,8 @@
 //! Runs a firmware's QEMU build in deterministic virtual time against a stimulus log.
 //!
 //! The stimulus is a `candump -l` log whose timestamps count from the start of the run. It is
-//! converted into fixed 20-byte records (`u64` µs, `u16` ID, `u8` length, `u8` flags, 8 data bytes)
-//! after a 16-byte header (`AMSTIM1\0`, `u64` duration in µs) that the firmware reads through
-//! semihosting. The firmware prints every frame it would put on the bus in the same log format,
+//! converted into `amiro_trace::stimulus`'s records (fixed 20 bytes after a 16-byte header) that
+//! the firmware reads through semihosting with the same crate's decoder. The firmware prints every frame it would put on the bus in the same log format,
 //! stamped with virtual time, and its trace events as lines starting with `#`.
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -20,29 +19,15 @@ pub use amiro_robot::log::{
 /// replayed, a SYS_PD_N record is no frame), µs; the whole duration (at least 1 µs) when it has fewer than two.
 /// An encoded stimulus that is cut or has no header is an error.
 pub fn received_gap_us(encoded: &[u8]) -> Result<u64> {
-    let (header, records) = encoded
-        .split_at_checked(16)
-        .filter(|(h, _)| &h[..8] == b"AMSTIM1\0")
-        .context("no AMSTIM1 header")?;
-    let mut duration = [0u8; 8];
-    duration.copy_from_slice(&header[8..16]);
-    let duration = u64::from_le_bytes(duration);
-    if records.len() % 20 != 0 {
-        bail!(
-            "{} bytes of records: not whole 20-byte records",
-            records.len()
-        );
+    use amiro_trace::stimulus::{decode, Event};
+    let (duration, records) = decode(encoded).map_err(|e| anyhow::anyhow!("stimulus: {e}"))?;
+    let mut times = Vec::new();
+    for record in records {
+        let record = record.map_err(|e| anyhow::anyhow!("stimulus: {e}"))?;
+        if matches!(record.event, Event::Frame { .. }) && record.at_us <= duration {
+            times.push(record.at_us);
+        }
     }
-    let mut times: Vec<u64> = records
-        .chunks_exact(20)
-        .filter(|r| r[11] & 2 == 0)
-        .map(|r| {
-            let mut at = [0u8; 8];
-            at.copy_from_slice(&r[..8]);
-            u64::from_le_bytes(at)
-        })
-        .filter(|&at| at <= duration)
-        .collect();
     times.sort_unstable();
     Ok(times
         .windows(2)

@@ -20,7 +20,7 @@ use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::termios::{self, BaudRate, ControlFlags, SetArg};
 
 use super::{interrupted, Bus, Reception};
-use crate::frame::{parse_hex_bytes, FrameId, LoggedFrame, RawFrame, Timestamp};
+use crate::frame::{LoggedFrame, RawFrame, Timestamp};
 
 /// How long an adapter may take to answer a command; real ones answer in well under a millisecond.
 const REPLY_TIMEOUT: Duration = Duration::from_secs(1);
@@ -56,18 +56,12 @@ pub enum AdapterMessage {
     },
 }
 
-/// The SLCAN text of a frame to transmit, including the final `\r`: `t2054018403 02\r` for 205#01840302.
+/// The SLCAN text of a frame to transmit, including the final `\r`: `t205401840302\r` for 205#01840302
+/// (`amiro_can::slcan`'s encoder, which the robot host's emulated adapter uses too).
 pub fn frame_command(frame: &RawFrame) -> String {
-    let (data_letter, remote_letter, id) = match frame.id() {
-        FrameId::Standard(id) => ('t', 'r', format!("{id:03X}")),
-        FrameId::Extended(id) => ('T', 'R', format!("{id:08X}")),
-    };
-    let letter = if frame.is_remote() {
-        remote_letter
-    } else {
-        data_letter
-    };
-    format!("{letter}{id}{}{}\r", frame.len(), frame.data_hex())
+    let mut text = [0u8; amiro_can::slcan::MAX_FRAME_MESSAGE];
+    let n = amiro_can::slcan::encode_frame(frame, None, &mut text);
+    String::from_utf8_lossy(&text[..n]).into_owned()
 }
 
 /// Reads one adapter message (terminator removed). A received frame may carry a 4-digit adapter timestamp
@@ -81,45 +75,10 @@ pub fn parse_message(message: &[u8]) -> AdapterMessage {
         "z" | "Z" => return AdapterMessage::Queued,
         _ => {}
     }
-    parse_frame_text(text).map_or_else(
-        || AdapterMessage::Other(text.to_string()),
-        AdapterMessage::Frame,
+    amiro_can::slcan::decode_frame(message).map_or_else(
+        |_| AdapterMessage::Other(text.to_string()),
+        |(frame, _)| AdapterMessage::Frame(frame),
     )
-}
-
-fn parse_frame_text(text: &str) -> Option<RawFrame> {
-    let (id_digits, remote) = match text.as_bytes().first()? {
-        b't' => (3, false),
-        b'r' => (3, true),
-        b'T' => (8, false),
-        b'R' => (8, true),
-        _ => return None,
-    };
-    let id_text = text.get(1..1 + id_digits)?;
-    if !id_text.bytes().all(|b| b.is_ascii_hexdigit()) {
-        return None;
-    }
-    let id_value = u32::from_str_radix(id_text, 16).ok()?;
-    let id = if id_digits == 3 {
-        FrameId::Standard(u16::try_from(id_value).ok()?)
-    } else {
-        FrameId::Extended(id_value)
-    };
-    let len_char = text.as_bytes().get(1 + id_digits)?;
-    let len = char::from(*len_char).to_digit(10).filter(|len| *len <= 8)? as u8;
-    let body = text.get(2 + id_digits..)?;
-    let data_digits = if remote { 0 } else { 2 * usize::from(len) };
-    let (data_text, rest) = (body.get(..data_digits)?, body.get(data_digits..)?);
-    let timestamp_ok =
-        rest.is_empty() || (rest.len() == 4 && rest.bytes().all(|b| b.is_ascii_hexdigit()));
-    if !timestamp_ok {
-        return None;
-    }
-    if remote {
-        RawFrame::remote_frame(id, len)
-    } else {
-        RawFrame::data_frame(id, &parse_hex_bytes(data_text)?)
-    }
 }
 
 /// What waiting on the adapter produced.

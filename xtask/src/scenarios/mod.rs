@@ -393,12 +393,12 @@ impl RunOutput {
     }
 }
 
+/// A time `s.micros` in µs (`amiro_can::candump`'s timestamp text).
 pub fn parse_seconds(text: &str) -> Result<u64> {
-    let (s, us) = text
-        .split_once('.')
-        .with_context(|| format!("bad time `{text}`"))?;
-    ensure!(us.len() == 6, "bad time `{text}`");
-    Ok(s.parse::<u64>()? * 1_000_000 + us.parse::<u64>()?)
+    amiro_can::candump::parse_seconds(text)
+        .map_err(|e| anyhow::anyhow!("{e}"))?
+        .checked_micros()
+        .with_context(|| format!("time `{text}` beyond u64 microseconds"))
 }
 
 /// A named scenario and its check.
@@ -529,13 +529,12 @@ impl HostAdmission {
     /// Decides the publish request `frame` (`ID#DATA`, e.g. `21F#01050000`) and keeps it when admitted.
     pub fn request(&mut self, frame: &str) -> Result<schedule_analysis::admission::Decision> {
         use schedule_analysis::{admission, time::Time};
-        let (id, data) = frame.split_once('#').context("frame without #")?;
-        let id = u16::from_str_radix(id, 16)?;
-        let data = (0..data.len())
-            .step_by(2)
-            .map(|i| u8::from_str_radix(data.get(i..i + 2).unwrap_or("x"), 16))
-            .collect::<Result<Vec<u8>, _>>()?;
-        let Ok(amiro_can::Command::Sensor(command)) = amiro_can::decode_command(id, &data) else {
+        let raw = amiro_can::candump::parse_compact(frame).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let amiro_can::candump::FrameId::Standard(id) = raw.id() else {
+            bail!("{frame} is not a standard frame");
+        };
+        let Ok(amiro_can::Command::Sensor(command)) = amiro_can::decode_command(id, raw.data())
+        else {
             bail!("{frame} is not a sensor command");
         };
         let amiro_can::SensorMode::Publish(period) = command.mode else {
