@@ -171,12 +171,8 @@ fn main() {
         println!("# duration: {}ms", end * 45 + 60);
         for (i, c) in best[..end].iter().enumerate() {
             let data: String = c.data[..c.len].iter().map(|b| format!("{b:02X}")).collect();
-            println!(
-                "({}.{:06}) can0 {:03X}#{data}",
-                (5_000 + i * 45_000) / 1_000_000,
-                (5_000 + i * 45_000) % 1_000_000,
-                c.id
-            );
+            let at = amiro_can::candump::Timestamp::from_micros((5_000 + i * 45_000) as u64);
+            println!("({at}) can0 {:03X}#{data}", c.id);
         }
     });
 }

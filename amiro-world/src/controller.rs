@@ -89,7 +89,7 @@ impl Frame {
 
 /// Virtual time as `candump -l` writes it: seconds with six decimals.
 pub fn timestamp(t_us: u64) -> String {
-    format!("({}.{:06})", t_us / 1_000_000, t_us % 1_000_000)
+    format!("({})", amiro_can::candump::Timestamp::from_micros(t_us))
 }
 
 /// What is wrong with a line the program wrote.
@@ -158,7 +158,7 @@ pub enum ControllerError {
 }
 
 fn seconds(t_us: u64) -> String {
-    format!("{}.{:06}", t_us / 1_000_000, t_us % 1_000_000)
+    amiro_can::candump::Timestamp::from_micros(t_us).to_string()
 }
 
 fn describe(status: &Option<ExitStatus>) -> String {

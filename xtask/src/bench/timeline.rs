@@ -125,6 +125,9 @@ fn shift(t: u64, offset: i128) -> i128 {
     i128::from(t) + offset
 }
 
+/// A `candump -l` timestamp of a time that may lie before the capture's origin (negative after the
+/// alignment), which `amiro_can::candump::Timestamp` cannot hold: floor division keeps the digits
+/// of such a time in the same form.
 fn stamp(ns: i128) -> String {
     let us = ns.div_euclid(1_000);
     format!(
