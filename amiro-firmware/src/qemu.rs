@@ -273,7 +273,6 @@ pub async fn replay_stimulus<W: core::future::Future<Output = ()>>(
     finish("end of run");
 }
 
-
 /// Prints the run's last line (receive losses, static RAM, the stack's high-water mark) and ends
 /// the run successfully.
 pub fn finish(why: &str) {
