@@ -472,26 +472,18 @@ impl<'a> Analysis<'a> {
         if let Some((file, line)) = self.image.line(call) {
             if let Some(stated) = self.bounds.length(caller, &file, line) {
                 let r = usize::from(stated.register);
-                let from_argument = stated
-                    .argument
-                    .and_then(|a| entry.get(usize::from(a)).copied().flatten());
-                let most = match (stated.bytes, from_argument) {
-                    (Some(a), Some(b)) => Some(a.min(b)),
-                    (a, b) => a.or(b),
-                };
-                if let Some(most) = most {
-                    args[r] = Some(args[r].map_or(most, |n| n.min(most)));
-                    stated_info = Some(LoopInfo {
-                        function: caller.to_string(),
-                        file: Some(file),
-                        line: Some(line),
-                        bound: u64::from(most),
-                        source: format!(
-                            "bounds file: a length of at most {most} bytes in r{r}: {}",
-                            stated.reason
-                        ),
-                    });
-                }
+                let most = stated.bytes;
+                args[r] = Some(args[r].map_or(most, |n| n.min(most)));
+                stated_info = Some(LoopInfo {
+                    function: caller.to_string(),
+                    file: Some(file),
+                    line: Some(line),
+                    bound: u64::from(most),
+                    source: format!(
+                        "bounds file: a length of at most {most} bytes in r{r}: {}",
+                        stated.reason
+                    ),
+                });
             }
         }
         if args == NO_ARGS {

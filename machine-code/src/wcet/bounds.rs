@@ -11,9 +11,7 @@
 //!   "indirect": [{ "function": "…", "file": "src/waker.rs", "line": 7,
 //!                  "targets": ["…::wake"], "reason": "the only waker vtable in the image" }],
 //!   "lengths": [{ "function": "…", "file": "heapless/src/vec/mod.rs", "line": 728, "register": 2,
-//!                 "bytes": 180, "reason": "shifts at most 15 frames of 12 bytes" },
-//!               { "function": "…::write", "file": "…", "line": 547, "register": 2, "argument": 2,
-//!                 "reason": "copies at most the slice it was passed" }],
+//!                 "bytes": 180, "reason": "shifts at most 15 frames of 12 bytes" }],
 //!   "per_element": [{ "function": "…::Encoder::put", "register": 2,
 //!                     "reason": "one pass per byte of its slice argument" }],
 //!   "tasks": [{ "name": "monotonic", "symbol": "TIM5", "handler": true,
@@ -65,9 +63,7 @@ pub struct IndirectTargets {
 }
 
 /// The most bytes a call of a memory function (`memcpy`, `memset`, …) at a place moves, where its
-/// machine code does not fix the length: the argument `register` is at most `bytes`, or at most what
-/// the calling function was itself passed in its argument register `argument` (`min` of a length and
-/// the room left), or the smaller of both.
+/// machine code does not fix the length: the argument `register` is at most `bytes`.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LengthBound {
@@ -75,10 +71,7 @@ pub struct LengthBound {
     pub file: String,
     pub line: u32,
     pub register: u8,
-    #[serde(default)]
-    pub bytes: Option<u32>,
-    #[serde(default)]
-    pub argument: Option<u8>,
+    pub bytes: u32,
     pub reason: String,
 }
 
@@ -159,10 +152,9 @@ impl BoundsFile {
             }
         }
         for l in &file.lengths {
-            let figure = l.bytes.is_some() || l.argument.is_some_and(|a| a <= 3);
-            if l.register > 3 || !figure || l.reason.trim().is_empty() {
+            if l.register > 3 || l.reason.trim().is_empty() {
                 return Err(Error::Bounds(format!(
-                    "the length at {}:{} in {} needs an argument register (0-3), `bytes` or an `argument` (0-3), and a reason",
+                    "the length at {}:{} in {} needs an argument register (0-3) and a reason",
                     l.file, l.line, l.function
                 )));
             }

@@ -621,6 +621,11 @@ fn a_loop_tested_at_its_top_is_counted() {
 
 /// A caller that clears `n` bytes through `__aeabi_memclr` (a byte loop on its length in r1).
 fn clears(n: u16) -> Image {
+    clears_through(n, "__aeabi_memclr")
+}
+
+/// [`clears`] through a callee named `callee`.
+fn clears_through(n: u16, callee: &str) -> Image {
     image(
         &[
             0xb580,     // 0x00 push {r7, lr}
@@ -640,7 +645,7 @@ fn clears(n: u16) -> Image {
         ],
         &[
             Sym::function("clear_some", 0, 10),
-            Sym::function("__aeabi_memclr", 0x0c, 0x10),
+            Sym::function(callee, 0x0c, 0x10),
         ],
     )
 }
@@ -686,4 +691,76 @@ fn a_register_loaded_with_one_function_address_is_a_direct_call() {
     let b = bound(&img, "caller", F103_0WS);
     // push, ldr, blx, the callee's movs and bx lr, pop.
     assert_eq!((b.instructions, b.declined.as_deref()), (6, None));
+}
+
+#[test]
+fn a_stated_length_bounds_a_call_the_machine_code_does_not_fix() {
+    // The length is read from memory: nothing in the machine code fixes it.
+    let code = thumb(&[
+        0xb580, // 0x00 push {r7, lr}           line 10
+        0x6801, // 0x02 ldr r1, [r0]
+        0xf000, 0xf802, // 0x04 bl 0x0c         line 11
+        0xbd80, // 0x08 pop {r7, pc}            line 12
+        0xbf00, // 0x0a
+        0x2200, // 0x0c movs r2, #0             (__aeabi_memclr, line 20)
+        0x2900, // 0x0e cmp r1, #0
+        0xd003, // 0x10 beq 0x1a
+        0x7002, // 0x12 strb r2, [r0]
+        0x3001, // 0x14 adds r0, #1
+        0x3901, // 0x16 subs r1, #1
+        0xe7f9, // 0x18 b 0x0e
+        0x4770, // 0x1a bx lr
+    ]);
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("clear_read", 0, 10),
+            Sym::function("__aeabi_memclr", 0x0c, 0x10),
+        ],
+        "firmware/src/c.rs",
+        &[(0, 10), (4, 11), (8, 12), (0x0c, 20)],
+    ))
+    .expect("the test image parses");
+    let none = bound_function(&img, "clear_read", F103_0WS, &BoundsFile::default()).unwrap();
+    assert!(
+        none.declined
+            .as_deref()
+            .is_some_and(|r| r.contains(length::LENGTH_UNKNOWN)),
+        "{none:?}"
+    );
+    let stated = BoundsFile::parse(
+        r#"{"lengths":[{"function":"clear_read","file":"src/c.rs","line":11,"register":1,"bytes":16,"reason":"a 16-byte record"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "clear_read", F103_0WS, &stated).unwrap();
+    // push, ldr, bl; the callee as for 16 bytes (100); pop.
+    assert_eq!((b.instructions, b.declined.as_deref()), (104, None));
+    assert!(
+        b.loops.iter().any(
+            |l| l.source == "bounds file: a length of at most 16 bytes in r1: a 16-byte record"
+        ),
+        "{:?}",
+        b.loops
+    );
+    // On another line the statement is no bound for the call.
+    let elsewhere = BoundsFile::parse(
+        r#"{"lengths":[{"function":"clear_read","file":"src/c.rs","line":12,"register":1,"bytes":16,"reason":"x"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "clear_read", F103_0WS, &elsewhere).unwrap();
+    assert!(b.declined.is_some());
+}
+
+#[test]
+fn a_per_element_function_is_bounded_like_a_memory_function() {
+    // Not one of the memory functions by name: its loop has no bound of its own.
+    let img = clears_through(16, "fill_slice");
+    let plain = bound(&img, "clear_some", F103_0WS);
+    assert!(plain.declined.is_some(), "{plain:?}");
+    let stated = BoundsFile::parse(
+        r#"{"per_element":[{"function":"fill_slice","register":1,"reason":"one pass per element"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "clear_some", F103_0WS, &stated).unwrap();
+    assert_eq!((b.instructions, b.declined.as_deref()), (104, None));
 }
