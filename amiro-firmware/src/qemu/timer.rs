@@ -193,75 +193,59 @@ fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     clock.reload = reload;
 }
 
-/// The apps' timer queue over the tick count.
-pub struct AppTimer;
+/// A timer queue over the tick count whose next expiry is the word `$due` (the tick interrupt reads
+/// it): the two backends differ only in their queue and that word.
+macro_rules! tick_backend {
+    ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident) => {
+        $(#[$doc])*
+        pub struct $backend;
 
-static APP_QUEUE: TimerQueue<AppTimer> = TimerQueue::new();
+        static $queue: TimerQueue<$backend> = TimerQueue::new();
 
-impl TimerQueueBackend for AppTimer {
-    type Ticks = u64;
+        impl TimerQueueBackend for $backend {
+            type Ticks = u64;
 
-    fn now() -> u64 {
-        now_ticks()
-    }
+            fn now() -> u64 {
+                now_ticks()
+            }
 
-    fn set_compare(at: u64) {
-        APP_DUE.store(at, Ordering::Relaxed);
-    }
+            fn set_compare(at: u64) {
+                $due.store(at, Ordering::Relaxed);
+            }
 
-    fn clear_compare_flag() {}
+            fn clear_compare_flag() {}
 
-    fn pend_interrupt() {
-        cortex_m::peripheral::SCB::set_pendst();
-    }
+            fn pend_interrupt() {
+                cortex_m::peripheral::SCB::set_pendst();
+            }
 
-    fn on_interrupt() {}
+            fn on_interrupt() {}
 
-    fn enable_timer() {}
+            fn enable_timer() {}
 
-    fn disable_timer() {
-        APP_DUE.store(u64::MAX, Ordering::Relaxed);
-    }
+            fn disable_timer() {
+                $due.store(u64::MAX, Ordering::Relaxed);
+            }
 
-    fn timer_queue() -> &'static TimerQueue<Self> {
-        &APP_QUEUE
-    }
+            fn timer_queue() -> &'static TimerQueue<Self> {
+                &$queue
+            }
+        }
+    };
 }
 
-/// The platform's timer queue (the robot exchange, the stimulus replay) over the tick count.
-pub struct PlatformTimer;
-
-static PLATFORM_QUEUE: TimerQueue<PlatformTimer> = TimerQueue::new();
-
-impl TimerQueueBackend for PlatformTimer {
-    type Ticks = u64;
-
-    fn now() -> u64 {
-        now_ticks()
-    }
-
-    fn set_compare(at: u64) {
-        PLATFORM_DUE.store(at, Ordering::Relaxed);
-    }
-
-    fn clear_compare_flag() {}
-
-    fn pend_interrupt() {
-        cortex_m::peripheral::SCB::set_pendst();
-    }
-
-    fn on_interrupt() {}
-
-    fn enable_timer() {}
-
-    fn disable_timer() {
-        PLATFORM_DUE.store(u64::MAX, Ordering::Relaxed);
-    }
-
-    fn timer_queue() -> &'static TimerQueue<Self> {
-        &PLATFORM_QUEUE
-    }
-}
+tick_backend!(
+    /// The apps' timer queue over the tick count.
+    AppTimer,
+    APP_QUEUE,
+    APP_DUE
+);
+tick_backend!(
+    /// The platform's timer queue (the robot exchange, the stimulus replay) over the tick count.
+    PlatformTimer,
+    PLATFORM_QUEUE,
+    PLATFORM_DUE
+);
 
 /// Waits on the platform's queue until tick `at` (no trace record: the platform's wait, not a
 /// task of the app's).
