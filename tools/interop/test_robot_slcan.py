@@ -7,50 +7,23 @@ Run by `cargo xtask test` (xtask/src/interop.rs: AMIRO_XTASK is the xtask binary
 """
 
 import os
-import signal
 import subprocess
-import threading
 import time
 
 import can
 import pytest
 
+from live_robot import live_robot
+
 AMIRO = os.environ.get("AMIRO", "amiro")
-XTASK = os.environ.get("AMIRO_XTASK")
 
 
 @pytest.fixture(scope="module")
 def robot():
-    if not XTASK:
-        pytest.skip("AMIRO_XTASK names no xtask binary")
-    proc = subprocess.Popen(
-        [XTASK, "robot", "--slcan", "--duration", "120s"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    path = None
-    deadline = time.monotonic() + 600
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        if line.startswith("slcan: "):
-            path = line.split(" ", 1)[1].strip()
-            break
-    assert path and path.startswith("/dev/pts/"), "no `slcan: /dev/pts/N` line"
-    # Keep reading the run's output so a full pipe never stalls it.
-    drained = []
-    reader = threading.Thread(target=lambda: drained.extend(proc.stdout), daemon=True)
-    reader.start()
-    yield path
-    proc.send_signal(signal.SIGINT)
-    proc.wait(timeout=120)
-    reader.join(timeout=60)
-    err = proc.stderr.read()
-    assert proc.returncode == 0, err
-    assert "bus log (candump -l): " in err
-    assert any(line.startswith("diwheeldrive: # qemu: end of run") for line in drained)
+    with live_robot() as (port, result):
+        yield port
+    assert "bus log (candump -l): " in result["stderr"]
+    assert any(line.startswith("diwheeldrive: # qemu: end of run") for line in result["lines"])
 
 
 def test_python_can_commands_the_robot(robot):

@@ -12,19 +12,18 @@ import csv
 import json
 import math
 import os
-import signal
 import struct
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import can
 import pytest
 
+import live_robot as robot
+
 ROOT = Path(__file__).resolve().parents[2]
-XTASK = os.environ.get("AMIRO_XTASK")
 # The floor sensors' positions under the robot (x forward, y left), m: amiro_world::floor::POSITIONS_M.
 FLOOR_SENSORS = [(0.040, -0.012), (0.000, -0.028), (0.000, 0.028), (0.040, 0.012)]
 
@@ -33,36 +32,9 @@ FLOOR_SENSORS = [(0.040, -0.012), (0.000, -0.028), (0.000, 0.028), (0.040, 0.012
 def live_robot(world, *extra):
     """Starts the live robot in `world`; yields (port, result) where result fills in at the end with its stdout lines,
     stderr and end-line figures."""
-    if not XTASK:
-        pytest.skip("AMIRO_XTASK names no xtask binary")
-    proc = subprocess.Popen(
-        [XTASK, "robot", "--slcan", "--duration", "120s", "--world", str(ROOT / "robot" / "worlds" / world), *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
-    port = None
-    deadline = time.monotonic() + 600
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        if line.startswith("slcan: "):
-            port = line.split(" ", 1)[1].strip()
-            break
-    assert port and port.startswith("/dev/pts/"), "no `slcan: /dev/pts/N` line"
-    lines = []
-    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
-    reader.start()
-    result = {}
-    try:
+    with robot.live_robot("--world", str(ROOT / "robot" / "worlds" / world), *extra) as (port, result):
         yield port, result
-    finally:
-        proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=120)
-        reader.join(timeout=60)
-        result["stderr"] = proc.stderr.read()
-        result["lines"] = lines
-    assert proc.returncode == 0, result["stderr"]
-    end = [line for line in lines if line.startswith("world: travelled")]
+    end = [line for line in result["lines"] if line.startswith("world: travelled")]
     assert len(end) == 1, result["stderr"]
     words = end[0].replace(",", "").split()
     result.update(travelled=float(words[2]), contacts=int(words[5]),
