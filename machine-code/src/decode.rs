@@ -387,6 +387,23 @@ impl Insn {
         ) || self.is_coprocessor_store()
     }
 
+    /// How many bytes it moves to or from memory as a load or store of the core's registers
+    /// (`STRB` 1, `STRH` 2, `STR` 4, `STRD` 8, `STM`/`PUSH`/`LDM`/`POP` 4 per register; 0 for
+    /// anything else, a floating-point transfer included).
+    pub fn bytes_moved(&self) -> u64 {
+        use Opcode::*;
+        match self.inst.opcode {
+            STRB | STRBT | STREXB | LDRB | LDRSB | LDRBT | LDRSBT | LDREXB => 1,
+            STRH | STRHT | STREXH | LDRH | LDRSH | LDRHT | LDRSHT | LDREXH => 2,
+            STR | STRT | STREX | LDR | LDRT | LDREX => 4,
+            STRD | LDRD => 8,
+            STM(..) | PUSH | LDM(..) | POP => {
+                4 * u64::from(self.register_list().unwrap_or(0).count_ones())
+            }
+            _ => 0,
+        }
+    }
+
     /// A floating-point load (`VLDR`, `VLDM`, `VPOP`): an `LDC` to coprocessor 10 or 11.
     pub fn is_coprocessor_load(&self) -> bool {
         matches!(self.inst.opcode, Opcode::LDC(c, _) | Opcode::LDCL(c, _) if c == 10 || c == 11)

@@ -239,18 +239,26 @@ impl<'a> Analysis<'a> {
                         f.name
                     )));
                 };
-                shared_count = Some(u64::from(n));
+                let (moved, factor) = length::moved_by(&f.name);
+                let units = u64::from(n) * factor;
+                shared_count = Some(units);
+                let per_pass = length::per_pass(insns, &graph, l, moved);
+                let what = match moved {
+                    length::Moved::Stores => "bytes stored",
+                    length::Moved::Loads => "bytes loaded",
+                    length::Moved::Passes => "elements",
+                };
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),
                     file: file.clone(),
                     line,
-                    bound: u64::from(n) + 1,
+                    bound: units / per_pass + 1,
                     source: format!(
-                        "length: at most {n} bytes at the call (r{r}); each pass of any of the \
-                         function's loops moves at least one, so all of them together iterate at most {n} times"
+                        "length: at most {n} at the call (r{r}), {units} {what} by all of the \
+                         function's loops together; each pass of this one moves at least {per_pass}"
                     ),
                 });
-                LoopCount::Shared
+                LoopCount::Shared { per_pass }
             } else {
                 return Ok(Err(format!(
                     "the loop in {} at {text} has no bound (not a counted loop, not in the bounds file)",

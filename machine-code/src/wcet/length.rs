@@ -37,6 +37,72 @@ pub fn length_register(name: &str) -> Option<u8> {
     }
 }
 
+/// What a memory function's loops move, to count their passes by: the bytes it stores or loads
+/// through a register other than `SP` (its buffers), or plain passes (one element each).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Moved {
+    Stores,
+    Loads,
+    Passes,
+}
+
+/// What the loops of function `name` move, and how many units all of them together move at most
+/// per byte of its length argument: `memcpy`, `memmove` and `memset` store each byte of the
+/// destination once, the byte-wise swap each byte of both buffers, `memcmp` and `bcmp` load each
+/// byte of both; any other function (a `per_element` one) counts passes, one per element.
+pub fn moved_by(name: &str) -> (Moved, u64) {
+    let name = name
+        .strip_prefix("compiler_builtins::mem::")
+        .unwrap_or(name);
+    match name {
+        "memcmp" | "bcmp" => (Moved::Loads, 2),
+        "core::ptr::swap_nonoverlapping_bytes" => (Moved::Stores, 2),
+        _ if length_register(name).is_some() => (Moved::Stores, 1),
+        _ => (Moved::Passes, 1),
+    }
+}
+
+/// The fewest units `moved` any pass of loop `l` moves: the least, over the ways from its header back
+/// to it, of the bytes its unconditional loads or stores (as `moved` says) move through a base other
+/// than `SP`; at least 1 (each pass moves at least one byte, or is one element).
+pub fn per_pass(insns: &[Insn], graph: &Cfg, l: &crate::wcet::cfg::Loop, moved: Moved) -> u64 {
+    let weight = |b: usize| -> u64 {
+        let blk = &graph.blocks[b];
+        insns[blk.first..=blk.last]
+            .iter()
+            .filter(|i| !i.conditional)
+            .filter(|i| match moved {
+                Moved::Stores => i.is_store(),
+                Moved::Loads => i.is_load(),
+                Moved::Passes => false,
+            })
+            .filter(|i| {
+                !matches!(i.inst.opcode, Opcode::PUSH | Opcode::POP)
+                    && i.memory_base().or_else(|| i.memory_base_wback()) != Some(crate::decode::SP)
+            })
+            .map(|i| i.bytes_moved())
+            .sum()
+    };
+    // Least bytes from the header to each block of the body (Dijkstra: the weights are not negative).
+    let mut best: std::collections::BTreeMap<usize, u64> = std::collections::BTreeMap::new();
+    let mut open = std::collections::BTreeSet::from([(weight(l.header), l.header)]);
+    let mut fewest: Option<u64> = None;
+    while let Some((d, b)) = open.pop_first() {
+        if best.contains_key(&b) {
+            continue;
+        }
+        best.insert(b, d);
+        for e in &graph.blocks[b].succs {
+            if e.to == l.header {
+                fewest = Some(fewest.map_or(d, |f| f.min(d)));
+            } else if l.body.contains(&e.to) && !best.contains_key(&e.to) {
+                open.insert((d + weight(e.to), e.to));
+            }
+        }
+    }
+    fewest.unwrap_or(1).max(1)
+}
+
 /// The argument registers' bounds at the call that ends block `block` of `graph`: from the last write of
 /// each on every way into the call (the function's `entry` arguments where a way starts at its entry
 /// without one).
@@ -138,7 +204,12 @@ impl Ways<'_> {
             // mov rN, rM
             (true, [d, m]) if *d == r => self.bound(block, first + at, *m, visiting),
             // cmp rM, #c; mov rN, rM; it cs|hi; movcs|movhi rN, #c: the smaller of rM and c.
-            (false, [d]) if *d == r => smaller_of(run, at, r),
+            (false, [d]) if *d == r && insn.immediate() != Some(0) => smaller_of(run, at, r),
+            // subs rN, rA, X; it cc; movcc rN, #0: `rA.saturating_sub(X)`, at most rA.
+            (false, [d]) if *d == r => {
+                let a = saturated_from(run, at, r)?;
+                self.bound(block, first + at - 2, a, visiting)
+            }
             _ => None,
         }
     }
@@ -154,6 +225,17 @@ fn smaller_of(run: &[Insn], at: usize, r: u8) -> Option<u32> {
     if !matches!(first_condition, 2 | 8) {
         return None;
     }
+    let cmp = run[..it].iter().rposition(|i| {
+        matches!(i.inst.opcode, Opcode::CMP | Opcode::CMN | Opcode::TST) || i.inst.s
+    })?;
+    // cmp rN, #c; it cs|hi; movcs|movhi rN, #c: rN itself made the smaller of it and c.
+    if run[cmp].inst.opcode == Opcode::CMP
+        && matches!(run[cmp].inst.operands[0], Operand::Reg(x) if x.number() == r)
+        && run[cmp].immediate() == Some(c)
+        && run[cmp + 1..at].iter().all(|i| !i.writes().contains(r))
+    {
+        return Some(c);
+    }
     let before = run[..it].iter().rposition(|i| i.writes().contains(r))?;
     let [d2, m] = run[before].registers()[..] else {
         return None;
@@ -161,9 +243,6 @@ fn smaller_of(run: &[Insn], at: usize, r: u8) -> Option<u32> {
     if run[before].inst.opcode != Opcode::MOV || run[before].conditional || d2 != r {
         return None;
     }
-    let cmp = run[..it].iter().rposition(|i| {
-        matches!(i.inst.opcode, Opcode::CMP | Opcode::CMN | Opcode::TST) || i.inst.s
-    })?;
     let compared = &run[cmp];
     let same = compared.inst.opcode == Opcode::CMP
         && matches!(compared.inst.operands[0], Operand::Reg(x) if x.number() == m)
@@ -171,6 +250,26 @@ fn smaller_of(run: &[Insn], at: usize, r: u8) -> Option<u32> {
     // Nothing between the compare and the conditional move writes rM.
     let untouched = run[cmp + 1..at].iter().all(|i| !i.writes().contains(m));
     (same && untouched).then_some(c)
+}
+
+/// `subs rN, rA, X; it cc; movcc rN, #0` ending at `run[at]` (`rA.saturating_sub(X)`): `rA`, whose bound
+/// is rN's (the subtraction without a borrow is at most rA, with one the result is 0).
+fn saturated_from(run: &[Insn], at: usize, r: u8) -> Option<u8> {
+    if at < 2 || run[at].immediate() != Some(0) {
+        return None;
+    }
+    let (it, sub) = (&run[at - 1], &run[at - 2]);
+    // `IT CC` (condition 3) covering the move alone.
+    if it.inst.opcode != Opcode::IT || (it.raw[0] >> 4) & 0xF != 3 || it_slots(it) != 1 {
+        return None;
+    }
+    if sub.inst.opcode != Opcode::SUB || !sub.inst.s || sub.conditional {
+        return None;
+    }
+    match sub.registers()[..] {
+        [d, a, ..] if d == r => Some(a),
+        _ => None,
+    }
 }
 
 /// How many instructions an `IT` instruction covers (1–4), from its mask.

@@ -29,6 +29,14 @@ impl Cost {
             wait_ns: self.wait_ns + other.wait_ns,
         }
     }
+    /// This divided by `n`, each figure rounded up.
+    pub fn div_ceil(self, n: u64) -> Cost {
+        Cost {
+            cycles: self.cycles.div_ceil(n),
+            instructions: self.instructions.div_ceil(n),
+            wait_ns: self.wait_ns.div_ceil(n),
+        }
+    }
     /// `n` times this.
     pub fn times(self, n: u64) -> Cost {
         Cost {
@@ -51,10 +59,12 @@ pub enum LoopCount {
     /// per job; each preemption inside it costs one more iteration, returned apart
     /// ([`Longest::retry`]).
     Retry,
-    /// One of several loops that share one count between them (a memory function's loops, each pass
-    /// moving at least one of its `n` bytes): collapsed to its way out, its longest iteration returned
-    /// apart ([`Longest::shared`]) for the caller to charge `n` times.
-    Shared,
+    /// One of several loops that share one count between them (a memory function's loops: each
+    /// pass moves at least `per_pass` of the `n` bytes all of them move together): collapsed to its
+    /// way out, its longest iteration per unit moved returned apart ([`Longest::shared`]) for the
+    /// caller to charge `n` times. Whatever passes the loops make, `Σ passes·per_pass ≤ n`, so
+    /// `Σ passes·iteration ≤ n · max(iteration / per_pass)`.
+    Shared { per_pass: u64 },
     /// No exit: no path through it completes.
     Endless,
 }
@@ -65,7 +75,7 @@ pub enum LoopCount {
 pub struct Longest {
     pub path: Cost,
     pub retry: Cost,
-    /// The longest iteration of a [`LoopCount::Shared`] loop.
+    /// The longest iteration per unit moved of a [`LoopCount::Shared`] loop (rounded up).
     pub shared: Cost,
 }
 
@@ -208,8 +218,8 @@ pub fn longest(
                 retry = better(retry, iteration, key);
                 Some(out)
             }
-            (LoopCount::Shared, Some(out)) => {
-                shared = better(shared, iteration, key);
+            (LoopCount::Shared { per_pass }, Some(out)) => {
+                shared = better(shared, iteration.div_ceil(per_pass.max(1)), key);
                 Some(out)
             }
             (LoopCount::Wait { ns, cycles }, Some(out)) => Some(out.plus(Cost {

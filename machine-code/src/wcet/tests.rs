@@ -764,3 +764,121 @@ fn a_per_element_function_is_bounded_like_a_memory_function() {
     let b = bound_function(&img, "clear_some", F103_0WS, &stated).unwrap();
     assert_eq!((b.instructions, b.declined.as_deref()), (104, None));
 }
+
+#[test]
+fn a_memory_loop_that_moves_a_word_a_pass_is_charged_per_word() {
+    // __aeabi_memclr4 clearing a word a pass: 16 bytes are 4 passes, not 16.
+    let img = image(
+        &[
+            0xb580, // 0x00 push {r7, lr}
+            0x2110, // 0x02 movs r1, #16
+            0xf000, 0xf802, // 0x04 bl 0x0c
+            0xbd80, // 0x08 pop {r7, pc}
+            0xbf00, // 0x0a
+            0x2200, // 0x0c movs r2, #0   (__aeabi_memclr4)
+            0x2900, // 0x0e cmp r1, #0    (header)
+            0xd003, // 0x10 beq 0x1a
+            0x6002, // 0x12 str r2, [r0]: 4 bytes a pass
+            0x3004, // 0x14 adds r0, #4
+            0x3904, // 0x16 subs r1, #4
+            0xe7f9, // 0x18 b 0x0e
+            0x4770, // 0x1a bx lr
+        ],
+        &[
+            Sym::function("clear_words", 0, 10),
+            Sym::function("__aeabi_memclr4", 0x0c, 0x10),
+        ],
+    );
+    let b = bound(&img, "clear_words", F103_0WS);
+    // What runs: push, movs, bl; movs; 4 × (cmp, beq, str, adds, subs, b); cmp, beq, bx lr; pop = 32.
+    // The bound charges each of the 16 bytes a quarter of the iteration's 6 instructions, rounded
+    // up (2): 3 + 1 + 32 + 3 + 1 = 40 — at least what runs, and a quarter of the byte-wise 104.
+    assert_eq!((b.instructions, b.declined.as_deref()), (40, None));
+    let l = b
+        .loops
+        .iter()
+        .find(|l| l.function == "__aeabi_memclr4")
+        .expect("the loop is listed");
+    assert_eq!(l.bound, 5, "{l:?}");
+    assert!(l.source.contains("at least 4"), "{l:?}");
+    // A store under a condition is no byte a pass can count on: the same loop with `strne`
+    // (after an `it ne`) is charged per byte.
+    let img = image(
+        &[
+            0xb580, 0x2110, 0xf000, 0xf802, 0xbd80, 0xbf00, // as above
+            0x2200, // 0x0c movs r2, #0
+            0x2900, // 0x0e cmp r1, #0
+            0xd004, // 0x10 beq 0x1c
+            0xbf18, // 0x12 it ne
+            0x6002, // 0x14 strne r2, [r0]
+            0x3004, // 0x16 adds r0, #4
+            0x3904, // 0x18 subs r1, #4
+            0xe7f8, // 0x1a b 0x0e
+            0x4770, // 0x1c bx lr
+        ],
+        &[
+            Sym::function("clear_words", 0, 10),
+            Sym::function("__aeabi_memclr4", 0x0c, 0x12),
+        ],
+    );
+    let b = bound(&img, "clear_words", F103_0WS);
+    // 16 bytes × the 7-instruction iteration: 3 + 1 + 112 + 3 + 1.
+    assert_eq!((b.instructions, b.declined.as_deref()), (120, None));
+}
+
+/// A caller that clears `min(a, 12).saturating_sub(b)` bytes (`a` and `b` read from memory) through
+/// `__aeabi_memclr`; with `min` false it clears `a.saturating_sub(b)`.
+fn clears_saturated(min: bool) -> Image {
+    let (cmp, it, mov) = if min {
+        (0x2b0c, 0xbf28, 0x230c) // cmp r3, #12; it cs; movcs r3, #12
+    } else {
+        (0xbf00, 0xbf00, 0xbf00) // nops
+    };
+    image(
+        &[
+            0xb580, // 0x00 push {r7, lr}
+            0x6803, // 0x02 ldr r3, [r0]
+            cmp,    // 0x04
+            it,     // 0x06
+            mov,    // 0x08
+            0x6841, // 0x0a ldr r1, [r0, #4]
+            0x1a59, // 0x0c subs r1, r3, r1
+            0xbf38, // 0x0e it cc
+            0x2100, // 0x10 movcc r1, #0
+            0xf000, 0xf801, // 0x12 bl 0x18
+            0xbd80, // 0x16 pop {r7, pc}
+            0x2200, // 0x18 movs r2, #0   (__aeabi_memclr)
+            0x2900, // 0x1a cmp r1, #0
+            0xd003, // 0x1c beq 0x26
+            0x7002, // 0x1e strb r2, [r0]
+            0x3001, // 0x20 adds r0, #1
+            0x3901, // 0x22 subs r1, #1
+            0xe7f9, // 0x24 b 0x1a
+            0x4770, // 0x26 bx lr
+        ],
+        &[
+            Sym::function("clear_rest", 0, 0x18),
+            Sym::function("__aeabi_memclr", 0x18, 0x10),
+        ],
+    )
+}
+
+#[test]
+fn a_length_made_the_smaller_of_itself_and_a_constant_then_saturated_is_bounded() {
+    // `min(a, 12)` in a register of its own, then `saturating_sub`: at most 12 bytes.
+    let b = bound(&clears_saturated(true), "clear_rest", F103_0WS);
+    // The caller's 11 instructions (both ITs counted), the callee's movs, 12 × (cmp, beq, strb,
+    // adds, subs, b) and its way out (cmp, beq, bx lr).
+    assert_eq!(
+        (b.instructions, b.declined.as_deref()),
+        (11 + 1 + 72 + 3, None)
+    );
+    // Without the `min`, the subtraction alone fixes nothing.
+    let b = bound(&clears_saturated(false), "clear_rest", F103_0WS);
+    assert!(
+        b.declined
+            .as_deref()
+            .is_some_and(|r| r.contains(length::LENGTH_UNKNOWN)),
+        "{b:?}"
+    );
+}
