@@ -448,15 +448,15 @@ struct Writer<'a> {
 }
 
 impl Writer<'_> {
-    fn put(&mut self, bytes: &[u8]) {
-        let end = self.at.saturating_add(bytes.len()).min(ENCODED_LEN);
-        if let (Some(dst), Some(src)) = (
-            self.record.get_mut(self.at..end),
-            bytes.get(..end.saturating_sub(self.at)),
-        ) {
-            dst.copy_from_slice(src);
+    // A field of a fixed size: each call copies its K bytes without a length to look up (no
+    // `memcpy` of a length the machine code does not fix: docs/analysis.md).
+    fn put<const K: usize>(&mut self, bytes: &[u8; K]) {
+        for (k, &byte) in bytes.iter().enumerate() {
+            if let Some(slot) = self.record.get_mut(self.at + k) {
+                *slot = byte;
+            }
         }
-        self.at = end;
+        self.at = self.at.saturating_add(K).min(ENCODED_LEN);
     }
 }
 

@@ -140,7 +140,7 @@ fn counted_at_top(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> 
         if l.body.contains(&blk) || !block.succs.iter().any(|e| e.to == l.header) {
             continue;
         }
-        let start = initial(&insns[block.first..=block.last], counter)?;
+        let start = initial(insns, cfg, blk, counter, &mut Vec::new())?;
         most = most.max(run_top(
             start,
             &step,
@@ -282,7 +282,7 @@ fn counted_at_bottom(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String
         if l.body.contains(&b) || !blk.succs.iter().any(|e| e.to == l.header) {
             continue;
         }
-        let start = initial(&insns[blk.first..=blk.last], counter)?;
+        let start = initial(insns, cfg, b, counter, &mut Vec::new())?;
         most = most.max(run(start, &step, compare, code)?);
         found_entry = true;
     }
@@ -413,13 +413,33 @@ pub fn exclusive_retry(
     }
 }
 
-/// The counter's constant value at the end of `block`: its last write there must be `MOV rX, #c`.
-fn initial(block: &[Insn], r: u8) -> Option<u32> {
-    let last = block.iter().rev().find(|i| i.writes().contains(r))?;
-    let regs = last.registers();
-    (last.inst.opcode == Opcode::MOV && regs == [r] && !last.conditional)
-        .then(|| last.immediate())
-        .flatten()
+/// The counter's constant value at the end of block `b`: its last write there must be `MOV rX, #c`;
+/// a block that does not write it has the value every way into it has (the same on all, and never
+/// through a cycle).
+fn initial(insns: &[Insn], cfg: &Cfg, b: usize, r: u8, on_the_way: &mut Vec<usize>) -> Option<u32> {
+    let block = &insns[cfg.blocks[b].first..=cfg.blocks[b].last];
+    if let Some(last) = block.iter().rev().find(|i| i.writes().contains(r)) {
+        let regs = last.registers();
+        return (last.inst.opcode == Opcode::MOV && regs == [r] && !last.conditional)
+            .then(|| last.immediate())
+            .flatten();
+    }
+    if b == 0 || on_the_way.contains(&b) {
+        return None;
+    }
+    on_the_way.push(b);
+    let mut value = None;
+    for (p, pred) in cfg.blocks.iter().enumerate() {
+        if pred.succs.iter().any(|e| e.to == b) {
+            let v = initial(insns, cfg, p, r, on_the_way)?;
+            if value.is_some_and(|known| known != v) {
+                return None;
+            }
+            value = Some(v);
+        }
+    }
+    on_the_way.pop();
+    value
 }
 
 /// The header's executions: each pass steps the counter and branches back while the condition

@@ -882,3 +882,36 @@ fn a_length_made_the_smaller_of_itself_and_a_constant_then_saturated_is_bounded(
         "{b:?}"
     );
 }
+
+#[test]
+fn a_counter_set_before_a_call_is_found_through_the_blocks_on_the_way() {
+    // r4 = 0 set, then a call (which leaves r4 alone, AAPCS) ends the block; the block after it
+    // does not write r4, and the loop counts r4 to 3.
+    let img = image(
+        &[
+            0xb510, // 0x00 push {r4, lr}
+            0x2400, // 0x02 movs r4, #0
+            0xf000, 0xf808, // 0x04 bl 0x18
+            0x3002, // 0x08 adds r0, #2     (the block after the call)
+            0x2c03, // 0x0a cmp r4, #3      (header: 4 passes)
+            0xd002, // 0x0c beq 0x14
+            0x3001, // 0x0e adds r0, #1     (3 iterations)
+            0x3401, // 0x10 adds r4, #1
+            0xe7fa, // 0x12 b 0x0a
+            0xbd10, // 0x14 pop {r4, pc}
+            0xbf00, // 0x16
+            0x4770, // 0x18 bx lr           (leaf)
+        ],
+        &[
+            Sym::function("after_call", 0, 0x18),
+            Sym::function("leaf", 0x18, 2),
+        ],
+    );
+    let b = bound(&img, "after_call", F103_0WS);
+    // push, movs, bl, bx lr, adds; 4 × (cmp, beq); 3 × (adds, adds, b); pop = 5 + 8 + 9 + 1.
+    assert_eq!((b.instructions, b.declined.as_deref()), (23, None));
+    assert!(b
+        .loops
+        .iter()
+        .any(|l| l.bound == 4 && l.source.starts_with("counted")));
+}
