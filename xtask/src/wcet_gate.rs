@@ -121,6 +121,49 @@ pub fn check_bounds_current(root: &Path) -> Result<()> {
             missing.join(", ")
         );
     }
+    check_stated_places(root, &every)
+}
+
+/// Every entry of each board's stated bounds file (`schedule-analysis/models/<board>.bounds.json`) must name a
+/// place in at least one of the board's images: an entry keyed to a line the source no longer has there would
+/// silently stop bounding its loop.
+fn check_stated_places(root: &Path, every: &[Build]) -> Result<()> {
+    let mut stale = Vec::new();
+    for board in BOARDS.iter() {
+        let path = root
+            .join("schedule-analysis")
+            .join("models")
+            .join(format!("{}.bounds.json", board.name));
+        if !path.exists() {
+            continue;
+        }
+        let stated = machine_code::wcet::bounds::BoundsFile::read(&path)?;
+        let mut left: Option<Vec<String>> = None;
+        for build in every.iter().filter(|b| b.board.name == board.name) {
+            let elf = revision::kept_elf(root, build, false);
+            let image =
+                machine_code::Image::read(&elf).with_context(|| elf.display().to_string())?;
+            let here = stated.missing_places(&image);
+            left = Some(match left {
+                None => here,
+                Some(before) => before.into_iter().filter(|m| here.contains(m)).collect(),
+            });
+        }
+        for entry in left.unwrap_or_default() {
+            stale.push(format!(
+                "{}: {entry}",
+                path.strip_prefix(root).unwrap_or(&path).display()
+            ));
+        }
+    }
+    if !stale.is_empty() {
+        bail!(
+            "stated bounds whose place is in none of the board's images (the source moved: correct the line, \
+             or remove the entry):\n  {}",
+            stale.join("\n  ")
+        );
+    }
+    println!("bounds gate: every stated bound names a place in its board's images");
     Ok(())
 }
 

@@ -155,6 +155,19 @@ impl<'a> Analysis<'a> {
             returning.insert(t, r);
         }
         let graph = Cfg::build(f, &read, &|t| returning.get(&t).copied().unwrap_or(true))?;
+        // A cycle with more than one entry (an async task's loop) made a natural loop.
+        let graph = match graph.split_irreducible() {
+            Ok(split) => split.unwrap_or(graph),
+            Err(b) => {
+                let (_, _, text) = place(image, insns[graph.blocks[b].first].addr);
+                return Ok(Err(format!(
+                    "irreducible control flow in {} at {text}: splitting it into natural loops \
+                     would grow the graph more than {}-fold",
+                    f.name,
+                    cfg::MAX_SPLIT_GROWTH
+                )));
+            }
+        };
         let chip = self.chip;
         let mut loops_info = Vec::new();
         // Loops and their counts.

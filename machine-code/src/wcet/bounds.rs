@@ -213,6 +213,68 @@ impl BoundsFile {
     }
 }
 
+impl BoundsFile {
+    /// The entries whose place is not in `image`: no function of their name, or no instruction of it
+    /// at their file and line (a key the source moved away from; keys are lines, so an edit above a
+    /// stated loop leaves its entry behind). Each as `kind function file:line`.
+    pub fn missing_places(&self, image: &crate::Image) -> Vec<String> {
+        let functions = |name: &str| -> Vec<&crate::image::Function> {
+            image
+                .functions
+                .values()
+                .filter(|f| f.name == name || f.symbol == name)
+                .collect()
+        };
+        let has_line = |function: &str, file: &str, line: u32| {
+            functions(function).iter().any(|f| {
+                f.instructions().is_ok_and(|insns| {
+                    insns.iter().any(|i| {
+                        image
+                            .line(i.addr)
+                            .is_some_and(|(path, l)| l == line && same_file(&path, file))
+                    })
+                })
+            })
+        };
+        let mut missing = Vec::new();
+        let keyed = self
+            .loops
+            .iter()
+            .map(|l| ("loop", &l.function, &l.file, l.line))
+            .chain(
+                self.waits
+                    .iter()
+                    .map(|w| ("wait", &w.function, &w.file, w.line)),
+            )
+            .chain(
+                self.indirect
+                    .iter()
+                    .map(|i| ("indirect call", &i.function, &i.file, i.line)),
+            )
+            .chain(
+                self.lengths
+                    .iter()
+                    .map(|l| ("length", &l.function, &l.file, l.line)),
+            );
+        for (kind, function, file, line) in keyed {
+            if !has_line(function, file, line) {
+                missing.push(format!("{kind} {function} {file}:{line}"));
+            }
+        }
+        for p in &self.per_element {
+            if functions(&p.function).is_empty() {
+                missing.push(format!("per-element function {}", p.function));
+            }
+        }
+        for t in &self.tasks {
+            if functions(&t.symbol).is_empty() {
+                missing.push(format!("task {} ({})", t.name, t.symbol));
+            }
+        }
+        missing
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

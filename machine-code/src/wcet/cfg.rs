@@ -378,3 +378,119 @@ pub struct Loop {
     /// The blocks with an edge back to the header.
     pub latches: Vec<usize>,
 }
+
+/// The most blocks [`Cfg::split_irreducible`] may make of a graph, as a multiple of its own: node
+/// splitting can grow a graph exponentially, and a graph that needs more is declined instead.
+pub const MAX_SPLIT_GROWTH: usize = 4;
+
+impl Cfg {
+    /// The graph made reducible by node splitting, where it is not: a cycle entered at more than one
+    /// block (an async task's loop, entered at its top on the first poll and at an `await` on every
+    /// later one) keeps one entry as its header, and the blocks a path from each other entry runs
+    /// through before it reaches the header are copied for the way in from outside. Every path of the
+    /// graph is a path of the result (its blocks are copies with the same instructions and edges),
+    /// so a bound of the result bounds the graph; its new natural loop has the header's place, where
+    /// a bounds file can state its bound (docs/analysis.md, "Async tasks"). `Ok(None)` when the graph
+    /// is reducible; `Err(block)` when splitting would grow it beyond [`MAX_SPLIT_GROWTH`] times.
+    pub fn split_irreducible(&self) -> Result<Option<Cfg>, usize> {
+        let mut graph = self.clone();
+        let limit = self.blocks.len() * MAX_SPLIT_GROWTH;
+        let mut split = false;
+        loop {
+            let header = match graph.loops() {
+                Ok(_) => return Ok(split.then_some(graph)),
+                Err(b) => b,
+            };
+            if graph.blocks.len() > limit {
+                return Err(header);
+            }
+            graph.split_at(header);
+            split = true;
+        }
+    }
+
+    /// The blocks reachable from `from` along the edges (or, `backwards`, that reach it).
+    fn reach(&self, from: usize, backwards: bool) -> BTreeSet<usize> {
+        let mut preds = vec![Vec::new(); self.blocks.len()];
+        for (b, block) in self.blocks.iter().enumerate() {
+            for e in &block.succs {
+                preds[e.to].push(b);
+            }
+        }
+        let mut seen = BTreeSet::from([from]);
+        let mut work = vec![from];
+        while let Some(x) = work.pop() {
+            let next: Vec<usize> = if backwards {
+                preds[x].clone()
+            } else {
+                self.blocks[x].succs.iter().map(|e| e.to).collect()
+            };
+            for y in next {
+                if seen.insert(y) {
+                    work.push(y);
+                }
+            }
+        }
+        seen
+    }
+
+    /// Splits the strongly connected region around `header` (an entry of it): every other entry's
+    /// blocks up to the header are copied for the edges from outside the region.
+    fn split_at(&mut self, header: usize) {
+        let ahead = self.reach(header, false);
+        let behind = self.reach(header, true);
+        let region: BTreeSet<usize> = ahead.intersection(&behind).copied().collect();
+        // The function's entry, where the region holds it, is the one entry that stays.
+        let header = if region.contains(&0) { 0 } else { header };
+        let outside_into = |g: &Cfg, x: usize| {
+            g.blocks
+                .iter()
+                .enumerate()
+                .any(|(p, blk)| !region.contains(&p) && blk.succs.iter().any(|e| e.to == x))
+        };
+        let entries: Vec<usize> = region
+            .iter()
+            .copied()
+            .filter(|&x| x != header && (x == 0 || outside_into(self, x)))
+            .collect();
+        for entry in entries {
+            // The region's blocks reachable from this entry without passing the header.
+            let mut part = BTreeSet::from([entry]);
+            let mut work = vec![entry];
+            while let Some(x) = work.pop() {
+                for e in &self.blocks[x].succs {
+                    if e.to != header && region.contains(&e.to) && part.insert(e.to) {
+                        work.push(e.to);
+                    }
+                }
+            }
+            let copy: BTreeMap<usize, usize> = part
+                .iter()
+                .enumerate()
+                .map(|(k, &x)| (x, self.blocks.len() + k))
+                .collect();
+            for &x in &part {
+                let mut block = self.blocks[x].clone();
+                for e in &mut block.succs {
+                    if let Some(&c) = copy.get(&e.to) {
+                        e.to = c;
+                    }
+                }
+                self.blocks.push(block);
+            }
+            // The ways in from outside the region now enter the copy.
+            let entry_copy = copy[&entry];
+            let copies: BTreeSet<usize> = copy.values().copied().collect();
+            for p in 0..self.blocks.len() {
+                if region.contains(&p) || copies.contains(&p) {
+                    continue;
+                }
+                for e in &mut self.blocks[p].succs {
+                    if e.to == entry {
+                        e.to = entry_copy;
+                    }
+                }
+            }
+        }
+    }
+}

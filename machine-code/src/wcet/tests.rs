@@ -915,3 +915,71 @@ fn a_counter_set_before_a_call_is_found_through_the_blocks_on_the_way() {
         .iter()
         .any(|l| l.bound == 4 && l.source.starts_with("counted")));
 }
+
+/// An async task's poll as rustc lowers `loop { x += 1; wait.await; y += 1; }`: the state (r0) sends
+/// a first poll to the loop's top and every later one to the `await` (r2 = 0: pending, return), so
+/// the loop is entered at two blocks (irreducible).
+fn async_loop() -> Image {
+    let code = thumb(&[
+        0xb908, // 0x00 cbnz r0, 0x06     (resumed: to the await)      line 10
+        0x2100, // 0x02 movs r1, #0       (first poll)                 line 11
+        0x3101, // 0x04 adds r1, #1       (the loop's top)             line 12
+        0x2a00, // 0x06 cmp r2, #0        (the await: pending?)        line 13
+        0xd001, // 0x08 beq 0x0e
+        0x3301, // 0x0a adds r3, #1       (after the await)            line 14
+        0xe7fa, // 0x0c b 0x04
+        0x4770, // 0x0e bx lr             (pending: the poll returns)  line 15
+    ]);
+    Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("poll", 0, 0x10)],
+        "firmware/src/task.rs",
+        &[(0, 10), (2, 11), (4, 12), (6, 13), (0x0a, 14), (0x0e, 15)],
+    ))
+    .expect("the test image parses")
+}
+
+#[test]
+fn an_async_loop_entered_at_its_await_is_split_into_a_natural_loop() {
+    let img = async_loop();
+    // Made reducible, the loop (entered now at the await, line 13: the loop's top is copied for the
+    // first poll) has no bound of its own: declined by name.
+    let plain = bound_function(&img, "poll", F103_0WS, &BoundsFile::default()).unwrap();
+    assert!(
+        plain.declined.as_deref().is_some_and(
+            |r| r.contains("the loop in poll at /work/firmware/src/task.rs:13 has no bound")
+        ),
+        "{plain:?}"
+    );
+    // One pass per job, stated: the await runs at most twice per poll (resumed, and pending again).
+    let stated = BoundsFile::parse(
+        r#"{"loops":[{"function":"poll","file":"src/task.rs","line":13,"bound":2,"reason":"one pass of the task's loop per job"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "poll", F103_0WS, &stated).unwrap();
+    // The longest poll is the first: cbnz, movs, the loop's top (adds, its copy for the way in), then
+    // the await twice: one iteration (cmp, beq, adds, b, adds) and the way out (cmp, beq); bx lr
+    // = 3 + 5 + 2 + 1. (A resumed poll: cbnz, 5 + 2, bx lr = 9.)
+    assert_eq!((b.instructions, b.declined.as_deref()), (11, None));
+}
+
+#[test]
+fn a_stated_entry_whose_place_the_image_lacks_is_named() {
+    let img = async_loop();
+    let stated = BoundsFile::parse(
+        r#"{"loops":[{"function":"poll","file":"src/task.rs","line":13,"bound":2,"reason":"r"},
+                     {"function":"poll","file":"src/task.rs","line":99,"bound":2,"reason":"r"},
+                     {"function":"gone","file":"src/task.rs","line":13,"bound":2,"reason":"r"}],
+            "per_element":[{"function":"gone_too","register":1,"reason":"r"}],
+            "tasks":[{"name":"t","symbol":"poll","handler":true,"reason":"r"}]}"#,
+    )
+    .unwrap();
+    assert_eq!(
+        stated.missing_places(&img),
+        [
+            "loop poll src/task.rs:99",
+            "loop gone src/task.rs:13",
+            "per-element function gone_too"
+        ]
+    );
+}
