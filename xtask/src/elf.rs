@@ -304,6 +304,26 @@ pub fn over_budget(reports: &[SizeReport]) -> Vec<String> {
         .collect()
 }
 
+/// The 52-byte header of a little-endian ARM ELF32 executable entered at 0x0800_6000, for tests: the program
+/// and section header tables at `phoff` and `shoff`, `[phnum, shnum, shstrndx]`.
+#[cfg(test)]
+pub(crate) fn elf32_header(phoff: u32, shoff: u32, [phnum, shnum, shstrndx]: [u16; 3]) -> Vec<u8> {
+    let mut out = vec![0x7f, b'E', b'L', b'F', 1, 1, 1];
+    out.resize(16, 0);
+    out.extend_from_slice(&2u16.to_le_bytes()); // e_type EXEC
+    out.extend_from_slice(&40u16.to_le_bytes()); // e_machine ARM
+    out.extend_from_slice(&1u32.to_le_bytes()); // e_version
+    out.extend_from_slice(&0x0800_6000u32.to_le_bytes()); // e_entry
+    out.extend_from_slice(&phoff.to_le_bytes());
+    out.extend_from_slice(&shoff.to_le_bytes());
+    out.extend_from_slice(&0u32.to_le_bytes()); // e_flags
+                                                // ehsize, phentsize, phnum, shentsize, shnum, shstrndx
+    for v in [52u16, 32, phnum, 40, shnum, shstrndx] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -371,18 +391,7 @@ mod tests {
     fn elf32(segments: &[(u32, &[u8], bool)]) -> Vec<u8> {
         let phoff = 52u32;
         let data_at = phoff + 32 * segments.len() as u32;
-        let mut out = vec![0x7f, b'E', b'L', b'F', 1, 1, 1];
-        out.resize(16, 0);
-        out.extend_from_slice(&2u16.to_le_bytes()); // e_type EXEC
-        out.extend_from_slice(&40u16.to_le_bytes()); // e_machine ARM
-        out.extend_from_slice(&1u32.to_le_bytes()); // e_version
-        out.extend_from_slice(&0x0800_6000u32.to_le_bytes()); // e_entry
-        out.extend_from_slice(&phoff.to_le_bytes());
-        out.extend_from_slice(&0u32.to_le_bytes()); // e_shoff
-        out.extend_from_slice(&0u32.to_le_bytes()); // e_flags
-        for v in [52u16, 32, segments.len() as u16, 40, 0, 0] {
-            out.extend_from_slice(&v.to_le_bytes());
-        }
+        let mut out = elf32_header(phoff, 0, [segments.len() as u16, 0, 0]);
         let mut offset = data_at;
         for (paddr, contents, load) in segments {
             let len = contents.len() as u32;

@@ -59,6 +59,14 @@ pub fn bounds_path(root: &Path, build: &Build) -> std::path::PathBuf {
     )
 }
 
+/// `path` as the gate names it: from the workspace root.
+fn shown(root: &Path, path: &Path) -> String {
+    path.strip_prefix(root)
+        .unwrap_or(path)
+        .display()
+        .to_string()
+}
+
 /// What the gate found for one image.
 #[derive(Debug, PartialEq)]
 pub enum Gate {
@@ -71,11 +79,7 @@ pub enum Gate {
 /// Checks one build's bounds file against its release ELF `elf`.
 pub fn check_one(root: &Path, build: &Build, elf: &Path) -> Result<Gate> {
     let path = bounds_path(root, build);
-    let name = path
-        .strip_prefix(root)
-        .unwrap_or(&path)
-        .display()
-        .to_string();
+    let name = shown(root, &path);
     let Some(file) = BoundsFile::read(&path, &name)? else {
         return Ok(Gate::NoFile);
     };
@@ -104,12 +108,7 @@ pub fn check_bounds_current(root: &Path) -> Result<()> {
     let mut missing = Vec::new();
     for build in &every {
         let elf = revision::kept_elf(root, build, false);
-        let path = bounds_path(root, build);
-        let name = path
-            .strip_prefix(root)
-            .unwrap_or(&path)
-            .display()
-            .to_string();
+        let name = shown(root, &bounds_path(root, build));
         match check_one(root, build, &elf)? {
             Gate::Current => println!("bounds gate: {name} matches {}", build.stem()),
             Gate::NoFile => missing.push(name),
@@ -179,18 +178,7 @@ mod tests {
         let rodata_at = text_at + code.len() as u32;
         let names_at = rodata_at + rodata.len() as u32;
         let shoff = (names_at + names.len() as u32 + 3) & !3;
-        let mut out = vec![0x7f, b'E', b'L', b'F', 1, 1, 1];
-        out.resize(16, 0);
-        out.extend_from_slice(&2u16.to_le_bytes()); // e_type EXEC
-        out.extend_from_slice(&40u16.to_le_bytes()); // e_machine ARM
-        out.extend_from_slice(&1u32.to_le_bytes()); // e_version
-        out.extend_from_slice(&0x0800_6000u32.to_le_bytes()); // e_entry
-        out.extend_from_slice(&0u32.to_le_bytes()); // e_phoff
-        out.extend_from_slice(&shoff.to_le_bytes());
-        out.extend_from_slice(&0u32.to_le_bytes()); // e_flags
-        for v in [52u16, 32, 0, 40, 4, 3] {
-            out.extend_from_slice(&v.to_le_bytes()); // ehsize, phentsize, phnum, shentsize, shnum, shstrndx
-        }
+        let mut out = crate::elf::elf32_header(0, shoff, [0, 4, 3]);
         out.extend_from_slice(code);
         out.extend_from_slice(rodata);
         out.extend_from_slice(names);

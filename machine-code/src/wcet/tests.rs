@@ -19,6 +19,11 @@ fn bound(image: &Image, f: &str, chip: Chip) -> Bound {
     bound_function(image, f, chip, &BoundsFile::default()).expect("the function is analysed")
 }
 
+/// A bound's cycles, instructions and declined reason, to compare at once.
+fn figures(b: &Bound) -> (u64, u64, Option<&str>) {
+    (b.cycles, b.instructions, b.declined.as_deref())
+}
+
 #[test]
 fn straight_line_code() {
     let img = image(
@@ -33,10 +38,7 @@ fn straight_line_code() {
     );
     // 0 wait states: 2 + 3 + 2 + 4 = 11 (one flash line fetched: 1 cycle, hidden).
     let b = bound(&img, "straight", F103_0WS);
-    assert_eq!(
-        (b.cycles, b.instructions, b.declined.as_deref()),
-        (11, 4, None)
-    );
+    assert_eq!(figures(&b), (11, 4, None));
     // 2 wait states: (2 + 2) + 3 + 2 + (4 + 2) = 15; the line costs 3, hidden.
     let b = bound(&img, "straight", F103_2WS);
     assert_eq!((b.cycles, b.instructions), (15, 4));
@@ -87,10 +89,7 @@ fn a_call_adds_the_callee() {
     assert_eq!((callee.cycles, callee.instructions), (5, 2));
     // 3 + 4 + (callee 5) + 6 = 18 cycles; 3 + 2 instructions.
     let b = bound(&img, "caller", F103_0WS);
-    assert_eq!(
-        (b.cycles, b.instructions, b.declined.as_deref()),
-        (18, 5, None)
-    );
+    assert_eq!(figures(&b), (18, 5, None));
 }
 
 #[test]
@@ -121,10 +120,7 @@ fn a_jump_table_takes_its_longest_case() {
     let b = bound(&img, "dispatch", F103_0WS);
     // Case 1 is the longest: 2 (cmp, bhi not taken) + 5 (tbb) + 1 + 1 + 1 + 4 = 14 cycles, 7
     // instructions; the default costs 2 + 3 + 1 + 4 = 10.
-    assert_eq!(
-        (b.cycles, b.instructions, b.declined.as_deref()),
-        (14, 7, None)
-    );
+    assert_eq!(figures(&b), (14, 7, None));
 }
 
 #[test]
@@ -207,10 +203,7 @@ fn a_path_into_a_panic_does_not_complete_the_job() {
     );
     // Only the path that returns: 1 + 1 + P + 1 + 4 = 10.
     let b = bound(&img, "checked", F103_0WS);
-    assert_eq!(
-        (b.cycles, b.instructions, b.declined.as_deref()),
-        (10, 4, None)
-    );
+    assert_eq!(figures(&b), (10, 4, None));
 }
 
 #[test]
@@ -348,10 +341,7 @@ fn a_stated_loop_bound_is_used() {
     let b = bound_function(&img, "spin", F103_0WS, &bounds).unwrap();
     // A pass: 7 + 1 + 1 = 9; 9 passes back (9 + P each) and one out (9), then bx lr (4):
     // 9 × 12 + 9 + 4 = 121 cycles; 10 × 3 + 1 = 31 instructions.
-    assert_eq!(
-        (b.cycles, b.instructions, b.declined.as_deref()),
-        (121, 31, None)
-    );
+    assert_eq!(figures(&b), (121, 31, None));
     assert_eq!(b.loops[0].bound, 10);
     assert_eq!(b.loops[0].line, Some(7));
     assert_eq!(b.loops[0].source, "bounds file: ten polls at most");
@@ -413,10 +403,7 @@ fn stated_targets_resolve_an_indirect_call() {
     let b = bound_function(&img, "through_register", F103_0WS, &bounds).unwrap();
     // A name stands for every function of it: 3 + 4 + (the longer: 6) + 6 = 19 cycles; 3 + 3
     // instructions.
-    assert_eq!(
-        (b.cycles, b.instructions, b.declined.as_deref()),
-        (19, 6, None)
-    );
+    assert_eq!(figures(&b), (19, 6, None));
     let unknown = BoundsFile::parse(
         r#"{"indirect":[{"function":"through_register","file":"src/call.rs","line":3,"targets":["gone"],"reason":"x"}]}"#,
     )
@@ -442,10 +429,7 @@ fn an_exclusive_retry_costs_one_pass_and_one_iteration_per_preemption() {
     );
     let b = bound(&img, "fetch_add", F103_0WS);
     // One pass (17) and the return (4); a preemption inside adds one iteration (17 + P).
-    assert_eq!(
-        (b.cycles, b.instructions, b.declined.as_deref()),
-        (21, 6, None)
-    );
+    assert_eq!(figures(&b), (21, 6, None));
     assert_eq!((b.retry_cycles, b.retry_instructions), (20, 5));
     assert!(b.loops[0].source.starts_with("exclusive retry"));
     // As a hardware task: entry 12, return 10, and the retry it may cause a preempted job (the
@@ -619,6 +603,25 @@ fn a_loop_tested_at_its_top_is_counted() {
     assert!(b.loops[0].source.starts_with("counted"), "{:?}", b.loops[0]);
 }
 
+/// `__aeabi_memclr` as a byte loop on its length in r1 (16 bytes of code, its branches relative):
+/// `movs r2, #0`; header `cmp r1, #0; beq` out; `strb r2, [r0]; adds r0, #1; subs r1, #1; b` header;
+/// `bx lr`.
+const MEMCLR_BYTES: [u16; 8] = [
+    0x2200, 0x2900, 0xd003, 0x7002, 0x3001, 0x3901, 0xe7f9, 0x4770,
+];
+
+/// `caller`'s code followed by [`MEMCLR_BYTES`].
+fn with_memclr(caller: &[u16]) -> Vec<u16> {
+    [caller, &MEMCLR_BYTES[..]].concat()
+}
+
+/// Whether `b` is declined for a memory function's length no call fixes.
+fn length_unknown(b: &Bound) -> bool {
+    b.declined
+        .as_deref()
+        .is_some_and(|r| r.contains(length::LENGTH_UNKNOWN))
+}
+
 /// A caller that clears `n` bytes through `__aeabi_memclr` (a byte loop on its length in r1).
 fn clears(n: u16) -> Image {
     clears_through(n, "__aeabi_memclr")
@@ -627,22 +630,14 @@ fn clears(n: u16) -> Image {
 /// [`clears`] through a callee named `callee`.
 fn clears_through(n: u16, callee: &str) -> Image {
     image(
-        &[
+        &with_memclr(&[
             0xb580,     // 0x00 push {r7, lr}
             0x2100 | n, // 0x02 movs r1, #n
             0xf000,
             0xf802, // 0x04 bl 0x0c
             0xbd80, // 0x08 pop {r7, pc}
             0xbf00, // 0x0a
-            0x2200, // 0x0c movs r2, #0   (__aeabi_memclr)
-            0x2900, // 0x0e cmp r1, #0    (header)
-            0xd003, // 0x10 beq 0x1a
-            0x7002, // 0x12 strb r2, [r0]
-            0x3001, // 0x14 adds r0, #1
-            0x3901, // 0x16 subs r1, #1
-            0xe7f9, // 0x18 b 0x0e
-            0x4770, // 0x1a bx lr
-        ],
+        ]), // 0x0c the callee
         &[
             Sym::function("clear_some", 0, 10),
             Sym::function(callee, 0x0c, 0x10),
@@ -654,13 +649,7 @@ fn clears_through(n: u16, callee: &str) -> Image {
 fn a_memory_function_is_bounded_by_the_length_its_call_passes() {
     // Alone, its loop runs once per byte of a length nothing fixes: declined.
     let alone = bound(&clears(16), "__aeabi_memclr", F103_0WS);
-    assert!(
-        alone
-            .declined
-            .as_deref()
-            .is_some_and(|r| r.contains(length::LENGTH_UNKNOWN)),
-        "{alone:?}"
-    );
+    assert!(length_unknown(&alone), "{alone:?}");
     // Called with 16: push, movs, bl; the callee's movs and its way out (cmp, beq, bx lr) and 16
     // iterations of (cmp, beq, strb, adds, subs, b); pop: 3 + 4 + 96 + 1.
     let b = bound(&clears(16), "clear_some", F103_0WS);
@@ -696,21 +685,13 @@ fn a_register_loaded_with_one_function_address_is_a_direct_call() {
 #[test]
 fn a_stated_length_bounds_a_call_the_machine_code_does_not_fix() {
     // The length is read from memory: nothing in the machine code fixes it.
-    let code = thumb(&[
+    let code = thumb(&with_memclr(&[
         0xb580, // 0x00 push {r7, lr}           line 10
         0x6801, // 0x02 ldr r1, [r0]
         0xf000, 0xf802, // 0x04 bl 0x0c         line 11
         0xbd80, // 0x08 pop {r7, pc}            line 12
         0xbf00, // 0x0a
-        0x2200, // 0x0c movs r2, #0             (__aeabi_memclr, line 20)
-        0x2900, // 0x0e cmp r1, #0
-        0xd003, // 0x10 beq 0x1a
-        0x7002, // 0x12 strb r2, [r0]
-        0x3001, // 0x14 adds r0, #1
-        0x3901, // 0x16 subs r1, #1
-        0xe7f9, // 0x18 b 0x0e
-        0x4770, // 0x1a bx lr
-    ]);
+    ])); // 0x0c __aeabi_memclr, line 20
     let img = Image::parse(&crate::testelf::elf_with_lines(
         &code,
         &[
@@ -722,12 +703,7 @@ fn a_stated_length_bounds_a_call_the_machine_code_does_not_fix() {
     ))
     .expect("the test image parses");
     let none = bound_function(&img, "clear_read", F103_0WS, &BoundsFile::default()).unwrap();
-    assert!(
-        none.declined
-            .as_deref()
-            .is_some_and(|r| r.contains(length::LENGTH_UNKNOWN)),
-        "{none:?}"
-    );
+    assert!(length_unknown(&none), "{none:?}");
     let stated = BoundsFile::parse(
         r#"{"lengths":[{"function":"clear_read","file":"src/c.rs","line":11,"register":1,"bytes":16,"reason":"a 16-byte record"}]}"#,
     )
@@ -765,34 +741,43 @@ fn a_per_element_function_is_bounded_like_a_memory_function() {
     assert_eq!((b.instructions, b.declined.as_deref()), (104, None));
 }
 
-#[test]
-fn a_memory_loop_that_moves_a_word_a_pass_is_charged_per_word() {
-    // __aeabi_memclr4 clearing a word a pass: 16 bytes are 4 passes, not 16.
-    let img = image(
-        &[
-            0xb580, // 0x00 push {r7, lr}
-            0x2110, // 0x02 movs r1, #16
-            0xf000, 0xf802, // 0x04 bl 0x0c
-            0xbd80, // 0x08 pop {r7, pc}
-            0xbf00, // 0x0a
-            0x2200, // 0x0c movs r2, #0   (__aeabi_memclr4)
-            0x2900, // 0x0e cmp r1, #0    (header)
-            0xd003, // 0x10 beq 0x1a
-            0x6002, // 0x12 str r2, [r0]: 4 bytes a pass
-            0x3004, // 0x14 adds r0, #4
-            0x3904, // 0x16 subs r1, #4
-            0xe7f9, // 0x18 b 0x0e
-            0x4770, // 0x1a bx lr
-        ],
+/// A caller that clears 16 bytes through `__aeabi_memclr4`, whose loop (from 0x0e: `cmp r1, #0`, a
+/// `beq` out, then `body`, then `b 0x0e`) steps r0 and r1 by 4; `out` is the `beq`'s encoding.
+fn clears_words(out: u16, body: &[u16]) -> Image {
+    let mut code = vec![
+        0xb580, // 0x00 push {r7, lr}
+        0x2110, // 0x02 movs r1, #16
+        0xf000, 0xf802, // 0x04 bl 0x0c
+        0xbd80, // 0x08 pop {r7, pc}
+        0xbf00, // 0x0a
+        0x2200, // 0x0c movs r2, #0   (__aeabi_memclr4)
+        0x2900, // 0x0e cmp r1, #0    (header)
+        out,    // 0x10 beq past the loop
+    ];
+    code.extend_from_slice(body);
+    code.extend_from_slice(&[
+        0x3004,                         // adds r0, #4
+        0x3904,                         // subs r1, #4
+        0xe7f9 - body.len() as u16 + 1, // b 0x0e
+        0x4770,                         // bx lr
+    ]);
+    let callee_len = 2 * (code.len() as u64) - 0x0c;
+    image(
+        &code,
         &[
             Sym::function("clear_words", 0, 10),
-            Sym::function("__aeabi_memclr4", 0x0c, 0x10),
+            Sym::function("__aeabi_memclr4", 0x0c, callee_len),
         ],
-    );
-    let b = bound(&img, "clear_words", F103_0WS);
-    // What runs: push, movs, bl; movs; 4 × (cmp, beq, str, adds, subs, b); cmp, beq, bx lr; pop = 32.
-    // The bound charges each of the 16 bytes a quarter of the iteration's 6 instructions, rounded
-    // up (2): 3 + 1 + 32 + 3 + 1 = 40 — at least what runs, and a quarter of the byte-wise 104.
+    )
+}
+
+#[test]
+fn a_memory_loop_that_moves_a_word_a_pass_is_charged_per_word() {
+    // A word a pass: 16 bytes are 4 passes, not 16.
+    let b = bound(&clears_words(0xd003, &[0x6002]), "clear_words", F103_0WS); // str r2, [r0]
+                                                                              // What runs: push, movs, bl; movs; 4 × (cmp, beq, str, adds, subs, b); cmp, beq, bx lr; pop = 32.
+                                                                              // The bound charges each of the 16 bytes a quarter of the iteration's 6 instructions, rounded
+                                                                              // up (2): 3 + 1 + 32 + 3 + 1 = 40 — at least what runs, and a quarter of the byte-wise 104.
     assert_eq!((b.instructions, b.declined.as_deref()), (40, None));
     let l = b
         .loops
@@ -801,28 +786,13 @@ fn a_memory_loop_that_moves_a_word_a_pass_is_charged_per_word() {
         .expect("the loop is listed");
     assert_eq!(l.bound, 5, "{l:?}");
     assert!(l.source.contains("at least 4"), "{l:?}");
-    // A store under a condition is no byte a pass can count on: the same loop with `strne`
-    // (after an `it ne`) is charged per byte.
-    let img = image(
-        &[
-            0xb580, 0x2110, 0xf000, 0xf802, 0xbd80, 0xbf00, // as above
-            0x2200, // 0x0c movs r2, #0
-            0x2900, // 0x0e cmp r1, #0
-            0xd004, // 0x10 beq 0x1c
-            0xbf18, // 0x12 it ne
-            0x6002, // 0x14 strne r2, [r0]
-            0x3004, // 0x16 adds r0, #4
-            0x3904, // 0x18 subs r1, #4
-            0xe7f8, // 0x1a b 0x0e
-            0x4770, // 0x1c bx lr
-        ],
-        &[
-            Sym::function("clear_words", 0, 10),
-            Sym::function("__aeabi_memclr4", 0x0c, 0x12),
-        ],
+    // A store under a condition is no byte a pass can count on: the same loop with `it ne;
+    // strne r2, [r0]` is charged per byte, 16 × its 7-instruction iteration: 3 + 1 + 112 + 3 + 1.
+    let b = bound(
+        &clears_words(0xd004, &[0xbf18, 0x6002]),
+        "clear_words",
+        F103_0WS,
     );
-    let b = bound(&img, "clear_words", F103_0WS);
-    // 16 bytes × the 7-instruction iteration: 3 + 1 + 112 + 3 + 1.
     assert_eq!((b.instructions, b.declined.as_deref()), (120, None));
 }
 
@@ -835,7 +805,7 @@ fn clears_saturated(min: bool) -> Image {
         (0xbf00, 0xbf00, 0xbf00) // nops
     };
     image(
-        &[
+        &with_memclr(&[
             0xb580, // 0x00 push {r7, lr}
             0x6803, // 0x02 ldr r3, [r0]
             cmp,    // 0x04
@@ -847,15 +817,7 @@ fn clears_saturated(min: bool) -> Image {
             0x2100, // 0x10 movcc r1, #0
             0xf000, 0xf801, // 0x12 bl 0x18
             0xbd80, // 0x16 pop {r7, pc}
-            0x2200, // 0x18 movs r2, #0   (__aeabi_memclr)
-            0x2900, // 0x1a cmp r1, #0
-            0xd003, // 0x1c beq 0x26
-            0x7002, // 0x1e strb r2, [r0]
-            0x3001, // 0x20 adds r0, #1
-            0x3901, // 0x22 subs r1, #1
-            0xe7f9, // 0x24 b 0x1a
-            0x4770, // 0x26 bx lr
-        ],
+        ]), // 0x18 __aeabi_memclr
         &[
             Sym::function("clear_rest", 0, 0x18),
             Sym::function("__aeabi_memclr", 0x18, 0x10),
@@ -875,12 +837,7 @@ fn a_length_made_the_smaller_of_itself_and_a_constant_then_saturated_is_bounded(
     );
     // Without the `min`, the subtraction alone fixes nothing.
     let b = bound(&clears_saturated(false), "clear_rest", F103_0WS);
-    assert!(
-        b.declined
-            .as_deref()
-            .is_some_and(|r| r.contains(length::LENGTH_UNKNOWN)),
-        "{b:?}"
-    );
+    assert!(length_unknown(&b), "{b:?}");
 }
 
 #[test]
