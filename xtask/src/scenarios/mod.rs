@@ -512,14 +512,8 @@ pub struct HostAdmission {
 impl HostAdmission {
     /// The table from the apps and timing files under `root`, nothing running.
     pub fn new(root: &Path) -> Result<Self> {
-        use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
-        let robot = admission_host::lower(
-            root,
-            &scenario::timing_files(root),
-            schedule_analysis::can::DEFAULT_BITRATE,
-            FrameCostSpec::Exact,
-        )
-        .map_err(|e| anyhow::anyhow!("admission table: {e}"))?;
+        let robot = schedule_analysis::admission_host::lower_robot(root)
+            .map_err(|e| anyhow::anyhow!("admission table: {e}"))?;
         Ok(Self {
             robot,
             streams: Vec::new(),
