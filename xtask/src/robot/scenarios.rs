@@ -371,7 +371,6 @@ fn shutdown(run: &Run) -> Result<String> {
 }
 
 fn admission_other_board(run: &Run) -> Result<String> {
-    use amiro_can::{Topic, Verdict, Violation};
     every_board_ended(run)?;
     let odometry = run.ends(0x701);
     let before = odometry.iter().filter(|&&t| t < 50_000).count();
@@ -379,25 +378,7 @@ fn admission_other_board(run: &Run) -> Result<String> {
         before >= 40,
         "{before} odometry frames on the bus before the request (one per ms expected)"
     );
-    let verdicts =
-        crate::scenarios::admission_verdicts(&run.view(1), amiro_can::Board::PowerManagement);
-    ensure!(
-        verdicts.len() == 1,
-        "{} verdicts from PowerManagement, expected one refusal",
-        verdicts.len()
-    );
-    let v = &verdicts[0].1;
-    ensure!(
-        v.verdict == Verdict::Refused
-            && v.topic == Topic::ProximityRing
-            && v.priority == amiro_can::Priority::Urgent,
-        "not the refusal of the ring at urgent: {v}"
-    );
-    ensure!(
-        matches!(v.violation, Violation::Message { id } if id.raw() == 0x701),
-        "the refusal names {:?}, not DiWheelDrive's odometry 0x701 on the bus",
-        v.violation
-    );
+    let v = crate::scenarios::ring_refused_for_odometry(&run.view(1))?;
     ensure!(
         run.ends(0x41F).is_empty(),
         "urgent ring frames on the bus: the refused request ran"
