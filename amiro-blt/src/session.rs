@@ -153,6 +153,15 @@ enum Trouble {
 }
 
 impl Trouble {
+    /// Whether trying again cannot help: a refusal other than busy, or the port failing.
+    fn is_final(&self) -> bool {
+        match self {
+            Trouble::Nak(code) => *code != ErrorCode::CmdBusy,
+            Trouble::Io(_) => true,
+            Trouble::Timeout | Trouble::Garbled(_) => false,
+        }
+    }
+
     fn describe(&self) -> String {
         match self {
             Trouble::Timeout => "no reply".into(),
@@ -584,42 +593,7 @@ impl<T: Transport> Flasher<T> {
         timeout: Duration,
         _board: &str,
     ) -> Result<Vec<u8>, Trouble> {
-        let mut last = Trouble::Timeout;
-        for attempt in 0..=self.opts.retries {
-            if attempt > 0 {
-                self.retries += 1;
-                self.resync();
-            }
-            if self.mta != Some(address) {
-                match self.checked(&Command::SetMta(address), self.opts.command_timeout) {
-                    Ok(_) => self.mta = Some(address),
-                    Err(Trouble::Nak(code)) if code != ErrorCode::CmdBusy => {
-                        return Err(Trouble::Nak(code))
-                    }
-                    Err(Trouble::Io(e)) => return Err(Trouble::Io(e)),
-                    Err(t) => {
-                        last = t;
-                        continue;
-                    }
-                }
-            }
-            match self.checked(command, timeout) {
-                Ok(body) => {
-                    self.mta = Some(address + advance(command));
-                    return Ok(body);
-                }
-                Err(Trouble::Nak(code)) if code != ErrorCode::CmdBusy => {
-                    self.mta = None;
-                    return Err(Trouble::Nak(code));
-                }
-                Err(Trouble::Io(e)) => return Err(Trouble::Io(e)),
-                Err(t) => {
-                    self.mta = None;
-                    last = t;
-                }
-            }
-        }
-        Err(last)
+        self.retried(Some(address), command, timeout)
     }
 
     /// A command that does not depend on the MTA, repeated like [`Self::at`].
@@ -629,19 +603,48 @@ impl<T: Transport> Flasher<T> {
         timeout: Duration,
         _board: &str,
     ) -> Result<Vec<u8>, Trouble> {
+        self.retried(None, command, timeout)
+    }
+
+    /// [`Self::at`] (`address` given) and [`Self::plain`]: up to `retries` more attempts after a timeout, a
+    /// garbled reply or a busy answer, each after a resync; the MTA, where it matters, is forgotten after a
+    /// failed command (the board's may have moved).
+    fn retried(
+        &mut self,
+        address: Option<u32>,
+        command: &Command,
+        timeout: Duration,
+    ) -> Result<Vec<u8>, Trouble> {
         let mut last = Trouble::Timeout;
         for attempt in 0..=self.opts.retries {
             if attempt > 0 {
                 self.retries += 1;
                 self.resync();
             }
-            match self.checked(command, timeout) {
-                Ok(body) => return Ok(body),
-                Err(Trouble::Nak(code)) if code != ErrorCode::CmdBusy => {
-                    return Err(Trouble::Nak(code))
+            if let Some(address) = address.filter(|&a| self.mta != Some(a)) {
+                match self.checked(&Command::SetMta(address), self.opts.command_timeout) {
+                    Ok(_) => self.mta = Some(address),
+                    Err(t) if t.is_final() => return Err(t),
+                    Err(t) => {
+                        last = t;
+                        continue;
+                    }
                 }
-                Err(Trouble::Io(e)) => return Err(Trouble::Io(e)),
+            }
+            match self.checked(command, timeout) {
+                Ok(body) => {
+                    if let Some(address) = address {
+                        self.mta = Some(address + advance(command));
+                    }
+                    return Ok(body);
+                }
                 Err(t) => {
+                    if address.is_some() && !matches!(t, Trouble::Io(_)) {
+                        self.mta = None;
+                    }
+                    if t.is_final() {
+                        return Err(t);
+                    }
                     last = t;
                 }
             }
@@ -791,30 +794,29 @@ pub fn program_chunks(len: usize, max_pgm: u8, max_cto: u8) -> Vec<usize> {
         chunks.push(full);
         rest -= full;
     }
+    split_avoiding(rest, program_max, 2, &mut chunks);
+    chunks
+}
+
+/// Appends `len` bytes in chunks of at most `limit` to `chunks`, a chunk of `avoid` bytes (a size whose packet
+/// the gateway cannot forward) one byte shorter.
+fn split_avoiding(len: usize, limit: usize, avoid: usize, chunks: &mut Vec<usize>) {
+    let mut rest = len;
     while rest > 0 {
-        let mut n = rest.min(program_max);
-        if n == 2 {
-            n = 1;
+        let mut n = rest.min(limit);
+        if n == avoid {
+            n -= 1;
         }
         chunks.push(n);
         rest -= n;
     }
-    chunks
 }
 
 /// Chunk sizes for reading `len` bytes back with UPLOAD (at most `limit` each), never a
 /// 3-byte UPLOAD, whose 4-byte reply the gateway cannot forward.
 pub fn upload_chunks(len: usize, limit: usize) -> Vec<usize> {
     let mut chunks = Vec::new();
-    let mut rest = len;
-    while rest > 0 {
-        let mut n = rest.min(limit);
-        if n == 3 {
-            n = 2;
-        }
-        chunks.push(n);
-        rest -= n;
-    }
+    split_avoiding(len, limit, 3, &mut chunks);
     chunks
 }
 

@@ -5,7 +5,7 @@
 //!
 //! `cargo run --release -p amiro-firmware --example admission_cost -- diwheeldrive/qemu/admission-cost.log`
 use amiro_firmware::admission::{Admission, Check, State};
-use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
+use schedule_analysis::admission_host;
 
 fn main() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -15,13 +15,7 @@ fn main() {
         Some("lightring") => amiro_can::Board::LightRing,
         _ => amiro_can::Board::DiWheelDrive,
     };
-    let robot = admission_host::lower(
-        &root,
-        &scenario::timing_files(&root),
-        1_000_000,
-        FrameCostSpec::Exact,
-    )
-    .expect("table");
+    let robot = admission_host::lower_robot(&root).expect("table");
     let text = std::fs::read_to_string(&path).expect("log");
     robot.with_table(|table| {
         let mut state = Box::new(State::<48, 32>::new());

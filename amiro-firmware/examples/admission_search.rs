@@ -9,7 +9,7 @@
 //!
 //! `cargo run --release -p amiro-firmware --example admission_search -- [SEED] [ROUNDS] [policies] > admission-search.log`
 use amiro_firmware::admission::{Admission, State};
-use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
+use schedule_analysis::{admission_host, rng::Rng};
 
 /// Every sensor topic of the robot: DiWheelDrive's nine, PowerManagement's three, LightRing's one.
 const TOPICS: [u8; 13] = [
@@ -44,28 +44,13 @@ struct Command {
     len: usize,
 }
 
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        // xorshift64*
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
-
 fn random_command(rng: &mut Rng, policies: bool) -> Command {
     let level = rng.below(4) as u16;
-    let topic = TOPICS[rng.below(TOPICS.len())] as u16;
+    let topic = rng.pick(&TOPICS) as u16;
     match rng.below(if policies { 10 } else { 9 }) {
         // Mostly publish requests: they are what the check analyses.
         0..=5 => {
-            let (value, unit) = PERIODS[rng.below(PERIODS.len())];
+            let (value, unit) = rng.pick(&PERIODS);
             let [lo, hi] = value.to_le_bytes();
             Command {
                 id: level << 8 | topic,
@@ -84,7 +69,7 @@ fn random_command(rng: &mut Rng, policies: bool) -> Command {
             len: 1,
         },
         _ => Command {
-            id: DIAGNOSTICS[rng.below(3)] as u16,
+            id: rng.pick(&DIAGNOSTICS) as u16,
             data: [3, rng.below(2) as u8, 0, 0],
             len: 2,
         },
@@ -118,15 +103,9 @@ fn main() {
     let rounds: usize = args.next().map_or(3000, |s| s.parse().expect("rounds"));
     // Policy changes only when asked (`policies`); scenario admission-search's sequence was searched without them.
     let policies = args.next().as_deref() == Some("policies");
-    let robot = admission_host::lower(
-        &root,
-        &scenario::timing_files(&root),
-        1_000_000,
-        FrameCostSpec::Exact,
-    )
-    .expect("table");
+    let robot = admission_host::lower_robot(&root).expect("table");
     robot.with_table(|table| {
-        let mut rng = Rng(seed.max(1));
+        let mut rng = Rng::new(seed.max(1));
         let mut best: Vec<Command> = (0..LENGTH).map(|_| random_command(&mut rng, policies)).collect();
         let mut best_cost = worst_step(table, &best);
         for round in 0..rounds {
@@ -136,7 +115,7 @@ fn main() {
             } else {
                 let mut c = best.clone();
                 for _ in 0..1 + rng.below(3) {
-                    let at = rng.below(LENGTH);
+                    let at = rng.index(LENGTH);
                     c[at] = random_command(&mut rng, policies);
                 }
                 c

@@ -318,11 +318,9 @@ mod tests {
         assert_eq!(w.readings_for(1, 2_080, 2_000).map(|r| r.at_us), Some(80));
     }
 
-    #[test]
-    fn the_wheels_move_the_robot_and_the_rows_follow_the_boundaries() {
-        let mut w = run();
-        w.at(0);
-        // One wheel revolution straight ahead in 1 s: 175 mm.
+    /// DiWheelDrive's wheels turn one revolution straight ahead in the first second: the robot is 175 mm on
+    /// (returned, m).
+    fn one_revolution_ahead(w: &mut WorldRun) -> f64 {
         w.wheels(
             0,
             Wheels {
@@ -332,9 +330,17 @@ mod tests {
             },
         );
         w.at(1_000_000);
-        assert_eq!(w.trajectory().samples.len(), 101);
         let x = w.world().pose().position.x;
         assert!((x - 0.175).abs() < 0.001, "{x}");
+        x
+    }
+
+    #[test]
+    fn the_wheels_move_the_robot_and_the_rows_follow_the_boundaries() {
+        let mut w = run();
+        w.at(0);
+        let x = one_revolution_ahead(&mut w);
+        assert_eq!(w.trajectory().samples.len(), 101);
         // A restart: the fresh plant's ticks do not move the robot back.
         w.wheels(
             1_000_000,
@@ -390,17 +396,7 @@ mod tests {
         assert!(!w.feeds());
         assert!(w.readings_for(0, 40, 0).is_none());
         assert!(w.readings_for(1, 40, 0).is_none());
-        w.wheels(
-            0,
-            Wheels {
-                now_us: 1_000_000,
-                left_ticks: 1408,
-                right_ticks: 1408,
-            },
-        );
-        w.at(1_000_000);
-        let x = w.world().pose().position.x;
-        assert!((x - 0.175).abs() < 0.001, "{x}");
+        one_revolution_ahead(&mut w);
         assert_eq!(w.summary().contacts, 0);
     }
 

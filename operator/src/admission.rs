@@ -23,7 +23,6 @@ use amiro_can::{
 use anyhow::{anyhow, Result};
 use schedule_analysis::admission::{self, Culprit, Refusal, Stream, Suggestion, TaskId};
 use schedule_analysis::admission_host::{self, OwnedRobot};
-use schedule_analysis::model::FrameCostSpec;
 use schedule_analysis::scenario;
 use schedule_analysis::time::Time;
 
@@ -113,13 +112,7 @@ impl Checker {
     /// The table lowered from the apps and timing files (an error names what is missing).
     pub fn load() -> Result<Checker> {
         let root = root();
-        let robot = admission_host::lower(
-            &root,
-            &scenario::timing_files(&root),
-            schedule_analysis::can::DEFAULT_BITRATE,
-            FrameCostSpec::Exact,
-        )
-        .map_err(|e| {
+        let robot = admission_host::lower_robot(&root).map_err(|e| {
             anyhow!(
                 "the admission check needs the timing files under {}: {e}",
                 root.display()

@@ -212,6 +212,22 @@ pub struct DrivePlan {
     pub every: Duration,
 }
 
+impl DrivePlan {
+    /// How it reads to the user: `V µm/s, A µrad/s, repeated every N ms`, then ` for D ms`, or `open_end` without
+    /// a duration.
+    pub fn describe(&self, open_end: &str) -> String {
+        format!(
+            "{} µm/s, {} µrad/s, repeated every {} ms{}",
+            self.command.velocity_um_s,
+            self.command.angular_urad_s,
+            self.every.as_millis(),
+            self.duration
+                .map(|duration| format!(" for {} ms", duration.as_millis()))
+                .unwrap_or_else(|| open_end.into())
+        )
+    }
+}
+
 /// How a drive ended (the stop was sent in every case).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DriveEnd {

@@ -258,18 +258,25 @@ impl Printer {
     }
 }
 
+/// The bus `bus_text` names, opened to send with Ctrl-C caught (a drive or a script then stops cleanly), and
+/// the printer of what goes out and comes back.
+fn open_to_send(bus_text: &str, json: bool) -> Result<(BusUrl, Box<dyn Bus>, Printer)> {
+    let url = BusUrl::parse(bus_text)?;
+    bus::catch_interrupts()?;
+    let bus = bus::open(&url, Direction::Send)?;
+    let printer = Printer {
+        view: View {
+            time: relative_time(&url),
+            json,
+        },
+    };
+    Ok((url, bus, printer))
+}
+
 /// `amiro drive`.
 pub fn drive_command(args: &DriveArgs) -> Result<ExitCode> {
     let plan = args.motion.plan()?;
-    let url = BusUrl::parse(&args.bus)?;
-    bus::catch_interrupts()?;
-    let mut bus = bus::open(&url, Direction::Send)?;
-    let mut printer = Printer {
-        view: View {
-            time: relative_time(&url),
-            json: args.json,
-        },
-    };
+    let (url, mut bus, mut printer) = open_to_send(&args.bus, args.json)?;
     let outcome = drive(
         bus.as_mut(),
         &HostClock::start(),
@@ -308,15 +315,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
                     "watch the bus for {}",
                     crate::period::human_micros(duration.as_micros() as u64)
                 ),
-                Step::Drive(plan) => format!(
-                    "drive {} µm/s, {} µrad/s, repeated every {} ms{}, then stop",
-                    plan.command.velocity_um_s,
-                    plan.command.angular_urad_s,
-                    plan.every.as_millis(),
-                    plan.duration
-                        .map(|d| format!(" for {} ms", d.as_millis()))
-                        .unwrap_or_default()
-                ),
+                Step::Drive(plan) => format!("drive {}, then stop", plan.describe("")),
             };
             writeln!(out, "line {number:>3}: {line:<60} {what}")?;
         }
@@ -331,15 +330,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let Some(bus_text) = &args.bus else {
         bail!("no bus given: add --bus slcan:/dev/ttyUSB0 (or socketcan:can0, file:out.log), or set AMIRO_BUS");
     };
-    let url = BusUrl::parse(bus_text)?;
-    bus::catch_interrupts()?;
-    let mut bus = bus::open(&url, Direction::Send)?;
-    let mut printer = Printer {
-        view: View {
-            time: relative_time(&url),
-            json: args.json,
-        },
-    };
+    let (url, mut bus, mut printer) = open_to_send(bus_text, args.json)?;
     let outcome = play(bus.as_mut(), &script, &mut printer);
     let closed = bus.close().with_context(|| format!("closing {url}"));
     let completed =

@@ -5,6 +5,9 @@ use std::path::Path;
 use assert_cmd::Command;
 use serde_json::Value;
 
+mod common;
+use common::{assert_mentions, thesis};
+
 fn amiro() -> Command {
     let mut command = Command::cargo_bin("amiro").expect("amiro binary");
     command.env_remove("AMIRO_BUS");
@@ -38,16 +41,7 @@ fn thesis_example_decodes_as_magnetometer_x_publish_every_900_us_at_medium() {
 
 #[test]
 fn thesis_example_encodes_exactly() {
-    let stdout = stdout_of(&[
-        "encode",
-        "publish",
-        "magnetometer-x",
-        "--every",
-        "900us",
-        "--priority",
-        "medium",
-    ]);
-    assert_eq!(stdout, "205#01840302\n");
+    assert_eq!(stdout_of(&thesis("encode")), "205#01840302\n");
 }
 
 #[test]
@@ -425,15 +419,15 @@ fn encode_help_examples_print_what_they_claim() {
 
 #[test]
 fn topics_lists_the_table() {
-    let stdout = stdout_of(&["topics"]);
-    for name in [
-        "0x05  magnetometer-x",
-        "0x1F  proximity-ring",
-        "0x10  motor",
-        "0x18  led-8",
-    ] {
-        assert!(stdout.contains(name), "{name} missing:\n{stdout}");
-    }
+    assert_mentions(
+        &stdout_of(&["topics"]),
+        &[
+            "0x05  magnetometer-x",
+            "0x1F  proximity-ring",
+            "0x10  motor",
+            "0x18  led-8",
+        ],
+    );
 }
 
 #[test]

@@ -12,6 +12,9 @@ use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::pty::openpty;
 use serde_json::Value;
 
+mod common;
+use common::{assert_mentions, thesis};
+
 /// How long the fake adapter waits for the next byte from `amiro` before failing the test.
 const PATIENCE: Duration = Duration::from_secs(10);
 
@@ -87,6 +90,27 @@ impl FakeAdapter {
         self.expect("S8\r", b"\r");
         self.expect("O\r", b"\r");
     }
+
+    /// Starts `amiro` with `args` on this adapter (`--bus` added) and accepts its channel set-up.
+    fn start(&mut self, args: &[&str]) -> Child {
+        let child = self.spawn(args);
+        self.accept_open();
+        child
+    }
+
+    /// Starts `amiro` with `args` on this adapter (`--bus` added).
+    fn spawn(&self, args: &[&str]) -> Child {
+        let bus = self.bus();
+        let mut args = args.to_vec();
+        args.extend(["--bus", &bus]);
+        amiro(&args)
+    }
+
+    /// Answers `amiro`'s close of the channel, then waits for it to exit.
+    fn close(&mut self, child: Child) -> Output {
+        self.expect("C\r", b"\r");
+        finish(child)
+    }
 }
 
 /// A rendezvous directory of its own per test binary run, so no other `amiro` on this machine is found.
@@ -96,14 +120,22 @@ fn runtime_dir() -> &'static Path {
         .path()
 }
 
-fn amiro(args: &[&str]) -> Child {
-    Command::new(assert_cmd::cargo::cargo_bin("amiro"))
+/// `amiro` with `args`: no bus from the environment, this test run's rendezvous directory, output piped.
+fn amiro_command(args: &[&str]) -> Command {
+    let mut command = Command::new(assert_cmd::cargo::cargo_bin("amiro"));
+    command
         .args(args)
         .env_remove("AMIRO_BUS")
         .env("AMIRO_RUNTIME_DIR", runtime_dir())
-        .stdin(Stdio::null())
         .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
+        .stderr(Stdio::piped());
+    command
+}
+
+/// `amiro` with `args` started, without input.
+fn amiro(args: &[&str]) -> Child {
+    amiro_command(args)
+        .stdin(Stdio::null())
         .spawn()
         .expect("start amiro")
 }
@@ -179,31 +211,23 @@ fn finish(mut child: Child) -> Output {
     child.wait_with_output().expect("output")
 }
 
-#[test]
-fn send_opens_the_channel_transmits_the_thesis_frame_and_closes() {
-    let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let child = amiro(&[
-        "send",
-        "publish",
-        "magnetometer-x",
-        "--every",
-        "900us",
-        "--priority",
-        "medium",
-        "--bus",
-        &bus,
-    ]);
-    adapter.accept_open();
-    // A frame from the bus arriving before the transmit acknowledgement must not confuse the sender.
-    adapter.expect("t205401840302\r", b"t6054D8ADFFFF\rz\r");
-    adapter.expect("C\r", b"\r");
-    let output = finish(child);
+/// Fails unless `amiro` succeeded, with what it said on standard error.
+fn assert_succeeded(output: &Output) {
     assert!(
         output.status.success(),
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
+}
+
+#[test]
+fn send_opens_the_channel_transmits_the_thesis_frame_and_closes() {
+    let mut adapter = FakeAdapter::new();
+    let child = adapter.start(&thesis("send"));
+    // A frame from the bus arriving before the transmit acknowledgement must not confuse the sender.
+    adapter.expect("t205401840302\r", b"t6054D8ADFFFF\rz\r");
+    let output = adapter.close(child);
+    assert_succeeded(&output);
     assert_eq!(adapter.heard, b"C\rS8\rO\rt205401840302\rC\r");
     let stdout = String::from_utf8(output.stdout).unwrap();
     assert!(stdout.starts_with("sent 205#01840302"), "{stdout}");
@@ -216,18 +240,10 @@ fn send_opens_the_channel_transmits_the_thesis_frame_and_closes() {
 #[test]
 fn send_passes_several_raw_frames_in_order() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let child = amiro(&["send", "204#02", "110#A0860100B03CFFFF", "--bus", &bus]);
-    adapter.accept_open();
+    let child = adapter.start(&["send", "204#02", "110#A0860100B03CFFFF"]);
     adapter.expect("t204102\r", b"z\r");
     adapter.expect("t1108A0860100B03CFFFF\r", b"\r");
-    adapter.expect("C\r", b"\r");
-    let output = finish(child);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    assert_succeeded(&adapter.close(child));
     assert_eq!(
         adapter.heard,
         b"C\rS8\rO\rt204102\rt1108A0860100B03CFFFF\rC\r"
@@ -237,21 +253,14 @@ fn send_passes_several_raw_frames_in_order() {
 #[test]
 fn monitor_reads_frames_split_across_writes_and_closes_the_channel() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let child = amiro(&["monitor", "--bus", &bus, "--count", "3", "--json"]);
-    adapter.accept_open();
+    let child = adapter.start(&["monitor", "--count", "3", "--json"]);
     // Gyroscope with negative values, split in the middle; a version string and a BEL in between are not frames;
     // then a magnetometer frame with the adapter's own timestamp, and a command that is too short.
     adapter.say(b"t6086FCFF1E");
     std::thread::sleep(Duration::from_millis(50));
     adapter.say(b"00FBFF\rV1013\r\x07t6054D8ADFFFF12AB\rt20520184\r");
-    adapter.expect("C\r", b"\r");
-    let output = finish(child);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let output = adapter.close(child);
+    assert_succeeded(&output);
     assert_eq!(adapter.heard, b"C\rS8\rO\rC\r");
 
     let records: Vec<Value> = String::from_utf8(output.stdout)
@@ -279,21 +288,13 @@ fn monitor_reads_frames_split_across_writes_and_closes_the_channel() {
 #[test]
 fn ctrl_c_closes_the_channel_before_exit() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let mut child = amiro(&["monitor", "--bus", &bus]);
+    let mut child = adapter.start(&["monitor"]);
     let mut printed = Watched::of(&mut child);
-    adapter.accept_open();
     adapter.say(b"t71F3037800\r");
     // Once amiro has printed the frame, interrupt it as a user would.
     printed.wait_for("front-left sees 120 mm");
     interrupt(&child);
-    adapter.expect("C\r", b"\r");
-    let output = finish(child);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    assert_succeeded(&adapter.close(child));
     let stdout = printed.all();
     assert!(
         stdout.contains("71F#037800")
@@ -306,8 +307,7 @@ fn ctrl_c_closes_the_channel_before_exit() {
 #[test]
 fn an_adapter_refusing_to_open_is_a_clear_error() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let child = amiro(&["send", "205#00", "--bus", &bus]);
+    let child = adapter.spawn(&["send", "205#00"]);
     adapter.expect("C\r", b"\x07");
     adapter.expect("S8\r", b"\r");
     adapter.expect("O\r", b"\x07");
@@ -325,12 +325,9 @@ fn an_adapter_refusing_to_open_is_a_clear_error() {
 #[test]
 fn a_refused_frame_is_an_error_and_the_channel_is_still_closed() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let child = amiro(&["send", "308#00", "--bus", &bus]);
-    adapter.accept_open();
+    let child = adapter.start(&["send", "308#00"]);
     adapter.expect("t308100\r", b"\x07");
-    adapter.expect("C\r", b"\r");
-    let output = finish(child);
+    let output = adapter.close(child);
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("refused to transmit 308#00"), "{stderr}");
@@ -339,8 +336,7 @@ fn a_refused_frame_is_an_error_and_the_channel_is_still_closed() {
 #[test]
 fn a_silent_device_is_not_mistaken_for_an_adapter() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let child = amiro(&["send", "205#00", "--bus", &bus]);
+    let child = adapter.spawn(&["send", "205#00"]);
     assert_eq!(adapter.hear(), "C\r");
     let output = finish(child);
     assert!(!output.status.success());
@@ -359,29 +355,17 @@ fn interrupt(child: &Child) {
 #[test]
 fn a_second_amiro_sends_through_the_first_without_closing_its_channel() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let mut monitor = amiro(&["monitor", "--bus", &bus, "--absolute"]);
+    let mut monitor = adapter.start(&["monitor", "--absolute"]);
     let mut printed = Watched::of(&mut monitor);
-    adapter.accept_open();
     // The thesis's workflow: one terminal watches, another sends.
-    let sender = amiro(&["send", "205#01840302", "--bus", &bus]);
+    let sender = adapter.spawn(&["send", "205#01840302"]);
     adapter.expect("t205401840302\r", b"z\rt6054D8ADFFFF\r");
     let sent = finish(sender);
-    assert!(
-        sent.status.success(),
-        "{}",
-        String::from_utf8_lossy(&sent.stderr)
-    );
+    assert_succeeded(&sent);
     assert!(String::from_utf8_lossy(&sent.stdout).starts_with("sent 205#01840302"));
     printed.wait_for("605#D8ADFFFF");
     interrupt(&monitor);
-    adapter.expect("C\r", b"\r");
-    let watched = finish(monitor);
-    assert!(
-        watched.status.success(),
-        "{}",
-        String::from_utf8_lossy(&watched.stderr)
-    );
+    assert_succeeded(&adapter.close(monitor));
     // Only the owner opened and closed the channel; the sender's frame went through it.
     assert_eq!(adapter.heard, b"C\rS8\rO\rt205401840302\rC\r");
     let stdout = printed.all();
@@ -396,10 +380,8 @@ fn a_second_amiro_sends_through_the_first_without_closing_its_channel() {
 #[test]
 fn a_monitor_whose_bus_owner_ends_reports_the_lost_bus_and_fails() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let owner = amiro(&["monitor", "--bus", &bus]);
-    adapter.accept_open();
-    let mut user = amiro(&["monitor", "--bus", &bus]);
+    let owner = adapter.start(&["monitor"]);
+    let mut user = adapter.spawn(&["monitor"]);
     let mut printed = Watched::of(&mut user);
     // Frames keep coming while the second monitor connects; once connected it prints them.
     let deadline = Instant::now() + PATIENCE;
@@ -418,9 +400,7 @@ fn a_monitor_whose_bus_owner_ends_reports_the_lost_bus_and_fails() {
         "the second monitor runs"
     );
     interrupt(&owner);
-    adapter.expect("C\r", b"\r");
-    let owner_output = finish(owner);
-    assert!(owner_output.status.success());
+    assert!(adapter.close(owner).status.success());
     let output = finish(user);
     assert!(!output.status.success(), "a lost bus is a failure");
     let stderr = String::from_utf8_lossy(&output.stderr);
@@ -459,24 +439,10 @@ const STOP: &str = "t11080000000000000000\r";
 #[test]
 fn drive_repeats_the_motor_command_within_the_deadman_and_ends_with_a_stop() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let child = amiro(&[
-        "drive",
-        "--forward",
-        "100mm/s",
-        "--for",
-        "1s",
-        "--bus",
-        &bus,
-    ]);
-    adapter.accept_open();
+    let child = adapter.start(&["drive", "--forward", "100mm/s", "--for", "1s"]);
     let motor = record_motor_frames(&mut adapter);
     let output = finish(child);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    assert_succeeded(&output);
     let (last_at, last) = motor.last().unwrap();
     assert_eq!(last, STOP);
     assert!(
@@ -507,17 +473,7 @@ fn drive_repeats_the_motor_command_within_the_deadman_and_ends_with_a_stop() {
 #[test]
 fn ctrl_c_while_driving_stops_the_robot_before_closing() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let child = amiro(&[
-        "drive",
-        "--forward",
-        "100mm/s",
-        "--turn",
-        "30deg/s",
-        "--bus",
-        &bus,
-    ]);
-    adapter.accept_open();
+    let child = adapter.start(&["drive", "--forward", "100mm/s", "--turn", "30deg/s"]);
     for _ in 0..3 {
         assert!(adapter.hear().starts_with("t1108A08601004FFD0700"));
         adapter.say(b"z\r");
@@ -533,7 +489,6 @@ fn ctrl_c_while_driving_stops_the_robot_before_closing() {
 #[test]
 fn a_script_plays_its_steps_in_order_and_prints_what_comes_back() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
     let dir = tempfile::tempdir().unwrap();
     let script = dir.path().join("short.amiro");
     std::fs::write(
@@ -542,8 +497,7 @@ fn a_script_plays_its_steps_in_order_and_prints_what_comes_back() {
          drive --forward 100mm/s --for 500ms\n",
     )
     .unwrap();
-    let child = amiro(&["run", script.to_str().unwrap(), "--bus", &bus]);
-    adapter.accept_open();
+    let child = adapter.start(&["run", script.to_str().unwrap()]);
     let gyroscope_published = Instant::now();
     adapter.expect("t108401640000\r", b"z\rt5086FCFF1E00FBFF\r");
     adapter.expect("t3133003278\r", b"z\r");
@@ -555,33 +509,24 @@ fn a_script_plays_its_steps_in_order_and_prints_what_comes_back() {
     assert_eq!(motor.first().unwrap().1, FORWARD_100);
     assert_eq!(motor.last().unwrap().1, STOP);
     let output = finish(child);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
+    assert_succeeded(&output);
+    assert_mentions(
+        &String::from_utf8_lossy(&output.stdout),
+        &[
+            "# line 2: publish gyroscope",
+            "sent (",
+            "gyroscope: x -4 dps, y 30 dps, z -5 dps",
+            "led-3: set colour red 0, green 50, blue 120",
+        ],
     );
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    for expected in [
-        "# line 2: publish gyroscope",
-        "sent (",
-        "gyroscope: x -4 dps, y 30 dps, z -5 dps",
-        "led-3: set colour red 0, green 50, blue 120",
-    ] {
-        assert!(stdout.contains(expected), "{expected} in {stdout}");
-    }
 }
 
 #[test]
 fn a_headless_console_sends_drives_and_shares_its_adapter() {
     let mut adapter = FakeAdapter::new();
     let bus = adapter.bus();
-    let mut console = Command::new(assert_cmd::cargo::cargo_bin("amiro"))
-        .args(["console", "--headless", "--linger", "100ms", "--bus", &bus])
-        .env_remove("AMIRO_BUS")
-        .env("AMIRO_RUNTIME_DIR", runtime_dir())
+    let mut console = amiro_command(&["console", "--headless", "--linger", "100ms", "--bus", &bus])
         .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
         .spawn()
         .expect("start amiro console");
     adapter.accept_open();
@@ -589,7 +534,7 @@ fn a_headless_console_sends_drives_and_shares_its_adapter() {
     writeln!(input, "publish gyroscope --every 10ms --priority high").unwrap();
     adapter.expect("t1084010A0000\r", b"z\rt5086FCFF1E00FBFF\r");
     // Another amiro on the same adapter goes through the console.
-    let led = amiro(&["send", "led", "3", "--rgb", "255,128,0", "--bus", &bus]);
+    let led = adapter.spawn(&["send", "led", "3", "--rgb", "255,128,0"]);
     adapter.expect("t3133FF8000\r", b"z\r");
     assert!(finish(led).status.success());
     writeln!(input, "drive --forward 100mm/s --for 600ms").unwrap();
@@ -599,20 +544,16 @@ fn a_headless_console_sends_drives_and_shares_its_adapter() {
     assert_eq!(motor.last().unwrap().1, STOP);
     assert!((3..=5).contains(&motor.len()), "{motor:?}");
     let output = finish(console);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
+    assert_succeeded(&output);
+    assert_mentions(
+        &String::from_utf8_lossy(&output.stdout),
+        &[
+            "> publish gyroscope",
+            "sent (",
+            "gyroscope: x -4 dps",
+            "313#FF8000",
+        ],
     );
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    for expected in [
-        "> publish gyroscope",
-        "sent (",
-        "gyroscope: x -4 dps",
-        "313#FF8000",
-    ] {
-        assert!(stdout.contains(expected), "{expected} in {stdout}");
-    }
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("summary:"), "{stderr}");
 }
@@ -646,14 +587,10 @@ fn the_console_screen_runs_on_a_terminal_and_ctrl_c_closes_the_channel() {
                 .extend_from_slice(&buffer[..count]);
         }
     });
-    let child = Command::new(assert_cmd::cargo::cargo_bin("amiro"))
-        .args(["console", "--bus", &bus])
-        .env_remove("AMIRO_BUS")
-        .env("AMIRO_RUNTIME_DIR", runtime_dir())
+    let child = amiro_command(&["console", "--bus", &bus])
         .env("TERM", "xterm")
         .stdin(slave.try_clone().unwrap())
         .stdout(slave.try_clone().unwrap())
-        .stderr(Stdio::piped())
         .spawn()
         .expect("start amiro console");
     drop(slave);
@@ -684,13 +621,7 @@ fn the_console_screen_runs_on_a_terminal_and_ctrl_c_closes_the_channel() {
         std::thread::sleep(Duration::from_millis(20));
     }
     keyboard.write_all(b"\x03").unwrap();
-    adapter.expect("C\r", b"\r");
-    let output = finish(child);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    assert_succeeded(&adapter.close(child));
     let screen = String::from_utf8_lossy(&screen.lock().unwrap()).into_owned();
     assert!(screen.contains("\u{1b}[?1049l"), "the terminal is restored");
 }
@@ -699,8 +630,7 @@ fn the_console_screen_runs_on_a_terminal_and_ctrl_c_closes_the_channel() {
 fn health_asks_each_board_once_and_reports_the_silent_one() {
     use amiro_can::{Board, Diagnostics, Priority};
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
-    let child = amiro(&[
+    let child = adapter.start(&[
         "health",
         "--board",
         "diwheeldrive",
@@ -708,10 +638,7 @@ fn health_asks_each_board_once_and_reports_the_silent_one() {
         "lightring",
         "--timeout",
         "1s",
-        "--bus",
-        &bus,
     ]);
-    adapter.accept_open();
     // One-shot requests (mode 2) on each board's diagnostics topic, at low priority.
     adapter.expect("t31A102\r", b"z\r");
     adapter.expect("t31C102\r", b"z\r");
@@ -728,8 +655,7 @@ fn health_asks_each_board_once_and_reports_the_silent_one() {
         answer.push(b'\r');
     }
     adapter.say(&answer);
-    adapter.expect("C\r", b"\r");
-    let output = finish(child);
+    let output = adapter.close(child);
     assert_eq!(output.status.code(), Some(1), "LightRing never answered");
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(
@@ -760,7 +686,6 @@ fn mcap_messages(path: &Path) -> Vec<(String, u64)> {
 #[test]
 fn record_writes_what_the_adapter_hears_stamped_on_arrival_and_stops_after_its_duration() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("live.mcap");
     let out_text = out.display().to_string();
@@ -769,26 +694,11 @@ fn record_writes_what_the_adapter_hears_stamped_on_arrival_and_stops_after_its_d
         .unwrap()
         .as_nanos() as u64;
     let started = Instant::now();
-    let child = amiro(&[
-        "record",
-        "--bus",
-        &bus,
-        "--out",
-        &out_text,
-        "--duration",
-        "700ms",
-    ]);
-    adapter.accept_open();
+    let child = adapter.start(&["record", "--out", &out_text, "--duration", "700ms"]);
     adapter.say(b"t6086FCFF1E00FBFF\r");
     std::thread::sleep(Duration::from_millis(200));
     adapter.say(b"t6086FDFF1E00FBFF\r");
-    adapter.expect("C\r", b"\r");
-    let output = finish(child);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    assert_succeeded(&adapter.close(child));
     assert!(started.elapsed() < Duration::from_secs(5));
     assert_eq!(adapter.heard, b"C\rS8\rO\rC\r");
     let messages = mcap_messages(&out);
@@ -807,24 +717,16 @@ fn record_writes_what_the_adapter_hears_stamped_on_arrival_and_stops_after_its_d
 #[test]
 fn ctrl_c_ends_a_recording_with_a_complete_file() {
     let mut adapter = FakeAdapter::new();
-    let bus = adapter.bus();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("interrupted.mcap");
     let out_text = out.display().to_string();
-    let mut child = amiro(&["monitor", "--bus", &bus, "--record", &out_text]);
+    let mut child = adapter.start(&["monitor", "--record", &out_text]);
     let mut printed = Watched::of(&mut child);
-    adapter.accept_open();
     adapter.say(b"t71F3037800\r");
     // Interrupted once the frame is in (printed, so it has been recorded).
     printed.wait_for("71F#037800");
     interrupt(&child);
-    adapter.expect("C\r", b"\r");
-    let output = finish(child);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    assert_succeeded(&adapter.close(child));
     let messages = mcap_messages(&out);
     assert!(
         messages

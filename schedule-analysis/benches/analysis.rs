@@ -25,29 +25,11 @@ use schedule_analysis::can;
 use schedule_analysis::model::{
     BoardSystem, BusSystem, FrameCostSpec, MessageSpec, OverheadTimes, System, TaskKind, TaskSpec,
 };
+use schedule_analysis::rng::Rng;
 use schedule_analysis::time::Time;
 
 use response_time_analysis::time as rta_time;
 use response_time_analysis::{arrival, demand, fixed_priority, wcet};
-
-/// xorshift64*: deterministic sets, no dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Log-uniform between `lo` and `hi`.
-    fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        (lo.ln() + self.unit() * (hi.ln() - lo.ln())).exp()
-    }
-}
 
 /// Priority assignment of a benchmark set.
 #[derive(Clone, Copy)]
@@ -60,7 +42,7 @@ enum Priorities {
 }
 
 fn board(n: usize, seed: u64, priorities: Priorities) -> BoardSystem {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let shares: Vec<f64> = (0..n).map(|_| rng.unit() + 0.05).collect();
     let total: f64 = shares.iter().sum();
     let levels = (n / 4).max(2) as u64;
@@ -71,8 +53,8 @@ fn board(n: usize, seed: u64, priorities: Priorities) -> BoardSystem {
             let period_us = rng.log_uniform(1_000.0, 1_000_000.0);
             let wcet_us = (period_us * 0.85 * share / total).max(0.01);
             let mut sections = Vec::new();
-            for _ in 0..(rng.next() % 3) {
-                let resource = format!("r{}", rng.next() % 8);
+            for _ in 0..(rng.next_u64() % 3) {
+                let resource = format!("r{}", rng.next_u64() % 8);
                 if !sections.iter().any(|(r, _)| *r == resource) {
                     sections.push((resource, Time::from_us_up(wcet_us * rng.unit() * 0.5)));
                 }
@@ -81,7 +63,7 @@ fn board(n: usize, seed: u64, priorities: Priorities) -> BoardSystem {
             TaskSpec {
                 name: format!("task{i}"),
                 priority: match priorities {
-                    Priorities::Random => (1 + rng.next() % levels) as u32,
+                    Priorities::Random => (1 + rng.next_u64() % levels) as u32,
                     // Shorter period, higher level: 1 µs … 1 s mapped logarithmically onto the levels.
                     Priorities::DeadlineMonotonic => (1.0
                         + (levels as f64 - 1.0)
@@ -114,7 +96,7 @@ fn board(n: usize, seed: u64, priorities: Priorities) -> BoardSystem {
 }
 
 fn bus(n: usize, seed: u64) -> System {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let bit = can::bit_time(1_000_000);
     let extended = n > 2048;
     let mut ids: Vec<u32> = (0..n as u32)
@@ -122,10 +104,10 @@ fn bus(n: usize, seed: u64) -> System {
         .collect();
     // Shuffle so priority order and period order are unrelated.
     for i in (1..ids.len()).rev() {
-        ids.swap(i, (rng.next() % (i as u64 + 1)) as usize);
+        ids.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
     }
     let raw: Vec<(u8, f64)> = (0..n)
-        .map(|_| ((rng.next() % 9) as u8, rng.log_uniform(1.0, 1000.0)))
+        .map(|_| ((rng.next_u64() % 9) as u8, rng.log_uniform(1.0, 1000.0)))
         .collect();
     // Scale the periods so the bus runs at 80 %.
     let load: f64 = raw

@@ -7,7 +7,7 @@
 //!
 //! ```text
 //! let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-//! let robot = admission_host::lower(&root, &scenario::timing_files(&root), 1_000_000, FrameCostSpec::Exact)
+//! let robot = admission_host::lower_robot(&root)      // `lower` with every timing file, 1 Mbit/s, exact frames
 //!     .unwrap_or_else(|e| panic!("{e}"));          // drift between app and timing file: the build fails
 //! std::fs::write(out_dir.join("admission_table.rs"), robot.to_rust_source("schedule_analysis"))?;
 //! ```
@@ -197,6 +197,18 @@ fn overhead_times(o: &crate::model::Overheads) -> OverheadTimes {
         isr_exit: Time::from_us_up(o.isr_exit_us),
         dispatcher: Time::from_us_up(o.dispatcher_us),
     }
+}
+
+/// The table the boards carry: every board's timing file under `root` ([`scenario::timing_files`]) lowered for
+/// the bus at [`crate::can::DEFAULT_BITRATE`] under the exact frame cost — what a board's build script
+/// generates, and what the host tools (the operator's check, the scenarios, the examples) compare with.
+pub fn lower_robot(root: &Path) -> Result<OwnedRobot, BuildError> {
+    lower(
+        root,
+        &scenario::timing_files(root),
+        crate::can::DEFAULT_BITRATE,
+        FrameCostSpec::Exact,
+    )
 }
 
 /// Lowers every board of the timing files to the admission table, for the bus at `bitrate` under `frame_cost`.

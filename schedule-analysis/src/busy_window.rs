@@ -975,6 +975,32 @@ mod tests {
         )
     }
 
+    /// The preemptive analysis of `s` delayed by `others` under the default limits, summed by division.
+    fn analyse_preemptive(s: &Subject, others: &[Stream]) -> Result<Response, AnalysisError> {
+        response_time(
+            s,
+            others,
+            None,
+            Discipline::Preemptive,
+            &Limits::default(),
+            &mut [],
+        )
+    }
+
+    /// The analysis with a counter per interferer and by division alone, which must agree; their answer.
+    fn counted_as_divided(
+        s: &Subject,
+        others: &[Stream],
+        discipline: Discipline,
+        limits: &Limits,
+    ) -> Result<Response, AnalysisError> {
+        let mut scratch = vec![Counter::default(); others.len()];
+        let with = response_time(s, others, None, discipline, limits, &mut scratch);
+        let without = response_time(s, others, None, discipline, limits, &mut []);
+        assert_eq!(with, without, "{others:?} {discipline:?}");
+        with
+    }
+
     #[test]
     fn the_long_division_is_the_64_bit_one() {
         let mut x = 0x2545_f491_4f6c_dd1du64;
@@ -1191,25 +1217,12 @@ mod tests {
     fn counters_and_divisions_agree() {
         // The same analysis with and without scratch must give the same answer.
         let others = [Stream(3, 7, 2), Stream(3, 12, 0), Stream(1, 5, 4)];
-        let s = subject(5, 80);
-        let mut scratch = [Counter::default(); 3];
-        let with = response_time(
-            &s,
+        let with = counted_as_divided(
+            &subject(5, 80),
             &others,
-            None,
             Discipline::Preemptive,
             &Limits::default(),
-            &mut scratch,
         );
-        let without = response_time(
-            &s,
-            &others,
-            None,
-            Discipline::Preemptive,
-            &Limits::default(),
-            &mut [],
-        );
-        assert_eq!(with, without);
         assert!(with.is_ok());
     }
 
@@ -1243,14 +1256,11 @@ mod tests {
                     bit_time: Time::from_ns(1),
                 },
             ] {
-                let mut scratch = [Counter::default(); 2];
                 let limits = Limits {
                     horizon: Time::from_ns(1_000 * second),
                     ..Limits::default()
                 };
-                let with = response_time(&s, others, None, discipline, &limits, &mut scratch);
-                let without = response_time(&s, others, None, discipline, &limits, &mut []);
-                assert_eq!(with, without, "{others:?} {discipline:?}");
+                counted_as_divided(&s, others, discipline, &limits).ok();
             }
         }
         // The first set's window does pass 2^32 ns.
@@ -1281,24 +1291,7 @@ mod tests {
             Time::from_ns(10),
             Time::ZERO,
         );
-        let mut scratch = [Counter::default(); 1];
-        let with = response_time(
-            &s,
-            &others,
-            None,
-            Discipline::Preemptive,
-            &Limits::default(),
-            &mut scratch,
-        );
-        let without = response_time(
-            &s,
-            &others,
-            None,
-            Discipline::Preemptive,
-            &Limits::default(),
-            &mut [],
-        );
-        assert_eq!(with, without);
+        let with = counted_as_divided(&s, &others, Discipline::Preemptive, &Limits::default());
         assert_eq!(with.map(|r| r.instances > 1), Ok(true));
     }
 
@@ -1306,15 +1299,10 @@ mod tests {
     fn overload_is_reported_not_looped_on() {
         let others = [Stream(6, 10, 0)];
         let s = subject(5, 10);
-        let r = response_time(
-            &s,
-            &others,
-            None,
-            Discipline::Preemptive,
-            &Limits::default(),
-            &mut [],
+        assert_eq!(
+            analyse_preemptive(&s, &others),
+            Err(AnalysisError::Overload)
         );
-        assert_eq!(r, Err(AnalysisError::Overload));
         let r = response_time(
             &s,
             &others,
@@ -1401,28 +1389,16 @@ mod tests {
     #[test]
     fn iterations_are_counted() {
         let others = [Stream(3, 7, 2), Stream(3, 12, 0), Stream(1, 5, 4)];
-        let r = response_time(
-            &subject(5, 80),
-            &others,
-            None,
-            Discipline::Preemptive,
-            &Limits::default(),
-            &mut [],
-        );
+        let r = analyse_preemptive(&subject(5, 80), &others);
         assert!(r.is_ok_and(|r| r.iterations >= 2), "{r:?}");
     }
 
     #[test]
     fn a_zero_period_interferer_is_overload() {
         let others = [Stream(1, 0, 0)];
-        let r = response_time(
-            &subject(1, 10),
-            &others,
-            None,
-            Discipline::Preemptive,
-            &Limits::default(),
-            &mut [],
+        assert_eq!(
+            analyse_preemptive(&subject(1, 10), &others),
+            Err(AnalysisError::Overload)
         );
-        assert_eq!(r, Err(AnalysisError::Overload));
     }
 }

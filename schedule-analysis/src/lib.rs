@@ -10,7 +10,8 @@
 //! * the **host layer** (feature `std`, on by default) reads models ([`model`]), the generated bounds files
 //!   ([`bounds`]), RTIC apps ([`rtic_source`]), timing files and scenarios ([`scenario`]), runs the whole system ([`analysis`]: names, ceilings and overheads
 //!   around the core's board and bus analyses, then the end-to-end paths; [`sensitivity`]) and renders the report
-//!   ([`report`]). `cargo xtask analyze` is a thin front end over it.
+//!   ([`report`]); [`rng`] is the deterministic generator of its randomised experiments (benchmark sets,
+//!   `cargo xtask campaign`, the admission-cost search). `cargo xtask analyze` is a thin front end over it.
 //!
 //! docs/analysis.md documents the model format, the equations and how to read the report.
 #![cfg_attr(not(feature = "std"), no_std)]
@@ -34,6 +35,8 @@ pub mod bounds;
 pub mod model;
 #[cfg(feature = "std")]
 pub mod report;
+#[cfg(feature = "std")]
+pub mod rng;
 #[cfg(feature = "std")]
 pub mod rtic_source;
 #[cfg(feature = "std")]

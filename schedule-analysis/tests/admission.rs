@@ -25,13 +25,7 @@ fn robot() -> &'static OwnedRobot {
     static ROBOT: OnceLock<OwnedRobot> = OnceLock::new();
     ROBOT.get_or_init(|| {
         let root = root();
-        admission_host::lower(
-            &root,
-            &scenario::timing_files(&root),
-            1_000_000,
-            FrameCostSpec::Exact,
-        )
-        .unwrap_or_else(|e| panic!("{e}"))
+        admission_host::lower_robot(&root).unwrap_or_else(|e| panic!("{e}"))
     })
 }
 

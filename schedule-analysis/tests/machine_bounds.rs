@@ -95,6 +95,15 @@ fn task<'a>(built: &'a scenario::Built, name: &str) -> &'a schedule_analysis::mo
         .unwrap()
 }
 
+/// The report's source line that starts with `start`.
+fn source<'a>(built: &'a scenario::Built, start: &str) -> &'a str {
+    built
+        .sources
+        .iter()
+        .find(|s| s.starts_with(start))
+        .unwrap_or_else(|| panic!("no source line {start:?} in {:?}", built.sources))
+}
+
 #[test]
 fn a_bound_is_the_budget_wherever_one_exists() {
     let root = workspace_with("bounded", Some(dwd_bounds()));
@@ -141,11 +150,7 @@ fn a_bound_is_the_budget_wherever_one_exists() {
         Some("stated")
     );
     // The report's line per board.
-    let line = built
-        .sources
-        .iter()
-        .find(|s| s.starts_with("diwheeldrive: budgets: "))
-        .unwrap();
+    let line = source(&built, "diwheeldrive: budgets: ");
     assert!(
         line.starts_with(
             "diwheeldrive: budgets: 2 bounded from the machine code (F103, 72 MHz, 2 wait states; schedule-analysis/models/diwheeldrive-1-1.wcet.json), 16 stated ("
@@ -154,11 +159,7 @@ fn a_bound_is_the_budget_wherever_one_exists() {
     );
     assert!(line.contains("admit_requests: bound declined"), "{line}");
     // The admission step: the declined bound beside the stated budget, and which one is used.
-    let admission = built
-        .sources
-        .iter()
-        .find(|s| s.starts_with("diwheeldrive: admission reserves"))
-        .unwrap();
+    let admission = source(&built, "diwheeldrive: admission reserves");
     assert!(
         admission.contains("the bound from its iteration caps is not used (bound declined")
             && admission.contains("the analysis uses the stated budget"),
@@ -206,11 +207,7 @@ fn a_bounded_admission_step_is_used_and_said_so() {
     let root = workspace_with("admission", Some(b));
     let built = build(&root).unwrap();
     assert_eq!(task(&built, "admit_requests").wcet_us, 10_000.0);
-    let admission = built
-        .sources
-        .iter()
-        .find(|s| s.starts_with("diwheeldrive: admission reserves"))
-        .unwrap();
+    let admission = source(&built, "diwheeldrive: admission reserves");
     assert!(
         admission.contains("one step's bound from the machine code (its iteration caps): 10000 µs")
             && admission.contains("beside it the stated budget 8600 µs")

@@ -40,18 +40,7 @@ pub const NOT_ON_1_2: &str = "thesis-magnetometer-900us";
 #[test]
 fn every_scenario_is_schedulable_on_both_revisions() {
     let root = root();
-    let models = root.join(scenario::MODELS_DIR);
-    let mut names: Vec<String> = std::fs::read_dir(&models)
-        .expect("models folder")
-        .filter_map(|e| e.ok())
-        .filter_map(|e| {
-            e.file_name()
-                .to_str()
-                .and_then(|n| n.strip_suffix(".scenario.json"))
-                .map(str::to_string)
-        })
-        .collect();
-    names.sort();
+    let names = scenario::scenario_names(&root).expect("models folder");
     assert!(!names.is_empty());
     for revision in [None, Some("1-2")] {
         let files = scenario::timing_files_for(&root, revision);

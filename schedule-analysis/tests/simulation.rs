@@ -9,7 +9,7 @@
 
 use proptest::prelude::*;
 use schedule_analysis::board::{self, CriticalSection, TaskTiming};
-use schedule_analysis::busy_window::{Counter, Limits, Response};
+use schedule_analysis::busy_window::{AnalysisError, Counter, Limits, Response};
 use schedule_analysis::can::{self, FrameCost, MessageTiming};
 use schedule_analysis::time::Time;
 
@@ -101,25 +101,30 @@ fn analyse_board(set: &BoardSet, with_blocking: bool) -> Vec<Option<Response>> {
         })
         .collect();
     let mut scratch = vec![Counter::default(); set.timings.len()];
-    (0..set.timings.len())
-        .map(|i| {
-            let b = if with_blocking {
-                board::srp_blocking(set.timings[i].priority, &sections)
-            } else {
-                Time::ZERO
-            };
-            board::response_time(
-                &set.timings,
-                i,
-                b,
-                &Limits {
-                    horizon: Time::from_us(10_000_000),
-                    ..Limits::default()
-                },
-                &mut scratch,
-            )
-            .ok()
-        })
+    responses(
+        set.timings.len(),
+        with_blocking.then_some(|i: usize| board::srp_blocking(set.timings[i].priority, &sections)),
+        |i, b| board::response_time(&set.timings, i, b, &limits(), &mut scratch),
+    )
+}
+
+/// The analyses' limits here: a 10 s horizon.
+fn limits() -> Limits {
+    Limits {
+        horizon: Time::from_us(10_000_000),
+        ..Limits::default()
+    }
+}
+
+/// The response of each of `n` elements with its `blocking` (none without), `None` where the analysis finds no
+/// bound.
+fn responses(
+    n: usize,
+    blocking: Option<impl Fn(usize) -> Time>,
+    mut analyse: impl FnMut(usize, Time) -> Result<Response, AnalysisError>,
+) -> Vec<Option<Response>> {
+    (0..n)
+        .map(|i| analyse(i, blocking.as_ref().map_or(Time::ZERO, |b| b(i))).ok())
         .collect()
 }
 
@@ -318,27 +323,11 @@ fn sim_messages(set: &[MessageTiming]) -> Vec<SimMessage> {
 fn analyse_bus(set: &[MessageTiming], with_blocking: bool) -> Vec<Option<Response>> {
     let bit = can::bit_time(1_000_000);
     let mut scratch = vec![Counter::default(); set.len()];
-    (0..set.len())
-        .map(|i| {
-            let b = if with_blocking {
-                can::blocking(set, i)
-            } else {
-                Time::ZERO
-            };
-            can::response_time(
-                set,
-                i,
-                b,
-                bit,
-                &Limits {
-                    horizon: Time::from_us(10_000_000),
-                    ..Limits::default()
-                },
-                &mut scratch,
-            )
-            .ok()
-        })
-        .collect()
+    responses(
+        set.len(),
+        with_blocking.then_some(|i: usize| can::blocking(set, i)),
+        |i, b| can::response_time(set, i, b, bit, &limits(), &mut scratch),
+    )
 }
 
 fn raw_messages() -> impl Strategy<Value = (Vec<RawMessage>, Vec<u32>)> {
@@ -435,7 +424,7 @@ proptest! {
             })
             .collect();
         let blockings: Vec<Time> = set.timings.iter().map(|t| board::srp_blocking(t.priority, &sections)).collect();
-        let limits = Limits { horizon: Time::from_us(10_000_000), ..Limits::default() };
+        let limits = limits();
         let mut scratch = vec![Counter::default(); set.timings.len()];
         let mut batched = vec![Err(schedule_analysis::AnalysisError::NoSuchIndex); set.timings.len()];
         board::response_times(&set.timings, &blockings, &limits, &mut scratch, &mut batched);

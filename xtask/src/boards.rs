@@ -94,47 +94,63 @@ impl Board {
 }
 
 impl Revision {
+    /// A revision with an image of its own (built with `feature`) for robots of the revisions `robots`.
+    const fn own_image(
+        name: &'static str,
+        feature: &'static str,
+        robots: &'static [&'static str],
+        device_ids: &'static [u32],
+    ) -> Self {
+        Self {
+            name,
+            robots,
+            feature: Some(feature),
+            device_ids,
+        }
+    }
+
     /// The robot revision its admission table is built for (`AMIRO_REVISION`): the newest it serves.
     pub fn robot(&self) -> &'static str {
         self.robots.first().copied().unwrap_or(NEWEST)
     }
 }
 
+/// What DiWheelDrive and LightRing share as STM32F103RE boards: the chip, AMiRo-BLT's F1 layout and QEMU's
+/// netduino2. Each board states its name, timer, budgets and revisions over it.
+const STM32F103: Board = Board {
+    name: "",
+    target: "thumbv7m-none-eabi",
+    chip: "STM32F103RE",
+    hard_float: false,
+    flash_bytes: 512 * 1024,
+    ram_bytes: 64 * 1024,
+    app_base: 0x0800_6000,
+    checksum_slot: 0x150,
+    qemu_machine: "netduino2",
+    qemu_inputs: environment::NETDUINO2,
+    monotonic_timer: MonotonicTimer { name: "", base: 0 },
+    internal_oscillator_hz: 8_000_000,
+    flash_budget: 0,
+    admission_allowance: 0,
+    revisions: &[],
+};
+
 /// DiWheelDrive, PowerManagement and LightRing.
 pub const BOARDS: [Board; 3] = [
     Board {
         name: "diwheeldrive",
-        target: "thumbv7m-none-eabi",
-        chip: "STM32F103RE",
-        hard_float: false,
-        flash_bytes: 512 * 1024,
-        ram_bytes: 64 * 1024,
-        app_base: 0x0800_6000,
-        checksum_slot: 0x150,
-        qemu_machine: "netduino2",
-        qemu_inputs: environment::NETDUINO2,
         // TIM2–TIM4 drive its motors and count its encoders; QEMU models TIM5 at the F103's address.
         monotonic_timer: MonotonicTimer {
             name: "TIM5",
             base: 0x4000_0C00,
         },
-        internal_oscillator_hz: 8_000_000,
         flash_budget: 40 * 1024,
         admission_allowance: 28 * 1024,
         revisions: &[
-            Revision {
-                name: "1-2",
-                robots: &["1-2"],
-                feature: Some("rev-1-2"),
-                device_ids: &[0x0100_0102],
-            },
-            Revision {
-                name: "1-1",
-                robots: &["1-1"],
-                feature: Some("rev-1-1"),
-                device_ids: &[0x0100_0101, 1],
-            },
+            Revision::own_image("1-2", "rev-1-2", &["1-2"], &[0x0100_0102]),
+            Revision::own_image("1-1", "rev-1-1", &["1-1"], &[0x0100_0101, 1]),
         ],
+        ..STM32F103
     },
     Board {
         name: "powermgmt",
@@ -172,39 +188,20 @@ pub const BOARDS: [Board; 3] = [
     },
     Board {
         name: "lightring",
-        target: "thumbv7m-none-eabi",
-        chip: "STM32F103RE",
-        hard_float: false,
-        flash_bytes: 512 * 1024,
-        ram_bytes: 64 * 1024,
-        app_base: 0x0800_6000,
-        checksum_slot: 0x150,
-        qemu_machine: "netduino2",
-        qemu_inputs: environment::NETDUINO2,
         // Where QEMU's F205 models it at the F103's address.
         monotonic_timer: MonotonicTimer {
             name: "TIM3",
             base: 0x4000_0400,
         },
-        internal_oscillator_hz: 8_000_000,
         flash_budget: 24 * 1024,
         admission_allowance: 28 * 1024,
         // The 1-2 ring (three TLC5947, 24 LEDs) of a 1-2 robot; the 1-0 ring (one TLC5947, eight
         // LEDs) of a 1-1 robot (docs/boards.md).
         revisions: &[
-            Revision {
-                name: "1-2",
-                robots: &["1-2"],
-                feature: Some("rev-1-2"),
-                device_ids: &[0x017F_0102],
-            },
-            Revision {
-                name: "1-0",
-                robots: &["1-1"],
-                feature: Some("rev-1-0"),
-                device_ids: &[0x017F_0100, 3],
-            },
+            Revision::own_image("1-2", "rev-1-2", &["1-2"], &[0x017F_0102]),
+            Revision::own_image("1-0", "rev-1-0", &["1-1"], &[0x017F_0100, 3]),
         ],
+        ..STM32F103
     },
 ];
 

@@ -15,6 +15,7 @@
 use std::path::Path;
 
 use anyhow::{bail, ensure, Context, Result};
+use schedule_analysis::rng::Rng;
 
 use crate::boards::Board;
 use crate::qemu::{self, TimedFrame, SIGNAL_SYS_PD_N};
@@ -111,30 +112,6 @@ enum Verdict {
     Ignored,
 }
 
-/// A deterministic generator (xorshift64*), so a seed names a campaign.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n.max(1)
-    }
-    fn range(&mut self, lo: u64, hi: u64) -> u64 {
-        lo + self.below(hi - lo + 1)
-    }
-    fn pick<T: Copy>(&mut self, items: &[T]) -> T {
-        items[self.below(items.len() as u64) as usize]
-    }
-    fn bytes(&mut self, n: usize) -> Vec<u8> {
-        (0..n).map(|_| self.next() as u8).collect()
-    }
-}
-
 /// A generated stimulus with what the model expects of it.
 struct Plan {
     frames: Vec<TimedFrame>,
@@ -226,7 +203,7 @@ fn plan(model: &BoardModel, rng: &mut Rng, count: usize) -> Plan {
             // Sensor data (C/S = 1) on any topic byte: ignored.
             (4, _) => {
                 let dlc = rng.below(9) as usize;
-                let id = 0x400 | command_id(prio, rng.next() as u8);
+                let id = 0x400 | command_id(prio, rng.next_u64() as u8);
                 push(t, id, rng.bytes(dlc), Verdict::Ignored, &mut expected);
             }
             // Bad mode with DLC 1 (3 only off the diagnostics topic).
@@ -645,7 +622,7 @@ pub fn run(
         )?;
         for k in 0..runs {
             let seed = seed.wrapping_add(k as u64);
-            let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+            let mut rng = Rng::new(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
             let plan = plan(model, &mut rng, frames);
             let work = qemu::fresh_work_dir(root, board.name);
             let duration = plan.shutdown_us + 100_000;
@@ -676,8 +653,8 @@ mod tests {
     #[test]
     fn plans_are_seeded_spaced_and_single_fault() {
         let model = &MODELS[0];
-        let a = plan(model, &mut Rng(7), 500);
-        let b = plan(model, &mut Rng(7), 500);
+        let a = plan(model, &mut Rng::new(7), 500);
+        let b = plan(model, &mut Rng::new(7), 500);
         assert_eq!(a.frames, b.frames);
         assert_eq!(a.expected.len(), 501);
         // The spaced phase keeps the command handler's 400 µs.

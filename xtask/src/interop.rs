@@ -17,6 +17,8 @@ use std::process::Command;
 
 use anyhow::{bail, Context, Result};
 
+use crate::workspace;
+
 /// pytest's exit code when it collected no tests: a renamed file must not pass silently.
 const PYTEST_NO_TESTS: i32 = 5;
 
@@ -128,53 +130,16 @@ pub(crate) fn venv(root: &Path, work: &Path) -> Result<PathBuf> {
 /// Node and npm for Foxglove's WebSocket client (`@foxglove/ws-protocol`, pinned in
 /// tools/interop/foxglove-client/package-lock.json); installed with apt when running as root, like can-utils.
 fn ensure_node() -> Result<()> {
-    let found = |tool: &str| {
-        Command::new(tool)
-            .arg("--version")
-            .stdin(std::process::Stdio::null())
-            .output()
-            .map(|o| o.status.success())
-            .unwrap_or(false)
-    };
-    if found("node") && found("npm") {
+    if workspace::runs("node", &["--version"]) && workspace::runs("npm", &["--version"]) {
         return Ok(());
     }
-    let is_root = crate::workspace::output(Path::new("."), "id", &["-u"])
-        .map(|u| u.trim() == "0")
-        .unwrap_or(false);
-    if is_root {
-        crate::workspace::run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
-        crate::workspace::run_tool(
-            Path::new("."),
-            "apt-get",
-            &["install", "-y", "-qq", "nodejs", "npm"],
-        )?;
-        return Ok(());
-    }
-    bail!("node and npm are missing: install them (Debian/Ubuntu: sudo apt-get install nodejs npm)")
+    workspace::apt_install(&["nodejs", "npm"], "node and npm are missing")
 }
 
 /// can-utils' log converters; installed with apt when running as root (as CI does), like QEMU.
 fn ensure_can_utils() -> Result<()> {
-    let found = Command::new("log2long")
-        .stdin(std::process::Stdio::null())
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if found {
+    if workspace::runs("log2long", &[]) {
         return Ok(());
     }
-    let is_root = crate::workspace::output(Path::new("."), "id", &["-u"])
-        .map(|u| u.trim() == "0")
-        .unwrap_or(false);
-    if is_root {
-        crate::workspace::run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
-        crate::workspace::run_tool(
-            Path::new("."),
-            "apt-get",
-            &["install", "-y", "-qq", "can-utils"],
-        )?;
-        return Ok(());
-    }
-    bail!("can-utils is missing: install it (Debian/Ubuntu: sudo apt-get install can-utils)")
+    workspace::apt_install(&["can-utils"], "can-utils is missing")
 }

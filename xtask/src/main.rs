@@ -359,52 +359,28 @@ fn check(root: &Path) -> Result<()> {
 fn test(root: &Path) -> Result<()> {
     ensure_toolchain(root)?;
     cargo(root, &["test", "--quiet"]).context("host tests")?;
-    // The libraries that run on the chips must build for both of them without a HAL.
+    // The libraries that run on the chips must build for both of them without a HAL: (package, its
+    // features, what a failure names).
+    let chip_libraries: [(&str, &[&str], &str); 4] = [
+        (
+            "amiro-can",
+            &["--features", "bxcan,embedded-can"],
+            "amiro-can",
+        ),
+        ("amiro-sensors", &[], "amiro-sensors"),
+        ("amiro-trace", &[], "amiro-trace"),
+        (
+            "schedule-analysis",
+            &["--no-default-features"],
+            "the no_std core of schedule-analysis",
+        ),
+    ];
     for target in ["thumbv7m-none-eabi", "thumbv7em-none-eabihf"] {
-        cargo(
-            root,
-            &[
-                "build",
-                "--quiet",
-                "--target",
-                target,
-                "-p",
-                "amiro-can",
-                "--features",
-                "bxcan,embedded-can",
-            ],
-        )
-        .with_context(|| format!("amiro-can for {target}"))?;
-        cargo(
-            root,
-            &[
-                "build",
-                "--quiet",
-                "--target",
-                target,
-                "-p",
-                "amiro-sensors",
-            ],
-        )
-        .with_context(|| format!("amiro-sensors for {target}"))?;
-        cargo(
-            root,
-            &["build", "--quiet", "--target", target, "-p", "amiro-trace"],
-        )
-        .with_context(|| format!("amiro-trace for {target}"))?;
-        cargo(
-            root,
-            &[
-                "build",
-                "--quiet",
-                "--target",
-                target,
-                "-p",
-                "schedule-analysis",
-                "--no-default-features",
-            ],
-        )
-        .with_context(|| format!("the no_std core of schedule-analysis for {target}"))?;
+        for (package, features, what) in chip_libraries {
+            let mut args = vec!["build", "--quiet", "--target", target, "-p", package];
+            args.extend_from_slice(features);
+            cargo(root, &args).with_context(|| format!("{what} for {target}"))?;
+        }
     }
     // Every revision of every board (docs/boards.md).
     let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &revision::Choice::All)?;
@@ -434,18 +410,8 @@ fn test(root: &Path) -> Result<()> {
 /// robot of each revision — but the thesis's 900 µs magnetometer on 1-2, which is shown not to fit
 /// (docs/boards.md, `schedule-analysis/tests/revisions.rs`).
 fn analysis_gate(root: &Path) -> Result<()> {
-    let models = root.join("schedule-analysis").join("models");
-    let mut scenarios: Vec<String> = std::fs::read_dir(&models)
-        .with_context(|| format!("listing {}", models.display()))?
-        .filter_map(|e| e.ok())
-        .filter_map(|e| {
-            e.file_name()
-                .to_str()
-                .and_then(|n| n.strip_suffix(".scenario.json"))
-                .map(str::to_string)
-        })
-        .collect();
-    scenarios.sort();
+    let scenarios = schedule_analysis::scenario::scenario_names(root)
+        .context("listing the shipped scenarios (schedule-analysis/models)")?;
     for robot in boards::ROBOT_REVISIONS {
         for name in &scenarios {
             if robot == "1-2" && name == "thesis-magnetometer-900us" {

@@ -95,27 +95,39 @@ pub fn build_qemu(root: &Path, build: &revision::Build) -> Result<PathBuf> {
 
 /// Installs QEMU where the machine lacks it and we may (root with apt-get); otherwise says how.
 pub fn ensure_qemu() -> Result<()> {
-    let found = Command::new("qemu-system-arm")
-        .arg("--version")
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if found {
+    if runs("qemu-system-arm", &["--version"]) {
         return Ok(());
     }
+    apt_install(&["qemu-system-arm"], "qemu-system-arm is missing")
+}
+
+/// Whether `program` starts and exits successfully with `args` (standard input closed): how a tool is found.
+pub fn runs(program: &str, args: &[&str]) -> bool {
+    Command::new(program)
+        .args(args)
+        .stdin(std::process::Stdio::null())
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false)
+}
+
+/// Installs the Debian `packages` where we may (root with apt-get, as CI runs); otherwise fails with `missing`
+/// and the command that installs them.
+pub fn apt_install(packages: &[&str], missing: &str) -> Result<()> {
     let is_root = output(Path::new("."), "id", &["-u"])
         .map(|u| u.trim() == "0")
         .unwrap_or(false);
     if is_root {
         run_tool(Path::new("."), "apt-get", &["update", "-qq"])?;
-        run_tool(
-            Path::new("."),
-            "apt-get",
-            &["install", "-y", "-qq", "qemu-system-arm"],
-        )?;
-        return Ok(());
+        let mut args = vec!["install", "-y", "-qq"];
+        args.extend_from_slice(packages);
+        return run_tool(Path::new("."), "apt-get", &args);
     }
-    bail!("qemu-system-arm is missing: install it (Debian/Ubuntu: sudo apt-get install qemu-system-arm)")
+    let them = if packages.len() > 1 { "them" } else { "it" };
+    bail!(
+        "{missing}: install {them} (Debian/Ubuntu: sudo apt-get install {})",
+        packages.join(" ")
+    )
 }
 
 /// Runs cargo in `dir` and fails unless it succeeds.

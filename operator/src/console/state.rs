@@ -402,15 +402,7 @@ impl Console {
                 self.keep_alive = KeepAlive::new(plan.every);
                 self.keep_alive.set(plan.command, now);
                 self.drive_end = plan.duration.map(|duration| now + duration);
-                self.status = format!(
-                    "driving {} µm/s, {} µrad/s, repeated every {} ms{}",
-                    plan.command.velocity_um_s,
-                    plan.command.angular_urad_s,
-                    plan.every.as_millis(),
-                    plan.duration
-                        .map(|duration| format!(" for {} ms", duration.as_millis()))
-                        .unwrap_or_else(|| " until stop-driving".into())
-                );
+                self.status = format!("driving {}", plan.describe(" until stop-driving"));
                 self.due_frames(now)
             }
             Ok(Some(Step::Wait(_))) => {

@@ -204,6 +204,22 @@ pub fn find_scenario(root: &Path, name_or_path: &str) -> PathBuf {
         .join(format!("{name_or_path}.scenario.json"))
 }
 
+/// The names of the shipped scenarios (the models folder's `<name>.scenario.json`, as [`find_scenario`] takes
+/// them), sorted.
+pub fn scenario_names(root: &Path) -> std::io::Result<Vec<String>> {
+    let mut names: Vec<String> = std::fs::read_dir(root.join(MODELS_DIR))?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            e.file_name()
+                .to_str()
+                .and_then(|n| n.strip_suffix(".scenario.json"))
+                .map(str::to_string)
+        })
+        .collect();
+    names.sort();
+    Ok(names)
+}
+
 /// The environment variable naming the board revision of the robot analysed (`1-2`, `1-1`): the timing
 /// files in `models/rev-<revision>/` replace the models folder's files of the same name (DiWheelDrive 1-2's
 /// BNO055 budgets). Unset, or a revision without its own files: the models folder's files alone (the

@@ -187,6 +187,18 @@ mod tests {
     /// 120 ms), as `qemu::received_gap_us` reads it from the run's stimulus.
     const RECEIVED_GAP_US: f64 = 20_000.0;
 
+    /// The traced QEMU build's analysis of the scenario at `path`, with the run's received gap.
+    fn traced(root: &Path, path: &Path, timings: &[PathBuf]) -> Analysis {
+        analyse_scenario(
+            root,
+            path,
+            timings,
+            scenario::Firmware::Qemu,
+            Some(RECEIVED_GAP_US),
+        )
+        .unwrap()
+    }
+
     #[test]
     fn the_stimulus_of_the_thesis_one_shots_is_read_as_it_is_replayed() {
         let root = crate::workspace::workspace_root();
@@ -210,14 +222,7 @@ mod tests {
             analyse_scenario(&root, &path, &timings, scenario::Firmware::Production, None).unwrap();
         assert!(production.all_ok(), "the board admitted this set");
         // The bench measures the traced QEMU build: every task of the board must have a bound there too.
-        let traced = analyse_scenario(
-            &root,
-            &path,
-            &timings,
-            scenario::Firmware::Qemu,
-            Some(RECEIVED_GAP_US),
-        )
-        .unwrap();
+        let traced = traced(&root, &path, &timings);
         let board = traced
             .boards
             .iter()
@@ -252,14 +257,7 @@ mod tests {
         let root = crate::workspace::workspace_root();
         let path = thesis_one_shots("publisher-sum");
         let timings = scenario::timing_files_for(&root, Some("1-1"));
-        let traced = analyse_scenario(
-            &root,
-            &path,
-            &timings,
-            scenario::Firmware::Qemu,
-            Some(RECEIVED_GAP_US),
-        )
-        .unwrap();
+        let traced = traced(&root, &path, &timings);
         let board = traced.boards.iter().find(|b| b.name == "diwheeldrive");
         let row = |task: &str, instructions: u64| {
             serde_json::json!({ "task": task, "cycles": instructions, "us": instructions as f64 / 72.0,

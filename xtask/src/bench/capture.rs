@@ -379,16 +379,30 @@ mod tests {
             .collect()
     }
 
+    /// The capture's first record: the board's trace clock.
+    fn hello(clock_hz: u32) -> (u64, Kind) {
+        (0, Kind::Hello { clock_hz })
+    }
+
+    /// A handler event recorded at `at` (cycles, and the event's µs on a 1 MHz clock).
+    fn event(at: u64, kind: TraceKind) -> (u64, Kind) {
+        let record = TraceEvent::new(at, kind).encode();
+        (at, Kind::Event { record })
+    }
+
+    /// Magnetometer-x's sample, released at `release_us`.
+    fn magnetometer_taken(release_us: u64) -> TraceKind {
+        TraceKind::SampleTaken {
+            topic: amiro_can::Topic::MagnetometerX,
+            release_us,
+        }
+    }
+
     #[test]
     fn runs_with_preemption_and_timer_releases() {
         // 1 MHz clock: one cycle per µs.
         let bytes = wire(&[
-            (
-                0,
-                Kind::Hello {
-                    clock_hz: 1_000_000,
-                },
-            ),
+            hello(1_000_000),
             (10, Kind::TaskStart { task: 4 }),
             (20, Kind::TaskStart { task: 0 }),
             (
@@ -434,33 +448,10 @@ mod tests {
 
     #[test]
     fn samples_from_release_to_the_bus() {
-        let taken = TraceEvent::new(
-            1_010,
-            TraceKind::SampleTaken {
-                topic: amiro_can::Topic::MagnetometerX,
-                release_us: 1_000,
-            },
-        );
-        let queued = TraceEvent::new(1_020, TraceKind::FrameQueued { id: 0x605 });
         let bytes = wire(&[
-            (
-                0,
-                Kind::Hello {
-                    clock_hz: 1_000_000,
-                },
-            ),
-            (
-                1_010,
-                Kind::Event {
-                    record: taken.encode(),
-                },
-            ),
-            (
-                1_020,
-                Kind::Event {
-                    record: queued.encode(),
-                },
-            ),
+            hello(1_000_000),
+            event(1_010, magnetometer_taken(1_000)),
+            event(1_020, TraceKind::FrameQueued { id: 0x605 }),
             (1_150, Kind::FrameAcked { id: 0x605 }),
         ]);
         let c = read(&bytes, 1).unwrap();
@@ -475,40 +466,11 @@ mod tests {
     fn a_verdict_on_the_topic_is_not_the_samples_frame() {
         // Magnetometer-x has one frame per sample; a second frame on 0x605 later (as an admission verdict on a
         // diagnostics topic is) does not move the sample's queued time.
-        let taken = TraceEvent::new(
-            1_010,
-            TraceKind::SampleTaken {
-                topic: amiro_can::Topic::MagnetometerX,
-                release_us: 1_000,
-            },
-        );
-        let queued = TraceEvent::new(1_020, TraceKind::FrameQueued { id: 0x605 });
-        let verdict = TraceEvent::new(270_000, TraceKind::FrameQueued { id: 0x605 });
         let bytes = wire(&[
-            (
-                0,
-                Kind::Hello {
-                    clock_hz: 1_000_000,
-                },
-            ),
-            (
-                1_010,
-                Kind::Event {
-                    record: taken.encode(),
-                },
-            ),
-            (
-                1_020,
-                Kind::Event {
-                    record: queued.encode(),
-                },
-            ),
-            (
-                270_000,
-                Kind::Event {
-                    record: verdict.encode(),
-                },
-            ),
+            hello(1_000_000),
+            event(1_010, magnetometer_taken(1_000)),
+            event(1_020, TraceKind::FrameQueued { id: 0x605 }),
+            event(270_000, TraceKind::FrameQueued { id: 0x605 }),
         ]);
         let c = read(&bytes, 1).unwrap();
         let s = &c.samples[0];
@@ -518,12 +480,7 @@ mod tests {
     #[test]
     fn qemu_runs_events_from_console_records_and_frames_as_acknowledgements() {
         let bin = wire(&[
-            (
-                0,
-                Kind::Hello {
-                    clock_hz: 120_000_000,
-                },
-            ),
+            hello(120_000_000),
             (1_200_000, Kind::TaskStart { task: 7 }),
             (
                 1_212_000,
@@ -533,13 +490,7 @@ mod tests {
                 },
             ),
         ]);
-        let taken = TraceEvent::new(
-            10_000,
-            TraceKind::SampleTaken {
-                topic: amiro_can::Topic::MagnetometerX,
-                release_us: 10_000,
-            },
-        );
+        let taken = TraceEvent::new(10_000, magnetometer_taken(10_000));
         let queued = TraceEvent::new(10_050, TraceKind::FrameQueued { id: 0x605 });
         let line = |cycles: u64, e: &TraceEvent| {
             let w = Record {

@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 
 use super::capture::{Capture, Stream};
+use super::report::{columns, names, task_cells, topic_cells};
 use super::Bench;
 
 /// Bytes from one up-channel.
@@ -233,10 +234,6 @@ impl Source for GrowingFile {
 const RED: &str = "\x1b[1;31m";
 const RESET: &str = "\x1b[0m";
 
-fn opt(v: Option<f64>) -> String {
-    v.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".into())
-}
-
 /// The live view: per task jobs, execution max/p99 and response max against the analysed WCRT,
 /// per topic the latencies against their bounds; anything above its bound in red and marked
 /// `!!`, with a banner. `color`: ANSI colours (a terminal).
@@ -271,62 +268,32 @@ pub fn view(
             let _ = writeln!(out, "{red}!!!   {f}{reset}");
         }
     }
-    let _ = writeln!(
-        out,
-        "\n   {:<20} {:>7} {:>9} {:>9} {:>10} {:>9}  verdict",
-        "task", "jobs", "exec max", "exec p99", "resp max", "WCRT"
-    );
+    // A row above its bound: marked `!!`, in red.
+    let row = |cells: &[String], widths: &[usize]| {
+        let line = columns(cells, widths);
+        if cells.last().is_some_and(|v| v.starts_with("EXCEEDS")) {
+            format!("{red}!! {line}{reset}")
+        } else {
+            format!("   {line}")
+        }
+    };
+    const TASK_WIDTHS: [usize; 6] = [20, 7, 9, 9, 10, 9];
+    let header = names("task|jobs|exec max|exec p99|resp max|WCRT|verdict");
+    let _ = writeln!(out, "\n   {}", columns(&header, &TASK_WIDTHS));
     for t in &bench.tasks {
-        let over = t.verdict.starts_with("EXCEEDS");
-        let line = format!(
-            "{} {:<20} {:>7} {:>9.1} {:>9.1} {:>10} {:>9}  {}",
-            if over { "!!" } else { "  " },
-            t.task,
-            t.jobs,
-            t.exec_max_us,
-            t.exec_p99_us,
-            format!(
-                "{}{:.1}",
-                if t.from_release { "" } else { "≥" },
-                t.response_max_us
-            ),
-            opt(t.wcrt_us),
-            t.verdict
-        );
-        if over {
-            let _ = writeln!(out, "{red}{line}{reset}");
-        } else {
-            let _ = writeln!(out, "{line}");
-        }
+        let [task, jobs, exec_max, exec_p99, _, response, wcrt, _, verdict] = task_cells(t);
+        let cells = [task, jobs, exec_max, exec_p99, response, wcrt, verdict];
+        let _ = writeln!(out, "{}", row(&cells, &TASK_WIDTHS));
     }
-    let _ = writeln!(
-        out,
-        "\n   {:<26} {:>7} {:>9} {:>9} {:>9} {:>9} {:>13}  verdict",
-        "topic", "samples", "→queued", "job WCRT", "→bus", "msg WCRT", "jitter/bound"
-    );
+    const TOPIC_WIDTHS: [usize; 7] = [26, 7, 9, 9, 9, 9, 13];
+    let header = names("topic|samples|→queued|job WCRT|→bus|msg WCRT|jitter/bound|verdict");
+    let _ = writeln!(out, "\n   {}", columns(&header, &TOPIC_WIDTHS));
     for t in &bench.topics {
-        let over = t.verdict.starts_with("EXCEEDS");
-        let line = format!(
-            "{} {:<26} {:>7} {:>9} {:>9} {:>9} {:>9} {:>13}  {}",
-            if over { "!!" } else { "  " },
-            format!("{}@{}", t.topic, t.level),
-            t.samples,
-            opt(t.queued_max_us),
-            opt(t.job_wcrt_us),
-            opt(t.bus_max_us),
-            opt(t.message_wcrt_us),
-            format!(
-                "{}/{}",
-                opt(t.delivery_jitter_us),
-                opt(t.analysed_jitter_us)
-            ),
-            t.verdict
-        );
-        if over {
-            let _ = writeln!(out, "{red}{line}{reset}");
-        } else {
-            let _ = writeln!(out, "{line}");
-        }
+        let [topic, level, samples, _, _, queued, job, bus, message, delivery, analysed, verdict] =
+            topic_cells(t);
+        let (name, jitter) = (format!("{topic}@{level}"), format!("{delivery}/{analysed}"));
+        let cells = [name, samples, queued, job, bus, message, jitter, verdict];
+        let _ = writeln!(out, "{}", row(&cells, &TOPIC_WIDTHS));
     }
     if !log.is_empty() {
         let _ = writeln!(out, "\nlog:");

@@ -1,10 +1,80 @@
 //! The bench report as a terminal table, markdown and an SVG of response-time histograms.
 use std::fmt::Write as _;
 
-use super::Bench;
+use super::{Bench, TaskRow, TopicRow};
 
-fn opt(v: Option<f64>) -> String {
+/// A figure to one decimal, `-` where there is none.
+pub(super) fn opt(v: Option<f64>) -> String {
     v.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".into())
+}
+
+/// Cells in columns: the first left-aligned in its width, the others right-aligned in theirs, the cell after
+/// the last width (the verdict) two spaces on, as it is.
+pub(super) fn columns<S: AsRef<str>>(cells: &[S], widths: &[usize]) -> String {
+    let mut line = String::new();
+    for (k, cell) in cells.iter().map(AsRef::as_ref).enumerate() {
+        match widths.get(k) {
+            Some(&width) if k == 0 => {
+                let _ = write!(line, "{cell:<width$}");
+            }
+            Some(&width) => {
+                let _ = write!(line, " {cell:>width$}");
+            }
+            None => {
+                let _ = write!(line, "  {cell}");
+            }
+        }
+    }
+    line
+}
+
+/// Column names, `|`-separated.
+pub(super) fn names(header: &str) -> Vec<&str> {
+    header.split('|').collect()
+}
+
+/// The cells of a task's row: task, jobs, execution max, p99 and mean, response max (`≥`: from the run's start,
+/// a lower bound), WCRT, deadline, verdict.
+pub(super) fn task_cells(t: &TaskRow) -> [String; 9] {
+    [
+        t.task.clone(),
+        t.jobs.to_string(),
+        format!("{:.1}", t.exec_max_us),
+        format!("{:.1}", t.exec_p99_us),
+        format!("{:.1}", t.exec_mean_us),
+        format!(
+            "{}{:.1}",
+            if t.from_release { "" } else { "≥" },
+            t.response_max_us
+        ),
+        opt(t.wcrt_us),
+        opt(t.deadline_us),
+        t.verdict.clone(),
+    ]
+}
+
+/// The cells of a topic's row: topic, level, samples, period, release → taken max, → queued max, job WCRT,
+/// → bus max, message WCRT, delivery jitter, analysed jitter, verdict.
+pub(super) fn topic_cells(t: &TopicRow) -> [String; 12] {
+    [
+        t.topic.clone(),
+        t.level.clone(),
+        t.samples.to_string(),
+        opt(t.period_us),
+        format!("{:.1}", t.start_latency_max_us),
+        opt(t.queued_max_us),
+        opt(t.job_wcrt_us),
+        opt(t.bus_max_us),
+        opt(t.message_wcrt_us),
+        opt(t.delivery_jitter_us),
+        opt(t.analysed_jitter_us),
+        t.verdict.clone(),
+    ]
+}
+
+/// A row of a markdown table.
+fn markdown_row(cells: &[String]) -> String {
+    format!("| {} |", cells.join(" | "))
 }
 
 fn header(b: &Bench) -> String {
@@ -58,65 +128,25 @@ fn machine_table(out: &mut String, b: &Bench) {
 /// The plain-text table (also what the terminal shows).
 pub fn table(b: &Bench) -> String {
     let mut out = header(b);
-    let _ = writeln!(
-        out,
-        "\n{:<20} {:>6} {:>9} {:>9} {:>9} {:>10} {:>9} {:>9}  verdict",
-        "task", "jobs", "exec max", "exec p99", "exec avg", "resp max", "WCRT", "deadline"
-    );
+    const TASK_WIDTHS: [usize; 8] = [20, 6, 9, 9, 9, 10, 9, 9];
+    let header = names("task|jobs|exec max|exec p99|exec avg|resp max|WCRT|deadline|verdict");
+    let _ = writeln!(out, "\n{}", columns(&header, &TASK_WIDTHS));
     for t in &b.tasks {
-        let _ = writeln!(
-            out,
-            "{:<20} {:>6} {:>9.1} {:>9.1} {:>9.1} {:>10} {:>9} {:>9}  {}",
-            t.task,
-            t.jobs,
-            t.exec_max_us,
-            t.exec_p99_us,
-            t.exec_mean_us,
-            format!(
-                "{}{:.1}",
-                if t.from_release { "" } else { "≥" },
-                t.response_max_us
-            ),
-            opt(t.wcrt_us),
-            opt(t.deadline_us),
-            t.verdict
-        );
+        let _ = writeln!(out, "{}", columns(&task_cells(t), &TASK_WIDTHS));
     }
     machine_table(&mut out, b);
-    let _ = writeln!(
-        out,
-        "\n{:<26} {:>6} {:>7} {:>9} {:>10} {:>9} {:>10} {:>9} {:>9} {:>9}  verdict",
-        "topic",
-        "level",
-        "samples",
-        "period",
-        "start max",
-        "→queued",
-        "job WCRT",
-        "→bus",
-        "msg WCRT",
-        "jitter"
-    );
+    const TOPIC_WIDTHS: [usize; 10] = [26, 6, 7, 9, 10, 9, 10, 9, 9, 9];
+    let header =
+        names("topic|level|samples|period|start max|→queued|job WCRT|→bus|msg WCRT|jitter|verdict");
+    let _ = writeln!(out, "\n{}", columns(&header, &TOPIC_WIDTHS));
     for t in &b.topics {
-        let _ = writeln!(
-            out,
-            "{:<26} {:>6} {:>7} {:>9} {:>10.1} {:>9} {:>10} {:>9} {:>9} {:>9}  {}",
-            t.topic,
-            t.level,
-            t.samples,
-            opt(t.period_us),
-            t.start_latency_max_us,
-            opt(t.queued_max_us),
-            opt(t.job_wcrt_us),
-            opt(t.bus_max_us),
-            opt(t.message_wcrt_us),
-            format!(
-                "{}/{}",
-                opt(t.delivery_jitter_us),
-                opt(t.analysed_jitter_us)
-            ),
-            t.verdict
-        );
+        let [topic, level, samples, period, taken, queued, job, bus, message, delivery, analysed, verdict] =
+            topic_cells(t);
+        let jitter = format!("{delivery}/{analysed}");
+        let cells = [
+            topic, level, samples, period, taken, queued, job, bus, message, jitter, verdict,
+        ];
+        let _ = writeln!(out, "{}", columns(&cells, &TOPIC_WIDTHS));
     }
     let _ = writeln!(
         out,
@@ -133,39 +163,11 @@ pub fn markdown(b: &Bench) -> String {
     }
     out.push_str("\n| task | jobs | exec max | exec p99 | exec mean | response max | WCRT | deadline | verdict |\n|---|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for t in &b.tasks {
-        let _ = writeln!(
-            out,
-            "| {} | {} | {:.1} | {:.1} | {:.1} | {}{:.1} | {} | {} | {} |",
-            t.task,
-            t.jobs,
-            t.exec_max_us,
-            t.exec_p99_us,
-            t.exec_mean_us,
-            if t.from_release { "" } else { "≥" },
-            t.response_max_us,
-            opt(t.wcrt_us),
-            opt(t.deadline_us),
-            t.verdict
-        );
+        let _ = writeln!(out, "{}", markdown_row(&task_cells(t)));
     }
     out.push_str("\n| topic | level | samples | period | release → taken max | → queued max | job WCRT | → bus max | message WCRT | delivery jitter | analysed jitter | verdict |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for t in &b.topics {
-        let _ = writeln!(
-            out,
-            "| {} | {} | {} | {} | {:.1} | {} | {} | {} | {} | {} | {} | {} |",
-            t.topic,
-            t.level,
-            t.samples,
-            opt(t.period_us),
-            t.start_latency_max_us,
-            opt(t.queued_max_us),
-            opt(t.job_wcrt_us),
-            opt(t.bus_max_us),
-            opt(t.message_wcrt_us),
-            opt(t.delivery_jitter_us),
-            opt(t.analysed_jitter_us),
-            t.verdict
-        );
+        let _ = writeln!(out, "{}", markdown_row(&topic_cells(t)));
     }
     out.push_str("\nTimes in µs. ≥: measured from the run's start (no traced release), a lower bound of the response.\n");
     out

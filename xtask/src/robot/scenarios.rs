@@ -113,13 +113,14 @@ impl Run {
             .collect()
     }
 
-    /// The bus's own notes (error frames, line levels, boards leaving).
-    pub fn bus_notes(&self) -> Vec<&str> {
+    /// The bus's own notes (error frames, line levels, boards leaving) that mention `text`.
+    pub fn bus_notes(&self, text: &str) -> Vec<&str> {
         self.outcome
             .text
             .lines()
             .filter_map(|l| l.strip_prefix("bus: #"))
             .map(str::trim)
+            .filter(|n| n.contains(text))
             .collect()
     }
 
@@ -254,16 +255,9 @@ fn thesis_demo(run: &Run) -> Result<String> {
             .all(|(k, &i)| usize::from(i) == k % 8),
         "ring frames out of sensor order: {order:?}"
     );
-    let latched = run
-        .notes(2)
-        .into_iter()
-        .rfind(|n| n.starts_with("tlc5947 latched"))
-        .context("LightRing latched nothing")?
-        .to_string();
     // LED 3 is on OUT 15..17 (channel order n → 3(8−n)); the others dark.
-    let outputs: Vec<&str> = latched.split_whitespace().skip(2).collect();
-    ensure!(outputs.len() == 24, "`{latched}`");
-    let lit: Vec<usize> = (0..24).filter(|&k| outputs[k] != "000").collect();
+    let (latched, channels, lit) = last_latch(run)?;
+    ensure!(channels == 24, "`{latched}`");
     ensure!(
         !lit.is_empty() && lit.iter().all(|k| (15..18).contains(k)),
         "LED 3 only should be lit: `{latched}`"
@@ -284,13 +278,28 @@ fn thesis_demo(run: &Run) -> Result<String> {
     ))
 }
 
+/// LightRing's last latch (its `tlc5947 latched` note): the note, its number of OUT channels, and the channels
+/// it lit.
+fn last_latch(run: &Run) -> Result<(String, usize, Vec<usize>)> {
+    let latched = run
+        .notes(2)
+        .into_iter()
+        .rfind(|n| n.starts_with("tlc5947 latched"))
+        .context("LightRing latched nothing")?
+        .to_string();
+    let outputs: Vec<&str> = latched.split_whitespace().skip(2).collect();
+    let (channels, lit) = (
+        outputs.len(),
+        (0..outputs.len())
+            .filter(|&k| outputs[k] != "000")
+            .collect(),
+    );
+    Ok((latched, channels, lit))
+}
+
 fn startup_sync(run: &Run) -> Result<String> {
     every_board_ended(run)?;
-    let sync: Vec<&str> = run
-        .bus_notes()
-        .into_iter()
-        .filter(|n| n.contains("SYS_SYNC_N"))
-        .collect();
+    let sync: Vec<&str> = run.bus_notes("SYS_SYNC_N");
     ensure!(
         sync.len() == 1 && sync[0].contains("SYS_SYNC_N high"),
         "expected one rise of SYS_SYNC_N and nothing after: {sync:?}"
@@ -321,9 +330,8 @@ fn end_time(note: &str) -> Option<u64> {
 
 fn shutdown(run: &Run) -> Result<String> {
     let pd = run
-        .bus_notes()
-        .into_iter()
-        .find(|n| n.contains("SYS_PD_N low (driven by powermgmt)"))
+        .bus_notes("SYS_PD_N low (driven by powermgmt)")
+        .first()
         .context("PowerManagement never drove SYS_PD_N")?
         .to_string();
     let mut summary = Vec::new();
@@ -371,7 +379,6 @@ fn shutdown(run: &Run) -> Result<String> {
 }
 
 fn admission_other_board(run: &Run) -> Result<String> {
-    use amiro_can::{Topic, Verdict, Violation};
     every_board_ended(run)?;
     let odometry = run.ends(0x701);
     let before = odometry.iter().filter(|&&t| t < 50_000).count();
@@ -379,25 +386,7 @@ fn admission_other_board(run: &Run) -> Result<String> {
         before >= 40,
         "{before} odometry frames on the bus before the request (one per ms expected)"
     );
-    let verdicts =
-        crate::scenarios::admission_verdicts(&run.view(1), amiro_can::Board::PowerManagement);
-    ensure!(
-        verdicts.len() == 1,
-        "{} verdicts from PowerManagement, expected one refusal",
-        verdicts.len()
-    );
-    let v = &verdicts[0].1;
-    ensure!(
-        v.verdict == Verdict::Refused
-            && v.topic == Topic::ProximityRing
-            && v.priority == amiro_can::Priority::Urgent,
-        "not the refusal of the ring at urgent: {v}"
-    );
-    ensure!(
-        matches!(v.violation, Violation::Message { id } if id.raw() == 0x701),
-        "the refusal names {:?}, not DiWheelDrive's odometry 0x701 on the bus",
-        v.violation
-    );
+    let v = crate::scenarios::ring_refused_for_odometry(&run.view(1))?;
     ensure!(
         run.ends(0x41F).is_empty(),
         "urgent ring frames on the bus: the refused request ran"
@@ -562,11 +551,7 @@ fn mailbox_abort(run: &Run) -> Result<String> {
         "power-status frames waited for the babbling to end (worst {worst} µs from release to sent)"
     );
     // What made room: PowerManagement aborted a waiting, less urgent frame, which went out later.
-    let aborts: Vec<&str> = run
-        .bus_notes()
-        .into_iter()
-        .filter(|n| n.contains("powermgmt aborts"))
-        .collect();
+    let aborts: Vec<&str> = run.bus_notes("powermgmt aborts");
     ensure!(
         !aborts.is_empty(),
         "PowerManagement aborted no waiting frame"
@@ -597,11 +582,7 @@ fn reset(run: &Run) -> Result<String> {
         .filter(|n| n.starts_with("LightRing up"))
         .count();
     ensure!(ups == 2, "LightRing came up {ups} times, expected twice");
-    let sync: Vec<&str> = run
-        .bus_notes()
-        .into_iter()
-        .filter(|n| n.contains("SYS_SYNC_N"))
-        .collect();
+    let sync: Vec<&str> = run.bus_notes("SYS_SYNC_N");
     ensure!(
         sync.len() == 3 && sync[1].contains("low (held by lightring)") && sync[2].contains("high"),
         "SYS_SYNC_N should rise, fall while LightRing boots, and rise again: {sync:?}"
@@ -611,17 +592,8 @@ fn reset(run: &Run) -> Result<String> {
         led_sets == 2,
         "{led_sets} LED commands applied, expected one before and one after the reset"
     );
-    let latched = run
-        .notes(2)
-        .into_iter()
-        .rfind(|n| n.starts_with("tlc5947 latched"))
-        .context("no latch")?
-        .to_string();
-    let outputs: Vec<&str> = latched.split_whitespace().skip(2).collect();
     // After the reset LED 3 is dark again; LED 4 (OUT 12..14) carries the new colour.
-    let lit: Vec<usize> = (0..outputs.len())
-        .filter(|&k| outputs[k] != "000")
-        .collect();
+    let (latched, _, lit) = last_latch(run)?;
     ensure!(
         !lit.is_empty() && lit.iter().all(|k| (12..15).contains(k)),
         "only LED 4 should be lit after the reset: `{latched}`"
@@ -637,9 +609,9 @@ fn reset(run: &Run) -> Result<String> {
 fn bus_fault(run: &Run) -> Result<String> {
     every_board_ended(run)?;
     let errors: Vec<&str> = run
-        .bus_notes()
+        .bus_notes("error frame")
         .into_iter()
-        .filter(|n| n.contains("error frame") && n.contains("605"))
+        .filter(|n| n.contains("605"))
         .collect();
     ensure!(
         errors.len() == 3,
@@ -748,11 +720,37 @@ fn same_bytes_twice(
     Ok(texts[0].len())
 }
 
+/// The robot scenarios' count, each printed as it ends: `robot <name> ok: <summary>` or
+/// `robot <name> FAILED (<what it checks>): <error>`.
+#[derive(Default)]
+struct Tally {
+    passed: usize,
+    failed: usize,
+}
+
+impl Tally {
+    fn record(&mut self, name: &str, about: Option<&str>, result: Result<String>) {
+        match result {
+            Ok(summary) => {
+                self.passed += 1;
+                println!("robot {name:<22} ok: {summary}");
+            }
+            Err(e) => {
+                self.failed += 1;
+                match about {
+                    Some(about) => println!("robot {name:<22} FAILED ({about}): {e:#}"),
+                    None => println!("robot {name:<22} FAILED: {e:#}"),
+                }
+            }
+        }
+    }
+}
+
 /// Runs every robot scenario; fails if any check fails.
 pub fn run_all(root: &Path) -> Result<()> {
     crate::workspace::ensure_qemu()?;
     let firmware = super::firmware::firmware(root)?;
-    let (mut passed, mut failed) = (0, 0);
+    let mut tally = Tally::default();
     for scenario in SCENARIOS {
         let path = root
             .join("robot")
@@ -801,83 +799,38 @@ pub fn run_all(root: &Path) -> Result<()> {
                 ))
             }
         })();
-        match result {
-            Ok(summary) => {
-                passed += 1;
-                println!("robot {:<22} ok: {summary}", scenario.name);
-            }
-            Err(e) => {
-                failed += 1;
-                println!(
-                    "robot {:<22} FAILED ({}): {e:#}",
-                    scenario.name, scenario.about
-                );
-            }
-        }
+        tally.record(scenario.name, Some(scenario.about), result);
     }
     // Determinism: the same stimulus again prints the same bytes.
-    match same_bytes_twice(root, &firmware, "thesis-demo") {
-        Ok(bytes) => {
-            passed += 1;
-            println!(
-                "robot {:<22} ok: thesis-demo twice, {bytes} bytes identical",
-                "determinism"
-            );
-        }
-        Err(e) => {
-            failed += 1;
-            println!("robot {:<22} FAILED: {e:#}", "determinism");
-        }
-    }
+    tally.record(
+        "determinism",
+        None,
+        same_bytes_twice(root, &firmware, "thesis-demo")
+            .map(|bytes| format!("thesis-demo twice, {bytes} bytes identical")),
+    );
     // The robot in a world: its ring against the trajectory, twice the same.
-    match super::world_scenario::run(root, &firmware) {
-        Ok(summary) => {
-            passed += 1;
-            println!(
-                "robot {:<22} ok: {summary}",
-                super::world_scenario::STIMULUS
-            );
-        }
-        Err(e) => {
-            failed += 1;
-            println!(
-                "robot {:<22} FAILED (the ring in {}.json against the trajectory): {e:#}",
-                super::world_scenario::STIMULUS,
-                super::world_scenario::WORLD
-            );
-        }
-    }
+    let about = format!(
+        "the ring in {}.json against the trajectory",
+        super::world_scenario::WORLD
+    );
+    tally.record(
+        super::world_scenario::STIMULUS,
+        Some(&about),
+        super::world_scenario::run(root, &firmware),
+    );
     // A behaviour closes the loop: the obstacle-avoidance example in the arena.
-    match super::world_scenario::avoidance(root, &firmware) {
-        Ok(summary) => {
-            passed += 1;
-            println!(
-                "robot {:<22} ok: {summary}",
-                super::world_scenario::AVOIDANCE
-            );
-        }
-        Err(e) => {
-            failed += 1;
-            println!(
-                "robot {:<22} FAILED (examples/obstacle_avoidance.py in arena.json): {e:#}",
-                super::world_scenario::AVOIDANCE
-            );
-        }
-    }
+    tally.record(
+        super::world_scenario::AVOIDANCE,
+        Some("examples/obstacle_avoidance.py in arena.json"),
+        super::world_scenario::avoidance(root, &firmware),
+    );
     // The line-following example round a closed line.
-    match super::world_scenario::line_following(root, &firmware) {
-        Ok(summary) => {
-            passed += 1;
-            println!("robot {:<22} ok: {summary}", super::world_scenario::LINE);
-        }
-        Err(e) => {
-            failed += 1;
-            println!(
-                "robot {:<22} FAILED (examples/line_following.py in line-lap.json): {e:#}",
-                super::world_scenario::LINE
-            );
-        }
-    }
+    tally.record(
+        super::world_scenario::LINE,
+        Some("examples/line_following.py in line-lap.json"),
+        super::world_scenario::line_following(root, &firmware),
+    );
+    let Tally { passed, failed } = tally;
     println!("robot scenarios: {passed} passed, {failed} failed");
     ensure!(
         failed == 0,

@@ -228,37 +228,23 @@ fn motor_deadman(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 }
 
 pub(super) fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
-    let rejected = out.traces("command-rejected").len();
-    ensure!(
-        rejected == 10,
-        "10 malformed frames must each be rejected and counted, got {rejected}"
-    );
+    // The 10 malformed frames each rejected with its own reason, in the order of the stimulus.
+    let rejected = out.expect_rejections(
+        &[
+            &super::MALFORMED_PUBLISH_REJECTIONS[..],
+            &[
+                "dlc-too-long",
+                "dlc-too-short",
+                "dlc-too-short",
+                "period-too-long",
+            ],
+        ]
+        .concat(),
+    )?;
     let ignored = out.traces("command-ignored").len();
     ensure!(
         ignored == 1,
         "the LightRing command must be ignored, got {ignored}"
-    );
-    // Each bad frame with its own reason, in the order of the stimulus.
-    let reasons: Vec<&str> = out
-        .traces("command-rejected")
-        .iter()
-        .filter_map(|line| line.split_whitespace().last())
-        .collect();
-    let expected = [
-        "unknown-topic",
-        "bad-mode",
-        "bad-unit",
-        "dlc-too-short",
-        "dlc-too-long",
-        "zero-sample-time",
-        "dlc-too-long",
-        "dlc-too-short",
-        "dlc-too-short",
-        "period-too-long",
-    ];
-    ensure!(
-        reasons == expected,
-        "rejection reasons {reasons:?}, expected {expected:?}"
     );
     ensure!(
         out.frames.iter().all(|f| f.id == 0x608 || f.id == 0x61A),
@@ -292,42 +278,14 @@ pub(super) fn flood_at(out: &RunOutput, bounds: &Bounds, period: u64) -> Result<
         gyro.worst_latency,
         bounds.publisher_latency_bound_us("gyroscope", "medium", period)?,
     )?;
-    // The command handler takes at most one command per COMMAND_MIN_INTERVAL_US: the flood's
-    // excess waits in the bounded receive queue and is dropped there, counted. Every frame is
-    // accounted for, and the handled ones are at least the interval apart.
-    let mut handled: Vec<u64> = out
-        .traces("command-")
-        .iter()
-        .map(|line| trace_time(line))
-        .collect::<Result<_>>()?;
-    // In time order: a record stamped by the admission task (priority 0) can be written after
-    // one the command handler stamped later, when the handler pre-empts it in between.
-    handled.sort_unstable();
-    let dropped = out.end_field("rx dropped")?;
-    let overruns = out.end_field("rx overruns")?;
-    ensure!(
-        overruns == 0,
-        "{overruns} receive-FIFO overruns: the receive interrupt fell behind"
-    );
-    ensure!(
-        // Up to ADMISSION_WAITING sensor commands may still wait for the admission task.
-        (2_002 - ADMISSION_WAITING..=2_002).contains(&(handled.len() as u64 + dropped)),
-        "{} commands handled + {dropped} dropped and counted != the 2002 sent (up to {ADMISSION_WAITING} may wait for the admission task)",
-        handled.len()
-    );
+    // The command handler takes at most one command per COMMAND_MIN_INTERVAL_US (the admission
+    // task one per ADMISSION_MIN_INTERVAL_US, which is longer): the flood's excess waits in the
+    // bounded receive queue and is dropped there, counted. Every frame is accounted for.
+    let (handled, dropped) =
+        super::flood_commands(out, ADMISSION_WAITING, COMMAND_MIN_INTERVAL_US)?;
     let health = check_health(out, amiro_can::Board::DiWheelDrive)?;
-    // Two tasks handle commands, each at most one per its interval (the command handler every
-    // COMMAND_MIN_INTERVAL_US, the admission task every ADMISSION_MIN_INTERVAL_US, which is
-    // longer): so no three commands are handled within COMMAND_MIN_INTERVAL_US.
-    if let Some(gap) = handled.windows(3).map(|w| w[2] - w[0]).min() {
-        ensure!(
-            gap >= COMMAND_MIN_INTERVAL_US,
-            "three commands handled within {gap} µs (the command handler and the admission task each take at most one per {COMMAND_MIN_INTERVAL_US} µs)"
-        );
-    }
     Ok(format!(
-        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted (diagnostics agree: {} dropped); gyroscope on its {} ms grid, {latency}",
-        handled.len(),
+        "{handled} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted (diagnostics agree: {} dropped); gyroscope on its {} ms grid, {latency}",
         health.rx_dropped,
         period / 1000
     ))
@@ -345,15 +303,6 @@ fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "{} gyroscope frames before the request, expected 48",
         gyro.frames.len()
     );
-    let late: Vec<u64> = out
-        .times(0x608)
-        .into_iter()
-        .filter(|t| *t > REQUEST + 100)
-        .collect();
-    ensure!(
-        late.is_empty(),
-        "frames after the shutdown request: {late:?}"
-    );
     let stop = out
         .traces("motors-stopped shutdown")
         .first()
@@ -370,21 +319,7 @@ fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
             .any(|n| n.contains("SYS_SYNC_N pulled low")),
         "SYS_SYNC_N was not pulled low"
     );
-    let accepted_after = out
-        .traces("command-accepted")
-        .iter()
-        .filter_map(|l| trace_time(l).ok())
-        .filter(|t| *t > REQUEST)
-        .count();
-    ensure!(
-        accepted_after == 0,
-        "{accepted_after} commands accepted after the shutdown request"
-    );
-    let handover = out
-        .notes
-        .iter()
-        .find(|n| n.starts_with("qemu: shutdown hand-over"))
-        .context("no hand-over to the bootloader")?;
+    let handover = super::stopped_and_handed_over(out, 0x608, REQUEST + 100, REQUEST)?;
     Ok(format!("48 frames, then motors off at {stop} µs, SYS_SYNC_N low, no frames or commands after; {handover}"))
 }
 

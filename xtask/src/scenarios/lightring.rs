@@ -388,19 +388,13 @@ fn malformed(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 
 /// `malformed.log` on a ring of `chips`.
 pub(super) fn malformed_on(out: &RunOutput, _bounds: &Bounds, chips: usize) -> Result<String> {
-    let reasons: Vec<String> = out
-        .traces("command-rejected")
-        .iter()
-        .map(|line| line.split_whitespace().last().unwrap_or("").to_string())
-        .collect();
-    let want = [
+    out.expect_rejections(&[
         "dlc-too-short",
         "dlc-too-long",
         "unknown-topic",
         "dlc-too-short",
         "dlc-too-long",
-    ];
-    ensure!(reasons == want, "rejections {reasons:?}, expected {want:?}");
+    ])?;
     let sets = led_sets(out)?;
     ensure!(
         sets.len() == 1 && sets[0].1 == 5 && sets[0].2 == [0x10, 0x20, 0x30],

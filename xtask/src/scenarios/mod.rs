@@ -170,6 +170,21 @@ impl RunOutput {
             .map(String::as_str)
             .collect()
     }
+
+    /// Checks that the board rejected exactly the commands `expected` names, in order (the reason each
+    /// `command-rejected` trace line ends with); their number.
+    pub fn expect_rejections(&self, expected: &[&str]) -> Result<usize> {
+        let reasons: Vec<&str> = self
+            .traces("command-rejected")
+            .iter()
+            .filter_map(|line| line.split_whitespace().last())
+            .collect();
+        ensure!(
+            reasons == expected,
+            "rejection reasons {reasons:?}, expected {expected:?}"
+        );
+        Ok(reasons.len())
+    }
 }
 
 /// What a board's last diagnostics sample in a run said (the fields the scenarios check).
@@ -318,6 +333,35 @@ impl RunOutput {
         Ok(out)
     }
 
+    /// The releases of `topic` within `[from, to)`, checked to be on the exact grid `first + k·period`
+    /// (drift-free, none skipped; at least one).
+    pub fn releases_on_grid(
+        &self,
+        topic: &str,
+        period: u64,
+        from: u64,
+        to: u64,
+    ) -> Result<Vec<u64>> {
+        let releases = self.releases(topic, from, to)?;
+        let first = *releases
+            .first()
+            .with_context(|| format!("no {topic} releases in {from}..{to} µs"))?;
+        for (k, r) in releases.iter().enumerate() {
+            let grid = first + k as u64 * period;
+            ensure!(
+                *r == grid,
+                "{topic} release {k} at {r} µs is off the {period} µs grid ({grid} µs)"
+            );
+        }
+        let expected = (to - first).div_ceil(period);
+        ensure!(
+            releases.len() as u64 == expected,
+            "{} {topic} releases in {first}..{to} µs, expected {expected} at {period} µs",
+            releases.len()
+        );
+        Ok(releases)
+    }
+
     /// The stream of frames `id` for `topic` within `[from, to)`: every release on the exact grid
     /// `first + k·period` (drift-free, none skipped), one frame per release, each after its release.
     pub fn periodic_stream(
@@ -343,10 +387,8 @@ impl RunOutput {
         per_sample: usize,
     ) -> Result<Stream> {
         let per_sample = per_sample.max(1);
-        let releases = self.releases(topic, from, to)?;
-        let first = *releases
-            .first()
-            .with_context(|| format!("no {topic} releases in {from}..{to} µs"))?;
+        let releases = self.releases_on_grid(topic, period, from, to)?;
+        let first = releases[0];
         let last = *releases.last().unwrap_or(&first);
         // The frames of these releases: from the first release to a period after the last (a sample's frames are on
         // the bus within its period, checked below), not the window's end, which a last frame may fall just past.
@@ -355,19 +397,6 @@ impl RunOutput {
             .into_iter()
             .filter(|t| (first..last + period).contains(t))
             .collect();
-        for (k, r) in releases.iter().enumerate() {
-            let grid = first + k as u64 * period;
-            ensure!(
-                *r == grid,
-                "{topic} release {k} at {r} µs is off the {period} µs grid ({grid} µs)"
-            );
-        }
-        let expected = (to - first).div_ceil(period);
-        ensure!(
-            releases.len() as u64 == expected,
-            "{} {topic} releases in {first}..{to} µs, expected {expected} at {period} µs",
-            releases.len()
-        );
         ensure!(
             frames.len() == releases.len() * per_sample,
             "{} frames {id:03X} for {} releases of {per_sample} frame(s) each",
@@ -490,6 +519,48 @@ pub fn within_flood_bound(worst: u64, bound: Option<u64>) -> Result<String> {
     }
 }
 
+/// The commands a flood scenario sends (`diwheeldrive/qemu/flood.log`, `powermgmt/qemu/flood.log`).
+const FLOOD_COMMANDS: u64 = 2_002;
+
+/// A command flood's accounting: (commands handled, commands dropped and counted at the bounded receive queue).
+/// The receive FIFO must never have overrun; every command sent is handled or dropped (up to `admission_waiting`
+/// sensor commands may still wait for the admission task when the run ends); and, as two tasks handle commands
+/// (the command handler and the admission task), each at most one per `min_interval_us`, no three are handled
+/// within that interval.
+pub fn flood_commands(
+    out: &RunOutput,
+    admission_waiting: u64,
+    min_interval_us: u64,
+) -> Result<(usize, u64)> {
+    let mut handled: Vec<u64> = out
+        .traces("command-")
+        .iter()
+        .map(|line| trace_time(line))
+        .collect::<Result<_>>()?;
+    // In time order: a record stamped by the admission task (priority 0) can be written after
+    // one the command handler stamped later, when the handler pre-empts it in between.
+    handled.sort_unstable();
+    let dropped = out.end_field("rx dropped")?;
+    let overruns = out.end_field("rx overruns")?;
+    ensure!(
+        overruns == 0,
+        "{overruns} receive-FIFO overruns: the receive interrupt fell behind"
+    );
+    ensure!(
+        (FLOOD_COMMANDS - admission_waiting..=FLOOD_COMMANDS)
+            .contains(&(handled.len() as u64 + dropped)),
+        "{} commands handled + {dropped} dropped and counted != the {FLOOD_COMMANDS} sent (up to {admission_waiting} may wait for the admission task)",
+        handled.len()
+    );
+    if let Some(gap) = handled.windows(3).map(|w| w[2] - w[0]).min() {
+        ensure!(
+            gap >= min_interval_us,
+            "three commands handled within {gap} µs (the command handler and the admission task each take at most one per {min_interval_us} µs)"
+        );
+    }
+    Ok((handled.len(), dropped))
+}
+
 /// The time of a trace line `(s.micros) ...`.
 pub fn trace_time(line: &str) -> Result<u64> {
     let stamp = line
@@ -512,14 +583,8 @@ pub struct HostAdmission {
 impl HostAdmission {
     /// The table from the apps and timing files under `root`, nothing running.
     pub fn new(root: &Path) -> Result<Self> {
-        use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
-        let robot = admission_host::lower(
-            root,
-            &scenario::timing_files(root),
-            schedule_analysis::can::DEFAULT_BITRATE,
-            FrameCostSpec::Exact,
-        )
-        .map_err(|e| anyhow::anyhow!("admission table: {e}"))?;
+        let robot = schedule_analysis::admission_host::lower_robot(root)
+            .map_err(|e| anyhow::anyhow!("admission table: {e}"))?;
         Ok(Self {
             robot,
             streams: Vec::new(),
@@ -606,6 +671,77 @@ pub fn same_refusal(
         );
     }
     Ok(())
+}
+
+/// The reasons of the six bad publish commands a sensor board's `malformed.log` starts with (DiWheelDrive's and
+/// PowerManagement's, each on its own topic): an unknown topic, a bad mode, a bad unit, too short, too long, a
+/// zero sample time.
+pub const MALFORMED_PUBLISH_REJECTIONS: [&str; 6] = [
+    "unknown-topic",
+    "bad-mode",
+    "bad-unit",
+    "dlc-too-short",
+    "dlc-too-long",
+    "zero-sample-time",
+];
+
+/// Common to every shutdown: no frame on `id` (the board's publisher) after `frames_by` µs, no command accepted
+/// after `commands_by` µs, and the hand-over to the bootloader (its note).
+pub fn stopped_and_handed_over(
+    out: &RunOutput,
+    id: u32,
+    frames_by: u64,
+    commands_by: u64,
+) -> Result<&str> {
+    let late: Vec<u64> = out
+        .times(id)
+        .into_iter()
+        .filter(|t| *t > frames_by)
+        .collect();
+    ensure!(
+        late.is_empty(),
+        "frames {id:03X} after the shutdown started: {late:?}"
+    );
+    let accepted_after = out
+        .traces("command-accepted")
+        .iter()
+        .filter_map(|l| trace_time(l).ok())
+        .filter(|t| *t > commands_by)
+        .count();
+    ensure!(
+        accepted_after == 0,
+        "{accepted_after} commands accepted after the shutdown started"
+    );
+    out.notes
+        .iter()
+        .find(|n| n.starts_with("qemu: shutdown hand-over"))
+        .map(String::as_str)
+        .context("no hand-over to the bootloader")
+}
+
+/// Scenario admission-other-board's verdict, on PowerManagement alone (the odometry replayed) and in the whole
+/// robot alike: PowerManagement's one verdict, refusing the ring at urgent for DiWheelDrive's odometry 0x701.
+pub fn ring_refused_for_odometry(out: &RunOutput) -> Result<amiro_can::AdmissionVerdict> {
+    use amiro_can::{Priority, Topic, Verdict, Violation};
+    let verdicts = admission_verdicts(out, amiro_can::Board::PowerManagement);
+    ensure!(
+        verdicts.len() == 1,
+        "{} verdicts from PowerManagement, expected the one refusal of the ring at urgent",
+        verdicts.len()
+    );
+    let (_, v) = verdicts[0];
+    ensure!(
+        v.verdict == Verdict::Refused
+            && v.topic == Topic::ProximityRing
+            && v.priority == Priority::Urgent,
+        "not the refusal of the ring at urgent: {v}"
+    );
+    ensure!(
+        matches!(v.violation, Violation::Message { id } if id.raw() == 0x701),
+        "the refusal names {:?}, not DiWheelDrive's odometry frames 0x701: {v}",
+        v.violation
+    );
+    Ok(v)
 }
 
 /// The admission verdicts `board` sent (pages 0x80 + 0x81 on its diagnostics topic), joined, with
@@ -747,30 +883,33 @@ mod tests {
 
     #[test]
     fn drift_a_skipped_release_or_a_missing_frame_fails() {
-        let drift = run(&[
+        let drift: &[&str] = &[
             "# (0.001000) trace sample-taken gyroscope release=0.001000",
             "(0.001020) can0 608#00",
             "# (0.002001) trace sample-taken gyroscope release=0.002001",
             "(0.002005) can0 608#00",
-        ]);
-        assert!(drift
-            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
-            .is_err());
-        let skipped = run(&[
+        ];
+        let skipped: &[&str] = &[
             "# (0.001000) trace sample-taken gyroscope release=0.001000",
             "(0.001020) can0 608#00",
-        ]);
-        assert!(skipped
-            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
-            .is_err());
-        let no_frame = run(&[
+        ];
+        let no_frame: &[&str] = &[
             "# (0.001000) trace sample-taken gyroscope release=0.001000",
             "# (0.002000) trace sample-taken gyroscope release=0.002000",
             "(0.002005) can0 608#00",
-        ]);
-        assert!(no_frame
-            .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
-            .is_err());
+        ];
+        for (case, lines) in [
+            ("drift", drift),
+            ("skipped", skipped),
+            ("no frame", no_frame),
+        ] {
+            assert!(
+                run(lines)
+                    .periodic_stream(0x608, "gyroscope", 1_000, 0, 3_000)
+                    .is_err(),
+                "{case}"
+            );
+        }
     }
 
     #[test]

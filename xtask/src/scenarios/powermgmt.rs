@@ -4,7 +4,7 @@
 //! critically low battery, VSYS and the plug) are described in `powermgmt/src/qemu.rs`.
 use anyhow::{ensure, Context, Result};
 
-use super::{trace_time, Bounds, RunOutput, Scenario};
+use super::{Bounds, RunOutput, Scenario};
 use crate::qemu::TimedFrame;
 
 /// Every scenario CI runs.
@@ -98,23 +98,7 @@ fn ring_samples(
     from: u64,
     to: u64,
 ) -> Result<Vec<RingSample>> {
-    let releases = out.releases("proximity-ring", from, to)?;
-    let first = *releases
-        .first()
-        .with_context(|| format!("no proximity-ring releases in {from}..{to} µs"))?;
-    for (k, r) in releases.iter().enumerate() {
-        let grid = first + k as u64 * period;
-        ensure!(
-            *r == grid,
-            "ring release {k} at {r} µs is off the {period} µs grid ({grid} µs)"
-        );
-    }
-    let expected = (to - first).div_ceil(period);
-    ensure!(
-        releases.len() as u64 == expected,
-        "{} ring releases in {first}..{to} µs, expected {expected} at {period} µs",
-        releases.len()
-    );
+    let releases = out.releases_on_grid("proximity-ring", period, from, to)?;
     let frames: Vec<&TimedFrame> = out
         .frames
         .iter()
@@ -312,28 +296,10 @@ fn admission_decisions(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 }
 
 fn admission_other_board(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    use amiro_can::{Topic, Verdict, Violation};
-    let verdicts = super::admission_verdicts(out, amiro_can::Board::PowerManagement);
-    ensure!(
-        verdicts.len() == 1,
-        "{} verdicts, expected the one refusal of the ring at urgent",
-        verdicts.len()
-    );
-    let (_, v) = &verdicts[0];
-    ensure!(
-        v.verdict == Verdict::Refused
-            && v.topic == Topic::ProximityRing
-            && v.priority == amiro_can::Priority::Urgent,
-        "not the refusal of the ring at urgent: {v}"
-    );
-    ensure!(
-        matches!(v.violation, Violation::Message { id } if id.raw() == 0x701),
-        "the refusal names {:?}, not DiWheelDrive's odometry frames 0x701: {v}",
-        v.violation
-    );
+    let v = super::ring_refused_for_odometry(out)?;
     let odometry = "301#01010000";
     super::same_refusal(
-        v,
+        &v,
         &super::host_admission(bounds.root(), &[odometry], "01F#01060000")?,
     )?;
     // Alone, the same request breaks nothing of PowerManagement's own.
@@ -488,27 +454,18 @@ fn sensor_lost(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 }
 
 fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
-    let reasons: Vec<&str> = out
-        .traces("command-rejected")
-        .iter()
-        .filter_map(|line| line.split_whitespace().last())
-        .collect();
-    let expected = [
-        "unknown-topic",
-        "bad-mode",
-        "bad-unit",
-        "dlc-too-short",
-        "dlc-too-long",
-        "zero-sample-time",
-        "dlc-too-short",
-        "bad-shutdown-key",
-        "bad-shutdown-mode",
-        "dlc-too-short",
-    ];
-    ensure!(
-        reasons == expected,
-        "rejection reasons {reasons:?}, expected {expected:?}"
-    );
+    let rejected = out.expect_rejections(
+        &[
+            &super::MALFORMED_PUBLISH_REJECTIONS[..],
+            &[
+                "dlc-too-short",
+                "bad-shutdown-key",
+                "bad-shutdown-mode",
+                "dlc-too-short",
+            ],
+        ]
+        .concat(),
+    )?;
     let ignored = out.traces("command-ignored").len();
     ensure!(
         ignored == 3,
@@ -525,8 +482,7 @@ fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let samples = ring_samples(out, 0x61F, 10_000, 5_000, 150_000)?;
     all_eight(&samples)?;
     Ok(format!(
-        "{} rejected with their reasons, {ignored} ignored; ring undisturbed: {} samples × 8 on its grid",
-        reasons.len(),
+        "{rejected} rejected with their reasons, {ignored} ignored; ring undisturbed: {} samples × 8 on its grid",
         samples.len()
     ))
 }
@@ -539,37 +495,10 @@ fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         worst_latency(&samples),
         bound_if_any(bounds, "proximity-ring", "medium", 10_000)?,
     )?;
-    let mut handled: Vec<u64> = out
-        .traces("command-")
-        .iter()
-        .map(|line| trace_time(line))
-        .collect::<Result<_>>()?;
-    // In time order: a record stamped by the admission task (priority 0) can be written after
-    // one the command handler stamped later, when the handler pre-empts it in between.
-    handled.sort_unstable();
-    let dropped = out.end_field("rx dropped")?;
-    let overruns = out.end_field("rx overruns")?;
-    ensure!(
-        overruns == 0,
-        "{overruns} receive-FIFO overruns: the receive interrupt fell behind"
-    );
-    ensure!(
-        // Up to ADMISSION_WAITING sensor commands may still wait for the admission task.
-        (2_002 - ADMISSION_WAITING..=2_002).contains(&(handled.len() as u64 + dropped)),
-        "{} commands handled + {dropped} dropped and counted != the 2002 sent (up to {ADMISSION_WAITING} may wait for the admission task)",
-        handled.len()
-    );
-    // Two tasks handle commands, each at most one per its interval (the command handler every
-    // COMMAND_MIN_INTERVAL_US, the admission task less often): so no three within that interval.
-    if let Some(gap) = handled.windows(3).map(|w| w[2] - w[0]).min() {
-        ensure!(
-            gap >= COMMAND_MIN_INTERVAL_US,
-            "three commands handled within {gap} µs (the command handler and the admission task each take at most one per {COMMAND_MIN_INTERVAL_US} µs)"
-        );
-    }
+    let (handled, dropped) =
+        super::flood_commands(out, ADMISSION_WAITING, COMMAND_MIN_INTERVAL_US)?;
     Ok(format!(
-        "{} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted; ring on its 10 ms grid, {latency}",
-        handled.len()
+        "{handled} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted; ring on its 10 ms grid, {latency}"
     ))
 }
 
@@ -577,33 +506,10 @@ fn note_time(out: &RunOutput, text: &str) -> bool {
     out.notes.iter().any(|n| n.contains(text))
 }
 
-/// Common to every shutdown: publishers stopped by `request` (no ring frame after it but those
-/// already queued), no command accepted after it, and the hand-over.
+/// Common to every shutdown: the ring stopped (no frame later than a millisecond after the `request`: those
+/// already queued), no command accepted after that either, and the hand-over.
 fn stopped_and_handed_over(out: &RunOutput, request: u64) -> Result<&str> {
-    let late: Vec<u64> = out
-        .times(0x61F)
-        .into_iter()
-        .filter(|t| *t > request + 1_000)
-        .collect();
-    ensure!(
-        late.is_empty(),
-        "ring frames after the shutdown started: {late:?}"
-    );
-    let accepted_after = out
-        .traces("command-accepted")
-        .iter()
-        .filter_map(|l| trace_time(l).ok())
-        .filter(|t| *t > request + 1_000)
-        .count();
-    ensure!(
-        accepted_after == 0,
-        "{accepted_after} commands accepted after the shutdown started"
-    );
-    out.notes
-        .iter()
-        .find(|n| n.starts_with("qemu: shutdown hand-over"))
-        .map(String::as_str)
-        .context("no hand-over to the bootloader")
+    super::stopped_and_handed_over(out, 0x61F, request + 1_000, request + 1_000)
 }
 
 fn shutdown_command(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
