@@ -23,6 +23,17 @@ pub struct Insn {
     pub inst: Instruction,
     /// Whether it executes only under a condition: its own (`B<c>`, `CBZ`) or an `IT` block's.
     pub conditional: bool,
+    /// A call of an `OUTLINED_FUNCTION_n` (LLVM's machine outliner, which follows no calling
+    /// convention): the registers the callee writes, and the constants it leaves in them (its last
+    /// write of the register an unconditional `MOV #c`). Filled in by [`crate::Image`].
+    pub outlined: Option<Outlined>,
+}
+
+/// What a call of an outlined function does to the registers ([`Insn::outlined`]).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Outlined {
+    pub writes: u16,
+    pub constants: Vec<(u8, u32)>,
 }
 
 /// Where control goes after an instruction.
@@ -108,6 +119,7 @@ pub fn decode(
             raw,
             inst,
             conditional,
+            outlined: None,
         });
         offset += usize::from(len);
     }
@@ -470,8 +482,11 @@ impl Insn {
             }
             BL | BLX => {
                 out.insert(LR);
-                // The callee may clobber r0-r3 and r12 (AAPCS).
+                // The callee may clobber r0-r3 and r12 (AAPCS); an outlined one whatever it writes.
                 out.0 |= 0b1_0000_0000_1111;
+                if let Some(outlined) = &self.outlined {
+                    out.0 |= outlined.writes;
+                }
             }
             BX => {}
             LDRD | UMULL | SMULL | UMLAL | SMLAL | UMAAL | MRRC(..) => {

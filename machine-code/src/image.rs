@@ -7,7 +7,7 @@ use std::rc::Rc;
 
 use object::{Object, ObjectSection, ObjectSymbol, SymbolKind};
 
-use crate::decode::{self, Insn};
+use crate::decode::{self, Insn, Outlined};
 use crate::Error;
 
 /// The DWARF reader the line table is read through.
@@ -152,6 +152,7 @@ impl Image {
                 },
             );
         }
+        mark_outlined_calls(&mut functions);
         let mut vectors = Vec::new();
         let mut address_taken = BTreeSet::new();
         for section in file.sections().filter(|s| allocated(s)) {
@@ -226,6 +227,89 @@ impl Image {
     pub fn line(&self, address: u64) -> Option<(String, u32)> {
         let location = self.lines.as_ref()?.find_location(address).ok()??;
         Some((location.file?.to_string(), location.line?))
+    }
+}
+
+/// What an `OUTLINED_FUNCTION_n` does to the registers: the machine outliner's helpers follow no calling
+/// convention, so a call of one may write any register (a loop counter in `r4`). Straight-line code ending
+/// in a return, or in a tail call of a function that is not outlined (which keeps to the calling
+/// convention: it may write r0-r3 and r12), is read whole: every register it writes, and the constants its
+/// last writes leave; anything else (a branch, a call) is taken to write every core register and leave
+/// nothing known.
+fn outlined_effect(f: &Function, outlined: &BTreeSet<u64>) -> Outlined {
+    let everything = Outlined {
+        writes: 0x1FFF,
+        constants: Vec::new(),
+    };
+    let Ok(insns) = f.instructions() else {
+        return everything;
+    };
+    let Some((last, body)) = insns.split_last() else {
+        return everything;
+    };
+    const CALLER_SAVED: u16 = 0b1_0000_0000_1111;
+    let clobbered = match last.flow() {
+        decode::Flow::Return => 0,
+        decode::Flow::Branch(t)
+            if !last.conditional && !f.contains(t) && !outlined.contains(&t) =>
+        {
+            CALLER_SAVED
+        }
+        _ => return everything,
+    };
+    if !body.iter().all(|i| i.flow() == decode::Flow::Next) {
+        return everything;
+    }
+    let mut writes = 0u16;
+    let mut constants: Vec<(u8, u32)> = Vec::new();
+    for insn in insns {
+        let w = insn.writes().0 & 0x1FFF;
+        for r in 0..13u8 {
+            if w & 1 << r != 0 {
+                constants.retain(|&(x, _)| x != r);
+                let regs = insn.registers();
+                if insn.inst.opcode == decode::Opcode::MOV && regs == [r] && !insn.conditional {
+                    if let Some(c) = insn.immediate() {
+                        constants.push((r, c));
+                    }
+                }
+            }
+        }
+        writes |= w;
+    }
+    constants.retain(|&(r, _)| clobbered & 1 << r == 0);
+    Outlined {
+        writes: writes | clobbered,
+        constants,
+    }
+}
+
+/// Marks every call of an outlined function with what it does to the registers ([`Insn::outlined`]).
+fn mark_outlined_calls(functions: &mut BTreeMap<u64, Function>) {
+    let outlined: BTreeSet<u64> = functions
+        .values()
+        .filter(|f| f.name.starts_with("OUTLINED_FUNCTION"))
+        .map(|f| f.start)
+        .collect();
+    let effects: BTreeMap<u64, Outlined> = outlined
+        .iter()
+        .filter_map(|at| functions.get(at))
+        .map(|f| (f.start, outlined_effect(f, &outlined)))
+        .collect();
+    if effects.is_empty() {
+        return;
+    }
+    for f in functions.values_mut() {
+        if let Ok(insns) = f.insns.as_mut() {
+            for insn in insns.iter_mut() {
+                let call = matches!(insn.flow(), decode::Flow::Call(_));
+                if let Some(effect) = insn.direct_target().and_then(|t| effects.get(&t)) {
+                    if call {
+                        insn.outlined = Some(effect.clone());
+                    }
+                }
+            }
+        }
     }
 }
 

@@ -419,6 +419,15 @@ pub fn exclusive_retry(
 fn initial(insns: &[Insn], cfg: &Cfg, b: usize, r: u8, on_the_way: &mut Vec<usize>) -> Option<u32> {
     let block = &insns[cfg.blocks[b].first..=cfg.blocks[b].last];
     if let Some(last) = block.iter().rev().find(|i| i.writes().contains(r)) {
+        // A call of an outlined helper that sets it (the machine outliner moved the `MOV` there).
+        if let Some(outlined) = &last.outlined {
+            return outlined
+                .constants
+                .iter()
+                .find(|&&(x, _)| x == r)
+                .map(|&(_, c)| c)
+                .filter(|_| !last.conditional);
+        }
         let regs = last.registers();
         return (last.inst.opcode == Opcode::MOV && regs == [r] && !last.conditional)
             .then(|| last.immediate())
