@@ -8,6 +8,8 @@
 //! sensors, motor PWM on TIM2 partial remap 1 (PA15 left fwd, PB3 left back, PA2 right fwd,
 //! PA3 right back) into an A3906, POWER_EN PB2, encoders on TIM3 full remap (PC6/PC7, left) and
 //! TIM4 (PB6/PB7, right), SYS_SYNC_N PC1, SYS_PD_N PC8, status LED PA1 (active low).
+use crate::sensors::SensorBuses;
+use crate::Board;
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::i2c::{self, Master};
 #[cfg(feature = "rev-1-1")]
@@ -78,48 +80,6 @@ impl embedded_hal::delay::DelayNs for ImuDelay {
     fn delay_ns(&mut self, ns: u32) {
         cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(SYSCLK_HZ / 1_000_000));
     }
-}
-
-/// The sensor buses `init` hands to `sensors::groups` (revision 1-1).
-#[cfg(feature = "rev-1-1")]
-pub struct SensorBuses {
-    /// Gyroscope SPI device.
-    pub gyro_spi: GyroSpi,
-    /// Accelerometer SPI device.
-    pub accel_spi: AccelSpi,
-    /// Compass bus.
-    pub compass_i2c: CompassI2c,
-    /// Floor-sensor bus.
-    pub floor_i2c: FloorI2c,
-}
-
-/// The sensor buses `init` hands to `sensors::groups` (revision 1-2).
-#[cfg(feature = "rev-1-2")]
-pub struct SensorBuses {
-    /// The BNO055's bus (I2C1), its reset already pulsed.
-    pub imu_i2c: ImuI2c,
-    /// Its waits.
-    pub imu_delay: ImuDelay,
-    /// Floor-sensor bus.
-    pub floor_i2c: FloorI2c,
-}
-
-/// Everything `init` hands on to the tasks.
-pub struct Board {
-    /// CAN transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// CAN receive FIFO 0 (command frames only, by hardware filter).
-    pub can_rx: CanRxPort,
-    /// CAN error-state monitor.
-    pub can_errors: CanErrors,
-    /// The sensors' buses.
-    pub sensors: SensorBuses,
-    /// Motor PWM and POWER_EN.
-    pub motors: Motors,
-    /// Wheel encoders.
-    pub encoders: Encoders,
-    /// System signals.
-    pub signals: SystemSignals,
 }
 
 /// The module's system-bus signals.

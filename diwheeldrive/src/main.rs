@@ -96,6 +96,25 @@ pub type AdmissionPacing = amiro_firmware::admission::Pacing<ADMISSION_BURST>;
 /// The clock every task uses (TIM5 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
 
+/// Everything the platform's `init` hands on to the tasks: the same fields on the chip (`board`)
+/// and in QEMU (`qemu`), each platform's types behind the names.
+pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: platform::CanTxPort,
+    /// CAN receive FIFO 0 (command frames only).
+    pub can_rx: platform::CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: platform::CanErrors,
+    /// The sensors' buses.
+    pub sensors: sensors::SensorBuses,
+    /// Motor PWM and POWER_EN.
+    pub motors: platform::Motors,
+    /// Wheel encoders.
+    pub encoders: platform::Encoders,
+    /// System signals.
+    pub signals: platform::SystemSignals,
+}
+
 // The robot's admission table, generated from the apps and timing files (`board-build.rs`).
 amiro_firmware::admission_table!();
 

@@ -14,6 +14,8 @@
 //! |---|---|
 //! | `01` | the BNO055 stops answering (its address is not acknowledged: a dead or absent part) |
 //! | `02` | the BNO055 answers again (a part that came back; the supervisor's retry finds it) |
+use crate::sensors::SensorBuses;
+use crate::Board;
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -202,30 +204,6 @@ impl embedded_hal::i2c::I2c for ImuI2c {
     }
 }
 
-/// The sensor buses `init` hands to `sensors::groups` (revision 1-1).
-#[cfg(feature = "rev-1-1")]
-pub struct SensorBuses {
-    /// Simulated L3G4200D.
-    pub gyro_spi: GyroSpi,
-    /// Simulated LIS331DLH.
-    pub accel_spi: AccelSpi,
-    /// Simulated HMC5883L bus.
-    pub compass_i2c: CompassI2c,
-    /// Simulated PCA9544A + floor sensors bus.
-    pub floor_i2c: FloorI2c,
-}
-
-/// The sensor buses `init` hands to `sensors::groups` (revision 1-2).
-#[cfg(feature = "rev-1-2")]
-pub struct SensorBuses {
-    /// Simulated BNO055 bus.
-    pub imu_i2c: ImuI2c,
-    /// Its mode-switch waits (none in the simulation).
-    pub imu_delay: ImuDelay,
-    /// Simulated PCA9544A + floor sensors bus.
-    pub floor_i2c: FloorI2c,
-}
-
 #[cfg(feature = "rev-1-1")]
 fn sensor_buses() -> SensorBuses {
     SensorBuses {
@@ -256,24 +234,6 @@ pub const CAN_RX_INTERRUPT: Interrupt = Interrupt::USB_LP_CAN_RX0;
 
 static PLANT: Mutex<RefCell<Option<amiro_sensors::sim::WheelPlant>>> =
     Mutex::new(RefCell::new(None));
-
-/// What `init` hands on to the tasks (same shape as the real board's).
-pub struct Board {
-    /// Virtual transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// Virtual receive FIFO.
-    pub can_rx: CanRxPort,
-    /// No CAN errors in QEMU.
-    pub can_errors: CanErrors,
-    /// The simulated sensors' buses.
-    pub sensors: SensorBuses,
-    /// Simulated motors.
-    pub motors: Motors,
-    /// Simulated encoders.
-    pub encoders: Encoders,
-    /// Simulated system signals.
-    pub signals: SystemSignals,
-}
 
 /// Brings the simulated board up (touches no STM32 peripheral: QEMU's machine is a different chip).
 pub fn init(

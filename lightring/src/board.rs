@@ -15,6 +15,7 @@
 //! VSYS PC6, driven low (off) at boot: this firmware drives no breakout module. On 1-0 these pins
 //! are other things (PB2 is the laser scanner's LASER_EN) or nothing; the 1-0 image leaves them
 //! in their reset state, as it always has.
+use crate::Board;
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
 use amiro_firmware::spi;
@@ -47,24 +48,6 @@ pub type Clock = amiro_firmware::mono::TimerClock<Tim3Backend, 1>;
 const TIM3_BASE: usize = 0x4000_0400;
 
 amiro_firmware::timer_monotonic!(Tim3Backend, TIM3_BASE, pac::Interrupt::TIM3, TIM3);
-
-/// Everything `init` hands on to the tasks.
-pub struct Board {
-    /// CAN transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// CAN receive FIFO 0 (command frames only, by hardware filter).
-    pub can_rx: CanRxPort,
-    /// CAN error-state monitor.
-    pub can_errors: CanErrors,
-    /// The LED driver's SPI device.
-    pub led_spi: LedSpi,
-    /// BLANK.
-    pub blank: Blank,
-    /// System signals.
-    pub signals: SystemSignals,
-    /// The APB1 timer clock (TIM3's input) of the clock plan in use.
-    pub timer_hz: u32,
-}
 
 /// TLC5947 BLANK (PA4): high = every output off.
 pub struct Blank(PA4<Output<PushPull>>);

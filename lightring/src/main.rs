@@ -107,6 +107,26 @@ pub type AdmissionPacing = amiro_firmware::admission::Pacing<ADMISSION_BURST>;
 /// The clock every task uses (TIM3 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
 
+/// Everything the platform's `init` hands on to the tasks: the same fields on the chip (`board`)
+/// and in QEMU (`qemu`), each platform's types behind the names.
+pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: platform::CanTxPort,
+    /// CAN receive FIFO 0 (command frames only).
+    pub can_rx: platform::CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: platform::CanErrors,
+    /// The LED driver's SPI device.
+    pub led_spi: platform::LedSpi,
+    /// TLC5947 BLANK.
+    pub blank: platform::Blank,
+    /// System signals.
+    pub signals: platform::SystemSignals,
+    /// The APB1 timer clock (TIM3's input) of the clock plan in use (unused in QEMU, whose
+    /// SysTick runs from the core clock).
+    pub timer_hz: u32,
+}
+
 // The robot's admission table, generated from the apps and timing files (`board-build.rs`).
 amiro_firmware::admission_table!();
 

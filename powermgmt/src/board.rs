@@ -9,6 +9,7 @@
 //! bq24103A EN1_N PC3 / EN2_N PD2 (active low, open drain) with STAT1A PC0 / STAT2A PB4, power plug
 //! PATH_DC PC8 (high = plug in), VSYS on PB1 = ADC1 IN9 (480-cycle sampling). TIM2 is the
 //! monotonic; RTC_BKP0R carries the shutdown reason to AMiRo-BLT.
+use crate::Board;
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
 use stm32f4xx_hal::gpio::{GpioExt, Input, OpenDrain, Output, PinState, PushPull};
@@ -55,26 +56,6 @@ pub type FrontI2c = Master;
 pub const CAN_TX_INTERRUPT: Interrupt = Interrupt::CAN1_TX;
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: Interrupt = Interrupt::EXTI15_10;
-
-/// Everything `init` hands on to the tasks.
-pub struct Board {
-    /// CAN transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// CAN receive FIFO 0 (command frames only, by hardware filter).
-    pub can_rx: CanRxPort,
-    /// CAN error-state monitor.
-    pub can_errors: CanErrors,
-    /// I2C1.
-    pub rear_i2c: RearI2c,
-    /// I2C2.
-    pub front_i2c: FrontI2c,
-    /// Chargers, their status, the plug and VSYS.
-    pub charger: Charger,
-    /// System signals.
-    pub signals: SystemSignals,
-    /// The power lines this board keeps on (held so nothing else reconfigures them).
-    pub power_lines: PowerLines,
-}
 
 /// The fuel gauges' bus-free pause (66 µs after each transfer): a busy wait on the core clock.
 #[derive(Debug, Default, Clone, Copy)]

@@ -87,6 +87,27 @@ pub const TX_DRAIN_US: u64 = 10_000;
 /// The clock every task uses (TIM2 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
 
+/// Everything the platform's `init` hands on to the tasks: the same fields on the chip (`board`)
+/// and in QEMU (`qemu`), each platform's types behind the names.
+pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: platform::CanTxPort,
+    /// CAN receive FIFO 0 (command frames only).
+    pub can_rx: platform::CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: platform::CanErrors,
+    /// I2C1, the rear bus.
+    pub rear_i2c: platform::RearI2c,
+    /// I2C2, the front bus.
+    pub front_i2c: platform::FrontI2c,
+    /// Chargers, their status, the plug and VSYS.
+    pub charger: platform::Charger,
+    /// System signals.
+    pub signals: platform::SystemSignals,
+    /// The power lines this board keeps on (held so nothing else reconfigures them).
+    pub power_lines: platform::PowerLines,
+}
+
 // The robot's admission table, generated from the apps and timing files (`board-build.rs`).
 amiro_firmware::admission_table!();
 

@@ -16,6 +16,7 @@
 //! | `01 ii` | ring sensor `ii` (0..7) stops answering (its address is not acknowledged) |
 //! | `02 mm` | the gauges in mask `mm` (1 front, 2 rear) report a critically low battery |
 //! | `03 vv vv pp` | VSYS = `vvvv` mV (u16 little-endian), power plug in if `pp` ≠ 0 |
+use crate::Board;
 use core::fmt::Write as _;
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
 
@@ -286,26 +287,6 @@ impl SystemSignals {
             at => Clock::now_us() >= u64::from(at - 1) + OTHERS_REACT_US,
         }
     }
-}
-
-/// What `init` hands on to the tasks (same shape as the real board's).
-pub struct Board {
-    /// Virtual transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// Virtual receive FIFO.
-    pub can_rx: CanRxPort,
-    /// No CAN errors in QEMU.
-    pub can_errors: CanErrors,
-    /// Simulated I2C1.
-    pub rear_i2c: RearI2c,
-    /// Simulated I2C2.
-    pub front_i2c: FrontI2c,
-    /// Simulated chargers.
-    pub charger: Charger,
-    /// Simulated system signals.
-    pub signals: SystemSignals,
-    /// The power lines.
-    pub power_lines: PowerLines,
 }
 
 /// Brings the simulated board up (touches no STM32 peripheral but SysTick).
