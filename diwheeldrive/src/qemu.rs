@@ -7,8 +7,8 @@
 //! simulated wheel plant for the motors and encoders.
 //!
 //! **QEMU-only control frames** (revision 1-2), as on PowerManagement: command frames on
-//! [`SIM_CONTROL_ID`] (`0x3F0`, topic 0xF0, which the protocol leaves free) are taken out by the
-//! receive port before the command queue:
+//! [`amiro_firmware::qemu::SIM_CONTROL_ID`] (`0x3F0`, topic 0xF0, which the protocol leaves
+//! free) are taken out by the receive port before the command queue:
 //!
 //! | data | effect |
 //! |---|---|
@@ -19,7 +19,6 @@ use crate::Board;
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use amiro_firmware::can::{CanRx, RxEvent};
 use critical_section::Mutex;
 use stm32f1xx_hal::pac::{self, Interrupt};
 
@@ -145,26 +144,11 @@ impl TakeReadings for amiro_sensors::sim::SimImuBus {
     }
 }
 
-/// The identifier of the QEMU-only control frames (see the module documentation).
-pub const SIM_CONTROL_ID: u16 = 0x3F0;
 /// Whether the simulated BNO055 has stopped answering (control frame `01`).
 static IMU_DEAD: AtomicBool = AtomicBool::new(false);
 
-/// The virtual receive FIFO, with the QEMU-only control frames taken out.
-pub struct CanRxPort(amiro_firmware::qemu::CanRxPort);
-
-impl CanRx for CanRxPort {
-    fn receive(&mut self) -> Option<RxEvent> {
-        loop {
-            match self.0.receive()? {
-                RxEvent::Frame(frame) if frame.id == SIM_CONTROL_ID => {
-                    apply_control(frame.payload())
-                }
-                other => return Some(other),
-            }
-        }
-    }
-}
+/// The virtual receive FIFO, with the QEMU-only control frames taken out for `apply_control`.
+pub type CanRxPort = amiro_firmware::qemu::ControlledRxPort;
 
 fn apply_control(data: &[u8]) {
     match data.first() {
@@ -252,7 +236,7 @@ pub fn init(
     (
         Board {
             can_tx: CanTxPort,
-            can_rx: CanRxPort(amiro_firmware::qemu::CanRxPort),
+            can_rx: CanRxPort::new(apply_control),
             can_errors: amiro_firmware::qemu::can_errors(),
             sensors: sensor_buses(),
             motors: Motors,
