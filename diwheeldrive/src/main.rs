@@ -131,7 +131,7 @@ mod app {
     use crate::{
         actuators, levels, platform, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN,
     };
-    use amiro_can::{Board as CanBoard, Priority};
+    use amiro_can::{Board as CanBoard, Command, Priority};
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
@@ -306,7 +306,7 @@ mod app {
                     &mut cx.shared.tx_queue,
                     platform::CAN_TX_INTERRUPT,
                 );
-            } else if let Some((now, Outcome::Motor { command, .. })) =
+            } else if let Some((now, Outcome::Command(Command::Motor { command, .. }))) =
                 tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
             {
                 cx.shared.drive.lock(|d| d.set_target(command, now));

@@ -141,7 +141,7 @@ type AdmissionState = amiro_firmware::admission::State<
 mod app {
     use crate::leds::{self, LedState};
     use crate::{levels, platform, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN};
-    use amiro_can::{Board as CanBoard, Priority};
+    use amiro_can::{Board as CanBoard, Command, Priority};
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
@@ -285,7 +285,7 @@ mod app {
                     &mut cx.shared.tx_queue,
                     platform::CAN_TX_INTERRUPT,
                 );
-            } else if let Some((now, Outcome::Led { command, .. })) =
+            } else if let Some((now, Outcome::Command(Command::Led { command, .. }))) =
                 tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
             {
                 cx.shared.leds.lock(|l| l.apply(now, &command));

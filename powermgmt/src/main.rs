@@ -133,7 +133,7 @@ async fn drain(
 mod app {
     use crate::sensors::{self, FrontBus, RearBus};
     use crate::{levels, platform, power, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN};
-    use amiro_can::{Board as CanBoard, Priority, ShutdownMode};
+    use amiro_can::{Board as CanBoard, Command, Priority, ShutdownMode};
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
@@ -294,7 +294,7 @@ mod app {
                     &mut cx.shared.tx_queue,
                     platform::CAN_TX_INTERRUPT,
                 );
-            } else if let Some((_, Outcome::Shutdown { mode, .. })) =
+            } else if let Some((_, Outcome::Command(Command::Shutdown { mode, .. }))) =
                 tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
             {
                 shutdown_sequence::spawn(Some(mode)).ok();
