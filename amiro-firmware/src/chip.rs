@@ -324,3 +324,30 @@ pub fn reset_and_enable_can1() {
     rcc_modify(RCC_APB1RSTR, |r| r & !APB1_CAN1);
     rcc_modify(RCC_APB1ENR, |r| r | APB1_CAN1);
 }
+
+/// GPIOC's input data register.
+#[cfg(feature = "f1")]
+const GPIOC_IDR: usize = 0x4001_1000 + 0x08;
+#[cfg(feature = "f4")]
+const GPIOC_IDR: usize = 0x4002_0800 + 0x10;
+/// EXTI_PR, the pending register (offset 0x14 of EXTI on both families).
+#[cfg(feature = "f1")]
+const EXTI_PR: usize = 0x4001_0400 + 0x14;
+#[cfg(feature = "f4")]
+const EXTI_PR: usize = 0x4001_3C00 + 0x14;
+
+/// Whether pin `PIN` of port C reads low (every board's SYS_PD_N is on port C).
+pub fn port_c_reads_low<const PIN: u8>() -> bool {
+    const { assert!(PIN < 16) };
+    // SAFETY: a volatile read of GPIOC's input data register, which reading never changes.
+    let idr = unsafe { core::ptr::read_volatile(GPIOC_IDR as *const u32) };
+    idr & (1 << PIN) == 0
+}
+
+/// Clears the pending bit of EXTI line `LINE` (writing 1 clears that bit and no other).
+pub fn clear_exti_pending<const LINE: u8>() {
+    const { assert!(LINE < 16) };
+    // SAFETY: a single write of EXTI_PR; its zero bits leave the other lines' pending bits as
+    // they are.
+    unsafe { core::ptr::write_volatile(EXTI_PR as *mut u32, 1 << LINE) };
+}

@@ -17,7 +17,7 @@
 //! in their reset state, as it always has.
 use crate::Board;
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
-use amiro_firmware::signals::SystemSignals as SystemSignalLines;
+use amiro_firmware::signals::Lines;
 use amiro_firmware::spi;
 use embedded_hal::spi::{Mode as SpiMode, Phase, Polarity};
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
@@ -59,11 +59,8 @@ impl Blank {
     }
 }
 
-/// The module's system-bus signals.
-pub struct SystemSignals {
-    sys_sync: PD2<Output<OpenDrain>>,
-    _sys_pd: PC14<Output<OpenDrain>>,
-}
+/// The module's system-bus signals: SYS_SYNC_N on PD2, SYS_PD_N on PC14 (EXTI line 14).
+pub type SystemSignals = Lines<PD2<Output<OpenDrain>>, PC14<Output<OpenDrain>>, 14>;
 
 /// Brings the board up: clocks (crystal, or the internal oscillator if the crystal does not start),
 /// pins, SPI1 for the LED driver, CAN.
@@ -186,10 +183,7 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
         can_errors: can.errors,
         led_spi,
         blank: Blank(blank),
-        signals: SystemSignals {
-            sys_sync,
-            _sys_pd: sys_pd,
-        },
+        signals: SystemSignals::new(sys_sync, sys_pd),
         timer_hz: clocks.timer_hz,
     }
 }
@@ -209,26 +203,6 @@ pub fn leds_dark() {
     // SAFETY: a single write of BSRR (set PA4), racing with nothing that could undo it but the
     // latch task's `Blank::show`, which the callers of this function pre-empt or have stopped.
     unsafe { (*pac::GPIOA::ptr()).bsrr().write(|w| w.bs4().set_bit()) };
-}
-
-impl SystemSignalLines for SystemSignals {
-    fn release_sync(&mut self) {
-        self.sys_sync.set_high();
-    }
-
-    fn pull_sync_low(&mut self) {
-        self.sys_sync.set_low();
-    }
-
-    fn shutdown_requested(&self) -> bool {
-        // SAFETY: a read of GPIOC's input data register.
-        unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 14) == 0 }
-    }
-
-    fn clear_shutdown_interrupt(&mut self) {
-        // SAFETY: writing 1 clears only line 14's pending bit.
-        unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(SYS_PD_LINE)) };
-    }
 }
 
 /// Interrupt of the SYS_PD_N line.

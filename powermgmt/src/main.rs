@@ -502,10 +502,10 @@ mod app {
                 "): SYS_PD_N low, publishers stopped"
             );
             let deadline = now + crate::OTHERS_ACK_TIMEOUT_US;
-            while !cx.shared.signals.lock(|s| s.sync_reads_low()) && Clock::now_us() < deadline {
+            while !platform::sync_reads_low() && Clock::now_us() < deadline {
                 Clock::delay_until_us(Clock::now_us() + 1_000).await;
             }
-            let acknowledged = cx.shared.signals.lock(|s| s.sync_reads_low());
+            let acknowledged = platform::sync_reads_low();
             amiro_firmware::log!(
                 "shutdown: other modules ",
                 if acknowledged {

@@ -259,17 +259,17 @@ impl SystemSignals {
         amiro_firmware::qemu::robot::drive_power_down();
         amiro_firmware::qemu::print_line("# qemu: SYS_PD_N driven low");
     }
+}
 
-    /// Whether SYS_SYNC_N reads low: the other modules react [`OTHERS_REACT_US`] after SYS_PD_N.
-    /// In a robot run (`cargo xtask robot`) the line is the robot's: the other boards' answer.
-    pub fn sync_reads_low(&self) -> bool {
-        if amiro_firmware::qemu::robot::active() {
-            return amiro_firmware::qemu::robot::sync_reads_low();
-        }
-        match PD_DRIVEN_AT.load(Ordering::SeqCst) {
-            0 => false,
-            at => Clock::now_us() >= u64::from(at - 1) + OTHERS_REACT_US,
-        }
+/// Whether SYS_SYNC_N reads low: the other modules react [`OTHERS_REACT_US`] after SYS_PD_N.
+/// In a robot run (`cargo xtask robot`) the line is the robot's: the other boards' answer.
+pub fn sync_reads_low() -> bool {
+    if amiro_firmware::qemu::robot::active() {
+        return amiro_firmware::qemu::robot::sync_reads_low();
+    }
+    match PD_DRIVEN_AT.load(Ordering::SeqCst) {
+        0 => false,
+        at => Clock::now_us() >= u64::from(at - 1) + OTHERS_REACT_US,
     }
 }
 
