@@ -135,9 +135,8 @@ mod app {
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
-    use amiro_firmware::signals::{self, SystemSignals as _};
-    use amiro_firmware::watchdog as iwdg;
-    use amiro_firmware::{bootloader, health, publisher, tasks};
+    use amiro_firmware::signals;
+    use amiro_firmware::{bootloader, publisher, tasks};
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
     use amiro_sensors::motion::DriveController;
     use amiro_sensors::tx_queue::TxQueue;
@@ -188,11 +187,7 @@ mod app {
 
     #[init(local = [spi_bus: Option<embedded_hal_bus::util::AtomicCell<platform::ImuBus>> = None])]
     fn init(cx: init::Context) -> (Shared, Local) {
-        // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
-        iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
-        health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
-        amiro_firmware::telemetry::init();
-        amiro_firmware::telemetry::boot_report("DiWheelDrive");
+        tasks::boot("DiWheelDrive", crate::BOOT_WATCHDOG_TIMEOUT_MS);
         let (hw, _nvic) = platform::init(cx.device, cx.core, cx.local.spi_bus);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
         let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
@@ -220,14 +215,7 @@ mod app {
         #[cfg(feature = "qemu")]
         stimulus::spawn().ok();
 
-        // Initialised: let the system come up (SYS_SYNC_N is wired-OR; it reads high once every
-        // module has released it).
-        signals.release_sync();
-        amiro_firmware::telemetry::init_done();
-        // A shutdown requested before we were up has no edge to catch: look at the level.
-        if signals.shutdown_requested() {
-            rtic::pend(platform::SHUTDOWN_INTERRUPT);
-        }
+        tasks::come_up(&mut signals, platform::SHUTDOWN_INTERRUPT);
         (
             Shared {
                 handler: SensorDataHandler::new(CanBoard::DiWheelDrive),
@@ -447,19 +435,16 @@ mod app {
     /// Feeds the independent watchdog — from the least urgent level, and only while motor control
     /// keeps running: a fed dog proves the whole schedule is alive.
     #[task(priority = 1, shared = [alive, can_errors])]
-    async fn watchdog(mut cx: watchdog::Context) {
+    async fn watchdog(cx: watchdog::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::WATCHDOG);
-        iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
-        let mut next = Clock::now_us();
-        loop {
-            next += crate::WATCHDOG_PERIOD_US;
-            Clock::delay_until_us(next).await;
-            if cx.shared.alive.lock(|a| a.take()) {
-                iwdg::feed();
-            }
-            // The controller recovers from bus-off without an interrupt: look at its state.
-            cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
-        }
+        let s = cx.shared;
+        tasks::feed_watchdog::<Clock, _>(
+            crate::WATCHDOG_TIMEOUT_MS,
+            crate::WATCHDOG_PERIOD_US,
+            s.alive,
+            s.can_errors,
+        )
+        .await;
     }
 
     /// SYS_PD_N fell: another module requests shutdown. Motors off first, then hand over.
@@ -482,10 +467,7 @@ mod app {
         platform::emergency_motors_off();
         actuators::trace_shutdown_stop(now);
         // Give the queued frames up to 10 ms to leave, then hand over regardless.
-        let deadline = now + 10_000;
-        while cx.shared.tx_queue.lock(|q| q.len()) > 0 && Clock::now_us() < deadline {
-            Clock::delay_until_us(Clock::now_us() + 1_000).await;
-        }
+        tasks::drain_tx_queue::<Clock, TX_QUEUE_LEN>(&mut cx.shared.tx_queue, 10_000).await;
         bootloader::hand_over(bootloader::Callback::HandleShutdownRequest);
     }
 

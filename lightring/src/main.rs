@@ -145,9 +145,8 @@ mod app {
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
-    use amiro_firmware::signals::{self, SystemSignals as _};
-    use amiro_firmware::watchdog as iwdg;
-    use amiro_firmware::{bootloader, health, publisher, tasks};
+    use amiro_firmware::signals;
+    use amiro_firmware::{bootloader, publisher, tasks};
     use amiro_sensors::drivers::suite::Samples;
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
     use amiro_sensors::tx_queue::TxQueue;
@@ -188,11 +187,7 @@ mod app {
 
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
-        // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
-        iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
-        health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
-        amiro_firmware::telemetry::init();
-        amiro_firmware::telemetry::boot_report("LightRing");
+        tasks::boot("LightRing", crate::BOOT_WATCHDOG_TIMEOUT_MS);
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
         let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
@@ -210,12 +205,7 @@ mod app {
         stimulus::spawn().ok();
         amiro_firmware::log!("LightRing up");
 
-        signals.release_sync();
-        amiro_firmware::telemetry::init_done();
-        // A shutdown requested before we were up has no edge to catch: look at the level.
-        if signals.shutdown_requested() {
-            rtic::pend(platform::SHUTDOWN_INTERRUPT);
-        }
+        tasks::come_up(&mut signals, platform::SHUTDOWN_INTERRUPT);
         (
             Shared {
                 handler: SensorDataHandler::new(CanBoard::LightRing),
@@ -393,19 +383,16 @@ mod app {
     /// Feeds the independent watchdog — from the least urgent level, and only while the latch task
     /// keeps running: a fed dog proves the whole schedule is alive.
     #[task(priority = 1, shared = [alive, can_errors])]
-    async fn watchdog(mut cx: watchdog::Context) {
+    async fn watchdog(cx: watchdog::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::WATCHDOG);
-        iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
-        let mut next = Clock::now_us();
-        loop {
-            next += crate::WATCHDOG_PERIOD_US;
-            Clock::delay_until_us(next).await;
-            if cx.shared.alive.lock(|a| a.take()) {
-                iwdg::feed();
-            }
-            // The controller recovers from bus-off without an interrupt: look at its state.
-            cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
-        }
+        let s = cx.shared;
+        tasks::feed_watchdog::<Clock, _>(
+            crate::WATCHDOG_TIMEOUT_MS,
+            crate::WATCHDOG_PERIOD_US,
+            s.alive,
+            s.can_errors,
+        )
+        .await;
     }
 
     /// SYS_PD_N fell: another module requests shutdown. LEDs dark first, then hand over.
