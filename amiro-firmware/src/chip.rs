@@ -24,6 +24,16 @@ const RCC_APB1ENR: usize = 0x1C;
 #[cfg(feature = "f4")]
 const RCC_APB1ENR: usize = 0x40;
 const APB1_CAN1: u32 = 1 << 25;
+/// RCC_APB2RSTR / RCC_APB2ENR offsets (SPI1 is bit 12 in both, on both families).
+#[cfg(feature = "f1")]
+const RCC_APB2RSTR: usize = 0x0C;
+#[cfg(feature = "f4")]
+const RCC_APB2RSTR: usize = 0x24;
+#[cfg(feature = "f1")]
+const RCC_APB2ENR: usize = 0x18;
+#[cfg(feature = "f4")]
+const RCC_APB2ENR: usize = 0x44;
+const APB2_SPI1: u32 = 1 << 12;
 
 /// The RCC block of this chip, for the clock-tree routines.
 fn rcc() -> crate::bxcan::Mmio {
@@ -312,6 +322,14 @@ pub fn take_reset_cause() -> amiro_can::ResetCause {
     // RMVF clears the flags.
     rcc_modify(RCC_CSR, |r| r | (1 << 24));
     cause
+}
+
+/// Resets SPI1 and enables its clock (the runtime's `spi::Master` takes it from there): called
+/// from `init` by the boards that drive a device on SPI1.
+pub fn reset_and_enable_spi1() {
+    rcc_modify(RCC_APB2RSTR, |r| r | APB2_SPI1);
+    rcc_modify(RCC_APB2RSTR, |r| r & !APB2_SPI1);
+    rcc_modify(RCC_APB2ENR, |r| r | APB2_SPI1);
 }
 
 /// Resets CAN1 (nothing of AMiRo-BLT's filters, modes or pending mailboxes survives) and enables its

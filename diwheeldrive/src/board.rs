@@ -103,7 +103,7 @@ pub fn init(
     let mut rcc = dp.RCC.constrain();
     // Only 1-1 has the SPI sensors; 1-2 leaves SPI1 off (its clock and the block's reset untouched).
     #[cfg(feature = "rev-1-1")]
-    enable_spi1();
+    amiro_firmware::chip::reset_and_enable_spi1();
     TIMER_CLOCK_HZ.store(clocks.timer_hz, core::sync::atomic::Ordering::Relaxed);
     // The blocking I2C driver times out on the DWT cycle counter.
     cp.DCB.enable_trace();
@@ -433,15 +433,3 @@ pub fn start_monotonic(priority: u8) {
 
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI9_5;
-
-/// SPI1's clock on and the block reset (the runtime's master takes it from there).
-#[cfg(feature = "rev-1-1")]
-fn enable_spi1() {
-    // SAFETY: SPI1's reset and clock bits, owned by init.
-    unsafe {
-        let rcc = &*pac::RCC::ptr();
-        rcc.apb2rstr().modify(|_, w| w.spi1rst().set_bit());
-        rcc.apb2rstr().modify(|_, w| w.spi1rst().clear_bit());
-        rcc.apb2enr().modify(|_, w| w.spi1en().set_bit());
-    }
-}

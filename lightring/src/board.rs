@@ -74,7 +74,7 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     // without a bound, and no driver here takes its frequencies from the HAL (they come from the
     // plan).
     let mut rcc = dp.RCC.constrain();
-    enable_spi1();
+    amiro_firmware::chip::reset_and_enable_spi1();
 
     let mut afio = dp.AFIO.constrain(&mut rcc);
     let mut gpioa = dp.GPIOA.split(&mut rcc);
@@ -207,14 +207,3 @@ pub fn leds_dark() {
 
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI15_10;
-
-/// SPI1's clock on and the block reset (the runtime's master takes it from there).
-fn enable_spi1() {
-    // SAFETY: SPI1's reset and clock bits, owned by init.
-    unsafe {
-        let rcc = &*pac::RCC::ptr();
-        rcc.apb2rstr().modify(|_, w| w.spi1rst().set_bit());
-        rcc.apb2rstr().modify(|_, w| w.spi1rst().clear_bit());
-        rcc.apb2enr().modify(|_, w| w.spi1en().set_bit());
-    }
-}
