@@ -107,7 +107,7 @@ impl TakeReadings for SimFloorBus {
 impl TakeReadings for SimGyroscope {
     fn take(&mut self, r: &Readings) {
         if r.has(robot::world_link::IMU_1_1) {
-            self.set_rate(Some(r.rate));
+            self.set_measured(Some(r.rate));
         }
     }
 }
@@ -116,7 +116,7 @@ impl TakeReadings for SimGyroscope {
 impl TakeReadings for SimAccelerometer {
     fn take(&mut self, r: &Readings) {
         if r.has(robot::world_link::IMU_1_1) {
-            self.set_acceleration(Some(r.accel));
+            self.set_measured(Some(r.accel));
         }
     }
 }

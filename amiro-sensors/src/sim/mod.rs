@@ -11,7 +11,7 @@
 //! wrong number. All state is a few bytes per device; nothing allocates.
 //!
 //! **Fed from outside.** Each measuring simulator also takes its physical input from outside
-//! instead of its pattern — `SimGyroscope::set_rate`, `SimAccelerometer::set_acceleration`,
+//! instead of its pattern — `SimGyroscope::set_measured` (mdps), `SimAccelerometer::set_measured` (µg),
 //! `SimHmc5883l::set_field`, `SimBno055::set_motion`, `SimVcnl4020::set_proximity` (and
 //! `SimMuxedProximity::set_proximity` by channel, `feed_ring` and `feed_floor` by protocol index) — encoded exactly as the pattern would be. This
 //! is how a world (amiro-world, docs/world.md) reaches the real drivers: the robot host sends
@@ -50,7 +50,9 @@ pub use compass::SimHmc5883l;
 pub use feed::{feed_floor, feed_ring};
 pub use fuel_gauge::SimBq27500;
 pub use leds::{SimLedChain, SimLedDriver};
-pub use motion_sensors::{SimAccelerometer, SimGyroscope};
+pub use motion_sensors::{
+    Accelerometer, Gyroscope, SimAccelerometer, SimGyroscope, SimStSensor, StPart,
+};
 pub use plant::{MotorModel, SimWheel, WheelPlant};
 pub use proximity::{SimMuxedProximity, SimVcnl4020};
 
