@@ -165,9 +165,54 @@ impl<const BITS: u32> fmt::Display for Count<BITS> {
     }
 }
 
-/// Why the board last reset, as flags (several can be set: the STM32's `RCC_CSR` latches them until cleared).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub struct ResetCause(u8);
+/// A byte of flags on the wire: the set operations and the `name+name` text every such type
+/// shares. Each type then declares its flags and `NAMES` (bit 0 first) in its own `impl`.
+macro_rules! flag_byte {
+    ($(#[$doc:meta])* $name:ident, $example:literal) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+        pub struct $name(u8);
+
+        impl $name {
+            /// No flag set.
+            pub const NONE: $name = $name(0);
+
+            /// From the wire byte; every bit is kept as it is, unassigned ones too.
+            pub const fn from_bits(bits: u8) -> $name {
+                $name(bits)
+            }
+
+            /// The wire byte.
+            pub const fn bits(self) -> u8 {
+                self.0
+            }
+
+            /// This set with `other`'s flags added.
+            #[must_use]
+            pub const fn with(self, other: $name) -> $name {
+                $name(self.0 | other.0)
+            }
+
+            /// Whether every flag of `other` is set.
+            pub const fn contains(self, other: $name) -> bool {
+                self.0 & other.0 == other.0
+            }
+        }
+
+        impl fmt::Display for $name {
+            #[doc = $example]
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                write_flags(f, self.0, &Self::NAMES)
+            }
+        }
+    };
+}
+
+flag_byte!(
+    /// Why the board last reset, as flags (several can be set: the STM32's `RCC_CSR` latches them until cleared).
+    ResetCause,
+    "`pin+independent-watchdog`, or `none`."
+);
 
 impl ResetCause {
     /// Power-on or power-down reset (`PORRSTF`).
@@ -197,42 +242,13 @@ impl ResetCause {
         "brown-out",
         "fault",
     ];
-
-    /// No flag set.
-    pub const NONE: ResetCause = ResetCause(0);
-
-    /// From the wire byte (every bit has a meaning).
-    pub const fn from_bits(bits: u8) -> ResetCause {
-        ResetCause(bits)
-    }
-
-    /// The wire byte.
-    pub const fn bits(self) -> u8 {
-        self.0
-    }
-
-    /// This set with `other`'s flags added.
-    #[must_use]
-    pub const fn with(self, other: ResetCause) -> ResetCause {
-        ResetCause(self.0 | other.0)
-    }
-
-    /// Whether every flag of `other` is set.
-    pub const fn contains(self, other: ResetCause) -> bool {
-        self.0 & other.0 == other.0
-    }
 }
 
-impl fmt::Display for ResetCause {
-    /// `pin+independent-watchdog`, or `none`.
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write_flags(f, self.0, &Self::NAMES)
-    }
-}
-
-/// The board's state now, as flags.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub struct StatusFlags(u8);
+flag_byte!(
+    /// The board's state now, as flags.
+    StatusFlags,
+    "`watchdog+accept-and-warn`, or `none`."
+);
 
 impl StatusFlags {
     /// The admission policy is accept-and-warn (clear: refuse, the default).
@@ -259,37 +275,6 @@ impl StatusFlags {
         "bit6",
         "bit7",
     ];
-
-    /// No flag set.
-    pub const NONE: StatusFlags = StatusFlags(0);
-
-    /// From the wire byte (bits 5–7 are unassigned and kept as they are).
-    pub const fn from_bits(bits: u8) -> StatusFlags {
-        StatusFlags(bits)
-    }
-
-    /// The wire byte.
-    pub const fn bits(self) -> u8 {
-        self.0
-    }
-
-    /// This set with `other`'s flags added.
-    #[must_use]
-    pub const fn with(self, other: StatusFlags) -> StatusFlags {
-        StatusFlags(self.0 | other.0)
-    }
-
-    /// Whether every flag of `other` is set.
-    pub const fn contains(self, other: StatusFlags) -> bool {
-        self.0 & other.0 == other.0
-    }
-}
-
-impl fmt::Display for StatusFlags {
-    /// `watchdog+accept-and-warn`, or `none`.
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write_flags(f, self.0, &Self::NAMES)
-    }
 }
 
 fn write_flags(f: &mut fmt::Formatter<'_>, bits: u8, names: &[&str; 8]) -> fmt::Result {
@@ -316,6 +301,16 @@ pub enum Verdict {
     Refused,
     /// The request was carried out (policy accept-and-warn) although it breaks the bound named.
     AcceptedWithWarning,
+}
+
+impl fmt::Display for Verdict {
+    /// `refused` or `accepted with a warning`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Verdict::Refused => "refused",
+            Verdict::AcceptedWithWarning => "accepted with a warning",
+        })
+    }
 }
 
 /// What kind of thing the request would make miss its deadline (the first frame of a verdict says which,
@@ -476,30 +471,26 @@ fn c16(lo: u8, hi: u8) -> Count<16> {
 impl DiagnosticsPage {
     /// The page byte (data\[0\]).
     pub const fn page(&self) -> u8 {
-        match self {
-            DiagnosticsPage::Status { .. } => 0,
-            DiagnosticsPage::Commands { .. } => 1,
-            DiagnosticsPage::Rejections { .. } => 2,
-            DiagnosticsPage::AdmissionAndReceive { .. } => 3,
-            DiagnosticsPage::Transmit { .. } => 4,
-            DiagnosticsPage::Deadlines { .. } => 5,
-            DiagnosticsPage::VerdictRequest(_) => VERDICT_PAGE,
-            DiagnosticsPage::VerdictBound(_) => VERDICT_BOUND_PAGE,
-        }
+        self.byte_and_name().0
     }
 
     /// The page's name (`status`, `commands`, `rejections`, `admission-and-receive`, `transmit`, `deadlines`,
     /// `verdict`, `verdict-bound`).
     pub const fn name(&self) -> &'static str {
+        self.byte_and_name().1
+    }
+
+    /// The page byte and the name of each page, in one table.
+    const fn byte_and_name(&self) -> (u8, &'static str) {
         match self {
-            DiagnosticsPage::Status { .. } => "status",
-            DiagnosticsPage::Commands { .. } => "commands",
-            DiagnosticsPage::Rejections { .. } => "rejections",
-            DiagnosticsPage::AdmissionAndReceive { .. } => "admission-and-receive",
-            DiagnosticsPage::Transmit { .. } => "transmit",
-            DiagnosticsPage::Deadlines { .. } => "deadlines",
-            DiagnosticsPage::VerdictRequest(_) => "verdict",
-            DiagnosticsPage::VerdictBound(_) => "verdict-bound",
+            DiagnosticsPage::Status { .. } => (0, "status"),
+            DiagnosticsPage::Commands { .. } => (1, "commands"),
+            DiagnosticsPage::Rejections { .. } => (2, "rejections"),
+            DiagnosticsPage::AdmissionAndReceive { .. } => (3, "admission-and-receive"),
+            DiagnosticsPage::Transmit { .. } => (4, "transmit"),
+            DiagnosticsPage::Deadlines { .. } => (5, "deadlines"),
+            DiagnosticsPage::VerdictRequest(_) => (VERDICT_PAGE, "verdict"),
+            DiagnosticsPage::VerdictBound(_) => (VERDICT_BOUND_PAGE, "verdict-bound"),
         }
     }
 
@@ -800,10 +791,7 @@ impl fmt::Display for DiagnosticsPage {
                 Ok(())
             }
             DiagnosticsPage::VerdictRequest(r) => {
-                let verdict = match r.verdict {
-                    Verdict::Refused => "refused",
-                    Verdict::AcceptedWithWarning => "accepted with warning",
-                };
+                let verdict = r.verdict;
                 if r.one_shot {
                     write!(
                         f,
@@ -968,10 +956,7 @@ impl fmt::Display for AdmissionVerdict {
     /// respond in 16777215+ µs but must within 1 µs. At urgent it accepts every 2 ms or slower; no priority makes
     /// 1 µs pass.`
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let decided = match self.verdict {
-            Verdict::Refused => "refused",
-            Verdict::AcceptedWithWarning => "accepted with a warning",
-        };
+        let decided = self.verdict;
         if self.one_shot {
             write!(
                 f,

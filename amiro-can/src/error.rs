@@ -150,67 +150,59 @@ pub enum DecodeError {
     },
 }
 
-impl DecodeError {
-    /// One short, stable name per variant, in [`DecodeError::kind_index`] order: counter and log names.
-    pub const KINDS: [&'static str; 25] = [
-        "id-out-of-range",
-        "extended-id",
-        "remote-frame",
-        "frame-too-long",
-        "bad-priority",
-        "unknown-topic",
-        "sensor-data-on-actuator",
-        "expected-command",
-        "not-a-sensor",
-        "dlc-too-short",
-        "dlc-too-long",
-        "bad-mode",
-        "bad-unit",
-        "zero-sample-time",
-        "period-too-long",
-        "period-not-encodable",
-        "led-out-of-range",
-        "sensor-index-out-of-range",
-        "bad-charging-flag",
-        "state-of-charge-out-of-range",
-        "unknown-page",
-        "reserved-bits",
-        "bad-policy",
-        "bad-shutdown-mode",
-        "bad-shutdown-key",
-    ];
+/// The reasons' short names and their counter order, from one list: `KINDS` and `kind_index` are
+/// generated together, so a name cannot drift from its index.
+macro_rules! decode_error_kinds {
+    ($($variant:ident => $name:literal,)*) => {
+        impl DecodeError {
+            /// One short, stable name per variant, in [`DecodeError::kind_index`] order: counter and
+            /// log names.
+            pub const KINDS: [&'static str; [$($name),*].len()] = [$($name),*];
 
-    /// The index of this error's reason in [`DecodeError::KINDS`] (always below `KINDS.len()`).
-    pub const fn kind_index(&self) -> usize {
-        match self {
-            DecodeError::IdOutOfRange { .. } => 0,
-            DecodeError::ExtendedId { .. } => 1,
-            DecodeError::RemoteFrame => 2,
-            DecodeError::FrameTooLong { .. } => 3,
-            DecodeError::BadPriority { .. } => 4,
-            DecodeError::UnknownTopic { .. } => 5,
-            DecodeError::SensorDataOnActuator { .. } => 6,
-            DecodeError::ExpectedCommand { .. } => 7,
-            DecodeError::NotASensor { .. } => 8,
-            DecodeError::DlcTooShort { .. } => 9,
-            DecodeError::DlcTooLong { .. } => 10,
-            DecodeError::BadMode { .. } => 11,
-            DecodeError::BadUnit { .. } => 12,
-            DecodeError::ZeroSampleTime => 13,
-            DecodeError::PeriodTooLong { .. } => 14,
-            DecodeError::PeriodNotEncodable { .. } => 15,
-            DecodeError::LedOutOfRange { .. } => 16,
-            DecodeError::SensorIndexOutOfRange { .. } => 17,
-            DecodeError::BadChargingFlag { .. } => 18,
-            DecodeError::StateOfChargeOutOfRange { .. } => 19,
-            DecodeError::UnknownPage { .. } => 20,
-            DecodeError::ReservedBits { .. } => 21,
-            DecodeError::BadPolicy { .. } => 22,
-            DecodeError::BadShutdownMode { .. } => 23,
-            DecodeError::BadShutdownKey { .. } => 24,
+            /// The index of this error's reason in [`DecodeError::KINDS`] (always below
+            /// `KINDS.len()`).
+            pub const fn kind_index(&self) -> usize {
+                // The variants in list order: their discriminants are the indices.
+                enum Index {
+                    $($variant),*
+                }
+                match self {
+                    $(DecodeError::$variant { .. } => Index::$variant as usize,)*
+                }
+            }
         }
-    }
+    };
+}
 
+decode_error_kinds! {
+    IdOutOfRange => "id-out-of-range",
+    ExtendedId => "extended-id",
+    RemoteFrame => "remote-frame",
+    FrameTooLong => "frame-too-long",
+    BadPriority => "bad-priority",
+    UnknownTopic => "unknown-topic",
+    SensorDataOnActuator => "sensor-data-on-actuator",
+    ExpectedCommand => "expected-command",
+    NotASensor => "not-a-sensor",
+    DlcTooShort => "dlc-too-short",
+    DlcTooLong => "dlc-too-long",
+    BadMode => "bad-mode",
+    BadUnit => "bad-unit",
+    ZeroSampleTime => "zero-sample-time",
+    PeriodTooLong => "period-too-long",
+    PeriodNotEncodable => "period-not-encodable",
+    LedOutOfRange => "led-out-of-range",
+    SensorIndexOutOfRange => "sensor-index-out-of-range",
+    BadChargingFlag => "bad-charging-flag",
+    StateOfChargeOutOfRange => "state-of-charge-out-of-range",
+    UnknownPage => "unknown-page",
+    ReservedBits => "reserved-bits",
+    BadPolicy => "bad-policy",
+    BadShutdownMode => "bad-shutdown-mode",
+    BadShutdownKey => "bad-shutdown-key",
+}
+
+impl DecodeError {
     /// The short name of this error's reason (`KINDS[kind_index()]`).
     pub const fn kind_name(&self) -> &'static str {
         Self::KINDS[self.kind_index()]
@@ -252,21 +244,21 @@ impl fmt::Display for DecodeError {
                 frame,
                 dlc,
                 expected,
-            } => {
-                write!(
-                    f,
-                    "DLC {dlc} too short for {topic} {frame} frame (needs {expected})"
-                )
             }
-            DecodeError::DlcTooLong {
+            | DecodeError::DlcTooLong {
                 topic,
                 frame,
                 dlc,
                 expected,
             } => {
+                let how = if matches!(self, DecodeError::DlcTooShort { .. }) {
+                    "short"
+                } else {
+                    "long"
+                };
                 write!(
                     f,
-                    "DLC {dlc} too long for {topic} {frame} frame (needs {expected})"
+                    "DLC {dlc} too {how} for {topic} {frame} frame (needs {expected})"
                 )
             }
             DecodeError::BadMode { mode } => write!(

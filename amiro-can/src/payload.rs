@@ -9,7 +9,7 @@ use crate::diagnostics::DiagnosticsPage;
 use crate::error::DecodeError;
 use crate::frame::Frame;
 use crate::id::{CanId, Kind, Priority};
-use crate::topic::{Board, Topic};
+use crate::topic::{led_topics, Board, Topic};
 use crate::wire;
 
 /// A magnetometer axis; each has its own topic because one i32 per axis fills half a frame.
@@ -221,14 +221,22 @@ pub struct PowerStatus {
     pub power_mw: u16,
 }
 
-impl fmt::Display for PowerStatus {
-    /// `discharging, 62 %, 32806 min to empty, 31860 mW`.
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let (state, until) = if self.charging {
+impl PowerStatus {
+    /// Which way the charge goes and where `minutes` ends: `("charging", "full")` or
+    /// `("discharging", "empty")`, the words every display of this status uses.
+    pub const fn direction(&self) -> (&'static str, &'static str) {
+        if self.charging {
             ("charging", "full")
         } else {
             ("discharging", "empty")
-        };
+        }
+    }
+}
+
+impl fmt::Display for PowerStatus {
+    /// `discharging, 62 %, 32806 min to empty, 31860 mW`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (state, until) = self.direction();
         write!(
             f,
             "{state}, {} %, {} min to {until}, {} mW",
@@ -430,16 +438,9 @@ impl SensorData {
                     page: DiagnosticsPage::from_bytes(topic, wire::exact(topic, k, data)?)?,
                 }
             }
-            Topic::MotorCommand
-            | Topic::Shutdown
-            | Topic::Led1
-            | Topic::Led2
-            | Topic::Led3
-            | Topic::Led4
-            | Topic::Led5
-            | Topic::Led6
-            | Topic::Led7
-            | Topic::Led8 => return Err(DecodeError::SensorDataOnActuator { topic }),
+            Topic::MotorCommand | Topic::Shutdown | led_topics!() => {
+                return Err(DecodeError::SensorDataOnActuator { topic })
+            }
         })
     }
 }

@@ -6,7 +6,7 @@
 //! fields of one page are [`Mux::Page`]. Names are the field names `amiro decode --json` prints, so a tool's
 //! decoding and `amiro`'s can be compared field by field (the interop check in `tools/interop/` does).
 
-use crate::topic::Topic;
+use crate::topic::{led_topics, Topic};
 
 /// Where a signal is present in a multiplexed message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -260,14 +260,7 @@ impl Topic {
             Topic::Gyroscope => GYROSCOPE,
             Topic::Accelerometer => ACCELEROMETER,
             Topic::MotorCommand => MOTOR,
-            Topic::Led1
-            | Topic::Led2
-            | Topic::Led3
-            | Topic::Led4
-            | Topic::Led5
-            | Topic::Led6
-            | Topic::Led7
-            | Topic::Led8 => LED,
+            led_topics!() => LED,
             Topic::DiWheelDriveDiagnostics
             | Topic::PowerManagementDiagnostics
             | Topic::LightRingDiagnostics => DIAGNOSTICS,

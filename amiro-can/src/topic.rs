@@ -6,6 +6,22 @@ use core::fmt;
 
 use crate::error::DecodeError;
 
+/// The pattern of the eight LED topics, for the `match`es that treat them alike (one list, kept
+/// exhaustive by the compiler wherever it is used).
+macro_rules! led_topics {
+    () => {
+        $crate::topic::Topic::Led1
+            | $crate::topic::Topic::Led2
+            | $crate::topic::Topic::Led3
+            | $crate::topic::Topic::Led4
+            | $crate::topic::Topic::Led5
+            | $crate::topic::Topic::Led6
+            | $crate::topic::Topic::Led7
+            | $crate::topic::Topic::Led8
+    };
+}
+pub(crate) use led_topics;
+
 /// The board that owns a topic: it publishes the sensor, or it drives the actuator.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Board {
@@ -255,14 +271,7 @@ impl Topic {
     /// The LED number 1..=8 for an LED topic.
     pub const fn led_number(self) -> Option<u8> {
         match self {
-            Topic::Led1
-            | Topic::Led2
-            | Topic::Led3
-            | Topic::Led4
-            | Topic::Led5
-            | Topic::Led6
-            | Topic::Led7
-            | Topic::Led8 => Some(self as u8 - Topic::Led1 as u8 + 1),
+            led_topics!() => Some(self as u8 - Topic::Led1 as u8 + 1),
             _ => None,
         }
     }

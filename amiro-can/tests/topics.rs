@@ -347,6 +347,34 @@ fn wrong_lengths_for_every_topic() {
     }
 }
 
+/// The DLC errors: `dlc` bytes in a `frame` on `topic`, which needs `expected`.
+fn too_short(topic: Topic, frame: Kind, dlc: u8, expected: u8) -> DecodeError {
+    DecodeError::DlcTooShort {
+        topic,
+        frame,
+        dlc,
+        expected,
+    }
+}
+
+/// See [`too_short`].
+fn too_long(topic: Topic, frame: Kind, dlc: u8, expected: u8) -> DecodeError {
+    DecodeError::DlcTooLong {
+        topic,
+        frame,
+        dlc,
+        expected,
+    }
+}
+
+/// Reserved bits in `byte` of a verdict request on DiWheelDrive's diagnostics topic.
+fn verdict_reserved(byte: u8) -> DecodeError {
+    DecodeError::ReservedBits {
+        topic: Topic::DiWheelDriveDiagnostics,
+        byte,
+    }
+}
+
 #[test]
 fn every_decode_error_reason() {
     use DecodeError as E;
@@ -371,62 +399,32 @@ fn every_decode_error_reason() {
         (
             0x205,
             &[],
-            E::DlcTooShort {
-                topic: Topic::MagnetometerX,
-                frame: Kind::Command,
-                dlc: 0,
-                expected: 1,
-            },
+            too_short(Topic::MagnetometerX, Kind::Command, 0, 1),
         ),
         (
             0x205,
             &[1, 0x84],
-            E::DlcTooShort {
-                topic: Topic::MagnetometerX,
-                frame: Kind::Command,
-                dlc: 2,
-                expected: 4,
-            },
+            too_short(Topic::MagnetometerX, Kind::Command, 2, 4),
         ),
         (
             0x205,
             &[1, 0x84, 0x03],
-            E::DlcTooShort {
-                topic: Topic::MagnetometerX,
-                frame: Kind::Command,
-                dlc: 3,
-                expected: 4,
-            },
+            too_short(Topic::MagnetometerX, Kind::Command, 3, 4),
         ),
         (
             0x205,
             &[1, 0x84, 0x03, 0x02, 0],
-            E::DlcTooLong {
-                topic: Topic::MagnetometerX,
-                frame: Kind::Command,
-                dlc: 5,
-                expected: 4,
-            },
+            too_long(Topic::MagnetometerX, Kind::Command, 5, 4),
         ),
         (
             0x205,
             &[0, 0],
-            E::DlcTooLong {
-                topic: Topic::MagnetometerX,
-                frame: Kind::Command,
-                dlc: 2,
-                expected: 1,
-            },
+            too_long(Topic::MagnetometerX, Kind::Command, 2, 1),
         ),
         (
             0x204,
             &[2, 0, 0, 0],
-            E::DlcTooLong {
-                topic: Topic::FloorProximity,
-                frame: Kind::Command,
-                dlc: 4,
-                expected: 1,
-            },
+            too_long(Topic::FloorProximity, Kind::Command, 4, 1),
         ),
         (0x208, &[3], E::BadMode { mode: 3 }),
         (0x208, &[1, 1, 0, 3], E::BadUnit { unit: 3 }),
@@ -471,42 +469,23 @@ fn every_decode_error_reason() {
         (
             0x41A,
             &[0x80, 0x09, 1, 0, 0b1010_0010, 0, 0, 0],
-            E::ReservedBits {
-                topic: Topic::DiWheelDriveDiagnostics,
-                byte: 4,
-            },
+            verdict_reserved(4),
         ),
         (
             0x41A,
             &[0x80, 0x09, 1, 0, 2, 0, 0, 0b0000_1100],
-            E::ReservedBits {
-                topic: Topic::DiWheelDriveDiagnostics,
-                byte: 7,
-            },
+            verdict_reserved(7),
         ),
         (
             0x41A,
             &[0x80, 0x09, 1, 0, 0x22, 0, 0, 0x80],
-            E::ReservedBits {
-                topic: Topic::DiWheelDriveDiagnostics,
-                byte: 7,
-            },
+            verdict_reserved(7),
         ),
-        (
-            0x41A,
-            &[0x80, 0x09, 1, 0, 2, 5, 0, 0],
-            E::ReservedBits {
-                topic: Topic::DiWheelDriveDiagnostics,
-                byte: 7,
-            },
-        ),
+        (0x41A, &[0x80, 0x09, 1, 0, 2, 5, 0, 0], verdict_reserved(7)),
         (
             0x41A,
             &[0x80, 0x09, 1, 0, 2, 0, 0, 0b0001_0100],
-            E::ReservedBits {
-                topic: Topic::DiWheelDriveDiagnostics,
-                byte: 7,
-            },
+            verdict_reserved(7),
         ),
         (
             0x41A,
@@ -525,27 +504,13 @@ fn every_decode_error_reason() {
         (
             0x21C,
             &[3],
-            E::DlcTooShort {
-                topic: Topic::LightRingDiagnostics,
-                frame: Kind::Command,
-                dlc: 1,
-                expected: 2,
-            },
+            too_short(Topic::LightRingDiagnostics, Kind::Command, 1, 2),
         ),
         (0x208, &[3, 1], E::BadMode { mode: 3 }),
         (0x01D, &[0, 0x55, 0xAA], E::BadShutdownMode { value: 0 }),
         (0x01D, &[5, 0x55, 0xAA], E::BadShutdownMode { value: 5 }),
         (0x01D, &[3, 0xAA, 0x55], E::BadShutdownKey { key: 0x55AA }),
-        (
-            0x01D,
-            &[2],
-            E::DlcTooShort {
-                topic: Topic::Shutdown,
-                frame: Kind::Command,
-                dlc: 1,
-                expected: 3,
-            },
-        ),
+        (0x01D, &[2], too_short(Topic::Shutdown, Kind::Command, 1, 3)),
         (
             0x41D,
             &[3, 0x55, 0xAA],

@@ -24,6 +24,16 @@ const RCC_APB1ENR: usize = 0x1C;
 #[cfg(feature = "f4")]
 const RCC_APB1ENR: usize = 0x40;
 const APB1_CAN1: u32 = 1 << 25;
+/// RCC_APB2RSTR / RCC_APB2ENR offsets (SPI1 is bit 12 in both, on both families).
+#[cfg(feature = "f1")]
+const RCC_APB2RSTR: usize = 0x0C;
+#[cfg(feature = "f4")]
+const RCC_APB2RSTR: usize = 0x24;
+#[cfg(feature = "f1")]
+const RCC_APB2ENR: usize = 0x18;
+#[cfg(feature = "f4")]
+const RCC_APB2ENR: usize = 0x44;
+const APB2_SPI1: u32 = 1 << 12;
 
 /// The RCC block of this chip, for the clock-tree routines.
 fn rcc() -> crate::bxcan::Mmio {
@@ -314,6 +324,14 @@ pub fn take_reset_cause() -> amiro_can::ResetCause {
     cause
 }
 
+/// Resets SPI1 and enables its clock (the runtime's `spi::Master` takes it from there): called
+/// from `init` by the boards that drive a device on SPI1.
+pub fn reset_and_enable_spi1() {
+    rcc_modify(RCC_APB2RSTR, |r| r | APB2_SPI1);
+    rcc_modify(RCC_APB2RSTR, |r| r & !APB2_SPI1);
+    rcc_modify(RCC_APB2ENR, |r| r | APB2_SPI1);
+}
+
 /// Resets CAN1 (nothing of AMiRo-BLT's filters, modes or pending mailboxes survives) and enables its
 /// clock. Every board calls it in `init`, before `bxcan::bring_up`.
 pub fn reset_and_enable_can1() {
@@ -323,4 +341,31 @@ pub fn reset_and_enable_can1() {
     rcc_modify(RCC_APB1RSTR, |r| r | APB1_CAN1);
     rcc_modify(RCC_APB1RSTR, |r| r & !APB1_CAN1);
     rcc_modify(RCC_APB1ENR, |r| r | APB1_CAN1);
+}
+
+/// GPIOC's input data register.
+#[cfg(feature = "f1")]
+const GPIOC_IDR: usize = 0x4001_1000 + 0x08;
+#[cfg(feature = "f4")]
+const GPIOC_IDR: usize = 0x4002_0800 + 0x10;
+/// EXTI_PR, the pending register (offset 0x14 of EXTI on both families).
+#[cfg(feature = "f1")]
+const EXTI_PR: usize = 0x4001_0400 + 0x14;
+#[cfg(feature = "f4")]
+const EXTI_PR: usize = 0x4001_3C00 + 0x14;
+
+/// Whether pin `PIN` of port C reads low (every board's SYS_PD_N is on port C).
+pub fn port_c_reads_low<const PIN: u8>() -> bool {
+    const { assert!(PIN < 16) };
+    // SAFETY: a volatile read of GPIOC's input data register, which reading never changes.
+    let idr = unsafe { core::ptr::read_volatile(GPIOC_IDR as *const u32) };
+    idr & (1 << PIN) == 0
+}
+
+/// Clears the pending bit of EXTI line `LINE` (writing 1 clears that bit and no other).
+pub fn clear_exti_pending<const LINE: u8>() {
+    const { assert!(LINE < 16) };
+    // SAFETY: a single write of EXTI_PR; its zero bits leave the other lines' pending bits as
+    // they are.
+    unsafe { core::ptr::write_volatile(EXTI_PR as *mut u32, 1 << LINE) };
 }

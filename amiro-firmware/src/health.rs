@@ -13,36 +13,14 @@ use amiro_can::{
 use amiro_sensors::handler::SensorDataHandler;
 use amiro_sensors::tx_queue::TxCounters;
 
-static DEADLINE_MISSES: [AtomicU32; 4] = [
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-];
+static DEADLINE_MISSES: [AtomicU32; 4] = [const { AtomicU32::new(0) }; 4];
 static LATE_FRAMES: AtomicU32 = AtomicU32::new(0);
 static ADMISSION_REFUSED: AtomicU32 = AtomicU32::new(0);
 static ADMISSION_WARNED: AtomicU32 = AtomicU32::new(0);
-static REFUSALS: [AtomicU32; REFUSAL_REASONS] = [
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-];
+static REFUSALS: [AtomicU32; REFUSAL_REASONS] = [const { AtomicU32::new(0) }; REFUSAL_REASONS];
 /// Sensor groups a board may report (one per bus or device group).
 pub const SENSOR_GROUPS: usize = 8;
-static GROUP_FAULTS: [AtomicU32; SENSOR_GROUPS] = [
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-    AtomicU32::new(0),
-];
+static GROUP_FAULTS: [AtomicU32; SENSOR_GROUPS] = [const { AtomicU32::new(0) }; SENSOR_GROUPS];
 static GROUPS_FAULTY: AtomicU8 = AtomicU8::new(0);
 static ERROR_PASSIVE: AtomicU32 = AtomicU32::new(0);
 static BUS_OFF: AtomicU32 = AtomicU32::new(0);

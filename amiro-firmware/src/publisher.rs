@@ -5,7 +5,7 @@
 //! the board's [`Sampler`] for each topic's sample, and queues the frames. The board provides only
 //! "what to sample for this topic" — and its sampler locks only the device it reads, so a level
 //! blocks another only for one device transfer.
-use amiro_can::{Priority, Topic};
+use amiro_can::{Frame, Priority, Topic};
 use amiro_sensors::drivers::suite::Samples;
 use amiro_sensors::handler::{late_by, Release, SensorDataHandler};
 use amiro_sensors::trace::{TraceEvent, TraceKind};
@@ -101,34 +101,37 @@ fn serve_due<C: Clock, const N: usize>(
             let frames =
                 handler.lock(|h| health::frames_now(h, &counters, board, taken, release.priority));
             let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
-            for frame in frames {
-                let outcome = tx_queue.lock(|q| crate::tasks::enqueue(q, frame));
-                note_push(
-                    C::now_us(),
-                    level,
-                    topic,
-                    deadline,
-                    frame.id().raw(),
-                    &outcome,
-                );
-            }
+            queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
         } else {
             let samples = sampler.sample(topic, taken);
             let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
-            for data in samples {
-                let frame = data.encode(release.priority);
-                let outcome = tx_queue.lock(|q| crate::tasks::enqueue(q, frame));
-                note_push(
-                    C::now_us(),
-                    level,
-                    topic,
-                    deadline,
-                    frame.id().raw(),
-                    &outcome,
-                );
-            }
+            let frames = samples
+                .into_iter()
+                .map(|data| data.encode(release.priority));
+            queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
         }
         cortex_m::peripheral::NVIC::pend(tx_interrupt);
+    }
+}
+
+/// Queues one sample's frames, tracing each push and counting a frame queued after `deadline`.
+fn queue_frames<C: Clock, const N: usize>(
+    tx_queue: &mut impl Mutex<T = TxQueue<N>>,
+    level: Priority,
+    topic: Topic,
+    deadline: Option<u64>,
+    frames: impl IntoIterator<Item = Frame>,
+) {
+    for frame in frames {
+        let outcome = tx_queue.lock(|q| crate::tasks::enqueue(q, frame));
+        note_push(
+            C::now_us(),
+            level,
+            topic,
+            deadline,
+            frame.id().raw(),
+            &outcome,
+        );
     }
 }
 

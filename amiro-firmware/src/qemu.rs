@@ -180,6 +180,37 @@ impl CanRx for CanRxPort {
     }
 }
 
+/// The identifier of the QEMU-only control frames (`0x3F0`: a low-priority command to topic 0xF0,
+/// which the protocol leaves free; on a robot it would be rejected as `unknown-topic`): a stimulus
+/// changes a board's simulated world with them.
+pub const SIM_CONTROL_ID: u16 = 0x3F0;
+
+/// The receive FIFO with the QEMU-only control frames ([`SIM_CONTROL_ID`]) taken out before the
+/// command queue: each one's data goes to the board's `apply`, the app never sees them.
+pub struct ControlledRxPort {
+    apply: fn(&[u8]),
+}
+
+impl ControlledRxPort {
+    /// A receive port that hands the control frames' data to `apply`.
+    pub const fn new(apply: fn(&[u8])) -> Self {
+        Self { apply }
+    }
+}
+
+impl CanRx for ControlledRxPort {
+    fn receive(&mut self) -> Option<RxEvent> {
+        loop {
+            match can::receive()? {
+                RxEvent::Frame(frame) if frame.id == SIM_CONTROL_ID => {
+                    (self.apply)(frame.payload())
+                }
+                other => return Some(other),
+            }
+        }
+    }
+}
+
 /// The CAN error monitor of the QEMU build: the driver's over the controller model (whose bus
 /// side reports no errors, so it stays error-active).
 pub type CanErrors = crate::bxcan::ErrorMonitor<can::Controller>;

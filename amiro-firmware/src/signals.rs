@@ -3,8 +3,11 @@
 //! SYS_SYNC_N (open drain, wired-OR) is held low by AMiRo-BLT and by each module until it is
 //! initialised; the system is up when the line reads high. A falling SYS_PD_N asks every module to
 //! stop and hand over to the bootloader (`shared/reference/amiro-boards.md` §2, §7). A board's
-//! `board.rs` implements [`SystemSignals`] on its pins; the QEMU platform simulates them.
+//! `board.rs` hands its two pins to [`Lines`], which implements [`SystemSignals`] on them; the
+//! QEMU platform simulates them.
 use core::sync::atomic::{AtomicBool, Ordering};
+
+use embedded_hal::digital::OutputPin;
 
 static SHUTTING_DOWN: AtomicBool = AtomicBool::new(false);
 
@@ -18,6 +21,46 @@ pub trait SystemSignals {
     fn shutdown_requested(&self) -> bool;
     /// Acknowledges the SYS_PD_N edge interrupt.
     fn clear_shutdown_interrupt(&mut self);
+}
+
+/// SYS_SYNC_N and SYS_PD_N as every board wires them: both open-drain outputs the board holds
+/// (SYS_PD_N released high: its input level and edge detector still work), SYS_PD_N on pin
+/// `PD_PIN` of port C, its falling edge watched on EXTI line `PD_PIN` (the board's `init` sets the
+/// edge detector up).
+pub struct Lines<Sync, Pd, const PD_PIN: u8> {
+    sync: Sync,
+    pd: Pd,
+}
+
+impl<Sync: OutputPin, Pd: OutputPin, const PD_PIN: u8> Lines<Sync, Pd, PD_PIN> {
+    /// The lines on these pins.
+    pub const fn new(sync: Sync, pd: Pd) -> Self {
+        Self { sync, pd }
+    }
+
+    /// Drives SYS_PD_N low: asks every module to shut down (the power board's privilege).
+    pub fn drive_shutdown_request(&mut self) {
+        // The HAL's pins cannot fail (`Infallible`).
+        let _ = self.pd.set_low();
+    }
+}
+
+impl<Sync: OutputPin, Pd: OutputPin, const PD_PIN: u8> SystemSignals for Lines<Sync, Pd, PD_PIN> {
+    fn release_sync(&mut self) {
+        let _ = self.sync.set_high();
+    }
+
+    fn pull_sync_low(&mut self) {
+        let _ = self.sync.set_low();
+    }
+
+    fn shutdown_requested(&self) -> bool {
+        crate::chip::port_c_reads_low::<PD_PIN>()
+    }
+
+    fn clear_shutdown_interrupt(&mut self) {
+        crate::chip::clear_exti_pending::<PD_PIN>();
+    }
 }
 
 /// Handles a SYS_PD_N edge interrupt: a glitch is not a request, so this acts only while the line

@@ -109,6 +109,64 @@ pub fn on_can_status<C: Clock, R: crate::bxcan::Registers>(
     );
 }
 
+/// The start of every board's `init`: the independent watchdog first, at the boot's timeout
+/// (nothing in the boot may hang for ever), then the reset cause for the diagnostics, the
+/// telemetry channels and the boot report naming `board`.
+pub fn boot(board: &str, boot_watchdog_timeout_ms: u32) {
+    crate::watchdog::start(boot_watchdog_timeout_ms);
+    crate::health::set_reset_cause(crate::chip::take_reset_cause());
+    telemetry::init();
+    telemetry::boot_report(board);
+}
+
+/// The end of every board's `init`: releases SYS_SYNC_N (wired-OR: the system is up once every
+/// module has released it), and, as a shutdown requested before the board was up has no edge to
+/// catch, looks at SYS_PD_N's level and pends `shutdown_interrupt` if it is low.
+pub fn come_up(
+    signals: &mut impl signals::SystemSignals,
+    shutdown_interrupt: impl cortex_m::interrupt::InterruptNumber,
+) {
+    signals.release_sync();
+    telemetry::init_done();
+    if signals.shutdown_requested() {
+        cortex_m::peripheral::NVIC::pend(shutdown_interrupt);
+    }
+}
+
+/// The watchdog task every board runs at its least urgent level: starts the independent watchdog
+/// at its run-time `timeout_ms`, then every `period_us` feeds it only if the board's progress
+/// mark was set since the last look (a fed dog proves the whole schedule is alive), and polls the
+/// CAN controller's error state (it recovers from bus-off without an interrupt).
+pub async fn feed_watchdog<C: Clock, R: crate::bxcan::Registers>(
+    timeout_ms: u32,
+    period_us: u64,
+    mut alive: impl rtic_core::Mutex<T = crate::liveness::Liveness>,
+    mut can_errors: impl rtic_core::Mutex<T = crate::bxcan::ErrorMonitor<R>>,
+) -> ! {
+    crate::watchdog::start(timeout_ms);
+    let mut next = C::now_us();
+    loop {
+        next += period_us;
+        C::delay_until_us(next).await;
+        if alive.lock(|a| a.take()) {
+            crate::watchdog::feed();
+        }
+        can_errors.lock(on_can_status::<C, R>);
+    }
+}
+
+/// Gives the queued frames up to `timeout_us` to leave (before a hand-over), looking every
+/// millisecond.
+pub async fn drain_tx_queue<C: Clock, const N: usize>(
+    tx_queue: &mut impl rtic_core::Mutex<T = TxQueue<N>>,
+    timeout_us: u64,
+) {
+    let deadline = C::now_us() + timeout_us;
+    while tx_queue.lock(|q| q.len()) > 0 && C::now_us() < deadline {
+        C::delay_until_us(C::now_us() + 1_000).await;
+    }
+}
+
 /// Emits the trace event for a command's outcome.
 pub fn trace_outcome(now: u64, id: u16, outcome: &Result<Outcome, Rejection>) {
     telemetry::trace(&TraceEvent::new(now, TraceKind::for_command(id, outcome)));

@@ -12,8 +12,8 @@ use core::fmt;
 use core::num::NonZeroU32;
 
 use amiro_can::{
-    decode_command, AdmissionPolicy, Board, CanId, Command, DecodeError, Kind, LedCommand,
-    MotorCommand, Priority, SensorCommand, SensorMode, ShutdownMode, Topic,
+    decode_command, AdmissionPolicy, Board, CanId, Command, DecodeError, Kind, Priority,
+    SensorCommand, SensorMode, Topic,
 };
 
 /// Room in the publisher table: the most sensor topics any one board owns in the protocol's topic
@@ -262,36 +262,13 @@ pub enum Outcome {
         /// they re-read [`SensorDataHandler::next_due`] (a one-shot or a new publisher is due now).
         wake: Levels,
     },
-    /// A motor command for this board: hand it to the motor controller.
-    Motor {
-        /// The CAN priority it came with.
-        priority: Priority,
-        /// The commanded velocities.
-        command: MotorCommand,
-    },
-    /// An LED command for this board: hand it to the LED driver.
-    Led {
-        /// The CAN priority it came with.
-        priority: Priority,
-        /// The LED and its colour.
-        command: LedCommand,
-    },
-    /// An admission-policy command (mode 3 on this board's diagnostics topic). The handler keeps the
-    /// policy ([`SensorDataHandler::admission_policy`]); the firmware's admission check reads it there.
-    Policy {
-        /// The CAN priority it came with.
-        priority: Priority,
-        /// The policy now in force.
-        policy: AdmissionPolicy,
-    },
-    /// A shutdown command (PowerManagement only; the other boards ignore it and follow SYS_PD_N):
-    /// the firmware starts the robot's shutdown in this mode.
-    Shutdown {
-        /// The CAN priority it came with.
-        priority: Priority,
-        /// Hibernate, deep sleep, transportation or restart (the AMiRo-BLT reason).
-        mode: ShutdownMode,
-    },
+    /// A command for this board that the firmware acts on, as decoded: a motor command (hand it
+    /// to the motor controller), an LED command (to the LED driver), an admission policy (the
+    /// handler keeps it, [`SensorDataHandler::admission_policy`]; the firmware's admission check
+    /// reads it there) or a shutdown (PowerManagement only; the other boards ignore it and follow
+    /// SYS_PD_N: the firmware starts the robot's shutdown in its mode). Never a sensor command: those
+    /// are applied, [`Outcome::Sensor`].
+    Command(Command),
     /// Not for this board; counted, nothing changed.
     Ignored(Ignored),
 }
@@ -454,23 +431,18 @@ impl SensorDataHandler {
                 Some(wake) => Outcome::Sensor { command, wake },
                 None => Outcome::Ignored(Ignored::OtherBoard(command.topic)),
             },
-            Command::Motor { priority, command } => Outcome::Motor { priority, command },
-            Command::Led { priority, command } => Outcome::Led { priority, command },
+            Command::Motor { .. } | Command::Led { .. } => Outcome::Command(command),
             // `not_for_us` already ignored another board's diagnostics topic and, on every board
             // but PowerManagement, the shutdown topic; the checks here keep that true by themselves.
-            Command::Policy {
-                priority,
-                board,
-                policy,
-            } if board == self.board => {
+            Command::Policy { board, policy, .. } if board == self.board => {
                 self.policy = policy;
-                Outcome::Policy { priority, policy }
+                Outcome::Command(command)
             }
             Command::Policy { board, .. } => {
                 Outcome::Ignored(Ignored::OtherBoard(board.diagnostics_topic()))
             }
-            Command::Shutdown { priority, mode } if Topic::Shutdown.board() == self.board => {
-                Outcome::Shutdown { priority, mode }
+            Command::Shutdown { .. } if Topic::Shutdown.board() == self.board => {
+                Outcome::Command(command)
             }
             Command::Shutdown { .. } => Outcome::Ignored(Ignored::OtherBoard(Topic::Shutdown)),
         };

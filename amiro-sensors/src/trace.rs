@@ -19,6 +19,19 @@ use amiro_can::{DecodeError, Topic};
 use crate::handler::{Outcome, Rejection};
 use crate::tx_queue::PushOutcome;
 
+/// The kinds whose one field is a frame identifier, the identifier bound to `$id`: one list for the
+/// binary record and the text line, which treat them alike.
+macro_rules! frame_id_kinds {
+    ($id:ident) => {
+        TraceKind::CommandAccepted { id: $id }
+            | TraceKind::CommandIgnored { id: $id }
+            | TraceKind::FrameQueued { id: $id }
+            | TraceKind::FrameReplaced { id: $id }
+            | TraceKind::FrameSent { id: $id }
+            | TraceKind::QueueOverflow { id: $id }
+    };
+}
+
 /// Size of one encoded trace record.
 pub const ENCODED_LEN: usize = 18;
 
@@ -340,12 +353,7 @@ impl TraceEvent {
         writer.put(&[self.kind.tag()]);
         writer.put(&self.at_us.to_le_bytes());
         match self.kind {
-            TraceKind::CommandAccepted { id }
-            | TraceKind::CommandIgnored { id }
-            | TraceKind::FrameQueued { id }
-            | TraceKind::FrameReplaced { id }
-            | TraceKind::FrameSent { id }
-            | TraceKind::QueueOverflow { id } => writer.put(&id.to_le_bytes()),
+            frame_id_kinds!(id) => writer.put(&id.to_le_bytes()),
             TraceKind::CommandRejected { id, reason } => {
                 writer.put(&id.to_le_bytes());
                 writer.put(&[reason.0]);
@@ -517,12 +525,7 @@ impl fmt::Display for TraceEvent {
         write!(f, "({}) trace {}", Seconds(self.at_us), self.kind.name())?;
         match self.kind {
             // Identifiers as can-utils print them (three hex digits).
-            TraceKind::CommandAccepted { id }
-            | TraceKind::CommandIgnored { id }
-            | TraceKind::FrameQueued { id }
-            | TraceKind::FrameReplaced { id }
-            | TraceKind::FrameSent { id }
-            | TraceKind::QueueOverflow { id } => write!(f, " {id:03X}"),
+            frame_id_kinds!(id) => write!(f, " {id:03X}"),
             TraceKind::CommandRejected { id, reason } => write!(f, " {id:03X} {}", reason.name()),
             TraceKind::SampleTaken { topic, release_us } => {
                 write!(f, " {topic} release={}", Seconds(release_us))

@@ -14,6 +14,20 @@ use embedded_hal_mock::eh1::i2c::{Mock as I2cMock, Transaction as T};
 
 const A: u8 = 0x28;
 const IDS: [u8; 4] = [0xA0, 0xFB, 0x32, 0x0F];
+/// What a part that is not there (or not yet booted) answers: no acknowledge of its address.
+const NACK: ErrorKind = ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address);
+
+/// A part found in configuration mode (OPR_MODE 0) where the driver set AMG (7): it reset.
+const NOT_RUNNING: Error<ErrorKind> = Error::ConfigMismatch {
+    register: 0x3D,
+    expected: 0x07,
+    found: 0x00,
+};
+
+/// `count` identity reads of `len` bytes that the part does not acknowledge.
+fn unanswered_identity_reads(count: usize, len: usize) -> Vec<T> {
+    vec![T::write_read(A, vec![0x00], vec![0; len]).with_error(NACK); count]
+}
 
 fn init_script(config_readback: [u8; 4], units: u8, mode: u8) -> Vec<T> {
     vec![
@@ -87,24 +101,32 @@ fn init_reports_a_setting_the_part_did_not_take() {
     let mut i2c = I2cMock::new(&init_script([0x0E, 0x0F, 0x22, 0x00], 0x01, 0x00));
     assert_eq!(
         Bno055::new(i2c.clone()).init(&mut NoopDelay::new()),
-        Err(Error::ConfigMismatch {
-            register: 0x3D,
-            expected: 0x07,
-            found: 0x00
-        })
+        Err(NOT_RUNNING)
     );
     i2c.done();
 }
 
 #[test]
 fn an_absent_part_is_a_bus_error() {
-    let nack = ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address);
-    let mut i2c = I2cMock::new(&[T::write_read(A, vec![0x00], vec![0; 4]).with_error(nack)]);
-    assert_eq!(
-        Bno055::new(i2c.clone()).init(&mut NoopDelay::new()),
-        Err(Error::Bus(nack))
-    );
-    i2c.done();
+    type Attempt = fn(&mut Bno055<I2cMock>) -> Result<(), Error<ErrorKind>>;
+    let attempts: [(Vec<T>, Attempt); 2] = [
+        // `init` stops at the first identity read.
+        (unanswered_identity_reads(1, 4), |imu| {
+            imu.init(&mut NoopDelay::new())
+        }),
+        // `wait_for_boot` is bounded and returns the last error.
+        (unanswered_identity_reads(3, 1), |imu| {
+            imu.wait_for_boot(&mut NoopDelay::new(), 20)
+        }),
+    ];
+    for (script, attempt) in attempts {
+        let mut i2c = I2cMock::new(&script);
+        assert_eq!(
+            attempt(&mut Bno055::new(i2c.clone())),
+            Err(Error::Bus(NACK))
+        );
+        i2c.done();
+    }
 }
 
 #[test]
@@ -165,29 +187,16 @@ fn a_dead_bus_pattern_is_checked_against_the_identity() {
 
 #[test]
 fn wait_for_boot_polls_until_the_part_answers() {
-    let nack = ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address);
-    let mut i2c = I2cMock::new(&[
-        T::write_read(A, vec![0x00], vec![0]).with_error(nack),
-        T::write_read(A, vec![0x00], vec![0]).with_error(nack),
-        T::write_read(A, vec![0x00], vec![0xA0]),
-    ]);
+    let mut script = unanswered_identity_reads(2, 1);
+    script.push(T::write_read(A, vec![0x00], vec![0xA0]));
+    let mut i2c = I2cMock::new(&script);
     let mut delay = CheckedDelay::new(&[D::delay_ms(10), D::delay_ms(10)]);
     Bno055::new(i2c.clone())
         .wait_for_boot(&mut delay, 800)
         .unwrap();
     i2c.done();
     delay.done();
-    // A part that never answers: bounded, the last error returned.
-    let mut i2c = I2cMock::new(&[
-        T::write_read(A, vec![0x00], vec![0]).with_error(nack),
-        T::write_read(A, vec![0x00], vec![0]).with_error(nack),
-        T::write_read(A, vec![0x00], vec![0]).with_error(nack),
-    ]);
-    assert_eq!(
-        Bno055::new(i2c.clone()).wait_for_boot(&mut NoopDelay::new(), 20),
-        Err(Error::Bus(nack))
-    );
-    i2c.done();
+    // A part that never answers: `an_absent_part_is_a_bus_error`.
 }
 
 #[test]
@@ -201,14 +210,7 @@ fn a_verified_read_checks_the_operating_mode_after_the_data() {
     ]);
     let mut imu = Bno055::new(i2c.clone());
     assert_eq!(imu.read_verified(0x14).unwrap(), [16, 0, 0]);
-    assert_eq!(
-        imu.read_verified(0x14),
-        Err(Error::ConfigMismatch {
-            register: 0x3D,
-            expected: 0x07,
-            found: 0x00
-        })
-    );
+    assert_eq!(imu.read_verified(0x14), Err(NOT_RUNNING));
     i2c.done();
 }
 

@@ -15,16 +15,10 @@ use amiro_sensors::drivers::vcnl4020::Vcnl4020;
 use amiro_sensors::drivers::{Error, IDENTITY_CHECK_EVERY};
 use amiro_sensors::sim::*;
 use embedded_hal_mock::eh1::i2c::{Mock as I2cMock, Transaction as I2cT};
-use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as T};
+use embedded_hal_mock::eh1::spi::Mock as SpiMock;
 
-fn read_tx(command: u8, response: &[u8]) -> Vec<T<u8>> {
-    vec![
-        T::transaction_start(),
-        T::write_vec(vec![command]),
-        T::read_vec(response.to_vec()),
-        T::transaction_end(),
-    ]
-}
+mod common;
+use common::read_tx;
 
 fn inertial() -> InertialSensors<SimGyroscope, SimAccelerometer> {
     let mut group = InertialSensors::new(SimGyroscope::new(), SimAccelerometer::new());

@@ -8,24 +8,8 @@ use amiro_sensors::drivers::Error;
 use embedded_hal::spi::{self, ErrorKind, Operation, SpiDevice};
 use embedded_hal_mock::eh1::spi::{Mock as SpiMock, Transaction as T};
 
-/// One `SpiDevice` transaction: command byte, then a read or a write.
-fn read_tx(command: u8, response: &[u8]) -> Vec<T<u8>> {
-    vec![
-        T::transaction_start(),
-        T::write_vec(vec![command]),
-        T::read_vec(response.to_vec()),
-        T::transaction_end(),
-    ]
-}
-
-fn write_tx(command: u8, data: &[u8]) -> Vec<T<u8>> {
-    vec![
-        T::transaction_start(),
-        T::write_vec(vec![command]),
-        T::write_vec(data.to_vec()),
-        T::transaction_end(),
-    ]
-}
+mod common;
+use common::{read_tx, write_tx};
 
 /// An SPI device whose every transfer fails.
 struct BrokenSpi;
@@ -43,19 +27,22 @@ impl SpiDevice for BrokenSpi {
 // ---------------------------------------------------------------- L3G4200D
 
 const GYRO_CONFIG: [u8; 5] = [0x1F, 0x00, 0x08, 0x10, 0x00];
+const ACCEL_CONFIG: [u8; 5] = [0x27, 0x00, 0x82, 0x30, 0x00];
 
-fn gyro_init_script() -> Vec<T<u8>> {
+/// What `init` does on either part: WHO_AM_I read (answering `identity`), CTRL_REG1..5 written in
+/// one auto-increment burst, then read back in one (answering `readback`).
+fn init_script(identity: u8, config: [u8; 5], readback: [u8; 5]) -> Vec<T<u8>> {
     [
-        read_tx(0x8F, &[0xD3]),       // WHO_AM_I, read, single byte
-        write_tx(0x60, &GYRO_CONFIG), // CTRL_REG1.., write, auto-increment
-        read_tx(0xE0, &GYRO_CONFIG),  // CTRL_REG1.., read, auto-increment
+        read_tx(0x8F, &[identity]), // WHO_AM_I, read, single byte
+        write_tx(0x60, &config),    // CTRL_REG1.., write, auto-increment
+        read_tx(0xE0, &readback),   // CTRL_REG1.., read, auto-increment
     ]
     .concat()
 }
 
 #[test]
 fn gyro_init_writes_the_original_settings_and_reads_them_back() {
-    let mut spi = SpiMock::new(&gyro_init_script());
+    let mut spi = SpiMock::new(&init_script(0xD3, GYRO_CONFIG, GYRO_CONFIG));
     let mut gyro = L3g4200d::new(spi.clone());
     gyro.init().unwrap();
     assert_eq!(gyro.control_registers(), GYRO_CONFIG);
@@ -63,39 +50,34 @@ fn gyro_init_writes_the_original_settings_and_reads_them_back() {
 }
 
 #[test]
-fn gyro_rejects_a_wrong_identity_before_writing_anything() {
+fn both_parts_reject_a_wrong_identity_before_writing_anything() {
+    let wrong = |expected, found| Err(Error::WrongIdentity { expected, found });
     let mut spi = SpiMock::new(&read_tx(0x8F, &[0xD4]));
-    let mut gyro = L3g4200d::new(spi.clone());
-    assert_eq!(
-        gyro.init(),
-        Err(Error::WrongIdentity {
-            expected: 0xD3,
-            found: 0xD4
-        })
-    );
+    assert_eq!(L3g4200d::new(spi.clone()).init(), wrong(0xD3, 0xD4));
+    spi.done();
+    let mut spi = SpiMock::new(&read_tx(0x8F, &[0xD3]));
+    assert_eq!(Lis331dlh::new(spi.clone()).init(), wrong(0x32, 0xD3));
     spi.done();
 }
 
 #[test]
-fn gyro_reports_a_register_that_did_not_take_the_range() {
-    let mut readback = GYRO_CONFIG;
-    readback[3] = 0x00; // still ±250 dps
-    let script = [
-        read_tx(0x8F, &[0xD3]),
-        write_tx(0x60, &GYRO_CONFIG),
-        read_tx(0xE0, &readback),
-    ]
-    .concat();
-    let mut spi = SpiMock::new(&script);
-    let mut gyro = L3g4200d::new(spi.clone());
-    assert_eq!(
-        gyro.init(),
+fn both_parts_report_a_register_that_did_not_take_the_range() {
+    let mismatch = |expected, found| {
         Err(Error::ConfigMismatch {
             register: 0x23,
-            expected: 0x10,
-            found: 0x00
+            expected,
+            found,
         })
-    );
+    };
+    let mut readback = GYRO_CONFIG;
+    readback[3] = 0x00; // still ±250 dps
+    let mut spi = SpiMock::new(&init_script(0xD3, GYRO_CONFIG, readback));
+    assert_eq!(L3g4200d::new(spi.clone()).init(), mismatch(0x10, 0x00));
+    spi.done();
+    let mut readback = ACCEL_CONFIG;
+    readback[3] = 0x10; // still ±4 g
+    let mut spi = SpiMock::new(&init_script(0x32, ACCEL_CONFIG, readback));
+    assert_eq!(Lis331dlh::new(spi.clone()).init(), mismatch(0x30, 0x10));
     spi.done();
 }
 
@@ -155,17 +137,9 @@ fn gyro_passes_bus_errors_through() {
 
 // ---------------------------------------------------------------- LIS331DLH
 
-const ACCEL_CONFIG: [u8; 5] = [0x27, 0x00, 0x82, 0x30, 0x00];
-
 #[test]
 fn accel_init_writes_the_original_settings_at_8g() {
-    let script = [
-        read_tx(0x8F, &[0x32]),
-        write_tx(0x60, &ACCEL_CONFIG),
-        read_tx(0xE0, &ACCEL_CONFIG),
-    ]
-    .concat();
-    let mut spi = SpiMock::new(&script);
+    let mut spi = SpiMock::new(&init_script(0x32, ACCEL_CONFIG, ACCEL_CONFIG));
     let mut accel = Lis331dlh::new(spi.clone());
     accel.init().unwrap();
     spi.done();
@@ -174,13 +148,7 @@ fn accel_init_writes_the_original_settings_at_8g() {
 #[test]
 fn accel_at_4g_writes_the_1x_ctrl4() {
     let config = [0x27, 0x00, 0x82, 0x10, 0x00];
-    let script = [
-        read_tx(0x8F, &[0x32]),
-        write_tx(0x60, &config),
-        read_tx(0xE0, &config),
-    ]
-    .concat();
-    let mut spi = SpiMock::new(&script);
+    let mut spi = SpiMock::new(&init_script(0x32, config, config));
     let mut accel = Lis331dlh::with_range(spi.clone(), lis331dlh::Range::G4);
     accel.init().unwrap();
     spi.done();
@@ -190,50 +158,8 @@ fn accel_at_4g_writes_the_1x_ctrl4() {
 fn accel_ignores_the_self_clearing_boot_bit_on_read_back() {
     let mut readback = ACCEL_CONFIG;
     readback[1] = 0x80; // BOOT still showing: not a mismatch
-    let script = [
-        read_tx(0x8F, &[0x32]),
-        write_tx(0x60, &ACCEL_CONFIG),
-        read_tx(0xE0, &readback),
-    ]
-    .concat();
-    let mut spi = SpiMock::new(&script);
+    let mut spi = SpiMock::new(&init_script(0x32, ACCEL_CONFIG, readback));
     Lis331dlh::new(spi.clone()).init().unwrap();
-    spi.done();
-}
-
-#[test]
-fn accel_rejects_a_wrong_identity() {
-    let mut spi = SpiMock::new(&read_tx(0x8F, &[0xD3]));
-    let mut accel = Lis331dlh::new(spi.clone());
-    assert_eq!(
-        accel.init(),
-        Err(Error::WrongIdentity {
-            expected: 0x32,
-            found: 0xD3
-        })
-    );
-    spi.done();
-}
-
-#[test]
-fn accel_reports_a_range_mismatch() {
-    let mut readback = ACCEL_CONFIG;
-    readback[3] = 0x10;
-    let script = [
-        read_tx(0x8F, &[0x32]),
-        write_tx(0x60, &ACCEL_CONFIG),
-        read_tx(0xE0, &readback),
-    ]
-    .concat();
-    let mut spi = SpiMock::new(&script);
-    assert_eq!(
-        Lis331dlh::new(spi.clone()).init(),
-        Err(Error::ConfigMismatch {
-            register: 0x23,
-            expected: 0x30,
-            found: 0x10
-        })
-    );
     spi.done();
 }
 

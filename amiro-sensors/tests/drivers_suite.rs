@@ -303,10 +303,9 @@ fn a_missing_gauge_degrades_to_the_other_one_and_is_counted() {
 
 // ---------------------------------------------------------------- LightRing
 
-#[test]
-fn led_command_sets_and_latches_the_ring() {
-    let mut ring = LightRing::new(SimLedDriver::new());
-    let command = LedCommand::new(
+/// LED 3 to (10, 20, 30): the command both ring sizes are tested with.
+fn led_3_command() -> LedCommand {
+    LedCommand::new(
         3,
         Rgb {
             r: 10,
@@ -314,7 +313,13 @@ fn led_command_sets_and_latches_the_ring() {
             b: 30,
         },
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn led_command_sets_and_latches_the_ring() {
+    let mut ring = LightRing::new(SimLedDriver::new());
+    let command = led_3_command();
     ring.apply(&command).unwrap();
     let sim = ring.release();
     assert_eq!(sim.latches(), 1);
@@ -325,15 +330,7 @@ fn led_command_sets_and_latches_the_ring() {
 #[test]
 fn led_command_on_the_24_led_ring_sets_the_leds_group_and_latches() {
     let mut ring = LightRing24::new(SimLedChain::<3>::new());
-    let command = LedCommand::new(
-        3,
-        Rgb {
-            r: 10,
-            g: 20,
-            b: 30,
-        },
-    )
-    .unwrap();
+    let command = led_3_command();
     ring.apply(&command).unwrap();
     let sim = ring.release();
     assert_eq!(sim.latches(), 1);

@@ -2,8 +2,8 @@
 //! payloads in, publisher table and releases out, under a fake clock.
 
 use amiro_can::{
-    AdmissionPolicy, Board, DecodeError, Kind, LedCommand, MotorCommand, Priority, Rgb, SampleTime,
-    SensorMode, ShutdownMode, TimeUnit, Topic,
+    AdmissionPolicy, Board, Command, DecodeError, Kind, LedCommand, MotorCommand, Priority, Rgb,
+    SampleTime, SensorMode, ShutdownMode, TimeUnit, Topic,
 };
 use amiro_sensors::clock::{Clock, FakeClock};
 use amiro_sensors::handler::{
@@ -351,13 +351,13 @@ fn actuator_commands_go_to_the_sinks_of_their_board_only() {
     let mut h = dwd();
     assert_eq!(
         h.on_frame(0, motor_id, &payload),
-        Ok(Outcome::Motor {
+        Ok(Outcome::Command(Command::Motor {
             priority: Priority::Urgent,
             command: MotorCommand {
                 velocity_um_s: 100_000,
                 angular_urad_s: -50_000
             }
-        })
+        }))
     );
     assert_eq!(h.counters().accepted, 1);
 
@@ -371,7 +371,7 @@ fn actuator_commands_go_to_the_sinks_of_their_board_only() {
     );
     assert_eq!(
         ring.on_frame(0, led_id, &[10, 20, 30]),
-        Ok(Outcome::Led {
+        Ok(Outcome::Command(Command::Led {
             priority: Priority::Medium,
             command: LedCommand {
                 led: 5,
@@ -381,7 +381,7 @@ fn actuator_commands_go_to_the_sinks_of_their_board_only() {
                     b: 30
                 }
             }
-        })
+        }))
     );
     assert_eq!(
         ring.on_frame(0, motor_id, &payload),
@@ -745,10 +745,11 @@ fn admission_policy_command_is_only_for_the_board_it_names() {
             if other == board {
                 assert_eq!(
                     outcome,
-                    Outcome::Policy {
+                    Outcome::Command(Command::Policy {
                         priority: Priority::High,
+                        board,
                         policy: AdmissionPolicy::AcceptAndWarn
-                    }
+                    })
                 );
                 assert_eq!(h.admission_policy(), AdmissionPolicy::AcceptAndWarn);
             } else {
@@ -763,10 +764,11 @@ fn admission_policy_command_is_only_for_the_board_it_names() {
         let id = command_id(Priority::Low, board.diagnostics_topic());
         assert_eq!(
             h.on_frame(20, id, &[3, 0]),
-            Ok(Outcome::Policy {
+            Ok(Outcome::Command(Command::Policy {
                 priority: Priority::Low,
+                board,
                 policy: AdmissionPolicy::Refuse
-            })
+            }))
         );
         assert_eq!(h.admission_policy(), AdmissionPolicy::Refuse);
         // A bad policy is rejected, counted, and changes nothing.
@@ -815,10 +817,10 @@ fn shutdown_command_is_for_power_management_only() {
         if board == Board::PowerManagement {
             assert_eq!(
                 outcome,
-                Outcome::Shutdown {
+                Outcome::Command(Command::Shutdown {
                     priority: Priority::Urgent,
                     mode: ShutdownMode::Transportation
-                }
+                })
             );
             assert_eq!(h.counters().accepted, 2);
             // A malformed shutdown (wrong key) is rejected with its reason.
@@ -859,14 +861,17 @@ proptest! {
                 Ok(Outcome::Sensor { command, .. }) => {
                     prop_assert_eq!(command.topic.board(), Board::DiWheelDrive);
                 }
-                Ok(Outcome::Motor { .. }) | Ok(Outcome::Led { .. }) => {
+                Ok(Outcome::Command(Command::Motor { .. })) | Ok(Outcome::Command(Command::Led { .. })) => {
                     prop_assert_eq!(snapshot(&h), before);
                 }
-                Ok(Outcome::Policy { policy, .. }) => {
+                Ok(Outcome::Command(Command::Policy { policy, .. })) => {
                     prop_assert_eq!(snapshot(&h), before);
                     prop_assert_eq!(h.admission_policy(), policy);
                 }
-                Ok(Outcome::Shutdown { .. }) => {
+                Ok(Outcome::Command(Command::Sensor(_))) => {
+                    prop_assert!(false, "a sensor command came back unapplied: {}:{:02X?}", id, data);
+                }
+                Ok(Outcome::Command(Command::Shutdown { .. })) => {
                     prop_assert!(false, "DiWheelDrive accepted a shutdown command: {}:{:02X?}", id, data);
                 }
                 Ok(Outcome::Ignored(_)) | Err(_) => {

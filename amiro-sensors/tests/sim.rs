@@ -21,7 +21,7 @@ fn simulators_fit_a_few_hundred_bytes() {
         + size_of::<SimCompassBus>()
         + size_of::<SimFloorBus>()
         + size_of::<WheelPlant>();
-    // 200 B with the patterns alone; the world feed (`set_rate`, `set_acceleration`, `set_field`,
+    // 200 B with the patterns alone; the world feed (`set_measured`, `set_field`,
     // `set_proximity`: docs/world.md) adds 80 B.
     assert!(
         diwheeldrive <= 288,
@@ -44,7 +44,11 @@ fn gyroscope_driver_configures_the_simulator_and_reads_its_pattern() {
     gyro.init().unwrap();
     for n in 0..500 {
         let rate = gyro.read().unwrap();
-        for (got, want) in rate.millidegrees_per_s.iter().zip(SimGyroscope::rate_at(n)) {
+        for (got, want) in rate
+            .millidegrees_per_s
+            .iter()
+            .zip(SimGyroscope::pattern_at(n))
+        {
             // One digit at ±500 dps is 17.5 mdps; the simulator rounds to the nearest digit.
             assert!((got - want).abs() <= 9, "sample {n}: {got} vs {want}");
         }
@@ -85,7 +89,7 @@ fn accelerometer_driver_reads_one_g_down() {
     accel.init().unwrap();
     for n in 0..300 {
         let a = accel.read().unwrap();
-        for (got, want) in a.micro_g.iter().zip(SimAccelerometer::acceleration_at(n)) {
+        for (got, want) in a.micro_g.iter().zip(SimAccelerometer::pattern_at(n)) {
             assert!((got - want).abs() <= 1_950, "sample {n}: {got} vs {want}");
         }
     }

@@ -14,13 +14,13 @@ fn the_gyroscope_reads_a_fed_turn() {
     gyro.init().unwrap();
     // 180 °/s about z: 10 285.7 digits of 17.5 mdps at ±500 dps, rounded to 10 286 → 180 005 mdps;
     // −1 °/s on y: −57.1 → −57 digits → −997.5, which the driver rounds away from zero.
-    gyro.bus_mut().set_rate(Some([0, -1_000, 180_000]));
+    gyro.bus_mut().set_measured(Some([0, -1_000, 180_000]));
     assert_eq!(gyro.read_raw().unwrap(), [0, -57, 10_286]);
     assert_eq!(gyro.read().unwrap().millidegrees_per_s, [0, -998, 180_005]);
-    gyro.bus_mut().set_rate(None);
+    gyro.bus_mut().set_measured(None);
     let rate = gyro.read().unwrap().millidegrees_per_s;
     // Sample 2 of the pattern: the two fed reads counted as samples too.
-    let want = SimGyroscope::rate_at(2);
+    let want = SimGyroscope::pattern_at(2);
     assert!(
         rate.iter().zip(want).all(|(g, w)| (g - w).abs() <= 9),
         "{rate:?}"
@@ -32,11 +32,9 @@ fn the_accelerometer_reads_a_fed_acceleration() {
     let mut accel = Lis331dlh::new(SimAccelerometer::new());
     accel.init().unwrap();
     // 0.2 g forward, gravity: 51.3 and 256.4 digits of 3.9 mg at ±8 g → 51, 256 → 198.9, 998.4 mg.
-    accel
-        .bus_mut()
-        .set_acceleration(Some([200_000, 0, 1_000_000]));
+    accel.bus_mut().set_measured(Some([200_000, 0, 1_000_000]));
     assert_eq!(accel.read().unwrap().milli_g(), [199, 0, 998]);
-    accel.bus_mut().set_acceleration(None);
+    accel.bus_mut().set_measured(None);
     assert_ne!(accel.read().unwrap().milli_g(), [199, 0, 998]);
 }
 

@@ -8,8 +8,11 @@
 //! sensors, motor PWM on TIM2 partial remap 1 (PA15 left fwd, PB3 left back, PA2 right fwd,
 //! PA3 right back) into an A3906, POWER_EN PB2, encoders on TIM3 full remap (PC6/PC7, left) and
 //! TIM4 (PB6/PB7, right), SYS_SYNC_N PC1, SYS_PD_N PC8, status LED PA1 (active low).
+use crate::sensors::SensorBuses;
+use crate::Board;
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::i2c::{self, Master};
+use amiro_firmware::signals::Lines;
 #[cfg(feature = "rev-1-1")]
 use amiro_firmware::spi;
 #[cfg(feature = "rev-1-1")]
@@ -18,7 +21,7 @@ use embedded_hal::spi::{Mode as SpiMode, Phase, Polarity};
 use embedded_hal_bus::spi::{AtomicDevice, NoDelay};
 use embedded_hal_bus::util::AtomicCell;
 use stm32f1xx_hal::afio::AfioExt;
-use stm32f1xx_hal::gpio::{GpioExt, OpenDrain, Output, PinState, PushPull, PA1, PB2, PC1, PC8};
+use stm32f1xx_hal::gpio::{GpioExt, OpenDrain, Output, PinState, PushPull, PB2, PC1, PC8};
 #[cfg(feature = "rev-1-1")]
 use stm32f1xx_hal::gpio::{PC13, PC14};
 use stm32f1xx_hal::pac;
@@ -80,57 +83,8 @@ impl embedded_hal::delay::DelayNs for ImuDelay {
     }
 }
 
-/// The sensor buses `init` hands to `sensors::groups` (revision 1-1).
-#[cfg(feature = "rev-1-1")]
-pub struct SensorBuses {
-    /// Gyroscope SPI device.
-    pub gyro_spi: GyroSpi,
-    /// Accelerometer SPI device.
-    pub accel_spi: AccelSpi,
-    /// Compass bus.
-    pub compass_i2c: CompassI2c,
-    /// Floor-sensor bus.
-    pub floor_i2c: FloorI2c,
-}
-
-/// The sensor buses `init` hands to `sensors::groups` (revision 1-2).
-#[cfg(feature = "rev-1-2")]
-pub struct SensorBuses {
-    /// The BNO055's bus (I2C1), its reset already pulsed.
-    pub imu_i2c: ImuI2c,
-    /// Its waits.
-    pub imu_delay: ImuDelay,
-    /// Floor-sensor bus.
-    pub floor_i2c: FloorI2c,
-}
-
-/// Everything `init` hands on to the tasks.
-pub struct Board {
-    /// CAN transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// CAN receive FIFO 0 (command frames only, by hardware filter).
-    pub can_rx: CanRxPort,
-    /// CAN error-state monitor.
-    pub can_errors: CanErrors,
-    /// The sensors' buses.
-    pub sensors: SensorBuses,
-    /// Motor PWM and POWER_EN.
-    pub motors: Motors,
-    /// Wheel encoders.
-    pub encoders: Encoders,
-    /// System signals.
-    pub signals: SystemSignals,
-}
-
-/// The module's system-bus signals.
-pub struct SystemSignals {
-    /// SYS_SYNC_N: held low until the module is initialised (open drain, wired-OR).
-    pub sys_sync: PC1<Output<OpenDrain>>,
-    /// SYS_PD_N: a falling edge is a shutdown request (EXTI line 8).
-    pub sys_pd: PC8<Output<OpenDrain>>,
-    /// Status LED, active low.
-    pub led: PA1<Output<OpenDrain>>,
-}
+/// The module's system-bus signals: SYS_SYNC_N on PC1, SYS_PD_N on PC8 (EXTI line 8).
+pub type SystemSignals = Lines<PC1<Output<OpenDrain>>, PC8<Output<OpenDrain>>, 8>;
 
 /// Brings the board up. `spi_cell` is the static home of the SPI bus the two IMU devices of 1-1 share.
 pub fn init(
@@ -149,7 +103,7 @@ pub fn init(
     let mut rcc = dp.RCC.constrain();
     // Only 1-1 has the SPI sensors; 1-2 leaves SPI1 off (its clock and the block's reset untouched).
     #[cfg(feature = "rev-1-1")]
-    enable_spi1();
+    amiro_firmware::chip::reset_and_enable_spi1();
     TIMER_CLOCK_HZ.store(clocks.timer_hz, core::sync::atomic::Ordering::Relaxed);
     // The blocking I2C driver times out on the DWT cycle counter.
     cp.DCB.enable_trace();
@@ -181,7 +135,9 @@ pub fn init(
         .modify(|r, w| unsafe { w.bits(r.bits() | SYS_PD_LINE) });
     exti.imr()
         .modify(|r, w| unsafe { w.bits(r.bits() | SYS_PD_LINE) });
-    let led = gpioa
+    // The status LED (PA1, active low) lit while the application runs. Set once here; its pin
+    // value is zero-sized, so the configuration stays when it goes out of scope.
+    let _status_led_lit = gpioa
         .pa1
         .into_open_drain_output_with_state(&mut gpioa.crl, PinState::Low);
 
@@ -294,11 +250,7 @@ pub fn init(
     let _can_tx_pin = gpioa.pa12.into_alternate_push_pull(&mut gpioa.crh);
     let can = bxcan::bring_up(clocks.can_btr);
 
-    let signals = SystemSignals {
-        sys_sync,
-        sys_pd,
-        led,
-    };
+    let signals = SystemSignals::new(sys_sync, sys_pd);
     let _ = dp.IWDG;
     (
         Board {
@@ -467,42 +419,6 @@ impl Encoders {
     }
 }
 
-impl amiro_firmware::signals::SystemSignals for SystemSignals {
-    /// Releases SYS_SYNC_N: this module is initialised.
-    fn release_sync(&mut self) {
-        self.sys_sync.set_high();
-    }
-
-    /// Acknowledges the SYS_PD_N edge interrupt.
-    fn clear_shutdown_interrupt(&mut self) {
-        // SAFETY: writing 1 clears only line 8's pending bit.
-        unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(SYS_PD_LINE)) };
-    }
-
-    /// Whether SYS_PD_N reads low (a shutdown is requested), whatever the edge detector saw.
-    fn shutdown_requested(&self) -> bool {
-        // SAFETY: a read of GPIOC's input data register.
-        unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 8) == 0 }
-    }
-
-    /// Pulls SYS_SYNC_N low: the first step of the shutdown protocol (AMiRo-BLT then counts the
-    /// power board's pulses on it to learn which low-power mode to enter).
-    fn pull_sync_low(&mut self) {
-        self.sys_sync.set_low();
-    }
-}
-
-impl SystemSignals {
-    /// Status LED (active low).
-    pub fn set_led(&mut self, on: bool) {
-        if on {
-            self.led.set_low();
-        } else {
-            self.led.set_high();
-        }
-    }
-}
-
 /// Interrupt that runs the transmit path.
 pub const CAN_TX_INTERRUPT: pac::Interrupt = pac::Interrupt::USB_HP_CAN_TX;
 
@@ -517,15 +433,3 @@ pub fn start_monotonic(priority: u8) {
 
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI9_5;
-
-/// SPI1's clock on and the block reset (the runtime's master takes it from there).
-#[cfg(feature = "rev-1-1")]
-fn enable_spi1() {
-    // SAFETY: SPI1's reset and clock bits, owned by init.
-    unsafe {
-        let rcc = &*pac::RCC::ptr();
-        rcc.apb2rstr().modify(|_, w| w.spi1rst().set_bit());
-        rcc.apb2rstr().modify(|_, w| w.spi1rst().clear_bit());
-        rcc.apb2enr().modify(|_, w| w.spi1en().set_bit());
-    }
-}

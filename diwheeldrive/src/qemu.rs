@@ -7,17 +7,18 @@
 //! simulated wheel plant for the motors and encoders.
 //!
 //! **QEMU-only control frames** (revision 1-2), as on PowerManagement: command frames on
-//! [`SIM_CONTROL_ID`] (`0x3F0`, topic 0xF0, which the protocol leaves free) are taken out by the
-//! receive port before the command queue:
+//! [`amiro_firmware::qemu::SIM_CONTROL_ID`] (`0x3F0`, topic 0xF0, which the protocol leaves
+//! free) are taken out by the receive port before the command queue:
 //!
 //! | data | effect |
 //! |---|---|
 //! | `01` | the BNO055 stops answering (its address is not acknowledged: a dead or absent part) |
 //! | `02` | the BNO055 answers again (a part that came back; the supervisor's retry finds it) |
+use crate::sensors::SensorBuses;
+use crate::Board;
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use amiro_firmware::can::{CanRx, RxEvent};
 use critical_section::Mutex;
 use stm32f1xx_hal::pac::{self, Interrupt};
 
@@ -106,7 +107,7 @@ impl TakeReadings for SimFloorBus {
 impl TakeReadings for SimGyroscope {
     fn take(&mut self, r: &Readings) {
         if r.has(robot::world_link::IMU_1_1) {
-            self.set_rate(Some(r.rate));
+            self.set_measured(Some(r.rate));
         }
     }
 }
@@ -115,7 +116,7 @@ impl TakeReadings for SimGyroscope {
 impl TakeReadings for SimAccelerometer {
     fn take(&mut self, r: &Readings) {
         if r.has(robot::world_link::IMU_1_1) {
-            self.set_acceleration(Some(r.accel));
+            self.set_measured(Some(r.accel));
         }
     }
 }
@@ -143,26 +144,11 @@ impl TakeReadings for amiro_sensors::sim::SimImuBus {
     }
 }
 
-/// The identifier of the QEMU-only control frames (see the module documentation).
-pub const SIM_CONTROL_ID: u16 = 0x3F0;
 /// Whether the simulated BNO055 has stopped answering (control frame `01`).
 static IMU_DEAD: AtomicBool = AtomicBool::new(false);
 
-/// The virtual receive FIFO, with the QEMU-only control frames taken out.
-pub struct CanRxPort(amiro_firmware::qemu::CanRxPort);
-
-impl CanRx for CanRxPort {
-    fn receive(&mut self) -> Option<RxEvent> {
-        loop {
-            match self.0.receive()? {
-                RxEvent::Frame(frame) if frame.id == SIM_CONTROL_ID => {
-                    apply_control(frame.payload())
-                }
-                other => return Some(other),
-            }
-        }
-    }
-}
+/// The virtual receive FIFO, with the QEMU-only control frames taken out for `apply_control`.
+pub type CanRxPort = amiro_firmware::qemu::ControlledRxPort;
 
 fn apply_control(data: &[u8]) {
     match data.first() {
@@ -202,30 +188,6 @@ impl embedded_hal::i2c::I2c for ImuI2c {
     }
 }
 
-/// The sensor buses `init` hands to `sensors::groups` (revision 1-1).
-#[cfg(feature = "rev-1-1")]
-pub struct SensorBuses {
-    /// Simulated L3G4200D.
-    pub gyro_spi: GyroSpi,
-    /// Simulated LIS331DLH.
-    pub accel_spi: AccelSpi,
-    /// Simulated HMC5883L bus.
-    pub compass_i2c: CompassI2c,
-    /// Simulated PCA9544A + floor sensors bus.
-    pub floor_i2c: FloorI2c,
-}
-
-/// The sensor buses `init` hands to `sensors::groups` (revision 1-2).
-#[cfg(feature = "rev-1-2")]
-pub struct SensorBuses {
-    /// Simulated BNO055 bus.
-    pub imu_i2c: ImuI2c,
-    /// Its mode-switch waits (none in the simulation).
-    pub imu_delay: ImuDelay,
-    /// Simulated PCA9544A + floor sensors bus.
-    pub floor_i2c: FloorI2c,
-}
-
 #[cfg(feature = "rev-1-1")]
 fn sensor_buses() -> SensorBuses {
     SensorBuses {
@@ -257,24 +219,6 @@ pub const CAN_RX_INTERRUPT: Interrupt = Interrupt::USB_LP_CAN_RX0;
 static PLANT: Mutex<RefCell<Option<amiro_sensors::sim::WheelPlant>>> =
     Mutex::new(RefCell::new(None));
 
-/// What `init` hands on to the tasks (same shape as the real board's).
-pub struct Board {
-    /// Virtual transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// Virtual receive FIFO.
-    pub can_rx: CanRxPort,
-    /// No CAN errors in QEMU.
-    pub can_errors: CanErrors,
-    /// The simulated sensors' buses.
-    pub sensors: SensorBuses,
-    /// Simulated motors.
-    pub motors: Motors,
-    /// Simulated encoders.
-    pub encoders: Encoders,
-    /// Simulated system signals.
-    pub signals: SystemSignals,
-}
-
 /// Brings the simulated board up (touches no STM32 peripheral: QEMU's machine is a different chip).
 pub fn init(
     _dp: pac::Peripherals,
@@ -292,7 +236,7 @@ pub fn init(
     (
         Board {
             can_tx: CanTxPort,
-            can_rx: CanRxPort(amiro_firmware::qemu::CanRxPort),
+            can_rx: CanRxPort::new(apply_control),
             can_errors: amiro_firmware::qemu::can_errors(),
             sensors: sensor_buses(),
             motors: Motors,

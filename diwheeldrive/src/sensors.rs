@@ -11,7 +11,35 @@ use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::suite::{self, SensorGroup};
 use amiro_sensors::motion::DriveController;
 
-use crate::platform::{FloorI2c, SensorBuses};
+use crate::platform::FloorI2c;
+#[cfg(feature = "rev-1-1")]
+use crate::platform::{AccelSpi, CompassI2c, GyroSpi};
+#[cfg(feature = "rev-1-2")]
+use crate::platform::{ImuDelay, ImuI2c};
+
+/// The sensor buses the platform's `init` hands to [`groups`] (revision 1-1).
+#[cfg(feature = "rev-1-1")]
+pub struct SensorBuses {
+    /// The L3G4200D's SPI device.
+    pub gyro_spi: GyroSpi,
+    /// The LIS331DLH's SPI device.
+    pub accel_spi: AccelSpi,
+    /// The HMC5883L's bus.
+    pub compass_i2c: CompassI2c,
+    /// The PCA9544A and floor sensors' bus.
+    pub floor_i2c: FloorI2c,
+}
+
+/// The sensor buses the platform's `init` hands to [`groups`] (revision 1-2).
+#[cfg(feature = "rev-1-2")]
+pub struct SensorBuses {
+    /// The BNO055's bus (I2C1), its reset already pulsed.
+    pub imu_i2c: ImuI2c,
+    /// Its mode-switch waits.
+    pub imu_delay: ImuDelay,
+    /// The PCA9544A and floor sensors' bus.
+    pub floor_i2c: FloorI2c,
+}
 
 pub use amiro_sensors::drivers::suite::Samples;
 

@@ -15,8 +15,9 @@
 //! VSYS PC6, driven low (off) at boot: this firmware drives no breakout module. On 1-0 these pins
 //! are other things (PB2 is the laser scanner's LASER_EN) or nothing; the 1-0 image leaves them
 //! in their reset state, as it always has.
+use crate::Board;
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
-use amiro_firmware::signals::SystemSignals as SystemSignalLines;
+use amiro_firmware::signals::Lines;
 use amiro_firmware::spi;
 use embedded_hal::spi::{Mode as SpiMode, Phase, Polarity};
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
@@ -48,24 +49,6 @@ const TIM3_BASE: usize = 0x4000_0400;
 
 amiro_firmware::timer_monotonic!(Tim3Backend, TIM3_BASE, pac::Interrupt::TIM3, TIM3);
 
-/// Everything `init` hands on to the tasks.
-pub struct Board {
-    /// CAN transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// CAN receive FIFO 0 (command frames only, by hardware filter).
-    pub can_rx: CanRxPort,
-    /// CAN error-state monitor.
-    pub can_errors: CanErrors,
-    /// The LED driver's SPI device.
-    pub led_spi: LedSpi,
-    /// BLANK.
-    pub blank: Blank,
-    /// System signals.
-    pub signals: SystemSignals,
-    /// The APB1 timer clock (TIM3's input) of the clock plan in use.
-    pub timer_hz: u32,
-}
-
 /// TLC5947 BLANK (PA4): high = every output off.
 pub struct Blank(PA4<Output<PushPull>>);
 
@@ -76,11 +59,8 @@ impl Blank {
     }
 }
 
-/// The module's system-bus signals.
-pub struct SystemSignals {
-    sys_sync: PD2<Output<OpenDrain>>,
-    _sys_pd: PC14<Output<OpenDrain>>,
-}
+/// The module's system-bus signals: SYS_SYNC_N on PD2, SYS_PD_N on PC14 (EXTI line 14).
+pub type SystemSignals = Lines<PD2<Output<OpenDrain>>, PC14<Output<OpenDrain>>, 14>;
 
 /// Brings the board up: clocks (crystal, or the internal oscillator if the crystal does not start),
 /// pins, SPI1 for the LED driver, CAN.
@@ -94,7 +74,7 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
     // without a bound, and no driver here takes its frequencies from the HAL (they come from the
     // plan).
     let mut rcc = dp.RCC.constrain();
-    enable_spi1();
+    amiro_firmware::chip::reset_and_enable_spi1();
 
     let mut afio = dp.AFIO.constrain(&mut rcc);
     let mut gpioa = dp.GPIOA.split(&mut rcc);
@@ -203,10 +183,7 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
         can_errors: can.errors,
         led_spi,
         blank: Blank(blank),
-        signals: SystemSignals {
-            sys_sync,
-            _sys_pd: sys_pd,
-        },
+        signals: SystemSignals::new(sys_sync, sys_pd),
         timer_hz: clocks.timer_hz,
     }
 }
@@ -228,36 +205,5 @@ pub fn leds_dark() {
     unsafe { (*pac::GPIOA::ptr()).bsrr().write(|w| w.bs4().set_bit()) };
 }
 
-impl SystemSignalLines for SystemSignals {
-    fn release_sync(&mut self) {
-        self.sys_sync.set_high();
-    }
-
-    fn pull_sync_low(&mut self) {
-        self.sys_sync.set_low();
-    }
-
-    fn shutdown_requested(&self) -> bool {
-        // SAFETY: a read of GPIOC's input data register.
-        unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 14) == 0 }
-    }
-
-    fn clear_shutdown_interrupt(&mut self) {
-        // SAFETY: writing 1 clears only line 14's pending bit.
-        unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(SYS_PD_LINE)) };
-    }
-}
-
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI15_10;
-
-/// SPI1's clock on and the block reset (the runtime's master takes it from there).
-fn enable_spi1() {
-    // SAFETY: SPI1's reset and clock bits, owned by init.
-    unsafe {
-        let rcc = &*pac::RCC::ptr();
-        rcc.apb2rstr().modify(|_, w| w.spi1rst().set_bit());
-        rcc.apb2rstr().modify(|_, w| w.spi1rst().clear_bit());
-        rcc.apb2enr().modify(|_, w| w.spi1en().set_bit());
-    }
-}

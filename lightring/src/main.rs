@@ -107,6 +107,26 @@ pub type AdmissionPacing = amiro_firmware::admission::Pacing<ADMISSION_BURST>;
 /// The clock every task uses (TIM3 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
 
+/// Everything the platform's `init` hands on to the tasks: the same fields on the chip (`board`)
+/// and in QEMU (`qemu`), each platform's types behind the names.
+pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: platform::CanTxPort,
+    /// CAN receive FIFO 0 (command frames only).
+    pub can_rx: platform::CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: platform::CanErrors,
+    /// The LED driver's SPI device.
+    pub led_spi: platform::LedSpi,
+    /// TLC5947 BLANK.
+    pub blank: platform::Blank,
+    /// System signals.
+    pub signals: platform::SystemSignals,
+    /// The APB1 timer clock (TIM3's input) of the clock plan in use (unused in QEMU, whose
+    /// SysTick runs from the core clock).
+    pub timer_hz: u32,
+}
+
 // The robot's admission table, generated from the apps and timing files (`board-build.rs`).
 amiro_firmware::admission_table!();
 
@@ -121,13 +141,12 @@ type AdmissionState = amiro_firmware::admission::State<
 mod app {
     use crate::leds::{self, LedState};
     use crate::{levels, platform, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN};
-    use amiro_can::{Board as CanBoard, Priority};
+    use amiro_can::{Board as CanBoard, Command, Priority};
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
-    use amiro_firmware::signals::{self, SystemSignals as _};
-    use amiro_firmware::watchdog as iwdg;
-    use amiro_firmware::{bootloader, health, publisher, tasks};
+    use amiro_firmware::signals;
+    use amiro_firmware::{bootloader, publisher, tasks};
     use amiro_sensors::drivers::suite::Samples;
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
     use amiro_sensors::tx_queue::TxQueue;
@@ -168,11 +187,7 @@ mod app {
 
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
-        // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
-        iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
-        health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
-        amiro_firmware::telemetry::init();
-        amiro_firmware::telemetry::boot_report("LightRing");
+        tasks::boot("LightRing", crate::BOOT_WATCHDOG_TIMEOUT_MS);
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
         let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
@@ -190,12 +205,7 @@ mod app {
         stimulus::spawn().ok();
         amiro_firmware::log!("LightRing up");
 
-        signals.release_sync();
-        amiro_firmware::telemetry::init_done();
-        // A shutdown requested before we were up has no edge to catch: look at the level.
-        if signals.shutdown_requested() {
-            rtic::pend(platform::SHUTDOWN_INTERRUPT);
-        }
+        tasks::come_up(&mut signals, platform::SHUTDOWN_INTERRUPT);
         (
             Shared {
                 handler: SensorDataHandler::new(CanBoard::LightRing),
@@ -265,7 +275,7 @@ mod app {
                     &mut cx.shared.tx_queue,
                     platform::CAN_TX_INTERRUPT,
                 );
-            } else if let Some((now, Outcome::Led { command, .. })) =
+            } else if let Some((now, Outcome::Command(Command::Led { command, .. }))) =
                 tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
             {
                 cx.shared.leds.lock(|l| l.apply(now, &command));
@@ -373,19 +383,16 @@ mod app {
     /// Feeds the independent watchdog — from the least urgent level, and only while the latch task
     /// keeps running: a fed dog proves the whole schedule is alive.
     #[task(priority = 1, shared = [alive, can_errors])]
-    async fn watchdog(mut cx: watchdog::Context) {
+    async fn watchdog(cx: watchdog::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::WATCHDOG);
-        iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
-        let mut next = Clock::now_us();
-        loop {
-            next += crate::WATCHDOG_PERIOD_US;
-            Clock::delay_until_us(next).await;
-            if cx.shared.alive.lock(|a| a.take()) {
-                iwdg::feed();
-            }
-            // The controller recovers from bus-off without an interrupt: look at its state.
-            cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
-        }
+        let s = cx.shared;
+        tasks::feed_watchdog::<Clock, _>(
+            crate::WATCHDOG_TIMEOUT_MS,
+            crate::WATCHDOG_PERIOD_US,
+            s.alive,
+            s.can_errors,
+        )
+        .await;
     }
 
     /// SYS_PD_N fell: another module requests shutdown. LEDs dark first, then hand over.

@@ -6,6 +6,7 @@
 //! behind the real driver. After each latch the simulator's latched outputs of the whole chain are
 //! printed (`# tlc5947 latched` and every channel, chain channel 0 — part 0's OUT0 — first: 24 or
 //! 72 values), so a scenario checks what the driver really shifted out, channel order included.
+use crate::Board;
 use amiro_sensors::sim::SimLedChain;
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 use stm32f1xx_hal::pac::{self, Interrupt};
@@ -66,24 +67,6 @@ impl Blank {
     pub fn show(&mut self) {
         amiro_firmware::qemu::print_line("# qemu: BLANK low (LEDs on)");
     }
-}
-
-/// What `init` hands on to the tasks (same shape as the real board's).
-pub struct Board {
-    /// Virtual transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// Virtual receive FIFO.
-    pub can_rx: CanRxPort,
-    /// No CAN errors in QEMU.
-    pub can_errors: CanErrors,
-    /// Simulated LED driver.
-    pub led_spi: LedSpi,
-    /// Simulated BLANK.
-    pub blank: Blank,
-    /// Simulated system signals.
-    pub signals: SystemSignals,
-    /// Unused in QEMU (SysTick runs from the core clock).
-    pub timer_hz: u32,
 }
 
 /// Brings the simulated board up (touches no STM32 peripheral).

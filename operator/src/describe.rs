@@ -112,11 +112,7 @@ fn describe_sample(data: &SensorData) -> String {
             velocity.velocity_um_s, velocity.angular_urad_s
         ),
         SensorData::PowerStatus(power) => {
-            let (state, until) = if power.charging {
-                ("charging", "full")
-            } else {
-                ("discharging", "empty")
-            };
+            let (state, until) = power.direction();
             format!(
                 "{state}, {} % charged, {} min to {until}, drawing {} mW",
                 power.state_of_charge, power.minutes, power.power_mw

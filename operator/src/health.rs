@@ -87,15 +87,10 @@ pub struct BoardHealth {
 
 /// The page number of a health page; `None` for admission verdicts.
 fn page_number(page: &DiagnosticsPage) -> Option<u8> {
-    Some(match page {
-        DiagnosticsPage::Status { .. } => 0,
-        DiagnosticsPage::Commands { .. } => 1,
-        DiagnosticsPage::Rejections { .. } => 2,
-        DiagnosticsPage::AdmissionAndReceive { .. } => 3,
-        DiagnosticsPage::Transmit { .. } => 4,
-        DiagnosticsPage::Deadlines { .. } => 5,
-        _ => return None,
-    })
+    match page {
+        DiagnosticsPage::VerdictRequest(_) | DiagnosticsPage::VerdictBound(_) => None,
+        _ => Some(page.page()),
+    }
 }
 
 impl BoardHealth {

@@ -9,8 +9,9 @@
 //! bq24103A EN1_N PC3 / EN2_N PD2 (active low, open drain) with STAT1A PC0 / STAT2A PB4, power plug
 //! PATH_DC PC8 (high = plug in), VSYS on PB1 = ADC1 IN9 (480-cycle sampling). TIM2 is the
 //! monotonic; RTC_BKP0R carries the shutdown reason to AMiRo-BLT.
+use crate::Board;
 use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
-use amiro_firmware::signals::SystemSignals as SystemSignalLines;
+use amiro_firmware::signals::Lines;
 use stm32f4xx_hal::gpio::{GpioExt, Input, OpenDrain, Output, PinState, PushPull};
 use stm32f4xx_hal::gpio::{PA8, PB2, PB4, PC0, PC12, PC13, PC14, PC3, PC8, PD2};
 use stm32f4xx_hal::pac::{self, Interrupt};
@@ -56,26 +57,6 @@ pub const CAN_TX_INTERRUPT: Interrupt = Interrupt::CAN1_TX;
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: Interrupt = Interrupt::EXTI15_10;
 
-/// Everything `init` hands on to the tasks.
-pub struct Board {
-    /// CAN transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// CAN receive FIFO 0 (command frames only, by hardware filter).
-    pub can_rx: CanRxPort,
-    /// CAN error-state monitor.
-    pub can_errors: CanErrors,
-    /// I2C1.
-    pub rear_i2c: RearI2c,
-    /// I2C2.
-    pub front_i2c: FrontI2c,
-    /// Chargers, their status, the plug and VSYS.
-    pub charger: Charger,
-    /// System signals.
-    pub signals: SystemSignals,
-    /// The power lines this board keeps on (held so nothing else reconfigures them).
-    pub power_lines: PowerLines,
-}
-
 /// The fuel gauges' bus-free pause (66 µs after each transfer): a busy wait on the core clock.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct GaugeDelay;
@@ -93,11 +74,9 @@ pub struct PowerLines {
     _sys_warmrst: PC14<Output<OpenDrain>>,
 }
 
-/// The module's system-bus signals.
-pub struct SystemSignals {
-    sys_sync: PC12<Output<OpenDrain>>,
-    sys_pd: PC13<Output<OpenDrain>>,
-}
+/// The module's system-bus signals: SYS_SYNC_N on PC12, SYS_PD_N on PC13 (EXTI line 13), which
+/// this board also drives ([`Lines::drive_shutdown_request`]).
+pub type SystemSignals = Lines<PC12<Output<OpenDrain>>, PC13<Output<OpenDrain>>, 13>;
 
 /// The two bq24103A chargers, their status pins, the plug and the VSYS sense.
 pub struct Charger {
@@ -165,10 +144,10 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
 
     // SYS_SYNC_N stays low (as AMiRo-BLT left it) until the app is initialised; SYS_PD_N is a
     // wired-OR open-drain line released high, watched for a falling edge on EXTI line 13.
-    let signals = SystemSignals {
-        sys_sync: gpioc.pc12.into_open_drain_output_in_state(PinState::Low),
-        sys_pd: gpioc.pc13.into_open_drain_output_in_state(PinState::High),
-    };
+    let signals = SystemSignals::new(
+        gpioc.pc12.into_open_drain_output_in_state(PinState::Low),
+        gpioc.pc13.into_open_drain_output_in_state(PinState::High),
+    );
     // As AMiRo-BLT left them.
     amiro_firmware::log!("power lines: POWER_EN, SYS_REG_EN on; SYS_WARMRST_N released; SYS_SYNC_N low; chargers off");
     // SAFETY: single bits in registers only init touches (the HAL has consumed its RCC handle);
@@ -304,37 +283,9 @@ pub fn write_shutdown_reason(reason: u8) {
     }
 }
 
-impl SystemSignalLines for SystemSignals {
-    fn release_sync(&mut self) {
-        self.sys_sync.set_high();
-    }
-
-    fn pull_sync_low(&mut self) {
-        self.sys_sync.set_low();
-    }
-
-    fn shutdown_requested(&self) -> bool {
-        // SAFETY: a read of GPIOC's input data register.
-        unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 13) == 0 }
-    }
-
-    fn clear_shutdown_interrupt(&mut self) {
-        // SAFETY: writing 1 clears only line 13's pending bit.
-        unsafe { (*pac::EXTI::ptr()).pr().write(|w| w.bits(SYS_PD_LINE)) };
-    }
-}
-
-impl SystemSignals {
-    /// Drives SYS_PD_N low: the power master asks every module to shut down.
-    pub fn drive_shutdown_request(&mut self) {
-        self.sys_pd.set_low();
-    }
-
-    /// Whether SYS_SYNC_N reads low: another module has taken the shutdown request.
-    pub fn sync_reads_low(&self) -> bool {
-        // SAFETY: a read of GPIOC's input data register.
-        unsafe { (*pac::GPIOC::ptr()).idr().read().bits() & (1 << 12) == 0 }
-    }
+/// Whether SYS_SYNC_N (PC12) reads low: another module has taken the shutdown request.
+pub fn sync_reads_low() -> bool {
+    amiro_firmware::chip::port_c_reads_low::<12>()
 }
 
 /// Starts the TIM2 monotonic (the runtime's half-period timer backend).

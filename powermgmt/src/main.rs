@@ -87,6 +87,27 @@ pub const TX_DRAIN_US: u64 = 10_000;
 /// The clock every task uses (TIM2 on the robot, SysTick in QEMU).
 type Clock = platform::Clock;
 
+/// Everything the platform's `init` hands on to the tasks: the same fields on the chip (`board`)
+/// and in QEMU (`qemu`), each platform's types behind the names.
+pub struct Board {
+    /// CAN transmit mailboxes.
+    pub can_tx: platform::CanTxPort,
+    /// CAN receive FIFO 0 (command frames only).
+    pub can_rx: platform::CanRxPort,
+    /// CAN error-state monitor.
+    pub can_errors: platform::CanErrors,
+    /// I2C1, the rear bus.
+    pub rear_i2c: platform::RearI2c,
+    /// I2C2, the front bus.
+    pub front_i2c: platform::FrontI2c,
+    /// Chargers, their status, the plug and VSYS.
+    pub charger: platform::Charger,
+    /// System signals.
+    pub signals: platform::SystemSignals,
+    /// The power lines this board keeps on (held so nothing else reconfigures them).
+    pub power_lines: platform::PowerLines,
+}
+
 // The robot's admission table, generated from the apps and timing files (`board-build.rs`).
 amiro_firmware::admission_table!();
 
@@ -97,27 +118,15 @@ type AdmissionState = amiro_firmware::admission::State<
     { admission_table::MAX_PUBLISHERS },
 >;
 
-/// Gives the queued frames up to `TX_DRAIN_US` to leave (before a hand-over).
-async fn drain(
-    tx_queue: &mut impl rtic::Mutex<T = amiro_sensors::tx_queue::TxQueue<TX_QUEUE_LEN>>,
-) {
-    use amiro_firmware::mono::Clock as _;
-    let deadline = Clock::now_us() + TX_DRAIN_US;
-    while tx_queue.lock(|q| q.len()) > 0 && Clock::now_us() < deadline {
-        Clock::delay_until_us(Clock::now_us() + 1_000).await;
-    }
-}
-
 #[rtic::app(device = stm32f4xx_hal::pac, dispatchers = [UART4, UART5, TIM7, SDIO, DMA2_STREAM0, DMA2_STREAM1])]
 mod app {
     use crate::sensors::{self, FrontBus, RearBus};
     use crate::{levels, platform, power, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN};
-    use amiro_can::{Board as CanBoard, Priority, ShutdownMode};
+    use amiro_can::{Board as CanBoard, Command, Priority, ShutdownMode};
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
     use amiro_firmware::signals::{self, SystemSignals as _};
-    use amiro_firmware::watchdog as iwdg;
     use amiro_firmware::{bootloader, publisher, tasks};
     use amiro_sensors::drivers::ring::RingBus;
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
@@ -166,11 +175,7 @@ mod app {
 
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
-        // Nothing in the boot may hang for ever: the watchdog runs before anything can spin.
-        iwdg::start(crate::BOOT_WATCHDOG_TIMEOUT_MS);
-        amiro_firmware::health::set_reset_cause(amiro_firmware::chip::take_reset_cause());
-        amiro_firmware::telemetry::init();
-        amiro_firmware::telemetry::boot_report("PowerManagement");
+        tasks::boot("PowerManagement", crate::BOOT_WATCHDOG_TIMEOUT_MS);
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
         let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
@@ -197,14 +202,7 @@ mod app {
         stimulus::spawn().ok();
         amiro_firmware::log!("PowerManagement up");
 
-        // Initialised: let the system come up (SYS_SYNC_N is wired-OR; it reads high once every
-        // module has released it).
-        signals.release_sync();
-        amiro_firmware::telemetry::init_done();
-        // A shutdown requested before we were up has no edge to catch: look at the level.
-        if signals.shutdown_requested() {
-            rtic::pend(platform::SHUTDOWN_INTERRUPT);
-        }
+        tasks::come_up(&mut signals, platform::SHUTDOWN_INTERRUPT);
         (
             Shared {
                 handler: SensorDataHandler::new(CanBoard::PowerManagement),
@@ -273,7 +271,7 @@ mod app {
                     &mut cx.shared.tx_queue,
                     platform::CAN_TX_INTERRUPT,
                 );
-            } else if let Some((_, Outcome::Shutdown { mode, .. })) =
+            } else if let Some((_, Outcome::Command(Command::Shutdown { mode, .. }))) =
                 tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
             {
                 shutdown_sequence::spawn(Some(mode)).ok();
@@ -430,19 +428,16 @@ mod app {
     /// Feeds the independent watchdog — from the least urgent level, and only while the power
     /// monitor keeps running: a fed dog proves the whole schedule is alive.
     #[task(priority = 1, shared = [alive, can_errors])]
-    async fn watchdog(mut cx: watchdog::Context) {
+    async fn watchdog(cx: watchdog::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::WATCHDOG);
-        iwdg::start(crate::WATCHDOG_TIMEOUT_MS);
-        let mut next = Clock::now_us();
-        loop {
-            next += crate::WATCHDOG_PERIOD_US;
-            Clock::delay_until_us(next).await;
-            if cx.shared.alive.lock(|a| a.take()) {
-                iwdg::feed();
-            }
-            // The controller recovers from bus-off without an interrupt: look at its state.
-            cx.shared.can_errors.lock(tasks::on_can_status::<Clock, _>);
-        }
+        let s = cx.shared;
+        tasks::feed_watchdog::<Clock, _>(
+            crate::WATCHDOG_TIMEOUT_MS,
+            crate::WATCHDOG_PERIOD_US,
+            s.alive,
+            s.can_errors,
+        )
+        .await;
     }
 
     /// SYS_PD_N fell: another module requests shutdown (this board's own request is already
@@ -481,10 +476,10 @@ mod app {
                 "): SYS_PD_N low, publishers stopped"
             );
             let deadline = now + crate::OTHERS_ACK_TIMEOUT_US;
-            while !cx.shared.signals.lock(|s| s.sync_reads_low()) && Clock::now_us() < deadline {
+            while !platform::sync_reads_low() && Clock::now_us() < deadline {
                 Clock::delay_until_us(Clock::now_us() + 1_000).await;
             }
-            let acknowledged = cx.shared.signals.lock(|s| s.sync_reads_low());
+            let acknowledged = platform::sync_reads_low();
             amiro_firmware::log!(
                 "shutdown: other modules ",
                 if acknowledged {
@@ -494,7 +489,11 @@ mod app {
                 }
             );
             Clock::delay_until_us(Clock::now_us() + crate::OTHERS_SETTLE_US).await;
-            crate::drain(&mut cx.shared.tx_queue).await;
+            tasks::drain_tx_queue::<Clock, TX_QUEUE_LEN>(
+                &mut cx.shared.tx_queue,
+                crate::TX_DRAIN_US,
+            )
+            .await;
             cx.shared.signals.lock(|s| s.pull_sync_low());
             platform::write_shutdown_reason(mode.blt_reason());
             amiro_firmware::log!("shutdown: hand over to AMiRo-BLT (", mode.name(), ")");
@@ -502,7 +501,11 @@ mod app {
         } else {
             cx.shared.handler.lock(|h| h.stop_all());
             amiro_firmware::log!("shutdown requested from outside: publishers stopped");
-            crate::drain(&mut cx.shared.tx_queue).await;
+            tasks::drain_tx_queue::<Clock, TX_QUEUE_LEN>(
+                &mut cx.shared.tx_queue,
+                crate::TX_DRAIN_US,
+            )
+            .await;
             bootloader::hand_over(bootloader::Callback::HandleShutdownRequest);
         }
     }

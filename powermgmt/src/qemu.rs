@@ -7,19 +7,19 @@
 //! VSYS, SYS_PD_N driven by this board, and the other modules' answer on SYS_SYNC_N.
 //!
 //! **QEMU-only control frames.** A stimulus changes the simulated world with command frames on
-//! [`SIM_CONTROL_ID`] (`0x3F0`: a low-priority command to topic 0xF0, which the protocol leaves
-//! free; on a robot it would be rejected as `unknown-topic`). The receive port takes them out
-//! before the command queue, so the app never sees them:
+//! [`amiro_firmware::qemu::SIM_CONTROL_ID`] (`0x3F0`: a low-priority command to topic 0xF0,
+//! which the protocol leaves free; on a robot it would be rejected as `unknown-topic`). The
+//! receive port takes them out before the command queue, so the app never sees them:
 //!
 //! | data | effect |
 //! |---|---|
 //! | `01 ii` | ring sensor `ii` (0..7) stops answering (its address is not acknowledged) |
 //! | `02 mm` | the gauges in mask `mm` (1 front, 2 rear) report a critically low battery |
 //! | `03 vv vv pp` | VSYS = `vvvv` mV (u16 little-endian), power plug in if `pp` ≠ 0 |
+use crate::Board;
 use core::fmt::Write as _;
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
 
-use amiro_firmware::can::{CanRx, RxEvent};
 use amiro_firmware::mono::Clock as _;
 use amiro_firmware::qemu::robot;
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
@@ -43,8 +43,6 @@ pub const SHUTDOWN_INTERRUPT: Interrupt = Interrupt::EXTI15_10;
 pub const CAN_TX_INTERRUPT: Interrupt = Interrupt::CAN1_TX;
 /// Interrupt of the CAN receive FIFO 0 (pended by the stimulus replay).
 pub const CAN_RX_INTERRUPT: Interrupt = Interrupt::CAN1_RX0;
-/// The identifier of the QEMU-only control frames (see the module documentation).
-pub const SIM_CONTROL_ID: u16 = 0x3F0;
 /// The other modules pull SYS_SYNC_N low this long after SYS_PD_N falls (their edge interrupt).
 pub const OTHERS_REACT_US: u64 = 50;
 
@@ -65,21 +63,8 @@ fn print(args: core::fmt::Arguments<'_>) {
     amiro_firmware::qemu::print_line(&line);
 }
 
-/// The virtual receive FIFO, with the QEMU-only control frames taken out.
-pub struct CanRxPort(amiro_firmware::qemu::CanRxPort);
-
-impl CanRx for CanRxPort {
-    fn receive(&mut self) -> Option<RxEvent> {
-        loop {
-            match self.0.receive()? {
-                RxEvent::Frame(frame) if frame.id == SIM_CONTROL_ID => {
-                    apply_control(frame.payload())
-                }
-                other => return Some(other),
-            }
-        }
-    }
-}
+/// The virtual receive FIFO, with the QEMU-only control frames taken out for `apply_control`.
+pub type CanRxPort = amiro_firmware::qemu::ControlledRxPort;
 
 fn apply_control(data: &[u8]) {
     match *data {
@@ -274,38 +259,18 @@ impl SystemSignals {
         amiro_firmware::qemu::robot::drive_power_down();
         amiro_firmware::qemu::print_line("# qemu: SYS_PD_N driven low");
     }
-
-    /// Whether SYS_SYNC_N reads low: the other modules react [`OTHERS_REACT_US`] after SYS_PD_N.
-    /// In a robot run (`cargo xtask robot`) the line is the robot's: the other boards' answer.
-    pub fn sync_reads_low(&self) -> bool {
-        if amiro_firmware::qemu::robot::active() {
-            return amiro_firmware::qemu::robot::sync_reads_low();
-        }
-        match PD_DRIVEN_AT.load(Ordering::SeqCst) {
-            0 => false,
-            at => Clock::now_us() >= u64::from(at - 1) + OTHERS_REACT_US,
-        }
-    }
 }
 
-/// What `init` hands on to the tasks (same shape as the real board's).
-pub struct Board {
-    /// Virtual transmit mailboxes.
-    pub can_tx: CanTxPort,
-    /// Virtual receive FIFO.
-    pub can_rx: CanRxPort,
-    /// No CAN errors in QEMU.
-    pub can_errors: CanErrors,
-    /// Simulated I2C1.
-    pub rear_i2c: RearI2c,
-    /// Simulated I2C2.
-    pub front_i2c: FrontI2c,
-    /// Simulated chargers.
-    pub charger: Charger,
-    /// Simulated system signals.
-    pub signals: SystemSignals,
-    /// The power lines.
-    pub power_lines: PowerLines,
+/// Whether SYS_SYNC_N reads low: the other modules react [`OTHERS_REACT_US`] after SYS_PD_N.
+/// In a robot run (`cargo xtask robot`) the line is the robot's: the other boards' answer.
+pub fn sync_reads_low() -> bool {
+    if amiro_firmware::qemu::robot::active() {
+        return amiro_firmware::qemu::robot::sync_reads_low();
+    }
+    match PD_DRIVEN_AT.load(Ordering::SeqCst) {
+        0 => false,
+        at => Clock::now_us() >= u64::from(at - 1) + OTHERS_REACT_US,
+    }
 }
 
 /// Brings the simulated board up (touches no STM32 peripheral but SysTick).
@@ -313,7 +278,7 @@ pub fn init(_dp: pac::Peripherals, cp: cortex_m::Peripherals) -> Board {
     amiro_firmware::mono::start_qemu(cp.SYST);
     Board {
         can_tx: CanTxPort,
-        can_rx: CanRxPort(amiro_firmware::qemu::CanRxPort),
+        can_rx: CanRxPort::new(apply_control),
         can_errors: amiro_firmware::qemu::can_errors(),
         rear_i2c: SimBus::new(RingBus::I2c1),
         front_i2c: SimBus::new(RingBus::I2c2),

@@ -35,6 +35,18 @@ pub const MAX_SAMPLES: usize = 8;
 /// The frames of one sample.
 pub type Samples = heapless::Vec<SensorData, MAX_SAMPLES>;
 
+/// DiWheelDrive's sensor topics, grouped as its devices serve them: the inertial pair
+/// (`..2`), the magnetometer's three axes (`2..5`; a BNO055 serves all five, `..5`), then the floor
+/// sensors. Each group's topic list is a slice of this one.
+static DIWHEELDRIVE_TOPICS: [Topic; 6] = [
+    Topic::Gyroscope,
+    Topic::Accelerometer,
+    Topic::MagnetometerX,
+    Topic::MagnetometerY,
+    Topic::MagnetometerZ,
+    Topic::FloorProximity,
+];
+
 /// A bus error with its type erased to the embedded-hal error kind.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BusFault {
@@ -198,7 +210,7 @@ impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
 
 impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
     fn topics(&self) -> &'static [Topic] {
-        &[Topic::Gyroscope, Topic::Accelerometer]
+        &DIWHEELDRIVE_TOPICS[..2]
     }
 
     fn init(&mut self) -> Result<(), SampleError> {
@@ -309,11 +321,7 @@ impl<I2C: I2c> Compass<I2C> {
 
 impl<I2C: I2c> SensorGroup for Compass<I2C> {
     fn topics(&self) -> &'static [Topic] {
-        &[
-            Topic::MagnetometerX,
-            Topic::MagnetometerY,
-            Topic::MagnetometerZ,
-        ]
+        &DIWHEELDRIVE_TOPICS[2..5]
     }
 
     fn init(&mut self) -> Result<(), SampleError> {
@@ -459,13 +467,7 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
 
 impl<I2C: I2c, D: DelayNs> SensorGroup for ImuSensors<I2C, D> {
     fn topics(&self) -> &'static [Topic] {
-        &[
-            Topic::Gyroscope,
-            Topic::Accelerometer,
-            Topic::MagnetometerX,
-            Topic::MagnetometerY,
-            Topic::MagnetometerZ,
-        ]
+        &DIWHEELDRIVE_TOPICS[..5]
     }
 
     fn init(&mut self) -> Result<(), SampleError> {
@@ -584,14 +586,7 @@ impl<G: SpiDevice, A: SpiDevice, M: I2c, F: I2c> DiWheelDriveSensors<G, A, M, F>
 
 impl<G: SpiDevice, A: SpiDevice, M: I2c, F: I2c> SensorGroup for DiWheelDriveSensors<G, A, M, F> {
     fn topics(&self) -> &'static [Topic] {
-        &[
-            Topic::Gyroscope,
-            Topic::Accelerometer,
-            Topic::MagnetometerX,
-            Topic::MagnetometerY,
-            Topic::MagnetometerZ,
-            Topic::FloorProximity,
-        ]
+        &DIWHEELDRIVE_TOPICS
     }
 
     fn init(&mut self) -> Result<(), SampleError> {

@@ -1,6 +1,6 @@
 //! Simulated HMC5883L magnetometer (I2C 0x1E).
 
-use super::{I2cTarget, SimBus};
+use super::{RegisterDevice, RegisterPointer, SimBus};
 use crate::drivers::hmc5883l::{self, reg};
 use crate::motion::trig::{sin_cos, ONE, TURN_NRAD};
 
@@ -18,8 +18,7 @@ pub struct SimHmc5883l {
     config_a: u8,
     config_b: u8,
     mode: u8,
-    pointer: u8,
-    expect_pointer: bool,
+    pointer: RegisterPointer,
     samples: u32,
     /// X, Z, Y digits, register order.
     latched: [i16; 3],
@@ -33,8 +32,7 @@ impl SimHmc5883l {
             config_a: 0x10,
             config_b: 0x20,
             mode: 0x01,
-            pointer: 0,
-            expect_pointer: false,
+            pointer: RegisterPointer::new(),
             samples: 0,
             latched: [0; 3],
             input_nt: None,
@@ -111,14 +109,6 @@ impl SimHmc5883l {
             self.mode = (self.mode & !0x03) | 0x03;
         }
     }
-
-    fn advance_pointer(&mut self) {
-        self.pointer = match self.pointer {
-            0x08 => 0x03,
-            p if p >= 0x0C => 0x00,
-            p => p + 1,
-        };
-    }
 }
 
 impl Default for SimHmc5883l {
@@ -127,35 +117,30 @@ impl Default for SimHmc5883l {
     }
 }
 
-impl I2cTarget for SimHmc5883l {
-    fn acknowledges(&self, address: u8) -> bool {
-        address == hmc5883l::ADDRESS
+impl RegisterDevice for SimHmc5883l {
+    const ADDRESS: u8 = hmc5883l::ADDRESS;
+
+    fn pointer(&mut self) -> &mut RegisterPointer {
+        &mut self.pointer
     }
 
-    fn start(&mut self, _address: u8, read: bool) {
-        self.expect_pointer = !read;
-        if read && self.pointer == reg::DATA_X_MSB {
+    fn read_started(&mut self, register: u8) {
+        if register == reg::DATA_X_MSB {
             self.measure();
         }
     }
 
-    fn write_byte(&mut self, _address: u8, byte: u8) {
-        if self.expect_pointer {
-            self.pointer = byte;
-            self.expect_pointer = false;
-            return;
-        }
-        match self.pointer {
+    fn write_register(&mut self, register: u8, byte: u8) {
+        match register {
             reg::CONFIG_A => self.config_a = byte & 0x7F,
             reg::CONFIG_B => self.config_b = byte & 0xE0,
             reg::MODE => self.mode = byte & 0x83,
             _ => {}
         }
-        self.advance_pointer();
     }
 
-    fn read_byte(&mut self, _address: u8) -> u8 {
-        let value = match self.pointer {
+    fn read_register(&mut self, register: u8) -> u8 {
+        match register {
             reg::CONFIG_A => self.config_a,
             reg::CONFIG_B => self.config_b,
             reg::MODE => self.mode,
@@ -169,9 +154,15 @@ impl I2cTarget for SimHmc5883l {
             0x0B => b'4',
             0x0C => b'3',
             _ => 0,
-        };
-        self.advance_pointer();
-        value
+        }
+    }
+
+    fn next_register(&self, register: u8) -> u8 {
+        match register {
+            0x08 => 0x03,
+            p if p >= 0x0C => 0x00,
+            p => p + 1,
+        }
     }
 }
 

@@ -1,6 +1,6 @@
 //! Simulated bq27500 fuel gauge (I2C 0x55).
 
-use super::{I2cTarget, SimBus};
+use super::{RegisterDevice, RegisterPointer, SimBus};
 use crate::drivers::bq27500::{self, cmd, subcommand, Flags};
 
 /// Full-charge capacity of the simulated cell, mAh.
@@ -21,8 +21,7 @@ const DISCHARGE_MA: i32 = -450;
 #[derive(Debug, Clone)]
 pub struct SimBq27500 {
     charging: bool,
-    pointer: u8,
-    expect_pointer: bool,
+    pointer: RegisterPointer,
     subcommand: u16,
     samples: u16,
 }
@@ -32,8 +31,7 @@ impl SimBq27500 {
     pub const fn new(charging: bool) -> Self {
         Self {
             charging,
-            pointer: 0,
-            expect_pointer: false,
+            pointer: RegisterPointer::new(),
             subcommand: 0,
             samples: 0,
         }
@@ -106,40 +104,34 @@ impl SimBq27500 {
     }
 }
 
-impl I2cTarget for SimBq27500 {
-    fn acknowledges(&self, address: u8) -> bool {
-        address == bq27500::ADDRESS
+impl RegisterDevice for SimBq27500 {
+    const ADDRESS: u8 = bq27500::ADDRESS;
+
+    fn pointer(&mut self) -> &mut RegisterPointer {
+        &mut self.pointer
     }
 
-    fn start(&mut self, _address: u8, read: bool) {
-        self.expect_pointer = !read;
-    }
-
-    fn write_byte(&mut self, _address: u8, byte: u8) {
-        if self.expect_pointer {
-            self.pointer = byte;
-            self.expect_pointer = false;
-            return;
-        }
+    fn write_register(&mut self, register: u8, byte: u8) {
         // Only Control() is writable among the standard commands.
         let [low, high] = self.subcommand.to_le_bytes();
-        match self.pointer {
+        match register {
             0x00 => self.subcommand = u16::from_le_bytes([byte, high]),
             0x01 => self.subcommand = u16::from_le_bytes([low, byte]),
             _ => {}
         }
-        self.pointer = self.pointer.wrapping_add(1);
     }
 
-    fn read_byte(&mut self, _address: u8) -> u8 {
-        let command = self.pointer & !1;
+    fn read_register(&mut self, register: u8) -> u8 {
+        let command = register & !1;
         let [low, high] = self.value(command).to_le_bytes();
-        let byte = if self.pointer & 1 == 0 { low } else { high };
-        if self.pointer == cmd::STATE_OF_CHARGE + 1 {
+        if register == cmd::STATE_OF_CHARGE + 1 {
             self.samples = self.samples.wrapping_add(1);
         }
-        self.pointer = self.pointer.wrapping_add(1);
-        byte
+        if register & 1 == 0 {
+            low
+        } else {
+            high
+        }
     }
 }
 

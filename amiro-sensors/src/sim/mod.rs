@@ -2,7 +2,8 @@
 //! drivers talk to on the host and in the firmware's QEMU build, where there is no hardware.
 //!
 //! Each simulator implements the bus trait its part sits on (`SpiDevice` for the SPI parts, `I2c`
-//! through [`SimBus`] for the I2C parts), answers the identity registers, stores configuration
+//! through [`SimBus`] for the I2C parts; a register-addressed part implements [`RegisterDevice`],
+//! which brings the register pointer), answers the identity registers, stores configuration
 //! writes with the part's writable-bit rules (so the drivers' read-back checks mean something), and
 //! produces a slow, deterministic pattern computed from a per-device sample counter — no clock, no
 //! randomness, the same bytes on every run. Values are generated in physical units and encoded
@@ -10,7 +11,7 @@
 //! wrong number. All state is a few bytes per device; nothing allocates.
 //!
 //! **Fed from outside.** Each measuring simulator also takes its physical input from outside
-//! instead of its pattern — `SimGyroscope::set_rate`, `SimAccelerometer::set_acceleration`,
+//! instead of its pattern — `SimGyroscope::set_measured` (mdps), `SimAccelerometer::set_measured` (µg),
 //! `SimHmc5883l::set_field`, `SimBno055::set_motion`, `SimVcnl4020::set_proximity` (and
 //! `SimMuxedProximity::set_proximity` by channel, `feed_ring` and `feed_floor` by protocol index) — encoded exactly as the pattern would be. This
 //! is how a world (amiro-world, docs/world.md) reaches the real drivers: the robot host sends
@@ -49,7 +50,9 @@ pub use compass::SimHmc5883l;
 pub use feed::{feed_floor, feed_ring};
 pub use fuel_gauge::SimBq27500;
 pub use leds::{SimLedChain, SimLedDriver};
-pub use motion_sensors::{SimAccelerometer, SimGyroscope};
+pub use motion_sensors::{
+    Accelerometer, Gyroscope, SimAccelerometer, SimGyroscope, SimStSensor, StPart,
+};
 pub use plant::{MotorModel, SimWheel, WheelPlant};
 pub use proximity::{SimMuxedProximity, SimVcnl4020};
 
@@ -102,6 +105,86 @@ impl<A: I2cTarget, B: I2cTarget> I2cTarget for (A, B) {
         } else {
             self.1.read_byte(address)
         }
+    }
+}
+
+/// The register pointer of a [`RegisterDevice`]: where the next byte goes to or comes from, and
+/// whether the next written byte sets it instead (the first byte of a write transfer).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RegisterPointer {
+    at: u8,
+    expect_pointer: bool,
+}
+
+impl RegisterPointer {
+    /// At register 0, as the parts come out of reset.
+    pub const fn new() -> Self {
+        Self {
+            at: 0,
+            expect_pointer: false,
+        }
+    }
+
+    /// The register the next byte goes to or comes from.
+    pub const fn at(&self) -> u8 {
+        self.at
+    }
+}
+
+/// A register-addressed I2C part: a write transfer's first byte selects a register, every byte
+/// after it (written or read) is the next register's. Its simulator supplies the registers; the
+/// pointer handling and the byte-level [`I2cTarget`] callbacks are the same for every such part
+/// and live here.
+pub trait RegisterDevice {
+    /// The part's 7-bit address.
+    const ADDRESS: u8;
+    /// The register pointer.
+    fn pointer(&mut self) -> &mut RegisterPointer;
+    /// The host writes `byte` to `register`.
+    fn write_register(&mut self, register: u8, byte: u8);
+    /// The host reads `register`.
+    fn read_register(&mut self, register: u8) -> u8;
+    /// The register the pointer moves to after `register`: the next one, unless the part wraps.
+    fn next_register(&self, register: u8) -> u8 {
+        register.wrapping_add(1)
+    }
+    /// A read transfer starts at `register` (a part that measures on a read hooks in here).
+    fn read_started(&mut self, register: u8) {
+        let _ = register;
+    }
+}
+
+impl<D: RegisterDevice> I2cTarget for D {
+    fn acknowledges(&self, address: u8) -> bool {
+        address == D::ADDRESS
+    }
+
+    fn start(&mut self, _address: u8, read: bool) {
+        let pointer = self.pointer();
+        pointer.expect_pointer = !read;
+        let at = pointer.at;
+        if read {
+            self.read_started(at);
+        }
+    }
+
+    fn write_byte(&mut self, _address: u8, byte: u8) {
+        let pointer = self.pointer();
+        if pointer.expect_pointer {
+            pointer.at = byte;
+            pointer.expect_pointer = false;
+            return;
+        }
+        let register = pointer.at;
+        self.write_register(register, byte);
+        self.pointer().at = self.next_register(register);
+    }
+
+    fn read_byte(&mut self, _address: u8) -> u8 {
+        let register = self.pointer().at;
+        let value = self.read_register(register);
+        self.pointer().at = self.next_register(register);
+        value
     }
 }
 

@@ -1,6 +1,6 @@
 //! Simulated VCNL4020 proximity sensors behind a simulated PCA9544A multiplexer.
 
-use super::{triangle, I2cTarget, SimBus};
+use super::{triangle, I2cTarget, RegisterDevice, RegisterPointer, SimBus};
 use crate::drivers::pca9544a;
 use crate::drivers::vcnl4020::{self, reg};
 
@@ -21,8 +21,7 @@ pub struct SimVcnl4020 {
     proximity_rate: u8,
     led_current: u8,
     ambient_parameter: u8,
-    pointer: u8,
-    expect_pointer: bool,
+    pointer: RegisterPointer,
     samples: u16,
     rejected_writes: u8,
     input_counts: Option<u16>,
@@ -44,8 +43,7 @@ impl SimVcnl4020 {
             proximity_rate: 0,
             led_current: 2,
             ambient_parameter: 0x0D,
-            pointer: 0,
-            expect_pointer: false,
+            pointer: RegisterPointer::new(),
             samples: 0,
             rejected_writes: 0,
             input_counts: None,
@@ -119,33 +117,24 @@ impl SimVcnl4020 {
     }
 }
 
-impl I2cTarget for SimVcnl4020 {
-    fn acknowledges(&self, address: u8) -> bool {
-        address == vcnl4020::ADDRESS
+impl RegisterDevice for SimVcnl4020 {
+    const ADDRESS: u8 = vcnl4020::ADDRESS;
+
+    fn pointer(&mut self) -> &mut RegisterPointer {
+        &mut self.pointer
     }
 
-    fn start(&mut self, _address: u8, read: bool) {
-        self.expect_pointer = !read;
-    }
-
-    fn write_byte(&mut self, _address: u8, byte: u8) {
-        if self.expect_pointer {
-            self.pointer = byte;
-            self.expect_pointer = false;
-            return;
-        }
-        match self.pointer {
+    fn write_register(&mut self, register: u8, byte: u8) {
+        match register {
             reg::COMMAND => self.command = byte & 0x07,
             reg::PROXIMITY_RATE if self.command & 0x01 == 0 => self.proximity_rate = byte & 0x07,
             reg::LED_CURRENT => self.led_current = byte & 0x3F,
             reg::AMBIENT_PARAMETER => self.ambient_parameter = byte,
             _ => self.rejected_writes = self.rejected_writes.saturating_add(1),
         }
-        self.pointer = self.pointer.wrapping_add(1);
     }
 
-    fn read_byte(&mut self, _address: u8) -> u8 {
-        let register = self.pointer;
+    fn read_register(&mut self, register: u8) -> u8 {
         let value = match register {
             reg::COMMAND => {
                 let ready = if self.command & 0x01 != 0 {
@@ -166,7 +155,6 @@ impl I2cTarget for SimVcnl4020 {
         if register == 0x88 && self.measuring(0x02) {
             self.samples = self.samples.wrapping_add(1);
         }
-        self.pointer = self.pointer.wrapping_add(1);
         value
     }
 }
