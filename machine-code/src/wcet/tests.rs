@@ -941,47 +941,49 @@ fn a_stated_entry_whose_place_the_image_lacks_is_named() {
     );
 }
 
+/// `code` (function `f`) followed by `OUTLINED_FUNCTION_1`: `movs r4, #0; bx lr`.
+fn with_helper(f: &str, code: &[u16]) -> Image {
+    let at = 2 * code.len() as u64;
+    image(
+        &[code, &[0x2400, 0x4770]].concat(),
+        &[
+            Sym::function(f, 0, at),
+            Sym::function("OUTLINED_FUNCTION_1", at, 4),
+        ],
+    )
+}
+
 #[test]
 fn an_outlined_helper_is_read_for_the_registers_it_writes() {
     // LLVM's machine outliner moved the counter's `movs r4, #0` into a helper (no calling convention).
-    let set_in_helper = image(
+    let set_in_helper = with_helper(
+        "counts",
         &[
             0xb510, // 0x00 push {r4, lr}
-            0xf000, 0xf805, // 0x02 bl 0x10 (OUTLINED_FUNCTION_1)
+            0xf000, 0xf805, // 0x02 bl 0x10 (the helper)
             0x2c03, // 0x06 cmp r4, #3      (header: 4 passes)
             0xd001, // 0x08 beq 0x0e
             0x3401, // 0x0a adds r4, #1
             0xe7fb, // 0x0c b 0x06
             0xbd10, // 0x0e pop {r4, pc}
-            0x2400, // 0x10 movs r4, #0     (OUTLINED_FUNCTION_1)
-            0x4770, // 0x12 bx lr
-        ],
-        &[
-            Sym::function("counts", 0, 0x10),
-            Sym::function("OUTLINED_FUNCTION_1", 0x10, 4),
         ],
     );
     let b = bound(&set_in_helper, "counts", F103_0WS);
     // push, bl, movs, bx lr; 4 × (cmp, beq); 3 × (adds, b); pop = 4 + 8 + 6 + 1.
     assert_eq!((b.instructions, b.declined.as_deref()), (19, None));
-    // A helper called in the loop that writes the counter (here: back to 0, for ever) is a write of it:
-    // the loop is no counted loop.
-    let reset_in_loop = image(
+    // A helper called in the loop that writes the counter (here: back to 0, for ever) is a write of
+    // it: the loop is no counted loop.
+    let reset_in_loop = with_helper(
+        "spins",
         &[
             0xb510, // 0x00 push {r4, lr}
             0x2400, // 0x02 movs r4, #0
             0x2c03, // 0x04 cmp r4, #3
             0xd003, // 0x06 beq 0x10
             0x3401, // 0x08 adds r4, #1
-            0xf000, 0xf802, // 0x0a bl 0x12 (OUTLINED_FUNCTION_2)
+            0xf000, 0xf802, // 0x0a bl 0x12 (the helper)
             0xe7f9, // 0x0e b 0x04
             0xbd10, // 0x10 pop {r4, pc}
-            0x2400, // 0x12 movs r4, #0     (OUTLINED_FUNCTION_2)
-            0x4770, // 0x14 bx lr
-        ],
-        &[
-            Sym::function("spins", 0, 0x12),
-            Sym::function("OUTLINED_FUNCTION_2", 0x12, 4),
         ],
     );
     let b = bound(&reset_in_loop, "spins", F103_0WS);
