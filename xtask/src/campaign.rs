@@ -77,7 +77,7 @@ pub const MODELS: &[BoardModel] = &[
         reference: (0x08, "gyroscope", 10_000),
         reference_frames: 1,
         actuators: &[0x10],
-        // diwheeldrive/src/qemu.rs SIM_CONTROL_ID (revision 1-2's dead BNO055)
+        // amiro_firmware::qemu::SIM_CONTROL_ID (revision 1-2's dead BNO055)
         qemu_control_id: Some(0x3F0),
         admission_task: true,
     },
@@ -98,7 +98,7 @@ pub const MODELS: &[BoardModel] = &[
         reference: (0x1E, "power-status", 50_000),
         reference_frames: 1,
         actuators: &[],
-        // powermgmt/src/qemu.rs SIM_CONTROL_ID
+        // amiro_firmware::qemu::SIM_CONTROL_ID
         qemu_control_id: Some(0x3F0),
         admission_task: true,
     },
