@@ -230,14 +230,21 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
     loop {
         boundary += QUANTUM_US;
         loop {
+            // Sent ahead: back at the first boundary after something to report — found now, or
+            // already there when the wait starts (set while the last exchange was being made: the
+            // wait must not then run on to the far boundary the host allowed).
+            if early && TO_REPORT.load(Ordering::SeqCst) {
+                let first = (super::now_us() / QUANTUM_US + 1) * QUANTUM_US;
+                if first < boundary {
+                    boundary = first;
+                    continue;
+                }
+            }
             let deliver_at = pending.map(|p| p.at_us).filter(|&at| at < boundary);
             let until = deliver_at.unwrap_or(boundary);
             if early && !TO_REPORT.load(Ordering::SeqCst) {
-                // Sent ahead: back at the first boundary after something to report.
                 wait_until_or_report(until).await;
                 if TO_REPORT.load(Ordering::SeqCst) {
-                    let first = (super::now_us() / QUANTUM_US + 1) * QUANTUM_US;
-                    boundary = boundary.min(first);
                     continue;
                 }
             } else {
@@ -322,7 +329,11 @@ static PARKED: AtomicBool = AtomicBool::new(false);
 /// The background task's own waker while it is parked.
 static PARKED_WAKER: Mutex<RefCell<Option<core::task::Waker>>> = Mutex::new(RefCell::new(None));
 
+/// A wake-up of the background task came since its last poll (so it must not be marked idle).
+static WOKEN: AtomicBool = AtomicBool::new(false);
+
 fn parked_wake() {
+    WOKEN.store(true, Ordering::SeqCst);
     PARKED.store(false, Ordering::SeqCst);
     if let Some(waker) = critical_section::with(|cs| PARKED_WAKER.borrow_ref_mut(cs).take()) {
         waker.wake();
@@ -338,12 +349,15 @@ static PARKED_VTABLE: core::task::RawWakerVTable = core::task::RawWakerVTable::n
 
 /// Runs `future`, a wait of the board's one priority-0 task, marking the task idle while it is
 /// pending: a wake-up clears the mark before the task runs, so an exchange between the two sees a
-/// board with work ([`sleeps_for`]).
+/// board with work ([`sleeps_for`]). The mark is set only once a poll found the wait pending and no
+/// wake-up came since: set before the poll, an exchange that pre-empted a poll about to end the
+/// wait (its deadline already taken from the timer queue) saw an idle board with no deadline near,
+/// and the host left it running unseen to a far boundary (robot `thesis-demo`: DiWheelDrive's
+/// first magnetometer frames held 2.6 ms in its mailboxes).
 pub async fn parked<F: core::future::Future>(future: F) -> F::Output {
     let mut future = core::pin::pin!(future);
     core::future::poll_fn(|cx| {
         critical_section::with(|cs| *PARKED_WAKER.borrow_ref_mut(cs) = Some(cx.waker().clone()));
-        PARKED.store(true, Ordering::SeqCst);
         // SAFETY: the vtable's functions ignore the data pointer.
         let waker = unsafe {
             core::task::Waker::from_raw(core::task::RawWaker::new(
@@ -352,6 +366,7 @@ pub async fn parked<F: core::future::Future>(future: F) -> F::Output {
             ))
         };
         loop {
+            WOKEN.store(false, Ordering::SeqCst);
             let result = future
                 .as_mut()
                 .poll(&mut core::task::Context::from_waker(&waker));
@@ -359,6 +374,11 @@ pub async fn parked<F: core::future::Future>(future: F) -> F::Output {
                 PARKED.store(false, Ordering::SeqCst);
                 return result;
             }
+            critical_section::with(|_| {
+                if !WOKEN.load(Ordering::SeqCst) {
+                    PARKED.store(true, Ordering::SeqCst);
+                }
+            });
             if !active() {
                 return result;
             }
@@ -379,7 +399,6 @@ pub async fn parked<F: core::future::Future>(future: F) -> F::Output {
                 // SAFETY: as above; the pending interrupt that ended the WFI runs now.
                 unsafe { cortex_m::interrupt::enable() };
             }
-            PARKED.store(true, Ordering::SeqCst);
         }
     })
     .await
