@@ -116,6 +116,8 @@ pub fn run_in_world(
     };
     let mut pending = actions.iter().peekable();
     let mut operator: VecDeque<(u64, Frame)> = VecDeque::new();
+    // A live run's frames from the adapter that wait for the host to catch up with the boards.
+    let mut adapter_waiting: Vec<Frame> = Vec::new();
     let mut deliveries: VecDeque<Transfer> = VecDeque::new();
     let mut pd_from_outside = false;
     let (mut sync_low, mut pd_low) = (true, false);
@@ -233,8 +235,17 @@ pub fn run_in_world(
         if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
             // Never ahead of the wall clock (behind it when the host is too slow: said at once).
             outcome.work.pacing_us += pace.hold(t);
-            for frame in live.slcan.poll() {
-                operator.push_back((t, frame));
+            // While boards sent ahead together hold reports beyond this boundary (at most a live
+            // step), the adapter's frames wait (and no board is sent ahead together meanwhile):
+            // a command frame queued now could reach such a board only after the time it
+            // completes. Queued once the host has caught up, they are what the adapter sent a
+            // little later.
+            adapter_waiting.extend(live.slcan.poll());
+            if !boards
+                .iter()
+                .any(|b| b.alive && b.held.as_ref().is_some_and(|&(at, _)| at > t))
+            {
+                operator.extend(adapter_waiting.drain(..).map(|frame| (t, frame)));
             }
         }
         // The adapter's three mailboxes, filled in the order the stimulus gives.
@@ -488,10 +499,11 @@ pub fn run_in_world(
         let mut busy = busy;
         // The steady state, in which several boards with work may be sent ahead together (below):
         // every module has released SYS_SYNC_N, nobody drives SYS_PD_N, no board is busy with a
-        // command or gets one now, no world, not live.
+        // command or gets one now, no world. Live, a live step at most, and the adapter's frames
+        // wait meanwhile (above), none of them waiting now.
         let steady = flags == 0
             && now.is_none_or(|d| !reaches_software(d.frame.id))
-            && live.is_none()
+            && adapter_waiting.is_empty()
             && world.is_none()
             && boards
                 .iter()
@@ -542,7 +554,7 @@ pub fn run_in_world(
         }
         let quiet = mailboxes_empty && deliveries.is_empty();
         // Several boards with work, in the steady state (every module has released SYS_SYNC_N,
-        // nobody drives SYS_PD_N, no board is busy with a command, no world, not live): they are
+        // nobody drives SYS_PD_N, no board is busy with a command, no world): they are
         // sent ahead together. The boards send sensor frames only, which no other board's filter
         // passes, so one's report cannot concern another but through the bus, which the host runs
         // after the reports. A line is driven in the steady state only by a shutdown, which a
