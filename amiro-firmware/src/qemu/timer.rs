@@ -61,6 +61,11 @@ struct Clock {
     armed: u64,
     /// The running period is a restart's that has wrapped once: it may be kept for one more turn.
     may_keep: bool,
+    /// The reload the counter takes at the running period's wrap (SysTick's RVR; `reload` unless a
+    /// restart set up the period after it as well), and the deadline that period ends at
+    /// ([`NOT_ARMED`]: none).
+    next_reload: u32,
+    next_armed: u64,
 }
 
 /// [`Clock::armed`] when no restart set the running period up for a deadline.
@@ -74,6 +79,8 @@ static CLOCK: Mutex<RefCell<Clock>> = Mutex::new(RefCell::new(Clock {
     last_tick: 0,
     armed: NOT_ARMED,
     may_keep: false,
+    next_reload: CYCLES_PER_TICK as u32 - 1,
+    next_armed: NOT_ARMED,
 }));
 /// The tick count of periodic mode: one per wrap, as rtic-monotonics' SysTick counts (the apps read
 /// the clock often, and every instruction here is virtual time they lose; the scenarios' cost
@@ -102,7 +109,9 @@ fn count_wrap(clock: &mut Clock) -> bool {
         clock.offset = (total % CYCLES_PER_TICK) as u32;
     }
     clock.may_keep = clock.armed != NOT_ARMED;
-    clock.armed = NOT_ARMED;
+    clock.armed = clock.next_armed;
+    clock.reload = clock.next_reload;
+    clock.next_armed = NOT_ARMED;
     true
 }
 
@@ -178,7 +187,9 @@ pub(super) fn set_tickless() {
         clock.tick = PERIODIC.load(Ordering::Relaxed);
         clock.offset = 0;
         clock.reload = PER_TICK - 1;
+        clock.next_reload = PER_TICK - 1;
         clock.armed = NOT_ARMED;
+        clock.next_armed = NOT_ARMED;
         TICKLESS.store(true, Ordering::SeqCst);
     });
     cortex_m::peripheral::SCB::set_pendst();
@@ -241,8 +252,40 @@ fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     clock.tick = tick;
     clock.offset = into;
     clock.reload = reload;
+    clock.next_reload = reload;
     clock.armed = due;
+    clock.next_armed = NOT_ARMED;
     clock.may_keep = false;
+    if period <= MAX_PERIOD {
+        set_up_next(clock, due);
+    }
+}
+
+/// After a restart for `due`: when the other queue's deadline follows it, the period after the
+/// wrap at `due` is set up to end there too, so that wrap needs no restart of its own (which would
+/// cost QEMU a reload expiry). SysTick takes a new reload at its next wrap; the counter must have
+/// reloaded from the restart first (a cycle after it: it reads non-zero then), else nothing is set
+/// up and the wrap restarts as before.
+fn set_up_next(clock: &mut Clock, due: u64) {
+    let second = APP_DUE
+        .load(Ordering::Relaxed)
+        .max(PLATFORM_DUE.load(Ordering::Relaxed));
+    if second == u64::MAX || second <= due {
+        return;
+    }
+    let period = (second - due).saturating_mul(CYCLES_PER_TICK);
+    if !(MIN_PERIOD..=MAX_PERIOD).contains(&period) {
+        return;
+    }
+    // SAFETY: a read of SysTick's current value, which has no side effects.
+    if unsafe { core::ptr::read_volatile(SYST_CVR) } == 0 {
+        return;
+    }
+    let reload = (period - 1) as u32;
+    // SAFETY: SysTick's reload: the running period keeps its count, the next one takes this.
+    unsafe { core::ptr::write_volatile(SYST_RVR, reload) };
+    clock.next_reload = reload;
+    clock.next_armed = second;
 }
 
 /// A timer queue over the tick count whose next expiry is the word `$due` (the tick interrupt reads
