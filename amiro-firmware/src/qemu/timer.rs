@@ -56,8 +56,9 @@ struct Clock {
     /// below.
     last_cycles: u64,
     last_tick: u64,
-    /// The due tick the running period was started for ([`NOT_ARMED`] once it has wrapped: SysTick
-    /// then runs on with the same reload, which ends at no deadline).
+    /// The due tick the running period ends at ([`NOT_ARMED`] when it ends at no deadline: after
+    /// a wrap SysTick runs on with the same reload, unless the restart set up that period too,
+    /// [`Clock::next_armed`]).
     armed: u64,
     /// The running period is a restart's that has wrapped once: it may be kept for one more turn.
     may_keep: bool,
