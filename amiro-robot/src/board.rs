@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use amiro_bus_sim::MAILBOXES;
+use amiro_bus_sim::{NodeId, MAILBOXES};
 use amiro_trace::robot_link::{
     Down, Up, DOWN_READINGS, DRIVES_SYNC_LOW, QUANTUM_US, UP_LEN, UP_WHEELS,
 };
@@ -24,6 +24,8 @@ pub(crate) const LIVE_NICE: i32 = -10;
 /// A board's process and the coordinator's view of it.
 pub(crate) struct Board {
     pub(crate) index: usize,
+    /// Its node on the bus model.
+    pub(crate) node: NodeId,
     pub(crate) firmware: Firmware,
     pub(crate) dir: PathBuf,
     pub(crate) child: Option<Child>,
@@ -92,10 +94,18 @@ pub(crate) fn set_nonblocking(fd: i32) {
 }
 
 impl Board {
-    /// Board `index` of the robot (not started): its build, its folder, whether the run is live.
-    pub(crate) fn new(index: usize, firmware: Firmware, dir: PathBuf, live: bool) -> Self {
+    /// Board `index` of the robot (not started): its bus node, its build, its folder, whether the
+    /// run is live.
+    pub(crate) fn new(
+        index: usize,
+        node: NodeId,
+        firmware: Firmware,
+        dir: PathBuf,
+        live: bool,
+    ) -> Self {
         Self {
             index,
+            node,
             firmware,
             dir,
             child: None,

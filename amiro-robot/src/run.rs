@@ -19,6 +19,9 @@ use crate::{candump_line, pace, stamp, Firmware, Live, Outcome, Sink, Transfer, 
 /// queued at the boundary the host is at, so this is how late one can come on (virtual time).
 const LIVE_STEP_US: u64 = 1_000;
 
+/// How long the host waits for a board's report before it calls the board hung.
+const REPORT_LIMIT: Duration = Duration::from_secs(30);
+
 /// Counts of a run's work, for `--bench` and the closing line.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct Work {
@@ -38,21 +41,21 @@ pub struct Work {
 
 /// What a board must get at boundary `t`: the frame that completes in the coming quantum if it is
 /// the board's own or passes its receive filter, an abort answer, a new line level, the end.
-fn due(b: &Board, d: Option<&Transfer>, bus: &Bus, node: NodeId, flags: u8, end: bool) -> bool {
-    end || b.aborted != 0 || flags != b.flags || d.is_some_and(|d| meant_for(b, d, bus, node))
+fn due(b: &Board, d: Option<&Transfer>, bus: &Bus, flags: u8, end: bool) -> bool {
+    end || b.aborted != 0 || flags != b.flags || d.is_some_and(|d| meant_for(b, d, bus))
 }
 
 /// Whether `d` is given to board `b`: its own frame (not one from before its last reset, nor its
 /// babbling controller's), or another node's while it is plugged in.
-fn given(b: &Board, d: &Transfer, bus: &Bus, node: NodeId) -> (bool, bool) {
+fn given(b: &Board, d: &Transfer, bus: &Bus) -> (bool, bool) {
     let own = d.node == b.index && d.start >= b.offset && d.mailbox < MAILBOXES;
-    let heard = d.node != b.index && bus.plugged(node);
+    let heard = d.node != b.index && bus.plugged(b.node);
     (own, heard)
 }
 
 /// Whether `d` makes board `b` act: its own completion, or a frame its filter passes.
-fn meant_for(b: &Board, d: &Transfer, bus: &Bus, node: NodeId) -> bool {
-    let (own, heard) = given(b, d, bus, node);
+fn meant_for(b: &Board, d: &Transfer, bus: &Bus) -> bool {
+    let (own, heard) = given(b, d, bus);
     own || (heard && reaches_software(d.frame.id))
 }
 
@@ -91,8 +94,13 @@ pub fn run_in_world(
 ) -> Result<Outcome> {
     std::fs::create_dir_all(work)?;
     let mut bus = Bus::new();
+    // The three boards' nodes, then the operator's adapter's (`OPERATOR`).
+    let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
     let mut boards: Vec<Board> = (0..3)
-        .map(|k| Board::new(k, firmware[k].clone(), work.join(BOARDS[k]), live.is_some()))
+        .map(|k| {
+            let dir = work.join(BOARDS[k]);
+            Board::new(k, nodes[k], firmware[k].clone(), dir, live.is_some())
+        })
         .collect();
     if live.is_some() {
         // The host's thread too (see `board::LIVE_NICE`).
@@ -104,7 +112,6 @@ pub fn run_in_world(
             );
         }
     }
-    let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
     for b in &mut boards {
         b.start(0)?;
     }
@@ -116,10 +123,11 @@ pub fn run_in_world(
     };
     let mut pending = actions.iter().peekable();
     let mut operator: VecDeque<(u64, Frame)> = VecDeque::new();
+    // A live run's frames from the adapter that wait for the host to catch up with the boards.
+    let mut adapter_waiting: Vec<Frame> = Vec::new();
     let mut deliveries: VecDeque<Transfer> = VecDeque::new();
     let mut pd_from_outside = false;
     let (mut sync_low, mut pd_low) = (true, false);
-    let limit = Duration::from_secs(30);
     let mut pace = live.as_ref().map(|_| pace::Pace::new(Instant::now()));
     let mut t = QUANTUM_US;
     // The boards sent ahead at the last boundary `from` (the only ones with work, everything else
@@ -134,12 +142,7 @@ pub fn run_in_world(
         if !ahead.is_empty() {
             for &k in &ahead {
                 let b = &mut boards[k];
-                b.held = Some(take_report(
-                    b,
-                    from + QUANTUM_US..=t,
-                    limit,
-                    &mut outcome.work,
-                )?);
+                b.held = Some(take_report(b, from + QUANTUM_US..=t, &mut outcome.work)?);
                 b.next = b.held.as_ref().map(|&(at, _)| at);
             }
             t = ahead
@@ -152,25 +155,10 @@ pub fn run_in_world(
         // those left waiting whose deadline falls here are sent on to it first.
         for b in boards.iter_mut() {
             if b.alive && b.next.is_none() && b.at < t && b.wants <= t {
-                let on = Down {
-                    next_us: t - b.offset,
-                    flags: b.flags,
-                    ..Down::default()
-                };
-                b.send(&on)?;
-                b.next = Some(t);
-                outcome.work.catch_ups += 1;
+                send_on(b, t, &mut outcome.work)?;
             }
             if b.alive && b.next == Some(t) {
-                exchange(
-                    b,
-                    t..=t,
-                    &mut bus,
-                    &nodes,
-                    &mut notes,
-                    limit,
-                    &mut outcome.work,
-                )?;
+                exchange(b, t..=t, &mut bus, &mut notes, &mut outcome.work)?;
             }
         }
         while let Some(a) = pending.next_if(|a| a.at_us < t) {
@@ -233,8 +221,17 @@ pub fn run_in_world(
         if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
             // Never ahead of the wall clock (behind it when the host is too slow: said at once).
             outcome.work.pacing_us += pace.hold(t);
-            for frame in live.slcan.poll() {
-                operator.push_back((t, frame));
+            // While boards sent ahead together hold reports beyond this boundary (at most a live
+            // step), the adapter's frames wait (and no board is sent ahead together meanwhile):
+            // a command frame queued now could reach such a board only after the time it
+            // completes. Queued once the host has caught up, they are what the adapter sent a
+            // little later.
+            adapter_waiting.extend(live.slcan.poll());
+            if !boards
+                .iter()
+                .any(|b| b.alive && b.held.as_ref().is_some_and(|&(at, _)| at > t))
+            {
+                operator.extend(adapter_waiting.drain(..).map(|frame| (t, frame)));
             }
         }
         // The adapter's three mailboxes, filled in the order the stimulus gives.
@@ -304,7 +301,7 @@ pub fn run_in_world(
         // request is as late as the exchange that carried it.
         for b in boards.iter_mut().filter(|b| b.alive) {
             for mailbox in (0..MAILBOXES).filter(|&k| b.aborts & 1 << k != 0) {
-                if let Some(p) = bus.abort(nodes[b.index], mailbox) {
+                if let Some(p) = bus.abort(b.node, mailbox) {
                     b.aborted |= 1 << mailbox;
                     notes.push(format!(
                         "bus: # {} {} aborts {:03X} in mailbox {mailbox} for a more urgent frame",
@@ -375,36 +372,17 @@ pub fn run_in_world(
         }
         // Boards left waiting at an earlier boundary that must get something at this one: sent on
         // to it first (they run there idle and report).
-        for k in 0..boards.len() {
-            let b = &boards[k];
-            if b.alive
-                && b.next.is_none()
-                && b.at < t
-                && due(b, now.as_ref(), &bus, nodes[k], flags, end)
-            {
-                let on = Down {
-                    next_us: t - b.offset,
-                    flags: b.flags,
-                    ..Down::default()
-                };
-                boards[k].send(&on)?;
-                outcome.work.catch_ups += 1;
-                exchange(
-                    &mut boards[k],
-                    t..=t,
-                    &mut bus,
-                    &nodes,
-                    &mut notes,
-                    limit,
-                    &mut outcome.work,
-                )?;
+        for b in boards.iter_mut() {
+            if b.alive && b.next.is_none() && b.at < t && due(b, now.as_ref(), &bus, flags, end) {
+                send_on(b, t, &mut outcome.work)?;
+                exchange(b, t..=t, &mut bus, &mut notes, &mut outcome.work)?;
             }
         }
         // A board sent ahead together with others and still ahead of this boundary gets what is
         // due for it here only at its report (never silently).
         for b in boards.iter().filter(|b| b.alive && b.held.is_some()) {
             if let Some(at) = b.next.filter(|&at| at > t) {
-                if due(b, now.as_ref(), &bus, nodes[b.index], flags, end) {
+                if due(b, now.as_ref(), &bus, flags, end) {
                     notes.push(format!(
                         "bus: # {} {} was sent ahead with another board: what is due for it here reaches it at {}",
                         stamp(t),
@@ -420,14 +398,13 @@ pub fn run_in_world(
         // What each board at this boundary wants next: the coming quantum if it has work or gets
         // something now, else the boundary of its deadline (with a world, a sensor board's last
         // boundary before it: `WorldRun::wake_boundary`).
-        for k in 0..boards.len() {
-            let b = &boards[k];
+        for b in boards.iter_mut() {
             if b.alive && b.next.is_none() && b.at == t {
-                let busy = b.wakes_at <= t || due(b, now.as_ref(), &bus, nodes[k], flags, end);
-                boards[k].wants = if busy {
+                let busy = b.wakes_at <= t || due(b, now.as_ref(), &bus, flags, end);
+                b.wants = if busy {
                     t + QUANTUM_US
                 } else if world.as_deref().is_some_and(WorldRun::feeds) {
-                    WorldRun::wake_boundary(k, t, b.wakes_at)
+                    WorldRun::wake_boundary(b.index, t, b.wakes_at)
                 } else {
                     at_or_after(b.wakes_at)
                 };
@@ -488,10 +465,11 @@ pub fn run_in_world(
         let mut busy = busy;
         // The steady state, in which several boards with work may be sent ahead together (below):
         // every module has released SYS_SYNC_N, nobody drives SYS_PD_N, no board is busy with a
-        // command or gets one now, no world, not live.
+        // command or gets one now, no world. Live, a live step at most, and the adapter's frames
+        // wait meanwhile (above), none of them waiting now.
         let steady = flags == 0
             && now.is_none_or(|d| !reaches_software(d.frame.id))
-            && live.is_none()
+            && adapter_waiting.is_empty()
             && world.is_none()
             && boards
                 .iter()
@@ -519,7 +497,7 @@ pub fn run_in_world(
                     && b.aborted == 0
                     && b.flags == flags
                     && !reaches_software(d.frame.id)
-                    && given(b, &d, &bus, nodes[d.node]).0
+                    && given(b, &d, &bus).0
             });
             let mut group = busy.clone();
             if !group.contains(&d.node) {
@@ -542,7 +520,7 @@ pub fn run_in_world(
         }
         let quiet = mailboxes_empty && deliveries.is_empty();
         // Several boards with work, in the steady state (every module has released SYS_SYNC_N,
-        // nobody drives SYS_PD_N, no board is busy with a command, no world, not live): they are
+        // nobody drives SYS_PD_N, no board is busy with a command, no world): they are
         // sent ahead together. The boards send sensor frames only, which no other board's filter
         // passes, so one's report cannot concern another but through the bus, which the host runs
         // after the reports. A line is driven in the steady state only by a shutdown, which a
@@ -565,9 +543,7 @@ pub fn run_in_world(
         // Answers: every board at this boundary that wants the next one gets what is due; one
         // that sleeps past it waits (its answer held back); one waiting from before whose
         // deadline is the next boundary is sent on to it.
-        for k in 0..boards.len() {
-            let node = nodes[k];
-            let b = &mut boards[k];
+        for (k, b) in boards.iter_mut().enumerate() {
             if !b.alive || b.next.is_some() {
                 continue;
             }
@@ -587,7 +563,7 @@ pub fn run_in_world(
                     answer.flags |= DOWN_EARLY;
                 }
                 if let Some(d) = now {
-                    let (own, heard) = given(b, &d, &bus, node);
+                    let (own, heard) = given(b, &d, &bus);
                     if own || heard {
                         b.commanded |= heard && reaches_software(d.frame.id);
                         answer.flags |= DOWN_FRAME | if own { DOWN_OWN } else { 0 };
@@ -706,28 +682,39 @@ fn exchange(
     b: &mut Board,
     within: std::ops::RangeInclusive<u64>,
     bus: &mut Bus,
-    nodes: &[NodeId],
     notes: &mut Vec<String>,
-    limit: Duration,
     work: &mut Work,
 ) -> Result<u64> {
     let (t, report) = match b.held.take() {
         Some(held) => held,
-        None => take_report(b, within, limit, work)?,
+        None => take_report(b, within, work)?,
     };
-    apply(b, t, report, bus, nodes, notes);
+    apply(b, t, report, bus, notes);
     Ok(t)
+}
+
+/// Sends board `b`, left waiting at an earlier boundary, on to boundary `t`: it runs there idle
+/// and reports (an exchange at `t` takes the report).
+fn send_on(b: &mut Board, t: u64, work: &mut Work) -> Result<()> {
+    let on = Down {
+        next_us: t - b.offset,
+        flags: b.flags,
+        ..Down::default()
+    };
+    b.send(&on)?;
+    b.next = Some(t);
+    work.catch_ups += 1;
+    Ok(())
 }
 
 /// Waits for board `b`'s report at one of the boundaries `within` (the last, if its run ended).
 fn take_report(
     b: &mut Board,
     within: std::ops::RangeInclusive<u64>,
-    limit: Duration,
     work: &mut Work,
 ) -> Result<(u64, Option<Up>)> {
     let waited = Instant::now();
-    let report = b.receive(waited, limit)?;
+    let report = b.receive(waited, REPORT_LIMIT)?;
     work.waiting_us += waited.elapsed().as_micros() as u64;
     let t = match &report {
         Some(r) => r.at_us.saturating_add(b.offset),
@@ -749,22 +736,15 @@ fn take_report(
 }
 
 /// Takes board `b`'s report at boundary `t` (`None`: its run ended).
-fn apply(
-    b: &mut Board,
-    t: u64,
-    report: Option<Up>,
-    bus: &mut Bus,
-    nodes: &[NodeId],
-    notes: &mut Vec<String>,
-) {
+fn apply(b: &mut Board, t: u64, report: Option<Up>, bus: &mut Bus, notes: &mut Vec<String>) {
     b.at = t;
     b.next = None;
     let Some(report) = report else {
         // The board ended (its hand-over, or a failure): off the bus from here on.
         b.alive = false;
         b.drives = 0;
-        bus.reset_node(nodes[b.index], t);
-        bus.set_plugged(nodes[b.index], false, t);
+        bus.reset_node(b.node, t);
+        bus.set_plugged(b.node, false, t);
         notes.push(format!(
             "bus: # {} {} left the bus (its run ended)",
             stamp(t),
@@ -793,7 +773,7 @@ fn apply(
             ));
             continue;
         };
-        if let Err(e) = bus.queue(nodes[b.index], usize::from(q.mailbox), frame, queued) {
+        if let Err(e) = bus.queue(b.node, usize::from(q.mailbox), frame, queued) {
             notes.push(format!(
                 "bus: # {} {}: mailbox {}: {e:?}",
                 stamp(t),
@@ -815,7 +795,7 @@ mod tests {
                     elf: "none.elf".into(),
                     machine: "netduino2",
                 };
-                let mut b = Board::new(k, firmware, format!("board-{k}").into(), false);
+                let mut b = Board::new(k, k, firmware, format!("board-{k}").into(), false);
                 b.alive = true;
                 b
             })

@@ -11,8 +11,10 @@
 //! tick), as it always did: the scenarios' cost figures include that interrupt. A robot run
 //! ([`set_tickless`], from `robot::connect`) interrupts only when something is due: after every
 //! interrupt SysTick is restarted to end at the earlier of the two queues' deadlines (at most one
-//! 24-bit reload, ≈ 100–140 ms, on). Under `-icount` an idle board then costs QEMU one interrupt per
-//! deadline instead of 100 000 per virtual second (docs/qemu.md, "Speed").
+//! 24-bit reload, ≈ 100–140 ms, on), unless it already runs to that deadline; a deadline less than
+//! half a tick away is waited for by pending the interrupt again, never with a period of a few
+//! cycles. Under `-icount` an idle board then costs QEMU one interrupt per deadline instead of
+//! 100 000 per virtual second (docs/qemu.md, "Speed").
 //!
 //! Periodic, the tick count is one per wrap (COUNTFLAG, as rtic-monotonics' SysTick counts it: the
 //! cheapest reading, which the scenarios' cost figures were measured with). Tickless, the clock is
@@ -54,7 +56,21 @@ struct Clock {
     /// below.
     last_cycles: u64,
     last_tick: u64,
+    /// The due tick the running period ends at ([`NOT_ARMED`] when it ends at no deadline: after
+    /// a wrap SysTick runs on with the same reload, unless the restart set up that period too,
+    /// [`Clock::next_armed`]).
+    armed: u64,
+    /// The running period is a restart's that has wrapped once: it may be kept for one more turn.
+    may_keep: bool,
+    /// The reload the counter takes at the running period's wrap (SysTick's RVR; `reload` unless a
+    /// restart set up the period after it as well), and the deadline that period ends at
+    /// ([`NOT_ARMED`]: none).
+    next_reload: u32,
+    next_armed: u64,
 }
+
+/// [`Clock::armed`] when no restart set the running period up for a deadline.
+const NOT_ARMED: u64 = u64::MAX - 1;
 
 static CLOCK: Mutex<RefCell<Clock>> = Mutex::new(RefCell::new(Clock {
     tick: 0,
@@ -62,6 +78,10 @@ static CLOCK: Mutex<RefCell<Clock>> = Mutex::new(RefCell::new(Clock {
     reload: CYCLES_PER_TICK as u32 - 1,
     last_cycles: 0,
     last_tick: 0,
+    armed: NOT_ARMED,
+    may_keep: false,
+    next_reload: CYCLES_PER_TICK as u32 - 1,
+    next_armed: NOT_ARMED,
 }));
 /// The tick count of periodic mode: one per wrap, as rtic-monotonics' SysTick counts (the apps read
 /// the clock often, and every instruction here is virtual time they lose; the scenarios' cost
@@ -89,6 +109,10 @@ fn count_wrap(clock: &mut Clock) -> bool {
         clock.tick += total / CYCLES_PER_TICK;
         clock.offset = (total % CYCLES_PER_TICK) as u32;
     }
+    clock.may_keep = clock.armed != NOT_ARMED;
+    clock.armed = clock.next_armed;
+    clock.reload = clock.next_reload;
+    clock.next_armed = NOT_ARMED;
     true
 }
 
@@ -164,23 +188,61 @@ pub(super) fn set_tickless() {
         clock.tick = PERIODIC.load(Ordering::Relaxed);
         clock.offset = 0;
         clock.reload = PER_TICK - 1;
+        clock.next_reload = PER_TICK - 1;
+        clock.armed = NOT_ARMED;
+        clock.next_armed = NOT_ARMED;
         TICKLESS.store(true, Ordering::SeqCst);
     });
     cortex_m::peripheral::SCB::set_pendst();
 }
 
-/// Restarts SysTick to wrap at the earlier queue deadline (or a full reload on).
+/// The shortest period a restart sets, in cycles. SysTick wraps again every period until the
+/// interrupt restarts it, and in QEMU every wrap is a timer expiry that its main loop must run
+/// (a hand-over of QEMU's global lock between its threads); the interrupt takes some hundred
+/// cycles from the wrap to its restart, so a period of a few cycles wrapped hundreds of times in
+/// it (96 % of DiWheelDrive's timer expiries in the thesis demo, docs/qemu.md "Speed").
+const MIN_PERIOD: u64 = CYCLES_PER_TICK / 2;
+
+/// The shortest running period a restart after its wrap keeps for one more turn, in cycles (see
+/// [`restart`]).
+const KEEP_PERIOD: u64 = 3 * CYCLES_PER_TICK;
+
+/// Restarts SysTick to wrap at the earlier queue deadline (or a full reload on); leaves it alone
+/// when the running period was set up for that deadline and has not wrapped. A deadline closer
+/// than [`MIN_PERIOD`] is not set up: the interrupt is pended again instead, and it runs until the
+/// deadline has come (the running period is at least that long, so it wraps at most once meanwhile).
+///
+/// Every restart costs QEMU a timer expiry of its own besides the wrap: writing the current value
+/// leaves the counter at 0, and QEMU's SysTick reloads it one cycle later through its timer. So
+/// right after a wrap, when the deadline lies beyond the end of the period SysTick has just begun
+/// again (at least [`KEEP_PERIOD`] long), that period is kept once: a sooner deadline usually
+/// comes first (the exchange's next wait, a task's delay) and restarts it, and otherwise its wrap
+/// does. In the thesis demo this saves about a quarter of DiWheelDrive's restarts.
 fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     let (tick, into) = position(cs, clock);
     let due = APP_DUE
         .load(Ordering::Relaxed)
         .min(PLATFORM_DUE.load(Ordering::Relaxed));
+    if due == clock.armed {
+        return;
+    }
     let period = due
         .saturating_sub(tick)
         .saturating_mul(CYCLES_PER_TICK)
-        .saturating_sub(u64::from(into))
-        .clamp(2, MAX_PERIOD);
-    let reload = (period - 1) as u32;
+        .saturating_sub(u64::from(into));
+    if clock.may_keep && u64::from(clock.reload) >= KEEP_PERIOD {
+        clock.may_keep = false;
+        let start = clock.tick * CYCLES_PER_TICK + u64::from(clock.offset);
+        let end = start + u64::from(clock.reload) + 1;
+        if due.saturating_mul(CYCLES_PER_TICK) > end {
+            return;
+        }
+    }
+    if period < MIN_PERIOD {
+        cortex_m::peripheral::SCB::set_pendst();
+        return;
+    }
+    let reload = (period.min(MAX_PERIOD) - 1) as u32;
     // SAFETY: SysTick's reload and current value; writing the current value clears it and
     // COUNTFLAG, and the counter reloads from RVR on the next cycle. The position was read before:
     // the cycles in between are the restart's cost (module docs).
@@ -191,6 +253,40 @@ fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     clock.tick = tick;
     clock.offset = into;
     clock.reload = reload;
+    clock.next_reload = reload;
+    clock.armed = due;
+    clock.next_armed = NOT_ARMED;
+    clock.may_keep = false;
+    if period <= MAX_PERIOD {
+        set_up_next(clock, due);
+    }
+}
+
+/// After a restart for `due`: when the other queue's deadline follows it, the period after the
+/// wrap at `due` is set up to end there too, so that wrap needs no restart of its own (which would
+/// cost QEMU a reload expiry). SysTick takes a new reload at its next wrap; the counter must have
+/// reloaded from the restart first (a cycle after it: it reads non-zero then), else nothing is set
+/// up and the wrap restarts as before.
+fn set_up_next(clock: &mut Clock, due: u64) {
+    let second = APP_DUE
+        .load(Ordering::Relaxed)
+        .max(PLATFORM_DUE.load(Ordering::Relaxed));
+    if second == u64::MAX || second <= due {
+        return;
+    }
+    let period = (second - due).saturating_mul(CYCLES_PER_TICK);
+    if !(MIN_PERIOD..=MAX_PERIOD).contains(&period) {
+        return;
+    }
+    // SAFETY: a read of SysTick's current value, which has no side effects.
+    if unsafe { core::ptr::read_volatile(SYST_CVR) } == 0 {
+        return;
+    }
+    let reload = (period - 1) as u32;
+    // SAFETY: SysTick's reload: the running period keeps its count, the next one takes this.
+    unsafe { core::ptr::write_volatile(SYST_RVR, reload) };
+    clock.next_reload = reload;
+    clock.next_armed = second;
 }
 
 /// A timer queue over the tick count whose next expiry is the word `$due` (the tick interrupt reads
