@@ -503,7 +503,11 @@ pub fn run_in_world(
             if !group.contains(&d.node) {
                 group.push(d.node);
             }
-            let horizon = limits.horizon(&boards, &group);
+            let horizon = if steady {
+                limits.widen(&boards, &mut group)
+            } else {
+                limits.horizon(&boards, &group)
+            };
             if own_waiting
                 && (group.len() == 1 || (steady && horizon < duration_us))
                 && horizon > d.end
@@ -527,12 +531,17 @@ pub fn run_in_world(
         // command starts (or PowerManagement's low battery): a line change or a command frame
         // from a board sent ahead with others reaches them at their own next report, and a bus
         // note says so.
-        if !end && quiet && (busy.len() == 1 || (busy.len() > 1 && steady)) {
-            let horizon = limits.horizon(&boards, &busy);
+        if !end && quiet && (busy.len() == 1 || steady) {
+            let horizon = if steady {
+                limits.widen(&boards, &mut busy)
+            } else {
+                limits.horizon(&boards, &busy)
+            };
             // A frame answered now completes before the boards' next boundary; boards sent ahead
             // together report before the run's end.
             if horizon > t + QUANTUM_US
                 && now.is_none_or(|d| d.end < horizon)
+                && !busy.is_empty()
                 && (busy.len() == 1 || horizon < duration_us)
             {
                 next = horizon;
@@ -580,6 +589,15 @@ pub fn run_in_world(
                     .as_deref_mut()
                     .and_then(|w| w.readings_for(k, t, b.offset));
                 b.send_with(&answer, readings)?;
+            } else if b.at < t && sent_ahead {
+                // A board left waiting for its deadline, sent ahead with the others (`widen`).
+                let on = Down {
+                    next_us: next - b.offset,
+                    flags: b.flags | DOWN_EARLY,
+                    ..Down::default()
+                };
+                b.next = Some(next);
+                b.send(&on)?;
             } else if b.at < t && b.wants == next && ahead.is_empty() {
                 let on = Down {
                     next_us: next - b.offset,
@@ -661,6 +679,34 @@ impl Limits {
             .flatten()
             .chain(others)
             .fold(self.end, u64::min)
+    }
+
+    /// The horizon of the boards `group` sent ahead together in the steady state, with every board
+    /// left waiting for a deadline before it taken into the group (until none is): such a board
+    /// would otherwise bound the horizon, and the group would report there only to go on. Sent
+    /// ahead too, it wakes at its deadline by itself and reports only when it has something to (a
+    /// frame, an abort, a line), as the others do. At most the last boundary before the run's end.
+    fn widen(&self, boards: &[Board], group: &mut Vec<usize>) -> u64 {
+        let last = self.end.saturating_sub(QUANTUM_US);
+        loop {
+            let horizon = self.horizon(boards, group).min(last);
+            let before = group.len();
+            group.extend(
+                boards
+                    .iter()
+                    .filter(|b| {
+                        b.alive
+                            && b.next.is_none()
+                            && b.wants <= horizon
+                            && !group.contains(&b.index)
+                    })
+                    .map(|b| b.index)
+                    .collect::<Vec<_>>(),
+            );
+            if group.len() == before {
+                return horizon;
+            }
+        }
     }
 }
 
@@ -827,5 +873,41 @@ mod tests {
             ..limits
         };
         assert_eq!(sooner.horizon(&b, &[0, 1]), 1_600);
+    }
+
+    #[test]
+    fn a_board_waiting_for_a_deadline_before_the_horizon_joins_the_group() {
+        let limits = Limits {
+            end: 10_000,
+            action: None,
+            live: None,
+            tick: None,
+        };
+        let mut b = boards();
+        // Board 0 has work; board 1 waits for its deadline at 800, board 2 for one at 4_000.
+        b[0].wants = 40;
+        b[1].wants = 800;
+        b[2].wants = 4_000;
+        let mut group = vec![0];
+        // Both join (board 2's deadline bounds the horizon once board 1 has joined): the group
+        // runs to the last boundary before the run's end.
+        assert_eq!(limits.widen(&b, &mut group), 9_960);
+        assert_eq!(group, [0, 1, 2]);
+        // A board already sent on to a boundary (or holding a report) bounds the horizon and
+        // stays out; one with no deadline bounds nothing and stays out too.
+        b[1].next = Some(1_200);
+        b[2].wants = u64::MAX;
+        let mut group = vec![0];
+        assert_eq!(limits.widen(&b, &mut group), 1_200);
+        assert_eq!(group, [0]);
+        // A stimulus action before a waiting board's deadline keeps it out.
+        b[1].next = None;
+        let sooner = Limits {
+            action: Some(600),
+            ..limits
+        };
+        let mut group = vec![0];
+        assert_eq!(sooner.widen(&b, &mut group), 600);
+        assert_eq!(group, [0]);
     }
 }
