@@ -848,14 +848,17 @@ mod tests {
             .collect()
     }
 
+    /// A run to 10 ms with no stimulus action, live step or tick.
+    const PLAIN: Limits = Limits {
+        end: 10_000,
+        action: None,
+        live: None,
+        tick: None,
+    };
+
     #[test]
     fn the_horizon_is_the_earliest_boundary_outside_the_group() {
-        let limits = Limits {
-            end: 10_000,
-            action: None,
-            live: None,
-            tick: None,
-        };
+        let limits = PLAIN;
         let mut b = boards();
         b[0].wants = 400;
         b[1].next = Some(800);
@@ -877,12 +880,7 @@ mod tests {
 
     #[test]
     fn a_board_waiting_for_a_deadline_before_the_horizon_joins_the_group() {
-        let limits = Limits {
-            end: 10_000,
-            action: None,
-            live: None,
-            tick: None,
-        };
+        let limits = PLAIN;
         let mut b = boards();
         // Board 0 has work; board 1 waits for its deadline at 800, board 2 for one at 4_000.
         b[0].wants = 40;
