@@ -451,7 +451,7 @@ impl Cfg {
         let entries: Vec<usize> = region
             .iter()
             .copied()
-            .filter(|&x| x != header && (x == 0 || outside_into(self, x)))
+            .filter(|&x| x != header && outside_into(self, x))
             .collect();
         for entry in entries {
             // The region's blocks reachable from this entry without passing the header.

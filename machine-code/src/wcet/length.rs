@@ -222,7 +222,9 @@ fn smaller_of(run: &[Insn], at: usize, r: u8) -> Option<u32> {
         .iter()
         .rposition(|i| i.inst.opcode == Opcode::IT)?;
     let first_condition = (run[it].raw[0] >> 4) & 0xF;
-    if !matches!(first_condition, 2 | 8) {
+    // The move runs under the `IT`'s own condition (no else slot) and the flags the compare set.
+    let in_block = at - it <= it_slots(&run[it]) && all_then(&run[it]);
+    if !matches!(first_condition, 2 | 8) || !in_block || run[it + 1..at].iter().any(|i| i.inst.s) {
         return None;
     }
     let cmp = run[..it].iter().rposition(|i| {

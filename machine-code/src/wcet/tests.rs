@@ -994,3 +994,27 @@ fn an_outlined_helper_is_read_for_the_registers_it_writes() {
         "{b:?}"
     );
 }
+
+#[test]
+fn a_move_in_an_else_slot_is_no_smaller_of() {
+    // `cmp r1, #12; ite cs; movcs r0, r0; movcc r1, #12`: r1 becomes 12 only when it was smaller, so
+    // nothing bounds it: the call's length stays unknown.
+    let img = image(
+        &with_memclr(&[
+            0xb580, // 0x00 push {r7, lr}
+            0x6801, // 0x02 ldr r1, [r0]
+            0x290c, // 0x04 cmp r1, #12
+            0xbf2c, // 0x06 ite cs
+            0x4600, // 0x08 movcs r0, r0
+            0x210c, // 0x0a movcc r1, #12
+            0xf000, 0xf801, // 0x0c bl 0x12
+            0xbd80, // 0x10 pop {r7, pc}
+        ]), // 0x12 __aeabi_memclr
+        &[
+            Sym::function("else_slot", 0, 0x12),
+            Sym::function("__aeabi_memclr", 0x12, 0x10),
+        ],
+    );
+    let b = bound(&img, "else_slot", F103_0WS);
+    assert!(length_unknown(&b), "{b:?}");
+}
