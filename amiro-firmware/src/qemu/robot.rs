@@ -179,7 +179,6 @@ async fn wait_until(at_us: u64) {
 /// else wakes a board in a robot run but a frame or a line level from the host, which the host
 /// sees coming. `u32::MAX`: no deadline.
 fn sleeps_for() -> u32 {
-    const ICSR: *const u32 = 0xE000_ED04 as *const u32;
     const ISPR: *const u32 = 0xE000_E200 as *const u32;
     const IABR: *const u32 = 0xE000_E300 as *const u32;
     const PENDSTSET: u32 = 1 << 26;
@@ -323,6 +322,25 @@ fn deliver(answer: &Down, rx_irq: impl InterruptNumber) {
     }
 }
 
+const ICSR: *const u32 = 0xE000_ED04 as *const u32;
+const ICSR_VECTPENDING: u32 = 0x1FF << 12;
+const ICSR_RETTOBASE: u32 = 1 << 11;
+
+/// No exception or interrupt is pending (the caller's own, if it is one, aside).
+pub(super) fn nothing_else_pending() -> bool {
+    // SAFETY: a read of the SCB's interrupt control and state register.
+    unsafe { core::ptr::read_volatile(ICSR) & ICSR_VECTPENDING == 0 }
+}
+
+/// Called at the end of SysTick's interrupt: the core goes idle when it returns (nothing pending,
+/// no other handler pre-empted, the background task [`parked`]), so the next deadline is reached
+/// by `timer::skip_to_deadline`, not by SysTick.
+pub(super) fn idle_after_systick() -> bool {
+    // SAFETY: as above.
+    let icsr = unsafe { core::ptr::read_volatile(ICSR) };
+    icsr & ICSR_VECTPENDING == 0 && icsr & ICSR_RETTOBASE != 0 && PARKED.load(Ordering::SeqCst)
+}
+
 /// Whether the board's background task (priority 0, thread mode, which no NVIC bit shows) waits
 /// in [`parked`]; `false` from its wake-up until it waits again.
 static PARKED: AtomicBool = AtomicBool::new(false);
@@ -395,7 +413,10 @@ pub async fn parked<F: core::future::Future>(future: F) -> F::Output {
                     unsafe { cortex_m::interrupt::enable() };
                     break;
                 }
-                cortex_m::asm::wfi();
+                // Idle: the clock goes to the next deadline at once (`timer::skip_to_deadline`).
+                if !super::timer::skip_to_deadline() {
+                    cortex_m::asm::wfi();
+                }
                 // SAFETY: as above; the pending interrupt that ended the WFI runs now.
                 unsafe { cortex_m::interrupt::enable() };
             }

@@ -16,6 +16,14 @@
 //! cycles. Under `-icount` an idle board then costs QEMU one interrupt per deadline instead of
 //! 100 000 per virtual second (docs/qemu.md, "Speed").
 //!
+//! **An idle core skips.** In a robot run nothing but a deadline can wake an idle board (the host's
+//! frames come through the exchange, which waits for a deadline of its own), so when the core goes
+//! idle ([`skip_to_deadline`], from `robot::parked`) the board's clock moves to the earlier queue
+//! deadline at once and SysTick is pended: no WFI for QEMU to end with a timer expiry. The clock's
+//! period start moves with it (SysTick counts on as it was), and an interrupt after which the core
+//! is idle again sets nothing up. A busy core still gets SysTick set up for its next deadline:
+//! the running period is kept when it ends before it ([`keep_until`]), else restarted.
+//!
 //! Periodic, the tick count is one per wrap (COUNTFLAG, as rtic-monotonics' SysTick counts it: the
 //! cheapest reading, which the scenarios' cost figures were measured with). Tickless, the clock is
 //! the tick and the cycles into it where the running period started, plus how far SysTick has
@@ -226,6 +234,9 @@ fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     if due == clock.armed {
         return;
     }
+    if keep_until(clock, tick * CYCLES_PER_TICK + u64::from(into), due) {
+        return;
+    }
     let period = due
         .saturating_sub(tick)
         .saturating_mul(CYCLES_PER_TICK)
@@ -260,6 +271,35 @@ fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     if period <= MAX_PERIOD {
         set_up_next(clock, due);
     }
+}
+
+/// When the running period ends before the deadline `due` (at least [`MIN_PERIOD`] before it, as
+/// after the board's clock went ahead while idle, `skip_to_deadline`), it is kept and the period
+/// after its wrap is set up to end at `due`: a wrap costs QEMU no more than a restart would, and
+/// none if the core is idle before it (the clock then skips). `false` (nothing set up) otherwise.
+fn keep_until(clock: &mut Clock, now: u64, due: u64) -> bool {
+    let end = clock.tick * CYCLES_PER_TICK + u64::from(clock.offset) + u64::from(clock.reload) + 1;
+    let Some(gap) = due.saturating_mul(CYCLES_PER_TICK).checked_sub(end) else {
+        return false;
+    };
+    // The reload must be written well before the wrap (SysTick takes RVR at its wrap: written
+    // after it, it would set the period after the next one instead). Half a tick is far more than
+    // the cycles from the reading to the write, in an interrupt nothing pre-empts.
+    // SAFETY: a read of SysTick's current value, which has no side effects (0: the counter has
+    // not reloaded from a restart yet, and RVR would still set the running period).
+    if end < now + MIN_PERIOD
+        || !(MIN_PERIOD..=MAX_PERIOD).contains(&gap)
+        || unsafe { core::ptr::read_volatile(SYST_CVR) } == 0
+    {
+        return false;
+    }
+    let reload = (gap - 1) as u32;
+    // SAFETY: SysTick's reload: the running period keeps its count, the next one takes this.
+    unsafe { core::ptr::write_volatile(SYST_RVR, reload) };
+    clock.next_reload = reload;
+    clock.next_armed = due;
+    clock.may_keep = false;
+    true
 }
 
 /// After a restart for `due`: when the other queue's deadline follows it, the period after the
@@ -367,6 +407,44 @@ pub(super) fn next_deadline_us() -> u64 {
     APP_DUE.load(Ordering::Relaxed).saturating_mul(TICK_US)
 }
 
+/// The core is idle (robot runs: the background task sleeps in `robot::parked`, nothing is pending
+/// or active): nothing but SysTick can happen before the earlier queue deadline, so the board's
+/// clock goes there at once and SysTick is pended, instead of a WFI that QEMU ends with a timer
+/// expiry (a hand-over to its main loop, the most of a board's wall time). `false` (nothing done:
+/// wait with WFI) when something is pending or there is no deadline. Called with interrupts
+/// masked.
+pub(super) fn skip_to_deadline() -> bool {
+    if !TICKLESS.load(Ordering::Relaxed) || !super::robot::nothing_else_pending() {
+        return false;
+    }
+    let due = APP_DUE
+        .load(Ordering::Relaxed)
+        .min(PLATFORM_DUE.load(Ordering::Relaxed));
+    if due == u64::MAX {
+        return false;
+    }
+    critical_section::with(|cs| {
+        let clock = &mut *CLOCK.borrow_ref_mut(cs);
+        let (tick, into) = position(cs, clock);
+        let now = tick * CYCLES_PER_TICK + u64::from(into);
+        let target = due.saturating_mul(CYCLES_PER_TICK);
+        if target > now {
+            // The running period started that much later on the board's clock: SysTick's count
+            // goes on as it was, and every later reading and restart are relative to it.
+            let start = clock.tick * CYCLES_PER_TICK + u64::from(clock.offset) + (target - now);
+            clock.tick = start / CYCLES_PER_TICK;
+            clock.offset = (start % CYCLES_PER_TICK) as u32;
+        }
+        // The period SysTick runs no longer ends at a deadline: the interrupt keeps it for the
+        // next one or restarts it (`restart`) if the core has work.
+        clock.armed = NOT_ARMED;
+        clock.next_armed = NOT_ARMED;
+        clock.may_keep = false;
+    });
+    cortex_m::peripheral::SCB::set_pendst();
+    true
+}
+
 #[no_mangle]
 #[allow(non_snake_case)]
 unsafe extern "C" fn SysTick() {
@@ -375,7 +453,9 @@ unsafe extern "C" fn SysTick() {
         PLATFORM_QUEUE.on_monotonic_interrupt();
         APP_QUEUE.on_monotonic_interrupt();
     }
-    if TICKLESS.load(Ordering::Relaxed) {
+    // A core left idle by this interrupt goes to its next deadline at once (`skip_to_deadline`):
+    // SysTick need not be set up for it (a restart costs QEMU a timer expiry).
+    if TICKLESS.load(Ordering::Relaxed) && !super::robot::idle_after_systick() {
         critical_section::with(|cs| restart(cs, &mut CLOCK.borrow_ref_mut(cs)));
     }
 }
