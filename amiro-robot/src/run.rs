@@ -129,6 +129,8 @@ pub fn run_in_world(
     let mut pd_from_outside = false;
     let (mut sync_low, mut pd_low) = (true, false);
     let mut pace = live.as_ref().map(|_| pace::Pace::new(Instant::now()));
+    // A live run's frames for the client, handed over at their time (`Pace::hold`).
+    let mut outbox: pace::Outbox<Frame> = pace::Outbox::default();
     let mut t = QUANTUM_US;
     // The boards sent ahead at the last boundary `from` (the only ones with work, everything else
     // quiet): each reports at the first boundary after it queued a frame, asked for an abort or
@@ -220,7 +222,9 @@ pub fn run_in_world(
         }
         if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
             // Never ahead of the wall clock (behind it when the host is too slow: said at once).
-            outcome.work.pacing_us += pace.hold(t);
+            outcome.work.pacing_us += pace.hold(t, &mut outbox, |end, frame| {
+                live.slcan.deliver(end, &frame);
+            });
             // While boards sent ahead together hold reports beyond this boundary (at most a live
             // step), the adapter's frames wait (and no board is sent ahead together meanwhile):
             // a command frame queued now could reach such a board only after the time it
@@ -357,10 +361,8 @@ pub fn run_in_world(
             .filter(|d| d.end < t + QUANTUM_US);
         if let Some(d) = now {
             deliveries.pop_front();
-            if d.node != OPERATOR {
-                if let Some(live) = live.as_deref_mut() {
-                    live.slcan.deliver(d.end, &d.frame);
-                }
+            if d.node != OPERATOR && live.is_some() {
+                outbox.push(d.end, d.frame);
             }
         }
         let mut flags = 0;
@@ -514,8 +516,8 @@ pub fn run_in_world(
                 && d.end >= t + QUANTUM_US
             {
                 deliveries.pop_front();
-                if let Some(live) = live.as_deref_mut() {
-                    live.slcan.deliver(d.end, &d.frame);
+                if live.is_some() {
+                    outbox.push(d.end, d.frame);
                 }
                 now = Some(d);
                 boards[d.node].wants = t + QUANTUM_US;
@@ -630,6 +632,10 @@ pub fn run_in_world(
         }
         t = next;
     })();
+    // What a live run computed ahead of the wall clock still reaches the client.
+    if let Some(live) = live {
+        outbox.flush(|end, frame| live.slcan.deliver(end, &frame));
+    }
     // The boards print their end lines and exit; whatever they still say is kept.
     for b in &mut boards {
         let started = Instant::now();
