@@ -12,6 +12,7 @@ pub mod bounds;
 pub mod cfg;
 pub mod chip;
 pub mod counted;
+pub mod critical;
 pub mod length;
 pub mod path;
 
@@ -21,6 +22,7 @@ use crate::{Error, Image};
 use analysis::{Analysis, Summary};
 use bounds::BoundsFile;
 use chip::Chip;
+pub use critical::{task_sections, Ceiling, CeilingBound, TaskSections};
 #[cfg(test)]
 use path::{Cost, LoopCount};
 
