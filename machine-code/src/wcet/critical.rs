@@ -29,7 +29,7 @@ use super::cfg::{Block, Call, Cfg, Edge};
 use super::chip::Chip;
 use super::length::{self, NO_ARGS};
 use super::{Task, TaskEntry};
-use crate::decode::Insn;
+use crate::decode::{Insn, Opcode, Operand};
 use crate::image::Function;
 use crate::{Error, Image};
 
@@ -239,6 +239,30 @@ fn place(image: &Image, at: u64) -> String {
     }
 }
 
+/// Where a raise is named: the nearest line of the project's own code in its block (after it,
+/// else before it), the raise being inlined from `cortex-m`; else the raise's own line.
+fn raise_place(image: &Image, insns: &[Insn], block: &Block, k: usize) -> String {
+    let own = |i: &Insn| {
+        image
+            .line(i.addr)
+            .filter(|(file, _)| !third_party(file))
+            .map(|(file, line)| format!("{file}:{line}"))
+    };
+    insns[k..=block.last]
+        .iter()
+        .find_map(own)
+        .or_else(|| insns[block.first..k].iter().rev().find_map(own))
+        .unwrap_or_else(|| place(image, insns[k].addr))
+}
+
+/// Whether a source path is a dependency's or the toolchain's, not the project's.
+fn third_party(file: &str) -> bool {
+    file.contains("/.cargo/registry/")
+        || file.contains("/.cargo/git/")
+        || file.contains("/rustlib/src/rust/library/")
+        || file.starts_with("/rustc/")
+}
+
 impl<'a> Finder<'a> {
     /// Every function reachable from `entry`, their sections per ceiling.
     fn task(&mut self, name: &str, entry: u64) -> TaskSections {
@@ -441,7 +465,7 @@ impl<'a> Finder<'a> {
         reg: Option<u8>,
     ) -> Result<Section, Error> {
         let image = self.image;
-        let at = place(image, insns[k].addr);
+        let at = raise_place(image, insns, &graph.blocks[b], k);
         let mut section = Section {
             ceiling: None,
             function: f.name.clone(),
@@ -621,7 +645,17 @@ fn through(image: &Image, run: &[Insn], r: u8, held: Held) -> Held {
     }
     let mut written = false;
     for insn in run {
+        // A register copied (`MOV rD, rM`) holds what its source held.
+        let copied = match (insn.inst.opcode, &insn.inst.operands[..2]) {
+            (Opcode::MOV, [Operand::Reg(d), Operand::Reg(m)]) if !insn.conditional => {
+                Some((d.number(), known[usize::from(m.number())]))
+            }
+            _ => None,
+        };
         crate::waits::step_constants(image, insn, &mut known);
+        if let Some((d, v)) = copied {
+            known[usize::from(d)] = v;
+        }
         written |= insn.writes().contains(r);
     }
     match (written, known[usize::from(r)]) {
