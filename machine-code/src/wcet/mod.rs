@@ -14,6 +14,7 @@ pub mod chip;
 pub mod counted;
 pub mod critical;
 pub mod length;
+mod masking;
 pub mod path;
 
 use serde::Serialize;
