@@ -385,7 +385,7 @@ pub(super) fn apply_sections(
 pub(super) fn blocking_line(b: &BoardBudgets) -> String {
     let k = &b.blocking;
     let mut line = format!(
-        "{}: blocking: {} terms bounded from the machine code (each job's longest critical section per ceiling, \
+        "{}: blocking terms: {} bounded from the machine code (each job's longest critical section per ceiling, \
          raise to restore",
         b.board,
         k.bounded.len(),
@@ -720,7 +720,7 @@ mod tests {
         );
         assert!(b.blocking.unstated.is_empty());
         let line = blocking_line(&b);
-        assert!(line.contains("2 terms bounded"), "{line}");
+        assert!(line.contains("blocking terms: 2 bounded"), "{line}");
         assert!(line.contains("low at priority 3 10 µs"), "{line}");
         // SRP on the result: `mid` is blocked by `low`'s 10 µs section at ceiling 3, `high` by the stated 4 µs at
         // 5 (the interrupts-off 1 µs is shorter).
