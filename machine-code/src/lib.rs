@@ -19,6 +19,7 @@
 //! let chip = Chip::Stm32f103 { wait_states: 2 };        // or Chip::Stm32f405 { wait_states: 5 }
 //! let bound: Bound = bound_function(&image, "symbol", chip, &bounds)?;
 //! let rows: Vec<TaskBound> = bound_tasks(&image, &tasks, chip, &bounds);
+//! let sections: Vec<TaskSections> = task_sections(&image, &tasks, chip, &bounds);
 //! ```
 //!
 //! - [`bound_function`] bounds one function (its demangled name without hash, or its raw symbol) with
@@ -36,6 +37,11 @@
 //!   vector index) into [`TaskBound`] rows (`cycles`, `us`, `instructions`, `bus_wait_us`, `loops`,
 //!   `preemption_retry_cycles`, `declined`); a handler adds the exception entry and exit (and lazy
 //!   FPU stacking on the M4F) and the longest retry iteration of any task it may preempt.
+//! - [`task_sections`] finds every critical section the same tasks' code can hold (an RTIC lock's
+//!   `MSR BASEPRI_MAX` to its `MSR BASEPRI`, `CPSID i` to `MSR PRIMASK`), bounds each from the raise
+//!   to the restore, and gives per task the longest at each [`Ceiling`] ([`CeilingBound`], declined
+//!   with the section named where a loop in it has no bound), or says why the list may be
+//!   incomplete ([`TaskSections::incomplete`]).
 //!
 //! Every error is an [`Error`]; nothing here panics on a malformed image.
 pub mod callgraph;
@@ -53,7 +59,10 @@ pub use error::Error;
 pub use image::Image;
 pub use wcet::bounds::BoundsFile;
 pub use wcet::chip::Chip;
-pub use wcet::{bound_function, bound_tasks, Bound, LoopInfo, Task, TaskBound, TaskEntry};
+pub use wcet::{
+    bound_function, bound_tasks, task_sections, Bound, Ceiling, CeilingBound, LoopInfo, Task,
+    TaskBound, TaskEntry, TaskSections,
+};
 
 /// Thumb halfwords as the bytes of an image (tests of the decoders).
 #[cfg(test)]

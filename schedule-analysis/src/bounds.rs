@@ -93,6 +93,56 @@ pub struct TaskBound {
     /// The critical sections the analysis uses as blocking (resource → bound), where computed.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub critical_sections: BTreeMap<String, SectionBound>,
+    /// The job's critical sections found in its machine code, the longest per ceiling (from the priority raise
+    /// to its restore); absent in a file of an older writer, or for a job the machine code has no code of.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sections: Option<CeilingSections>,
+}
+
+/// Every critical section of one job's machine code, as the longest per ceiling.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CeilingSections {
+    /// Why the list may miss sections (a raise whose ceiling the machine code does not fix, code the analysis
+    /// cannot follow); `null` when it holds every raise of the job's code. An incomplete list stands for
+    /// nothing: the timing file's stated sections are kept.
+    pub incomplete: Option<String>,
+    /// One entry per ceiling the code raises to, each ceiling once.
+    pub ceilings: Vec<CeilingSection>,
+}
+
+/// A job's longest critical section at one ceiling.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CeilingSection {
+    /// The RTIC priority BASEPRI is raised to; `null` for interrupts off (PRIMASK: above every priority).
+    pub ceiling: Option<u32>,
+    /// Where the longest (or the declined) section is raised: function, then file:line.
+    pub at: String,
+    /// The bound in core cycles (`null` when declined).
+    pub cycles: Option<u64>,
+    /// The bound at the file's clock, µs (`null` when declined).
+    pub us: Option<f64>,
+    /// Peripheral waits inside the section, stated, µs.
+    #[serde(default)]
+    pub bus_wait_us: f64,
+    /// Why no bound was computed, or `null`.
+    pub declined: Option<String>,
+}
+
+impl CeilingSection {
+    /// The section's length the bound gives, µs; `None` when declined.
+    pub fn length_us(&self) -> Option<f64> {
+        self.us.map(|us| us + self.bus_wait_us)
+    }
+
+    /// The ceiling as the report names it.
+    pub fn ceiling_name(&self) -> String {
+        match self.ceiling {
+            Some(p) => format!("priority {p}"),
+            None => "interrupts off".to_string(),
+        }
+    }
 }
 
 impl TaskBound {
@@ -164,7 +214,7 @@ pub enum Problem {
     NotFinite(f64),
     /// Not 64 lowercase hexadecimal digits.
     NotAHash,
-    /// The same task twice.
+    /// The same task twice, or the same ceiling twice in a task's sections.
     Duplicate,
     /// Empty text.
     Empty,
@@ -200,7 +250,7 @@ impl fmt::Display for Problem {
             Problem::NotPositive => write!(f, "must be greater than 0"),
             Problem::NotFinite(v) => write!(f, "must be a finite number ≥ 0, got {v}"),
             Problem::NotAHash => write!(f, "must be 64 lowercase hexadecimal digits (SHA-256)"),
-            Problem::Duplicate => write!(f, "this task has a row already"),
+            Problem::Duplicate => write!(f, "this task (or ceiling) has a row already"),
             Problem::Empty => write!(f, "must not be empty"),
             Problem::BoundAndDeclined => write!(
                 f,
@@ -405,6 +455,30 @@ impl BoundsFile {
                 self.check_section(s).map_err(|(field, p)| {
                     fail(at(&format!("critical_sections.{resource}{field}")), p)
                 })?;
+            }
+            if let Some(sections) = &t.sections {
+                if sections
+                    .incomplete
+                    .as_deref()
+                    .is_some_and(|r| r.trim().is_empty())
+                {
+                    return Err(fail(at("sections.incomplete"), Problem::Empty));
+                }
+                let mut ceilings = BTreeSet::new();
+                for (k, c) in sections.ceilings.iter().enumerate() {
+                    let field = |f: &str| at(&format!("sections.ceilings[{k}]{f}"));
+                    if !ceilings.insert(c.ceiling) {
+                        return Err(fail(field(".ceiling"), Problem::Duplicate));
+                    }
+                    let as_section = SectionBound {
+                        cycles: c.cycles,
+                        us: c.us,
+                        bus_wait_us: c.bus_wait_us,
+                        declined: c.declined.clone(),
+                    };
+                    self.check_section(&as_section)
+                        .map_err(|(f, p)| fail(field(f), p))?;
+                }
             }
         }
         for (resource, s) in &self.idle_critical_sections {

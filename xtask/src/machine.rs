@@ -155,6 +155,10 @@ struct Row<'a> {
     loops: Vec<machine_code::LoopInfo>,
     preemption_retry_cycles: u64,
     declined: Option<String>,
+    /// The task's longest critical section per ceiling (from the priority raise to its restore).
+    critical_sections: Vec<machine_code::CeilingBound>,
+    /// Why the sections found may not be all of them (then none stands for the task's blocking).
+    critical_sections_incomplete: Option<String>,
 }
 
 /// The tasks of one board's image to bound: its hardware tasks (the handler of the interrupt each
@@ -197,6 +201,8 @@ pub struct Bounded {
     pub chip: Chip,
     pub app: schedule_analysis::rtic_source::RticApp,
     pub tasks: Vec<machine_code::TaskBound>,
+    /// Each task's critical sections per ceiling, in the order of `tasks`.
+    pub sections: Vec<machine_code::TaskSections>,
     /// The bounds file's entries that name no place in this image (`BoundsFile::missing_places`).
     pub missing: Vec<String>,
 }
@@ -233,12 +239,14 @@ pub fn bound_build(
         .map_err(|e| anyhow::anyhow!("{}: {e}", board.name))?;
     let tasks = tasks_of(&app, &bounds);
     let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
+    let sections = machine_code::task_sections(&image, &tasks, chip, &bounds);
     let tasks = machine_code::bound_tasks(&image, &tasks, chip, &bounds);
     let missing = bounds.missing_places(&image);
     Ok(Bounded {
         chip,
         app,
         tasks,
+        sections,
         missing,
     })
 }
@@ -261,7 +269,7 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
         let board = build.board;
         let found = bound_build(root, build, args.wait_states, args.bounds.as_deref())?;
         let chip = found.chip;
-        for t in found.tasks {
+        for (t, sections) in found.tasks.into_iter().zip(found.sections) {
             rows.push(Row {
                 board: board.name,
                 revision: build.revision.name,
@@ -274,6 +282,8 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
                 loops: t.loops,
                 preemption_retry_cycles: t.preemption_retry_cycles,
                 declined: t.declined,
+                critical_sections: sections.ceilings,
+                critical_sections_incomplete: sections.incomplete,
             });
         }
         if !args.json {
@@ -315,11 +325,49 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
                     r.loops.len()
                 ),
             }
+            print_sections(r);
         }
         let bounded = rows.iter().filter(|r| r.declined.is_none()).count();
         println!("{bounded} of {} tasks bounded", rows.len());
+        let ceilings: Vec<&machine_code::CeilingBound> =
+            rows.iter().flat_map(|r| &r.critical_sections).collect();
+        println!(
+            "critical sections: {} of {} ceilings bounded ({} tasks' enumeration incomplete)",
+            ceilings.iter().filter(|c| c.declined.is_none()).count(),
+            ceilings.len(),
+            rows.iter()
+                .filter(|r| r.critical_sections_incomplete.is_some())
+                .count()
+        );
     }
     Ok(true)
+}
+
+/// A task's critical sections, one line per ceiling under its row.
+fn print_sections(r: &Row<'_>) {
+    for c in &r.critical_sections {
+        let many = if c.sections == 1 {
+            String::new()
+        } else {
+            format!(", longest of {}", c.sections)
+        };
+        match &c.declined {
+            Some(reason) => println!("    section at {}: DECLINED: {reason}", c.ceiling),
+            None => println!(
+                "    section at {}: ≤ {} cycles {:.2} µs {} instructions, bus waits {:.2} µs ({} at {}{many})",
+                c.ceiling,
+                c.cycles,
+                c.us,
+                c.instructions,
+                c.bus_wait_us,
+                short(&c.function),
+                c.at
+            ),
+        }
+    }
+    if let Some(reason) = &r.critical_sections_incomplete {
+        println!("    sections: INCOMPLETE: {reason}");
+    }
 }
 
 /// `cargo xtask wcet --elf FILE --function SYMBOL --chip CHIP`: one function's bound. `Ok(false)`

@@ -25,7 +25,7 @@ use std::path::Path;
 
 use anyhow::{bail, ensure, Context, Result};
 use machine_code::Chip;
-use schedule_analysis::bounds::{self, BoundsFile, TaskBound};
+use schedule_analysis::bounds::{self, BoundsFile, CeilingSection, CeilingSections, TaskBound};
 use schedule_analysis::rtic_source::{RticApp, RticTaskKind};
 
 use crate::revision::{self, Build};
@@ -145,6 +145,7 @@ fn generate(
         &found.app,
         &budgets,
         &found.tasks,
+        &found.sections,
         found.chip,
     );
     // The workspace's own files by their path in it, not this checkout's.
@@ -152,6 +153,17 @@ fn generate(
     for r in &mut rows {
         if let Some(reason) = &mut r.declined {
             *reason = reason.replace(&here, "");
+        }
+        if let Some(sections) = &mut r.sections {
+            if let Some(reason) = &mut sections.incomplete {
+                *reason = reason.replace(&here, "");
+            }
+            for c in &mut sections.ceilings {
+                c.at = c.at.replace(&here, "");
+                if let Some(reason) = &mut c.declined {
+                    *reason = reason.replace(&here, "");
+                }
+            }
         }
     }
     let chip = if found.chip.m4() {
@@ -212,6 +224,7 @@ fn declined(task: &str, reason: String) -> TaskBound {
         bus_wait_us: 0.0,
         declined: Some(reason),
         critical_sections: BTreeMap::new(),
+        sections: None,
     }
 }
 
@@ -224,14 +237,15 @@ fn bounded(task: &str, cycles: u64, instructions: u64, bus_wait_us: f64, clock: 
         bus_wait_us,
         declined: None,
         critical_sections: BTreeMap::new(),
+        sections: None,
     }
 }
 
-/// The row `task` from the machine code's bound `found` (named `what` in a reason).
+/// The row `task` from the machine code's bound `found` and its critical sections (named `what` in a reason).
 fn from_found(
     task: &str,
     what: &str,
-    found: Option<&machine_code::TaskBound>,
+    found: Option<(&machine_code::TaskBound, &machine_code::TaskSections)>,
     clock: u64,
 ) -> TaskBound {
     match found {
@@ -239,11 +253,68 @@ fn from_found(
             task,
             format!("{what}: not bounded (no such handler in the image)"),
         ),
-        Some(f) => match &f.declined {
-            Some(reason) => declined(task, format!("{what}: {reason}")),
-            None => bounded(task, f.cycles, f.instructions, f.bus_wait_us, clock),
-        },
+        Some((f, s)) => {
+            let mut row = match &f.declined {
+                Some(reason) => declined(task, format!("{what}: {reason}")),
+                None => bounded(task, f.cycles, f.instructions, f.bus_wait_us, clock),
+            };
+            row.sections = Some(sections_row(s, clock));
+            row
+        }
     }
+}
+
+/// A task's critical sections as the file has them.
+fn sections_row(s: &machine_code::TaskSections, clock: u64) -> CeilingSections {
+    CeilingSections {
+        incomplete: s.incomplete.clone(),
+        ceilings: s
+            .ceilings
+            .iter()
+            .map(|c| {
+                let bounded = c.declined.is_none();
+                CeilingSection {
+                    ceiling: c.ceiling.priority().map(u32::from),
+                    at: format!("{} at {}", c.function, c.at),
+                    cycles: bounded.then_some(c.cycles),
+                    us: bounded.then(|| us(c.cycles, clock)),
+                    bus_wait_us: c.bus_wait_us,
+                    declined: c.declined.clone(),
+                }
+            })
+            .collect(),
+    }
+}
+
+/// The sections of one job of whichever of `rows` runs it: per ceiling the longest, declined where any of them is;
+/// `None` when any has none.
+fn merged_sections(rows: &[TaskBound]) -> Option<CeilingSections> {
+    let mut incomplete = None;
+    let mut by_ceiling: BTreeMap<Option<u32>, CeilingSection> = BTreeMap::new();
+    for r in rows {
+        let s = r.sections.as_ref()?;
+        if incomplete.is_none() {
+            incomplete.clone_from(&s.incomplete);
+        }
+        for c in &s.ceilings {
+            let keep = match by_ceiling.get(&c.ceiling) {
+                None => true,
+                Some(old) if old.declined.is_some() => false,
+                Some(_) if c.declined.is_some() => true,
+                Some(old) => c.length_us() > old.length_us(),
+            };
+            if keep {
+                by_ceiling.insert(c.ceiling, c.clone());
+            }
+        }
+    }
+    // Interrupts off first, then by priority down.
+    let mut ceilings: Vec<CeilingSection> = by_ceiling.into_values().collect();
+    ceilings.sort_by_key(|c| std::cmp::Reverse(c.ceiling.unwrap_or(u32::MAX)));
+    Some(CeilingSections {
+        incomplete,
+        ceilings,
+    })
 }
 
 /// The rows of one image: `built` is the app as built (its `cfg`s applied), `app` as written (for RTIC's
@@ -253,14 +324,19 @@ pub fn rows(
     app: &RticApp,
     budgets: &Budgets,
     found: &[machine_code::TaskBound],
+    sections: &[machine_code::TaskSections],
     chip: Chip,
 ) -> Vec<TaskBound> {
     let clock = chip.clock_hz();
-    let by_name: BTreeMap<&str, &machine_code::TaskBound> =
-        found.iter().map(|t| (t.task.as_str(), t)).collect();
+    let by_name: BTreeMap<&str, (&machine_code::TaskBound, &machine_code::TaskSections)> = found
+        .iter()
+        .zip(sections)
+        .map(|(t, s)| (t.task.as_str(), (t, s)))
+        .collect();
     let dispatchers = dispatcher_of(app);
     // The machine-code row a task's job is bounded by, and what to call it.
-    let source = |name: &str| -> Option<(String, Option<&machine_code::TaskBound>)> {
+    type Found<'f> = (&'f machine_code::TaskBound, &'f machine_code::TaskSections);
+    let source = |name: &str| -> Option<(String, Option<Found<'_>>)> {
         let task = built.tasks.iter().find(|t| t.name == name)?;
         match &task.kind {
             RticTaskKind::Hardware { binds } => Some((
@@ -305,13 +381,19 @@ pub fn rows(
         let refused = publishers.iter().find_map(|p| p.declined.clone());
         out.push(match (refused, publishers.is_empty()) {
             (_, true) => declined(&row, "the timing file names no publisher task".into()),
-            (Some(reason), _) => declined(&row, reason),
+            (Some(reason), _) => TaskBound {
+                sections: merged_sections(&publishers),
+                ..declined(&row, reason)
+            },
             (None, false) => {
                 let max = |f: fn(&TaskBound) -> u64| publishers.iter().map(f).max().unwrap_or(0);
                 let cycles = max(|p| p.cycles.unwrap_or(0));
                 let instructions = max(|p| p.instructions.unwrap_or(0));
                 let wait = publishers.iter().map(|p| p.bus_wait_us).fold(0.0, f64::max);
-                bounded(&row, cycles, instructions, wait, clock)
+                TaskBound {
+                    sections: merged_sections(&publishers),
+                    ..bounded(&row, cycles, instructions, wait, clock)
+                }
             }
         });
     }
@@ -372,6 +454,37 @@ mod app {
         }
     }
 
+    /// No sections for each of `machine`, but `with` (task, ceiling, cycles, declined).
+    fn sections_of(
+        machine: &[machine_code::TaskBound],
+        with: &[(&str, machine_code::Ceiling, u64, Option<&str>)],
+    ) -> Vec<machine_code::TaskSections> {
+        machine
+            .iter()
+            .map(|t| machine_code::TaskSections {
+                task: t.task.clone(),
+                ceilings: with
+                    .iter()
+                    .filter(|(task, ..)| *task == t.task)
+                    .map(
+                        |&(_, ceiling, cycles, declined)| machine_code::CeilingBound {
+                            ceiling,
+                            cycles,
+                            us: 0.0,
+                            instructions: 1,
+                            bus_wait_us: 0.0,
+                            sections: 1,
+                            function: "f".into(),
+                            at: "src/f.rs:1".into(),
+                            declined: declined.map(str::to_string),
+                        },
+                    )
+                    .collect(),
+                incomplete: None,
+            })
+            .collect()
+    }
+
     #[test]
     fn rtic_assigns_the_last_dispatchers_to_the_highest_priorities_cfg_or_not() {
         let app = parse_app(APP).unwrap();
@@ -403,7 +516,24 @@ mod app {
             found("dispatcher LOW", 7200, None),
             found("monotonic", 0, Some("the loop in TIM3 has no bound")),
         ];
-        let rows = rows(&built, &app, &budgets, &machine, chip);
+        let p3 = machine_code::Ceiling::Basepri {
+            hardware: 0xd0,
+            priority: 3,
+        };
+        let sections = sections_of(
+            &machine,
+            &[
+                ("dispatcher LOW", p3, 144, None),
+                (
+                    "dispatcher LOW",
+                    machine_code::Ceiling::InterruptsOff,
+                    0,
+                    Some("a loop"),
+                ),
+                ("can_rx", machine_code::Ceiling::InterruptsOff, 72, None),
+            ],
+        );
+        let rows = rows(&built, &app, &budgets, &machine, &sections, chip);
         let row = |n: &str| rows.iter().find(|r| r.task == n).unwrap();
         assert_eq!(row("can_rx").cycles, Some(720));
         assert_eq!(row("can_rx").us, Some(10.0));
@@ -412,6 +542,21 @@ mod app {
         assert_eq!(row("handle").cycles, Some(144));
         assert_eq!(row("drive").instructions, Some(72));
         assert_eq!(row("publisher[gyro]").cycles, Some(7200));
+        // Sections ride along with their rows: a topic's are its publisher's, interrupts off first.
+        let gyro = row("publisher[gyro]").sections.clone().unwrap();
+        assert_eq!(gyro.incomplete, None);
+        let ceilings: Vec<(Option<u32>, Option<u64>, bool)> = gyro
+            .ceilings
+            .iter()
+            .map(|c| (c.ceiling, c.cycles, c.declined.is_some()))
+            .collect();
+        assert_eq!(ceilings, [(None, None, true), (Some(3), Some(144), false)]);
+        assert_eq!(gyro.ceilings[1].us, Some(2.0));
+        let rx = row("can_rx").sections.clone().unwrap();
+        assert_eq!(rx.ceilings[0].us, Some(1.0));
+        assert!(row("handle").sections.as_ref().unwrap().ceilings.is_empty());
+        // A task with no code of its own in the image has none: its stated sections stand.
+        assert_eq!(row("admit").sections, None);
         assert!(row("admit")
             .declined
             .as_deref()
@@ -459,7 +604,14 @@ mod app {
             0,
             Some("irreducible control flow in LOW"),
         )];
-        let rows = rows(&built, &app, &budgets, &machine, chip);
+        let rows = rows(
+            &built,
+            &app,
+            &budgets,
+            &machine,
+            &sections_of(&machine, &[]),
+            chip,
+        );
         for topic in ["publisher[a]", "publisher[b]"] {
             let r = rows.iter().find(|r| r.task == topic).unwrap();
             assert!(

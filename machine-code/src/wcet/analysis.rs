@@ -61,7 +61,7 @@ impl<'a> Analysis<'a> {
 
     /// Whether the function at `at` can return: a return or a tail call of a function that can
     /// is reachable in its graph. A panic cannot; a function being worked out is taken to.
-    fn can_return(&mut self, at: u64) -> bool {
+    pub(super) fn can_return(&mut self, at: u64) -> bool {
         if let Some(&known) = self.returns.get(&at) {
             return known;
         }
@@ -137,6 +137,17 @@ impl<'a> Analysis<'a> {
     }
 
     fn work_out(&mut self, f: &'a Function, args: Args) -> Result<Result<Summary, String>, Error> {
+        let graph = match self.graph(f)? {
+            Ok(graph) => graph,
+            Err(reason) => return Ok(Err(reason)),
+        };
+        self.bound_graph(f, graph, args)
+    }
+
+    /// The control-flow graph of `f` as the bound reads it: the blocks after a call of a function
+    /// that cannot return left out, irreducible cycles split into natural loops. `Ok(Err(reason))`
+    /// when splitting would grow it too much.
+    pub(super) fn graph(&mut self, f: &'a Function) -> Result<Result<Cfg, String>, Error> {
         let insns = f.instructions()?;
         let image = self.image;
         let read = |address: u64, size: u64| read_entry(image, address, size);
@@ -168,6 +179,19 @@ impl<'a> Analysis<'a> {
                 )));
             }
         };
+        Ok(Ok(graph))
+    }
+
+    /// The longest paths through `graph` (of `f`, or a part of it: block 0 is where the paths start,
+    /// the blocks marked `exit` where they end), its loops bounded and its calls composed.
+    pub(super) fn bound_graph(
+        &mut self,
+        f: &'a Function,
+        graph: Cfg,
+        args: Args,
+    ) -> Result<Result<Summary, String>, Error> {
+        let insns = f.instructions()?;
+        let image = self.image;
         let chip = self.chip;
         let mut loops_info = Vec::new();
         // Loops and their counts.

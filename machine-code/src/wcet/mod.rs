@@ -12,7 +12,9 @@ pub mod bounds;
 pub mod cfg;
 pub mod chip;
 pub mod counted;
+pub mod critical;
 pub mod length;
+mod masking;
 pub mod path;
 
 use serde::Serialize;
@@ -21,6 +23,7 @@ use crate::{Error, Image};
 use analysis::{Analysis, Summary};
 use bounds::BoundsFile;
 use chip::Chip;
+pub use critical::{task_sections, Ceiling, CeilingBound, TaskSections};
 #[cfg(test)]
 use path::{Cost, LoopCount};
 

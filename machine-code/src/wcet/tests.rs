@@ -1018,3 +1018,171 @@ fn a_move_in_an_else_slot_is_no_smaller_of() {
     let b = bound(&img, "else_slot", F103_0WS);
     assert!(length_unknown(&b), "{b:?}");
 }
+
+/// The critical sections of `f`'s code as one task's (a handler).
+fn sections_of(image: &Image, f: &str, chip: Chip) -> TaskSections {
+    let task = Task {
+        name: f.to_string(),
+        entry: TaskEntry::Symbol(f.to_string()),
+        handler: true,
+    };
+    let mut found = task_sections(image, &[task], chip, &BoundsFile::default());
+    found.remove(0)
+}
+
+#[test]
+fn a_basepri_lock_is_a_section_at_its_ceiling() {
+    let img = image(
+        &[
+            0xf3ef, 0x8411, // 0x00 mrs r4, BASEPRI: 2
+            0x20b0, // 0x04 movs r0, #0xb0: 1
+            0xf380, 0x8812, // 0x06 msr BASEPRI_MAX, r0: 2 (the raise)
+            0x2101, // 0x0a movs r1, #1: 1
+            0x3101, // 0x0c adds r1, #1: 1
+            0xf384, 0x8811, // 0x0e msr BASEPRI, r4: 2 (the restore)
+            0x4770, // 0x12 bx lr: 1 + P
+        ],
+        &[Sym::function("locked", 0, 0x14)],
+    );
+    let found = sections_of(&img, "locked", F103_0WS);
+    assert_eq!(found.incomplete, None);
+    assert_eq!(found.ceilings.len(), 1, "{found:?}");
+    let c = &found.ceilings[0];
+    // 0xb0 with 4 priority bits is level 11: RTIC's logical priority 16 − 11 = 5.
+    assert_eq!(
+        c.ceiling,
+        Ceiling::Basepri {
+            hardware: 0xb0,
+            priority: 5
+        }
+    );
+    // From the raise to the restore, both in: 2 + 1 + 1 + 2 = 6 cycles, 4 instructions (the three
+    // flash lines it spans cost 1 each at 0 wait states, hidden).
+    assert_eq!((c.cycles, c.instructions, c.sections), (6, 4, 1));
+    assert_eq!(c.declined, None);
+    // 6 cycles at 72 MHz, 83.3 ns, rounded up to the nanosecond.
+    assert_eq!(c.us, 0.084);
+    assert_eq!(
+        Ceiling::of_basepri(0x90).and_then(Ceiling::priority),
+        Some(7)
+    );
+    assert_eq!(Ceiling::of_basepri(0), None);
+    assert_eq!(Ceiling::of_basepri(0xb8), None);
+}
+
+#[test]
+fn interrupts_off_runs_to_the_primask_restore_on_its_longest_path() {
+    let img = image(
+        &[
+            0xf3ef, 0x8010, // 0x00 mrs r0, PRIMASK: 2
+            0xb672, // 0x04 cpsid i: 1 (the raise)
+            0x2900, // 0x06 cmp r1, #0: 1
+            0xd001, // 0x08 beq 0x0e: 1, taken + P
+            0x3201, // 0x0a adds r2, #1: 1
+            0x3201, // 0x0c adds r2, #1: 1
+            0xf380, 0x8810, // 0x0e msr PRIMASK, r0: 2 (the restore)
+            0x4770, // 0x12 bx lr
+        ],
+        &[Sym::function("masked", 0, 0x14)],
+    );
+    let found = sections_of(&img, "masked", F103_0WS);
+    assert_eq!(found.ceilings.len(), 1, "{found:?}");
+    let c = &found.ceilings[0];
+    assert_eq!(c.ceiling, Ceiling::InterruptsOff);
+    // Taken: 1 + 1 + 1 + P + 2 = 8 cycles; through the adds: 1 + 1 + 1 + 1 + 1 + 2 = 7 cycles but
+    // 6 instructions, the most of any path.
+    assert_eq!((c.cycles, c.instructions), (8, 6));
+}
+
+#[test]
+fn a_section_holds_what_it_calls_and_the_callee_has_its_own() {
+    let img = image(
+        &[
+            0xb510, // 0x00 push {r4, lr}
+            0xf3ef, 0x8411, // 0x02 mrs r4, BASEPRI
+            0x20c0, // 0x06 movs r0, #0xc0
+            0xf380, 0x8812, // 0x08 msr BASEPRI_MAX, r0: 2 (priority 4)
+            0xf000, 0xf804, // 0x0c bl 0x18: 1 + P
+            0xf384, 0x8811, // 0x10 msr BASEPRI, r4: 2
+            0xbd10, // 0x14 pop {r4, pc}
+            0xbf00, // 0x16 nop
+            0xf3ef, 0x8010, // 0x18 mrs r0, PRIMASK: 2
+            0xb672, // 0x1c cpsid i: 1
+            0xf380, 0x8810, // 0x1e msr PRIMASK, r0: 2
+            0x4770, // 0x22 bx lr: 1 + P
+        ],
+        &[
+            Sym::function("outer", 0, 0x18),
+            Sym::function("inner", 0x18, 0x0c),
+        ],
+    );
+    let found = sections_of(&img, "outer", F103_0WS);
+    assert_eq!(found.incomplete, None);
+    // Highest ceiling first: the callee's interrupts off, then the caller's lock.
+    let ceilings: Vec<(Ceiling, u64, u64)> = found
+        .ceilings
+        .iter()
+        .map(|c| (c.ceiling, c.cycles, c.instructions))
+        .collect();
+    assert_eq!(
+        ceilings,
+        [
+            // cpsid 1 + msr 2.
+            (Ceiling::InterruptsOff, 3, 2),
+            // msr 2 + bl 4 + the callee (2 + 1 + 2 + 4 = 9) + msr 2 = 17 cycles; 1 + 1 + 4 + 1.
+            (
+                Ceiling::Basepri {
+                    hardware: 0xc0,
+                    priority: 4
+                },
+                17,
+                7
+            ),
+        ]
+    );
+}
+
+#[test]
+fn a_section_with_a_loop_without_a_bound_is_declined_by_name() {
+    let img = image(
+        &[
+            0xf3ef, 0x8411, // 0x00 mrs r4, BASEPRI
+            0x20b0, // 0x04 movs r0, #0xb0
+            0xf380, 0x8812, // 0x06 msr BASEPRI_MAX, r0
+            0x680a, // 0x0a ldr r2, [r1]: a poll of a flag with no bound
+            0x2a00, // 0x0c cmp r2, #0
+            0xd0fc, // 0x0e beq 0x0a
+            0xf384, 0x8811, // 0x10 msr BASEPRI, r4
+            0x4770, // 0x14 bx lr
+        ],
+        &[Sym::function("polls_locked", 0, 0x16)],
+    );
+    let found = sections_of(&img, "polls_locked", F103_2WS);
+    assert_eq!(found.ceilings.len(), 1, "{found:?}");
+    let c = &found.ceilings[0];
+    assert_eq!(c.ceiling.priority(), Some(5));
+    let reason = c.declined.as_deref().expect("declined");
+    assert!(
+        reason.contains("section raised in polls_locked")
+            && reason.contains("loop in polls_locked")
+            && reason.contains("no bound"),
+        "{reason}"
+    );
+    assert_eq!((c.cycles, c.us), (0, 0.0));
+}
+
+#[test]
+fn a_raise_of_no_constant_leaves_the_task_incomplete() {
+    let img = image(
+        &[
+            0xf3ef, 0x8411, // 0x00 mrs r4, BASEPRI
+            0xf380, 0x8812, // 0x04 msr BASEPRI_MAX, r0: r0 is the caller's
+            0xf384, 0x8811, // 0x08 msr BASEPRI, r4
+            0x4770, // 0x0c bx lr
+        ],
+        &[Sym::function("raises_an_argument", 0, 0x0e)],
+    );
+    let found = sections_of(&img, "raises_an_argument", F103_0WS);
+    let reason = found.incomplete.expect("incomplete");
+    assert!(reason.contains("no constant"), "{reason}");
+}

@@ -143,7 +143,7 @@ fn build_board(
         }
         _ => timing,
     };
-    let (declared, idle, ceilings) = declared_tasks(root, file, timing, built)?;
+    let (declared, idle, mut ceilings) = declared_tasks(root, file, timing, built)?;
     check_roles(file, timing, &declared)?;
     let board = Board {
         file,
@@ -181,9 +181,12 @@ fn build_board(
     let mut all = timer_jobs.jobs;
     all.extend(tasks);
     let source = built.sources.last().cloned();
+    let mut budgets = budgets;
+    super::bounded::apply_sections(&mut budgets, &mut all, &mut ceilings);
     built
         .sources
         .push(super::bounded::budgets_line(&budgets, &measured));
+    built.sources.push(super::bounded::blocking_line(&budgets));
     if let Some(line) = admission_line(timing, &measured, &budgets) {
         built.sources.push(line);
     }

@@ -8,6 +8,7 @@ use std::path::Path;
 
 use super::{display, fail, BuildError, Timing, MODELS_DIR};
 use crate::bounds::{self, BoundsFile, TaskBound};
+use crate::model::{TaskModel, GLOBAL_CRITICAL_SECTION};
 
 /// Where one budget came from.
 #[derive(Debug, Clone, PartialEq)]
@@ -52,6 +53,33 @@ pub struct BoardBudgets {
     /// Per budget of the timing file — a task's name, `publisher[<topic>]`, or an overhead row — where it came
     /// from.
     pub rows: BTreeMap<String, BudgetFrom>,
+    /// Where the blocking terms (each job's critical sections) came from.
+    pub blocking: Blocking,
+}
+
+/// Where a board's blocking terms came from: each job's critical section per ceiling bounded from the machine
+/// code, or the timing file's stated section kept.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Blocking {
+    /// Job × ceiling terms bounded from the machine code (`<job> at <ceiling> <µs> µs`).
+    pub bounded: Vec<String>,
+    /// Stated terms kept, each with why in short (`<job>/<resource> (declined at priority 5)`); the sections'
+    /// own reasons are in the bounds file and `cargo xtask wcet`.
+    pub stated: Vec<String>,
+    /// The reason behind each short one that is not a declined section (`no sections` → which file lacks them).
+    pub why: BTreeMap<String, String>,
+    /// Ceilings a job's machine code raises to where its section is declined and the timing file states none at
+    /// that ceiling: not in the analysis (as before the machine code was read), named for the report.
+    pub unstated: Vec<String>,
+}
+
+/// The resource a job's bounded section at `ceiling` stands as in the model: the global critical section for
+/// interrupts off, else one resource per ceiling, its static ceiling that priority.
+pub fn ceiling_resource(ceiling: Option<u32>) -> String {
+    match ceiling {
+        None => GLOBAL_CRITICAL_SECTION.to_string(),
+        Some(p) => format!("machine code: priority {p}"),
+    }
 }
 
 impl BoardBudgets {
@@ -221,8 +249,166 @@ pub(super) fn apply(
             file: name,
             bounds: read,
             rows,
+            blocking: Blocking::default(),
         },
     ))
+}
+
+/// The blocking terms from the machine code: every job of `tasks` whose row in the bounds file lists its
+/// sections completely gets, per ceiling its code raises to, the bounded section (a resource of that ceiling,
+/// [`ceiling_resource`]) in place of the timing file's stated sections at that ceiling; where the section at a
+/// ceiling is declined, the stated ones at it are kept; a stated section at a ceiling the code never raises to
+/// is dropped (the job never masks there). A job without such a row keeps its stated sections. `ceilings` (the
+/// static ceilings) gains each new resource's, and each stated resource's as resolved before any was dropped,
+/// so that a resource keeps its ceiling when the holder that raised it is now a bounded term. SRP's blocking of a
+/// task stays the longest section of a lower-priority job whose ceiling is at least its priority, computed where
+/// it always was.
+pub(super) fn apply_sections(
+    budgets: &mut BoardBudgets,
+    tasks: &mut [TaskModel],
+    ceilings: &mut BTreeMap<String, u32>,
+) {
+    let mut blocking = Blocking::default();
+    let mut resolved = ceilings.clone();
+    for t in tasks.iter() {
+        for r in t.critical_sections_us.keys() {
+            let c = resolved.entry(r.clone()).or_insert(0);
+            *c = (*c).max(t.priority);
+        }
+    }
+    let ceiling_of = |r: &str| {
+        if r == GLOBAL_CRITICAL_SECTION {
+            None
+        } else {
+            Some(resolved.get(r).copied().unwrap_or(0))
+        }
+    };
+    if let Some(file) = &budgets.bounds {
+        for row in &file.tasks {
+            for c in row.sections.iter().flat_map(|s| &s.ceilings) {
+                if let Some(p) = c.ceiling {
+                    ceilings.insert(ceiling_resource(Some(p)), p);
+                }
+            }
+        }
+    }
+    for (r, c) in &resolved {
+        if r != GLOBAL_CRITICAL_SECTION {
+            ceilings.insert(r.clone(), *c);
+        }
+    }
+    // A job no other job can preempt blocks nobody: its sections are no terms.
+    let top = tasks.iter().map(|t| t.priority).max().unwrap_or(0);
+    for t in tasks.iter_mut() {
+        if t.priority >= top {
+            continue;
+        }
+        let row = budgets.row_of_job(&t.name).map(str::to_string);
+        let sections = budgets
+            .bounds
+            .as_ref()
+            .zip(row.as_deref())
+            .and_then(|(file, row)| file.task(row))
+            .and_then(|r| r.sections.as_ref());
+        let why = match (sections, &budgets.bounds) {
+            (Some(s), _) => s
+                .incomplete
+                .as_ref()
+                .map(|w| format!("sections incomplete: {w}")),
+            (None, None) => Some("no bounds file".to_string()),
+            (None, Some(_)) => Some(format!(
+                "no sections in {} for `{}`",
+                budgets.file,
+                row.as_deref().unwrap_or(&t.name)
+            )),
+        };
+        let (Some(sections), None) = (sections, &why) else {
+            let why = why.unwrap_or_default();
+            let short = if sections.is_some() {
+                "sections incomplete"
+            } else {
+                "no sections"
+            };
+            for r in t.critical_sections_us.keys() {
+                blocking.stated.push(format!("{}/{r} ({short})", t.name));
+            }
+            blocking.why.entry(short.to_string()).or_insert(why);
+            continue;
+        };
+        let mut out = BTreeMap::new();
+        for (r, &length) in &t.critical_sections_us {
+            let at = ceiling_of(r);
+            if let Some(s) = sections.ceilings.iter().find(|s| s.ceiling == at) {
+                if s.declined.is_some() {
+                    out.insert(r.clone(), length);
+                    blocking.stated.push(format!(
+                        "{}/{r} (declined at {})",
+                        t.name,
+                        s.ceiling_name()
+                    ));
+                }
+            }
+        }
+        for s in &sections.ceilings {
+            // A raise to the job's own priority or below holds off nobody that could preempt it.
+            if s.ceiling.is_some_and(|c| c <= t.priority) {
+                continue;
+            }
+            match (s.length_us(), &s.declined) {
+                (Some(length), _) => {
+                    out.insert(ceiling_resource(s.ceiling), length);
+                    blocking.bounded.push(format!(
+                        "{} at {} {length} µs",
+                        t.name,
+                        s.ceiling_name()
+                    ));
+                }
+                (None, _) => {
+                    if !t
+                        .critical_sections_us
+                        .keys()
+                        .any(|r| ceiling_of(r) == s.ceiling)
+                    {
+                        blocking
+                            .unstated
+                            .push(format!("{} at {}", t.name, s.ceiling_name()));
+                    }
+                }
+            }
+        }
+        t.critical_sections_us = out;
+    }
+    budgets.blocking = blocking;
+}
+
+/// The report's line about a board's blocking terms: how many bounded from the machine code, how many stated.
+pub(super) fn blocking_line(b: &BoardBudgets) -> String {
+    let k = &b.blocking;
+    let mut line = format!(
+        "{}: blocking terms: {} bounded from the machine code (each job's longest critical section per ceiling, \
+         raise to restore",
+        b.board,
+        k.bounded.len(),
+    );
+    if !k.bounded.is_empty() {
+        line.push_str(&format!(": {}", k.bounded.join(", ")));
+    }
+    line.push_str(&format!("), {} stated", k.stated.len()));
+    if !k.stated.is_empty() {
+        line.push_str(&format!(" ({})", k.stated.join(", ")));
+    }
+    if !k.unstated.is_empty() {
+        line.push_str(&format!(
+            "; {} ceilings raised in the machine code with the section declined and nothing stated at them (not \
+             counted): {}",
+            k.unstated.len(),
+            k.unstated.join(", ")
+        ));
+    }
+    for (short, why) in &k.why {
+        line.push_str(&format!("; {short}: {why}"));
+    }
+    line
 }
 
 /// A row's bound as the budget (and its bounded critical sections as theirs), or the estimate kept with the
@@ -394,4 +580,211 @@ pub fn breaking_bounds(
         )];
     }
     Vec::new()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bounds::{CeilingSection, CeilingSections, Chip, ImageIdentity};
+    use crate::model::TaskKind;
+
+    fn job(name: &str, priority: u32, sections: &[(&str, f64)]) -> TaskModel {
+        TaskModel {
+            name: name.into(),
+            priority,
+            wcet_us: 50.0,
+            period_us: 1000.0,
+            deadline_us: None,
+            jitter_us: 0.0,
+            critical_sections_us: sections.iter().map(|(r, l)| (r.to_string(), *l)).collect(),
+            blocking_us: None,
+            bcet_us: None,
+            kind: TaskKind::Hardware,
+            released_by: None,
+            sporadic: false,
+            job_of: None,
+        }
+    }
+
+    fn section(ceiling: Option<u32>, cycles: Option<u64>) -> CeilingSection {
+        CeilingSection {
+            ceiling,
+            at: "f at src/f.rs:1".into(),
+            cycles,
+            us: cycles.map(|c| c as f64 / 72.0),
+            bus_wait_us: 0.0,
+            declined: cycles
+                .is_none()
+                .then(|| "the loop in f at src/f.rs:2 has no bound".into()),
+        }
+    }
+
+    fn row(task: &str, sections: Option<CeilingSections>) -> TaskBound {
+        TaskBound {
+            task: task.into(),
+            cycles: None,
+            us: None,
+            instructions: None,
+            bus_wait_us: 0.0,
+            declined: Some("a loop".into()),
+            critical_sections: BTreeMap::new(),
+            sections,
+        }
+    }
+
+    fn budgets(rows: Vec<TaskBound>) -> BoardBudgets {
+        let from = rows
+            .iter()
+            .map(|r| {
+                (
+                    r.task.clone(),
+                    BudgetFrom::Stated {
+                        why: "bound declined: a loop".into(),
+                    },
+                )
+            })
+            .collect();
+        BoardBudgets {
+            board: "b".into(),
+            file: "models/b.wcet.json".into(),
+            bounds: Some(BoundsFile {
+                generated: bounds::GENERATED_PREFIX.into(),
+                board: "b".into(),
+                revision: None,
+                chip: Chip::Stm32f103,
+                clock_hz: 72_000_000,
+                wait_states: 2,
+                image: ImageIdentity {
+                    code_sha256: "0".repeat(64),
+                    code_bytes: 4,
+                },
+                tasks: rows,
+                idle_critical_sections: BTreeMap::new(),
+            }),
+            rows: from,
+            blocking: Blocking::default(),
+        }
+    }
+
+    #[test]
+    fn bounded_sections_replace_the_stated_ones_at_their_ceiling_and_declined_ones_keep_them() {
+        // `low` (priority 1) shares `queue` with `mid` (3) and `bus` with `high` (5): stated 2 and 4 µs, and
+        // interrupts off 1 µs. Its code raises to 3 (bounded: 720 cycles, 10 µs), to 5 (declined) and turns
+        // interrupts off (bounded: 72 cycles, 1 µs); it never raises to 4, where nothing is stated.
+        let sections = CeilingSections {
+            incomplete: None,
+            ceilings: vec![
+                section(None, Some(72)),
+                section(Some(5), None),
+                section(Some(3), Some(720)),
+            ],
+        };
+        let mut b = budgets(vec![row("low", Some(sections)), row("mid", None)]);
+        let mut tasks = vec![
+            job(
+                "low",
+                1,
+                &[("queue", 2.0), ("bus", 4.0), (GLOBAL_CRITICAL_SECTION, 1.0)],
+            ),
+            job("mid", 3, &[("queue", 1.0)]),
+            job("high", 5, &[("bus", 1.0)]),
+        ];
+        let mut ceilings = BTreeMap::new();
+        apply_sections(&mut b, &mut tasks, &mut ceilings);
+        let low: Vec<(&str, f64)> = tasks[0]
+            .critical_sections_us
+            .iter()
+            .map(|(r, l)| (r.as_str(), *l))
+            .collect();
+        assert_eq!(
+            low,
+            [
+                ("bus", 4.0),
+                (GLOBAL_CRITICAL_SECTION, 1.0),
+                ("machine code: priority 3", 10.0),
+            ]
+        );
+        // `mid` has no sections in the file: its stated one stands.
+        assert_eq!(tasks[1].critical_sections_us["queue"], 1.0);
+        // Every resource keeps the ceiling its users gave it, and the bounded one has its own.
+        assert_eq!(ceilings["queue"], 3);
+        assert_eq!(ceilings["bus"], 5);
+        assert_eq!(ceilings["machine code: priority 3"], 3);
+        assert_eq!(b.blocking.bounded.len(), 2);
+        assert_eq!(
+            b.blocking.stated,
+            [
+                "low/bus (declined at priority 5)",
+                "mid/queue (no sections)"
+            ]
+        );
+        assert!(b.blocking.unstated.is_empty());
+        let line = blocking_line(&b);
+        assert!(line.contains("blocking terms: 2 bounded"), "{line}");
+        assert!(line.contains("low at priority 3 10 µs"), "{line}");
+        // SRP on the result: `mid` is blocked by `low`'s 10 µs section at ceiling 3, `high` by the stated 4 µs at
+        // 5 (the interrupts-off 1 µs is shorter).
+        let model = crate::model::Model {
+            name: None,
+            boards: vec![crate::model::BoardModel {
+                name: "b".into(),
+                source: None,
+                overheads: Default::default(),
+                idle_critical_sections_us: BTreeMap::new(),
+                can_tx_task: None,
+                ceilings: ceilings.clone(),
+                tasks: tasks.clone(),
+            }],
+            can: None,
+        };
+        let system = model.validate().expect("valid");
+        let result = crate::analysis::analyse(
+            &system,
+            &crate::analysis::Options {
+                frame_cost: Default::default(),
+                horizon: None,
+            },
+        );
+        let blocking = |name: &str| {
+            result.boards[0]
+                .tasks
+                .iter()
+                .find(|t| t.name == name)
+                .map(|t| t.blocking.as_us_f64())
+        };
+        assert_eq!(blocking("mid"), Some(10.0));
+        assert_eq!(blocking("high"), Some(4.0));
+    }
+
+    #[test]
+    fn an_incomplete_list_or_a_top_priority_job_changes_nothing_and_a_gap_is_named() {
+        let incomplete = CeilingSections {
+            incomplete: Some("a raise of no constant".into()),
+            ceilings: vec![section(Some(3), Some(72))],
+        };
+        let gap = CeilingSections {
+            incomplete: None,
+            ceilings: vec![section(Some(4), None)],
+        };
+        let mut b = budgets(vec![
+            row("a", Some(incomplete)),
+            row("c", Some(gap.clone())),
+            row("top", Some(gap)),
+        ]);
+        let mut tasks = vec![
+            job("a", 1, &[("r", 2.0)]),
+            job("c", 2, &[]),
+            job("other", 3, &[("r", 1.0)]),
+            job("top", 6, &[("s", 1.0)]),
+        ];
+        apply_sections(&mut b, &mut tasks, &mut BTreeMap::new());
+        assert_eq!(tasks[0].critical_sections_us["r"], 2.0);
+        assert_eq!(tasks[3].critical_sections_us["s"], 1.0);
+        assert!(b.blocking.bounded.is_empty());
+        assert_eq!(
+            b.blocking.stated,
+            ["a/r (sections incomplete)", "other/r (no sections)"]
+        );
+        assert_eq!(b.blocking.unstated, ["c at priority 4"]);
+    }
 }
