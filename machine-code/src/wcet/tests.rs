@@ -1018,3 +1018,146 @@ fn a_move_in_an_else_slot_is_no_smaller_of() {
     let b = bound(&img, "else_slot", F103_0WS);
     assert!(length_unknown(&b), "{b:?}");
 }
+
+/// `bounds_file` with the async loop of [`async_loop`] stated as one pass per job.
+fn one_job_of_poll() -> BoundsFile {
+    BoundsFile::parse(
+        r#"{"jobs":[{"function":"poll","file":"src/task.rs","line":13,"reason":"ready at once, the await is the next release"}]}"#,
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_stated_job_is_one_pass_of_an_async_loop() {
+    let img = async_loop();
+    // Without the statement the loop, entered at its await, stays declined by name.
+    let plain = bound_function(&img, "poll", F103_0WS, &BoundsFile::default()).unwrap();
+    assert!(
+        plain.declined.as_deref().is_some_and(
+            |r| r.contains("the loop in poll at /work/firmware/src/task.rs:13 has no bound")
+        ),
+        "{plain:?}"
+    );
+    let b = bound_function(&img, "poll", F103_0WS, &one_job_of_poll()).unwrap();
+    // The split keeps the await (line 13) as the loop's header (copying the loop's top, one block,
+    // for the first poll) and a job runs it twice: where the job resumes (ready) and where it parks
+    // (pending). The resumed job: cbnz taken (1 + P), cmp, beq (1, 1), adds r3, b (1 + P), the loop's
+    // top adds r1, cmp, beq taken (1 + P), bx lr (1 + P) = 4 + 2 + 1 + 4 + 1 + 1 + 4 + 4 = 21 cycles,
+    // 9 instructions. The first poll: cbnz, movs, adds (1 each), the await ready at once as one pass
+    // (cmp, beq, adds, b: 1 + 1 + 1 + 4, adds 1), cmp, beq taken (1 + 4), bx lr (4) = 20 cycles,
+    // 11 instructions. Each figure is its own longest path: 21 cycles, 11 instructions.
+    assert_eq!(figures(&b), (21, 11, None));
+    assert_eq!(b.loops.len(), 1);
+    assert_eq!((b.loops[0].line, b.loops[0].bound), (Some(13), 2));
+    assert!(b.loops[0].source.starts_with("job: "), "{:?}", b.loops[0]);
+    // Stated for another line, the statement bounds nothing.
+    let elsewhere = BoundsFile::parse(
+        r#"{"jobs":[{"function":"poll","file":"src/task.rs","line":12,"reason":"r"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "poll", F103_0WS, &elsewhere).unwrap();
+    assert!(b.declined.is_some());
+    // A job needs its reason; its place is checked like a loop's.
+    assert!(matches!(
+        BoundsFile::parse(r#"{"jobs":[{"function":"poll","file":"a.rs","line":13,"reason":""}]}"#),
+        Err(Error::Bounds(_))
+    ));
+    assert!(one_job_of_poll().missing_places(&img).is_empty());
+}
+
+#[test]
+fn an_async_loop_with_two_awaits_is_split_where_every_pass_goes() {
+    // `loop { if x { a.await } else { b.await }; y += 2 }` with `x` true on the first poll: a first
+    // poll (state 0) enters the loop at await a (line 12), a resumed one at a or b (line 13). Every
+    // pass goes through the join behind the awaits (line 14), and splitting there copies the fewest
+    // blocks (each await's way to it): one natural loop, named at the join's line, entered only
+    // through those copies — so a job runs its header once: it polled its await before.
+    let code = thumb(&[
+        0x2801, // 0x00 cmp r0, #1
+        0xd005, // 0x02 beq 0x10: resumed at await a
+        0x2802, // 0x04 cmp r0, #2
+        0xd007, // 0x06 beq 0x18: resumed at await b
+        0x2100, // 0x08 movs r1, #0 (first poll)
+        0xe001, // 0x0a b 0x10
+        0x2900, // 0x0c cmp r1, #0 (the loop's top)
+        0xd103, // 0x0e bne 0x18
+        0x2a00, // 0x10 cmp r2, #0 (await a: pending?)
+        0xd007, // 0x12 beq 0x24
+        0xe003, // 0x14 b 0x1e
+        0xbf00, // 0x16 nop
+        0x2b00, // 0x18 cmp r3, #0 (await b: pending?)
+        0xd003, // 0x1a beq 0x24
+        0xbf00, // 0x1c nop
+        0x3102, // 0x1e adds r1, #2 (the join behind either await)
+        0xe7f4, // 0x20 b 0x0c
+        0xbf00, // 0x22 nop
+        0x4770, // 0x24 bx lr
+    ]);
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("poll2", 0, 0x26)],
+        "firmware/src/task.rs",
+        &[
+            (0, 10),
+            (0x0c, 11),
+            (0x10, 12),
+            (0x18, 13),
+            (0x1e, 14),
+            (0x24, 15),
+        ],
+    ))
+    .expect("the test image parses");
+    let plain = bound_function(&img, "poll2", F103_0WS, &BoundsFile::default()).unwrap();
+    assert!(
+        plain
+            .declined
+            .as_deref()
+            .is_some_and(|r| r.contains("task.rs:14 has no bound")),
+        "{plain:?}"
+    );
+    let stated = BoundsFile::parse(
+        r#"{"jobs":[{"function":"poll2","file":"src/task.rs","line":14,"reason":"r"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "poll2", F103_0WS, &stated).unwrap();
+    assert_eq!(b.loops.len(), 1);
+    assert_eq!((b.loops[0].line, b.loops[0].bound), (Some(14), 1));
+    // The longest job is the first poll, with await a ready at once (no pass of the loop yet): cmp,
+    // beq, cmp, beq, movs, b (1 + 1 + 1 + 1 + 1 + 4 cycles), a ready (cmp, beq, b: 1 + 1 + 4), the
+    // join (adds, b: 1 + 4), the top (cmp, bne taken: 1 + 4), b pending (cmp, beq taken: 1 + 4), bx
+    // lr (4) = 34 cycles, 16 instructions. A job resumed at b: cmp, beq, cmp, beq taken (1 + 1 + 1 +
+    // 4), b ready (cmp, beq, nop: 3), the join (5), the top (5), b pending (5), bx lr (4) = 29
+    // cycles, 14 instructions — the header once: a second pass would be the next release.
+    assert_eq!(figures(&b), (34, 16, None));
+}
+
+#[test]
+fn a_function_that_only_calls_one_that_cannot_return_cannot_either() {
+    // `panic_const_async_fn_resumed` is no panic by its name (the panic check leaves it out), but it
+    // only calls `panic_fmt`: a path into it completes no job, as a path into a panic does not.
+    let img = image(
+        &[
+            0x2800, // 0x00 cmp r0, #0: 1
+            0xd001, // 0x02 beq 0x08: 1 (+ P)
+            0xf000, 0xf803, // 0x04 bl 0x0e
+            0x2001, // 0x08 movs r0, #1: 1
+            0x4770, // 0x0a bx lr: 4
+            0xbf00, // 0x0c
+            0xb580, // 0x0e push {r7, lr}
+            0xf000, 0xf800, // 0x10 bl 0x14
+            0xe7fe, // 0x14 b 0x14: the panic spins for ever
+        ],
+        &[
+            Sym::function("resumes", 0, 0x0c),
+            Sym::function(
+                "core::panicking::panic_const::panic_const_async_fn_resumed",
+                0x0e,
+                6,
+            ),
+            Sym::function("core::panicking::panic_fmt", 0x14, 2),
+        ],
+    );
+    // Only the path that returns: 1 + 1 + P + 1 + 4 = 10.
+    let b = bound(&img, "resumes", F103_0WS);
+    assert_eq!(figures(&b), (10, 4, None));
+}
