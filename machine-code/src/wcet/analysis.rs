@@ -218,6 +218,24 @@ impl<'a> Analysis<'a> {
                         .to_string(),
                 });
                 LoopCount::Retry
+            // A stated wait before a count: a poll loop's count is its timeout, the fault path.
+            } else if let Some(wait) = file
+                .as_deref()
+                .zip(line)
+                .and_then(|(file, line)| self.bounds.wait(&f.name, file, line))
+            {
+                let ns = (wait.wait_us * 1000.0).ceil() as u64;
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: 1,
+                    source: format!("wait: {} µs ({})", wait.wait_us, wait.source),
+                });
+                LoopCount::Wait {
+                    ns,
+                    cycles: chip.ns_to_cycles(ns),
+                }
             } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),
@@ -274,23 +292,6 @@ impl<'a> Analysis<'a> {
                     ),
                 });
                 LoopCount::Passes(passes)
-            } else if let Some(wait) = file
-                .as_deref()
-                .zip(line)
-                .and_then(|(file, line)| self.bounds.wait(&f.name, file, line))
-            {
-                let ns = (wait.wait_us * 1000.0).ceil() as u64;
-                loops_info.push(LoopInfo {
-                    function: f.name.clone(),
-                    file: file.clone(),
-                    line,
-                    bound: 1,
-                    source: format!("wait: {} µs ({})", wait.wait_us, wait.source),
-                });
-                LoopCount::Wait {
-                    ns,
-                    cycles: chip.ns_to_cycles(ns),
-                }
             } else if let Some(r) = length::length_register(&f.name)
                 .or_else(|| self.bounds.per_element(&f.name).map(|p| p.register))
             {

@@ -1161,3 +1161,47 @@ fn a_function_that_only_calls_one_that_cannot_return_cannot_either() {
     let b = bound(&img, "resumes", F103_0WS);
     assert_eq!(figures(&b), (10, 4, None));
 }
+
+#[test]
+fn a_stated_wait_is_taken_before_the_poll_count_it_times_out_at() {
+    // `for _ in 0..250 { if read(SR) != 0 { return 1 } } 0`: a flag poll whose count is its timeout.
+    let code = thumb(&[
+        0x2300, // 0x00 movs r3, #0: 1                                       line 5
+        0x6801, // 0x02 ldr r1, [r0]: 2 + 5 (an unknown base: APB1)          line 7
+        0xb919, // 0x04 cbnz r1, 0x0e: 1 (+ P)
+        0x3301, // 0x06 adds r3, #1: 1
+        0x2bfa, // 0x08 cmp r3, #250: 1
+        0xd1fa, // 0x0a bne 0x02: 1 (+ P)
+        0x4770, // 0x0c bx lr: 4 (the timeout)                               line 9
+        0x2001, // 0x0e movs r0, #1: 1                                        line 10
+        0x4770, // 0x10 bx lr: 4
+    ]);
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("poll_flag", 0, 0x12)],
+        "firmware/src/flag.rs",
+        &[(0, 5), (2, 7), (0x0c, 9), (0x0e, 10)],
+    ))
+    .expect("the test image parses");
+    // Counted, the loop runs to its timeout: 250 passes.
+    let plain = bound_function(&img, "poll_flag", F103_0WS, &BoundsFile::default()).unwrap();
+    assert_eq!(plain.loops[0].bound, 250, "{plain:?}");
+    assert!(plain.loops[0].source.starts_with("counted"));
+    // With the flag's latency stated, the wait is what bounds it: the way out (ldr 7, cbnz 1 + P,
+    // movs 1, bx lr 4) after movs (1) = 17 cycles, the 25 µs apart; instructions: movs, the longest
+    // way out by count (ldr, cbnz, adds, cmp, bne), then the longest way on from any exit (movs, bx
+    // lr: the collapsed loop leaves by either) = 8, and at most one a cycle of the wait (1800 at
+    // 72 MHz).
+    let stated = BoundsFile::parse(
+        r#"{"waits":[{"function":"poll_flag","file":"src/flag.rs","line":7,"wait_us":25.0,"source":"the flag's stated latency"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "poll_flag", F103_0WS, &stated).unwrap();
+    assert_eq!(figures(&b), (17, 8 + 1800, None));
+    assert_eq!(b.bus_wait_ns, 25_000);
+    assert!(
+        b.loops[0].source.starts_with("wait: 25 µs"),
+        "{:?}",
+        b.loops
+    );
+}
