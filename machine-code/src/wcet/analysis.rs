@@ -266,9 +266,10 @@ impl<'a> Analysis<'a> {
                 // A job runs the header twice where it can resume there (the header is entered
                 // from outside the loop by a block of the function's own, not a copy: the await
                 // it polls when resumed, or the loop's top on the first poll), else once: every
-                // way in is a copy of an entry's blocks, so a resumed job has polled its await
-                // before it reaches the header, and the next await it meets parks the job or,
-                // ready at once, is the next release (docs/analysis.md, "Async tasks").
+                // way in is a copy of an entry's blocks — a resumed poll lands where its await's
+                // poll starts, an entry of the loop, so the copied way in holds that poll ahead of
+                // the header — and the next await the job meets parks it or, ready at once, is
+                // the next release (docs/analysis.md, "Async tasks: one job").
                 let resumed_here = l.header == 0
                     || graph.blocks.iter().enumerate().any(|(p, blk)| {
                         !l.body.contains(&p)
