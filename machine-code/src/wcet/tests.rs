@@ -1205,3 +1205,33 @@ fn a_stated_wait_is_taken_before_the_poll_count_it_times_out_at() {
         b.loops
     );
 }
+
+#[test]
+fn a_down_counter_tested_by_cbz_at_the_top_is_counted() {
+    // `let mut k = 4; while k != 0 { x += 1; k -= 1 }` as `CBZ` at the loop's top.
+    let img = image(
+        &[
+            0x2504, // 0x00 movs r5, #4: 1
+            0xb11d, // 0x02 cbz r5, 0x0c: 1 (taken: + P)
+            0x3001, // 0x04 adds r0, #1: 1
+            0x3d01, // 0x06 subs r5, #1: 1
+            0xe7fb, // 0x08 b 0x02: 1 + P
+            0xbf00, // 0x0a nop
+            0x4770, // 0x0c bx lr: 1 + P
+        ],
+        &[Sym::function("count_down", 0, 0x0e)],
+    );
+    let b = bound(&img, "count_down", F103_0WS);
+    // The header runs 5 times (k = 4, 3, 2, 1, then 0 leaves): movs 1, four passes of cbz, adds,
+    // subs, b (1 + 1 + 1 + 4), the cbz that leaves (1 + P), bx lr (4) = 1 + 28 + 4 + 4 = 37 cycles;
+    // 1 + 4 × 4 + 1 + 1 = 19 instructions.
+    assert_eq!(figures(&b), (37, 19, None));
+    assert_eq!(b.loops[0].bound, 5);
+    assert!(
+        b.loops[0]
+            .source
+            .contains("by -1, compared with #0 at the loop's top"),
+        "{:?}",
+        b.loops[0]
+    );
+}
