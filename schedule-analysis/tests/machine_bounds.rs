@@ -158,6 +158,10 @@ fn a_bound_is_the_budget_wherever_one_exists() {
         "{line}"
     );
     assert!(line.contains("admit_requests: bound declined"), "{line}");
+    assert!(
+        line.ends_with("each bounded publisher[…] row is one publisher job's bound (its dispatcher's poll of every task of its priority, serving every topic due at its levels), taken for each topic's sample alone"),
+        "{line}"
+    );
     // The admission step: the declined bound beside the stated budget, and which one is used.
     let admission = source(&built, "diwheeldrive: admission reserves");
     assert!(

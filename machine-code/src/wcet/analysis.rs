@@ -2,7 +2,7 @@
 //! once and composed bottom up ([`super`] states the method).
 use std::collections::{BTreeMap, BTreeSet};
 
-use super::bounds::BoundsFile;
+use super::bounds::{BoundsFile, JOB_PASSES};
 use super::cfg::{self, Call, Cfg};
 use super::chip::Chip;
 use super::counted;
@@ -75,7 +75,21 @@ impl<'a> Analysis<'a> {
         self.returns.insert(at, true);
         let image = self.image;
         let read = |address: u64, size: u64| read_entry(image, address, size);
-        let Ok(graph) = Cfg::build(f, &read, &|_| true) else {
+        // A call of a function that cannot return ends the way through it (`panic_const_async_fn_resumed`
+        // is no panic for the panic check, and returns only if `panic_fmt` did).
+        let mut returning = BTreeMap::new();
+        if let Ok(insns) = f.instructions() {
+            for i in insns {
+                if let Flow::Call(t) = i.flow() {
+                    if t != at && !returning.contains_key(&t) {
+                        let r = self.can_return(t);
+                        returning.insert(t, r);
+                    }
+                }
+            }
+        }
+        let Ok(graph) = Cfg::build(f, &read, &|t| returning.get(&t).copied().unwrap_or(true))
+        else {
             return true;
         };
         let mut seen = BTreeSet::from([0usize]);
@@ -228,6 +242,24 @@ impl<'a> Analysis<'a> {
                         .to_string(),
                 });
                 LoopCount::Retry
+            // A stated wait before a count: a poll loop's count is its timeout, the fault path.
+            } else if let Some(wait) = file
+                .as_deref()
+                .zip(line)
+                .and_then(|(file, line)| self.bounds.wait(&f.name, file, line))
+            {
+                let ns = (wait.wait_us * 1000.0).ceil() as u64;
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: 1,
+                    source: format!("wait: {} µs ({})", wait.wait_us, wait.source),
+                });
+                LoopCount::Wait {
+                    ns,
+                    cycles: chip.ns_to_cycles(ns),
+                }
             } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),
@@ -250,23 +282,41 @@ impl<'a> Analysis<'a> {
                     source: format!("bounds file: {}", stated.reason),
                 });
                 LoopCount::Passes(stated.bound)
-            } else if let Some(wait) = file
+            } else if let Some(job) = file
                 .as_deref()
                 .zip(line)
-                .and_then(|(file, line)| self.bounds.wait(&f.name, file, line))
+                .and_then(|(file, line)| self.bounds.job(&f.name, file, line))
             {
-                let ns = (wait.wait_us * 1000.0).ceil() as u64;
+                // A job runs the header twice where it can resume there (the header is entered
+                // from outside the loop by a block of the function's own, not a copy: the await
+                // it polls when resumed, or the loop's top on the first poll), else once: every
+                // way in is a copy of an entry's blocks — a resumed poll lands where its await's
+                // poll starts, an entry of the loop, so the copied way in holds that poll ahead of
+                // the header — and the next await the job meets parks it or, ready at once, is
+                // the next release (docs/analysis.md, "Async tasks: one job").
+                let resumed_here = l.header == 0
+                    || graph.blocks.iter().enumerate().any(|(p, blk)| {
+                        !l.body.contains(&p)
+                            && !blk.copy
+                            && blk.succs.iter().any(|e| e.to == l.header)
+                    });
+                let passes = if resumed_here { JOB_PASSES } else { 1 };
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),
                     file: file.clone(),
                     line,
-                    bound: 1,
-                    source: format!("wait: {} µs ({})", wait.wait_us, wait.source),
+                    bound: passes,
+                    source: format!(
+                        "job: one pass of the task's loop per job, its header run {} (bounds file: {})",
+                        if resumed_here {
+                            "where the job resumes and where it parks"
+                        } else {
+                            "once, behind the await the job resumes at"
+                        },
+                        job.reason
+                    ),
                 });
-                LoopCount::Wait {
-                    ns,
-                    cycles: chip.ns_to_cycles(ns),
-                }
+                LoopCount::Passes(passes)
             } else if let Some(r) = length::length_register(&f.name)
                 .or_else(|| self.bounds.per_element(&f.name).map(|p| p.register))
             {

@@ -15,7 +15,9 @@
 //!   "per_element": [{ "function": "…::Encoder::put", "register": 2,
 //!                     "reason": "one pass per byte of its slice argument" }],
 //!   "tasks": [{ "name": "monotonic", "symbol": "TIM5", "handler": true,
-//!               "reason": "the TIM5 monotonic's compare interrupt (board.rs)" }]
+//!               "reason": "the TIM5 monotonic's compare interrupt (board.rs)" }],
+//!   "jobs": [{ "function": "UART4", "file": "src/tasks.rs", "line": 150,
+//!              "reason": "the watchdog's period: a delay ready at once is the next release" }]
 //! }
 //! ```
 //!
@@ -97,6 +99,24 @@ pub struct TaskSpec {
     pub reason: String,
 }
 
+/// An async task's loop, named at the `.await` its jobs end at: one job (one poll of the task, from
+/// its resume to the next `await` that is pending) makes at most one pass of the loop, because that
+/// `await` ready at once is the task's next release, which the response-time analysis counts as a
+/// job of its own. The analysis counts the loop, entered at that `await`, as two runs of its header
+/// (the resume and the `await` the job parks at) — [`JOB_PASSES`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobLoop {
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    pub reason: String,
+}
+
+/// The runs of an async task's loop header in one job ([`JobLoop`]): the `await` it resumes at,
+/// and the one it parks at after its pass.
+pub const JOB_PASSES: u64 = 2;
+
 /// The stated bounds of one image (see the module documentation).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -114,6 +134,9 @@ pub struct BoundsFile {
     /// Tasks besides the app's own (for `cargo xtask wcet BOARD`).
     #[serde(default)]
     pub tasks: Vec<TaskSpec>,
+    /// Async tasks' loops: one pass per job.
+    #[serde(default)]
+    pub jobs: Vec<JobLoop>,
 }
 
 /// Whether a line-table path is the stated `file`.
@@ -159,6 +182,14 @@ impl BoundsFile {
                 )));
             }
         }
+        for j in &file.jobs {
+            if j.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the task's loop at {}:{} in {} needs a reason (what its `await` waits for)",
+                    j.file, j.line, j.function
+                )));
+            }
+        }
         for p in &file.per_element {
             if p.register > 3 || p.reason.trim().is_empty() {
                 return Err(Error::Bounds(format!(
@@ -191,6 +222,13 @@ impl BoundsFile {
         self.waits
             .iter()
             .find(|w| w.function == function && w.line == line && same_file(file, &w.file))
+    }
+
+    /// The async task's loop at `file:line` in `function`, when stated as one pass per job.
+    pub fn job(&self, function: &str, file: &str, line: u32) -> Option<&JobLoop> {
+        self.jobs
+            .iter()
+            .find(|j| j.function == function && j.line == line && same_file(file, &j.file))
     }
 
     /// The stated slice-length register of `function`, if its loops pass once per element.
@@ -255,6 +293,11 @@ impl BoundsFile {
                 self.lengths
                     .iter()
                     .map(|l| ("length", &l.function, &l.file, l.line)),
+            )
+            .chain(
+                self.jobs
+                    .iter()
+                    .map(|j| ("job", &j.function, &j.file, j.line)),
             );
         for (kind, function, file, line) in keyed {
             if !has_line(function, file, line) {

@@ -32,6 +32,8 @@ pub struct Block {
     pub call: Option<Call>,
     /// Control may leave the function here (a return, a tail call, the end of its code).
     pub exit: bool,
+    /// A copy node splitting made of a block ([`Cfg::split_irreducible`]).
+    pub copy: bool,
 }
 
 /// A function's control-flow graph.
@@ -153,6 +155,7 @@ impl Cfg {
                 succs: Vec::new(),
                 call: None,
                 exit: false,
+                copy: false,
             };
             // The next instruction, when it follows directly (not behind a literal pool).
             let fall = (last + 1 < insns.len() && insns[last + 1].addr == insn.next())
@@ -386,8 +389,10 @@ pub const MAX_SPLIT_GROWTH: usize = 4;
 impl Cfg {
     /// The graph made reducible by node splitting, where it is not: a cycle entered at more than one
     /// block (an async task's loop, entered at its top on the first poll and at an `await` on every
-    /// later one) keeps one entry as its header, and the blocks a path from each other entry runs
-    /// through before it reaches the header are copied for the way in from outside. Every path of the
+    /// later one) keeps one block as its header — the one whose split copies the fewest blocks, of
+    /// those the one leaving the fewest loops — and the blocks a path from each entry runs through
+    /// before it reaches the header are copied for the way in from outside (marked
+    /// [`Block::copy`]). Every path of the
     /// graph is a path of the result (its blocks are copies with the same instructions and edges),
     /// so a bound of the result bounds the graph; its new natural loop has the header's place, where
     /// a bounds file can state its bound (docs/analysis.md, "Async tasks"). `Ok(None)` when the graph
@@ -404,7 +409,7 @@ impl Cfg {
             if graph.blocks.len() > limit {
                 return Err(header);
             }
-            graph.split_at(header);
+            graph = graph.split_region(header);
             split = true;
         }
     }
@@ -434,25 +439,62 @@ impl Cfg {
         seen
     }
 
-    /// Splits the strongly connected region around `header` (an entry of it): every other entry's
-    /// blocks up to the header are copied for the edges from outside the region.
-    fn split_at(&mut self, header: usize) {
-        let ahead = self.reach(header, false);
-        let behind = self.reach(header, true);
+    /// The strongly connected region around `block`, and its entries (the blocks of it with an edge
+    /// from outside).
+    fn region(&self, block: usize) -> (BTreeSet<usize>, BTreeSet<usize>) {
+        let ahead = self.reach(block, false);
+        let behind = self.reach(block, true);
         let region: BTreeSet<usize> = ahead.intersection(&behind).copied().collect();
-        // The function's entry, where the region holds it, is the one entry that stays.
-        let header = if region.contains(&0) { 0 } else { header };
-        let outside_into = |g: &Cfg, x: usize| {
-            g.blocks
-                .iter()
-                .enumerate()
-                .any(|(p, blk)| !region.contains(&p) && blk.succs.iter().any(|e| e.to == x))
-        };
-        let entries: Vec<usize> = region
+        let entries = region
             .iter()
             .copied()
-            .filter(|&x| x != header && outside_into(self, x))
+            .filter(|&x| {
+                self.blocks
+                    .iter()
+                    .enumerate()
+                    .any(|(p, blk)| !region.contains(&p) && blk.succs.iter().any(|e| e.to == x))
+            })
             .collect();
+        (region, entries)
+    }
+
+    /// The region around `block` split at the block that copies the fewest blocks (the function's
+    /// entry, where the region holds it, always stays); of those that copy as few, the one that
+    /// leaves the fewest loops (none of them irreducible), so that the cycles of an async task's
+    /// loop, entered at its top and at each `await`, share one header.
+    fn split_region(&self, block: usize) -> Cfg {
+        let (region, entries) = self.region(block);
+        if region.contains(&0) {
+            let mut graph = self.clone();
+            graph.split_at(0, &region, &entries);
+            return graph;
+        }
+        let mut fewest: Vec<Cfg> = Vec::new();
+        for &header in &region {
+            let mut graph = self.clone();
+            graph.split_at(header, &region, &entries);
+            // A split that copies nothing changes nothing (a region entered at one block, with
+            // an irreducible region inside: `block` is in that one).
+            if graph.blocks.len() == self.blocks.len() && header != block {
+                continue;
+            }
+            match fewest.first().map(|g| g.blocks.len()) {
+                Some(n) if n < graph.blocks.len() => {}
+                Some(n) if n == graph.blocks.len() => fewest.push(graph),
+                _ => fewest = vec![graph],
+            }
+        }
+        let loops = |g: &Cfg| g.loops().map_or(usize::MAX, |l| l.len());
+        fewest
+            .into_iter()
+            .min_by_key(loops)
+            .unwrap_or_else(|| self.clone())
+    }
+
+    /// Splits `region` at `header` (one of its `entries`): every other entry's blocks up to the
+    /// header are copied for the edges from outside the region.
+    fn split_at(&mut self, header: usize, region: &BTreeSet<usize>, entries: &BTreeSet<usize>) {
+        let entries: Vec<usize> = entries.iter().copied().filter(|&x| x != header).collect();
         for entry in entries {
             // The region's blocks reachable from this entry without passing the header.
             let mut part = BTreeSet::from([entry]);
@@ -471,6 +513,7 @@ impl Cfg {
                 .collect();
             for &x in &part {
                 let mut block = self.blocks[x].clone();
+                block.copy = true;
                 for e in &mut block.succs {
                     if let Some(&c) = copy.get(&e.to) {
                         e.to = c;

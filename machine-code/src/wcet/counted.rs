@@ -102,7 +102,6 @@ pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
 fn counted_at_top(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
     let header = &cfg.blocks[l.header];
     let branch = &insns[header.last];
-    let code = branch_condition(branch)?;
     // One edge out of the loop, one in: whether taking the branch leaves.
     let [a, b] = header.succs[..] else {
         return None;
@@ -112,16 +111,40 @@ fn counted_at_top(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> 
         (false, true) => a.taken,
         _ => return None,
     };
-    let head = &insns[header.first..header.last];
-    let (at, setter) = head.iter().enumerate().rev().find(|(_, i)| sets_flags(i))?;
-    if setter.inst.opcode != Opcode::CMP || setter.conditional || setter.registers().len() != 1 {
-        return None;
-    }
-    let Operand::Reg(r) = setter.inst.operands[0] else {
-        return None;
+    // The counter, the constant it is compared with, the condition (EQ/NE for `CBZ`/`CBNZ`, whose
+    // test is a compare with 0), and where in the header the compare is.
+    let (counter, limit, code, at) = match branch.inst.opcode {
+        Opcode::CBZ | Opcode::CBNZ
+            if !insns[header.first..header.last]
+                .iter()
+                .any(|i| i.conditional) =>
+        {
+            let Operand::Reg(r) = branch.inst.operands[0] else {
+                return None;
+            };
+            let code = if branch.inst.opcode == Opcode::CBZ {
+                0
+            } else {
+                1
+            };
+            (r.number(), 0, code, header.last - header.first)
+        }
+        _ => {
+            let code = branch_condition(branch)?;
+            let head = &insns[header.first..header.last];
+            let (at, setter) = head.iter().enumerate().rev().find(|(_, i)| sets_flags(i))?;
+            if setter.inst.opcode != Opcode::CMP
+                || setter.conditional
+                || setter.registers().len() != 1
+            {
+                return None;
+            }
+            let Operand::Reg(r) = setter.inst.operands[0] else {
+                return None;
+            };
+            (r.number(), setter.immediate()?, code, at)
+        }
     };
-    let counter = r.number();
-    let limit = setter.immediate()?;
     // Exactly one write of the counter in the loop: the step.
     let (step_block, step_at) = only_write(insns, cfg, l, counter)?;
     if insns[step_at].conditional {

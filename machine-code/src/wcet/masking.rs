@@ -113,6 +113,7 @@ pub(super) fn region(
                 succs: Vec::new(),
                 call: None,
                 exit: true,
+                copy: block.copy,
             };
             continue;
         }
@@ -143,6 +144,7 @@ pub(super) fn region(
             succs,
             call: block.call,
             exit: false,
+            copy: block.copy,
         };
     }
     Ok(Cfg { blocks })
@@ -155,6 +157,7 @@ fn placeholder() -> Block {
         succs: Vec::new(),
         call: None,
         exit: false,
+        copy: false,
     }
 }
 

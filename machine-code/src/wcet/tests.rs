@@ -1186,3 +1186,220 @@ fn a_raise_of_no_constant_leaves_the_task_incomplete() {
     let reason = found.incomplete.expect("incomplete");
     assert!(reason.contains("no constant"), "{reason}");
 }
+
+/// `bounds_file` with the async loop of [`async_loop`] stated as one pass per job.
+fn one_job_of_poll() -> BoundsFile {
+    BoundsFile::parse(
+        r#"{"jobs":[{"function":"poll","file":"src/task.rs","line":13,"reason":"ready at once, the await is the next release"}]}"#,
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_stated_job_is_one_pass_of_an_async_loop() {
+    let img = async_loop();
+    // Without the statement the loop, entered at its await, stays declined by name.
+    let plain = bound_function(&img, "poll", F103_0WS, &BoundsFile::default()).unwrap();
+    assert!(
+        plain.declined.as_deref().is_some_and(
+            |r| r.contains("the loop in poll at /work/firmware/src/task.rs:13 has no bound")
+        ),
+        "{plain:?}"
+    );
+    let b = bound_function(&img, "poll", F103_0WS, &one_job_of_poll()).unwrap();
+    // The split keeps the await (line 13) as the loop's header (copying the loop's top, one block,
+    // for the first poll) and a job runs it twice: where the job resumes (ready) and where it parks
+    // (pending). The resumed job: cbnz taken (1 + P), cmp, beq (1, 1), adds r3, b (1 + P), the loop's
+    // top adds r1, cmp, beq taken (1 + P), bx lr (1 + P) = 4 + 2 + 1 + 4 + 1 + 1 + 4 + 4 = 21 cycles,
+    // 9 instructions. The first poll: cbnz, movs, adds (1 each), the await ready at once as one pass
+    // (cmp, beq, adds, b: 1 + 1 + 1 + 4, adds 1), cmp, beq taken (1 + 4), bx lr (4) = 20 cycles,
+    // 11 instructions. Each figure is its own longest path: 21 cycles, 11 instructions.
+    assert_eq!(figures(&b), (21, 11, None));
+    assert_eq!(b.loops.len(), 1);
+    assert_eq!((b.loops[0].line, b.loops[0].bound), (Some(13), 2));
+    assert!(b.loops[0].source.starts_with("job: "), "{:?}", b.loops[0]);
+    // Stated for another line, the statement bounds nothing.
+    let elsewhere = BoundsFile::parse(
+        r#"{"jobs":[{"function":"poll","file":"src/task.rs","line":12,"reason":"r"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "poll", F103_0WS, &elsewhere).unwrap();
+    assert!(b.declined.is_some());
+    // A job needs its reason; its place is checked like a loop's.
+    assert!(matches!(
+        BoundsFile::parse(r#"{"jobs":[{"function":"poll","file":"a.rs","line":13,"reason":""}]}"#),
+        Err(Error::Bounds(_))
+    ));
+    assert!(one_job_of_poll().missing_places(&img).is_empty());
+}
+
+#[test]
+fn an_async_loop_with_two_awaits_is_split_where_every_pass_goes() {
+    // `loop { if x { a.await } else { b.await }; y += 2 }` with `x` true on the first poll: a first
+    // poll (state 0) enters the loop at await a (line 12), a resumed one at a or b (line 13). Every
+    // pass goes through the join behind the awaits (line 14), and splitting there copies the fewest
+    // blocks (each await's way to it): one natural loop, named at the join's line, entered only
+    // through those copies — so a job runs its header once: it polled its await before.
+    let code = thumb(&[
+        0x2801, // 0x00 cmp r0, #1
+        0xd005, // 0x02 beq 0x10: resumed at await a
+        0x2802, // 0x04 cmp r0, #2
+        0xd007, // 0x06 beq 0x18: resumed at await b
+        0x2100, // 0x08 movs r1, #0 (first poll)
+        0xe001, // 0x0a b 0x10
+        0x2900, // 0x0c cmp r1, #0 (the loop's top)
+        0xd103, // 0x0e bne 0x18
+        0x2a00, // 0x10 cmp r2, #0 (await a: pending?)
+        0xd007, // 0x12 beq 0x24
+        0xe003, // 0x14 b 0x1e
+        0xbf00, // 0x16 nop
+        0x2b00, // 0x18 cmp r3, #0 (await b: pending?)
+        0xd003, // 0x1a beq 0x24
+        0xbf00, // 0x1c nop
+        0x3102, // 0x1e adds r1, #2 (the join behind either await)
+        0xe7f4, // 0x20 b 0x0c
+        0xbf00, // 0x22 nop
+        0x4770, // 0x24 bx lr
+    ]);
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("poll2", 0, 0x26)],
+        "firmware/src/task.rs",
+        &[
+            (0, 10),
+            (0x0c, 11),
+            (0x10, 12),
+            (0x18, 13),
+            (0x1e, 14),
+            (0x24, 15),
+        ],
+    ))
+    .expect("the test image parses");
+    let plain = bound_function(&img, "poll2", F103_0WS, &BoundsFile::default()).unwrap();
+    assert!(
+        plain
+            .declined
+            .as_deref()
+            .is_some_and(|r| r.contains("task.rs:14 has no bound")),
+        "{plain:?}"
+    );
+    let stated = BoundsFile::parse(
+        r#"{"jobs":[{"function":"poll2","file":"src/task.rs","line":14,"reason":"r"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "poll2", F103_0WS, &stated).unwrap();
+    assert_eq!(b.loops.len(), 1);
+    assert_eq!((b.loops[0].line, b.loops[0].bound), (Some(14), 1));
+    // The longest job is the first poll, with await a ready at once (no pass of the loop yet): cmp,
+    // beq, cmp, beq, movs, b (1 + 1 + 1 + 1 + 1 + 4 cycles), a ready (cmp, beq, b: 1 + 1 + 4), the
+    // join (adds, b: 1 + 4), the top (cmp, bne taken: 1 + 4), b pending (cmp, beq taken: 1 + 4), bx
+    // lr (4) = 34 cycles, 16 instructions. A job resumed at b: cmp, beq, cmp, beq taken (1 + 1 + 1 +
+    // 4), b ready (cmp, beq, nop: 3), the join (5), the top (5), b pending (5), bx lr (4) = 29
+    // cycles, 14 instructions — the header once: a second pass would be the next release.
+    assert_eq!(figures(&b), (34, 16, None));
+}
+
+#[test]
+fn a_function_that_only_calls_one_that_cannot_return_cannot_either() {
+    // `panic_const_async_fn_resumed` is no panic by its name (the panic check leaves it out), but it
+    // only calls `panic_fmt`: a path into it completes no job, as a path into a panic does not.
+    let img = image(
+        &[
+            0x2800, // 0x00 cmp r0, #0: 1
+            0xd001, // 0x02 beq 0x08: 1 (+ P)
+            0xf000, 0xf803, // 0x04 bl 0x0e
+            0x2001, // 0x08 movs r0, #1: 1
+            0x4770, // 0x0a bx lr: 4
+            0xbf00, // 0x0c
+            0xb580, // 0x0e push {r7, lr}
+            0xf000, 0xf800, // 0x10 bl 0x14
+            0xe7fe, // 0x14 b 0x14: the panic spins for ever
+        ],
+        &[
+            Sym::function("resumes", 0, 0x0c),
+            Sym::function(
+                "core::panicking::panic_const::panic_const_async_fn_resumed",
+                0x0e,
+                6,
+            ),
+            Sym::function("core::panicking::panic_fmt", 0x14, 2),
+        ],
+    );
+    // Only the path that returns: 1 + 1 + P + 1 + 4 = 10.
+    let b = bound(&img, "resumes", F103_0WS);
+    assert_eq!(figures(&b), (10, 4, None));
+}
+
+#[test]
+fn a_stated_wait_is_taken_before_the_poll_count_it_times_out_at() {
+    // `for _ in 0..250 { if read(SR) != 0 { return 1 } } 0`: a flag poll whose count is its timeout.
+    let code = thumb(&[
+        0x2300, // 0x00 movs r3, #0: 1                                       line 5
+        0x6801, // 0x02 ldr r1, [r0]: 2 + 5 (an unknown base: APB1)          line 7
+        0xb919, // 0x04 cbnz r1, 0x0e: 1 (+ P)
+        0x3301, // 0x06 adds r3, #1: 1
+        0x2bfa, // 0x08 cmp r3, #250: 1
+        0xd1fa, // 0x0a bne 0x02: 1 (+ P)
+        0x4770, // 0x0c bx lr: 4 (the timeout)                               line 9
+        0x2001, // 0x0e movs r0, #1: 1                                        line 10
+        0x4770, // 0x10 bx lr: 4
+    ]);
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("poll_flag", 0, 0x12)],
+        "firmware/src/flag.rs",
+        &[(0, 5), (2, 7), (0x0c, 9), (0x0e, 10)],
+    ))
+    .expect("the test image parses");
+    // Counted, the loop runs to its timeout: 250 passes.
+    let plain = bound_function(&img, "poll_flag", F103_0WS, &BoundsFile::default()).unwrap();
+    assert_eq!(plain.loops[0].bound, 250, "{plain:?}");
+    assert!(plain.loops[0].source.starts_with("counted"));
+    // With the flag's latency stated, the wait is what bounds it: the way out (ldr 7, cbnz 1 + P,
+    // movs 1, bx lr 4) after movs (1) = 17 cycles, the 25 µs apart; instructions: movs, the longest
+    // way out by count (ldr, cbnz, adds, cmp, bne), then the longest way on from any exit (movs, bx
+    // lr: the collapsed loop leaves by either) = 8, and at most one a cycle of the wait (1800 at
+    // 72 MHz).
+    let stated = BoundsFile::parse(
+        r#"{"waits":[{"function":"poll_flag","file":"src/flag.rs","line":7,"wait_us":25.0,"source":"the flag's stated latency"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "poll_flag", F103_0WS, &stated).unwrap();
+    assert_eq!(figures(&b), (17, 8 + 1800, None));
+    assert_eq!(b.bus_wait_ns, 25_000);
+    assert!(
+        b.loops[0].source.starts_with("wait: 25 µs"),
+        "{:?}",
+        b.loops
+    );
+}
+
+#[test]
+fn a_down_counter_tested_by_cbz_at_the_top_is_counted() {
+    // `let mut k = 4; while k != 0 { x += 1; k -= 1 }` as `CBZ` at the loop's top.
+    let img = image(
+        &[
+            0x2504, // 0x00 movs r5, #4: 1
+            0xb11d, // 0x02 cbz r5, 0x0c: 1 (taken: + P)
+            0x3001, // 0x04 adds r0, #1: 1
+            0x3d01, // 0x06 subs r5, #1: 1
+            0xe7fb, // 0x08 b 0x02: 1 + P
+            0xbf00, // 0x0a nop
+            0x4770, // 0x0c bx lr: 1 + P
+        ],
+        &[Sym::function("count_down", 0, 0x0e)],
+    );
+    let b = bound(&img, "count_down", F103_0WS);
+    // The header runs 5 times (k = 4, 3, 2, 1, then 0 leaves): movs 1, four passes of cbz, adds,
+    // subs, b (1 + 1 + 1 + 4), the cbz that leaves (1 + P), bx lr (4) = 1 + 28 + 4 + 4 = 37 cycles;
+    // 1 + 4 × 4 + 1 + 1 = 19 instructions.
+    assert_eq!(figures(&b), (37, 19, None));
+    assert_eq!(b.loops[0].bound, 5);
+    assert!(
+        b.loops[0]
+            .source
+            .contains("by -1, compared with #0 at the loop's top"),
+        "{:?}",
+        b.loops[0]
+    );
+}

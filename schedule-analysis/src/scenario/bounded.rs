@@ -494,8 +494,18 @@ pub(super) fn budgets_line(b: &BoardBudgets, measured: &[String]) -> String {
             .collect();
         format!(" ({})", reasons.join("; "))
     };
+    // A topic's row is bounded by a whole publisher job (docs/analysis.md, "Writing the files"): say so.
+    let per_topic = b
+        .job_rows()
+        .any(|(row, f)| row.starts_with("publisher[") && matches!(f, BudgetFrom::Bound { .. }));
+    let note = if per_topic {
+        "; each bounded publisher[…] row is one publisher job's bound (its dispatcher's poll of every task of \
+         its priority, serving every topic due at its levels), taken for each topic's sample alone"
+    } else {
+        ""
+    };
     format!(
-        "{}: budgets: {bounded} bounded from the machine code ({facts}), {} stated{why}",
+        "{}: budgets: {bounded} bounded from the machine code ({facts}), {} stated{why}{note}",
         b.board,
         total - bounded
     )
