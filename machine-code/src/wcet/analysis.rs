@@ -24,6 +24,39 @@ pub(super) struct Summary {
     pub(super) retry_time: Cost,
     pub(super) retry_count: Cost,
     pub(super) loops: Vec<LoopInfo>,
+    /// The loops stated in total per job ([`LoopCount::Total`]) in this function and its callees:
+    /// charged once, by the job's bound, not at each call.
+    pub(super) totals: Totals,
+}
+
+/// A loop stated in total per job: the most passes back to its header, and its longest iteration by
+/// time and by instruction count.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Total {
+    pub(super) passes: u64,
+    pub(super) time: Cost,
+    pub(super) count: Cost,
+}
+
+/// A loop's function, file and line.
+pub(super) type LoopKey = (String, Option<String>, Option<u32>);
+
+/// Such loops by their [`LoopKey`].
+pub(super) type Totals = BTreeMap<LoopKey, Total>;
+
+/// `from`'s totals into `into`: a loop reached on several ways is charged once, at its longest
+/// iteration.
+fn merge_totals(into: &mut Totals, from: &Totals, chip: Chip) {
+    for (key, t) in from {
+        let entry = into.entry(key.clone()).or_insert(*t);
+        if time_key(chip)(t.time) > time_key(chip)(entry.time) {
+            entry.time = t.time;
+        }
+        if t.count.instructions > entry.count.instructions {
+            entry.count = t.count;
+        }
+        entry.passes = entry.passes.max(t.passes);
+    }
 }
 
 /// The analysis of one image: function summaries worked out once each.
@@ -185,6 +218,9 @@ impl<'a> Analysis<'a> {
         // The count the function's `Shared` loops iterate at most, all together.
         let mut shared_count: Option<u64> = None;
         let (mut retry_time, mut retry_count) = (Cost::default(), Cost::default());
+        // The function's loops stated in total per job, by their [`LoopCount::Total`] key.
+        let mut total_keys: Vec<(LoopKey, u64)> = Vec::new();
+        let mut totals = Totals::new();
         for l in &natural {
             let leaves = l.body.iter().any(|&b| {
                 let blk = &graph.blocks[b];
@@ -204,6 +240,29 @@ impl<'a> Analysis<'a> {
                         .to_string(),
                 });
                 LoopCount::Retry
+            } else if let Some(stated) = file
+                .as_deref()
+                .zip(line)
+                .and_then(|(file, line)| self.bounds.total(&f.name, file, line))
+            {
+                let key = (f.name.clone(), file.clone(), line);
+                if total_keys.iter().any(|(k, _)| *k == key) {
+                    return Ok(Err(format!(
+                        "two loops in {} are at {text}: a total in the bounds file names one",
+                        f.name
+                    )));
+                }
+                loops_info.push(LoopInfo {
+                    function: f.name.clone(),
+                    file: file.clone(),
+                    line,
+                    bound: stated.passes,
+                    source: format!("bounds file, passes in total per job: {}", stated.reason),
+                });
+                total_keys.push((key, stated.passes));
+                LoopCount::Total {
+                    key: total_keys.len() - 1,
+                }
             } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),
@@ -318,6 +377,7 @@ impl<'a> Analysis<'a> {
                         *time_ref = time_ref.plus(s.time);
                         *count_ref = count_ref.plus(s.count);
                         loops_info.extend(s.loops);
+                        merge_totals(&mut totals, &s.totals, chip);
                     }
                     Err(reason) => return Ok(Err(format!("via {}: {reason}", image.name(target)))),
                 },
@@ -338,6 +398,7 @@ impl<'a> Analysis<'a> {
                                 retry_count = s.retry_count;
                             }
                             loops_info.extend(s.loops);
+                            merge_totals(&mut totals, &s.totals, chip);
                         }
                         Err(reason) => {
                             return Ok(Err(format!("via {}: {reason}", image.name(target))))
@@ -391,6 +452,7 @@ impl<'a> Analysis<'a> {
                                     worst_count = s.count;
                                 }
                                 loops_info.extend(s.loops);
+                                merge_totals(&mut totals, &s.totals, chip);
                             }
                             Err(reason) => return Ok(Err(format!("via {name}: {reason}"))),
                         }
@@ -442,6 +504,29 @@ impl<'a> Analysis<'a> {
                     retry_count = c.retry;
                 }
                 let n = shared_count.unwrap_or(0);
+                let own = |key: usize, longest: &path::Longest, by: &dyn Fn(Cost) -> u64| {
+                    longest
+                        .totals
+                        .iter()
+                        .filter(|&&(k, _)| k == key)
+                        .map(|&(_, c)| c)
+                        .max_by_key(|&c| by(c))
+                        .unwrap_or_default()
+                };
+                let mut mine = Totals::new();
+                for (key, (name, passes)) in total_keys.iter().enumerate() {
+                    let time = own(key, &t, &time_key(chip));
+                    let count = own(key, &c, &|c: Cost| c.instructions);
+                    mine.insert(
+                        name.clone(),
+                        Total {
+                            passes: *passes,
+                            time,
+                            count,
+                        },
+                    );
+                }
+                merge_totals(&mut totals, &mine, chip);
                 (
                     t.path.plus(t.shared.times(n)),
                     c.path.plus(c.shared.times(n)),
@@ -468,6 +553,7 @@ impl<'a> Analysis<'a> {
             retry_time,
             retry_count,
             loops: loops_info,
+            totals,
         }))
     }
 

@@ -15,7 +15,9 @@
 //!   "per_element": [{ "function": "…::Encoder::put", "register": 2,
 //!                     "reason": "one pass per byte of its slice argument" }],
 //!   "tasks": [{ "name": "monotonic", "symbol": "TIM5", "handler": true,
-//!               "reason": "the TIM5 monotonic's compare interrupt (board.rs)" }]
+//!               "reason": "the TIM5 monotonic's compare interrupt (board.rs)" }],
+//!   "totals": [{ "function": "…", "file": "src/busy_window.rs", "line": 829, "passes": 500,
+//!                "reason": "every pass back is one of the job's at most 500 fixed-point iterations" }]
 //! }
 //! ```
 //!
@@ -97,6 +99,18 @@ pub struct TaskSpec {
     pub reason: String,
 }
 
+/// A loop whose passes back to its header are capped for the whole job, however often the job enters
+/// it (a budget of iterations the code counts across calls): at most `passes` in total per job.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TotalBound {
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    pub passes: u64,
+    pub reason: String,
+}
+
 /// The stated bounds of one image (see the module documentation).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -114,6 +128,9 @@ pub struct BoundsFile {
     /// Tasks besides the app's own (for `cargo xtask wcet BOARD`).
     #[serde(default)]
     pub tasks: Vec<TaskSpec>,
+    /// Loops capped in total per job ([`TotalBound`]).
+    #[serde(default)]
+    pub totals: Vec<TotalBound>,
 }
 
 /// Whether a line-table path is the stated `file`.
@@ -156,6 +173,14 @@ impl BoundsFile {
                 return Err(Error::Bounds(format!(
                     "the length at {}:{} in {} needs an argument register (0-3) and a reason",
                     l.file, l.line, l.function
+                )));
+            }
+        }
+        for t in &file.totals {
+            if t.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the total at {}:{} in {} needs a reason",
+                    t.file, t.line, t.function
                 )));
             }
         }
@@ -203,6 +228,13 @@ impl BoundsFile {
         self.lengths
             .iter()
             .find(|l| l.function == function && l.line == line && same_file(file, &l.file))
+    }
+
+    /// The stated total of the loop at `file:line` in `function`, for the whole job.
+    pub fn total(&self, function: &str, file: &str, line: u32) -> Option<&TotalBound> {
+        self.totals
+            .iter()
+            .find(|t| t.function == function && t.line == line && same_file(file, &t.file))
     }
 
     /// The stated targets of the call through a register at `file:line` in `function`.
@@ -255,6 +287,11 @@ impl BoundsFile {
                 self.lengths
                     .iter()
                     .map(|l| ("length", &l.function, &l.file, l.line)),
+            )
+            .chain(
+                self.totals
+                    .iter()
+                    .map(|t| ("total", &t.function, &t.file, t.line)),
             );
         for (kind, function, file, line) in keyed {
             if !has_line(function, file, line) {

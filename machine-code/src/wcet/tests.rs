@@ -1018,3 +1018,71 @@ fn a_move_in_an_else_slot_is_no_smaller_of() {
     let b = bound(&img, "else_slot", F103_0WS);
     assert!(length_unknown(&b), "{b:?}");
 }
+
+/// `spin` of [`spin_with_lines`] at 0x10 (its loop at src/spin.rs:7), called three times by `thrice`.
+fn spin_called_thrice() -> Image {
+    let code = thumb(&[
+        0xb580, // 0x00 push {r7, lr}: 1 + 2
+        0xf000, 0xf805, // 0x02 bl 0x10: 1 + P
+        0xf000, 0xf803, // 0x06 bl 0x10: 1 + P
+        0xf000, 0xf801, // 0x0a bl 0x10: 1 + P
+        0xbd80, // 0x0e pop {r7, pc}: 1 + 2 + P
+        0x6801, // 0x10 ldr r1, [r0]: 2 + 5 (an unknown base: APB1, the slowest)
+        0x2900, // 0x12 cmp r1, #0: 1
+        0xd1fc, // 0x14 bne 0x10: 1, taken + P
+        0x4770, // 0x16 bx lr: 1 + P
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("thrice", 0, 0x10),
+            Sym::function("spin", 0x10, 8),
+        ],
+        "firmware/src/spin.rs",
+        &[(0, 3), (0x10, 7), (0x16, 9)],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+#[test]
+fn a_loop_stated_in_total_per_job_is_charged_once_whatever_its_entries() {
+    let img = spin_called_thrice();
+    let totals = BoundsFile::parse(
+        r#"{"totals":[{"function":"spin","file":"src/spin.rs","line":7,"passes":5,"reason":"five polls per job in all"}]}"#,
+    )
+    .unwrap();
+    // `spin` entered once and left at once: ldr 7, cmp 1, bne 1 (not taken), bx lr 4 = 13 cycles, 4
+    // instructions. An iteration back: 9 + P = 12 cycles, 3 instructions.
+    let alone = bound_function(&img, "spin", F103_0WS, &totals).unwrap();
+    // Its way out, and five iterations for the whole job: 13 + 5 × 12 = 73; 4 + 5 × 3 = 19.
+    assert_eq!(figures(&alone), (73, 19, None));
+    assert_eq!(alone.loops.len(), 1);
+    assert_eq!(alone.loops[0].bound, 5);
+    assert_eq!(
+        alone.loops[0].source,
+        "bounds file, passes in total per job: five polls per job in all"
+    );
+    // Called three times: push 3, three calls of 4 + 13, pop 6 = 60 cycles, 1 + 3 × (1 + 4) + 1 =
+    // 17 instructions; the five passes back once more for the whole job, not at each call:
+    // 60 + 60 = 120 cycles, 17 + 15 = 32 instructions.
+    let b = bound_function(&img, "thrice", F103_0WS, &totals).unwrap();
+    assert_eq!(figures(&b), (120, 32, None));
+    // The same five stated per entry are five passes at each of the three calls: 60 + 3 × 4 × 12 =
+    // 204 cycles (a bound of 5 header runs: 4 passes back), 17 + 3 × 4 × 3 = 53 instructions.
+    let per_entry = BoundsFile::parse(
+        r#"{"loops":[{"function":"spin","file":"src/spin.rs","line":7,"bound":5,"reason":"five polls per call"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "thrice", F103_0WS, &per_entry).unwrap();
+    assert_eq!(figures(&b), (204, 53, None));
+    // A total needs a reason, and names a place the image must have.
+    assert!(BoundsFile::parse(
+        r#"{"totals":[{"function":"spin","file":"src/spin.rs","line":7,"passes":5,"reason":" "}]}"#
+    )
+    .is_err());
+    let moved = BoundsFile::parse(
+        r#"{"totals":[{"function":"spin","file":"src/spin.rs","line":8,"passes":5,"reason":"x"}]}"#,
+    )
+    .unwrap();
+    assert_eq!(moved.missing_places(&img), vec!["total spin src/spin.rs:8"]);
+}
