@@ -69,6 +69,9 @@ pub(super) struct Analysis<'a> {
     open: Vec<u64>,
 }
 
+/// How a declined length names the call that passes it.
+const CALL_NAMED: &str = "the length comes from the call in";
+
 /// Where an address is in the source, for messages and keys.
 fn place(image: &Image, at: u64) -> (Option<String>, Option<u32>, String) {
     match image.line(at) {
@@ -593,12 +596,23 @@ impl<'a> Analysis<'a> {
                 });
             }
         }
-        if args == NO_ARGS {
-            return Ok(plain);
-        }
-        let mut outcome = self.summary_with(target, args)?;
+        let mut outcome = if args == NO_ARGS {
+            plain
+        } else {
+            self.summary_with(target, args)?
+        };
         if let (Ok(s), Some(info)) = (&mut outcome, stated_info) {
             s.loops.push(info);
+        }
+        // Still no length: name the call that passes it (where a `lengths` entry would go), unless the
+        // caller only passes its own argument on.
+        let passes_on =
+            length::length_register(caller).is_some() || self.bounds.per_element(caller).is_some();
+        if let Err(reason) = &mut outcome {
+            if !passes_on && !reason.contains(CALL_NAMED) {
+                let (_, _, text) = place(self.image, call);
+                reason.push_str(&format!(" ({CALL_NAMED} {caller} at {text})"));
+            }
         }
         Ok(outcome)
     }

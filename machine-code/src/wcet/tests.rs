@@ -1086,3 +1086,37 @@ fn a_loop_stated_in_total_per_job_is_charged_once_whatever_its_entries() {
     .unwrap();
     assert_eq!(moved.missing_places(&img), vec!["total spin src/spin.rs:8"]);
 }
+
+#[test]
+fn a_length_no_call_fixes_names_the_call_that_passes_it() {
+    // A caller reads the length from memory and passes it to `__aeabi_memclr` at line 11, which
+    // passes its own argument on to its loop: the call to state is the caller's.
+    let code = thumb(&with_memclr(&[
+        0xb580, // 0x00 push {r7, lr}           line 10
+        0x6801, // 0x02 ldr r1, [r0]
+        0xf000, 0xf802, // 0x04 bl 0x0c         line 11
+        0xbd80, // 0x08 pop {r7, pc}            line 12
+        0xbf00, // 0x0a
+    ])); // 0x0c __aeabi_memclr, line 20
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("clear_read", 0, 10),
+            Sym::function("__aeabi_memclr", 0x0c, 0x10),
+        ],
+        "firmware/src/c.rs",
+        &[(0, 10), (4, 11), (8, 12), (0x0c, 20)],
+    ))
+    .expect("the test image parses");
+    let b = bound_function(&img, "clear_read", F103_0WS, &BoundsFile::default()).unwrap();
+    let reason = b.declined.expect("declined");
+    assert!(
+        reason.ends_with(
+            "(the length comes from the call in clear_read at /work/firmware/src/c.rs:11)"
+        ),
+        "{reason}"
+    );
+    // The memory function alone names no call.
+    let alone = bound(&img, "__aeabi_memclr", F103_0WS);
+    assert!(!alone.declined.expect("declined").contains("the call in"));
+}
