@@ -605,9 +605,11 @@ impl<'a> Analysis<'a> {
             s.loops.push(info);
         }
         // Still no length: name the call that passes it (where a `lengths` entry would go), unless the
-        // caller only passes its own argument on.
-        let passes_on =
-            length::length_register(caller).is_some() || self.bounds.per_element(caller).is_some();
+        // caller is a memory function called without a length of its own (it passes its argument on;
+        // the call that passes it is named).
+        let passes_on = length::length_register(caller)
+            .or_else(|| self.bounds.per_element(caller).map(|p| p.register))
+            .is_some_and(|r| entry[usize::from(r)].is_none());
         if let Err(reason) = &mut outcome {
             if !passes_on && !reason.contains(CALL_NAMED) {
                 let (_, _, text) = place(self.image, call);

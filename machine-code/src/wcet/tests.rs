@@ -1119,4 +1119,34 @@ fn a_length_no_call_fixes_names_the_call_that_passes_it() {
     // The memory function alone names no call.
     let alone = bound(&img, "__aeabi_memclr", F103_0WS);
     assert!(!alone.declined.expect("declined").contains("the call in"));
+    // A memory function given its length (16) that passes another one on, read from memory: its
+    // own call is named, not its caller's.
+    let code = thumb(&with_memclr(&[
+        0xb580, // 0x00 push {r7, lr}           line 10
+        0x2110, // 0x02 movs r1, #16
+        0xf000, 0xf802, // 0x04 bl 0x0c         line 11
+        0xbd80, // 0x08 pop {r7, pc}            line 12
+        0xbf00, // 0x0a
+        0x6801, // 0x0c ldr r1, [r0]            line 30 (__aeabi_memclr4)
+        0xe7ff, // 0x0e b 0x10: a tail call
+    ])); // 0x10 __aeabi_memclr, line 20
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("clear_wrapped", 0, 10),
+            Sym::function("__aeabi_memclr4", 0x0c, 4),
+            Sym::function("__aeabi_memclr", 0x10, 0x10),
+        ],
+        "firmware/src/c.rs",
+        &[(0, 10), (4, 11), (8, 12), (0x0c, 30), (0x10, 20)],
+    ))
+    .expect("the test image parses");
+    let b = bound_function(&img, "clear_wrapped", F103_0WS, &BoundsFile::default()).unwrap();
+    let reason = b.declined.expect("declined");
+    assert!(
+        reason.ends_with(
+            "(the length comes from the call in __aeabi_memclr4 at /work/firmware/src/c.rs:30)"
+        ),
+        "{reason}"
+    );
 }
