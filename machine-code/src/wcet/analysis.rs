@@ -248,24 +248,27 @@ impl<'a> Analysis<'a> {
                 .zip(line)
                 .and_then(|(file, line)| self.bounds.total(&f.name, file, line))
             {
+                // Loops named at one place (a loop the compiler split, or one whose header has no
+                // line of its own) share the statement: their passes back together.
                 let key = (f.name.clone(), file.clone(), line);
-                if total_keys.iter().any(|(k, _)| *k == key) {
-                    return Ok(Err(format!(
-                        "two loops in {} are at {text}: a total in the bounds file names one",
-                        f.name
-                    )));
-                }
-                loops_info.push(LoopInfo {
-                    function: f.name.clone(),
-                    file: file.clone(),
-                    line,
-                    bound: stated.passes,
-                    source: format!("bounds file, passes in total per job: {}", stated.reason),
-                });
-                total_keys.push((key, stated.passes));
-                LoopCount::Total {
-                    key: total_keys.len() - 1,
-                }
+                let index = match total_keys.iter().position(|(k, _)| *k == key) {
+                    Some(index) => index,
+                    None => {
+                        loops_info.push(LoopInfo {
+                            function: f.name.clone(),
+                            file: file.clone(),
+                            line,
+                            bound: stated.passes,
+                            source: format!(
+                                "bounds file, passes in total per job: {}",
+                                stated.reason
+                            ),
+                        });
+                        total_keys.push((key, stated.passes));
+                        total_keys.len() - 1
+                    }
+                };
+                LoopCount::Total { key: index }
             } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),

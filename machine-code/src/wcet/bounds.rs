@@ -100,7 +100,9 @@ pub struct TaskSpec {
 }
 
 /// A loop whose passes back to its header are capped for the whole job, however often the job enters
-/// it (a budget of iterations the code counts across calls): at most `passes` in total per job.
+/// it (a budget of iterations the code counts across calls): at most `passes` in total per job. Several
+/// loops the analysis names at one place (a loop the compiler split in two, or one whose header has no
+/// line of its own) share the statement: `passes` counts their passes back together.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TotalBound {

@@ -68,8 +68,9 @@ pub enum LoopCount {
     /// A loop whose passes back to its header are stated in total for the whole job, however often
     /// it is entered (the bounds file's `totals`): collapsed to its way out, its longest iteration
     /// returned apart ([`Longest::totals`], under `key`) for the job's bound to charge the stated
-    /// number of times. Every pass back is one iteration at most as long as the longest, so the
-    /// passes of all its entries together cost at most that many longest iterations.
+    /// number of times. Loops under one key share the count (their passes back together). Every
+    /// pass back is one iteration at most as long as the longest of them, so the passes of all
+    /// their entries together cost at most that many longest iterations.
     Total { key: usize },
     /// No exit: no path through it completes.
     Endless,

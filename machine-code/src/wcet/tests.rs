@@ -1150,3 +1150,42 @@ fn a_length_no_call_fixes_names_the_call_that_passes_it() {
         "{reason}"
     );
 }
+
+#[test]
+fn loops_named_at_one_place_share_their_stated_total() {
+    // Two polling loops one after the other, both at src/spin.rs:7 (as a loop the compiler split
+    // is): each a header of ldr 7 (an unknown base: APB1), cmp 1, bne 1; the return at line 9.
+    let code = thumb(&[
+        0x6801, // 0x00 ldr r1, [r0]
+        0x2900, // 0x02 cmp r1, #0
+        0xd1fc, // 0x04 bne 0x00: taken + P
+        0x6802, // 0x06 ldr r2, [r0]
+        0x2a00, // 0x08 cmp r2, #0
+        0xd1fc, // 0x0a bne 0x06: taken + P
+        0x4770, // 0x0c bx lr: 1 + P
+    ]);
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("twice", 0, 0x0e)],
+        "firmware/src/spin.rs",
+        &[(0, 7), (0x0c, 9)],
+    ))
+    .expect("the test image parses");
+    let shared = BoundsFile::parse(
+        r#"{"totals":[{"function":"twice","file":"src/spin.rs","line":7,"passes":5,"reason":"five polls in all"}]}"#,
+    )
+    .unwrap();
+    // Each loop's way out (9 cycles, 3 instructions), the return (4, 1), and five passes back in all
+    // of the longer iteration (both 12 cycles, 3 instructions): 9 + 9 + 4 + 60 = 82; 3 + 3 + 1 +
+    // 15 = 22. The statement is listed once.
+    let b = bound_function(&img, "twice", F103_0WS, &shared).unwrap();
+    assert_eq!(figures(&b), (82, 22, None));
+    assert_eq!(b.loops.iter().filter(|l| l.bound == 5).count(), 1);
+    // Stated per entry instead, five header runs each: 4 passes back each, 9 + 9 + 4 + 8 × 12 = 118.
+    let each = BoundsFile::parse(
+        r#"{"loops":[{"function":"twice","file":"src/spin.rs","line":7,"bound":5,"reason":"five polls each"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "twice", F103_0WS, &each).unwrap();
+    assert_eq!(figures(&b), (118, 31, None));
+}
