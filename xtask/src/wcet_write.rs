@@ -246,6 +246,30 @@ fn from_found(
     }
 }
 
+/// Why a thread-mode task's row (the admission step, priority 0) is not its bound, with what the machine code
+/// bounds of it: the functions of one step the bounds file names under the task's name (`step`: a decision or a
+/// refresh step, the worst of them), within the check's iteration caps. The rest of the job — the handler's
+/// update, the verdict frames and their trace events, the pacing — runs in the thread-mode executor, which never
+/// returns, so no function's bound is the job's, and a part of a job is no budget for it.
+fn thread_mode_step(task: &str, step: &machine_code::TaskBound, clock: u64) -> String {
+    let function = step.function.as_deref().unwrap_or("?");
+    let head = format!(
+        "{task}: thread mode (polled by the idle executor, no handler whose bound is a job)"
+    );
+    match &step.declined {
+        Some(reason) => format!("{head}; its step's check ({function}) is declined: {reason}"),
+        None => format!(
+            "{head}; its step's check ({function}) is bounded from the machine code within its iteration caps at \
+             {} cycles ({:.0} µs at {} MHz, {} instructions), the rest of its job (the handler's update, the verdict \
+             frames and their trace events, the pacing) is not: a part of a job is no budget for it",
+            step.cycles,
+            us(step.cycles, clock),
+            clock / 1_000_000,
+            step.instructions
+        ),
+    }
+}
+
 /// The rows of one image: `built` is the app as built (its `cfg`s applied), `app` as written (for RTIC's
 /// dispatcher assignment), `found` the machine code's bounds by task ([`crate::machine::tasks_of`]).
 pub fn rows(
@@ -280,9 +304,10 @@ pub fn rows(
     };
     let mut out = Vec::new();
     for task in &budgets.tasks {
-        out.push(match source(task) {
-            Some((what, f)) => from_found(task, &what, f, clock),
-            None => declined(
+        out.push(match (source(task), by_name.get(task.as_str())) {
+            (Some((what, f)), _) => from_found(task, &what, f, clock),
+            (None, Some(step)) => declined(task, thread_mode_step(task, step, clock)),
+            (None, None) => declined(
                 task,
                 format!("{task}: not an interrupt-driven task of the image as built (thread mode, or not in the app)"),
             ),
@@ -476,6 +501,35 @@ mod app {
         // Lazy FPU stacking on the M4F's entry, and its 5 wait states.
         let entry = rows.iter().find(|r| r.task == "exception_entry").unwrap();
         assert_eq!(entry.cycles, Some(12 + 17 + 2 * 5));
+    }
+
+    #[test]
+    fn a_thread_mode_task_names_its_steps_bound_and_keeps_its_stated_budget() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: vec!["admit".into()],
+            topics: Vec::new(),
+            publishers: BTreeSet::new(),
+        };
+        let mut step = found("admit", 7200, None);
+        step.function = Some("check".into());
+        let written = rows(&built, &app, &budgets, &[step], chip);
+        let admit = written.iter().find(|r| r.task == "admit").unwrap();
+        assert_eq!(admit.cycles, None);
+        let reason = admit.declined.as_deref().unwrap();
+        assert!(
+            reason.contains("its step's check (check) is bounded from the machine code within its iteration caps at 7200 cycles (100 µs at 72 MHz, 3600 instructions)"),
+            "{reason}"
+        );
+        let mut step = found("admit", 0, Some("the loop in check at a.rs:3 has no bound"));
+        step.function = Some("check".into());
+        let written = rows(&built, &app, &budgets, &[step], chip);
+        let admit = written.iter().find(|r| r.task == "admit").unwrap();
+        assert!(admit.declined.as_deref().unwrap().ends_with(
+            "its step's check (check) is declined: the loop in check at a.rs:3 has no bound"
+        ));
     }
 
     #[test]
