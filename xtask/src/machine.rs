@@ -196,6 +196,69 @@ pub fn tasks_of(
     tasks
 }
 
+/// One row per task name: a task the bounds file names with several functions, one of which each
+/// job runs (the admission step: a decision, `Admission::on_command`, or a refresh step,
+/// `Admission::step`), is bounded by the worst of them — declined when any of them is, naming it.
+/// The critical sections of a task the bounds file names with several functions, merged as
+/// [`worst_per_name`] merges their bounds: per ceiling the longest section (a declined one wins),
+/// incomplete when any function's list is.
+pub fn sections_per_name(
+    rows: Vec<machine_code::TaskSections>,
+) -> Vec<machine_code::TaskSections> {
+    let mut out: Vec<machine_code::TaskSections> = Vec::new();
+    for row in rows {
+        let Some(kept) = out.iter_mut().find(|k| k.task == row.task) else {
+            out.push(row);
+            continue;
+        };
+        if kept.incomplete.is_none() {
+            kept.incomplete = row.incomplete;
+        }
+        for c in row.ceilings {
+            match kept.ceilings.iter_mut().find(|k| k.ceiling == c.ceiling) {
+                None => kept.ceilings.push(c),
+                Some(k) if k.declined.is_some() => {}
+                Some(k) => {
+                    if c.declined.is_some() || c.us > k.us {
+                        *k = c;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+pub fn worst_per_name(rows: Vec<machine_code::TaskBound>) -> Vec<machine_code::TaskBound> {
+    let mut out: Vec<machine_code::TaskBound> = Vec::new();
+    for row in rows {
+        let Some(kept) = out.iter_mut().find(|k| k.task == row.task) else {
+            out.push(row);
+            continue;
+        };
+        let functions = [kept.function.take(), row.function.clone()]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>()
+            .join(" or ");
+        if kept.declined.is_none() {
+            if let Some(reason) = &row.declined {
+                let name = row.function.as_deref().unwrap_or("?");
+                kept.declined = Some(format!("{name}: {reason}"));
+            } else {
+                // The longer in time (cycles and stated waits), and the most instructions of either.
+                let instructions = kept.instructions.max(row.instructions);
+                if row.us > kept.us {
+                    *kept = row;
+                }
+                kept.instructions = instructions;
+            }
+        }
+        kept.function = Some(functions);
+    }
+    out
+}
+
 /// One image's task bounds, with what they were computed from.
 pub struct Bounded {
     pub chip: Chip,
@@ -239,8 +302,8 @@ pub fn bound_build(
         .map_err(|e| anyhow::anyhow!("{}: {e}", board.name))?;
     let tasks = tasks_of(&app, &bounds);
     let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
-    let sections = machine_code::task_sections(&image, &tasks, chip, &bounds);
-    let tasks = machine_code::bound_tasks(&image, &tasks, chip, &bounds);
+    let sections = sections_per_name(machine_code::task_sections(&image, &tasks, chip, &bounds));
+    let tasks = worst_per_name(machine_code::bound_tasks(&image, &tasks, chip, &bounds));
     let missing = bounds.missing_places(&image);
     Ok(Bounded {
         chip,
@@ -430,4 +493,50 @@ fn wcet_function(args: &WcetArgs) -> Result<bool> {
         }
     }
     Ok(!declined)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(
+        task: &str,
+        function: &str,
+        cycles: u64,
+        declined: Option<&str>,
+    ) -> machine_code::TaskBound {
+        machine_code::TaskBound {
+            task: task.into(),
+            function: Some(function.into()),
+            cycles,
+            us: cycles as f64 / 72.0,
+            instructions: 1000 - cycles,
+            bus_wait_us: 0.0,
+            loops: Vec::new(),
+            preemption_retry_cycles: 0,
+            declined: declined.map(str::to_string),
+        }
+    }
+
+    #[test]
+    fn a_task_of_several_functions_is_bounded_by_the_worst() {
+        let rows = worst_per_name(vec![
+            row("step", "decide", 720, None),
+            row("other", "f", 72, None),
+            row("step", "refresh", 144, None),
+        ]);
+        assert_eq!(rows.len(), 2);
+        let step = &rows[0];
+        // The longer one's time, the most instructions of either (856 from `refresh`).
+        assert_eq!((step.cycles, step.us, step.instructions), (720, 10.0, 856));
+        assert_eq!(step.function.as_deref(), Some("decide or refresh"));
+        let rows = worst_per_name(vec![
+            row("step", "decide", 720, None),
+            row("step", "refresh", 0, Some("a loop without a bound")),
+        ]);
+        assert_eq!(
+            rows[0].declined.as_deref(),
+            Some("refresh: a loop without a bound")
+        );
+    }
 }

@@ -92,6 +92,8 @@ pub struct Budgets {
     pub tasks: Vec<String>,
     pub topics: Vec<String>,
     pub publishers: BTreeSet<String>,
+    /// Per task its stated budget and its deadline (or period), µs, where the file gives them.
+    pub stated: BTreeMap<String, (f64, f64)>,
 }
 
 /// Reads the timing file of `build`'s board at its robot revision.
@@ -120,10 +122,29 @@ fn budgets_of(root: &Path, build: &Build) -> Result<Budgets> {
                 .collect()
         })
         .unwrap_or_default();
+    let stated = json
+        .get("tasks")
+        .and_then(|v| v.as_object())
+        .map(|tasks| {
+            tasks
+                .iter()
+                .filter_map(|(name, t)| {
+                    let wcet = t.get("wcet_us")?.as_f64()?;
+                    let arrival = t
+                        .get("arrival")
+                        .and_then(|a| a.as_object())
+                        .and_then(|a| a.values().find_map(|v| v.as_f64()));
+                    let deadline = t.get("deadline_us").and_then(|d| d.as_f64()).or(arrival)?;
+                    Some((name.clone(), (wcet, deadline)))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
     Ok(Budgets {
         tasks: keys("tasks"),
         topics: keys("topics"),
         publishers,
+        stated,
     })
 }
 
@@ -317,6 +338,57 @@ fn merged_sections(rows: &[TaskBound]) -> Option<CeilingSections> {
     })
 }
 
+/// Why a thread-mode task's row (the admission step, priority 0) is not its bound, with what the machine code
+/// bounds of it: the functions of one step the bounds file names under the task's name (`step`: a decision or a
+/// refresh step, the worst of them), within the check's iteration caps. The rest of the job — the handler's
+/// update, the verdict frames and their trace events, the pacing — runs in the thread-mode executor, which never
+/// returns, so no function's bound is the job's, and a part of a job is no budget for it.
+fn thread_mode_step(
+    task: &str,
+    step: &machine_code::TaskBound,
+    stated: Option<&(f64, f64)>,
+    clock: u64,
+) -> String {
+    // Each function by its type and name (`Admission<_,_>::on_command`), not its whole path.
+    let function = step
+        .function
+        .as_deref()
+        .unwrap_or("?")
+        .split(" or ")
+        .map(|f| {
+            let parts: Vec<&str> = f.split("::").collect();
+            parts[parts.len().saturating_sub(2)..].join("::")
+        })
+        .collect::<Vec<_>>()
+        .join(" or ");
+    let head = format!(
+        "{task}: thread mode (polled by the idle executor, no handler whose bound is a job)"
+    );
+    let Some(reason) = &step.declined else {
+        let bound = us(step.cycles, clock);
+        let against = stated.map_or(String::new(), |&(budget, deadline)| {
+            format!(
+                "; that check alone is {:.0} times the stated {budget} µs{}",
+                bound / budget,
+                if bound > deadline {
+                    format!(" and above the task's {deadline} µs deadline")
+                } else {
+                    String::new()
+                }
+            )
+        });
+        return format!(
+            "{head}; its step's check ({function}) is bounded from the machine code within its iteration caps at \
+             {} cycles ({bound:.0} µs at {} MHz, {} instructions), the rest of its job (the handler's update, the \
+             verdict frames and their trace events, the pacing) is not: a part of a job is no budget for it{against}",
+            step.cycles,
+            clock / 1_000_000,
+            step.instructions
+        );
+    };
+    format!("{head}; its step's check ({function}) is declined: {reason}")
+}
+
 /// The rows of one image: `built` is the app as built (its `cfg`s applied), `app` as written (for RTIC's
 /// dispatcher assignment), `found` the machine code's bounds by task ([`crate::machine::tasks_of`]).
 pub fn rows(
@@ -356,9 +428,13 @@ pub fn rows(
     };
     let mut out = Vec::new();
     for task in &budgets.tasks {
-        out.push(match source(task) {
-            Some((what, f)) => from_found(task, &what, f, clock),
-            None => declined(
+        out.push(match (source(task), by_name.get(task.as_str())) {
+            (Some((what, f)), _) => from_found(task, &what, f, clock),
+            (None, Some(step)) => declined(
+                task,
+                thread_mode_step(task, step.0, budgets.stated.get(task.as_str()), clock),
+            ),
+            (None, None) => declined(
                 task,
                 format!("{task}: not an interrupt-driven task of the image as built (thread mode, or not in the app)"),
             ),
@@ -509,6 +585,7 @@ mod app {
             ],
             topics: vec!["gyro".into()],
             publishers: ["publish".to_string()].into(),
+            stated: BTreeMap::new(),
         };
         let machine = [
             found("can_rx", 720, None),
@@ -598,6 +675,7 @@ mod app {
             tasks: vec!["handle".into()],
             topics: vec!["a".into(), "b".into()],
             publishers: ["publish".to_string()].into(),
+            stated: BTreeMap::new(),
         };
         let machine = [found(
             "dispatcher LOW",
@@ -628,6 +706,37 @@ mod app {
         // Lazy FPU stacking on the M4F's entry, and its 5 wait states.
         let entry = rows.iter().find(|r| r.task == "exception_entry").unwrap();
         assert_eq!(entry.cycles, Some(12 + 17 + 2 * 5));
+    }
+
+    #[test]
+    fn a_thread_mode_task_names_its_steps_bound_and_keeps_its_stated_budget() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: vec!["admit".into()],
+            topics: Vec::new(),
+            publishers: BTreeSet::new(),
+            stated: [("admit".to_string(), (50.0, 80.0))].into(),
+        };
+        let mut step = found("admit", 7200, None);
+        step.function = Some("check".into());
+        let written = rows(&built, &app, &budgets, &[step], chip);
+        let admit = written.iter().find(|r| r.task == "admit").unwrap();
+        assert_eq!(admit.cycles, None);
+        let reason = admit.declined.as_deref().unwrap();
+        assert!(
+            reason.contains("its step's check (check) is bounded from the machine code within its iteration caps at 7200 cycles (100 µs at 72 MHz, 3600 instructions)")
+                && reason.ends_with("that check alone is 2 times the stated 50 µs and above the task's 80 µs deadline"),
+            "{reason}"
+        );
+        let mut step = found("admit", 0, Some("the loop in check at a.rs:3 has no bound"));
+        step.function = Some("check".into());
+        let written = rows(&built, &app, &budgets, &[step], chip);
+        let admit = written.iter().find(|r| r.task == "admit").unwrap();
+        assert!(admit.declined.as_deref().unwrap().ends_with(
+            "its step's check (check) is declined: the loop in check at a.rs:3 has no bound"
+        ));
     }
 
     #[test]

@@ -24,6 +24,39 @@ pub(super) struct Summary {
     pub(super) retry_time: Cost,
     pub(super) retry_count: Cost,
     pub(super) loops: Vec<LoopInfo>,
+    /// The loops stated in total per job ([`LoopCount::Total`]) in this function and its callees:
+    /// charged once, by the job's bound, not at each call.
+    pub(super) totals: Totals,
+}
+
+/// A loop stated in total per job: the most passes back to its header, and its longest iteration by
+/// time and by instruction count.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Total {
+    pub(super) passes: u64,
+    pub(super) time: Cost,
+    pub(super) count: Cost,
+}
+
+/// A loop's function, file and line.
+pub(super) type LoopKey = (String, Option<String>, Option<u32>);
+
+/// Such loops by their [`LoopKey`].
+pub(super) type Totals = BTreeMap<LoopKey, Total>;
+
+/// `from`'s totals into `into`: a loop reached on several ways is charged once, at its longest
+/// iteration.
+fn merge_totals(into: &mut Totals, from: &Totals, chip: Chip) {
+    for (key, t) in from {
+        let entry = into.entry(key.clone()).or_insert(*t);
+        if time_key(chip)(t.time) > time_key(chip)(entry.time) {
+            entry.time = t.time;
+        }
+        if t.count.instructions > entry.count.instructions {
+            entry.count = t.count;
+        }
+        entry.passes = entry.passes.max(t.passes);
+    }
 }
 
 /// The analysis of one image: function summaries worked out once each.
@@ -35,6 +68,9 @@ pub(super) struct Analysis<'a> {
     returns: BTreeMap<u64, bool>,
     open: Vec<u64>,
 }
+
+/// How a declined length names the call that passes it.
+const CALL_NAMED: &str = "the length comes from the call in";
 
 /// Where an address is in the source, for messages and keys.
 fn place(image: &Image, at: u64) -> (Option<String>, Option<u32>, String) {
@@ -223,6 +259,9 @@ impl<'a> Analysis<'a> {
         // The count the function's `Shared` loops iterate at most, all together.
         let mut shared_count: Option<u64> = None;
         let (mut retry_time, mut retry_count) = (Cost::default(), Cost::default());
+        // The function's loops stated in total per job, by their [`LoopCount::Total`] key.
+        let mut total_keys: Vec<(LoopKey, u64)> = Vec::new();
+        let mut totals = Totals::new();
         for l in &natural {
             let leaves = l.body.iter().any(|&b| {
                 let blk = &graph.blocks[b];
@@ -260,6 +299,32 @@ impl<'a> Analysis<'a> {
                     ns,
                     cycles: chip.ns_to_cycles(ns),
                 }
+            } else if let Some(stated) = file
+                .as_deref()
+                .zip(line)
+                .and_then(|(file, line)| self.bounds.total(&f.name, file, line))
+            {
+                // Loops named at one place (a loop the compiler split, or one whose header has no
+                // line of its own) share the statement: their passes back together.
+                let key = (f.name.clone(), file.clone(), line);
+                let index = match total_keys.iter().position(|(k, _)| *k == key) {
+                    Some(index) => index,
+                    None => {
+                        loops_info.push(LoopInfo {
+                            function: f.name.clone(),
+                            file: file.clone(),
+                            line,
+                            bound: stated.passes,
+                            source: format!(
+                                "bounds file, passes in total per job: {}",
+                                stated.reason
+                            ),
+                        });
+                        total_keys.push((key, stated.passes));
+                        total_keys.len() - 1
+                    }
+                };
+                LoopCount::Total { key: index }
             } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),
@@ -392,6 +457,7 @@ impl<'a> Analysis<'a> {
                         *time_ref = time_ref.plus(s.time);
                         *count_ref = count_ref.plus(s.count);
                         loops_info.extend(s.loops);
+                        merge_totals(&mut totals, &s.totals, chip);
                     }
                     Err(reason) => return Ok(Err(format!("via {}: {reason}", image.name(target)))),
                 },
@@ -412,6 +478,7 @@ impl<'a> Analysis<'a> {
                                 retry_count = s.retry_count;
                             }
                             loops_info.extend(s.loops);
+                            merge_totals(&mut totals, &s.totals, chip);
                         }
                         Err(reason) => {
                             return Ok(Err(format!("via {}: {reason}", image.name(target))))
@@ -465,6 +532,7 @@ impl<'a> Analysis<'a> {
                                     worst_count = s.count;
                                 }
                                 loops_info.extend(s.loops);
+                                merge_totals(&mut totals, &s.totals, chip);
                             }
                             Err(reason) => return Ok(Err(format!("via {name}: {reason}"))),
                         }
@@ -516,6 +584,29 @@ impl<'a> Analysis<'a> {
                     retry_count = c.retry;
                 }
                 let n = shared_count.unwrap_or(0);
+                let own = |key: usize, longest: &path::Longest, by: &dyn Fn(Cost) -> u64| {
+                    longest
+                        .totals
+                        .iter()
+                        .filter(|&&(k, _)| k == key)
+                        .map(|&(_, c)| c)
+                        .max_by_key(|&c| by(c))
+                        .unwrap_or_default()
+                };
+                let mut mine = Totals::new();
+                for (key, (name, passes)) in total_keys.iter().enumerate() {
+                    let time = own(key, &t, &time_key(chip));
+                    let count = own(key, &c, &|c: Cost| c.instructions);
+                    mine.insert(
+                        name.clone(),
+                        Total {
+                            passes: *passes,
+                            time,
+                            count,
+                        },
+                    );
+                }
+                merge_totals(&mut totals, &mine, chip);
                 (
                     t.path.plus(t.shared.times(n)),
                     c.path.plus(c.shared.times(n)),
@@ -542,6 +633,7 @@ impl<'a> Analysis<'a> {
             retry_time,
             retry_count,
             loops: loops_info,
+            totals,
         }))
     }
 
@@ -581,12 +673,25 @@ impl<'a> Analysis<'a> {
                 });
             }
         }
-        if args == NO_ARGS {
-            return Ok(plain);
-        }
-        let mut outcome = self.summary_with(target, args)?;
+        let mut outcome = if args == NO_ARGS {
+            plain
+        } else {
+            self.summary_with(target, args)?
+        };
         if let (Ok(s), Some(info)) = (&mut outcome, stated_info) {
             s.loops.push(info);
+        }
+        // Still no length: name the call that passes it (where a `lengths` entry would go), unless the
+        // caller is a memory function called without a length of its own (it passes its argument on;
+        // the call that passes it is named).
+        let passes_on = length::length_register(caller)
+            .or_else(|| self.bounds.per_element(caller).map(|p| p.register))
+            .is_some_and(|r| entry[usize::from(r)].is_none());
+        if let Err(reason) = &mut outcome {
+            if !passes_on && !reason.contains(CALL_NAMED) {
+                let (_, _, text) = place(self.image, call);
+                reason.push_str(&format!(" ({CALL_NAMED} {caller} at {text})"));
+            }
         }
         Ok(outcome)
     }

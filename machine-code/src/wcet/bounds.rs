@@ -17,7 +17,9 @@
 //!   "tasks": [{ "name": "monotonic", "symbol": "TIM5", "handler": true,
 //!               "reason": "the TIM5 monotonic's compare interrupt (board.rs)" }],
 //!   "jobs": [{ "function": "UART4", "file": "src/tasks.rs", "line": 150,
-//!              "reason": "the watchdog's period: a delay ready at once is the next release" }]
+//!              "reason": "the watchdog's period: a delay ready at once is the next release" }],
+//!   "totals": [{ "function": "…", "file": "src/busy_window.rs", "line": 829, "passes": 500,
+//!                "reason": "every pass back is one of the job's at most 500 fixed-point iterations" }]
 //! }
 //! ```
 //!
@@ -117,6 +119,20 @@ pub struct JobLoop {
 /// and the one it parks at after its pass.
 pub const JOB_PASSES: u64 = 2;
 
+/// A loop whose passes back to its header are capped for the whole job, however often the job enters
+/// it (a budget of iterations the code counts across calls): at most `passes` in total per job. Several
+/// loops the analysis names at one place (a loop the compiler split in two, or one whose header has no
+/// line of its own) share the statement: `passes` counts their passes back together.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TotalBound {
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    pub passes: u64,
+    pub reason: String,
+}
+
 /// The stated bounds of one image (see the module documentation).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -137,6 +153,9 @@ pub struct BoundsFile {
     /// Async tasks' loops: one pass per job.
     #[serde(default)]
     pub jobs: Vec<JobLoop>,
+    /// Loops capped in total per job ([`TotalBound`]).
+    #[serde(default)]
+    pub totals: Vec<TotalBound>,
 }
 
 /// Whether a line-table path is the stated `file`.
@@ -187,6 +206,14 @@ impl BoundsFile {
                 return Err(Error::Bounds(format!(
                     "the task's loop at {}:{} in {} needs a reason (what its `await` waits for)",
                     j.file, j.line, j.function
+                )));
+            }
+        }
+        for t in &file.totals {
+            if t.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the total at {}:{} in {} needs a reason",
+                    t.file, t.line, t.function
                 )));
             }
         }
@@ -241,6 +268,13 @@ impl BoundsFile {
         self.lengths
             .iter()
             .find(|l| l.function == function && l.line == line && same_file(file, &l.file))
+    }
+
+    /// The stated total of the loop at `file:line` in `function`, for the whole job.
+    pub fn total(&self, function: &str, file: &str, line: u32) -> Option<&TotalBound> {
+        self.totals
+            .iter()
+            .find(|t| t.function == function && t.line == line && same_file(file, &t.file))
     }
 
     /// The stated targets of the call through a register at `file:line` in `function`.
@@ -298,6 +332,11 @@ impl BoundsFile {
                 self.jobs
                     .iter()
                     .map(|j| ("job", &j.function, &j.file, j.line)),
+            )
+            .chain(
+                self.totals
+                    .iter()
+                    .map(|t| ("total", &t.function, &t.file, t.line)),
             );
         for (kind, function, file, line) in keyed {
             if !has_line(function, file, line) {

@@ -125,15 +125,25 @@ pub fn bound_function(
 
 fn to_bound(outcome: Result<Summary, String>) -> Bound {
     match outcome {
-        Ok(s) => Bound {
-            cycles: s.time.cycles,
-            instructions: s.count.instructions,
-            bus_wait_ns: s.time.wait_ns,
-            loops: s.loops,
-            retry_cycles: s.retry_time.cycles,
-            retry_instructions: s.retry_count.instructions,
-            declined: None,
-        },
+        Ok(s) => {
+            // The loops stated in total per job, each charged its passes of its longest iteration
+            // once for the whole job.
+            let (time, count) = s.totals.values().fold((s.time, s.count), |(t, c), total| {
+                (
+                    t.plus(total.time.times(total.passes)),
+                    c.plus(total.count.times(total.passes)),
+                )
+            });
+            Bound {
+                cycles: time.cycles,
+                instructions: count.instructions,
+                bus_wait_ns: time.wait_ns,
+                loops: s.loops,
+                retry_cycles: s.retry_time.cycles,
+                retry_instructions: s.retry_count.instructions,
+                declined: None,
+            }
+        }
         Err(reason) => Bound {
             cycles: 0,
             instructions: 0,

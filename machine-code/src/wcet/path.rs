@@ -65,18 +65,27 @@ pub enum LoopCount {
     /// caller to charge `n` times. Whatever passes the loops make, `Σ passes·per_pass ≤ n`, so
     /// `Σ passes·iteration ≤ n · max(iteration / per_pass)`.
     Shared { per_pass: u64 },
+    /// A loop whose passes back to its header are stated in total for the whole job, however often
+    /// it is entered (the bounds file's `totals`): collapsed to its way out, its longest iteration
+    /// returned apart ([`Longest::totals`], under `key`) for the job's bound to charge the stated
+    /// number of times. Loops under one key share the count (their passes back together). Every
+    /// pass back is one iteration at most as long as the longest of them, so the passes of all
+    /// their entries together cost at most that many longest iterations.
+    Total { key: usize },
     /// No exit: no path through it completes.
     Endless,
 }
 
 /// The longest path, and the longest iteration of an exclusive-access retry loop on any path (what
 /// one preemption can add).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Longest {
     pub path: Cost,
     pub retry: Cost,
     /// The longest iteration per unit moved of a [`LoopCount::Shared`] loop (rounded up).
     pub shared: Cost,
+    /// The longest iteration of each [`LoopCount::Total`] loop, by its key.
+    pub totals: Vec<(usize, Cost)>,
 }
 
 /// One node: a block, or a loop collapsed.
@@ -182,6 +191,7 @@ pub fn longest(
     let n = nodes.len();
     let mut retry: Option<Cost> = None;
     let mut shared: Option<Cost> = None;
+    let mut totals: Vec<(usize, Cost)> = Vec::new();
     // Each original node's representative (itself, or the header of the loop it was collapsed into).
     let mut rep: Vec<usize> = (0..n).collect();
     for l in loops {
@@ -220,6 +230,10 @@ pub fn longest(
             }
             (LoopCount::Shared { per_pass }, Some(out)) => {
                 shared = better(shared, iteration.div_ceil(per_pass.max(1)), key);
+                Some(out)
+            }
+            (LoopCount::Total { key }, Some(out)) => {
+                totals.push((key, iteration));
                 Some(out)
             }
             (LoopCount::Wait { ns, cycles }, Some(out)) => Some(out.plus(Cost {
@@ -269,5 +283,6 @@ pub fn longest(
         path: best.ok_or(PathError::NoExit)?,
         retry: retry.unwrap_or_default(),
         shared: shared.unwrap_or_default(),
+        totals,
     })
 }

@@ -1403,3 +1403,174 @@ fn a_down_counter_tested_by_cbz_at_the_top_is_counted() {
         b.loops[0]
     );
 }
+
+/// `spin` of [`spin_with_lines`] at 0x10 (its loop at src/spin.rs:7), called three times by `thrice`.
+fn spin_called_thrice() -> Image {
+    let code = thumb(&[
+        0xb580, // 0x00 push {r7, lr}: 1 + 2
+        0xf000, 0xf805, // 0x02 bl 0x10: 1 + P
+        0xf000, 0xf803, // 0x06 bl 0x10: 1 + P
+        0xf000, 0xf801, // 0x0a bl 0x10: 1 + P
+        0xbd80, // 0x0e pop {r7, pc}: 1 + 2 + P
+        0x6801, // 0x10 ldr r1, [r0]: 2 + 5 (an unknown base: APB1, the slowest)
+        0x2900, // 0x12 cmp r1, #0: 1
+        0xd1fc, // 0x14 bne 0x10: 1, taken + P
+        0x4770, // 0x16 bx lr: 1 + P
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("thrice", 0, 0x10),
+            Sym::function("spin", 0x10, 8),
+        ],
+        "firmware/src/spin.rs",
+        &[(0, 3), (0x10, 7), (0x16, 9)],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+#[test]
+fn a_loop_stated_in_total_per_job_is_charged_once_whatever_its_entries() {
+    let img = spin_called_thrice();
+    let totals = BoundsFile::parse(
+        r#"{"totals":[{"function":"spin","file":"src/spin.rs","line":7,"passes":5,"reason":"five polls per job in all"}]}"#,
+    )
+    .unwrap();
+    // `spin` entered once and left at once: ldr 7, cmp 1, bne 1 (not taken), bx lr 4 = 13 cycles, 4
+    // instructions. An iteration back: 9 + P = 12 cycles, 3 instructions.
+    let alone = bound_function(&img, "spin", F103_0WS, &totals).unwrap();
+    // Its way out, and five iterations for the whole job: 13 + 5 × 12 = 73; 4 + 5 × 3 = 19.
+    assert_eq!(figures(&alone), (73, 19, None));
+    assert_eq!(alone.loops.len(), 1);
+    assert_eq!(alone.loops[0].bound, 5);
+    assert_eq!(
+        alone.loops[0].source,
+        "bounds file, passes in total per job: five polls per job in all"
+    );
+    // Called three times: push 3, three calls of 4 + 13, pop 6 = 60 cycles, 1 + 3 × (1 + 4) + 1 =
+    // 17 instructions; the five passes back once more for the whole job, not at each call:
+    // 60 + 60 = 120 cycles, 17 + 15 = 32 instructions.
+    let b = bound_function(&img, "thrice", F103_0WS, &totals).unwrap();
+    assert_eq!(figures(&b), (120, 32, None));
+    // The same five stated per entry are five passes at each of the three calls: 60 + 3 × 4 × 12 =
+    // 204 cycles (a bound of 5 header runs: 4 passes back), 17 + 3 × 4 × 3 = 53 instructions.
+    let per_entry = BoundsFile::parse(
+        r#"{"loops":[{"function":"spin","file":"src/spin.rs","line":7,"bound":5,"reason":"five polls per call"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "thrice", F103_0WS, &per_entry).unwrap();
+    assert_eq!(figures(&b), (204, 53, None));
+    // A total needs a reason, and names a place the image must have.
+    assert!(BoundsFile::parse(
+        r#"{"totals":[{"function":"spin","file":"src/spin.rs","line":7,"passes":5,"reason":" "}]}"#
+    )
+    .is_err());
+    let moved = BoundsFile::parse(
+        r#"{"totals":[{"function":"spin","file":"src/spin.rs","line":8,"passes":5,"reason":"x"}]}"#,
+    )
+    .unwrap();
+    assert_eq!(moved.missing_places(&img), vec!["total spin src/spin.rs:8"]);
+}
+
+#[test]
+fn a_length_no_call_fixes_names_the_call_that_passes_it() {
+    // A caller reads the length from memory and passes it to `__aeabi_memclr` at line 11, which
+    // passes its own argument on to its loop: the call to state is the caller's.
+    let code = thumb(&with_memclr(&[
+        0xb580, // 0x00 push {r7, lr}           line 10
+        0x6801, // 0x02 ldr r1, [r0]
+        0xf000, 0xf802, // 0x04 bl 0x0c         line 11
+        0xbd80, // 0x08 pop {r7, pc}            line 12
+        0xbf00, // 0x0a
+    ])); // 0x0c __aeabi_memclr, line 20
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("clear_read", 0, 10),
+            Sym::function("__aeabi_memclr", 0x0c, 0x10),
+        ],
+        "firmware/src/c.rs",
+        &[(0, 10), (4, 11), (8, 12), (0x0c, 20)],
+    ))
+    .expect("the test image parses");
+    let b = bound_function(&img, "clear_read", F103_0WS, &BoundsFile::default()).unwrap();
+    let reason = b.declined.expect("declined");
+    assert!(
+        reason.ends_with(
+            "(the length comes from the call in clear_read at /work/firmware/src/c.rs:11)"
+        ),
+        "{reason}"
+    );
+    // The memory function alone names no call.
+    let alone = bound(&img, "__aeabi_memclr", F103_0WS);
+    assert!(!alone.declined.expect("declined").contains("the call in"));
+    // A memory function given its length (16) that passes another one on, read from memory: its
+    // own call is named, not its caller's.
+    let code = thumb(&with_memclr(&[
+        0xb580, // 0x00 push {r7, lr}           line 10
+        0x2110, // 0x02 movs r1, #16
+        0xf000, 0xf802, // 0x04 bl 0x0c         line 11
+        0xbd80, // 0x08 pop {r7, pc}            line 12
+        0xbf00, // 0x0a
+        0x6801, // 0x0c ldr r1, [r0]            line 30 (__aeabi_memclr4)
+        0xe7ff, // 0x0e b 0x10: a tail call
+    ])); // 0x10 __aeabi_memclr, line 20
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("clear_wrapped", 0, 10),
+            Sym::function("__aeabi_memclr4", 0x0c, 4),
+            Sym::function("__aeabi_memclr", 0x10, 0x10),
+        ],
+        "firmware/src/c.rs",
+        &[(0, 10), (4, 11), (8, 12), (0x0c, 30), (0x10, 20)],
+    ))
+    .expect("the test image parses");
+    let b = bound_function(&img, "clear_wrapped", F103_0WS, &BoundsFile::default()).unwrap();
+    let reason = b.declined.expect("declined");
+    assert!(
+        reason.ends_with(
+            "(the length comes from the call in __aeabi_memclr4 at /work/firmware/src/c.rs:30)"
+        ),
+        "{reason}"
+    );
+}
+
+#[test]
+fn loops_named_at_one_place_share_their_stated_total() {
+    // Two polling loops one after the other, both at src/spin.rs:7 (as a loop the compiler split
+    // is): each a header of ldr 7 (an unknown base: APB1), cmp 1, bne 1; the return at line 9.
+    let code = thumb(&[
+        0x6801, // 0x00 ldr r1, [r0]
+        0x2900, // 0x02 cmp r1, #0
+        0xd1fc, // 0x04 bne 0x00: taken + P
+        0x6802, // 0x06 ldr r2, [r0]
+        0x2a00, // 0x08 cmp r2, #0
+        0xd1fc, // 0x0a bne 0x06: taken + P
+        0x4770, // 0x0c bx lr: 1 + P
+    ]);
+    let img = Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("twice", 0, 0x0e)],
+        "firmware/src/spin.rs",
+        &[(0, 7), (0x0c, 9)],
+    ))
+    .expect("the test image parses");
+    let shared = BoundsFile::parse(
+        r#"{"totals":[{"function":"twice","file":"src/spin.rs","line":7,"passes":5,"reason":"five polls in all"}]}"#,
+    )
+    .unwrap();
+    // Each loop's way out (9 cycles, 3 instructions), the return (4, 1), and five passes back in all
+    // of the longer iteration (both 12 cycles, 3 instructions): 9 + 9 + 4 + 60 = 82; 3 + 3 + 1 +
+    // 15 = 22. The statement is listed once.
+    let b = bound_function(&img, "twice", F103_0WS, &shared).unwrap();
+    assert_eq!(figures(&b), (82, 22, None));
+    assert_eq!(b.loops.iter().filter(|l| l.bound == 5).count(), 1);
+    // Stated per entry instead, five header runs each: 4 passes back each, 9 + 9 + 4 + 8 × 12 = 118.
+    let each = BoundsFile::parse(
+        r#"{"loops":[{"function":"twice","file":"src/spin.rs","line":7,"bound":5,"reason":"five polls each"}]}"#,
+    )
+    .unwrap();
+    let b = bound_function(&img, "twice", F103_0WS, &each).unwrap();
+    assert_eq!(figures(&b), (118, 31, None));
+}
