@@ -55,15 +55,16 @@ mod rtt {
     }
 
     /// Writes one whole trace record, or nothing when the channel has no room for all of it
-    /// (`false`); the critical section lasts one short copy into the ring.
+    /// (`false`). Only the trace drain writes this channel (`tracing::drain`, priority 0): the
+    /// channel is taken out and put back under two short critical sections and the copy runs
+    /// outside them, so it blocks no task.
     pub fn write_trace(bytes: &[u8]) -> bool {
-        critical_section::with(|cs| {
-            let mut written = false;
-            with_channel(cs, &TRACE, |channel| {
-                written = channel.write(bytes) == bytes.len();
-            });
-            written
-        })
+        let Some(mut channel) = critical_section::with(|cs| TRACE.borrow(cs).take()) else {
+            return false;
+        };
+        let written = channel.write(bytes) == bytes.len();
+        critical_section::with(|cs| TRACE.borrow(cs).set(Some(channel)));
+        written
     }
 }
 
@@ -103,6 +104,62 @@ pub fn write_trace(bytes: &[u8]) -> bool {
     return rtt::write_trace(bytes);
     #[cfg(feature = "qemu")]
     return crate::qemu::write_trace_file(bytes);
+}
+
+/// Log lines a task asked for with [`defer_log`] and the drain has not written yet (a ring: the
+/// oldest at `head`).
+#[derive(Clone, Copy)]
+struct Deferred {
+    lines: [&'static str; DEFERRED_LOG_LEN],
+    head: usize,
+    len: usize,
+}
+
+/// Deferred log lines held at once (a power of two); one more is dropped (the lines are one-off
+/// reports: a monotonic event gone missing, the watchdog's first feed).
+pub const DEFERRED_LOG_LEN: usize = 4;
+
+static DEFERRED: critical_section::Mutex<core::cell::Cell<Deferred>> =
+    critical_section::Mutex::new(core::cell::Cell::new(Deferred {
+        lines: [""; DEFERRED_LOG_LEN],
+        head: 0,
+        len: 0,
+    }));
+
+/// Queues one static log line for the trace drain to write (`tracing::drain`, priority 0): what a
+/// handler logs, at the cost of a short copy instead of a channel write. A full queue drops it.
+pub fn defer_log(line: &'static str) {
+    critical_section::with(|cs| {
+        let cell = DEFERRED.borrow(cs);
+        let mut deferred = cell.get();
+        if deferred.len < DEFERRED_LOG_LEN {
+            let tail = (deferred.head + deferred.len) & (DEFERRED_LOG_LEN - 1);
+            if let Some(slot) = deferred.lines.get_mut(tail) {
+                *slot = line;
+                deferred.len += 1;
+            }
+            cell.set(deferred);
+        }
+    });
+}
+
+/// Writes the oldest deferred log line, if any (one per drain job).
+pub fn write_deferred_log() {
+    let line = critical_section::with(|cs| {
+        let cell = DEFERRED.borrow(cs);
+        let mut deferred = cell.get();
+        if deferred.len == 0 {
+            return None;
+        }
+        let line = deferred.lines.get(deferred.head).copied();
+        deferred.head = (deferred.head + 1) & (DEFERRED_LOG_LEN - 1);
+        deferred.len -= 1;
+        cell.set(deferred);
+        line
+    });
+    if let Some(line) = line {
+        write_log(&[line]);
+    }
 }
 
 /// Writes one human log line made of `parts` (RTT channel 0 on the robot, a `# ` line on QEMU's

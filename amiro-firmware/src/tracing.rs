@@ -17,7 +17,27 @@
 //! without it [`job`], [`enter`], [`suspend`], [`resume`] and [`frame_acked`] are empty and only the
 //! handler events and the boot record remain on the channel. Its cost per job is a term of each
 //! board's timing file (`trace` in schedule-analysis/models/*.timing.json).
+//!
+//! Two halves, so a task's cost for its records is a constant: a task stamps each record and copies
+//! it raw (its [`Kind`] and the stamp's low 32 bits: 24 bytes) into a static ring of [`RING_LEN`],
+//! under one short critical
+//! section — no encoding, no loop, no channel. The board's `drain_trace` task, at priority 0 (thread
+//! mode, beside `admit_requests`), calls [`serve_drain`]: each of its jobs ([`drain`]) takes at most
+//! [`DRAIN_BATCH`] records out of the ring, COBS-encodes them and writes them to the trace channel
+//! (RTT on the robot), and writes at most one log line a handler deferred
+//! (`channels::defer_log`). A full ring counts the record as lost, and the drain reports the count
+//! (`Kind::Lost`) before the next record it writes.
+//!
+//! The QEMU build writes through instead: each record is encoded and written to `trace.bin` or the
+//! console as it is stamped, as before the ring, and its drain finds nothing to do. The bench needs
+//! every record, the scenarios read the handler events in their place among the console's other
+//! lines (LightRing's latch lines), and under the scenarios' floods thread mode gets no time for
+//! a drain; a QEMU job's trace cost is the timing file's `trace.qemu` term (docs/analysis.md,
+//! "The trace path", says why and how the analysis counts either build).
 use core::cell::UnsafeCell;
+use core::future::Future;
+use core::pin::Pin;
+use core::task::{Context, Poll};
 
 use amiro_trace::{Kind, Record};
 use critical_section::{CriticalSection, Mutex};
@@ -27,6 +47,32 @@ pub const NO_TASK: u8 = u8::MAX;
 
 /// Tasks a board may have (task numbers are below this).
 pub const MAX_TASKS: usize = 32;
+
+/// Records the ring holds (a power of two): 32, 768 bytes of RAM. The drain runs whenever thread
+/// mode is free, so the ring holds what the tasks stamp while an admission step (up to 8.6 ms on
+/// the F103) keeps it from running; beyond 32 records the ring loses them (counted and reported).
+pub const RING_LEN: usize = 32;
+
+/// The most records one drain job ([`drain`]) writes: the bound of its loop, and so of its job.
+pub const DRAIN_BATCH: usize = 4;
+
+/// One record in the ring: what, and the low 32 bits of its stamp. The drain widens the stamp
+/// again from the clock's reading when it takes the record out ([`widen`]): a record waits far
+/// less than the 32-bit wrap (59 s at 72 MHz, 25 s at 168 MHz; the drain runs whenever thread mode
+/// is free, and an admission step ends within 240 ms).
+#[cfg(not(feature = "qemu"))]
+#[derive(Clone, Copy)]
+struct Raw {
+    low: u32,
+    kind: Kind,
+}
+
+/// A free slot's contents (never written out: only slots below `len` are read).
+#[cfg(not(feature = "qemu"))]
+const EMPTY: Raw = Raw {
+    low: 0,
+    kind: Kind::Lost { count: 0 },
+};
 
 struct State {
     #[cfg(feature = "task-trace")]
@@ -39,8 +85,16 @@ struct State {
     last: u32,
     #[cfg(feature = "qemu")]
     last: u64,
+    /// Records the full ring turned away since the drain last reported them.
+    #[cfg(not(feature = "qemu"))]
     lost: u32,
-    wire: [u8; amiro_trace::MAX_WIRE],
+    /// The records stamped and not yet written, oldest at `head`.
+    #[cfg(not(feature = "qemu"))]
+    ring: [Raw; RING_LEN],
+    #[cfg(not(feature = "qemu"))]
+    head: usize,
+    #[cfg(not(feature = "qemu"))]
+    len: usize,
 }
 
 static STATE: Mutex<UnsafeCell<State>> = Mutex::new(UnsafeCell::new(State {
@@ -54,8 +108,14 @@ static STATE: Mutex<UnsafeCell<State>> = Mutex::new(UnsafeCell::new(State {
     last: 0,
     #[cfg(feature = "qemu")]
     last: 0,
+    #[cfg(not(feature = "qemu"))]
     lost: 0,
-    wire: [0; amiro_trace::MAX_WIRE],
+    #[cfg(not(feature = "qemu"))]
+    ring: [EMPTY; RING_LEN],
+    #[cfg(not(feature = "qemu"))]
+    head: 0,
+    #[cfg(not(feature = "qemu"))]
+    len: 0,
 }));
 
 /// The trace state, inside a critical section. Not a `RefCell`: its borrow check would bring a
@@ -113,43 +173,169 @@ pub fn hello(clock_hz: u32) {
     emit(Kind::Hello { clock_hz });
 }
 
-/// Stamps and writes one record into the trace channel.
+/// Stamps one record into the ring.
 fn emit(kind: Kind) {
-    critical_section::with(|cs| write(state_in(cs), kind, crate::channels::write_trace));
+    critical_section::with(|cs| write(state_in(cs), kind));
 }
 
-/// Stamps and writes one record into `sink`, in the caller's critical section (so a task record's
-/// state change and its record are one step). A record that does not fit is counted and reported
-/// by the next one that does. One copy for every kind (flash).
+/// Stamps one record and copies it into the ring, in the caller's critical section (so a task
+/// record's state change and its record are one step): a fixed-size copy, no loop. A full ring
+/// counts it as lost. One copy for every kind (flash).
+#[cfg(not(feature = "qemu"))]
 #[inline(never)]
-fn write(state: &mut State, kind: Kind, sink: fn(&[u8]) -> bool) {
-    let at = cycles(state);
-    // The buffer lives in the state: a stack array would be cleared on every record.
-    let wire = &mut state.wire;
-    if state.lost > 0 {
-        let lost = Record {
-            cycles: at,
-            kind: Kind::Lost { count: state.lost },
-        };
-        let n = lost.encode_into(wire);
-        if sink(&wire[..n]) {
-            state.lost = 0;
+fn write(state: &mut State, kind: Kind) {
+    if state.len >= RING_LEN {
+        state.lost = state.lost.saturating_add(1);
+        return;
+    }
+    // The low half of the stamp (the drain widens it again).
+    let record = Raw {
+        low: cycles(state) as u32,
+        kind,
+    };
+    let tail = (state.head + state.len) & (RING_LEN - 1);
+    if let Some(slot) = state.ring.get_mut(tail) {
+        *slot = record;
+        state.len += 1;
+    }
+}
+
+/// QEMU: stamps one record and writes it through, in the caller's critical section.
+#[cfg(feature = "qemu")]
+#[inline(never)]
+fn write(state: &mut State, kind: Kind) {
+    let record = Record {
+        cycles: cycles(state),
+        kind,
+    };
+    write_out(&record);
+}
+
+/// Takes the oldest record out of the ring, its stamp widened with the clock's reading now.
+#[cfg(not(feature = "qemu"))]
+fn pop(state: &mut State) -> Option<Record> {
+    if state.len == 0 {
+        return None;
+    }
+    let raw = state.ring.get(state.head & (RING_LEN - 1)).copied();
+    state.head = (state.head + 1) & (RING_LEN - 1);
+    state.len -= 1;
+    let now = cycles(state);
+    raw.map(|raw| Record {
+        cycles: widen(now, raw.low),
+        kind: raw.kind,
+    })
+}
+
+/// The latest stamp at or before `now` whose low 32 bits are `low`.
+#[cfg(not(feature = "qemu"))]
+fn widen(now: u64, low: u32) -> u64 {
+    let back = (now as u32).wrapping_sub(low);
+    now.saturating_sub(u64::from(back))
+}
+
+/// Encodes one record and writes it to its sink (the trace channel; in QEMU a handler event goes to
+/// the console as a `# T` line, the rest to `trace.bin`); `false` when the sink had no room for it.
+fn write_out(record: &Record) -> bool {
+    let mut wire = [0u8; amiro_trace::MAX_WIRE];
+    let n = record.encode_into(&mut wire);
+    let bytes = wire.get(..n).unwrap_or(&[]);
+    #[cfg(feature = "qemu")]
+    if let Kind::Event { .. } = record.kind {
+        return crate::channels::write_console_record(bytes);
+    }
+    crate::channels::write_trace(bytes)
+}
+
+/// One job of the drain: writes at most [`DRAIN_BATCH`] records from the ring to the trace channel
+/// (after a `Lost` record when the ring turned some away) and at most one deferred log line.
+/// Returns whether records are left. Called by [`serve_drain`]; bounded by its batch (the bounds
+/// files state the loop).
+#[inline(never)]
+pub fn drain() -> bool {
+    let mut left = true;
+    for _ in 0..DRAIN_BATCH {
+        left = drain_one();
+        if !left {
+            break;
         }
     }
-    let n = Record { cycles: at, kind }.encode_into(wire);
-    if !sink(&wire[..n]) {
-        state.lost = state.lost.saturating_add(1);
+    crate::channels::write_deferred_log();
+    left
+}
+
+/// Writes the oldest record of the ring (robot: reports a loss first); `false` when the ring is empty.
+/// The record is taken out under a short critical section and encoded and written outside it: the
+/// drain is the trace channel's only writer.
+#[cfg(not(feature = "qemu"))]
+fn drain_one() -> bool {
+    let (record, lost, at) = critical_section::with(|cs| {
+        let state = state_in(cs);
+        let lost = core::mem::take(&mut state.lost);
+        let at = if lost > 0 { cycles(state) } else { 0 };
+        (pop(state), lost, at)
+    });
+    if lost > 0 {
+        let report = Record {
+            cycles: at,
+            kind: Kind::Lost { count: lost },
+        };
+        if !write_out(&report) {
+            critical_section::with(|cs| {
+                let state = state_in(cs);
+                state.lost = state.lost.saturating_add(lost);
+            });
+        }
+    }
+    let Some(record) = record else {
+        return false;
+    };
+    if !write_out(&record) {
+        critical_section::with(|cs| {
+            let state = state_in(cs);
+            state.lost = state.lost.saturating_add(1);
+        });
+    }
+    true
+}
+
+/// QEMU: the records were written as they were stamped; nothing waits.
+#[cfg(feature = "qemu")]
+fn drain_one() -> bool {
+    false
+}
+
+/// The drain task's body (priority 0): one [`drain`] job, then it yields to `admit_requests` and
+/// the thread-mode executor, forever. A job that finds the ring empty is a few instructions; the
+/// executor polls thread mode's tasks in a loop anyway.
+pub async fn serve_drain() -> ! {
+    loop {
+        drain();
+        YieldNow(false).await;
     }
 }
 
-/// A handler event (`amiro_sensors::trace` record), with the trace clock's stamp. (QEMU sends it to
-/// the console, in order with the other lines.)
+/// Ready on its second poll: wakes its own task and returns pending once, so the executor polls
+/// the other thread-mode task before this one goes on.
+struct YieldNow(bool);
+
+impl Future for YieldNow {
+    type Output = ();
+
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        if self.0 {
+            return Poll::Ready(());
+        }
+        self.0 = true;
+        cx.waker().wake_by_ref();
+        Poll::Pending
+    }
+}
+
+/// A handler event (`amiro_sensors::trace` record), with the trace clock's stamp. (QEMU prints it
+/// on the console as a `# T` line when the drain writes it, its time in the record.)
 pub fn event(record: &[u8; amiro_trace::EVENT_LEN]) {
-    let kind = Kind::Event { record: *record };
-    #[cfg(not(feature = "qemu"))]
-    emit(kind);
-    #[cfg(feature = "qemu")]
-    critical_section::with(|cs| write(state_in(cs), kind, crate::channels::write_console_record));
+    emit(Kind::Event { record: *record });
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.
@@ -192,11 +378,7 @@ fn start(task: u8) {
             *slot = state.current;
             state.current = task;
         }
-        write(
-            state,
-            Kind::TaskStart { task },
-            crate::channels::write_trace,
-        );
+        write(state, Kind::TaskStart { task });
     });
 }
 
@@ -212,7 +394,7 @@ fn end(task: u8, next_release_in_us: u32) {
             task,
             next_release_in_us,
         };
-        write(state, kind, crate::channels::write_trace);
+        write(state, kind);
     });
 }
 
