@@ -54,17 +54,31 @@ mod rtt {
         });
     }
 
-    /// Writes one whole trace record, or nothing when the channel has no room for all of it
-    /// (`false`). Only the trace drain writes this channel (`tracing::drain`, priority 0): the
-    /// channel is taken out and put back under two short critical sections and the copy runs
-    /// outside them, so it blocks no task.
-    pub fn write_trace(bytes: &[u8]) -> bool {
-        let Some(mut channel) = critical_section::with(|cs| TRACE.borrow(cs).take()) else {
+    /// Writes `first` and then `second` into the channel in `slot`, or nothing of what finds no
+    /// room (`false`). The channel is taken out and put back under two short critical sections
+    /// and the copies run outside them, so the writer blocks no task: only the trace drain
+    /// (priority 0) writes this way, and a task that logs while it holds the log channel finds
+    /// none and its line is dropped (only while a deferred line, a one-off report, is written).
+    fn write_outside(slot: &Mutex<Cell<Option<UpChannel>>>, first: &[u8], second: &[u8]) -> bool {
+        let Some(mut channel) = critical_section::with(|cs| slot.borrow(cs).take()) else {
             return false;
         };
-        let written = channel.write(bytes) == bytes.len();
-        critical_section::with(|cs| TRACE.borrow(cs).set(Some(channel)));
+        let written = channel.write(first) == first.len() && channel.write(second) == second.len();
+        critical_section::with(|cs| slot.borrow(cs).set(Some(channel)));
         written
+    }
+
+    /// Writes one log line for the trace drain (`super::write_deferred_log`), cut to
+    /// [`super::LOG_PART_MAX`] bytes.
+    pub fn write_deferred(line: &str) {
+        let bytes = line.as_bytes();
+        write_outside(&LOG, &bytes[..bytes.len().min(super::LOG_PART_MAX)], b"\n");
+    }
+
+    /// Writes one whole trace record, or nothing when the channel has no room for all of it
+    /// (`false`): only the trace drain writes this channel (`tracing::drain`).
+    pub fn write_trace(bytes: &[u8]) -> bool {
+        write_outside(&TRACE, bytes, &[])
     }
 }
 
@@ -106,58 +120,29 @@ pub fn write_trace(bytes: &[u8]) -> bool {
     return crate::qemu::write_trace_file(bytes);
 }
 
-/// Log lines a task asked for with [`defer_log`] and the drain has not written yet (a ring: the
-/// oldest at `head`).
-#[derive(Clone, Copy)]
-struct Deferred {
-    lines: [&'static str; DEFERRED_LOG_LEN],
-    head: usize,
-    len: usize,
-}
-
-/// Deferred log lines held at once (a power of two); one more is dropped (the lines are one-off
-/// reports: a monotonic event gone missing, the watchdog's first feed).
-pub const DEFERRED_LOG_LEN: usize = 4;
-
-static DEFERRED: critical_section::Mutex<core::cell::Cell<Deferred>> =
-    critical_section::Mutex::new(core::cell::Cell::new(Deferred {
-        lines: [""; DEFERRED_LOG_LEN],
-        head: 0,
-        len: 0,
-    }));
+/// The log line a task asked for with [`defer_log`] and the drain has not written yet. One slot:
+/// the lines deferred are one-off reports (a monotonic event gone missing, the watchdog's first
+/// feed), far apart; one that finds the slot taken is dropped.
+static DEFERRED: critical_section::Mutex<core::cell::Cell<Option<&'static str>>> =
+    critical_section::Mutex::new(core::cell::Cell::new(None));
 
 /// Queues one static log line for the trace drain to write (`tracing::drain`, priority 0): what a
-/// handler logs, at the cost of a short copy instead of a channel write. A full queue drops it.
+/// handler logs, at the cost of a short copy instead of a channel write.
 pub fn defer_log(line: &'static str) {
     critical_section::with(|cs| {
-        let cell = DEFERRED.borrow(cs);
-        let mut deferred = cell.get();
-        if deferred.len < DEFERRED_LOG_LEN {
-            let tail = (deferred.head + deferred.len) & (DEFERRED_LOG_LEN - 1);
-            if let Some(slot) = deferred.lines.get_mut(tail) {
-                *slot = line;
-                deferred.len += 1;
-            }
-            cell.set(deferred);
+        let slot = DEFERRED.borrow(cs);
+        if slot.get().is_none() {
+            slot.set(Some(line));
         }
     });
 }
 
-/// Writes the oldest deferred log line, if any (one per drain job).
+/// Writes the deferred log line, if there is one (the drain, once per job).
 pub fn write_deferred_log() {
-    let line = critical_section::with(|cs| {
-        let cell = DEFERRED.borrow(cs);
-        let mut deferred = cell.get();
-        if deferred.len == 0 {
-            return None;
-        }
-        let line = deferred.lines.get(deferred.head).copied();
-        deferred.head = (deferred.head + 1) & (DEFERRED_LOG_LEN - 1);
-        deferred.len -= 1;
-        cell.set(deferred);
-        line
-    });
-    if let Some(line) = line {
+    if let Some(line) = critical_section::with(|cs| DEFERRED.borrow(cs).take()) {
+        #[cfg(not(feature = "qemu"))]
+        rtt::write_deferred(line);
+        #[cfg(feature = "qemu")]
         write_log(&[line]);
     }
 }

@@ -19,8 +19,7 @@
 //! board's timing file (`trace` in schedule-analysis/models/*.timing.json).
 //!
 //! Two halves, so a task's cost for its records is a constant: a task stamps each record and copies
-//! it raw (its [`Kind`] and the stamp's low 32 bits: 24 bytes) into a static ring of [`RING_LEN`],
-//! under one short critical
+//! it raw (a [`Record`], 32 bytes) into a static ring of [`RING_LEN`], under one short critical
 //! section — no encoding, no loop, no channel. The board's `drain_trace` task, at priority 0 (thread
 //! mode, beside `admit_requests`), calls [`serve_drain`]: each of its jobs ([`drain`]) takes at most
 //! [`DRAIN_BATCH`] records out of the ring, COBS-encodes them and writes them to the trace channel
@@ -48,7 +47,7 @@ pub const NO_TASK: u8 = u8::MAX;
 /// Tasks a board may have (task numbers are below this).
 pub const MAX_TASKS: usize = 32;
 
-/// Records the ring holds (a power of two): 32, 768 bytes of RAM. The drain runs whenever thread
+/// Records the ring holds (a power of two): 32, 1 KiB of RAM. The drain runs whenever thread
 /// mode is free, so the ring holds what the tasks stamp while an admission step (up to 8.6 ms on
 /// the F103) keeps it from running; beyond 32 records the ring loses them (counted and reported).
 pub const RING_LEN: usize = 32;
@@ -56,22 +55,12 @@ pub const RING_LEN: usize = 32;
 /// The most records one drain job ([`drain`]) writes: the bound of its loop, and so of its job.
 pub const DRAIN_BATCH: usize = 4;
 
-/// One record in the ring: what, and the low 32 bits of its stamp. The drain widens the stamp
-/// again from the clock's reading when it takes the record out ([`widen`]): a record waits far
-/// less than the 32-bit wrap (59 s at 72 MHz, 25 s at 168 MHz; the drain runs whenever thread mode
-/// is free, and an admission step ends within 240 ms).
+/// A free slot's contents (never written out: only slots below `len` are read). All zero bytes,
+/// so the ring lives in `.bss`, not in `.data` with its image in flash.
 #[cfg(not(feature = "qemu"))]
-#[derive(Clone, Copy)]
-struct Raw {
-    low: u32,
-    kind: Kind,
-}
-
-/// A free slot's contents (never written out: only slots below `len` are read).
-#[cfg(not(feature = "qemu"))]
-const EMPTY: Raw = Raw {
-    low: 0,
-    kind: Kind::Lost { count: 0 },
+const EMPTY: Record = Record {
+    cycles: 0,
+    kind: Kind::Hello { clock_hz: 0 },
 };
 
 struct State {
@@ -90,7 +79,7 @@ struct State {
     lost: u32,
     /// The records stamped and not yet written, oldest at `head`.
     #[cfg(not(feature = "qemu"))]
-    ring: [Raw; RING_LEN],
+    ring: [Record; RING_LEN],
     #[cfg(not(feature = "qemu"))]
     head: usize,
     #[cfg(not(feature = "qemu"))]
@@ -188,9 +177,8 @@ fn write(state: &mut State, kind: Kind) {
         state.lost = state.lost.saturating_add(1);
         return;
     }
-    // The low half of the stamp (the drain widens it again).
-    let record = Raw {
-        low: cycles(state) as u32,
+    let record = Record {
+        cycles: cycles(state),
         kind,
     };
     let tail = (state.head + state.len) & (RING_LEN - 1);
@@ -211,31 +199,24 @@ fn write(state: &mut State, kind: Kind) {
     write_out(&record);
 }
 
-/// Takes the oldest record out of the ring, its stamp widened with the clock's reading now.
+/// Takes the oldest record out of the ring into `out`; `false` when the ring is empty.
 #[cfg(not(feature = "qemu"))]
-fn pop(state: &mut State) -> Option<Record> {
+fn pop_into(state: &mut State, out: &mut Record) -> bool {
     if state.len == 0 {
-        return None;
+        return false;
     }
-    let raw = state.ring.get(state.head & (RING_LEN - 1)).copied();
+    if let Some(oldest) = state.ring.get(state.head & (RING_LEN - 1)) {
+        *out = *oldest;
+    }
     state.head = (state.head + 1) & (RING_LEN - 1);
     state.len -= 1;
-    let now = cycles(state);
-    raw.map(|raw| Record {
-        cycles: widen(now, raw.low),
-        kind: raw.kind,
-    })
-}
-
-/// The latest stamp at or before `now` whose low 32 bits are `low`.
-#[cfg(not(feature = "qemu"))]
-fn widen(now: u64, low: u32) -> u64 {
-    let back = (now as u32).wrapping_sub(low);
-    now.saturating_sub(u64::from(back))
+    true
 }
 
 /// Encodes one record and writes it to its sink (the trace channel; in QEMU a handler event goes to
 /// the console as a `# T` line, the rest to `trace.bin`); `false` when the sink had no room for it.
+/// One copy of the encoder (flash).
+#[inline(never)]
 fn write_out(record: &Record) -> bool {
     let mut wire = [0u8; amiro_trace::MAX_WIRE];
     let n = record.encode_into(&mut wire);
@@ -248,55 +229,48 @@ fn write_out(record: &Record) -> bool {
 }
 
 /// One job of the drain: writes at most [`DRAIN_BATCH`] records from the ring to the trace channel
-/// (after a `Lost` record when the ring turned some away) and at most one deferred log line.
-/// Returns whether records are left. Called by [`serve_drain`]; bounded by its batch (the bounds
-/// files state the loop).
+/// (a `Lost` report, when the ring turned some away, is one of them) and at most one deferred log
+/// line. Called by [`serve_drain`]; bounded by its batch.
 #[inline(never)]
-pub fn drain() -> bool {
-    let mut left = true;
+pub fn drain() {
     for _ in 0..DRAIN_BATCH {
-        left = drain_one();
-        if !left {
+        if !drain_one() {
             break;
         }
     }
     crate::channels::write_deferred_log();
-    left
 }
 
-/// Writes the oldest record of the ring (robot: reports a loss first); `false` when the ring is empty.
-/// The record is taken out under a short critical section and encoded and written outside it: the
-/// drain is the trace channel's only writer.
+/// Writes one record: a `Lost` report when the ring turned records away since the last one, else
+/// the oldest record of the ring; `false` when there was none. The record is taken out under a
+/// short critical section and encoded and written outside it (the drain is the trace channel's
+/// only writer); one the channel has no room for is counted as lost.
 #[cfg(not(feature = "qemu"))]
 fn drain_one() -> bool {
-    let (record, lost, at) = critical_section::with(|cs| {
+    let mut record = EMPTY;
+    let taken = critical_section::with(|cs| {
         let state = state_in(cs);
-        let lost = core::mem::take(&mut state.lost);
-        let at = if lost > 0 { cycles(state) } else { 0 };
-        (pop(state), lost, at)
-    });
-    if lost > 0 {
-        let report = Record {
-            cycles: at,
-            kind: Kind::Lost { count: lost },
-        };
-        if !write_out(&report) {
-            critical_section::with(|cs| {
-                let state = state_in(cs);
-                state.lost = state.lost.saturating_add(lost);
-            });
+        if state.lost > 0 {
+            let count = core::mem::take(&mut state.lost);
+            record = Record {
+                cycles: cycles(state),
+                kind: Kind::Lost { count },
+            };
+            return true;
         }
-    }
-    let Some(record) = record else {
-        return false;
-    };
-    if !write_out(&record) {
+        pop_into(state, &mut record)
+    });
+    if taken && !write_out(&record) {
+        let count = match record.kind {
+            Kind::Lost { count } => count,
+            _ => 1,
+        };
         critical_section::with(|cs| {
             let state = state_in(cs);
-            state.lost = state.lost.saturating_add(1);
+            state.lost = state.lost.saturating_add(count);
         });
     }
-    true
+    taken
 }
 
 /// QEMU: the records were written as they were stamped; nothing waits.
