@@ -19,7 +19,8 @@
 //! board's timing file (`trace` in schedule-analysis/models/*.timing.json).
 //!
 //! Two halves, so a task's cost for its records is a constant: a task stamps each record and copies
-//! it raw (a [`Record`], 32 bytes) into a static ring of [`RING_LEN`], under one short critical
+//! it raw (its stamp and its kind, or the handler event unencoded: 40 bytes) into a static ring of
+//! [`RING_LEN`], under one short critical
 //! section — no encoding, no loop, no channel. The board's `drain_trace` task, at priority 0 (thread
 //! mode, beside `admit_requests`), calls [`serve_drain`]: each of its jobs ([`drain`]) takes at most
 //! [`DRAIN_BATCH`] records out of the ring, COBS-encodes them and writes them to the trace channel
@@ -38,6 +39,7 @@ use core::future::Future;
 use core::pin::Pin;
 use core::task::{Context, Poll};
 
+use amiro_sensors::trace::TraceEvent;
 use amiro_trace::{Kind, Record};
 use critical_section::{CriticalSection, Mutex};
 
@@ -47,7 +49,7 @@ pub const NO_TASK: u8 = u8::MAX;
 /// Tasks a board may have (task numbers are below this).
 pub const MAX_TASKS: usize = 32;
 
-/// Records the ring holds (a power of two): 32, 1 KiB of RAM. The drain runs whenever thread
+/// Records the ring holds (a power of two): 32, 1.25 KiB of RAM. The drain runs whenever thread
 /// mode is free, so the ring holds what the tasks stamp while an admission step (up to 8.6 ms on
 /// the F103) keeps it from running; beyond 32 records the ring loses them (counted and reported).
 pub const RING_LEN: usize = 32;
@@ -55,12 +57,28 @@ pub const RING_LEN: usize = 32;
 /// The most records one drain job ([`drain`]) writes: the bound of its loop, and so of its job.
 pub const DRAIN_BATCH: usize = 4;
 
+/// What a record says before it is encoded: a record's kind, or a handler event whose 18 bytes
+/// the drain encodes (`TraceEvent::encode`, whose field loops so stay out of the task).
+#[derive(Clone, Copy)]
+#[repr(u8)]
+enum What {
+    Kind(Kind),
+    Event(TraceEvent),
+}
+
+/// One record as the tasks stamp it: when, and what (raw, fixed size).
+#[derive(Clone, Copy)]
+struct Slot {
+    cycles: u64,
+    what: What,
+}
+
 /// A free slot's contents (never written out: only slots below `len` are read). All zero bytes,
 /// so the ring lives in `.bss`, not in `.data` with its image in flash.
 #[cfg(not(feature = "qemu"))]
-const EMPTY: Record = Record {
+const EMPTY: Slot = Slot {
     cycles: 0,
-    kind: Kind::Hello { clock_hz: 0 },
+    what: What::Kind(Kind::Hello { clock_hz: 0 }),
 };
 
 struct State {
@@ -79,7 +97,7 @@ struct State {
     lost: u32,
     /// The records stamped and not yet written, oldest at `head`.
     #[cfg(not(feature = "qemu"))]
-    ring: [Record; RING_LEN],
+    ring: [Slot; RING_LEN],
     #[cfg(not(feature = "qemu"))]
     head: usize,
     #[cfg(not(feature = "qemu"))]
@@ -159,12 +177,12 @@ pub fn start_clock(clock_hz: u32) {
 /// Writes the boot record again (the clock plan changed: DiWheelDrive's internal-oscillator
 /// fallback runs at 64 MHz).
 pub fn hello(clock_hz: u32) {
-    emit(Kind::Hello { clock_hz });
+    emit(What::Kind(Kind::Hello { clock_hz }));
 }
 
 /// Stamps one record into the ring.
-fn emit(kind: Kind) {
-    critical_section::with(|cs| write(state_in(cs), kind));
+fn emit(what: What) {
+    critical_section::with(|cs| write(state_in(cs), &what));
 }
 
 /// Stamps one record and copies it into the ring, in the caller's critical section (so a task
@@ -172,36 +190,53 @@ fn emit(kind: Kind) {
 /// counts it as lost. One copy for every kind (flash).
 #[cfg(not(feature = "qemu"))]
 #[inline(never)]
-fn write(state: &mut State, kind: Kind) {
+fn write(state: &mut State, what: &What) {
     if state.len >= RING_LEN {
         state.lost = state.lost.saturating_add(1);
         return;
     }
-    let record = Record {
-        cycles: cycles(state),
-        kind,
-    };
+    let cycles = cycles(state);
     let tail = (state.head + state.len) & (RING_LEN - 1);
     if let Some(slot) = state.ring.get_mut(tail) {
-        *slot = record;
+        slot.cycles = cycles;
+        copy_words(what, &mut slot.what);
         state.len += 1;
+    }
+}
+
+/// Words of a [`What`].
+#[cfg(not(feature = "qemu"))]
+const WHAT_WORDS: usize = core::mem::size_of::<What>() / 4;
+
+/// Copies `from` into `to` a word at a time, in a counted loop of [`WHAT_WORDS`] passes: a
+/// `memcpy` call would be charged by the execution-time bound at its byte loop's cost (it cannot
+/// know the alignment), and volatile accesses keep LLVM from turning the loop back into one.
+#[cfg(not(feature = "qemu"))]
+fn copy_words(from: &What, to: &mut What) {
+    use core::mem::MaybeUninit;
+    let from = core::ptr::from_ref(from).cast::<MaybeUninit<u32>>();
+    let to = core::ptr::from_mut(to).cast::<MaybeUninit<u32>>();
+    for i in 0..WHAT_WORDS {
+        // SAFETY: both point to a `What` (4-byte aligned, `WHAT_WORDS` whole words); a word is
+        // moved as `MaybeUninit`, so padding bytes are never read as initialised values.
+        unsafe { to.add(i).write_volatile(from.add(i).read_volatile()) };
     }
 }
 
 /// QEMU: stamps one record and writes it through, in the caller's critical section.
 #[cfg(feature = "qemu")]
 #[inline(never)]
-fn write(state: &mut State, kind: Kind) {
-    let record = Record {
+fn write(state: &mut State, what: &What) {
+    let slot = Slot {
         cycles: cycles(state),
-        kind,
+        what: *what,
     };
-    write_out(&record);
+    write_out(&slot);
 }
 
 /// Takes the oldest record out of the ring into `out`; `false` when the ring is empty.
 #[cfg(not(feature = "qemu"))]
-fn pop_into(state: &mut State, out: &mut Record) -> bool {
+fn pop_into(state: &mut State, out: &mut Slot) -> bool {
     if state.len == 0 {
         return false;
     }
@@ -213,11 +248,20 @@ fn pop_into(state: &mut State, out: &mut Record) -> bool {
     true
 }
 
-/// Encodes one record and writes it to its sink (the trace channel; in QEMU a handler event goes to
-/// the console as a `# T` line, the rest to `trace.bin`); `false` when the sink had no room for it.
-/// One copy of the encoder (flash).
+/// Encodes one record (a handler event's fields first) and writes it to its sink (the trace
+/// channel; in QEMU a handler event goes to the console as a `# T` line, the rest to `trace.bin`);
+/// `false` when the sink had no room for it. One copy of the encoders (flash).
 #[inline(never)]
-fn write_out(record: &Record) -> bool {
+fn write_out(slot: &Slot) -> bool {
+    let record = Record {
+        cycles: slot.cycles,
+        kind: match slot.what {
+            What::Kind(kind) => kind,
+            What::Event(event) => Kind::Event {
+                record: event.encode(),
+            },
+        },
+    };
     let mut wire = [0u8; amiro_trace::MAX_WIRE];
     let n = record.encode_into(&mut wire);
     let bytes = wire.get(..n).unwrap_or(&[]);
@@ -247,22 +291,22 @@ pub fn drain() {
 /// only writer); one the channel has no room for is counted as lost.
 #[cfg(not(feature = "qemu"))]
 fn drain_one() -> bool {
-    let mut record = EMPTY;
+    let mut slot = EMPTY;
     let taken = critical_section::with(|cs| {
         let state = state_in(cs);
         if state.lost > 0 {
             let count = core::mem::take(&mut state.lost);
-            record = Record {
+            slot = Slot {
                 cycles: cycles(state),
-                kind: Kind::Lost { count },
+                what: What::Kind(Kind::Lost { count }),
             };
             return true;
         }
-        pop_into(state, &mut record)
+        pop_into(state, &mut slot)
     });
-    if taken && !write_out(&record) {
-        let count = match record.kind {
-            Kind::Lost { count } => count,
+    if taken && !write_out(&slot) {
+        let count = match slot.what {
+            What::Kind(Kind::Lost { count }) => count,
             _ => 1,
         };
         critical_section::with(|cs| {
@@ -279,37 +323,32 @@ fn drain_one() -> bool {
     false
 }
 
-/// The drain task's body (priority 0): one [`drain`] job, then it yields to `admit_requests` and
-/// the thread-mode executor, forever. A job that finds the ring empty is a few instructions; the
-/// executor polls thread mode's tasks in a loop anyway.
-pub async fn serve_drain() -> ! {
-    loop {
-        drain();
-        YieldNow(false).await;
-    }
+/// The drain task's body (priority 0): a future that never completes, each poll one [`drain`]
+/// job; it wakes its own task before it returns, so the thread-mode executor polls it again after
+/// `admit_requests` (a job that finds the ring empty is a few instructions; the executor polls
+/// thread mode's tasks in a loop anyway).
+pub fn serve_drain() -> Drain {
+    Drain
 }
 
-/// Ready on its second poll: wakes its own task and returns pending once, so the executor polls
-/// the other thread-mode task before this one goes on.
-struct YieldNow(bool);
+/// The future [`serve_drain`] returns.
+pub struct Drain;
 
-impl Future for YieldNow {
+impl Future for Drain {
     type Output = ();
 
-    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
-        if self.0 {
-            return Poll::Ready(());
-        }
-        self.0 = true;
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        drain();
         cx.waker().wake_by_ref();
         Poll::Pending
     }
 }
 
-/// A handler event (`amiro_sensors::trace` record), with the trace clock's stamp. (QEMU prints it
-/// on the console as a `# T` line when the drain writes it, its time in the record.)
-pub fn event(record: &[u8; amiro_trace::EVENT_LEN]) {
-    emit(Kind::Event { record: *record });
+/// A handler event, with the trace clock's stamp: copied raw, encoded by the drain (QEMU: at once,
+/// as a `# T` line on the console, in order with the other lines).
+#[inline(never)]
+pub fn event(event: &TraceEvent) {
+    emit(What::Event(*event));
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.
@@ -352,7 +391,7 @@ fn start(task: u8) {
             *slot = state.current;
             state.current = task;
         }
-        write(state, Kind::TaskStart { task });
+        write(state, &What::Kind(Kind::TaskStart { task }));
     });
 }
 
@@ -368,7 +407,7 @@ fn end(task: u8, next_release_in_us: u32) {
             task,
             next_release_in_us,
         };
-        write(state, kind);
+        write(state, &What::Kind(kind));
     });
 }
 
@@ -409,7 +448,7 @@ pub fn resume(task: u8) {
 #[inline(always)]
 pub fn frame_acked(id: u16) {
     #[cfg(feature = "task-trace")]
-    emit(Kind::FrameAcked { id });
+    emit(What::Kind(Kind::FrameAcked { id }));
     #[cfg(not(feature = "task-trace"))]
     let _ = id;
 }
