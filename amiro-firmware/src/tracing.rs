@@ -63,10 +63,12 @@ pub const DRAIN_BATCH: usize = 4;
 #[repr(u8)]
 enum What {
     Kind(Kind),
+    #[cfg(not(feature = "qemu"))]
     Event(TraceEvent),
 }
 
 /// One record as the tasks stamp it: when, and what (raw, fixed size).
+#[cfg(not(feature = "qemu"))]
 #[derive(Clone, Copy)]
 struct Slot {
     cycles: u64,
@@ -223,15 +225,25 @@ fn copy_words(from: &What, to: &mut What) {
     }
 }
 
-/// QEMU: stamps one record and writes it through, in the caller's critical section.
+/// QEMU: stamps one record and writes it through, in the caller's critical section: a handler
+/// event to the console as a `# T` line, the rest to `trace.bin` (a handler event arrives encoded:
+/// [`event`]).
 #[cfg(feature = "qemu")]
 #[inline(never)]
 fn write(state: &mut State, what: &What) {
-    let slot = Slot {
+    let What::Kind(kind) = *what;
+    let record = Record {
         cycles: cycles(state),
-        what: *what,
+        kind,
     };
-    write_out(&slot);
+    let mut wire = [0u8; amiro_trace::MAX_WIRE];
+    let n = record.encode_into(&mut wire);
+    let bytes = wire.get(..n).unwrap_or(&[]);
+    if let Kind::Event { .. } = record.kind {
+        crate::channels::write_console_record(bytes);
+    } else {
+        crate::channels::write_trace(bytes);
+    }
 }
 
 /// Takes the oldest record out of the ring into `out`; `false` when the ring is empty.
@@ -248,9 +260,9 @@ fn pop_into(state: &mut State, out: &mut Slot) -> bool {
     true
 }
 
-/// Encodes one record (a handler event's fields first) and writes it to its sink (the trace
-/// channel; in QEMU a handler event goes to the console as a `# T` line, the rest to `trace.bin`);
-/// `false` when the sink had no room for it. One copy of the encoders (flash).
+/// Encodes one record (a handler event's fields first) and writes it to the trace channel; `false`
+/// when the channel had no room for it. One copy of the encoders (flash).
+#[cfg(not(feature = "qemu"))]
 #[inline(never)]
 fn write_out(slot: &Slot) -> bool {
     let record = Record {
@@ -264,12 +276,7 @@ fn write_out(slot: &Slot) -> bool {
     };
     let mut wire = [0u8; amiro_trace::MAX_WIRE];
     let n = record.encode_into(&mut wire);
-    let bytes = wire.get(..n).unwrap_or(&[]);
-    #[cfg(feature = "qemu")]
-    if let Kind::Event { .. } = record.kind {
-        return crate::channels::write_console_record(bytes);
-    }
-    crate::channels::write_trace(bytes)
+    crate::channels::write_trace(wire.get(..n).unwrap_or(&[]))
 }
 
 /// One job of the drain: writes at most [`DRAIN_BATCH`] records from the ring to the trace channel
@@ -348,7 +355,13 @@ impl Future for Drain {
 /// as a `# T` line on the console, in order with the other lines).
 #[inline(never)]
 pub fn event(event: &TraceEvent) {
+    #[cfg(not(feature = "qemu"))]
     emit(What::Event(*event));
+    // QEMU: encoded before the critical section, as the robot's drain does outside it.
+    #[cfg(feature = "qemu")]
+    emit(What::Kind(Kind::Event {
+        record: event.encode(),
+    }));
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.
