@@ -20,8 +20,8 @@
 //!
 //! Two halves, so a task's cost for its records is a constant: a task stamps each record and copies
 //! it raw (its stamp and its kind, or the handler event unencoded: 40 bytes) into a static ring of
-//! [`RING_LEN`], under one short critical
-//! section — no encoding, no loop, no channel. The board's `drain_trace` task, at priority 0 (thread
+//! [`RING_LEN`], under one short critical section — no encoding, no loop of unknown length, no
+//! channel. The board's `drain_trace` task, at priority 0 (thread
 //! mode, beside `admit_requests`), calls [`serve_drain`]: each of its jobs ([`drain`]) takes at most
 //! [`DRAIN_BATCH`] records out of the ring, COBS-encodes them and writes them to the trace channel
 //! (RTT on the robot), and writes at most one log line a handler deferred
