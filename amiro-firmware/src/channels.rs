@@ -54,16 +54,31 @@ mod rtt {
         });
     }
 
+    /// Writes `first` and then `second` into the channel in `slot`, or nothing of what finds no
+    /// room (`false`). The channel is taken out and put back under two short critical sections
+    /// and the copies run outside them, so the writer blocks no task: only the trace drain
+    /// (priority 0) writes this way, and a task that logs while it holds the log channel finds
+    /// none and its line is dropped (only while a deferred line, a one-off report, is written).
+    fn write_outside(slot: &Mutex<Cell<Option<UpChannel>>>, first: &[u8], second: &[u8]) -> bool {
+        let Some(mut channel) = critical_section::with(|cs| slot.borrow(cs).take()) else {
+            return false;
+        };
+        let written = channel.write(first) == first.len() && channel.write(second) == second.len();
+        critical_section::with(|cs| slot.borrow(cs).set(Some(channel)));
+        written
+    }
+
+    /// Writes one log line for the trace drain (`super::write_deferred_log`), cut to
+    /// [`super::LOG_PART_MAX`] bytes.
+    pub fn write_deferred(line: &str) {
+        let bytes = line.as_bytes();
+        write_outside(&LOG, &bytes[..bytes.len().min(super::LOG_PART_MAX)], b"\n");
+    }
+
     /// Writes one whole trace record, or nothing when the channel has no room for all of it
-    /// (`false`); the critical section lasts one short copy into the ring.
+    /// (`false`): only the trace drain writes this channel (`tracing::drain`).
     pub fn write_trace(bytes: &[u8]) -> bool {
-        critical_section::with(|cs| {
-            let mut written = false;
-            with_channel(cs, &TRACE, |channel| {
-                written = channel.write(bytes) == bytes.len();
-            });
-            written
-        })
+        write_outside(&TRACE, bytes, &[])
     }
 }
 
@@ -103,6 +118,33 @@ pub fn write_trace(bytes: &[u8]) -> bool {
     return rtt::write_trace(bytes);
     #[cfg(feature = "qemu")]
     return crate::qemu::write_trace_file(bytes);
+}
+
+/// The log line a task asked for with [`defer_log`] and the drain has not written yet. One slot:
+/// the lines deferred are one-off reports (a monotonic event gone missing, the watchdog's first
+/// feed), far apart; one that finds the slot taken is dropped.
+static DEFERRED: critical_section::Mutex<core::cell::Cell<Option<&'static str>>> =
+    critical_section::Mutex::new(core::cell::Cell::new(None));
+
+/// Queues one static log line for the trace drain to write (`tracing::drain`, priority 0): what a
+/// handler logs, at the cost of a short copy instead of a channel write.
+pub fn defer_log(line: &'static str) {
+    critical_section::with(|cs| {
+        let slot = DEFERRED.borrow(cs);
+        if slot.get().is_none() {
+            slot.set(Some(line));
+        }
+    });
+}
+
+/// Writes the deferred log line, if there is one (the drain, once per job).
+pub fn write_deferred_log() {
+    if let Some(line) = critical_section::with(|cs| DEFERRED.borrow(cs).take()) {
+        #[cfg(not(feature = "qemu"))]
+        rtt::write_deferred(line);
+        #[cfg(feature = "qemu")]
+        write_log(&[line]);
+    }
 }
 
 /// Writes one human log line made of `parts` (RTT channel 0 on the robot, a `# ` line on QEMU's

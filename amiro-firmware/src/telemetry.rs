@@ -51,7 +51,7 @@ pub fn init_done() {
 
 /// Emits one trace event.
 pub fn trace(event: &TraceEvent) {
-    crate::tracing::event(&event.encode());
+    crate::tracing::event(event);
 }
 
 /// Writes a line to the human log (RTT channel 0 on the robot, a `#` line in QEMU), made of string

@@ -17,8 +17,29 @@
 //! without it [`job`], [`enter`], [`suspend`], [`resume`] and [`frame_acked`] are empty and only the
 //! handler events and the boot record remain on the channel. Its cost per job is a term of each
 //! board's timing file (`trace` in schedule-analysis/models/*.timing.json).
+//!
+//! Two halves, so a task's cost for its records is a constant: a task stamps each record and copies
+//! it raw (its stamp and its kind, or the handler event unencoded: 40 bytes) into a static ring of
+//! [`RING_LEN`], under one short critical section — no encoding, no loop of unknown length, no
+//! channel. The board's `drain_trace` task, at priority 0 (thread
+//! mode, beside `admit_requests`), calls [`serve_drain`]: each of its jobs ([`drain`]) takes at most
+//! [`DRAIN_BATCH`] records out of the ring, COBS-encodes them and writes them to the trace channel
+//! (RTT on the robot), and writes at most one log line a handler deferred
+//! (`channels::defer_log`). A full ring counts the record as lost, and the drain reports the count
+//! (`Kind::Lost`) before the next record it writes.
+//!
+//! The QEMU build writes through instead: each record is encoded and written to `trace.bin` or the
+//! console as it is stamped, as before the ring, and its drain finds nothing to do. The bench needs
+//! every record, the scenarios read the handler events in their place among the console's other
+//! lines (LightRing's latch lines), and under the scenarios' floods thread mode gets no time for
+//! a drain; a QEMU job's trace cost is the timing file's `trace.qemu` term (docs/analysis.md,
+//! "The trace path", says why and how the analysis counts either build).
 use core::cell::UnsafeCell;
+use core::future::Future;
+use core::pin::Pin;
+use core::task::{Context, Poll};
 
+use amiro_sensors::trace::TraceEvent;
 use amiro_trace::{Kind, Record};
 use critical_section::{CriticalSection, Mutex};
 
@@ -27,6 +48,40 @@ pub const NO_TASK: u8 = u8::MAX;
 
 /// Tasks a board may have (task numbers are below this).
 pub const MAX_TASKS: usize = 32;
+
+/// Records the ring holds (a power of two): 32, 1.25 KiB of RAM. The drain runs whenever thread
+/// mode is free, so the ring holds what the tasks stamp while an admission step (up to 8.6 ms on
+/// the F103) keeps it from running; beyond 32 records the ring loses them (counted and reported).
+pub const RING_LEN: usize = 32;
+
+/// The most records one drain job ([`drain`]) writes: the bound of its loop, and so of its job.
+pub const DRAIN_BATCH: usize = 4;
+
+/// What a record says before it is encoded: a record's kind, or a handler event whose 18 bytes
+/// the drain encodes (`TraceEvent::encode`, whose field loops so stay out of the task).
+#[derive(Clone, Copy)]
+#[repr(u8)]
+enum What {
+    Kind(Kind),
+    #[cfg(not(feature = "qemu"))]
+    Event(TraceEvent),
+}
+
+/// One record as the tasks stamp it: when, and what (raw, fixed size).
+#[cfg(not(feature = "qemu"))]
+#[derive(Clone, Copy)]
+struct Slot {
+    cycles: u64,
+    what: What,
+}
+
+/// A free slot's contents (never written out: only slots below `len` are read). All zero bytes,
+/// so the ring lives in `.bss`, not in `.data` with its image in flash.
+#[cfg(not(feature = "qemu"))]
+const EMPTY: Slot = Slot {
+    cycles: 0,
+    what: What::Kind(Kind::Hello { clock_hz: 0 }),
+};
 
 struct State {
     #[cfg(feature = "task-trace")]
@@ -39,8 +94,16 @@ struct State {
     last: u32,
     #[cfg(feature = "qemu")]
     last: u64,
+    /// Records the full ring turned away since the drain last reported them.
+    #[cfg(not(feature = "qemu"))]
     lost: u32,
-    wire: [u8; amiro_trace::MAX_WIRE],
+    /// The records stamped and not yet written, oldest at `head`.
+    #[cfg(not(feature = "qemu"))]
+    ring: [Slot; RING_LEN],
+    #[cfg(not(feature = "qemu"))]
+    head: usize,
+    #[cfg(not(feature = "qemu"))]
+    len: usize,
 }
 
 static STATE: Mutex<UnsafeCell<State>> = Mutex::new(UnsafeCell::new(State {
@@ -54,8 +117,14 @@ static STATE: Mutex<UnsafeCell<State>> = Mutex::new(UnsafeCell::new(State {
     last: 0,
     #[cfg(feature = "qemu")]
     last: 0,
+    #[cfg(not(feature = "qemu"))]
     lost: 0,
-    wire: [0; amiro_trace::MAX_WIRE],
+    #[cfg(not(feature = "qemu"))]
+    ring: [EMPTY; RING_LEN],
+    #[cfg(not(feature = "qemu"))]
+    head: 0,
+    #[cfg(not(feature = "qemu"))]
+    len: 0,
 }));
 
 /// The trace state, inside a critical section. Not a `RefCell`: its borrow check would bring a
@@ -110,46 +179,189 @@ pub fn start_clock(clock_hz: u32) {
 /// Writes the boot record again (the clock plan changed: DiWheelDrive's internal-oscillator
 /// fallback runs at 64 MHz).
 pub fn hello(clock_hz: u32) {
-    emit(Kind::Hello { clock_hz });
+    emit(What::Kind(Kind::Hello { clock_hz }));
 }
 
-/// Stamps and writes one record into the trace channel.
-fn emit(kind: Kind) {
-    critical_section::with(|cs| write(state_in(cs), kind, crate::channels::write_trace));
+/// Stamps one record into the ring.
+fn emit(what: What) {
+    critical_section::with(|cs| write(state_in(cs), &what));
 }
 
-/// Stamps and writes one record into `sink`, in the caller's critical section (so a task record's
-/// state change and its record are one step). A record that does not fit is counted and reported
-/// by the next one that does. One copy for every kind (flash).
+/// Stamps one record and copies it into the ring, in the caller's critical section (so a task
+/// record's state change and its record are one step): a fixed-size copy, no loop. A full ring
+/// counts it as lost. One copy for every kind (flash).
+#[cfg(not(feature = "qemu"))]
 #[inline(never)]
-fn write(state: &mut State, kind: Kind, sink: fn(&[u8]) -> bool) {
-    let at = cycles(state);
-    // The buffer lives in the state: a stack array would be cleared on every record.
-    let wire = &mut state.wire;
-    if state.lost > 0 {
-        let lost = Record {
-            cycles: at,
-            kind: Kind::Lost { count: state.lost },
-        };
-        let n = lost.encode_into(wire);
-        if sink(&wire[..n]) {
-            state.lost = 0;
+fn write(state: &mut State, what: &What) {
+    if state.len >= RING_LEN {
+        state.lost = state.lost.saturating_add(1);
+        return;
+    }
+    let cycles = cycles(state);
+    let tail = (state.head + state.len) & (RING_LEN - 1);
+    if let Some(slot) = state.ring.get_mut(tail) {
+        slot.cycles = cycles;
+        copy_words(what, &mut slot.what);
+        state.len += 1;
+    }
+}
+
+/// Words of a [`What`].
+#[cfg(not(feature = "qemu"))]
+const WHAT_WORDS: usize = core::mem::size_of::<What>() / 4;
+
+/// Copies `from` into `to` a word at a time, in a counted loop of [`WHAT_WORDS`] passes: a
+/// `memcpy` call would be charged by the execution-time bound at its byte loop's cost (it cannot
+/// know the alignment), and volatile accesses keep LLVM from turning the loop back into one.
+#[cfg(not(feature = "qemu"))]
+fn copy_words(from: &What, to: &mut What) {
+    use core::mem::MaybeUninit;
+    let from = core::ptr::from_ref(from).cast::<MaybeUninit<u32>>();
+    let to = core::ptr::from_mut(to).cast::<MaybeUninit<u32>>();
+    for i in 0..WHAT_WORDS {
+        // SAFETY: both point to a `What` (4-byte aligned, `WHAT_WORDS` whole words); a word is
+        // moved as `MaybeUninit`, so padding bytes are never read as initialised values.
+        unsafe { to.add(i).write_volatile(from.add(i).read_volatile()) };
+    }
+}
+
+/// QEMU: stamps one record and writes it through, in the caller's critical section: a handler
+/// event to the console as a `# T` line, the rest to `trace.bin` (a handler event arrives encoded:
+/// [`event`]).
+#[cfg(feature = "qemu")]
+#[inline(never)]
+fn write(state: &mut State, what: &What) {
+    let What::Kind(kind) = *what;
+    let record = Record {
+        cycles: cycles(state),
+        kind,
+    };
+    let mut wire = [0u8; amiro_trace::MAX_WIRE];
+    let n = record.encode_into(&mut wire);
+    let bytes = wire.get(..n).unwrap_or(&[]);
+    if let Kind::Event { .. } = record.kind {
+        crate::channels::write_console_record(bytes);
+    } else {
+        crate::channels::write_trace(bytes);
+    }
+}
+
+/// Takes the oldest record out of the ring into `out`; `false` when the ring is empty.
+#[cfg(not(feature = "qemu"))]
+fn pop_into(state: &mut State, out: &mut Slot) -> bool {
+    if state.len == 0 {
+        return false;
+    }
+    if let Some(oldest) = state.ring.get(state.head & (RING_LEN - 1)) {
+        *out = *oldest;
+    }
+    state.head = (state.head + 1) & (RING_LEN - 1);
+    state.len -= 1;
+    true
+}
+
+/// Encodes one record (a handler event's fields first) and writes it to the trace channel; `false`
+/// when the channel had no room for it. One copy of the encoders (flash).
+#[cfg(not(feature = "qemu"))]
+#[inline(never)]
+fn write_out(slot: &Slot) -> bool {
+    let record = Record {
+        cycles: slot.cycles,
+        kind: match slot.what {
+            What::Kind(kind) => kind,
+            What::Event(event) => Kind::Event {
+                record: event.encode(),
+            },
+        },
+    };
+    let mut wire = [0u8; amiro_trace::MAX_WIRE];
+    let n = record.encode_into(&mut wire);
+    crate::channels::write_trace(wire.get(..n).unwrap_or(&[]))
+}
+
+/// One job of the drain: writes at most [`DRAIN_BATCH`] records from the ring to the trace channel
+/// (a `Lost` report, when the ring turned some away, is one of them) and at most one deferred log
+/// line. Called by [`serve_drain`]; bounded by its batch.
+#[inline(never)]
+pub fn drain() {
+    for _ in 0..DRAIN_BATCH {
+        if !drain_one() {
+            break;
         }
     }
-    let n = Record { cycles: at, kind }.encode_into(wire);
-    if !sink(&wire[..n]) {
-        state.lost = state.lost.saturating_add(1);
+    crate::channels::write_deferred_log();
+}
+
+/// Writes one record: a `Lost` report when the ring turned records away since the last one, else
+/// the oldest record of the ring; `false` when there was none. The record is taken out under a
+/// short critical section and encoded and written outside it (the drain is the trace channel's
+/// only writer); one the channel has no room for is counted as lost.
+#[cfg(not(feature = "qemu"))]
+fn drain_one() -> bool {
+    let mut slot = EMPTY;
+    let taken = critical_section::with(|cs| {
+        let state = state_in(cs);
+        if state.lost > 0 {
+            let count = core::mem::take(&mut state.lost);
+            slot = Slot {
+                cycles: cycles(state),
+                what: What::Kind(Kind::Lost { count }),
+            };
+            return true;
+        }
+        pop_into(state, &mut slot)
+    });
+    if taken && !write_out(&slot) {
+        let count = match slot.what {
+            What::Kind(Kind::Lost { count }) => count,
+            _ => 1,
+        };
+        critical_section::with(|cs| {
+            let state = state_in(cs);
+            state.lost = state.lost.saturating_add(count);
+        });
+    }
+    taken
+}
+
+/// QEMU: the records were written as they were stamped; nothing waits.
+#[cfg(feature = "qemu")]
+fn drain_one() -> bool {
+    false
+}
+
+/// The drain task's body (priority 0): a future that never completes, each poll one [`drain`]
+/// job; it wakes its own task before it returns, so the thread-mode executor polls it again after
+/// `admit_requests` (a job that finds the ring empty is a few instructions; the executor polls
+/// thread mode's tasks in a loop anyway).
+pub fn serve_drain() -> Drain {
+    Drain
+}
+
+/// The future [`serve_drain`] returns.
+pub struct Drain;
+
+impl Future for Drain {
+    type Output = ();
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        drain();
+        cx.waker().wake_by_ref();
+        Poll::Pending
     }
 }
 
-/// A handler event (`amiro_sensors::trace` record), with the trace clock's stamp. (QEMU sends it to
-/// the console, in order with the other lines.)
-pub fn event(record: &[u8; amiro_trace::EVENT_LEN]) {
-    let kind = Kind::Event { record: *record };
+/// A handler event, with the trace clock's stamp: copied raw, encoded by the drain (QEMU: at once,
+/// as a `# T` line on the console, in order with the other lines).
+#[inline(never)]
+pub fn event(event: &TraceEvent) {
     #[cfg(not(feature = "qemu"))]
-    emit(kind);
+    emit(What::Event(*event));
+    // QEMU: encoded before the critical section, as the robot's drain does outside it.
     #[cfg(feature = "qemu")]
-    critical_section::with(|cs| write(state_in(cs), kind, crate::channels::write_console_record));
+    emit(What::Kind(Kind::Event {
+        record: event.encode(),
+    }));
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.
@@ -192,11 +404,7 @@ fn start(task: u8) {
             *slot = state.current;
             state.current = task;
         }
-        write(
-            state,
-            Kind::TaskStart { task },
-            crate::channels::write_trace,
-        );
+        write(state, &What::Kind(Kind::TaskStart { task }));
     });
 }
 
@@ -212,7 +420,7 @@ fn end(task: u8, next_release_in_us: u32) {
             task,
             next_release_in_us,
         };
-        write(state, kind, crate::channels::write_trace);
+        write(state, &What::Kind(kind));
     });
 }
 
@@ -253,7 +461,7 @@ pub fn resume(task: u8) {
 #[inline(always)]
 pub fn frame_acked(id: u16) {
     #[cfg(feature = "task-trace")]
-    emit(Kind::FrameAcked { id });
+    emit(What::Kind(Kind::FrameAcked { id }));
     #[cfg(not(feature = "task-trace"))]
     let _ = id;
 }

@@ -75,7 +75,8 @@ pub fn start(timeout_ms: u32) {
     crate::health::watchdog_started();
 }
 
-/// Reloads the counter. The first feed is logged: the tasks and the monotonic run.
+/// Reloads the counter. The first feed is logged (through the trace drain): the tasks and the
+/// monotonic run.
 pub fn feed() {
     use core::sync::atomic::{AtomicBool, Ordering};
     static FED: AtomicBool = AtomicBool::new(false);
@@ -84,7 +85,8 @@ pub fn feed() {
     }
     write(KR, 0xAAAA);
     if !FED.swap(true, Ordering::Relaxed) {
-        crate::log!("watchdog: first feed (the tasks and the monotonic run)");
+        // Written by the trace drain (priority 0): the feeding task only queues it.
+        crate::channels::defer_log("watchdog: first feed (the tasks and the monotonic run)");
     }
 }
 

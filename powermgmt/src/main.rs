@@ -196,6 +196,7 @@ mod app {
         publish_low::spawn().ok();
         handle_commands::spawn().ok();
         admit_requests::spawn().ok();
+        drain_trace::spawn().ok();
         power_monitor::spawn().ok();
         watchdog::spawn().ok();
         #[cfg(feature = "qemu")]
@@ -521,5 +522,13 @@ mod app {
             <platform::Clock as amiro_firmware::mono::Clock>::delay_until_us,
         )
         .await;
+    }
+
+    /// Writes the trace out (priority 0, thread mode, beside `admit_requests`): each job encodes at
+    /// most `tracing::DRAIN_BATCH` of the records the tasks copied into the trace ring and writes
+    /// them to the trace channel, and one log line a handler deferred. Not traced itself.
+    #[task(priority = 0)]
+    async fn drain_trace(_cx: drain_trace::Context) {
+        amiro_firmware::tracing::serve_drain().await;
     }
 }

@@ -153,7 +153,7 @@ fn a_bound_is_the_budget_wherever_one_exists() {
     let line = source(&built, "diwheeldrive: budgets: ");
     assert!(
         line.starts_with(
-            "diwheeldrive: budgets: 2 bounded from the machine code (F103, 72 MHz, 2 wait states; schedule-analysis/models/diwheeldrive-1-1.wcet.json), 16 stated ("
+            "diwheeldrive: budgets: 2 bounded from the machine code (F103, 72 MHz, 2 wait states; schedule-analysis/models/diwheeldrive-1-1.wcet.json), 17 stated ("
         ),
         "{line}"
     );

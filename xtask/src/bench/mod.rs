@@ -292,6 +292,10 @@ fn seen_publishers(capture: &Capture) -> Vec<(amiro_can::Topic, u8, Option<u64>,
     best.into_iter()
         .filter_map(|(topic, (level, releases))| {
             let topic = amiro_can::Topic::from_byte(topic)?;
+            // In release order: a one-shot released before a periodic sample of its level may be
+            // taken after it.
+            let mut releases = releases;
+            releases.sort_unstable();
             let mut gaps: Vec<u64> = releases.windows(2).map(|w| w[1] - w[0]).collect();
             gaps.sort_unstable();
             // Releases are on a µs grid; the period in whole µs.
