@@ -202,9 +202,7 @@ pub fn tasks_of(
 /// The critical sections of a task the bounds file names with several functions, merged as
 /// [`worst_per_name`] merges their bounds: per ceiling the longest section (a declined one wins),
 /// incomplete when any function's list is.
-pub fn sections_per_name(
-    rows: Vec<machine_code::TaskSections>,
-) -> Vec<machine_code::TaskSections> {
+pub fn sections_per_name(rows: Vec<machine_code::TaskSections>) -> Vec<machine_code::TaskSections> {
     let mut out: Vec<machine_code::TaskSections> = Vec::new();
     for row in rows {
         let Some(kept) = out.iter_mut().find(|k| k.task == row.task) else {
@@ -268,6 +266,8 @@ pub struct Bounded {
     pub sections: Vec<machine_code::TaskSections>,
     /// The bounds file's entries that name no place in this image (`BoundsFile::missing_places`).
     pub missing: Vec<String>,
+    /// The tasks whose bound the generated file holds back from the analysis (`BoundsFile::held`).
+    pub held: Vec<machine_code::wcet::bounds::HeldBound>,
 }
 
 /// Bounds every task of `build`'s kept release image (it must be built) with the board's input
@@ -305,7 +305,9 @@ pub fn bound_build(
     let sections = sections_per_name(machine_code::task_sections(&image, &tasks, chip, &bounds));
     let tasks = worst_per_name(machine_code::bound_tasks(&image, &tasks, chip, &bounds));
     let missing = bounds.missing_places(&image);
+    let held = bounds.held.clone();
     Ok(Bounded {
+        held,
         chip,
         app,
         tasks,

@@ -169,6 +169,7 @@ fn generate(
         &found.sections,
         found.chip,
     );
+    hold(&mut rows, &found.held);
     // The workspace's own files by their path in it, not this checkout's.
     let here = format!("{}/", root.display());
     for r in &mut rows {
@@ -234,6 +235,33 @@ pub fn dispatcher_of(app: &RticApp) -> BTreeMap<u8, String> {
 /// `cycles` at `chip`'s clock in µs, rounded up to the file's 0.001 µs.
 fn us(cycles: u64, clock_hz: u64) -> f64 {
     ((cycles as f64 * 1e9 / clock_hz as f64).ceil() / 1000.0).max(0.0)
+}
+
+/// The rows the bounds file holds back (`held`): declined for the analysis, the bound and why it is not
+/// used in the reason, so the report shows both (docs/analysis.md, "Held bounds").
+fn hold(rows: &mut [TaskBound], held: &[machine_code::wcet::bounds::HeldBound]) {
+    for r in rows.iter_mut() {
+        let Some(h) = held.iter().find(|h| h.names(&r.task)) else {
+            continue;
+        };
+        // Its critical sections come from the same paths: held with it, the stated ones stand.
+        r.sections = None;
+        let bound = match (&r.declined, r.cycles, r.us, r.instructions) {
+            (None, Some(cycles), Some(us), Some(instructions)) => format!(
+                "bounded from the machine code at {cycles} cycles ({us} µs, {instructions} instructions, bus waits {} µs)",
+                r.bus_wait_us
+            ),
+            (Some(reason), ..) => format!("declined ({reason}), its critical sections"),
+            _ => "its bound".to_string(),
+        };
+        r.declined = Some(format!(
+            "{}: {bound}, held back as its budget: {}",
+            r.task, h.reason
+        ));
+        r.cycles = None;
+        r.us = None;
+        r.instructions = None;
+    }
 }
 
 fn declined(task: &str, reason: String) -> TaskBound {
@@ -709,6 +737,46 @@ mod app {
     }
 
     #[test]
+    fn a_held_row_is_declined_with_its_figures_and_without_its_sections() {
+        let held: machine_code::BoundsFile = machine_code::BoundsFile::parse(
+            r#"{"held":[{"task":"can_tx","reason":"loose: every pass at its worst"},{"task":"publisher[*]","reason":"the bus transfers"}]}"#,
+        )
+        .unwrap();
+        let mut rows = vec![
+            bounded("can_tx", 7200, 3600, 0.0, 72_000_000),
+            declined("publisher[gyroscope]", "i2c.rs:215".into()),
+            bounded("shutdown", 72, 30, 0.0, 72_000_000),
+        ];
+        rows[0].sections = Some(CeilingSections {
+            incomplete: None,
+            ceilings: Vec::new(),
+        });
+        hold(&mut rows, &held.held);
+        let reason = rows[0].declined.as_deref().unwrap();
+        assert!(
+            reason.starts_with(
+                "can_tx: bounded from the machine code at 7200 cycles (100 µs, 3600 instructions"
+            ) && reason.ends_with("held back as its budget: loose: every pass at its worst"),
+            "{reason}"
+        );
+        assert_eq!(
+            (rows[0].cycles, rows[0].us, &rows[0].sections),
+            (None, None, &None)
+        );
+        assert!(rows[1]
+            .declined
+            .as_deref()
+            .unwrap()
+            .ends_with("held back as its budget: the bus transfers"));
+        // A row the file does not hold keeps its bound.
+        assert_eq!((rows[2].cycles, &rows[2].declined), (Some(72), &None));
+        assert!(
+            machine_code::BoundsFile::parse(r#"{"held":[{"task":"can_tx","reason":" "}]}"#)
+                .is_err()
+        );
+    }
+
+    #[test]
     fn a_thread_mode_task_names_its_steps_bound_and_keeps_its_stated_budget() {
         let app = parse_app(APP).unwrap();
         let built = app.with_features(&[]);
@@ -721,7 +789,15 @@ mod app {
         };
         let mut step = found("admit", 7200, None);
         step.function = Some("check".into());
-        let written = rows(&built, &app, &budgets, &[step], chip);
+        let steps = [step];
+        let written = rows(
+            &built,
+            &app,
+            &budgets,
+            &steps,
+            &sections_of(&steps, &[]),
+            chip,
+        );
         let admit = written.iter().find(|r| r.task == "admit").unwrap();
         assert_eq!(admit.cycles, None);
         let reason = admit.declined.as_deref().unwrap();
@@ -732,7 +808,15 @@ mod app {
         );
         let mut step = found("admit", 0, Some("the loop in check at a.rs:3 has no bound"));
         step.function = Some("check".into());
-        let written = rows(&built, &app, &budgets, &[step], chip);
+        let steps = [step];
+        let written = rows(
+            &built,
+            &app,
+            &budgets,
+            &steps,
+            &sections_of(&steps, &[]),
+            chip,
+        );
         let admit = written.iter().find(|r| r.task == "admit").unwrap();
         assert!(admit.declined.as_deref().unwrap().ends_with(
             "its step's check (check) is declined: the loop in check at a.rs:3 has no bound"
