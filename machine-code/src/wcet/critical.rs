@@ -34,7 +34,7 @@ use super::cfg::{Block, Call, Cfg};
 use super::chip::Chip;
 use super::length::{self, NO_ARGS};
 use super::masking::{effect, region, value_before, Effect, Kind};
-use super::{Task, TaskEntry};
+use super::Task;
 use crate::decode::Insn;
 use crate::image::Function;
 use crate::{Error, Image};
@@ -150,15 +150,7 @@ pub fn task_sections(
     tasks
         .iter()
         .map(|task| {
-            let start = match &task.entry {
-                TaskEntry::Symbol(s) => image.function_named(s).map(|f| f.start),
-                TaskEntry::Vector(i) => image
-                    .vectors
-                    .iter()
-                    .find(|(k, _)| k == i)
-                    .map(|&(_, at)| at)
-                    .ok_or_else(|| Error::Other(format!("no handler at vector {i}"))),
-            };
+            let start = task.entry.start(image);
             match start {
                 Ok(at) => finder.task(&task.name, at),
                 Err(e) => TaskSections {

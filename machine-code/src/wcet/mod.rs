@@ -82,6 +82,21 @@ pub enum TaskEntry {
     Vector(usize),
 }
 
+impl TaskEntry {
+    /// The address the task's code starts at in `image`: its function's, or its vector's handler.
+    pub(crate) fn start(&self, image: &Image) -> Result<u64, Error> {
+        match self {
+            TaskEntry::Symbol(s) => image.function_named(s).map(|f| f.start),
+            TaskEntry::Vector(i) => image
+                .vectors
+                .iter()
+                .find(|(k, _)| k == i)
+                .map(|&(_, at)| at)
+                .ok_or_else(|| Error::Other(format!("no handler at vector {i}"))),
+        }
+    }
+}
+
 /// A task to bound.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Task {
@@ -168,15 +183,7 @@ pub fn bound_tasks(
     let found: Vec<(Option<String>, Bound)> = tasks
         .iter()
         .map(|task| {
-            let start = match &task.entry {
-                TaskEntry::Symbol(s) => image.function_named(s).map(|f| f.start),
-                TaskEntry::Vector(i) => image
-                    .vectors
-                    .iter()
-                    .find(|(k, _)| k == i)
-                    .map(|&(_, at)| at)
-                    .ok_or_else(|| Error::Other(format!("no handler at vector {i}"))),
-            };
+            let start = task.entry.start(image);
             match start {
                 Ok(at) => (
                     Some(image.name(at)),
