@@ -120,26 +120,32 @@ pub fn write_trace(bytes: &[u8]) -> bool {
     return crate::qemu::write_trace_file(bytes);
 }
 
-/// The log line a task asked for with [`defer_log`] and the drain has not written yet. One slot:
-/// the lines deferred are one-off reports (a monotonic event gone missing, the watchdog's first
-/// feed), far apart; one that finds the slot taken is dropped.
-static DEFERRED: critical_section::Mutex<core::cell::Cell<Option<&'static str>>> =
-    critical_section::Mutex::new(core::cell::Cell::new(None));
+/// How many deferred log lines wait at most for the drain.
+pub const DEFERRED_LINES: usize = 4;
+
+/// The log lines tasks asked for with [`defer_log`] and the drain has not written yet: one-off
+/// reports (a monotonic event gone missing, the watchdog's first feed), which can come together at
+/// boot; a line that finds every slot taken is dropped. (One slot lost the watchdog's first feed
+/// behind the monotonic's report at boot.)
+static DEFERRED: critical_section::Mutex<[core::cell::Cell<Option<&'static str>>; DEFERRED_LINES]> =
+    critical_section::Mutex::new([const { core::cell::Cell::new(None) }; DEFERRED_LINES]);
 
 /// Queues one static log line for the trace drain to write (`tracing::drain`, priority 0): what a
-/// handler logs, at the cost of a short copy instead of a channel write.
+/// handler logs, at the cost of a short store instead of a channel write.
 pub fn defer_log(line: &'static str) {
     critical_section::with(|cs| {
-        let slot = DEFERRED.borrow(cs);
-        if slot.get().is_none() {
+        if let Some(slot) = DEFERRED.borrow(cs).iter().find(|s| s.get().is_none()) {
             slot.set(Some(line));
         }
     });
 }
 
-/// Writes the deferred log line, if there is one (the drain, once per job).
+/// Writes the deferred log lines, in the order they were deferred (the drain, once per job).
 pub fn write_deferred_log() {
-    if let Some(line) = critical_section::with(|cs| DEFERRED.borrow(cs).take()) {
+    for i in 0..DEFERRED_LINES {
+        let Some(line) = critical_section::with(|cs| DEFERRED.borrow(cs)[i].take()) else {
+            break;
+        };
         #[cfg(not(feature = "qemu"))]
         rtt::write_deferred(line);
         #[cfg(feature = "qemu")]
