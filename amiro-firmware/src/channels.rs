@@ -121,12 +121,13 @@ pub fn write_trace(bytes: &[u8]) -> bool {
 }
 
 /// How many deferred log lines wait at most for the drain.
-pub const DEFERRED_LINES: usize = 4;
+pub const DEFERRED_LINES: usize = 2;
 
 /// The log lines tasks asked for with [`defer_log`] and the drain has not written yet: one-off
 /// reports (a monotonic event gone missing, the watchdog's first feed), which can come together at
-/// boot; a line that finds every slot taken is dropped. (One slot lost the watchdog's first feed
-/// behind the monotonic's report at boot.)
+/// boot; a line that finds both slots taken is dropped. (One slot lost the watchdog's first feed
+/// behind the monotonic's report at boot.) Two straight-line slots: PowerManagement's flash has no
+/// room for a loop over more.
 static DEFERRED: critical_section::Mutex<[core::cell::Cell<Option<&'static str>>; DEFERRED_LINES]> =
     critical_section::Mutex::new([const { core::cell::Cell::new(None) }; DEFERRED_LINES]);
 
@@ -134,18 +135,22 @@ static DEFERRED: critical_section::Mutex<[core::cell::Cell<Option<&'static str>>
 /// handler logs, at the cost of a short store instead of a channel write.
 pub fn defer_log(line: &'static str) {
     critical_section::with(|cs| {
-        if let Some(slot) = DEFERRED.borrow(cs).iter().find(|s| s.get().is_none()) {
-            slot.set(Some(line));
+        let [first, second] = DEFERRED.borrow(cs);
+        if first.get().is_none() {
+            first.set(Some(line));
+        } else if second.get().is_none() {
+            second.set(Some(line));
         }
     });
 }
 
 /// Writes the deferred log lines, in the order they were deferred (the drain, once per job).
 pub fn write_deferred_log() {
-    for i in 0..DEFERRED_LINES {
-        let Some(line) = critical_section::with(|cs| DEFERRED.borrow(cs)[i].take()) else {
-            break;
-        };
+    let lines = critical_section::with(|cs| {
+        let [first, second] = DEFERRED.borrow(cs);
+        [first.take(), second.take()]
+    });
+    for line in lines.into_iter().flatten() {
         #[cfg(not(feature = "qemu"))]
         rtt::write_deferred(line);
         #[cfg(feature = "qemu")]

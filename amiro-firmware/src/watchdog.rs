@@ -86,7 +86,7 @@ pub fn feed() {
     write(KR, 0xAAAA);
     if !FED.swap(true, Ordering::Relaxed) {
         // Written by the trace drain (priority 0): the feeding task only queues it.
-        crate::channels::defer_log("watchdog: first feed (the tasks and the monotonic run)");
+        crate::channels::defer_log("watchdog: first feed");
     }
 }
 
