@@ -53,9 +53,9 @@ pub struct Image {
     /// Functions whose address is stored anywhere outside the vector table (literal pools, vtables,
     /// tables): what a call through a register may reach.
     pub address_taken: BTreeSet<u64>,
-    /// The named data objects (`static`s, vtables): their address by demangled name without the
-    /// hash and by symbol.
-    objects: BTreeMap<String, u64>,
+    /// The named data objects (`static`s, vtables): their address and size by demangled name
+    /// without the hash and by symbol.
+    objects: BTreeMap<String, (u64, u64)>,
     /// The contents of the allocated sections with file data (address, bytes): flash, and the
     /// initial values of RAM.
     sections: Vec<(u64, Vec<u8>)>,
@@ -163,8 +163,9 @@ impl Image {
             }
             let Ok(raw) = symbol.name() else { continue };
             let name = format!("{:#}", rustc_demangle::demangle(raw));
-            objects.entry(name).or_insert(symbol.address());
-            objects.entry(raw.to_string()).or_insert(symbol.address());
+            let at = (symbol.address(), symbol.size());
+            objects.entry(name).or_insert(at);
+            objects.entry(raw.to_string()).or_insert(at);
         }
         let mut vectors = Vec::new();
         let mut address_taken = BTreeSet::new();
@@ -204,8 +205,9 @@ impl Image {
             .ok_or_else(|| Error::MissingSymbol(name.to_string()))
     }
 
-    /// The address of the data object named `name` (demangled without hash, or its symbol).
-    pub fn object_named(&self, name: &str) -> Option<u64> {
+    /// The address and size of the data object named `name` (demangled without hash, or its
+    /// symbol).
+    pub fn object_named(&self, name: &str) -> Option<(u64, u64)> {
         self.objects.get(name).copied()
     }
 

@@ -20,7 +20,9 @@
 //!   function address left in a pool no load reads is data too. A constant only ever called (a
 //!   `fn` pointer the compiler kept in a register, the drive controller's closure) is not a waker.
 //!
-//! No such function declines the call. Known answers in this module's tests.
+//! No such function, or a function that takes the address (other than one the object itself holds:
+//! `waker_clone`) while neither it nor a caller holds a function's address as data, declines the call.
+//! Known answers in this module's tests.
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::bounds::IndirectTargets;
@@ -68,7 +70,7 @@ pub(super) fn targets(
 /// The functions whose addresses the code taking `object`'s address (and its callers) uses as data
 /// (the module's method), or why they cannot be found.
 pub fn stored_with(image: &Image, object: &str) -> Result<BTreeSet<u64>, String> {
-    let address = image
+    let (address, size) = image
         .object_named(object)
         .ok_or_else(|| format!("no data object `{object}` in the image"))?;
     let value = u32::try_from(address).map_err(|_| format!("`{object}` lies above 4 GiB"))?;
@@ -115,20 +117,48 @@ pub fn stored_with(image: &Image, object: &str) -> Result<BTreeSet<u64>, String>
             }
         }
     }
-    let mut builders = takers.clone();
-    let mut work: Vec<u64> = takers.into_iter().collect();
-    while let Some(f) = work.pop() {
-        for &c in callers.get(&f).map(Vec::as_slice).unwrap_or_default() {
-            if builders.insert(c) {
-                work.push(c);
+    let upward = |from: u64| {
+        let mut seen = BTreeSet::from([from]);
+        let mut work = vec![from];
+        while let Some(f) = work.pop() {
+            for &c in callers.get(&f).map(Vec::as_slice).unwrap_or_default() {
+                if seen.insert(c) {
+                    work.push(c);
+                }
             }
         }
-    }
+        seen
+    };
+    // The functions the object itself holds (a vtable's entries: `waker_clone` takes the vtable's
+    // address to pass on the data of the waker it clones, no new data).
+    let entries: BTreeSet<u64> = (0..size / 4)
+        .filter_map(|k| image.word(address + 4 * k))
+        .filter(|v| v & 1 == 1)
+        .map(|v| u64::from(v & !1))
+        .collect();
+    let mut of_builder: BTreeMap<u64, BTreeSet<u64>> = BTreeMap::new();
     let mut found = BTreeSet::new();
-    for at in builders {
-        if let Some(f) = image.function_at(at) {
-            found.extend(data_constants(image, f)?);
+    for &taker in &takers {
+        let mut here = BTreeSet::new();
+        for at in upward(taker) {
+            if let std::collections::btree_map::Entry::Vacant(slot) = of_builder.entry(at) {
+                slot.insert(match image.function_at(at) {
+                    Some(f) => data_constants(image, f)?,
+                    None => BTreeSet::new(),
+                });
+            }
+            here.extend(of_builder[&at].iter().copied());
         }
+        // A builder whose data no constant of its own or its callers' gives: it comes from memory
+        // or from elsewhere the method does not follow.
+        if here.is_empty() && !entries.contains(&taker) {
+            return Err(format!(
+                "{} takes the address of `{object}`, but neither it nor a caller holds a function's \
+                 address as data: where its wakers' data comes from is not followed",
+                image.name(taker)
+            ));
+        }
+        found.extend(here);
     }
     if found.is_empty() {
         return Err(format!(
@@ -374,9 +404,8 @@ mod tests {
     /// `wake` calls its argument (`bx r0`, as RTIC's `waker_wake`) at src/exec.rs:22. `dispatch`
     /// builds a waker on its stack from `VTABLE`'s address and `pend`'s, and calls `costly`
     /// through a register it only calls; `outer` passes `pend2` to `dispatch`; `elsewhere` returns
-    /// `other`'s address but takes no vtable's. `stray` adds, after the code, a word holding the
-    /// vtable's address outside any function.
-    fn waker_image(stray: bool) -> Image {
+    /// `other`'s address but takes no vtable's. [`Extra`] adds more after the vtable.
+    fn waker_image(extra: Extra) -> Image {
         let mut halves = vec![
             0x4700, // 0x00 wake: bx r0
             0xbf00, // 0x02 nop
@@ -429,10 +458,28 @@ mod tests {
             0x0001, 0x0000, // 0x70 wake by reference
             0x0000, 0x0000, // 0x74 drop
         ];
-        if stray {
-            halves.extend([0x0068, 0x0000]); // 0x78 .word VTABLE, in no function
+        let mut symbols = vec![];
+        match extra {
+            Extra::Nothing => {}
+            Extra::Stray => halves.extend([0x0068, 0x0000]), // 0x78 .word VTABLE, in no function
+            Extra::Reload => {
+                halves.extend([
+                    0x6810, // 0x78 reload: ldr r0, [r2]: the data from memory
+                    0x4902, // 0x7a ldr r1, [pc, #8]: VTABLE (0x84)
+                    0x6019, // 0x7c str r1, [r3]
+                    0x6058, // 0x7e str r0, [r3, #4]
+                    0x4770, // 0x80 bx lr
+                    0xbf00, // 0x82 nop
+                    0x0068, 0x0000, // 0x84 .word VTABLE
+                ]);
+                symbols.extend([
+                    Sym::code(0x78),
+                    Sym::function("reload", 0x78, 0x10),
+                    Sym::data(0x84),
+                ]);
+            }
         }
-        let symbols = [
+        symbols.extend([
             Sym::function("wake", 0, 4),
             Sym::function("dispatch", 0x04, 0x24),
             Sym::data(0x1c),
@@ -449,7 +496,7 @@ mod tests {
             Sym::function("other", 0x58, 0x10),
             Sym::object("VTABLE", 0x68, 16),
             Sym::data(0x68),
-        ];
+        ]);
         let bytes = elf_with_lines(
             &thumb(&halves),
             &symbols,
@@ -457,6 +504,16 @@ mod tests {
             &[(0, 22), (4, 30)],
         );
         Image::parse(&bytes).expect("the test image parses")
+    }
+
+    /// What the test image holds after its vtable.
+    #[derive(Clone, Copy)]
+    enum Extra {
+        Nothing,
+        /// A word holding the vtable's address outside any function.
+        Stray,
+        /// `reload`, which builds a waker of the vtable from data it loads from memory.
+        Reload,
     }
 
     fn bounds(targets: &str) -> BoundsFile {
@@ -468,7 +525,7 @@ mod tests {
 
     #[test]
     fn the_functions_stored_with_a_vtable_are_those_its_builders_use_as_data() {
-        let img = waker_image(false);
+        let img = waker_image(Extra::Nothing);
         let found = stored_with(&img, "VTABLE").unwrap();
         // pend (stored beside the vtable's address) and pend2 (passed to the builder by its
         // caller); not costly (only called through r4), not other (no builder holds it).
@@ -477,7 +534,7 @@ mod tests {
 
     #[test]
     fn a_waker_call_is_bounded_by_the_functions_stored_with_its_vtable() {
-        let img = waker_image(false);
+        let img = waker_image(Extra::Nothing);
         let b =
             bound_function(&img, "wake", F103_0WS, &bounds(r#""stored_with":"VTABLE""#)).unwrap();
         // bx r0: 1 + P = 4, then the costlier target, pend2: movs 1 + adds 1 + bx lr 4 = 6.
@@ -491,15 +548,21 @@ mod tests {
     #[test]
     fn a_vtable_that_cannot_be_followed_declines_the_call() {
         // Its address stored outside any function's code.
-        let img = waker_image(true);
+        let img = waker_image(Extra::Stray);
         let reason = stored_with(&img, "VTABLE").unwrap_err();
         assert!(reason.contains("stored in data at 0x00000078"), "{reason}");
         let b =
             bound_function(&img, "wake", F103_0WS, &bounds(r#""stored_with":"VTABLE""#)).unwrap();
         let declined = b.declined.expect("declined");
         assert!(declined.contains("exec.rs:22"), "{declined}");
+        // A builder whose data comes from memory.
+        let reason = stored_with(&waker_image(Extra::Reload), "VTABLE").unwrap_err();
+        assert!(
+            reason.starts_with("reload takes the address of `VTABLE`"),
+            "{reason}"
+        );
         // No such object.
-        let img = waker_image(false);
+        let img = waker_image(Extra::Nothing);
         let b = bound_function(&img, "wake", F103_0WS, &bounds(r#""stored_with":"NONE""#)).unwrap();
         assert!(b
             .declined
