@@ -53,6 +53,9 @@ pub struct Image {
     /// Functions whose address is stored anywhere outside the vector table (literal pools, vtables,
     /// tables): what a call through a register may reach.
     pub address_taken: BTreeSet<u64>,
+    /// The named data objects (`static`s, vtables): their address and size by demangled name
+    /// without the hash and by symbol.
+    objects: BTreeMap<String, (u64, u64)>,
     /// The contents of the allocated sections with file data (address, bytes): flash, and the
     /// initial values of RAM.
     sections: Vec<(u64, Vec<u8>)>,
@@ -153,6 +156,17 @@ impl Image {
             );
         }
         mark_outlined_calls(&mut functions);
+        let mut objects = BTreeMap::new();
+        for symbol in file.symbols() {
+            if symbol.kind() != SymbolKind::Data || symbol.size() == 0 {
+                continue;
+            }
+            let Ok(raw) = symbol.name() else { continue };
+            let name = format!("{:#}", rustc_demangle::demangle(raw));
+            let at = (symbol.address(), symbol.size());
+            objects.entry(name).or_insert(at);
+            objects.entry(raw.to_string()).or_insert(at);
+        }
         let mut vectors = Vec::new();
         let mut address_taken = BTreeSet::new();
         for section in file.sections().filter(|s| allocated(s)) {
@@ -176,6 +190,7 @@ impl Image {
             functions,
             vectors,
             address_taken,
+            objects,
             sections,
             lines: line_table(&file),
         })
@@ -188,6 +203,31 @@ impl Image {
             .values()
             .find(|f| f.name == name || f.symbol == name)
             .ok_or_else(|| Error::MissingSymbol(name.to_string()))
+    }
+
+    /// The address and size of the data object named `name` (demangled without hash, or its
+    /// symbol).
+    pub fn object_named(&self, name: &str) -> Option<(u64, u64)> {
+        self.objects.get(name).copied()
+    }
+
+    /// The addresses of the aligned words of the loaded sections (code, its literal pools, data)
+    /// that hold `value`.
+    pub fn words_holding(&self, value: u32) -> Vec<u64> {
+        let bytes = value.to_le_bytes();
+        self.sections
+            .iter()
+            .flat_map(|(start, data)| {
+                let start = *start;
+                let skip = ((4 - start % 4) % 4) as usize;
+                data.get(skip..)
+                    .unwrap_or_default()
+                    .chunks_exact(4)
+                    .enumerate()
+                    .filter(move |(_, w)| **w == bytes)
+                    .map(move |(k, _)| start + skip as u64 + 4 * k as u64)
+            })
+            .collect()
     }
 
     /// The function starting at `address`.

@@ -23,6 +23,15 @@ impl Sym {
             kind: SymbolKind::Text,
         }
     }
+    /// A named data object (a `static`, a vtable) of `size` bytes at `offset`.
+    pub fn object(name: &str, offset: u64, size: u64) -> Sym {
+        Sym {
+            name: name.to_string(),
+            offset,
+            size,
+            kind: SymbolKind::Data,
+        }
+    }
     /// Data (a literal pool, a table) starts at `offset`.
     pub fn data(offset: u64) -> Sym {
         Sym {

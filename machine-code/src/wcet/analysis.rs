@@ -8,6 +8,7 @@ use super::chip::Chip;
 use super::counted;
 use super::length::{self, Args, LENGTH_UNKNOWN, NO_ARGS};
 use super::path::{self, Cost, LoopCount, LoopNodes, Node, PathError};
+use super::stored;
 use super::LoopInfo;
 use crate::callgraph::is_panic;
 use crate::decode::{Flow, Insn, Opcode, PC, SP};
@@ -498,24 +499,15 @@ impl<'a> Analysis<'a> {
                         )));
                     };
                     let (mut worst_time, mut worst_count) = (Cost::default(), Cost::default());
-                    // A name stands for every function of that name (monomorphs and closures
-                    // share theirs once the hash is gone).
-                    let mut targets = Vec::new();
-                    for name in &stated.targets {
-                        let before = targets.len();
-                        targets.extend(
-                            image
-                                .functions
-                                .values()
-                                .filter(|f| &f.name == name || &f.symbol == name)
-                                .map(|f| (name, f.start)),
-                        );
-                        if targets.len() == before {
-                            return Err(Error::Bounds(format!(
-                                "the indirect call at {text} names `{name}`, which is not in the image"
-                            )));
+                    let targets = match stored::targets(image, stated, &text)? {
+                        Ok(targets) => targets,
+                        Err(reason) => {
+                            return Ok(Err(format!(
+                                "the call through a register in {} at {text}: {reason}",
+                                f.name
+                            )))
                         }
-                    }
+                    };
                     for (name, start) in targets {
                         match self.summary(start)? {
                             Ok(s) => {

@@ -55,14 +55,19 @@ pub struct WaitBound {
     pub source: String,
 }
 
-/// The functions a call through a register at a place may reach.
+/// The functions a call through a register at a place may reach: named (`targets`), or found in
+/// the image (`stored_with`: the functions whose addresses the code that takes the named data
+/// object's address uses as data, [`super::stored`]). One of the two.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct IndirectTargets {
     pub function: String,
     pub file: String,
     pub line: u32,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub targets: Vec<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stored_with: Option<String>,
     pub reason: String,
 }
 
@@ -208,9 +213,11 @@ impl BoundsFile {
             }
         }
         for i in &file.indirect {
-            if i.targets.is_empty() || i.reason.trim().is_empty() {
+            let one_way = i.targets.is_empty() != i.stored_with.is_none();
+            if !one_way || i.reason.trim().is_empty() {
                 return Err(Error::Bounds(format!(
-                    "the indirect call at {}:{} in {} needs its targets and a reason",
+                    "the indirect call at {}:{} in {} needs its targets or the object they are \
+                     stored with (one of the two) and a reason",
                     i.file, i.line, i.function
                 )));
             }

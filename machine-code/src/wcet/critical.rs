@@ -34,6 +34,7 @@ use super::cfg::{Block, Call, Cfg};
 use super::chip::Chip;
 use super::length::{self, NO_ARGS};
 use super::masking::{effect, region, value_before, Effect, Kind};
+use super::stored;
 use super::Task;
 use crate::decode::Insn;
 use crate::image::Function;
@@ -338,18 +339,13 @@ impl<'a> Finder<'a> {
                         self.bounds.indirect(&f.name, &file, line).cloned()
                     });
                     match stated {
-                        Some(stated) => callees.extend(
-                            image
-                                .functions
-                                .values()
-                                .filter(|g| {
-                                    stated
-                                        .targets
-                                        .iter()
-                                        .any(|n| *n == g.name || *n == g.symbol)
-                                })
-                                .map(|g| g.start),
-                        ),
+                        // The stated targets, or those found stored with the stated object;
+                        // where they cannot be found, every function whose address the image
+                        // stores (below).
+                        Some(stated) => match stored::targets(image, &stated, &f.name) {
+                            Ok(Ok(targets)) => callees.extend(targets.into_iter().map(|(_, t)| t)),
+                            _ => callees.extend(image.address_taken.iter().copied()),
+                        },
                         // Not stated: every function whose address the image stores (a call
                         // through a register reaches no other), a superset.
                         None => callees.extend(image.address_taken.iter().copied()),

@@ -16,6 +16,7 @@ pub mod critical;
 pub mod length;
 mod masking;
 pub mod path;
+pub mod stored;
 
 use serde::Serialize;
 
