@@ -93,13 +93,7 @@ impl Odometry {
     pub fn from_micrometres(x_um: i64, y_um: i64, heading_urad: i64) -> Option<Odometry> {
         let x = i32::try_from(round_div(i128::from(x_um), 100)).ok()?;
         let y = i32::try_from(round_div(i128::from(y_um), 100)).ok()?;
-        let counts = round_div(
-            i128::from(heading_urad) * TURN_COUNTS * 1_000_000,
-            TURN_PICORAD,
-        );
-        // rem_euclid into 0..65536, so the cast is exact.
-        let heading = counts.rem_euclid(TURN_COUNTS) as u16;
-        Odometry::new(x, y, heading)
+        Odometry::new(x, y, heading_counts(heading_urad))
     }
 
     /// x in 100 µm units.
@@ -163,6 +157,23 @@ impl Odometry {
 }
 
 /// Integer division rounding half away from zero; `d` is positive.
+/// `heading_urad × 65536 × 10⁶ / TURN_PICORAD`, rounded to the nearest count and wrapped into one turn,
+/// in 64-bit arithmetic: a 128-bit division is a loop of up to 128 passes the compiler writes inline
+/// (with no source line to state its bound at), a 64-bit one a call of the runtime's bounded division.
+///
+/// `M = TURN_PICORAD / 20` µrad are exactly 50 000 turns of 65536 counts, so the heading is reduced
+/// modulo `M` first (`r`), then the whole turns of `r × 50 000 / M` dropped (`u = r × 50 000 mod M`):
+/// what is left is `65536 × u / M` counts, below 65536. No exact half occurs (`M` is odd and `u < M`),
+/// so rounding to the nearest is the exact formula's rounding of halves away from zero.
+fn heading_counts(heading_urad: i64) -> u16 {
+    const M: u64 = (TURN_PICORAD / 20) as u64;
+    // r < M ≈ 3.1 × 10¹¹, r × 50 000 < 1.6 × 10¹⁶ and u × 131 072 < 4.2 × 10¹⁶: all within u64.
+    let r = heading_urad.rem_euclid(M as i64) as u64;
+    let u = r * 50_000 % M;
+    // At most 65536 (one turn), which the cast wraps to 0 as the exact formula's rem_euclid does.
+    ((u * 2 * TURN_COUNTS as u64 + M) / (2 * M)) as u16
+}
+
 fn round_div(n: i128, d: i128) -> i128 {
     if n >= 0 {
         (n + d / 2) / d
@@ -493,6 +504,39 @@ impl fmt::Display for SensorData {
 mod tests {
     use super::*;
     use std::format;
+
+    /// The heading conversion in 64-bit arithmetic is the exact 128-bit formula: at the ends of the
+    /// range, around every multiple of the reduction's 50 000 turns and of a turn, and across the range.
+    #[test]
+    fn heading_counts_match_the_exact_division() {
+        let exact = |h: i64| {
+            round_div(i128::from(h) * TURN_COUNTS * 1_000_000, TURN_PICORAD).rem_euclid(TURN_COUNTS)
+                as u16
+        };
+        let m = (TURN_PICORAD / 20) as i64;
+        let turn = 6_283_185i64;
+        let mut cases = std::vec![i64::MIN, i64::MIN + 1, i64::MAX, i64::MAX - 1, 0, 1, -1];
+        for k in [-3i64, -2, -1, 1, 2, 3, 1000, -1000] {
+            for d in -3..=3 {
+                cases.push(k * m + d);
+                cases.push(k * turn + d);
+                cases.push(k * (turn + 1) + d);
+            }
+        }
+        // A deterministic spread over the whole range (a 64-bit LCG), and every µrad of one turn.
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        for _ in 0..200_000 {
+            x = x
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            cases.push(x as i64);
+            cases.push((x as i64) >> 20);
+        }
+        cases.extend(-turn..=2 * turn);
+        for h in cases {
+            assert_eq!(heading_counts(h), exact(h), "heading {h} µrad");
+        }
+    }
 
     #[test]
     fn odometry_i24_sign_extension() {

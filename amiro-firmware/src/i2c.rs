@@ -193,22 +193,59 @@ impl Master {
         let _ = self.read(SR2_REG);
     }
 
+    /// Sends `bytes`, one at a time as the data register empties (the address phase done). Not
+    /// inlined: its loop runs once per byte of the slice it is given, and the execution-time
+    /// analysis bounds it per call by the length its caller passes (`per_element` in the boards'
+    /// bounds files), which every register access of the drivers fixes.
+    #[inline(never)]
+    fn send(&self, bytes: &[u8]) -> Result<(), Error> {
+        for &byte in bytes {
+            self.wait(SR1_TXE, NoAcknowledgeSource::Data)?;
+            self.write(DR, u16::from(byte));
+        }
+        Ok(())
+    }
+
+    /// Receives `buffer`, byte by byte (the address phase done); where `stop_at_last`, the last byte
+    /// is not acknowledged and the STOP is requested before it arrives (the reference manuals'
+    /// polling sequence for a transfer of more than one byte). Not inlined, as [`Master::send`].
+    #[inline(never)]
+    fn receive(&self, buffer: &mut [u8], stop_at_last: bool) -> Result<(), Error> {
+        let last = buffer.len().wrapping_sub(1);
+        for (n, byte) in buffer.iter_mut().enumerate() {
+            if stop_at_last && n == last {
+                self.set_cr1(CR1_STOP, CR1_ACK);
+            }
+            self.wait(SR1_RXNE, NoAcknowledgeSource::Data)?;
+            *byte = self.read(DR) as u8;
+        }
+        Ok(())
+    }
+
+    /// The address phase of a read of `total` bytes: START, the address, ADDR cleared; a read of
+    /// one byte is not acknowledged and has its STOP requested here.
+    fn read_address(&self, address: u8, total: usize) -> Result<(), Error> {
+        self.address(address, true, total > 1)?;
+        self.clear_addr();
+        if total == 1 {
+            self.set_cr1(CR1_STOP, 0);
+        }
+        Ok(())
+    }
+
     fn write_group(&self, address: u8, group: &[Operation<'_>]) -> Result<(), Error> {
         self.address(address, false, false)?;
         self.clear_addr();
         for operation in group {
             if let Operation::Write(bytes) = operation {
-                for &byte in bytes.iter() {
-                    self.wait(SR1_TXE, NoAcknowledgeSource::Data)?;
-                    self.write(DR, u16::from(byte));
-                }
+                self.send(bytes)?;
             }
         }
         self.wait(SR1_BTF, NoAcknowledgeSource::Data)
     }
 
     /// Reads every byte of the read operations in `group`; the last byte is not acknowledged and
-    /// the STOP is requested before it arrives (the reference manuals' polling sequence).
+    /// the STOP is requested before it arrives.
     fn read_group(&self, address: u8, group: &mut [Operation<'_>]) -> Result<(), Error> {
         let total: usize = group
             .iter()
@@ -220,27 +257,55 @@ impl Master {
         if total == 0 {
             return Ok(());
         }
-        self.address(address, true, total > 1)?;
-        if total == 1 {
-            self.clear_addr();
-            self.set_cr1(CR1_STOP, 0);
-        } else {
-            self.clear_addr();
-        }
-        let mut n = 0;
-        for operation in group.iter_mut() {
+        self.read_address(address, total)?;
+        // The last byte of the transfer is the last of the last read operation that has any.
+        let last = group
+            .iter()
+            .rposition(|o| matches!(o, Operation::Read(b) if !b.is_empty()));
+        for (k, operation) in group.iter_mut().enumerate() {
             if let Operation::Read(buffer) = operation {
-                for byte in buffer.iter_mut() {
-                    n += 1;
-                    if n == total && total > 1 {
-                        self.set_cr1(CR1_STOP, CR1_ACK);
-                    }
-                    self.wait(SR1_RXNE, NoAcknowledgeSource::Data)?;
-                    *byte = self.read(DR) as u8;
-                }
+                self.receive(buffer, total > 1 && Some(k) == last)?;
             }
         }
         Ok(())
+    }
+
+    /// A register read (one byte written, then `read`, after a repeated START), the transfer every
+    /// `write_read` of the AMiRo drivers makes; `target` is the device's address (high byte) and
+    /// the register's (low byte), so the length of `read` is an argument in a register (r3), which
+    /// the call's machine code fixes.
+    #[inline(never)]
+    fn read_register(&mut self, target: u16, read: &mut [u8]) -> Result<(), Error> {
+        let [address, register] = target.to_be_bytes();
+        let result = self.wait_idle().and_then(|()| {
+            self.address(address, false, false)?;
+            self.clear_addr();
+            self.send(&[register])?;
+            self.wait(SR1_BTF, NoAcknowledgeSource::Data)?;
+            if read.is_empty() {
+                self.set_cr1(CR1_STOP, 0);
+                return Ok(());
+            }
+            self.read_address(address, read.len())?;
+            self.receive(read, read.len() > 1)
+        });
+        self.finish(result)
+    }
+
+    /// After a transfer: on a missing acknowledge the bus is released (the block stays usable),
+    /// after any other error the block is reset and set up again.
+    fn finish(&mut self, result: Result<(), Error>) -> Result<(), Error> {
+        match result {
+            Ok(()) => {}
+            Err(Error::NoAcknowledge(_)) => {
+                self.set_cr1(CR1_STOP, 0);
+                if self.wait_idle().is_err() {
+                    self.setup();
+                }
+            }
+            Err(_) => self.setup(),
+        }
+        result
     }
 
     fn run(&mut self, address: u8, operations: &mut [Operation<'_>]) -> Result<(), Error> {
@@ -284,17 +349,51 @@ impl I2c for Master {
         operations: &mut [Operation<'_>],
     ) -> Result<(), Self::Error> {
         let result = self.run(address, operations);
-        match result {
-            Ok(()) => {}
-            Err(Error::NoAcknowledge(_)) => {
-                // Release the bus; the block stays usable.
-                self.set_cr1(CR1_STOP, 0);
-                if self.wait_idle().is_err() {
-                    self.setup();
-                }
+        self.finish(result)
+    }
+
+    // The drivers' transfers, each with its slice's length in an argument register (r3) rather
+    // than in an operation list in memory: the execution-time analysis bounds their byte loops
+    // per call (docs/analysis.md, "The bounds file").
+
+    fn read(&mut self, address: u8, read: &mut [u8]) -> Result<(), Self::Error> {
+        let result = self.wait_idle().and_then(|()| {
+            if read.is_empty() {
+                return Ok(());
             }
-            Err(_) => self.setup(),
+            self.read_address(address, read.len())?;
+            self.receive(read, read.len() > 1)
+        });
+        self.finish(result)
+    }
+
+    fn write(&mut self, address: u8, write: &[u8]) -> Result<(), Self::Error> {
+        let result = self.wait_idle().and_then(|()| {
+            self.address(address, false, false)?;
+            self.clear_addr();
+            self.send(write)?;
+            self.wait(SR1_BTF, NoAcknowledgeSource::Data)?;
+            self.set_cr1(CR1_STOP, 0);
+            Ok(())
+        });
+        self.finish(result)
+    }
+
+    /// A one-byte write then a read is a register read ([`Master::read_register`]); any other a
+    /// transaction. Inlined, so a call whose write is one byte calls `read_register` alone.
+    #[inline(always)]
+    fn write_read(
+        &mut self,
+        address: u8,
+        write: &[u8],
+        read: &mut [u8],
+    ) -> Result<(), Self::Error> {
+        match write {
+            [register] => self.read_register(u16::from_be_bytes([address, *register]), read),
+            _ => self.transaction(
+                address,
+                &mut [Operation::Write(write), Operation::Read(read)],
+            ),
         }
-        result
     }
 }

@@ -16,9 +16,8 @@ use amiro_can::{
     SensorCommand, SensorMode, Topic,
 };
 
-/// Room in the publisher table: the most sensor topics any one board owns in the protocol's topic
-/// table (DiWheelDrive's nine: eight sensor topics and its diagnostics), computed when the crate
-/// compiles so no board can outgrow it.
+/// Room in the publisher table: the most topics any board publishes (DiWheelDrive's nine, its
+/// diagnostics included), computed when the crate compiles so no board can outgrow it.
 pub const MAX_PUBLISHERS: usize = {
     let mut most = 0;
     let mut i = 0;

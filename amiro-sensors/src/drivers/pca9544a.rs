@@ -170,14 +170,19 @@ impl<I2C: I2c> I2c for MuxedBus<'_, I2C> {
         self.mux.i2c.transaction(address, operations)
     }
 
+    // Inlined, so the bus's own `read`/`write`/`write_read` are called with the driver's slices
+    // (their lengths fixed at the driver's call, where the execution-time analysis reads them).
+    #[inline(always)]
     fn read(&mut self, address: u8, read: &mut [u8]) -> Result<(), Self::Error> {
         self.mux.i2c.read(address, read)
     }
 
+    #[inline(always)]
     fn write(&mut self, address: u8, write: &[u8]) -> Result<(), Self::Error> {
         self.mux.i2c.write(address, write)
     }
 
+    #[inline(always)]
     fn write_read(
         &mut self,
         address: u8,

@@ -1574,3 +1574,62 @@ fn loops_named_at_one_place_share_their_stated_total() {
     let b = bound_function(&img, "twice", F103_0WS, &each).unwrap();
     assert_eq!(figures(&b), (118, 31, None));
 }
+
+/// The I2C driver's shape: a caller fixes a length in r3 (`movs r3, #n`), an intermediate function
+/// passes it on in r1 (`mov r1, r3`) to a `per_element` function whose loop runs once per element. The
+/// length the outer call fixes bounds the loop two calls down; an outer call that loads the length
+/// from memory leaves it declined, naming that call.
+fn passes_length_on(set_r3: u16) -> Image {
+    image(
+        &with_memclr(&[
+            0xb580, // 0x00 push {r7, lr}
+            set_r3, // 0x02 movs r3, #n (or a load)
+            0xf000, 0xf802, // 0x04 bl 0x0c (read)
+            0xbd80, // 0x08 pop {r7, pc}
+            0xbf00, // 0x0a
+            0xb580, // 0x0c push {r7, lr}   (read)
+            0x4619, // 0x0e mov r1, r3
+            0xf000, 0xf802, // 0x10 bl 0x18 (receive)
+            0xbd80, // 0x14 pop {r7, pc}
+            0xbf00, // 0x16
+        ]), // 0x18 receive: MEMCLR_BYTES, one store a pass, its length in r1
+        &[
+            Sym::function("transfer", 0, 0x0c),
+            Sym::function("read", 0x0c, 0x0c),
+            Sym::function("receive", 0x18, 0x10),
+        ],
+    )
+}
+
+#[test]
+fn a_length_fixed_at_a_call_bounds_a_per_element_loop_two_calls_down() {
+    let stated = BoundsFile::parse(
+        r#"{"per_element":[{"function":"receive","register":1,"reason":"one pass per byte"}]}"#,
+    )
+    .unwrap();
+    // movs r3, #6. What runs: transfer's push, movs, bl and pop (4); read's push, mov, bl and pop
+    // (4); receive's movs, then 6 passes of (cmp, beq, strb, adds, subs, b) and the way out (cmp,
+    // beq, bx lr): 1 + 36 + 3. 48 instructions, all of them what runs.
+    let b = bound_function(&passes_length_on(0x2306), "transfer", F103_0WS, &stated).unwrap();
+    assert_eq!((b.instructions, b.declined.as_deref()), (48, None));
+    let l = b
+        .loops
+        .iter()
+        .find(|l| l.function == "receive")
+        .expect("the loop is listed");
+    assert_eq!(l.bound, 7, "{l:?}");
+    assert!(l.source.contains("at most 6 at the call (r1)"), "{l:?}");
+    // Cycles (TRM, 0 wait states): 6 more elements are 6 more passes of cmp 1, beq 1 (not taken),
+    // strb 2 and 5 more for a store whose address the analysis does not know (charged as an APB1
+    // peripheral's, 2 × 2 + 1 on the F103), adds 1, subs 1, b 1 + P = 4: 15 cycles and 6
+    // instructions each.
+    let twelve = bound_function(&passes_length_on(0x230c), "transfer", F103_0WS, &stated).unwrap();
+    assert_eq!(twelve.instructions, 48 + 6 * 6);
+    assert_eq!(twelve.cycles, b.cycles + 6 * 15);
+    // ldr r3, [r0]: the length comes from memory, no call fixes it; the reason names the call that
+    // passes the unfixed length to the loop's function (read's), where a `lengths` entry would go.
+    let unknown = bound_function(&passes_length_on(0x6803), "transfer", F103_0WS, &stated).unwrap();
+    let reason = unknown.declined.expect("declined");
+    assert!(reason.contains(length::LENGTH_UNKNOWN), "{reason}");
+    assert!(reason.contains("the call in read"), "{reason}");
+}
