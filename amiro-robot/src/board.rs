@@ -68,6 +68,8 @@ pub(crate) struct Board {
     /// It was given a command frame and has not slept since: it may drive a line (a shutdown
     /// command), so it is not sent ahead together with another board meanwhile.
     pub(crate) commanded: bool,
+    /// What its QEMUs cost (summed over its starts), taken as each is reaped.
+    pub(crate) cost: crate::cost::Cost,
 }
 
 fn make_fifo(path: &Path) -> Result<()> {
@@ -130,6 +132,7 @@ impl Board {
             held: None,
             commanded: false,
             live,
+            cost: crate::cost::Cost::default(),
         }
     }
 
@@ -323,8 +326,8 @@ impl Board {
                 continue;
             }
             if ready <= 0 {
-                if let Some(child) = self.child.as_mut() {
-                    if child.try_wait()?.is_some() {
+                if let Some(child) = self.child.as_ref() {
+                    if crate::cost::ended(child.id()) {
                         while self.drain() {}
                         self.flush_partial();
                         self.ready.append(&mut self.lines);
@@ -373,8 +376,11 @@ impl Board {
 
     pub(crate) fn stop(&mut self) {
         if let Some(mut child) = self.child.take() {
-            let _ = child.kill();
-            let _ = child.wait();
+            if !crate::cost::ended(child.id()) {
+                let _ = child.kill();
+            }
+            // Reaped here with what it cost (not through `child`, which is dropped unwaited).
+            self.cost += crate::cost::reap(child.id());
         }
         while self.drain() {}
         self.flush_partial();

@@ -37,6 +37,10 @@ pub struct Work {
     pub waiting_us: u64,
     /// Wall time live runs slept to stay behind the wall clock, µs.
     pub pacing_us: u64,
+    /// What each board's QEMU cost (CPU, task switches, system calls; summed over its starts).
+    pub boards: [crate::cost::Cost; 3],
+    /// What the host cost in the run (this process: the bus model, the coordinator, the pipes).
+    pub host: crate::cost::Cost,
 }
 
 /// What a board must get at boundary `t`: the frame that completes in the coming quantum if it is
@@ -93,6 +97,7 @@ pub fn run_in_world(
     mut world: Option<&mut WorldRun>,
 ) -> Result<Outcome> {
     std::fs::create_dir_all(work)?;
+    let host_before = crate::cost::own();
     let mut bus = Bus::new();
     // The three boards' nodes, then the operator's adapter's (`OPERATOR`).
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
@@ -641,8 +646,8 @@ pub fn run_in_world(
         let started = Instant::now();
         while b
             .child
-            .as_mut()
-            .is_some_and(|c| c.try_wait().ok().flatten().is_none())
+            .as_ref()
+            .is_some_and(|c| !crate::cost::ended(c.id()))
             && started.elapsed() < Duration::from_secs(10)
         {
             b.drain();
@@ -653,6 +658,10 @@ pub fn run_in_world(
             emit(&mut outcome, sink, line);
         }
     }
+    for (cost, b) in outcome.work.boards.iter_mut().zip(&boards) {
+        *cost = b.cost;
+    }
+    outcome.work.host = crate::cost::own().since(&host_before);
     if let Some(pace) = pace {
         outcome.pace = Some(pace.summary());
     }

@@ -156,6 +156,10 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         amiro_robot::QUANTUM_US,
         outcome.work.waiting_us as f64 / 1e6
     );
+    eprint!(
+        "robot: where the CPU went:\n{}",
+        amiro_robot::cost::table(&outcome.work, virtual_s)
+    );
     if let Some(pace) = outcome.pace {
         eprintln!(
             "robot: live: real-time factor {:.3}, worst lag {:.1} ms, {} time(s) behind by more than {} ms",
