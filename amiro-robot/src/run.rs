@@ -591,7 +591,8 @@ pub fn run_in_world(
                     }
                 }
                 b.flags = flags;
-                b.next = Some(next);
+                // A board given the end has nothing more to report.
+                b.next = (!end).then_some(next);
                 let readings = world
                     .as_deref_mut()
                     .and_then(|w| w.readings_for(k, t, b.offset));
@@ -640,6 +641,24 @@ pub fn run_in_world(
     // What a live run computed ahead of the wall clock still reaches the client.
     if let Some(live) = live {
         outbox.flush(|end, frame| live.slcan.deliver(end, &frame));
+    }
+    // A live run stopped by Ctrl-C ends at the host's boundary while boards sent ahead (at most a
+    // live step) still run towards theirs: each reports there and gets the end then. (A run that
+    // reaches its duration never sends a board past it.) Without this a board sent ahead waited
+    // for its answer until the wait below gave up and killed it, 10 s later, without its end line.
+    if result.is_ok() {
+        for b in boards.iter_mut().filter(|b| b.alive && b.next.is_some()) {
+            let reported = match b.held.take() {
+                Some((_, report)) => Ok(report),
+                None => b.receive(Instant::now(), REPORT_LIMIT),
+            };
+            if let Ok(Some(_)) = reported {
+                let _ = b.send(&Down {
+                    flags: DOWN_END,
+                    ..Down::default()
+                });
+            }
+        }
     }
     // The boards print their end lines and exit; whatever they still say is kept.
     for b in &mut boards {
