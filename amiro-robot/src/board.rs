@@ -18,8 +18,30 @@ use anyhow::{bail, Context, Result};
 
 use crate::{Firmware, NODES};
 
-/// The nice value of a live run's QEMUs and host (the default is 0).
+/// The real-time priority (`SCHED_RR`) of a live run's QEMUs: above every ordinary process, so a
+/// build beside the run no longer holds a board up for a time slice (the lags above 5 ms were such
+/// moments, docs/qemu.md "Live"). The host's is one higher ([`live_priority`]).
+pub(crate) const LIVE_RT_PRIORITY: i32 = 10;
+/// The nice value a live run's QEMUs and host fall back to where real-time priority is not
+/// permitted (the default is 0).
 pub(crate) const LIVE_NICE: i32 = -10;
+
+/// Puts the calling thread (or, in a child between fork and exec, the process) at real-time
+/// priority `rt`, else at [`LIVE_NICE`]; what it got: `Some(true)` real-time, `Some(false)` the
+/// nice value, `None` neither (not permitted). Async-signal-safe (two system calls).
+pub(crate) fn live_priority(rt: i32) -> Option<bool> {
+    let param = libc::sched_param { sched_priority: rt };
+    // SAFETY: sched_setscheduler and setpriority on the calling thread, with a parameter we own.
+    unsafe {
+        if libc::sched_setscheduler(0, libc::SCHED_RR, &param) == 0 {
+            Some(true)
+        } else if libc::setpriority(libc::PRIO_PROCESS, 0, LIVE_NICE) == 0 {
+            Some(false)
+        } else {
+            None
+        }
+    }
+}
 
 /// A board's process and the coordinator's view of it.
 pub(crate) struct Board {
@@ -63,7 +85,7 @@ pub(crate) struct Board {
     /// ahead together with another reported later than the other (`None` inside: its run
     /// ended). The host takes it when it reaches that boundary.
     pub(crate) held: Option<(u64, Option<Up>)>,
-    /// Part of a live run (its QEMU runs at [`LIVE_NICE`]).
+    /// Part of a live run (its QEMU runs at [`LIVE_RT_PRIORITY`], else at [`LIVE_NICE`]).
     pub(crate) live: bool,
     /// It was given a command frame and has not slept since: it may drive a line (a shutdown
     /// command), so it is not sent ahead together with another board meanwhile.
@@ -183,7 +205,7 @@ impl Board {
         // A live run's boards (and host, `run`) at a raised priority: the wall clock is theirs
         // to keep up with, other work on the machine can wait (needs the privilege; a refusal
         // keeps the default priority, which the run's first line says).
-        let nice = self.live.then_some(LIVE_NICE);
+        let live = self.live;
         {
             use std::os::unix::process::CommandExt;
             // SAFETY: sched_setaffinity and setpriority on the child between fork and exec (both
@@ -195,8 +217,8 @@ impl Board {
                         libc::CPU_SET(cpu, &mut set);
                         libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
                     }
-                    if let Some(nice) = nice {
-                        libc::setpriority(libc::PRIO_PROCESS, 0, nice);
+                    if live {
+                        live_priority(LIVE_RT_PRIORITY);
                     }
                     Ok(())
                 });
@@ -374,8 +396,14 @@ impl Board {
     fn lower_main_loop(&mut self) {
         self.main_loop_lowered = true;
         if let Some(child) = self.child.as_ref() {
-            // SAFETY: setpriority on one thread of our child (Linux: a thread id names one thread).
+            let param = libc::sched_param { sched_priority: 0 };
+            // SAFETY: sched_setscheduler and setpriority on one thread of our child (Linux: a
+            // thread id names one thread); a live run's QEMU started at real-time priority, which
+            // its main loop leaves for the ordinary class first.
             unsafe {
+                if self.live {
+                    libc::sched_setscheduler(child.id() as libc::pid_t, libc::SCHED_OTHER, &param);
+                }
                 libc::setpriority(libc::PRIO_PROCESS, child.id(), MAIN_LOOP_NICE);
             }
         }

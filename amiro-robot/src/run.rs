@@ -108,13 +108,18 @@ pub fn run_in_world(
         })
         .collect();
     if live.is_some() {
-        // The host's thread too (see `board::LIVE_NICE`).
-        // SAFETY: setpriority on the calling thread.
-        if unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, crate::board::LIVE_NICE) } != 0 {
-            eprintln!(
+        // The host's thread too, one above the boards (it answers them): see
+        // `board::LIVE_RT_PRIORITY`. Put back when the run ends.
+        match crate::board::live_priority(crate::board::LIVE_RT_PRIORITY + 1) {
+            Some(true) => {}
+            Some(false) => eprintln!(
+                "robot: live: no real-time priority for the host and the boards (not permitted), nice {} instead: other work on the machine can hold them up for a time slice",
+                crate::board::LIVE_NICE
+            ),
+            None => eprintln!(
                 "robot: live: the host and the boards keep the default priority ({}): other work on the machine can hold them up",
                 std::io::Error::last_os_error()
-            );
+            ),
         }
     }
     for b in &mut boards {
@@ -681,6 +686,15 @@ pub fn run_in_world(
         *cost = b.cost;
     }
     outcome.work.host = crate::cost::own().since(&host_before);
+    if pace.is_some() {
+        // The host's thread back to the ordinary class for what follows the run (the report).
+        let param = libc::sched_param { sched_priority: 0 };
+        // SAFETY: sched_setscheduler and setpriority on the calling thread.
+        unsafe {
+            libc::sched_setscheduler(0, libc::SCHED_OTHER, &param);
+            libc::setpriority(libc::PRIO_PROCESS, 0, 0);
+        }
+    }
     if let Some(pace) = pace {
         outcome.pace = Some(pace.summary());
     }
