@@ -390,21 +390,27 @@ impl Board {
         }
     }
 
-    /// Puts the QEMU's main loop at [`MAIN_LOOP_NICE`]: at the board's first report its threads
-    /// are all there, and only the first (the main loop's, whose thread id is the process id)
-    /// changes. A refusal leaves it as it was.
+    /// Puts the QEMU's main loop at [`MAIN_LOOP_NICE`] (live, at real-time priority: one below the
+    /// vCPU thread's): at the board's first report its threads are all there, and only the first
+    /// (the main loop's, whose thread id is the process id) changes. A refusal leaves it as it was.
     fn lower_main_loop(&mut self) {
         self.main_loop_lowered = true;
         if let Some(child) = self.child.as_ref() {
-            let param = libc::sched_param { sched_priority: 0 };
-            // SAFETY: sched_setscheduler and setpriority on one thread of our child (Linux: a
-            // thread id names one thread); a live run's QEMU started at real-time priority, which
-            // its main loop leaves for the ordinary class first.
+            let tid = child.id() as libc::pid_t;
+            // SAFETY: sched_getscheduler, sched_setscheduler and setpriority on one thread of our
+            // child (Linux: a thread id names one thread), with parameters we own.
             unsafe {
-                if self.live {
-                    libc::sched_setscheduler(child.id() as libc::pid_t, libc::SCHED_OTHER, &param);
+                if libc::sched_getscheduler(tid) == libc::SCHED_RR {
+                    // A live run's QEMU at real-time priority: its main loop one below the vCPU
+                    // thread, so it never pre-empts it but is never held up by ordinary processes
+                    // either (it may hold QEMU's global lock, which the vCPU thread then waits for).
+                    let param = libc::sched_param {
+                        sched_priority: LIVE_RT_PRIORITY - 1,
+                    };
+                    libc::sched_setscheduler(tid, libc::SCHED_RR, &param);
+                } else {
+                    libc::setpriority(libc::PRIO_PROCESS, child.id(), MAIN_LOOP_NICE);
                 }
-                libc::setpriority(libc::PRIO_PROCESS, child.id(), MAIN_LOOP_NICE);
             }
         }
     }

@@ -231,6 +231,10 @@ pub fn run_in_world(
             operator.extend(w.ticks(t)?.into_iter().map(|f| (t, f)));
         }
         if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
+            if outcome.work.steps == 1 {
+                // The robot's wall clock starts with its boards' first exchange (`Pace::start_at`).
+                pace.start_at(t);
+            }
             // Never ahead of the wall clock (behind it when the host is too slow: said at once).
             outcome.work.pacing_us += pace.hold(t, &mut outbox, |end, frame| {
                 live.slcan.deliver(end, &frame);
