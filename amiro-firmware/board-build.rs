@@ -59,7 +59,9 @@ fn main() {
         println!("cargo:rerun-if-changed=../{board}/src/main.rs");
     }
     println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed=build.rs");
+    // The script itself (it lives here, not in the board crate: a `build.rs` there does not exist,
+    // and a path that does not exist makes cargo rebuild the board at every invocation).
+    println!("cargo:rerun-if-changed=../amiro-firmware/board-build.rs");
     println!("cargo:rustc-link-arg-bins=--nmagic");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
     // Identical code folding: functions (and read-only sections) that compile to the same bytes —

@@ -18,8 +18,30 @@ use anyhow::{bail, Context, Result};
 
 use crate::{Firmware, NODES};
 
-/// The nice value of a live run's QEMUs and host (the default is 0).
+/// The real-time priority (`SCHED_RR`) of a live run's QEMUs: above every ordinary process, so a
+/// build beside the run no longer holds a board up for a time slice (the lags above 5 ms were such
+/// moments, docs/qemu.md "Live"). The host's is one higher ([`live_priority`]).
+pub(crate) const LIVE_RT_PRIORITY: i32 = 10;
+/// The nice value a live run's QEMUs and host fall back to where real-time priority is not
+/// permitted (the default is 0).
 pub(crate) const LIVE_NICE: i32 = -10;
+
+/// Puts the calling thread (or, in a child between fork and exec, the process) at real-time
+/// priority `rt`, else at [`LIVE_NICE`]; what it got: `Some(true)` real-time, `Some(false)` the
+/// nice value, `None` neither (not permitted). Async-signal-safe (two system calls).
+pub(crate) fn live_priority(rt: i32) -> Option<bool> {
+    let param = libc::sched_param { sched_priority: rt };
+    // SAFETY: sched_setscheduler and setpriority on the calling thread, with a parameter we own.
+    unsafe {
+        if libc::sched_setscheduler(0, libc::SCHED_RR, &param) == 0 {
+            Some(true)
+        } else if libc::setpriority(libc::PRIO_PROCESS, 0, LIVE_NICE) == 0 {
+            Some(false)
+        } else {
+            None
+        }
+    }
+}
 
 /// A board's process and the coordinator's view of it.
 pub(crate) struct Board {
@@ -63,12 +85,26 @@ pub(crate) struct Board {
     /// ahead together with another reported later than the other (`None` inside: its run
     /// ended). The host takes it when it reaches that boundary.
     pub(crate) held: Option<(u64, Option<Up>)>,
-    /// Part of a live run (its QEMU runs at [`LIVE_NICE`]).
+    /// Part of a live run (its QEMU runs at [`LIVE_RT_PRIORITY`], else at [`LIVE_NICE`]).
     pub(crate) live: bool,
     /// It was given a command frame and has not slept since: it may drive a line (a shutdown
     /// command), so it is not sent ahead together with another board meanwhile.
     pub(crate) commanded: bool,
+    /// What its QEMUs cost (summed over its starts), taken as each is reaped.
+    pub(crate) cost: crate::cost::Cost,
+    /// Its QEMU's main loop runs at [`MAIN_LOOP_NICE`] (set at its first report).
+    pub(crate) main_loop_lowered: bool,
 }
+
+/// The nice value of a board's QEMU main loop (its process's first thread; the vCPU thread and
+/// the rest keep the process's). Under `-icount` the vCPU thread runs the expired timers itself,
+/// but every timer expiry and every SysTick restart still notifies the main loop, which then
+/// wakes on the same core (the QEMU is pinned), pre-empts the vCPU thread and contends for QEMU's
+/// global lock: 13 task switches per exchange. At the lowest priority it runs when the vCPU
+/// thread waits (for its answer) instead, and takes up the notifications in one turn: 2 switches
+/// per exchange, and 15 % less QEMU CPU in the thesis demo (docs/qemu.md, "Speed"). Nothing in
+/// the virtual timeline depends on it: two runs still print the same bytes.
+pub(crate) const MAIN_LOOP_NICE: i32 = 19;
 
 fn make_fifo(path: &Path) -> Result<()> {
     let _ = std::fs::remove_file(path);
@@ -130,6 +166,8 @@ impl Board {
             held: None,
             commanded: false,
             live,
+            cost: crate::cost::Cost::default(),
+            main_loop_lowered: false,
         }
     }
 
@@ -167,7 +205,7 @@ impl Board {
         // A live run's boards (and host, `run`) at a raised priority: the wall clock is theirs
         // to keep up with, other work on the machine can wait (needs the privilege; a refusal
         // keeps the default priority, which the run's first line says).
-        let nice = self.live.then_some(LIVE_NICE);
+        let live = self.live;
         {
             use std::os::unix::process::CommandExt;
             // SAFETY: sched_setaffinity and setpriority on the child between fork and exec (both
@@ -179,8 +217,8 @@ impl Board {
                         libc::CPU_SET(cpu, &mut set);
                         libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
                     }
-                    if let Some(nice) = nice {
-                        libc::setpriority(libc::PRIO_PROCESS, 0, nice);
+                    if live {
+                        live_priority(LIVE_RT_PRIORITY);
                     }
                     Ok(())
                 });
@@ -235,6 +273,7 @@ impl Board {
         self.ready.clear();
         self.held = None;
         self.commanded = false;
+        self.main_loop_lowered = false;
         Ok(())
     }
 
@@ -309,6 +348,9 @@ impl Board {
                     want = UP_LEN + WHEELS_LEN;
                 }
                 if got == want {
+                    if !self.main_loop_lowered {
+                        self.lower_main_loop();
+                    }
                     // Everything the board printed before this exchange is in its pipe by now.
                     self.drain();
                     self.ready.append(&mut self.lines);
@@ -323,8 +365,8 @@ impl Board {
                 continue;
             }
             if ready <= 0 {
-                if let Some(child) = self.child.as_mut() {
-                    if child.try_wait()?.is_some() {
+                if let Some(child) = self.child.as_ref() {
+                    if crate::cost::ended(child.id()) {
                         while self.drain() {}
                         self.flush_partial();
                         self.ready.append(&mut self.lines);
@@ -344,6 +386,31 @@ impl Board {
                         .map(|l| format!("  {l}\n"))
                         .collect::<String>()
                 );
+            }
+        }
+    }
+
+    /// Puts the QEMU's main loop at [`MAIN_LOOP_NICE`] (live, at real-time priority: one below the
+    /// vCPU thread's): at the board's first report its threads are all there, and only the first
+    /// (the main loop's, whose thread id is the process id) changes. A refusal leaves it as it was.
+    fn lower_main_loop(&mut self) {
+        self.main_loop_lowered = true;
+        if let Some(child) = self.child.as_ref() {
+            let tid = child.id() as libc::pid_t;
+            // SAFETY: sched_getscheduler, sched_setscheduler and setpriority on one thread of our
+            // child (Linux: a thread id names one thread), with parameters we own.
+            unsafe {
+                if libc::sched_getscheduler(tid) == libc::SCHED_RR {
+                    // A live run's QEMU at real-time priority: its main loop one below the vCPU
+                    // thread, so it never pre-empts it but is never held up by ordinary processes
+                    // either (it may hold QEMU's global lock, which the vCPU thread then waits for).
+                    let param = libc::sched_param {
+                        sched_priority: LIVE_RT_PRIORITY - 1,
+                    };
+                    libc::sched_setscheduler(tid, libc::SCHED_RR, &param);
+                } else {
+                    libc::setpriority(libc::PRIO_PROCESS, child.id(), MAIN_LOOP_NICE);
+                }
             }
         }
     }
@@ -373,8 +440,11 @@ impl Board {
 
     pub(crate) fn stop(&mut self) {
         if let Some(mut child) = self.child.take() {
-            let _ = child.kill();
-            let _ = child.wait();
+            if !crate::cost::ended(child.id()) {
+                let _ = child.kill();
+            }
+            // Reaped here with what it cost (not through `child`, which is dropped unwaited).
+            self.cost += crate::cost::reap(child.id());
         }
         while self.drain() {}
         self.flush_partial();

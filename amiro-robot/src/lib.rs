@@ -30,6 +30,7 @@ use std::path::PathBuf;
 use amiro_bus_sim::Frame;
 
 pub mod board;
+pub mod cost;
 pub mod log;
 pub mod pace;
 pub mod report;

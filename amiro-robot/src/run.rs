@@ -37,6 +37,10 @@ pub struct Work {
     pub waiting_us: u64,
     /// Wall time live runs slept to stay behind the wall clock, µs.
     pub pacing_us: u64,
+    /// What each board's QEMU cost (CPU, task switches, system calls; summed over its starts).
+    pub boards: [crate::cost::Cost; 3],
+    /// What the host cost in the run (this process: the bus model, the coordinator, the pipes).
+    pub host: crate::cost::Cost,
 }
 
 /// What a board must get at boundary `t`: the frame that completes in the coming quantum if it is
@@ -93,6 +97,7 @@ pub fn run_in_world(
     mut world: Option<&mut WorldRun>,
 ) -> Result<Outcome> {
     std::fs::create_dir_all(work)?;
+    let host_before = crate::cost::own();
     let mut bus = Bus::new();
     // The three boards' nodes, then the operator's adapter's (`OPERATOR`).
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
@@ -103,13 +108,18 @@ pub fn run_in_world(
         })
         .collect();
     if live.is_some() {
-        // The host's thread too (see `board::LIVE_NICE`).
-        // SAFETY: setpriority on the calling thread.
-        if unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, crate::board::LIVE_NICE) } != 0 {
-            eprintln!(
+        // The host's thread too, one above the boards (it answers them): see
+        // `board::LIVE_RT_PRIORITY`. Put back when the run ends.
+        match crate::board::live_priority(crate::board::LIVE_RT_PRIORITY + 1) {
+            Some(true) => {}
+            Some(false) => eprintln!(
+                "robot: live: no real-time priority for the host and the boards (not permitted), nice {} instead: other work on the machine can hold them up for a time slice",
+                crate::board::LIVE_NICE
+            ),
+            None => eprintln!(
                 "robot: live: the host and the boards keep the default priority ({}): other work on the machine can hold them up",
                 std::io::Error::last_os_error()
-            );
+            ),
         }
     }
     for b in &mut boards {
@@ -221,6 +231,10 @@ pub fn run_in_world(
             operator.extend(w.ticks(t)?.into_iter().map(|f| (t, f)));
         }
         if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
+            if outcome.work.steps == 1 {
+                // The robot's wall clock starts with its boards' first exchange (`Pace::start_at`).
+                pace.start_at(t);
+            }
             // Never ahead of the wall clock (behind it when the host is too slow: said at once).
             outcome.work.pacing_us += pace.hold(t, &mut outbox, |end, frame| {
                 live.slcan.deliver(end, &frame);
@@ -586,7 +600,8 @@ pub fn run_in_world(
                     }
                 }
                 b.flags = flags;
-                b.next = Some(next);
+                // A board given the end has nothing more to report.
+                b.next = (!end).then_some(next);
                 let readings = world
                     .as_deref_mut()
                     .and_then(|w| w.readings_for(k, t, b.offset));
@@ -636,13 +651,31 @@ pub fn run_in_world(
     if let Some(live) = live {
         outbox.flush(|end, frame| live.slcan.deliver(end, &frame));
     }
+    // A live run stopped by Ctrl-C ends at the host's boundary while boards sent ahead (at most a
+    // live step) still run towards theirs: each reports there and gets the end then. (A run that
+    // reaches its duration never sends a board past it.) Without this a board sent ahead waited
+    // for its answer until the wait below gave up and killed it, 10 s later, without its end line.
+    if result.is_ok() {
+        for b in boards.iter_mut().filter(|b| b.alive && b.next.is_some()) {
+            let reported = match b.held.take() {
+                Some((_, report)) => Ok(report),
+                None => b.receive(Instant::now(), REPORT_LIMIT),
+            };
+            if let Ok(Some(_)) = reported {
+                let _ = b.send(&Down {
+                    flags: DOWN_END,
+                    ..Down::default()
+                });
+            }
+        }
+    }
     // The boards print their end lines and exit; whatever they still say is kept.
     for b in &mut boards {
         let started = Instant::now();
         while b
             .child
-            .as_mut()
-            .is_some_and(|c| c.try_wait().ok().flatten().is_none())
+            .as_ref()
+            .is_some_and(|c| !crate::cost::ended(c.id()))
             && started.elapsed() < Duration::from_secs(10)
         {
             b.drain();
@@ -651,6 +684,19 @@ pub fn run_in_world(
         b.stop();
         for line in board_lines(b) {
             emit(&mut outcome, sink, line);
+        }
+    }
+    for (cost, b) in outcome.work.boards.iter_mut().zip(&boards) {
+        *cost = b.cost;
+    }
+    outcome.work.host = crate::cost::own().since(&host_before);
+    if pace.is_some() {
+        // The host's thread back to the ordinary class for what follows the run (the report).
+        let param = libc::sched_param { sched_priority: 0 };
+        // SAFETY: sched_setscheduler and setpriority on the calling thread.
+        unsafe {
+            libc::sched_setscheduler(0, libc::SCHED_OTHER, &param);
+            libc::setpriority(libc::PRIO_PROCESS, 0, 0);
         }
     }
     if let Some(pace) = pace {

@@ -16,18 +16,6 @@ fn load() -> String {
         .unwrap_or_else(|| "?".into())
 }
 
-/// CPU seconds (user, system) of this process and of its waited-for children so far.
-fn cpu() -> [(f64, f64); 2] {
-    let take = |who| {
-        // SAFETY: getrusage fills the structure we own.
-        let mut u: libc::rusage = unsafe { std::mem::zeroed() };
-        unsafe { libc::getrusage(who, &mut u) };
-        let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 / 1e6;
-        (s(u.ru_utime), s(u.ru_stime))
-    };
-    [take(libc::RUSAGE_SELF), take(libc::RUSAGE_CHILDREN)]
-}
-
 /// Runs the three cases for `duration` (default 2 s) of virtual time each and prints the table.
 pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
     let duration_us = match duration {
@@ -69,17 +57,16 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
         "host cpu",
         "load 1 min"
     );
+    let mut costs = Vec::new();
     for (name, actions) in cases {
         let work = crate::qemu::target_dir(root).join("robot-bench").join(name);
         let _ = std::fs::remove_dir_all(&work);
         let load_before = load();
-        let before = cpu();
         let started = Instant::now();
         let mut lines: Vec<String> = Vec::new();
         let outcome = amiro_robot::run(&firmware, &actions, duration_us, &work, &mut lines, None)
             .with_context(|| format!("bench case {name}"))?;
         let wall = started.elapsed().as_secs_f64();
-        let after = cpu();
         let per = |x: f64| x / virtual_s;
         let w = outcome.work;
         println!(
@@ -88,12 +75,13 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
             per(w.exchanges as f64),
             per(wall),
             per(w.waiting_us as f64 / 1e6),
-            per(after[1].0 - before[1].0),
-            per(after[1].1 - before[1].1),
-            per(after[0].0 - before[0].0 + after[0].1 - before[0].1),
+            per(w.boards.iter().map(|c| c.user_s).sum()),
+            per(w.boards.iter().map(|c| c.sys_s).sum()),
+            per(w.host.cpu_s()),
             load_before,
             load()
         );
+        costs.push((name, w));
     }
     println!(
         "steps: boundaries the host ran the bus to; exchanges: board reports (the rest of the \
@@ -102,6 +90,18 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
          emulation and the pipes); qemu usr/sys: the three QEMUs' CPU in user space (emulation) \
          and in the kernel (the exchanges' semihosting reads and writes, pipes, task switches); \
          host cpu: this process (the bus model, the coordinator)."
+    );
+    // The figures that do not depend on the machine's load: per board's QEMU, its CPU, task
+    // switches and read/write system calls per virtual second and per exchange.
+    for (name, w) in costs {
+        println!("\n{name}: where the CPU goes");
+        print!("{}", amiro_robot::cost::table(&w, virtual_s));
+    }
+    println!(
+        "\nswitches: the QEMU's task switches (its vCPU thread and main loop hand QEMU's lock and \
+         timer events to each other, the exchange's blocking read); reads/writes: its read and \
+         write system calls (the exchange's pipes, semihosting writes of the console and the \
+         trace, QEMU's event notifications); CPU µs: its CPU time per exchange."
     );
     Ok(())
 }

@@ -1,0 +1,269 @@
+//! What a run costs the machine, in figures that do not depend on its load: the CPU time of each
+//! board's QEMU (user and kernel, all its threads, from `wait4` when the host reaps it), its task
+//! switches and its read and write system calls (`/proc/PID/io`, read while it is a zombie: the
+//! exchange's pipe, the semihosting writes of its console and trace, QEMU's own event
+//! notifications), and the host's CPU time (`getrusage`). `cargo xtask robot --bench` prints
+//! them per virtual second (docs/qemu.md, "Speed").
+use std::ops::AddAssign;
+
+/// One process's cost, summed over its starts (a board reset starts a new QEMU).
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub struct Cost {
+    /// CPU seconds in user space.
+    pub user_s: f64,
+    /// CPU seconds in the kernel.
+    pub sys_s: f64,
+    /// Task switches where it waited (a blocking read, a lock, the main loop's poll).
+    pub voluntary: u64,
+    /// Task switches where the scheduler took the core from it.
+    pub involuntary: u64,
+    /// `read`-family system calls.
+    pub reads: u64,
+    /// `write`-family system calls.
+    pub writes: u64,
+}
+
+impl AddAssign for Cost {
+    fn add_assign(&mut self, o: Self) {
+        self.user_s += o.user_s;
+        self.sys_s += o.sys_s;
+        self.voluntary += o.voluntary;
+        self.involuntary += o.involuntary;
+        self.reads += o.reads;
+        self.writes += o.writes;
+    }
+}
+
+impl Cost {
+    /// What was spent since `before` (an earlier reading of the same process).
+    pub fn since(&self, before: &Self) -> Self {
+        Self {
+            user_s: self.user_s - before.user_s,
+            sys_s: self.sys_s - before.sys_s,
+            voluntary: self.voluntary.saturating_sub(before.voluntary),
+            involuntary: self.involuntary.saturating_sub(before.involuntary),
+            reads: self.reads.saturating_sub(before.reads),
+            writes: self.writes.saturating_sub(before.writes),
+        }
+    }
+
+    /// CPU seconds, user and kernel.
+    pub fn cpu_s(&self) -> f64 {
+        self.user_s + self.sys_s
+    }
+
+    /// Task switches of both kinds.
+    pub fn switches(&self) -> u64 {
+        self.voluntary + self.involuntary
+    }
+}
+
+fn seconds(t: libc::timeval) -> f64 {
+    t.tv_sec as f64 + t.tv_usec as f64 / 1e6
+}
+
+fn from_rusage(u: &libc::rusage) -> Cost {
+    Cost {
+        user_s: seconds(u.ru_utime),
+        sys_s: seconds(u.ru_stime),
+        voluntary: u.ru_nvcsw as u64,
+        involuntary: u.ru_nivcsw as u64,
+        reads: 0,
+        writes: 0,
+    }
+}
+
+/// This process's CPU time and task switches so far (the host: the bus model, the coordinator).
+pub fn own() -> Cost {
+    // SAFETY: getrusage fills the structure we own.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: as above.
+    unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) };
+    from_rusage(&u)
+}
+
+/// Whether child `pid` has ended, without reaping it (its `/proc` entry stays for [`reap`]).
+pub(crate) fn ended(pid: u32) -> bool {
+    // SAFETY: waitid fills the structure we own; WNOWAIT leaves the child waitable.
+    let mut info: libc::siginfo_t = unsafe { std::mem::zeroed() };
+    // SAFETY: as above.
+    let r = unsafe {
+        libc::waitid(
+            libc::P_PID,
+            pid as libc::id_t,
+            &mut info,
+            libc::WEXITED | libc::WNOHANG | libc::WNOWAIT,
+        )
+    };
+    // Not ours any more (already reaped) counts as ended.
+    // SAFETY: si_pid is valid for a child state change, and 0 when none happened.
+    r != 0 || unsafe { info.si_pid() } != 0
+}
+
+/// The read and write system calls of process `pid` so far (`None` where `/proc` has none).
+fn io_calls(pid: u32) -> Option<(u64, u64)> {
+    let text = std::fs::read_to_string(format!("/proc/{pid}/io")).ok()?;
+    let field = |name: &str| {
+        text.lines()
+            .find_map(|l| l.strip_prefix(name))
+            .and_then(|v| v.trim().parse().ok())
+    };
+    Some((field("syscr:")?, field("syscw:")?))
+}
+
+/// Waits for child `pid` to end and reaps it: its CPU time and task switches (all its threads),
+/// and its system calls as its zombie's `/proc` entry counts them. Once this returns the child is
+/// gone: the caller must not wait for it again.
+pub(crate) fn reap(pid: u32) -> Cost {
+    // SAFETY: waitid fills the structure we own; WNOWAIT leaves the zombie for wait4 below.
+    let mut info: libc::siginfo_t = unsafe { std::mem::zeroed() };
+    // SAFETY: as above.
+    let waited = unsafe {
+        libc::waitid(
+            libc::P_PID,
+            pid as libc::id_t,
+            &mut info,
+            libc::WEXITED | libc::WNOWAIT,
+        )
+    };
+    let calls = if waited == 0 { io_calls(pid) } else { None };
+    // SAFETY: wait4 fills the structures we own.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    let mut status = 0;
+    // SAFETY: as above.
+    let reaped = unsafe { libc::wait4(pid as libc::pid_t, &mut status, 0, &mut usage) };
+    let mut cost = if reaped == pid as libc::pid_t {
+        from_rusage(&usage)
+    } else {
+        Cost::default()
+    };
+    if let Some((reads, writes)) = calls {
+        cost.reads = reads;
+        cost.writes = writes;
+    }
+    cost
+}
+
+/// Where a run's CPU went, one row per board's QEMU and one for the host, per virtual second of
+/// `virtual_s` and per board exchange; the last line sums the CPU and says what it means for two
+/// cores (the QEMUs overlap there at best).
+pub fn table(work: &crate::Work, virtual_s: f64) -> String {
+    use std::fmt::Write;
+    let per = |x: f64| x / virtual_s.max(1e-9);
+    let mut out = format!(
+        "  {:<13} {:>9} {:>7} {:>7} {:>9} {:>8} {:>8} | per exchange: {:>8} {:>6} {:>6} {:>7}\n",
+        "per virtual s",
+        "exchanges",
+        "usr s",
+        "sys s",
+        "switches",
+        "reads",
+        "writes",
+        "switches",
+        "reads",
+        "writes",
+        "CPU µs"
+    );
+    for (k, c) in work.boards.iter().enumerate() {
+        let exchanges = work.per_board[k];
+        let each = |x: f64| {
+            if exchanges == 0 {
+                "-".to_string()
+            } else {
+                format!("{:.1}", x / exchanges as f64)
+            }
+        };
+        let _ = writeln!(
+            out,
+            "  {:<13} {:>9.0} {:>7.3} {:>7.3} {:>9.0} {:>8.0} {:>8.0} | {:>22} {:>6} {:>6} {:>7}",
+            crate::NODES[k],
+            per(exchanges as f64),
+            per(c.user_s),
+            per(c.sys_s),
+            per(c.switches() as f64),
+            per(c.reads as f64),
+            per(c.writes as f64),
+            each(c.switches() as f64),
+            each(c.reads as f64),
+            each(c.writes as f64),
+            each(c.cpu_s() * 1e6),
+        );
+    }
+    let h = &work.host;
+    let _ = writeln!(
+        out,
+        "  {:<13} {:>9} {:>7.3} {:>7.3} {:>9.0} {:>8} {:>8} |",
+        "host",
+        "",
+        per(h.user_s),
+        per(h.sys_s),
+        per(h.switches() as f64),
+        "",
+        ""
+    );
+    let qemu: f64 = work.boards.iter().map(Cost::cpu_s).sum();
+    let all = qemu + h.cpu_s();
+    let _ = writeln!(
+        out,
+        "  CPU per virtual s: {:.3} s (QEMUs {:.3}, host {:.3}): at best {:.3} s of wall per virtual s on 2 cores, {:.3} on one",
+        per(all),
+        per(qemu),
+        per(h.cpu_s()),
+        per(all) / 2.0,
+        per(all)
+    );
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_child_that_reads_and_writes_is_reaped_with_its_calls_and_cpu() {
+        // A shell that spins a little and writes 200 lines to /dev/null, one write each.
+        let child = std::process::Command::new("sh")
+            .args([
+                "-c",
+                "i=0; while [ $i -lt 200 ]; do echo $i; i=$((i+1)); done >/dev/null",
+            ])
+            .spawn()
+            .expect("sh starts");
+        let pid = child.id();
+        while !ended(pid) {
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        // Ended, not reaped: still a zombie with its /proc entry.
+        assert!(std::path::Path::new(&format!("/proc/{pid}")).exists());
+        let cost = reap(pid);
+        assert!(cost.writes >= 200, "{cost:?}");
+        assert!(!std::path::Path::new(&format!("/proc/{pid}/io")).exists());
+        // Once reaped it counts as ended (it is no child of ours any more).
+        assert!(ended(pid));
+        std::mem::forget(child);
+    }
+
+    #[test]
+    fn costs_add_up() {
+        let mut a = Cost {
+            user_s: 1.0,
+            sys_s: 0.5,
+            voluntary: 3,
+            involuntary: 4,
+            reads: 5,
+            writes: 6,
+        };
+        a += a;
+        assert_eq!(
+            a,
+            Cost {
+                user_s: 2.0,
+                sys_s: 1.0,
+                voluntary: 6,
+                involuntary: 8,
+                reads: 10,
+                writes: 12,
+            }
+        );
+    }
+}
