@@ -247,15 +247,16 @@ impl<'a> Analysis<'a> {
         }
     }
 
-    /// The summary of one software task's part of the dispatcher at `at`: the dispatcher's own code
+    /// The graph of one software task's part of the dispatcher at `at`: the dispatcher's own code
     /// and `task`'s poll, the polls of `others` (the other tasks of its priority) left out
-    /// ([`polled`]); the whole dispatcher where the image does not tell `task`'s part.
-    pub(super) fn polled_summary(
+    /// ([`polled`]), split as [`Self::graph`] splits; `None` where the image does not tell `task`'s
+    /// part (then the whole dispatcher is its part).
+    pub(super) fn polled_graph(
         &mut self,
         at: u64,
         task: &str,
         others: &[String],
-    ) -> Result<Result<Summary, String>, Error> {
+    ) -> Result<Option<Result<Cfg, String>>, Error> {
         let image = self.image;
         let f = image.function_at(at).ok_or_else(|| {
             Error::Other(format!(
@@ -266,12 +267,25 @@ impl<'a> Analysis<'a> {
         let graph = self.built(f)?;
         let part = polled::others_blocks(image, insns, &graph, task, others)
             .and_then(|dropped| graph.without(&dropped));
-        let Some(part) = part else {
-            return self.summary(at);
-        };
-        match self.split(f, part) {
-            Ok(graph) => self.bound_graph(f, graph, NO_ARGS),
-            Err(reason) => Ok(Err(reason)),
+        Ok(part.map(|part| self.split(f, part)))
+    }
+
+    /// The summary of `task`'s part of the dispatcher at `at` ([`Self::polled_graph`]).
+    pub(super) fn polled_summary(
+        &mut self,
+        at: u64,
+        task: &str,
+        others: &[String],
+    ) -> Result<Result<Summary, String>, Error> {
+        let f = self.image.function_at(at).ok_or_else(|| {
+            Error::Other(format!(
+                "a dispatcher at {at:#010x}, where no function starts"
+            ))
+        })?;
+        match self.polled_graph(at, task, others)? {
+            None => self.summary(at),
+            Some(Ok(graph)) => self.bound_graph(f, graph, NO_ARGS),
+            Some(Err(reason)) => Ok(Err(reason)),
         }
     }
 

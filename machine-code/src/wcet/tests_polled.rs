@@ -11,7 +11,7 @@ use crate::thumb;
 const F103_0WS: Chip = Chip::Stm32f103 { wait_states: 0 };
 
 /// The dispatcher `DISPATCH`: `fast` polled when r0 is set (five moves), then `slow` when r1 is (a
-/// counted loop of 8 passes and three more instructions); each poll inlined, as DWARF says.
+/// counted loop of 8 passes and three more instructions, interrupts off for them); each poll inlined, as DWARF says.
 fn dispatcher(with_inlines: bool) -> Image {
     let code = thumb(&[
         0xb510, // 0x00 push {r4, lr}: 1 + 2
@@ -26,9 +26,9 @@ fn dispatcher(with_inlines: bool) -> Image {
         0x3301, // 0x12 adds r3, #1: 1 (8 passes)
         0x2b08, // 0x14 cmp r3, #8: 1
         0xd1fc, // 0x16 bne 0x12: 1, taken + P
-        0xbf00, // 0x18 nop: 1
+        0xb672, // 0x18 cpsid i: 1 (interrupts off, slow's section)
         0xbf00, // 0x1a nop: 1
-        0xbf00, // 0x1c nop: 1
+        0xb662, // 0x1c cpsie i: 1
         0xbd10, // 0x1e pop {r4, pc}: 1 + 2 + P
     ]);
     let inlined = [
@@ -97,7 +97,7 @@ fn dwarf_names_the_inlined_polls() {
 fn each_task_is_bounded_by_the_dispatcher_and_its_own_poll() {
     let found = rows(&dispatcher(true));
     // The whole dispatcher, both pending: push 3 + cbz 1, fast 5, cbz 1, slow: movs 1 + 8 passes
-    // of 3 and 7 branches back of P + 3 nops, pop 6: 4 + 5 + 1 + 1 + 45 + 3 + 6 = 65 cycles;
+    // of 3 and 7 branches back of P + 3 more, pop 6: 4 + 5 + 1 + 1 + 45 + 3 + 6 = 65 cycles;
     // 2 + 5 + 1 + 1 + 24 + 3 + 1 = 37 instructions.
     assert_eq!(found[0], ("dispatcher".into(), 65, 37));
     // fast's job: its poll, then slow's check taken past slow's poll (1 + P):
@@ -115,4 +115,22 @@ fn without_the_polls_in_dwarf_a_task_is_bounded_by_the_whole_dispatcher() {
         found.iter().all(|(_, c, i)| (*c, *i) == (65, 37)),
         "{found:?}"
     );
+}
+
+#[test]
+fn each_task_has_the_sections_of_its_own_part() {
+    let img = dispatcher(true);
+    let tasks = [part("fast", "slow"), part("slow", "fast")];
+    let found = task_sections(&img, &tasks, F103_0WS, &BoundsFile::default());
+    // fast's part holds no raise; slow's the interrupts-off section `cpsid i; nop; cpsie i`:
+    // 3 cycles, 3 instructions.
+    assert_eq!(found[0].task, "fast");
+    assert!(found[0].ceilings.is_empty(), "{:?}", found[0]);
+    assert_eq!(found[0].incomplete, None);
+    let slow: Vec<(Ceiling, u64, u64)> = found[1]
+        .ceilings
+        .iter()
+        .map(|c| (c.ceiling, c.cycles, c.instructions))
+        .collect();
+    assert_eq!(slow, [(Ceiling::InterruptsOff, 3, 3)]);
 }
