@@ -325,7 +325,17 @@ pub fn bound_build(
         .with_context(|| format!("{}'s app source", board.name))?;
     let app = schedule_analysis::rtic_source::parse_app(&source)
         .map_err(|e| anyhow::anyhow!("{}: {e}", board.name))?;
-    let tasks = tasks_of(&app, &bounds);
+    // A software task the image as built leaves out (`#[cfg]`: DiWheelDrive's QEMU-only stimulus) has
+    // no part of its dispatcher to bound.
+    let features: Vec<&str> = build.revision.feature.into_iter().collect();
+    let built = app.with_features(&features);
+    let tasks: Vec<machine_code::Task> = tasks_of(&app, &bounds)
+        .into_iter()
+        .filter(|t| {
+            !matches!(t.entry, machine_code::TaskEntry::Polled { .. })
+                || built.tasks.iter().any(|b| b.name == t.name)
+        })
+        .collect();
     let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
     let sections = sections_per_name(machine_code::task_sections(&image, &tasks, chip, &bounds));
     let tasks = worst_per_name(machine_code::bound_tasks(&image, &tasks, chip, &bounds));
