@@ -13,8 +13,9 @@
 //! reaches; the pending checks and the executor's code around the polls stay. A block that this
 //! task's own code flows into directly is kept whatever its attribution (code LLVM merged between
 //! two tasks' tails is named after one of them). Without any block of its own in the dispatcher
-//! (no debug information, a poll reached some other way) the task is bounded by the whole
-//! dispatcher, as before.
+//! (no debug information, a poll reached some other way), or with one that only another task's
+//! code leads to (an attribution that does not tell the polls apart), the task is bounded by the
+//! whole dispatcher, as before.
 use std::collections::BTreeSet;
 
 use super::cfg::{Call, Cfg};
@@ -38,7 +39,8 @@ struct Owners {
 
 /// The blocks of `graph` (of the dispatcher whose instructions are `insns`) that run another of
 /// `others`' polls and none of `task`'s: what to leave out for `task`'s part. `None` when no block
-/// runs `task`'s poll (nothing to tell its part by).
+/// runs `task`'s poll (nothing to tell its part by), or when leaving them out would leave a block of
+/// `task`'s own unreached.
 pub fn others_blocks(
     image: &Image,
     insns: &[Insn],
@@ -86,5 +88,28 @@ pub fn others_blocks(
             }
         }
     }
-    Some(dropped)
+    // Every block of this task's own that the dispatcher reaches must stay reachable: one that only
+    // another task's code leads to says the attribution does not tell the polls apart, and the whole
+    // dispatcher is the bound.
+    let before = reached(graph, &BTreeSet::new());
+    let after = reached(graph, &dropped);
+    let own_reached = owners
+        .iter()
+        .enumerate()
+        .all(|(b, o)| !o.own || !before.contains(&b) || after.contains(&b));
+    own_reached.then_some(dropped)
+}
+
+/// The blocks of `graph` block 0 reaches without entering `dropped`.
+fn reached(graph: &Cfg, dropped: &BTreeSet<usize>) -> BTreeSet<usize> {
+    let mut seen = BTreeSet::from([0usize]);
+    let mut work = vec![0usize];
+    while let Some(b) = work.pop() {
+        for e in &graph.blocks[b].succs {
+            if !dropped.contains(&e.to) && seen.insert(e.to) {
+                work.push(e.to);
+            }
+        }
+    }
+    seen
 }

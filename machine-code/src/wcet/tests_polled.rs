@@ -11,36 +11,44 @@ use crate::thumb;
 const F103_0WS: Chip = Chip::Stm32f103 { wait_states: 0 };
 
 /// The dispatcher `DISPATCH`: `fast` polled when r0 is set (five moves), then `slow` when r1 is (a
-/// counted loop of 8 passes and three more instructions, interrupts off for them); each poll inlined, as DWARF says.
+/// counted loop of 8 passes and three more instructions, interrupts off for them); each poll inlined,
+/// as DWARF says (or, without `with_inlines`, says nothing of them).
 fn dispatcher(with_inlines: bool) -> Image {
-    let code = thumb(&[
-        0xb510, // 0x00 push {r4, lr}: 1 + 2
-        0xb120, // 0x02 cbz r0, 0x0e: 1, taken + P (fast not pending)
-        0x2201, // 0x04 movs r2, #1: fast's poll, 1 each
-        0x2202, // 0x06 movs r2, #2
-        0x2203, // 0x08 movs r2, #3
-        0x2204, // 0x0a movs r2, #4
-        0x2205, // 0x0c movs r2, #5
-        0xb131, // 0x0e cbz r1, 0x1e: 1, taken + P (slow not pending)
-        0x2300, // 0x10 movs r3, #0: slow's poll: 1
-        0x3301, // 0x12 adds r3, #1: 1 (8 passes)
-        0x2b08, // 0x14 cmp r3, #8: 1
-        0xd1fc, // 0x16 bne 0x12: 1, taken + P
-        0xb672, // 0x18 cpsid i: 1 (interrupts off, slow's section)
-        0xbf00, // 0x1a nop: 1
-        0xb662, // 0x1c cpsie i: 1
-        0xbd10, // 0x1e pop {r4, pc}: 1 + 2 + P
-    ]);
     let inlined = [
         ("board::app::fast::{{closure}}", 0x04, 0x0e),
         ("board::app::slow::{{closure}}", 0x10, 0x1e),
     ];
+    build(&CODE, if with_inlines { &inlined } else { &[] })
+}
+
+/// The dispatcher's code.
+const CODE: [u16; 16] = [
+    0xb510, // 0x00 push {r4, lr}: 1 + 2
+    0xb120, // 0x02 cbz r0, 0x0e: 1, taken + P (fast not pending)
+    0x2201, // 0x04 movs r2, #1: fast's poll, 1 each
+    0x2202, // 0x06 movs r2, #2
+    0x2203, // 0x08 movs r2, #3
+    0x2204, // 0x0a movs r2, #4
+    0x2205, // 0x0c movs r2, #5
+    0xb131, // 0x0e cbz r1, 0x1e: 1, taken + P (slow not pending)
+    0x2300, // 0x10 movs r3, #0: slow's poll: 1
+    0x3301, // 0x12 adds r3, #1: 1 (8 passes)
+    0x2b08, // 0x14 cmp r3, #8: 1
+    0xd1fc, // 0x16 bne 0x12: 1, taken + P
+    0xb672, // 0x18 cpsid i: 1 (interrupts off, slow's section)
+    0xbf00, // 0x1a nop: 1
+    0xb662, // 0x1c cpsie i: 1
+    0xbd10, // 0x1e pop {r4, pc}: 1 + 2 + P
+];
+
+/// An image of `DISPATCH` (`code`, 32 bytes) with `inlined` as its DWARF inlined subroutines.
+fn build(code: &[u16], inlined: &[(&str, u64, u64)]) -> Image {
     let functions = [Inlines {
         function: ("DISPATCH", 0, 0x20),
-        inlined: if with_inlines { &inlined } else { &[] },
+        inlined,
     }];
     let bytes = elf_with_inlines(
-        &code,
+        &thumb(code),
         &[Sym::function("DISPATCH", 0, 0x20)],
         "board/src/main.rs",
         &[(0, 10)],
@@ -133,4 +141,30 @@ fn each_task_has_the_sections_of_its_own_part() {
         .map(|c| (c.ceiling, c.cycles, c.instructions))
         .collect();
     assert_eq!(slow, [(Ceiling::InterruptsOff, 3, 3)]);
+}
+
+#[test]
+fn a_task_whose_code_only_another_task_reaches_is_bounded_by_the_whole_dispatcher() {
+    // fast's poll split by a branch over one move (`b 0x08`, 1 + P, in place of `movs r2, #1`),
+    // DWARF naming its first block slow's: the block of fast's own behind it is reached only
+    // through a block named another task's, so the attribution does not tell the polls apart and
+    // fast is bounded by the whole dispatcher: 65 − 2 moves + 4 = 67 cycles, 37 − 1 = 36
+    // instructions.
+    let mut code = CODE;
+    code[2] = 0xe000; // 0x04 b 0x08 (0x06 skipped)
+    let split = [
+        ("board::app::slow::{{closure}}", 0x04, 0x08),
+        ("board::app::fast::{{closure}}", 0x08, 0x0e),
+        ("board::app::slow::{{closure}}", 0x10, 0x1e),
+    ];
+    let img = build(&code, &split);
+    let found = rows(&img);
+    assert_eq!(found[0], ("dispatcher".into(), 67, 36));
+    assert_eq!(found[1], ("fast".into(), 67, 36));
+    // Named as the code runs, fast's part is its own again: 19 − 2 + 4 = 21 cycles, 8 instructions.
+    let named = [
+        ("board::app::fast::{{closure}}", 0x04, 0x0e),
+        ("board::app::slow::{{closure}}", 0x10, 0x1e),
+    ];
+    assert_eq!(rows(&build(&code, &named))[1], ("fast".into(), 21, 8));
 }
