@@ -268,6 +268,25 @@ impl Image {
         let location = self.lines.as_ref()?.find_location(address).ok()??;
         Some((location.file?.to_string(), location.line?))
     }
+
+    /// The functions whose code is at `address`, innermost first: each DWARF inlined subroutine
+    /// the address lies in, then the function it was inlined into, each demangled without its
+    /// hash. Empty without DWARF debug information for it.
+    pub fn inlined_at(&self, address: u64) -> Vec<String> {
+        let Some(context) = self.lines.as_ref() else {
+            return Vec::new();
+        };
+        let Ok(mut frames) = context.find_frames(address).skip_all_loads() else {
+            return Vec::new();
+        };
+        let mut names = Vec::new();
+        while let Ok(Some(frame)) = frames.next() {
+            if let Some(raw) = frame.function.as_ref().and_then(|f| f.raw_name().ok()) {
+                names.push(format!("{:#}", rustc_demangle::demangle(&raw)));
+            }
+        }
+        names
+    }
 }
 
 /// What an `OUTLINED_FUNCTION_n` does to the registers: the machine outliner's helpers follow no calling

@@ -33,8 +33,9 @@
 //!   cycles), `loops` ([`LoopInfo`]: function, file:line, bound, where the bound came from),
 //!   `retry_cycles`/`retry_instructions` (what one preemption inside an exclusive-access sequence
 //!   adds), `declined`.
-//! - [`bound_tasks`] bounds a list of [`Task`]s (a name and an entry: a symbol, or an interrupt's
-//!   vector index) into [`TaskBound`] rows (`cycles`, `us`, `instructions`, `bus_wait_us`, `loops`,
+//! - [`bound_tasks`] bounds a list of [`Task`]s (a name and an entry: a symbol, an interrupt's
+//!   vector index, or one software task's part of the RTIC dispatcher that polls it,
+//!   [`TaskEntry::Polled`]) into [`TaskBound`] rows (`cycles`, `us`, `instructions`, `bus_wait_us`, `loops`,
 //!   `preemption_retry_cycles`, `declined`); a handler adds the exception entry and exit (and lazy
 //!   FPU stacking on the M4F) and the longest retry iteration of any task it may preempt.
 //! - [`task_sections`] finds every critical section the same tasks' code can hold (an RTIC lock's

@@ -60,6 +60,26 @@ pub fn elf(code: &[u8], symbols: &[Sym]) -> Vec<u8> {
 /// An ELF image of `code` with `symbols` and a DWARF line table: each `(address, line)` row of
 /// `file` (`/work/<file>`) holds from its address to the next row's.
 pub fn elf_with_lines(code: &[u8], symbols: &[Sym], file: &str, rows: &[(u64, u64)]) -> Vec<u8> {
+    elf_with_inlines(code, symbols, file, rows, &[])
+}
+
+/// A function's code as DWARF describes it: `function` (its name, start and end) with the
+/// subroutines inlined into it (each its name and the address range its code occupies).
+pub struct Inlines<'a> {
+    pub function: (&'a str, u64, u64),
+    pub inlined: &'a [(&'a str, u64, u64)],
+}
+
+/// [`elf_with_lines`] with DWARF subprograms: each of `functions` a subprogram, its inlined
+/// subroutines children of it naming an abstract subprogram of their name (as rustc writes an
+/// inlined function).
+pub fn elf_with_inlines(
+    code: &[u8],
+    symbols: &[Sym],
+    file: &str,
+    rows: &[(u64, u64)],
+    functions: &[Inlines<'_>],
+) -> Vec<u8> {
     let mut object = Object::new(BinaryFormat::Elf, Architecture::Arm, Endianness::Little);
     let text = object.add_section(Vec::new(), b".text".to_vec(), SectionKind::Text);
     object.append_section_data(text, code, 4);
@@ -81,7 +101,7 @@ pub fn elf_with_lines(code: &[u8], symbols: &[Sym], file: &str, rows: &[(u64, u6
         });
     }
     if !rows.is_empty() {
-        for (name, data) in line_table(code.len() as u64, file, rows) {
+        for (name, data) in line_table(code.len() as u64, file, rows, functions) {
             let id = object.add_section(Vec::new(), name.into_bytes(), SectionKind::Debug);
             object.append_section_data(id, &data, 1);
         }
@@ -89,8 +109,14 @@ pub fn elf_with_lines(code: &[u8], symbols: &[Sym], file: &str, rows: &[(u64, u6
     object.write().expect("a test image writes")
 }
 
-/// The DWARF sections of one compilation unit covering `0..len` with the given line rows.
-fn line_table(len: u64, file: &str, rows: &[(u64, u64)]) -> Vec<(String, Vec<u8>)> {
+/// The DWARF sections of one compilation unit covering `0..len` with the given line rows and
+/// subprograms.
+fn line_table(
+    len: u64,
+    file: &str,
+    rows: &[(u64, u64)],
+    functions: &[Inlines<'_>],
+) -> Vec<(String, Vec<u8>)> {
     use gimli::write::{
         Address, AttributeValue, DwarfUnit, EndianVec, LineProgram, LineString, Sections,
     };
@@ -127,6 +153,41 @@ fn line_table(len: u64, file: &str, rows: &[(u64, u64)]) -> Vec<(String, Vec<u8>
         AttributeValue::Address(Address::Constant(0)),
     );
     entry.set(gimli::DW_AT_high_pc, AttributeValue::Udata(len));
+    let range = |unit: &mut gimli::write::Unit, id, from: u64, to: u64| {
+        let entry = unit.get_mut(id);
+        entry.set(
+            gimli::DW_AT_low_pc,
+            AttributeValue::Address(Address::Constant(from)),
+        );
+        entry.set(gimli::DW_AT_high_pc, AttributeValue::Udata(to - from));
+    };
+    for f in functions {
+        let (name, from, to) = f.function;
+        let outer = dwarf.unit.add(root, gimli::DW_TAG_subprogram);
+        dwarf.unit.get_mut(outer).set(
+            gimli::DW_AT_name,
+            AttributeValue::String(name.as_bytes().to_vec()),
+        );
+        range(&mut dwarf.unit, outer, from, to);
+        for &(name, from, to) in f.inlined {
+            let origin = dwarf.unit.add(root, gimli::DW_TAG_subprogram);
+            let abstract_entry = dwarf.unit.get_mut(origin);
+            abstract_entry.set(
+                gimli::DW_AT_linkage_name,
+                AttributeValue::String(name.as_bytes().to_vec()),
+            );
+            abstract_entry.set(
+                gimli::DW_AT_inline,
+                AttributeValue::Inline(gimli::DW_INL_inlined),
+            );
+            let inlined = dwarf.unit.add(outer, gimli::DW_TAG_inlined_subroutine);
+            dwarf.unit.get_mut(inlined).set(
+                gimli::DW_AT_abstract_origin,
+                AttributeValue::UnitRef(origin),
+            );
+            range(&mut dwarf.unit, inlined, from, to);
+        }
+    }
     let mut sections = Sections::new(EndianVec::new(gimli::LittleEndian));
     dwarf.write(&mut sections).expect("the line table writes");
     let mut out = Vec::new();

@@ -163,8 +163,9 @@ struct Row<'a> {
 
 /// The tasks of one board's image to bound: its hardware tasks (the handler of the interrupt each
 /// binds, named by the task), its dispatchers (`dispatcher <interrupt>`: the interrupt handlers that
-/// poll the software tasks of one priority, their bodies inlined into them), and the tasks the
-/// bounds file adds (the monotonic's interrupt).
+/// poll the software tasks of one priority, their bodies inlined into them), each software task
+/// (named by the task: its part of its dispatcher, [`machine_code::TaskEntry::Polled`]), and the
+/// tasks the bounds file adds (the monotonic's interrupt).
 pub fn tasks_of(
     app: &schedule_analysis::rtic_source::RticApp,
     bounds: &BoundsFile,
@@ -183,6 +184,30 @@ pub fn tasks_of(
         tasks.push(machine_code::Task {
             name: format!("dispatcher {dispatcher}"),
             entry: machine_code::TaskEntry::Symbol(dispatcher.clone()),
+            handler: true,
+        });
+    }
+    // Each software task's job: its part of its dispatcher (the dispatcher's own code and its
+    // poll, the other polls of its priority left out).
+    let dispatchers = crate::wcet_write::dispatcher_of(app);
+    for task in &app.tasks {
+        let software = task.kind == schedule_analysis::rtic_source::RticTaskKind::Software;
+        let Some(dispatcher) = dispatchers.get(&task.priority).filter(|_| software) else {
+            continue;
+        };
+        let others = app
+            .tasks
+            .iter()
+            .filter(|t| t.kind == task.kind && t.priority == task.priority && t.name != task.name)
+            .map(|t| t.name.clone())
+            .collect();
+        tasks.push(machine_code::Task {
+            name: task.name.clone(),
+            entry: machine_code::TaskEntry::Polled {
+                dispatcher: dispatcher.clone(),
+                task: task.name.clone(),
+                others,
+            },
             handler: true,
         });
     }
@@ -300,7 +325,17 @@ pub fn bound_build(
         .with_context(|| format!("{}'s app source", board.name))?;
     let app = schedule_analysis::rtic_source::parse_app(&source)
         .map_err(|e| anyhow::anyhow!("{}: {e}", board.name))?;
-    let tasks = tasks_of(&app, &bounds);
+    // A software task the image as built leaves out (`#[cfg]`: DiWheelDrive's QEMU-only stimulus) has
+    // no part of its dispatcher to bound.
+    let features: Vec<&str> = build.revision.feature.into_iter().collect();
+    let built = app.with_features(&features);
+    let tasks: Vec<machine_code::Task> = tasks_of(&app, &bounds)
+        .into_iter()
+        .filter(|t| {
+            !matches!(t.entry, machine_code::TaskEntry::Polled { .. })
+                || built.tasks.iter().any(|b| b.name == t.name)
+        })
+        .collect();
     let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
     let sections = sections_per_name(machine_code::task_sections(&image, &tasks, chip, &bounds));
     let tasks = worst_per_name(machine_code::bound_tasks(&image, &tasks, chip, &bounds));

@@ -4,11 +4,13 @@
 //!
 //! How the machine code's rows map onto them (docs/analysis.md, "Budgets from the machine code"):
 //! - a hardware task's row is the bound of the handler of the interrupt it binds;
-//! - a software task's row is the bound of the dispatcher of its priority (with LTO the task bodies are inlined
-//!   into it): one invocation polls every pending task of that priority once, so its bound covers one job of
-//!   each of them, and is a sound (if pessimistic) bound of any one of them;
-//! - `publisher[<topic>]` is the largest bound of the dispatchers of the publisher tasks (a topic may be
-//!   published at any level), declined if any of them is;
+//! - a software task's row is the bound of its part of the dispatcher of its priority (with LTO the task bodies
+//!   are inlined into it): the dispatcher's own code and the task's poll, the other tasks' polls left out by the
+//!   DWARF inlined subroutines that name them (`machine_code::TaskEntry::Polled`); where the machine code does
+//!   not tell the task's part, the whole dispatcher's bound (one poll of every task of that priority, sound and
+//!   pessimistic);
+//! - `publisher[<topic>]` is the largest bound of the publisher tasks (a topic may be published at any level),
+//!   declined if any of them is;
 //! - `monotonic` is the bound of the monotonic's interrupt (the task the input bounds file adds);
 //! - `exception_entry` and `exception_exit` are the core's (the TRM's 12 and 10 cycles, the entry with lazy FPU
 //!   stacking on the M4F), with the flash accesses' wait states (the vector read and the handler's first fetch on
@@ -445,11 +447,24 @@ pub fn rows(
             )),
             RticTaskKind::Software => {
                 let d = dispatchers.get(&task.priority)?;
-                let key = format!("dispatcher {d}");
-                Some((
-                    format!("{name} (polled by {d}, priority {})", task.priority),
-                    by_name.get(key.as_str()).copied(),
-                ))
+                // Its own part of the dispatcher where the machine code has it, else the whole
+                // dispatcher's poll.
+                match by_name.get(name) {
+                    Some(&own) => Some((
+                        format!(
+                            "{name} (its part of {d}'s poll, priority {})",
+                            task.priority
+                        ),
+                        Some(own),
+                    )),
+                    None => {
+                        let key = format!("dispatcher {d}");
+                        Some((
+                            format!("{name} (polled by {d}, priority {})", task.priority),
+                            by_name.get(key.as_str()).copied(),
+                        ))
+                    }
+                }
             }
             RticTaskKind::Idle => None,
         }
@@ -692,6 +707,69 @@ mod app {
             idle_critical_sections: BTreeMap::new(),
         };
         assert_eq!(BoundsFile::from_json("t", &file.to_json()).unwrap(), file);
+    }
+
+    #[test]
+    fn a_software_task_takes_its_own_part_of_the_dispatcher_where_there_is_one() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: vec!["handle".into(), "drive".into()],
+            topics: vec!["gyro".into()],
+            publishers: ["publish".to_string()].into(),
+            stated: BTreeMap::new(),
+        };
+        let machine = [
+            found("dispatcher MID", 1440, None),
+            found("dispatcher LOW", 7200, None),
+            found("handle", 720, None),
+            found("publish", 144, None),
+        ];
+        let sections = sections_of(&machine, &[]);
+        let rows = rows(&built, &app, &budgets, &machine, &sections, chip);
+        let row = |n: &str| rows.iter().find(|r| r.task == n).unwrap();
+        // `handle` has its own part; `drive`, without one, the whole dispatcher's poll.
+        assert_eq!(row("handle").cycles, Some(720));
+        assert_eq!(row("drive").cycles, Some(1440));
+        assert_eq!(row("publisher[gyro]").cycles, Some(144));
+    }
+
+    #[test]
+    fn each_software_task_is_bounded_by_its_part_of_its_dispatcher() {
+        let app = parse_app(APP).unwrap();
+        let tasks = crate::machine::tasks_of(&app, &machine_code::BoundsFile::default());
+        let entry = |n: &str| {
+            tasks
+                .iter()
+                .find(|t| t.name == n)
+                .map(|t| (t.entry.clone(), t.handler))
+        };
+        assert_eq!(
+            entry("handle"),
+            Some((
+                machine_code::TaskEntry::Polled {
+                    dispatcher: "MID".into(),
+                    task: "handle".into(),
+                    others: vec!["drive".into()],
+                },
+                true
+            ))
+        );
+        // One task of its priority (`stimulus`, in the QEMU build only): nothing to leave out.
+        assert_eq!(
+            entry("stimulus"),
+            Some((
+                machine_code::TaskEntry::Polled {
+                    dispatcher: "HIGH".into(),
+                    task: "stimulus".into(),
+                    others: Vec::new(),
+                },
+                true
+            ))
+        );
+        assert!(entry("dispatcher LOW").is_some());
+        assert!(entry("can_rx").is_some());
     }
 
     #[test]

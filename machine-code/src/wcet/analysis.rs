@@ -8,6 +8,7 @@ use super::chip::Chip;
 use super::counted;
 use super::length::{self, Args, LENGTH_UNKNOWN, NO_ARGS};
 use super::path::{self, Cost, LoopCount, LoopNodes, Node, PathError};
+use super::polled;
 use super::stored;
 use super::LoopInfo;
 use crate::callgraph::is_panic;
@@ -199,6 +200,13 @@ impl<'a> Analysis<'a> {
     /// that cannot return left out, irreducible cycles split into natural loops. `Ok(Err(reason))`
     /// when splitting would grow it too much.
     pub(super) fn graph(&mut self, f: &'a Function) -> Result<Result<Cfg, String>, Error> {
+        let graph = self.built(f)?;
+        Ok(self.split(f, graph))
+    }
+
+    /// The control-flow graph of `f` as built, the blocks after a call of a function that cannot
+    /// return left out (before any splitting).
+    fn built(&mut self, f: &'a Function) -> Result<Cfg, Error> {
         let insns = f.instructions()?;
         let image = self.image;
         let read = |address: u64, size: u64| read_entry(image, address, size);
@@ -216,21 +224,70 @@ impl<'a> Analysis<'a> {
             let r = self.can_return(t);
             returning.insert(t, r);
         }
-        let graph = Cfg::build(f, &read, &|t| returning.get(&t).copied().unwrap_or(true))?;
-        // A cycle with more than one entry (an async task's loop) made a natural loop.
-        let graph = match graph.split_irreducible() {
-            Ok(split) => split.unwrap_or(graph),
+        Cfg::build(f, &read, &|t| returning.get(&t).copied().unwrap_or(true))
+    }
+
+    /// `graph` (of `f`) with each cycle of more than one entry (an async task's loop) made a
+    /// natural loop; `Err(reason)` when splitting would grow it too much.
+    fn split(&self, f: &Function, graph: Cfg) -> Result<Cfg, String> {
+        let image = self.image;
+        let Ok(insns) = f.instructions() else {
+            return Ok(graph);
+        };
+        match graph.split_irreducible() {
+            Ok(split) => Ok(split.unwrap_or(graph)),
             Err(b) => {
                 let (_, _, text) = place(image, insns[graph.blocks[b].first].addr);
-                return Ok(Err(format!(
+                Err(format!(
                     "irreducible control flow in {} at {text}: splitting it into natural loops \
                      would grow the graph more than {}-fold",
                     f.name,
                     cfg::MAX_SPLIT_GROWTH
-                )));
+                ))
             }
-        };
-        Ok(Ok(graph))
+        }
+    }
+
+    /// The graph of one software task's part of the dispatcher at `at`: the dispatcher's own code
+    /// and `task`'s poll, the polls of `others` (the other tasks of its priority) left out
+    /// ([`polled`]), split as [`Self::graph`] splits; `None` where the image does not tell `task`'s
+    /// part (then the whole dispatcher is its part).
+    pub(super) fn polled_graph(
+        &mut self,
+        at: u64,
+        task: &str,
+        others: &[String],
+    ) -> Result<Option<Result<Cfg, String>>, Error> {
+        let image = self.image;
+        let f = image.function_at(at).ok_or_else(|| {
+            Error::Other(format!(
+                "a dispatcher at {at:#010x}, where no function starts"
+            ))
+        })?;
+        let insns = f.instructions()?;
+        let graph = self.built(f)?;
+        let part = polled::others_blocks(image, insns, &graph, task, others)
+            .and_then(|dropped| graph.without(&dropped));
+        Ok(part.map(|part| self.split(f, part)))
+    }
+
+    /// The summary of `task`'s part of the dispatcher at `at` ([`Self::polled_graph`]).
+    pub(super) fn polled_summary(
+        &mut self,
+        at: u64,
+        task: &str,
+        others: &[String],
+    ) -> Result<Result<Summary, String>, Error> {
+        let f = self.image.function_at(at).ok_or_else(|| {
+            Error::Other(format!(
+                "a dispatcher at {at:#010x}, where no function starts"
+            ))
+        })?;
+        match self.polled_graph(at, task, others)? {
+            None => self.summary(at),
+            Some(Ok(graph)) => self.bound_graph(f, graph, NO_ARGS),
+            Some(Err(reason)) => Ok(Err(reason)),
+        }
     }
 
     /// The longest paths through `graph` (of `f`, or a part of it: block 0 is where the paths start,

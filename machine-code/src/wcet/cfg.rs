@@ -414,6 +414,40 @@ impl Cfg {
         }
     }
 
+    /// The graph without the blocks in `dropped`: the blocks block 0 reaches through the others,
+    /// renumbered in their order, each edge into a dropped block left out (a block left with no
+    /// successor and no exit ends no path). `None` when block 0 itself is dropped. Every path of
+    /// the graph that avoids the dropped blocks is a path of the result.
+    pub fn without(&self, dropped: &BTreeSet<usize>) -> Option<Cfg> {
+        if dropped.contains(&0) {
+            return None;
+        }
+        let mut seen = BTreeSet::from([0usize]);
+        let mut work = vec![0usize];
+        while let Some(b) = work.pop() {
+            for e in &self.blocks[b].succs {
+                if !dropped.contains(&e.to) && seen.insert(e.to) {
+                    work.push(e.to);
+                }
+            }
+        }
+        let number: BTreeMap<usize, usize> =
+            seen.iter().enumerate().map(|(k, &b)| (b, k)).collect();
+        let blocks = seen
+            .iter()
+            .map(|&b| {
+                let mut block = self.blocks[b].clone();
+                block.succs = block
+                    .succs
+                    .iter()
+                    .filter_map(|e| number.get(&e.to).map(|&to| Edge { to, taken: e.taken }))
+                    .collect();
+                block
+            })
+            .collect();
+        Some(Cfg { blocks })
+    }
+
     /// The blocks reachable from `from` along the edges (or, `backwards`, that reach it).
     fn reach(&self, from: usize, backwards: bool) -> BTreeSet<usize> {
         let mut preds = vec![Vec::new(); self.blocks.len()];

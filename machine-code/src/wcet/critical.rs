@@ -35,7 +35,7 @@ use super::chip::Chip;
 use super::length::{self, NO_ARGS};
 use super::masking::{effect, region, value_before, Effect, Kind};
 use super::stored;
-use super::Task;
+use super::{Task, TaskEntry};
 use crate::decode::Insn;
 use crate::image::Function;
 use crate::{Error, Image};
@@ -152,9 +152,15 @@ pub fn task_sections(
         .iter()
         .map(|task| {
             let start = task.entry.start(image);
-            match start {
-                Ok(at) => finder.task(&task.name, at),
-                Err(e) => TaskSections {
+            match (start, &task.entry) {
+                (
+                    Ok(at),
+                    TaskEntry::Polled {
+                        task: own, others, ..
+                    },
+                ) => finder.polled_task(&task.name, at, own, others),
+                (Ok(at), _) => finder.task(&task.name, at),
+                (Err(e), _) => TaskSections {
                     task: task.name.clone(),
                     ceilings: Vec::new(),
                     incomplete: Some(e.to_string()),
@@ -216,12 +222,53 @@ fn third_party(file: &str) -> bool {
 impl<'a> Finder<'a> {
     /// Every function reachable from `entry`, their sections per ceiling.
     fn task(&mut self, name: &str, entry: u64) -> TaskSections {
+        self.task_from(name, entry, None)
+    }
+
+    /// One software task's sections: those of its part of the dispatcher at `entry` (the
+    /// dispatcher's own code and its poll, [`Analysis::polled_graph`]) and of every function that
+    /// part reaches; the whole dispatcher's where the image does not tell its part.
+    fn polled_task(
+        &mut self,
+        name: &str,
+        entry: u64,
+        task: &str,
+        others: &[String],
+    ) -> TaskSections {
+        let part = match (
+            self.image.function_at(entry),
+            self.analysis.polled_graph(entry, task, others),
+        ) {
+            (Some(f), Ok(Some(Ok(graph)))) => match self.work_out_graph(f, graph) {
+                Ok(found) => found,
+                Err(e) => Found {
+                    sections: Vec::new(),
+                    callees: Vec::new(),
+                    incomplete: Some(format!("{}: {e}", f.name)),
+                },
+            },
+            (Some(_), Ok(Some(Err(reason)))) => Found {
+                sections: Vec::new(),
+                callees: Vec::new(),
+                incomplete: Some(reason),
+            },
+            _ => return self.task(name, entry),
+        };
+        self.task_from(name, entry, Some(part))
+    }
+
+    /// [`Self::task`], the entry's own sections and callees `entry_found` where given.
+    fn task_from(&mut self, name: &str, entry: u64, entry_found: Option<Found>) -> TaskSections {
         let mut seen = BTreeSet::from([entry]);
         let mut work = vec![entry];
         let mut sections = Vec::new();
         let mut incomplete = None;
+        let mut entry_found = entry_found;
         while let Some(at) = work.pop() {
-            let found = self.function(at);
+            let found = match entry_found.take().filter(|_| at == entry) {
+                Some(found) => found,
+                None => self.function(at),
+            };
             sections.extend(found.sections.iter().cloned());
             if incomplete.is_none() {
                 incomplete.clone_from(&found.incomplete);
@@ -312,8 +359,6 @@ impl<'a> Finder<'a> {
     }
 
     fn work_out(&mut self, f: &'a Function) -> Result<Found, Error> {
-        let image = self.image;
-        let insns = f.instructions()?;
         let graph = match self.analysis.graph(f)? {
             Ok(g) => g,
             Err(reason) => {
@@ -324,6 +369,13 @@ impl<'a> Finder<'a> {
                 })
             }
         };
+        self.work_out_graph(f, graph)
+    }
+
+    /// The sections and callees of `graph`, `f`'s graph or a part of it.
+    fn work_out_graph(&mut self, f: &'a Function, graph: Cfg) -> Result<Found, Error> {
+        let image = self.image;
+        let insns = f.instructions()?;
         let mut callees = Vec::new();
         for (index, block) in graph.blocks.iter().enumerate() {
             match block.call {

@@ -16,6 +16,7 @@ pub mod critical;
 pub mod length;
 mod masking;
 pub mod path;
+pub mod polled;
 pub mod stored;
 
 use serde::Serialize;
@@ -81,13 +82,23 @@ pub enum TaskEntry {
     Symbol(String),
     /// The handler of a vector-table entry (the word index: 16 + IRQ number for an interrupt).
     Vector(usize),
+    /// One software task's part of the dispatcher that polls it: the dispatcher's own code and
+    /// the task's poll, the polls of `others` (the other tasks of its priority, RTIC names) left
+    /// out ([`polled`]).
+    Polled {
+        dispatcher: String,
+        task: String,
+        others: Vec<String>,
+    },
 }
 
 impl TaskEntry {
     /// The address the task's code starts at in `image`: its function's, or its vector's handler.
     pub(crate) fn start(&self, image: &Image) -> Result<u64, Error> {
         match self {
-            TaskEntry::Symbol(s) => image.function_named(s).map(|f| f.start),
+            TaskEntry::Symbol(s) | TaskEntry::Polled { dispatcher: s, .. } => {
+                image.function_named(s).map(|f| f.start)
+            }
             TaskEntry::Vector(i) => image
                 .vectors
                 .iter()
@@ -188,7 +199,12 @@ pub fn bound_tasks(
             match start {
                 Ok(at) => (
                     Some(image.name(at)),
-                    match analysis.summary(at) {
+                    match match &task.entry {
+                        TaskEntry::Polled { task, others, .. } => {
+                            analysis.polled_summary(at, task, others)
+                        }
+                        _ => analysis.summary(at),
+                    } {
                         Ok(outcome) => to_bound(outcome),
                         Err(e) => to_bound(Err(e.to_string())),
                     },
@@ -237,3 +253,5 @@ pub fn bound_tasks(
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_polled;
