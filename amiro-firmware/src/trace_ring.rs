@@ -9,8 +9,13 @@
 //!
 //! The indices are two free-running counters: `reserved`, written only by [`Ring::reserve`] (its
 //! callers exclude each other by a critical section), and `released`, written only by the drain.
-//! Each is one word, read and written whole on the core (atomics, relaxed where no data depends on
-//! them), so the drain needs no critical section, and a writer only reads `released`.
+//! Each is one word, read and written whole on the core (relaxed atomics), so the drain needs no
+//! critical section, and a writer only reads `released`.
+//!
+//! One core only ([`Ring::new`]'s contract): the writers and the drain interleave only where an
+//! interrupt preempts, like a signal handler and the code it interrupts, so compiler fences order a
+//! slot's copy against its flag and the drain's read against its release (no `DMB`: the core
+//! itself sees its own accesses in program order).
 //!
 //! Why that is correct (one core; writers are interrupt handlers of any priority, or thread mode;
 //! the drain is one task at the lowest priority, and the slots' only reader):
@@ -20,14 +25,15 @@
 //!   consumed by `fill`); a writer that preempts another mid-copy reserves the next slot, never
 //!   the same one.
 //! * **The drain reads only complete slots.** `fill` sets the flag after the copy (a release
-//!   store), and `take` reads the slot only after seeing the flag set (an acquire load). A slot
+//!   fence before it), and `take` reads the slot only after seeing the flag set (an acquire fence
+//!   after it). A slot
 //!   reserved but not yet complete — its writer preempted mid-copy, maybe by writers that completed
 //!   later slots — stops the drain there: it takes nothing and tries again on its next job, so
 //!   records leave in the order they were reserved (the order of their stamps, which the firmware
 //!   takes under the reservation's critical section).
 //! * **No slot is written while the drain reads it.** The drain reads the slot `released mod N`,
 //!   which stays counted (`reserved − released`) until the drain moves `released` past it, after
-//!   its copy and after clearing the flag (release stores). A writer that reads the old `released`
+//!   its copy and after clearing the flag (a release fence before it). A writer that reads the old `released`
 //!   sees the ring one slot fuller than it is: at worst a record counted as lost while the drain
 //!   was freeing a slot, never a slot handed out twice.
 //! * **Loss is counted, never silent.** A reservation that finds all `N` slots reserved (complete
@@ -37,7 +43,7 @@
 //!
 //! The host tests below run these steps in the orders an interrupt can put them in.
 use core::cell::UnsafeCell;
-use core::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
+use core::sync::atomic::{compiler_fence, AtomicBool, AtomicU32, AtomicUsize, Ordering};
 
 /// A ring of `N` records (a power of two) of type `T`.
 pub struct Ring<T, const N: usize> {
@@ -54,7 +60,8 @@ pub struct Ring<T, const N: usize> {
 }
 
 // SAFETY: a slot is written only by the holder of its `Claim` and read only by the drain, never
-// both at once (the module's argument); everything else is atomics.
+// both at once (the module's argument, on the one core `Ring::new` requires); everything else is
+// atomics.
 unsafe impl<T: Send, const N: usize> Sync for Ring<T, N> {}
 
 /// The right to fill one reserved slot, once ([`Claim::fill`]).
@@ -66,7 +73,11 @@ pub struct Claim<'r, T, const N: usize> {
 
 impl<T: Copy, const N: usize> Ring<T, N> {
     /// `N` slots holding `empty`, none reserved.
-    pub const fn new(empty: T) -> Self {
+    ///
+    /// # Safety
+    /// The ring is used on one core only: its writers and its drain run on the same core (thread
+    /// mode and interrupt handlers), never in parallel — its orderings are compiler fences.
+    pub const unsafe fn new(empty: T) -> Self {
         assert!(N.is_power_of_two());
         Self {
             reserved: AtomicUsize::new(0),
@@ -85,7 +96,10 @@ impl<T: Copy, const N: usize> Ring<T, N> {
     /// No other call of `reserve` on this ring runs meanwhile: call it under a critical section.
     pub unsafe fn reserve(&self) -> Option<Claim<'_, T, N>> {
         let reserved = self.reserved.load(Ordering::Relaxed);
-        if reserved.wrapping_sub(self.released.load(Ordering::Acquire)) >= N {
+        let released = self.released.load(Ordering::Relaxed);
+        // The drain's read of the slot `released` frees came before its release (one core).
+        compiler_fence(Ordering::Acquire);
+        if reserved.wrapping_sub(released) >= N {
             let lost = self.lost.load(Ordering::Relaxed);
             self.lost.store(lost.wrapping_add(1), Ordering::Relaxed);
             return None;
@@ -115,14 +129,17 @@ impl<T: Copy, const N: usize> Ring<T, N> {
             return false;
         }
         let flag = &self.complete[released & (N - 1)];
-        if !flag.load(Ordering::Acquire) {
+        if !flag.load(Ordering::Relaxed) {
             return false;
         }
+        // The writer's copy came before its flag (one core).
+        compiler_fence(Ordering::Acquire);
         // SAFETY: complete, and counted until `released` moves past it: no writer holds it.
         *out = unsafe { *self.slot(released) };
         flag.store(false, Ordering::Relaxed);
+        compiler_fence(Ordering::Release);
         self.released
-            .store(released.wrapping_add(1), Ordering::Release);
+            .store(released.wrapping_add(1), Ordering::Relaxed);
         true
     }
 
@@ -158,7 +175,8 @@ impl<T, const N: usize> Claim<'_, T, N> {
         // SAFETY: the claim is the slot's only writer, and the drain does not read it before
         // its flag is set (the module's argument); `at` is below `N`.
         write(unsafe { &mut *slot });
-        self.ring.complete[at].store(true, Ordering::Release);
+        compiler_fence(Ordering::Release);
+        self.ring.complete[at].store(true, Ordering::Relaxed);
     }
 }
 
@@ -169,6 +187,11 @@ mod tests {
     const N: usize = 4;
 
     /// One drain step as `tracing::drain_one` takes it: the oldest complete record, or `None`.
+    fn ring() -> Ring<u32, N> {
+        // SAFETY: each test runs on one thread, its steps one at a time.
+        unsafe { Ring::new(0) }
+    }
+
     fn drain(ring: &Ring<u32, N>) -> Option<u32> {
         let mut out = 0;
         // SAFETY: each test is the ring's only drain.
@@ -189,7 +212,7 @@ mod tests {
 
     #[test]
     fn records_leave_in_the_order_they_were_reserved() {
-        let ring = Ring::<u32, N>::new(0);
+        let ring = ring();
         for v in 1..=3 {
             assert!(push(&ring, v));
         }
@@ -201,7 +224,7 @@ mod tests {
 
     #[test]
     fn a_writer_preempted_mid_copy_keeps_its_slot_and_the_drain_waits_for_it() {
-        let ring = Ring::<u32, N>::new(0);
+        let ring = ring();
         // Writer A reserves (under its critical section) and is preempted before its copy.
         let a = unsafe { ring.reserve() }.expect("room");
         // Writer B, at a higher priority, reserves the next slot and completes its record.
@@ -217,7 +240,7 @@ mod tests {
 
     #[test]
     fn a_half_written_record_is_never_read_and_a_writer_preempting_the_copy_goes_next() {
-        let ring = Ring::<u32, N>::new(0);
+        let ring = ring();
         let a = unsafe { ring.reserve() }.expect("room");
         // A writes half its record and is preempted by writer B, then the drain runs.
         a.fill(|s| {
@@ -232,7 +255,7 @@ mod tests {
 
     #[test]
     fn a_full_ring_counts_what_it_turns_away_and_incomplete_slots_count_as_full() {
-        let ring = Ring::<u32, N>::new(0);
+        let ring = ring();
         // Three complete records and one reserved by a writer that was preempted.
         for v in 1..=3 {
             assert!(push(&ring, v));
@@ -262,7 +285,7 @@ mod tests {
 
     #[test]
     fn a_writer_while_the_drain_copies_out_gets_another_slot() {
-        let ring = Ring::<u32, N>::new(0);
+        let ring = ring();
         for v in 1..=4 {
             assert!(push(&ring, v));
         }
@@ -280,7 +303,7 @@ mod tests {
 
     #[test]
     fn the_counters_wrap_and_the_ring_stays_in_order() {
-        let ring = Ring::<u32, N>::new(0);
+        let ring = ring();
         // Both counters a few steps below their wrap.
         ring.reserved.store(usize::MAX - 5, Ordering::Relaxed);
         ring.released.store(usize::MAX - 5, Ordering::Relaxed);
