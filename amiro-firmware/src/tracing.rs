@@ -342,8 +342,10 @@ fn drain_one() -> bool {
 
 /// The drain task's body (priority 0): a future that never completes, each poll one [`drain`]
 /// job; it wakes its own task before it returns, so the thread-mode executor polls it again after
-/// `admit_requests` (a job that finds the ring empty is a few instructions; the executor polls
-/// thread mode's tasks in a loop anyway).
+/// `admit_requests`. A job that finds the ring empty is a few instructions and no critical section
+/// but the deferred lines' short one. Parking while the ring is empty would save nothing: RTIC's
+/// priority-0 executor polls its tasks in a loop with no `WFI`, so the core would spin there
+/// instead (docs/analysis.md, "The trace path").
 pub fn serve_drain() -> Drain {
     Drain
 }
