@@ -20,10 +20,13 @@
 //!
 //! Two halves, so a task's cost for its records is a constant: a task stamps each record and copies
 //! it raw (its stamp and its kind, or the handler event unencoded: 40 bytes) into a static ring of
-//! [`RING_LEN`], under one short critical section — no encoding, no loop of unknown length, no
-//! channel. The board's `drain_trace` task, at priority 0 (thread
-//! mode, beside `admit_requests`), calls [`serve_drain`]: each of its jobs ([`drain`]) takes at most
-//! [`DRAIN_BATCH`] records out of the ring, COBS-encodes them and writes them to the trace channel
+//! [`RING_LEN`] — no encoding, no loop of unknown length, no channel. Only the slot's reservation
+//! and the stamp run with interrupts off (a few instructions); the copy runs after, outside the
+//! critical section, and marks the slot complete (`crate::trace_ring`, which argues why a
+//! preempting writer and the drain never touch a slot being copied). The board's `drain_trace`
+//! task, at priority 0 (thread mode, beside `admit_requests`), calls [`serve_drain`]: each of its
+//! jobs ([`drain`]) takes at most [`DRAIN_BATCH`] complete records out of the ring (each copied out
+//! between two short critical sections), COBS-encodes them and writes them to the trace channel
 //! (RTT on the robot), and writes at most one log line a handler deferred
 //! (`channels::defer_log`). A full ring counts the record as lost, and the drain reports the count
 //! (`Kind::Lost`) before the next record it writes.
@@ -42,6 +45,9 @@ use core::task::{Context, Poll};
 use amiro_sensors::trace::TraceEvent;
 use amiro_trace::{Kind, Record};
 use critical_section::{CriticalSection, Mutex};
+
+#[cfg(not(feature = "qemu"))]
+use crate::trace_ring::{Claim, Ring};
 
 /// The task number of "no task" (init or idle).
 pub const NO_TASK: u8 = u8::MAX;
@@ -75,8 +81,8 @@ struct Slot {
     what: What,
 }
 
-/// A free slot's contents (never written out: only slots below `len` are read). All zero bytes,
-/// so the ring lives in `.bss`, not in `.data` with its image in flash.
+/// A free slot's contents (never written out: only complete slots are read). All zero bytes, so
+/// the ring lives in `.bss`, not in `.data` with its image in flash.
 #[cfg(not(feature = "qemu"))]
 const EMPTY: Slot = Slot {
     cycles: 0,
@@ -94,16 +100,6 @@ struct State {
     last: u32,
     #[cfg(feature = "qemu")]
     last: u64,
-    /// Records the full ring turned away since the drain last reported them.
-    #[cfg(not(feature = "qemu"))]
-    lost: u32,
-    /// The records stamped and not yet written, oldest at `head`.
-    #[cfg(not(feature = "qemu"))]
-    ring: [Slot; RING_LEN],
-    #[cfg(not(feature = "qemu"))]
-    head: usize,
-    #[cfg(not(feature = "qemu"))]
-    len: usize,
 }
 
 static STATE: Mutex<UnsafeCell<State>> = Mutex::new(UnsafeCell::new(State {
@@ -117,15 +113,13 @@ static STATE: Mutex<UnsafeCell<State>> = Mutex::new(UnsafeCell::new(State {
     last: 0,
     #[cfg(feature = "qemu")]
     last: 0,
-    #[cfg(not(feature = "qemu"))]
-    lost: 0,
-    #[cfg(not(feature = "qemu"))]
-    ring: [EMPTY; RING_LEN],
-    #[cfg(not(feature = "qemu"))]
-    head: 0,
-    #[cfg(not(feature = "qemu"))]
-    len: 0,
 }));
+
+/// The records stamped and not yet written: reserved under a writer's critical section, written
+/// by that writer and read by the drain outside any (`crate::trace_ring`).
+#[cfg(not(feature = "qemu"))]
+// SAFETY: both chips are single-core; the ring's writers and drain run on that core.
+static RING: Ring<Slot, RING_LEN> = unsafe { Ring::new(EMPTY) };
 
 /// The trace state, inside a critical section. Not a `RefCell`: its borrow check would bring a
 /// panic path (and the formatting machinery) into every image for a borrow that cannot fail.
@@ -183,45 +177,80 @@ pub fn hello(clock_hz: u32) {
 }
 
 /// Stamps one record into the ring.
+// QEMU's `Reserved` is `()`: the record went through in the critical section.
+#[cfg_attr(feature = "qemu", allow(clippy::let_unit_value))]
 fn emit(what: What) {
-    critical_section::with(|cs| write(state_in(cs), &what));
+    let reserved = critical_section::with(|cs| write(state_in(cs), &what));
+    fill(reserved, &what);
 }
 
-/// Stamps one record and copies it into the ring, in the caller's critical section (so a task
-/// record's state change and its record are one step): a fixed-size copy, no loop. A full ring
-/// counts it as lost. One copy for every kind (flash).
+/// A slot reserved for a record and its stamp, to fill outside the critical section ([`fill`]);
+/// `None` when the full ring counted the record as lost.
 #[cfg(not(feature = "qemu"))]
-#[inline(never)]
-fn write(state: &mut State, what: &What) {
-    if state.len >= RING_LEN {
-        state.lost = state.lost.saturating_add(1);
-        return;
-    }
-    let cycles = cycles(state);
-    let tail = (state.head + state.len) & (RING_LEN - 1);
-    if let Some(slot) = state.ring.get_mut(tail) {
-        slot.cycles = cycles;
-        copy_words(what, &mut slot.what);
-        state.len += 1;
+type Reserved = Option<(Claim<'static, Slot, RING_LEN>, u64)>;
+/// QEMU: the record was written through ([`write`]); nothing to fill.
+#[cfg(feature = "qemu")]
+type Reserved = ();
+
+/// Stamps one record and reserves its slot, in the caller's critical section (so a task record's
+/// state change, its stamp and its place in the ring are one step): a few instructions, no copy.
+/// A full ring counts it as lost.
+#[cfg(not(feature = "qemu"))]
+fn write(state: &mut State, _what: &What) -> Reserved {
+    // SAFETY: every reservation runs under a critical section (the caller's).
+    let claim = unsafe { RING.reserve() }?;
+    Some((claim, cycles(state)))
+}
+
+/// Copies a record into the slot [`write`] reserved and marks it complete, outside any critical
+/// section: a fixed-size copy, no loop of unknown length. Inlined: the production image has one
+/// writer ([`emit`]), the traced one three.
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn fill(reserved: Reserved, what: &What) {
+    if let Some((claim, cycles)) = reserved {
+        claim.fill(|slot| {
+            slot.cycles = cycles;
+            copy_words(what, &mut slot.what);
+        });
     }
 }
+
+/// QEMU: the record was written through.
+#[cfg(feature = "qemu")]
+fn fill(_reserved: Reserved, _what: &What) {}
 
 /// Words of a [`What`].
 #[cfg(not(feature = "qemu"))]
 const WHAT_WORDS: usize = core::mem::size_of::<What>() / 4;
 
-/// Copies `from` into `to` a word at a time, in a counted loop of [`WHAT_WORDS`] passes: a
-/// `memcpy` call would be charged by the execution-time bound at its byte loop's cost (it cannot
-/// know the alignment), and volatile accesses keep LLVM from turning the loop back into one.
+/// Copies `from` into `to`: two 4-word `LDM`/`STM` pairs, 4 instructions of straight-line code (a
+/// `memcpy` call would be charged by the execution-time bound at its byte loop's cost, as it
+/// cannot know the alignment; a loop of words costs a taken branch per word).
 #[cfg(not(feature = "qemu"))]
+#[inline(always)]
 fn copy_words(from: &What, to: &mut What) {
-    use core::mem::MaybeUninit;
-    let from = core::ptr::from_ref(from).cast::<MaybeUninit<u32>>();
-    let to = core::ptr::from_mut(to).cast::<MaybeUninit<u32>>();
-    for i in 0..WHAT_WORDS {
-        // SAFETY: both point to a `What` (4-byte aligned, `WHAT_WORDS` whole words); a word is
-        // moved as `MaybeUninit`, so padding bytes are never read as initialised values.
-        unsafe { to.add(i).write_volatile(from.add(i).read_volatile()) };
+    const {
+        assert!(WHAT_WORDS == 8 && core::mem::size_of::<What>() == 4 * WHAT_WORDS);
+        assert!(core::mem::align_of::<What>() >= 4);
+    }
+    // SAFETY: both point to a `What`: word-aligned (LDM/STM need it), 8 whole words, `to` unique;
+    // the words are moved as they are (padding included), read from `from` and written to `to`
+    // only. r0-r3 are declared clobbered, the pointers consumed.
+    unsafe {
+        core::arch::asm!(
+            "ldm {from}!, {{r0, r1, r2, r3}}",
+            "stm {to}!, {{r0, r1, r2, r3}}",
+            "ldm {from}, {{r0, r1, r2, r3}}",
+            "stm {to}, {{r0, r1, r2, r3}}",
+            from = inout(reg) core::ptr::from_ref(from) => _,
+            to = inout(reg) core::ptr::from_mut(to) => _,
+            out("r0") _,
+            out("r1") _,
+            out("r2") _,
+            out("r3") _,
+            options(nostack, preserves_flags),
+        );
     }
 }
 
@@ -244,20 +273,6 @@ fn write(state: &mut State, what: &What) {
     } else {
         crate::channels::write_trace(bytes);
     }
-}
-
-/// Takes the oldest record out of the ring into `out`; `false` when the ring is empty.
-#[cfg(not(feature = "qemu"))]
-fn pop_into(state: &mut State, out: &mut Slot) -> bool {
-    if state.len == 0 {
-        return false;
-    }
-    if let Some(oldest) = state.ring.get(state.head & (RING_LEN - 1)) {
-        *out = *oldest;
-    }
-    state.head = (state.head + 1) & (RING_LEN - 1);
-    state.len -= 1;
-    true
 }
 
 /// Encodes one record (a handler event's fields first) and writes it to the trace channel; `false`
@@ -293,35 +308,30 @@ pub fn drain() {
 }
 
 /// Writes one record: a `Lost` report when the ring turned records away since the last one, else
-/// the oldest record of the ring; `false` when there was none. The record is taken out under a
-/// short critical section and encoded and written outside it (the drain is the trace channel's
+/// the oldest record of the ring once its writer has completed it; `false` when there was none.
+/// The record is copied out of the ring without a critical section (`crate::trace_ring`; only a
+/// `Lost` report's stamp takes one), then encoded and written (the drain is the trace channel's
 /// only writer); one the channel has no room for is counted as lost.
 #[cfg(not(feature = "qemu"))]
 fn drain_one() -> bool {
     let mut slot = EMPTY;
-    let taken = critical_section::with(|cs| {
-        let state = state_in(cs);
-        if state.lost > 0 {
-            let count = core::mem::take(&mut state.lost);
-            slot = Slot {
-                cycles: cycles(state),
-                what: What::Kind(Kind::Lost { count }),
-            };
-            return true;
-        }
-        pop_into(state, &mut slot)
-    });
-    if taken && !write_out(&slot) {
+    // SAFETY (the three calls on `RING`): this is its only drain (`drain_trace`, one task).
+    let count = unsafe { RING.take_lost() };
+    if count > 0 {
+        slot.cycles = critical_section::with(|cs| cycles(state_in(cs)));
+        slot.what = What::Kind(Kind::Lost { count });
+    } else if !unsafe { RING.take(&mut slot) } {
+        // Empty, or its oldest record's writer was preempted mid-copy: the next job takes it.
+        return false;
+    }
+    if !write_out(&slot) {
         let count = match slot.what {
             What::Kind(Kind::Lost { count }) => count,
             _ => 1,
         };
-        critical_section::with(|cs| {
-            let state = state_in(cs);
-            state.lost = state.lost.saturating_add(count);
-        });
+        unsafe { RING.count_lost(count) };
     }
-    taken
+    true
 }
 
 /// QEMU: the records were written as they were stamped; nothing waits.
@@ -332,8 +342,10 @@ fn drain_one() -> bool {
 
 /// The drain task's body (priority 0): a future that never completes, each poll one [`drain`]
 /// job; it wakes its own task before it returns, so the thread-mode executor polls it again after
-/// `admit_requests` (a job that finds the ring empty is a few instructions; the executor polls
-/// thread mode's tasks in a loop anyway).
+/// `admit_requests`. A job that finds the ring empty is a few instructions and no critical section
+/// but the deferred lines' short one. Parking while the ring is empty would save nothing: RTIC's
+/// priority-0 executor polls its tasks in a loop with no `WFI`, so the core would spin there
+/// instead (docs/analysis.md, "The trace path").
 pub fn serve_drain() -> Drain {
     Drain
 }
@@ -403,31 +415,38 @@ pub fn enter(task: u8) {
 
 #[cfg(feature = "task-trace")]
 #[inline(never)]
+// QEMU's `Reserved` is `()`: the record went through in the critical section.
+#[cfg_attr(feature = "qemu", allow(clippy::let_unit_value))]
 fn start(task: u8) {
-    critical_section::with(|cs| {
+    let what = What::Kind(Kind::TaskStart { task });
+    let reserved = critical_section::with(|cs| {
         let state = state_in(cs);
         if let Some(slot) = state.preempted.get_mut(usize::from(task)) {
             *slot = state.current;
             state.current = task;
         }
-        write(state, &What::Kind(Kind::TaskStart { task }));
+        write(state, &what)
     });
+    fill(reserved, &what);
 }
 
 #[cfg(feature = "task-trace")]
 #[inline(never)]
+// QEMU's `Reserved` is `()`: the record went through in the critical section.
+#[cfg_attr(feature = "qemu", allow(clippy::let_unit_value))]
 fn end(task: u8, next_release_in_us: u32) {
-    critical_section::with(|cs| {
+    let what = What::Kind(Kind::TaskEnd {
+        task,
+        next_release_in_us,
+    });
+    let reserved = critical_section::with(|cs| {
         let state = state_in(cs);
         if let Some(&before) = state.preempted.get(usize::from(task)) {
             state.current = before;
         }
-        let kind = Kind::TaskEnd {
-            task,
-            next_release_in_us,
-        };
-        write(state, &What::Kind(kind));
+        write(state, &what)
     });
+    fill(reserved, &what);
 }
 
 /// The running task is about to wait (its run ends): for a timer, its next release `at_us` with

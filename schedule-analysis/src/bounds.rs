@@ -104,8 +104,9 @@ pub struct TaskBound {
 #[serde(deny_unknown_fields)]
 pub struct CeilingSections {
     /// Why the list may miss sections (a raise whose ceiling the machine code does not fix, code the analysis
-    /// cannot follow); `null` when it holds every raise of the job's code. An incomplete list stands for
-    /// nothing: the timing file's stated sections are kept.
+    /// cannot follow, a thread-mode task whose bounds-file functions are only part of its job); `null` when it
+    /// holds every raise of the job's code. An incomplete list does not replace the timing file's stated
+    /// sections: they are kept, and its bounded sections are added beside them.
     pub incomplete: Option<String>,
     /// One entry per ceiling the code raises to, each ceiling once.
     pub ceilings: Vec<CeilingSection>,

@@ -407,10 +407,16 @@ fn thread_mode_step(
                 }
             )
         });
+        // The admission step's job around its check; any other thread-mode task's poll around its functions.
+        let rest = if task == "admit_requests" {
+            "the handler's update, the verdict frames and their trace events, the pacing"
+        } else {
+            "its poll around the named functions"
+        };
         return format!(
             "{head}; its step's check ({function}) is bounded from the machine code within its iteration caps at \
-             {} cycles ({bound:.0} µs at {} MHz, {} instructions), the rest of its job (the handler's update, the \
-             verdict frames and their trace events, the pacing) is not: a part of a job is no budget for it{against}",
+             {} cycles ({bound:.0} µs at {} MHz, {} instructions), the rest of its job ({rest}) is not: a part of a \
+             job is no budget for it{against}",
             step.cycles,
             clock / 1_000_000,
             step.instructions
@@ -473,10 +479,28 @@ pub fn rows(
     for task in &budgets.tasks {
         out.push(match (source(task), by_name.get(task.as_str())) {
             (Some((what, f)), _) => from_found(task, &what, f, clock),
-            (None, Some(step)) => declined(
-                task,
-                thread_mode_step(task, step.0, budgets.stated.get(task.as_str()), clock),
-            ),
+            // Its budget stays stated, but the sections of the functions named for it are sections of its job:
+            // blocking terms beside the stated ones (not in place of them: those functions may be only part
+            // of the job).
+            (None, Some(step)) => TaskBound {
+                sections: Some({
+                    let mut s = sections_row(step.1, clock);
+                    let part = format!(
+                        "{task}: thread mode, the sections of the functions the bounds file names for it \
+                         ({}), which may be only part of its job",
+                        step.0.function.as_deref().unwrap_or("?")
+                    );
+                    s.incomplete = Some(match s.incomplete {
+                        Some(why) => format!("{part}; {why}"),
+                        None => part,
+                    });
+                    s
+                }),
+                ..declined(
+                    task,
+                    thread_mode_step(task, step.0, budgets.stated.get(task.as_str()), clock),
+                )
+            },
             (None, None) => declined(
                 task,
                 format!("{task}: not an interrupt-driven task of the image as built (thread mode, or not in the app)"),
@@ -878,6 +902,12 @@ mod app {
         );
         let admit = written.iter().find(|r| r.task == "admit").unwrap();
         assert_eq!(admit.cycles, None);
+        // Its sections go with it, marked as possibly only part of the job's.
+        let sections = admit.sections.as_ref().expect("the step's sections");
+        assert!(sections
+            .incomplete
+            .as_deref()
+            .is_some_and(|w| w.contains("thread mode") && w.contains("(check)")));
         let reason = admit.declined.as_deref().unwrap();
         assert!(
             reason.contains("its step's check (check) is bounded from the machine code within its iteration caps at 7200 cycles (100 µs at 72 MHz, 3600 instructions)")

@@ -311,10 +311,7 @@ pub(super) fn apply_sections(
             .and_then(|(file, row)| file.task(row))
             .and_then(|r| r.sections.as_ref());
         let why = match (sections, &budgets.bounds) {
-            (Some(s), _) => s
-                .incomplete
-                .as_ref()
-                .map(|w| format!("sections incomplete: {w}")),
+            (Some(s), _) => s.incomplete.as_ref().cloned(),
             (None, None) => Some("no bounds file".to_string()),
             (None, Some(_)) => Some(format!(
                 "no sections in {} for `{}`",
@@ -333,6 +330,24 @@ pub(super) fn apply_sections(
                 blocking.stated.push(format!("{}/{r} ({short})", t.name));
             }
             blocking.why.entry(short.to_string()).or_insert(why);
+            // An incomplete list still holds sections of the job (a thread-mode task's: those of the functions
+            // its bounds file names): each bounded one is a term too, beside the stated ones (at a resource
+            // stated already, the longer of the two).
+            for s in sections.iter().flat_map(|s| &s.ceilings) {
+                let (Some(length), false) =
+                    (s.length_us(), s.ceiling.is_some_and(|c| c <= t.priority))
+                else {
+                    continue;
+                };
+                let term = t
+                    .critical_sections_us
+                    .entry(ceiling_resource(s.ceiling))
+                    .or_insert(0.0);
+                *term = term.max(length);
+                blocking
+                    .bounded
+                    .push(format!("{} at {} {length} µs", t.name, s.ceiling_name()));
+            }
             continue;
         };
         let mut out = BTreeMap::new();
@@ -767,33 +782,66 @@ mod tests {
     }
 
     #[test]
-    fn an_incomplete_list_or_a_top_priority_job_changes_nothing_and_a_gap_is_named() {
+    fn an_incomplete_list_adds_its_bounded_sections_beside_the_stated_ones_a_top_job_none_and_a_gap_is_named(
+    ) {
+        // `a`'s list holds only some of its job's sections (a thread-mode task's named functions): priority 3
+        // for 72 cycles (1 µs) and interrupts off for 144 (2 µs), where 1 µs is stated; `b`'s the same, where
+        // 3 µs is stated with interrupts off.
         let incomplete = CeilingSections {
             incomplete: Some("a raise of no constant".into()),
-            ceilings: vec![section(Some(3), Some(72))],
+            ceilings: vec![section(Some(3), Some(72)), section(None, Some(144))],
         };
         let gap = CeilingSections {
             incomplete: None,
             ceilings: vec![section(Some(4), None)],
         };
         let mut b = budgets(vec![
-            row("a", Some(incomplete)),
+            row("a", Some(incomplete.clone())),
+            row("b", Some(incomplete)),
             row("c", Some(gap.clone())),
             row("top", Some(gap)),
         ]);
         let mut tasks = vec![
-            job("a", 1, &[("r", 2.0)]),
+            job("a", 1, &[("r", 2.0), (GLOBAL_CRITICAL_SECTION, 1.0)]),
+            job("b", 1, &[(GLOBAL_CRITICAL_SECTION, 3.0)]),
             job("c", 2, &[]),
             job("other", 3, &[("r", 1.0)]),
             job("top", 6, &[("s", 1.0)]),
         ];
         apply_sections(&mut b, &mut tasks, &mut BTreeMap::new());
-        assert_eq!(tasks[0].critical_sections_us["r"], 2.0);
-        assert_eq!(tasks[3].critical_sections_us["s"], 1.0);
-        assert!(b.blocking.bounded.is_empty());
+        // The stated sections stay; the bounded ones are added, the longer one where both name a resource.
+        let a: Vec<(&str, f64)> = tasks[0]
+            .critical_sections_us
+            .iter()
+            .map(|(r, l)| (r.as_str(), *l))
+            .collect();
+        assert_eq!(
+            a,
+            [
+                (GLOBAL_CRITICAL_SECTION, 2.0),
+                ("machine code: priority 3", 1.0),
+                ("r", 2.0),
+            ]
+        );
+        assert_eq!(tasks[1].critical_sections_us[GLOBAL_CRITICAL_SECTION], 3.0);
+        assert_eq!(tasks[4].critical_sections_us["s"], 1.0);
+        assert_eq!(
+            b.blocking.bounded,
+            [
+                "a at priority 3 1 µs",
+                "a at interrupts off 2 µs",
+                "b at priority 3 1 µs",
+                "b at interrupts off 2 µs"
+            ]
+        );
         assert_eq!(
             b.blocking.stated,
-            ["a/r (sections incomplete)", "other/r (no sections)"]
+            [
+                "a/critical_section (sections incomplete)",
+                "a/r (sections incomplete)",
+                "b/critical_section (sections incomplete)",
+                "other/r (no sections)"
+            ]
         );
         assert_eq!(b.blocking.unstated, ["c at priority 4"]);
     }
