@@ -61,8 +61,8 @@ pub use image::Image;
 pub use wcet::bounds::BoundsFile;
 pub use wcet::chip::Chip;
 pub use wcet::{
-    bound_function, bound_tasks, task_sections, Bound, Ceiling, CeilingBound, LoopInfo, Task,
-    TaskBound, TaskEntry, TaskSections,
+    bound_function, bound_tasks, task_sections, ActivationBound, Bound, Ceiling, CeilingBound,
+    LoopInfo, Task, TaskBound, TaskEntry, TaskSections,
 };
 
 /// Thumb halfwords as the bytes of an image (tests of the decoders).

@@ -97,6 +97,26 @@ pub struct TaskBound {
     /// to its restore); absent in a file of an older writer, or for a job the machine code has no code of.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sections: Option<CeilingSections>,
+    /// Where the row's figures are a charge per activation, not one job's bound (the board's bounds file's
+    /// `per_activation`: a receive interrupt whose job drains every frame that arrived by then is charged per
+    /// frame): the whole job's bound and why the charge holds. The analysis uses the row's figures; a check of
+    /// observed jobs holds each against the job's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub job: Option<JobBound>,
+}
+
+/// The bound of one whole job of a task whose row is a charge per activation ([`TaskBound::job`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobBound {
+    /// The job's bound in core cycles.
+    pub cycles: u64,
+    /// At the file's clock, µs.
+    pub us: f64,
+    /// The job's longest path in instructions.
+    pub instructions: u64,
+    /// The charge: where, at how many passes, and why a job that serves k activations costs at most k charges.
+    pub per_activation: String,
 }
 
 /// Every critical section of one job's machine code, as the longest per ceiling.

@@ -155,6 +155,8 @@ struct Row<'a> {
     loops: Vec<machine_code::LoopInfo>,
     preemption_retry_cycles: u64,
     declined: Option<String>,
+    /// Where the bounds file charges the task per activation: that charge (the row's figures are the job's).
+    per_activation: Option<machine_code::ActivationBound>,
     /// The task's longest critical section per ceiling (from the priority raise to its restore).
     critical_sections: Vec<machine_code::CeilingBound>,
     /// Why the sections found may not be all of them (then none stands for the task's blocking).
@@ -269,12 +271,31 @@ pub fn worst_per_name(rows: Vec<machine_code::TaskBound>) -> Vec<machine_code::T
                 let name = row.function.as_deref().unwrap_or("?");
                 kept.declined = Some(format!("{name}: {reason}"));
             } else {
-                // The longer in time (cycles and stated waits), and the most instructions of either.
+                // The longer in time (cycles and stated waits), and the most instructions of either; the
+                // longer charge per activation, declined where either is.
                 let instructions = kept.instructions.max(row.instructions);
+                let per_activation = match (kept.per_activation.take(), row.per_activation.clone())
+                {
+                    (Some(a), Some(b)) => Some(
+                        if a.declined.is_some() || (b.declined.is_none() && a.us >= b.us) {
+                            machine_code::ActivationBound {
+                                instructions: a.instructions.max(b.instructions),
+                                ..a
+                            }
+                        } else {
+                            machine_code::ActivationBound {
+                                instructions: a.instructions.max(b.instructions),
+                                ..b
+                            }
+                        },
+                    ),
+                    (a, b) => a.or(b),
+                };
                 if row.us > kept.us {
                     *kept = row;
                 }
                 kept.instructions = instructions;
+                kept.per_activation = per_activation;
             }
         }
         kept.function = Some(functions);
@@ -382,6 +403,7 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
                 loops: t.loops,
                 preemption_retry_cycles: t.preemption_retry_cycles,
                 declined: t.declined,
+                per_activation: t.per_activation,
                 critical_sections: sections.ceilings,
                 critical_sections_incomplete: sections.incomplete,
             });
@@ -424,6 +446,19 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
                     r.bus_wait_us,
                     r.loops.len()
                 ),
+            }
+            if let Some(a) = &r.per_activation {
+                match &a.declined {
+                    Some(reason) => println!(
+                        "    per activation ({} at {} passes): DECLINED: {reason}",
+                        a.at, a.passes
+                    ),
+                    None => println!(
+                        "    per activation ({} at {} passes): ≤ {} cycles {:.2} µs {} instructions, bus waits {:.2} µs \
+                         (a job that serves k ≥ 1 activations: at most k times this; the bounds file's reason)",
+                        a.at, a.passes, a.cycles, a.us, a.instructions, a.bus_wait_us
+                    ),
+                }
             }
             print_sections(r);
         }
@@ -552,6 +587,7 @@ mod tests {
             loops: Vec::new(),
             preemption_retry_cycles: 0,
             declined: declined.map(str::to_string),
+            per_activation: None,
         }
     }
 

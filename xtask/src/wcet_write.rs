@@ -249,10 +249,26 @@ fn hold(rows: &mut [TaskBound], held: &[machine_code::wcet::bounds::HeldBound]) 
         // Its critical sections come from the same paths: held with it, the stated ones stand.
         r.sections = None;
         let bound = match (&r.declined, r.cycles, r.us, r.instructions) {
-            (None, Some(cycles), Some(us), Some(instructions)) => format!(
-                "bounded from the machine code at {cycles} cycles ({us} µs, {instructions} instructions, bus waits {} µs)",
-                r.bus_wait_us
-            ),
+            (None, Some(cycles), Some(us), Some(instructions)) => {
+                let figures = format!(
+                    "{cycles} cycles ({us} µs, {instructions} instructions, bus waits {} µs)",
+                    r.bus_wait_us
+                );
+                match r.job.take() {
+                    None => format!("bounded from the machine code at {figures}"),
+                    // Where and at how many passes; the bounds file holds why.
+                    Some(job) => format!(
+                        "bounded from the machine code at {figures} per activation ({}), its job at {} cycles \
+                         ({} µs, {} instructions)",
+                        job.per_activation
+                            .split_once(": ")
+                            .map_or(job.per_activation.as_str(), |(at, _)| at),
+                        job.cycles,
+                        job.us,
+                        job.instructions
+                    ),
+                }
+            }
             (Some(reason), ..) => format!("declined ({reason}), its critical sections"),
             _ => "its bound".to_string(),
         };
@@ -276,6 +292,7 @@ fn declined(task: &str, reason: String) -> TaskBound {
         declined: Some(reason),
         critical_sections: BTreeMap::new(),
         sections: None,
+        job: None,
     }
 }
 
@@ -289,6 +306,7 @@ fn bounded(task: &str, cycles: u64, instructions: u64, bus_wait_us: f64, clock: 
         declined: None,
         critical_sections: BTreeMap::new(),
         sections: None,
+        job: None,
     }
 }
 
@@ -305,9 +323,37 @@ fn from_found(
             format!("{what}: not bounded (no such handler in the image)"),
         ),
         Some((f, s)) => {
-            let mut row = match &f.declined {
-                Some(reason) => declined(task, format!("{what}: {reason}")),
-                None => bounded(task, f.cycles, f.instructions, f.bus_wait_us, clock),
+            let mut row = match (&f.declined, &f.per_activation) {
+                (Some(reason), _) => declined(task, format!("{what}: {reason}")),
+                (None, None) => bounded(task, f.cycles, f.instructions, f.bus_wait_us, clock),
+                // Charged per activation: the charge is the budget, the job's bound kept beside it.
+                (None, Some(charge)) => match &charge.declined {
+                    Some(reason) => declined(
+                        task,
+                        format!(
+                            "{what}: its charge per activation ({} at {} passes) is declined: {reason}",
+                            charge.at, charge.passes
+                        ),
+                    ),
+                    None => TaskBound {
+                        job: Some(bounds::JobBound {
+                            cycles: f.cycles,
+                            us: us(f.cycles, clock),
+                            instructions: f.instructions,
+                            per_activation: format!(
+                                "{} at {} passes: {}",
+                                charge.at, charge.passes, charge.reason
+                            ),
+                        }),
+                        ..bounded(
+                            task,
+                            charge.cycles,
+                            charge.instructions,
+                            charge.bus_wait_us,
+                            clock,
+                        )
+                    },
+                },
             };
             row.sections = Some(sections_row(s, clock));
             row
@@ -594,6 +640,7 @@ mod app {
             loops: Vec::new(),
             preemption_retry_cycles: 0,
             declined: declined.map(str::to_string),
+            per_activation: None,
         }
     }
 
@@ -731,6 +778,83 @@ mod app {
             idle_critical_sections: BTreeMap::new(),
         };
         assert_eq!(BoundsFile::from_json("t", &file.to_json()).unwrap(), file);
+    }
+
+    /// `can_rx` charged per frame: its job 2 160 cycles, a frame's charge 576 (or declined).
+    fn charged(declined: Option<&str>) -> machine_code::TaskBound {
+        machine_code::TaskBound {
+            per_activation: Some(machine_code::ActivationBound {
+                at: "RX at src/rx.rs:12".into(),
+                passes: 2,
+                cycles: 576,
+                us: 8.0,
+                instructions: 160,
+                bus_wait_us: 0.0,
+                reason: "a job that drains k frames costs at most k charges".into(),
+                declined: declined.map(str::to_string),
+            }),
+            ..found("can_rx", 2160, None)
+        }
+    }
+
+    #[test]
+    fn a_task_charged_per_activation_has_the_charge_as_its_budget_and_keeps_its_job() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: vec!["can_rx".into()],
+            ..Budgets::default()
+        };
+        let machine = [charged(None)];
+        let sections = sections_of(&machine, &[]);
+        let written = super::rows(&built, &app, &budgets, &machine, &sections, chip);
+        let rx = written.iter().find(|r| r.task == "can_rx").unwrap();
+        // 576 cycles at 72 MHz: 8 µs, the budget; the job's 2 160 cycles (30 µs) beside it.
+        assert_eq!(
+            (rx.cycles, rx.us, rx.instructions),
+            (Some(576), Some(8.0), Some(160))
+        );
+        assert_eq!(rx.budget_us(), Some(8.0));
+        let job = rx.job.as_ref().expect("the job's bound kept");
+        assert_eq!((job.cycles, job.us, job.instructions), (2160, 30.0, 1080));
+        assert_eq!(
+            job.per_activation,
+            "RX at src/rx.rs:12 at 2 passes: a job that drains k frames costs at most k charges"
+        );
+        // Written and read back.
+        let text = serde_json::to_string(rx).unwrap();
+        assert!(text.contains(r#""job":{"cycles":2160"#), "{text}");
+        // A declined charge declines the row (the job's bound is no per-frame budget).
+        let machine = [charged(Some(
+            "the loop RX at src/rx.rs:12 is not on the task's path",
+        ))];
+        let written = super::rows(&built, &app, &budgets, &machine, &sections, chip);
+        let rx = written.iter().find(|r| r.task == "can_rx").unwrap();
+        assert_eq!(rx.cycles, None);
+        assert!(rx
+            .declined
+            .as_deref()
+            .unwrap()
+            .contains("not on the task's path"));
+        // Held, the row says both figures and drops the job.
+        let machine = [charged(None)];
+        let mut written = super::rows(&built, &app, &budgets, &machine, &sections, chip);
+        let held = machine_code::wcet::bounds::HeldBound {
+            task: "can_rx".into(),
+            reason: "LightRing's can_tx misses".into(),
+        };
+        hold(&mut written, &[held]);
+        let rx = written.iter().find(|r| r.task == "can_rx").unwrap();
+        assert_eq!((rx.cycles, rx.job.as_ref()), (None, None));
+        let reason = rx.declined.as_deref().unwrap();
+        assert!(reason.contains("576 cycles (8 µs"), "{reason}");
+        assert!(
+            reason.contains("per activation (RX at src/rx.rs:12 at 2 passes), its job"),
+            "{reason}"
+        );
+        assert!(reason.contains("its job at 2160 cycles (30 µs"), "{reason}");
+        assert!(reason.ends_with("LightRing's can_tx misses"), "{reason}");
     }
 
     #[test]

@@ -19,7 +19,9 @@
 //!   "jobs": [{ "function": "UART4", "file": "src/tasks.rs", "line": 150,
 //!              "reason": "the watchdog's period: a delay ready at once is the next release" }],
 //!   "totals": [{ "function": "…", "file": "src/busy_window.rs", "line": 829, "passes": 500,
-//!                "reason": "every pass back is one of the job's at most 500 fixed-point iterations" }]
+//!                "reason": "every pass back is one of the job's at most 500 fixed-point iterations" }],
+//!   "per_activation": [{ "task": "can_rx", "function": "…", "file": "src/bxcan.rs", "line": 125,
+//!                        "passes": 2, "reason": "a job that drains k frames costs at most k times one frame's" }]
 //! }
 //! ```
 //!
@@ -157,6 +159,23 @@ pub struct TotalBound {
     pub reason: String,
 }
 
+/// A task whose activations are not its jobs: one job serves every activation that arrived by then (a
+/// receive interrupt drains every frame its FIFO holds), so the analysis charges it per activation, and
+/// that charge is the task's bound with the stated loop at `file:line` in `function` (its header runs,
+/// as [`LoopBound::bound`]) at `passes` — one activation's pass and the one that ends — in place of its
+/// bound per job. The reason says why a job that serves k activations costs at most k such charges.
+/// The loop must be one the file states under `loops`, at a bound of at least `passes`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PerActivation {
+    pub task: String,
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    pub passes: u64,
+    pub reason: String,
+}
+
 /// The stated bounds of one image (see the module documentation).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -183,10 +202,13 @@ pub struct BoundsFile {
     /// Tasks whose bound is not the analysis' budget yet ([`HeldBound`]).
     #[serde(default)]
     pub held: Vec<HeldBound>,
+    /// Tasks charged per activation, not per job ([`PerActivation`]).
+    #[serde(default)]
+    pub per_activation: Vec<PerActivation>,
 }
 
 /// Whether a line-table path is the stated `file`.
-fn same_file(path: &str, file: &str) -> bool {
+pub(crate) fn same_file(path: &str, file: &str) -> bool {
     let file = file.trim_start_matches("./");
     path == file || path.ends_with(&format!("/{file}"))
 }
@@ -254,6 +276,32 @@ impl BoundsFile {
                 )));
             }
         }
+        for a in &file.per_activation {
+            let stated = file.loop_bound(&a.function, &a.file, a.line);
+            if a.passes == 0 || a.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the per-activation charge of {} needs passes of at least 1 and a reason",
+                    a.task
+                )));
+            }
+            match stated {
+                Some(l) if l.bound >= a.passes => {}
+                Some(l) => {
+                    return Err(Error::Bounds(format!(
+                    "the per-activation charge of {} takes the loop at {}:{} in {} at {} passes, \
+                         more than its stated bound of {}",
+                    a.task, a.file, a.line, a.function, a.passes, l.bound
+                )))
+                }
+                None => {
+                    return Err(Error::Bounds(format!(
+                        "the per-activation charge of {} names the loop at {}:{} in {}, which the \
+                         file does not state under `loops`",
+                        a.task, a.file, a.line, a.function
+                    )))
+                }
+            }
+        }
         for p in &file.per_element {
             if p.register > 3 || p.reason.trim().is_empty() {
                 return Err(Error::Bounds(format!(
@@ -312,6 +360,26 @@ impl BoundsFile {
         self.totals
             .iter()
             .find(|t| t.function == function && t.line == line && same_file(file, &t.file))
+    }
+
+    /// The per-activation charge of the task named `task`, if it has one.
+    pub fn per_activation(&self, task: &str) -> Option<&PerActivation> {
+        self.per_activation.iter().find(|a| a.task == task)
+    }
+
+    /// This file with the loop of `charge` at its passes per activation in place of its bound per
+    /// job (the file's other statements unchanged).
+    pub fn at_activation(&self, charge: &PerActivation) -> BoundsFile {
+        let mut file = self.clone();
+        for l in &mut file.loops {
+            if l.function == charge.function
+                && l.line == charge.line
+                && same_file(&charge.file, &l.file)
+            {
+                l.bound = charge.passes;
+            }
+        }
+        file
     }
 
     /// The stated targets of the call through a register at `file:line` in `function`.
@@ -374,6 +442,11 @@ impl BoundsFile {
                 self.totals
                     .iter()
                     .map(|t| ("total", &t.function, &t.file, t.line)),
+            )
+            .chain(
+                self.per_activation
+                    .iter()
+                    .map(|a| ("per-activation loop", &a.function, &a.file, a.line)),
             );
         for (kind, function, file, line) in keyed {
             if !has_line(function, file, line) {

@@ -134,6 +134,28 @@ pub struct TaskBound {
     /// one).
     pub preemption_retry_cycles: u64,
     pub declined: Option<String>,
+    /// Where the bounds file charges the task per activation ([`bounds::PerActivation`]): that
+    /// charge, beside the job's bound above.
+    pub per_activation: Option<ActivationBound>,
+}
+
+/// A task's charge per activation ([`bounds::PerActivation`]): its bound with the stated loop at its
+/// passes per activation, everything else as in the job's bound (a handler's entry and exit and the
+/// preemption retry included alike).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ActivationBound {
+    /// The loop, `function at file:line`.
+    pub at: String,
+    /// Its header's runs per activation.
+    pub passes: u64,
+    pub cycles: u64,
+    pub us: f64,
+    pub instructions: u64,
+    pub bus_wait_us: f64,
+    /// Why a job that serves k activations costs at most k charges (the bounds file's).
+    pub reason: String,
+    /// Why there is no charge (the loop is not on the task's path, or the bound declined).
+    pub declined: Option<String>,
 }
 
 /// Bounds one function of `image` with everything it calls.
@@ -194,24 +216,7 @@ pub fn bound_tasks(
     let mut analysis = Analysis::new(image, chip, bounds);
     let found: Vec<(Option<String>, Bound)> = tasks
         .iter()
-        .map(|task| {
-            let start = task.entry.start(image);
-            match start {
-                Ok(at) => (
-                    Some(image.name(at)),
-                    match match &task.entry {
-                        TaskEntry::Polled { task, others, .. } => {
-                            analysis.polled_summary(at, task, others)
-                        }
-                        _ => analysis.summary(at),
-                    } {
-                        Ok(outcome) => to_bound(outcome),
-                        Err(e) => to_bound(Err(e.to_string())),
-                    },
-                ),
-                Err(e) => (None, to_bound(Err(e.to_string()))),
-            }
-        })
+        .map(|task| bound_task(&mut analysis, image, task))
         .collect();
     // What one preemption can cost the job it preempts: one retry of the longest exclusive-access
     // loop of any task (charged to the preempting handler).
@@ -221,37 +226,103 @@ pub fn bound_tasks(
         .map(|(_, b)| b.retry_instructions)
         .max()
         .unwrap_or(0);
+    // A handler's figures: the bound, its entry and exit, one retry of what it preempts.
+    let extras = |task: &Task, bound: &Bound| {
+        if task.handler && bound.declined.is_none() {
+            (chip.exception_cycles() + retry_cycles, retry_instructions)
+        } else {
+            (0, 0)
+        }
+    };
+    let us = |cycles: u64, bound: &Bound| {
+        if bound.declined.is_some() {
+            0.0
+        } else {
+            (chip.cycles_to_ns(cycles) + bound.bus_wait_ns) as f64 / 1000.0
+        }
+    };
     tasks
         .iter()
         .zip(found)
         .map(|(task, (function, bound))| {
-            let handler = task.handler && bound.declined.is_none();
-            let (extra, retry, retry_insns) = if handler {
-                (chip.exception_cycles(), retry_cycles, retry_instructions)
-            } else {
-                (0, 0, 0)
-            };
-            let cycles = bound.cycles + extra + retry;
+            let (extra, extra_insns) = extras(task, &bound);
+            let per_activation = bounds.per_activation(&task.name).map(|charge| {
+                let at = format!("{} at {}:{}", charge.function, charge.file, charge.line);
+                let on_path = bound.loops.iter().any(|l| {
+                    l.function == charge.function
+                        && l.line == Some(charge.line)
+                        && l.file
+                            .as_deref()
+                            .is_some_and(|f| bounds::same_file(f, &charge.file))
+                });
+                let (cycles, instructions, bus_wait_ns, declined) = if bound.declined.is_some() {
+                    (0, 0, 0, Some("the job's bound is declined".to_string()))
+                } else if !on_path {
+                    (
+                        0,
+                        0,
+                        0,
+                        Some(format!("the loop {at} is not on the task's path")),
+                    )
+                } else {
+                    let stated = bounds.at_activation(charge);
+                    let mut again = Analysis::new(image, chip, &stated);
+                    let (_, b) = bound_task(&mut again, image, task);
+                    let (e, ei) = extras(task, &b);
+                    (b.cycles + e, b.instructions + ei, b.bus_wait_ns, b.declined)
+                };
+                ActivationBound {
+                    at,
+                    passes: charge.passes,
+                    cycles,
+                    us: if declined.is_some() {
+                        0.0
+                    } else {
+                        (chip.cycles_to_ns(cycles) + bus_wait_ns) as f64 / 1000.0
+                    },
+                    instructions,
+                    bus_wait_us: bus_wait_ns as f64 / 1000.0,
+                    reason: charge.reason.clone(),
+                    declined,
+                }
+            });
+            let cycles = bound.cycles + extra;
             TaskBound {
                 task: task.name.clone(),
                 function,
                 cycles,
-                us: if bound.declined.is_some() {
-                    0.0
-                } else {
-                    (chip.cycles_to_ns(cycles) + bound.bus_wait_ns) as f64 / 1000.0
-                },
-                instructions: bound.instructions + retry_insns,
+                us: us(cycles, &bound),
+                instructions: bound.instructions + extra_insns,
                 bus_wait_us: bound.bus_wait_us(),
+                preemption_retry_cycles: if extra > 0 { retry_cycles } else { 0 },
                 loops: bound.loops,
-                preemption_retry_cycles: retry,
                 declined: bound.declined,
+                per_activation,
             }
         })
         .collect()
 }
 
+/// One task's bound with `analysis` (its function's name, where its start is found).
+fn bound_task(analysis: &mut Analysis<'_>, image: &Image, task: &Task) -> (Option<String>, Bound) {
+    match task.entry.start(image) {
+        Ok(at) => (
+            Some(image.name(at)),
+            match match &task.entry {
+                TaskEntry::Polled { task, others, .. } => analysis.polled_summary(at, task, others),
+                _ => analysis.summary(at),
+            } {
+                Ok(outcome) => to_bound(outcome),
+                Err(e) => to_bound(Err(e.to_string())),
+            },
+        ),
+        Err(e) => (None, to_bound(Err(e.to_string()))),
+    }
+}
+
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_activation;
 #[cfg(test)]
 mod tests_polled;

@@ -654,6 +654,7 @@ mod tests {
             declined: Some("a loop".into()),
             critical_sections: BTreeMap::new(),
             sections,
+            job: None,
         }
     }
 

@@ -40,7 +40,8 @@ pub struct MachineRow {
 /// The verdict of a job above its bound (`--check` fails on it).
 pub const EXCEEDS: &str = "EXCEEDS BOUND";
 
-/// A task's bound in the file, in `unit`: its own row, or — for a publisher task, whose run takes one sample of
+/// A task's bound in the file, in `unit`: its own row (its job's bound where the row is a charge per activation),
+/// or — for a publisher task, whose run takes one sample of
 /// each topic due — the sum of the rows of the topics the analysis has as its jobs (`publish_medium[magnetometer-x]`
 /// → `publisher[magnetometer-x]`). `Some(Err(reason))` when a row is declined; `None` when the file has none.
 fn bound_of(
@@ -49,9 +50,13 @@ fn bound_of(
     analysed: Option<&BoardResult>,
     qemu: bool,
 ) -> Option<Result<u64, String>> {
-    let value = |row: &bounds::TaskBound| match (qemu, row.instructions, row.cycles) {
-        (true, Some(i), _) => Ok(i),
-        (false, _, Some(c)) => Ok(c),
+    // A row charged per activation holds an observed job against its job's bound: a trace's job does not say
+    // how many activations (frames) it served, and the job's bound holds every job, however many.
+    let value = |row: &bounds::TaskBound| match (qemu, row.instructions, row.cycles, &row.job) {
+        (true, _, _, Some(job)) => Ok(job.instructions),
+        (false, _, _, Some(job)) => Ok(job.cycles),
+        (true, Some(i), _, None) => Ok(i),
+        (false, _, Some(c), None) => Ok(c),
         _ => Err(row
             .declined
             .clone()
@@ -229,6 +234,32 @@ mod tests {
             72_000_000,
         );
         assert_eq!(rows[0].verdict, EXCEEDS);
+    }
+
+    #[test]
+    fn a_row_charged_per_activation_holds_a_job_against_the_job_bound() {
+        // can_rx charged per frame at 300 instructions (the budget), its job (a FIFO drained) 900.
+        let mut file = file();
+        let rx = file.tasks.iter_mut().find(|t| t.task == "can_rx").unwrap();
+        rx.instructions = Some(300);
+        rx.job = Some(bounds::JobBound {
+            cycles: 2160,
+            us: 30.0,
+            instructions: 900,
+            per_activation: "RX at src/rx.rs:12 at 2 passes: …".into(),
+        });
+        let charged = BoardBounds {
+            bounds: Some(file),
+            ..board_bounds()
+        };
+        // 2 400 instructions, 900 once the trace is out: a job of three frames, above one frame's 300 but within
+        // the job's bound.
+        let held = rows(&charged, &[("can_rx".into(), 19.2)], None, true, 1);
+        assert_eq!((held[0].bound, held[0].verdict.as_str()), (Some(900), "ok"));
+        let over = rows(&charged, &[("can_rx".into(), 19.208)], None, true, 1);
+        assert_eq!(over[0].verdict, EXCEEDS);
+        let robot = rows(&charged, &[("can_rx".into(), 1.0)], None, false, 72_000_000);
+        assert_eq!(robot[0].bound, Some(2160));
     }
 
     #[test]

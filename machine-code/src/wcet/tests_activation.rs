@@ -1,0 +1,141 @@
+//! Known answers for a task charged per activation ([`bounds::PerActivation`]): a hand-assembled receive
+//! handler that drains a FIFO, its job bounded with the drain at its stated 6 passes and its charge per frame
+//! with the drain at 2 (one frame and the pass that finds the FIFO empty), each worked out from the Cortex-M3
+//! TRM's cycle table as in [`super::tests`] (ARM DDI 0337, table 18-1: data processing 1, LDR 2, PUSH 1 + N,
+//! POP with the PC 1 + N + P, a taken branch 1 + P, P = 3; a load from a peripheral whose base the code does not
+//! fix 5 more, APB1's; flash at 0 wait states; exception entry 12 and exit 10).
+use super::*;
+use crate::testelf::{elf_with_lines, Sym};
+use crate::thumb;
+
+const F103_0WS: Chip = Chip::Stm32f103 { wait_states: 0 };
+
+/// `RX`: `push {r4, lr}`, a drain loop at src/rx.rs:12 that reads a status word and counts a frame per pass
+/// until it reads 0, `pop {r4, pc}`.
+fn receive_handler() -> Image {
+    let code = thumb(&[
+        0xb510, // 0x00 push {r4, lr}: 1 + 2
+        0x2400, // 0x02 movs r4, #0: 1
+        0x6801, // 0x04 ldr r1, [r0]: 2 + 5 (the loop's header, line 12)
+        0x2900, // 0x06 cmp r1, #0: 1
+        0xd002, // 0x08 beq 0x10: 1, taken 1 + P
+        0x3401, // 0x0a adds r4, #1: 1
+        0x3401, // 0x0c adds r4, #1: 1
+        0xe7f9, // 0x0e b 0x04: 1 + P
+        0xbd10, // 0x10 pop {r4, pc}: 1 + 2 + P
+    ]);
+    let bytes = elf_with_lines(
+        &code,
+        &[Sym::function("RX", 0, 18)],
+        "firmware/src/rx.rs",
+        &[(0, 10), (4, 12), (0x10, 14)],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+fn drain(per_activation: &str) -> BoundsFile {
+    BoundsFile::parse(&format!(
+        r#"{{"loops":[{{"function":"RX","file":"src/rx.rs","line":12,"bound":6,"reason":"3 frames, an overrun, one more, the empty check"}}]{per_activation}}}"#
+    ))
+    .expect("the bounds file parses")
+}
+
+const PER_FRAME: &str = r#","per_activation":[{"task":"rx","function":"RX","file":"src/rx.rs","line":12,"passes":2,"reason":"a job that drains k frames costs at most k charges"}]"#;
+
+fn rx_task() -> Task {
+    Task {
+        name: "rx".into(),
+        entry: TaskEntry::Symbol("RX".into()),
+        handler: true,
+    }
+}
+
+#[test]
+fn a_task_charged_per_activation_has_its_job_and_its_charge() {
+    let img = receive_handler();
+    let rows = bound_tasks(&img, &[rx_task()], F103_0WS, &drain(PER_FRAME));
+    let rx = &rows[0];
+    // A pass with a frame: ldr 7, cmp 1, beq not taken 1, two adds 2, b 1 + P = 4: 15 cycles, 6
+    // instructions. The pass that ends: ldr 7, cmp 1, beq taken 4: 12 cycles, 3 instructions. Around the loop:
+    // push 3, movs 1, pop 6: 10 cycles, 3 instructions. The handler's entry and exit: 12 + 10.
+    // The job, the header run 6 times: 5 × 15 + 12 + 10 + 22 = 119 cycles; 5 × 6 + 3 + 3 = 36 instructions.
+    assert_eq!(
+        (rx.cycles, rx.instructions, rx.declined.as_deref()),
+        (119, 36, None)
+    );
+    assert_eq!(rx.loops[0].bound, 6);
+    // Per activation, the header run twice: 15 + 12 + 10 + 22 = 59 cycles; 6 + 3 + 3 = 12 instructions.
+    let charge = rx.per_activation.as_ref().expect("charged per activation");
+    assert_eq!(
+        (
+            charge.cycles,
+            charge.instructions,
+            charge.declined.as_deref()
+        ),
+        (59, 12, None)
+    );
+    assert_eq!(charge.passes, 2);
+    assert_eq!(charge.at, "RX at src/rx.rs:12");
+    // Sound per frame: a job that drains k frames (1 ≤ k ≤ 5) costs 15 k + 44 ≤ 59 k.
+    for k in 1..=5u64 {
+        assert!(15 * k + 44 <= k * charge.cycles);
+    }
+    assert!(rx.cycles <= 5 * charge.cycles);
+    // 72 MHz: 59 cycles are 0.820 µs (rounded up to the ns).
+    assert_eq!(charge.us, 0.82);
+    // Without the statement, no charge.
+    let rows = bound_tasks(&img, &[rx_task()], F103_0WS, &drain(""));
+    assert!(rows[0].per_activation.is_none());
+    assert_eq!(rows[0].cycles, 119);
+}
+
+#[test]
+fn a_charge_whose_loop_is_not_on_the_task_path_is_declined() {
+    let img = receive_handler();
+    let other = Task {
+        name: "rx".into(),
+        entry: TaskEntry::Symbol("RX".into()),
+        handler: true,
+    };
+    // The file states a loop of another function for the charge.
+    let bounds = BoundsFile::parse(
+        r#"{"loops":[{"function":"RX","file":"src/rx.rs","line":12,"bound":6,"reason":"r"},
+                     {"function":"TX","file":"src/tx.rs","line":3,"bound":4,"reason":"r"}],
+            "per_activation":[{"task":"rx","function":"TX","file":"src/tx.rs","line":3,"passes":2,"reason":"r"}]}"#,
+    )
+    .unwrap();
+    let rows = bound_tasks(&img, &[other], F103_0WS, &bounds);
+    assert_eq!(rows[0].cycles, 119);
+    let charge = rows[0].per_activation.as_ref().unwrap();
+    assert!(charge
+        .declined
+        .as_deref()
+        .is_some_and(|r| r.contains("TX at src/tx.rs:3 is not on the task's path")));
+}
+
+#[test]
+fn a_charge_needs_a_stated_loop_passes_within_its_bound_and_a_reason() {
+    let refused = |entry: &str| {
+        matches!(
+            BoundsFile::parse(&format!(
+                r#"{{"loops":[{{"function":"RX","file":"src/rx.rs","line":12,"bound":6,"reason":"r"}}],"per_activation":[{entry}]}}"#
+            )),
+            Err(crate::Error::Bounds(_))
+        )
+    };
+    assert!(refused(
+        r#"{"task":"rx","function":"RX","file":"src/rx.rs","line":12,"passes":7,"reason":"r"}"#
+    ));
+    assert!(refused(
+        r#"{"task":"rx","function":"RX","file":"src/rx.rs","line":13,"passes":2,"reason":"r"}"#
+    ));
+    assert!(refused(
+        r#"{"task":"rx","function":"RX","file":"src/rx.rs","line":12,"passes":0,"reason":"r"}"#
+    ));
+    assert!(refused(
+        r#"{"task":"rx","function":"RX","file":"src/rx.rs","line":12,"passes":2,"reason":" "}"#
+    ));
+    assert!(!refused(
+        r#"{"task":"rx","function":"RX","file":"src/rx.rs","line":12,"passes":2,"reason":"r"}"#
+    ));
+}
