@@ -119,13 +119,17 @@ pub fn boot(board: &str, boot_watchdog_timeout_ms: u32) {
     telemetry::boot_report(board);
 }
 
-/// The end of every board's `init`: releases SYS_SYNC_N (wired-OR: the system is up once every
+/// The end of every board's `init`: switches the independent watchdog from the boot's timeout to
+/// its run-time `watchdog_timeout_ms` (a one-off cost, the register update wait, kept out of the
+/// watchdog task's periodic jobs), releases SYS_SYNC_N (wired-OR: the system is up once every
 /// module has released it), and, as a shutdown requested before the board was up has no edge to
 /// catch, looks at SYS_PD_N's level and pends `shutdown_interrupt` if it is low.
 pub fn come_up(
     signals: &mut impl signals::SystemSignals,
     shutdown_interrupt: impl cortex_m::interrupt::InterruptNumber,
+    watchdog_timeout_ms: u32,
 ) {
+    crate::watchdog::start(watchdog_timeout_ms);
     signals.release_sync();
     telemetry::init_done();
     if signals.shutdown_requested() {
@@ -133,17 +137,15 @@ pub fn come_up(
     }
 }
 
-/// The watchdog task every board runs at its least urgent level: starts the independent watchdog
-/// at its run-time `timeout_ms`, then every `period_us` feeds it only if the board's progress
+/// The watchdog task every board runs at its least urgent level (the watchdog runs at its
+/// run-time timeout since [`come_up`]): every `period_us` feeds it only if the board's progress
 /// mark was set since the last look (a fed dog proves the whole schedule is alive), and polls the
 /// CAN controller's error state (it recovers from bus-off without an interrupt).
 pub async fn feed_watchdog<C: Clock, R: crate::bxcan::Registers>(
-    timeout_ms: u32,
     period_us: u64,
     mut alive: impl rtic_core::Mutex<T = crate::liveness::Liveness>,
     mut can_errors: impl rtic_core::Mutex<T = crate::bxcan::ErrorMonitor<R>>,
 ) -> ! {
-    crate::watchdog::start(timeout_ms);
     let mut next = C::now_us();
     loop {
         next += period_us;

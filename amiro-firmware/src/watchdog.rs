@@ -2,9 +2,10 @@
 //! F103 and the F405. It runs from the ~40 kHz (F1) / 32 kHz (F4) LSI and, once started, cannot be
 //! stopped; only a reset does.
 //!
-//! Every board starts it first thing in `init` (so nothing in the boot can spin for ever), feeds
-//! it from its least urgent task, and stretches it to its longest period before handing over to
-//! AMiRo-BLT. The QEMU build has no watchdog (the calls do nothing).
+//! Every board starts it first thing in `init` at the boot's timeout (so nothing in the boot can
+//! spin for ever), switches it to its run-time timeout at the end of `init` (`tasks::come_up`),
+//! feeds it from its least urgent task, and stretches it to its longest period before handing over
+//! to AMiRo-BLT. The QEMU build has no watchdog (the calls do nothing).
 
 const IWDG: usize = 0x4000_3000;
 const KR: usize = 0x00;
@@ -65,7 +66,7 @@ pub fn start(timeout_ms: u32) {
     }
     write(KR, 0xAAAA);
     // Logged only once the log runs (the boot's first start comes before it; `boot_report` says
-    // that one ran): the running tasks' start, and the hand-over's stretch.
+    // that one ran): the run-time timeout at the end of `init`, and the hand-over's stretch.
     let mut digits = [0u8; 10];
     crate::log!(
         "watchdog: reset after ",

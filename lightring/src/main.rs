@@ -66,7 +66,7 @@ pub const TX_QUEUE_LEN: usize = 8;
 pub const REFRESH_PERIOD_US: u64 = 20_000;
 /// Watchdog check period; the IWDG resets the board if it is not fed for `WATCHDOG_TIMEOUT_MS`.
 pub const WATCHDOG_PERIOD_US: u64 = 100_000;
-/// Independent watchdog timeout.
+/// Independent watchdog timeout once the board is up (set at the end of `init`, `tasks::come_up`).
 pub const WATCHDOG_TIMEOUT_MS: u32 = 500;
 /// The watchdog's timeout during the boot (started first thing in `init`).
 pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
@@ -206,7 +206,11 @@ mod app {
         stimulus::spawn().ok();
         amiro_firmware::log!("LightRing up");
 
-        tasks::come_up(&mut signals, platform::SHUTDOWN_INTERRUPT);
+        tasks::come_up(
+            &mut signals,
+            platform::SHUTDOWN_INTERRUPT,
+            crate::WATCHDOG_TIMEOUT_MS,
+        );
         (
             Shared {
                 handler: SensorDataHandler::new(CanBoard::LightRing),
@@ -387,13 +391,7 @@ mod app {
     async fn watchdog(cx: watchdog::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::WATCHDOG);
         let s = cx.shared;
-        tasks::feed_watchdog::<Clock, _>(
-            crate::WATCHDOG_TIMEOUT_MS,
-            crate::WATCHDOG_PERIOD_US,
-            s.alive,
-            s.can_errors,
-        )
-        .await;
+        tasks::feed_watchdog::<Clock, _>(crate::WATCHDOG_PERIOD_US, s.alive, s.can_errors).await;
     }
 
     /// SYS_PD_N fell: another module requests shutdown. LEDs dark first, then hand over.
