@@ -157,7 +157,13 @@ fn a_bound_is_the_budget_wherever_one_exists() {
         ),
         "{line}"
     );
-    assert!(line.contains("admit_requests: bound declined"), "{line}");
+    assert!(line.contains("admit_requests"), "{line}");
+    // Each stated budget's reason on a line of its own.
+    let admit = source(&built, "diwheeldrive: stated budget of admit_requests: ");
+    assert!(
+        admit.starts_with("diwheeldrive: stated budget of admit_requests: bound declined"),
+        "{admit}"
+    );
     assert!(
         line.ends_with("each bounded publisher[…] row is one publisher job's bound (its dispatcher's poll of every task of its priority, serving every topic due at its levels), taken for each topic's sample alone"),
         "{line}"

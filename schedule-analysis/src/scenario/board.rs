@@ -185,7 +185,7 @@ fn build_board(
     super::bounded::apply_sections(&mut budgets, &mut all, &mut ceilings);
     built
         .sources
-        .push(super::bounded::budgets_line(&budgets, &measured));
+        .extend(super::bounded::budgets_lines(&budgets, &measured));
     built.sources.push(super::bounded::blocking_line(&budgets));
     if let Some(line) = admission_line(timing, &measured, &budgets) {
         built.sources.push(line);

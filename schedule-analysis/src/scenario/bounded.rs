@@ -455,9 +455,10 @@ fn take(
     }
 }
 
-/// The report's line about a board's budgets: how many are bounded from the machine code (on which chip, clock
-/// and wait states), how many stated and why.
-pub(super) fn budgets_line(b: &BoardBudgets, measured: &[String]) -> String {
+/// The report's lines about a board's budgets: the first says how many are bounded from the machine code (on which
+/// chip, clock and wait states) and how many stated; where a bounds file exists, one line follows per stated budget
+/// with why (`<board>: stated budget of <row>: <why>`), so a long reason reads on its own line.
+pub(super) fn budgets_lines(b: &BoardBudgets, measured: &[String]) -> Vec<String> {
     let total = b.job_rows().count();
     let bounded = b.bounded();
     let facts = match &b.bounds {
@@ -480,6 +481,7 @@ pub(super) fn budgets_line(b: &BoardBudgets, measured: &[String]) -> String {
             BudgetFrom::Bound { .. } => None,
         })
         .collect();
+    let mut each = Vec::new();
     let why = if stated.is_empty() {
         String::new()
     } else if b.bounds.is_none() {
@@ -493,7 +495,7 @@ pub(super) fn budgets_line(b: &BoardBudgets, measured: &[String]) -> String {
             )
         }
     } else {
-        let reasons: Vec<String> = stated
+        each = stated
             .iter()
             .map(|(row, why)| {
                 let m = measured.iter().find(|m| {
@@ -502,12 +504,13 @@ pub(super) fn budgets_line(b: &BoardBudgets, measured: &[String]) -> String {
                     })
                 });
                 match m {
-                    Some(m) => format!("{row}: {why}; measured {m}"),
-                    None => format!("{row}: {why}"),
+                    Some(m) => format!("{}: stated budget of {row}: {why}; measured {m}", b.board),
+                    None => format!("{}: stated budget of {row}: {why}", b.board),
                 }
             })
             .collect();
-        format!(" ({})", reasons.join("; "))
+        let names: Vec<&str> = stated.iter().map(|(row, _)| row.as_str()).collect();
+        format!(" ({}; why, each below)", names.join(", "))
     };
     // A topic's row is bounded by a whole publisher job (docs/analysis.md, "Writing the files"): say so.
     let per_topic = b
@@ -519,11 +522,13 @@ pub(super) fn budgets_line(b: &BoardBudgets, measured: &[String]) -> String {
     } else {
         ""
     };
-    format!(
+    let mut lines = vec![format!(
         "{}: budgets: {bounded} bounded from the machine code ({facts}), {} stated{why}{note}",
         b.board,
         total - bounded
-    )
+    )];
+    lines.extend(each);
+    lines
 }
 
 /// Which machine-code bounds break a set that fails: for each bound above the timing file's stated budget, the set

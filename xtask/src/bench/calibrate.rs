@@ -156,14 +156,17 @@ mod tests {
             &files,
         )
         .unwrap();
-        // With a generated bounds file each stated row names its measurement (`…; measured magnetometer-x (…)`),
-        // without one the line lists them (`measured for N of them: …`).
+        // With a generated bounds file each stated row's own line names its measurement (`diwheeldrive: stated
+        // budget of …: …; measured magnetometer-x (…)`), without one the budgets line lists them (`measured for N of
+        // them: …`).
         assert!(built
             .sources
             .iter()
-            .any(|s| s.starts_with("diwheeldrive: budgets: ")
-                && (s.contains("measured magnetometer-x")
-                    || (s.contains("measured for") && s.contains("magnetometer-x")))));
+            .any(|s| (s.starts_with("diwheeldrive: stated budget of ")
+                && s.contains("measured magnetometer-x"))
+                || (s.starts_with("diwheeldrive: budgets: ")
+                    && s.contains("measured for")
+                    && s.contains("magnetometer-x"))));
         let board_model = built
             .model
             .boards
