@@ -112,11 +112,6 @@ impl<T: Copy, const N: usize> Ring<T, N> {
         })
     }
 
-    fn slot(&self, at: usize) -> *mut T {
-        // In bounds (`at` is masked below `N`); no reference to the whole array.
-        self.records.get().cast::<T>().wrapping_add(at & (N - 1))
-    }
-
     /// Copies the oldest slot into `out` and frees it, if it is complete; `false` (nothing read)
     /// when the ring is empty or the oldest slot's writer has not finished it.
     ///
@@ -166,15 +161,22 @@ impl<T: Copy, const N: usize> Ring<T, N> {
     }
 }
 
+impl<T, const N: usize> Ring<T, N> {
+    /// Slot `at` (masked below `N`), without a reference to the whole array.
+    fn slot(&self, at: usize) -> *mut T {
+        // In bounds (`at` is masked below `N`); no reference to the whole array.
+        self.records.get().cast::<T>().wrapping_add(at & (N - 1))
+    }
+}
+
 impl<T, const N: usize> Claim<'_, T, N> {
     /// Writes the reserved slot (`write` gets it with its previous contents) and marks it
     /// complete. Outside any critical section.
     pub fn fill(self, write: impl FnOnce(&mut T)) {
         let at = self.at & (N - 1);
-        let slot = self.ring.records.get().cast::<T>().wrapping_add(at);
         // SAFETY: the claim is the slot's only writer, and the drain does not read it before
         // its flag is set (the module's argument); `at` is below `N`.
-        write(unsafe { &mut *slot });
+        write(unsafe { &mut *self.ring.slot(at) });
         compiler_fence(Ordering::Release);
         self.ring.complete[at].store(true, Ordering::Relaxed);
     }

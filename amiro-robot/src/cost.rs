@@ -84,7 +84,15 @@ pub fn own() -> Cost {
 
 /// Whether child `pid` has ended, without reaping it (its `/proc` entry stays for [`reap`]).
 pub(crate) fn ended(pid: u32) -> bool {
-    // SAFETY: waitid fills the structure we own; WNOWAIT leaves the child waitable.
+    // Not ours any more (already reaped) counts as ended.
+    !matches!(wait_leaving_zombie(pid, libc::WNOHANG), Some(0))
+}
+
+/// `waitid` for child `pid`'s end with `WNOWAIT` (the child stays waitable) and `flags`: `None`
+/// when the call fails (not our child, or already reaped), else the pid it reports (0: no change
+/// yet, under `WNOHANG`).
+fn wait_leaving_zombie(pid: u32, flags: libc::c_int) -> Option<libc::pid_t> {
+    // SAFETY: waitid fills the structure we own.
     let mut info: libc::siginfo_t = unsafe { std::mem::zeroed() };
     // SAFETY: as above.
     let r = unsafe {
@@ -92,12 +100,11 @@ pub(crate) fn ended(pid: u32) -> bool {
             libc::P_PID,
             pid as libc::id_t,
             &mut info,
-            libc::WEXITED | libc::WNOHANG | libc::WNOWAIT,
+            libc::WEXITED | libc::WNOWAIT | flags,
         )
     };
-    // Not ours any more (already reaped) counts as ended.
     // SAFETY: si_pid is valid for a child state change, and 0 when none happened.
-    r != 0 || unsafe { info.si_pid() } != 0
+    (r == 0).then(|| unsafe { info.si_pid() })
 }
 
 /// The read and write system calls of process `pid` so far (`None` where `/proc` has none).
@@ -115,18 +122,8 @@ fn io_calls(pid: u32) -> Option<(u64, u64)> {
 /// and its system calls as its zombie's `/proc` entry counts them. Once this returns the child is
 /// gone: the caller must not wait for it again.
 pub(crate) fn reap(pid: u32) -> Cost {
-    // SAFETY: waitid fills the structure we own; WNOWAIT leaves the zombie for wait4 below.
-    let mut info: libc::siginfo_t = unsafe { std::mem::zeroed() };
-    // SAFETY: as above.
-    let waited = unsafe {
-        libc::waitid(
-            libc::P_PID,
-            pid as libc::id_t,
-            &mut info,
-            libc::WEXITED | libc::WNOWAIT,
-        )
-    };
-    let calls = if waited == 0 { io_calls(pid) } else { None };
+    // WNOWAIT leaves the zombie for wait4 below, its `/proc` entry readable meanwhile.
+    let calls = wait_leaving_zombie(pid, 0).and_then(|_| io_calls(pid));
     // SAFETY: wait4 fills the structures we own.
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
     let mut status = 0;

@@ -215,7 +215,8 @@ mod tests {
             "{sent:?}"
         );
         assert!(pace.start.elapsed() + AHEAD >= Duration::from_millis(20));
-        assert!(!pace.behind);
+        // Not asserted: `!pace.behind`. Whether the run counts as behind after the hold depends on how
+        // long the sleep overran, which a loaded machine decides (a test failed so once under load).
     }
 
     #[test]

@@ -422,15 +422,7 @@ impl Cfg {
         if dropped.contains(&0) {
             return None;
         }
-        let mut seen = BTreeSet::from([0usize]);
-        let mut work = vec![0usize];
-        while let Some(b) = work.pop() {
-            for e in &self.blocks[b].succs {
-                if !dropped.contains(&e.to) && seen.insert(e.to) {
-                    work.push(e.to);
-                }
-            }
-        }
+        let seen = self.reached_avoiding(dropped);
         let number: BTreeMap<usize, usize> =
             seen.iter().enumerate().map(|(k, &b)| (b, k)).collect();
         let blocks = seen
@@ -446,6 +438,20 @@ impl Cfg {
             })
             .collect();
         Some(Cfg { blocks })
+    }
+
+    /// The blocks block 0 reaches without entering any block of `dropped`.
+    pub fn reached_avoiding(&self, dropped: &BTreeSet<usize>) -> BTreeSet<usize> {
+        let mut seen = BTreeSet::from([0usize]);
+        let mut work = vec![0usize];
+        while let Some(b) = work.pop() {
+            for e in &self.blocks[b].succs {
+                if !dropped.contains(&e.to) && seen.insert(e.to) {
+                    work.push(e.to);
+                }
+            }
+        }
+        seen
     }
 
     /// The blocks reachable from `from` along the edges (or, `backwards`, that reach it).

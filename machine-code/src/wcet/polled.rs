@@ -91,25 +91,11 @@ pub fn others_blocks(
     // Every block of this task's own that the dispatcher reaches must stay reachable: one that only
     // another task's code leads to says the attribution does not tell the polls apart, and the whole
     // dispatcher is the bound.
-    let before = reached(graph, &BTreeSet::new());
-    let after = reached(graph, &dropped);
+    let before = graph.reached_avoiding(&BTreeSet::new());
+    let after = graph.reached_avoiding(&dropped);
     let own_reached = owners
         .iter()
         .enumerate()
         .all(|(b, o)| !o.own || !before.contains(&b) || after.contains(&b));
     own_reached.then_some(dropped)
-}
-
-/// The blocks of `graph` block 0 reaches without entering `dropped`.
-fn reached(graph: &Cfg, dropped: &BTreeSet<usize>) -> BTreeSet<usize> {
-    let mut seen = BTreeSet::from([0usize]);
-    let mut work = vec![0usize];
-    while let Some(b) = work.pop() {
-        for e in &graph.blocks[b].succs {
-            if !dropped.contains(&e.to) && seen.insert(e.to) {
-                work.push(e.to);
-            }
-        }
-    }
-    seen
 }
