@@ -16,7 +16,10 @@ use amiro_trace::robot_link::{
 use amiro_trace::world_link::{Readings, Wheels, WHEELS_LEN};
 use anyhow::{bail, Context, Result};
 
+use crate::cost::Overlap;
 use crate::{Firmware, NODES};
+use std::cell::RefCell;
+use std::rc::Rc;
 
 /// The real-time priority (`SCHED_RR`) of a live run's QEMUs: above every ordinary process, so a
 /// build beside the run no longer holds a board up for a time slice (the lags above 5 ms were such
@@ -94,6 +97,12 @@ pub(crate) struct Board {
     pub(crate) cost: crate::cost::Cost,
     /// Its QEMU's main loop runs at [`MAIN_LOOP_NICE`] (set at its first report).
     pub(crate) main_loop_lowered: bool,
+    /// When it was last sent on, while it runs towards its report (`None` while it waits).
+    pub(crate) running_since: Option<Instant>,
+    /// The run's record of how the boards ran side by side (shared by its boards).
+    pub(crate) overlap: Rc<RefCell<Overlap>>,
+    /// The wall time of its last run, from being sent on to its report.
+    pub(crate) last_run: Duration,
 }
 
 /// The nice value of a board's QEMU main loop (its process's first thread; the vCPU thread and
@@ -168,6 +177,9 @@ impl Board {
             live,
             cost: crate::cost::Cost::default(),
             main_loop_lowered: false,
+            running_since: None,
+            overlap: Rc::default(),
+            last_run: Duration::ZERO,
         }
     }
 
@@ -274,6 +286,7 @@ impl Board {
         self.held = None;
         self.commanded = false;
         self.main_loop_lowered = false;
+        self.run_from(Instant::now());
         Ok(())
     }
 
@@ -348,6 +361,7 @@ impl Board {
                     want = UP_LEN + WHEELS_LEN;
                 }
                 if got == want {
+                    self.stopped(Instant::now());
                     if !self.main_loop_lowered {
                         self.lower_main_loop();
                     }
@@ -367,6 +381,7 @@ impl Board {
             if ready <= 0 {
                 if let Some(child) = self.child.as_ref() {
                     if crate::cost::ended(child.id()) {
+                        self.stopped(Instant::now());
                         while self.drain() {}
                         self.flush_partial();
                         self.ready.append(&mut self.lines);
@@ -415,6 +430,22 @@ impl Board {
         }
     }
 
+    /// The board runs from `now` (it was started or sent on).
+    fn run_from(&mut self, now: Instant) {
+        if self.running_since.is_none() {
+            self.running_since = Some(now);
+            self.overlap.borrow_mut().started(now);
+        }
+    }
+
+    /// The board stopped running at `now` (it reported or ended).
+    fn stopped(&mut self, now: Instant) {
+        if let Some(since) = self.running_since.take() {
+            self.overlap.borrow_mut().stopped(now);
+            self.last_run = now.duration_since(since);
+        }
+    }
+
     pub(crate) fn send(&mut self, answer: &Down) -> Result<()> {
         self.send_with(answer, None)
     }
@@ -434,6 +465,9 @@ impl Board {
                 }
                 None => down.write_all(&answer.encode())?,
             }
+            if answer.flags & amiro_trace::robot_link::DOWN_END == 0 {
+                self.run_from(Instant::now());
+            }
         }
         Ok(())
     }
@@ -451,6 +485,7 @@ impl Board {
         self.ready.append(&mut self.lines);
         self.alive = false;
         self.next = None;
+        self.stopped(Instant::now());
     }
 }
 

@@ -141,6 +141,51 @@ pub(crate) fn reap(pid: u32) -> Cost {
     cost
 }
 
+/// How the boards' emulation overlapped in wall time: a board runs from the answer that sends it
+/// on to its next report (its QEMU emulates meanwhile, or waits for a core); the wall time with
+/// none, one, two or three boards running. Two boards running side by side is what two cores
+/// give: a run with little of it waits for one board while the other emulates.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Overlap {
+    /// Wall µs with 0, 1, 2 and 3 boards running.
+    pub running_us: [u64; 4],
+    /// Boards running now.
+    running: usize,
+    /// When `running` last changed.
+    since: Option<std::time::Instant>,
+}
+
+impl Overlap {
+    fn change(&mut self, now: std::time::Instant, by: isize) {
+        if let Some(since) = self.since {
+            let slot = self.running.min(3);
+            self.running_us[slot] += now.duration_since(since).as_micros() as u64;
+        }
+        self.running = self.running.saturating_add_signed(by);
+        self.since = Some(now);
+    }
+
+    /// A board was sent on (its answer written).
+    pub(crate) fn started(&mut self, now: std::time::Instant) {
+        self.change(now, 1);
+    }
+
+    /// A board reported (or ended).
+    pub(crate) fn stopped(&mut self, now: std::time::Instant) {
+        self.change(now, -1);
+    }
+
+    /// Wall µs with at least one board running.
+    pub fn busy_us(&self) -> u64 {
+        self.running_us[1..].iter().sum()
+    }
+
+    /// Wall µs with two or more boards running side by side.
+    pub fn side_by_side_us(&self) -> u64 {
+        self.running_us[2..].iter().sum()
+    }
+}
+
 /// Where a run's CPU went, one row per board's QEMU and one for the host, per virtual second of
 /// `virtual_s` and per board exchange; the last line sums the CPU and says what it means for two
 /// cores (the QEMUs overlap there at best).
@@ -208,6 +253,16 @@ pub fn table(work: &crate::Work, virtual_s: f64) -> String {
         per(h.cpu_s()),
         per(all) / 2.0,
         per(all)
+    );
+    let o = &work.overlap;
+    let busiest = work.boards.iter().map(Cost::cpu_s).fold(0.0, f64::max);
+    let _ = writeln!(
+        out,
+        "  wall per virtual s with the boards running: none {:.3}, one {:.3}, two or more side by side {:.3}; the busiest QEMU's CPU {:.3}",
+        per(o.running_us[0] as f64 / 1e6),
+        per(o.running_us[1] as f64 / 1e6),
+        per(o.side_by_side_us() as f64 / 1e6),
+        per(busiest),
     );
     out
 }

@@ -19,6 +19,11 @@ use crate::{candump_line, pace, stamp, Firmware, Live, Outcome, Sink, Transfer, 
 /// queued at the boundary the host is at, so this is how late one can come on (virtual time).
 const LIVE_STEP_US: u64 = 1_000;
 
+/// A live run's boards have started when each has made its first exchange and gone idle (the
+/// boot's code runs for the first time then, 10 ms of wall time for LightRing's first virtual
+/// millisecond), at the latest at this virtual time: its wall clock starts there.
+const BOOT_LIMIT_US: u64 = 100_000;
+
 /// How long the host waits for a board's report before it calls the board hung.
 const REPORT_LIMIT: Duration = Duration::from_secs(30);
 
@@ -41,6 +46,11 @@ pub struct Work {
     pub boards: [crate::cost::Cost; 3],
     /// What the host cost in the run (this process: the bus model, the coordinator, the pipes).
     pub host: crate::cost::Cost,
+    /// How the boards ran side by side in wall time.
+    pub overlap: crate::cost::Overlap,
+    /// The board run that took the most wall time beyond its virtual time since a live run's
+    /// pacing last took it (`pace::Pace::hold`).
+    pub slowest: Option<pace::SlowRun>,
 }
 
 /// What a board must get at boundary `t`: the frame that completes in the coming quantum if it is
@@ -98,13 +108,17 @@ pub fn run_in_world(
 ) -> Result<Outcome> {
     std::fs::create_dir_all(work)?;
     let host_before = crate::cost::own();
+    let overlap = std::rc::Rc::new(std::cell::RefCell::new(crate::cost::Overlap::default()));
+
     let mut bus = Bus::new();
     // The three boards' nodes, then the operator's adapter's (`OPERATOR`).
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
     let mut boards: Vec<Board> = (0..3)
         .map(|k| {
             let dir = work.join(BOARDS[k]);
-            Board::new(k, nodes[k], firmware[k].clone(), dir, live.is_some())
+            let mut b = Board::new(k, nodes[k], firmware[k].clone(), dir, live.is_some());
+            b.overlap = overlap.clone();
+            b
         })
         .collect();
     if live.is_some() {
@@ -139,6 +153,8 @@ pub fn run_in_world(
     let mut pd_from_outside = false;
     let (mut sync_low, mut pd_low) = (true, false);
     let mut pace = live.as_ref().map(|_| pace::Pace::new(Instant::now()));
+    // A live run is paced from the end of its boards' start.
+    let mut paced = false;
     // A live run's frames for the client, handed over at their time (`Pace::hold`).
     let mut outbox: pace::Outbox<Frame> = pace::Outbox::default();
     let mut t = QUANTUM_US;
@@ -231,14 +247,26 @@ pub fn run_in_world(
             operator.extend(w.ticks(t)?.into_iter().map(|f| (t, f)));
         }
         if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
-            if outcome.work.steps == 1 {
-                // The robot's wall clock starts with its boards' first exchange (`Pace::start_at`).
+            if !paced
+                && (t >= BOOT_LIMIT_US || boards.iter().filter(|b| b.alive).all(|b| b.wakes_at > t))
+            {
+                // The robot's wall clock starts once its boards have started: each has made its
+                // first exchange and gone idle (`Pace::start_at`).
+                paced = true;
                 pace.start_at(t);
+                // The boards' start is not a run that holds the robot up.
+                outcome.work.slowest = None;
             }
-            // Never ahead of the wall clock (behind it when the host is too slow: said at once).
-            outcome.work.pacing_us += pace.hold(t, &mut outbox, |end, frame| {
-                live.slcan.deliver(end, &frame);
-            });
+            if paced {
+                // Never ahead of the wall clock (behind it when the host is too slow: said at
+                // once, with the board run that held it up).
+                if let Some(slow) = outcome.work.slowest.take() {
+                    pace.note(slow);
+                }
+                outcome.work.pacing_us += pace.hold(t, &mut outbox, |end, frame| {
+                    live.slcan.deliver(end, &frame);
+                });
+            }
             // While boards sent ahead together hold reports beyond this boundary (at most a live
             // step), the adapter's frames wait (and no board is sent ahead together meanwhile):
             // a command frame queued now could reach such a board only after the time it
@@ -690,6 +718,7 @@ pub fn run_in_world(
         *cost = b.cost;
     }
     outcome.work.host = crate::cost::own().since(&host_before);
+    outcome.work.overlap = *overlap.borrow();
     if pace.is_some() {
         // The host's thread back to the ordinary class for what follows the run (the report).
         let param = libc::sched_param { sched_priority: 0 };
@@ -827,6 +856,16 @@ fn take_report(
         );
     }
     work.exchanges += 1;
+    // What this run of the board took: `b.at`, its last boundary, to `t`.
+    let run = pace::SlowRun {
+        board: b.index,
+        from_us: b.at,
+        to_us: t,
+        wall: b.last_run,
+    };
+    if work.slowest.is_none_or(|s| run.excess() > s.excess()) {
+        work.slowest = Some(run);
+    }
     if let Some(n) = work.per_board.get_mut(b.index) {
         *n += 1;
     }

@@ -46,12 +46,14 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
         std::thread::available_parallelism().map_or(0, usize::from)
     );
     println!(
-        "{:<12} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11}",
+        "{:<12} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11}",
         "case",
         "steps",
         "exchanges",
         "wall s",
         "waiting",
+        "one runs",
+        "two run",
         "qemu usr",
         "qemu sys",
         "host cpu",
@@ -70,11 +72,13 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
         let per = |x: f64| x / virtual_s;
         let w = outcome.work;
         println!(
-            "{name:<12} {:>9.0} {:>10.0} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>5}→{:<5}",
+            "{name:<12} {:>9.0} {:>10.0} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>5}→{:<5}",
             per(w.steps as f64),
             per(w.exchanges as f64),
             per(wall),
             per(w.waiting_us as f64 / 1e6),
+            per(w.overlap.running_us[1] as f64 / 1e6),
+            per(w.overlap.side_by_side_us() as f64 / 1e6),
             per(w.boards.iter().map(|c| c.user_s).sum()),
             per(w.boards.iter().map(|c| c.sys_s).sum()),
             per(w.host.cpu_s()),
@@ -87,7 +91,9 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
         "steps: boundaries the host ran the bus to; exchanges: board reports (the rest of the \
          boards waited, lookahead); wall s: wall seconds per virtual second (below 1: faster than \
          real time); waiting: wall time the host waited for the boards' reports (their \
-         emulation and the pipes); qemu usr/sys: the three QEMUs' CPU in user space (emulation) \
+         emulation and the pipes); one runs / two run: wall time with one board's QEMU \
+         running (from its answer to its report), and with two or more side by side (what the \
+         second core gives); qemu usr/sys: the three QEMUs' CPU in user space (emulation) \
          and in the kernel (the exchanges' semihosting reads and writes, pipes, task switches); \
          host cpu: this process (the bus model, the coordinator)."
     );
