@@ -103,6 +103,11 @@ pub(crate) struct Board {
     pub(crate) overlap: Rc<RefCell<Overlap>>,
     /// The wall time of its last run, from being sent on to its report.
     pub(crate) last_run: Duration,
+    /// A live board's QEMU's vCPU thread's clock (from its first report), with its reading when
+    /// the board was last sent on.
+    pub(crate) vcpu: Option<(crate::cost::ThreadClock, Option<(u64, u64)>)>,
+    /// What its vCPU thread did in its last run: ran and waited for a core (live runs).
+    pub(crate) last_run_cpu: Option<(Duration, Duration)>,
 }
 
 /// The nice value of a board's QEMU main loop (its process's first thread; the vCPU thread and
@@ -180,6 +185,8 @@ impl Board {
             running_since: None,
             overlap: Rc::default(),
             last_run: Duration::ZERO,
+            vcpu: None,
+            last_run_cpu: None,
         }
     }
 
@@ -238,6 +245,8 @@ impl Board {
         }
         let mut child = command
             .args(["-machine", self.firmware.machine, "-nographic"])
+            // Named threads: a live run reads its vCPU thread's scheduler clock (`ThreadClock`).
+            .args(["-name", &format!("{},debug-threads=on", NODES[self.index])])
             .args(["-monitor", "none", "-serial", "none"])
             // The console as a chardev on stdout: every semihosting write is a write(2) that has
             // happened when the board's next exchange arrives (lines are assigned to quanta).
@@ -286,6 +295,8 @@ impl Board {
         self.held = None;
         self.commanded = false;
         self.main_loop_lowered = false;
+        self.vcpu = None;
+        self.last_run_cpu = None;
         self.run_from(Instant::now());
         Ok(())
     }
@@ -411,6 +422,9 @@ impl Board {
     fn lower_main_loop(&mut self) {
         self.main_loop_lowered = true;
         if let Some(child) = self.child.as_ref() {
+            if self.live {
+                self.vcpu = crate::cost::ThreadClock::vcpu(child.id()).map(|c| (c, None));
+            }
             let tid = child.id() as libc::pid_t;
             // SAFETY: sched_getscheduler, sched_setscheduler and setpriority on one thread of our
             // child (Linux: a thread id names one thread), with parameters we own.
@@ -435,6 +449,9 @@ impl Board {
         if self.running_since.is_none() {
             self.running_since = Some(now);
             self.overlap.borrow_mut().started(now);
+            if let Some((clock, at)) = self.vcpu.as_mut() {
+                *at = clock.read();
+            }
         }
     }
 
@@ -443,6 +460,13 @@ impl Board {
         if let Some(since) = self.running_since.take() {
             self.overlap.borrow_mut().stopped(now);
             self.last_run = now.duration_since(since);
+            self.last_run_cpu = self.vcpu.as_ref().and_then(|(clock, at)| {
+                let ((ran0, waited0), (ran1, waited1)) = ((*at)?, clock.read()?);
+                Some((
+                    Duration::from_nanos(ran1.saturating_sub(ran0)),
+                    Duration::from_nanos(waited1.saturating_sub(waited0)),
+                ))
+            });
         }
     }
 

@@ -186,6 +186,37 @@ impl Overlap {
     }
 }
 
+/// A live board's QEMU's vCPU thread's scheduler clock (`/proc/PID/task/TID/schedstat`): the
+/// nanoseconds it ran and waited for a core, so a board run that took long in wall time is told
+/// apart as emulation (its CPU) or a wait behind other work on the machine.
+pub(crate) struct ThreadClock(std::fs::File);
+
+impl ThreadClock {
+    /// The vCPU thread of QEMU process `pid` (QEMU started with `-name …,debug-threads=on` calls
+    /// it `ALL CPUs/TCG` under `-icount`, `CPU 0/TCG` otherwise), if there is one.
+    pub(crate) fn vcpu(pid: u32) -> Option<Self> {
+        let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
+        tasks.flatten().find_map(|task| {
+            let comm = std::fs::read_to_string(task.path().join("comm")).ok()?;
+            comm.trim_end()
+                .ends_with("/TCG")
+                .then(|| std::fs::File::open(task.path().join("schedstat")).ok())
+                .flatten()
+                .map(Self)
+        })
+    }
+
+    /// Nanoseconds on a core and waiting for one, so far.
+    pub(crate) fn read(&self) -> Option<(u64, u64)> {
+        use std::os::unix::fs::FileExt;
+        let mut buf = [0u8; 96];
+        let n = self.0.read_at(&mut buf, 0).ok()?;
+        let text = std::str::from_utf8(&buf[..n]).ok()?;
+        let mut fields = text.split_whitespace().map(|f| f.parse::<u64>().ok());
+        Some((fields.next()??, fields.next()??))
+    }
+}
+
 /// Where a run's CPU went, one row per board's QEMU and one for the host, per virtual second of
 /// `virtual_s` and per board exchange; the last line sums the CPU and says what it means for two
 /// cores (the QEMUs overlap there at best).
@@ -293,6 +324,33 @@ mod tests {
         // Once reaped it counts as ended (it is no child of ours any more).
         assert!(ended(pid));
         std::mem::forget(child);
+    }
+
+    #[test]
+    fn a_thread_clock_counts_the_cpu_a_thread_spends() {
+        // This test's own thread: its schedstat file is the same format.
+        let clock = ThreadClock(
+            std::fs::File::open("/proc/thread-self/schedstat").expect("schedstat is readable"),
+        );
+        // The thread's CPU as getrusage counts it (µs), whatever the machine's load.
+        let thread_cpu = || {
+            // SAFETY: getrusage fills the structure we own.
+            let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+            // SAFETY: as above.
+            unsafe { libc::getrusage(libc::RUSAGE_THREAD, &mut u) };
+            (seconds(u.ru_utime) + seconds(u.ru_stime)) * 1e6
+        };
+        let (before, _) = clock.read().expect("two numbers");
+        let from = thread_cpu();
+        // Spin until the thread has run 20 ms on a core (at most 10 s of wall time).
+        let spin = std::time::Instant::now();
+        while thread_cpu() - from < 20_000.0 && spin.elapsed().as_secs() < 10 {
+            std::hint::black_box(0u64);
+        }
+        let (after, _) = clock.read().expect("two numbers");
+        assert!(after - before >= 10_000_000, "{before} -> {after}");
+        // Not a QEMU: no vCPU thread.
+        assert!(ThreadClock::vcpu(std::process::id()).is_none());
     }
 
     #[test]

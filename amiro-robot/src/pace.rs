@@ -83,6 +83,8 @@ pub struct SlowRun {
     pub to_us: u64,
     /// The wall time it took.
     pub wall: Duration,
+    /// Of it, its QEMU's vCPU thread ran and waited for a core (live runs, where readable).
+    pub cpu: Option<(Duration, Duration)>,
 }
 
 impl SlowRun {
@@ -94,12 +96,18 @@ impl SlowRun {
     }
 
     fn describe(&self) -> String {
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
         format!(
-            "{} took {:.1} ms of wall time for {:.2} ms of virtual time (from {:.6} s)",
+            "{} took {:.1} ms of wall time for {:.2} ms of virtual time (from {:.6} s){}",
             crate::NODES.get(self.board).unwrap_or(&"?"),
-            self.wall.as_secs_f64() * 1e3,
+            ms(self.wall),
             self.to_us.saturating_sub(self.from_us) as f64 / 1e3,
-            self.from_us as f64 / 1e6
+            self.from_us as f64 / 1e6,
+            self.cpu.map_or(String::new(), |(ran, waited)| format!(
+                ", its vCPU thread emulating {:.1} ms and waiting for a core {:.1} ms",
+                ms(ran),
+                ms(waited)
+            ))
         )
     }
 }
@@ -144,7 +152,10 @@ fn slower(a: Option<SlowRun>, b: Option<SlowRun>) -> Option<SlowRun> {
 }
 
 fn describe(run: Option<SlowRun>) -> String {
-    run.map_or_else(|| "none".into(), |r| r.describe())
+    run.map_or_else(
+        || "none: no board ran, the host itself was held up".into(),
+        |r| r.describe(),
+    )
 }
 
 impl Pace {
@@ -339,6 +350,7 @@ mod tests {
             from_us,
             to_us,
             wall: Duration::from_millis(ms),
+            cpu: None,
         };
         let mut pace = Pace::new(Instant::now());
         // 10 ms of wall for 40 µs of virtual time beats 12 ms for 9 ms.
@@ -352,6 +364,17 @@ mod tests {
         assert_eq!(
             run(0, 8_000, 8_040, 10).describe(),
             "diwheeldrive took 10.0 ms of wall time for 0.04 ms of virtual time (from 0.008000 s)"
+        );
+        let measured = SlowRun {
+            cpu: Some((Duration::from_micros(9_500), Duration::from_micros(200))),
+            ..run(0, 8_000, 8_040, 10)
+        };
+        assert!(
+            measured
+                .describe()
+                .ends_with(", its vCPU thread emulating 9.5 ms and waiting for a core 0.2 ms"),
+            "{}",
+            measured.describe()
         );
     }
 

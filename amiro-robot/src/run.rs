@@ -862,6 +862,7 @@ fn take_report(
         from_us: b.at,
         to_us: t,
         wall: b.last_run,
+        cpu: b.last_run_cpu,
     };
     if work.slowest.is_none_or(|s| run.excess() > s.excess()) {
         work.slowest = Some(run);
