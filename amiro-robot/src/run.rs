@@ -181,10 +181,13 @@ pub fn run_in_world(
         }
         // The boards due at this boundary report (those sent on to it at the last answer), and
         // those left waiting whose deadline falls here are sent on to it first.
+        // Every board sent on before any report is taken: they run side by side meanwhile.
         for b in boards.iter_mut() {
             if b.alive && b.next.is_none() && b.at < t && b.wants <= t {
                 send_on(b, t, &mut outcome.work)?;
             }
+        }
+        for b in boards.iter_mut() {
             if b.alive && b.next == Some(t) {
                 exchange(b, t..=t, &mut bus, &mut notes, &mut outcome.work)?;
             }
@@ -416,9 +419,16 @@ pub fn run_in_world(
         }
         // Boards left waiting at an earlier boundary that must get something at this one: sent on
         // to it first (they run there idle and report).
-        for b in boards.iter_mut() {
+        // (All sent on before any report is taken, so they run side by side.)
+        let mut caught_up = [false; 3];
+        for (k, b) in boards.iter_mut().enumerate() {
             if b.alive && b.next.is_none() && b.at < t && due(b, now.as_ref(), &bus, flags, end) {
                 send_on(b, t, &mut outcome.work)?;
+                caught_up[k] = true;
+            }
+        }
+        for (k, b) in boards.iter_mut().enumerate() {
+            if caught_up[k] {
                 exchange(b, t..=t, &mut bus, &mut notes, &mut outcome.work)?;
             }
         }
