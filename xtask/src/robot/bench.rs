@@ -46,7 +46,7 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
         std::thread::available_parallelism().map_or(0, usize::from)
     );
     println!(
-        "{:<12} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11}",
+        "{:<12} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11}",
         "case",
         "steps",
         "exchanges",
@@ -54,6 +54,7 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
         "waiting",
         "one runs",
         "two run",
+        "max qemu",
         "qemu usr",
         "qemu sys",
         "host cpu",
@@ -72,13 +73,14 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
         let per = |x: f64| x / virtual_s;
         let w = outcome.work;
         println!(
-            "{name:<12} {:>9.0} {:>10.0} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>5}→{:<5}",
+            "{name:<12} {:>9.0} {:>10.0} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>5}→{:<5}",
             per(w.steps as f64),
             per(w.exchanges as f64),
             per(wall),
             per(w.waiting_us as f64 / 1e6),
             per(w.overlap.running_us[1] as f64 / 1e6),
             per(w.overlap.side_by_side_us() as f64 / 1e6),
+            per(w.boards.iter().map(|c| c.cpu_s()).fold(0.0, f64::max)),
             per(w.boards.iter().map(|c| c.user_s).sum()),
             per(w.boards.iter().map(|c| c.sys_s).sum()),
             per(w.host.cpu_s()),
@@ -93,7 +95,8 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
          real time); waiting: wall time the host waited for the boards' reports (their \
          emulation and the pipes); one runs / two run: wall time with one board's QEMU \
          running (from its answer to its report), and with two or more side by side (what the \
-         second core gives); qemu usr/sys: the three QEMUs' CPU in user space (emulation) \
+         second core gives); max qemu: the busiest board's QEMU's CPU (the least wall time the \
+         run could take, its boards side by side); qemu usr/sys: the three QEMUs' CPU in user space (emulation) \
          and in the kernel (the exchanges' semihosting reads and writes, pipes, task switches); \
          host cpu: this process (the bus model, the coordinator)."
     );
