@@ -2,11 +2,13 @@
 //! on a pipe), the two named pipes it trades over with the coordinator, and what it printed. The
 //! one place a board's exchange happens: [`Board::receive`] takes its report, [`Board::send`] gives
 //! its answer (the messages are `amiro_trace::robot_link`'s).
+use std::cell::RefCell;
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::AsRawFd;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Command, Stdio};
+use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 use amiro_bus_sim::{NodeId, MAILBOXES};
@@ -18,8 +20,6 @@ use anyhow::{bail, Context, Result};
 
 use crate::cost::Overlap;
 use crate::{Firmware, NODES};
-use std::cell::RefCell;
-use std::rc::Rc;
 
 /// The real-time priority (`SCHED_RR`) of a live run's QEMUs: above every ordinary process, so a
 /// build beside the run no longer holds a board up for a time slice (the lags above 5 ms were such

@@ -108,8 +108,8 @@ pub fn run_in_world(
 ) -> Result<Outcome> {
     std::fs::create_dir_all(work)?;
     let host_before = crate::cost::own();
+    // How the boards run side by side, kept by the boards as they are sent on and report.
     let overlap = std::rc::Rc::new(std::cell::RefCell::new(crate::cost::Overlap::default()));
-
     let mut bus = Bus::new();
     // The three boards' nodes, then the operator's adapter's (`OPERATOR`).
     let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
@@ -180,8 +180,8 @@ pub fn run_in_world(
                 .unwrap_or(t);
         }
         // The boards due at this boundary report (those sent on to it at the last answer), and
-        // those left waiting whose deadline falls here are sent on to it first.
-        // Every board sent on before any report is taken: they run side by side meanwhile.
+        // those left waiting whose deadline falls here are sent on to it first — all of them
+        // before any report is taken, so they run side by side meanwhile.
         for b in boards.iter_mut() {
             if b.alive && b.next.is_none() && b.at < t && b.wants <= t {
                 send_on(b, t, &mut outcome.work)?;
@@ -418,8 +418,7 @@ pub fn run_in_world(
             flags |= DOWN_SYNC_LOW;
         }
         // Boards left waiting at an earlier boundary that must get something at this one: sent on
-        // to it first (they run there idle and report).
-        // (All sent on before any report is taken, so they run side by side.)
+        // to it first (they run there idle and report), all before any report is taken.
         let mut caught_up = [false; 3];
         for (k, b) in boards.iter_mut().enumerate() {
             if b.alive && b.next.is_none() && b.at < t && due(b, now.as_ref(), &bus, flags, end) {
