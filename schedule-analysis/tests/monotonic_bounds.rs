@@ -109,6 +109,19 @@ fn the_charge_per_expiry_is_every_timer_jobs_budget_in_the_report_and_on_the_chi
         Some(BudgetFrom::Stated { why }) => assert!(why.contains("held back"), "{why}"),
         other => panic!("{other:?}"),
     }
+    // The report says so, on a line of its own: the stated figure is below what the code can take.
+    let line = before
+        .sources
+        .iter()
+        .find(|s| {
+            s.starts_with("diwheeldrive: stated overhead of monotonic: bound declined: monotonic: ")
+        })
+        .expect("the held overhead's line");
+    assert!(line.contains("below what the code can take"), "{line}");
+    assert!(!after
+        .sources
+        .iter()
+        .any(|s| s.starts_with("diwheeldrive: stated overhead of monotonic")));
     // Charged: every timer job has the charge in place of the stated 3 µs, not the job's 83.2 µs.
     let (stated, bounded) = (timer_jobs(&before), timer_jobs(&after));
     assert_eq!(stated.len(), 6, "{stated:?}");
