@@ -103,33 +103,42 @@ impl Missed {
 
 /// The half-period count after the events `update` (the wrap) and `half` (the compare at
 /// `0x8000`) seen in one interrupt, from `count`, and the first event that went missing. An even
-/// count waits for the compare, an odd one for the update; both pending are taken in that order.
-/// An event that comes where the other was due means the other went missing: the count skips it
-/// (two half periods), so the parity keeps telling the counter's half.
+/// count waits for the compare, an odd one for the update; both pending are taken in that order
+/// (two half periods). An event that comes where the other was due means the other went missing:
+/// the count skips it (two half periods), so the parity keeps telling the counter's half. No loop:
+/// the timer's interrupt runs it once per interrupt, and its bound is the longer of two
+/// straight-line paths.
 pub fn advance(count: u32, update: bool, half: bool) -> (u32, Option<Missed>) {
-    let (mut count, mut update, mut half) = (count, update, half);
-    let mut missed = None;
-    while update || half {
-        let due_is_half = count % 2 == 0;
-        let (due, other) = if due_is_half {
-            (&mut half, &mut update)
-        } else {
-            (&mut update, &mut half)
-        };
-        if *due {
-            *due = false;
-            count = count.wrapping_add(1);
-        } else {
-            *other = false;
-            count = count.wrapping_add(2);
-            missed.get_or_insert(if due_is_half {
-                Missed::HalfPeriodCompare
-            } else {
-                Missed::Update
-            });
-        }
-    }
-    (count, missed)
+    let due_is_half = count & 1 == 0;
+    let (due, other) = if due_is_half {
+        (half, update)
+    } else {
+        (update, half)
+    };
+    let step = match (due, other) {
+        (false, false) => 0,
+        (true, false) => 1,
+        // Both in their order, or the other alone: the one due went missing.
+        (_, true) => 2,
+    };
+    let missed = (other && !due).then_some(if due_is_half {
+        Missed::HalfPeriodCompare
+    } else {
+        Missed::Update
+    });
+    (count.wrapping_add(step), missed)
+}
+
+/// Time in ticks from the half periods counted and the counter's 16 bits, as rtic-time's
+/// `half_period_counter::calculate_now` (the backend's `now`) computes it, the counter read after
+/// the count. An even count
+/// means the lower half of a period: the counter's value adds to it as it is; an odd count means
+/// the upper half: a counter already wrapped (below `0x8000`) is the next period's. Exact while the
+/// counter read is within one half period of the count's.
+pub const fn now_from(half_periods: u32, counter: u16) -> u64 {
+    let upper = (half_periods as u64) << 15;
+    let lower = upper & (1 << 15);
+    upper + (lower ^ counter as u64)
 }
 
 /// Starts the timer at [`TICK_HZ`] from a `timer_clock_hz` input (its bus clock on, its interrupt
@@ -152,20 +161,31 @@ pub fn start<R: Registers>(regs: &R, counter: &HalfPeriods, timer_clock_hz: u32)
     regs.write(CR1, CR1_CEN);
 }
 
-/// The timer's interrupt: takes the update and half-period flags (clearing only those: the status
-/// bits are write-0-to-clear) and counts them; returns the event that went missing if this is the
-/// first time one did (to be reported once).
+/// The timer's interrupt: clears the timer-queue compare flag (before the queue is looked at, so a
+/// compare that matches while it is sets it again) and takes the update and half-period flags,
+/// in one write (the status bits are write-0-to-clear: only those three), and counts them; returns
+/// the event that went missing if this is the first time one did (to be reported once). The
+/// backend's `clear_compare_flag`, which rtic-time calls just before, has nothing left to do.
 pub fn on_interrupt<R: Registers>(regs: &R, counter: &HalfPeriods) -> Option<Missed> {
     let sr = regs.read(SR);
     let taken = sr & (SR_UIF | SR_CC1IF);
+    regs.write(SR, !(taken | SR_CC2IF) & 0xFFFF);
     if taken == 0 {
         return None;
     }
-    regs.write(SR, !taken & 0xFFFF);
     let (count, missed) = advance(counter.count(), taken & SR_UIF != 0, taken & SR_CC1IF != 0);
     counter.count.store(count, Ordering::Relaxed);
     let missed = missed?;
     (counter.missed.fetch_add(1, Ordering::Relaxed) == 0).then_some(missed)
+}
+
+/// Time in ticks read in the timer's own interrupt: the count and the counter without a critical
+/// section, as nothing that changes the count (this interrupt, at the highest priority) can run
+/// between the two reads there. Elsewhere the backend's `now` reads them with interrupts masked.
+pub fn now_in_interrupt<R: Registers>(regs: &R, counter: &HalfPeriods) -> u64 {
+    let count = counter.count();
+    core::sync::atomic::compiler_fence(Ordering::Acquire);
+    now_from(count, self::counter(regs))
 }
 
 /// The counter's 16 bits.
@@ -182,11 +202,6 @@ pub fn set_compare<R: Registers>(regs: &R, instant: u64, now: u64) {
         0
     };
     regs.write(CCR2, value.into());
-}
-
-/// Clears the timer-queue compare flag.
-pub fn clear_compare_flag<R: Registers>(regs: &R) {
-    regs.write(SR, !SR_CC2IF & 0xFFFF);
 }
 
 /// Turns the timer-queue compare interrupt on or off.
@@ -256,11 +271,14 @@ macro_rules! timer_monotonic {
             }
 
             fn set_compare(instant: u64) {
-                $crate::timer_monotonic::set_compare(&Self::regs(), instant, Self::now());
+                // rtic-time sets the compare only in the timer's interrupt (on_monotonic_interrupt).
+                let regs = Self::regs();
+                let now = $crate::timer_monotonic::now_in_interrupt(&regs, &HALF_PERIODS);
+                $crate::timer_monotonic::set_compare(&regs, instant, now);
             }
 
             fn clear_compare_flag() {
-                $crate::timer_monotonic::clear_compare_flag(&Self::regs());
+                // Done by `on_interrupt`, which rtic-time calls next, in the same status write.
             }
 
             fn pend_interrupt() {

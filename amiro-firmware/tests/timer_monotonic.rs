@@ -6,12 +6,14 @@ use std::collections::BTreeMap;
 
 use amiro_firmware::bxcan::Registers;
 use amiro_firmware::timer_monotonic::{
-    advance, on_interrupt, set_compare, start, HalfPeriods, Missed,
+    advance, now_from, now_in_interrupt, on_interrupt, set_compare, start, HalfPeriods, Missed,
 };
 
 const SR: usize = 0x10;
 const UIF: u32 = 1;
 const CC1IF: u32 = 2;
+const CC2IF: u32 = 4;
+const CC3IF: u32 = 8;
 
 /// Registers that keep what is written; the status register clears the bits written as 0.
 #[derive(Default)]
@@ -113,6 +115,117 @@ fn the_accounting_keeps_the_parity_whatever_goes_missing() {
     assert_eq!(advance(1, false, true), (3, Some(Missed::Update)));
     assert_eq!(advance(7, false, false), (7, None));
     assert_eq!(advance(u32::MAX, true, false), (0, None), "wraps");
+}
+
+/// The catch-up as it was written first, one event per pass of a loop: `advance` must agree with it.
+fn advance_by_passes(count: u32, update: bool, half: bool) -> (u32, Option<Missed>) {
+    let (mut count, mut update, mut half) = (count, update, half);
+    let mut missed = None;
+    while update || half {
+        let due_is_half = count.is_multiple_of(2);
+        let (due, other) = if due_is_half {
+            (&mut half, &mut update)
+        } else {
+            (&mut update, &mut half)
+        };
+        if *due {
+            *due = false;
+            count = count.wrapping_add(1);
+        } else {
+            *other = false;
+            count = count.wrapping_add(2);
+            missed.get_or_insert(if due_is_half {
+                Missed::HalfPeriodCompare
+            } else {
+                Missed::Update
+            });
+        }
+    }
+    (count, missed)
+}
+
+#[test]
+fn the_catch_up_without_a_loop_is_the_catch_up_one_event_at_a_time() {
+    for count in [0, 1, 2, 3, 0x7FFF_FFFF, u32::MAX - 1, u32::MAX] {
+        for update in [false, true] {
+            for half in [false, true] {
+                assert_eq!(
+                    advance(count, update, half),
+                    advance_by_passes(count, update, half),
+                    "count {count}, update {update}, half {half}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_interrupt_clears_the_queue_compare_with_the_events_it_takes_and_nothing_else() {
+    let timer = Timer::default();
+    let counter = HalfPeriods::new();
+    start(&&timer, &counter, 8_000_000);
+    // Only the queue's compare: cleared, nothing counted.
+    timer.flag(CC2IF | CC3IF);
+    assert_eq!(on_interrupt(&&timer, &counter), None);
+    assert_eq!(timer.get(SR), CC3IF, "CC2IF cleared, CC3IF left");
+    assert_eq!(counter.count(), 0);
+    // With the half-period compare: both cleared in one write, the half period counted.
+    timer.flag(CC1IF | CC2IF);
+    let writes = timer.writes.borrow().len();
+    assert_eq!(on_interrupt(&&timer, &counter), None);
+    assert_eq!(timer.get(SR), CC3IF);
+    assert_eq!(counter.count(), 1);
+    assert_eq!(timer.writes.borrow().len(), writes + 1, "one status write");
+}
+
+#[test]
+fn time_is_the_counter_placed_in_the_half_periods_counted() {
+    // The one time whose low 16 bits are the counter's and that lies at most one period beyond the
+    // count's half period: the count may lag the counter by up to one half period.
+    for count in [0u32, 1, 2, 3, 1000, 1001, u32::MAX - 1, u32::MAX] {
+        let base = u64::from(count) << 15;
+        for value in 0..=u16::MAX {
+            let now = now_from(count, value);
+            assert_eq!(
+                now & 0xFFFF,
+                u64::from(value),
+                "count {count}, counter {value}"
+            );
+            assert!(
+                (base..base + 0x1_0000).contains(&now),
+                "count {count}, counter {value}: {now:#x}"
+            );
+        }
+    }
+    assert_eq!(now_from(0, 5), 5);
+    assert_eq!(now_from(1, 0x8005), 0x8005);
+    assert_eq!(
+        now_from(1, 5),
+        0x1_0005,
+        "wrapped, its update not yet counted"
+    );
+    assert_eq!(
+        now_from(2, 0x8005),
+        0x1_8005,
+        "past the half, not yet counted"
+    );
+}
+
+#[test]
+fn the_interrupt_reads_time_from_the_count_and_the_counter() {
+    let timer = Timer::default();
+    let counter = HalfPeriods::new();
+    start(&&timer, &counter, 8_000_000);
+    for _ in 0..3 {
+        timer.flag(if counter.count().is_multiple_of(2) {
+            CC1IF
+        } else {
+            UIF
+        });
+        on_interrupt(&&timer, &counter);
+    }
+    (&timer).write(0x24, 0x0123);
+    assert_eq!(now_in_interrupt(&&timer, &counter), 0x1_8000 + 0x8123);
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! Known answers for a task charged per activation ([`bounds::PerActivation`]): a hand-assembled receive
 //! handler that drains a FIFO, its job bounded with the drain at its stated 6 passes and its charge per frame
-//! with the drain at 2 (one frame and the pass that finds the FIFO empty), each worked out from the Cortex-M3
+//! with the drain at 2 (one frame and the pass that finds the FIFO empty), and a timer queue's interrupt, its
+//! job at 19 passes and its charge per expiry at 3 (a pop, a `continue`, the last pass), each worked out from the Cortex-M3
 //! TRM's cycle table as in [`super::tests`] (ARM DDI 0337, table 18-1: data processing 1, LDR 2, PUSH 1 + N,
 //! POP with the PC 1 + N + P, a taken branch 1 + P, P = 3; a load from a peripheral whose base the code does not
 //! fix 5 more, APB1's; flash at 0 wait states; exception entry 12 and exit 10).
@@ -138,4 +139,88 @@ fn a_charge_needs_a_stated_loop_passes_within_its_bound_and_a_reason() {
     assert!(!refused(
         r#"{"task":"rx","function":"RX","file":"src/rx.rs","line":12,"passes":2,"reason":"r"}"#
     ));
+}
+
+/// `TQ`: a timer queue's interrupt as rtic-time's `on_monotonic_interrupt` runs it: `push {r4, lr}`, a loop at
+/// src/tq.rs:20 whose pass reads the head (none: the queue is empty, the loop ends), reads whether it is due
+/// (due: a pop, counted, and round again) and, not due, whether the time passed it meanwhile (round again: the
+/// `continue`; else the loop ends), `pop {r4, pc}`.
+fn timer_queue_handler() -> Image {
+    let code = thumb(&[
+        0xb510, // 0x00 push {r4, lr}: 1 + 2
+        0x2400, // 0x02 movs r4, #0: 1
+        0x6801, // 0x04 ldr r1, [r0]: 2 + 5 (the head; the loop's header, line 20)
+        0xb131, // 0x06 cbz r1, 0x16: 1, taken 1 + P (the queue empty)
+        0x680a, // 0x08 ldr r2, [r1]: 2 + 5 (due?)
+        0xb10a, // 0x0a cbz r2, 0x10: 1, taken 1 + P (not due)
+        0x3401, // 0x0c adds r4, #1: 1 (the pop and its wake)
+        0xe7f9, // 0x0e b 0x04: 1 + P
+        0x684b, // 0x10 ldr r3, [r1, #4]: 2 + 5 (passed meanwhile?)
+        0x2b00, // 0x12 cmp r3, #0: 1
+        0xd1f6, // 0x14 bne 0x04: 1, taken 1 + P (the `continue`)
+        0xbd10, // 0x16 pop {r4, pc}: 1 + 2 + P
+    ]);
+    let bytes = elf_with_lines(
+        &code,
+        &[Sym::function("TQ", 0, 24)],
+        "firmware/src/tq.rs",
+        &[(0, 10), (4, 20), (0x16, 30)],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+#[test]
+fn a_timer_interrupt_charged_per_expiry_covers_every_job_and_what_its_continues_leave() {
+    let img = timer_queue_handler();
+    let bounds = BoundsFile::parse(
+        r#"{"loops":[{"function":"TQ","file":"src/tq.rs","line":20,"bound":19,"reason":"9 waiters: a pop each, a continue before each, the last pass"}],
+            "per_activation":[{"task":"tq","function":"TQ","file":"src/tq.rs","line":20,"passes":3,"reason":"a job that serves k expiries costs at most k charges"}]}"#,
+    )
+    .expect("the bounds file parses");
+    let task = Task {
+        name: "tq".into(),
+        entry: TaskEntry::Symbol("TQ".into()),
+        handler: true,
+    };
+    let rows = bound_tasks(&img, &[task], F103_0WS, &bounds);
+    let tq = &rows[0];
+    // The passes: a pop — ldr 7, cbz 1, ldr 7, cbz 1, adds 1, b 4 — 21 cycles, 6 instructions; a `continue` —
+    // ldr 7, cbz 1, ldr 7, cbz taken 4, ldr 7, cmp 1, bne taken 4 — 31 cycles, 7 instructions (the longest,
+    // P); the last — the same with bne not taken, 28 cycles, 7 instructions — or the empty queue's, ldr 7,
+    // cbz taken 4: 11 cycles. Around the loop: push 3, movs 1, pop 6: 10 cycles, 3 instructions; entry and
+    // exit 12 + 10. So F = 32 cycles outside the loop's passes.
+    // The job, the header run 19 times: 18 × 31 + 28 + 32 = 618 cycles; 18 × 7 + 7 + 3 = 136 instructions.
+    assert_eq!(
+        (tq.cycles, tq.instructions, tq.declined.as_deref()),
+        (618, 136, None)
+    );
+    // Per expiry, the header run 3 times: 2 × 31 + 28 + 32 = 122 cycles; 2 × 7 + 7 + 3 = 24 instructions.
+    let charge = tq.per_activation.as_ref().expect("charged per expiry");
+    assert_eq!(
+        (
+            charge.cycles,
+            charge.instructions,
+            charge.declined.as_deref()
+        ),
+        (122, 24, None)
+    );
+    // Sound per expiry (the bounds files' argument): a job that pops k expiries with c `continue`s costs
+    // F + 21 k + 31 c + 28 (its last pass not a pop), and each `continue` may leave one more job whose first
+    // pass pops nothing, charged F + P = 63 to it. A job whose first pass pops has c <= k - 1; in any other
+    // job that pops, the first pass is a `continue` too (c + 1 <= k of them), and even with that pass's
+    // F + P counted in (the bounds files charge it to what started the job) it stays within k charges.
+    let (f, p) = (32, 31);
+    for k in 1..=9u64 {
+        for c in 0..k {
+            let job = f + 21 * k + 31 * c + 28;
+            assert!(job + c * (f + p) <= k * charge.cycles, "k {k}, c {c}");
+            let other = 21 * k + 31 * c + 28;
+            assert!(
+                other + (c + 1) * (f + p) <= k * charge.cycles,
+                "k {k}, c + 1"
+            );
+        }
+    }
+    // And the one job that serves every waiter is within its 9 charges, as it is within its own bound.
+    assert!(tq.cycles <= 9 * charge.cycles);
 }

@@ -528,6 +528,19 @@ pub(super) fn budgets_lines(b: &BoardBudgets, measured: &[String]) -> Vec<String
         total - bounded
     )];
     lines.extend(each);
+    // An overhead whose bound the file declines or holds back (the monotonic's interrupt): its stated figure
+    // stands, and why, on a line of its own.
+    lines.extend(
+        b.rows
+            .iter()
+            .filter(|(r, _)| bounds::OVERHEAD_ROWS.contains(&r.as_str()))
+            .filter_map(|(row, f)| match f {
+                BudgetFrom::Stated { why } if why.starts_with("bound declined") => {
+                    Some(format!("{}: stated overhead of {row}: {why}", b.board))
+                }
+                _ => None,
+            }),
+    );
     lines
 }
 
