@@ -32,6 +32,16 @@ impl Frame {
         }
     }
 
+    /// A frame without data bytes (DLC 0); `const`, so a fixed-size store of frames can be
+    /// initialised at compile time.
+    pub const fn empty(id: CanId) -> Frame {
+        Frame {
+            id,
+            len: 0,
+            data: [0; 8],
+        }
+    }
+
     /// A frame from an 8-byte buffer of which the first `len` bytes are used; `len` above 8 is an error.
     pub fn from_parts(id: CanId, len: u8, data: [u8; 8]) -> Result<Frame, DecodeError> {
         if len <= 8 {
@@ -113,5 +123,6 @@ mod tests {
         assert_eq!(std::format!("{frame}"), "205#01840302");
         let empty = Frame::new(CanId::try_from(0x7FF).unwrap(), &[]).unwrap();
         assert_eq!(std::format!("{empty}"), "7FF#");
+        assert_eq!(Frame::empty(CanId::try_from(0x7FF).unwrap()), empty);
     }
 }
