@@ -13,8 +13,8 @@
 //!
 //! Each frame stays in a fixed slot from when it is queued until it leaves; what moves is a small
 //! array of slot numbers kept in the order the frames will leave, the next one last. So `pop` in
-//! the transmit interrupt is O(1), and `push`, `requeue` and an eviction read at most `N` frames'
-//! identifiers in one pass and move at most `N` one-byte slot numbers, never a frame.
+//! the transmit interrupt is O(1), and `push` and `requeue` read at most `N` frames' identifiers
+//! in one pass and move at most `N - 1` one-byte slot numbers (evicting or not), never a frame.
 
 use amiro_can::{CanId, Frame, Kind, Topic};
 
@@ -284,65 +284,68 @@ impl<const N: usize> TxQueue<N> {
         self.slots.get(usize::from(*slot))
     }
 
-    /// Inserts `frame` at `at` of `order`; when full, drops whichever of it and the frame that
-    /// would leave last goes last (`new_goes_last(id of the frame leaving last)`).
+    /// Inserts `frame` at `at` of `order` (`at` queued frames leave after it); when full, drops
+    /// whichever of it and the frame that would leave last goes last (`new_goes_last(id of the
+    /// frame leaving last)`). Slot numbers move by swaps, not `copy_within` (no `memmove` is linked
+    /// into the images for it), and only one way per call: at most `N - 1` of them.
     fn insert_or_drop(
         &mut self,
         at: usize,
         frame: Frame,
         new_goes_last: impl FnOnce(u16) -> bool,
     ) -> PushOutcome {
-        let mut outcome = PushOutcome::Queued;
-        let mut at = at;
-        if self.len >= N {
-            let evict = match self.at(0) {
-                Some(last_in_line) => !new_goes_last(last_in_line.id().raw()),
-                // Only with N = 0: nowhere to put anything.
-                None => false,
-            };
-            if !evict {
-                self.counters.dropped = self.counters.dropped.saturating_add(1);
-                return PushOutcome::DroppedNew { dropped: frame };
-            }
-            // The frame leaving last is at 0: its slot number goes to the end of the queued ones
-            // and becomes the first free slot. By swaps, not `copy_within` (no `memmove` is linked
-            // into the images for it).
-            for i in 1..self.len {
-                swap_with_next(&mut self.order, i - 1);
-            }
-            self.len -= 1;
-            let Some(dropped) = self
+        if self.len < N {
+            // The first free slot takes the frame, and its number moves from `len` down to `at`
+            // (`at` <= len: it counted queued frames).
+            let Some(slot) = self
                 .order
                 .get(self.len)
-                .and_then(|slot| self.slots.get(usize::from(*slot)))
-                .copied()
+                .and_then(|slot| self.slots.get_mut(usize::from(*slot)))
             else {
+                // Unreachable: len < N. Report it as a drop rather than lose it silently.
+                self.counters.dropped = self.counters.dropped.saturating_add(1);
                 return PushOutcome::DroppedNew { dropped: frame };
             };
-            self.counters.dropped = self.counters.dropped.saturating_add(1);
-            outcome = PushOutcome::DroppedOther { dropped };
-            // `at` counted frames before the insertion point, the one dropped among them.
-            at = at.saturating_sub(1);
+            *slot = frame;
+            for i in (at..self.len).rev() {
+                swap_with_next(&mut self.order, i);
+            }
+            self.len += 1;
+            self.note_high_water();
+            return PushOutcome::Queued;
         }
-        // The first free slot takes the frame.
+        let evict = match self.at(0) {
+            Some(last_in_line) => !new_goes_last(last_in_line.id().raw()),
+            // Only with N = 0: nowhere to put anything.
+            None => false,
+        };
+        if !evict {
+            self.counters.dropped = self.counters.dropped.saturating_add(1);
+            return PushOutcome::DroppedNew { dropped: frame };
+        }
+        // The frame leaving last, at 0, gives its slot to the new one, whose number moves up to
+        // `at - 1` (`at` >= 1: the frame at 0 leaves after the new one, so `at` counted it).
         let Some(slot) = self
             .order
-            .get(self.len)
+            .first()
             .and_then(|slot| self.slots.get_mut(usize::from(*slot)))
         else {
-            // Unreachable: len < N here. Report it as a drop rather than lose it silently.
+            // Unreachable: the frame at 0 was just read.
             self.counters.dropped = self.counters.dropped.saturating_add(1);
             return PushOutcome::DroppedNew { dropped: frame };
         };
-        *slot = frame;
-        self.len += 1;
-        // Its slot number into its place by swaps (`at` <= len - 1: it counted queued frames).
-        for i in (at + 1..self.len).rev() {
+        let dropped = core::mem::replace(slot, frame);
+        for i in 1..at {
             swap_with_next(&mut self.order, i - 1);
         }
+        self.counters.dropped = self.counters.dropped.saturating_add(1);
+        self.note_high_water();
+        PushOutcome::DroppedOther { dropped }
+    }
+
+    fn note_high_water(&mut self) {
         let len = u16::try_from(self.len).unwrap_or(u16::MAX);
         self.counters.high_water = self.counters.high_water.max(len);
-        outcome
     }
 
     /// Takes the most urgent frame (lowest identifier, oldest among equals).
