@@ -7,7 +7,12 @@ use crate::id::CanId;
 
 /// A data frame: identifier and 0..=8 data bytes. The length is validated on construction, so
 /// [`Frame::data`] never panics.
+///
+/// Aligned to 4 bytes (its size stays 12): the firmware copies frames between its queues and the
+/// mailboxes, and a word-aligned copy is three loads and stores on the chip where one of 2-byte
+/// alignment is a call of `memcpy`, which copies byte by byte.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(align(4))]
 pub struct Frame {
     id: CanId,
     len: u8,
@@ -29,6 +34,16 @@ impl Frame {
                 })
             }
             None => Err(DecodeError::FrameTooLong { len: data.len() }),
+        }
+    }
+
+    /// A frame without data bytes (DLC 0); `const`, so a fixed-size store of frames can be
+    /// initialised at compile time.
+    pub const fn empty(id: CanId) -> Frame {
+        Frame {
+            id,
+            len: 0,
+            data: [0; 8],
         }
     }
 
@@ -63,6 +78,13 @@ impl Frame {
     pub fn data(&self) -> &[u8] {
         // len <= 8 is an invariant of every constructor; the fallback is never taken.
         self.data.get(..usize::from(self.len)).unwrap_or(&self.data)
+    }
+
+    /// The whole 8-byte data buffer: the first `dlc()` bytes are [`Frame::data`], the rest as the
+    /// frame was built (zeros, unless [`Frame::from_parts`] was given others). For a CAN controller's
+    /// mailbox, which sends the first DLC bytes of its 8: a copy of fixed size, whatever the length.
+    pub const fn data_buffer(&self) -> [u8; 8] {
+        self.data
     }
 
     /// Decodes this frame; see [`crate::decode`].
@@ -113,5 +135,10 @@ mod tests {
         assert_eq!(std::format!("{frame}"), "205#01840302");
         let empty = Frame::new(CanId::try_from(0x7FF).unwrap(), &[]).unwrap();
         assert_eq!(std::format!("{empty}"), "7FF#");
+        assert_eq!(Frame::empty(CanId::try_from(0x7FF).unwrap()), empty);
+        assert_eq!(core::mem::size_of::<Frame>(), 12);
+        assert_eq!(core::mem::align_of::<Frame>(), 4);
+        let frame = Frame::new(CanId::try_from(0x605).unwrap(), &[1, 2, 3]).unwrap();
+        assert_eq!(frame.data_buffer(), [1, 2, 3, 0, 0, 0, 0, 0]);
     }
 }

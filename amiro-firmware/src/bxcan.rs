@@ -288,16 +288,16 @@ impl<R: Registers> CanTx for Mailboxes<R> {
     fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
         let tsr = self.regs.read(reg::TSR);
         let pending = |i: usize| tsr & (bit::TSR_TME0 << i) == 0;
-        // The frame a pending mailbox holds (one whose completion is not collected yet holds none).
-        let held = |i: usize| self.shadow.get(i).copied().flatten().filter(|_| pending(i));
-        if (0..3).any(|i| held(i).is_some_and(|f| f.id() == frame.id())) {
+        // The identifier a pending mailbox holds (one whose completion is not collected holds none).
+        let held = |i: usize| Some(self.shadow.get(i)?.as_ref()?.id()).filter(|_| pending(i));
+        if (0..3).any(|i| held(i) == Some(frame.id())) {
             return Transmit::Busy;
         }
         let empty = |i: usize| !pending(i) && self.shadow.get(i).is_some_and(Option::is_none);
         if let Some(free) = (0..3).find(|&i| empty(i)) {
-            let mut data = [0u8; 8];
-            let n = frame.data().len().min(8);
-            data[..n].copy_from_slice(&frame.data()[..n]);
+            // All 8 bytes, a copy of fixed size (no `memcpy` of a run-time length): the controller
+            // sends as many of them as the DLC written to TDTxR says.
+            let data = frame.data_buffer();
             self.regs.write(reg::tdtr(free), u32::from(frame.dlc()));
             self.regs.write(
                 reg::tdlr(free),
@@ -320,7 +320,7 @@ impl<R: Registers> CanTx for Mailboxes<R> {
         // All three taken: abort the least urgent pending one if this frame beats it (and no abort is
         // already under way for it), without waiting.
         let least = (0..3)
-            .filter_map(|i| held(i).map(|f| (i, f.id().raw())))
+            .filter_map(|i| held(i).map(|id| (i, id.raw())))
             .max_by_key(|&(_, id)| id);
         if let Some((i, id)) = least {
             if frame.id().raw() < id && tsr & bit::abrq(i) == 0 {

@@ -60,19 +60,19 @@ pub fn transmit_pending<C: Clock, const N: usize>(port: &mut impl CanTx, queue: 
         }
         Completion::Sent(frame) => crate::tracing::frame_acked(frame.id().raw()),
     });
-    while let Some(frame) = queue.peek().copied() {
-        match port.transmit(&frame) {
+    // The frame goes to the mailbox from its place in the queue: copied out first, it was a
+    // `memcpy` call per pass on the chip. Its identifier is kept for the trace event, which comes
+    // after `pop` has freed its slot.
+    while let Some(frame) = queue.peek() {
+        #[cfg(not(feature = "qemu"))]
+        let id = frame.id().raw();
+        match port.transmit(frame) {
             Transmit::Queued => {
                 queue.pop();
                 // QEMU prints the frame itself as it enters the (virtual) mailbox: the event would
                 // say it twice, at a cost the robot does not have.
                 #[cfg(not(feature = "qemu"))]
-                telemetry::trace(&TraceEvent::new(
-                    C::now_us(),
-                    TraceKind::FrameSent {
-                        id: frame.id().raw(),
-                    },
-                ));
+                telemetry::trace(&TraceEvent::new(C::now_us(), TraceKind::FrameSent { id }));
             }
             Transmit::Busy => break,
         }

@@ -169,6 +169,26 @@ fn frames_leave_most_urgent_first_and_are_reported_sent() {
 }
 
 #[test]
+fn the_mailbox_gets_the_whole_data_buffer_and_the_bus_only_the_dlc_bytes() {
+    // `transmit` writes all 8 data bytes (a copy of fixed size); the DLC decides what is sent, so
+    // bytes past it in a frame's buffer (possible from `Frame::from_parts`) never reach the bus.
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
+    let id = CanId::try_from(0x605).unwrap();
+    let padded = Frame::from_parts(id, 2, [7, 8, 0xEE, 0xEE, 0xEE, 0xEE, 0xEE, 0xEE]).unwrap();
+    assert_eq!(tx.transmit(&padded), Transmit::Queued);
+    assert_eq!(bus_sends_one(&can), Some((0x605, vec![7, 8])));
+    assert_eq!(tx.transmit(&frame(0x606, &[])), Transmit::Queued);
+    assert_eq!(bus_sends_one(&can), Some((0x606, vec![])));
+    let eight = frame(0x607, &[1, 2, 3, 4, 5, 6, 7, 8]);
+    assert_eq!(tx.transmit(&eight), Transmit::Queued);
+    assert_eq!(
+        bus_sends_one(&can),
+        Some((0x607, vec![1, 2, 3, 4, 5, 6, 7, 8]))
+    );
+}
+
+#[test]
 fn an_urgent_frame_displaces_the_least_urgent_without_waiting() {
     let can = configured();
     let mut tx = Mailboxes::new(&can);
