@@ -28,7 +28,9 @@
 //! jobs ([`drain`]) takes at most [`DRAIN_BATCH`] complete records out of the ring (each copied out
 //! between two short critical sections), COBS-encodes them and writes them to the trace channel
 //! (RTT on the robot), and writes at most one log line a handler deferred
-//! (`channels::defer_log`). A full ring counts the record as lost, and the drain reports the count
+//! (`channels::defer_log`); before its batch it stamps the handler event a handler deferred
+//! ([`defer_event`]: `can_status`' bus-state change, four words stored under a short critical
+//! section, so the most urgent handler pays no record). A full ring counts the record as lost, and the drain reports the count
 //! (`Kind::Lost`) before the next record it writes.
 //!
 //! The QEMU build writes through instead: each record is encoded and written to `trace.bin` or the
