@@ -19,6 +19,7 @@ pub mod can;
 pub mod clock_tree;
 pub mod digits;
 pub mod layout;
+pub mod rx_queue;
 pub mod spi;
 pub mod timer_monotonic;
 pub mod trace_ring;

@@ -11,6 +11,7 @@ use rtic_sync::channel::{Receiver, Sender};
 
 use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
 use crate::mono::Clock;
+use crate::rx_queue::Producer;
 use crate::{signals, telemetry};
 
 /// Frames the board received but could not queue for the command handler (queue full).
@@ -23,24 +24,23 @@ pub fn rx_overruns() -> u32 {
     crate::health::rx_overruns()
 }
 
-/// The CAN receive interrupt: moves every frame from the FIFO into the bounded command queue; a
-/// full queue drops the frame and counts it, an overrun is counted.
-pub fn receive_frames<const N: usize>(
-    port: &mut impl CanRx,
-    queue: &mut Sender<'static, RxFrame, N>,
-) {
+/// The CAN receive interrupt: moves every frame from the FIFO into the bounded command queue, then
+/// wakes the command handler once (not once per frame: `rx_queue`). A full queue drops the frame
+/// and counts it ([`rx_dropped`]), an overrun is counted ([`rx_overruns`]); nothing here looks into
+/// a frame (the command handler checks it), so each frame costs the same (docs/analysis.md, the
+/// bounds files' `per_activation` charge of `can_rx`).
+pub fn receive_frames<const N: usize>(port: &mut impl CanRx, queue: &mut Producer<'static, N>) {
     while let Some(event) = port.receive() {
         match event {
-            RxEvent::Frame(frame) => {
-                if queue.try_send(frame).is_err() {
-                    crate::health::count_rx_dropped();
-                }
-            }
-            RxEvent::Overrun => {
-                crate::health::count_rx_overrun();
-            }
+            RxEvent::Frame(frame) if queue.push(&frame) => {}
+            RxEvent::Frame(_) => crate::health::count_rx_dropped(),
+            RxEvent::Overrun => crate::health::count_rx_overrun(),
         }
     }
+    // Also after a job that queued nothing (an overrun, or a frame an earlier job took): a
+    // spurious wake costs the handler one poll that finds the queue empty, where a flag kept
+    // across the drain cost every pass a stack slot and split the drain loop's header in two.
+    queue.wake();
 }
 
 /// Puts `frame` into the transmit queue: every frame a board sends goes in here (a sample's, a
@@ -93,7 +93,7 @@ pub fn on_can_status<C: Clock, R: crate::bxcan::Registers>(
             BusState::Passive => 2,
             BusState::BusOff => 3,
         };
-        telemetry::trace(&TraceEvent::new(
+        crate::tracing::defer_event(&TraceEvent::new(
             C::now_us(),
             TraceKind::CanBusState {
                 state,
@@ -500,6 +500,16 @@ pub async fn next_command<const N: usize>(
 ) -> Option<RxFrame> {
     let task = crate::tracing::suspend(None);
     let frame = commands.recv().await.ok();
+    crate::tracing::resume(task);
+    frame
+}
+
+/// Waits for the next frame the CAN receive interrupt queued (the command handler's queue).
+pub async fn next_frame<const N: usize>(
+    frames: &mut crate::rx_queue::Consumer<'static, N>,
+) -> RxFrame {
+    let task = crate::tracing::suspend(None);
+    let frame = frames.recv().await;
     crate::tracing::resume(task);
     frame
 }

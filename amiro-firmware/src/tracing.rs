@@ -28,7 +28,9 @@
 //! jobs ([`drain`]) takes at most [`DRAIN_BATCH`] complete records out of the ring (each copied out
 //! between two short critical sections), COBS-encodes them and writes them to the trace channel
 //! (RTT on the robot), and writes at most one log line a handler deferred
-//! (`channels::defer_log`). A full ring counts the record as lost, and the drain reports the count
+//! (`channels::defer_log`); before its batch it stamps the handler event a handler deferred
+//! ([`defer_event`]: `can_status`' bus-state change, four words stored under a short critical
+//! section, so the most urgent handler pays no record). A full ring counts the record as lost, and the drain reports the count
 //! (`Kind::Lost`) before the next record it writes.
 //!
 //! The QEMU build writes through instead: each record is encoded and written to `trace.bin` or the
@@ -299,12 +301,49 @@ fn write_out(slot: &Slot) -> bool {
 /// line. Called by [`serve_drain`]; bounded by its batch.
 #[inline(never)]
 pub fn drain() {
+    #[cfg(not(feature = "qemu"))]
+    emit_deferred_event();
     for _ in 0..DRAIN_BATCH {
         if !drain_one() {
             break;
         }
     }
     crate::channels::write_deferred_log();
+}
+
+/// The handler event a handler left for the drain ([`defer_event`]), as four words: its `at_us`
+/// (low, high), [`DEFERRED_HELD`] with the bus state and the error counters, and how many events
+/// it replaced before the drain took it (each counted as a lost record). Words, so that its
+/// critical sections move four words at known addresses (a `TraceEvent` would be a byte copy).
+#[cfg(not(feature = "qemu"))]
+static DEFERRED: Mutex<core::cell::Cell<[u32; 4]>> = Mutex::new(core::cell::Cell::new([0; 4]));
+
+/// The third word's mark of a deferred event waiting.
+#[cfg(not(feature = "qemu"))]
+const DEFERRED_HELD: u32 = 1 << 24;
+
+/// Stamps the handler event a handler deferred into the ring, as [`event`] would have (the drain,
+/// once per job, before its batch): its record's stamp is the drain's, its `at_us` the handler's.
+/// The events it replaced are reported as lost.
+#[cfg(not(feature = "qemu"))]
+fn emit_deferred_event() {
+    let [low, high, held, replaced] =
+        critical_section::with(|cs| DEFERRED.borrow(cs).replace([0; 4]));
+    if replaced > 0 {
+        // SAFETY: the drain is the ring's only drain (`drain_trace`, one task).
+        unsafe { RING.count_lost(replaced) };
+    }
+    if held & DEFERRED_HELD != 0 {
+        let kind = amiro_sensors::trace::TraceKind::CanBusState {
+            state: (held >> 16) as u8,
+            tec: (held >> 8) as u8,
+            rec: held as u8,
+        };
+        event(&TraceEvent::new(
+            u64::from(high) << 32 | u64::from(low),
+            kind,
+        ));
+    }
 }
 
 /// Writes one record: a `Lost` report when the ring turned records away since the last one, else
@@ -380,6 +419,35 @@ pub fn event(event: &TraceEvent) {
     emit(What::Kind(Kind::Event {
         record: event.encode(),
     }));
+}
+
+/// A handler event for the drain to stamp ([`drain`], priority 0), for the handlers whose bound
+/// the analysis uses at the most urgent priority (`can_status`'s bus-state change): four words
+/// stored into a static under a short critical section, where [`event`]'s stamp, reservation and
+/// 40-byte copy into the ring were half of the handler's bound (docs/analysis.md, *Held bounds*).
+/// The event keeps its own `at_us`; its record is stamped when the drain writes it. One waits at
+/// most: a later one replaces it, and the replaced one is reported as a lost record. Any other
+/// kind is written at once ([`event`]); QEMU writes every event through at once, as every record
+/// there (in its place among the console's lines).
+#[inline(always)]
+pub fn defer_event(event: &TraceEvent) {
+    #[cfg(not(feature = "qemu"))]
+    if let amiro_sensors::trace::TraceKind::CanBusState { state, tec, rec } = event.kind {
+        let held = DEFERRED_HELD | u32::from(state) << 16 | u32::from(tec) << 8 | u32::from(rec);
+        critical_section::with(|cs| {
+            let latch = DEFERRED.borrow(cs);
+            let [_, _, waiting, replaced] = latch.get();
+            let replaced = replaced.wrapping_add(u32::from(waiting & DEFERRED_HELD != 0));
+            latch.set([
+                event.at_us as u32,
+                (event.at_us >> 32) as u32,
+                held,
+                replaced,
+            ]);
+        });
+        return;
+    }
+    self::event(event);
 }
 
 /// A running job of a bound interrupt; dropping it ends the job.

@@ -350,7 +350,7 @@ fn fifo_clamps_long_length_codes_and_marks_foreign_frames() {
     let mut rx = Fifo0::new(&can);
     assert_eq!(rx.receive(), None);
     deliver(&can, 0x205 << 21, 15, [1, 2, 3, 4, 5, 6, 7, 8]);
-    deliver(&can, (0x205 << 21) | 0b100, 2, [0; 8]); // extended
+    deliver(&can, (0x205 << 21) | 0b100, 2, [9; 8]); // extended, its data not passed on
     deliver(&can, (0x205 << 21) | 0b010, 0, [0; 8]); // remote
     assert!(can.borrow().rx0_interrupt());
     match rx.receive() {
@@ -362,7 +362,7 @@ fn fifo_clamps_long_length_codes_and_marks_foreign_frames() {
     }
     for _ in 0..2 {
         match rx.receive() {
-            Some(RxEvent::Frame(f)) => assert_eq!((f.id, f.len), (u16::MAX, 0)),
+            Some(RxEvent::Frame(f)) => assert_eq!((f.id, f.len, f.data), (u16::MAX, 0, [0; 8])),
             other => panic!("{other:?}"),
         }
     }

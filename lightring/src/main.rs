@@ -171,8 +171,8 @@ mod app {
     struct Local {
         can_rx: platform::CanRxPort,
         can_tx: platform::CanTxPort,
-        rx_frames: Sender<'static, RxFrame, RX_QUEUE_LEN>,
-        commands: Receiver<'static, RxFrame, RX_QUEUE_LEN>,
+        rx_frames: amiro_firmware::rx_queue::Producer<'static, RX_QUEUE_LEN>,
+        commands: amiro_firmware::rx_queue::Consumer<'static, RX_QUEUE_LEN>,
         to_admission: Sender<'static, RxFrame, ADMISSION_QUEUE_LEN>,
         requests: Receiver<'static, RxFrame, ADMISSION_QUEUE_LEN>,
         wake_latch: Sender<'static, (), 1>,
@@ -189,7 +189,7 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         tasks::boot("LightRing", crate::BOOT_WATCHDOG_TIMEOUT_MS);
         let hw = platform::init(cx.device, cx.core);
-        let (rx_frames, commands) = make_channel!(RxFrame, RX_QUEUE_LEN);
+        let (rx_frames, commands) = amiro_firmware::frame_queue!(RX_QUEUE_LEN);
         let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
         let (wake_latch, latch_wakeups) = make_channel!((), 1);
         let (wake_publisher, publisher_wakeups) = make_channel!((), 1);
@@ -268,8 +268,8 @@ mod app {
     #[task(priority = 5, shared = [handler, leds, tx_queue], local = [commands, to_admission, wake_latch, wake_commands])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
-        while let Some(frame) = tasks::next_command(cx.local.commands).await {
-            let started = Clock::now_us();
+        loop {
+            let (frame, started) = (tasks::next_frame(cx.local.commands).await, Clock::now_us());
             if tasks::for_admission(&frame) {
                 tasks::route_to_admission::<Clock, ADMISSION_QUEUE_LEN, TX_QUEUE_LEN>(
                     &frame,
