@@ -217,9 +217,33 @@ impl ThreadClock {
     }
 }
 
+/// A board's reports made more than a quantum after the boundary they are for: the board's
+/// exchange ran late (held off by work of the exchange's priority or above, a critical section, or
+/// a deadline its clock missed), so the host's answer for that boundary, a frame due in the quantum
+/// after it, reached the board late. Expected none; the table names them (docs/qemu.md, "What the
+/// clock's readings cost").
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Late {
+    /// How many.
+    pub reports: u64,
+    /// The latest, µs after its boundary.
+    pub worst_us: u64,
+}
+
+impl Late {
+    /// Takes a report for the boundary at `at_us` made at the board's `now_us`.
+    pub fn note(&mut self, at_us: u64, now_us: u64) {
+        let after = now_us.saturating_sub(at_us);
+        if after > crate::QUANTUM_US {
+            self.reports += 1;
+            self.worst_us = self.worst_us.max(after);
+        }
+    }
+}
+
 /// Where a run's CPU went, one row per board's QEMU and one for the host, per virtual second of
-/// `virtual_s` and per board exchange; the last line sums the CPU and says what it means for two
-/// cores (the QEMUs overlap there at best).
+/// `virtual_s` and per board exchange; then the CPU summed and what it means for two cores (the
+/// QEMUs overlap there at best), and the boards' late reports if there were any ([`Late`]).
 pub fn table(work: &crate::Work, virtual_s: f64) -> String {
     use std::fmt::Write;
     let per = |x: f64| x / virtual_s.max(1e-9);
@@ -295,12 +319,53 @@ pub fn table(work: &crate::Work, virtual_s: f64) -> String {
         per(o.side_by_side_us() as f64 / 1e6),
         per(busiest),
     );
+    let late: Vec<String> = work
+        .late
+        .iter()
+        .zip(crate::NODES)
+        .filter(|(l, _)| l.reports > 0)
+        .map(|(l, node)| format!("{node} {} (the latest {} µs after)", l.reports, l.worst_us))
+        .collect();
+    if !late.is_empty() {
+        let _ = writeln!(
+            out,
+            "  reports more than a quantum after their boundary: {}",
+            late.join(", ")
+        );
+    }
     out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_report_more_than_a_quantum_late_is_counted_with_the_latest() {
+        let mut late = Late::default();
+        late.note(30_040, 30_050);
+        late.note(30_040, 30_040 + crate::QUANTUM_US);
+        assert_eq!(late, Late::default());
+        late.note(30_840, 31_540);
+        late.note(95_520, 95_860);
+        assert_eq!(
+            late,
+            Late {
+                reports: 2,
+                worst_us: 700
+            }
+        );
+        let work = crate::Work {
+            late: [late, Late::default(), Late::default()],
+            ..crate::Work::default()
+        };
+        let text = table(&work, 1.0);
+        assert!(
+            text.contains("after their boundary: diwheeldrive 2 (the latest 700 µs after)"),
+            "{text}"
+        );
+        assert!(!table(&crate::Work::default(), 1.0).contains("after their boundary"));
+    }
 
     #[test]
     fn a_child_that_reads_and_writes_is_reaped_with_its_calls_and_cpu() {

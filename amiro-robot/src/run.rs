@@ -51,6 +51,8 @@ pub struct Work {
     /// The board run that took the most wall time beyond its virtual time since a live run's
     /// pacing last took it (`pace::Pace::hold`).
     pub slowest: Option<pace::SlowRun>,
+    /// Each board's reports made more than a quantum after their boundary.
+    pub late: [crate::cost::Late; 3],
 }
 
 /// What a board must get at boundary `t`: the frame that completes in the coming quantum if it is
@@ -865,6 +867,9 @@ fn take_report(
         );
     }
     work.exchanges += 1;
+    if let (Some(r), Some(late)) = (&report, work.late.get_mut(b.index)) {
+        late.note(r.at_us, r.now_us);
+    }
     // What this run of the board took: `b.at`, its last boundary, to `t`.
     let run = pace::SlowRun {
         board: b.index,

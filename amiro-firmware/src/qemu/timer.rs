@@ -24,6 +24,17 @@
 //! is idle again sets nothing up. A busy core still gets SysTick set up for its next deadline:
 //! the running period is kept when it ends before it ([`keep_until`]), else restarted.
 //!
+//! **One reading per interrupt.** Tickless, the SysTick interrupt reads the clock once before
+//! the queues and once after them, and both queues' expiry checks take the first tick
+//! ([`HANDLER_TICK`]; rtic-time's `on_monotonic_interrupt` reads `now` at least twice per queue
+//! and once more per expired wait). Every reading is two SysTick register reads, each an I/O
+//! instruction that QEMU's `-icount` makes end its translation block and sends through its device
+//! dispatch: the queues' readings were half of a board's clock readings in a robot run
+//! (docs/qemu.md, "Speed"). A deadline that came while the queues ran is expired in the same
+//! interrupt, as rtic-time's own second look would: the reading after them finds it due, and the
+//! queues run again with that tick. The restart's reading stays: its period starts from it, and an
+//! older reading would make the board's clock lose the interrupt's cycles at every restart.
+//!
 //! Periodic, the tick count is one per wrap (COUNTFLAG, as rtic-monotonics' SysTick counts it: the
 //! cheapest reading, which the scenarios' cost figures were measured with). Tickless, the clock is
 //! the tick and the cycles into it where the running period started, plus how far SysTick has
@@ -100,6 +111,11 @@ static APP_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
 /// The platform's earliest deadline in ticks (`u64::MAX`: none).
 static PLATFORM_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
 static TICKLESS: AtomicBool = AtomicBool::new(false);
+/// Tickless: the tick the running SysTick interrupt read before its queues, which both queues'
+/// expiry checks take ([`NO_TICK`] outside it).
+static HANDLER_TICK: AtomicU64 = AtomicU64::new(NO_TICK);
+/// [`HANDLER_TICK`] outside the SysTick interrupt.
+const NO_TICK: u64 = u64::MAX;
 const PER_TICK: u32 = CYCLES_PER_TICK as u32;
 
 /// Counts a wrap if SysTick has wrapped since the last look (reading the status clears
@@ -177,6 +193,15 @@ pub fn now_ticks() -> u64 {
         }
         return PERIODIC.load(Ordering::Relaxed);
     }
+    let held = HANDLER_TICK.load(Ordering::Relaxed);
+    if held != NO_TICK {
+        return held;
+    }
+    read_ticks()
+}
+
+/// Tickless: ticks since the clock started, read from SysTick.
+fn read_ticks() -> u64 {
     critical_section::with(|cs| {
         let clock = &mut *CLOCK.borrow_ref_mut(cs);
         let tick = position(cs, clock).0.max(clock.last_tick);
@@ -445,17 +470,46 @@ pub(super) fn skip_to_deadline() -> bool {
     true
 }
 
-#[no_mangle]
-#[allow(non_snake_case)]
-unsafe extern "C" fn SysTick() {
-    // SAFETY: called only from the SysTick exception, which drives both queues.
+/// Runs both queues' expiries.
+///
+/// # Safety
+///
+/// Only from the SysTick exception, which drives both queues.
+unsafe fn run_queues() {
+    // SAFETY: the caller's (the SysTick exception).
     unsafe {
         PLATFORM_QUEUE.on_monotonic_interrupt();
         APP_QUEUE.on_monotonic_interrupt();
     }
+}
+
+#[no_mangle]
+#[allow(non_snake_case)]
+unsafe extern "C" fn SysTick() {
+    if !TICKLESS.load(Ordering::Relaxed) {
+        // SAFETY: this is the SysTick exception.
+        unsafe { run_queues() };
+        return;
+    }
+    // One reading for both queues' expiry checks, and one after them: a deadline that came
+    // meanwhile is expired in this interrupt too (module docs, "One reading per interrupt").
+    HANDLER_TICK.store(read_ticks(), Ordering::Relaxed);
+    loop {
+        // SAFETY: this is the SysTick exception.
+        unsafe { run_queues() };
+        let now = read_ticks();
+        let due = APP_DUE
+            .load(Ordering::Relaxed)
+            .min(PLATFORM_DUE.load(Ordering::Relaxed));
+        if due > now {
+            break;
+        }
+        HANDLER_TICK.store(now, Ordering::Relaxed);
+    }
+    HANDLER_TICK.store(NO_TICK, Ordering::Relaxed);
     // A core left idle by this interrupt goes to its next deadline at once (`skip_to_deadline`):
     // SysTick need not be set up for it (a restart costs QEMU a timer expiry).
-    if TICKLESS.load(Ordering::Relaxed) && !super::robot::idle_after_systick() {
+    if !super::robot::idle_after_systick() {
         critical_section::with(|cs| restart(cs, &mut CLOCK.borrow_ref_mut(cs)));
     }
 }
