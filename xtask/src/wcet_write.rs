@@ -712,6 +712,54 @@ mod app {
     }
 
     #[test]
+    fn a_topic_row_takes_its_group_bound_of_one_release_where_the_bounds_file_groups_it() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: Vec::new(),
+            topics: vec!["gyro".into(), "odo".into(), "temp".into()],
+            publishers: ["publish".to_string()].into(),
+            stated: BTreeMap::new(),
+        };
+        let group = |name: &str, topic: &str, cycles: u64, declined: Option<&str>| {
+            machine_code::TopicBound {
+                group: name.into(),
+                topics: vec![topic.into()],
+                cycles,
+                us: 0.0,
+                instructions: cycles / 3,
+                bus_wait_us: 25.2,
+                loops: Vec::new(),
+                declined: declined.map(str::to_string),
+            }
+        };
+        let mut publish = found("dispatcher LOW", 7200, None);
+        publish.topics = vec![
+            group("imu", "gyro", 720, None),
+            group("drive", "odo", 0, Some("the loop in F has no bound")),
+        ];
+        let machine = [publish];
+        let sections = sections_of(&machine, &[]);
+        let rows = rows(&built, &app, &budgets, &machine, &sections, chip);
+        let row = |n: &str| rows.iter().find(|r| r.task == n).unwrap();
+        // Its group's one release: 720 cycles (10 µs at 72 MHz), its instructions and bus waits.
+        let gyro = row("publisher[gyro]");
+        assert_eq!(
+            (gyro.cycles, gyro.us, gyro.instructions, gyro.bus_wait_us),
+            (Some(720), Some(10.0), Some(240), 25.2)
+        );
+        // A group whose bound is declined declines the topic's row, naming the group.
+        assert!(row("publisher[odo]")
+            .declined
+            .as_deref()
+            .is_some_and(|r| r.contains("one release of topic group drive")));
+        // A topic in no group: the task's whole job.
+        assert_eq!(row("publisher[temp]").cycles, Some(7200));
+        assert_eq!(row("publisher[temp]").bus_wait_us, 0.5);
+    }
+
+    #[test]
     fn rtic_assigns_the_last_dispatchers_to_the_highest_priorities_cfg_or_not() {
         let app = parse_app(APP).unwrap();
         let d = dispatcher_of(&app);
