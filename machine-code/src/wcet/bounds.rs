@@ -465,6 +465,11 @@ impl BoundsFile {
                     g.waits
                         .iter()
                         .map(|w| ("topic group wait", &w.function, &w.file, w.line))
+                        .chain(
+                            g.loops
+                                .iter()
+                                .map(|l| ("topic group loop", &l.function, &l.file, l.line)),
+                        )
                 })
             }));
         for (kind, function, file, line) in keyed {

@@ -252,3 +252,39 @@ fn topic_groups_need_topics_functions_a_reason_and_one_group_a_topic_per_image()
         ["topic group a function NOWHERE"]
     );
 }
+
+#[test]
+fn a_group_states_its_own_loop_bounds_and_waits_in_place_of_the_files() {
+    let file = BoundsFile::parse(&format!(
+        r#"{{{LOOPS},"topics":{{"function":"PUB","file":"src/pub.rs","line":20,"reason":"r",
+            "groups":[{{"name":"b","topics":["beta"],"functions":["SAMPLE_B"],"reason":"r",
+                        "loops":[{{"function":"F","file":"src/f.rs","line":3,"bound":2,"reason":"one frame"}}],
+                        "waits":[{{"function":"SAMPLE_B","file":"src/pub.rs","line":40,"wait_us":25,"source":"one byte"}}]}}]}}}}"#
+    ))
+    .unwrap();
+    let per_topic = file.topics.clone().unwrap();
+    let b = file.for_topic_group(&per_topic, &per_topic.groups[0]);
+    // The release loop one pass in total; the group's loop and wait in place of the file's.
+    assert_eq!(
+        b.total("PUB", "x/src/pub.rs", 20).map(|t| t.passes),
+        Some(1)
+    );
+    assert_eq!(b.loop_bound("F", "x/src/f.rs", 3).map(|l| l.bound), Some(2));
+    assert_eq!(
+        b.wait("SAMPLE_B", "x/src/pub.rs", 40).map(|w| w.wait_us),
+        Some(25.0)
+    );
+    assert_eq!(b.waits.len(), 1);
+    // A group loop without a bound or a reason is refused.
+    for bad in [r#""bound":0,"reason":"r""#, r#""bound":2,"reason":" ""#] {
+        let text = format!(
+            r#"{{{LOOPS},"topics":{{"function":"PUB","file":"src/pub.rs","line":20,"reason":"r",
+                "groups":[{{"name":"b","topics":["beta"],"functions":["SAMPLE_B"],"reason":"r",
+                            "loops":[{{"function":"F","file":"src/f.rs","line":3,{bad}}}]}}]}}}}"#
+        );
+        assert!(matches!(
+            BoundsFile::parse(&text),
+            Err(crate::Error::Bounds(_))
+        ));
+    }
+}

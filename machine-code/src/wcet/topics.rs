@@ -12,8 +12,8 @@
 //! * every call of a function another group names left out of every function of the job, with the
 //!   blocks only such a call leads to ([`super::cfg::Cfg::without`]); a function left with no way
 //!   to its return is left out where it is called, in turn;
-//! * the group's own `waits` in place of the file's at the same places (the bus waits of the
-//!   devices this group's sample addresses).
+//! * the group's own `waits` and `loops` in place of the file's at the same places (the bus waits
+//!   of the devices this group's sample addresses, the frames its sample holds).
 //!
 //! Sound per release: a job that serves k ≥ 1 releases of topics T₁ … T_k runs the task's code
 //! around the loop once and one iteration per release, where each iteration of T_i calls only
@@ -22,7 +22,7 @@
 //! bound. docs/analysis.md ("One topic's job") states it with what the model charges it to.
 use serde::{Deserialize, Serialize};
 
-use super::bounds::{same_file, BoundsFile, TotalBound, WaitBound};
+use super::bounds::{same_file, BoundsFile, LoopBound, TotalBound, WaitBound};
 use crate::Error;
 
 /// The bounds file's `topics` (module documentation).
@@ -52,6 +52,10 @@ pub struct TopicGroup {
     /// `line`): the stated latency of the devices its sample addresses.
     #[serde(default)]
     pub waits: Vec<WaitBound>,
+    /// Loop bounds of this group's jobs, in place of the file's at the same places (how many frames
+    /// this group's sample holds, where the file states the most of any sample).
+    #[serde(default)]
+    pub loops: Vec<LoopBound>,
     /// Why only a job of these topics calls `functions` (the sampler's dispatch), and the waits'.
     pub reason: String,
 }
@@ -72,6 +76,14 @@ impl PerTopic {
                     "the topic group {} needs its topics, the functions only its jobs call and a reason",
                     g.name
                 )));
+            }
+            for l in &g.loops {
+                if l.bound == 0 || l.reason.trim().is_empty() {
+                    return Err(Error::Bounds(format!(
+                        "the loop of topic group {} at {}:{} in {} needs a bound of at least 1 and a reason",
+                        g.name, l.file, l.line, l.function
+                    )));
+                }
             }
             for w in &g.waits {
                 if !(w.wait_us.is_finite() && w.wait_us > 0.0) || w.source.trim().is_empty() {
@@ -127,8 +139,8 @@ impl PerTopic {
 
 impl BoundsFile {
     /// This file as a job of `group`'s topics reads it: the release loop one pass in total per job,
-    /// the group's waits in place of the file's at their places (the file's other statements
-    /// unchanged).
+    /// the group's waits and loops in place of the file's at their places (the file's other
+    /// statements unchanged).
     pub fn for_topic_group(&self, per_topic: &PerTopic, group: &TopicGroup) -> BoundsFile {
         let mut file = self.clone();
         file.totals.retain(|t| {
@@ -146,6 +158,12 @@ impl BoundsFile {
                 group.name, per_topic.reason
             ),
         });
+        for l in &group.loops {
+            file.loops.retain(|x| {
+                !(x.function == l.function && x.line == l.line && same_file(&l.file, &x.file))
+            });
+            file.loops.push(l.clone());
+        }
         for w in &group.waits {
             file.waits.retain(|x| {
                 !(x.function == w.function && x.line == w.line && same_file(&w.file, &x.file))
