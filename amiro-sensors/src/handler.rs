@@ -581,23 +581,33 @@ impl SensorDataHandler {
         releases
     }
 
+    /// The earliest release of `level` due at `now_us` (ties to the lower topic byte), taken and its
+    /// next one scheduled; `None` when nothing of `level` is due. Taking releases one at a time
+    /// until `None` hands out what [`take_due_releases`](Self::take_due_releases) does at once, in
+    /// its order (each take makes its row not due at `now_us`): the publisher task takes one,
+    /// samples it, and takes the next, so each pass of its loop is one release (the
+    /// execution-time analysis charges a job per release, docs/analysis.md "One topic's job").
+    pub fn take_next_release(&mut self, level: Priority, now_us: u64) -> Option<Release> {
+        let slot = self
+            .publishers
+            .iter_mut()
+            .filter(|slot| slot.is_due_at(level, now_us))
+            .min_by_key(|slot| (slot.next_due_us, slot.topic as u8))?;
+        let release = slot.release(now_us);
+        self.counters.releases = self.counters.releases.saturating_add(1);
+        self.counters.deadline_misses =
+            self.counters.deadline_misses.saturating_add(release.missed);
+        Some(release)
+    }
+
     fn release_due(&mut self, level: Priority, now_us: u64, mut out: impl FnMut(Release)) -> usize {
         let mut released: usize = 0;
         // Each pass makes the chosen row not due (its next release lies after `now_us`, or it
         // stopped), so the table size bounds the loop.
         for _ in 0..MAX_PUBLISHERS {
-            let Some(slot) = self
-                .publishers
-                .iter_mut()
-                .filter(|slot| slot.is_due_at(level, now_us))
-                .min_by_key(|slot| (slot.next_due_us, slot.topic as u8))
-            else {
+            let Some(release) = self.take_next_release(level, now_us) else {
                 break;
             };
-            let release = slot.release(now_us);
-            self.counters.releases = self.counters.releases.saturating_add(1);
-            self.counters.deadline_misses =
-                self.counters.deadline_misses.saturating_add(release.missed);
             released = released.saturating_add(1);
             out(release);
         }

@@ -901,3 +901,69 @@ fn a_frame_queued_after_its_release_deadline_is_late() {
     assert_eq!(late_by(u64::MAX, Some(0)), Some(u32::MAX), "saturates");
     assert_eq!(late_by(9_000, None), None, "a one-shot has no deadline");
 }
+
+/// A DiWheelDrive handler whose sensor topics publish at `periods` (µs, one per topic in the table's
+/// order, 0: not started) at `level`, each started at `start`.
+fn publishing(periods: &[u16], level: Priority, start: u64) -> SensorDataHandler {
+    let mut h = dwd();
+    let topics: Vec<Topic> = h.publishers().iter().map(Publisher::topic).collect();
+    for (topic, &period) in topics.iter().zip(periods) {
+        if period > 0 && topic.diagnostics_of().is_none() {
+            h.on_frame(
+                start,
+                command_id(level, *topic),
+                &publish(period, TimeUnit::Micros),
+            )
+            .unwrap();
+        }
+    }
+    h
+}
+
+#[test]
+fn taking_releases_one_at_a_time_is_taking_them_at_once() {
+    // Three topics due at once, one not yet: the earliest first, ties to the lower topic byte,
+    // each take scheduling the next, and none left at the end.
+    let periods = [900, 900, 0, 1_000, 0, 5_000, 0, 900];
+    let mut one = publishing(&periods, Priority::High, 0);
+    let mut all = one.clone();
+    let at_once = all.take_due_releases(Priority::High, 1_000);
+    let mut singly = Vec::new();
+    while let Some(release) = one.take_next_release(Priority::High, 1_000) {
+        singly.push(release);
+        assert!(
+            singly.len() <= MAX_PUBLISHERS,
+            "each take makes its row not due"
+        );
+    }
+    assert_eq!(singly, at_once.to_vec());
+    assert!(!singly.is_empty());
+    assert_eq!(snapshot(&one), snapshot(&all));
+    assert_eq!(one.take_next_release(Priority::High, 1_000), None);
+    // Another level's releases are not taken.
+    assert_eq!(one.take_next_release(Priority::Low, 1_000_000), None);
+}
+
+proptest! {
+    #[test]
+    fn one_at_a_time_matches_the_batch_at_any_time(
+        periods in proptest::collection::vec(prop_oneof![Just(0u16), 50u16..5_000], 8),
+        starts in 0u64..10_000,
+        steps in proptest::collection::vec(1u64..20_000, 1..6),
+    ) {
+        let mut one = publishing(&periods, Priority::Medium, starts);
+        let mut all = one.clone();
+        let mut now = starts;
+        for step in steps {
+            now += step;
+            let batch = all.take_due_releases(Priority::Medium, now).to_vec();
+            let mut singly = Vec::new();
+            while let Some(r) = one.take_next_release(Priority::Medium, now) {
+                singly.push(r);
+                prop_assert!(singly.len() <= MAX_PUBLISHERS);
+            }
+            prop_assert_eq!(singly, batch);
+            prop_assert_eq!(snapshot(&one), snapshot(&all));
+        }
+    }
+}

@@ -105,8 +105,6 @@ mod revision {
     pub type Imu = Group<InertialSensors<GyroSpi, AccelSpi>>;
     /// Magnetometer on I2C1.
     pub type Compass = Group<suite::Compass<CompassI2c>>;
-    /// Whether the magnetometer topics are sampled from `imu` (1-2) or from `compass` (1-1).
-    pub const MAGNETOMETER_IN_IMU: bool = false;
 }
 
 #[cfg(feature = "rev-1-2")]
@@ -120,8 +118,6 @@ mod revision {
     /// Nothing: 1-2's magnetometer is the BNO055's (in `imu`); the slot keeps the app's resources
     /// (and so its analysis model) the same on both revisions.
     pub type Compass = Group<suite::NoSensors>;
-    /// Whether the magnetometer topics are sampled from `imu` (1-2) or from `compass` (1-1).
-    pub const MAGNETOMETER_IN_IMU: bool = true;
     /// How long the BNO055 may take from its reset (IMU_RESET_N released by the board) to answer:
     /// the datasheet's 650 ms and a margin, inside the boot watchdog's 2 s.
     pub const IMU_BOOT_TIMEOUT_MS: u32 = 800;
@@ -141,7 +137,7 @@ mod revision {
     }
 }
 
-pub use revision::{Compass, Imu, MAGNETOMETER_IN_IMU};
+pub use revision::{Compass, Imu};
 
 /// Brings every sensor group up on its bus: the motion sensors (per revision) and the floor.
 pub fn groups(buses: SensorBuses) -> (Imu, Compass, Floor) {
@@ -182,23 +178,65 @@ pub fn sample_drive(drive: &DriveController, topic: Topic) -> Samples {
     samples
 }
 
+/// One sample of the gyroscope or the accelerometer: 1-1's L3G4200D and LIS331DLH on SPI1. Each
+/// topic family's sample is a function of its own, not inlined, named per revision (its devices
+/// and their bus waits differ), so the execution-time analysis tells a publisher job's topic by the
+/// function it calls (the bounds file's `topics`, docs/analysis.md "One topic's job"): a job of one
+/// family calls no other's.
+#[cfg(feature = "rev-1-1")]
+#[inline(never)]
+fn sample_inertial_spi(imu: &mut impl rtic::Mutex<T = Imu>, topic: Topic, taken: u64) -> Samples {
+    imu.lock(|d| d.sample(topic, taken))
+}
+
+/// One sample of a magnetometer axis: 1-1's HMC5883L on I2C1.
+#[cfg(feature = "rev-1-1")]
+#[inline(never)]
+fn sample_compass_hmc5883l(
+    compass: &mut impl rtic::Mutex<T = Compass>,
+    topic: Topic,
+    taken: u64,
+) -> Samples {
+    compass.lock(|d| d.sample(topic, taken))
+}
+
+/// One sample of the gyroscope, the accelerometer or a magnetometer axis: 1-2's BNO055 on I2C1.
+#[cfg(feature = "rev-1-2")]
+#[inline(never)]
+fn sample_imu_bno055(imu: &mut impl rtic::Mutex<T = Imu>, topic: Topic, taken: u64) -> Samples {
+    imu.lock(|d| d.sample(topic, taken))
+}
+
+/// One sample of the floor sensors (the four VCNL4020 behind the PCA9544A on I2C2).
+#[inline(never)]
+fn sample_floor(floor: &mut impl rtic::Mutex<T = Floor>, topic: Topic, taken: u64) -> Samples {
+    floor.lock(|d| d.sample(topic, taken))
+}
+
 /// What DiWheelDrive samples for a topic: each topic locks only the device group it reads.
 pub fn sampler(
     mut imu: impl rtic::Mutex<T = Imu>,
-    mut compass: impl rtic::Mutex<T = Compass>,
+    #[cfg_attr(feature = "rev-1-2", allow(unused_mut))] mut compass: impl rtic::Mutex<T = Compass>,
     mut floor: impl rtic::Mutex<T = Floor>,
     mut drive: impl rtic::Mutex<T = DriveController>,
 ) -> impl amiro_firmware::publisher::Sampler {
+    // 1-2's magnetometer is the BNO055's: the empty slot is not read.
+    #[cfg(feature = "rev-1-2")]
+    drop(compass);
     move |topic: Topic, taken: u64| match topic {
-        Topic::Gyroscope | Topic::Accelerometer => imu.lock(|d| d.sample(topic, taken)),
+        #[cfg(feature = "rev-1-1")]
+        Topic::Gyroscope | Topic::Accelerometer => sample_inertial_spi(&mut imu, topic, taken),
+        #[cfg(feature = "rev-1-1")]
         Topic::MagnetometerX | Topic::MagnetometerY | Topic::MagnetometerZ => {
-            if MAGNETOMETER_IN_IMU {
-                imu.lock(|d| d.sample(topic, taken))
-            } else {
-                compass.lock(|d| d.sample(topic, taken))
-            }
+            sample_compass_hmc5883l(&mut compass, topic, taken)
         }
-        Topic::FloorProximity => floor.lock(|d| d.sample(topic, taken)),
+        #[cfg(feature = "rev-1-2")]
+        Topic::Gyroscope
+        | Topic::Accelerometer
+        | Topic::MagnetometerX
+        | Topic::MagnetometerY
+        | Topic::MagnetometerZ => sample_imu_bno055(&mut imu, topic, taken),
+        Topic::FloorProximity => sample_floor(&mut floor, topic, taken),
         Topic::Odometry | Topic::Velocity => drive.lock(|d| sample_drive(d, topic)),
         _ => Samples::new(),
     }

@@ -62,7 +62,7 @@ pub use wcet::bounds::BoundsFile;
 pub use wcet::chip::Chip;
 pub use wcet::{
     bound_function, bound_tasks, task_sections, ActivationBound, Bound, Ceiling, CeilingBound,
-    LoopInfo, Task, TaskBound, TaskEntry, TaskSections,
+    LoopInfo, Task, TaskBound, TaskEntry, TaskSections, TopicBound,
 };
 
 /// Thumb halfwords as the bytes of an image (tests of the decoders).

@@ -157,6 +157,9 @@ struct Row<'a> {
     declined: Option<String>,
     /// Where the bounds file charges the task per activation: that charge (the row's figures are the job's).
     per_activation: Option<machine_code::ActivationBound>,
+    /// Where the bounds file states the release loop per topic: one release of each topic group's topics.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    topics: Vec<machine_code::TopicBound>,
     /// The task's longest critical section per ceiling (from the priority raise to its restore).
     critical_sections: Vec<machine_code::CeilingBound>,
     /// Why the sections found may not be all of them (then none stands for the task's blocking).
@@ -404,6 +407,7 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
                 preemption_retry_cycles: t.preemption_retry_cycles,
                 declined: t.declined,
                 per_activation: t.per_activation,
+                topics: t.topics,
                 critical_sections: sections.ceilings,
                 critical_sections_incomplete: sections.incomplete,
             });
@@ -457,6 +461,24 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
                         "    per activation ({} at {} passes): ≤ {} cycles {:.2} µs {} instructions, bus waits {:.2} µs \
                          (a job that serves k ≥ 1 activations: at most k times this; the bounds file's reason)",
                         a.at, a.passes, a.cycles, a.us, a.instructions, a.bus_wait_us
+                    ),
+                }
+            }
+            for g in &r.topics {
+                match &g.declined {
+                    Some(reason) => println!(
+                        "    one release of {} ({}): DECLINED: {reason}",
+                        g.group,
+                        g.topics.join(", ")
+                    ),
+                    None => println!(
+                        "    one release of {} ({}): ≤ {} cycles {:.2} µs {} instructions, bus waits {:.2} µs",
+                        g.group,
+                        g.topics.join(", "),
+                        g.cycles,
+                        g.us,
+                        g.instructions,
+                        g.bus_wait_us
                     ),
                 }
             }
@@ -588,6 +610,7 @@ mod tests {
             preemption_retry_cycles: 0,
             declined: declined.map(str::to_string),
             per_activation: None,
+            topics: Vec::new(),
         }
     }
 

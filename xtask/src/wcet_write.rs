@@ -10,7 +10,9 @@
 //!   not tell the task's part, the whole dispatcher's bound (one poll of every task of that priority, sound and
 //!   pessimistic);
 //! - `publisher[<topic>]` is the largest bound of the publisher tasks (a topic may be published at any level),
-//!   declined if any of them is;
+//!   declined if any of them is: of one release of the topic's group where the bounds file states the release
+//!   loop per topic (`topics`, `machine_code::TopicBound`), else of the task's whole job; its critical sections
+//!   are the publisher tasks' (any job of the task may hold them);
 //! - `monotonic` is the bound of the monotonic's interrupt (the task the input bounds file adds);
 //! - `exception_entry` and `exception_exit` are the core's (the TRM's 12 and 10 cycles, the entry with lazy FPU
 //!   stacking on the M4F), with the flash accesses' wait states (the vector read and the handler's first fetch on
@@ -565,20 +567,53 @@ pub fn rows(
             ),
         })
         .collect();
+    // Where the bounds file states the release loop per topic (`topics`), each publisher task's bound of one
+    // release of the topic's group (machine_code::TopicBound) in place of its whole job's.
+    let per_topic: Vec<Option<&machine_code::TaskBound>> = budgets
+        .publishers
+        .iter()
+        .map(|p| source(p).and_then(|(_, f)| f).map(|(t, _)| t))
+        .collect();
     for topic in &budgets.topics {
         let row = bounds::publisher_row(topic);
-        let refused = publishers.iter().find_map(|p| p.declined.clone());
-        out.push(match (refused, publishers.is_empty()) {
+        let rows: Vec<TaskBound> = publishers
+            .iter()
+            .zip(&per_topic)
+            .map(|(whole, found)| {
+                let group = found.and_then(|f| {
+                    f.topics
+                        .iter()
+                        .find(|g| g.topics.iter().any(|t| t == topic))
+                });
+                match (group, &whole.declined) {
+                    (Some(g), None) => match &g.declined {
+                        Some(reason) => declined(
+                            &whole.task,
+                            format!(
+                                "{}: one release of topic group {}: {reason}",
+                                whole.task, g.group
+                            ),
+                        ),
+                        None => {
+                            bounded(&whole.task, g.cycles, g.instructions, g.bus_wait_us, clock)
+                        }
+                    },
+                    _ => whole.clone(),
+                }
+            })
+            .collect();
+        let refused = rows.iter().find_map(|p| p.declined.clone());
+        out.push(match (refused, rows.is_empty()) {
             (_, true) => declined(&row, "the timing file names no publisher task".into()),
             (Some(reason), _) => TaskBound {
                 sections: merged_sections(&publishers),
                 ..declined(&row, reason)
             },
             (None, false) => {
-                let max = |f: fn(&TaskBound) -> u64| publishers.iter().map(f).max().unwrap_or(0);
+                let max = |f: fn(&TaskBound) -> u64| rows.iter().map(f).max().unwrap_or(0);
                 let cycles = max(|p| p.cycles.unwrap_or(0));
                 let instructions = max(|p| p.instructions.unwrap_or(0));
-                let wait = publishers.iter().map(|p| p.bus_wait_us).fold(0.0, f64::max);
+                let wait = rows.iter().map(|p| p.bus_wait_us).fold(0.0, f64::max);
                 TaskBound {
                     sections: merged_sections(&publishers),
                     ..bounded(&row, cycles, instructions, wait, clock)
@@ -641,6 +676,7 @@ mod app {
             preemption_retry_cycles: 0,
             declined: declined.map(str::to_string),
             per_activation: None,
+            topics: Vec::new(),
         }
     }
 
@@ -673,6 +709,54 @@ mod app {
                 incomplete: None,
             })
             .collect()
+    }
+
+    #[test]
+    fn a_topic_row_takes_its_group_bound_of_one_release_where_the_bounds_file_groups_it() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: Vec::new(),
+            topics: vec!["gyro".into(), "odo".into(), "temp".into()],
+            publishers: ["publish".to_string()].into(),
+            stated: BTreeMap::new(),
+        };
+        let group = |name: &str, topic: &str, cycles: u64, declined: Option<&str>| {
+            machine_code::TopicBound {
+                group: name.into(),
+                topics: vec![topic.into()],
+                cycles,
+                us: 0.0,
+                instructions: cycles / 3,
+                bus_wait_us: 25.2,
+                loops: Vec::new(),
+                declined: declined.map(str::to_string),
+            }
+        };
+        let mut publish = found("dispatcher LOW", 7200, None);
+        publish.topics = vec![
+            group("imu", "gyro", 720, None),
+            group("drive", "odo", 0, Some("the loop in F has no bound")),
+        ];
+        let machine = [publish];
+        let sections = sections_of(&machine, &[]);
+        let rows = rows(&built, &app, &budgets, &machine, &sections, chip);
+        let row = |n: &str| rows.iter().find(|r| r.task == n).unwrap();
+        // Its group's one release: 720 cycles (10 µs at 72 MHz), its instructions and bus waits.
+        let gyro = row("publisher[gyro]");
+        assert_eq!(
+            (gyro.cycles, gyro.us, gyro.instructions, gyro.bus_wait_us),
+            (Some(720), Some(10.0), Some(240), 25.2)
+        );
+        // A group whose bound is declined declines the topic's row, naming the group.
+        assert!(row("publisher[odo]")
+            .declined
+            .as_deref()
+            .is_some_and(|r| r.contains("one release of topic group drive")));
+        // A topic in no group: the task's whole job.
+        assert_eq!(row("publisher[temp]").cycles, Some(7200));
+        assert_eq!(row("publisher[temp]").bus_wait_us, 0.5);
     }
 
     #[test]

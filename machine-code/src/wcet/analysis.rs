@@ -69,6 +69,11 @@ pub(super) struct Analysis<'a> {
     known: BTreeMap<(u64, Args), Result<Summary, String>>,
     returns: BTreeMap<u64, bool>,
     open: Vec<u64>,
+    /// Functions no path of the job calls (by name, [`super::topics`]): a call of one, and the
+    /// blocks only it leads to, are left out of every graph.
+    excluded: BTreeSet<String>,
+    /// Whether a function has a way to its return with the excluded calls left out.
+    feasible: BTreeMap<u64, bool>,
 }
 
 /// How a declined length names the call that passes it.
@@ -94,7 +99,74 @@ impl<'a> Analysis<'a> {
             known: BTreeMap::new(),
             returns: BTreeMap::new(),
             open: Vec::new(),
+            excluded: BTreeSet::new(),
+            feasible: BTreeMap::new(),
         }
+    }
+
+    /// An analysis of jobs that call none of the functions named `excluded` ([`super::topics`]).
+    pub(super) fn excluding(
+        image: &'a Image,
+        chip: Chip,
+        bounds: &'a BoundsFile,
+        excluded: &[String],
+    ) -> Analysis<'a> {
+        let mut analysis = Analysis::new(image, chip, bounds);
+        analysis.excluded = excluded.iter().cloned().collect();
+        analysis
+    }
+
+    /// Whether the function at `at` is one the job does not call: named as excluded, or left with no
+    /// way to its return once its excluded calls are left out.
+    fn left_out(&mut self, at: u64) -> Result<bool, Error> {
+        if self.excluded.is_empty() {
+            return Ok(false);
+        }
+        let Some(f) = self.image.function_at(at).filter(|f| f.start == at) else {
+            return Ok(false);
+        };
+        if self.excluded.contains(&f.name) || self.excluded.contains(&f.symbol) {
+            return Ok(true);
+        }
+        if let Some(&known) = self.feasible.get(&at) {
+            return Ok(!known);
+        }
+        // Taken as feasible while being worked out (a recursive call keeps its caller's paths).
+        self.feasible.insert(at, true);
+        let feasible = match self.pruned(f)? {
+            Some(graph) => graph.blocks.iter().any(|b| b.exit),
+            None => false,
+        };
+        self.feasible.insert(at, feasible);
+        Ok(!feasible)
+    }
+
+    /// `f`'s graph as built, every block that calls a function the job does not call
+    /// ([`Self::left_out`]) left out with the blocks only it leads to; `None` when its entry is such
+    /// a block.
+    fn pruned(&mut self, f: &'a Function) -> Result<Option<Cfg>, Error> {
+        let graph = self.built(f)?;
+        self.without_left_out(f, graph)
+    }
+
+    /// `graph` (of `f`, or a part of it) without the blocks that call a function the job does not
+    /// call and those only they lead to; `None` when its entry is such a block.
+    fn without_left_out(&mut self, f: &Function, graph: Cfg) -> Result<Option<Cfg>, Error> {
+        if self.excluded.is_empty() {
+            return Ok(Some(graph));
+        }
+        let mut dropped = BTreeSet::new();
+        for (b, block) in graph.blocks.iter().enumerate() {
+            if let Some(Call::Direct { target, .. }) = block.call {
+                if target != f.start && self.left_out(target)? {
+                    dropped.insert(b);
+                }
+            }
+        }
+        if dropped.is_empty() {
+            return Ok(Some(graph));
+        }
+        Ok(graph.without(&dropped))
     }
 
     /// Whether the function at `at` can return: a return or a tail call of a function that can
@@ -200,8 +272,13 @@ impl<'a> Analysis<'a> {
     /// that cannot return left out, irreducible cycles split into natural loops. `Ok(Err(reason))`
     /// when splitting would grow it too much.
     pub(super) fn graph(&mut self, f: &'a Function) -> Result<Result<Cfg, String>, Error> {
-        let graph = self.built(f)?;
-        Ok(self.split(f, graph))
+        match self.pruned(f)? {
+            Some(graph) if graph.blocks.iter().any(|b| b.exit) => Ok(self.split(f, graph)),
+            _ => Ok(Err(format!(
+                "every path of {} calls a function this job does not call",
+                f.name
+            ))),
+        }
     }
 
     /// The control-flow graph of `f` as built, the blocks after a call of a function that cannot
@@ -268,7 +345,17 @@ impl<'a> Analysis<'a> {
         let graph = self.built(f)?;
         let part = polled::others_blocks(image, insns, &graph, task, others)
             .and_then(|dropped| graph.without(&dropped));
-        Ok(part.map(|part| self.split(f, part)))
+        let Some(part) = part else {
+            return Ok(None);
+        };
+        // The calls the job does not make, left out of the part as of any function.
+        Ok(Some(match self.without_left_out(f, part)? {
+            Some(part) if part.blocks.iter().any(|b| b.exit) => self.split(f, part),
+            _ => Err(format!(
+                "every path of {}'s part for {task} calls a function this job does not call",
+                f.name
+            )),
+        }))
     }
 
     /// The summary of `task`'s part of the dispatcher at `at` ([`Self::polled_graph`]).

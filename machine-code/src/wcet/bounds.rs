@@ -205,6 +205,10 @@ pub struct BoundsFile {
     /// Tasks charged per activation, not per job ([`PerActivation`]).
     #[serde(default)]
     pub per_activation: Vec<PerActivation>,
+    /// The publisher's release loop and its topic groups: a bound per topic's job
+    /// ([`super::topics::PerTopic`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub topics: Option<super::topics::PerTopic>,
 }
 
 /// Whether a line-table path is the stated `file`.
@@ -301,6 +305,9 @@ impl BoundsFile {
                     )))
                 }
             }
+        }
+        if let Some(t) = &file.topics {
+            t.check()?;
         }
         for p in &file.per_element {
             if p.register > 3 || p.reason.trim().is_empty() {
@@ -447,7 +454,24 @@ impl BoundsFile {
                 self.per_activation
                     .iter()
                     .map(|a| ("per-activation loop", &a.function, &a.file, a.line)),
-            );
+            )
+            .chain(
+                self.topics
+                    .iter()
+                    .map(|t| ("per-topic release loop", &t.function, &t.file, t.line)),
+            )
+            .chain(self.topics.iter().flat_map(|t| {
+                t.groups.iter().flat_map(|g| {
+                    g.waits
+                        .iter()
+                        .map(|w| ("topic group wait", &w.function, &w.file, w.line))
+                        .chain(
+                            g.loops
+                                .iter()
+                                .map(|l| ("topic group loop", &l.function, &l.file, l.line)),
+                        )
+                })
+            }));
         for (kind, function, file, line) in keyed {
             if !has_line(function, file, line) {
                 missing.push(format!("{kind} {function} {file}:{line}"));
@@ -456,6 +480,13 @@ impl BoundsFile {
         for p in &self.per_element {
             if functions(&p.function).is_empty() {
                 missing.push(format!("per-element function {}", p.function));
+            }
+        }
+        for g in self.topics.iter().flat_map(|t| &t.groups) {
+            for f in &g.functions {
+                if functions(f).is_empty() {
+                    missing.push(format!("topic group {} function {f}", g.name));
+                }
             }
         }
         for t in &self.tasks {

@@ -18,6 +18,7 @@ mod masking;
 pub mod path;
 pub mod polled;
 pub mod stored;
+pub mod topics;
 
 use serde::Serialize;
 
@@ -137,6 +138,28 @@ pub struct TaskBound {
     /// Where the bounds file charges the task per activation ([`bounds::PerActivation`]): that
     /// charge, beside the job's bound above.
     pub per_activation: Option<ActivationBound>,
+    /// Where the bounds file states the task's release loop per topic ([`topics::PerTopic`]): the
+    /// bound of one topic group's job each, beside the job's bound above.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub topics: Vec<TopicBound>,
+}
+
+/// The bound of one job of a publisher task that serves one release of a topic group's topic
+/// ([`topics`]): the release loop one pass in total, the other groups' sample functions not called,
+/// the group's own waits; a handler's entry, exit and preemption retry added as to the job's bound.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TopicBound {
+    /// The group's name and topics.
+    pub group: String,
+    pub topics: Vec<String>,
+    pub cycles: u64,
+    pub us: f64,
+    pub instructions: u64,
+    pub bus_wait_us: f64,
+    /// The loops on the way, with their bounds (the waits with the group's sources).
+    pub loops: Vec<LoopInfo>,
+    /// Why there is no bound (then the figures are 0 and mean nothing).
+    pub declined: Option<String>,
 }
 
 /// A task's charge per activation ([`bounds::PerActivation`]): its bound with the stated loop at its
@@ -286,6 +309,50 @@ pub fn bound_tasks(
                     declined,
                 }
             });
+            let topics = match &bounds.topics {
+                Some(per_topic) if bound.declined.is_none() => {
+                    let on_path = bound.loops.iter().any(|l| {
+                        l.function == per_topic.function
+                            && l.line == Some(per_topic.line)
+                            && l.file
+                                .as_deref()
+                                .is_some_and(|f| bounds::same_file(f, &per_topic.file))
+                    });
+                    if on_path {
+                        let present = per_topic.present(image);
+                        present
+                            .iter()
+                            .map(|&group| {
+                                let stated = bounds.for_topic_group(per_topic, group);
+                                let excluded = topics::PerTopic::excluded(group, &present);
+                                let mut again =
+                                    Analysis::excluding(image, chip, &stated, &excluded);
+                                let (_, mut b) = bound_task(&mut again, image, task);
+                                if let Some(t) = topics::PerTopic::shared_topic(group, &present) {
+                                    b = to_bound(Err(format!(
+                                        "the topic {t} is in two topic groups of this image"
+                                    )));
+                                }
+                                let (e, ei) = extras(task, &b);
+                                let cycles = b.cycles + e;
+                                TopicBound {
+                                    group: group.name.clone(),
+                                    topics: group.topics.clone(),
+                                    cycles,
+                                    us: us(cycles, &b),
+                                    instructions: b.instructions + ei,
+                                    bus_wait_us: b.bus_wait_us(),
+                                    loops: b.loops,
+                                    declined: b.declined,
+                                }
+                            })
+                            .collect()
+                    } else {
+                        Vec::new()
+                    }
+                }
+                _ => Vec::new(),
+            };
             let cycles = bound.cycles + extra;
             TaskBound {
                 task: task.name.clone(),
@@ -298,6 +365,7 @@ pub fn bound_tasks(
                 loops: bound.loops,
                 declined: bound.declined,
                 per_activation,
+                topics,
             }
         })
         .collect()
@@ -326,3 +394,5 @@ mod tests;
 mod tests_activation;
 #[cfg(test)]
 mod tests_polled;
+#[cfg(test)]
+mod tests_topics;

@@ -1,0 +1,175 @@
+//! One topic's job of a publisher task. A publisher task's job (one poll of `serve_level`) takes
+//! every release due at its levels and samples each release's topic: its longest path takes the
+//! release loop at its stated worst and every topic's sample on each pass, which bounds the job but
+//! not what the response-time analysis charges, one job per release of one topic.
+//!
+//! The bounds file's `topics` states, for the publisher's release loop, the groups of topics that
+//! share a sample and the functions only their samples call (each topic family's sample is a
+//! function of its own, not inlined). The bound of a topic's job is then the task's bound with
+//!
+//! * the release loop charged one pass in total per job (as `totals` charges a loop: its way out on
+//!   every entry, and one longest iteration once), and
+//! * every call of a function another group names left out of every function of the job, with the
+//!   blocks only such a call leads to ([`super::cfg::Cfg::without`]); a function left with no way
+//!   to its return is left out where it is called, in turn;
+//! * the group's own `waits` and `loops` in place of the file's at the same places (the bus waits
+//!   of the devices this group's sample addresses, the frames its sample holds).
+//!
+//! Sound per release: a job that serves k ≥ 1 releases of topics T₁ … T_k runs the task's code
+//! around the loop once and one iteration per release, where each iteration of T_i calls only
+//! T_i's functions; so it costs at most Σ (around + iteration(T_i)) ≤ Σ bound(T_i). A job that
+//! serves none (woken by a schedule change) runs the code around the loop alone, within any topic's
+//! bound. docs/analysis.md ("One topic's job") states it with what the model charges it to.
+use serde::{Deserialize, Serialize};
+
+use super::bounds::{same_file, BoundsFile, LoopBound, TotalBound, WaitBound};
+use crate::Error;
+
+/// The bounds file's `topics` (module documentation).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PerTopic {
+    /// The release loop (`for release in releases`), as the analysis names it.
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    /// Why one job's releases each cost at most one topic's bound.
+    pub reason: String,
+    pub groups: Vec<TopicGroup>,
+}
+
+/// Topics whose job calls the same sample functions.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TopicGroup {
+    /// The name the report gives the group (`compass`, `diagnostics`).
+    pub name: String,
+    /// Its topics (`magnetometer-x`, as the timing file names them).
+    pub topics: Vec<String>,
+    /// The functions (demangled, without hash) only a job of these topics calls.
+    pub functions: Vec<String>,
+    /// The waits of this group's jobs, in place of the file's at the same places (`function`, `file`,
+    /// `line`): the stated latency of the devices its sample addresses.
+    #[serde(default)]
+    pub waits: Vec<WaitBound>,
+    /// Loop bounds of this group's jobs, in place of the file's at the same places (how many frames
+    /// this group's sample holds, where the file states the most of any sample).
+    #[serde(default)]
+    pub loops: Vec<LoopBound>,
+    /// Why only a job of these topics calls `functions` (the sampler's dispatch), and the waits'.
+    pub reason: String,
+}
+
+impl PerTopic {
+    /// Checks every group has topics, functions and a reason, and each wait has a positive figure
+    /// and a source.
+    pub(super) fn check(&self) -> Result<(), Error> {
+        if self.reason.trim().is_empty() || self.groups.is_empty() {
+            return Err(Error::Bounds(format!(
+                "the per-topic statement at {}:{} in {} needs its groups and a reason",
+                self.file, self.line, self.function
+            )));
+        }
+        for g in &self.groups {
+            if g.topics.is_empty() || g.functions.is_empty() || g.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the topic group {} needs its topics, the functions only its jobs call and a reason",
+                    g.name
+                )));
+            }
+            for l in &g.loops {
+                if l.bound == 0 || l.reason.trim().is_empty() {
+                    return Err(Error::Bounds(format!(
+                        "the loop of topic group {} at {}:{} in {} needs a bound of at least 1 and a reason",
+                        g.name, l.file, l.line, l.function
+                    )));
+                }
+            }
+            for w in &g.waits {
+                if !(w.wait_us.is_finite() && w.wait_us > 0.0) || w.source.trim().is_empty() {
+                    return Err(Error::Bounds(format!(
+                        "the wait of topic group {} at {}:{} in {} needs a positive wait_us and its source",
+                        g.name, w.file, w.line, w.function
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The groups present in `image`: those with a function of theirs in it (a group may be one
+    /// revision's, its functions built only there). A topic may be in groups of several revisions,
+    /// of which one image holds at most one.
+    pub fn present<'t>(&'t self, image: &crate::Image) -> Vec<&'t TopicGroup> {
+        self.groups
+            .iter()
+            .filter(|g| g.functions.iter().any(|f| image.function_named(f).is_ok()))
+            .collect()
+    }
+
+    /// The functions a job of `group` does not call: every other present group's, but its own.
+    pub fn excluded(group: &TopicGroup, present: &[&TopicGroup]) -> Vec<String> {
+        present
+            .iter()
+            .filter(|g| g.name != group.name)
+            .flat_map(|g| g.functions.iter().cloned())
+            .filter(|f| !group.functions.contains(f))
+            .collect()
+    }
+
+    /// A topic of `group` that another present group holds too (which of them samples it is not
+    /// told apart).
+    pub fn shared_topic<'t>(group: &'t TopicGroup, present: &[&TopicGroup]) -> Option<&'t str> {
+        group
+            .topics
+            .iter()
+            .find(|t| {
+                present
+                    .iter()
+                    .any(|g| g.name != group.name && g.topics.contains(t))
+            })
+            .map(String::as_str)
+    }
+
+    /// The release loop, `function at file:line`.
+    pub fn at(&self) -> String {
+        format!("{} at {}:{}", self.function, self.file, self.line)
+    }
+}
+
+impl BoundsFile {
+    /// This file as a job of `group`'s topics reads it: the release loop one pass in total per job,
+    /// the group's waits and loops in place of the file's at their places (the file's other
+    /// statements unchanged).
+    pub fn for_topic_group(&self, per_topic: &PerTopic, group: &TopicGroup) -> BoundsFile {
+        let mut file = self.clone();
+        file.totals.retain(|t| {
+            !(t.function == per_topic.function
+                && t.line == per_topic.line
+                && same_file(&per_topic.file, &t.file))
+        });
+        file.totals.push(TotalBound {
+            function: per_topic.function.clone(),
+            file: per_topic.file.clone(),
+            line: per_topic.line,
+            passes: 1,
+            reason: format!(
+                "one release per job of topic group {} ({})",
+                group.name, per_topic.reason
+            ),
+        });
+        for l in &group.loops {
+            file.loops.retain(|x| {
+                !(x.function == l.function && x.line == l.line && same_file(&l.file, &x.file))
+            });
+            file.loops.push(l.clone());
+        }
+        for w in &group.waits {
+            file.waits.retain(|x| {
+                !(x.function == w.function && x.line == w.line && same_file(&w.file, &x.file))
+            });
+            file.waits.push(w.clone());
+        }
+        file
+    }
+}
