@@ -89,9 +89,27 @@ pub struct QemuBuild {
     /// The QEMU build's stand-in for the bus: the task that replays the stimulus (absent: none).
     #[serde(default)]
     pub replay: Option<QemuReplay>,
+    /// Instructions every run that pre-empts a traced job executes outside its own stamps, inside the
+    /// pre-empted job's: at least its start record before that record's clock read and its end record
+    /// after it (counted from the traced image, docs/bench.md "A pre-empting run's unstamped part").
+    /// The bench takes this many per direct pre-emption off a job before holding it to its
+    /// machine-code bound: a lower bound, so a job is never made smaller than what it ran itself.
+    /// Absent: 0 (nothing taken off).
+    #[serde(default)]
+    pub unstamped_per_preemption: Option<UnstampedPerPreemption>,
     /// Where the figures come from.
     #[serde(default)]
     pub note: Option<String>,
+}
+
+/// What every pre-empting run executes unstamped inside the job it pre-empts, in the traced QEMU image.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct UnstampedPerPreemption {
+    /// Instructions (at most the fewest any pre-emption executes outside its stamps).
+    pub instructions: u64,
+    /// How they were counted.
+    pub note: String,
 }
 
 /// The task of the traced QEMU build that replays a run's stimulus: woken by the monotonic at each

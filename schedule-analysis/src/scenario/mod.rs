@@ -39,7 +39,8 @@ pub use bounded::{bounds_file, breaking_bounds, BoardBudgets, BudgetFrom};
 pub use files::{
     AppSource, Arrival, Measured, Monotonic, QemuBuild, QemuReplay, QemuTransmit, Scenario,
     ScenarioCommand, ScenarioOneShot, ScenarioPublisher, Timing, TimingTask, TopicTiming,
-    TraceCost, WorstStep, ACKS_PER_TRANSMIT_JOB, QEMU_FRAMES_PER_TRANSMIT_JOB,
+    TraceCost, UnstampedPerPreemption, WorstStep, ACKS_PER_TRANSMIT_JOB,
+    QEMU_FRAMES_PER_TRANSMIT_JOB,
 };
 
 /// Where the default models live, relative to the workspace root.

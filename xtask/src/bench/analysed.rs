@@ -284,8 +284,8 @@ mod tests {
         let rows = machine::rows(
             &bounds,
             &[
-                ("publish_low".into(), 40.0),
-                ("publish_medium".into(), 80.0),
+                ("publish_low".into(), vec![machine::Job::alone(40.0)]),
+                ("publish_medium".into(), vec![machine::Job::alone(80.0)]),
             ],
             board,
             true,

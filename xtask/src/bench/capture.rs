@@ -31,6 +31,9 @@ pub struct Run {
     pub end_ns: u64,
     /// Time spent in runs that pre-empted it, ns.
     pub preempted_ns: u64,
+    /// Traced runs that pre-empted it directly (each ran part of its records outside its own stamps,
+    /// inside this run: docs/bench.md, "A pre-empting run's unstamped part").
+    pub preemptions: u32,
     /// Where the release came from.
     pub release_from: ReleaseFrom,
 }
@@ -112,6 +115,7 @@ struct Open {
     release_ns: u64,
     release_from: ReleaseFrom,
     preempted_ns: u64,
+    preemptions: u32,
 }
 
 impl Builder {
@@ -160,6 +164,7 @@ impl Builder {
                     release_ns,
                     release_from,
                     preempted_ns: 0,
+                    preemptions: 0,
                 });
             }
             Kind::TaskEnd {
@@ -171,6 +176,7 @@ impl Builder {
                         let took = t.saturating_sub(open.start_ns);
                         if let Some(parent) = self.stack.last_mut() {
                             parent.preempted_ns += took;
+                            parent.preemptions += 1;
                         }
                         self.capture.runs.push(Run {
                             task,
@@ -178,6 +184,7 @@ impl Builder {
                             start_ns: open.start_ns,
                             end_ns: t,
                             preempted_ns: open.preempted_ns,
+                            preemptions: open.preemptions,
                             release_from: open.release_from,
                         });
                     }
@@ -439,6 +446,8 @@ mod tests {
         let first = c.runs[1];
         assert_eq!(first.execution_ns(), 25_000);
         assert_eq!(first.release_from, ReleaseFrom::Start);
+        // The receive interrupt pre-empted it once; nothing pre-empted the interrupt or the next run.
+        assert_eq!((isr.preemptions, first.preemptions), (0, 1));
         let second = c.runs[2];
         assert_eq!(second.release_from, ReleaseFrom::Timer);
         // Due at 40 + 1000 µs, done at 1070 µs.

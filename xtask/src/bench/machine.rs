@@ -6,10 +6,14 @@
 //! The bounds are the release image's; the measured build is the traced one. A run's measured execution holds the
 //! task trace's records (its start and end records, docs/bench.md), which the release image does not execute:
 //! they are accounted for explicitly, as the timing file's `trace` cost per job (`trace.qemu.per_job_us` in QEMU,
-//! `trace.per_job_us` on the chip), subtracted from the observation before it is held to the bound. Nothing else
-//! is subtracted: what the QEMU build executes beyond the release image otherwise (its platform's console lines,
-//! SysTick's ticks counted to the task they interrupt) makes an observation larger, never smaller, so a run within
-//! its bound is within it.
+//! `trace.per_job_us` on the chip), subtracted from the observation before it is held to the bound. In QEMU, so is
+//! what each traced run that pre-empted the job executed of its own records outside its stamps (its start record
+//! before the clock read, its end record after it), at the fewest instructions that can take (the timing file's
+//! `trace.qemu.unstamped_per_preemption`, counted from the traced image: docs/bench.md, "A pre-empting run's
+//! unstamped part"), once per direct pre-emption. Nothing else is subtracted: what the QEMU build executes beyond
+//! the release image otherwise (its platform's console lines, the untraced timer interrupts counted to the task
+//! they interrupt, a pre-emption's entry, dispatch and return beyond its records) makes an observation larger,
+//! never smaller, so a run within its bound is within it.
 use schedule_analysis::analysis::BoardResult;
 use schedule_analysis::bounds::{self, BoundsFile};
 use schedule_analysis::scenario::BoardBounds;
@@ -24,13 +28,19 @@ pub struct MachineRow {
     pub task: String,
     /// `instructions` (a QEMU run) or `cycles` (a robot capture).
     pub unit: &'static str,
-    /// The largest execution observed, in `unit`, the trace records included.
+    /// The execution observed of the job held (the one with the largest own figure once the allowances are
+    /// out), in `unit`, the trace records included.
     pub observed: u64,
     /// The trace records' part of it, per job, in `unit` (subtracted before the comparison).
     pub trace_allowance: u64,
+    /// Traced runs that pre-empted that job directly.
+    pub preemptions: u32,
+    /// What they ran of their records inside it, at the fewest, in `unit` (subtracted before the comparison;
+    /// QEMU only, 0 without the timing file's `trace.qemu.unstamped_per_preemption`).
+    pub unstamped: u64,
     /// The bound, in `unit` (`None`: declined).
     pub bound: Option<u64>,
-    /// `(observed − trace_allowance) / bound`: at most 1 within the bound; below 0.5 the bound is more than twice
+    /// `(observed − trace_allowance − unstamped) / bound`: at most 1 within the bound; below 0.5 the bound is more than twice
     /// what ran.
     pub ratio: Option<f64>,
     /// `ok`, `EXCEEDS BOUND`, or `declined: …`.
@@ -85,11 +95,31 @@ fn bound_of(
     Some(rows.iter().map(|r| value(r)).sum())
 }
 
-/// The rows of `tasks` (task name, largest execution in µs) against the board's bounds, for a QEMU run (`qemu`)
-/// or a robot capture at `clock_hz`.
+/// One observed job of a task.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Job {
+    /// Its execution, the stamped spans of the runs that pre-empted it taken out, µs.
+    pub exec_us: f64,
+    /// The traced runs that pre-empted it directly.
+    pub preemptions: u32,
+}
+
+#[cfg(test)]
+impl Job {
+    /// A job no traced run pre-empted.
+    pub fn alone(exec_us: f64) -> Job {
+        Job {
+            exec_us,
+            preemptions: 0,
+        }
+    }
+}
+
+/// The rows of `tasks` (task name, its observed jobs) against the board's bounds, for a QEMU run (`qemu`)
+/// or a robot capture at `clock_hz`: each task's job with the largest own figure, held to its bound.
 pub fn rows(
     bounds: &BoardBounds,
-    tasks: &[(String, f64)],
+    tasks: &[(String, Vec<Job>)],
     analysed: Option<&BoardResult>,
     qemu: bool,
     clock_hz: u64,
@@ -110,15 +140,37 @@ pub fn rows(
         }
     });
     let trace_allowance = (trace_us * per_us).floor() as u64;
+    // A robot capture's records are the ring's (no write-through): nothing is known of them per pre-emption.
+    let per_preemption = match (qemu, &bounds.trace) {
+        (true, Some(t)) => t
+            .qemu
+            .as_ref()
+            .and_then(|q| q.unstamped_per_preemption.as_ref())
+            .map_or(0, |u| u.instructions),
+        _ => 0,
+    };
     let mut out = Vec::new();
-    for (task, exec_max_us) in tasks {
+    for (task, jobs) in tasks {
         let Some(bound) = bound_of(file, task, analysed, qemu) else {
             continue;
         };
-        let observed = (exec_max_us * per_us).round() as u64;
+        // (own, observed, pre-emptions, unstamped) of each job; the largest own figure is the one held.
+        let Some((own, observed, preemptions, unstamped)) = jobs
+            .iter()
+            .map(|j| {
+                let observed = (j.exec_us * per_us).round() as u64;
+                let unstamped = u64::from(j.preemptions) * per_preemption;
+                let own = observed
+                    .saturating_sub(trace_allowance)
+                    .saturating_sub(unstamped);
+                (own, observed, j.preemptions, unstamped)
+            })
+            .max()
+        else {
+            continue;
+        };
         let (bound, ratio, verdict) = match bound {
             Ok(b) => {
-                let own = observed.saturating_sub(trace_allowance);
                 let ratio = (b > 0).then(|| own as f64 / b as f64);
                 let verdict = if own > b {
                     EXCEEDS.to_string()
@@ -134,6 +186,8 @@ pub fn rows(
             unit,
             observed,
             trace_allowance,
+            preemptions,
+            unstamped,
             bound,
             ratio,
             verdict,
@@ -145,7 +199,7 @@ pub fn rows(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use schedule_analysis::scenario::TraceCost;
+    use schedule_analysis::scenario::{QemuBuild, TraceCost, UnstampedPerPreemption};
 
     fn file() -> BoundsFile {
         BoundsFile::from_json(
@@ -186,9 +240,9 @@ mod tests {
         let rows = rows(
             &board_bounds(),
             &[
-                ("can_rx".into(), 16.0), // 2000 instructions: 500 once the trace is out
-                ("admit_requests".into(), 100.0), // declined
-                ("stimulus".into(), 5.0), // no row: not listed
+                ("can_rx".into(), vec![Job::alone(16.0)]), // 2000 instructions: 500 once the trace is out
+                ("admit_requests".into(), vec![Job::alone(100.0)]), // declined
+                ("stimulus".into(), vec![Job::alone(5.0)]), // no row: not listed
             ],
             None,
             true,
@@ -204,7 +258,7 @@ mod tests {
         // One instruction more than the bound and the trace: above it.
         let over = super::rows(
             &board_bounds(),
-            &[("can_rx".into(), 16.008)],
+            &[("can_rx".into(), vec![Job::alone(16.008)])],
             None,
             true,
             120_000_000,
@@ -218,7 +272,7 @@ mod tests {
         // 72 MHz: 12 µs of trace = 864 cycles; 20 µs observed = 1440 cycles, 576 once the trace is out.
         let rows = rows(
             &board_bounds(),
-            &[("can_rx".into(), 20.0)],
+            &[("can_rx".into(), vec![Job::alone(20.0)])],
             None,
             false,
             72_000_000,
@@ -228,7 +282,7 @@ mod tests {
         assert_eq!(rows[0].verdict, "ok");
         let rows = super::rows(
             &board_bounds(),
-            &[("can_rx".into(), 22.1)],
+            &[("can_rx".into(), vec![Job::alone(22.1)])],
             None,
             false,
             72_000_000,
@@ -254,12 +308,103 @@ mod tests {
         };
         // 2 400 instructions, 900 once the trace is out: a job of three frames, above one frame's 300 but within
         // the job's bound.
-        let held = rows(&charged, &[("can_rx".into(), 19.2)], None, true, 1);
+        let held = rows(
+            &charged,
+            &[("can_rx".into(), vec![Job::alone(19.2)])],
+            None,
+            true,
+            1,
+        );
         assert_eq!((held[0].bound, held[0].verdict.as_str()), (Some(900), "ok"));
-        let over = rows(&charged, &[("can_rx".into(), 19.208)], None, true, 1);
+        let over = rows(
+            &charged,
+            &[("can_rx".into(), vec![Job::alone(19.208)])],
+            None,
+            true,
+            1,
+        );
         assert_eq!(over[0].verdict, EXCEEDS);
-        let robot = rows(&charged, &[("can_rx".into(), 1.0)], None, false, 72_000_000);
+        let robot = rows(
+            &charged,
+            &[("can_rx".into(), vec![Job::alone(1.0)])],
+            None,
+            false,
+            72_000_000,
+        );
         assert_eq!(robot[0].bound, Some(2160));
+    }
+
+    #[test]
+    fn a_pre_empted_job_is_held_after_the_unstamped_records_of_what_pre_empted_it() {
+        // QEMU: 8 µs of trace per job = 1000 instructions; 400 instructions unstamped per pre-emption.
+        let mut bounds = board_bounds();
+        bounds.trace = Some(TraceCost {
+            feature: "task-trace".into(),
+            per_job_us: 12.0,
+            note: None,
+            qemu: Some(QemuBuild {
+                per_job_us: 8.0,
+                budget_scale: 1.0,
+                transmit: None,
+                replay: None,
+                unstamped_per_preemption: Some(UnstampedPerPreemption {
+                    instructions: 400,
+                    note: "a test".into(),
+                }),
+                note: None,
+            }),
+        });
+        let pre_empted = |exec_us: f64, preemptions: u32| Job {
+            exec_us,
+            preemptions,
+        };
+        // can_rx's bound is 500. Pre-empted twice, 2 300 observed: 1 000 its records, 800 the pre-empting
+        // runs', 500 its own, within; alone, 1 400 observed: 400 its own. The held job is the pre-empted one.
+        let r = rows(
+            &bounds,
+            &[("can_rx".into(), vec![Job::alone(11.2), pre_empted(18.4, 2)])],
+            None,
+            true,
+            1,
+        );
+        assert_eq!(
+            (r[0].observed, r[0].preemptions, r[0].unstamped),
+            (2300, 2, 800)
+        );
+        assert_eq!((r[0].verdict.as_str(), r[0].ratio), ("ok", Some(1.0)));
+        // One instruction more: above.
+        let over = rows(
+            &bounds,
+            &[("can_rx".into(), vec![pre_empted(18.408, 2)])],
+            None,
+            true,
+            1,
+        );
+        assert_eq!(over[0].verdict, EXCEEDS);
+        // Nothing is taken off a job no run pre-empted: one above its bound stays above.
+        let alone = rows(
+            &bounds,
+            &[(
+                "can_rx".into(),
+                vec![Job::alone(12.008), pre_empted(18.4, 2)],
+            )],
+            None,
+            true,
+            1,
+        );
+        assert_eq!(
+            (alone[0].preemptions, alone[0].verdict.as_str()),
+            (0, EXCEEDS)
+        );
+        // A robot capture's records are the ring's: nothing per pre-emption.
+        let robot = rows(
+            &bounds,
+            &[("can_rx".into(), vec![pre_empted(1.0, 3)])],
+            None,
+            false,
+            72_000_000,
+        );
+        assert_eq!(robot[0].unstamped, 0);
     }
 
     #[test]
@@ -268,6 +413,13 @@ mod tests {
             bounds: None,
             ..board_bounds()
         };
-        assert!(rows(&none, &[("can_rx".into(), 1.0)], None, true, 1).is_empty());
+        assert!(rows(
+            &none,
+            &[("can_rx".into(), vec![Job::alone(1.0)])],
+            None,
+            true,
+            1
+        )
+        .is_empty());
     }
 }

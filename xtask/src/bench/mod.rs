@@ -206,12 +206,15 @@ impl Bench {
             .filter(|m| m.verdict == machine::EXCEEDS)
             .map(|m| {
                 format!(
-                    "{}/{}: {} {} observed ({} of them the trace records) > bound {} {}",
+                    "{}/{}: {} {} observed ({} of them the trace records, {} the unstamped records of {} \
+                     pre-empting runs) > bound {} {}",
                     self.board,
                     m.task,
                     m.observed,
                     m.unit,
                     m.trace_allowance,
+                    m.unstamped,
+                    m.preemptions,
                     m.bound.unwrap_or(0),
                     m.unit
                 )
@@ -400,9 +403,22 @@ pub fn measure(
         .map_err(|e| anyhow!("{e}"))?;
     let (machine_bounds, machine) = match &board_bounds {
         Some(b) => {
-            let executions: Vec<(String, f64)> = tasks
+            // Each task's jobs, with the traced runs that pre-empted each (their records' unstamped part).
+            let executions: Vec<(String, Vec<machine::Job>)> = tasks
                 .iter()
-                .map(|t: &TaskRow| (t.task.clone(), t.exec_max_us))
+                .map(|t: &TaskRow| {
+                    let number = names.iter().position(|n| *n == t.task);
+                    let jobs = capture
+                        .runs
+                        .iter()
+                        .filter(|r| number == Some(usize::from(r.task)))
+                        .map(|r| machine::Job {
+                            exec_us: us(r.execution_ns()),
+                            preemptions: r.preemptions,
+                        })
+                        .collect();
+                    (t.task.clone(), jobs)
+                })
                 .collect();
             let rows = machine::rows(b, &executions, board_result, qemu, capture.clock_hz);
             let line = match &b.bounds {

@@ -106,16 +106,17 @@ fn machine_table(out: &mut String, b: &Bench) {
     }
     let _ = writeln!(
         out,
-        "{:<20} {:>12} {:>8} {:>12} {:>7}  unit, verdict",
-        "task", "observed", "trace", "bound", "ratio"
+        "{:<20} {:>12} {:>8} {:>14} {:>12} {:>7}  unit, verdict",
+        "task", "observed", "trace", "pre-empted", "bound", "ratio"
     );
     for m in &b.machine {
         let _ = writeln!(
             out,
-            "{:<20} {:>12} {:>8} {:>12} {:>7}  {}, {}",
+            "{:<20} {:>12} {:>8} {:>14} {:>12} {:>7}  {}, {}",
             m.task,
             m.observed,
             m.trace_allowance,
+            format!("{}× −{}", m.preemptions, m.unstamped),
             m.bound.map_or_else(|| "-".to_string(), |v| v.to_string()),
             m.ratio
                 .map_or_else(|| "-".to_string(), |r| format!("{r:.2}")),
