@@ -10,6 +10,15 @@ use super::{display, fail, BuildError, Timing, MODELS_DIR};
 use crate::bounds::{self, BoundsFile, TaskBound};
 use crate::model::{TaskModel, GLOBAL_CRITICAL_SECTION};
 
+/// What a build does with the bounds the bounds files hold back ([`crate::bounds::TaskBound::held`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Held {
+    /// Held back: the stated budget and sections stand (the analysis the boards admit on).
+    Kept,
+    /// Used in place of the stated ones (docs/analysis.md, "The verdict on the bounds").
+    Used,
+}
+
 /// Where one budget came from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum BudgetFrom {
@@ -152,9 +161,14 @@ pub(super) fn apply(
     root: &Path,
     file: &str,
     timing: &Timing,
+    held: Held,
     warnings: &mut Vec<String>,
 ) -> Result<(Timing, BoardBudgets), BuildError> {
     let (name, read) = bounds_file(root, timing)?;
+    let read = match held {
+        Held::Kept => read,
+        Held::Used => read.map(|b| b.with_held_used()),
+    };
     let mut out = timing.clone();
     let mut rows = BTreeMap::new();
     let stated = |why: String| BudgetFrom::Stated { why };
@@ -673,6 +687,7 @@ mod tests {
             critical_sections: BTreeMap::new(),
             sections,
             job: None,
+            held: None,
         }
     }
 
