@@ -422,14 +422,15 @@ impl BoundsFile {
         self.tasks.iter().filter(|t| t.held.is_some()).count()
     }
 
-    /// The file with every held bound used (docs/analysis.md, "The verdict on the bounds"): each held row takes
+    /// The file with every held bound of the rows `which` accepts used (docs/analysis.md, "The verdict on the
+    /// bounds"): each such held row takes
     /// its held bound (the charge and the job beside it, for a row charged per activation) in place of its
     /// declined one, and its held critical sections; a held row without a bound stays declined and takes its
     /// sections. The `held` field stays, so that the result still tells the held rows.
-    pub fn with_held_used(&self) -> BoundsFile {
+    pub fn with_held_used(&self, which: impl Fn(&str) -> bool) -> BoundsFile {
         let mut out = self.clone();
         for t in &mut out.tasks {
-            let Some(h) = &t.held else {
+            let Some(h) = t.held.as_ref().filter(|_| which(&t.task)) else {
                 continue;
             };
             if let (Some(cycles), Some(us), Some(instructions)) = (h.cycles, h.us, h.instructions) {

@@ -53,7 +53,7 @@ fn workspace_with(name: &str, bounds: &serde_json::Value) -> PathBuf {
 }
 
 /// DiWheelDrive 1-1's bounds: `can_tx` held at 4 680 cycles (65 µs at 72 MHz) against its stated 9 µs, with a
-/// held section at interrupts off; `can_rx` bounded (not held).
+/// held section at interrupts off; `can_status` held at 5 µs against its stated 4 µs; `can_rx` bounded (not held).
 fn held_file(can_tx_held: serde_json::Value) -> serde_json::Value {
     serde_json::json!({
         "generated": format!("{GENERATED_PREFIX} from target/firmware/diwheeldrive-1-1.elf; do not edit"),
@@ -65,7 +65,10 @@ fn held_file(can_tx_held: serde_json::Value) -> serde_json::Value {
               "declined": null },
             { "task": "can_tx", "cycles": null, "us": null, "instructions": null,
               "declined": "can_tx: bounded from the machine code at 4680 cycles, held back as its budget: loose",
-              "held": can_tx_held }
+              "held": can_tx_held },
+            { "task": "can_status", "cycles": null, "us": null, "instructions": null,
+              "declined": "can_status: bounded from the machine code at 360 cycles, held back as its budget: a test",
+              "held": { "cycles": 360, "us": 5.0, "instructions": 100, "reason": "a test" } }
         ]
     })
 }
@@ -88,7 +91,7 @@ fn parse(v: &serde_json::Value) -> Result<BoundsFile, schedule_analysis::bounds:
 #[test]
 fn a_held_bound_is_read_back_used_only_on_request_and_an_older_file_still_loads() {
     let file = parse(&held_file(can_tx_held())).unwrap();
-    assert_eq!(file.held_rows(), 1);
+    assert_eq!(file.held_rows(), 2);
     let held = file.task("can_tx").unwrap().held.as_ref().unwrap();
     assert_eq!(
         (held.cycles, held.us, held.budget_us()),
@@ -98,7 +101,7 @@ fn a_held_bound_is_read_back_used_only_on_request_and_an_older_file_still_loads(
     assert_eq!(BoundsFile::from_json("t", &file.to_json()).unwrap(), file);
     // As written, the row is declined; used, it is the bound, its sections the held ones, `held` kept.
     assert_eq!(file.task("can_tx").unwrap().budget_us(), None);
-    let used = file.with_held_used();
+    let used = file.with_held_used(|_| true);
     let tx = used.task("can_tx").unwrap();
     assert_eq!((tx.budget_us(), tx.declined.as_deref()), (Some(65.0), None));
     assert_eq!(tx.sections.as_ref().unwrap().ceilings[0].us, Some(2.0));
@@ -106,7 +109,9 @@ fn a_held_bound_is_read_back_used_only_on_request_and_an_older_file_still_loads(
     assert_eq!(used.task("can_rx"), file.task("can_rx"));
     // A file without the field (an older writer's) loads, nothing held.
     let mut old = held_file(can_tx_held());
-    old["tasks"][1].as_object_mut().unwrap().remove("held");
+    for row in old["tasks"].as_array_mut().unwrap() {
+        row.as_object_mut().unwrap().remove("held");
+    }
     assert_eq!(parse(&old).unwrap().held_rows(), 0);
 }
 
@@ -178,7 +183,11 @@ fn the_second_run_names_the_held_bound_that_turns_a_verdict_into_a_miss() {
         .iter()
         .find(|b| b.board == "diwheeldrive")
         .unwrap();
-    assert_eq!(dwd.held, ["can_tx"]);
+    assert_eq!(dwd.held, ["can_status", "can_tx"]);
+    // Alone, can_tx's breaks the set and can_status's does not.
+    let alone = |row: &str| dwd.alone.iter().find(|a| a.row == row).unwrap();
+    assert!(alone("can_tx").breaks.is_some());
+    assert_eq!(alone("can_status").breaks, None);
     let tx = dwd
         .misses
         .iter()
@@ -232,7 +241,7 @@ fn the_second_run_names_the_held_bound_that_turns_a_verdict_into_a_miss() {
     assert!(lines[0].ends_with("NOT schedulable"), "{lines:?}");
     let board = lines
         .iter()
-        .find(|l| l.starts_with("diwheeldrive (1 held bounds used: can_tx): "))
+        .find(|l| l.starts_with("diwheeldrive (2 held bounds used: can_status, can_tx): "))
         .unwrap_or_else(|| panic!("{lines:?}"));
     assert!(
         board.contains(&format!(" of {} jobs miss; utilisation ", dwd.jobs)),
@@ -244,6 +253,11 @@ fn the_second_run_names_the_held_bound_that_turns_a_verdict_into_a_miss() {
         schedule_analysis::time::Time::from_us_up(wcrt)
     );
     assert!(lines.contains(&expected), "{expected:?} not in {lines:?}");
+    let each = format!(
+        "  each held bound alone (the others held): breaks the set: can_tx ({}); passes: can_status",
+        alone("can_tx").breaks.as_deref().unwrap()
+    );
+    assert!(lines.contains(&each), "{each:?} not in {lines:?}");
     // In the report, before the verdict, which stays the first run's; and in its JSON.
     let report = report.with_on_bounds(Some(on));
     assert!(report.all_ok());
@@ -255,7 +269,7 @@ fn the_second_run_names_the_held_bound_that_turns_a_verdict_into_a_miss() {
         serde_json::from_str(&report::render(&report, Format::Json)).unwrap();
     assert_eq!(json["schedulable"], true);
     assert_eq!(json["on_bounds"]["all_ok"], false);
-    assert_eq!(json["on_bounds"]["boards"][0]["held"][0], "can_tx");
+    assert_eq!(json["on_bounds"]["boards"][0]["held"][1], "can_tx");
 }
 
 #[test]
@@ -263,6 +277,7 @@ fn nothing_held_means_no_second_run() {
     let mut file = held_file(can_tx_held());
     file["tasks"][1] = serde_json::json!({ "task": "can_tx", "cycles": null, "us": null,
         "instructions": null, "declined": "a loop without a bound" });
+    file["tasks"].as_array_mut().unwrap().truncate(2);
     let root = workspace_with("none", &file);
     // The other boards' generated files hold bounds too: this test's own robot is DiWheelDrive alone.
     for other in [

@@ -38,7 +38,7 @@ pub(super) fn build_boards(
     bit: Time,
     firmware: Firmware,
     received: Option<Time>,
-    held: super::bounded::Held,
+    held: super::bounded::Held<'_>,
     built: &mut Built,
 ) -> Result<Ends, BuildError> {
     let mut ends = Ends::default();
@@ -128,7 +128,7 @@ fn build_board(
     scenario: &Scenario,
     arrivals: Arrivals,
     firmware: Firmware,
-    held: super::bounded::Held,
+    held: super::bounded::Held<'_>,
     built: &mut Built,
 ) -> Result<BoardModel, BuildError> {
     // The machine-code bounds replace the stated budgets (before any QEMU scaling: they are the chip's).

@@ -343,13 +343,23 @@ pub fn build_on_held_bounds(
     scenario_path: &Path,
     timing_paths: &[PathBuf],
 ) -> Result<Built, BuildError> {
+    build_held(root, scenario_path, timing_paths, Held::Used)
+}
+
+/// [`build`] with the held bounds used as `held` says.
+pub fn build_held(
+    root: &Path,
+    scenario_path: &Path,
+    timing_paths: &[PathBuf],
+    held: Held<'_>,
+) -> Result<Built, BuildError> {
     build_with(
         root,
         scenario_path,
         timing_paths,
         Firmware::Production,
         None,
-        Held::Used,
+        held,
     )
 }
 
@@ -359,7 +369,7 @@ fn build_with(
     timing_paths: &[PathBuf],
     firmware: Firmware,
     received_gap_us: Option<f64>,
-    held: Held,
+    held: Held<'_>,
 ) -> Result<Built, BuildError> {
     let scenario_file = display(root, scenario_path);
     let scenario: Scenario = read_json(root, scenario_path)?;

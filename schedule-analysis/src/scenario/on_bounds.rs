@@ -42,6 +42,18 @@ pub struct BoardOnBounds {
     pub utilisation: f64,
     /// CPU utilisation on the stated budgets (the first run's), when the board is in it.
     pub stated_utilisation: Option<f64>,
+    /// Each held bound used alone (the board's `publisher[…]` rows together: they share one bound), every other
+    /// held back: whether the set then fails, and what fails first.
+    pub alone: Vec<Alone>,
+}
+
+/// One held bound used alone.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Alone {
+    /// The row (`can_tx`), or `publisher[…]` for every publisher row of the board.
+    pub row: String,
+    /// The first failure of the set with only this bound used (`diwheeldrive/can_tx`), `None` when it passes.
+    pub breaks: Option<String>,
 }
 
 /// A job that misses on the bounds.
@@ -127,6 +139,27 @@ impl OnBounds {
                 b.utilisation * 100.0
             ));
             out.extend(capped(b.misses.iter().map(Miss::line), "  "));
+            let (breaks, passes): (Vec<&Alone>, Vec<&Alone>) =
+                b.alone.iter().partition(|a| a.breaks.is_some());
+            if !b.alone.is_empty() {
+                let breaks: Vec<String> = breaks
+                    .iter()
+                    .map(|a| format!("{} ({})", a.row, a.breaks.as_deref().unwrap_or("")))
+                    .collect();
+                let passes: Vec<&str> = passes.iter().map(|a| a.row.as_str()).collect();
+                let list = |v: &[String]| {
+                    if v.is_empty() {
+                        "none".to_string()
+                    } else {
+                        v.join(", ")
+                    }
+                };
+                out.push(format!(
+                    "  each held bound alone (the others held): breaks the set: {}; passes: {}",
+                    list(&breaks),
+                    list(&passes.iter().map(|p| p.to_string()).collect::<Vec<_>>())
+                ));
+            }
         }
         out.extend(capped(self.bus.iter().map(|l| format!("bus: {l}")), ""));
         out
@@ -179,7 +212,80 @@ pub fn on_held_bounds(
             horizon: None,
         },
     );
-    Ok(Some(summarise(&built, &analysis, stated)))
+    let mut on = summarise(&built, &analysis, stated);
+    for board in &mut on.boards {
+        board.alone = alone(
+            root,
+            scenario_path,
+            timing_paths,
+            frame_cost,
+            &built,
+            &board.board,
+        )?;
+    }
+    Ok(Some(on))
+}
+
+/// Each held row of `board` (its publisher rows as one) used alone: the set built with only it used and
+/// analysed, and what fails first.
+fn alone(
+    root: &Path,
+    scenario_path: &Path,
+    timing_paths: &[PathBuf],
+    frame_cost: FrameCostSpec,
+    built: &Built,
+    board: &str,
+) -> Result<Vec<Alone>, BuildError> {
+    let Some(file) = built
+        .budgets
+        .iter()
+        .find(|b| b.board == board)
+        .and_then(|b| b.bounds.as_ref())
+    else {
+        return Ok(Vec::new());
+    };
+    let held: Vec<String> = file
+        .tasks
+        .iter()
+        .filter(|t| t.held.is_some())
+        .map(|t| t.task.clone())
+        .collect();
+    let (topics, rows): (Vec<String>, Vec<String>) =
+        held.into_iter().partition(|r| r.starts_with("publisher["));
+    let mut groups: Vec<(String, Vec<String>)> =
+        rows.into_iter().map(|r| (r.clone(), vec![r])).collect();
+    if !topics.is_empty() {
+        groups.push(("publisher[…]".to_string(), topics));
+    }
+    let mut out = Vec::new();
+    for (name, rows) in groups {
+        let one = super::build_held(
+            root,
+            scenario_path,
+            timing_paths,
+            super::Held::Only { board, rows: &rows },
+        )?;
+        let system = one.model.validate().map_err(|e| {
+            fail(
+                &super::display(root, scenario_path),
+                "",
+                format!("the model on the held bound of {board}/{name}: {e}"),
+            )
+        })?;
+        let failures = analyse(
+            &system,
+            &Options {
+                frame_cost,
+                horizon: None,
+            },
+        )
+        .failures();
+        out.push(Alone {
+            row: name,
+            breaks: failures.into_iter().next(),
+        });
+    }
+    Ok(out)
 }
 
 /// The findings of `analysis`, the analysis of `built` (a model on the held bounds).
@@ -239,6 +345,7 @@ pub(super) fn summarise(built: &Built, analysis: &Analysis, stated: &Analysis) -
                     .iter()
                     .find(|s| s.name == b.name)
                     .map(|s| s.utilisation),
+                alone: Vec::new(),
             }
         })
         .collect();
@@ -310,6 +417,16 @@ mod tests {
                 misses,
                 utilisation: 0.713,
                 stated_utilisation: Some(0.306),
+                alone: vec![
+                    Alone {
+                        row: "can_tx".into(),
+                        breaks: Some("b/can_tx".into()),
+                    },
+                    Alone {
+                        row: "publisher[…]".into(),
+                        breaks: None,
+                    },
+                ],
             }],
             bus: vec!["topic t end to end 1200 µs > 1000 µs deadline".into()],
         };
@@ -330,8 +447,12 @@ mod tests {
         assert_eq!(lines[12], "  and 3 more");
         assert_eq!(
             lines[13],
+            "  each held bound alone (the others held): breaks the set: can_tx (b/can_tx); passes: publisher[…]"
+        );
+        assert_eq!(
+            lines[14],
             "bus: topic t end to end 1200 µs > 1000 µs deadline"
         );
-        assert_eq!(lines.len(), 14);
+        assert_eq!(lines.len(), 15);
     }
 }
