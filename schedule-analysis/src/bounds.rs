@@ -103,6 +103,42 @@ pub struct TaskBound {
     /// observed jobs holds each against the job's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub job: Option<JobBound>,
+    /// A row the board's bounds file holds back (its `held`; docs/analysis.md, "Held bounds"): declined for the
+    /// analysis, its bound and critical sections kept here in structured form, for the report's second run on
+    /// every bound ("The verdict on the bounds"). Absent in a file of an older writer and on rows not held.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held: Option<HeldBound>,
+}
+
+/// The bound of a held row ([`TaskBound::held`]): what the row would carry were it not held, and why it is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeldBound {
+    /// The bound in core cycles (for a row charged per activation, the charge); `null` where the machine code's
+    /// bound is declined too and only the row's critical sections are held.
+    pub cycles: Option<u64>,
+    /// At the file's clock, µs (`null` with `cycles`).
+    pub us: Option<f64>,
+    /// The longest path's instruction count (`null` with `cycles`).
+    pub instructions: Option<u64>,
+    /// Stated peripheral waits on the longest path, µs.
+    #[serde(default)]
+    pub bus_wait_us: f64,
+    /// Why the bound is held back: the bounds file's reason.
+    pub reason: String,
+    /// The row's critical sections, held with it (they come from the same paths).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sections: Option<CeilingSections>,
+    /// For a row charged per activation, the whole job's bound beside the charge.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub job: Option<JobBound>,
+}
+
+impl HeldBound {
+    /// The budget the held bound would give: its time plus its stated bus waits, µs; `None` without a bound.
+    pub fn budget_us(&self) -> Option<f64> {
+        self.us.map(|us| us + self.bus_wait_us)
+    }
 }
 
 /// The bound of one whole job of a task whose row is a charge per activation ([`TaskBound::job`]).
@@ -241,6 +277,9 @@ pub enum Problem {
     Empty,
     /// A bound and a reason to decline it at once.
     BoundAndDeclined,
+    /// A `held` bound on a row that is not declined (a held row is declined for the analysis), or a held `job`
+    /// without a held bound.
+    HeldNotDeclined,
     /// Neither a bound (all of `cycles`, `us`, `instructions`) nor a reason.
     NeitherBoundNorDeclined,
     /// `us` is not `cycles` at `clock_hz`.
@@ -276,6 +315,11 @@ impl fmt::Display for Problem {
             Problem::BoundAndDeclined => write!(
                 f,
                 "a declined bound has no `cycles`, `us` or `instructions` (all null)"
+            ),
+            Problem::HeldNotDeclined => write!(
+                f,
+                "a held row is declined for the analysis (`declined` names why), and a held `job` needs the \
+                 held bound it is the job of"
             ),
             Problem::NeitherBoundNorDeclined => write!(
                 f,
@@ -371,6 +415,37 @@ impl BoundsFile {
     /// The file as the writer writes it (pretty JSON, a newline at the end).
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).unwrap_or_default() + "\n"
+    }
+
+    /// How many rows hold a bound back ([`TaskBound::held`]) with figures or sections to use.
+    pub fn held_rows(&self) -> usize {
+        self.tasks.iter().filter(|t| t.held.is_some()).count()
+    }
+
+    /// The file with every held bound of the rows `which` accepts used (docs/analysis.md, "The verdict on the
+    /// bounds"): each such held row takes
+    /// its held bound (the charge and the job beside it, for a row charged per activation) in place of its
+    /// declined one, and its held critical sections; a held row without a bound stays declined and takes its
+    /// sections. The `held` field stays, so that the result still tells the held rows.
+    pub fn with_held_used(&self, which: impl Fn(&str) -> bool) -> BoundsFile {
+        let mut out = self.clone();
+        for t in &mut out.tasks {
+            let Some(h) = t.held.as_ref().filter(|_| which(&t.task)) else {
+                continue;
+            };
+            if let (Some(cycles), Some(us), Some(instructions)) = (h.cycles, h.us, h.instructions) {
+                t.cycles = Some(cycles);
+                t.us = Some(us);
+                t.instructions = Some(instructions);
+                t.bus_wait_us = h.bus_wait_us;
+                t.declined = None;
+                t.job = h.job.clone();
+            }
+            if h.sections.is_some() {
+                t.sections = h.sections.clone();
+            }
+        }
+        out
     }
 
     /// The row of `task`, if any.
@@ -478,34 +553,73 @@ impl BoundsFile {
                 })?;
             }
             if let Some(sections) = &t.sections {
-                if sections
-                    .incomplete
-                    .as_deref()
-                    .is_some_and(|r| r.trim().is_empty())
-                {
-                    return Err(fail(at("sections.incomplete"), Problem::Empty));
-                }
-                let mut ceilings = BTreeSet::new();
-                for (k, c) in sections.ceilings.iter().enumerate() {
-                    let field = |f: &str| at(&format!("sections.ceilings[{k}]{f}"));
-                    if !ceilings.insert(c.ceiling) {
-                        return Err(fail(field(".ceiling"), Problem::Duplicate));
-                    }
-                    let as_section = SectionBound {
-                        cycles: c.cycles,
-                        us: c.us,
-                        bus_wait_us: c.bus_wait_us,
-                        declined: c.declined.clone(),
-                    };
-                    self.check_section(&as_section)
-                        .map_err(|(f, p)| fail(field(f), p))?;
-                }
+                self.check_sections(sections)
+                    .map_err(|(f, p)| fail(at(&format!("sections{f}")), p))?;
+            }
+            if let Some(h) = &t.held {
+                self.check_held(h, declined)
+                    .map_err(|(f, p)| fail(at(&format!("held{f}")), p))?;
             }
         }
         for (resource, s) in &self.idle_critical_sections {
             self.check_section(s).map_err(|(field, p)| {
                 fail(format!("idle_critical_sections.{resource}{field}"), p)
             })?;
+        }
+        Ok(())
+    }
+
+    /// A job's sections: each ceiling once, each bounded or declined.
+    fn check_sections(&self, sections: &CeilingSections) -> Result<(), (String, Problem)> {
+        if sections
+            .incomplete
+            .as_deref()
+            .is_some_and(|r| r.trim().is_empty())
+        {
+            return Err((".incomplete".into(), Problem::Empty));
+        }
+        let mut ceilings = BTreeSet::new();
+        for (k, c) in sections.ceilings.iter().enumerate() {
+            let field = |f: &str| format!(".ceilings[{k}]{f}");
+            if !ceilings.insert(c.ceiling) {
+                return Err((field(".ceiling"), Problem::Duplicate));
+            }
+            let as_section = SectionBound {
+                cycles: c.cycles,
+                us: c.us,
+                bus_wait_us: c.bus_wait_us,
+                declined: c.declined.clone(),
+            };
+            self.check_section(&as_section)
+                .map_err(|(f, p)| (field(f), p))?;
+        }
+        Ok(())
+    }
+
+    /// A held row's bound: on a declined row, with a reason, all of `cycles`, `us`, `instructions` or none.
+    fn check_held(&self, h: &HeldBound, row_declined: bool) -> Result<(), (String, Problem)> {
+        if !row_declined {
+            return Err((String::new(), Problem::HeldNotDeclined));
+        }
+        if h.reason.trim().is_empty() {
+            return Err((".reason".into(), Problem::Empty));
+        }
+        finite(h.bus_wait_us).map_err(|p| (".bus_wait_us".into(), p))?;
+        match (h.cycles, h.us, h.instructions) {
+            (Some(cycles), Some(us), Some(_)) => {
+                self.check_us(cycles, us).map_err(|p| (".us".into(), p))?
+            }
+            (None, None, None) if h.job.is_some() => {
+                return Err((".job".into(), Problem::HeldNotDeclined))
+            }
+            (None, None, None) => {}
+            (None, ..) => return Err((".cycles".into(), Problem::NeitherBoundNorDeclined)),
+            (_, None, _) => return Err((".us".into(), Problem::NeitherBoundNorDeclined)),
+            (_, _, None) => return Err((".instructions".into(), Problem::NeitherBoundNorDeclined)),
+        }
+        if let Some(s) = &h.sections {
+            self.check_sections(s)
+                .map_err(|(f, p)| (format!(".sections{f}"), p))?;
         }
         Ok(())
     }

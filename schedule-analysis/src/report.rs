@@ -34,6 +34,9 @@ pub struct Report {
     /// Per board and task, where its budget came from (`bound`: the machine code's, `stated`: the timing
     /// file's), when the model was built from timing files ([`Report::with_budget_sources`]).
     pub budget_from: BTreeMap<(String, String), String>,
+    /// The scenario analysed again with every held bound used ([`Report::with_on_bounds`]); it does not change
+    /// the verdict.
+    pub on_bounds: Option<crate::scenario::OnBounds>,
 }
 
 /// Publishers beyond this many skip the sensitivity search (each costs about twenty whole-system analyses).
@@ -105,6 +108,7 @@ impl Report {
             sensitivity,
             admission: Vec::new(),
             budget_from: BTreeMap::new(),
+            on_bounds: None,
         }
     }
 
@@ -131,6 +135,13 @@ impl Report {
                 }
             }
         }
+        self
+    }
+
+    /// Adds the second run's findings, on every held bound ([`crate::scenario::on_held_bounds`]); printed
+    /// before the verdict, which stays the first run's.
+    pub fn with_on_bounds(mut self, on_bounds: Option<crate::scenario::OnBounds>) -> Report {
+        self.on_bounds = on_bounds;
         self
     }
 
@@ -482,8 +493,31 @@ fn text(report: &Report, markdown: bool) -> String {
     );
     text_sensitivity(report, markdown, &mut out);
     text_admission(report, markdown, &mut out);
+    text_on_bounds(report, markdown, &mut out);
     text_verdict(report, markdown, &mut out);
     out
+}
+
+/// The second run's findings, on every held bound: its heading line, then a line per board and per miss.
+fn text_on_bounds(report: &Report, markdown: bool, out: &mut String) {
+    let Some(o) = &report.on_bounds else {
+        return;
+    };
+    let lines = o.lines();
+    let Some((head, rest)) = lines.split_first() else {
+        return;
+    };
+    heading(out, markdown, 2, "The verdict on the bounds");
+    let _ = writeln!(out, "{head}{}", if markdown { "\n" } else { "" });
+    for l in rest {
+        if markdown {
+            let depth = l.len() - l.trim_start().len();
+            let _ = writeln!(out, "{}- {}", " ".repeat(depth), l.trim_start());
+        } else {
+            let _ = writeln!(out, "  {l}");
+        }
+    }
+    out.push('\n');
 }
 
 /// The title, the frame costs, the sources and the warnings.
@@ -784,6 +818,12 @@ fn to_json(report: &Report) -> Value {
                 "messages": messages_json(c),
                 "topics": topics_json(c),
             }),
+        );
+    }
+    if let (Some(o), Value::Object(map)) = (&report.on_bounds, &mut out) {
+        map.insert(
+            "on_bounds".into(),
+            serde_json::to_value(o).unwrap_or(Value::Null),
         );
     }
     if let (Some(s), Value::Object(map)) = (&report.sensitivity, &mut out) {

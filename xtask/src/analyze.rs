@@ -112,7 +112,7 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
                 warnings,
                 "the built model".to_string(),
             );
-            from_timing = Some(built);
+            from_timing = Some((built, path));
             parts
         }
     };
@@ -142,7 +142,19 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
         &mut progress,
     );
     let report = match &from_timing {
-        Some(built) => report.with_budget_sources(built),
+        Some((built, path)) => {
+            // The same scenario again with every held bound used: what the verdict would be on the machine
+            // code's bounds (docs/analysis.md, "The verdict on the bounds"); the verdict stays the first run's.
+            progress("on every held bound");
+            let on_bounds = scenario::on_held_bounds(
+                root,
+                path,
+                &scenario::timing_files(root),
+                args.frame_cost.unwrap_or(built.frame_cost),
+                &report.primary,
+            )?;
+            report.with_budget_sources(built).with_on_bounds(on_bounds)
+        }
         None => report,
     };
     let report = match &robot {

@@ -248,8 +248,28 @@ fn hold(rows: &mut [TaskBound], held: &[machine_code::wcet::bounds::HeldBound]) 
         let Some(h) = held.iter().find(|h| h.names(&r.task)) else {
             continue;
         };
-        // Its critical sections come from the same paths: held with it, the stated ones stand.
-        r.sections = None;
+        // Its critical sections come from the same paths: held with it, the stated ones stand. The bound, its
+        // job and its sections are kept in structured form (`held`), for the report's run on every bound.
+        let sections = r.sections.take();
+        let figures = match (&r.declined, r.cycles, r.us, r.instructions) {
+            (None, Some(cycles), Some(us), Some(instructions)) => Some((cycles, us, instructions)),
+            _ => None,
+        };
+        if figures.is_some() || sections.is_some() {
+            r.held = Some(bounds::HeldBound {
+                cycles: figures.map(|f| f.0),
+                us: figures.map(|f| f.1),
+                instructions: figures.map(|f| f.2),
+                bus_wait_us: if figures.is_some() {
+                    r.bus_wait_us
+                } else {
+                    0.0
+                },
+                reason: h.reason.clone(),
+                sections,
+                job: figures.and(r.job.clone()),
+            });
+        }
         let bound = match (&r.declined, r.cycles, r.us, r.instructions) {
             (None, Some(cycles), Some(us), Some(instructions)) => {
                 let figures = format!(
@@ -295,6 +315,7 @@ fn declined(task: &str, reason: String) -> TaskBound {
         critical_sections: BTreeMap::new(),
         sections: None,
         job: None,
+        held: None,
     }
 }
 
@@ -309,6 +330,7 @@ fn bounded(task: &str, cycles: u64, instructions: u64, bus_wait_us: f64, clock: 
         critical_sections: BTreeMap::new(),
         sections: None,
         job: None,
+        held: None,
     }
 }
 
@@ -931,6 +953,17 @@ mod app {
         hold(&mut written, &[held]);
         let rx = written.iter().find(|r| r.task == "can_rx").unwrap();
         assert_eq!((rx.cycles, rx.job.as_ref()), (None, None));
+        // The charge and the job beside it kept in structured form, written and read back.
+        let kept = rx.held.as_ref().expect("the held bound kept");
+        assert_eq!(
+            (kept.cycles, kept.us, kept.instructions),
+            (Some(576), Some(8.0), Some(160))
+        );
+        assert_eq!(kept.job.as_ref().map(|j| j.cycles), Some(2160));
+        assert_eq!(kept.reason, "LightRing's can_tx misses");
+        let text = serde_json::to_string(rx).unwrap();
+        assert!(text.contains(r#""held":{"cycles":576"#), "{text}");
+        assert_eq!(&serde_json::from_str::<TaskBound>(&text).unwrap(), rx);
         let reason = rx.declined.as_deref().unwrap();
         assert!(reason.contains("576 cycles (8 µs"), "{reason}");
         assert!(
@@ -1073,6 +1106,16 @@ mod app {
             (rows[0].cycles, rows[0].us, &rows[0].sections),
             (None, None, &None)
         );
+        // Kept in structured form: the bound, its sections, the reason.
+        let kept = rows[0].held.as_ref().expect("the held bound kept");
+        assert_eq!(
+            (kept.cycles, kept.us, kept.instructions, kept.bus_wait_us),
+            (Some(7200), Some(100.0), Some(3600), 0.0)
+        );
+        assert_eq!(kept.reason, "loose: every pass at its worst");
+        assert_eq!(kept.sections.as_ref().map(|s| s.ceilings.len()), Some(0));
+        // A declined row held without sections has nothing to use: no `held`.
+        assert_eq!(rows[1].held, None);
         assert!(rows[1]
             .declined
             .as_deref()

@@ -38,6 +38,7 @@ pub(super) fn build_boards(
     bit: Time,
     firmware: Firmware,
     received: Option<Time>,
+    held: super::bounded::Held<'_>,
     built: &mut Built,
 ) -> Result<Ends, BuildError> {
     let mut ends = Ends::default();
@@ -59,7 +60,7 @@ pub(super) fn build_boards(
             own_frame,
         };
         let board = build_board(
-            root, file, timing, &mine, scenario, arrivals, firmware, built,
+            root, file, timing, &mine, scenario, arrivals, firmware, held, built,
         )?;
         for p in &mine {
             let publisher = timing
@@ -127,10 +128,12 @@ fn build_board(
     scenario: &Scenario,
     arrivals: Arrivals,
     firmware: Firmware,
+    held: super::bounded::Held<'_>,
     built: &mut Built,
 ) -> Result<BoardModel, BuildError> {
     // The machine-code bounds replace the stated budgets (before any QEMU scaling: they are the chip's).
-    let (bounded_timing, budgets) = super::bounded::apply(root, file, timing, &mut built.warnings)?;
+    let (bounded_timing, budgets) =
+        super::bounded::apply(root, file, timing, held, &mut built.warnings)?;
     let timing = &bounded_timing;
     let scaled;
     let timing = match (

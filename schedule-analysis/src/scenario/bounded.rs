@@ -10,6 +10,22 @@ use super::{display, fail, BuildError, Timing, MODELS_DIR};
 use crate::bounds::{self, BoundsFile, TaskBound};
 use crate::model::{TaskModel, GLOBAL_CRITICAL_SECTION};
 
+/// What a build does with the bounds the bounds files hold back ([`crate::bounds::TaskBound::held`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Held<'a> {
+    /// Held back: the stated budget and sections stand (the analysis the boards admit on).
+    Kept,
+    /// Used in place of the stated ones (docs/analysis.md, "The verdict on the bounds").
+    Used,
+    /// Used for these rows of this board only, every other held back: which held bound breaks a set alone.
+    Only {
+        /// The board.
+        board: &'a str,
+        /// Its rows.
+        rows: &'a [String],
+    },
+}
+
 /// Where one budget came from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum BudgetFrom {
@@ -152,9 +168,18 @@ pub(super) fn apply(
     root: &Path,
     file: &str,
     timing: &Timing,
+    held: Held<'_>,
     warnings: &mut Vec<String>,
 ) -> Result<(Timing, BoardBudgets), BuildError> {
     let (name, read) = bounds_file(root, timing)?;
+    let read = match held {
+        Held::Kept => read,
+        Held::Used => read.map(|b| b.with_held_used(|_| true)),
+        Held::Only { board, rows } if board == timing.board => {
+            read.map(|b| b.with_held_used(|row| rows.iter().any(|r| r == row)))
+        }
+        Held::Only { .. } => read,
+    };
     let mut out = timing.clone();
     let mut rows = BTreeMap::new();
     let stated = |why: String| BudgetFrom::Stated { why };
@@ -673,6 +698,7 @@ mod tests {
             critical_sections: BTreeMap::new(),
             sections,
             job: None,
+            held: None,
         }
     }
 

@@ -32,16 +32,18 @@ mod bounded;
 mod declared;
 mod files;
 mod messages;
+mod on_bounds;
 mod plan;
 mod qemu;
 
-pub use bounded::{bounds_file, breaking_bounds, BoardBudgets, BudgetFrom};
+pub use bounded::{bounds_file, breaking_bounds, BoardBudgets, BudgetFrom, Held};
 pub use files::{
     AppSource, Arrival, Measured, Monotonic, QemuBuild, QemuReplay, QemuTransmit, Scenario,
     ScenarioCommand, ScenarioOneShot, ScenarioPublisher, Timing, TimingTask, TopicTiming,
     TraceCost, UnstampedPerPreemption, WorstStep, ACKS_PER_TRANSMIT_JOB,
     QEMU_FRAMES_PER_TRANSMIT_JOB,
 };
+pub use on_bounds::{on_held_bounds, BoardOnBounds, OnBounds};
 
 /// Where the default models live, relative to the workspace root.
 pub const MODELS_DIR: &str = "schedule-analysis/models";
@@ -325,6 +327,51 @@ pub fn build_for_run(
     firmware: Firmware,
     received_gap_us: Option<f64>,
 ) -> Result<Built, BuildError> {
+    build_with(
+        root,
+        scenario_path,
+        timing_paths,
+        firmware,
+        received_gap_us,
+        Held::Kept,
+    )
+}
+
+/// [`build`] with every bound the bounds files hold back used in place of the stated budget and sections
+/// ([`Held::Used`]): the model of the report's second run (docs/analysis.md, "The verdict on the bounds").
+pub fn build_on_held_bounds(
+    root: &Path,
+    scenario_path: &Path,
+    timing_paths: &[PathBuf],
+) -> Result<Built, BuildError> {
+    build_held(root, scenario_path, timing_paths, Held::Used)
+}
+
+/// [`build`] with the held bounds used as `held` says.
+pub fn build_held(
+    root: &Path,
+    scenario_path: &Path,
+    timing_paths: &[PathBuf],
+    held: Held<'_>,
+) -> Result<Built, BuildError> {
+    build_with(
+        root,
+        scenario_path,
+        timing_paths,
+        Firmware::Production,
+        None,
+        held,
+    )
+}
+
+fn build_with(
+    root: &Path,
+    scenario_path: &Path,
+    timing_paths: &[PathBuf],
+    firmware: Firmware,
+    received_gap_us: Option<f64>,
+    held: Held<'_>,
+) -> Result<Built, BuildError> {
     let scenario_file = display(root, scenario_path);
     let scenario: Scenario = read_json(root, scenario_path)?;
     let (scenario, one_shot_notes) = plan::one_shots_as_publishers(scenario, &scenario_file)?;
@@ -354,6 +401,7 @@ pub fn build_for_run(
         bit,
         firmware,
         received_gap_us.map(crate::time::Time::from_us_down),
+        held,
         &mut built,
     )?;
     let messages = messages::messages(&scenario, &plan, &ends, &mut built.warnings);
