@@ -11,10 +11,17 @@
 //! along the heading halfway through the turn `dθ = (dr - dl) / axle`. Position is kept in
 //! nanometres and heading in nanoradians so rounding does not accumulate into anything visible.
 
+use core::num::NonZeroU64;
+
+use super::divide::{constant, div_i64, div_u64};
 use super::trig::{sin_cos, wrap_turn};
 
 /// π × 10⁹, for the wheel circumference.
 const PI_NANO: u64 = 3_141_592_654;
+/// The divisor from pm to nm and from nm to µm.
+const THOUSAND: NonZeroU64 = constant(1000);
+/// µrad/s × µm to µm/s of half the wheel speed difference.
+const TWO_MILLION: NonZeroU64 = constant(2_000_000);
 
 /// The drive's mechanical constants.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,31 +48,35 @@ impl DriveGeometry {
     /// Wheel travel per tick in picometres (124 302 647 pm for the AMiRo). Zero ticks per
     /// revolution gives 0 (no motion is ever measured) rather than a division fault.
     pub const fn pm_per_tick(&self) -> i64 {
-        if self.ticks_per_revolution == 0 {
-            return 0;
-        }
         // π × 10⁹ × d [µm] is the circumference in fm (at most 1.35e19: fits a u64); shared out
         // over the ticks and divided by 1000 for pm. 64-bit only, so the chip needs no 128-bit
         // division routine.
         let circumference_fm = PI_NANO * self.wheel_diameter_um as u64;
-        let denominator = self.ticks_per_revolution as u64 * 1000;
-        ((circumference_fm + denominator / 2) / denominator) as i64
+        match NonZeroU64::new(self.ticks_per_revolution as u64 * 1000) {
+            Some(denominator) => {
+                div_u64(circumference_fm + denominator.get() / 2, denominator) as i64
+            }
+            None => 0,
+        }
     }
 
     /// Wheel travel for `ticks` in nanometres (saturating far beyond any real travel).
     pub const fn ticks_to_nm(&self, ticks: i64) -> i64 {
         let pm = ticks.saturating_mul(self.pm_per_tick());
         if pm >= 0 {
-            pm.saturating_add(500) / 1000
+            div_i64(pm.saturating_add(500), THOUSAND)
         } else {
-            pm.saturating_sub(500) / 1000
+            div_i64(pm.saturating_sub(500), THOUSAND)
         }
     }
 
     /// Wheel speeds (left, right) in µm/s for a body velocity: `v ∓ ω · axle / 2`.
     pub const fn wheel_speeds_um_s(&self, velocity_um_s: i32, angular_urad_s: i32) -> (i64, i64) {
         // µrad/s × µm = 1e-12 m·rad/s; / 2 / 1e6 gives µm/s.
-        let half_difference = angular_urad_s as i64 * self.axle_width_um as i64 / 2_000_000;
+        let half_difference = div_i64(
+            angular_urad_s as i64 * self.axle_width_um as i64,
+            TWO_MILLION,
+        );
         (
             velocity_um_s as i64 - half_difference,
             velocity_um_s as i64 + half_difference,
@@ -170,11 +181,10 @@ impl DeadReckoning {
         let left_nm = self.geometry.ticks_to_nm(left_ticks as i64);
         let right_nm = self.geometry.ticks_to_nm(right_ticks as i64);
         let distance_nm = (left_nm + right_nm) / 2;
-        let rotation_nrad = if self.geometry.axle_width_um == 0 {
-            0
-        } else {
+        let rotation_nrad = match NonZeroU64::new(self.geometry.axle_width_um as u64) {
             // nm / µm = 1e-3 rad; × 1e6 gives nrad (saturating only for absurd tick counts).
-            (right_nm - left_nm).saturating_mul(1_000_000) / self.geometry.axle_width_um as i64
+            Some(axle_um) => div_i64((right_nm - left_nm).saturating_mul(1_000_000), axle_um),
+            None => 0,
         };
         Step {
             left_nm,
@@ -229,8 +239,8 @@ fn scale(value: i64, fraction: i64) -> i64 {
 
 const fn round_thousandth(value: i64) -> i64 {
     if value >= 0 {
-        (value + 500) / 1000
+        div_i64(value + 500, THOUSAND)
     } else {
-        (value - 500) / 1000
+        div_i64(value - 500, THOUSAND)
     }
 }
