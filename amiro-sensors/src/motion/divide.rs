@@ -5,11 +5,15 @@
 //! so a plain `/` on `i64` calls the compiler's `__aeabi_ldivmod`, a shift-and-subtract loop whose
 //! worst case is about 1 800 cycles; the drive controller's step made some thirty of them and was
 //! the DiWheelDrive's costliest task. The functions here give exactly the quotient `/` gives, for
-//! every dividend and every non-zero divisor, in a fixed sequence of at most four `UDIV`s, a few
-//! multiplies and two corrections each, with no loop: schoolbook long division (Knuth, TAOCP vol. 2,
+//! every dividend and every non-zero divisor ([`div_u64`]), in a fixed sequence of at most three
+//! `UDIV`s, a few multiplies and two corrections each, with no loop: schoolbook long division (Knuth, TAOCP vol. 2,
 //! 4.3.1, algorithm D) in base 2¹⁶ digits, where the divisor normalised to 32 bits is two digits,
 //! so each quotient digit's estimate from its leading digit is corrected with the second digit to
 //! the exact one.
+//!
+//! A value divided by often — a constant, the axle width, a velocity window's time — is a
+//! [`Divisor`]: its reciprocal is taken once (by the compiler, for a constant), and each quotient
+//! is then a 64 × 64-bit multiply-high and one correction, cheaper still.
 //!
 //! The divisor is a [`NonZeroU64`]: a division by zero cannot be written, and every divisor the
 //! motion math uses is positive (lengths, time steps, constants).
@@ -52,26 +56,81 @@ pub const fn div_u64(n: u64, d: NonZeroU64) -> u64 {
     }
 }
 
-/// `n / d`, exactly as `i64`'s `/` by `d as i64` (rounding towards zero).
-pub const fn div_i64(n: i64, d: NonZeroU64) -> i64 {
-    // |i64::MIN| / 1 is 2⁶³, which wraps to i64::MIN and its negation is itself: still exact.
-    let q = div_u64(n.unsigned_abs(), d) as i64;
-    if n < 0 {
-        q.wrapping_neg()
-    } else {
-        q
+/// A divisor with its reciprocal, for a value divided by often (a constant, the geometry's axle
+/// width, a window's time): a quotient is then one 64 × 64-bit multiply-high (four `UMULL`s) and
+/// one correction, where [`div_u64`] normalises and estimates two digits.
+///
+/// The reciprocal is m = ⌊(2⁶⁴ − 1) / d⌋. For n < 2⁶⁴, m·d > 2⁶⁴ − 1 − d, so n·m / 2⁶⁴ lies in
+/// (n/d − 1, n/d): its floor is ⌊n/d⌋ or one less, and the remainder it leaves, n − q·d, tells which.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Divisor {
+    divisor: u64,
+    reciprocal: u64,
+}
+
+impl Divisor {
+    /// `d` with its reciprocal (one [`div_u64`]).
+    pub const fn new(d: NonZeroU64) -> Self {
+        Self {
+            divisor: d.get(),
+            reciprocal: div_u64(u64::MAX, d),
+        }
+    }
+
+    /// A divisor from a constant, for `const` items (the reciprocal is computed by the compiler):
+    /// a zero is a build error.
+    pub const fn constant(d: u64) -> Self {
+        Self::new(constant(d))
+    }
+
+    /// The divisor.
+    pub const fn get(&self) -> u64 {
+        self.divisor
+    }
+
+    /// `n / d`, exactly as `u64`'s `/`.
+    pub const fn div_u64(&self, n: u64) -> u64 {
+        let q = mul_high(n, self.reciprocal);
+        // q ≤ n / d, so q·d ≤ n: no overflow.
+        if n - q * self.divisor >= self.divisor {
+            q + 1
+        } else {
+            q
+        }
+    }
+
+    /// `n / d`, exactly as `i64`'s `/` by `d as i64` (rounding towards zero).
+    pub const fn div_i64(&self, n: i64) -> i64 {
+        let q = self.div_u64(n.unsigned_abs()) as i64;
+        if n < 0 {
+            q.wrapping_neg()
+        } else {
+            q
+        }
+    }
+
+    /// `n.rem_euclid(d as i64)`, exactly: the remainder in `0..d`.
+    pub const fn rem_euclid_i64(&self, n: i64) -> i64 {
+        let magnitude = n.unsigned_abs();
+        let r = magnitude - self.div_u64(magnitude) * self.divisor;
+        if n < 0 && r != 0 {
+            (self.divisor - r) as i64
+        } else {
+            r as i64
+        }
     }
 }
 
-/// `n.rem_euclid(d as i64)`, exactly: the remainder in `0..d`.
-pub const fn rem_euclid_i64(n: i64, d: NonZeroU64) -> i64 {
-    let magnitude = n.unsigned_abs();
-    let r = magnitude - div_u64(magnitude, d) * d.get(); // |n| mod d, in 0..d
-    if n < 0 && r != 0 {
-        (d.get() - r) as i64
-    } else {
-        r as i64
-    }
+/// The high 64 bits of `a · b`, from four 32 × 32-bit products.
+const fn mul_high(a: u64, b: u64) -> u64 {
+    let (a1, a0) = (a >> 32, a & 0xffff_ffff);
+    let (b1, b0) = (b >> 32, b & 0xffff_ffff);
+    let low = a0 * b0;
+    let cross_a = a1 * b0;
+    let cross_b = a0 * b1;
+    // The middle column: each term below 2³², their sum below 3·2³².
+    let middle = (low >> 32) + (cross_a & 0xffff_ffff) + (cross_b & 0xffff_ffff);
+    a1 * b1 + (cross_a >> 32) + (cross_b >> 32) + (middle >> 32)
 }
 
 /// `(high·2³² + low) / d` and its remainder, for `high < d`: the quotient fits 32 bits.
@@ -122,13 +181,15 @@ mod tests {
     fn check(n: u64, d: u64) {
         let nz = NonZeroU64::new(d).unwrap();
         assert_eq!(div_u64(n, nz), n / d, "{n} / {d}");
+        let divisor = Divisor::new(nz);
+        assert_eq!(divisor.div_u64(n), n / d, "{n} / {d} by its reciprocal");
         let signed = n as i64;
         if d <= i64::MAX as u64 {
-            assert_eq!(div_i64(signed, nz), signed / d as i64, "{signed} / {d}");
+            assert_eq!(divisor.div_i64(signed), signed / d as i64, "{signed} / {d}");
             assert_eq!(
-                rem_euclid_i64(signed, nz),
+                divisor.rem_euclid_i64(signed),
                 signed.rem_euclid(d as i64),
-                "{signed} rem {d}"
+                "{signed} rem {d} by its reciprocal"
             );
         }
     }
@@ -211,10 +272,12 @@ mod tests {
             77_000,
         ] {
             let nz = NonZeroU64::new(d).unwrap();
+            let divisor = Divisor::constant(d);
             for q in (0..200_000u64).chain((1u64 << 40)..(1u64 << 40) + 1000) {
                 let base = q.saturating_mul(d);
                 for n in [base, base.saturating_add(1), base.saturating_sub(1)] {
                     assert_eq!(div_u64(n, nz), n / d, "{n} / {d}");
+                    assert_eq!(divisor.div_u64(n), n / d, "{n} / {d} by its reciprocal");
                 }
             }
         }
@@ -222,16 +285,31 @@ mod tests {
 
     #[test]
     fn signed_extremes_round_towards_zero() {
-        let one = constant(1);
-        assert_eq!(div_i64(i64::MIN, one), i64::MIN);
-        assert_eq!(div_i64(i64::MIN, constant(2)), i64::MIN / 2);
-        assert_eq!(div_i64(-7, constant(2)), -3);
-        assert_eq!(rem_euclid_i64(-7, constant(3)), 2);
+        let one = Divisor::constant(1);
+        assert_eq!(one.div_i64(i64::MIN), i64::MIN);
+        assert_eq!(Divisor::constant(2).div_i64(i64::MIN), i64::MIN / 2);
+        assert_eq!(Divisor::constant(2).div_i64(-7), -3);
+        assert_eq!(Divisor::constant(3).rem_euclid_i64(-7), 2);
+        let turn = Divisor::constant(6_283_185_307);
         assert_eq!(
-            rem_euclid_i64(i64::MIN, constant(6_283_185_307)),
+            turn.rem_euclid_i64(i64::MIN),
             i64::MIN.rem_euclid(6_283_185_307)
         );
-        assert_eq!(div_i64(i64::MIN, constant(u64::MAX)), 0);
+        assert_eq!(Divisor::constant(u64::MAX).div_i64(i64::MIN), 0);
         assert_eq!(div_u64(u64::MAX, constant(u64::MAX)), 1);
+        assert_eq!(Divisor::constant(u64::MAX).div_u64(u64::MAX), 1);
+    }
+
+    #[test]
+    fn the_multiply_high_is_the_wide_product_s_high_half() {
+        let mut rng = Sweep(0x5555_aaaa_1234_4321);
+        for _ in 0..1_000_000 {
+            let (a, b) = (rng.next(), rng.next() >> (rng.next() % 64));
+            assert_eq!(
+                mul_high(a, b),
+                ((u128::from(a) * u128::from(b)) >> 64) as u64
+            );
+        }
+        assert_eq!(mul_high(u64::MAX, u64::MAX), u64::MAX - 1);
     }
 }

@@ -15,7 +15,7 @@ use core::num::NonZeroU64;
 
 use amiro_can::{MotorCommand, Odometry, SensorData, Topic, Velocity};
 
-use super::divide::div_i64;
+use super::divide::Divisor;
 use super::odometry::{DeadReckoning, DriveGeometry, EncoderTracker, Pose};
 use super::speed::{PiGains, WheelSpeedController};
 use super::Duty;
@@ -269,10 +269,13 @@ impl DriveController {
         let limit = i64::from(self.config.max_wheel_speed_um_s.max(0));
         let largest = left.abs().max(right.abs());
         match NonZeroU64::new(largest.unsigned_abs()) {
-            Some(divisor) if largest > limit => (
-                div_i64(left * limit, divisor),
-                div_i64(right * limit, divisor),
-            ),
+            Some(largest_um_s) if largest > limit => {
+                let largest = Divisor::new(largest_um_s);
+                (
+                    largest.div_i64(left * limit),
+                    largest.div_i64(right * limit),
+                )
+            }
             _ => (left, right),
         }
     }
@@ -298,12 +301,14 @@ impl DriveController {
         let Some(dt) = NonZeroU64::new(dt) else {
             return;
         };
+        // Four quotients by the window's time: its reciprocal once.
+        let dt = Divisor::new(dt);
         let motion = self.odometry.step(
             left.clamp(i32::MIN.into(), i32::MAX.into()) as i32,
             right.clamp(i32::MIN.into(), i32::MAX.into()) as i32,
         );
         // nm per µs = mm/s; × 1000 gives µm/s (and nrad per µs × 1000 gives µrad/s).
-        let per_second = |value: i64| div_i64(value.saturating_mul(1000), dt);
+        let per_second = |value: i64| dt.div_i64(value.saturating_mul(1000));
         let saturate = |value: i64| value.clamp(i32::MIN.into(), i32::MAX.into()) as i32;
         self.wheel_speeds_um_s = (per_second(motion.left_nm), per_second(motion.right_nm));
         self.velocity = Velocity {

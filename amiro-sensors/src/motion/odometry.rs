@@ -13,15 +13,15 @@
 
 use core::num::NonZeroU64;
 
-use super::divide::{constant, div_i64, div_u64};
+use super::divide::{div_u64, Divisor};
 use super::trig::{sin_cos, wrap_turn};
 
 /// π × 10⁹, for the wheel circumference.
 const PI_NANO: u64 = 3_141_592_654;
 /// The divisor from pm to nm and from nm to µm.
-const THOUSAND: NonZeroU64 = constant(1000);
+const THOUSAND: Divisor = Divisor::constant(1000);
 /// µrad/s × µm to µm/s of half the wheel speed difference.
-const TWO_MILLION: NonZeroU64 = constant(2_000_000);
+const TWO_MILLION: Divisor = Divisor::constant(2_000_000);
 
 /// The drive's mechanical constants.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -62,21 +62,14 @@ impl DriveGeometry {
 
     /// Wheel travel for `ticks` in nanometres (saturating far beyond any real travel).
     pub const fn ticks_to_nm(&self, ticks: i64) -> i64 {
-        let pm = ticks.saturating_mul(self.pm_per_tick());
-        if pm >= 0 {
-            div_i64(pm.saturating_add(500), THOUSAND)
-        } else {
-            div_i64(pm.saturating_sub(500), THOUSAND)
-        }
+        nm_from_pm(ticks.saturating_mul(self.pm_per_tick()))
     }
 
     /// Wheel speeds (left, right) in µm/s for a body velocity: `v ∓ ω · axle / 2`.
     pub const fn wheel_speeds_um_s(&self, velocity_um_s: i32, angular_urad_s: i32) -> (i64, i64) {
         // µrad/s × µm = 1e-12 m·rad/s; / 2 / 1e6 gives µm/s.
-        let half_difference = div_i64(
-            angular_urad_s as i64 * self.axle_width_um as i64,
-            TWO_MILLION,
-        );
+        let half_difference =
+            TWO_MILLION.div_i64(angular_urad_s as i64 * self.axle_width_um as i64);
         (
             velocity_um_s as i64 - half_difference,
             velocity_um_s as i64 + half_difference,
@@ -155,6 +148,10 @@ pub struct Step {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DeadReckoning {
     geometry: DriveGeometry,
+    /// The geometry's [`DriveGeometry::pm_per_tick`], computed once.
+    pm_per_tick: i64,
+    /// The axle width (µm) as a divisor; `None` for a zero width (no rotation is measured).
+    axle_um: Option<Divisor>,
     x_nm: i64,
     y_nm: i64,
     heading_nrad: i64,
@@ -165,6 +162,11 @@ impl DeadReckoning {
     pub const fn new(geometry: DriveGeometry) -> Self {
         Self {
             geometry,
+            pm_per_tick: geometry.pm_per_tick(),
+            axle_um: match NonZeroU64::new(geometry.axle_width_um as u64) {
+                Some(axle_um) => Some(Divisor::new(axle_um)),
+                None => None,
+            },
             x_nm: 0,
             y_nm: 0,
             heading_nrad: 0,
@@ -178,12 +180,13 @@ impl DeadReckoning {
 
     /// The wheel and body motion for tick differences, without moving the pose.
     pub const fn step(&self, left_ticks: i32, right_ticks: i32) -> Step {
-        let left_nm = self.geometry.ticks_to_nm(left_ticks as i64);
-        let right_nm = self.geometry.ticks_to_nm(right_ticks as i64);
+        // As DriveGeometry::ticks_to_nm, with the travel per tick computed once.
+        let left_nm = nm_from_pm((left_ticks as i64).saturating_mul(self.pm_per_tick));
+        let right_nm = nm_from_pm((right_ticks as i64).saturating_mul(self.pm_per_tick));
         let distance_nm = (left_nm + right_nm) / 2;
-        let rotation_nrad = match NonZeroU64::new(self.geometry.axle_width_um as u64) {
+        let rotation_nrad = match &self.axle_um {
             // nm / µm = 1e-3 rad; × 1e6 gives nrad (saturating only for absurd tick counts).
-            Some(axle_um) => div_i64((right_nm - left_nm).saturating_mul(1_000_000), axle_um),
+            Some(axle_um) => axle_um.div_i64((right_nm - left_nm).saturating_mul(1_000_000)),
             None => 0,
         };
         Step {
@@ -237,10 +240,19 @@ fn scale(value: i64, fraction: i64) -> i64 {
     ((product + (1 << 29)) >> 30) as i64
 }
 
+/// Picometres to nanometres, rounded half away from zero (saturating at the ends).
+const fn nm_from_pm(pm: i64) -> i64 {
+    if pm >= 0 {
+        THOUSAND.div_i64(pm.saturating_add(500))
+    } else {
+        THOUSAND.div_i64(pm.saturating_sub(500))
+    }
+}
+
 const fn round_thousandth(value: i64) -> i64 {
     if value >= 0 {
-        div_i64(value + 500, THOUSAND)
+        THOUSAND.div_i64(value + 500)
     } else {
-        div_i64(value - 500, THOUSAND)
+        THOUSAND.div_i64(value - 500)
     }
 }
