@@ -58,7 +58,10 @@ pub const fn div_u64(n: u64, d: NonZeroU64) -> u64 {
 
 /// A divisor with its reciprocal, for a value divided by often (a constant, the geometry's axle
 /// width, a window's time): a quotient is then one 64 × 64-bit multiply-high (four `UMULL`s) and
-/// one correction, where [`div_u64`] normalises and estimates two digits.
+/// one correction, where [`div_u64`] normalises and estimates two digits. The quotient is inlined
+/// at each use: it is short, a constant's reciprocal folds into it, and a function called from
+/// many places in one task is what the size-optimising build reaches through a register moved
+/// into an outlined helper, a call the bound cannot follow.
 ///
 /// The reciprocal is m = ⌊(2⁶⁴ − 1) / d⌋. For n < 2⁶⁴, m·d > 2⁶⁴ − 1 − d, so n·m / 2⁶⁴ lies in
 /// (n/d − 1, n/d): its floor is ⌊n/d⌋ or one less, and the remainder it leaves, n − q·d, tells which.
@@ -89,6 +92,7 @@ impl Divisor {
     }
 
     /// `n / d`, exactly as `u64`'s `/`.
+    #[inline(always)]
     pub const fn div_u64(&self, n: u64) -> u64 {
         let q = mul_high(n, self.reciprocal);
         // q ≤ n / d, so q·d ≤ n: no overflow.
@@ -100,6 +104,7 @@ impl Divisor {
     }
 
     /// `n / d`, exactly as `i64`'s `/` by `d as i64` (rounding towards zero).
+    #[inline(always)]
     pub const fn div_i64(&self, n: i64) -> i64 {
         let q = self.div_u64(n.unsigned_abs()) as i64;
         if n < 0 {
@@ -110,6 +115,7 @@ impl Divisor {
     }
 
     /// `n.rem_euclid(d as i64)`, exactly: the remainder in `0..d`.
+    #[inline(always)]
     pub const fn rem_euclid_i64(&self, n: i64) -> i64 {
         let magnitude = n.unsigned_abs();
         let r = magnitude - self.div_u64(magnitude) * self.divisor;
@@ -122,6 +128,7 @@ impl Divisor {
 }
 
 /// The high 64 bits of `a · b`, from four 32 × 32-bit products.
+#[inline(always)]
 const fn mul_high(a: u64, b: u64) -> u64 {
     let (a1, a0) = (a >> 32, a & 0xffff_ffff);
     let (b1, b0) = (b >> 32, b & 0xffff_ffff);
