@@ -183,7 +183,7 @@ impl DeadReckoning {
         // As DriveGeometry::ticks_to_nm, with the travel per tick computed once.
         let left_nm = nm_from_pm((left_ticks as i64).saturating_mul(self.pm_per_tick));
         let right_nm = nm_from_pm((right_ticks as i64).saturating_mul(self.pm_per_tick));
-        let distance_nm = (left_nm + right_nm) / 2;
+        let distance_nm = half(left_nm + right_nm);
         let rotation_nrad = match &self.axle_um {
             // nm / µm = 1e-3 rad; × 1e6 gives nrad (saturating only for absurd tick counts).
             Some(axle_um) => axle_um.div_i64((right_nm - left_nm).saturating_mul(1_000_000)),
@@ -200,7 +200,7 @@ impl DeadReckoning {
     /// Moves the pose by one step of tick differences and returns the step.
     pub fn advance(&mut self, left_ticks: i32, right_ticks: i32) -> Step {
         let step = self.step(left_ticks, right_ticks);
-        let (sin, cos) = sin_cos(self.heading_nrad + step.rotation_nrad / 2);
+        let (sin, cos) = sin_cos(self.heading_nrad + half(step.rotation_nrad));
         self.x_nm += scale(step.distance_nm, cos);
         self.y_nm += scale(step.distance_nm, sin);
         self.heading_nrad = wrap_turn(self.heading_nrad + step.rotation_nrad);
@@ -238,6 +238,13 @@ impl DeadReckoning {
 fn scale(value: i64, fraction: i64) -> i64 {
     let product = i128::from(value) * i128::from(fraction);
     ((product + (1 << 29)) >> 30) as i64
+}
+
+/// `value / 2` (rounding towards zero) by a shift: the size-optimised build calls
+/// `__aeabi_ldivmod` for an `i64` divided by 2.
+const fn half(value: i64) -> i64 {
+    // A negative value gets its odd bit added first, so the flooring shift rounds towards zero.
+    (value + ((value >> 63) & 1)) >> 1
 }
 
 /// Picometres to nanometres, rounded half away from zero (saturating at the ends).
