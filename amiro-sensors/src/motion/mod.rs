@@ -7,6 +7,7 @@
 //! nanoradians inside, microradians outside; time in microseconds. Frame: x forward, y to the left,
 //! heading counter-clockwise seen from above, as the protocol defines it.
 
+pub mod divide;
 pub mod drive;
 pub mod odometry;
 pub mod speed;

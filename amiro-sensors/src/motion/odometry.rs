@@ -11,10 +11,17 @@
 //! along the heading halfway through the turn `dθ = (dr - dl) / axle`. Position is kept in
 //! nanometres and heading in nanoradians so rounding does not accumulate into anything visible.
 
+use core::num::NonZeroU64;
+
+use super::divide::{div_u64, Divisor};
 use super::trig::{sin_cos, wrap_turn};
 
 /// π × 10⁹, for the wheel circumference.
 const PI_NANO: u64 = 3_141_592_654;
+/// The divisor from pm to nm and from nm to µm.
+const THOUSAND: Divisor = Divisor::constant(1000);
+/// µrad/s × µm to µm/s of half the wheel speed difference.
+const TWO_MILLION: Divisor = Divisor::constant(2_000_000);
 
 /// The drive's mechanical constants.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,31 +48,28 @@ impl DriveGeometry {
     /// Wheel travel per tick in picometres (124 302 647 pm for the AMiRo). Zero ticks per
     /// revolution gives 0 (no motion is ever measured) rather than a division fault.
     pub const fn pm_per_tick(&self) -> i64 {
-        if self.ticks_per_revolution == 0 {
-            return 0;
-        }
         // π × 10⁹ × d [µm] is the circumference in fm (at most 1.35e19: fits a u64); shared out
         // over the ticks and divided by 1000 for pm. 64-bit only, so the chip needs no 128-bit
         // division routine.
         let circumference_fm = PI_NANO * self.wheel_diameter_um as u64;
-        let denominator = self.ticks_per_revolution as u64 * 1000;
-        ((circumference_fm + denominator / 2) / denominator) as i64
+        match NonZeroU64::new(self.ticks_per_revolution as u64 * 1000) {
+            Some(denominator) => {
+                div_u64(circumference_fm + denominator.get() / 2, denominator) as i64
+            }
+            None => 0,
+        }
     }
 
     /// Wheel travel for `ticks` in nanometres (saturating far beyond any real travel).
     pub const fn ticks_to_nm(&self, ticks: i64) -> i64 {
-        let pm = ticks.saturating_mul(self.pm_per_tick());
-        if pm >= 0 {
-            pm.saturating_add(500) / 1000
-        } else {
-            pm.saturating_sub(500) / 1000
-        }
+        nm_from_pm(ticks.saturating_mul(self.pm_per_tick()))
     }
 
     /// Wheel speeds (left, right) in µm/s for a body velocity: `v ∓ ω · axle / 2`.
     pub const fn wheel_speeds_um_s(&self, velocity_um_s: i32, angular_urad_s: i32) -> (i64, i64) {
         // µrad/s × µm = 1e-12 m·rad/s; / 2 / 1e6 gives µm/s.
-        let half_difference = angular_urad_s as i64 * self.axle_width_um as i64 / 2_000_000;
+        let half_difference =
+            TWO_MILLION.div_i64(angular_urad_s as i64 * self.axle_width_um as i64);
         (
             velocity_um_s as i64 - half_difference,
             velocity_um_s as i64 + half_difference,
@@ -144,6 +148,10 @@ pub struct Step {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DeadReckoning {
     geometry: DriveGeometry,
+    /// The geometry's [`DriveGeometry::pm_per_tick`], computed once.
+    pm_per_tick: i64,
+    /// The axle width (µm) as a divisor; `None` for a zero width (no rotation is measured).
+    axle_um: Option<Divisor>,
     x_nm: i64,
     y_nm: i64,
     heading_nrad: i64,
@@ -154,6 +162,11 @@ impl DeadReckoning {
     pub const fn new(geometry: DriveGeometry) -> Self {
         Self {
             geometry,
+            pm_per_tick: geometry.pm_per_tick(),
+            axle_um: match NonZeroU64::new(geometry.axle_width_um as u64) {
+                Some(axle_um) => Some(Divisor::new(axle_um)),
+                None => None,
+            },
             x_nm: 0,
             y_nm: 0,
             heading_nrad: 0,
@@ -167,14 +180,14 @@ impl DeadReckoning {
 
     /// The wheel and body motion for tick differences, without moving the pose.
     pub const fn step(&self, left_ticks: i32, right_ticks: i32) -> Step {
-        let left_nm = self.geometry.ticks_to_nm(left_ticks as i64);
-        let right_nm = self.geometry.ticks_to_nm(right_ticks as i64);
-        let distance_nm = (left_nm + right_nm) / 2;
-        let rotation_nrad = if self.geometry.axle_width_um == 0 {
-            0
-        } else {
+        // As DriveGeometry::ticks_to_nm, with the travel per tick computed once.
+        let left_nm = nm_from_pm((left_ticks as i64).saturating_mul(self.pm_per_tick));
+        let right_nm = nm_from_pm((right_ticks as i64).saturating_mul(self.pm_per_tick));
+        let distance_nm = half(left_nm + right_nm);
+        let rotation_nrad = match &self.axle_um {
             // nm / µm = 1e-3 rad; × 1e6 gives nrad (saturating only for absurd tick counts).
-            (right_nm - left_nm).saturating_mul(1_000_000) / self.geometry.axle_width_um as i64
+            Some(axle_um) => axle_um.div_i64((right_nm - left_nm).saturating_mul(1_000_000)),
+            None => 0,
         };
         Step {
             left_nm,
@@ -187,7 +200,7 @@ impl DeadReckoning {
     /// Moves the pose by one step of tick differences and returns the step.
     pub fn advance(&mut self, left_ticks: i32, right_ticks: i32) -> Step {
         let step = self.step(left_ticks, right_ticks);
-        let (sin, cos) = sin_cos(self.heading_nrad + step.rotation_nrad / 2);
+        let (sin, cos) = sin_cos(self.heading_nrad + half(step.rotation_nrad));
         self.x_nm += scale(step.distance_nm, cos);
         self.y_nm += scale(step.distance_nm, sin);
         self.heading_nrad = wrap_turn(self.heading_nrad + step.rotation_nrad);
@@ -227,10 +240,26 @@ fn scale(value: i64, fraction: i64) -> i64 {
     ((product + (1 << 29)) >> 30) as i64
 }
 
+/// `value / 2` (rounding towards zero) by a shift: the size-optimised build calls
+/// `__aeabi_ldivmod` for an `i64` divided by 2.
+const fn half(value: i64) -> i64 {
+    // A negative value gets its odd bit added first, so the flooring shift rounds towards zero.
+    (value + ((value >> 63) & 1)) >> 1
+}
+
+/// Picometres to nanometres, rounded half away from zero (saturating at the ends).
+const fn nm_from_pm(pm: i64) -> i64 {
+    if pm >= 0 {
+        THOUSAND.div_i64(pm.saturating_add(500))
+    } else {
+        THOUSAND.div_i64(pm.saturating_sub(500))
+    }
+}
+
 const fn round_thousandth(value: i64) -> i64 {
     if value >= 0 {
-        (value + 500) / 1000
+        THOUSAND.div_i64(value + 500)
     } else {
-        (value - 500) / 1000
+        THOUSAND.div_i64(value - 500)
     }
 }

@@ -10,6 +10,7 @@
 //! harder outward. Units are chosen so integer gains have a plain meaning: `kff` and `kp` in duty
 //! (1/10 000) per m/s, `ki` in duty per metre of accumulated speed error.
 
+use super::divide::Divisor;
 use super::Duty;
 
 /// Controller gains and limits.
@@ -54,6 +55,12 @@ pub const LIMIT_GUARD_PER_MILLE: i64 = 20;
 const LAG_STEPS: i64 = 2;
 /// One duty in the integrator's unit (duty × 10⁻¹²: ki [duty/m] × error [µm/s] × dt [µs]).
 const INTEGRAL_PER_DUTY: i64 = 1_000_000_000_000;
+/// [`INTEGRAL_PER_DUTY`] as a divisor.
+const PER_DUTY: Divisor = Divisor::constant(INTEGRAL_PER_DUTY as u64);
+/// Per mille.
+const THOUSAND: Divisor = Divisor::constant(1000);
+/// µm/s per m/s (the gains' unit).
+const MILLION: Divisor = Divisor::constant(1_000_000);
 
 /// One wheel's controller state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -89,7 +96,7 @@ impl WheelSpeedController {
 
     /// The integral term in duty units.
     pub const fn integral_duty(&self) -> i64 {
-        self.integral / INTEGRAL_PER_DUTY
+        PER_DUTY.div_i64(self.integral)
     }
 
     /// One control step of `dt_us` towards `target_um_s` given `measured_um_s`, with no speed
@@ -116,7 +123,7 @@ impl WheelSpeedController {
         let speed_limit = limit_um_s.clamp(0, MAX_ERROR_UM_S);
         // Regulate to a ceiling a guard band below the limit: the measurement's resolution and
         // the loop's ripple around its set-point then stay under the limit.
-        let guard = speed_limit * LIMIT_GUARD_PER_MILLE / 1000;
+        let guard = THOUSAND.div_i64(speed_limit * LIMIT_GUARD_PER_MILLE);
         let ceiling = speed_limit - guard;
         let target = target_um_s.clamp(-ceiling, ceiling);
         let measured = measured_um_s.clamp(-MAX_ERROR_UM_S, MAX_ERROR_UM_S);
@@ -133,8 +140,8 @@ impl WheelSpeedController {
         let error = target
             .saturating_sub(feedback)
             .clamp(-MAX_ERROR_UM_S, MAX_ERROR_UM_S);
-        let feed_forward = i64::from(self.gains.kff) * target / 1_000_000;
-        let proportional = i64::from(self.gains.kp) * error / 1_000_000;
+        let feed_forward = MILLION.div_i64(i64::from(self.gains.kff) * target);
+        let proportional = MILLION.div_i64(i64::from(self.gains.kp) * error);
         let mut step = i64::from(self.gains.ki)
             .saturating_mul(error)
             .saturating_mul(i64::from(dt_us));
@@ -155,7 +162,7 @@ impl WheelSpeedController {
         let integral_limit = limit.saturating_mul(INTEGRAL_PER_DUTY);
         self.integral = integral.clamp(-integral_limit, integral_limit);
         let mut output =
-            (feed_forward + proportional + self.integral / INTEGRAL_PER_DUTY).clamp(-limit, limit);
+            (feed_forward + proportional + PER_DUTY.div_i64(self.integral)).clamp(-limit, limit);
         if near_limit && output.signum() == target.signum() && predicted.abs() >= ceiling {
             // Push no harder than last time in the direction the wheel already runs at the limit.
             let held = if self.last_output.signum() == output.signum() {

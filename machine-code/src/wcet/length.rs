@@ -288,9 +288,10 @@ fn all_then(it: &Insn) -> bool {
 }
 
 /// The function a call through a register at the end of block `block` reaches when the register holds a
-/// constant address: its only write in the function is a literal load (`LDR rX, [PC, #k]`) or a
-/// `MOVW`/`MOVT` pair, in a block that dominates the call (or before it in the call's block). The
-/// address with its Thumb bit cleared.
+/// constant address: its last write on every way into the call is a literal load (`LDR rX, [PC, #k]`)
+/// or a `MOVW`/`MOVT` pair of the same address, or a plain copy (`MOV rX, rY`) of a register that
+/// holds it so (the compiler keeps a function's address in one register for several calls and may
+/// move it to another between them). The address with its Thumb bit cleared.
 pub fn constant_target(
     image: &crate::Image,
     insns: &[Insn],
@@ -312,13 +313,19 @@ pub fn constant_target(
             .map(|(p, _)| p)
     };
     let mut value = None;
+    // (block, register) pairs whose predecessors are queued; a copy goes back within its block, so
+    // the search ends.
     let mut seen = std::collections::BTreeSet::new();
-    let mut work = vec![(block, b.last)];
-    while let Some((x, end)) = work.pop() {
+    let mut work = vec![(block, b.last, r)];
+    while let Some((x, end, r)) = work.pop() {
         let blk = &graph.blocks[x];
         let run = &insns[blk.first..end];
         match run.iter().rposition(|i| i.writes().contains(r)) {
             Some(at) => {
+                if let Some(source) = register_copy(&run[at], r) {
+                    work.push((x, blk.first + at, source));
+                    continue;
+                }
                 let v = loaded_address(image, run, at, r)?;
                 if value.is_some_and(|known| known != v) {
                     return None;
@@ -329,14 +336,32 @@ pub fn constant_target(
             None if x == 0 => return None,
             None => {
                 for p in preds(x) {
-                    if seen.insert(p) {
-                        work.push((p, graph.blocks[p].last + 1));
+                    if seen.insert((p, r)) {
+                        work.push((p, graph.blocks[p].last + 1, r));
                     }
                 }
             }
         }
     }
     value.map(|v| u64::from(v & !1))
+}
+
+/// The register `w` copies into `r` when it is a plain, unconditional `MOV r, rY` (no shift, no
+/// immediate).
+fn register_copy(w: &Insn, r: u8) -> Option<u8> {
+    if w.inst.opcode != Opcode::MOV || w.conditional {
+        return None;
+    }
+    let [d, source] = w.registers()[..] else {
+        return None;
+    };
+    let operands = w
+        .inst
+        .operands
+        .iter()
+        .filter(|o| !matches!(o, Operand::Nothing))
+        .count();
+    (d == r && operands == 2).then_some(source)
 }
 
 /// The address the write of `r` at `run[at]` puts there: a literal load, or the high half of a `MOVW`/`MOVT`

@@ -683,6 +683,46 @@ fn a_register_loaded_with_one_function_address_is_a_direct_call() {
 }
 
 #[test]
+fn a_function_address_copied_to_another_register_is_a_direct_call() {
+    // The compiler keeps a function's address in one register for several calls and moves it to
+    // another between them (`mov r12, r3; blx r12`): the copy holds the same address.
+    let img = image(
+        &[
+            0xb580, // 0x00 push {r7, lr}
+            0x4b03, // 0x02 ldr r3, [pc, #12]: the literal at 0x10
+            0x469c, // 0x04 mov r12, r3
+            0x47e0, // 0x06 blx r12
+            0xbd80, // 0x08 pop {r7, pc}
+            0x2005, // 0x0a movs r0, #5   (five)
+            0x4770, // 0x0c bx lr
+            0xbf00, // 0x0e (padding)
+            0x000b, 0x0000, // 0x10 .word five | 1
+        ],
+        &[
+            Sym::function("caller", 0, 0x0a),
+            Sym::function("five", 0x0a, 4),
+            Sym::data(0x0e),
+        ],
+    );
+    let b = bound(&img, "caller", F103_0WS);
+    // push, ldr, mov, blx, the callee's movs and bx lr, pop.
+    assert_eq!((b.instructions, b.declined.as_deref()), (7, None));
+    // A copy of an argument register holds no known address: the call stays unresolved.
+    let img = image(
+        &[
+            0xb580, // 0x00 push {r7, lr}
+            0x4684, // 0x02 mov r12, r0
+            0x47e0, // 0x04 blx r12
+            0xbd80, // 0x06 pop {r7, pc}
+        ],
+        &[Sym::function("caller", 0, 8)],
+    );
+    let b = bound(&img, "caller", F103_0WS);
+    let reason = b.declined.expect("a call through an argument is declined");
+    assert!(reason.contains("call through a register"), "{reason}");
+}
+
+#[test]
 fn a_stated_length_bounds_a_call_the_machine_code_does_not_fix() {
     // The length is read from memory: nothing in the machine code fixes it.
     let code = thumb(&with_memclr(&[
