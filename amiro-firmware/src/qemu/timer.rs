@@ -441,7 +441,7 @@ pub(super) async fn platform_delay_until(at: u64) {
     let mut delay = core::pin::pin!(PLATFORM_QUEUE.delay_until(at));
     let mut first = true;
     core::future::poll_fn(|cx| {
-        if !core::mem::take(&mut first) {
+        if !core::mem::take(&mut first) || !TICKLESS.load(Ordering::Relaxed) {
             return delay.as_mut().poll(cx);
         }
         critical_section::with(|cs| {
