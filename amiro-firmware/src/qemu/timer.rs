@@ -24,6 +24,10 @@
 //! is idle again sets nothing up. A busy core still gets SysTick set up for its next deadline:
 //! the running period is kept when it ends before it ([`keep_until`]), else restarted.
 //!
+//! **A platform wait sets itself up.** Tickless, a wait that becomes the platform queue's head
+//! restarts SysTick for its deadline in its first poll ([`platform_delay_until`]) instead of
+//! pending the interrupt as rtic-time's queues do (the exchange's every wait did).
+//!
 //! **One reading per interrupt.** Tickless, the SysTick interrupt reads the clock once before
 //! the queues and once after them, and both queues' expiry checks take the first tick
 //! ([`HANDLER_TICK`]; rtic-time's `on_monotonic_interrupt` reads `now` at least twice per queue
