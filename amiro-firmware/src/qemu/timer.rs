@@ -28,16 +28,13 @@
 //! restarts SysTick for its deadline in its first poll ([`platform_delay_until`]) instead of
 //! pending the interrupt as rtic-time's queues do (the exchange's every wait did).
 //!
-//! **One reading per interrupt.** Tickless, the SysTick interrupt reads the clock once before
-//! the queues and once after them, and both queues' expiry checks take the first tick
-//! ([`HANDLER_TICK`]; rtic-time's `on_monotonic_interrupt` reads `now` at least twice per queue
-//! and once more per expired wait). Every reading is two SysTick register reads, each an I/O
-//! instruction that QEMU's `-icount` makes end its translation block and sends through its device
-//! dispatch: the queues' readings were half of a board's clock readings in a robot run
-//! (docs/qemu.md, "Speed"). A deadline that came while the queues ran is expired in the same
-//! interrupt, as rtic-time's own second look would: the reading after them finds it due, and the
-//! queues run again with that tick. The restart's reading stays: its period starts from it, and an
-//! older reading would make the board's clock lose the interrupt's cycles at every restart.
+//! **No held reading.** Tickless, the queues' expiry checks read the clock themselves (rtic-time's
+//! `on_monotonic_interrupt`: at least twice per queue), and the interrupt reads it once more after
+//! both: a deadline that came while they ran is expired in the same interrupt. A single reading
+//! taken at the interrupt's start and held for both queues' checks (a quarter fewer SysTick register
+//! reads, no CPU gain measured) made DiWheelDrive's magnetometer miss samples in the 10 s thesis
+//! demo — 147 gaps of over a millisecond, the longest 10.8 ms — on the tree it was merged into
+//! (docs/qemu.md, "A new wait sets up its own deadline"); why is not found.
 //!
 //! Periodic, the tick count is one per wrap (COUNTFLAG, as rtic-monotonics' SysTick counts it: the
 //! cheapest reading, which the scenarios' cost figures were measured with). Tickless, the clock is
@@ -115,11 +112,6 @@ static APP_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
 /// The platform's earliest deadline in ticks (`u64::MAX`: none).
 static PLATFORM_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
 static TICKLESS: AtomicBool = AtomicBool::new(false);
-/// Tickless: the tick the running SysTick interrupt read before its queues, which both queues'
-/// expiry checks take ([`NO_TICK`] outside it).
-static HANDLER_TICK: AtomicU64 = AtomicU64::new(NO_TICK);
-/// [`HANDLER_TICK`] outside the SysTick interrupt.
-const NO_TICK: u64 = u64::MAX;
 const PER_TICK: u32 = CYCLES_PER_TICK as u32;
 
 /// Counts a wrap if SysTick has wrapped since the last look (reading the status clears
@@ -196,10 +188,6 @@ pub fn now_ticks() -> u64 {
             PERIODIC.fetch_add(1, Ordering::AcqRel);
         }
         return PERIODIC.load(Ordering::Relaxed);
-    }
-    let held = HANDLER_TICK.load(Ordering::Relaxed);
-    if held != NO_TICK {
-        return held;
     }
     read_ticks()
 }
@@ -540,9 +528,8 @@ unsafe extern "C" fn SysTick() {
         unsafe { run_queues() };
         return;
     }
-    // One reading for both queues' expiry checks, and one after them: a deadline that came
-    // meanwhile is expired in this interrupt too (module docs, "One reading per interrupt").
-    HANDLER_TICK.store(read_ticks(), Ordering::Relaxed);
+    // A deadline that came while the queues ran is expired in this interrupt too (module docs,
+    // "No held reading").
     loop {
         // SAFETY: this is the SysTick exception.
         unsafe { run_queues() };
@@ -553,9 +540,7 @@ unsafe extern "C" fn SysTick() {
         if due > now {
             break;
         }
-        HANDLER_TICK.store(now, Ordering::Relaxed);
     }
-    HANDLER_TICK.store(NO_TICK, Ordering::Relaxed);
     // A core left idle by this interrupt goes to its next deadline at once (`skip_to_deadline`):
     // SysTick need not be set up for it (a restart costs QEMU a timer expiry).
     if !super::robot::idle_after_systick() {
