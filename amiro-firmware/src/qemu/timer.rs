@@ -24,16 +24,17 @@
 //! is idle again sets nothing up. A busy core still gets SysTick set up for its next deadline:
 //! the running period is kept when it ends before it ([`keep_until`]), else restarted.
 //!
-//! **One reading per interrupt.** Tickless, the SysTick interrupt reads the clock once before
-//! the queues and once after them, and both queues' expiry checks take the first tick
-//! ([`HANDLER_TICK`]; rtic-time's `on_monotonic_interrupt` reads `now` at least twice per queue
-//! and once more per expired wait). Every reading is two SysTick register reads, each an I/O
-//! instruction that QEMU's `-icount` makes end its translation block and sends through its device
-//! dispatch: the queues' readings were half of a board's clock readings in a robot run
-//! (docs/qemu.md, "Speed"). A deadline that came while the queues ran is expired in the same
-//! interrupt, as rtic-time's own second look would: the reading after them finds it due, and the
-//! queues run again with that tick. The restart's reading stays: its period starts from it, and an
-//! older reading would make the board's clock lose the interrupt's cycles at every restart.
+//! **A platform wait sets itself up.** Tickless, a wait that becomes the platform queue's head
+//! restarts SysTick for its deadline in its first poll ([`platform_delay_until`]) instead of
+//! pending the interrupt as rtic-time's queues do (the exchange's every wait did).
+//!
+//! **No held reading.** Tickless, the queues' expiry checks read the clock themselves (rtic-time's
+//! `on_monotonic_interrupt`: at least twice per queue), and the interrupt reads it once more after
+//! both: a deadline that came while they ran is expired in the same interrupt. A single reading
+//! taken at the interrupt's start and held for both queues' checks (a quarter fewer SysTick register
+//! reads, no CPU gain measured) made DiWheelDrive's magnetometer miss samples in the 10 s thesis
+//! demo — 147 gaps of over a millisecond, the longest 10.8 ms — on the tree it was merged into
+//! (docs/qemu.md, "A new wait sets up its own deadline"); why is not found.
 //!
 //! Periodic, the tick count is one per wrap (COUNTFLAG, as rtic-monotonics' SysTick counts it: the
 //! cheapest reading, which the scenarios' cost figures were measured with). Tickless, the clock is
@@ -111,11 +112,6 @@ static APP_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
 /// The platform's earliest deadline in ticks (`u64::MAX`: none).
 static PLATFORM_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
 static TICKLESS: AtomicBool = AtomicBool::new(false);
-/// Tickless: the tick the running SysTick interrupt read before its queues, which both queues'
-/// expiry checks take ([`NO_TICK`] outside it).
-static HANDLER_TICK: AtomicU64 = AtomicU64::new(NO_TICK);
-/// [`HANDLER_TICK`] outside the SysTick interrupt.
-const NO_TICK: u64 = u64::MAX;
 const PER_TICK: u32 = CYCLES_PER_TICK as u32;
 
 /// Counts a wrap if SysTick has wrapped since the last look (reading the status clears
@@ -192,10 +188,6 @@ pub fn now_ticks() -> u64 {
             PERIODIC.fetch_add(1, Ordering::AcqRel);
         }
         return PERIODIC.load(Ordering::Relaxed);
-    }
-    let held = HANDLER_TICK.load(Ordering::Relaxed);
-    if held != NO_TICK {
-        return held;
     }
     read_ticks()
 }
@@ -357,7 +349,7 @@ fn set_up_next(clock: &mut Clock, due: u64) {
 /// A timer queue over the tick count whose next expiry is the word `$due` (the tick interrupt reads
 /// it): the two backends differ only in their queue and that word.
 macro_rules! tick_backend {
-    ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident) => {
+    ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident, $pend:path) => {
         $(#[$doc])*
         pub struct $backend;
 
@@ -377,7 +369,7 @@ macro_rules! tick_backend {
             fn clear_compare_flag() {}
 
             fn pend_interrupt() {
-                cortex_m::peripheral::SCB::set_pendst();
+                $pend();
             }
 
             fn on_interrupt() {}
@@ -399,19 +391,64 @@ tick_backend!(
     /// The apps' timer queue over the tick count.
     AppTimer,
     APP_QUEUE,
-    APP_DUE
+    APP_DUE,
+    cortex_m::peripheral::SCB::set_pendst
 );
 tick_backend!(
     /// The platform's timer queue (the robot exchange, the stimulus replay) over the tick count.
     PlatformTimer,
     PLATFORM_QUEUE,
-    PLATFORM_DUE
+    PLATFORM_DUE,
+    platform_head_changed
 );
+
+/// Tickless: a wait's first poll made its deadline the platform queue's head
+/// ([`platform_delay_until`] sets it up itself).
+static PLATFORM_HEAD_NEW: AtomicBool = AtomicBool::new(false);
+
+/// The platform queue's head changed in a wait's first poll (rtic-time's `pend_interrupt`).
+/// Periodic: SysTick is pended, which updates [`PLATFORM_DUE`] and SysTick (as the apps' queue
+/// does). Tickless: the wait sets up its own deadline ([`platform_delay_until`]).
+fn platform_head_changed() {
+    if TICKLESS.load(Ordering::Relaxed) {
+        PLATFORM_HEAD_NEW.store(true, Ordering::Relaxed);
+    } else {
+        cortex_m::peripheral::SCB::set_pendst();
+    }
+}
 
 /// Waits on the platform's queue until tick `at` (no trace record: the platform's wait, not a
 /// task of the app's).
+///
+/// **A new wait sets up its deadline itself** (tickless). rtic-time pends the timer's interrupt
+/// when a wait becomes its queue's head, so that the interrupt reads the head and sets up the
+/// timer; the exchange's every wait does, and that interrupt (entry, both queues' checks, two
+/// clock readings, exit) was about one in seven of DiWheelDrive's SysTick interrupts in the
+/// thesis demo. The wait's first poll runs in a critical section here: when it made `at` the
+/// head, nothing can have changed the queue since, so [`PLATFORM_DUE`] is `at` and SysTick is
+/// set up for it at once ([`restart`]: a deadline already due or closer than half a tick still
+/// pends the interrupt). Unless SysTick is pending already: its interrupt sets everything up.
 pub(super) async fn platform_delay_until(at: u64) {
-    PLATFORM_QUEUE.delay_until(at).await;
+    use core::future::Future;
+    let mut delay = core::pin::pin!(PLATFORM_QUEUE.delay_until(at));
+    let mut first = true;
+    core::future::poll_fn(|cx| {
+        if !core::mem::take(&mut first) || !TICKLESS.load(Ordering::Relaxed) {
+            return delay.as_mut().poll(cx);
+        }
+        critical_section::with(|cs| {
+            PLATFORM_HEAD_NEW.store(false, Ordering::Relaxed);
+            let polled = delay.as_mut().poll(cx);
+            if polled.is_pending() && PLATFORM_HEAD_NEW.swap(false, Ordering::Relaxed) {
+                PLATFORM_DUE.store(at, Ordering::Relaxed);
+                if !super::robot::systick_pending() {
+                    restart(cs, &mut CLOCK.borrow_ref_mut(cs));
+                }
+            }
+            polled
+        })
+    })
+    .await;
 }
 
 /// Starts SysTick at one tick per [`TICK_US`] (periodic) and both queues.
@@ -491,9 +528,8 @@ unsafe extern "C" fn SysTick() {
         unsafe { run_queues() };
         return;
     }
-    // One reading for both queues' expiry checks, and one after them: a deadline that came
-    // meanwhile is expired in this interrupt too (module docs, "One reading per interrupt").
-    HANDLER_TICK.store(read_ticks(), Ordering::Relaxed);
+    // A deadline that came while the queues ran is expired in this interrupt too (module docs,
+    // "No held reading").
     loop {
         // SAFETY: this is the SysTick exception.
         unsafe { run_queues() };
@@ -504,9 +540,7 @@ unsafe extern "C" fn SysTick() {
         if due > now {
             break;
         }
-        HANDLER_TICK.store(now, Ordering::Relaxed);
     }
-    HANDLER_TICK.store(NO_TICK, Ordering::Relaxed);
     // A core left idle by this interrupt goes to its next deadline at once (`skip_to_deadline`):
     // SysTick need not be set up for it (a restart costs QEMU a timer expiry).
     if !super::robot::idle_after_systick() {
