@@ -332,12 +332,6 @@ pub(super) fn nothing_else_pending() -> bool {
     unsafe { core::ptr::read_volatile(ICSR) & ICSR_VECTPENDING == 0 }
 }
 
-/// Whether SysTick's interrupt is pending (ICSR's PENDSTSET).
-pub(super) fn systick_pending() -> bool {
-    // SAFETY: as above.
-    unsafe { core::ptr::read_volatile(ICSR) & (1 << 26) != 0 }
-}
-
 /// Called at the end of SysTick's interrupt: the core goes idle when it returns (nothing pending,
 /// no other handler pre-empted, the background task [`parked`]), so the next deadline is reached
 /// by `timer::skip_to_deadline`, not by SysTick.

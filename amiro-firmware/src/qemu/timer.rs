@@ -349,7 +349,7 @@ fn set_up_next(clock: &mut Clock, due: u64) {
 /// A timer queue over the tick count whose next expiry is the word `$due` (the tick interrupt reads
 /// it): the two backends differ only in their queue and that word.
 macro_rules! tick_backend {
-    ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident, $pend:path) => {
+    ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident) => {
         $(#[$doc])*
         pub struct $backend;
 
@@ -369,7 +369,7 @@ macro_rules! tick_backend {
             fn clear_compare_flag() {}
 
             fn pend_interrupt() {
-                $pend();
+                cortex_m::peripheral::SCB::set_pendst();
             }
 
             fn on_interrupt() {}
@@ -391,64 +391,19 @@ tick_backend!(
     /// The apps' timer queue over the tick count.
     AppTimer,
     APP_QUEUE,
-    APP_DUE,
-    cortex_m::peripheral::SCB::set_pendst
+    APP_DUE
 );
 tick_backend!(
     /// The platform's timer queue (the robot exchange, the stimulus replay) over the tick count.
     PlatformTimer,
     PLATFORM_QUEUE,
-    PLATFORM_DUE,
-    platform_head_changed
+    PLATFORM_DUE
 );
-
-/// Tickless: a wait's first poll made its deadline the platform queue's head
-/// ([`platform_delay_until`] sets it up itself).
-static PLATFORM_HEAD_NEW: AtomicBool = AtomicBool::new(false);
-
-/// The platform queue's head changed in a wait's first poll (rtic-time's `pend_interrupt`).
-/// Periodic: SysTick is pended, which updates [`PLATFORM_DUE`] and SysTick (as the apps' queue
-/// does). Tickless: the wait sets up its own deadline ([`platform_delay_until`]).
-fn platform_head_changed() {
-    if TICKLESS.load(Ordering::Relaxed) {
-        PLATFORM_HEAD_NEW.store(true, Ordering::Relaxed);
-    } else {
-        cortex_m::peripheral::SCB::set_pendst();
-    }
-}
 
 /// Waits on the platform's queue until tick `at` (no trace record: the platform's wait, not a
 /// task of the app's).
-///
-/// **A new wait sets up its deadline itself** (tickless). rtic-time pends the timer's interrupt
-/// when a wait becomes its queue's head, so that the interrupt reads the head and sets up the
-/// timer; the exchange's every wait does, and that interrupt (entry, both queues' checks, two
-/// clock readings, exit) was about one in seven of DiWheelDrive's SysTick interrupts in the
-/// thesis demo. The wait's first poll runs in a critical section here: when it made `at` the
-/// head, nothing can have changed the queue since, so [`PLATFORM_DUE`] is `at` and SysTick is
-/// set up for it at once ([`restart`]: a deadline already due or closer than half a tick still
-/// pends the interrupt). Unless SysTick is pending already: its interrupt sets everything up.
 pub(super) async fn platform_delay_until(at: u64) {
-    use core::future::Future;
-    let mut delay = core::pin::pin!(PLATFORM_QUEUE.delay_until(at));
-    let mut first = true;
-    core::future::poll_fn(|cx| {
-        if !core::mem::take(&mut first) || !TICKLESS.load(Ordering::Relaxed) {
-            return delay.as_mut().poll(cx);
-        }
-        critical_section::with(|cs| {
-            PLATFORM_HEAD_NEW.store(false, Ordering::Relaxed);
-            let polled = delay.as_mut().poll(cx);
-            if polled.is_pending() && PLATFORM_HEAD_NEW.swap(false, Ordering::Relaxed) {
-                PLATFORM_DUE.store(at, Ordering::Relaxed);
-                if !super::robot::systick_pending() {
-                    restart(cs, &mut CLOCK.borrow_ref_mut(cs));
-                }
-            }
-            polled
-        })
-    })
-    .await;
+    PLATFORM_QUEUE.delay_until(at).await;
 }
 
 /// Starts SysTick at one tick per [`TICK_US`] (periodic) and both queues.
