@@ -441,8 +441,25 @@ impl BoundsFile {
                 t.declined = None;
                 t.job = h.job.clone();
             }
-            if h.sections.is_some() {
-                t.sections = h.sections.clone();
+            if let Some(mut sections) = h.sections.clone() {
+                // A section is part of its job, so no longer than the job's bound: the sections of a
+                // row bounded per part (a publisher's topic) come from the whole task's paths and may
+                // be longer than the part's job; the job's bound is the sound and tighter figure.
+                let job = h.job.as_ref().map(|j| (j.cycles, j.us, 0.0));
+                let whole = match (h.cycles, h.us) {
+                    (Some(c), Some(us)) => Some((c, us, h.bus_wait_us)),
+                    _ => None,
+                };
+                if let Some((cap_cycles, cap_us, cap_wait)) = job.or(whole) {
+                    for c in &mut sections.ceilings {
+                        if c.length_us().is_some_and(|l| l > cap_us + cap_wait) {
+                            c.cycles = Some(cap_cycles);
+                            c.us = Some(cap_us);
+                            c.bus_wait_us = cap_wait;
+                        }
+                    }
+                }
+                t.sections = Some(sections);
             }
         }
         out

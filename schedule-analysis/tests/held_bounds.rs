@@ -116,6 +116,36 @@ fn a_held_bound_is_read_back_used_only_on_request_and_an_older_file_still_loads(
 }
 
 #[test]
+fn a_held_section_longer_than_its_job_is_cut_to_the_job() {
+    // A row bounded per part (a publisher's topic) keeps the sections of the whole task's paths:
+    // used, a section longer than the row's own bound is cut to it (a section is part of its job).
+    let mut held = can_tx_held();
+    held["sections"]["ceilings"][0]["cycles"] = 720_000.into();
+    held["sections"]["ceilings"][0]["us"] = 10_000.0.into();
+    let used = parse(&held_file(held)).unwrap().with_held_used(|_| true);
+    let section = &used
+        .task("can_tx")
+        .unwrap()
+        .sections
+        .as_ref()
+        .unwrap()
+        .ceilings[0];
+    assert_eq!((section.cycles, section.us), (Some(4680), Some(65.0)));
+    // One within the bound stays as it is.
+    let used = parse(&held_file(can_tx_held()))
+        .unwrap()
+        .with_held_used(|_| true);
+    let section = &used
+        .task("can_tx")
+        .unwrap()
+        .sections
+        .as_ref()
+        .unwrap()
+        .ceilings[0];
+    assert_eq!((section.cycles, section.us), (Some(144), Some(2.0)));
+}
+
+#[test]
 fn a_malformed_held_bound_is_refused_naming_its_field() {
     let field = |v: serde_json::Value| parse(&v).unwrap_err();
     // On a row that is not declined.
