@@ -2,32 +2,15 @@
 //! back (an older file without them still loads), and used by the report's second run, which says what the
 //! verdict would be on every bound without changing the verdict (docs/analysis.md, "The verdict on the bounds").
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use schedule_analysis::analysis::{analyse, Options};
 use schedule_analysis::bounds::{BoundsFile, Problem, GENERATED_PREFIX};
 use schedule_analysis::report::{self, Format, Report};
 use schedule_analysis::scenario::{self, BudgetFrom};
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).unwrap();
-        }
-    }
-}
+mod common;
+use common::{copy_dir, workspace};
 
 /// A workspace of its own (the boards' apps linked, the models copied) with `bounds` as DiWheelDrive 1-1's
 /// bounds file.

@@ -9,25 +9,8 @@ use schedule_analysis::bounds::GENERATED_PREFIX;
 use schedule_analysis::report::{self, Format, Report};
 use schedule_analysis::scenario::{self, BudgetFrom};
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).unwrap();
-        }
-    }
-}
+mod common;
+use common::{copy_dir, workspace};
 
 /// A workspace of its own: the boards' apps (linked) and a copy of the models folder, with `bounds` written as
 /// DiWheelDrive 1-1's bounds file.

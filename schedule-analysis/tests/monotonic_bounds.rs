@@ -12,25 +12,8 @@ use schedule_analysis::scenario::{self, BudgetFrom};
 /// DiWheelDrive 1-1's charge per expiry and its job, as `cargo xtask wcet` bounds them (1 174 and 5 990 cycles).
 const CHARGE_US: f64 = 16.306;
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).unwrap();
-        }
-    }
-}
+mod common;
+use common::{copy_dir, workspace};
 
 /// A workspace of its own: the boards' apps (linked) and a copy of the models folder, DiWheelDrive 1-1's generated
 /// file with its `monotonic` row bounded per expiry when `charged`, as it comes from the repository otherwise.
