@@ -10,29 +10,10 @@ use schedule_analysis::report::{self, Format, Report};
 use schedule_analysis::scenario::{self, BudgetFrom};
 
 mod common;
-use common::{copy_dir, workspace};
 
-/// A workspace of its own (the boards' apps linked, the models copied) with `bounds` as DiWheelDrive 1-1's
-/// bounds file.
+/// A workspace of its own with `bounds` as DiWheelDrive 1-1's bounds file.
 fn workspace_with(name: &str, bounds: &serde_json::Value) -> PathBuf {
-    let real = workspace();
-    let root = std::env::temp_dir().join(format!("held-bounds-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    std::fs::create_dir_all(&root).unwrap();
-    for board in ["diwheeldrive", "powermgmt", "lightring"] {
-        std::os::unix::fs::symlink(real.join(board), root.join(board)).unwrap();
-    }
-    copy_dir(
-        &real.join(scenario::MODELS_DIR),
-        &root.join(scenario::MODELS_DIR),
-    );
-    std::fs::write(
-        root.join(scenario::MODELS_DIR)
-            .join("diwheeldrive-1-1.wcet.json"),
-        bounds.to_string(),
-    )
-    .unwrap();
-    root
+    common::scratch_workspace(&format!("held-bounds-{name}"), Some(bounds))
 }
 
 /// DiWheelDrive 1-1's bounds: `can_tx` held at 4 680 cycles (65 µs at 72 MHz) against its stated 9 µs, with a

@@ -10,31 +10,10 @@ use schedule_analysis::report::{self, Format, Report};
 use schedule_analysis::scenario::{self, BudgetFrom};
 
 mod common;
-use common::{copy_dir, workspace};
 
-/// A workspace of its own: the boards' apps (linked) and a copy of the models folder, with `bounds` written as
-/// DiWheelDrive 1-1's bounds file.
+/// A workspace of its own with `bounds`, when given, as DiWheelDrive 1-1's bounds file.
 fn workspace_with(name: &str, bounds: Option<serde_json::Value>) -> PathBuf {
-    let real = workspace();
-    let root = std::env::temp_dir().join(format!("machine-bounds-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    std::fs::create_dir_all(&root).unwrap();
-    for board in ["diwheeldrive", "powermgmt", "lightring"] {
-        std::os::unix::fs::symlink(real.join(board), root.join(board)).unwrap();
-    }
-    copy_dir(
-        &real.join(scenario::MODELS_DIR),
-        &root.join(scenario::MODELS_DIR),
-    );
-    if let Some(b) = bounds {
-        std::fs::write(
-            root.join(scenario::MODELS_DIR)
-                .join("diwheeldrive-1-1.wcet.json"),
-            b.to_string(),
-        )
-        .unwrap();
-    }
-    root
+    common::scratch_workspace(&format!("machine-bounds-{name}"), bounds.as_ref())
 }
 
 /// Bounds for DiWheelDrive 1-1: `can_rx` bounded below its estimate with a bounded global critical section,

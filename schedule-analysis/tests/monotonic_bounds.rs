@@ -13,20 +13,12 @@ use schedule_analysis::scenario::{self, BudgetFrom};
 const CHARGE_US: f64 = 16.306;
 
 mod common;
-use common::{copy_dir, workspace};
 
 /// A workspace of its own: the boards' apps (linked) and a copy of the models folder, DiWheelDrive 1-1's generated
 /// file with its `monotonic` row bounded per expiry when `charged`, as it comes from the repository otherwise.
 fn workspace_with(name: &str, charged: bool) -> PathBuf {
-    let real = workspace();
-    let root = std::env::temp_dir().join(format!("monotonic-bounds-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    std::fs::create_dir_all(&root).unwrap();
-    for board in ["diwheeldrive", "powermgmt", "lightring"] {
-        std::os::unix::fs::symlink(real.join(board), root.join(board)).unwrap();
-    }
+    let root = common::scratch_workspace(&format!("monotonic-bounds-{name}"), None);
     let models = root.join(scenario::MODELS_DIR);
-    copy_dir(&real.join(scenario::MODELS_DIR), &models);
     if charged {
         let path = models.join("diwheeldrive-1-1.wcet.json");
         let mut file: serde_json::Value =

@@ -2,6 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
+use schedule_analysis::scenario;
+
 /// The workspace's root (this crate's parent).
 pub fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -10,8 +12,30 @@ pub fn workspace() -> PathBuf {
         .to_path_buf()
 }
 
-/// Copies the folder `from` to `to`, recursively.
-pub fn copy_dir(from: &Path, to: &Path) {
+/// A workspace of its own under the temporary folder, named by `tag`: the boards' apps linked, a copy of the
+/// models folder (which a test may then change), and, when given, `dwd_bounds` as DiWheelDrive 1-1's generated
+/// bounds file.
+pub fn scratch_workspace(tag: &str, dwd_bounds: Option<&serde_json::Value>) -> PathBuf {
+    let real = workspace();
+    let root = std::env::temp_dir().join(format!("{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(&root).unwrap();
+    for board in ["diwheeldrive", "powermgmt", "lightring"] {
+        std::os::unix::fs::symlink(real.join(board), root.join(board)).unwrap();
+    }
+    let models = root.join(scenario::MODELS_DIR);
+    copy_dir(&real.join(scenario::MODELS_DIR), &models);
+    if let Some(bounds) = dwd_bounds {
+        std::fs::write(
+            models.join("diwheeldrive-1-1.wcet.json"),
+            bounds.to_string(),
+        )
+        .unwrap();
+    }
+    root
+}
+
+fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
     for entry in std::fs::read_dir(from).unwrap() {
         let entry = entry.unwrap();
