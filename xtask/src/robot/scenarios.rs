@@ -734,16 +734,7 @@ fn long_demo(root: &Path, firmware: &[amiro_robot::Firmware; 3]) -> Result<Strin
         .join("robot")
         .join("thesis-demo-10s");
     let _ = std::fs::remove_dir_all(&work);
-    let duration = LONG_DEMO_US;
-    let mut lines: Vec<String> = Vec::new();
-    let outcome = amiro_robot::run(firmware, &actions, duration, &work, &mut lines, None)?;
-    std::fs::write(work.join("output.log"), &outcome.text)?;
-    let report = amiro_robot::report::analyse(&outcome.transfers, duration);
-    std::fs::write(
-        work.join("bus-report.txt"),
-        amiro_robot::report::render(&report),
-    )?;
-    let run = Run { outcome };
+    let (run, report) = run_and_report(firmware, &actions, LONG_DEMO_US, &work)?;
     every_board_ended(&run)?;
     // Commanded at 10 ms, a release every 900 µs from the first sample (about 11.7 ms): 11 099 by
     // 10 s. The count allows 10 ms of set-up; a lost or late sample breaks the grid itself.
@@ -754,21 +745,53 @@ fn long_demo(root: &Path, firmware: &[amiro_robot::Firmware; 3]) -> Result<Strin
         samples as u64 >= (LONG_DEMO_US - 20_000) / 10_000,
         "{samples} ring samples in {LONG_DEMO_US} µs"
     );
-    let exceeded: Vec<String> = report
-        .iter()
-        .filter(|l| l.exceeds())
-        .map(|l| format!("{:03X} {} µs > {:?}", l.id, l.observed_us, l.bound_us))
-        .collect();
-    ensure!(
-        exceeded.is_empty(),
-        "observed responses beyond the Davis bound: {}",
-        exceeded.join(", ")
-    );
+    within_davis(&report)?;
     Ok(format!(
         "{} magnetometer frames on the 900 µs grid, {samples} ring samples; bus: {} streams within their Davis bounds",
         magnetometer.len(),
         report.len()
     ))
+}
+
+/// Runs `actions` on the robot for `duration` µs in `work`, and writes there the run's output, its
+/// bus log and its bus report (observed responses against the Davis analysis of the same traffic).
+fn run_and_report(
+    firmware: &[amiro_robot::Firmware; 3],
+    actions: &[amiro_robot::stimulus::Timed],
+    duration: u64,
+    work: &Path,
+) -> Result<(Run, Vec<amiro_robot::report::Line>)> {
+    let mut lines: Vec<String> = Vec::new();
+    let outcome = amiro_robot::run(firmware, actions, duration, work, &mut lines, None)?;
+    std::fs::write(work.join("output.log"), &outcome.text)?;
+    let (bus, _) = crate::qemu::split_output(&outcome.text);
+    std::fs::write(work.join("bus.log"), bus)?;
+    let report = amiro_robot::report::analyse(&outcome.transfers, duration);
+    std::fs::write(
+        work.join("bus-report.txt"),
+        amiro_robot::report::render(&report),
+    )?;
+    Ok((Run { outcome }, report))
+}
+
+/// The streams whose observed worst response is beyond their Davis bound, one line each.
+fn beyond_davis(report: &[amiro_robot::report::Line]) -> Vec<String> {
+    report
+        .iter()
+        .filter(|l| l.exceeds())
+        .map(|l| format!("{:03X} {} µs > {:?}", l.id, l.observed_us, l.bound_us))
+        .collect()
+}
+
+/// Fails when a stream's observed worst response is beyond its Davis bound.
+fn within_davis(report: &[amiro_robot::report::Line]) -> Result<()> {
+    let exceeded = beyond_davis(report);
+    ensure!(
+        exceeded.is_empty(),
+        "observed responses beyond the Davis bound: {}",
+        exceeded.join(", ")
+    );
+    Ok(())
 }
 
 /// How long [`long_demo`] runs the thesis demo (virtual time, µs).
@@ -819,28 +842,10 @@ pub fn run_all(root: &Path) -> Result<()> {
             let (actions, duration) = amiro_robot::stimulus::read(&path)?;
             let duration =
                 duration.with_context(|| format!("{}: no `# duration:`", path.display()))?;
-            let mut lines: Vec<String> = Vec::new();
-            let outcome = amiro_robot::run(&firmware, &actions, duration, &work, &mut lines, None)?;
-            std::fs::write(work.join("output.log"), &outcome.text)?;
-            let (bus, _) = crate::qemu::split_output(&outcome.text);
-            std::fs::write(work.join("bus.log"), bus)?;
-            let report = amiro_robot::report::analyse(&outcome.transfers, duration);
-            std::fs::write(
-                work.join("bus-report.txt"),
-                amiro_robot::report::render(&report),
-            )?;
-            let summary = (scenario.check)(&Run { outcome })?;
-            let exceeded: Vec<String> = report
-                .iter()
-                .filter(|l| l.exceeds())
-                .map(|l| format!("{:03X} {} µs > {:?}", l.id, l.observed_us, l.bound_us))
-                .collect();
+            let (run, report) = run_and_report(&firmware, &actions, duration, &work)?;
+            let summary = (scenario.check)(&run)?;
             if scenario.bus_bounds {
-                ensure!(
-                    exceeded.is_empty(),
-                    "observed responses beyond the Davis bound: {}",
-                    exceeded.join(", ")
-                );
+                within_davis(&report)?;
                 Ok(format!(
                     "{summary}; bus: {} streams within their Davis bounds",
                     report.len()
@@ -848,7 +853,7 @@ pub fn run_all(root: &Path) -> Result<()> {
             } else {
                 Ok(format!(
                     "{summary}; bus: {} of {} streams beyond their Davis bounds (fault episode)",
-                    exceeded.len(),
+                    beyond_davis(&report).len(),
                     report.len()
                 ))
             }
