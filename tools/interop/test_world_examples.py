@@ -152,6 +152,9 @@ def test_the_same_behaviour_runs_live_on_a_python_can_bus():
             if msg is not None:
                 heard.append(msg)
         worker.join()
+        # The stop is sent as the worker ends, possibly after the loop's last look.
+        while (msg := robot.recv(timeout=0.2)) is not None:
+            heard.append(msg)
     motors = [struct.unpack("<ii", bytes(m.data)) for m in heard if m.arbitration_id == 0x110]
     assert len(motors) >= 5, heard
     assert motors[-1] == (0, 0), "the last command stops the robot"
