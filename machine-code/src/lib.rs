@@ -61,7 +61,7 @@ pub use image::Image;
 pub use wcet::bounds::BoundsFile;
 pub use wcet::chip::Chip;
 pub use wcet::{
-    bound_function, bound_tasks, task_sections, ActivationBound, Bound, Ceiling, CeilingBound,
+    bound_function, bound_tasks, task_sections, ActivationBound, FrameBound, Part, Bound, Ceiling, CeilingBound,
     LoopInfo, Task, TaskBound, TaskEntry, TaskSections, TopicBound,
 };
 

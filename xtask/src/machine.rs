@@ -157,6 +157,10 @@ struct Row<'a> {
     declined: Option<String>,
     /// Where the bounds file charges the task per activation: that charge (the row's figures are the job's).
     per_activation: Option<machine_code::ActivationBound>,
+    /// Where the bounds file charges the task by its parts: fixed per job, a pass and a completion per frame,
+    /// a requeue per abort (the row's figures are the job's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    per_frame: Option<machine_code::FrameBound>,
     /// Where the bounds file states the release loop per topic: one release of each topic group's topics.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     topics: Vec<machine_code::TopicBound>,
@@ -294,16 +298,50 @@ pub fn worst_per_name(rows: Vec<machine_code::TaskBound>) -> Vec<machine_code::T
                     ),
                     (a, b) => a.or(b),
                 };
+                let per_frame = match (kept.per_frame.take(), row.per_frame.clone()) {
+                    (Some(a), Some(b)) => Some(larger_parts(a, b)),
+                    (a, b) => a.or(b),
+                };
                 if row.us > kept.us {
                     *kept = row;
                 }
                 kept.instructions = instructions;
                 kept.per_activation = per_activation;
+                kept.per_frame = per_frame;
             }
         }
         kept.function = Some(functions);
     }
     out
+}
+
+/// The larger of two images' parts, part by part (each part bounds its share of every job of either image);
+/// declined where either is.
+fn larger_parts(a: machine_code::FrameBound, b: machine_code::FrameBound) -> machine_code::FrameBound {
+    if a.declined.is_some() {
+        return a;
+    }
+    if b.declined.is_some() {
+        return b;
+    }
+    let max = |x: machine_code::Part, y: machine_code::Part| machine_code::Part {
+        cycles: x.cycles.max(y.cycles),
+        us: x.us.max(y.us),
+        instructions: x.instructions.max(y.instructions),
+    };
+    let (pass, sent) = (max(a.pass, b.pass), max(a.sent, b.sent));
+    machine_code::FrameBound {
+        fixed: max(a.fixed, b.fixed),
+        abort: max(a.abort, b.abort),
+        per_frame: machine_code::Part {
+            cycles: pass.cycles + sent.cycles,
+            us: pass.us + sent.us,
+            instructions: pass.instructions + sent.instructions,
+        },
+        pass,
+        sent,
+        ..a
+    }
 }
 
 /// One image's task bounds, with what they were computed from.
@@ -407,6 +445,7 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
                 preemption_retry_cycles: t.preemption_retry_cycles,
                 declined: t.declined,
                 per_activation: t.per_activation,
+                per_frame: t.per_frame,
                 topics: t.topics,
                 critical_sections: sections.ceilings,
                 critical_sections_incomplete: sections.incomplete,
@@ -461,6 +500,29 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
                         "    per activation ({} at {} passes): ≤ {} cycles {:.2} µs {} instructions, bus waits {:.2} µs \
                          (a job that serves k ≥ 1 activations: at most k times this; the bounds file's reason)",
                         a.at, a.passes, a.cycles, a.us, a.instructions, a.bus_wait_us
+                    ),
+                }
+            }
+            if let Some(f) = &r.per_frame {
+                match &f.declined {
+                    Some(reason) => println!("    per frame ({}): DECLINED: {reason}", f.at),
+                    None => println!(
+                        "    per job ≤ {} cycles {:.2} µs {} instructions; per frame ≤ {} cycles {:.2} µs {} instructions \
+                         (a pass {} + a completion {}); per abort ≤ {} cycles {:.2} µs {} instructions (the requeue; the \
+                         transmit loop {}, {} completions a job)",
+                        f.fixed.cycles,
+                        f.fixed.us,
+                        f.fixed.instructions,
+                        f.per_frame.cycles,
+                        f.per_frame.us,
+                        f.per_frame.instructions,
+                        f.pass.cycles,
+                        f.sent.cycles,
+                        f.abort.cycles,
+                        f.abort.us,
+                        f.abort.instructions,
+                        f.at,
+                        f.completions
                     ),
                 }
             }

@@ -21,7 +21,10 @@
 //!   "totals": [{ "function": "…", "file": "src/busy_window.rs", "line": 829, "passes": 500,
 //!                "reason": "every pass back is one of the job's at most 500 fixed-point iterations" }],
 //!   "per_activation": [{ "task": "can_rx", "function": "…", "file": "src/bxcan.rs", "line": 125,
-//!                        "passes": 2, "reason": "a job that drains k frames costs at most k times one frame's" }]
+//!                        "passes": 2, "reason": "a job that drains k frames costs at most k times one frame's" }],
+//!   "per_frame": [{ "task": "can_tx", "function": "…", "file": "src/tx_queue.rs", "line": 372,
+//!                   "completion": "…::transmit_pending::{{closure}}", "completions": 3,
+//!                   "requeue": "…::TxQueue<_>::place", "reason": "a job costs at most F + q·P + s·S + a·(S + R)" }]
 //! }
 //! ```
 //!
@@ -176,6 +179,27 @@ pub struct PerActivation {
     pub reason: String,
 }
 
+/// A transmit interrupt charged by its parts ([`super::FrameBound`]): a fixed part once per job, a pass
+/// of its transmit loop (`function` at `file:line`, stated under `loops`: one pass fills one mailbox) per
+/// frame it puts in a mailbox, a completion per completion it collects (the scan calls `completion`
+/// once per pass of a loop of `completions` passes, one per mailbox), and the requeue per aborted frame
+/// (`requeue`: a function only an aborted frame's completion calls). Each part comes from the machine
+/// code: the task bounded with the transmit loop at 1 and 2 passes and with `completion` or `requeue`
+/// left out. The reason says why a job costs at most the fixed part plus its passes, completions and
+/// requeues.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PerFrame {
+    pub task: String,
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    pub completion: String,
+    pub completions: u64,
+    pub requeue: String,
+    pub reason: String,
+}
+
 /// The stated bounds of one image (see the module documentation).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -205,6 +229,9 @@ pub struct BoundsFile {
     /// Tasks charged per activation, not per job ([`PerActivation`]).
     #[serde(default)]
     pub per_activation: Vec<PerActivation>,
+    /// Transmit interrupts charged by their parts, per job, frame and abort ([`PerFrame`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub per_frame: Vec<PerFrame>,
     /// The publisher's release loop and its topic groups: a bound per topic's job
     /// ([`super::topics::PerTopic`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -306,6 +333,29 @@ impl BoundsFile {
                 }
             }
         }
+        for f in &file.per_frame {
+            if f.completions == 0
+                || f.reason.trim().is_empty()
+                || f.completion.trim().is_empty()
+                || f.requeue.trim().is_empty()
+            {
+                return Err(Error::Bounds(format!(
+                    "the per-frame charge of {} needs its completion and requeue functions, \
+                     completions of at least 1 and a reason",
+                    f.task
+                )));
+            }
+            match file.loop_bound(&f.function, &f.file, f.line) {
+                Some(l) if l.bound >= 2 => {}
+                _ => {
+                    return Err(Error::Bounds(format!(
+                        "the per-frame charge of {} names the loop at {}:{} in {}, which the file \
+                         does not state under `loops` at a bound of at least 2",
+                        f.task, f.file, f.line, f.function
+                    )))
+                }
+            }
+        }
         if let Some(t) = &file.topics {
             t.check()?;
         }
@@ -372,6 +422,25 @@ impl BoundsFile {
     /// The per-activation charge of the task named `task`, if it has one.
     pub fn per_activation(&self, task: &str) -> Option<&PerActivation> {
         self.per_activation.iter().find(|a| a.task == task)
+    }
+
+    /// The per-frame charge of the task named `task`, if it has one.
+    pub fn per_frame(&self, task: &str) -> Option<&PerFrame> {
+        self.per_frame.iter().find(|f| f.task == task)
+    }
+
+    /// This file with the transmit loop of `charge` at `passes`.
+    pub fn at_passes(&self, charge: &PerFrame, passes: u64) -> BoundsFile {
+        let mut file = self.clone();
+        for l in &mut file.loops {
+            if l.function == charge.function
+                && l.line == charge.line
+                && same_file(&charge.file, &l.file)
+            {
+                l.bound = passes;
+            }
+        }
+        file
     }
 
     /// This file with the loop of `charge` at its passes per activation in place of its bound per
@@ -456,6 +525,11 @@ impl BoundsFile {
                     .map(|a| ("per-activation loop", &a.function, &a.file, a.line)),
             )
             .chain(
+                self.per_frame
+                    .iter()
+                    .map(|f| ("per-frame transmit loop", &f.function, &f.file, f.line)),
+            )
+            .chain(
                 self.topics
                     .iter()
                     .map(|t| ("per-topic release loop", &t.function, &t.file, t.line)),
@@ -480,6 +554,13 @@ impl BoundsFile {
         for p in &self.per_element {
             if functions(&p.function).is_empty() {
                 missing.push(format!("per-element function {}", p.function));
+            }
+        }
+        for f in &self.per_frame {
+            for (kind, name) in [("completion", &f.completion), ("requeue", &f.requeue)] {
+                if functions(name).is_empty() {
+                    missing.push(format!("per-frame {kind} function {name}"));
+                }
             }
         }
         for g in self.topics.iter().flat_map(|t| &t.groups) {

@@ -138,6 +138,10 @@ pub struct TaskBound {
     /// Where the bounds file charges the task per activation ([`bounds::PerActivation`]): that
     /// charge, beside the job's bound above.
     pub per_activation: Option<ActivationBound>,
+    /// Where the bounds file charges the task by its parts ([`bounds::PerFrame`]): the fixed part per
+    /// job, the pass and completion per frame, the requeue per abort, beside the job's bound above.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub per_frame: Option<FrameBound>,
     /// Where the bounds file states the task's release loop per topic ([`topics::PerTopic`]): the
     /// bound of one topic group's job each, beside the job's bound above.
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -179,6 +183,176 @@ pub struct ActivationBound {
     pub reason: String,
     /// Why there is no charge (the loop is not on the task's path, or the bound declined).
     pub declined: Option<String>,
+}
+
+/// One part of a [`FrameBound`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Part {
+    pub cycles: u64,
+    pub us: f64,
+    pub instructions: u64,
+}
+
+impl Part {
+    fn of(chip: Chip, cycles: u64, instructions: u64) -> Part {
+        Part {
+            cycles,
+            us: chip.cycles_to_ns(cycles) as f64 / 1000.0,
+            instructions,
+        }
+    }
+}
+
+/// A transmit interrupt's parts ([`bounds::PerFrame`]), each from the machine code. With the
+/// transmit loop's header at 1 and 2 runs and the completion or the requeue function left out
+/// (`T(p, X)`, the handler's entry, exit and preemption retry added to the fixed part alone):
+/// `fixed` = T(1, {completion}) — the code around both loops, the completion scan's passes that
+/// collect nothing, the transmit loop's last pass (the queue empty, or every mailbox taken and at
+/// most one abort requested); `pass` = T(2, {completion}) − T(1, {completion}), the longest pass that
+/// fills a mailbox; `sent` = (T(1, {requeue}) − T(1, {completion})) / completions, what collecting a
+/// completion adds to a scan pass; `abort` = (T(1, {}) − T(1, {requeue})) / completions, what an
+/// aborted frame's requeue adds to that. A loop of bound N costs (N − 1) times its longest iteration
+/// plus its longest way out ([`path`]), so each difference is exact, and the divisions are checked:
+/// the requeue's difference must be `completions` times the completion function's own (its bound
+/// with and without the requeue), or the parts are declined. A job that fills q mailboxes and
+/// collects s sent and a aborted completions costs at most fixed + q·pass + s·sent + a·(sent + abort).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FrameBound {
+    /// The transmit loop, `function at file:line`.
+    pub at: String,
+    pub completion: String,
+    pub completions: u64,
+    pub requeue: String,
+    /// Once per job.
+    pub fixed: Part,
+    /// Per frame put in a mailbox.
+    pub pass: Part,
+    /// Per completion collected.
+    pub sent: Part,
+    /// Per aborted frame, beyond its completion.
+    pub abort: Part,
+    /// One frame's: `pass` + `sent`.
+    pub per_frame: Part,
+    /// Why a job costs at most its parts (the bounds file's).
+    pub reason: String,
+    /// Why there are no parts (then the figures are 0 and mean nothing).
+    pub declined: Option<String>,
+}
+
+/// The parts of `task` charged per frame ([`FrameBound`]); `extra` is the handler's entry, exit and
+/// preemption retry (cycles, instructions), added to the fixed part.
+fn frame_bound(
+    image: &Image,
+    chip: Chip,
+    bounds: &BoundsFile,
+    task: &Task,
+    charge: &bounds::PerFrame,
+    job: &Bound,
+    extra: (u64, u64),
+) -> FrameBound {
+    let at = format!("{} at {}:{}", charge.function, charge.file, charge.line);
+    let on_path = job.loops.iter().any(|l| {
+        l.function == charge.function
+            && l.line == Some(charge.line)
+            && l.file
+                .as_deref()
+                .is_some_and(|f| bounds::same_file(f, &charge.file))
+    });
+    let parts = || -> Result<[(u64, u64); 4], String> {
+        if let Some(d) = &job.declined {
+            return Err(format!("the job's bound is declined: {d}"));
+        }
+        if !on_path {
+            return Err(format!("the loop {at} is not on the task's path"));
+        }
+        for name in [&charge.completion, &charge.requeue] {
+            image
+                .function_named(name)
+                .map_err(|e| format!("{name}: {e} (inlined? the parts need it as a function)"))?;
+        }
+        let at_passes = |passes: u64, left_out: &[&String]| -> Result<(u64, u64), String> {
+            let stated = bounds.at_passes(charge, passes);
+            let excluded: Vec<String> = left_out.iter().map(|s| s.to_string()).collect();
+            let mut again = Analysis::excluding(image, chip, &stated, &excluded);
+            let (_, b) = bound_task(&mut again, image, task);
+            match b.declined {
+                Some(d) => Err(d),
+                None => Ok((b.cycles, b.instructions)),
+            }
+        };
+        let function = |left_out: &[&String]| -> Result<(u64, u64), String> {
+            let f = image
+                .function_named(&charge.completion)
+                .map_err(|e| e.to_string())?;
+            let excluded: Vec<String> = left_out.iter().map(|s| s.to_string()).collect();
+            let mut again = Analysis::excluding(image, chip, bounds, &excluded);
+            match again.summary(f.start) {
+                Ok(outcome) => {
+                    let b = to_bound(outcome);
+                    match b.declined {
+                        Some(d) => Err(d),
+                        None => Ok((b.cycles, b.instructions)),
+                    }
+                }
+                Err(e) => Err(e.to_string()),
+            }
+        };
+        let none = at_passes(1, &[&charge.completion])?;
+        let two = at_passes(2, &[&charge.completion])?;
+        let sent = at_passes(1, &[&charge.requeue])?;
+        let all = at_passes(1, &[])?;
+        let (whole, without) = (function(&[])?, function(&[&charge.requeue])?);
+        let n = charge.completions;
+        let requeue_own = whole.0.checked_sub(without.0).filter(|&d| d > 0);
+        let requeue_in_task = all.0.checked_sub(sent.0);
+        match (requeue_own, requeue_in_task) {
+            (Some(own), Some(in_task)) if in_task == n * own => {}
+            _ => {
+                return Err(format!(
+                    "the requeue ({}) adds {} cycles to the task and {} to {}: not {n} times \
+                     its own, so {} is not called once per pass of a loop of {n} passes",
+                    charge.requeue,
+                    all.0 as i128 - sent.0 as i128,
+                    whole.0 as i128 - without.0 as i128,
+                    charge.completion,
+                    charge.completion
+                ))
+            }
+        }
+        if two.0 < none.0 || sent.0 < none.0 {
+            return Err("a part came out negative".into());
+        }
+        Ok([
+            (none.0 + extra.0, none.1 + extra.1),
+            (two.0 - none.0, two.1.saturating_sub(none.1)),
+            (
+                (sent.0 - none.0).div_ceil(n),
+                sent.1.saturating_sub(none.1).div_ceil(n),
+            ),
+            (
+                (all.0 - sent.0) / n,
+                all.1.saturating_sub(sent.1).div_ceil(n),
+            ),
+        ])
+    };
+    let (parts, declined) = match parts() {
+        Ok(p) => (p, None),
+        Err(e) => ([(0, 0); 4], Some(e)),
+    };
+    let part = |(c, i): (u64, u64)| Part::of(chip, c, i);
+    FrameBound {
+        at,
+        completion: charge.completion.clone(),
+        completions: charge.completions,
+        requeue: charge.requeue.clone(),
+        fixed: part(parts[0]),
+        pass: part(parts[1]),
+        sent: part(parts[2]),
+        abort: part(parts[3]),
+        per_frame: part((parts[1].0 + parts[2].0, parts[1].1 + parts[2].1)),
+        reason: charge.reason.clone(),
+        declined,
+    }
 }
 
 /// Bounds one function of `image` with everything it calls.
@@ -309,6 +483,9 @@ pub fn bound_tasks(
                     declined,
                 }
             });
+            let per_frame = bounds
+                .per_frame(&task.name)
+                .map(|charge| frame_bound(image, chip, bounds, task, charge, &bound, extras(task, &bound)));
             let topics = match &bounds.topics {
                 Some(per_topic) if bound.declined.is_none() => {
                     let on_path = bound.loops.iter().any(|l| {
@@ -365,6 +542,7 @@ pub fn bound_tasks(
                 loops: bound.loops,
                 declined: bound.declined,
                 per_activation,
+                per_frame,
                 topics,
             }
         })
