@@ -317,7 +317,10 @@ pub fn worst_per_name(rows: Vec<machine_code::TaskBound>) -> Vec<machine_code::T
 
 /// The larger of two images' parts, part by part (each part bounds its share of every job of either image);
 /// declined where either is.
-fn larger_parts(a: machine_code::FrameBound, b: machine_code::FrameBound) -> machine_code::FrameBound {
+fn larger_parts(
+    a: machine_code::FrameBound,
+    b: machine_code::FrameBound,
+) -> machine_code::FrameBound {
     if a.declined.is_some() {
         return a;
     }

@@ -483,9 +483,17 @@ pub fn bound_tasks(
                     declined,
                 }
             });
-            let per_frame = bounds
-                .per_frame(&task.name)
-                .map(|charge| frame_bound(image, chip, bounds, task, charge, &bound, extras(task, &bound)));
+            let per_frame = bounds.per_frame(&task.name).map(|charge| {
+                frame_bound(
+                    image,
+                    chip,
+                    bounds,
+                    task,
+                    charge,
+                    &bound,
+                    extras(task, &bound),
+                )
+            });
             let topics = match &bounds.topics {
                 Some(per_topic) if bound.declined.is_none() => {
                     let on_path = bound.loops.iter().any(|l| {

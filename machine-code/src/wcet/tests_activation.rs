@@ -1,4 +1,5 @@
-//! Known answers for a task charged per activation ([`bounds::PerActivation`]): a hand-assembled receive
+//! Known answers for a task charged per activation ([`bounds::PerActivation`]) and for a transmit interrupt
+//! charged by its parts ([`bounds::PerFrame`], at the end): a hand-assembled receive
 //! handler that drains a FIFO, its job bounded with the drain at its stated 6 passes and its charge per frame
 //! with the drain at 2 (one frame and the pass that finds the FIFO empty), and a timer queue's interrupt, its
 //! job at 19 passes and its charge per expiry at 3 (a pop, a `continue`, the last pass), each worked out from the Cortex-M3
@@ -223,4 +224,184 @@ fn a_timer_interrupt_charged_per_expiry_covers_every_job_and_what_its_continues_
     }
     // And the one job that serves every waiter is within its 9 charges, as it is within its own bound.
     assert!(tq.cycles <= 9 * charge.cycles);
+}
+
+/// A `BL` from `at` to `target` (both offsets in the code), its two halfwords.
+fn bl(at: u32, target: u32) -> [u16; 2] {
+    let imm = target.wrapping_sub(at + 4);
+    let s = (imm >> 31) & 1;
+    [
+        (0xf000 | (s << 10) | ((imm >> 12) & 0x3ff)) as u16,
+        (0xf800 | ((imm >> 1) & 0x7ff)) as u16,
+    ]
+}
+
+/// `TX`: a transmit interrupt as `tasks::transmit_pending` runs it. A completion scan at src/tx.rs:20 over
+/// three mailboxes (a counter to 3) reads each mailbox's flag and, set, calls `C`, the completion; then a
+/// transmit loop at src/tx.rs:30 reads the queue's head (none: the loop ends), whether a mailbox is free
+/// (none: Busy, the loop ends) and fills it. `C` reads whether the frame was sent; not sent (aborted), it calls
+/// `Q`, the requeue's search.
+fn transmit_handler() -> Image {
+    let [c0, c1] = bl(0x0c, 0x22);
+    let [q0, q1] = bl(0x28, 0x30);
+    let code = thumb(&[
+        0xb530, // 0x00 push {r4, r5, lr}: 1 + 3
+        0x2400, // 0x02 movs r4, #0: 1
+        0x2c03, // 0x04 cmp r4, #3: 1 (the scan's header, line 20)
+        0xda05, // 0x06 bge 0x14: 1, taken 1 + P
+        0x6801, // 0x08 ldr r1, [r0]: 2 + 5 (the mailbox's completion flag)
+        0xb109, // 0x0a cbz r1, 0x10: 1, taken 1 + P
+        c0, c1,     // 0x0c bl C: 1 + P
+        0x3401, // 0x10 adds r4, #1: 1
+        0xe7f7, // 0x12 b 0x04: 1 + P
+        0x6841, // 0x14 ldr r1, [r0, #4]: 2 + 5 (the queue's head; the transmit loop's header, line 30)
+        0xb119, // 0x16 cbz r1, 0x20: 1, taken 1 + P (empty)
+        0x6882, // 0x18 ldr r2, [r0, #8]: 2 + 5 (a free mailbox?)
+        0xb10a, // 0x1a cbz r2, 0x20: 1, taken 1 + P (Busy)
+        0x3501, // 0x1c adds r5, #1: 1 (the mailbox filled)
+        0xe7f9, // 0x1e b 0x14: 1 + P
+        0xbd30, // 0x20 pop {r4, r5, pc}: 1 + 3 + P
+        0xb510, // 0x22 C: push {r4, lr}: 1 + 2
+        0x68c1, // 0x24 ldr r1, [r0, #12]: 2 + 5 (sent?)
+        0xb911, // 0x26 cbnz r1, 0x2e: 1, taken 1 + P (sent)
+        q0, q1,     // 0x28 bl Q: 1 + P (aborted: requeued)
+        0x3401, // 0x2c adds r4, #1: 1
+        0xbd10, // 0x2e pop {r4, pc}: 1 + 2 + P
+        0x6901, // 0x30 Q: ldr r1, [r0, #16]: 2 + 5
+        0x3101, // 0x32 adds r1, #1: 1
+        0x4770, // 0x34 bx lr: 1 + P
+    ]);
+    let bytes = elf_with_lines(
+        &code,
+        &[
+            Sym::function("TX", 0, 0x22),
+            Sym::function("C", 0x22, 0x0e),
+            Sym::function("Q", 0x30, 0x06),
+        ],
+        "firmware/src/tx.rs",
+        &[
+            (0, 10),
+            (4, 20),
+            (0x14, 30),
+            (0x20, 40),
+            (0x22, 50),
+            (0x30, 60),
+        ],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+fn transmit_bounds(per_frame: &str) -> BoundsFile {
+    BoundsFile::parse(&format!(
+        r#"{{"loops":[{{"function":"TX","file":"src/tx.rs","line":20,"bound":4,"reason":"three mailboxes and the test that ends"}},
+                     {{"function":"TX","file":"src/tx.rs","line":30,"bound":5,"reason":"four fills and the pass that ends"}}]{per_frame}}}"#
+    ))
+    .expect("the bounds file parses")
+}
+
+fn tx_task() -> Task {
+    Task {
+        name: "tx".into(),
+        entry: TaskEntry::Symbol("TX".into()),
+        handler: true,
+    }
+}
+
+#[test]
+fn a_transmit_interrupt_has_its_parts_per_job_frame_and_abort() {
+    let img = transmit_handler();
+    let per_frame = r#","per_frame":[{"task":"tx","function":"TX","file":"src/tx.rs","line":30,"completion":"C","completions":3,"requeue":"Q","reason":"a job costs at most its parts"}]"#;
+    let rows = bound_tasks(&img, &[tx_task()], F103_0WS, &transmit_bounds(per_frame));
+    let tx = &rows[0];
+    // C: sent — push 3, ldr 7, cbnz taken 4, pop 6: 20 cycles, 4 instructions; aborted — push 3, ldr 7, cbnz 1,
+    // bl 4, Q (ldr 7, adds 1, bx 4: 12 cycles, 3 instructions), adds 1, pop 6: 34 cycles, 9 instructions.
+    // The scan's passes: nothing collected — cmp 1, bge 1, ldr 7, cbz taken 4, adds 1, b 4: 18 cycles, 6
+    // instructions; a completion — cmp 1, bge 1, ldr 7, cbz 1, bl 4, C, adds 1, b 4: 19 + C (39 sent, 11
+    // instructions; 53 aborted, 16); its way out: cmp 1, bge taken 4: 5 cycles, 2 instructions.
+    // The transmit loop's pass that fills: ldr 7, cbz 1, ldr 7, cbz 1, adds 1, b 4: 21 cycles, 6 instructions;
+    // its way out, Busy: ldr 7, cbz 1, ldr 7, cbz taken 4: 19 cycles, 4 instructions (empty: 11).
+    // Around the loops: push 4, movs 1, pop 7: 12 cycles, 3 instructions; entry and exit 12 + 10.
+    // The job: 12 + 22 + (3 × 53 + 5) + (4 × 21 + 19) = 301 cycles; 3 + (3 × 16 + 2) + (4 × 6 + 4) = 81.
+    assert_eq!(
+        (tx.cycles, tx.instructions, tx.declined.as_deref()),
+        (301, 81, None)
+    );
+    let parts = tx.per_frame.as_ref().expect("charged by its parts");
+    assert_eq!(parts.declined, None);
+    // Fixed: C left out, the transmit loop at one pass: 12 + 22 + (3 × 18 + 5) + 19 = 112 cycles;
+    // 3 + (3 × 6 + 2) + 4 = 27 instructions.
+    assert_eq!((parts.fixed.cycles, parts.fixed.instructions), (112, 27));
+    // A pass: 21 cycles, 6 instructions. A completion: 39 − 18 = 21 cycles, 5 instructions. An abort beyond
+    // it: 53 − 39 = 14 cycles (C's 34 aborted less its 20 sent), 16 − 11 = 5 instructions.
+    assert_eq!((parts.pass.cycles, parts.pass.instructions), (21, 6));
+    assert_eq!((parts.sent.cycles, parts.sent.instructions), (21, 5));
+    assert_eq!((parts.abort.cycles, parts.abort.instructions), (14, 5));
+    assert_eq!(
+        (parts.per_frame.cycles, parts.per_frame.instructions),
+        (42, 11)
+    );
+    // The job's bound is its parts at their worst: 4 fills and 3 aborted completions.
+    assert_eq!(
+        parts.fixed.cycles + 4 * parts.pass.cycles + 3 * (parts.sent.cycles + parts.abort.cycles),
+        tx.cycles
+    );
+    // Every job within its parts: q fills (0..=4), s sent and a aborted completions (s + a <= 3), the
+    // transmit loop left Busy (the longer way out), each scan pass as it ran.
+    for q in 0..=4u64 {
+        for s in 0..=3u64 {
+            for a in 0..=(3 - s) {
+                let scan = 18 * (3 - s - a) + 39 * s + 53 * a + 5;
+                let job = 12 + 22 + scan + 21 * q + 19;
+                let charged = parts.fixed.cycles
+                    + q * parts.pass.cycles
+                    + s * parts.sent.cycles
+                    + a * (parts.sent.cycles + parts.abort.cycles);
+                assert_eq!(job, charged, "q {q}, s {s}, a {a}");
+            }
+        }
+    }
+    // Without the statement, no parts.
+    let rows = bound_tasks(&img, &[tx_task()], F103_0WS, &transmit_bounds(""));
+    assert!(rows[0].per_frame.is_none());
+}
+
+#[test]
+fn parts_whose_functions_do_not_fit_the_scan_are_declined() {
+    let img = transmit_handler();
+    let declined = |completion: &str, completions: u64, requeue: &str| {
+        let entry = format!(
+            r#","per_frame":[{{"task":"tx","function":"TX","file":"src/tx.rs","line":30,"completion":"{completion}","completions":{completions},"requeue":"{requeue}","reason":"r"}}]"#
+        );
+        let rows = bound_tasks(&img, &[tx_task()], F103_0WS, &transmit_bounds(&entry));
+        assert_eq!(rows[0].cycles, 301);
+        rows[0].per_frame.clone().expect("stated").declined
+    };
+    // A requeue the image does not have (inlined).
+    assert!(declined("C", 3, "R").is_some_and(|r| r.contains("R:")));
+    // The scan stated at two passes where it makes three: the requeue's share is not twice C's own.
+    assert!(declined("C", 2, "Q").is_some_and(|r| r.contains("not 2 times")));
+    // The requeue named as the completion: Q calls no Q.
+    assert!(declined("Q", 3, "Q").is_some());
+    assert_eq!(declined("C", 3, "Q"), None);
+    // The file refuses an entry without completions, a reason, or a stated transmit loop.
+    let refused = |entry: &str| {
+        matches!(
+            BoundsFile::parse(&format!(
+                r#"{{"loops":[{{"function":"TX","file":"src/tx.rs","line":30,"bound":5,"reason":"r"}}],"per_frame":[{entry}]}}"#
+            )),
+            Err(crate::Error::Bounds(_))
+        )
+    };
+    assert!(refused(
+        r#"{"task":"tx","function":"TX","file":"src/tx.rs","line":30,"completion":"C","completions":0,"requeue":"Q","reason":"r"}"#
+    ));
+    assert!(refused(
+        r#"{"task":"tx","function":"TX","file":"src/tx.rs","line":30,"completion":"C","completions":3,"requeue":"Q","reason":" "}"#
+    ));
+    assert!(refused(
+        r#"{"task":"tx","function":"TX","file":"src/tx.rs","line":31,"completion":"C","completions":3,"requeue":"Q","reason":"r"}"#
+    ));
+    assert!(!refused(
+        r#"{"task":"tx","function":"TX","file":"src/tx.rs","line":30,"completion":"C","completions":3,"requeue":"Q","reason":"r"}"#
+    ));
 }
