@@ -153,6 +153,30 @@ pub struct JobBound {
     pub instructions: u64,
     /// The charge: where, at how many passes, and why a job that serves k activations costs at most k charges.
     pub per_activation: String,
+    /// For a transmit interrupt charged by its parts (the board's bounds file's `per_frame`): the parts, each from
+    /// the machine code. The row's figures are then one frame's job, `fixed` + `per_frame`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parts: Option<FrameParts>,
+}
+
+/// A transmit interrupt's parts ([`JobBound::parts`]): a job that puts q frames in mailboxes and collects s sent and a
+/// aborted completions costs at most `fixed` + q·pass + s·completion + a·(completion + `abort`), `per_frame` being a
+/// pass and a completion. docs/analysis.md, "The transmit interrupt's parts".
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameParts {
+    /// Once per job (entry and exit included), cycles and µs at the file's clock.
+    pub fixed_cycles: u64,
+    /// `fixed_cycles` at the file's clock, µs.
+    pub fixed_us: f64,
+    /// Per frame: its pass of the transmit loop and the collection of its completion.
+    pub per_frame_cycles: u64,
+    /// `per_frame_cycles` at the file's clock, µs.
+    pub per_frame_us: f64,
+    /// Per aborted frame, beyond its completion: the requeue.
+    pub abort_cycles: u64,
+    /// `abort_cycles` at the file's clock, µs.
+    pub abort_us: f64,
 }
 
 /// Every critical section of one job's machine code, as the longest per ceiling.

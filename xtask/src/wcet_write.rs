@@ -278,6 +278,24 @@ fn hold(rows: &mut [TaskBound], held: &[machine_code::wcet::bounds::HeldBound]) 
                 );
                 match r.job.take() {
                     None => format!("bounded from the machine code at {figures}"),
+                    Some(job) if job.parts.is_some() => {
+                        let p = job.parts.as_ref().map_or((0, 0, 0), |p| {
+                            (p.fixed_cycles, p.per_frame_cycles, p.abort_cycles)
+                        });
+                        format!(
+                            "bounded from the machine code at {figures} per frame sent, by its parts ({}: {} cycles \
+                             once per job, {} per frame, {} per abort), its job at {} cycles ({} µs, {} instructions)",
+                            job.per_activation
+                                .split_once(": ")
+                                .map_or(job.per_activation.as_str(), |(at, _)| at),
+                            p.0,
+                            p.1,
+                            p.2,
+                            job.cycles,
+                            job.us,
+                            job.instructions
+                        )
+                    }
                     // Where and at how many passes; the bounds file holds why.
                     Some(job) => format!(
                         "bounded from the machine code at {figures} per activation ({}), its job at {} cycles \
@@ -347,11 +365,45 @@ fn from_found(
             format!("{what}: not bounded (no such handler in the image)"),
         ),
         Some((f, s)) => {
-            let mut row = match (&f.declined, &f.per_activation) {
-                (Some(reason), _) => declined(task, format!("{what}: {reason}")),
-                (None, None) => bounded(task, f.cycles, f.instructions, f.bus_wait_us, clock),
+            let mut row = match (&f.declined, &f.per_activation, &f.per_frame) {
+                (Some(reason), ..) => declined(task, format!("{what}: {reason}")),
+                // Charged by its parts: one frame's job (the fixed part, a pass and a completion) is the
+                // budget, the parts and the whole job's bound kept beside it.
+                (None, _, Some(parts)) => match &parts.declined {
+                    Some(reason) => declined(
+                        task,
+                        format!("{what}: its parts per frame ({}) are declined: {reason}", parts.at),
+                    ),
+                    None => TaskBound {
+                        job: Some(bounds::JobBound {
+                            cycles: f.cycles,
+                            us: us(f.cycles, clock),
+                            instructions: f.instructions,
+                            per_activation: format!(
+                                "{} by its parts per job, frame and abort: {}",
+                                parts.at, parts.reason
+                            ),
+                            parts: Some(bounds::FrameParts {
+                                fixed_cycles: parts.fixed.cycles,
+                                fixed_us: us(parts.fixed.cycles, clock),
+                                per_frame_cycles: parts.per_frame.cycles,
+                                per_frame_us: us(parts.per_frame.cycles, clock),
+                                abort_cycles: parts.abort.cycles,
+                                abort_us: us(parts.abort.cycles, clock),
+                            }),
+                        }),
+                        ..bounded(
+                            task,
+                            parts.fixed.cycles + parts.per_frame.cycles,
+                            parts.fixed.instructions + parts.per_frame.instructions,
+                            f.bus_wait_us,
+                            clock,
+                        )
+                    },
+                },
+                (None, None, None) => bounded(task, f.cycles, f.instructions, f.bus_wait_us, clock),
                 // Charged per activation: the charge is the budget, the job's bound kept beside it.
-                (None, Some(charge)) => match &charge.declined {
+                (None, Some(charge), None) => match &charge.declined {
                     Some(reason) => declined(
                         task,
                         format!(
@@ -368,6 +420,7 @@ fn from_found(
                                 "{} at {} passes: {}",
                                 charge.at, charge.passes, charge.reason
                             ),
+                            parts: None,
                         }),
                         ..bounded(
                             task,

@@ -58,6 +58,7 @@ pub(super) fn build_boards(
         let arrivals = Arrivals {
             bus_frame: received.map_or(bus_frame, |gap| gap.max(bus_frame)),
             own_frame,
+            longest_frame: can::frame_time(can::FrameCost::Exact, 8, false, bit),
         };
         let board = build_board(
             root, file, timing, &mine, scenario, arrivals, firmware, held, built,
@@ -117,6 +118,8 @@ struct Arrivals {
     bus_frame: Time,
     /// The shortest frame this board sends.
     own_frame: Time,
+    /// The longest standard frame on the bus (8 bytes, worst-case stuffing).
+    longest_frame: Time,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -162,6 +165,19 @@ fn build_board(
     };
     let mut tasks = board.fixed_tasks(arrivals, &mut timer_jobs, &mut measured, built)?;
     board.publisher_jobs(topics, scenario, &mut timer_jobs, &mut measured, &mut tasks)?;
+    if firmware != Firmware::Qemu {
+        if let Some(parts) = transmit_parts(timing, &budgets) {
+            let line = super::transmit::charge_by_parts(
+                file,
+                timing,
+                &declared,
+                &parts,
+                arrivals.longest_frame,
+                &mut tasks,
+            )?;
+            built.sources.push(line);
+        }
+    }
     if firmware == Firmware::Qemu {
         if let Some(replay) = timing
             .trace
@@ -204,6 +220,19 @@ fn build_board(
         ceilings,
         tasks: all,
     })
+}
+
+/// The transmit task's parts, where its row in the bounds file is used (not declined) and charged by its parts.
+fn transmit_parts(
+    timing: &Timing,
+    budgets: &super::bounded::BoardBudgets,
+) -> Option<crate::bounds::FrameParts> {
+    let name = timing.can_tx_task.as_deref()?;
+    let row = budgets.bounds.as_ref()?.task(name)?;
+    if row.declined.is_some() {
+        return None;
+    }
+    row.job.as_ref()?.parts.clone()
 }
 
 /// The tasks the timing file gives a role (a publisher per CAN level, the command handler, the transmit task)

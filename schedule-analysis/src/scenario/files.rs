@@ -336,6 +336,24 @@ pub struct TimingTask {
     /// The admission task only: the costliest step measured in QEMU, which its estimate rests on.
     #[serde(default)]
     pub worst_step: Option<WorstStep>,
+    /// The transmit task only (`can_tx_task`): every other task that puts frames in the transmit queue (its
+    /// `tx_queue`) but is no publisher, with the most frames one job of it queues (each job pends the transmit
+    /// interrupt once after them). Used where the machine code charges the transmit interrupt by its parts
+    /// (docs/analysis.md, "The transmit interrupt's parts"): a publisher's frames per sample come from its topic.
+    #[serde(default)]
+    pub queued_by: Option<BTreeMap<String, QueuedBy>>,
+}
+
+/// What one task's jobs put in the transmit queue ([`TimingTask::queued_by`]).
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct QueuedBy {
+    /// The most frames one job queues (0: none, and no pend).
+    pub frames: u32,
+    /// The shortest time between two of its jobs that queue frames, where the code spaces them further apart than
+    /// the task's period (the command handler's busy verdicts: one per one-shot interval), µs.
+    #[serde(default)]
+    pub at_least_us: Option<f64>,
 }
 
 /// Budgets of one published topic: one job of the publisher task per sample.

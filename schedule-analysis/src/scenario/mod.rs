@@ -35,6 +35,7 @@ mod messages;
 mod on_bounds;
 mod plan;
 mod qemu;
+mod transmit;
 
 pub use bounded::{bounds_file, breaking_bounds, BoardBudgets, BudgetFrom, Held};
 pub use files::{
