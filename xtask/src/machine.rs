@@ -675,6 +675,7 @@ mod tests {
             preemption_retry_cycles: 0,
             declined: declined.map(str::to_string),
             per_activation: None,
+            per_frame: None,
             topics: Vec::new(),
         }
     }

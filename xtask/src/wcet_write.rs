@@ -751,6 +751,7 @@ mod app {
             preemption_retry_cycles: 0,
             declined: declined.map(str::to_string),
             per_activation: None,
+            per_frame: None,
             topics: Vec::new(),
         }
     }
@@ -954,6 +955,92 @@ mod app {
             }),
             ..found("can_rx", 2160, None)
         }
+    }
+
+    #[test]
+    fn a_transmit_task_charged_by_its_parts_has_one_frames_job_as_its_budget() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: vec!["can_rx".into()],
+            ..Budgets::default()
+        };
+        let part = |cycles: u64, instructions: u64| machine_code::Part {
+            cycles,
+            us: cycles as f64 / 72.0,
+            instructions,
+        };
+        let parts = |declined: Option<&str>| machine_code::TaskBound {
+            per_frame: Some(machine_code::FrameBound {
+                at: "TX at src/tx.rs:30".into(),
+                completion: "C".into(),
+                completions: 3,
+                requeue: "Q".into(),
+                fixed: part(2160, 800),
+                pass: part(1080, 300),
+                sent: part(72, 30),
+                abort: part(2448, 700),
+                per_frame: part(1152, 330),
+                reason: "a job costs at most its parts".into(),
+                declined: declined.map(str::to_string),
+            }),
+            ..found("can_rx", 13_968, None)
+        };
+        let machine = [parts(None)];
+        let sections = sections_of(&machine, &[]);
+        let written = super::rows(&built, &app, &budgets, &machine, &sections, chip);
+        let tx = written.iter().find(|r| r.task == "can_rx").unwrap();
+        // One frame's job: the fixed part and a frame's pass and completion, 2 160 + 1 152 = 3 312 cycles, 46 µs at
+        // 72 MHz; the job's bound and the parts beside it.
+        assert_eq!(
+            (tx.cycles, tx.us, tx.instructions),
+            (Some(3312), Some(46.0), Some(1130))
+        );
+        let job = tx.job.as_ref().expect("the job's bound kept");
+        assert_eq!((job.cycles, job.us), (13_968, 194.0));
+        let p = job.parts.as_ref().expect("the parts kept");
+        assert_eq!(
+            (
+                p.fixed_cycles,
+                p.fixed_us,
+                p.per_frame_cycles,
+                p.per_frame_us,
+                p.abort_cycles,
+                p.abort_us
+            ),
+            (2160, 30.0, 1152, 16.0, 2448, 34.0)
+        );
+        // Declined parts decline the row (the worst job is no frame's budget).
+        let machine = [parts(Some("the requeue adds 10 cycles to the task"))];
+        let written = super::rows(&built, &app, &budgets, &machine, &sections, chip);
+        let tx = written.iter().find(|r| r.task == "can_rx").unwrap();
+        assert_eq!(tx.cycles, None);
+        assert!(tx.declined.as_deref().unwrap().contains("parts per frame"));
+        // Held, the row names the frame's job and the parts; the held bound keeps them for the run on every bound.
+        let machine = [parts(None)];
+        let mut written = super::rows(&built, &app, &budgets, &machine, &sections, chip);
+        let held = machine_code::wcet::bounds::HeldBound {
+            task: "can_rx".into(),
+            reason: "every set fails".into(),
+        };
+        hold(&mut written, &[held]);
+        let tx = written.iter().find(|r| r.task == "can_rx").unwrap();
+        let reason = tx.declined.as_deref().unwrap();
+        assert!(
+            reason.contains("3312 cycles")
+                && reason.contains("2160 cycles once per job, 1152 per frame, 2448 per abort"),
+            "{reason}"
+        );
+        let kept = tx.held.as_ref().expect("held");
+        assert_eq!(kept.cycles, Some(3312));
+        assert_eq!(
+            kept.job
+                .as_ref()
+                .and_then(|j| j.parts.as_ref())
+                .map(|p| p.abort_cycles),
+            Some(2448)
+        );
     }
 
     #[test]

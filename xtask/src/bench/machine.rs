@@ -301,6 +301,7 @@ mod tests {
             us: 30.0,
             instructions: 900,
             per_activation: "RX at src/rx.rs:12 at 2 passes: …".into(),
+            parts: None,
         });
         let charged = BoardBounds {
             bounds: Some(file),
