@@ -121,7 +121,9 @@ fn a_row_without_parts_adds_no_jobs() {
 #[test]
 fn a_task_sharing_the_queue_whose_frames_are_not_stated_is_refused() {
     let root = workspace("unstated", true);
-    let timing = root.join(scenario::MODELS_DIR).join("diwheeldrive.timing.json");
+    let timing = root
+        .join(scenario::MODELS_DIR)
+        .join("diwheeldrive.timing.json");
     let text = std::fs::read_to_string(&timing).unwrap();
     let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
     json["tasks"]["can_tx"]["queued_by"]
