@@ -504,6 +504,50 @@ pub async fn next_command<const N: usize>(
     frame
 }
 
+/// The command handler's one wait (`docs/analysis.md`, "The command handler"): until `not_before_us`
+/// (the rate limit: `None` before the first command), then for the next frame the CAN receive
+/// interrupt queued. The same waits, in the same order, as a rate-limit wait after each command
+/// followed by [`next_frame`]. Both are polled through one function the compiler keeps apart
+/// ([`Outlined`]), so the handler's loop has one `await` and one place that polls it: a job (from a
+/// resume to the next wait that is pending) runs the loop's body once, and the machine-code bound
+/// charges one command's handling. With the two waits inlined into the loop, the way from the
+/// frame's wait round the handling to the rate-limit wait's first poll was a way out of the loop as
+/// well as a pass of it, and the bound charged two commands' handling per job.
+pub async fn next_frame_after<C: Clock, const N: usize>(
+    frames: &mut crate::rx_queue::Consumer<'static, N>,
+    not_before_us: Option<u64>,
+) -> RxFrame {
+    let wait = core::pin::pin!(wait_then_receive::<C, N>(frames, not_before_us));
+    Outlined(wait).await
+}
+
+/// [`next_frame_after`]'s two waits.
+async fn wait_then_receive<C: Clock, const N: usize>(
+    frames: &mut crate::rx_queue::Consumer<'static, N>,
+    not_before_us: Option<u64>,
+) -> RxFrame {
+    if let Some(at_us) = not_before_us {
+        C::delay_until_us(at_us).await;
+    }
+    next_frame(frames).await
+}
+
+/// A pinned future polled through a function of its own (never inlined into the caller's state
+/// machine): the caller's `await` on it is one call, wherever the caller resumes.
+struct Outlined<'f, F: core::future::Future>(core::pin::Pin<&'f mut F>);
+
+impl<F: core::future::Future> core::future::Future for Outlined<'_, F> {
+    type Output = F::Output;
+
+    #[inline(never)]
+    fn poll(
+        mut self: core::pin::Pin<&mut Self>,
+        cx: &mut core::task::Context<'_>,
+    ) -> core::task::Poll<F::Output> {
+        self.0.as_mut().poll(cx)
+    }
+}
+
 /// Waits for the next frame the CAN receive interrupt queued (the command handler's queue).
 pub async fn next_frame<const N: usize>(
     frames: &mut crate::rx_queue::Consumer<'static, N>,
