@@ -565,6 +565,11 @@ pub fn busy_verdict(board: Board, id: u16, data: &[u8]) -> Option<[Frame; 2]> {
     let Ok(Command::Sensor(command)) = decode_command(id, data) else {
         return None;
     };
+    busy_verdict_for(board, &command)
+}
+
+/// [`busy_verdict`] for a sensor command already decoded (the command handler decodes each frame once).
+pub fn busy_verdict_for(board: Board, command: &SensorCommand) -> Option<[Frame; 2]> {
     if command.topic.board() != board {
         return None;
     }

@@ -222,32 +222,49 @@ fn handle_command_at(
     }
 }
 
-/// Whether a command belongs to the admission task (`docs/analysis.md`, "The on-chip admission
-/// check"): every board's sensor commands (publish, stop, once) and admission-policy commands, which
-/// the check must see in the order heard to keep the robot's running set. Actuator commands (motor,
-/// LEDs, shutdown) stay with the command handler, which forwards the others with
-/// [`forward_to_admission`] and never runs the check itself.
+/// Where the command handler sends a frame, decoded once (`docs/analysis.md`, "The on-chip admission
+/// check"): every board's sensor commands (publish, stop, once) and admission-policy commands go to
+/// the admission task, which must see them in the order heard to keep the robot's running set;
+/// actuator commands (motor, LEDs, shutdown) and anything that does not decode stay with the command
+/// handler, which forwards the others with [`route_to_admission`] and never runs the check itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Route {
+    /// For the admission task: the sensor command (`None` for an admission-policy command).
+    Admission(Option<amiro_can::SensorCommand>),
+    /// For the command handler itself ([`handle_command`]).
+    Handler,
+}
+
+/// Decodes `frame` once and says where it goes ([`Route`]).
+pub fn route(frame: &RxFrame) -> Route {
+    match amiro_can::decode_command(frame.id, frame.payload()) {
+        Ok(amiro_can::Command::Sensor(command)) => Route::Admission(Some(command)),
+        Ok(amiro_can::Command::Policy { .. }) => Route::Admission(None),
+        _ => Route::Handler,
+    }
+}
+
+/// Whether a command belongs to the admission task ([`route`]).
 pub fn for_admission(frame: &RxFrame) -> bool {
-    matches!(
-        amiro_can::decode_command(frame.id, frame.payload()),
-        Ok(amiro_can::Command::Sensor(_) | amiro_can::Command::Policy { .. })
-    )
+    matches!(route(frame), Route::Admission(_))
 }
 
 /// When the last busy verdict was sent (ms since boot, 0: never).
 static LAST_BUSY_VERDICT_MS: AtomicU32 = AtomicU32::new(0);
 
 /// The command handler's part of a sensor or admission-policy command (`docs/analysis.md`, "The
-/// admission task"). A **stop** only removes load: it takes effect here, at the handler's priority and
-/// within its deadline, and then goes to the admission task like every such command, which brings its
-/// running set up to date in the order heard (and applies the stop again, in case a request for the
-/// same topic was still waiting there). When the admission queue is full, one of this board's publish or
-/// one-shot requests is refused unseen: counted as [`amiro_can::RefusalReason::Busy`] and answered with
-/// a verdict through the transmit queue; anything else is dropped and counted as a received frame
-/// dropped (the queue is bounded, as the receive queue is).
+/// admission task"), `sensor` as [`route`] decoded it. A **stop** only removes load: it takes effect here,
+/// at the handler's priority and within its deadline, and then goes to the admission task like every such
+/// command, which brings its running set up to date in the order heard (and applies the stop again, in case
+/// a request for the same topic was still waiting there). When the admission queue is full, one of this
+/// board's publish or one-shot requests is refused unseen:
+/// counted as [`amiro_can::RefusalReason::Busy`] and answered with a verdict through the transmit queue;
+/// anything else is dropped and counted as a received frame dropped (the queue is bounded, as the receive
+/// queue is).
 #[allow(clippy::too_many_arguments)]
 pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
     frame: &RxFrame,
+    sensor: Option<amiro_can::SensorCommand>,
     board: amiro_can::Board,
     handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     wake_levels: &mut [Sender<'static, (), 1>],
@@ -255,7 +272,7 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
     mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
     tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
 ) {
-    let stop = crate::admission::is_stop(frame.id, frame.payload());
+    let stop = sensor.is_some_and(|c| c.mode == amiro_can::SensorMode::Stop);
     if stop {
         let _ = handle_command::<C>(frame, handler, wake_levels);
     }
@@ -264,7 +281,7 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
         // only the admission task's view keeps the stream, which errs on the safe side (more load).
         return;
     }
-    match crate::admission::busy_verdict(board, frame.id, frame.payload()) {
+    match sensor.and_then(|command| crate::admission::busy_verdict_for(board, &command)) {
         Some(verdict) => {
             crate::health::count_admission(true, amiro_can::RefusalReason::Busy);
             let now = C::now_us();
@@ -280,7 +297,8 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
             }
             LAST_BUSY_VERDICT_MS.store(now_ms.max(1), Ordering::Relaxed);
             // Not traced as queued frames: no sample was released for them (the bench would take
-            // them for late samples of the diagnostics topic).
+            // them for late samples of the diagnostics topic). One lock per frame: the transmit task
+            // waits for one frame's insertion at most.
             for verdict_frame in verdict {
                 let _ = tx_queue.lock(|q| enqueue(q, verdict_frame));
             }
@@ -518,18 +536,23 @@ pub async fn next_frame_after<C: Clock, const N: usize>(
     not_before_us: Option<u64>,
 ) -> RxFrame {
     let wait = core::pin::pin!(wait_then_receive::<C, N>(frames, not_before_us));
-    Outlined(wait).await
+    Outlined(wait).await.0
 }
+
+/// A frame on a word boundary: returned through [`Outlined`]'s poll, it is copied out by words
+/// (a frame at the poll result's half-word offset was copied by a `memcpy` call).
+#[repr(align(4))]
+struct Aligned(RxFrame);
 
 /// [`next_frame_after`]'s two waits.
 async fn wait_then_receive<C: Clock, const N: usize>(
     frames: &mut crate::rx_queue::Consumer<'static, N>,
     not_before_us: Option<u64>,
-) -> RxFrame {
+) -> Aligned {
     if let Some(at_us) = not_before_us {
         C::delay_until_us(at_us).await;
     }
-    next_frame(frames).await
+    Aligned(next_frame(frames).await)
 }
 
 /// A pinned future polled through a function of its own (never inlined into the caller's state

@@ -289,11 +289,13 @@ mod app {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
         let mut not_before = None;
         loop {
-            let frame = tasks::next_frame_after::<Clock, RX_QUEUE_LEN>(cx.local.commands, not_before).await;
+            let frame =
+                tasks::next_frame_after::<Clock, RX_QUEUE_LEN>(cx.local.commands, not_before).await;
             let started = Clock::now_us();
-            if tasks::for_admission(&frame) {
+            if let tasks::Route::Admission(sensor) = tasks::route(&frame) {
                 tasks::route_to_admission::<Clock, ADMISSION_QUEUE_LEN, TX_QUEUE_LEN>(
                     &frame,
+                    sensor,
                     CanBoard::DiWheelDrive,
                     &mut cx.shared.handler,
                     cx.local.wake_commands,
