@@ -222,27 +222,7 @@ fn handle_command_at(
     }
 }
 
-/// Where the command handler sends a frame, decoded once (`docs/analysis.md`, "The on-chip admission
-/// check"): every board's sensor commands (publish, stop, once) and admission-policy commands go to
-/// the admission task, which must see them in the order heard to keep the robot's running set;
-/// actuator commands (motor, LEDs, shutdown) and anything that does not decode stay with the command
-/// handler, which forwards the others with [`route_to_admission`] and never runs the check itself.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Route {
-    /// For the admission task: the sensor command (`None` for an admission-policy command).
-    Admission(Option<amiro_can::SensorCommand>),
-    /// For the command handler itself ([`handle_command`]).
-    Handler,
-}
-
-/// Decodes `frame` once and says where it goes ([`Route`]).
-pub fn route(frame: &RxFrame) -> Route {
-    match amiro_can::decode_command(frame.id, frame.payload()) {
-        Ok(amiro_can::Command::Sensor(command)) => Route::Admission(Some(command)),
-        Ok(amiro_can::Command::Policy { .. }) => Route::Admission(None),
-        _ => Route::Handler,
-    }
-}
+pub use crate::admission::{route, Route};
 
 /// Whether a command belongs to the admission task ([`route`]).
 pub fn for_admission(frame: &RxFrame) -> bool {
