@@ -565,6 +565,11 @@ pub fn busy_verdict(board: Board, id: u16, data: &[u8]) -> Option<[Frame; 2]> {
     let Ok(Command::Sensor(command)) = decode_command(id, data) else {
         return None;
     };
+    busy_verdict_for(board, &command)
+}
+
+/// [`busy_verdict`] for a sensor command already decoded (the command handler decodes each frame once).
+pub fn busy_verdict_for(board: Board, command: &SensorCommand) -> Option<[Frame; 2]> {
     if command.topic.board() != board {
         return None;
     }
@@ -588,6 +593,28 @@ pub fn busy_verdict(board: Board, id: u16, data: &[u8]) -> Option<[Frame; 2]> {
         one_shot: command.mode == SensorMode::Once,
     };
     Some(verdict.frames(command.priority))
+}
+
+/// Where the command handler sends a frame, decoded once (`docs/analysis.md`, "The on-chip admission
+/// check"): every board's sensor commands (publish, stop, once) and admission-policy commands go to
+/// the admission task, which must see them in the order heard to keep the robot's running set;
+/// actuator commands (motor, LEDs, shutdown) and anything that does not decode stay with the command
+/// handler, which forwards the others with `tasks::route_to_admission` and never runs the check itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Route {
+    /// For the admission task: the sensor command (`None` for an admission-policy command).
+    Admission(Option<SensorCommand>),
+    /// For the command handler itself (`tasks::handle_command`).
+    Handler,
+}
+
+/// Decodes `frame` once and says where it goes ([`Route`]).
+pub fn route(frame: &crate::can::RxFrame) -> Route {
+    match decode_command(frame.id, frame.payload()) {
+        Ok(Command::Sensor(command)) => Route::Admission(Some(command)),
+        Ok(Command::Policy { .. }) => Route::Admission(None),
+        _ => Route::Handler,
+    }
 }
 
 /// `now_us` in units of 1024 µs, wrapping at 32 bits (a shift: no division is linked for it).
@@ -706,6 +733,7 @@ pub fn table_source(root: &std::path::Path) -> Result<std::string::String, std::
 #[cfg(test)]
 mod tests {
     use super::*;
+    use amiro_can::{AdmissionPolicy, MotorCommand, Priority};
 
     #[test]
     fn pacing_decides_a_burst_back_to_back_then_waits_for_the_window() {
@@ -744,5 +772,83 @@ mod tests {
             amiro_can::reason_name(RefusalReason::Budget.counted_index()),
             Some("admission-iteration-budget")
         );
+    }
+    /// The frame as the receive side hands it on.
+    fn received(frame: amiro_can::Frame) -> crate::can::RxFrame {
+        let mut data = [0; 8];
+        data[..frame.data().len()].copy_from_slice(frame.data());
+        crate::can::RxFrame {
+            id: frame.id().raw(),
+            len: frame.dlc(),
+            data,
+        }
+    }
+
+    #[test]
+    fn route_sends_sensor_and_policy_commands_to_admission_and_keeps_the_rest() {
+        // DiWheelDrive's gyroscope (0x208): a stop (mode 0), then every 10 ms at medium.
+        let stop = crate::can::RxFrame {
+            id: 0x208,
+            len: 1,
+            data: [0; 8],
+        };
+        let publish = crate::can::RxFrame {
+            id: 0x208,
+            len: 4,
+            data: [1, 10, 0, 1, 0, 0, 0, 0],
+        };
+        match route(&stop) {
+            Route::Admission(Some(command)) => assert_eq!(command.mode, SensorMode::Stop),
+            other => panic!("a stop routed as {other:?}"),
+        }
+        let Route::Admission(Some(command)) = route(&publish) else {
+            panic!("a publish request not routed to the admission task");
+        };
+        assert!(matches!(command.mode, SensorMode::Publish(_)));
+        // The verdict from the command decoded once is the verdict from the frame.
+        assert_eq!(
+            busy_verdict_for(Board::DiWheelDrive, &command),
+            busy_verdict(Board::DiWheelDrive, publish.id, publish.payload())
+        );
+        assert!(busy_verdict_for(Board::PowerManagement, &command).is_none());
+
+        let policy = received(
+            Command::Policy {
+                priority: Priority::Low,
+                board: Board::DiWheelDrive,
+                policy: AdmissionPolicy::AcceptAndWarn,
+            }
+            .encode(),
+        );
+        assert_eq!(route(&policy), Route::Admission(None));
+        let motor = received(
+            Command::Motor {
+                priority: Priority::High,
+                command: MotorCommand {
+                    velocity_um_s: 100_000,
+                    angular_urad_s: 0,
+                },
+            }
+            .encode(),
+        );
+        assert_eq!(route(&motor), Route::Handler);
+        // A frame no command decodes from stays with the handler (which counts it as rejected).
+        let unknown = crate::can::RxFrame {
+            id: u16::MAX,
+            len: 0,
+            data: [0; 8],
+        };
+        assert_eq!(route(&unknown), Route::Handler);
+        // The handler's stop check reads the mode `route` decoded.
+        for frame in [stop, publish, policy, motor, unknown] {
+            let routed_stop = matches!(
+                route(&frame),
+                Route::Admission(Some(SensorCommand {
+                    mode: SensorMode::Stop,
+                    ..
+                }))
+            );
+            assert_eq!(is_stop(frame.id, frame.payload()), routed_stop);
+        }
     }
 }

@@ -222,32 +222,29 @@ fn handle_command_at(
     }
 }
 
-/// Whether a command belongs to the admission task (`docs/analysis.md`, "The on-chip admission
-/// check"): every board's sensor commands (publish, stop, once) and admission-policy commands, which
-/// the check must see in the order heard to keep the robot's running set. Actuator commands (motor,
-/// LEDs, shutdown) stay with the command handler, which forwards the others with
-/// [`forward_to_admission`] and never runs the check itself.
+pub use crate::admission::{route, Route};
+
+/// Whether a command belongs to the admission task ([`route`]).
 pub fn for_admission(frame: &RxFrame) -> bool {
-    matches!(
-        amiro_can::decode_command(frame.id, frame.payload()),
-        Ok(amiro_can::Command::Sensor(_) | amiro_can::Command::Policy { .. })
-    )
+    matches!(route(frame), Route::Admission(_))
 }
 
 /// When the last busy verdict was sent (ms since boot, 0: never).
 static LAST_BUSY_VERDICT_MS: AtomicU32 = AtomicU32::new(0);
 
 /// The command handler's part of a sensor or admission-policy command (`docs/analysis.md`, "The
-/// admission task"). A **stop** only removes load: it takes effect here, at the handler's priority and
-/// within its deadline, and then goes to the admission task like every such command, which brings its
-/// running set up to date in the order heard (and applies the stop again, in case a request for the
-/// same topic was still waiting there). When the admission queue is full, one of this board's publish or
-/// one-shot requests is refused unseen: counted as [`amiro_can::RefusalReason::Busy`] and answered with
-/// a verdict through the transmit queue; anything else is dropped and counted as a received frame
-/// dropped (the queue is bounded, as the receive queue is).
+/// admission task"), `sensor` as [`route`] decoded it. A **stop** only removes load: it takes effect here,
+/// at the handler's priority and within its deadline, and then goes to the admission task like every such
+/// command, which brings its running set up to date in the order heard (and applies the stop again, in case
+/// a request for the same topic was still waiting there). When the admission queue is full, one of this
+/// board's publish or one-shot requests is refused unseen:
+/// counted as [`amiro_can::RefusalReason::Busy`] and answered with a verdict through the transmit queue;
+/// anything else is dropped and counted as a received frame dropped (the queue is bounded, as the receive
+/// queue is).
 #[allow(clippy::too_many_arguments)]
 pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
     frame: &RxFrame,
+    sensor: Option<amiro_can::SensorCommand>,
     board: amiro_can::Board,
     handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     wake_levels: &mut [Sender<'static, (), 1>],
@@ -255,7 +252,7 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
     mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
     tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
 ) {
-    let stop = crate::admission::is_stop(frame.id, frame.payload());
+    let stop = sensor.is_some_and(|c| c.mode == amiro_can::SensorMode::Stop);
     if stop {
         let _ = handle_command::<C>(frame, handler, wake_levels);
     }
@@ -264,7 +261,7 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
         // only the admission task's view keeps the stream, which errs on the safe side (more load).
         return;
     }
-    match crate::admission::busy_verdict(board, frame.id, frame.payload()) {
+    match sensor.and_then(|command| crate::admission::busy_verdict_for(board, &command)) {
         Some(verdict) => {
             crate::health::count_admission(true, amiro_can::RefusalReason::Busy);
             let now = C::now_us();
@@ -280,7 +277,8 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
             }
             LAST_BUSY_VERDICT_MS.store(now_ms.max(1), Ordering::Relaxed);
             // Not traced as queued frames: no sample was released for them (the bench would take
-            // them for late samples of the diagnostics topic).
+            // them for late samples of the diagnostics topic). One lock per frame: the transmit task
+            // waits for one frame's insertion at most.
             for verdict_frame in verdict {
                 let _ = tx_queue.lock(|q| enqueue(q, verdict_frame));
             }
@@ -502,6 +500,55 @@ pub async fn next_command<const N: usize>(
     let frame = commands.recv().await.ok();
     crate::tracing::resume(task);
     frame
+}
+
+/// The command handler's one wait (`docs/analysis.md`, "The command handler"): until `not_before_us`
+/// (the rate limit: `None` before the first command), then for the next frame the CAN receive
+/// interrupt queued. The same waits, in the same order, as a rate-limit wait after each command
+/// followed by [`next_frame`]. Both are polled through one function the compiler keeps apart
+/// ([`Outlined`]), so the handler's loop has one `await` and one place that polls it: a job (from a
+/// resume to the next wait that is pending) runs the loop's body once, and the machine-code bound
+/// charges one command's handling. With the two waits inlined into the loop, the way from the
+/// frame's wait round the handling to the rate-limit wait's first poll was a way out of the loop as
+/// well as a pass of it, and the bound charged two commands' handling per job.
+pub async fn next_frame_after<C: Clock, const N: usize>(
+    frames: &mut crate::rx_queue::Consumer<'static, N>,
+    not_before_us: Option<u64>,
+) -> RxFrame {
+    let wait = core::pin::pin!(wait_then_receive::<C, N>(frames, not_before_us));
+    Outlined(wait).await.0
+}
+
+/// A frame on a word boundary: returned through [`Outlined`]'s poll, it is copied out by words
+/// (a frame at the poll result's half-word offset was copied by a `memcpy` call).
+#[repr(align(4))]
+struct Aligned(RxFrame);
+
+/// [`next_frame_after`]'s two waits.
+async fn wait_then_receive<C: Clock, const N: usize>(
+    frames: &mut crate::rx_queue::Consumer<'static, N>,
+    not_before_us: Option<u64>,
+) -> Aligned {
+    if let Some(at_us) = not_before_us {
+        C::delay_until_us(at_us).await;
+    }
+    Aligned(next_frame(frames).await)
+}
+
+/// A pinned future polled through a function of its own (never inlined into the caller's state
+/// machine): the caller's `await` on it is one call, wherever the caller resumes.
+struct Outlined<'f, F: core::future::Future>(core::pin::Pin<&'f mut F>);
+
+impl<F: core::future::Future> core::future::Future for Outlined<'_, F> {
+    type Output = F::Output;
+
+    #[inline(never)]
+    fn poll(
+        mut self: core::pin::Pin<&mut Self>,
+        cx: &mut core::task::Context<'_>,
+    ) -> core::task::Poll<F::Output> {
+        self.0.as_mut().poll(cx)
+    }
 }
 
 /// Waits for the next frame the CAN receive interrupt queued (the command handler's queue).

@@ -264,11 +264,15 @@ mod app {
     #[task(priority = 5, shared = [handler, tx_queue], local = [commands, to_admission, wake_commands])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
+        let mut not_before = None;
         loop {
-            let (frame, started) = (tasks::next_frame(cx.local.commands).await, Clock::now_us());
-            if tasks::for_admission(&frame) {
+            let frame =
+                tasks::next_frame_after::<Clock, RX_QUEUE_LEN>(cx.local.commands, not_before).await;
+            let started = Clock::now_us();
+            if let tasks::Route::Admission(sensor) = tasks::route(&frame) {
                 tasks::route_to_admission::<Clock, ADMISSION_QUEUE_LEN, TX_QUEUE_LEN>(
                     &frame,
+                    sensor,
                     CanBoard::PowerManagement,
                     &mut cx.shared.handler,
                     cx.local.wake_commands,
@@ -281,7 +285,7 @@ mod app {
             {
                 shutdown_sequence::spawn(Some(mode)).ok();
             }
-            Clock::delay_until_us(started + crate::COMMAND_MIN_INTERVAL_US).await;
+            not_before = Some(started + crate::COMMAND_MIN_INTERVAL_US);
         }
     }
 
