@@ -106,8 +106,9 @@ fn serve_due<C: Clock, const N: usize>(
         if let Some(board) = topic.diagnostics_of() {
             // The runtime's own topic: frames straight from the health counters.
             let counters = tx_queue.lock(|q| *q.counters());
-            let frames =
-                handler.lock(|h| health::frames_now(h, &counters, board, taken, release.priority));
+            // The snapshot under the handler's lock, its six frames made after it.
+            let diagnostics = handler.lock(|h| health::snapshot(h, &counters, taken));
+            let frames = health::frames_now(&diagnostics, board, release.priority);
             let deadline = sample_deadline(taken, &release, period_us);
             queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
         } else {

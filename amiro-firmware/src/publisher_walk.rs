@@ -7,7 +7,7 @@
 //! levels (the execution-time analysis charges every level's walk to every job; docs/analysis.md,
 //! "One topic's job").
 use amiro_can::Priority;
-use amiro_sensors::handler::{Publisher, SensorDataHandler, LEVELS};
+use amiro_sensors::handler::{SensorDataHandler, LEVELS};
 
 /// Where each CAN priority comes in a publisher task's `levels` (its first place there), or
 /// [`Ranks::NOT_SERVED`]: taken once from the board's slice, so that finding the next due time or
