@@ -201,17 +201,16 @@ pub fn snapshot(handler: &SensorDataHandler, tx: &TxCounters, now_us: u64) -> Di
     }
 }
 
-/// One sample of `board`'s diagnostics topic at `priority`, from the health now: its six frames,
-/// the rejection window moving on by three reasons per sample.
+/// One sample of `board`'s diagnostics topic at `priority` from the health now (its
+/// [`snapshot`], which the caller takes under the handler's lock): its six frames, the rejection
+/// window moving on by three reasons per sample. The frames are made outside the lock.
 #[inline(never)]
 pub fn frames_now(
-    handler: &SensorDataHandler,
-    tx: &TxCounters,
+    diagnostics: &Diagnostics,
     board: Board,
-    now_us: u64,
     priority: Priority,
 ) -> [Frame; PAGES_PER_SAMPLE as usize] {
     let window = WINDOW.load(Ordering::Relaxed);
     WINDOW.store(Diagnostics::next_window(window), Ordering::Relaxed);
-    snapshot(handler, tx, now_us).frames(board, priority, window)
+    diagnostics.frames(board, priority, window)
 }

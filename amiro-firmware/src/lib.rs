@@ -42,6 +42,7 @@ pub mod liveness;
 pub mod mono;
 #[cfg(target_os = "none")]
 pub mod publisher;
+pub mod publisher_walk;
 #[cfg(all(target_os = "none", feature = "qemu"))]
 pub mod qemu;
 #[cfg(target_os = "none")]

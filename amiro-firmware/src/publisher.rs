@@ -15,6 +15,7 @@ use rtic_core::Mutex;
 use rtic_sync::channel::Receiver;
 
 use crate::mono::Clock;
+use crate::publisher_walk::{next_due, next_to_take, Ranks};
 use crate::{health, telemetry};
 
 /// What a board samples for a topic.
@@ -55,8 +56,9 @@ pub async fn serve_level<C: Clock, const N: usize>(
     mut sampler: impl Sampler,
     tx_interrupt: impl InterruptNumber,
 ) -> ! {
+    let ranks = Ranks::of(levels);
     loop {
-        let due = handler.lock(|h| levels.iter().filter_map(|l| h.next_due(*l)).min());
+        let due = handler.lock(|h| next_due(h, ranks));
         match due {
             Some(due) => {
                 let _ = C::timeout_at_us(due, wake.recv()).await;
@@ -67,47 +69,51 @@ pub async fn serve_level<C: Clock, const N: usize>(
                 crate::tracing::resume(task);
             }
         }
-        for &level in levels {
-            serve_due::<C, N>(
-                level,
-                &mut handler,
-                &mut tx_queue,
-                &mut sampler,
-                tx_interrupt,
-            );
-        }
+        serve_due::<C, N>(
+            ranks,
+            &mut handler,
+            &mut tx_queue,
+            &mut sampler,
+            tx_interrupt,
+        );
     }
 }
 
 // Generic over the task's locks (one copy per publisher task): only the locking is here, the
 // work is in the non-generic functions below, so the copies stay small.
 fn serve_due<C: Clock, const N: usize>(
-    level: Priority,
+    ranks: Ranks,
     handler: &mut impl Mutex<T = SensorDataHandler>,
     tx_queue: &mut impl Mutex<T = TxQueue<N>>,
     sampler: &mut impl Sampler,
     tx_interrupt: impl InterruptNumber,
 ) {
     let now = C::now_us();
-    // Take the due releases one at a time under the handler's lock (earliest first, as
-    // `take_due_releases` orders them), each sampled after releasing it: one pass of this loop
-    // is one release, which the execution-time analysis charges as one job of its topic
-    // (docs/analysis.md, "One topic's job"). Each take makes its row not due at `now`, so the
-    // publisher table's size bounds the loop.
-    while let Some(release) = handler.lock(|h| h.take_next_release(level, now)) {
+    // Take the due releases one at a time under the handler's lock (the first served level's
+    // first, each level's earliest first, as `take_due_releases` orders them), each sampled after
+    // releasing it: one pass of this loop is one release, which the execution-time analysis
+    // charges as one job of its topic (docs/analysis.md, "One topic's job"). Each take makes its
+    // row not due at `now`, so the publisher table's size bounds the loop.
+    while let Some((release, period_us)) = handler.lock(|h| {
+        let (level, period_us) = next_to_take(h, ranks, now)?;
+        h.take_next_release(level, now)
+            .map(|release| (release, period_us))
+    }) {
+        let level = release.priority;
         note_release(now, level, &release);
         let topic = release.topic;
         let taken = C::now_us();
         if let Some(board) = topic.diagnostics_of() {
             // The runtime's own topic: frames straight from the health counters.
             let counters = tx_queue.lock(|q| *q.counters());
-            let frames =
-                handler.lock(|h| health::frames_now(h, &counters, board, taken, release.priority));
-            let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
+            // The snapshot under the handler's lock, its six frames made after it.
+            let diagnostics = handler.lock(|h| health::snapshot(h, &counters, taken));
+            let frames = health::frames_now(&diagnostics, board, release.priority);
+            let deadline = sample_deadline(taken, &release, period_us);
             queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
         } else {
             let samples = sampler.sample(topic, taken);
-            let deadline = handler.lock(|h| sample_deadline(h, taken, &release));
+            let deadline = sample_deadline(taken, &release, period_us);
             let frames = samples
                 .into_iter()
                 .map(|data| data.encode(release.priority));
@@ -147,10 +153,10 @@ fn note_release(now: u64, level: Priority, release: &Release) {
     }
 }
 
-/// Traces the sample taken; a periodic sample's deadline is its next release (`None` for a
-/// one-shot).
+/// Traces the sample taken; a periodic sample's deadline is its next release, one period of its
+/// row (`period_us`, as the row had it when released) after it (`None` for a one-shot).
 #[inline(never)]
-fn sample_deadline(handler: &SensorDataHandler, taken: u64, release: &Release) -> Option<u64> {
+fn sample_deadline(taken: u64, release: &Release, period_us: u32) -> Option<u64> {
     telemetry::trace(&TraceEvent::new(
         taken,
         TraceKind::SampleTaken {
@@ -161,9 +167,7 @@ fn sample_deadline(handler: &SensorDataHandler, taken: u64, release: &Release) -
     if release.once {
         return None;
     }
-    handler
-        .publisher(release.topic)
-        .map(|p| release.release_us + u64::from(p.period_us()))
+    Some(release.release_us + u64::from(period_us))
 }
 
 /// Traces a frame's push, and counts and traces it as a deadline miss if it was queued after its

@@ -6,7 +6,7 @@
 //! accelerometer and I2C1 magnetometer, or 1-2's BNO055 on I2C1; both revisions publish the same
 //! topics in the same units) and keeps a group that failed its identity check
 //! from being read again (its topics then publish nothing, and the fault is counted).
-use amiro_can::Topic;
+use amiro_can::{SensorData, Topic};
 use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::suite::{self, SensorGroup};
 use amiro_sensors::motion::DriveController;
@@ -168,11 +168,23 @@ pub fn summary(imu: &Imu, compass: &Compass, floor: &Floor) -> &'static str {
     }
 }
 
-/// The odometry and velocity topics come from the drive controller, not from a bus.
+/// The odometry and velocity topics come from the drive controller, not from a bus. Only the
+/// controller's state is read under its lock, which motor control and the command handler share at
+/// priority 5 (the pose, or the velocity); its conversion to the odometry's wire units (the
+/// heading's reduction to a turn, three 64-bit divisions) and the sample's frame are made after
+/// it, so the publisher holds the lock for a read, not for the conversion. The same values as
+/// [`DriveController::sample`].
 #[inline(never)]
-pub fn sample_drive(drive: &DriveController, topic: Topic) -> Samples {
+fn sample_drive(drive: &mut impl rtic::Mutex<T = DriveController>, topic: Topic) -> Samples {
     let mut samples = Samples::new();
-    if let Some(data) = drive.sample(topic) {
+    let data = match topic {
+        Topic::Odometry => Some(SensorData::Odometry(DriveController::odometry_of(
+            drive.lock(|d| d.pose()),
+        ))),
+        Topic::Velocity => Some(SensorData::Velocity(drive.lock(|d| d.velocity()))),
+        _ => None,
+    };
+    if let Some(data) = data {
         let _ = samples.push(data);
     }
     samples
@@ -237,7 +249,7 @@ pub fn sampler(
         | Topic::MagnetometerY
         | Topic::MagnetometerZ => sample_imu_bno055(&mut imu, topic, taken),
         Topic::FloorProximity => sample_floor(&mut floor, topic, taken),
-        Topic::Odometry | Topic::Velocity => drive.lock(|d| sample_drive(d, topic)),
+        Topic::Odometry | Topic::Velocity => sample_drive(&mut drive, topic),
         _ => Samples::new(),
     }
 }

@@ -166,7 +166,9 @@ const fn div_64_32(high: u32, low: u32, d: u32) -> (u32, u32) {
 /// digit. The caller's remainder, `top·2¹⁶ + next − digit·d`, is below `d` and is computed modulo
 /// 2³² (the product and the shifted `top` wrap alike).
 const fn quotient_digit(top: u32, next: u32, d: u32) -> u32 {
-    let d_high = d >> 16; // ≥ 2¹⁵
+    // ≥ 2¹⁵: bit 31 of the normalised `d`, set again so that the compiler sees a divisor that is
+    // never zero (no panic path for the images' panic check; the value is the same).
+    let d_high = (d >> 16) | (1 << 15);
     let d_low = d & 0xffff;
     let mut q = top / d_high;
     let mut r = top - q * d_high; // < d_high < 2¹⁶

@@ -232,13 +232,13 @@ impl DriveController {
         self.odometry.set_pose(pose);
     }
 
-    /// The pose in the protocol's odometry units; x and y saturate at the wire's ±838.8 m.
+    /// The pose in the protocol's odometry units; x and y saturate at the wire's ±838.8 m:
+    /// [`odometry_of`](Self::odometry_of) of the [`pose`](Self::pose). A caller that holds the
+    /// controller under a lock reads the pose there and converts it after the lock (the
+    /// heading's reduction to one turn takes three 64-bit divisions, which need not hold up the
+    /// lock's other users).
     pub fn odometry(&self) -> Odometry {
-        let pose = self.pose();
-        let limit = i64::from(Odometry::MAX_100UM) * 100;
-        let x = pose.x_um.clamp(-limit, limit);
-        let y = pose.y_um.clamp(-limit, limit);
-        Odometry::from_micrometres(x, y, pose.heading_urad).unwrap_or_default()
+        Self::odometry_of(self.pose())
     }
 
     /// The measured body velocity, averaged over the velocity window.
@@ -330,5 +330,16 @@ fn per_second(value: i64, dt_us: &Divisor) -> i64 {
 impl Default for DriveController {
     fn default() -> Self {
         Self::new(DriveConfig::AMIRO)
+    }
+}
+
+impl DriveController {
+    /// A pose in the protocol's odometry units, as [`odometry`](Self::odometry) gives the
+    /// controller's own; x and y saturate at the wire's ±838.8 m.
+    pub fn odometry_of(pose: Pose) -> Odometry {
+        let limit = i64::from(Odometry::MAX_100UM) * 100;
+        let x = pose.x_um.clamp(-limit, limit);
+        let y = pose.y_um.clamp(-limit, limit);
+        Odometry::from_micrometres(x, y, pose.heading_urad).unwrap_or_default()
     }
 }

@@ -1,0 +1,220 @@
+//! Which publisher rows a publisher task serves next: the walks of the publisher table behind
+//! [`crate::publisher::serve_level`], apart from the task's locks and clock so they run on the host.
+//!
+//! A task serves the CAN priorities of its `levels` (DiWheelDrive and PowerManagement one per task,
+//! LightRing all four from one). Its earliest due time and its next release are each found in one
+//! walk of the table for all its levels, where one walk per level made the job's cost grow with the
+//! levels (the execution-time analysis charges every level's walk to every job; docs/analysis.md,
+//! "One topic's job").
+use amiro_can::Priority;
+use amiro_sensors::handler::{SensorDataHandler, LEVELS};
+
+/// Where each CAN priority comes in a publisher task's `levels` (its first place there), or
+/// [`Ranks::NOT_SERVED`]: taken once from the board's slice, so that finding the next due time or
+/// the next release of all the task's levels is one walk of the publisher table, not one per level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Ranks([u8; LEVELS]);
+
+impl Ranks {
+    /// A level the task does not serve.
+    pub const NOT_SERVED: u8 = u8::MAX;
+
+    /// The ranks of the board's slice `levels` (a level listed twice keeps its first place).
+    pub fn of(levels: &[Priority]) -> Self {
+        let mut ranks = [Self::NOT_SERVED; LEVELS];
+        // An index loop (as the walks below), so that the execution-time analysis finds each of
+        // these loops at a line of its own (the bounds files key loops by function and line).
+        let mut rank = 0;
+        while let Some(&level) = levels.get(rank) {
+            if let Some(slot) = ranks.get_mut(usize::from(level.bits())) {
+                if *slot == Self::NOT_SERVED {
+                    *slot = u8::try_from(rank).unwrap_or(Self::NOT_SERVED - 1);
+                }
+            }
+            rank += 1;
+        }
+        Ranks(ranks)
+    }
+
+    /// `level`'s place in the task's `levels`, or `None` when the task does not serve it.
+    pub fn of_level(self, level: Priority) -> Option<u8> {
+        self.0
+            .get(usize::from(level.bits()))
+            .copied()
+            .filter(|&rank| rank != Self::NOT_SERVED)
+    }
+}
+
+/// The earliest due time of the running publishers and pending one-shots at the task's levels, or
+/// `None` if none of its levels has anything to do: the minimum of [`SensorDataHandler::next_due`]
+/// over the levels, in one walk of the table. It may lie in the past: the task is behind.
+pub fn next_due(handler: &SensorDataHandler, ranks: Ranks) -> Option<u64> {
+    let rows = handler.publishers();
+    let mut earliest: Option<u64> = None;
+    let mut i = 0;
+    while let Some(row) = rows.get(i) {
+        if ranks.of_level(row.priority()).is_some() {
+            if let Some(due) = row.next_due_us() {
+                earliest = Some(earliest.map_or(due, |e| e.min(due)));
+            }
+        }
+        i += 1;
+    }
+    earliest
+}
+
+/// The next release to take at `now_us`: the level of the task's `levels` that comes first and has a
+/// row due, with that row's period (which its release keeps). Taking that level's next release
+/// ([`SensorDataHandler::take_next_release`]: its earliest due row, ties to the lower topic byte) until
+/// this finds none hands out the releases the levels' own loops would (`for level in levels`,
+/// take each level's until none), in their order, with one walk of the table to find the level.
+pub fn next_to_take(
+    handler: &SensorDataHandler,
+    ranks: Ranks,
+    now_us: u64,
+) -> Option<(Priority, u32)> {
+    let rows = handler.publishers();
+    // The best row so far: its (rank, due, topic byte), its level and its period.
+    let mut best: Option<((u8, u64, u8), Priority, u32)> = None;
+    let mut i = 0;
+    while let Some(row) = rows.get(i) {
+        if let (Some(rank), Some(due)) = (ranks.of_level(row.priority()), row.next_due_us()) {
+            let key = (rank, due, row.topic() as u8);
+            if due <= now_us && best.is_none_or(|(best_key, _, _)| key < best_key) {
+                best = Some((key, row.priority(), row.period_us()));
+            }
+        }
+        i += 1;
+    }
+    best.map(|(_, level, period_us)| (level, period_us))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::vec::Vec;
+
+    use amiro_can::{Board, CanId, Kind, Priority, TimeUnit, Topic};
+    use amiro_sensors::handler::{Release, SensorDataHandler};
+
+    use super::{next_due, next_to_take, Ranks};
+
+    /// A random table of DiWheelDrive: each topic stopped, publishing at a random period and
+    /// level, or a pending one-shot, set up at random times before `at`.
+    fn random_table(seed: &mut u64, at: u64) -> SensorDataHandler {
+        let mut next = || {
+            *seed ^= *seed << 13;
+            *seed ^= *seed >> 7;
+            *seed ^= *seed << 17;
+            *seed
+        };
+        let mut handler = SensorDataHandler::new(Board::DiWheelDrive);
+        let topics: Vec<Topic> = handler.publishers().iter().map(|p| p.topic()).collect();
+        for topic in topics {
+            let level = Priority::ALL[(next() % 4) as usize];
+            let id = CanId::new(Kind::Command, level, topic.byte()).raw();
+            let set_up = next() % (at + 1);
+            let period = 100 + (next() % 5_000) as u16;
+            let [lo, hi] = period.to_le_bytes();
+            let payload: &[u8] = match next() % 3 {
+                0 => &[0],
+                1 => &[1, lo, hi, TimeUnit::Micros as u8],
+                _ => &[2],
+            };
+            let _ = handler.on_frame(set_up, id, payload);
+        }
+        handler
+    }
+
+    /// What the publisher did before it took the next level from one walk: each level of
+    /// `levels` in turn, its releases until none.
+    fn per_level(handler: &mut SensorDataHandler, levels: &[Priority], now: u64) -> Vec<Release> {
+        let mut out = Vec::new();
+        for &level in levels {
+            while let Some(release) = handler.take_next_release(level, now) {
+                out.push(release);
+            }
+        }
+        out
+    }
+
+    /// What it does now: the level from one walk, then that level's next release.
+    fn one_walk(handler: &mut SensorDataHandler, levels: &[Priority], now: u64) -> Vec<Release> {
+        let ranks = Ranks::of(levels);
+        let mut out = Vec::new();
+        while let Some((level, period_us)) = next_to_take(handler, ranks, now) {
+            let release = handler
+                .take_next_release(level, now)
+                .expect("a level with a due row releases");
+            assert_eq!(release.priority, level);
+            assert_eq!(
+                handler.publisher(release.topic).map(|p| p.period_us()),
+                Some(period_us),
+                "the period handed out is the released row's"
+            );
+            out.push(release);
+        }
+        out
+    }
+
+    const LEVEL_SETS: &[&[Priority]] = &[
+        &[Priority::Urgent],
+        &[Priority::High],
+        &[Priority::Medium],
+        &[Priority::Low],
+        &[
+            Priority::Urgent,
+            Priority::High,
+            Priority::Medium,
+            Priority::Low,
+        ],
+        &[Priority::Low, Priority::Urgent],
+        &[Priority::Medium, Priority::High, Priority::Medium],
+        &[],
+    ];
+
+    #[test]
+    fn one_walk_takes_the_releases_the_per_level_loops_took_in_their_order() {
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let mut released = 0;
+        for round in 0..400u64 {
+            let at = 1 + round * 997;
+            for levels in LEVEL_SETS {
+                let table = random_table(&mut seed, at);
+                let (mut old, mut new) = (table.clone(), table);
+                for now in [at, at + 50, at + 10_000] {
+                    let expected = per_level(&mut old, levels, now);
+                    let got = one_walk(&mut new, levels, now);
+                    assert_eq!(got, expected, "levels {levels:?} at {now}");
+                    assert_eq!(new.publishers(), old.publishers());
+                    released += got.len();
+                }
+            }
+        }
+        assert!(released > 1_000, "the tables released {released}");
+    }
+
+    #[test]
+    fn one_walk_finds_the_earliest_due_time_of_the_levels() {
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut some = 0;
+        for round in 0..400u64 {
+            for levels in LEVEL_SETS {
+                let table = random_table(&mut seed, round * 500);
+                let expected = levels.iter().filter_map(|l| table.next_due(*l)).min();
+                assert_eq!(next_due(&table, Ranks::of(levels)), expected, "{levels:?}");
+                some += usize::from(expected.is_some());
+            }
+        }
+        assert!(some > 1_000, "{some} tables had something due");
+    }
+
+    #[test]
+    fn ranks_keep_each_level_first_place() {
+        let ranks = Ranks::of(&[Priority::Medium, Priority::Urgent, Priority::Medium]);
+        assert_eq!(ranks.of_level(Priority::Medium), Some(0));
+        assert_eq!(ranks.of_level(Priority::Urgent), Some(1));
+        assert_eq!(ranks.of_level(Priority::High), None);
+        assert_eq!(ranks.of_level(Priority::Low), None);
+        assert_eq!(Ranks::of(&[]).of_level(Priority::Low), None);
+    }
+}
