@@ -192,13 +192,17 @@ use core::convert::Infallible;
 use embedded_hal::digital::OutputPin;
 use embedded_hal::spi::{Operation, SpiDevice};
 
+/// CR1 DFF: 16-bit frames.
+const CR1_DFF: u32 = 1 << 11;
+
 impl<R: Registers> Master<R> {
     /// Waits for TXE (the transmit buffer free), or with `until_idle` for BSY clear (the last bit
     /// gone). An overrun is no error here: a transmit-only stream leaves every received byte
-    /// unread, so OVR sets from its second byte on ([`Master::send`] clears it at the end). Not
-    /// inlined, so its loop keeps its name (`spi::Master<R>::wait_send`) for the bounds file's
-    /// stated wait: either flag comes within one byte time.
-    #[inline(never)]
+    /// unread, so OVR sets from its second byte on ([`Master::send`] clears it at the end).
+    /// Inlined into the frame loop (no call and return a frame); the bounds file states its wait
+    /// where it lands (LightRing: in the latch task's dispatcher): either flag comes within one
+    /// frame time.
+    #[inline(always)]
     fn wait_send(&self, until_idle: bool) -> Result<(), Error> {
         for _ in 0..POLLS {
             let sr = self.register(SR);
@@ -219,16 +223,52 @@ impl<R: Registers> Master<R> {
     }
 
     /// Shifts `words` out and returns when the last bit has left (BSY clear), reading nothing:
-    /// RM0008 §25.3.5's transmit-only sequence (each byte written when TXE shows the buffer free,
-    /// so the bytes go back to back, one byte time each), then §25.3.8's end of a transfer (TXE,
-    /// then BSY clear), then the received byte and the overrun the unread bytes set are cleared
-    /// (DR read, then SR, §25.3.10) so the next exchange starts clean. One flag wait per byte
-    /// (TXE, within one byte time of the previous write) where the full-duplex [`SpiBus::write`]
-    /// takes two (TXE and RXNE) and leaves the bus idle between bytes while it reads each one back.
+    /// RM0008 §25.3.5's transmit-only sequence (each frame written when TXE shows the buffer free,
+    /// so the frames go back to back), then §25.3.8's end of a transfer (TXE, then BSY clear), then
+    /// the received frame and the overrun the unread ones set are cleared (DR read, then SR,
+    /// §25.3.10) so the next exchange starts clean. An even number of bytes goes as 16-bit frames
+    /// (CR1 DFF; MSB first, so the same bits leave in the same order), half the frames to poll;
+    /// the frame format is switched with the block off, as §25.5.1 asks of DFF, and back to 8 bits
+    /// at the end; an odd number goes as bytes. One flag wait per frame (TXE, within one frame time
+    /// of the previous write) where the full-duplex [`SpiBus::write`] takes two a byte (TXE and
+    /// RXNE) and leaves the bus idle between bytes while it reads each one back. Called with the bus
+    /// idle (every transfer of [`Device`] ends with BSY clear).
     pub fn send(&mut self, words: &[u8]) -> Result<(), Error> {
-        for &word in words {
-            self.wait_send(false)?;
-            self.set_register(DR, u32::from(word));
+        let wide = words.len() % 2 == 0;
+        if wide {
+            self.frame_format(CR1_DFF);
+        }
+        let sent = self.shift_out(words, wide);
+        if wide {
+            self.frame_format(0);
+        }
+        sent
+    }
+
+    /// Sets the frame format (`dff`: [`CR1_DFF`] for 16 bits, 0 for 8) with the block off.
+    fn frame_format(&self, dff: u32) {
+        let cr1 = self.register(CR1) & !(CR1_SPE | CR1_DFF);
+        self.set_register(CR1, cr1);
+        self.set_register(CR1, cr1 | dff);
+        self.set_register(CR1, cr1 | dff | CR1_SPE);
+    }
+
+    fn shift_out(&self, words: &[u8], wide: bool) -> Result<(), Error> {
+        if wide {
+            // Counted by frame (not `chunks_exact`, whose step of two the execution-time analysis
+            // does not count): the loop's bound is found in each image's machine code.
+            for frame in 0..words.len() / 2 {
+                if let (Some(&high), Some(&low)) = (words.get(2 * frame), words.get(2 * frame + 1))
+                {
+                    self.wait_send(false)?;
+                    self.set_register(DR, u32::from(high) << 8 | u32::from(low));
+                }
+            }
+        } else {
+            for &word in words {
+                self.wait_send(false)?;
+                self.set_register(DR, u32::from(word));
+            }
         }
         self.wait_send(false)?;
         self.wait_send(true)?;

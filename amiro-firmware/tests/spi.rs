@@ -21,6 +21,7 @@ struct Block {
     dead: bool,
     overrun: Cell<bool>,
     sr_reads: Cell<u32>,
+    frames16: Cell<u32>,
 }
 
 impl Registers for &Block {
@@ -52,6 +53,20 @@ impl Registers for &Block {
     fn write(&self, offset: usize, value: u32) {
         match offset {
             CR1 => self.cr1.set(value),
+            // A 16-bit frame (CR1 DFF) is recorded as its two bytes, the high one first (MSB
+            // first on the wire).
+            DR if !self.dead && self.cr1.get() & 1 << 11 != 0 => {
+                assert_eq!(
+                    self.cr1.get() & 1 << 6,
+                    1 << 6,
+                    "a frame written while enabled"
+                );
+                self.frames16.set(self.frames16.get() + 1);
+                self.sent
+                    .borrow_mut()
+                    .extend([(value >> 8) as u8, value as u8]);
+                self.rx.set(Some(0));
+            }
             DR if !self.dead => {
                 let byte = value as u8;
                 self.sent.borrow_mut().push(byte);
@@ -190,6 +205,13 @@ fn a_device_write_sends_every_byte_between_the_select_falling_and_rising() {
     device.write(&frame).unwrap();
     assert_eq!(*block.sent.borrow(), frame, "every byte, in order");
     assert_eq!(
+        block.frames16.get(),
+        54,
+        "as 16-bit frames, half the writes"
+    );
+    assert_eq!(block.cr1.get() & 1 << 11, 0, "back to 8-bit frames");
+    assert_eq!(block.cr1.get() & 1 << 6, 1 << 6, "enabled again");
+    assert_eq!(
         *levels.borrow(),
         [true, false, true],
         "one select, one latch"
@@ -201,6 +223,19 @@ fn a_device_write_sends_every_byte_between_the_select_falling_and_rising() {
     let mut read = [0u8; 1];
     device.transfer(&mut read, &[0x80]).unwrap();
     assert_eq!(read, [0x5A]);
+}
+
+#[test]
+fn an_odd_number_of_bytes_goes_as_bytes() {
+    use embedded_hal::spi::SpiDevice;
+    let block = Block::default();
+    let mut device = spi::Device::new(
+        Master::new(&block, 36_000_000, 2_250_000, MODE_0),
+        Select::default(),
+    );
+    device.write(&[1, 2, 3]).unwrap();
+    assert_eq!(*block.sent.borrow(), [1, 2, 3]);
+    assert_eq!(block.frames16.get(), 0);
 }
 
 #[test]
