@@ -182,3 +182,183 @@ const _: () = {
     assert!(divider_code(8_000_000, 2_250_000) == 1);
     assert!(divider_code(168_000_000, 1) == 7);
 };
+
+// The transmit-only path and the device that uses it. Appended below the bus's own code, whose
+// loops the boards' bounds files name by line (docs/analysis.md): DiWheelDrive's motion sensors
+// keep the full-duplex exchange above, byte for byte as before.
+
+use core::convert::Infallible;
+
+use embedded_hal::digital::OutputPin;
+use embedded_hal::spi::{Operation, SpiDevice};
+
+/// CR1 DFF: 16-bit frames.
+const CR1_DFF: u32 = 1 << 11;
+
+impl<R: Registers> Master<R> {
+    /// Waits for TXE (the transmit buffer free), or with `until_idle` for BSY clear (the last bit
+    /// gone). An overrun is no error here: a transmit-only stream leaves every received byte
+    /// unread, so OVR sets from its second byte on ([`Master::send`] clears it at the end).
+    /// Inlined into the frame loop (no call and return a frame); the bounds file states its wait
+    /// where it lands (LightRing: in the latch task's dispatcher): either flag comes within one
+    /// frame time.
+    #[inline(always)]
+    fn wait_send(&self, until_idle: bool) -> Result<(), Error> {
+        for _ in 0..POLLS {
+            let sr = self.register(SR);
+            if sr & SR_MODF != 0 {
+                self.set_register(CR1, self.register(CR1) | CR1_SPE);
+                return Err(Error::ModeFault);
+            }
+            let done = if until_idle {
+                sr & SR_BSY == 0
+            } else {
+                sr & SR_TXE != 0
+            };
+            if done {
+                return Ok(());
+            }
+        }
+        Err(Error::Timeout)
+    }
+
+    /// Shifts `words` out and returns when the last bit has left (BSY clear), reading nothing:
+    /// RM0008 §25.3.5's transmit-only sequence (each frame written when TXE shows the buffer free,
+    /// so the frames go back to back), then §25.3.8's end of a transfer (TXE, then BSY clear), then
+    /// the received frame and the overrun the unread ones set are cleared (DR read, then SR,
+    /// §25.3.10) so the next exchange starts clean. An even number of bytes goes as 16-bit frames
+    /// (CR1 DFF; MSB first, so the same bits leave in the same order), half the frames to poll;
+    /// the frame format is switched with the block off, as §25.5.1 asks of DFF, and back to 8 bits
+    /// at the end; an odd number goes as bytes. One flag wait per frame (TXE, within one frame time
+    /// of the previous write) where the full-duplex [`SpiBus::write`] takes two a byte (TXE and
+    /// RXNE) and leaves the bus idle between bytes while it reads each one back. Called with the bus
+    /// idle (every transfer of [`Device`] ends with BSY clear).
+    pub fn send(&mut self, words: &[u8]) -> Result<(), Error> {
+        let wide = words.len() % 2 == 0;
+        if wide {
+            self.frame_format(CR1_DFF);
+        }
+        let sent = self.shift_out(words, wide);
+        if wide {
+            self.frame_format(0);
+        }
+        sent
+    }
+
+    /// Sets the frame format (`dff`: [`CR1_DFF`] for 16 bits, 0 for 8) with the block off.
+    fn frame_format(&self, dff: u32) {
+        let cr1 = self.register(CR1) & !(CR1_SPE | CR1_DFF);
+        self.set_register(CR1, cr1);
+        self.set_register(CR1, cr1 | dff);
+        self.set_register(CR1, cr1 | dff | CR1_SPE);
+    }
+
+    fn shift_out(&self, words: &[u8], wide: bool) -> Result<(), Error> {
+        if wide {
+            // Counted by frame (not `chunks_exact`, whose step of two the execution-time analysis
+            // does not count): the loop's bound is found in each image's machine code.
+            for frame in 0..words.len() / 2 {
+                if let (Some(&high), Some(&low)) = (words.get(2 * frame), words.get(2 * frame + 1))
+                {
+                    self.wait_send(false)?;
+                    self.set_register(DR, u32::from(high) << 8 | u32::from(low));
+                }
+            }
+        } else {
+            for &word in words {
+                self.wait_send(false)?;
+                self.set_register(DR, u32::from(word));
+            }
+        }
+        self.wait_send(false)?;
+        self.wait_send(true)?;
+        let _ = self.register(DR);
+        let _ = self.register(SR);
+        Ok(())
+    }
+}
+
+/// One device alone on a [`Master`]'s bus with its chip select `cs` (LightRing's TLC5947 chain,
+/// XLAT as the select: its rising edge at the end of a write latches). [`SpiDevice::write`] is the
+/// transmit-only [`Master::send`] between the select's fall and rise, one loop over the bytes;
+/// other transactions run each operation on the full-duplex bus, as embedded-hal-bus'
+/// `ExclusiveDevice` does. A pin whose writes cannot fail (`Infallible`, as every stm32 HAL pin).
+pub struct Device<R, CS> {
+    bus: Master<R>,
+    cs: CS,
+}
+
+impl<R: Registers, CS: OutputPin<Error = Infallible>> Device<R, CS> {
+    /// The device on `bus`, its select `cs` released (high).
+    pub fn new(bus: Master<R>, mut cs: CS) -> Self {
+        let Ok(()) = cs.set_high();
+        Self { bus, cs }
+    }
+
+    /// Gives the bus and the select back.
+    pub fn release(self) -> (Master<R>, CS) {
+        (self.bus, self.cs)
+    }
+}
+
+/// What a [`Device`]'s transaction can fail with: the bus's error, or a delay operation (the
+/// device has no delay source: refused, not skipped).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DeviceError {
+    /// The bus failed ([`Error`]).
+    Bus(Error),
+    /// An `Operation::DelayNs` was asked for.
+    NoDelay,
+}
+
+impl From<Error> for DeviceError {
+    fn from(error: Error) -> Self {
+        DeviceError::Bus(error)
+    }
+}
+
+impl embedded_hal::spi::Error for DeviceError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            DeviceError::Bus(error) => error.kind(),
+            DeviceError::NoDelay => ErrorKind::Other,
+        }
+    }
+}
+
+impl<R, CS> ErrorType for Device<R, CS> {
+    type Error = DeviceError;
+}
+
+impl<R: Registers, CS: OutputPin<Error = Infallible>> SpiDevice for Device<R, CS> {
+    fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), DeviceError> {
+        let Ok(()) = self.cs.set_low();
+        let mut result = Ok(());
+        for operation in operations.iter_mut() {
+            result = match operation {
+                Operation::Read(words) => self.bus.read(words).map_err(DeviceError::Bus),
+                Operation::Write(words) => self.bus.write(words).map_err(DeviceError::Bus),
+                Operation::Transfer(read, write) => {
+                    self.bus.transfer(read, write).map_err(DeviceError::Bus)
+                }
+                Operation::TransferInPlace(words) => {
+                    self.bus.transfer_in_place(words).map_err(DeviceError::Bus)
+                }
+                Operation::DelayNs(_) => Err(DeviceError::NoDelay),
+            };
+            if result.is_err() {
+                break;
+            }
+        }
+        let flushed = self.bus.flush().map_err(DeviceError::Bus);
+        let Ok(()) = self.cs.set_high();
+        result.and(flushed)
+    }
+
+    fn write(&mut self, buf: &[u8]) -> Result<(), DeviceError> {
+        let Ok(()) = self.cs.set_low();
+        let sent = self.bus.send(buf);
+        let Ok(()) = self.cs.set_high();
+        Ok(sent?)
+    }
+}

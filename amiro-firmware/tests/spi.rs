@@ -21,6 +21,7 @@ struct Block {
     dead: bool,
     overrun: Cell<bool>,
     sr_reads: Cell<u32>,
+    frames16: Cell<u32>,
 }
 
 impl Registers for &Block {
@@ -52,6 +53,20 @@ impl Registers for &Block {
     fn write(&self, offset: usize, value: u32) {
         match offset {
             CR1 => self.cr1.set(value),
+            // A 16-bit frame (CR1 DFF) is recorded as its two bytes, the high one first (MSB
+            // first on the wire).
+            DR if !self.dead && self.cr1.get() & 1 << 11 != 0 => {
+                assert_eq!(
+                    self.cr1.get() & 1 << 6,
+                    1 << 6,
+                    "a frame written while enabled"
+                );
+                self.frames16.set(self.frames16.get() + 1);
+                self.sent
+                    .borrow_mut()
+                    .extend([(value >> 8) as u8, value as u8]);
+                self.rx.set(Some(0));
+            }
             DR if !self.dead => {
                 let byte = value as u8;
                 self.sent.borrow_mut().push(byte);
@@ -143,4 +158,124 @@ fn an_overrun_is_reported_and_cleared() {
     assert!(!block.overrun.get(), "reading DR then SR cleared it");
     assert_eq!(bus.write(&[1]), Ok(()));
     let _ = spi::SPI1;
+}
+
+/// A chip-select pin that records every level it is driven to.
+#[derive(Default)]
+struct Select<'a> {
+    levels: Option<&'a RefCell<Vec<bool>>>,
+}
+
+impl embedded_hal::digital::ErrorType for Select<'_> {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for Select<'_> {
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        if let Some(levels) = self.levels {
+            levels.borrow_mut().push(false);
+        }
+        Ok(())
+    }
+
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        if let Some(levels) = self.levels {
+            levels.borrow_mut().push(true);
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn a_device_write_sends_every_byte_between_the_select_falling_and_rising() {
+    use embedded_hal::spi::SpiDevice;
+    let block = Block::default();
+    let levels = RefCell::new(Vec::new());
+    let bus = Master::new(&block, 36_000_000, 2_250_000, MODE_0);
+    let mut device = spi::Device::new(
+        bus,
+        Select {
+            levels: Some(&levels),
+        },
+    );
+    assert_eq!(*levels.borrow(), [true], "released at set-up");
+    let frame: Vec<u8> = (0..108).map(|i| (i * 7) as u8).collect();
+    // The unread bytes of a transmit-only stream overrun the receiver: no error, cleared at the end.
+    block.overrun.set(true);
+    device.write(&frame).unwrap();
+    assert_eq!(*block.sent.borrow(), frame, "every byte, in order");
+    assert_eq!(
+        block.frames16.get(),
+        54,
+        "as 16-bit frames, half the writes"
+    );
+    assert_eq!(block.cr1.get() & 1 << 11, 0, "back to 8-bit frames");
+    assert_eq!(block.cr1.get() & 1 << 6, 1 << 6, "enabled again");
+    assert_eq!(
+        *levels.borrow(),
+        [true, false, true],
+        "one select, one latch"
+    );
+    assert!(!block.overrun.get(), "the overrun cleared (DR, then SR)");
+    assert_eq!(block.rx.get(), None, "the last received byte read away");
+    // The full-duplex exchange after it starts clean.
+    block.replies.borrow_mut().push_back(0x5A);
+    let mut read = [0u8; 1];
+    device.transfer(&mut read, &[0x80]).unwrap();
+    assert_eq!(read, [0x5A]);
+}
+
+#[test]
+fn an_odd_number_of_bytes_goes_as_bytes() {
+    use embedded_hal::spi::SpiDevice;
+    let block = Block::default();
+    let mut device = spi::Device::new(
+        Master::new(&block, 36_000_000, 2_250_000, MODE_0),
+        Select::default(),
+    );
+    device.write(&[1, 2, 3]).unwrap();
+    assert_eq!(*block.sent.borrow(), [1, 2, 3]);
+    assert_eq!(block.frames16.get(), 0);
+}
+
+#[test]
+fn a_device_write_to_a_dead_block_times_out_and_releases_the_select() {
+    use embedded_hal::spi::SpiDevice;
+    let block = Block {
+        dead: true,
+        ..Block::default()
+    };
+    let levels = RefCell::new(Vec::new());
+    let mut device = spi::Device::new(
+        Master::new(&block, 36_000_000, 2_250_000, MODE_0),
+        Select {
+            levels: Some(&levels),
+        },
+    );
+    assert_eq!(
+        device.write(&[1, 2, 3]),
+        Err(spi::DeviceError::Bus(Error::Timeout))
+    );
+    assert_eq!(
+        block.sr_reads.get(),
+        POLLS,
+        "one byte's wait, then the error"
+    );
+    assert!(block.sent.borrow().is_empty());
+    assert_eq!(levels.borrow().last(), Some(&true), "the select released");
+}
+
+#[test]
+fn a_device_refuses_a_delay_operation() {
+    use embedded_hal::spi::{Operation, SpiDevice};
+    let block = Block::default();
+    let mut device = spi::Device::new(
+        Master::new(&block, 36_000_000, 2_250_000, MODE_0),
+        Select::default(),
+    );
+    assert_eq!(
+        device.transaction(&mut [Operation::Write(&[1]), Operation::DelayNs(10)]),
+        Err(spi::DeviceError::NoDelay)
+    );
+    assert_eq!(*block.sent.borrow(), [1], "the write before it ran");
 }

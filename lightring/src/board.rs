@@ -20,7 +20,6 @@ use amiro_firmware::bxcan::{self, Fifo0, Mailboxes, Mmio};
 use amiro_firmware::signals::Lines;
 use amiro_firmware::spi;
 use embedded_hal::spi::{Mode as SpiMode, Phase, Polarity};
-use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
 use stm32f1xx_hal::afio::AfioExt;
 use stm32f1xx_hal::gpio::{GpioExt, OpenDrain, Output, PinState, PushPull, PA4, PC14, PC4, PD2};
 use stm32f1xx_hal::pac;
@@ -31,8 +30,10 @@ pub const LED_SPI_HZ: u32 = 2_250_000;
 /// EXTI line of SYS_PD_N (PC14).
 const SYS_PD_LINE: u32 = 1 << 14;
 
-/// The TLC5947 on SPI1, XLAT as its chip select.
-pub type LedSpi = ExclusiveDevice<spi::Master<Mmio>, PC4<Output<PushPull>>, NoDelay>;
+/// The TLC5947 on SPI1, XLAT as its chip select: the runtime's device, whose write is the bus's
+/// transmit-only send (one flag wait a byte, the bytes back to back) and XLAT's rise after the
+/// last bit has left (`amiro_firmware::spi::Device`).
+pub type LedSpi = spi::Device<Mmio, PC4<Output<PushPull>>>;
 /// The CAN controller's transmit mailboxes (the runtime's register-level driver).
 pub type CanTxPort = Mailboxes<Mmio>;
 /// The CAN controller's error monitor.
@@ -168,8 +169,7 @@ pub fn init(dp: pac::Peripherals, _cp: cortex_m::Peripherals) -> Board {
             phase: Phase::CaptureOnFirstTransition,
         },
     );
-    let led_spi =
-        ExclusiveDevice::new_no_delay(spi, xlat).unwrap_or_else(|_| amiro_firmware::fault::halt());
+    let led_spi = spi::Device::new(spi, xlat);
 
     // CAN1 on PA11 (RX, floating input) and PA12 (TX, alternate push-pull), no remap; the runtime's
     // driver configures the controller.

@@ -73,7 +73,9 @@ impl Default for LedState {
 }
 
 /// Shifts `colours` into the driver and latches them; traces the latch with the LEDs that changed.
-/// A failed transfer is logged; the next latch writes the whole state again.
+/// A failed transfer is logged (deferred to the trace drain, as a handler's one-off report: a
+/// store here instead of the RTT channel write, which was the latch job's longest path); the next
+/// latch writes the whole state again.
 pub fn latch<C: Clock, SPI: SpiDevice>(
     ring: &mut Ring<SPI>,
     colours: &[[u8; 3]; LEDS as usize],
@@ -89,6 +91,6 @@ pub fn latch<C: Clock, SPI: SpiDevice>(
             C::now_us(),
             TraceKind::LedsLatched { changed },
         )),
-        Err(_) => amiro_firmware::log!("LED driver transfer failed"),
+        Err(_) => amiro_firmware::channels::defer_log("LED driver transfer failed"),
     }
 }

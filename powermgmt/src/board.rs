@@ -57,13 +57,24 @@ pub const CAN_TX_INTERRUPT: Interrupt = Interrupt::CAN1_TX;
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: Interrupt = Interrupt::EXTI15_10;
 
-/// The fuel gauges' bus-free pause (66 µs after each transfer): a busy wait on the core clock.
+/// The fuel gauges' bus-free pause (66 µs after each transfer, `bq27500::BUS_FREE_NS`): a wait on
+/// the DWT cycle counter (started in [`init`]), also bounded in polls (each takes several core
+/// cycles) so it ends where the counter does not run. Not inlined, so its loop keeps its name for
+/// the bounds file's stated wait (the pause itself), rather than a count of delay-loop passes each
+/// at the cycle model's worst (a flash line fetch after every taken branch).
 #[derive(Debug, Default, Clone, Copy)]
 pub struct GaugeDelay;
 
 impl embedded_hal::delay::DelayNs for GaugeDelay {
+    #[inline(never)]
     fn delay_ns(&mut self, ns: u32) {
-        cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(SYSCLK_HZ / 1_000_000));
+        let cycles = ns.div_ceil(1_000).saturating_mul(SYSCLK_HZ / 1_000_000);
+        let start = cortex_m::peripheral::DWT::cycle_count();
+        for _ in 0..cycles {
+            if cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) >= cycles {
+                return;
+            }
+        }
     }
 }
 

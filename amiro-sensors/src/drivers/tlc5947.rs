@@ -243,11 +243,27 @@ pub type LightRing24<SPI> = LedRing<SPI, 3>;
 impl<SPI: SpiDevice, const CHIPS: usize> LedRing<SPI, CHIPS> {
     /// RGB LEDs on the ring.
     pub const RGB_LEDS: usize = RGB_PER_CHIP * CHIPS;
+    /// RGB LEDs (output triples) one protocol LED lights: the length of every [`led_triples`]
+    /// range of this chain.
+    const TRIPLES_PER_LED: u8 = (CHIPS as u8 * RGB_PER_CHIP as u8) / LEDS;
     /// A chain length no LightRing has does not build.
-    const KNOWN: () = assert!(
-        led_triples(CHIPS, 1).is_some(),
-        "no LightRing revision has this many TLC5947"
-    );
+    const KNOWN: () = {
+        assert!(
+            led_triples(CHIPS, 1).is_some(),
+            "no LightRing revision has this many TLC5947"
+        );
+        let mut led = 1;
+        while led <= LEDS {
+            match led_triples(CHIPS, led) {
+                Some(triples) => assert!(
+                    triples.end - triples.start == Self::TRIPLES_PER_LED,
+                    "every protocol LED lights TRIPLES_PER_LED triples"
+                ),
+                None => panic!("no LightRing revision has this many TLC5947"),
+            }
+            led += 1;
+        }
+    };
 
     /// A ring with every LED off. Does no I/O.
     pub const fn new(spi: SPI) -> Self {
@@ -273,7 +289,11 @@ impl<SPI: SpiDevice, const CHIPS: usize> LedRing<SPI, CHIPS> {
             });
         };
         let values = [gamma(red), gamma(green), gamma(blue)];
-        for triple in triples {
+        // A count fixed by the chain length (1 or 3), not the range's run-time length: the loop
+        // is gone on one part and a counted loop of three on three, so the execution-time
+        // analysis finds its bound in the machine code of each revision.
+        for k in 0..Self::TRIPLES_PER_LED {
+            let triple = triples.start + k;
             for (out, value) in (3 * triple..).zip(values) {
                 self.driver.set_channel(out, value)?;
             }
