@@ -2,8 +2,8 @@
 SLCAN port — the proximity ring every 10 ms at PowerManagement, LED 3, magnetometer-x every 900 µs at medium — and
 the gyroscope every 10 ms at low priority, 10 ms apart, then counts for `--seconds` of wall time the frames that
 come back, per wall-clock second and identifier (the gyroscope's first), and stops the run with Ctrl-C as a user
-would. The robot's own stderr (its real-time factor and worst lag every 2 s, "cannot keep pace", the closing
-summary) is printed as it comes, prefixed `robot:`; the last lines sum up frames per second and the lag.
+would. The robot's own stderr (its warm-up, its real-time factor and worst lag every 2 s, "cannot keep pace", the
+closing summary) is printed as it comes, each line marked `robot:` once; the last lines sum up frames per second and the lag.
 
     python3 tools/interop/live_pace.py --xtask target/debug/xtask            # the load, 10 s counted
     python3 tools/interop/live_pace.py --gyroscope-first                     # the gyroscope asked for first
@@ -72,7 +72,10 @@ def main():
     def read_stderr():
         for line in robot.stderr:
             stderr_lines.append(line.rstrip("\n"))
-            print(f"robot: {line.rstrip()}", flush=True)
+            # The robot's own lines start with `robot: ` already; the rest (its CPU table, the bus
+            # log's path) get it, so every line of its stderr shows once, marked.
+            line = line.rstrip()
+            print(line if line.startswith("robot: ") else f"robot: {line}", flush=True)
 
     stdout_lines = []
     threads = [
