@@ -757,6 +757,12 @@ pub fn run_in_world(
     // What a live run computed ahead of the wall clock still reaches the client.
     if let Some(live) = live {
         outbox.flush(|end, frame| live.slcan.deliver(end, &frame));
+        if live.slcan.dropped() > 0 {
+            eprintln!(
+                "robot: live: {} message(s) to the client dropped whole: it did not read them in time (more than 64 KiB waited)",
+                live.slcan.dropped()
+            );
+        }
     }
     // A live run stopped by Ctrl-C ends at the host's boundary while boards sent ahead (at most a
     // live step) still run towards theirs: each reports there and gets the end then. (A run that

@@ -8,6 +8,7 @@ closing summary) is printed as it comes, each line marked `robot:` once; the las
     python3 tools/interop/live_pace.py --xtask target/debug/xtask            # the issue's load, 10 s counted
     python3 tools/interop/live_pace.py --gyroscope-first                     # the gyroscope asked for first
     python3 tools/interop/live_pace.py --only-gyroscope                      # the gyroscope alone
+    python3 tools/interop/live_pace.py --no-warm-up                          # the robot without its warm-up
 
 Needs python-can and pyserial (tools/requirements-ci.txt). Exit status 0 whatever the figures: it measures, the
 issue's targets (100 ± 2 gyroscope frames per second, lag within 5 ms) are for the reader to compare. The boards'
@@ -49,13 +50,19 @@ def main():
     parser.add_argument(
         "--gyroscope-priority", choices=sorted(PRIORITIES), default="low", help="the gyroscope's CAN priority"
     )
+    parser.add_argument(
+        "--no-warm-up", action="store_true", help="start the robot without its warm-up (to compare the start-up's lag)"
+    )
     args = parser.parse_args()
     level = PRIORITIES[args.gyroscope_priority] << 8
     GYROSCOPE = (level | GYROSCOPE_TOPIC, bytes.fromhex("010A0000"))
     GYROSCOPE_FRAMES = 0x400 | level | GYROSCOPE_TOPIC
 
     robot = subprocess.Popen(
-        [args.xtask, "robot", "--slcan"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [args.xtask, "robot", "--slcan", *(["--no-warm-up"] if args.no_warm_up else [])],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     port = None
     for line in robot.stdout:
