@@ -77,9 +77,17 @@ pub fn actions() -> Vec<Timed> {
     // `tools/interop/live_pace.py` sends it): the ring every 10 ms, LED 3, magnetometer-x every
     // 900 µs at medium, the gyroscope every 10 ms at low; the streams then run to the restart.
     plan.from(100_000);
-    plan.send(Priority::Medium, Topic::ProximityRing.byte(), &[1, 10, 0, 0]);
+    plan.send(
+        Priority::Medium,
+        Topic::ProximityRing.byte(),
+        &[1, 10, 0, 0],
+    );
     plan.send(Priority::Medium, Topic::Led3.byte(), &[0xFF, 0x80, 0x20]);
-    plan.send(Priority::Medium, Topic::MagnetometerX.byte(), &[1, 0x84, 0x03, 2]);
+    plan.send(
+        Priority::Medium,
+        Topic::MagnetometerX.byte(),
+        &[1, 0x84, 0x03, 2],
+    );
     plan.send(Priority::Low, Topic::Gyroscope.byte(), &[1, 10, 0, 0]);
     plan.frames
 }
@@ -105,7 +113,9 @@ mod tests {
             .collect();
         // Command frames only (what a client sends), to every board: the ring (PowerManagement),
         // magnetometer-x and the gyroscope at low (DiWheelDrive), LED 3 (LightRing).
-        assert!(ids.iter().all(|&id| amiro_trace::robot_link::reaches_software(id)));
+        assert!(ids
+            .iter()
+            .all(|&id| amiro_trace::robot_link::reaches_software(id)));
         for id in [0x21F, 0x205, 0x308, 0x213] {
             assert!(ids.contains(&id), "{id:03X} missing");
         }
