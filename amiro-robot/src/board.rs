@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use amiro_bus_sim::{NodeId, MAILBOXES};
 use amiro_trace::robot_link::{
-    Down, Up, DOWN_READINGS, DRIVES_SYNC_LOW, QUANTUM_US, UP_LEN, UP_WHEELS,
+    Down, Up, DOWN_READINGS, DOWN_RESTART, DRIVES_SYNC_LOW, QUANTUM_US, UP_LEN, UP_WHEELS,
 };
 use amiro_trace::world_link::{Readings, Wheels, WHEELS_LEN};
 use anyhow::{bail, Context, Result};
@@ -277,6 +277,32 @@ impl Board {
         self.out = Some(out);
         self.child = Some(child);
         self.partial.clear();
+        self.main_loop_lowered = false;
+        self.vcpu = None;
+        self.lines.clear();
+        self.ready.clear();
+        self.booted(at);
+        Ok(())
+    }
+
+    /// Restarts the board in its running QEMU at boundary `at` (a system reset, [`DOWN_RESTART`]):
+    /// it must be waiting for its answer (reported, not sent on). The code QEMU translated for it
+    /// stays, so what it ran before costs no translation again (a live run's warm-up). Its lines
+    /// so far stay in `lines`.
+    pub(crate) fn restart(&mut self, at: u64) -> Result<()> {
+        if self.next.is_some() || self.down.is_none() {
+            bail!("{} restarted while it runs", NODES[self.index]);
+        }
+        self.send(&Down {
+            flags: DOWN_RESTART,
+            ..Down::default()
+        })?;
+        self.booted(at);
+        Ok(())
+    }
+
+    /// The coordinator's view of a board that boots at boundary `at` (started or restarted).
+    fn booted(&mut self, at: u64) {
         self.offset = at;
         self.alive = true;
         // A module holds SYS_SYNC_N low until it is initialised.
@@ -290,15 +316,10 @@ impl Board {
         self.next = Some(at + QUANTUM_US);
         self.wants = at + QUANTUM_US;
         self.flags = 0;
-        self.lines.clear();
-        self.ready.clear();
         self.held = None;
         self.commanded = false;
-        self.main_loop_lowered = false;
-        self.vcpu = None;
         self.last_run_cpu = None;
         self.run_from(Instant::now());
-        Ok(())
     }
 
     /// Reads what the board printed so far (never blocks); `false` once its output has closed.

@@ -37,6 +37,7 @@ pub mod report;
 mod run;
 pub mod slcan;
 pub mod stimulus;
+pub mod warm;
 pub mod world;
 
 pub use amiro_trace::robot_link::QUANTUM_US;
@@ -128,4 +129,10 @@ pub struct Live {
     pub slcan: slcan::Slcan,
     /// Set by Ctrl-C.
     pub stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    /// Warm the boards up before the wall clock starts ([`warm`]; not in a world, whose time and
+    /// state the warm-up would move).
+    pub warm_up: bool,
+    /// Called once, when the wall clock starts (the boards have booted, after the warm-up): the
+    /// robot is ready for a client (`cargo xtask robot` prints the port then).
+    pub ready: Option<Box<dyn FnOnce()>>,
 }

@@ -147,6 +147,29 @@ pub fn run_in_world(
         outcome.text.push_str(&line);
         outcome.text.push('\n');
     };
+    // A live run's warm-up (`crate::warm`): its requests first, the boards restarted in their
+    // QEMUs at `warm_end`; the run's own stimulus and duration count from there.
+    let warm_end = live
+        .as_ref()
+        .filter(|l| l.warm_up && world.is_none())
+        .map(|_| crate::warm::RESTART_US);
+    let mut warming = warm_end.is_some();
+    let warm_end = warm_end.unwrap_or(0);
+    let warm_started = Instant::now();
+    let shifted: Vec<Timed>;
+    let actions: &[Timed] = if warming {
+        shifted = crate::warm::actions()
+            .into_iter()
+            .chain(actions.iter().map(|a| Timed {
+                at_us: a.at_us.saturating_add(warm_end),
+                action: a.action.clone(),
+            }))
+            .collect();
+        &shifted
+    } else {
+        actions
+    };
+    let duration_us = duration_us.saturating_add(warm_end);
     let mut pending = actions.iter().peekable();
     let mut operator: VecDeque<(u64, Frame)> = VecDeque::new();
     // A live run's frames from the adapter that wait for the host to catch up with the boards.
@@ -193,6 +216,34 @@ pub fn run_in_world(
             if b.alive && b.next == Some(t) {
                 exchange(b, t..=t, &mut bus, &mut notes, &mut outcome.work)?;
             }
+        }
+        if warming && t >= warm_end {
+            // The warm-up is over: every board waits for its answer here (nothing was sent past
+            // this boundary), and restarts in its QEMU with the code it ran translated. What the
+            // warm-up put on the bus goes with it; the bus report covers the live run.
+            warming = false;
+            for (k, b) in boards.iter_mut().enumerate().filter(|(_, b)| b.alive) {
+                if b.next.is_none() {
+                    b.restart(t)?;
+                } else {
+                    b.stop();
+                    b.start(t)?;
+                }
+                bus.reset_node(nodes[k], t);
+            }
+            operator.clear();
+            deliveries.clear();
+            outcome.transfers.clear();
+            outcome.error_frames = 0;
+            notes.push(format!(
+                "bus: # {} warm-up over: the boards restart in their QEMUs, the code they ran translated",
+                stamp(t)
+            ));
+            eprintln!(
+                "robot: live: warm-up: {:.0} ms of virtual time in {:.1} s of wall time (every sensor topic requested, sampled and stopped, the LEDs, the motor, the thesis load); the boards restart with their code translated",
+                warm_end as f64 / 1e3,
+                warm_started.elapsed().as_secs_f64()
+            );
         }
         while let Some(a) = pending.next_if(|a| a.at_us < t) {
             match &a.action {
@@ -253,7 +304,9 @@ pub fn run_in_world(
         }
         if let (Some(live), Some(pace)) = (live.as_deref_mut(), pace.as_mut()) {
             if !paced
-                && (t >= BOOT_LIMIT_US || boards.iter().filter(|b| b.alive).all(|b| b.wakes_at > t))
+                && !warming
+                && (t >= warm_end + BOOT_LIMIT_US
+                    || boards.iter().filter(|b| b.alive).all(|b| b.wakes_at > t))
             {
                 // The robot's wall clock starts once its boards have started: each has made its
                 // first exchange and gone idle (`Pace::start_at`).
@@ -261,6 +314,9 @@ pub fn run_in_world(
                 pace.start_at(t);
                 // The boards' start is not a run that holds the robot up.
                 outcome.work.slowest = None;
+                if let Some(ready) = live.ready.take() {
+                    ready();
+                }
             }
             if paced {
                 // Never ahead of the wall clock (behind it when the host is too slow: said at
@@ -277,7 +333,10 @@ pub fn run_in_world(
             // a command frame queued now could reach such a board only after the time it
             // completes. Queued once the host has caught up, they are what the adapter sent a
             // little later.
-            adapter_waiting.extend(live.slcan.poll());
+            // The client's frames wait in the port until the wall clock runs (it is announced then).
+            if paced {
+                adapter_waiting.extend(live.slcan.poll());
+            }
             if !boards
                 .iter()
                 .any(|b| b.alive && b.held.as_ref().is_some_and(|&(at, _)| at > t))
@@ -408,7 +467,7 @@ pub fn run_in_world(
             .filter(|d| d.end < t + QUANTUM_US);
         if let Some(d) = now {
             deliveries.pop_front();
-            if d.node != OPERATOR && live.is_some() {
+            if d.node != OPERATOR && live.is_some() && !warming {
                 outbox.push(d.end, d.frame);
             }
         }
@@ -477,6 +536,10 @@ pub fn run_in_world(
             if let Some(a) = pending.peek() {
                 until = until.min(after(a.at_us));
             }
+            if warming {
+                // No board goes past the warm-up's restart.
+                until = until.min(warm_end);
+            }
             for b in boards.iter().filter(|b| b.alive) {
                 until = until.min(b.next.unwrap_or(b.wants));
             }
@@ -507,7 +570,12 @@ pub fn run_in_world(
         // every other board's next boundary, a live run's step, the world's next tick.
         let limits = Limits {
             end: at_or_after(duration_us),
-            action: pending.peek().map(|a| after(a.at_us)),
+            action: pending
+                .peek()
+                .map(|a| after(a.at_us))
+                .into_iter()
+                .chain(warming.then_some(warm_end))
+                .min(),
             live: live.is_some().then_some(t + LIVE_STEP_US),
             tick: world.as_deref().and_then(WorldRun::next_tick),
         };
@@ -569,7 +637,7 @@ pub fn run_in_world(
                 && d.end >= t + QUANTUM_US
             {
                 deliveries.pop_front();
-                if live.is_some() {
+                if live.is_some() && !warming {
                     outbox.push(d.end, d.frame);
                 }
                 now = Some(d);
@@ -689,6 +757,12 @@ pub fn run_in_world(
     // What a live run computed ahead of the wall clock still reaches the client.
     if let Some(live) = live {
         outbox.flush(|end, frame| live.slcan.deliver(end, &frame));
+        if live.slcan.dropped() > 0 {
+            eprintln!(
+                "robot: live: {} message(s) to the client dropped whole: it did not read them in time (more than 64 KiB waited)",
+                live.slcan.dropped()
+            );
+        }
     }
     // A live run stopped by Ctrl-C ends at the host's boundary while boards sent ahead (at most a
     // live step) still run towards theirs: each reports there and gets the end then. (A run that

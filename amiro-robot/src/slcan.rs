@@ -6,7 +6,10 @@
 //! queued on the bus at the current virtual time; every frame a board completes is sent to the
 //! client (`tIIILDD…[TTTT]`) while the channel is open. Extended and remote frames are refused
 //! (BEL): the robot's bus carries neither. Output the client does not read is dropped, never
-//! buffered without bound.
+//! buffered without bound, and whole messages at a time: a message the terminal takes only in part
+//! keeps its rest in a small backlog, written first at the next chance, so the client never reads a
+//! frame cut short (python-can's parser failed on one, `int('t')`, when a busy machine held the
+//! client up; issue 34). The run says how many it dropped.
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::{AsRawFd, FromRawFd};
@@ -17,6 +20,9 @@ use anyhow::{bail, Result};
 const BELL: &[u8] = b"\x07";
 /// Longest command worth reading (`T` + 8 + 1 + 16 digits + slack); longer without `\r` is garbage.
 const MAX_COMMAND: usize = 64;
+/// The most output held back for a client that reads slowly (some 2 000 frames); a message that
+/// would go beyond it is dropped whole.
+const MAX_BACKLOG: usize = 1 << 16;
 
 /// The pseudo-terminal and the adapter's state.
 pub struct Slcan {
@@ -27,6 +33,10 @@ pub struct Slcan {
     partial: Vec<u8>,
     open: bool,
     timestamps: bool,
+    /// What the terminal has not taken yet (whole messages, the first possibly begun).
+    backlog: Vec<u8>,
+    /// Messages to the client dropped whole because the backlog was full.
+    dropped: u64,
 }
 
 impl Slcan {
@@ -69,6 +79,8 @@ impl Slcan {
             partial: Vec::new(),
             open: false,
             timestamps: false,
+            backlog: Vec::new(),
+            dropped: 0,
         })
     }
 
@@ -78,12 +90,35 @@ impl Slcan {
     }
 
     fn reply(&mut self, bytes: &[u8]) {
-        // A client that does not read loses its answers, not our memory.
-        let _ = self.master.write(bytes);
+        // A client that does not read loses its answers, whole, not our memory.
+        if self.backlog.len() + bytes.len() > MAX_BACKLOG {
+            self.dropped += 1;
+            return;
+        }
+        self.backlog.extend_from_slice(bytes);
+        self.flush();
+    }
+
+    /// Writes as much of the backlog as the terminal takes now (never blocks).
+    fn flush(&mut self) {
+        while !self.backlog.is_empty() {
+            match self.master.write(&self.backlog) {
+                Ok(0) | Err(_) => break,
+                Ok(n) => {
+                    self.backlog.drain(..n);
+                }
+            }
+        }
+    }
+
+    /// Messages to the client dropped so far because it did not read them in time.
+    pub fn dropped(&self) -> u64 {
+        self.dropped
     }
 
     /// Reads what the client sent and answers it; returns the frames to put on the bus.
     pub fn poll(&mut self) -> Vec<Frame> {
+        self.flush();
         let mut frames = Vec::new();
         let mut chunk = [0u8; 512];
         while let Ok(n) = self.master.read(&mut chunk) {
@@ -189,6 +224,62 @@ mod tests {
         assert_eq!(parse_frame(b"t2052011"), None);
         assert_eq!(parse_frame(b"r2050"), None);
         assert_eq!(parse_frame(b"T000002050"), None);
+    }
+
+    #[test]
+    fn a_client_that_reads_late_gets_whole_messages() {
+        let mut adapter = Slcan::new().unwrap();
+        let mut client = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(adapter.path())
+            .unwrap();
+        client.write_all(b"O\r").unwrap();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while !adapter.open && std::time::Instant::now() < deadline {
+            adapter.poll();
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        // SAFETY: the client's descriptor, open for the whole test.
+        unsafe {
+            let fd = std::os::fd::AsRawFd::as_raw_fd(&client);
+            libc::fcntl(
+                fd,
+                libc::F_SETFL,
+                libc::fcntl(fd, libc::F_GETFL) | libc::O_NONBLOCK,
+            );
+        }
+        // 10 000 frames of 14 bytes while the client reads nothing: more than the terminal and the
+        // backlog hold together.
+        let frame = Frame::new(0x605, &[0xAA, 0xBB, 0xCC, 0xDD]).unwrap();
+        for k in 0..10_000 {
+            adapter.deliver(k, &frame);
+        }
+        assert!(adapter.dropped() > 0);
+        // Then it reads everything (the adapter writing its backlog as it polls).
+        let mut got = Vec::new();
+        let mut idle = 0;
+        while idle < 20 && std::time::Instant::now() < deadline {
+            adapter.poll();
+            let mut buffer = [0u8; 4096];
+            match client.read(&mut buffer) {
+                Ok(n) if n > 0 => {
+                    got.extend_from_slice(&buffer[..n]);
+                    idle = 0;
+                }
+                _ => {
+                    idle += 1;
+                    std::thread::sleep(std::time::Duration::from_millis(2));
+                }
+            }
+        }
+        // The answer to `O`, then whole frames only.
+        assert_eq!(&got[..1], b"\r");
+        let frames = &got[1..];
+        assert!(!frames.is_empty());
+        assert_eq!(frames.len() % 14, 0, "a message cut short");
+        assert!(frames.chunks(14).all(|m| m == b"t6054AABBCCDD\r"));
+        assert_eq!(frames.len() / 14 + adapter.dropped() as usize, 10_000);
     }
 
     #[test]

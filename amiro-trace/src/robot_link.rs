@@ -40,6 +40,11 @@ pub const DOWN_EARLY: u8 = 32;
 /// Down: the world's readings for this board follow the answer (`world_link::Readings`,
 /// `READINGS_LEN` bytes); its simulators take them before the drivers next read.
 pub const DOWN_READINGS: u8 = 64;
+/// Down: restart the board (a system reset through SCB AIRCR's SYSRESETREQ, in the same QEMU, which
+/// keeps the code it has translated): a live run's warm-up ends with it, so code the boards ran
+/// then costs no translation once the wall clock runs (docs/qemu.md, "Live"). The board boots as
+/// from power-on and makes its first exchange at its first boundary.
+pub const DOWN_RESTART: u8 = 128;
 
 /// Whether a board's software ever sees a frame with identifier `id` that another node sent: the
 /// boards' bxCAN receive filter passes only command frames (bit 10, C/S, clear;

@@ -2,12 +2,13 @@
 SLCAN port — the proximity ring every 10 ms at PowerManagement, LED 3, magnetometer-x every 900 µs at medium — and
 the gyroscope every 10 ms at low priority, 10 ms apart, then counts for `--seconds` of wall time the frames that
 come back, per wall-clock second and identifier (the gyroscope's first), and stops the run with Ctrl-C as a user
-would. The robot's own stderr (its real-time factor and worst lag every 2 s, "cannot keep pace", the closing
-summary) is printed as it comes, prefixed `robot:`; the last lines sum up frames per second and the lag.
+would. The robot's own stderr (its warm-up, its real-time factor and worst lag every 2 s, "cannot keep pace", the
+closing summary) is printed as it comes, each line marked `robot:` once; the last lines sum up frames per second and the lag.
 
     python3 tools/interop/live_pace.py --xtask target/debug/xtask            # the issue's load, 10 s counted
     python3 tools/interop/live_pace.py --gyroscope-first                     # the gyroscope asked for first
     python3 tools/interop/live_pace.py --only-gyroscope                      # the gyroscope alone
+    python3 tools/interop/live_pace.py --no-warm-up                          # the robot without its warm-up
 
 Needs python-can and pyserial (tools/requirements-ci.txt). Exit status 0 whatever the figures: it measures, the
 issue's targets (100 ± 2 gyroscope frames per second, lag within 5 ms) are for the reader to compare. The boards'
@@ -49,13 +50,19 @@ def main():
     parser.add_argument(
         "--gyroscope-priority", choices=sorted(PRIORITIES), default="low", help="the gyroscope's CAN priority"
     )
+    parser.add_argument(
+        "--no-warm-up", action="store_true", help="start the robot without its warm-up (to compare the start-up's lag)"
+    )
     args = parser.parse_args()
     level = PRIORITIES[args.gyroscope_priority] << 8
     GYROSCOPE = (level | GYROSCOPE_TOPIC, bytes.fromhex("010A0000"))
     GYROSCOPE_FRAMES = 0x400 | level | GYROSCOPE_TOPIC
 
     robot = subprocess.Popen(
-        [args.xtask, "robot", "--slcan"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [args.xtask, "robot", "--slcan", *(["--no-warm-up"] if args.no_warm_up else [])],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     port = None
     for line in robot.stdout:
@@ -72,7 +79,10 @@ def main():
     def read_stderr():
         for line in robot.stderr:
             stderr_lines.append(line.rstrip("\n"))
-            print(f"robot: {line.rstrip()}", flush=True)
+            # The robot's own lines start with `robot: ` already; the rest (its CPU table, the bus
+            # log's path) get it, so every line of its stderr shows once, marked.
+            line = line.rstrip()
+            print(line if line.startswith("robot: ") else f"robot: {line}", flush=True)
 
     stdout_lines = []
     threads = [

@@ -27,7 +27,7 @@ use super::{HostFile, TICK_US};
 pub use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::robot_link::{
     Down, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_READINGS,
-    DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_WHEELS,
+    DOWN_RESTART, DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_WHEELS,
 };
 pub use amiro_trace::world_link;
 use world_link::{Readings, Wheels, READINGS_LEN};
@@ -284,6 +284,11 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             super::print_line("# qemu: the robot's bus is gone");
             super::exit(false);
             return;
+        }
+        if flags & DOWN_RESTART != 0 {
+            // A system reset in the same QEMU (the end of a live run's warm-up): everything the
+            // board set up goes, the code QEMU translated for it stays.
+            cortex_m::peripheral::SCB::sys_reset();
         }
         early = flags & DOWN_EARLY != 0;
         // The host skips quanta in which no board can act: the next exchange is further on.

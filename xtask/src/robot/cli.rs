@@ -32,6 +32,12 @@ pub struct RobotArgs {
     /// default: printing them costs pace; everything is in the run's output.log either way).
     #[arg(long)]
     pub trace: bool,
+    /// Live (`--slcan`): no warm-up. By default the boards first run every sensor topic's
+    /// request, sample and stop, the LEDs, the motor and the thesis load in virtual time and
+    /// restart in their QEMUs, so that the code a client's commands run is translated before the
+    /// wall clock starts (about 0.16 s of virtual time; the port is printed after it).
+    #[arg(long, requires = "slcan")]
+    pub no_warm_up: bool,
     /// Put the robot in a world (JSON: walls, obstacles, floor, the robot's start; docs/world.md):
     /// the DiWheelDrive's wheels move it, the ring, floor and IMU read it. Ends with the line
     /// `world: travelled X m, contacts N, pose X Y HEADING`; the arena's SVG with the path goes
@@ -119,9 +125,19 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         signal_hook::flag::register(signal_hook::consts::SIGINT, stop.clone())?;
         let slcan = amiro_robot::slcan::Slcan::new()?;
-        println!("slcan: {}", slcan.path());
-        std::io::Write::flush(&mut std::io::stdout())?;
-        Some(amiro_robot::Live { slcan, stop })
+        let path = slcan.path().to_string();
+        // Announced once the wall clock runs (after the warm-up and the boards' start): a client
+        // that opens the port then is served at once.
+        let ready = move || {
+            println!("slcan: {path}");
+            let _ = std::io::Write::flush(&mut std::io::stdout());
+        };
+        Some(amiro_robot::Live {
+            slcan,
+            stop,
+            warm_up: !args.no_warm_up,
+            ready: Some(Box::new(ready)),
+        })
     } else {
         None
     };
