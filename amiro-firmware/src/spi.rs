@@ -234,7 +234,7 @@ impl<R: Registers> Master<R> {
     /// RXNE) and leaves the bus idle between bytes while it reads each one back. Called with the bus
     /// idle (every transfer of [`Device`] ends with BSY clear).
     pub fn send(&mut self, words: &[u8]) -> Result<(), Error> {
-        let wide = words.len() % 2 == 0;
+        let wide = words.len().is_multiple_of(2);
         if wide {
             self.frame_format(CR1_DFF);
         }
