@@ -282,6 +282,7 @@ mod tests {
             trace: None,
         };
         let rows = machine::rows(
+            "diwheeldrive",
             &bounds,
             &[
                 ("publish_low".into(), vec![machine::Job::alone(40.0)]),

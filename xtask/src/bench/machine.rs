@@ -40,11 +40,62 @@ pub struct MachineRow {
     pub unstamped: u64,
     /// The bound, in `unit` (`None`: declined).
     pub bound: Option<u64>,
+    /// Whether the bound is one the bounds file holds back (the analysis keeps a stated budget): held to it all
+    /// the same.
+    pub held: bool,
     /// `(observed − trace_allowance − unstamped) / bound`: at most 1 within the bound; below 0.5 the bound is more than twice
     /// what ran.
     pub ratio: Option<f64>,
     /// `ok`, `EXCEEDS BOUND`, or `declined: …`.
     pub verdict: String,
+    /// Where the bound is more than twice the largest job's own figure (issue 33's "tight"), why, where known
+    /// ([`LOOSE`]); `None` within 2×.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub loose: Option<String>,
+}
+
+impl MachineRow {
+    /// The job's own figure: observed, its trace records and the pre-empting runs' unstamped records out.
+    pub fn own(&self) -> u64 {
+        self.observed
+            .saturating_sub(self.trace_allowance)
+            .saturating_sub(self.unstamped)
+    }
+}
+
+/// One line of a task's largest job over the runs (`run`: where it ran) against its bound: own / bound, the ratio,
+/// used or held, the verdict and whether the bound is loose.
+pub fn summary(m: &MachineRow, run: &str) -> String {
+    match m.bound {
+        Some(b) => format!(
+            "{} / {} {} ({:.2}; {run}; {} bound): {}{}",
+            m.own(),
+            b,
+            m.unit,
+            m.ratio.unwrap_or(0.0),
+            if m.held { "held" } else { "used" },
+            m.verdict,
+            m.loose
+                .as_ref()
+                .map_or_else(String::new, |why| format!(", loose (bound > {TIGHT}× the job): {why}"))
+        ),
+        None => format!("{} {} ({run}): {}", m.own(), m.unit, m.verdict),
+    }
+}
+
+/// A bound is loose above this many times the largest own figure observed (issue 33's "tight": at most 2×).
+pub const TIGHT: f64 = 2.0;
+
+/// Why a task's bound is known to be looser than [`TIGHT`] times what the scenarios run, per (board, task); a
+/// loose bound not listed says "not explained".
+pub const LOOSE: &[(&str, &str, &str)] = &[];
+
+/// The reason a loose bound of `board`'s `task` is loose.
+fn loose_reason(board: &str, task: &str) -> String {
+    LOOSE
+        .iter()
+        .find(|(b, t, _)| *b == board && *t == task)
+        .map_or_else(|| "not explained".to_string(), |(_, _, why)| (*why).to_string())
 }
 
 /// The verdict of a job above its bound (`--check` fails on it).
@@ -53,24 +104,39 @@ pub const EXCEEDS: &str = "EXCEEDS BOUND";
 /// A task's bound in the file, in `unit`: its own row (its job's bound where the row is a charge per activation),
 /// or — for a publisher task, whose run takes one sample of
 /// each topic due — the sum of the rows of the topics the analysis has as its jobs (`publish_medium[magnetometer-x]`
-/// → `publisher[magnetometer-x]`). `Some(Err(reason))` when a row is declined; `None` when the file has none.
+/// → `publisher[magnetometer-x]`). A row the bounds file holds back (`held`: declined for the analysis, which keeps a
+/// stated budget) is held to its machine-code bound all the same: a held bound is still a promise that every job
+/// runs within it. `Some(Ok((bound, held)))`, `held` when any row summed is a held one; `Some(Err(reason))` when a
+/// row has no bound at all (declined by the machine code too); `None` when the file has no row for the task.
 fn bound_of(
     file: &BoundsFile,
     task: &str,
     analysed: Option<&BoardResult>,
     qemu: bool,
-) -> Option<Result<u64, String>> {
+) -> Option<Result<(u64, bool), String>> {
     // A row charged per activation holds an observed job against its job's bound: a trace's job does not say
     // how many activations (frames) it served, and the job's bound holds every job, however many.
-    let value = |row: &bounds::TaskBound| match (qemu, row.instructions, row.cycles, &row.job) {
-        (true, _, _, Some(job)) => Ok(job.instructions),
-        (false, _, _, Some(job)) => Ok(job.cycles),
-        (true, Some(i), _, None) => Ok(i),
-        (false, _, Some(c), None) => Ok(c),
-        _ => Err(row
-            .declined
-            .clone()
-            .unwrap_or_else(|| "no bound".to_string())),
+    let value = |row: &bounds::TaskBound| -> Result<(u64, bool), String> {
+        match (qemu, row.instructions, row.cycles, &row.job, &row.held) {
+            (true, _, _, Some(job), _) => Ok((job.instructions, false)),
+            (false, _, _, Some(job), _) => Ok((job.cycles, false)),
+            (true, Some(i), _, None, _) => Ok((i, false)),
+            (false, _, Some(c), None, _) => Ok((c, false)),
+            (_, _, _, None, Some(held)) => match (qemu, &held.job, held.instructions, held.cycles) {
+                (true, Some(job), _, _) => Ok((job.instructions, true)),
+                (false, Some(job), _, _) => Ok((job.cycles, true)),
+                (true, None, Some(i), _) => Ok((i, true)),
+                (false, None, _, Some(c)) => Ok((c, true)),
+                _ => Err(row
+                    .declined
+                    .clone()
+                    .unwrap_or_else(|| "no bound".to_string())),
+            },
+            _ => Err(row
+                .declined
+                .clone()
+                .unwrap_or_else(|| "no bound".to_string())),
+        }
     };
     if let Some(row) = file.task(task) {
         return Some(value(row));
@@ -92,7 +158,12 @@ fn bound_of(
     if rows.len() < topics.len() {
         return Some(Err("a topic of the task has no row".into()));
     }
-    Some(rows.iter().map(|r| value(r)).sum())
+    rows.iter()
+        .map(|r| value(r))
+        .try_fold((0, false), |(sum, held), v| {
+            v.map(|(b, h)| (sum + b, held || h))
+        })
+        .into()
 }
 
 /// One observed job of a task.
@@ -118,6 +189,7 @@ impl Job {
 /// The rows of `tasks` (task name, its observed jobs) against the board's bounds, for a QEMU run (`qemu`)
 /// or a robot capture at `clock_hz`: each task's job with the largest own figure, held to its bound.
 pub fn rows(
+    board: &str,
     bounds: &BoardBounds,
     tasks: &[(String, Vec<Job>)],
     analysed: Option<&BoardResult>,
@@ -169,18 +241,21 @@ pub fn rows(
         else {
             continue;
         };
-        let (bound, ratio, verdict) = match bound {
-            Ok(b) => {
+        let (bound, held, ratio, verdict) = match bound {
+            Ok((b, held)) => {
                 let ratio = (b > 0).then(|| own as f64 / b as f64);
                 let verdict = if own > b {
                     EXCEEDS.to_string()
                 } else {
                     "ok".to_string()
                 };
-                (Some(b), ratio, verdict)
+                (Some(b), held, ratio, verdict)
             }
-            Err(reason) => (None, None, format!("declined: {reason}")),
+            Err(reason) => (None, false, None, format!("declined: {reason}")),
         };
+        let loose = bound
+            .filter(|b| *b as f64 > TIGHT * own as f64)
+            .map(|_| loose_reason(board, task));
         out.push(MachineRow {
             task: task.clone(),
             unit,
@@ -189,8 +264,10 @@ pub fn rows(
             preemptions,
             unstamped,
             bound,
+            held,
             ratio,
             verdict,
+            loose,
         });
     }
     out
@@ -238,6 +315,7 @@ mod tests {
     fn observed_instructions_are_held_to_the_bound_after_the_trace_records() {
         // 12 µs of trace per job = 1500 instructions at 8 ns.
         let rows = rows(
+            "diwheeldrive",
             &board_bounds(),
             &[
                 ("can_rx".into(), vec![Job::alone(16.0)]), // 2000 instructions: 500 once the trace is out
@@ -257,6 +335,7 @@ mod tests {
         assert!(rows[1].verdict.starts_with("declined: a loop"));
         // One instruction more than the bound and the trace: above it.
         let over = super::rows(
+            "diwheeldrive",
             &board_bounds(),
             &[("can_rx".into(), vec![Job::alone(16.008)])],
             None,
@@ -271,6 +350,7 @@ mod tests {
     fn a_robot_capture_is_held_to_the_cycles() {
         // 72 MHz: 12 µs of trace = 864 cycles; 20 µs observed = 1440 cycles, 576 once the trace is out.
         let rows = rows(
+            "diwheeldrive",
             &board_bounds(),
             &[("can_rx".into(), vec![Job::alone(20.0)])],
             None,
@@ -281,6 +361,7 @@ mod tests {
         assert_eq!(rows[0].bound, Some(720));
         assert_eq!(rows[0].verdict, "ok");
         let rows = super::rows(
+            "diwheeldrive",
             &board_bounds(),
             &[("can_rx".into(), vec![Job::alone(22.1)])],
             None,
@@ -310,6 +391,7 @@ mod tests {
         // 2 400 instructions, 900 once the trace is out: a job of three frames, above one frame's 300 but within
         // the job's bound.
         let held = rows(
+            "diwheeldrive",
             &charged,
             &[("can_rx".into(), vec![Job::alone(19.2)])],
             None,
@@ -318,6 +400,7 @@ mod tests {
         );
         assert_eq!((held[0].bound, held[0].verdict.as_str()), (Some(900), "ok"));
         let over = rows(
+            "diwheeldrive",
             &charged,
             &[("can_rx".into(), vec![Job::alone(19.208)])],
             None,
@@ -326,6 +409,7 @@ mod tests {
         );
         assert_eq!(over[0].verdict, EXCEEDS);
         let robot = rows(
+            "diwheeldrive",
             &charged,
             &[("can_rx".into(), vec![Job::alone(1.0)])],
             None,
@@ -362,6 +446,7 @@ mod tests {
         // can_rx's bound is 500. Pre-empted twice, 2 300 observed: 1 000 its records, 800 the pre-empting
         // runs', 500 its own, within; alone, 1 400 observed: 400 its own. The held job is the pre-empted one.
         let r = rows(
+            "diwheeldrive",
             &bounds,
             &[("can_rx".into(), vec![Job::alone(11.2), pre_empted(18.4, 2)])],
             None,
@@ -375,6 +460,7 @@ mod tests {
         assert_eq!((r[0].verdict.as_str(), r[0].ratio), ("ok", Some(1.0)));
         // One instruction more: above.
         let over = rows(
+            "diwheeldrive",
             &bounds,
             &[("can_rx".into(), vec![pre_empted(18.408, 2)])],
             None,
@@ -384,6 +470,7 @@ mod tests {
         assert_eq!(over[0].verdict, EXCEEDS);
         // Nothing is taken off a job no run pre-empted: one above its bound stays above.
         let alone = rows(
+            "diwheeldrive",
             &bounds,
             &[(
                 "can_rx".into(),
@@ -399,6 +486,7 @@ mod tests {
         );
         // A robot capture's records are the ring's: nothing per pre-emption.
         let robot = rows(
+            "diwheeldrive",
             &bounds,
             &[("can_rx".into(), vec![pre_empted(1.0, 3)])],
             None,
@@ -409,12 +497,97 @@ mod tests {
     }
 
     #[test]
+    fn a_held_row_is_held_to_its_bound_and_a_loose_one_is_flagged() {
+        // can_tx held (declined for the analysis, which keeps a stated budget): one frame's job 400, its whole job
+        // 900; handle_commands held at 3 000; the accelerometer held, the gyroscope used.
+        let held = |instructions: u64, job: Option<u64>| {
+            serde_json::json!({ "task": "x", "cycles": null, "us": null, "instructions": null,
+                "declined": "held back as its budget: a test",
+                "held": { "cycles": instructions * 3, "us": instructions as f64 * 3.0 / 72.0,
+                          "instructions": instructions, "reason": "a test",
+                          "job": job.map(|j| serde_json::json!({ "cycles": j * 3, "us": j as f64 * 3.0 / 72.0,
+                              "instructions": j, "per_activation": "a test" })) } })
+        };
+        let named = |task: &str, mut row: serde_json::Value| {
+            row["task"] = task.into();
+            row
+        };
+        let file = BoundsFile::from_json(
+            "t.wcet.json",
+            &serde_json::json!({
+                "generated": format!("{} for a test", bounds::GENERATED_PREFIX),
+                "board": "diwheeldrive", "revision": "1-1", "chip": "stm32f103",
+                "clock_hz": 72_000_000, "wait_states": 2,
+                "image": { "code_sha256": "0".repeat(64), "code_bytes": 4 },
+                "tasks": [
+                    named("can_tx", held(400, Some(900))),
+                    named("handle_commands", held(3000, None)),
+                    { "task": "can_rx", "cycles": 720, "us": 10.0, "instructions": 500, "declined": null },
+                    { "task": "watchdog", "cycles": null, "us": null, "instructions": null,
+                      "declined": "a loop without a bound" }
+                ]
+            })
+            .to_string(),
+        )
+        .unwrap();
+        let held_bounds = BoardBounds {
+            file: "t.wcet.json".into(),
+            bounds: Some(file),
+            trace: None,
+        };
+        // 8 ns per instruction: can_tx 901 instructions (7.208 µs), handle_commands 1 400 (11.2 µs), can_rx 300
+        // (2.4 µs), the watchdog declined by the machine code as well.
+        let r = rows(
+            "diwheeldrive",
+            &held_bounds,
+            &[
+                ("can_tx".into(), vec![Job::alone(7.208)]),
+                ("handle_commands".into(), vec![Job::alone(11.2)]),
+                ("can_rx".into(), vec![Job::alone(2.4)]),
+                ("watchdog".into(), vec![Job::alone(1.0)]),
+            ],
+            None,
+            true,
+            1,
+        );
+        // A held row with a whole job is held to the job's bound, not one frame's: 901 > 900.
+        assert_eq!((r[0].bound, r[0].held, r[0].verdict.as_str()), (Some(900), true, EXCEEDS));
+        // Held, within; more than twice what ran: loose, unexplained.
+        assert_eq!((r[1].bound, r[1].held, r[1].verdict.as_str()), (Some(3000), true, "ok"));
+        assert_eq!(r[1].loose.as_deref(), Some("not explained"));
+        // Used, within, and within 2× of what ran.
+        assert_eq!((r[2].bound, r[2].held, r[2].loose.as_deref()), (Some(500), false, None));
+        assert!(r[3].verdict.starts_with("declined: a loop"));
+        // Exactly twice is tight.
+        let twice = rows(
+            "diwheeldrive",
+            &held_bounds,
+            &[("handle_commands".into(), vec![Job::alone(12.0)])],
+            None,
+            true,
+            1,
+        );
+        assert_eq!(twice[0].loose, None);
+        // A robot capture holds the held row's cycles.
+        let robot = rows(
+            "diwheeldrive",
+            &held_bounds,
+            &[("can_tx".into(), vec![Job::alone(1.0)])],
+            None,
+            false,
+            72_000_000,
+        );
+        assert_eq!(robot[0].bound, Some(2700));
+    }
+
+    #[test]
     fn without_a_file_there_is_nothing_to_compare() {
         let none = BoardBounds {
             bounds: None,
             ..board_bounds()
         };
         assert!(rows(
+            "diwheeldrive",
             &none,
             &[("can_rx".into(), vec![Job::alone(1.0)])],
             None,

@@ -57,6 +57,11 @@ pub struct BenchArgs {
     /// its own.
     #[arg(long, value_name = "DIR", num_args = 1..)]
     pub qemu_output: Vec<PathBuf>,
+    /// With `--qemu-output`: check the directories as the scenario runs of `cargo xtask ci` (each named by its
+    /// directory, the scenario's name), as CI does after the scenarios: every run's report beside its output, the
+    /// largest job of each task against its machine-code bound (used or held), failing as CI fails.
+    #[arg(long, requires = "qemu_output")]
+    pub as_scenarios: bool,
     /// Analyse this scenario instead of the publishers the capture shows.
     #[arg(long)]
     pub scenario: Option<String>,
@@ -207,7 +212,7 @@ impl Bench {
             .map(|m| {
                 format!(
                     "{}/{}: {} {} observed ({} of them the trace records, {} the unstamped records of {} \
-                     pre-empting runs) > bound {} {}",
+                     pre-empting runs) > {}bound {} {}",
                     self.board,
                     m.task,
                     m.observed,
@@ -215,6 +220,7 @@ impl Bench {
                     m.trace_allowance,
                     m.unstamped,
                     m.preemptions,
+                    if m.held { "held " } else { "" },
                     m.bound.unwrap_or(0),
                     m.unit
                 )
@@ -420,7 +426,7 @@ pub fn measure(
                     (t.task.clone(), jobs)
                 })
                 .collect();
-            let rows = machine::rows(b, &executions, board_result, qemu, capture.clock_hz);
+            let rows = machine::rows(board.name, b, &executions, board_result, qemu, capture.clock_hz);
             let line = match &b.bounds {
                 Some(f) => format!(
                     "{} ({}, {} MHz, {} wait states; image code SHA-256 {}…)",
@@ -554,6 +560,26 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
         .with_context(|| format!("unknown board `{}`", args.board))?;
     let build = revision_build(board, args.revision.as_deref())?;
     build.select_models();
+    if args.as_scenarios {
+        let runs: Vec<(String, PathBuf)> = args
+            .qemu_output
+            .iter()
+            .map(|dir| {
+                let name = dir
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                (name, dir.clone())
+            })
+            .collect();
+        return match check_scenario_runs(root, board, &runs) {
+            Ok(()) => Ok(true),
+            Err(e) => {
+                eprintln!("{e:#}");
+                Ok(!args.check)
+            }
+        };
+    }
     let mut inputs: Vec<(String, Capture, bool)> = Vec::new();
     if args.live {
         inputs.push(stream_live(root, board, args)?);
@@ -820,6 +846,8 @@ pub const BEYOND_THE_TRACED_BUILD: &[(&str, &str, &str)] = &[
 /// writes each run's report beside its output and fails when a run exceeds an analysed bound.
 pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)]) -> Result<()> {
     let mut failures = Vec::new();
+    // Per task over every run: the row of the job with the largest own figure, and its run.
+    let mut largest: BTreeMap<String, (machine::MachineRow, String)> = BTreeMap::new();
     for (name, work) in runs {
         let capture = read_scenario_run(board, work)?;
         let mut bench = measure(root, board, &capture, name, true, None)
@@ -842,6 +870,14 @@ pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)
         }
         let dir = work.join("bench");
         write_reports(&bench, &dir)?;
+        for m in &bench.machine {
+            let bigger = largest
+                .get(&m.task)
+                .is_none_or(|(l, _)| m.own() > l.own());
+            if bigger {
+                largest.insert(m.task.clone(), (m.clone(), name.clone()));
+            }
+        }
         let tightest = bench
             .tasks
             .iter()
@@ -871,6 +907,15 @@ pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)
             ));
         }
         failures.extend(bench.failures());
+    }
+    // Every observed job against its machine-code bound, used or held: the largest of each task over the runs.
+    for (task, (m, run)) in &largest {
+        println!(
+            "bound {:<12} {:<20} {}",
+            board.name,
+            task,
+            machine::summary(m, run)
+        );
     }
     if !failures.is_empty() {
         bail!(

@@ -106,13 +106,14 @@ fn machine_table(out: &mut String, b: &Bench) {
     }
     let _ = writeln!(
         out,
-        "{:<20} {:>12} {:>8} {:>14} {:>12} {:>7}  unit, verdict",
-        "task", "observed", "trace", "pre-empted", "bound", "ratio"
+        "{:<20} {:>12} {:>8} {:>14} {:>12} {:>7}  unit, verdict (held: the analysis keeps a stated budget, the \
+         job is held to the machine code's bound all the same; loose: bound > {}× the job)",
+        "task", "observed", "trace", "pre-empted", "bound", "ratio", super::machine::TIGHT
     );
     for m in &b.machine {
         let _ = writeln!(
             out,
-            "{:<20} {:>12} {:>8} {:>14} {:>12} {:>7}  {}, {}",
+            "{:<20} {:>12} {:>8} {:>14} {:>12} {:>7}  {}, {}{}{}",
             m.task,
             m.observed,
             m.trace_allowance,
@@ -121,7 +122,11 @@ fn machine_table(out: &mut String, b: &Bench) {
             m.ratio
                 .map_or_else(|| "-".to_string(), |r| format!("{r:.2}")),
             m.unit,
-            m.verdict
+            m.verdict,
+            if m.held { " (held)" } else { "" },
+            m.loose
+                .as_ref()
+                .map_or_else(String::new, |why| format!("; loose: {why}"))
         );
     }
 }
