@@ -282,7 +282,6 @@ mod tests {
             trace: None,
         };
         let rows = machine::rows(
-            "diwheeldrive",
             &bounds,
             &[
                 ("publish_low".into(), vec![machine::Job::alone(40.0)]),

@@ -34,9 +34,24 @@ pub struct Run {
     /// Traced runs that pre-empted it directly (each ran part of its records outside its own stamps,
     /// inside this run: docs/bench.md, "A pre-empting run's unstamped part").
     pub preemptions: u32,
+    /// The tasks of those runs, one bit per task number (below 32).
+    pub preempted_by: u32,
+    /// Handler events stamped while this run was the innermost (its own, not a pre-empting run's): in QEMU each
+    /// is encoded and written to the console inside the run (`amiro_firmware::tracing::event`), which the release
+    /// image does not do.
+    pub events: u32,
+    /// QEMU only: the platform's tick interrupts (untraced, `amiro_firmware::qemu::timer`'s SysTick, every
+    /// [`QEMU_TICK_US`]) that surely ran inside this run while it was the innermost: per stretch in which it ran
+    /// innermost, the tick boundaries in it less one (the last one's interrupt may be taken after the stretch
+    /// ends, once a critical section lets it). 0 for a robot capture.
+    pub ticks: u32,
     /// Where the release came from.
     pub release_from: ReleaseFrom,
 }
+
+/// The QEMU build's tick, µs (`amiro_firmware::qemu::TICK_US`): a single-board run's SysTick interrupts every
+/// tick, untraced, inside whatever runs.
+pub const QEMU_TICK_US: u64 = 10;
 
 impl Run {
     /// Execution time (pre-emptions taken out), ns.
@@ -105,6 +120,9 @@ struct Builder {
     base_cycles: u64,
     base_ns: u64,
     stack: Vec<Open>,
+    /// QEMU: the tick in trace-clock cycles (ticks are counted), and since when the innermost open run runs.
+    tick_cycles: Option<u64>,
+    top_since: u64,
     next_release: BTreeMap<u8, u64>,
     open_samples: BTreeMap<u8, usize>,
 }
@@ -116,6 +134,9 @@ struct Open {
     release_from: ReleaseFrom,
     preempted_ns: u64,
     preemptions: u32,
+    preempted_by: u32,
+    events: u32,
+    ticks: u32,
 }
 
 impl Builder {
@@ -129,6 +150,8 @@ impl Builder {
             base_cycles: 0,
             base_ns: 0,
             stack: Vec::new(),
+            tick_cycles: None,
+            top_since: 0,
             next_release: BTreeMap::new(),
             open_samples: BTreeMap::new(),
         }
@@ -141,12 +164,28 @@ impl Builder {
                 / u128::from(self.hz)) as u64
     }
 
+    /// QEMU: the ticks that surely ran inside the innermost open run from `top_since` to `cycles` (the tick
+    /// boundaries after the first less one), counted to it; the next stretch starts at `cycles`.
+    fn close_stretch(&mut self, cycles: u64) {
+        if let (Some(tick), Some(top)) = (self.tick_cycles.filter(|t| *t > 0), self.stack.last_mut()) {
+            let boundaries = (cycles / tick).saturating_sub(self.top_since / tick);
+            top.ticks += u32::try_from(boundaries.saturating_sub(1)).unwrap_or(u32::MAX);
+        }
+        self.top_since = cycles;
+    }
+
     fn record(&mut self, record: Record) {
         let t = self.ns(record.cycles);
+        if matches!(record.kind, Kind::TaskStart { .. } | Kind::TaskEnd { .. }) {
+            self.close_stretch(record.cycles);
+        }
         self.capture.end_ns = self.capture.end_ns.max(t);
         match record.kind {
             Kind::Hello { clock_hz } => {
                 if clock_hz > 0 {
+                    if self.tick_cycles.is_some() {
+                        self.tick_cycles = Some(u64::from(clock_hz) * QEMU_TICK_US / 1_000_000);
+                    }
                     self.base_ns = t;
                     self.base_cycles = record.cycles;
                     self.hz = u64::from(clock_hz);
@@ -165,6 +204,9 @@ impl Builder {
                     release_from,
                     preempted_ns: 0,
                     preemptions: 0,
+                    preempted_by: 0,
+                    events: 0,
+                    ticks: 0,
                 });
             }
             Kind::TaskEnd {
@@ -177,6 +219,7 @@ impl Builder {
                         if let Some(parent) = self.stack.last_mut() {
                             parent.preempted_ns += took;
                             parent.preemptions += 1;
+                            parent.preempted_by |= 1u32.checked_shl(u32::from(task)).unwrap_or(0);
                         }
                         self.capture.runs.push(Run {
                             task,
@@ -185,6 +228,9 @@ impl Builder {
                             end_ns: t,
                             preempted_ns: open.preempted_ns,
                             preemptions: open.preemptions,
+                            preempted_by: open.preempted_by,
+                            events: open.events,
+                            ticks: open.ticks,
                             release_from: open.release_from,
                         });
                     }
@@ -211,6 +257,9 @@ impl Builder {
     fn event(&mut self, t: u64, event: TraceEvent) {
         self.capture.end_ns = self.capture.end_ns.max(t);
         self.capture.events.push((t, event));
+        if let Some(open) = self.stack.last_mut() {
+            open.events += 1;
+        }
         match event.kind {
             TraceKind::SampleTaken { topic, release_us } => {
                 let behind = event.at_us.saturating_sub(release_us) * 1_000;
@@ -334,6 +383,7 @@ pub fn read_qemu(trace_bin: &[u8], text: &str, default_hz: u64) -> Result<Captur
     // A stable sort: records of one stream stay in their order.
     records.sort_by_key(|r| r.cycles);
     let mut builder = Builder::new(default_hz);
+    builder.tick_cycles = Some(default_hz * QEMU_TICK_US / 1_000_000);
     for record in records {
         builder.record(record);
     }

@@ -35,8 +35,19 @@ pub struct MachineRow {
     pub trace_allowance: u64,
     /// Traced runs that pre-empted that job directly.
     pub preemptions: u32,
-    /// What they ran of their records inside it, at the fewest, in `unit` (subtracted before the comparison;
-    /// QEMU only, 0 without the timing file's `trace.qemu.unstamped_per_preemption`).
+    /// Their tasks (filled in by the caller, which knows the task names).
+    pub preempted_by: Vec<String>,
+    /// Their tasks, one bit per task number.
+    #[serde(skip)]
+    pub preempted_by_mask: u32,
+    /// Handler events the job stamped itself (in QEMU each is encoded and printed inside the job).
+    pub events: u32,
+    /// QEMU: the platform's tick interrupts that surely ran inside it (their fewest instructions are in
+    /// `unstamped`).
+    pub ticks: u32,
+    /// What they ran of their records inside it, at the fewest, and (QEMU) the tick interrupts that ran inside it
+    /// at their fewest, in `unit` (subtracted before the comparison; QEMU only; the records' part 0 without the
+    /// timing file's `trace.qemu.unstamped_per_preemption`).
     pub unstamped: u64,
     /// The bound, in `unit` (`None`: declined).
     pub bound: Option<u64>,
@@ -48,8 +59,8 @@ pub struct MachineRow {
     pub ratio: Option<f64>,
     /// `ok`, `EXCEEDS BOUND`, or `declined: …`.
     pub verdict: String,
-    /// Where the bound is more than twice the largest job's own figure (issue 33's "tight"), why, where known
-    /// ([`LOOSE`]); `None` within 2×.
+    /// Where the bound is more than twice the largest job's own figure (issue 33's "tight"), why, where the rows
+    /// tell (`loose_reason`); `None` within 2×, or where the allowances leave no own figure.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub loose: Option<String>,
 }
@@ -68,12 +79,23 @@ impl MachineRow {
 pub fn summary(m: &MachineRow, run: &str) -> String {
     match m.bound {
         Some(b) => format!(
-            "{} / {} {} ({:.2}; {run}; {} bound): {}{}",
+            "{} / {} {} ({:.2}; {run}; {} bound; observed {}, trace {}, {} pre-emptions{} and {} ticks −{}, {} events): {}{}",
             m.own(),
             b,
             m.unit,
             m.ratio.unwrap_or(0.0),
             if m.held { "held" } else { "used" },
+            m.observed,
+            m.trace_allowance,
+            m.preemptions,
+            if m.preempted_by.is_empty() {
+                String::new()
+            } else {
+                format!(" by {}", m.preempted_by.join("+"))
+            },
+            m.ticks,
+            m.unstamped,
+            m.events,
             m.verdict,
             m.loose
                 .as_ref()
@@ -85,17 +107,31 @@ pub fn summary(m: &MachineRow, run: &str) -> String {
 
 /// A bound is loose above this many times the largest own figure observed (issue 33's "tight": at most 2×).
 pub const TIGHT: f64 = 2.0;
-
-/// Why a task's bound is known to be looser than [`TIGHT`] times what the scenarios run, per (board, task); a
-/// loose bound not listed says "not explained".
-pub const LOOSE: &[(&str, &str, &str)] = &[];
-
-/// The reason a loose bound of `board`'s `task` is loose.
-fn loose_reason(board: &str, task: &str) -> String {
-    LOOSE
+/// Why a bound can be far above what a QEMU job runs, from the rows summed for the task: stated bus waits (the
+/// bound's longest path polls each wait for its stated latency; QEMU's devices answer at once), a whole job of
+/// several activations (the observed jobs served fewer), or nothing known.
+fn loose_reason(rows: &[&bounds::TaskBound]) -> String {
+    let mut why = Vec::new();
+    let waits: f64 = rows
         .iter()
-        .find(|(b, t, _)| *b == board && *t == task)
-        .map_or_else(|| "not explained".to_string(), |(_, _, why)| (*why).to_string())
+        .map(|r| r.held.as_ref().map_or(r.bus_wait_us, |h| h.bus_wait_us))
+        .sum();
+    if waits > 0.0 {
+        why.push(format!(
+            "its path polls {waits:.0} µs of stated bus waits, which QEMU's devices answer at once"
+        ));
+    }
+    if rows
+        .iter()
+        .any(|r| r.job.is_some() || r.held.as_ref().is_some_and(|h| h.job.is_some()))
+    {
+        why.push("its job's bound serves the most activations (frames) a job can; the jobs seen served fewer".into());
+    }
+    if why.is_empty() {
+        "not explained".into()
+    } else {
+        why.join("; ")
+    }
 }
 
 /// The verdict of a job above its bound (`--check` fails on it).
@@ -113,7 +149,7 @@ fn bound_of(
     task: &str,
     analysed: Option<&BoardResult>,
     qemu: bool,
-) -> Option<Result<(u64, bool), String>> {
+) -> Option<Result<(u64, bool, String), String>> {
     // A row charged per activation holds an observed job against its job's bound: a trace's job does not say
     // how many activations (frames) it served, and the job's bound holds every job, however many.
     let value = |row: &bounds::TaskBound| -> Result<(u64, bool), String> {
@@ -139,7 +175,7 @@ fn bound_of(
         }
     };
     if let Some(row) = file.task(task) {
-        return Some(value(row));
+        return Some(value(row).map(|(b, h)| (b, h, loose_reason(&[row]))));
     }
     let prefix = format!("{task}[");
     let topics: Vec<&str> = analysed?
@@ -158,11 +194,13 @@ fn bound_of(
     if rows.len() < topics.len() {
         return Some(Err("a topic of the task has no row".into()));
     }
+    let reason = loose_reason(&rows);
     rows.iter()
         .map(|r| value(r))
         .try_fold((0, false), |(sum, held), v| {
             v.map(|(b, h)| (sum + b, held || h))
         })
+        .map(|(b, h)| (b, h, reason))
         .into()
 }
 
@@ -173,7 +211,20 @@ pub struct Job {
     pub exec_us: f64,
     /// The traced runs that pre-empted it directly.
     pub preemptions: u32,
+    /// Their tasks, one bit per task number.
+    pub preempted_by: u32,
+    /// Handler events it stamped itself (QEMU: each a console line written inside it).
+    pub events: u32,
+    /// QEMU: the platform's tick interrupts that surely ran inside it (`capture::Run::ticks`).
+    pub ticks: u32,
 }
+
+/// The fewest instructions the QEMU build's tick interrupt executes (`SysTick` and
+/// `amiro_firmware::qemu::timer::run_queues`, nothing due): counted by single-stepping QEMU
+/// (`-singlestep -d exec,nochain -dfilter` on those two functions only, so calls out of them are not counted and
+/// the figure is at most the true one) on the traced DiWheelDrive 1-1 image over the 900 ms motor-deadman run:
+/// 90 173 interrupts, 42 to 72 instructions each (42 three times, 50 for 89 970). docs/bench.md, "The QEMU tick".
+pub const QEMU_TICK_FEWEST_INSTRUCTIONS: u64 = 42;
 
 #[cfg(test)]
 impl Job {
@@ -182,6 +233,9 @@ impl Job {
         Job {
             exec_us,
             preemptions: 0,
+            preempted_by: 0,
+            events: 0,
+            ticks: 0,
         }
     }
 }
@@ -189,7 +243,6 @@ impl Job {
 /// The rows of `tasks` (task name, its observed jobs) against the board's bounds, for a QEMU run (`qemu`)
 /// or a robot capture at `clock_hz`: each task's job with the largest own figure, held to its bound.
 pub fn rows(
-    board: &str,
     bounds: &BoardBounds,
     tasks: &[(String, Vec<Job>)],
     analysed: Option<&BoardResult>,
@@ -226,42 +279,49 @@ pub fn rows(
         let Some(bound) = bound_of(file, task, analysed, qemu) else {
             continue;
         };
-        // (own, observed, pre-emptions, unstamped) of each job; the largest own figure is the one held.
-        let Some((own, observed, preemptions, unstamped)) = jobs
+        // (own, observed, pre-emptions, unstamped, by, events) of each job; the largest own figure is the one held.
+        let Some((own, observed, preemptions, unstamped, by, events, ticks)) = jobs
             .iter()
             .map(|j| {
                 let observed = (j.exec_us * per_us).round() as u64;
-                let unstamped = u64::from(j.preemptions) * per_preemption;
+                // QEMU: the tick interrupts that ran inside it, at their fewest instructions.
+                let ticks = if qemu { u64::from(j.ticks) * QEMU_TICK_FEWEST_INSTRUCTIONS } else { 0 };
+                let unstamped = u64::from(j.preemptions) * per_preemption + ticks;
                 let own = observed
                     .saturating_sub(trace_allowance)
                     .saturating_sub(unstamped);
-                (own, observed, j.preemptions, unstamped)
+                (own, observed, j.preemptions, unstamped, j.preempted_by, j.events, j.ticks)
             })
             .max()
         else {
             continue;
         };
-        let (bound, held, ratio, verdict) = match bound {
-            Ok((b, held)) => {
+        let (bound, held, ratio, verdict, why) = match bound {
+            Ok((b, held, why)) => {
                 let ratio = (b > 0).then(|| own as f64 / b as f64);
                 let verdict = if own > b {
                     EXCEEDS.to_string()
                 } else {
                     "ok".to_string()
                 };
-                (Some(b), held, ratio, verdict)
+                (Some(b), held, ratio, verdict, why)
             }
-            Err(reason) => (None, false, None, format!("declined: {reason}")),
+            Err(reason) => (None, false, None, format!("declined: {reason}"), String::new()),
         };
+        // Where the allowances swallow the whole observation the job's own figure is not known: not loose.
         let loose = bound
-            .filter(|b| *b as f64 > TIGHT * own as f64)
-            .map(|_| loose_reason(board, task));
+            .filter(|b| own > 0 && *b as f64 > TIGHT * own as f64)
+            .map(|_| why);
         out.push(MachineRow {
             task: task.clone(),
             unit,
             observed,
             trace_allowance,
             preemptions,
+            preempted_by: Vec::new(),
+            preempted_by_mask: by,
+            events,
+            ticks,
             unstamped,
             bound,
             held,
@@ -315,7 +375,6 @@ mod tests {
     fn observed_instructions_are_held_to_the_bound_after_the_trace_records() {
         // 12 µs of trace per job = 1500 instructions at 8 ns.
         let rows = rows(
-            "diwheeldrive",
             &board_bounds(),
             &[
                 ("can_rx".into(), vec![Job::alone(16.0)]), // 2000 instructions: 500 once the trace is out
@@ -335,7 +394,6 @@ mod tests {
         assert!(rows[1].verdict.starts_with("declined: a loop"));
         // One instruction more than the bound and the trace: above it.
         let over = super::rows(
-            "diwheeldrive",
             &board_bounds(),
             &[("can_rx".into(), vec![Job::alone(16.008)])],
             None,
@@ -350,7 +408,6 @@ mod tests {
     fn a_robot_capture_is_held_to_the_cycles() {
         // 72 MHz: 12 µs of trace = 864 cycles; 20 µs observed = 1440 cycles, 576 once the trace is out.
         let rows = rows(
-            "diwheeldrive",
             &board_bounds(),
             &[("can_rx".into(), vec![Job::alone(20.0)])],
             None,
@@ -361,7 +418,6 @@ mod tests {
         assert_eq!(rows[0].bound, Some(720));
         assert_eq!(rows[0].verdict, "ok");
         let rows = super::rows(
-            "diwheeldrive",
             &board_bounds(),
             &[("can_rx".into(), vec![Job::alone(22.1)])],
             None,
@@ -391,7 +447,6 @@ mod tests {
         // 2 400 instructions, 900 once the trace is out: a job of three frames, above one frame's 300 but within
         // the job's bound.
         let held = rows(
-            "diwheeldrive",
             &charged,
             &[("can_rx".into(), vec![Job::alone(19.2)])],
             None,
@@ -400,7 +455,6 @@ mod tests {
         );
         assert_eq!((held[0].bound, held[0].verdict.as_str()), (Some(900), "ok"));
         let over = rows(
-            "diwheeldrive",
             &charged,
             &[("can_rx".into(), vec![Job::alone(19.208)])],
             None,
@@ -409,7 +463,6 @@ mod tests {
         );
         assert_eq!(over[0].verdict, EXCEEDS);
         let robot = rows(
-            "diwheeldrive",
             &charged,
             &[("can_rx".into(), vec![Job::alone(1.0)])],
             None,
@@ -442,11 +495,13 @@ mod tests {
         let pre_empted = |exec_us: f64, preemptions: u32| Job {
             exec_us,
             preemptions,
+            preempted_by: 0,
+            events: 0,
+            ticks: 0,
         };
         // can_rx's bound is 500. Pre-empted twice, 2 300 observed: 1 000 its records, 800 the pre-empting
         // runs', 500 its own, within; alone, 1 400 observed: 400 its own. The held job is the pre-empted one.
         let r = rows(
-            "diwheeldrive",
             &bounds,
             &[("can_rx".into(), vec![Job::alone(11.2), pre_empted(18.4, 2)])],
             None,
@@ -460,7 +515,6 @@ mod tests {
         assert_eq!((r[0].verdict.as_str(), r[0].ratio), ("ok", Some(1.0)));
         // One instruction more: above.
         let over = rows(
-            "diwheeldrive",
             &bounds,
             &[("can_rx".into(), vec![pre_empted(18.408, 2)])],
             None,
@@ -470,7 +524,6 @@ mod tests {
         assert_eq!(over[0].verdict, EXCEEDS);
         // Nothing is taken off a job no run pre-empted: one above its bound stays above.
         let alone = rows(
-            "diwheeldrive",
             &bounds,
             &[(
                 "can_rx".into(),
@@ -486,7 +539,6 @@ mod tests {
         );
         // A robot capture's records are the ring's: nothing per pre-emption.
         let robot = rows(
-            "diwheeldrive",
             &bounds,
             &[("can_rx".into(), vec![pre_empted(1.0, 3)])],
             None,
@@ -538,7 +590,6 @@ mod tests {
         // 8 ns per instruction: can_tx 901 instructions (7.208 µs), handle_commands 1 400 (11.2 µs), can_rx 300
         // (2.4 µs), the watchdog declined by the machine code as well.
         let r = rows(
-            "diwheeldrive",
             &held_bounds,
             &[
                 ("can_tx".into(), vec![Job::alone(7.208)]),
@@ -560,7 +611,6 @@ mod tests {
         assert!(r[3].verdict.starts_with("declined: a loop"));
         // Exactly twice is tight.
         let twice = rows(
-            "diwheeldrive",
             &held_bounds,
             &[("handle_commands".into(), vec![Job::alone(12.0)])],
             None,
@@ -570,7 +620,6 @@ mod tests {
         assert_eq!(twice[0].loose, None);
         // A robot capture holds the held row's cycles.
         let robot = rows(
-            "diwheeldrive",
             &held_bounds,
             &[("can_tx".into(), vec![Job::alone(1.0)])],
             None,
@@ -587,7 +636,6 @@ mod tests {
             ..board_bounds()
         };
         assert!(rows(
-            "diwheeldrive",
             &none,
             &[("can_rx".into(), vec![Job::alone(1.0)])],
             None,

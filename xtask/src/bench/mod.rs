@@ -212,7 +212,7 @@ impl Bench {
             .map(|m| {
                 format!(
                     "{}/{}: {} {} observed ({} of them the trace records, {} the unstamped records of {} \
-                     pre-empting runs) > {}bound {} {}",
+                     pre-empting runs{} and the {} tick interrupts inside it; {} handler events printed inside it) > {}bound {} {}",
                     self.board,
                     m.task,
                     m.observed,
@@ -220,6 +220,13 @@ impl Bench {
                     m.trace_allowance,
                     m.unstamped,
                     m.preemptions,
+                    if m.preempted_by.is_empty() {
+                        String::new()
+                    } else {
+                        format!(": {}", m.preempted_by.join(", "))
+                    },
+                    m.ticks,
+                    m.events,
                     if m.held { "held " } else { "" },
                     m.bound.unwrap_or(0),
                     m.unit
@@ -421,12 +428,24 @@ pub fn measure(
                         .map(|r| machine::Job {
                             exec_us: us(r.execution_ns()),
                             preemptions: r.preemptions,
+                            preempted_by: r.preempted_by,
+                            events: r.events,
+                            ticks: r.ticks,
                         })
                         .collect();
                     (t.task.clone(), jobs)
                 })
                 .collect();
-            let rows = machine::rows(board.name, b, &executions, board_result, qemu, capture.clock_hz);
+            let mut rows =
+                machine::rows(b, &executions, board_result, qemu, capture.clock_hz);
+            for row in &mut rows {
+                row.preempted_by = names
+                    .iter()
+                    .enumerate()
+                    .filter(|(n, _)| *n < 32 && row.preempted_by_mask & (1 << n) != 0)
+                    .map(|(_, name)| name.clone())
+                    .collect();
+            }
             let line = match &b.bounds {
                 Some(f) => format!(
                     "{} ({}, {} MHz, {} wait states; image code SHA-256 {}…)",
