@@ -167,7 +167,9 @@ impl Builder {
     /// QEMU: the ticks that surely ran inside the innermost open run from `top_since` to `cycles` (the tick
     /// boundaries after the first less one), counted to it; the next stretch starts at `cycles`.
     fn close_stretch(&mut self, cycles: u64) {
-        if let (Some(tick), Some(top)) = (self.tick_cycles.filter(|t| *t > 0), self.stack.last_mut()) {
+        if let (Some(tick), Some(top)) =
+            (self.tick_cycles.filter(|t| *t > 0), self.stack.last_mut())
+        {
             let boundaries = (cycles / tick).saturating_sub(self.top_since / tick);
             top.ticks += u32::try_from(boundaries.saturating_sub(1)).unwrap_or(u32::MAX);
         }

@@ -436,8 +436,7 @@ pub fn measure(
                     (t.task.clone(), jobs)
                 })
                 .collect();
-            let mut rows =
-                machine::rows(b, &executions, board_result, qemu, capture.clock_hz);
+            let mut rows = machine::rows(b, &executions, board_result, qemu, capture.clock_hz);
             for row in &mut rows {
                 row.preempted_by = names
                     .iter()
@@ -890,9 +889,7 @@ pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)
         let dir = work.join("bench");
         write_reports(&bench, &dir)?;
         for m in &bench.machine {
-            let bigger = largest
-                .get(&m.task)
-                .is_none_or(|(l, _)| m.own() > l.own());
+            let bigger = largest.get(&m.task).is_none_or(|(l, _)| m.own() > l.own());
             if bigger {
                 largest.insert(m.task.clone(), (m.clone(), name.clone()));
             }
