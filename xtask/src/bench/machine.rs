@@ -46,6 +46,9 @@ pub struct MachineRow {
     /// QEMU: the platform's tick interrupts that surely ran inside it (their fewest instructions are in
     /// `unstamped`).
     pub ticks: u32,
+    /// The largest own figure of the task's jobs that no traced run pre-empted (`None`: every job was): what the
+    /// job ran with no pre-emption's unstamped rest in it.
+    pub alone: Option<u64>,
     /// What they ran of their records inside it, at the fewest, and (QEMU) the tick interrupts that ran inside it
     /// at their fewest, in `unit` (subtracted before the comparison; QEMU only; the records' part 0 without the
     /// timing file's `trace.qemu.unstamped_per_preemption`).
@@ -80,7 +83,8 @@ impl MachineRow {
 pub fn summary(m: &MachineRow, run: &str) -> String {
     match m.bound {
         Some(b) => format!(
-            "{} / {} {} ({:.2}; {run}; {} bound; observed {}, trace {}, {} pre-emptions{} and {} ticks −{}, {} events): {}{}",
+            "{} / {} {} ({:.2}; {run}; {} bound; observed {}, trace {}, {} pre-emptions{} and {} ticks −{}, {} events; \
+             largest not pre-empted {}): {}{}",
             m.own(),
             b,
             m.unit,
@@ -97,6 +101,7 @@ pub fn summary(m: &MachineRow, run: &str) -> String {
             m.ticks,
             m.unstamped,
             m.events,
+            m.alone.map_or_else(|| "-".to_string(), |a| a.to_string()),
             m.verdict,
             m.loose
                 .as_ref()
@@ -303,33 +308,36 @@ pub fn rows(
             continue;
         };
         // (own, observed, pre-emptions, unstamped, by, events) of each job; the largest own figure is the one held.
-        let Some((own, observed, preemptions, unstamped, by, events, ticks, trace_allowance)) =
-            jobs.iter()
-                .map(|j| {
-                    let observed = (j.exec_us * per_us).round() as u64;
-                    // QEMU: the tick interrupts that ran inside it, at their fewest instructions.
-                    let ticks = if qemu {
-                        u64::from(j.ticks) * QEMU_TICK_FEWEST_INSTRUCTIONS
-                    } else {
-                        0
-                    };
-                    let unstamped = u64::from(j.preemptions) * per_preemption + ticks;
-                    let trace_allowance = allowance(j.events);
-                    let own = observed
-                        .saturating_sub(trace_allowance)
-                        .saturating_sub(unstamped);
-                    (
-                        own,
-                        observed,
-                        j.preemptions,
-                        unstamped,
-                        j.preempted_by,
-                        j.events,
-                        j.ticks,
-                        trace_allowance,
-                    )
-                })
-                .max()
+        let figures: Vec<_> = jobs
+            .iter()
+            .map(|j| {
+                let observed = (j.exec_us * per_us).round() as u64;
+                // QEMU: the tick interrupts that ran inside it, at their fewest instructions.
+                let ticks = if qemu {
+                    u64::from(j.ticks) * QEMU_TICK_FEWEST_INSTRUCTIONS
+                } else {
+                    0
+                };
+                let unstamped = u64::from(j.preemptions) * per_preemption + ticks;
+                let trace_allowance = allowance(j.events);
+                let own = observed
+                    .saturating_sub(trace_allowance)
+                    .saturating_sub(unstamped);
+                (
+                    own,
+                    observed,
+                    j.preemptions,
+                    unstamped,
+                    j.preempted_by,
+                    j.events,
+                    j.ticks,
+                    trace_allowance,
+                )
+            })
+            .collect();
+        let alone = figures.iter().filter(|f| f.2 == 0).map(|f| f.0).max();
+        let Some(&(own, observed, preemptions, unstamped, by, events, ticks, trace_allowance)) =
+            figures.iter().max()
         else {
             continue;
         };
@@ -365,6 +373,7 @@ pub fn rows(
             preempted_by_mask: by,
             events,
             ticks,
+            alone,
             unstamped,
             bound,
             held,
@@ -582,6 +591,8 @@ mod tests {
             (r[0].observed, r[0].preemptions, r[0].unstamped),
             (1791, 2, 800)
         );
+        // The largest job no run pre-empted: 900 − 491.
+        assert_eq!(r[0].alone, Some(409));
         assert_eq!((r[0].verdict.as_str(), r[0].ratio), ("ok", Some(1.0)));
         // One instruction more: above.
         let over = rows(
