@@ -103,11 +103,22 @@ impl SlowRun {
             ms(self.wall),
             self.to_us.saturating_sub(self.from_us) as f64 / 1e3,
             self.from_us as f64 / 1e6,
-            self.cpu.map_or(String::new(), |(ran, waited)| format!(
-                ", its vCPU thread emulating {:.1} ms and waiting for a core {:.1} ms",
-                ms(ran),
-                ms(waited)
-            ))
+            self.cpu.map_or(String::new(), |(ran, waited)| {
+                let neither = self.wall.saturating_sub(ran + waited);
+                format!(
+                    ", its vCPU thread emulating {:.1} ms and waiting for a core {:.1} ms{}",
+                    ms(ran),
+                    ms(waited),
+                    if neither > self.wall / 2 {
+                        format!(
+                            ", neither for {:.1} ms (held in QEMU, or its core given to another guest by the machine's hypervisor)",
+                            ms(neither)
+                        )
+                    } else {
+                        String::new()
+                    }
+                )
+            })
         )
     }
 }
@@ -400,6 +411,18 @@ mod tests {
                 .ends_with(", its vCPU thread emulating 9.5 ms and waiting for a core 0.2 ms"),
             "{}",
             measured.describe()
+        );
+        // A run whose thread mostly neither ran nor waited for a core says so.
+        let held = SlowRun {
+            cpu: Some((Duration::from_micros(1_200), Duration::ZERO)),
+            ..run(0, 8_000, 8_920, 24)
+        };
+        assert!(
+            held.describe().ends_with(
+                "waiting for a core 0.0 ms, neither for 22.8 ms (held in QEMU, or its core given to another guest by the machine's hypervisor)"
+            ),
+            "{}",
+            held.describe()
         );
     }
 
