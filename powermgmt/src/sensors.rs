@@ -8,7 +8,7 @@
 //! which its missing sensors are skipped until their retry, so they do not delay the other bus's
 //! sensors on every sample. A sensor that does not answer yields no frame for its index, is
 //! counted (`missed`), and is set up again at most once per [`RETRY_US`], at most one sensor per bus
-per sample (so a ring release costs one sensor's set-up per bus, not four).
+//! per sample (so a ring release costs one sensor's set-up per bus, not four).
 //!
 //! The devices are amiro-sensors' drivers (`Pca9544a`, `Vcnl4020`, `Bq27500`) with the ring's
 //! wiring table `WIRING`; amiro-sensors' `ProximityRing` holds both buses in one value, which
