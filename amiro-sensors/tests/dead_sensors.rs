@@ -220,8 +220,15 @@ fn a_dead_group_stops_publishing_is_counted_and_retried_with_back_off() {
     group.group_mut().gyroscope.bus_mut().set_stuck_miso(None);
     let back = group.retry_at_us();
     assert!(group.sample(Topic::Gyroscope, back).is_empty());
-    assert!(!group.is_ready(), "still missing after the first part's set-up");
-    assert_eq!(group.retry_at_us(), back, "the next step at the next sample");
+    assert!(
+        !group.is_ready(),
+        "still missing after the first part's set-up"
+    );
+    assert_eq!(
+        group.retry_at_us(),
+        back,
+        "the next step at the next sample"
+    );
     assert_eq!(group.sample(Topic::Gyroscope, back + 2_000).len(), 1);
     assert!(group.is_ready());
     // Not served topics are no fault.

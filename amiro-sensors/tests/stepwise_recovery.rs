@@ -6,8 +6,7 @@ use amiro_can::Topic;
 use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::pca9544a;
 use amiro_sensors::drivers::suite::{
-    Device, InitStep, PowerManagementSensors, SampleError, SensorGroup, Supervised,
-    RETRY_FIRST_US,
+    Device, InitStep, PowerManagementSensors, SampleError, SensorGroup, Supervised, RETRY_FIRST_US,
 };
 use amiro_sensors::drivers::vcnl4020;
 use amiro_sensors::drivers::Error;
@@ -96,7 +95,11 @@ fn a_floor_sensor_that_nacks_then_comes_back_is_set_up_one_sensor_per_sample() {
     // The retry: sensors 0 and 1 set up, one per sample, each costing one sensor's set-up; sensor
     // 2 fails its step (a NACK on PRODUCT_ID: two transfers), which is the attempt's fault.
     assert_eq!(sample(&mut group, retry), (0, ONE_SENSOR_SET_UP));
-    assert_eq!(group.retry_at_us(), retry, "the next step at the next sample");
+    assert_eq!(
+        group.retry_at_us(),
+        retry,
+        "the next step at the next sample"
+    );
     assert_eq!(group.faults(), 3, "a step that worked is no fault");
     assert_eq!(sample(&mut group, retry + 10_000), (0, ONE_SENSOR_SET_UP));
     assert_eq!(sample(&mut group, retry + 20_000), (0, 2));
@@ -131,10 +134,18 @@ fn a_floor_sensor_that_nacks_then_comes_back_is_set_up_one_sensor_per_sample() {
         transfers <= ONE_SENSOR_SET_UP + 2 * normal,
         "{transfers}: one sensor's set-up and a sample (with its identity check)"
     );
-    let sensors = group.group_mut().mux_mut().bus_mut().bus.proximity().clone();
+    let sensors = group
+        .group_mut()
+        .mux_mut()
+        .bus_mut()
+        .bus
+        .proximity()
+        .clone();
     for channel in 0..4 {
         assert!(
-            sensors.sensor(channel).is_some_and(|s| s.is_configured_for_amiro()),
+            sensors
+                .sensor(channel)
+                .is_some_and(|s| s.is_configured_for_amiro()),
             "sensor {channel}"
         );
     }
@@ -166,7 +177,9 @@ fn every_floor_step_sets_up_one_sensor_and_the_fourth_completes() {
         let sensors = floor.mux_mut().bus_mut().proximity().clone();
         for channel in 0..4 {
             assert_eq!(
-                sensors.sensor(channel).is_some_and(|s| s.is_configured_for_amiro()),
+                sensors
+                    .sensor(channel)
+                    .is_some_and(|s| s.is_configured_for_amiro()),
                 channel <= step,
                 "after step {step}, sensor {channel}"
             );
@@ -218,7 +231,13 @@ fn power_management_is_set_up_one_device_per_step_ring_then_gauges() {
     }
     assert!(matches!(
         failed,
-        Some((_, SampleError::Device { device: Device::RingSensor(3), .. }))
+        Some((
+            _,
+            SampleError::Device {
+                device: Device::RingSensor(3),
+                ..
+            }
+        ))
     ));
     group.ring.i2c2_mut().set_nack(false);
     let before = selections(&mut group);

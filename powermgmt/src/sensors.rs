@@ -136,9 +136,9 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
     /// one sensor's set-up per bus, never four.
     #[inline(never)]
     pub fn sample_ring(&mut self, now_us: u64, sample: &mut RingSample) {
-        if let Some(k) = self.slots.iter().position(|slot| {
-            !slot.ready && now_us.saturating_sub(slot.last_try_us) >= RETRY_US
-        }) {
+        let due = |s: &RingSlot| !s.ready && now_us.saturating_sub(s.last_try_us) >= RETRY_US;
+        // The first missing sensor whose retry passed, if any: one set-up per call.
+        if let Some(k) = self.slots.iter().position(due) {
             self.set_up(k, now_us);
         }
         for k in 0..PER_BUS {

@@ -760,9 +760,10 @@ impl<I1: I2c, I2: I2c, D: DelayNs> SensorGroup for PowerManagementSensors<I1, I2
     fn init_step(&mut self, now_us: u64) -> InitStep {
         let step = self.next_to_init;
         let result = match usize::from(step) {
-            index @ 0..RING_SENSORS => self.ring.init_sensor(index).map_err(|e| {
-                i2c_error::<i2c::ErrorKind>(Device::RingSensor(e.sensor))(e.error)
-            }),
+            index @ 0..RING_SENSORS => self
+                .ring
+                .init_sensor(index)
+                .map_err(|e| i2c_error::<i2c::ErrorKind>(Device::RingSensor(e.sensor))(e.error)),
             RING_SENSORS => Bq27500::new(self.ring.i2c2_mut(), &mut self.delay)
                 .init()
                 .map_err(i2c_error(Device::FuelGauge(Battery::Front))),
