@@ -598,7 +598,7 @@ fn group_row_sections(
         if let Some(best) = own
             .iter()
             .filter_map(|(_, s)| at(s, c.ceiling))
-            .max_by_key(|x| key(x))
+            .max_by_key(key)
         {
             ceilings.push(best);
         }
