@@ -80,9 +80,9 @@ impl<G: SensorGroup> Group<G> {
     }
 
     /// One sample of `topic`: its frames, or none when the group is missing or the read failed.
-    /// A group that is missing is initialised again when its back-off has passed, so a sensor
-    /// that was slow at boot or recovered joins later (the retry's transfers count against that
-    /// sample).
+    /// A group that is missing is initialised again when its back-off has passed, one device per
+    /// sample (`SensorGroup::init_step`), so a sensor that was slow at boot or recovered joins
+    /// later (each step's transfers count against its sample, never the whole group's set-up).
     // One copy for the four publisher tasks that call it (they are generic over their locks).
     #[inline(never)]
     pub fn sample(&mut self, topic: Topic, now_us: u64) -> Samples {
