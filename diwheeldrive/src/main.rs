@@ -6,9 +6,9 @@
 //! `amiro-sensors`; the chip is behind `board` (or `qemu` for the QEMU build of this same app).
 //!
 //! Task priorities (RTIC, higher = more urgent; the mapping of CAN priorities lives in `levels`):
-//! `shutdown`, `can_rx`, `can_status` 7 · `can_tx` 6 · `handle_commands` 5 · `motor_control`,
-//! `shutdown_sequence`, `publish_urgent` 4 · `publish_high` 3 · `publish_medium` 2 · `publish_low`,
-//! `watchdog` 1.
+//! `shutdown`, `can_rx`, `can_status` 7 · `can_tx` 6 · `handle_commands` 5 · `publish_urgent` 4 ·
+//! `publish_high` 3 · `publish_medium` 2 · `publish_low`, `watchdog`, `motor_control`,
+//! `shutdown_sequence` 1.
 //! `cargo xtask analyze` reads these tasks, priorities and shared resources from this file.
 #![no_std]
 #![no_main]
@@ -372,11 +372,14 @@ mod app {
         .await;
     }
 
-    /// The wheel speed controller at 100 Hz, with the dead-man stop. Below the command handler (at
-    /// the urgent publisher's level, `levels::MOTOR_CONTROL`), with the controller its own: the
-    /// handler waits for the command's copy only (`motor_command`), the publishers read the
-    /// published pose and velocity (`drive`), and neither waits for a control step.
-    #[task(priority = 4, shared = [motor_command, drive, alive], local = [motors, encoders, controller])]
+    /// The wheel speed controller at 100 Hz, with the dead-man stop. Below the command handler and
+    /// the publishers (`levels::MOTOR_CONTROL`: its 10 ms deadline is the longest of the board's
+    /// periodic work but the odometry's), with the controller its own: the handler waits only for
+    /// the section that takes the command and reads the encoders and the clock (`motor_command`,
+    /// at the handler's priority, so that no task below the CAN interrupts runs between the counts
+    /// and their time), the publishers only for the copy of the published pose and velocity
+    /// (`drive`); no lock holds a control step.
+    #[task(priority = 1, shared = [motor_command, drive, alive], local = [motors, encoders, controller])]
     async fn motor_control(mut cx: motor_control::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::MOTOR_CONTROL);
         let controller = cx.local.controller;
@@ -384,13 +387,16 @@ mod app {
         loop {
             next += crate::MOTOR_PERIOD_US;
             Clock::delay_until_us(next).await;
-            let (left, right) = cx.local.encoders.counts();
+            let encoders = &*cx.local.encoders;
             // A command heard since the last step, with the time it was heard (the dead-man
-            // counts from there).
-            if let Some((command, heard)) = cx.shared.motor_command.lock(Option::take) {
+            // counts from there), and the encoders' counts with their time, read together.
+            let (command, left, right, now) = cx.shared.motor_command.lock(|pending| {
+                let (left, right) = encoders.counts();
+                (pending.take(), left, right, Clock::now_us())
+            });
+            if let Some((command, heard)) = command {
                 controller.set_target(command, heard);
             }
-            let now = Clock::now_us();
             let output = controller.update(now, left, right);
             actuators::apply_drive(cx.local.motors, now, &output);
             let sample = sensors::DriveSample::of(controller);
@@ -487,7 +493,7 @@ mod app {
     }
 
     /// Stops every publisher, lets the transmit queue drain, then calls AMiRo-BLT's shutdown handler.
-    #[task(priority = 4, shared = [handler, tx_queue])]
+    #[task(priority = 1, shared = [handler, tx_queue])]
     async fn shutdown_sequence(mut cx: shutdown_sequence::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::SHUTDOWN_SEQUENCE);
         let now = Clock::now_us();
