@@ -188,32 +188,68 @@ fn count_at_least(entries: &[u32], floor: u32) -> usize {
     count
 }
 
-/// Where among `group` (the entries of one identifier) the one with tag bits `tag` is, if any.
-/// Two entries a pass (as [`carry_up`]), then the one left.
+/// The bits of an entry that say which frame of which identifier it is (all but the slot number).
+const SAMPLE_MASK: u32 = !SLOT_MASK;
+
+/// Where among `entries`, from their start as far as the first with another identifier than
+/// `key`'s, the entry of the frame `sample` (identifier and tag bits) is, if any: two entries a
+/// pass, each one compare for the frame and one for the end of the identifier's frames.
 #[inline(never)]
-fn position_of_tag(group: &[u32], tag: u32) -> Option<usize> {
-    let mut pairs = group.chunks_exact(2);
+fn position_of_sample(entries: &[u32], key: u32, sample: u32) -> Option<usize> {
+    let mut pairs = entries.chunks_exact(2);
     let mut at = 0;
     for pair in &mut pairs {
         if let [a, b] = pair {
-            if a & TAG_MASK == tag {
+            if a & SAMPLE_MASK == sample {
                 return Some(at);
             }
-            if b & TAG_MASK == tag {
+            if a & !(TAG_MASK | SLOT_MASK) != key {
+                return None;
+            }
+            if b & SAMPLE_MASK == sample {
                 return Some(at + 1);
+            }
+            if b & !(TAG_MASK | SLOT_MASK) != key {
+                return None;
             }
         }
         at += 2;
     }
     match pairs.remainder() {
-        [last] if last & TAG_MASK == tag => Some(at),
+        [last] if last & SAMPLE_MASK == sample => Some(at),
         _ => None,
     }
 }
 
-/// Moves every entry of `entries` one place up (towards the end) and puts `new` first: the last
-/// entry, a free slot's whose number `new` carries, is overwritten. Each carried through a register
-/// (a `copy_within` would link `memmove`, whose byte loop the execution-time bound charges).
+/// As [`position_of_sample`], from the end of `entries` backwards: the position counted from the
+/// end (0 for the last entry).
+#[inline(never)]
+fn position_of_sample_from_end(entries: &[u32], key: u32, sample: u32) -> Option<usize> {
+    let mut pairs = entries.rchunks_exact(2);
+    let mut at = 0;
+    for pair in &mut pairs {
+        if let [b, a] = pair {
+            if a & SAMPLE_MASK == sample {
+                return Some(at);
+            }
+            if a & !(TAG_MASK | SLOT_MASK) != key {
+                return None;
+            }
+            if b & SAMPLE_MASK == sample {
+                return Some(at + 1);
+            }
+            if b & !(TAG_MASK | SLOT_MASK) != key {
+                return None;
+            }
+        }
+        at += 2;
+    }
+    match pairs.remainder() {
+        [last] if last & SAMPLE_MASK == sample => Some(at),
+        _ => None,
+    }
+}
+
 /// Four entries a pass, then one a pass for the rest: a loop's pass costs a taken branch, a
 /// pipeline refill and a flash line on the chip, more than the entries it moves.
 #[inline(never)]
@@ -322,38 +358,26 @@ impl<const N: usize> TxQueue<N> {
         self.entries.get(..self.len).unwrap_or(&[])
     }
 
-    /// The positions of the queued frames with key `key`: from `above` (the ones before leave
-    /// after them) to `through` (exclusive): two binary searches.
-    fn group(&self, key: u32) -> (usize, usize) {
-        let queued = self.queued();
-        (
-            count_at_least(queued, key + (1 << KEY_SHIFT)),
-            count_at_least(queued, key),
-        )
-    }
-
-    /// The position of an older sample of `frame` (key `key`) among the queued frames between
-    /// `above` and `through`, the ones with its identifier.
-    fn older_sample(&self, frame: &Frame, above: usize, through: usize) -> Option<usize> {
-        match Replaces::of(frame) {
-            Replaces::Nothing => None,
-            // At most one is queued.
-            Replaces::SameId => (through > above).then_some(above),
-            Replaces::SameIndex(tag) => {
-                let group = self.queued().get(above..through)?;
-                position_of_tag(group, tag).map(|found| above + found)
-            }
-        }
-    }
-
     /// Queues a new frame under the overload policy of this module.
     pub fn push(&mut self, frame: Frame) -> PushOutcome {
         self.counters.pushed = self.counters.pushed.saturating_add(1);
         let raw = frame.id().raw();
+        let key = key_floor(raw);
         // The queued frames with a greater identifier (they leave after it) end at `above`; the
-        // ones with its identifier follow, newest first.
-        let (above, through) = self.group(key_floor(raw));
-        let older = self.older_sample(&frame, above, through);
+        // ones with its identifier follow, newest first: one binary search.
+        let above = count_at_least(self.queued(), key + (1 << KEY_SHIFT));
+        let from_above = self.queued().get(above..).unwrap_or(&[]);
+        let older = match Replaces::of(&frame) {
+            Replaces::Nothing => None,
+            // At most one is queued: the first after `above`, if it has the identifier.
+            Replaces::SameId => from_above
+                .first()
+                .filter(|&&queued| queued & !(TAG_MASK | SLOT_MASK) == key)
+                .map(|_| above),
+            Replaces::SameIndex(tag) => {
+                position_of_sample(from_above, key, key | tag).map(|found| above + found)
+            }
+        };
         if let Some(at) = older {
             return self.replace_at(at, frame);
         }
@@ -389,10 +413,20 @@ impl<const N: usize> TxQueue<N> {
     pub fn requeue(&mut self, frame: Frame) -> PushOutcome {
         self.counters.requeued = self.counters.requeued.saturating_add(1);
         let raw = frame.id().raw();
+        let key = key_floor(raw);
         // The queued frames with a greater or equal identifier end at `through`: it leaves before
-        // all of them.
-        let (above, through) = self.group(key_floor(raw));
-        let newer = self.older_sample(&frame, above, through).is_some();
+        // all of them. The ones with its identifier are just below, oldest last: one binary search.
+        let through = count_at_least(self.queued(), key);
+        let to_through = self.queued().get(..through).unwrap_or(&[]);
+        let newer = match Replaces::of(&frame) {
+            Replaces::Nothing => false,
+            Replaces::SameId => to_through
+                .last()
+                .is_some_and(|&queued| queued & !(TAG_MASK | SLOT_MASK) == key),
+            Replaces::SameIndex(tag) => {
+                position_of_sample_from_end(to_through, key, key | tag).is_some()
+            }
+        };
         if newer {
             self.counters.replaced = self.counters.replaced.saturating_add(1);
             return PushOutcome::Replaced { older: frame };
