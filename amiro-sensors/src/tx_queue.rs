@@ -192,97 +192,40 @@ fn count_at_least(entries: &[u32], floor: u32) -> usize {
 const SAMPLE_MASK: u32 = !SLOT_MASK;
 
 /// Where among `entries`, from their start as far as the first with another identifier than
-/// `key`'s, the entry of the frame `sample` (identifier and tag bits) is, if any: two entries a
-/// pass, each one compare for the frame and one for the end of the identifier's frames.
+/// `key`'s, the entry of the frame `sample` (identifier and tag bits) is, if any: one compare for
+/// the frame and one for the end of the identifier's frames per entry.
 #[inline(never)]
 fn position_of_sample(entries: &[u32], key: u32, sample: u32) -> Option<usize> {
-    let mut pairs = entries.chunks_exact(2);
-    let mut at = 0;
-    for pair in &mut pairs {
-        if let [a, b] = pair {
-            if a & SAMPLE_MASK == sample {
-                return Some(at);
-            }
-            if a & !(TAG_MASK | SLOT_MASK) != key {
-                return None;
-            }
-            if b & SAMPLE_MASK == sample {
-                return Some(at + 1);
-            }
-            if b & !(TAG_MASK | SLOT_MASK) != key {
-                return None;
-            }
+    for (at, &queued) in entries.iter().enumerate() {
+        if queued & SAMPLE_MASK == sample {
+            return Some(at);
         }
-        at += 2;
+        if queued & !(TAG_MASK | SLOT_MASK) != key {
+            return None;
+        }
     }
-    match pairs.remainder() {
-        [last] if last & SAMPLE_MASK == sample => Some(at),
-        _ => None,
-    }
+    None
 }
 
-/// As [`position_of_sample`], from the end of `entries` backwards: the position counted from the
-/// end (0 for the last entry).
-#[inline(never)]
-fn position_of_sample_from_end(entries: &[u32], key: u32, sample: u32) -> Option<usize> {
-    let mut pairs = entries.rchunks_exact(2);
-    let mut at = 0;
-    for pair in &mut pairs {
-        if let [b, a] = pair {
-            if a & SAMPLE_MASK == sample {
-                return Some(at);
-            }
-            if a & !(TAG_MASK | SLOT_MASK) != key {
-                return None;
-            }
-            if b & SAMPLE_MASK == sample {
-                return Some(at + 1);
-            }
-            if b & !(TAG_MASK | SLOT_MASK) != key {
-                return None;
-            }
-        }
-        at += 2;
-    }
-    match pairs.remainder() {
-        [last] if last & SAMPLE_MASK == sample => Some(at),
-        _ => None,
-    }
-}
-
-/// Four entries a pass, then one a pass for the rest: a loop's pass costs a taken branch, a
-/// pipeline refill and a flash line on the chip, more than the entries it moves.
+/// Moves every entry of `entries` one place up (towards the end) and puts `new` first: the last
+/// entry, a free slot's whose number `new` carries, is overwritten. Each carried through a register
+/// (a `copy_within` would link `memmove`, whose byte loop the execution-time bound charges). One
+/// entry a pass: unrolled by four it was 32 cycles faster at 16 entries but 60 bytes longer, more
+/// than PowerManagement's flash budget had left.
 #[inline(never)]
 fn carry_up(entries: &mut [u32], new: u32) {
     let mut carried = new;
-    let mut fours = entries.chunks_exact_mut(4);
-    for four in &mut fours {
-        if let [a, b, c, d] = four {
-            let out = *d;
-            (*a, *b, *c, *d) = (carried, *a, *b, *c);
-            carried = out;
-        }
-    }
-    for place in fours.into_remainder() {
+    for place in entries {
         carried = core::mem::replace(place, carried);
     }
 }
 
 /// Moves every entry of `entries` one place down (towards the start) and puts `new` last: the
 /// first entry, the evicted frame's whose slot number `new` carries, is overwritten.
-/// Four entries a pass from the end, then one a pass for the rest (as [`carry_up`]).
 #[inline(never)]
 fn carry_down(entries: &mut [u32], new: u32) {
     let mut carried = new;
-    let mut fours = entries.rchunks_exact_mut(4);
-    for four in &mut fours {
-        if let [a, b, c, d] = four {
-            let out = *a;
-            (*a, *b, *c, *d) = (*b, *c, *d, carried);
-            carried = out;
-        }
-    }
-    for place in fours.into_remainder().iter_mut().rev() {
+    for place in entries.iter_mut().rev() {
         carried = core::mem::replace(place, carried);
     }
 }
@@ -360,11 +303,25 @@ impl<const N: usize> TxQueue<N> {
 
     /// Queues a new frame under the overload policy of this module.
     pub fn push(&mut self, frame: Frame) -> PushOutcome {
-        self.counters.pushed = self.counters.pushed.saturating_add(1);
+        self.add(frame, false)
+    }
+
+    /// [`Self::push`] (`requeue` false) and [`Self::requeue`] in one body (the boards' flash is
+    /// tight): the frames with a greater identifier end at `above` (they leave after it), the ones
+    /// with its identifier follow up to `through`, newest first (two binary searches for a requeue,
+    /// one for a push). An older sample is looked for among those (one entry for a topic of one
+    /// frame per sample, none for a command); a push replaces it, a requeue is discarded for it.
+    /// Otherwise a push goes in front of (below) its equals, a requeue behind them.
+    #[inline(never)]
+    fn add(&mut self, frame: Frame, requeue: bool) -> PushOutcome {
+        let counter = if requeue {
+            &mut self.counters.requeued
+        } else {
+            &mut self.counters.pushed
+        };
+        *counter = counter.saturating_add(1);
         let raw = frame.id().raw();
         let key = key_floor(raw);
-        // The queued frames with a greater identifier (they leave after it) end at `above`; the
-        // ones with its identifier follow, newest first: one binary search.
         let above = count_at_least(self.queued(), key + (1 << KEY_SHIFT));
         let from_above = self.queued().get(above..).unwrap_or(&[]);
         let older = match Replaces::of(&frame) {
@@ -378,11 +335,22 @@ impl<const N: usize> TxQueue<N> {
                 position_of_sample(from_above, key, key | tag).map(|found| above + found)
             }
         };
-        if let Some(at) = older {
-            return self.replace_at(at, frame);
+        match older {
+            Some(_) if requeue => {
+                // A newer sample is already queued: the requeued frame is the one discarded.
+                self.counters.replaced = self.counters.replaced.saturating_add(1);
+                PushOutcome::Replaced { older: frame }
+            }
+            Some(at) => self.replace_at(at, frame),
+            None if requeue => {
+                let through = count_at_least(self.queued(), key);
+                // It leaves before every frame of its identifier: a full queue's last frame
+                // leaves after it if its identifier is at least as great.
+                self.insert_or_drop(through, frame, raw)
+            }
+            // A full queue's last frame leaves after it only with a greater identifier.
+            None => self.insert_or_drop(above, frame, raw.saturating_add(1)),
         }
-        // Newest among equal identifiers: in front of (below) the ones already waiting.
-        self.insert_or_drop(above, frame, |last_in_line| raw >= last_in_line)
     }
 
     /// Puts `frame` in the place of the queued frame at `at`, an older sample of it.
@@ -411,27 +379,7 @@ impl<const N: usize> TxQueue<N> {
     /// aborted frame by its name (the bounds files' `per_frame` `requeue`).
     #[inline(never)]
     pub fn requeue(&mut self, frame: Frame) -> PushOutcome {
-        self.counters.requeued = self.counters.requeued.saturating_add(1);
-        let raw = frame.id().raw();
-        let key = key_floor(raw);
-        // The queued frames with a greater or equal identifier end at `through`: it leaves before
-        // all of them. The ones with its identifier are just below, oldest last: one binary search.
-        let through = count_at_least(self.queued(), key);
-        let to_through = self.queued().get(..through).unwrap_or(&[]);
-        let newer = match Replaces::of(&frame) {
-            Replaces::Nothing => false,
-            Replaces::SameId => to_through
-                .last()
-                .is_some_and(|&queued| queued & !(TAG_MASK | SLOT_MASK) == key),
-            Replaces::SameIndex(tag) => {
-                position_of_sample_from_end(to_through, key, key | tag).is_some()
-            }
-        };
-        if newer {
-            self.counters.replaced = self.counters.replaced.saturating_add(1);
-            return PushOutcome::Replaced { older: frame };
-        }
-        self.insert_or_drop(through, frame, |last_in_line| raw > last_in_line)
+        self.add(frame, true)
     }
 
     /// The frame at `at` in the leaving order (0 leaves last), if queued.
@@ -444,14 +392,14 @@ impl<const N: usize> TxQueue<N> {
     }
 
     /// Inserts `frame` at `at` of the entries (`at` queued frames leave after it); when full,
-    /// drops whichever of it and the frame that would leave last goes last (`new_goes_last(id of
-    /// the frame leaving last)`). The entries between move by one place ([`carry_up`],
+    /// drops whichever of it and the frame that would leave last goes last (the one leaving last
+    /// is evicted when its identifier is at least `evict_from`). The entries between move by one place ([`carry_up`],
     /// [`carry_down`]), only one way per call: at most `N - 1` of them.
     fn insert_or_drop(
         &mut self,
         at: usize,
         frame: Frame,
-        new_goes_last: impl FnOnce(u16) -> bool,
+        evict_from: u16,
     ) -> PushOutcome {
         if self.len < N {
             // The first free slot takes the frame, and the entries from `at` move up by one onto
@@ -472,7 +420,7 @@ impl<const N: usize> TxQueue<N> {
             return PushOutcome::Queued;
         }
         let evict = match self.at(0) {
-            Some(last_in_line) => !new_goes_last(last_in_line.id().raw()),
+            Some(last_in_line) => last_in_line.id().raw() >= evict_from,
             // Only with N = 0: nowhere to put anything.
             None => false,
         };
