@@ -90,10 +90,17 @@ impl Odometry {
 
     /// From µm and µrad: position rounded to the nearest 100 µm, heading to the nearest 1/65536 turn and wrapped
     /// into one turn (any angle is accepted). `None` when x or y is beyond ±838.8 m.
+    ///
+    /// No 64-bit division (the STM32F103 has none: each is a call of the runtime's loop): x and y
+    /// through the 32-bit divide (a value that does not fit 32 bits is beyond the wire's range), the
+    /// heading through multiplications by reciprocals ([`heading_counts`]). The results are the
+    /// exact formula's (`tests/odometry_exact.rs` compares them).
     pub fn from_micrometres(x_um: i64, y_um: i64, heading_urad: i64) -> Option<Odometry> {
-        let x = i32::try_from(round_div(i128::from(x_um), 100)).ok()?;
-        let y = i32::try_from(round_div(i128::from(y_um), 100)).ok()?;
-        Odometry::new(x, y, heading_counts(heading_urad))
+        Odometry::new(
+            hundred_micrometres(x_um)?,
+            hundred_micrometres(y_um)?,
+            heading_counts(heading_urad),
+        )
     }
 
     /// x in 100 µm units.
@@ -156,24 +163,96 @@ impl Odometry {
     }
 }
 
-/// Integer division rounding half away from zero; `d` is positive.
-/// `heading_urad × 65536 × 10⁶ / TURN_PICORAD`, rounded to the nearest count and wrapped into one turn,
-/// in 64-bit arithmetic: a 128-bit division is a loop of up to 128 passes the compiler writes inline
-/// (with no source line to state its bound at), a 64-bit one a call of the runtime's bounded division.
-///
-/// `M = TURN_PICORAD / 20` µrad are exactly 50 000 turns of 65536 counts, so the heading is reduced
-/// modulo `M` first (`r`), then the whole turns of `r × 50 000 / M` dropped (`u = r × 50 000 mod M`):
-/// what is left is `65536 × u / M` counts, below 65536. No exact half occurs (`M` is odd and `u < M`),
-/// so rounding to the nearest is the exact formula's rounding of halves away from zero.
-fn heading_counts(heading_urad: i64) -> u16 {
-    const M: u64 = (TURN_PICORAD / 20) as u64;
-    // r < M ≈ 3.1 × 10¹¹, r × 50 000 < 1.6 × 10¹⁶ and u × 131 072 < 4.2 × 10¹⁶: all within u64.
-    let r = heading_urad.rem_euclid(M as i64) as u64;
-    let u = r * 50_000 % M;
-    // At most 65536 (one turn), which the cast wraps to 0 as the exact formula's rem_euclid does.
-    ((u * 2 * TURN_COUNTS as u64 + M) / (2 * M)) as u16
+/// `value_um / 100` rounded half away from zero, `None` where it does not fit an `i32` or the
+/// wire's 24 bits anyway. A magnitude of 2³² or more is more than 42 949 672 hundreds, beyond the
+/// wire's ±2²³ (and the exact quotient's `Odometry::new` refuses it): below that, one 32-bit divide.
+fn hundred_micrometres(value_um: i64) -> Option<i32> {
+    // |i64::MIN| + 50 fits a u64.
+    let magnitude = u32::try_from(value_um.unsigned_abs() + 50).ok()? / 100;
+    // At most 42 949 672: fits an i32 either way.
+    let magnitude = magnitude as i32;
+    Some(if value_um < 0 { -magnitude } else { magnitude })
 }
 
+/// An exact quotient and remainder by a constant `d` (2 ≤ d < 2⁶⁴) without a 64-bit division: one
+/// multiply-high by the reciprocal `⌊2⁶⁴ / d⌋` (taken at compile time) and one correction. With
+/// `R = ⌊2⁶⁴ / d⌋ > 2⁶⁴ / d − 1`, `q = ⌊n·R / 2⁶⁴⌋` is at most `n / d` and more than
+/// `n / d − n / 2⁶⁴ > n / d − 1`: the quotient or one below it, so one step finishes it.
+#[derive(Clone, Copy)]
+struct ConstDivisor {
+    d: u64,
+    reciprocal: u64,
+}
+
+impl ConstDivisor {
+    const fn new(d: u64) -> Self {
+        assert!(d >= 2);
+        ConstDivisor {
+            d,
+            reciprocal: ((1u128 << 64) / d as u128) as u64,
+        }
+    }
+
+    /// `(n / d, n % d)`.
+    #[inline(always)]
+    fn div_rem(self, n: u64) -> (u64, u64) {
+        let mut q = mul_high(n, self.reciprocal);
+        // q ≤ n / d: no underflow.
+        let mut r = n - q * self.d;
+        if r >= self.d {
+            q += 1;
+            r -= self.d;
+        }
+        (q, r)
+    }
+}
+
+/// The high 64 bits of `a × b`, from four 32 × 32 → 64-bit products (`UMULL`), not a 128-bit
+/// multiply's runtime call.
+#[inline(always)]
+const fn mul_high(a: u64, b: u64) -> u64 {
+    let (a0, a1) = (a & 0xFFFF_FFFF, a >> 32);
+    let (b0, b1) = (b & 0xFFFF_FFFF, b >> 32);
+    let low = a0 * b0;
+    let cross_a = a1 * b0;
+    let cross_b = a0 * b1;
+    // At most 3 × (2³² − 1): no overflow.
+    let middle = (low >> 32) + (cross_a & 0xFFFF_FFFF) + (cross_b & 0xFFFF_FFFF);
+    a1 * b1 + (cross_a >> 32) + (cross_b >> 32) + (middle >> 32)
+}
+
+/// `M = TURN_PICORAD / 20` µrad: exactly 50 000 turns of 65536 counts.
+const HEADING_M: u64 = (TURN_PICORAD / 20) as u64;
+/// Division by `M`.
+const BY_M: ConstDivisor = ConstDivisor::new(HEADING_M);
+/// Division by `2M`.
+const BY_2M: ConstDivisor = ConstDivisor::new(2 * HEADING_M);
+
+/// `heading_urad × 65536 × 10⁶ / TURN_PICORAD`, rounded to the nearest count and wrapped into one turn,
+/// without a 64-bit division: each of the three quotients is an exact [`ConstDivisor`] by a
+/// constant (a 128-bit division is a loop of up to 128 passes the compiler writes inline, a
+/// 64-bit one a call of the runtime's shift-and-subtract loop, 1 781 cycles at its worst).
+///
+/// `M` µrad are exactly 50 000 turns of 65536 counts, so the heading is reduced modulo `M` first
+/// (`r`, of the magnitude, then mirrored for a negative heading: Euclid's remainder), then the
+/// whole turns of `r × 50 000 / M` dropped (`u = r × 50 000 mod M`): what is left is
+/// `65536 × u / M` counts, below 65536. No exact half occurs (`M` is odd and `u < M`), so rounding
+/// to the nearest is the exact formula's rounding of halves away from zero.
+fn heading_counts(heading_urad: i64) -> u16 {
+    let (_, magnitude) = BY_M.div_rem(heading_urad.unsigned_abs());
+    let r = if heading_urad < 0 && magnitude != 0 {
+        HEADING_M - magnitude
+    } else {
+        magnitude
+    };
+    // r < M ≈ 3.1 × 10¹¹, r × 50 000 < 1.6 × 10¹⁶ and u × 131 072 + M < 4.2 × 10¹⁶: all within u64.
+    let (_, u) = BY_M.div_rem(r * 50_000);
+    let (counts, _) = BY_2M.div_rem(u * 2 * TURN_COUNTS as u64 + HEADING_M);
+    // At most 65536 (one turn), which the cast wraps to 0 as the exact formula's rem_euclid does.
+    counts as u16
+}
+
+/// Integer division rounding half away from zero; `d` is positive.
 fn round_div(n: i128, d: i128) -> i128 {
     if n >= 0 {
         (n + d / 2) / d

@@ -186,6 +186,59 @@ impl Overlap {
     }
 }
 
+/// The machine's processors' time (`/proc/stat`'s first line, in clock ticks): all of it, and the
+/// part the hypervisor gave to other guests ("steal"). On a virtual machine that shares its host
+/// the steal is wall time in which this machine's cores ran nothing of its own; the run reports
+/// it beside its real-time factor, since no scheduling inside the machine can win it back.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Machine {
+    /// Every state's ticks summed (user, nice, system, idle, iowait, irq, softirq, steal).
+    pub total: u64,
+    /// The steal ticks.
+    pub steal: u64,
+}
+
+impl Machine {
+    /// Now (`None` where `/proc/stat` is not readable, as off Linux).
+    pub fn now() -> Option<Self> {
+        Self::parse(&std::fs::read_to_string("/proc/stat").ok()?)
+    }
+
+    /// From `/proc/stat`'s text: its `cpu ` line's first eight fields (guest time is already
+    /// inside user and nice, so the fields after steal are not added).
+    pub fn parse(text: &str) -> Option<Self> {
+        let line = text.lines().find(|l| l.starts_with("cpu "))?;
+        let fields: Vec<u64> = line
+            .split_whitespace()
+            .skip(1)
+            .take(8)
+            .map(str::parse)
+            .collect::<Result<_, _>>()
+            .ok()?;
+        (fields.len() == 8).then(|| Self {
+            total: fields.iter().sum(),
+            steal: fields[7],
+        })
+    }
+
+    /// What passed since `before`.
+    pub fn since(&self, before: &Self) -> Self {
+        Self {
+            total: self.total.saturating_sub(before.total),
+            steal: self.steal.saturating_sub(before.steal),
+        }
+    }
+
+    /// The share of the cores' time stolen (0.0-1.0; 0 with no time passed).
+    pub fn steal_share(&self) -> f64 {
+        if self.total == 0 {
+            0.0
+        } else {
+            self.steal as f64 / self.total as f64
+        }
+    }
+}
+
 /// A live board's QEMU's vCPU thread's scheduler clock (`/proc/PID/task/TID/schedstat`): the
 /// nanoseconds it ran and waited for a core, so a board run that took long in wall time is told
 /// apart as emulation (its CPU) or a wait behind other work on the machine.
@@ -319,6 +372,13 @@ pub fn table(work: &crate::Work, virtual_s: f64) -> String {
         per(o.side_by_side_us() as f64 / 1e6),
         per(busiest),
     );
+    if let Some(m) = work.machine {
+        let _ = writeln!(
+            out,
+            "  the machine's cores were taken by its hypervisor for {:.1} % of the run (steal, /proc/stat): a share no scheduling here wins back",
+            m.steal_share() * 100.0
+        );
+    }
     let late: Vec<String> = work
         .late
         .iter()
@@ -365,6 +425,43 @@ mod tests {
             "{text}"
         );
         assert!(!table(&crate::Work::default(), 1.0).contains("after their boundary"));
+    }
+
+    #[test]
+    fn the_machines_steal_is_read_from_proc_stat_and_shared_over_all_its_time() {
+        let before = Machine::parse("cpu  100 0 50 800 10 0 5 35 0 0\ncpu0 1 2 3 4 5 6 7 8 0 0\n")
+            .expect("a cpu line");
+        assert_eq!(
+            before,
+            Machine {
+                total: 1000,
+                steal: 35
+            }
+        );
+        let after = Machine::parse("cpu  300 0 150 1200 10 0 5 335 7 0\n").expect("a cpu line");
+        let run = after.since(&before);
+        assert_eq!(
+            run,
+            Machine {
+                total: 1000,
+                steal: 300
+            }
+        );
+        assert!((run.steal_share() - 0.3).abs() < 1e-9);
+        // A line too short, or not a number, is no reading.
+        assert_eq!(Machine::parse("cpu  1 2 3\n"), None);
+        assert_eq!(Machine::parse("cpu  1 2 3 x 5 6 7 8\n"), None);
+        assert_eq!(Machine::default().steal_share(), 0.0);
+        let work = crate::Work {
+            machine: Some(run),
+            ..crate::Work::default()
+        };
+        assert!(
+            table(&work, 1.0).contains("hypervisor for 30.0 % of the run"),
+            "{}",
+            table(&work, 1.0)
+        );
+        assert!(!table(&crate::Work::default(), 1.0).contains("hypervisor"));
     }
 
     #[test]

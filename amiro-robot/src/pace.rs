@@ -103,11 +103,22 @@ impl SlowRun {
             ms(self.wall),
             self.to_us.saturating_sub(self.from_us) as f64 / 1e3,
             self.from_us as f64 / 1e6,
-            self.cpu.map_or(String::new(), |(ran, waited)| format!(
-                ", its vCPU thread emulating {:.1} ms and waiting for a core {:.1} ms",
-                ms(ran),
-                ms(waited)
-            ))
+            self.cpu.map_or(String::new(), |(ran, waited)| {
+                let neither = self.wall.saturating_sub(ran + waited);
+                format!(
+                    ", its vCPU thread emulating {:.1} ms and waiting for a core {:.1} ms{}",
+                    ms(ran),
+                    ms(waited),
+                    if neither > self.wall / 2 {
+                        format!(
+                            ", neither for {:.1} ms (held in QEMU, or its core given to another guest by the machine's hypervisor)",
+                            ms(neither)
+                        )
+                    } else {
+                        String::new()
+                    }
+                )
+            })
         )
     }
 }
@@ -128,6 +139,9 @@ pub struct Pace {
     window_slowest: Option<SlowRun>,
     /// The board run noted since the last hold.
     last_note: Option<SlowRun>,
+    /// The machine's processors at the window's start: the hypervisor's share is printed with the
+    /// factor.
+    window_machine: Option<crate::cost::Machine>,
 }
 
 /// A time the run was behind the wall clock.
@@ -173,6 +187,7 @@ impl Pace {
             last_virtual: 0,
             window_slowest: None,
             last_note: None,
+            window_machine: crate::cost::Machine::now(),
         }
     }
 
@@ -233,11 +248,12 @@ impl Pace {
             if said {
                 self.said = Some(Instant::now());
                 eprintln!(
-                    "robot: cannot keep pace: {:.1} ms behind the wall clock at {:.3} s of virtual time (real-time factor {:.2} so far, {:.2} over the last window; the slowest board run: {})",
+                    "robot: cannot keep pace: {:.1} ms behind the wall clock at {:.3} s of virtual time (real-time factor {:.2} so far, {:.2} over the last window{}; the slowest board run: {})",
                     lag.as_secs_f64() * 1e3,
                     t_us as f64 / 1e6,
                     factor(t_us, wall),
                     self.window_factor(t_us),
+                    self.window_steal(),
                     describe(self.last_note),
                 );
             }
@@ -262,10 +278,11 @@ impl Pace {
         self.last_note = None;
         if self.window_start.0.elapsed() >= EVERY {
             eprintln!(
-                "robot: live at {:.1} s: real-time factor {:.3} over the last {:.0} s, worst lag {:.1} ms, {} time(s) behind by more than {} ms; the slowest board run: {}",
+                "robot: live at {:.1} s: real-time factor {:.3} over the last {:.0} s{}, worst lag {:.1} ms, {} time(s) behind by more than {} ms; the slowest board run: {}",
                 t_us as f64 / 1e6,
                 self.window_factor(t_us),
                 self.window_start.0.elapsed().as_secs_f64(),
+                self.window_steal(),
                 self.window_worst_lag.as_secs_f64() * 1e3,
                 self.window_episodes,
                 LAG_LIMIT.as_millis(),
@@ -275,8 +292,24 @@ impl Pace {
             self.window_start = (Instant::now(), t_us);
             self.window_worst_lag = Duration::ZERO;
             self.window_episodes = 0;
+            self.window_machine = crate::cost::Machine::now();
         }
         slept
+    }
+
+    /// ", the hypervisor took N % of the cores" over the window so far, where the machine says
+    /// (nothing where it does not, or took none).
+    fn window_steal(&self) -> String {
+        crate::cost::Machine::now()
+            .zip(self.window_machine)
+            .map(|(now, before)| now.since(&before).steal_share())
+            .filter(|&share| share >= 0.005)
+            .map_or(String::new(), |share| {
+                format!(
+                    ", the machine's hypervisor took {:.0} % of its cores",
+                    share * 100.0
+                )
+            })
     }
 
     fn window_factor(&self, t_us: u64) -> f64 {
@@ -378,6 +411,18 @@ mod tests {
                 .ends_with(", its vCPU thread emulating 9.5 ms and waiting for a core 0.2 ms"),
             "{}",
             measured.describe()
+        );
+        // A run whose thread mostly neither ran nor waited for a core says so.
+        let held = SlowRun {
+            cpu: Some((Duration::from_micros(1_200), Duration::ZERO)),
+            ..run(0, 8_000, 8_920, 24)
+        };
+        assert!(
+            held.describe().ends_with(
+                "waiting for a core 0.0 ms, neither for 22.8 ms (held in QEMU, or its core given to another guest by the machine's hypervisor)"
+            ),
+            "{}",
+            held.describe()
         );
     }
 

@@ -53,6 +53,9 @@ pub struct Work {
     pub slowest: Option<pace::SlowRun>,
     /// Each board's reports made more than a quantum after their boundary.
     pub late: [crate::cost::Late; 3],
+    /// The machine's processors over the run: how much of them its hypervisor took (`None` off
+    /// Linux).
+    pub machine: Option<crate::cost::Machine>,
 }
 
 /// What a board must get at boundary `t`: the frame that completes in the coming quantum if it is
@@ -110,6 +113,7 @@ pub fn run_in_world(
 ) -> Result<Outcome> {
     std::fs::create_dir_all(work)?;
     let host_before = crate::cost::own();
+    let machine_before = crate::cost::Machine::now();
     // How the boards run side by side, kept by the boards as they are sent on and report.
     let overlap = std::rc::Rc::new(std::cell::RefCell::new(crate::cost::Overlap::default()));
     let mut bus = Bus::new();
@@ -803,6 +807,9 @@ pub fn run_in_world(
         *cost = b.cost;
     }
     outcome.work.host = crate::cost::own().since(&host_before);
+    outcome.work.machine = crate::cost::Machine::now()
+        .zip(machine_before)
+        .map(|(now, before)| now.since(&before));
     outcome.work.overlap = *overlap.borrow();
     if pace.is_some() {
         // The host's thread back to the ordinary class for what follows the run (the report).

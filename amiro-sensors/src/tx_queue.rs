@@ -11,10 +11,15 @@
 //!   dropped — the highest identifier, possibly the new frame itself. Counted as *dropped*.
 //! - Command frames (C/S = 0) are never replaced: each command matters, not just the latest.
 //!
-//! Each frame stays in a fixed slot from when it is queued until it leaves; what moves is a small
-//! array of slot numbers kept in the order the frames will leave, the next one last. So `pop` in
-//! the transmit interrupt is O(1), and `push` and `requeue` read at most `N` frames' identifiers
-//! in one pass and move at most `N - 1` one-byte slot numbers (evicting or not), never a frame.
+//! Each frame stays in a fixed slot from when it is queued until it leaves; what moves is one word
+//! per queued frame, its *entry*, kept in an array in the order the frames will leave, the next one
+//! last. An entry packs the frame's identifier (the sort key, in its top bits, so entries compare as
+//! plain words), the index byte that tells a multi-frame topic's frames apart, and the slot number.
+//! So `pop` in the transmit interrupt is O(1); `push` and `requeue` find the frame's place by a
+//! binary search over the entries (at most `log2 N + 1` word loads and compares, no frame read),
+//! look for an older sample only among the frames of the same identifier (one entry for a topic of
+//! one frame per sample), and move at most `N - 1` entries by one place, each carried through a
+//! register (one load and one store), never a frame.
 
 use amiro_can::{CanId, Frame, Kind, Topic};
 
@@ -91,10 +96,11 @@ pub fn swap_with_next<T>(items: &mut [T], i: usize) {
 pub struct TxQueue<const N: usize> {
     /// The frames, each in its slot from `push` until it leaves; a free slot's contents are stale.
     slots: [Frame; N],
-    /// A permutation of the slot numbers `0..N`. `order[..len]` are the queued frames' slots in
-    /// reverse leaving order: identifiers descending, and among equal identifiers the newest first,
-    /// so the next frame to send is `order[len - 1]`. `order[len..]` are the free slots.
-    order: [u8; N],
+    /// One entry per slot ([`entry`]); their slot numbers are a permutation of `0..N`.
+    /// `entries[..len]` are the queued frames' in reverse leaving order: identifiers descending, and
+    /// among equal identifiers the newest first, so the next frame to send is `entries[len - 1]`'s.
+    /// `entries[len..]` hold the free slots' numbers (the rest of such an entry is stale).
+    entries: [u32; N],
     /// Frames queued (at most `N`).
     len: usize,
     counters: TxCounters,
@@ -125,13 +131,103 @@ impl<const N: usize> core::fmt::Debug for DebugFrames<'_, N> {
     }
 }
 
-/// Where a frame goes among the queued ones, from one pass over them.
-enum Place {
-    /// A queued frame (this slot) is an older sample of the same thing.
-    Same(usize),
-    /// No such frame: `above` queued frames have a greater identifier (they leave after it) and
-    /// `through` have a greater or equal one.
-    Between { above: usize, through: usize },
+/// The bits of an entry ([`TxQueue`]'s `entries`): the identifier plus one from bit 20 (so every
+/// queued frame's entry is at least `1 << 20`), the index tag from bit 8 (bit 16 set when the frame
+/// has a first data byte, bits 8–15 that byte: the sensor number of a multi-frame topic's frame),
+/// the slot number in bits 0–7. Entries in descending order are frames in descending identifier
+/// order, whatever their tags and slots.
+const KEY_SHIFT: u32 = 20;
+const TAG_SHIFT: u32 = 8;
+const TAG_MASK: u32 = 0x1FF << TAG_SHIFT;
+const SLOT_MASK: u32 = 0xFF;
+
+/// The smallest entry of a frame with identifier `raw` (11 bits: [`CanId`]'s range; the mask only
+/// keeps the arithmetic in 32 bits).
+fn key_floor(raw: u16) -> u32 {
+    (u32::from(raw & 0x7FF) + 1) << KEY_SHIFT
+}
+
+/// The index tag of a frame: its first data byte, if it has one (bits 8–16 of an entry).
+fn tag(frame: &Frame) -> u32 {
+    frame
+        .data()
+        .first()
+        .map_or(0, |&byte| (0x100 | u32::from(byte)) << TAG_SHIFT)
+}
+
+/// The entry of `frame` in slot `slot`.
+fn entry(frame: &Frame, slot: u32) -> u32 {
+    key_floor(frame.id().raw()) | tag(frame) | (slot & SLOT_MASK)
+}
+
+/// The slot number of an entry.
+fn slot_of(entry: u32) -> usize {
+    (entry & SLOT_MASK) as usize
+}
+
+/// How many of `entries` (in descending order) are at least `floor`: the length of the prefix that
+/// is. Binary lifting over the positions, from the largest power of two at most `entries.len()`
+/// down to 1: one word load and compare per step, `log2 len + 1` steps (5 for 16 frames). One
+/// function for every queue and every caller, so the execution-time bound finds its loop under one
+/// name (the bounds files' `count_at_least` entries).
+#[inline(never)]
+fn count_at_least(entries: &[u32], floor: u32) -> usize {
+    let len = entries.len();
+    if len == 0 {
+        return 0;
+    }
+    let mut step = 1usize << (usize::BITS - 1 - len.leading_zeros());
+    let mut count = 0;
+    while step > 0 {
+        let next = count + step;
+        if entries.get(next.wrapping_sub(1)).is_some_and(|&e| e >= floor) {
+            count = next;
+        }
+        step >>= 1;
+    }
+    count
+}
+
+/// The bits of an entry that say which frame of which identifier it is (all but the slot number).
+const SAMPLE_MASK: u32 = !SLOT_MASK;
+
+/// Where among `entries`, from their start as far as the first with another identifier than
+/// `key`'s, the entry of the frame `sample` (identifier and tag bits) is, if any: one compare for
+/// the frame and one for the end of the identifier's frames per entry.
+#[inline(never)]
+fn position_of_sample(entries: &[u32], key: u32, sample: u32) -> Option<usize> {
+    for (at, &queued) in entries.iter().enumerate() {
+        if queued & SAMPLE_MASK == sample {
+            return Some(at);
+        }
+        if queued & !(TAG_MASK | SLOT_MASK) != key {
+            return None;
+        }
+    }
+    None
+}
+
+/// Moves every entry of `entries` one place up (towards the end) and puts `new` first: the last
+/// entry, a free slot's whose number `new` carries, is overwritten. Each carried through a register
+/// (a `copy_within` would link `memmove`, whose byte loop the execution-time bound charges). One
+/// entry a pass: unrolled by four it was 32 cycles faster at 16 entries but 60 bytes longer, more
+/// than PowerManagement's flash budget had left.
+#[inline(never)]
+fn carry_up(entries: &mut [u32], new: u32) {
+    let mut carried = new;
+    for place in entries {
+        carried = core::mem::replace(place, carried);
+    }
+}
+
+/// Moves every entry of `entries` one place down (towards the start) and puts `new` last: the
+/// first entry, the evicted frame's whose slot number `new` carries, is overwritten.
+#[inline(never)]
+fn carry_down(entries: &mut [u32], new: u32) {
+    let mut carried = new;
+    for place in entries.iter_mut().rev() {
+        carried = core::mem::replace(place, carried);
+    }
 }
 
 /// Which queued frames of the same identifier a newer frame is a newer sample of, worked out once
@@ -140,11 +236,12 @@ enum Place {
 enum Replaces {
     /// A command (C/S = 0): none, each command matters.
     Nothing,
-    /// A sensor topic of one frame per sample: the queued frame with its identifier.
+    /// A sensor topic of one frame per sample: the queued frame with its identifier (at most one
+    /// is queued: a second sample always replaced the first).
     SameId,
     /// A sensor topic whose sample spans several frames: the one with the same first data byte
-    /// (the frame's index, such as the proximity ring's sensor number).
-    SameIndex(Option<u8>),
+    /// (the frame's index, such as the proximity ring's sensor number), as an entry's tag bits.
+    SameIndex(u32),
 }
 
 impl Replaces {
@@ -157,18 +254,9 @@ impl Replaces {
             .map(|topic| topic.frames_per_sample() > 1)
             .unwrap_or(false);
         if multi_frame {
-            Replaces::SameIndex(newer.data().first().copied())
+            Replaces::SameIndex(tag(newer))
         } else {
             Replaces::SameId
-        }
-    }
-
-    /// Whether `queued`, which has the newer frame's identifier, is an older sample of it.
-    fn matches(self, queued: &Frame) -> bool {
-        match self {
-            Replaces::Nothing => false,
-            Replaces::SameId => true,
-            Replaces::SameIndex(index) => queued.data().first().copied() == index,
         }
     }
 }
@@ -178,15 +266,15 @@ impl<const N: usize> TxQueue<N> {
     const FITS: () = assert!(N <= 256, "a TxQueue holds at most 256 frames");
 
     /// Every slot free, in slot order.
-    const FREE: [u8; N] = {
-        let mut order = [0u8; N];
+    const FREE: [u32; N] = {
+        let mut entries = [0u32; N];
         let mut slot = 0;
         while slot < N {
             // N <= 256 (FITS), so the slot number fits in a byte.
-            order[slot] = slot as u8;
+            entries[slot] = slot as u32;
             slot += 1;
         }
-        order
+        entries
     };
 
     /// An empty queue.
@@ -195,7 +283,7 @@ impl<const N: usize> TxQueue<N> {
         let () = Self::FITS;
         Self {
             slots: [Frame::empty(CanId::new(Kind::Command, amiro_can::Priority::Urgent, 0)); N],
-            order: Self::FREE,
+            entries: Self::FREE,
             len: 0,
             counters: TxCounters {
                 pushed: 0,
@@ -208,114 +296,131 @@ impl<const N: usize> TxQueue<N> {
         }
     }
 
+    /// The queued frames' entries: from the one leaving last to the next one to leave.
+    fn queued(&self) -> &[u32] {
+        self.entries.get(..self.len).unwrap_or(&[])
+    }
+
     /// Queues a new frame under the overload policy of this module.
     pub fn push(&mut self, frame: Frame) -> PushOutcome {
-        self.counters.pushed = self.counters.pushed.saturating_add(1);
-        match self.place(&frame) {
-            Place::Same(slot) => {
-                if let Some(queued) = self.slots.get_mut(slot) {
-                    let older = core::mem::replace(queued, frame);
-                    self.counters.replaced = self.counters.replaced.saturating_add(1);
-                    return PushOutcome::Replaced { older };
-                }
-                // Unreachable: `place` found the slot among the queued ones. Report it as a drop
-                // rather than queue a second sample.
-                self.counters.dropped = self.counters.dropped.saturating_add(1);
-                PushOutcome::DroppedNew { dropped: frame }
+        self.add(frame, false)
+    }
+
+    /// [`Self::push`] (`requeue` false) and [`Self::requeue`] in one body (the boards' flash is
+    /// tight): the frames with a greater identifier end at `above` (they leave after it), the ones
+    /// with its identifier follow up to `through`, newest first (two binary searches for a requeue,
+    /// one for a push). An older sample is looked for among those (one entry for a topic of one
+    /// frame per sample, none for a command); a push replaces it, a requeue is discarded for it.
+    /// Otherwise a push goes in front of (below) its equals, a requeue behind them.
+    #[inline(never)]
+    fn add(&mut self, frame: Frame, requeue: bool) -> PushOutcome {
+        let counter = if requeue {
+            &mut self.counters.requeued
+        } else {
+            &mut self.counters.pushed
+        };
+        *counter = counter.saturating_add(1);
+        let raw = frame.id().raw();
+        let key = key_floor(raw);
+        let above = count_at_least(self.queued(), key + (1 << KEY_SHIFT));
+        let from_above = self.queued().get(above..).unwrap_or(&[]);
+        let older = match Replaces::of(&frame) {
+            Replaces::Nothing => None,
+            // At most one is queued: the first after `above`, if it has the identifier.
+            Replaces::SameId => from_above
+                .first()
+                .filter(|&&queued| queued & !(TAG_MASK | SLOT_MASK) == key)
+                .map(|_| above),
+            Replaces::SameIndex(tag) => {
+                position_of_sample(from_above, key, key | tag).map(|found| above + found)
             }
-            // Newest among equal identifiers: in front of (below) the ones already waiting.
-            Place::Between { above, .. } => {
-                let raw = frame.id().raw();
-                self.insert_or_drop(above, frame, |last_in_line| raw >= last_in_line)
+        };
+        match older {
+            Some(_) if requeue => {
+                // A newer sample is already queued: the requeued frame is the one discarded.
+                self.counters.replaced = self.counters.replaced.saturating_add(1);
+                PushOutcome::Replaced { older: frame }
             }
+            Some(at) => self.replace_at(at, frame),
+            None if requeue => {
+                let through = count_at_least(self.queued(), key);
+                // It leaves before every frame of its identifier: a full queue's last frame
+                // leaves after it if its identifier is at least as great.
+                self.insert_or_drop(through, frame, raw)
+            }
+            // A full queue's last frame leaves after it only with a greater identifier.
+            None => self.insert_or_drop(above, frame, raw.saturating_add(1)),
         }
+    }
+
+    /// Puts `frame` in the place of the queued frame at `at`, an older sample of it.
+    fn replace_at(&mut self, at: usize, frame: Frame) -> PushOutcome {
+        let Some(queued) = self.entries.get_mut(at) else {
+            // Unreachable: `at` was read. Report it as a drop rather than queue a second sample.
+            self.counters.dropped = self.counters.dropped.saturating_add(1);
+            return PushOutcome::DroppedNew { dropped: frame };
+        };
+        let slot = *queued & SLOT_MASK;
+        *queued = entry(&frame, slot);
+        let Some(place) = self.slots.get_mut(slot as usize) else {
+            // Unreachable: a slot number is below N.
+            self.counters.dropped = self.counters.dropped.saturating_add(1);
+            return PushOutcome::DroppedNew { dropped: frame };
+        };
+        let older = core::mem::replace(place, frame);
+        self.counters.replaced = self.counters.replaced.saturating_add(1);
+        PushOutcome::Replaced { older }
     }
 
     /// Puts back a frame that a more urgent one displaced from a transmit mailbox (bxcan hands it
     /// back from `transmit`). It was queued before anything now waiting with its identifier, so it
     /// goes ahead of those; if a newer sample of its topic is already queued, it is discarded
-    /// instead (counted as replaced).
+    /// instead (counted as replaced). Not inlined: the transmit interrupt's bound charges it per
+    /// aborted frame by its name (the bounds files' `per_frame` `requeue`).
+    #[inline(never)]
     pub fn requeue(&mut self, frame: Frame) -> PushOutcome {
-        self.counters.requeued = self.counters.requeued.saturating_add(1);
-        match self.place(&frame) {
-            Place::Same(_) => {
-                self.counters.replaced = self.counters.replaced.saturating_add(1);
-                PushOutcome::Replaced { older: frame }
-            }
-            Place::Between { through, .. } => {
-                let raw = frame.id().raw();
-                self.insert_or_drop(through, frame, |last_in_line| raw > last_in_line)
-            }
-        }
+        self.add(frame, true)
     }
 
-    /// One pass over the queued frames from the one leaving last, as far as the first with a
-    /// smaller identifier (the order is by identifier, so the frames of `frame`'s identifier are
-    /// together): an older sample of `frame`, or where `frame` goes.
-    fn place(&self, frame: &Frame) -> Place {
-        let raw = frame.id().raw();
-        let replaces = Replaces::of(frame);
-        let (mut above, mut through) = (0, 0);
-        for &slot in self.order.iter().take(self.len) {
-            let slot = usize::from(slot);
-            let Some(queued) = self.slots.get(slot) else {
-                break;
-            };
-            let id = queued.id().raw();
-            if id < raw {
-                break;
-            }
-            if id > raw {
-                above += 1;
-            } else if replaces.matches(queued) {
-                return Place::Same(slot);
-            }
-            through += 1;
-        }
-        Place::Between { above, through }
-    }
-
-    /// The frame at `at` in `order` (0 leaves last), if queued.
+    /// The frame at `at` in the leaving order (0 leaves last), if queued.
     fn at(&self, at: usize) -> Option<&Frame> {
         if at >= self.len {
             return None;
         }
-        let slot = self.order.get(at)?;
-        self.slots.get(usize::from(*slot))
+        let entry = self.entries.get(at)?;
+        self.slots.get(slot_of(*entry))
     }
 
-    /// Inserts `frame` at `at` of `order` (`at` queued frames leave after it); when full, drops
-    /// whichever of it and the frame that would leave last goes last (`new_goes_last(id of the
-    /// frame leaving last)`). Slot numbers move by swaps, not `copy_within` (no `memmove` is linked
-    /// into the images for it), and only one way per call: at most `N - 1` of them.
+    /// Inserts `frame` at `at` of the entries (`at` queued frames leave after it); when full,
+    /// drops whichever of it and the frame that would leave last goes last (the one leaving last
+    /// is evicted when its identifier is at least `evict_from`). The entries between move by one place ([`carry_up`],
+    /// [`carry_down`]), only one way per call: at most `N - 1` of them.
     fn insert_or_drop(
         &mut self,
         at: usize,
         frame: Frame,
-        new_goes_last: impl FnOnce(u16) -> bool,
+        evict_from: u16,
     ) -> PushOutcome {
         if self.len < N {
-            // The first free slot takes the frame, and its number moves from `len` down to `at`
-            // (`at` <= len: it counted queued frames).
-            let Some(slot) = self
-                .order
-                .get(self.len)
-                .and_then(|slot| self.slots.get_mut(usize::from(*slot)))
-            else {
+            // The first free slot takes the frame, and the entries from `at` move up by one onto
+            // the free entry at `len` (`at` <= len: it counted queued frames).
+            let len = self.len;
+            let free = self.entries.get(len).copied();
+            let (Some(free), Some(moving)) = (free, self.entries.get_mut(at..=len)) else {
                 // Unreachable: len < N. Report it as a drop rather than lose it silently.
                 self.counters.dropped = self.counters.dropped.saturating_add(1);
                 return PushOutcome::DroppedNew { dropped: frame };
             };
-            *slot = frame;
-            for i in (at..self.len).rev() {
-                swap_with_next(&mut self.order, i);
+            carry_up(moving, entry(&frame, free));
+            if let Some(slot) = self.slots.get_mut(slot_of(free)) {
+                *slot = frame;
             }
-            self.len += 1;
+            self.len = len + 1;
             self.note_high_water();
             return PushOutcome::Queued;
         }
         let evict = match self.at(0) {
-            Some(last_in_line) => !new_goes_last(last_in_line.id().raw()),
+            Some(last_in_line) => last_in_line.id().raw() >= evict_from,
             // Only with N = 0: nowhere to put anything.
             None => false,
         };
@@ -323,21 +428,22 @@ impl<const N: usize> TxQueue<N> {
             self.counters.dropped = self.counters.dropped.saturating_add(1);
             return PushOutcome::DroppedNew { dropped: frame };
         }
-        // The frame leaving last, at 0, gives its slot to the new one, whose number moves up to
-        // `at - 1` (`at` >= 1: the frame at 0 leaves after the new one, so `at` counted it).
-        let Some(slot) = self
-            .order
-            .first()
-            .and_then(|slot| self.slots.get_mut(usize::from(*slot)))
-        else {
+        // The frame leaving last, at 0, gives its slot to the new one, whose entry goes to `at - 1`
+        // as the ones from 1 to `at - 1` move down by one (`at` >= 1: the frame at 0 leaves after
+        // the new one, so `at` counted it).
+        let last = self.entries.first().copied();
+        let (Some(last), Some(moving)) = (last, self.entries.get_mut(..at)) else {
             // Unreachable: the frame at 0 was just read.
             self.counters.dropped = self.counters.dropped.saturating_add(1);
             return PushOutcome::DroppedNew { dropped: frame };
         };
+        carry_down(moving, entry(&frame, last));
+        let Some(slot) = self.slots.get_mut(slot_of(last)) else {
+            // Unreachable: a slot number is below N.
+            self.counters.dropped = self.counters.dropped.saturating_add(1);
+            return PushOutcome::DroppedNew { dropped: frame };
+        };
         let dropped = core::mem::replace(slot, frame);
-        for i in 1..at {
-            swap_with_next(&mut self.order, i - 1);
-        }
         self.counters.dropped = self.counters.dropped.saturating_add(1);
         self.note_high_water();
         PushOutcome::DroppedOther { dropped }
@@ -389,11 +495,11 @@ impl<const N: usize> TxQueue<N> {
 
     /// The waiting frames in the order they will leave.
     pub fn iter(&self) -> impl Iterator<Item = &Frame> {
-        self.order
+        self.entries
             .iter()
             .take(self.len)
             .rev()
-            .filter_map(|slot| self.slots.get(usize::from(*slot)))
+            .filter_map(|entry| self.slots.get(slot_of(*entry)))
     }
 
     /// Empties the queue (shutdown); the discarded frames are not counted as dropped.
@@ -420,8 +526,8 @@ mod tests {
     #[test]
     fn sixteen_frames_fit_in_a_small_budget() {
         let size = core::mem::size_of::<TxQueue<16>>();
-        // 16 frames of 12 bytes, their 16 slot numbers, the length and the counters.
-        let limit = 16 * 12 + 16 + core::mem::size_of::<usize>() + 24;
+        // 16 frames of 12 bytes, their 16 entries of a word, the length and the counters.
+        let limit = 16 * 12 + 16 * 4 + core::mem::size_of::<usize>() + 24;
         assert!(size <= limit, "TxQueue<16> is {size} bytes");
     }
 

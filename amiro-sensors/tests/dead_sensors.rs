@@ -215,10 +215,21 @@ fn a_dead_group_stops_publishing_is_counted_and_retried_with_back_off() {
             ..
         })
     ));
-    // Repaired: the next attempt brings it back, and it publishes again.
+    // Repaired: the next attempt brings it back in two steps, one part each (the gyroscope, then
+    // the accelerometer with that sample's reading), and it publishes again.
     group.group_mut().gyroscope.bus_mut().set_stuck_miso(None);
     let back = group.retry_at_us();
-    assert_eq!(group.sample(Topic::Gyroscope, back).len(), 1);
+    assert!(group.sample(Topic::Gyroscope, back).is_empty());
+    assert!(
+        !group.is_ready(),
+        "still missing after the first part's set-up"
+    );
+    assert_eq!(
+        group.retry_at_us(),
+        back,
+        "the next step at the next sample"
+    );
+    assert_eq!(group.sample(Topic::Gyroscope, back + 2_000).len(), 1);
     assert!(group.is_ready());
     // Not served topics are no fault.
     assert!(group.sample(Topic::PowerStatus, back).is_empty());

@@ -47,6 +47,83 @@ fn lowest_identifier_leaves_first_and_equal_identifiers_in_order() {
     assert_eq!(q.counters().popped, 6);
 }
 
+/// The queue's entries sort by the identifier in their top bits, whatever the index byte and the
+/// slot below it: the smallest and the largest identifiers, frames with and without data, a
+/// capacity that is no power of two, every insertion place and both ends of an eviction.
+#[test]
+fn identifiers_at_both_ends_and_every_place_of_a_five_frame_queue() {
+    let cmd = |id: u8, n: u8| frame(CanId::new(Kind::Command, Priority::Urgent, id).raw(), &[n]);
+    let mut q = TxQueue::<5>::new();
+    // Command identifiers: never replaced, so equal ones queue in order.
+    let low = cmd(0, 0);
+    assert_eq!(low.id().raw(), 0x000);
+    assert_eq!(q.push(frame(0x7FF, &[])), PushOutcome::Queued);
+    assert_eq!(q.push(low), PushOutcome::Queued);
+    assert_eq!(q.push(frame(0x0FF, &[9])), PushOutcome::Queued);
+    assert_eq!(q.push(cmd(0, 1)), PushOutcome::Queued);
+    assert_eq!(q.push(frame(0x0FF, &[8])), PushOutcome::Queued);
+    assert_eq!(ids(&q), [0x000, 0x000, 0x0FF, 0x0FF, 0x7FF]);
+    // Full: the newest 0x0FF leaves after the older one, before 0x7FF, which is evicted.
+    let last = frame(0x0FF, &[7]);
+    assert_eq!(
+        q.push(last),
+        PushOutcome::DroppedOther {
+            dropped: frame(0x7FF, &[])
+        }
+    );
+    // Full: a frame that would leave last (an equal identifier queued after the others) is refused.
+    let refused = frame(0x0FF, &[6]);
+    assert_eq!(q.push(refused), PushOutcome::DroppedNew { dropped: refused });
+    // A requeued 0x0FF goes ahead of its equals, and the newest of them leaves the full queue.
+    let back = frame(0x0FF, &[5]);
+    assert_eq!(q.requeue(back), PushOutcome::DroppedOther { dropped: last });
+    let order: Vec<(u16, Vec<u8>)> = drain(&mut q)
+        .iter()
+        .map(|f| (f.id().raw(), f.data().to_vec()))
+        .collect();
+    assert_eq!(
+        order,
+        [
+            (0x000, vec![0]),
+            (0x000, vec![1]),
+            (0x0FF, vec![5]),
+            (0x0FF, vec![9]),
+            (0x0FF, vec![8]),
+        ]
+    );
+    assert_eq!(q.counters().dropped, 3);
+    assert_eq!(q.counters().requeued, 1);
+}
+
+/// A requeued command (never replaced) goes ahead of every queued frame of its identifier and
+/// behind every smaller identifier, at each length of the queue, and the slots it frees and takes
+/// keep the rest in order.
+#[test]
+fn a_requeued_frame_goes_ahead_of_its_equals_at_every_length() {
+    let cmd = |n: u8| frame(0x205, &[n]);
+    for queued in 0..8u8 {
+        let mut q = TxQueue::<8>::new();
+        q.push(frame(0x100, &[0xAA]));
+        for n in 0..queued {
+            q.push(cmd(n));
+        }
+        q.push(frame(0x300, &[0xBB]));
+        let requeued = q.requeue(cmd(0xEE));
+        assert!(requeued.is_queued(), "{queued} commands queued: {requeued:?}");
+        let order: Vec<(u16, u8)> = drain(&mut q)
+            .iter()
+            .map(|f| (f.id().raw(), f.data()[0]))
+            .collect();
+        // Whatever a full queue lost is the end of the whole order: a push that would leave last
+        // is refused, a requeue evicts the frame that leaves last.
+        let mut expected = vec![(0x100, 0xAA), (0x205, 0xEE)];
+        expected.extend((0..queued).map(|n| (0x205, n)));
+        expected.push((0x300, 0xBB));
+        expected.truncate(8);
+        assert_eq!(order, expected, "{queued} commands queued");
+    }
+}
+
 #[test]
 fn a_newer_sample_replaces_the_queued_one_in_its_place() {
     let mut q = TxQueue::<8>::new();
@@ -292,7 +369,7 @@ fn arb_frame() -> impl Strategy<Value = Frame> {
     // Few identifiers, so collisions (replacement, FIFO ties) are common: sensor topics, the
     // proximity ring (multi-frame), commands, and an unknown topic byte.
     let ids = prop::sample::select(vec![
-        0x605u16, 0x608, 0x41F, 0x71F, 0x205, 0x205, 0x010, 0x7FF, 0x501,
+        0x605u16, 0x608, 0x41F, 0x71F, 0x205, 0x205, 0x010, 0x7FF, 0x501, 0x000,
     ]);
     (ids, 0u8..3, any::<u8>(), 0usize..=8).prop_map(|(id, index, value, len)| {
         let bytes = [index, value, 0, 0, 0, 0, 0, 0];
@@ -361,6 +438,23 @@ proptest! {
     #[test]
     fn matches_the_model_with_room_for_sixteen(ops in prop::collection::vec(arb_op(), 0..200)) {
         run_against_model::<16>(&ops)?;
+    }
+
+    // The binary search's steps start at the largest power of two at most N: capacities that are
+    // not a power of two (LightRing's 8 is one, the steps 4, 2, 1 for 5 and 7 reach every place).
+    #[test]
+    fn matches_the_model_with_room_for_five(ops in prop::collection::vec(arb_op(), 0..100)) {
+        run_against_model::<5>(&ops)?;
+    }
+
+    #[test]
+    fn matches_the_model_with_room_for_seven(ops in prop::collection::vec(arb_op(), 0..120)) {
+        run_against_model::<7>(&ops)?;
+    }
+
+    #[test]
+    fn matches_the_model_with_room_for_eight(ops in prop::collection::vec(arb_op(), 0..120)) {
+        run_against_model::<8>(&ops)?;
     }
 
     #[test]

@@ -13,8 +13,19 @@ pub const PUBLISH_HIGH: u8 = 3;
 pub const PUBLISH_MEDIUM: u8 = 2;
 /// RTIC priority of the publisher serving CAN priority `Low`.
 pub const PUBLISH_LOW: u8 = 1;
-/// Command handling and motor control run above every publisher.
+/// Command handling runs above every publisher and above motor control: a motor command waits for
+/// no control step, only for the copy of the command motor control takes under the
+/// `motor_command` lock.
 pub const CONTROL: u8 = 5;
+/// Motor control (100 Hz, a 10 ms deadline) runs at the low publisher's level, below command
+/// handling and every other publisher: its deadline is longer than the jitter budgets of the
+/// topics the publishers above serve (deadline-monotonic), so its job (about 180 µs bounded from
+/// the machine code) delays none of them. The drive controller is its own, so no lock of the
+/// command handler's or the publishers' holds a control step.
+pub const MOTOR_CONTROL: u8 = 1;
+/// The shutdown sequence runs at motor control's level, so that its motors-off comes after any
+/// control step in progress (which may have read the shutdown flag before it was set).
+pub const SHUTDOWN_SEQUENCE: u8 = 1;
 /// The CAN transmit interrupt.
 pub const CAN_TX: u8 = 6;
 /// The CAN receive interrupt: above transmit, so the 3-frame receive FIFO is emptied even while
@@ -37,13 +48,17 @@ pub const fn rtic_priority(p: Priority) -> u8 {
 
 // The mapping is checked where it is defined, at compile time: a more urgent CAN priority must get a
 // strictly higher RTIC priority, and every publisher must stay below command handling, which stays
-// below the CAN interrupts, which stay below the shutdown request and the monotonic.
+// below the CAN interrupts, which stay below the shutdown request and the monotonic; motor control
+// (and the shutdown sequence with it) at the lowest publisher's level.
 const _: () = {
     assert!(rtic_priority(Priority::Urgent) > rtic_priority(Priority::High));
     assert!(rtic_priority(Priority::High) > rtic_priority(Priority::Medium));
     assert!(rtic_priority(Priority::Medium) > rtic_priority(Priority::Low));
     assert!(rtic_priority(Priority::Low) >= 1);
     assert!(CONTROL > PUBLISH_URGENT);
+    assert!(CONTROL > MOTOR_CONTROL);
+    assert!(MOTOR_CONTROL == PUBLISH_LOW);
+    assert!(SHUTDOWN_SEQUENCE == MOTOR_CONTROL);
     assert!(CAN_TX > CONTROL);
     assert!(CAN_RX > CAN_TX);
     assert!(SHUTDOWN > CAN_TX);

@@ -6,8 +6,9 @@
 //! `amiro-sensors`; the chip is behind `board` (or `qemu` for the QEMU build of this same app).
 //!
 //! Task priorities (RTIC, higher = more urgent; the mapping of CAN priorities lives in `levels`):
-//! `shutdown`, `can_rx`, `can_status` 7 · `can_tx` 6 · `handle_commands`, `motor_control` 5 ·
-//! `publish_urgent` 4 · `publish_high` 3 · `publish_medium` 2 · `publish_low`, `watchdog` 1.
+//! `shutdown`, `can_rx`, `can_status` 7 · `can_tx` 6 · `handle_commands` 5 · `publish_urgent` 4 ·
+//! `publish_high` 3 · `publish_medium` 2 · `publish_low`, `watchdog`, `motor_control`,
+//! `shutdown_sequence` 1.
 //! `cargo xtask analyze` reads these tasks, priorities and shared resources from this file.
 #![no_std]
 #![no_main]
@@ -131,6 +132,7 @@ mod app {
     use crate::{
         actuators, levels, platform, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN,
     };
+    use amiro_can::MotorCommand;
     use amiro_can::{Board as CanBoard, Command, Priority};
     use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
@@ -152,8 +154,13 @@ mod app {
         handler: SensorDataHandler,
         /// Frames waiting for a transmit mailbox, most urgent ID first.
         tx_queue: TxQueue<TX_QUEUE_LEN>,
-        /// Wheel speed control, odometry and velocity.
-        drive: DriveController,
+        /// The last motor command and when it was heard, until motor control takes it: the command
+        /// handler's only share of the drive (a copy under the lock, at priority 5).
+        motor_command: Option<(MotorCommand, u64)>,
+        /// The pose and velocity motor control published after its last step, for the odometry and
+        /// velocity topics (a copy under the lock, at priority 4). The controller itself is motor
+        /// control's own.
+        drive: sensors::DriveSample,
         /// Gyroscope and accelerometer (1-1: on SPI1; 1-2: the BNO055 on I2C1, magnetometer too).
         imu: Imu,
         /// 1-1: the magnetometer on I2C1 (1-2: empty, its magnetometer is in `imu`).
@@ -182,6 +189,8 @@ mod app {
         wake_low: Wake,
         motors: platform::Motors,
         encoders: platform::Encoders,
+        /// Wheel speed control, odometry and velocity: motor control's own.
+        controller: DriveController,
         signals: platform::SystemSignals,
     }
 
@@ -225,7 +234,8 @@ mod app {
             Shared {
                 handler: SensorDataHandler::new(CanBoard::DiWheelDrive),
                 tx_queue: TxQueue::new(),
-                drive: DriveController::new(Default::default()),
+                motor_command: None,
+                drive: sensors::DriveSample::default(),
                 imu,
                 compass,
                 floor,
@@ -252,6 +262,7 @@ mod app {
                 wake_low,
                 motors: hw.motors,
                 encoders: hw.encoders,
+                controller: DriveController::new(Default::default()),
                 signals,
             },
         )
@@ -284,7 +295,7 @@ mod app {
 
     /// Decodes each command and sets the motor target; sensor and admission-policy commands go to
     /// `admit_requests` in the order heard; at most one command per `COMMAND_MIN_INTERVAL_US`.
-    #[task(priority = 5, shared = [handler, drive, tx_queue], local = [commands, to_admission, wake_commands])]
+    #[task(priority = 5, shared = [handler, motor_command, tx_queue], local = [commands, to_admission, wake_commands])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
         let mut not_before = None;
@@ -306,7 +317,11 @@ mod app {
             } else if let Some((now, Outcome::Command(Command::Motor { command, .. }))) =
                 tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
             {
-                cx.shared.drive.lock(|d| d.set_target(command, now));
+                // Motor control takes it at its next step (the same step the controller's target
+                // changed at when the handler set it directly).
+                cx.shared
+                    .motor_command
+                    .lock(|pending| *pending = Some((command, now)));
             }
             not_before = Some(started + crate::COMMAND_MIN_INTERVAL_US);
         }
@@ -357,18 +372,35 @@ mod app {
         .await;
     }
 
-    /// The wheel speed controller at 100 Hz, with the dead-man stop.
-    #[task(priority = 5, shared = [drive, alive], local = [motors, encoders])]
+    /// The wheel speed controller at 100 Hz, with the dead-man stop. Below the command handler and
+    /// the publishers (`levels::MOTOR_CONTROL`: its 10 ms deadline is the longest of the board's
+    /// periodic work but the odometry's), with the controller its own: the handler waits only for
+    /// the section that takes the command and reads the encoders and the clock (`motor_command`,
+    /// at the handler's priority, so that no task below the CAN interrupts runs between the counts
+    /// and their time), the publishers only for the copy of the published pose and velocity
+    /// (`drive`); no lock holds a control step.
+    #[task(priority = 1, shared = [motor_command, drive, alive], local = [motors, encoders, controller])]
     async fn motor_control(mut cx: motor_control::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::MOTOR_CONTROL);
+        let controller = cx.local.controller;
         let mut next = Clock::now_us();
         loop {
             next += crate::MOTOR_PERIOD_US;
             Clock::delay_until_us(next).await;
-            let (left, right) = cx.local.encoders.counts();
-            let now = Clock::now_us();
-            let output = cx.shared.drive.lock(|d| d.update(now, left, right));
+            let encoders = &*cx.local.encoders;
+            // A command heard since the last step, with the time it was heard (the dead-man
+            // counts from there), and the encoders' counts with their time, read together.
+            let (command, left, right, now) = cx.shared.motor_command.lock(|pending| {
+                let (left, right) = encoders.counts();
+                (pending.take(), left, right, Clock::now_us())
+            });
+            if let Some((command, heard)) = command {
+                controller.set_target(command, heard);
+            }
+            let output = controller.update(now, left, right);
             actuators::apply_drive(cx.local.motors, now, &output);
+            let sample = sensors::DriveSample::of(controller);
+            cx.shared.drive.lock(|d| *d = sample);
             cx.shared.alive.lock(|a| a.mark());
         }
     }
@@ -461,12 +493,13 @@ mod app {
     }
 
     /// Stops every publisher, lets the transmit queue drain, then calls AMiRo-BLT's shutdown handler.
-    #[task(priority = 5, shared = [handler, tx_queue])]
+    #[task(priority = 1, shared = [handler, tx_queue])]
     async fn shutdown_sequence(mut cx: shutdown_sequence::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::SHUTDOWN_SEQUENCE);
         let now = Clock::now_us();
         cx.shared.handler.lock(|h| h.stop_all());
-        // Motor control runs at this priority, so it cannot be half-way through re-enabling them.
+        // Motor control runs at this priority (`levels::SHUTDOWN_SEQUENCE`), so it cannot be half-way
+        // through re-enabling them; its later steps see the shutdown and keep them off.
         platform::emergency_motors_off();
         actuators::trace_shutdown_stop(now);
         // Give the queued frames up to 10 ms to leave, then hand over regardless.

@@ -6,10 +6,10 @@
 //! accelerometer and I2C1 magnetometer, or 1-2's BNO055 on I2C1; both revisions publish the same
 //! topics in the same units) and keeps a group that failed its identity check
 //! from being read again (its topics then publish nothing, and the fault is counted).
-use amiro_can::{SensorData, Topic};
+use amiro_can::{SensorData, Topic, Velocity};
 use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::suite::{self, SensorGroup};
-use amiro_sensors::motion::DriveController;
+use amiro_sensors::motion::{DriveController, Pose};
 
 use crate::platform::FloorI2c;
 #[cfg(feature = "rev-1-1")]
@@ -80,9 +80,9 @@ impl<G: SensorGroup> Group<G> {
     }
 
     /// One sample of `topic`: its frames, or none when the group is missing or the read failed.
-    /// A group that is missing is initialised again when its back-off has passed, so a sensor
-    /// that was slow at boot or recovered joins later (the retry's transfers count against that
-    /// sample).
+    /// A group that is missing is initialised again when its back-off has passed, one device per
+    /// sample (`SensorGroup::init_step`), so a sensor that was slow at boot or recovered joins
+    /// later (each step's transfers count against its sample, never the whole group's set-up).
     // One copy for the four publisher tasks that call it (they are generic over their locks).
     #[inline(never)]
     pub fn sample(&mut self, topic: Topic, now_us: u64) -> Samples {
@@ -168,20 +168,40 @@ pub fn summary(imu: &Imu, compass: &Compass, floor: &Floor) -> &'static str {
     }
 }
 
-/// The odometry and velocity topics come from the drive controller, not from a bus. Only the
-/// controller's state is read under its lock, which motor control and the command handler share at
-/// priority 5 (the pose, or the velocity); its conversion to the odometry's wire units (the
-/// heading's reduction to a turn, three 64-bit divisions) and the sample's frame are made after
-/// it, so the publisher holds the lock for a read, not for the conversion. The same values as
-/// [`DriveController::sample`].
+/// What motor control publishes after each step for the odometry and velocity topics: the
+/// controller's pose and velocity, copied out so that the controller stays motor control's own (a
+/// publisher's lock is a copy of these 32 bytes, not a control step).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DriveSample {
+    /// The pose in µm and µrad.
+    pub pose: Pose,
+    /// The measured body velocity.
+    pub velocity: Velocity,
+}
+
+impl DriveSample {
+    /// The controller's pose and velocity now.
+    pub fn of(controller: &DriveController) -> Self {
+        Self {
+            pose: controller.pose(),
+            velocity: controller.velocity(),
+        }
+    }
+}
+
+/// The odometry and velocity topics come from the drive controller, not from a bus: from the
+/// sample motor control published after its last step (a copy under the `drive` lock, which motor
+/// control and the publishers share at priority 4). The pose's conversion to the odometry's wire
+/// units (the heading's reduction to a turn) and the sample's frame are made after the lock. The
+/// same values as [`DriveController::sample`] of the controller at that step.
 #[inline(never)]
-fn sample_drive(drive: &mut impl rtic::Mutex<T = DriveController>, topic: Topic) -> Samples {
+fn sample_drive(drive: &mut impl rtic::Mutex<T = DriveSample>, topic: Topic) -> Samples {
     let mut samples = Samples::new();
     let data = match topic {
         Topic::Odometry => Some(SensorData::Odometry(DriveController::odometry_of(
-            drive.lock(|d| d.pose()),
+            drive.lock(|d| d.pose),
         ))),
-        Topic::Velocity => Some(SensorData::Velocity(drive.lock(|d| d.velocity()))),
+        Topic::Velocity => Some(SensorData::Velocity(drive.lock(|d| d.velocity))),
         _ => None,
     };
     if let Some(data) = data {
@@ -230,7 +250,7 @@ pub fn sampler(
     mut imu: impl rtic::Mutex<T = Imu>,
     #[cfg_attr(feature = "rev-1-2", allow(unused_mut))] mut compass: impl rtic::Mutex<T = Compass>,
     mut floor: impl rtic::Mutex<T = Floor>,
-    mut drive: impl rtic::Mutex<T = DriveController>,
+    mut drive: impl rtic::Mutex<T = DriveSample>,
 ) -> impl amiro_firmware::publisher::Sampler {
     // 1-2's magnetometer is the BNO055's: the empty slot is not read.
     #[cfg(feature = "rev-1-2")]

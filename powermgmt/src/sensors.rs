@@ -7,7 +7,8 @@
 //! a failing bus costs bounded time (`amiro_firmware::i2c::FLAG_TIMEOUT_US` per transfer on the robot) — after
 //! which its missing sensors are skipped until their retry, so they do not delay the other bus's
 //! sensors on every sample. A sensor that does not answer yields no frame for its index, is
-//! counted (`missed`), and is set up again at most once per [`RETRY_US`].
+//! counted (`missed`), and is set up again at most once per [`RETRY_US`], at most one sensor per bus
+//! per sample (so a ring release costs one sensor's set-up per bus, not four).
 //!
 //! The devices are amiro-sensors' drivers (`Pca9544a`, `Vcnl4020`, `Bq27500`) with the ring's
 //! wiring table `WIRING`; amiro-sensors' `ProximityRing` holds both buses in one value, which
@@ -128,15 +129,23 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
     }
 
     /// Reads this bus's four ring sensors into `sample` (by sensor index).
+    ///
+    /// At most one missing sensor is set up again per call (the first whose [`RETRY_US`] has
+    /// passed; the one set up gets its `last_try_us`, so the others take their turns at the
+    /// next samples), before the reads and outside their loop: a ring release costs its reads and
+    /// one sensor's set-up per bus, never four.
     #[inline(never)]
     pub fn sample_ring(&mut self, now_us: u64, sample: &mut RingSample) {
+        let due = |s: &RingSlot| !s.ready && now_us.saturating_sub(s.last_try_us) >= RETRY_US;
+        // The first missing sensor whose retry passed, if any: one set-up per call.
+        if let Some(k) = self.slots.iter().position(due) {
+            self.set_up(k, now_us);
+        }
         for k in 0..PER_BUS {
             let Some(&slot) = self.slots.get(k) else {
                 continue;
             };
-            let ready = slot.ready
-                || (now_us.saturating_sub(slot.last_try_us) >= RETRY_US && self.set_up(k, now_us));
-            let reading = if ready {
+            let reading = if slot.ready {
                 self.mux
                     .select(slot.channel)
                     .ok()

@@ -358,6 +358,47 @@ pub struct Bounded {
     pub missing: Vec<String>,
     /// The tasks whose bound the generated file holds back from the analysis (`BoundsFile::held`).
     pub held: Vec<machine_code::wcet::bounds::HeldBound>,
+    /// Per topic group of the image (the bounds file's `topics`), the critical sections of each of
+    /// its functions and what they reach, with the group's own waits ([`group_sections`]).
+    pub group_sections: GroupSections,
+}
+
+/// Per topic group's name, each of its functions in the image with its critical sections.
+pub type GroupSections =
+    std::collections::BTreeMap<String, Vec<(String, machine_code::TaskSections)>>;
+
+/// The critical sections of every present topic group's functions (the bounds file's `topics`),
+/// each function taken as an entry of its own and bounded with its group's waits and loops
+/// (`BoundsFile::for_topic_group`, as the group's release bound is): what a release of the group
+/// may hold beside the publisher's own code (docs/analysis.md, "One topic's job").
+pub fn group_sections(image: &Image, chip: Chip, bounds: &BoundsFile) -> GroupSections {
+    let Some(per_topic) = &bounds.topics else {
+        return GroupSections::new();
+    };
+    per_topic
+        .present(image)
+        .into_iter()
+        .map(|group| {
+            let stated = bounds.for_topic_group(per_topic, group);
+            let functions: Vec<machine_code::Task> = group
+                .functions
+                .iter()
+                .filter(|f| image.function_named(f).is_ok())
+                .map(|f| machine_code::Task {
+                    name: f.clone(),
+                    entry: machine_code::TaskEntry::Symbol(f.clone()),
+                    handler: false,
+                })
+                .collect();
+            let found = machine_code::task_sections(image, &functions, chip, &stated);
+            let sections = functions
+                .iter()
+                .map(|f| f.name.clone())
+                .zip(found)
+                .collect();
+            (group.name.clone(), sections)
+        })
+        .collect()
 }
 
 /// Bounds every task of `build`'s kept release image (it must be built) with the board's input
@@ -403,6 +444,7 @@ pub fn bound_build(
         .collect();
     let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
     let sections = sections_per_name(machine_code::task_sections(&image, &tasks, chip, &bounds));
+    let group_sections = group_sections(&image, chip, &bounds);
     let tasks = worst_per_name(machine_code::bound_tasks(&image, &tasks, chip, &bounds));
     let missing = bounds.missing_places(&image);
     let held = bounds.held.clone();
@@ -413,6 +455,7 @@ pub fn bound_build(
         tasks,
         sections,
         missing,
+        group_sections,
     })
 }
 

@@ -193,9 +193,11 @@ fn run(cmd: Cmd) -> Result<bool> {
         Cmd::Check => check(&root).map(|()| true),
         Cmd::Test => test(&root).map(|()| true),
         Cmd::Ci => {
-            check(&root)?;
-            analysis_gate(&root)?;
+            let start = std::time::Instant::now();
+            timed("checks (layers, rustfmt, clippy)", || check(&root))?;
+            timed("the analysis gate", || analysis_gate(&root))?;
             test(&root)?;
+            println!("ci: all steps took {:.0} s", start.elapsed().as_secs_f64());
             Ok(true)
         }
         Cmd::Qemu {
@@ -356,9 +358,24 @@ fn check(root: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Runs one step of `ci`/`test` and prints its wall time (CI's whole run must stay within its
+/// budget on a 2-core machine: the figures say which step to cut).
+fn timed<T>(what: &str, step: impl FnOnce() -> Result<T>) -> Result<T> {
+    let start = std::time::Instant::now();
+    let out = step();
+    println!(
+        "ci: {what}: {:.0} s{}",
+        start.elapsed().as_secs_f64(),
+        if out.is_err() { " (failed)" } else { "" }
+    );
+    out
+}
+
 fn test(root: &Path) -> Result<()> {
     ensure_toolchain(root)?;
-    cargo(root, &["test", "--quiet"]).context("host tests")?;
+    timed("host tests", || {
+        cargo(root, &["test", "--quiet"]).context("host tests")
+    })?;
     // The libraries that run on the chips must build for both of them without a HAL: (package, its
     // features, what a failure names).
     let chip_libraries: [(&str, &[&str], &str); 4] = [
@@ -375,35 +392,49 @@ fn test(root: &Path) -> Result<()> {
             "the no_std core of schedule-analysis",
         ),
     ];
-    for target in ["thumbv7m-none-eabi", "thumbv7em-none-eabihf"] {
-        for (package, features, what) in chip_libraries {
-            let mut args = vec!["build", "--quiet", "--target", target, "-p", package];
-            args.extend_from_slice(features);
-            cargo(root, &args).with_context(|| format!("{what} for {target}"))?;
+    timed("the chip libraries", || {
+        for target in ["thumbv7m-none-eabi", "thumbv7em-none-eabihf"] {
+            for (package, features, what) in chip_libraries {
+                let mut args = vec!["build", "--quiet", "--target", target, "-p", package];
+                args.extend_from_slice(features);
+                cargo(root, &args).with_context(|| format!("{what} for {target}"))?;
+            }
         }
-    }
+        Ok(())
+    })?;
     // Every revision of every board (docs/boards.md).
     let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &revision::Choice::All)?;
     // The bare-chip layout must keep linking (it is the documented switch for development chips).
-    build_boards(root, &every, true)?;
-    let reports = build_boards(root, &every, false)?;
-    flash::simulated_robot(root, &reports)?;
+    let reports = timed("the firmware images (bare-chip and release)", || {
+        build_boards(root, &every, true)?;
+        build_boards(root, &every, false)
+    })?;
+    timed("flashing a simulated robot", || {
+        flash::simulated_robot(root, &reports)
+    })?;
     elf::print_table(&reports);
     let over = elf::over_budget(&reports);
     ensure!(over.is_empty(), "flash budget: {}", over.join("; "));
-    machine::check_panics(&reports)?;
-    machine::check_stacks(root, &reports)?;
-    // The generated bounds files must be computed from these images (docs/analysis.md).
-    wcet_gate::check_bounds_current(root)?;
-    run_scenarios(root, &every)?;
+    timed(
+        "the machine-code checks (panics, stacks, bounds current)",
+        || {
+            machine::check_panics(&reports)?;
+            machine::check_stacks(root, &reports)?;
+            // The generated bounds files must be computed from these images (docs/analysis.md).
+            wcet_gate::check_bounds_current(root)
+        },
+    )?;
+    timed("the boards' QEMU scenarios", || run_scenarios(root, &every))?;
     // The whole robot on one bus (issue 23), with its bus report against the analysis.
-    robot::scenarios::run_all(root)?;
+    timed("the robot scenarios", || robot::scenarios::run_all(root))?;
     // The production images booted in QEMU (issue 21): every revision's, as built above.
-    smoke::run(root, &every, true)?;
+    timed("the smoke runs", || smoke::run(root, &every, true))?;
     // After the scenarios: their bus logs are among what the other CAN tools must read.
-    interop::check(root)?;
+    timed("the CAN tools' interop", || interop::check(root))?;
     // The hostile-bus campaign, one run of 3000 spaced frames per board (issue 12).
-    campaign::run(root, &BOARDS.iter().collect::<Vec<_>>(), 12, 3000, 1)
+    timed("the hostile-bus campaign", || {
+        campaign::run(root, &BOARDS.iter().collect::<Vec<_>>(), 12, 3000, 1)
+    })
 }
 
 /// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets, on a

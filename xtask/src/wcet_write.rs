@@ -165,12 +165,13 @@ fn generate(
     let image = wcet_gate::image_identity(&bytes).with_context(|| elf.display().to_string())?;
     let budgets = budgets_of(root, build)?;
     let features: Vec<&str> = build.revision.feature.into_iter().collect();
-    let mut rows = rows(
+    let mut rows = rows_with_groups(
         &found.app.with_features(&features),
         &found.app,
         &budgets,
         &found.tasks,
         &found.sections,
+        &found.group_sections,
         found.chip,
     );
     hold(&mut rows, &found.held);
@@ -548,14 +549,105 @@ fn thread_mode_step(
     format!("{head}; its step's check ({function}) is declined: {reason}")
 }
 
+/// A topic row's critical sections: those one release of `group` may hold, from the publisher task's
+/// (`whole`, any job of the task) and each topic group's functions' (`groups`, bounded with each group's
+/// own waits: [`crate::machine::group_sections`]). Per ceiling of the task, where every section of the task
+/// at that ceiling is accounted for by the groups' functions — each function that has one at that ceiling
+/// has exactly one, raised in the function itself (a lock the sampler takes inside the group's not-inlined
+/// sample function), and the task has no more sections there than those functions (so none of the code
+/// around the samples raises to it) — the row has only its own group's there (none, for a group that does
+/// not raise to it); at any other ceiling the task's longest stands, whoever's it is. `None` (the task's
+/// sections stand whole) where an enumeration is incomplete or the group has no sections found.
+fn group_row_sections(
+    whole: &machine_code::TaskSections,
+    group: &str,
+    groups: &crate::machine::GroupSections,
+    clock: u64,
+) -> Option<CeilingSections> {
+    let own = groups.get(group)?;
+    if whole.incomplete.is_some() {
+        return None;
+    }
+    // Every present group's functions, each once.
+    let mut functions: BTreeMap<&str, &machine_code::TaskSections> = BTreeMap::new();
+    for (f, s) in groups.values().flatten() {
+        if s.incomplete.is_some() {
+            return None;
+        }
+        functions.insert(f.as_str(), s);
+    }
+    let at = |s: &machine_code::TaskSections, c: machine_code::Ceiling| {
+        s.ceilings.iter().find(|x| x.ceiling == c).cloned()
+    };
+    let mut ceilings = Vec::new();
+    for c in &whole.ceilings {
+        let in_functions: Vec<(&str, machine_code::CeilingBound)> = functions
+            .iter()
+            .filter_map(|(f, s)| at(s, c.ceiling).map(|x| (*f, x)))
+            .collect();
+        let separable = in_functions
+            .iter()
+            .all(|(f, x)| x.sections == 1 && x.function == *f)
+            && in_functions.len() == c.sections;
+        if !separable {
+            ceilings.push(c.clone());
+            continue;
+        }
+        // The group's own at this ceiling: declined where one is, else the longest.
+        let key = |x: &machine_code::CeilingBound| (x.declined.is_some(), x.us.to_bits());
+        if let Some(best) = own
+            .iter()
+            .filter_map(|(_, s)| at(s, c.ceiling))
+            .max_by_key(key)
+        {
+            ceilings.push(best);
+        }
+    }
+    let mut row = sections_row(
+        &machine_code::TaskSections {
+            task: whole.task.clone(),
+            ceilings,
+            incomplete: None,
+        },
+        clock,
+    );
+    row.ceilings
+        .sort_by_key(|c| std::cmp::Reverse(c.ceiling.unwrap_or(u32::MAX)));
+    Some(row)
+}
+
 /// The rows of one image: `built` is the app as built (its `cfg`s applied), `app` as written (for RTIC's
-/// dispatcher assignment), `found` the machine code's bounds by task ([`crate::machine::tasks_of`]).
+/// dispatcher assignment), `found` the machine code's bounds by task ([`crate::machine::tasks_of`]). The topic
+/// rows carry their publisher tasks' whole sections ([`rows_with_groups`] with no topic group's).
+#[cfg(test)]
 pub fn rows(
     built: &RticApp,
     app: &RticApp,
     budgets: &Budgets,
     found: &[machine_code::TaskBound],
     sections: &[machine_code::TaskSections],
+    chip: Chip,
+) -> Vec<TaskBound> {
+    rows_with_groups(
+        built,
+        app,
+        budgets,
+        found,
+        sections,
+        &crate::machine::GroupSections::new(),
+        chip,
+    )
+}
+
+/// [`rows`], each topic row with the critical sections of one release of its group where `groups` tells
+/// them apart ([`group_row_sections`]).
+pub fn rows_with_groups(
+    built: &RticApp,
+    app: &RticApp,
+    budgets: &Budgets,
+    found: &[machine_code::TaskBound],
+    sections: &[machine_code::TaskSections],
+    groups: &crate::machine::GroupSections,
     chip: Chip,
 ) -> Vec<TaskBound> {
     let clock = chip.clock_hz();
@@ -644,10 +736,10 @@ pub fn rows(
         .collect();
     // Where the bounds file states the release loop per topic (`topics`), each publisher task's bound of one
     // release of the topic's group (machine_code::TopicBound) in place of its whole job's.
-    let per_topic: Vec<Option<&machine_code::TaskBound>> = budgets
+    let per_topic: Vec<Option<Found<'_>>> = budgets
         .publishers
         .iter()
-        .map(|p| source(p).and_then(|(_, f)| f).map(|(t, _)| t))
+        .map(|p| source(p).and_then(|(_, f)| f))
         .collect();
     for topic in &budgets.topics {
         let row = bounds::publisher_row(topic);
@@ -655,7 +747,7 @@ pub fn rows(
             .iter()
             .zip(&per_topic)
             .map(|(whole, found)| {
-                let group = found.and_then(|f| {
+                let group = found.and_then(|(f, _)| {
                     f.topics
                         .iter()
                         .find(|g| g.topics.iter().any(|t| t == topic))
@@ -678,10 +770,30 @@ pub fn rows(
             })
             .collect();
         let refused = rows.iter().find_map(|p| p.declined.clone());
+        // Each publisher's sections of one release of the topic's group where they tell apart, else its
+        // whole task's; then the longest over the publishers, as for the task's.
+        let with_group_sections: Vec<TaskBound> = publishers
+            .iter()
+            .zip(&per_topic)
+            .map(|(whole, found)| {
+                let own = found.and_then(|(f, s)| {
+                    let g = f
+                        .topics
+                        .iter()
+                        .find(|g| g.topics.iter().any(|t| t == topic))?;
+                    group_row_sections(s, &g.group, groups, clock)
+                });
+                TaskBound {
+                    sections: own.or_else(|| whole.sections.clone()),
+                    ..whole.clone()
+                }
+            })
+            .collect();
+        let row_sections = merged_sections(&with_group_sections);
         out.push(match (refused, rows.is_empty()) {
             (_, true) => declined(&row, "the timing file names no publisher task".into()),
             (Some(reason), _) => TaskBound {
-                sections: merged_sections(&publishers),
+                sections: row_sections,
                 ..declined(&row, reason)
             },
             (None, false) => {
@@ -690,7 +802,7 @@ pub fn rows(
                 let instructions = max(|p| p.instructions.unwrap_or(0));
                 let wait = rows.iter().map(|p| p.bus_wait_us).fold(0.0, f64::max);
                 TaskBound {
-                    sections: merged_sections(&publishers),
+                    sections: row_sections,
                     ..bounded(&row, cycles, instructions, wait, clock)
                 }
             }
@@ -833,6 +945,179 @@ mod app {
         // A topic in no group: the task's whole job.
         assert_eq!(row("publisher[temp]").cycles, Some(7200));
         assert_eq!(row("publisher[temp]").bus_wait_us, 0.5);
+    }
+
+    /// A ceiling's longest section as the machine code reports it: `sections` raises at `ceiling`, the
+    /// longest `us` long, raised in `function`.
+    fn ceiling(
+        ceiling: machine_code::Ceiling,
+        us: f64,
+        sections: usize,
+        function: &str,
+    ) -> machine_code::CeilingBound {
+        machine_code::CeilingBound {
+            ceiling,
+            cycles: (us * 72.0) as u64,
+            us,
+            instructions: 1,
+            bus_wait_us: 0.0,
+            sections,
+            function: function.into(),
+            at: format!("{function} at src/f.rs:1"),
+            declined: None,
+        }
+    }
+
+    #[test]
+    fn a_topic_row_carries_its_own_groups_sections_where_the_groups_account_for_a_ceiling() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: Vec::new(),
+            topics: vec!["floor".into(), "odo".into()],
+            publishers: ["publish".to_string()].into(),
+            stated: BTreeMap::new(),
+        };
+        let topic = |name: &str, t: &str| machine_code::TopicBound {
+            group: name.into(),
+            topics: vec![t.into()],
+            cycles: 720,
+            us: 10.0,
+            instructions: 240,
+            bus_wait_us: 0.0,
+            loops: Vec::new(),
+            declined: None,
+        };
+        let mut publish = found("dispatcher LOW", 7200, None);
+        publish.topics = vec![topic("floor", "floor"), topic("drive", "odo")];
+        let (p4, p5) = (
+            machine_code::Ceiling::Basepri {
+                hardware: 0xc0,
+                priority: 4,
+            },
+            machine_code::Ceiling::Basepri {
+                hardware: 0xb0,
+                priority: 5,
+            },
+        );
+        // The task: at priority 4 two sections (the floor's lock, 9 000 µs with the file's waits, and the
+        // drive's), at priority 5 three (the drive's two and the code around the samples, 50 µs).
+        let whole = machine_code::TaskSections {
+            task: "dispatcher LOW".into(),
+            ceilings: vec![
+                ceiling(p5, 50.0, 3, "serve"),
+                ceiling(p4, 9_000.0, 2, "sample_floor"),
+            ],
+            incomplete: None,
+        };
+        let function = |f: &str, ceilings: Vec<machine_code::CeilingBound>| {
+            (
+                f.to_string(),
+                machine_code::TaskSections {
+                    task: f.into(),
+                    ceilings,
+                    incomplete: None,
+                },
+            )
+        };
+        let mut groups = crate::machine::GroupSections::new();
+        // The floor's lock with the group's own waits: 1 200 µs, raised in its sample function.
+        groups.insert(
+            "floor".into(),
+            vec![function(
+                "sample_floor",
+                vec![ceiling(p4, 1_200.0, 1, "sample_floor")],
+            )],
+        );
+        groups.insert(
+            "drive".into(),
+            vec![function(
+                "sample_drive",
+                vec![
+                    ceiling(p5, 20.0, 2, "sample_drive"),
+                    ceiling(p4, 30.0, 1, "sample_drive"),
+                ],
+            )],
+        );
+        let machine = [publish];
+        let rows = rows_with_groups(
+            &built,
+            &app,
+            &budgets,
+            &machine,
+            std::slice::from_ref(&whole),
+            &groups,
+            chip,
+        );
+        let row = |n: &str| rows.iter().find(|r| r.task == n).unwrap();
+        let at = |n: &str, p: u32| {
+            row(n)
+                .sections
+                .as_ref()
+                .unwrap()
+                .ceilings
+                .iter()
+                .find(|c| c.ceiling == Some(p))
+                .map(|c| (c.us, c.at.clone()))
+        };
+        // Priority 4: both sections are the groups' own, one each in their sample functions: the floor's
+        // row has its own (with its waits), the drive's its own, not the floor's 9 000 µs.
+        assert_eq!(
+            at("publisher[floor]", 4),
+            Some((
+                Some(1_200.0),
+                "sample_floor at sample_floor at src/f.rs:1".into()
+            ))
+        );
+        assert_eq!(at("publisher[odo]", 4).and_then(|c| c.0), Some(30.0));
+        // Priority 5: the drive's function raises twice there, so the groups do not account for the
+        // ceiling: the task's longest stands on every row.
+        assert_eq!(at("publisher[floor]", 5).and_then(|c| c.0), Some(50.0));
+        assert_eq!(at("publisher[odo]", 5).and_then(|c| c.0), Some(50.0));
+        // A third raise at priority 4 (the code around the samples): no longer accounted for, the task's
+        // longest stands on every row.
+        let mut more = whole.clone();
+        more.ceilings[1].sections = 3;
+        let rows = rows_with_groups(
+            &built,
+            &app,
+            &budgets,
+            &machine,
+            std::slice::from_ref(&more),
+            &groups,
+            chip,
+        );
+        let odo = rows.iter().find(|r| r.task == "publisher[odo]").unwrap();
+        let p4_us = odo
+            .sections
+            .as_ref()
+            .unwrap()
+            .ceilings
+            .iter()
+            .find(|c| c.ceiling == Some(4));
+        assert_eq!(p4_us.and_then(|c| c.us), Some(9_000.0));
+        // Without the groups' sections, the task's whole sections, as before.
+        let whole_rows = super::rows(
+            &built,
+            &app,
+            &budgets,
+            &machine,
+            std::slice::from_ref(&whole),
+            chip,
+        );
+        let odo = whole_rows
+            .iter()
+            .find(|r| r.task == "publisher[odo]")
+            .unwrap();
+        let p4_us = odo
+            .sections
+            .as_ref()
+            .unwrap()
+            .ceilings
+            .iter()
+            .find(|c| c.ceiling == Some(4));
+        assert_eq!(p4_us.and_then(|c| c.us), Some(9_000.0));
     }
 
     #[test]

@@ -59,6 +59,9 @@ pub struct FloorSensors<I2C> {
     mux: Pca9544a<I2C>,
     config: Config,
     identity: IdentitySchedule,
+    /// The sensor (protocol index) the next step of a stepwise set-up configures
+    /// ([`init_next`](Self::init_next)).
+    next_to_init: u8,
 }
 
 impl<I2C: I2c> FloorSensors<I2C> {
@@ -73,16 +76,46 @@ impl<I2C: I2c> FloorSensors<I2C> {
             mux: Pca9544a::new(i2c),
             config,
             identity: IdentitySchedule { samples: 0 },
+            next_to_init: 0,
         }
     }
 
     /// Checks and configures all four sensors (channel 0 first).
     pub fn init(&mut self) -> Result<(), GroupError<I2C::Error>> {
+        self.next_to_init = 0;
         let config = self.config;
         for sensor in FloorSensor::ALL {
             self.with_sensor(sensor, |vcnl| vcnl.init(&config))?;
         }
         Ok(())
+    }
+
+    /// One step of a stepwise set-up: checks and configures the next sensor only (channel 0
+    /// first), so a set-up costs one sensor's transfers per call, never the group's. `Ok(true)`
+    /// once the fourth is configured (the next call starts again at the first); a failure also
+    /// starts the next set-up at the first sensor.
+    pub fn init_next(&mut self) -> Result<bool, GroupError<I2C::Error>> {
+        let index = self.next_to_init;
+        let Some(&sensor) = FloorSensor::ALL.get(usize::from(index)) else {
+            // Out of range only if the field were corrupted: start again.
+            self.next_to_init = 0;
+            return Ok(false);
+        };
+        let config = self.config;
+        match self.with_sensor(sensor, |vcnl| vcnl.init(&config)) {
+            Ok(()) if usize::from(index) + 1 >= FloorSensor::ALL.len() => {
+                self.next_to_init = 0;
+                Ok(true)
+            }
+            Ok(()) => {
+                self.next_to_init = index + 1;
+                Ok(false)
+            }
+            Err(error) => {
+                self.next_to_init = 0;
+                Err(error)
+            }
+        }
     }
 
     /// Reads every sensor's PRODUCT_ID through its mux channel (a mux that does not switch, or a

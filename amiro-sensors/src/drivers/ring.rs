@@ -108,6 +108,12 @@ impl<I1: I2c, I2: I2c> ProximityRing<I1, I2> {
         Ok(())
     }
 
+    /// Checks and configures sensor `index` alone (one step of a stepwise set-up).
+    pub fn init_sensor(&mut self, index: usize) -> Result<(), GroupError<ErrorKind>> {
+        let config = self.config;
+        self.with_sensor(index, |vcnl| vcnl.init(&config), |vcnl| vcnl.init(&config))
+    }
+
     /// Proximity counts of all eight sensors, by index.
     pub fn read_counts(&mut self) -> Result<[u16; RING_SENSORS], GroupError<ErrorKind>> {
         let mut counts = [0u16; RING_SENSORS];

@@ -139,9 +139,11 @@ pub trait SensorGroup {
     fn init(&mut self) -> Result<(), SampleError>;
 
     /// One step of a re-initialisation at `now_us` (the retry of a missing group, inside its bus
-    /// lock): a group whose parts need a wait between steps returns [`InitStep::Pending`] and
-    /// is called again at that time, so no wait happens inside the lock. Default: [`init`] at
-    /// once.
+    /// lock and inside a publisher's release): at most one device's set-up, so a release that
+    /// recovers a group costs its sample and one bounded step, never the whole group's set-up. A
+    /// group with more steps to go returns [`InitStep::Pending`] and is called again at that
+    /// time (`now_us` for the next release; later where a part needs a wait between steps, so no
+    /// wait happens inside the lock). Default: [`init`] at once, for a group of one device.
     ///
     /// [`init`]: Self::init
     fn init_step(&mut self, now_us: u64) -> InitStep {
@@ -183,6 +185,8 @@ pub struct InertialSensors<G, A> {
     /// The LIS331DLH.
     pub accelerometer: Lis331dlh<A>,
     identity: IdentitySchedule,
+    /// The next step of a stepwise set-up: 0 the gyroscope, 1 the accelerometer.
+    next_to_init: u8,
 }
 
 impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
@@ -192,6 +196,7 @@ impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
             gyroscope: L3g4200d::new(gyroscope),
             accelerometer: Lis331dlh::new(accelerometer),
             identity: IdentitySchedule { samples: 0 },
+            next_to_init: 0,
         }
     }
 
@@ -214,12 +219,39 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
     }
 
     fn init(&mut self) -> Result<(), SampleError> {
+        self.next_to_init = 0;
         self.gyroscope
             .init()
             .map_err(spi_error(Device::Gyroscope))?;
         self.accelerometer
             .init()
             .map_err(spi_error(Device::Accelerometer))
+    }
+
+    /// One part per step: the gyroscope, then (at the next call) the accelerometer.
+    fn init_step(&mut self, now_us: u64) -> InitStep {
+        let gyroscope = self.next_to_init == 0;
+        let result = if gyroscope {
+            self.gyroscope.init().map_err(spi_error(Device::Gyroscope))
+        } else {
+            self.accelerometer
+                .init()
+                .map_err(spi_error(Device::Accelerometer))
+        };
+        match result {
+            Ok(()) if gyroscope => {
+                self.next_to_init = 1;
+                InitStep::Pending { next_us: now_us }
+            }
+            Ok(()) => {
+                self.next_to_init = 0;
+                InitStep::Done
+            }
+            Err(error) => {
+                self.next_to_init = 0;
+                InitStep::Failed(error)
+            }
+        }
     }
 
     fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
@@ -364,6 +396,15 @@ impl<I2C: I2c> SensorGroup for FloorSensors<I2C> {
 
     fn init(&mut self) -> Result<(), SampleError> {
         FloorSensors::init(self).map_err(floor_error)
+    }
+
+    /// One sensor per step ([`FloorSensors::init_next`]), channel 0 first.
+    fn init_step(&mut self, now_us: u64) -> InitStep {
+        match self.init_next() {
+            Ok(true) => InitStep::Done,
+            Ok(false) => InitStep::Pending { next_us: now_us },
+            Err(error) => InitStep::Failed(floor_error(error)),
+        }
     }
 
     fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
@@ -570,6 +611,8 @@ pub struct DiWheelDriveSensors<G, A, M, F> {
     pub compass: Compass<M>,
     /// Floor sensors behind the mux on I2C2.
     pub floor: FloorSensors<F>,
+    /// The group a stepwise set-up is in: 0 inertial, 1 compass, 2 floor.
+    init_part: u8,
 }
 
 impl<G: SpiDevice, A: SpiDevice, M: I2c, F: I2c> DiWheelDriveSensors<G, A, M, F> {
@@ -580,6 +623,7 @@ impl<G: SpiDevice, A: SpiDevice, M: I2c, F: I2c> DiWheelDriveSensors<G, A, M, F>
             inertial: InertialSensors::new(gyroscope, accelerometer),
             compass: Compass::new(i2c1),
             floor: FloorSensors::new(i2c2),
+            init_part: 0,
         }
     }
 }
@@ -590,9 +634,34 @@ impl<G: SpiDevice, A: SpiDevice, M: I2c, F: I2c> SensorGroup for DiWheelDriveSen
     }
 
     fn init(&mut self) -> Result<(), SampleError> {
+        self.init_part = 0;
         self.inertial.init()?;
         self.compass.init()?;
         SensorGroup::init(&mut self.floor)
+    }
+
+    /// The three groups' steps in turn (inertial, compass, floor), one step per call.
+    fn init_step(&mut self, now_us: u64) -> InitStep {
+        let (step, last) = match self.init_part {
+            0 => (self.inertial.init_step(now_us), false),
+            1 => (self.compass.init_step(now_us), false),
+            _ => (SensorGroup::init_step(&mut self.floor, now_us), true),
+        };
+        match step {
+            InitStep::Done if last => {
+                self.init_part = 0;
+                InitStep::Done
+            }
+            InitStep::Done => {
+                self.init_part += 1;
+                InitStep::Pending { next_us: now_us }
+            }
+            InitStep::Pending { next_us } => InitStep::Pending { next_us },
+            InitStep::Failed(error) => {
+                self.init_part = 0;
+                InitStep::Failed(error)
+            }
+        }
     }
 
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
@@ -614,6 +683,9 @@ pub struct PowerManagementSensors<I1, I2, D> {
     pub ring: ProximityRing<I1, I2>,
     delay: D,
     gauge_faults: [u32; 2],
+    /// The next step of a stepwise set-up: ring sensor 0..=7, then the front gauge (8) and the
+    /// rear one (9).
+    next_to_init: u8,
 }
 
 impl<I1: I2c, I2: I2c, D: DelayNs> PowerManagementSensors<I1, I2, D> {
@@ -623,6 +695,7 @@ impl<I1: I2c, I2: I2c, D: DelayNs> PowerManagementSensors<I1, I2, D> {
             ring: ProximityRing::new(i2c1, i2c2),
             delay,
             gauge_faults: [0; 2],
+            next_to_init: 0,
         }
     }
 
@@ -671,6 +744,7 @@ impl<I1: I2c, I2: I2c, D: DelayNs> SensorGroup for PowerManagementSensors<I1, I2
     }
 
     fn init(&mut self) -> Result<(), SampleError> {
+        self.next_to_init = 0;
         self.ring
             .init()
             .map_err(|e| i2c_error::<i2c::ErrorKind>(Device::RingSensor(e.sensor))(e.error))?;
@@ -680,6 +754,37 @@ impl<I1: I2c, I2: I2c, D: DelayNs> SensorGroup for PowerManagementSensors<I1, I2
         Bq27500::new(self.ring.i2c1_mut(), &mut self.delay)
             .init()
             .map_err(i2c_error(Device::FuelGauge(Battery::Rear)))
+    }
+
+    /// One device per step: the eight ring sensors by index, then the front gauge, the rear one.
+    fn init_step(&mut self, now_us: u64) -> InitStep {
+        let step = self.next_to_init;
+        let result = match usize::from(step) {
+            index @ 0..RING_SENSORS => self
+                .ring
+                .init_sensor(index)
+                .map_err(|e| i2c_error::<i2c::ErrorKind>(Device::RingSensor(e.sensor))(e.error)),
+            RING_SENSORS => Bq27500::new(self.ring.i2c2_mut(), &mut self.delay)
+                .init()
+                .map_err(i2c_error(Device::FuelGauge(Battery::Front))),
+            _ => Bq27500::new(self.ring.i2c1_mut(), &mut self.delay)
+                .init()
+                .map_err(i2c_error(Device::FuelGauge(Battery::Rear))),
+        };
+        match result {
+            Ok(()) if usize::from(step) > RING_SENSORS => {
+                self.next_to_init = 0;
+                InitStep::Done
+            }
+            Ok(()) => {
+                self.next_to_init = step + 1;
+                InitStep::Pending { next_us: now_us }
+            }
+            Err(error) => {
+                self.next_to_init = 0;
+                InitStep::Failed(error)
+            }
+        }
     }
 
     fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
@@ -731,9 +836,13 @@ pub const RETRY_MAX_US: u64 = 8_000_000;
 /// empty, never invented), every failure is counted, and it is initialised again with back-off.
 ///
 /// - At construction the group is initialised; if that fails it is *missing*.
-/// - A missing group answers nothing until its retry time; then `init()` runs again (its
-///   transfers count against that sample). A failed attempt doubles the wait, 1 s → 2 → 4 → 8 s,
-///   and stays at [`RETRY_MAX_US`].
+/// - A missing group answers nothing until its retry time; then it is set up again in steps
+///   ([`SensorGroup::init_step`]): one step per sample, at most one device's set-up (its
+///   transfers count against that sample), the group answering nothing until the last step is
+///   done — the sample that takes the last step is read as well. So a release costs its sample
+///   and at most one bounded step, never the whole group's set-up. A failed step doubles the
+///   wait, 1 s → 2 → 4 → 8 s, stays at [`RETRY_MAX_US`], and the set-up starts again from its
+///   first step at the next retry.
 /// - A ready group whose sample fails [`FAILURES_BEFORE_RETRY`] times in a row becomes missing
 ///   (retry after the current wait, which then doubles). A successful sample resets the wait to
 ///   [`RETRY_FIRST_US`].
@@ -809,8 +918,9 @@ impl<G: SensorGroup> Supervised<G> {
                     self.consecutive_failures = 0;
                 }
                 InitStep::Pending { next_us } => {
-                    // Not a fault: the group's parts are switching modes; the next step at
-                    // `next_us` (the back-off is left as it is).
+                    // Not a fault: more devices to set up (the next at the next sample), or the
+                    // group's parts are switching modes; the next step at `next_us` (the
+                    // back-off is left as it is).
                     self.retry_at_us = next_us;
                     return Samples::new();
                 }
