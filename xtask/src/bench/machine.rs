@@ -142,6 +142,10 @@ fn loose_reason(rows: &[&bounds::TaskBound]) -> String {
 
 /// The verdict of a job above its bound (`--check` fails on it).
 pub const EXCEEDS: &str = "EXCEEDS BOUND";
+/// The start of the verdict of a task whose largest job is above the bound for a cause the release image's bound
+/// does not cover (QEMU's simulated devices) or the bench cannot yet take off (what a pre-empting run executes
+/// unstamped beyond its records): printed with the cause, not failed (docs/bench.md, "What the check holds").
+pub const NOT_HELD: &str = "NOT HELD";
 
 /// A task's bound in the file, in `unit`: its own row (its job's bound where the row is a charge per activation),
 /// or — for a publisher task, whose run takes one sample of
@@ -302,6 +306,13 @@ pub fn rows(
             .map_or(0, |u| u.instructions),
         _ => 0,
     };
+    let other_code = |task: &str| {
+        if !qemu {
+            return None;
+        }
+        let q = bounds.trace.as_ref()?.qemu.as_ref()?;
+        q.other_code.get(task).cloned()
+    };
     let mut out = Vec::new();
     for (task, jobs) in tasks {
         let Some(bound) = bound_of(file, task, analysed, qemu) else {
@@ -344,10 +355,21 @@ pub fn rows(
         let (bound, held, ratio, verdict, why) = match bound {
             Ok((b, held, why)) => {
                 let ratio = (b > 0).then(|| own as f64 / b as f64);
-                let verdict = if own > b {
-                    EXCEEDS.to_string()
-                } else {
+                let verdict = if own <= b {
                     "ok".to_string()
+                } else if let Some(what) = other_code(task) {
+                    // The release bound never covered the simulated device's code the job runs.
+                    format!("{NOT_HELD}: the QEMU build runs {what} inside it, which the release image's bound does not cover")
+                } else if preemptions > 0 && alone.is_none_or(|a| a <= b) {
+                    // Every job no run pre-empted is within; the pre-empted one's excess may be the pre-empting
+                    // runs' dispatch, entry and exit, which no record stamps.
+                    format!(
+                        "{NOT_HELD}: above only when pre-empted (every job no run pre-empted within: largest {}); \
+                         the pre-empting runs' unstamped dispatch, entry and return are not taken off",
+                        alone.map_or_else(|| "none seen".to_string(), |a| a.to_string())
+                    )
+                } else {
+                    EXCEEDS.to_string()
                 };
                 (Some(b), held, ratio, verdict, why)
             }
@@ -565,6 +587,7 @@ mod tests {
                     instructions: 400,
                     note: "a test".into(),
                 }),
+                other_code: std::collections::BTreeMap::new(),
                 note: None,
             }),
         });
@@ -594,7 +617,7 @@ mod tests {
         // The largest job no run pre-empted: 900 − 491.
         assert_eq!(r[0].alone, Some(409));
         assert_eq!((r[0].verdict.as_str(), r[0].ratio), ("ok", Some(1.0)));
-        // One instruction more: above.
+        // One instruction more: above, but only pre-empted (no job ran alone): printed, not held.
         let over = rows(
             &bounds,
             &[("can_rx".into(), vec![pre_empted(14.336, 2)])],
@@ -602,7 +625,63 @@ mod tests {
             true,
             1,
         );
-        assert_eq!(over[0].verdict, EXCEEDS);
+        assert!(over[0].verdict.starts_with(NOT_HELD), "{}", over[0].verdict);
+        // ... nor with every job that ran alone within ...
+        let over_alone_within = rows(
+            &bounds,
+            &[(
+                "can_rx".into(),
+                vec![Job::alone(7.2), pre_empted(14.336, 2)],
+            )],
+            None,
+            true,
+            1,
+        );
+        assert!(over_alone_within[0].verdict.starts_with(NOT_HELD));
+        // ... but a job that ran alone above the bound fails, however large the pre-empted one.
+        let both_over = rows(
+            &bounds,
+            &[(
+                "can_rx".into(),
+                vec![Job::alone(7.936), pre_empted(16.0, 2)],
+            )],
+            None,
+            true,
+            1,
+        );
+        assert_eq!(
+            (both_over[0].preemptions, both_over[0].verdict.as_str()),
+            (2, EXCEEDS)
+        );
+        // A task the timing file says runs a simulated device in QEMU: printed against the bound, not held.
+        if let Some(q) = bounds.trace.as_mut().and_then(|t| t.qemu.as_mut()) {
+            q.other_code
+                .insert("can_rx".into(), "the bxCAN register model".into());
+        }
+        let model = rows(
+            &bounds,
+            &[("can_rx".into(), vec![Job::alone(7.936)])],
+            None,
+            true,
+            1,
+        );
+        assert!(
+            model[0].verdict.contains("the bxCAN register model"),
+            "{}",
+            model[0].verdict
+        );
+        // ... in QEMU only: a robot capture runs the release code.
+        let robot_model = rows(
+            &bounds,
+            &[("can_rx".into(), vec![Job::alone(25.0)])],
+            None,
+            false,
+            72_000_000,
+        );
+        assert_eq!(robot_model[0].verdict, EXCEEDS);
+        if let Some(q) = bounds.trace.as_mut().and_then(|t| t.qemu.as_mut()) {
+            q.other_code.clear();
+        }
         // Nothing is taken off a job no run pre-empted: one above its bound stays above.
         let alone = rows(
             &bounds,
