@@ -295,9 +295,8 @@ impl<R: Registers> CanTx for Mailboxes<R> {
         // holds no frame).
         let empty = (tsr / bit::TSR_TME0) & 0b111;
         let [s0, s1, s2] = &self.shadow;
-        let collected = u32::from(s0.is_none())
-            | u32::from(s1.is_none()) << 1
-            | u32::from(s2.is_none()) << 2;
+        let collected =
+            u32::from(s0.is_none()) | u32::from(s1.is_none()) << 1 | u32::from(s2.is_none()) << 2;
         // The identifier a pending mailbox holds (one whose completion is not collected holds none).
         let held = |shadow: &Option<amiro_can::Frame>, i: u32| {
             shadow

@@ -180,7 +180,10 @@ fn count_at_least(entries: &[u32], floor: u32) -> usize {
     let mut count = 0;
     while step > 0 {
         let next = count + step;
-        if entries.get(next.wrapping_sub(1)).is_some_and(|&e| e >= floor) {
+        if entries
+            .get(next.wrapping_sub(1))
+            .is_some_and(|&e| e >= floor)
+        {
             count = next;
         }
         step >>= 1;
@@ -395,12 +398,7 @@ impl<const N: usize> TxQueue<N> {
     /// drops whichever of it and the frame that would leave last goes last (the one leaving last
     /// is evicted when its identifier is at least `evict_from`). The entries between move by one place ([`carry_up`],
     /// [`carry_down`]), only one way per call: at most `N - 1` of them.
-    fn insert_or_drop(
-        &mut self,
-        at: usize,
-        frame: Frame,
-        evict_from: u16,
-    ) -> PushOutcome {
+    fn insert_or_drop(&mut self, at: usize, frame: Frame, evict_from: u16) -> PushOutcome {
         if self.len < N {
             // The first free slot takes the frame, and the entries from `at` move up by one onto
             // the free entry at `len` (`at` <= len: it counted queued frames).

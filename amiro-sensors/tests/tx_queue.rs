@@ -73,7 +73,10 @@ fn identifiers_at_both_ends_and_every_place_of_a_five_frame_queue() {
     );
     // Full: a frame that would leave last (an equal identifier queued after the others) is refused.
     let refused = frame(0x0FF, &[6]);
-    assert_eq!(q.push(refused), PushOutcome::DroppedNew { dropped: refused });
+    assert_eq!(
+        q.push(refused),
+        PushOutcome::DroppedNew { dropped: refused }
+    );
     // A requeued 0x0FF goes ahead of its equals, and the newest of them leaves the full queue.
     let back = frame(0x0FF, &[5]);
     assert_eq!(q.requeue(back), PushOutcome::DroppedOther { dropped: last });
@@ -109,7 +112,10 @@ fn a_requeued_frame_goes_ahead_of_its_equals_at_every_length() {
         }
         q.push(frame(0x300, &[0xBB]));
         let requeued = q.requeue(cmd(0xEE));
-        assert!(requeued.is_queued(), "{queued} commands queued: {requeued:?}");
+        assert!(
+            requeued.is_queued(),
+            "{queued} commands queued: {requeued:?}"
+        );
         let order: Vec<(u16, u8)> = drain(&mut q)
             .iter()
             .map(|f| (f.id().raw(), f.data()[0]))
