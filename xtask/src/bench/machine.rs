@@ -364,7 +364,7 @@ pub fn rows(
                     // Every job no run pre-empted is within; the pre-empted one's excess may be the pre-empting
                     // runs' dispatch, entry and exit, which no record stamps.
                     format!(
-                        "{NOT_HELD}: above only when pre-empted (every job no run pre-empted within: largest {}); \
+                        "{NOT_HELD}: above only when pre-empted (every job of this run that no run pre-empted within: largest {}); \
                          the pre-empting runs' unstamped dispatch, entry and return are not taken off",
                         alone.map_or_else(|| "none seen".to_string(), |a| a.to_string())
                     )
