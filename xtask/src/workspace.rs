@@ -71,10 +71,13 @@ pub fn build_qemu(root: &Path, build: &revision::Build) -> Result<PathBuf> {
     let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
     // With the task trace: the bench measures the scenario runs (docs/bench.md).
     args.extend(build.feature_args(&["qemu", "task-trace"]));
-    let status = Command::new(cargo_bin)
+    let mut command = Command::new(cargo_bin);
+    command
         .args(&args)
         .current_dir(root.join(board.name))
-        .env("CARGO_TARGET_DIR", &dir)
+        .env("CARGO_TARGET_DIR", &dir);
+    firmware_paths(&mut command, root);
+    let status = command
         .status()
         .with_context(|| format!("building the QEMU variant of {}", board.name))?;
     if !status.success() {
@@ -133,11 +136,17 @@ pub fn apt_install(packages: &[&str], missing: &str) -> Result<()> {
 /// Runs cargo in `dir` and fails unless it succeeds.
 pub fn cargo(dir: &Path, args: &[&str]) -> Result<()> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(&cargo)
+    let mut command = Command::new(&cargo);
+    command
         .args(args)
         .current_dir(dir)
         // The firmware folders pick their target from their own .cargo/config.toml.
-        .env_remove("CARGO_BUILD_TARGET")
+        .env_remove("CARGO_BUILD_TARGET");
+    if crate::boards::BOARDS.iter().any(|b| dir.ends_with(b.name)) {
+        // A board's folder: its image is the same wherever the workspace is checked out.
+        firmware_paths(&mut command, &workspace_root());
+    }
+    let status = command
         .status()
         .with_context(|| format!("running `cargo {}`", args.join(" ")))?;
     if !status.success() {
@@ -148,6 +157,47 @@ pub fn cargo(dir: &Path, args: &[&str]) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Makes a firmware build's debug information name its sources by fixed prefixes, not by where this checkout
+/// and the cargo home are (`--remap-path-prefix`, added to any flags already set in the environment): the
+/// machine code never depended on the checkout path, but the DWARF line rows of inlined code did (the same
+/// instruction of `CAN1_TX` at `tx_queue.rs:478` in one checkout, `:476` in another), and the bounds files key
+/// their loops by file and line, so a bound found in one checkout was declined in the next. With the prefixes
+/// fixed, `cargo xtask wcet` gives the same answer in every checkout and on every machine (docs/analysis.md,
+/// "Keys by file and line").
+pub fn firmware_paths(command: &mut Command, root: &Path) {
+    let mut flags: Vec<String> = match std::env::var("CARGO_ENCODED_RUSTFLAGS") {
+        Ok(encoded) if !encoded.is_empty() => encoded.split('\x1f').map(String::from).collect(),
+        _ => std::env::var("RUSTFLAGS")
+            .map(|f| f.split_whitespace().map(String::from).collect())
+            .unwrap_or_default(),
+    };
+    flags.push(format!(
+        "--remap-path-prefix={}={WORKSPACE_PREFIX}",
+        root.display()
+    ));
+    if let Some(home) = cargo_home() {
+        flags.push(format!(
+            "--remap-path-prefix={}={CARGO_HOME_PREFIX}",
+            home.display()
+        ));
+    }
+    command
+        .env_remove("RUSTFLAGS")
+        .env("CARGO_ENCODED_RUSTFLAGS", flags.join("\x1f"));
+}
+
+/// What a firmware image's debug information calls the workspace's root (`firmware_paths`).
+pub const WORKSPACE_PREFIX: &str = "/amiro";
+/// What it calls the cargo home (the registry's sources under it).
+pub const CARGO_HOME_PREFIX: &str = "/cargo";
+
+/// Cargo's home: `CARGO_HOME`, else `~/.cargo`.
+fn cargo_home() -> Option<PathBuf> {
+    std::env::var_os("CARGO_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cargo")))
 }
 
 /// Installs the thumb targets and components `rust-toolchain.toml` names when the pinned toolchain
