@@ -26,6 +26,7 @@ mod robot;
 mod scenarios;
 mod smoke;
 mod wcet_gate;
+mod wcet_qemu;
 mod wcet_write;
 mod workspace;
 
