@@ -548,7 +548,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
             println!("{} RAM goal missed", board.name);
         }
         // Measured against analysed, from the same runs (`cargo xtask bench --qemu --check`).
-        if let Err(e) = bench::check_scenario_runs(root, board, &outputs) {
+        if let Err(e) = bench::check_scenario_runs(root, build, &elf, &outputs) {
             failed += 1;
             println!("{e:#}");
         }

@@ -67,7 +67,26 @@ pub struct MachineRow {
     /// tell (`loose_reason`); `None` within 2×, or where the allowances leave no own figure.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub loose: Option<String>,
+    /// Whose bound: `release` (the generated bounds file's, the trace records taken off) or `qemu image` (the
+    /// traced QEMU image's own, [`QemuImage`]: its records are in it, nothing is taken off for them).
+    pub image: &'static str,
 }
+
+/// The traced QEMU image's own bounds of the tasks that run a simulated device in QEMU (the timing file's
+/// `trace.qemu.other_code`): computed from the image the scenarios ran (`crate::wcet_qemu`), in instructions
+/// (the longest path's), or the reason the machine code declined it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct QemuImage {
+    /// The image bounded (for the report).
+    pub elf: String,
+    /// Per task its bound in instructions, or why it has none.
+    pub tasks: std::collections::BTreeMap<String, Result<u64, String>>,
+}
+
+/// The bound's source of a row held to the release image's bound.
+pub const RELEASE: &str = "release";
+/// The bound's source of a row held to the traced QEMU image's own bound.
+pub const QEMU_IMAGE: &str = "qemu image";
 
 impl MachineRow {
     /// The job's own figure: observed, its trace records and the pre-empting runs' unstamped records out.
@@ -89,7 +108,11 @@ pub fn summary(m: &MachineRow, run: &str) -> String {
             b,
             m.unit,
             m.ratio.unwrap_or(0.0),
-            if m.held { "held" } else { "used" },
+            match (m.image, m.held) {
+                (QEMU_IMAGE, _) => "QEMU image's own",
+                (_, true) => "held",
+                _ => "used",
+            },
             m.observed,
             m.trace_allowance,
             m.preemptions,
@@ -269,12 +292,31 @@ impl Job {
 
 /// The rows of `tasks` (task name, its observed jobs) against the board's bounds, for a QEMU run (`qemu`)
 /// or a robot capture at `clock_hz`: each task's job with the largest own figure, held to its bound.
+#[cfg(test)]
 pub fn rows(
     bounds: &BoardBounds,
     tasks: &[(String, Vec<Job>)],
     analysed: Option<&BoardResult>,
     qemu: bool,
     clock_hz: u64,
+) -> Vec<MachineRow> {
+    rows_against(bounds, tasks, analysed, qemu, clock_hz, None)
+}
+
+/// [`rows`], with the traced QEMU image's own bounds (`image`) for the tasks that run a simulated device in QEMU
+/// (`trace.qemu.other_code`): in a QEMU run such a task is held to its bound in the image that ran, with nothing
+/// taken off for the trace records (the image's bound holds them, and its handler events: the tracing code is in
+/// it), only the pre-empting runs' unstamped records and the tick interrupts (other tasks' code) at their fewest.
+/// A job above it fails (`EXCEEDS BOUND`) unless it is above only when pre-empted; where the image's bound is
+/// declined the task is `NOT HELD` with the machine code's reason. Without `image` (or in a robot capture, the
+/// release code) such a task is held as before: to the release bound, `NOT HELD` above it.
+pub fn rows_against(
+    bounds: &BoardBounds,
+    tasks: &[(String, Vec<Job>)],
+    analysed: Option<&BoardResult>,
+    qemu: bool,
+    clock_hz: u64,
+    image: Option<&QemuImage>,
 ) -> Vec<MachineRow> {
     let Some(file) = &bounds.bounds else {
         return Vec::new();
@@ -315,9 +357,18 @@ pub fn rows(
     };
     let mut out = Vec::new();
     for (task, jobs) in tasks {
-        let Some(bound) = bound_of(file, task, analysed, qemu) else {
+        let Some(release) = bound_of(file, task, analysed, qemu) else {
             continue;
         };
+        // A simulated device's task in a QEMU run with the image's own bound: held to it, records in it.
+        let own_image = other_code(task)
+            .and(image)
+            .and_then(|i| i.tasks.get(task).map(|b| (i, b)));
+        let (bound, in_image) = match own_image {
+            Some((_, Ok(b))) => (Ok((*b, false, String::new())), true),
+            _ => (release, false),
+        };
+        let allowance = |events: u32| if in_image { 0 } else { allowance(events) };
         // (own, observed, pre-emptions, unstamped, by, events) of each job; the largest own figure is the one held.
         let figures: Vec<_> = jobs
             .iter()
@@ -357,7 +408,16 @@ pub fn rows(
                 let ratio = (b > 0).then(|| own as f64 / b as f64);
                 let verdict = if own <= b {
                     "ok".to_string()
-                } else if let Some(what) = other_code(task) {
+                } else if let (Some(what), Some((i, Err(why)))) =
+                    (other_code(task).filter(|_| !in_image), own_image)
+                {
+                    // The QEMU image's own bound is declined: the release bound never covered the device's code.
+                    format!(
+                        "{NOT_HELD}: the QEMU build runs {what} inside it, which the release image's bound does not cover, \
+                         and the bound of {} declined: {why}",
+                        i.elf
+                    )
+                } else if let Some(what) = other_code(task).filter(|_| !in_image) {
                     // The release bound never covered the simulated device's code the job runs.
                     format!("{NOT_HELD}: the QEMU build runs {what} inside it, which the release image's bound does not cover")
                 } else if preemptions > 0 && alone.is_none_or(|a| a <= b) {
@@ -402,6 +462,7 @@ pub fn rows(
             ratio,
             verdict,
             loose,
+            image: if in_image { QEMU_IMAGE } else { RELEASE },
         });
     }
     out
