@@ -637,6 +637,42 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_qemu_file_adds_its_places_and_states_none_twice_nor_any_task() {
+        let release = BoundsFile::parse(
+            r#"{"loops":[{"function":"f","file":"src/a.rs","line":3,"bound":8,"reason":"capacity 8"}],
+                "held":[{"task":"t","reason":"loose"}]}"#,
+        )
+        .unwrap();
+        let qemu = BoundsFile::parse(
+            r#"{"loops":[{"function":"f","file":"src/sim.rs","line":9,"bound":4,"reason":"three mailboxes"}],
+                "indirect":[{"function":"g","file":"src/w.rs","line":2,"targets":["h"],"reason":"the only one"}]}"#,
+        )
+        .unwrap();
+        let both = release.with(&qemu).unwrap();
+        assert_eq!(
+            both.loop_bound("f", "src/a.rs", 3).map(|l| l.bound),
+            Some(8)
+        );
+        assert_eq!(
+            both.loop_bound("f", "src/sim.rs", 9).map(|l| l.bound),
+            Some(4)
+        );
+        assert!(both.indirect("g", "src/w.rs", 2).is_some());
+        assert_eq!(both.held, release.held);
+        // The release file alone does not know the QEMU places.
+        assert!(release.loop_bound("f", "src/sim.rs", 9).is_none());
+        // A place stated in both files has two reasons: refused.
+        let twice = BoundsFile::parse(
+            r#"{"loops":[{"function":"f","file":"src/a.rs","line":3,"bound":9,"reason":"other"}]}"#,
+        )
+        .unwrap();
+        assert!(matches!(release.with(&twice), Err(Error::Bounds(_))));
+        // What the release file says of the tasks is its own.
+        let task = BoundsFile::parse(r#"{"held":[{"task":"u","reason":"loose"}]}"#).unwrap();
+        assert!(matches!(release.with(&task), Err(Error::Bounds(_))));
+    }
+
+    #[test]
     fn entries_need_a_reason_and_a_figure() {
         let ok = r#"{"loops":[{"function":"f","file":"src/a.rs","line":3,"bound":8,"reason":"capacity 8"}]}"#;
         let file = BoundsFile::parse(ok).unwrap();

@@ -365,7 +365,17 @@ pub fn rows_against(
             .and(image)
             .and_then(|i| i.tasks.get(task).map(|b| (i, b)));
         let (bound, in_image) = match own_image {
-            Some((_, Ok(b))) => (Ok((*b, false, String::new())), true),
+            Some((_, Ok(b))) => (
+                Ok((
+                    *b,
+                    false,
+                    "the QEMU image's own bound takes every path of the simulated device at its stated worst \
+                     (a robot run's register-model and link paths, the queue's searches, every loop at its bound); \
+                     the single-board runs took fewer"
+                        .to_string(),
+                )),
+                true,
+            ),
             _ => (release, false),
         };
         let allowance = |events: u32| if in_image { 0 } else { allowance(events) };
@@ -857,6 +867,111 @@ mod tests {
             72_000_000,
         );
         assert_eq!(robot[0].bound, Some(2700));
+    }
+
+    #[test]
+    fn a_simulated_devices_task_is_held_to_the_qemu_images_own_bound_with_its_records_in_it() {
+        // can_rx runs the bxCAN model in QEMU (other_code); its release bound is 500, its QEMU image's 2 000.
+        let mut bounds = board_bounds();
+        bounds.trace = Some(TraceCost {
+            feature: "task-trace".into(),
+            per_job_us: 12.0,
+            note: None,
+            qemu: Some(QemuBuild {
+                per_job_us: 8.0,
+                budget_scale: 1.0,
+                transmit: None,
+                replay: None,
+                unstamped_per_preemption: Some(UnstampedPerPreemption {
+                    instructions: 400,
+                    note: "a test".into(),
+                }),
+                other_code: [("can_rx".to_string(), "the bxCAN model".to_string())].into(),
+                note: None,
+            }),
+        });
+        let image = |bound: Result<u64, String>| QemuImage {
+            elf: "target/qemu/firmware/t".into(),
+            tasks: [("can_rx".to_string(), bound)].into(),
+        };
+        let held = |exec_us: f64, image: Option<&QemuImage>| {
+            rows_against(
+                &bounds,
+                &[(
+                    "can_rx".into(),
+                    vec![Job {
+                        events: 1,
+                        ticks: 1,
+                        ..Job::alone(exec_us)
+                    }],
+                )],
+                None,
+                true,
+                1,
+                image,
+            )
+            .remove(0)
+        };
+        // 16.336 µs = 2 042 instructions, 42 of them the tick; nothing off for the records or the event (the
+        // image's bound holds them): 2 000, at the bound.
+        let at = held(16.336, Some(&image(Ok(2000))));
+        assert_eq!(
+            (at.observed, at.trace_allowance, at.unstamped, at.own()),
+            (2042, 0, 42, 2000)
+        );
+        assert_eq!(
+            (at.bound, at.image, at.verdict.as_str()),
+            (Some(2000), QEMU_IMAGE, "ok")
+        );
+        // One instruction more fails: no NOT HELD for a simulated device once the image has its own bound.
+        let over = held(16.344, Some(&image(Ok(2000))));
+        assert_eq!((over.own(), over.verdict.as_str()), (2001, EXCEEDS));
+        // The same job against the release bound, before the image was bounded: the records and the event
+        // off (491 + 1 311), 198 own within 500; 2 001 + 1 802 would be NOT HELD, not failed.
+        let release = held(16.336, None);
+        assert_eq!(
+            (release.image, release.trace_allowance, release.bound),
+            (RELEASE, 491 + 1311, Some(500))
+        );
+        let far = held(30.0, None);
+        assert!(far.verdict.starts_with(NOT_HELD), "{}", far.verdict);
+        // The image's bound declined: NOT HELD above the release bound, with the machine code's reason.
+        let declined = held(30.0, Some(&image(Err("a loop without a bound".into()))));
+        assert_eq!(declined.image, RELEASE);
+        assert!(
+            declined.verdict.starts_with(NOT_HELD)
+                && declined
+                    .verdict
+                    .ends_with("declined: a loop without a bound"),
+            "{}",
+            declined.verdict
+        );
+        // A task that runs the release code is held to the release file whatever the image says.
+        let release_code = rows_against(
+            &bounds,
+            &[("admit_requests".into(), vec![Job::alone(1.0)])],
+            None,
+            true,
+            1,
+            Some(&QemuImage {
+                elf: "t".into(),
+                tasks: [("admit_requests".to_string(), Ok(1))].into(),
+            }),
+        )
+        .remove(0);
+        assert_eq!(release_code.image, RELEASE);
+        assert!(release_code.verdict.starts_with("declined: a loop"));
+        // A robot capture (the release code) ignores the QEMU image.
+        let robot = rows_against(
+            &bounds,
+            &[("can_rx".into(), vec![Job::alone(20.0)])],
+            None,
+            false,
+            72_000_000,
+            Some(&image(Ok(1))),
+        )
+        .remove(0);
+        assert_eq!((robot.image, robot.bound), (RELEASE, Some(720)));
     }
 
     #[test]
