@@ -277,8 +277,7 @@ pub async fn replay_stimulus<W: core::future::Future<Output = ()>>(
     let duration = match decoded {
         Ok(duration) => duration,
         Err(e) => {
-            hprintln!("# qemu: stimulus.bin: {}", e);
-            exit(false);
+            stimulus_failed(e);
             return;
         }
     };
@@ -287,8 +286,7 @@ pub async fn replay_stimulus<W: core::future::Future<Output = ()>>(
         let record = match stimulus::Record::decode(&bytes) {
             Ok(record) => record,
             Err(e) => {
-                hprintln!("# qemu: stimulus.bin: {}", e);
-                exit(false);
+                stimulus_failed(e);
                 return;
             }
         };
@@ -311,6 +309,16 @@ pub async fn replay_stimulus<W: core::future::Future<Output = ()>>(
     finish("end of run");
 }
 
+/// Prints why the stimulus cannot be read and ends the run as failed. Not inlined: the error's
+/// `Display` is a function address the formatting stores as data, and in the replay task's
+/// dispatcher, which builds the task's wakers, the execution-time bound would take it for a
+/// waker's target (`machine_code::wcet::stored`; docs/bench.md, "The traced QEMU image's own bound").
+#[inline(never)]
+fn stimulus_failed(e: stimulus::StimulusError) {
+    hprintln!("# qemu: stimulus.bin: {}", e);
+    exit(false);
+}
+
 /// Prints the run's last line (receive losses, static RAM, the stack's high-water mark) and ends
 /// the run successfully.
 pub fn finish(why: &str) {
@@ -328,9 +336,16 @@ pub fn finish(why: &str) {
     exit(true);
 }
 
-/// Prints one line on the console (a board's simulated device reporting what it saw).
+/// Prints one line on the console (a board's simulated device reporting what it saw): the text and
+/// its end written as they are, under one critical section so no other line splits it. Without
+/// `core::fmt` (whose loops over the format's pieces and the text's characters have no bound the
+/// execution-time analysis can state): the receive interrupt prints a control frame's line with it,
+/// and the traced QEMU image's own bound holds that interrupt (docs/bench.md).
 pub fn print_line(line: &str) {
-    hprintln!("{}", line);
+    critical_section::with(|_| {
+        console_write(line.as_bytes());
+        console_write(b"\n");
+    });
 }
 
 /// Prints one line given in pieces (`pieces` calls its sink once per piece), under one critical

@@ -196,6 +196,11 @@ impl Charger {
     }
 
     /// Enables or disables both chargers (printed).
+    ///
+    /// Not inlined: its line's formatting stores a `Display` function's address as data, which in
+    /// a dispatcher that builds wakers the execution-time bound would take for a waker's target
+    /// (`machine_code::wcet::stored`; docs/bench.md, "The traced QEMU image's own bound").
+    #[inline(never)]
     pub fn set_enabled(&mut self, on: bool) {
         self.enabled = on;
         CHARGING.store(on && PLUG.load(Ordering::SeqCst), Ordering::SeqCst);
@@ -298,6 +303,11 @@ pub fn chargers_off() {
 }
 
 /// RTC_BKP0R byte 0 (printed: QEMU's STM32F405 has no RTC backup domain).
+///
+/// Not inlined: its line's formatting stores a `Display` function's address as data, which in a
+/// dispatcher that builds wakers the execution-time bound would take for a waker's target
+/// (`machine_code::wcet::stored`; docs/bench.md, "The traced QEMU image's own bound").
+#[inline(never)]
 pub fn write_shutdown_reason(reason: u8) {
     print(format_args!("# qemu: RTC_BKP0R byte 0 = {reason}"));
 }

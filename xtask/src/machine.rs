@@ -119,6 +119,11 @@ pub struct WcetArgs {
     /// the files are the images bounded (default: every revision).
     #[arg(long, conflicts_with = "elf")]
     pub write: bool,
+    /// Bound the tasks that run a simulated device in QEMU (the timing file's `trace.qemu.other_code`) in the
+    /// traced QEMU image the scenarios built (`target/qemu/firmware/<board>-<rev>`), with the board's bounds file
+    /// and its QEMU-only statements (`schedule-analysis/models/<board>.qemu.bounds.json`).
+    #[arg(long, conflicts_with_all = ["elf", "write"])]
+    pub qemu: bool,
 }
 
 /// `cargo xtask wcet`: one function of any ELF (`--elf`), else every task of the boards' images.
@@ -130,7 +135,7 @@ pub fn wcet(root: &Path, args: &WcetArgs) -> Result<bool> {
 }
 
 /// The chip a board's image runs on, at its board clock's wait states unless overridden.
-fn chip_of(board: &crate::boards::Board, wait_states: Option<u32>) -> Result<Chip> {
+pub(crate) fn chip_of(board: &crate::boards::Board, wait_states: Option<u32>) -> Result<Chip> {
     let name = if board.chip.starts_with("STM32F103") {
         "stm32f103"
     } else if board.chip.starts_with("STM32F405") {
@@ -469,6 +474,9 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
         (revision, _) => crate::revision::Choice::parse(revision.as_deref())?,
     };
     let plan = crate::revision::plan(&boards, &choice)?;
+    if args.qemu {
+        return crate::wcet_qemu::print(root, &plan, args.json);
+    }
     if args.write {
         crate::wcet_write::write(root, &plan, args.wait_states, args.bounds.as_deref())?;
     }

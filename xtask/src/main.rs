@@ -26,6 +26,7 @@ mod robot;
 mod scenarios;
 mod smoke;
 mod wcet_gate;
+mod wcet_qemu;
 mod wcet_write;
 mod workspace;
 
@@ -547,7 +548,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
             println!("{} RAM goal missed", board.name);
         }
         // Measured against analysed, from the same runs (`cargo xtask bench --qemu --check`).
-        if let Err(e) = bench::check_scenario_runs(root, board, &outputs) {
+        if let Err(e) = bench::check_scenario_runs(root, build, &elf, &outputs) {
             failed += 1;
             println!("{e:#}");
         }

@@ -458,6 +458,59 @@ impl BoundsFile {
         file
     }
 
+    /// This file with the statements of `extra` added: the bounds of another build of the same source (the traced
+    /// QEMU build's simulated devices, `<board>.qemu.bounds.json`) beside the release image's. `extra` states
+    /// loops, waits, indirect calls, lengths, per-element functions, job loops and totals only: what the release
+    /// file says of the tasks (their charges, holds and topic groups) stays the release file's. A place stated in
+    /// both is an error (two reasons for one loop).
+    pub fn with(&self, extra: &BoundsFile) -> Result<BoundsFile, Error> {
+        if !(extra.tasks.is_empty()
+            && extra.held.is_empty()
+            && extra.per_activation.is_empty()
+            && extra.per_frame.is_empty()
+            && extra.topics.is_none())
+        {
+            return Err(Error::Bounds(
+                "a file added to another states loops, waits, indirect calls, lengths, per-element functions, \
+                 jobs and totals only (tasks, held, per_activation, per_frame and topics are the first file's)"
+                    .into(),
+            ));
+        }
+        let twice = extra
+            .loops
+            .iter()
+            .find(|l| self.loop_bound(&l.function, &l.file, l.line).is_some())
+            .map(|l| (&l.function, &l.file, l.line))
+            .or_else(|| {
+                extra
+                    .indirect
+                    .iter()
+                    .find(|i| self.indirect(&i.function, &i.file, i.line).is_some())
+                    .map(|i| (&i.function, &i.file, i.line))
+            })
+            .or_else(|| {
+                extra
+                    .jobs
+                    .iter()
+                    .find(|j| self.job(&j.function, &j.file, j.line).is_some())
+                    .map(|j| (&j.function, &j.file, j.line))
+            });
+        if let Some((function, file, line)) = twice {
+            return Err(Error::Bounds(format!(
+                "{file}:{line} in {function} is stated in both files"
+            )));
+        }
+        let mut out = self.clone();
+        out.loops.extend(extra.loops.iter().cloned());
+        out.waits.extend(extra.waits.iter().cloned());
+        out.indirect.extend(extra.indirect.iter().cloned());
+        out.lengths.extend(extra.lengths.iter().cloned());
+        out.per_element.extend(extra.per_element.iter().cloned());
+        out.jobs.extend(extra.jobs.iter().cloned());
+        out.totals.extend(extra.totals.iter().cloned());
+        Ok(out)
+    }
+
     /// The stated targets of the call through a register at `file:line` in `function`.
     pub fn indirect(&self, function: &str, file: &str, line: u32) -> Option<&IndirectTargets> {
         self.indirect
@@ -582,6 +635,42 @@ impl BoundsFile {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_qemu_file_adds_its_places_and_states_none_twice_nor_any_task() {
+        let release = BoundsFile::parse(
+            r#"{"loops":[{"function":"f","file":"src/a.rs","line":3,"bound":8,"reason":"capacity 8"}],
+                "held":[{"task":"t","reason":"loose"}]}"#,
+        )
+        .unwrap();
+        let qemu = BoundsFile::parse(
+            r#"{"loops":[{"function":"f","file":"src/sim.rs","line":9,"bound":4,"reason":"three mailboxes"}],
+                "indirect":[{"function":"g","file":"src/w.rs","line":2,"targets":["h"],"reason":"the only one"}]}"#,
+        )
+        .unwrap();
+        let both = release.with(&qemu).unwrap();
+        assert_eq!(
+            both.loop_bound("f", "src/a.rs", 3).map(|l| l.bound),
+            Some(8)
+        );
+        assert_eq!(
+            both.loop_bound("f", "src/sim.rs", 9).map(|l| l.bound),
+            Some(4)
+        );
+        assert!(both.indirect("g", "src/w.rs", 2).is_some());
+        assert_eq!(both.held, release.held);
+        // The release file alone does not know the QEMU places.
+        assert!(release.loop_bound("f", "src/sim.rs", 9).is_none());
+        // A place stated in both files has two reasons: refused.
+        let twice = BoundsFile::parse(
+            r#"{"loops":[{"function":"f","file":"src/a.rs","line":3,"bound":9,"reason":"other"}]}"#,
+        )
+        .unwrap();
+        assert!(matches!(release.with(&twice), Err(Error::Bounds(_))));
+        // What the release file says of the tasks is its own.
+        let task = BoundsFile::parse(r#"{"held":[{"task":"u","reason":"loose"}]}"#).unwrap();
+        assert!(matches!(release.with(&task), Err(Error::Bounds(_))));
+    }
 
     #[test]
     fn entries_need_a_reason_and_a_figure() {

@@ -67,7 +67,26 @@ pub struct MachineRow {
     /// tell (`loose_reason`); `None` within 2×, or where the allowances leave no own figure.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub loose: Option<String>,
+    /// Whose bound: `release` (the generated bounds file's, the trace records taken off) or `qemu image` (the
+    /// traced QEMU image's own, [`QemuImage`]: its records are in it, nothing is taken off for them).
+    pub image: &'static str,
 }
+
+/// The traced QEMU image's own bounds of the tasks that run a simulated device in QEMU (the timing file's
+/// `trace.qemu.other_code`): computed from the image the scenarios ran (`crate::wcet_qemu`), in instructions
+/// (the longest path's), or the reason the machine code declined it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct QemuImage {
+    /// The image bounded (for the report).
+    pub elf: String,
+    /// Per task its bound in instructions, or why it has none.
+    pub tasks: std::collections::BTreeMap<String, Result<u64, String>>,
+}
+
+/// The bound's source of a row held to the release image's bound.
+pub const RELEASE: &str = "release";
+/// The bound's source of a row held to the traced QEMU image's own bound.
+pub const QEMU_IMAGE: &str = "qemu image";
 
 impl MachineRow {
     /// The job's own figure: observed, its trace records and the pre-empting runs' unstamped records out.
@@ -89,7 +108,11 @@ pub fn summary(m: &MachineRow, run: &str) -> String {
             b,
             m.unit,
             m.ratio.unwrap_or(0.0),
-            if m.held { "held" } else { "used" },
+            match (m.image, m.held) {
+                (QEMU_IMAGE, _) => "QEMU image's own",
+                (_, true) => "held",
+                _ => "used",
+            },
             m.observed,
             m.trace_allowance,
             m.preemptions,
@@ -269,12 +292,31 @@ impl Job {
 
 /// The rows of `tasks` (task name, its observed jobs) against the board's bounds, for a QEMU run (`qemu`)
 /// or a robot capture at `clock_hz`: each task's job with the largest own figure, held to its bound.
+#[cfg(test)]
 pub fn rows(
     bounds: &BoardBounds,
     tasks: &[(String, Vec<Job>)],
     analysed: Option<&BoardResult>,
     qemu: bool,
     clock_hz: u64,
+) -> Vec<MachineRow> {
+    rows_against(bounds, tasks, analysed, qemu, clock_hz, None)
+}
+
+/// [`rows`], with the traced QEMU image's own bounds (`image`) for the tasks that run a simulated device in QEMU
+/// (`trace.qemu.other_code`): in a QEMU run such a task is held to its bound in the image that ran, with nothing
+/// taken off for the trace records (the image's bound holds them, and its handler events: the tracing code is in
+/// it), only the pre-empting runs' unstamped records and the tick interrupts (other tasks' code) at their fewest.
+/// A job above it fails (`EXCEEDS BOUND`) unless it is above only when pre-empted; where the image's bound is
+/// declined the task is `NOT HELD` with the machine code's reason. Without `image` (or in a robot capture, the
+/// release code) such a task is held as before: to the release bound, `NOT HELD` above it.
+pub fn rows_against(
+    bounds: &BoardBounds,
+    tasks: &[(String, Vec<Job>)],
+    analysed: Option<&BoardResult>,
+    qemu: bool,
+    clock_hz: u64,
+    image: Option<&QemuImage>,
 ) -> Vec<MachineRow> {
     let Some(file) = &bounds.bounds else {
         return Vec::new();
@@ -315,9 +357,28 @@ pub fn rows(
     };
     let mut out = Vec::new();
     for (task, jobs) in tasks {
-        let Some(bound) = bound_of(file, task, analysed, qemu) else {
+        let Some(release) = bound_of(file, task, analysed, qemu) else {
             continue;
         };
+        // A simulated device's task in a QEMU run with the image's own bound: held to it, records in it.
+        let own_image = other_code(task)
+            .and(image)
+            .and_then(|i| i.tasks.get(task).map(|b| (i, b)));
+        let (bound, in_image) = match own_image {
+            Some((_, Ok(b))) => (
+                Ok((
+                    *b,
+                    false,
+                    "the QEMU image's own bound takes every path of the simulated device at its stated worst \
+                     (a robot run's register-model and link paths, the queue's searches, every loop at its bound); \
+                     the single-board runs took fewer"
+                        .to_string(),
+                )),
+                true,
+            ),
+            _ => (release, false),
+        };
+        let allowance = |events: u32| if in_image { 0 } else { allowance(events) };
         // (own, observed, pre-emptions, unstamped, by, events) of each job; the largest own figure is the one held.
         let figures: Vec<_> = jobs
             .iter()
@@ -357,7 +418,16 @@ pub fn rows(
                 let ratio = (b > 0).then(|| own as f64 / b as f64);
                 let verdict = if own <= b {
                     "ok".to_string()
-                } else if let Some(what) = other_code(task) {
+                } else if let (Some(what), Some((i, Err(why)))) =
+                    (other_code(task).filter(|_| !in_image), own_image)
+                {
+                    // The QEMU image's own bound is declined: the release bound never covered the device's code.
+                    format!(
+                        "{NOT_HELD}: the QEMU build runs {what} inside it, which the release image's bound does not cover, \
+                         and the bound of {} declined: {why}",
+                        i.elf
+                    )
+                } else if let Some(what) = other_code(task).filter(|_| !in_image) {
                     // The release bound never covered the simulated device's code the job runs.
                     format!("{NOT_HELD}: the QEMU build runs {what} inside it, which the release image's bound does not cover")
                 } else if preemptions > 0 && alone.is_none_or(|a| a <= b) {
@@ -402,6 +472,7 @@ pub fn rows(
             ratio,
             verdict,
             loose,
+            image: if in_image { QEMU_IMAGE } else { RELEASE },
         });
     }
     out
@@ -796,6 +867,111 @@ mod tests {
             72_000_000,
         );
         assert_eq!(robot[0].bound, Some(2700));
+    }
+
+    #[test]
+    fn a_simulated_devices_task_is_held_to_the_qemu_images_own_bound_with_its_records_in_it() {
+        // can_rx runs the bxCAN model in QEMU (other_code); its release bound is 500, its QEMU image's 2 000.
+        let mut bounds = board_bounds();
+        bounds.trace = Some(TraceCost {
+            feature: "task-trace".into(),
+            per_job_us: 12.0,
+            note: None,
+            qemu: Some(QemuBuild {
+                per_job_us: 8.0,
+                budget_scale: 1.0,
+                transmit: None,
+                replay: None,
+                unstamped_per_preemption: Some(UnstampedPerPreemption {
+                    instructions: 400,
+                    note: "a test".into(),
+                }),
+                other_code: [("can_rx".to_string(), "the bxCAN model".to_string())].into(),
+                note: None,
+            }),
+        });
+        let image = |bound: Result<u64, String>| QemuImage {
+            elf: "target/qemu/firmware/t".into(),
+            tasks: [("can_rx".to_string(), bound)].into(),
+        };
+        let held = |exec_us: f64, image: Option<&QemuImage>| {
+            rows_against(
+                &bounds,
+                &[(
+                    "can_rx".into(),
+                    vec![Job {
+                        events: 1,
+                        ticks: 1,
+                        ..Job::alone(exec_us)
+                    }],
+                )],
+                None,
+                true,
+                1,
+                image,
+            )
+            .remove(0)
+        };
+        // 16.336 µs = 2 042 instructions, 42 of them the tick; nothing off for the records or the event (the
+        // image's bound holds them): 2 000, at the bound.
+        let at = held(16.336, Some(&image(Ok(2000))));
+        assert_eq!(
+            (at.observed, at.trace_allowance, at.unstamped, at.own()),
+            (2042, 0, 42, 2000)
+        );
+        assert_eq!(
+            (at.bound, at.image, at.verdict.as_str()),
+            (Some(2000), QEMU_IMAGE, "ok")
+        );
+        // One instruction more fails: no NOT HELD for a simulated device once the image has its own bound.
+        let over = held(16.344, Some(&image(Ok(2000))));
+        assert_eq!((over.own(), over.verdict.as_str()), (2001, EXCEEDS));
+        // The same job against the release bound, before the image was bounded: the records and the event
+        // off (491 + 1 311), 198 own within 500; 2 001 + 1 802 would be NOT HELD, not failed.
+        let release = held(16.336, None);
+        assert_eq!(
+            (release.image, release.trace_allowance, release.bound),
+            (RELEASE, 491 + 1311, Some(500))
+        );
+        let far = held(30.0, None);
+        assert!(far.verdict.starts_with(NOT_HELD), "{}", far.verdict);
+        // The image's bound declined: NOT HELD above the release bound, with the machine code's reason.
+        let declined = held(30.0, Some(&image(Err("a loop without a bound".into()))));
+        assert_eq!(declined.image, RELEASE);
+        assert!(
+            declined.verdict.starts_with(NOT_HELD)
+                && declined
+                    .verdict
+                    .ends_with("declined: a loop without a bound"),
+            "{}",
+            declined.verdict
+        );
+        // A task that runs the release code is held to the release file whatever the image says.
+        let release_code = rows_against(
+            &bounds,
+            &[("admit_requests".into(), vec![Job::alone(1.0)])],
+            None,
+            true,
+            1,
+            Some(&QemuImage {
+                elf: "t".into(),
+                tasks: [("admit_requests".to_string(), Ok(1))].into(),
+            }),
+        )
+        .remove(0);
+        assert_eq!(release_code.image, RELEASE);
+        assert!(release_code.verdict.starts_with("declined: a loop"));
+        // A robot capture (the release code) ignores the QEMU image.
+        let robot = rows_against(
+            &bounds,
+            &[("can_rx".into(), vec![Job::alone(20.0)])],
+            None,
+            false,
+            72_000_000,
+            Some(&image(Ok(1))),
+        )
+        .remove(0);
+        assert_eq!((robot.image, robot.bound), (RELEASE, Some(720)));
     }
 
     #[test]

@@ -335,6 +335,20 @@ pub fn measure(
     qemu: bool,
     scenario_name: Option<&str>,
 ) -> Result<Bench> {
+    measure_with(root, board, capture, origin, qemu, scenario_name, None)
+}
+
+/// [`measure`], with the traced QEMU image's own bounds of the tasks that run a simulated device
+/// (`machine::rows_against`).
+pub fn measure_with(
+    root: &Path,
+    board: &Board,
+    capture: &Capture,
+    origin: &str,
+    qemu: bool,
+    scenario_name: Option<&str>,
+    image: Option<&machine::QemuImage>,
+) -> Result<Bench> {
     let names = amiro_firmware::trace_ids::board_names(root, board.name)
         .map_err(|e| anyhow!("{e}"))
         .context("the board's task numbers")?;
@@ -436,7 +450,8 @@ pub fn measure(
                     (t.task.clone(), jobs)
                 })
                 .collect();
-            let mut rows = machine::rows(b, &executions, board_result, qemu, capture.clock_hz);
+            let mut rows =
+                machine::rows_against(b, &executions, board_result, qemu, capture.clock_hz, image);
             for row in &mut rows {
                 row.preempted_by = names
                     .iter()
@@ -590,7 +605,10 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
                 (name, dir.clone())
             })
             .collect();
-        return match check_scenario_runs(root, board, &runs) {
+        let elf = crate::qemu::target_dir(root)
+            .join("firmware")
+            .join(build.stem());
+        return match check_scenario_runs(root, &build, &elf, &runs) {
             Ok(()) => Ok(true),
             Err(e) => {
                 eprintln!("{e:#}");
@@ -645,15 +663,26 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
     if inputs.is_empty() {
         inputs.push(stream_live(root, board, args)?);
     }
+    // A QEMU run's simulated devices' tasks are held to the traced QEMU image's own bounds: the image the
+    // scenarios or `--qemu` built last (without it they are held as before, NOT HELD above the release bound).
+    let elf = crate::qemu::target_dir(root)
+        .join("firmware")
+        .join(build.stem());
+    let image = if inputs.iter().any(|(_, _, qemu)| *qemu) && elf.exists() {
+        Some(qemu_image_bounds(root, &build, &elf)?)
+    } else {
+        None
+    };
     let mut ok = true;
     for (origin, capture, qemu) in &inputs {
-        let bench = measure(
+        let bench = measure_with(
             root,
             board,
             capture,
             origin,
             *qemu,
             args.scenario.as_deref(),
+            image.as_ref(),
         )?;
         let stem = Path::new(origin)
             .file_stem()
@@ -860,15 +889,76 @@ pub const BEYOND_THE_TRACED_BUILD: &[(&str, &str, &str)] = &[
     ),
 ];
 
+/// The traced QEMU image `elf`'s own bounds of the board's tasks that run a simulated device there
+/// (`crate::wcet_qemu`), once per image, with the time it took printed.
+pub fn qemu_image_bounds(
+    root: &Path,
+    build: &crate::revision::Build,
+    elf: &Path,
+) -> Result<machine::QemuImage> {
+    let tasks = crate::wcet_qemu::other_code_tasks(root, build.board.name)?;
+    let found = crate::wcet_qemu::bound(root, build, elf, &tasks)
+        .with_context(|| format!("bounding the QEMU image {}", elf.display()))?;
+    let here = format!("{}/", root.display());
+    let image = machine::QemuImage {
+        elf: found
+            .elf
+            .strip_prefix(root)
+            .unwrap_or(&found.elf)
+            .display()
+            .to_string(),
+        tasks: found
+            .tasks
+            .iter()
+            .map(|t| {
+                let bound = match &t.declined {
+                    Some(why) => Err(why.replace(&here, "")),
+                    None => Ok(t.instructions),
+                };
+                (t.task.clone(), bound)
+            })
+            .collect(),
+    };
+    println!(
+        "qemu-image bounds {}: {} ({:.1} s): {}",
+        build.stem(),
+        image.elf,
+        found.seconds,
+        image
+            .tasks
+            .iter()
+            .map(|(task, b)| match b {
+                Ok(i) => format!("{task} ≤ {i} instructions"),
+                Err(why) => format!("{task} declined ({why})"),
+            })
+            .collect::<Vec<_>>()
+            .join("; ")
+    );
+    for m in &found.missing {
+        println!(
+            "qemu-image bounds {}: a QEMU-only statement with no place in this image: {m}",
+            build.stem()
+        );
+    }
+    Ok(image)
+}
+
 /// Measures the outputs of a board's QEMU scenario runs (`cargo xtask test`, after the scenarios):
 /// writes each run's report beside its output and fails when a run exceeds an analysed bound.
-pub fn check_scenario_runs(root: &Path, board: &Board, runs: &[(String, PathBuf)]) -> Result<()> {
+pub fn check_scenario_runs(
+    root: &Path,
+    build: &crate::revision::Build,
+    elf: &Path,
+    runs: &[(String, PathBuf)],
+) -> Result<()> {
+    let board = build.board;
     let mut failures = Vec::new();
+    let image = qemu_image_bounds(root, build, elf)?;
     // Per task over every run: the row of the job with the largest own figure, and its run.
     let mut largest: BTreeMap<String, (machine::MachineRow, String)> = BTreeMap::new();
     for (name, work) in runs {
         let capture = read_scenario_run(board, work)?;
-        let mut bench = measure(root, board, &capture, name, true, None)
+        let mut bench = measure_with(root, board, &capture, name, true, None, Some(&image))
             .with_context(|| format!("bench of {} {name}", board.name))?;
         if let Some((_, _, why)) = BEYOND_THE_TRACED_BUILD
             .iter()

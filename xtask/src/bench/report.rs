@@ -123,7 +123,12 @@ fn machine_table(out: &mut String, b: &Bench) {
                 .map_or_else(|| "-".to_string(), |r| format!("{r:.2}")),
             m.unit,
             m.verdict,
-            if m.held { " (held)" } else { "" },
+            match (m.image, m.held) {
+                (super::machine::QEMU_IMAGE, _) =>
+                    " (the QEMU image's own bound, its records in it)",
+                (_, true) => " (held)",
+                _ => "",
+            },
             m.loose
                 .as_ref()
                 .map_or_else(String::new, |why| format!("; loose: {why}"))
