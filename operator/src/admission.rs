@@ -666,24 +666,25 @@ mod tests {
             warning.contains("At urgent it would accept every"),
             "{warning}"
         );
-        // The thesis example passes; beside it a 2 ms gyroscope does not (the board's CPU would be
-        // overloaded), once it is stopped the gyroscope does.
+        // The thesis example passes; beside it a gyroscope every 500 µs does not (its publisher job
+        // would miss its deadline), once it is stopped the gyroscope does. (A 2 ms gyroscope fits beside
+        // it on today's tables.)
         assert_eq!(checker.check(&message("205#01840302")), None);
-        assert!(checker.check(&message("208#01020000")).is_some());
+        assert!(checker.check(&message("208#01F40102")).is_some());
         assert_eq!(checker.check(&message("205#00")), None);
-        assert_eq!(checker.check(&message("208#01020000")), None);
+        assert_eq!(checker.check(&message("208#01F40102")), None);
     }
 
     #[test]
     fn what_runs_is_learned_from_commands_and_data_heard() {
         let mut checker = Checker::load().expect("the repository's timing files");
-        // The thesis example heard as a command: the gyroscope every 2 ms is then refused.
+        // The thesis example heard as a command: the gyroscope every 500 µs is then refused.
         assert_eq!(checker.heard(&at(0, "205#01840302")), None);
-        assert!(checker.check(&message("208#01020000")).is_some());
+        assert!(checker.check(&message("208#01F40102")).is_some());
 
         // Without the command: magnetometer-x data at medium every 900 µs teaches the same.
         let mut checker = Checker::load().expect("the repository's timing files");
-        assert_eq!(checker.check(&message("208#01020000")), None, "idle robot");
+        assert_eq!(checker.check(&message("208#01F40102")), None, "idle robot");
         checker.heard(&at(0, "208#00"));
         for k in 0..10 {
             checker.heard(&at(1_000 + k * 900, "605#00000000"));
@@ -694,7 +695,7 @@ mod tests {
         assert_eq!(known[0].1, Priority::Medium);
         assert_eq!(known[0].2, Time::from_us(900));
         assert!(known[0].3, "measured");
-        let warning = checker.check(&message("208#01020000")).expect("refused");
+        let warning = checker.check(&message("208#01F40102")).expect("refused");
         assert!(warning.contains("measured from the bus"), "{warning}");
         // A stop heard ends it.
         checker.heard(&at(20_000, "205#00"));

@@ -710,8 +710,8 @@ fn monitor_filters_names_positions_and_summarises_a_log() {
 fn send_warns_from_what_a_log_of_the_bus_shows_runs() {
     let dir = tempfile::tempdir().unwrap();
     let bus = format!("file:{}", dir.path().join("sent.log").display());
-    // On an idle robot a gyroscope every 2 ms at medium passes without a warning.
-    let (ok, _, stderr) = run(&["send", "208#01020000", "--bus", &bus]);
+    // On an idle robot a gyroscope every 500 µs at medium passes without a warning.
+    let (ok, _, stderr) = run(&["send", "208#01F40102", "--bus", &bus]);
     assert!(ok, "{stderr}");
     assert!(!stderr.contains("warning"), "{stderr}");
     // A candump -l log in which magnetometer-x data arrive at medium every 900 µs (its command was
@@ -723,7 +723,7 @@ fn send_warns_from_what_a_log_of_the_bus_shows_runs() {
     std::fs::write(&heard, lines).unwrap();
     let (ok, _, stderr) = run(&[
         "send",
-        "208#01020000",
+        "208#01F40102",
         "--bus",
         &bus,
         "--heard",
@@ -731,7 +731,7 @@ fn send_warns_from_what_a_log_of_the_bus_shows_runs() {
     ]);
     assert!(ok, "{stderr}");
     assert!(
-        stderr.contains("warning: 208#01020000: DiWheelDrive would refuse"),
+        stderr.contains("warning: 208#01F40102: DiWheelDrive would refuse"),
         "{stderr}"
     );
     assert!(

@@ -610,13 +610,13 @@ mod tests {
     fn a_request_the_robot_would_refuse_is_warned_about_from_what_was_heard() {
         let mut console =
             console().with_admission(Checker::load().expect("the repository's timing files"));
-        // On an idle robot a 2 ms gyroscope passes without a word.
+        // On an idle robot a gyroscope every 500 µs passes without a word.
         let frames = type_line(
             &mut console,
-            "publish gyroscope --every 2ms --priority medium",
+            "publish gyroscope --every 500us --priority medium",
             Duration::ZERO,
         );
-        assert_eq!(texts(&frames), ["208#01020000"]);
+        assert_eq!(texts(&frames), ["208#01F40102"]);
         assert!(!console.status.contains("warning"), "{}", console.status);
         type_line(
             &mut console,
@@ -631,10 +631,10 @@ mod tests {
         });
         let frames = type_line(
             &mut console,
-            "publish gyroscope --every 2ms --priority medium",
+            "publish gyroscope --every 500us --priority medium",
             Duration::ZERO,
         );
-        assert_eq!(texts(&frames), ["208#01020000"], "sent all the same");
+        assert_eq!(texts(&frames), ["208#01F40102"], "sent all the same");
         assert!(
             console.status.contains("DiWheelDrive would refuse"),
             "{}",
