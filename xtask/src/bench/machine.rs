@@ -503,6 +503,33 @@ mod tests {
         .unwrap()
     }
 
+    /// `board_bounds` with the traced QEMU build's figures: 8 µs of trace per job, 400 instructions unstamped
+    /// per pre-emption, and `other_code`'s tasks running a simulated device.
+    fn traced_bounds(other_code: &[(&str, &str)]) -> BoardBounds {
+        let mut bounds = board_bounds();
+        bounds.trace = Some(TraceCost {
+            feature: "task-trace".into(),
+            per_job_us: 12.0,
+            note: None,
+            qemu: Some(QemuBuild {
+                per_job_us: 8.0,
+                budget_scale: 1.0,
+                transmit: None,
+                replay: None,
+                unstamped_per_preemption: Some(UnstampedPerPreemption {
+                    instructions: 400,
+                    note: "a test".into(),
+                }),
+                other_code: other_code
+                    .iter()
+                    .map(|(t, w)| (t.to_string(), w.to_string()))
+                    .collect(),
+                note: None,
+            }),
+        });
+        bounds
+    }
+
     fn board_bounds() -> BoardBounds {
         BoardBounds {
             file: "t.wcet.json".into(),
@@ -644,24 +671,7 @@ mod tests {
     #[test]
     fn a_pre_empted_job_is_held_after_the_unstamped_records_of_what_pre_empted_it() {
         // QEMU: 8 µs of trace per job = 1000 instructions; 400 instructions unstamped per pre-emption.
-        let mut bounds = board_bounds();
-        bounds.trace = Some(TraceCost {
-            feature: "task-trace".into(),
-            per_job_us: 12.0,
-            note: None,
-            qemu: Some(QemuBuild {
-                per_job_us: 8.0,
-                budget_scale: 1.0,
-                transmit: None,
-                replay: None,
-                unstamped_per_preemption: Some(UnstampedPerPreemption {
-                    instructions: 400,
-                    note: "a test".into(),
-                }),
-                other_code: std::collections::BTreeMap::new(),
-                note: None,
-            }),
-        });
+        let mut bounds = traced_bounds(&[]);
         let pre_empted = |exec_us: f64, preemptions: u32| Job {
             exec_us,
             preemptions,
@@ -872,24 +882,7 @@ mod tests {
     #[test]
     fn a_simulated_devices_task_is_held_to_the_qemu_images_own_bound_with_its_records_in_it() {
         // can_rx runs the bxCAN model in QEMU (other_code); its release bound is 500, its QEMU image's 2 000.
-        let mut bounds = board_bounds();
-        bounds.trace = Some(TraceCost {
-            feature: "task-trace".into(),
-            per_job_us: 12.0,
-            note: None,
-            qemu: Some(QemuBuild {
-                per_job_us: 8.0,
-                budget_scale: 1.0,
-                transmit: None,
-                replay: None,
-                unstamped_per_preemption: Some(UnstampedPerPreemption {
-                    instructions: 400,
-                    note: "a test".into(),
-                }),
-                other_code: [("can_rx".to_string(), "the bxCAN model".to_string())].into(),
-                note: None,
-            }),
-        });
+        let bounds = traced_bounds(&[("can_rx", "the bxCAN model")]);
         let image = |bound: Result<u64, String>| QemuImage {
             elf: "target/qemu/firmware/t".into(),
             tasks: [("can_rx".to_string(), bound)].into(),
