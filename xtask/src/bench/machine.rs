@@ -450,8 +450,17 @@ pub fn rows_against(
             })
             .collect();
         let alone = figures.iter().filter(|f| f.2 == 0).map(|f| f.0).max();
-        let Some(&(own, observed, preemptions, unstamped, by, events, ticks, trace_allowance, dispatched)) =
-            figures.iter().max()
+        let Some(&(
+            own,
+            observed,
+            preemptions,
+            unstamped,
+            by,
+            events,
+            ticks,
+            trace_allowance,
+            dispatched,
+        )) = figures.iter().max()
         else {
             continue;
         };
@@ -735,7 +744,12 @@ mod tests {
             1,
         );
         assert_eq!(
-            (r[0].observed, r[0].preemptions, r[0].dispatched, r[0].unstamped),
+            (
+                r[0].observed,
+                r[0].preemptions,
+                r[0].dispatched,
+                r[0].unstamped
+            ),
             (at, 2, 1, handler + dispatched)
         );
         assert_eq!(r[0].alone, Some(409));

@@ -350,7 +350,9 @@ fn dispatched_tasks(root: &Path, board: &str) -> Result<u32> {
         .tasks
         .iter()
         .enumerate()
-        .filter(|(n, t)| *n < 32 && t.kind == schedule_analysis::rtic_source::RticTaskKind::Software)
+        .filter(|(n, t)| {
+            *n < 32 && t.kind == schedule_analysis::rtic_source::RticTaskKind::Software
+        })
         .fold(0, |mask, (n, _)| mask | 1 << n))
 }
 
