@@ -270,6 +270,14 @@ pub struct Job {
 /// 90 173 interrupts, 42 to 72 instructions each (42 three times, 50 for 89 970). docs/bench.md, "The QEMU tick".
 pub const QEMU_TICK_FEWEST_INSTRUCTIONS: u64 = 42;
 
+/// The most instructions a QEMU tick interrupt was seen to run beyond [`QEMU_TICK_FEWEST_INSTRUCTIONS`]: a tick that
+/// wakes a task ran 161 (single-stepped over DiWheelDrive 1-1 `hostile` and LightRing 1-2 `admission`, docs/bench.md
+/// "What the ticks leave open"), 119 more than the fewest. No record stamps a tick, and a tick inside a pre-empting
+/// run is not counted at all, so a pre-empted or ticked job whose own figure is above its bound by no more than this
+/// per tick and per pre-emption is not proved above it: it prints [`NOT_HELD`] (a measured spread, not a proven
+/// one), and a job above by more fails.
+pub const QEMU_TICK_SPREAD_INSTRUCTIONS: u64 = 161 - QEMU_TICK_FEWEST_INSTRUCTIONS;
+
 /// The fewest instructions a QEMU job's own two task records run inside its span (its start record after the clock
 /// read, its end record up to it; `amiro_firmware::tracing::{start, end, write}`, written through semihosting):
 /// single-stepped as [`QEMU_TICK_FEWEST_INSTRUCTIONS`] with `-dfilter` on `tracing::{start, end, event, emit,
@@ -481,6 +489,19 @@ pub fn rows_against(
                 } else if let Some(what) = other_code(task).filter(|_| !in_image) {
                     // The release bound never covered the simulated device's code the job runs.
                     format!("{NOT_HELD}: the QEMU build runs {what} inside it, which the release image's bound does not cover")
+                } else if qemu
+                    && own - b
+                        <= u64::from(preemptions + ticks) * QEMU_TICK_SPREAD_INSTRUCTIONS
+                {
+                    // Above by no more than the ticks inside it (counted, and one inside each pre-empting run)
+                    // may run beyond their fewest: not proved above, not held either.
+                    format!(
+                        "{NOT_HELD}: above by {} after its records, its pre-empting runs and its ticks were taken \
+                         off at their fewest, within what its {ticks} ticks and one tick inside each of its \
+                         {preemptions} pre-empting runs may run beyond their fewest ({QEMU_TICK_SPREAD_INSTRUCTIONS} \
+                         each), which no record stamps",
+                        own - b
+                    )
                 } else {
                     EXCEEDS.to_string()
                 };
@@ -754,9 +775,9 @@ mod tests {
         );
         assert_eq!(r[0].alone, Some(409));
         assert_eq!((r[0].verdict.as_str(), r[0].ratio), ("ok", Some(1.0)));
-        // One instruction more: above its bound, and it fails like a job that ran alone (no NOT HELD for a
-        // pre-empted job), however well the jobs that ran alone kept within.
-        let over = rows(
+        // One instruction more: above its bound, but by less than a tick inside each of its two pre-empting runs
+        // may run beyond its fewest: not proved above, printed and not held.
+        let within_ticks = rows(
             &bounds,
             &[(
                 "can_rx".into(),
@@ -766,9 +787,28 @@ mod tests {
             true,
             1,
         );
+        assert_eq!(within_ticks[0].own(), 501);
+        assert!(
+            within_ticks[0].verdict.starts_with(NOT_HELD),
+            "{}",
+            within_ticks[0].verdict
+        );
+        // Above by one more than that spread: it fails like a job that ran alone, however well the jobs that ran
+        // alone kept within.
+        let spread = 2 * QEMU_TICK_SPREAD_INSTRUCTIONS;
+        let over = rows(
+            &bounds,
+            &[(
+                "can_rx".into(),
+                vec![Job::alone(us(900)), pre_empted(at + spread + 1, 2, 1)],
+            )],
+            None,
+            true,
+            1,
+        );
         assert_eq!(
             (over[0].own(), over[0].alone, over[0].verdict.as_str()),
-            (501, Some(409), EXCEEDS)
+            (501 + spread, Some(409), EXCEEDS)
         );
         // The same observation with both runs a hardware task's: only the handler's part comes off twice.
         let by_handlers = rows(
@@ -782,9 +822,12 @@ mod tests {
             (by_handlers[0].unstamped, by_handlers[0].own()),
             (2 * handler, 500 + dispatched - handler)
         );
-        assert_eq!(
-            by_handlers[0].verdict,
-            if dispatched > handler { EXCEEDS } else { "ok" }
+        // 86 above: within what a tick inside each of the two runs may add beyond its fewest, so not proved above.
+        assert!(dispatched - handler <= 2 * QEMU_TICK_SPREAD_INSTRUCTIONS);
+        assert!(
+            by_handlers[0].verdict.starts_with(NOT_HELD),
+            "{}",
+            by_handlers[0].verdict
         );
         // A dispatched count above the pre-emptions (a damaged input) is not taken off more than once per run.
         let capped = rows(
@@ -981,9 +1024,19 @@ mod tests {
             (at.bound, at.image, at.verdict.as_str()),
             (Some(2000), QEMU_IMAGE, "ok")
         );
-        // One instruction more fails: no NOT HELD for a simulated device once the image has its own bound.
-        let over = held(16.344, Some(&image(Ok(2000))));
-        assert_eq!((over.own(), over.verdict.as_str()), (2001, EXCEEDS));
+        // One instruction more is within what its one tick may run beyond its fewest: not proved above.
+        let near = held(16.344, Some(&image(Ok(2000))));
+        assert_eq!(near.own(), 2001);
+        assert!(near.verdict.starts_with(NOT_HELD), "{}", near.verdict);
+        // One more than that fails: no NOT HELD for a simulated device once the image has its own bound.
+        let over = held(
+            16.344 + QEMU_TICK_SPREAD_INSTRUCTIONS as f64 * QEMU_NS_PER_INSTRUCTION / 1_000.0,
+            Some(&image(Ok(2000))),
+        );
+        assert_eq!(
+            (over.own(), over.verdict.as_str()),
+            (2001 + QEMU_TICK_SPREAD_INSTRUCTIONS, EXCEEDS)
+        );
         // The same job against the release bound, before the image was bounded: the records and the event
         // off (491 + 1 311), 198 own within 500; 2 001 + 1 802 would be NOT HELD, not failed.
         let release = held(16.336, None);
