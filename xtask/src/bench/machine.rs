@@ -490,8 +490,7 @@ pub fn rows_against(
                     // The release bound never covered the simulated device's code the job runs.
                     format!("{NOT_HELD}: the QEMU build runs {what} inside it, which the release image's bound does not cover")
                 } else if qemu
-                    && own - b
-                        <= u64::from(preemptions + ticks) * QEMU_TICK_SPREAD_INSTRUCTIONS
+                    && own - b <= u64::from(preemptions + ticks) * QEMU_TICK_SPREAD_INSTRUCTIONS
                 {
                     // Above by no more than the ticks inside it (counted, and one inside each pre-empting run)
                     // may run beyond their fewest: not proved above, not held either.
