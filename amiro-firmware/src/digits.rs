@@ -1,6 +1,5 @@
-//! Decimal and hex digits without `core::fmt` (a board's flash budget has no room for it, and the
-//! execution-time analysis finds no bound for its loops): a leaf every layer may use, the QEMU
-//! platform's frame lines and the logs alike.
+//! Decimal and hex digits without `core::fmt` (a board's flash budget has no room for it): a leaf
+//! every layer may use, the QEMU platform's frame lines and the logs alike.
 
 /// `value` in decimal, into `buffer`.
 pub fn decimal(value: u32, buffer: &mut [u8; 10]) -> &str {
