@@ -47,7 +47,7 @@
 //! time: the run stays deterministic. No tickless reading goes below the one before (QEMU updates
 //! SysTick lazily around a wrap: a reading there can come out a little early).
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use portable_atomic::AtomicU64;
 
@@ -110,11 +110,90 @@ static CLOCK: Mutex<RefCell<Clock>> = Mutex::new(RefCell::new(Clock {
 /// figures were measured with that count).
 static PERIODIC: AtomicU64 = AtomicU64::new(0);
 /// The apps' earliest deadline in ticks (`u64::MAX`: none).
-static APP_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
+static APP_DUE: Due = Due::new(u64::MAX);
 /// The platform's earliest deadline in ticks (`u64::MAX`: none).
-static PLATFORM_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
+static PLATFORM_DUE: Due = Due::new(u64::MAX);
 static TICKLESS: AtomicBool = AtomicBool::new(false);
 const PER_TICK: u32 = CYCLES_PER_TICK as u32;
+
+/// A queue's earliest deadline in ticks, as two words that are read and written without masking
+/// interrupts (a `portable_atomic::AtomicU64` masks them for every access, and in QEMU every
+/// `cpsid` and every `msr primask` leaves the translated code: the deadlines' loads and stores were
+/// 60 000 of DiWheelDrive's 237 000 critical sections per virtual second in the thesis demo,
+/// docs/qemu.md "Critical sections"). Only SysTick's interrupt writes it (the timer queues'
+/// `set_compare` and `disable_timer`, from `on_monotonic_interrupt`), and nothing that reads it can
+/// pre-empt that interrupt (the highest priority), so every store is whole to every reader; a
+/// reader that the interrupt pre-empts between its two word loads reads again until two readings
+/// agree, and two agreeing readings are a value the deadline had.
+struct Due {
+    low: AtomicU32,
+    high: AtomicU32,
+}
+
+impl Due {
+    const fn new(ticks: u64) -> Self {
+        Self {
+            low: AtomicU32::new(ticks as u32),
+            high: AtomicU32::new((ticks >> 32) as u32),
+        }
+    }
+
+    /// Only from SysTick's interrupt (or before interrupts are enabled).
+    fn store(&self, ticks: u64, order: Ordering) {
+        self.low.store(ticks as u32, order);
+        self.high.store((ticks >> 32) as u32, order);
+    }
+
+    fn read(&self, order: Ordering) -> u64 {
+        u64::from(self.low.load(order)) | u64::from(self.high.load(order)) << 32
+    }
+
+    fn load(&self, order: Ordering) -> u64 {
+        let mut ticks = self.read(order);
+        loop {
+            let again = self.read(order);
+            if again == ticks {
+                return ticks;
+            }
+            ticks = again;
+        }
+    }
+}
+
+/// Whether nothing that touches the clock can pre-empt the caller: interrupts are masked
+/// (PRIMASK), or the caller is SysTick's interrupt, which has the highest priority (SysTick's
+/// reset priority, 0, which nothing changes; the apps' interrupts sit below it) and is the only
+/// exception that changes the clock. Read with `mrs`, which QEMU runs in the translated code.
+#[cfg(target_arch = "arm")]
+fn unpreempted() -> bool {
+    let ipsr: u32;
+    // SAFETY: reads the interrupt program status register; no side effect.
+    unsafe {
+        core::arch::asm!("mrs {}, IPSR", out(reg) ipsr, options(nomem, nostack, preserves_flags));
+    }
+    ipsr & 0x1FF == 15 || cortex_m::register::primask::read().is_inactive()
+}
+
+/// No ARM core (a host check): always mask.
+#[cfg(not(target_arch = "arm"))]
+fn unpreempted() -> bool {
+    false
+}
+
+/// Runs `f` on the clock, with interrupts masked unless nothing that touches the clock can
+/// pre-empt the caller anyway ([`unpreempted`]). Under QEMU a critical section costs two trips out
+/// of the translated code (`cpsid i` and `msr primask` each end the translation block and return to
+/// QEMU's execution loop); most clock readings are taken in SysTick's interrupt (rtic-time's expiry
+/// checks) or inside another critical section (the trace's stamps), where the mask changes nothing.
+fn with_clock<R>(f: impl FnOnce(CriticalSection<'_>, &mut Clock) -> R) -> R {
+    if unpreempted() {
+        // SAFETY: nothing that touches `CLOCK` can run until `f` returns (`unpreempted`), which is
+        // what the critical section would ensure; the token does not leave `f`.
+        let cs = unsafe { CriticalSection::new() };
+        return f(cs, &mut CLOCK.borrow_ref_mut(cs));
+    }
+    critical_section::with(|cs| f(cs, &mut CLOCK.borrow_ref_mut(cs)))
+}
 
 /// SysTick's status (CSR) and current value (CVR), read by one instruction: a load of CSR, RVR and
 /// CVR together (`ldm`). Under `-icount` every device access in the middle of a translation block
@@ -209,8 +288,7 @@ pub fn now_cycles() -> u64 {
             }
         }
     }
-    critical_section::with(|cs| {
-        let clock = &mut *CLOCK.borrow_ref_mut(cs);
+    with_clock(|cs, clock| {
         let (tick, into) = position(cs, clock);
         let now = (tick * CYCLES_PER_TICK + u64::from(into)).max(clock.last_cycles);
         clock.last_cycles = now;
@@ -231,8 +309,7 @@ pub fn now_ticks() -> u64 {
 
 /// Tickless: ticks since the clock started, read from SysTick.
 fn read_ticks() -> u64 {
-    critical_section::with(|cs| {
-        let clock = &mut *CLOCK.borrow_ref_mut(cs);
+    with_clock(|cs, clock| {
         let tick = position(cs, clock).0.max(clock.last_tick);
         clock.last_tick = tick;
         tick
@@ -477,8 +554,7 @@ pub(super) fn skip_to_deadline() -> bool {
     if due == u64::MAX {
         return false;
     }
-    critical_section::with(|cs| {
-        let clock = &mut *CLOCK.borrow_ref_mut(cs);
+    with_clock(|cs, clock| {
         let (tick, into) = position(cs, clock);
         let now = tick * CYCLES_PER_TICK + u64::from(into);
         let target = due.saturating_mul(CYCLES_PER_TICK);
@@ -536,6 +612,6 @@ unsafe extern "C" fn SysTick() {
     // A core left idle by this interrupt goes to its next deadline at once (`skip_to_deadline`):
     // SysTick need not be set up for it (a restart costs QEMU a timer expiry).
     if !super::robot::idle_after_systick() {
-        critical_section::with(|cs| restart(cs, &mut CLOCK.borrow_ref_mut(cs)));
+        with_clock(restart);
     }
 }
