@@ -148,6 +148,7 @@ impl Due {
         u64::from(self.low.load(order)) | u64::from(self.high.load(order)) << 32
     }
 
+    /// Where the caller may be pre-empted by SysTick's interrupt (the exchange's report).
     fn load(&self, order: Ordering) -> u64 {
         let mut ticks = self.read(order);
         loop {
@@ -158,6 +159,12 @@ impl Due {
             ticks = again;
         }
     }
+
+    /// Where SysTick's interrupt cannot run: in it, or with interrupts masked (the token: a
+    /// critical section, or [`with_clock`]'s where nothing pre-empts), so one reading is whole.
+    fn get(&self, _cs: CriticalSection<'_>) -> u64 {
+        self.read(Ordering::Relaxed)
+    }
 }
 
 /// Whether nothing that touches the clock can pre-empt the caller: interrupts are masked
@@ -165,6 +172,7 @@ impl Due {
 /// reset priority, 0, which nothing changes; the apps' interrupts sit below it) and is the only
 /// exception that changes the clock. Read with `mrs`, which QEMU runs in the translated code.
 #[cfg(target_arch = "arm")]
+#[inline(always)]
 fn unpreempted() -> bool {
     let ipsr: u32;
     // SAFETY: reads the interrupt program status register; no side effect.
@@ -185,6 +193,7 @@ fn unpreempted() -> bool {
 /// of the translated code (`cpsid i` and `msr primask` each end the translation block and return to
 /// QEMU's execution loop); most clock readings are taken in SysTick's interrupt (rtic-time's expiry
 /// checks) or inside another critical section (the trace's stamps), where the mask changes nothing.
+#[inline(always)]
 fn with_clock<R>(f: impl FnOnce(CriticalSection<'_>, &mut Clock) -> R) -> R {
     if unpreempted() {
         // SAFETY: nothing that touches `CLOCK` can run until `f` returns (`unpreempted`), which is
@@ -309,11 +318,14 @@ pub fn now_ticks() -> u64 {
 
 /// Tickless: ticks since the clock started, read from SysTick.
 fn read_ticks() -> u64 {
-    with_clock(|cs, clock| {
-        let tick = position(cs, clock).0.max(clock.last_tick);
-        clock.last_tick = tick;
-        tick
-    })
+    with_clock(ticks_at)
+}
+
+/// The tick count where nothing pre-empts the caller (the token).
+fn ticks_at(cs: CriticalSection<'_>, clock: &mut Clock) -> u64 {
+    let tick = position(cs, clock).0.max(clock.last_tick);
+    clock.last_tick = tick;
+    tick
 }
 
 /// Makes SysTick interrupt only when a deadline is due (robot runs); takes effect at once.
@@ -359,9 +371,7 @@ const KEEP_PERIOD: u64 = 3 * CYCLES_PER_TICK;
 /// does. In the thesis demo this saves about a quarter of DiWheelDrive's restarts.
 fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     let (tick, into) = position(cs, clock);
-    let due = APP_DUE
-        .load(Ordering::Relaxed)
-        .min(PLATFORM_DUE.load(Ordering::Relaxed));
+    let due = APP_DUE.get(cs).min(PLATFORM_DUE.get(cs));
     if due == clock.armed {
         return;
     }
@@ -400,7 +410,7 @@ fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     clock.next_armed = NOT_ARMED;
     clock.may_keep = false;
     if period <= MAX_PERIOD {
-        set_up_next(clock, due);
+        set_up_next(cs, clock, due);
     }
 }
 
@@ -438,10 +448,8 @@ fn keep_until(clock: &mut Clock, now: u64, due: u64) -> bool {
 /// cost QEMU a reload expiry). SysTick takes a new reload at its next wrap; the counter must have
 /// reloaded from the restart first (a cycle after it: it reads non-zero then), else nothing is set
 /// up and the wrap restarts as before.
-fn set_up_next(clock: &mut Clock, due: u64) {
-    let second = APP_DUE
-        .load(Ordering::Relaxed)
-        .max(PLATFORM_DUE.load(Ordering::Relaxed));
+fn set_up_next(cs: CriticalSection<'_>, clock: &mut Clock, due: u64) {
+    let second = APP_DUE.get(cs).max(PLATFORM_DUE.get(cs));
     if second == u64::MAX || second <= due {
         return;
     }
@@ -548,13 +556,15 @@ pub(super) fn skip_to_deadline() -> bool {
     if !TICKLESS.load(Ordering::Relaxed) || !super::robot::nothing_else_pending() {
         return false;
     }
-    let due = APP_DUE
-        .load(Ordering::Relaxed)
-        .min(PLATFORM_DUE.load(Ordering::Relaxed));
+    // SAFETY: called with interrupts masked: nothing touches the clock or the deadlines until it
+    // returns.
+    let cs = unsafe { CriticalSection::new() };
+    let due = APP_DUE.get(cs).min(PLATFORM_DUE.get(cs));
     if due == u64::MAX {
         return false;
     }
-    with_clock(|cs, clock| {
+    {
+        let clock = &mut *CLOCK.borrow_ref_mut(cs);
         let (tick, into) = position(cs, clock);
         let now = tick * CYCLES_PER_TICK + u64::from(into);
         let target = due.saturating_mul(CYCLES_PER_TICK);
@@ -570,7 +580,7 @@ pub(super) fn skip_to_deadline() -> bool {
         clock.armed = NOT_ARMED;
         clock.next_armed = NOT_ARMED;
         clock.may_keep = false;
-    });
+    }
     cortex_m::peripheral::SCB::set_pendst();
     true
 }
@@ -596,15 +606,16 @@ unsafe extern "C" fn SysTick() {
         unsafe { run_queues() };
         return;
     }
+    // SAFETY: SysTick's interrupt, the highest priority: nothing that touches the clock or the
+    // deadlines pre-empts it (`unpreempted`), which is all the clock's critical sections ensure.
+    let cs = unsafe { CriticalSection::new() };
     // A deadline that came while the queues ran is expired in this interrupt too (module docs,
     // "No held reading").
     loop {
         // SAFETY: this is the SysTick exception.
         unsafe { run_queues() };
-        let now = read_ticks();
-        let due = APP_DUE
-            .load(Ordering::Relaxed)
-            .min(PLATFORM_DUE.load(Ordering::Relaxed));
+        let now = ticks_at(cs, &mut CLOCK.borrow_ref_mut(cs));
+        let due = APP_DUE.get(cs).min(PLATFORM_DUE.get(cs));
         if due > now {
             break;
         }
@@ -612,6 +623,6 @@ unsafe extern "C" fn SysTick() {
     // A core left idle by this interrupt goes to its next deadline at once (`skip_to_deadline`):
     // SysTick need not be set up for it (a restart costs QEMU a timer expiry).
     if !super::robot::idle_after_systick() {
-        with_clock(restart);
+        restart(cs, &mut CLOCK.borrow_ref_mut(cs));
     }
 }
