@@ -68,8 +68,9 @@ pub fn init(syst: cortex_m::peripheral::SYST) {
     can::init();
     // A robot run's boards write no `trace.bin`: nothing reads it there (the robot's checks read
     // the bus log and the console's `# T` lines), and each record was a semihosting write into a
-    // file, 5-6 per exchange on DiWheelDrive in the thesis demo (docs/qemu.md, "Speed"). The
-    // records are still encoded; `write_trace_file` reports them not written.
+    // file, 5-6 per exchange on DiWheelDrive in the thesis demo (docs/qemu.md, "Speed"). Nor are
+    // they stamped or encoded (`tracing::write` asks `writes_trace_file`): a stamp is a clock
+    // reading, a trip out of QEMU's translated code, for a record nothing keeps.
     if robot::connect() {
         return;
     }
@@ -81,6 +82,11 @@ pub fn init(syst: cortex_m::peripheral::SYST) {
 /// The host file the trace records go to (`usize::MAX`: none).
 static TRACE_FILE: core::sync::atomic::AtomicUsize =
     core::sync::atomic::AtomicUsize::new(usize::MAX);
+
+/// Whether trace records go anywhere (`trace.bin`: single-board runs; a robot run's do not).
+pub fn writes_trace_file() -> bool {
+    TRACE_FILE.load(Ordering::Relaxed) != usize::MAX
+}
 
 /// Writes trace record bytes to `trace.bin` (the QEMU build's trace channel); `false` if not all.
 pub fn write_trace_file(bytes: &[u8]) -> bool {
