@@ -479,7 +479,7 @@ fn set_up_next(cs: CriticalSection<'_>, clock: &mut Clock, due: u64) {
 /// A timer queue over the tick count whose next expiry is the word `$due` (the tick interrupt reads
 /// it): the two backends differ only in their queue and that word.
 macro_rules! tick_backend {
-    ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident) => {
+    ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident, $asked:ident) => {
         $(#[$doc])*
         pub struct $backend;
 
@@ -499,6 +499,7 @@ macro_rules! tick_backend {
             fn clear_compare_flag() {}
 
             fn pend_interrupt() {
+                $asked.store(true, Ordering::Relaxed);
                 cortex_m::peripheral::SCB::set_pendst();
             }
 
@@ -521,14 +522,23 @@ tick_backend!(
     /// The apps' timer queue over the tick count.
     AppTimer,
     APP_QUEUE,
-    APP_DUE
+    APP_DUE,
+    APP_ASKED
 );
 tick_backend!(
     /// The platform's timer queue (the robot exchange, the stimulus replay) over the tick count.
     PlatformTimer,
     PLATFORM_QUEUE,
-    PLATFORM_DUE
+    PLATFORM_DUE,
+    PLATFORM_ASKED
 );
+
+/// A queue's head changed since SysTick's interrupt last ran its expiries (rtic-time pends the
+/// interrupt for it): the tickless interrupt runs a queue's expiries only then or when its deadline
+/// has come, as nothing else changes what they would find. Set at a lower priority, cleared by the
+/// interrupt, which nothing that sets them pre-empts.
+static APP_ASKED: AtomicBool = AtomicBool::new(false);
+static PLATFORM_ASKED: AtomicBool = AtomicBool::new(false);
 
 /// Waits on the platform's queue until tick `at` (no trace record: the platform's wait, not a
 /// task of the app's).
@@ -619,10 +629,21 @@ unsafe extern "C" fn SysTick() {
     let cs = unsafe { CriticalSection::new() };
     // A deadline that came while the queues ran is expired in this interrupt too (module docs,
     // "No held reading").
+    // A queue whose head did not change and whose deadline has not come is left alone: its expiry
+    // check would read the clock twice and take rtic-time's critical section to find nothing.
+    let mut now = ticks_at(cs, &mut CLOCK.borrow_ref_mut(cs));
     loop {
-        // SAFETY: this is the SysTick exception.
-        unsafe { run_queues() };
-        let now = ticks_at(cs, &mut CLOCK.borrow_ref_mut(cs));
+        if PLATFORM_ASKED.load(Ordering::Relaxed) || PLATFORM_DUE.get(cs) <= now {
+            PLATFORM_ASKED.store(false, Ordering::Relaxed);
+            // SAFETY: this is the SysTick exception.
+            unsafe { PLATFORM_QUEUE.on_monotonic_interrupt() };
+        }
+        if APP_ASKED.load(Ordering::Relaxed) || APP_DUE.get(cs) <= now {
+            APP_ASKED.store(false, Ordering::Relaxed);
+            // SAFETY: this is the SysTick exception.
+            unsafe { APP_QUEUE.on_monotonic_interrupt() };
+        }
+        now = ticks_at(cs, &mut CLOCK.borrow_ref_mut(cs));
         let due = APP_DUE.get(cs).min(PLATFORM_DUE.get(cs));
         if due > now {
             break;
