@@ -42,7 +42,7 @@
 //! touches it can pre-empt the caller ([`with_clock`]: SysTick's own interrupt, the highest
 //! priority, or code that already masked them), and the queues' deadlines are two plain words that
 //! only SysTick's interrupt writes ([`Due`]). DiWheelDrive's critical sections in the thesis demo
-//! fell from 237 000 to 93 000 per virtual second (docs/qemu.md, "Critical sections").
+//! fell from 237 000 to 82 000 per virtual second (docs/qemu.md, "Critical sections and dropped records").
 //!
 //! Periodic, the tick count is one per wrap (COUNTFLAG, as rtic-monotonics' SysTick counts it: the
 //! cheapest reading, which the scenarios' cost figures were measured with). Tickless, the clock is
@@ -128,7 +128,7 @@ const PER_TICK: u32 = CYCLES_PER_TICK as u32;
 /// interrupts (a `portable_atomic::AtomicU64` masks them for every access, and in QEMU every
 /// `cpsid` and every `msr primask` leaves the translated code: the deadlines' loads and stores were
 /// 60 000 of DiWheelDrive's 237 000 critical sections per virtual second in the thesis demo,
-/// docs/qemu.md "Critical sections"). Only SysTick's interrupt writes it (the timer queues'
+/// docs/qemu.md "Critical sections and dropped records"). Only SysTick's interrupt writes it (the timer queues'
 /// `set_compare` and `disable_timer`, from `on_monotonic_interrupt`), and nothing that reads it can
 /// pre-empt that interrupt (the highest priority), so every store is whole to every reader; a
 /// reader that the interrupt pre-empts between its two word loads reads again until two readings
