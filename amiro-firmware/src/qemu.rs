@@ -241,12 +241,12 @@ pub struct Signals;
 impl SystemSignals for Signals {
     fn release_sync(&mut self) {
         robot::drive_sync(false);
-        hprintln!("# qemu: SYS_SYNC_N released");
+        print_line("# qemu: SYS_SYNC_N released");
     }
 
     fn pull_sync_low(&mut self) {
         robot::drive_sync(true);
-        hprintln!("# qemu: SYS_SYNC_N pulled low");
+        print_line("# qemu: SYS_SYNC_N pulled low");
     }
 
     fn shutdown_requested(&self) -> bool {
@@ -352,6 +352,20 @@ pub fn finish(why: &str) {
 pub fn print_line(line: &str) {
     critical_section::with(|_| {
         console_write(line.as_bytes());
+        console_write(b"\n");
+    });
+}
+
+/// Prints one line of three parts (`before`, `value`, `after`: a number between two texts), under
+/// one critical section so no other line splits it, without `core::fmt` and without a buffer: each
+/// part written as it is, by direct calls (a receive interrupt's control-frame line; its
+/// execution-time bound follows every call, where `print_line_pieces`' sink is a call through a
+/// register).
+pub fn print_line_around(before: &[u8], value: &[u8], after: &[u8]) {
+    critical_section::with(|_| {
+        console_write(before);
+        console_write(value);
+        console_write(after);
         console_write(b"\n");
     });
 }

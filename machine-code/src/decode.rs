@@ -53,7 +53,7 @@ pub enum Flow {
     IndirectJump,
     /// A table branch (`TBB`/`TBH [PC, Rm]`): the table follows the instruction.
     Table { halfwords: bool, index: u8 },
-    /// A trap that ends the path (`UDF`, `BKPT`).
+    /// A trap that ends the path (`UDF`, `BKPT` other than a semihosting call's).
     Stop,
 }
 
@@ -226,6 +226,11 @@ impl Insn {
         })
     }
 
+    /// Whether it is a semihosting call: `BKPT #0xAB` (Thumb encoding `0xBEAB`).
+    pub fn is_semihosting(&self) -> bool {
+        self.inst.opcode == Opcode::BKPT && self.len == 2 && self.raw[0] == 0xbeab
+    }
+
     /// Where control goes after it.
     pub fn flow(&self) -> Flow {
         let ops = &self.inst.operands;
@@ -247,6 +252,10 @@ impl Insn {
                 halfwords: self.raw[1] & 0x10 != 0,
                 index: (self.raw[1] & 0xf) as u8,
             },
+            // A semihosting call (`BKPT #0xAB`, the ARMv7-M semihosting specification): the
+            // debugger or QEMU performs it and the program goes on after it, its result in r0
+            // (the QEMU builds' console and trace writes). Any other breakpoint stops the core.
+            Opcode::BKPT if self.is_semihosting() => Flow::Next,
             Opcode::UDF | Opcode::BKPT => Flow::Stop,
             Opcode::POP => match ops[0] {
                 Operand::RegList(list) if list & (1 << PC) != 0 => Flow::Return,
@@ -458,8 +467,14 @@ impl Insn {
         match self.inst.opcode {
             MCR(..) | MCRR(..) | CDP(..) | STC(..) | STCL(..) => {}
             CMP | CMN | TST | TEQ | IT | B | CBZ | CBNZ | NOP | DMB | DSB | ISB | WFI | WFE
-            | SEV | YIELD | CPS(_) | CPS_modeonly | UDF | BKPT | SVC | MSR | TBB | TBH | PLD
-            | PLI | CLREX | HINT | DBG => {}
+            | SEV | YIELD | CPS(_) | CPS_modeonly | UDF | SVC | MSR | TBB | TBH | PLD | PLI
+            | CLREX | HINT | DBG => {}
+            // A semihosting call's result is in r0.
+            BKPT => {
+                if self.is_semihosting() {
+                    out.insert(0);
+                }
+            }
             STR | STRB | STRH | STRD | STRT | STRBT | STRHT | STM(..) => {}
             PUSH => out.insert(SP),
             STREX | STREXB | STREXH => {

@@ -56,6 +56,10 @@ pub struct Image {
     /// The named data objects (`static`s, vtables): their address and size by demangled name
     /// without the hash and by symbol.
     objects: BTreeMap<String, (u64, u64)>,
+    /// Every function symbol's start, by demangled name without the hash and by symbol: the names
+    /// of functions the linker folded into one (identical code, one address) too, of which
+    /// [`Function::name`] keeps the first.
+    aliases: BTreeMap<String, BTreeSet<u64>>,
     /// The contents of the allocated sections with file data (address, bytes): flash, and the
     /// initial values of RAM.
     sections: Vec<(u64, Vec<u8>)>,
@@ -112,12 +116,16 @@ impl Image {
             .map(|(k, &(at, _))| (at, marks.get(k + 1).map_or(u64::MAX, |&(next, _)| next)))
             .collect();
         let mut functions = BTreeMap::new();
+        let mut aliases: BTreeMap<String, BTreeSet<u64>> = BTreeMap::new();
         for symbol in file.symbols() {
             if symbol.kind() != SymbolKind::Text || symbol.size() == 0 {
                 continue;
             }
             let Ok(raw) = symbol.name() else { continue };
             let start = symbol.address() & !1;
+            let demangled = format!("{:#}", rustc_demangle::demangle(raw));
+            aliases.entry(demangled).or_default().insert(start);
+            aliases.entry(raw.to_string()).or_default().insert(start);
             if functions.contains_key(&start) {
                 continue;
             }
@@ -191,6 +199,7 @@ impl Image {
             vectors,
             address_taken,
             objects,
+            aliases,
             sections,
             lines: line_table(&file),
         })
@@ -203,6 +212,18 @@ impl Image {
             .values()
             .find(|f| f.name == name || f.symbol == name)
             .ok_or_else(|| Error::MissingSymbol(name.to_string()))
+    }
+
+    /// The starts of every function a symbol named `name` (demangled without hash, or the symbol)
+    /// names: the functions of that name and those the linker folded one of that name into.
+    pub fn starts_named(&self, name: &str) -> BTreeSet<u64> {
+        self.aliases
+            .get(name)
+            .into_iter()
+            .flatten()
+            .copied()
+            .filter(|at| self.functions.contains_key(at))
+            .collect()
     }
 
     /// The address and size of the data object named `name` (demangled without hash, or its

@@ -17,11 +17,11 @@
 //! | `02 mm` | the gauges in mask `mm` (1 front, 2 rear) report a critically low battery |
 //! | `03 vv vv pp` | VSYS = `vvvv` mV (u16 little-endian), power plug in if `pp` ≠ 0 |
 use crate::Board;
-use core::fmt::Write as _;
 use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
 
+use amiro_firmware::digits;
 use amiro_firmware::mono::Clock as _;
-use amiro_firmware::qemu::robot;
+use amiro_firmware::qemu::{print_line, print_line_around, robot};
 use amiro_firmware::signals::SystemSignals as SystemSignalLines;
 use amiro_sensors::drivers::bq27500::{self, cmd, Flags};
 use amiro_sensors::drivers::pca9544a;
@@ -57,37 +57,56 @@ static CHARGING: AtomicBool = AtomicBool::new(false);
 /// When this board drove SYS_PD_N low (µs + 1; 0 = not yet).
 static PD_DRIVEN_AT: AtomicU32 = AtomicU32::new(0);
 
-fn print(args: core::fmt::Arguments<'_>) {
-    let mut line: heapless::String<96> = heapless::String::new();
-    let _ = line.write_fmt(args);
-    amiro_firmware::qemu::print_line(&line);
-}
-
 /// The virtual receive FIFO, with the QEMU-only control frames taken out for `apply_control`.
 pub type CanRxPort = amiro_firmware::qemu::ControlledRxPort;
 
+///
+/// Runs in the receive interrupt, whose bound the traced QEMU image's own analysis states
+/// (docs/bench.md): its lines are printed in parts without `core::fmt` (whose loops over a
+/// format's pieces have no bound the analysis can state), the numbers by `amiro_firmware::digits`'
+/// loop-free helpers; the text is what `format!` would print (`{sensor}`, `{mask:#x}`, `{mv}`,
+/// `{data:02X?}`), which the scenarios read.
 fn apply_control(data: &[u8]) {
     match *data {
         [1, sensor, ..] if usize::from(sensor) < WIRING.len() => {
             DEAD_SENSORS.fetch_or(1 << sensor, Ordering::SeqCst);
-            print(format_args!("# qemu: ring sensor {sensor} stops answering"));
+            let mut buffer = [0; 5];
+            let sensor = digits::decimal_u16(u16::from(sensor), &mut buffer);
+            print_line_around(b"# qemu: ring sensor ", sensor, b" stops answering");
         }
         [2, mask, ..] => {
             CRITICAL_GAUGES.store(mask & 3, Ordering::SeqCst);
-            print(format_args!(
-                "# qemu: gauges {mask:#x} report a critically low battery"
-            ));
+            let mut buffer = [0; 2];
+            let mask = digits::hex_u8(mask, false, &mut buffer);
+            print_line_around(
+                b"# qemu: gauges 0x",
+                mask,
+                b" report a critically low battery",
+            );
         }
         [3, low, high, plug, ..] => {
-            let mv = u32::from(u16::from_le_bytes([low, high]));
-            VSYS_MV.store(mv, Ordering::SeqCst);
+            let mv = u16::from_le_bytes([low, high]);
+            VSYS_MV.store(u32::from(mv), Ordering::SeqCst);
             PLUG.store(plug != 0, Ordering::SeqCst);
-            print(format_args!(
-                "# qemu: VSYS {mv} mV, plug {}",
-                if plug != 0 { "in" } else { "out" }
-            ));
+            let mut buffer = [0; 5];
+            let mv = digits::decimal_u16(mv, &mut buffer);
+            let plug: &[u8] = if plug != 0 {
+                b" mV, plug in"
+            } else {
+                b" mV, plug out"
+            };
+            print_line_around(b"# qemu: VSYS ", mv, plug);
         }
-        _ => print(format_args!("# qemu: unknown control frame {data:02X?}")),
+        _ => {
+            // ", XX" per data byte (a frame has at most 8), the first one's ", " left out.
+            let mut bytes = [0u8; 32];
+            for (text, &byte) in bytes.chunks_exact_mut(4).zip(data) {
+                let [high, low] = digits::hex_byte(byte, true);
+                text.copy_from_slice(&[b',', b' ', high, low]);
+            }
+            let bytes = bytes.get(2..4 * data.len()).unwrap_or(&[]);
+            print_line_around(b"# qemu: unknown control frame [", bytes, b"]");
+        }
     }
 }
 
@@ -196,22 +215,14 @@ impl Charger {
     }
 
     /// Enables or disables both chargers (printed).
-    ///
-    /// Not inlined: its line's formatting stores a `Display` function's address as data, which in
-    /// a dispatcher that builds wakers the execution-time bound would take for a waker's target
-    /// (`machine_code::wcet::stored`; docs/bench.md, "The traced QEMU image's own bound").
-    #[inline(never)]
     pub fn set_enabled(&mut self, on: bool) {
         self.enabled = on;
         CHARGING.store(on && PLUG.load(Ordering::SeqCst), Ordering::SeqCst);
-        print(format_args!(
-            "# qemu: chargers {}",
-            if on {
-                "enabled (EN1_N, EN2_N low)"
-            } else {
-                "disabled"
-            }
-        ));
+        print_line(if on {
+            "# qemu: chargers enabled (EN1_N, EN2_N low)"
+        } else {
+            "# qemu: chargers disabled"
+        });
     }
 
     /// The plug, the enables and the chargers' status pins (charging while enabled and plugged).
@@ -262,7 +273,7 @@ impl SystemSignals {
         let now = Clock::now_us();
         PD_DRIVEN_AT.store(now as u32 + 1, Ordering::SeqCst);
         amiro_firmware::qemu::robot::drive_power_down();
-        amiro_firmware::qemu::print_line("# qemu: SYS_PD_N driven low");
+        print_line("# qemu: SYS_PD_N driven low");
     }
 }
 
@@ -299,15 +310,12 @@ pub fn start_monotonic(_priority: u8) {}
 /// The safe state: chargers off (printed).
 pub fn chargers_off() {
     CHARGING.store(false, Ordering::SeqCst);
-    amiro_firmware::qemu::print_line("# qemu: safe state: chargers off");
+    print_line("# qemu: safe state: chargers off");
 }
 
 /// RTC_BKP0R byte 0 (printed: QEMU's STM32F405 has no RTC backup domain).
-///
-/// Not inlined: its line's formatting stores a `Display` function's address as data, which in a
-/// dispatcher that builds wakers the execution-time bound would take for a waker's target
-/// (`machine_code::wcet::stored`; docs/bench.md, "The traced QEMU image's own bound").
-#[inline(never)]
 pub fn write_shutdown_reason(reason: u8) {
-    print(format_args!("# qemu: RTC_BKP0R byte 0 = {reason}"));
+    let mut buffer = [0; 5];
+    let reason = digits::decimal_u16(u16::from(reason), &mut buffer);
+    print_line_around(b"# qemu: RTC_BKP0R byte 0 = ", reason, b"");
 }

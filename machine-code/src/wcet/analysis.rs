@@ -66,7 +66,7 @@ pub(super) struct Analysis<'a> {
     image: &'a Image,
     chip: Chip,
     bounds: &'a BoundsFile,
-    known: BTreeMap<(u64, Args), Result<Summary, String>>,
+    known: BTreeMap<(u64, Args, Option<Site>), Result<Summary, String>>,
     returns: BTreeMap<u64, bool>,
     open: Vec<u64>,
     /// Functions no path of the job calls (by name, [`super::topics`]): a call of one, and the
@@ -74,6 +74,19 @@ pub(super) struct Analysis<'a> {
     excluded: BTreeSet<String>,
     /// Whether a function has a way to its return with the excluded calls left out.
     feasible: BTreeMap<u64, bool>,
+}
+
+/// Where a machine-outlined helper (`OUTLINED_FUNCTION_n`) is called from: the calling function's
+/// name and the call's file and line. The helper's code has no line of its own (the outliner moved
+/// it out of its callers and the line table keeps none for it), so a call through a register in it
+/// is keyed at this place in the bounds file's `indirect` section ([`Analysis::bound_graph`]); each
+/// call site of a helper is its own key, as its register holds what that caller loaded.
+pub(super) type Site = (String, String, u32);
+
+/// Whether `f` is a helper of LLVM's machine outliner: code the compiler moved out of its callers,
+/// without a line of its own and following no calling convention.
+fn is_outlined(f: &Function) -> bool {
+    f.name.starts_with("OUTLINED_FUNCTION_")
 }
 
 /// How a declined length names the call that passes it.
@@ -232,12 +245,18 @@ impl<'a> Analysis<'a> {
     /// The summary of the function at `at`: `Err(Error)` for an image that cannot be analysed,
     /// `Ok(Err(reason))` for a declined bound.
     pub(super) fn summary(&mut self, at: u64) -> Result<Result<Summary, String>, Error> {
-        self.summary_with(at, NO_ARGS)
+        self.summary_with(at, NO_ARGS, None)
     }
 
-    /// [`Self::summary`] of a call whose argument registers are bounded by `args` ([`length`]).
-    fn summary_with(&mut self, at: u64, args: Args) -> Result<Result<Summary, String>, Error> {
-        if let Some(known) = self.known.get(&(at, args)) {
+    /// [`Self::summary`] of a call whose argument registers are bounded by `args` ([`length`]);
+    /// for an outlined helper, called from `site` ([`Site`]).
+    fn summary_with(
+        &mut self,
+        at: u64,
+        args: Args,
+        site: Option<Site>,
+    ) -> Result<Result<Summary, String>, Error> {
+        if let Some(known) = self.known.get(&(at, args, site.clone())) {
             return Ok(known.clone());
         }
         if self.open.contains(&at) {
@@ -253,19 +272,24 @@ impl<'a> Analysis<'a> {
             Error::Other(format!("a call to {at:#010x}, where no function starts"))
         })?;
         self.open.push(at);
-        let outcome = self.work_out(f, args);
+        let outcome = self.work_out(f, args, site.as_ref());
         self.open.pop();
         let outcome = outcome?;
-        self.known.insert((at, args), outcome.clone());
+        self.known.insert((at, args, site), outcome.clone());
         Ok(outcome)
     }
 
-    fn work_out(&mut self, f: &'a Function, args: Args) -> Result<Result<Summary, String>, Error> {
+    fn work_out(
+        &mut self,
+        f: &'a Function,
+        args: Args,
+        site: Option<&Site>,
+    ) -> Result<Result<Summary, String>, Error> {
         let graph = match self.graph(f)? {
             Ok(graph) => graph,
             Err(reason) => return Ok(Err(reason)),
         };
-        self.bound_graph(f, graph, args)
+        self.bound_graph(f, graph, args, site)
     }
 
     /// The control-flow graph of `f` as the bound reads it: the blocks after a call of a function
@@ -372,18 +396,21 @@ impl<'a> Analysis<'a> {
         })?;
         match self.polled_graph(at, task, others)? {
             None => self.summary(at),
-            Some(Ok(graph)) => self.bound_graph(f, graph, NO_ARGS),
+            Some(Ok(graph)) => self.bound_graph(f, graph, NO_ARGS, None),
             Some(Err(reason)) => Ok(Err(reason)),
         }
     }
 
     /// The longest paths through `graph` (of `f`, or a part of it: block 0 is where the paths start,
-    /// the blocks marked `exit` where they end), its loops bounded and its calls composed.
+    /// the blocks marked `exit` where they end), its loops bounded and its calls composed. `site`:
+    /// where `f`, an outlined helper, is called from ([`Site`]); a call through a register in `f`
+    /// that has no line of its own is keyed there.
     pub(super) fn bound_graph(
         &mut self,
         f: &'a Function,
         graph: Cfg,
         args: Args,
+        site: Option<&Site>,
     ) -> Result<Result<Summary, String>, Error> {
         let insns = f.instructions()?;
         let image = self.image;
@@ -596,7 +623,7 @@ impl<'a> Analysis<'a> {
                 // from it); a tail call of one is no return either.
                 Some(Call::Direct { target, tail }) if !self.can_return(target) => exit &= !tail,
                 Some(Call::Direct { target, .. }) => match self
-                    .call_summary(target, &f.name, insns, &graph, index, &args)?
+                    .call_summary(target, &f.name, insns, &graph, index, &args, site)?
                 {
                     Ok(s) => {
                         *time_ref = time_ref.plus(s.time);
@@ -612,7 +639,7 @@ impl<'a> Analysis<'a> {
                 {
                     // A register that holds one function's address: a direct call in effect.
                     let target = length::constant_target(image, insns, &graph, index).unwrap_or(0);
-                    match self.call_summary(target, &f.name, insns, &graph, index, &args)? {
+                    match self.call_summary(target, &f.name, insns, &graph, index, &args, site)? {
                         Ok(s) => {
                             *time_ref = time_ref.plus(s.time);
                             *count_ref = count_ref.plus(s.count);
@@ -631,11 +658,19 @@ impl<'a> Analysis<'a> {
                     }
                 }
                 Some(Call::Indirect { at, .. }) => {
-                    let (file, line, text) = place(image, at);
-                    let stated = file
-                        .as_deref()
-                        .zip(line)
-                        .and_then(|(file, line)| self.bounds.indirect(&f.name, file, line));
+                    let (file, line, mut text) = place(image, at);
+                    let stated = match (file.as_deref().zip(line), site) {
+                        (Some((file, line)), _) => self.bounds.indirect(&f.name, file, line),
+                        // No line of its own, in an outlined helper: keyed where it is called.
+                        (None, Some((caller, file, line))) => {
+                            text = format!(
+                                "{text}, an outlined helper's, keyed at its call in {caller} at \
+                                 {file}:{line}"
+                            );
+                            self.bounds.indirect(caller, file, *line)
+                        }
+                        (None, None) => None,
+                    };
                     let Some(stated) = stated else {
                         return Ok(Err(format!(
                             "the call through a register in {} at {text} has no stated targets",
@@ -775,6 +810,11 @@ impl<'a> Analysis<'a> {
 
     /// The summary of the call ending block `index`: without its arguments, or, where a memory function's
     /// length is what it lacks, with the bounds the call's machine code gives them ([`length`]).
+    ///
+    /// A call of an outlined helper passes it its place ([`Site`]): the call's line in `caller`
+    /// ([`call_line`]), or, where `caller` has none (a helper calling a helper), `site`, the place
+    /// `caller` was called from.
+    #[allow(clippy::too_many_arguments)]
     fn call_summary(
         &mut self,
         target: u64,
@@ -783,14 +823,24 @@ impl<'a> Analysis<'a> {
         graph: &Cfg,
         index: usize,
         entry: &Args,
+        site: Option<&Site>,
     ) -> Result<Result<Summary, String>, Error> {
-        let plain = self.summary(target)?;
+        let call = insns[graph.blocks[index].last].addr;
+        let site = match self.image.function_at(target) {
+            Some(callee) if callee.start == target && is_outlined(callee) => {
+                match call_line(self.image, insns, graph.blocks[index].last) {
+                    Some((file, line)) => Some((caller.to_string(), file, line)),
+                    None => site.cloned(),
+                }
+            }
+            _ => None,
+        };
+        let plain = self.summary_with(target, NO_ARGS, site.clone())?;
         if !matches!(&plain, Err(reason) if reason.contains(LENGTH_UNKNOWN)) {
             return Ok(plain);
         }
         let mut args = length::call_args(insns, graph, index, entry);
         // A length the bounds file states for this call (its machine code does not fix it).
-        let call = insns[graph.blocks[index].last].addr;
         let mut stated_info = None;
         if let Some((file, line)) = self.image.line(call) {
             if let Some(stated) = self.bounds.length(caller, &file, line) {
@@ -812,7 +862,7 @@ impl<'a> Analysis<'a> {
         let mut outcome = if args == NO_ARGS {
             plain
         } else {
-            self.summary_with(target, args)?
+            self.summary_with(target, args, site)?
         };
         if let (Ok(s), Some(info)) = (&mut outcome, stated_info) {
             s.loops.push(info);
@@ -885,6 +935,14 @@ fn loop_place(
         Some((at, _)) => place(image, *at),
         None => place(image, insns[header.first].addr),
     }
+}
+
+/// The line of the call `insns[call]` as a key: its own, or, where the line table gives it none (LLVM
+/// marks a call of an outlined helper line 0), the line of the closest instruction before it in the
+/// function that has one — the line the code was at when it called (as a disassembly listing with
+/// lines shows the call). `None` when no instruction up to the call has a line.
+fn call_line(image: &Image, insns: &[Insn], call: usize) -> Option<(String, u32)> {
+    insns[..=call].iter().rev().find_map(|i| image.line(i.addr))
 }
 
 /// Whether a source path is the Rust toolchain's own library (core, alloc, compiler-builtins).

@@ -9,7 +9,10 @@
 //!   "waits": [{ "function": "…", "file": "src/i2c.rs", "line": 120, "wait_us": 25.0,
 //!               "source": "one I2C byte at 400 kHz: 9 bit times (UM10204 §3.1)" }],
 //!   "indirect": [{ "function": "…", "file": "src/waker.rs", "line": 7,
-//!                  "targets": ["…::wake"], "reason": "the only waker vtable in the image" }],
+//!                  "targets": ["…::wake"], "reason": "the only waker vtable in the image" },
+//!                { "function": "…", "file": "src/waker.rs", "line": 9,
+//!                  "vtable_entry": { "objects": ["…::WAKER_VTABLE"], "entry": 0 },
+//!                  "reason": "a clone of a waker of one of these vtables" }],
 //!   "lengths": [{ "function": "…", "file": "heapless/src/vec/mod.rs", "line": 728, "register": 2,
 //!                 "bytes": 180, "reason": "shifts at most 15 frames of 12 bytes" }],
 //!   "per_element": [{ "function": "…::Encoder::put", "register": 2,
@@ -62,7 +65,8 @@ pub struct WaitBound {
 
 /// The functions a call through a register at a place may reach: named (`targets`), or found in
 /// the image (`stored_with`: the functions whose addresses the code that takes the named data
-/// object's address uses as data, [`super::stored`]). One of the two.
+/// object's address uses as data, [`super::stored`]; `vtable_entry`: the function each named
+/// vtable holds at one entry). One of the three.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct IndirectTargets {
@@ -73,7 +77,23 @@ pub struct IndirectTargets {
     pub targets: Vec<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stored_with: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vtable_entry: Option<VtableEntry>,
     pub reason: String,
+}
+
+/// The functions at one entry of named vtables (data objects of function addresses): a call through
+/// a function pointer loaded from word `entry` of a vtable the value may be (a `Waker`'s clone is
+/// entry 0 of its `RawWakerVTable`, wake 1, wake_by_ref 2, drop 3). The image gives each function:
+/// named by its object, not by its own name, which a closure or a shim (`FnOnce::call_once`) shares
+/// with others.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VtableEntry {
+    /// The vtables (data objects, demangled names without hash).
+    pub objects: Vec<String>,
+    /// The word of each.
+    pub entry: u32,
 }
 
 /// The most bytes a call of a memory function (`memcpy`, `memset`, …) at a place moves, where its
@@ -266,11 +286,21 @@ impl BoundsFile {
             }
         }
         for i in &file.indirect {
-            let one_way = i.targets.is_empty() != i.stored_with.is_none();
-            if !one_way || i.reason.trim().is_empty() {
+            let ways = usize::from(!i.targets.is_empty())
+                + usize::from(i.stored_with.is_some())
+                + usize::from(
+                    i.vtable_entry
+                        .as_ref()
+                        .is_some_and(|v| !v.objects.is_empty()),
+                );
+            let empty_vtables = i
+                .vtable_entry
+                .as_ref()
+                .is_some_and(|v| v.objects.is_empty());
+            if ways != 1 || empty_vtables || i.reason.trim().is_empty() {
                 return Err(Error::Bounds(format!(
-                    "the indirect call at {}:{} in {} needs its targets or the object they are \
-                     stored with (one of the two) and a reason",
+                    "the indirect call at {}:{} in {} needs its targets, the object they are \
+                     stored with or the vtables whose entry they are (one of the three) and a reason",
                     i.file, i.line, i.function
                 )));
             }
@@ -693,6 +723,24 @@ mod tests {
         assert!(matches!(BoundsFile::parse(zero), Err(Error::Bounds(_))));
         let address = r#"{"loops":[{"address":134242304,"bound":8}]}"#;
         assert!(matches!(BoundsFile::parse(address), Err(Error::Bounds(_))));
+        // An indirect call's targets one way of three: named, stored with an object, or a vtable
+        // entry (with at least one vtable).
+        let call = |targets: &str| {
+            BoundsFile::parse(&format!(
+                r#"{{"indirect":[{{"function":"f","file":"a.rs","line":3,{targets},"reason":"r"}}]}}"#
+            ))
+        };
+        let vtable = r#""vtable_entry":{"objects":["V"],"entry":0}"#;
+        assert!(call(vtable).is_ok());
+        assert!(call(r#""targets":["g"]"#).is_ok());
+        for bad in [
+            format!(r#""targets":["g"],{vtable}"#),
+            format!(r#""stored_with":"V",{vtable}"#),
+            r#""vtable_entry":{"objects":[],"entry":0}"#.to_string(),
+            r#""targets":[]"#.to_string(),
+        ] {
+            assert!(matches!(call(&bad), Err(Error::Bounds(_))), "{bad}");
+        }
         assert!(matches!(
             BoundsFile::parse("not json"),
             Err(Error::Bounds(_))

@@ -501,7 +501,7 @@ impl<'a> Finder<'a> {
                 return Ok(section);
             }
         };
-        match self.analysis.bound_graph(f, sub, NO_ARGS)? {
+        match self.analysis.bound_graph(f, sub, NO_ARGS, None)? {
             Ok(Summary { time, count, .. }) => {
                 section.cycles = time.cycles;
                 section.instructions = count.instructions;

@@ -46,17 +46,19 @@ pub(super) fn targets(
         return Ok(stored_with(image, object)
             .map(|found| found.into_iter().map(|t| (image.name(t), t)).collect()));
     }
+    if let Some(v) = &stated.vtable_entry {
+        return vtable_entries(image, v, at).map(Ok);
+    }
     let mut targets = Vec::new();
     // A name stands for every function of that name (monomorphs and closures share theirs once
-    // the hash is gone).
+    // the hash is gone), and for the function the linker folded one of that name into.
     for name in &stated.targets {
         let before = targets.len();
         targets.extend(
             image
-                .functions
-                .values()
-                .filter(|f| &f.name == name || &f.symbol == name)
-                .map(|f| (name.clone(), f.start)),
+                .starts_named(name)
+                .into_iter()
+                .map(|start| (name.clone(), start)),
         );
         if targets.len() == before {
             return Err(Error::Bounds(format!(
@@ -65,6 +67,42 @@ pub(super) fn targets(
         }
     }
     Ok(Ok(targets))
+}
+
+/// The function at word `entry` of each vtable `v` names (its name and address): `Err(Error)` for a
+/// vtable the image lacks, one too short for the entry, or an entry that is no function's address
+/// (a Thumb function's, with bit 0 set).
+fn vtable_entries(
+    image: &Image,
+    v: &super::bounds::VtableEntry,
+    at: &str,
+) -> Result<Vec<(String, u64)>, Error> {
+    let mut found = Vec::new();
+    for object in &v.objects {
+        let (address, size) = image.object_named(object).ok_or_else(|| {
+            Error::Bounds(format!(
+                "the indirect call at {at} names the vtable `{object}`, which is not in the image"
+            ))
+        })?;
+        let offset = 4 * u64::from(v.entry);
+        let function = (offset + 4 <= size)
+            .then(|| image.word(address + offset))
+            .flatten()
+            .filter(|w| w & 1 == 1)
+            .map(|w| u64::from(w & !1))
+            .filter(|&t| image.function_at(t).is_some_and(|f| f.start == t));
+        let Some(t) = function else {
+            return Err(Error::Bounds(format!(
+                "the indirect call at {at}: entry {} of the vtable `{object}` ({size} bytes) \
+                 holds no function's address",
+                v.entry
+            )));
+        };
+        if !found.iter().any(|&(_, s)| s == t) {
+            found.push((format!("{} ({object}[{}])", image.name(t), v.entry), t));
+        }
+    }
+    Ok(found)
 }
 
 /// The functions whose addresses the code taking `object`'s address (and its callers) uses as data

@@ -206,6 +206,42 @@ fn a_path_into_a_panic_does_not_complete_the_job() {
     assert_eq!(figures(&b), (10, 4, None));
 }
 
+/// `latch` calls `write`, which makes the breakpoint call `bkpt` (`0xBEAB`: a semihosting call, as
+/// the QEMU builds write their console; `0xBE00`: a breakpoint) and returns.
+fn breakpoint_call(bkpt: u16) -> Image {
+    image(
+        &[
+            0xb580, // 0x00 push {r7, lr}: 3
+            0xf000, 0xf802, // 0x02 bl 0x0a: 1 + P
+            0xbd80, // 0x06 pop {r7, pc}: 1 + 2 + P
+            0xbf00, // 0x08
+            0x2005, // 0x0a movs r0, #5: 1
+            bkpt,   // 0x0c bkpt: 1
+            0x4770, // 0x0e bx lr: 1 + P
+        ],
+        &[
+            Sym::function("latch", 0, 8),
+            Sym::function("write", 0x0a, 6),
+        ],
+    )
+}
+
+#[test]
+fn a_semihosting_call_returns_and_a_breakpoint_does_not() {
+    // The host performs a semihosting call and the code goes on: 3 + 4 + 1 + 1 + 4 + 6 = 19
+    // cycles, 6 instructions.
+    let b = bound(&breakpoint_call(0xbeab), "latch", F103_0WS);
+    assert_eq!(figures(&b), (19, 6, None));
+    // Any other breakpoint stops the core: no path of `write`, nor of `latch`, returns.
+    let b = bound(&breakpoint_call(0xbe00), "latch", F103_0WS);
+    assert!(
+        b.declined
+            .as_deref()
+            .is_some_and(|r| r.contains("never returns")),
+        "{b:?}"
+    );
+}
+
 #[test]
 fn bad_input_is_a_typed_error() {
     assert!(matches!(
@@ -412,6 +448,145 @@ fn stated_targets_resolve_an_indirect_call() {
         bound_function(&img, "through_register", F103_0WS, &unknown),
         Err(Error::Bounds(_))
     ));
+}
+
+/// A waker's clone as LLVM's machine outliner leaves it (the boards' QEMU images: `Delay::poll`'s
+/// `cx.waker().clone()`): `poll` calls `OUTLINED_FUNCTION_0`, which loads the waker's vtable and
+/// data and tail-calls the vtable's first entry through a register. The helper's code has no line
+/// (rows of line 0), and neither has the call (LLVM marks it line 0): the call is keyed at the line
+/// before it in `poll`, src/poll.rs:10. `VTABLE` holds `clone`.
+fn outlined_waker_clone() -> Image {
+    let code = thumb(&[
+        0xb580, // 0x00 push {r7, lr}: 3                     line 10
+        0xf000, 0xf803, // 0x02 bl 0x0c: 1 + P               line 0
+        0xbd80, // 0x06 pop {r7, pc}: 1 + 2 + P              line 12
+        0x2005, // 0x08 clone: movs r0, #5: 1                line 20
+        0x4770, // 0x0a bx lr: 1 + P
+        0xe9d6, 0x1000, // 0x0c ldrd r1, r0, [r6]: 1 + 2     line 0
+        0x6809, // 0x10 ldr r1, [r1]: 2
+        0x4708, // 0x12 bx r1: 1 + P (a tail call through a register)
+        0x0009, 0x0000, // 0x14 VTABLE: clone's address, Thumb bit set
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("poll", 0, 8),
+            Sym::function("clone", 8, 4),
+            Sym::function("OUTLINED_FUNCTION_0", 0x0c, 8),
+            Sym::data(0x14),
+            Sym::object("VTABLE", 0x14, 4),
+        ],
+        "firmware/src/poll.rs",
+        &[(0, 10), (2, 0), (6, 12), (8, 20), (0x0c, 0)],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+#[test]
+fn an_outlined_helpers_indirect_call_is_keyed_at_its_call_site() {
+    let img = outlined_waker_clone();
+    // Neither the helper's call through a register nor the call of the helper has a line.
+    assert_eq!(img.line(0x12), None);
+    assert_eq!(img.line(0x02), None);
+    assert_eq!(
+        img.line(0x00),
+        Some(("/work/firmware/src/poll.rs".into(), 10))
+    );
+    // Not stated: declined, naming the place a statement would go.
+    let plain = bound(&img, "poll", F103_0WS);
+    let reason = plain.declined.expect("declined");
+    assert!(
+        reason.starts_with(
+            "via OUTLINED_FUNCTION_0: the call through a register in OUTLINED_FUNCTION_0"
+        ) && reason.contains("keyed at its call in poll at /work/firmware/src/poll.rs:10")
+            && reason.ends_with("has no stated targets"),
+        "{reason}"
+    );
+    // Stated at the call site: poll 3 + bl 4, the helper's ldrd 3 + ldr 2 + bx 4, clone's movs 1 +
+    // bx lr 4, pop 6: 27 cycles on the core; the helper's loads through registers of unknown value
+    // each word an APB1 access at worst (the F103's 2 APB cycles at half the clock + 1: 5), 3 words:
+    // 15 more: 42 cycles; 8 instructions. Named, or as the vtable's entry 0 (the image gives the
+    // function), alike.
+    for stated in [
+        r#""targets":["clone"]"#,
+        r#""vtable_entry":{"objects":["VTABLE"],"entry":0}"#,
+    ] {
+        let bounds = BoundsFile::parse(&format!(
+            r#"{{"indirect":[{{"function":"poll","file":"src/poll.rs","line":10,{stated},"reason":"the only vtable's clone"}}]}}"#
+        ))
+        .unwrap();
+        let b = bound_function(&img, "poll", F103_0WS, &bounds).unwrap();
+        assert_eq!(figures(&b), (42, 8, None), "{stated}");
+    }
+    // Stated at another line of poll (after the call), or for the helper itself: declined as before.
+    for (function, line) in [("poll", 12), ("OUTLINED_FUNCTION_0", 10)] {
+        let bounds = BoundsFile::parse(&format!(
+            r#"{{"indirect":[{{"function":"{function}","file":"src/poll.rs","line":{line},"targets":["clone"],"reason":"x"}}]}}"#
+        ))
+        .unwrap();
+        let b = bound_function(&img, "poll", F103_0WS, &bounds).unwrap();
+        assert!(
+            b.declined
+                .as_deref()
+                .is_some_and(|r| r.contains("has no stated targets")),
+            "{function}:{line}: {b:?}"
+        );
+    }
+    // The helper bounded alone has no call site: declined.
+    let bounds = BoundsFile::parse(
+        r#"{"indirect":[{"function":"poll","file":"src/poll.rs","line":10,"targets":["clone"],"reason":"x"}]}"#,
+    )
+    .unwrap();
+    let alone = bound_function(&img, "OUTLINED_FUNCTION_0", F103_0WS, &bounds).unwrap();
+    assert!(alone.declined.is_some(), "{alone:?}");
+    // A vtable entry that holds no function's address is an error of the bounds file, as a missing
+    // target is.
+    let bad = BoundsFile::parse(
+        r#"{"indirect":[{"function":"poll","file":"src/poll.rs","line":10,"vtable_entry":{"objects":["VTABLE"],"entry":1},"reason":"x"}]}"#,
+    )
+    .unwrap();
+    assert!(matches!(
+        bound_function(&img, "poll", F103_0WS, &bad),
+        Err(Error::Bounds(_))
+    ));
+}
+
+#[test]
+fn a_stated_target_names_a_function_the_linker_folded_into_another() {
+    // `waker_drop` and `pre_init` are one empty function (identical code folded to one address, as
+    // the QEMU images' `rtic::export::executor::waker_drop`); its first symbol names it.
+    let code = thumb(&[
+        0xb580, // 0x00 push {r7, lr}: 3
+        0x4798, // 0x02 blx r3: 1 + P
+        0xbd80, // 0x04 pop {r7, pc}: 1 + 2 + P
+        0xbf00, // 0x06
+        0x4770, // 0x08 bx lr: 1 + P
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[
+            Sym::function("through_register", 0, 6),
+            Sym::function("pre_init", 8, 2),
+            Sym::function("waker_drop", 8, 2),
+        ],
+        "firmware/src/call.rs",
+        &[(0, 2), (2, 3), (4, 4)],
+    );
+    let img = Image::parse(&bytes).unwrap();
+    assert_eq!(img.name(8), "pre_init");
+    assert_eq!(
+        img.starts_named("waker_drop")
+            .into_iter()
+            .collect::<Vec<_>>(),
+        [8]
+    );
+    let bounds = BoundsFile::parse(
+        r#"{"indirect":[{"function":"through_register","file":"src/call.rs","line":3,"targets":["waker_drop"],"reason":"the vtable's drop"}]}"#,
+    )
+    .unwrap();
+    // 3 + 4 + 4 + 6 = 17 cycles, 4 instructions.
+    let b = bound_function(&img, "through_register", F103_0WS, &bounds).unwrap();
+    assert_eq!(figures(&b), (17, 4, None));
 }
 
 #[test]

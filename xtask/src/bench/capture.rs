@@ -36,6 +36,9 @@ pub struct Run {
     pub preemptions: u32,
     /// The tasks of those runs, one bit per task number (below 32).
     pub preempted_by: u32,
+    /// How many of those runs each task had, by task number (below 32): a hardware task's run and a dispatched
+    /// one leave different unstamped parts inside this run (docs/bench.md, "A pre-empting run's unstamped part").
+    pub preempted_runs: [u16; 32],
     /// Handler events stamped while this run was the innermost (its own, not a pre-empting run's): in QEMU each
     /// is encoded and written to the console inside the run (`amiro_firmware::tracing::event`), which the release
     /// image does not do.
@@ -135,6 +138,7 @@ struct Open {
     preempted_ns: u64,
     preemptions: u32,
     preempted_by: u32,
+    preempted_runs: [u16; 32],
     events: u32,
     ticks: u32,
 }
@@ -207,6 +211,7 @@ impl Builder {
                     preempted_ns: 0,
                     preemptions: 0,
                     preempted_by: 0,
+                    preempted_runs: [0; 32],
                     events: 0,
                     ticks: 0,
                 });
@@ -222,6 +227,9 @@ impl Builder {
                             parent.preempted_ns += took;
                             parent.preemptions += 1;
                             parent.preempted_by |= 1u32.checked_shl(u32::from(task)).unwrap_or(0);
+                            if let Some(n) = parent.preempted_runs.get_mut(usize::from(task)) {
+                                *n = n.saturating_add(1);
+                            }
                         }
                         self.capture.runs.push(Run {
                             task,
@@ -231,6 +239,7 @@ impl Builder {
                             preempted_ns: open.preempted_ns,
                             preemptions: open.preemptions,
                             preempted_by: open.preempted_by,
+                            preempted_runs: open.preempted_runs,
                             events: open.events,
                             ticks: open.ticks,
                             release_from: open.release_from,
@@ -500,6 +509,7 @@ mod tests {
         assert_eq!(first.release_from, ReleaseFrom::Start);
         // The receive interrupt pre-empted it once; nothing pre-empted the interrupt or the next run.
         assert_eq!((isr.preemptions, first.preemptions), (0, 1));
+        assert_eq!((first.preempted_runs[0], first.preempted_runs[4]), (1, 0));
         let second = c.runs[2];
         assert_eq!(second.release_from, ReleaseFrom::Timer);
         // Due at 40 + 1000 µs, done at 1070 µs.

@@ -211,7 +211,7 @@ impl Bench {
             .filter(|m| m.verdict == machine::EXCEEDS)
             .map(|m| {
                 format!(
-                    "{}/{}: {} {} observed ({} of them the trace records, {} the unstamped records of {} \
+                    "{}/{}: {} {} observed ({} of them the trace records, {} the unstamped parts of {} \
                      pre-empting runs{} and the {} tick interrupts inside it; {} handler events printed inside it) > {}bound {} {}",
                     self.board,
                     m.task,
@@ -338,6 +338,24 @@ pub fn measure(
     measure_with(root, board, capture, origin, qemu, scenario_name, None)
 }
 
+/// The board's software tasks (run by a dispatcher), one bit per trace task number (the app's source order, as
+/// `amiro_firmware::trace_ids` numbers them); the others are hardware tasks (a handler) and `idle`. A pre-empting
+/// run of each kind leaves its own unstamped part in the job it pre-empts (`machine::Job::dispatched`).
+fn dispatched_tasks(root: &Path, board: &str) -> Result<u32> {
+    let path = root.join(board).join("src").join("main.rs");
+    let source =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let app = schedule_analysis::rtic_source::parse_app(&source).map_err(|e| anyhow!("{e}"))?;
+    Ok(app
+        .tasks
+        .iter()
+        .enumerate()
+        .filter(|(n, t)| {
+            *n < 32 && t.kind == schedule_analysis::rtic_source::RticTaskKind::Software
+        })
+        .fold(0, |mask, (n, _)| mask | 1 << n))
+}
+
 /// [`measure`], with the traced QEMU image's own bounds of the tasks that run a simulated device
 /// (`machine::rows_against`).
 pub fn measure_with(
@@ -352,6 +370,7 @@ pub fn measure_with(
     let names = amiro_firmware::trace_ids::board_names(root, board.name)
         .map_err(|e| anyhow!("{e}"))
         .context("the board's task numbers")?;
+    let dispatched = dispatched_tasks(root, board.name)?;
     // The run's received frames: a QEMU run's stimulus, else the capture's runs of the receive interrupt.
     let received_gap_us = match capture.received_gap_us {
         Some(gap) => Some(gap),
@@ -442,6 +461,13 @@ pub fn measure_with(
                         .map(|r| machine::Job {
                             exec_us: us(r.execution_ns()),
                             preemptions: r.preemptions,
+                            dispatched: r
+                                .preempted_runs
+                                .iter()
+                                .enumerate()
+                                .filter(|(n, _)| dispatched & (1 << n) != 0)
+                                .map(|(_, runs)| u32::from(*runs))
+                                .sum(),
                             preempted_by: r.preempted_by,
                             events: r.events,
                             ticks: r.ticks,

@@ -391,7 +391,7 @@ fn admission_other_board(run: &Run) -> Result<String> {
         run.ends(0x41F).is_empty(),
         "urgent ring frames on the bus: the refused request ran"
     );
-    let samples = ring_samples(run, 0x71F, 8_000)?;
+    let samples = ring_samples(run, 0x71F, 10_000)?;
     Ok(format!("{v}; {before} odometry frames on the bus before it; the ring at low runs ({samples} samples)"))
 }
 

@@ -51,7 +51,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "admission",
-        about: "issue 11: diagnostics at 1 µs refused, at 2 ms accepted, at urgent refused for DiWheelDrive's frames, then started with a warning; each verdict as the host decides; LEDs keep working",
+        about: "issue 11: diagnostics at 1 µs refused, at 3 ms accepted (2 ms is refused since the latch's bound is its budget), at urgent refused for DiWheelDrive's frames, then started with a warning; each verdict as the host decides; LEDs keep working",
         check: admission,
     },
 ];
@@ -541,12 +541,13 @@ pub(super) fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 
 /// `lightring/qemu/admission.log` (issue 11).
 fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    admission_on(out, bounds, CHIPS, 2)
+    admission_on(out, bounds, CHIPS, 3)
 }
 
 /// `admission.log` on a ring of `chips`, whose accepted request is the diagnostics every
-/// `every_ms` at medium (2 ms on 1-0; the 1-2 ring's log asks for 5 ms: the 1-2 image on a 1-2
-/// robot refuses 2 ms).
+/// `every_ms` at medium (3 ms on 1-0, 5 ms on 1-2). Both revisions refuse 2 ms: with the latch task's bound as
+/// its budget (1-0: 174.9 µs + 149.5 µs of LED bus waits) the six frames 0x61C of a 1-0 ring respond in 2374.8 µs
+/// against their 2 ms deadline; on a 1-2 robot the publisher's own job misses (2103.6 µs of 2 000).
 pub(super) fn admission_on(
     out: &RunOutput,
     bounds: &Bounds,

@@ -36,7 +36,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "admission",
-        about: "the admission check on a 1-2 robot: diagnostics at 1 µs refused, at 5 ms accepted (2 ms, which 1-0 accepts, is refused on a 1-2 robot), at urgent refused for DiWheelDrive's frames, then warned; each verdict as the host decides; LED 3 on its three LEDs",
+        about: "the admission check on a 1-2 robot: diagnostics at 1 µs refused, at 5 ms accepted (2 ms is refused on a 1-2 robot, as on 1-0), at urgent refused for DiWheelDrive's frames, then warned; each verdict as the host decides; LED 3 on its three LEDs",
         check: admission,
     },
     Scenario {

@@ -313,10 +313,10 @@ fn admission_other_board(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         out.times(0x41F).is_empty(),
         "urgent ring frames sent: the refused request started"
     );
-    let samples = ring_samples(out, 0x71F, 8_000, 100_000, 240_000)?;
+    let samples = ring_samples(out, 0x71F, 10_000, 100_000, 240_000)?;
     all_eight(&samples)?;
     Ok(format!(
-        "{v}; the ring at low every 8 ms runs ({} samples × 8), no urgent ring frame",
+        "{v}; the ring at low every 10 ms runs ({} samples × 8), no urgent ring frame",
         samples.len()
     ))
 }
