@@ -295,7 +295,7 @@ pub const QEMU_TICK_SPREAD_INSTRUCTIONS: u64 = 280 - QEMU_TICK_FEWEST_INSTRUCTIO
 /// to the clock read 54 (198 of 206; at most 92): 491 on main. Recounted 2026-12-03 on branch 34speed's image (main
 /// merged: `write`'s clock read inlined, its clamp after the read), from a whole single-stepped log with only those
 /// functions' instructions counted: after the clock read 431 (114 of 207; at most 436), up to it 58 (152 of 206; at
-/// most 66): 489; `hostile`'s 16 645 records the same (431, 58). docs/bench.md, "The traced QEMU build's own records".
+/// most 66): 489; `hostile`'s 16 645 records and LightRing 1-2 `flood`'s 330 the same (431, 58). docs/bench.md, "The traced QEMU build's own records".
 pub const QEMU_RECORDS_FEWEST_INSTRUCTIONS: u64 = 489;
 
 /// The fewest instructions one handler event runs in the traced QEMU build (`amiro_firmware::tracing::event`:
@@ -318,7 +318,8 @@ pub const QEMU_EVENT_FEWEST_INSTRUCTIONS: u64 = 1311;
 /// the fewest, 690 (entry 130, exit 559 or more), less 13 for the end record's data-dependent steps (2
 /// instructions per zero byte the encoder meets, at most 5 of them, and the clock's clamp and range checks):
 /// 677. Recounted 2026-12-03 on branch 34speed's DiWheelDrive 1-1 image (main merged) over `hostile` (7 217
-/// activations: 691–, entry 135 or more, exit 555 or more) and `motor-deadman` (47: 691–): not lower, 677 kept.
+/// activations: 691–, entry 135 or more, exit 555 or more), `motor-deadman` (47: 691–) and, on LightRing 1-2's
+/// image, `flood` (123: 691–): not lower, 677 kept.
 /// docs/bench.md, "A pre-empting run's unstamped part".
 pub const QEMU_PREEMPTION_BY_HANDLER_FEWEST_INSTRUCTIONS: u64 = 677;
 
@@ -333,7 +334,7 @@ pub const QEMU_PREEMPTION_BY_HANDLER_FEWEST_INSTRUCTIONS: u64 = 677;
 /// 150, exit 633, gap 776 (DiWheelDrive 1-1 `hostile`'s 893 activations of two runs of one dispatcher; 778 on
 /// PowerManagement `flood`, 779 on LightRing 1-2 `flood`), so 776, less 13 as above: 763. Recounted 2026-12-03 on
 /// branch 34speed's DiWheelDrive 1-1 image (main merged) over `hostile`: fewest gap 777 (888 two-run activations),
-/// entry 171 + exit 630; `motor-deadman` no lower: not lower, 763 kept.
+/// entry 171 + exit 630; `motor-deadman` no lower; LightRing 1-2 `flood` gap 779: not lower, 763 kept.
 pub const QEMU_PREEMPTION_BY_DISPATCHER_FEWEST_INSTRUCTIONS: u64 = 763;
 
 #[cfg(test)]
