@@ -68,8 +68,9 @@ pub fn init(syst: cortex_m::peripheral::SYST) {
     can::init();
     // A robot run's boards write no `trace.bin`: nothing reads it there (the robot's checks read
     // the bus log and the console's `# T` lines), and each record was a semihosting write into a
-    // file, 5-6 per exchange on DiWheelDrive in the thesis demo (docs/qemu.md, "Speed"). The
-    // records are still encoded; `write_trace_file` reports them not written.
+    // file, 5-6 per exchange on DiWheelDrive in the thesis demo (docs/qemu.md, "Speed"). Nor are
+    // they stamped or encoded (`tracing::write` asks `trace_file`): a stamp is a clock
+    // reading, a trip out of QEMU's translated code, for a record nothing keeps.
     if robot::connect() {
         return;
     }
@@ -82,12 +83,19 @@ pub fn init(syst: cortex_m::peripheral::SYST) {
 static TRACE_FILE: core::sync::atomic::AtomicUsize =
     core::sync::atomic::AtomicUsize::new(usize::MAX);
 
+/// The host file trace records go to (`trace.bin`): single-board runs; `None` in a robot run.
+pub fn trace_file() -> Option<usize> {
+    let fd = TRACE_FILE.load(Ordering::Relaxed);
+    (fd != usize::MAX).then_some(fd)
+}
+
 /// Writes trace record bytes to `trace.bin` (the QEMU build's trace channel); `false` if not all.
 pub fn write_trace_file(bytes: &[u8]) -> bool {
-    let fd = TRACE_FILE.load(Ordering::Relaxed);
-    if fd == usize::MAX {
-        return false;
-    }
+    trace_file().is_some_and(|fd| write_trace_to(fd, bytes))
+}
+
+/// Writes trace record bytes to the host file `fd` ([`trace_file`]); `false` if not all.
+pub fn write_trace_to(fd: usize, bytes: &[u8]) -> bool {
     // SAFETY: semihosting WRITE from a buffer we own; it returns the number of bytes NOT written.
     let left = unsafe { syscall!(WRITE, fd, bytes.as_ptr(), bytes.len()) };
     left == 0

@@ -36,6 +36,14 @@
 //! demo — 147 gaps of over a millisecond, the longest 10.8 ms — on the tree it was merged into
 //! (docs/qemu.md, "A new wait sets up its own deadline"); why is not found.
 //!
+//! **Few critical sections.** Under QEMU every `cpsid i` and `msr primask` ends the translation
+//! block and returns to QEMU's execution loop, so a critical section costs two trips out of the
+//! translated code. The clock is read and changed without masking interrupts where nothing that
+//! touches it can pre-empt the caller ([`with_clock`]: SysTick's own interrupt, the highest
+//! priority, or code that already masked them), and the queues' deadlines are two plain words that
+//! only SysTick's interrupt writes ([`Due`]). DiWheelDrive's critical sections in the thesis demo
+//! fell from 237 000 to 82 000 per virtual second (docs/qemu.md, "Critical sections and dropped records").
+//!
 //! Periodic, the tick count is one per wrap (COUNTFLAG, as rtic-monotonics' SysTick counts it: the
 //! cheapest reading, which the scenarios' cost figures were measured with). Tickless, the clock is
 //! the tick and the cycles into it where the running period started, plus how far SysTick has
@@ -47,7 +55,7 @@
 //! time: the run stays deterministic. No tickless reading goes below the one before (QEMU updates
 //! SysTick lazily around a wrap: a reading there can come out a little early).
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use portable_atomic::AtomicU64;
 
@@ -110,11 +118,99 @@ static CLOCK: Mutex<RefCell<Clock>> = Mutex::new(RefCell::new(Clock {
 /// figures were measured with that count).
 static PERIODIC: AtomicU64 = AtomicU64::new(0);
 /// The apps' earliest deadline in ticks (`u64::MAX`: none).
-static APP_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
+static APP_DUE: Due = Due::new(u64::MAX);
 /// The platform's earliest deadline in ticks (`u64::MAX`: none).
-static PLATFORM_DUE: AtomicU64 = AtomicU64::new(u64::MAX);
+static PLATFORM_DUE: Due = Due::new(u64::MAX);
 static TICKLESS: AtomicBool = AtomicBool::new(false);
 const PER_TICK: u32 = CYCLES_PER_TICK as u32;
+
+/// A queue's earliest deadline in ticks, as two words that are read and written without masking
+/// interrupts (a `portable_atomic::AtomicU64` masks them for every access, and in QEMU every
+/// `cpsid` and every `msr primask` leaves the translated code: the deadlines' loads and stores were
+/// 60 000 of DiWheelDrive's 237 000 critical sections per virtual second in the thesis demo,
+/// docs/qemu.md "Critical sections and dropped records"). Only SysTick's interrupt writes it (the timer queues'
+/// `set_compare` and `disable_timer`, from `on_monotonic_interrupt`), and nothing that reads it can
+/// pre-empt that interrupt (the highest priority), so every store is whole to every reader; a
+/// reader that the interrupt pre-empts between its two word loads reads again until two readings
+/// agree, and two agreeing readings are a value the deadline had.
+struct Due {
+    low: AtomicU32,
+    high: AtomicU32,
+}
+
+impl Due {
+    const fn new(ticks: u64) -> Self {
+        Self {
+            low: AtomicU32::new(ticks as u32),
+            high: AtomicU32::new((ticks >> 32) as u32),
+        }
+    }
+
+    /// Only from SysTick's interrupt (or before interrupts are enabled).
+    fn store(&self, ticks: u64, order: Ordering) {
+        self.low.store(ticks as u32, order);
+        self.high.store((ticks >> 32) as u32, order);
+    }
+
+    fn read(&self, order: Ordering) -> u64 {
+        u64::from(self.low.load(order)) | u64::from(self.high.load(order)) << 32
+    }
+
+    /// Where the caller may be pre-empted by SysTick's interrupt (the exchange's report).
+    fn load(&self, order: Ordering) -> u64 {
+        let mut ticks = self.read(order);
+        loop {
+            let again = self.read(order);
+            if again == ticks {
+                return ticks;
+            }
+            ticks = again;
+        }
+    }
+
+    /// Where SysTick's interrupt cannot run: in it, or with interrupts masked (the token: a
+    /// critical section, or [`with_clock`]'s where nothing pre-empts), so one reading is whole.
+    fn get(&self, _cs: CriticalSection<'_>) -> u64 {
+        self.read(Ordering::Relaxed)
+    }
+}
+
+/// Whether nothing that touches the clock can pre-empt the caller: interrupts are masked
+/// (PRIMASK), or the caller is SysTick's interrupt, which has the highest priority (SysTick's
+/// reset priority, 0, which nothing changes; the apps' interrupts sit below it) and is the only
+/// exception that changes the clock. Read with `mrs`, which QEMU runs in the translated code.
+#[cfg(target_arch = "arm")]
+#[inline(always)]
+fn unpreempted() -> bool {
+    let ipsr: u32;
+    // SAFETY: reads the interrupt program status register; no side effect.
+    unsafe {
+        core::arch::asm!("mrs {}, IPSR", out(reg) ipsr, options(nomem, nostack, preserves_flags));
+    }
+    ipsr & 0x1FF == 15 || cortex_m::register::primask::read().is_inactive()
+}
+
+/// No ARM core (a host check): always mask.
+#[cfg(not(target_arch = "arm"))]
+fn unpreempted() -> bool {
+    false
+}
+
+/// Runs `f` on the clock, with interrupts masked unless nothing that touches the clock can
+/// pre-empt the caller anyway ([`unpreempted`]). Under QEMU a critical section costs two trips out
+/// of the translated code (`cpsid i` and `msr primask` each end the translation block and return to
+/// QEMU's execution loop); most clock readings are taken in SysTick's interrupt (rtic-time's expiry
+/// checks) or inside another critical section (the trace's stamps), where the mask changes nothing.
+#[inline(always)]
+fn with_clock<R>(f: impl FnOnce(CriticalSection<'_>, &mut Clock) -> R) -> R {
+    if unpreempted() {
+        // SAFETY: nothing that touches `CLOCK` can run until `f` returns (`unpreempted`), which is
+        // what the critical section would ensure; the token does not leave `f`.
+        let cs = unsafe { CriticalSection::new() };
+        return f(cs, &mut CLOCK.borrow_ref_mut(cs));
+    }
+    critical_section::with(|cs| f(cs, &mut CLOCK.borrow_ref_mut(cs)))
+}
 
 /// SysTick's status (CSR) and current value (CVR), read by one instruction: a load of CSR, RVR and
 /// CVR together (`ldm`). Under `-icount` every device access in the middle of a translation block
@@ -209,8 +305,7 @@ pub fn now_cycles() -> u64 {
             }
         }
     }
-    critical_section::with(|cs| {
-        let clock = &mut *CLOCK.borrow_ref_mut(cs);
+    with_clock(|cs, clock| {
         let (tick, into) = position(cs, clock);
         let now = (tick * CYCLES_PER_TICK + u64::from(into)).max(clock.last_cycles);
         clock.last_cycles = now;
@@ -231,12 +326,14 @@ pub fn now_ticks() -> u64 {
 
 /// Tickless: ticks since the clock started, read from SysTick.
 fn read_ticks() -> u64 {
-    critical_section::with(|cs| {
-        let clock = &mut *CLOCK.borrow_ref_mut(cs);
-        let tick = position(cs, clock).0.max(clock.last_tick);
-        clock.last_tick = tick;
-        tick
-    })
+    with_clock(ticks_at)
+}
+
+/// The tick count where nothing pre-empts the caller (the token).
+fn ticks_at(cs: CriticalSection<'_>, clock: &mut Clock) -> u64 {
+    let tick = position(cs, clock).0.max(clock.last_tick);
+    clock.last_tick = tick;
+    tick
 }
 
 /// Makes SysTick interrupt only when a deadline is due (robot runs); takes effect at once.
@@ -282,9 +379,7 @@ const KEEP_PERIOD: u64 = 3 * CYCLES_PER_TICK;
 /// does. In the thesis demo this saves about a quarter of DiWheelDrive's restarts.
 fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     let (tick, into) = position(cs, clock);
-    let due = APP_DUE
-        .load(Ordering::Relaxed)
-        .min(PLATFORM_DUE.load(Ordering::Relaxed));
+    let due = APP_DUE.get(cs).min(PLATFORM_DUE.get(cs));
     if due == clock.armed {
         return;
     }
@@ -323,7 +418,7 @@ fn restart(cs: CriticalSection<'_>, clock: &mut Clock) {
     clock.next_armed = NOT_ARMED;
     clock.may_keep = false;
     if period <= MAX_PERIOD {
-        set_up_next(clock, due);
+        set_up_next(cs, clock, due);
     }
 }
 
@@ -361,10 +456,8 @@ fn keep_until(clock: &mut Clock, now: u64, due: u64) -> bool {
 /// cost QEMU a reload expiry). SysTick takes a new reload at its next wrap; the counter must have
 /// reloaded from the restart first (a cycle after it: it reads non-zero then), else nothing is set
 /// up and the wrap restarts as before.
-fn set_up_next(clock: &mut Clock, due: u64) {
-    let second = APP_DUE
-        .load(Ordering::Relaxed)
-        .max(PLATFORM_DUE.load(Ordering::Relaxed));
+fn set_up_next(cs: CriticalSection<'_>, clock: &mut Clock, due: u64) {
+    let second = APP_DUE.get(cs).max(PLATFORM_DUE.get(cs));
     if second == u64::MAX || second <= due {
         return;
     }
@@ -386,7 +479,7 @@ fn set_up_next(clock: &mut Clock, due: u64) {
 /// A timer queue over the tick count whose next expiry is the word `$due` (the tick interrupt reads
 /// it): the two backends differ only in their queue and that word.
 macro_rules! tick_backend {
-    ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident) => {
+    ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident, $asked:ident) => {
         $(#[$doc])*
         pub struct $backend;
 
@@ -406,6 +499,7 @@ macro_rules! tick_backend {
             fn clear_compare_flag() {}
 
             fn pend_interrupt() {
+                $asked.store(true, Ordering::Relaxed);
                 cortex_m::peripheral::SCB::set_pendst();
             }
 
@@ -428,14 +522,23 @@ tick_backend!(
     /// The apps' timer queue over the tick count.
     AppTimer,
     APP_QUEUE,
-    APP_DUE
+    APP_DUE,
+    APP_ASKED
 );
 tick_backend!(
     /// The platform's timer queue (the robot exchange, the stimulus replay) over the tick count.
     PlatformTimer,
     PLATFORM_QUEUE,
-    PLATFORM_DUE
+    PLATFORM_DUE,
+    PLATFORM_ASKED
 );
+
+/// A queue's head changed since SysTick's interrupt last ran its expiries (rtic-time pends the
+/// interrupt for it): the tickless interrupt runs a queue's expiries only then or when its deadline
+/// has come, as nothing else changes what they would find. Set at a lower priority, cleared by the
+/// interrupt, which nothing that sets them pre-empts.
+static APP_ASKED: AtomicBool = AtomicBool::new(false);
+static PLATFORM_ASKED: AtomicBool = AtomicBool::new(false);
 
 /// Waits on the platform's queue until tick `at` (no trace record: the platform's wait, not a
 /// task of the app's).
@@ -471,13 +574,14 @@ pub(super) fn skip_to_deadline() -> bool {
     if !TICKLESS.load(Ordering::Relaxed) || !super::robot::nothing_else_pending() {
         return false;
     }
-    let due = APP_DUE
-        .load(Ordering::Relaxed)
-        .min(PLATFORM_DUE.load(Ordering::Relaxed));
+    // SAFETY: called with interrupts masked: nothing touches the clock or the deadlines until it
+    // returns.
+    let cs = unsafe { CriticalSection::new() };
+    let due = APP_DUE.get(cs).min(PLATFORM_DUE.get(cs));
     if due == u64::MAX {
         return false;
     }
-    critical_section::with(|cs| {
+    {
         let clock = &mut *CLOCK.borrow_ref_mut(cs);
         let (tick, into) = position(cs, clock);
         let now = tick * CYCLES_PER_TICK + u64::from(into);
@@ -494,7 +598,7 @@ pub(super) fn skip_to_deadline() -> bool {
         clock.armed = NOT_ARMED;
         clock.next_armed = NOT_ARMED;
         clock.may_keep = false;
-    });
+    }
     cortex_m::peripheral::SCB::set_pendst();
     true
 }
@@ -520,15 +624,27 @@ unsafe extern "C" fn SysTick() {
         unsafe { run_queues() };
         return;
     }
+    // SAFETY: SysTick's interrupt, the highest priority: nothing that touches the clock or the
+    // deadlines pre-empts it (`unpreempted`), which is all the clock's critical sections ensure.
+    let cs = unsafe { CriticalSection::new() };
     // A deadline that came while the queues ran is expired in this interrupt too (module docs,
     // "No held reading").
+    // A queue whose head did not change and whose deadline has not come is left alone: its expiry
+    // check would read the clock twice and take rtic-time's critical section to find nothing.
+    let mut now = ticks_at(cs, &mut CLOCK.borrow_ref_mut(cs));
     loop {
-        // SAFETY: this is the SysTick exception.
-        unsafe { run_queues() };
-        let now = read_ticks();
-        let due = APP_DUE
-            .load(Ordering::Relaxed)
-            .min(PLATFORM_DUE.load(Ordering::Relaxed));
+        if PLATFORM_ASKED.load(Ordering::Relaxed) || PLATFORM_DUE.get(cs) <= now {
+            PLATFORM_ASKED.store(false, Ordering::Relaxed);
+            // SAFETY: this is the SysTick exception.
+            unsafe { PLATFORM_QUEUE.on_monotonic_interrupt() };
+        }
+        if APP_ASKED.load(Ordering::Relaxed) || APP_DUE.get(cs) <= now {
+            APP_ASKED.store(false, Ordering::Relaxed);
+            // SAFETY: this is the SysTick exception.
+            unsafe { APP_QUEUE.on_monotonic_interrupt() };
+        }
+        now = ticks_at(cs, &mut CLOCK.borrow_ref_mut(cs));
+        let due = APP_DUE.get(cs).min(PLATFORM_DUE.get(cs));
         if due > now {
             break;
         }
@@ -536,6 +652,6 @@ unsafe extern "C" fn SysTick() {
     // A core left idle by this interrupt goes to its next deadline at once (`skip_to_deadline`):
     // SysTick need not be set up for it (a restart costs QEMU a timer expiry).
     if !super::robot::idle_after_systick() {
-        critical_section::with(|cs| restart(cs, &mut CLOCK.borrow_ref_mut(cs)));
+        restart(cs, &mut CLOCK.borrow_ref_mut(cs));
     }
 }

@@ -267,16 +267,24 @@ pub struct Job {
 /// `amiro_firmware::qemu::timer::run_queues`, nothing due): counted by single-stepping QEMU
 /// (`-singlestep -d exec,nochain -dfilter` on those two functions only, so calls out of them are not counted and
 /// the figure is at most the true one) on the traced DiWheelDrive 1-1 image over the 900 ms motor-deadman run:
-/// 90 173 interrupts, 42 to 72 instructions each (42 three times, 50 for 89 970). docs/bench.md, "The QEMU tick".
+/// 90 173 interrupts, 42 to 72 instructions each (42 three times, 50 for 89 970). Recounted 2026-12-03 on branch
+/// 34speed's image (main merged), the same run single-stepped whole (`-d exec,nochain,int`, each tick's own
+/// instructions by function): there `run_queues` is inlined into `SysTick` and the queues' expiry checks
+/// (`rtic_time`'s `on_monotonic_interrupt`, inlined into `run_queues` on main) are calls, so `SysTick` alone runs 13;
+/// with the two checks it always calls (their callees not counted) 51 (twice, at boot) to 81, 59 for 89 975 of
+/// 90 131; whole, 55 to 213. Still at most what a tick runs: unchanged. docs/bench.md, "The QEMU tick".
 pub const QEMU_TICK_FEWEST_INSTRUCTIONS: u64 = 42;
 
-/// The most instructions a QEMU tick interrupt was seen to run beyond [`QEMU_TICK_FEWEST_INSTRUCTIONS`]: a tick that
-/// wakes a task ran 161 (single-stepped over DiWheelDrive 1-1 `hostile` and LightRing 1-2 `admission`, docs/bench.md
-/// "What the ticks leave open"), 119 more than the fewest. No record stamps a tick, and a tick inside a pre-empting
+/// The most instructions a QEMU tick interrupt was seen to run beyond [`QEMU_TICK_FEWEST_INSTRUCTIONS`]: on main a
+/// tick that wakes a task ran 161 (single-stepped over DiWheelDrive 1-1 `hostile` and LightRing 1-2 `admission`,
+/// docs/bench.md "What the ticks leave open"); recounted 2026-12-03 on branch 34speed's image (main merged), whose
+/// tick reads the clock in the queues' expiry checks, the largest of `hostile`'s 46 568 ticks ran 280 (the waking
+/// ones tail-chained into a run up to 239; `motor-deadman`'s 90 131 up to 213; LightRing 1-2 `flood`'s up to 172;
+/// PowerManagement `flood`'s 26 935 up to 302): 260 more than the fewest. No record stamps a tick, and a tick inside a pre-empting
 /// run is not counted at all, so a pre-empted or ticked job whose own figure is above its bound by no more than this
 /// per tick and per pre-emption is not proved above it: it prints [`NOT_HELD`] (a measured spread, not a proven
 /// one), and a job above by more fails.
-pub const QEMU_TICK_SPREAD_INSTRUCTIONS: u64 = 161 - QEMU_TICK_FEWEST_INSTRUCTIONS;
+pub const QEMU_TICK_SPREAD_INSTRUCTIONS: u64 = 302 - QEMU_TICK_FEWEST_INSTRUCTIONS;
 
 /// The fewest instructions a QEMU job's own two task records run inside its span (its start record after the clock
 /// read, its end record up to it; `amiro_firmware::tracing::{start, end, write}`, written through semihosting):
@@ -285,12 +293,19 @@ pub const QEMU_TICK_SPREAD_INSTRUCTIONS: u64 = 161 - QEMU_TICK_FEWEST_INSTRUCTIO
 /// `HostStream::write_all`, `__aeabi_memclr8` and the outlined helper `write` calls (other callees not counted: a
 /// lower bound), on DiWheelDrive 1-1's traced image over `motor-deadman`: after the clock read (the `ldr` of
 /// SysTick's CVR in `write`) to `start`'s return 437 instructions (118 of 207 records; at most 469), from `end`'s entry
-/// to the clock read 54 (198 of 206; at most 92): 491. docs/bench.md, "The traced QEMU build's own records".
-pub const QEMU_RECORDS_FEWEST_INSTRUCTIONS: u64 = 491;
+/// to the clock read 54 (198 of 206; at most 92): 491 on main. Recounted 2026-12-03 on branch 34speed's image (main
+/// merged: `write`'s clock read inlined, its clamp after the read), from a whole single-stepped log with only those
+/// functions' instructions counted: after the clock read 431 (114 of 207; at most 436), up to it 58 (152 of 206; at
+/// most 66): 489; `hostile`'s 16 645 records and LightRing 1-2 `flood`'s 330 the same (431, 58); PowerManagement's
+/// image (Cortex-M4) over `flood`: 431 and 55 (2 719 of 4 626), so 486. docs/bench.md, "The traced QEMU build's own
+/// records".
+pub const QEMU_RECORDS_FEWEST_INSTRUCTIONS: u64 = 486;
 
 /// The fewest instructions one handler event runs in the traced QEMU build (`amiro_firmware::tracing::event`:
 /// encoded, stamped and printed as a `# T` console line; the release image copies it into the ring, which its bound
-/// holds): 1 311 to 1 318 over the run's 93 events, counted as [`QEMU_RECORDS_FEWEST_INSTRUCTIONS`].
+/// holds): 1 311 to 1 318 over the run's 93 events, counted as [`QEMU_RECORDS_FEWEST_INSTRUCTIONS`]. Recounted
+/// 2026-12-03 on branch 34speed's image (main merged): 1 617 to 1 625 over the same 93 (`hostile`'s 600: 1 617 to
+/// 1 666), not lower; 1 311 kept (the difference from main's count not explained).
 pub const QEMU_EVENT_FEWEST_INSTRUCTIONS: u64 = 1311;
 
 /// The fewest instructions a traced **hardware task**'s run executes inside the job it pre-empts outside its own
@@ -305,7 +320,10 @@ pub const QEMU_EVENT_FEWEST_INSTRUCTIONS: u64 = 1311;
 /// `USB_HP_CAN_TX`: 690–699), PowerManagement `flood` (2 077: 692–699) and LightRing 1-2 `flood` (123: 690–693);
 /// the fewest, 690 (entry 130, exit 559 or more), less 13 for the end record's data-dependent steps (2
 /// instructions per zero byte the encoder meets, at most 5 of them, and the clock's clamp and range checks):
-/// 677. docs/bench.md, "A pre-empting run's unstamped part".
+/// 677. Recounted 2026-12-03 on branch 34speed's DiWheelDrive 1-1 image (main merged) over `hostile` (7 217
+/// activations: 691–, entry 135 or more, exit 555 or more), `motor-deadman` (47: 691–) and, on LightRing 1-2's
+/// image, `flood` (123: 691–), on PowerManagement's (2 077: 693–): not lower, 677 kept.
+/// docs/bench.md, "A pre-empting run's unstamped part".
 pub const QEMU_PREEMPTION_BY_HANDLER_FEWEST_INSTRUCTIONS: u64 = 677;
 
 /// The same for a traced **software task**'s run, which its priority's dispatcher polls: the dispatcher's entry
@@ -317,7 +335,10 @@ pub const QEMU_PREEMPTION_BY_HANDLER_FEWEST_INSTRUCTIONS: u64 = 677;
 /// per run `(entry + (k − 1) × gap + exit) / k` is at least that for any k. Counted as
 /// [`QEMU_PREEMPTION_BY_HANDLER_FEWEST_INSTRUCTIONS`], over every dispatcher activation with a run: fewest entry
 /// 150, exit 633, gap 776 (DiWheelDrive 1-1 `hostile`'s 893 activations of two runs of one dispatcher; 778 on
-/// PowerManagement `flood`, 779 on LightRing 1-2 `flood`), so 776, less 13 as above: 763.
+/// PowerManagement `flood`, 779 on LightRing 1-2 `flood`), so 776, less 13 as above: 763. Recounted 2026-12-03 on
+/// branch 34speed's DiWheelDrive 1-1 image (main merged) over `hostile`: fewest gap 777 (888 two-run activations),
+/// entry 171 + exit 630; `motor-deadman` no lower; LightRing 1-2 `flood` and PowerManagement `flood` gap 779: not lower,
+/// 763 kept.
 pub const QEMU_PREEMPTION_BY_DISPATCHER_FEWEST_INSTRUCTIONS: u64 = 763;
 
 #[cfg(test)]
@@ -610,11 +631,11 @@ mod tests {
 
     #[test]
     fn observed_instructions_are_held_to_the_bound_after_the_trace_records() {
-        // QEMU: the job's own records at their fewest, 491 instructions (the timing file's 12 µs are the robot's).
+        // QEMU: the job's own records at their fewest, 486 instructions (the timing file's 12 µs are the robot's).
         let rows = rows(
             &board_bounds(),
             &[
-                ("can_rx".into(), vec![Job::alone(7.928)]), // 991 instructions: 500 once the records are out
+                ("can_rx".into(), vec![Job::alone(7.888)]), // 986 instructions: 500 once the records are out
                 ("admit_requests".into(), vec![Job::alone(100.0)]), // declined
                 ("stimulus".into(), vec![Job::alone(5.0)]), // no row: not listed
             ],
@@ -623,7 +644,7 @@ mod tests {
             120_000_000,
         );
         assert_eq!(rows.len(), 2);
-        assert_eq!(rows[0].observed, 991);
+        assert_eq!(rows[0].observed, 986);
         assert_eq!(rows[0].trace_allowance, QEMU_RECORDS_FEWEST_INSTRUCTIONS);
         assert_eq!(rows[0].bound, Some(500));
         assert_eq!(rows[0].verdict, "ok");
@@ -632,12 +653,12 @@ mod tests {
         // One instruction more than the bound and the trace: above it.
         let over = super::rows(
             &board_bounds(),
-            &[("can_rx".into(), vec![Job::alone(7.936)])],
+            &[("can_rx".into(), vec![Job::alone(7.896)])],
             None,
             true,
             120_000_000,
         );
-        assert_eq!(over[0].observed, 992);
+        assert_eq!(over[0].observed, 987);
         assert_eq!(over[0].verdict, EXCEEDS);
         // A job that printed two handler events: each taken off at its fewest (1 311), not more.
         let printed = |exec_us: f64| Job {
@@ -646,18 +667,18 @@ mod tests {
         };
         let two = super::rows(
             &board_bounds(),
-            &[("can_rx".into(), vec![printed(28.904)])], // 3 613 = 500 + 491 + 2 × 1 311
+            &[("can_rx".into(), vec![printed(28.864)])], // 3 608 = 500 + 486 + 2 × 1 311
             None,
             true,
             120_000_000,
         );
         assert_eq!(
             (two[0].trace_allowance, two[0].verdict.as_str()),
-            (491 + 2 * 1311, "ok")
+            (486 + 2 * 1311, "ok")
         );
         let two_over = super::rows(
             &board_bounds(),
-            &[("can_rx".into(), vec![printed(28.912)])],
+            &[("can_rx".into(), vec![printed(28.872)])],
             None,
             true,
             120_000_000,
@@ -705,11 +726,11 @@ mod tests {
             bounds: Some(file),
             ..board_bounds()
         };
-        // 1 391 instructions, 900 once the records are out: a job of three frames, above one frame's 300 but
+        // 1 386 instructions, 900 once the records are out: a job of three frames, above one frame's 300 but
         // within the job's bound.
         let held = rows(
             &charged,
-            &[("can_rx".into(), vec![Job::alone(11.128)])],
+            &[("can_rx".into(), vec![Job::alone(11.088)])],
             None,
             true,
             1,
@@ -717,7 +738,7 @@ mod tests {
         assert_eq!((held[0].bound, held[0].verdict.as_str()), (Some(900), "ok"));
         let over = rows(
             &charged,
-            &[("can_rx".into(), vec![Job::alone(11.136)])],
+            &[("can_rx".into(), vec![Job::alone(11.096)])],
             None,
             true,
             1,
@@ -750,8 +771,8 @@ mod tests {
             events: 0,
             ticks: 0,
         };
-        // can_rx's bound is 500. Pre-empted by a hardware task's run and a dispatched one: its records (491),
-        // each run's unstamped part at its fewest, 500 its own: within. Alone, 900 observed: 409 its own.
+        // can_rx's bound is 500. Pre-empted by a hardware task's run and a dispatched one: its records (486),
+        // each run's unstamped part at its fewest, 500 its own: within. Alone, 900 observed: 414 its own.
         let at = 500 + QEMU_RECORDS_FEWEST_INSTRUCTIONS + handler + dispatched;
         let r = rows(
             &bounds,
@@ -772,7 +793,7 @@ mod tests {
             ),
             (at, 2, 1, handler + dispatched)
         );
-        assert_eq!(r[0].alone, Some(409));
+        assert_eq!(r[0].alone, Some(414));
         assert_eq!((r[0].verdict.as_str(), r[0].ratio), ("ok", Some(1.0)));
         // One instruction more: above its bound, but by less than a tick inside each of its two pre-empting runs
         // may run beyond its fewest: not proved above, printed and not held.
@@ -807,7 +828,7 @@ mod tests {
         );
         assert_eq!(
             (over[0].own(), over[0].alone, over[0].verdict.as_str()),
-            (501 + spread, Some(409), EXCEEDS)
+            (501 + spread, Some(414), EXCEEDS)
         );
         // The same observation with both runs a hardware task's: only the handler's part comes off twice.
         let by_handlers = rows(
@@ -935,8 +956,8 @@ mod tests {
             bounds: Some(file),
             trace: None,
         };
-        // 8 ns per instruction, each with its records' 491: can_tx 901 of its own (1 392 instructions, 11.136 µs),
-        // handle_commands 1 400 (15.128 µs), can_rx 300 (6.328 µs), the watchdog declined by the machine code too.
+        // 8 ns per instruction, each with its records' 486: can_tx 906 of its own (1 392 instructions, 11.136 µs),
+        // handle_commands 1 405 (15.128 µs), can_rx 305 (6.328 µs), the watchdog declined by the machine code too.
         let r = rows(
             &held_bounds,
             &[
@@ -949,7 +970,7 @@ mod tests {
             true,
             1,
         );
-        // A held row with a whole job is held to the job's bound, not one frame's: 901 > 900.
+        // A held row with a whole job is held to the job's bound, not one frame's: 906 > 900.
         assert_eq!(
             (r[0].bound, r[0].held, r[0].verdict.as_str()),
             (Some(900), true, EXCEEDS)
@@ -1037,11 +1058,11 @@ mod tests {
             (2001 + QEMU_TICK_SPREAD_INSTRUCTIONS, EXCEEDS)
         );
         // The same job against the release bound, before the image was bounded: the records and the event
-        // off (491 + 1 311), 198 own within 500; 2 001 + 1 802 would be NOT HELD, not failed.
+        // off (486 + 1 311), 203 own within 500; 2 001 + 1 797 would be NOT HELD, not failed.
         let release = held(16.336, None);
         assert_eq!(
             (release.image, release.trace_allowance, release.bound),
-            (RELEASE, 491 + 1311, Some(500))
+            (RELEASE, 486 + 1311, Some(500))
         );
         let far = held(30.0, None);
         assert!(far.verdict.starts_with(NOT_HELD), "{}", far.verdict);
