@@ -77,6 +77,8 @@ pub fn init(syst: cortex_m::peripheral::SYST) {
     if let Some(file) = HostFile::create(b"trace.bin\0") {
         TRACE_FILE.store(file.0, Ordering::Relaxed);
     }
+    // The clock's busy ticks, stamped as runs of their own (`timer`'s `SysTick`).
+    timer::stamp_busy_ticks(HostFile::create(b"clock.bin\0").map(|file| file.0));
 }
 
 /// The host file the trace records go to (`usize::MAX`: none).

@@ -29,6 +29,13 @@
 //! | 3 | `event` | one 18-byte `amiro_sensors::trace` record (handler events: sample taken with its release, frame queued, frame in a mailbox, …) |
 //! | 4 | `frame-acked` | identifier `u16`: the frame's transmission completed (acknowledged on the bus) |
 //! | 5 | `lost` | records lost `u32` (the channel was full), written when there is room again |
+//!
+//! Task numbers are the app's tasks in source order, below 32, with one exception: [`PLATFORM_CLOCK_TASK`]
+//! (254) is the QEMU platform clock's interrupt (SysTick in a single-board run), not an app task. Its busy
+//! ticks (a queue checked: a deadline due, a head changed) are stamped cheaply, outside this stream: two raw
+//! trace-clock readings per tick in the
+//! run's host file `clock.bin` ([`clock_run`]), which the reader turns into a `task-start`/`task-end` pair of
+//! this task so it can take the interrupt out of the job it interrupts. A robot never writes it.
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 
@@ -44,6 +51,54 @@ pub const EVENT_LEN: usize = 18;
 
 /// Longest body: kind, timestamp, the largest payload, check.
 pub const MAX_BODY: usize = 1 + 8 + EVENT_LEN + 1;
+
+/// The task number of the QEMU platform clock's interrupt (`amiro_firmware::qemu::timer`'s SysTick in a
+/// single-board run): each busy tick is a `task-start`/`task-end` pair with this number (read from
+/// [`clock_run`]'s stamps), so the host sees it as a pre-empting run of its own, not as part of the job it
+/// interrupts. No app task has it (app tasks are numbered below 32; 255 is the firmware's "no task").
+pub const PLATFORM_CLOCK_TASK: u8 = 254;
+
+/// The QEMU platform clock's stamps (`clock.bin` of a single-board run): per busy SysTick tick its start and end
+/// on the trace clock, two `u64` little-endian, 16 bytes, in the order the activations ended. Written raw (no
+/// COBS, no check: a host file, not a link) because the interrupt runs often and an encoded pair of records cost
+/// it about 1 000 instructions. A reader makes each pair a `task-start`/`task-end` of [`PLATFORM_CLOCK_TASK`].
+pub mod clock_run {
+    /// Bytes per activation.
+    pub const LEN: usize = 16;
+
+    /// One activation's stamps as written.
+    #[inline(always)]
+    pub fn encode(start: u64, end: u64) -> [u8; LEN] {
+        let mut out = [0u8; LEN];
+        let (a, b) = out.split_at_mut(8);
+        a.copy_from_slice(&start.to_le_bytes());
+        b.copy_from_slice(&end.to_le_bytes());
+        out
+    }
+
+    /// The activations in `bytes` (a trailing part of one is ignored): (start, end) cycles.
+    pub fn decode(bytes: &[u8]) -> impl Iterator<Item = (u64, u64)> + '_ {
+        bytes.chunks_exact(LEN).map(|c| {
+            let mut start = [0u8; 8];
+            let mut end = [0u8; 8];
+            start.copy_from_slice(&c[..8]);
+            end.copy_from_slice(&c[8..]);
+            (u64::from_le_bytes(start), u64::from_le_bytes(end))
+        })
+    }
+
+    #[cfg(test)]
+    mod tests {
+        #[test]
+        fn round_trip_and_a_cut_tail() {
+            let mut bytes = super::encode(5, 1_000_000_007).to_vec();
+            bytes.extend_from_slice(&super::encode(u64::MAX - 1, u64::MAX));
+            bytes.extend_from_slice(&[1, 2, 3]);
+            let runs: Vec<_> = super::decode(&bytes).collect();
+            assert_eq!(runs, [(5, 1_000_000_007), (u64::MAX - 1, u64::MAX)]);
+        }
+    }
+}
 
 /// Longest record on the wire: COBS adds one byte per 254, plus the delimiter.
 pub const MAX_WIRE: usize = MAX_BODY + 2;

@@ -55,7 +55,7 @@
 //! time: the run stays deterministic. No tickless reading goes below the one before (QEMU updates
 //! SysTick lazily around a wrap: a reading there can come out a little early).
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 
 use portable_atomic::AtomicU64;
 
@@ -616,12 +616,85 @@ unsafe fn run_queues() {
     }
 }
 
+/// A single-board run's host file `clock.bin`, where SysTick's interrupt writes the stamps of its
+/// busy ticks ([`stamp_busy_ticks`]; `usize::MAX`: none, a robot run or no file).
+static CLOCK_FILE: AtomicUsize = AtomicUsize::new(usize::MAX);
+
+/// A single-board run: SysTick's periodic interrupt stamps every tick that does more than a plain
+/// tick ([`busy_queues`]) into the host file `file` (see [`SysTick`]).
+pub(super) fn stamp_busy_ticks(file: Option<usize>) {
+    CLOCK_FILE.store(file.unwrap_or(usize::MAX), Ordering::Relaxed);
+}
+
+/// Periodic: which queues this tick must check, (platform, apps): a queue whose head changed since
+/// the last tick (rtic-time pended the interrupt for it, [`APP_ASKED`]) or whose deadline has come
+/// (an expiry, a task woken). A tick with neither is a plain tick: both checks would find nothing.
+/// Counts the wrap that raised the interrupt (`now_ticks`), as the checks would.
+fn busy_queues(cs: CriticalSection<'_>) -> (bool, bool) {
+    let now = now_ticks();
+    let platform = PLATFORM_ASKED.swap(false, Ordering::Relaxed) || PLATFORM_DUE.get(cs) <= now;
+    let app = APP_ASKED.swap(false, Ordering::Relaxed) || APP_DUE.get(cs) <= now;
+    (platform, app)
+}
+
+/// Periodic: the trace clock ([`now_cycles`]) where nothing pre-empts the caller (SysTick's
+/// interrupt): the counter, then whether SysTick wrapped meanwhile (counted, and read again), with
+/// one look at the tick count instead of two.
+fn tick_cycles() -> u64 {
+    loop {
+        // SAFETY: a read of SysTick's current value, which has no side effects.
+        let value = unsafe { core::ptr::read_volatile(SYST_CVR) };
+        if !has_wrapped() {
+            return PERIODIC.load(Ordering::Relaxed) * CYCLES_PER_TICK
+                + (CYCLES_PER_TICK - 1).saturating_sub(u64::from(value));
+        }
+        PERIODIC.fetch_add(1, Ordering::AcqRel);
+    }
+}
+
+/// The platform clock's interrupt.
+///
+/// **Stamped busy ticks (a single-board run).** A single-board run stays periodic (a tick every
+/// [`TICK_US`]: a tickless interrupt costs some 300–600 instructions against a plain tick's
+/// hundred, and DiWheelDrive's `hostile` scenario, a frame every 20 µs, overran its receive FIFO
+/// tickless; docs/bench.md, "The QEMU tick"). Every tick that does more than a plain tick
+/// ([`busy_queues`]) is a stamped run of its own: it reads the trace clock before and after the
+/// queues' checks and writes the two readings, raw, to the host file `clock.bin`
+/// (`amiro_trace::clock_run`: 16 bytes, one semihosting write, no encoding); the bench reads each
+/// pair as a task-start/task-end pair of the platform clock (`amiro_trace::PLATFORM_CLOCK_TASK`)
+/// and takes such a tick out of the job it interrupts like any pre-empting run. A plain tick is
+/// not stamped (the bench counts it at its fewest) and leaves both queues alone, as a tickless
+/// interrupt does (their checks would find nothing: no head changed, none due), so it runs a few
+/// dozen instructions, not a hundred, and a busy tick checks only the queues it must:
+/// `hostile` overran its FIFO with the stamps alone (10 overruns; 1 with plain ticks left alone). Two
+/// encoded trace records per busy tick cost it about 1 000 instructions more, and
+/// PowerManagement's `flood` then starved its ring publisher.
 #[no_mangle]
 #[allow(non_snake_case)]
 unsafe extern "C" fn SysTick() {
     if !TICKLESS.load(Ordering::Relaxed) {
-        // SAFETY: this is the SysTick exception.
-        unsafe { run_queues() };
+        let file = CLOCK_FILE.load(Ordering::Relaxed);
+        // SAFETY: SysTick's interrupt, the highest priority: nothing that writes the deadlines
+        // pre-empts it (`Due::get`).
+        if file == usize::MAX {
+            // SAFETY: this is the SysTick exception.
+            unsafe { run_queues() };
+            return;
+        }
+        // SAFETY: as above.
+        let (platform, app) = busy_queues(unsafe { CriticalSection::new() });
+        if platform || app {
+            let start = tick_cycles();
+            // SAFETY (both): this is the SysTick exception, which drives both queues.
+            if platform {
+                unsafe { PLATFORM_QUEUE.on_monotonic_interrupt() };
+            }
+            if app {
+                unsafe { APP_QUEUE.on_monotonic_interrupt() };
+            }
+            let end = tick_cycles();
+            super::write_trace_to(file, &amiro_trace::clock_run::encode(start, end));
+        }
         return;
     }
     // SAFETY: SysTick's interrupt, the highest priority: nothing that touches the clock or the
