@@ -43,17 +43,25 @@ pub struct Run {
     /// is encoded and written to the console inside the run (`amiro_firmware::tracing::event`), which the release
     /// image does not do.
     pub events: u32,
-    /// QEMU only: the platform's tick interrupts (untraced, `amiro_firmware::qemu::timer`'s SysTick, every
-    /// [`QEMU_TICK_US`]) that surely ran inside this run while it was the innermost: per stretch in which it ran
-    /// innermost, the tick boundaries in it less one (the last one's interrupt may be taken after the stretch
-    /// ends, once a critical section lets it). 0 for a robot capture.
+    /// Of [`Run::preemptions`], the runs of the QEMU platform clock's interrupt
+    /// ([`amiro_trace::PLATFORM_CLOCK_TASK`]: SysTick's busy ticks in a single-board run, stamped in the run's
+    /// `clock.bin`; docs/bench.md, "The QEMU tick"). 0 for a robot capture.
+    pub clock_preemptions: u32,
+    /// QEMU only: the platform's plain ticks (unstamped: `amiro_firmware::qemu::timer`'s SysTick, every
+    /// [`QEMU_TICK_US`], when it checks no queue) that surely ran inside this run while it was the innermost: per
+    /// stretch in which it ran innermost, the tick boundaries in it less one (the last one's interrupt may be taken
+    /// after the stretch ends, once a critical section lets it; a busy tick, stamped, ends the stretch it falls in).
+    /// 0 for a robot capture.
     pub ticks: u32,
+    /// QEMU only: the stretches (as for [`Run::ticks`]) that held a tick boundary whose tick was not counted
+    /// (the last one's): each may have run inside this run, a plain tick the bench did not take off.
+    pub uncounted_ticks: u32,
     /// Where the release came from.
     pub release_from: ReleaseFrom,
 }
 
 /// The QEMU build's tick, µs (`amiro_firmware::qemu::TICK_US`): a single-board run's SysTick interrupts every
-/// tick, untraced, inside whatever runs.
+/// tick, inside whatever runs; its plain ticks are not stamped.
 pub const QEMU_TICK_US: u64 = 10;
 
 impl Run {
@@ -140,7 +148,9 @@ struct Open {
     preempted_by: u32,
     preempted_runs: [u16; 32],
     events: u32,
+    clock_preemptions: u32,
     ticks: u32,
+    uncounted_ticks: u32,
 }
 
 impl Builder {
@@ -176,6 +186,7 @@ impl Builder {
         {
             let boundaries = (cycles / tick).saturating_sub(self.top_since / tick);
             top.ticks += u32::try_from(boundaries.saturating_sub(1)).unwrap_or(u32::MAX);
+            top.uncounted_ticks += u32::from(boundaries > 0);
         }
         self.top_since = cycles;
     }
@@ -213,7 +224,9 @@ impl Builder {
                     preempted_by: 0,
                     preempted_runs: [0; 32],
                     events: 0,
+                    clock_preemptions: 0,
                     ticks: 0,
+                    uncounted_ticks: 0,
                 });
             }
             Kind::TaskEnd {
@@ -226,6 +239,9 @@ impl Builder {
                         if let Some(parent) = self.stack.last_mut() {
                             parent.preempted_ns += took;
                             parent.preemptions += 1;
+                            if task == amiro_trace::PLATFORM_CLOCK_TASK {
+                                parent.clock_preemptions += 1;
+                            }
                             parent.preempted_by |= 1u32.checked_shl(u32::from(task)).unwrap_or(0);
                             if let Some(n) = parent.preempted_runs.get_mut(usize::from(task)) {
                                 *n = n.saturating_add(1);
@@ -241,7 +257,9 @@ impl Builder {
                             preempted_by: open.preempted_by,
                             preempted_runs: open.preempted_runs,
                             events: open.events,
+                            clock_preemptions: open.clock_preemptions,
                             ticks: open.ticks,
+                            uncounted_ticks: open.uncounted_ticks,
                             release_from: open.release_from,
                         });
                     }
@@ -382,7 +400,19 @@ pub use amiro_robot::log::console_record_bytes;
 /// Reads a QEMU run: the task records from its `trace.bin`, the handler events from the `# T`
 /// lines of its console `text` (records in the same format, on the same clock, merged in time
 /// order), and the frames on QEMU's virtual bus, acknowledged when printed (µs).
+#[cfg(test)]
 pub fn read_qemu(trace_bin: &[u8], text: &str, default_hz: u64) -> Result<Capture> {
+    read_qemu_clocked(trace_bin, &[], text, default_hz)
+}
+
+/// [`read_qemu`], with the platform clock's stamps (`clock.bin`, [`amiro_trace::clock_run`]): each activation of
+/// its interrupt a run of [`amiro_trace::PLATFORM_CLOCK_TASK`], which pre-empts whatever ran.
+pub fn read_qemu_clocked(
+    trace_bin: &[u8],
+    clock_bin: &[u8],
+    text: &str,
+    default_hz: u64,
+) -> Result<Capture> {
     let mut reader = Reader::new();
     let mut records: Vec<Record> = trace_bin.iter().filter_map(|&b| reader.push(b)).collect();
     let mut console = Reader::new();
@@ -391,6 +421,20 @@ pub fn read_qemu(trace_bin: &[u8], text: &str, default_hz: u64) -> Result<Captur
             .iter()
             .filter_map(|&b| console.push(b)),
     );
+    let task = amiro_trace::PLATFORM_CLOCK_TASK;
+    for (start, end) in amiro_trace::clock_run::decode(clock_bin) {
+        records.push(Record {
+            cycles: start,
+            kind: Kind::TaskStart { task },
+        });
+        records.push(Record {
+            cycles: end,
+            kind: Kind::TaskEnd {
+                task,
+                next_release_in_us: u32::MAX,
+            },
+        });
+    }
     // A stable sort: records of one stream stay in their order.
     records.sort_by_key(|r| r.cycles);
     let mut builder = Builder::new(default_hz);
@@ -424,7 +468,15 @@ pub fn read_qemu_dir(dir: &std::path::Path, default_hz: u64) -> Result<Capture> 
             dir.join("trace.bin").display()
         )
     })?;
-    let mut capture = read_qemu(&bin, &text, default_hz)?;
+    // The platform clock's stamps (a single-board run since 2026-12-03), as its runs.
+    let clock = match std::fs::read(dir.join("clock.bin")) {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => {
+            return Err(e).with_context(|| format!("reading {}", dir.join("clock.bin").display()))
+        }
+    };
+    let mut capture = read_qemu_clocked(&bin, &clock, &text, default_hz)?;
     // The stimulus the run replayed (its only received frames), when the directory keeps it.
     if let Ok(stimulus) = std::fs::read(dir.join("stimulus.bin")) {
         capture.received_gap_us = Some(
@@ -515,6 +567,39 @@ mod tests {
         // Due at 40 + 1000 µs, done at 1070 µs.
         assert_eq!(second.response_ns(), 30_000);
         assert_eq!(c.unbalanced, 0);
+    }
+
+    #[test]
+    fn the_clocks_busy_ticks_pre_empt_and_plain_ticks_are_counted_per_stretch() {
+        // 1.2 MHz: one tick (10 µs) is 12 cycles. Task 3 runs from cycle 10 to 100; the clock's busy tick
+        // (clock.bin) from 40 to 46 inside it.
+        let bin = wire(&[
+            hello(1_200_000),
+            (10, Kind::TaskStart { task: 3 }),
+            (
+                100,
+                Kind::TaskEnd {
+                    task: 3,
+                    next_release_in_us: u32::MAX,
+                },
+            ),
+        ]);
+        let clock = amiro_trace::clock_run::encode(40, 46);
+        let c = read_qemu_clocked(&bin, &clock, "", 1_200_000).unwrap();
+        let (tick, job) = (c.runs[0], c.runs[1]);
+        assert_eq!(tick.task, amiro_trace::PLATFORM_CLOCK_TASK);
+        assert_eq!(
+            (job.preemptions, job.clock_preemptions, job.preempted_by),
+            (1, 1, 0)
+        );
+        // 90 cycles less the tick's 6: 84 cycles = 70 µs.
+        assert_eq!(job.execution_ns(), 70_000);
+        // Stretch 10..40 holds the boundaries 12, 24, 36: two surely inside (36's may come after 40); stretch
+        // 46..100 holds 48, 60, 72, 84, 96: four. The busy tick itself is a run, not a plain tick.
+        assert_eq!((job.ticks, job.uncounted_ticks), (6, 2));
+        // Without clock.bin (a robot capture's format, or an older run) the same span is the job's own.
+        let plain = read_qemu_clocked(&bin, &[], "", 1_200_000).unwrap();
+        assert_eq!((plain.runs.len(), plain.runs[0].clock_preemptions), (1, 0));
     }
 
     #[test]

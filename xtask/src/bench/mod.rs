@@ -212,7 +212,7 @@ impl Bench {
             .map(|m| {
                 format!(
                     "{}/{}: {} {} observed ({} of them the trace records, {} the unstamped parts of {} \
-                     pre-empting runs{} and the {} tick interrupts inside it; {} handler events printed inside it) > {}bound {} {}",
+                     pre-empting runs{} ({} of them the clock's busy ticks) and the {} plain ticks inside it; {} handler events printed inside it) > {}bound {} {}",
                     self.board,
                     m.task,
                     m.observed,
@@ -225,6 +225,7 @@ impl Bench {
                     } else {
                         format!(": {}", m.preempted_by.join(", "))
                     },
+                    m.clocked,
                     m.ticks,
                     m.events,
                     if m.held { "held " } else { "" },
@@ -468,9 +469,11 @@ pub fn measure_with(
                                 .filter(|(n, _)| dispatched & (1 << n) != 0)
                                 .map(|(_, runs)| u32::from(*runs))
                                 .sum(),
+                            clocked: r.clock_preemptions,
                             preempted_by: r.preempted_by,
                             events: r.events,
                             ticks: r.ticks,
+                            uncounted_ticks: r.uncounted_ticks,
                         })
                         .collect();
                     (t.task.clone(), jobs)
