@@ -971,6 +971,19 @@ impl fmt::Display for AdmissionVerdict {
             )?;
         }
         match self.violation {
+            // No deadline named and no bound: the board's check decided without a verdict on any deadline (its
+            // working arrays too small for the set, its fixed-point iteration budget spent, or a zero period;
+            // the board's diagnostics count which). Refusing never breaks a deadline.
+            Violation::Unknown if self.deadline_us.get() == 0 && self.wcrt_us.get() == 0 => {
+                f.write_str(
+                    "its check reached no verdict on a deadline (the set is beyond its capacity or its iteration \
+                     budget, or the period is zero; the diagnostics' admission reasons say which), so it refuses.",
+                )?;
+                if !self.searched {
+                    return f.write_str(" The board did not search for what it would accept.");
+                }
+                return Ok(());
+            }
             Violation::Unknown => f.write_str("a deadline would be missed")?,
             Violation::Task { index } => write!(f, "its task #{index} would miss its deadline")?,
             Violation::Message { id } => match Topic::from_byte(id.topic_byte()) {

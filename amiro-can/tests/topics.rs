@@ -860,6 +860,31 @@ fn admission_verdict_example_from_the_docs() {
     assert!(a.decode().is_ok() && b.decode().is_ok());
     assert!(on_bus.to_string().contains("high gyroscope frames (0x508)"));
     assert!(on_bus.to_string().contains("needs priority urgent"));
+    // A refusal that names no deadline (the board's check out of capacity or iterations: the firmware sends no
+    // culprit and 0 µs / 0 µs) does not claim a deadline would be missed at 0 µs.
+    let no_verdict = AdmissionVerdict {
+        violation: Violation::Unknown,
+        wcrt_us: Count::saturating(0),
+        deadline_us: Count::saturating(0),
+        shortest_period: None,
+        searched: false,
+        ..verdict
+    };
+    assert_eq!(
+        no_verdict.to_string(),
+        "DiWheelDrive refused \"publish accelerometer every 1 µs at urgent\": its check reached no verdict on a \
+         deadline (the set is beyond its capacity or its iteration budget, or the period is zero; the diagnostics' \
+         admission reasons say which), so it refuses. The board did not search for what it would accept."
+    );
+    // An unnamed culprit with its bounds still says what misses.
+    let unnamed = AdmissionVerdict {
+        violation: Violation::Unknown,
+        searched: false,
+        ..verdict
+    };
+    assert!(unnamed
+        .to_string()
+        .contains("a deadline would be missed (worst-case response 2000 µs, deadline 1000 µs)"));
 }
 
 /// A board's counters survive the trip over the bus: after one full cycle of rejection windows the host's

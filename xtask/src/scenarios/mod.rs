@@ -648,8 +648,19 @@ pub fn same_refusal(
     host: &schedule_analysis::admission::Decision,
 ) -> Result<()> {
     use schedule_analysis::admission::{Culprit, Refusal};
-    let Some(Refusal::Deadline(v)) = host.refusal else {
-        bail!("the host admits what the board answered with {verdict}");
+    let v = match host.refusal {
+        Some(Refusal::Deadline(v)) => v,
+        // Refused without a verdict on a deadline: the board sends no culprit and no bound.
+        Some(other) => {
+            ensure!(
+                verdict.violation == amiro_can::Violation::Unknown
+                    && verdict.wcrt_us.get() == 0
+                    && verdict.deadline_us.get() == 0,
+                "the host refuses on {other:?} (no deadline named), the board answered with {verdict}"
+            );
+            return Ok(());
+        }
+        None => bail!("the host admits what the board answered with {verdict}"),
     };
     let us = |t: schedule_analysis::time::Time| t.as_ns().div_ceil(1000);
     let wcrt = v.wcrt.map_or(u64::from(u32::MAX), us).min(0xFF_FFFF);
@@ -861,6 +872,62 @@ pub fn check_refusal_counts(out: &RunOutput, board: amiro_can::Board) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A board's refusal without a culprit (0 µs / 0 µs) matches the host's refusal on its iteration budget or
+    /// capacity, and no other; a deadline the host names must be the board's.
+    #[test]
+    fn a_refusal_without_a_deadline_matches_only_the_hosts_own() {
+        use amiro_can::{
+            AdmissionVerdict, Board, Count, Priority, SampleTime, TimeUnit, Topic, Verdict,
+            Violation,
+        };
+        use schedule_analysis::admission::{Culprit, Decision, Refusal, Suggestion, TaskId};
+        let board = AdmissionVerdict {
+            board: Board::DiWheelDrive,
+            topic: Topic::FloorProximity,
+            requested: SampleTime {
+                value: 1,
+                unit: TimeUnit::Millis,
+            },
+            priority: Priority::Urgent,
+            verdict: Verdict::Refused,
+            violation: Violation::Unknown,
+            wcrt_us: Count::saturating(0),
+            deadline_us: Count::saturating(0),
+            shortest_period: None,
+            priority_needed: None,
+            searched: false,
+            one_shot: false,
+        };
+        let host = |refusal| Decision {
+            refusal,
+            floor: refusal,
+            suggestion: Suggestion::default(),
+            iterations: 0,
+            evaluations: 1,
+            boards: 1,
+        };
+        assert!(same_refusal(&board, &host(Some(Refusal::Budget))).is_ok());
+        assert!(same_refusal(&board, &host(Some(Refusal::Capacity))).is_ok());
+        assert!(same_refusal(&board, &host(None)).is_err());
+        let deadline = Refusal::Deadline(schedule_analysis::admission::Violation {
+            culprit: Culprit::Task {
+                board: 0,
+                task: TaskId::Fixed(5),
+            },
+            wcrt: Some(schedule_analysis::time::Time::from_us(55)),
+            deadline: schedule_analysis::time::Time::from_us(47),
+        });
+        assert!(same_refusal(&board, &host(Some(deadline))).is_err());
+        let named = AdmissionVerdict {
+            violation: Violation::Task { index: 5 },
+            wcrt_us: Count::saturating(55),
+            deadline_us: Count::saturating(47),
+            ..board
+        };
+        assert!(same_refusal(&named, &host(Some(deadline))).is_ok());
+        assert!(same_refusal(&named, &host(Some(Refusal::Budget))).is_err());
+    }
 
     fn run(lines: &[&str]) -> RunOutput {
         RunOutput::parse(&lines.join("\n")).unwrap()
