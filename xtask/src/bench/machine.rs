@@ -12,9 +12,10 @@
 //! read to the exception return — at the fewest instructions that takes, counted from the traced images
 //! ([`QEMU_PREEMPTION_BY_HANDLER_FEWEST_INSTRUCTIONS`], [`QEMU_PREEMPTION_BY_DISPATCHER_FEWEST_INSTRUCTIONS`];
 //! docs/bench.md, "A pre-empting run's unstamped part"), once per direct pre-emption. The QEMU platform clock's
-//! interrupt is one such run: tickless, it interrupts only at the timer queues' deadlines and stamps each
-//! activation as a run of its own ([`QEMU_PREEMPTION_BY_CLOCK_FEWEST_INSTRUCTIONS`]; docs/bench.md, "The QEMU
-//! clock"). Nothing else is subtracted: what the QEMU build executes beyond the release image otherwise (its
+//! busy ticks (a single-board run's SysTick stays periodic; a tick that checks a timer queue stamps itself in
+//! `clock.bin`) are such runs ([`QEMU_PREEMPTION_BY_CLOCK_FEWEST_INSTRUCTIONS`]); its plain ticks, unstamped, are
+//! counted where they surely fell inside the job and taken off at their fewest ([`QEMU_TICK_FEWEST_INSTRUCTIONS`];
+//! docs/bench.md, "The QEMU tick"). Nothing else is subtracted: what the QEMU build executes beyond the release image otherwise (its
 //! platform's console lines, a pre-emption's unstamped part beyond its fewest) makes an observation larger, never
 //! smaller, so a run within its bound is within it, and a job above its bound by more than its pre-emptions'
 //! measured spread ([`QEMU_PREEMPTION_BY_HANDLER_SPREAD_INSTRUCTIONS`] and the others) fails however often it was
