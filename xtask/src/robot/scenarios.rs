@@ -334,6 +334,15 @@ fn shutdown(run: &Run) -> Result<String> {
         .first()
         .context("PowerManagement never drove SYS_PD_N")?
         .to_string();
+    // The check below reads the boards' handler events: without them (none printed, or none
+    // parsed) it would hold for nothing. The commands before the request were accepted.
+    let accepted: usize = (0..3)
+        .map(|board| run.view(board).traces("command-accepted").len())
+        .sum();
+    ensure!(
+        accepted > 0,
+        "no board's command-accepted event: the run has no handler events to check"
+    );
     let mut summary = Vec::new();
     for (board, name) in NODES.iter().enumerate().take(3) {
         let view = run.view(board);
@@ -907,4 +916,34 @@ pub fn run_all(root: &Path) -> Result<()> {
             .display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A shutdown run without the boards' handler events fails the check instead of passing on
+    /// no `command-accepted` line at all.
+    #[test]
+    fn shutdown_needs_the_handler_events() {
+        let end = |board: &str| format!("{board}: # qemu: shutdown hand-over at 100420 µs");
+        let mut text = vec!["bus: # (0.100160) SYS_PD_N low (driven by powermgmt)".to_string()];
+        text.extend(NODES.iter().take(3).map(|b| end(b)));
+        let run = Run {
+            outcome: Outcome {
+                text: text.join("\n"),
+                ..Outcome::default()
+            },
+        };
+        let error = shutdown(&run).unwrap_err().to_string();
+        assert!(error.contains("no handler events"), "{error}");
+        text.push("powermgmt: # (0.008420) trace command-accepted 21F".into());
+        let run = Run {
+            outcome: Outcome {
+                text: text.join("\n"),
+                ..Outcome::default()
+            },
+        };
+        shutdown(&run).unwrap();
+    }
 }
