@@ -177,9 +177,9 @@ fn a_frame_deadline_needs_an_own_frame_arrival_and_no_deadline_beside_it() {
                 .expect("parses");
         json["tasks"]["can_tx"][field] = value;
         std::fs::write(lightring, json.to_string()).expect("write");
-        let e = scenario::build(&root, &path, &files)
-            .err()
-            .expect("refused");
+        let Err(e) = scenario::build(&root, &path, &files) else {
+            panic!("{case}: built");
+        };
         assert!(
             e.to_string().contains("tasks.can_tx.deadline_own_frames"),
             "{case}: {e}"
