@@ -31,7 +31,12 @@ fn main() {
             ("thesis-magnetometer-900us".into(), Some("1-1".into())),
         ];
     }
-    let rows = vec!["can_tx".to_string()];
+    // Other held rows (with or instead of can_tx): `ROWS=can_tx,can_rx`, used together on each board that holds them.
+    let rows: Vec<String> = std::env::var("ROWS")
+        .unwrap_or_else(|_| "can_tx".into())
+        .split(',')
+        .map(str::to_string)
+        .collect();
     for (name, revision) in runs {
         let path = scenario::find_scenario(&root, &name);
         let timings = scenario::timing_files_for(&root, revision.as_deref());

@@ -81,6 +81,22 @@ pub fn shortest_frame_time(bit: Time) -> Time {
     bit.times(u64::from(frame_bits_best(0, false)))
 }
 
+/// The shortest frame a board sends, from the data lengths of the frames it sends (standard identifiers, no stuff
+/// bits): its transmit-complete interrupt's minimum inter-arrival time; [`shortest_frame_time`] when it sends none.
+/// The host analysis (`scenario`) and the on-chip admission check both take it from here.
+pub fn own_frame_time(bit: Time, dlcs: impl Iterator<Item = u8>) -> Time {
+    dlcs.map(|dlc| bit.times(u64::from(frame_bits_best(dlc, false))))
+        .min()
+        .unwrap_or_else(|| shortest_frame_time(bit))
+}
+
+/// `frames` of a board's shortest own frames ([`own_frame_time`]): the deadline of a task activated per own frame
+/// whose timing file states `deadline_own_frames` (the transmit interrupt's, two: docs/analysis.md "The deadline,
+/// from bxCAN's behaviour"). The host analysis and the on-chip admission check both take it from here.
+pub const fn own_frames(own_frame: Time, frames: u8) -> Time {
+    own_frame.times(frames as u64)
+}
+
 /// The order in which identifiers win arbitration, as one number (lower wins): the 11 base bits, then the
 /// SRR/IDE bits (a standard frame beats an extended one with the same base), then the 18 extension bits.
 pub fn arbitration_key(id: u32, extended: bool) -> u32 {

@@ -94,13 +94,7 @@ impl<'a, const M: usize> BoardInput<'a, M> {
 
     /// The shortest frame this board sends (its transmit-complete interrupt's minimum inter-arrival time).
     fn own_frame(&self) -> Time {
-        self.mine()
-            .map(|(_, s)| {
-                self.bit_time
-                    .times(u64::from(can::frame_bits_best(s.dlc, false)))
-            })
-            .min()
-            .unwrap_or_else(|| can::shortest_frame_time(self.bit_time))
+        can::own_frame_time(self.bit_time, self.mine().map(|(_, s)| s.dlc))
     }
 }
 
@@ -217,7 +211,9 @@ fn build_job<const M: usize>(
             } else {
                 row_time(t.period)
             };
-            let deadline = if t.deadline == NO_DEADLINE {
+            let deadline = if t.own_frame && t.deadline_own_frames > 0 {
+                can::own_frames(own_frame, t.deadline_own_frames)
+            } else if t.deadline == NO_DEADLINE {
                 period
             } else {
                 row_time(t.deadline)

@@ -82,7 +82,8 @@ pub struct TaskRow {
     pub cost: RowTime,
     /// Period or minimum inter-arrival time (ignored when `own_frame`).
     pub period: RowTime,
-    /// Deadline from the release event; [`NO_DEADLINE`]: the period.
+    /// Deadline from the release event; [`NO_DEADLINE`]: the period (or, for an `own_frame` task with
+    /// `deadline_own_frames`, that many own frames).
     pub deadline: RowTime,
     /// Release jitter of its own.
     pub jitter: RowTime,
@@ -93,6 +94,10 @@ pub struct TaskRow {
     /// Activated once per frame this board sends: its period is the best-case time of the shortest frame the board's
     /// publishers send (the shortest frame on the bus when it sends nothing).
     pub own_frame: bool,
+    /// An `own_frame` task only (0: none): its deadline is this many of the board's shortest own frames
+    /// ([`can::own_frames`]), worked out with its period when the board's streams are known; `deadline` is then
+    /// [`NO_DEADLINE`]. The timing file's `deadline_own_frames`.
+    pub deadline_own_frames: u8,
     /// Its share of the CPU, [`row_share`]`(cost, period)`, worked out when the table is built so that a decision
     /// divides only for its streams' jobs; [`SHARE_AT_RUNTIME`]: worked out by the check (an `own_frame` task, whose
     /// period depends on the streams, or a zero period).
@@ -884,6 +889,7 @@ mod tests {
         jitter: 0,
         released_by: NO_RELEASER,
         own_frame: false,
+        deadline_own_frames: 0,
         share: SHARE_AT_RUNTIME,
     }];
     const BOARDS: [BoardTable<'static>; 1] = [BoardTable {
@@ -1021,6 +1027,65 @@ mod tests {
                 other => panic!("{deadline_us} µs: {other:?}"),
             }
         }
+    }
+
+    /// A task activated per own frame with `deadline_own_frames`: its deadline is that many of the board's shortest
+    /// own frames, from the streams it sends. Worked by hand: the board sends 3-byte frames (47 + 24 = 71 bits,
+    /// 71 µs at 1 Mbit/s); the transmit-like task (55 µs, priority 5) is pre-empted once by a 20 µs task at priority 6
+    /// (every 1 ms), so its first job responds in 75 µs; its second, released at 71 µs, starts at 75 and ends at 130
+    /// (59 µs), and the third comes at 142, after the level's busy period. 75 µs misses one own frame (71 µs) and
+    /// meets two (142 µs); a 4-byte stream (79 µs) meets one frame as well.
+    #[test]
+    fn an_own_frame_deadline_is_counted_in_the_boards_own_frames() {
+        let decide = |frames: u8, dlc: u8| {
+            let tasks = [
+                TaskRow {
+                    priority: 6,
+                    cost: 20_000,
+                    period: 1_000_000,
+                    ..TASKS[0]
+                },
+                TaskRow {
+                    priority: 5,
+                    cost: 55_000,
+                    period: 0,
+                    own_frame: true,
+                    deadline_own_frames: frames,
+                    ..TASKS[0]
+                },
+            ];
+            let boards = [BoardTable {
+                tasks: &tasks,
+                ..BOARDS[0]
+            }];
+            let robot = RobotTable {
+                boards: &boards,
+                ..ROBOT
+            };
+            let mut stream = request(3, 10_000);
+            stream.dlc = dlc;
+            evaluate::<8, 8>(&robot, &[stream]).refusal
+        };
+        let own_frame = can::own_frame_time(Time::from_ns(1000), [3u8].into_iter());
+        assert_eq!(own_frame, Time::from_us(71));
+        assert_eq!(can::own_frames(own_frame, 2), Time::from_us(142));
+        match decide(1, 3) {
+            Some(Refusal::Deadline(v)) => {
+                assert_eq!(
+                    v.culprit,
+                    Culprit::Task {
+                        board: 0,
+                        task: TaskId::Fixed(1)
+                    }
+                );
+                assert_eq!((v.wcrt, v.deadline), (Some(Time::from_us(75)), own_frame));
+            }
+            other => panic!("one own frame: {other:?}"),
+        }
+        assert_eq!(decide(2, 3), None);
+        // 0: no own-frame deadline, the period (one own frame) as before.
+        assert!(matches!(decide(0, 3), Some(Refusal::Deadline(_))));
+        assert_eq!(decide(1, 4), None);
     }
 
     #[test]

@@ -48,11 +48,7 @@ pub(super) fn build_boards(
             .filter(|p| super::board_folder(p.info.board) == timing.board)
             .collect();
         // The transmit-complete interrupt cannot come faster than the shortest frame this board sends.
-        let own_frame = mine
-            .iter()
-            .map(|p| bit.times(u64::from(can::frame_bits_best(p.info.dlc, false))))
-            .min()
-            .unwrap_or_else(|| can::shortest_frame_time(bit));
+        let own_frame = can::own_frame_time(bit, mine.iter().map(|p| p.info.dlc));
         // A run whose received frames are known (a QEMU stimulus) receives them no closer than they come.
         let bus_frame = can::shortest_frame_time(bit);
         let arrivals = Arrivals {
@@ -368,6 +364,18 @@ impl Board<'_> {
                 Arrival::SporadicUs(us) => (us, true),
             };
             super::plan::check_positive(file, &format!("{p}.arrival"), period_us)?;
+            let deadline_us =
+                match (t.deadline_own_frames, arrival) {
+                    (None, _) => t.deadline_us,
+                    (Some(n), Arrival::OwnFrame) if n > 0 && t.deadline_us.is_none() => {
+                        Some(can::own_frames(arrivals.own_frame, n).as_us_f64())
+                    }
+                    (Some(_), _) => return Err(fail(
+                        file,
+                        format!("{p}.deadline_own_frames"),
+                        "only for an \"own_frame\" arrival, at least 1, and not with `deadline_us`",
+                    )),
+                };
             let sections = critical_sections(
                 file,
                 &p,
@@ -382,7 +390,7 @@ impl Board<'_> {
                 priority: d.priority,
                 wcet_us: wcet,
                 period_us,
-                deadline_us: t.deadline_us,
+                deadline_us,
                 jitter_us: t.jitter_us,
                 critical_sections_us: sections,
                 blocking_us: None,

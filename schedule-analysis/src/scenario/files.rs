@@ -330,6 +330,12 @@ pub struct TimingTask {
     /// Deadline, µs (default: the period).
     #[serde(default)]
     pub deadline_us: Option<f64>,
+    /// A task activated per own frame ([`Arrival::OwnFrame`]) only, instead of `deadline_us`: its deadline as this
+    /// many of the board's shortest own frames (the transmit interrupt's, from its three mailboxes: two,
+    /// docs/analysis.md "The deadline, from bxCAN's behaviour"). The host analysis and the boards' admission table
+    /// both take it from here ([`crate::can::own_frames`]).
+    #[serde(default)]
+    pub deadline_own_frames: Option<u8>,
     /// Longest critical section per resource, µs.
     #[serde(default)]
     pub critical_sections_us: BTreeMap<String, f64>,
