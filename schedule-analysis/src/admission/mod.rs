@@ -1030,14 +1030,22 @@ mod tests {
     }
 
     /// A task activated per own frame with `deadline_own_frames`: its deadline is that many of the board's shortest
-    /// own frames, from the streams it sends. Worked by hand: the board sends 3-byte frames (47 + 24 = 71 bits,
+    /// own frames, from the topics it can send (its table's rows). Worked by hand: the board's one topic has 3-byte
+    /// frames (the proximity ring; 47 + 24 = 71 bits,
     /// 71 µs at 1 Mbit/s); the transmit-like task (55 µs, priority 5) is pre-empted once by a 20 µs task at priority 6
     /// (every 1 ms), so its first job responds in 75 µs; its second, released at 71 µs, starts at 75 and ends at 130
     /// (59 µs), and the third comes at 142, after the level's busy period. 75 µs misses one own frame (71 µs) and
-    /// meets two (142 µs); a 4-byte stream (79 µs) meets one frame as well.
+    /// meets two (142 µs); a board whose one topic has 4-byte frames (magnetometer-z, 79 µs) meets one frame as well.
     #[test]
     fn an_own_frame_deadline_is_counted_in_the_boards_own_frames() {
+        // The board's one topic, by its frame length: 3 bytes the proximity ring, 4 magnetometer-z.
         let decide = |frames: u8, dlc: u8| {
+            let topic = if dlc == 3 { 0x1F } else { 7 };
+            assert_eq!(
+                amiro_can::Topic::from_byte(topic).map(|t| t.dlc()),
+                Some(dlc)
+            );
+            let topics = [TopicRow { topic, ..TOPICS[0] }];
             let tasks = [
                 TaskRow {
                     priority: 6,
@@ -1056,6 +1064,7 @@ mod tests {
             ];
             let boards = [BoardTable {
                 tasks: &tasks,
+                topics: &topics,
                 ..BOARDS[0]
             }];
             let robot = RobotTable {
@@ -1064,6 +1073,9 @@ mod tests {
             };
             let mut stream = request(3, 10_000);
             stream.dlc = dlc;
+            if let Some(sender) = stream.sender.as_mut() {
+                sender.topic = topic;
+            }
             evaluate::<8, 8>(&robot, &[stream]).refusal
         };
         let own_frame = can::own_frame_time(Time::from_ns(1000), [3u8].into_iter());

@@ -47,8 +47,18 @@ pub(super) fn build_boards(
             .iter()
             .filter(|p| super::board_folder(p.info.board) == timing.board)
             .collect();
-        // The transmit-complete interrupt cannot come faster than the shortest frame this board sends.
-        let own_frame = can::own_frame_time(bit, mine.iter().map(|p| p.info.dlc));
+        // The transmit-complete interrupt cannot come faster than the shortest frame this board can send: every
+        // topic it can publish (its timing file's `topics`), not only the set's streams, since a decided one-shot
+        // or a stopped stream's queued frames still go out after they left the set.
+        let own_frame = can::own_frame_time(
+            bit,
+            timing
+                .topics
+                .keys()
+                .filter_map(|name| amiro_can::Topic::from_name(name))
+                .map(|topic| topic.dlc())
+                .chain(mine.iter().map(|p| p.info.dlc)),
+        );
         // A run whose received frames are known (a QEMU stimulus) receives them no closer than they come.
         let bus_frame = can::shortest_frame_time(bit);
         let arrivals = Arrivals {
