@@ -22,29 +22,6 @@ fn sent(events: &[Event]) -> Vec<(u16, NodeId, u64, u64)> {
 }
 
 #[test]
-fn crc15_matches_the_standard_check_value() {
-    // CRC-15/CAN over the ASCII bytes "123456789", most significant bit first: 0x059E.
-    let bits = b"123456789"
-        .iter()
-        .flat_map(|&b| (0..8).rev().map(move |k| b >> k & 1 != 0));
-    assert_eq!(crc15(bits), 0x059E);
-}
-
-#[test]
-fn a_stuff_bit_starts_the_next_run() {
-    assert_eq!(stuff_bit_count(&[false; 4]), 0);
-    assert_eq!(stuff_bit_count(&[false; 5]), 1);
-    assert_eq!(stuff_bit_count(&[false; 10]), 2);
-    // 11111 → stuff 0, and that 0 with the next four zeros is a run of five → stuff 1.
-    let mut bits = vec![true; 5];
-    bits.extend([false; 4]);
-    assert_eq!(stuff_bit_count(&bits), 2);
-    // Alternating bits are never stuffed.
-    let alternating: Vec<bool> = (0..40).map(|k| k % 2 == 0).collect();
-    assert_eq!(stuff_bit_count(&alternating), 0);
-}
-
-#[test]
 fn frame_lengths_worked_by_hand() {
     // Identifier 0, no data: SOF … DLC are 19 dominant bits, the CRC of zeros is zero, so 34 zeros
     // carry 6 stuff bits (after the 5th, 10th, … 30th); + 10 tail bits = 50.
