@@ -407,6 +407,26 @@ impl Bus {
         self.idle_from
     }
 
+    /// When `node` could start a frame on the bus from here on, if nothing else competed (the bus
+    /// idle after everything run so far, and the node's own hold); `None` when a frame of it
+    /// might not go through as computed from its bits alone: it is unplugged, not error-active or
+    /// babbling, no other node is on the bus to acknowledge it, or a bit error is still to be
+    /// injected. The host grants a board the bus with it (docs/qemu.md, "Lookahead").
+    pub fn alone_from(&self, node: NodeId) -> Option<u64> {
+        let n = self.nodes.get(node)?;
+        let acknowledged = self
+            .nodes
+            .iter()
+            .enumerate()
+            .any(|(k, other)| k != node && self.on_bus(other));
+        let clean = self.on_bus(n)
+            && n.state() == ErrorState::Active
+            && n.babble.is_none()
+            && acknowledged
+            && self.faults.is_empty();
+        clean.then_some(self.idle_from.max(n.hold_until))
+    }
+
     fn on_bus(&self, n: &Node) -> bool {
         n.plugged && !n.bus_off
     }

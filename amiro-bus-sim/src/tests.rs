@@ -366,3 +366,34 @@ fn an_abort_takes_a_waiting_frame_back_but_not_one_already_sent() {
     assert!(first_after <= 1, "{after:?}");
     assert!(after.iter().all(|s| s.0 != 0x500), "{after:?}");
 }
+
+#[test]
+fn a_node_alone_on_the_bus_starts_when_it_is_idle() {
+    let mut bus = Bus::new();
+    let (a, b) = (bus.add_node(), bus.add_node());
+    assert_eq!(bus.alone_from(a), Some(0));
+    bus.queue(a, 0, frame(0x605, &[1, 2]), 100).unwrap();
+    bus.run_until(101);
+    let end = 100 + u64::from(frame_bits(&frame(0x605, &[1, 2])));
+    // After the frame and its intermission, for either node.
+    assert_eq!(bus.alone_from(b), Some(end + 3));
+    assert_eq!(bus.alone_from(a), Some(end + 3));
+    // No one to acknowledge, a fault to come, a babbling controller: no such time.
+    bus.set_plugged(b, false, end);
+    assert_eq!(bus.alone_from(a), None);
+    bus.set_plugged(b, true, end);
+    assert_eq!(bus.alone_from(a), Some(end + 3));
+    assert_eq!(bus.alone_from(b), Some(end + 3));
+    bus.inject(BitFault {
+        id: None,
+        not_before: 0,
+        at_bit: 5,
+    });
+    assert_eq!(bus.alone_from(a), None);
+    let mut bus = Bus::new();
+    let (a, b) = (bus.add_node(), bus.add_node());
+    bus.babble(b, frame(0x700, &[]), 0, u64::MAX);
+    assert_eq!(bus.alone_from(b), None);
+    assert_eq!(bus.alone_from(a), Some(0));
+    assert_eq!(bus.alone_from(7), None);
+}
