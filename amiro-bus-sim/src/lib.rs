@@ -72,68 +72,14 @@ impl Frame {
     }
 }
 
-/// CRC-15 of the CAN standard (polynomial 0x4599) over `bits`, most significant first.
-pub fn crc15(bits: impl IntoIterator<Item = bool>) -> u16 {
-    let mut crc: u16 = 0;
-    for bit in bits {
-        let feedback = bit ^ (crc & 0x4000 != 0);
-        crc = (crc << 1) & 0x7FFF;
-        if feedback {
-            crc ^= 0x4599;
-        }
-    }
-    crc
-}
-
-fn push_bits(out: &mut Vec<bool>, value: u32, width: u32) {
-    for k in (0..width).rev() {
-        out.push(value >> k & 1 != 0);
-    }
-}
-
-/// The bits of `frame` that bit stuffing applies to, before stuffing: start of frame, identifier,
-/// RTR, IDE, r0, DLC, data, CRC.
-pub fn stuffable_bits(frame: &Frame) -> Vec<bool> {
-    let mut bits = Vec::with_capacity(STUFFABLE_BITS as usize + 64);
-    bits.push(false); // start of frame, dominant
-    push_bits(&mut bits, u32::from(frame.id), 11);
-    bits.extend([false, false, false]); // RTR (data frame), IDE (standard), r0
-    push_bits(&mut bits, u32::from(frame.len.min(8)), 4);
-    for &byte in frame.payload() {
-        push_bits(&mut bits, u32::from(byte), 8);
-    }
-    let crc = crc15(bits.iter().copied());
-    push_bits(&mut bits, u32::from(crc), 15);
-    bits
-}
-
-/// Stuff bits a transmitter inserts into `bits`: after five equal bits, one of the opposite
-/// value, which itself starts the next run.
-pub fn stuff_bit_count(bits: &[bool]) -> u32 {
-    let mut count = 0;
-    let mut last = None;
-    let mut run = 0;
-    for &bit in bits {
-        if Some(bit) == last {
-            run += 1;
-        } else {
-            last = Some(bit);
-            run = 1;
-        }
-        if run == 5 {
-            count += 1;
-            last = Some(!bit);
-            run = 1;
-        }
-    }
-    count
-}
+/// CRC-15 and the stuff-bit count, the CAN protocol crate's (one place: the QEMU platform's
+/// local completion of its own frames counts with them too).
+pub use amiro_can::timing::{crc15, stuff_bit_count};
 
 /// Bits of `frame` on the bus from start of frame to the end of its end-of-frame field (its
-/// completion), stuff bits included, interframe space not.
+/// completion), stuff bits included, interframe space not (`amiro_can::timing::frame_bits`).
 pub fn frame_bits(frame: &Frame) -> u32 {
-    let bits = stuffable_bits(frame);
-    bits.len() as u32 + stuff_bit_count(&bits) + TAIL_BITS
+    amiro_can::timing::frame_bits(frame.id, frame.payload())
 }
 
 /// A node on the bus (its index in the order nodes were added).
@@ -461,6 +407,26 @@ impl Bus {
         self.idle_from
     }
 
+    /// When `node` could start a frame on the bus from here on, if nothing else competed (the bus
+    /// idle after everything run so far, and the node's own hold); `None` when a frame of it
+    /// might not go through as computed from its bits alone: it is unplugged, not error-active or
+    /// babbling, no other node is on the bus to acknowledge it, or a bit error is still to be
+    /// injected. The host grants a board the bus with it (docs/qemu.md, "Lookahead").
+    pub fn alone_from(&self, node: NodeId) -> Option<u64> {
+        let n = self.nodes.get(node)?;
+        let acknowledged = self
+            .nodes
+            .iter()
+            .enumerate()
+            .any(|(k, other)| k != node && self.on_bus(other));
+        let clean = self.on_bus(n)
+            && n.state() == ErrorState::Active
+            && n.babble.is_none()
+            && acknowledged
+            && self.faults.is_empty();
+        clean.then_some(self.idle_from.max(n.hold_until))
+    }
+
     fn on_bus(&self, n: &Node) -> bool {
         n.plugged && !n.bus_off
     }
@@ -525,9 +491,8 @@ impl Bus {
         events: &mut Vec<Event>,
     ) {
         let frame = pending.frame;
-        let bits = stuffable_bits(&frame);
-        let stuffed = bits.len() as u32 + stuff_bit_count(&bits);
-        let length = stuffed + TAIL_BITS;
+        let length = frame_bits(&frame);
+        let stuffed = length - TAIL_BITS;
         let receivers: u32 = self
             .nodes
             .iter()

@@ -22,29 +22,6 @@ fn sent(events: &[Event]) -> Vec<(u16, NodeId, u64, u64)> {
 }
 
 #[test]
-fn crc15_matches_the_standard_check_value() {
-    // CRC-15/CAN over the ASCII bytes "123456789", most significant bit first: 0x059E.
-    let bits = b"123456789"
-        .iter()
-        .flat_map(|&b| (0..8).rev().map(move |k| b >> k & 1 != 0));
-    assert_eq!(crc15(bits), 0x059E);
-}
-
-#[test]
-fn a_stuff_bit_starts_the_next_run() {
-    assert_eq!(stuff_bit_count(&[false; 4]), 0);
-    assert_eq!(stuff_bit_count(&[false; 5]), 1);
-    assert_eq!(stuff_bit_count(&[false; 10]), 2);
-    // 11111 → stuff 0, and that 0 with the next four zeros is a run of five → stuff 1.
-    let mut bits = vec![true; 5];
-    bits.extend([false; 4]);
-    assert_eq!(stuff_bit_count(&bits), 2);
-    // Alternating bits are never stuffed.
-    let alternating: Vec<bool> = (0..40).map(|k| k % 2 == 0).collect();
-    assert_eq!(stuff_bit_count(&alternating), 0);
-}
-
-#[test]
 fn frame_lengths_worked_by_hand() {
     // Identifier 0, no data: SOF … DLC are 19 dominant bits, the CRC of zeros is zero, so 34 zeros
     // carry 6 stuff bits (after the 5th, 10th, … 30th); + 10 tail bits = 50.
@@ -388,4 +365,35 @@ fn an_abort_takes_a_waiting_frame_back_but_not_one_already_sent() {
     // At most the babbling frame already on the bus goes before it; 0x500 never goes out.
     assert!(first_after <= 1, "{after:?}");
     assert!(after.iter().all(|s| s.0 != 0x500), "{after:?}");
+}
+
+#[test]
+fn a_node_alone_on_the_bus_starts_when_it_is_idle() {
+    let mut bus = Bus::new();
+    let (a, b) = (bus.add_node(), bus.add_node());
+    assert_eq!(bus.alone_from(a), Some(0));
+    bus.queue(a, 0, frame(0x605, &[1, 2]), 100).unwrap();
+    bus.run_until(101);
+    let end = 100 + u64::from(frame_bits(&frame(0x605, &[1, 2])));
+    // After the frame and its intermission, for either node.
+    assert_eq!(bus.alone_from(b), Some(end + 3));
+    assert_eq!(bus.alone_from(a), Some(end + 3));
+    // No one to acknowledge, a fault to come, a babbling controller: no such time.
+    bus.set_plugged(b, false, end);
+    assert_eq!(bus.alone_from(a), None);
+    bus.set_plugged(b, true, end);
+    assert_eq!(bus.alone_from(a), Some(end + 3));
+    assert_eq!(bus.alone_from(b), Some(end + 3));
+    bus.inject(BitFault {
+        id: None,
+        not_before: 0,
+        at_bit: 5,
+    });
+    assert_eq!(bus.alone_from(a), None);
+    let mut bus = Bus::new();
+    let (a, b) = (bus.add_node(), bus.add_node());
+    bus.babble(b, frame(0x700, &[]), 0, u64::MAX);
+    assert_eq!(bus.alone_from(b), None);
+    assert_eq!(bus.alone_from(a), Some(0));
+    assert_eq!(bus.alone_from(7), None);
 }

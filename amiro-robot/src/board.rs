@@ -13,7 +13,8 @@ use std::time::{Duration, Instant};
 
 use amiro_bus_sim::{NodeId, MAILBOXES};
 use amiro_trace::robot_link::{
-    Down, Up, DOWN_READINGS, DOWN_RESTART, DRIVES_SYNC_LOW, QUANTUM_US, UP_LEN, UP_WHEELS,
+    Done, Down, Up, DONE_LEN, DOWN_READINGS, DOWN_RESTART, DRIVES_SYNC_LOW, MAX_DONE, QUANTUM_US,
+    UP_LEN, UP_WHEELS,
 };
 use amiro_trace::world_link::{Readings, Wheels, WHEELS_LEN};
 use anyhow::{bail, Context, Result};
@@ -108,6 +109,11 @@ pub(crate) struct Board {
     pub(crate) vcpu: Option<(crate::cost::ThreadClock, Option<(u64, u64)>)>,
     /// What its vCPU thread did in its last run: ran and waited for a core (live runs).
     pub(crate) last_run_cpu: Option<(Duration, Duration)>,
+    /// The frames it completed itself under a grant, from its last report (`Up::done`).
+    pub(crate) done: Vec<Done>,
+    /// It was granted the bus with its last answer, until this global virtual time
+    /// (`Down::free_until_us`).
+    pub(crate) granted: Option<u64>,
 }
 
 /// The nice value of a board's QEMU main loop (its process's first thread; the vCPU thread and
@@ -187,6 +193,8 @@ impl Board {
             last_run: Duration::ZERO,
             vcpu: None,
             last_run_cpu: None,
+            done: Vec::new(),
+            granted: None,
         }
     }
 
@@ -318,6 +326,8 @@ impl Board {
         self.flags = 0;
         self.held = None;
         self.commanded = false;
+        self.done.clear();
+        self.granted = None;
         self.last_run_cpu = None;
         self.run_from(Instant::now());
     }
@@ -363,7 +373,7 @@ impl Board {
 
     /// Waits for the board's next exchange; `None` if the board has ended (its QEMU exited).
     pub(crate) fn receive(&mut self, guard: Instant, limit: Duration) -> Result<Option<Up>> {
-        let mut message = [0u8; UP_LEN + WHEELS_LEN];
+        let mut message = [0u8; UP_LEN + MAX_DONE * DONE_LEN + WHEELS_LEN];
         let (mut got, mut want) = (0, UP_LEN);
         let up_fd = self.up.as_ref().context("no pipe")?.as_raw_fd();
         loop {
@@ -388,9 +398,13 @@ impl Board {
                     .context("no pipe")?
                     .read(&mut message[got..want])?;
                 got += n;
-                if got == UP_LEN && Up::decode(message[..UP_LEN].try_into()?).flags & UP_WHEELS != 0
-                {
-                    want = UP_LEN + WHEELS_LEN;
+                if got == UP_LEN {
+                    // The frames completed under a grant follow the report, then the wheels.
+                    let up = Up::decode(message[..UP_LEN].try_into()?);
+                    want = UP_LEN + up.done_len();
+                    if up.flags & UP_WHEELS != 0 {
+                        want += WHEELS_LEN;
+                    }
                 }
                 if got == want {
                     self.stopped(Instant::now());
@@ -401,8 +415,13 @@ impl Board {
                     self.drain();
                     self.ready.append(&mut self.lines);
                     let up = Up::decode(message[..UP_LEN].try_into()?);
-                    self.wheels = if want > UP_LEN {
-                        Some(Wheels::decode(message[UP_LEN..].try_into()?))
+                    let wheels_at = UP_LEN + up.done_len();
+                    self.done = message[UP_LEN..wheels_at]
+                        .chunks_exact(DONE_LEN)
+                        .filter_map(|r| r.try_into().ok().map(Done::decode))
+                        .collect();
+                    self.wheels = if want > wheels_at {
+                        Some(Wheels::decode(message[wheels_at..want].try_into()?))
                     } else {
                         None
                     };

@@ -3,12 +3,12 @@ use std::collections::VecDeque;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use amiro_bus_sim::{BitFault, Bus, ErrorState, Event, Frame, NodeId, MAILBOXES};
+use amiro_bus_sim::{frame_bits, BitFault, Bus, ErrorState, Event, Frame, NodeId, MAILBOXES};
 use amiro_trace::robot_link::{
-    reaches_software, Down, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_OWN, DOWN_PD_LOW,
-    DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, QUANTUM_US,
+    reaches_software, Done, Down, Queued, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_OWN,
+    DOWN_PD_LOW, DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, QUANTUM_US,
 };
-use anyhow::{bail, Result};
+use anyhow::{anyhow, bail, Result};
 
 use crate::board::{board_lines, Board};
 use crate::stimulus::{Action, Timed, BOARDS};
@@ -38,6 +38,10 @@ pub struct Work {
     pub per_board: [u64; 3],
     /// Of those, boards brought to a boundary from a wait (a frame, a line, the end was due).
     pub catch_ups: u64,
+    /// Answers that granted a board the bus (it completes its own sensor frames itself).
+    pub grants: u64,
+    /// Frames boards completed themselves under a grant (each checked against the bus model).
+    pub local_frames: u64,
     /// Wall time spent waiting for boards' reports (their emulation), µs.
     pub waiting_us: u64,
     /// Wall time live runs slept to stay behind the wall clock, µs.
@@ -187,6 +191,9 @@ pub fn run_in_world(
     // A live run's frames for the client, handed over at their time (`Pace::hold`).
     let mut outbox: pace::Outbox<Frame> = pace::Outbox::default();
     let mut t = QUANTUM_US;
+    // `AMIRO_ROBOT_NO_GRANT=1`: no board is granted the bus (the run as before the grant, for
+    // comparing the two on one build; docs/qemu.md, "Lookahead").
+    let grants_on = std::env::var_os("AMIRO_ROBOT_NO_GRANT").is_none_or(|v| v != "1");
     // The boards sent ahead at the last boundary `from` (the only ones with work, everything else
     // quiet): each reports at the first boundary after it queued a frame, asked for an abort or
     // changed a line, at the latest at `t`. The host goes on from the earliest report; a later
@@ -199,8 +206,45 @@ pub fn run_in_world(
         if !ahead.is_empty() {
             for &k in &ahead {
                 let b = &mut boards[k];
-                b.held = Some(take_report(b, from + QUANTUM_US..=t, &mut outcome.work)?);
-                b.next = b.held.as_ref().map(|&(at, _)| at);
+                let (at, mut report) = take_report(b, from + QUANTUM_US..=t, &mut outcome.work)?;
+                if let Some(free_until) = b.granted {
+                    // A board granted the bus: the frames it completed itself go through the bus
+                    // model now (checked), and the ones it hands over are queued at once — some
+                    // may have waited since before another board's report the host takes first.
+                    let done = std::mem::take(&mut b.done);
+                    for d in replay_done(&mut bus, b, &done)? {
+                        outcome.work.local_frames += 1;
+                        outcome.transfers.push(d);
+                        emit(&mut outcome, sink, candump_line(d.end, &d.frame));
+                        if live.is_some() && !warming {
+                            outbox.push(d.end, d.frame);
+                        }
+                    }
+                    if let Some(r) = report.as_mut() {
+                        // Those queued before the grant's end (held back for the board's own
+                        // arbitration, then starting past the grant's end, or queued before
+                        // a command frame ended it) are queued at once: they may be older than
+                        // another board's report the host takes first. The rest when the host
+                        // reaches the report, as any board's.
+                        let (old, recent): (Vec<Queued>, Vec<Queued>) = r
+                            .queued()
+                            .iter()
+                            .copied()
+                            .partition(|q| q.at_us + b.offset < free_until);
+                        let mut early = Up { count: 0, ..*r };
+                        for q in old {
+                            early.push(q);
+                        }
+                        queue_reported(b, at, &early, &mut bus, &mut notes);
+                        r.count = 0;
+                        for q in recent {
+                            r.push(q);
+                        }
+                    }
+                    b.granted = None;
+                }
+                b.held = Some((at, report));
+                b.next = Some(at);
             }
             t = ahead
                 .drain(..)
@@ -594,13 +638,12 @@ pub fn run_in_world(
         // every module has released SYS_SYNC_N, nobody drives SYS_PD_N, no board is busy with a
         // command or gets one now, no world. Live, a live step at most, and the adapter's frames
         // wait meanwhile (above), none of them waiting now.
-        let steady = flags == 0
-            && now.is_none_or(|d| !reaches_software(d.frame.id))
-            && adapter_waiting.is_empty()
-            && world.is_none()
-            && boards
-                .iter()
-                .all(|b| b.drives == 0 && b.aborted == 0 && !b.commanded);
+        let steady = steady_state(
+            flags,
+            now.is_some_and(|d| reaches_software(d.frame.id)),
+            !adapter_waiting.is_empty() || world.is_some(),
+            &boards,
+        );
         // Lookahead through a board's own frame: when the one thing on the bus is a frame of a
         // board that reported here, already started (nothing can pre-empt it, nothing else
         // completes before it) and no other board has work (in the steady state: the boards with
@@ -676,6 +719,37 @@ pub fn run_in_world(
                 from = t;
             }
         }
+        // Grants: a board sent ahead in the steady state completes its own sensor frames itself
+        // while no other node can have one pending (`grant_until`).
+        let bound = [
+            pending.peek().map(|a| a.at_us),
+            warming.then_some(warm_end),
+            live.is_some().then_some(t + LIVE_STEP_US),
+            Some(duration_us),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+        .unwrap_or(duration_us);
+        let bus_quiet = mailboxes_empty && deliveries.is_empty() && grants_on;
+        let grants: Vec<Option<(u64, u64, u8)>> = (0..boards.len())
+            .map(|k| {
+                let b = &boards[k];
+                if !ahead.contains(&k) || b.at != t || end {
+                    return None;
+                }
+                let own = now.map(|d| (d.node, d.end));
+                let free_until = grant_until(&boards, k, t, steady && bus_quiet, own, bound)?;
+                let idle = bus.alone_from(b.node)?;
+                let held = bus
+                    .mailboxes(b.node)
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, m)| m.is_some())
+                    .fold(0u8, |mask, (i, _)| mask | 1 << i);
+                Some((free_until, idle, held))
+            })
+            .collect();
         // Answers: every board at this boundary that wants the next one gets what is due; one
         // that sleeps past it waits (its answer held back); one waiting from before whose
         // deadline is the next boundary is sent on to it.
@@ -697,6 +771,14 @@ pub fn run_in_world(
                 }
                 if sent_ahead {
                     answer.flags |= DOWN_EARLY;
+                }
+                b.granted = None;
+                if let Some((free_until, idle, held)) = grants[k] {
+                    answer.free_until_us = free_until - b.offset;
+                    answer.idle_from_us = idle.max(b.offset) - b.offset;
+                    answer.held = held;
+                    b.granted = Some(free_until);
+                    outcome.work.grants += 1;
                 }
                 if let Some(d) = now {
                     let (own, heard) = given(b, &d, &bus);
@@ -883,6 +965,166 @@ impl Limits {
     }
 }
 
+/// The steady state, in which boards with work may be sent ahead together and a board may be
+/// granted the bus: no line is low (`flags`), no command frame completes now (`command`), nothing
+/// else holds it up (`held`: adapter frames waiting, a world), and no board drives a line, waits
+/// for an abort's answer or is busy with a command.
+fn steady_state(flags: u8, command: bool, held: bool, boards: &[Board]) -> bool {
+    flags == 0
+        && !command
+        && !held
+        && boards
+            .iter()
+            .all(|b| b.drives == 0 && b.aborted == 0 && !b.commanded)
+}
+
+/// The grant for board `k`, answered at boundary `t` and sent ahead: the earliest time any other
+/// node could have a frame pending on the bus — each other board's current time if it has work or
+/// runs, its deadline if it waits (it does nothing before it: no frame that reaches it comes in the
+/// steady state), the frames or the work of the report it holds for a later boundary (sent ahead
+/// together, it reported there) — and `bound` (the next stimulus action, the warm-up's
+/// end, a live step, the run's end; `own`: another board's own frame answered now, whose
+/// completion wakes it). `None` outside the steady state with a quiet bus (`steady`:
+/// nothing queued, nothing on its way, no babbling) and when it would not reach past `t`. Until
+/// then the board may arbitrate and complete its own sensor frames itself (docs/qemu.md,
+/// "Lookahead").
+fn grant_until(
+    boards: &[Board],
+    k: usize,
+    t: u64,
+    steady: bool,
+    own: Option<(usize, u64)>,
+    bound: u64,
+) -> Option<u64> {
+    if !steady {
+        return None;
+    }
+    // Another board given its own frame's completion now acts on it then (its next frame).
+    let bound = match own {
+        Some((node, end)) if node != k => bound.min(end),
+        _ => bound,
+    };
+    let free_until = boards
+        .iter()
+        .filter(|b| b.alive && b.index != k)
+        .map(|b| match (&b.held, b.next) {
+            // Its report at a later boundary is in: the frames in it, else its work or deadline
+            // from that boundary on.
+            (Some((at, Some(up))), _) => {
+                let work = match up.sleeps_us {
+                    0 => *at,
+                    u32::MAX => u64::MAX,
+                    us => at.saturating_add(u64::from(us)),
+                };
+                up.queued()
+                    .iter()
+                    .map(|q| q.at_us + b.offset)
+                    .fold(work, u64::min)
+            }
+            (Some((_, None)), _) => u64::MAX,
+            (None, Some(_)) => b.at,
+            (None, None) if b.wakes_at <= b.at => b.at,
+            (None, None) => b.wakes_at,
+        })
+        .fold(bound, u64::min);
+    (free_until > t).then_some(free_until)
+}
+
+/// Puts the frames board `b` completed itself under its grant through the bus model, each queued
+/// at its time, and checks that the model completes each as the board did: a board and the model
+/// that disagree fail the run with both figures. Returns them as transfers, in order.
+fn replay_done(bus: &mut Bus, b: &Board, done: &[Done]) -> Result<Vec<Transfer>> {
+    let name = NODES[b.index];
+    let frames: Vec<Frame> = done
+        .iter()
+        .map(|d| {
+            Frame::new(d.frame.id, d.frame.payload())
+                .ok_or_else(|| anyhow!("{name} completed an invalid frame {:03X}", d.frame.id))
+        })
+        .collect::<Result<_>>()?;
+    let mut queued = vec![false; done.len()];
+    let mut out = Vec::new();
+    for (k, (d, frame)) in done.iter().zip(&frames).enumerate() {
+        let end = d.completed_us + b.offset;
+        let start = end.saturating_sub(u64::from(frame_bits(frame)));
+        for (j, (e, f)) in done.iter().zip(&frames).enumerate() {
+            let at = e.frame.at_us + b.offset;
+            if !queued[j] && (at <= start || j == k) {
+                queued[j] = true;
+                bus.queue(b.node, usize::from(e.frame.mailbox), *f, at)
+                    .map_err(|err| {
+                        anyhow!(
+                            "{name}'s frame {:03X} completed under its grant: mailbox {} at {at} µs: {err:?}",
+                            f.id,
+                            e.frame.mailbox
+                        )
+                    })?;
+            }
+        }
+        let idle_before = bus.idle_from();
+        let events = bus.run_until(start + 1);
+        let model = match events.as_slice() {
+            [Event::Sent {
+                node,
+                mailbox,
+                frame: sent,
+                queued_at,
+                start: s,
+                end: e,
+                ..
+            }] if *node == b.node && *mailbox == usize::from(d.frame.mailbox) && sent == frame => {
+                if *e == end {
+                    out.push(Transfer {
+                        node: b.index,
+                        mailbox: *mailbox,
+                        frame: *frame,
+                        queued_at: *queued_at,
+                        released_at: (d.frame.released_us + b.offset).min(*queued_at),
+                        start: *s,
+                        end,
+                    });
+                    continue;
+                }
+                format!("completes it at {e} µs (start {s} µs)")
+            }
+            [] => {
+                // Where the model does complete it, for the message.
+                let later = bus.run_until(end + 10_000);
+                match later.iter().find_map(|e| match e {
+                    Event::Sent {
+                        frame: sent, end, ..
+                    } if sent == frame => Some(*end),
+                    _ => None,
+                }) {
+                    Some(e) => format!("completes it at {e} µs"),
+                    None => "does not complete it".to_string(),
+                }
+            }
+            [Event::Sent {
+                node,
+                mailbox,
+                frame: sent,
+                start: s,
+                end: e,
+                ..
+            }] => format!(
+                "starts {:03X} of {} (mailbox {mailbox}) at {s} µs instead, completing at {e} µs",
+                sent.id,
+                NODES.get(*node).unwrap_or(&"a node")
+            ),
+            other => format!("runs {other:?}"),
+        };
+        bail!(
+            "{name} completed its frame {:03X} (mailbox {}, queued at {} µs) itself at {end} µs under its grant, but the bus model {model} (the bus idle from {} µs before)",
+            frame.id,
+            d.frame.mailbox,
+            d.frame.at_us + b.offset,
+            idle_before
+        );
+    }
+    Ok(out)
+}
+
 /// The first boundary after `a` (where an action at `a` is taken).
 fn after(a: u64) -> u64 {
     (a / QUANTUM_US + 1) * QUANTUM_US
@@ -908,6 +1150,15 @@ fn exchange(
         Some(held) => held,
         None => take_report(b, within, work)?,
     };
+    // A granted board reports as one sent ahead, where its completed frames are put through the
+    // bus model: any left here would be lost from the bus.
+    if !b.done.is_empty() {
+        bail!(
+            "{} reported {} frame(s) it completed itself at {t} µs outside a grant of the bus",
+            NODES[b.index],
+            b.done.len()
+        );
+    }
     apply(b, t, report, bus, notes);
     Ok(t)
 }
@@ -993,6 +1244,12 @@ fn apply(b: &mut Board, t: u64, report: Option<Up>, bus: &mut Bus, notes: &mut V
     };
     // A board that sleeps has done what a command asked of it.
     b.commanded &= b.wakes_at <= t;
+    queue_reported(b, t, &report, bus, notes);
+}
+
+/// Queues the frames board `b` handed over in its report at boundary `t` into the bus model, each
+/// at the time the board put it into its mailbox.
+fn queue_reported(b: &mut Board, t: u64, report: &Up, bus: &mut Bus, notes: &mut Vec<String>) {
     for q in report.queued() {
         let queued = q.at_us + b.offset;
         if let Some(slot) = b.released.get_mut(usize::from(q.mailbox)) {
@@ -1063,6 +1320,150 @@ mod tests {
             ..limits
         };
         assert_eq!(sooner.horizon(&b, &[0, 1]), 1_600);
+    }
+
+    #[test]
+    fn a_grant_reaches_the_earliest_time_another_node_could_send() {
+        let mut b = boards();
+        b.iter_mut().for_each(|x| x.drives = 0);
+        // At 400: board 0 has work; board 1 waits for its deadline at 1_234, board 2 for none.
+        for x in b.iter_mut() {
+            x.at = 400;
+        }
+        b[0].wakes_at = 400;
+        b[1].wakes_at = 1_234;
+        b[2].wakes_at = u64::MAX;
+        let steady = steady_state(0, false, false, &b);
+        assert!(steady);
+        // The waiting board's deadline bounds it (not its boundary: it queues nothing before).
+        assert_eq!(grant_until(&b, 0, 400, steady, None, 10_000), Some(1_234));
+        // Another board's own frame completing (answered now) wakes it; the board's own does not.
+        assert_eq!(
+            grant_until(&b, 0, 400, steady, Some((2, 1_000)), 10_000),
+            Some(1_000)
+        );
+        assert_eq!(
+            grant_until(&b, 0, 400, steady, Some((0, 1_000)), 10_000),
+            Some(1_234)
+        );
+        // The next stimulus action (or a live step, the run's end) comes first.
+        assert_eq!(grant_until(&b, 0, 400, steady, None, 900), Some(900));
+        // A board waiting for a deadline gets none while another has work.
+        assert_eq!(grant_until(&b, 1, 400, steady, None, 10_000), None);
+        // Another board with work, or one sent on (running, or holding its report): none.
+        b[1].wakes_at = 400;
+        assert_eq!(grant_until(&b, 0, 400, steady, None, 10_000), None);
+        b[1].wakes_at = 1_234;
+        b[2].next = Some(800);
+        assert_eq!(grant_until(&b, 0, 400, steady, None, 10_000), None);
+        b[2].next = None;
+        // A board that has ended bounds nothing.
+        b[1].alive = false;
+        assert_eq!(grant_until(&b, 0, 400, steady, None, 10_000), Some(10_000));
+        b[1].alive = true;
+        // Nothing past the board's own boundary: none.
+        assert_eq!(grant_until(&b, 0, 400, steady, None, 400), None);
+    }
+
+    #[test]
+    fn no_grant_outside_the_steady_state() {
+        let mut b = boards();
+        for x in b.iter_mut() {
+            x.at = 400;
+            x.wakes_at = 5_000;
+            x.drives = 0;
+        }
+        b[0].wakes_at = 400;
+        let grant = |b: &[Board], steady| grant_until(b, 0, 400, steady, None, 10_000);
+        assert_eq!(grant(&b, steady_state(0, false, false, &b)), Some(5_000));
+        // A line low, a command frame completing now, a world (or adapter frames waiting).
+        assert_eq!(
+            grant(&b, steady_state(DOWN_SYNC_LOW, false, false, &b)),
+            None
+        );
+        assert_eq!(grant(&b, steady_state(0, true, false, &b)), None);
+        assert_eq!(grant(&b, steady_state(0, false, true, &b)), None);
+        // A board busy with a command, one driving a line, one waiting for an abort's answer.
+        b[2].commanded = true;
+        assert_eq!(grant(&b, steady_state(0, false, false, &b)), None);
+        b[2].commanded = false;
+        b[1].drives = DRIVES_PD_LOW;
+        assert_eq!(grant(&b, steady_state(0, false, false, &b)), None);
+        b[1].drives = 0;
+        b[1].aborted = 1;
+        assert_eq!(grant(&b, steady_state(0, false, false, &b)), None);
+        b[1].aborted = 0;
+        // A babbling controller (the bus is not quiet: the caller's `steady && quiet`), or one
+        // that may not complete a frame as computed (`Bus::alone_from`).
+        assert_eq!(grant(&b, false), None);
+        let mut bus = Bus::new();
+        let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
+        bus.babble(nodes[0], Frame::new(0x700, &[]).unwrap(), 0, u64::MAX);
+        assert_eq!(bus.alone_from(nodes[0]), None);
+    }
+
+    fn done(id: u16, data: &[u8], mailbox: u8, at_us: u64, completed_us: u64) -> Done {
+        let mut d = [0u8; 8];
+        d[..data.len()].copy_from_slice(data);
+        Done {
+            frame: Queued {
+                at_us,
+                released_us: at_us,
+                id,
+                len: data.len() as u8,
+                mailbox,
+                data: d,
+            },
+            completed_us,
+        }
+    }
+
+    #[test]
+    fn frames_completed_under_a_grant_are_checked_against_the_bus_model() {
+        let b = &boards()[0];
+        let bits = |id, data: &[u8]| u64::from(frame_bits(&Frame::new(id, data).unwrap()));
+        let fresh = || {
+            let mut bus = Bus::new();
+            (0..4).for_each(|_| {
+                bus.add_node();
+            });
+            bus
+        };
+        // Two frames queued at 100 (the lower identifier first, whatever its mailbox), a third in
+        // the first's mailbox once it completed: back to back, an intermission apart.
+        let e1 = 100 + bits(0x605, &[1, 2]);
+        let e2 = e1 + 3 + bits(0x606, &[3]);
+        let e3 = e2 + 3 + bits(0x605, &[4, 5]);
+        let good = [
+            done(0x605, &[1, 2], 1, 100, e1),
+            done(0x606, &[3], 0, 100, e2),
+            done(0x605, &[4, 5], 1, e1 + 20, e3),
+        ];
+        let mut bus = fresh();
+        let transfers = replay_done(&mut bus, b, &good).unwrap();
+        let ends: Vec<u64> = transfers.iter().map(|t| t.end).collect();
+        assert_eq!(ends, [e1, e2, e3]);
+        assert_eq!(bus.idle_from(), e3 + 3);
+        // A board that computed one bit more: the run fails, with both figures.
+        let mut bad = good;
+        bad[1].completed_us += 1;
+        let err = replay_done(&mut fresh(), b, &bad).unwrap_err().to_string();
+        assert!(err.contains(&format!("itself at {} µs", e2 + 1)), "{err}");
+        assert!(err.contains(&format!("completes it at {e2} µs")), "{err}");
+        // One that started the higher identifier first: the model runs the other.
+        let mut swapped = good;
+        swapped.swap(0, 1);
+        swapped[0].completed_us = 100 + bits(0x606, &[3]);
+        let err = replay_done(&mut fresh(), b, &swapped)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("its frame 606"), "{err}");
+        assert!(
+            err.contains(&format!(
+                "starts 605 of diwheeldrive (mailbox 1) at 100 µs instead, completing at {e1} µs"
+            )),
+            "{err}"
+        );
     }
 
     #[test]

@@ -7,14 +7,25 @@
 pub const QUANTUM_US: u64 = 40;
 /// Board → host, [`Up`]: `u64` now, `u8` new frames, `u8` lines driven, `u8` abort requests, `u8`
 /// flags ([`UP_WHEELS`]), `u32` µs the board sleeps from now, three 28-byte records (`u64` queued at, `u16` id,
-/// `u8` length, `u8` mailbox, 8 data bytes, `u64` released at), `u64` the boundary it reports at.
-pub const UP_LEN: usize = 16 + MAILBOXES * RECORD_LEN + 8;
+/// `u8` length, `u8` mailbox, 8 data bytes, `u64` released at), `u64` the boundary it reports at,
+/// `u8` frames the board completed itself under a grant (7 reserved). Those frames follow the
+/// report, [`DONE_LEN`] bytes each ([`Done`]), then the wheels if [`UP_WHEELS`].
+pub const UP_LEN: usize = 16 + MAILBOXES * RECORD_LEN + 8 + 8;
+/// A frame the board completed itself ([`Done`]): a 28-byte record as in [`Up`], then `u64` its
+/// completion.
+pub const DONE_LEN: usize = RECORD_LEN + 8;
+/// The most frames a board completes itself between two reports ([`Down::free_until_us`]): a
+/// board whose record is full reports.
+pub const MAX_DONE: usize = 8;
 /// Host → board, [`Down`]: `u64` completion time, `u8` flags, `u8` mailbox, `u16` id, `u8` length,
-/// `u8` aborted mailboxes, 2 reserved, 8 data bytes, `u64` time of the next exchange.
-pub const DOWN_LEN: usize = 32;
+/// `u8` aborted mailboxes, `u8` the mailboxes the host holds a frame of the board's in, 1 reserved,
+/// 8 data bytes, `u64` time of the next exchange, `u64` the grant's end, `u64` when the bus is idle.
+pub const DOWN_LEN: usize = 48;
 /// A board's transmit mailboxes (bxCAN's three).
 pub const MAILBOXES: usize = 3;
 const RECORD_LEN: usize = 28;
+/// Where [`Up::at_us`] lies in the message (the done count after it).
+const AT: usize = 16 + MAILBOXES * RECORD_LEN;
 
 /// Up: this board pulls SYS_SYNC_N low.
 pub const DRIVES_SYNC_LOW: u8 = 1;
@@ -102,6 +113,60 @@ pub struct Up {
     pub count: u8,
     /// The frames.
     pub frames: [Queued; MAILBOXES],
+    /// How many frames it completed itself under a grant since its last report (at most
+    /// [`MAX_DONE`]): as many [`Done`] records follow the report, in the order they started.
+    pub done: u8,
+}
+
+/// A frame a board completed itself while granted the bus ([`Down::free_until_us`]): it started
+/// before the grant's end, so nothing else could compete with it; the host puts it through its
+/// bus model at its queueing time and checks the completion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Done {
+    /// The frame, its mailbox and its queueing and release times.
+    pub frame: Queued,
+    /// Its completion (end of frame) as the board computed it, the board's virtual µs.
+    pub completed_us: u64,
+}
+
+impl Done {
+    /// The record's bytes.
+    pub fn encode(&self) -> [u8; DONE_LEN] {
+        let mut m = [0u8; DONE_LEN];
+        encode_record(&self.frame, &mut m[..RECORD_LEN]);
+        m[RECORD_LEN..].copy_from_slice(&self.completed_us.to_le_bytes());
+        m
+    }
+
+    /// The record in `m` (a length above 8 is read as 8).
+    pub fn decode(m: &[u8; DONE_LEN]) -> Done {
+        Done {
+            frame: decode_record(&m[..RECORD_LEN]),
+            completed_us: le_u64(&m[RECORD_LEN..]),
+        }
+    }
+}
+
+fn encode_record(q: &Queued, r: &mut [u8]) {
+    r[..8].copy_from_slice(&q.at_us.to_le_bytes());
+    r[8..10].copy_from_slice(&q.id.to_le_bytes());
+    r[10] = q.len.min(8);
+    r[11] = q.mailbox;
+    r[12..20].copy_from_slice(&q.data);
+    r[20..28].copy_from_slice(&q.released_us.to_le_bytes());
+}
+
+fn decode_record(r: &[u8]) -> Queued {
+    let mut data = [0u8; 8];
+    data.copy_from_slice(&r[12..20]);
+    Queued {
+        at_us: le_u64(&r[..8]),
+        released_us: le_u64(&r[20..28]),
+        id: u16::from_le_bytes([r[8], r[9]]),
+        len: r[10].min(8),
+        mailbox: r[11],
+        data,
+    }
 }
 
 impl Up {
@@ -130,19 +195,15 @@ impl Up {
         m[11] = self.flags;
         m[12..16].copy_from_slice(&self.sleeps_us.to_le_bytes());
         for (k, q) in self.queued().iter().enumerate() {
-            let r = &mut m[16 + RECORD_LEN * k..16 + RECORD_LEN * (k + 1)];
-            r[..8].copy_from_slice(&q.at_us.to_le_bytes());
-            r[8..10].copy_from_slice(&q.id.to_le_bytes());
-            r[10] = q.len.min(8);
-            r[11] = q.mailbox;
-            r[12..20].copy_from_slice(&q.data);
-            r[20..28].copy_from_slice(&q.released_us.to_le_bytes());
+            encode_record(q, &mut m[16 + RECORD_LEN * k..16 + RECORD_LEN * (k + 1)]);
         }
-        m[UP_LEN - 8..].copy_from_slice(&self.at_us.to_le_bytes());
+        m[AT..AT + 8].copy_from_slice(&self.at_us.to_le_bytes());
+        m[AT + 8] = self.done.min(MAX_DONE as u8);
         m
     }
 
-    /// The message in `m` (a count above three is read as three, a length above 8 as 8).
+    /// The message in `m` (a count above three is read as three, a length above 8 as 8, more
+    /// completed frames than [`MAX_DONE`] as [`MAX_DONE`]).
     pub fn decode(m: &[u8; UP_LEN]) -> Up {
         let mut up = Up {
             now_us: le_u64(&m[..8]),
@@ -150,24 +211,20 @@ impl Up {
             aborts: m[10],
             flags: m[11],
             sleeps_us: u32::from_le_bytes([m[12], m[13], m[14], m[15]]),
-            at_us: le_u64(&m[UP_LEN - 8..]),
+            at_us: le_u64(&m[AT..AT + 8]),
             count: m[8].min(MAILBOXES as u8),
             frames: [Queued::default(); MAILBOXES],
+            done: m[AT + 8].min(MAX_DONE as u8),
         };
         for (k, q) in up.frames.iter_mut().enumerate().take(usize::from(up.count)) {
-            let r = &m[16 + RECORD_LEN * k..16 + RECORD_LEN * (k + 1)];
-            let mut data = [0u8; 8];
-            data.copy_from_slice(&r[12..20]);
-            *q = Queued {
-                at_us: le_u64(&r[..8]),
-                released_us: le_u64(&r[20..28]),
-                id: u16::from_le_bytes([r[8], r[9]]),
-                len: r[10].min(8),
-                mailbox: r[11],
-                data,
-            };
+            *q = decode_record(&m[16 + RECORD_LEN * k..16 + RECORD_LEN * (k + 1)]);
         }
         up
+    }
+
+    /// The bytes of [`Done`] records that follow this report.
+    pub fn done_len(&self) -> usize {
+        usize::from(self.done.min(MAX_DONE as u8)) * DONE_LEN
     }
 }
 
@@ -196,6 +253,19 @@ pub struct Down {
     /// that sleeps past the next boundary waiting in its read until it is needed, then answers with
     /// the boundary it must run to (it runs there idle and reports again, then gets what is due).
     pub next_us: u64,
+    /// With [`DOWN_EARLY`], a grant of the bus (0: none; the board's virtual µs): no other node
+    /// can have a frame pending before this time, so a sensor frame (one no board's software
+    /// hears, [`reaches_software`]) the board queues and whose transmission starts before it is
+    /// arbitrated and completed by the board itself, exactly as the host's bus model would: it
+    /// reports it later as a [`Done`] record instead of at the next boundary (docs/qemu.md,
+    /// "Lookahead").
+    pub free_until_us: u64,
+    /// With a grant: when the bus is idle (after the frame in progress and its intermission, or
+    /// the board's own hold), the board's virtual µs.
+    pub idle_from_us: u64,
+    /// With a grant: bit `k`, the host's bus model holds a frame of the board's in mailbox `k`
+    /// (one the board handed over that has not started).
+    pub held: u8,
 }
 
 impl Down {
@@ -208,8 +278,11 @@ impl Down {
         m[10..12].copy_from_slice(&self.id.to_le_bytes());
         m[12] = self.len.min(8);
         m[13] = self.aborted;
+        m[14] = self.held;
         m[16..24].copy_from_slice(&self.data);
         m[24..32].copy_from_slice(&self.next_us.to_le_bytes());
+        m[32..40].copy_from_slice(&self.free_until_us.to_le_bytes());
+        m[40..48].copy_from_slice(&self.idle_from_us.to_le_bytes());
         m
     }
 
@@ -226,6 +299,9 @@ impl Down {
             data,
             aborted: m[13],
             next_us: le_u64(&m[24..32]),
+            held: m[14],
+            free_until_us: le_u64(&m[32..40]),
+            idle_from_us: le_u64(&m[40..48]),
         }
     }
 }
@@ -249,6 +325,7 @@ mod tests {
             sleeps_us: u32::MAX,
             flags: UP_WHEELS,
             at_us: 123_456_760,
+            done: 5,
             ..Up::default()
         };
         for k in 0..MAILBOXES as u8 {
@@ -268,7 +345,28 @@ mod tests {
         assert_eq!(&bytes[8..11], &[3, 3, 0b100]);
         assert_eq!(&bytes[16 + 8..16 + 12], &[0x1F, 0x06, 2, 2]);
         assert_eq!(up.queued()[1].payload(), &[1, 1, 1]);
-        assert_eq!(&bytes[UP_LEN - 8..], &123_456_760u64.to_le_bytes());
+        assert_eq!(&bytes[AT..AT + 8], &123_456_760u64.to_le_bytes());
+        assert_eq!(bytes[AT + 8], 5);
+        assert_eq!(up.done_len(), 5 * DONE_LEN);
+    }
+
+    #[test]
+    fn a_completed_frame_survives_the_link() {
+        let done = Done {
+            frame: Queued {
+                at_us: 40_123,
+                released_us: 40_100,
+                id: 0x605,
+                len: 4,
+                mailbox: 2,
+                data: [9, 8, 7, 6, 0, 0, 0, 0],
+            },
+            completed_us: 40_201,
+        };
+        let bytes = done.encode();
+        assert_eq!(Done::decode(&bytes), done);
+        assert_eq!(&bytes[RECORD_LEN..], &40_201u64.to_le_bytes());
+        assert_eq!(&bytes[8..12], &[0x05, 0x06, 4, 2]);
     }
 
     #[test]
@@ -282,6 +380,9 @@ mod tests {
             data: [1, 2, 3, 4, 0, 0, 0, 0],
             aborted: 0b011,
             next_us: 1_000_040,
+            held: 0b101,
+            free_until_us: 1_900_000,
+            idle_from_us: 1_000_013,
         };
         assert_eq!(Down::decode(&down.encode()), down);
     }
@@ -292,5 +393,7 @@ mod tests {
         assert_eq!(up.queued().len(), MAILBOXES);
         assert!(up.queued().iter().all(|q| q.payload().len() == 8));
         assert_eq!(Down::decode(&[0xFF; DOWN_LEN]).len, 8);
+        assert_eq!(Up::decode(&[0xFF; UP_LEN]).done_len(), MAX_DONE * DONE_LEN);
+        assert_eq!(Done::decode(&[0xFF; DONE_LEN]).frame.payload().len(), 8);
     }
 }

@@ -26,8 +26,9 @@ use super::{HostFile, TICK_US};
 
 pub use amiro_trace::robot_link::QUANTUM_US;
 use amiro_trace::robot_link::{
-    Down, Up, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW, DOWN_READINGS,
-    DOWN_RESTART, DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, UP_WHEELS,
+    Down, Up, DONE_LEN, DOWN_EARLY, DOWN_END, DOWN_FRAME, DOWN_LEN, DOWN_OWN, DOWN_PD_LOW,
+    DOWN_READINGS, DOWN_RESTART, DOWN_SYNC_LOW, DRIVES_PD_LOW, DRIVES_SYNC_LOW, MAX_DONE, UP_LEN,
+    UP_WHEELS,
 };
 pub use amiro_trace::world_link;
 use world_link::{Readings, Wheels, READINGS_LEN};
@@ -141,24 +142,39 @@ static REPORT_WAKER: Mutex<RefCell<Option<core::task::Waker>>> = Mutex::new(RefC
 
 pub(super) fn to_report() {
     TO_REPORT.store(true, Ordering::SeqCst);
+    // Starts from here on are the host's again (a command frame queued now takes part in them).
+    super::can::close_grant(super::now_us());
     if let Some(waker) = critical_section::with(|cs| REPORT_WAKER.borrow_ref_mut(cs).take()) {
         waker.wake();
     }
 }
 
-/// Waits until `at_us`, or until there is something [`to_report`].
-async fn wait_until_or_report(at_us: u64) {
+/// A sensor frame went into a mailbox under the grant: the exchange, waiting ahead, looks at its
+/// own arbitration again (`can::local_run`).
+static POKED: AtomicBool = AtomicBool::new(false);
+
+pub(super) fn poke() {
+    POKED.store(true, Ordering::SeqCst);
+    if let Some(waker) = critical_section::with(|cs| REPORT_WAKER.borrow_ref_mut(cs).take()) {
+        waker.wake();
+    }
+}
+
+/// Waits until `at_us`, or until there is something [`to_report`] or the board's own arbitration
+/// has a new frame ([`poke`]); `true`: `at_us` was reached.
+async fn wait_until_or_report(at_us: u64) -> bool {
     use core::future::Future;
     let mut delay = core::pin::pin!(super::timer::platform_delay_until(at_us.div_ceil(TICK_US)));
-    core::future::poll_fn(|cx| {
+    let reached = core::future::poll_fn(|cx| {
         critical_section::with(|cs| *REPORT_WAKER.borrow_ref_mut(cs) = Some(cx.waker().clone()));
-        if TO_REPORT.load(Ordering::SeqCst) {
-            return core::task::Poll::Ready(());
+        if TO_REPORT.load(Ordering::SeqCst) || POKED.swap(false, Ordering::SeqCst) {
+            return core::task::Poll::Ready(false);
         }
-        delay.as_mut().poll(cx)
+        delay.as_mut().poll(cx).map(|()| true)
     })
     .await;
     critical_section::with(|cs| REPORT_WAKER.borrow_ref_mut(cs).take());
+    reached
 }
 
 /// Whether SYS_SYNC_N reads low on the robot's line (the wired-AND of every module), as of the
@@ -229,6 +245,10 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
     loop {
         boundary += QUANTUM_US;
         loop {
+            // The frames the board completes itself under a grant: delivered at their
+            // completion, started as the bus model would start them (`can::local_run`; one that
+            // can no longer be asks for a report).
+            let local = super::can::local_run(super::now_us());
             // Sent ahead: back at the first boundary after something to report — found now, or
             // already there when the wait starts (set while the last exchange was being made: the
             // wait must not then run on to the far boundary the host allowed).
@@ -240,20 +260,23 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
                 }
             }
             let deliver_at = pending.map(|p| p.at_us).filter(|&at| at < boundary);
-            let until = deliver_at.unwrap_or(boundary);
-            if early && !TO_REPORT.load(Ordering::SeqCst) {
-                wait_until_or_report(until).await;
-                if TO_REPORT.load(Ordering::SeqCst) {
-                    continue;
-                }
+            let until = deliver_at.unwrap_or(boundary).min(local);
+            let reached = if early && !TO_REPORT.load(Ordering::SeqCst) {
+                wait_until_or_report(until).await
             } else {
                 wait_until(until).await;
+                true
+            };
+            if !reached {
+                continue;
             }
             match (deliver_at, pending.take()) {
-                (Some(_), Some(answer)) => deliver(&answer, rx_irq),
+                (Some(at), Some(answer)) if at <= until => deliver(&answer, rx_irq),
                 (_, kept) => {
                     pending = kept;
-                    break;
+                    if until >= boundary {
+                        break;
+                    }
                 }
             }
         }
@@ -265,19 +288,41 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
         };
         super::can::report(&mut report);
         report.drives = DRIVES.load(Ordering::SeqCst);
-        // A frame still to be delivered wakes the board at its completion time.
-        let delivery = pending.map_or(u32::MAX, |p| {
-            u32::try_from(p.at_us.saturating_sub(report.now_us)).unwrap_or(u32::MAX - 1)
-        });
+        // A frame still to be delivered (the host's answer kept, or one the board completes
+        // itself) wakes the board at its completion time.
+        let completes = pending
+            .map_or(u64::MAX, |p| p.at_us)
+            .min(super::can::local_run(report.now_us));
+        let delivery = if completes == u64::MAX {
+            u32::MAX
+        } else {
+            u32::try_from(completes.saturating_sub(report.now_us)).unwrap_or(u32::MAX - 1)
+        };
         report.sleeps_us = sleeps_for().min(delivery);
         let wheels = world_wheels(report.now_us);
         if wheels.is_some() {
             report.flags |= UP_WHEELS;
         }
         let mut answer = [0u8; DOWN_LEN];
-        let sent = up.write_all(&report.encode())
-            && wheels.is_none_or(|w| up.write_all(&w.encode()))
-            && down.read_exact(&mut answer);
+        let sent = if report.done == 0 {
+            // The usual report: as it always was (the exchange's cost is the apps' lost time).
+            up.write_all(&report.encode()) && wheels.is_none_or(|w| up.write_all(&w.encode()))
+        } else {
+            // After a grant: the report, the frames completed under it, the wheels, in one write.
+            let mut message = [0u8; UP_LEN + MAX_DONE * DONE_LEN + world_link::WHEELS_LEN];
+            message[..UP_LEN].copy_from_slice(&report.encode());
+            let mut len = UP_LEN;
+            if let Some(rest) = message.get_mut(UP_LEN..UP_LEN + MAX_DONE * DONE_LEN) {
+                len += super::can::take_done(rest, report.now_us);
+            }
+            if let Some(w) = wheels {
+                if let Some(out) = message.get_mut(len..len + world_link::WHEELS_LEN) {
+                    out.copy_from_slice(&w.encode());
+                }
+                len += world_link::WHEELS_LEN;
+            }
+            up.write_all(message.get(..len).unwrap_or(&message))
+        } && down.read_exact(&mut answer);
         let answer = Down::decode(&answer);
         let flags = answer.flags;
         if !sent || (flags & DOWN_READINGS != 0 && !take_readings(&down)) {
@@ -291,6 +336,9 @@ pub(super) async fn run(rx_irq: impl InterruptNumber, shutdown_irq: impl Interru
             cortex_m::peripheral::SCB::sys_reset();
         }
         early = flags & DOWN_EARLY != 0;
+        if early && answer.free_until_us > 0 {
+            super::can::grant(answer.free_until_us, answer.idle_from_us, answer.held);
+        }
         // The host skips quanta in which no board can act: the next exchange is further on.
         boundary = boundary.max(answer.next_us.saturating_sub(QUANTUM_US));
         SYNC_READS_LOW.store(flags & DOWN_SYNC_LOW != 0, Ordering::SeqCst);

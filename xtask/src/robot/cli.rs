@@ -184,10 +184,12 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         wall / virtual_s.max(1e-9)
     );
     eprintln!(
-        "robot: {} board exchanges ({:?} per board, {} caught up from a wait) at {} of {} boundaries of {} µs; {:.1} s waiting for the boards' emulation",
+        "robot: {} board exchanges ({:?} per board, {} caught up from a wait; {} frames completed by the boards themselves under {} grants of the bus) at {} of {} boundaries of {} µs; {:.1} s waiting for the boards' emulation",
         outcome.work.exchanges,
         outcome.work.per_board,
         outcome.work.catch_ups,
+        outcome.work.local_frames,
+        outcome.work.grants,
         outcome.work.steps,
         duration / amiro_robot::QUANTUM_US,
         amiro_robot::QUANTUM_US,
