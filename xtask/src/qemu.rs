@@ -36,6 +36,48 @@ pub fn received_gap_us(encoded: &[u8]) -> Result<u64> {
         .unwrap_or(duration.max(1)))
 }
 
+/// How many single-board QEMU runs go at once: one per core (each run is one emulator thread; the runs are in
+/// virtual time, so their outputs do not depend on it), or `AMIRO_QEMU_JOBS` (1: one after the other).
+pub fn parallel_runs() -> usize {
+    std::env::var("AMIRO_QEMU_JOBS")
+        .ok()
+        .and_then(|n| n.trim().parse::<usize>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or_else(|| {
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1)
+        })
+}
+
+/// `run(item)` for every item, at most [`parallel_runs`] at a time; the results in the items' order (the
+/// caller checks and prints them in that order, as if they had run one after the other).
+pub fn run_each<I: Sync, T: Send>(items: &[I], run: impl Fn(&I) -> T + Sync) -> Vec<T> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let workers = parallel_runs().min(items.len());
+    if workers <= 1 {
+        return items.iter().map(run).collect();
+    }
+    let next = AtomicUsize::new(0);
+    let results: Vec<Mutex<Option<T>>> = items.iter().map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..workers {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(item) = items.get(i) else { break };
+                let result = run(item);
+                *results[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(result);
+            });
+        }
+    });
+    // Every slot is filled: a worker takes each index once and a panic in `run` ends the scope with it.
+    results
+        .into_iter()
+        .filter_map(|slot| slot.into_inner().unwrap_or_else(|e| e.into_inner()))
+        .collect()
+}
+
 /// Runs `elf` on QEMU's `machine` with `stimulus` for `duration_us` of virtual time and returns its
 /// output. QEMU emulates neither the STM32 clock tree nor bxCAN, so a QEMU build touches only core
 /// peripherals: netduino2 (a Cortex-M3 STM32F205) runs the F103 boards, netduinoplus2 (an
