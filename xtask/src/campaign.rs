@@ -639,7 +639,7 @@ pub fn run(
         let started = std::time::Instant::now();
         let text = qemu::run(elf, board.qemu_machine, &plan.frames, duration, work);
         (text, started.elapsed())
-    });
+    })?;
     for ((board, model, _, seed, plan, work), (text, took)) in jobs.iter().zip(outputs) {
         let out = RunOutput::parse(&text?)?;
         match check(model, plan, &out) {

@@ -514,7 +514,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
                 let duration = scenarios::duration_of(&path)?;
                 qemu::run(&elf, board.qemu_machine, &frames, duration, work)
             },
-        );
+        )?;
         for ((scenario, work), run) in list.iter().zip(works).zip(runs) {
             let result = (|| {
                 let text = run?;

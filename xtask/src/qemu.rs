@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, ensure, Context, Result};
 
 pub use amiro_robot::log::{
     duration_of, encode_stimulus, parse_duration, parse_log_line, read_stimulus, split_output,
@@ -52,12 +52,12 @@ pub fn parallel_runs() -> usize {
 
 /// `run(item)` for every item, at most [`parallel_runs`] at a time; the results in the items' order (the
 /// caller checks and prints them in that order, as if they had run one after the other).
-pub fn run_each<I: Sync, T: Send>(items: &[I], run: impl Fn(&I) -> T + Sync) -> Vec<T> {
+pub fn run_each<I: Sync, T: Send>(items: &[I], run: impl Fn(&I) -> T + Sync) -> Result<Vec<T>> {
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
     let workers = parallel_runs().min(items.len());
     if workers <= 1 {
-        return items.iter().map(run).collect();
+        return Ok(items.iter().map(run).collect());
     }
     let next = AtomicUsize::new(0);
     let results: Vec<Mutex<Option<T>>> = items.iter().map(|_| Mutex::new(None)).collect();
@@ -71,11 +71,19 @@ pub fn run_each<I: Sync, T: Send>(items: &[I], run: impl Fn(&I) -> T + Sync) -> 
             });
         }
     });
-    // Every slot is filled: a worker takes each index once and a panic in `run` ends the scope with it.
-    results
+    // Every slot is filled (a worker takes each index once; a panic in `run` ends the scope with it); a run
+    // without a result would be a check left out, so it is an error, never a shorter list.
+    let results: Vec<T> = results
         .into_iter()
         .filter_map(|slot| slot.into_inner().unwrap_or_else(|e| e.into_inner()))
-        .collect()
+        .collect();
+    ensure!(
+        results.len() == items.len(),
+        "{} of {} QEMU runs gave no result",
+        items.len() - results.len(),
+        items.len()
+    );
+    Ok(results)
 }
 
 /// Runs `elf` on QEMU's `machine` with `stimulus` for `duration_us` of virtual time and returns its
