@@ -53,9 +53,18 @@ pub fn parallel_runs() -> usize {
 /// `run(item)` for every item, at most [`parallel_runs`] at a time; the results in the items' order (the
 /// caller checks and prints them in that order, as if they had run one after the other).
 pub fn run_each<I: Sync, T: Send>(items: &[I], run: impl Fn(&I) -> T + Sync) -> Result<Vec<T>> {
+    run_on(parallel_runs(), items, run)
+}
+
+/// [`run_each`] on at most `workers` threads.
+fn run_on<I: Sync, T: Send>(
+    workers: usize,
+    items: &[I],
+    run: impl Fn(&I) -> T + Sync,
+) -> Result<Vec<T>> {
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
-    let workers = parallel_runs().min(items.len());
+    let workers = workers.min(items.len());
     if workers <= 1 {
         return Ok(items.iter().map(run).collect());
     }
@@ -240,6 +249,25 @@ pub fn target_dir(root: &Path) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn side_by_side_runs_come_back_in_their_order() {
+        let items: Vec<u64> = (0..23).collect();
+        // Later items finish first: the order must come from the items, not from the finishing.
+        let run = |&i: &u64| {
+            std::thread::sleep(Duration::from_millis(23 - i));
+            i * 3
+        };
+        let expected: Vec<u64> = items.iter().map(|i| i * 3).collect();
+        for workers in [1, 2, 4, 64] {
+            assert_eq!(
+                run_on(workers, &items, run).unwrap(),
+                expected,
+                "{workers} workers"
+            );
+        }
+        assert!(run_on(2, &[] as &[u64], run).unwrap().is_empty());
+    }
 
     #[test]
     fn the_shortest_gap_between_received_frames() {
