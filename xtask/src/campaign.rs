@@ -608,6 +608,8 @@ pub fn run(
     let boards = boards
         .iter()
         .filter(|b| !scenarios::for_board(b.name).is_empty());
+    // Every board's image built and every run planned first, then run.
+    let mut jobs = Vec::new();
     for board in boards {
         let model = MODELS
             .iter()
@@ -628,22 +630,29 @@ pub fn run(
             let mut rng = Rng::new(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
             let plan = plan(model, &mut rng, frames);
             let work = qemu::fresh_work_dir(root, board.name);
-            let duration = plan.shutdown_us + 100_000;
-            let started = std::time::Instant::now();
-            let text = qemu::run(&elf, board.qemu_machine, &plan.frames, duration, &work)?;
-            let out = RunOutput::parse(&text)?;
-            match check(model, &plan, &out) {
-                Ok(summary) => println!(
-                    "campaign {} seed {seed}: ok in {:.1} s: {summary}",
-                    board.name,
-                    started.elapsed().as_secs_f64()
-                ),
-                Err(e) => bail!(
-                    "campaign {} seed {seed} failed (output in {}): {e:#}",
-                    board.name,
-                    work.display()
-                ),
-            }
+            jobs.push((*board, model, elf.clone(), seed, plan, work));
+        }
+    }
+    // The runs side by side (`qemu::run_each`: one per core, each in virtual time), checked in order.
+    let outputs = qemu::run_each(&jobs, |(board, _, elf, _, plan, work)| {
+        let duration = plan.shutdown_us + 100_000;
+        let started = std::time::Instant::now();
+        let text = qemu::run(elf, board.qemu_machine, &plan.frames, duration, work);
+        (text, started.elapsed())
+    })?;
+    for ((board, model, _, seed, plan, work), (text, took)) in jobs.iter().zip(outputs) {
+        let out = RunOutput::parse(&text?)?;
+        match check(model, plan, &out) {
+            Ok(summary) => println!(
+                "campaign {} seed {seed}: ok in {:.1} s: {summary}",
+                board.name,
+                took.as_secs_f64()
+            ),
+            Err(e) => bail!(
+                "campaign {} seed {seed} failed (output in {}): {e:#}",
+                board.name,
+                work.display()
+            ),
         }
     }
     Ok(())

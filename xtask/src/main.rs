@@ -495,16 +495,29 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
         let mut ram_high_water = 0;
         // The runs whose output the bench measures afterwards (no second QEMU run).
         let mut outputs = Vec::new();
-        for scenario in list {
-            let path = scenarios::log_path(root, board.name, build.revision.name, scenario.name);
-            let work = qemu::target_dir(root)
-                .join("scenarios")
-                .join(build.stem())
-                .join(scenario.name);
-            let result = (|| {
+        let works: Vec<PathBuf> = list
+            .iter()
+            .map(|scenario| {
+                qemu::target_dir(root)
+                    .join("scenarios")
+                    .join(build.stem())
+                    .join(scenario.name)
+            })
+            .collect();
+        // The QEMU runs of this image side by side (`qemu::run_each`: one per core), checked below in order.
+        let runs = qemu::run_each(
+            &list.iter().zip(&works).collect::<Vec<_>>(),
+            |(scenario, work)| {
+                let path =
+                    scenarios::log_path(root, board.name, build.revision.name, scenario.name);
                 let frames = qemu::read_stimulus(&path)?;
                 let duration = scenarios::duration_of(&path)?;
-                let text = qemu::run(&elf, board.qemu_machine, &frames, duration, &work)?;
+                qemu::run(&elf, board.qemu_machine, &frames, duration, work)
+            },
+        )?;
+        for ((scenario, work), run) in list.iter().zip(works).zip(runs) {
+            let result = (|| {
+                let text = run?;
                 let (bus, trace) = qemu::split_output(&text);
                 std::fs::write(work.join("bus.log"), bus)?;
                 std::fs::write(work.join("trace.log"), trace)?;

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, ensure, Context, Result};
 
 pub use amiro_robot::log::{
     duration_of, encode_stimulus, parse_duration, parse_log_line, read_stimulus, split_output,
@@ -34,6 +34,65 @@ pub fn received_gap_us(encoded: &[u8]) -> Result<u64> {
         .map(|w| w[1] - w[0])
         .min()
         .unwrap_or(duration.max(1)))
+}
+
+/// How many single-board QEMU runs go at once: one per core (each run is one emulator thread; the runs are in
+/// virtual time, so their outputs do not depend on it), or `AMIRO_QEMU_JOBS` (1: one after the other).
+pub fn parallel_runs() -> usize {
+    std::env::var("AMIRO_QEMU_JOBS")
+        .ok()
+        .and_then(|n| n.trim().parse::<usize>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or_else(|| {
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1)
+        })
+}
+
+/// `run(item)` for every item, at most [`parallel_runs`] at a time; the results in the items' order (the
+/// caller checks and prints them in that order, as if they had run one after the other).
+pub fn run_each<I: Sync, T: Send>(items: &[I], run: impl Fn(&I) -> T + Sync) -> Result<Vec<T>> {
+    run_on(parallel_runs(), items, run)
+}
+
+/// [`run_each`] on at most `workers` threads.
+fn run_on<I: Sync, T: Send>(
+    workers: usize,
+    items: &[I],
+    run: impl Fn(&I) -> T + Sync,
+) -> Result<Vec<T>> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let workers = workers.min(items.len());
+    if workers <= 1 {
+        return Ok(items.iter().map(run).collect());
+    }
+    let next = AtomicUsize::new(0);
+    let results: Vec<Mutex<Option<T>>> = items.iter().map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..workers {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(item) = items.get(i) else { break };
+                let result = run(item);
+                *results[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(result);
+            });
+        }
+    });
+    // Every slot is filled (a worker takes each index once; a panic in `run` ends the scope with it); a run
+    // without a result would be a check left out, so it is an error, never a shorter list.
+    let results: Vec<T> = results
+        .into_iter()
+        .filter_map(|slot| slot.into_inner().unwrap_or_else(|e| e.into_inner()))
+        .collect();
+    ensure!(
+        results.len() == items.len(),
+        "{} of {} QEMU runs gave no result",
+        items.len() - results.len(),
+        items.len()
+    );
+    Ok(results)
 }
 
 /// Runs `elf` on QEMU's `machine` with `stimulus` for `duration_us` of virtual time and returns its
@@ -190,6 +249,25 @@ pub fn target_dir(root: &Path) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn side_by_side_runs_come_back_in_their_order() {
+        let items: Vec<u64> = (0..23).collect();
+        // Later items finish first: the order must come from the items, not from the finishing.
+        let run = |&i: &u64| {
+            std::thread::sleep(Duration::from_millis(23 - i));
+            i * 3
+        };
+        let expected: Vec<u64> = items.iter().map(|i| i * 3).collect();
+        for workers in [1, 2, 4, 64] {
+            assert_eq!(
+                run_on(workers, &items, run).unwrap(),
+                expected,
+                "{workers} workers"
+            );
+        }
+        assert!(run_on(2, &[] as &[u64], run).unwrap().is_empty());
+    }
 
     #[test]
     fn the_shortest_gap_between_received_frames() {
