@@ -74,6 +74,17 @@ pub struct OwnedBoard {
     pub command_handler: Option<u16>,
 }
 
+impl OwnedBoard {
+    /// The shortest data length of its topics' frames (0 without topics): [`BoardTable::shortest_dlc`].
+    pub fn shortest_dlc(&self) -> u8 {
+        self.topics
+            .iter()
+            .filter_map(|t| amiro_can::Topic::from_byte(t.topic).map(|topic| topic.dlc()))
+            .min()
+            .unwrap_or(0)
+    }
+}
+
 /// The whole robot's table, owned.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OwnedRobot {
@@ -562,6 +573,7 @@ impl OwnedRobot {
                 sections: &b.sections,
                 blocking: &b.blocking,
                 topics,
+                shortest_dlc: b.shortest_dlc(),
                 levels: b.levels,
                 monotonic: b.monotonic,
                 can_tx: b.can_tx,
@@ -760,16 +772,17 @@ impl OwnedRobot {
                     topic.name, topic.topic, topic.cost, topic.bcet, sections.join(", ")
                 );
             }
+            let _ = writeln!(
+                s,
+                "            ],\n            shortest_dlc: {},",
+                b.shortest_dlc()
+            );
             let levels: Vec<String> = b
                 .levels
                 .iter()
                 .map(|l| l.map_or_else(|| "None".to_string(), |p| format!("Some({p})")))
                 .collect();
-            let _ = writeln!(
-                s,
-                "            ],\n            levels: [{}],",
-                levels.join(", ")
-            );
+            let _ = writeln!(s, "            levels: [{}],", levels.join(", "));
             let _ = writeln!(
                 s,
                 "            monotonic: {},",

@@ -92,13 +92,13 @@ impl<'a, const M: usize> BoardInput<'a, M> {
         self.table.levels.get(usize::from(level)).copied().flatten()
     }
 
-    /// The shortest frame this board can send (its transmit-complete interrupt's minimum inter-arrival time): every
-    /// topic of its table (a running stream's is one of them), not only the running streams: a decided one-shot's
-    /// or a stopped stream's queued frames still go out after they left the set.
+    /// The shortest frame this board can send (its transmit-complete interrupt's minimum inter-arrival time): of every
+    /// topic of its table (the table's `shortest_dlc`), not only the running streams: a decided one-shot's or a
+    /// stopped stream's queued frames still go out after they left the set.
     fn own_frame(&self) -> Time {
-        let topics = self.table.topics.iter();
-        let dlcs = topics.filter_map(|row| amiro_can::Topic::from_byte(row.topic).map(|t| t.dlc()));
-        can::own_frame_time(self.bit_time, dlcs)
+        // Worked out when the table was built (`admission_host`), so the check walks no rows for it.
+        let dlc = self.table.shortest_dlc;
+        can::own_frame_time(self.bit_time, core::iter::once(dlc))
     }
 }
 

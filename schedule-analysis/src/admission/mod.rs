@@ -190,6 +190,9 @@ pub struct BoardTable<'a> {
     pub blocking: &'a [RowTime],
     /// The topics it can publish, with their budgets.
     pub topics: &'a [TopicRow<'a>],
+    /// The shortest data length of `topics`' frames (0 without topics), worked out when the table is built: every
+    /// frame the board sends is of one of them, so its shortest own frame ([`crate::can::own_frame_time`]).
+    pub shortest_dlc: u8,
     /// RTIC priority of the publisher task per CAN priority level (urgent, high, medium, low); `None`: none.
     pub levels: [Option<u8>; LEVELS],
     /// The monotonic's timer job, when publishers are timer-released.
@@ -898,6 +901,7 @@ mod tests {
         sections: &[],
         blocking: &[],
         topics: &TOPICS,
+        shortest_dlc: 4,
         levels: [Some(4), Some(3), Some(2), Some(1)],
         monotonic: None,
         can_tx: None,
@@ -1065,6 +1069,7 @@ mod tests {
             let boards = [BoardTable {
                 tasks: &tasks,
                 topics: &topics,
+                shortest_dlc: dlc,
                 ..BOARDS[0]
             }];
             let robot = RobotTable {
