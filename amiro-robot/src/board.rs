@@ -91,8 +91,9 @@ pub(crate) struct Board {
     pub(crate) held: Option<(u64, Option<Up>)>,
     /// Part of a live run (its QEMU runs at [`LIVE_RT_PRIORITY`], else at [`LIVE_NICE`]).
     pub(crate) live: bool,
-    /// It was given a command frame and has not slept since: it may drive a line (a shutdown
-    /// command), so it is not sent ahead together with another board meanwhile.
+    /// It was given a command frame that may drive a line (a shutdown command; anything but a
+    /// sensor request, an LED or the motor command: `run::may_drive_a_line`) and has not slept
+    /// since, so it is not sent ahead together with another board meanwhile.
     pub(crate) commanded: bool,
     /// What its QEMUs cost (summed over its starts), taken as each is reaped.
     pub(crate) cost: crate::cost::Cost,

@@ -69,10 +69,9 @@ impl<T> Outbox<T> {
 }
 
 /// One board's run between two of its exchanges: what the host waits for. A run whose wall time
-/// far exceeds its virtual time is what puts a live robot behind the wall clock: in the first
-/// seconds of a run the boards' QEMUs emulate code they run for the first time (a command's
-/// admission decision, a stream's first sample), which takes them 10-20 times longer than once it
-/// has run (docs/qemu.md, "Live").
+/// far exceeds its virtual time puts a live robot behind the wall clock: its QEMU emulating code
+/// it runs for the first time (10-20 times slower than later: the warm-up runs it first), waiting
+/// for a core behind the machine's other work, or held by the hypervisor (docs/qemu.md, "Live").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SlowRun {
     /// The board (an index into [`crate::NODES`]).
@@ -155,6 +154,28 @@ struct Episode {
     slowest: Option<SlowRun>,
     /// Its start was said (at most every [`AGAIN`]): its end is said too.
     said: bool,
+    /// The virtual time it fell behind at, and the host's steps since: many steps, none of them
+    /// slow, are boards trading quantum by quantum.
+    from_us: u64,
+    steps: u64,
+}
+
+impl Episode {
+    /// What held the run up, as far as the figures tell: one board run that took far more wall
+    /// time than its virtual time (its QEMU emulating, waiting for a core, or neither), else the
+    /// host's many steps, each short (boards trading quantum by quantum).
+    fn cause(&self, now_us: u64) -> String {
+        let explained = self.slowest.is_some_and(|r| r.excess() * 2 >= self.worst);
+        if explained {
+            "that board run's wall time, beyond its virtual time, is the lag: emulating, its QEMU's work (code run for the first time takes 10-20 times longer than later); waiting for a core, or neither, the machine's other work or its hypervisor".into()
+        } else {
+            format!(
+                "no board run explains it: the host took {} steps for {:.2} ms of virtual time (boards trading quantum by quantum)",
+                self.steps,
+                now_us.saturating_sub(self.from_us) as f64 / 1e3
+            )
+        }
+    }
 }
 
 /// The one of `a` and `b` most beyond its virtual time.
@@ -240,6 +261,7 @@ impl Pace {
         if let Some(e) = self.episode.as_mut() {
             e.worst = e.worst.max(lag);
             e.slowest = slower(e.slowest, self.last_note);
+            e.steps += 1;
         }
         if lag > LAG_LIMIT && self.episode.is_none() {
             self.episodes += 1;
@@ -262,16 +284,19 @@ impl Pace {
                 worst: lag,
                 slowest: self.last_note,
                 said,
+                from_us: t_us,
+                steps: 0,
             });
         } else if lag < LAG_LIMIT / 2 {
             if let Some(e) = self.episode.take().filter(|e| e.said) {
                 // What the run fell behind by in all, and what held it up.
                 eprintln!(
-                    "robot: caught up with the wall clock at {:.3} s of virtual time after {:.0} ms behind, at worst {:.1} ms (the slowest board run meanwhile: {}); a QEMU emulating code it runs for the first time (a command's admission decision, a stream's first sample) takes 10-20 times longer than later, else this machine is too slow or too busy for a live robot",
+                    "robot: caught up with the wall clock at {:.3} s of virtual time after {:.0} ms behind, at worst {:.1} ms (the slowest board run meanwhile: {}); {}",
                     t_us as f64 / 1e6,
                     e.began.elapsed().as_secs_f64() * 1e3,
                     e.worst.as_secs_f64() * 1e3,
                     describe(e.slowest),
+                    e.cause(t_us),
                 );
             }
         }
@@ -424,6 +449,35 @@ mod tests {
             "{}",
             held.describe()
         );
+    }
+
+    #[test]
+    fn a_lag_no_board_run_explains_is_put_down_to_the_host_s_steps() {
+        let run = |ms| SlowRun {
+            board: 2,
+            from_us: 2_170_720,
+            to_us: 2_170_760,
+            wall: Duration::from_micros(ms),
+            cpu: None,
+        };
+        let episode = |slowest| Episode {
+            began: Instant::now(),
+            worst: Duration::from_micros(10_700),
+            slowest,
+            said: true,
+            from_us: 2_171_000,
+            steps: 30,
+        };
+        // 1.4 ms of wall for 0.04 ms of virtual time does not make 10.7 ms of lag: 30 steps did.
+        assert_eq!(
+            episode(Some(run(1_400))).cause(2_172_200),
+            "no board run explains it: the host took 30 steps for 1.20 ms of virtual time (boards trading quantum by quantum)"
+        );
+        assert!(episode(None).cause(2_172_200).starts_with("no board run"));
+        // 9 ms of wall for 0.04 ms does.
+        assert!(episode(Some(run(9_000)))
+            .cause(2_172_200)
+            .starts_with("that board run's wall time"));
     }
 
     #[test]

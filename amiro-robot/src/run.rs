@@ -76,6 +76,24 @@ fn given(b: &Board, d: &Transfer, bus: &Bus) -> (bool, bool) {
     (own, heard)
 }
 
+/// Whether a command frame with identifier `id` may make a board that hears it drive a line (the
+/// shutdown command drives SYS_PD_N) or do something else the host does not vouch for (a topic it
+/// does not know): such a board goes ahead with no other until it sleeps again
+/// (`Board::commanded`). A sensor request (a diagnostics topic's admission policy too), an LED or
+/// the motor command makes a board decide, sample, light and publish sensor frames, which no
+/// other board's filter passes: the
+/// boards deciding one go ahead together as in the steady state (before, each such command put
+/// all three boards quantum by quantum through their admission decision, some 30 exchanges of
+/// 0.2–0.5 ms of wall time each, a live run 5–11 ms behind the wall clock at each request).
+fn may_drive_a_line(id: u16) -> bool {
+    use amiro_can::Topic;
+    reaches_software(id)
+        && !u8::try_from(id & 0xFF)
+            .ok()
+            .and_then(|byte| Topic::try_from(byte).ok())
+            .is_some_and(|t| t.is_sensor() || t.led_number().is_some() || t == Topic::MotorCommand)
+}
+
 /// Whether `d` makes board `b` act: its own completion, or a frame its filter passes.
 fn meant_for(b: &Board, d: &Transfer, bus: &Bus) -> bool {
     let (own, heard) = given(b, d, bus);
@@ -783,7 +801,7 @@ pub fn run_in_world(
                 if let Some(d) = now {
                     let (own, heard) = given(b, &d, &bus);
                     if own || heard {
-                        b.commanded |= heard && reaches_software(d.frame.id);
+                        b.commanded |= heard && may_drive_a_line(d.frame.id);
                         answer.flags |= DOWN_FRAME | if own { DOWN_OWN } else { 0 };
                         answer.at_us = d.end.saturating_sub(b.offset);
                         answer.mailbox = d.mailbox as u8;
@@ -1400,6 +1418,33 @@ mod tests {
         let nodes: Vec<NodeId> = (0..4).map(|_| bus.add_node()).collect();
         bus.babble(nodes[0], Frame::new(0x700, &[]).unwrap(), 0, u64::MAX);
         assert_eq!(bus.alone_from(nodes[0]), None);
+    }
+
+    #[test]
+    fn only_a_command_that_may_drive_a_line_keeps_the_boards_apart() {
+        use amiro_can::{CanId, Kind, Priority, Topic};
+        let command =
+            |topic: Topic| CanId::new(Kind::Command, Priority::Medium, topic.byte()).raw();
+        // The shutdown command drives SYS_PD_N; a topic the host does not know is not vouched for.
+        assert!(may_drive_a_line(command(Topic::Shutdown)));
+        assert!(may_drive_a_line(0x2FF));
+        assert!(may_drive_a_line(0x203));
+        // Requests (a diagnostics topic's too, and its admission policy), LEDs and the motor: the
+        // boards decide, sample, light and publish.
+        for topic in [
+            Topic::MagnetometerX,
+            Topic::Gyroscope,
+            Topic::ProximityRing,
+            Topic::DiWheelDriveDiagnostics,
+        ] {
+            assert!(!may_drive_a_line(command(topic)), "{topic:?}");
+        }
+        assert!(!may_drive_a_line(command(Topic::Led3)));
+        assert!(!may_drive_a_line(command(Topic::MotorCommand)));
+        // A sensor frame reaches no board's software at all.
+        assert!(!may_drive_a_line(
+            CanId::new(Kind::Sensor, Priority::Medium, Topic::Shutdown.byte()).raw()
+        ));
     }
 
     fn done(id: u16, data: &[u8], mailbox: u8, at_us: u64, completed_us: u64) -> Done {
