@@ -169,10 +169,17 @@ impl Episode {
         if explained {
             "that board run's wall time, beyond its virtual time, is the lag: emulating, its QEMU's work (code run for the first time takes 10-20 times longer than later); waiting for a core, or neither, the machine's other work or its hypervisor".into()
         } else {
+            let virtual_us = now_us.saturating_sub(self.from_us);
             format!(
-                "no board run explains it: the host took {} steps for {:.2} ms of virtual time (boards trading quantum by quantum)",
+                "no board run explains it: the host took {} steps for {:.2} ms of virtual time ({})",
                 self.steps,
-                now_us.saturating_sub(self.from_us) as f64 / 1e3
+                virtual_us as f64 / 1e3,
+                // A live step is at most 1 ms; steps of a quantum or two are boards in lock-step.
+                if self.steps > 0 && virtual_us <= self.steps * 2 * crate::QUANTUM_US {
+                    "boards trading quantum by quantum"
+                } else {
+                    "each a little slower than real time: the machine's other work or its hypervisor"
+                }
             )
         }
     }
@@ -474,6 +481,12 @@ mod tests {
             "no board run explains it: the host took 30 steps for 1.20 ms of virtual time (boards trading quantum by quantum)"
         );
         assert!(episode(None).cause(2_172_200).starts_with("no board run"));
+        // 233 steps for 149 ms: live steps, each a little slow (a loaded machine).
+        let mut loaded = episode(None);
+        loaded.steps = 233;
+        assert!(loaded.cause(2_171_000 + 149_160).ends_with(
+            "233 steps for 149.16 ms of virtual time (each a little slower than real time: the machine's other work or its hypervisor)"
+        ));
         // 9 ms of wall for 0.04 ms does.
         assert!(episode(Some(run(9_000)))
             .cause(2_172_200)
