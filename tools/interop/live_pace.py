@@ -3,7 +3,8 @@ SLCAN port — the proximity ring every 10 ms at PowerManagement, LED 3, magneto
 the gyroscope every 10 ms at low priority, 10 ms apart, then counts for `--seconds` of wall time the frames that
 come back, per wall-clock second and identifier (the gyroscope's first), and stops the run with Ctrl-C as a user
 would. The robot's own stderr (its warm-up, its real-time factor and worst lag every 2 s, "cannot keep pace", the
-closing summary) is printed as it comes, each line marked `robot:` once; the last lines sum up frames per second and the lag.
+closing summary) is printed as it comes, each line marked `robot:` once; the last lines sum up frames per second and the lag,
+with the machine's load average (1 min) at the start and the end: a wall-clock figure means little without it.
 
     python3 tools/interop/live_pace.py --xtask target/debug/xtask            # the load, 10 s counted
     python3 tools/interop/live_pace.py --gyroscope-first                     # the gyroscope asked for first
@@ -58,6 +59,7 @@ def main():
     GYROSCOPE = (level | GYROSCOPE_TOPIC, bytes.fromhex("010A0000"))
     GYROSCOPE_FRAMES = 0x400 | level | GYROSCOPE_TOPIC
 
+    load_before = os.getloadavg()[0]
     robot = subprocess.Popen(
         [args.xtask, "robot", "--slcan", *(["--no-warm-up"] if args.no_warm_up else [])],
         stdout=subprocess.PIPE,
@@ -149,7 +151,11 @@ def main():
         if ": # qemu: end of run" in line:
             print(line.rstrip())
     summary = [l for l in stderr_lines if l.startswith("robot: live: real-time factor")]
-    print("lag: " + (summary[-1] if summary else "(the robot printed no closing summary)"))
+    print(
+        "lag: "
+        + (summary[-1] if summary else "(the robot printed no closing summary)")
+        + f"; load average {load_before:.2f} -> {os.getloadavg()[0]:.2f}"
+    )
     return 0
 
 
