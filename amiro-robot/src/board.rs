@@ -110,6 +110,12 @@ pub(crate) struct Board {
     pub(crate) vcpu: Option<(crate::cost::ThreadClock, Option<(u64, u64)>)>,
     /// What its vCPU thread did in its last run: ran and waited for a core (live runs).
     pub(crate) last_run_cpu: Option<(Duration, Duration)>,
+    /// A live board's QEMU's main loop's clock, read as [`Board::vcpu`]'s: the main loop may hold
+    /// QEMU's global lock, which the vCPU thread then waits for, neither running nor waiting for
+    /// a core.
+    pub(crate) main_loop: Option<(crate::cost::ThreadClock, Option<(u64, u64)>)>,
+    /// What its main loop did in its last run: ran and waited for a core (live runs).
+    pub(crate) last_run_main_loop: Option<(Duration, Duration)>,
     /// The frames it completed itself under a grant, from its last report (`Up::done`).
     pub(crate) done: Vec<Done>,
     /// It was granted the bus with its last answer, until this global virtual time
@@ -194,6 +200,8 @@ impl Board {
             last_run: Duration::ZERO,
             vcpu: None,
             last_run_cpu: None,
+            main_loop: None,
+            last_run_main_loop: None,
             done: Vec::new(),
             granted: None,
         }
@@ -288,6 +296,7 @@ impl Board {
         self.partial.clear();
         self.main_loop_lowered = false;
         self.vcpu = None;
+        self.main_loop = None;
         self.lines.clear();
         self.ready.clear();
         self.booted(at);
@@ -330,6 +339,7 @@ impl Board {
         self.done.clear();
         self.granted = None;
         self.last_run_cpu = None;
+        self.last_run_main_loop = None;
         self.run_from(Instant::now());
     }
 
@@ -465,6 +475,7 @@ impl Board {
         if let Some(child) = self.child.as_ref() {
             if self.live {
                 self.vcpu = crate::cost::ThreadClock::vcpu(child.id()).map(|c| (c, None));
+                self.main_loop = crate::cost::ThreadClock::main_loop(child.id()).map(|c| (c, None));
             }
             let tid = child.id() as libc::pid_t;
             // SAFETY: sched_getscheduler, sched_setscheduler and setpriority on one thread of our
@@ -490,7 +501,7 @@ impl Board {
         if self.running_since.is_none() {
             self.running_since = Some(now);
             self.overlap.borrow_mut().started(now);
-            if let Some((clock, at)) = self.vcpu.as_mut() {
+            for (clock, at) in self.vcpu.iter_mut().chain(self.main_loop.iter_mut()) {
                 *at = clock.read();
             }
         }
@@ -501,13 +512,15 @@ impl Board {
         if let Some(since) = self.running_since.take() {
             self.overlap.borrow_mut().stopped(now);
             self.last_run = now.duration_since(since);
-            self.last_run_cpu = self.vcpu.as_ref().and_then(|(clock, at)| {
+            let since = |(clock, at): &(crate::cost::ThreadClock, Option<(u64, u64)>)| {
                 let ((ran0, waited0), (ran1, waited1)) = ((*at)?, clock.read()?);
                 Some((
                     Duration::from_nanos(ran1.saturating_sub(ran0)),
                     Duration::from_nanos(waited1.saturating_sub(waited0)),
                 ))
-            });
+            };
+            self.last_run_cpu = self.vcpu.as_ref().and_then(since);
+            self.last_run_main_loop = self.main_loop.as_ref().and_then(since);
         }
     }
 

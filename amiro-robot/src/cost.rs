@@ -259,6 +259,20 @@ impl ThreadClock {
         })
     }
 
+    /// The calling thread (`/proc/thread-self`): a live run's host.
+    pub(crate) fn own() -> Option<Self> {
+        std::fs::File::open("/proc/thread-self/schedstat")
+            .ok()
+            .map(Self)
+    }
+
+    /// The main loop of QEMU process `pid`: its first thread, whose thread id is the process id.
+    pub(crate) fn main_loop(pid: u32) -> Option<Self> {
+        std::fs::File::open(format!("/proc/{pid}/task/{pid}/schedstat"))
+            .ok()
+            .map(Self)
+    }
+
     /// Nanoseconds on a core and waiting for one, so far.
     pub(crate) fn read(&self) -> Option<(u64, u64)> {
         use std::os::unix::fs::FileExt;
@@ -490,10 +504,8 @@ mod tests {
 
     #[test]
     fn a_thread_clock_counts_the_cpu_a_thread_spends() {
-        // This test's own thread: its schedstat file is the same format.
-        let clock = ThreadClock(
-            std::fs::File::open("/proc/thread-self/schedstat").expect("schedstat is readable"),
-        );
+        // This test's own thread, as a live run's host reads its own.
+        let clock = ThreadClock::own().expect("schedstat is readable");
         // The thread's CPU as getrusage counts it (µs), whatever the machine's load.
         let thread_cpu = || {
             // SAFETY: getrusage fills the structure we own.
@@ -511,8 +523,11 @@ mod tests {
         }
         let (after, _) = clock.read().expect("two numbers");
         assert!(after - before >= 10_000_000, "{before} -> {after}");
-        // Not a QEMU: no vCPU thread.
+        // Not a QEMU: no vCPU thread; the process's first thread (a QEMU's main loop) is there.
         assert!(ThreadClock::vcpu(std::process::id()).is_none());
+        assert!(ThreadClock::main_loop(std::process::id())
+            .and_then(|c| c.read())
+            .is_some());
     }
 
     #[test]

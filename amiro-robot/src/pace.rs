@@ -84,6 +84,10 @@ pub struct SlowRun {
     pub wall: Duration,
     /// Of it, its QEMU's vCPU thread ran and waited for a core (live runs, where readable).
     pub cpu: Option<(Duration, Duration)>,
+    /// Meanwhile its QEMU's main loop ran and waited for a core (live runs, where readable): a
+    /// vCPU thread that did neither for long waited for QEMU's global lock, which the main loop
+    /// holds while it runs, or lost its core to the machine's hypervisor.
+    pub main_loop: Option<(Duration, Duration)>,
 }
 
 impl SlowRun {
@@ -110,8 +114,13 @@ impl SlowRun {
                     ms(waited),
                     if neither > self.wall / 2 {
                         format!(
-                            ", neither for {:.1} ms (held in QEMU, or its core given to another guest by the machine's hypervisor)",
-                            ms(neither)
+                            ", neither for {:.1} ms (held in QEMU, or its core given to another guest by the machine's hypervisor){}",
+                            ms(neither),
+                            self.main_loop.map_or(String::new(), |(ran, waited)| format!(
+                                "; its main loop, which may hold QEMU's lock, ran {:.1} ms and waited for a core {:.1} ms",
+                                ms(ran),
+                                ms(waited)
+                            ))
                         )
                     } else {
                         String::new()
@@ -141,6 +150,10 @@ pub struct Pace {
     /// The machine's processors at the window's start: the hypervisor's share is printed with the
     /// factor.
     window_machine: Option<crate::cost::Machine>,
+    /// The host's own thread's scheduler clock (ran, waited for a core), read at every hold: a
+    /// time behind says how much of it the host itself waited for a core.
+    host: Option<crate::cost::ThreadClock>,
+    host_last: Option<(u64, u64)>,
 }
 
 /// A time the run was behind the wall clock.
@@ -158,6 +171,10 @@ struct Episode {
     /// slow, are boards trading quantum by quantum.
     from_us: u64,
     steps: u64,
+    /// The host's thread's clock at the hold before it fell behind.
+    host_from: Option<(u64, u64)>,
+    /// What the host's thread did from then to the end (ran, waited for a core), once known.
+    host: Option<(Duration, Duration)>,
 }
 
 impl Episode {
@@ -165,6 +182,17 @@ impl Episode {
     /// time than its virtual time (its QEMU emulating, waiting for a core, or neither), else the
     /// host's many steps, each short (boards trading quantum by quantum).
     fn cause(&self, now_us: u64) -> String {
+        let host = self.host.map_or(String::new(), |(ran, waited)| {
+            format!(
+                "; meanwhile the host's thread ran {:.1} ms and waited for a core {:.1} ms",
+                ran.as_secs_f64() * 1e3,
+                waited.as_secs_f64() * 1e3
+            )
+        });
+        format!("{}{host}", self.held_up_by(now_us))
+    }
+
+    fn held_up_by(&self, now_us: u64) -> String {
         let explained = self.slowest.is_some_and(|r| r.excess() * 2 >= self.worst);
         if explained {
             "that board run's wall time, beyond its virtual time, is the lag: emulating, its QEMU's work (code run for the first time takes 10-20 times longer than later); waiting for a core, or neither, the machine's other work or its hypervisor".into()
@@ -216,6 +244,8 @@ impl Pace {
             window_slowest: None,
             last_note: None,
             window_machine: crate::cost::Machine::now(),
+            host: crate::cost::ThreadClock::own(),
+            host_last: None,
         }
     }
 
@@ -263,6 +293,8 @@ impl Pace {
             slept += nap.as_micros() as u64;
         };
         let lag = wall.saturating_sub(virtual_now);
+        let host_before = self.host_last;
+        self.host_last = self.host.as_ref().and_then(crate::cost::ThreadClock::read);
         self.window_worst_lag = self.window_worst_lag.max(lag);
         self.worst_lag = self.worst_lag.max(lag);
         if let Some(e) = self.episode.as_mut() {
@@ -293,9 +325,17 @@ impl Pace {
                 said,
                 from_us: t_us,
                 steps: 0,
+                host_from: host_before,
+                host: None,
             });
         } else if lag < LAG_LIMIT / 2 {
-            if let Some(e) = self.episode.take().filter(|e| e.said) {
+            if let Some(mut e) = self.episode.take().filter(|e| e.said) {
+                e.host = e.host_from.zip(self.host_last).map(|((r0, w0), (r1, w1))| {
+                    (
+                        Duration::from_nanos(r1.saturating_sub(r0)),
+                        Duration::from_nanos(w1.saturating_sub(w0)),
+                    )
+                });
                 // What the run fell behind by in all, and what held it up.
                 eprintln!(
                     "robot: caught up with the wall clock at {:.3} s of virtual time after {:.0} ms behind, at worst {:.1} ms (the slowest board run meanwhile: {}); {}",
@@ -419,6 +459,7 @@ mod tests {
             to_us,
             wall: Duration::from_millis(ms),
             cpu: None,
+            main_loop: None,
         };
         let mut pace = Pace::new(Instant::now());
         // 10 ms of wall for 40 µs of virtual time beats 12 ms for 9 ms.
@@ -456,6 +497,19 @@ mod tests {
             "{}",
             held.describe()
         );
+        // With its main loop's clock: the main loop waited for a core while the vCPU thread
+        // waited for its lock.
+        let locked = SlowRun {
+            main_loop: Some((Duration::from_micros(300), Duration::from_micros(21_000))),
+            ..held
+        };
+        assert!(
+            locked.describe().ends_with(
+                "hypervisor); its main loop, which may hold QEMU's lock, ran 0.3 ms and waited for a core 21.0 ms"
+            ),
+            "{}",
+            locked.describe()
+        );
     }
 
     #[test]
@@ -466,6 +520,7 @@ mod tests {
             to_us: 2_170_760,
             wall: Duration::from_micros(ms),
             cpu: None,
+            main_loop: None,
         };
         let episode = |slowest| Episode {
             began: Instant::now(),
@@ -474,6 +529,8 @@ mod tests {
             said: true,
             from_us: 2_171_000,
             steps: 30,
+            host_from: None,
+            host: None,
         };
         // 1.4 ms of wall for 0.04 ms of virtual time does not make 10.7 ms of lag: 30 steps did.
         assert_eq!(
@@ -486,6 +543,11 @@ mod tests {
         loaded.steps = 233;
         assert!(loaded.cause(2_171_000 + 149_160).ends_with(
             "233 steps for 149.16 ms of virtual time (each a little slower than real time: the machine's other work or its hypervisor)"
+        ));
+        // The host's own thread's share, where its clock was read.
+        loaded.host = Some((Duration::from_micros(2_400), Duration::from_micros(9_100)));
+        assert!(loaded.cause(2_171_000 + 149_160).ends_with(
+            "hypervisor); meanwhile the host's thread ran 2.4 ms and waited for a core 9.1 ms"
         ));
         // 9 ms of wall for 0.04 ms does.
         assert!(episode(Some(run(9_000)))

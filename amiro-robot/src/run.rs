@@ -1227,6 +1227,7 @@ fn take_report(
         to_us: t,
         wall: b.last_run,
         cpu: b.last_run_cpu,
+        main_loop: b.last_run_main_loop,
     };
     if work.slowest.is_none_or(|s| run.excess() > s.excess()) {
         work.slowest = Some(run);
