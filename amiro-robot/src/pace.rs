@@ -98,6 +98,26 @@ impl SlowRun {
         ))
     }
 
+    /// What most of its wall time went to, as far as its threads' clocks tell.
+    fn where_it_went(&self) -> &'static str {
+        let Some((ran, waited)) = self.cpu else {
+            return "its QEMU's work, or the machine's other work or its hypervisor (no thread clocks here)";
+        };
+        let neither = self.wall.saturating_sub(ran + waited);
+        if ran >= waited && ran >= neither {
+            "its QEMU emulating (code run for the first time takes 10-20 times longer than later; a core the hypervisor takes from a running thread counts here too)"
+        } else if waited >= neither {
+            "its QEMU waiting for a core: the machine's other work"
+        } else if self
+            .main_loop
+            .is_some_and(|(r, w)| w > r && w * 2 >= neither)
+        {
+            "its QEMU's main loop waiting for a core while its vCPU thread waited for QEMU's lock: the machine's other work or its hypervisor"
+        } else {
+            "held in QEMU, its report waiting for the host, or its core given to another guest by the machine's hypervisor"
+        }
+    }
+
     fn describe(&self) -> String {
         let ms = |d: Duration| d.as_secs_f64() * 1e3;
         format!(
@@ -193,9 +213,11 @@ impl Episode {
     }
 
     fn held_up_by(&self, now_us: u64) -> String {
-        let explained = self.slowest.is_some_and(|r| r.excess() * 2 >= self.worst);
-        if explained {
-            "that board run's wall time, beyond its virtual time, is the lag: emulating, its QEMU's work (code run for the first time takes 10-20 times longer than later); waiting for a core, or neither, the machine's other work or its hypervisor".into()
+        if let Some(run) = self.slowest.filter(|r| r.excess() * 2 >= self.worst) {
+            format!(
+                "that board run's wall time, beyond its virtual time, is the lag: {}",
+                run.where_it_went()
+            )
         } else {
             let virtual_us = now_us.saturating_sub(self.from_us);
             format!(
@@ -549,10 +571,25 @@ mod tests {
         assert!(loaded.cause(2_171_000 + 149_160).ends_with(
             "hypervisor); meanwhile the host's thread ran 2.4 ms and waited for a core 9.1 ms"
         ));
-        // 9 ms of wall for 0.04 ms does.
+        // 9 ms of wall for 0.04 ms does, and what it went to is named where the clocks tell.
         assert!(episode(Some(run(9_000)))
             .cause(2_172_200)
             .starts_with("that board run's wall time"));
+        let split = |cpu, main_loop| {
+            episode(Some(SlowRun {
+                cpu: Some(cpu),
+                main_loop,
+                ..run(9_000)
+            }))
+            .cause(2_172_200)
+        };
+        let ms = Duration::from_millis;
+        assert!(split((ms(8), ms(0)), None).contains(": its QEMU emulating"));
+        assert!(split((ms(1), ms(7)), None).contains(": its QEMU waiting for a core"));
+        assert!(
+            split((ms(1), ms(0)), Some((ms(0), ms(8)))).contains(": its QEMU's main loop waiting")
+        );
+        assert!(split((ms(1), ms(0)), Some((ms(0), ms(0)))).contains(": held in QEMU"));
     }
 
     #[test]
