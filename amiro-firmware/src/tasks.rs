@@ -7,7 +7,7 @@ use amiro_can::Priority;
 use amiro_sensors::handler::{Outcome, Rejection, SensorDataHandler};
 use amiro_sensors::trace::{TraceEvent, TraceKind};
 use amiro_sensors::tx_queue::{PushOutcome, TxQueue};
-use rtic_sync::channel::{Receiver, Sender};
+use rtic_sync::channel::Sender;
 
 use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
 use crate::mono::Clock;
@@ -248,7 +248,7 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
     board: amiro_can::Board,
     handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     wake_levels: &mut [Sender<'static, (), 1>],
-    requests: &mut Sender<'static, RxFrame, N>,
+    requests: &mut Producer<'static, N>,
     mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
     tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
 ) {
@@ -256,7 +256,11 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
     if stop {
         let _ = handle_command::<C>(frame, handler, wake_levels);
     }
-    if requests.try_send(*frame).is_ok() || stop {
+    if requests.push(frame) {
+        requests.wake();
+        return;
+    }
+    if stop {
         // A stop that finds the queue full has taken effect all the same (and is traced as handled);
         // only the admission task's view keeps the stream, which errs on the safe side (more load).
         return;
@@ -305,7 +309,7 @@ pub async fn serve_admission<
 >(
     admission: &mut crate::admission::Admission<'_, N, M>,
     pacing: &mut crate::admission::Pacing<K>,
-    requests: &mut Receiver<'static, RxFrame, R>,
+    requests: &mut crate::rx_queue::Consumer<'static, R>,
     mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
     tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
@@ -314,7 +318,8 @@ pub async fn serve_admission<
     // Every board analysed once with nothing running, before the first request (cheap: no stream runs yet, so
     // back to back, as one activation).
     admission.prepare();
-    while let Some(frame) = parked(next_command(requests)).await {
+    loop {
+        let frame = parked(next_command(requests)).await;
         // A request whose period moves the analysis horizon changes every board's key: the other boards are
         // analysed first, one per step, so that the decision analyses only its own board and the bus.
         refresh_steps::<C, N, M, K>(admission, pacing, Some(&frame), false).await;
@@ -494,10 +499,10 @@ pub const fn level_index(p: Priority) -> usize {
 
 /// Waits for the next command frame.
 pub async fn next_command<const N: usize>(
-    commands: &mut Receiver<'static, RxFrame, N>,
-) -> Option<RxFrame> {
+    commands: &mut crate::rx_queue::Consumer<'static, N>,
+) -> RxFrame {
     let task = crate::tracing::suspend(None);
-    let frame = commands.recv().await.ok();
+    let frame = commands.recv().await;
     crate::tracing::resume(task);
     frame
 }

@@ -70,8 +70,6 @@ pub const WATCHDOG_PERIOD_US: u64 = 100_000;
 pub const WATCHDOG_TIMEOUT_MS: u32 = 500;
 /// The watchdog's timeout during the boot (started first thing in `init`).
 pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
-/// The command handler takes at most one command per this interval (`docs/analysis.md`).
-pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// The latch task starts at most one latch per this interval: LED commands handled meanwhile are
 /// latched together (each LED shows its newest colour), so the latch costs at most about 175 µs
 /// per millisecond whatever the bus carries. 1-0: one latch (36 bytes, 175 µs) per 1 ms, a command
@@ -142,7 +140,6 @@ mod app {
     use crate::leds::{self, LedState};
     use crate::{levels, platform, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN};
     use amiro_can::{Board as CanBoard, Command, Priority};
-    use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
     use amiro_firmware::signals;
@@ -173,8 +170,8 @@ mod app {
         can_tx: platform::CanTxPort,
         rx_frames: amiro_firmware::rx_queue::Producer<'static, RX_QUEUE_LEN>,
         commands: amiro_firmware::rx_queue::Consumer<'static, RX_QUEUE_LEN>,
-        to_admission: Sender<'static, RxFrame, ADMISSION_QUEUE_LEN>,
-        requests: Receiver<'static, RxFrame, ADMISSION_QUEUE_LEN>,
+        to_admission: amiro_firmware::rx_queue::Producer<'static, ADMISSION_QUEUE_LEN>,
+        requests: amiro_firmware::rx_queue::Consumer<'static, ADMISSION_QUEUE_LEN>,
         wake_latch: Sender<'static, (), 1>,
         wake_publisher: [Sender<'static, (), 1>; 1],
         wake_commands: [Sender<'static, (), 1>; 1],
@@ -190,7 +187,7 @@ mod app {
         tasks::boot("LightRing", crate::BOOT_WATCHDOG_TIMEOUT_MS);
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = amiro_firmware::frame_queue!(RX_QUEUE_LEN);
-        let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
+        let (to_admission, requests) = amiro_firmware::frame_queue!(ADMISSION_QUEUE_LEN);
         let (wake_latch, latch_wakeups) = make_channel!((), 1);
         let (wake_publisher, publisher_wakeups) = make_channel!((), 1);
         let mut signals = hw.signals;
@@ -264,7 +261,7 @@ mod app {
 
     /// Decodes each command and records LED colours (waking the latch); sensor and admission-policy
     /// commands go to `admit_requests` in the order heard; at most one command per
-    /// `COMMAND_MIN_INTERVAL_US`.
+    /// `admission::COMMAND_MIN_INTERVAL_US`.
     #[task(priority = 5, shared = [handler, leds, tx_queue], local = [commands, to_admission, wake_latch, wake_commands])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
@@ -290,7 +287,7 @@ mod app {
                 cx.shared.leds.lock(|l| l.apply(now, &command));
                 let _ = cx.local.wake_latch.try_send(());
             }
-            not_before = Some(started + crate::COMMAND_MIN_INTERVAL_US);
+            not_before = Some(started + amiro_firmware::admission::COMMAND_MIN_INTERVAL_US);
         }
     }
 

@@ -753,7 +753,7 @@ fn monitor_explains_an_admission_verdict_in_one_sentence() {
         verdict: Verdict::Refused,
         violation: Violation::Task { index: 0 },
         wcrt_us: Count::saturating(u32::MAX),
-        deadline_us: Count::saturating(400),
+        deadline_us: Count::saturating(1000),
         shortest_period: None,
         priority_needed: None,
         searched: false,
@@ -785,7 +785,7 @@ fn monitor_explains_an_admission_verdict_in_one_sentence() {
         ),
         "{sentence}"
     );
-    assert!(sentence.contains("deadline 400 µs"), "{sentence}");
+    assert!(sentence.contains("deadline 1000 µs"), "{sentence}");
     assert!(
         sentence.contains("At urgent it would accept every"),
         "{sentence}"

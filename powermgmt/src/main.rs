@@ -54,8 +54,6 @@ pub const WATCHDOG_PERIOD_US: u64 = 100_000;
 pub const WATCHDOG_TIMEOUT_MS: u32 = 500;
 /// The watchdog's timeout during the boot (started first thing in `init`).
 pub const BOOT_WATCHDOG_TIMEOUT_MS: u32 = 2_000;
-/// The command handler takes at most one command per this interval (`docs/analysis.md`).
-pub const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// The admission task starts at most `ADMISSION_BURST` analysed commands (publish and one-shot
 /// requests of any board) in any window of `ADMISSION_WINDOW_US` (`amiro_firmware::admission::Pacing`):
 /// a burst of requests is decided back to back, and the pacing bounds how often the check runs. The
@@ -123,7 +121,6 @@ mod app {
     use crate::sensors::{self, FrontBus, RearBus};
     use crate::{levels, platform, power, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN};
     use amiro_can::{Board as CanBoard, Command, Priority, ShutdownMode};
-    use amiro_firmware::can::RxFrame;
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
     use amiro_firmware::signals::{self, SystemSignals as _};
@@ -163,8 +160,8 @@ mod app {
         can_tx: platform::CanTxPort,
         rx_frames: amiro_firmware::rx_queue::Producer<'static, RX_QUEUE_LEN>,
         commands: amiro_firmware::rx_queue::Consumer<'static, RX_QUEUE_LEN>,
-        to_admission: Sender<'static, RxFrame, ADMISSION_QUEUE_LEN>,
-        requests: Receiver<'static, RxFrame, ADMISSION_QUEUE_LEN>,
+        to_admission: amiro_firmware::rx_queue::Producer<'static, ADMISSION_QUEUE_LEN>,
+        requests: amiro_firmware::rx_queue::Consumer<'static, ADMISSION_QUEUE_LEN>,
         wake_levels: [Sender<'static, (), 1>; 4],
         wake_commands: [Sender<'static, (), 1>; 4],
         wake_urgent: Wake,
@@ -178,7 +175,7 @@ mod app {
         tasks::boot("PowerManagement", crate::BOOT_WATCHDOG_TIMEOUT_MS);
         let hw = platform::init(cx.device, cx.core);
         let (rx_frames, commands) = amiro_firmware::frame_queue!(RX_QUEUE_LEN);
-        let (to_admission, requests) = make_channel!(RxFrame, ADMISSION_QUEUE_LEN);
+        let (to_admission, requests) = amiro_firmware::frame_queue!(ADMISSION_QUEUE_LEN);
         let (wake_u, wake_urgent) = make_channel!((), 1);
         let (wake_h, wake_high) = make_channel!((), 1);
         let (wake_m, wake_medium) = make_channel!((), 1);
@@ -260,7 +257,7 @@ mod app {
 
     /// Decodes each command; the operator's shutdown command starts the robot's shutdown; sensor
     /// and admission-policy commands go to `admit_requests` in the order heard. At most one
-    /// command per `COMMAND_MIN_INTERVAL_US`.
+    /// command per `admission::COMMAND_MIN_INTERVAL_US`.
     #[task(priority = 5, shared = [handler, tx_queue], local = [commands, to_admission, wake_commands])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
@@ -285,7 +282,7 @@ mod app {
             {
                 shutdown_sequence::spawn(Some(mode)).ok();
             }
-            not_before = Some(started + crate::COMMAND_MIN_INTERVAL_US);
+            not_before = Some(started + amiro_firmware::admission::COMMAND_MIN_INTERVAL_US);
         }
     }
 

@@ -6,18 +6,25 @@
 //! Every generated frame carries exactly one fault (or none), so its verdict is unambiguous.
 //! Board-specific parts are one row of [`MODELS`]; a board with QEMU scenarios and no row fails.
 //!
-//! Per run: a reference publisher at urgent priority, then frames spaced 450–900 µs apart (more
-//! than the command handler's 400 µs), then a burst 20 µs apart whose excess the handler drops,
+//! Per run: a reference publisher at urgent priority, then frames spaced 1 125–2 250 µs apart (more
+//! than the command handler's 1 ms interval), then a burst 20 µs apart whose excess the handler drops,
 //! then SYS_PD_N. Checks: the run ends; the reference keeps its exact grid; nothing unrequested is
 //! sent; every traced verdict matches the model in order; handled + `rx dropped` + `rx overruns` = sent (the burst, 20 µs apart, is faster than any bus: its FIFO may overrun); the
 //! stack's high-water mark is reported.
 
 use std::path::Path;
 
+use amiro_firmware::admission::COMMAND_MIN_INTERVAL_US;
 use anyhow::{bail, ensure, Context, Result};
 use schedule_analysis::rng::Rng;
 
 use crate::boards::Board;
+
+/// The spaced phase's gaps between frames: more than the command handler's interval
+/// (`amiro_firmware::admission::COMMAND_MIN_INTERVAL_US`, 1 ms), so no spaced frame waits for a
+/// command before it and none is dropped; up to twice that plus its margin.
+const SPACED_MIN_US: u64 = COMMAND_MIN_INTERVAL_US + COMMAND_MIN_INTERVAL_US / 8;
+const SPACED_MAX_US: u64 = 2 * SPACED_MIN_US;
 use crate::qemu::{self, TimedFrame, SIGNAL_SYS_PD_N};
 use crate::scenarios::{self, RunOutput};
 
@@ -170,7 +177,7 @@ fn plan(model: &BoardModel, rng: &mut Rng, count: usize) -> Plan {
     };
     let mut n = 0;
     while n < count {
-        t += rng.range(450, 900);
+        t += rng.range(SPACED_MIN_US, SPACED_MAX_US);
         let prio = rng.below(4);
         let class = rng.below(16);
         let sensor = if own_sensors.is_empty() {
@@ -329,7 +336,7 @@ fn plan(model: &BoardModel, rng: &mut Rng, count: usize) -> Plan {
                     Verdict::Accepted,
                     &mut expected,
                 );
-                t += rng.range(450, 900);
+                t += rng.range(SPACED_MIN_US, SPACED_MAX_US);
                 push(
                     t,
                     command_id(3, topic),
@@ -395,7 +402,7 @@ fn plan(model: &BoardModel, rng: &mut Rng, count: usize) -> Plan {
         n += 1;
     }
     // The burst: 40 valid admission-policy commands (harmless, accepted) 20 µs apart, faster
-    // than one frame time; the handler takes one per 400 µs and drops what its queue cannot hold.
+    // than one frame time; the handler takes one per 1 ms and drops what its queue cannot hold.
     let burst_us = t + 20_000;
     let burst = 40;
     for k in 0..burst as u64 {
@@ -669,14 +676,16 @@ mod tests {
         let b = plan(model, &mut Rng::new(7), 500);
         assert_eq!(a.frames, b.frames);
         assert_eq!(a.expected.len(), 501);
-        // The spaced phase keeps the command handler's 400 µs.
+        // The spaced phase keeps the command handler's interval.
         let spaced: Vec<u64> = a
             .frames
             .iter()
             .take(a.expected.len())
             .map(|f| f.at_us)
             .collect();
-        assert!(spaced.windows(2).all(|w| w[1] - w[0] >= 400));
+        assert!(spaced
+            .windows(2)
+            .all(|w| w[1] - w[0] > COMMAND_MIN_INTERVAL_US));
         assert!(a.frames.iter().all(|f| f.data.len() <= 8));
     }
 

@@ -413,7 +413,7 @@ fn adapter_flood(run: &Run) -> Result<String> {
     );
     // The slack is the spread between the earliest and the latest completion on the grid: well
     // under 900 µs, so a skipped or an extra sample still fails. The latest: the flood command
-    // DiWheelDrive is handling when its sample is due (one per 400 µs at most, ≈ 200 µs each with
+    // DiWheelDrive is handling when its sample is due (one per 1 ms at most, ≈ 200 µs each with
     // its trace), the sample itself (≈ 240 µs), a frame already on the bus and the next flood frame,
     // which wins against 0x605 (≈ 111 µs each), then 0x605 (≈ 80 µs): ≈ 740 µs after the release;
     // the earliest ≈ 240 µs. Measured: under 400 µs while every board also spent time on a 10 µs

@@ -303,13 +303,13 @@ pub(super) fn led3_on(out: &RunOutput, bounds: &Bounds, chips: usize) -> Result<
 fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let commands: [(u64, [u8; 3]); 8] = [
         (10_000, [0xFF, 0, 0]),
-        (10_500, [0, 0xFF, 0]),
-        (11_000, [0, 0, 0xFF]),
-        (11_500, [0xFF, 0xFF, 0]),
-        (12_000, [0, 0xFF, 0xFF]),
-        (12_500, [0xFF, 0, 0xFF]),
-        (13_000, [0x80, 0x80, 0x80]),
-        (13_500, [0xFF, 0xFF, 0xFF]),
+        (11_250, [0, 0xFF, 0]),
+        (12_500, [0, 0, 0xFF]),
+        (13_750, [0xFF, 0xFF, 0]),
+        (15_000, [0, 0xFF, 0xFF]),
+        (16_250, [0xFF, 0, 0xFF]),
+        (17_500, [0x80, 0x80, 0x80]),
+        (18_750, [0xFF, 0xFF, 0xFF]),
     ];
     all_eight_on(out, bounds, CHIPS, &commands)
 }

@@ -98,7 +98,7 @@ fn all_eight(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let commands: [(u64, [u8; 3]); 8] = core::array::from_fn(|i| {
         let step = 0x20 * i as u32;
         (
-            10_000 + 500 * i as u64,
+            10_000 + 1_250 * i as u64,
             [(step + 0x1F) as u8, (0xFF - step) as u8, blues[i]],
         )
     });

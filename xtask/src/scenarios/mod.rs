@@ -985,4 +985,40 @@ mod tests {
         assert_eq!(out.ram_used().unwrap(), (5040, 2056));
         assert!(run(&["(0.000001) can0 608#00"]).ram_used().is_err());
     }
+
+    /// Every timing file models the command handler at the firmware's one interval
+    /// (`amiro_firmware::admission::COMMAND_MIN_INTERVAL_US`): released at most once per interval, done within it.
+    #[test]
+    fn every_timing_file_models_the_command_interval() {
+        use amiro_firmware::admission::COMMAND_MIN_INTERVAL_US;
+        let models = crate::workspace::workspace_root().join("schedule-analysis/models");
+        let mut files: Vec<std::path::PathBuf> = Vec::new();
+        for dir in std::iter::once(models.clone()).chain(
+            std::fs::read_dir(&models)
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .filter(|p| p.is_dir()),
+        ) {
+            for entry in std::fs::read_dir(&dir).unwrap() {
+                let path = entry.unwrap().path();
+                if path.to_string_lossy().ends_with(".timing.json") {
+                    files.push(path);
+                }
+            }
+        }
+        assert!(files.len() >= 5, "timing files: {files:?}");
+        for path in files {
+            let json: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+            let handler = &json["tasks"]["handle_commands"];
+            for field in [&handler["arrival"]["sporadic_us"], &handler["deadline_us"]] {
+                assert_eq!(
+                    field.as_u64(),
+                    Some(COMMAND_MIN_INTERVAL_US),
+                    "{}",
+                    path.display()
+                );
+            }
+        }
+    }
 }

@@ -2,6 +2,7 @@
 //!
 //! The QEMU build's control frames on 0x3F0 (a ring sensor stops answering, the gauges report a
 //! critically low battery, VSYS and the plug) are described in `powermgmt/src/qemu.rs`.
+use amiro_firmware::admission::COMMAND_MIN_INTERVAL_US;
 use anyhow::{ensure, Context, Result};
 
 use super::{Bounds, RunOutput, Scenario};
@@ -76,8 +77,6 @@ pub const SCENARIOS: &[Scenario] = &[
     },
 ];
 
-/// The board's command handler takes at most one command per this interval.
-const COMMAND_MIN_INTERVAL_US: u64 = 400;
 /// Commands that may still wait for PowerManagement's admission task when a run ends: its queue
 /// (`ADMISSION_QUEUE_LEN` in powermgmt/src/main.rs) and the one being decided.
 const ADMISSION_WAITING: u64 = 8 + 1;
