@@ -480,6 +480,27 @@ fn take(
     }
 }
 
+/// `why` as the report prints it: a held reason (after [`HELD`]) already printed for an earlier row is replaced
+/// by that row's name, so rows sharing one reason (a publisher task's topics) do not repeat it.
+fn shared_reason_once<'a>(
+    told: &mut Vec<(&'a str, &'a str)>,
+    row: &'a str,
+    why: &'a str,
+) -> String {
+    let Some(at) = why.find(HELD) else {
+        return why.to_string();
+    };
+    let reason = &why[at + HELD.len()..];
+    if let Some((first, _)) = told.iter().find(|(_, r)| *r == reason) {
+        return format!("{}{HELD}the reason given for {first} above", &why[..at]);
+    }
+    told.push((row, reason));
+    why.to_string()
+}
+
+/// What a held bound's reason follows (xtask's `wcet --write` writes it).
+const HELD: &str = ", held back as its budget: ";
+
 /// The report's lines about a board's budgets: the first says how many are bounded from the machine code (on which
 /// chip, clock and wait states) and how many stated; where a bounds file exists, one line follows per stated budget
 /// with why (`<board>: stated budget of <row>: <why>`), so a long reason reads on its own line.
@@ -520,6 +541,9 @@ pub(super) fn budgets_lines(b: &BoardBudgets, measured: &[String]) -> Vec<String
             )
         }
     } else {
+        // A reason several rows share (the publisher rows of one task) is printed in full once; the
+        // rows after it name the row that carries it.
+        let mut told: Vec<(&str, &str)> = Vec::new();
         each = stated
             .iter()
             .map(|(row, why)| {
@@ -528,6 +552,7 @@ pub(super) fn budgets_lines(b: &BoardBudgets, measured: &[String]) -> Vec<String
                         name == row.as_str() || bounds::publisher_row(name) == **row
                     })
                 });
+                let why = shared_reason_once(&mut told, row, why);
                 match m {
                     Some(m) => format!("{}: stated budget of {row}: {why}; measured {m}", b.board),
                     None => format!("{}: stated budget of {row}: {why}", b.board),
@@ -653,6 +678,24 @@ pub fn breaking_bounds(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_shared_held_reason_is_printed_once() {
+        let mut told = Vec::new();
+        let a = "bound declined: publisher[a]: bounded at 1 cycles, held back as its budget: the samples";
+        let b = "bound declined: publisher[b]: bounded at 2 cycles, held back as its budget: the samples";
+        let c =
+            "bound declined: publisher[c]: bounded at 3 cycles, held back as its budget: another";
+        let d = "bound declined: thread mode";
+        assert_eq!(shared_reason_once(&mut told, "publisher[a]", a), a);
+        assert_eq!(
+            shared_reason_once(&mut told, "publisher[b]", b),
+            "bound declined: publisher[b]: bounded at 2 cycles, held back as its budget: the reason given \
+             for publisher[a] above"
+        );
+        assert_eq!(shared_reason_once(&mut told, "publisher[c]", c), c);
+        assert_eq!(shared_reason_once(&mut told, "admit", d), d);
+    }
     use crate::bounds::{CeilingSection, CeilingSections, Chip, ImageIdentity};
     use crate::model::TaskKind;
 
