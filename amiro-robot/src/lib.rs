@@ -79,12 +79,21 @@ pub struct Transfer {
 }
 
 /// What a robot run produced.
+///
+/// A run in virtual time keeps everything it printed and every frame (the robot scenarios check
+/// them; its length bounds them). A live run has no end: it is [`Outcome::bounded`], keeps neither,
+/// and what it printed is in its [`Sink`] (`cargo xtask robot` writes the run's `output.log` and
+/// `bus.log` as the lines come, [`log::RunFiles`]); its bus report comes from [`Outcome::traffic`].
 #[derive(Debug, Default)]
 pub struct Outcome {
-    /// Everything printed, in order.
+    /// Everything printed, in order (a bounded run's: empty).
     pub text: String,
-    /// Every frame that went over the bus, in order.
+    /// Every frame that went over the bus, in order (a bounded run's: empty).
     pub transfers: Vec<Transfer>,
+    /// The bus report's figures, kept as frames go over the bus in a bounded space (every run's).
+    pub traffic: report::Traffic,
+    /// Keeps neither [`Outcome::text`] nor [`Outcome::transfers`]: a live run's.
+    pub bounded: bool,
     /// Error frames on the bus.
     pub error_frames: usize,
     /// The virtual time the run ended at (µs).
@@ -93,6 +102,47 @@ pub struct Outcome {
     pub work: Work,
     /// A live run's pacing: its real-time factor and lag.
     pub pace: Option<pace::Summary>,
+}
+
+impl Outcome {
+    /// An outcome that keeps only running figures, however long its run (a live run's).
+    pub fn bounded() -> Self {
+        Self {
+            bounded: true,
+            ..Self::default()
+        }
+    }
+
+    /// Takes an output line: to `sink` as it comes, and into [`Outcome::text`] unless bounded.
+    pub fn emit(&mut self, sink: &mut dyn Sink, line: &str) {
+        sink.line(line);
+        if !self.bounded {
+            self.text.push_str(line);
+            self.text.push('\n');
+        }
+    }
+
+    /// Takes a frame that went over the bus: into the running figures, and into
+    /// [`Outcome::transfers`] unless bounded.
+    pub fn transfer(&mut self, t: Transfer) {
+        self.traffic.push(&t);
+        if !self.bounded {
+            self.transfers.push(t);
+        }
+    }
+
+    /// Forgets the frames taken so far (a live run's warm-up: the bus report covers the live run).
+    pub fn forget_transfers(&mut self) {
+        self.transfers.clear();
+        self.traffic.clear();
+    }
+
+    /// About how many bytes it holds of what the run produced (text, frames, running figures).
+    pub fn retained_bytes(&self) -> usize {
+        self.text.capacity()
+            + self.transfers.capacity() * std::mem::size_of::<Transfer>()
+            + self.traffic.retained_bytes()
+    }
 }
 
 /// Formats a completed frame as a `candump -l` line.
@@ -123,6 +173,14 @@ impl Sink for Vec<String> {
     }
 }
 
+/// Both sinks, each line to the first and then the second (the terminal and the run's files).
+impl<A: Sink, B: Sink> Sink for (A, B) {
+    fn line(&mut self, line: &str) {
+        self.0.line(line);
+        self.1.line(line);
+    }
+}
+
 /// A live run (`--slcan`): paced to the wall clock, the adapter a client drives, stopped by Ctrl-C.
 pub struct Live {
     /// The SLCAN pseudo-terminal.
@@ -135,4 +193,97 @@ pub struct Live {
     /// Called once, when the wall clock starts (the boards have booted, after the warm-up): the
     /// robot is ready for a client (`cargo xtask robot` prints the port then).
     pub ready: Option<Box<dyn FnOnce()>>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Counts the lines it is given, keeps none.
+    #[derive(Default)]
+    struct Count(usize, usize);
+
+    impl Sink for Count {
+        fn line(&mut self, line: &str) {
+            self.0 += 1;
+            self.1 += line.len() + 1;
+        }
+    }
+
+    /// `seconds` of virtual time at about the thesis demo's output into `outcome`: per
+    /// millisecond two boards' trace lines, and a frame (magnetometer-x at 900 µs, its burst of
+    /// three, the proximity ring every 10 ms) with its `candump -l` line.
+    fn run_for(outcome: &mut Outcome, sink: &mut dyn Sink, seconds: u64) {
+        let mut next_mag = 0;
+        for ms in 0..seconds * 1000 {
+            let t = ms * 1000;
+            outcome.emit(
+                sink,
+                &format!("diwheeldrive: # {} trace sample-start 205 at {t}", stamp(t)),
+            );
+            outcome.emit(
+                sink,
+                &format!("powermgmt: # {} trace publish 21F ring at {t}", stamp(t)),
+            );
+            let mut frames = Vec::new();
+            while next_mag < t + 1000 {
+                frames.push((0x605, 6, next_mag, 0));
+                next_mag += 900;
+            }
+            if ms % 10 == 0 {
+                frames.extend((0..3).map(|j| (0x61F, 8, t + 200, j)));
+            }
+            for (id, len, released_at, j) in frames {
+                let end = released_at + 150 + j * 140;
+                let frame = Frame::new(id, &[0x5A; 8][..len]).unwrap();
+                outcome.transfer(Transfer {
+                    node: 0,
+                    mailbox: 0,
+                    frame,
+                    queued_at: released_at + j * 140,
+                    released_at,
+                    start: end - 130,
+                    end,
+                });
+                outcome.emit(sink, &candump_line(end, &frame));
+            }
+        }
+    }
+
+    #[test]
+    fn a_live_run_keeps_a_bounded_space_however_long_it_runs() {
+        // Two minutes of virtual time: a bounded outcome holds what it held after ten seconds,
+        // under 64 KiB; its sink got every line and its report is the whole one's.
+        let (mut ten, mut long) = (Outcome::bounded(), Outcome::bounded());
+        let (mut sink_ten, mut sink_long) = (Count::default(), Count::default());
+        run_for(&mut ten, &mut sink_ten, 10);
+        run_for(&mut long, &mut sink_long, 120);
+        assert!(long.text.is_empty() && long.transfers.is_empty());
+        assert!(sink_long.0 > 12 * sink_ten.0 - 1_000, "{}", sink_long.0);
+        assert!(sink_long.1 > 16 << 20, "{} B printed", sink_long.1);
+        assert!(
+            long.retained_bytes() <= ten.retained_bytes().max(1),
+            "{} B after 120 s, {} B after 10 s",
+            long.retained_bytes(),
+            ten.retained_bytes()
+        );
+        assert!(
+            long.retained_bytes() < 64 * 1024,
+            "{} B",
+            long.retained_bytes()
+        );
+        // A run in virtual time keeps the whole: the same two minutes hold megabytes.
+        let mut whole = Outcome::default();
+        run_for(&mut whole, &mut Count::default(), 120);
+        assert!(
+            whole.retained_bytes() > 16 << 20,
+            "{} B",
+            whole.retained_bytes()
+        );
+        assert_eq!(whole.text.len(), sink_long.1);
+        assert_eq!(
+            long.traffic.report(120_000_000),
+            report::analyse(&whole.transfers, 120_000_000)
+        );
+    }
 }

@@ -158,7 +158,7 @@ pub fn split_output(text: &str) -> (String, String) {
     let mut bus = String::new();
     let mut trace = String::new();
     for line in text.lines() {
-        let target = if line.starts_with('(') {
+        let target = if is_frame_line(line) {
             &mut bus
         } else {
             &mut trace
@@ -167,6 +167,87 @@ pub fn split_output(text: &str) -> (String, String) {
         target.push('\n');
     }
     (bus, trace)
+}
+
+/// Whether an output line is a bus frame (a `candump -l` line): the bus log's lines.
+fn is_frame_line(line: &str) -> bool {
+    line.starts_with('(')
+}
+
+/// A run's `output.log` (every line) and `bus.log` (its frame lines, a plain `candump -l` log),
+/// written as the lines come: the same bytes as [`split_output`] of the whole, with nothing kept.
+/// Buffered; with a flush period (a live run's), flushed at a line once that long has passed since
+/// the last flush, so that a reader following the files lags at most about that much behind a run
+/// that prints.
+pub struct RunFiles {
+    output: std::io::BufWriter<std::fs::File>,
+    bus: std::io::BufWriter<std::fs::File>,
+    flush_every: Option<std::time::Duration>,
+    flushed: std::time::Instant,
+    /// The first write that failed (a [`crate::Sink`] cannot fail; [`RunFiles::finish`] says it).
+    error: Option<std::io::Error>,
+}
+
+impl RunFiles {
+    /// Creates `output.log` and `bus.log` in `dir`.
+    pub fn create(dir: &Path, flush_every: Option<std::time::Duration>) -> Result<Self> {
+        let open = |name: &str| -> Result<_> {
+            let path = dir.join(name);
+            let file = std::fs::File::create(&path)
+                .with_context(|| format!("creating {}", path.display()))?;
+            Ok(std::io::BufWriter::with_capacity(1 << 16, file))
+        };
+        Ok(Self {
+            output: open("output.log")?,
+            bus: open("bus.log")?,
+            flush_every,
+            flushed: std::time::Instant::now(),
+            error: None,
+        })
+    }
+
+    fn write(&mut self, line: &str) -> std::io::Result<()> {
+        use std::io::Write;
+        writeln!(self.output, "{line}")?;
+        if line.contains(['\n', '\r']) {
+            // As `split_output` splits the whole (`str::lines` drops a line's trailing `\r`).
+            for part in format!("{line}\n").lines().filter(|l| is_frame_line(l)) {
+                writeln!(self.bus, "{part}")?;
+            }
+        } else if is_frame_line(line) {
+            writeln!(self.bus, "{line}")?;
+        }
+        if self
+            .flush_every
+            .is_some_and(|every| self.flushed.elapsed() >= every)
+        {
+            self.output.flush()?;
+            self.bus.flush()?;
+            self.flushed = std::time::Instant::now();
+        }
+        Ok(())
+    }
+
+    /// Flushes both files; the first write that failed, if one did.
+    pub fn finish(mut self) -> Result<()> {
+        use std::io::Write;
+        if let Some(e) = self.error.take() {
+            return Err(e).context("writing the run's output.log and bus.log");
+        }
+        self.output.flush()?;
+        self.bus.flush()?;
+        Ok(())
+    }
+}
+
+impl crate::Sink for RunFiles {
+    fn line(&mut self, line: &str) {
+        if self.error.is_none() {
+            if let Err(e) = self.write(line) {
+                self.error = Some(e);
+            }
+        }
+    }
 }
 
 /// The `# duration:` header of a stimulus log.
@@ -263,5 +344,36 @@ mod tests {
         assert_eq!(parse_duration("1.5s").unwrap(), 1_500_000);
         assert!(parse_duration("2").is_err());
         assert!(parse_duration("2h").is_err());
+    }
+
+    #[test]
+    fn run_files_are_the_split_of_the_whole() {
+        use crate::Sink;
+        let dir =
+            std::env::temp_dir().join(format!("amiro-robot-run-files-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let lines = [
+            "diwheeldrive: # qemu: start",
+            "(0.010082) can0 201#010A0000",
+            "bus: # (0.010100) SYS_SYNC_N high (every module released it)",
+            "(0.010622) can0 601#0000000000000000\r",
+            "powermgmt: odd\r\n(0.011000) can0 605#F0D7FFFF",
+            "",
+            "(0.012000) can0 708#00",
+        ];
+        let mut files = RunFiles::create(&dir, Some(std::time::Duration::ZERO)).unwrap();
+        let mut text = String::new();
+        for line in lines {
+            files.line(line);
+            text.push_str(line);
+            text.push('\n');
+        }
+        files.finish().unwrap();
+        let output = std::fs::read_to_string(dir.join("output.log")).unwrap();
+        let bus = std::fs::read_to_string(dir.join("bus.log")).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(output, text);
+        assert_eq!(bus, split_output(&text).0);
+        assert_eq!(bus.lines().count(), 4);
     }
 }

@@ -48,13 +48,150 @@ impl Line {
     }
 }
 
+/// How many of an identifier's latest frames [`Traffic`] keeps to put them in order of release.
+pub const WINDOW: usize = 256;
+
+/// The bus report's figures kept as a run goes, in a bounded space: per identifier its counts, its
+/// longest frame, its worst response and its bursts folded so far, and its latest [`WINDOW`]
+/// frames in order of release. A live run has no end: it keeps this, not every frame
+/// ([`analyse`] on the whole), and its closing report comes from here.
+///
+/// Frames complete in order (the bus gives them so), but a frame released early can complete after
+/// later ones of its identifier (another node's, a babbling controller's); bursts are folded in
+/// order of release, so a frame is folded only once [`WINDOW`] later ones of its identifier have
+/// come. The report is then [`analyse`]'s, unless a frame comes released before one already folded
+/// ([`Traffic::out_of_order`] counts those: folded where they come, they can merge or split a
+/// burst).
+#[derive(Debug, Default, Clone)]
+pub struct Traffic {
+    streams: BTreeMap<u16, Stream>,
+    out_of_order: usize,
+}
+
+/// One identifier's running figures.
+#[derive(Debug, Default, Clone)]
+struct Stream {
+    node: usize,
+    frames: usize,
+    dlc: u8,
+    observed_us: u64,
+    /// The latest frames not yet folded, (released, completed), in order of release.
+    window: std::collections::VecDeque<(u64, u64)>,
+    /// The release of the last frame folded.
+    folded_to: Option<u64>,
+    /// The burst being folded: its first release, frames, last completion.
+    burst: Option<(u64, u32, u64)>,
+    /// The largest burst closed, the shortest time between two bursts' starts.
+    per_activation: u32,
+    period_us: Option<u64>,
+}
+
+impl Stream {
+    fn fold(&mut self, (q, end): (u64, u64)) {
+        self.folded_to = Some(self.folded_to.map_or(q, |f| f.max(q)));
+        match &mut self.burst {
+            Some((_, n, busy_until)) if q <= *busy_until => {
+                *n += 1;
+                *busy_until = (*busy_until).max(end);
+            }
+            burst => {
+                if let Some((first, n, _)) = *burst {
+                    self.per_activation = self.per_activation.max(n);
+                    let gap = q.saturating_sub(first);
+                    self.period_us = Some(self.period_us.map_or(gap, |p| p.min(gap)));
+                }
+                *burst = Some((q, 1, end));
+            }
+        }
+    }
+
+    /// Its line with every frame folded (on a copy: the run goes on).
+    fn line(&self, id: u16, duration_us: u64) -> Line {
+        let mut s = self.clone();
+        while let Some(f) = s.window.pop_front() {
+            s.fold(f);
+        }
+        let last = s.burst.map_or(1, |b| b.1);
+        Line {
+            id,
+            node: s.node,
+            frames: s.frames,
+            dlc: s.dlc,
+            per_activation: s.per_activation.max(last),
+            period_us: s.period_us.unwrap_or(duration_us.max(1)),
+            observed_us: s.observed_us,
+            bound_us: Err(String::new()),
+        }
+    }
+}
+
+impl Traffic {
+    /// Takes a frame that went over the bus (in order of completion).
+    pub fn push(&mut self, t: &Transfer) {
+        let s = self.streams.entry(t.frame.id).or_insert_with(|| Stream {
+            node: t.node,
+            window: std::collections::VecDeque::with_capacity(WINDOW + 1),
+            ..Stream::default()
+        });
+        s.frames += 1;
+        s.dlc = s.dlc.max(t.frame.len);
+        s.observed_us = s.observed_us.max(t.end - t.released_at);
+        let f = (t.released_at, t.end);
+        if s.folded_to.is_some_and(|to| f.0 < to) {
+            self.out_of_order += 1;
+            s.fold(f);
+            return;
+        }
+        let at = s.window.partition_point(|&w| w <= f);
+        s.window.insert(at, f);
+        if s.window.len() > WINDOW {
+            if let Some(oldest) = s.window.pop_front() {
+                s.fold(oldest);
+            }
+        }
+    }
+
+    /// Forgets every frame (a live run's warm-up: the report covers the live run).
+    pub fn clear(&mut self) {
+        *self = Self::default();
+    }
+
+    /// Frames that came released before one already folded (see [`Traffic`]).
+    pub fn out_of_order(&self) -> usize {
+        self.out_of_order
+    }
+
+    /// Frames taken.
+    pub fn frames(&self) -> usize {
+        self.streams.values().map(|s| s.frames).sum()
+    }
+
+    /// What it holds, in bytes (its size stays bounded however long a run goes).
+    pub fn retained_bytes(&self) -> usize {
+        self.streams
+            .values()
+            .map(|s| std::mem::size_of::<(u16, Stream)>() + s.window.capacity() * 16)
+            .sum()
+    }
+
+    /// The report of the frames taken so far, from a run of `duration_us`: [`analyse`]'s.
+    pub fn report(&self, duration_us: u64) -> Vec<Line> {
+        let lines = self
+            .streams
+            .iter()
+            .map(|(&id, s)| s.line(id, duration_us))
+            .collect();
+        bound(lines)
+    }
+}
+
 /// The report of `transfers` from a run of `duration_us`.
 pub fn analyse(transfers: &[Transfer], duration_us: u64) -> Vec<Line> {
     let mut streams: BTreeMap<u16, Vec<&Transfer>> = BTreeMap::new();
     for t in transfers {
         streams.entry(t.frame.id).or_default().push(t);
     }
-    let mut lines: Vec<Line> = streams
+    let lines: Vec<Line> = streams
         .iter()
         .map(|(&id, frames)| {
             let mut queued: Vec<(u64, u64)> =
@@ -92,6 +229,11 @@ pub fn analyse(transfers: &[Transfer], duration_us: u64) -> Vec<Line> {
             }
         })
         .collect();
+    bound(lines)
+}
+
+/// The lines with their Davis bounds.
+fn bound(mut lines: Vec<Line>) -> Vec<Line> {
     // Highest priority first, as the analysis wants them.
     let bit = can::bit_time(can::DEFAULT_BITRATE);
     let timings: Vec<MessageTiming> = lines
@@ -210,5 +352,85 @@ mod tests {
         let lines = analyse(&t, 30_000);
         assert!(lines[0].exceeds());
         assert!(render(&lines).contains("EXCEEDED"));
+    }
+
+    /// Frames as a long run gives them, in order of completion: `0x100` every 900 µs, `0x200` in
+    /// bursts of three every 10 ms (each waiting for the one before), and a low `0x300` that
+    /// waits behind the bursts, so that it completes after frames released after it.
+    fn long_run(ms: u64) -> Vec<Transfer> {
+        let mut t = Vec::new();
+        for k in 0..ms * 1000 / 900 {
+            t.push(transfer(0, 0x100, 6, k * 900, k * 900 + 120));
+        }
+        for k in 0..ms / 10 {
+            let at = k * 10_000 + 30;
+            for j in 0..3 {
+                let mut f = transfer(1, 0x200, 8, at + j * 131, at + (j + 1) * 131);
+                f.released_at = at;
+                t.push(f);
+            }
+            // Released before the burst's second frame, completed after its third.
+            let mut late = transfer(2, 0x300, 8, at + 100, at + 4 * 131 + 40);
+            late.released_at = at + 100 - 1 - k % 7;
+            t.push(late);
+            // And one of 0x200's stream from another node, released before but completed last.
+            if k % 50 == 0 {
+                let mut other = transfer(0, 0x200, 2, at, at + 700);
+                other.released_at = at - 5;
+                t.push(other);
+            }
+        }
+        t.sort_by_key(|x| x.end);
+        t
+    }
+
+    #[test]
+    fn the_running_report_is_the_report_of_the_whole() {
+        for ms in [1, 10, 95, 3_000] {
+            let frames = long_run(ms);
+            let mut traffic = Traffic::default();
+            for f in &frames {
+                traffic.push(f);
+            }
+            assert_eq!(traffic.out_of_order(), 0);
+            assert_eq!(traffic.frames(), frames.len());
+            let whole = analyse(&frames, ms * 1000);
+            assert_eq!(traffic.report(ms * 1000), whole, "{ms} ms");
+            // The report can be asked for as the run goes; it folds a copy.
+            assert_eq!(traffic.report(ms * 1000), whole);
+        }
+    }
+
+    #[test]
+    fn a_frame_later_than_the_window_is_counted() {
+        let mut traffic = Traffic::default();
+        let mut frames: Vec<Transfer> = (0..WINDOW as u64 + 2)
+            .map(|k| transfer(0, 0x100, 2, 1_000 + k * 1000, 1_000 + k * 1000 + 60))
+            .collect();
+        // Released before every other one, completed after them all.
+        frames.push(transfer(1, 0x100, 2, 10, 900_000));
+        for f in &frames {
+            traffic.push(f);
+        }
+        assert_eq!(traffic.out_of_order(), 1);
+        assert_eq!(traffic.frames(), frames.len());
+        // Its response is still the worst, whatever the bursts.
+        assert_eq!(traffic.report(1_000_000)[0].observed_us, 900_000 - 10);
+    }
+
+    #[test]
+    fn the_running_report_stays_bounded() {
+        // An hour of 0x100 every 900 µs in a space that a second of it fills.
+        let mut traffic = Traffic::default();
+        let mut second = 0;
+        for k in 0..4_000_000u64 {
+            traffic.push(&transfer(0, 0x100, 6, k * 900, k * 900 + 120));
+            if k == 1_111 {
+                second = traffic.retained_bytes();
+            }
+        }
+        assert!(second > 0);
+        assert_eq!(traffic.retained_bytes(), second);
+        assert!(second < 8 * 1024, "{second} B");
     }
 }

@@ -167,12 +167,13 @@ pub fn run_in_world(
     for b in &mut boards {
         b.start(0)?;
     }
-    let mut outcome = Outcome::default();
-    let emit = |outcome: &mut Outcome, sink: &mut dyn Sink, line: String| {
-        sink.line(&line);
-        outcome.text.push_str(&line);
-        outcome.text.push('\n');
+    // A live run keeps running figures only (it has no end): `Outcome::bounded`.
+    let mut outcome = if live.is_some() {
+        Outcome::bounded()
+    } else {
+        Outcome::default()
     };
+    let emit = |outcome: &mut Outcome, sink: &mut dyn Sink, line: String| outcome.emit(sink, &line);
     // A live run's warm-up (`crate::warm`): its requests first, the boards restarted in their
     // QEMUs at `warm_end`; the run's own stimulus and duration count from there.
     let warm_end = live
@@ -232,7 +233,7 @@ pub fn run_in_world(
                     let done = std::mem::take(&mut b.done);
                     for d in replay_done(&mut bus, b, &done)? {
                         outcome.work.local_frames += 1;
-                        outcome.transfers.push(d);
+                        outcome.transfer(d);
                         emit(&mut outcome, sink, candump_line(d.end, &d.frame));
                         if live.is_some() && !warming {
                             outbox.push(d.end, d.frame);
@@ -299,7 +300,7 @@ pub fn run_in_world(
             }
             operator.clear();
             deliveries.clear();
-            outcome.transfers.clear();
+            outcome.forget_transfers();
             outcome.error_frames = 0;
             notes.push(format!(
                 "bus: # {} warm-up over: the boards restart in their QEMUs, the code they ran translated",
@@ -444,7 +445,7 @@ pub fn run_in_world(
                         end,
                     };
                     deliveries.push_back(transfer);
-                    outcome.transfers.push(transfer);
+                    outcome.transfer(transfer);
                 }
                 Event::ErrorFrame {
                     node,

@@ -153,27 +153,52 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         world.with_controller(program, period)?;
     }
     let started = Instant::now();
-    let mut print = Print::new(!args.slcan || args.trace, args.slcan);
+    let print = Print::new(!args.slcan || args.trace, args.slcan);
+    // The run's output.log and bus.log are written as the lines come (a live run keeps none of
+    // them: `Outcome::bounded`); live, flushed at least every 200 ms while it prints.
+    std::fs::create_dir_all(&work)?;
+    let files = amiro_robot::log::RunFiles::create(
+        &work,
+        args.slcan.then_some(std::time::Duration::from_millis(200)),
+    )?;
+    let mut sink = (print, files);
+    if args.slcan {
+        eprintln!(
+            "robot: live: bus log (candump -l), written as it goes: {}",
+            work.join("bus.log").display()
+        );
+    }
     let outcome = amiro_robot::run_in_world(
         &firmware,
         &actions,
         duration,
         &work,
-        &mut print,
+        &mut sink,
         live.as_mut(),
         world.as_mut(),
     );
+    let (mut print, files) = sink;
     let _ = std::io::Write::flush(&mut print.out);
     if let Some(world) = world.as_mut() {
         world.finish();
     }
     let outcome = outcome?;
+    files.finish()?;
     let duration = outcome.ended_at;
     let wall = started.elapsed().as_secs_f64();
-    std::fs::write(work.join("output.log"), &outcome.text)?;
-    let (bus, _) = crate::qemu::split_output(&outcome.text);
-    std::fs::write(work.join("bus.log"), bus)?;
-    let report = amiro_robot::report::analyse(&outcome.transfers, duration);
+    // A live run kept the report's running figures only; a run in virtual time every frame.
+    let report = if outcome.bounded {
+        if outcome.traffic.out_of_order() > 0 {
+            eprintln!(
+                "bus report: {} frame(s) came released before an earlier-folded one of their identifier (more than {} frames late): their bursts are approximate",
+                outcome.traffic.out_of_order(),
+                amiro_robot::report::WINDOW
+            );
+        }
+        outcome.traffic.report(duration)
+    } else {
+        amiro_robot::report::analyse(&outcome.transfers, duration)
+    };
     let table = amiro_robot::report::render(&report);
     print!("{table}");
     std::fs::write(work.join("bus-report.txt"), &table)?;
