@@ -1,11 +1,11 @@
 //! The QEMU build's clock and timers: SysTick counts core cycles, and a tick is [`TICK_US`] µs of
 //! them; two timer queues run over the tick count.
 //!
-//! - The apps' ([`AppTimer`], behind `mono::QemuClock`): every task's delay and timeout. Its
-//!   earliest deadline is known ([`next_deadline_us`]), so a robot run can tell the host how long
-//!   the board will sleep.
-//! - The platform's own ([`PlatformTimer`]): the robot exchange and the stimulus replay wait in
-//!   it, so their waits never hide the apps' next deadline.
+//! - The apps' ([`AppTimer`], behind `mono::QemuClock`): every task's delay and timeout, in the
+//!   boards' own queue (`crate::timer_queue`, as on the chips). Its earliest deadline is known
+//!   ([`next_deadline_us`]), so a robot run can tell the host how long the board will sleep.
+//! - The platform's own ([`PlatformTimer`], rtic-time's queue): the robot exchange and the stimulus
+//!   replay wait in it, so their waits never hide the apps' next deadline.
 //!
 //! **Periodic or tickless.** A single-board run interrupts every tick (SysTick's reload is one
 //! tick), as it always did: the scenarios' cost figures include that interrupt. A robot run
@@ -28,8 +28,8 @@
 //! restarts SysTick for its deadline in its first poll ([`platform_delay_until`]) instead of
 //! pending the interrupt as rtic-time's queues do (the exchange's every wait did).
 //!
-//! **No held reading.** Tickless, the queues' expiry checks read the clock themselves (rtic-time's
-//! `on_monotonic_interrupt`: at least twice per queue), and the interrupt reads it once more after
+//! **No held reading.** Tickless, the queues' expiry checks read the clock themselves (at least
+//! twice each), and the interrupt reads it once more after
 //! both: a deadline that came while they ran is expired in the same interrupt. A single reading
 //! taken at the interrupt's start and held for both queues' checks (a quarter fewer SysTick register
 //! reads, no CPU gain measured) made DiWheelDrive's magnetometer miss samples in the 10 s thesis
