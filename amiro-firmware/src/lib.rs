@@ -22,6 +22,7 @@ pub mod layout;
 pub mod rx_queue;
 pub mod spi;
 pub mod timer_monotonic;
+pub mod timer_queue;
 pub mod trace_ring;
 
 #[cfg(target_os = "none")]

@@ -1,9 +1,9 @@
 //! The monotonic glue: microseconds over whichever timer a board uses.
 //!
 //! Tasks and the runtime see time only as [`Clock`]: `now_us`, `delay_until_us`,
-//! `timeout_at_us`. [`TimerClock`] provides it over any rtic-time timer-queue backend with 64-bit
-//! ticks of `TICK_US` microseconds: DiWheelDrive's TIM5 half-period counter, rtic-monotonics' TIM3
-//! (LightRing) and TIM2 (PowerManagement), and the SysTick of the QEMU builds.
+//! `timeout_at_us`. [`TimerClock`] provides it over any [`crate::timer_queue`] backend with 64-bit
+//! ticks of `TICK_US` microseconds: the boards' half-period timers (`timer_monotonic`: TIM5 on
+//! DiWheelDrive, TIM3 on LightRing, TIM2 on PowerManagement) and the SysTick of the QEMU builds.
 //!
 //! Deadlock freedom: rtic-monotonics keeps its 64-bit tick counters in `portable_atomic::AtomicU64`,
 //! which thumbv7 has no instructions for. Its default emulation is a global spin lock; a timer
@@ -14,7 +14,7 @@
 use core::future::Future;
 use core::marker::PhantomData;
 
-use rtic_time::timer_queue::TimerQueueBackend;
+use crate::timer_queue::Backend;
 
 /// The QEMU build's clock: the apps' timer queue over the platform's SysTick (`qemu::timer`).
 #[cfg(feature = "qemu")]
@@ -36,6 +36,9 @@ pub trait Clock {
     fn delay_until_us(at_us: u64) -> impl Future<Output = ()>;
     /// Runs `future` until it completes or the monotonic reaches `at_us`, whichever is first.
     fn timeout_at_us<F: Future>(at_us: u64, future: F) -> impl Future<Output = Option<F::Output>>;
+    /// A fault of the timer to log, once (the timer's interrupt only counts it; the watchdog task
+    /// asks).
+    fn take_fault_report() -> Option<&'static str>;
 }
 
 /// [`Clock`] over the timer queue of `B`, whose ticks are `TICK_US` microseconds.
@@ -43,26 +46,27 @@ pub struct TimerClock<B, const TICK_US: u64>(PhantomData<B>);
 
 impl<B, const TICK_US: u64> Clock for TimerClock<B, TICK_US>
 where
-    B: TimerQueueBackend<Ticks = u64>,
+    B: Backend,
 {
     fn now_us() -> u64 {
-        B::timer_queue().now().saturating_mul(TICK_US)
+        B::now().saturating_mul(TICK_US)
     }
 
     // The waits end the running task's run in the trace, with its next release, and start it
     // again when it resumes (`tracing`).
     async fn delay_until_us(at_us: u64) {
         let task = crate::tracing::suspend(Some((at_us, Self::now_us())));
-        B::timer_queue().delay_until(at_us.div_ceil(TICK_US)).await;
+        B::queue().delay_until(at_us.div_ceil(TICK_US)).await;
         crate::tracing::resume(task);
+    }
+
+    fn take_fault_report() -> Option<&'static str> {
+        B::take_fault_report()
     }
 
     async fn timeout_at_us<F: Future>(at_us: u64, future: F) -> Option<F::Output> {
         let task = crate::tracing::suspend(Some((at_us, Self::now_us())));
-        let result = B::timer_queue()
-            .timeout_at(at_us.div_ceil(TICK_US), future)
-            .await
-            .ok();
+        let result = B::queue().timeout_at(at_us.div_ceil(TICK_US), future).await;
         crate::tracing::resume(task);
         result
     }

@@ -139,8 +139,9 @@ pub fn come_up(
 
 /// The watchdog task every board runs at its least urgent level (the watchdog runs at its
 /// run-time timeout since [`come_up`]): every `period_us` feeds it only if the board's progress
-/// mark was set since the last look (a fed dog proves the whole schedule is alive), and polls the
-/// CAN controller's error state (it recovers from bus-off without an interrupt).
+/// mark was set since the last look (a fed dog proves the whole schedule is alive), polls the
+/// CAN controller's error state (it recovers from bus-off without an interrupt), and logs a fault
+/// the monotonic's timer counted (`mono::Clock::take_fault_report`).
 pub async fn feed_watchdog<C: Clock, R: crate::bxcan::Registers>(
     period_us: u64,
     mut alive: impl rtic_core::Mutex<T = crate::liveness::Liveness>,
@@ -154,6 +155,9 @@ pub async fn feed_watchdog<C: Clock, R: crate::bxcan::Registers>(
             crate::watchdog::feed();
         }
         can_errors.lock(on_can_status::<C, R>);
+        if let Some(line) = C::take_fault_report() {
+            crate::channels::defer_log(line);
+        }
     }
 }
 

@@ -11,8 +11,9 @@
 //! alternate with the half-period compare ("Monotonic must have missed an interrupt!"). Here an
 //! event that goes missing — on a chip only if the monotonic's interrupt is held off for half a
 //! period (32.8 ms at 1 MHz), in QEMU always, as its timer model has no compare channels — is
-//! counted, reported once on the log, and the time goes on from the events that did come
-//! ([`advance`]); a fault is reported, not turned into a reset loop.
+//! counted, reported once on the log (by the watchdog task, [`HalfPeriods::take_report`]), and the
+//! time goes on from the events that did come ([`advance`]); a fault is reported, not turned into a
+//! reset loop.
 //!
 //! The event accounting and the register sequences are plain functions over
 //! [`crate::bxcan::Registers`], tested on the host against a model timer
@@ -50,6 +51,9 @@ const HALF_PERIOD: u32 = 0x8000;
 pub struct HalfPeriods {
     count: AtomicU32,
     missed: AtomicU32,
+    /// The first event that went missing, until reported ([`HalfPeriods::take_report`]): 0 none,
+    /// 1 a half-period compare, 2 an update.
+    unreported: AtomicU32,
 }
 
 impl HalfPeriods {
@@ -58,6 +62,7 @@ impl HalfPeriods {
         Self {
             count: AtomicU32::new(0),
             missed: AtomicU32::new(0),
+            unreported: AtomicU32::new(0),
         }
     }
 
@@ -69,6 +74,16 @@ impl HalfPeriods {
     /// Timer events that went missing since the start.
     pub fn missed(&self) -> u32 {
         self.missed.load(Ordering::Relaxed)
+    }
+
+    /// The first event that went missing, once: reported by a task (the watchdog's, through
+    /// `mono::Clock::take_fault_report`), not by the timer's interrupt, which only counts it.
+    pub fn take_report(&self) -> Option<Missed> {
+        match self.unreported.swap(0, Ordering::Relaxed) {
+            1 => Some(Missed::HalfPeriodCompare),
+            2 => Some(Missed::Update),
+            _ => None,
+        }
     }
 }
 
@@ -163,20 +178,31 @@ pub fn start<R: Registers>(regs: &R, counter: &HalfPeriods, timer_clock_hz: u32)
 
 /// The timer's interrupt: clears the timer-queue compare flag (before the queue is looked at, so a
 /// compare that matches while it is sets it again) and takes the update and half-period flags,
-/// in one write (the status bits are write-0-to-clear: only those three), and counts them; returns
-/// the event that went missing if this is the first time one did (to be reported once). The
-/// backend's `clear_compare_flag`, which rtic-time calls just before, has nothing left to do.
-pub fn on_interrupt<R: Registers>(regs: &R, counter: &HalfPeriods) -> Option<Missed> {
+/// in one write (the status bits are write-0-to-clear: only those three), and counts them; an
+/// event that went missing is counted, and the first one kept for [`HalfPeriods::take_report`].
+/// Nothing else writes the counts (a load and a store each, no exclusive access).
+pub fn on_interrupt<R: Registers>(regs: &R, counter: &HalfPeriods) {
     let sr = regs.read(SR);
     let taken = sr & (SR_UIF | SR_CC1IF);
     regs.write(SR, !(taken | SR_CC2IF) & 0xFFFF);
     if taken == 0 {
-        return None;
+        return;
     }
     let (count, missed) = advance(counter.count(), taken & SR_UIF != 0, taken & SR_CC1IF != 0);
     counter.count.store(count, Ordering::Relaxed);
-    let missed = missed?;
-    (counter.missed.fetch_add(1, Ordering::Relaxed) == 0).then_some(missed)
+    if let Some(missed) = missed {
+        let before = counter.missed();
+        counter
+            .missed
+            .store(before.wrapping_add(1), Ordering::Relaxed);
+        if before == 0 {
+            let code = match missed {
+                Missed::HalfPeriodCompare => 1,
+                Missed::Update => 2,
+            };
+            counter.unreported.store(code, Ordering::Relaxed);
+        }
+    }
 }
 
 /// Time in ticks read in the timer's own interrupt: the count and the counter without a critical
@@ -193,28 +219,27 @@ pub fn counter<R: Registers>(regs: &R) -> u16 {
     regs.read(CNT) as u16
 }
 
-/// Sets the timer-queue compare (channel 2) for `instant` as seen at `now`: a target more than one
-/// counter period away (or past) fires at the next wrap, where the queue looks again.
-pub fn set_compare<R: Registers>(regs: &R, instant: u64, now: u64) {
-    let value = if instant.wrapping_sub(now) <= 0xFFFF {
-        instant as u16
-    } else {
-        0
-    };
-    regs.write(CCR2, value.into());
+/// Sets the timer-queue compare (channel 2) for `instant` as seen at `now` (read in this
+/// interrupt): a target more than one counter period away fires at the next wrap, where the queue
+/// looks again. `true` if the counter, read after the write, had already reached `instant`: its
+/// match may be gone by, and the interrupt must look again (the ticks since `now` fit the counter's
+/// 16 bits, as the interrupt runs far less than a period).
+pub fn set_compare<R: Registers>(regs: &R, instant: u64, now: u64) -> bool {
+    let ahead = instant.wrapping_sub(now);
+    if ahead > 0xFFFF {
+        regs.write(CCR2, 0);
+        return false;
+    }
+    regs.write(CCR2, u32::from(instant as u16));
+    let since = counter(regs).wrapping_sub(now as u16);
+    u64::from(since) >= ahead
 }
 
-/// Turns the timer-queue compare interrupt on or off.
+/// Turns the timer-queue compare interrupt on or off: one write, the period events' interrupts
+/// staying on (nothing else writes DIER after [`start`]).
 pub fn set_compare_interrupt<R: Registers>(regs: &R, on: bool) {
-    let dier = regs.read(DIER);
-    regs.write(
-        DIER,
-        if on {
-            dier | DIER_CC2IE
-        } else {
-            dier & !DIER_CC2IE
-        },
-    );
+    let compare = if on { DIER_CC2IE } else { 0 };
+    regs.write(DIER, DIER_UIE | DIER_CC1IE | compare);
 }
 
 /// Declares `$backend`, the timer-queue backend of the general-purpose timer at `$base` whose
@@ -230,8 +255,8 @@ macro_rules! timer_monotonic {
 
         static HALF_PERIODS: $crate::timer_monotonic::HalfPeriods =
             $crate::timer_monotonic::HalfPeriods::new();
-        static QUEUE: $crate::__rtic_time::timer_queue::TimerQueue<$backend> =
-            $crate::__rtic_time::timer_queue::TimerQueue::new();
+        static QUEUE: $crate::timer_queue::TimerQueue<$backend> =
+            $crate::timer_queue::TimerQueue::new();
 
         impl $backend {
             fn regs() -> $crate::bxcan::Mmio {
@@ -244,7 +269,6 @@ macro_rules! timer_monotonic {
             /// unmasks its interrupt at RTIC `priority` (the highest in the system).
             pub fn start(timer_clock_hz: u32, priority: u8) {
                 $crate::timer_monotonic::start(&Self::regs(), &HALF_PERIODS, timer_clock_hz);
-                QUEUE.initialize($backend);
                 // SAFETY: only this interrupt's priority changes, before any task uses the clock.
                 unsafe {
                     let mut core = $crate::__cortex_m::Peripherals::steal();
@@ -260,9 +284,7 @@ macro_rules! timer_monotonic {
             }
         }
 
-        impl $crate::__rtic_time::timer_queue::TimerQueueBackend for $backend {
-            type Ticks = u64;
-
+        impl $crate::timer_queue::Backend for $backend {
             fn now() -> u64 {
                 $crate::__rtic_time::half_period_counter::calculate_now(
                     || HALF_PERIODS.count(),
@@ -270,49 +292,42 @@ macro_rules! timer_monotonic {
                 )
             }
 
-            fn set_compare(instant: u64) {
-                // rtic-time sets the compare only in the timer's interrupt (on_monotonic_interrupt).
-                let regs = Self::regs();
-                let now = $crate::timer_monotonic::now_in_interrupt(&regs, &HALF_PERIODS);
-                $crate::timer_monotonic::set_compare(&regs, instant, now);
+            fn now_in_interrupt() -> u64 {
+                $crate::timer_monotonic::now_in_interrupt(&Self::regs(), &HALF_PERIODS)
             }
 
-            fn clear_compare_flag() {
-                // Done by `on_interrupt`, which rtic-time calls next, in the same status write.
+            fn set_compare(at: u64, now: u64) -> bool {
+                let regs = Self::regs();
+                $crate::timer_monotonic::set_compare_interrupt(&regs, true);
+                $crate::timer_monotonic::set_compare(&regs, at, now)
+            }
+
+            fn disable_compare() {
+                $crate::timer_monotonic::set_compare_interrupt(&Self::regs(), false);
             }
 
             fn pend_interrupt() {
                 $crate::__cortex_m::peripheral::NVIC::pend($interrupt);
             }
 
-            fn enable_timer() {
-                $crate::timer_monotonic::set_compare_interrupt(&Self::regs(), true);
-            }
-
-            fn disable_timer() {
-                $crate::timer_monotonic::set_compare_interrupt(&Self::regs(), false);
-            }
-
-            fn on_interrupt() {
-                if let Some(missed) =
-                    $crate::timer_monotonic::on_interrupt(&Self::regs(), &HALF_PERIODS)
-                {
-                    // One short copy: the trace drain writes the line (priority 0).
-                    $crate::channels::defer_log(missed.report());
-                }
-            }
-
-            fn timer_queue() -> &'static $crate::__rtic_time::timer_queue::TimerQueue<Self> {
+            fn queue() -> &'static $crate::timer_queue::TimerQueue<Self> {
                 &QUEUE
+            }
+
+            fn take_fault_report() -> Option<&'static str> {
+                HALF_PERIODS
+                    .take_report()
+                    .map($crate::timer_monotonic::Missed::report)
             }
         }
 
         #[allow(non_snake_case)]
         #[no_mangle]
         unsafe extern "C" fn $vector() {
-            use $crate::__rtic_time::timer_queue::TimerQueueBackend as _;
-            // SAFETY: called only from this timer's vector, as the timer queue requires.
-            unsafe { $backend::timer_queue().on_monotonic_interrupt() };
+            $crate::timer_monotonic::on_interrupt(&$backend::regs(), &HALF_PERIODS);
+            // SAFETY: this timer's vector, at the highest priority: nothing that touches the
+            // queue pre-empts it.
+            unsafe { QUEUE.on_interrupt() };
         }
     };
 }

@@ -1,11 +1,11 @@
 //! The QEMU build's clock and timers: SysTick counts core cycles, and a tick is [`TICK_US`] µs of
 //! them; two timer queues run over the tick count.
 //!
-//! - The apps' ([`AppTimer`], behind `mono::QemuClock`): every task's delay and timeout. Its
-//!   earliest deadline is known ([`next_deadline_us`]), so a robot run can tell the host how long
-//!   the board will sleep.
-//! - The platform's own ([`PlatformTimer`]): the robot exchange and the stimulus replay wait in
-//!   it, so their waits never hide the apps' next deadline.
+//! - The apps' ([`AppTimer`], behind `mono::QemuClock`): every task's delay and timeout, in the
+//!   boards' own queue (`crate::timer_queue`, as on the chips). Its earliest deadline is known
+//!   ([`next_deadline_us`]), so a robot run can tell the host how long the board will sleep.
+//! - The platform's own ([`PlatformTimer`], rtic-time's queue): the robot exchange and the stimulus
+//!   replay wait in it, so their waits never hide the apps' next deadline.
 //!
 //! **Periodic or tickless.** A single-board run interrupts every tick (SysTick's reload is one
 //! tick), as it always did: the scenarios' cost figures include that interrupt. A robot run
@@ -28,8 +28,8 @@
 //! restarts SysTick for its deadline in its first poll ([`platform_delay_until`]) instead of
 //! pending the interrupt as rtic-time's queues do (the exchange's every wait did).
 //!
-//! **No held reading.** Tickless, the queues' expiry checks read the clock themselves (rtic-time's
-//! `on_monotonic_interrupt`: at least twice per queue), and the interrupt reads it once more after
+//! **No held reading.** Tickless, the queues' expiry checks read the clock themselves (at least
+//! twice each), and the interrupt reads it once more after
 //! both: a deadline that came while they ran is expired in the same interrupt. A single reading
 //! taken at the interrupt's start and held for both queues' checks (a quarter fewer SysTick register
 //! reads, no CPU gain measured) made DiWheelDrive's magnetometer miss samples in the 10 s thesis
@@ -476,8 +476,8 @@ fn set_up_next(cs: CriticalSection<'_>, clock: &mut Clock, due: u64) {
     clock.next_armed = second;
 }
 
-/// A timer queue over the tick count whose next expiry is the word `$due` (the tick interrupt reads
-/// it): the two backends differ only in their queue and that word.
+/// An rtic-time timer queue over the tick count whose next expiry is the word `$due` (the tick
+/// interrupt reads it): the platform's.
 macro_rules! tick_backend {
     ($(#[$doc:meta])* $backend:ident, $queue:ident, $due:ident, $asked:ident) => {
         $(#[$doc])*
@@ -518,13 +518,36 @@ macro_rules! tick_backend {
     };
 }
 
-tick_backend!(
-    /// The apps' timer queue over the tick count.
-    AppTimer,
-    APP_QUEUE,
-    APP_DUE,
-    APP_ASKED
-);
+/// The apps' timer queue over the tick count: the boards' queue (`crate::timer_queue`), as on the
+/// chips, its compare the word [`APP_DUE`].
+pub struct AppTimer;
+
+static APP_QUEUE: crate::timer_queue::TimerQueue<AppTimer> = crate::timer_queue::TimerQueue::new();
+
+impl crate::timer_queue::Backend for AppTimer {
+    fn now() -> u64 {
+        now_ticks()
+    }
+
+    fn set_compare(at: u64, _now: u64) -> bool {
+        APP_DUE.store(at, Ordering::Relaxed);
+        now_ticks() >= at
+    }
+
+    fn disable_compare() {
+        APP_DUE.store(u64::MAX, Ordering::Relaxed);
+    }
+
+    fn pend_interrupt() {
+        APP_ASKED.store(true, Ordering::Relaxed);
+        cortex_m::peripheral::SCB::set_pendst();
+    }
+
+    fn queue() -> &'static crate::timer_queue::TimerQueue<Self> {
+        &APP_QUEUE
+    }
+}
+
 tick_backend!(
     /// The platform's timer queue (the robot exchange, the stimulus replay) over the tick count.
     PlatformTimer,
@@ -555,7 +578,6 @@ pub(super) fn start(mut syst: cortex_m::peripheral::SYST) {
     syst.enable_interrupt();
     syst.enable_counter();
     PLATFORM_QUEUE.initialize(PlatformTimer);
-    APP_QUEUE.initialize(AppTimer);
 }
 
 /// The apps' earliest deadline in µs (`u64::MAX`: none). A queue whose head changed pends SysTick,
@@ -612,7 +634,7 @@ unsafe fn run_queues() {
     // SAFETY: the caller's (the SysTick exception).
     unsafe {
         PLATFORM_QUEUE.on_monotonic_interrupt();
-        APP_QUEUE.on_monotonic_interrupt();
+        APP_QUEUE.on_interrupt();
     }
 }
 
@@ -690,7 +712,7 @@ unsafe extern "C" fn SysTick() {
                 unsafe { PLATFORM_QUEUE.on_monotonic_interrupt() };
             }
             if app {
-                unsafe { APP_QUEUE.on_monotonic_interrupt() };
+                unsafe { APP_QUEUE.on_interrupt() };
             }
             let end = tick_cycles();
             super::write_trace_to(file, &amiro_trace::clock_run::encode(start, end));
@@ -714,7 +736,7 @@ unsafe extern "C" fn SysTick() {
         if APP_ASKED.load(Ordering::Relaxed) || APP_DUE.get(cs) <= now {
             APP_ASKED.store(false, Ordering::Relaxed);
             // SAFETY: this is the SysTick exception.
-            unsafe { APP_QUEUE.on_monotonic_interrupt() };
+            unsafe { APP_QUEUE.on_interrupt() };
         }
         now = ticks_at(cs, &mut CLOCK.borrow_ref_mut(cs));
         let due = APP_DUE.get(cs).min(PLATFORM_DUE.get(cs));
