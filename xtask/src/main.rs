@@ -439,19 +439,12 @@ fn test(root: &Path) -> Result<()> {
 }
 
 /// The analysis gate: every shipped scenario must be schedulable and within its jitter budgets, on a
-/// robot of each revision — but the thesis's 900 µs magnetometer on 1-2, which is shown not to fit
-/// (docs/boards.md, `schedule-analysis/tests/revisions.rs`).
+/// robot of each revision (`schedule-analysis/tests/revisions.rs` holds the same).
 fn analysis_gate(root: &Path) -> Result<()> {
     let scenarios = schedule_analysis::scenario::scenario_names(root)
         .context("listing the shipped scenarios (schedule-analysis/models)")?;
     for robot in boards::ROBOT_REVISIONS {
         for name in &scenarios {
-            if robot == "1-2" && name == "thesis-magnetometer-900us" {
-                println!(
-                    "analysis gate: scenario {name} not gated on a 1-2 robot (the BNO055's reads leave its frames under 1 µs of slack; docs/boards.md)"
-                );
-                continue;
-            }
             let args = analyze::AnalyzeArgs {
                 scenario: Some(name.clone()),
                 model: None,
