@@ -29,7 +29,8 @@ pub struct RobotArgs {
     #[arg(long)]
     pub check: bool,
     /// Live (`--slcan`): print the boards' trace and log lines and the frames on stdout too (off by
-    /// default: printing them costs pace; everything is in the run's output.log either way).
+    /// default: printing them costs pace; they are in the run's output.log either way, its newest
+    /// lines: see `--output-log-max`).
     #[arg(long)]
     pub trace: bool,
     /// Live (`--slcan`): no warm-up. By default the boards first run every sensor topic's
@@ -334,4 +335,56 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         println!("{}", world.summary());
     }
     Ok(!(args.check && exceeded > 0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use amiro_robot::log::{LogBounds, LIVE_OUTPUT_LOG_MAX};
+    use clap::Parser;
+
+    #[derive(clap::Parser)]
+    struct Robot {
+        #[command(flatten)]
+        args: RobotArgs,
+    }
+
+    fn bounds(line: &[&str]) -> Result<LogBounds> {
+        let robot = Robot::try_parse_from(std::iter::once("robot").chain(line.iter().copied()))?;
+        log_bounds(&robot.args)
+    }
+
+    #[test]
+    fn a_live_run_rotates_its_output_log_and_a_run_in_virtual_time_keeps_both_whole() {
+        assert_eq!(
+            bounds(&["--duration", "10s"]).unwrap(),
+            LogBounds::default()
+        );
+        assert_eq!(
+            bounds(&["--slcan"]).unwrap(),
+            LogBounds {
+                output: Some(LIVE_OUTPUT_LOG_MAX),
+                bus: None
+            }
+        );
+        assert_eq!(
+            bounds(&[
+                "--slcan",
+                "--output-log-max",
+                "1GiB",
+                "--bus-log-max",
+                "200MB"
+            ])
+            .unwrap(),
+            LogBounds {
+                output: Some(1 << 30),
+                bus: Some(200_000_000)
+            }
+        );
+        // A size too small to hold more than seconds, a malformed one, or a bound on a run in
+        // virtual time (whose files the scenarios read whole) is refused.
+        assert!(bounds(&["--slcan", "--bus-log-max", "64KiB"]).is_err());
+        assert!(bounds(&["--slcan", "--output-log-max", "64M"]).is_err());
+        assert!(bounds(&["--output-log-max", "1GiB"]).is_err());
+    }
 }
