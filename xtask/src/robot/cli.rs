@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 use amiro_robot::stimulus;
 use amiro_robot::world::WorldRun;
@@ -29,7 +29,8 @@ pub struct RobotArgs {
     #[arg(long)]
     pub check: bool,
     /// Live (`--slcan`): print the boards' trace and log lines and the frames on stdout too (off by
-    /// default: printing them costs pace; everything is in the run's output.log either way).
+    /// default: printing them costs pace; they are in the run's output.log either way, its newest
+    /// lines: see `--output-log-max`).
     #[arg(long)]
     pub trace: bool,
     /// Live (`--slcan`): no warm-up. By default the boards first run every sensor topic's
@@ -38,6 +39,15 @@ pub struct RobotArgs {
     /// wall clock starts (about 0.16 s of virtual time; the port is printed after it).
     #[arg(long, requires = "slcan")]
     pub no_warm_up: bool,
+    /// Live (`--slcan`): rotate the run's output.log at SIZE (e.g. 64MiB, 1GiB; at least 1MiB):
+    /// the newest lines in output.log, the ones before them in output.log.1, the two at most twice
+    /// SIZE. Default 64MiB (the run prints about 530 KB a second with the thesis load).
+    #[arg(long, value_name = "SIZE", requires = "slcan")]
+    pub output_log_max: Option<String>,
+    /// Live (`--slcan`): rotate the bus log the same way at SIZE (bus.log and bus.log.1). Default:
+    /// kept whole, the recording candump -l would make (its growth is said at the start).
+    #[arg(long, value_name = "SIZE", requires = "slcan")]
+    pub bus_log_max: Option<String>,
     /// Put the robot in a world (JSON: walls, obstacles, floor, the robot's start; docs/world.md):
     /// the DiWheelDrive's wheels move it, the ring, floor and IMU read it. Ends with the line
     /// `world: travelled X m, contacts N, pose X Y HEADING`; the arena's SVG with the path goes
@@ -103,6 +113,54 @@ impl amiro_robot::Sink for Print {
     }
 }
 
+/// The run's files wrapped so that a file's first rotation is said on stderr as it happens.
+struct RotationNotes(amiro_robot::log::RunFiles);
+
+impl amiro_robot::Sink for RotationNotes {
+    fn line(&mut self, line: &str) {
+        self.0.line(line);
+        for note in self.0.take_rotation_notes() {
+            eprintln!("robot: live: {note}");
+        }
+    }
+}
+
+/// How fast a bus log can grow at most: a saturated 1 Mbit/s bus of the shortest frames (an 11-bit
+/// identifier, no data: 44 bits and 3 of interframe space, some 21 000 a second), each a `candump -l`
+/// line of about 25 bytes.
+const BUS_LOG_MOST: &str = "about 0.5 MB a second (1.9 GB an hour)";
+
+/// The smallest rotation size the command takes: below it a file holds only seconds of the run.
+const LEAST_ROTATION: u64 = 1 << 20;
+
+/// A live run's files rotate at their sizes (`output.log` by default); a run in virtual time keeps
+/// them whole (its duration bounds them, and the scenarios and tests read them whole).
+fn log_bounds(args: &RobotArgs) -> Result<amiro_robot::log::LogBounds> {
+    use amiro_robot::log::{parse_size, LogBounds, LIVE_OUTPUT_LOG_MAX};
+    if !args.slcan {
+        return Ok(LogBounds::default());
+    }
+    let size = |flag: &str, text: &str| -> Result<u64> {
+        let size = parse_size(text).with_context(|| format!("--{flag}"))?;
+        anyhow::ensure!(
+            size >= LEAST_ROTATION,
+            "--{flag} {text}: at least 1MiB (a file would hold only seconds of the run)"
+        );
+        Ok(size)
+    };
+    Ok(LogBounds {
+        output: Some(match &args.output_log_max {
+            Some(text) => size("output-log-max", text)?,
+            None => LIVE_OUTPUT_LOG_MAX,
+        }),
+        bus: args
+            .bus_log_max
+            .as_deref()
+            .map(|text| size("bus-log-max", text))
+            .transpose()?,
+    })
+}
+
 /// Runs `cargo xtask robot`.
 pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
     crate::workspace::ensure_qemu()?;
@@ -157,16 +215,34 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
     // The run's output.log and bus.log are written as the lines come (a live run keeps none of
     // them: `Outcome::bounded`); live, flushed at least every 200 ms while it prints.
     std::fs::create_dir_all(&work)?;
-    let files = amiro_robot::log::RunFiles::create(
+    let bounds = log_bounds(args)?;
+    let files = RotationNotes(amiro_robot::log::RunFiles::create(
         &work,
         args.slcan.then_some(std::time::Duration::from_millis(200)),
-    )?;
+        bounds,
+    )?);
     let mut sink = (print, files);
     if args.slcan {
+        let kept = match bounds.bus {
+            None => format!(
+                "kept whole: it grows with the traffic, about 60 KB a second with the thesis load (216 MB an hour), at most {} on a saturated bus; --bus-log-max SIZE keeps the newest instead",
+                BUS_LOG_MOST
+            ),
+            Some(max) => format!(
+                "rotated at {} (bus.log.1 the older lines)",
+                amiro_robot::log::size_text(max)
+            ),
+        };
         eprintln!(
-            "robot: live: bus log (candump -l), written as it goes: {}",
+            "robot: live: bus log (candump -l), written as it goes, {kept}: {}",
             work.join("bus.log").display()
         );
+        if let Some(max) = bounds.output {
+            eprintln!(
+                "robot: live: output.log (every line, about 530 KB a second with the thesis load) rotated at {} (output.log.1 the older lines; --output-log-max SIZE)",
+                amiro_robot::log::size_text(max)
+            );
+        }
     }
     let outcome = amiro_robot::run_in_world(
         &firmware,
@@ -177,12 +253,13 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         live.as_mut(),
         world.as_mut(),
     );
-    let (mut print, files) = sink;
+    let (mut print, RotationNotes(files)) = sink;
     let _ = std::io::Write::flush(&mut print.out);
     if let Some(world) = world.as_mut() {
         world.finish();
     }
     let outcome = outcome?;
+    let rotated = files.rotation_summary();
     files.finish()?;
     let duration = outcome.ended_at;
     let wall = started.elapsed().as_secs_f64();
@@ -233,6 +310,9 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
             amiro_robot::pace::LAG_LIMIT.as_millis()
         );
     }
+    for line in rotated {
+        eprintln!("robot: live: {line}");
+    }
     eprintln!("bus log (candump -l): {}", work.join("bus.log").display());
     if exceeded > 0 {
         eprintln!("bus report: {exceeded} message(s) beyond their Davis bound");
@@ -255,4 +335,56 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         println!("{}", world.summary());
     }
     Ok(!(args.check && exceeded > 0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use amiro_robot::log::{LogBounds, LIVE_OUTPUT_LOG_MAX};
+    use clap::Parser;
+
+    #[derive(clap::Parser)]
+    struct Robot {
+        #[command(flatten)]
+        args: RobotArgs,
+    }
+
+    fn bounds(line: &[&str]) -> Result<LogBounds> {
+        let robot = Robot::try_parse_from(std::iter::once("robot").chain(line.iter().copied()))?;
+        log_bounds(&robot.args)
+    }
+
+    #[test]
+    fn a_live_run_rotates_its_output_log_and_a_run_in_virtual_time_keeps_both_whole() {
+        assert_eq!(
+            bounds(&["--duration", "10s"]).unwrap(),
+            LogBounds::default()
+        );
+        assert_eq!(
+            bounds(&["--slcan"]).unwrap(),
+            LogBounds {
+                output: Some(LIVE_OUTPUT_LOG_MAX),
+                bus: None
+            }
+        );
+        assert_eq!(
+            bounds(&[
+                "--slcan",
+                "--output-log-max",
+                "1GiB",
+                "--bus-log-max",
+                "200MB"
+            ])
+            .unwrap(),
+            LogBounds {
+                output: Some(1 << 30),
+                bus: Some(200_000_000)
+            }
+        );
+        // A size too small to hold more than seconds, a malformed one, or a bound on a run in
+        // virtual time (whose files the scenarios read whole) is refused.
+        assert!(bounds(&["--slcan", "--bus-log-max", "64KiB"]).is_err());
+        assert!(bounds(&["--slcan", "--output-log-max", "64M"]).is_err());
+        assert!(bounds(&["--output-log-max", "1GiB"]).is_err());
+    }
 }
