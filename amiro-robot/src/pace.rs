@@ -354,9 +354,9 @@ impl Episode {
                 waited.as_secs_f64() * 1e3
             )
         });
-        let io = self.io.map_or(String::new(), |io| {
-            format!("; {}", io.describe())
-        });
+        let io = self
+            .io
+            .map_or(String::new(), |io| format!("; {}", io.describe()));
         let steal = self
             .steal
             .filter(|&share| share >= 0.005)
@@ -379,7 +379,10 @@ impl Episode {
             format!(
                 "the host's own thread was held up: {}",
                 if io.overslept.0 >= io.sink.0 + io.port.0 {
-                    "its sleeps overslept (a timer late, or the thread not woken: the machine's other work or its hypervisor)"
+                    // Measured: single sleeps 7-11 ms late while the thread, at real-time
+                    // priority, waited 0.0 ms for a core once woken: its timer's interrupt came
+                    // late, so the core did not run (docs/qemu.md, "Live").
+                    "its sleeps overslept: woken late, its timer's interrupt late with no wait for a core after it (the machine's core not run: its hypervisor), unless the waits for a core below say otherwise"
                 } else if io.sink.0 >= io.port.0 {
                     "its writes to the run's files and stdout blocked"
                 } else {

@@ -395,9 +395,7 @@ pub fn run_in_world(
                     pace.stop_requested(t);
                 }
                 outcome.work.pacing_us += pace.hold(t, &mut outbox, |end, frame| {
-                    crate::pace::timed(crate::pace::Io::Port, || {
-                        live.slcan.deliver(end, &frame)
-                    });
+                    crate::pace::timed(crate::pace::Io::Port, || live.slcan.deliver(end, &frame));
                 });
             }
             // While boards sent ahead together hold reports beyond this boundary (at most a live
