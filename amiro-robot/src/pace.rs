@@ -867,6 +867,35 @@ mod tests {
     }
 
     #[test]
+    fn the_host_s_io_since_a_hold_keeps_a_longest_only_where_it_grew() {
+        let ms = Duration::from_millis;
+        let before = HostIo {
+            sink: (ms(10), ms(2)),
+            overslept: (ms(5), ms(1)),
+            switches: (100, 1),
+            ..HostIo::default()
+        };
+        let after = HostIo {
+            sink: (ms(11), ms(2)),
+            overslept: (ms(14), ms(8)),
+            switches: (120, 1),
+            ..HostIo::default()
+        };
+        let d = after.since(&before);
+        assert_eq!(d.sink, (ms(1), Duration::ZERO));
+        assert_eq!(d.overslept, (ms(9), ms(8)));
+        assert_eq!(d.switches, (20, 0));
+        assert_eq!(d.blocked(), ms(10));
+        assert!(d
+            .describe()
+            .contains("its sleeps overslept 9.0 ms (the longest 8.0 ms)"));
+        // A sleep counted on this thread shows up in its figures.
+        let io = HostIo::now();
+        sleep_counted(Duration::from_micros(100));
+        assert!(HostIo::now().switches.0 > io.switches.0);
+    }
+
+    #[test]
     fn lag_after_the_client_asked_to_stop_is_not_counted() {
         let mut pace = Pace::new(Instant::now() - Duration::from_millis(50));
         let mut outbox: Outbox<()> = Outbox::default();
