@@ -115,7 +115,7 @@ impl Outcome {
 
     /// Takes an output line: to `sink` as it comes, and into [`Outcome::text`] unless bounded.
     pub fn emit(&mut self, sink: &mut dyn Sink, line: &str) {
-        sink.line(line);
+        crate::pace::timed(crate::pace::Io::Sink, || sink.line(line));
         if !self.bounded {
             self.text.push_str(line);
             self.text.push('\n');

@@ -391,8 +391,11 @@ pub fn run_in_world(
                 if let Some(slow) = outcome.work.slowest.take() {
                     pace.note(slow);
                 }
+                if live.stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    pace.stop_requested(t);
+                }
                 outcome.work.pacing_us += pace.hold(t, &mut outbox, |end, frame| {
-                    live.slcan.deliver(end, &frame);
+                    crate::pace::timed(crate::pace::Io::Port, || live.slcan.deliver(end, &frame));
                 });
             }
             // While boards sent ahead together hold reports beyond this boundary (at most a live
@@ -402,7 +405,9 @@ pub fn run_in_world(
             // little later.
             // The client's frames wait in the port until the wall clock runs (it is announced then).
             if paced {
-                adapter_waiting.extend(live.slcan.poll());
+                adapter_waiting.extend(crate::pace::timed(crate::pace::Io::Port, || {
+                    live.slcan.poll()
+                }));
             }
             if !boards
                 .iter()
@@ -1203,7 +1208,7 @@ fn take_report(
     work: &mut Work,
 ) -> Result<(u64, Option<Up>)> {
     let waited = Instant::now();
-    let report = b.receive(waited, REPORT_LIMIT)?;
+    let report = crate::pace::timed(crate::pace::Io::Boards, || b.receive(waited, REPORT_LIMIT))?;
     work.waiting_us += waited.elapsed().as_micros() as u64;
     let t = match &report {
         Some(r) => r.at_us.saturating_add(b.offset),

@@ -309,6 +309,7 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
             pace.behind_episodes,
             amiro_robot::pace::LAG_LIMIT.as_millis()
         );
+        eprintln!("robot: live: {}", pace.io.describe());
     }
     for line in rotated {
         eprintln!("robot: live: {line}");
