@@ -62,10 +62,22 @@ pub const WINDOW: usize = 256;
 /// come. The report is then [`analyse`]'s, unless a frame comes released before one already folded
 /// ([`Traffic::out_of_order`] counts those: folded where they come, they can merge or split a
 /// burst).
-#[derive(Debug, Default, Clone)]
+#[derive(Debug, Clone)]
 pub struct Traffic {
     streams: BTreeMap<u16, Stream>,
     out_of_order: usize,
+    /// Frames of one identifier kept unfolded ([`WINDOW`]; [`analyse`]'s: all of them).
+    window: usize,
+}
+
+impl Default for Traffic {
+    fn default() -> Self {
+        Self {
+            streams: BTreeMap::new(),
+            out_of_order: 0,
+            window: WINDOW,
+        }
+    }
 }
 
 /// One identifier's running figures.
@@ -128,9 +140,10 @@ impl Stream {
 impl Traffic {
     /// Takes a frame that went over the bus (in order of completion).
     pub fn push(&mut self, t: &Transfer) {
+        let window = self.window;
         let s = self.streams.entry(t.frame.id).or_insert_with(|| Stream {
             node: t.node,
-            window: std::collections::VecDeque::with_capacity(WINDOW + 1),
+            window: std::collections::VecDeque::with_capacity(window.min(WINDOW) + 1),
             ..Stream::default()
         });
         s.frames += 1;
@@ -144,7 +157,7 @@ impl Traffic {
         }
         let at = s.window.partition_point(|&w| w <= f);
         s.window.insert(at, f);
-        if s.window.len() > WINDOW {
+        if s.window.len() > window {
             if let Some(oldest) = s.window.pop_front() {
                 s.fold(oldest);
             }
@@ -153,7 +166,10 @@ impl Traffic {
 
     /// Forgets every frame (a live run's warm-up: the report covers the live run).
     pub fn clear(&mut self) {
-        *self = Self::default();
+        *self = Self {
+            window: self.window,
+            ..Self::default()
+        };
     }
 
     /// Frames that came released before one already folded (see [`Traffic`]).
@@ -185,51 +201,17 @@ impl Traffic {
     }
 }
 
-/// The report of `transfers` from a run of `duration_us`.
+/// The report of `transfers` (in order of completion) from a run of `duration_us`: [`Traffic`] with every
+/// frame kept until the report, so that each identifier's bursts are folded in order of release.
 pub fn analyse(transfers: &[Transfer], duration_us: u64) -> Vec<Line> {
-    let mut streams: BTreeMap<u16, Vec<&Transfer>> = BTreeMap::new();
+    let mut traffic = Traffic {
+        window: usize::MAX,
+        ..Traffic::default()
+    };
     for t in transfers {
-        streams.entry(t.frame.id).or_default().push(t);
+        traffic.push(t);
     }
-    let lines: Vec<Line> = streams
-        .iter()
-        .map(|(&id, frames)| {
-            let mut queued: Vec<(u64, u64)> =
-                frames.iter().map(|t| (t.released_at, t.end)).collect();
-            queued.sort_unstable();
-            // (first queued, frames, last completion)
-            let mut bursts: Vec<(u64, u32, u64)> = Vec::new();
-            for &(q, end) in &queued {
-                match bursts.last_mut() {
-                    Some((_, n, busy_until)) if q <= *busy_until => {
-                        *n += 1;
-                        *busy_until = (*busy_until).max(end);
-                    }
-                    _ => bursts.push((q, 1, end)),
-                }
-            }
-            let period_us = bursts
-                .windows(2)
-                .map(|w| w[1].0 - w[0].0)
-                .min()
-                .unwrap_or(duration_us.max(1));
-            Line {
-                id,
-                node: frames[0].node,
-                frames: frames.len(),
-                dlc: frames.iter().map(|t| t.frame.len).max().unwrap_or(0),
-                per_activation: bursts.iter().map(|b| b.1).max().unwrap_or(1),
-                period_us,
-                observed_us: frames
-                    .iter()
-                    .map(|t| t.end - t.released_at)
-                    .max()
-                    .unwrap_or(0),
-                bound_us: Err(String::new()),
-            }
-        })
-        .collect();
-    bound(lines)
+    traffic.report(duration_us)
 }
 
 /// The lines with their Davis bounds.
