@@ -19,14 +19,14 @@ use anyhow::{bail, ensure, Context, Result};
 use schedule_analysis::rng::Rng;
 
 use crate::boards::Board;
+use crate::qemu::{self, TimedFrame, SIGNAL_SYS_PD_N};
+use crate::scenarios::{self, RunOutput};
 
 /// The spaced phase's gaps between frames: more than the command handler's interval
 /// (`amiro_firmware::admission::COMMAND_MIN_INTERVAL_US`, 1 ms), so no spaced frame waits for a
 /// command before it and none is dropped; up to twice that plus its margin.
 const SPACED_MIN_US: u64 = COMMAND_MIN_INTERVAL_US + COMMAND_MIN_INTERVAL_US / 8;
 const SPACED_MAX_US: u64 = 2 * SPACED_MIN_US;
-use crate::qemu::{self, TimedFrame, SIGNAL_SYS_PD_N};
-use crate::scenarios::{self, RunOutput};
 
 /// Whose topic a byte is, from docs/protocol.md's topic table: (byte, board, actuator DLC or 0
 /// for a sensor topic).
