@@ -124,15 +124,17 @@ pub fn write_trace(bytes: &[u8]) -> bool {
 pub const DEFERRED_LINES: usize = 2;
 
 /// The log lines tasks asked for with [`defer_log`] and the drain has not written yet: one-off
-/// reports (a monotonic event gone missing, the watchdog's first feed), which can come together at
-/// boot; a line that finds both slots taken is dropped. (One slot lost the watchdog's first feed
-/// behind the monotonic's report at boot.) Two straight-line slots: PowerManagement's flash has no
-/// room for a loop over more.
+/// reports (a monotonic event gone missing, the watchdog's first feed, which can come together at
+/// boot; LightRing's failed LED transfer; PowerManagement's shutdown sequence's two lines, which
+/// come together when the other modules answer at once); a line that finds both slots taken is
+/// dropped. (One slot lost the watchdog's first feed behind the monotonic's report at boot.) Two
+/// straight-line slots: PowerManagement's flash has no room for a loop over more.
 static DEFERRED: critical_section::Mutex<[core::cell::Cell<Option<&'static str>>; DEFERRED_LINES]> =
     critical_section::Mutex::new([const { core::cell::Cell::new(None) }; DEFERRED_LINES]);
 
 /// Queues one static log line for the trace drain to write (`tracing::drain`, priority 0): what a
-/// handler logs, at the cost of a short store instead of a channel write.
+/// handler or a bounded job logs, at the cost of a short store instead of a channel write under
+/// interrupts off.
 pub fn defer_log(line: &'static str) {
     // QEMU: written through, as its trace records are (the drain does not run there).
     #[cfg(feature = "qemu")]

@@ -470,24 +470,19 @@ mod app {
             signals::request_shutdown();
             cx.shared.signals.lock(|s| s.drive_shutdown_request());
             cx.shared.handler.lock(|h| h.stop_all());
-            amiro_firmware::log!(
-                "shutdown (",
-                mode.name(),
-                "): SYS_PD_N low, publishers stopped"
-            );
+            // The lines before the hand-over go to the trace drain: a store, where an RTT write
+            // under interrupts off cost the job most of its bound (docs/analysis.md, *Held
+            // bounds*, the shutdown sequence). The hand-over's line names the mode.
+            amiro_firmware::channels::defer_log("shutdown: SYS_PD_N low, publishers stopped");
             let deadline = now + crate::OTHERS_ACK_TIMEOUT_US;
             while !platform::sync_reads_low() && Clock::now_us() < deadline {
                 Clock::delay_until_us(Clock::now_us() + 1_000).await;
             }
-            let acknowledged = platform::sync_reads_low();
-            amiro_firmware::log!(
-                "shutdown: other modules ",
-                if acknowledged {
-                    "took the request"
-                } else {
-                    "silent (timeout)"
-                }
-            );
+            amiro_firmware::channels::defer_log(if platform::sync_reads_low() {
+                "shutdown: other modules took the request"
+            } else {
+                "shutdown: other modules silent (timeout)"
+            });
             Clock::delay_until_us(Clock::now_us() + crate::OTHERS_SETTLE_US).await;
             tasks::drain_tx_queue::<Clock, TX_QUEUE_LEN>(
                 &mut cx.shared.tx_queue,
@@ -500,12 +495,14 @@ mod app {
             bootloader::hand_over(power::callback(mode));
         } else {
             cx.shared.handler.lock(|h| h.stop_all());
-            amiro_firmware::log!("shutdown requested from outside: publishers stopped");
             tasks::drain_tx_queue::<Clock, TX_QUEUE_LEN>(
                 &mut cx.shared.tx_queue,
                 crate::TX_DRAIN_US,
             )
             .await;
+            // Written on the way to the hand-over, which never returns: a deferred line could
+            // find the hand-over before the trace drain ran.
+            amiro_firmware::log!("shutdown requested from outside: publishers stopped");
             bootloader::hand_over(bootloader::Callback::HandleShutdownRequest);
         }
     }
