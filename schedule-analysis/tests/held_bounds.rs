@@ -190,7 +190,15 @@ fn the_second_run_names_the_held_bound_that_turns_a_verdict_into_a_miss() {
     assert_eq!(dwd.held, ["can_status", "can_tx"]);
     // Alone, can_tx's breaks the set and can_status's does not.
     let alone = |row: &str| dwd.alone.iter().find(|a| a.row == row).unwrap();
-    assert!(alone("can_tx").breaks.is_some());
+    // What it breaks comes with its figure: can_tx's own response against its one-frame deadline first.
+    let breaks = alone("can_tx")
+        .breaks
+        .clone()
+        .expect("can_tx breaks the set");
+    assert!(
+        breaks.starts_with("diwheeldrive/can_tx WCRT ") && breaks.contains(" of 79 µs"),
+        "{breaks}"
+    );
     assert_eq!(alone("can_status").breaks, None);
     let tx = dwd
         .misses
@@ -257,11 +265,15 @@ fn the_second_run_names_the_held_bound_that_turns_a_verdict_into_a_miss() {
         schedule_analysis::time::Time::from_us_up(wcrt)
     );
     assert!(lines.contains(&expected), "{expected:?} not in {lines:?}");
-    let each = format!(
-        "  each held bound alone (the others held): breaks the set: can_tx ({}); passes: can_status",
-        alone("can_tx").breaks.as_deref().unwrap()
+    let each = "  each held bound alone (the others held): passes: can_status; breaks the set:";
+    let at = lines
+        .iter()
+        .position(|l| l == each)
+        .unwrap_or_else(|| panic!("{each:?} not in {lines:?}"));
+    assert_eq!(
+        lines[at + 1],
+        format!("    can_tx: {}", alone("can_tx").breaks.as_deref().unwrap())
     );
-    assert!(lines.contains(&each), "{each:?} not in {lines:?}");
     // In the report, before the verdict, which stays the first run's; and in its JSON.
     let report = report.with_on_bounds(Some(on));
     assert!(report.all_ok());

@@ -14,6 +14,8 @@ use crate::time::Time;
 
 /// Misses listed per board (and on the bus) before the rest is counted.
 pub const MAX_LISTED: usize = 10;
+/// Failures listed per held bound used alone before the rest is counted.
+pub const ALONE_LISTED: usize = 3;
 
 /// The second run's findings.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -52,7 +54,9 @@ pub struct BoardOnBounds {
 pub struct Alone {
     /// The row (`can_tx`), or `publisher[…]` for every publisher row of the board.
     pub row: String,
-    /// The first failure of the set with only this bound used (`diwheeldrive/can_tx`), `None` when it passes.
+    /// What fails in the set with only this bound used, each with its figure against its limit
+    /// (`diwheeldrive/can_tx WCRT 515.6 of 158 µs`, at most [`ALONE_LISTED`], then how many more), `None` when it
+    /// passes.
     pub breaks: Option<String>,
 }
 
@@ -142,23 +146,25 @@ impl OnBounds {
             let (breaks, passes): (Vec<&Alone>, Vec<&Alone>) =
                 b.alone.iter().partition(|a| a.breaks.is_some());
             if !b.alone.is_empty() {
-                let breaks: Vec<String> = breaks
-                    .iter()
-                    .map(|a| format!("{} ({})", a.row, a.breaks.as_deref().unwrap_or("")))
-                    .collect();
                 let passes: Vec<&str> = passes.iter().map(|a| a.row.as_str()).collect();
-                let list = |v: &[String]| {
-                    if v.is_empty() {
-                        "none".to_string()
-                    } else {
-                        v.join(", ")
-                    }
+                let passes = if passes.is_empty() {
+                    "none".to_string()
+                } else {
+                    passes.join(", ")
+                };
+                let breaks_word = if breaks.is_empty() {
+                    "breaks the set: none"
+                } else {
+                    "breaks the set:"
                 };
                 out.push(format!(
-                    "  each held bound alone (the others held): breaks the set: {}; passes: {}",
-                    list(&breaks),
-                    list(&passes.iter().map(|p| p.to_string()).collect::<Vec<_>>())
+                    "  each held bound alone (the others held): passes: {passes}; {breaks_word}"
                 ));
+                out.extend(
+                    breaks
+                        .iter()
+                        .map(|a| format!("    {}: {}", a.row, a.breaks.as_deref().unwrap_or(""))),
+                );
             }
         }
         out.extend(capped(self.bus.iter().map(|l| format!("bus: {l}")), ""));
@@ -279,10 +285,15 @@ fn alone(
                 horizon: None,
             },
         )
-        .failures();
+        .failure_figures();
+        let more = failures.len().saturating_sub(ALONE_LISTED);
+        let mut listed: Vec<String> = failures.into_iter().take(ALONE_LISTED).collect();
+        if more > 0 {
+            listed.push(format!("and {more} more"));
+        }
         out.push(Alone {
             row: name,
-            breaks: failures.into_iter().next(),
+            breaks: (!listed.is_empty()).then(|| listed.join(", ")),
         });
     }
     Ok(out)
@@ -420,7 +431,7 @@ mod tests {
                 alone: vec![
                     Alone {
                         row: "can_tx".into(),
-                        breaks: Some("b/can_tx".into()),
+                        breaks: Some("b/can_tx WCRT 120.25 of 95 µs".into()),
                     },
                     Alone {
                         row: "publisher[…]".into(),
@@ -447,12 +458,13 @@ mod tests {
         assert_eq!(lines[12], "  and 3 more");
         assert_eq!(
             lines[13],
-            "  each held bound alone (the others held): breaks the set: can_tx (b/can_tx); passes: publisher[…]"
+            "  each held bound alone (the others held): passes: publisher[…]; breaks the set:"
         );
+        assert_eq!(lines[14], "    can_tx: b/can_tx WCRT 120.25 of 95 µs");
         assert_eq!(
-            lines[14],
+            lines[15],
             "bus: topic t end to end 1200 µs > 1000 µs deadline"
         );
-        assert_eq!(lines.len(), 15);
+        assert_eq!(lines.len(), 16);
     }
 }
