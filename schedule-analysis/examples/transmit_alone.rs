@@ -2,6 +2,7 @@
 //! jobs and bus paths that miss, and `can_tx`'s rows with their WCRTs (docs/analysis.md, "The transmit interrupt's
 //! parts"). `cargo run -p schedule-analysis --example transmit_alone -- [ROOT] [SCENARIO REVISION]...`; without
 //! pairs: thesis-demo on each board's newest revision, thesis-demo on 1-2 and thesis-magnetometer-900us on 1-1.
+//! `SHOW=row,row` names the rows printed with their WCRTs (default `can_tx`).
 use std::path::PathBuf;
 
 use schedule_analysis::analysis::{analyse, Options};
@@ -37,6 +38,12 @@ fn main() {
         .split(',')
         .map(str::to_string)
         .collect();
+    // The rows printed with their WCRTs (prefixes of the board's job names): `SHOW=handle_commands,latch_leds`.
+    let show: Vec<String> = std::env::var("SHOW")
+        .unwrap_or_else(|_| "can_tx".into())
+        .split(',')
+        .map(str::to_string)
+        .collect();
     for (name, revision) in runs {
         let path = scenario::find_scenario(&root, &name);
         let timings = scenario::timing_files_for(&root, revision.as_deref());
@@ -63,7 +70,7 @@ fn main() {
                     let wcrt = t
                         .wcrt()
                         .map_or("unbounded".to_string(), |r| format!("{:.1}", r.as_us_f64()));
-                    if b.name == board && t.name.starts_with("can_tx") {
+                    if b.name == board && show.iter().any(|s| t.name.starts_with(s.as_str())) {
                         println!(
                             "{name} {} {board}: {} wcet {:.2} µs, jitter {:.1}, WCRT {wcrt} µs, deadline {:.0} µs{}",
                             revision.as_deref().unwrap_or("newest"),

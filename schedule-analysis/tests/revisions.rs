@@ -189,3 +189,54 @@ fn the_1_2_lightring_model_dominates_the_1_0_model() {
         );
     }
 }
+
+/// LightRing's latch: its release jitter is derived (docs/analysis.md, "LightRing's latch: its release jitter"),
+/// not budgeted: the latch interval plus the command handler's own release jitter, released by the timer (whose
+/// response the analysis adds). It holds while the handler is more urgent than the latch and its deadline is at
+/// most the interval (that the handler meets it, every scenario's analysis checks).
+#[test]
+fn the_latch_jitter_is_the_interval_plus_the_handlers_own_jitter() {
+    let root = root();
+    let path = scenario::find_scenario(&root, "thesis-demo");
+    for revision in [None, Some("1-2")] {
+        let files = scenario::timing_files_for(&root, revision);
+        let file = files
+            .iter()
+            .find(|p| p.ends_with("lightring.timing.json"))
+            .expect("a lightring timing file");
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(file).expect("readable")).expect("JSON");
+        let (latch, handler) = (
+            &json["tasks"]["latch_leds"],
+            &json["tasks"]["handle_commands"],
+        );
+        let us = |v: &serde_json::Value| v.as_f64().expect("a figure");
+        let interval = us(&latch["arrival"]["sporadic_us"]);
+        assert_eq!(latch["released_by"], "timer", "{revision:?}");
+        assert_eq!(
+            us(&latch["jitter_us"]),
+            interval + us(&handler["jitter_us"]),
+            "{revision:?}"
+        );
+        assert!(us(&handler["deadline_us"]) <= interval, "{revision:?}");
+        let built = build(&root, &path, &files).expect("builds");
+        let board = built
+            .model
+            .boards
+            .iter()
+            .find(|b| b.name == "lightring")
+            .expect("lightring");
+        let priority = |name: &str| {
+            board
+                .tasks
+                .iter()
+                .find(|t| t.name == name)
+                .map(|t| t.priority)
+                .expect("the task")
+        };
+        assert!(
+            priority("handle_commands") > priority("latch_leds"),
+            "{revision:?}"
+        );
+    }
+}
