@@ -127,7 +127,8 @@ impl OnBounds {
                 if !topics.is_empty() {
                     names.push(format!("{} publisher[…] rows", topics.len()));
                 }
-                format!("{} held bounds used: {}", b.held.len(), names.join(", "))
+                let bounds = if b.held.len() == 1 { "bound" } else { "bounds" };
+                format!("{} held {bounds} used: {}", b.held.len(), names.join(", "))
             };
             let misses = if b.misses.is_empty() {
                 format!("all {} jobs meet their deadlines", b.jobs)
