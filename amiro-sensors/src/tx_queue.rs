@@ -250,15 +250,32 @@ enum Replaces {
     SameIndex(u32),
 }
 
+/// The topic bytes (bit `b` for byte `b`; every topic's byte is below 32) of the topics whose sample
+/// spans several frames, worked out from amiro-can's table when compiling: a lookup per frame
+/// queued or requeued cost a call into the table.
+const MULTI_FRAME_TOPICS: u32 = {
+    let mut bits = 0u32;
+    let mut byte = 0u8;
+    while byte < 32 {
+        if let Some(topic) = Topic::from_byte(byte) {
+            if topic.frames_per_sample() > 1 {
+                bits |= 1 << byte;
+            }
+        }
+        byte += 1;
+    }
+    bits
+};
+
 impl Replaces {
     fn of(newer: &Frame) -> Replaces {
         let id = newer.id();
         if id.kind() != Kind::Sensor {
             return Replaces::Nothing;
         }
-        let multi_frame = Topic::from_byte(id.topic_byte())
-            .map(|topic| topic.frames_per_sample() > 1)
-            .unwrap_or(false);
+        let multi_frame = MULTI_FRAME_TOPICS
+            .checked_shr(u32::from(id.topic_byte()))
+            .is_some_and(|bits| bits & 1 != 0);
         if multi_frame {
             Replaces::SameIndex(tag(newer))
         } else {
@@ -455,12 +472,16 @@ impl<const N: usize> TxQueue<N> {
     }
 
     /// Takes the most urgent frame (lowest identifier, oldest among equals).
+    ///
+    /// The frame is read beside the queue's shortening, not before it: where the caller drops it
+    /// (the transmit interrupt, which sent the frame from [`Self::peek`]'s reference), the compiler
+    /// drops the read, a call per frame the interrupt's bound charges.
     pub fn pop(&mut self) -> Option<Frame> {
         let next = self.len.checked_sub(1)?;
-        let frame = *self.at(next)?;
+        let frame = self.at(next).copied();
         self.len = next;
         self.counters.popped = self.counters.popped.saturating_add(1);
-        Some(frame)
+        frame
     }
 
     /// Takes the most urgent frame only if it beats `id` in arbitration (strictly lower
@@ -529,6 +550,21 @@ mod tests {
         // 16 frames of 12 bytes, their 16 entries of a word, the length and the counters.
         let limit = 16 * 12 + 16 * 4 + core::mem::size_of::<usize>() + 24;
         assert!(size <= limit, "TxQueue<16> is {size} bytes");
+    }
+
+    #[test]
+    fn the_multi_frame_mask_is_the_topic_table() {
+        for byte in 0..=u8::MAX {
+            let from_table = Topic::from_byte(byte).is_some_and(|t| t.frames_per_sample() > 1);
+            let from_mask = MULTI_FRAME_TOPICS
+                .checked_shr(u32::from(byte))
+                .is_some_and(|bits| bits & 1 != 0);
+            assert_eq!(from_mask, from_table, "topic byte {byte:#04x}");
+        }
+        assert_ne!(
+            MULTI_FRAME_TOPICS, 0,
+            "the proximity ring spans several frames"
+        );
     }
 
     #[test]
