@@ -284,9 +284,9 @@ impl<R: Registers> Mailboxes<R> {
     }
 }
 
-// `R: Copy` (every accessor is: an address, or a reference to the model): each call takes its own
-// copy, so the block's address stays in a register; read through `self`, it was loaded again
-// before every register write, as a volatile write might have changed it.
+// `R: Copy` (every accessor is: an address, a reference to the model, QEMU's unit `Controller`): each
+// call takes its own copy, so the block's address stays in a register; read through `self`, it was
+// loaded again before every register write, as a volatile write might have changed it.
 impl<R: Registers + Copy> CanTx for Mailboxes<R> {
     fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
         let regs = self.regs;
