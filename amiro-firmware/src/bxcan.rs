@@ -284,13 +284,17 @@ impl<R: Registers> Mailboxes<R> {
     }
 }
 
-impl<R: Registers> CanTx for Mailboxes<R> {
+// `R: Copy` (every accessor is: an address, a reference to the model, QEMU's unit `Controller`): each
+// call takes its own copy, so the block's address stays in a register; read through `self`, it was
+// loaded again before every register write, as a volatile write might have changed it.
+impl<R: Registers + Copy> CanTx for Mailboxes<R> {
     fn transmit(&mut self, frame: &amiro_can::Frame) -> Transmit {
+        let regs = self.regs;
         // Straight-line code over the three mailboxes, no loop: each pass of a loop costs the
         // transmit interrupt a taken branch, a pipeline refill and a flash line on the chip, three
         // loops of three passes (the same-identifier check, the free mailbox, the least urgent)
         // more than the rest of the call (docs/analysis.md, "The transmit interrupt's parts").
-        let tsr = self.regs.read(reg::TSR);
+        let tsr = regs.read(reg::TSR);
         // Bit i: mailbox i is empty (TMEi), and mailbox i's completion is collected (its shadow
         // holds no frame).
         let empty = (tsr / bit::TSR_TME0) & 0b111;
@@ -316,17 +320,17 @@ impl<R: Registers> CanTx for Mailboxes<R> {
             // All 8 bytes, a copy of fixed size (no `memcpy` of a run-time length): the controller
             // sends as many of them as the DLC written to TDTxR says.
             let data = frame.data_buffer();
-            self.regs.write(reg::tdtr(free), u32::from(frame.dlc()));
-            self.regs.write(
+            regs.write(reg::tdtr(free), u32::from(frame.dlc()));
+            regs.write(
                 reg::tdlr(free),
                 u32::from_le_bytes([data[0], data[1], data[2], data[3]]),
             );
-            self.regs.write(
+            regs.write(
                 reg::tdhr(free),
                 u32::from_le_bytes([data[4], data[5], data[6], data[7]]),
             );
             // TXRQ last hands the mailbox to the controller.
-            self.regs.write(
+            regs.write(
                 reg::tir(free),
                 (u32::from(frame.id().raw()) << 21) | bit::TIR_TXRQ,
             );
@@ -346,20 +350,21 @@ impl<R: Registers> CanTx for Mailboxes<R> {
         if let Some((i, least)) = later(later(later(None, 0, h0), 1, h1), 2, h2) {
             if id < least && tsr & bit::abrq(i) == 0 {
                 // Setting ABRQ; the other TSR bits are write-1-to-clear flags, written as 0.
-                self.regs.write(reg::TSR, bit::abrq(i));
+                regs.write(reg::TSR, bit::abrq(i));
             }
         }
         Transmit::Busy
     }
 
     fn completed(&mut self, on_completion: &mut dyn FnMut(Completion)) {
-        let tsr = self.regs.read(reg::TSR);
+        let regs = self.regs;
+        let tsr = regs.read(reg::TSR);
         for i in 0..3 {
             if tsr & bit::rqcp(i) == 0 {
                 continue;
             }
             // Writing RQCP clears that mailbox's completion flags (TXOK, ALST, TERR).
-            self.regs.write(reg::TSR, bit::rqcp(i));
+            regs.write(reg::TSR, bit::rqcp(i));
             let Some(frame) = self.shadow.get_mut(i).and_then(Option::take) else {
                 continue;
             };

@@ -15,11 +15,12 @@
 //! per queued frame, its *entry*, kept in an array in the order the frames will leave, the next one
 //! last. An entry packs the frame's identifier (the sort key, in its top bits, so entries compare as
 //! plain words), the index byte that tells a multi-frame topic's frames apart, and the slot number.
-//! So `pop` in the transmit interrupt is O(1); `push` and `requeue` find the frame's place by a
+//! So `pop` in the transmit interrupt is O(1); `push` and `requeue` find the frame's place by one
 //! binary search over the entries (at most `log2 N + 1` word loads and compares, no frame read),
 //! look for an older sample only among the frames of the same identifier (one entry for a topic of
-//! one frame per sample), and move at most `N - 1` entries by one place, each carried through a
-//! register (one load and one store), never a frame.
+//! one frame per sample; a requeue walks those frames to their end, which is its place), and move
+//! at most `N - 1` entries by one place, each carried through a register (one load and one store),
+//! never a frame.
 
 use amiro_can::{CanId, Frame, Kind, Topic};
 
@@ -195,19 +196,21 @@ fn count_at_least(entries: &[u32], floor: u32) -> usize {
 const SAMPLE_MASK: u32 = !SLOT_MASK;
 
 /// Where among `entries`, from their start as far as the first with another identifier than
-/// `key`'s, the entry of the frame `sample` (identifier and tag bits) is, if any: one compare for
-/// the frame and one for the end of the identifier's frames per entry.
+/// `key`'s, the entry of the frame `sample` (identifier and tag bits) is: `Ok` with its position,
+/// or `Err` with how many entries from the start have `key`'s identifier (none is the frame; a
+/// `sample` of 0 matches no queued entry, so it only counts them). One compare for the frame and
+/// one for the end of the identifier's frames per entry.
 #[inline(never)]
-fn position_of_sample(entries: &[u32], key: u32, sample: u32) -> Option<usize> {
+fn position_of_sample(entries: &[u32], key: u32, sample: u32) -> Result<usize, usize> {
     for (at, &queued) in entries.iter().enumerate() {
         if queued & SAMPLE_MASK == sample {
-            return Some(at);
+            return Ok(at);
         }
         if queued & !(TAG_MASK | SLOT_MASK) != key {
-            return None;
+            return Err(at);
         }
     }
-    None
+    Err(entries.len())
 }
 
 /// Moves every entry of `entries` one place up (towards the end) and puts `new` first: the last
@@ -247,15 +250,32 @@ enum Replaces {
     SameIndex(u32),
 }
 
+/// The topic bytes (bit `b` for byte `b`; every topic's byte is below 32) of the topics whose sample
+/// spans several frames, worked out from amiro-can's table when compiling: a lookup per frame
+/// queued or requeued cost a call into the table.
+const MULTI_FRAME_TOPICS: u32 = {
+    let mut bits = 0u32;
+    let mut byte = 0u8;
+    while byte < 32 {
+        if let Some(topic) = Topic::from_byte(byte) {
+            if topic.frames_per_sample() > 1 {
+                bits |= 1 << byte;
+            }
+        }
+        byte += 1;
+    }
+    bits
+};
+
 impl Replaces {
     fn of(newer: &Frame) -> Replaces {
         let id = newer.id();
         if id.kind() != Kind::Sensor {
             return Replaces::Nothing;
         }
-        let multi_frame = Topic::from_byte(id.topic_byte())
-            .map(|topic| topic.frames_per_sample() > 1)
-            .unwrap_or(false);
+        let multi_frame = MULTI_FRAME_TOPICS
+            .checked_shr(u32::from(id.topic_byte()))
+            .is_some_and(|bits| bits & 1 != 0);
         if multi_frame {
             Replaces::SameIndex(tag(newer))
         } else {
@@ -310,11 +330,13 @@ impl<const N: usize> TxQueue<N> {
     }
 
     /// [`Self::push`] (`requeue` false) and [`Self::requeue`] in one body (the boards' flash is
-    /// tight): the frames with a greater identifier end at `above` (they leave after it), the ones
-    /// with its identifier follow up to `through`, newest first (two binary searches for a requeue,
-    /// one for a push). An older sample is looked for among those (one entry for a topic of one
-    /// frame per sample, none for a command); a push replaces it, a requeue is discarded for it.
-    /// Otherwise a push goes in front of (below) its equals, a requeue behind them.
+    /// tight): the frames with a greater identifier end at `above` (they leave after it, one binary
+    /// search), the ones with its identifier follow, newest first, for `run` entries. An older
+    /// sample is looked for among those (one entry for a topic of one frame per sample, none for a
+    /// command); a push replaces it, a requeue is discarded for it. Otherwise a push goes in front
+    /// of (below) its equals, a requeue behind them, at `above + run`: the walk that looks for the
+    /// older sample counts `run` on the way (a requeued command walks them for it alone), where a
+    /// second binary search cost the transmit interrupt's requeue more than the walk.
     #[inline(never)]
     fn add(&mut self, frame: Frame, requeue: bool) -> PushOutcome {
         let counter = if requeue {
@@ -328,31 +350,28 @@ impl<const N: usize> TxQueue<N> {
         let above = count_at_least(self.queued(), key + (1 << KEY_SHIFT));
         let from_above = self.queued().get(above..).unwrap_or(&[]);
         let older = match Replaces::of(&frame) {
-            Replaces::Nothing => None,
+            // A push needs no count of its equals: it goes in front of them.
+            Replaces::Nothing if !requeue => Err(0),
+            Replaces::Nothing => position_of_sample(from_above, key, 0),
             // At most one is queued: the first after `above`, if it has the identifier.
-            Replaces::SameId => from_above
-                .first()
-                .filter(|&&queued| queued & !(TAG_MASK | SLOT_MASK) == key)
-                .map(|_| above),
-            Replaces::SameIndex(tag) => {
-                position_of_sample(from_above, key, key | tag).map(|found| above + found)
-            }
+            Replaces::SameId => match from_above.first() {
+                Some(&queued) if queued & !(TAG_MASK | SLOT_MASK) == key => Ok(0),
+                _ => Err(0),
+            },
+            Replaces::SameIndex(tag) => position_of_sample(from_above, key, key | tag),
         };
         match older {
-            Some(_) if requeue => {
+            Ok(_) if requeue => {
                 // A newer sample is already queued: the requeued frame is the one discarded.
                 self.counters.replaced = self.counters.replaced.saturating_add(1);
                 PushOutcome::Replaced { older: frame }
             }
-            Some(at) => self.replace_at(at, frame),
-            None if requeue => {
-                let through = count_at_least(self.queued(), key);
-                // It leaves before every frame of its identifier: a full queue's last frame
-                // leaves after it if its identifier is at least as great.
-                self.insert_or_drop(through, frame, raw)
-            }
+            Ok(found) => self.replace_at(above + found, frame),
+            // It leaves before every frame of its identifier: a full queue's last frame leaves
+            // after it if its identifier is at least as great.
+            Err(run) if requeue => self.insert_or_drop(above + run, frame, raw),
             // A full queue's last frame leaves after it only with a greater identifier.
-            None => self.insert_or_drop(above, frame, raw.saturating_add(1)),
+            Err(_) => self.insert_or_drop(above, frame, raw.saturating_add(1)),
         }
     }
 
@@ -453,12 +472,16 @@ impl<const N: usize> TxQueue<N> {
     }
 
     /// Takes the most urgent frame (lowest identifier, oldest among equals).
+    ///
+    /// The frame is read beside the queue's shortening, not before it: where the caller drops it
+    /// (the transmit interrupt, which sent the frame from [`Self::peek`]'s reference), the compiler
+    /// drops the read, a call per frame the interrupt's bound charges.
     pub fn pop(&mut self) -> Option<Frame> {
         let next = self.len.checked_sub(1)?;
-        let frame = *self.at(next)?;
+        let frame = self.at(next).copied();
         self.len = next;
         self.counters.popped = self.counters.popped.saturating_add(1);
-        Some(frame)
+        frame
     }
 
     /// Takes the most urgent frame only if it beats `id` in arbitration (strictly lower
@@ -527,6 +550,21 @@ mod tests {
         // 16 frames of 12 bytes, their 16 entries of a word, the length and the counters.
         let limit = 16 * 12 + 16 * 4 + core::mem::size_of::<usize>() + 24;
         assert!(size <= limit, "TxQueue<16> is {size} bytes");
+    }
+
+    #[test]
+    fn the_multi_frame_mask_is_the_topic_table() {
+        for byte in 0..=u8::MAX {
+            let from_table = Topic::from_byte(byte).is_some_and(|t| t.frames_per_sample() > 1);
+            let from_mask = MULTI_FRAME_TOPICS
+                .checked_shr(u32::from(byte))
+                .is_some_and(|bits| bits & 1 != 0);
+            assert_eq!(from_mask, from_table, "topic byte {byte:#04x}");
+        }
+        assert_ne!(
+            MULTI_FRAME_TOPICS, 0,
+            "the proximity ring spans several frames"
+        );
     }
 
     #[test]
