@@ -14,7 +14,7 @@
 //! wiring table `WIRING`; amiro-sensors' `ProximityRing` holds both buses in one value, which
 //! would make one resource of them, so this module binds the same drivers per bus.
 use amiro_can::{SensorData, Topic};
-use amiro_sensors::drivers::bq27500::{BatteryStatus, Bq27500};
+use amiro_sensors::drivers::bq27500::{BatteryStatus, Bq27500, StatusRead};
 use amiro_sensors::drivers::pca9544a::{Channel, Pca9544a};
 use amiro_sensors::drivers::proximity::ProximityCalibration;
 use amiro_sensors::drivers::ring::{RingBus, RING_SENSORS, WIRING};
@@ -196,17 +196,19 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
         );
     }
 
-    /// This bus's fuel gauge, or `None` (counted) when it did not answer.
+    /// One transfer of `read` to this bus's fuel gauge ([`StatusRead::step`]): `None` while the
+    /// read goes on; at its end `Some` of the status, or of `None` (counted) when the gauge did not
+    /// answer.
     #[inline(never)]
-    pub fn read_gauge(&mut self) -> Option<BatteryStatus> {
-        let status = Bq27500::new(self.mux.bus_mut(), &mut self.delay)
-            .read_status()
+    pub fn gauge_step(&mut self, read: &mut StatusRead) -> Option<Option<BatteryStatus>> {
+        let status = read
+            .step(&mut Bq27500::new(self.mux.bus_mut(), &mut self.delay))?
             .ok();
         if status.is_none() {
             self.gauge_faults = self.gauge_faults.saturating_add(1);
         }
         self.report();
-        status
+        Some(status)
     }
 
     /// Samples without a frame per ring sensor of this bus: `(index, missed)`.
@@ -238,14 +240,37 @@ pub type RearBus = SensorBus<RearI2c, GaugeDelay>;
 /// I2C2: ring sensors 3, 4, 5, 6 and the front fuel gauge (battery A).
 pub type FrontBus = SensorBus<FrontI2c, GaugeDelay>;
 
-/// Both batteries' gauges, front then rear, each bus locked on its own.
+/// One bus's fuel gauge, or `None` (counted) when it did not answer: each transfer to the gauge
+/// under its own lock of the bus ([`SensorBus::gauge_step`]), so a publisher waiting for the bus
+/// waits for one transfer (at most [`StatusRead::MAX_TRANSFERS`] of them make a read).
+fn read_battery<I: I2c, D: DelayNs>(
+    bus: &mut impl rtic::Mutex<T = SensorBus<I, D>>,
+) -> Option<BatteryStatus> {
+    let mut read = StatusRead::new();
+    for _ in 0..StatusRead::MAX_TRANSFERS {
+        if let Some(status) = locked_gauge_step(bus, &mut read) {
+            return status;
+        }
+    }
+    None
+}
+
+/// One gauge transfer under the bus's lock. Not inlined: the lock's raise keeps its ceiling in
+/// its own straight-line code, which the execution-time analysis reads its sections from.
+#[inline(never)]
+fn locked_gauge_step<I: I2c, D: DelayNs>(
+    bus: &mut impl rtic::Mutex<T = SensorBus<I, D>>,
+    read: &mut StatusRead,
+) -> Option<Option<BatteryStatus>> {
+    bus.lock(|b| b.gauge_step(read))
+}
+
+/// Both batteries' gauges, front then rear, each transfer under its own lock of its bus.
 pub fn read_batteries(
     rear: &mut impl rtic::Mutex<T = RearBus>,
     front: &mut impl rtic::Mutex<T = FrontBus>,
 ) -> (Option<BatteryStatus>, Option<BatteryStatus>) {
-    let front_status = front.lock(|b| b.read_gauge());
-    let rear_status = rear.lock(|b| b.read_gauge());
-    (front_status, rear_status)
+    (read_battery(front), read_battery(rear))
 }
 
 /// What PowerManagement samples for a topic: the ring locks each bus in turn, power status both
