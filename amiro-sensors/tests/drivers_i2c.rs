@@ -510,6 +510,28 @@ fn a_stepped_status_read_checks_the_identity_after_a_dead_lines_pattern_in_three
 }
 
 #[test]
+fn a_restarted_status_read_begins_again_without_the_last_reads_identity_check() {
+    let mut script = vec![
+        gauge_read(0x06, 0),
+        gauge_read(0x08, 0),
+        T::write(0x55, vec![0x00, 0x01]),
+        T::write(0x55, vec![0x01, 0x00]),
+        gauge_read(0x00, 0x0500),
+    ];
+    script.extend(status_script(0, 0, 0xFFFF, 0xFFFF, 0).into_iter().skip(2));
+    script.extend(status_script(Flags::DISCHARGING, -450, 160, 0xFFFF, -1_755));
+    let mut i2c = I2cMock::new(&script);
+    let mut gauge = Bq27500::new(i2c.clone(), NoopDelay::new());
+    let mut read = StatusRead::new();
+    let (first, steps) = step_to_end(&mut read, &mut gauge);
+    assert_eq!((first.map(|s| s.voltage_mv), steps), (Ok(0), 13));
+    read.restart();
+    let (second, steps) = step_to_end(&mut read, &mut gauge);
+    assert_eq!((second.map(|s| s.voltage_mv), steps), (Ok(3_900), 10));
+    i2c.done();
+}
+
+#[test]
 fn a_stepped_status_read_ends_at_the_first_failed_transfer() {
     let mut i2c = I2cMock::new(&[gauge_read(0x06, 2981), gauge_read(0x08, 0).with_error(NACK)]);
     let mut gauge = Bq27500::new(i2c.clone(), NoopDelay::new());

@@ -240,37 +240,79 @@ pub type RearBus = SensorBus<RearI2c, GaugeDelay>;
 /// I2C2: ring sensors 3, 4, 5, 6 and the front fuel gauge (battery A).
 pub type FrontBus = SensorBus<FrontI2c, GaugeDelay>;
 
-/// One bus's fuel gauge, or `None` (counted) when it did not answer: each transfer to the gauge
-/// under its own lock of the bus ([`SensorBus::gauge_step`]), so a publisher waiting for the bus
-/// waits for one transfer (at most [`StatusRead::MAX_TRANSFERS`] of them make a read).
-fn read_battery<I: I2c, D: DelayNs>(
-    bus: &mut impl rtic::Mutex<T = SensorBus<I, D>>,
-) -> Option<BatteryStatus> {
-    let mut read = StatusRead::new();
-    for _ in 0..StatusRead::MAX_TRANSFERS {
-        if let Some(status) = locked_gauge_step(bus, &mut read) {
-            return status;
+/// Both gauges read one transfer a call, front then rear, each transfer under its own lock of its
+/// bus: a publisher waiting for either bus waits for one transfer to a gauge, not a whole read.
+#[derive(Debug, Default)]
+pub struct BatteryRound {
+    read: StatusRead,
+    /// The rear gauge's read is under way (the front one's has ended).
+    at_rear: bool,
+    /// The front gauge's last status (`None`: its last read failed).
+    front: Option<BatteryStatus>,
+    /// The rear gauge's last status.
+    rear: Option<BatteryStatus>,
+}
+
+impl BatteryRound {
+    /// The most transfers a round makes: both gauges' reads at their longest.
+    pub const MAX_TRANSFERS: usize = 2 * StatusRead::MAX_TRANSFERS;
+
+    /// A round not begun, with no status yet.
+    pub const fn new() -> Self {
+        Self {
+            read: StatusRead::new(),
+            at_rear: false,
+            front: None,
+            rear: None,
         }
     }
-    None
+
+    /// Makes the round's next transfer, under its bus's lock; whether the round has ended (the
+    /// rear gauge's read with it: [`BatteryRound::batteries`] are both this round's, and the next
+    /// call begins a new round). A round takes at most [`BatteryRound::MAX_TRANSFERS`] calls.
+    pub fn step(
+        &mut self,
+        rear: &mut impl rtic::Mutex<T = RearBus>,
+        front: &mut impl rtic::Mutex<T = FrontBus>,
+    ) -> bool {
+        let read = &mut self.read;
+        let ended = if self.at_rear {
+            rear.lock(|b| b.gauge_step(read))
+        } else {
+            front.lock(|b| b.gauge_step(read))
+        };
+        let Some(status) = ended else {
+            return false;
+        };
+        self.read.restart();
+        if self.at_rear {
+            self.rear = status;
+        } else {
+            self.front = status;
+        }
+        self.at_rear = !self.at_rear;
+        !self.at_rear
+    }
+
+    /// The last statuses read, front and rear (`None` for a gauge that did not answer, counted).
+    pub fn batteries(&self) -> (Option<&BatteryStatus>, Option<&BatteryStatus>) {
+        (self.front.as_ref(), self.rear.as_ref())
+    }
 }
 
-/// One gauge transfer under the bus's lock. Not inlined: the lock's raise keeps its ceiling in
-/// its own straight-line code, which the execution-time analysis reads its sections from.
-#[inline(never)]
-fn locked_gauge_step<I: I2c, D: DelayNs>(
-    bus: &mut impl rtic::Mutex<T = SensorBus<I, D>>,
-    read: &mut StatusRead,
-) -> Option<Option<BatteryStatus>> {
-    bus.lock(|b| b.gauge_step(read))
-}
-
-/// Both batteries' gauges, front then rear, each transfer under its own lock of its bus.
+/// Both batteries' gauges, front then rear, each transfer under its own lock of its bus: a
+/// [`BatteryRound`] made at once (its [`BatteryRound::batteries`] are this round's).
 pub fn read_batteries(
     rear: &mut impl rtic::Mutex<T = RearBus>,
     front: &mut impl rtic::Mutex<T = FrontBus>,
-) -> (Option<BatteryStatus>, Option<BatteryStatus>) {
-    (read_battery(front), read_battery(rear))
+) -> BatteryRound {
+    let mut round = BatteryRound::new();
+    for _ in 0..BatteryRound::MAX_TRANSFERS {
+        if round.step(rear, front) {
+            break;
+        }
+    }
+    round
 }
 
 /// What PowerManagement samples for a topic: the ring locks each bus in turn, power status both
@@ -295,9 +337,10 @@ pub fn sampler(
                 }
             }
             Topic::PowerStatus => {
-                let (f, r) = read_batteries(&mut rear, &mut front);
+                let round = read_batteries(&mut rear, &mut front);
+                let (f, r) = round.batteries();
                 let lines = charger.lock(|c| c.lines());
-                if let Some(status) = power::status(f.as_ref(), r.as_ref(), &lines) {
+                if let Some(status) = power::status(f, r, &lines) {
                     let _ = samples.push(SensorData::PowerStatus(status));
                 }
             }

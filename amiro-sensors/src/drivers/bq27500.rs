@@ -300,7 +300,7 @@ const STATUS_COMMANDS: [u8; 10] = [
 /// A status read ([`Bq27500::read_status`]) one transfer at a time, so that a caller sharing the
 /// bus can give it back between transfers: a task waiting for the bus then waits for one
 /// transfer to the gauge, not for a whole status read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StatusRead {
     /// The words read so far, in [`STATUS_COMMANDS`] order.
     words: [u16; STATUS_COMMANDS.len()],
@@ -310,6 +310,12 @@ pub struct StatusRead {
     /// when it passed); [`IDENTITY_UNCHECKED`] while temperature and voltage show no dead
     /// line's pattern.
     identity: u8,
+}
+
+impl Default for StatusRead {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 /// [`StatusRead::identity`] while no identity check is needed.
@@ -326,6 +332,12 @@ impl StatusRead {
             read: 0,
             identity: IDENTITY_UNCHECKED,
         }
+    }
+
+    /// Begins the read again (the words already read are overwritten before they are used).
+    pub fn restart(&mut self) {
+        self.read = 0;
+        self.identity = IDENTITY_UNCHECKED;
     }
 
     /// Makes the read's next transfer on `gauge`: `None` while transfers remain, then the status,
