@@ -1,7 +1,7 @@
 //! Mock-transaction tests of the I2C drivers: HMC5883L, VCNL4020, PCA9544A, the floor and ring
 //! groups, and the bq27500.
 
-use amiro_sensors::drivers::bq27500::{BatteryStatus, Bq27500, Flags, PowerSummary};
+use amiro_sensors::drivers::bq27500::{BatteryStatus, Bq27500, Flags, PowerSummary, StatusRead};
 use amiro_sensors::drivers::floor::{FloorSensor, FloorSensors, GroupError};
 use amiro_sensors::drivers::hmc5883l::{Gain, Hmc5883l};
 use amiro_sensors::drivers::pca9544a::{Channel, Control, Pca9544a};
@@ -457,6 +457,86 @@ fn gauge_status_while_charging() {
     assert!(status.charging());
     assert_eq!(status.minutes(), 60);
     assert_eq!(PowerSummary::of(&status).power_mw, 3_120);
+    i2c.done();
+}
+
+/// Steps `read` to its end on `gauge`: the result and how many steps (one transfer each) it took.
+fn step_to_end(
+    read: &mut StatusRead,
+    gauge: &mut Bq27500<I2cMock, NoopDelay>,
+) -> (Result<BatteryStatus, Error<ErrorKind>>, usize) {
+    for steps in 1..=StatusRead::MAX_TRANSFERS {
+        if let Some(done) = read.step(gauge) {
+            return (done, steps);
+        }
+    }
+    panic!(
+        "a status read took more than {} steps",
+        StatusRead::MAX_TRANSFERS
+    );
+}
+
+#[test]
+fn a_stepped_status_read_makes_one_transfer_a_step_and_equals_read_status() {
+    let script = status_script(Flags::DISCHARGING, -450, 160, 0xFFFF, -1_755);
+    let mut i2c = I2cMock::new(&script);
+    let whole = Bq27500::new(i2c.clone(), NoopDelay::new()).read_status();
+    i2c.done();
+    let mut i2c = I2cMock::new(&script);
+    let mut gauge = Bq27500::new(i2c.clone(), NoopDelay::new());
+    let (stepped, steps) = step_to_end(&mut StatusRead::new(), &mut gauge);
+    assert_eq!(steps, 10);
+    assert_eq!(stepped, whole);
+    assert!(stepped.is_ok());
+    i2c.done();
+}
+
+#[test]
+fn a_stepped_status_read_checks_the_identity_after_a_dead_lines_pattern_in_three_more_steps() {
+    let mut script = vec![
+        gauge_read(0x06, 0xFFFF),
+        gauge_read(0x08, 0xFFFF),
+        T::write(0x55, vec![0x00, 0x01]),
+        T::write(0x55, vec![0x01, 0x00]),
+        gauge_read(0x00, 0x0500),
+    ];
+    script.extend(status_script(0, 0, 0xFFFF, 0xFFFF, 0).into_iter().skip(2));
+    let mut i2c = I2cMock::new(&script);
+    let mut gauge = Bq27500::new(i2c.clone(), NoopDelay::new());
+    let (status, steps) = step_to_end(&mut StatusRead::new(), &mut gauge);
+    assert_eq!(steps, StatusRead::MAX_TRANSFERS);
+    assert_eq!(status.map(|s| s.voltage_mv), Ok(0xFFFF));
+    i2c.done();
+}
+
+#[test]
+fn a_restarted_status_read_begins_again_without_the_last_reads_identity_check() {
+    let mut script = vec![
+        gauge_read(0x06, 0),
+        gauge_read(0x08, 0),
+        T::write(0x55, vec![0x00, 0x01]),
+        T::write(0x55, vec![0x01, 0x00]),
+        gauge_read(0x00, 0x0500),
+    ];
+    script.extend(status_script(0, 0, 0xFFFF, 0xFFFF, 0).into_iter().skip(2));
+    script.extend(status_script(Flags::DISCHARGING, -450, 160, 0xFFFF, -1_755));
+    let mut i2c = I2cMock::new(&script);
+    let mut gauge = Bq27500::new(i2c.clone(), NoopDelay::new());
+    let mut read = StatusRead::new();
+    let (first, steps) = step_to_end(&mut read, &mut gauge);
+    assert_eq!((first.map(|s| s.voltage_mv), steps), (Ok(0), 13));
+    read.restart();
+    let (second, steps) = step_to_end(&mut read, &mut gauge);
+    assert_eq!((second.map(|s| s.voltage_mv), steps), (Ok(3_900), 10));
+    i2c.done();
+}
+
+#[test]
+fn a_stepped_status_read_ends_at_the_first_failed_transfer() {
+    let mut i2c = I2cMock::new(&[gauge_read(0x06, 2981), gauge_read(0x08, 0).with_error(NACK)]);
+    let mut gauge = Bq27500::new(i2c.clone(), NoopDelay::new());
+    let (status, steps) = step_to_end(&mut StatusRead::new(), &mut gauge);
+    assert_eq!((status, steps), (Err(Error::Bus(NACK)), 2));
     i2c.done();
 }
 

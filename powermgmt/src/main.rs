@@ -412,10 +412,11 @@ mod app {
             cx.shared.charger.lock(power::regulate_charging);
             round = round.wrapping_add(1);
             if round.is_multiple_of(crate::BATTERY_CHECK_EVERY) {
-                let (front, rear) =
+                let round =
                     sensors::read_batteries(&mut cx.shared.rear_bus, &mut cx.shared.front_bus);
+                let (front, rear) = round.batteries();
                 let lines = cx.shared.charger.lock(|c| c.lines());
-                if power::critically_low(front.as_ref(), rear.as_ref(), &lines) {
+                if power::critically_low(front, rear, &lines) {
                     amiro_firmware::log!("battery critically low: shutting down");
                     shutdown_sequence::spawn(Some(power::LOW_BATTERY_MODE)).ok();
                 }

@@ -14,7 +14,7 @@
 //! wiring table `WIRING`; amiro-sensors' `ProximityRing` holds both buses in one value, which
 //! would make one resource of them, so this module binds the same drivers per bus.
 use amiro_can::{SensorData, Topic};
-use amiro_sensors::drivers::bq27500::{BatteryStatus, Bq27500};
+use amiro_sensors::drivers::bq27500::{BatteryStatus, Bq27500, StatusRead};
 use amiro_sensors::drivers::pca9544a::{Channel, Pca9544a};
 use amiro_sensors::drivers::proximity::ProximityCalibration;
 use amiro_sensors::drivers::ring::{RingBus, RING_SENSORS, WIRING};
@@ -196,17 +196,19 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
         );
     }
 
-    /// This bus's fuel gauge, or `None` (counted) when it did not answer.
+    /// One transfer of `read` to this bus's fuel gauge ([`StatusRead::step`]): `None` while the
+    /// read goes on; at its end `Some` of the status, or of `None` (counted) when the gauge did not
+    /// answer.
     #[inline(never)]
-    pub fn read_gauge(&mut self) -> Option<BatteryStatus> {
-        let status = Bq27500::new(self.mux.bus_mut(), &mut self.delay)
-            .read_status()
+    pub fn gauge_step(&mut self, read: &mut StatusRead) -> Option<Option<BatteryStatus>> {
+        let status = read
+            .step(&mut Bq27500::new(self.mux.bus_mut(), &mut self.delay))?
             .ok();
         if status.is_none() {
             self.gauge_faults = self.gauge_faults.saturating_add(1);
         }
         self.report();
-        status
+        Some(status)
     }
 
     /// Samples without a frame per ring sensor of this bus: `(index, missed)`.
@@ -238,14 +240,79 @@ pub type RearBus = SensorBus<RearI2c, GaugeDelay>;
 /// I2C2: ring sensors 3, 4, 5, 6 and the front fuel gauge (battery A).
 pub type FrontBus = SensorBus<FrontI2c, GaugeDelay>;
 
-/// Both batteries' gauges, front then rear, each bus locked on its own.
+/// Both gauges read one transfer a call, front then rear, each transfer under its own lock of its
+/// bus: a publisher waiting for either bus waits for one transfer to a gauge, not a whole read.
+#[derive(Debug, Default)]
+pub struct BatteryRound {
+    read: StatusRead,
+    /// The rear gauge's read is under way (the front one's has ended).
+    at_rear: bool,
+    /// The front gauge's last status (`None`: its last read failed).
+    front: Option<BatteryStatus>,
+    /// The rear gauge's last status.
+    rear: Option<BatteryStatus>,
+}
+
+impl BatteryRound {
+    /// The most transfers a round makes: both gauges' reads at their longest.
+    pub const MAX_TRANSFERS: usize = 2 * StatusRead::MAX_TRANSFERS;
+
+    /// A round not begun, with no status yet.
+    pub const fn new() -> Self {
+        Self {
+            read: StatusRead::new(),
+            at_rear: false,
+            front: None,
+            rear: None,
+        }
+    }
+
+    /// Makes the round's next transfer, under its bus's lock; whether the round has ended (the
+    /// rear gauge's read with it: [`BatteryRound::batteries`] are both this round's, and the next
+    /// call begins a new round). A round takes at most [`BatteryRound::MAX_TRANSFERS`] calls.
+    pub fn step(
+        &mut self,
+        rear: &mut impl rtic::Mutex<T = RearBus>,
+        front: &mut impl rtic::Mutex<T = FrontBus>,
+    ) -> bool {
+        let read = &mut self.read;
+        let ended = if self.at_rear {
+            rear.lock(|b| b.gauge_step(read))
+        } else {
+            front.lock(|b| b.gauge_step(read))
+        };
+        let Some(status) = ended else {
+            return false;
+        };
+        self.read.restart();
+        if self.at_rear {
+            self.rear = status;
+        } else {
+            self.front = status;
+        }
+        self.at_rear = !self.at_rear;
+        !self.at_rear
+    }
+
+    /// The last statuses read, front and rear (`None` for a gauge that did not answer, counted).
+    pub fn batteries(&self) -> (Option<&BatteryStatus>, Option<&BatteryStatus>) {
+        (self.front.as_ref(), self.rear.as_ref())
+    }
+}
+
+/// Both batteries' gauges, front then rear, each transfer under its own lock of its bus: a
+/// [`BatteryRound`] made at once (its [`BatteryRound::batteries`] are this round's).
 pub fn read_batteries(
     rear: &mut impl rtic::Mutex<T = RearBus>,
     front: &mut impl rtic::Mutex<T = FrontBus>,
-) -> (Option<BatteryStatus>, Option<BatteryStatus>) {
-    let front_status = front.lock(|b| b.read_gauge());
-    let rear_status = rear.lock(|b| b.read_gauge());
-    (front_status, rear_status)
+) -> BatteryRound {
+    let mut round = BatteryRound::new();
+    for _ in 0..BatteryRound::MAX_TRANSFERS {
+        if round.step(rear, front) {
+            break;
+        }
+    }
+    round
 }
 
 /// What PowerManagement samples for a topic: the ring locks each bus in turn, power status both
@@ -270,9 +337,10 @@ pub fn sampler(
                 }
             }
             Topic::PowerStatus => {
-                let (f, r) = read_batteries(&mut rear, &mut front);
+                let round = read_batteries(&mut rear, &mut front);
+                let (f, r) = round.batteries();
                 let lines = charger.lock(|c| c.lines());
-                if let Some(status) = power::status(f.as_ref(), r.as_ref(), &lines) {
+                if let Some(status) = power::status(f, r, &lines) {
                     let _ = samples.push(SensorData::PowerStatus(status));
                 }
             }

@@ -254,40 +254,19 @@ impl<I2C: I2c, D: DelayNs> Bq27500<I2C, D> {
         Ok(u16::from_le_bytes(value))
     }
 
-    /// Reads everything [`BatteryStatus`] holds (ten transfers, in command order).
+    /// Reads everything [`BatteryStatus`] holds (ten transfers, in command order): a
+    /// [`StatusRead`] stepped to its end.
     ///
     /// Temperature and voltage both all `0x00` or all `0xFF` (0 K at 0 V, or 6553.5 K at
     /// 65.5 V: no gauge measures that) are a dead line's pattern; the status is returned only if
     /// the gauge then still answers DEVICE_TYPE ([`Error::WrongIdentity`] otherwise).
     pub fn read_status(&mut self) -> Result<BatteryStatus, Error<I2C::Error>> {
-        let temperature = self.read_u16(cmd::TEMPERATURE)?;
-        let voltage_mv = self.read_u16(cmd::VOLTAGE)?;
-        let [t0, t1] = temperature.to_le_bytes();
-        let [v0, v1] = voltage_mv.to_le_bytes();
-        if super::is_bus_pattern(&[t0, t1, v0, v1]) {
-            self.init()?;
+        let mut read = StatusRead::new();
+        loop {
+            if let Some(done) = read.step(self) {
+                return done;
+            }
         }
-        let flags = Flags(self.read_u16(cmd::FLAGS)?);
-        let remaining_capacity_mah = self.read_u16(cmd::REMAINING_CAPACITY)?;
-        let full_charge_capacity_mah = self.read_u16(cmd::FULL_CHARGE_CAPACITY)?;
-        let average_current_ma = self.read_u16(cmd::AVERAGE_CURRENT)? as i16;
-        let time_to_empty = self.read_u16(cmd::TIME_TO_EMPTY)?;
-        let time_to_full = self.read_u16(cmd::TIME_TO_FULL)?;
-        let average_power_mw = self.read_u16(cmd::AVERAGE_POWER)? as i16;
-        let state_of_charge = self.read_u16(cmd::STATE_OF_CHARGE)?;
-        let celsius = i32::from(temperature) - ZERO_CELSIUS_DECIKELVIN;
-        Ok(BatteryStatus {
-            temperature_decicelsius: celsius.clamp(i16::MIN.into(), i16::MAX.into()) as i16,
-            voltage_mv,
-            flags,
-            remaining_capacity_mah,
-            full_charge_capacity_mah,
-            average_current_ma,
-            time_to_empty_min: (time_to_empty != TIME_NOT_APPLICABLE).then_some(time_to_empty),
-            time_to_full_min: (time_to_full != TIME_NOT_APPLICABLE).then_some(time_to_full),
-            average_power_mw,
-            state_of_charge: state_of_charge.min(100) as u8,
-        })
     }
 
     /// Gives the bus and the delay back.
@@ -300,5 +279,133 @@ impl<I2C: I2c, D: DelayNs> Bq27500<I2C, D> {
         self.delay.delay_ns(BUS_FREE_NS);
         result?;
         Ok(())
+    }
+}
+
+/// The status commands in the order a read makes them (temperature and voltage first: their
+/// pattern decides whether the identity is checked before the rest).
+const STATUS_COMMANDS: [u8; 10] = [
+    cmd::TEMPERATURE,
+    cmd::VOLTAGE,
+    cmd::FLAGS,
+    cmd::REMAINING_CAPACITY,
+    cmd::FULL_CHARGE_CAPACITY,
+    cmd::AVERAGE_CURRENT,
+    cmd::TIME_TO_EMPTY,
+    cmd::TIME_TO_FULL,
+    cmd::AVERAGE_POWER,
+    cmd::STATE_OF_CHARGE,
+];
+
+/// A status read ([`Bq27500::read_status`]) one transfer at a time, so that a caller sharing the
+/// bus can give it back between transfers: a task waiting for the bus then waits for one
+/// transfer to the gauge, not for a whole status read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StatusRead {
+    /// The words read so far, in [`STATUS_COMMANDS`] order.
+    words: [u16; STATUS_COMMANDS.len()],
+    /// How many of them are read.
+    read: u8,
+    /// The identity check's transfers made (0 to 3: the subcommand's two bytes, the answer; 3
+    /// when it passed); [`IDENTITY_UNCHECKED`] while temperature and voltage show no dead
+    /// line's pattern.
+    identity: u8,
+}
+
+impl Default for StatusRead {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// [`StatusRead::identity`] while no identity check is needed.
+const IDENTITY_UNCHECKED: u8 = u8::MAX;
+
+impl StatusRead {
+    /// The most transfers a read makes: ten reads and the three of the identity check.
+    pub const MAX_TRANSFERS: usize = STATUS_COMMANDS.len() + 3;
+
+    /// A read not begun.
+    pub const fn new() -> Self {
+        Self {
+            words: [0; STATUS_COMMANDS.len()],
+            read: 0,
+            identity: IDENTITY_UNCHECKED,
+        }
+    }
+
+    /// Begins the read again (the words already read are overwritten before they are used).
+    pub fn restart(&mut self) {
+        self.read = 0;
+        self.identity = IDENTITY_UNCHECKED;
+    }
+
+    /// Makes the read's next transfer on `gauge`: `None` while transfers remain, then the status,
+    /// or the error of the transfer that failed (the read ends there). At most
+    /// [`StatusRead::MAX_TRANSFERS`] calls return `None` in a row.
+    pub fn step<I2C: I2c, D: DelayNs>(
+        &mut self,
+        gauge: &mut Bq27500<I2C, D>,
+    ) -> Option<Result<BatteryStatus, Error<I2C::Error>>> {
+        let [low, high] = subcommand::DEVICE_TYPE.to_le_bytes();
+        let checking = self.identity < 3;
+        let step = match self.identity {
+            0 => gauge.write_paced(&[cmd::CONTROL, low]),
+            1 => gauge.write_paced(&[cmd::CONTROL + 1, high]),
+            2 => gauge.read_u16(cmd::CONTROL).and_then(|found| {
+                if found == DEVICE_TYPE_VALUE {
+                    Ok(())
+                } else {
+                    Err(Error::WrongIdentity {
+                        expected: DEVICE_TYPE_VALUE.into(),
+                        found: found.into(),
+                    })
+                }
+            }),
+            _ => {
+                let k = usize::from(self.read);
+                let (Some(&command), Some(word)) = (STATUS_COMMANDS.get(k), self.words.get_mut(k))
+                else {
+                    return Some(Ok(self.status()));
+                };
+                gauge.read_u16(command).map(|value| *word = value)
+            }
+        };
+        if let Err(e) = step {
+            return Some(Err(e));
+        }
+        if checking {
+            self.identity += 1;
+        } else {
+            self.read += 1;
+            if self.read == 2 {
+                let [t, v, ..] = self.words;
+                let [t0, t1] = t.to_le_bytes();
+                let [v0, v1] = v.to_le_bytes();
+                if super::is_bus_pattern(&[t0, t1, v0, v1]) {
+                    self.identity = 0;
+                }
+            }
+        }
+        (usize::from(self.read) == STATUS_COMMANDS.len()).then(|| Ok(self.status()))
+    }
+
+    /// The status from the ten words.
+    fn status(&self) -> BatteryStatus {
+        let [temperature, voltage_mv, flags, remaining, full, current, tte, ttf, power, soc] =
+            self.words;
+        let celsius = i32::from(temperature) - ZERO_CELSIUS_DECIKELVIN;
+        BatteryStatus {
+            temperature_decicelsius: celsius.clamp(i16::MIN.into(), i16::MAX.into()) as i16,
+            voltage_mv,
+            flags: Flags(flags),
+            remaining_capacity_mah: remaining,
+            full_charge_capacity_mah: full,
+            average_current_ma: current as i16,
+            time_to_empty_min: (tte != TIME_NOT_APPLICABLE).then_some(tte),
+            time_to_full_min: (ttf != TIME_NOT_APPLICABLE).then_some(ttf),
+            average_power_mw: power as i16,
+            state_of_charge: soc.min(100) as u8,
+        }
     }
 }
