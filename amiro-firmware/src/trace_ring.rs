@@ -94,6 +94,7 @@ impl<T: Copy, const N: usize> Ring<T, N> {
     ///
     /// # Safety
     /// No other call of `reserve` on this ring runs meanwhile: call it under a critical section.
+    #[inline(always)]
     pub unsafe fn reserve(&self) -> Option<Claim<'_, T, N>> {
         let reserved = self.reserved.load(Ordering::Relaxed);
         let released = self.released.load(Ordering::Relaxed);

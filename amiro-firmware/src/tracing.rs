@@ -70,9 +70,25 @@ pub const DRAIN_BATCH: usize = 4;
 #[derive(Clone, Copy)]
 #[repr(u8)]
 enum What {
-    Kind(Kind),
+    Kind(Kind) = 0,
+    /// Written by [`event`] as an [`EventWhat`], never built as a `What`.
     #[cfg(not(feature = "qemu"))]
-    Event(TraceEvent),
+    #[allow(dead_code)]
+    Event(TraceEvent) = EVENT_TAG,
+}
+
+/// [`What::Event`]'s tag.
+#[cfg(not(feature = "qemu"))]
+const EVENT_TAG: u8 = 1;
+
+/// [`What::Event`] as the language lays it out (a `repr(u8)` enum's variant is a `repr(C)` struct
+/// of its tag and its fields), so [`event`] can write the tag and copy the event into a slot
+/// without building the whole `What` first.
+#[cfg(not(feature = "qemu"))]
+#[repr(C)]
+struct EventWhat {
+    tag: u8,
+    event: TraceEvent,
 }
 
 /// One record as the tasks stamp it: when, and what (raw, fixed size).
@@ -198,7 +214,15 @@ type Reserved = ();
 /// state change, its stamp and its place in the ring are one step): a few instructions, no copy.
 /// A full ring counts it as lost.
 #[cfg(not(feature = "qemu"))]
+#[inline(always)]
 fn write(state: &mut State, _what: &What) -> Reserved {
+    reserve(state)
+}
+
+/// [`write`]'s reservation and stamp, which do not depend on the record.
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn reserve(state: &mut State) -> Reserved {
     // SAFETY: every reservation runs under a critical section (the caller's).
     let claim = unsafe { RING.reserve() }?;
     Some((claim, cycles(state)))
@@ -251,6 +275,34 @@ fn copy_words(from: &What, to: &mut What) {
             out("r1") _,
             out("r2") _,
             out("r3") _,
+            options(nostack, preserves_flags),
+        );
+    }
+}
+
+/// Copies a handler event (6 words) into a slot: two 3-word `LDM`/`STM` pairs of straight-line
+/// code, where the compiler called `memcpy` ([`copy_words`] says why not that).
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn copy_event(from: &TraceEvent, to: &mut TraceEvent) {
+    const {
+        assert!(core::mem::size_of::<TraceEvent>() == 24);
+        assert!(core::mem::align_of::<TraceEvent>() >= 4);
+    }
+    // SAFETY: both point to a `TraceEvent`: word-aligned, 6 whole words, `to` unique; the words
+    // are moved as they are (padding included), read from `from` and written to `to` only. r0-r2
+    // are declared clobbered, the pointers consumed.
+    unsafe {
+        core::arch::asm!(
+            "ldm {from}!, {{r0, r1, r2}}",
+            "stm {to}!, {{r0, r1, r2}}",
+            "ldm {from}, {{r0, r1, r2}}",
+            "stm {to}, {{r0, r1, r2}}",
+            from = inout(reg) core::ptr::from_ref(from) => _,
+            to = inout(reg) core::ptr::from_mut(to) => _,
+            out("r0") _,
+            out("r1") _,
+            out("r2") _,
             options(nostack, preserves_flags),
         );
     }
@@ -424,8 +476,25 @@ impl Future for Drain {
 /// as a `# T` line on the console, in order with the other lines).
 #[inline(never)]
 pub fn event(event: &TraceEvent) {
+    // One copy, from the caller's event into the slot: through a `What` on the stack first
+    // ([`emit`]), the event was copied twice (each word loaded from an address the execution-time
+    // bound cannot place, charged as a peripheral's) and a call deeper.
     #[cfg(not(feature = "qemu"))]
-    emit(What::Event(*event));
+    {
+        let reserved = critical_section::with(|cs| reserve(state_in(cs)));
+        if let Some((claim, cycles)) = reserved {
+            claim.fill(|slot| {
+                slot.cycles = cycles;
+                let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
+                // SAFETY: `what` is the slot's `What`, laid out as `EventWhat` once its tag says
+                // `Event` (`repr(u8)`): the tag is written and the event copied whole.
+                unsafe {
+                    (*what).tag = EVENT_TAG;
+                    copy_event(event, &mut (*what).event);
+                }
+            });
+        }
+    }
     // QEMU: encoded before the critical section, as the robot's drain does outside it.
     #[cfg(feature = "qemu")]
     emit(What::Kind(Kind::Event {
