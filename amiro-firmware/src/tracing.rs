@@ -476,9 +476,9 @@ impl Future for Drain {
 /// as a `# T` line on the console, in order with the other lines).
 #[inline(never)]
 pub fn event(event: &TraceEvent) {
-    // One copy, from the caller's event into the slot: through a `What` on the stack first
-    // ([`emit`]), the event was copied twice (each word loaded from an address the execution-time
-    // bound cannot place, charged as a peripheral's) and a call deeper.
+    // One copy, from the caller's event into the slot: not through a `What` on the stack and
+    // [`emit`], which would copy it twice (each word loaded and stored at an address the
+    // execution-time bound cannot place, so charged as a peripheral's) and a call deeper.
     #[cfg(not(feature = "qemu"))]
     {
         let reserved = critical_section::with(|cs| reserve(state_in(cs)));
