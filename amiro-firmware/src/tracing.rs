@@ -9,9 +9,10 @@
 //! one it pre-empted), which is exact on one core: a task only runs while everything it pre-empted
 //! waits.
 //!
-//! Timestamps: the DWT cycle counter widened to 64 bits on the robot (the watchdog task's run every
-//! 100 ms is far inside the counter's 59 s wrap at 72 MHz); in QEMU, SysTick's ticks and its
-//! current value (core cycles of the QEMU machine, in virtual time).
+//! Timestamps: the DWT cycle counter on the robot, stamped raw (32 bits) and widened to 64 by the
+//! drain, which takes the records in the order of their stamps (`trace_ring::Widen`; the watchdog
+//! task's run every 100 ms is far inside the counter's 59 s wrap at 72 MHz); in QEMU, SysTick's
+//! ticks and its current value (core cycles of the QEMU machine, in virtual time).
 //!
 //! The cargo feature `task-trace` (on by default in every board) compiles the task records in;
 //! without it [`job`], [`enter`], [`suspend`], [`resume`] and [`frame_acked`] are empty and only the
@@ -49,7 +50,7 @@ use amiro_trace::{Kind, Record};
 use critical_section::{CriticalSection, Mutex};
 
 #[cfg(not(feature = "qemu"))]
-use crate::trace_ring::{Claim, Ring};
+use crate::trace_ring::{Claim, Ring, Widen};
 
 /// The task number of "no task" (init or idle).
 pub const NO_TASK: u8 = u8::MAX;
@@ -95,7 +96,8 @@ struct EventWhat {
 #[cfg(not(feature = "qemu"))]
 #[derive(Clone, Copy)]
 struct Slot {
-    cycles: u64,
+    /// The DWT counter as read under the reservation; the drain widens it.
+    cycles: u32,
     what: What,
 }
 
@@ -112,10 +114,9 @@ struct State {
     current: u8,
     #[cfg(feature = "task-trace")]
     preempted: [u8; MAX_TASKS],
+    /// The drain's widening of the raw stamps (only the drain uses it).
     #[cfg(not(feature = "qemu"))]
-    high: u32,
-    #[cfg(not(feature = "qemu"))]
-    last: u32,
+    clock: Widen,
     #[cfg(feature = "qemu")]
     last: u64,
 }
@@ -126,9 +127,7 @@ static STATE: Mutex<UnsafeCell<State>> = Mutex::new(UnsafeCell::new(State {
     #[cfg(feature = "task-trace")]
     preempted: [NO_TASK; MAX_TASKS],
     #[cfg(not(feature = "qemu"))]
-    high: 0,
-    #[cfg(not(feature = "qemu"))]
-    last: 0,
+    clock: Widen::new(),
     #[cfg(feature = "qemu")]
     last: 0,
 }));
@@ -150,17 +149,14 @@ fn state_in(cs: CriticalSection<'_>) -> &mut State {
     unsafe { &mut *STATE.borrow(cs).get() }
 }
 
-/// The trace clock, widened to 64 bits (robot: DWT CYCCNT).
+/// The trace clock as a record's writer stamps it (robot: DWT CYCCNT, 32 bits; the drain widens
+/// it): one load, where widening it here was a call and a read-modify-write of the state.
 #[cfg(not(feature = "qemu"))]
-fn cycles(state: &mut State) -> u64 {
+#[inline(always)]
+fn raw_cycles() -> u32 {
     const DWT_CYCCNT: *const u32 = 0xE000_1004 as *const u32;
     // SAFETY: a read of the DWT cycle counter, enabled by `start_clock`.
-    let now = unsafe { core::ptr::read_volatile(DWT_CYCCNT) };
-    if now < state.last {
-        state.high = state.high.wrapping_add(1);
-    }
-    state.last = now;
-    u64::from(state.high) << 32 | u64::from(now)
+    unsafe { core::ptr::read_volatile(DWT_CYCCNT) }
 }
 
 /// The trace clock in QEMU: the platform clock's cycles (`qemu::timer`: the start of SysTick's
@@ -205,7 +201,7 @@ fn emit(what: What) {
 /// A slot reserved for a record and its stamp, to fill outside the critical section ([`fill`]);
 /// `None` when the full ring counted the record as lost.
 #[cfg(not(feature = "qemu"))]
-type Reserved = Option<(Claim<'static, Slot, RING_LEN>, u64)>;
+type Reserved = Option<(Claim<'static, Slot, RING_LEN>, u32)>;
 /// QEMU: the record was written through ([`write`]); nothing to fill.
 #[cfg(feature = "qemu")]
 type Reserved = ();
@@ -215,17 +211,18 @@ type Reserved = ();
 /// A full ring counts it as lost.
 #[cfg(not(feature = "qemu"))]
 #[inline(always)]
-fn write(state: &mut State, _what: &What) -> Reserved {
-    reserve(state)
+fn write(_state: &mut State, _what: &What) -> Reserved {
+    reserve()
 }
 
-/// [`write`]'s reservation and stamp, which do not depend on the record.
+/// [`write`]'s reservation and stamp, which do not depend on the record. Call it under a critical
+/// section: the stamps are then in the order of the slots, which the drain's widening needs.
 #[cfg(not(feature = "qemu"))]
 #[inline(always)]
-fn reserve(state: &mut State) -> Reserved {
+fn reserve() -> Reserved {
     // SAFETY: every reservation runs under a critical section (the caller's).
     let claim = unsafe { RING.reserve() }?;
-    Some((claim, cycles(state)))
+    Some((claim, raw_cycles()))
 }
 
 /// Copies a record into the slot [`write`] reserved and marks it complete, outside any critical
@@ -345,10 +342,10 @@ fn write(state: &mut State, what: &What) {
 /// when the channel had no room for it. One copy of the encoders (flash).
 #[cfg(not(feature = "qemu"))]
 #[inline(never)]
-fn write_out(slot: &Slot) -> bool {
+fn write_out(cycles: u64, what: &What) -> bool {
     let record = Record {
-        cycles: slot.cycles,
-        kind: match slot.what {
+        cycles,
+        kind: match *what {
             What::Kind(kind) => kind,
             What::Event(event) => Kind::Event {
                 record: event.encode(),
@@ -420,14 +417,20 @@ fn drain_one() -> bool {
     let mut slot = EMPTY;
     // SAFETY (the three calls on `RING`): this is its only drain (`drain_trace`, one task).
     let count = unsafe { RING.take_lost() };
-    if count > 0 {
-        slot.cycles = critical_section::with(|cs| cycles(state_in(cs)));
+    let cycles = if count > 0 {
+        // Stamped now, later than the records still in the ring: widened without moving the
+        // widening past them.
+        let now = raw_cycles();
         slot.what = What::Kind(Kind::Lost { count });
-    } else if !unsafe { RING.take(&mut slot) } {
+        critical_section::with(|cs| state_in(cs).clock.peek(now))
+    } else if unsafe { RING.take(&mut slot) } {
+        // The records leave in the order of their stamps (`reserve`).
+        critical_section::with(|cs| state_in(cs).clock.advance(slot.cycles))
+    } else {
         // Empty, or its oldest record's writer was preempted mid-copy: the next job takes it.
         return false;
-    }
-    if !write_out(&slot) {
+    };
+    if !write_out(cycles, &slot.what) {
         let count = match slot.what {
             What::Kind(Kind::Lost { count }) => count,
             _ => 1,
@@ -481,7 +484,7 @@ pub fn event(event: &TraceEvent) {
     // execution-time bound cannot place, so charged as a peripheral's) and a call deeper.
     #[cfg(not(feature = "qemu"))]
     {
-        let reserved = critical_section::with(|cs| reserve(state_in(cs)));
+        let reserved = critical_section::with(|_| reserve());
         if let Some((claim, cycles)) = reserved {
             claim.fill(|slot| {
                 slot.cycles = cycles;
