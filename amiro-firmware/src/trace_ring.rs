@@ -41,6 +41,9 @@
 //!   ([`Ring::take_lost`]) before the next record it writes, and counts back what its channel had
 //!   no room for ([`Ring::count_lost`]).
 //!
+//! The drain also widens the writers' raw 32-bit stamps to 64 bits ([`Widen`]): it takes the
+//! records in the order of their stamps, so a stamp below the one before is a wrap.
+//!
 //! The host tests below run these steps in the orders an interrupt can put them in.
 use core::cell::UnsafeCell;
 use core::sync::atomic::{compiler_fence, AtomicBool, AtomicU32, AtomicUsize, Ordering};
