@@ -41,6 +41,9 @@
 //!   ([`Ring::take_lost`]) before the next record it writes, and counts back what its channel had
 //!   no room for ([`Ring::count_lost`]).
 //!
+//! The drain also widens the writers' raw 32-bit stamps to 64 bits ([`Widen`]): it takes the
+//! records in the order of their stamps, so a stamp below the one before is a wrap.
+//!
 //! The host tests below run these steps in the orders an interrupt can put them in.
 use core::cell::UnsafeCell;
 use core::sync::atomic::{compiler_fence, AtomicBool, AtomicU32, AtomicUsize, Ordering};
@@ -94,6 +97,7 @@ impl<T: Copy, const N: usize> Ring<T, N> {
     ///
     /// # Safety
     /// No other call of `reserve` on this ring runs meanwhile: call it under a critical section.
+    #[inline(always)]
     pub unsafe fn reserve(&self) -> Option<Claim<'_, T, N>> {
         let reserved = self.reserved.load(Ordering::Relaxed);
         let released = self.released.load(Ordering::Relaxed);
@@ -182,9 +186,69 @@ impl<T, const N: usize> Claim<'_, T, N> {
     }
 }
 
+/// A 32-bit counter's readings widened to 64 bits, for a reader that sees them in the order they
+/// were taken: a reading below the one before means the counter wrapped once in between. The
+/// drain widens the writers' raw stamps so (a writer's stamp is one load): it takes the records in
+/// the order of their reservations, under which each stamp is read, so consecutive records are in
+/// time order and the wrap is seen as long as they are less than one wrap apart — as when the
+/// writers widened their own stamps, each against the record stamped before it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Widen {
+    /// Wraps seen so far: the high word.
+    high: u32,
+    /// The latest reading taken in order.
+    last: u32,
+}
+
+impl Widen {
+    /// Nothing read yet: the counter started at zero.
+    pub const fn new() -> Self {
+        Self { high: 0, last: 0 }
+    }
+
+    /// The next reading in order, widened; it becomes the one later readings are compared to.
+    pub fn advance(&mut self, raw: u32) -> u64 {
+        let wide = self.peek(raw);
+        self.high = (wide >> 32) as u32;
+        self.last = raw;
+        wide
+    }
+
+    /// A reading taken after the latest one (and after those still to come through
+    /// [`Widen::advance`]), widened without becoming the latest: a stamp read now, written before
+    /// records stamped earlier (the drain's `Lost` report).
+    pub fn peek(&self, raw: u32) -> u64 {
+        let high = self.high.wrapping_add(u32::from(raw < self.last));
+        u64::from(high) << 32 | u64::from(raw)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn widening_counts_each_wrap_between_readings_in_order() {
+        let mut clock = Widen::new();
+        assert_eq!(clock.advance(5), 5);
+        assert_eq!(clock.advance(5), 5);
+        assert_eq!(clock.advance(u32::MAX), u64::from(u32::MAX));
+        assert_eq!(clock.advance(3), 1 << 32 | 3);
+        assert_eq!(clock.advance(0x8000_0000), 1 << 32 | 0x8000_0000);
+        assert_eq!(clock.advance(1), 2 << 32 | 1);
+    }
+
+    #[test]
+    fn a_peeked_reading_leaves_the_widening_of_older_ones_alone() {
+        let mut clock = Widen::new();
+        assert_eq!(clock.advance(u32::MAX - 10), u64::from(u32::MAX - 10));
+        // A report stamped after a wrap, written before two records stamped earlier, one on either
+        // side of the wrap.
+        assert_eq!(clock.peek(20), 1 << 32 | 20);
+        assert_eq!(clock.advance(u32::MAX - 5), u64::from(u32::MAX - 5));
+        assert_eq!(clock.advance(10), 1 << 32 | 10);
+        assert_eq!(clock.advance(30), 1 << 32 | 30);
+    }
 
     const N: usize = 4;
 

@@ -9,9 +9,10 @@
 //! one it pre-empted), which is exact on one core: a task only runs while everything it pre-empted
 //! waits.
 //!
-//! Timestamps: the DWT cycle counter widened to 64 bits on the robot (the watchdog task's run every
-//! 100 ms is far inside the counter's 59 s wrap at 72 MHz); in QEMU, SysTick's ticks and its
-//! current value (core cycles of the QEMU machine, in virtual time).
+//! Timestamps: the DWT cycle counter on the robot, stamped raw (32 bits) and widened to 64 by the
+//! drain, which takes the records in the order of their stamps (`trace_ring::Widen`; the watchdog
+//! task's run every 100 ms is far inside the counter's 59 s wrap at 72 MHz); in QEMU, SysTick's
+//! ticks and its current value (core cycles of the QEMU machine, in virtual time).
 //!
 //! The cargo feature `task-trace` (on by default in every board) compiles the task records in;
 //! without it [`job`], [`enter`], [`suspend`], [`resume`] and [`frame_acked`] are empty and only the
@@ -49,7 +50,7 @@ use amiro_trace::{Kind, Record};
 use critical_section::{CriticalSection, Mutex};
 
 #[cfg(not(feature = "qemu"))]
-use crate::trace_ring::{Claim, Ring};
+use crate::trace_ring::{Claim, Ring, Widen};
 
 /// The task number of "no task" (init or idle).
 pub const NO_TASK: u8 = u8::MAX;
@@ -70,16 +71,33 @@ pub const DRAIN_BATCH: usize = 4;
 #[derive(Clone, Copy)]
 #[repr(u8)]
 enum What {
-    Kind(Kind),
+    Kind(Kind) = 0,
+    /// Written by [`event`] as an [`EventWhat`], never built as a `What`.
     #[cfg(not(feature = "qemu"))]
-    Event(TraceEvent),
+    #[allow(dead_code)]
+    Event(TraceEvent) = EVENT_TAG,
+}
+
+/// [`What::Event`]'s tag.
+#[cfg(not(feature = "qemu"))]
+const EVENT_TAG: u8 = 1;
+
+/// [`What::Event`] as the language lays it out (a `repr(u8)` enum's variant is a `repr(C)` struct
+/// of its tag and its fields), so [`event`] can write the tag and copy the event into a slot
+/// without building the whole `What` first.
+#[cfg(not(feature = "qemu"))]
+#[repr(C)]
+struct EventWhat {
+    tag: u8,
+    event: TraceEvent,
 }
 
 /// One record as the tasks stamp it: when, and what (raw, fixed size).
 #[cfg(not(feature = "qemu"))]
 #[derive(Clone, Copy)]
 struct Slot {
-    cycles: u64,
+    /// The DWT counter as read under the reservation; the drain widens it.
+    cycles: u32,
     what: What,
 }
 
@@ -96,10 +114,9 @@ struct State {
     current: u8,
     #[cfg(feature = "task-trace")]
     preempted: [u8; MAX_TASKS],
+    /// The drain's widening of the raw stamps (only the drain uses it).
     #[cfg(not(feature = "qemu"))]
-    high: u32,
-    #[cfg(not(feature = "qemu"))]
-    last: u32,
+    clock: Widen,
     #[cfg(feature = "qemu")]
     last: u64,
 }
@@ -110,9 +127,7 @@ static STATE: Mutex<UnsafeCell<State>> = Mutex::new(UnsafeCell::new(State {
     #[cfg(feature = "task-trace")]
     preempted: [NO_TASK; MAX_TASKS],
     #[cfg(not(feature = "qemu"))]
-    high: 0,
-    #[cfg(not(feature = "qemu"))]
-    last: 0,
+    clock: Widen::new(),
     #[cfg(feature = "qemu")]
     last: 0,
 }));
@@ -134,17 +149,14 @@ fn state_in(cs: CriticalSection<'_>) -> &mut State {
     unsafe { &mut *STATE.borrow(cs).get() }
 }
 
-/// The trace clock, widened to 64 bits (robot: DWT CYCCNT).
+/// The trace clock as a record's writer stamps it (robot: DWT CYCCNT, 32 bits; the drain widens
+/// it): one load, where widening it here was a call and a read-modify-write of the state.
 #[cfg(not(feature = "qemu"))]
-fn cycles(state: &mut State) -> u64 {
+#[inline(always)]
+fn raw_cycles() -> u32 {
     const DWT_CYCCNT: *const u32 = 0xE000_1004 as *const u32;
     // SAFETY: a read of the DWT cycle counter, enabled by `start_clock`.
-    let now = unsafe { core::ptr::read_volatile(DWT_CYCCNT) };
-    if now < state.last {
-        state.high = state.high.wrapping_add(1);
-    }
-    state.last = now;
-    u64::from(state.high) << 32 | u64::from(now)
+    unsafe { core::ptr::read_volatile(DWT_CYCCNT) }
 }
 
 /// The trace clock in QEMU: the platform clock's cycles (`qemu::timer`: the start of SysTick's
@@ -189,7 +201,7 @@ fn emit(what: What) {
 /// A slot reserved for a record and its stamp, to fill outside the critical section ([`fill`]);
 /// `None` when the full ring counted the record as lost.
 #[cfg(not(feature = "qemu"))]
-type Reserved = Option<(Claim<'static, Slot, RING_LEN>, u64)>;
+type Reserved = Option<(Claim<'static, Slot, RING_LEN>, u32)>;
 /// QEMU: the record was written through ([`write`]); nothing to fill.
 #[cfg(feature = "qemu")]
 type Reserved = ();
@@ -198,10 +210,19 @@ type Reserved = ();
 /// state change, its stamp and its place in the ring are one step): a few instructions, no copy.
 /// A full ring counts it as lost.
 #[cfg(not(feature = "qemu"))]
-fn write(state: &mut State, _what: &What) -> Reserved {
+#[inline(always)]
+fn write(_state: &mut State, _what: &What) -> Reserved {
+    reserve()
+}
+
+/// [`write`]'s reservation and stamp, which do not depend on the record. Call it under a critical
+/// section: the stamps are then in the order of the slots, which the drain's widening needs.
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn reserve() -> Reserved {
     // SAFETY: every reservation runs under a critical section (the caller's).
     let claim = unsafe { RING.reserve() }?;
-    Some((claim, cycles(state)))
+    Some((claim, raw_cycles()))
 }
 
 /// Copies a record into the slot [`write`] reserved and marks it complete, outside any critical
@@ -256,6 +277,34 @@ fn copy_words(from: &What, to: &mut What) {
     }
 }
 
+/// Copies a handler event (6 words) into a slot: two 3-word `LDM`/`STM` pairs of straight-line
+/// code, where the compiler called `memcpy` ([`copy_words`] says why not that).
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn copy_event(from: &TraceEvent, to: &mut TraceEvent) {
+    const {
+        assert!(core::mem::size_of::<TraceEvent>() == 24);
+        assert!(core::mem::align_of::<TraceEvent>() >= 4);
+    }
+    // SAFETY: both point to a `TraceEvent`: word-aligned, 6 whole words, `to` unique; the words
+    // are moved as they are (padding included), read from `from` and written to `to` only. r0-r2
+    // are declared clobbered, the pointers consumed.
+    unsafe {
+        core::arch::asm!(
+            "ldm {from}!, {{r0, r1, r2}}",
+            "stm {to}!, {{r0, r1, r2}}",
+            "ldm {from}, {{r0, r1, r2}}",
+            "stm {to}, {{r0, r1, r2}}",
+            from = inout(reg) core::ptr::from_ref(from) => _,
+            to = inout(reg) core::ptr::from_mut(to) => _,
+            out("r0") _,
+            out("r1") _,
+            out("r2") _,
+            options(nostack, preserves_flags),
+        );
+    }
+}
+
 /// QEMU: stamps one record and writes it through, in the caller's critical section: a handler
 /// event to the console as a `# T` line, the rest to `trace.bin` (a handler event arrives encoded:
 /// [`event`]).
@@ -293,10 +342,10 @@ fn write(state: &mut State, what: &What) {
 /// when the channel had no room for it. One copy of the encoders (flash).
 #[cfg(not(feature = "qemu"))]
 #[inline(never)]
-fn write_out(slot: &Slot) -> bool {
+fn write_out(cycles: u64, what: &What) -> bool {
     let record = Record {
-        cycles: slot.cycles,
-        kind: match slot.what {
+        cycles,
+        kind: match *what {
             What::Kind(kind) => kind,
             What::Event(event) => Kind::Event {
                 record: event.encode(),
@@ -368,14 +417,20 @@ fn drain_one() -> bool {
     let mut slot = EMPTY;
     // SAFETY (the three calls on `RING`): this is its only drain (`drain_trace`, one task).
     let count = unsafe { RING.take_lost() };
-    if count > 0 {
-        slot.cycles = critical_section::with(|cs| cycles(state_in(cs)));
+    let cycles = if count > 0 {
+        // Stamped now, later than the records still in the ring: widened without moving the
+        // widening past them.
+        let now = raw_cycles();
         slot.what = What::Kind(Kind::Lost { count });
-    } else if !unsafe { RING.take(&mut slot) } {
+        critical_section::with(|cs| state_in(cs).clock.peek(now))
+    } else if unsafe { RING.take(&mut slot) } {
+        // The records leave in the order of their stamps (`reserve`).
+        critical_section::with(|cs| state_in(cs).clock.advance(slot.cycles))
+    } else {
         // Empty, or its oldest record's writer was preempted mid-copy: the next job takes it.
         return false;
-    }
-    if !write_out(&slot) {
+    };
+    if !write_out(cycles, &slot.what) {
         let count = match slot.what {
             What::Kind(Kind::Lost { count }) => count,
             _ => 1,
@@ -424,8 +479,25 @@ impl Future for Drain {
 /// as a `# T` line on the console, in order with the other lines).
 #[inline(never)]
 pub fn event(event: &TraceEvent) {
+    // One copy, from the caller's event into the slot: not through a `What` on the stack and
+    // [`emit`], which would copy it twice (each word loaded and stored at an address the
+    // execution-time bound cannot place, so charged as a peripheral's) and a call deeper.
     #[cfg(not(feature = "qemu"))]
-    emit(What::Event(*event));
+    {
+        let reserved = critical_section::with(|_| reserve());
+        if let Some((claim, cycles)) = reserved {
+            claim.fill(|slot| {
+                slot.cycles = cycles;
+                let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
+                // SAFETY: `what` is the slot's `What`, laid out as `EventWhat` once its tag says
+                // `Event` (`repr(u8)`): the tag is written and the event copied whole.
+                unsafe {
+                    (*what).tag = EVENT_TAG;
+                    copy_event(event, &mut (*what).event);
+                }
+            });
+        }
+    }
     // QEMU: encoded before the critical section, as the robot's drain does outside it.
     #[cfg(feature = "qemu")]
     emit(What::Kind(Kind::Event {
