@@ -21,6 +21,8 @@ pub mod digits;
 pub mod layout;
 pub mod rx_queue;
 pub mod spi;
+#[cfg(test)]
+mod test_waker;
 pub mod timer_monotonic;
 pub mod timer_queue;
 pub mod trace_ring;

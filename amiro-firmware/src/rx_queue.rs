@@ -254,28 +254,14 @@ macro_rules! frame_queue {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::atomic::AtomicUsize;
-    use std::sync::Arc;
-    use std::task::Wake;
 
     const N: usize = 4;
 
     /// A waker that counts its wakes.
-    struct Counter(AtomicUsize);
-
-    impl Wake for Counter {
-        fn wake(self: Arc<Self>) {
-            self.0.fetch_add(1, Ordering::Relaxed);
-        }
-    }
-
-    fn counter() -> (Arc<Counter>, Waker) {
-        let counter = Arc::new(Counter(AtomicUsize::new(0)));
-        (counter.clone(), Waker::from(counter))
-    }
+    use crate::test_waker::{counting as counter, Wakes as Counter};
 
     fn wakes(counter: &Counter) -> usize {
-        counter.0.load(Ordering::Relaxed)
+        counter.count()
     }
 
     fn queue() -> &'static FrameQueue<N> {

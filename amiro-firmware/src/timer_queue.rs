@@ -381,8 +381,7 @@ impl<B: Backend, F: Future> Future for Timeout<B, F> {
 mod tests {
     use super::*;
     use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
-    use std::sync::{Arc, Mutex, MutexGuard};
-    use std::task::Wake;
+    use std::sync::{Mutex, MutexGuard};
 
     // One model timer per test binary: the tests that use it take `LOCK`.
     static LOCK: Mutex<()> = Mutex::new(());
@@ -445,25 +444,14 @@ mod tests {
     }
 
     /// A task: counts its wakes.
-    struct Task(AtomicUsize);
-
-    impl Wake for Task {
-        fn wake(self: Arc<Self>) {
-            self.0.fetch_add(1, Ordering::SeqCst);
-        }
-    }
-
-    fn task() -> (Arc<Task>, Waker) {
-        let task = Arc::new(Task(AtomicUsize::new(0)));
-        (task.clone(), Waker::from(task))
-    }
+    use crate::test_waker::{counting as task, Wakes as Task};
 
     fn poll<F: Future + Unpin>(f: &mut F, waker: &Waker) -> Poll<F::Output> {
         Pin::new(f).poll(&mut Context::from_waker(waker))
     }
 
     fn wakes(t: &Task) -> usize {
-        t.0.load(Ordering::SeqCst)
+        t.count()
     }
 
     #[test]
