@@ -39,8 +39,8 @@ mod qmp;
 mod rtt;
 mod standin;
 
+use crate::boards::Via;
 use boot::run_board;
-use environment::Via;
 
 /// Where the stand-in for AMiRo-BLT goes: where the chip starts.
 pub const STANDIN_BASE: u32 = 0x0800_0000;
