@@ -203,7 +203,7 @@ pub fn tasks_of(
     }
     // Each software task's job: its part of its dispatcher (the dispatcher's own code and its
     // poll, the other polls of its priority left out).
-    let dispatchers = crate::wcet_write::dispatcher_of(app);
+    let dispatchers = dispatcher_of(app);
     for task in &app.tasks {
         let software = task.kind == schedule_analysis::rtic_source::RticTaskKind::Software;
         let Some(dispatcher) = dispatchers.get(&task.priority).filter(|_| software) else {
@@ -233,6 +233,28 @@ pub fn tasks_of(
         });
     }
     tasks
+}
+
+/// The dispatcher of each software-task priority, as RTIC's code generation assigns them: the priorities of
+/// every software task (whatever its `cfg`: RTIC counts them before `cfg` removes any) from the highest down,
+/// each taking the last dispatcher not yet taken.
+pub fn dispatcher_of(
+    app: &schedule_analysis::rtic_source::RticApp,
+) -> std::collections::BTreeMap<u8, String> {
+    let priorities: std::collections::BTreeSet<u8> = app
+        .tasks
+        .iter()
+        .filter(|t| {
+            t.kind == schedule_analysis::rtic_source::RticTaskKind::Software && t.priority > 0
+        })
+        .map(|t| t.priority)
+        .collect();
+    let mut available = app.dispatchers.clone();
+    priorities
+        .iter()
+        .rev()
+        .filter_map(|&p| available.pop().map(|d| (p, d)))
+        .collect()
 }
 
 /// One row per task name: a task the bounds file names with several functions, one of which each

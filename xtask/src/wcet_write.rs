@@ -32,6 +32,7 @@ use machine_code::Chip;
 use schedule_analysis::bounds::{self, BoundsFile, CeilingSection, CeilingSections, TaskBound};
 use schedule_analysis::rtic_source::{RticApp, RticTaskKind};
 
+use crate::machine::dispatcher_of;
 use crate::revision::{self, Build};
 use crate::wcet_gate;
 
@@ -217,24 +218,6 @@ fn generate(
         tasks: rows,
         idle_critical_sections: BTreeMap::new(),
     })
-}
-
-/// The dispatcher of each software-task priority, as RTIC's code generation assigns them: the priorities of
-/// every software task (whatever its `cfg`: RTIC counts them before `cfg` removes any) from the highest down,
-/// each taking the last dispatcher not yet taken.
-pub fn dispatcher_of(app: &RticApp) -> BTreeMap<u8, String> {
-    let priorities: BTreeSet<u8> = app
-        .tasks
-        .iter()
-        .filter(|t| t.kind == RticTaskKind::Software && t.priority > 0)
-        .map(|t| t.priority)
-        .collect();
-    let mut available = app.dispatchers.clone();
-    priorities
-        .iter()
-        .rev()
-        .filter_map(|&p| available.pop().map(|d| (p, d)))
-        .collect()
 }
 
 /// `cycles` at `chip`'s clock in µs, rounded up to the file's 0.001 µs.
