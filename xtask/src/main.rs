@@ -25,6 +25,7 @@ mod revision;
 mod robot;
 mod scenarios;
 mod smoke;
+mod wcet;
 mod wcet_gate;
 mod wcet_qemu;
 mod wcet_write;
@@ -130,7 +131,7 @@ enum Cmd {
     /// Execution-time bounds from the machine code: every task of the boards' built images, or one
     /// function of any ELF, in cycles on its chip (docs/analysis.md, "Execution-time bounds from the
     /// machine code").
-    Wcet(machine::WcetArgs),
+    Wcet(wcet::WcetArgs),
     /// Measured timing against the analysis: per task jobs, execution and response times against
     /// the analysed WCRT, per topic jitter and latency to the queue and the bus; from a capture of
     /// the trace channel, a QEMU run, or QEMU outputs (docs/bench.md).
@@ -307,7 +308,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             );
             Ok(stats.damaged == 0)
         }
-        Cmd::Wcet(args) => machine::wcet(&root, &args),
+        Cmd::Wcet(args) => wcet::wcet(&root, &args),
         Cmd::Bench(args) => bench::run(&root, &args),
         Cmd::Timeline(args) => bench::timeline::run(&root, &args).map(|()| true),
         Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),
