@@ -793,7 +793,7 @@ fn stream_live(
         Some(d) => Some(Duration::from_micros(crate::qemu::parse_duration(d)?)),
         None => None,
     };
-    let (mut source, mut pipeline, origin, idle): (Box<dyn live::Source>, _, _, _) =
+    let (mut source, mut pipeline, origin, idle): (Box<dyn crate::probe::Source>, _, _, _) =
         match (&args.capture, args.live) {
             (Some(path), true) => (
                 Box::new(live::GrowingFile::open(path)?),
@@ -815,7 +815,7 @@ fn stream_live(
                 let pipeline = live::Pipeline::new(hz, Some(&dir))?;
                 // The report goes beside the saved capture (the origin's last component names it).
                 (
-                    Box::new(link) as Box<dyn live::Source>,
+                    Box::new(link) as Box<dyn crate::probe::Source>,
                     pipeline,
                     dir.display().to_string(),
                     None,
