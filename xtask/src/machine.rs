@@ -359,7 +359,7 @@ pub fn bound_build(
     bounds: Option<&Path>,
 ) -> Result<Bounded> {
     let board = build.board;
-    let elf = crate::revision::kept_elf(root, build, false);
+    let elf = crate::workspace::kept_elf(root, build, false);
     ensure!(
         elf.exists(),
         "{} is not built: cargo xtask build {} --revision {}",

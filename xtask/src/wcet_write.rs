@@ -33,7 +33,7 @@ use schedule_analysis::bounds::{self, BoundsFile, CeilingSection, CeilingSection
 use schedule_analysis::rtic_source::{RticApp, RticTaskKind};
 
 use crate::machine::dispatcher_of;
-use crate::revision::{self, Build};
+use crate::revision::Build;
 use crate::wcet_gate;
 
 /// How often `--write` builds and bounds before it gives up on a fixed point.
@@ -68,7 +68,7 @@ pub fn write(
         if changed.is_empty() {
             // What CI's gate will find: each file matches its image as just rebuilt.
             for build in plan {
-                let elf = revision::kept_elf(root, build, false);
+                let elf = crate::workspace::kept_elf(root, build, false);
                 ensure!(
                     wcet_gate::check_one(root, build, &elf)? == wcet_gate::Gate::Current,
                     "{}: no bounds file after writing it",
@@ -161,7 +161,7 @@ fn generate(
     input: Option<&Path>,
 ) -> Result<BoundsFile> {
     let found = crate::machine::bound_build(root, build, wait_states, input)?;
-    let elf = revision::kept_elf(root, build, false);
+    let elf = crate::workspace::kept_elf(root, build, false);
     let bytes = std::fs::read(&elf).with_context(|| format!("reading {}", elf.display()))?;
     let image = wcet_gate::image_identity(&bytes).with_context(|| elf.display().to_string())?;
     let budgets = budgets_of(root, build)?;

@@ -40,7 +40,7 @@ pub fn build_boards(
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         cargo(&root.join(board.name), &args)
             .with_context(|| format!("building {} {}", board.name, build.revision.name))?;
-        let kept = revision::kept_elf(root, build, bare_chip);
+        let kept = kept_elf(root, build, bare_chip);
         if let Some(dir) = kept.parent() {
             std::fs::create_dir_all(dir)?;
         }
@@ -59,6 +59,16 @@ pub fn firmware_elf(root: &Path, board: &Board) -> PathBuf {
         .join(board.target)
         .join("release")
         .join(board.name)
+}
+
+/// Where a built image of `build` is kept (the cargo output is overwritten by the next revision's
+/// build): `target/firmware/<board>-<revision>.elf`.
+pub fn kept_elf(root: &Path, build: &revision::Build, bare_chip: bool) -> PathBuf {
+    target_dir(root).join("firmware").join(format!(
+        "{}{}.elf",
+        build.stem(),
+        if bare_chip { "-bare" } else { "" }
+    ))
 }
 
 /// Builds a board revision's QEMU variant (its own target dir: the features differ from the robot
