@@ -33,7 +33,8 @@ mod workspace;
 
 use boards::{select_boards, BOARDS};
 use workspace::{
-    build_boards, build_qemu, cargo, ensure_qemu, ensure_toolchain, target_dir, workspace_root,
+    build_boards, build_qemu, cargo, ensure_qemu, ensure_toolchain, qemu_target_dir, target_dir,
+    workspace_root,
 };
 
 #[derive(Parser, Debug)]
@@ -337,7 +338,7 @@ fn check(root: &Path) -> Result<()> {
     .context("clippy on the host crates")?;
     // Every revision of every board, for the chip and (where it has scenarios) for QEMU.
     let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &revision::Choice::All)?;
-    let qemu_target = qemu::target_dir(root).to_string_lossy().into_owned();
+    let qemu_target = qemu_target_dir(root).to_string_lossy().into_owned();
     for build in &every {
         let board = build.board;
         build.select_models();
@@ -492,7 +493,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
         let works: Vec<PathBuf> = list
             .iter()
             .map(|scenario| {
-                qemu::target_dir(root)
+                qemu_target_dir(root)
                     .join("scenarios")
                     .join(build.stem())
                     .join(scenario.name)
@@ -564,7 +565,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
     if failed > 0 {
         bail!(
             "{failed} QEMU scenario(s) failed (outputs in {})",
-            qemu::target_dir(root).join("scenarios").display()
+            qemu_target_dir(root).join("scenarios").display()
         );
     }
     Ok(())

@@ -7,7 +7,7 @@ use std::process::Command;
 use anyhow::{bail, Context, Result};
 
 use crate::boards::Board;
-use crate::{elf, qemu, revision};
+use crate::{elf, revision};
 
 /// The workspace root (the parent of this crate's folder).
 pub fn workspace_root() -> PathBuf {
@@ -21,6 +21,11 @@ pub fn target_dir(root: &Path) -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root.join("target"))
+}
+
+/// Where QEMU builds go, apart from the real-hardware builds.
+pub fn qemu_target_dir(root: &Path) -> PathBuf {
+    target_dir(root).join("qemu")
 }
 
 /// Builds each image in its own cargo invocation (chip features must never unify), keeps a copy of
@@ -75,7 +80,7 @@ pub fn kept_elf(root: &Path, build: &revision::Build, bare_chip: bool) -> PathBu
 /// build) and keeps its ELF apart from the other revision's (`target/qemu/firmware/`).
 pub fn build_qemu(root: &Path, build: &revision::Build) -> Result<PathBuf> {
     let board = build.board;
-    let dir = qemu::target_dir(root);
+    let dir = qemu_target_dir(root);
     let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     build.select_models();
     let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];

@@ -634,7 +634,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
                 (name, dir.clone())
             })
             .collect();
-        let elf = crate::qemu::target_dir(root)
+        let elf = crate::workspace::qemu_target_dir(root)
             .join("firmware")
             .join(build.stem());
         return match check_scenario_runs(root, &build, &elf, &runs) {
@@ -694,7 +694,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
     }
     // A QEMU run's simulated devices' tasks are held to the traced QEMU image's own bounds: the image the
     // scenarios or `--qemu` built last (without it they are held as before, NOT HELD above the release bound).
-    let elf = crate::qemu::target_dir(root)
+    let elf = crate::workspace::qemu_target_dir(root)
         .join("firmware")
         .join(build.stem());
     let image = if inputs.iter().any(|(_, _, qemu)| *qemu) && elf.exists() {
