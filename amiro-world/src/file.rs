@@ -102,7 +102,7 @@ impl fmt::Display for Problem {
             Problem::StartsInside { what, distance_m } => write!(
                 f,
                 "the robot starts {distance_m:.3} m from {what}, inside its body (radius {:.3} m)",
-                crate::motion::BODY_RADIUS_M
+                BODY_RADIUS_M
             ),
             Problem::FloorShape => write!(f, "needs exactly one of `polygon` or `line`"),
             Problem::ObstacleShape => write!(f, "needs exactly one of `polygon` or `circle`"),
@@ -203,6 +203,10 @@ struct RawLab {
     #[serde(default)]
     inclination_deg: Option<f64>,
 }
+
+/// The body's radius: the AMiRo is 100 mm across (thesis, chapter 2). The robot must start
+/// this far clear of every wall and obstacle.
+pub const BODY_RADIUS_M: f64 = 0.050;
 
 /// Where the robot starts.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -457,7 +461,7 @@ impl Arena {
     /// The robot must start clear of every wall and obstacle.
     fn check_start(&self) -> Result<(), WorldError> {
         let p = self.start.position;
-        let r = crate::motion::BODY_RADIUS_M;
+        let r = BODY_RADIUS_M;
         for (k, s) in self.segments.iter().enumerate() {
             let d = s.distance_to(p);
             if d < r {

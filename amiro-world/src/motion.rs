@@ -13,11 +13,9 @@
 
 use amiro_sensors::motion::DriveGeometry;
 
-use crate::file::{Arena, Pose};
+use crate::file::{Arena, Pose, BODY_RADIUS_M};
 use crate::geometry::Vec2;
 
-/// The body's radius: the AMiRo is 100 mm across (thesis, chapter 2).
-pub const BODY_RADIUS_M: f64 = 0.050;
 /// Longest sub-step of travel, m.
 const SUB_STEP_M: f64 = 0.001;
 /// Largest sub-step of turn, rad.

@@ -4,9 +4,9 @@
 use std::fmt::Write as _;
 use std::io::{self, Write};
 
-use crate::file::{Arena, FloorShape, Pose};
+use crate::file::{Arena, FloorShape, Pose, BODY_RADIUS_M};
 use crate::geometry::Vec2;
-use crate::motion::{wrap, BODY_RADIUS_M};
+use crate::motion::wrap;
 
 /// One row of the trajectory.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -249,7 +249,7 @@ mod tests {
             let t = f64::from(step) / 2000.0;
             let position = Vec2::new(0.15 + 1.7 * t, 0.75 + 0.55 * (t * 13.0).sin());
             let heading = t * 40.0;
-            if crate::motion::clearance(&a, position) < crate::motion::BODY_RADIUS_M {
+            if crate::motion::clearance(&a, position) < crate::file::BODY_RADIUS_M {
                 continue;
             }
             for i in 0..SENSORS {

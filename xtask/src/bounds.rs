@@ -19,7 +19,7 @@ pub fn publisher_bound_us(
     (topic, level, period_us): (&str, &str, u64),
     received_gap_us: Option<f64>,
 ) -> Result<Option<u64>> {
-    let dir = crate::qemu::target_dir(root).join("bounds");
+    let dir = crate::workspace::qemu_target_dir(root).join("bounds");
     std::fs::create_dir_all(&dir)?;
     let name = format!("qemu-{board}-{topic}-{level}-{period_us}us");
     let path = dir.join(format!("{name}.scenario.json"));

@@ -66,7 +66,7 @@ pub fn check(root: &Path) -> Result<()> {
         // The bus logs of the QEMU scenarios (`bus.log` per run): other tools must read them too.
         .env(
             "AMIRO_QEMU_SCENARIOS",
-            crate::qemu::target_dir(root).join("scenarios"),
+            crate::workspace::qemu_target_dir(root).join("scenarios"),
         )
         .current_dir(root)
         .status()

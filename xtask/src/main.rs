@@ -25,6 +25,7 @@ mod revision;
 mod robot;
 mod scenarios;
 mod smoke;
+mod wcet;
 mod wcet_gate;
 mod wcet_qemu;
 mod wcet_write;
@@ -32,7 +33,8 @@ mod workspace;
 
 use boards::{select_boards, BOARDS};
 use workspace::{
-    build_boards, build_qemu, cargo, ensure_qemu, ensure_toolchain, target_dir, workspace_root,
+    build_boards, build_qemu, cargo, ensure_qemu, ensure_toolchain, qemu_target_dir, target_dir,
+    workspace_root,
 };
 
 #[derive(Parser, Debug)]
@@ -130,7 +132,7 @@ enum Cmd {
     /// Execution-time bounds from the machine code: every task of the boards' built images, or one
     /// function of any ELF, in cycles on its chip (docs/analysis.md, "Execution-time bounds from the
     /// machine code").
-    Wcet(machine::WcetArgs),
+    Wcet(wcet::WcetArgs),
     /// Measured timing against the analysis: per task jobs, execution and response times against
     /// the analysed WCRT, per topic jitter and latency to the queue and the bus; from a capture of
     /// the trace channel, a QEMU run, or QEMU outputs (docs/bench.md).
@@ -307,7 +309,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             );
             Ok(stats.damaged == 0)
         }
-        Cmd::Wcet(args) => machine::wcet(&root, &args),
+        Cmd::Wcet(args) => wcet::wcet(&root, &args),
         Cmd::Bench(args) => bench::run(&root, &args),
         Cmd::Timeline(args) => bench::timeline::run(&root, &args).map(|()| true),
         Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),
@@ -336,7 +338,7 @@ fn check(root: &Path) -> Result<()> {
     .context("clippy on the host crates")?;
     // Every revision of every board, for the chip and (where it has scenarios) for QEMU.
     let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &revision::Choice::All)?;
-    let qemu_target = qemu::target_dir(root).to_string_lossy().into_owned();
+    let qemu_target = qemu_target_dir(root).to_string_lossy().into_owned();
     for build in &every {
         let board = build.board;
         build.select_models();
@@ -491,7 +493,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
         let works: Vec<PathBuf> = list
             .iter()
             .map(|scenario| {
-                qemu::target_dir(root)
+                qemu_target_dir(root)
                     .join("scenarios")
                     .join(build.stem())
                     .join(scenario.name)
@@ -563,7 +565,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
     if failed > 0 {
         bail!(
             "{failed} QEMU scenario(s) failed (outputs in {})",
-            qemu::target_dir(root).join("scenarios").display()
+            qemu_target_dir(root).join("scenarios").display()
         );
     }
     Ok(())

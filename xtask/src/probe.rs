@@ -1,7 +1,7 @@
 //! The debug probe, through probe-rs as a library: open a probe, flash an image, attach to a
 //! running board and read its RTT up-channels. Thin on purpose: nothing here can run without a
 //! probe, so everything else (demultiplexing, decoding, the live view) lives in `bench::live` and
-//! is tested on the host; this module only moves bytes.
+//! is tested on the host; this module only moves bytes ([`Chunk`]s, a [`Source`] of them).
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -12,13 +12,29 @@ use probe_rs::probe::DebugProbeSelector;
 use probe_rs::rtt::{Rtt, ScanRegion};
 use probe_rs::{Permissions, Session};
 
-use crate::bench::live::{Chunk, Source};
 use crate::boards::Board;
 
 /// RTT up-channel of the human log.
 const LOG_CHANNEL: usize = 0;
 /// RTT up-channel of the trace records (named `trace` by the firmware).
 const TRACE_CHANNEL: usize = 1;
+
+/// Bytes from one up-channel.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Chunk {
+    /// Channel 0, the human log.
+    Log(Vec<u8>),
+    /// Channel 1, the trace records.
+    Trace(Vec<u8>),
+}
+
+/// Where the channels' bytes come from: a probe's [`RttLink`], or a file still being written
+/// (`bench::live`).
+pub trait Source {
+    /// Appends whatever arrived since the last call to `out` (possibly nothing); `false` once the
+    /// source has ended for good.
+    fn poll(&mut self, out: &mut Vec<Chunk>) -> Result<bool>;
+}
 
 /// Opens the probe `selector` names (`VID:PID` or `VID:PID:SERIAL`), or the only one attached.
 fn open_probe(selector: Option<&str>) -> Result<probe_rs::probe::Probe> {

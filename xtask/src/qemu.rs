@@ -211,7 +211,7 @@ pub fn fresh_work_dir(root: &Path, board: &str) -> PathBuf {
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_nanos())
         .unwrap_or_default();
-    let runs = target_dir(root).join("runs");
+    let runs = crate::workspace::qemu_target_dir(root).join("runs");
     prune_runs(&runs, KEEP_RUNS, std::time::Duration::from_secs(3600));
     runs.join(format!("{board}-{}-{stamp}", std::process::id()))
 }
@@ -239,11 +239,6 @@ fn prune_runs(runs: &Path, keep: usize, min_age: std::time::Duration) {
             let _ = std::fs::remove_dir_all(dir);
         }
     }
-}
-
-/// Where QEMU builds go, apart from the real-hardware builds.
-pub fn target_dir(root: &Path) -> PathBuf {
-    crate::workspace::target_dir(root).join("qemu")
 }
 
 #[cfg(test)]

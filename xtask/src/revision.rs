@@ -1,7 +1,7 @@
 //! Board revisions in the build (`--revision`): which image of each board a command builds, how
 //! cargo is told (a `rev-*` feature), where each revision's ELF is kept, and which timing files the
 //! analysis reads for it (`AMIRO_REVISION`, schedule_analysis::scenario::REVISION_ENV).
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 
@@ -149,18 +149,6 @@ pub fn of_elf(board: &Board, elf: &Path) -> Result<&'static Revision> {
             board.name
         ),
     }
-}
-
-/// Where a built image of `build` is kept (the cargo output is overwritten by the next revision's
-/// build): `target/firmware/<board>-<revision>.elf`.
-pub fn kept_elf(root: &Path, build: &Build, bare_chip: bool) -> PathBuf {
-    crate::workspace::target_dir(root)
-        .join("firmware")
-        .join(format!(
-            "{}{}.elf",
-            build.stem(),
-            if bare_chip { "-bare" } else { "" }
-        ))
 }
 
 #[cfg(test)]

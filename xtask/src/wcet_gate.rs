@@ -107,7 +107,7 @@ pub fn check_bounds_current(root: &Path) -> Result<()> {
     let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &Choice::All)?;
     let mut missing = Vec::new();
     for build in &every {
-        let elf = revision::kept_elf(root, build, false);
+        let elf = crate::workspace::kept_elf(root, build, false);
         let name = shown(root, &bounds_path(root, build));
         match check_one(root, build, &elf)? {
             Gate::Current => println!("bounds gate: {name} matches {}", build.stem()),
@@ -139,7 +139,7 @@ fn check_stated_places(root: &Path, every: &[Build]) -> Result<()> {
         let stated = machine_code::wcet::bounds::BoundsFile::read(&path)?;
         let mut left: Option<Vec<String>> = None;
         for build in every.iter().filter(|b| b.board.name == board.name) {
-            let elf = revision::kept_elf(root, build, false);
+            let elf = crate::workspace::kept_elf(root, build, false);
             let image =
                 machine_code::Image::read(&elf).with_context(|| elf.display().to_string())?;
             let here = stated.missing_places(&image);

@@ -161,7 +161,7 @@ pub fn print(root: &Path, plan: &[Build], json: bool) -> Result<bool> {
     let mut all = Vec::new();
     for build in plan {
         build.select_models();
-        let elf = crate::qemu::target_dir(root)
+        let elf = crate::workspace::qemu_target_dir(root)
             .join("firmware")
             .join(build.stem());
         anyhow::ensure!(

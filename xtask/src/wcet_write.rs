@@ -32,7 +32,8 @@ use machine_code::Chip;
 use schedule_analysis::bounds::{self, BoundsFile, CeilingSection, CeilingSections, TaskBound};
 use schedule_analysis::rtic_source::{RticApp, RticTaskKind};
 
-use crate::revision::{self, Build};
+use crate::machine::dispatcher_of;
+use crate::revision::Build;
 use crate::wcet_gate;
 
 /// How often `--write` builds and bounds before it gives up on a fixed point.
@@ -67,7 +68,7 @@ pub fn write(
         if changed.is_empty() {
             // What CI's gate will find: each file matches its image as just rebuilt.
             for build in plan {
-                let elf = revision::kept_elf(root, build, false);
+                let elf = crate::workspace::kept_elf(root, build, false);
                 ensure!(
                     wcet_gate::check_one(root, build, &elf)? == wcet_gate::Gate::Current,
                     "{}: no bounds file after writing it",
@@ -160,7 +161,7 @@ fn generate(
     input: Option<&Path>,
 ) -> Result<BoundsFile> {
     let found = crate::machine::bound_build(root, build, wait_states, input)?;
-    let elf = revision::kept_elf(root, build, false);
+    let elf = crate::workspace::kept_elf(root, build, false);
     let bytes = std::fs::read(&elf).with_context(|| format!("reading {}", elf.display()))?;
     let image = wcet_gate::image_identity(&bytes).with_context(|| elf.display().to_string())?;
     let budgets = budgets_of(root, build)?;
@@ -217,24 +218,6 @@ fn generate(
         tasks: rows,
         idle_critical_sections: BTreeMap::new(),
     })
-}
-
-/// The dispatcher of each software-task priority, as RTIC's code generation assigns them: the priorities of
-/// every software task (whatever its `cfg`: RTIC counts them before `cfg` removes any) from the highest down,
-/// each taking the last dispatcher not yet taken.
-pub fn dispatcher_of(app: &RticApp) -> BTreeMap<u8, String> {
-    let priorities: BTreeSet<u8> = app
-        .tasks
-        .iter()
-        .filter(|t| t.kind == RticTaskKind::Software && t.priority > 0)
-        .map(|t| t.priority)
-        .collect();
-    let mut available = app.dispatchers.clone();
-    priorities
-        .iter()
-        .rev()
-        .filter_map(|&p| available.pop().map(|d| (p, d)))
-        .collect()
 }
 
 /// `cycles` at `chip`'s clock in µs, rounded up to the file's 0.001 µs.

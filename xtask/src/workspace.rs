@@ -7,7 +7,7 @@ use std::process::Command;
 use anyhow::{bail, Context, Result};
 
 use crate::boards::Board;
-use crate::{elf, qemu, revision};
+use crate::{elf, revision};
 
 /// The workspace root (the parent of this crate's folder).
 pub fn workspace_root() -> PathBuf {
@@ -21,6 +21,11 @@ pub fn target_dir(root: &Path) -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root.join("target"))
+}
+
+/// Where QEMU builds go, apart from the real-hardware builds.
+pub fn qemu_target_dir(root: &Path) -> PathBuf {
+    target_dir(root).join("qemu")
 }
 
 /// Builds each image in its own cargo invocation (chip features must never unify), keeps a copy of
@@ -40,7 +45,7 @@ pub fn build_boards(
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         cargo(&root.join(board.name), &args)
             .with_context(|| format!("building {} {}", board.name, build.revision.name))?;
-        let kept = revision::kept_elf(root, build, bare_chip);
+        let kept = kept_elf(root, build, bare_chip);
         if let Some(dir) = kept.parent() {
             std::fs::create_dir_all(dir)?;
         }
@@ -61,11 +66,21 @@ pub fn firmware_elf(root: &Path, board: &Board) -> PathBuf {
         .join(board.name)
 }
 
+/// Where a built image of `build` is kept (the cargo output is overwritten by the next revision's
+/// build): `target/firmware/<board>-<revision>.elf`.
+pub fn kept_elf(root: &Path, build: &revision::Build, bare_chip: bool) -> PathBuf {
+    target_dir(root).join("firmware").join(format!(
+        "{}{}.elf",
+        build.stem(),
+        if bare_chip { "-bare" } else { "" }
+    ))
+}
+
 /// Builds a board revision's QEMU variant (its own target dir: the features differ from the robot
 /// build) and keeps its ELF apart from the other revision's (`target/qemu/firmware/`).
 pub fn build_qemu(root: &Path, build: &revision::Build) -> Result<PathBuf> {
     let board = build.board;
-    let dir = qemu::target_dir(root);
+    let dir = qemu_target_dir(root);
     let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     build.select_models();
     let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];

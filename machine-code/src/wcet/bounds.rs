@@ -253,9 +253,83 @@ pub struct BoundsFile {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub per_frame: Vec<PerFrame>,
     /// The publisher's release loop and its topic groups: a bound per topic's job
-    /// ([`super::topics::PerTopic`]).
+    /// ([`PerTopic`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub topics: Option<super::topics::PerTopic>,
+    pub topics: Option<PerTopic>,
+}
+
+/// The bounds file's `topics`: the publisher's release loop and its topic groups, for a bound per
+/// topic's job ([`super::topics`] says how it is used).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PerTopic {
+    /// The release loop (`for release in releases`), as the analysis names it.
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+    /// Why one job's releases each cost at most one topic's bound.
+    pub reason: String,
+    pub groups: Vec<TopicGroup>,
+}
+
+/// Topics whose job calls the same sample functions.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TopicGroup {
+    /// The name the report gives the group (`compass`, `diagnostics`).
+    pub name: String,
+    /// Its topics (`magnetometer-x`, as the timing file names them).
+    pub topics: Vec<String>,
+    /// The functions (demangled, without hash) only a job of these topics calls.
+    pub functions: Vec<String>,
+    /// The waits of this group's jobs, in place of the file's at the same places (`function`, `file`,
+    /// `line`): the stated latency of the devices its sample addresses.
+    #[serde(default)]
+    pub waits: Vec<WaitBound>,
+    /// Loop bounds of this group's jobs, in place of the file's at the same places (how many frames
+    /// this group's sample holds, where the file states the most of any sample).
+    #[serde(default)]
+    pub loops: Vec<LoopBound>,
+    /// Why only a job of these topics calls `functions` (the sampler's dispatch), and the waits'.
+    pub reason: String,
+}
+
+impl PerTopic {
+    /// Checks every group has topics, functions and a reason, and each wait has a positive figure
+    /// and a source.
+    fn check(&self) -> Result<(), Error> {
+        if self.reason.trim().is_empty() || self.groups.is_empty() {
+            return Err(Error::Bounds(format!(
+                "the per-topic statement at {}:{} in {} needs its groups and a reason",
+                self.file, self.line, self.function
+            )));
+        }
+        for g in &self.groups {
+            if g.topics.is_empty() || g.functions.is_empty() || g.reason.trim().is_empty() {
+                return Err(Error::Bounds(format!(
+                    "the topic group {} needs its topics, the functions only its jobs call and a reason",
+                    g.name
+                )));
+            }
+            for l in &g.loops {
+                if l.bound == 0 || l.reason.trim().is_empty() {
+                    return Err(Error::Bounds(format!(
+                        "the loop of topic group {} at {}:{} in {} needs a bound of at least 1 and a reason",
+                        g.name, l.file, l.line, l.function
+                    )));
+                }
+            }
+            for w in &g.waits {
+                if !(w.wait_us.is_finite() && w.wait_us > 0.0) || w.source.trim().is_empty() {
+                    return Err(Error::Bounds(format!(
+                        "the wait of topic group {} at {}:{} in {} needs a positive wait_us and its source",
+                        g.name, w.file, w.line, w.function
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Whether a line-table path is the stated `file`.

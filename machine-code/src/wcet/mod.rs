@@ -142,7 +142,7 @@ pub struct TaskBound {
     /// job, the pass and completion per frame, the requeue per abort, beside the job's bound above.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub per_frame: Option<FrameBound>,
-    /// Where the bounds file states the task's release loop per topic ([`topics::PerTopic`]): the
+    /// Where the bounds file states the task's release loop per topic ([`bounds::PerTopic`]): the
     /// bound of one topic group's job each, beside the job's bound above.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub topics: Vec<TopicBound>,
@@ -509,11 +509,11 @@ pub fn bound_tasks(
                             .iter()
                             .map(|&group| {
                                 let stated = bounds.for_topic_group(per_topic, group);
-                                let excluded = topics::PerTopic::excluded(group, &present);
+                                let excluded = bounds::PerTopic::excluded(group, &present);
                                 let mut again =
                                     Analysis::excluding(image, chip, &stated, &excluded);
                                 let (_, mut b) = bound_task(&mut again, image, task);
-                                if let Some(t) = topics::PerTopic::shared_topic(group, &present) {
+                                if let Some(t) = bounds::PerTopic::shared_topic(group, &present) {
                                     b = to_bound(Err(format!(
                                         "the topic {t} is in two topic groups of this image"
                                     )));

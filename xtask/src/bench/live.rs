@@ -11,25 +11,11 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 
+use crate::probe::{Chunk, Source};
+
 use super::capture::{Capture, Stream};
 use super::report::{columns, names, task_cells, topic_cells};
 use super::Bench;
-
-/// Bytes from one up-channel.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Chunk {
-    /// Channel 0, the human log.
-    Log(Vec<u8>),
-    /// Channel 1, the trace records.
-    Trace(Vec<u8>),
-}
-
-/// Where the channels' bytes come from.
-pub trait Source {
-    /// Appends whatever arrived since the last call to `out` (possibly nothing); `false` once the
-    /// source has ended for good.
-    fn poll(&mut self, out: &mut Vec<Chunk>) -> Result<bool>;
-}
 
 /// Splits the log channel into lines: a line is complete at its `\n`; a partial one waits.
 #[derive(Debug, Default)]

@@ -634,7 +634,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
                 (name, dir.clone())
             })
             .collect();
-        let elf = crate::qemu::target_dir(root)
+        let elf = crate::workspace::qemu_target_dir(root)
             .join("firmware")
             .join(build.stem());
         return match check_scenario_runs(root, &build, &elf, &runs) {
@@ -694,7 +694,7 @@ pub fn run(root: &Path, args: &BenchArgs) -> Result<bool> {
     }
     // A QEMU run's simulated devices' tasks are held to the traced QEMU image's own bounds: the image the
     // scenarios or `--qemu` built last (without it they are held as before, NOT HELD above the release bound).
-    let elf = crate::qemu::target_dir(root)
+    let elf = crate::workspace::qemu_target_dir(root)
         .join("firmware")
         .join(build.stem());
     let image = if inputs.iter().any(|(_, _, qemu)| *qemu) && elf.exists() {
@@ -793,7 +793,7 @@ fn stream_live(
         Some(d) => Some(Duration::from_micros(crate::qemu::parse_duration(d)?)),
         None => None,
     };
-    let (mut source, mut pipeline, origin, idle): (Box<dyn live::Source>, _, _, _) =
+    let (mut source, mut pipeline, origin, idle): (Box<dyn crate::probe::Source>, _, _, _) =
         match (&args.capture, args.live) {
             (Some(path), true) => (
                 Box::new(live::GrowingFile::open(path)?),
@@ -815,7 +815,7 @@ fn stream_live(
                 let pipeline = live::Pipeline::new(hz, Some(&dir))?;
                 // The report goes beside the saved capture (the origin's last component names it).
                 (
-                    Box::new(link) as Box<dyn live::Source>,
+                    Box::new(link) as Box<dyn crate::probe::Source>,
                     pipeline,
                     dir.display().to_string(),
                     None,

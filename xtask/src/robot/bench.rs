@@ -62,7 +62,9 @@ pub fn command(root: &Path, duration: Option<&str>) -> Result<()> {
     );
     let mut costs = Vec::new();
     for (name, actions) in cases {
-        let work = crate::qemu::target_dir(root).join("robot-bench").join(name);
+        let work = crate::workspace::qemu_target_dir(root)
+            .join("robot-bench")
+            .join(name);
         let _ = std::fs::remove_dir_all(&work);
         let load_before = load();
         let started = Instant::now();

@@ -714,7 +714,7 @@ fn same_bytes_twice(
     let duration = duration.context("no `# duration:`")?;
     let mut texts = Vec::new();
     for k in 0..2 {
-        let work = crate::qemu::target_dir(root)
+        let work = crate::workspace::qemu_target_dir(root)
             .join("scenarios")
             .join("robot")
             .join(format!("{name}-determinism-{k}"));
@@ -738,7 +738,7 @@ fn same_bytes_twice(
 fn long_demo(root: &Path, firmware: &[amiro_robot::Firmware; 3]) -> Result<String> {
     let path = root.join("robot").join("scenarios").join("thesis-demo.log");
     let (actions, _) = amiro_robot::stimulus::read(&path)?;
-    let work = crate::qemu::target_dir(root)
+    let work = crate::workspace::qemu_target_dir(root)
         .join("scenarios")
         .join("robot")
         .join("thesis-demo-10s");
@@ -842,7 +842,7 @@ pub fn run_all(root: &Path) -> Result<()> {
             .join("robot")
             .join("scenarios")
             .join(format!("{}.log", scenario.name));
-        let work = crate::qemu::target_dir(root)
+        let work = crate::workspace::qemu_target_dir(root)
             .join("scenarios")
             .join("robot")
             .join(scenario.name);
@@ -910,7 +910,7 @@ pub fn run_all(root: &Path) -> Result<()> {
     ensure!(
         failed == 0,
         "{failed} robot scenario(s) failed (outputs in {})",
-        crate::qemu::target_dir(root)
+        crate::workspace::qemu_target_dir(root)
             .join("scenarios")
             .join("robot")
             .display()

@@ -48,7 +48,7 @@ pub fn run(root: &Path, firmware: &[amiro_robot::Firmware; 3]) -> Result<String>
     let duration = duration.with_context(|| format!("{}: no `# duration:`", stimulus.display()))?;
     let mut runs = Vec::new();
     for k in 0..2 {
-        let work = crate::qemu::target_dir(root)
+        let work = crate::workspace::qemu_target_dir(root)
             .join("scenarios")
             .join("robot")
             .join(format!("{STIMULUS}-{k}"));
@@ -223,7 +223,7 @@ fn behaviour(
     duration_us: u64,
 ) -> Result<Behaviour> {
     let python = crate::interop::venv(root, &crate::workspace::target_dir(root).join("interop"))?;
-    let work = crate::qemu::target_dir(root)
+    let work = crate::workspace::qemu_target_dir(root)
         .join("scenarios")
         .join("robot")
         .join(name);

@@ -7,11 +7,11 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use object::{Object, ObjectSymbol};
 
-use crate::boards::Board;
+use crate::boards::{Board, Via};
 use crate::qemu::ICOUNT_SHIFT;
 
 use super::checks::{check_log, check_timer};
-use super::environment::{expected_ending, Ending, Via};
+use super::environment::{expected_ending, Ending};
 use super::qmp::Qmp;
 use super::rtt::rtt_up_channel;
 use super::standin::{callback_at, flash_image, standin};

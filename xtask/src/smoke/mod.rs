@@ -39,8 +39,8 @@ mod qmp;
 mod rtt;
 mod standin;
 
+use crate::boards::Via;
 use boot::run_board;
-use environment::Via;
 
 /// Where the stand-in for AMiRo-BLT goes: where the chip starts.
 pub const STANDIN_BASE: u32 = 0x0800_0000;
@@ -58,7 +58,7 @@ pub fn run(root: &Path, builds: &[crate::revision::Build], built: bool) -> Resul
     let mut failed = Vec::new();
     for build in builds {
         let board = build.board;
-        let elf = crate::revision::kept_elf(root, build, false);
+        let elf = crate::workspace::kept_elf(root, build, false);
         let name = format!("{} {}", board.name, build.revision.name);
         // Every wait on the boot path and after it bounded: the machine code says so.
         let found = machine_code::waits::scan_elf(&elf)?;
