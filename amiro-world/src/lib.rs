@@ -9,7 +9,7 @@
 //!
 //! | module | owns |
 //! |---|---|
-//! | [`file`] | the world file's format and its checks ([`Arena`], [`WorldError`]) |
+//! | [`file`](mod@file) | the world file's format and its checks ([`Arena`], [`WorldError`]) |
 //! | [`geometry`] | points, segments, circles, rays, polygons |
 //! | [`motion`] | the pose from the wheels' travel, the body stopped by walls, contacts |
 //! | [`ring`], [`floor`], [`imu`] | the sensor models |

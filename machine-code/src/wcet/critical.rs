@@ -1,6 +1,6 @@
 //! Critical sections from the machine code: every priority raise a task's code can make (its
 //! handler or dispatcher, and every function it calls), each bounded from the raise to its restore
-//! with the cycle model and loop bounds of the task bounds ([`super::analysis`]), and per task the
+//! with the cycle model and loop bounds of the task bounds (`wcet::analysis`), and per task the
 //! longest section at each ceiling: what the task can block others for (SRP's blocking term).
 //!
 //! The raises and restores, as RTIC 2 and `critical-section` (cortex-m, single core) compile:
@@ -23,7 +23,7 @@
 //! register resolved as the bound resolves it, else every function whose address the image stores
 //! (a superset); not a function that cannot return (a panic halts the board).
 //!
-//! [`super::masking`] reads the instructions and builds a section's part of the graph.
+//! `wcet::masking` reads the instructions and builds a section's part of the graph.
 use std::collections::{BTreeMap, BTreeSet};
 
 use serde::Serialize;
