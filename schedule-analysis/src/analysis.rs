@@ -269,64 +269,80 @@ impl Analysis {
 
     /// What fails, as `board/task`, `bus/message`, `topic/name (deadline|jitter budget)`.
     pub fn failures(&self) -> Vec<String> {
-        let mut out = Vec::new();
-        for b in &self.boards {
-            for t in &b.tasks {
-                if !t.schedulable() {
-                    out.push(format!("{}/{}", b.name, t.name));
-                }
-            }
-        }
-        if let Some(bus) = &self.bus {
-            for m in &bus.messages {
-                if !m.schedulable() {
-                    out.push(format!("bus/{}", m.name));
-                }
-            }
-        }
-        for topic in &self.topics {
-            if !topic.deadline_met() {
-                out.push(format!("topic/{} (end-to-end deadline)", topic.name));
-            }
-            if !topic.budget_met() && topic.jitter_budget.is_some() {
-                out.push(format!("topic/{} (jitter budget)", topic.name));
-            }
-        }
-        out
+        self.failing()
+            .into_iter()
+            .map(|f| format!("{}{}", f.what, f.suffix))
+            .collect()
     }
 
     /// [`Analysis::failures`] with each one's figure against its limit: `diwheeldrive/can_tx WCRT 515.6 of
     /// 158 µs`, `bus/m unbounded`, `topic/gyroscope jitter 1057.4 of 1000 µs`, `topic/t end to end 2100 of
     /// 2000 µs`; the same failures in the same order.
     pub fn failure_figures(&self) -> Vec<String> {
-        let figure = |what: &str, value: Option<Time>, limit: Time| match value {
-            Some(v) => format!("{what}{v} of {limit} µs"),
-            None => "unbounded".to_string(),
+        self.failing().into_iter().map(|f| f.figure()).collect()
+    }
+
+    /// Every failure once, in the report's order: tasks, messages, topics (deadline, then jitter budget).
+    fn failing(&self) -> Vec<Failure> {
+        let failure = |what: String, suffix, quantity, value, limit| Failure {
+            what,
+            suffix,
+            quantity,
+            value,
+            limit,
         };
         let mut out = Vec::new();
         for b in &self.boards {
             for t in b.tasks.iter().filter(|t| !t.schedulable()) {
-                let f = figure("WCRT ", t.wcrt(), t.deadline);
-                out.push(format!("{}/{} {f}", b.name, t.name));
+                let what = format!("{}/{}", b.name, t.name);
+                out.push(failure(what, "", "WCRT", t.wcrt(), t.deadline));
             }
         }
         if let Some(bus) = &self.bus {
             for m in bus.messages.iter().filter(|m| !m.schedulable()) {
-                let f = figure("WCRT ", m.wcrt(), m.deadline);
-                out.push(format!("bus/{} {f}", m.name));
+                let what = format!("bus/{}", m.name);
+                out.push(failure(what, "", "WCRT", m.wcrt(), m.deadline));
             }
         }
         for topic in &self.topics {
+            let what = format!("topic/{}", topic.name);
             if !topic.deadline_met() {
-                let f = figure("end to end ", topic.worst, topic.deadline);
-                out.push(format!("topic/{} {f}", topic.name));
+                let suffix = " (end-to-end deadline)";
+                out.push(failure(
+                    what.clone(),
+                    suffix,
+                    "end to end",
+                    topic.worst,
+                    topic.deadline,
+                ));
             }
             if let Some(budget) = topic.jitter_budget.filter(|_| !topic.budget_met()) {
-                let f = figure("jitter ", topic.jitter(), budget);
-                out.push(format!("topic/{} {f}", topic.name));
+                let suffix = " (jitter budget)";
+                out.push(failure(what, suffix, "jitter", topic.jitter(), budget));
             }
         }
         out
+    }
+}
+
+/// One failure of an analysis: what fails, and its figure against its limit.
+struct Failure {
+    /// `board/task`, `bus/message` or `topic/name`.
+    what: String,
+    /// Which limit a topic breaks, as [`Analysis::failures`] names it (` (jitter budget)`), or empty.
+    suffix: &'static str,
+    /// `WCRT`, `end to end`, `jitter`.
+    quantity: &'static str,
+    value: Option<Time>,
+    limit: Time,
+}
+
+impl Failure {
+    fn figure(&self) -> String {
+        match self.value {
+            Some(v) => format!("{} {} {v} of {} µs", self.what, self.quantity, self.limit),
+            None => format!("{} unbounded", self.what),
+        }
     }
 }
 
