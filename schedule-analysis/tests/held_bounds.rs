@@ -191,15 +191,12 @@ fn the_second_run_names_the_held_bound_that_turns_a_verdict_into_a_miss() {
     // Alone, can_tx's breaks the set and can_status's does not.
     let alone = |row: &str| dwd.alone.iter().find(|a| a.row == row).unwrap();
     // What it breaks comes with its figure: can_tx's own response against its one-frame deadline first.
-    let breaks = alone("can_tx")
-        .breaks
-        .clone()
-        .expect("can_tx breaks the set");
+    let breaks = &alone("can_tx").breaks;
     assert!(
-        breaks.starts_with("diwheeldrive/can_tx WCRT ") && breaks.contains(" of 79 µs"),
-        "{breaks}"
+        breaks[0].starts_with("diwheeldrive/can_tx WCRT ") && breaks[0].ends_with(" of 79 µs"),
+        "{breaks:?}"
     );
-    assert_eq!(alone("can_status").breaks, None);
+    assert!(alone("can_status").breaks.is_empty());
     let tx = dwd
         .misses
         .iter()
@@ -270,10 +267,13 @@ fn the_second_run_names_the_held_bound_that_turns_a_verdict_into_a_miss() {
         .iter()
         .position(|l| l == each)
         .unwrap_or_else(|| panic!("{each:?} not in {lines:?}"));
-    assert_eq!(
-        lines[at + 1],
-        format!("    can_tx: {}", alone("can_tx").breaks.as_deref().unwrap())
-    );
+    // Its failures, at most three listed, then how many more.
+    let breaks = &alone("can_tx").breaks;
+    let mut listed: Vec<String> = breaks.iter().take(3).cloned().collect();
+    if breaks.len() > 3 {
+        listed.push(format!("and {} more", breaks.len() - 3));
+    }
+    assert_eq!(lines[at + 1], format!("    can_tx: {}", listed.join(", ")));
     // In the report, before the verdict, which stays the first run's; and in its JSON.
     let report = report.with_on_bounds(Some(on));
     assert!(report.all_ok());

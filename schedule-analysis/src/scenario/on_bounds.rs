@@ -55,9 +55,9 @@ pub struct Alone {
     /// The row (`can_tx`), or `publisher[…]` for every publisher row of the board.
     pub row: String,
     /// What fails in the set with only this bound used, each with its figure against its limit
-    /// (`diwheeldrive/can_tx WCRT 515.6 of 158 µs`, at most [`ALONE_LISTED`], then how many more), `None` when it
-    /// passes.
-    pub breaks: Option<String>,
+    /// (`diwheeldrive/can_tx WCRT 515.6 of 158 µs`); empty when it passes. The report lists at most
+    /// [`ALONE_LISTED`], then how many more.
+    pub breaks: Vec<String>,
 }
 
 /// A job that misses on the bounds.
@@ -143,9 +143,9 @@ impl OnBounds {
                 b.board,
                 b.utilisation * 100.0
             ));
-            out.extend(capped(b.misses.iter().map(Miss::line), "  "));
+            out.extend(capped(b.misses.iter().map(Miss::line), "  ", MAX_LISTED));
             let (breaks, passes): (Vec<&Alone>, Vec<&Alone>) =
-                b.alone.iter().partition(|a| a.breaks.is_some());
+                b.alone.iter().partition(|a| !a.breaks.is_empty());
             if !b.alone.is_empty() {
                 let passes: Vec<&str> = passes.iter().map(|a| a.row.as_str()).collect();
                 let passes = if passes.is_empty() {
@@ -161,27 +161,32 @@ impl OnBounds {
                 out.push(format!(
                     "  each held bound alone (the others held): passes: {passes}; {breaks_word}"
                 ));
-                out.extend(
-                    breaks
-                        .iter()
-                        .map(|a| format!("    {}: {}", a.row, a.breaks.as_deref().unwrap_or(""))),
-                );
+                out.extend(breaks.iter().map(|a| {
+                    let listed: Vec<String> =
+                        capped(a.breaks.iter().cloned(), "", ALONE_LISTED).collect();
+                    format!("    {}: {}", a.row, listed.join(", "))
+                }));
             }
         }
-        out.extend(capped(self.bus.iter().map(|l| format!("bus: {l}")), ""));
+        out.extend(capped(
+            self.bus.iter().map(|l| format!("bus: {l}")),
+            "",
+            MAX_LISTED,
+        ));
         out
     }
 }
 
-/// At most [`MAX_LISTED`] lines, each after `indent`, then `and N more`.
+/// At most `limit` lines, each after `indent`, then `and N more`.
 fn capped<'a>(
     lines: impl Iterator<Item = String>,
     indent: &'a str,
+    limit: usize,
 ) -> impl Iterator<Item = String> + 'a {
     let all: Vec<String> = lines.collect();
-    let more = all.len().saturating_sub(MAX_LISTED);
+    let more = all.len().saturating_sub(limit);
     all.into_iter()
-        .take(MAX_LISTED)
+        .take(limit)
         .map(move |l| format!("{indent}{l}"))
         .chain((more > 0).then(|| format!("{indent}and {more} more")))
 }
@@ -287,14 +292,9 @@ fn alone(
             },
         )
         .failure_figures();
-        let more = failures.len().saturating_sub(ALONE_LISTED);
-        let mut listed: Vec<String> = failures.into_iter().take(ALONE_LISTED).collect();
-        if more > 0 {
-            listed.push(format!("and {more} more"));
-        }
         out.push(Alone {
             row: name,
-            breaks: (!listed.is_empty()).then(|| listed.join(", ")),
+            breaks: failures,
         });
     }
     Ok(out)
@@ -432,11 +432,11 @@ mod tests {
                 alone: vec![
                     Alone {
                         row: "can_tx".into(),
-                        breaks: Some("b/can_tx WCRT 120.25 of 95 µs".into()),
+                        breaks: vec!["b/can_tx WCRT 120.25 of 95 µs".into()],
                     },
                     Alone {
                         row: "publisher[…]".into(),
-                        breaks: None,
+                        breaks: Vec::new(),
                     },
                 ],
             }],
