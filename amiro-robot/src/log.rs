@@ -420,6 +420,10 @@ impl crate::Sink for RunFiles {
     fn line(&mut self, line: &str) {
         if self.error.is_none() {
             if let Err(e) = self.write(line) {
+                // Said at once: the run goes on without its logs, and `finish` returns the error.
+                eprintln!(
+                    "robot: writing output.log or bus.log failed ({e:#}): the logs stop here"
+                );
                 self.error = Some(e);
             }
         }

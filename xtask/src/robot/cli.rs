@@ -260,7 +260,8 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
     }
     let outcome = outcome?;
     let rotated = files.rotation_summary();
-    files.finish()?;
+    // A failed log write is said when it happens; the report below still comes, the error after it.
+    let logs = files.finish();
     let duration = outcome.ended_at;
     let wall = started.elapsed().as_secs_f64();
     // A live run kept the report's running figures only; a run in virtual time every frame.
@@ -335,6 +336,7 @@ pub fn command(root: &Path, args: &RobotArgs) -> Result<bool> {
         );
         println!("{}", world.summary());
     }
+    logs?;
     Ok(!(args.check && exceeded > 0))
 }
 
