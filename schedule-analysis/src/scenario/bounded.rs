@@ -480,26 +480,25 @@ fn take(
     }
 }
 
-/// `why` as the report prints it: a held reason (after [`HELD`]) already printed for an earlier row is replaced
-/// by that row's name, so rows sharing one reason (a publisher task's topics) do not repeat it.
+/// `why` as the report prints it: where it ends with the row's held reason (the bounds file's `held.reason`) and
+/// an earlier row printed the same reason, the reason is replaced by that row's name, so rows sharing one reason
+/// (a publisher task's topics) do not repeat it.
 fn shared_reason_once<'a>(
     told: &mut Vec<(&'a str, &'a str)>,
     row: &'a str,
     why: &'a str,
+    held: Option<&'a str>,
 ) -> String {
-    let Some(at) = why.find(HELD) else {
+    let Some(reason) = held.filter(|r| !r.is_empty() && why.ends_with(*r)) else {
         return why.to_string();
     };
-    let reason = &why[at + HELD.len()..];
     if let Some((first, _)) = told.iter().find(|(_, r)| *r == reason) {
-        return format!("{}{HELD}the reason given for {first} above", &why[..at]);
+        let before = &why[..why.len() - reason.len()];
+        return format!("{before}the reason given for {first} above");
     }
     told.push((row, reason));
     why.to_string()
 }
-
-/// What a held bound's reason follows (xtask's `wcet --write` writes it).
-const HELD: &str = ", held back as its budget: ";
 
 /// The report's lines about a board's budgets: the first says how many are bounded from the machine code (on which
 /// chip, clock and wait states) and how many stated; where a bounds file exists, one line follows per stated budget
@@ -552,7 +551,13 @@ pub(super) fn budgets_lines(b: &BoardBudgets, measured: &[String]) -> Vec<String
                         name == row.as_str() || bounds::publisher_row(name) == **row
                     })
                 });
-                let why = shared_reason_once(&mut told, row, why);
+                let held = b
+                    .bounds
+                    .as_ref()
+                    .and_then(|f| f.task(row))
+                    .and_then(|t| t.held.as_ref())
+                    .map(|h| h.reason.as_str());
+                let why = shared_reason_once(&mut told, row, why, held);
                 match m {
                     Some(m) => format!("{}: stated budget of {row}: {why}; measured {m}", b.board),
                     None => format!("{}: stated budget of {row}: {why}", b.board),
@@ -687,14 +692,18 @@ mod tests {
         let c =
             "bound declined: publisher[c]: bounded at 3 cycles, held back as its budget: another";
         let d = "bound declined: thread mode";
-        assert_eq!(shared_reason_once(&mut told, "publisher[a]", a), a);
+        let held = Some("the samples");
+        assert_eq!(shared_reason_once(&mut told, "publisher[a]", a, held), a);
         assert_eq!(
-            shared_reason_once(&mut told, "publisher[b]", b),
+            shared_reason_once(&mut told, "publisher[b]", b, held),
             "bound declined: publisher[b]: bounded at 2 cycles, held back as its budget: the reason given \
              for publisher[a] above"
         );
-        assert_eq!(shared_reason_once(&mut told, "publisher[c]", c), c);
-        assert_eq!(shared_reason_once(&mut told, "admit", d), d);
+        assert_eq!(
+            shared_reason_once(&mut told, "publisher[c]", c, Some("another")),
+            c
+        );
+        assert_eq!(shared_reason_once(&mut told, "admit", d, None), d);
     }
     use crate::bounds::{CeilingSection, CeilingSections, Chip, ImageIdentity};
     use crate::model::TaskKind;
