@@ -18,6 +18,12 @@ pub mod bxcan;
 pub mod can;
 pub mod clock_tree;
 pub mod digits;
+pub mod i2c_bus;
+pub mod i2c_engine;
+#[cfg(test)]
+mod i2c_model;
+#[cfg(test)]
+mod i2c_tests;
 pub mod layout;
 pub mod rx_queue;
 pub mod spi;
@@ -39,6 +45,8 @@ pub mod fault;
 pub mod health;
 #[cfg(target_os = "none")]
 pub mod i2c;
+#[cfg(target_os = "none")]
+pub mod i2c_block;
 #[cfg(target_os = "none")]
 pub mod liveness;
 #[cfg(target_os = "none")]

@@ -304,6 +304,15 @@ pub struct Readings {
 }
 
 impl Readings {
+    /// No readings (a slot's before its first script).
+    pub const fn empty() -> Self {
+        Self {
+            bytes: [0; MAX_READ_BYTES],
+            reads: [0; MAX_OPERATIONS],
+            stored: 0,
+        }
+    }
+
     /// Empty readings laid out for `script`'s operations.
     pub fn for_script(script: &Script) -> Self {
         let mut reads = [0; MAX_OPERATIONS];
