@@ -12,11 +12,13 @@
 //!   only: a waiting script is removed, a running one aborted (the block reset and set up again)
 //!   and the next waiting one started.
 //!
-//! The state is shared by the interrupts and the clients under one critical section per call,
-//! whose length is bounded: the engine's actions for one event (docs/i2c.md's table, the longest a
-//! START's bounded STOP poll) and at most one walk of the slots (no loop longer than the slot
-//! count). The same section is what keeps the engine's uninterruptible steps uninterrupted
-//! (`i2c_engine`). No heap; a slot holds its script and readings by value.
+//! The state is shared by the interrupts and the clients under critical sections whose length is
+//! bounded: the engine's actions for one event (at most six register accesses), a slot's script
+//! and readings copied in, and at most one walk of the slots (no loop longer than the slot count).
+//! The same section is what keeps the engine's uninterruptible steps uninterrupted
+//! (`i2c_engine`). The waits for a STOP or a repeated START to go out are polled outside it, a
+//! section per poll, at most [`CONDITION_POLLS`]. No heap; a slot holds its script and readings
+//! by value.
 use core::cell::UnsafeCell;
 use core::future::Future;
 use core::pin::Pin;
@@ -24,7 +26,7 @@ use core::task::{Context, Poll, Waker};
 
 use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
 
-use crate::i2c_engine::{Block, Engine, Progress};
+use crate::i2c_engine::{Block, Engine, Progress, CONDITION_POLLS};
 
 /// A client of the bus: a slot index checked against the bus's slot count ([`I2cBus::client`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -141,6 +143,7 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
             inner.after(progress)
         });
         wake(waker);
+        self.settle();
     }
 
     /// The block's error interrupt (I2Cx_ER).
@@ -151,6 +154,33 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
             inner.after(progress)
         });
         wake(waker);
+        self.settle();
+    }
+
+    /// Waits for the condition the engine awaits (a STOP to clear before a START, a repeated
+    /// START to go out), each poll a critical section of its own, at most [`CONDITION_POLLS`]
+    /// polls; then lets the engine go on. A client's abort and a new script between two polls
+    /// change the wait's number, and the old wait ends without touching the new one.
+    fn settle(&self) {
+        let Some(wait) = self.with(|inner| inner.engine.awaiting()) else {
+            return;
+        };
+        let mut cleared = false;
+        for _ in 0..CONDITION_POLLS {
+            let pending = self.with(|inner| {
+                inner.engine.awaiting() == Some(wait)
+                    && inner.engine.condition_pending(&mut inner.block)
+            });
+            if !pending {
+                cleared = true;
+                break;
+            }
+        }
+        self.with(|inner| {
+            if inner.engine.awaiting() == Some(wait) {
+                inner.engine.resume(cleared, &mut inner.block);
+            }
+        });
     }
 
     /// Runs `f` on the block (a test's model, or the board's look at the adapter), inside the
@@ -210,7 +240,6 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
         self.running = Some(index);
         let slot = &mut self.slots[index];
         slot.state = State::Running;
-        slot.readings = Readings::for_script(&slot.script);
         match self.engine.start(&slot.script, &mut self.block) {
             Progress::Running => None,
             // Only an empty script finishes at its start, and `Transfer` never submits one.
@@ -232,8 +261,10 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
 
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
         let this = self.get_mut();
+        // The readings' layout is made here, outside the critical section.
+        let readings = Readings::for_script(&this.script);
         if !this.submitted && this.script.operations().is_empty() {
-            return Poll::Ready(Ok(Readings::for_script(&this.script)));
+            return Poll::Ready(Ok(readings));
         }
         let (poll, started) = this.bus.with(|inner| {
             let mut started = None;
@@ -250,6 +281,7 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
                     );
                 }
                 slot.script = this.script;
+                slot.readings = readings;
                 slot.state = State::Waiting(inner.submitted);
                 inner.submitted += 1;
                 this.submitted = true;
@@ -269,6 +301,7 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
             (Poll::Pending, started)
         });
         wake([started, None]);
+        this.bus.settle();
         poll
     }
 }
@@ -294,5 +327,6 @@ impl<B: Block, const SLOTS: usize> Drop for Transfer<'_, B, SLOTS> {
             }
         });
         wake([started, None]);
+        self.bus.settle();
     }
 }

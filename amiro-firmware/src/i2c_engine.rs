@@ -30,15 +30,15 @@
 //! may not. The bus (`i2c_bus`) runs every call into the engine inside its critical section
 //! (interrupts masked on the single-core chip), so no interrupt of any priority and no client
 //! comes between two actions of one event. The section's length is an event's actions (at most
-//! five register accesses) plus the bounded wait for a STOP or a repeated START to go out
-//! ([`CONDITION_POLLS`]), plus the bus's one walk of its slots.
+//! six register accesses) and the bus's one walk of its slots.
 //!
 //! Each operation is a transaction of its own (it ends with a STOP; a write then a read has a
 //! repeated START between them). A START is set only once the previous STOP has cleared (the
-//! CR1 note); that STOP takes at most one SCL period (2.5 µs at 400 kHz), so the wait is a
-//! bounded poll of CR1.STOP; one that does not clear (a device holding SCL) resets the block and
-//! sets the START anyway: the START then waits for a free bus, which a stuck bus never gives, and
-//! the client's timeout ends the script.
+//! CR1 note), and a repeated START, set at BTF, leaves BTF raising the event interrupt until it
+//! is on the bus. Either condition takes at most one SCL period once SCL is free (2.5 µs at
+//! 400 kHz) and raises no interrupt of its own, so the engine says it waits for it
+//! ([`Engine::awaiting`]) and the caller polls it outside the critical section, at most
+//! [`CONDITION_POLLS`] times, each poll a section of its own, then calls [`Engine::resume`].
 use amiro_sensors::script::{Failure, Operation, Readings, Script, ScriptError};
 
 /// CR1: peripheral enable.
@@ -132,6 +132,18 @@ pub trait Block {
     fn reset(&mut self);
 }
 
+/// A condition the engine waits to see on the bus before it goes on: the caller polls it
+/// ([`Engine::condition_pending`]) outside its critical section, at most [`CONDITION_POLLS`]
+/// times, then calls [`Engine::resume`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Condition {
+    /// The STOP before an operation's START has to clear (RM0008 §26.6.1, the CR1 note).
+    Stop,
+    /// A repeated START set at BTF has to go out (BTF, and with it the event interrupt, stays set
+    /// until it has).
+    Start,
+}
+
 /// What an event did to the script.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Progress {
@@ -170,6 +182,10 @@ enum Phase {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Engine {
     phase: Phase,
+    /// The condition awaited, and which wait it is (a client's abort and a new script between
+    /// the polls make the old wait's resume a no-op).
+    awaiting: Option<(Condition, u32)>,
+    waits: u32,
     /// The running operation's index.
     operation: u8,
     /// The script's written bytes before the running operation's.
@@ -187,6 +203,8 @@ impl Engine {
     pub const fn new() -> Self {
         Self {
             phase: Phase::Idle,
+            awaiting: None,
+            waits: 0,
             operation: 0,
             written: 0,
         }
@@ -208,6 +226,7 @@ impl Engine {
     /// leaves the block reset and set up again.
     pub fn abort(&mut self, block: &mut impl Block) {
         self.phase = Phase::Idle;
+        self.awaiting = None;
         block.reset();
     }
 
@@ -222,21 +241,57 @@ impl Engine {
     fn begin(&mut self, script: &Script, block: &mut impl Block) -> Progress {
         let Some(op) = self.current(script) else {
             self.phase = Phase::Idle;
+            self.awaiting = None;
             block.set_interrupts(Interrupts::Off);
             return Progress::Finished(Ok(()));
         };
-        // RM0008 §26.6.1, CR1 note: no write to CR1 until the STOP set before has cleared.
-        if !wait_cleared(block, |b| b.stop_pending()) {
-            block.reset();
-        }
-        block.set_interrupts(Interrupts::Events);
-        // §26.3.3 "Start condition": setting START makes the block a master (once the bus is
-        // free); SB follows.
-        block.modify_cr1(CR1_START, 0);
+        // RM0008 §26.6.1, CR1 note: no write to CR1 until the STOP set before has cleared; the
+        // START is set in `resume`.
         self.phase = Phase::Start {
             read: op.write == 0,
         };
+        self.wait_for(Condition::Stop);
         Progress::Running
+    }
+
+    fn wait_for(&mut self, condition: Condition) {
+        self.waits = self.waits.wrapping_add(1);
+        self.awaiting = Some((condition, self.waits));
+    }
+
+    /// The condition to poll before the script goes on, and which wait it is.
+    pub fn awaiting(&self) -> Option<(Condition, u32)> {
+        self.awaiting
+    }
+
+    /// One poll of the awaited condition: `true` while it is still pending.
+    pub fn condition_pending(&self, block: &mut impl Block) -> bool {
+        match self.awaiting {
+            Some((Condition::Stop, _)) => block.stop_pending(),
+            Some((Condition::Start, _)) => block.start_pending(),
+            None => false,
+        }
+    }
+
+    /// After the polls of the awaited condition (`cleared`: it went out within them). A STOP
+    /// that did not clear is a device holding SCL: the block is reset (which drops the STOP) and
+    /// the START set anyway; it waits for a free bus, which a stuck bus never gives, and the
+    /// client's timeout ends the script. A repeated START that did not go out within the polls
+    /// (a device stretching SCL after its acknowledge) is left to go out: until it does, BTF
+    /// raises the event interrupt again, and each entry is an SR1 read and nothing else.
+    pub fn resume(&mut self, cleared: bool, block: &mut impl Block) {
+        match self.awaiting.take() {
+            Some((Condition::Stop, _)) => {
+                if !cleared {
+                    block.reset();
+                }
+                block.set_interrupts(Interrupts::Events);
+                // §26.3.3 "Start condition": setting START makes the block a master (once the
+                // bus is free); SB follows.
+                block.modify_cr1(CR1_START, 0);
+            }
+            Some((Condition::Start, _)) | None => {}
+        }
     }
 
     /// The next operation, or the script's end.
@@ -253,6 +308,7 @@ impl Engine {
 
     fn fail(&mut self, failure: Failure) -> Progress {
         self.phase = Phase::Idle;
+        self.awaiting = None;
         Progress::Finished(Err(ScriptError {
             operation: self.operation,
             failure,
@@ -313,13 +369,11 @@ impl Engine {
                 if op.read > 0 {
                     // §26.3.3 "Closing the communication" / a write then a read: a repeated
                     // START instead of the STOP, set while BTF holds SCL low. BTF stays set
-                    // (and raises this interrupt again) until the START is on the bus, so wait
-                    // for it here, bounded; SB's own interrupt follows. A device that stretches
-                    // SCL longer than the polls leaves the interrupt re-entering, each entry an
-                    // SR1 read and nothing else (the `_` arm), until its START goes out.
+                    // (and would raise this interrupt again) until the START is on the bus: the
+                    // caller waits for it (`Condition::Start`); SB's own interrupt follows.
                     block.modify_cr1(CR1_START, 0);
-                    wait_cleared(block, |b| b.start_pending());
                     self.phase = Phase::Start { read: true };
+                    self.wait_for(Condition::Start);
                     Progress::Running
                 } else {
                     // EV8_2: TXE = BTF = 1, program STOP (it clears both).
@@ -383,6 +437,7 @@ impl Engine {
     /// the block): its enables off, so that it does not come back.
     pub fn on_stray_event(&mut self, block: &mut impl Block) {
         self.phase = Phase::Idle;
+        self.awaiting = None;
         block.set_interrupts(Interrupts::Off);
     }
 
@@ -466,15 +521,4 @@ impl Engine {
         }
         self.fail(failure)
     }
-}
-
-/// Polls a condition bit of CR1 (`pending`) at most [`CONDITION_POLLS`] times; `true` once it
-/// has cleared.
-fn wait_cleared<B: Block>(block: &mut B, mut pending: impl FnMut(&mut B) -> bool) -> bool {
-    for _ in 0..CONDITION_POLLS {
-        if !pending(block) {
-            return true;
-        }
-    }
-    false
 }

@@ -15,12 +15,21 @@ use crate::test_waker;
 
 use Access::*;
 
+/// The caller's wait for a condition the engine awaits (the bus's `settle`).
+fn settle(engine: &mut Engine, model: &mut Model) {
+    if engine.awaiting().is_some() {
+        let cleared = (0..CONDITION_POLLS).any(|_| !engine.condition_pending(model));
+        engine.resume(cleared, model);
+    }
+}
+
 /// Runs `script` on a fresh engine; before serving each interrupt the bus runs on `late` more
 /// steps (an interrupt served late). `None` if the bus stops with no interrupt and no end.
 fn run(model: &mut Model, script: &Script, late: usize) -> Option<Result<Readings, ScriptError>> {
     let mut engine = Engine::new();
     let mut readings = Readings::for_script(script);
     let mut progress = engine.start(script, model);
+    settle(&mut engine, model);
     for _ in 0..10_000 {
         if let Progress::Finished(result) = progress {
             assert!(engine.is_idle());
@@ -46,6 +55,7 @@ fn run(model: &mut Model, script: &Script, late: usize) -> Option<Result<Reading
         } else {
             return None;
         };
+        settle(&mut engine, model);
     }
     panic!(
         "the script did not end: {:?}",
@@ -311,11 +321,13 @@ fn the_one_byte_ending_interrupted_after_addr_is_caught_by_the_model() {
     let mut engine = Engine::new();
     let mut readings = Readings::for_script(&script);
     engine.start(&script, &mut Preempted(&mut model));
+    settle(&mut engine, &mut model);
     for _ in 0..10 {
         let (ev, _) = model.pending();
         if ev {
             let sr1 = model.read_sr1();
             engine.on_event(sr1, &script, &mut readings, &mut Preempted(&mut model));
+            settle(&mut engine, &mut model);
         } else if !model.advance() {
             break;
         }
@@ -605,6 +617,7 @@ fn arbitration_loss_bus_error_and_overrun_reset_the_block() {
     let mut engine = Engine::new();
     let mut readings = Readings::for_script(&script);
     engine.start(&script, &mut model);
+    settle(&mut engine, &mut model);
     let mut served = 0;
     let result = loop {
         let (ev, _) = model.pending();
@@ -625,6 +638,7 @@ fn arbitration_loss_bus_error_and_overrun_reset_the_block() {
             assert!(model.advance());
             Progress::Running
         };
+        settle(&mut engine, &mut model);
         if let Progress::Finished(result) = progress {
             break result;
         }
@@ -647,6 +661,7 @@ fn an_event_the_sequence_has_no_step_for_resets_the_block() {
     let mut engine = Engine::new();
     let mut readings = Readings::for_script(&script);
     engine.start(&script, &mut model);
+    settle(&mut engine, &mut model);
     // SB while the engine waits for ADDR.
     model.advance();
     let sr1 = model.read_sr1();
@@ -690,6 +705,7 @@ fn a_stretch_holds_the_script_and_a_stuck_bus_is_aborted_and_reset() {
     let mut engine = Engine::new();
     let mut readings = Readings::for_script(&script);
     engine.start(&script, &mut model);
+    settle(&mut engine, &mut model);
     let mut released = false;
     let result = loop {
         let (ev, er) = model.pending();
@@ -707,6 +723,7 @@ fn a_stretch_holds_the_script_and_a_stuck_bus_is_aborted_and_reset() {
             model.release();
             Progress::Running
         };
+        settle(&mut engine, &mut model);
         if let Progress::Finished(result) = progress {
             break result;
         }
@@ -721,6 +738,7 @@ fn a_stretch_holds_the_script_and_a_stuck_bus_is_aborted_and_reset() {
     model.stuck = true;
     let mut engine = Engine::new();
     engine.start(&script, &mut model);
+    settle(&mut engine, &mut model);
     assert!(!model.advance() && model.pending() == (false, false));
     assert!(!engine.is_idle());
     engine.abort(&mut model);
