@@ -714,3 +714,45 @@ fn a_failed_operation_is_the_work_s_error_at_that_transfer() {
     assert_eq!(scripted.step(work).unwrap(), Next::Done(Err(2)));
     assert_eq!(pca9544a::AMIRO_ADDRESS, 0x77);
 }
+
+/// Two publishers' jobs on one group overlap (each keeps its own `Job`; the group changes only
+/// when a job ends): the magnetometer's X job records its read, the Y job runs and ends first,
+/// and the X job then ends on the group as the Y job left it — the Y reading reused within the
+/// window, as the blocking path would after a Y sample, the X job's own read unused.
+#[test]
+fn overlapping_jobs_each_keep_their_log_and_end_on_the_group_as_it_is() {
+    use amiro_sensors::drivers::scripted::{step, Job};
+    let mut bus = SimCompassBus::new();
+    let mut group = Replayed::boot(Compass::new(ReplayBus::compass()), &mut bus)
+        .unwrap()
+        .state()
+        .clone();
+    let (mut x, mut y) = (Job::new(), Job::new());
+    let sample = |topic| move |s: &mut Supervised<Compass<ReplayBus>>| s.sample(topic, 5_000);
+    let Next::Run(x_script) = step(&mut group, &mut x, sample(Topic::MagnetometerX)).unwrap()
+    else {
+        panic!("X needs the bus");
+    };
+    let Next::Run(y_script) = step(&mut group, &mut y, sample(Topic::MagnetometerY)).unwrap()
+    else {
+        panic!("Y needs the bus");
+    };
+    assert_eq!(x_script, y_script);
+    x.complete(&bus.answer(&x_script).result);
+    y.complete(&bus.answer(&y_script).result);
+    let Next::Done(y_frames) = step(&mut group, &mut y, sample(Topic::MagnetometerY)).unwrap()
+    else {
+        panic!("Y has its readings");
+    };
+    let Next::Done(x_frames) = step(&mut group, &mut x, sample(Topic::MagnetometerX)).unwrap()
+    else {
+        panic!("X has its readings");
+    };
+    // The blocking path, Y then X: the second reading's field for both.
+    let mut blocking = Supervised::new(Compass::new(SimCompassBus::new()));
+    // The simulator's first read is X's (unused); the Y job's read is the second.
+    blocking.group_mut().magnetometer.read().unwrap();
+    assert_eq!(y_frames, blocking.sample(Topic::MagnetometerY, 5_000));
+    assert_eq!(x_frames, blocking.sample(Topic::MagnetometerX, 5_000));
+    assert_eq!(x.logged() + y.logged(), 0);
+}

@@ -94,7 +94,7 @@ pub struct Expected {
 
 /// A write after which the part needs time before the next transfer (the BNO055's operating
 /// mode switch): the recording ends with it, and the next script waits `us` first
-/// ([`Replayed::settle_us`]).
+/// ([`Job::settle_us`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Settle {
     /// The device's address.
@@ -198,6 +198,116 @@ enum Recording {
     Closed { start: u8 },
 }
 
+/// The log of one job (a sample, a set-up step, a gauge transfer) while its scripts run: the
+/// transfers recorded so far and what the bus answered. It belongs to the job, not to the
+/// group, so two publishers whose jobs on one group overlap each keep their own; the group's
+/// state changes only when a job ends ([`step`]).
+#[derive(Debug, Clone)]
+pub struct Job {
+    entries: [Entry; MAX_LOGGED],
+    len: u8,
+    bytes: [u8; MAX_LOGGED_READ],
+    bytes_len: u8,
+    /// The settling time of the last script recorded ([`Settle`]).
+    recorded_settle_us: u32,
+    /// The wait the last completed script asks for before the next.
+    settle_us: u32,
+}
+
+impl Default for Job {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Job {
+    /// A job not begun.
+    pub const fn new() -> Self {
+        Self {
+            entries: [EMPTY_ENTRY; MAX_LOGGED],
+            len: 0,
+            bytes: [0; MAX_LOGGED_READ],
+            bytes_len: 0,
+            recorded_settle_us: 0,
+            settle_us: 0,
+        }
+    }
+
+    /// Transfers in the log.
+    pub const fn logged(&self) -> usize {
+        self.len as usize
+    }
+
+    /// How long to wait before the script [`step`] asked for: a part's settling time after the
+    /// previous script's last write ([`Settle`]), 0 mostly.
+    pub const fn settle_us(&self) -> u32 {
+        self.settle_us
+    }
+
+    fn entries(&self) -> &[Entry] {
+        self.entries.get(..usize::from(self.len)).unwrap_or(&[])
+    }
+
+    /// Stores the result of the script [`step`] asked for in its entries (the pending ones).
+    pub fn complete(&mut self, result: &ScriptResult) {
+        let first = self
+            .entries()
+            .iter()
+            .position(|e| e.outcome == Outcome::Pending)
+            .unwrap_or(usize::from(self.len));
+        let mut keep = usize::from(self.len);
+        self.settle_us = if result.is_ok() {
+            self.recorded_settle_us
+        } else {
+            0
+        };
+        self.recorded_settle_us = 0;
+        for (k, entry) in self.entries.iter_mut().enumerate().take(keep).skip(first) {
+            let op = k - first;
+            match result {
+                Ok(readings) => {
+                    let start = usize::from(entry.read_at);
+                    let end = start + usize::from(entry.read);
+                    if let Some(slot) = self.bytes.get_mut(start..end) {
+                        let got = readings.of(op);
+                        if got.len() == slot.len() {
+                            slot.copy_from_slice(got);
+                        }
+                    }
+                    entry.outcome = Outcome::Read;
+                }
+                Err(error) if op < usize::from(error.operation) => entry.outcome = Outcome::Unknown,
+                Err(error) if op == usize::from(error.operation) => {
+                    entry.outcome = Outcome::Failed(error.failure)
+                }
+                Err(_) => {
+                    keep = keep.min(k);
+                }
+            }
+        }
+        self.truncate(keep);
+    }
+
+    /// The script [`step`] asked for did not end within its client's timeout (the block was
+    /// reset): its first operation fails, with the kind a polled master's timeout has
+    /// ([`ErrorKind::Other`]).
+    pub fn timed_out(&mut self) {
+        self.complete(&Err(ScriptError {
+            operation: 0,
+            failure: Failure::UnexpectedEvent,
+        }));
+    }
+
+    fn truncate(&mut self, len: usize) {
+        if len < usize::from(self.len) {
+            if let Some(entry) = self.entries.get(len) {
+                self.bytes_len = entry.read_at;
+            }
+            self.len = len as u8;
+        }
+    }
+}
+
 /// An embedded-hal `I2c` whose transfers are recorded into scripts and served from their
 /// results ([`Replayed`]). One per bus; it carries the log of the job under way.
 #[derive(Debug, Clone)]
@@ -210,12 +320,8 @@ pub struct ReplayBus {
     paced: Option<u8>,
     expected: &'static [Expected],
     settles: &'static [Settle],
-    /// The wait the last completed script asks for before the next ([`Settle`]).
-    settle_us: u32,
-    entries: [Entry; MAX_LOGGED],
-    len: u8,
-    bytes: [u8; MAX_LOGGED_READ],
-    bytes_len: u8,
+    /// The job's log while a round runs (empty between rounds).
+    log: Job,
     // The round under way.
     cursor: u8,
     recording: Recording,
@@ -233,11 +339,7 @@ impl ReplayBus {
             paced: None,
             expected,
             settles: &[],
-            settle_us: 0,
-            entries: [EMPTY_ENTRY; MAX_LOGGED],
-            len: 0,
-            bytes: [0; MAX_LOGGED_READ],
-            bytes_len: 0,
+            log: Job::new(),
             cursor: 0,
             recording: Recording::Off,
             selected: None,
@@ -265,27 +367,11 @@ impl ReplayBus {
         bus
     }
 
-    /// Transfers in the log (the job under way).
-    pub const fn logged(&self) -> usize {
-        self.len as usize
-    }
-
-    fn clear(&mut self) {
-        self.len = 0;
-        self.bytes_len = 0;
-        self.settle_us = 0;
-        self.begin_round();
-    }
-
     fn begin_round(&mut self) {
         self.cursor = 0;
         self.recording = Recording::Off;
         self.selected = None;
         self.unsupported = false;
-    }
-
-    fn entries(&self) -> &[Entry] {
-        self.entries.get(..usize::from(self.len)).unwrap_or(&[])
     }
 
     /// The script this round recorded, if it recorded one.
@@ -294,7 +380,7 @@ impl ReplayBus {
             Recording::Off => return None,
             Recording::On { start, .. } | Recording::Closed { start } => usize::from(start),
         };
-        let entries = self.entries().get(start..)?;
+        let entries = self.log.entries().get(start..)?;
         if entries.is_empty() {
             return None;
         }
@@ -308,67 +394,6 @@ impl ReplayBus {
             };
         }
         Some(script)
-    }
-
-    /// Takes over `round`'s log (its recorded script, now on the bus, pending).
-    fn adopt(&mut self, round: &ReplayBus) {
-        self.entries = round.entries;
-        self.len = round.len;
-        self.bytes = round.bytes;
-        self.bytes_len = round.bytes_len;
-        self.begin_round();
-    }
-
-    /// Stores a script's result in the pending entries (the last script's operations).
-    fn complete(&mut self, result: &ScriptResult) {
-        let first = self
-            .entries()
-            .iter()
-            .position(|e| e.outcome == Outcome::Pending)
-            .unwrap_or(usize::from(self.len));
-        let mut keep = usize::from(self.len);
-        let settle_us = match (result, self.entries().last()) {
-            (Ok(_), Some(last)) => self
-                .settles
-                .iter()
-                .find(|s| last.address == s.address && last.written() == [s.register, s.value])
-                .map_or(0, |s| s.us),
-            _ => 0,
-        };
-        self.settle_us = settle_us;
-        for (k, entry) in self.entries.iter_mut().enumerate().take(keep).skip(first) {
-            let op = k - first;
-            match result {
-                Ok(readings) => {
-                    let start = usize::from(entry.read_at);
-                    let end = start + usize::from(entry.read);
-                    if let Some(slot) = self.bytes.get_mut(start..end) {
-                        let got = readings.of(op);
-                        if got.len() == slot.len() {
-                            slot.copy_from_slice(got);
-                        }
-                    }
-                    entry.outcome = Outcome::Read;
-                }
-                Err(error) if op < usize::from(error.operation) => entry.outcome = Outcome::Unknown,
-                Err(error) if op == usize::from(error.operation) => {
-                    entry.outcome = Outcome::Failed(error.failure)
-                }
-                Err(_) => {
-                    keep = keep.min(k);
-                }
-            }
-        }
-        self.truncate(keep);
-    }
-
-    fn truncate(&mut self, len: usize) {
-        if len < usize::from(self.len) {
-            if let Some(entry) = self.entries.get(len) {
-                self.bytes_len = entry.read_at;
-            }
-            self.len = len as u8;
-        }
     }
 
     /// The stand-in for a read of `read.len()` bytes after writing `write` to `address`.
@@ -388,7 +413,7 @@ impl ReplayBus {
             return;
         }
         // A read-back: the last value the work wrote to each register of the read.
-        let earlier = self.entries().get(..upto).unwrap_or(&[]);
+        let earlier = self.log.entries().get(..upto).unwrap_or(&[]);
         for (offset, out) in read.iter_mut().enumerate() {
             let wanted = register.wrapping_add(offset as u8);
             let last = earlier.iter().rev().find_map(|e| {
@@ -416,6 +441,7 @@ impl ReplayBus {
         if self.recording == Recording::Off {
             // Skip the selects sent again at a script's start: the work did not make them.
             while self
+                .log
                 .entries()
                 .get(usize::from(self.cursor))
                 .is_some_and(|e| e.inserted)
@@ -423,7 +449,7 @@ impl ReplayBus {
                 self.cursor += 1;
             }
             let at = usize::from(self.cursor);
-            if let Some(&entry) = self.entries().get(at) {
+            if let Some(&entry) = self.log.entries().get(at) {
                 if entry.address == address
                     && entry.written() == write
                     && usize::from(entry.read) == read.len()
@@ -435,7 +461,7 @@ impl ReplayBus {
                     return match entry.outcome {
                         Outcome::Read => {
                             let start = usize::from(entry.read_at);
-                            let bytes = self.bytes.get(start..start + read.len());
+                            let bytes = self.log.bytes.get(start..start + read.len());
                             read.copy_from_slice(bytes.unwrap_or(&[]));
                             Ok(())
                         }
@@ -448,10 +474,10 @@ impl ReplayBus {
                 }
                 // The work went another way than the stand-ins guessed: the rest of the log
                 // was made on a guess (reads and selects only) and is dropped.
-                self.truncate(at);
+                self.log.truncate(at);
             }
             self.recording = Recording::On {
-                start: self.len,
+                start: self.log.len,
                 has_read: false,
             };
             if !select && Some(address) != self.paced {
@@ -471,21 +497,24 @@ impl ReplayBus {
             return Err(ReplayError::Unsupported);
         }
         let paced = Some(address) == self.paced;
-        let recorded = usize::from(self.len) - usize::from(start);
+        let recorded = usize::from(self.log.len) - usize::from(start);
         if !self.fits(start, write.len(), read.len()) || (paced && recorded > 0) {
             return self.close(start);
         }
-        let at = usize::from(self.len);
+        let at = usize::from(self.log.len);
         self.push(address, write, read.len(), false);
         self.stand_in(at, address, write, read);
         if select {
             self.selected = write.first().copied();
         }
-        let settles = self
+        let settle = self
             .settles
             .iter()
-            .any(|s| s.address == address && write == [s.register, s.value]);
-        self.recording = if paced || settles {
+            .find(|s| s.address == address && write == [s.register, s.value]);
+        if let Some(settle) = settle {
+            self.log.recorded_settle_us = settle.us;
+        }
+        self.recording = if paced || settle.is_some() {
             Recording::Closed { start }
         } else {
             Recording::On {
@@ -498,15 +527,15 @@ impl ReplayBus {
 
     /// Ends the recording: a select at its end goes to the next script, with its reads.
     fn close(&mut self, start: u8) -> Result<(), ReplayError> {
-        let len = usize::from(self.len);
+        let len = usize::from(self.log.len);
         if len > usize::from(start) + 1 {
-            if let Some(last) = self.entries().get(len - 1) {
+            if let Some(last) = self.log.entries().get(len - 1) {
                 if last.is_select(self.mux) && !last.inserted {
-                    self.truncate(len - 1);
+                    self.log.truncate(len - 1);
                 }
             }
         }
-        let recorded = self.entries().get(usize::from(start)..).unwrap_or(&[]);
+        let recorded = self.log.entries().get(usize::from(start)..).unwrap_or(&[]);
         if recorded.iter().all(|e| e.inserted) {
             // Nothing fits: a transfer larger than a script, or a job larger than the log.
             self.unsupported = true;
@@ -520,7 +549,7 @@ impl ReplayBus {
         let Some(mux) = self.mux else {
             return Ok(());
         };
-        if usize::from(self.len) >= MAX_LOGGED {
+        if usize::from(self.log.len) >= MAX_LOGGED {
             self.unsupported = true;
             return Err(ReplayError::Unsupported);
         }
@@ -530,14 +559,14 @@ impl ReplayBus {
 
     /// Whether one more transfer fits the script recorded from `start` and the log.
     fn fits(&self, start: u8, write: usize, read: usize) -> bool {
-        let recorded = self.entries().get(usize::from(start)..).unwrap_or(&[]);
+        let recorded = self.log.entries().get(usize::from(start)..).unwrap_or(&[]);
         let written: usize = recorded.iter().map(|e| usize::from(e.write)).sum();
         let reads: usize = recorded.iter().map(|e| usize::from(e.read)).sum();
         recorded.len() < MAX_OPERATIONS
             && written + write <= MAX_WRITE_BYTES
             && reads + read <= MAX_READ_BYTES
-            && usize::from(self.len) < MAX_LOGGED
-            && usize::from(self.bytes_len) + read <= MAX_LOGGED_READ
+            && usize::from(self.log.len) < MAX_LOGGED
+            && usize::from(self.log.bytes_len) + read <= MAX_LOGGED_READ
     }
 
     fn push(&mut self, address: u8, write: &[u8], read: usize, inserted: bool) {
@@ -545,19 +574,19 @@ impl ReplayBus {
         for (slot, &byte) in written.iter_mut().zip(write) {
             *slot = byte;
         }
-        if let Some(entry) = self.entries.get_mut(usize::from(self.len)) {
+        if let Some(entry) = self.log.entries.get_mut(usize::from(self.log.len)) {
             // Both within their capacities (checked by `fits`), so the narrowing is exact.
             *entry = Entry {
                 address,
                 written,
                 write: write.len() as u8,
                 read: read as u8,
-                read_at: self.bytes_len,
+                read_at: self.log.bytes_len,
                 outcome: Outcome::Pending,
                 inserted,
             };
-            self.len += 1;
-            self.bytes_len += read as u8;
+            self.log.len += 1;
+            self.log.bytes_len += read as u8;
         }
     }
 }
@@ -677,19 +706,55 @@ pub enum Next<T> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Unfinished;
 
-/// A state (a supervised group, a gauge's read) whose work runs as scripts ([module
-/// documentation](self)).
+/// One round of `work` on `state` for `job` ([module documentation](self)): the script the work
+/// needs next, or its result. The work runs on a copy of `state`; only a round that needs no
+/// further script (the work's result is the devices' answers) puts its copy in `state`, and
+/// `job` begins again empty. `state`'s bus log is empty between rounds.
+pub fn step<S: Clone + Replaying, T>(
+    state: &mut S,
+    job: &mut Job,
+    work: impl FnOnce(&mut S) -> T,
+) -> Result<Next<T>, Unfinished> {
+    let mut round = state.clone();
+    let bus = round.replay_bus();
+    bus.log = job.clone();
+    bus.begin_round();
+    let value = work(&mut round);
+    let bus = round.replay_bus();
+    if bus.unsupported {
+        *job = Job::new();
+        return Err(Unfinished);
+    }
+    if let Some(script) = bus.recorded() {
+        *job = bus.log.clone();
+        return Ok(Next::Run(script));
+    }
+    bus.log = Job::new();
+    bus.begin_round();
+    *state = round;
+    *job = Job::new();
+    Ok(Next::Done(value))
+}
+
+/// A state (a supervised group, a bus with a gauge's read) and one job on it at a time: the
+/// simulators' and the host tests' way to run [`step`].
 #[derive(Debug, Clone)]
 pub struct Replayed<S> {
     state: S,
+    job: Job,
 }
 
 impl<S: Clone + Replaying> Replayed<S> {
-    /// The state, its bus's log empty. Its constructor must have made no transfer (a
+    /// The state, its bus's log emptied. Its constructor must have made no transfer (a
     /// [`Supervised`] group's boot set-up is a job: [`Replayed::boot`]).
     pub fn new(mut state: S) -> Self {
-        state.replay_bus().clear();
-        Self { state }
+        let bus = state.replay_bus();
+        bus.log = Job::new();
+        bus.begin_round();
+        Self {
+            state,
+            job: Job::new(),
+        }
     }
 
     /// The state between jobs.
@@ -702,37 +767,20 @@ impl<S: Clone + Replaying> Replayed<S> {
         &mut self.state
     }
 
-    /// One round of `work`: the script it needs next, or its result (then the state is the one
-    /// the work left, and the next job begins with an empty log).
+    /// One round of `work` ([`step`]).
     pub fn step<T>(&mut self, work: impl FnOnce(&mut S) -> T) -> Result<Next<T>, Unfinished> {
-        let mut round = self.state.clone();
-        round.replay_bus().begin_round();
-        let value = work(&mut round);
-        let bus = round.replay_bus();
-        if bus.unsupported {
-            self.state.replay_bus().clear();
-            return Err(Unfinished);
-        }
-        if let Some(script) = bus.recorded() {
-            let bus = bus.clone();
-            self.state.replay_bus().adopt(&bus);
-            return Ok(Next::Run(script));
-        }
-        bus.clear();
-        self.state = round;
-        Ok(Next::Done(value))
+        step(&mut self.state, &mut self.job, work)
     }
 
-    /// How long to wait before running the script the last [`step`](Self::step) asked for: a
-    /// part's settling time after the previous script's last write ([`Settle`]), 0 mostly. The
-    /// simulators need no wait ([`Replayed::run`] makes none).
-    pub fn settle_us(&mut self) -> u32 {
-        self.state.replay_bus().settle_us
+    /// How long to wait before running the script the last [`step`](Self::step) asked for
+    /// ([`Job::settle_us`]). The simulators need no wait ([`Replayed::run`] makes none).
+    pub fn settle_us(&self) -> u32 {
+        self.job.settle_us()
     }
 
     /// The result of the script the last [`step`](Self::step) asked for.
     pub fn complete(&mut self, result: &ScriptResult) {
-        self.state.replay_bus().complete(result);
+        self.job.complete(result);
     }
 
     /// A whole job on a bus that runs scripts at once (the simulators, the host tests):
@@ -751,7 +799,7 @@ impl<S: Clone + Replaying> Replayed<S> {
                 Next::Done(value) => return Ok(value),
             }
         }
-        self.state.replay_bus().clear();
+        self.job = Job::new();
         Err(Unfinished)
     }
 }
