@@ -15,9 +15,9 @@
 //!   Bletsas et al., "Errata for three papers (2004-05) on fixed-priority scheduling with self-suspensions",
 //!   LITES 5(1), 2018): the sound form of the jitter-based charge (jitter = the suspension alone is not).
 //! * **The engine's interrupt** is a row per script at the engine's priority (`<bus>_engine[<task>]`, added when
-//!   the model is validated), released by the submitting job, costing the script's events × (the per-event bound
-//!   + interrupt entry and exit). The master holds SCL low while an event waits for the engine, so each event's
-//!   worst response on the CPU is added to the script's bus time as well.
+//!   the model is validated), released by the submitting job, costing the script's events times the per-event
+//!   bound with interrupt entry and exit. The master holds SCL low while an event waits for the engine, so each
+//!   event's worst response on the CPU is added to the script's bus time as well.
 //!
 //! The jitters feed the bus responses, which feed the jobs' responses, which are the jitters: iterated from zero
 //! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason.

@@ -401,3 +401,53 @@ fn three_scripts_on_one_bus_worked_by_hand() {
     // The bus's share: 100/1000 + 200/2000 + 300/5000.
     assert!((bus.utilisation - 0.26).abs() < 1e-9);
 }
+
+/// A suspending job is blocked again when it resumes: a lower task may lock a resource while it is suspended.
+/// τs (priority 3): CPU 2 µs (1 before, 1 after its script), a 5 µs script, T 100; τl and τm (priorities 1 and 2):
+/// 4 µs each, all of it holding `r`, whose ceiling is 3.
+///
+/// The simulator: τl locks `r` at 0; τs arrives at 0.5 and waits until 4, runs 4..5, its script 5..10; τm arrives
+/// at 9.5 (the CPU is idle) and locks `r` until 13.5; τs, ready at 10, waits for it and runs 13.5..14.5: response
+/// 14. Charging one blocking, as for a job that never suspends, gives 2 + 5 + 4 = 11; the analysis charges a
+/// second one for the resumption: 15.
+#[test]
+fn a_suspending_job_is_blocked_again_when_it_resumes() {
+    let locked = |length: u64| {
+        Piece::Cpu(Segment {
+            length,
+            lock: Some(0),
+        })
+    };
+    let free = |length: u64| Piece::Cpu(Segment { length, lock: None });
+    let job = |task, arrival, pieces| SuspendingJob {
+        task,
+        arrival,
+        release: arrival,
+        pieces,
+    };
+    let jobs = vec![
+        job(0, 500, vec![free(1000), Piece::Script(5000), free(1000)]),
+        job(1, 0, vec![locked(4000)]),
+        job(2, 9500, vec![locked(4000)]),
+    ];
+    let simulated = sim::suspending_run(&[3, 1, 2], &[0, 1, 2], &[3], &jobs);
+    assert_eq!(simulated[0], 14_000);
+
+    let with_section = |mut t: TaskSpec| {
+        t.sections = vec![("r".into(), t.wcet)];
+        t
+    };
+    let mut board = suspending_board(
+        vec![
+            board_task("s", 3, 2, 100),
+            with_section(board_task("l", 1, 4, 100)),
+            with_section(board_task("m", 2, 4, 100)),
+        ],
+        &[(0, 5)],
+    );
+    board.static_ceilings = vec![("r".into(), 3)];
+    let result = analysis::analyse_board(&board, &Limits::default());
+    assert_eq!(result.tasks[0].blocking, Time::from_us(4));
+    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(15)));
+    assert!(simulated[0] > 11_000, "one blocking would miss it");
+}
