@@ -242,8 +242,67 @@ pub fn validate_board(
     overheads: &OverheadTimes,
     tasks: &mut Vec<TaskSpec>,
 ) -> Result<BoardBuses, Refusal> {
-    let mut buses = Vec::with_capacity(board.sensor_buses.len());
-    for (b, bus) in board.sensor_buses.iter().enumerate() {
+    let buses = validate_buses(&board.sensor_buses, overheads)?;
+    let mut scripts = Vec::new();
+    let mut rows = Vec::new();
+    for (t, task) in board.tasks.iter().enumerate() {
+        let Some(script) = &task.script else {
+            continue;
+        };
+        let p = format!("tasks[{t}].script");
+        let checked = validate_script(&buses, script, &p)?;
+        let (Some(spec), Some(bus)) = (tasks.get(t), buses.get(checked.bus)) else {
+            continue;
+        };
+        let name = format!("{}_engine[{}]", bus.name, spec.name);
+        if board.tasks.iter().any(|o| o.name == name) {
+            return Err((p, SensorBusError::RowTaken(name)));
+        }
+        rows.push(TaskSpec {
+            name,
+            priority: bus.engine_priority,
+            wcet: bus.per_event.times(u64::from(checked.events)),
+            bcet: Time::ZERO,
+            period: spec.period,
+            deadline: spec.period,
+            deadline_follows_period: true,
+            jitter: Time::ZERO,
+            sections: Vec::new(),
+            blocking: None,
+            kind: TaskKind::Plain,
+            released_by: Some(t),
+            sporadic: spec.sporadic,
+            job_of: Some(format!("{}_engine", bus.name)),
+        });
+        scripts.push(Script {
+            task: t,
+            engine_row: tasks.len() + rows.len() - 1,
+            ..checked
+        });
+    }
+    tasks.extend(rows);
+    Ok(BoardBuses { buses, scripts })
+}
+
+/// Checks a timing file's `sensor_buses` and its topics' scripts (`(field, script)`, the field as the file spells
+/// it: `topics.gyroscope.script`) before a model is built from it, so that a refusal names the timing file's field.
+pub fn check_timing<'a>(
+    buses: &[SensorBusModel],
+    scripts: impl Iterator<Item = (String, &'a ScriptModel)>,
+) -> Result<(), Refusal> {
+    let buses = validate_buses(buses, &OverheadTimes::default())?;
+    for (field, script) in scripts {
+        validate_script(&buses, script, &field)?;
+    }
+    Ok(())
+}
+
+fn validate_buses(
+    models: &[SensorBusModel],
+    overheads: &OverheadTimes,
+) -> Result<Vec<SensorBus>, Refusal> {
+    let mut buses: Vec<SensorBus> = Vec::with_capacity(models.len());
+    for (b, bus) in models.iter().enumerate() {
         let p = format!("sensor_buses[{b}]");
         if bus.name.trim().is_empty() || bus.name.contains(['/', '[', ']']) {
             return Err((
@@ -251,7 +310,7 @@ pub fn validate_board(
                 SensorBusError::BadName(bus.name.clone()),
             ));
         }
-        if buses.iter().any(|o: &SensorBus| o.name == bus.name) {
+        if buses.iter().any(|o| o.name == bus.name) {
             return Err((
                 format!("{p}.name"),
                 SensorBusError::BusTwice(bus.name.clone()),
@@ -277,107 +336,79 @@ pub fn validate_board(
             source: bus.engine.source.clone(),
         });
     }
-    let mut scripts = Vec::new();
-    let mut rows = Vec::new();
-    for (t, task) in board.tasks.iter().enumerate() {
-        let Some(script) = &task.script else {
-            continue;
-        };
-        let p = format!("tasks[{t}].script");
-        let (b, bus) = buses
-            .iter()
-            .enumerate()
-            .find(|(_, bus)| bus.name == script.bus)
-            .ok_or_else(|| {
-                (
-                    format!("{p}.bus"),
-                    SensorBusError::UnknownBus(script.bus.clone()),
-                )
-            })?;
-        let (wire, derived_events) = match (script.bytes, script.bus_time_us) {
-            (Some(bytes), None) => {
-                if bytes == 0 {
-                    return Err((
-                        format!("{p}.bytes"),
-                        SensorBusError::NotPositive("0".into()),
-                    ));
-                }
-                let starts = script.starts.unwrap_or(1);
-                if starts == 0 {
-                    return Err((
-                        format!("{p}.starts"),
-                        SensorBusError::NotPositive("0".into()),
-                    ));
-                }
-                let (bytes, starts) = (u64::from(bytes), u64::from(starts));
-                let bits = BITS_PER_BYTE * bytes + BITS_PER_START * starts;
-                let events = u32::try_from(2 * bytes + 2 * starts).unwrap_or(u32::MAX);
-                (bus.bit_time.times(bits), Some(events))
-            }
-            (None, Some(us)) => {
-                if script.starts.is_some() {
-                    return Err((format!("{p}.starts"), SensorBusError::StartsWithoutBytes));
-                }
-                positive(us, format!("{p}.bus_time_us"))?;
-                (Time::from_us_up(us), None)
-            }
-            _ => return Err((p, SensorBusError::OneFigure)),
-        };
-        sourced(&script.source, format!("{p}.source"))?;
-        if !(script.stretch_us.is_finite()
-            && script.stretch_us >= 0.0
-            && script.stretch_us <= Time::LIMIT_US)
-        {
-            return Err((
-                format!("{p}.stretch_us"),
-                SensorBusError::Negative(script.stretch_us.to_string()),
-            ));
-        }
-        sourced(&script.stretch_source, format!("{p}.stretch_source"))?;
-        let events = match (script.events, derived_events) {
-            (Some(0), _) => {
+    Ok(buses)
+}
+
+/// A script checked against its board's buses (`task` and `engine_row` still to be filled in).
+fn validate_script(buses: &[SensorBus], script: &ScriptModel, p: &str) -> Result<Script, Refusal> {
+    let (b, bus) = buses
+        .iter()
+        .enumerate()
+        .find(|(_, bus)| bus.name == script.bus)
+        .ok_or_else(|| {
+            (
+                format!("{p}.bus"),
+                SensorBusError::UnknownBus(script.bus.clone()),
+            )
+        })?;
+    let (wire, derived_events) = match (script.bytes, script.bus_time_us) {
+        (Some(bytes), None) => {
+            if bytes == 0 {
                 return Err((
-                    format!("{p}.events"),
+                    format!("{p}.bytes"),
                     SensorBusError::NotPositive("0".into()),
-                ))
+                ));
             }
-            (Some(e), _) | (None, Some(e)) => e,
-            (None, None) => return Err((format!("{p}.events"), SensorBusError::NoEvents)),
-        };
-        let Some(spec) = tasks.get(t) else {
-            continue;
-        };
-        let name = format!("{}_engine[{}]", bus.name, spec.name);
-        if board.tasks.iter().any(|o| o.name == name) {
-            return Err((p, SensorBusError::RowTaken(name)));
+            let starts = script.starts.unwrap_or(1);
+            if starts == 0 {
+                return Err((
+                    format!("{p}.starts"),
+                    SensorBusError::NotPositive("0".into()),
+                ));
+            }
+            let (bytes, starts) = (u64::from(bytes), u64::from(starts));
+            let bits = BITS_PER_BYTE * bytes + BITS_PER_START * starts;
+            let events = u32::try_from(2 * bytes + 2 * starts).unwrap_or(u32::MAX);
+            (bus.bit_time.times(bits), Some(events))
         }
-        rows.push(TaskSpec {
-            name,
-            priority: bus.engine_priority,
-            wcet: bus.per_event.times(u64::from(events)),
-            bcet: Time::ZERO,
-            period: spec.period,
-            deadline: spec.period,
-            deadline_follows_period: true,
-            jitter: Time::ZERO,
-            sections: Vec::new(),
-            blocking: None,
-            kind: TaskKind::Plain,
-            released_by: Some(t),
-            sporadic: spec.sporadic,
-            job_of: Some(format!("{}_engine", bus.name)),
-        });
-        scripts.push(Script {
-            task: t,
-            bus: b,
-            wire,
-            stretch: Time::from_us_up(script.stretch_us),
-            events,
-            engine_row: tasks.len() + rows.len() - 1,
-        });
+        (None, Some(us)) => {
+            if script.starts.is_some() {
+                return Err((format!("{p}.starts"), SensorBusError::StartsWithoutBytes));
+            }
+            positive(us, format!("{p}.bus_time_us"))?;
+            (Time::from_us_up(us), None)
+        }
+        _ => return Err((p.to_string(), SensorBusError::OneFigure)),
+    };
+    sourced(&script.source, format!("{p}.source"))?;
+    if !(script.stretch_us.is_finite()
+        && script.stretch_us >= 0.0
+        && script.stretch_us <= Time::LIMIT_US)
+    {
+        return Err((
+            format!("{p}.stretch_us"),
+            SensorBusError::Negative(script.stretch_us.to_string()),
+        ));
     }
-    tasks.extend(rows);
-    Ok(BoardBuses { buses, scripts })
+    sourced(&script.stretch_source, format!("{p}.stretch_source"))?;
+    let events = match (script.events, derived_events) {
+        (Some(0), _) => {
+            return Err((
+                format!("{p}.events"),
+                SensorBusError::NotPositive("0".into()),
+            ))
+        }
+        (Some(e), _) | (None, Some(e)) => e,
+        (None, None) => return Err((format!("{p}.events"), SensorBusError::NoEvents)),
+    };
+    Ok(Script {
+        task: usize::MAX,
+        bus: b,
+        wire,
+        stretch: Time::from_us_up(script.stretch_us),
+        events,
+        engine_row: usize::MAX,
+    })
 }
 
 /// One sensor bus's results.
@@ -591,7 +622,14 @@ pub(crate) fn analyse(
         let mut next_event = event.clone();
         if let Some((view_costs, view_jitters)) = &default_view {
             for (b, bus) in buses.iter().enumerate() {
-                let tasks = (0..n).map(|i| TaskTiming {
+                // The bus's own engine rows are this handler's events, one at a time: not its interference.
+                let own_rows: Vec<usize> = scripts
+                    .iter()
+                    .filter(|s| s.bus == b)
+                    .map(|s| s.engine_row)
+                    .collect();
+                let others = (0..n).filter(|i| !own_rows.contains(i));
+                let tasks = others.map(|i| TaskTiming {
                     priority: priorities.get(i).copied().unwrap_or(0),
                     wcet: view_costs.get(i).copied().unwrap_or(Time::ZERO),
                     period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
@@ -717,9 +755,10 @@ fn bus_responses(
         .collect()
 }
 
-/// One engine event's worst response on the CPU: its cost at the engine's priority, interfered with by every task
-/// of at least that priority, blocked by SRP as a task of that priority. One instance: the block waits for the
-/// engine at each event, so one script's events never overlap.
+/// One engine event's worst response on the CPU: its cost at the engine's priority, interfered with by every
+/// other task of at least that priority (`tasks`: not the bus's own engine rows, which are these very events),
+/// blocked by SRP as a task of that priority. One instance: the block waits for the engine at each event, and the
+/// bus runs one script at a time, so the engine's events never overlap.
 fn event_response(
     bus: &SensorBus,
     tasks: impl Iterator<Item = TaskTiming>,

@@ -218,6 +218,12 @@ fn build_board(
     }
     built.budgets.push(budgets);
     let overheads = build_overheads(file, timing, firmware, &mut all, built)?;
+    let scripts = timing.topics.iter().filter_map(|(name, t)| {
+        let script = t.script.as_ref()?;
+        Some((format!("topics.{name}.script"), script))
+    });
+    crate::sensor_bus::check_timing(&timing.sensor_buses, scripts)
+        .map_err(|(field, e)| fail(file, field, e.to_string()))?;
     Ok(BoardModel {
         name: timing.board.clone(),
         source,
