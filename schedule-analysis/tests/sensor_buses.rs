@@ -199,7 +199,8 @@ fn an_overloaded_bus_leaves_its_jobs_unbounded_with_the_reason() {
 
 /// The timing file's form: DiWheelDrive's floor-proximity topic with a script on a stated bus, published at
 /// medium. The job gets the script, the analysis its engine row, and the topic's end to end grows by at least the
-/// suspension; a script on a bus the timing file does not state is refused naming the timing file's field.
+/// suspension; the on-chip admission table refuses the script (it has no self-suspending jobs yet); a script on a
+/// bus the timing file does not state is refused naming the timing file's field.
 #[test]
 fn a_timing_file_topic_states_its_script() {
     let root = common::scratch_workspace("sensor-buses", None);
@@ -267,6 +268,10 @@ fn a_timing_file_topic_states_its_script() {
         worst(&before),
         suspension
     );
+
+    // The on-chip admission table cannot carry the script yet: lowering refuses rather than admit too much.
+    let refused = schedule_analysis::admission_host::lower_robot(&root).expect_err("refused");
+    assert_eq!(refused.path, "topics.floor-proximity.script");
 
     timing["topics"]["floor-proximity"]["script"]["bus"] = json!("i2c1");
     std::fs::write(&timing_path, timing.to_string()).unwrap();
