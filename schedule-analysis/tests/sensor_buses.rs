@@ -281,3 +281,21 @@ fn a_timing_file_topic_states_its_script() {
     assert!(error.problem.contains("no sensor bus `i2c1`"), "{error}");
     let _ = std::fs::remove_dir_all(&root);
 }
+
+/// The sensitivity search moves a script's engine row with its job: the row runs once per sample.
+#[test]
+fn the_engine_row_moves_with_its_publisher() {
+    let text = json!({
+        "boards": [board_json()],
+        "can": { "messages": [ { "name": "floor", "id": 1544, "dlc": 8, "period_us": 10000,
+                                 "sender": "b/publish[floor]" } ] }
+    })
+    .to_string();
+    let system = Model::from_json(&text).unwrap().validate().unwrap();
+    let publishers = schedule_analysis::sensitivity::publishers(&system);
+    let tasks: Vec<usize> = publishers[0].tasks.iter().map(|t| t.task).collect();
+    assert_eq!(tasks, vec![0, 2]);
+    let moved =
+        schedule_analysis::sensitivity::with_period(&system, &publishers[0], Time::from_us(5000));
+    assert_eq!(moved.boards[0].tasks[2].period, Time::from_us(5000));
+}
