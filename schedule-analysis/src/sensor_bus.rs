@@ -1,5 +1,5 @@
 //! Self-suspending jobs and the sensor buses (I2C): a job that runs a *script* on one of its board's sensor buses
-//! hands the script to the bus's engine and suspends until the script ends (the plan of /work/i2c-design.md;
+//! hands the script to the bus's engine and suspends until the script ends (the engine: docs/i2c.md;
 //! docs/analysis.md, "Self-suspending publishers and the sensor buses").
 //!
 //! * **The bus** serves one script at a time, start to end, the most urgent waiting one first (the submitting
