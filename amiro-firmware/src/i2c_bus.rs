@@ -13,7 +13,7 @@
 //!   and the next waiting one started.
 //!
 //! The state is shared by the interrupts and the clients under critical sections whose length is
-//! bounded: the engine's actions for one event (at most six register accesses), a slot's script
+//! bounded: the engine's actions for one event (at most five), a slot's script
 //! and readings copied in, and at most one walk of the slots (no loop longer than the slot count).
 //! The same section is what keeps the engine's uninterruptible steps uninterrupted
 //! (`i2c_engine`). The waits for a STOP or a repeated START to go out are polled outside it, a
