@@ -9,6 +9,7 @@ pub mod clock;
 pub mod drivers;
 pub mod handler;
 pub mod motion;
+pub mod script;
 pub mod sim;
 pub mod trace;
 pub mod tx_queue;

@@ -1,0 +1,106 @@
+//! The register adapter under [`crate::i2c_engine`]: one I2C block (I2C1 or I2C2, RM0008 §26.6 /
+//! RM0090 §27.6) as volatile reads and writes, and its set-up for 400 kHz (the polled master's,
+//! `i2c::Master`, which the boards still use until the engine is wired).
+use crate::i2c_engine::{Block, Interrupts, CR1_PE, CR1_START, CR1_STOP, CR1_SWRST};
+
+const CR1: usize = 0x00;
+const CR2: usize = 0x04;
+const DR: usize = 0x10;
+const SR1: usize = 0x14;
+const SR2: usize = 0x18;
+const CCR: usize = 0x1C;
+const TRISE: usize = 0x20;
+/// CR2's interrupt enables (ITERREN, ITEVTEN, ITBUFEN).
+const CR2_INTERRUPTS: u16 = 0b111 << 8;
+
+/// One I2C block's registers.
+pub struct Registers {
+    base: usize,
+    /// APB1 in MHz (CR2's FREQ field and the timing).
+    pclk1_mhz: u16,
+}
+
+impl Registers {
+    /// The block at `base` (`i2c::I2C1` or `i2c::I2C2`) with a `pclk1_hz` APB1. Touches nothing:
+    /// [`Block::reset`] sets the block up.
+    ///
+    /// # Safety
+    /// `base` must be I2C1 or I2C2, its clock on and its pins in open-drain alternate function,
+    /// and the block used through this value alone.
+    pub const unsafe fn new(base: usize, pclk1_hz: u32) -> Self {
+        let mhz = pclk1_hz / 1_000_000;
+        let mhz = if mhz < 2 {
+            2
+        } else if mhz > 50 {
+            50
+        } else {
+            mhz
+        };
+        Self {
+            base,
+            pclk1_mhz: mhz as u16,
+        }
+    }
+
+    fn read(&self, offset: usize) -> u16 {
+        // SAFETY: `new`'s contract: a register of the I2C block this value owns.
+        unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) as u16 }
+    }
+
+    fn write(&self, offset: usize, value: u16) {
+        // SAFETY: as in `read`; documented bit patterns of the I2C registers.
+        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, u32::from(value)) }
+    }
+}
+
+impl Block for Registers {
+    fn read_sr1(&mut self) -> u16 {
+        self.read(SR1)
+    }
+
+    fn read_sr2(&mut self) -> u16 {
+        self.read(SR2)
+    }
+
+    fn read_dr(&mut self) -> u8 {
+        self.read(DR) as u8
+    }
+
+    fn write_dr(&mut self, byte: u8) {
+        self.write(DR, u16::from(byte));
+    }
+
+    fn modify_cr1(&mut self, set: u16, clear: u16) {
+        self.write(CR1, (self.read(CR1) | set) & !clear);
+    }
+
+    fn stop_pending(&mut self) -> bool {
+        self.read(CR1) & CR1_STOP != 0
+    }
+
+    fn start_pending(&mut self) -> bool {
+        self.read(CR1) & CR1_START != 0
+    }
+
+    fn set_interrupts(&mut self, interrupts: Interrupts) {
+        self.write(CR2, (self.read(CR2) & !CR2_INTERRUPTS) | interrupts.bits());
+    }
+
+    fn clear_sr1(&mut self, flags: u16) {
+        // SR1's error flags are rc_w0: writing 0 clears, writing 1 keeps.
+        self.write(SR1, !flags);
+    }
+
+    fn reset(&mut self) {
+        // Fast mode, duty 2:1: SCL = PCLK1 / (3 × CCR), rounded so it never exceeds 400 kHz;
+        // TRISE: the 300 ns rise time in PCLK1 cycles, plus one (as `i2c::Master::setup`).
+        let ccr = (self.pclk1_mhz * 10).div_ceil(12).max(1);
+        let trise = self.pclk1_mhz * 300 / 1000 + 1;
+        self.write(CR1, CR1_SWRST);
+        self.write(CR1, 0);
+        self.write(CR2, self.pclk1_mhz);
+        self.write(CCR, (1 << 15) | ccr);
+        self.write(TRISE, trise);
+        self.write(CR1, CR1_PE);
+    }
+}

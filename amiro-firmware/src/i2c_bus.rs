@@ -1,0 +1,357 @@
+//! One I2C bus shared by its clients: a slot per client with a static priority, the
+//! interrupt-driven [`Engine`] that runs one client's script at a time, and the future a client
+//! awaits (docs/i2c.md, "The queue").
+//!
+//! - A client puts its script in its slot and awaits it ([`I2cBus::run`]): the [`Transfer`]
+//!   submits on its first poll and starts the script at once if the bus is idle.
+//! - The engine's interrupts ([`I2cBus::on_event`], [`I2cBus::on_error`]) advance the running
+//!   script; at its end the slot holds the result, the client's waker is woken, and the most urgent
+//!   waiting script starts (the highest priority; equal priorities in submission order). The bus
+//!   is thus scheduled like CAN: non-preemptively, by fixed priority, one script at a time.
+//! - A dropped [`Transfer`] (its client's timeout, or a task that gave up) cancels its own slot
+//!   only: a waiting script is removed, a running one aborted (the block reset and set up again)
+//!   and the next waiting one started.
+//!
+//! The state is shared by the interrupts and the clients under critical sections whose length is
+//! bounded: the engine's actions for one event (at most five), a slot's script
+//! and readings copied in, and at most one walk of the slots (no loop longer than the slot count).
+//! The same section is what keeps the engine's uninterruptible steps uninterrupted
+//! (`i2c_engine`). The waits for a STOP or a repeated START to go out are polled outside it, a
+//! section per poll, at most [`CONDITION_POLLS`]. No heap; a slot holds its script and readings
+//! by value.
+use core::cell::UnsafeCell;
+use core::future::Future;
+use core::pin::Pin;
+use core::task::{Context, Poll, Waker};
+
+use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
+
+use crate::i2c_engine::{Block, Engine, Progress, CONDITION_POLLS};
+
+/// A client of a bus with `SLOTS` slots: a slot index checked against that count when it was made
+/// ([`I2cBus::client`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Client<const SLOTS: usize>(u8);
+
+impl<const SLOTS: usize> Client<SLOTS> {
+    /// The slot's index.
+    pub fn index(self) -> usize {
+        usize::from(self.0)
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum State {
+    Free,
+    /// Submitted `seq`-th (ties among equal priorities go to the lower).
+    Waiting(u64),
+    Running,
+    Finished(Result<(), ScriptError>),
+}
+
+struct Slot {
+    priority: u8,
+    state: State,
+    script: Script,
+    readings: Readings,
+    waker: Option<Waker>,
+}
+
+struct Inner<B, const SLOTS: usize> {
+    block: B,
+    engine: Engine,
+    slots: [Slot; SLOTS],
+    running: Option<usize>,
+    submitted: u64,
+}
+
+/// One I2C bus: its block, its engine and a slot per client.
+pub struct I2cBus<B, const SLOTS: usize> {
+    inner: UnsafeCell<Inner<B, SLOTS>>,
+}
+
+// SAFETY: every access to `inner` is inside a critical section (`with`), which on the single-core
+// chips masks every interrupt, and on the host is the `std` implementation's lock.
+unsafe impl<B: Send, const SLOTS: usize> Sync for I2cBus<B, SLOTS> {}
+
+impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
+    /// The bus over `block`, with a slot per client at `priorities[client]` (higher is more
+    /// urgent, as RTIC's priorities). At most 255 clients.
+    pub const fn new(block: B, priorities: [u8; SLOTS]) -> Self {
+        let mut slots = [const {
+            Slot {
+                priority: 0,
+                state: State::Free,
+                script: Script::new(),
+                readings: Readings::empty(),
+                waker: None,
+            }
+        }; SLOTS];
+        let mut i = 0;
+        while i < SLOTS {
+            slots[i].priority = priorities[i];
+            i += 1;
+        }
+        Self {
+            inner: UnsafeCell::new(Inner {
+                block,
+                engine: Engine::new(),
+                slots,
+                running: None,
+                submitted: 0,
+            }),
+        }
+    }
+
+    fn with<R>(&self, f: impl FnOnce(&mut Inner<B, SLOTS>) -> R) -> R {
+        // SAFETY: the only access to `inner`, and inside the critical section (see `Sync`).
+        critical_section::with(|_| f(unsafe { &mut *self.inner.get() }))
+    }
+
+    /// Client `index`, if the bus has that slot.
+    pub fn client(&self, index: usize) -> Option<Client<SLOTS>> {
+        (index < SLOTS && index <= usize::from(u8::MAX)).then_some(Client(index as u8))
+    }
+
+    /// Runs `script` for `client`: the future submits it on its first poll and gives its
+    /// readings (or the failure and the operation it happened in) at its end. Dropping it
+    /// cancels the script.
+    pub fn run(&self, client: Client<SLOTS>, script: Script) -> Transfer<'_, B, SLOTS> {
+        Transfer {
+            bus: self,
+            client: client.index(),
+            script,
+            stage: Stage::New,
+        }
+    }
+
+    /// The block's event interrupt (I2Cx_EV): reads SR1 and advances the running script.
+    pub fn on_event(&self) {
+        let waker = self.with(|inner| {
+            let sr1 = inner.block.read_sr1();
+            let running = inner.running.and_then(|index| inner.slots.get_mut(index));
+            let progress = match running {
+                Some(slot) => {
+                    inner
+                        .engine
+                        .on_event(sr1, &slot.script, &mut slot.readings, &mut inner.block)
+                }
+                None => {
+                    inner.engine.on_stray_event(&mut inner.block);
+                    Progress::Running
+                }
+            };
+            inner.after(progress)
+        });
+        wake(waker);
+        self.settle();
+    }
+
+    /// The block's error interrupt (I2Cx_ER).
+    pub fn on_error(&self) {
+        let waker = self.with(|inner| {
+            let sr1 = inner.block.read_sr1();
+            let progress = inner.engine.on_error(sr1, &mut inner.block);
+            inner.after(progress)
+        });
+        wake(waker);
+        self.settle();
+    }
+
+    /// Waits for the condition the engine awaits (a STOP to clear before a START, a repeated
+    /// START to go out), each poll a critical section of its own, at most [`CONDITION_POLLS`]
+    /// polls; then lets the engine go on. A client's abort and a new script between two polls
+    /// change the wait's number, and the old wait ends without touching the new one.
+    fn settle(&self) {
+        let Some(wait) = self.with(|inner| inner.engine.awaiting()) else {
+            return;
+        };
+        let mut cleared = false;
+        for _ in 0..CONDITION_POLLS {
+            let pending = self.with(|inner| {
+                inner.engine.awaiting() == Some(wait)
+                    && inner.engine.condition_pending(&mut inner.block)
+            });
+            if !pending {
+                cleared = true;
+                break;
+            }
+        }
+        self.with(|inner| {
+            if inner.engine.awaiting() == Some(wait) {
+                inner.engine.resume(cleared, &mut inner.block);
+            }
+        });
+    }
+
+    /// Runs `f` on the block (a test's model, or the board's look at the adapter), inside the
+    /// critical section.
+    pub fn with_block<R>(&self, f: impl FnOnce(&mut B) -> R) -> R {
+        self.with(|inner| f(&mut inner.block))
+    }
+}
+
+fn wake(wakers: [Option<Waker>; 2]) {
+    for waker in wakers.into_iter().flatten() {
+        waker.wake();
+    }
+}
+
+impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
+    /// After an event: a finished script's slot holds its result and its waker is handed out;
+    /// the next script starts. At most two wakers: the finished client's and (never in practice,
+    /// see `start_next`) the started one's.
+    fn after(&mut self, progress: Progress) -> [Option<Waker>; 2] {
+        match progress {
+            Progress::Running => [None, None],
+            Progress::Finished(result) => {
+                let finished = self.finish(result);
+                [finished, self.start_next()]
+            }
+        }
+    }
+
+    fn finish(&mut self, result: Result<(), ScriptError>) -> Option<Waker> {
+        let index = self.running.take()?;
+        let slot = self.slots.get_mut(index)?;
+        slot.state = State::Finished(result);
+        slot.waker.take()
+    }
+
+    /// Starts the most urgent waiting script if the bus is idle: one walk of the slots.
+    fn start_next(&mut self) -> Option<Waker> {
+        if self.running.is_some() {
+            return None;
+        }
+        let mut best: Option<(usize, u8, u64)> = None;
+        for (index, slot) in self.slots.iter().enumerate() {
+            if let State::Waiting(seq) = slot.state {
+                let better = match best {
+                    None => true,
+                    Some((_, priority, first)) => {
+                        slot.priority > priority || (slot.priority == priority && seq < first)
+                    }
+                };
+                if better {
+                    best = Some((index, slot.priority, seq));
+                }
+            }
+        }
+        let (index, _, _) = best?;
+        let slot = self.slots.get_mut(index)?;
+        self.running = Some(index);
+        slot.state = State::Running;
+        match self.engine.start(&slot.script, &mut self.block) {
+            Progress::Running => None,
+            // Only an empty script finishes at its start, and `Transfer` never submits one.
+            Progress::Finished(result) => self.finish(result),
+        }
+    }
+}
+
+/// Where a [`Transfer`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    /// Not polled yet.
+    New,
+    /// Its script is in the slot (waiting, running or finished).
+    Submitted,
+    /// Resolved (or refused): the slot is not its own.
+    Done,
+}
+
+/// A client's script on the bus, awaited; see [`I2cBus::run`].
+pub struct Transfer<'a, B: Block, const SLOTS: usize> {
+    bus: &'a I2cBus<B, SLOTS>,
+    client: usize,
+    script: Script,
+    stage: Stage,
+}
+
+/// The answer to a [`Transfer`] that cannot have the client's slot.
+const BUSY: ScriptError = ScriptError {
+    operation: 0,
+    failure: Failure::Busy,
+};
+
+impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
+    type Output = Result<Readings, ScriptError>;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
+        let this = self.get_mut();
+        match this.stage {
+            // Polled after it resolved: the slot may be another transfer's by now.
+            Stage::Done => return Poll::Ready(Err(BUSY)),
+            Stage::New if this.script.operations().is_empty() => {
+                this.stage = Stage::Done;
+                return Poll::Ready(Ok(Readings::for_script(&this.script)));
+            }
+            Stage::New | Stage::Submitted => {}
+        }
+        // The readings' layout is made here, outside the critical section.
+        let readings = Readings::for_script(&this.script);
+        let (poll, started) = this.bus.with(|inner| {
+            let mut started = None;
+            if this.stage == Stage::New {
+                let Some(slot) = inner.slots.get_mut(this.client) else {
+                    this.stage = Stage::Done;
+                    return (Poll::Ready(Err(BUSY)), None);
+                };
+                if slot.state != State::Free {
+                    // The client's slot holds another of its scripts (one at a time).
+                    this.stage = Stage::Done;
+                    return (Poll::Ready(Err(BUSY)), None);
+                }
+                slot.script = this.script;
+                slot.readings = readings;
+                slot.state = State::Waiting(inner.submitted);
+                inner.submitted += 1;
+                this.stage = Stage::Submitted;
+                started = inner.start_next();
+            }
+            let Some(slot) = inner.slots.get_mut(this.client) else {
+                this.stage = Stage::Done;
+                return (Poll::Ready(Err(BUSY)), started);
+            };
+            if let State::Finished(result) = slot.state {
+                slot.state = State::Free;
+                slot.waker = None;
+                this.stage = Stage::Done;
+                return (Poll::Ready(result.map(|()| slot.readings)), started);
+            }
+            match &slot.waker {
+                Some(waker) if waker.will_wake(cx.waker()) => {}
+                _ => slot.waker = Some(cx.waker().clone()),
+            }
+            (Poll::Pending, started)
+        });
+        wake([started, None]);
+        this.bus.settle();
+        poll
+    }
+}
+
+impl<B: Block, const SLOTS: usize> Drop for Transfer<'_, B, SLOTS> {
+    fn drop(&mut self) {
+        if self.stage != Stage::Submitted {
+            return;
+        }
+        let client = self.client;
+        let started = self.bus.with(|inner| {
+            let slot = inner.slots.get_mut(client)?;
+            let was = slot.state;
+            slot.state = State::Free;
+            slot.waker = None;
+            if was == State::Running && inner.running == Some(client) {
+                // The client's own script only: abort it, reset the block, start the next.
+                inner.running = None;
+                inner.engine.abort(&mut inner.block);
+                inner.start_next()
+            } else {
+                None
+            }
+        });
+        wake([started, None]);
+        self.bus.settle();
+    }
+}

@@ -1,0 +1,525 @@
+//! The interrupt-driven I2C master: a hardware-free state machine that runs one [`Script`] on
+//! the STM32 I2C v1 block (the F103's, RM0008 §26; the F405's is the same IP, RM0090 §27), one
+//! interrupt at a time (docs/i2c.md).
+//!
+//! At each event interrupt (I2Cx_EV) the caller reads SR1 and hands it to [`Engine::on_event`];
+//! at each error interrupt (I2Cx_ER) to [`Engine::on_error`]. The engine answers with register
+//! actions on a [`Block`] (SR2 read, DR read and write, CR1's START, STOP, ACK and POS, CR2's
+//! interrupt enables, an error flag cleared, the block reset), in the order the reference manual
+//! gives them. The chip's [`Block`] is a thin adapter of volatile accesses (`i2c_block`); the host
+//! tests' is a register-level model of the block and the devices on its bus.
+//!
+//! Sources (the step each action follows is named beside it in the code):
+//! - RM0008 rev 21, §26.3.3 "I2C master mode": the start condition and EV5, the slave address
+//!   and EV6, the master transmitter (EV8_1, EV8, EV8_2) and the master receiver (EV7, EV7_1);
+//!   "Closing the communication" and its method 2 (for interrupts that are not the highest
+//!   priority in the application): the endings for N = 1, N = 2 (POS) and N > 2 bytes ("When 3
+//!   bytes remain to be read").
+//! - RM0008 §26.3.4 "Error conditions" (BERR, ARLO, AF, OVR) and §26.6.1, the note to CR1's
+//!   START and STOP bits: no write to CR1 while a STOP (or START) the software set is pending.
+//! - ST AN2824, "STM32F10xxx I2C optimized examples", the interrupt-driven master receiver: the
+//!   one-byte and N > 2 endings run with interrupts masked; and the STM32F10x errata sheets'
+//!   I2C entry "Some software events must be managed before the current byte is being
+//!   transferred", which is why.
+//!
+//! **What must not be interrupted, and how it is not.** Two sequences race the bus: the one-byte
+//! read's "clear ADDR, then program STOP" (the byte is on the wire from the moment ADDR is
+//! cleared, so a STOP set after its acknowledge bit comes too late and the block clocks another
+//! byte), and the N > 2 read's "read DataN-2, program STOP, read DataN-1" (reading DataN-2 starts
+//! DataN's reception, whose end the STOP must precede). The events before them stretch SCL (EV6
+//! and BTF hold the clock low until software answers), so their start may be late; their middle
+//! may not. The bus (`i2c_bus`) runs every call into the engine inside its critical section
+//! (interrupts masked on the single-core chip), so no interrupt of any priority and no client
+//! comes between two actions of one event. The section's length is an event's actions (at most
+//! five; nine register accesses with the SR1 read) and the bus's one walk of its slots.
+//!
+//! Each operation is a transaction of its own (it ends with a STOP; a write then a read has a
+//! repeated START between them). A START is set only once the previous STOP has cleared (the
+//! CR1 note), and a repeated START, set at BTF, leaves BTF raising the event interrupt until it
+//! is on the bus. Either condition takes at most one SCL period once SCL is free (2.5 µs at
+//! 400 kHz) and raises no interrupt of its own, so the engine says it waits for it
+//! ([`Engine::awaiting`]) and the caller polls it outside the critical section, at most
+//! [`CONDITION_POLLS`] times, each poll a section of its own, then calls [`Engine::resume`].
+use amiro_sensors::script::{Failure, Operation, Readings, Script, ScriptError};
+
+/// CR1: peripheral enable.
+pub const CR1_PE: u16 = 1 << 0;
+/// CR1: START generation.
+pub const CR1_START: u16 = 1 << 8;
+/// CR1: STOP generation.
+pub const CR1_STOP: u16 = 1 << 9;
+/// CR1: acknowledge enable.
+pub const CR1_ACK: u16 = 1 << 10;
+/// CR1: acknowledge / PEC position (the two-byte reception).
+pub const CR1_POS: u16 = 1 << 11;
+/// CR1: software reset.
+pub const CR1_SWRST: u16 = 1 << 15;
+/// CR2: error interrupt enable.
+pub const CR2_ITERREN: u16 = 1 << 8;
+/// CR2: event interrupt enable.
+pub const CR2_ITEVTEN: u16 = 1 << 9;
+/// CR2: buffer interrupt enable (TXE and RXNE raise the event interrupt).
+pub const CR2_ITBUFEN: u16 = 1 << 10;
+/// SR1: start bit (master mode): EV5.
+pub const SR1_SB: u16 = 1 << 0;
+/// SR1: address sent (master mode): EV6.
+pub const SR1_ADDR: u16 = 1 << 1;
+/// SR1: byte transfer finished.
+pub const SR1_BTF: u16 = 1 << 2;
+/// SR1: data register not empty (receiver).
+pub const SR1_RXNE: u16 = 1 << 6;
+/// SR1: data register empty (transmitter).
+pub const SR1_TXE: u16 = 1 << 7;
+/// SR1: bus error.
+pub const SR1_BERR: u16 = 1 << 8;
+/// SR1: arbitration lost.
+pub const SR1_ARLO: u16 = 1 << 9;
+/// SR1: acknowledge failure.
+pub const SR1_AF: u16 = 1 << 10;
+/// SR1: overrun / underrun.
+pub const SR1_OVR: u16 = 1 << 11;
+/// The error flags the engine serves (I2Cx_ER).
+pub const SR1_ERRORS: u16 = SR1_BERR | SR1_ARLO | SR1_AF | SR1_OVR;
+
+/// Polls of CR1.STOP (before a START) or CR1.START (after a repeated START is set): a condition
+/// takes at most one SCL period once SCL is free (2.5 µs at 400 kHz, 180 cycles at 72 MHz), and
+/// one poll is a volatile read on APB1 and a branch (at least four cycles), so 128 polls outlast
+/// it with room; a condition still pending after them is a device holding SCL.
+pub const CONDITION_POLLS: u32 = 128;
+
+/// Which of the block's interrupts are on (CR2's three enables).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Interrupts {
+    /// None: the block is idle.
+    Off,
+    /// ITEVTEN and ITERREN: SB, ADDR, BTF and the errors (a step that waits for BTF).
+    Events,
+    /// ITEVTEN, ITBUFEN and ITERREN: TXE and RXNE as well (a step that moves one byte).
+    Buffer,
+}
+
+impl Interrupts {
+    /// CR2's enable bits.
+    pub const fn bits(self) -> u16 {
+        match self {
+            Interrupts::Off => 0,
+            Interrupts::Events => CR2_ITEVTEN | CR2_ITERREN,
+            Interrupts::Buffer => CR2_ITEVTEN | CR2_ITERREN | CR2_ITBUFEN,
+        }
+    }
+}
+
+/// The register actions of one I2C block: what the engine does, in the order it does it.
+pub trait Block {
+    /// Reads SR1 (the caller's, at each interrupt: the engine is given its value).
+    fn read_sr1(&mut self) -> u16;
+    /// Reads SR2 (after an SR1 read with ADDR set, this clears ADDR: EV6).
+    fn read_sr2(&mut self) -> u16;
+    /// Reads DR (a received byte; clears RXNE, and BTF with it).
+    fn read_dr(&mut self) -> u8;
+    /// Writes DR (an address byte or a data byte).
+    fn write_dr(&mut self, byte: u8);
+    /// Sets the bits `set` and clears the bits `clear` of CR1 (a read-modify-write).
+    fn modify_cr1(&mut self, set: u16, clear: u16);
+    /// Whether CR1.STOP is still set (a STOP not yet on the bus).
+    fn stop_pending(&mut self) -> bool;
+    /// Whether CR1.START is still set (a START not yet on the bus).
+    fn start_pending(&mut self) -> bool;
+    /// Sets CR2's interrupt enables (the FREQ field kept).
+    fn set_interrupts(&mut self, interrupts: Interrupts);
+    /// Clears the rc_w0 flags `flags` of SR1 (writes 0 to them, 1 to the others).
+    fn clear_sr1(&mut self, flags: u16);
+    /// Resets the block (SWRST) and sets it up again for 400 kHz, interrupts off.
+    fn reset(&mut self);
+}
+
+/// A condition the engine waits to see on the bus before it goes on: the caller polls it
+/// ([`Engine::condition_pending`]) outside its critical section, at most [`CONDITION_POLLS`]
+/// times, then calls [`Engine::resume`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Condition {
+    /// The STOP before an operation's START has to clear (RM0008 §26.6.1, the CR1 note).
+    Stop,
+    /// A repeated START set at BTF has to go out (BTF, and with it the event interrupt, stays set
+    /// until it has).
+    Start,
+}
+
+/// What an event did to the script.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Progress {
+    /// The script goes on (or the engine is idle and the event was stray).
+    Running,
+    /// The script ended: every operation done, or the first failure.
+    Finished(Result<(), ScriptError>),
+}
+
+/// Where the engine is in the current operation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    /// No script.
+    Idle,
+    /// START set; waiting for SB (EV5), then the address byte with this direction.
+    Start { read: bool },
+    /// Address byte written; waiting for ADDR (EV6).
+    Address { read: bool },
+    /// Writing: `sent` bytes of the operation are in DR or gone; waiting for TXE (EV8_1, EV8).
+    Transmit { sent: u8 },
+    /// Every byte written; waiting for BTF (EV8_2).
+    TransmitEnd,
+    /// Reading N > 3 bytes, `left` of them still to come (> 3); RXNE each (EV7).
+    Receive { left: u8 },
+    /// Reading N > 2 bytes, three left: waiting for BTF (DataN-2 in DR, DataN-1 in the shift
+    /// register: method 2).
+    ReceiveThreeLeft,
+    /// Reading two bytes with POS: waiting for BTF (both received).
+    ReceiveTwo,
+    /// The last byte (its NACK and the STOP already programmed): waiting for RXNE.
+    ReceiveLast,
+}
+
+/// The state machine of one I2C block's master: which operation of the running script, and
+/// which step of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Engine {
+    phase: Phase,
+    /// The condition awaited, and which wait it is (a client's abort and a new script between
+    /// the polls make the old wait's resume a no-op).
+    awaiting: Option<(Condition, u32)>,
+    waits: u32,
+    /// The running operation's index.
+    operation: u8,
+    /// The script's written bytes before the running operation's.
+    written: u8,
+}
+
+impl Default for Engine {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Engine {
+    /// An idle engine.
+    pub const fn new() -> Self {
+        Self {
+            phase: Phase::Idle,
+            awaiting: None,
+            waits: 0,
+            operation: 0,
+            written: 0,
+        }
+    }
+
+    /// Whether no script runs.
+    pub fn is_idle(&self) -> bool {
+        self.phase == Phase::Idle
+    }
+
+    /// Starts `script` (its first operation's START). An empty script finishes at once.
+    pub fn start(&mut self, script: &Script, block: &mut impl Block) -> Progress {
+        self.operation = 0;
+        self.written = 0;
+        self.begin(script, block)
+    }
+
+    /// Stops the running script where it is (the client's timeout, or a dropped client) and
+    /// leaves the block reset and set up again.
+    pub fn abort(&mut self, block: &mut impl Block) {
+        self.phase = Phase::Idle;
+        self.awaiting = None;
+        block.reset();
+    }
+
+    fn current(&self, script: &Script) -> Option<Operation> {
+        script
+            .operations()
+            .get(usize::from(self.operation))
+            .copied()
+    }
+
+    /// The running operation's START, or the script's end.
+    fn begin(&mut self, script: &Script, block: &mut impl Block) -> Progress {
+        let Some(op) = self.current(script) else {
+            self.phase = Phase::Idle;
+            self.awaiting = None;
+            block.set_interrupts(Interrupts::Off);
+            return Progress::Finished(Ok(()));
+        };
+        // RM0008 §26.6.1, CR1 note: no write to CR1 until the STOP set before has cleared; the
+        // START is set in `resume`.
+        self.phase = Phase::Start {
+            read: op.write == 0,
+        };
+        self.wait_for(Condition::Stop);
+        Progress::Running
+    }
+
+    fn wait_for(&mut self, condition: Condition) {
+        self.waits = self.waits.wrapping_add(1);
+        self.awaiting = Some((condition, self.waits));
+    }
+
+    /// The condition to poll before the script goes on, and which wait it is.
+    pub fn awaiting(&self) -> Option<(Condition, u32)> {
+        self.awaiting
+    }
+
+    /// One poll of the awaited condition: `true` while it is still pending.
+    pub fn condition_pending(&self, block: &mut impl Block) -> bool {
+        match self.awaiting {
+            Some((Condition::Stop, _)) => block.stop_pending(),
+            Some((Condition::Start, _)) => block.start_pending(),
+            None => false,
+        }
+    }
+
+    /// After the polls of the awaited condition (`cleared`: it went out within them). A STOP
+    /// that did not clear is a device holding SCL: the block is reset (which drops the STOP) and
+    /// the START set anyway; it waits for a free bus, which a stuck bus never gives, and the
+    /// client's timeout ends the script. A repeated START that did not go out within the polls
+    /// (a device stretching SCL after its acknowledge) is left to go out: until it does, BTF
+    /// raises the event interrupt again, and each entry is an SR1 read and nothing else.
+    pub fn resume(&mut self, cleared: bool, block: &mut impl Block) {
+        match self.awaiting.take() {
+            Some((Condition::Stop, _)) => {
+                if !cleared {
+                    block.reset();
+                }
+                block.set_interrupts(Interrupts::Events);
+                // §26.3.3 "Start condition": setting START makes the block a master (once the
+                // bus is free); SB follows.
+                block.modify_cr1(CR1_START, 0);
+            }
+            Some((Condition::Start, _)) | None => {}
+        }
+    }
+
+    /// The next operation, or the script's end.
+    fn next_operation(
+        &mut self,
+        op: Operation,
+        script: &Script,
+        block: &mut impl Block,
+    ) -> Progress {
+        self.operation += 1;
+        self.written += op.write;
+        self.begin(script, block)
+    }
+
+    fn fail(&mut self, failure: Failure) -> Progress {
+        self.phase = Phase::Idle;
+        self.awaiting = None;
+        Progress::Finished(Err(ScriptError {
+            operation: self.operation,
+            failure,
+        }))
+    }
+
+    /// An event interrupt (I2Cx_EV) with SR1 read as `sr1`; bytes read go to `readings`.
+    pub fn on_event(
+        &mut self,
+        sr1: u16,
+        script: &Script,
+        readings: &mut Readings,
+        block: &mut impl Block,
+    ) -> Progress {
+        let op = match self.current(script) {
+            Some(op) if self.phase != Phase::Idle => op,
+            _ => {
+                self.on_stray_event(block);
+                return Progress::Running;
+            }
+        };
+        match self.phase {
+            Phase::Start { read } if sr1 & SR1_SB != 0 => {
+                // EV5: SB is cleared by the SR1 read (the caller's) followed by the DR write of
+                // the address byte.
+                block.write_dr((op.address << 1) | u8::from(read));
+                self.phase = Phase::Address { read };
+                Progress::Running
+            }
+            Phase::Address { read: false } if sr1 & SR1_ADDR != 0 => {
+                // EV6: ADDR is cleared by the SR1 read followed by the SR2 read; the transmitter
+                // then has TXE (EV8_1), served with the buffer interrupt.
+                block.read_sr2();
+                block.set_interrupts(Interrupts::Buffer);
+                self.phase = Phase::Transmit { sent: 0 };
+                Progress::Running
+            }
+            Phase::Address { read: true } if sr1 & SR1_ADDR != 0 => {
+                self.addressed_for_read(op.read, block);
+                Progress::Running
+            }
+            Phase::Transmit { sent } if sr1 & SR1_TXE != 0 => {
+                // EV8_1 (first byte), EV8 (the others): TXE is cleared by writing DR.
+                let index = usize::from(self.written) + usize::from(sent);
+                let byte = script.written().get(index).copied().unwrap_or(0);
+                block.write_dr(byte);
+                let sent = sent + 1;
+                if sent >= op.write {
+                    // The last byte is in DR: TXE off, wait for BTF (EV8_2).
+                    block.set_interrupts(Interrupts::Events);
+                    self.phase = Phase::TransmitEnd;
+                } else {
+                    self.phase = Phase::Transmit { sent };
+                }
+                Progress::Running
+            }
+            Phase::TransmitEnd if sr1 & SR1_BTF != 0 => {
+                if op.read > 0 {
+                    // §26.3.3 "Closing the communication" / a write then a read: a repeated
+                    // START instead of the STOP, set while BTF holds SCL low. BTF stays set
+                    // (and would raise this interrupt again) until the START is on the bus: the
+                    // caller waits for it (`Condition::Start`); SB's own interrupt follows.
+                    block.modify_cr1(CR1_START, 0);
+                    self.phase = Phase::Start { read: true };
+                    self.wait_for(Condition::Start);
+                    Progress::Running
+                } else {
+                    // EV8_2: TXE = BTF = 1, program STOP (it clears both).
+                    block.modify_cr1(CR1_STOP, 0);
+                    self.next_operation(op, script, block)
+                }
+            }
+            Phase::Receive { left } if sr1 & SR1_RXNE != 0 => {
+                // EV7: RXNE is cleared by reading DR.
+                readings.push(block.read_dr());
+                let left = left - 1;
+                if left <= 3 {
+                    // Method 2: with three left, wait for BTF instead of RXNE.
+                    block.set_interrupts(Interrupts::Events);
+                    self.phase = Phase::ReceiveThreeLeft;
+                } else {
+                    self.phase = Phase::Receive { left };
+                }
+                Progress::Running
+            }
+            Phase::ReceiveThreeLeft if sr1 & SR1_BTF != 0 => {
+                // Method 2, "When 3 bytes remain to be read": BTF = 1 (DataN-2 in DR, DataN-1 in
+                // the shift register, SCL held low). Clear ACK; read DataN-2 (DataN's reception
+                // starts, to be NACKed); program STOP; read DataN-1. The last three must not be
+                // interrupted (AN2824; the critical section, above).
+                block.modify_cr1(0, CR1_ACK);
+                readings.push(block.read_dr());
+                block.modify_cr1(CR1_STOP, 0);
+                readings.push(block.read_dr());
+                // Then RXNE for DataN (EV7).
+                block.set_interrupts(Interrupts::Buffer);
+                self.phase = Phase::ReceiveLast;
+                Progress::Running
+            }
+            Phase::ReceiveTwo if sr1 & SR1_BTF != 0 => {
+                // Method 2, N = 2: BTF = 1 (data 1 in DR, data 2 in the shift register); program
+                // STOP, read data 1 and data 2.
+                block.modify_cr1(CR1_STOP, 0);
+                readings.push(block.read_dr());
+                readings.push(block.read_dr());
+                self.next_operation(op, script, block)
+            }
+            Phase::ReceiveLast if sr1 & SR1_RXNE != 0 => {
+                // EV7 of the last byte (its NACK and the STOP programmed before it came).
+                readings.push(block.read_dr());
+                self.next_operation(op, script, block)
+            }
+            _ if sr1 & (SR1_SB | SR1_ADDR) != 0 => {
+                // SB or ADDR where the sequence has none: they hold SCL and raise the event
+                // interrupt until served, and no step serves them here.
+                block.reset();
+                self.fail(Failure::UnexpectedEvent)
+            }
+            // Anything else is an interrupt whose flag has gone (a TXE or RXNE pended just before
+            // its enable was turned off, a BTF beside a byte already served): nothing to do.
+            _ => Progress::Running,
+        }
+    }
+
+    /// An event interrupt with no script running (one pended as the last ended, or a fault of
+    /// the block): its enables off, so that it does not come back.
+    pub fn on_stray_event(&mut self, block: &mut impl Block) {
+        self.phase = Phase::Idle;
+        self.awaiting = None;
+        block.set_interrupts(Interrupts::Off);
+    }
+
+    /// EV6 of a read of `count` bytes: the acknowledge set up for its ending before ADDR is
+    /// cleared (the first byte's reception starts when it is).
+    fn addressed_for_read(&mut self, count: u8, block: &mut impl Block) {
+        match count {
+            1 => {
+                // Method 2, N = 1: ACK = 0 in the ADDR event, before ADDR is cleared; STOP
+                // programmed just after (no interrupt between the two: AN2824,
+                // the errata's "must be managed before the current byte is being transferred").
+                block.modify_cr1(0, CR1_ACK | CR1_POS);
+                block.read_sr2();
+                block.modify_cr1(CR1_STOP, 0);
+                // EV7: the byte's read when RXNE comes.
+                block.set_interrupts(Interrupts::Buffer);
+                self.phase = Phase::ReceiveLast;
+            }
+            2 => {
+                // Method 2, N = 2: ACK low and POS high, then clear ADDR; wait for BTF (the
+                // buffer interrupt off).
+                block.modify_cr1(CR1_POS, CR1_ACK);
+                block.read_sr2();
+                block.set_interrupts(Interrupts::Events);
+                self.phase = Phase::ReceiveTwo;
+            }
+            _ => {
+                // N > 2: every byte but the last two acknowledged as it comes (ACK = 1, POS = 0
+                // before the first byte's reception), method 2's ending at three left.
+                block.modify_cr1(CR1_ACK, CR1_POS);
+                block.read_sr2();
+                if count > 3 {
+                    block.set_interrupts(Interrupts::Buffer);
+                    self.phase = Phase::Receive { left: count };
+                } else {
+                    block.set_interrupts(Interrupts::Events);
+                    self.phase = Phase::ReceiveThreeLeft;
+                }
+            }
+        }
+    }
+
+    /// An error interrupt (I2Cx_ER) with SR1 read as `sr1` (RM0008 §26.3.4). An arbitration loss,
+    /// a bus error or an overrun resets the block (the polled master's rule); a missing
+    /// acknowledge programs the STOP the reference manual asks the master for and leaves the
+    /// block as it is. Arbitration loss is served first (the block is no longer a master), then
+    /// a bus error, an overrun, and a missing acknowledge.
+    pub fn on_error(&mut self, sr1: u16, block: &mut impl Block) -> Progress {
+        let flags = sr1 & SR1_ERRORS;
+        if flags == 0 {
+            return Progress::Running;
+        }
+        block.clear_sr1(flags);
+        if self.phase == Phase::Idle {
+            block.set_interrupts(Interrupts::Off);
+            return Progress::Running;
+        }
+        let failure = if flags & SR1_ARLO != 0 {
+            // ARLO: the block went back to slave mode and released the lines.
+            Failure::ArbitrationLoss
+        } else if flags & SR1_BERR != 0 {
+            Failure::Bus
+        } else if flags & SR1_OVR != 0 {
+            Failure::Overrun
+        } else {
+            match self.phase {
+                Phase::Address { .. } => Failure::NackAddress,
+                Phase::Transmit { .. } | Phase::TransmitEnd => Failure::NackData,
+                // A missing acknowledge while the block receives or starts is not a step of
+                // the sequence.
+                _ => Failure::UnexpectedEvent,
+            }
+        };
+        match failure {
+            Failure::NackAddress | Failure::NackData => {
+                // AF: "a Stop or repeated Start condition must be generated by software".
+                block.modify_cr1(CR1_STOP, 0);
+                block.set_interrupts(Interrupts::Off);
+            }
+            _ => block.reset(),
+        }
+        self.fail(failure)
+    }
+}
