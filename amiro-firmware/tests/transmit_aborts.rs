@@ -1,8 +1,10 @@
 //! The transmit path's aborts on bxCAN's register model (`bxcan::model`) with the boards' transmit queue: what the
 //! analysis's charge of the transmit interrupt assumes of them (docs/analysis.md, "The transmit interrupt's parts":
 //! an abort is requested only by the queue's head, for the least urgent pending frame, at most one per job, and
-//! there are no more aborts than frames queued), and the two cases that keep the charge at one abort per frame
-//! queued rather than per job's frames of one identifier (both under *Refinements examined*).
+//! there are no more aborts than frames queued), and two known answers (docs/analysis.md, *Refinements examined*): a
+//! frame that asks for two aborts (the count holds over the frames, not per frame), and one job's two frames of one
+//! identifier that ask for two (why the charge stays one abort per frame queued, not per job's frames of one
+//! identifier).
 //!
 //! The interrupt's job is `tasks::transmit_pending`'s (a chip-only module): collect every completion, requeue an
 //! aborted frame, then fill mailboxes from the queue's head until the queue is empty or a frame is refused. It is
