@@ -13,7 +13,7 @@
 //!   and the next waiting one started.
 //!
 //! The state is shared by the interrupts and the clients under critical sections whose length is
-//! bounded: the engine's actions for one event (at most six register accesses), a slot's script
+//! bounded: the engine's actions for one event (at most five), a slot's script
 //! and readings copied in, and at most one walk of the slots (no loop longer than the slot count).
 //! The same section is what keeps the engine's uninterruptible steps uninterrupted
 //! (`i2c_engine`). The waits for a STOP or a repeated START to go out are polled outside it, a
@@ -28,11 +28,12 @@ use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
 
 use crate::i2c_engine::{Block, Engine, Progress, CONDITION_POLLS};
 
-/// A client of the bus: a slot index checked against the bus's slot count ([`I2cBus::client`]).
+/// A client of a bus with `SLOTS` slots: a slot index checked against that count when it was made
+/// ([`I2cBus::client`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Client(u8);
+pub struct Client<const SLOTS: usize>(u8);
 
-impl Client {
+impl<const SLOTS: usize> Client<SLOTS> {
     /// The slot's index.
     pub fn index(self) -> usize {
         usize::from(self.0)
@@ -108,19 +109,19 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
     }
 
     /// Client `index`, if the bus has that slot.
-    pub fn client(&self, index: usize) -> Option<Client> {
+    pub fn client(&self, index: usize) -> Option<Client<SLOTS>> {
         (index < SLOTS && index <= usize::from(u8::MAX)).then_some(Client(index as u8))
     }
 
     /// Runs `script` for `client`: the future submits it on its first poll and gives its
     /// readings (or the failure and the operation it happened in) at its end. Dropping it
     /// cancels the script.
-    pub fn run(&self, client: Client, script: Script) -> Transfer<'_, B, SLOTS> {
+    pub fn run(&self, client: Client<SLOTS>, script: Script) -> Transfer<'_, B, SLOTS> {
         Transfer {
             bus: self,
             client: client.index(),
             script,
-            submitted: false,
+            stage: Stage::New,
         }
     }
 
@@ -128,9 +129,9 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
     pub fn on_event(&self) {
         let waker = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
-            let progress = match inner.running {
-                Some(index) => {
-                    let slot = &mut inner.slots[index];
+            let running = inner.running.and_then(|index| inner.slots.get_mut(index));
+            let progress = match running {
+                Some(slot) => {
                     inner
                         .engine
                         .on_event(sr1, &slot.script, &mut slot.readings, &mut inner.block)
@@ -212,7 +213,7 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
 
     fn finish(&mut self, result: Result<(), ScriptError>) -> Option<Waker> {
         let index = self.running.take()?;
-        let slot = &mut self.slots[index];
+        let slot = self.slots.get_mut(index)?;
         slot.state = State::Finished(result);
         slot.waker.take()
     }
@@ -237,8 +238,8 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
             }
         }
         let (index, _, _) = best?;
+        let slot = self.slots.get_mut(index)?;
         self.running = Some(index);
-        let slot = &mut self.slots[index];
         slot.state = State::Running;
         match self.engine.start(&slot.script, &mut self.block) {
             Progress::Running => None,
@@ -248,50 +249,74 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
     }
 }
 
+/// Where a [`Transfer`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    /// Not polled yet.
+    New,
+    /// Its script is in the slot (waiting, running or finished).
+    Submitted,
+    /// Resolved (or refused): the slot is not its own.
+    Done,
+}
+
 /// A client's script on the bus, awaited; see [`I2cBus::run`].
 pub struct Transfer<'a, B: Block, const SLOTS: usize> {
     bus: &'a I2cBus<B, SLOTS>,
     client: usize,
     script: Script,
-    submitted: bool,
+    stage: Stage,
 }
+
+/// The answer to a [`Transfer`] that cannot have the client's slot.
+const BUSY: ScriptError = ScriptError {
+    operation: 0,
+    failure: Failure::Busy,
+};
 
 impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
     type Output = Result<Readings, ScriptError>;
 
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
         let this = self.get_mut();
+        match this.stage {
+            // Polled after it resolved: the slot may be another transfer's by now.
+            Stage::Done => return Poll::Ready(Err(BUSY)),
+            Stage::New if this.script.operations().is_empty() => {
+                this.stage = Stage::Done;
+                return Poll::Ready(Ok(Readings::for_script(&this.script)));
+            }
+            Stage::New | Stage::Submitted => {}
+        }
         // The readings' layout is made here, outside the critical section.
         let readings = Readings::for_script(&this.script);
-        if !this.submitted && this.script.operations().is_empty() {
-            return Poll::Ready(Ok(readings));
-        }
         let (poll, started) = this.bus.with(|inner| {
             let mut started = None;
-            let slot = &mut inner.slots[this.client];
-            if !this.submitted {
+            if this.stage == Stage::New {
+                let Some(slot) = inner.slots.get_mut(this.client) else {
+                    this.stage = Stage::Done;
+                    return (Poll::Ready(Err(BUSY)), None);
+                };
                 if slot.state != State::Free {
                     // The client's slot holds another of its scripts (one at a time).
-                    return (
-                        Poll::Ready(Err(ScriptError {
-                            operation: 0,
-                            failure: Failure::Busy,
-                        })),
-                        None,
-                    );
+                    this.stage = Stage::Done;
+                    return (Poll::Ready(Err(BUSY)), None);
                 }
                 slot.script = this.script;
                 slot.readings = readings;
                 slot.state = State::Waiting(inner.submitted);
                 inner.submitted += 1;
-                this.submitted = true;
+                this.stage = Stage::Submitted;
                 started = inner.start_next();
             }
-            let slot = &mut inner.slots[this.client];
+            let Some(slot) = inner.slots.get_mut(this.client) else {
+                this.stage = Stage::Done;
+                return (Poll::Ready(Err(BUSY)), started);
+            };
             if let State::Finished(result) = slot.state {
                 slot.state = State::Free;
                 slot.waker = None;
-                this.submitted = false;
+                this.stage = Stage::Done;
                 return (Poll::Ready(result.map(|()| slot.readings)), started);
             }
             match &slot.waker {
@@ -308,12 +333,12 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
 
 impl<B: Block, const SLOTS: usize> Drop for Transfer<'_, B, SLOTS> {
     fn drop(&mut self) {
-        if !self.submitted {
+        if self.stage != Stage::Submitted {
             return;
         }
         let client = self.client;
         let started = self.bus.with(|inner| {
-            let slot = &mut inner.slots[client];
+            let slot = inner.slots.get_mut(client)?;
             let was = slot.state;
             slot.state = State::Free;
             slot.waker = None;

@@ -1,6 +1,6 @@
-//! The interrupt-driven I2C master: a hardware-free state machine that runs one
-//! [`Script`](amiro_sensors::script::Script) on the STM32 I2C v1 block (the F103's, RM0008 §26;
-//! the F405's is the same IP, RM0090 §27), one interrupt at a time (docs/i2c.md).
+//! The interrupt-driven I2C master: a hardware-free state machine that runs one [`Script`] on
+//! the STM32 I2C v1 block (the F103's, RM0008 §26; the F405's is the same IP, RM0090 §27), one
+//! interrupt at a time (docs/i2c.md).
 //!
 //! At each event interrupt (I2Cx_EV) the caller reads SR1 and hands it to [`Engine::on_event`];
 //! at each error interrupt (I2Cx_ER) to [`Engine::on_error`]. The engine answers with register
@@ -12,8 +12,9 @@
 //! Sources (the step each action follows is named beside it in the code):
 //! - RM0008 rev 21, §26.3.3 "I2C master mode": the start condition and EV5, the slave address
 //!   and EV6, the master transmitter (EV8_1, EV8, EV8_2) and the master receiver (EV7, EV7_1);
-//!   "Closing the communication"; the receiver's endings for one byte, two bytes (POS) and N > 2
-//!   bytes (its method 2, "When 3 bytes remain to be read").
+//!   "Closing the communication" and its method 2 (for interrupts that are not the highest
+//!   priority in the application): the endings for N = 1, N = 2 (POS) and N > 2 bytes ("When 3
+//!   bytes remain to be read").
 //! - RM0008 §26.3.4 "Error conditions" (BERR, ARLO, AF, OVR) and §26.6.1, the note to CR1's
 //!   START and STOP bits: no write to CR1 while a STOP (or START) the software set is pending.
 //! - ST AN2824, "STM32F10xxx I2C optimized examples", the interrupt-driven master receiver: the
@@ -30,7 +31,7 @@
 //! may not. The bus (`i2c_bus`) runs every call into the engine inside its critical section
 //! (interrupts masked on the single-core chip), so no interrupt of any priority and no client
 //! comes between two actions of one event. The section's length is an event's actions (at most
-//! six register accesses) and the bus's one walk of its slots.
+//! five; nine register accesses with the SR1 read) and the bus's one walk of its slots.
 //!
 //! Each operation is a transaction of its own (it ends with a STOP; a write then a read has a
 //! repeated START between them). A START is set only once the previous STOP has cleared (the
@@ -409,8 +410,8 @@ impl Engine {
                 Progress::Running
             }
             Phase::ReceiveTwo if sr1 & SR1_BTF != 0 => {
-                // "Case of two bytes to be received": BTF = 1 (data 1 in DR, data 2 in the shift
-                // register); program STOP, read data 1 and data 2.
+                // Method 2, N = 2: BTF = 1 (data 1 in DR, data 2 in the shift register); program
+                // STOP, read data 1 and data 2.
                 block.modify_cr1(CR1_STOP, 0);
                 readings.push(block.read_dr());
                 readings.push(block.read_dr());
@@ -446,19 +447,19 @@ impl Engine {
     fn addressed_for_read(&mut self, count: u8, block: &mut impl Block) {
         match count {
             1 => {
-                // "Case of a single byte to be received": ACK = 0 during EV6, before ADDR is
-                // cleared; STOP programmed just after (no interrupt between the two: AN2824,
+                // Method 2, N = 1: ACK = 0 in the ADDR event, before ADDR is cleared; STOP
+                // programmed just after (no interrupt between the two: AN2824,
                 // the errata's "must be managed before the current byte is being transferred").
                 block.modify_cr1(0, CR1_ACK | CR1_POS);
                 block.read_sr2();
                 block.modify_cr1(CR1_STOP, 0);
-                // EV7_1's read when RXNE comes.
+                // EV7: the byte's read when RXNE comes.
                 block.set_interrupts(Interrupts::Buffer);
                 self.phase = Phase::ReceiveLast;
             }
             2 => {
-                // "Case of two bytes to be received": ACK low and POS high, then clear ADDR; wait
-                // for BTF (the buffer interrupt off).
+                // Method 2, N = 2: ACK low and POS high, then clear ADDR; wait for BTF (the
+                // buffer interrupt off).
                 block.modify_cr1(CR1_POS, CR1_ACK);
                 block.read_sr2();
                 block.set_interrupts(Interrupts::Events);

@@ -492,6 +492,74 @@ fn a_floor_round_reads_each_sensor_through_its_channel() {
 }
 
 #[test]
+fn a_floor_select_is_a_write_whose_stop_clears_before_the_next_start() {
+    let (mut model, script) = floor();
+    run(&mut model, &script, 0).unwrap().unwrap();
+    let select = model
+        .access
+        .iter()
+        .position(|a| *a == WriteDr(pca9544a::ENABLE | 1))
+        .unwrap();
+    assert_eq!(
+        model.access[select..select + 9],
+        [
+            WriteDr(pca9544a::ENABLE | 1),
+            Enable(Interrupts::Events),
+            // EV8_2: STOP; the next operation waits for it (two polls in the model) before its
+            // START.
+            Sr1,
+            Cr1 {
+                set: CR1_STOP,
+                clear: 0
+            },
+            StopPoll,
+            StopPoll,
+            Enable(Interrupts::Events),
+            Cr1 {
+                set: CR1_START,
+                clear: 0
+            },
+            Sr1,
+        ]
+    );
+    // The mux connected channel 1 at that STOP, before the sensor behind it was addressed.
+    let stop = model
+        .wire
+        .iter()
+        .position(|w| *w == Wire::Sent(pca9544a::ENABLE | 1, true))
+        .unwrap();
+    assert_eq!(model.wire[stop + 1..stop + 3], [Wire::Stop, Wire::Start]);
+    assert_eq!(
+        model.wire[stop + 3],
+        Wire::Sent(vcnl4020::ADDRESS << 1, true)
+    );
+}
+
+#[test]
+fn a_bno055_verified_read_is_a_burst_then_a_one_byte_check() {
+    let device = Device::new(bno055::ADDRESS);
+    let mut script = Script::new();
+    script
+        .write_read(bno055::ADDRESS, &[bno055::reg::GYR_DATA_X_LSB], 6)
+        .unwrap()
+        .write_read(bno055::ADDRESS, &[bno055::reg::OPR_MODE], 1)
+        .unwrap();
+    for late in 0..3 {
+        let mut model = Model::new(vec![device.clone()]);
+        let readings = run(&mut model, &script, late).unwrap().unwrap();
+        assert_eq!(
+            readings.of(0),
+            expected_bytes(&device, bno055::reg::GYR_DATA_X_LSB, 6)
+        );
+        assert_eq!(
+            readings.of(1),
+            expected_bytes(&device, bno055::reg::OPR_MODE, 1)
+        );
+        check_wire(&model, &script);
+    }
+}
+
+#[test]
 fn every_shape_is_the_same_when_the_interrupts_come_late() {
     let shapes: [(u8, usize); 6] = [(1, 1), (1, 2), (1, 3), (1, 4), (1, 6), (1, 18)];
     for (write, read) in shapes {
@@ -976,7 +1044,7 @@ fn a_client_has_one_script_at_a_time_and_a_failure_reaches_only_its_own() {
     );
     assert!(other.as_mut().poll(&mut cx).is_pending());
     pump(&bus);
-    assert!(matches!(first.poll(&mut cx), Poll::Ready(Ok(_))));
+    assert!(matches!(first.as_mut().poll(&mut cx), Poll::Ready(Ok(_))));
     assert_eq!(
         other.poll(&mut cx),
         Poll::Ready(Err(ScriptError {
@@ -984,6 +1052,17 @@ fn a_client_has_one_script_at_a_time_and_a_failure_reaches_only_its_own() {
             failure: Failure::NackAddress
         }))
     );
+    // A transfer polled again after it resolved does not run its script again.
+    let wire = bus.with_block(|m| m.wire.len());
+    assert_eq!(
+        first.poll(&mut cx),
+        Poll::Ready(Err(ScriptError {
+            operation: 0,
+            failure: Failure::Busy
+        }))
+    );
+    pump(&bus);
+    assert_eq!(bus.with_block(|m| m.wire.len()), wire);
     // An empty script needs no bus.
     let mut empty = pin!(bus.run(c(0), Script::new()));
     assert!(matches!(empty.as_mut().poll(&mut cx), Poll::Ready(Ok(r)) if r.all().is_empty()));

@@ -6,9 +6,9 @@
 //! publisher loop, the independent watchdog, the clock-tree reset, and the QEMU platform. A board
 //! crate keeps only its `board.rs` (pins and devices), its sampling and its RTIC app (wiring).
 //!
-//! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`layout`], [`spi`], [`timer_monotonic`],
-//! [`trace_ring`]) builds and is tested on the host; the rest
-//! exists only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
+//! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`i2c_bus`], [`i2c_engine`], [`layout`],
+//! [`spi`], [`timer_monotonic`], [`trace_ring`]) builds and is tested on the host; the rest exists
+//! only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
 //! is enabled on a chip build; `qemu` selects the QEMU platform.
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]

@@ -92,6 +92,7 @@ fn board(n: usize, seed: u64, priorities: Priorities) -> BoardSystem {
         idle_sections: Vec::new(),
         can_tx_task: None,
         static_ceilings: Vec::new(),
+        sensor_buses: Default::default(),
     }
 }
 

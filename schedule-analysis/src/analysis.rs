@@ -31,6 +31,11 @@ pub enum Unbounded {
     Sender(String),
     /// Inherited release jitters kept growing.
     NoConvergence,
+    /// A script on a sensor bus has no bound, so the job that awaits it has none
+    /// ([`crate::sensor_bus`]): the bus, and why.
+    SensorBus(String, String),
+    /// A self-suspending job of at least this priority has no bound, so its interference has none.
+    Suspending(String),
 }
 
 impl fmt::Display for Unbounded {
@@ -50,6 +55,8 @@ impl fmt::Display for Unbounded {
             Unbounded::Releaser(name) => write!(f, "released by unbounded `{name}`"),
             Unbounded::Sender(name) => write!(f, "sent by unbounded `{name}`"),
             Unbounded::NoConvergence => f.write_str("inherited jitter does not converge"),
+            Unbounded::SensorBus(bus, why) => write!(f, "its script on `{bus}`: {why}"),
+            Unbounded::Suspending(name) => write!(f, "self-suspending `{name}` unbounded"),
         }
     }
 }
@@ -90,6 +97,8 @@ pub struct BoardResult {
     pub utilisation: f64,
     /// Tasks in model order.
     pub tasks: Vec<TaskResult>,
+    /// The board's sensor buses and their scripts ([`crate::sensor_bus`]); empty without scripts.
+    pub sensor_buses: Vec<crate::sensor_bus::SensorBusResult>,
 }
 
 /// One task's results.
@@ -416,7 +425,13 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
         .map(|t| t.wcet.plus(board.overheads.for_kind(t.kind)))
         .collect();
     let blocking = task_blockings(board);
-    let (bounds, jitter) = task_bounds(board, &costs, &blocking, limits);
+    // A board without scripts is analysed exactly as before the sensor buses existed.
+    let (bounds, jitter, sensor_buses) = if board.sensor_buses.scripts.is_empty() {
+        let (bounds, jitter) = task_bounds(board, &costs, &blocking, limits);
+        (bounds, jitter, Vec::new())
+    } else {
+        crate::sensor_bus::analyse(board, &costs, &blocking, limits)
+    };
     let utilisation = board
         .tasks
         .iter()
@@ -450,12 +465,28 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
         name: board.name.clone(),
         utilisation,
         tasks,
+        sensor_buses,
     }
 }
 
 /// Each task's blocking (model order): its own from the model, or SRP's from the critical sections, with the
 /// ceilings resolved from who uses what ("interrupts disabled" is above everyone).
 fn task_blockings(board: &BoardSystem) -> Vec<Time> {
+    let sections = critical_sections(board);
+    let srp = srp_blockings(
+        &board.tasks.iter().map(|t| t.priority).collect::<Vec<_>>(),
+        &sections,
+    );
+    board
+        .tasks
+        .iter()
+        .zip(&srp)
+        .map(|(t, computed)| t.blocking.unwrap_or(*computed))
+        .collect()
+}
+
+/// Every critical section of the board (its tasks' and idle's) with its resource's ceiling resolved.
+pub(crate) fn critical_sections(board: &BoardSystem) -> Vec<CriticalSection> {
     // A sorted vector, not a hash map: the per-call set-up dominates small boards (docs/analysis.md, benchmark).
     let mut ceilings: Vec<(&str, u32)> = board
         .static_ceilings
@@ -484,23 +515,12 @@ fn task_blockings(board: &BoardSystem) -> Vec<Time> {
         .iter()
         .flat_map(|t| t.sections.iter().map(move |s| (t.priority, s)))
         .chain(board.idle_sections.iter().map(|s| (0, s)));
-    let sections: Vec<CriticalSection> = held
-        .map(|(holder_priority, (resource, length))| CriticalSection {
-            holder_priority,
-            ceiling: ceiling_of(resource),
-            length: *length,
-        })
-        .collect();
-    let srp = srp_blockings(
-        &board.tasks.iter().map(|t| t.priority).collect::<Vec<_>>(),
-        &sections,
-    );
-    board
-        .tasks
-        .iter()
-        .zip(&srp)
-        .map(|(t, computed)| t.blocking.unwrap_or(*computed))
-        .collect()
+    held.map(|(holder_priority, (resource, length))| CriticalSection {
+        holder_priority,
+        ceiling: ceiling_of(resource),
+        length: *length,
+    })
+    .collect()
 }
 
 /// A board's tasks as [`board_analysis`] reads them: in priority order (highest first, ties in model order).
@@ -578,8 +598,23 @@ fn task_bounds(
     blocking: &[Time],
     limits: &Limits,
 ) -> (Vec<Bound>, Vec<Time>) {
+    let jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
+    let releases: Vec<Option<usize>> = board.tasks.iter().map(|t| t.released_by).collect();
+    task_bounds_in(board, costs, blocking, &jitters, &releases, limits)
+}
+
+/// [`task_bounds`] with each task's own release jitter and releaser given (model order) in place of the model's:
+/// the views the self-suspension analysis ([`crate::sensor_bus`]) runs the board in.
+pub(crate) fn task_bounds_in(
+    board: &BoardSystem,
+    costs: &[Time],
+    blocking: &[Time],
+    jitters: &[Time],
+    releases: &[Option<usize>],
+    limits: &Limits,
+) -> (Vec<Bound>, Vec<Time>) {
     let n = board.tasks.len();
-    let sorted = sort_tasks(board);
+    let sorted = sort_tasks(board, jitters, releases);
     let mut timings: Vec<TaskTiming> = sorted
         .order
         .iter()
@@ -587,7 +622,7 @@ fn task_bounds(
             priority: board.tasks.get(i).map_or(0, |t| t.priority),
             wcet: costs.get(i).copied().unwrap_or(Time::ZERO),
             period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
-            jitter: board.tasks.get(i).map_or(Time::ZERO, |t| t.jitter),
+            jitter: jitters.get(i).copied().unwrap_or(Time::ZERO),
         })
         .collect();
     let sorted_blocking: Vec<Time> = sorted
@@ -621,7 +656,7 @@ fn task_bounds(
         board_analysis::IterationBudget::PerJob,
     );
     let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
-    let mut jitter: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
+    let mut jitter: Vec<Time> = jitters.to_vec();
     for (p, &i) in sorted.order.iter().enumerate() {
         let (Some(slot), Some(record), Some(j), Some(timing)) = (
             bounds.get_mut(i),
@@ -639,7 +674,7 @@ fn task_bounds(
             }
             NoBound::Inherited(board_analysis::Unbound::NoConvergence) => Unbounded::NoConvergence,
             NoBound::Inherited(board_analysis::Unbound::Releaser) => {
-                let releaser = board.tasks.get(i).and_then(|t| t.released_by);
+                let releaser = releases.get(i).copied().flatten();
                 let name = releaser
                     .and_then(|r| board.tasks.get(r))
                     .map_or("?", |t| t.name.as_str());
@@ -652,7 +687,7 @@ fn task_bounds(
 
 /// The board's tasks in priority order (highest first; ties keep model order), with what the analysis reads of
 /// each.
-fn sort_tasks(board: &BoardSystem) -> SortedTasks {
+fn sort_tasks(board: &BoardSystem, jitters: &[Time], releases: &[Option<usize>]) -> SortedTasks {
     let n = board.tasks.len();
     let priority = |i: usize| board.tasks.get(i).map_or(0, |t| t.priority);
     let mut order: Vec<usize> = (0..n).collect();
@@ -666,11 +701,10 @@ fn sort_tasks(board: &BoardSystem) -> SortedTasks {
     let release = order
         .iter()
         .map(|&i| {
-            let task = board.tasks.get(i)?;
-            let r = task.released_by?;
+            let r = releases.get(i).copied().flatten()?;
             Some(board_analysis::Release {
                 by: position.get(r).copied().unwrap_or(usize::MAX),
-                own_jitter: task.jitter,
+                own_jitter: jitters.get(i).copied().unwrap_or(Time::ZERO),
             })
         })
         .collect();

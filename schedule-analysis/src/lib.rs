@@ -9,7 +9,8 @@
 //!   [`admission_host`] lowers from the same apps and timing files;
 //! * the **host layer** (feature `std`, on by default) reads models ([`model`]), the generated bounds files
 //!   ([`bounds`]), RTIC apps ([`rtic_source`]), timing files and scenarios ([`scenario`]), runs the whole system ([`analysis`]: names, ceilings and overheads
-//!   around the core's board and bus analyses, then the end-to-end paths; [`sensitivity`]) and renders the report
+//!   around the core's board and bus analyses, then the end-to-end paths; [`sensor_bus`]: jobs that suspend on a
+//!   sensor bus; [`sensitivity`]) and renders the report
 //!   ([`report`]); [`rng`] is the deterministic generator of its randomised experiments (benchmark sets,
 //!   `cargo xtask campaign`, the admission-cost search). `cargo xtask analyze` is a thin front end over it.
 //!
@@ -43,6 +44,8 @@ pub mod rtic_source;
 pub mod scenario;
 #[cfg(feature = "std")]
 pub mod sensitivity;
+#[cfg(feature = "std")]
+pub mod sensor_bus;
 
 pub use busy_window::{AnalysisError, Limits, Response};
 pub use time::Time;

@@ -56,6 +56,10 @@ pub struct BoardModel {
     /// The tasks (jobs) to analyse.
     #[serde(default)]
     pub tasks: Vec<TaskModel>,
+    /// The board's sensor buses (I2C), each with its engine's interrupt, where a task's `script` runs
+    /// ([`crate::sensor_bus`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sensor_buses: Vec<crate::sensor_bus::SensorBusModel>,
 }
 
 /// Per-board overheads in µs (all default to 0).
@@ -128,9 +132,14 @@ pub struct TaskModel {
     /// The period is a minimum inter-arrival time (informational: the analysis is the same).
     #[serde(default, skip_serializing_if = "is_false")]
     pub sporadic: bool,
-    /// The RTIC task this is a job of (informational, for grouping in reports).
+    /// The RTIC task this is a job of (informational, for grouping in reports; the jobs of one task run one
+    /// after the other, which the self-suspension analysis reads).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub job_of: Option<String>,
+    /// The script each job runs on one of the board's sensor buses, suspending until it ends
+    /// ([`crate::sensor_bus`]); `wcet_us` is then the job's CPU alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub script: Option<crate::sensor_bus::ScriptModel>,
 }
 
 /// The CAN bus.
@@ -549,6 +558,18 @@ fn validate_board(board: &BoardModel, path: &str) -> Result<BoardSystem, ModelEr
             at = next;
         }
     }
+    let sensor_buses = crate::sensor_bus::validate_board(board, &overheads, &mut tasks).map_err(
+        |(field, e)| {
+            error(
+                if field.is_empty() {
+                    path.to_string()
+                } else {
+                    format!("{path}.{field}")
+                },
+                e.to_string(),
+            )
+        },
+    )?;
     let can_tx_task = match &board.can_tx_task {
         None => None,
         Some(name) => Some(*names.get(name.as_str()).ok_or_else(|| {
@@ -565,6 +586,7 @@ fn validate_board(board: &BoardModel, path: &str) -> Result<BoardSystem, ModelEr
         idle_sections,
         can_tx_task,
         static_ceilings: board.ceilings.clone().into_iter().collect(),
+        sensor_buses,
     })
 }
 
@@ -758,6 +780,8 @@ pub struct BoardSystem {
     pub can_tx_task: Option<usize>,
     /// Static ceilings given in the model.
     pub static_ceilings: Vec<(String, u32)>,
+    /// Its sensor buses and the scripts its tasks run on them (none: the board is analysed as without buses).
+    pub sensor_buses: crate::sensor_bus::BoardBuses,
 }
 
 /// A validated task.

@@ -573,7 +573,62 @@ fn text_boards(primary: &Analysis, markdown: bool, out: &mut String) {
             ),
         );
         board_table(board).render(markdown, out);
+        for bus in &board.sensor_buses {
+            text_sensor_bus(bus, markdown, out);
+        }
     }
+}
+
+/// A sensor bus's scripts ([`crate::sensor_bus`]): each script's bus time, its response on the bus, and the
+/// suspension its job is charged; the engine's per-event figure says whether it is an estimate or a bound.
+fn text_sensor_bus(bus: &crate::sensor_bus::SensorBusResult, markdown: bool, out: &mut String) {
+    heading(
+        out,
+        markdown,
+        3,
+        &format!(
+            "Sensor bus {} — {} kbit/s, bus utilisation {}; engine interrupt at priority {}, {} µs per event \
+             (with entry and exit; {}: {}), an event's response {} µs",
+            bus.name,
+            us_f(f64::from(bus.bitrate) / 1000.0),
+            percent(bus.utilisation),
+            bus.engine_priority,
+            us(bus.per_event),
+            bus.per_event_from.label(),
+            bus.source,
+            opt(bus.event_response),
+        ),
+    );
+    let mut table = Table::new(&[
+        ("script of", false),
+        ("prio", true),
+        ("wire µs", true),
+        ("stretch µs", true),
+        ("events", true),
+        ("bus time µs", true),
+        ("block µs", true),
+        ("jitter µs", true),
+        ("bus WCRT µs", true),
+        ("suspension µs", true),
+    ]);
+    for script in &bus.scripts {
+        table.rows.push(vec![
+            script.task.clone(),
+            script.priority.to_string(),
+            us(script.wire),
+            us(script.stretch),
+            script.events.to_string(),
+            us(script.bus_time),
+            us(script.blocking),
+            us(script.jitter),
+            match &script.bound {
+                Ok(r) => us(r.wcrt),
+                Err(why) => format!("∞ ({why})"),
+            },
+            opt(script.suspension),
+        ]);
+    }
+    table.render(markdown, out);
 }
 
 /// The bus's messages and the end-to-end paths per topic.
@@ -767,6 +822,36 @@ fn topics_json(a: &Analysis) -> Value {
     )
 }
 
+fn sensor_buses_json(buses: &[crate::sensor_bus::SensorBusResult]) -> Value {
+    let buses: Vec<Value> = buses
+        .iter()
+        .map(|bus| {
+            let scripts: Vec<Value> = bus
+                .scripts
+                .iter()
+                .map(|s| {
+                    json!({
+                        "task": s.task, "priority": s.priority, "wire_us": s.wire.as_us_f64(),
+                        "stretch_us": s.stretch.as_us_f64(), "events": s.events,
+                        "bus_time_us": s.bus_time.as_us_f64(), "blocking_us": s.blocking.as_us_f64(),
+                        "jitter_us": s.jitter.as_us_f64(),
+                        "bus_wcrt_us": json_time(s.bound.as_ref().ok().map(|r| r.wcrt)),
+                        "unbounded": s.bound.as_ref().err().map(|e| e.to_string()),
+                        "suspension_us": json_time(s.suspension),
+                    })
+                })
+                .collect();
+            json!({
+                "name": bus.name, "bitrate": bus.bitrate, "utilisation": bus.utilisation,
+                "engine_priority": bus.engine_priority, "per_event_us": bus.per_event.as_us_f64(),
+                "per_event_from": bus.per_event_from.label(), "per_event_source": bus.source,
+                "event_response_us": json_time(bus.event_response), "scripts": scripts,
+            })
+        })
+        .collect();
+    Value::Array(buses)
+}
+
 fn to_json(report: &Report) -> Value {
     let a = &report.primary;
     let tasks: Vec<Value> = a
@@ -792,7 +877,14 @@ fn to_json(report: &Report) -> Value {
     let boards: Vec<Value> = a
         .boards
         .iter()
-        .map(|b| json!({"name": b.name, "utilisation": b.utilisation}))
+        .map(|b| {
+            let mut board = json!({"name": b.name, "utilisation": b.utilisation});
+            // Only a board with scripts has the key, so that the others' reports stay as they were.
+            if let (false, Some(fields)) = (b.sensor_buses.is_empty(), board.as_object_mut()) {
+                fields.insert("sensor_buses".into(), sensor_buses_json(&b.sensor_buses));
+            }
+            board
+        })
         .collect();
     let mut out = json!({
         "title": report.title,

@@ -1,8 +1,8 @@
 //! How far each publisher could be pushed: the shortest period (1 µs resolution) that keeps the whole system
 //! schedulable and inside its jitter budgets, and what fails first below it.
 //!
-//! A publisher is a sending task with everything that shares its period (the timer job that releases it, the
-//! messages it sends), or a message without a modelled sender (operator commands). Its period is found by
+//! A publisher is a sending task with everything that shares its period (the timer job that releases it, the rows
+//! its job releases — a script's engine row, a transmit row per sample —, the messages it sends), or a message without a modelled sender (operator commands). Its period is found by
 //! binary search; deadlines that default to the period move with it. When the set already fails, the search goes
 //! the other way: the shortest longer period (up to 1024 × the current one) that would pass. Schedulability is monotone in the period for
 //! every term of the analysis except deadlines that move along, so the search reports a period it has verified, not
@@ -92,6 +92,19 @@ pub fn publishers(system: &System) -> Vec<Publisher> {
                             at = releaser.released_by;
                         }
                         _ => break,
+                    }
+                }
+                // So are the rows its job releases at its period (a script's engine row, a transmit row per
+                // sample): they run once per sample.
+                for (r, released) in board.tasks.iter().enumerate() {
+                    if released.released_by == Some(sender.task)
+                        && released.period == task.period
+                        && !tasks.iter().any(|t| t.task == r)
+                    {
+                        tasks.push(TaskRef {
+                            board: sender.board,
+                            task: r,
+                        });
                     }
                 }
                 out.push(Publisher {

@@ -1,12 +1,17 @@
 //! Small examples whose answers are known from the response-time-analysis literature, worked by hand in the
 //! comments so a reader can check them without the papers.
 
+use schedule_analysis::analysis;
 use schedule_analysis::board::{self, CriticalSection, TaskTiming};
 use schedule_analysis::busy_window::{Counter, Limits};
 use schedule_analysis::can::{self, FrameCost, MessageTiming};
+use schedule_analysis::model::{BoardSystem, OverheadTimes, TaskKind, TaskSpec};
+use schedule_analysis::sensor_bus::{BoardBuses, PerEventFrom, Script, SensorBus};
 use schedule_analysis::time::Time;
 
 mod sim;
+
+use sim::{Piece, Segment, SuspendingJob};
 
 fn task(priority: u32, wcet: u64, period: u64) -> TaskTiming {
     TaskTiming {
@@ -216,4 +221,233 @@ fn thesis_cost_overload_is_unbounded() {
         Ok(Time::from_us(1090)),
         "blocking 545 + own 545"
     );
+}
+
+/// A board task for the self-suspension examples: CPU `wcet` µs, no overheads, released periodically.
+fn board_task(name: &str, priority: u32, wcet: u64, period: u64) -> TaskSpec {
+    TaskSpec {
+        name: name.into(),
+        priority,
+        wcet: Time::from_us(wcet),
+        bcet: Time::ZERO,
+        period: Time::from_us(period),
+        deadline: Time::from_us(period),
+        deadline_follows_period: true,
+        jitter: Time::ZERO,
+        sections: Vec::new(),
+        blocking: None,
+        kind: TaskKind::Plain,
+        released_by: None,
+        sporadic: false,
+        job_of: None,
+    }
+}
+
+/// A board whose tasks `scripts` (task, bus time µs) run scripts on one bus whose engine costs nothing (no
+/// engine rows: the examples isolate the suspension and the bus).
+fn suspending_board(tasks: Vec<TaskSpec>, scripts: &[(usize, u64)]) -> BoardSystem {
+    BoardSystem {
+        name: "b".into(),
+        overheads: OverheadTimes::default(),
+        tasks,
+        idle_sections: Vec::new(),
+        can_tx_task: None,
+        static_ceilings: Vec::new(),
+        sensor_buses: BoardBuses {
+            buses: vec![SensorBus {
+                name: "i2c1".into(),
+                bitrate: 400_000,
+                bit_time: Time::from_ns(2500),
+                engine_priority: 10,
+                per_event: Time::ZERO,
+                per_event_from: PerEventFrom::Estimate,
+                source: "none: the examples have no engine".into(),
+            }],
+            scripts: scripts
+                .iter()
+                .map(|&(task, us)| Script {
+                    task,
+                    bus: 0,
+                    wire: Time::from_us(us),
+                    stretch: Time::ZERO,
+                    events: 0,
+                    engine_row: usize::MAX,
+                })
+                .collect(),
+        },
+    }
+}
+
+fn board_wcrts_us(board: &BoardSystem) -> Vec<Option<u64>> {
+    let result = analysis::analyse_board(board, &Limits::default());
+    result
+        .tasks
+        .iter()
+        .map(|t| t.wcrt().map(|r| r.as_ns() / 1000))
+        .collect()
+}
+
+/// A self-suspending task over a plain one: counting the suspending task as its CPU with no jitter is unsound.
+/// τ1 (priority 2): CPU 2 µs, a 6 µs script, T 10 µs. τ2 (priority 1): CPU 4 µs, T 100 µs.
+///
+/// The naive charge: R2 = 4 + ⌈R2/10⌉·2 → 6. The simulator finds 8: τ1's first job runs none of its CPU before
+/// its script (the bus 0..6) and all 2 µs after it (6..8); τ2, released at 6, waits; it runs 8..10; τ1's next
+/// job runs its 2 µs at once (10..12) and ends without its script this time (a job may be shorter); τ2 runs
+/// 12..14: response 14 − 6 = 8.
+///
+/// The analysis: R1 = 2 + 6 = 8 (suspension-oblivious for itself; its script alone on the bus: 6), and τ1 seen by
+/// τ2 as 2 µs released with jitter R1 − C1 = 6: R2 = 4 + ⌈(R2 + 6)/10⌉·2 → 6 → 8 → 8. It covers the 8.
+#[test]
+fn a_suspending_task_interferes_with_its_response_minus_its_cpu_as_jitter() {
+    let cpu = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: None,
+        })
+    };
+    let jobs = vec![
+        SuspendingJob {
+            task: 0,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(0), Piece::Script(6000), cpu(2)],
+        },
+        SuspendingJob {
+            task: 0,
+            arrival: 10_000,
+            release: 10_000,
+            pieces: vec![cpu(2)],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 6000,
+            release: 6000,
+            pieces: vec![cpu(4)],
+        },
+    ];
+    let simulated = sim::suspending_run(&[2, 1], &[0, 1], &[], &jobs);
+    assert_eq!(simulated, vec![8000, 2000, 8000]);
+
+    let naive = wcrts(&[task(2, 2, 10), task(1, 4, 100)], &[]);
+    assert_eq!(naive, vec![2, 6]);
+    assert!(simulated[2] > naive[1] * 1000, "the naive charge misses it");
+
+    let board = suspending_board(
+        vec![board_task("t1", 2, 2, 10), board_task("t2", 1, 4, 100)],
+        &[(0, 6)],
+    );
+    assert_eq!(board_wcrts_us(&board), vec![Some(8), Some(8)]);
+    let result = analysis::analyse_board(&board, &Limits::default());
+    assert_eq!(result.tasks[1].jitter, Time::ZERO, "τ2's own jitter");
+    let bus = &result.sensor_buses[0];
+    assert_eq!(bus.scripts[0].suspension, Some(Time::from_us(6)));
+}
+
+/// Three scripts on one bus, each from its own task: A (priority 3, CPU 10, script 100, T 1000), B (2, 10, 200,
+/// 2000), C (1, 10, 300, 5000), all µs. A script's blocking is the longest lower one (A, B: 300; C: 0), its
+/// jitter its job's response, its suspension the bus response minus that jitter.
+///
+/// Round 1 (jitters 0). Bus: A 300 + 100 = 400; B: w = 300 + ⌈(w + 0+)/1000⌉·100 = 400, + 200 = 600;
+/// C: w = ⌈(w+)/1000⌉·100 + ⌈(w+)/2000⌉·200 = 300, + 300 = 600. CPU (suspension-oblivious for the job itself,
+/// the others at their CPU with jitter response − CPU, still 0): A 10 + 400 = 410; B 610 + ⌈R/1000⌉·10 = 620;
+/// C 610 + 10 + 10 = 630.
+///
+/// Round 2 (jitters 410, 620, 630). Bus: A 410 + 300 + 100 = 810; B: w = 300 + ⌈(w + 410+)/1000⌉·100 = 400,
+/// 620 + 400 + 200 = 1220; C: w = ⌈(w + 410+)/1000⌉·100 + ⌈(w + 620+)/2000⌉·200 = 300, 630 + 300 + 300 = 1230:
+/// suspensions 400, 600, 600 as before. CPU: A 410; B = 610 + ⌈(R + 400)/1000⌉·10 = 630 (two of A's CPU bursts
+/// now fit); C = 610 + ⌈(R + 400)/1000⌉·10 + ⌈(R + 610)/2000⌉·10 = 640.
+///
+/// Round 3 (jitters 410, 630, 640): the bus responses 810, 1230, 1240, the suspensions unchanged, and the CPU
+/// responses 410, 630, 640 again: the fixed point.
+#[test]
+fn three_scripts_on_one_bus_worked_by_hand() {
+    let board = suspending_board(
+        vec![
+            board_task("a", 3, 10, 1000),
+            board_task("b", 2, 10, 2000),
+            board_task("c", 1, 10, 5000),
+        ],
+        &[(0, 100), (1, 200), (2, 300)],
+    );
+    let result = analysis::analyse_board(&board, &Limits::default());
+    let wcrt = |i: usize| result.tasks[i].wcrt().map(|r| r.as_ns() / 1000);
+    assert_eq!(
+        [wcrt(0), wcrt(1), wcrt(2)],
+        [Some(410), Some(630), Some(640)]
+    );
+    let bus = &result.sensor_buses[0];
+    let us = |t: Time| t.as_ns() / 1000;
+    let scripts: Vec<(String, u64, u64, u64, u64)> = bus
+        .scripts
+        .iter()
+        .map(|s| {
+            (
+                s.task.clone(),
+                us(s.blocking),
+                us(s.jitter),
+                s.bound.as_ref().map_or(u64::MAX, |r| us(r.wcrt)),
+                s.suspension.map_or(u64::MAX, us),
+            )
+        })
+        .collect();
+    assert_eq!(
+        scripts,
+        vec![
+            ("a".into(), 300, 410, 810, 400),
+            ("b".into(), 300, 630, 1230, 600),
+            ("c".into(), 0, 640, 1240, 600),
+        ]
+    );
+    // The bus's share: 100/1000 + 200/2000 + 300/5000.
+    assert!((bus.utilisation - 0.26).abs() < 1e-9);
+}
+
+/// A suspending job is blocked again when it resumes: a lower task may lock a resource while it is suspended.
+/// τs (priority 3): CPU 2 µs (1 before, 1 after its script), a 5 µs script, T 100; τl and τm (priorities 1 and 2):
+/// 4 µs each, all of it holding `r`, whose ceiling is 3.
+///
+/// The simulator: τl locks `r` at 0; τs arrives at 0.5 and waits until 4, runs 4..5, its script 5..10; τm arrives
+/// at 9.5 (the CPU is idle) and locks `r` until 13.5; τs, ready at 10, waits for it and runs 13.5..14.5: response
+/// 14. Charging one blocking, as for a job that never suspends, gives 2 + 5 + 4 = 11; the analysis charges a
+/// second one for the resumption: 15.
+#[test]
+fn a_suspending_job_is_blocked_again_when_it_resumes() {
+    let locked = |length: u64| {
+        Piece::Cpu(Segment {
+            length,
+            lock: Some(0),
+        })
+    };
+    let free = |length: u64| Piece::Cpu(Segment { length, lock: None });
+    let job = |task, arrival, pieces| SuspendingJob {
+        task,
+        arrival,
+        release: arrival,
+        pieces,
+    };
+    let jobs = vec![
+        job(0, 500, vec![free(1000), Piece::Script(5000), free(1000)]),
+        job(1, 0, vec![locked(4000)]),
+        job(2, 9500, vec![locked(4000)]),
+    ];
+    let simulated = sim::suspending_run(&[3, 1, 2], &[0, 1, 2], &[3], &jobs);
+    assert_eq!(simulated[0], 14_000);
+
+    let with_section = |mut t: TaskSpec| {
+        t.sections = vec![("r".into(), t.wcet)];
+        t
+    };
+    let mut board = suspending_board(
+        vec![
+            board_task("s", 3, 2, 100),
+            with_section(board_task("l", 1, 4, 100)),
+            with_section(board_task("m", 2, 4, 100)),
+        ],
+        &[(0, 5)],
+    );
+    board.static_ceilings = vec![("r".into(), 3)];
+    let result = analysis::analyse_board(&board, &Limits::default());
+    assert_eq!(result.tasks[0].blocking, Time::from_us(4));
+    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(15)));
+    assert!(simulated[0] > 11_000, "one blocking would miss it");
 }

@@ -114,6 +114,7 @@ fn replay_task(
         released_by: None,
         sporadic: true,
         job_of: None,
+        script: None,
     })
 }
 
@@ -217,6 +218,12 @@ fn build_board(
     }
     built.budgets.push(budgets);
     let overheads = build_overheads(file, timing, firmware, &mut all, built)?;
+    let scripts = timing.topics.iter().filter_map(|(name, t)| {
+        let script = t.script.as_ref()?;
+        Some((format!("topics.{name}.script"), script))
+    });
+    crate::sensor_bus::check_timing(&timing.sensor_buses, scripts)
+        .map_err(|(field, e)| fail(file, field, e.to_string()))?;
     Ok(BoardModel {
         name: timing.board.clone(),
         source,
@@ -225,6 +232,7 @@ fn build_board(
         can_tx_task: timing.can_tx_task.clone(),
         ceilings,
         tasks: all,
+        sensor_buses: timing.sensor_buses.clone(),
     })
 }
 
@@ -322,6 +330,7 @@ impl TimerJobs<'_> {
             released_by: None,
             sporadic: released.sporadic,
             job_of: Some("monotonic".into()),
+            script: None,
         });
         Ok(name)
     }
@@ -413,6 +422,7 @@ impl Board<'_> {
                 released_by: None,
                 sporadic,
                 job_of: None,
+                script: None,
             };
             task.released_by = match t.released_by.as_deref() {
                 None => None,
@@ -498,6 +508,7 @@ impl Board<'_> {
                 released_by: None,
                 sporadic: false,
                 job_of: Some(publisher.clone()),
+                script: t.script.clone(),
             };
             if timer_jobs.monotonic.is_some() {
                 job.released_by = Some(timer_jobs.add(&job, &p)?);

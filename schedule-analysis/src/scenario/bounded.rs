@@ -723,6 +723,7 @@ mod tests {
             released_by: None,
             sporadic: false,
             job_of: None,
+            script: None,
         }
     }
 
@@ -856,6 +857,7 @@ mod tests {
                 can_tx_task: None,
                 ceilings: ceilings.clone(),
                 tasks: tasks.clone(),
+                sensor_buses: Vec::new(),
             }],
             can: None,
         };

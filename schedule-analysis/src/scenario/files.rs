@@ -49,6 +49,9 @@ pub struct Timing {
     /// Budgets per published topic (one job of the publisher task per sample).
     #[serde(default)]
     pub topics: BTreeMap<String, TopicTiming>,
+    /// The board's sensor buses (I2C) where a topic's `script` runs ([`crate::sensor_bus`]).
+    #[serde(default)]
+    pub sensor_buses: Vec<crate::sensor_bus::SensorBusModel>,
 }
 
 fn default_publishers() -> BTreeMap<String, String> {
@@ -194,6 +197,9 @@ impl Timing {
             if let Some(m) = &mut task.measured {
                 m.wcet_us *= f;
             }
+        }
+        for bus in &mut t.sensor_buses {
+            bus.engine.per_event_us *= f;
         }
         for topic in t.topics.values_mut() {
             topic.wcet_us *= f;
@@ -386,6 +392,10 @@ pub struct TopicTiming {
     /// A measured budget; when present the analysis uses it instead of `wcet_us` (the estimate).
     #[serde(default)]
     pub measured: Option<Measured>,
+    /// The script the sample runs on one of the board's `sensor_buses`, suspending the publisher until it ends
+    /// ([`crate::sensor_bus`]); `wcet_us` is then the sample's CPU alone.
+    #[serde(default)]
+    pub script: Option<crate::sensor_bus::ScriptModel>,
 }
 
 /// A scenario: what runs on the robot.

@@ -97,6 +97,7 @@ pub(super) fn transmit_jobs(
             jitter_us: 0.0,
             released_by: Some(job),
             job_of: Some(tx_name.to_string()),
+            script: None,
             ..tx.clone()
         });
     }

@@ -328,3 +328,253 @@ fn can_simulator_never_preempts_a_frame() {
     // Frame 1 of message 1 runs 0..30; message 0 waits until 30, runs 30..40; message 1's second frame 40..70.
     assert_eq!(can_run(&messages, &activations), vec![70, 35]);
 }
+
+/// A piece of a job that may suspend: CPU (with or without a lock), or a script on the sensor bus, during which
+/// the job is suspended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Piece {
+    Cpu(Segment),
+    /// The script's time on the bus, ns.
+    Script(u64),
+}
+
+/// One job of a board whose jobs may suspend on the sensor bus.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SuspendingJob {
+    pub task: usize,
+    /// Nominal activation: responses are measured from here.
+    pub arrival: u64,
+    /// When it becomes ready (arrival + release jitter).
+    pub release: u64,
+    pub pieces: Vec<Piece>,
+}
+
+/// Replays `jobs` on a board (as [`board_run`]: preemption above the running priority, SRP locks, one job of a
+/// task at a time) whose jobs may suspend on one sensor bus. The bus serves one script at a time, start to end;
+/// when it falls idle it starts the waiting script of the most urgent job (its task's priority; equal priorities
+/// in submission order). A job is suspended from its script's submission to its end, then ready again at its
+/// priority; it keeps its RTIC task (`serial[task]`) busy all the while, so the task's next job waits for it.
+/// Returns every job's response (finish − arrival) in the order of `jobs`.
+pub fn suspending_run(
+    priorities: &[u32],
+    serial: &[usize],
+    ceilings: &[u32],
+    jobs: &[SuspendingJob],
+) -> Vec<u64> {
+    #[derive(Clone, Copy)]
+    struct Active {
+        job: usize,
+        left: u64,
+    }
+    let groups = serial.iter().copied().max().map_or(0, |g| g + 1);
+    let mut order: Vec<usize> = (0..jobs.len()).collect();
+    order.sort_by_key(|&j| (jobs[j].release, j));
+    let mut response = vec![0u64; jobs.len()];
+    let mut piece = vec![0usize; jobs.len()];
+    let mut queues: Vec<std::collections::VecDeque<usize>> = vec![Default::default(); groups];
+    let mut busy_group = vec![false; groups];
+    // Jobs whose script has ended, waiting to run again: (job, since).
+    let mut resumed: Vec<(usize, u64)> = Vec::new();
+    let mut stack: Vec<Active> = Vec::new();
+    // Scripts waiting for the bus: (job, submitted, length); the one on the bus: (job, end).
+    let mut waiting: Vec<(usize, u64, u64)> = Vec::new();
+    let mut on_bus: Option<(usize, u64)> = None;
+    let mut next_release = 0usize;
+    let mut t = 0u64;
+    let mut finished = 0usize;
+    let priority_of = |j: usize| priorities[jobs[j].task];
+
+    let running_priority = |stack: &Vec<Active>, piece: &Vec<usize>| -> Option<u32> {
+        stack
+            .iter()
+            .map(|a| {
+                let own = priority_of(a.job);
+                match jobs[a.job].pieces.get(piece[a.job]) {
+                    Some(Piece::Cpu(Segment {
+                        lock: Some(r),
+                        length,
+                    })) if a.left < *length => own.max(ceilings[*r]),
+                    _ => own,
+                }
+            })
+            .max()
+    };
+
+    while finished < jobs.len() {
+        while next_release < order.len() && jobs[order[next_release]].release <= t {
+            let j = order[next_release];
+            queues[serial[jobs[j].task]].push_back(j);
+            next_release += 1;
+        }
+        if let Some((j, end)) = on_bus {
+            if end <= t {
+                on_bus = None;
+                piece[j] += 1;
+                resumed.push((j, t));
+            }
+        }
+        if on_bus.is_none() {
+            let pick = waiting
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, &(j, submitted, _))| {
+                    (std::cmp::Reverse(priority_of(j)), submitted, j)
+                })
+                .map(|(i, _)| i);
+            if let Some(i) = pick {
+                let (j, _, length) = waiting.remove(i);
+                on_bus = Some((j, t + length));
+                continue;
+            }
+        }
+        // The running piece has ended: the job's next piece runs, suspends it, or it is done.
+        if let Some(top) = stack.last().copied() {
+            if top.left == 0 {
+                stack.pop();
+                piece[top.job] += 1;
+                resumed.push((top.job, t));
+                // Re-entered at once below (it is the most urgent candidate at or above the running priority).
+            }
+        }
+        // A resumed job whose next piece is not CPU: submit, or finish.
+        let mut settled = false;
+        for k in (0..resumed.len()).rev() {
+            let (j, _) = resumed[k];
+            match jobs[j].pieces.get(piece[j]) {
+                Some(Piece::Script(length)) => {
+                    waiting.push((j, t, *length));
+                    resumed.remove(k);
+                    settled = true;
+                }
+                None => {
+                    response[j] = t - jobs[j].arrival;
+                    busy_group[serial[jobs[j].task]] = false;
+                    finished += 1;
+                    resumed.remove(k);
+                    settled = true;
+                }
+                Some(Piece::Cpu(s)) if s.length == 0 => {
+                    piece[j] += 1;
+                    settled = true;
+                }
+                Some(Piece::Cpu(_)) => {}
+            }
+        }
+        if settled {
+            continue;
+        }
+        // The job that would run: a resumed one or a new one, highest priority, then the earliest.
+        let fresh = queues
+            .iter()
+            .enumerate()
+            .filter(|(g, _)| !busy_group[*g])
+            .filter_map(|(_, q)| q.front().copied())
+            .map(|j| (j, jobs[j].release, true));
+        let candidate = resumed
+            .iter()
+            .map(|&(j, since)| (j, since, false))
+            .chain(fresh)
+            .min_by_key(|&(j, since, _)| (std::cmp::Reverse(priority_of(j)), since, j));
+        if let Some((j, _, is_fresh)) = candidate {
+            let preempts = match running_priority(&stack, &piece) {
+                None => true,
+                Some(p) => priority_of(j) > p,
+            };
+            if preempts {
+                if is_fresh {
+                    queues[serial[jobs[j].task]].pop_front();
+                    busy_group[serial[jobs[j].task]] = true;
+                    resumed.push((j, t));
+                    continue;
+                }
+                resumed.retain(|&(k, _)| k != j);
+                let left = match jobs[j].pieces.get(piece[j]) {
+                    Some(Piece::Cpu(s)) => s.length,
+                    _ => 0,
+                };
+                stack.push(Active { job: j, left });
+                continue;
+            }
+        }
+        let next_event = [
+            order.get(next_release).map(|&j| jobs[j].release),
+            on_bus.map(|(_, end)| end),
+        ]
+        .into_iter()
+        .flatten()
+        .min();
+        let Some(top) = stack.last_mut() else {
+            match next_event {
+                Some(at) => t = at,
+                None => break,
+            }
+            continue;
+        };
+        let run = match next_event {
+            Some(at) => top.left.min(at - t),
+            None => top.left,
+        };
+        top.left -= run;
+        t += run;
+    }
+    response
+}
+
+#[test]
+fn suspending_simulator_serves_the_bus_by_priority_without_preemption() {
+    // Task 0 (prio 1) submits a 10 ns script at 0; task 1 (prio 3) submits a 5 ns script at 2, task 2 (prio 2) a
+    // 5 ns script at 1. The bus runs 0's 0..10 (never preempted), then 1's 10..15, then 2's 15..20.
+    let script = |length, arrival| SuspendingJob {
+        task: 0,
+        arrival,
+        release: arrival,
+        pieces: vec![Piece::Script(length)],
+    };
+    let jobs = vec![
+        script(10, 0),
+        SuspendingJob {
+            task: 1,
+            ..script(5, 2)
+        },
+        SuspendingJob {
+            task: 2,
+            ..script(5, 1)
+        },
+    ];
+    assert_eq!(
+        suspending_run(&[1, 3, 2], &[0, 1, 2], &[], &jobs),
+        vec![10, 13, 19]
+    );
+}
+
+#[test]
+fn suspending_simulator_lets_lower_tasks_run_and_keeps_the_rtic_task_busy() {
+    // Task 0 (prio 2) runs 2, suspends 6, runs 1; task 1 (prio 1) released at 0 runs 4 in its suspension.
+    // Task 2 shares task 0's RTIC task (serial 0): released at 1, it waits for task 0's job to end.
+    let cpu = |length| Piece::Cpu(Segment { length, lock: None });
+    let jobs = vec![
+        SuspendingJob {
+            task: 0,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(2), Piece::Script(6), cpu(1)],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(4)],
+        },
+        SuspendingJob {
+            task: 2,
+            arrival: 1,
+            release: 1,
+            pieces: vec![cpu(1)],
+        },
+    ];
+    // Task 0: 0..2, bus 2..8, 8..9 → 9. Task 1: 2..6 → 6. Task 2: 9..10 → 9 after its arrival at 1.
+    assert_eq!(
+        suspending_run(&[2, 1, 2], &[0, 1, 0], &[], &jobs),
+        vec![9, 6, 9]
+    );
+}

@@ -1,0 +1,912 @@
+//! Self-suspending jobs and the sensor buses (I2C): a job that runs a *script* on one of its board's sensor buses
+//! hands the script to the bus's engine and suspends until the script ends (the engine: docs/i2c.md;
+//! docs/analysis.md, "Self-suspending publishers and the sensor buses").
+//!
+//! * **The bus** serves one script at a time, start to end, the most urgent waiting one first (the submitting
+//!   task's priority; equal priorities counted as higher): non-preemptive fixed priority, analysed with the CAN
+//!   bus's machinery ([`can::response_times_into`]: one "frame" per script, its bus time). A script's release
+//!   jitter is its submitting job's response; its blocking the longest lower-priority script.
+//! * **The suspending job** is analysed suspension-oblivious for itself: its CPU plus its script's bus response
+//!   (from submission) plus one more blocking (a lower-priority critical section may start while it is
+//!   suspended), all as if executed. The jobs of the same RTIC task (`job_of`) run one after the other, so for
+//!   them the suspension is execution too.
+//! * **Every other task** sees a suspending job as its CPU alone, released with jitter = its response minus its
+//!   CPU (Chen, Nelissen, Huang et al., "Many suspensions, many problems", Real-Time Systems 55, 2019, §5;
+//!   Bletsas et al., "Errata for three papers (2004-05) on fixed-priority scheduling with self-suspensions",
+//!   LITES 5(1), 2018): the sound form of the jitter-based charge (jitter = the suspension alone is not).
+//! * **The engine's interrupt** is a row per script at the engine's priority (`<bus>_engine[<task>]`, added when
+//!   the model is validated), released by the submitting job, costing the script's events times the per-event
+//!   bound with interrupt entry and exit. The master holds SCL low while an event waits for the engine, so each
+//!   event's worst response on the CPU is added to the script's bus time as well.
+//!
+//! The jitters feed the bus responses, which feed the jobs' responses, which are the jitters: iterated from zero
+//! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason.
+
+use std::collections::BTreeSet;
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+use crate::analysis::{self, Bound, Unbounded};
+use crate::board::{self, TaskTiming};
+use crate::busy_window::{AnalysisError, Counter, Limits, Response};
+use crate::can::{self, MessageTiming};
+use crate::model::{BoardModel, OverheadTimes, TaskKind, TaskSpec};
+use crate::time::Time;
+
+/// Bit times one byte takes on an I2C bus: eight data bits and the acknowledge.
+pub const BITS_PER_BYTE: u64 = 9;
+/// Bit times a script's bytes form adds per (repeated) START: the START's hold and the STOP's set-up (or the
+/// repeated START's), each within one bit time at 100 and 400 kHz (I2C-bus specification UM10204, table 10).
+pub const BITS_PER_START: u64 = 2;
+/// Rounds of the holistic iteration (jitters → bus responses → responses) before the affected jobs are declared
+/// unbounded.
+pub const MAX_ROUNDS: usize = 1000;
+
+/// One sensor bus of a board, as the model and timing files state it.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SensorBusModel {
+    /// Name (`i2c1`), which a script's `bus` names.
+    pub name: String,
+    /// SCL bits per second (400 000 for Fast mode).
+    pub bitrate: u32,
+    /// The engine's interrupt (I2Cx_EV and I2Cx_ER).
+    pub engine: EngineModel,
+}
+
+/// The bus engine's interrupt.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct EngineModel {
+    /// Its RTIC/NVIC logical priority.
+    pub priority: u32,
+    /// One event's execution, µs, interrupt entry and exit excluded (the board's overheads add them).
+    pub per_event_us: f64,
+    /// Whether `per_event_us` is an estimate or the machine code's bound; the report says which.
+    pub per_event_from: PerEventFrom,
+    /// Where the figure comes from.
+    pub source: String,
+}
+
+/// Where an engine's per-event figure comes from.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum PerEventFrom {
+    /// A stated estimate (until the machine code bounds the engine's handler).
+    Estimate,
+    /// The machine code's bound of the handler.
+    Bound,
+}
+
+impl PerEventFrom {
+    /// As the report says it.
+    pub fn label(self) -> &'static str {
+        match self {
+            PerEventFrom::Estimate => "estimate",
+            PerEventFrom::Bound => "machine-code bound",
+        }
+    }
+}
+
+/// The script one job runs on a sensor bus: its bytes on the wire or its bus time, and the devices' stretches.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScriptModel {
+    /// The bus (a `sensor_buses` name of the board).
+    pub bus: String,
+    /// Bytes on the wire, address bytes included (each [`BITS_PER_BYTE`] bit times); or `bus_time_us`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bytes: Option<u32>,
+    /// With `bytes`: its (repeated) START conditions, one per operation (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub starts: Option<u32>,
+    /// The script's time on the wire, µs; or `bytes`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bus_time_us: Option<f64>,
+    /// Where `bytes` or `bus_time_us` comes from.
+    pub source: String,
+    /// The devices' stated clock-stretch allowance for the whole script, µs (0 for devices that never stretch).
+    pub stretch_us: f64,
+    /// Where the stretch allowance comes from (the devices' datasheets).
+    pub stretch_source: String,
+    /// Engine interrupts one script raises; with `bytes` it defaults to two per byte and two per START (every
+    /// byte raises at most one TXE or RXNE and one BTF, every operation one SB and its end).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub events: Option<u32>,
+}
+
+/// A board's validated sensor buses and the scripts its tasks run on them.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BoardBuses {
+    /// The buses in model order.
+    pub buses: Vec<SensorBus>,
+    /// One per task with a script, in task order.
+    pub scripts: Vec<Script>,
+}
+
+/// A validated sensor bus.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorBus {
+    /// Name.
+    pub name: String,
+    /// SCL bits per second.
+    pub bitrate: u32,
+    /// One bit time, rounded up.
+    pub bit_time: Time,
+    /// The engine interrupt's priority.
+    pub engine_priority: u32,
+    /// One engine event's cost on the CPU: the per-event figure plus interrupt entry and exit.
+    pub per_event: Time,
+    /// Where the per-event figure comes from.
+    pub per_event_from: PerEventFrom,
+    /// Its source.
+    pub source: String,
+}
+
+/// A validated script.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Script {
+    /// The submitting task (model index).
+    pub task: usize,
+    /// The bus (index into [`BoardBuses::buses`]).
+    pub bus: usize,
+    /// Its time on the wire.
+    pub wire: Time,
+    /// The devices' stretch allowance.
+    pub stretch: Time,
+    /// Engine events one script raises.
+    pub events: u32,
+    /// The engine row charged per script (model index of the added task).
+    pub engine_row: usize,
+}
+
+/// Why a board's sensor buses or a script are refused.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SensorBusError {
+    /// A script names a bus the board does not state.
+    UnknownBus(String),
+    /// Two buses have one name.
+    BusTwice(String),
+    /// A name that is empty or holds `/`, `[` or `]`.
+    BadName(String),
+    /// A figure that must be positive is not (the figure as written).
+    NotPositive(String),
+    /// A figure that must be finite and at least 0 is not.
+    Negative(String),
+    /// A stated figure without its source.
+    NoSource,
+    /// A script with neither `bytes` nor `bus_time_us`, or with both.
+    OneFigure,
+    /// `starts` without `bytes`.
+    StartsWithoutBytes,
+    /// A script given as `bus_time_us` must state its `events`.
+    NoEvents,
+    /// The engine row's name is already a task's.
+    RowTaken(String),
+}
+
+impl fmt::Display for SensorBusError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SensorBusError::UnknownBus(bus) => write!(f, "no sensor bus `{bus}` on this board"),
+            SensorBusError::BusTwice(bus) => write!(f, "sensor bus `{bus}` is stated twice"),
+            SensorBusError::BadName(name) => {
+                write!(
+                    f,
+                    "`{name}`: a bus name must be non-empty, without `/`, `[` or `]`"
+                )
+            }
+            SensorBusError::NotPositive(v) => write!(f, "must be a finite number > 0, got {v}"),
+            SensorBusError::Negative(v) => write!(f, "must be a finite number ≥ 0, got {v}"),
+            SensorBusError::NoSource => f.write_str("a stated figure needs its source"),
+            SensorBusError::OneFigure => {
+                f.write_str("a script states exactly one of `bytes` and `bus_time_us`")
+            }
+            SensorBusError::StartsWithoutBytes => f.write_str("`starts` goes with `bytes`"),
+            SensorBusError::NoEvents => {
+                f.write_str("a script given by `bus_time_us` states its engine `events`")
+            }
+            SensorBusError::RowTaken(name) => {
+                write!(f, "the engine row `{name}` is already a task's name")
+            }
+        }
+    }
+}
+
+impl std::error::Error for SensorBusError {}
+
+/// A refusal and the field it is about, relative to the board (`tasks[3].script.bus`).
+pub type Refusal = (String, SensorBusError);
+
+fn positive(value: f64, field: String) -> Result<(), Refusal> {
+    if value.is_finite() && value > 0.0 && value <= Time::LIMIT_US {
+        Ok(())
+    } else {
+        Err((field, SensorBusError::NotPositive(value.to_string())))
+    }
+}
+
+fn sourced(source: &str, field: String) -> Result<(), Refusal> {
+    if source.trim().is_empty() {
+        Err((field, SensorBusError::NoSource))
+    } else {
+        Ok(())
+    }
+}
+
+/// Checks a board's buses and its tasks' scripts (the tasks validated into `tasks`, model order), and adds each
+/// script's engine row to `tasks`.
+pub fn validate_board(
+    board: &BoardModel,
+    overheads: &OverheadTimes,
+    tasks: &mut Vec<TaskSpec>,
+) -> Result<BoardBuses, Refusal> {
+    let buses = validate_buses(&board.sensor_buses, overheads)?;
+    let mut scripts = Vec::new();
+    let mut rows = Vec::new();
+    for (t, task) in board.tasks.iter().enumerate() {
+        let Some(script) = &task.script else {
+            continue;
+        };
+        let p = format!("tasks[{t}].script");
+        let checked = validate_script(&buses, script, &p)?;
+        let (Some(spec), Some(bus)) = (tasks.get(t), buses.get(checked.bus)) else {
+            continue;
+        };
+        let name = format!("{}_engine[{}]", bus.name, spec.name);
+        if board.tasks.iter().any(|o| o.name == name) {
+            return Err((p, SensorBusError::RowTaken(name)));
+        }
+        rows.push(TaskSpec {
+            name,
+            priority: bus.engine_priority,
+            wcet: bus.per_event.times(u64::from(checked.events)),
+            bcet: Time::ZERO,
+            period: spec.period,
+            deadline: spec.period,
+            deadline_follows_period: true,
+            jitter: Time::ZERO,
+            sections: Vec::new(),
+            blocking: None,
+            kind: TaskKind::Plain,
+            released_by: Some(t),
+            sporadic: spec.sporadic,
+            job_of: Some(format!("{}_engine", bus.name)),
+        });
+        scripts.push(Script {
+            task: t,
+            engine_row: tasks.len() + rows.len() - 1,
+            ..checked
+        });
+    }
+    tasks.extend(rows);
+    Ok(BoardBuses { buses, scripts })
+}
+
+/// Checks a timing file's `sensor_buses` and its topics' scripts (`(field, script)`, the field as the file spells
+/// it: `topics.gyroscope.script`) before a model is built from it, so that a refusal names the timing file's field.
+pub fn check_timing<'a>(
+    buses: &[SensorBusModel],
+    scripts: impl Iterator<Item = (String, &'a ScriptModel)>,
+) -> Result<(), Refusal> {
+    let buses = validate_buses(buses, &OverheadTimes::default())?;
+    for (field, script) in scripts {
+        validate_script(&buses, script, &field)?;
+    }
+    Ok(())
+}
+
+fn validate_buses(
+    models: &[SensorBusModel],
+    overheads: &OverheadTimes,
+) -> Result<Vec<SensorBus>, Refusal> {
+    let mut buses: Vec<SensorBus> = Vec::with_capacity(models.len());
+    for (b, bus) in models.iter().enumerate() {
+        let p = format!("sensor_buses[{b}]");
+        if bus.name.trim().is_empty() || bus.name.contains(['/', '[', ']']) {
+            return Err((
+                format!("{p}.name"),
+                SensorBusError::BadName(bus.name.clone()),
+            ));
+        }
+        if buses.iter().any(|o| o.name == bus.name) {
+            return Err((
+                format!("{p}.name"),
+                SensorBusError::BusTwice(bus.name.clone()),
+            ));
+        }
+        if bus.bitrate == 0 {
+            return Err((
+                format!("{p}.bitrate"),
+                SensorBusError::NotPositive("0".into()),
+            ));
+        }
+        positive(bus.engine.per_event_us, format!("{p}.engine.per_event_us"))?;
+        sourced(&bus.engine.source, format!("{p}.engine.source"))?;
+        buses.push(SensorBus {
+            name: bus.name.clone(),
+            bitrate: bus.bitrate,
+            bit_time: can::bit_time(bus.bitrate),
+            engine_priority: bus.engine.priority,
+            per_event: Time::from_us_up(bus.engine.per_event_us)
+                .plus(overheads.isr_entry)
+                .plus(overheads.isr_exit),
+            per_event_from: bus.engine.per_event_from,
+            source: bus.engine.source.clone(),
+        });
+    }
+    Ok(buses)
+}
+
+/// A script checked against its board's buses (`task` and `engine_row` still to be filled in).
+fn validate_script(buses: &[SensorBus], script: &ScriptModel, p: &str) -> Result<Script, Refusal> {
+    let (b, bus) = buses
+        .iter()
+        .enumerate()
+        .find(|(_, bus)| bus.name == script.bus)
+        .ok_or_else(|| {
+            (
+                format!("{p}.bus"),
+                SensorBusError::UnknownBus(script.bus.clone()),
+            )
+        })?;
+    let (wire, derived_events) = match (script.bytes, script.bus_time_us) {
+        (Some(bytes), None) => {
+            if bytes == 0 {
+                return Err((
+                    format!("{p}.bytes"),
+                    SensorBusError::NotPositive("0".into()),
+                ));
+            }
+            let starts = script.starts.unwrap_or(1);
+            if starts == 0 {
+                return Err((
+                    format!("{p}.starts"),
+                    SensorBusError::NotPositive("0".into()),
+                ));
+            }
+            let (bytes, starts) = (u64::from(bytes), u64::from(starts));
+            let bits = BITS_PER_BYTE * bytes + BITS_PER_START * starts;
+            let events = u32::try_from(2 * bytes + 2 * starts).unwrap_or(u32::MAX);
+            (bus.bit_time.times(bits), Some(events))
+        }
+        (None, Some(us)) => {
+            if script.starts.is_some() {
+                return Err((format!("{p}.starts"), SensorBusError::StartsWithoutBytes));
+            }
+            positive(us, format!("{p}.bus_time_us"))?;
+            (Time::from_us_up(us), None)
+        }
+        _ => return Err((p.to_string(), SensorBusError::OneFigure)),
+    };
+    sourced(&script.source, format!("{p}.source"))?;
+    if !(script.stretch_us.is_finite()
+        && script.stretch_us >= 0.0
+        && script.stretch_us <= Time::LIMIT_US)
+    {
+        return Err((
+            format!("{p}.stretch_us"),
+            SensorBusError::Negative(script.stretch_us.to_string()),
+        ));
+    }
+    sourced(&script.stretch_source, format!("{p}.stretch_source"))?;
+    let events = match (script.events, derived_events) {
+        (Some(0), _) => {
+            return Err((
+                format!("{p}.events"),
+                SensorBusError::NotPositive("0".into()),
+            ))
+        }
+        (Some(e), _) | (None, Some(e)) => e,
+        (None, None) => return Err((format!("{p}.events"), SensorBusError::NoEvents)),
+    };
+    Ok(Script {
+        task: usize::MAX,
+        bus: b,
+        wire,
+        stretch: Time::from_us_up(script.stretch_us),
+        events,
+        engine_row: usize::MAX,
+    })
+}
+
+/// One sensor bus's results.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorBusResult {
+    /// Name.
+    pub name: String,
+    /// SCL bits per second.
+    pub bitrate: u32,
+    /// The engine interrupt's priority.
+    pub engine_priority: u32,
+    /// One event's cost on the CPU (entry and exit included).
+    pub per_event: Time,
+    /// Where the per-event figure comes from.
+    pub per_event_from: PerEventFrom,
+    /// Its source.
+    pub source: String,
+    /// One engine event's worst response on the CPU (what an event may hold SCL low), if bounded.
+    pub event_response: Option<Time>,
+    /// Σ bus time / period of its scripts.
+    pub utilisation: f64,
+    /// Its scripts, most urgent first.
+    pub scripts: Vec<ScriptResult>,
+}
+
+/// One script's results.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScriptResult {
+    /// The submitting task.
+    pub task: String,
+    /// Its priority (the script's on the bus).
+    pub priority: u32,
+    /// Time on the wire.
+    pub wire: Time,
+    /// The devices' stretch allowance.
+    pub stretch: Time,
+    /// Engine events.
+    pub events: u32,
+    /// The bus time used: wire + stretch + events × the event response.
+    pub bus_time: Time,
+    /// Release jitter used (the submitting job's response).
+    pub jitter: Time,
+    /// Blocking by the longest lower-priority script.
+    pub blocking: Time,
+    /// The response on the bus from the nominal submission (jitter included).
+    pub bound: Bound,
+    /// The submitting job's suspension: the bus response from the actual submission (`bound` minus `jitter`).
+    pub suspension: Option<Time>,
+}
+
+/// One script as its bus's analysis found it.
+#[derive(Debug, Clone, Copy)]
+struct OnBus {
+    /// Index into the board's scripts.
+    script: usize,
+    result: Result<Response, AnalysisError>,
+    bus_time: Time,
+    jitter: Time,
+    blocking: Time,
+}
+
+/// What stopped the iteration: the bus or job that has no bound.
+enum Failure {
+    /// A script has no bound on the bus (`scripts` index), why.
+    Script(usize, String),
+    /// A bus's engine event has no bound on the CPU.
+    Event(usize, String),
+    /// A suspending job has no bound: its script index, why.
+    Job(usize, Unbounded),
+    /// The rounds ran out.
+    Rounds,
+}
+
+/// Analyses a board with scripts: per task its bound and the release jitter it was found with (model order), and
+/// the buses' results. `costs` are the tasks' CPU costs with overheads, `blocking` their SRP blockings.
+pub(crate) fn analyse(
+    board: &crate::model::BoardSystem,
+    costs: &[Time],
+    blocking: &[Time],
+    limits: &Limits,
+) -> (Vec<Bound>, Vec<Time>, Vec<SensorBusResult>) {
+    let n = board.tasks.len();
+    let buses = &board.sensor_buses.buses;
+    let scripts = &board.sensor_buses.scripts;
+    let cost = |i: usize| costs.get(i).copied().unwrap_or(Time::ZERO);
+    let group = |i: usize| {
+        board
+            .tasks
+            .get(i)
+            .map(|t| t.job_of.as_deref().unwrap_or(t.name.as_str()))
+    };
+    let mut script_of: Vec<Option<usize>> = vec![None; n];
+    for (k, s) in scripts.iter().enumerate() {
+        if let Some(slot) = script_of.get_mut(s.task) {
+            *slot = Some(k);
+        }
+    }
+    // The views: one per RTIC task with a suspending job (its jobs see the suspensions as execution), and the
+    // default view for every other task (position 0).
+    let groups: Vec<&str> = scripts
+        .iter()
+        .filter_map(|s| group(s.task))
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let view_of = |i: usize| {
+        group(i)
+            .and_then(|g| groups.iter().position(|o| *o == g))
+            .map_or(0, |v| v + 1)
+    };
+    let sections = analysis::critical_sections(board);
+    let priorities: Vec<u32> = board.tasks.iter().map(|t| t.priority).collect();
+
+    // The iteration's state: each suspending job's response (its script's jitter), each bus's event response.
+    let mut response = vec![Time::ZERO; scripts.len()];
+    let mut event = vec![Time::ZERO; buses.len()];
+    let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
+    let mut jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
+    let mut on_bus: Vec<Vec<OnBus>> = vec![Vec::new(); buses.len()];
+    let mut failure = Some(Failure::Rounds);
+    for _ in 0..MAX_ROUNDS {
+        // 1. The buses, with the scripts' jitters and the events' responses as they stand.
+        let mut suspension = vec![Time::ZERO; scripts.len()];
+        let mut stop = None;
+        for (b, results) in on_bus.iter_mut().enumerate() {
+            *results = bus_responses(board, scripts, b, &response, event.get(b).copied(), limits);
+            for s in results.iter() {
+                match s.result {
+                    Ok(r) => {
+                        if let Some(slot) = suspension.get_mut(s.script) {
+                            *slot = r.wcrt.minus(s.jitter);
+                        }
+                    }
+                    Err(e) => {
+                        let why = Unbounded::Analysis(e).to_string();
+                        stop = stop.or(Some(Failure::Script(s.script, why)));
+                    }
+                }
+            }
+        }
+        if stop.is_some() {
+            failure = stop;
+            break;
+        }
+        // 2. The board, once per view.
+        let mut next_bounds = bounds.clone();
+        let mut next_jitters = jitters.clone();
+        let mut default_view = None;
+        for v in 0..=groups.len() {
+            let mut view_costs = costs.to_vec();
+            let mut view_jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
+            let mut releases: Vec<Option<usize>> =
+                board.tasks.iter().map(|t| t.released_by).collect();
+            for (k, s) in scripts.iter().enumerate() {
+                let r = response.get(k).copied().unwrap_or(Time::ZERO);
+                if view_of(s.task) == v {
+                    // Suspension-oblivious: the suspension, and the blocking on resuming, as execution.
+                    if let Some(c) = view_costs.get_mut(s.task) {
+                        *c = c
+                            .plus(suspension.get(k).copied().unwrap_or(Time::ZERO))
+                            .plus(blocking.get(s.task).copied().unwrap_or(Time::ZERO));
+                    }
+                } else {
+                    // Its CPU, released anywhere up to its response minus its CPU after its activation.
+                    if let (Some(j), Some(rel)) =
+                        (view_jitters.get_mut(s.task), releases.get_mut(s.task))
+                    {
+                        *j = r.minus(cost(s.task));
+                        *rel = None;
+                    }
+                }
+            }
+            // A job released by a suspending one inherits the suspending job's whole response.
+            for (i, t) in board.tasks.iter().enumerate() {
+                let Some(k) = t
+                    .released_by
+                    .and_then(|r| script_of.get(r).copied().flatten())
+                else {
+                    continue;
+                };
+                if let (Some(j), Some(rel)) = (view_jitters.get_mut(i), releases.get_mut(i)) {
+                    *j = t
+                        .jitter
+                        .plus(response.get(k).copied().unwrap_or(Time::ZERO));
+                    *rel = None;
+                }
+            }
+            let (view_bounds, found_jitters) = analysis::task_bounds_in(
+                board,
+                &view_costs,
+                blocking,
+                &view_jitters,
+                &releases,
+                limits,
+            );
+            for i in (0..n).filter(|&i| view_of(i) == v) {
+                if let (Some(slot), Some(bound)) = (next_bounds.get_mut(i), view_bounds.get(i)) {
+                    *slot = bound.clone();
+                }
+                if let (Some(slot), Some(j)) = (next_jitters.get_mut(i), found_jitters.get(i)) {
+                    *slot = *j;
+                }
+            }
+            if v == 0 {
+                default_view = Some((view_costs, found_jitters));
+            }
+        }
+        bounds = next_bounds;
+        jitters = next_jitters;
+        // 3. Each bus's engine event on the CPU, in the default view.
+        let mut next_event = event.clone();
+        if let Some((view_costs, view_jitters)) = &default_view {
+            for (b, bus) in buses.iter().enumerate() {
+                // The bus's own engine rows are this handler's events, one at a time: not its interference.
+                let own_rows: Vec<usize> = scripts
+                    .iter()
+                    .filter(|s| s.bus == b)
+                    .map(|s| s.engine_row)
+                    .collect();
+                let others = (0..n).filter(|i| !own_rows.contains(i));
+                let tasks = others.map(|i| TaskTiming {
+                    priority: priorities.get(i).copied().unwrap_or(0),
+                    wcet: view_costs.get(i).copied().unwrap_or(Time::ZERO),
+                    period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
+                    jitter: view_jitters.get(i).copied().unwrap_or(Time::ZERO),
+                });
+                match event_response(bus, tasks, &sections, limits) {
+                    Ok(r) => {
+                        if let Some(slot) = next_event.get_mut(b) {
+                            *slot = r;
+                        }
+                    }
+                    Err(e) => {
+                        stop = stop.or(Some(Failure::Event(b, Unbounded::Analysis(e).to_string())))
+                    }
+                }
+            }
+        }
+        // 4. The suspending jobs' responses: the scripts' next jitters.
+        let mut next_response = response.clone();
+        for (k, s) in scripts.iter().enumerate() {
+            match bounds.get(s.task) {
+                Some(Ok(r)) => {
+                    if let Some(slot) = next_response.get_mut(k) {
+                        *slot = r.wcrt;
+                    }
+                }
+                Some(Err(why)) => stop = stop.or(Some(Failure::Job(k, why.clone()))),
+                None => {}
+            }
+        }
+        if stop.is_some() {
+            failure = stop;
+            break;
+        }
+        if next_response == response && next_event == event {
+            failure = None;
+            break;
+        }
+        response = next_response;
+        event = next_event;
+    }
+    if let Some(failure) = &failure {
+        mark_unbounded(board, scripts, buses, failure, &mut bounds);
+    }
+    let results = buses
+        .iter()
+        .enumerate()
+        .map(|(b, bus)| {
+            let list = on_bus.get(b).map(Vec::as_slice).unwrap_or(&[]);
+            let event_response = match &failure {
+                Some(Failure::Event(e, _)) if *e == b => None,
+                _ => event.get(b).copied(),
+            };
+            bus_result(board, scripts, bus, list, event_response)
+        })
+        .collect();
+    (bounds, jitters, results)
+}
+
+/// The scripts on bus `b` analysed as non-preemptive fixed priority: per script (most urgent first) its index,
+/// its response, its bus time and its jitter.
+fn bus_responses(
+    board: &crate::model::BoardSystem,
+    scripts: &[Script],
+    b: usize,
+    response: &[Time],
+    event: Option<Time>,
+    limits: &Limits,
+) -> Vec<OnBus> {
+    let priority = |k: usize| {
+        scripts
+            .get(k)
+            .and_then(|s| board.tasks.get(s.task))
+            .map_or(0, |t| t.priority)
+    };
+    let mut order: Vec<usize> = (0..scripts.len())
+        .filter(|&k| scripts.get(k).is_some_and(|s| s.bus == b))
+        .collect();
+    order.sort_by_key(|&k| std::cmp::Reverse(priority(k)));
+    let event = event.unwrap_or(Time::ZERO);
+    let timings: Vec<MessageTiming> = order
+        .iter()
+        .filter_map(|&k| {
+            let s = scripts.get(k)?;
+            Some(MessageTiming {
+                // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
+                key: u32::MAX - priority(k),
+                frame_time: s
+                    .wire
+                    .plus(s.stretch)
+                    .plus(event.times(u64::from(s.events))),
+                frames: 1,
+                period: board.tasks.get(s.task).map_or(Time::ZERO, |t| t.period),
+                jitter: response.get(k).copied().unwrap_or(Time::ZERO),
+            })
+        })
+        .collect();
+    let mut blockings = vec![Time::ZERO; timings.len()];
+    can::blockings(&timings, &mut blockings);
+    let mut scratch = vec![Counter::default(); timings.len()];
+    let mut out = vec![Err(AnalysisError::NoSuchIndex); timings.len()];
+    // The engine picks the next script when one ends; a script submitted at that very instant is counted as
+    // having been in time (the CAN analysis's bit term, one nanosecond here).
+    can::response_times_into(
+        &timings,
+        &blockings,
+        Time::from_ns(1),
+        limits,
+        &mut scratch,
+        out.as_mut_slice(),
+    );
+    order
+        .iter()
+        .zip(&timings)
+        .zip(out.into_iter().zip(blockings))
+        .map(|((&script, t), (result, blocking))| OnBus {
+            script,
+            result,
+            bus_time: t.frame_time,
+            jitter: t.jitter,
+            blocking,
+        })
+        .collect()
+}
+
+/// One engine event's worst response on the CPU: its cost at the engine's priority, interfered with by every
+/// other task of at least that priority (`tasks`: not the bus's own engine rows, which are these very events),
+/// blocked by SRP as a task of that priority. One instance: the block waits for the engine at each event, and the
+/// bus runs one script at a time, so the engine's events never overlap.
+fn event_response(
+    bus: &SensorBus,
+    tasks: impl Iterator<Item = TaskTiming>,
+    sections: &[board::CriticalSection],
+    limits: &Limits,
+) -> Result<Time, AnalysisError> {
+    let mut timings: Vec<TaskTiming> = tasks
+        .filter(|t| t.priority >= bus.engine_priority)
+        .collect();
+    timings.sort_by_key(|t| std::cmp::Reverse(t.priority));
+    timings.push(TaskTiming {
+        priority: bus.engine_priority,
+        wcet: bus.per_event,
+        period: limits.horizon,
+        jitter: Time::ZERO,
+    });
+    let index = timings.len() - 1;
+    let mut scratch = vec![Counter::default(); timings.len()];
+    let blocking = board::srp_blocking(bus.engine_priority, sections);
+    board::response_time(&timings, index, blocking, limits, &mut scratch).map(|r| r.wcrt)
+}
+
+/// Marks what a failure leaves without a bound: the failing suspending jobs, every task at or below their
+/// priority, and every task released by one of those.
+fn mark_unbounded(
+    board: &crate::model::BoardSystem,
+    scripts: &[Script],
+    buses: &[SensorBus],
+    failure: &Failure,
+    bounds: &mut [Bound],
+) {
+    let bus_name = |b: usize| {
+        buses
+            .get(b)
+            .map_or("?", |bus| bus.name.as_str())
+            .to_string()
+    };
+    let failing: Vec<(usize, Unbounded)> = match failure {
+        Failure::Script(k, why) => scripts
+            .get(*k)
+            .map(|s| vec![(s.task, Unbounded::SensorBus(bus_name(s.bus), why.clone()))])
+            .unwrap_or_default(),
+        Failure::Event(b, why) => scripts
+            .iter()
+            .filter(|s| s.bus == *b)
+            .map(|s| {
+                (
+                    s.task,
+                    Unbounded::SensorBus(bus_name(*b), format!("its engine's event: {why}")),
+                )
+            })
+            .collect(),
+        Failure::Job(k, why) => scripts
+            .get(*k)
+            .map(|s| vec![(s.task, why.clone())])
+            .unwrap_or_default(),
+        Failure::Rounds => scripts
+            .iter()
+            .map(|s| (s.task, Unbounded::NoConvergence))
+            .collect(),
+    };
+    let name = |i: usize| {
+        board
+            .tasks
+            .get(i)
+            .map_or("?", |t| t.name.as_str())
+            .to_string()
+    };
+    let mut unbounded = vec![false; board.tasks.len()];
+    for (task, why) in &failing {
+        if let Some(slot) = bounds.get_mut(*task) {
+            *slot = Err(why.clone());
+        }
+        if let Some(u) = unbounded.get_mut(*task) {
+            *u = true;
+        }
+        let priority = board.tasks.get(*task).map_or(0, |t| t.priority);
+        for (i, t) in board.tasks.iter().enumerate() {
+            if i != *task && t.priority <= priority {
+                if let (Some(slot), Some(u)) = (bounds.get_mut(i), unbounded.get_mut(i)) {
+                    if !*u {
+                        *slot = Err(Unbounded::Suspending(name(*task)));
+                        *u = true;
+                    }
+                }
+            }
+        }
+    }
+    // Release chains from an unbounded task are unbounded too.
+    let mut changed = true;
+    while changed {
+        changed = false;
+        for (i, t) in board.tasks.iter().enumerate() {
+            let Some(r) = t.released_by else {
+                continue;
+            };
+            if unbounded.get(r).copied().unwrap_or(false)
+                && !unbounded.get(i).copied().unwrap_or(true)
+            {
+                if let Some(slot) = bounds.get_mut(i) {
+                    *slot = Err(Unbounded::Releaser(name(r)));
+                }
+                if let Some(u) = unbounded.get_mut(i) {
+                    *u = true;
+                }
+                changed = true;
+            }
+        }
+    }
+}
+
+fn bus_result(
+    board: &crate::model::BoardSystem,
+    scripts: &[Script],
+    bus: &SensorBus,
+    list: &[OnBus],
+    event_response: Option<Time>,
+) -> SensorBusResult {
+    let mut utilisation = 0.0;
+    let scripts_out = list
+        .iter()
+        .filter_map(|on| {
+            let s = scripts.get(on.script)?;
+            let task = board.tasks.get(s.task)?;
+            utilisation += on.bus_time.as_ns() as f64 / task.period.as_ns().max(1) as f64;
+            Some(ScriptResult {
+                task: task.name.clone(),
+                priority: task.priority,
+                wire: s.wire,
+                stretch: s.stretch,
+                events: s.events,
+                bus_time: on.bus_time,
+                jitter: on.jitter,
+                blocking: on.blocking,
+                bound: on.result.map_err(Unbounded::Analysis),
+                suspension: on.result.ok().map(|r| r.wcrt.minus(on.jitter)),
+            })
+        })
+        .collect();
+    SensorBusResult {
+        name: bus.name.clone(),
+        bitrate: bus.bitrate,
+        engine_priority: bus.engine_priority,
+        per_event: bus.per_event,
+        per_event_from: bus.per_event_from,
+        source: bus.source.clone(),
+        event_response,
+        utilisation,
+        scripts: scripts_out,
+    }
+}

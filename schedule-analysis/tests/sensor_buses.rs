@@ -1,0 +1,301 @@
+//! The sensor buses in the model and timing files: what is accepted (a script's engine row, its figures, the
+//! report's section and the topic's end-to-end figure), what is refused with which typed error, and that a file
+//! without scripts is analysed as before.
+
+use schedule_analysis::analysis::{self, Options};
+use schedule_analysis::busy_window::Limits;
+use schedule_analysis::model::{BoardModel, FrameCostSpec, Model, OverheadTimes};
+use schedule_analysis::report::{self, Format, Report};
+use schedule_analysis::scenario;
+use schedule_analysis::sensor_bus::{self, SensorBusError};
+use schedule_analysis::time::Time;
+use serde_json::json;
+
+mod common;
+
+/// A board with a publisher job that runs a 6-byte script (one START) on `i2c1` at 400 kHz, a lower task, and
+/// the engine at priority 7 with 2 µs per event (1 µs entry and exit).
+fn board_json() -> serde_json::Value {
+    json!({
+        "name": "b",
+        "overheads": { "isr_entry_us": 0.5, "isr_exit_us": 0.5 },
+        "sensor_buses": [{
+            "name": "i2c1", "bitrate": 400000,
+            "engine": { "priority": 7, "per_event_us": 2.0, "per_event_from": "estimate",
+                        "source": "a guess until the machine code bounds the handler" }
+        }],
+        "tasks": [
+            { "name": "publish[floor]", "priority": 3, "wcet_us": 50.0, "period_us": 10000.0,
+              "job_of": "publish",
+              "script": { "bus": "i2c1", "bytes": 6, "source": "address + register, address + 4 data bytes",
+                          "stretch_us": 10.0, "stretch_source": "the device's datasheet" } },
+            { "name": "background", "priority": 1, "wcet_us": 100.0, "period_us": 1000.0 }
+        ]
+    })
+}
+
+fn board(value: serde_json::Value) -> BoardModel {
+    serde_json::from_value(value).expect("a board")
+}
+
+/// The script: 9 × 6 + 2 = 56 bit times of 2.5 µs = 140 µs on the wire, 2 × 6 + 2 = 14 events; its engine row
+/// costs 14 × (2 + 1) = 42 µs. An event's response at priority 7 (nothing above, nothing blocking): 3 µs, so the
+/// bus time is 140 + 10 + 14 × 3 = 192 µs, alone on the bus: the suspension. The job: 50 + 192 + the engine's
+/// 42 µs (its row, released by the job, above it) = 284 µs.
+#[test]
+fn a_script_adds_its_engine_row_and_its_suspension() {
+    let model = Model {
+        name: None,
+        boards: vec![board(board_json())],
+        can: None,
+    };
+    let system = model.validate().expect("valid");
+    let b = &system.boards[0];
+    assert_eq!(b.tasks.len(), 3);
+    let row = &b.tasks[2];
+    assert_eq!(row.name, "i2c1_engine[publish[floor]]");
+    assert_eq!((row.priority, row.wcet), (7, Time::from_us(42)));
+    assert_eq!(row.released_by, Some(0));
+    let script = &b.sensor_buses.scripts[0];
+    assert_eq!(
+        (script.wire, script.events, script.stretch),
+        (Time::from_us(140), 14, Time::from_us(10))
+    );
+
+    let result = analysis::analyse_board(b, &Limits::default());
+    let bus = &result.sensor_buses[0];
+    assert_eq!(bus.event_response, Some(Time::from_us(3)));
+    assert_eq!(bus.scripts[0].bus_time, Time::from_us(192));
+    assert_eq!(bus.scripts[0].suspension, Some(Time::from_us(192)));
+    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(284)));
+    // The engine row inherits the job's whole response as its jitter.
+    assert_eq!(result.tasks[2].jitter, Time::from_us(284));
+    // The lower task sees the job's 50 µs with jitter 284 − 50 and the engine's 42 µs with jitter 284:
+    // R = 100 + ⌈(R + 234)/10000⌉·50 + ⌈(R + 284)/10000⌉·42 = 192.
+    assert_eq!(result.tasks[1].wcrt(), Some(Time::from_us(192)));
+
+    let analysis = analysis::analyse(
+        &system,
+        &Options {
+            frame_cost: FrameCostSpec::Exact,
+            horizon: None,
+        },
+    );
+    let report = Report::build(&system, "t".into(), Vec::new(), Vec::new(), None);
+    let text = report::render(&report, Format::Table);
+    assert!(text.contains("Sensor bus i2c1 — 400 kbit/s"), "{text}");
+    assert!(text.contains("estimate: a guess until"), "{text}");
+    assert_eq!(analysis.boards[0].sensor_buses, result.sensor_buses);
+    let json = report::render(&report, Format::Json);
+    assert!(json.contains("\"per_event_from\": \"estimate\""), "{json}");
+}
+
+fn refusal(value: serde_json::Value) -> (String, SensorBusError) {
+    let b = board(value);
+    sensor_bus::validate_board(&b, &OverheadTimes::default(), &mut Vec::new()).expect_err("refused")
+}
+
+#[test]
+fn refusals_are_typed_and_name_the_field() {
+    let mut v = board_json();
+    v["tasks"][0]["script"]["bus"] = json!("i2c9");
+    assert_eq!(
+        refusal(v),
+        (
+            "tasks[0].script.bus".into(),
+            SensorBusError::UnknownBus("i2c9".into())
+        )
+    );
+    let mut v = board_json();
+    v["sensor_buses"][0]["engine"]["per_event_us"] = json!(0.0);
+    assert_eq!(
+        refusal(v),
+        (
+            "sensor_buses[0].engine.per_event_us".into(),
+            SensorBusError::NotPositive("0".into())
+        )
+    );
+    let mut v = board_json();
+    v["sensor_buses"][0]["bitrate"] = json!(0);
+    assert_eq!(refusal(v).0, "sensor_buses[0].bitrate");
+    let mut v = board_json();
+    v["tasks"][0]["script"]["bytes"] = json!(0);
+    assert_eq!(
+        refusal(v),
+        (
+            "tasks[0].script.bytes".into(),
+            SensorBusError::NotPositive("0".into())
+        )
+    );
+    let mut v = board_json();
+    v["tasks"][0]["script"]["bus_time_us"] = json!(-3.0);
+    assert_eq!(
+        refusal(v),
+        ("tasks[0].script".into(), SensorBusError::OneFigure)
+    );
+    let mut v = board_json();
+    v["tasks"][0]["script"]["stretch_us"] = json!(-1.0);
+    assert_eq!(
+        refusal(v),
+        (
+            "tasks[0].script.stretch_us".into(),
+            SensorBusError::Negative("-1".into())
+        )
+    );
+    let mut v = board_json();
+    v["tasks"][0]["script"]["stretch_source"] = json!(" ");
+    assert_eq!(refusal(v).1, SensorBusError::NoSource);
+    let mut v = board_json();
+    v["tasks"][0]["script"]
+        .as_object_mut()
+        .unwrap()
+        .remove("bytes");
+    v["tasks"][0]["script"]["bus_time_us"] = json!(120.0);
+    assert_eq!(
+        refusal(v),
+        ("tasks[0].script.events".into(), SensorBusError::NoEvents)
+    );
+    let mut v = board_json();
+    v["sensor_buses"][0]["engine"]["per_event_from"] = json!("guess");
+    assert!(serde_json::from_value::<BoardModel>(v).is_err());
+    // An unknown field, in the model file as in a timing file.
+    let mut v = board_json();
+    v["tasks"][0]["script"]["speed"] = json!(1);
+    let text = json!({ "boards": [v] }).to_string();
+    let error = Model::from_json(&text).expect_err("unknown field");
+    assert!(error.path.contains("script"), "{error}");
+    assert!(error.problem.contains("unknown field `speed`"), "{error}");
+    // And the model's error names the board.
+    let mut v = board_json();
+    v["tasks"][0]["script"]["bus"] = json!("i2c9");
+    let model = Model {
+        name: None,
+        boards: vec![board(v)],
+        can: None,
+    };
+    let error = model.validate().expect_err("unknown bus");
+    assert_eq!(error.path, "boards[0].tasks[0].script.bus");
+}
+
+/// A model whose suspending job cannot be bounded on the bus says why, for it and for what it interferes with.
+#[test]
+fn an_overloaded_bus_leaves_its_jobs_unbounded_with_the_reason() {
+    let mut v = board_json();
+    // 60 000 bytes at 400 kHz: 1.35 s of bus time every 10 ms.
+    v["tasks"][0]["script"]["bytes"] = json!(60_000);
+    let model = Model {
+        name: None,
+        boards: vec![board(v)],
+        can: None,
+    };
+    let system = model.validate().expect("valid");
+    let result = analysis::analyse_board(&system.boards[0], &Limits::default());
+    let why = result.tasks[0].bound.as_ref().expect_err("unbounded");
+    assert!(why.to_string().contains("its script on `i2c1`"), "{why}");
+    assert!(result.tasks[1].wcrt().is_none());
+    assert!(result.tasks[2].wcrt().is_none(), "released by it");
+    assert!(result.sensor_buses[0].scripts[0].bound.is_err());
+}
+
+/// The timing file's form: DiWheelDrive's floor-proximity topic with a script on a stated bus, published at
+/// medium. The job gets the script, the analysis its engine row, and the topic's end to end grows by at least the
+/// suspension; the on-chip admission table refuses the script (it has no self-suspending jobs yet); a script on a
+/// bus the timing file does not state is refused naming the timing file's field.
+#[test]
+fn a_timing_file_topic_states_its_script() {
+    let root = common::scratch_workspace("sensor-buses", None);
+    let models = root.join(scenario::MODELS_DIR);
+    let scenario_path = models.join("floor.scenario.json");
+    std::fs::write(
+        &scenario_path,
+        json!({
+            "name": "floor",
+            "publishers": [{ "topic": "floor-proximity", "priority": "medium", "period_us": 100000 }]
+        })
+        .to_string(),
+    )
+    .unwrap();
+    let analyse = |root: &std::path::Path| {
+        let built = scenario::build(root, &scenario_path, &scenario::timing_files(root))?;
+        let system = built.model.validate().expect("valid");
+        Ok::<_, scenario::BuildError>(analysis::analyse(
+            &system,
+            &Options {
+                frame_cost: FrameCostSpec::Exact,
+                horizon: None,
+            },
+        ))
+    };
+    let before = analyse(&root).expect("builds");
+
+    let timing_path = models.join("diwheeldrive.timing.json");
+    let original: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&timing_path).unwrap()).unwrap();
+    let mut timing = original.clone();
+    timing["sensor_buses"] = json!([{
+        "name": "i2c2", "bitrate": 400000,
+        "engine": { "priority": 7, "per_event_us": 3.0, "per_event_from": "estimate", "source": "test" }
+    }]);
+    timing["topics"]["floor-proximity"]["script"] = json!({
+        "bus": "i2c2", "bytes": 28, "starts": 8, "source": "four channel selects and four reads",
+        "stretch_us": 0.0, "stretch_source": "the PCA9544A and VCNL4020 do not stretch (test)"
+    });
+    std::fs::write(&timing_path, timing.to_string()).unwrap();
+    let after = analyse(&root).expect("builds");
+    let dwd = after
+        .boards
+        .iter()
+        .find(|b| b.name == "diwheeldrive")
+        .unwrap();
+    assert!(dwd
+        .tasks
+        .iter()
+        .any(|t| t.name == "i2c2_engine[publish_medium[floor-proximity]]"));
+    let suspension = dwd.sensor_buses[0].scripts[0].suspension.expect("bounded");
+    // 9 × 28 + 2 × 8 = 268 bit times of 2.5 µs on the wire, and 72 events' responses.
+    assert!(suspension >= Time::from_us(670), "{suspension}");
+    let worst = |a: &analysis::Analysis| {
+        a.topics
+            .iter()
+            .find(|t| t.name == "floor-proximity")
+            .and_then(|t| t.worst)
+            .expect("bounded")
+    };
+    assert!(
+        worst(&after) >= worst(&before).plus(suspension),
+        "{} {} {}",
+        worst(&after),
+        worst(&before),
+        suspension
+    );
+
+    // The on-chip admission table cannot carry the script yet: lowering refuses rather than admit too much.
+    let refused = schedule_analysis::admission_host::lower_robot(&root).expect_err("refused");
+    assert_eq!(refused.path, "topics.floor-proximity.script");
+
+    timing["topics"]["floor-proximity"]["script"]["bus"] = json!("i2c1");
+    std::fs::write(&timing_path, timing.to_string()).unwrap();
+    let error = analyse(&root).expect_err("refused");
+    assert_eq!(error.path, "topics.floor-proximity.script.bus");
+    assert!(error.file.ends_with("diwheeldrive.timing.json"), "{error}");
+    assert!(error.problem.contains("no sensor bus `i2c1`"), "{error}");
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// The sensitivity search moves a script's engine row with its job: the row runs once per sample.
+#[test]
+fn the_engine_row_moves_with_its_publisher() {
+    let text = json!({
+        "boards": [board_json()],
+        "can": { "messages": [ { "name": "floor", "id": 1544, "dlc": 8, "period_us": 10000,
+                                 "sender": "b/publish[floor]" } ] }
+    })
+    .to_string();
+    let system = Model::from_json(&text).unwrap().validate().unwrap();
+    let publishers = schedule_analysis::sensitivity::publishers(&system);
+    let tasks: Vec<usize> = publishers[0].tasks.iter().map(|t| t.task).collect();
+    assert_eq!(tasks, vec![0, 2]);
+    let moved =
+        schedule_analysis::sensitivity::with_period(&system, &publishers[0], Time::from_us(5000));
+    assert_eq!(moved.boards[0].tasks[2].period, Time::from_us(5000));
+}

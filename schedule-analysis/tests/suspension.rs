@@ -1,0 +1,331 @@
+//! The self-suspension analysis (`schedule_analysis::sensor_bus`) against the simulator on many random boards:
+//! jobs that run their CPU before and after a script on one sensor bus (non-preemptive, by priority), SRP locks,
+//! release jitter, sporadic gaps, shorter executions and scripts, the jobs of one RTIC task one at a time: no
+//! simulated response exceeds the analysed bound. The engine's interrupt is not simulated (its rows are zero
+//! here: a script raises no events).
+
+use proptest::prelude::*;
+use schedule_analysis::analysis;
+use schedule_analysis::busy_window::Limits;
+use schedule_analysis::model::{BoardSystem, OverheadTimes, TaskKind, TaskSpec};
+use schedule_analysis::sensor_bus::{BoardBuses, PerEventFrom, Script, SensorBus};
+use schedule_analysis::time::Time;
+
+mod sim;
+
+use sim::{Piece, Segment, SuspendingJob};
+
+const US: u64 = 1000;
+
+/// A random task before scaling: priority, period (µs), CPU share, jitter (% of the period), joins the previous
+/// task's RTIC task, its script's bus time (% of its period, 0: no script), its critical section (% of its CPU, 0:
+/// none).
+type RawTask = (u32, u64, u64, u64, bool, u64, u64);
+
+struct Set {
+    board: BoardSystem,
+    /// The RTIC task of each task.
+    serial: Vec<usize>,
+    /// Per task: the script's stated bus time (ns), the critical section (ns).
+    script: Vec<Option<u64>>,
+    section: Vec<Option<u64>>,
+    ceiling: u32,
+}
+
+fn set(raw: &[RawTask], utilisation: u64) -> Set {
+    let shares: u64 = raw.iter().map(|t| t.2).sum::<u64>().max(1);
+    let mut tasks = Vec::new();
+    let mut serial = Vec::new();
+    let mut script = Vec::new();
+    let mut section = Vec::new();
+    let mut scripts = Vec::new();
+    for (i, &(priority, period_us, share, jitter_pct, joins, script_pct, section_pct)) in
+        raw.iter().enumerate()
+    {
+        let period = period_us * US;
+        let wcet = ((period * utilisation * share) / (shares * 1000) / US).max(1) * US;
+        let joined = joins && i > 0;
+        let (priority, group) = if joined {
+            let previous: &TaskSpec = &tasks[i - 1];
+            (previous.priority, serial[i - 1])
+        } else {
+            (priority, i)
+        };
+        let bus_time = (script_pct > 0).then(|| (period * script_pct / 100 / US).max(1) * US);
+        let cs = (section_pct > 0).then(|| (wcet * section_pct / 100 / US).max(1) * US);
+        if let Some(b) = bus_time {
+            scripts.push(Script {
+                task: i,
+                bus: 0,
+                wire: Time::from_ns(b),
+                stretch: Time::ZERO,
+                events: 0,
+                engine_row: usize::MAX,
+            });
+        }
+        tasks.push(TaskSpec {
+            name: format!("t{i}"),
+            priority,
+            wcet: Time::from_ns(wcet),
+            bcet: Time::ZERO,
+            period: Time::from_ns(period),
+            deadline: Time::from_ns(period),
+            deadline_follows_period: true,
+            jitter: Time::from_ns(period * jitter_pct / 100 / US * US),
+            sections: cs
+                .map(|l| vec![("r".to_string(), Time::from_ns(l))])
+                .unwrap_or_default(),
+            blocking: None,
+            kind: TaskKind::Plain,
+            released_by: None,
+            sporadic: false,
+            job_of: Some(format!("rtic{group}")),
+        });
+        serial.push(group);
+        script.push(bus_time);
+        section.push(cs);
+    }
+    let ceiling = tasks
+        .iter()
+        .filter(|t| !t.sections.is_empty())
+        .map(|t| t.priority)
+        .max()
+        .unwrap_or(0);
+    let board = BoardSystem {
+        name: "random".into(),
+        overheads: OverheadTimes::default(),
+        tasks,
+        idle_sections: Vec::new(),
+        can_tx_task: None,
+        static_ceilings: Vec::new(),
+        sensor_buses: BoardBuses {
+            buses: vec![SensorBus {
+                name: "i2c1".into(),
+                bitrate: 400_000,
+                bit_time: Time::from_ns(2500),
+                engine_priority: 10,
+                per_event: Time::ZERO,
+                per_event_from: PerEventFrom::Estimate,
+                source: "not simulated".into(),
+            }],
+            scripts,
+        },
+    };
+    Set {
+        board,
+        serial,
+        script,
+        section,
+        ceiling,
+    }
+}
+
+/// A deterministic generator for the release patterns (proptest chooses its seed).
+struct Lcg(u64);
+
+impl Lcg {
+    fn next(&mut self) -> u64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        self.0 >> 33
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        if n == 0 {
+            0
+        } else {
+            self.next() % n
+        }
+    }
+    /// 0, `n` or anything between (the extremes are where suspensions hurt most).
+    fn split(&mut self, n: u64) -> u64 {
+        match self.below(3) {
+            0 => 0,
+            1 => n,
+            _ => self.below(n / US + 1) * US,
+        }
+    }
+}
+
+fn cpu(length: u64, lock: bool) -> Piece {
+    Piece::Cpu(Segment {
+        length,
+        lock: lock.then_some(0),
+    })
+}
+
+/// Random jobs: offsets, periodic or sporadic, release jitter, the CPU split at random around the script (often all
+/// before or all after), shorter CPU and scripts at times, the critical section in either part.
+fn random_jobs(set: &Set, seed: u64, horizon: u64) -> Vec<SuspendingJob> {
+    let mut rng = Lcg(seed);
+    let mut jobs = Vec::new();
+    for (task, t) in set.board.tasks.iter().enumerate() {
+        let period = t.period.as_ns();
+        let mut arrival = rng.below(period / US) * US;
+        let sporadic = rng.below(3) == 0;
+        let mut last_release = 0;
+        while arrival <= horizon {
+            let jitter = rng.below(t.jitter.as_ns() / US + 1) * US;
+            let release = (arrival + jitter).max(last_release);
+            last_release = release;
+            let wcet = t.wcet.as_ns();
+            let exec = if rng.below(4) == 0 {
+                (rng.below(wcet / US) + 1) * US
+            } else {
+                wcet
+            };
+            let before = rng.split(exec);
+            let after = exec - before;
+            // The critical section at the start of the part that can hold it (clipped to that part).
+            let section = set.section[task].unwrap_or(0);
+            let piece = |length: u64, with_lock: bool| -> Vec<Piece> {
+                let locked = if with_lock { section.min(length) } else { 0 };
+                let mut out = Vec::new();
+                if locked > 0 {
+                    out.push(cpu(locked, true));
+                }
+                if length > locked {
+                    out.push(cpu(length - locked, false));
+                }
+                out
+            };
+            let lock_before = rng.below(2) == 0;
+            let mut pieces = Vec::new();
+            match set.script[task] {
+                Some(bus_time) => {
+                    let actual = if rng.below(4) == 0 {
+                        (rng.below(bus_time / US) + 1) * US
+                    } else {
+                        bus_time
+                    };
+                    pieces.extend(piece(before, lock_before));
+                    pieces.push(Piece::Script(actual));
+                    pieces.extend(piece(after, !lock_before));
+                }
+                None => pieces.extend(piece(exec, true)),
+            }
+            jobs.push(SuspendingJob {
+                task,
+                arrival,
+                release,
+                pieces,
+            });
+            arrival += period
+                + if sporadic {
+                    rng.below(period / US) * US
+                } else {
+                    0
+                };
+        }
+    }
+    jobs
+}
+
+fn raw_tasks() -> impl Strategy<Value = Vec<RawTask>> {
+    prop::collection::vec(
+        (
+            1u32..=4,
+            20u64..=240,
+            1u64..=10,
+            0u64..=60,
+            prop::bool::weighted(0.25),
+            prop_oneof![Just(0u64), 1u64..=12],
+            prop_oneof![Just(0u64), 10u64..=100],
+        ),
+        2..=5,
+    )
+}
+
+/// Every job's simulated response against its task's bound; how many jobs had a bound.
+fn check(set: &Set, seed: u64) -> Result<usize, String> {
+    let result = analysis::analyse_board(&set.board, &Limits::default());
+    let longest = set
+        .board
+        .tasks
+        .iter()
+        .map(|t| t.period.as_ns())
+        .max()
+        .unwrap_or(0);
+    let jobs = random_jobs(set, seed, 40 * longest);
+    let priorities: Vec<u32> = set.board.tasks.iter().map(|t| t.priority).collect();
+    let responses = sim::suspending_run(&priorities, &set.serial, &[set.ceiling], &jobs);
+    let mut bounded = 0;
+    for (job, r) in jobs.iter().zip(responses) {
+        if let Some(bound) = result.tasks[job.task].wcrt() {
+            bounded += 1;
+            if r > bound.as_ns() {
+                return Err(format!(
+                    "task {} job at {}: simulated {} > analysed {}",
+                    job.task,
+                    job.arrival,
+                    r,
+                    bound.as_ns()
+                ));
+            }
+        }
+    }
+    Ok(bounded)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
+
+    #[test]
+    fn suspending_simulation_never_exceeds_the_analysis(
+        raw in raw_tasks(),
+        utilisation in 100u64..=600,
+        seed in any::<u64>(),
+    ) {
+        let set = set(&raw, utilisation);
+        let checked = check(&set, seed);
+        prop_assert!(checked.is_ok(), "{}", checked.unwrap_err());
+    }
+}
+
+/// The property above is not vacuous: on a fixed sweep of sets most tasks with a script are bounded, and their
+/// jobs are checked.
+#[test]
+fn the_random_sets_are_mostly_bounded() {
+    let mut rng = Lcg(0x5eed);
+    let (mut suspending, mut bounded_suspending, mut jobs) = (0, 0, 0);
+    for case in 0..200 {
+        let n = 2 + rng.below(4) as usize;
+        let raw: Vec<RawTask> = (0..n)
+            .map(|_| {
+                (
+                    1 + rng.below(4) as u32,
+                    20 + rng.below(221),
+                    1 + rng.below(10),
+                    rng.below(61),
+                    rng.below(4) == 0,
+                    if rng.below(2) == 0 {
+                        0
+                    } else {
+                        1 + rng.below(12)
+                    },
+                    if rng.below(2) == 0 {
+                        0
+                    } else {
+                        10 + rng.below(91)
+                    },
+                )
+            })
+            .collect();
+        let set = set(&raw, 100 + rng.below(501));
+        let result = analysis::analyse_board(&set.board, &Limits::default());
+        for s in &set.board.sensor_buses.scripts {
+            suspending += 1;
+            if result.tasks[s.task].wcrt().is_some() {
+                bounded_suspending += 1;
+            }
+        }
+        jobs += check(&set, case).expect("within the analysis");
+    }
+    assert!(suspending > 100, "{suspending} suspending tasks");
+    assert!(
+        bounded_suspending * 10 >= suspending * 7,
+        "{bounded_suspending} of {suspending} suspending tasks bounded"
+    );
+    assert!(jobs > 10_000, "{jobs} jobs checked");
+}
