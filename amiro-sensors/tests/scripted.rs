@@ -89,6 +89,11 @@ fn script(ops: &[(u8, &[u8], usize)]) -> Script {
     script
 }
 
+/// Each script's SCL periods.
+fn periods(scripts: &[Script]) -> Vec<u32> {
+    scripts.iter().map(Script::scl_periods).collect()
+}
+
 /// Samples `topics` in turn every `period` µs from `start` to `end` on both paths; how many
 /// samples published frames and how many did not.
 #[allow(clippy::too_many_arguments)]
@@ -199,6 +204,7 @@ fn the_compass_scripts_are_the_datasheet_transactions() {
             ]),
         ]
     );
+    assert_eq!(periods(&bus.scripts), [57, 144]);
     bus.scripts.clear();
     bus.bus_time_ns = 0;
     scripted
@@ -221,6 +227,19 @@ fn the_compass_scripts_are_the_datasheet_transactions() {
     );
     assert_eq!(sample.scl_periods(), 84);
     assert_eq!(bus.bus_time_ns, 210_000);
+    // Every 256th read checks the identity first, in the same script.
+    scripted.state_mut().group_mut().set_reuse_window_us(0);
+    for n in 2..=256u64 {
+        bus.scripts.clear();
+        scripted
+            .run(&mut bus, |s| s.sample(Topic::MagnetometerX, n * 1_000))
+            .unwrap();
+    }
+    assert_eq!(
+        bus.scripts,
+        [script(&[(0x1E, &[0x0A], 3), (0x1E, &[0x03], 6)])]
+    );
+    assert_eq!(periods(&bus.scripts), [141]);
 }
 
 /// A reading of all zeros (a dead bus's pattern) on the split path: the identity is read in a
@@ -366,6 +385,9 @@ fn the_floor_scripts_are_the_datasheet_transactions() {
     );
     // A sensor's last read-back, the next sensor's select and PRODUCT_ID share a script.
     assert_eq!(bus.scripts.len(), 1 + 4 * 5);
+    // Select and PRODUCT_ID 59 periods; each register's select, write and read-back 88 (the
+    // last with the next sensor's select and PRODUCT_ID).
+    assert_eq!(periods(&bus.scripts[..6]), [59, 88, 88, 88, 88, 88 + 59]);
     bus.scripts.clear();
     bus.bus_time_ns = 0;
     scripted
@@ -398,6 +420,7 @@ fn the_floor_scripts_are_the_datasheet_transactions() {
         .collect();
     assert_eq!(identities, [(0x77, 1, 0), (0x13, 1, 1)].repeat(4));
     assert_eq!(bus.scripts[0].operations().len(), 12);
+    assert_eq!(periods(&bus.scripts), [372, 136]);
     assert_muxed_rules(&bus.scripts);
 }
 
@@ -497,6 +520,7 @@ fn the_bno055_scripts_are_the_datasheet_transactions() {
             script(&[(0x28, &[0x3D], 1)]),
         ]
     );
+    assert_eq!(periods(&bus.scripts), [105, 58, 209, 68, 29, 39]);
     // The mode switches' waits come before the script after each OPR_MODE write.
     let mut settles = Vec::new();
     let mut imu = Replayed::new(ImuSensors::new(ReplayBus::imu(), NoDelay));
