@@ -466,6 +466,7 @@ impl ReplayBus {
                             Ok(())
                         }
                         Outcome::Failed(failure) => Err(ReplayError::Bus(failure)),
+                        // Pending: not reached, `step` refuses a job with a script out.
                         Outcome::Unknown | Outcome::Pending => {
                             self.stand_in(at, address, write, read);
                             Ok(())
@@ -709,12 +710,18 @@ pub struct Unfinished;
 /// One round of `work` on `state` for `job` ([module documentation](self)): the script the work
 /// needs next, or its result. The work runs on a copy of `state`; only a round that needs no
 /// further script (the work's result is the devices' answers) puts its copy in `state`, and
-/// `job` begins again empty. `state`'s bus log is empty between rounds.
+/// `job` begins again empty. `state`'s bus log is empty between rounds. A step while the last
+/// script's result is not in `job` ([`Job::complete`]) is refused, the job dropped: its work
+/// would otherwise end on stand-ins.
 pub fn step<S: Clone + Replaying, T>(
     state: &mut S,
     job: &mut Job,
     work: impl FnOnce(&mut S) -> T,
 ) -> Result<Next<T>, Unfinished> {
+    if job.entries().iter().any(|e| e.outcome == Outcome::Pending) {
+        *job = Job::new();
+        return Err(Unfinished);
+    }
     let mut round = state.clone();
     let bus = round.replay_bus();
     bus.log = job.clone();
