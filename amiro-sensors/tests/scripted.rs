@@ -864,3 +864,37 @@ fn a_floor_sensor_gone_is_named_and_recovered_as_on_the_blocking_path() {
     );
     assert!(published > 0 && scripted.state().is_ready());
 }
+
+/// A publisher's way through a sample (`begin_sample`, then `finish_sample` per script until the
+/// frames): the BNO055's magnetometer X, its first sample and then one within the reuse window
+/// that needs no script.
+#[test]
+fn a_publisher_begins_and_finishes_a_sample_script_by_script() {
+    use amiro_sensors::drivers::scripted::{begin_sample, finish_sample, Job};
+    let mut sim = SimImuBus::new();
+    let mut blocking = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
+    let mut group = Replayed::boot(ImuSensors::new(ReplayBus::imu(), NoDelay), &mut sim)
+        .unwrap()
+        .state()
+        .clone();
+    let mut job = Job::new();
+    let mut scripts = 0;
+    let mut next = begin_sample(&mut group, &mut job, Topic::MagnetometerX, 2_000);
+    let frames = loop {
+        match next {
+            Next::Run(script) => {
+                scripts += 1;
+                let result = sim.answer(&script).result;
+                next = finish_sample(&mut group, &mut job, Topic::MagnetometerX, 2_000, &result);
+            }
+            Next::Done(frames) => break frames,
+        }
+    };
+    assert_eq!(scripts, 1);
+    assert_eq!(frames, blocking.sample(Topic::MagnetometerX, 2_000));
+    let reused = begin_sample(&mut group, &mut job, Topic::MagnetometerY, 3_000);
+    assert_eq!(
+        reused,
+        Next::Done(blocking.sample(Topic::MagnetometerY, 3_000))
+    );
+}

@@ -42,6 +42,7 @@
 //! bus, to the log's confirmed part, so a work of `n` transfers ends within `n + 1` rounds
 //! ([`MAX_ROUNDS`]).
 
+use amiro_can::Topic;
 use embedded_hal::i2c::{self, ErrorKind, ErrorType, I2c, NoAcknowledgeSource, Operation};
 
 use super::bno055::{self, Bno055};
@@ -49,7 +50,7 @@ use super::bq27500;
 use super::floor::FloorSensors;
 use super::hmc5883l::{self, Hmc5883l};
 use super::pca9544a::{self, Pca9544a};
-use super::suite::{Compass, ImuSensors, SensorGroup, Supervised};
+use super::suite::{Compass, ImuSensors, Samples, SensorGroup, Supervised};
 use super::vcnl4020;
 use crate::script::{
     Failure, Readings, Script, ScriptError, MAX_OPERATIONS, MAX_READ_BYTES, MAX_WRITE_BYTES,
@@ -741,6 +742,41 @@ pub fn step<S: Clone + Replaying, T>(
     *state = round;
     *job = Job::new();
     Ok(Next::Done(value))
+}
+
+/// A publisher's sample of `topic` taken at `now_us` on a supervised group, begun: the first
+/// script it needs, or its frames at once (a reading reused, a group in its back-off). The
+/// caller keeps `job` until the sample is done.
+pub fn begin_sample<G: SensorGroup + Clone + Replaying>(
+    group: &mut Supervised<G>,
+    job: &mut Job,
+    topic: Topic,
+    now_us: u64,
+) -> Next<Samples> {
+    *job = Job::new();
+    resume(group, job, topic, now_us)
+}
+
+/// The same sample, its last script's `result` in: the next script, or the frames. A sample
+/// whose rounds run out ([`Unfinished`]) has no frames.
+pub fn finish_sample<G: SensorGroup + Clone + Replaying>(
+    group: &mut Supervised<G>,
+    job: &mut Job,
+    topic: Topic,
+    now_us: u64,
+    result: &ScriptResult,
+) -> Next<Samples> {
+    job.complete(result);
+    resume(group, job, topic, now_us)
+}
+
+fn resume<G: SensorGroup + Clone + Replaying>(
+    group: &mut Supervised<G>,
+    job: &mut Job,
+    topic: Topic,
+    now_us: u64,
+) -> Next<Samples> {
+    step(group, job, |g| g.sample(topic, now_us)).unwrap_or(Next::Done(Samples::new()))
 }
 
 /// A state (a supervised group, a bus with a gauge's read) and one job on it at a time: the
