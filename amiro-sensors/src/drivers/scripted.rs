@@ -462,8 +462,10 @@ impl ReplayBus {
                     return match entry.outcome {
                         Outcome::Read => {
                             let start = usize::from(entry.read_at);
-                            let bytes = self.log.bytes.get(start..start + read.len());
-                            read.copy_from_slice(bytes.unwrap_or(&[]));
+                            match self.log.bytes.get(start..start + read.len()) {
+                                Some(bytes) => read.copy_from_slice(bytes),
+                                None => read.fill(STAND_IN),
+                            }
                             Ok(())
                         }
                         Outcome::Failed(failure) => Err(ReplayError::Bus(failure)),
@@ -626,13 +628,17 @@ impl I2c for ReplayBus {
                 }
             }
         }
-        let (write, read) = (&write[..write_len], &mut read[..read_len]);
+        let (Some(write), Some(read)) = (write.get(..write_len), read.get_mut(..read_len)) else {
+            return Err(ReplayError::Unsupported);
+        };
         self.transfer(address, write, read)?;
         let mut from = 0;
         for operation in operations.iter_mut() {
             if let Operation::Read(buffer) = operation {
                 let end = from + buffer.len();
-                buffer.copy_from_slice(read.get(from..end).unwrap_or(&[]));
+                if let Some(bytes) = read.get(from..end) {
+                    buffer.copy_from_slice(bytes);
+                }
                 from = end;
             }
         }
