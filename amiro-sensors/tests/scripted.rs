@@ -898,3 +898,48 @@ fn a_publisher_begins_and_finishes_a_sample_script_by_script() {
         Next::Done(blocking.sample(Topic::MagnetometerY, 3_000))
     );
 }
+
+/// A floor sensor reading 0 (a dead bus's pattern) in the middle of a round: the round's script
+/// ran on the guess that every reading is data, so the replay finds the work wanting that
+/// sensor's PRODUCT_ID where the log has the next select. The reads made on the guess are
+/// dropped and the next script carries the identity read behind the sensor's select and the rest
+/// of the round again (the sensors after it read twice: the cost of a wrong guess). The frames
+/// are the blocking path's (the sensors fed fixed counts, as a world feeds them).
+#[test]
+fn a_dead_bus_pattern_mid_round_is_checked_and_the_round_goes_on() {
+    let counts = [3000, 0, 5000, 6000];
+    let mut blocking = Supervised::new(FloorSensors::new(SimFloorBus::new()));
+    let mut bus = Recorder::new(SimFloorBus::new());
+    let mut scripted = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut bus).unwrap();
+    for (k, &c) in counts.iter().enumerate() {
+        blocking
+            .group_mut()
+            .mux_mut()
+            .bus_mut()
+            .proximity_mut()
+            .set_proximity(k, Some(c));
+        bus.bus.proximity_mut().set_proximity(k, Some(c));
+    }
+    bus.scripts.clear();
+    let frames = same_sample(
+        &mut blocking,
+        &mut scripted,
+        &mut bus,
+        Topic::FloorProximity,
+        1_000,
+    );
+    assert_eq!(frames, 1);
+    assert_eq!(
+        bus.scripts[1],
+        script(&[
+            (0x77, &[0x05], 0),
+            (0x13, &[0x81], 1),
+            (0x77, &[0x06], 0),
+            (0x13, &[0x87], 2),
+            (0x77, &[0x07], 0),
+            (0x13, &[0x87], 2),
+        ])
+    );
+    assert_eq!(bus.scripts.len(), 2);
+    assert_muxed_rules(&bus.scripts);
+}
