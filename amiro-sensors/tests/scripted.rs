@@ -943,3 +943,29 @@ fn a_dead_bus_pattern_mid_round_is_checked_and_the_round_goes_on() {
     assert_eq!(bus.scripts.len(), 2);
     assert_muxed_rules(&bus.scripts);
 }
+
+/// At boot, before the engine takes the block, a group's set-up runs its scripts operation by
+/// operation on the blocking bus (`OnI2c`): the same devices' state and readiness as the
+/// simulator's own answers give, and a refused operation is the same error in the same place.
+#[test]
+fn a_script_on_a_blocking_bus_answers_as_the_simulator() {
+    use amiro_sensors::drivers::scripted::OnI2c;
+    let mut on_i2c = OnI2c(SimFloorBus::new());
+    let mut answering = SimFloorBus::new();
+    let a = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut on_i2c).unwrap();
+    let b = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut answering).unwrap();
+    assert!(a.state().is_ready() && b.state().is_ready());
+    for k in 0..4 {
+        let (x, y) = (
+            on_i2c.0.proximity().sensor(k).unwrap(),
+            answering.proximity().sensor(k).unwrap(),
+        );
+        assert_eq!(x.registers(), y.registers());
+        assert!(x.is_configured_for_amiro());
+    }
+    let round = script(&[(0x77, &[0x04], 0), (0x13, &[0x87], 2), (0x13, &[0x85], 2)]);
+    assert_eq!(on_i2c.run(&round), answering.answer(&round).result);
+    let refused = script(&[(0x77, &[0x00], 0), (0x13, &[0x87], 2)]);
+    assert_eq!(on_i2c.run(&refused), answering.answer(&refused).result);
+    assert_eq!(on_i2c.run(&refused).unwrap_err().operation, 1);
+}

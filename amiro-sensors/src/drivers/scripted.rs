@@ -66,6 +66,54 @@ pub trait ScriptBus {
     fn run(&mut self, script: &Script) -> ScriptResult;
 }
 
+/// A script run operation by operation on a blocking embedded-hal bus (the polled master at
+/// boot, before the engine takes the block): each operation one `write`, `read` or `write_read`,
+/// the first that fails ending the script with its failure ([`kind_failure`]).
+#[derive(Debug)]
+pub struct OnI2c<I>(pub I);
+
+impl<I: I2c> ScriptBus for OnI2c<I> {
+    fn run(&mut self, script: &Script) -> ScriptResult {
+        let mut readings = Readings::for_script(script);
+        let mut written = script.written();
+        for (index, op) in script.operations().iter().enumerate() {
+            let (bytes, rest) = written.split_at(usize::from(op.write).min(written.len()));
+            written = rest;
+            let mut read = [0u8; MAX_READ_BYTES];
+            let read = read.get_mut(..usize::from(op.read)).unwrap_or(&mut []);
+            let result = match (bytes.is_empty(), read.is_empty()) {
+                (false, true) => self.0.write(op.address, bytes),
+                (true, false) => self.0.read(op.address, read),
+                _ => self.0.write_read(op.address, bytes, read),
+            };
+            if let Err(error) = result {
+                return Err(ScriptError {
+                    operation: index as u8,
+                    failure: kind_failure(i2c::Error::kind(&error)),
+                });
+            }
+            for &byte in read.iter() {
+                readings.push(byte);
+            }
+        }
+        Ok(readings)
+    }
+}
+
+/// The engine failure a blocking bus's error kind stands for ([`failure_kind`]'s inverse; a kind
+/// the engine has no failure for, a polled master's timeout among them, is
+/// [`Failure::UnexpectedEvent`]).
+pub const fn kind_failure(kind: ErrorKind) -> Failure {
+    match kind {
+        ErrorKind::NoAcknowledge(NoAcknowledgeSource::Data) => Failure::NackData,
+        ErrorKind::NoAcknowledge(_) => Failure::NackAddress,
+        ErrorKind::Bus => Failure::Bus,
+        ErrorKind::ArbitrationLoss => Failure::ArbitrationLoss,
+        ErrorKind::Overrun => Failure::Overrun,
+        _ => Failure::UnexpectedEvent,
+    }
+}
+
 /// Most bytes one transfer of an AMiRo driver writes: the BNO055's configuration burst (the
 /// register and four values).
 pub const MAX_TRANSFER_WRITE: usize = 5;
