@@ -706,6 +706,14 @@ fn the_power_bus_scripts_are_the_datasheet_transactions() {
             script(&[(0x55, &[0x00], 2)]),
         ]
     );
+    // Each gauge script after the first waits the gauge's 66 µs of bus-free time.
+    let mut settles = Vec::new();
+    let init = |s: &mut PowerBus| Bq27500::new(s.mux.bus_mut(), NoDelay).init();
+    while let Next::Run(script) = scripted.step(init).unwrap() {
+        settles.push(scripted.settle_us());
+        scripted.complete(&bus.bus.answer(&script).result);
+    }
+    assert_eq!(settles, [0, 66, 66]);
     bus.scripts.clear();
     bus.bus_time_ns = 0;
     let step = scripted

@@ -43,6 +43,7 @@
 //! ([`MAX_ROUNDS`]).
 
 use amiro_can::Topic;
+use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::{self, ErrorKind, ErrorType, I2c, NoAcknowledgeSource, Operation};
 
 use super::bno055::{self, Bno055};
@@ -143,7 +144,8 @@ pub struct Expected {
 
 /// A write after which the part needs time before the next transfer (the BNO055's operating
 /// mode switch): the recording ends with it, and the next script waits `us` first
-/// ([`Job::settle_us`]).
+/// ([`Job::settle_us`]). A paced device's transfer (the bq27500) asks for its bus-free time the
+/// same way.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Settle {
     /// The device's address.
@@ -565,6 +567,8 @@ impl ReplayBus {
             .find(|s| s.address == address && write == [s.register, s.value]);
         if let Some(settle) = settle {
             self.log.recorded_settle_us = settle.us;
+        } else if paced {
+            self.log.recorded_settle_us = bq27500::BUS_FREE_NS.div_ceil(1_000);
         }
         self.recording = if paced || settle.is_some() {
             Recording::Closed { start }
@@ -885,11 +889,23 @@ impl<S: Clone + Replaying> Replayed<S> {
     pub fn run<T>(
         &mut self,
         bus: &mut impl ScriptBus,
+        work: impl FnMut(&mut S) -> T,
+    ) -> Result<T, Unfinished> {
+        self.run_paced(bus, &mut crate::sim::NoDelay, work)
+    }
+
+    /// [`run`](Self::run) on real devices: waits each script's [`settle_us`](Self::settle_us)
+    /// on `delay` before it (the boot on the polled master, [`OnI2c`]).
+    pub fn run_paced<T>(
+        &mut self,
+        bus: &mut impl ScriptBus,
+        delay: &mut impl DelayNs,
         mut work: impl FnMut(&mut S) -> T,
     ) -> Result<T, Unfinished> {
         for _ in 0..MAX_ROUNDS {
             match self.step(&mut work)? {
                 Next::Run(script) => {
+                    delay.delay_us(self.settle_us());
                     let result = bus.run(&script);
                     self.complete(&result);
                 }
@@ -902,10 +918,20 @@ impl<S: Clone + Replaying> Replayed<S> {
 }
 
 impl<G: Clone + Replaying + SensorGroup> Replayed<Supervised<G>> {
-    /// A supervised group whose boot set-up ([`Supervised::new`]) ran as scripts on `bus`.
+    /// A supervised group whose boot set-up ([`Supervised::new`]) ran as scripts on `bus`, with no
+    /// waits between them (the simulators).
     pub fn boot(group: G, bus: &mut impl ScriptBus) -> Result<Self, Unfinished> {
+        Self::boot_paced(group, bus, &mut crate::sim::NoDelay)
+    }
+
+    /// [`boot`](Self::boot) on real devices, each script's settling time waited on `delay`.
+    pub fn boot_paced(
+        group: G,
+        bus: &mut impl ScriptBus,
+        delay: &mut impl DelayNs,
+    ) -> Result<Self, Unfinished> {
         let mut boot = Replayed::new(group);
-        let supervised = boot.run(bus, |group| {
+        let supervised = boot.run_paced(bus, delay, |group| {
             // The set-up's transfers are made on the new value's bus: the round's bus takes
             // them over, so the round sees what was recorded.
             let mut supervised = Supervised::new(group.clone());
