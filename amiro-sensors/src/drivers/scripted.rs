@@ -7,7 +7,8 @@
 //! and a second copy of each for the split path would drift from the first. So the split path
 //! runs the *same* code on a [`ReplayBus`]: an embedded-hal `I2c` that records the transfers the
 //! code makes into a script instead of making them, and, once the script has run, serves the
-//! code the readings. [`Replayed`] does the rounds:
+//! code the readings. [`step`] does a round, for a job whose log ([`Job`]) the caller keeps
+//! ([`begin_sample`] / [`finish_sample`] for a publisher's sample; [`Replayed`] for the host):
 //!
 //! 1. **Record.** The work (a group's `sample`, a set-up step, a gauge transfer) runs on a copy
 //!    of the state. Transfers the log does not hold yet are appended to the script and answered
@@ -15,7 +16,7 @@
 //!    ([`Expected`]), or the value the work wrote to that register earlier in the log (a
 //!    read-back), or `0x5A` bytes (not a dead bus's pattern). The copy and its result are
 //!    dropped: [`Next::Run`] hands the script to the bus.
-//! 2. **Replay.** With the script's result in the log ([`Replayed::complete`]) the work runs
+//! 2. **Replay.** With the script's result in the log ([`Job::complete`]) the work runs
 //!    again on a fresh copy, and the bus answers every logged transfer with what the devices
 //!    answered (or with the bus error of the transfer that failed). If the work needs nothing
 //!    more, the copy becomes the state and the work's result is the sample: [`Next::Done`].
@@ -38,9 +39,15 @@
 //!   its error (mapped to embedded-hal's [`ErrorKind`], as a blocking bus reports it), and the
 //!   ones after it were never made.
 //!
+//! - A part that needs time after a transfer (the BNO055's mode switch, the bq27500's bus-free
+//!   time) ends its script there, and the job asks for the wait before its next script
+//!   ([`Job::settle_us`]).
+//!
 //! A job's rounds are bounded: every round but the last adds at least one transfer, made on the
 //! bus, to the log's confirmed part, so a work of `n` transfers ends within `n + 1` rounds
-//! ([`MAX_ROUNDS`]).
+//! ([`MAX_ROUNDS`]) — when no other job on the same group ends in between (one that does can
+//! send the work another way; a job out of rounds ends [`Unfinished`]). A work must change
+//! nothing but its state (no log line, no report): a round may run it more than once.
 
 use amiro_can::Topic;
 use embedded_hal::delay::DelayNs;
