@@ -977,3 +977,41 @@ fn a_script_on_a_blocking_bus_answers_as_the_simulator() {
     assert_eq!(on_i2c.run(&refused), answering.answer(&refused).result);
     assert_eq!(on_i2c.run(&refused).unwrap_err().operation, 1);
 }
+
+/// A BNO055 that comes back with a failed self-test: every set-up step 1 reads the identities
+/// and ST_RESULT and stops there, on both paths — the scripted one writes neither the page nor
+/// the operating mode on the guess that the self-test passed (the part's mode switches and mode
+/// stay the blocking path's).
+#[test]
+fn no_write_reaches_a_part_whose_check_failed() {
+    let mut blocking = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
+    let mut bus = Recorder::new(SimImuBus::new());
+    let mut scripted =
+        Replayed::boot(ImuSensors::new(ReplayBus::imu(), NoDelay), &mut bus).unwrap();
+    for (fault, from, to) in [
+        (Bno055Fault::Absent, 0, 3_000_000),
+        (Bno055Fault::SelfTestFailed, 3_000_000, 20_000_000),
+    ] {
+        blocking
+            .group_mut()
+            .imu
+            .bus_mut()
+            .imu_mut()
+            .set_fault(fault);
+        bus.bus.imu_mut().set_fault(fault);
+        run_both(
+            &mut blocking,
+            &mut scripted,
+            &mut bus,
+            &IMU_TOPICS,
+            from,
+            to,
+            10_000,
+        );
+    }
+    assert!(!scripted.state().is_ready());
+    assert!(scripted.state().faults() > 3 + 1);
+    let device = blocking.group_mut().imu.bus_mut().imu();
+    assert_eq!(device.mode_switches(), bus.bus.imu().mode_switches());
+    assert_eq!(device.operating_mode(), bus.bus.imu().operating_mode());
+}
