@@ -231,8 +231,15 @@ impl<B: Backend> TimerQueue<B> {
         Delay {
             at,
             slot: NO_SLOT,
+            stepped: false,
             _backend: PhantomData,
         }
+    }
+
+    /// A future that completes at tick `at` or later, once this queue's interrupt has taken its
+    /// slot off the list ([`Expiry`]).
+    pub fn expiry(&'static self, at: u64) -> Expiry<B> {
+        Expiry(self.delay_until(at))
     }
 
     /// Runs `future` until it completes (`Some`) or tick `at` comes (`None`), whichever is first.
@@ -275,6 +282,24 @@ impl<B: Backend> TimerQueue<B> {
         Ok(spare)
     }
 
+    /// An [`Expiry`]'s look at its armed `slot`, in one critical section: still listed, it keeps
+    /// waiting (`Err`), with `waker` in place of the one it held unless that one wakes the same
+    /// task; taken off the list by the interrupt, it is freed without a walk of the list (`Ok`).
+    /// Either way the waker left over is returned, to be dropped outside the section.
+    fn settle(&self, slot: u8, waker: &Waker) -> Result<Option<Waker>, Option<Waker>> {
+        let i = usize::from(slot) % CAPACITY;
+        self.with(|s| {
+            if s.armed & (1 << i) == 0 {
+                s.claimed &= !(1 << i);
+                return Ok(s.waker[i].take());
+            }
+            if s.waker[i].as_ref().is_some_and(|w| w.will_wake(waker)) {
+                return Err(None);
+            }
+            Err(s.waker[i].replace(waker.clone()))
+        })
+    }
+
     /// Frees `slot`: no longer armed nor claimed. Returns its waker, to be dropped outside the
     /// section.
     fn release(&self, slot: u8) -> Option<Waker> {
@@ -301,6 +326,8 @@ const NO_SLOT: u8 = u8::MAX;
 pub struct Delay<B: Backend> {
     at: u64,
     slot: u8,
+    /// Armed a [`STEP`] ahead, short of `at` ([`Expiry`] asks).
+    stepped: bool,
     _backend: PhantomData<fn() -> B>,
 }
 
@@ -323,6 +350,7 @@ impl<B: Backend> Future for Delay<B> {
             return Poll::Ready(());
         }
         let arm_at = this.at.min(now.saturating_add(STEP));
+        this.stepped = arm_at < this.at;
         match B::queue().arm(&mut this.slot, arm_at, cx.waker().clone()) {
             Ok(spare) => drop(spare),
             Err(Full(waker)) => {
@@ -337,6 +365,51 @@ impl<B: Backend> Future for Delay<B> {
 impl<B: Backend> Drop for Delay<B> {
     fn drop(&mut self) {
         self.free();
+    }
+}
+
+/// The future of [`TimerQueue::expiry`]: a [`Delay`] that, once armed, completes only when the
+/// timer's interrupt has taken its slot off the list, so that its completion frees the slot with
+/// no walk of the list ([`TimerQueue::settle`]). A [`Delay`] completes as soon as the time has
+/// come and leaves its slot to its drop, whose removal walk the execution-time bound charges on
+/// every way the wait may end; here that walk is left to a wait dropped before it completed. Its
+/// first poll is the [`Delay`]'s (complete at once, without a slot, when the tick has come; else
+/// armed); a later one only looks at its slot. It may complete later than a [`Delay`] by the
+/// interrupt's own latency: the time has passed the list's head, so the interrupt is due, and it
+/// wakes the task.
+///
+/// A wait further than [`STEP`] ahead is armed [`STEP`] ahead, as a [`Delay`] is; when that
+/// expires, the wait asks its task to be polled again and arms anew in that poll, so that no poll
+/// that finds its slot freed arms one. (The command handler, its one user, waits at most one
+/// command interval.)
+pub struct Expiry<B: Backend>(Delay<B>);
+
+impl<B: Backend> Future for Expiry<B> {
+    type Output = ();
+
+    #[inline]
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        let delay = &mut self.0;
+        if delay.slot != NO_SLOT {
+            let spare = match B::queue().settle(delay.slot, cx.waker()) {
+                Ok(spare) => spare,
+                Err(spare) => {
+                    drop(spare);
+                    return Poll::Pending;
+                }
+            };
+            drop(spare);
+            delay.slot = NO_SLOT;
+            if !delay.stepped {
+                // Taken off the list at its instant: the interrupt takes a slot off only once the
+                // time has reached it.
+                return Poll::Ready(());
+            }
+            // Armed a step ahead: the next poll arms again.
+            poll_again(cx.waker());
+            return Poll::Pending;
+        }
+        Pin::new(delay).poll(cx)
     }
 }
 
@@ -711,6 +784,94 @@ mod tests {
     }
 
     /// The list's slots from its head.
+    #[test]
+    fn an_expiry_ends_only_once_the_interrupt_took_its_slot_off_and_frees_it_without_its_drop() {
+        let _m = model(100);
+        let (t, w) = task();
+        let mut e = QUEUE.expiry(150);
+        assert!(poll(&mut e, &w).is_pending());
+        interrupt();
+        NOW.store(150, Ordering::SeqCst);
+        assert!(
+            poll(&mut e, &w).is_pending(),
+            "the time has come, but the slot is still listed: the interrupt is due"
+        );
+        assert_eq!(QUEUE.waiting(), 1);
+        interrupt();
+        assert_eq!(wakes(&t), 1, "the interrupt wakes it");
+        assert!(poll(&mut e, &w).is_ready());
+        assert_eq!(
+            QUEUE.with(|s| s.claimed),
+            0,
+            "freed as it completed, before its drop"
+        );
+        drop(e);
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+    }
+
+    #[test]
+    fn an_expiry_whose_tick_has_come_ends_at_once_without_a_slot() {
+        let _m = model(500);
+        let (_t, w) = task();
+        let mut e = QUEUE.expiry(500);
+        assert!(poll(&mut e, &w).is_ready());
+        assert_eq!(PENDS.load(Ordering::SeqCst), 0);
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+    }
+
+    #[test]
+    fn an_expiry_further_than_a_step_asks_to_be_polled_again_and_arms_then() {
+        let _m = model(0);
+        let (t, w) = task();
+        let at = STEP + 7;
+        let mut e = QUEUE.expiry(at);
+        assert!(poll(&mut e, &w).is_pending());
+        interrupt();
+        assert_eq!(COMPARE.load(Ordering::SeqCst), STEP);
+        NOW.store(STEP, Ordering::SeqCst);
+        interrupt();
+        assert_eq!(wakes(&t), 1);
+        assert!(poll(&mut e, &w).is_pending(), "a step short of its tick");
+        assert_eq!(wakes(&t), 2, "it asks to be polled again");
+        assert_eq!(QUEUE.waiting(), 0, "and holds no slot until then");
+        assert!(poll(&mut e, &w).is_pending());
+        interrupt();
+        assert_eq!(COMPARE.load(Ordering::SeqCst), at, "armed for its tick");
+        NOW.store(at, Ordering::SeqCst);
+        interrupt();
+        assert!(poll(&mut e, &w).is_ready());
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+    }
+
+    #[test]
+    fn an_expiry_dropped_while_it_waits_frees_its_slot_and_is_not_woken() {
+        let _m = model(0);
+        let (t, w) = task();
+        let mut e = QUEUE.expiry(100);
+        assert!(poll(&mut e, &w).is_pending());
+        interrupt();
+        drop(e);
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+        NOW.store(100, Ordering::SeqCst);
+        interrupt();
+        assert_eq!(wakes(&t), 0);
+        assert_eq!(COMPARE.load(Ordering::SeqCst), NONE);
+    }
+
+    #[test]
+    fn an_expiry_polled_by_another_task_while_it_waits_wakes_that_task() {
+        let _m = model(0);
+        let (first, w1) = task();
+        let (second, w2) = task();
+        let mut e = QUEUE.expiry(100);
+        assert!(poll(&mut e, &w1).is_pending());
+        assert!(poll(&mut e, &w2).is_pending());
+        NOW.store(100, Ordering::SeqCst);
+        interrupt();
+        assert_eq!((wakes(&first), wakes(&second)), (0, 1));
+        assert!(poll(&mut e, &w2).is_ready());
+    }
+
     fn order(s: &State) -> Vec<usize> {
         let mut out = Vec::new();
         let mut cur = s.head;
