@@ -231,7 +231,6 @@ impl<B: Backend> TimerQueue<B> {
         Delay {
             at,
             slot: NO_SLOT,
-            stepped: false,
             _backend: PhantomData,
         }
     }
@@ -326,8 +325,6 @@ const NO_SLOT: u8 = u8::MAX;
 pub struct Delay<B: Backend> {
     at: u64,
     slot: u8,
-    /// Armed a [`STEP`] ahead, short of `at` ([`Expiry`] asks).
-    stepped: bool,
     _backend: PhantomData<fn() -> B>,
 }
 
@@ -350,7 +347,6 @@ impl<B: Backend> Future for Delay<B> {
             return Poll::Ready(());
         }
         let arm_at = this.at.min(now.saturating_add(STEP));
-        this.stepped = arm_at < this.at;
         match B::queue().arm(&mut this.slot, arm_at, cx.waker().clone()) {
             Ok(spare) => drop(spare),
             Err(Full(waker)) => {
@@ -400,12 +396,10 @@ impl<B: Backend> Future for Expiry<B> {
             };
             drop(spare);
             delay.slot = NO_SLOT;
-            if !delay.stepped {
-                // Taken off the list at its instant: the interrupt takes a slot off only once the
-                // time has reached it.
+            if B::now() >= delay.at {
                 return Poll::Ready(());
             }
-            // Armed a step ahead: the next poll arms again.
+            // Armed a step ahead, short of its tick: the next poll arms again.
             poll_again(cx.waker());
             return Poll::Pending;
         }
