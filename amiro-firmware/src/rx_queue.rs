@@ -418,6 +418,23 @@ mod tests {
     }
 
     #[test]
+    fn a_packed_frame_unpacks_to_the_frame_pushed_and_parks_as_the_plain_poll_does() {
+        let (count, waker) = counter();
+        let mut cx = Context::from_waker(&waker);
+        // SAFETY: this test's only split.
+        let (mut tx, mut rx) = unsafe { queue().split() };
+        assert_eq!(rx.poll_recv_packed(&mut cx), Poll::Pending);
+        assert!(tx.push(&frame(0x7ff)));
+        tx.wake();
+        assert_eq!(wakes(&count), 1, "parked: the push wakes it");
+        let Poll::Ready(packed) = rx.poll_recv_packed(&mut cx) else {
+            panic!("the pushed frame is there");
+        };
+        assert_eq!(packed.unpack(), frame(0x7ff));
+        assert_eq!(rx.try_recv(), None, "taken once");
+    }
+
+    #[test]
     fn a_push_between_the_first_look_and_the_park_is_found_by_the_second_look() {
         let (count, waker) = counter();
         // SAFETY: this test's only split.
