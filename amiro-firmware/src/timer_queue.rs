@@ -22,7 +22,8 @@
 //!   is less than 2^31 ticks from the time, as each is armed at most [`STEP`] ahead and the
 //!   interrupt runs at least every 32.8 ms, on the timers' own period events); a wait further away
 //!   is armed [`STEP`] ahead and arms again when woken.
-//! - Dropping a [`Delay`] (a timeout whose future finished first) unlinks and frees its slot; a
+//! - Dropping a [`Delay`] (a timeout whose future finished first) unlinks and frees its slot (each
+//!   listed slot keeps its predecessor as well as its successor: no walk to it); a
 //!   forgotten one only keeps its slot. A slot is no pointer into a future: nothing dangles.
 //!
 //! The queue holds [`CAPACITY`] waits; a board's async tasks wait one at a time each, so a full
@@ -85,6 +86,9 @@ struct State {
     head: u8,
     /// Each listed slot's successor plus one (0: the last).
     link: [u8; CAPACITY],
+    /// Each listed slot's predecessor plus one, but the head's (left as it was when the interrupt
+    /// popped the slot before it), so that a slot leaves the list without a walk to it.
+    prev: [u8; CAPACITY],
     /// Low 32 bits of each listed slot's instant.
     at: [u32; CAPACITY],
     /// Each listed slot's waker (taken when the interrupt wakes it).
@@ -99,27 +103,28 @@ impl State {
         armed: 0,
         head: 0,
         link: [0; CAPACITY],
+        prev: [0; CAPACITY],
         at: [0; CAPACITY],
         waker: [const { None }; CAPACITY],
         compare: NONE,
     };
 
-    /// Takes slot `i` out of the list (it is in it). One pass per slot ahead of it.
+    /// Takes slot `i` out of the list (it is in it): its neighbours' links, no walk.
     fn unlink(&mut self, i: usize) {
         let me = i as u8 + 1;
         let after = self.link[i];
-        if self.head == me {
+        // The head's predecessor link is not kept (the interrupt pops heads without a store for it),
+        // so the head is told by `head`; any other listed slot's `prev` names its predecessor.
+        let before = if self.head == me {
             self.head = after;
+            0
         } else {
-            let mut cur = self.head;
-            while cur != 0 {
-                let c = usize::from(cur - 1) % CAPACITY;
-                if self.link[c] == me {
-                    self.link[c] = after;
-                    break;
-                }
-                cur = self.link[c];
-            }
+            let before = self.prev[i];
+            self.link[usize::from(before.wrapping_sub(1)) % CAPACITY] = after;
+            before
+        };
+        if after != 0 {
+            self.prev[usize::from(after - 1) % CAPACITY] = before;
         }
         self.armed &= !(1 << i);
     }
@@ -139,7 +144,11 @@ impl State {
             cur = self.link[c];
         }
         self.link[i] = cur;
+        self.prev[i] = before;
         let me = i as u8 + 1;
+        if cur != 0 {
+            self.prev[usize::from(cur - 1) % CAPACITY] = me;
+        }
         if before == 0 {
             self.head = me;
         } else {
@@ -626,6 +635,36 @@ mod tests {
     }
 
     #[test]
+    fn the_head_the_interrupt_left_leaves_the_list_as_its_head_when_dropped() {
+        let _m = model(0);
+        let tasks: Vec<_> = (0..3).map(|_| task()).collect();
+        let mut delays: Vec<_> = [100, 200, 300]
+            .iter()
+            .map(|&at| QUEUE.delay_until(at))
+            .collect();
+        for (d, (_, w)) in delays.iter_mut().zip(&tasks) {
+            assert!(poll(d, w).is_pending());
+        }
+        NOW.store(100, Ordering::SeqCst);
+        interrupt();
+        let second = delays.remove(1);
+        drop(second);
+        assert_eq!(
+            QUEUE.with(|s| order(s)).len(),
+            1,
+            "the third alone, as the head"
+        );
+        interrupt();
+        assert_eq!(COMPARE.load(Ordering::SeqCst), 300);
+        NOW.store(300, Ordering::SeqCst);
+        interrupt();
+        let woken: Vec<_> = tasks.iter().map(|(t, _)| wakes(t)).collect();
+        assert_eq!(woken, [1, 0, 1]);
+        drop(delays);
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+    }
+
+    #[test]
     fn a_timeout_whose_future_finishes_first_frees_its_slot() {
         let _m = model(0);
         let (t, w) = task();
@@ -866,12 +905,19 @@ mod tests {
         assert!(poll(&mut e, &w2).is_ready());
     }
 
+    /// The listed slots from the head, each but the head checked against its predecessor link.
     fn order(s: &State) -> Vec<usize> {
         let mut out = Vec::new();
+        let mut before = 0u8;
         let mut cur = s.head;
         while cur != 0 {
-            out.push(usize::from(cur - 1));
-            cur = s.link[usize::from(cur - 1)];
+            let i = usize::from(cur - 1);
+            if before != 0 {
+                assert_eq!(s.prev[i], before, "slot {i}'s predecessor");
+            }
+            out.push(i);
+            before = cur;
+            cur = s.link[i];
         }
         out
     }
