@@ -517,7 +517,7 @@ pub async fn next_command<const N: usize>(
 /// followed by [`next_frame`]: a command is taken no earlier than `not_before_us`, which is what
 /// the analysis's arrival model of the handler (`sporadic_us`, one command per interval) rests on.
 ///
-/// One future polled through one function the compiler keeps apart ([`NextFrame`]'s `poll`), so the
+/// One future polled through one function the compiler keeps apart (`NextFrame`'s `poll`), so the
 /// handler's loop has one `await` and one place that polls it: a job (from a resume to the next
 /// wait that is pending) runs the loop's body once, and the machine-code bound charges one
 /// command's handling and two polls of the wait — the one that resumes the job and the next wait's

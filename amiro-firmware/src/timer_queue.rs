@@ -374,14 +374,13 @@ impl<B: Backend> Drop for Delay<B> {
 }
 
 /// The future of [`TimerQueue::expiry`]: a [`Delay`] that, once armed, completes only when the
-/// timer's interrupt has taken its slot off the list, so that its completion frees the slot with
-/// no walk of the list ([`TimerQueue::settle`]). A [`Delay`] completes as soon as the time has
-/// come and leaves its slot to its drop, whose removal walk the execution-time bound charges on
-/// every way the wait may end; here that walk is left to a wait dropped before it completed. Its
-/// first poll is the [`Delay`]'s (complete at once, without a slot, when the tick has come; else
-/// armed); a later one only looks at its slot. It may complete later than a [`Delay`] by the
-/// interrupt's own latency: the time has passed the list's head, so the interrupt is due, and it
-/// wakes the task.
+/// timer's interrupt has taken its slot off the list, and frees the slot then
+/// (`TimerQueue::settle`). Its first poll is the [`Delay`]'s (complete at once, without a slot,
+/// when the tick has come; else armed: the insertion walk); a later one only looks at its slot, so
+/// the poll that ends the wait never runs the arming, which the execution-time bound would charge it
+/// wherever one function polls the wait (the command handler's job: the poll that resumes it and
+/// the next wait's first). It may complete later than a [`Delay`] by the interrupt's own latency:
+/// the time has passed the list's head, so the interrupt is due, and it wakes the task.
 ///
 /// A wait further than [`STEP`] ahead is armed [`STEP`] ahead, as a [`Delay`] is; when that
 /// expires, the wait asks its task to be polled again and arms anew in that poll, so that no poll
