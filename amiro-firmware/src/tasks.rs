@@ -513,9 +513,8 @@ pub async fn next_command<const N: usize>(
 
 /// The command handler's one wait (`docs/analysis.md`, "The command handler"): until `not_before_us`
 /// (the rate limit: `None` before the first command), then for the next frame the CAN receive
-/// interrupt queued. The same waits, in the same order, as a rate-limit wait after each command
-/// followed by [`next_frame`]: a command is taken no earlier than `not_before_us`, which is what
-/// the analysis's arrival model of the handler (`sporadic_us`, one command per interval) rests on.
+/// interrupt queued: a command is taken no earlier than `not_before_us`, which is what the
+/// analysis's arrival model of the handler (`sporadic_us`, one command per interval) rests on.
 ///
 /// One future polled through one function the compiler keeps apart (`NextFrame`'s `poll`), so the
 /// handler's loop has one `await` and one place that polls it: a job (from a resume to the next
@@ -523,8 +522,8 @@ pub async fn next_command<const N: usize>(
 /// command's handling and two polls of the wait — the one that resumes the job and the next wait's
 /// first. Each poll is cheap on every way through it: the rate limit compares the time with its
 /// instant before it arms a timer (none when the frame comes late enough), a wait that has armed one
-/// ends only once the timer's interrupt has taken it off the timer queue, so that it frees its slot
-/// without a walk of the queue (`timer_queue::Expiry`), and nothing is copied but the frame.
+/// ends only once the timer's interrupt has taken it off the timer queue, so that the poll that
+/// ends it never arms one (`timer_queue::Expiry`), and nothing is copied but the frame.
 pub async fn next_frame_after<C: Clock, const N: usize>(
     frames: &mut crate::rx_queue::Consumer<'static, N>,
     not_before_us: Option<u64>,
@@ -586,14 +585,4 @@ impl<C: Clock, const N: usize> core::future::Future for NextFrame<'_, C, N> {
             Poll::Pending => Poll::Pending,
         }
     }
-}
-
-/// Waits for the next frame the CAN receive interrupt queued (the command handler's queue).
-pub async fn next_frame<const N: usize>(
-    frames: &mut crate::rx_queue::Consumer<'static, N>,
-) -> RxFrame {
-    let task = crate::tracing::suspend(None);
-    let frame = frames.recv().await;
-    crate::tracing::resume(task);
-    frame
 }
