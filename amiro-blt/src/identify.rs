@@ -87,7 +87,7 @@ impl Identification {
 }
 
 /// The main boards' ids that `code` (read from `BOOTLOADER_SCAN.0`) loads or compares with, in
-/// [`MAIN_BOARD_IDS`] order: see [`constants_in`] for the forms read.
+/// [`MAIN_BOARD_IDS`] order: see `constants_in` for the forms read.
 pub fn ids_in_code(code: &[u8]) -> Identification {
     let constants = constants_in(code);
     Identification {

@@ -93,7 +93,7 @@ impl Odometry {
     ///
     /// No 64-bit division (the STM32F103 has none: each is a call of the runtime's loop): x and y
     /// through the 32-bit divide (a value that does not fit 32 bits is beyond the wire's range), the
-    /// heading through multiplications by reciprocals ([`heading_counts`]). The results are the
+    /// heading through multiplications by reciprocals (`heading_counts`). The results are the
     /// exact formula's (`tests/odometry_exact.rs` compares them).
     pub fn from_micrometres(x_um: i64, y_um: i64, heading_urad: i64) -> Option<Odometry> {
         Odometry::new(

@@ -5,7 +5,7 @@
 //!
 //! Inputs: the robot's task models, generated at build time from the same app sources and timing
 //! files `cargo xtask analyze` reads (`board-build.rs` writes `admission_table.rs`; the board
-//! `include!`s it with [`admission_table!`]), and the whole robot's table of running publishers,
+//! `include!`s it with `admission_table!`), and the whole robot's table of running publishers,
 //! which every board keeps from *every* command it hears on the bus — its own and the other
 //! boards' publish, stop and once requests and policy commands.
 //!
@@ -232,7 +232,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
 
     /// One board's step: [`Admission::prepare_step`] for the command `before` (`id`, `data`), else
     /// [`Admission::refresh_step`]. The admission task runs them from `from` 0 on, `from` one past the board of the
-    /// step before, until `None`, waiting between them; [`Admission::steps`] runs them back to back.
+    /// step before, until `None`, waiting between them; `Admission::steps` runs them back to back.
     pub fn step(&mut self, before: Option<(u16, &[u8])>, from: usize) -> Option<usize> {
         match before {
             Some((id, data)) => self.prepare_step(id, data, from),

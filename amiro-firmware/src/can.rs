@@ -3,7 +3,7 @@
 //! Received frames stay raw (an 11-bit ID and 0–8 bytes) so that the handler sees, counts and
 //! rejects malformed frames itself; frames to send are already-validated `amiro_can::Frame`s.
 //! The one implementation for the robot is [`crate::bxcan`] (the same IP on the F103 and the F405);
-//! the QEMU build has virtual ports in [`crate::qemu`].
+//! the QEMU build has virtual ports in `crate::qemu`.
 
 /// A frame as it came off the bus, before any protocol check.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -72,7 +72,7 @@ pub mod watchdog;
 
 /// The trace numbers of the board's tasks (`pub mod trace_task { pub const CAN_RX: u8 = 0; … }`),
 /// written by `board-build.rs` from the app's source into the board crate's `OUT_DIR`
-/// (see [`trace_ids`] on the host, and [`tracing`] on the chip).
+/// (see `trace_ids` on the host, and `tracing` on the chip).
 #[macro_export]
 macro_rules! trace_tasks {
     () => {

@@ -1,5 +1,5 @@
 //! Which publisher rows a publisher task serves next: the walks of the publisher table behind
-//! [`crate::publisher::serve_level`], apart from the task's locks and clock so they run on the host.
+//! `crate::publisher::serve_level`, apart from the task's locks and clock so they run on the host.
 //!
 //! A task serves the CAN priorities of its `levels` (DiWheelDrive and PowerManagement one per task,
 //! LightRing all four from one). Its earliest due time and its next release are each found in one

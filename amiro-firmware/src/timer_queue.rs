@@ -330,7 +330,7 @@ struct Full(Waker);
 const NO_SLOT: u8 = u8::MAX;
 
 /// The future of [`TimerQueue::delay_until`]: completes at its tick or later. It holds a slot
-/// index ([`NO_SLOT`]: none), no link: it may move, and dropping it frees the slot.
+/// index (`NO_SLOT`: none), no link: it may move, and dropping it frees the slot.
 pub struct Delay<B: Backend> {
     at: u64,
     slot: u8,

@@ -1,6 +1,6 @@
 //! One board of the robot: its QEMU process (the board's QEMU build under `-icount`, the console
 //! on a pipe), the two named pipes it trades over with the coordinator, and what it printed. The
-//! one place a board's exchange happens: [`Board::receive`] takes its report, [`Board::send`] gives
+//! one place a board's exchange happens: `Board::receive` takes its report, `Board::send` gives
 //! its answer (the messages are `amiro_trace::robot_link`'s).
 use std::cell::RefCell;
 use std::fs::File;

@@ -166,7 +166,7 @@ pub struct Summary {
 }
 
 /// What a live run sends the client, each at its virtual time (µs) on the wall clock: the host
-/// computes up to [`AHEAD`] beyond it, and [`Pace::hold`] hands each one over once the wall clock
+/// computes up to `AHEAD` beyond it, and [`Pace::hold`] hands each one over once the wall clock
 /// has reached it (at once when the run is behind).
 pub struct Outbox<T> {
     queue: std::collections::VecDeque<(u64, T)>,

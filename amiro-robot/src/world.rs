@@ -12,7 +12,7 @@
 //!
 //! **Lookahead.** A sensor board that sleeps is woken only by what the coordinator sees coming;
 //! with a world it is also brought to the last boundary *before* its next deadline
-//! ([`WorldRun::wake_boundary`]), so the readings it samples there are at most one feed period
+//! (`WorldRun::wake_boundary`), so the readings it samples there are at most one feed period
 //! (plus the DiWheelDrive's time since its last report) old, at the cost of one exchange per
 //! wake-up.
 use std::path::Path;

@@ -368,7 +368,7 @@ pub struct SendArgs {
     #[arg(long, short, value_name = "FILE", conflicts_with = "frames")]
     pub file: Option<PathBuf>,
 
-    /// The bus: socketcan:IFACE, slcan:DEVICE[@BAUD] or file:PATH
+    /// The bus: socketcan:IFACE, slcan:DEVICE or slcan:DEVICE@BAUD or file:PATH
     #[arg(long, env = "AMIRO_BUS", global = true, value_name = "BUS")]
     pub bus: Option<String>,
 
@@ -389,7 +389,7 @@ pub struct SendArgs {
 /// `amiro monitor`.
 #[derive(Debug, Args)]
 pub struct MonitorArgs {
-    /// The bus: socketcan:IFACE, slcan:DEVICE[@BAUD] or file:PATH
+    /// The bus: socketcan:IFACE, slcan:DEVICE or slcan:DEVICE@BAUD or file:PATH
     #[arg(long, env = "AMIRO_BUS", value_name = "BUS")]
     pub bus: String,
 

@@ -7,7 +7,7 @@ use clap::Args;
 
 use crate::script::DriveWords;
 
-const BUS_HELP: &str = "The bus: socketcan:IFACE, slcan:DEVICE[@BAUD] or file:PATH";
+const BUS_HELP: &str = "The bus: socketcan:IFACE, slcan:DEVICE or slcan:DEVICE@BAUD or file:PATH";
 
 pub const CONSOLE_ABOUT: &str = "\
 One screen for the thesis's Demo Sender and Demo Receiver: the bus scrolls by, decoded, at the top; commands \
@@ -38,7 +38,7 @@ Examples:
 /// `amiro console`.
 #[derive(Debug, Args)]
 pub struct ConsoleArgs {
-    #[doc = "The bus: socketcan:IFACE, slcan:DEVICE[@BAUD] or file:PATH"]
+    #[doc = "The bus: socketcan:IFACE, slcan:DEVICE or slcan:DEVICE@BAUD or file:PATH"]
     #[arg(long, env = "AMIRO_BUS", value_name = "BUS", help = BUS_HELP)]
     pub bus: String,
 
@@ -142,7 +142,7 @@ adapter. Ends on Ctrl-C, closing the adapter's channel; connected commands then 
 /// `amiro relay`.
 #[derive(Debug, Args)]
 pub struct RelayArgs {
-    /// The adapter: slcan:DEVICE[@BAUD]
+    /// The adapter: slcan:DEVICE or slcan:DEVICE@BAUD
     #[arg(long, env = "AMIRO_BUS", value_name = "BUS")]
     pub bus: String,
 }

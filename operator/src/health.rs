@@ -37,7 +37,7 @@ Examples:
 /// `amiro health`.
 #[derive(Debug, Args)]
 pub struct HealthArgs {
-    /// The bus: socketcan:IFACE, slcan:DEVICE[@BAUD] or file:PATH
+    /// The bus: socketcan:IFACE, slcan:DEVICE or slcan:DEVICE@BAUD or file:PATH
     #[arg(long, env = "AMIRO_BUS", value_name = "BUS")]
     pub bus: String,
 

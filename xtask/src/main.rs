@@ -64,7 +64,7 @@ enum Cmd {
         #[arg(long, value_name = "1-2|1-1|all")]
         revision: Option<String>,
     },
-    /// The firmware runtime's layers, rustfmt check, and clippy with warnings denied on the host
+    /// The firmware runtime's layers, rustfmt check, clippy and rustdoc with warnings denied on the host
     /// crates and each firmware.
     Check,
     /// Host tests, firmware builds and the QEMU scenarios.
@@ -197,7 +197,7 @@ fn run(cmd: Cmd) -> Result<bool> {
         Cmd::Test => test(&root).map(|()| true),
         Cmd::Ci => {
             let start = std::time::Instant::now();
-            timed("checks (layers, rustfmt, clippy)", || check(&root))?;
+            timed("checks (layers, rustfmt, clippy, rustdoc)", || check(&root))?;
             timed("the analysis gate", || analysis_gate(&root))?;
             test(&root)?;
             println!("ci: all steps took {:.0} s", start.elapsed().as_secs_f64());
@@ -336,6 +336,26 @@ fn check(root: &Path) -> Result<()> {
         &["clippy", "--quiet", "--all-targets", "--", "-D", "warnings"],
     )
     .context("clippy on the host crates")?;
+    // The host crates' documentation, its broken and private links refused (the firmware apps
+    // are binaries for the chip: their clippy runs below).
+    cargo(
+        root,
+        &[
+            "doc",
+            "--quiet",
+            "--no-deps",
+            "--workspace",
+            "--exclude",
+            "diwheeldrive",
+            "--exclude",
+            "powermgmt",
+            "--exclude",
+            "lightring",
+            "--config",
+            "build.rustdocflags=[\"-D\", \"warnings\"]",
+        ],
+    )
+    .context("rustdoc on the host crates (warnings denied)")?;
     // Every revision of every board, for the chip and (where it has scenarios) for QEMU.
     let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &revision::Choice::All)?;
     let qemu_target = qemu_target_dir(root).to_string_lossy().into_owned();

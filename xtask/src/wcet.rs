@@ -32,7 +32,7 @@ pub struct WcetArgs {
     #[arg(long, value_name = "N")]
     pub wait_states: Option<u32>,
     /// A bounds file (JSON; docs/analysis.md) for the loops and calls the machine code cannot
-    /// bound (default with a board: schedule-analysis/models/<board>.bounds.json).
+    /// bound (default with a board: schedule-analysis/models/BOARD.bounds.json).
     #[arg(long, value_name = "FILE")]
     pub bounds: Option<PathBuf>,
     /// Print JSON.

@@ -622,7 +622,7 @@ pub fn rows(
     )
 }
 
-/// [`rows`], each topic row with the critical sections of one release of its group where `groups` tells
+/// `rows`, each topic row with the critical sections of one release of its group where `groups` tells
 /// them apart ([`group_row_sections`]).
 pub fn rows_with_groups(
     built: &RticApp,

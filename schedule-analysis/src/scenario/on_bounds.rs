@@ -104,7 +104,7 @@ fn t(us: f64) -> Time {
 }
 
 impl OnBounds {
-    /// The report's lines: a heading line, then per board a line and one per miss (at most [`MAX_LISTED`], then
+    /// The report's lines: a heading line, then per board a line and one per miss (at most `MAX_LISTED`, then
     /// how many more), then the bus's and topics' misses.
     pub fn lines(&self) -> Vec<String> {
         let verdict = if self.all_ok {

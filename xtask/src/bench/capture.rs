@@ -405,7 +405,7 @@ pub fn read_qemu(trace_bin: &[u8], text: &str, default_hz: u64) -> Result<Captur
     read_qemu_clocked(trace_bin, &[], text, default_hz)
 }
 
-/// [`read_qemu`], with the platform clock's stamps (`clock.bin`, [`amiro_trace::clock_run`]): each activation of
+/// `read_qemu`, with the platform clock's stamps (`clock.bin`, [`amiro_trace::clock_run`]): each activation of
 /// its interrupt a run of [`amiro_trace::PLATFORM_CLOCK_TASK`], which pre-empts whatever ran.
 pub fn read_qemu_clocked(
     trace_bin: &[u8],

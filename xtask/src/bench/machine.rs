@@ -424,7 +424,7 @@ fn kinds(j: &Job) -> (u64, u64, u64) {
     )
 }
 
-/// [`rows`], with the traced QEMU image's own bounds (`image`) for the tasks that run a simulated device in QEMU
+/// `rows`, with the traced QEMU image's own bounds (`image`) for the tasks that run a simulated device in QEMU
 /// (`trace.qemu.other_code`): in a QEMU run such a task is held to its bound in the image that ran, with nothing
 /// taken off for the trace records (the image's bound holds them, and its handler events: the tracing code is in
 /// it), only the pre-empting runs' unstamped records and the tick interrupts (other tasks' code) at their fewest.

@@ -68,8 +68,8 @@ pub struct BenchArgs {
     /// The trace clock when the capture has no boot record (default: the board's core clock).
     #[arg(long)]
     pub clock_hz: Option<u64>,
-    /// Where the report goes (table.txt, report.md, report.json, <board>.svg); default
-    /// target/bench/<board>/<capture name>.
+    /// Where the report goes (table.txt, report.md, report.json, BOARD.svg); default
+    /// target/bench/BOARD/CAPTURE.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Fail when an observed response exceeds its analysed WCRT, or a topic its analysed bound.

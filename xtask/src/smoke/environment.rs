@@ -6,7 +6,7 @@ use crate::boards::Board;
 /// How a board's boot must end in QEMU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Ending {
-    /// The tasks run (the watchdog task has started), the monotonic counts [`HALF_PERIODS`] and
+    /// The tasks run (the watchdog task has started), the monotonic counts `HALF_PERIODS` and
     /// reports the compare events QEMU's timer lacks, and nothing faults.
     Running,
     /// SYS_PD_N reads low (a machine with no way to hold it released): the board's shutdown task
