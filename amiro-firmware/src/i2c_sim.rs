@@ -117,15 +117,18 @@ impl<D: ScriptDevices> SimBus<D> {
 /// A publisher task's client of a [`SimBus`], with its timeout on the monotonic `C`.
 pub struct SimPort<'a, C, D> {
     bus: &'a SimBus<D>,
+    client: u8,
     allowance_us: u32,
     clock: PhantomData<C>,
 }
 
 impl<'a, C, D> SimPort<'a, C, D> {
-    /// A client of `bus`; a script's timeout is its wire time plus `allowance_us`.
-    pub const fn new(bus: &'a SimBus<D>, allowance_us: u32) -> Self {
+    /// Client `client` of `bus` (its publisher task's index, as on the chip's bus); a script's
+    /// timeout is its wire time plus `allowance_us`.
+    pub const fn new(bus: &'a SimBus<D>, client: u8, allowance_us: u32) -> Self {
         Self {
             bus,
+            client,
             allowance_us,
             clock: PhantomData,
         }
@@ -133,9 +136,16 @@ impl<'a, C, D> SimPort<'a, C, D> {
 }
 
 impl<C: Deadline, D: ScriptDevices> ScriptPort for SimPort<'_, C, D> {
-    async fn run(&mut self, script: Script) -> Result<Readings, BusFault> {
+    fn client(&self) -> u8 {
+        self.client
+    }
+
+    async fn run(&mut self, script: Script, settle_us: u32) -> Result<Readings, BusFault> {
         if script.operations().is_empty() {
             return Ok(Readings::for_script(&script));
+        }
+        if settle_us > 0 {
+            C::delay_until_us(C::now_us() + u64::from(settle_us)).await;
         }
         let now = C::now_us();
         let ends = self.bus.take(&script, now);

@@ -19,7 +19,8 @@ use crate::i2c_engine::CR1_START;
 use crate::i2c_model::{Access, Device, Model};
 use crate::i2c_sim::{HalDevices, SimBus, SimPort};
 use crate::scripted::{
-    sample_on_bus, script_timeout_us, Begin, BusFault, Deadline, I2cPort, ScriptPort, ScriptedGroup,
+    sample_on_bus, script_timeout_us, BusFault, Deadline, I2cPort, OneJobAtATime, ScriptPort,
+    ScriptedGroup, Step,
 };
 use crate::test_waker;
 
@@ -91,56 +92,107 @@ impl<T> rtic_core::Mutex for &Lock<T> {
     }
 }
 
-/// A magnetometer group that samples by script: the HMC5883L's data register block (six bytes
-/// from DATA_X_MSB, X Z Y big-endian; its datasheet's register list) decoded to one axis.
+/// A magnetometer group that samples by script, in rounds: with `check_identity` its job first
+/// reads the HMC5883L's identification registers (three bytes from IDENTIFICATION_A, "H43") and
+/// reads the data only if they match; the data round is the register block (six bytes from
+/// DATA_X_MSB, X Z Y big-endian; the datasheet's register list), decoded to the X axis.
 #[derive(Default)]
 struct Magnetometer {
     /// Serve the frames without the bus (a reading reused).
     reuse: Option<i32>,
+    check_identity: bool,
+    /// Never done: every round asks for one more script.
+    endless: bool,
+    stage: Stage,
+    outcome: Option<Result<Readings, BusFault>>,
     outcomes: Vec<Result<Readings, BusFault>>,
+    abandoned: usize,
+}
+
+#[derive(Default, Clone, Copy, PartialEq, Eq, Debug)]
+enum Stage {
+    #[default]
+    Idle,
+    Identity,
+    Data,
+}
+
+fn register_read(register: u8, count: usize) -> Script {
+    let mut script = Script::new();
+    script
+        .write_read(hmc5883l::ADDRESS, &[register], count)
+        .unwrap();
+    script
+}
+
+fn x_frame(nanotesla: i32) -> Samples {
+    let mut frames = Samples::new();
+    let _ = frames.push(SensorData::Magnetometer {
+        axis: Axis::X,
+        nanotesla,
+    });
+    frames
+}
+
+impl Magnetometer {
+    fn run(&mut self, stage: Stage) -> Step {
+        self.stage = stage;
+        let script = match stage {
+            Stage::Identity => register_read(hmc5883l::reg::IDENTIFICATION_A, 3),
+            _ => register_read(hmc5883l::reg::DATA_X_MSB, 6),
+        };
+        Step::Run {
+            script,
+            settle_us: 0,
+        }
+    }
 }
 
 impl ScriptedGroup for Magnetometer {
-    fn begin(&mut self, topic: Topic, _now_us: u64) -> Begin {
-        if let Some(nanotesla) = self.reuse {
-            let mut frames = Samples::new();
-            let _ = frames.push(SensorData::Magnetometer {
-                axis: Axis::X,
-                nanotesla,
-            });
-            return Begin::Frames(frames);
-        }
+    const MAX_ROUNDS: usize = 3;
+
+    fn step(&mut self, topic: Topic, _now_us: u64) -> Step {
         assert_eq!(topic, Topic::MagnetometerX);
-        let mut script = Script::new();
-        script
-            .write_read(hmc5883l::ADDRESS, &[hmc5883l::reg::DATA_X_MSB], 6)
-            .unwrap();
-        Begin::Script(script)
+        let outcome = self.outcome.take();
+        match (self.stage, outcome) {
+            (Stage::Idle, _) => match self.reuse {
+                Some(nanotesla) => Step::Done(x_frame(nanotesla)),
+                None if self.check_identity => self.run(Stage::Identity),
+                None => self.run(Stage::Data),
+            },
+            (_, _) if self.endless => self.run(Stage::Data),
+            (Stage::Identity, Some(Ok(readings))) if readings.of(0) == hmc5883l::IDENTITY => {
+                self.run(Stage::Data)
+            }
+            (Stage::Data, Some(Ok(readings))) => {
+                self.stage = Stage::Idle;
+                let bytes = readings.of(0);
+                Step::Done(x_frame(i32::from(i16::from_be_bytes([bytes[0], bytes[1]]))))
+            }
+            _ => {
+                self.stage = Stage::Idle;
+                Step::Done(Samples::new())
+            }
+        }
     }
 
-    fn finish(
-        &mut self,
-        _topic: Topic,
-        _now_us: u64,
-        outcome: Result<Readings, BusFault>,
-    ) -> Samples {
+    fn complete(&mut self, outcome: Result<Readings, BusFault>) {
         self.outcomes.push(outcome);
-        let mut frames = Samples::new();
-        if let Ok(readings) = outcome {
-            let bytes = readings.of(0);
-            let x = i16::from_be_bytes([bytes[0], bytes[1]]);
-            let _ = frames.push(SensorData::Magnetometer {
-                axis: Axis::X,
-                nanotesla: i32::from(x),
-            });
-        }
-        frames
+        self.outcome = Some(outcome);
+    }
+
+    fn abandon(&mut self) {
+        self.abandoned += 1;
+        self.stage = Stage::Idle;
+        self.outcome = None;
     }
 }
 
+type Shared = OneJobAtATime<Magnetometer, 2>;
+
 /// The publisher's sample of `topic` through `port`, the group behind its lock.
 async fn sample_of(
-    group: &Lock<Magnetometer>,
+    group: &Lock<Shared>,
     port: &mut impl ScriptPort,
     topic: Topic,
     taken_us: u64,
@@ -177,7 +229,7 @@ fn x_of(frames: &Samples) -> Option<i32> {
 fn a_sample_suspends_while_the_bus_runs_its_script_and_holds_no_group_lock() {
     set_now(1_000);
     let bus = I2cBus::new(Model::new(vec![Device::new(hmc5883l::ADDRESS)]), [3, 1]);
-    let group = Lock::new(Magnetometer::default());
+    let group = Lock::new(Shared::new(Magnetometer::default()));
     let mut port = I2cPort::<TestClock, _, 2>::new(&bus, bus.client(0).unwrap(), 100);
     let (wakes, waker) = test_waker::counting();
     let mut cx = Context::from_waker(&waker);
@@ -185,7 +237,7 @@ fn a_sample_suspends_while_the_bus_runs_its_script_and_holds_no_group_lock() {
     // Begun: the script is on the bus, the publisher suspended, the group's lock released.
     assert!(sample.as_mut().poll(&mut cx).is_pending());
     assert_eq!(group.taken.get(), 1);
-    assert!(group.other_task().outcomes.is_empty());
+    assert!(group.other_task().group().outcomes.is_empty());
     // The engine asked the block for the START (the bus model has not moved yet).
     assert!(bus.with_block(|m| m.access.contains(&Access::Cr1 {
         set: CR1_START,
@@ -197,7 +249,8 @@ fn a_sample_suspends_while_the_bus_runs_its_script_and_holds_no_group_lock() {
     let Poll::Ready(frames) = sample.as_mut().poll(&mut cx) else {
         panic!("not resumed");
     };
-    assert_eq!(group.taken.get(), 2);
+    // The round's step, its outcome, the step that ends the job.
+    assert_eq!(group.taken.get(), 3);
     // Device::new's registers hold `register ^ address`: DATA_X_MSB and the next.
     let msb = hmc5883l::reg::DATA_X_MSB ^ hmc5883l::ADDRESS;
     let lsb = (hmc5883l::reg::DATA_X_MSB + 1) ^ hmc5883l::ADDRESS;
@@ -208,13 +261,127 @@ fn a_sample_suspends_while_the_bus_runs_its_script_and_holds_no_group_lock() {
     assert!(bus.with_block(|m| m.violations.is_empty()));
 }
 
+/// The HMC5883L of the model, its identification registers answering "H43".
+fn identified_magnetometer() -> Device {
+    let mut device = Device::new(hmc5883l::ADDRESS);
+    let at = usize::from(hmc5883l::reg::IDENTIFICATION_A);
+    device.registers[at..at + 3].copy_from_slice(&hmc5883l::IDENTITY);
+    device
+}
+
+#[test]
+fn a_job_of_two_rounds_runs_to_its_end_while_another_level_waits_for_the_group() {
+    set_now(0);
+    let bus = I2cBus::new(Model::new(vec![identified_magnetometer()]), [3, 1]);
+    let group = Lock::new(Shared::new(Magnetometer {
+        check_identity: true,
+        ..Magnetometer::default()
+    }));
+    let mut urgent = I2cPort::<TestClock, _, 2>::new(&bus, bus.client(0).unwrap(), 100);
+    let mut low = I2cPort::<TestClock, _, 2>::new(&bus, bus.client(1).unwrap(), 100);
+    let (urgent_wakes, urgent_waker) = test_waker::counting();
+    let (low_wakes, low_waker) = test_waker::counting();
+    let mut cx_urgent = Context::from_waker(&urgent_waker);
+    let mut cx_low = Context::from_waker(&low_waker);
+    let mut first = pin!(sample_of(&group, &mut urgent, Topic::MagnetometerX, 0));
+    let mut second = pin!(sample_of(&group, &mut low, Topic::MagnetometerX, 0));
+    // The urgent level's job takes the group (its identity round on the bus); the low level's
+    // sample waits for the job, with nothing of its own on the bus.
+    assert!(first.as_mut().poll(&mut cx_urgent).is_pending());
+    assert!(second.as_mut().poll(&mut cx_low).is_pending());
+    pump(&bus);
+    assert_eq!(urgent_wakes.count(), 1);
+    // The identity matched: the data round.
+    assert!(first.as_mut().poll(&mut cx_urgent).is_pending());
+    assert_eq!(low_wakes.count(), 0);
+    pump(&bus);
+    let Poll::Ready(frames) = first.as_mut().poll(&mut cx_urgent) else {
+        panic!("the urgent job did not end after its two rounds");
+    };
+    assert!(x_of(&frames).is_some());
+    // The job's end woke the waiting level, which now runs a job of its own.
+    assert_eq!(low_wakes.count(), 1);
+    assert!(second.as_mut().poll(&mut cx_low).is_pending());
+    pump(&bus);
+    assert!(second.as_mut().poll(&mut cx_low).is_pending());
+    pump(&bus);
+    let Poll::Ready(frames) = second.as_mut().poll(&mut cx_low) else {
+        panic!("the low job did not end after its two rounds");
+    };
+    assert!(x_of(&frames).is_some());
+    // Four scripts, one after the other: identity, data, identity, data.
+    let lengths: Vec<usize> = group
+        .other_task()
+        .group()
+        .outcomes
+        .iter()
+        .map(|o| o.as_ref().map_or(0, |r| r.all().len()))
+        .collect();
+    assert_eq!(lengths, [3, 6, 3, 6]);
+    assert!(bus.with_block(|m| m.violations.is_empty()));
+}
+
+#[test]
+fn a_wrong_identity_ends_the_job_after_its_first_round() {
+    let bus = I2cBus::new(Model::new(vec![Device::new(hmc5883l::ADDRESS)]), [1]);
+    let group = Lock::new(Shared::new(Magnetometer {
+        check_identity: true,
+        ..Magnetometer::default()
+    }));
+    let mut port = I2cPort::<TestClock, _, 1>::new(&bus, bus.client(0).unwrap(), 100);
+    let (_, waker) = test_waker::counting();
+    let mut cx = Context::from_waker(&waker);
+    let mut sample = pin!(sample_of(&group, &mut port, Topic::MagnetometerX, 0));
+    assert!(sample.as_mut().poll(&mut cx).is_pending());
+    pump(&bus);
+    assert_eq!(sample.as_mut().poll(&mut cx), Poll::Ready(Samples::new()));
+    assert_eq!(group.other_task().group().outcomes.len(), 1);
+}
+
+#[test]
+fn a_job_whose_rounds_run_out_is_given_up_and_frees_the_group() {
+    set_now(0);
+    let bus = SimBus::new(HalDevices(SimCompassBus::new()));
+    let group = Lock::new(Shared::new(Magnetometer {
+        endless: true,
+        ..Magnetometer::default()
+    }));
+    let mut port = SimPort::<TestClock, _>::new(&bus, 0, 100);
+    let (_, waker) = test_waker::counting();
+    let mut cx = Context::from_waker(&waker);
+    let mut sample = pin!(sample_of(&group, &mut port, Topic::MagnetometerX, 0));
+    let mut polls = 0;
+    let frames = loop {
+        if let Poll::Ready(frames) = sample.as_mut().poll(&mut cx) {
+            break frames;
+        }
+        polls += 1;
+        assert!(polls <= 10, "the job did not end");
+        set_now(NOW_US.with(Cell::get) + 210);
+    };
+    assert!(frames.is_empty());
+    // Magnetometer::MAX_ROUNDS scripts, then given up.
+    assert_eq!(polls, Magnetometer::MAX_ROUNDS);
+    let mut shared = group.other_task();
+    assert_eq!(shared.group().outcomes.len(), Magnetometer::MAX_ROUNDS);
+    assert_eq!(shared.group().abandoned, 1);
+    // No job under way: a step of another client is served, not told to wait.
+    shared.group_mut().endless = false;
+    shared.group_mut().reuse = Some(1);
+    let (_, other) = test_waker::counting();
+    assert!(matches!(
+        shared.step(1, Topic::MagnetometerX, 0, &other),
+        Some(Step::Done(_))
+    ));
+}
+
 #[test]
 fn frames_ready_without_the_bus_do_not_suspend() {
     let bus = I2cBus::new(Model::new(vec![Device::new(hmc5883l::ADDRESS)]), [1]);
-    let group = Lock::new(Magnetometer {
+    let group = Lock::new(Shared::new(Magnetometer {
         reuse: Some(-7),
         ..Magnetometer::default()
-    });
+    }));
     let mut port = I2cPort::<TestClock, _, 1>::new(&bus, bus.client(0).unwrap(), 100);
     let (_, waker) = test_waker::counting();
     let mut sample = pin!(sample_of(&group, &mut port, Topic::MagnetometerX, 0));
@@ -233,7 +400,7 @@ fn a_stuck_script_is_ended_by_the_client_timeout_and_the_group_sees_it() {
     // The device holds SCL low after the third byte on the wire, for ever.
     model.hold_at = Some(3);
     let bus = I2cBus::new(model, [2, 1]);
-    let group = Lock::new(Magnetometer::default());
+    let group = Lock::new(Shared::new(Magnetometer::default()));
     let allowance_us = 300;
     let mut port = I2cPort::<TestClock, _, 2>::new(&bus, bus.client(0).unwrap(), allowance_us);
     let (_, waker) = test_waker::counting();
@@ -255,7 +422,10 @@ fn a_stuck_script_is_ended_by_the_client_timeout_and_the_group_sees_it() {
         panic!("the timeout did not end the script");
     };
     assert!(frames.is_empty());
-    assert_eq!(group.other_task().outcomes, [Err(BusFault::Timeout)]);
+    assert_eq!(
+        group.other_task().group().outcomes,
+        [Err(BusFault::Timeout)]
+    );
     // The transfer dropped: the script aborted, the block reset.
     assert_eq!(
         bus.with_block(|m| m.access.last().cloned()),
@@ -278,7 +448,7 @@ fn a_refused_address_reaches_the_group_as_the_failed_operation() {
     let mut device = Device::new(hmc5883l::ADDRESS);
     device.nack_address = true;
     let bus = I2cBus::new(Model::new(vec![device]), [1]);
-    let group = Lock::new(Magnetometer::default());
+    let group = Lock::new(Shared::new(Magnetometer::default()));
     let mut port = I2cPort::<TestClock, _, 1>::new(&bus, bus.client(0).unwrap(), 100);
     let (_, waker) = test_waker::counting();
     let mut cx = Context::from_waker(&waker);
@@ -290,7 +460,7 @@ fn a_refused_address_reaches_the_group_as_the_failed_operation() {
     };
     assert!(frames.is_empty());
     assert_eq!(
-        group.other_task().outcomes,
+        group.other_task().group().outcomes,
         [Err(BusFault::Script(ScriptError {
             operation: 0,
             failure: Failure::NackAddress
@@ -304,8 +474,8 @@ fn a_refused_address_reaches_the_group_as_the_failed_operation() {
 fn the_simulated_bus_answers_a_script_after_its_wire_time() {
     set_now(10_000);
     let bus = SimBus::new(HalDevices(SimCompassBus::new()));
-    let group = Lock::new(Magnetometer::default());
-    let mut port = SimPort::<TestClock, _>::new(&bus, 100);
+    let group = Lock::new(Shared::new(Magnetometer::default()));
+    let mut port = SimPort::<TestClock, _>::new(&bus, 0, 100);
     let (_, waker) = test_waker::counting();
     let mut cx = Context::from_waker(&waker);
     let mut sample = pin!(sample_of(&group, &mut port, Topic::MagnetometerX, 10_000));
@@ -351,14 +521,14 @@ fn simulated_scripts_go_one_after_the_other_and_a_late_one_times_out() {
     // The select: START, address, control byte, STOP (20 SCL periods); the register read:
     // START, address, register, repeated START, address, two bytes, STOP (48): 68, 170 µs.
     assert_eq!(script.scl_periods(), 68);
-    let mut first = SimPort::<TestClock, _>::new(&bus, 200);
-    let mut second = SimPort::<TestClock, _>::new(&bus, 200);
-    let mut third = SimPort::<TestClock, _>::new(&bus, 100);
+    let mut first = SimPort::<TestClock, _>::new(&bus, 0, 200);
+    let mut second = SimPort::<TestClock, _>::new(&bus, 0, 200);
+    let mut third = SimPort::<TestClock, _>::new(&bus, 0, 100);
     let (_, waker) = test_waker::counting();
     let mut cx = Context::from_waker(&waker);
-    let mut a = pin!(first.run(script));
-    let mut b = pin!(second.run(floor_sensor_script(5)));
-    let mut c = pin!(third.run(floor_sensor_script(6)));
+    let mut a = pin!(first.run(script, 0));
+    let mut b = pin!(second.run(floor_sensor_script(5), 0));
+    let mut c = pin!(third.run(floor_sensor_script(6), 0));
     assert!(a.as_mut().poll(&mut cx).is_pending());
     assert!(b.as_mut().poll(&mut cx).is_pending());
     // The third would end at 510 µs, after its own 170 µs and its 100 µs allowance.
@@ -404,11 +574,11 @@ fn an_absent_simulated_device_is_a_nack_of_its_operation() {
     let mut devices = SimFloorBus::new();
     devices.set_nack(true);
     let bus = SimBus::new(HalDevices(devices));
-    let mut port = SimPort::<TestClock, _>::new(&bus, 200);
+    let mut port = SimPort::<TestClock, _>::new(&bus, 0, 200);
     let (_, waker) = test_waker::counting();
     let mut cx = Context::from_waker(&waker);
     {
-        let mut run = pin!(port.run(floor_sensor_script(4)));
+        let mut run = pin!(port.run(floor_sensor_script(4), 0));
         assert!(run.as_mut().poll(&mut cx).is_pending());
         set_now(170);
         assert_eq!(
@@ -421,7 +591,7 @@ fn an_absent_simulated_device_is_a_nack_of_its_operation() {
     }
     // The devices come back: the next script reads; the failure was the first operation's.
     bus.with_devices(|d| d.0.set_nack(false));
-    let mut again = pin!(port.run(floor_sensor_script(4)));
+    let mut again = pin!(port.run(floor_sensor_script(4), 0));
     assert!(again.as_mut().poll(&mut cx).is_pending());
     set_now(340);
     assert!(matches!(again.as_mut().poll(&mut cx), Poll::Ready(Ok(_))));
