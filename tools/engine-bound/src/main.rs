@@ -6,6 +6,8 @@
 
 use amiro_firmware::i2c_block::Registers;
 use amiro_firmware::i2c_bus::I2cBus;
+use amiro_firmware::i2c_engine::{Engine, Progress};
+use amiro_sensors::script::{Readings, Script};
 
 /// I2C2's registers (RM0008 and RM0090: the same address on both chips).
 const I2C2: usize = 0x4000_5800;
@@ -34,6 +36,28 @@ pub extern "C" fn i2c_error() {
     BUS.on_error();
 }
 
+/// The engine's step for one event alone (`Engine::on_event`: the state machine and its register
+/// actions), without the bus around it (its critical section, the script's end, the condition
+/// wait), on a script and readings the caller passes (not inlined: bounded on its own).
+#[no_mangle]
+#[inline(never)]
+pub extern "Rust" fn engine_event(
+    engine: &mut Engine,
+    sr1: u16,
+    script: &Script,
+    readings: &mut Readings,
+    block: &mut Registers,
+) -> Progress {
+    engine.on_event(sr1, script, readings, block)
+}
+
+/// The engine's step for one error event alone (`Engine::on_error`).
+#[no_mangle]
+#[inline(never)]
+pub extern "Rust" fn engine_error(engine: &mut Engine, sr1: u16, block: &mut Registers) -> Progress {
+    engine.on_error(sr1, block)
+}
+
 /// What a finished client's waker does in a board's image (RTIC's executor `waker_wake` calls the
 /// task's pend closure: one store to NVIC ISPR): the stated target of the engine's wakes.
 #[no_mangle]
@@ -45,6 +69,12 @@ pub extern "C" fn pend_dispatcher() {
 
 #[used]
 static HANDLERS: [extern "C" fn(); 3] = [i2c_event, i2c_error, pend_dispatcher];
+
+#[used]
+static STEPS: (
+    extern "Rust" fn(&mut Engine, u16, &Script, &mut Readings, &mut Registers) -> Progress,
+    extern "Rust" fn(&mut Engine, u16, &mut Registers) -> Progress,
+) = (engine_event, engine_error);
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
