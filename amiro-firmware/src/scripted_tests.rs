@@ -8,11 +8,12 @@ use core::pin::pin;
 use core::task::{Context, Poll};
 
 use amiro_can::{Axis, SensorData, Topic};
-use amiro_sensors::drivers::scripted::{ReplayBus, Replayed};
-use amiro_sensors::drivers::suite::{Compass, Samples, Supervised};
-use amiro_sensors::drivers::{hmc5883l, pca9544a, vcnl4020};
+use amiro_sensors::drivers::floor::FloorSensors;
+use amiro_sensors::drivers::scripted::{ReplayBus, Replayed, Replaying, ScriptBus};
+use amiro_sensors::drivers::suite::{Compass, ImuSensors, Samples, SensorGroup, Supervised};
+use amiro_sensors::drivers::{bno055, hmc5883l, pca9544a, vcnl4020};
 use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
-use amiro_sensors::sim::{SimCompassBus, SimFloorBus};
+use amiro_sensors::sim::{Bno055Fault, NoDelay, SimCompassBus, SimFloorBus, SimImuBus};
 use embedded_hal::i2c::I2c;
 
 use crate::i2c_bus::I2cBus;
@@ -575,28 +576,31 @@ fn an_absent_simulated_device_is_a_nack_of_its_operation() {
 
 // A supervised group of amiro-sensors, replayed, through the firmware's path.
 
-/// Samples `topics` in turn every `step_us` from `from_us` to `to_us` through the simulated bus
-/// (the publisher polled, the monotonic moved on while it waits) and on the blocking path beside
-/// it; asserts that both publish the same frames and keep the same fault count and readiness.
-/// The frames published and the samples that had none.
-fn run_both(
-    blocking: &mut Supervised<Compass<SimCompassBus>>,
-    group: &Lock<Supervised<Compass<ReplayBus>>>,
-    bus: &SimBus<SimCompassBus>,
+/// Samples `topics` in turn every `step_us` from `from_us` to `to_us` (or when the last sample
+/// ended, if later) through the simulated bus — the publisher polled, the monotonic moved on while
+/// it waits, its settling waits included — and on the blocking path beside it; asserts that both
+/// publish the same frames and keep the same fault count and readiness. The frames published, the
+/// samples that had none, and the longest a sample took on the monotonic.
+fn run_both<GB, GR, D>(
+    blocking: &mut Supervised<GB>,
+    group: &Lock<Supervised<GR>>,
+    bus: &SimBus<D>,
+    topics: &[Topic],
     (from_us, to_us, step_us): (u64, u64, u64),
-) -> (usize, usize) {
-    let topics = [
-        Topic::MagnetometerX,
-        Topic::MagnetometerY,
-        Topic::MagnetometerZ,
-    ];
+) -> (usize, usize, u64)
+where
+    GB: SensorGroup,
+    GR: SensorGroup + Clone + Replaying,
+    D: ScriptBus,
+{
     let (_, waker) = test_waker::counting();
     let mut cx = Context::from_waker(&waker);
-    let (mut published, mut empty) = (0, 0);
+    let (mut published, mut empty, mut longest) = (0, 0, 0);
     let mut at = from_us;
     let mut k = 0;
     while at < to_us {
-        let topic = topics[k % 3];
+        let topic = topics[k % topics.len()];
+        at = at.max(NOW_US.with(Cell::get));
         set_now(at);
         let mut port = SimPort::<TestClock, _>::new(bus, 500);
         let mut sample = pin!(sample_of(group, &mut port, topic, at));
@@ -606,9 +610,10 @@ fn run_both(
                 break frames;
             }
             waited += 1;
-            assert!(waited < 100, "the sample at {at} µs did not end");
+            assert!(waited < 1_000, "the sample at {at} µs did not end");
             set_now(NOW_US.with(Cell::get) + 50);
         };
+        longest = longest.max(NOW_US.with(Cell::get) - at);
         let expected = blocking.sample(topic, at);
         assert_eq!(frames, expected, "{topic} at {at} µs");
         let scripted = group.other_task();
@@ -626,8 +631,14 @@ fn run_both(
         k += 1;
         at += step_us;
     }
-    (published, empty)
+    (published, empty, longest)
 }
+
+const MAGNETOMETER: [Topic; 3] = [
+    Topic::MagnetometerX,
+    Topic::MagnetometerY,
+    Topic::MagnetometerZ,
+];
 
 #[test]
 fn the_replayed_compass_through_the_simulated_bus_publishes_as_the_blocking_path() {
@@ -639,17 +650,35 @@ fn the_replayed_compass_through_the_simulated_bus_publishes_as_the_blocking_path
     });
     let group = Lock::new(booted.state().clone());
     assert!(group.other_task().is_ready());
-    let (published, empty) = run_both(&mut blocking, &group, &bus, (1_000, 3_001_000, 10_000));
+    let (published, empty, _) = run_both(
+        &mut blocking,
+        &group,
+        &bus,
+        &MAGNETOMETER,
+        (1_000, 3_001_000, 10_000),
+    );
     assert_eq!((published, empty), (300, 0));
     // The part stops answering for 6 s: failures, then the set-up retried after 1, 2 s.
     blocking.group_mut().magnetometer.bus_mut().set_nack(true);
     bus.with_devices(|d| d.set_nack(true));
-    let (_, empty) = run_both(&mut blocking, &group, &bus, (3_001_000, 9_001_000, 10_000));
+    let (_, empty, _) = run_both(
+        &mut blocking,
+        &group,
+        &bus,
+        &MAGNETOMETER,
+        (3_001_000, 9_001_000, 10_000),
+    );
     assert_eq!(empty, 600);
     assert!(group.other_task().faults() >= 3);
     blocking.group_mut().magnetometer.bus_mut().set_nack(false);
     bus.with_devices(|d| d.set_nack(false));
-    let (published, _) = run_both(&mut blocking, &group, &bus, (9_001_000, 19_001_000, 10_000));
+    let (published, _, _) = run_both(
+        &mut blocking,
+        &group,
+        &bus,
+        &MAGNETOMETER,
+        (9_001_000, 19_001_000, 10_000),
+    );
     assert!(published > 0 && group.other_task().is_ready());
     // The devices saw the same traffic.
     let device = blocking.group_mut().magnetometer.bus_mut().magnetometer();
@@ -692,4 +721,132 @@ fn a_timed_out_script_is_a_fault_of_the_supervised_group() {
         bus.with_block(|m| m.access.last().cloned()),
         Some(Access::Reset)
     );
+}
+
+#[test]
+fn the_replayed_floor_through_the_simulated_bus_publishes_as_the_blocking_path() {
+    set_now(0);
+    let mut blocking = Supervised::new(FloorSensors::new(SimFloorBus::new()));
+    let bus = SimBus::new(SimFloorBus::new());
+    let booted = bus.with_devices(|devices| {
+        Replayed::boot(FloorSensors::new(ReplayBus::muxed()), devices).expect("the boot's scripts")
+    });
+    let group = Lock::new(booted.state().clone());
+    let floor = [Topic::FloorProximity];
+    let (published, empty, _) = run_both(
+        &mut blocking,
+        &group,
+        &bus,
+        &floor,
+        (1_000, 3_001_000, 10_000),
+    );
+    // One frame a round (the four sensors' values), 300 rounds.
+    assert_eq!((published, empty), (300, 0));
+    blocking.group_mut().mux_mut().bus_mut().set_nack(true);
+    bus.with_devices(|d| d.set_nack(true));
+    let (_, empty, _) = run_both(
+        &mut blocking,
+        &group,
+        &bus,
+        &floor,
+        (3_001_000, 9_001_000, 10_000),
+    );
+    assert_eq!(empty, 600);
+    blocking.group_mut().mux_mut().bus_mut().set_nack(false);
+    bus.with_devices(|d| d.set_nack(false));
+    let (published, _, _) = run_both(
+        &mut blocking,
+        &group,
+        &bus,
+        &floor,
+        (9_001_000, 19_001_000, 10_000),
+    );
+    assert!(published > 0 && group.other_task().is_ready());
+}
+
+#[test]
+fn the_replayed_bno055_through_the_simulated_bus_publishes_as_the_blocking_path() {
+    set_now(0);
+    let mut blocking = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
+    let bus = SimBus::new(SimImuBus::new());
+    let booted = bus.with_devices(|devices| {
+        Replayed::boot(ImuSensors::new(ReplayBus::imu(), NoDelay), devices)
+            .expect("the boot's scripts")
+    });
+    let group = Lock::new(booted.state().clone());
+    let topics = [
+        Topic::Gyroscope,
+        Topic::Accelerometer,
+        Topic::MagnetometerX,
+        Topic::MagnetometerY,
+        Topic::MagnetometerZ,
+    ];
+    let (published, _, _) = run_both(
+        &mut blocking,
+        &group,
+        &bus,
+        &topics,
+        (1_000, 2_001_000, 10_000),
+    );
+    assert_eq!(published, 200);
+    // Gone (no acknowledge), then back: the set-up again, step by step.
+    blocking
+        .group_mut()
+        .imu
+        .bus_mut()
+        .imu_mut()
+        .set_fault(Bno055Fault::Absent);
+    bus.with_devices(|d| d.imu_mut().set_fault(Bno055Fault::Absent));
+    let (_, empty, _) = run_both(
+        &mut blocking,
+        &group,
+        &bus,
+        &topics,
+        (2_001_000, 8_001_000, 10_000),
+    );
+    assert!(empty > 0);
+    blocking
+        .group_mut()
+        .imu
+        .bus_mut()
+        .imu_mut()
+        .set_fault(Bno055Fault::None);
+    bus.with_devices(|d| d.imu_mut().set_fault(Bno055Fault::None));
+    let start = NOW_US.with(Cell::get);
+    let (published, _, longest) = run_both(
+        &mut blocking,
+        &group,
+        &bus,
+        &topics,
+        (start, start + 10_000_000, 1_000),
+    );
+    assert!(published > 0 && group.other_task().is_ready());
+    // The set-up's mode switches are the supervisor's waits between samples (one step a
+    // sample, `SensorGroup::init_step`), not a wait inside one: no sample took a switch's 19 ms.
+    assert!(longest < u64::from(bno055::OPERATING_TO_CONFIG_MS) * 1_000);
+    let device = blocking.group_mut().imu.bus_mut().imu();
+    let (samples, switches) = bus.with_devices(|d| (d.imu().samples(), d.imu().mode_switches()));
+    assert_eq!(
+        (device.samples(), device.mode_switches()),
+        (samples, switches)
+    );
+}
+
+#[test]
+fn a_simulated_script_waits_its_settling_time_first() {
+    set_now(1_000);
+    let bus = SimBus::new(SimFloorBus::new());
+    let mut port = SimPort::<TestClock, _>::new(&bus, 100);
+    let (_, waker) = test_waker::counting();
+    let mut cx = Context::from_waker(&waker);
+    // A part's 66 µs of bus-free time first (the bq27500's, `Job::settle_us`), then the
+    // script's 170 µs on the wire: it ends at 1 236 µs, and its timeout counts from its start.
+    let mut run = pin!(port.run(floor_sensor_script(4), 66));
+    assert!(run.as_mut().poll(&mut cx).is_pending());
+    set_now(1_066);
+    assert!(run.as_mut().poll(&mut cx).is_pending());
+    set_now(1_235);
+    assert!(run.as_mut().poll(&mut cx).is_pending());
+    set_now(1_236);
+    assert!(matches!(run.as_mut().poll(&mut cx), Poll::Ready(Ok(_))));
 }
