@@ -34,6 +34,12 @@ pub trait Clock {
     fn now_us() -> u64;
     /// Waits until the monotonic reaches `at_us`.
     fn delay_until_us(at_us: u64) -> impl Future<Output = ()>;
+    /// A wait until the monotonic reaches `at_us` that frees its timer slot as it completes
+    /// (`timer_queue::Expiry`): the command handler's rate limit (`tasks::next_frame_after`). Not
+    /// traced: its caller says when its task stops and runs again.
+    type Expiry: Future<Output = ()> + Unpin;
+    /// [`Clock::Expiry`] for `at_us`.
+    fn expiry_at_us(at_us: u64) -> Self::Expiry;
     /// Runs `future` until it completes or the monotonic reaches `at_us`, whichever is first.
     fn timeout_at_us<F: Future>(at_us: u64, future: F) -> impl Future<Output = Option<F::Output>>;
     /// A fault of the timer to log, once (the timer's interrupt only counts it; the watchdog task
@@ -62,6 +68,12 @@ where
 
     fn take_fault_report() -> Option<&'static str> {
         B::take_fault_report()
+    }
+
+    type Expiry = crate::timer_queue::Expiry<B>;
+
+    fn expiry_at_us(at_us: u64) -> Self::Expiry {
+        B::queue().expiry(at_us.div_ceil(TICK_US))
     }
 
     async fn timeout_at_us<F: Future>(at_us: u64, future: F) -> Option<F::Output> {

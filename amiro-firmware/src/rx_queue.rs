@@ -169,6 +169,18 @@ impl<const N: usize> Producer<'_, N> {
     }
 }
 
+/// A received frame as the ring holds it (three words): a poll result that carries it is copied
+/// by words, where an [`RxFrame`] at the result's half-word offset was copied by a `memcpy` call.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Packed(Slot);
+
+impl Packed {
+    /// The frame.
+    pub fn unpack(self) -> RxFrame {
+        unpack(self.0)
+    }
+}
+
 /// The command handler's end of a [`FrameQueue`].
 pub struct Consumer<'q, const N: usize> {
     queue: &'q FrameQueue<N>,
@@ -177,6 +189,11 @@ pub struct Consumer<'q, const N: usize> {
 impl<'q, const N: usize> Consumer<'q, N> {
     /// The oldest queued frame, if any.
     pub fn try_recv(&mut self) -> Option<RxFrame> {
+        self.take().map(unpack)
+    }
+
+    /// The oldest queued frame as the ring holds it, if any.
+    fn take(&mut self) -> Option<Slot> {
         let q = self.queue;
         let read = q.read.load(Ordering::Relaxed);
         if q.written.load(Ordering::Relaxed) == read {
@@ -189,7 +206,7 @@ impl<'q, const N: usize> Consumer<'q, N> {
         let slot = unsafe { *q.slot(read) };
         compiler_fence(Ordering::Release);
         q.read.store(read.wrapping_add(1), Ordering::Relaxed);
-        Some(unpack(slot))
+        Some(slot)
     }
 
     /// Stores `waker` for the producer's next [`Producer::wake`] (kept if it already wakes the
@@ -208,13 +225,19 @@ impl<'q, const N: usize> Consumer<'q, N> {
     /// The oldest queued frame, or `Pending` with the task's waker stored: the producer's next
     /// push wakes it.
     pub fn poll_recv(&mut self, cx: &mut Context<'_>) -> Poll<RxFrame> {
-        if let Some(frame) = self.try_recv() {
-            return Poll::Ready(frame);
+        self.poll_recv_packed(cx).map(Packed::unpack)
+    }
+
+    /// [`Consumer::poll_recv`] with the frame as the ring holds it, for a poll that passes it on
+    /// before it is looked into (the command handler's wait, `tasks::next_frame_after`).
+    pub fn poll_recv_packed(&mut self, cx: &mut Context<'_>) -> Poll<Packed> {
+        if let Some(slot) = self.take() {
+            return Poll::Ready(Packed(slot));
         }
         self.park(cx.waker());
         // A frame pushed between the first look and the waker's store found no waker to wake.
-        match self.try_recv() {
-            Some(frame) => Poll::Ready(frame),
+        match self.take() {
+            Some(slot) => Poll::Ready(Packed(slot)),
             None => Poll::Pending,
         }
     }
@@ -392,6 +415,23 @@ mod tests {
         tx.wake();
         assert_eq!(wakes(&count), 2, "the waker was taken: no second wake");
         assert_eq!(rx.poll_recv(&mut cx), Poll::Ready(frame(7)));
+    }
+
+    #[test]
+    fn a_packed_frame_unpacks_to_the_frame_pushed_and_parks_as_the_plain_poll_does() {
+        let (count, waker) = counter();
+        let mut cx = Context::from_waker(&waker);
+        // SAFETY: this test's only split.
+        let (mut tx, mut rx) = unsafe { queue().split() };
+        assert_eq!(rx.poll_recv_packed(&mut cx), Poll::Pending);
+        assert!(tx.push(&frame(0x7ff)));
+        tx.wake();
+        assert_eq!(wakes(&count), 1, "parked: the push wakes it");
+        let Poll::Ready(packed) = rx.poll_recv_packed(&mut cx) else {
+            panic!("the pushed frame is there");
+        };
+        assert_eq!(packed.unpack(), frame(0x7ff));
+        assert_eq!(rx.try_recv(), None, "taken once");
     }
 
     #[test]

@@ -513,59 +513,76 @@ pub async fn next_command<const N: usize>(
 
 /// The command handler's one wait (`docs/analysis.md`, "The command handler"): until `not_before_us`
 /// (the rate limit: `None` before the first command), then for the next frame the CAN receive
-/// interrupt queued. The same waits, in the same order, as a rate-limit wait after each command
-/// followed by [`next_frame`]. Both are polled through one function the compiler keeps apart
-/// ([`Outlined`]), so the handler's loop has one `await` and one place that polls it: a job (from a
-/// resume to the next wait that is pending) runs the loop's body once, and the machine-code bound
-/// charges one command's handling. With the two waits inlined into the loop, the way from the
-/// frame's wait round the handling to the rate-limit wait's first poll was a way out of the loop as
-/// well as a pass of it, and the bound charged two commands' handling per job.
+/// interrupt queued: a command is taken no earlier than `not_before_us`, which is what the
+/// analysis's arrival model of the handler (`sporadic_us`, one command per interval) rests on.
+///
+/// One future polled through one function the compiler keeps apart (`NextFrame`'s `poll`), so the
+/// handler's loop has one `await` and one place that polls it: a job (from a resume to the next
+/// wait that is pending) runs the loop's body once, and the machine-code bound charges one
+/// command's handling and two polls of the wait — the one that resumes the job and the next wait's
+/// first. Each poll is cheap on every way through it: the rate limit compares the time with its
+/// instant before it arms a timer (none when the frame comes late enough), a wait that has armed one
+/// ends only once the timer's interrupt has taken it off the timer queue, so that the poll that
+/// ends it never arms one (`timer_queue::Expiry`), and nothing is copied but the frame.
 pub async fn next_frame_after<C: Clock, const N: usize>(
     frames: &mut crate::rx_queue::Consumer<'static, N>,
     not_before_us: Option<u64>,
 ) -> RxFrame {
-    let wait = core::pin::pin!(wait_then_receive::<C, N>(frames, not_before_us));
-    Outlined(wait).await.0
-}
-
-/// A frame on a word boundary: returned through [`Outlined`]'s poll, it is copied out by words
-/// (a frame at the poll result's half-word offset was copied by a `memcpy` call).
-#[repr(align(4))]
-struct Aligned(RxFrame);
-
-/// [`next_frame_after`]'s two waits.
-async fn wait_then_receive<C: Clock, const N: usize>(
-    frames: &mut crate::rx_queue::Consumer<'static, N>,
-    not_before_us: Option<u64>,
-) -> Aligned {
-    if let Some(at_us) = not_before_us {
-        C::delay_until_us(at_us).await;
+    NextFrame::<C, N> {
+        frames,
+        not_before_us,
+        limit: C::expiry_at_us(not_before_us.unwrap_or(0)),
+        stopped: None,
     }
-    Aligned(next_frame(frames).await)
+    .await
+    .unpack()
 }
 
-/// A pinned future polled through a function of its own (never inlined into the caller's state
-/// machine): the caller's `await` on it is one call, wherever the caller resumes.
-struct Outlined<'f, F: core::future::Future>(core::pin::Pin<&'f mut F>);
+/// [`next_frame_after`]'s two waits, in one future.
+struct NextFrame<'c, C: Clock, const N: usize> {
+    frames: &'c mut crate::rx_queue::Consumer<'static, N>,
+    /// The rate limit's instant, `None` once it has passed (or without one).
+    not_before_us: Option<u64>,
+    /// The rate limit's wait (its instant, or 0 without one: never polled then). Once it has
+    /// completed it holds no timer slot, so nothing is left for its drop to free.
+    limit: C::Expiry,
+    /// The task the trace stopped at the wait in progress ([`crate::tracing::suspend`]), `None`
+    /// before that wait's first poll.
+    stopped: Option<u8>,
+}
 
-impl<F: core::future::Future> core::future::Future for Outlined<'_, F> {
-    type Output = F::Output;
+impl<C: Clock, const N: usize> core::future::Future for NextFrame<'_, C, N> {
+    type Output = crate::rx_queue::Packed;
 
     #[inline(never)]
     fn poll(
-        mut self: core::pin::Pin<&mut Self>,
+        self: core::pin::Pin<&mut Self>,
         cx: &mut core::task::Context<'_>,
-    ) -> core::task::Poll<F::Output> {
-        self.0.as_mut().poll(cx)
+    ) -> core::task::Poll<crate::rx_queue::Packed> {
+        use core::task::Poll;
+        let this = self.get_mut();
+        if let Some(at_us) = this.not_before_us {
+            // The trace's next release: the rate limit's instant. The time is read in every build (the
+            // QEMU runs' jobs are held to the release image's bound, which must hold their code).
+            let task = *this
+                .stopped
+                .get_or_insert_with(|| crate::tracing::suspend(Some((at_us, C::now_us()))));
+            if core::pin::Pin::new(&mut this.limit).poll(cx).is_pending() {
+                return Poll::Pending;
+            }
+            this.not_before_us = None;
+            crate::tracing::resume(task);
+            this.stopped = None;
+        }
+        let task = *this
+            .stopped
+            .get_or_insert_with(|| crate::tracing::suspend(None));
+        match this.frames.poll_recv_packed(cx) {
+            Poll::Ready(frame) => {
+                crate::tracing::resume(task);
+                Poll::Ready(frame)
+            }
+            Poll::Pending => Poll::Pending,
+        }
     }
-}
-
-/// Waits for the next frame the CAN receive interrupt queued (the command handler's queue).
-pub async fn next_frame<const N: usize>(
-    frames: &mut crate::rx_queue::Consumer<'static, N>,
-) -> RxFrame {
-    let task = crate::tracing::suspend(None);
-    let frame = frames.recv().await;
-    crate::tracing::resume(task);
-    frame
 }

@@ -22,7 +22,8 @@
 //!   is less than 2^31 ticks from the time, as each is armed at most [`STEP`] ahead and the
 //!   interrupt runs at least every 32.8 ms, on the timers' own period events); a wait further away
 //!   is armed [`STEP`] ahead and arms again when woken.
-//! - Dropping a [`Delay`] (a timeout whose future finished first) unlinks and frees its slot; a
+//! - Dropping a [`Delay`] (a timeout whose future finished first) unlinks and frees its slot (each
+//!   listed slot keeps its predecessor as well as its successor: no walk to it); a
 //!   forgotten one only keeps its slot. A slot is no pointer into a future: nothing dangles.
 //!
 //! The queue holds [`CAPACITY`] waits; a board's async tasks wait one at a time each, so a full
@@ -85,6 +86,9 @@ struct State {
     head: u8,
     /// Each listed slot's successor plus one (0: the last).
     link: [u8; CAPACITY],
+    /// Each listed slot's predecessor plus one, but the head's (left as it was when the interrupt
+    /// popped the slot before it), so that a slot leaves the list without a walk to it.
+    prev: [u8; CAPACITY],
     /// Low 32 bits of each listed slot's instant.
     at: [u32; CAPACITY],
     /// Each listed slot's waker (taken when the interrupt wakes it).
@@ -99,27 +103,28 @@ impl State {
         armed: 0,
         head: 0,
         link: [0; CAPACITY],
+        prev: [0; CAPACITY],
         at: [0; CAPACITY],
         waker: [const { None }; CAPACITY],
         compare: NONE,
     };
 
-    /// Takes slot `i` out of the list (it is in it). One pass per slot ahead of it.
+    /// Takes slot `i` out of the list (it is in it): its neighbours' links, no walk.
     fn unlink(&mut self, i: usize) {
         let me = i as u8 + 1;
         let after = self.link[i];
-        if self.head == me {
+        // The head's predecessor link is not kept (the interrupt pops heads without a store for it),
+        // so the head is told by `head`; any other listed slot's `prev` names its predecessor.
+        let before = if self.head == me {
             self.head = after;
+            0
         } else {
-            let mut cur = self.head;
-            while cur != 0 {
-                let c = usize::from(cur - 1) % CAPACITY;
-                if self.link[c] == me {
-                    self.link[c] = after;
-                    break;
-                }
-                cur = self.link[c];
-            }
+            let before = self.prev[i];
+            self.link[usize::from(before.wrapping_sub(1)) % CAPACITY] = after;
+            before
+        };
+        if after != 0 {
+            self.prev[usize::from(after - 1) % CAPACITY] = before;
         }
         self.armed &= !(1 << i);
     }
@@ -139,7 +144,11 @@ impl State {
             cur = self.link[c];
         }
         self.link[i] = cur;
+        self.prev[i] = before;
         let me = i as u8 + 1;
+        if cur != 0 {
+            self.prev[usize::from(cur - 1) % CAPACITY] = me;
+        }
         if before == 0 {
             self.head = me;
         } else {
@@ -235,6 +244,12 @@ impl<B: Backend> TimerQueue<B> {
         }
     }
 
+    /// A future that completes at tick `at` or later, once this queue's interrupt has taken its
+    /// slot off the list ([`Expiry`]).
+    pub fn expiry(&'static self, at: u64) -> Expiry<B> {
+        Expiry(self.delay_until(at))
+    }
+
     /// Runs `future` until it completes (`Some`) or tick `at` comes (`None`), whichever is first.
     pub fn timeout_at<F: Future>(&'static self, at: u64, future: F) -> Timeout<B, F> {
         Timeout {
@@ -273,6 +288,24 @@ impl<B: Backend> TimerQueue<B> {
             B::pend_interrupt();
         }
         Ok(spare)
+    }
+
+    /// An [`Expiry`]'s look at its armed `slot`, in one critical section: still listed, it keeps
+    /// waiting (`Err`), with `waker` in place of the one it held unless that one wakes the same
+    /// task; taken off the list by the interrupt, it is freed without a walk of the list (`Ok`).
+    /// Either way the waker left over is returned, to be dropped outside the section.
+    fn settle(&self, slot: u8, waker: &Waker) -> Result<Option<Waker>, Option<Waker>> {
+        let i = usize::from(slot) % CAPACITY;
+        self.with(|s| {
+            if s.armed & (1 << i) == 0 {
+                s.claimed &= !(1 << i);
+                return Ok(s.waker[i].take());
+            }
+            if s.waker[i].as_ref().is_some_and(|w| w.will_wake(waker)) {
+                return Err(None);
+            }
+            Err(s.waker[i].replace(waker.clone()))
+        })
     }
 
     /// Frees `slot`: no longer armed nor claimed. Returns its waker, to be dropped outside the
@@ -337,6 +370,48 @@ impl<B: Backend> Future for Delay<B> {
 impl<B: Backend> Drop for Delay<B> {
     fn drop(&mut self) {
         self.free();
+    }
+}
+
+/// The future of [`TimerQueue::expiry`]: a [`Delay`] that, once armed, completes only when the
+/// timer's interrupt has taken its slot off the list, and frees the slot then
+/// (`TimerQueue::settle`). Its first poll is the [`Delay`]'s (complete at once, without a slot,
+/// when the tick has come; else armed: the insertion walk); a later one only looks at its slot, so
+/// the poll that ends the wait never runs the arming, which the execution-time bound would charge it
+/// wherever one function polls the wait (the command handler's job: the poll that resumes it and
+/// the next wait's first). It may complete later than a [`Delay`] by the interrupt's own latency:
+/// the time has passed the list's head, so the interrupt is due, and it wakes the task.
+///
+/// A wait further than [`STEP`] ahead is armed [`STEP`] ahead, as a [`Delay`] is; when that
+/// expires, the wait asks its task to be polled again and arms anew in that poll, so that no poll
+/// that finds its slot freed arms one. (The command handler, its one user, waits at most one
+/// command interval.)
+pub struct Expiry<B: Backend>(Delay<B>);
+
+impl<B: Backend> Future for Expiry<B> {
+    type Output = ();
+
+    #[inline]
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        let delay = &mut self.0;
+        if delay.slot != NO_SLOT {
+            let spare = match B::queue().settle(delay.slot, cx.waker()) {
+                Ok(spare) => spare,
+                Err(spare) => {
+                    drop(spare);
+                    return Poll::Pending;
+                }
+            };
+            drop(spare);
+            delay.slot = NO_SLOT;
+            if B::now() >= delay.at {
+                return Poll::Ready(());
+            }
+            // Armed a step ahead, short of its tick: the next poll arms again.
+            poll_again(cx.waker());
+            return Poll::Pending;
+        }
+        Pin::new(delay).poll(cx)
     }
 }
 
@@ -559,6 +634,36 @@ mod tests {
     }
 
     #[test]
+    fn the_head_the_interrupt_left_leaves_the_list_as_its_head_when_dropped() {
+        let _m = model(0);
+        let tasks: Vec<_> = (0..3).map(|_| task()).collect();
+        let mut delays: Vec<_> = [100, 200, 300]
+            .iter()
+            .map(|&at| QUEUE.delay_until(at))
+            .collect();
+        for (d, (_, w)) in delays.iter_mut().zip(&tasks) {
+            assert!(poll(d, w).is_pending());
+        }
+        NOW.store(100, Ordering::SeqCst);
+        interrupt();
+        let second = delays.remove(1);
+        drop(second);
+        assert_eq!(
+            QUEUE.with(|s| order(s)).len(),
+            1,
+            "the third alone, as the head"
+        );
+        interrupt();
+        assert_eq!(COMPARE.load(Ordering::SeqCst), 300);
+        NOW.store(300, Ordering::SeqCst);
+        interrupt();
+        let woken: Vec<_> = tasks.iter().map(|(t, _)| wakes(t)).collect();
+        assert_eq!(woken, [1, 0, 1]);
+        drop(delays);
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+    }
+
+    #[test]
     fn a_timeout_whose_future_finishes_first_frees_its_slot() {
         let _m = model(0);
         let (t, w) = task();
@@ -711,12 +816,107 @@ mod tests {
     }
 
     /// The list's slots from its head.
+    #[test]
+    fn an_expiry_ends_only_once_the_interrupt_took_its_slot_off_and_frees_it_without_its_drop() {
+        let _m = model(100);
+        let (t, w) = task();
+        let mut e = QUEUE.expiry(150);
+        assert!(poll(&mut e, &w).is_pending());
+        interrupt();
+        NOW.store(150, Ordering::SeqCst);
+        assert!(
+            poll(&mut e, &w).is_pending(),
+            "the time has come, but the slot is still listed: the interrupt is due"
+        );
+        assert_eq!(QUEUE.waiting(), 1);
+        interrupt();
+        assert_eq!(wakes(&t), 1, "the interrupt wakes it");
+        assert!(poll(&mut e, &w).is_ready());
+        assert_eq!(
+            QUEUE.with(|s| s.claimed),
+            0,
+            "freed as it completed, before its drop"
+        );
+        drop(e);
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+    }
+
+    #[test]
+    fn an_expiry_whose_tick_has_come_ends_at_once_without_a_slot() {
+        let _m = model(500);
+        let (_t, w) = task();
+        let mut e = QUEUE.expiry(500);
+        assert!(poll(&mut e, &w).is_ready());
+        assert_eq!(PENDS.load(Ordering::SeqCst), 0);
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+    }
+
+    #[test]
+    fn an_expiry_further_than_a_step_asks_to_be_polled_again_and_arms_then() {
+        let _m = model(0);
+        let (t, w) = task();
+        let at = STEP + 7;
+        let mut e = QUEUE.expiry(at);
+        assert!(poll(&mut e, &w).is_pending());
+        interrupt();
+        assert_eq!(COMPARE.load(Ordering::SeqCst), STEP);
+        NOW.store(STEP, Ordering::SeqCst);
+        interrupt();
+        assert_eq!(wakes(&t), 1);
+        assert!(poll(&mut e, &w).is_pending(), "a step short of its tick");
+        assert_eq!(wakes(&t), 2, "it asks to be polled again");
+        assert_eq!(QUEUE.waiting(), 0, "and holds no slot until then");
+        assert!(poll(&mut e, &w).is_pending());
+        interrupt();
+        assert_eq!(COMPARE.load(Ordering::SeqCst), at, "armed for its tick");
+        NOW.store(at, Ordering::SeqCst);
+        interrupt();
+        assert!(poll(&mut e, &w).is_ready());
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+    }
+
+    #[test]
+    fn an_expiry_dropped_while_it_waits_frees_its_slot_and_is_not_woken() {
+        let _m = model(0);
+        let (t, w) = task();
+        let mut e = QUEUE.expiry(100);
+        assert!(poll(&mut e, &w).is_pending());
+        interrupt();
+        drop(e);
+        assert_eq!(QUEUE.with(|s| s.claimed), 0);
+        NOW.store(100, Ordering::SeqCst);
+        interrupt();
+        assert_eq!(wakes(&t), 0);
+        assert_eq!(COMPARE.load(Ordering::SeqCst), NONE);
+    }
+
+    #[test]
+    fn an_expiry_polled_by_another_task_while_it_waits_wakes_that_task() {
+        let _m = model(0);
+        let (first, w1) = task();
+        let (second, w2) = task();
+        let mut e = QUEUE.expiry(100);
+        assert!(poll(&mut e, &w1).is_pending());
+        assert!(poll(&mut e, &w2).is_pending());
+        NOW.store(100, Ordering::SeqCst);
+        interrupt();
+        assert_eq!((wakes(&first), wakes(&second)), (0, 1));
+        assert!(poll(&mut e, &w2).is_ready());
+    }
+
+    /// The listed slots from the head, each but the head checked against its predecessor link.
     fn order(s: &State) -> Vec<usize> {
         let mut out = Vec::new();
+        let mut before = 0u8;
         let mut cur = s.head;
         while cur != 0 {
-            out.push(usize::from(cur - 1));
-            cur = s.link[usize::from(cur - 1)];
+            let i = usize::from(cur - 1);
+            if before != 0 {
+                assert_eq!(s.prev[i], before, "slot {i}'s predecessor");
+            }
+            out.push(i);
+            before = cur;
+            cur = s.link[i];
         }
         out
     }

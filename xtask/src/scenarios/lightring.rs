@@ -566,10 +566,10 @@ fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 }
 
 /// `admission.log` on a ring of `chips`, whose accepted request is the diagnostics every
-/// `every_ms` at medium (5 ms on 1-0, 6 ms on 1-2). 1-0 refuses 4 ms since the command handler's bound is its budget
-/// (164.8 µs, above the publisher's priority: the six frames 0x61C respond in 4532.1 µs against 4 ms), 1-2 refuses
-/// 5 ms (0x61C in 5388.7 µs). Both refuse 2 and 3 ms: the latch task's and the publisher's bounds are their budgets
-/// (on 1-0 the publisher's job responds in 3649.5 µs).
+/// `every_ms` at medium (5 ms on 1-0, 6 ms on 1-2). With the latch task's, the command handler's and the publisher's
+/// bounds as their budgets (the handler above the publisher's priority), 1-0 refuses 3 ms (the six frames 0x61C
+/// respond in 3577.8 µs against 3 ms) and 1-2 refuses 4 ms (the publisher's job responds in 4086.6 µs); 1-0's 4 ms
+/// and 1-2's 5 ms pass (docs/boards.md).
 pub(super) fn admission_on(
     out: &RunOutput,
     bounds: &Bounds,
