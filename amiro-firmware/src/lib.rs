@@ -6,9 +6,9 @@
 //! publisher loop, the independent watchdog, the clock-tree reset, and the QEMU platform. A board
 //! crate keeps only its `board.rs` (pins and devices), its sampling and its RTIC app (wiring).
 //!
-//! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`i2c_bus`], [`i2c_engine`], [`layout`],
-//! [`spi`], [`timer_monotonic`], [`trace_ring`]) builds and is tested on the host; the rest exists
-//! only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
+//! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`i2c_bus`], [`i2c_engine`], [`i2c_sim`],
+//! [`layout`], [`scripted`], [`spi`], [`timer_monotonic`], [`trace_ring`]) builds and is tested on
+//! the host; the rest exists only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
 //! is enabled on a chip build; `qemu` selects the QEMU platform.
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
@@ -22,10 +22,14 @@ pub mod i2c_bus;
 pub mod i2c_engine;
 #[cfg(test)]
 mod i2c_model;
+pub mod i2c_sim;
 #[cfg(test)]
 mod i2c_tests;
 pub mod layout;
 pub mod rx_queue;
+pub mod scripted;
+#[cfg(test)]
+mod scripted_tests;
 pub mod spi;
 #[cfg(test)]
 mod test_waker;
