@@ -4,7 +4,7 @@
 //! (`scripted`), and the bus's time is virtual time the other tasks run in.
 //!
 //! The bus runs one script at a time: a script starts when the bus is free (at its submission, or
-//! when the script before it ends) and ends its wire time at [`SCL_HZ`](crate::scripted::SCL_HZ)
+//! when the script before it ends) and ends its wire time at [`SCL_HZ`]
 //! later, when the devices answer it (amiro-sensors' `ScriptBus`: its simulated buses run the
 //! script's operations on their registers). Unlike the chip's queue (`i2c_bus`: the most urgent
 //! waiting script next), scripts go in submission order, and one that fails at a refused address
