@@ -163,7 +163,7 @@ fn le3(bytes: &[u8]) -> [i16; 3] {
 }
 
 /// The BNO055 on its I2C bus.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Bno055<I2C> {
     i2c: I2C,
 }

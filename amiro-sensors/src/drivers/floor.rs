@@ -54,7 +54,7 @@ pub struct GroupError<E> {
 }
 
 /// The four floor sensors and their mux.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct FloorSensors<I2C> {
     mux: Pca9544a<I2C>,
     config: Config,

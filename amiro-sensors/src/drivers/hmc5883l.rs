@@ -129,7 +129,7 @@ impl MagneticField {
 }
 
 /// The magnetometer on its I2C bus.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Hmc5883l<I2C> {
     i2c: I2C,
     gain: Gain,

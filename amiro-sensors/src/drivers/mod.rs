@@ -242,3 +242,7 @@ pub(crate) const fn saturate_i16(value: i64) -> i16 {
         value as i16
     }
 }
+
+// Declared after the shared helpers above, whose line numbers the boards' execution-time bounds
+// files key loops by (schedule-analysis/models/*.bounds.json).
+pub mod scripted;

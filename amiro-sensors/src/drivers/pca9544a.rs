@@ -88,7 +88,7 @@ impl Control {
 }
 
 /// A PCA9544A on a bus.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Pca9544a<I2C> {
     i2c: I2C,
     address: u8,

@@ -282,7 +282,7 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
 /// the same reading if they come less than [`Compass::reuse_window_us`] later (default one output period of
 /// the part, 33.3 ms at 30 Hz — a fresh read in that window could only return the same data). An
 /// axis sampled twice always triggers a new read, so a single running topic never repeats itself.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Compass<I2C> {
     /// The HMC5883L.
     pub magnetometer: Hmc5883l<I2C>,
@@ -434,7 +434,7 @@ fn floor_error<E: i2c::Error>(e: GroupError<E>) -> SampleError {
 /// [`MAGNETOMETER_PERIOD_US`]). `delay` paces the part's mode switches in `init` (26 ms of busy
 /// waiting, at boot only); a re-initialisation runs in steps (`init_step`), the waits between
 /// them outside the bus lock.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct ImuSensors<I2C, D> {
     /// The BNO055.
     pub imu: Bno055<I2C>,
@@ -848,7 +848,7 @@ pub const RETRY_MAX_US: u64 = 8_000_000;
 ///   [`RETRY_FIRST_US`].
 /// - [`faults`](Self::faults) counts every failed sample and every failed (re-)initialisation;
 ///   a topic the group does not serve is no fault.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Supervised<G> {
     group: G,
     ready: bool,

@@ -41,6 +41,7 @@ mod leds;
 mod motion_sensors;
 mod plant;
 mod proximity;
+mod scripts;
 
 pub use bno055::{
     Bno055Fault, Bno055Motion, SimBno055, SimImuBus, FIELD_DOWN_NT, FIELD_HORIZONTAL_NT,
@@ -55,6 +56,7 @@ pub use motion_sensors::{
 };
 pub use plant::{MotorModel, SimWheel, WheelPlant};
 pub use proximity::{SimMuxedProximity, SimVcnl4020};
+pub use scripts::{Answer, SCL_HZ};
 
 /// The DiWheelDrive's I2C1 with its HMC5883L.
 pub type SimCompassBus = SimBus<SimHmc5883l>;
