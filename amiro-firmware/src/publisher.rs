@@ -194,3 +194,79 @@ fn note_push(
         ));
     }
 }
+
+/// What a board samples for a topic when some of its groups run on an I2C bus: the sample of such
+/// a topic suspends the publisher while the bus runs its scripts (`scripted::sample_on_bus`);
+/// every other topic's is ready at once.
+pub trait SuspendingSampler {
+    /// One sample of `topic` taken at `taken_us`: its frames, or none when the device is missing or
+    /// the read failed.
+    fn sample(
+        &mut self,
+        topic: Topic,
+        taken_us: u64,
+    ) -> impl core::future::Future<Output = Samples>;
+}
+
+/// [`serve_level`] for a board whose sampler suspends ([`SuspendingSampler`]): the same releases,
+/// deadlines, traces and frames, with the publisher task suspended while a sample's scripts run on
+/// the bus (its job's CPU is the code before and after; docs/analysis.md, "Self-suspending
+/// publishers and the sensor buses"). A board moves here when its I2C groups sample by script;
+/// until every board has, the polled boards keep [`serve_level`], whose state machine has no
+/// suspension inside a release (PowerManagement's flash budget pays for no unused one).
+///
+/// One pass of the loop serves one release, taken at the pass's start: a release the sample's
+/// suspension let fall due is the next pass's, and a pass that finds none due parks until the
+/// earliest due time (or the command handler's wake). Each pass is thus one job of one topic
+/// (docs/analysis.md, "One topic's job").
+pub async fn serve_level_suspending<C: Clock, const N: usize>(
+    levels: &[Priority],
+    wake: &mut Receiver<'static, (), 1>,
+    mut handler: impl Mutex<T = SensorDataHandler>,
+    mut tx_queue: impl Mutex<T = TxQueue<N>>,
+    mut sampler: impl SuspendingSampler,
+    tx_interrupt: impl InterruptNumber,
+) -> ! {
+    let ranks = Ranks::of(levels);
+    loop {
+        let now = C::now_us();
+        let next = handler.lock(|h| {
+            let (level, period_us) = next_to_take(h, ranks, now)?;
+            h.take_next_release(level, now)
+                .map(|release| (release, period_us))
+        });
+        let Some((release, period_us)) = next else {
+            match handler.lock(|h| next_due(h, ranks)) {
+                Some(due) => {
+                    let _ = C::timeout_at_us(due, wake.recv()).await;
+                }
+                None => {
+                    let task = crate::tracing::suspend(None);
+                    let _ = wake.recv().await;
+                    crate::tracing::resume(task);
+                }
+            }
+            continue;
+        };
+        let level = release.priority;
+        note_release(now, level, &release);
+        let topic = release.topic;
+        let taken = C::now_us();
+        if let Some(board) = topic.diagnostics_of() {
+            let counters = tx_queue.lock(|q| *q.counters());
+            let diagnostics = handler.lock(|h| health::snapshot(h, &counters, taken));
+            let frames = health::frames_now(&diagnostics, board, release.priority);
+            let deadline = sample_deadline(taken, &release, period_us);
+            queue_frames::<C, N>(&mut tx_queue, level, topic, deadline, frames);
+        } else {
+            // The suspension: the sample's scripts on the bus (none for a topic off I2C).
+            let samples = sampler.sample(topic, taken).await;
+            let deadline = sample_deadline(taken, &release, period_us);
+            let frames = samples
+                .into_iter()
+                .map(|data| data.encode(release.priority));
+            queue_frames::<C, N>(&mut tx_queue, level, topic, deadline, frames);
+        }
+        cortex_m::peripheral::NVIC::pend(tx_interrupt);
+    }
+}
