@@ -4,69 +4,21 @@
 //! (`scripted`), and the bus's time is virtual time the other tasks run in.
 //!
 //! The bus runs one script at a time: a script starts when the bus is free (at its submission, or
-//! when the script before it ends) and ends [`SCL_HZ`](crate::scripted::SCL_HZ) wire time later,
-//! when the devices answer it. Unlike the chip's queue (`i2c_bus`: the most urgent waiting script
-//! next), scripts go in submission order: in the emulated runs a bus has one script at a time
-//! waiting at most, and the order changes only which of two waits first, never a reading. A
-//! client's timeout ([`SimPort`], the same rule as `scripted::I2cPort`'s) ends a script that would
-//! end too late; its bus time stays taken, as a stuck script's would on the chip until the reset.
+//! when the script before it ends) and ends its wire time at [`SCL_HZ`](crate::scripted::SCL_HZ)
+//! later, when the devices answer it (amiro-sensors' `ScriptBus`: its simulated buses run the
+//! script's operations on their registers). Unlike the chip's queue (`i2c_bus`: the most urgent
+//! waiting script next), scripts go in submission order, and one that fails at a refused address
+//! still takes its whole wire time: either changes only when a sample's frames come, never what
+//! they read. A client's timeout ([`SimPort`], the same rule as `scripted::I2cPort`'s) ends a
+//! script that would end too late; its bus time stays taken, as a stuck script's would on the chip
+//! until the reset.
 use core::cell::RefCell;
 use core::marker::PhantomData;
 
-use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
-use embedded_hal::i2c::{ErrorKind, I2c, NoAcknowledgeSource};
+use amiro_sensors::drivers::scripted::ScriptBus;
+use amiro_sensors::script::{Readings, Script, ScriptError};
 
 use crate::scripted::{script_timeout_us, BusFault, Deadline, ScriptPort, SCL_HZ};
-
-/// Devices that answer a script: its readings, or the failure of the operation that failed.
-pub trait ScriptDevices {
-    /// Runs `script`'s operations against the devices, in order.
-    fn answer(&mut self, script: &Script) -> Result<Readings, ScriptError>;
-}
-
-/// Simulated devices behind an embedded-hal bus (amiro-sensors' register-level simulators): each
-/// operation of a script is one `write`, `read` or `write_read` on it.
-pub struct HalDevices<I>(pub I);
-
-impl<I: I2c> ScriptDevices for HalDevices<I> {
-    fn answer(&mut self, script: &Script) -> Result<Readings, ScriptError> {
-        let mut readings = Readings::for_script(script);
-        let mut written = script.written();
-        let mut buffer = [0u8; amiro_sensors::script::MAX_READ_BYTES];
-        for (index, op) in script.operations().iter().enumerate() {
-            let (bytes, rest) = written.split_at(usize::from(op.write).min(written.len()));
-            written = rest;
-            let read = buffer.get_mut(..usize::from(op.read)).unwrap_or(&mut []);
-            let result = match (bytes.is_empty(), read.is_empty()) {
-                (false, false) => self.0.write_read(op.address, bytes, read),
-                (false, true) => self.0.write(op.address, bytes),
-                _ => self.0.read(op.address, read),
-            };
-            if let Err(error) = result {
-                return Err(ScriptError {
-                    // At most MAX_OPERATIONS (12).
-                    operation: index as u8,
-                    failure: failure_of(embedded_hal::i2c::Error::kind(&error)),
-                });
-            }
-            for &byte in read.iter() {
-                readings.push(byte);
-            }
-        }
-        Ok(readings)
-    }
-}
-
-/// The engine's failure for an embedded-hal error kind.
-fn failure_of(kind: ErrorKind) -> Failure {
-    match kind {
-        ErrorKind::NoAcknowledge(NoAcknowledgeSource::Data) => Failure::NackData,
-        ErrorKind::NoAcknowledge(_) => Failure::NackAddress,
-        ErrorKind::ArbitrationLoss => Failure::ArbitrationLoss,
-        ErrorKind::Overrun => Failure::Overrun,
-        _ => Failure::Bus,
-    }
-}
 
 struct Inner<D> {
     devices: D,
@@ -79,7 +31,7 @@ pub struct SimBus<D> {
     inner: critical_section::Mutex<RefCell<Inner<D>>>,
 }
 
-impl<D: ScriptDevices> SimBus<D> {
+impl<D: ScriptBus> SimBus<D> {
     /// The bus with `devices` on it, free.
     pub const fn new(devices: D) -> Self {
         Self {
@@ -110,36 +62,29 @@ impl<D: ScriptDevices> SimBus<D> {
     }
 
     fn answer(&self, script: &Script) -> Result<Readings, ScriptError> {
-        self.with(|inner| inner.devices.answer(script))
+        self.with(|inner| inner.devices.run(script))
     }
 }
 
 /// A publisher task's client of a [`SimBus`], with its timeout on the monotonic `C`.
 pub struct SimPort<'a, C, D> {
     bus: &'a SimBus<D>,
-    client: u8,
     allowance_us: u32,
     clock: PhantomData<C>,
 }
 
 impl<'a, C, D> SimPort<'a, C, D> {
-    /// Client `client` of `bus` (its publisher task's index, as on the chip's bus); a script's
-    /// timeout is its wire time plus `allowance_us`.
-    pub const fn new(bus: &'a SimBus<D>, client: u8, allowance_us: u32) -> Self {
+    /// A client of `bus`; a script's timeout is its wire time plus `allowance_us`.
+    pub const fn new(bus: &'a SimBus<D>, allowance_us: u32) -> Self {
         Self {
             bus,
-            client,
             allowance_us,
             clock: PhantomData,
         }
     }
 }
 
-impl<C: Deadline, D: ScriptDevices> ScriptPort for SimPort<'_, C, D> {
-    fn client(&self) -> u8 {
-        self.client
-    }
-
+impl<C: Deadline, D: ScriptBus> ScriptPort for SimPort<'_, C, D> {
     async fn run(&mut self, script: Script, settle_us: u32) -> Result<Readings, BusFault> {
         if script.operations().is_empty() {
             return Ok(Readings::for_script(&script));

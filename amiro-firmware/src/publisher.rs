@@ -215,10 +215,12 @@ pub trait SuspendingSampler {
 /// until every board has, the polled boards keep [`serve_level`], whose state machine has no
 /// suspension inside a release (PowerManagement's flash budget pays for no unused one).
 ///
-/// One pass of the loop serves one release, taken at the pass's start: a release the sample's
-/// suspension let fall due is the next pass's, and a pass that finds none due parks until the
-/// earliest due time (or the command handler's wake). Each pass is thus one job of one topic
-/// (docs/analysis.md, "One topic's job").
+/// Every await is at the top of the loop: the sample of the release taken in the last pass, or,
+/// with none taken, the park until the earliest due time (or the command handler's wake). After
+/// them (the loop's join) a pass queues the sample's frames and takes the next release due. So one
+/// pass holds the end of one release and the start of the next, and a job — a resumed await, then
+/// the code to the next await that is pending — is one pass (docs/analysis.md, "One topic's
+/// job").
 pub async fn serve_level_suspending<C: Clock, const N: usize>(
     levels: &[Priority],
     wake: &mut Receiver<'static, (), 1>,
@@ -228,45 +230,71 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
     tx_interrupt: impl InterruptNumber,
 ) -> ! {
     let ranks = Ranks::of(levels);
+    let mut next: Option<(Release, u32, u64)> = None;
     loop {
-        let now = C::now_us();
-        let next = handler.lock(|h| {
-            let (level, period_us) = next_to_take(h, ranks, now)?;
-            h.take_next_release(level, now)
-                .map(|release| (release, period_us))
-        });
-        let Some((release, period_us)) = next else {
-            match handler.lock(|h| next_due(h, ranks)) {
-                Some(due) => {
-                    let _ = C::timeout_at_us(due, wake.recv()).await;
-                }
-                None => {
-                    let task = crate::tracing::suspend(None);
-                    let _ = wake.recv().await;
-                    crate::tracing::resume(task);
-                }
+        let sampled = match next.take() {
+            Some((release, period_us, taken)) => {
+                // The suspension: the sample's scripts on the bus (none for a topic off I2C).
+                let samples = sampler.sample(release.topic, taken).await;
+                Some((release, period_us, taken, samples))
             }
-            continue;
+            None => {
+                match handler.lock(|h| next_due(h, ranks)) {
+                    Some(due) => {
+                        let _ = C::timeout_at_us(due, wake.recv()).await;
+                    }
+                    None => {
+                        let task = crate::tracing::suspend(None);
+                        let _ = wake.recv().await;
+                        crate::tracing::resume(task);
+                    }
+                }
+                None
+            }
         };
-        let level = release.priority;
-        note_release(now, level, &release);
-        let topic = release.topic;
-        let taken = C::now_us();
-        if let Some(board) = topic.diagnostics_of() {
-            let counters = tx_queue.lock(|q| *q.counters());
-            let diagnostics = handler.lock(|h| health::snapshot(h, &counters, taken));
-            let frames = health::frames_now(&diagnostics, board, release.priority);
-            let deadline = sample_deadline(taken, &release, period_us);
-            queue_frames::<C, N>(&mut tx_queue, level, topic, deadline, frames);
-        } else {
-            // The suspension: the sample's scripts on the bus (none for a topic off I2C).
-            let samples = sampler.sample(topic, taken).await;
+        if let Some((release, period_us, taken, samples)) = sampled {
             let deadline = sample_deadline(taken, &release, period_us);
             let frames = samples
                 .into_iter()
                 .map(|data| data.encode(release.priority));
-            queue_frames::<C, N>(&mut tx_queue, level, topic, deadline, frames);
+            queue_frames::<C, N>(
+                &mut tx_queue,
+                release.priority,
+                release.topic,
+                deadline,
+                frames,
+            );
+            cortex_m::peripheral::NVIC::pend(tx_interrupt);
         }
-        cortex_m::peripheral::NVIC::pend(tx_interrupt);
+        // The next release due now: the diagnostics' served here, a sensor's sampled at the top.
+        let now = C::now_us();
+        let taken = handler.lock(|h| {
+            let (level, period_us) = next_to_take(h, ranks, now)?;
+            h.take_next_release(level, now)
+                .map(|release| (release, period_us))
+        });
+        if let Some((release, period_us)) = taken {
+            note_release(now, release.priority, &release);
+            let taken = C::now_us();
+            match release.topic.diagnostics_of() {
+                Some(board) => {
+                    let counters = tx_queue.lock(|q| *q.counters());
+                    let diagnostics = handler.lock(|h| health::snapshot(h, &counters, taken));
+                    let frames = health::frames_now(&diagnostics, board, release.priority);
+                    let deadline = sample_deadline(taken, &release, period_us);
+                    queue_frames::<C, N>(
+                        &mut tx_queue,
+                        release.priority,
+                        release.topic,
+                        deadline,
+                        frames,
+                    );
+                    cortex_m::peripheral::NVIC::pend(tx_interrupt);
+                    // The next release (if any is due) in the next pass, after a park that a due
+                    // time past is ready at once.
+                }
+                None => next = Some((release, period_us, taken)),
+            }
+        }
     }
 }

@@ -1,30 +1,29 @@
 //! A topic's sample whose bus work is I2C scripts (docs/i2c.md): the publisher suspends while
 //! the bus runs them, instead of polling the bus under its device group's lock.
 //!
-//! A group's sample is a *job* of one or more rounds (amiro-sensors' `drivers::scripted`: the
-//! driver code recorded into a script, replayed on its readings; a check that passed may call for
-//! a further script). [`sample_on_bus`] runs a job: under the group's lock the group says what the
-//! next round needs ([`ScriptedGroup::step`]: a script, or the frames); with the lock released the
-//! publisher hands the script to the bus through its own client slot ([`ScriptPort::run`]) and
-//! awaits it; under the lock again the group takes the outcome ([`ScriptedGroup::complete`]). No
-//! lock of a device group is held across the bus, so a publisher that waits for the bus blocks no
-//! other task; the bus itself orders the scripts (its queue, one script at a time, by the
-//! clients' priorities).
-//!
-//! A group runs one job at a time ([`OneJobAtATime`]): its rounds carry the job's log, so a
-//! publisher of another level that wants the same group while a job is under way waits for that
-//! job's end (its waker is kept and woken then), suspended like a publisher waiting for the bus.
+//! A group's sample is a *job* of one or more scripts (amiro-sensors' `drivers::scripted`: the
+//! driver code recorded into a script and replayed on its readings; a check that passed may call
+//! for a further script). The job's log is the publisher's own ([`ScriptedGroup::Job`]), so
+//! publishers of two levels whose samples of one group overlap each keep theirs.
+//! [`sample_on_bus`] runs a job: under the group's lock the group says what the sample needs first
+//! ([`ScriptedGroup::begin`]: a script, or the frames); with the lock released the publisher hands
+//! the script to the bus through its own client slot ([`ScriptPort::run`]) and awaits it; under
+//! the lock again the group takes the outcome and says what comes next
+//! ([`ScriptedGroup::resume`]). No lock of a device group is held across the bus, so a publisher
+//! that waits for the bus blocks no other task; the bus itself orders the scripts (its queue, one
+//! script at a time, by the clients' priorities).
 //!
 //! A script that does not end — a device that stretches SCL for ever, a bus stuck low — is ended by
 //! the client's timeout on the monotonic ([`I2cPort`]): the script's time on the wire at the bus's
 //! [`SCL_HZ`] plus the board's stated allowance (the devices' clock stretching and the other
 //! clients' scripts it may wait behind). The dropped transfer aborts the script and resets the
-//! block (`i2c_bus`); the group sees [`BusFault::Timeout`], the fault it reports as before.
-use core::future::{poll_fn, Future};
-use core::task::{Poll, Waker};
+//! block (`i2c_bus`); the group sees [`BusFault::Timeout`], the fault a polled master's timeout
+//! was.
+use core::future::Future;
 
 use amiro_can::Topic;
-use amiro_sensors::drivers::suite::Samples;
+use amiro_sensors::drivers::scripted::{self, Job, Next, Replaying, MAX_ROUNDS};
+use amiro_sensors::drivers::suite::{Samples, SensorGroup, Supervised};
 use amiro_sensors::script::{Readings, Script, ScriptError};
 use rtic_core::Mutex;
 
@@ -35,15 +34,15 @@ use crate::i2c_engine::Block;
 /// block's set-up never exceeds it, `i2c_block::Registers`).
 pub const SCL_HZ: u32 = 400_000;
 
-/// What the next round of a group's sample needs ([`ScriptedGroup::step`]).
+/// What a group's sample needs next ([`ScriptedGroup::begin`], [`ScriptedGroup::resume`]).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Step {
-    /// The job is done: its frames (none when a device failed or the group is missing; the group
-    /// counted it).
+    /// The sample is done: its frames (none when a device failed or the group is missing; the
+    /// group counted it).
     Done(Samples),
     /// Run `script` on the bus, `settle_us` after now at the earliest (a part's settling time
     /// after the previous script's last write), then hand its outcome to
-    /// [`ScriptedGroup::complete`].
+    /// [`ScriptedGroup::resume`].
     Run {
         /// The round's bus work.
         script: Script,
@@ -62,104 +61,79 @@ pub enum BusFault {
     Timeout,
 }
 
-/// A sensor group whose sample is a job of scripts and their decoding, one job at a time.
+/// A sensor group whose sample is a job of scripts and their decoding.
 pub trait ScriptedGroup {
-    /// Rounds a job of this group takes at most; a job still asking for scripts after them is
-    /// given up ([`ScriptedGroup::abandon`]) and publishes nothing.
+    /// A sample's log between its scripts, kept by the publisher that takes the sample.
+    type Job;
+
+    /// Scripts a sample takes at most; a sample still asking for one after them publishes
+    /// nothing (the group is as before it).
     const MAX_ROUNDS: usize;
 
-    /// The next round of the sample of `topic` at `now_us` (the first, or the one after the last
-    /// [`complete`](Self::complete)).
-    fn step(&mut self, topic: Topic, now_us: u64) -> Step;
+    /// A job not begun.
+    fn new_job() -> Self::Job;
 
-    /// The outcome of the script the last [`step`](Self::step) asked for.
-    fn complete(&mut self, outcome: Result<Readings, BusFault>);
+    /// The sample of `topic` at `now_us`, begun in `job`: its first script, or its frames.
+    fn begin(&mut self, job: &mut Self::Job, topic: Topic, now_us: u64) -> Step;
 
-    /// Gives the job under way up (its rounds ran out): the group is as before it.
-    fn abandon(&mut self);
+    /// The same sample with its last script's `outcome`: the next script, or its frames.
+    fn resume(
+        &mut self,
+        job: &mut Self::Job,
+        topic: Topic,
+        now_us: u64,
+        outcome: Result<Readings, BusFault>,
+    ) -> Step;
 }
 
-/// A [`ScriptedGroup`] shared by `CLIENTS` publisher tasks (clients `0..CLIENTS`, as their
-/// ports number them): the job under way is one client's, and another client's
-/// [`step`](Self::step) waits until it is done.
-pub struct OneJobAtATime<G, const CLIENTS: usize> {
-    group: G,
-    /// The client whose job is under way.
-    owner: Option<u8>,
-    /// The clients waiting for its end, one waker each.
-    waiting: [Option<Waker>; CLIENTS],
+fn step_of(next: Next<Samples>, job: &Job) -> Step {
+    match next {
+        Next::Done(samples) => Step::Done(samples),
+        Next::Run(script) => Step::Run {
+            script,
+            settle_us: job.settle_us(),
+        },
+    }
 }
 
-impl<G: ScriptedGroup, const CLIENTS: usize> OneJobAtATime<G, CLIENTS> {
-    /// The group, no job under way.
-    pub const fn new(group: G) -> Self {
-        Self {
-            group,
-            owner: None,
-            waiting: [const { None }; CLIENTS],
-        }
+/// amiro-sensors' supervised groups, replayed (`drivers::scripted`): the fault policy, the
+/// back-off and the stepwise set-up run as on the blocking path.
+impl<G: SensorGroup + Clone + Replaying> ScriptedGroup for Supervised<G> {
+    type Job = Job;
+    const MAX_ROUNDS: usize = MAX_ROUNDS;
+
+    fn new_job() -> Job {
+        Job::new()
     }
 
-    /// The group between jobs (its health report, a test's look).
-    pub fn group(&self) -> &G {
-        &self.group
+    fn begin(&mut self, job: &mut Job, topic: Topic, now_us: u64) -> Step {
+        step_of(scripted::begin_sample(self, job, topic, now_us), job)
     }
 
-    /// The group between jobs.
-    pub fn group_mut(&mut self) -> &mut G {
-        &mut self.group
-    }
-
-    /// The next round of `client`'s sample of `topic` at `now_us`, or `None` (with `waker`
-    /// kept, and woken at the job's end) while another client's job is under way. A client past
-    /// `CLIENTS` (a wiring mistake) is answered with no frames and never waits.
-    pub fn step(&mut self, client: u8, topic: Topic, now_us: u64, waker: &Waker) -> Option<Step> {
-        if self.owner.is_some_and(|owner| owner != client) {
-            let Some(slot) = self.waiting.get_mut(usize::from(client)) else {
-                return Some(Step::Done(Samples::new()));
-            };
-            match slot {
-                Some(kept) if kept.will_wake(waker) => {}
-                _ => *slot = Some(waker.clone()),
+    fn resume(
+        &mut self,
+        job: &mut Job,
+        topic: Topic,
+        now_us: u64,
+        outcome: Result<Readings, BusFault>,
+    ) -> Step {
+        let next = match outcome {
+            Ok(readings) => scripted::finish_sample(self, job, topic, now_us, &Ok(readings)),
+            Err(BusFault::Script(error)) => {
+                scripted::finish_sample(self, job, topic, now_us, &Err(error))
             }
-            return None;
-        }
-        let step = self.group.step(topic, now_us);
-        match step {
-            Step::Run { .. } => self.owner = Some(client),
-            Step::Done(_) => self.end_job(),
-        }
-        Some(step)
-    }
-
-    /// The outcome of `client`'s script (ignored unless its job is under way).
-    pub fn complete(&mut self, client: u8, outcome: Result<Readings, BusFault>) {
-        if self.owner == Some(client) {
-            self.group.complete(outcome);
-        }
-    }
-
-    /// Gives `client`'s job up (its rounds ran out).
-    pub fn abandon(&mut self, client: u8) {
-        if self.owner == Some(client) {
-            self.group.abandon();
-            self.end_job();
-        }
-    }
-
-    fn end_job(&mut self) {
-        self.owner = None;
-        for waker in self.waiting.iter_mut().filter_map(Option::take) {
-            waker.wake();
-        }
+            Err(BusFault::Timeout) => {
+                job.timed_out();
+                scripted::step(self, job, |g| g.sample(topic, now_us))
+                    .unwrap_or(Next::Done(Samples::new()))
+            }
+        };
+        step_of(next, job)
     }
 }
 
 /// A publisher task's way to its bus: the bus and the task's client slot on it.
 pub trait ScriptPort {
-    /// The client's index among the bus's clients (its publisher task's).
-    fn client(&self) -> u8;
-
     /// Runs `script` on the bus, `settle_us` from now at the earliest, and gives its readings,
     /// or why it gave none (its client's timeout included). Dropping the future cancels the
     /// script.
@@ -170,32 +144,29 @@ pub trait ScriptPort {
     ) -> impl Future<Output = Result<Readings, BusFault>>;
 }
 
-/// One sample of `topic`, taken at `taken_us`, of the group behind `group`: each round's script
-/// run on `port` with the group's lock released while the bus runs it.
-pub async fn sample_on_bus<G: ScriptedGroup, const CLIENTS: usize>(
-    group: &mut impl Mutex<T = OneJobAtATime<G, CLIENTS>>,
+/// One sample of `topic`, taken at `taken_us`, of the group behind `group`: each script run on
+/// `port` with the group's lock released while the bus runs it.
+pub async fn sample_on_bus<G: ScriptedGroup>(
+    group: &mut impl Mutex<T = G>,
     port: &mut impl ScriptPort,
     topic: Topic,
     taken_us: u64,
 ) -> Samples {
-    let client = port.client();
+    let mut job = G::new_job();
+    let mut step = group.lock(|g| g.begin(&mut job, topic, taken_us));
     for _ in 0..G::MAX_ROUNDS {
-        let step = poll_fn(|cx| {
-            group
-                .lock(|g| g.step(client, topic, taken_us, cx.waker()))
-                .map_or(Poll::Pending, Poll::Ready)
-        })
-        .await;
         match step {
             Step::Done(samples) => return samples,
             Step::Run { script, settle_us } => {
                 let outcome = port.run(script, settle_us).await;
-                group.lock(|g| g.complete(client, outcome));
+                step = group.lock(|g| g.resume(&mut job, topic, taken_us, outcome));
             }
         }
     }
-    group.lock(|g| g.abandon(client));
-    Samples::new()
+    match step {
+        Step::Done(samples) => samples,
+        Step::Run { .. } => Samples::new(),
+    }
 }
 
 /// The monotonic as a client's timeout sees it (the tasks' `mono::Clock` on the chips).
@@ -252,11 +223,6 @@ impl<'a, D, B, const SLOTS: usize> I2cPort<'a, D, B, SLOTS> {
 }
 
 impl<D: Deadline, B: Block, const SLOTS: usize> ScriptPort for I2cPort<'_, D, B, SLOTS> {
-    fn client(&self) -> u8 {
-        // A client's index is below 256 (`I2cBus::client`).
-        self.client.index() as u8
-    }
-
     async fn run(&mut self, script: Script, settle_us: u32) -> Result<Readings, BusFault> {
         if settle_us > 0 {
             D::delay_until_us(D::now_us() + u64::from(settle_us)).await;
