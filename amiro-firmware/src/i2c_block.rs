@@ -1,7 +1,9 @@
 //! The register adapter under [`crate::i2c_engine`]: one I2C block (I2C1 or I2C2, RM0008 §26.6 /
 //! RM0090 §27.6) as volatile reads and writes, and its set-up for 400 kHz (the polled master's,
 //! `i2c::Master`, which the boards still use until the engine is wired).
-use crate::i2c_engine::{Block, Interrupts, CR1_PE, CR1_START, CR1_STOP, CR1_SWRST};
+use crate::i2c_engine::{
+    Block, Interrupts, CONDITION_WAIT_NS, CR1_PE, CR1_START, CR1_STOP, CR1_SWRST,
+};
 
 const CR1: usize = 0x00;
 const CR2: usize = 0x04;
@@ -18,16 +20,20 @@ pub struct Registers {
     base: usize,
     /// APB1 in MHz (CR2's FREQ field and the timing).
     pclk1_mhz: u16,
+    /// [`CONDITION_WAIT_NS`] in core cycles.
+    condition_cycles: u32,
 }
 
 impl Registers {
-    /// The block at `base` (`i2c::I2C1` or `i2c::I2C2`) with a `pclk1_hz` APB1. Touches nothing:
-    /// [`Block::reset`] sets the block up.
+    /// The block at `base` (`i2c::I2C1` or `i2c::I2C2`) with a `pclk1_hz` APB1, its condition
+    /// waits timed in cycles of a `sysclk_hz` core clock. Touches nothing: [`Block::reset`] sets
+    /// the block up.
     ///
     /// # Safety
     /// `base` must be I2C1 or I2C2, its clock on and its pins in open-drain alternate function,
-    /// and the block used through this value alone.
-    pub const unsafe fn new(base: usize, pclk1_hz: u32) -> Self {
+    /// and the block used through this value alone. The core's cycle counter should run (DWT
+    /// CYCCNT, as for `i2c::Master`); where it does not, a condition wait ends at its poll cap.
+    pub const unsafe fn new(base: usize, pclk1_hz: u32, sysclk_hz: u32) -> Self {
         let mhz = pclk1_hz / 1_000_000;
         let mhz = if mhz < 2 {
             2
@@ -39,6 +45,7 @@ impl Registers {
         Self {
             base,
             pclk1_mhz: mhz as u16,
+            condition_cycles: (CONDITION_WAIT_NS as u64 * sysclk_hz as u64 / 1_000_000_000) as u32,
         }
     }
 
@@ -89,6 +96,14 @@ impl Block for Registers {
     fn clear_sr1(&mut self, flags: u16) {
         // SR1's error flags are rc_w0: writing 0 clears, writing 1 keeps.
         self.write(SR1, !flags);
+    }
+
+    fn cycles(&mut self) -> u32 {
+        cortex_m::peripheral::DWT::cycle_count()
+    }
+
+    fn condition_cycles(&self) -> u32 {
+        self.condition_cycles
     }
 
     fn reset(&mut self) {

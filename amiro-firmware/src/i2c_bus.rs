@@ -17,7 +17,8 @@
 //! and readings copied in, and at most one walk of the slots (no loop longer than the slot count).
 //! The same section is what keeps the engine's uninterruptible steps uninterrupted
 //! (`i2c_engine`). The waits for a STOP or a repeated START to go out are polled outside it, a
-//! section per poll, at most [`CONDITION_POLLS`]. No heap; a slot holds its script and readings
+//! section per poll, for at most [`CONDITION_WAIT_NS`](crate::i2c_engine::CONDITION_WAIT_NS) (two SCL periods, on the cycle counter)
+//! and at most [`CONDITION_POLLS`] polls. No heap; a slot holds its script and readings
 //! by value.
 use core::cell::UnsafeCell;
 use core::future::Future;
@@ -159,21 +160,31 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
     }
 
     /// Waits for the condition the engine awaits (a STOP to clear before a START, a repeated
-    /// START to go out), each poll a critical section of its own, at most [`CONDITION_POLLS`]
-    /// polls; then lets the engine go on. A client's abort and a new script between two polls
-    /// change the wait's number, and the old wait ends without touching the new one.
+    /// START to go out), each poll a critical section of its own, for at most
+    /// [`CONDITION_WAIT_NS`](crate::i2c_engine::CONDITION_WAIT_NS) on the block's cycle counter and at most [`CONDITION_POLLS`] polls;
+    /// then lets the engine go on. A client's abort and a new script between two polls change the
+    /// wait's number, and the old wait ends without touching the new one. Not inlined: the
+    /// execution-time analysis states its loop as a peripheral wait (tools/engine-bound).
+    #[inline(never)]
     fn settle(&self) {
-        let Some(wait) = self.with(|inner| inner.engine.awaiting()) else {
+        let Some((wait, start, limit)) = self.with(|inner| {
+            let wait = inner.engine.awaiting()?;
+            Some((wait, inner.block.cycles(), inner.block.condition_cycles()))
+        }) else {
             return;
         };
         let mut cleared = false;
         for _ in 0..CONDITION_POLLS {
-            let pending = self.with(|inner| {
-                inner.engine.awaiting() == Some(wait)
-                    && inner.engine.condition_pending(&mut inner.block)
+            let (pending, now) = self.with(|inner| {
+                let pending = inner.engine.awaiting() == Some(wait)
+                    && inner.engine.condition_pending(&mut inner.block);
+                (pending, inner.block.cycles())
             });
             if !pending {
                 cleared = true;
+                break;
+            }
+            if now.wrapping_sub(start) > limit {
                 break;
             }
         }
@@ -188,6 +199,17 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
     /// critical section.
     pub fn with_block<R>(&self, f: impl FnOnce(&mut B) -> R) -> R {
         self.with(|inner| f(&mut inner.block))
+    }
+}
+
+/// A slot's rank among the waiting: 0 for a slot that does not wait; above every slot of lower
+/// priority, and among equal priorities the earlier submission higher (the submission number's
+/// low 55 bits: 2^55 submissions, a thousand years at a million a second, before it wraps).
+fn rank(slot: &Slot) -> u64 {
+    const SEQ: u64 = (1 << 55) - 1;
+    match slot.state {
+        State::Waiting(seq) => (1 << 63) | (u64::from(slot.priority) << 55) | (SEQ - (seq & SEQ)),
+        _ => 0,
     }
 }
 
@@ -218,26 +240,24 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
         slot.waker.take()
     }
 
-    /// Starts the most urgent waiting script if the bus is idle: one walk of the slots.
+    /// Starts the most urgent waiting script if the bus is idle: one walk of the slots, a pass
+    /// per slot with no branch out of it (each slot's rank, [`rank`], against the best so far),
+    /// so that the loop is one counted loop of `SLOTS` passes.
     fn start_next(&mut self) -> Option<Waker> {
         if self.running.is_some() {
             return None;
         }
-        let mut best: Option<(usize, u8, u64)> = None;
-        for (index, slot) in self.slots.iter().enumerate() {
-            if let State::Waiting(seq) = slot.state {
-                let better = match best {
-                    None => true,
-                    Some((_, priority, first)) => {
-                        slot.priority > priority || (slot.priority == priority && seq < first)
-                    }
-                };
-                if better {
-                    best = Some((index, slot.priority, seq));
-                }
+        let mut best = (0, 0);
+        for index in 0..SLOTS {
+            let key = self.slots.get(index).map_or(0, rank);
+            if key > best.1 {
+                best = (index, key);
             }
         }
-        let (index, _, _) = best?;
+        if best.1 == 0 {
+            return None;
+        }
+        let index = best.0;
         let slot = self.slots.get_mut(index)?;
         self.running = Some(index);
         slot.state = State::Running;

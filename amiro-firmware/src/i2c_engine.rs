@@ -38,8 +38,9 @@
 //! CR1 note), and a repeated START, set at BTF, leaves BTF raising the event interrupt until it
 //! is on the bus. Either condition takes at most one SCL period once SCL is free (2.5 µs at
 //! 400 kHz) and raises no interrupt of its own, so the engine says it waits for it
-//! ([`Engine::awaiting`]) and the caller polls it outside the critical section, at most
-//! [`CONDITION_POLLS`] times, each poll a section of its own, then calls [`Engine::resume`].
+//! ([`Engine::awaiting`]) and the caller polls it outside the critical section, for at most
+//! [`CONDITION_WAIT_NS`] (two SCL periods) on the cycle counter and at most [`CONDITION_POLLS`]
+//! times, each poll a section of its own, then calls [`Engine::resume`].
 use amiro_sensors::script::{Failure, Operation, Readings, Script, ScriptError};
 
 /// CR1: peripheral enable.
@@ -81,10 +82,22 @@ pub const SR1_OVR: u16 = 1 << 11;
 /// The error flags the engine serves (I2Cx_ER).
 pub const SR1_ERRORS: u16 = SR1_BERR | SR1_ARLO | SR1_AF | SR1_OVR;
 
-/// Polls of CR1.STOP (before a START) or CR1.START (after a repeated START is set): a condition
-/// takes at most one SCL period once SCL is free (2.5 µs at 400 kHz, 180 cycles at 72 MHz), and
-/// one poll is a volatile read on APB1 and a branch (at least four cycles), so 128 polls outlast
-/// it with room; a condition still pending after them is a device holding SCL.
+/// The condition wait's time bound: two SCL periods of the bus's 400 kHz, each 2.5 µs plus the
+/// SCL rise time (at most 300 ns in Fast-mode, UM10204 Table 10). A STOP programmed at BTF goes
+/// out within one SCL period of SCL's release, one programmed before a read's last byte within
+/// the NACK bit's period and the STOP's set-up after the byte's RXNE (UM10204 §3.1.4, Table 10:
+/// tSU;STO ≥ 0.6 µs); a repeated START set at BTF within one period (RM0008 §26.6.1: START
+/// "generates a repeated Start condition at the end of the current byte transfer", here the
+/// stretched ninth clock's end). Longer is a device holding SCL: the fault path
+/// ([`Engine::resume`] with `cleared` false). Counted on the core's cycle counter
+/// ([`Block::cycles`]); the stated peripheral wait of tools/engine-bound's bounds files.
+pub const CONDITION_WAIT_NS: u32 = 5_600;
+
+/// Polls of CR1.STOP (before a START) or CR1.START (after a repeated START is set) at most, as well
+/// as [`CONDITION_WAIT_NS`]: where the cycle counter runs (the chips) the time ends the wait first
+/// (a poll is a critical section, a volatile read on APB1 and the counter's read, more than eight
+/// cycles, so 128 polls outlast the 941 cycles 5.6 µs are at 168 MHz); where it does not (QEMU has
+/// no DWT, the host model's default) the count ends it, as in the polled master (`i2c::Master`).
 pub const CONDITION_POLLS: u32 = 128;
 
 /// Which of the block's interrupts are on (CR2's three enables).
@@ -131,6 +144,15 @@ pub trait Block {
     fn clear_sr1(&mut self, flags: u16);
     /// Resets the block (SWRST) and sets it up again for 400 kHz, interrupts off.
     fn reset(&mut self);
+    /// The core's cycle counter (DWT CYCCNT on the chip): the condition wait's clock. A block
+    /// with no counter keeps this default, 0, and the wait ends at [`CONDITION_POLLS`].
+    fn cycles(&mut self) -> u32 {
+        0
+    }
+    /// [`CONDITION_WAIT_NS`] in cycles of the counter [`Block::cycles`] reads.
+    fn condition_cycles(&self) -> u32 {
+        u32::MAX
+    }
 }
 
 /// A condition the engine waits to see on the bus before it goes on: the caller polls it

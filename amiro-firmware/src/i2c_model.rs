@@ -133,6 +133,13 @@ pub struct Model {
     pub bus_error_at: Option<usize>,
     /// Polls of CR1.STOP (CR1.START) a STOP (a repeated START) takes to go on the wire.
     pub stop_polls: u32,
+    /// The core's cycles each poll of CR1.STOP or CR1.START takes (0: no cycle counter, as in
+    /// QEMU; the condition wait then ends at its poll cap).
+    pub cycles_per_poll: u32,
+    /// The condition wait's limit in those cycles (`Block::condition_cycles`).
+    pub condition_cycles: u32,
+    /// The cycle counter.
+    pub now: u32,
     polls: u32,
 }
 
@@ -164,6 +171,9 @@ impl Model {
             arbitration_loss_at: None,
             bus_error_at: None,
             stop_polls: 2,
+            cycles_per_poll: 0,
+            condition_cycles: u32::MAX,
+            now: 0,
             polls: 0,
         }
     }
@@ -533,8 +543,17 @@ impl Block for Model {
         self.cr1 = (self.cr1 | set) & !clear;
     }
 
+    fn cycles(&mut self) -> u32 {
+        self.now
+    }
+
+    fn condition_cycles(&self) -> u32 {
+        self.condition_cycles
+    }
+
     fn stop_pending(&mut self) -> bool {
         self.access.push(Access::StopPoll);
+        self.now = self.now.wrapping_add(self.cycles_per_poll);
         if self.cr1 & CR1_STOP == 0 {
             self.polls = 0;
             return false;
@@ -550,6 +569,7 @@ impl Block for Model {
 
     fn start_pending(&mut self) -> bool {
         self.access.push(Access::StartPoll);
+        self.now = self.now.wrapping_add(self.cycles_per_poll);
         if self.cr1 & CR1_START == 0 {
             self.polls = 0;
             return false;

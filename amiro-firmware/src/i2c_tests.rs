@@ -1067,3 +1067,39 @@ fn a_client_has_one_script_at_a_time_and_a_failure_reaches_only_its_own() {
     let mut empty = pin!(bus.run(c(0), Script::new()));
     assert!(matches!(empty.as_mut().poll(&mut cx), Poll::Ready(Ok(r)) if r.all().is_empty()));
 }
+
+/// The condition wait ends on the cycle counter, not at the poll cap, where the counter runs: a
+/// STOP held past two SCL periods (a device holding SCL) is given up after the counter passes
+/// `condition_cycles`, and the next START set on a reset block, as at the cap.
+#[test]
+fn a_held_stop_ends_the_condition_wait_on_the_cycle_counter() {
+    let held = |cycles_per_poll: u32| {
+        let bus = I2cBus::new(devices(&[0x1E]), [1]);
+        bus.with_block(|m| {
+            m.stop_polls = CONDITION_POLLS + 1;
+            m.cycles_per_poll = cycles_per_poll;
+            // 5.6 µs at 72 MHz.
+            m.condition_cycles = 403;
+        });
+        let mut script = Script::new();
+        script.write(0x1E, &[1]).unwrap().read(0x1E, 1).unwrap();
+        let client = bus.client(0).unwrap();
+        let mut transfer = pin!(bus.run(client, script));
+        let (_, waker) = test_waker::counting();
+        let mut cx = Context::from_waker(&waker);
+        assert!(transfer.as_mut().poll(&mut cx).is_pending());
+        pump(&bus);
+        let done = transfer.as_mut().poll(&mut cx);
+        assert!(matches!(done, Poll::Ready(Ok(_))), "{done:?}");
+        bus.with_block(|m| {
+            assert!(m.violations.is_empty(), "{:?}", m.violations);
+            let polls = m.access.iter().filter(|a| **a == StopPoll).count();
+            let resets = m.access.iter().filter(|a| **a == Reset).count();
+            (polls, resets)
+        })
+    };
+    // No counter (QEMU): the first START's one poll, the second's CONDITION_POLLS.
+    assert_eq!(held(0), (1 + CONDITION_POLLS as usize, 1));
+    // 10 cycles a poll: the wait ends at the first poll past 403 cycles, the 41st.
+    assert_eq!(held(10), (1 + 41, 1));
+}

@@ -15,12 +15,18 @@ const I2C2: usize = 0x4000_5800;
 #[cfg(feature = "f1")]
 static BUS: I2cBus<Registers, 4> =
     // SAFETY: I2C2 is this image's only user of the block (the image never runs).
-    I2cBus::new(unsafe { Registers::new(I2C2, 36_000_000) }, [4, 3, 2, 1]);
+    I2cBus::new(
+        unsafe { Registers::new(I2C2, 36_000_000, 72_000_000) },
+        [4, 3, 2, 1],
+    );
 
 #[cfg(feature = "f4")]
 static BUS: I2cBus<Registers, 5> =
     // SAFETY: as above.
-    I2cBus::new(unsafe { Registers::new(I2C2, 42_000_000) }, [5, 4, 3, 2, 1]);
+    I2cBus::new(
+        unsafe { Registers::new(I2C2, 42_000_000, 168_000_000) },
+        [5, 4, 3, 2, 1],
+    );
 
 /// I2Cx_EV's handler.
 #[no_mangle]
@@ -54,7 +60,11 @@ pub extern "Rust" fn engine_event(
 /// The engine's step for one error event alone (`Engine::on_error`).
 #[no_mangle]
 #[inline(never)]
-pub extern "Rust" fn engine_error(engine: &mut Engine, sr1: u16, block: &mut Registers) -> Progress {
+pub extern "Rust" fn engine_error(
+    engine: &mut Engine,
+    sr1: u16,
+    block: &mut Registers,
+) -> Progress {
     engine.on_error(sr1, block)
 }
 
