@@ -142,7 +142,10 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                     Progress::Running
                 }
             };
-            inner.after(progress)
+            match progress {
+                Progress::Running => [None, None],
+                Progress::Finished(result) => inner.end(result),
+            }
         });
         wake(waker);
         self.settle();
@@ -153,7 +156,10 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
         let waker = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
             let progress = inner.engine.on_error(sr1, &mut inner.block);
-            inner.after(progress)
+            match progress {
+                Progress::Running => [None, None],
+                Progress::Finished(result) => inner.end(result),
+            }
         });
         wake(waker);
         self.settle();
@@ -220,17 +226,15 @@ fn wake(wakers: [Option<Waker>; 2]) {
 }
 
 impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
-    /// After an event: a finished script's slot holds its result and its waker is handed out;
-    /// the next script starts. At most two wakers: the finished client's and (never in practice,
-    /// see `start_next`) the started one's.
-    fn after(&mut self, progress: Progress) -> [Option<Waker>; 2] {
-        match progress {
-            Progress::Running => [None, None],
-            Progress::Finished(result) => {
-                let finished = self.finish(result);
-                [finished, self.start_next()]
-            }
-        }
+    /// A script's end: its slot holds its result and its waker is handed out; the next script
+    /// starts. At most two wakers: the finished client's and (never in practice, see
+    /// `start_next`) the started one's. Once per script, not per event; not inlined, so that the
+    /// execution-time analysis bounds it on its own (tools/engine-bound: the handler's
+    /// per-script part).
+    #[inline(never)]
+    fn end(&mut self, result: Result<(), ScriptError>) -> [Option<Waker>; 2] {
+        let finished = self.finish(result);
+        [finished, self.start_next()]
     }
 
     fn finish(&mut self, result: Result<(), ScriptError>) -> Option<Waker> {
