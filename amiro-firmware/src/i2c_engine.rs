@@ -86,9 +86,9 @@ pub const SR1_ERRORS: u16 = SR1_BERR | SR1_ARLO | SR1_AF | SR1_OVR;
 /// SCL rise time (at most 300 ns in Fast-mode, UM10204 Table 10). A STOP programmed at BTF goes
 /// out within one SCL period of SCL's release, one programmed before a read's last byte within
 /// the NACK bit's period and the STOP's set-up after the byte's RXNE (UM10204 §3.1.4, Table 10:
-/// tSU;STO ≥ 0.6 µs); a repeated START set at BTF within one period (RM0008 §26.6.1: START
-/// "generates a repeated Start condition at the end of the current byte transfer", here the
-/// stretched ninth clock's end). Longer is a device holding SCL: the fault path
+/// tSU;STO ≥ 0.6 µs); a repeated START set at BTF within one period (RM0008 §26.6.1, CR1's
+/// START: a repeated start in master mode; BTF holds SCL low, and the START goes out once the
+/// block releases it). Longer is a device holding SCL: the fault path
 /// ([`Engine::resume`] with `cleared` false). Counted on the core's cycle counter
 /// ([`Block::cycles`]); the stated peripheral wait of tools/engine-bound's bounds files.
 pub const CONDITION_WAIT_NS: u32 = 5_600;
