@@ -80,11 +80,14 @@ pub extern "C" fn pend_dispatcher() {
 #[used]
 static HANDLERS: [extern "C" fn(); 3] = [i2c_event, i2c_error, pend_dispatcher];
 
+/// `engine_event`'s type.
+type EventStep =
+    extern "Rust" fn(&mut Engine, u16, &Script, &mut Readings, &mut Registers) -> Progress;
+/// `engine_error`'s type.
+type ErrorStep = extern "Rust" fn(&mut Engine, u16, &mut Registers) -> Progress;
+
 #[used]
-static STEPS: (
-    extern "Rust" fn(&mut Engine, u16, &Script, &mut Readings, &mut Registers) -> Progress,
-    extern "Rust" fn(&mut Engine, u16, &mut Registers) -> Progress,
-) = (engine_event, engine_error);
+static STEPS: (EventStep, ErrorStep) = (engine_event, engine_error);
 
 #[cortex_m_rt::entry]
 fn main() -> ! {
