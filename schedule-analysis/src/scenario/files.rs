@@ -396,6 +396,10 @@ pub struct TopicTiming {
     /// ([`crate::sensor_bus`]); `wcet_us` is then the sample's CPU alone.
     #[serde(default)]
     pub script: Option<crate::sensor_bus::ScriptModel>,
+    /// A sample of several scripts, in the order the sample runs them (each submitted when the one before it
+    /// ends and its `settle_us` has passed); instead of `script`.
+    #[serde(default)]
+    pub scripts: Option<Vec<crate::sensor_bus::ScriptModel>>,
 }
 
 /// A scenario: what runs on the robot.
