@@ -5,19 +5,25 @@
 //! * **The bus** serves one script at a time, start to end, the most urgent waiting one first (the submitting
 //!   task's priority; equal priorities counted as higher): non-preemptive fixed priority, analysed with the CAN
 //!   bus's machinery ([`can::response_times_into`]: one "frame" per script, its bus time). A script's release
-//!   jitter is its submitting job's response; its blocking the longest lower-priority script.
-//! * **The suspending job** is analysed suspension-oblivious for itself: its CPU plus its script's bus response
-//!   (from submission) plus one more blocking (a lower-priority critical section may start while it is
-//!   suspended), all as if executed. The jobs of the same RTIC task (`job_of`) run one after the other, so for
-//!   them the suspension is execution too.
+//!   jitter is its submitting job's response; its blocking the longest lower-priority script. Its siblings (the
+//!   other scripts of its RTIC task) are left out: they run one after the other, never while it is pending.
+//! * **A job of several scripts** (`scripts`) submits each when the one before it has ended and its settle (the
+//!   job's own wait, `settle_us`) has passed: each script is submitted within its job's response, so each keeps
+//!   the job's response as its jitter.
+//! * **The suspending job** is analysed suspension-oblivious for itself: its CPU plus, per script, its bus
+//!   response (from submission), its settle and one more blocking per resumption (after the settle, after the
+//!   script: a lower-priority critical section may start while it is suspended), all as if executed. The jobs of
+//!   the same RTIC task (`job_of`) run one after the other, so for them the suspension is execution too.
 //! * **Every other task** sees a suspending job as its CPU alone, released with jitter = its response minus its
 //!   CPU (Chen, Nelissen, Huang et al., "Many suspensions, many problems", Real-Time Systems 55, 2019, §5;
 //!   Bletsas et al., "Errata for three papers (2004-05) on fixed-priority scheduling with self-suspensions",
 //!   LITES 5(1), 2018): the sound form of the jitter-based charge (jitter = the suspension alone is not).
-//! * **The engine's interrupt** is a row per script at the engine's priority (`<bus>_engine[<task>]`, added when
-//!   the model is validated), released by the submitting job, costing the script's events times the per-event
+//! * **The engine's interrupt** is a row per script at the engine's priority (`<bus>_engine[<task>]`, or
+//!   `<bus>_engine[<task>#<n>]` for a job of several; added when the model is validated), released by the
+//!   submitting job, costing the script's events times the per-event
 //!   bound with interrupt entry and exit. The master holds SCL low while an event waits for the engine, so each
-//!   event's worst response on the CPU is added to the script's bus time as well.
+//!   event's worst response on the CPU is added to the script's bus time as well. The app's tasks that are the
+//!   engine's handlers ([`EngineModel::handlers`]) have no row of their own: the engine rows are their charge.
 //!
 //! The jitters feed the bus responses, which feed the jobs' responses, which are the jitters: iterated from zero
 //! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason.
