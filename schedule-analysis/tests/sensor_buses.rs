@@ -414,7 +414,8 @@ fn a_job_of_several_scripts_has_an_engine_row_per_script() {
     );
 }
 
-/// The timing file's form: a topic's `scripts` on two buses gives its publisher job one engine row per script;
+/// The timing file's form: a topic's `scripts` on two buses gives its publisher job one engine row per script, a
+/// fixed task's `script` its own row;
 /// a refusal names the timing file's field (`topics.<topic>.scripts[<k>]…`); the admission table refuses the
 /// scripts. The buses' engine handlers are app tasks without a row of their own, at the engine's priority (here
 /// DiWheelDrive's `can_status`, at 7, stands in for I2C2_EV): a handler at another priority, one the app does not
@@ -449,6 +450,7 @@ fn a_timing_file_topic_states_several_scripts_and_the_engine_names_its_handlers(
                       "handlers": ["can_status"] } }
     ]);
     timing["topics"]["floor-proximity"]["scripts"] = json!([script("i2c2"), script("i2c1")]);
+    timing["tasks"]["watchdog"]["script"] = script("i2c1");
     timing["tasks"]
         .as_object_mut()
         .unwrap()
@@ -468,9 +470,22 @@ fn a_timing_file_topic_states_several_scripts_and_the_engine_names_its_handlers(
     assert!(!names.contains(&"can_status"), "{names:?}");
     assert!(names.contains(&"i2c2_engine[publish_medium[floor-proximity]#1]"));
     assert!(names.contains(&"i2c1_engine[publish_medium[floor-proximity]#2]"));
+    assert!(names.contains(&"i2c1_engine[watchdog]"));
 
     let refused = schedule_analysis::admission_host::lower_robot(&root).expect_err("refused");
     assert_eq!(refused.path, "topics.floor-proximity.scripts");
+    let mut fixed_only = timing.clone();
+    fixed_only["topics"]["floor-proximity"]
+        .as_object_mut()
+        .unwrap()
+        .remove("scripts");
+    write(&fixed_only);
+    let refused = schedule_analysis::admission_host::lower_robot(&root).expect_err("refused");
+    assert_eq!(refused.path, "tasks.watchdog.script");
+    fixed_only["tasks"]["watchdog"]["script"]["bus"] = json!("i2c3");
+    write(&fixed_only);
+    let error = build().expect_err("refused");
+    assert_eq!(error.path, "tasks.watchdog.script.bus");
 
     let mut priority = timing.clone();
     priority["sensor_buses"][1]["engine"]["priority"] = json!(6);

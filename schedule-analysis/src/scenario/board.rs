@@ -219,6 +219,13 @@ fn build_board(
     }
     built.budgets.push(budgets);
     let overheads = build_overheads(file, timing, firmware, &mut all, built)?;
+    let fixed = timing.tasks.iter().map(|(name, t)| {
+        (
+            format!("tasks.{name}"),
+            t.script.as_ref(),
+            t.scripts.as_deref(),
+        )
+    });
     let jobs = timing.topics.iter().map(|(name, t)| {
         (
             format!("topics.{name}"),
@@ -226,6 +233,7 @@ fn build_board(
             t.scripts.as_deref(),
         )
     });
+    let jobs = fixed.chain(jobs);
     crate::sensor_bus::check_timing(&timing.sensor_buses, jobs)
         .map_err(|(field, e)| fail(file, field, e.to_string()))?;
     Ok(BoardModel {
@@ -427,8 +435,8 @@ impl Board<'_> {
                 released_by: None,
                 sporadic,
                 job_of: None,
-                script: None,
-                scripts: None,
+                script: t.script.clone(),
+                scripts: t.scripts.clone(),
             };
             task.released_by = match t.released_by.as_deref() {
                 None => None,
