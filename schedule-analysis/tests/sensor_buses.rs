@@ -355,6 +355,11 @@ fn a_job_of_several_scripts_has_an_engine_row_per_script() {
     assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(834)));
     assert_eq!(result.sensor_buses[1].scripts[0].task, "publish[floor]#2");
     assert_eq!(result.sensor_buses[1].scripts[0].settle, Time::from_us(66));
+    let report = Report::build(&system, "t".into(), Vec::new(), Vec::new(), None);
+    let json = report::render(&report, Format::Json);
+    assert!(json.contains("\"settle_us\": 66.0"), "{json}");
+    let text = report::render(&report, Format::Table);
+    assert!(text.contains("settle µs"), "{text}");
 
     // The form's refusals, each naming its field.
     let mut both = v.clone();
