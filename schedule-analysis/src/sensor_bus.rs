@@ -221,6 +221,9 @@ pub enum SensorBusError {
     UnknownHandler(String),
     /// An engine handler whose RTIC priority is not its engine's: (handler, its priority, the engine's).
     HandlerPriority(String, u32, u32),
+    /// An engine handler that locks a resource a task above the engine also uses: (handler, resource, its
+    /// ceiling). Its critical sections would block that task, and the handler has no row that states them.
+    HandlerLocksAbove(String, String, u32),
 }
 
 impl fmt::Display for SensorBusError {
@@ -260,6 +263,11 @@ impl fmt::Display for SensorBusError {
             SensorBusError::UnknownHandler(name) => {
                 write!(f, "engine handler `{name}` is not a task of the app")
             }
+            SensorBusError::HandlerLocksAbove(name, resource, ceiling) => write!(
+                f,
+                "engine handler `{name}` locks `{resource}`, whose ceiling {ceiling} is above its engine: its \
+                 critical sections would block a task the analysis does not charge them to"
+            ),
             SensorBusError::HandlerPriority(name, got, engine) => write!(
                 f,
                 "engine handler `{name}` runs at RTIC priority {got}, its engine at {engine}: they must be one"

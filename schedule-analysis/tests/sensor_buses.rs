@@ -424,7 +424,7 @@ fn a_job_of_several_scripts_has_an_engine_row_per_script() {
 /// a refusal names the timing file's field (`topics.<topic>.scripts[<k>]…`); the admission table refuses the
 /// scripts. The buses' engine handlers are app tasks without a row of their own, at the engine's priority (here
 /// DiWheelDrive's `can_status`, at 7, stands in for I2C2_EV): a handler at another priority, one the app does not
-/// declare, or one the file also budgets is refused.
+/// declare, one the file also budgets, or one that locks a resource a task above the engine uses is refused.
 #[test]
 fn a_timing_file_topic_states_several_scripts_and_the_engine_names_its_handlers() {
     let root = common::scratch_workspace("sensor-buses-several", None);
@@ -510,6 +510,22 @@ fn a_timing_file_topic_states_several_scripts_and_the_engine_names_its_handlers(
     assert_eq!(
         error.problem,
         SensorBusError::UnknownHandler("I2C2_EV".into()).to_string()
+    );
+
+    let mut locks = timing.clone();
+    locks["sensor_buses"][1]["engine"]["priority"] = json!(5);
+    locks["sensor_buses"][1]["engine"]["handlers"] = json!(["handle_commands"]);
+    locks["tasks"]
+        .as_object_mut()
+        .unwrap()
+        .remove("handle_commands");
+    write(&locks);
+    let error = build().expect_err("refused");
+    assert_eq!(error.path, "sensor_buses[1].engine.handlers[0]");
+    assert_eq!(
+        error.problem,
+        SensorBusError::HandlerLocksAbove("handle_commands".into(), "tx_queue".into(), 6)
+            .to_string()
     );
 
     let mut twice = timing.clone();

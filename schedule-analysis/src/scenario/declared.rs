@@ -78,6 +78,25 @@ pub(super) fn declared_tasks(
                 .to_string(),
             ));
         }
+        // Its critical sections are not modelled (it has no row): it may lock only what no task above it uses.
+        if let Some((resource, ceiling)) = task
+            .shared
+            .iter()
+            .filter(|r| !app.is_lock_free(r))
+            .filter_map(|r| ceilings.get(r).map(|c| (r, *c)))
+            .find(|(_, c)| *c > engine)
+        {
+            return Err(fail(
+                file,
+                field(),
+                crate::sensor_bus::SensorBusError::HandlerLocksAbove(
+                    handler.to_string(),
+                    resource.clone(),
+                    ceiling,
+                )
+                .to_string(),
+            ));
+        }
         tasks.retain(|t| t.name != handler);
     }
     let handler_names: BTreeSet<&str> = handlers.iter().map(|&(_, h)| h).collect();
