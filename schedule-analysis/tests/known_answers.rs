@@ -501,8 +501,8 @@ type ScriptRow = (String, u64, u64, u64, u64);
 /// ⌈R/1000⌉·10 = 520.
 ///
 /// Round 2 (jitters 610, 610, 520). X: 610 + 100, suspension 100. Y: 610 + 300 + 200 = 1110 (its level's busy
-/// period 700 = 300 + ⌈(700 + 610)/1000⌉·200 holds a second instance, which ends at 310 − 1000 + … earlier):
-/// suspension 500. Z: w = ⌈(w + 610+)/1000⌉·200 = 200, 520 + 200 + 300 = 1020: suspension 500. τ1 = 610; τ2 sees
+/// period, 700 = 300 + ⌈(700 + 610)/1000⌉·200, holds a second instance, whose response 610 + 500 − 1000 + 200 =
+/// 310 is smaller): suspension 500. Z: w = ⌈(w + 610+)/1000⌉·200 = 200, 520 + 200 + 300 = 1020: suspension 500. τ1 = 610; τ2 sees
 /// τ1's 10 µs with jitter 610 − 10 = 600: R = 510 + ⌈(R + 600)/1000⌉·10 = 530.
 ///
 /// Round 3 (Z's jitter 530): Z's bus response 1030, every suspension and response unchanged: the fixed point.
