@@ -242,10 +242,25 @@ pub fn lower(
         let timing = read_timing(root, path)?;
         // The chip's check has no self-suspending jobs yet: a table without the scripts would admit too much
         // (docs/analysis.md, "Self-suspending publishers and the sensor buses").
-        if let Some((topic, _)) = timing.topics.iter().find(|(_, t)| t.script.is_some()) {
+        let topics = timing.topics.iter().map(|(name, t)| {
+            (
+                format!("topics.{name}"),
+                t.script.is_some(),
+                t.scripts.is_some(),
+            )
+        });
+        let tasks = timing.tasks.iter().map(|(name, t)| {
+            (
+                format!("tasks.{name}"),
+                t.script.is_some(),
+                t.scripts.is_some(),
+            )
+        });
+        if let Some((job, one, _)) = topics.chain(tasks).find(|(_, one, list)| *one || *list) {
+            let field = if one { "script" } else { "scripts" };
             return Err(BuildError {
                 file: relative(root, path),
-                path: format!("topics.{topic}.script"),
+                path: format!("{job}.{field}"),
                 problem: "the on-chip admission check does not model sensor-bus scripts yet".into(),
             });
         }

@@ -140,6 +140,10 @@ pub struct TaskModel {
     /// ([`crate::sensor_bus`]); `wcet_us` is then the job's CPU alone.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub script: Option<crate::sensor_bus::ScriptModel>,
+    /// A job of several scripts, in the order the job runs them (each submitted when the one before it ends and
+    /// its `settle_us` has passed); instead of `script`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scripts: Option<Vec<crate::sensor_bus::ScriptModel>>,
 }
 
 /// The CAN bus.

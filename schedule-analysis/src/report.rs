@@ -605,6 +605,7 @@ fn text_sensor_bus(bus: &crate::sensor_bus::SensorBusResult, markdown: bool, out
         ("wire µs", true),
         ("stretch µs", true),
         ("events", true),
+        ("settle µs", true),
         ("bus time µs", true),
         ("block µs", true),
         ("jitter µs", true),
@@ -618,6 +619,7 @@ fn text_sensor_bus(bus: &crate::sensor_bus::SensorBusResult, markdown: bool, out
             us(script.wire),
             us(script.stretch),
             script.events.to_string(),
+            us(script.settle),
             us(script.bus_time),
             us(script.blocking),
             us(script.jitter),
@@ -833,6 +835,7 @@ fn sensor_buses_json(buses: &[crate::sensor_bus::SensorBusResult]) -> Value {
                     json!({
                         "task": s.task, "priority": s.priority, "wire_us": s.wire.as_us_f64(),
                         "stretch_us": s.stretch.as_us_f64(), "events": s.events,
+                        "settle_us": s.settle.as_us_f64(),
                         "bus_time_us": s.bus_time.as_us_f64(), "blocking_us": s.blocking.as_us_f64(),
                         "jitter_us": s.jitter.as_us_f64(),
                         "bus_wcrt_us": json_time(s.bound.as_ref().ok().map(|r| r.wcrt)),

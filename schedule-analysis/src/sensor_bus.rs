@@ -5,19 +5,25 @@
 //! * **The bus** serves one script at a time, start to end, the most urgent waiting one first (the submitting
 //!   task's priority; equal priorities counted as higher): non-preemptive fixed priority, analysed with the CAN
 //!   bus's machinery ([`can::response_times_into`]: one "frame" per script, its bus time). A script's release
-//!   jitter is its submitting job's response; its blocking the longest lower-priority script.
-//! * **The suspending job** is analysed suspension-oblivious for itself: its CPU plus its script's bus response
-//!   (from submission) plus one more blocking (a lower-priority critical section may start while it is
-//!   suspended), all as if executed. The jobs of the same RTIC task (`job_of`) run one after the other, so for
-//!   them the suspension is execution too.
+//!   jitter is its submitting job's response; its blocking the longest lower-priority script. Its siblings (the
+//!   other scripts of its RTIC task) are left out: they run one after the other, never while it is pending.
+//! * **A job of several scripts** (`scripts`) submits each when the one before it has ended and its settle (the
+//!   job's own wait, `settle_us`) has passed: each script is submitted within its job's response, so each keeps
+//!   the job's response as its jitter.
+//! * **The suspending job** is analysed suspension-oblivious for itself: its CPU plus, per script, its bus
+//!   response (from submission), its settle and one more blocking per resumption (after the settle, after the
+//!   script: a lower-priority critical section may start while it is suspended), all as if executed. The jobs of
+//!   the same RTIC task (`job_of`) run one after the other, so for them the suspension is execution too.
 //! * **Every other task** sees a suspending job as its CPU alone, released with jitter = its response minus its
 //!   CPU (Chen, Nelissen, Huang et al., "Many suspensions, many problems", Real-Time Systems 55, 2019, §5;
 //!   Bletsas et al., "Errata for three papers (2004-05) on fixed-priority scheduling with self-suspensions",
 //!   LITES 5(1), 2018): the sound form of the jitter-based charge (jitter = the suspension alone is not).
-//! * **The engine's interrupt** is a row per script at the engine's priority (`<bus>_engine[<task>]`, added when
-//!   the model is validated), released by the submitting job, costing the script's events times the per-event
+//! * **The engine's interrupt** is a row per script at the engine's priority (`<bus>_engine[<task>]`, or
+//!   `<bus>_engine[<task>#<n>]` for a job of several; added when the model is validated), released by the
+//!   submitting job, costing the script's events times the per-event
 //!   bound with interrupt entry and exit. The master holds SCL low while an event waits for the engine, so each
-//!   event's worst response on the CPU is added to the script's bus time as well.
+//!   event's worst response on the CPU is added to the script's bus time as well. The app's tasks that are the
+//!   engine's handlers ([`EngineModel::handlers`]) have no row of their own: the engine rows are their charge.
 //!
 //! The jitters feed the bus responses, which feed the jobs' responses, which are the jitters: iterated from zero
 //! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason.
@@ -67,6 +73,12 @@ pub struct EngineModel {
     pub per_event_from: PerEventFrom,
     /// Where the figure comes from.
     pub source: String,
+    /// The app's tasks that are this engine's interrupt handlers (`I2C1_EV`, `I2C1_ER`): declared by the RTIC
+    /// app at the engine's `priority`, they need no timing-file row and are charged only through the
+    /// `<bus>_engine[<task>]` rows, one per script (docs/analysis.md, "Self-suspending publishers and the sensor
+    /// buses").
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub handlers: Vec<String>,
 }
 
 /// Where an engine's per-event figure comes from.
@@ -114,6 +126,13 @@ pub struct ScriptModel {
     /// byte raises at most one TXE or RXNE and one BTF, every operation one SB and its end).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub events: Option<u32>,
+    /// The job's own wait before it submits this script, µs (a device's bus-free time since the job's previous
+    /// script on it: the bq27500's 66 µs); the bus is free for other clients meanwhile. Absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle_us: Option<f64>,
+    /// Where `settle_us` comes from (required with it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle_source: Option<String>,
 }
 
 /// A board's validated sensor buses and the scripts its tasks run on them.
@@ -159,6 +178,12 @@ pub struct Script {
     pub events: u32,
     /// The engine row charged per script (model index of the added task).
     pub engine_row: usize,
+    /// Its place in its job's scripts (0: the first; a job of one script has only 0).
+    pub position: usize,
+    /// How many scripts its job runs.
+    pub of: usize,
+    /// The job's wait before submitting it (suspension, not bus time).
+    pub settle: Time,
 }
 
 /// Why a board's sensor buses or a script are refused.
@@ -184,6 +209,21 @@ pub enum SensorBusError {
     NoEvents,
     /// The engine row's name is already a task's.
     RowTaken(String),
+    /// A task or topic states both `script` and `scripts`.
+    ScriptAndScripts,
+    /// `scripts` is an empty list.
+    NoScripts,
+    /// `settle_source` without `settle_us`.
+    SettleSourceAlone,
+    /// An engine handler named twice (on one bus or two).
+    HandlerTwice(String),
+    /// An engine handler the app does not declare.
+    UnknownHandler(String),
+    /// An engine handler whose RTIC priority is not its engine's: (handler, its priority, the engine's).
+    HandlerPriority(String, u32, u32),
+    /// An engine handler that locks a resource a task above the engine also uses: (handler, resource, its
+    /// ceiling). Its critical sections would block that task, and the handler has no row that states them.
+    HandlerLocksAbove(String, String, u32),
 }
 
 impl fmt::Display for SensorBusError {
@@ -210,6 +250,28 @@ impl fmt::Display for SensorBusError {
             SensorBusError::RowTaken(name) => {
                 write!(f, "the engine row `{name}` is already a task's name")
             }
+            SensorBusError::ScriptAndScripts => {
+                f.write_str("state either one `script` or the list `scripts`, not both")
+            }
+            SensorBusError::NoScripts => {
+                f.write_str("`scripts` lists at least one script (or leave it out)")
+            }
+            SensorBusError::SettleSourceAlone => f.write_str("`settle_source` goes with `settle_us`"),
+            SensorBusError::HandlerTwice(name) => {
+                write!(f, "`{name}` is named as an engine handler twice")
+            }
+            SensorBusError::UnknownHandler(name) => {
+                write!(f, "engine handler `{name}` is not a task of the app")
+            }
+            SensorBusError::HandlerLocksAbove(name, resource, ceiling) => write!(
+                f,
+                "engine handler `{name}` locks `{resource}`, whose ceiling {ceiling} is above its engine: its \
+                 critical sections would block a task the analysis does not charge them to"
+            ),
+            SensorBusError::HandlerPriority(name, got, engine) => write!(
+                f,
+                "engine handler `{name}` runs at RTIC priority {got}, its engine at {engine}: they must be one"
+            ),
         }
     }
 }
@@ -246,55 +308,111 @@ pub fn validate_board(
     let mut scripts = Vec::new();
     let mut rows = Vec::new();
     for (t, task) in board.tasks.iter().enumerate() {
-        let Some(script) = &task.script else {
-            continue;
-        };
-        let p = format!("tasks[{t}].script");
-        let checked = validate_script(&buses, script, &p)?;
-        let (Some(spec), Some(bus)) = (tasks.get(t), buses.get(checked.bus)) else {
-            continue;
-        };
-        let name = format!("{}_engine[{}]", bus.name, spec.name);
-        if board.tasks.iter().any(|o| o.name == name) {
-            return Err((p, SensorBusError::RowTaken(name)));
+        let job = job_scripts(
+            task.script.as_ref(),
+            task.scripts.as_deref(),
+            &format!("tasks[{t}]"),
+        )?;
+        let of = job.len();
+        for (position, (p, script)) in job.into_iter().enumerate() {
+            let checked = validate_script(&buses, script, &p)?;
+            let (Some(spec), Some(bus)) = (tasks.get(t), buses.get(checked.bus)) else {
+                continue;
+            };
+            let name = engine_row_name(&bus.name, &spec.name, position, of);
+            if board.tasks.iter().any(|o| o.name == name) {
+                return Err((p, SensorBusError::RowTaken(name)));
+            }
+            rows.push(TaskSpec {
+                name,
+                priority: bus.engine_priority,
+                wcet: bus.per_event.times(u64::from(checked.events)),
+                bcet: Time::ZERO,
+                period: spec.period,
+                deadline: spec.period,
+                deadline_follows_period: true,
+                jitter: Time::ZERO,
+                sections: Vec::new(),
+                blocking: None,
+                kind: TaskKind::Plain,
+                released_by: Some(t),
+                sporadic: spec.sporadic,
+                job_of: Some(format!("{}_engine", bus.name)),
+            });
+            scripts.push(Script {
+                task: t,
+                engine_row: tasks.len() + rows.len() - 1,
+                position,
+                of,
+                ..checked
+            });
         }
-        rows.push(TaskSpec {
-            name,
-            priority: bus.engine_priority,
-            wcet: bus.per_event.times(u64::from(checked.events)),
-            bcet: Time::ZERO,
-            period: spec.period,
-            deadline: spec.period,
-            deadline_follows_period: true,
-            jitter: Time::ZERO,
-            sections: Vec::new(),
-            blocking: None,
-            kind: TaskKind::Plain,
-            released_by: Some(t),
-            sporadic: spec.sporadic,
-            job_of: Some(format!("{}_engine", bus.name)),
-        });
-        scripts.push(Script {
-            task: t,
-            engine_row: tasks.len() + rows.len() - 1,
-            ..checked
-        });
     }
     tasks.extend(rows);
     Ok(BoardBuses { buses, scripts })
 }
 
-/// Checks a timing file's `sensor_buses` and its topics' scripts (`(field, script)`, the field as the file spells
-/// it: `topics.gyroscope.script`) before a model is built from it, so that a refusal names the timing file's field.
+/// The engine row charged for a job's script: `<bus>_engine[<task>]` for a job of one script, and
+/// `<bus>_engine[<task>#<n>]` (`n` from 1, in the job's order) for each script of a job of several.
+pub fn engine_row_name(bus: &str, task: &str, position: usize, of: usize) -> String {
+    if of <= 1 {
+        format!("{bus}_engine[{task}]")
+    } else {
+        format!("{bus}_engine[{task}#{}]", position + 1)
+    }
+}
+
+/// A job's scripts in order, each with its field (`{p}.script`, or `{p}.scripts[k]`): one `script`, or the list
+/// `scripts`, or none; never both.
+pub fn job_scripts<'a>(
+    script: Option<&'a ScriptModel>,
+    scripts: Option<&'a [ScriptModel]>,
+    p: &str,
+) -> Result<Vec<(String, &'a ScriptModel)>, Refusal> {
+    match (script, scripts) {
+        (Some(_), Some(_)) => Err((p.to_string(), SensorBusError::ScriptAndScripts)),
+        (Some(one), None) => Ok(vec![(format!("{p}.script"), one)]),
+        (None, Some([])) => Err((format!("{p}.scripts"), SensorBusError::NoScripts)),
+        (None, Some(list)) => Ok(list
+            .iter()
+            .enumerate()
+            .map(|(k, s)| (format!("{p}.scripts[{k}]"), s))
+            .collect()),
+        (None, None) => Ok(Vec::new()),
+    }
+}
+
+/// Checks a timing file's `sensor_buses` and its topics' scripts (`(field, script, scripts)`, the field as the
+/// file spells it: `topics.gyroscope`) before a model is built from it, so that a refusal names the timing file's
+/// field.
 pub fn check_timing<'a>(
     buses: &[SensorBusModel],
-    scripts: impl Iterator<Item = (String, &'a ScriptModel)>,
+    jobs: impl Iterator<Item = (String, Option<&'a ScriptModel>, Option<&'a [ScriptModel]>)>,
 ) -> Result<(), Refusal> {
     let buses = validate_buses(buses, &OverheadTimes::default())?;
-    for (field, script) in scripts {
-        validate_script(&buses, script, &field)?;
+    for (field, script, scripts) in jobs {
+        for (p, s) in job_scripts(script, scripts, &field)? {
+            validate_script(&buses, s, &p)?;
+        }
     }
     Ok(())
+}
+
+/// The engine handlers the board's buses name (`(bus index, handler)`), each named once.
+pub fn engine_handlers(buses: &[SensorBusModel]) -> Result<Vec<(usize, &str)>, Refusal> {
+    let mut out: Vec<(usize, &str)> = Vec::new();
+    for (b, bus) in buses.iter().enumerate() {
+        for (h, name) in bus.engine.handlers.iter().enumerate() {
+            if out.iter().any(|(_, o)| *o == name.as_str()) {
+                return Err((
+                    format!("sensor_buses[{b}].engine.handlers[{h}]"),
+                    SensorBusError::HandlerTwice(name.clone()),
+                ));
+            }
+            out.push((b, name.as_str()));
+        }
+    }
+    Ok(out)
 }
 
 fn validate_buses(
@@ -391,6 +509,28 @@ fn validate_script(buses: &[SensorBus], script: &ScriptModel, p: &str) -> Result
         ));
     }
     sourced(&script.stretch_source, format!("{p}.stretch_source"))?;
+    let settle = match (script.settle_us, &script.settle_source) {
+        (None, None) => Time::ZERO,
+        (None, Some(_)) => {
+            return Err((
+                format!("{p}.settle_source"),
+                SensorBusError::SettleSourceAlone,
+            ))
+        }
+        (Some(us), source) => {
+            if !(us.is_finite() && (0.0..=Time::LIMIT_US).contains(&us)) {
+                return Err((
+                    format!("{p}.settle_us"),
+                    SensorBusError::Negative(us.to_string()),
+                ));
+            }
+            sourced(
+                source.as_deref().unwrap_or(""),
+                format!("{p}.settle_source"),
+            )?;
+            Time::from_us_up(us)
+        }
+    };
     let events = match (script.events, derived_events) {
         (Some(0), _) => {
             return Err((
@@ -408,6 +548,9 @@ fn validate_script(buses: &[SensorBus], script: &ScriptModel, p: &str) -> Result
         stretch: Time::from_us_up(script.stretch_us),
         events,
         engine_row: usize::MAX,
+        position: 0,
+        of: 1,
+        settle,
     })
 }
 
@@ -437,8 +580,10 @@ pub struct SensorBusResult {
 /// One script's results.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScriptResult {
-    /// The submitting task.
+    /// The submitting task (`<task>#<n>` for the `n`th script of a job of several).
     pub task: String,
+    /// The job's wait before submitting it (suspension of the job, not bus time).
+    pub settle: Time,
     /// Its priority (the script's on the bus).
     pub priority: u32,
     /// Time on the wire.
@@ -565,11 +710,20 @@ pub(crate) fn analyse(
             for (k, s) in scripts.iter().enumerate() {
                 let r = response.get(k).copied().unwrap_or(Time::ZERO);
                 if view_of(s.task) == v {
-                    // Suspension-oblivious: the suspension, and the blocking on resuming, as execution.
+                    // Suspension-oblivious: each script's suspension and its settle, and the blocking on each
+                    // resumption (after the settle's wait and after the script), as execution.
+                    let resumptions = if s.settle > Time::ZERO { 2 } else { 1 };
                     if let Some(c) = view_costs.get_mut(s.task) {
                         *c = c
                             .plus(suspension.get(k).copied().unwrap_or(Time::ZERO))
-                            .plus(blocking.get(s.task).copied().unwrap_or(Time::ZERO));
+                            .plus(s.settle)
+                            .plus(
+                                blocking
+                                    .get(s.task)
+                                    .copied()
+                                    .unwrap_or(Time::ZERO)
+                                    .times(resumptions),
+                            );
                     }
                 } else {
                     // Its CPU, released anywhere up to its response minus its CPU after its activation.
@@ -690,7 +844,10 @@ pub(crate) fn analyse(
 }
 
 /// The scripts on bus `b` analysed as non-preemptive fixed priority: per script (most urgent first) its index,
-/// its response, its bus time and its jitter.
+/// its response, its bus time and its jitter. A script is analysed without its *siblings*, the other scripts of
+/// its RTIC task (`job_of`, or the task itself): a job submits its scripts one after the other, each when the one
+/// before it has ended, and the task runs one job at a time, so no sibling is waiting or on the bus while a script
+/// is pending; a sibling neither interferes with it nor blocks it.
 fn bus_responses(
     board: &crate::model::BoardSystem,
     scripts: &[Script],
@@ -705,52 +862,64 @@ fn bus_responses(
             .and_then(|s| board.tasks.get(s.task))
             .map_or(0, |t| t.priority)
     };
+    let group = |k: usize| {
+        scripts
+            .get(k)
+            .and_then(|s| board.tasks.get(s.task))
+            .map(|t| t.job_of.as_deref().unwrap_or(t.name.as_str()))
+    };
     let mut order: Vec<usize> = (0..scripts.len())
         .filter(|&k| scripts.get(k).is_some_and(|s| s.bus == b))
         .collect();
     order.sort_by_key(|&k| std::cmp::Reverse(priority(k)));
     let event = event.unwrap_or(Time::ZERO);
-    let timings: Vec<MessageTiming> = order
-        .iter()
-        .filter_map(|&k| {
-            let s = scripts.get(k)?;
-            Some(MessageTiming {
-                // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
-                key: u32::MAX - priority(k),
-                frame_time: s
-                    .wire
-                    .plus(s.stretch)
-                    .plus(event.times(u64::from(s.events))),
-                frames: 1,
-                period: board.tasks.get(s.task).map_or(Time::ZERO, |t| t.period),
-                jitter: response.get(k).copied().unwrap_or(Time::ZERO),
-            })
+    let timing = |k: usize| {
+        let s = scripts.get(k)?;
+        Some(MessageTiming {
+            // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
+            key: u32::MAX - priority(k),
+            frame_time: s
+                .wire
+                .plus(s.stretch)
+                .plus(event.times(u64::from(s.events))),
+            frames: 1,
+            period: board.tasks.get(s.task).map_or(Time::ZERO, |t| t.period),
+            jitter: response.get(k).copied().unwrap_or(Time::ZERO),
         })
-        .collect();
-    let mut blockings = vec![Time::ZERO; timings.len()];
-    can::blockings(&timings, &mut blockings);
-    let mut scratch = vec![Counter::default(); timings.len()];
-    let mut out = vec![Err(AnalysisError::NoSuchIndex); timings.len()];
-    // The engine picks the next script when one ends; a script submitted at that very instant is counted as
-    // having been in time (the CAN analysis's bit term, one nanosecond here).
-    can::response_times_into(
-        &timings,
-        &blockings,
-        Time::from_ns(1),
-        limits,
-        &mut scratch,
-        out.as_mut_slice(),
-    );
+    };
     order
         .iter()
-        .zip(&timings)
-        .zip(out.into_iter().zip(blockings))
-        .map(|((&script, t), (result, blocking))| OnBus {
-            script,
-            result,
-            bus_time: t.frame_time,
-            jitter: t.jitter,
-            blocking,
+        .filter_map(|&script| {
+            // The script and every script on the bus that is not its sibling, most urgent first.
+            let subset: Vec<usize> = order
+                .iter()
+                .copied()
+                .filter(|&o| o == script || group(o) != group(script))
+                .collect();
+            let timings: Vec<MessageTiming> = subset.iter().filter_map(|&o| timing(o)).collect();
+            let at = subset.iter().position(|&o| o == script)?;
+            let mut blockings = vec![Time::ZERO; timings.len()];
+            can::blockings(&timings, &mut blockings);
+            let mut scratch = vec![Counter::default(); timings.len()];
+            let mut out = vec![Err(AnalysisError::NoSuchIndex); timings.len()];
+            // The engine picks the next script when one ends; a script submitted at that very instant is counted
+            // as having been in time (the CAN analysis's bit term, one nanosecond here).
+            can::response_times_into(
+                &timings,
+                &blockings,
+                Time::from_ns(1),
+                limits,
+                &mut scratch,
+                out.as_mut_slice(),
+            );
+            let t = timings.get(at)?;
+            Some(OnBus {
+                script,
+                result: out.get(at).copied()?,
+                bus_time: t.frame_time,
+                jitter: t.jitter,
+                blocking: blockings.get(at).copied().unwrap_or(Time::ZERO),
+            })
         })
         .collect()
 }
@@ -885,7 +1054,12 @@ fn bus_result(
             let task = board.tasks.get(s.task)?;
             utilisation += on.bus_time.as_ns() as f64 / task.period.as_ns().max(1) as f64;
             Some(ScriptResult {
-                task: task.name.clone(),
+                task: if s.of > 1 {
+                    format!("{}#{}", task.name, s.position + 1)
+                } else {
+                    task.name.clone()
+                },
+                settle: s.settle,
                 priority: task.priority,
                 wire: s.wire,
                 stretch: s.stretch,

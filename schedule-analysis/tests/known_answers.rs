@@ -272,6 +272,9 @@ fn suspending_board(tasks: Vec<TaskSpec>, scripts: &[(usize, u64)]) -> BoardSyst
                     stretch: Time::ZERO,
                     events: 0,
                     engine_row: usize::MAX,
+                    position: 0,
+                    of: 1,
+                    settle: Time::ZERO,
                 })
                 .collect(),
         },
@@ -450,4 +453,212 @@ fn a_suspending_job_is_blocked_again_when_it_resumes() {
     assert_eq!(result.tasks[0].blocking, Time::from_us(4));
     assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(15)));
     assert!(simulated[0] > 11_000, "one blocking would miss it");
+}
+
+/// A board with `buses` sensor buses whose engines cost nothing, and jobs of several scripts: per script (task,
+/// bus, bus time µs, settle µs), in each task's order.
+fn several_scripts_board(
+    tasks: Vec<TaskSpec>,
+    buses: usize,
+    scripts: &[(usize, usize, u64, u64)],
+) -> BoardSystem {
+    let mut board = suspending_board(tasks, &[]);
+    let bus = board.sensor_buses.buses[0].clone();
+    board.sensor_buses.buses = (0..buses)
+        .map(|b| SensorBus {
+            name: format!("i2c{}", b + 1),
+            ..bus.clone()
+        })
+        .collect();
+    board.sensor_buses.scripts = scripts
+        .iter()
+        .map(|&(task, bus, us, settle)| Script {
+            task,
+            bus,
+            wire: Time::from_us(us),
+            stretch: Time::ZERO,
+            events: 0,
+            engine_row: usize::MAX,
+            position: 0,
+            of: scripts.iter().filter(|s| s.0 == task).count(),
+            settle: Time::from_us(settle),
+        })
+        .collect();
+    for (k, s) in board.sensor_buses.scripts.iter_mut().enumerate() {
+        s.position = scripts[..k].iter().filter(|o| o.0 == s.task).count();
+    }
+    board
+}
+
+/// A script's figures as the hand-worked examples state them: (task, blocking, jitter, bus WCRT, suspension), µs.
+type ScriptRow = (String, u64, u64, u64, u64);
+
+/// A job of two scripts on two buses. τ1 (priority 2, CPU 10, T 1000) runs X on i2c1 (100) then Y on i2c2 (200);
+/// τ2 (priority 1, CPU 10, T 2000) runs Z on i2c2 (300); all µs.
+///
+/// Round 1 (jitters 0). i2c1: X alone, 100. i2c2: Y blocked by Z, 300 + 200 = 500; Z: w = ⌈(w + 0+)/1000⌉·200 =
+/// 200, + 300 = 500. τ1 = 10 + 100 + 500 = 610 (its suspensions, one per script, as execution); τ2 = 10 + 500 +
+/// ⌈R/1000⌉·10 = 520.
+///
+/// Round 2 (jitters 610, 610, 520). X: 610 + 100, suspension 100. Y: 610 + 300 + 200 = 1110 (its level's busy
+/// period, 700 = 300 + ⌈(700 + 610)/1000⌉·200, holds a second instance, whose response 610 + 500 − 1000 + 200 =
+/// 310 is smaller): suspension 500. Z: w = ⌈(w + 610+)/1000⌉·200 = 200, 520 + 200 + 300 = 1020: suspension 500. τ1 = 610; τ2 sees
+/// τ1's 10 µs with jitter 610 − 10 = 600: R = 510 + ⌈(R + 600)/1000⌉·10 = 530.
+///
+/// Round 3 (Z's jitter 530): Z's bus response 1030, every suspension and response unchanged: the fixed point.
+/// The simulator's worst placement found below (Z on i2c2 first, τ1's CPU before its scripts) stays within.
+#[test]
+fn a_job_of_two_scripts_on_two_buses_worked_by_hand() {
+    let board = several_scripts_board(
+        vec![board_task("t1", 2, 10, 1000), board_task("t2", 1, 10, 2000)],
+        2,
+        &[(0, 0, 100, 0), (0, 1, 200, 0), (1, 1, 300, 0)],
+    );
+    let result = analysis::analyse_board(&board, &Limits::default());
+    let us = |t: Time| t.as_ns() / 1000;
+    assert_eq!(board_wcrts_us(&board), vec![Some(610), Some(530)]);
+    let per_script: Vec<Vec<ScriptRow>> = result
+        .sensor_buses
+        .iter()
+        .map(|bus| {
+            bus.scripts
+                .iter()
+                .map(|s| {
+                    (
+                        s.task.clone(),
+                        us(s.blocking),
+                        us(s.jitter),
+                        s.bound.as_ref().map_or(u64::MAX, |r| us(r.wcrt)),
+                        s.suspension.map_or(u64::MAX, us),
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    assert_eq!(
+        per_script,
+        vec![
+            vec![("t1#1".into(), 0, 610, 710, 100)],
+            vec![
+                ("t1#2".into(), 300, 610, 1110, 500),
+                ("t2".into(), 0, 530, 1030, 500)
+            ],
+        ]
+    );
+
+    let cpu = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: None,
+        })
+    };
+    let jobs = vec![
+        SuspendingJob {
+            task: 1,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(0), Piece::ScriptOn(1, 300_000), cpu(10)],
+        },
+        SuspendingJob {
+            task: 0,
+            arrival: 1000,
+            release: 1000,
+            pieces: vec![
+                cpu(10),
+                Piece::ScriptOn(0, 100_000),
+                Piece::ScriptOn(1, 200_000),
+                cpu(0),
+            ],
+        },
+    ];
+    let simulated = sim::suspending_run(&[1, 2], &[1, 0], &[], &jobs);
+    // τ1: CPU 1..11, X 11..111, Y waits for Z until 300, 300..500: 499 after its arrival. τ2: Z 0..300, CPU
+    // 300..310 — τ1's CPU is done by then: 310.
+    assert_eq!(simulated, vec![310_000, 499_000]);
+    assert!(simulated[1] <= 610_000 && simulated[0] <= 530_000);
+}
+
+/// A job with settles: τ1 (priority 2, CPU 10, T 1000) runs two 100 µs scripts on one bus, each after a 66 µs
+/// settle of its own (the bq27500's bus-free time); τ2 (priority 1, CPU 20, all of it holding `r`, ceiling 2;
+/// T 1000) has no script. τ1's blocking: 20.
+///
+/// τ1's two scripts are siblings (one job, one after the other): neither interferes with the other on the bus,
+/// so each one's suspension is its 100 µs. τ1 for itself: C + Σ (S + settle + 2 B) = 10 + 2 × (100 + 66 + 40) =
+/// 422 (a resumption after each settle and after each script, each may meet τ2's section), plus its own
+/// blocking 20: 442. τ2: 20 + ⌈(R + 442 − 10)/1000⌉·10 = 30.
+///
+/// The simulator (τ1's CPU 8 first, then 1 after each settle to submit the script): τ2 takes `r` at 70, in τ1's
+/// first settle (8..74), and holds it until 90; τ1 runs 90..91, its script 91..191, its second settle 191..257;
+/// τ2's next job takes `r` at 250 until 270; τ1 runs 270..271, its script 271..371: response 371 ≤ 442.
+#[test]
+fn a_job_with_settles_worked_by_hand() {
+    let with_section = |mut t: TaskSpec| {
+        t.sections = vec![("r".into(), t.wcet)];
+        t
+    };
+    let mut board = several_scripts_board(
+        vec![
+            board_task("t1", 2, 10, 1000),
+            with_section(board_task("t2", 1, 20, 1000)),
+        ],
+        1,
+        &[(0, 0, 100, 66), (0, 0, 100, 66)],
+    );
+    board.static_ceilings = vec![("r".into(), 2)];
+    let result = analysis::analyse_board(&board, &Limits::default());
+    assert_eq!(result.tasks[0].blocking, Time::from_us(20));
+    assert_eq!(board_wcrts_us(&board), vec![Some(442), Some(30)]);
+    let suspensions: Vec<Option<Time>> = result.sensor_buses[0]
+        .scripts
+        .iter()
+        .map(|s| s.suspension)
+        .collect();
+    assert_eq!(
+        suspensions,
+        vec![Some(Time::from_us(100)), Some(Time::from_us(100))]
+    );
+
+    let locked = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: Some(0),
+        })
+    };
+    let free = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: None,
+        })
+    };
+    let jobs = vec![
+        SuspendingJob {
+            task: 0,
+            arrival: 0,
+            release: 0,
+            pieces: vec![
+                free(8),
+                Piece::Settle(66_000),
+                free(1),
+                Piece::Script(100_000),
+                Piece::Settle(66_000),
+                free(1),
+                Piece::Script(100_000),
+            ],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 70_000,
+            release: 70_000,
+            pieces: vec![locked(20)],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 250_000,
+            release: 250_000,
+            pieces: vec![locked(20)],
+        },
+    ];
+    let simulated = sim::suspending_run(&[2, 1], &[0, 1], &[2], &jobs);
+    assert_eq!(simulated[0], 371_000);
+    assert!(simulated[0] <= 442_000);
 }

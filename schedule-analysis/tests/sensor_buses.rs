@@ -299,3 +299,252 @@ fn the_engine_row_moves_with_its_publisher() {
         schedule_analysis::sensitivity::with_period(&system, &publishers[0], Time::from_us(5000));
     assert_eq!(moved.boards[0].tasks[2].period, Time::from_us(5000));
 }
+
+/// A job of several scripts (`scripts`, in order): one engine row per script, `<bus>_engine[<task>#<n>]`, each at
+/// its bus's engine priority and costing that script's events, released by the job; each script's settle is kept.
+#[test]
+fn a_job_of_several_scripts_has_an_engine_row_per_script() {
+    let mut v = board_json();
+    v["sensor_buses"].as_array_mut().unwrap().push(json!({
+        "name": "i2c2", "bitrate": 100000,
+        "engine": { "priority": 6, "per_event_us": 1.0, "per_event_from": "bound", "source": "a test figure" }
+    }));
+    let script = v["tasks"][0]["script"].take();
+    v["tasks"][0].as_object_mut().unwrap().remove("script");
+    let mut second = json!({ "bus": "i2c2", "bus_time_us": 300.0, "events": 4, "source": "a test figure",
+                             "stretch_us": 0.0, "stretch_source": "never stretches",
+                             "settle_us": 66.0, "settle_source": "the bq27500's bus-free time" });
+    v["tasks"][0]["scripts"] = json!([script.clone(), second.clone()]);
+    let model = Model {
+        name: None,
+        boards: vec![board(v.clone())],
+        can: None,
+    };
+    let system = model.validate().expect("valid");
+    let b = &system.boards[0];
+    let rows: Vec<(&str, u32, Time)> = b.tasks[2..]
+        .iter()
+        .map(|t| (t.name.as_str(), t.priority, t.wcet))
+        .collect();
+    assert_eq!(
+        rows,
+        vec![
+            ("i2c1_engine[publish[floor]#1]", 7, Time::from_us(42)),
+            ("i2c2_engine[publish[floor]#2]", 6, Time::from_us(8)),
+        ]
+    );
+    let s = &b.sensor_buses.scripts;
+    assert_eq!(
+        s.iter()
+            .map(|s| (s.bus, s.position, s.of, s.settle))
+            .collect::<Vec<_>>(),
+        vec![(0, 0, 2, Time::ZERO), (1, 1, 2, Time::from_us(66))]
+    );
+    // An i2c2 event (2 µs at priority 6) may wait for i2c1's engine row (42 µs at 7): its response 44 µs, so the
+    // second script's bus time is 300 + 4 × 44 = 476 µs; i2c1's events still answer in 3 µs (192 µs as above).
+    // The job: 50 + 192 + 476 + its settle 66 + both engine rows (42 + 8, released by the job, above it) = 834 µs.
+    let result = analysis::analyse_board(b, &Limits::default());
+    assert_eq!(
+        result.sensor_buses[1].event_response,
+        Some(Time::from_us(44))
+    );
+    assert_eq!(
+        result.sensor_buses[1].scripts[0].bus_time,
+        Time::from_us(476)
+    );
+    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(834)));
+    assert_eq!(result.sensor_buses[1].scripts[0].task, "publish[floor]#2");
+    assert_eq!(result.sensor_buses[1].scripts[0].settle, Time::from_us(66));
+    let report = Report::build(&system, "t".into(), Vec::new(), Vec::new(), None);
+    let json = report::render(&report, Format::Json);
+    assert!(json.contains("\"settle_us\": 66.0"), "{json}");
+    let text = report::render(&report, Format::Table);
+    assert!(text.contains("settle µs"), "{text}");
+
+    // The form's refusals, each naming its field.
+    let mut both = v.clone();
+    both["tasks"][0]["script"] = script.clone();
+    assert_eq!(
+        refusal(both),
+        ("tasks[0]".into(), SensorBusError::ScriptAndScripts)
+    );
+    let mut empty = v.clone();
+    empty["tasks"][0]["scripts"] = json!([]);
+    assert_eq!(
+        refusal(empty),
+        ("tasks[0].scripts".into(), SensorBusError::NoScripts)
+    );
+    let mut alone = v.clone();
+    alone["tasks"][0]["scripts"][1]
+        .as_object_mut()
+        .unwrap()
+        .remove("settle_us");
+    assert_eq!(
+        refusal(alone),
+        (
+            "tasks[0].scripts[1].settle_source".into(),
+            SensorBusError::SettleSourceAlone
+        )
+    );
+    let mut unsourced = v.clone();
+    unsourced["tasks"][0]["scripts"][1]
+        .as_object_mut()
+        .unwrap()
+        .remove("settle_source");
+    assert_eq!(
+        refusal(unsourced),
+        (
+            "tasks[0].scripts[1].settle_source".into(),
+            SensorBusError::NoSource
+        )
+    );
+    second["settle_us"] = json!(-1.0);
+    let mut negative = v.clone();
+    negative["tasks"][0]["scripts"][1] = second;
+    assert_eq!(
+        refusal(negative),
+        (
+            "tasks[0].scripts[1].settle_us".into(),
+            SensorBusError::Negative("-1".into())
+        )
+    );
+    let mut unknown = v;
+    unknown["tasks"][0]["scripts"][0]["bus"] = json!("i2c3");
+    assert_eq!(
+        refusal(unknown),
+        (
+            "tasks[0].scripts[0].bus".into(),
+            SensorBusError::UnknownBus("i2c3".into())
+        )
+    );
+}
+
+/// The timing file's form: a topic's `scripts` on two buses gives its publisher job one engine row per script, a
+/// fixed task's `script` its own row;
+/// a refusal names the timing file's field (`topics.<topic>.scripts[<k>]…`); the admission table refuses the
+/// scripts. The buses' engine handlers are app tasks without a row of their own, at the engine's priority (here
+/// DiWheelDrive's `can_status`, at 7, stands in for I2C2_EV): a handler at another priority, one the app does not
+/// declare, one the file also budgets, or one that locks a resource a task above the engine uses is refused.
+#[test]
+fn a_timing_file_topic_states_several_scripts_and_the_engine_names_its_handlers() {
+    let root = common::scratch_workspace("sensor-buses-several", None);
+    let models = root.join(scenario::MODELS_DIR);
+    let scenario_path = models.join("floor.scenario.json");
+    std::fs::write(
+        &scenario_path,
+        json!({
+            "name": "floor",
+            "publishers": [{ "topic": "floor-proximity", "priority": "medium", "period_us": 100000 }]
+        })
+        .to_string(),
+    )
+    .unwrap();
+    let build = || scenario::build(&root, &scenario_path, &scenario::timing_files(&root));
+    let timing_path = models.join("diwheeldrive.timing.json");
+    let mut timing: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&timing_path).unwrap()).unwrap();
+    let script = |bus: &str| {
+        json!({ "bus": bus, "bytes": 7, "starts": 2, "source": "a channel select and one read",
+                "stretch_us": 0.0, "stretch_source": "the PCA9544A and VCNL4020 do not stretch (test)" })
+    };
+    timing["sensor_buses"] = json!([
+        { "name": "i2c1", "bitrate": 400000,
+          "engine": { "priority": 7, "per_event_us": 3.0, "per_event_from": "estimate", "source": "test" } },
+        { "name": "i2c2", "bitrate": 400000,
+          "engine": { "priority": 7, "per_event_us": 3.0, "per_event_from": "estimate", "source": "test",
+                      "handlers": ["can_status"] } }
+    ]);
+    timing["topics"]["floor-proximity"]["scripts"] = json!([script("i2c2"), script("i2c1")]);
+    timing["tasks"]["watchdog"]["script"] = script("i2c1");
+    timing["tasks"]
+        .as_object_mut()
+        .unwrap()
+        .remove("can_status");
+    let write = |timing: &serde_json::Value| {
+        std::fs::write(&timing_path, timing.to_string()).unwrap();
+    };
+    write(&timing);
+    let built = build().expect("builds");
+    let system = built.model.validate().expect("valid");
+    let dwd = system
+        .boards
+        .iter()
+        .find(|b| b.name == "diwheeldrive")
+        .unwrap();
+    let names: Vec<&str> = dwd.tasks.iter().map(|t| t.name.as_str()).collect();
+    assert!(!names.contains(&"can_status"), "{names:?}");
+    assert!(names.contains(&"i2c2_engine[publish_medium[floor-proximity]#1]"));
+    assert!(names.contains(&"i2c1_engine[publish_medium[floor-proximity]#2]"));
+    assert!(names.contains(&"i2c1_engine[watchdog]"));
+
+    let refused = schedule_analysis::admission_host::lower_robot(&root).expect_err("refused");
+    assert_eq!(refused.path, "topics.floor-proximity.scripts");
+    let mut fixed_only = timing.clone();
+    fixed_only["topics"]["floor-proximity"]
+        .as_object_mut()
+        .unwrap()
+        .remove("scripts");
+    write(&fixed_only);
+    let refused = schedule_analysis::admission_host::lower_robot(&root).expect_err("refused");
+    assert_eq!(refused.path, "tasks.watchdog.script");
+    fixed_only["tasks"]["watchdog"]["script"]["bus"] = json!("i2c3");
+    write(&fixed_only);
+    let error = build().expect_err("refused");
+    assert_eq!(error.path, "tasks.watchdog.script.bus");
+
+    let mut priority = timing.clone();
+    priority["sensor_buses"][1]["engine"]["priority"] = json!(6);
+    write(&priority);
+    let error = build().expect_err("refused");
+    assert_eq!(error.path, "sensor_buses[1].engine.handlers[0]");
+    assert_eq!(
+        error.problem,
+        SensorBusError::HandlerPriority("can_status".into(), 7, 6).to_string()
+    );
+
+    let mut unknown = timing.clone();
+    unknown["sensor_buses"][1]["engine"]["handlers"] = json!(["I2C2_EV"]);
+    write(&unknown);
+    let error = build().expect_err("refused");
+    assert_eq!(error.path, "sensor_buses[1].engine.handlers[0]");
+    assert_eq!(
+        error.problem,
+        SensorBusError::UnknownHandler("I2C2_EV".into()).to_string()
+    );
+
+    let mut locks = timing.clone();
+    locks["sensor_buses"][1]["engine"]["priority"] = json!(5);
+    locks["sensor_buses"][1]["engine"]["handlers"] = json!(["handle_commands"]);
+    locks["tasks"]
+        .as_object_mut()
+        .unwrap()
+        .remove("handle_commands");
+    write(&locks);
+    let error = build().expect_err("refused");
+    assert_eq!(error.path, "sensor_buses[1].engine.handlers[0]");
+    assert_eq!(
+        error.problem,
+        SensorBusError::HandlerLocksAbove("handle_commands".into(), "tx_queue".into(), 6)
+            .to_string()
+    );
+
+    let mut twice = timing.clone();
+    twice["sensor_buses"][0]["engine"]["handlers"] = json!(["can_status"]);
+    write(&twice);
+    let error = build().expect_err("refused");
+    assert_eq!(error.path, "sensor_buses[1].engine.handlers[0]");
+
+    let mut budgeted = timing.clone();
+    budgeted["tasks"]["can_status"] = json!({ "wcet_us": 4.0, "arrival": { "sporadic_us": 1000 } });
+    write(&budgeted);
+    let error = build().expect_err("refused");
+    assert_eq!(error.path, "tasks.can_status");
+
+    let mut bad = timing;
+    bad["topics"]["floor-proximity"]["scripts"][1]["bus"] = json!("i2c3");
+    write(&bad);
+    let error = build().expect_err("refused");
+    assert_eq!(error.path, "topics.floor-proximity.scripts[1].bus");
+    assert!(error.file.ends_with("diwheeldrive.timing.json"), "{error}");
+    let _ = std::fs::remove_dir_all(&root);
+}

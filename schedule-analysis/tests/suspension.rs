@@ -1,8 +1,9 @@
 //! The self-suspension analysis (`schedule_analysis::sensor_bus`) against the simulator on many random boards:
-//! jobs that run their CPU before and after a script on one sensor bus (non-preemptive, by priority), SRP locks,
-//! release jitter, sporadic gaps, shorter executions and scripts, the jobs of one RTIC task one at a time: no
-//! simulated response exceeds the analysed bound. The engine's interrupt is not simulated (its rows are zero
-//! here: a script raises no events).
+//! jobs that run their CPU before, between and after one to three scripts on two sensor buses (each bus
+//! non-preemptive, by priority), each script after a settle of the job's own at times, SRP locks, release jitter,
+//! sporadic gaps, shorter executions, scripts and settles, the jobs of one RTIC task one at a time: no simulated
+//! response exceeds the analysed bound. The engine's interrupt is not simulated (its rows are zero here: a script
+//! raises no events).
 
 use proptest::prelude::*;
 use schedule_analysis::analysis;
@@ -18,16 +19,25 @@ use sim::{Piece, Segment, SuspendingJob};
 const US: u64 = 1000;
 
 /// A random task before scaling: priority, period (µs), CPU share, jitter (% of the period), joins the previous
-/// task's RTIC task, its script's bus time (% of its period, 0: no script), its critical section (% of its CPU, 0:
-/// none).
-type RawTask = (u32, u64, u64, u64, bool, u64, u64);
+/// task's RTIC task, its scripts' bus time together (% of its period, 0: no script), its critical section (% of its
+/// CPU, 0: none), how many scripts its job runs (1 to 3; the `k`th on bus `(task + k) % 2`), each script's settle
+/// (‰ of its period, 0: none).
+type RawTask = (u32, u64, u64, u64, bool, u64, u64, u64, u64);
+
+/// One script of a random job: its bus, its bus time and its settle (ns).
+#[derive(Clone, Copy)]
+struct RandomScript {
+    bus: usize,
+    length: u64,
+    settle: u64,
+}
 
 struct Set {
     board: BoardSystem,
     /// The RTIC task of each task.
     serial: Vec<usize>,
-    /// Per task: the script's stated bus time (ns), the critical section (ns).
-    script: Vec<Option<u64>>,
+    /// Per task: its job's scripts in order, the critical section (ns).
+    script: Vec<Vec<RandomScript>>,
     section: Vec<Option<u64>>,
     ceiling: u32,
 }
@@ -39,8 +49,10 @@ fn set(raw: &[RawTask], utilisation: u64) -> Set {
     let mut script = Vec::new();
     let mut section = Vec::new();
     let mut scripts = Vec::new();
-    for (i, &(priority, period_us, share, jitter_pct, joins, script_pct, section_pct)) in
-        raw.iter().enumerate()
+    for (
+        i,
+        &(priority, period_us, share, jitter_pct, joins, script_pct, section_pct, count, settle_pm),
+    ) in raw.iter().enumerate()
     {
         let period = period_us * US;
         let wcet = ((period * utilisation * share) / (shares * 1000) / US).max(1) * US;
@@ -51,16 +63,26 @@ fn set(raw: &[RawTask], utilisation: u64) -> Set {
         } else {
             (priority, i)
         };
-        let bus_time = (script_pct > 0).then(|| (period * script_pct / 100 / US).max(1) * US);
+        let count = if script_pct > 0 { count.max(1) } else { 0 };
+        let job: Vec<RandomScript> = (0..count)
+            .map(|k| RandomScript {
+                bus: (i + k as usize) % 2,
+                length: (period * script_pct / 100 / count / US).max(1) * US,
+                settle: period * settle_pm / 1000 / US * US,
+            })
+            .collect();
         let cs = (section_pct > 0).then(|| (wcet * section_pct / 100 / US).max(1) * US);
-        if let Some(b) = bus_time {
+        for (k, s) in job.iter().enumerate() {
             scripts.push(Script {
                 task: i,
-                bus: 0,
-                wire: Time::from_ns(b),
+                bus: s.bus,
+                wire: Time::from_ns(s.length),
                 stretch: Time::ZERO,
                 events: 0,
                 engine_row: usize::MAX,
+                position: k,
+                of: job.len(),
+                settle: Time::from_ns(s.settle),
             });
         }
         tasks.push(TaskSpec {
@@ -82,7 +104,7 @@ fn set(raw: &[RawTask], utilisation: u64) -> Set {
             job_of: Some(format!("rtic{group}")),
         });
         serial.push(group);
-        script.push(bus_time);
+        script.push(job);
         section.push(cs);
     }
     let ceiling = tasks
@@ -99,15 +121,18 @@ fn set(raw: &[RawTask], utilisation: u64) -> Set {
         can_tx_task: None,
         static_ceilings: Vec::new(),
         sensor_buses: BoardBuses {
-            buses: vec![SensorBus {
-                name: "i2c1".into(),
-                bitrate: 400_000,
-                bit_time: Time::from_ns(2500),
-                engine_priority: 10,
-                per_event: Time::ZERO,
-                per_event_from: PerEventFrom::Estimate,
-                source: "not simulated".into(),
-            }],
+            buses: ["i2c1", "i2c2"]
+                .into_iter()
+                .map(|name| SensorBus {
+                    name: name.into(),
+                    bitrate: 400_000,
+                    bit_time: Time::from_ns(2500),
+                    engine_priority: 10,
+                    per_event: Time::ZERO,
+                    per_event_from: PerEventFrom::Estimate,
+                    source: "not simulated".into(),
+                })
+                .collect(),
             scripts,
         },
     };
@@ -155,8 +180,8 @@ fn cpu(length: u64, lock: bool) -> Piece {
     })
 }
 
-/// Random jobs: offsets, periodic or sporadic, release jitter, the CPU split at random around the script (often all
-/// before or all after), shorter CPU and scripts at times, the critical section in either part.
+/// Random jobs: offsets, periodic or sporadic, release jitter, the CPU split at random around the scripts (often all
+/// in one part), shorter CPU, scripts and settles at times, the critical section in any one part.
 fn random_jobs(set: &Set, seed: u64, horizon: u64) -> Vec<SuspendingJob> {
     let mut rng = Lcg(seed);
     let mut jobs = Vec::new();
@@ -175,8 +200,16 @@ fn random_jobs(set: &Set, seed: u64, horizon: u64) -> Vec<SuspendingJob> {
             } else {
                 wcet
             };
-            let before = rng.split(exec);
-            let after = exec - before;
+            // The CPU in one part more than the job has scripts.
+            let job = &set.script[task];
+            let mut parts = Vec::with_capacity(job.len() + 1);
+            let mut left = exec;
+            for _ in 0..job.len() {
+                let part = rng.split(left);
+                parts.push(part);
+                left -= part;
+            }
+            parts.push(left);
             // The critical section at the start of the part that can hold it (clipped to that part).
             let section = set.section[task].unwrap_or(0);
             let piece = |length: u64, with_lock: bool| -> Vec<Piece> {
@@ -190,20 +223,27 @@ fn random_jobs(set: &Set, seed: u64, horizon: u64) -> Vec<SuspendingJob> {
                 }
                 out
             };
-            let lock_before = rng.below(2) == 0;
+            let locked_part = rng.below(parts.len() as u64) as usize;
             let mut pieces = Vec::new();
-            match set.script[task] {
-                Some(bus_time) => {
-                    let actual = if rng.below(4) == 0 {
-                        (rng.below(bus_time / US) + 1) * US
+            for (k, &part) in parts.iter().enumerate() {
+                pieces.extend(piece(part, k == locked_part));
+                let Some(s) = job.get(k) else {
+                    continue;
+                };
+                if s.settle > 0 {
+                    let settle = if rng.below(4) == 0 {
+                        rng.below(s.settle / US + 1) * US
                     } else {
-                        bus_time
+                        s.settle
                     };
-                    pieces.extend(piece(before, lock_before));
-                    pieces.push(Piece::Script(actual));
-                    pieces.extend(piece(after, !lock_before));
+                    pieces.push(Piece::Settle(settle));
                 }
-                None => pieces.extend(piece(exec, true)),
+                let actual = if rng.below(4) == 0 {
+                    (rng.below(s.length / US) + 1) * US
+                } else {
+                    s.length
+                };
+                pieces.push(Piece::ScriptOn(s.bus, actual));
             }
             jobs.push(SuspendingJob {
                 task,
@@ -232,6 +272,8 @@ fn raw_tasks() -> impl Strategy<Value = Vec<RawTask>> {
             prop::bool::weighted(0.25),
             prop_oneof![Just(0u64), 1u64..=12],
             prop_oneof![Just(0u64), 10u64..=100],
+            1u64..=3,
+            prop_oneof![Just(0u64), 1u64..=30],
         ),
         2..=5,
     )
@@ -288,7 +330,7 @@ proptest! {
 #[test]
 fn the_random_sets_are_mostly_bounded() {
     let mut rng = Lcg(0x5eed);
-    let (mut suspending, mut bounded_suspending, mut jobs) = (0, 0, 0);
+    let (mut suspending, mut bounded_suspending, mut jobs, mut several) = (0, 0, 0, 0);
     for case in 0..200 {
         let n = 2 + rng.below(4) as usize;
         let raw: Vec<RawTask> = (0..n)
@@ -309,15 +351,30 @@ fn the_random_sets_are_mostly_bounded() {
                     } else {
                         10 + rng.below(91)
                     },
+                    1 + rng.below(3),
+                    if rng.below(2) == 0 {
+                        0
+                    } else {
+                        1 + rng.below(30)
+                    },
                 )
             })
             .collect();
         let set = set(&raw, 100 + rng.below(501));
         let result = analysis::analyse_board(&set.board, &Limits::default());
-        for s in &set.board.sensor_buses.scripts {
+        for s in set
+            .board
+            .sensor_buses
+            .scripts
+            .iter()
+            .filter(|s| s.position == 0)
+        {
             suspending += 1;
             if result.tasks[s.task].wcrt().is_some() {
                 bounded_suspending += 1;
+                if s.of > 1 {
+                    several += 1;
+                }
             }
         }
         jobs += check(&set, case).expect("within the analysis");
@@ -328,4 +385,5 @@ fn the_random_sets_are_mostly_bounded() {
         "{bounded_suspending} of {suspending} suspending tasks bounded"
     );
     assert!(jobs > 10_000, "{jobs} jobs checked");
+    assert!(several > 50, "{several} bounded jobs of several scripts");
 }

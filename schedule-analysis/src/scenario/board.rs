@@ -115,6 +115,7 @@ fn replay_task(
         sporadic: true,
         job_of: None,
         script: None,
+        scripts: None,
     })
 }
 
@@ -218,11 +219,22 @@ fn build_board(
     }
     built.budgets.push(budgets);
     let overheads = build_overheads(file, timing, firmware, &mut all, built)?;
-    let scripts = timing.topics.iter().filter_map(|(name, t)| {
-        let script = t.script.as_ref()?;
-        Some((format!("topics.{name}.script"), script))
+    let fixed = timing.tasks.iter().map(|(name, t)| {
+        (
+            format!("tasks.{name}"),
+            t.script.as_ref(),
+            t.scripts.as_deref(),
+        )
     });
-    crate::sensor_bus::check_timing(&timing.sensor_buses, scripts)
+    let jobs = timing.topics.iter().map(|(name, t)| {
+        (
+            format!("topics.{name}"),
+            t.script.as_ref(),
+            t.scripts.as_deref(),
+        )
+    });
+    let jobs = fixed.chain(jobs);
+    crate::sensor_bus::check_timing(&timing.sensor_buses, jobs)
         .map_err(|(field, e)| fail(file, field, e.to_string()))?;
     Ok(BoardModel {
         name: timing.board.clone(),
@@ -331,6 +343,7 @@ impl TimerJobs<'_> {
             sporadic: released.sporadic,
             job_of: Some("monotonic".into()),
             script: None,
+            scripts: None,
         });
         Ok(name)
     }
@@ -422,7 +435,8 @@ impl Board<'_> {
                 released_by: None,
                 sporadic,
                 job_of: None,
-                script: None,
+                script: t.script.clone(),
+                scripts: t.scripts.clone(),
             };
             task.released_by = match t.released_by.as_deref() {
                 None => None,
@@ -509,6 +523,7 @@ impl Board<'_> {
                 sporadic: false,
                 job_of: Some(publisher.clone()),
                 script: t.script.clone(),
+                scripts: t.scripts.clone(),
             };
             if timer_jobs.monotonic.is_some() {
                 job.released_by = Some(timer_jobs.add(&job, &p)?);

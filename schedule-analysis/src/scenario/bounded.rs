@@ -724,6 +724,7 @@ mod tests {
             sporadic: false,
             job_of: None,
             script: None,
+            scripts: None,
         }
     }
 

@@ -26,12 +26,81 @@ pub(super) fn declared_tasks(
     timing: &Timing,
     built: &mut Built,
 ) -> Result<Declarations, BuildError> {
+    let handlers = crate::sensor_bus::engine_handlers(&timing.sensor_buses)
+        .map_err(|(field, e)| fail(file, field, e.to_string()))?;
+    for name in timing.tasks.keys() {
+        if let Some((b, _)) = handlers.iter().find(|(_, h)| h == name) {
+            return Err(fail(
+                file,
+                format!("tasks.{name}"),
+                format!(
+                    "`{name}` is sensor_buses[{b}]'s engine handler: it is charged through the `<bus>_engine[<task>]` \
+                     rows, not a budget of its own"
+                ),
+            ));
+        }
+    }
     let Some(app_source) = &timing.app else {
         return from_timing_file(file, timing, built);
     };
     let (app, used) = read_app(root, file, timing, app_source, built)?;
-    let (tasks, idle, ceilings) = from_app(&app);
-    check_drift(file, timing, &app, &used)?;
+    let (mut tasks, idle, ceilings) = from_app(&app);
+    // The buses' engine handlers are the engine's: at its priority, charged per script by its rows, no row here.
+    for &(b, handler) in &handlers {
+        let field = || {
+            let h = timing
+                .sensor_buses
+                .get(b)
+                .and_then(|bus| bus.engine.handlers.iter().position(|o| o == handler))
+                .unwrap_or(0);
+            format!("sensor_buses[{b}].engine.handlers[{h}]")
+        };
+        let engine = timing
+            .sensor_buses
+            .get(b)
+            .map_or(0, |bus| bus.engine.priority);
+        let Some(task) = app.task(handler) else {
+            return Err(fail(
+                file,
+                field(),
+                crate::sensor_bus::SensorBusError::UnknownHandler(handler.to_string()).to_string(),
+            ));
+        };
+        if u32::from(task.priority) != engine {
+            return Err(fail(
+                file,
+                field(),
+                crate::sensor_bus::SensorBusError::HandlerPriority(
+                    handler.to_string(),
+                    u32::from(task.priority),
+                    engine,
+                )
+                .to_string(),
+            ));
+        }
+        // Its critical sections are not modelled (it has no row): it may lock only what no task above it uses.
+        if let Some((resource, ceiling)) = task
+            .shared
+            .iter()
+            .filter(|r| !app.is_lock_free(r))
+            .filter_map(|r| ceilings.get(r).map(|c| (r, *c)))
+            .find(|(_, c)| *c > engine)
+        {
+            return Err(fail(
+                file,
+                field(),
+                crate::sensor_bus::SensorBusError::HandlerLocksAbove(
+                    handler.to_string(),
+                    resource.clone(),
+                    ceiling,
+                )
+                .to_string(),
+            ));
+        }
+        tasks.retain(|t| t.name != handler);
+    }
+    let handler_names: BTreeSet<&str> = handlers.iter().map(|&(_, h)| h).collect();
+    check_drift(file, timing, &app, &used, &handler_names)?;
     built.sources.push(format!(
         "{}: {} tasks read from {used} (#[rtic::app], dispatchers {})",
         timing.board,
@@ -180,11 +249,21 @@ fn from_app(app: &RticApp) -> Declarations {
     (tasks, idle, ceilings)
 }
 
-/// Drift checks: every declared task budgeted, every budget declared, nothing the source decides overridden.
-fn check_drift(file: &str, timing: &Timing, app: &RticApp, used: &str) -> Result<(), BuildError> {
+/// Drift checks: every declared task budgeted (or one of the buses' engine handlers), every budget declared,
+/// nothing the source decides overridden.
+fn check_drift(
+    file: &str,
+    timing: &Timing,
+    app: &RticApp,
+    used: &str,
+    handlers: &BTreeSet<&str>,
+) -> Result<(), BuildError> {
     let publishers = publisher_tasks(timing);
     for t in &app.tasks {
-        if !timing.tasks.contains_key(&t.name) && !publishers.contains(t.name.as_str()) {
+        if !timing.tasks.contains_key(&t.name)
+            && !publishers.contains(t.name.as_str())
+            && !handlers.contains(t.name.as_str())
+        {
             return Err(fail(
                 file,
                 "tasks",

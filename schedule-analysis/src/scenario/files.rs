@@ -360,6 +360,13 @@ pub struct TimingTask {
     /// (docs/analysis.md, "The transmit interrupt's parts"): a publisher's frames per sample come from its topic.
     #[serde(default)]
     pub queued_by: Option<BTreeMap<String, QueuedBy>>,
+    /// The script each job runs on one of the board's `sensor_buses` (PowerManagement's `power_monitor`), as a
+    /// topic's; `wcet_us` is then the job's CPU alone.
+    #[serde(default)]
+    pub script: Option<crate::sensor_bus::ScriptModel>,
+    /// A job of several scripts, in the order it runs them; instead of `script`.
+    #[serde(default)]
+    pub scripts: Option<Vec<crate::sensor_bus::ScriptModel>>,
 }
 
 /// What one task's jobs put in the transmit queue ([`TimingTask::queued_by`]).
@@ -396,6 +403,10 @@ pub struct TopicTiming {
     /// ([`crate::sensor_bus`]); `wcet_us` is then the sample's CPU alone.
     #[serde(default)]
     pub script: Option<crate::sensor_bus::ScriptModel>,
+    /// A sample of several scripts, in the order the sample runs them (each submitted when the one before it
+    /// ends and its `settle_us` has passed); instead of `script`.
+    #[serde(default)]
+    pub scripts: Option<Vec<crate::sensor_bus::ScriptModel>>,
 }
 
 /// A scenario: what runs on the robot.

@@ -98,6 +98,7 @@ pub(super) fn transmit_jobs(
             released_by: Some(job),
             job_of: Some(tx_name.to_string()),
             script: None,
+            scripts: None,
             ..tx.clone()
         });
     }

@@ -329,13 +329,17 @@ fn can_simulator_never_preempts_a_frame() {
     assert_eq!(can_run(&messages, &activations), vec![70, 35]);
 }
 
-/// A piece of a job that may suspend: CPU (with or without a lock), or a script on the sensor bus, during which
-/// the job is suspended.
+/// A piece of a job that may suspend: CPU (with or without a lock), a script on a sensor bus, during which the job
+/// is suspended, or a wait of its own (a settle time) during which it is suspended and the buses are free.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Piece {
     Cpu(Segment),
-    /// The script's time on the bus, ns.
+    /// The script's time on bus 0, ns.
     Script(u64),
+    /// A script on the given bus, its time on it, ns.
+    ScriptOn(usize, u64),
+    /// The job's own wait, ns.
+    Settle(u64),
 }
 
 /// One job of a board whose jobs may suspend on the sensor bus.
@@ -350,11 +354,11 @@ pub struct SuspendingJob {
 }
 
 /// Replays `jobs` on a board (as [`board_run`]: preemption above the running priority, SRP locks, one job of a
-/// task at a time) whose jobs may suspend on one sensor bus. The bus serves one script at a time, start to end;
+/// task at a time) whose jobs may suspend on sensor buses. Each bus serves one script at a time, start to end;
 /// when it falls idle it starts the waiting script of the most urgent job (its task's priority; equal priorities
-/// in submission order). A job is suspended from its script's submission to its end, then ready again at its
-/// priority; it keeps its RTIC task (`serial[task]`) busy all the while, so the task's next job waits for it.
-/// Returns every job's response (finish − arrival) in the order of `jobs`.
+/// in submission order). A job is suspended from its script's submission to its end, and for its settles, then
+/// ready again at its priority; it keeps its RTIC task (`serial[task]`) busy all the while, so the task's next job
+/// waits for it. Returns every job's response (finish − arrival) in the order of `jobs`.
 pub fn suspending_run(
     priorities: &[u32],
     serial: &[usize],
@@ -376,9 +380,20 @@ pub fn suspending_run(
     // Jobs whose script has ended, waiting to run again: (job, since).
     let mut resumed: Vec<(usize, u64)> = Vec::new();
     let mut stack: Vec<Active> = Vec::new();
-    // Scripts waiting for the bus: (job, submitted, length); the one on the bus: (job, end).
-    let mut waiting: Vec<(usize, u64, u64)> = Vec::new();
-    let mut on_bus: Option<(usize, u64)> = None;
+    // Scripts waiting for a bus: (job, submitted, bus, length); the one on each bus: (job, end).
+    let buses = jobs
+        .iter()
+        .flat_map(|j| j.pieces.iter())
+        .filter_map(|p| match p {
+            Piece::ScriptOn(b, _) => Some(b + 1),
+            _ => None,
+        })
+        .max()
+        .unwrap_or(1);
+    let mut waiting: Vec<(usize, u64, usize, u64)> = Vec::new();
+    let mut on_bus: Vec<Option<(usize, u64)>> = vec![None; buses];
+    // Jobs in a settle: (job, until).
+    let mut sleeping: Vec<(usize, u64)> = Vec::new();
     let mut next_release = 0usize;
     let mut t = 0u64;
     let mut finished = 0usize;
@@ -406,26 +421,44 @@ pub fn suspending_run(
             queues[serial[jobs[j].task]].push_back(j);
             next_release += 1;
         }
-        if let Some((j, end)) = on_bus {
-            if end <= t {
-                on_bus = None;
+        for slot in on_bus.iter_mut() {
+            if let Some((j, end)) = *slot {
+                if end <= t {
+                    *slot = None;
+                    piece[j] += 1;
+                    resumed.push((j, t));
+                }
+            }
+        }
+        for k in (0..sleeping.len()).rev() {
+            let (j, until) = sleeping[k];
+            if until <= t {
+                sleeping.remove(k);
                 piece[j] += 1;
                 resumed.push((j, t));
             }
         }
-        if on_bus.is_none() {
+        let mut started = false;
+        for (b, slot) in on_bus.iter_mut().enumerate() {
+            if slot.is_some() {
+                continue;
+            }
             let pick = waiting
                 .iter()
                 .enumerate()
-                .min_by_key(|(_, &(j, submitted, _))| {
+                .filter(|(_, w)| w.2 == b)
+                .min_by_key(|(_, &(j, submitted, _, _))| {
                     (std::cmp::Reverse(priority_of(j)), submitted, j)
                 })
                 .map(|(i, _)| i);
             if let Some(i) = pick {
-                let (j, _, length) = waiting.remove(i);
-                on_bus = Some((j, t + length));
-                continue;
+                let (j, _, _, length) = waiting.remove(i);
+                *slot = Some((j, t + length));
+                started = true;
             }
+        }
+        if started {
+            continue;
         }
         // The running piece has ended: the job's next piece runs, suspends it, or it is done.
         if let Some(top) = stack.last().copied() {
@@ -442,7 +475,17 @@ pub fn suspending_run(
             let (j, _) = resumed[k];
             match jobs[j].pieces.get(piece[j]) {
                 Some(Piece::Script(length)) => {
-                    waiting.push((j, t, *length));
+                    waiting.push((j, t, 0, *length));
+                    resumed.remove(k);
+                    settled = true;
+                }
+                Some(Piece::ScriptOn(bus, length)) => {
+                    waiting.push((j, t, *bus, *length));
+                    resumed.remove(k);
+                    settled = true;
+                }
+                Some(Piece::Settle(length)) => {
+                    sleeping.push((j, t + length));
                     resumed.remove(k);
                     settled = true;
                 }
@@ -496,13 +539,12 @@ pub fn suspending_run(
                 continue;
             }
         }
-        let next_event = [
-            order.get(next_release).map(|&j| jobs[j].release),
-            on_bus.map(|(_, end)| end),
-        ]
-        .into_iter()
-        .flatten()
-        .min();
+        let next_event = [order.get(next_release).map(|&j| jobs[j].release)]
+            .into_iter()
+            .chain(on_bus.iter().map(|slot| slot.map(|(_, end)| end)))
+            .chain(sleeping.iter().map(|&(_, until)| Some(until)))
+            .flatten()
+            .min();
         let Some(top) = stack.last_mut() else {
             match next_event {
                 Some(at) => t = at,
@@ -577,4 +619,30 @@ fn suspending_simulator_lets_lower_tasks_run_and_keeps_the_rtic_task_busy() {
         suspending_run(&[2, 1, 2], &[0, 1, 0], &[], &jobs),
         vec![9, 6, 9]
     );
+}
+
+#[test]
+fn suspending_simulator_runs_two_buses_at_once_and_frees_them_in_a_settle() {
+    // Task 0 (prio 2): a 10 ns script on bus 0, a settle of 4, a 6 ns script on bus 1. Task 1 (prio 1): a 7 ns
+    // script on bus 1 at 0, then a 3 ns script on bus 0 at once. Bus 1: task 1's 0..7, task 0's 14..20 (the settle
+    // 10..14). Bus 0: task 0's 0..10, task 1's 10..13 (submitted at 7, the bus busy until 10).
+    let jobs = vec![
+        SuspendingJob {
+            task: 0,
+            arrival: 0,
+            release: 0,
+            pieces: vec![
+                Piece::ScriptOn(0, 10),
+                Piece::Settle(4),
+                Piece::ScriptOn(1, 6),
+            ],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 0,
+            release: 0,
+            pieces: vec![Piece::ScriptOn(1, 7), Piece::ScriptOn(0, 3)],
+        },
+    ];
+    assert_eq!(suspending_run(&[2, 1], &[0, 1], &[], &jobs), vec![20, 13]);
 }
