@@ -588,7 +588,7 @@ fn text_sensor_bus(bus: &crate::sensor_bus::SensorBusResult, markdown: bool, out
         3,
         &format!(
             "Sensor bus {} — {} kbit/s, bus utilisation {}; engine interrupt at priority {}, {} µs per event \
-             (with entry and exit; {}: {}), an event's response {} µs",
+             (with entry and exit; {}: {}){}{}, an event's response {} µs",
             bus.name,
             us_f(f64::from(bus.bitrate) / 1000.0),
             percent(bus.utilisation),
@@ -596,6 +596,12 @@ fn text_sensor_bus(bus: &crate::sensor_bus::SensorBusResult, markdown: bool, out
             us(bus.per_event),
             bus.per_event_from.label(),
             bus.source,
+            engine_part(", ", "per script", bus.per_script.as_ref()),
+            engine_part(
+                ", ",
+                "condition wait per START",
+                bus.condition_wait.as_ref()
+            ),
             opt(bus.event_response),
         ),
     );
@@ -844,15 +850,40 @@ fn sensor_buses_json(buses: &[crate::sensor_bus::SensorBusResult]) -> Value {
                     })
                 })
                 .collect();
-            json!({
+            let mut out = json!({
                 "name": bus.name, "bitrate": bus.bitrate, "utilisation": bus.utilisation,
                 "engine_priority": bus.engine_priority, "per_event_us": bus.per_event.as_us_f64(),
                 "per_event_from": bus.per_event_from.label(), "per_event_source": bus.source,
                 "event_response_us": json_time(bus.event_response), "scripts": scripts,
-            })
+            });
+            // The parts beside the per-event one, only where the engine states them.
+            for (key, part) in [("per_script", &bus.per_script), ("condition_wait", &bus.condition_wait)] {
+                if let (Some(part), Some(map)) = (part, out.as_object_mut()) {
+                    map.insert(key.into(), json_part(part));
+                }
+            }
+            out
         })
         .collect();
     Value::Array(buses)
+}
+
+/// A stated part of a sensor bus's engine charge as the heading says it (`, 12.74 µs per script (machine-code
+/// bound: …)`), or nothing.
+fn engine_part(lead: &str, what: &str, part: Option<&crate::sensor_bus::Part>) -> String {
+    part.map_or(String::new(), |p| {
+        format!(
+            "{lead}{} µs {what} ({}: {})",
+            us(p.time),
+            p.from.label(),
+            p.source
+        )
+    })
+}
+
+/// A stated part of a sensor bus's engine charge in the JSON report.
+fn json_part(p: &crate::sensor_bus::Part) -> Value {
+    json!({ "us": p.time.as_us_f64(), "from": p.from.label(), "source": p.source })
 }
 
 fn to_json(report: &Report) -> Value {

@@ -73,12 +73,34 @@ pub struct EngineModel {
     pub per_event_from: PerEventFrom,
     /// Where the figure comes from.
     pub source: String,
+    /// The per-script part, charged once per script: a script's end (its result stored, the next script
+    /// started) and its client's wake, inside the event that ends it. Absent: 0 (the per-event figure covers it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub per_script: Option<EnginePart>,
+    /// The condition wait (the handler's wait for the block's previous STOP or START to clear), charged once per
+    /// START condition of a script — an operation's start and a repeated START, the events that take it (the
+    /// script's `starts`) — and not in `per_event_us`. Absent: the per-event figure holds whatever wait there is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub condition_wait: Option<EnginePart>,
     /// The app's tasks that are this engine's interrupt handlers (`I2C1_EV`, `I2C1_ER`): declared by the RTIC
     /// app at the engine's `priority`, they need no timing-file row and are charged only through the
     /// `<bus>_engine[<task>]` rows, one per script (docs/analysis.md, "Self-suspending publishers and the sensor
     /// buses").
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub handlers: Vec<String>,
+}
+
+/// One part of the engine's charge beside the per-event one (docs/analysis.md, "Self-suspending publishers and the
+/// sensor buses"): its figure, whether an estimate or the machine code's bound, and its source.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct EnginePart {
+    /// Its time, µs (≥ 0).
+    pub us: f64,
+    /// Whether `us` is an estimate or the machine code's bound.
+    pub from: PerEventFrom,
+    /// Where the figure comes from.
+    pub source: String,
 }
 
 /// Where an engine's per-event figure comes from.
@@ -110,7 +132,9 @@ pub struct ScriptModel {
     /// Bytes on the wire, address bytes included (each [`BITS_PER_BYTE`] bit times); or `bus_time_us`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bytes: Option<u32>,
-    /// With `bytes`: its (repeated) START conditions, one per operation (default 1).
+    /// Its START conditions: an operation's start and each repeated START (with `bytes` default 1; each adds
+    /// [`BITS_PER_START`] bit times). On an engine with a `condition_wait`, the events that take the wait; a script
+    /// given by `bus_time_us` then states them (its wire time is the stated one), and otherwise it cannot.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub starts: Option<u32>,
     /// The script's time on the wire, µs; or `bytes`.
@@ -161,6 +185,38 @@ pub struct SensorBus {
     pub per_event_from: PerEventFrom,
     /// Its source.
     pub source: String,
+    /// The per-script part (a script's end and its client's wake), charged once per script, if stated.
+    pub per_script: Option<Part>,
+    /// The condition wait, charged once per START condition of a script, if stated as a part of its own (then a
+    /// script counts its STARTs).
+    pub condition_wait: Option<Part>,
+}
+
+/// A validated part of the engine's charge.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Part {
+    /// Its time, rounded up.
+    pub time: Time,
+    /// Whether it is an estimate or the machine code's bound.
+    pub from: PerEventFrom,
+    /// Its source.
+    pub source: String,
+}
+
+/// A part's time, 0 if not stated.
+fn part_time(part: Option<&Part>) -> Time {
+    part.map_or(Time::ZERO, |p| p.time)
+}
+
+impl SensorBus {
+    /// The engine's charge for one script: `events × per_event` (each with the interrupt's entry and exit), plus
+    /// the per-script part once, plus the condition wait once per START condition.
+    pub fn script_charge(&self, script: &Script) -> Time {
+        self.per_event
+            .times(u64::from(script.events))
+            .plus(part_time(self.per_script.as_ref()))
+            .plus(part_time(self.condition_wait.as_ref()).times(u64::from(script.starts)))
+    }
 }
 
 /// A validated script.
@@ -176,6 +232,10 @@ pub struct Script {
     pub stretch: Time,
     /// Engine events one script raises.
     pub events: u32,
+    /// Its START conditions (operation starts and repeated STARTs): the events that take the engine's condition
+    /// wait. From `starts` (with `bytes`, default 1); 0 for a script by `bus_time_us` on an engine without a
+    /// stated wait.
+    pub starts: u32,
     /// The engine row charged per script (model index of the added task).
     pub engine_row: usize,
     /// Its place in its job's scripts (0: the first; a job of one script has only 0).
@@ -203,8 +263,10 @@ pub enum SensorBusError {
     NoSource,
     /// A script with neither `bytes` nor `bus_time_us`, or with both.
     OneFigure,
-    /// `starts` without `bytes`.
+    /// `starts` without `bytes`, on an engine that states no condition wait.
     StartsWithoutBytes,
+    /// A script by `bus_time_us` on an engine with a condition wait, without its `starts`.
+    NoStarts,
     /// A script given as `bus_time_us` must state its `events`.
     NoEvents,
     /// The engine row's name is already a task's.
@@ -243,7 +305,12 @@ impl fmt::Display for SensorBusError {
             SensorBusError::OneFigure => {
                 f.write_str("a script states exactly one of `bytes` and `bus_time_us`")
             }
-            SensorBusError::StartsWithoutBytes => f.write_str("`starts` goes with `bytes`"),
+            SensorBusError::StartsWithoutBytes => f.write_str(
+                "`starts` goes with `bytes`, or with an engine that states its `condition_wait`",
+            ),
+            SensorBusError::NoStarts => f.write_str(
+                "a script given by `bus_time_us` on an engine with a `condition_wait` states its `starts`",
+            ),
             SensorBusError::NoEvents => {
                 f.write_str("a script given by `bus_time_us` states its engine `events`")
             }
@@ -289,6 +356,28 @@ fn positive(value: f64, field: String) -> Result<(), Refusal> {
     }
 }
 
+fn at_least_zero(value: f64, field: String) -> Result<(), Refusal> {
+    if value.is_finite() && (0.0..=Time::LIMIT_US).contains(&value) {
+        Ok(())
+    } else {
+        Err((field, SensorBusError::Negative(value.to_string())))
+    }
+}
+
+/// A stated part of the engine's charge: its figure (≥ 0) and its source.
+fn engine_part(part: Option<&EnginePart>, field: String) -> Result<Option<Part>, Refusal> {
+    let Some(part) = part else {
+        return Ok(None);
+    };
+    at_least_zero(part.us, format!("{field}.us"))?;
+    sourced(&part.source, format!("{field}.source"))?;
+    Ok(Some(Part {
+        time: Time::from_us_up(part.us),
+        from: part.from,
+        source: part.source.clone(),
+    }))
+}
+
 fn sourced(source: &str, field: String) -> Result<(), Refusal> {
     if source.trim().is_empty() {
         Err((field, SensorBusError::NoSource))
@@ -326,7 +415,7 @@ pub fn validate_board(
             rows.push(TaskSpec {
                 name,
                 priority: bus.engine_priority,
-                wcet: bus.per_event.times(u64::from(checked.events)),
+                wcet: bus.script_charge(&checked),
                 bcet: Time::ZERO,
                 period: spec.period,
                 deadline: spec.period,
@@ -442,6 +531,14 @@ fn validate_buses(
         }
         positive(bus.engine.per_event_us, format!("{p}.engine.per_event_us"))?;
         sourced(&bus.engine.source, format!("{p}.engine.source"))?;
+        let per_script = engine_part(
+            bus.engine.per_script.as_ref(),
+            format!("{p}.engine.per_script"),
+        )?;
+        let condition_wait = engine_part(
+            bus.engine.condition_wait.as_ref(),
+            format!("{p}.engine.condition_wait"),
+        )?;
         buses.push(SensorBus {
             name: bus.name.clone(),
             bitrate: bus.bitrate,
@@ -452,6 +549,8 @@ fn validate_buses(
                 .plus(overheads.isr_exit),
             per_event_from: bus.engine.per_event_from,
             source: bus.engine.source.clone(),
+            per_script,
+            condition_wait,
         });
     }
     Ok(buses)
@@ -469,7 +568,7 @@ fn validate_script(buses: &[SensorBus], script: &ScriptModel, p: &str) -> Result
                 SensorBusError::UnknownBus(script.bus.clone()),
             )
         })?;
-    let (wire, derived_events) = match (script.bytes, script.bus_time_us) {
+    let (wire, derived_events, starts) = match (script.bytes, script.bus_time_us) {
         (Some(bytes), None) => {
             if bytes == 0 {
                 return Err((
@@ -484,17 +583,28 @@ fn validate_script(buses: &[SensorBus], script: &ScriptModel, p: &str) -> Result
                     SensorBusError::NotPositive("0".into()),
                 ));
             }
-            let (bytes, starts) = (u64::from(bytes), u64::from(starts));
-            let bits = BITS_PER_BYTE * bytes + BITS_PER_START * starts;
-            let events = u32::try_from(2 * bytes + 2 * starts).unwrap_or(u32::MAX);
-            (bus.bit_time.times(bits), Some(events))
+            let (bytes, wide_starts) = (u64::from(bytes), u64::from(starts));
+            let bits = BITS_PER_BYTE * bytes + BITS_PER_START * wide_starts;
+            let events = u32::try_from(2 * bytes + 2 * wide_starts).unwrap_or(u32::MAX);
+            (bus.bit_time.times(bits), Some(events), starts)
         }
         (None, Some(us)) => {
-            if script.starts.is_some() {
-                return Err((format!("{p}.starts"), SensorBusError::StartsWithoutBytes));
-            }
+            let starts = match (script.starts, bus.condition_wait.is_some()) {
+                (Some(_), false) => {
+                    return Err((format!("{p}.starts"), SensorBusError::StartsWithoutBytes))
+                }
+                (None, true) => return Err((format!("{p}.starts"), SensorBusError::NoStarts)),
+                (Some(0), true) => {
+                    return Err((
+                        format!("{p}.starts"),
+                        SensorBusError::NotPositive("0".into()),
+                    ))
+                }
+                (Some(n), true) => n,
+                (None, false) => 0,
+            };
             positive(us, format!("{p}.bus_time_us"))?;
-            (Time::from_us_up(us), None)
+            (Time::from_us_up(us), None, starts)
         }
         _ => return Err((p.to_string(), SensorBusError::OneFigure)),
     };
@@ -547,6 +657,7 @@ fn validate_script(buses: &[SensorBus], script: &ScriptModel, p: &str) -> Result
         wire,
         stretch: Time::from_us_up(script.stretch_us),
         events,
+        starts,
         engine_row: usize::MAX,
         position: 0,
         of: 1,
@@ -569,7 +680,12 @@ pub struct SensorBusResult {
     pub per_event_from: PerEventFrom,
     /// Its source.
     pub source: String,
-    /// One engine event's worst response on the CPU (what an event may hold SCL low), if bounded.
+    /// The per-script part, if stated.
+    pub per_script: Option<Part>,
+    /// The condition wait as a part of its own (once per START condition), if stated.
+    pub condition_wait: Option<Part>,
+    /// One engine event's worst response on the CPU (what an event may hold SCL low), if bounded: an event with the
+    /// per-event part alone.
     pub event_response: Option<Time>,
     /// Σ bus time / period of its scripts.
     pub utilisation: f64,
@@ -602,6 +718,33 @@ pub struct ScriptResult {
     pub bound: Bound,
     /// The submitting job's suspension: the bus response from the actual submission (`bound` minus `jitter`).
     pub suspension: Option<Time>,
+}
+
+/// A bus's engine events' worst responses on the CPU, by what the event carries beside the per-event part.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct EventResponses {
+    /// An event with the per-event part alone.
+    plain: Time,
+    /// An event that takes the condition wait.
+    waiting: Time,
+    /// The event that ends a script: the per-script part and, if the engine states one, the condition wait.
+    ending: Time,
+}
+
+impl EventResponses {
+    /// What a script's events hold SCL on the CPU: its ending event, one that takes the condition wait per
+    /// further START (as many as its other events allow), the rest plain. The ending event is charged the wait as
+    /// well, so whichever event takes which wait, each event is charged at least its cost.
+    fn of(&self, script: &Script) -> Time {
+        if script.events == 0 {
+            return Time::ZERO;
+        }
+        let others = u64::from(script.events.saturating_sub(1));
+        let waiting = u64::from(script.starts).min(others);
+        self.ending
+            .plus(self.waiting.times(waiting))
+            .plus(self.plain.times(others - waiting))
+    }
 }
 
 /// One script as its bus's analysis found it.
@@ -669,7 +812,7 @@ pub(crate) fn analyse(
 
     // The iteration's state: each suspending job's response (its script's jitter), each bus's event response.
     let mut response = vec![Time::ZERO; scripts.len()];
-    let mut event = vec![Time::ZERO; buses.len()];
+    let mut event = vec![EventResponses::default(); buses.len()];
     let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
     let mut jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
     let mut on_bus: Vec<Vec<OnBus>> = vec![Vec::new(); buses.len()];
@@ -783,13 +926,26 @@ pub(crate) fn analyse(
                     .map(|s| s.engine_row)
                     .collect();
                 let others = (0..n).filter(|i| !own_rows.contains(i));
-                let tasks = others.map(|i| TaskTiming {
-                    priority: priorities.get(i).copied().unwrap_or(0),
-                    wcet: view_costs.get(i).copied().unwrap_or(Time::ZERO),
-                    period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
-                    jitter: view_jitters.get(i).copied().unwrap_or(Time::ZERO),
+                let tasks: Vec<TaskTiming> = others
+                    .map(|i| TaskTiming {
+                        priority: priorities.get(i).copied().unwrap_or(0),
+                        wcet: view_costs.get(i).copied().unwrap_or(Time::ZERO),
+                        period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
+                        jitter: view_jitters.get(i).copied().unwrap_or(Time::ZERO),
+                    })
+                    .collect();
+                let wait = part_time(bus.condition_wait.as_ref());
+                let respond = |extra: Time| {
+                    event_response(bus, bus.per_event.plus(extra), &tasks, &sections, limits)
+                };
+                let responses = respond(Time::ZERO).and_then(|plain| {
+                    Ok(EventResponses {
+                        plain,
+                        waiting: respond(wait)?,
+                        ending: respond(part_time(bus.per_script.as_ref()).plus(wait))?,
+                    })
                 });
-                match event_response(bus, tasks, &sections, limits) {
+                match responses {
                     Ok(r) => {
                         if let Some(slot) = next_event.get_mut(b) {
                             *slot = r;
@@ -835,7 +991,7 @@ pub(crate) fn analyse(
             let list = on_bus.get(b).map(Vec::as_slice).unwrap_or(&[]);
             let event_response = match &failure {
                 Some(Failure::Event(e, _)) if *e == b => None,
-                _ => event.get(b).copied(),
+                _ => event.get(b).map(|e| e.plain),
             };
             bus_result(board, scripts, bus, list, event_response)
         })
@@ -853,7 +1009,7 @@ fn bus_responses(
     scripts: &[Script],
     b: usize,
     response: &[Time],
-    event: Option<Time>,
+    event: Option<EventResponses>,
     limits: &Limits,
 ) -> Vec<OnBus> {
     let priority = |k: usize| {
@@ -872,16 +1028,13 @@ fn bus_responses(
         .filter(|&k| scripts.get(k).is_some_and(|s| s.bus == b))
         .collect();
     order.sort_by_key(|&k| std::cmp::Reverse(priority(k)));
-    let event = event.unwrap_or(Time::ZERO);
+    let event = event.unwrap_or_default();
     let timing = |k: usize| {
         let s = scripts.get(k)?;
         Some(MessageTiming {
             // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
             key: u32::MAX - priority(k),
-            frame_time: s
-                .wire
-                .plus(s.stretch)
-                .plus(event.times(u64::from(s.events))),
+            frame_time: s.wire.plus(s.stretch).plus(event.of(s)),
             frames: 1,
             period: board.tasks.get(s.task).map_or(Time::ZERO, |t| t.period),
             jitter: response.get(k).copied().unwrap_or(Time::ZERO),
@@ -924,23 +1077,26 @@ fn bus_responses(
         .collect()
 }
 
-/// One engine event's worst response on the CPU: its cost at the engine's priority, interfered with by every
+/// One engine event's worst response on the CPU: its `cost` at the engine's priority, interfered with by every
 /// other task of at least that priority (`tasks`: not the bus's own engine rows, which are these very events),
 /// blocked by SRP as a task of that priority. One instance: the block waits for the engine at each event, and the
 /// bus runs one script at a time, so the engine's events never overlap.
 fn event_response(
     bus: &SensorBus,
-    tasks: impl Iterator<Item = TaskTiming>,
+    cost: Time,
+    tasks: &[TaskTiming],
     sections: &[board::CriticalSection],
     limits: &Limits,
 ) -> Result<Time, AnalysisError> {
     let mut timings: Vec<TaskTiming> = tasks
+        .iter()
         .filter(|t| t.priority >= bus.engine_priority)
+        .copied()
         .collect();
     timings.sort_by_key(|t| std::cmp::Reverse(t.priority));
     timings.push(TaskTiming {
         priority: bus.engine_priority,
-        wcet: bus.per_event,
+        wcet: cost,
         period: limits.horizon,
         jitter: Time::ZERO,
     });
@@ -1079,6 +1235,8 @@ fn bus_result(
         per_event: bus.per_event,
         per_event_from: bus.per_event_from,
         source: bus.source.clone(),
+        per_script: bus.per_script.clone(),
+        condition_wait: bus.condition_wait.clone(),
         event_response,
         utilisation,
         scripts: scripts_out,

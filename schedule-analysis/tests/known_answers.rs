@@ -262,6 +262,8 @@ fn suspending_board(tasks: Vec<TaskSpec>, scripts: &[(usize, u64)]) -> BoardSyst
                 per_event: Time::ZERO,
                 per_event_from: PerEventFrom::Estimate,
                 source: "none: the examples have no engine".into(),
+                per_script: None,
+                condition_wait: None,
             }],
             scripts: scripts
                 .iter()
@@ -271,6 +273,7 @@ fn suspending_board(tasks: Vec<TaskSpec>, scripts: &[(usize, u64)]) -> BoardSyst
                     wire: Time::from_us(us),
                     stretch: Time::ZERO,
                     events: 0,
+                    starts: 0,
                     engine_row: usize::MAX,
                     position: 0,
                     of: 1,
@@ -478,6 +481,7 @@ fn several_scripts_board(
             wire: Time::from_us(us),
             stretch: Time::ZERO,
             events: 0,
+            starts: 0,
             engine_row: usize::MAX,
             position: 0,
             of: scripts.iter().filter(|s| s.0 == task).count(),

@@ -548,3 +548,166 @@ fn a_timing_file_topic_states_several_scripts_and_the_engine_names_its_handlers(
     assert!(error.file.ends_with("diwheeldrive.timing.json"), "{error}");
     let _ = std::fs::remove_dir_all(&root);
 }
+
+/// [`board_json`]'s engine charged by its three parts: 2 µs per event (3 µs with entry and exit), 4 µs per script
+/// and a 5 µs condition wait per START, for a 7-byte script with two STARTs (a write, a repeated START, a read).
+fn parts_json() -> serde_json::Value {
+    let mut v = board_json();
+    v["sensor_buses"][0]["engine"]["per_script"] = json!({ "us": 4.0, "from": "bound", "source": "a script's end and its client's wake (test)" });
+    v["sensor_buses"][0]["engine"]["condition_wait"] =
+        json!({ "us": 5.0, "from": "estimate", "source": "two SCL periods (test)" });
+    v["tasks"][0]["script"]["bytes"] = json!(7);
+    v["tasks"][0]["script"]["starts"] = json!(2);
+    v
+}
+
+/// Worked by hand: 9 × 7 + 2 × 2 = 67 bit times of 2.5 µs = 167.5 µs on the wire, 2 × 7 + 2 × 2 = 18 events. The
+/// engine row: 18 × 3 + 4 + 2 × 5 = 68 µs. An event's response at priority 7 (nothing above, nothing blocking) is
+/// its cost: 3 µs plain, 8 µs with the wait, 12 µs for the ending event (3 + 4, and the wait, which the ending
+/// event is charged as well). The bus time: 167.5 + 10 stretch + 12 + 2 × 8 + 15 × 3 = 250.5 µs, alone on the bus:
+/// the suspension. The job: 50 + 250.5 + the engine's 68 = 368.5 µs. With the per-event figure alone (3 µs, the
+/// wait inside it) the same script would be charged 18 × 3 = 54 µs: the parts are what move the figures.
+#[test]
+fn the_engine_charged_by_its_parts() {
+    let model = Model {
+        name: None,
+        boards: vec![board(parts_json())],
+        can: None,
+    };
+    let system = model.validate().expect("valid");
+    let b = &system.boards[0];
+    let row = &b.tasks[2];
+    assert_eq!(row.name, "i2c1_engine[publish[floor]]");
+    assert_eq!(row.wcet, Time::from_us(68));
+    let script = &b.sensor_buses.scripts[0];
+    assert_eq!(
+        (script.wire, script.events, script.starts),
+        (Time::from_ns(167_500), 18, 2)
+    );
+    let result = analysis::analyse_board(b, &Limits::default());
+    let bus = &result.sensor_buses[0];
+    assert_eq!(bus.event_response, Some(Time::from_us(3)));
+    assert_eq!(bus.scripts[0].bus_time, Time::from_ns(250_500));
+    assert_eq!(bus.scripts[0].suspension, Some(Time::from_ns(250_500)));
+    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_ns(368_500)));
+
+    // The report states each part with its source and kind.
+    let report = Report::build(&system, "t".into(), Vec::new(), Vec::new(), None);
+    let text = report::render(&report, Format::Table);
+    assert!(
+        text.contains(
+            ", 4 µs per script (machine-code bound: a script's end and its client's wake (test)), 5 µs condition \
+             wait per START (estimate: two SCL periods (test))"
+        ),
+        "{text}"
+    );
+    let json = report::render(&report, Format::Json);
+    assert!(json.contains("\"per_script\": {"), "{json}");
+    // Without the parts, the report says nothing of them.
+    let plain = Model {
+        name: None,
+        boards: vec![board(board_json())],
+        can: None,
+    }
+    .validate()
+    .expect("valid");
+    let json = report::render(
+        &Report::build(&plain, "t".into(), Vec::new(), Vec::new(), None),
+        Format::Json,
+    );
+    assert!(
+        !json.contains("per_script") && !json.contains("condition_wait"),
+        "{json}"
+    );
+}
+
+/// A script by `bus_time_us` counts its STARTs for the condition wait: its `starts` is required on an engine that
+/// states the wait and refused on one that does not (it would mean nothing there).
+#[test]
+fn a_script_by_its_bus_time_states_its_starts_for_the_wait() {
+    let by_time = |v: &mut serde_json::Value| {
+        let script = v["tasks"][0]["script"].as_object_mut().unwrap();
+        script.remove("bytes");
+        script.remove("starts");
+        script.insert("bus_time_us".into(), json!(120.0));
+        script.insert("events".into(), json!(10));
+    };
+    let mut v = parts_json();
+    by_time(&mut v);
+    assert_eq!(
+        refusal(v.clone()),
+        ("tasks[0].script.starts".into(), SensorBusError::NoStarts)
+    );
+    v["tasks"][0]["script"]["starts"] = json!(3);
+    let system = Model {
+        name: None,
+        boards: vec![board(v)],
+        can: None,
+    }
+    .validate()
+    .expect("valid");
+    let b = &system.boards[0];
+    assert_eq!(b.sensor_buses.scripts[0].starts, 3);
+    // 10 × (2 + 1) + 4 + 3 × 5.
+    assert_eq!(b.tasks[2].wcet, Time::from_us(49));
+    let mut v = board_json();
+    by_time(&mut v);
+    v["tasks"][0]["script"]["starts"] = json!(3);
+    assert_eq!(
+        refusal(v),
+        (
+            "tasks[0].script.starts".into(),
+            SensorBusError::StartsWithoutBytes
+        )
+    );
+}
+
+/// The parts as a timing file states them (its `sensor_buses`): a part without its source, a negative figure or
+/// an unknown field is refused, naming the field.
+#[test]
+fn a_timing_files_engine_parts_are_checked() {
+    let buses = |engine: serde_json::Value| -> Vec<sensor_bus::SensorBusModel> {
+        serde_json::from_value(json!([{ "name": "i2c2", "bitrate": 400000, "engine": engine }]))
+            .expect("the timing file's form")
+    };
+    let engine = || {
+        json!({ "priority": 7, "per_event_us": 12.51, "per_event_from": "bound",
+                "source": "tools/engine-bound: I2Cx_EV without end and wake",
+                "per_script": { "us": 12.74, "from": "bound", "source": "tools/engine-bound: end + wake" },
+                "condition_wait": { "us": 5.6, "from": "estimate", "source": "CONDITION_WAIT_NS" } })
+    };
+    assert_eq!(
+        sensor_bus::check_timing(&buses(engine()), std::iter::empty()),
+        Ok(())
+    );
+    let mut e = engine();
+    e["per_script"]["source"] = json!("");
+    assert_eq!(
+        sensor_bus::check_timing(&buses(e), std::iter::empty()),
+        Err((
+            "sensor_buses[0].engine.per_script.source".into(),
+            SensorBusError::NoSource
+        ))
+    );
+    let mut e = engine();
+    e["condition_wait"]["us"] = json!(-5.6);
+    assert_eq!(
+        sensor_bus::check_timing(&buses(e), std::iter::empty()),
+        Err((
+            "sensor_buses[0].engine.condition_wait.us".into(),
+            SensorBusError::Negative("-5.6".into())
+        ))
+    );
+    let mut e = engine();
+    e["per_script"].as_object_mut().unwrap().remove("source");
+    assert!(serde_json::from_value::<Vec<sensor_bus::SensorBusModel>>(
+        json!([{ "name": "i2c2", "bitrate": 400000, "engine": e }])
+    )
+    .is_err());
+    let mut e = engine();
+    e["condition_wait"]["at"] = json!(["repeated_start"]);
+    assert!(serde_json::from_value::<Vec<sensor_bus::SensorBusModel>>(
+        json!([{ "name": "i2c2", "bitrate": 400000, "engine": e }])
+    )
+    .is_err());
+}

@@ -79,6 +79,7 @@ fn set(raw: &[RawTask], utilisation: u64) -> Set {
                 wire: Time::from_ns(s.length),
                 stretch: Time::ZERO,
                 events: 0,
+                starts: 0,
                 engine_row: usize::MAX,
                 position: k,
                 of: job.len(),
@@ -131,6 +132,8 @@ fn set(raw: &[RawTask], utilisation: u64) -> Set {
                     per_event: Time::ZERO,
                     per_event_from: PerEventFrom::Estimate,
                     source: "not simulated".into(),
+                    per_script: None,
+                    condition_wait: None,
                 })
                 .collect(),
             scripts,

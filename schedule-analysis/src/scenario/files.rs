@@ -200,6 +200,13 @@ impl Timing {
         }
         for bus in &mut t.sensor_buses {
             bus.engine.per_event_us *= f;
+            // The condition wait is the block's time, not the CPU's, but scaling it only widens the charge.
+            for part in [&mut bus.engine.per_script, &mut bus.engine.condition_wait]
+                .into_iter()
+                .flatten()
+            {
+                part.us *= f;
+            }
         }
         for topic in t.topics.values_mut() {
             topic.wcet_us *= f;
