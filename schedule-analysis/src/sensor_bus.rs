@@ -20,9 +20,11 @@
 //!   LITES 5(1), 2018): the sound form of the jitter-based charge (jitter = the suspension alone is not).
 //! * **The engine's interrupt** is a row per script at the engine's priority (`<bus>_engine[<task>]`, or
 //!   `<bus>_engine[<task>#<n>]` for a job of several; added when the model is validated), released by the
-//!   submitting job, costing the script's events times the per-event
-//!   bound with interrupt entry and exit. The master holds SCL low while an event waits for the engine, so each
-//!   event's worst response on the CPU is added to the script's bus time as well. The app's tasks that are the
+//!   submitting job, costing the engine's charge by its parts ([`SensorBus::script_charge`]): the script's events
+//!   times the per-event figure with interrupt entry and exit, the per-script part once (its end and its client's
+//!   wake), and the condition wait once per START condition (an operation's start, a repeated START). The master
+//!   holds SCL low while an event waits for the engine, so each event's worst response on the CPU (by what it
+//!   carries: plain, with the wait, or the ending one) is added to the script's bus time as well. The app's tasks that are the
 //!   engine's handlers ([`EngineModel::handlers`]) have no row of their own: the engine rows are their charge.
 //!
 //! The jitters feed the bus responses, which feed the jobs' responses, which are the jitters: iterated from zero
