@@ -279,6 +279,42 @@ fn a_timing_file_topic_states_its_script() {
     assert_eq!(error.path, "topics.floor-proximity.script.bus");
     assert!(error.file.ends_with("diwheeldrive.timing.json"), "{error}");
     assert!(error.problem.contains("no sensor bus `i2c1`"), "{error}");
+
+    // The engine's parts as the timing file states them: a part without its source, a negative wait.
+    timing["topics"]["floor-proximity"]["script"]["bus"] = json!("i2c2");
+    timing["sensor_buses"][0]["engine"]["per_script"] =
+        json!({ "us": 12.74, "from": "bound", "source": "" });
+    std::fs::write(&timing_path, timing.to_string()).unwrap();
+    let error = analyse(&root).expect_err("refused");
+    assert_eq!(error.path, "sensor_buses[0].engine.per_script.source");
+    assert!(error.file.ends_with("diwheeldrive.timing.json"), "{error}");
+    timing["sensor_buses"][0]["engine"]["per_script"]["source"] = json!("tools/engine-bound");
+    timing["sensor_buses"][0]["engine"]["condition_wait"] =
+        json!({ "us": -5.6, "from": "estimate", "source": "CONDITION_WAIT_NS" });
+    std::fs::write(&timing_path, timing.to_string()).unwrap();
+    let error = analyse(&root).expect_err("refused");
+    assert_eq!(error.path, "sensor_buses[0].engine.condition_wait.us");
+    assert!(error.problem.contains("≥ 0, got -5.6"), "{error}");
+    // Stated right, the parts are taken: the engine row grows by 12.74 µs per script and 8 STARTs × 5.6 µs.
+    timing["sensor_buses"][0]["engine"]["condition_wait"]["us"] = json!(5.6);
+    std::fs::write(&timing_path, timing.to_string()).unwrap();
+    let parts = analyse(&root).expect("builds");
+    let row = |a: &analysis::Analysis| {
+        a.boards
+            .iter()
+            .find(|b| b.name == "diwheeldrive")
+            .and_then(|b| {
+                b.tasks
+                    .iter()
+                    .find(|t| t.name == "i2c2_engine[publish_medium[floor-proximity]]")
+            })
+            .map(|t| t.wcet)
+            .expect("the engine row")
+    };
+    assert_eq!(
+        row(&parts),
+        row(&after).plus(Time::from_ns(12_740 + 8 * 5_600))
+    );
     let _ = std::fs::remove_dir_all(&root);
 }
 
