@@ -301,7 +301,9 @@ impl Engine {
     /// the START set anyway; it waits for a free bus, which a stuck bus never gives, and the
     /// client's timeout ends the script. A repeated START that did not go out within the polls
     /// (a device stretching SCL after its acknowledge) is left to go out: until it does, BTF
-    /// raises the event interrupt again, and each entry is an SR1 read and nothing else.
+    /// raises the event interrupt again, each entry a whole handler's run (docs/i2c.md: open
+    /// before a board binds the engine, a device holding SCL there re-enters it until the
+    /// client's timeout).
     pub fn resume(&mut self, cleared: bool, block: &mut impl Block) {
         match self.awaiting.take() {
             Some((Condition::Stop, _)) => {

@@ -815,7 +815,6 @@ mod tests {
         drop(extra);
     }
 
-    /// The list's slots from its head.
     #[test]
     fn an_expiry_ends_only_once_the_interrupt_took_its_slot_off_and_frees_it_without_its_drop() {
         let _m = model(100);

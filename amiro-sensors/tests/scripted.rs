@@ -744,7 +744,6 @@ fn a_failed_operation_is_the_work_s_error_at_that_transfer() {
         failure: amiro_sensors::script::Failure::NackAddress,
     }));
     assert_eq!(scripted.step(work).unwrap(), Next::Done(Err(2)));
-    assert_eq!(pca9544a::AMIRO_ADDRESS, 0x77);
 }
 
 /// Two publishers' jobs on one group overlap (each keeps its own `Job`; the group changes only
@@ -950,6 +949,40 @@ fn a_dead_bus_pattern_mid_round_is_checked_and_the_round_goes_on() {
     );
     assert_eq!(bus.scripts.len(), 2);
     assert_muxed_rules(&bus.scripts);
+}
+
+/// A later script of a job that fails at its first operation, the select sent again at its start
+/// (the bus gone mid-job, or the client's timeout, which fails operation 0): the work sees that
+/// failure at its next transfer and the group counts the fault, as the blocking path's failed
+/// read does; the same script is not recorded again.
+#[test]
+fn a_failed_resent_select_is_the_work_s_failure_not_a_script_to_run_again() {
+    let counts = [3000, 0, 5000, 6000];
+    let mut bus = SimFloorBus::new();
+    let mut scripted = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut bus).unwrap();
+    for (k, &c) in counts.iter().enumerate() {
+        bus.proximity_mut().set_proximity(k, Some(c));
+    }
+    let faults = scripted.state().faults();
+    let sample =
+        |s: &mut Supervised<FloorSensors<ReplayBus>>| s.sample(Topic::FloorProximity, 1_000);
+    let Next::Run(first) = scripted.step(sample).unwrap() else {
+        panic!("a round needs a script");
+    };
+    scripted.complete(&bus.answer(&first).result);
+    let Next::Run(second) = scripted.step(sample).unwrap() else {
+        panic!("the dead-bus pattern is checked by a second script");
+    };
+    assert_eq!(second.operations().first().map(|o| o.address), Some(0x77));
+    scripted.complete(&Err(amiro_sensors::script::ScriptError {
+        operation: 0,
+        failure: amiro_sensors::script::Failure::NackAddress,
+    }));
+    assert_eq!(
+        scripted.step(sample).unwrap(),
+        Next::Done(amiro_sensors::drivers::suite::Samples::new())
+    );
+    assert_eq!(scripted.state().faults(), faults + 1);
 }
 
 /// At boot, before the engine takes the block, a group's set-up runs its scripts operation by

@@ -497,14 +497,20 @@ impl ReplayBus {
         }
         let select = Some(address) == self.mux && write.len() == 1 && read.is_empty();
         if self.recording == Recording::Off {
-            // Skip the selects sent again at a script's start: the work did not make them.
-            while self
+            // Skip the selects sent again at a script's start: the work did not make them. One that
+            // failed failed the script there (the engine ran nothing after it): that failure is the
+            // work's next transfer's, so the group counts it as the blocking path would.
+            while let Some(entry) = self
                 .log
                 .entries()
                 .get(usize::from(self.cursor))
-                .is_some_and(|e| e.inserted)
+                .filter(|e| e.inserted)
             {
+                let outcome = entry.outcome;
                 self.cursor += 1;
+                if let Outcome::Failed(failure) = outcome {
+                    return Err(ReplayError::Bus(failure));
+                }
             }
             let at = usize::from(self.cursor);
             if let Some(&entry) = self.log.entries().get(at) {
@@ -553,9 +559,8 @@ impl ReplayBus {
         if read.is_empty() && !select && has_read {
             return self.close(start);
         }
-        if write.len() > MAX_TRANSFER_WRITE || (write.is_empty() && read.is_empty()) {
-            self.unsupported = true;
-            return Err(ReplayError::Unsupported);
+        if write.is_empty() && read.is_empty() {
+            return Err(self.unsupported());
         }
         let paced = Some(address) == self.paced;
         let recorded = usize::from(self.log.len) - usize::from(start);
@@ -606,6 +611,13 @@ impl ReplayBus {
         }
         self.recording = Recording::Closed { start };
         Err(ReplayError::Deferred)
+    }
+
+    /// A transfer this bus cannot log (larger than a script or the log): the job ends `Unfinished`
+    /// (`step` reads the mark), never a bus fault of the group's.
+    fn unsupported(&mut self) -> ReplayError {
+        self.unsupported = true;
+        ReplayError::Unsupported
     }
 
     fn push_inserted_select(&mut self, control: u8) -> Result<(), ReplayError> {
@@ -674,21 +686,21 @@ impl I2c for ReplayBus {
                 Operation::Write(bytes) if read_len == 0 => {
                     let slot = write
                         .get_mut(write_len..write_len + bytes.len())
-                        .ok_or(ReplayError::Unsupported)?;
+                        .ok_or_else(|| self.unsupported())?;
                     slot.copy_from_slice(bytes);
                     write_len += bytes.len();
                 }
-                Operation::Write(_) => return Err(ReplayError::Unsupported),
+                Operation::Write(_) => return Err(self.unsupported()),
                 Operation::Read(buffer) => {
                     read_len += buffer.len();
                     if read_len > MAX_READ_BYTES {
-                        return Err(ReplayError::Unsupported);
+                        return Err(self.unsupported());
                     }
                 }
             }
         }
         let (Some(write), Some(read)) = (write.get(..write_len), read.get_mut(..read_len)) else {
-            return Err(ReplayError::Unsupported);
+            return Err(self.unsupported());
         };
         self.transfer(address, write, read)?;
         let mut from = 0;
