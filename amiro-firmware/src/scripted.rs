@@ -30,9 +30,9 @@ use rtic_core::Mutex;
 use crate::i2c_bus::{Client, I2cBus};
 use crate::i2c_engine::Block;
 
-/// The sensor buses' SCL rate: 400 kHz on I2C1 and I2C2 of every board (amiro-boards.md; the
-/// block's set-up never exceeds it, `i2c_block::Registers`).
-pub const SCL_HZ: u32 = 400_000;
+/// The sensor buses' SCL rate ([`amiro_sensors::script::SCL_HZ`]; the block's set-up never
+/// exceeds it, `i2c_block::Registers`).
+pub use amiro_sensors::script::SCL_HZ;
 
 /// What a group's sample needs next ([`ScriptedGroup::begin`], [`ScriptedGroup::resume`]).
 #[derive(Debug, Clone, PartialEq)]

@@ -396,6 +396,10 @@ impl fmt::Display for ScriptError {
     }
 }
 
+/// The sensor buses' SCL rate: 400 kHz (fast mode) on I2C1 and I2C2 of every board
+/// (amiro-boards.md); the one figure the engine's timeouts and the simulated buses' times use.
+pub const SCL_HZ: u32 = 400_000;
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -8,8 +8,8 @@ use super::{I2cTarget, SimBus};
 use crate::drivers::scripted::ScriptBus;
 use crate::script::{Failure, Readings, Script, ScriptError, Symbol};
 
-/// The AMiRo's I2C clock: every bus runs at 400 kHz (fast mode).
-pub const SCL_HZ: u32 = 400_000;
+/// The AMiRo's I2C clock, [`crate::script::SCL_HZ`].
+pub use crate::script::SCL_HZ;
 
 /// What a simulated bus answers to a script.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
