@@ -4,13 +4,11 @@
 #![no_std]
 #![no_main]
 
+use amiro_firmware::i2c::I2C2;
 use amiro_firmware::i2c_block::Registers;
 use amiro_firmware::i2c_bus::I2cBus;
 use amiro_firmware::i2c_engine::{Engine, Progress};
 use amiro_sensors::script::{Readings, Script};
-
-/// I2C2's registers (RM0008 and RM0090: the same address on both chips).
-const I2C2: usize = 0x4000_5800;
 
 #[cfg(feature = "f1")]
 static BUS: I2cBus<Registers, 4> =
