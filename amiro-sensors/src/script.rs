@@ -183,20 +183,19 @@ impl Script {
     /// UM10204, table 10). A device's clock stretching is not in it: the analysis adds the
     /// devices' stated stretches.
     pub fn scl_periods(&self) -> u32 {
-        self.wire()
-            .map(|symbol| match symbol {
-                Symbol::Address { .. } | Symbol::Written(_) | Symbol::Read { .. } => 9,
-                Symbol::Start | Symbol::RepeatedStart | Symbol::Stop => 1,
-            })
-            .sum()
+        self.wire().map(Symbol::scl_periods).sum()
     }
 
     /// The script's time on the bus in nanoseconds at `scl_hz` (rounded up): [`Self::scl_periods`]
     /// SCL periods.
     pub fn bus_time_ns(&self, scl_hz: u32) -> u64 {
-        let periods = u64::from(self.scl_periods());
-        (periods * 1_000_000_000).div_ceil(u64::from(scl_hz.max(1)))
+        periods_ns(self.scl_periods(), scl_hz)
     }
+}
+
+/// `periods` SCL periods in nanoseconds at `scl_hz` (rounded up).
+pub fn periods_ns(periods: u32, scl_hz: u32) -> u64 {
+    (u64::from(periods) * 1_000_000_000).div_ceil(u64::from(scl_hz.max(1)))
 }
 
 /// One symbol on the wire.
@@ -222,6 +221,17 @@ pub enum Symbol {
     },
     /// A STOP condition.
     Stop,
+}
+
+impl Symbol {
+    /// SCL periods the symbol holds the bus for: nine for a byte and its acknowledge, one for a
+    /// START, repeated START or STOP ([`Script::scl_periods`]).
+    pub const fn scl_periods(self) -> u32 {
+        match self {
+            Symbol::Address { .. } | Symbol::Written(_) | Symbol::Read { .. } => 9,
+            Symbol::Start | Symbol::RepeatedStart | Symbol::Stop => 1,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -5,8 +5,8 @@
 //! interrupt would.
 
 use super::{I2cTarget, SimBus};
-use crate::drivers::scripted::ScriptBus;
-use crate::script::{Failure, Readings, Script, ScriptError, Symbol};
+use crate::drivers::scripted::{OnI2c, ScriptBus};
+use crate::script::{Readings, Script, ScriptError, Symbol};
 
 /// The AMiRo's I2C clock, [`crate::script::SCL_HZ`].
 pub use crate::script::SCL_HZ;
@@ -24,7 +24,7 @@ pub struct Answer {
 impl Answer {
     /// The bus time in nanoseconds at [`SCL_HZ`] (rounded up).
     pub fn bus_time_ns(&self) -> u64 {
-        (u64::from(self.scl_periods) * 1_000_000_000).div_ceil(u64::from(SCL_HZ))
+        crate::script::periods_ns(self.scl_periods, SCL_HZ)
     }
 }
 
@@ -35,10 +35,7 @@ fn periods_until_nack(script: &Script, failed: usize) -> u32 {
     let mut stops = 0;
     let mut addressed = false;
     for symbol in script.wire() {
-        periods += match symbol {
-            Symbol::Address { .. } | Symbol::Written(_) | Symbol::Read { .. } => 9,
-            Symbol::Start | Symbol::RepeatedStart | Symbol::Stop => 1,
-        };
+        periods += symbol.scl_periods();
         match symbol {
             Symbol::Stop => stops += 1,
             Symbol::Address { .. } if stops == failed => {
@@ -58,37 +55,21 @@ fn periods_until_nack(script: &Script, failed: usize) -> u32 {
 impl<T: I2cTarget> SimBus<T> {
     /// Runs `script` on the simulated devices: each operation is a transfer (the write, then the
     /// read after a repeated START), the first one whose address nobody acknowledges ends the
-    /// script with [`Failure::NackAddress`] (a device that is absent, behind a channel the mux has
+    /// script with [`Failure::NackAddress`](crate::script::Failure::NackAddress) (a device that is absent, behind a channel the mux has
     /// not connected, or every device while [`SimBus::set_nack`] holds).
     pub fn answer(&mut self, script: &Script) -> Answer {
-        let mut readings = Readings::for_script(script);
-        let mut written = script.written().iter();
-        for (index, op) in script.operations().iter().enumerate() {
-            if self.nack || !self.target.acknowledges(op.address) {
-                return Answer {
-                    result: Err(ScriptError {
-                        operation: index as u8,
-                        failure: Failure::NackAddress,
-                    }),
-                    scl_periods: periods_until_nack(script, index),
-                };
+        // The operations as the blocking path makes them (one embedded-hal transfer each, on
+        // this bus's own `I2c`), so the simulators answer a script as they answer the drivers.
+        let result = OnI2c(&mut *self).run(script);
+        let scl_periods = match result {
+            Err(ScriptError { operation, .. }) => {
+                periods_until_nack(script, usize::from(operation))
             }
-            if op.write > 0 {
-                self.target.start(op.address, false);
-                for &byte in written.by_ref().take(usize::from(op.write)) {
-                    self.target.write_byte(op.address, byte);
-                }
-            }
-            if op.read > 0 {
-                self.target.start(op.address, true);
-                for _ in 0..op.read {
-                    readings.push(self.target.read_byte(op.address));
-                }
-            }
-        }
+            Ok(_) => script.scl_periods(),
+        };
         Answer {
-            result: Ok(readings),
-            scl_periods: script.scl_periods(),
+            result,
+            scl_periods,
         }
     }
 }
@@ -103,6 +84,7 @@ impl<T: I2cTarget> ScriptBus for SimBus<T> {
 mod tests {
     use super::*;
     use crate::drivers::hmc5883l;
+    use crate::script::Failure;
     use crate::sim::{SimCompassBus, SimFloorBus};
 
     #[test]
