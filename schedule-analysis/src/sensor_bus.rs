@@ -768,6 +768,8 @@ enum Failure {
     Event(usize, String),
     /// A suspending job has no bound: its script index, why.
     Job(usize, Unbounded),
+    /// A job of a suspending RTIC task without a script has no bound: its task index, why.
+    Task(usize, Unbounded),
     /// The rounds ran out.
     Rounds,
 }
@@ -814,6 +816,8 @@ pub(crate) fn analyse(
 
     // The iteration's state: each suspending job's response (its script's jitter), each bus's event response.
     let mut response = vec![Time::ZERO; scripts.len()];
+    // Each job of a suspending RTIC task (script or not): its own-view response.
+    let mut own = vec![Time::ZERO; n];
     let mut event = vec![EventResponses::default(); buses.len()];
     let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
     let mut jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
@@ -853,7 +857,6 @@ pub(crate) fn analyse(
             let mut releases: Vec<Option<usize>> =
                 board.tasks.iter().map(|t| t.released_by).collect();
             for (k, s) in scripts.iter().enumerate() {
-                let r = response.get(k).copied().unwrap_or(Time::ZERO);
                 if view_of(s.task) == v {
                     // Suspension-oblivious: each script's suspension and its settle, and the blocking on each
                     // resumption (after the settle's wait and after the script), as execution.
@@ -870,28 +873,24 @@ pub(crate) fn analyse(
                                     .times(resumptions),
                             );
                     }
-                } else {
-                    // Its CPU, released anywhere up to its response minus its CPU after its activation.
-                    if let (Some(j), Some(rel)) =
-                        (view_jitters.get_mut(s.task), releases.get_mut(s.task))
-                    {
-                        *j = r.minus(cost(s.task));
-                        *rel = None;
-                    }
                 }
             }
-            // A job released by a suspending one inherits the suspending job's whole response.
+            // Every job of a suspending RTIC task, with a script or not, seen from another view: its CPU,
+            // released anywhere up to its own-view response minus its CPU after its activation (a job without a
+            // script still waits behind its task's suspended job, so its own response holds that wait).
+            for i in (0..n).filter(|&i| view_of(i) != 0 && view_of(i) != v) {
+                if let (Some(j), Some(rel)) = (view_jitters.get_mut(i), releases.get_mut(i)) {
+                    *j = own.get(i).copied().unwrap_or(Time::ZERO).minus(cost(i));
+                    *rel = None;
+                }
+            }
+            // A job released by a job of a suspending RTIC task inherits that job's whole own-view response.
             for (i, t) in board.tasks.iter().enumerate() {
-                let Some(k) = t
-                    .released_by
-                    .and_then(|r| script_of.get(r).copied().flatten())
-                else {
+                let Some(r) = t.released_by.filter(|&r| view_of(r) != 0) else {
                     continue;
                 };
                 if let (Some(j), Some(rel)) = (view_jitters.get_mut(i), releases.get_mut(i)) {
-                    *j = t
-                        .jitter
-                        .plus(response.get(k).copied().unwrap_or(Time::ZERO));
+                    *j = t.jitter.plus(own.get(r).copied().unwrap_or(Time::ZERO));
                     *rel = None;
                 }
             }
@@ -972,16 +971,30 @@ pub(crate) fn analyse(
                 None => {}
             }
         }
+        // The own-view responses of every job of a suspending RTIC task: their jitters in the other views.
+        let mut next_own = own.clone();
+        for i in (0..n).filter(|&i| view_of(i) != 0) {
+            match bounds.get(i) {
+                Some(Ok(r)) => {
+                    if let Some(slot) = next_own.get_mut(i) {
+                        *slot = r.wcrt;
+                    }
+                }
+                Some(Err(why)) => stop = stop.or(Some(Failure::Task(i, why.clone()))),
+                None => {}
+            }
+        }
         if stop.is_some() {
             failure = stop;
             break;
         }
-        if next_response == response && next_event == event {
+        if next_response == response && next_event == event && next_own == own {
             failure = None;
             break;
         }
         response = next_response;
         event = next_event;
+        own = next_own;
     }
     if let Some(failure) = &failure {
         mark_unbounded(board, scripts, buses, failure, &mut bounds);
@@ -1142,6 +1155,7 @@ fn mark_unbounded(
             .get(*k)
             .map(|s| vec![(s.task, why.clone())])
             .unwrap_or_default(),
+        Failure::Task(i, why) => vec![(*i, why.clone())],
         Failure::Rounds => scripts
             .iter()
             .map(|s| (s.task, Unbounded::NoConvergence))

@@ -666,3 +666,69 @@ fn a_job_with_settles_worked_by_hand() {
     assert_eq!(simulated[0], 371_000);
     assert!(simulated[0] <= 442_000);
 }
+
+/// Two jobs of one suspending RTIC task `g`: A (priority 2, CPU 1, an 8 µs script, T 20) and B (priority 2, CPU 4,
+/// no script, T 20); L (priority 1, CPU 9, T 100); all µs.
+///
+/// B waits behind A's suspended job (one job of `g` at a time), so B too runs late and then early again: seen by L
+/// it needs its own-view response minus its CPU as jitter, as A does. Own view of `g`: A = 1 + 8 + 4 (B) = 13, B =
+/// 13. L: R = 9 + ⌈(R + 12)/20⌉·1 + ⌈(R + 9)/20⌉·4 → 14 → 19 → 19. With B's model jitter 0 (only the job with a
+/// script given R − C) it was 15.
+///
+/// The simulator: A's first job suspends 0..8, runs 8..9; B's first job (released at 0) runs 9..13; L, arrived at
+/// 8, runs 13..20; A's second job (no script this time) 20..21, B's 21..25; L 25..27: response 19.
+#[test]
+fn a_suspending_tasks_job_without_a_script_has_its_response_as_jitter_too() {
+    let mut a = board_task("a", 2, 1, 20);
+    a.job_of = Some("g".into());
+    let mut b = board_task("b", 2, 4, 20);
+    b.job_of = Some("g".into());
+    let board = suspending_board(vec![a, b, board_task("l", 1, 9, 100)], &[(0, 8)]);
+    let wcrts = board_wcrts_us(&board);
+    assert_eq!(wcrts[2], Some(19));
+
+    let cpu = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: None,
+        })
+    };
+    let jobs = vec![
+        SuspendingJob {
+            task: 0,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(0), Piece::Script(8000), cpu(1)],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(4)],
+        },
+        SuspendingJob {
+            task: 2,
+            arrival: 8000,
+            release: 8000,
+            pieces: vec![cpu(9)],
+        },
+        SuspendingJob {
+            task: 0,
+            arrival: 20_000,
+            release: 20_000,
+            pieces: vec![cpu(1)],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 20_000,
+            release: 20_000,
+            pieces: vec![cpu(4)],
+        },
+    ];
+    let simulated = sim::suspending_run(&[2, 2, 1], &[0, 0, 1], &[], &jobs);
+    assert_eq!(simulated[2], 19_000);
+    assert!(simulated
+        .iter()
+        .zip([0, 1, 2, 0, 1])
+        .all(|(&s, i)| s <= wcrts[i].unwrap() * 1000));
+}
