@@ -747,3 +747,36 @@ fn a_timing_files_engine_parts_are_checked() {
     )
     .is_err());
 }
+
+/// An engine row is left out of the deadline check: it carries its job's whole response as jitter, so its analysed
+/// response is no completion time (the engine does the script's work while the job is suspended on it, before the
+/// job ends; the job's check covers it). [`board_json`]'s job with a 330 µs period: the job 50 + 192 + 2 × 42 =
+/// 326 µs meets its deadline; its row's analysed response, 326 + 42 = 368, is above the 330 µs it was checked
+/// against, and the set is schedulable (it was not).
+#[test]
+fn an_engine_row_is_left_out_of_the_deadline_check() {
+    let mut v = board_json();
+    v["tasks"][0]["period_us"] = json!(330.0);
+    let model = Model {
+        name: None,
+        boards: vec![board(v)],
+        can: None,
+    };
+    let system = model.validate().expect("valid");
+    let result = analysis::analyse_board(&system.boards[0], &Limits::default());
+    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(326)));
+    assert!(result.tasks[0].schedulable());
+    let row = &result.tasks[2];
+    assert_eq!(row.name, "i2c1_engine[publish[floor]]");
+    assert_eq!(row.wcrt(), Some(Time::from_us(368)), "{row:?}");
+    assert!(!row.deadline_checked && row.schedulable());
+    assert!(result.tasks[1].deadline_checked);
+    let analysis = analysis::analyse(
+        &system,
+        &Options {
+            frame_cost: FrameCostSpec::Exact,
+            horizon: None,
+        },
+    );
+    assert!(analysis.all_ok(), "{:?}", analysis.failures());
+}
