@@ -288,6 +288,9 @@ pub enum SensorBusError {
     /// An engine handler that locks a resource a task above the engine also uses: (handler, resource, its
     /// ceiling). Its critical sections would block that task, and the handler has no row that states them.
     HandlerLocksAbove(String, String, u32),
+    /// `engine.handlers` on a bus no script names: the handlers' tasks would lose their rows and be charged
+    /// nowhere (the bus's name).
+    HandlersWithoutScripts(String),
 }
 
 impl fmt::Display for SensorBusError {
@@ -326,6 +329,10 @@ impl fmt::Display for SensorBusError {
                 f.write_str("`scripts` lists at least one script (or leave it out)")
             }
             SensorBusError::SettleSourceAlone => f.write_str("`settle_source` goes with `settle_us`"),
+            SensorBusError::HandlersWithoutScripts(bus) => write!(
+                f,
+                "`{bus}` names engine handlers but no script runs on it: they would be charged nowhere"
+            ),
             SensorBusError::HandlerTwice(name) => {
                 write!(f, "`{name}` is named as an engine handler twice")
             }
@@ -480,13 +487,31 @@ pub fn check_timing<'a>(
     buses: &[SensorBusModel],
     jobs: impl Iterator<Item = (String, Option<&'a ScriptModel>, Option<&'a [ScriptModel]>)>,
 ) -> Result<(), Refusal> {
-    let buses = validate_buses(buses, &OverheadTimes::default())?;
+    let models = buses;
+    let buses = validate_buses(models, &OverheadTimes::default())?;
+    let mut used = BTreeSet::new();
     for (field, script, scripts) in jobs {
         for (p, s) in job_scripts(script, scripts, &field)? {
-            validate_script(&buses, s, &p)?;
+            used.insert(validate_script(&buses, s, &p)?.bus);
         }
     }
-    Ok(())
+    handlers_need_scripts(models, &used)
+}
+
+/// Refuses `engine.handlers` on a bus (index) not in `used`: removed from the tasks, they would be charged by no
+/// engine row.
+fn handlers_need_scripts(models: &[SensorBusModel], used: &BTreeSet<usize>) -> Result<(), Refusal> {
+    match models
+        .iter()
+        .enumerate()
+        .find(|(b, bus)| !bus.engine.handlers.is_empty() && !used.contains(b))
+    {
+        Some((b, bus)) => Err((
+            format!("sensor_buses[{b}].engine.handlers"),
+            SensorBusError::HandlersWithoutScripts(bus.name.clone()),
+        )),
+        None => Ok(()),
+    }
 }
 
 /// The engine handlers the board's buses name (`(bus index, handler)`), each named once.

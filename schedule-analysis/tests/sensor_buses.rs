@@ -780,3 +780,48 @@ fn an_engine_row_is_left_out_of_the_deadline_check() {
     );
     assert!(analysis.all_ok(), "{:?}", analysis.failures());
 }
+
+/// `engine.handlers` take the handlers' tasks off the board: on a bus no script names, nothing would charge them,
+/// so the timing file is refused naming the field; with a script on the bus it is taken.
+#[test]
+fn engine_handlers_on_a_bus_without_scripts_are_refused() {
+    let buses: Vec<sensor_bus::SensorBusModel> = serde_json::from_value(json!([
+        { "name": "i2c1", "bitrate": 400000,
+          "engine": { "priority": 7, "per_event_us": 2.0, "per_event_from": "estimate", "source": "a guess" } },
+        { "name": "i2c2", "bitrate": 400000,
+          "engine": { "priority": 7, "per_event_us": 2.0, "per_event_from": "estimate", "source": "a guess",
+                      "handlers": ["i2c2_ev", "i2c2_er"] } }
+    ]))
+    .expect("the timing file's form");
+    let script = |bus: &str| -> sensor_bus::ScriptModel {
+        serde_json::from_value(
+            json!({ "bus": bus, "bytes": 6, "source": "address + 5 bytes",
+                                      "stretch_us": 0.0, "stretch_source": "none" }),
+        )
+        .expect("a script")
+    };
+    let refused = Err((
+        "sensor_buses[1].engine.handlers".into(),
+        SensorBusError::HandlersWithoutScripts("i2c2".into()),
+    ));
+    assert_eq!(
+        sensor_bus::check_timing(&buses, std::iter::empty()),
+        refused
+    );
+    let on_i2c1 = script("i2c1");
+    assert_eq!(
+        sensor_bus::check_timing(
+            &buses,
+            std::iter::once(("topics.a".to_string(), Some(&on_i2c1), None))
+        ),
+        refused
+    );
+    let on_i2c2 = script("i2c2");
+    assert_eq!(
+        sensor_bus::check_timing(
+            &buses,
+            std::iter::once(("topics.a".to_string(), Some(&on_i2c2), None))
+        ),
+        Ok(())
+    );
+}
