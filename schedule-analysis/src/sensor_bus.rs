@@ -847,11 +847,11 @@ pub(crate) fn analyse(
     let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
     let mut jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
     let mut on_bus: Vec<Vec<OnBus>> = vec![Vec::new(); buses.len()];
-    let mut failure = Some(Failure::Rounds);
+    let mut failures = vec![Failure::Rounds];
     for _ in 0..MAX_ROUNDS {
         // 1. The buses, with the scripts' jitters and the events' responses as they stand.
         let mut suspension = vec![Time::ZERO; scripts.len()];
-        let mut stop = None;
+        let mut stop: Vec<Failure> = Vec::new();
         for (b, results) in on_bus.iter_mut().enumerate() {
             *results = bus_responses(board, scripts, b, &response, event.get(b).copied(), limits);
             for s in results.iter() {
@@ -863,13 +863,13 @@ pub(crate) fn analyse(
                     }
                     Err(e) => {
                         let why = Unbounded::Analysis(e).to_string();
-                        stop = stop.or(Some(Failure::Script(s.script, why)));
+                        stop.push(Failure::Script(s.script, why));
                     }
                 }
             }
         }
-        if stop.is_some() {
-            failure = stop;
+        if !stop.is_empty() {
+            failures = stop;
             break;
         }
         // 2. The board, once per view.
@@ -977,9 +977,7 @@ pub(crate) fn analyse(
                             *slot = r;
                         }
                     }
-                    Err(e) => {
-                        stop = stop.or(Some(Failure::Event(b, Unbounded::Analysis(e).to_string())))
-                    }
+                    Err(e) => stop.push(Failure::Event(b, Unbounded::Analysis(e).to_string())),
                 }
             }
         }
@@ -992,7 +990,7 @@ pub(crate) fn analyse(
                         *slot = r.wcrt;
                     }
                 }
-                Some(Err(why)) => stop = stop.or(Some(Failure::Job(k, why.clone()))),
+                Some(Err(why)) => stop.push(Failure::Job(k, why.clone())),
                 None => {}
             }
         }
@@ -1005,33 +1003,37 @@ pub(crate) fn analyse(
                         *slot = r.wcrt;
                     }
                 }
-                Some(Err(why)) => stop = stop.or(Some(Failure::Task(i, why.clone()))),
+                Some(Err(why)) => stop.push(Failure::Task(i, why.clone())),
                 None => {}
             }
         }
-        if stop.is_some() {
-            failure = stop;
+        if !stop.is_empty() {
+            failures = stop;
             break;
         }
         if next_response == response && next_event == event && next_own == own {
-            failure = None;
+            failures = Vec::new();
             break;
         }
         response = next_response;
         event = next_event;
         own = next_own;
     }
-    if let Some(failure) = &failure {
-        mark_unbounded(board, scripts, buses, failure, &mut bounds);
+    if !failures.is_empty() {
+        mark_unbounded(board, scripts, buses, &failures, &view_of, &mut bounds);
     }
     let results = buses
         .iter()
         .enumerate()
         .map(|(b, bus)| {
             let list = on_bus.get(b).map(Vec::as_slice).unwrap_or(&[]);
-            let event_response = match &failure {
-                Some(Failure::Event(e, _)) if *e == b => None,
-                _ => event.get(b).map(|e| e.plain),
+            let event_failed = failures
+                .iter()
+                .any(|f| matches!(f, Failure::Event(e, _) if *e == b));
+            let event_response = if event_failed {
+                None
+            } else {
+                event.get(b).map(|e| e.plain)
             };
             bus_result(board, scripts, bus, list, event_response)
         })
@@ -1146,13 +1148,16 @@ fn event_response(
     board::response_time(&timings, index, blocking, limits, &mut scratch).map(|r| r.wcrt)
 }
 
-/// Marks what a failure leaves without a bound: the failing suspending jobs, every task at or below their
-/// priority, and every task released by one of those.
+/// Marks what the failures leave without a bound: the failing suspending jobs, every task at or below their
+/// priority, every other task not above every suspending job and every engine (its bound came from a round that
+/// did not converge, with jitters and suspensions still growing), and every task released by one of those. Only
+/// a task above all of them, in no suspending RTIC task, keeps its bound: nothing the iteration moves reaches it.
 fn mark_unbounded(
     board: &crate::model::BoardSystem,
     scripts: &[Script],
     buses: &[SensorBus],
-    failure: &Failure,
+    failures: &[Failure],
+    view_of: &dyn Fn(usize) -> usize,
     bounds: &mut [Bound],
 ) {
     let bus_name = |b: usize| {
@@ -1161,31 +1166,34 @@ fn mark_unbounded(
             .map_or("?", |bus| bus.name.as_str())
             .to_string()
     };
-    let failing: Vec<(usize, Unbounded)> = match failure {
-        Failure::Script(k, why) => scripts
-            .get(*k)
-            .map(|s| vec![(s.task, Unbounded::SensorBus(bus_name(s.bus), why.clone()))])
-            .unwrap_or_default(),
-        Failure::Event(b, why) => scripts
-            .iter()
-            .filter(|s| s.bus == *b)
-            .map(|s| {
-                (
-                    s.task,
-                    Unbounded::SensorBus(bus_name(*b), format!("its engine's event: {why}")),
-                )
-            })
-            .collect(),
-        Failure::Job(k, why) => scripts
-            .get(*k)
-            .map(|s| vec![(s.task, why.clone())])
-            .unwrap_or_default(),
-        Failure::Task(i, why) => vec![(*i, why.clone())],
-        Failure::Rounds => scripts
-            .iter()
-            .map(|s| (s.task, Unbounded::NoConvergence))
-            .collect(),
-    };
+    let failing: Vec<(usize, Unbounded)> = failures
+        .iter()
+        .flat_map(|failure| match failure {
+            Failure::Script(k, why) => scripts
+                .get(*k)
+                .map(|s| vec![(s.task, Unbounded::SensorBus(bus_name(s.bus), why.clone()))])
+                .unwrap_or_default(),
+            Failure::Event(b, why) => scripts
+                .iter()
+                .filter(|s| s.bus == *b)
+                .map(|s| {
+                    (
+                        s.task,
+                        Unbounded::SensorBus(bus_name(*b), format!("its engine's event: {why}")),
+                    )
+                })
+                .collect(),
+            Failure::Job(k, why) => scripts
+                .get(*k)
+                .map(|s| vec![(s.task, why.clone())])
+                .unwrap_or_default(),
+            Failure::Task(i, why) => vec![(*i, why.clone())],
+            Failure::Rounds => scripts
+                .iter()
+                .map(|s| (s.task, Unbounded::NoConvergence))
+                .collect(),
+        })
+        .collect();
     let name = |i: usize| {
         board
             .tasks
@@ -1210,6 +1218,35 @@ fn mark_unbounded(
                         *u = true;
                     }
                 }
+            }
+        }
+    }
+    // Every other task not above every suspending job and every engine: its bound is not a fixed point's.
+    let top = scripts
+        .iter()
+        .filter_map(|s| board.tasks.get(s.task).map(|t| t.priority))
+        .chain(
+            scripts
+                .iter()
+                .filter_map(|s| buses.get(s.bus).map(|b| b.engine_priority)),
+        )
+        .chain(
+            scripts
+                .iter()
+                .filter_map(|s| board.tasks.get(s.engine_row).map(|t| t.priority)),
+        )
+        .max()
+        .unwrap_or(0);
+    let cause = failing.first().map(|(task, _)| *task);
+    for (i, t) in board.tasks.iter().enumerate() {
+        if t.priority > top && view_of(i) == 0 {
+            continue;
+        }
+        if let (Some(slot), Some(u)) = (bounds.get_mut(i), unbounded.get_mut(i)) {
+            if !*u {
+                *slot =
+                    Err(cause.map_or(Unbounded::NoConvergence, |c| Unbounded::Suspending(name(c))));
+                *u = true;
             }
         }
     }
