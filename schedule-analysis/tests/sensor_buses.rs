@@ -779,6 +779,14 @@ fn an_engine_row_is_left_out_of_the_deadline_check() {
         },
     );
     assert!(analysis.all_ok(), "{:?}", analysis.failures());
+    // Nor is it the board's tightest task in the report.
+    let report = Report::build(&system, "t".into(), Vec::new(), Vec::new(), None);
+    let text = report::render(&report, Format::Table);
+    let heading = text
+        .lines()
+        .find(|l| l.contains("Board b"))
+        .expect("the board's heading");
+    assert!(heading.contains("tightest: publish[floor]"), "{heading}");
 }
 
 /// `engine.handlers` take the handlers' tasks off the board: on a bus no script names, nothing would charge them,
