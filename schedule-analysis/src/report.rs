@@ -559,6 +559,7 @@ fn text_boards(primary: &Analysis, markdown: bool, out: &mut String) {
             board
                 .tasks
                 .iter()
+                .filter(|t| t.deadline_checked)
                 .map(|t| (t.name.as_str(), t.wcrt(), t.deadline)),
         );
         heading(

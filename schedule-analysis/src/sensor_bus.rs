@@ -288,6 +288,9 @@ pub enum SensorBusError {
     /// An engine handler that locks a resource a task above the engine also uses: (handler, resource, its
     /// ceiling). Its critical sections would block that task, and the handler has no row that states them.
     HandlerLocksAbove(String, String, u32),
+    /// `engine.handlers` on a bus no script names: the handlers' tasks would lose their rows and be charged
+    /// nowhere (the bus's name).
+    HandlersWithoutScripts(String),
 }
 
 impl fmt::Display for SensorBusError {
@@ -326,6 +329,10 @@ impl fmt::Display for SensorBusError {
                 f.write_str("`scripts` lists at least one script (or leave it out)")
             }
             SensorBusError::SettleSourceAlone => f.write_str("`settle_source` goes with `settle_us`"),
+            SensorBusError::HandlersWithoutScripts(bus) => write!(
+                f,
+                "`{bus}` names engine handlers but no script runs on it: they would be charged nowhere"
+            ),
             SensorBusError::HandlerTwice(name) => {
                 write!(f, "`{name}` is named as an engine handler twice")
             }
@@ -480,13 +487,31 @@ pub fn check_timing<'a>(
     buses: &[SensorBusModel],
     jobs: impl Iterator<Item = (String, Option<&'a ScriptModel>, Option<&'a [ScriptModel]>)>,
 ) -> Result<(), Refusal> {
-    let buses = validate_buses(buses, &OverheadTimes::default())?;
+    let models = buses;
+    let buses = validate_buses(models, &OverheadTimes::default())?;
+    let mut used = BTreeSet::new();
     for (field, script, scripts) in jobs {
         for (p, s) in job_scripts(script, scripts, &field)? {
-            validate_script(&buses, s, &p)?;
+            used.insert(validate_script(&buses, s, &p)?.bus);
         }
     }
-    Ok(())
+    handlers_need_scripts(models, &used)
+}
+
+/// Refuses `engine.handlers` on a bus (index) not in `used`: removed from the tasks, they would be charged by no
+/// engine row.
+fn handlers_need_scripts(models: &[SensorBusModel], used: &BTreeSet<usize>) -> Result<(), Refusal> {
+    match models
+        .iter()
+        .enumerate()
+        .find(|(b, bus)| !bus.engine.handlers.is_empty() && !used.contains(b))
+    {
+        Some((b, bus)) => Err((
+            format!("sensor_buses[{b}].engine.handlers"),
+            SensorBusError::HandlersWithoutScripts(bus.name.clone()),
+        )),
+        None => Ok(()),
+    }
 }
 
 /// The engine handlers the board's buses name (`(bus index, handler)`), each named once.
@@ -768,6 +793,8 @@ enum Failure {
     Event(usize, String),
     /// A suspending job has no bound: its script index, why.
     Job(usize, Unbounded),
+    /// A job of a suspending RTIC task without a script has no bound: its task index, why.
+    Task(usize, Unbounded),
     /// The rounds ran out.
     Rounds,
 }
@@ -814,15 +841,17 @@ pub(crate) fn analyse(
 
     // The iteration's state: each suspending job's response (its script's jitter), each bus's event response.
     let mut response = vec![Time::ZERO; scripts.len()];
+    // Each job of a suspending RTIC task (script or not): its own-view response.
+    let mut own = vec![Time::ZERO; n];
     let mut event = vec![EventResponses::default(); buses.len()];
     let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
     let mut jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
     let mut on_bus: Vec<Vec<OnBus>> = vec![Vec::new(); buses.len()];
-    let mut failure = Some(Failure::Rounds);
+    let mut failures = vec![Failure::Rounds];
     for _ in 0..MAX_ROUNDS {
         // 1. The buses, with the scripts' jitters and the events' responses as they stand.
         let mut suspension = vec![Time::ZERO; scripts.len()];
-        let mut stop = None;
+        let mut stop: Vec<Failure> = Vec::new();
         for (b, results) in on_bus.iter_mut().enumerate() {
             *results = bus_responses(board, scripts, b, &response, event.get(b).copied(), limits);
             for s in results.iter() {
@@ -834,13 +863,13 @@ pub(crate) fn analyse(
                     }
                     Err(e) => {
                         let why = Unbounded::Analysis(e).to_string();
-                        stop = stop.or(Some(Failure::Script(s.script, why)));
+                        stop.push(Failure::Script(s.script, why));
                     }
                 }
             }
         }
-        if stop.is_some() {
-            failure = stop;
+        if !stop.is_empty() {
+            failures = stop;
             break;
         }
         // 2. The board, once per view.
@@ -853,7 +882,6 @@ pub(crate) fn analyse(
             let mut releases: Vec<Option<usize>> =
                 board.tasks.iter().map(|t| t.released_by).collect();
             for (k, s) in scripts.iter().enumerate() {
-                let r = response.get(k).copied().unwrap_or(Time::ZERO);
                 if view_of(s.task) == v {
                     // Suspension-oblivious: each script's suspension and its settle, and the blocking on each
                     // resumption (after the settle's wait and after the script), as execution.
@@ -870,28 +898,24 @@ pub(crate) fn analyse(
                                     .times(resumptions),
                             );
                     }
-                } else {
-                    // Its CPU, released anywhere up to its response minus its CPU after its activation.
-                    if let (Some(j), Some(rel)) =
-                        (view_jitters.get_mut(s.task), releases.get_mut(s.task))
-                    {
-                        *j = r.minus(cost(s.task));
-                        *rel = None;
-                    }
                 }
             }
-            // A job released by a suspending one inherits the suspending job's whole response.
+            // Every job of a suspending RTIC task, with a script or not, seen from another view: its CPU,
+            // released anywhere up to its own-view response minus its CPU after its activation (a job without a
+            // script still waits behind its task's suspended job, so its own response holds that wait).
+            for i in (0..n).filter(|&i| view_of(i) != 0 && view_of(i) != v) {
+                if let (Some(j), Some(rel)) = (view_jitters.get_mut(i), releases.get_mut(i)) {
+                    *j = own.get(i).copied().unwrap_or(Time::ZERO).minus(cost(i));
+                    *rel = None;
+                }
+            }
+            // A job released by a job of a suspending RTIC task inherits that job's whole own-view response.
             for (i, t) in board.tasks.iter().enumerate() {
-                let Some(k) = t
-                    .released_by
-                    .and_then(|r| script_of.get(r).copied().flatten())
-                else {
+                let Some(r) = t.released_by.filter(|&r| view_of(r) != 0) else {
                     continue;
                 };
                 if let (Some(j), Some(rel)) = (view_jitters.get_mut(i), releases.get_mut(i)) {
-                    *j = t
-                        .jitter
-                        .plus(response.get(k).copied().unwrap_or(Time::ZERO));
+                    *j = t.jitter.plus(own.get(r).copied().unwrap_or(Time::ZERO));
                     *rel = None;
                 }
             }
@@ -953,9 +977,7 @@ pub(crate) fn analyse(
                             *slot = r;
                         }
                     }
-                    Err(e) => {
-                        stop = stop.or(Some(Failure::Event(b, Unbounded::Analysis(e).to_string())))
-                    }
+                    Err(e) => stop.push(Failure::Event(b, Unbounded::Analysis(e).to_string())),
                 }
             }
         }
@@ -968,32 +990,50 @@ pub(crate) fn analyse(
                         *slot = r.wcrt;
                     }
                 }
-                Some(Err(why)) => stop = stop.or(Some(Failure::Job(k, why.clone()))),
+                Some(Err(why)) => stop.push(Failure::Job(k, why.clone())),
                 None => {}
             }
         }
-        if stop.is_some() {
-            failure = stop;
+        // The own-view responses of every job of a suspending RTIC task: their jitters in the other views.
+        let mut next_own = own.clone();
+        for i in (0..n).filter(|&i| view_of(i) != 0) {
+            match bounds.get(i) {
+                Some(Ok(r)) => {
+                    if let Some(slot) = next_own.get_mut(i) {
+                        *slot = r.wcrt;
+                    }
+                }
+                Some(Err(why)) => stop.push(Failure::Task(i, why.clone())),
+                None => {}
+            }
+        }
+        if !stop.is_empty() {
+            failures = stop;
             break;
         }
-        if next_response == response && next_event == event {
-            failure = None;
+        if next_response == response && next_event == event && next_own == own {
+            failures = Vec::new();
             break;
         }
         response = next_response;
         event = next_event;
+        own = next_own;
     }
-    if let Some(failure) = &failure {
-        mark_unbounded(board, scripts, buses, failure, &mut bounds);
+    if !failures.is_empty() {
+        mark_unbounded(board, scripts, buses, &failures, &view_of, &mut bounds);
     }
     let results = buses
         .iter()
         .enumerate()
         .map(|(b, bus)| {
             let list = on_bus.get(b).map(Vec::as_slice).unwrap_or(&[]);
-            let event_response = match &failure {
-                Some(Failure::Event(e, _)) if *e == b => None,
-                _ => event.get(b).map(|e| e.plain),
+            let event_failed = failures
+                .iter()
+                .any(|f| matches!(f, Failure::Event(e, _) if *e == b));
+            let event_response = if event_failed {
+                None
+            } else {
+                event.get(b).map(|e| e.plain)
             };
             bus_result(board, scripts, bus, list, event_response)
         })
@@ -1108,13 +1148,16 @@ fn event_response(
     board::response_time(&timings, index, blocking, limits, &mut scratch).map(|r| r.wcrt)
 }
 
-/// Marks what a failure leaves without a bound: the failing suspending jobs, every task at or below their
-/// priority, and every task released by one of those.
+/// Marks what the failures leave without a bound: the failing suspending jobs, every task at or below their
+/// priority, every other task not above every suspending job and every engine (its bound came from a round that
+/// did not converge, with jitters and suspensions still growing), and every task released by one of those. Only
+/// a task above all of them, in no suspending RTIC task, keeps its bound: nothing the iteration moves reaches it.
 fn mark_unbounded(
     board: &crate::model::BoardSystem,
     scripts: &[Script],
     buses: &[SensorBus],
-    failure: &Failure,
+    failures: &[Failure],
+    view_of: &dyn Fn(usize) -> usize,
     bounds: &mut [Bound],
 ) {
     let bus_name = |b: usize| {
@@ -1123,30 +1166,34 @@ fn mark_unbounded(
             .map_or("?", |bus| bus.name.as_str())
             .to_string()
     };
-    let failing: Vec<(usize, Unbounded)> = match failure {
-        Failure::Script(k, why) => scripts
-            .get(*k)
-            .map(|s| vec![(s.task, Unbounded::SensorBus(bus_name(s.bus), why.clone()))])
-            .unwrap_or_default(),
-        Failure::Event(b, why) => scripts
-            .iter()
-            .filter(|s| s.bus == *b)
-            .map(|s| {
-                (
-                    s.task,
-                    Unbounded::SensorBus(bus_name(*b), format!("its engine's event: {why}")),
-                )
-            })
-            .collect(),
-        Failure::Job(k, why) => scripts
-            .get(*k)
-            .map(|s| vec![(s.task, why.clone())])
-            .unwrap_or_default(),
-        Failure::Rounds => scripts
-            .iter()
-            .map(|s| (s.task, Unbounded::NoConvergence))
-            .collect(),
-    };
+    let failing: Vec<(usize, Unbounded)> = failures
+        .iter()
+        .flat_map(|failure| match failure {
+            Failure::Script(k, why) => scripts
+                .get(*k)
+                .map(|s| vec![(s.task, Unbounded::SensorBus(bus_name(s.bus), why.clone()))])
+                .unwrap_or_default(),
+            Failure::Event(b, why) => scripts
+                .iter()
+                .filter(|s| s.bus == *b)
+                .map(|s| {
+                    (
+                        s.task,
+                        Unbounded::SensorBus(bus_name(*b), format!("its engine's event: {why}")),
+                    )
+                })
+                .collect(),
+            Failure::Job(k, why) => scripts
+                .get(*k)
+                .map(|s| vec![(s.task, why.clone())])
+                .unwrap_or_default(),
+            Failure::Task(i, why) => vec![(*i, why.clone())],
+            Failure::Rounds => scripts
+                .iter()
+                .map(|s| (s.task, Unbounded::NoConvergence))
+                .collect(),
+        })
+        .collect();
     let name = |i: usize| {
         board
             .tasks
@@ -1171,6 +1218,35 @@ fn mark_unbounded(
                         *u = true;
                     }
                 }
+            }
+        }
+    }
+    // Every other task not above every suspending job and every engine: its bound is not a fixed point's.
+    let top = scripts
+        .iter()
+        .filter_map(|s| board.tasks.get(s.task).map(|t| t.priority))
+        .chain(
+            scripts
+                .iter()
+                .filter_map(|s| buses.get(s.bus).map(|b| b.engine_priority)),
+        )
+        .chain(
+            scripts
+                .iter()
+                .filter_map(|s| board.tasks.get(s.engine_row).map(|t| t.priority)),
+        )
+        .max()
+        .unwrap_or(0);
+    let cause = failing.first().map(|(task, _)| *task);
+    for (i, t) in board.tasks.iter().enumerate() {
+        if t.priority > top && view_of(i) == 0 {
+            continue;
+        }
+        if let (Some(slot), Some(u)) = (bounds.get_mut(i), unbounded.get_mut(i)) {
+            if !*u {
+                *slot =
+                    Err(cause.map_or(Unbounded::NoConvergence, |c| Unbounded::Suspending(name(c))));
+                *u = true;
             }
         }
     }

@@ -666,3 +666,126 @@ fn a_job_with_settles_worked_by_hand() {
     assert_eq!(simulated[0], 371_000);
     assert!(simulated[0] <= 442_000);
 }
+
+/// Two jobs of one suspending RTIC task `g`: A (priority 2, CPU 1, an 8 µs script, T 20) and B (priority 2, CPU 4,
+/// no script, T 20); L (priority 1, CPU 9, T 100); all µs.
+///
+/// B waits behind A's suspended job (one job of `g` at a time), so B too runs late and then early again: seen by L
+/// it needs its own-view response minus its CPU as jitter, as A does. Own view of `g`: A = 1 + 8 + 4 (B) = 13, B =
+/// 13. L: R = 9 + ⌈(R + 12)/20⌉·1 + ⌈(R + 9)/20⌉·4 → 14 → 19 → 19. With B's model jitter 0 (only the job with a
+/// script given R − C) it was 15.
+///
+/// The simulator: A's first job suspends 0..8, runs 8..9; B's first job (released at 0) runs 9..13; L, arrived at
+/// 8, runs 13..20; A's second job (no script this time) 20..21, B's 21..25; L 25..27: response 19.
+#[test]
+fn a_suspending_tasks_job_without_a_script_has_its_response_as_jitter_too() {
+    let mut a = board_task("a", 2, 1, 20);
+    a.job_of = Some("g".into());
+    let mut b = board_task("b", 2, 4, 20);
+    b.job_of = Some("g".into());
+    let board = suspending_board(vec![a, b, board_task("l", 1, 9, 100)], &[(0, 8)]);
+    let wcrts = board_wcrts_us(&board);
+    assert_eq!(wcrts[2], Some(19));
+
+    let cpu = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: None,
+        })
+    };
+    let jobs = vec![
+        SuspendingJob {
+            task: 0,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(0), Piece::Script(8000), cpu(1)],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(4)],
+        },
+        SuspendingJob {
+            task: 2,
+            arrival: 8000,
+            release: 8000,
+            pieces: vec![cpu(9)],
+        },
+        SuspendingJob {
+            task: 0,
+            arrival: 20_000,
+            release: 20_000,
+            pieces: vec![cpu(1)],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 20_000,
+            release: 20_000,
+            pieces: vec![cpu(4)],
+        },
+    ];
+    let simulated = sim::suspending_run(&[2, 2, 1], &[0, 0, 1], &[], &jobs);
+    assert_eq!(simulated[2], 19_000);
+    assert!(simulated
+        .iter()
+        .zip([0, 1, 2, 0, 1])
+        .all(|(&s, i)| s <= wcrts[i].unwrap() * 1000));
+}
+
+/// A failure leaves no unconverged bound behind: τ1 (priority 3, CPU 2, a 6 µs script, T 10), τ2 (priority 2, CPU
+/// 4, T 100), τ3 (priority 1, CPU 80, a 1 µs script, T 100; all µs). τ3 overloads, and the iteration stops at its
+/// failure in the first round, τ1's response still 0 as τ2's jitter; τ2's bound from that round was 6 µs, while the simulator (τ1's
+/// placement of [`a_suspending_task_interferes_with_its_response_minus_its_cpu_as_jitter`]) reaches 8. Only a task
+/// above every suspending job and every engine keeps a bound: here none, each says why.
+#[test]
+fn a_failure_leaves_no_unconverged_bound_behind() {
+    let board = suspending_board(
+        vec![
+            board_task("t1", 3, 2, 10),
+            board_task("t2", 2, 4, 100),
+            board_task("t3", 1, 80, 100),
+        ],
+        &[(0, 6), (2, 1)],
+    );
+    let result = analysis::analyse_board(&board, &Limits::default());
+    assert!(result.tasks[2].wcrt().is_none(), "{:?}", result.tasks[2]);
+    let why = result.tasks[1]
+        .bound
+        .as_ref()
+        .expect_err("not a fixed point's");
+    assert!(why.to_string().contains("t3"), "{why}");
+    assert!(result.tasks[0].wcrt().is_none(), "{:?}", result.tasks[0]);
+
+    let cpu = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: None,
+        })
+    };
+    let jobs = vec![
+        SuspendingJob {
+            task: 0,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(0), Piece::Script(6000), cpu(2)],
+        },
+        SuspendingJob {
+            task: 0,
+            arrival: 10_000,
+            release: 10_000,
+            pieces: vec![cpu(2)],
+        },
+        SuspendingJob {
+            task: 1,
+            arrival: 6000,
+            release: 6000,
+            pieces: vec![cpu(4)],
+        },
+    ];
+    let simulated = sim::suspending_run(&[3, 2, 1], &[0, 1, 2], &[], &jobs);
+    assert_eq!(
+        simulated[2], 8000,
+        "above the 6 µs the failed round gave τ2"
+    );
+}

@@ -747,3 +747,89 @@ fn a_timing_files_engine_parts_are_checked() {
     )
     .is_err());
 }
+
+/// An engine row is left out of the deadline check: it carries its job's whole response as jitter, so its analysed
+/// response is no completion time (the engine does the script's work while the job is suspended on it, before the
+/// job ends; the job's check covers it). [`board_json`]'s job with a 330 µs period: the job 50 + 192 + 2 × 42 =
+/// 326 µs meets its deadline; its row's analysed response, 326 + 42 = 368, is above the 330 µs it was checked
+/// against, and the set is schedulable (it was not).
+#[test]
+fn an_engine_row_is_left_out_of_the_deadline_check() {
+    let mut v = board_json();
+    v["tasks"][0]["period_us"] = json!(330.0);
+    let model = Model {
+        name: None,
+        boards: vec![board(v)],
+        can: None,
+    };
+    let system = model.validate().expect("valid");
+    let result = analysis::analyse_board(&system.boards[0], &Limits::default());
+    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(326)));
+    assert!(result.tasks[0].schedulable());
+    let row = &result.tasks[2];
+    assert_eq!(row.name, "i2c1_engine[publish[floor]]");
+    assert_eq!(row.wcrt(), Some(Time::from_us(368)), "{row:?}");
+    assert!(!row.deadline_checked && row.schedulable());
+    assert!(result.tasks[1].deadline_checked);
+    let analysis = analysis::analyse(
+        &system,
+        &Options {
+            frame_cost: FrameCostSpec::Exact,
+            horizon: None,
+        },
+    );
+    assert!(analysis.all_ok(), "{:?}", analysis.failures());
+    // Nor is it the board's tightest task in the report.
+    let report = Report::build(&system, "t".into(), Vec::new(), Vec::new(), None);
+    let text = report::render(&report, Format::Table);
+    let heading = text
+        .lines()
+        .find(|l| l.contains("Board b"))
+        .expect("the board's heading");
+    assert!(heading.contains("tightest: publish[floor]"), "{heading}");
+}
+
+/// `engine.handlers` take the handlers' tasks off the board: on a bus no script names, nothing would charge them,
+/// so the timing file is refused naming the field; with a script on the bus it is taken.
+#[test]
+fn engine_handlers_on_a_bus_without_scripts_are_refused() {
+    let buses: Vec<sensor_bus::SensorBusModel> = serde_json::from_value(json!([
+        { "name": "i2c1", "bitrate": 400000,
+          "engine": { "priority": 7, "per_event_us": 2.0, "per_event_from": "estimate", "source": "a guess" } },
+        { "name": "i2c2", "bitrate": 400000,
+          "engine": { "priority": 7, "per_event_us": 2.0, "per_event_from": "estimate", "source": "a guess",
+                      "handlers": ["i2c2_ev", "i2c2_er"] } }
+    ]))
+    .expect("the timing file's form");
+    let script = |bus: &str| -> sensor_bus::ScriptModel {
+        serde_json::from_value(
+            json!({ "bus": bus, "bytes": 6, "source": "address + 5 bytes",
+                                      "stretch_us": 0.0, "stretch_source": "none" }),
+        )
+        .expect("a script")
+    };
+    let refused = Err((
+        "sensor_buses[1].engine.handlers".into(),
+        SensorBusError::HandlersWithoutScripts("i2c2".into()),
+    ));
+    assert_eq!(
+        sensor_bus::check_timing(&buses, std::iter::empty()),
+        refused
+    );
+    let on_i2c1 = script("i2c1");
+    assert_eq!(
+        sensor_bus::check_timing(
+            &buses,
+            std::iter::once(("topics.a".to_string(), Some(&on_i2c1), None))
+        ),
+        refused
+    );
+    let on_i2c2 = script("i2c2");
+    assert_eq!(
+        sensor_bus::check_timing(
+            &buses,
+            std::iter::once(("topics.a".to_string(), Some(&on_i2c2), None))
+        ),
+        Ok(())
+    );
+}
