@@ -1200,8 +1200,9 @@ impl<D> ImuSensors<Scripts, D> {
 
 impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
     type Stage = ImuStage;
-    /// Set-up step 2's two scripts, then the sample's.
-    const MAX_SCRIPTS: usize = 3;
+    /// Set-up step 1's or step 2's two scripts (a step that ends pending takes no sample), or
+    /// step 3's one and the sample's.
+    const MAX_SCRIPTS: usize = 2;
     const SET_UP_STEPS: usize = 3;
 
     fn topics(&self) -> &'static [Topic] {
