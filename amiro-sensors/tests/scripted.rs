@@ -1183,3 +1183,102 @@ fn a_ring_sensor_gone_fails_alone() {
     assert_eq!(bus.scripts[1].operations().len(), 6);
     assert_muxed_rules(&bus.scripts);
 }
+
+/// A boot with the parts gone (no acknowledge): the scripted set-up fails as `Supervised::new`'s
+/// blocking one does — missing, one fault, the same error, its retry after 1 s — and the groups
+/// then sample as the blocking path through the retries and the parts' return.
+#[test]
+fn a_boot_without_the_parts_is_missing_as_on_the_blocking_path() {
+    fn check<G: SensorGroup, R: ScriptedSensors>(blocking: Supervised<G>, scripted: Supervised<R>) {
+        assert!(!scripted.is_ready());
+        assert_eq!(
+            (
+                scripted.faults(),
+                scripted.last_error(),
+                scripted.retry_at_us()
+            ),
+            (
+                blocking.faults(),
+                blocking.last_error(),
+                blocking.retry_at_us()
+            )
+        );
+        assert_eq!(scripted.faults(), 1);
+    }
+    let absent = || {
+        let mut bus = SimCompassBus::new();
+        bus.set_nack(true);
+        bus
+    };
+    let mut bus = Recorder::new(absent());
+    let mut scripted = Supervised::boot(Compass::scripted(), &mut bus, &mut NoDelay);
+    let mut blocking = Supervised::new(Compass::new(absent()));
+    check(Supervised::new(Compass::new(absent())), scripted.clone());
+    blocking.group_mut().magnetometer.bus_mut().set_nack(false);
+    bus.bus.set_nack(false);
+    run_both(
+        &mut blocking,
+        &mut scripted,
+        &mut bus,
+        &MAGNETOMETER,
+        0,
+        3_000_000,
+        20_000,
+    );
+    assert!(scripted.is_ready());
+
+    let absent = || {
+        let mut bus = SimFloorBus::new();
+        bus.set_nack(true);
+        bus
+    };
+    let mut bus = Recorder::new(absent());
+    let mut scripted = Supervised::boot(FloorSensors::scripted(), &mut bus, &mut NoDelay);
+    let mut blocking = Supervised::new(FloorSensors::new(absent()));
+    check(
+        Supervised::new(FloorSensors::new(absent())),
+        scripted.clone(),
+    );
+    blocking.group_mut().mux_mut().bus_mut().set_nack(false);
+    bus.bus.set_nack(false);
+    run_both(
+        &mut blocking,
+        &mut scripted,
+        &mut bus,
+        &FLOOR,
+        0,
+        3_000_000,
+        10_000,
+    );
+    assert!(scripted.is_ready());
+
+    let absent = || {
+        let mut bus = SimImuBus::new();
+        bus.imu_mut().set_fault(Bno055Fault::Absent);
+        bus
+    };
+    let mut bus = Recorder::new(absent());
+    let mut scripted = Supervised::boot(ImuSensors::scripted(NoDelay), &mut bus, &mut NoDelay);
+    let mut blocking = Supervised::new(ImuSensors::new(absent(), NoDelay));
+    check(
+        Supervised::new(ImuSensors::new(absent(), NoDelay)),
+        scripted.clone(),
+    );
+    blocking
+        .group_mut()
+        .imu
+        .bus_mut()
+        .imu_mut()
+        .set_fault(Bno055Fault::None);
+    bus.bus.imu_mut().set_fault(Bno055Fault::None);
+    run_both(
+        &mut blocking,
+        &mut scripted,
+        &mut bus,
+        &IMU_TOPICS,
+        0,
+        3_000_000,
+        1_000,
+    );
+    assert!(scripted.is_ready());
+}

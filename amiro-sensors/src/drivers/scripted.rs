@@ -324,31 +324,31 @@ impl<G: ScriptedSensors> Supervised<G> {
         for _ in 0..G::SET_UP_STEPS {
             let mut stage = G::Stage::default();
             let mut next = group.begin_set_up_step(&mut stage, now_us);
-            let mut scripts = 0;
-            let step = loop {
-                match next {
-                    Next::Done(step) => break step,
-                    Next::Run { script, settle_us } => {
-                        let result = if scripts < G::MAX_SCRIPTS {
-                            delay.delay_us(settle_us);
-                            bus.run(&script)
-                        } else {
-                            timed_out()
-                        };
-                        scripts += 1;
-                        next = group.resume_set_up_step(&mut stage, now_us, &result);
-                    }
-                }
-            };
-            match step {
-                InitStep::Done => return Self::set_up(group, Ok(())),
-                InitStep::Failed(error) => return Self::set_up(group, Err(error)),
-                InitStep::Pending { next_us } => {
+            // One more pass than scripts: the last hands the step a timeout, which every group
+            // ends its step on.
+            for scripts in 0..=G::MAX_SCRIPTS {
+                let Next::Run { script, settle_us } = next else {
+                    break;
+                };
+                let result = if scripts < G::MAX_SCRIPTS {
+                    delay.delay_us(settle_us);
+                    bus.run(&script)
+                } else {
+                    timed_out()
+                };
+                next = group.resume_set_up_step(&mut stage, now_us, &result);
+            }
+            match next {
+                Next::Done(InitStep::Done) => return Self::set_up(group, Ok(())),
+                Next::Done(InitStep::Failed(error)) => return Self::set_up(group, Err(error)),
+                Next::Done(InitStep::Pending { next_us }) => {
                     delay.delay_us(
                         u32::try_from(next_us.saturating_sub(now_us)).unwrap_or(u32::MAX),
                     );
                     now_us = next_us;
                 }
+                // A step that did not end: the set-up goes on stepwise at the first samples.
+                Next::Run { .. } => break,
             }
         }
         Self::set_up_pending(group, now_us)
