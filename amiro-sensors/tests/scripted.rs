@@ -1348,6 +1348,46 @@ mod random_faults {
             }
         }
 
+        /// A PowerManagement ring bus (its sensors fed fixed counts, as a world feeds them, so
+        /// that a sensor read again in the next script reads the same): the counts of every round
+        /// equal the blocking read's.
+        #[test]
+        fn a_ring_bus(
+            faults in proptest::collection::vec(fault(), 50..150),
+            counts in proptest::array::uniform4(1u16..5000),
+        ) {
+            let ring = || {
+                SimBus::with(DeadChannel {
+                    floor: SimMuxedProximity::new(0),
+                    dead: None,
+                })
+            };
+            let channels = [Channel::Ch1, Channel::Ch3, Channel::Ch2, Channel::Ch0];
+            let mut blocking = Pca9544a::new(ring());
+            let mut bus = ring();
+            for channel in channels {
+                assert!(ring_set_up(&mut blocking, channel));
+                assert!(ring_set_up_scripted(&mut bus, channel));
+            }
+            for (k, fault) in faults.into_iter().enumerate() {
+                for sim in [blocking.bus_mut(), &mut bus] {
+                    sim.set_nack(matches!(fault, Fault::Nack));
+                    sim.target.dead = match fault {
+                        Fault::One(channel) => Some(channel),
+                        _ => None,
+                    };
+                    for (channel, &count) in counts.iter().enumerate() {
+                        let pattern = matches!(fault, Fault::Pattern) && channel % 2 == 1;
+                        sim.target
+                            .floor
+                            .set_proximity(channel, Some(if pattern { 0 } else { count }));
+                    }
+                }
+                let expected = ring_read(&mut blocking, &channels);
+                prop_assert_eq!(ring_read_scripted(&mut bus, &channels), expected, "round {}", k);
+            }
+        }
+
         #[test]
         fn the_bno055(faults in proptest::collection::vec(fault(), 100..300)) {
             let mut blocking = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
