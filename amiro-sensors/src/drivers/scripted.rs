@@ -1023,17 +1023,21 @@ impl RingRead {
 
     /// The last script's result in.
     pub fn complete(&mut self, result: &ScriptResult) {
-        let involved: heapless::Vec<(usize, RingSensor), RING_BUS_SENSORS> =
-            self.involved().map(|(k, _, s)| (k, s)).collect();
+        // The sensors the script read, in its order (a copy: the loop below changes them).
+        let mut involved = [None; RING_BUS_SENSORS];
+        for (slot, (k, _, sensor)) in involved.iter_mut().zip(self.involved()) {
+            *slot = Some((k, sensor));
+        }
+        let involved = involved.into_iter().flatten();
         match result {
             Err(error) => {
-                let failed = involved.get(usize::from(error.operation / 2));
-                if let Some(slot) = failed.and_then(|&(k, _)| self.sensors.get_mut(k)) {
+                let failed = involved.clone().nth(usize::from(error.operation / 2));
+                if let Some(slot) = failed.and_then(|(k, _)| self.sensors.get_mut(k)) {
                     *slot = RingSensor::Failed;
                 }
             }
             Ok(r) => {
-                for (i, &(k, sensor)) in involved.iter().enumerate() {
+                for (i, (k, sensor)) in involved.enumerate() {
                     let op = 2 * i + 1;
                     let next = match sensor {
                         RingSensor::Check(count) => match block::<1>(r, op) {
