@@ -68,9 +68,14 @@ scripted_sample!(imu_begin, imu_resume, ImuSensors<Scripts, NoWait>, ImuStage);
 // PowerManagement's parts: a ring bus's read, a sensor's set-up, the gauge's status read and
 // identity check, each a script at a time.
 
+/// A part's end (`Some` once done) and its next script.
+type Stepped<T, S> = (Option<Result<T, Error<ErrorKind>>>, S);
+/// A script, or why it could not be built.
+type Built = Result<Script, Error<ErrorKind>>;
+
 /// A ring bus's next script.
 #[no_mangle]
-pub fn ring_script(read: &RingRead) -> Option<Result<Script, Error<ErrorKind>>> {
+pub fn ring_script(read: &RingRead) -> Option<Built> {
     read.script()
 }
 
@@ -83,13 +88,7 @@ pub fn ring_complete(read: &mut RingRead, result: &ScriptResult) -> Option<[Opti
 
 /// A sensor's set-up: its next script and its last script's result.
 #[no_mangle]
-pub fn set_up_step(
-    set_up: &mut SensorSetUp,
-    result: &ScriptResult,
-) -> (
-    Option<Result<(), Error<ErrorKind>>>,
-    Result<Script, Error<ErrorKind>>,
-) {
+pub fn set_up_step(set_up: &mut SensorSetUp, result: &ScriptResult) -> Stepped<(), Built> {
     let done = set_up.complete(result);
     (done, set_up.script())
 }
@@ -99,10 +98,7 @@ pub fn set_up_step(
 pub fn gauge_status_step(
     read: &mut StatusRead,
     result: &ScriptResult,
-) -> (
-    Option<Result<BatteryStatus, Error<ErrorKind>>>,
-    Option<Result<Script, Error<ErrorKind>>>,
-) {
+) -> Stepped<BatteryStatus, Option<Built>> {
     let Some(transfer) = read.next_transfer() else {
         return (None, None);
     };
@@ -115,10 +111,7 @@ pub fn gauge_status_step(
 pub fn gauge_identity_step(
     check: &mut GaugeIdentity,
     result: &ScriptResult,
-) -> (
-    Option<Result<(), Error<ErrorKind>>>,
-    Option<Result<Script, Error<ErrorKind>>>,
-) {
+) -> Stepped<(), Option<Built>> {
     let Some(transfer) = check.next_transfer() else {
         return (None, None);
     };
