@@ -202,8 +202,18 @@ fn bound_of(
     qemu: bool,
 ) -> Option<Result<(u64, bool, String), String>> {
     // A row charged per activation holds an observed job against its job's bound: a trace's job does not say
-    // how many activations (frames) it served, and the job's bound holds every job, however many.
+    // how many activations (frames) it served, and the job's bound holds every job, however many. A release of a
+    // task that suspends on its scripts holds each traced run, one poll (a script's wait ends the run), against
+    // one poll's bound, which the release's rests on.
     let value = |row: &bounds::TaskBound| -> Result<(u64, bool), String> {
+        if let Some(release) = &row.release {
+            let poll = if qemu {
+                release.poll_instructions
+            } else {
+                release.poll_cycles
+            };
+            return Ok((poll, row.declined.is_some()));
+        }
         match (qemu, row.instructions, row.cycles, &row.job, &row.held) {
             (true, _, _, Some(job), _) => Ok((job.instructions, false)),
             (false, _, _, Some(job), _) => Ok((job.cycles, false)),
@@ -826,6 +836,58 @@ mod tests {
             72_000_000,
         );
         assert_eq!(robot[0].bound, Some(2160));
+    }
+
+    #[test]
+    fn a_suspending_release_holds_each_run_to_one_polls_bound() {
+        // can_rx as a release of one script: 4 polls of 500 instructions (720 cycles), the row 2 000 (2 880).
+        let mut file = file();
+        let row = file.tasks.iter_mut().find(|t| t.task == "can_rx").unwrap();
+        (row.cycles, row.us, row.instructions) = (Some(2880), Some(40.0), Some(2000));
+        row.release = Some(bounds::ReleaseBound {
+            polls: 4,
+            poll_cycles: 720,
+            poll_us: 10.0,
+            poll_instructions: 500,
+            poll_bus_wait_us: 0.0,
+            reason: "1 script stated: …".into(),
+        });
+        let release = BoardBounds {
+            bounds: Some(file),
+            ..board_bounds()
+        };
+        // A run is one poll: 986 instructions, 500 once its records (486) are out, is within one poll's bound;
+        // 987 is above it, though far within the release's 2 000.
+        let within = rows(
+            &release,
+            &[("can_rx".into(), vec![Job::alone(7.888)])],
+            None,
+            true,
+            1,
+        );
+        assert_eq!(
+            (within[0].bound, within[0].verdict.as_str()),
+            (Some(500), "ok")
+        );
+        let over = rows(
+            &release,
+            &[("can_rx".into(), vec![Job::alone(7.896)])],
+            None,
+            true,
+            1,
+        );
+        assert_eq!(
+            (over[0].bound, over[0].verdict.as_str()),
+            (Some(500), EXCEEDS)
+        );
+        let robot = rows(
+            &release,
+            &[("can_rx".into(), vec![Job::alone(1.0)])],
+            None,
+            false,
+            72_000_000,
+        );
+        assert_eq!(robot[0].bound, Some(720));
     }
 
     #[test]
