@@ -8,18 +8,18 @@
 //! frames of one identifier would rest on a count over such runs, which the random traffic also checks, but nothing
 //! argues).
 //!
-//! The mailboxes are the driver's own (`bxcan::Mailboxes` on the model's registers). The interrupt's job is
-//! `tasks::transmit_pending`'s (a chip-only module): collect every completion, requeue an aborted frame, then fill
-//! mailboxes from the queue's head until the queue is empty or a frame is refused. Its few lines are written out here
-//! ([`Bench::job`]) with a hook between the collection and the fills, where the bus may change a mailbox (the
-//! controller runs beside the interrupt).
+//! The mailboxes are the driver's own (`bxcan::Mailboxes` on the model's registers), and so is the interrupt's job:
+//! `tasks::transmit_pending` (a chip-only module) runs `can::collect_completions` (every completion collected, an
+//! aborted frame requeued) and then `can::fill_mailboxes` (mailboxes filled from the queue's head until it is empty or
+//! a frame is refused), which [`Bench::job`] runs with a hook between them, where the bus may change a mailbox (the
+//! controller runs beside the interrupt), through a port that reports what the mailboxes did.
 use std::cell::RefCell;
 use std::collections::HashMap;
 
 use amiro_can::{CanId, Frame, Kind, Priority};
 use amiro_firmware::bxcan::model::{Failure, Model};
 use amiro_firmware::bxcan::{self, Mailboxes};
-use amiro_firmware::can::{CanTx, Completion, Transmit};
+use amiro_firmware::can::{self, CanTx, Completion, Transmit};
 use amiro_sensors::tx_queue::TxQueue;
 
 type Can = RefCell<Model>;
@@ -75,6 +75,53 @@ struct JobReport {
     requests: Vec<Request>,
 }
 
+/// The mailboxes as the job drives them, each completion and each abort a refused frame asked for reported.
+struct Watched<'a> {
+    can: &'static Can,
+    tx: &'a mut Mailboxes<&'static Can>,
+    report: JobReport,
+}
+
+impl CanTx for Watched<'_> {
+    fn transmit(&mut self, frame: &Frame) -> Transmit {
+        let before = aborts_requested(self.can);
+        let held: Vec<Option<FrameKey>> = (0..3)
+            .map(|i| {
+                let model = self.can.borrow();
+                let r = model.request(i)?;
+                let tag = u32::from_le_bytes([r.data[1], r.data[2], r.data[3], r.data[4]]);
+                Some((r.id as u16, tag, r.data[0]))
+            })
+            .collect();
+        let outcome = self.tx.transmit(frame);
+        let new = aborts_requested(self.can) & !before;
+        if new != 0 {
+            assert_eq!(outcome, Transmit::Busy, "an abort only for a refused frame");
+            assert_eq!(new.count_ones(), 1, "one abort per refused frame");
+            let mailbox = new.trailing_zeros() as usize;
+            let victim_frame = held[mailbox].expect("an abort of a pending mailbox");
+            self.report.requests.push(Request {
+                by: *frame,
+                mailbox,
+                victim: victim_frame.0,
+                victim_frame,
+            });
+        }
+        outcome
+    }
+
+    fn completed(&mut self, on_completion: &mut dyn FnMut(Completion)) {
+        let report = &mut self.report;
+        self.tx.completed(&mut |completion| {
+            match completion {
+                Completion::Aborted(frame) => report.aborted.push(frame),
+                Completion::Sent(frame) => report.sent.push(frame),
+            }
+            on_completion(completion);
+        });
+    }
+}
+
 /// A configured controller, its mailboxes and a transmit queue of LightRing's length.
 struct Bench {
     can: &'static Can,
@@ -105,50 +152,19 @@ impl Bench {
             .collect()
     }
 
-    /// One job of the transmit interrupt; `between` runs after the collection, before the fills.
+    /// One job of the transmit interrupt, the firmware's (`can::collect_completions`, then `can::fill_mailboxes`,
+    /// as `tasks::transmit_pending` runs them) through a port that reports what it saw; `between` runs after the
+    /// collection, before the fills.
     fn job(&mut self, mut between: impl FnMut(&Can)) -> JobReport {
-        let mut report = JobReport::default();
-        let queue = &mut self.queue;
-        self.tx.completed(&mut |completion| match completion {
-            Completion::Aborted(frame) => {
-                report.aborted.push(frame);
-                let _ = queue.requeue(frame);
-            }
-            Completion::Sent(frame) => report.sent.push(frame),
-        });
+        let mut port = Watched {
+            can: self.can,
+            tx: &mut self.tx,
+            report: JobReport::default(),
+        };
+        can::collect_completions(&mut port, &mut self.queue, |_| {});
         between(self.can);
-        while let Some(frame) = self.queue.peek().copied() {
-            let before = aborts_requested(self.can);
-            let held: Vec<Option<FrameKey>> = (0..3)
-                .map(|i| {
-                    let model = self.can.borrow();
-                    let r = model.request(i)?;
-                    let tag = u32::from_le_bytes([r.data[1], r.data[2], r.data[3], r.data[4]]);
-                    Some((r.id as u16, tag, r.data[0]))
-                })
-                .collect();
-            match self.tx.transmit(&frame) {
-                Transmit::Queued => {
-                    self.queue.pop();
-                }
-                Transmit::Busy => {
-                    let new = aborts_requested(self.can) & !before;
-                    if new != 0 {
-                        let mailbox = new.trailing_zeros() as usize;
-                        let victim_frame = held[mailbox].expect("an abort of a pending mailbox");
-                        report.requests.push(Request {
-                            by: frame,
-                            mailbox,
-                            victim: victim_frame.0,
-                            victim_frame,
-                        });
-                        assert_eq!(new.count_ones(), 1, "one abort per refused frame");
-                    }
-                    break;
-                }
-            }
-        }
-        report
+        can::fill_mailboxes(&mut port, &mut self.queue, |_| {});
+        port.report
     }
 
     /// The controller sends the frame it offers (the most urgent pending one).
