@@ -146,8 +146,9 @@ pub struct ReleaseBound {
 /// * per script, one poll a second wake may add: the script's await is a timeout on the monotonic around the bus's
 ///   transfer, two wakers of one task; the one that does not resume the task may pend it again while the poll that
 ///   takes the result runs, before the loser is dropped (the timer's slot freed, the bus's slot given up);
-/// * 1, the release point's channel: rtic-sync's receiver keeps the waker its last `recv` poll registered after a
-///   timeout drops that wait, and the command handler's next send wakes it once, possibly during a release.
+/// * 1, the release point's channel: rtic-sync's receiver keeps the waker its last `recv` poll registered when the
+///   wait ends (ready, or dropped by its timeout), and the command handler's next send wakes it, possibly during a
+///   release; only the next park registers again, so at most one such wake comes between two parks.
 pub fn release_polls(settles: &[bool]) -> u64 {
     let scripts = settles.len() as u64;
     let settled = settles.iter().filter(|s| **s).count() as u64;

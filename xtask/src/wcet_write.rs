@@ -423,7 +423,7 @@ fn as_release(
     let reason = format!(
         "{scripts}: at most {polls} polls, each within one poll's bound: 1 takes the release, {} resume it after \
          each script and each settle, {n} a second wake of a script's await may add (its timeout's and its \
-         transfer's wakers), 1 the release point's channel may add (its receiver's waker, kept after a timeout, \
+         transfer's wakers), 1 the release point's channel may add (its receiver's waker, kept when its wait ends, \
          woken once by the next send)",
         n + settled
     );
