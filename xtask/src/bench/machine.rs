@@ -432,10 +432,12 @@ pub fn release_row(row: &str) -> String {
 /// the runs of each of its releases in the trace. A release's job is its runs' executions summed less every run's
 /// trace records but one's at their fewest (the check takes one job's off), with their pre-emptions, events and
 /// ticks summed; its row is [`release_row`]. A run that ended one release and took the next is in both, as the
-/// count has it (docs/analysis.md, "A suspending release: the sum of its polls").
+/// count has it (docs/analysis.md, "A suspending release: the sum of its polls"). `releases` names each row's
+/// releases' task: where the QEMU build runs a simulated device inside it (`trace.qemu.other_code`), the release
+/// image's bound does not cover the runs, and a sum above it is `NOT HELD`, as such a task's run is.
 pub fn release_rows(
     bounds: &BoardBounds,
-    releases: &[(String, Vec<Vec<Job>>)],
+    releases: &[(String, String, Vec<Vec<Job>>)],
     qemu: bool,
     clock_hz: u64,
 ) -> Vec<MachineRow> {
@@ -454,10 +456,17 @@ pub fn release_rows(
             ..r.clone()
         })
         .collect();
-    let sums = BoardBounds {
+    let mut sums = BoardBounds {
         bounds: Some(sums),
         ..bounds.clone()
     };
+    if let Some(q) = sums.trace.as_mut().and_then(|t| t.qemu.as_mut()) {
+        for (row, task, _) in releases {
+            if let Some(what) = q.other_code.get(task).cloned() {
+                q.other_code.insert(release_row(row), what);
+            }
+        }
+    }
     // One run's records at their fewest, µs: QEMU's, or the timing file's trace cost per job on the chip.
     let records_us = if qemu {
         QEMU_RECORDS_FEWEST_INSTRUCTIONS as f64 * QEMU_NS_PER_INSTRUCTION / 1_000.0
@@ -466,7 +475,7 @@ pub fn release_rows(
     };
     let jobs: Vec<(String, Vec<Job>)> = releases
         .iter()
-        .map(|(row, each)| {
+        .map(|(row, _, each)| {
             let merged = each
                 .iter()
                 .filter(|runs| !runs.is_empty())
@@ -984,7 +993,7 @@ mod tests {
         let held = |runs: Vec<Job>| {
             release_rows(
                 &release,
-                &[("publisher[gyroscope]".into(), vec![runs])],
+                &[("publisher[gyroscope]".into(), "publish".into(), vec![runs])],
                 true,
                 1,
             )
@@ -1004,6 +1013,7 @@ mod tests {
             &release,
             &[(
                 "publisher[gyroscope]".into(),
+                "publish".into(),
                 vec![vec![run(986)], vec![run(986), run(1486)]],
             )],
             true,
@@ -1012,11 +1022,36 @@ mod tests {
         assert_eq!(two[0].own(), 1500);
         assert!(release_rows(
             &board_bounds(),
-            &[("publisher[gyroscope]".into(), vec![vec![run(986)]])],
+            &[(
+                "publisher[gyroscope]".into(),
+                "publish".into(),
+                vec![vec![run(986)]]
+            )],
             true,
             1
         )
         .is_empty());
+        // A publisher that runs a simulated device in QEMU: the release image's bound does not cover its runs, and
+        // the sum above it is not held.
+        let simulated = BoardBounds {
+            trace: traced_bounds(&[("publish", "the simulated bus")]).trace,
+            ..release.clone()
+        };
+        let not_held = release_rows(
+            &simulated,
+            &[(
+                "publisher[gyroscope]".into(),
+                "publish".into(),
+                vec![vec![run(936); 5]],
+            )],
+            true,
+            1,
+        );
+        assert!(
+            not_held[0].verdict.starts_with(NOT_HELD),
+            "{}",
+            not_held[0].verdict
+        );
     }
 
     #[test]

@@ -484,20 +484,30 @@ pub fn measure_with(
             let mut rows =
                 machine::rows_against(b, &executions, board_result, qemu, capture.clock_hz, image);
             // A suspending release's runs summed against the release's bound.
-            let releases: Vec<(String, Vec<Vec<machine::Job>>)> = b
+            // One entry per row and task that took its releases (a topic may be published at several levels).
+            let mut releases: Vec<(String, String, Vec<Vec<machine::Job>>)> = Vec::new();
+            for r in b
                 .bounds
                 .iter()
                 .flat_map(|f| &f.tasks)
                 .filter(|r| r.release.is_some())
-                .map(|r| {
-                    let runs = capture
-                        .release_runs(&r.task)
-                        .into_iter()
-                        .map(|runs| runs.into_iter().map(job_of).collect())
-                        .collect();
-                    (r.task.clone(), runs)
-                })
-                .collect();
+            {
+                for runs in capture.release_runs(&r.task) {
+                    let task = runs
+                        .first()
+                        .and_then(|run| names.get(usize::from(run.task)))
+                        .cloned()
+                        .unwrap_or_default();
+                    let jobs: Vec<machine::Job> = runs.into_iter().map(job_of).collect();
+                    match releases
+                        .iter_mut()
+                        .find(|(row, t, _)| *row == r.task && *t == task)
+                    {
+                        Some((_, _, each)) => each.push(jobs),
+                        None => releases.push((r.task.clone(), task, vec![jobs])),
+                    }
+                }
+            }
             rows.extend(machine::release_rows(b, &releases, qemu, capture.clock_hz));
             for row in &mut rows {
                 row.preempted_by = names
