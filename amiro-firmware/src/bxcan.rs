@@ -339,16 +339,19 @@ impl<R: Registers + Copy> CanTx for Mailboxes<R> {
             }
             return Transmit::Queued;
         }
-        // All three taken: abort the least urgent pending one if this frame beats it (and no abort is
-        // already under way for it), without waiting. The greatest identifier, the later mailbox
-        // among equals.
+        // All three taken: abort the least urgent pending one if this frame beats it, without
+        // waiting (the greatest identifier, the later mailbox among equals). None while an abort is
+        // under way for it, nor while a mailbox is empty with its completion uncollected (`empty`
+        // is not 0 here, as no mailbox is free): that completion pends the interrupt, whose next
+        // job frees the mailbox, so no frame asks for a second abort behind one that ended unseen
+        // (docs/analysis.md, "Refinements examined").
         let later = |best: Option<(usize, u16)>, i: usize, held: Option<u16>| match (best, held) {
             (Some((_, most)), Some(id)) if id < most => best,
             (_, Some(id)) => Some((i, id)),
             (_, None) => best,
         };
         if let Some((i, least)) = later(later(later(None, 0, h0), 1, h1), 2, h2) {
-            if id < least && tsr & bit::abrq(i) == 0 {
+            if id < least && tsr & bit::abrq(i) == 0 && empty == 0 {
                 // Setting ABRQ; the other TSR bits are write-1-to-clear flags, written as 0.
                 regs.write(reg::TSR, bit::abrq(i));
             }

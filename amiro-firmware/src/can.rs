@@ -3,7 +3,10 @@
 //! Received frames stay raw (an 11-bit ID and 0–8 bytes) so that the handler sees, counts and
 //! rejects malformed frames itself; frames to send are already-validated `amiro_can::Frame`s.
 //! The one implementation for the robot is [`crate::bxcan`] (the same IP on the F103 and the F405);
-//! the QEMU build has virtual ports in `crate::qemu`.
+//! the QEMU build has virtual ports in `crate::qemu`. The transmit interrupt's job over a port and the transmit
+//! queue is here too ([`collect_completions`], [`fill_mailboxes`]), hardware-free.
+
+use amiro_sensors::tx_queue::TxQueue;
 
 /// A frame as it came off the bus, before any protocol check.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -70,4 +73,45 @@ pub trait CanTx {
 pub trait CanRx {
     /// Takes the next received frame or overrun report, if any.
     fn receive(&mut self) -> Option<RxEvent>;
+}
+
+/// The transmit interrupt's job, its first half: every completion collected, each aborted frame put back into
+/// `queue`, `sent` told of each frame sent. `tasks::transmit_pending` runs it and then [`fill_mailboxes`]; they are
+/// apart so that the host's tests run the job itself with the controller moving between them, as it runs beside
+/// the interrupt (amiro-firmware's `tests/transmit_aborts.rs`).
+#[inline(always)]
+pub fn collect_completions<const N: usize>(
+    port: &mut impl CanTx,
+    queue: &mut TxQueue<N>,
+    mut sent: impl FnMut(&amiro_can::Frame),
+) {
+    port.completed(&mut |completion| match completion {
+        Completion::Aborted(frame) => {
+            let _ = queue.requeue(frame);
+        }
+        Completion::Sent(frame) => sent(&frame),
+    });
+}
+
+/// The transmit interrupt's job, its second half: mailboxes filled from the queue's head, most urgent first, until
+/// the queue is empty or a frame is refused (`Busy`, where the port may have asked for an abort); `queued` told the
+/// identifier of each frame that went into a mailbox.
+#[inline(always)]
+pub fn fill_mailboxes<const N: usize>(
+    port: &mut impl CanTx,
+    queue: &mut TxQueue<N>,
+    mut queued: impl FnMut(u16),
+) {
+    // The frame goes to the mailbox from its place in the queue: copied out first, it was a `memcpy` call per
+    // pass on the chip. Its identifier is kept for `queued`, which comes after `pop` has freed its slot.
+    while let Some(frame) = queue.peek() {
+        let id = frame.id().raw();
+        match port.transmit(frame) {
+            Transmit::Queued => {
+                queue.pop();
+                queued(id);
+            }
+            Transmit::Busy => break,
+        }
+    }
 }

@@ -9,7 +9,7 @@ use amiro_sensors::trace::{TraceEvent, TraceKind};
 use amiro_sensors::tx_queue::{PushOutcome, TxQueue};
 use rtic_sync::channel::Sender;
 
-use crate::can::{CanRx, CanTx, Completion, RxEvent, RxFrame, Transmit};
+use crate::can::{CanRx, CanTx, RxEvent, RxFrame};
 use crate::mono::Clock;
 use crate::rx_queue::Producer;
 use crate::{signals, telemetry};
@@ -52,31 +52,20 @@ pub fn enqueue<const N: usize>(queue: &mut TxQueue<N>, frame: amiro_can::Frame) 
 }
 
 /// The CAN transmit interrupt: frames whose mailbox was aborted for a more urgent one go back into
-/// the queue; then the mailboxes are filled from the queue, most urgent first.
+/// the queue; then the mailboxes are filled from the queue, most urgent first (`can::collect_completions`,
+/// `can::fill_mailboxes`).
 pub fn transmit_pending<C: Clock, const N: usize>(port: &mut impl CanTx, queue: &mut TxQueue<N>) {
-    port.completed(&mut |completion| match completion {
-        Completion::Aborted(frame) => {
-            let _ = queue.requeue(frame);
-        }
-        Completion::Sent(frame) => crate::tracing::frame_acked(frame.id().raw()),
+    crate::can::collect_completions(port, queue, |frame| {
+        crate::tracing::frame_acked(frame.id().raw())
     });
-    // The frame goes to the mailbox from its place in the queue: copied out first, it was a
-    // `memcpy` call per pass on the chip. Its identifier is kept for the trace event, which comes
-    // after `pop` has freed its slot.
-    while let Some(frame) = queue.peek() {
+    crate::can::fill_mailboxes(port, queue, |id| {
+        // QEMU prints the frame itself as it enters the (virtual) mailbox: the event would say it
+        // twice, at a cost the robot does not have.
         #[cfg(not(feature = "qemu"))]
-        let id = frame.id().raw();
-        match port.transmit(frame) {
-            Transmit::Queued => {
-                queue.pop();
-                // QEMU prints the frame itself as it enters the (virtual) mailbox: the event would
-                // say it twice, at a cost the robot does not have.
-                #[cfg(not(feature = "qemu"))]
-                telemetry::trace(&TraceEvent::new(C::now_us(), TraceKind::FrameSent { id }));
-            }
-            Transmit::Busy => break,
-        }
-    }
+        telemetry::trace(&TraceEvent::new(C::now_us(), TraceKind::FrameSent { id }));
+        #[cfg(feature = "qemu")]
+        let _ = id;
+    });
 }
 
 /// The CAN status-change (error) interrupt, also polled periodically: reads the controller's error

@@ -1,21 +1,25 @@
 //! The transmit path's aborts on bxCAN's register model (`bxcan::model`) with the boards' transmit queue: what the
 //! analysis's charge of the transmit interrupt assumes of them (docs/analysis.md, "The transmit interrupt's parts":
-//! an abort is requested only by the queue's head, for the least urgent pending frame, at most one per job, and
-//! there are no more aborts than frames queued), and two known answers (docs/analysis.md, *Refinements examined*): a
-//! frame that asks for two aborts (the count holds over the frames, not per frame), and one job's two frames of one
-//! identifier that ask for two (so a charge of one abort per job's frames of one identifier would rest on a count
-//! over such runs, which the random traffic also checks, but nothing argues).
+//! an abort is requested only by the queue's head, for the least urgent pending frame, at most one per job, none
+//! behind a completion not yet collected, and there are no more aborts than frames queued), and two known answers
+//! (docs/analysis.md, *Refinements examined*): an abort that ends between a job's collection and its fills lets the
+//! frame that asked for it ask for no second (`Mailboxes::transmit` asks for none while a completion is
+//! uncollected), and one job's two frames of one identifier that ask for two (so a charge of one abort per job's
+//! frames of one identifier would rest on a count over such runs, which the random traffic also checks, but nothing
+//! argues).
 //!
-//! The interrupt's job is `tasks::transmit_pending`'s (a chip-only module): collect every completion, requeue an
-//! aborted frame, then fill mailboxes from the queue's head until the queue is empty or a frame is refused. It is
-//! written out here ([`Bench::job`]) with a hook between the collection and the fills, where the bus may change a
-//! mailbox (the controller runs beside the interrupt).
+//! The mailboxes are the driver's own (`bxcan::Mailboxes` on the model's registers), and so is the interrupt's job:
+//! `tasks::transmit_pending` (a chip-only module) runs `can::collect_completions` (every completion collected, an
+//! aborted frame requeued) and then `can::fill_mailboxes` (mailboxes filled from the queue's head until it is empty or
+//! a frame is refused), which [`Bench::job`] runs with a hook between them, where the bus may change a mailbox (the
+//! controller runs beside the interrupt), through a port that reports what the mailboxes did.
 use std::cell::RefCell;
+use std::collections::HashMap;
 
 use amiro_can::{CanId, Frame, Kind, Priority};
 use amiro_firmware::bxcan::model::{Failure, Model};
 use amiro_firmware::bxcan::{self, Mailboxes};
-use amiro_firmware::can::{CanTx, Completion, Transmit};
+use amiro_firmware::can::{self, CanTx, Completion, Transmit};
 use amiro_sensors::tx_queue::TxQueue;
 
 type Can = RefCell<Model>;
@@ -52,6 +56,15 @@ struct Request {
     by: Frame,
     mailbox: usize,
     victim: u16,
+    /// The frame in that mailbox: identifier, tag and page.
+    victim_frame: FrameKey,
+}
+
+/// A frame the test follows: identifier, tag and page (byte 0).
+type FrameKey = (u16, u32, u8);
+
+fn key_of(frame: &Frame) -> FrameKey {
+    (frame.id().raw(), tag_of(frame), frame.data()[0])
 }
 
 /// What one job did.
@@ -60,6 +73,53 @@ struct JobReport {
     aborted: Vec<Frame>,
     sent: Vec<Frame>,
     requests: Vec<Request>,
+}
+
+/// The mailboxes as the job drives them, each completion and each abort a refused frame asked for reported.
+struct Watched<'a> {
+    can: &'static Can,
+    tx: &'a mut Mailboxes<&'static Can>,
+    report: JobReport,
+}
+
+impl CanTx for Watched<'_> {
+    fn transmit(&mut self, frame: &Frame) -> Transmit {
+        let before = aborts_requested(self.can);
+        let held: Vec<Option<FrameKey>> = (0..3)
+            .map(|i| {
+                let model = self.can.borrow();
+                let r = model.request(i)?;
+                let tag = u32::from_le_bytes([r.data[1], r.data[2], r.data[3], r.data[4]]);
+                Some((r.id as u16, tag, r.data[0]))
+            })
+            .collect();
+        let outcome = self.tx.transmit(frame);
+        let new = aborts_requested(self.can) & !before;
+        if new != 0 {
+            assert_eq!(outcome, Transmit::Busy, "an abort only for a refused frame");
+            assert_eq!(new.count_ones(), 1, "one abort per refused frame");
+            let mailbox = new.trailing_zeros() as usize;
+            let victim_frame = held[mailbox].expect("an abort of a pending mailbox");
+            self.report.requests.push(Request {
+                by: *frame,
+                mailbox,
+                victim: victim_frame.0,
+                victim_frame,
+            });
+        }
+        outcome
+    }
+
+    fn completed(&mut self, on_completion: &mut dyn FnMut(Completion)) {
+        let report = &mut self.report;
+        self.tx.completed(&mut |completion| {
+            match completion {
+                Completion::Aborted(frame) => report.aborted.push(frame),
+                Completion::Sent(frame) => report.sent.push(frame),
+            }
+            on_completion(completion);
+        });
+    }
 }
 
 /// A configured controller, its mailboxes and a transmit queue of LightRing's length.
@@ -92,42 +152,19 @@ impl Bench {
             .collect()
     }
 
-    /// One job of the transmit interrupt; `between` runs after the collection, before the fills.
+    /// One job of the transmit interrupt, the firmware's (`can::collect_completions`, then `can::fill_mailboxes`,
+    /// as `tasks::transmit_pending` runs them) through a port that reports what it saw; `between` runs after the
+    /// collection, before the fills.
     fn job(&mut self, mut between: impl FnMut(&Can)) -> JobReport {
-        let mut report = JobReport::default();
-        let queue = &mut self.queue;
-        self.tx.completed(&mut |completion| match completion {
-            Completion::Aborted(frame) => {
-                report.aborted.push(frame);
-                let _ = queue.requeue(frame);
-            }
-            Completion::Sent(frame) => report.sent.push(frame),
-        });
+        let mut port = Watched {
+            can: self.can,
+            tx: &mut self.tx,
+            report: JobReport::default(),
+        };
+        can::collect_completions(&mut port, &mut self.queue, |_| {});
         between(self.can);
-        while let Some(frame) = self.queue.peek().copied() {
-            let before = aborts_requested(self.can);
-            let pending = self.pending();
-            match self.tx.transmit(&frame) {
-                Transmit::Queued => {
-                    self.queue.pop();
-                }
-                Transmit::Busy => {
-                    let new = aborts_requested(self.can) & !before;
-                    if new != 0 {
-                        let mailbox = new.trailing_zeros() as usize;
-                        let victim = pending.iter().find(|p| p.0 == mailbox).map_or(0, |p| p.1);
-                        report.requests.push(Request {
-                            by: frame,
-                            mailbox,
-                            victim,
-                        });
-                        assert_eq!(new.count_ones(), 1, "one abort per refused frame");
-                    }
-                    break;
-                }
-            }
-        }
-        report
+        can::fill_mailboxes(&mut port, &mut self.queue, |_| {});
+        port.report
     }
 
     /// The controller sends the frame it offers (the most urgent pending one).
@@ -183,8 +220,9 @@ fn bus_event(can: &Can, rng: &mut Rng) {
 }
 
 /// Random traffic of runs (1–6 frames of one identifier, queued one at a time, up to five runs under way, the
-/// interrupt pended after a run's last frame) over `ids` (priority, topic): returns (frames queued, aborts asked).
-fn random_traffic(seed: u64, ids: &[(Priority, u8)], steps: usize) -> (u32, u32) {
+/// interrupt pended after a run's last frame) over `ids` (priority, topic): returns (frames queued, aborts asked,
+/// aborts asked by a frame that had asked before).
+fn random_traffic(seed: u64, ids: &[(Priority, u8)], steps: usize) -> (u32, u32, u32) {
     let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
     let mut bench = Bench::new();
     let (mut frames, mut requests, mut runs) = (0u32, 0u32, 0u32);
@@ -193,6 +231,9 @@ fn random_traffic(seed: u64, ids: &[(Priority, u8)], steps: usize) -> (u32, u32)
     // Runs under way: (priority, topic, next page, pages, tag).
     let mut open: Vec<(Priority, u8, u8, u8, u32)> = Vec::new();
     let mut pended = false;
+    // Per frame that asked for an abort: the frame it asked to abort, and whether that one's completion is collected.
+    let mut asked: HashMap<FrameKey, (FrameKey, bool)> = HashMap::new();
+    let mut asked_again = 0u32;
     for _ in 0..steps {
         match rng.below(10) {
             0 | 1 if open.len() < 5 => {
@@ -227,6 +268,24 @@ fn random_traffic(seed: u64, ids: &[(Priority, u8)], steps: usize) -> (u32, u32)
                     let by = request.by.id().raw();
                     assert!(by < request.victim, "seed {seed}: {request:?}");
                 }
+                // A frame asks again only once the frame it asked to abort has left its mailbox and that completion
+                // is collected (the mailbox it freed went to a frame at least as urgent, which asked for none): never
+                // behind a completion not yet collected (docs/analysis.md, *Refinements examined*).
+                for done in report.aborted.iter().chain(&report.sent) {
+                    for (victim, collected) in asked.values_mut() {
+                        *collected |= *victim == key_of(done);
+                    }
+                }
+                for request in &report.requests {
+                    let previous = asked.insert(key_of(&request.by), (request.victim_frame, false));
+                    if let Some((victim, collected)) = previous {
+                        assert!(
+                            collected,
+                            "seed {seed}: {request:?} asks again, {victim:?} not collected"
+                        );
+                        asked_again += 1;
+                    }
+                }
                 requests += report.requests.len() as u32;
                 assert!(
                     requests <= frames,
@@ -241,12 +300,12 @@ fn random_traffic(seed: u64, ids: &[(Priority, u8)], steps: usize) -> (u32, u32)
             _ => bus_event(bench.can, &mut rng),
         }
     }
-    (frames, requests)
+    (frames, requests, asked_again)
 }
 
 #[test]
-fn an_abort_is_asked_by_the_queues_head_for_a_less_urgent_frame_and_never_more_than_frames_queued()
-{
+fn an_abort_is_asked_by_the_queues_head_for_a_less_urgent_frame_never_behind_an_uncollected_completion(
+) {
     let lightring: Vec<(Priority, u8)> = Priority::ALL
         .iter()
         .map(|&p| (p, LIGHTRING_DIAGNOSTICS))
@@ -256,14 +315,19 @@ fn an_abort_is_asked_by_the_queues_head_for_a_less_urgent_frame_and_never_more_t
         .iter()
         .flat_map(|&p| [(p, 0x01), (p, 0x08), (p, 0x1A), (p, 0x1F)])
         .collect();
+    let mut again = 0;
     for ids in [&lightring, &many] {
         let mut asked = 0;
         for seed in 1..1500 {
-            asked += random_traffic(seed, ids, 600).1;
+            let (_, requests, asked_again) = random_traffic(seed, ids, 600);
+            asked += requests;
+            again += asked_again;
         }
         // The runs do reach full mailboxes and aborts (the checks above are not vacuous).
         assert!(asked > 100, "{asked} aborts asked");
     }
+    // And frames that ask again (on the sixteen identifiers: a more urgent frame must take the mailbox first).
+    assert!(again > 10, "{again} aborts asked again");
 }
 
 /// Frames of LightRing's diagnostics topic at each priority.
@@ -272,19 +336,21 @@ fn lightring(priority: Priority, tag: u32) -> Frame {
 }
 
 #[test]
-fn an_abort_ending_between_the_collection_and_the_fills_lets_one_frame_ask_for_a_second() {
+fn an_abort_ending_between_the_collection_and_the_fills_lets_no_frame_ask_for_a_second() {
     // docs/analysis.md, "Refinements examined": the low frame is on the bus when the more urgent ones fill the
     // other mailboxes, so the abort the high frame asks for waits for its transmission to end; it ends (lost
     // arbitration, so aborted) after the next job has collected the completions: that job finds the mailbox neither
-    // pending nor free, and the high frame, still the queue's head, asks for the abort of the next least urgent.
+    // pending nor free (its completion not yet collected). The high frame, still the queue's head, asks for no
+    // other abort (`Mailboxes::transmit` asks for none while a completion is uncollected: it asked for the medium
+    // frame's before); the completion has pended the interrupt, whose job collects it and gives the high frame the
+    // low frame's mailbox.
     let mut bench = Bench::new();
     let low = lightring(Priority::Low, 1);
     let _ = bench.queue.push(low);
     bench.job(|_| {});
     // The low frame is alone: the controller starts sending it. Then an urgent and a medium frame come.
-    let medium = lightring(Priority::Medium, 3);
     let _ = bench.queue.push(lightring(Priority::Urgent, 2));
-    let _ = bench.queue.push(medium);
+    let _ = bench.queue.push(lightring(Priority::Medium, 3));
     bench.job(|_| {});
     let high = lightring(Priority::High, 4);
     let _ = bench.queue.push(high);
@@ -299,16 +365,26 @@ fn an_abort_ending_between_the_collection_and_the_fills_lets_one_frame_ask_for_a
             .failed(low_mailbox, Failure::ArbitrationLost));
     });
     assert!(second.aborted.is_empty());
-    assert_eq!(second.requests.len(), 1, "the high frame asks again");
-    assert_eq!(second.requests[0].by, high);
-    assert_eq!(second.requests[0].victim, medium.id().raw());
-    // Both aborts complete; the next job collects both and refills in order.
-    assert!(bench.can.borrow_mut().abort(second.requests[0].mailbox));
+    assert_eq!(
+        second.requests,
+        [],
+        "the high frame asks for no second abort"
+    );
+    assert_eq!(aborts_requested(bench.can), 0);
+    assert!(
+        bench.can.borrow().tx_interrupt(),
+        "the completion is pending"
+    );
+    // The job the completion pends collects it, the high frame takes the low frame's mailbox, and the low frame,
+    // requeued, waits behind three more urgent ones without asking.
     let third = bench.job(|_| {});
-    assert_eq!(third.aborted, [low, medium]);
+    assert_eq!(third.aborted, [low]);
+    assert_eq!(third.requests, []);
+    assert_eq!(bench.mailbox_of(high.id().raw()), low_mailbox);
     let mut held: Vec<u16> = bench.pending().iter().map(|p| p.1).collect();
     held.sort_unstable();
     assert_eq!(held, [0x41C, 0x51C, 0x61C]);
+    assert_eq!(bench.queue.peek(), Some(&low));
 }
 
 #[test]

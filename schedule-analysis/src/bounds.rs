@@ -108,6 +108,51 @@ pub struct TaskBound {
     /// every bound ("The verdict on the bounds"). Absent in a file of an older writer and on rows not held.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held: Option<HeldBound>,
+    /// Where the row is a release of a task that suspends on its scripts (the timing file's `script` or `scripts`
+    /// for the topic or task): the row's figures (or its held ones) are `polls` times one poll's bound, and one
+    /// poll's bound is kept here, which each traced run (one poll) is held to. docs/analysis.md, "A suspending
+    /// release: the sum of its polls". Absent on every other row.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub release: Option<ReleaseBound>,
+}
+
+/// A suspending task's release as the sum of its polls ([`TaskBound::release`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReleaseBound {
+    /// The most polls one release takes ([`release_polls`]).
+    pub polls: u64,
+    /// One poll's bound in core cycles.
+    pub poll_cycles: u64,
+    /// At the file's clock, µs.
+    pub poll_us: f64,
+    /// One poll's longest path in instructions.
+    pub poll_instructions: u64,
+    /// One poll's stated peripheral waits, µs.
+    #[serde(default)]
+    pub poll_bus_wait_us: f64,
+    /// The scripts stated and what each term of `polls` counts.
+    pub reason: String,
+}
+
+/// The most polls one release of a task that suspends on `settles.len()` scripts takes, `settles[k]` whether the
+/// job waits before script k (its `settle_us`): the firmware's suspending sample (`scripted::sample_on_bus` through
+/// an `I2cPort`, under `publisher::serve_level_suspending`; docs/analysis.md, "A suspending release: the sum of its
+/// polls"):
+///
+/// * 1, the poll that takes the release, up to its first script's await;
+/// * per script, the poll its end resumes, and one more where a settle comes before it (the settle's delay is an
+///   await of its own): the resumptions `r_k` the analysis charges a blocking each;
+/// * per script, one poll a second wake may add: the script's await is a timeout on the monotonic around the bus's
+///   transfer, two wakers of one task; the one that does not resume the task may pend it again while the poll that
+///   takes the result runs, before the loser is dropped (the timer's slot freed, the bus's slot given up);
+/// * 1, the release point's channel: rtic-sync's receiver keeps the waker its last `recv` poll registered when the
+///   wait ends (ready, or dropped by its timeout), and the command handler's next send wakes it, possibly during a
+///   release; only the next park registers again, so at most one such wake comes between two parks.
+pub fn release_polls(settles: &[bool]) -> u64 {
+    let scripts = settles.len() as u64;
+    let settled = settles.iter().filter(|s| **s).count() as u64;
+    1 + (scripts + settled) + scripts + 1
 }
 
 /// The bound of a held row ([`TaskBound::held`]): what the row would carry were it not held, and why it is.
@@ -313,6 +358,8 @@ pub enum Problem {
         /// The file's.
         got: f64,
     },
+    /// A release's figures are not its `polls` times its poll's ([`TaskBound::release`]).
+    ReleaseNotItsPolls,
     /// The file is for another board or revision than the timing file it is read for.
     WrongImage {
         /// What the timing file describes.
@@ -352,6 +399,10 @@ impl fmt::Display for Problem {
             Problem::UsDisagrees { expected, got } => write!(
                 f,
                 "{got} µs is not the cycles at the file's clock ({expected:.3} µs)"
+            ),
+            Problem::ReleaseNotItsPolls => write!(
+                f,
+                "the row's cycles and instructions must be `polls` times the poll's (a release is the sum of its polls)"
             ),
             Problem::WrongImage { expected, got } => {
                 write!(f, "the file is for {got}, the timing file for {expected}")
@@ -601,6 +652,15 @@ impl BoundsFile {
                 self.check_held(h, declined)
                     .map_err(|(f, p)| fail(at(&format!("held{f}")), p))?;
             }
+            if let Some(r) = &t.release {
+                let figures = match (t.cycles, t.instructions, &t.held) {
+                    (Some(c), Some(i), _) => Some((c, i)),
+                    (_, _, Some(h)) => h.cycles.zip(h.instructions),
+                    _ => None,
+                };
+                self.check_release(r, figures)
+                    .map_err(|(f, p)| fail(at(&format!("release{f}")), p))?;
+            }
         }
         for (resource, s) in &self.idle_critical_sections {
             self.check_section(s).map_err(|(field, p)| {
@@ -661,6 +721,30 @@ impl BoundsFile {
         if let Some(s) = &h.sections {
             self.check_sections(s)
                 .map_err(|(f, p)| (format!(".sections{f}"), p))?;
+        }
+        Ok(())
+    }
+
+    /// A release's poll: its `us` at the clock, a reason, at least one poll, and the row's figures (where it has
+    /// them, or its held ones) `polls` times the poll's.
+    fn check_release(
+        &self,
+        r: &ReleaseBound,
+        figures: Option<(u64, u64)>,
+    ) -> Result<(), (String, Problem)> {
+        if r.reason.trim().is_empty() {
+            return Err((".reason".into(), Problem::Empty));
+        }
+        if r.polls == 0 {
+            return Err((".polls".into(), Problem::NotPositive));
+        }
+        self.check_us(r.poll_cycles, r.poll_us)
+            .map_err(|p| (".poll_us".into(), p))?;
+        finite(r.poll_bus_wait_us).map_err(|p| (".poll_bus_wait_us".into(), p))?;
+        if let Some((cycles, instructions)) = figures {
+            if cycles != r.polls * r.poll_cycles || instructions != r.polls * r.poll_instructions {
+                return Err((".polls".into(), Problem::ReleaseNotItsPolls));
+            }
         }
         Ok(())
     }

@@ -13,6 +13,10 @@
 //!   declined if any of them is: of one release of the topic's group where the bounds file states the release
 //!   loop per topic (`topics`, `machine_code::TopicBound`), else of the task's whole job; its critical sections
 //!   are the publisher tasks' (any job of the task may hold them);
+//! - a task or topic whose timing-file entry states `script` or `scripts` suspends on them: its row is one release,
+//!   `schedule_analysis::bounds::release_polls` times one poll's bound (a topic's: the publisher tasks' whole
+//!   bound), the poll kept as the row's `release` ([`as_release`]; docs/analysis.md, "A suspending release: the sum
+//!   of its polls"), or declined where the task's polls cannot be found;
 //! - `monotonic` is the bound of the monotonic's interrupt (the task the input bounds file adds);
 //! - `exception_entry` and `exception_exit` are the core's (the TRM's 12 and 10 cycles, the entry with lazy FPU
 //!   stacking on the M4F), with the flash accesses' wait states (the vector read and the handler's first fetch on
@@ -99,6 +103,28 @@ pub struct Budgets {
     pub publishers: BTreeSet<String>,
     /// Per task its stated budget and its deadline (or period), µs, where the file gives them.
     pub stated: BTreeMap<String, (f64, f64)>,
+    /// Per task or topic that suspends on scripts (its `script` or `scripts`), whether each script has a settle
+    /// before it, in the job's order: its rows are a release's polls ([`as_release`]). Keyed `tasks.<name>` and
+    /// `topics.<name>`, as the timing file places them.
+    pub scripts: BTreeMap<String, Vec<bool>>,
+}
+
+/// The scripts one entry of a timing file states (`script`, or `scripts` in order): per script whether the job
+/// waits before it (`settle_us` above 0). `None` without either.
+fn scripts_of(entry: &serde_json::Value) -> Option<Vec<bool>> {
+    let settle = |s: &serde_json::Value| {
+        s.get("settle_us")
+            .and_then(|v| v.as_f64())
+            .is_some_and(|v| v > 0.0)
+    };
+    match (
+        entry.get("script"),
+        entry.get("scripts").and_then(|v| v.as_array()),
+    ) {
+        (Some(one), _) => Some(vec![settle(one)]),
+        (None, Some(list)) => Some(list.iter().map(settle).collect()),
+        (None, None) => None,
+    }
 }
 
 /// Reads the timing file of `build`'s board at its robot revision.
@@ -145,11 +171,25 @@ fn budgets_of(root: &Path, build: &Build) -> Result<Budgets> {
                 .collect()
         })
         .unwrap_or_default();
+    let mut scripts = BTreeMap::new();
+    for field in ["tasks", "topics"] {
+        for (name, entry) in json
+            .get(field)
+            .and_then(|v| v.as_object())
+            .into_iter()
+            .flatten()
+        {
+            if let Some(list) = scripts_of(entry) {
+                scripts.insert(format!("{field}.{name}"), list);
+            }
+        }
+    }
     Ok(Budgets {
         tasks: keys("tasks"),
         topics: keys("topics"),
         publishers,
         stated,
+        scripts,
     })
 }
 
@@ -261,6 +301,13 @@ fn hold(rows: &mut [TaskBound], held: &[machine_code::wcet::bounds::HeldBound]) 
                     r.bus_wait_us
                 );
                 match r.job.take() {
+                    None if r.release.is_some() => {
+                        let p = r.release.as_ref().map_or((0, 0), |p| (p.polls, p.poll_cycles));
+                        format!(
+                            "bounded from the machine code at {figures} per release ({} polls of at most {} cycles)",
+                            p.0, p.1
+                        )
+                    }
                     None => format!("bounded from the machine code at {figures}"),
                     Some(job) if job.parts.is_some() => {
                         let p = job.parts.as_ref().map_or((0, 0, 0), |p| {
@@ -318,6 +365,7 @@ fn declined(task: &str, reason: String) -> TaskBound {
         sections: None,
         job: None,
         held: None,
+        release: None,
     }
 }
 
@@ -333,6 +381,69 @@ fn bounded(task: &str, cycles: u64, instructions: u64, bus_wait_us: f64, clock: 
         sections: None,
         job: None,
         held: None,
+        release: None,
+    }
+}
+
+/// The row of a task or topic that suspends on its scripts (`settles`: one per script, whether a settle comes
+/// before it; `stated_as`: where the timing file states them) as one release: [`bounds::release_polls`] times its
+/// one-poll bound `row`, the poll kept as `release` (docs/analysis.md, "A suspending release: the sum of its
+/// polls"). Declined where the task's polls cannot be found (`polls_found`: an interrupt handler, thread mode, no
+/// task of the image) or the row is a charge per activation; a declined row keeps its reason.
+fn as_release(
+    row: TaskBound,
+    settles: &[bool],
+    stated_as: &str,
+    polls_found: Result<(), String>,
+    clock: u64,
+) -> TaskBound {
+    let n = settles.len();
+    let settled = settles.iter().filter(|s| **s).count();
+    let scripts = format!(
+        "{n} script{} stated ({stated_as}), {settled} with a settle before it",
+        if n == 1 { "" } else { "s" }
+    );
+    let refuse = |why: String| TaskBound {
+        sections: row.sections.clone(),
+        ..declined(&row.task, format!("{}: {scripts}, but {why}", row.task))
+    };
+    if let Err(why) = polls_found {
+        return refuse(format!("its polls cannot be found: {why}"));
+    }
+    if row.job.is_some() {
+        return refuse(
+            "its row is a charge per activation, which a release of polls cannot be".into(),
+        );
+    }
+    let (Some(cycles), Some(instructions), None) = (row.cycles, row.instructions, &row.declined)
+    else {
+        return row;
+    };
+    let polls = bounds::release_polls(settles);
+    let reason = format!(
+        "{scripts}: at most {polls} polls, each within one poll's bound: 1 takes the release, {} resume it after \
+         each script and each settle, {n} a second wake of a script's await may add (its timeout's and its \
+         transfer's wakers), 1 the release point's channel may add (its receiver's waker, kept when its wait ends, \
+         woken once by the next send)",
+        n + settled
+    );
+    TaskBound {
+        release: Some(bounds::ReleaseBound {
+            polls,
+            poll_cycles: cycles,
+            poll_us: us(cycles, clock),
+            poll_instructions: instructions,
+            poll_bus_wait_us: row.bus_wait_us,
+            reason,
+        }),
+        sections: row.sections.clone(),
+        ..bounded(
+            &row.task,
+            polls * cycles,
+            polls * instructions,
+            polls as f64 * row.bus_wait_us,
+            clock,
+        )
     }
 }
 
@@ -673,9 +784,26 @@ pub fn rows_with_groups(
             RticTaskKind::Idle => None,
         }
     };
+    // Whether the task's jobs are polls (an async task its dispatcher polls), for a task that suspends.
+    let polls_found = |name: &str| -> Result<(), String> {
+        let Some(task) = built.tasks.iter().find(|t| t.name == name) else {
+            return Err(format!("{name} is no task of the image as built"));
+        };
+        match &task.kind {
+            RticTaskKind::Software if dispatchers.contains_key(&task.priority) => Ok(()),
+            RticTaskKind::Software => Err(format!("{name} has no dispatcher at its priority")),
+            RticTaskKind::Hardware { binds } => Err(format!(
+                "{name} is the handler of {binds}, whose job runs to its end: no await suspends it"
+            )),
+            RticTaskKind::Idle => Err(format!(
+                "{name} runs in thread mode, polled by no dispatcher"
+            )),
+        }
+    };
     let mut out = Vec::new();
     for task in &budgets.tasks {
-        out.push(match (source(task), by_name.get(task.as_str())) {
+        let suspends = budgets.scripts.get(&format!("tasks.{task}"));
+        let row = match (source(task), by_name.get(task.as_str())) {
             (Some((what, f)), _) => from_found(task, &what, f, clock),
             // Its budget stays stated, but the sections of the functions named for it are sections of its job:
             // blocking terms beside the stated ones (not in place of them: those functions may be only part
@@ -703,6 +831,16 @@ pub fn rows_with_groups(
                 task,
                 format!("{task}: not an interrupt-driven task of the image as built (thread mode, or not in the app)"),
             ),
+        };
+        out.push(match suspends {
+            Some(settles) => as_release(
+                row,
+                settles,
+                &format!("tasks.{task}"),
+                polls_found(task),
+                clock,
+            ),
+            None => row,
         });
     }
     // One sample of a topic: a job of whichever publisher task publishes it.
@@ -726,6 +864,46 @@ pub fn rows_with_groups(
         .collect();
     for topic in &budgets.topics {
         let row = bounds::publisher_row(topic);
+        // A topic whose sample suspends on scripts: a release is several polls, and a poll that ends one release
+        // may take the next and start its sample, so each poll is bounded by its task's whole job (every group's
+        // functions), not one group's release.
+        if let Some(settles) = budgets.scripts.get(&format!("topics.{topic}")) {
+            let poll = match (
+                publishers.iter().find_map(|p| p.declined.clone()),
+                publishers.is_empty(),
+            ) {
+                (_, true) => declined(&row, "the timing file names no publisher task".into()),
+                (Some(reason), _) => declined(&row, reason),
+                (None, false) => {
+                    let max =
+                        |f: fn(&TaskBound) -> u64| publishers.iter().map(f).max().unwrap_or(0);
+                    bounded(
+                        &row,
+                        max(|p| p.cycles.unwrap_or(0)),
+                        max(|p| p.instructions.unwrap_or(0)),
+                        publishers.iter().map(|p| p.bus_wait_us).fold(0.0, f64::max),
+                        clock,
+                    )
+                }
+            };
+            let found = budgets
+                .publishers
+                .iter()
+                .map(|p| polls_found(p))
+                .find(Result::is_err)
+                .unwrap_or(Ok(()));
+            out.push(as_release(
+                TaskBound {
+                    sections: merged_sections(&publishers),
+                    ..poll
+                },
+                settles,
+                &format!("topics.{topic}"),
+                found,
+                clock,
+            ));
+            continue;
+        }
         let rows: Vec<TaskBound> = publishers
             .iter()
             .zip(&per_topic)
@@ -892,6 +1070,7 @@ mod app {
             topics: vec!["gyro".into(), "odo".into(), "temp".into()],
             publishers: ["publish".to_string()].into(),
             stated: BTreeMap::new(),
+            scripts: BTreeMap::new(),
         };
         let group = |name: &str, topic: &str, cycles: u64, declined: Option<&str>| {
             machine_code::TopicBound {
@@ -930,6 +1109,144 @@ mod app {
         assert_eq!(row("publisher[temp]").bus_wait_us, 0.5);
     }
 
+    #[test]
+    fn a_suspending_release_is_its_polls_times_its_tasks_whole_poll_and_a_task_without_polls_is_declined(
+    ) {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        // gyro: three scripts, the second after a settle; odo: none (its group's bound, as before); the task
+        // `handle` (async, priority 2): one script; `can_rx` (the CAN_RX handler): one script.
+        let budgets = Budgets {
+            tasks: vec!["handle".into(), "can_rx".into(), "drive".into()],
+            topics: vec!["gyro".into(), "odo".into()],
+            publishers: ["publish".to_string()].into(),
+            stated: BTreeMap::new(),
+            scripts: [
+                ("topics.gyro".to_string(), vec![false, true, false]),
+                ("tasks.handle".to_string(), vec![false]),
+                ("tasks.can_rx".to_string(), vec![false]),
+            ]
+            .into(),
+        };
+        let group = |name: &str, topic: &str, cycles: u64| machine_code::TopicBound {
+            group: name.into(),
+            topics: vec![topic.into()],
+            cycles,
+            us: 0.0,
+            instructions: cycles / 3,
+            bus_wait_us: 0.0,
+            loops: Vec::new(),
+            declined: None,
+        };
+        let mut publish = found("dispatcher LOW", 720, None);
+        publish.topics = vec![group("imu", "gyro", 360), group("drive", "odo", 144)];
+        let machine = [
+            publish,
+            found("handle", 1_440, None),
+            found("can_rx", 288, None),
+            found("drive", 72, None),
+        ];
+        let sections = sections_of(&machine, &[]);
+        let rows = rows(&built, &app, &budgets, &machine, &sections, chip);
+        let row = |n: &str| rows.iter().find(|r| r.task == n).unwrap();
+        // gyro: 1 + (3 scripts + 1 settle) + 3 + 1 = 9 polls, each at the publisher task's whole poll (720
+        // cycles, 10 µs, 360 instructions, 0.5 µs of waits; not its group's 360: a poll may end one release and
+        // take the next): 6 480 cycles, 90 µs, 3 240 instructions, 4.5 µs of waits.
+        let gyro = row("publisher[gyro]");
+        assert_eq!(
+            (gyro.cycles, gyro.us, gyro.instructions, gyro.bus_wait_us),
+            (Some(6_480), Some(90.0), Some(3_240), 4.5)
+        );
+        let release = gyro.release.as_ref().unwrap();
+        assert_eq!(
+            (
+                release.polls,
+                release.poll_cycles,
+                release.poll_us,
+                release.poll_instructions
+            ),
+            (9, 720, 10.0, 360)
+        );
+        assert!(release
+            .reason
+            .contains("3 scripts stated (topics.gyro), 1 with a settle"));
+        // odo states no script: its group's one release, no release.
+        assert_eq!(
+            (
+                row("publisher[odo]").cycles,
+                row("publisher[odo]").release.is_none()
+            ),
+            (Some(144), true)
+        );
+        // handle: one script, 1 + 1 + 1 + 1 = 4 polls of 1 440 cycles.
+        let handle = row("handle");
+        assert_eq!(
+            (handle.cycles, handle.instructions),
+            (Some(5_760), Some(2_880))
+        );
+        assert_eq!(handle.release.as_ref().map(|r| r.polls), Some(4));
+        // can_rx: a handler runs to its end, so its polls cannot be found: declined, naming why.
+        let can_rx = row("can_rx");
+        assert_eq!((can_rx.cycles, can_rx.release.is_none()), (None, true));
+        assert!(can_rx.declined.as_deref().is_some_and(|r| r.contains(
+            "1 script stated (tasks.can_rx), 0 with a settle before it, but its polls cannot be found: can_rx is \
+             the handler of CAN_RX"
+        )));
+        // drive states none: as before.
+        assert_eq!(
+            (row("drive").cycles, row("drive").release.is_none()),
+            (Some(72), true)
+        );
+        // The file with these rows is valid, and a release whose figures are not its polls' is refused.
+        let file = |tasks: Vec<TaskBound>| BoundsFile {
+            generated: format!("{} from a test", bounds::GENERATED_PREFIX),
+            board: "b".into(),
+            revision: None,
+            chip: bounds::Chip::Stm32f103,
+            clock_hz: 72_000_000,
+            wait_states: 2,
+            image: bounds::ImageIdentity {
+                code_sha256: "0".repeat(64),
+                code_bytes: 1,
+            },
+            tasks,
+            idle_critical_sections: BTreeMap::new(),
+        };
+        let written = file(rows.clone()).to_json();
+        assert!(BoundsFile::from_json("b.wcet.json", &written).is_ok());
+        let mut wrong = rows.clone();
+        if let Some(r) = wrong.iter_mut().find(|r| r.task == "publisher[gyro]") {
+            r.release.as_mut().unwrap().polls = 8;
+        }
+        let refused = BoundsFile::from_json("b.wcet.json", &file(wrong).to_json()).unwrap_err();
+        assert!(refused.to_string().contains("release.polls"), "{refused}");
+    }
+
+    /// A publisher that is no async task cannot have its polls found: its suspending topic is declined.
+    #[test]
+    fn a_suspending_topic_whose_publisher_is_a_handler_is_declined() {
+        let app = parse_app(APP).unwrap();
+        let built = app.with_features(&[]);
+        let chip = Chip::parse("stm32f103", None).unwrap();
+        let budgets = Budgets {
+            tasks: Vec::new(),
+            topics: vec!["gyro".into()],
+            publishers: ["can_rx".to_string()].into(),
+            stated: BTreeMap::new(),
+            scripts: [("topics.gyro".to_string(), vec![false, false])].into(),
+        };
+        let machine = [found("can_rx", 288, None)];
+        let sections = sections_of(&machine, &[]);
+        let rows = rows(&built, &app, &budgets, &machine, &sections, chip);
+        let gyro = rows.iter().find(|r| r.task == "publisher[gyro]").unwrap();
+        assert_eq!(gyro.cycles, None);
+        assert!(gyro.declined.as_deref().is_some_and(|r| r.contains(
+            "2 scripts stated (topics.gyro), 0 with a settle before it, but its polls cannot be found: can_rx is the \
+             handler of CAN_RX"
+        )), "{:?}", gyro.declined);
+    }
+
     /// A ceiling's longest section as the machine code reports it: `sections` raises at `ceiling`, the
     /// longest `us` long, raised in `function`.
     fn ceiling(
@@ -961,6 +1278,7 @@ mod app {
             topics: vec!["floor".into(), "odo".into()],
             publishers: ["publish".to_string()].into(),
             stated: BTreeMap::new(),
+            scripts: BTreeMap::new(),
         };
         let topic = |name: &str, t: &str| machine_code::TopicBound {
             group: name.into(),
@@ -1128,6 +1446,7 @@ mod app {
             topics: vec!["gyro".into()],
             publishers: ["publish".to_string()].into(),
             stated: BTreeMap::new(),
+            scripts: BTreeMap::new(),
         };
         let machine = [
             found("can_rx", 720, None),
@@ -1392,6 +1711,7 @@ mod app {
             topics: vec!["gyro".into()],
             publishers: ["publish".to_string()].into(),
             stated: BTreeMap::new(),
+            scripts: BTreeMap::new(),
         };
         let machine = [
             found("dispatcher MID", 1440, None),
@@ -1455,6 +1775,7 @@ mod app {
             topics: vec!["a".into(), "b".into()],
             publishers: ["publish".to_string()].into(),
             stated: BTreeMap::new(),
+            scripts: BTreeMap::new(),
         };
         let machine = [found(
             "dispatcher LOW",
@@ -1547,6 +1868,7 @@ mod app {
             topics: Vec::new(),
             publishers: BTreeSet::new(),
             stated: [("admit".to_string(), (50.0, 80.0))].into(),
+            scripts: BTreeMap::new(),
         };
         let mut step = found("admit", 7200, None);
         step.function = Some("check".into());

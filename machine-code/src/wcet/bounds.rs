@@ -26,7 +26,7 @@
 //!   "per_activation": [{ "task": "can_rx", "function": "…", "file": "src/bxcan.rs", "line": 125,
 //!                        "passes": 2, "reason": "a job that drains k frames costs at most k times one frame's" }],
 //!   "per_frame": [{ "task": "can_tx", "function": "…", "file": "src/tx_queue.rs", "line": 372,
-//!                   "completion": "…::transmit_pending::{{closure}}", "completions": 3,
+//!                   "completion": "…::collect_completions::{{closure}}", "completions": 3,
 //!                   "requeue": "…::TxQueue<_>::place", "reason": "a job costs at most F + q·P + s·S + a·(S + R)" }]
 //! }
 //! ```

@@ -753,6 +753,7 @@ mod tests {
             sections,
             job: None,
             held: None,
+            release: None,
         }
     }
 
@@ -788,6 +789,35 @@ mod tests {
             rows: from,
             blocking: Blocking::default(),
         }
+    }
+
+    #[test]
+    fn a_suspending_releases_row_is_its_jobs_whole_cpu() {
+        // A topic stating scripts: its row is the release, 9 polls of 720 cycles (10 µs) and 0.5 µs of waits. The
+        // analysis's C of the suspending job (its CPU alone, the suspension apart) is the release's 94.5 µs, not
+        // one poll's 10.5 or the stated 20.
+        let release = TaskBound {
+            cycles: Some(6_480),
+            us: Some(90.0),
+            instructions: Some(3_240),
+            bus_wait_us: 4.5,
+            declined: None,
+            release: Some(bounds::ReleaseBound {
+                polls: 9,
+                poll_cycles: 720,
+                poll_us: 10.0,
+                poll_instructions: 360,
+                poll_bus_wait_us: 0.5,
+                reason: "3 scripts stated (topics.gyro), 1 with a settle before it: …".into(),
+            }),
+            ..row("publisher[gyro]", None)
+        };
+        let file = budgets(vec![release.clone()]);
+        assert!(BoundsFile::from_json("b.wcet.json", &file.bounds.unwrap().to_json()).is_ok());
+        let (mut wcet, mut sections) = (None, BTreeMap::new());
+        let from = take(&release, 20.0, &mut wcet, &mut sections);
+        assert_eq!(wcet, Some(94.5));
+        assert!(matches!(from, BudgetFrom::Bound { us, .. } if us == 94.5));
     }
 
     #[test]

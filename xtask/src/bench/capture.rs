@@ -124,6 +124,39 @@ pub struct Capture {
     pub received_gap_us: Option<f64>,
 }
 
+impl Capture {
+    /// The runs of each release of the topic whose row is `row` (`publisher[<topic>]`): per sample taken of it, the
+    /// runs of the task that took it (the innermost run at its `SampleTaken` event) from the one running at the
+    /// release's instant, or the first to start after it, to the one that took it (docs/analysis.md, "A suspending
+    /// release: the sum of its polls"). A run that ended one release and took the next is in both.
+    pub fn release_runs(&self, row: &str) -> Vec<Vec<&Run>> {
+        let Some(topic) = row
+            .strip_prefix("publisher[")
+            .and_then(|t| t.strip_suffix(']'))
+        else {
+            return Vec::new();
+        };
+        self.samples
+            .iter()
+            .filter(|s| s.topic.name() == topic)
+            .filter_map(|s| {
+                let took = self
+                    .runs
+                    .iter()
+                    .filter(|r| r.start_ns <= s.taken_ns && s.taken_ns <= r.end_ns)
+                    .min_by_key(|r| r.end_ns - r.start_ns)?;
+                Some(
+                    self.runs
+                        .iter()
+                        .filter(|r| r.task == took.task)
+                        .filter(|r| r.end_ns >= s.release_ns && r.start_ns <= took.start_ns)
+                        .collect(),
+                )
+            })
+            .collect()
+    }
+}
+
 /// Builds a [`Capture`] from records, events and acknowledgements in time order.
 struct Builder {
     capture: Capture,
@@ -600,6 +633,61 @@ mod tests {
         // Without clock.bin (a robot capture's format, or an older run) the same span is the job's own.
         let plain = read_qemu_clocked(&bin, &[], "", 1_200_000).unwrap();
         assert_eq!((plain.runs.len(), plain.runs[0].clock_preemptions), (1, 0));
+    }
+
+    #[test]
+    fn a_suspending_releases_runs_are_those_from_its_instant_to_the_one_that_took_it() {
+        // 1 MHz clock. The publisher (task 4) takes magnetometer-x's release of 1 000 µs at 1 002 and suspends on
+        // its script (run 1 002–1 010), resumes after it (1 100–1 110, a pre-empting run of task 0 inside) and
+        // after its second (1 200–1 215), where it traces the sample; an earlier run (900–950) is the release
+        // before's, and the next release (2 000) takes the runs from 2 001.
+        let start = |at, task| (at, Kind::TaskStart { task });
+        let end = |at, task| {
+            (
+                at,
+                Kind::TaskEnd {
+                    task,
+                    next_release_in_us: u32::MAX,
+                },
+            )
+        };
+        let bytes = wire(&[
+            hello(1_000_000),
+            start(900, 4),
+            end(950, 4),
+            start(1_002, 4),
+            end(1_010, 4),
+            start(1_100, 4),
+            start(1_104, 0),
+            end(1_106, 0),
+            end(1_110, 4),
+            start(1_200, 4),
+            event(1_212, magnetometer_taken(1_000)),
+            end(1_215, 4),
+            start(2_001, 4),
+            event(2_005, magnetometer_taken(2_000)),
+            end(2_009, 4),
+        ]);
+        let c = read(&bytes, 1).unwrap();
+        let releases = c.release_runs("publisher[magnetometer-x]");
+        let spans: Vec<Vec<(u64, u64)>> = releases
+            .iter()
+            .map(|runs| {
+                runs.iter()
+                    .map(|r| (r.start_ns / 1_000, r.end_ns / 1_000))
+                    .collect()
+            })
+            .collect();
+        assert_eq!(
+            spans,
+            [
+                vec![(1_002, 1_010), (1_100, 1_110), (1_200, 1_215)],
+                vec![(2_001, 2_009)]
+            ]
+        );
+        // Another topic's row, or no publisher row: none.
+        assert!(c.release_runs("publisher[gyroscope]").is_empty());
+        assert!(c.release_runs("can_rx").is_empty());
     }
 
     #[test]

@@ -202,8 +202,18 @@ fn bound_of(
     qemu: bool,
 ) -> Option<Result<(u64, bool, String), String>> {
     // A row charged per activation holds an observed job against its job's bound: a trace's job does not say
-    // how many activations (frames) it served, and the job's bound holds every job, however many.
+    // how many activations (frames) it served, and the job's bound holds every job, however many. A release of a
+    // task that suspends on its scripts holds each traced run, one poll (a script's wait ends the run), against
+    // one poll's bound, which the release's rests on.
     let value = |row: &bounds::TaskBound| -> Result<(u64, bool), String> {
+        if let Some(release) = &row.release {
+            let poll = if qemu {
+                release.poll_instructions
+            } else {
+                release.poll_cycles
+            };
+            return Ok((poll, row.declined.is_some()));
+        }
         match (qemu, row.instructions, row.cycles, &row.job, &row.held) {
             (true, _, _, Some(job), _) => Ok((job.instructions, false)),
             (false, _, _, Some(job), _) => Ok((job.cycles, false)),
@@ -410,6 +420,82 @@ pub fn rows(
     clock_hz: u64,
 ) -> Vec<MachineRow> {
     rows_against(bounds, tasks, analysed, qemu, clock_hz, None)
+}
+
+/// The row a suspending release's summed runs are held against: `publisher[gyroscope] release`.
+pub fn release_row(row: &str) -> String {
+    format!("{row} release")
+}
+
+/// The releases of the rows that are a suspending task's release (the bounds file's `release`), each held as one
+/// job, its runs (one poll each) summed, against the release's bound (`polls` × one poll's): per row (`publisher[…]`)
+/// the runs of each of its releases in the trace. A release's job is its runs' executions summed less every run's
+/// trace records but one's at their fewest (the check takes one job's off), with their pre-emptions, events and
+/// ticks summed; its row is [`release_row`]. A run that ended one release and took the next is in both, as the
+/// count has it (docs/analysis.md, "A suspending release: the sum of its polls"). `releases` names each row's
+/// releases' task: where the QEMU build runs a simulated device inside it (`trace.qemu.other_code`), the release
+/// image's bound does not cover the runs, and a sum above it is `NOT HELD`, as such a task's run is.
+pub fn release_rows(
+    bounds: &BoardBounds,
+    releases: &[(String, String, Vec<Vec<Job>>)],
+    qemu: bool,
+    clock_hz: u64,
+) -> Vec<MachineRow> {
+    let Some(file) = &bounds.bounds else {
+        return Vec::new();
+    };
+    // Each release row as a plain row of its release's figures (or held ones), under its own name.
+    let mut sums = file.clone();
+    sums.tasks = file
+        .tasks
+        .iter()
+        .filter(|r| r.release.is_some())
+        .map(|r| bounds::TaskBound {
+            task: release_row(&r.task),
+            release: None,
+            ..r.clone()
+        })
+        .collect();
+    let mut sums = BoardBounds {
+        bounds: Some(sums),
+        ..bounds.clone()
+    };
+    if let Some(q) = sums.trace.as_mut().and_then(|t| t.qemu.as_mut()) {
+        for (row, task, _) in releases {
+            if let Some(what) = q.other_code.get(task).cloned() {
+                q.other_code.insert(release_row(row), what);
+            }
+        }
+    }
+    // One run's records at their fewest, µs: QEMU's, or the timing file's trace cost per job on the chip.
+    let records_us = if qemu {
+        QEMU_RECORDS_FEWEST_INSTRUCTIONS as f64 * QEMU_NS_PER_INSTRUCTION / 1_000.0
+    } else {
+        bounds.trace.as_ref().map_or(0.0, |t| t.per_job_us)
+    };
+    let jobs: Vec<(String, Vec<Job>)> = releases
+        .iter()
+        .map(|(row, _, each)| {
+            let merged = each
+                .iter()
+                .filter(|runs| !runs.is_empty())
+                .map(|runs| Job {
+                    exec_us: (runs.iter().map(|j| j.exec_us).sum::<f64>()
+                        - (runs.len() - 1) as f64 * records_us)
+                        .max(0.0),
+                    preemptions: runs.iter().map(|j| j.preemptions).sum(),
+                    dispatched: runs.iter().map(|j| j.dispatched).sum(),
+                    clocked: runs.iter().map(|j| j.clocked).sum(),
+                    preempted_by: runs.iter().fold(0, |m, j| m | j.preempted_by),
+                    events: runs.iter().map(|j| j.events).sum(),
+                    ticks: runs.iter().map(|j| j.ticks).sum(),
+                    uncounted_ticks: runs.iter().map(|j| j.uncounted_ticks).sum(),
+                })
+                .collect();
+            (release_row(row), merged)
+        })
+        .collect();
+    rows_against(&sums, &jobs, None, qemu, clock_hz, None)
 }
 
 /// A job's direct pre-emptions by kind: (hardware tasks' runs, dispatched runs, the clock's runs). The clock's come
@@ -826,6 +912,146 @@ mod tests {
             72_000_000,
         );
         assert_eq!(robot[0].bound, Some(2160));
+    }
+
+    #[test]
+    fn a_suspending_release_holds_each_run_to_one_polls_bound() {
+        // can_rx as a release of one script: 4 polls of 500 instructions (720 cycles), the row 2 000 (2 880).
+        let mut file = file();
+        let row = file.tasks.iter_mut().find(|t| t.task == "can_rx").unwrap();
+        (row.cycles, row.us, row.instructions) = (Some(2880), Some(40.0), Some(2000));
+        row.release = Some(bounds::ReleaseBound {
+            polls: 4,
+            poll_cycles: 720,
+            poll_us: 10.0,
+            poll_instructions: 500,
+            poll_bus_wait_us: 0.0,
+            reason: "1 script stated: …".into(),
+        });
+        let release = BoardBounds {
+            bounds: Some(file),
+            ..board_bounds()
+        };
+        // A run is one poll: 986 instructions, 500 once its records (486) are out, is within one poll's bound;
+        // 987 is above it, though far within the release's 2 000.
+        let within = rows(
+            &release,
+            &[("can_rx".into(), vec![Job::alone(7.888)])],
+            None,
+            true,
+            1,
+        );
+        assert_eq!(
+            (within[0].bound, within[0].verdict.as_str()),
+            (Some(500), "ok")
+        );
+        let over = rows(
+            &release,
+            &[("can_rx".into(), vec![Job::alone(7.896)])],
+            None,
+            true,
+            1,
+        );
+        assert_eq!(
+            (over[0].bound, over[0].verdict.as_str()),
+            (Some(500), EXCEEDS)
+        );
+        let robot = rows(
+            &release,
+            &[("can_rx".into(), vec![Job::alone(1.0)])],
+            None,
+            false,
+            72_000_000,
+        );
+        assert_eq!(robot[0].bound, Some(720));
+    }
+
+    #[test]
+    fn a_suspending_releases_runs_are_held_summed_to_the_release_bound() {
+        // publisher[gyroscope] as a release of one script: 4 polls of 500 instructions, the release 2 000.
+        let mut file = file();
+        let row = file
+            .tasks
+            .iter_mut()
+            .find(|t| t.task == "publisher[gyroscope]")
+            .unwrap();
+        (row.cycles, row.us, row.instructions) = (Some(2880), Some(40.0), Some(2000));
+        row.release = Some(bounds::ReleaseBound {
+            polls: 4,
+            poll_cycles: 720,
+            poll_us: 10.0,
+            poll_instructions: 500,
+            poll_bus_wait_us: 0.0,
+            reason: "1 script stated: …".into(),
+        });
+        let release = BoardBounds {
+            bounds: Some(file),
+            ..board_bounds()
+        };
+        // A run of `n` instructions (8 ns each), its records (486) in it.
+        let run = |n: u64| Job::alone(n as f64 * QEMU_NS_PER_INSTRUCTION / 1_000.0);
+        let held = |runs: Vec<Job>| {
+            release_rows(
+                &release,
+                &[("publisher[gyroscope]".into(), "publish".into(), vec![runs])],
+                true,
+                1,
+            )
+        };
+        // Three polls of 500 each after their records: 1 500 of 2 000.
+        let three = held(vec![run(986), run(986), run(986)]);
+        assert_eq!(three[0].task, "publisher[gyroscope] release");
+        assert_eq!(
+            (three[0].own(), three[0].bound, three[0].verdict.as_str()),
+            (1500, Some(2000), "ok")
+        );
+        // Five polls of 450: each within one poll's 500, the release above its 2 000 (more polls than counted).
+        let five = held(vec![run(936); 5]);
+        assert_eq!((five[0].own(), five[0].verdict.as_str()), (2250, EXCEEDS));
+        // The largest release is the one held; no release row, no check.
+        let two = release_rows(
+            &release,
+            &[(
+                "publisher[gyroscope]".into(),
+                "publish".into(),
+                vec![vec![run(986)], vec![run(986), run(1486)]],
+            )],
+            true,
+            1,
+        );
+        assert_eq!(two[0].own(), 1500);
+        assert!(release_rows(
+            &board_bounds(),
+            &[(
+                "publisher[gyroscope]".into(),
+                "publish".into(),
+                vec![vec![run(986)]]
+            )],
+            true,
+            1
+        )
+        .is_empty());
+        // A publisher that runs a simulated device in QEMU: the release image's bound does not cover its runs, and
+        // the sum above it is not held.
+        let simulated = BoardBounds {
+            trace: traced_bounds(&[("publish", "the simulated bus")]).trace,
+            ..release.clone()
+        };
+        let not_held = release_rows(
+            &simulated,
+            &[(
+                "publisher[gyroscope]".into(),
+                "publish".into(),
+                vec![vec![run(936); 5]],
+            )],
+            true,
+            1,
+        );
+        assert!(
+            not_held[0].verdict.starts_with(NOT_HELD),
+            "{}",
+            not_held[0].verdict
+        );
     }
 
     #[test]

@@ -450,7 +450,24 @@ pub fn measure_with(
         .map_err(|e| anyhow!("{e}"))?;
     let (machine_bounds, machine) = match &board_bounds {
         Some(b) => {
-            // Each task's jobs, with the traced runs that pre-empted each (their records' unstamped part).
+            // A run as a job, with the traced runs that pre-empted it (their records' unstamped part).
+            let job_of = |r: &capture::Run| machine::Job {
+                exec_us: us(r.execution_ns()),
+                preemptions: r.preemptions,
+                dispatched: r
+                    .preempted_runs
+                    .iter()
+                    .enumerate()
+                    .filter(|(n, _)| dispatched & (1 << n) != 0)
+                    .map(|(_, runs)| u32::from(*runs))
+                    .sum(),
+                clocked: r.clock_preemptions,
+                preempted_by: r.preempted_by,
+                events: r.events,
+                ticks: r.ticks,
+                uncounted_ticks: r.uncounted_ticks,
+            };
+            // Each task's jobs.
             let executions: Vec<(String, Vec<machine::Job>)> = tasks
                 .iter()
                 .map(|t: &TaskRow| {
@@ -459,28 +476,39 @@ pub fn measure_with(
                         .runs
                         .iter()
                         .filter(|r| number == Some(usize::from(r.task)))
-                        .map(|r| machine::Job {
-                            exec_us: us(r.execution_ns()),
-                            preemptions: r.preemptions,
-                            dispatched: r
-                                .preempted_runs
-                                .iter()
-                                .enumerate()
-                                .filter(|(n, _)| dispatched & (1 << n) != 0)
-                                .map(|(_, runs)| u32::from(*runs))
-                                .sum(),
-                            clocked: r.clock_preemptions,
-                            preempted_by: r.preempted_by,
-                            events: r.events,
-                            ticks: r.ticks,
-                            uncounted_ticks: r.uncounted_ticks,
-                        })
+                        .map(job_of)
                         .collect();
                     (t.task.clone(), jobs)
                 })
                 .collect();
             let mut rows =
                 machine::rows_against(b, &executions, board_result, qemu, capture.clock_hz, image);
+            // A suspending release's runs summed against the release's bound.
+            // One entry per row and task that took its releases (a topic may be published at several levels).
+            let mut releases: Vec<(String, String, Vec<Vec<machine::Job>>)> = Vec::new();
+            for r in b
+                .bounds
+                .iter()
+                .flat_map(|f| &f.tasks)
+                .filter(|r| r.release.is_some())
+            {
+                for runs in capture.release_runs(&r.task) {
+                    let task = runs
+                        .first()
+                        .and_then(|run| names.get(usize::from(run.task)))
+                        .cloned()
+                        .unwrap_or_default();
+                    let jobs: Vec<machine::Job> = runs.into_iter().map(job_of).collect();
+                    match releases
+                        .iter_mut()
+                        .find(|(row, t, _)| *row == r.task && *t == task)
+                    {
+                        Some((_, _, each)) => each.push(jobs),
+                        None => releases.push((r.task.clone(), task, vec![jobs])),
+                    }
+                }
+            }
+            rows.extend(machine::release_rows(b, &releases, qemu, capture.clock_hz));
             for row in &mut rows {
                 row.preempted_by = names
                     .iter()
