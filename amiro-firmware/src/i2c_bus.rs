@@ -123,6 +123,13 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
         (index < SLOTS && index <= usize::from(u8::MAX)).then_some(Client(index as u8))
     }
 
+    /// Client `INDEX`, checked against the slot count when the program is built (a board's
+    /// wiring: a task's fixed slot).
+    pub const fn client_at<const INDEX: usize>(&self) -> Client<SLOTS> {
+        const { assert!(INDEX < SLOTS && INDEX <= u8::MAX as usize) };
+        Client(INDEX as u8)
+    }
+
     /// Runs `script` for `client`: the future submits it on its first poll and gives its
     /// readings (or the failure and the operation it happened in) at its end. Dropping it
     /// cancels the script.

@@ -312,3 +312,71 @@ impl Encoders {
         })
     }
 }
+
+/// With `scripted-i2c`: the compass's and the floor's buses as the QEMU build runs their scripts
+/// (`amiro_firmware::i2c_sim`: each script answered by the simulated devices, fed from the world,
+/// after its time on the wire). The devices live in the bus from the start; the boot's set-up
+/// runs on them too (the boot bus values `init` hands over are not used).
+#[cfg(feature = "scripted-i2c")]
+pub mod scripted {
+    use amiro_firmware::i2c_sim::{SimBus, SimPort};
+    use amiro_sensors::drivers::floor::FloorSensors;
+    use amiro_sensors::drivers::scripted::{OnI2c, ReplayBus, Replayed, Replaying};
+    use amiro_sensors::drivers::suite::{self, SensorGroup, Supervised};
+    use amiro_sensors::sim::{SimCompassBus, SimFloorBus};
+
+    use super::{Clock, CompassI2c, Fed, FloorI2c};
+    use crate::sensors::TIMEOUT_ALLOWANCE_US;
+
+    /// I2C1's simulated HMC5883L, fed from the world.
+    type CompassDevices = OnI2c<Fed<SimCompassBus>>;
+    /// I2C2's simulated PCA9544A and floor sensors, fed from the world.
+    type FloorDevices = OnI2c<Fed<SimFloorBus>>;
+    /// The task's slot on I2C1 (the compass).
+    pub type CompassPort = SimPort<'static, Clock, CompassDevices>;
+    /// The task's slot on I2C2 (the floor).
+    pub type FloorPort = SimPort<'static, Clock, FloorDevices>;
+
+    /// I2C1.
+    pub static I2C1_BUS: SimBus<CompassDevices> = SimBus::new(OnI2c(Fed(SimCompassBus::new())));
+    /// I2C2.
+    pub static I2C2_BUS: SimBus<FloorDevices> = SimBus::new(OnI2c(Fed(SimFloorBus::new())));
+
+    /// `group` set up by its scripts on `bus`'s devices (no waits: the simulated parts need none).
+    /// A set-up that asked for more scripts than a job may run leaves the group missing, retried
+    /// with its back-off.
+    fn boot_on<
+        G: SensorGroup + Clone + Replaying,
+        D: amiro_sensors::drivers::scripted::ScriptBus,
+    >(
+        group: G,
+        bus: &SimBus<D>,
+    ) -> Supervised<G> {
+        bus.with_devices(|devices| {
+            Replayed::boot(group.clone(), devices)
+                .map(|booted| booted.state().clone())
+                .unwrap_or_else(|_| Replayed::new(Supervised::new(group)).state().clone())
+        })
+    }
+
+    /// The compass set up on I2C1's simulated part.
+    pub fn boot_compass(_boot: CompassI2c) -> Supervised<suite::Compass<ReplayBus>> {
+        boot_on(suite::Compass::new(ReplayBus::compass()), &I2C1_BUS)
+    }
+
+    /// The floor set up on I2C2's simulated parts.
+    pub fn boot_floor(_boot: FloorI2c) -> Supervised<FloorSensors<ReplayBus>> {
+        boot_on(FloorSensors::new(ReplayBus::muxed()), &I2C2_BUS)
+    }
+
+    /// Publisher task `CLIENT`'s clients of I2C1 and I2C2.
+    pub fn ports<const CLIENT: usize>() -> (CompassPort, FloorPort) {
+        const { assert!(CLIENT < crate::sensors::CLIENTS) };
+        (
+            SimPort::new(&I2C1_BUS, TIMEOUT_ALLOWANCE_US),
+            SimPort::new(&I2C2_BUS, TIMEOUT_ALLOWANCE_US),
+        )
+    }
+}
+#[cfg(feature = "scripted-i2c")]
+pub use scripted::{boot_compass, boot_floor, ports, CompassPort, FloorPort};
