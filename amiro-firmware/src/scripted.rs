@@ -1,10 +1,11 @@
 //! A topic's sample whose bus work is I2C scripts (docs/i2c.md): the publisher suspends while
 //! the bus runs them, instead of polling the bus under its device group's lock.
 //!
-//! A group's sample is a *job* of one or more scripts (amiro-sensors' `drivers::scripted`: the
-//! driver code recorded into a script and replayed on its readings; a check that passed may call
-//! for a further script). The job's log is the publisher's own ([`ScriptedGroup::Job`]), so
-//! publishers of two levels whose samples of one group overlap each keep theirs.
+//! A group's sample is a *job* of one or more scripts (amiro-sensors' `drivers::scripted`: each
+//! script built from the drivers' register maps and decoded by their decode functions; a check
+//! that passed may call for a further script). Where the job stands is the publisher's own
+//! ([`ScriptedGroup::Job`], a few bytes), so publishers of two levels whose samples of one group
+//! overlap each keep theirs.
 //! [`sample_on_bus`] runs a job: under the group's lock the group says what the sample needs first
 //! ([`ScriptedGroup::begin`]: a script, or the frames); with the lock released the publisher hands
 //! the script to the bus through its own client slot ([`ScriptPort::run`]) and awaits it; under
@@ -22,8 +23,8 @@
 use core::future::Future;
 
 use amiro_can::Topic;
-use amiro_sensors::drivers::scripted::{self, Job, Next, Replaying, MAX_ROUNDS};
-use amiro_sensors::drivers::suite::{Samples, SensorGroup, Supervised};
+use amiro_sensors::drivers::scripted::{self, Job, Next, ScriptedSensors};
+use amiro_sensors::drivers::suite::{Samples, Supervised};
 use amiro_sensors::script::{Readings, Script, ScriptError};
 use rtic_core::Mutex;
 
@@ -86,49 +87,41 @@ pub trait ScriptedGroup {
     ) -> Step;
 }
 
-fn step_of(next: Next<Samples>, job: &Job) -> Step {
+fn step_of(next: Next<Samples>) -> Step {
     match next {
         Next::Done(samples) => Step::Done(samples),
-        Next::Run(script) => Step::Run {
-            script,
-            settle_us: job.settle_us(),
-        },
+        Next::Run { script, settle_us } => Step::Run { script, settle_us },
     }
 }
 
-/// amiro-sensors' supervised groups, replayed (`drivers::scripted`): the fault policy, the
-/// back-off and the stepwise set-up run as on the blocking path.
-impl<G: SensorGroup + Clone + Replaying> ScriptedGroup for Supervised<G> {
-    type Job = Job;
-    const MAX_ROUNDS: usize = MAX_ROUNDS;
+/// amiro-sensors' supervised groups whose scripts they build and decode themselves
+/// (`drivers::scripted`): the fault policy, the back-off and the stepwise set-up are the
+/// blocking path's (`Supervised`'s, one code for both).
+impl<G: ScriptedSensors> ScriptedGroup for Supervised<G> {
+    type Job = Job<G::Stage>;
+    const MAX_ROUNDS: usize = G::MAX_SCRIPTS;
 
-    fn new_job() -> Job {
+    fn new_job() -> Self::Job {
         Job::new()
     }
 
-    fn begin(&mut self, job: &mut Job, topic: Topic, now_us: u64) -> Step {
-        step_of(scripted::begin_sample(self, job, topic, now_us), job)
+    fn begin(&mut self, job: &mut Self::Job, topic: Topic, now_us: u64) -> Step {
+        step_of(self.begin_scripted(job, topic, now_us))
     }
 
     fn resume(
         &mut self,
-        job: &mut Job,
+        job: &mut Self::Job,
         topic: Topic,
         now_us: u64,
         outcome: Result<Readings, BusFault>,
     ) -> Step {
-        let next = match outcome {
-            Ok(readings) => scripted::finish_sample(self, job, topic, now_us, &Ok(readings)),
-            Err(BusFault::Script(error)) => {
-                scripted::finish_sample(self, job, topic, now_us, &Err(error))
-            }
-            Err(BusFault::Timeout) => {
-                job.timed_out();
-                scripted::step(self, job, |g| g.sample(topic, now_us))
-                    .unwrap_or(Next::Done(Samples::new()))
-            }
+        let result = match outcome {
+            Ok(readings) => Ok(readings),
+            Err(BusFault::Script(error)) => Err(error),
+            Err(BusFault::Timeout) => scripted::timed_out(),
         };
-        step_of(next, job)
+        step_of(self.resume_scripted(job, topic, now_us, &result))
     }
 }
 

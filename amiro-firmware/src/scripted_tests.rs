@@ -9,7 +9,7 @@ use core::task::{Context, Poll};
 
 use amiro_can::{Axis, SensorData, Topic};
 use amiro_sensors::drivers::floor::FloorSensors;
-use amiro_sensors::drivers::scripted::{ReplayBus, Replayed, Replaying, ScriptBus};
+use amiro_sensors::drivers::scripted::{ScriptBus, ScriptedSensors};
 use amiro_sensors::drivers::suite::{Compass, ImuSensors, Samples, SensorGroup, Supervised};
 use amiro_sensors::drivers::{bno055, hmc5883l, pca9544a, vcnl4020};
 use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
@@ -574,7 +574,8 @@ fn an_absent_simulated_device_is_a_nack_of_its_operation() {
     assert!(matches!(again.as_mut().poll(&mut cx), Poll::Ready(Ok(_))));
 }
 
-// A supervised group of amiro-sensors, replayed, through the firmware's path.
+// A supervised group of amiro-sensors, its scripts built and decoded by the group, through the
+// firmware's path.
 
 /// Samples `topics` in turn every `step_us` from `from_us` to `to_us` (or when the last sample
 /// ended, if later) through the simulated bus — the publisher polled, the monotonic moved on while
@@ -590,7 +591,7 @@ fn run_both<GB, GR, D>(
 ) -> (usize, usize, u64)
 where
     GB: SensorGroup,
-    GR: SensorGroup + Clone + Replaying,
+    GR: ScriptedSensors,
     D: ScriptBus,
 {
     let (_, waker) = test_waker::counting();
@@ -641,14 +642,13 @@ const MAGNETOMETER: [Topic; 3] = [
 ];
 
 #[test]
-fn the_replayed_compass_through_the_simulated_bus_publishes_as_the_blocking_path() {
+fn the_scripted_compass_through_the_simulated_bus_publishes_as_the_blocking_path() {
     set_now(0);
     let mut blocking = Supervised::new(Compass::new(SimCompassBus::new()));
     let bus = SimBus::new(SimCompassBus::new());
-    let booted = bus.with_devices(|devices| {
-        Replayed::boot(Compass::new(ReplayBus::compass()), devices).expect("the boot's scripts")
-    });
-    let group = Lock::new(booted.state().clone());
+    let booted =
+        bus.with_devices(|devices| Supervised::boot(Compass::scripted(), devices, &mut NoDelay));
+    let group = Lock::new(booted);
     assert!(group.other_task().is_ready());
     let (published, empty, _) = run_both(
         &mut blocking,
@@ -690,12 +690,8 @@ fn the_replayed_compass_through_the_simulated_bus_publishes_as_the_blocking_path
 #[test]
 fn a_timed_out_script_is_a_fault_of_the_supervised_group() {
     set_now(0);
-    let booted = Replayed::boot(
-        Compass::new(ReplayBus::compass()),
-        &mut SimCompassBus::new(),
-    )
-    .expect("the boot's scripts");
-    let group = Lock::new(booted.state().clone());
+    let booted = Supervised::boot(Compass::scripted(), &mut SimCompassBus::new(), &mut NoDelay);
+    let group = Lock::new(booted);
     // The chip's bus, its HMC5883L holding SCL low after the third byte of the sample's script.
     let mut model = Model::new(vec![identified_magnetometer()]);
     model.hold_at = Some(3);
@@ -724,14 +720,13 @@ fn a_timed_out_script_is_a_fault_of_the_supervised_group() {
 }
 
 #[test]
-fn the_replayed_floor_through_the_simulated_bus_publishes_as_the_blocking_path() {
+fn the_scripted_floor_through_the_simulated_bus_publishes_as_the_blocking_path() {
     set_now(0);
     let mut blocking = Supervised::new(FloorSensors::new(SimFloorBus::new()));
     let bus = SimBus::new(SimFloorBus::new());
-    let booted = bus.with_devices(|devices| {
-        Replayed::boot(FloorSensors::new(ReplayBus::muxed()), devices).expect("the boot's scripts")
-    });
-    let group = Lock::new(booted.state().clone());
+    let booted = bus
+        .with_devices(|devices| Supervised::boot(FloorSensors::scripted(), devices, &mut NoDelay));
+    let group = Lock::new(booted);
     let floor = [Topic::FloorProximity];
     let (published, empty, _) = run_both(
         &mut blocking,
@@ -765,15 +760,14 @@ fn the_replayed_floor_through_the_simulated_bus_publishes_as_the_blocking_path()
 }
 
 #[test]
-fn the_replayed_bno055_through_the_simulated_bus_publishes_as_the_blocking_path() {
+fn the_scripted_bno055_through_the_simulated_bus_publishes_as_the_blocking_path() {
     set_now(0);
     let mut blocking = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
     let bus = SimBus::new(SimImuBus::new());
     let booted = bus.with_devices(|devices| {
-        Replayed::boot(ImuSensors::new(ReplayBus::imu(), NoDelay), devices)
-            .expect("the boot's scripts")
+        Supervised::boot(ImuSensors::scripted(NoDelay), devices, &mut NoDelay)
     });
-    let group = Lock::new(booted.state().clone());
+    let group = Lock::new(booted);
     let topics = [
         Topic::Gyroscope,
         Topic::Accelerometer,

@@ -1,7 +1,8 @@
-//! The sensor groups' split path (`drivers::scripted`): the same work, its transfers recorded
-//! into scripts and run by the simulated buses (`SimBus::answer`), gives the samples the blocking
-//! path gives on identical simulated devices — fault counting, back-off and the stepwise set-up
-//! included — and each script carries the datasheet's transaction.
+//! The sensor groups' scripted path (`drivers::scripted`): the scripts each group builds from its
+//! drivers' register maps, run by the simulated buses (`SimBus::answer`) and decoded by the
+//! drivers' decode functions, give the samples the blocking path gives on identical simulated
+//! devices — fault counting, back-off and the stepwise set-up included — and each script carries
+//! the datasheet's transaction, worked byte by byte in the tests.
 
 use amiro_can::Topic;
 use amiro_sensors::drivers::bq27500::{self, BatteryStatus, Bq27500, StatusRead};
@@ -9,13 +10,16 @@ use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::pca9544a::{Channel, Pca9544a};
 use amiro_sensors::drivers::ring::{RingBus, WIRING};
 use amiro_sensors::drivers::scripted::{
-    Next, ReplayBus, Replayed, Replaying, ScriptBus, ScriptResult,
+    gauge_outcome, gauge_script, sample_on, GaugeIdentity, Next, RingRead, ScriptBus, ScriptResult,
+    ScriptedSensors, SensorSetUp, GAUGE_SETTLE_US,
 };
 use amiro_sensors::drivers::suite::{Compass, ImuSensors, SensorGroup, Supervised};
 use amiro_sensors::drivers::vcnl4020::{self, Config, Vcnl4020};
+use amiro_sensors::drivers::Error;
 use amiro_sensors::drivers::{bno055, hmc5883l, pca9544a};
 use amiro_sensors::script::{Script, Symbol};
 use amiro_sensors::sim::*;
+use embedded_hal::i2c::ErrorKind;
 
 /// A simulated bus that keeps every script it ran.
 struct Recorder<T> {
@@ -43,26 +47,76 @@ impl<T: I2cTarget> ScriptBus for Recorder<T> {
     }
 }
 
+/// What a boot did, in order: the scripts a simulated bus ran and the waits between them.
+#[derive(Debug, Clone, PartialEq)]
+enum Event {
+    Script(Script),
+    Wait(u32),
+}
+
+/// A simulated bus and a delay that share one timeline of [`Event`]s.
+#[derive(Clone)]
+struct Timeline<T> {
+    bus: std::rc::Rc<std::cell::RefCell<SimBus<T>>>,
+    events: std::rc::Rc<std::cell::RefCell<Vec<Event>>>,
+}
+
+impl<T: I2cTarget> Timeline<T> {
+    fn new(bus: SimBus<T>) -> Self {
+        Self {
+            bus: std::rc::Rc::new(std::cell::RefCell::new(bus)),
+            events: Default::default(),
+        }
+    }
+
+    fn events(&self) -> Vec<Event> {
+        self.events.borrow().clone()
+    }
+
+    fn scripts(&self) -> Vec<Script> {
+        self.events()
+            .into_iter()
+            .filter_map(|e| match e {
+                Event::Script(s) => Some(s),
+                Event::Wait(_) => None,
+            })
+            .collect()
+    }
+}
+
+impl<T: I2cTarget> ScriptBus for Timeline<T> {
+    fn run(&mut self, script: &Script) -> ScriptResult {
+        self.events.borrow_mut().push(Event::Script(*script));
+        self.bus.borrow_mut().answer(script).result
+    }
+}
+
+impl<T> embedded_hal::delay::DelayNs for Timeline<T> {
+    fn delay_ns(&mut self, ns: u32) {
+        if ns > 0 {
+            self.events.borrow_mut().push(Event::Wait(ns / 1_000));
+        }
+    }
+}
+
 /// One sample of `topic` at `now` on both paths: the frames, the fault count, readiness, the last
 /// error and the retry time must be the same. Returns the frames' count.
 fn same_sample<G, R, B>(
     blocking: &mut Supervised<G>,
-    scripted: &mut Replayed<Supervised<R>>,
+    scripted: &mut Supervised<R>,
     bus: &mut B,
     topic: Topic,
     now: u64,
 ) -> usize
 where
     G: SensorGroup,
-    R: SensorGroup + Clone + Replaying,
+    R: ScriptedSensors,
     B: ScriptBus,
 {
     let expected = blocking.sample(topic, now);
-    let got = scripted
-        .run(bus, |s| s.sample(topic, now))
-        .expect("a job within its rounds");
+    let got = sample_on(scripted, bus, topic, now);
     assert_eq!(got, expected, "{topic:?} at {now} µs");
-    let s = scripted.state();
+    let s = scripted;
     assert_eq!(
         (s.is_ready(), s.faults(), s.last_error(), s.retry_at_us()),
         (
@@ -99,7 +153,7 @@ fn periods(scripts: &[Script]) -> Vec<u32> {
 #[allow(clippy::too_many_arguments)]
 fn run_both<G, R, B>(
     blocking: &mut Supervised<G>,
-    scripted: &mut Replayed<Supervised<R>>,
+    scripted: &mut Supervised<R>,
     bus: &mut B,
     topics: &[Topic],
     start: u64,
@@ -108,7 +162,7 @@ fn run_both<G, R, B>(
 ) -> (u32, u32)
 where
     G: SensorGroup,
-    R: SensorGroup + Clone + Replaying,
+    R: ScriptedSensors,
     B: ScriptBus,
 {
     let (mut published, mut empty) = (0, 0);
@@ -140,8 +194,8 @@ const MAGNETOMETER: [Topic; 3] = [
 fn the_compass_as_scripts_samples_as_the_blocking_path_through_a_fault() {
     let mut blocking = Supervised::new(Compass::new(SimCompassBus::new()));
     let mut bus = Recorder::new(SimCompassBus::new());
-    let mut scripted = Replayed::boot(Compass::new(ReplayBus::compass()), &mut bus).unwrap();
-    assert!(scripted.state().is_ready());
+    let mut scripted = Supervised::boot(Compass::scripted(), &mut bus, &mut NoDelay);
+    assert!(scripted.is_ready());
     let (published, empty) = run_both(
         &mut blocking,
         &mut scripted,
@@ -165,7 +219,7 @@ fn the_compass_as_scripts_samples_as_the_blocking_path_through_a_fault() {
     );
     assert_eq!(empty, 600);
     // Three failed samples, then set-ups that fail 1, 2 and 4 s later (the next is due after 8).
-    assert_eq!(scripted.state().faults(), 3 + 3);
+    assert_eq!(scripted.faults(), 3 + 3);
     blocking.group_mut().magnetometer.bus_mut().set_nack(false);
     bus.bus.set_nack(false);
     let (published, _) = run_both(
@@ -177,7 +231,7 @@ fn the_compass_as_scripts_samples_as_the_blocking_path_through_a_fault() {
         28_001_000,
         20_000,
     );
-    assert!(published > 0 && scripted.state().is_ready());
+    assert!(published > 0 && scripted.is_ready());
     // The devices saw the same traffic: the same registers and the same measurement count.
     let device = blocking.group_mut().magnetometer.bus_mut().magnetometer();
     assert_eq!(device.samples(), bus.bus.magnetometer().samples());
@@ -191,7 +245,7 @@ fn the_compass_as_scripts_samples_as_the_blocking_path_through_a_fault() {
 #[test]
 fn the_compass_scripts_are_the_datasheet_transactions() {
     let mut bus = Recorder::new(SimCompassBus::new());
-    let mut scripted = Replayed::boot(Compass::new(ReplayBus::compass()), &mut bus).unwrap();
+    let mut scripted = Supervised::boot(Compass::scripted(), &mut bus, &mut NoDelay);
     assert_eq!(
         bus.scripts,
         [
@@ -207,9 +261,7 @@ fn the_compass_scripts_are_the_datasheet_transactions() {
     assert_eq!(periods(&bus.scripts), [57, 144]);
     bus.scripts.clear();
     bus.bus_time_ns = 0;
-    scripted
-        .run(&mut bus, |s| s.sample(Topic::MagnetometerX, 1_000))
-        .unwrap();
+    sample_on(&mut scripted, &mut bus, Topic::MagnetometerX, 1_000);
     let sample = script(&[(0x1E, &[hmc5883l::reg::DATA_X_MSB], 6)]);
     assert_eq!(bus.scripts, [sample]);
     let wire: Vec<Symbol> = sample.wire().collect();
@@ -228,12 +280,10 @@ fn the_compass_scripts_are_the_datasheet_transactions() {
     assert_eq!(sample.scl_periods(), 84);
     assert_eq!(bus.bus_time_ns, 210_000);
     // Every 256th read checks the identity first, in the same script.
-    scripted.state_mut().group_mut().set_reuse_window_us(0);
+    scripted.group_mut().set_reuse_window_us(0);
     for n in 2..=256u64 {
         bus.scripts.clear();
-        scripted
-            .run(&mut bus, |s| s.sample(Topic::MagnetometerX, n * 1_000))
-            .unwrap();
+        sample_on(&mut scripted, &mut bus, Topic::MagnetometerX, n * 1_000);
     }
     assert_eq!(
         bus.scripts,
@@ -249,7 +299,7 @@ fn a_compass_pattern_calls_for_an_identity_script() {
     let field = Some([0, 0, 0]);
     let mut blocking = Supervised::new(Compass::new(SimCompassBus::new()));
     let mut bus = Recorder::new(SimCompassBus::new());
-    let mut scripted = Replayed::boot(Compass::new(ReplayBus::compass()), &mut bus).unwrap();
+    let mut scripted = Supervised::boot(Compass::scripted(), &mut bus, &mut NoDelay);
     blocking
         .group_mut()
         .magnetometer
@@ -282,7 +332,7 @@ const FLOOR: [Topic; 1] = [Topic::FloorProximity];
 fn the_floor_as_scripts_samples_as_the_blocking_path_through_a_fault() {
     let mut blocking = Supervised::new(FloorSensors::new(SimFloorBus::new()));
     let mut bus = Recorder::new(SimFloorBus::new());
-    let mut scripted = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut bus).unwrap();
+    let mut scripted = Supervised::boot(FloorSensors::scripted(), &mut bus, &mut NoDelay);
     let (published, _) = run_both(
         &mut blocking,
         &mut scripted,
@@ -318,7 +368,7 @@ fn the_floor_as_scripts_samples_as_the_blocking_path_through_a_fault() {
         25_001_000,
         10_000,
     );
-    assert!(published > 0 && scripted.state().is_ready());
+    assert!(published > 0 && scripted.is_ready());
     assert!(empty > 3);
     for (k, channel) in (0..4).zip(Channel::ALL) {
         let sensor = blocking
@@ -355,44 +405,44 @@ fn assert_muxed_rules(scripts: &[Script]) {
     }
 }
 
-/// The floor round's script is PCA9544A's channel selection (its datasheet's "Control
-/// register" write: 0x04 | channel) and the VCNL4020's proximity result read (its datasheet's
-/// register #7 and #8, high byte first), four times: one script, 8 operations, 272 SCL periods,
-/// 680 µs at 400 kHz. The identity check every 256 rounds adds PRODUCT_ID (register #1) behind
-/// each select; it and the round are 16 operations, two scripts.
+/// The floor's scripts, worked from the datasheets: the PCA9544A's channel selection is one
+/// write of its control register (0x04 | channel) to 0x77, a transaction of its own (START,
+/// address, byte, STOP: 1 + 9 + 9 + 1 = 20 SCL periods); a VCNL4020 result is a write of its
+/// register (#7, 0x87, proximity high byte) and a two-byte read after a repeated START (1 + 9 +
+/// 9 + 1 + 9 + 18 + 1 = 48). A round is four of each, one script: 4 × 68 = 272 periods, 680 µs
+/// at 400 kHz. The identity check every 256 rounds is its own script before the round:
+/// PRODUCT_ID (register #1, 0x81, one byte: 39 periods) behind each select, 4 × 59 = 236. A
+/// sensor's set-up is six scripts, each behind its select: PRODUCT_ID (59), then each of the five
+/// registers written (1 + 9 + 18 + 1 = 29) and read back (39): 20 + 29 + 39 = 88.
 #[test]
 fn the_floor_scripts_are_the_datasheet_transactions() {
     let mut bus = Recorder::new(SimFloorBus::new());
-    let mut scripted = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut bus).unwrap();
-    // The boot set-up: per sensor the select and PRODUCT_ID, then each register written and
-    // read back, each write in a script that begins with the select again.
+    let mut scripted = Supervised::boot(FloorSensors::scripted(), &mut bus, &mut NoDelay);
+    assert!(scripted.is_ready());
     assert_muxed_rules(&bus.scripts);
-    assert_eq!(
-        bus.scripts[..3],
-        [
-            script(&[(0x77, &[0x04], 0), (0x13, &[0x81], 1)]),
-            script(&[
-                (0x77, &[0x04], 0),
-                (0x13, &[0x80, 0x00], 0),
-                (0x13, &[0x80], 1)
-            ]),
-            script(&[
-                (0x77, &[0x04], 0),
-                (0x13, &[0x82, 0x06], 0),
-                (0x13, &[0x82], 1)
-            ]),
-        ]
-    );
-    // A sensor's last read-back, the next sensor's select and PRODUCT_ID share a script.
-    assert_eq!(bus.scripts.len(), 1 + 4 * 5);
-    // Select and PRODUCT_ID 59 periods; each register's select, write and read-back 88 (the
-    // last with the next sensor's select and PRODUCT_ID).
-    assert_eq!(periods(&bus.scripts[..6]), [59, 88, 88, 88, 88, 88 + 59]);
+    let set_up = |channel: u8| {
+        let mut scripts = vec![script(&[(0x77, &[channel], 0), (0x13, &[0x81], 1)])];
+        for (register, value) in [
+            (0x80, 0x00),
+            (0x82, 0x06),
+            (0x83, 20),
+            (0x84, 0x15),
+            (0x80, 0x07),
+        ] {
+            scripts.push(script(&[
+                (0x77, &[channel], 0),
+                (0x13, &[register, value], 0),
+                (0x13, &[register], 1),
+            ]));
+        }
+        scripts
+    };
+    let boot: Vec<Script> = (4..8).flat_map(set_up).collect();
+    assert_eq!(bus.scripts, boot);
+    assert_eq!(periods(&bus.scripts[..6]), [59, 88, 88, 88, 88, 88]);
     bus.scripts.clear();
     bus.bus_time_ns = 0;
-    scripted
-        .run(&mut bus, |s| s.sample(Topic::FloorProximity, 1_000))
-        .unwrap();
+    sample_on(&mut scripted, &mut bus, Topic::FloorProximity, 1_000);
     let round = script(&[
         (0x77, &[0x04], 0),
         (0x13, &[0x87], 2),
@@ -409,18 +459,20 @@ fn the_floor_scripts_are_the_datasheet_transactions() {
     // Rounds 2..=255 are the same script; the 256th checks the identities first.
     for n in 2..=256u64 {
         bus.scripts.clear();
-        scripted
-            .run(&mut bus, |s| s.sample(Topic::FloorProximity, n * 10_000))
-            .unwrap();
+        sample_on(&mut scripted, &mut bus, Topic::FloorProximity, n * 10_000);
     }
-    assert_eq!(bus.scripts.len(), 2);
-    let identities: Vec<_> = bus.scripts[0].operations()[..8]
-        .iter()
-        .map(|op| (op.address, op.write, op.read))
-        .collect();
-    assert_eq!(identities, [(0x77, 1, 0), (0x13, 1, 1)].repeat(4));
-    assert_eq!(bus.scripts[0].operations().len(), 12);
-    assert_eq!(periods(&bus.scripts), [372, 136]);
+    let identities = script(&[
+        (0x77, &[0x04], 0),
+        (0x13, &[0x81], 1),
+        (0x77, &[0x05], 0),
+        (0x13, &[0x81], 1),
+        (0x77, &[0x06], 0),
+        (0x13, &[0x81], 1),
+        (0x77, &[0x07], 0),
+        (0x13, &[0x81], 1),
+    ]);
+    assert_eq!(bus.scripts, [identities, round]);
+    assert_eq!(periods(&bus.scripts), [236, 272]);
     assert_muxed_rules(&bus.scripts);
 }
 
@@ -439,8 +491,7 @@ const IMU_TOPICS: [Topic; 5] = [
 fn the_bno055_as_scripts_samples_as_the_blocking_path_through_a_fault() {
     let mut blocking = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
     let mut bus = Recorder::new(SimImuBus::new());
-    let mut scripted =
-        Replayed::boot(ImuSensors::new(ReplayBus::imu(), NoDelay), &mut bus).unwrap();
+    let mut scripted = Supervised::boot(ImuSensors::scripted(NoDelay), &mut bus, &mut NoDelay);
     let (published, _) = run_both(
         &mut blocking,
         &mut scripted,
@@ -485,7 +536,7 @@ fn the_bno055_as_scripts_samples_as_the_blocking_path_through_a_fault() {
             27_001_000,
             1_000,
         );
-        assert!(published > 0 && scripted.state().is_ready(), "{fault:?}");
+        assert!(published > 0 && scripted.is_ready(), "{fault:?}");
     }
     let device = blocking.group_mut().imu.bus_mut().imu();
     assert_eq!(device.samples(), bus.bus.imu().samples());
@@ -497,44 +548,43 @@ fn the_bno055_as_scripts_samples_as_the_blocking_path_through_a_fault() {
 /// of two register reads: 123 SCL periods, 307.5 µs at 400 kHz.
 #[test]
 fn the_bno055_scripts_are_the_datasheet_transactions() {
-    let mut bus = Recorder::new(SimImuBus::new());
-    let mut scripted =
-        Replayed::boot(ImuSensors::new(ReplayBus::imu(), NoDelay), &mut bus).unwrap();
-    // The boot set-up: the identities and the self-test in one script of reads, page 0 and
-    // configuration mode; power mode, units, page 1, the configuration burst and its
-    // read-back; page 0 and the units' read-back; AMG mode; its check.
+    let mut bus = Timeline::new(SimImuBus::new());
+    let mut waits = bus.clone();
+    let mut scripted = Supervised::boot(ImuSensors::scripted(NoDelay), &mut bus, &mut waits);
+    assert!(scripted.is_ready());
+    // The boot set-up (BNO055 datasheet, register map page 0 and 1): the identities (0x00, four
+    // bytes) and ST_RESULT (0x36) read; page 0 (PAGE_ID 0x07) and configuration mode (OPR_MODE
+    // 0x3D = 0x00) written; then the part's 19 ms into configuration mode; power mode
+    // (PWR_MODE 0x3E), units (UNIT_SEL 0x3B = 0x01), page 1, the configuration burst from
+    // ACC_CONFIG (0x08: 0x0E, 0x0F, 0x22, 0x00) and its read-back, page 0 and the units'
+    // read-back; AMG mode (OPR_MODE = 0x07); 7 ms into it; OPR_MODE read.
+    // SCL periods: a two-byte write 29; a register read of n bytes 30 + 9n; the burst 56.
     assert_eq!(
-        bus.scripts,
+        bus.events(),
         [
-            script(&[(0x28, &[0x00], 4), (0x28, &[0x36], 1)]),
-            script(&[(0x28, &[0x07, 0], 0), (0x28, &[0x3D, 0x00], 0)]),
-            script(&[
+            Event::Script(script(&[(0x28, &[0x00], 4), (0x28, &[0x36], 1)])),
+            Event::Script(script(&[(0x28, &[0x07, 0], 0), (0x28, &[0x3D, 0x00], 0)])),
+            Event::Wait(19_000),
+            Event::Script(script(&[
                 (0x28, &[0x3E, 0x00], 0),
                 (0x28, &[0x3B, 0x01], 0),
                 (0x28, &[0x07, 1], 0),
                 (0x28, &[0x08, 0x0E, 0x0F, 0x22, 0x00], 0),
                 (0x28, &[0x08], 4),
-            ]),
-            script(&[(0x28, &[0x07, 0], 0), (0x28, &[0x3B], 1)]),
-            script(&[(0x28, &[0x3D, 0x07], 0)]),
-            script(&[(0x28, &[0x3D], 1)]),
+                (0x28, &[0x07, 0], 0),
+                (0x28, &[0x3B], 1),
+            ])),
+            Event::Script(script(&[(0x28, &[0x3D, 0x07], 0)])),
+            Event::Wait(7_000),
+            Event::Script(script(&[(0x28, &[0x3D], 1)])),
         ]
     );
-    assert_eq!(periods(&bus.scripts), [105, 58, 209, 68, 29, 39]);
-    // The mode switches' waits come before the script after each OPR_MODE write.
-    let mut settles = Vec::new();
-    let mut imu = Replayed::new(ImuSensors::new(ReplayBus::imu(), NoDelay));
-    let mut twin = SimImuBus::new();
-    while let Next::Run(script) = imu.step(|s| s.init()).unwrap() {
-        settles.push(imu.settle_us());
-        imu.complete(&twin.answer(&script).result);
-    }
-    assert_eq!(settles, [0, 0, 19_000, 0, 0, 7_000]);
+    let scripts: Vec<Script> = bus.scripts();
+    assert_eq!(periods(&scripts), [105, 58, 4 * 29 + 56 + 66 + 39, 29, 39]);
+    let mut bus = Recorder::new(SimImuBus::new());
     bus.scripts.clear();
     bus.bus_time_ns = 0;
-    scripted
-        .run(&mut bus, |s| s.sample(Topic::Gyroscope, 1_000))
-        .unwrap();
+    sample_on(&mut scripted, &mut bus, Topic::Gyroscope, 1_000);
     let sample = script(&[
         (0x28, &[bno055::reg::GYR_DATA_X_LSB], 6),
         (0x28, &[bno055::reg::OPR_MODE], 1),
@@ -544,248 +594,92 @@ fn the_bno055_scripts_are_the_datasheet_transactions() {
     assert_eq!(bus.bus_time_ns, 307_500);
 }
 
-/// One PowerManagement bus as the board samples it (powermgmt's `SensorBus`): its mux, the
-/// ring sensors on it and its fuel gauge's read under way.
-#[derive(Clone)]
-struct PowerBus {
-    mux: Pca9544a<ReplayBus>,
-    read: StatusRead,
-}
-
-impl Replaying for PowerBus {
-    fn replay_bus(&mut self) -> &mut ReplayBus {
-        self.mux.bus_mut()
-    }
-}
-
-/// The board's ring read of one bus: per sensor the select and the proximity result, a sensor
-/// that fails yields `None` and the next is read all the same.
-fn ring_read<I: embedded_hal::i2c::I2c>(
-    mux: &mut Pca9544a<I>,
-    channels: &[Channel],
-) -> Vec<Option<u16>> {
-    channels
-        .iter()
-        .map(|&channel| {
-            mux.select(channel)
-                .ok()
-                .and_then(|muxed| Vcnl4020::new(muxed).read_proximity().ok())
-        })
-        .collect()
-}
-
-/// The set-up of one ring sensor as the board makes it.
-fn ring_set_up<I: embedded_hal::i2c::I2c>(mux: &mut Pca9544a<I>, channel: Channel) -> bool {
-    match mux.select(channel) {
-        Ok(muxed) => Vcnl4020::new(muxed).init(&Config::AMIRO).is_ok(),
-        Err(_) => false,
-    }
-}
-
-/// PowerManagement's I2C1: the ring sensors' set-up and 100 rounds, the gauge's identity check
-/// and ten status reads a transfer at a time (`StatusRead::step`, what `BatteryRound` makes),
-/// the bus gone and back: the same values, the same devices' state, on both paths.
-#[test]
-fn a_power_bus_as_scripts_reads_as_the_blocking_path() {
-    let channels: Vec<Channel> = WIRING
-        .iter()
-        .filter(|(bus, _)| *bus == RingBus::I2c1)
-        .map(|&(_, channel)| channel)
-        .collect();
-    let mut blocking = Pca9544a::new(SimPowerBus::new(0, true));
-    let mut bus = Recorder::new(SimPowerBus::new(0, true));
-    let mut scripted = Replayed::new(PowerBus {
-        mux: Pca9544a::new(ReplayBus::muxed()),
-        read: StatusRead::new(),
-    });
-    for &channel in &channels {
-        let expected = ring_set_up(&mut blocking, channel);
-        let got = scripted
-            .run(&mut bus, |s| ring_set_up(&mut s.mux, channel))
-            .unwrap();
-        assert!(expected && got);
-    }
-    let identity = Bq27500::new(blocking.bus_mut(), NoDelay).init();
-    let scripted_identity = scripted
-        .run(&mut bus, |s| Bq27500::new(s.mux.bus_mut(), NoDelay).init())
-        .unwrap();
-    assert_eq!(identity, Ok(()));
-    assert_eq!(scripted_identity.map_err(|e| e.map_bus(|_| ())), Ok(()));
-    let gauge_read = |s: &mut PowerBus| -> Option<Option<BatteryStatus>> {
-        let mut gauge = Bq27500::new(s.mux.bus_mut(), NoDelay);
-        s.read.step(&mut gauge).map(|done| done.ok())
-    };
-    for round in 0..100 {
-        let expected = ring_read(&mut blocking, &channels);
-        let got = scripted
-            .run(&mut bus, |s| ring_read(&mut s.mux, &channels))
-            .unwrap();
-        assert_eq!(got, expected, "round {round}");
-        if round % 10 == 0 {
-            if round == 50 {
-                blocking.bus_mut().set_nack(true);
-                bus.bus.set_nack(true);
-            }
-            let expected = Bq27500::new(blocking.bus_mut(), NoDelay).read_status().ok();
-            let mut got = None;
-            for _ in 0..StatusRead::MAX_TRANSFERS {
-                if let Some(done) = scripted.run(&mut bus, gauge_read).unwrap() {
-                    got = Some(done);
-                    scripted.state_mut().read.restart();
-                    break;
-                }
-            }
-            assert_eq!(got, Some(expected), "gauge at round {round}");
-            if round == 50 {
-                assert_eq!(expected, None);
-                assert_eq!(ring_read(&mut blocking, &channels), [None; 4]);
-                blocking.bus_mut().set_nack(false);
-                bus.bus.set_nack(false);
-            }
-        }
-    }
-    assert_eq!(
-        blocking.bus_mut().fuel_gauge().samples(),
-        bus.bus.fuel_gauge().samples()
-    );
-    for k in 0..4 {
-        assert_eq!(
-            blocking.bus_mut().proximity().sensor(k).unwrap().samples(),
-            bus.bus.proximity().sensor(k).unwrap().samples()
-        );
-    }
-    assert_muxed_rules(&bus.scripts);
-}
-
-/// A power bus's scripts: the ring round is four selects and proximity reads (PCA9544A
-/// "Control register", VCNL4020 registers #7/#8), 272 SCL periods; a gauge's standard command
-/// is one write of the command byte and a two-byte read after a repeated START (bq27500
-/// datasheet, "I2C interface", standard commands), alone in its script for the gauge's 66 µs of
-/// bus-free time: 48 SCL periods, 120 µs. Control(DEVICE_TYPE) is its two one-byte subcommand
-/// writes and the read of 0x00, three scripts.
-#[test]
-fn the_power_bus_scripts_are_the_datasheet_transactions() {
-    let mut bus = Recorder::new(SimPowerBus::new(4, false));
-    let mut scripted = Replayed::new(PowerBus {
-        mux: Pca9544a::new(ReplayBus::muxed()),
-        read: StatusRead::new(),
-    });
-    for channel in Channel::ALL {
-        assert!(scripted
-            .run(&mut bus, |s| ring_set_up(&mut s.mux, channel))
-            .unwrap());
-    }
-    bus.scripts.clear();
-    let channels = [Channel::Ch0, Channel::Ch1, Channel::Ch3, Channel::Ch2];
-    let counts = scripted
-        .run(&mut bus, |s| ring_read(&mut s.mux, &channels))
-        .unwrap();
-    assert!(counts.iter().all(Option::is_some));
-    let round = script(&[
-        (0x77, &[0x04], 0),
-        (0x13, &[0x87], 2),
-        (0x77, &[0x05], 0),
-        (0x13, &[0x87], 2),
-        (0x77, &[0x07], 0),
-        (0x13, &[0x87], 2),
-        (0x77, &[0x06], 0),
-        (0x13, &[0x87], 2),
-    ]);
-    assert_eq!(bus.scripts, [round]);
-    assert_eq!(round.scl_periods(), 272);
-    bus.scripts.clear();
-    scripted
-        .run(&mut bus, |s| Bq27500::new(s.mux.bus_mut(), NoDelay).init())
-        .unwrap()
-        .unwrap();
-    assert_eq!(
-        bus.scripts,
-        [
-            script(&[(0x55, &[0x00, 0x01], 0)]),
-            script(&[(0x55, &[0x01, 0x00], 0)]),
-            script(&[(0x55, &[0x00], 2)]),
-        ]
-    );
-    // Each gauge script after the first waits the gauge's 66 µs of bus-free time.
-    let mut settles = Vec::new();
-    let init = |s: &mut PowerBus| Bq27500::new(s.mux.bus_mut(), NoDelay).init();
-    while let Next::Run(script) = scripted.step(init).unwrap() {
-        settles.push(scripted.settle_us());
-        scripted.complete(&bus.bus.answer(&script).result);
-    }
-    assert_eq!(settles, [0, 66, 66]);
-    bus.scripts.clear();
-    bus.bus_time_ns = 0;
-    let step = scripted
-        .step(|s| {
-            let mut gauge = Bq27500::new(s.mux.bus_mut(), NoDelay);
-            s.read.step(&mut gauge).is_some()
-        })
-        .unwrap();
-    let temperature = script(&[(0x55, &[bq27500::cmd::TEMPERATURE], 2)]);
-    assert_eq!(step, Next::Run(temperature));
-    assert_eq!(temperature.scl_periods(), 48);
-    assert_eq!(bus.bus.answer(&temperature).bus_time_ns(), 120_000);
-}
-
-/// A failed script names its operation, and the work sees the bus error at the transfer that
-/// failed (the floor's sensor behind the mux, here the first read), not at the first operation.
 #[test]
 fn a_failed_operation_is_the_work_s_error_at_that_transfer() {
-    let mut scripted = Replayed::new(FloorSensors::new(ReplayBus::muxed()));
-    let work = |s: &mut FloorSensors<ReplayBus>| s.read_proximity().map_err(|e| e.sensor);
-    let Next::Run(round) = scripted.step(work).unwrap() else {
+    use amiro_sensors::drivers::scripted::Job;
+    use amiro_sensors::drivers::suite::{Device, SampleError};
+    let mut scripted = Supervised::boot(
+        FloorSensors::scripted(),
+        &mut SimFloorBus::new(),
+        &mut NoDelay,
+    );
+    let mut job = Job::new();
+    let Next::Run { script: round, .. } =
+        scripted.begin_scripted(&mut job, Topic::FloorProximity, 1_000)
+    else {
         panic!("a round needs a script");
     };
     assert_eq!(round.operations().len(), 8);
     // Sensor 2's read (operation 5) is not acknowledged.
-    scripted.complete(&Err(amiro_sensors::script::ScriptError {
+    let failed = Err(amiro_sensors::script::ScriptError {
         operation: 5,
         failure: amiro_sensors::script::Failure::NackAddress,
-    }));
-    assert_eq!(scripted.step(work).unwrap(), Next::Done(Err(2)));
+    });
+    let next = scripted.resume_scripted(&mut job, Topic::FloorProximity, 1_000, &failed);
+    assert_eq!(next, Next::Done(Default::default()));
+    assert_eq!(scripted.faults(), 1);
+    assert!(matches!(
+        scripted.last_error(),
+        Some(SampleError::Device {
+            device: Device::FloorSensor(2),
+            ..
+        })
+    ));
 }
 
-/// Two publishers' jobs on one group overlap (each keeps its own `Job`; the group changes only
-/// when a job ends): the magnetometer's X job records its read, the Y job runs and ends first,
-/// and the X job then ends on the group as the Y job left it — the Y reading reused within the
-/// window, as the blocking path would after a Y sample, the X job's own read unused.
+/// Two publishers' samples of one group overlap (each keeps its own `Job`): the magnetometer's X
+/// and Y samples both need the bus and their scripts run one after the other; each publishes its
+/// own script's reading, decoded when its script ends, and the group keeps the reading decoded
+/// last (X's), which a Z sample in the window then reuses without the bus.
 #[test]
-fn overlapping_jobs_each_keep_their_log_and_end_on_the_group_as_it_is() {
-    use amiro_sensors::drivers::scripted::{step, Job};
+fn overlapping_jobs_each_publish_their_own_reading() {
+    use amiro_sensors::drivers::scripted::Job;
     let mut bus = SimCompassBus::new();
-    let mut group = Replayed::boot(Compass::new(ReplayBus::compass()), &mut bus)
-        .unwrap()
-        .state()
-        .clone();
+    let mut group = Supervised::boot(Compass::scripted(), &mut bus, &mut NoDelay);
     let (mut x, mut y) = (Job::new(), Job::new());
-    let sample = |topic| move |s: &mut Supervised<Compass<ReplayBus>>| s.sample(topic, 5_000);
-    let Next::Run(x_script) = step(&mut group, &mut x, sample(Topic::MagnetometerX)).unwrap()
+    let Next::Run {
+        script: x_script, ..
+    } = group.begin_scripted(&mut x, Topic::MagnetometerX, 5_000)
     else {
         panic!("X needs the bus");
     };
-    let Next::Run(y_script) = step(&mut group, &mut y, sample(Topic::MagnetometerY)).unwrap()
+    let Next::Run {
+        script: y_script, ..
+    } = group.begin_scripted(&mut y, Topic::MagnetometerY, 5_000)
     else {
         panic!("Y needs the bus");
     };
     assert_eq!(x_script, y_script);
-    x.complete(&bus.answer(&x_script).result);
-    y.complete(&bus.answer(&y_script).result);
-    let Next::Done(y_frames) = step(&mut group, &mut y, sample(Topic::MagnetometerY)).unwrap()
+    let x_result = bus.answer(&x_script).result;
+    let y_result = bus.answer(&y_script).result;
+    let Next::Done(y_frames) =
+        group.resume_scripted(&mut y, Topic::MagnetometerY, 5_000, &y_result)
     else {
         panic!("Y has its readings");
     };
-    let Next::Done(x_frames) = step(&mut group, &mut x, sample(Topic::MagnetometerX)).unwrap()
+    let Next::Done(x_frames) =
+        group.resume_scripted(&mut x, Topic::MagnetometerX, 5_000, &x_result)
     else {
         panic!("X has its readings");
     };
-    // The blocking path, Y then X: the second reading's field for both.
-    let mut blocking = Supervised::new(Compass::new(SimCompassBus::new()));
-    // The simulator's first read is X's (unused); the Y job's read is the second.
-    blocking.group_mut().magnetometer.read().unwrap();
-    assert_eq!(y_frames, blocking.sample(Topic::MagnetometerY, 5_000));
-    assert_eq!(x_frames, blocking.sample(Topic::MagnetometerX, 5_000));
-    assert_eq!(x.logged() + y.logged(), 0);
+    // The same part read twice by the blocking driver: X's reading first, Y's second.
+    let mut twin = Supervised::new(Compass::new(SimCompassBus::new()));
+    let first = twin.group_mut().magnetometer.read().unwrap();
+    let second = twin.group_mut().magnetometer.read().unwrap();
+    let frame = |axis, nanotesla| amiro_can::SensorData::Magnetometer { axis, nanotesla };
+    assert_eq!(
+        x_frames.as_slice(),
+        [frame(amiro_can::Axis::X, first.nanotesla[0])]
+    );
+    assert_eq!(
+        y_frames.as_slice(),
+        [frame(amiro_can::Axis::Y, second.nanotesla[1])]
+    );
+    let mut z = Job::new();
+    let reused = group.begin_scripted(&mut z, Topic::MagnetometerZ, 6_000);
+    let expected = [frame(amiro_can::Axis::Z, first.nanotesla[2])];
+    assert_eq!(reused, Next::Done(expected.iter().copied().collect()));
+    assert!(!x.under_way() && !y.under_way() && !z.under_way());
 }
 
 /// The floor bus with the VCNL4020 behind one channel gone (its address not acknowledged while
@@ -829,7 +723,7 @@ fn a_floor_sensor_gone_is_named_and_recovered_as_on_the_blocking_path() {
     };
     let mut blocking = Supervised::new(FloorSensors::new(floor()));
     let mut bus = Recorder::new(floor());
-    let mut scripted = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut bus).unwrap();
+    let mut scripted = Supervised::boot(FloorSensors::scripted(), &mut bus, &mut NoDelay);
     run_both(
         &mut blocking,
         &mut scripted,
@@ -852,7 +746,7 @@ fn a_floor_sensor_gone_is_named_and_recovered_as_on_the_blocking_path() {
     );
     assert_eq!(empty, 500);
     assert!(matches!(
-        scripted.state().last_error(),
+        scripted.last_error(),
         Some(SampleError::Device {
             device: Device::FloorSensor(2),
             ..
@@ -869,37 +763,35 @@ fn a_floor_sensor_gone_is_named_and_recovered_as_on_the_blocking_path() {
         16_000_000,
         10_000,
     );
-    assert!(published > 0 && scripted.state().is_ready());
+    assert!(published > 0 && scripted.is_ready());
 }
 
-/// A publisher's way through a sample (`begin_sample`, then `finish_sample` per script until the
-/// frames): the BNO055's magnetometer X, its first sample and then one within the reuse window
-/// that needs no script.
+/// A publisher's way through a sample (`begin_scripted`, then `resume_scripted` per script
+/// until the frames): the BNO055's magnetometer X, its first sample and then one within the reuse
+/// window that needs no script.
 #[test]
 fn a_publisher_begins_and_finishes_a_sample_script_by_script() {
-    use amiro_sensors::drivers::scripted::{begin_sample, finish_sample, Job};
+    use amiro_sensors::drivers::scripted::Job;
     let mut sim = SimImuBus::new();
     let mut blocking = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
-    let mut group = Replayed::boot(ImuSensors::new(ReplayBus::imu(), NoDelay), &mut sim)
-        .unwrap()
-        .state()
-        .clone();
+    let mut group = Supervised::boot(ImuSensors::scripted(NoDelay), &mut sim, &mut NoDelay);
     let mut job = Job::new();
     let mut scripts = 0;
-    let mut next = begin_sample(&mut group, &mut job, Topic::MagnetometerX, 2_000);
+    let mut next = group.begin_scripted(&mut job, Topic::MagnetometerX, 2_000);
     let frames = loop {
         match next {
-            Next::Run(script) => {
+            Next::Run { script, settle_us } => {
+                assert_eq!(settle_us, 0);
                 scripts += 1;
                 let result = sim.answer(&script).result;
-                next = finish_sample(&mut group, &mut job, Topic::MagnetometerX, 2_000, &result);
+                next = group.resume_scripted(&mut job, Topic::MagnetometerX, 2_000, &result);
             }
             Next::Done(frames) => break frames,
         }
     };
     assert_eq!(scripts, 1);
     assert_eq!(frames, blocking.sample(Topic::MagnetometerX, 2_000));
-    let reused = begin_sample(&mut group, &mut job, Topic::MagnetometerY, 3_000);
+    let reused = group.begin_scripted(&mut job, Topic::MagnetometerY, 3_000);
     assert_eq!(
         reused,
         Next::Done(blocking.sample(Topic::MagnetometerY, 3_000))
@@ -917,7 +809,7 @@ fn a_dead_bus_pattern_mid_round_is_checked_and_the_round_goes_on() {
     let counts = [3000, 0, 5000, 6000];
     let mut blocking = Supervised::new(FloorSensors::new(SimFloorBus::new()));
     let mut bus = Recorder::new(SimFloorBus::new());
-    let mut scripted = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut bus).unwrap();
+    let mut scripted = Supervised::boot(FloorSensors::scripted(), &mut bus, &mut NoDelay);
     for (k, &c) in counts.iter().enumerate() {
         blocking
             .group_mut()
@@ -951,38 +843,57 @@ fn a_dead_bus_pattern_mid_round_is_checked_and_the_round_goes_on() {
     assert_muxed_rules(&bus.scripts);
 }
 
-/// A later script of a job that fails at its first operation, the select sent again at its start
-/// (the bus gone mid-job, or the client's timeout, which fails operation 0): the work sees that
-/// failure at its next transfer and the group counts the fault, as the blocking path's failed
-/// read does; the same script is not recorded again.
+/// A later script of a job that fails at its first operation (the bus gone mid-job, or the
+/// client's timeout, which fails operation 0): the second script of a round whose sensor 1 read
+/// a dead bus's pattern (its select, PRODUCT_ID, then the sensors after it) names sensor 1, and
+/// the group counts one fault, as the blocking path's failed identity read does.
 #[test]
-fn a_failed_resent_select_is_the_work_s_failure_not_a_script_to_run_again() {
+fn a_failed_later_script_is_the_sample_s_failure() {
+    use amiro_sensors::drivers::scripted::{timed_out, Job};
+    use amiro_sensors::drivers::suite::{Device, SampleError};
     let counts = [3000, 0, 5000, 6000];
     let mut bus = SimFloorBus::new();
-    let mut scripted = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut bus).unwrap();
+    let mut scripted = Supervised::boot(FloorSensors::scripted(), &mut bus, &mut NoDelay);
     for (k, &c) in counts.iter().enumerate() {
         bus.proximity_mut().set_proximity(k, Some(c));
     }
-    let faults = scripted.state().faults();
-    let sample =
-        |s: &mut Supervised<FloorSensors<ReplayBus>>| s.sample(Topic::FloorProximity, 1_000);
-    let Next::Run(first) = scripted.step(sample).unwrap() else {
+    let faults = scripted.faults();
+    let mut job = Job::new();
+    let Next::Run { script: first, .. } =
+        scripted.begin_scripted(&mut job, Topic::FloorProximity, 1_000)
+    else {
         panic!("a round needs a script");
     };
-    scripted.complete(&bus.answer(&first).result);
-    let Next::Run(second) = scripted.step(sample).unwrap() else {
+    let result = bus.answer(&first).result;
+    let Next::Run { script: second, .. } =
+        scripted.resume_scripted(&mut job, Topic::FloorProximity, 1_000, &result)
+    else {
         panic!("the dead-bus pattern is checked by a second script");
     };
-    assert_eq!(second.operations().first().map(|o| o.address), Some(0x77));
-    scripted.complete(&Err(amiro_sensors::script::ScriptError {
-        operation: 0,
-        failure: amiro_sensors::script::Failure::NackAddress,
-    }));
     assert_eq!(
-        scripted.step(sample).unwrap(),
+        second,
+        script(&[
+            (0x77, &[0x05], 0),
+            (0x13, &[0x81], 1),
+            (0x77, &[0x06], 0),
+            (0x13, &[0x87], 2),
+            (0x77, &[0x07], 0),
+            (0x13, &[0x87], 2),
+        ])
+    );
+    assert_eq!(
+        scripted.resume_scripted(&mut job, Topic::FloorProximity, 1_000, &timed_out()),
         Next::Done(amiro_sensors::drivers::suite::Samples::new())
     );
-    assert_eq!(scripted.state().faults(), faults + 1);
+    assert_eq!(scripted.faults(), faults + 1);
+    assert!(matches!(
+        scripted.last_error(),
+        Some(SampleError::Device {
+            device: Device::FloorSensor(1),
+            ..
+        })
+    ));
+    assert!(!job.under_way());
 }
 
 /// At boot, before the engine takes the block, a group's set-up runs its scripts operation by
@@ -993,9 +904,9 @@ fn a_script_on_a_blocking_bus_answers_as_the_simulator() {
     use amiro_sensors::drivers::scripted::OnI2c;
     let mut on_i2c = OnI2c(SimFloorBus::new());
     let mut answering = SimFloorBus::new();
-    let a = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut on_i2c).unwrap();
-    let b = Replayed::boot(FloorSensors::new(ReplayBus::muxed()), &mut answering).unwrap();
-    assert!(a.state().is_ready() && b.state().is_ready());
+    let a = Supervised::boot(FloorSensors::scripted(), &mut on_i2c, &mut NoDelay);
+    let b = Supervised::boot(FloorSensors::scripted(), &mut answering, &mut NoDelay);
+    assert!(a.is_ready() && b.is_ready());
     for k in 0..4 {
         let (x, y) = (
             on_i2c.0.proximity().sensor(k).unwrap(),
@@ -1019,8 +930,7 @@ fn a_script_on_a_blocking_bus_answers_as_the_simulator() {
 fn no_write_reaches_a_part_whose_check_failed() {
     let mut blocking = Supervised::new(ImuSensors::new(SimImuBus::new(), NoDelay));
     let mut bus = Recorder::new(SimImuBus::new());
-    let mut scripted =
-        Replayed::boot(ImuSensors::new(ReplayBus::imu(), NoDelay), &mut bus).unwrap();
+    let mut scripted = Supervised::boot(ImuSensors::scripted(NoDelay), &mut bus, &mut NoDelay);
     for (fault, from, to) in [
         (Bno055Fault::Absent, 0, 3_000_000),
         (Bno055Fault::SelfTestFailed, 3_000_000, 20_000_000),
@@ -1042,9 +952,234 @@ fn no_write_reaches_a_part_whose_check_failed() {
             10_000,
         );
     }
-    assert!(!scripted.state().is_ready());
-    assert!(scripted.state().faults() > 3 + 1);
+    assert!(!scripted.is_ready());
+    assert!(scripted.faults() > 3 + 1);
     let device = blocking.group_mut().imu.bus_mut().imu();
     assert_eq!(device.mode_switches(), bus.bus.imu().mode_switches());
     assert_eq!(device.operating_mode(), bus.bus.imu().operating_mode());
+}
+
+/// The board's ring read of one bus on the blocking path: per sensor the select and the
+/// proximity result; a sensor that fails yields `None` and the next is read all the same.
+fn ring_read<I: embedded_hal::i2c::I2c>(
+    mux: &mut Pca9544a<I>,
+    channels: &[Channel],
+) -> Vec<Option<u16>> {
+    channels
+        .iter()
+        .map(|&channel| {
+            mux.select(channel)
+                .ok()
+                .and_then(|muxed| Vcnl4020::new(muxed).read_proximity().ok())
+        })
+        .collect()
+}
+
+/// The set-up of one ring sensor on the blocking path, as the board makes it.
+fn ring_set_up<I: embedded_hal::i2c::I2c>(mux: &mut Pca9544a<I>, channel: Channel) -> bool {
+    match mux.select(channel) {
+        Ok(muxed) => Vcnl4020::new(muxed).init(&Config::AMIRO).is_ok(),
+        Err(_) => false,
+    }
+}
+
+/// The same read as scripts: [`RingRead`] to its end.
+fn ring_read_scripted(bus: &mut impl ScriptBus, channels: &[Channel]) -> Vec<Option<u16>> {
+    let mut read = RingRead::new(pca9544a::AMIRO_ADDRESS, channels);
+    for _ in 0..RingRead::MAX_SCRIPTS {
+        let Some(script) = read.script() else { break };
+        read.complete(&bus.run(&script.unwrap()));
+    }
+    let counts = read.counts().expect("the read ends within its scripts");
+    counts[..channels.len()].to_vec()
+}
+
+/// The same set-up as scripts: [`SensorSetUp`] to its end.
+fn ring_set_up_scripted(bus: &mut impl ScriptBus, channel: Channel) -> bool {
+    let mut set_up = SensorSetUp::new(pca9544a::AMIRO_ADDRESS, channel, Config::AMIRO);
+    loop {
+        let script = set_up.script().unwrap();
+        if let Some(done) = set_up.complete(&bus.run(&script)) {
+            return done.is_ok();
+        }
+    }
+}
+
+/// A gauge's work as scripts, one transfer each, with the settling time each asks for.
+fn gauge_status_scripted(
+    bus: &mut impl ScriptBus,
+    settles: &mut Vec<u32>,
+) -> Option<BatteryStatus> {
+    let mut read = StatusRead::new();
+    for _ in 0..StatusRead::MAX_TRANSFERS + 1 {
+        let transfer = read.next_transfer()?;
+        settles.push(GAUGE_SETTLE_US);
+        let result = bus.run(&gauge_script(transfer).unwrap());
+        if let Some(done) = read.complete(gauge_outcome(transfer, &result)) {
+            return done.ok();
+        }
+    }
+    panic!("the status read did not end within its transfers");
+}
+
+fn gauge_identity_scripted(bus: &mut impl ScriptBus) -> Result<(), Error<ErrorKind>> {
+    let mut check = GaugeIdentity::new();
+    while let Some(transfer) = check.next_transfer() {
+        let result = bus.run(&gauge_script(transfer).unwrap());
+        if let Some(done) = check.complete(gauge_outcome(transfer, &result)) {
+            return done;
+        }
+    }
+    panic!("the identity check ended without an answer");
+}
+
+/// PowerManagement's I2C1: the ring sensors' set-up and 100 rounds, the gauge's identity check
+/// and ten status reads a transfer a script (`StatusRead`, as `BatteryRound` makes them), the bus
+/// gone and back: the same values, the same devices' state, on both paths.
+#[test]
+fn a_power_bus_as_scripts_reads_as_the_blocking_path() {
+    let channels: Vec<Channel> = WIRING
+        .iter()
+        .filter(|(bus, _)| *bus == RingBus::I2c1)
+        .map(|&(_, channel)| channel)
+        .collect();
+    let mut blocking = Pca9544a::new(SimPowerBus::new(0, true));
+    let mut bus = Recorder::new(SimPowerBus::new(0, true));
+    for &channel in &channels {
+        let expected = ring_set_up(&mut blocking, channel);
+        let got = ring_set_up_scripted(&mut bus, channel);
+        assert!(expected && got);
+    }
+    let identity = Bq27500::new(blocking.bus_mut(), NoDelay).init();
+    assert_eq!(identity, Ok(()));
+    assert_eq!(gauge_identity_scripted(&mut bus), Ok(()));
+    let mut settles = Vec::new();
+    for round in 0..100 {
+        let expected = ring_read(&mut blocking, &channels);
+        let got = ring_read_scripted(&mut bus, &channels);
+        assert_eq!(got, expected, "round {round}");
+        if round % 10 == 0 {
+            if round == 50 {
+                blocking.bus_mut().set_nack(true);
+                bus.bus.set_nack(true);
+            }
+            let expected = Bq27500::new(blocking.bus_mut(), NoDelay).read_status().ok();
+            let got = gauge_status_scripted(&mut bus, &mut settles);
+            assert_eq!(got, expected, "gauge at round {round}");
+            if round == 50 {
+                assert_eq!(expected, None);
+                assert_eq!(ring_read(&mut blocking, &channels), [None; 4]);
+                assert_eq!(ring_read_scripted(&mut bus, &channels), [None; 4]);
+                blocking.bus_mut().set_nack(false);
+                bus.bus.set_nack(false);
+            }
+        }
+    }
+    // Every gauge script waits the gauge's 66 µs of bus-free time first.
+    assert!(settles.iter().all(|&s| s == 66));
+    assert_eq!(
+        blocking.bus_mut().fuel_gauge().samples(),
+        bus.bus.fuel_gauge().samples()
+    );
+    for k in 0..4 {
+        assert_eq!(
+            blocking.bus_mut().proximity().sensor(k).unwrap().samples(),
+            bus.bus.proximity().sensor(k).unwrap().samples()
+        );
+    }
+    assert_muxed_rules(&bus.scripts);
+}
+
+/// A power bus's scripts, worked from the datasheets: the ring round is four selects (PCA9544A
+/// control register, 20 SCL periods each) and proximity reads (VCNL4020 register #7, 0x87, two
+/// bytes: 48), 272 SCL periods, in the channels' order; a gauge's standard command is one write
+/// of the command byte and a two-byte read after a repeated START (bq27500 datasheet, standard
+/// commands): 1 + 9 + 9 + 1 + 9 + 18 + 1 = 48 SCL periods, 120 µs, alone in its script for the
+/// gauge's 66 µs of bus-free time. Control(DEVICE_TYPE) is its two one-byte subcommand writes
+/// (0x01 to 0x00, 0x00 to 0x01: 29 periods each) and the read of 0x00, three scripts.
+#[test]
+fn the_power_bus_scripts_are_the_datasheet_transactions() {
+    let mut bus = Recorder::new(SimPowerBus::new(4, false));
+    for channel in Channel::ALL {
+        assert!(ring_set_up_scripted(&mut bus, channel));
+    }
+    bus.scripts.clear();
+    let channels = [Channel::Ch0, Channel::Ch1, Channel::Ch3, Channel::Ch2];
+    let counts = ring_read_scripted(&mut bus, &channels);
+    assert!(counts.iter().all(Option::is_some));
+    let round = script(&[
+        (0x77, &[0x04], 0),
+        (0x13, &[0x87], 2),
+        (0x77, &[0x05], 0),
+        (0x13, &[0x87], 2),
+        (0x77, &[0x07], 0),
+        (0x13, &[0x87], 2),
+        (0x77, &[0x06], 0),
+        (0x13, &[0x87], 2),
+    ]);
+    assert_eq!(bus.scripts, [round]);
+    assert_eq!(round.scl_periods(), 272);
+    bus.scripts.clear();
+    assert_eq!(gauge_identity_scripted(&mut bus), Ok(()));
+    assert_eq!(
+        bus.scripts,
+        [
+            script(&[(0x55, &[0x00, 0x01], 0)]),
+            script(&[(0x55, &[0x01, 0x00], 0)]),
+            script(&[(0x55, &[0x00], 2)]),
+        ]
+    );
+    assert_eq!(periods(&bus.scripts), [29, 29, 48]);
+    bus.scripts.clear();
+    bus.bus_time_ns = 0;
+    let read = StatusRead::new();
+    let temperature = gauge_script(read.next_transfer().unwrap()).unwrap();
+    assert_eq!(
+        temperature,
+        script(&[(0x55, &[bq27500::cmd::TEMPERATURE], 2)])
+    );
+    assert_eq!(temperature.scl_periods(), 48);
+    assert_eq!(bus.bus.answer(&temperature).bus_time_ns(), 120_000);
+    assert_eq!(GAUGE_SETTLE_US, 66);
+    // A whole status read: the ten commands in the driver's order, one script each.
+    let mut settles = Vec::new();
+    assert!(gauge_status_scripted(&mut bus, &mut settles).is_some());
+    let commands: Vec<u8> = bus.scripts.iter().map(|s| s.written()[0]).collect();
+    assert_eq!(
+        commands,
+        [0x06, 0x08, 0x0A, 0x10, 0x12, 0x14, 0x16, 0x18, 0x24, 0x2C]
+    );
+}
+
+/// A ring sensor whose read fails mid-round (its channel's VCNL4020 gone): it yields no count,
+/// the others theirs, as on the blocking path; the script that failed (which returns no
+/// readings) is followed by one that reads the sensor before it again and the ones after it.
+#[test]
+fn a_ring_sensor_gone_fails_alone() {
+    let channels = [Channel::Ch0, Channel::Ch1, Channel::Ch2, Channel::Ch3];
+    let floor = || {
+        SimBus::with(DeadChannel {
+            floor: SimMuxedProximity::new(0),
+            dead: Some(1),
+        })
+    };
+    let mut blocking = Pca9544a::new(floor());
+    let mut bus = Recorder::new(floor());
+    for channel in [Channel::Ch0, Channel::Ch2, Channel::Ch3] {
+        assert!(ring_set_up(&mut blocking, channel));
+        assert!(ring_set_up_scripted(&mut bus, channel));
+    }
+    bus.scripts.clear();
+    let expected = ring_read(&mut blocking, &channels);
+    assert_eq!(expected[1], None);
+    assert!(expected[0].is_some() && expected[2].is_some() && expected[3].is_some());
+    let got = ring_read_scripted(&mut bus, &channels);
+    assert_eq!(got[1..], expected[1..]);
+    // Sensor 0's count of the failed script is lost with it: the next script reads it again,
+    // the count the blocking path's next read of it gives.
+    assert_eq!(got[0], ring_read(&mut blocking, &[Channel::Ch0])[0]);
+    assert_ne!(got[0], expected[0]);
+    assert_eq!(bus.scripts.len(), 2);
+    assert_eq!(bus.scripts[1].operations().len(), 6);
+    assert_muxed_rules(&bus.scripts);
 }

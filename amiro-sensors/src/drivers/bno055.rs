@@ -152,7 +152,8 @@ pub const fn nanotesla(raw: [i16; 3]) -> [i32; 3] {
     ]
 }
 
-fn le3(bytes: &[u8]) -> [i16; 3] {
+/// One sensor's six data bytes (X, Y, Z, each LSB first) as digits.
+pub fn le3(bytes: &[u8]) -> [i16; 3] {
     let word = |i: usize| {
         i16::from_le_bytes([
             bytes.get(i).copied().unwrap_or(0),
@@ -168,12 +169,14 @@ pub struct Bno055<I2C> {
     i2c: I2C,
 }
 
-impl<I2C: I2c> Bno055<I2C> {
+impl<I2C> Bno055<I2C> {
     /// A driver at the AMiRo's address. Does no I/O; call [`init`](Self::init).
     pub const fn new(i2c: I2C) -> Self {
         Self { i2c }
     }
+}
 
+impl<I2C: I2c> Bno055<I2C> {
     /// Waits for the part to answer after a reset: reads the chip identity every 10 ms, at most
     /// `timeout_ms` long. The board calls it once after releasing IMU_RESET_N; a part that never
     /// answers returns the last error (and [`init`](Self::init) reports it again later).
@@ -239,28 +242,16 @@ impl<I2C: I2c> Bno055<I2C> {
         self.i2c.write(ADDRESS, &[reg::UNIT_SEL, UNIT_SEL_AMIRO])?;
         // Page 1: the four sensor configuration registers in one burst, read back in one.
         self.i2c.write(ADDRESS, &[reg::PAGE_ID, 1])?;
-        let config = [
-            ACC_CONFIG_AMIRO,
-            MAG_CONFIG_AMIRO,
-            GYR_CONFIG_0_AMIRO,
-            GYR_CONFIG_1_AMIRO,
-        ];
-        let [a, m, g0, g1] = config;
+        let [a, m, g0, g1] = CONFIGURATION;
         self.i2c.write(ADDRESS, &[reg::ACC_CONFIG, a, m, g0, g1])?;
         let mut readback = [0u8; 4];
         self.i2c
             .write_read(ADDRESS, &[reg::ACC_CONFIG], &mut readback)?;
         self.i2c.write(ADDRESS, &[reg::PAGE_ID, 0])?;
-        // Writable bits: ACC all 8; MAG bits 6..0; GYR_0 bits 5..0; GYR_1 bits 2..0.
-        let writable = [0xFF, 0x7F, 0x3F, 0x07];
-        for (((register, written), read), mask) in
-            (reg::ACC_CONFIG..).zip(config).zip(readback).zip(writable)
-        {
-            check_register(register, written, read, mask)?;
-        }
+        check_configuration(readback)?;
         let mut units = [0u8; 1];
         self.i2c.write_read(ADDRESS, &[reg::UNIT_SEL], &mut units)?;
-        check_register(reg::UNIT_SEL, UNIT_SEL_AMIRO, units[0], 0x97)?;
+        check_units(units[0])?;
         self.i2c.write(ADDRESS, &[reg::OPR_MODE, mode::AMG])?;
         Ok(())
     }
@@ -269,21 +260,14 @@ impl<I2C: I2c> Bno055<I2C> {
     pub fn init_check_running(&mut self) -> Result<(), Error<I2C::Error>> {
         let mut opr = [0u8; 1];
         self.i2c.write_read(ADDRESS, &[reg::OPR_MODE], &mut opr)?;
-        check_register(reg::OPR_MODE, mode::AMG, opr[0], 0x0F)
+        check_amg_started(opr[0])
     }
 
     /// Reads the four identity registers in one transfer and compares them with the datasheet's.
     pub fn check_identity(&mut self) -> Result<(), Error<I2C::Error>> {
         let mut id = [0u8; 4];
         self.i2c.write_read(ADDRESS, &[reg::CHIP_ID], &mut id)?;
-        if id == IDENTITY {
-            Ok(())
-        } else {
-            Err(Error::WrongIdentity {
-                expected: u32::from_be_bytes(IDENTITY),
-                found: u32::from_be_bytes(id),
-            })
-        }
+        identity(id)
     }
 
     /// Reads the power-on self-test result: every sensor and the MCU must have passed.
@@ -291,13 +275,7 @@ impl<I2C: I2c> Bno055<I2C> {
         let mut result = [0u8; 1];
         self.i2c
             .write_read(ADDRESS, &[reg::ST_RESULT], &mut result)?;
-        if result[0] & 0x0F == SELF_TEST_PASSED {
-            Ok(())
-        } else {
-            Err(Error::SelfTest {
-                result: result[0] & 0x0F,
-            })
-        }
+        self_test(result[0])
     }
 
     /// Reads six data bytes at `first` (one sensor's X, Y, Z) in one burst.
@@ -316,7 +294,7 @@ impl<I2C: I2c> Bno055<I2C> {
     pub fn check_running(&mut self) -> Result<(), Error<I2C::Error>> {
         let mut opr = [0u8; 1];
         self.i2c.write_read(ADDRESS, &[reg::OPR_MODE], &mut opr)?;
-        check_register(reg::OPR_MODE, mode::AMG, opr[0], 0xFF)
+        still_running(opr[0])
     }
 
     /// One sensor's X, Y, Z digits (one 6-byte burst at `first`), then [`check_running`]: the
@@ -377,5 +355,125 @@ impl<I2C: I2c> Bno055<I2C> {
     /// Gives the bus back.
     pub fn release(self) -> I2C {
         self.i2c
+    }
+}
+
+/// The page-1 configuration the set-up writes in one burst from ACC_CONFIG: accelerometer,
+/// magnetometer, gyroscope 0 and 1.
+pub const CONFIGURATION: [u8; 4] = [
+    ACC_CONFIG_AMIRO,
+    MAG_CONFIG_AMIRO,
+    GYR_CONFIG_0_AMIRO,
+    GYR_CONFIG_1_AMIRO,
+];
+
+/// The four identity registers: [`IDENTITY`], or [`Error::WrongIdentity`].
+pub fn identity<E>(id: [u8; 4]) -> Result<(), Error<E>> {
+    if id == IDENTITY {
+        Ok(())
+    } else {
+        Err(Error::WrongIdentity {
+            expected: u32::from_be_bytes(IDENTITY),
+            found: u32::from_be_bytes(id),
+        })
+    }
+}
+
+/// ST_RESULT: every sensor and the MCU passed, or [`Error::SelfTest`].
+pub fn self_test<E>(result: u8) -> Result<(), Error<E>> {
+    if result & 0x0F == SELF_TEST_PASSED {
+        Ok(())
+    } else {
+        Err(Error::SelfTest {
+            result: result & 0x0F,
+        })
+    }
+}
+
+/// The read-back of the page-1 configuration ([`CONFIGURATION`]) on its writable bits.
+#[inline(always)]
+pub fn check_configuration<E>(readback: [u8; 4]) -> Result<(), Error<E>> {
+    // Writable bits: ACC all 8; MAG bits 6..0; GYR_0 bits 5..0; GYR_1 bits 2..0.
+    let writable = [0xFF, 0x7F, 0x3F, 0x07];
+    for (((register, written), read), mask) in (reg::ACC_CONFIG..)
+        .zip(CONFIGURATION)
+        .zip(readback)
+        .zip(writable)
+    {
+        check_register(register, written, read, mask)?;
+    }
+    Ok(())
+}
+
+/// UNIT_SEL's read-back on its writable bits.
+pub fn check_units<E>(units: u8) -> Result<(), Error<E>> {
+    check_register(reg::UNIT_SEL, UNIT_SEL_AMIRO, units, 0x97)
+}
+
+/// OPR_MODE after the set-up's switch: AMG in bits 3..0.
+pub fn check_amg_started<E>(opr: u8) -> Result<(), Error<E>> {
+    check_register(reg::OPR_MODE, mode::AMG, opr, 0x0F)
+}
+
+/// OPR_MODE beside a sample: still AMG, the whole byte (a dead line's 0x00 or 0xFF fails).
+pub fn still_running<E>(opr: u8) -> Result<(), Error<E>> {
+    check_register(reg::OPR_MODE, mode::AMG, opr, 0xFF)
+}
+
+/// The part's transactions as script operations (decoded by the functions above).
+pub mod ops {
+    use super::{mode, reg, ADDRESS, CONFIGURATION, UNIT_SEL_AMIRO};
+    use crate::script::{BuildError, Script};
+
+    /// Set-up step 1's checks: the four identities (write 0x00, read 4, [`super::identity`])
+    /// and ST_RESULT (write 0x36, read 1, [`super::self_test`]).
+    pub fn checks(script: &mut Script) -> Result<(), BuildError> {
+        script.write_read(ADDRESS, &[reg::CHIP_ID], 4)?;
+        script.write_read(ADDRESS, &[reg::ST_RESULT], 1)?;
+        Ok(())
+    }
+
+    /// Set-up step 1's writes: page 0, configuration mode (the part then takes
+    /// [`super::OPERATING_TO_CONFIG_MS`]).
+    pub fn enter_config(script: &mut Script) -> Result<(), BuildError> {
+        script.write(ADDRESS, &[reg::PAGE_ID, 0])?;
+        script.write(ADDRESS, &[reg::OPR_MODE, mode::CONFIG])?;
+        Ok(())
+    }
+
+    /// Set-up step 2 up to its checks: power mode, units, page 1, the configuration burst and
+    /// its read-back (operation 4, [`super::check_configuration`]), page 0, UNIT_SEL's read-back
+    /// (operation 6, [`super::check_units`]).
+    pub fn configure(script: &mut Script) -> Result<(), BuildError> {
+        let [a, m, g0, g1] = CONFIGURATION;
+        script.write(ADDRESS, &[reg::PWR_MODE, 0x00])?;
+        script.write(ADDRESS, &[reg::UNIT_SEL, UNIT_SEL_AMIRO])?;
+        script.write(ADDRESS, &[reg::PAGE_ID, 1])?;
+        script.write(ADDRESS, &[reg::ACC_CONFIG, a, m, g0, g1])?;
+        script.write_read(ADDRESS, &[reg::ACC_CONFIG], 4)?;
+        script.write(ADDRESS, &[reg::PAGE_ID, 0])?;
+        script.write_read(ADDRESS, &[reg::UNIT_SEL], 1)?;
+        Ok(())
+    }
+
+    /// Set-up step 2's end once its checks passed: AMG mode (the part then takes
+    /// [`super::CONFIG_TO_OPERATING_MS`]).
+    pub fn start_amg(script: &mut Script) -> Result<(), BuildError> {
+        script.write(ADDRESS, &[reg::OPR_MODE, mode::AMG])?;
+        Ok(())
+    }
+
+    /// OPR_MODE: write 0x3D, read 1 (set-up step 3, [`super::check_amg_started`]; beside a
+    /// sample, [`super::still_running`]).
+    pub fn operating_mode(script: &mut Script) -> Result<(), BuildError> {
+        script.write_read(ADDRESS, &[reg::OPR_MODE], 1)?;
+        Ok(())
+    }
+
+    /// A sample of one sensor ([`super::Bno055::read_verified`]): its six data bytes from
+    /// `first` (write it, read 6, [`super::le3`]), then OPR_MODE.
+    pub fn verified_block(script: &mut Script, first: u8) -> Result<(), BuildError> {
+        script.write_read(ADDRESS, &[first], 6)?;
+        operating_mode(script)
     }
 }

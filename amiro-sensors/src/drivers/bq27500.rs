@@ -226,23 +226,23 @@ impl<I2C: I2c, D: DelayNs> Bq27500<I2C, D> {
     /// Checks that the gauge is a bq27500 (Control(DEVICE_TYPE) = 0x0500). The gauge needs no
     /// configuration.
     pub fn init(&mut self) -> Result<(), Error<I2C::Error>> {
-        let device_type = self.control(subcommand::DEVICE_TYPE)?;
-        if device_type == DEVICE_TYPE_VALUE {
-            Ok(())
-        } else {
-            Err(Error::WrongIdentity {
-                expected: DEVICE_TYPE_VALUE.into(),
-                found: device_type.into(),
-            })
-        }
+        device_type(self.control(subcommand::DEVICE_TYPE)?)
     }
 
     /// Sends a Control() subcommand and reads its result.
     pub fn control(&mut self, subcommand: u16) -> Result<u16, Error<I2C::Error>> {
-        let [low, high] = subcommand.to_le_bytes();
-        self.write_paced(&[cmd::CONTROL, low])?;
-        self.write_paced(&[cmd::CONTROL + 1, high])?;
-        self.read_u16(cmd::CONTROL)
+        let [low, high, answer] = control_transfers(subcommand);
+        self.transfer(low)?;
+        self.transfer(high)?;
+        self.transfer(answer)
+    }
+
+    /// Makes one transfer, then the bus-free time: a read's word, 0 for a write.
+    pub fn transfer(&mut self, transfer: Transfer) -> Result<u16, Error<I2C::Error>> {
+        match transfer {
+            Transfer::Write { command, value } => self.write_paced(&[command, value]).map(|()| 0),
+            Transfer::Read(command) => self.read_u16(command),
+        }
     }
 
     /// Reads one standard command's 16-bit value.
@@ -251,7 +251,7 @@ impl<I2C: I2c, D: DelayNs> Bq27500<I2C, D> {
         let result = self.i2c.write_read(ADDRESS, &[command], &mut value);
         self.delay.delay_ns(BUS_FREE_NS);
         result?;
-        Ok(u16::from_le_bytes(value))
+        Ok(word(value))
     }
 
     /// Reads everything [`BatteryStatus`] holds (ten transfers, in command order): a
@@ -347,29 +347,44 @@ impl StatusRead {
         &mut self,
         gauge: &mut Bq27500<I2C, D>,
     ) -> Option<Result<BatteryStatus, Error<I2C::Error>>> {
-        let [low, high] = subcommand::DEVICE_TYPE.to_le_bytes();
+        let Some(transfer) = self.next_transfer() else {
+            return Some(Ok(self.status()));
+        };
+        let outcome = gauge.transfer(transfer);
+        self.complete(outcome)
+    }
+
+    /// The read's next transfer: the identity check's three when a dead line's pattern called
+    /// for it, else the next status word's read; `None` once the ten words are read.
+    pub fn next_transfer(&self) -> Option<Transfer> {
+        match control_transfers(subcommand::DEVICE_TYPE).get(usize::from(self.identity)) {
+            Some(&transfer) => Some(transfer),
+            None => STATUS_COMMANDS
+                .get(usize::from(self.read))
+                .map(|&command| Transfer::Read(command)),
+        }
+    }
+
+    /// The outcome of the transfer [`next_transfer`](Self::next_transfer) named (a read's word,
+    /// anything for a write): `None` while transfers remain, then the status, or the error of
+    /// the transfer that failed (the read ends there).
+    pub fn complete<E>(
+        &mut self,
+        outcome: Result<u16, Error<E>>,
+    ) -> Option<Result<BatteryStatus, Error<E>>> {
         let checking = self.identity < 3;
-        let step = match self.identity {
-            0 => gauge.write_paced(&[cmd::CONTROL, low]),
-            1 => gauge.write_paced(&[cmd::CONTROL + 1, high]),
-            2 => gauge.read_u16(cmd::CONTROL).and_then(|found| {
-                if found == DEVICE_TYPE_VALUE {
+        let k = usize::from(self.read);
+        let step = match (self.identity, outcome) {
+            (_, Err(e)) => Err(e),
+            (2, Ok(found)) => device_type(found),
+            (0 | 1, Ok(_)) => Ok(()),
+            (_, Ok(value)) => match self.words.get_mut(k) {
+                Some(word) => {
+                    *word = value;
                     Ok(())
-                } else {
-                    Err(Error::WrongIdentity {
-                        expected: DEVICE_TYPE_VALUE.into(),
-                        found: found.into(),
-                    })
                 }
-            }),
-            _ => {
-                let k = usize::from(self.read);
-                let (Some(&command), Some(word)) = (STATUS_COMMANDS.get(k), self.words.get_mut(k))
-                else {
-                    return Some(Ok(self.status()));
-                };
-                gauge.read_u16(command).map(|value| *word = value)
-            }
+                None => return Some(Ok(self.status())),
+            },
         };
         if let Err(e) = step {
             return Some(Err(e));
@@ -408,4 +423,67 @@ impl StatusRead {
             state_of_charge: soc.min(100) as u8,
         }
     }
+}
+
+/// One packet to the gauge: each a transfer of its own, with [`BUS_FREE_NS`] of bus-free time
+/// after it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transfer {
+    /// A one-byte write to a command register (a Control() subcommand byte).
+    Write {
+        /// The command register.
+        command: u8,
+        /// The byte.
+        value: u8,
+    },
+    /// A standard command's 16-bit little-endian read ([`word`]).
+    Read(u8),
+}
+
+/// A Control() subcommand's transfers: its low byte to 0x00, its high byte to 0x01 (one-byte
+/// writes, as the datasheet asks above 100 kHz), the answer read from 0x00.
+pub const fn control_transfers(subcommand: u16) -> [Transfer; 3] {
+    let [low, high] = subcommand.to_le_bytes();
+    [
+        Transfer::Write {
+            command: cmd::CONTROL,
+            value: low,
+        },
+        Transfer::Write {
+            command: cmd::CONTROL + 1,
+            value: high,
+        },
+        Transfer::Read(cmd::CONTROL),
+    ]
+}
+
+/// Control(DEVICE_TYPE)'s answer: a bq27500's [`DEVICE_TYPE_VALUE`], or
+/// [`Error::WrongIdentity`].
+pub fn device_type<E>(found: u16) -> Result<(), Error<E>> {
+    if found == DEVICE_TYPE_VALUE {
+        Ok(())
+    } else {
+        Err(Error::WrongIdentity {
+            expected: DEVICE_TYPE_VALUE.into(),
+            found: found.into(),
+        })
+    }
+}
+
+/// A standard command's two bytes (little-endian) as its word.
+pub const fn word(bytes: [u8; 2]) -> u16 {
+    u16::from_le_bytes(bytes)
+}
+
+/// A transfer as a script operation (decoded by [`word`]); the script holds nothing else, for
+/// the gauge's bus-free time between packets.
+pub fn transfer_op(
+    script: &mut crate::script::Script,
+    transfer: Transfer,
+) -> Result<(), crate::script::BuildError> {
+    match transfer {
+        Transfer::Write { command, value } => script.write(ADDRESS, &[command, value])?,
+        Transfer::Read(command) => script.write_read(ADDRESS, &[command], 2)?,
+    };
+    Ok(())
 }

@@ -64,7 +64,7 @@ pub struct FloorSensors<I2C> {
     next_to_init: u8,
 }
 
-impl<I2C: I2c> FloorSensors<I2C> {
+impl<I2C> FloorSensors<I2C> {
     /// The group on `i2c` with the mux at 0x77 and the original firmware's VCNL4020 settings.
     pub const fn new(i2c: I2C) -> Self {
         Self::with_config(i2c, Config::AMIRO)
@@ -80,6 +80,33 @@ impl<I2C: I2c> FloorSensors<I2C> {
         }
     }
 
+    /// The VCNL4020 settings the set-up writes.
+    pub const fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The mux's address.
+    pub const fn mux_address(&self) -> u8 {
+        self.mux.address()
+    }
+
+    /// The sensor (protocol index) the next set-up step configures.
+    pub(crate) const fn next_to_set_up(&self) -> u8 {
+        self.next_to_init
+    }
+
+    /// Sets the sensor the next set-up step configures.
+    pub(crate) fn set_next_to_set_up(&mut self, sensor: u8) {
+        self.next_to_init = sensor;
+    }
+
+    /// Counts one sample; true every [`super::IDENTITY_CHECK_EVERY`] samples.
+    pub(crate) fn identity_check_due(&mut self) -> bool {
+        self.identity.due()
+    }
+}
+
+impl<I2C: I2c> FloorSensors<I2C> {
     /// Checks and configures all four sensors (channel 0 first).
     pub fn init(&mut self) -> Result<(), GroupError<I2C::Error>> {
         self.next_to_init = 0;
@@ -125,11 +152,6 @@ impl<I2C: I2c> FloorSensors<I2C> {
             self.with_sensor(sensor, |vcnl| vcnl.check_identity())?;
         }
         Ok(())
-    }
-
-    /// Counts one sample; true every [`super::IDENTITY_CHECK_EVERY`] samples.
-    pub(crate) fn identity_check_due(&mut self) -> bool {
-        self.identity.due()
     }
 
     /// The four proximity counts in protocol order (front-right, right-wheel, left-wheel,

@@ -135,7 +135,7 @@ pub struct Hmc5883l<I2C> {
     gain: Gain,
 }
 
-impl<I2C: I2c> Hmc5883l<I2C> {
+impl<I2C> Hmc5883l<I2C> {
     /// A driver at the AMiRo's gain (±4.7 Ga). Does no I/O; call [`init`](Self::init).
     pub const fn new(i2c: I2C) -> Self {
         Self::with_gain(i2c, Gain::Ga4_7)
@@ -150,28 +150,21 @@ impl<I2C: I2c> Hmc5883l<I2C> {
     pub const fn gain(&self) -> Gain {
         self.gain
     }
-
+}
+impl<I2C: I2c> Hmc5883l<I2C> {
     /// Checks the identification registers, writes CRA, CRB and MODE, and reads them back.
-    ///
     /// The datasheet notes the first measurement after a gain change still uses the old gain; in
     /// continuous mode that sample is gone long before the first publisher asks (33 ms at 30 Hz).
     pub fn init(&mut self) -> Result<(), Error<I2C::Error>> {
         self.check_identity()?;
-        let config = [CONFIG_A_AMIRO, self.gain.config_b(), MODE_CONTINUOUS];
+        let config = set_up_values(self.gain);
         for (register, value) in (reg::CONFIG_A..).zip(config) {
             self.i2c.write(ADDRESS, &[register, value])?;
         }
         let mut readback = [0u8; 3];
         self.i2c
             .write_read(ADDRESS, &[reg::CONFIG_A], &mut readback)?;
-        // CRA bit 7 must stay clear; CRB bits 4..0 and MODE bits 6..2 read back as zero.
-        let writable = [0x7F, 0xE0, 0x83];
-        for (((register, written), read), mask) in
-            (reg::CONFIG_A..).zip(config).zip(readback).zip(writable)
-        {
-            check_register(register, written, read, mask)?;
-        }
-        Ok(())
+        check_set_up(config, readback)
     }
 
     /// Reads the three identification registers and compares them with "H43".
@@ -179,14 +172,7 @@ impl<I2C: I2c> Hmc5883l<I2C> {
         let mut id = [0u8; 3];
         self.i2c
             .write_read(ADDRESS, &[reg::IDENTIFICATION_A], &mut id)?;
-        if id == IDENTITY {
-            Ok(())
-        } else {
-            Err(Error::WrongIdentity {
-                expected: pack3(IDENTITY),
-                found: pack3(id),
-            })
-        }
+        identity(id)
     }
 
     /// Reads the six data bytes in one transfer: raw X, Y, Z digits (reordered from X, Z, Y).
@@ -200,10 +186,7 @@ impl<I2C: I2c> Hmc5883l<I2C> {
         if super::is_bus_pattern(&out) {
             self.check_identity()?;
         }
-        let x = i16::from_be_bytes([out[0], out[1]]);
-        let z = i16::from_be_bytes([out[2], out[3]]);
-        let y = i16::from_be_bytes([out[4], out[5]]);
-        Ok([x, y, z])
+        Ok(raw_field(out))
     }
 
     /// Reads and converts one field sample.
@@ -230,4 +213,72 @@ impl<I2C: I2c> Hmc5883l<I2C> {
 
 fn pack3(bytes: [u8; 3]) -> u32 {
     u32::from_be_bytes([0, bytes[0], bytes[1], bytes[2]])
+}
+
+/// CRA, CRB and MODE as the set-up writes them at `gain` (the AMiRo's: 0x74, 0xA0, 0x00).
+pub const fn set_up_values(gain: Gain) -> [u8; 3] {
+    [CONFIG_A_AMIRO, gain.config_b(), MODE_CONTINUOUS]
+}
+
+/// The set-up's read-back of CRA, CRB and MODE checked against `config` on the bits the part
+/// lets a host write.
+#[inline(always)]
+pub fn check_set_up<E>(config: [u8; 3], readback: [u8; 3]) -> Result<(), Error<E>> {
+    // CRA bit 7 must stay clear; CRB bits 4..0 and MODE bits 6..2 read back as zero.
+    let writable = [0x7F, 0xE0, 0x83];
+    for (((register, written), read), mask) in
+        (reg::CONFIG_A..).zip(config).zip(readback).zip(writable)
+    {
+        check_register(register, written, read, mask)?;
+    }
+    Ok(())
+}
+
+/// The identification registers' three bytes: "H43", or [`Error::WrongIdentity`].
+pub fn identity<E>(id: [u8; 3]) -> Result<(), Error<E>> {
+    if id == IDENTITY {
+        Ok(())
+    } else {
+        Err(Error::WrongIdentity {
+            expected: pack3(IDENTITY),
+            found: pack3(id),
+        })
+    }
+}
+
+/// The six data registers (X, Z, Y, each MSB first) as raw X, Y, Z digits.
+pub const fn raw_field(out: [u8; 6]) -> [i16; 3] {
+    let x = i16::from_be_bytes([out[0], out[1]]);
+    let z = i16::from_be_bytes([out[2], out[3]]);
+    let y = i16::from_be_bytes([out[4], out[5]]);
+    [x, y, z]
+}
+
+/// The part's transactions as script operations (the same registers the blocking driver above
+/// reads and writes, decoded by the same functions).
+pub mod ops {
+    use super::{reg, set_up_values, Gain, ADDRESS};
+    use crate::script::{BuildError, Script};
+
+    /// The identification registers: write 0x0A, read 3 ([`super::identity`]).
+    pub fn identity(script: &mut Script) -> Result<(), BuildError> {
+        script.write_read(ADDRESS, &[reg::IDENTIFICATION_A], 3)?;
+        Ok(())
+    }
+
+    /// The six data registers: write 0x03, read 6 ([`super::raw_field`]).
+    pub fn data(script: &mut Script) -> Result<(), BuildError> {
+        script.write_read(ADDRESS, &[reg::DATA_X_MSB], 6)?;
+        Ok(())
+    }
+
+    /// The set-up's three register writes (one transfer each) and their read-back, read 3 from
+    /// CRA ([`super::check_set_up`]).
+    pub fn set_up(script: &mut Script, gain: Gain) -> Result<(), BuildError> {
+        for (register, value) in (reg::CONFIG_A..).zip(set_up_values(gain)) {
+            script.write(ADDRESS, &[register, value])?;
+        }
+        script.write_read(ADDRESS, &[reg::CONFIG_A], 3)?;
+        Ok(())
+    }
 }

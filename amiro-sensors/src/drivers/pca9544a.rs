@@ -94,7 +94,7 @@ pub struct Pca9544a<I2C> {
     address: u8,
 }
 
-impl<I2C: I2c> Pca9544a<I2C> {
+impl<I2C> Pca9544a<I2C> {
     /// A mux at [`AMIRO_ADDRESS`]. Does no I/O.
     pub const fn new(i2c: I2C) -> Self {
         Self::with_address(i2c, AMIRO_ADDRESS)
@@ -109,7 +109,9 @@ impl<I2C: I2c> Pca9544a<I2C> {
     pub const fn address(&self) -> u8 {
         self.address
     }
+}
 
+impl<I2C: I2c> Pca9544a<I2C> {
     /// Connects `channel` and returns a bus that reaches the devices behind it.
     pub fn select(&mut self, channel: Channel) -> Result<MuxedBus<'_, I2C>, Error<I2C::Error>> {
         self.i2c.write(self.address, &[channel.control_byte()])?;
@@ -191,4 +193,15 @@ impl<I2C: I2c> I2c for MuxedBus<'_, I2C> {
     ) -> Result<(), Self::Error> {
         self.mux.i2c.write_read(address, write, read)
     }
+}
+
+/// The mux's transaction as a script operation: the control byte that connects `channel`,
+/// written to the mux at `address` (its own transaction: the part connects at the STOP).
+pub fn select_op(
+    script: &mut crate::script::Script,
+    address: u8,
+    channel: Channel,
+) -> Result<(), crate::script::BuildError> {
+    script.write(address, &[channel.control_byte()])?;
+    Ok(())
 }

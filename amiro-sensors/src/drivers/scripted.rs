@@ -1,74 +1,45 @@
-//! The sensor groups' bus work as [`Script`]s, decoded by the same driver code that the blocking
-//! path runs (docs/i2c.md, "The sensor groups' scripts").
+//! The sensor groups' bus work as [`Script`]s: each group builds the next script of a job from
+//! its drivers' register maps (the `ops` of [`super::hmc5883l`], [`super::vcnl4020`],
+//! [`super::bno055`], [`super::pca9544a::select_op`]) and decodes what came back with the same
+//! decode functions the blocking drivers call (docs/i2c.md, "The sensor groups' scripts").
 //!
-//! A publisher that samples through the interrupt-driven bus engine cannot call a driver that
-//! polls the bus; but the drivers hold everything a sample is made of — the register maps, the
-//! byte layouts, the identity and read-back checks, the groups' fault policy ([`Supervised`]) —
-//! and a second copy of each for the split path would drift from the first. So the split path
-//! runs the *same* code on a [`ReplayBus`]: an embedded-hal `I2c` that records the transfers the
-//! code makes into a script instead of making them, and, once the script has run, serves the
-//! code the readings. [`step`] does a round, for a job whose log ([`Job`]) the caller keeps
-//! ([`begin_sample`] / [`finish_sample`] for a publisher's sample; [`Replayed`] for the host):
+//! A *job* is a sample of one topic, or a step of a group's set-up: one or more scripts, each
+//! built once the one before it is decoded (an identity that must match before a write, a dead
+//! bus's pattern that calls for an identity read, a mode switch the part needs time for). Where
+//! the job stands between its scripts is a small value of the group's ([`ScriptedSensors::Stage`])
+//! kept by the job's owner ([`Job`]), not by the group: two publishers whose samples of one group
+//! overlap each keep theirs, and each decodes into the group as the group is when its script
+//! ends.
 //!
-//! 1. **Record.** The work (a group's `sample`, a set-up step, a gauge transfer) runs on a copy
-//!    of the state. Transfers the log does not hold yet are appended to the script and answered
-//!    with a stand-in: the datasheet's identity or the mode the part is put in
-//!    ([`Expected`]), or the value the work wrote to that register earlier in the log (a
-//!    read-back), or `0x5A` bytes (not a dead bus's pattern). The copy and its result are
-//!    dropped: [`Next::Run`] hands the script to the bus.
-//! 2. **Replay.** With the script's result in the log ([`Job::complete`]) the work runs
-//!    again on a fresh copy, and the bus answers every logged transfer with what the devices
-//!    answered (or with the bus error of the transfer that failed). If the work needs nothing
-//!    more, the copy becomes the state and the work's result is the sample: [`Next::Done`].
-//!    If it needs more (a dead-bus pattern that calls for an identity check, a check that
-//!    passed and lets a set-up go on, a transfer after a failed one), those are recorded in
-//!    the next script.
+//! The groups' fault policy is [`Supervised`]'s, the same code on both paths: whether a sample
+//! is skipped, takes a set-up step first, or is read ([`Supervised::begin_scripted`]); a step's
+//! or a sample's end counted, backed off and retried ([`Supervised::resume_scripted`]). A script
+//! that fails (or comes back short) is a typed failure of the device its operation addressed,
+//! never a panic: the blocking path's `Error::Bus` with the embedded-hal kind a blocking bus
+//! reports for the same event ([`failure_kind`]).
 //!
-//! Rules that keep the replay equal to the blocking path:
-//! - A recording ends before a write that changes a device (not a mux select) once it holds a
-//!   read: a write goes to the bus only when every check before it ran on the devices' real
-//!   answers (an identity that does not match stops a set-up before it writes, as blocking).
-//!   Reads and mux selects may be recorded on a stand-in's guess; a guess that was wrong costs
-//!   the reads made after it and a further round, never a write the blocking path would not
-//!   make.
-//! - A script that goes on behind a PCA9544A starts with the channel select the work made last
-//!   (sent again, not served to the work), and never ends with a select: a select and the reads
-//!   behind it are in one script, with no other client's operation between.
-//! - A script that fails returns no readings (the engine's `Result<Readings, ScriptError>`):
-//!   the operations before the failed one are replayed with their stand-ins, the failed one with
-//!   its error (mapped to embedded-hal's [`ErrorKind`], as a blocking bus reports it), and the
-//!   ones after it were never made.
-//!
-//! - A part that needs time after a transfer (the BNO055's mode switch, the bq27500's bus-free
-//!   time) ends its script there, and the job asks for the wait before its next script
-//!   ([`Job::settle_us`]).
-//!
-//! A job's rounds are bounded: every round but the last adds at least one transfer, made on the
-//! bus, to the log's confirmed part, so a work of `n` transfers ends within `n + 1` rounds
-//! ([`MAX_ROUNDS`]) — when no other job on the same group ends in between (one that does can
-//! send the work another way; a job out of rounds ends [`Unfinished`]). A work must change
-//! nothing but its state (no log line, no report): a round may run it more than once.
+//! At boot, before the engine takes the block, a group is set up by the same scripts run
+//! operation by operation on the polled master ([`OnI2c`], [`Supervised::boot`]).
 
-use amiro_can::Topic;
+use amiro_can::{SensorData, Topic};
 use embedded_hal::delay::DelayNs;
-use embedded_hal::i2c::{self, ErrorKind, ErrorType, I2c, NoAcknowledgeSource, Operation};
+use embedded_hal::i2c::{self, ErrorKind, I2c, NoAcknowledgeSource};
 
-use super::bno055::{self, Bno055};
-use super::bq27500;
-use super::floor::FloorSensors;
-use super::hmc5883l::{self, Hmc5883l};
-use super::pca9544a::{self, Pca9544a};
-use super::suite::{Compass, ImuSensors, Samples, SensorGroup, Supervised};
-use super::vcnl4020;
-use crate::script::{
-    Failure, Readings, Script, ScriptError, MAX_OPERATIONS, MAX_READ_BYTES, MAX_WRITE_BYTES,
+use super::floor::{FloorSensor, FloorSensors, GroupError};
+use super::hmc5883l::{self, MagneticField};
+use super::pca9544a::{self, Channel};
+use super::suite::{
+    floor_error, i2c_error, imu_frame, magnetometer_axis, one, Compass, Device, Gate, ImuRead,
+    ImuReinit, ImuSensors, InitStep, SampleError, Samples, Supervised, DIWHEELDRIVE_TOPICS,
 };
+use super::{bno055, bq27500, is_bus_pattern, vcnl4020, Error};
+use crate::script::{BuildError, Failure, Readings, Script, ScriptError, MAX_READ_BYTES};
 
 /// What a script came back with.
 pub type ScriptResult = Result<Readings, ScriptError>;
 
 /// A bus that runs a script to its end at once: the simulated buses
-/// ([`crate::sim::SimBus::answer`]), or a client that awaits the engine.
+/// ([`crate::sim::SimBus::answer`]), the polled master at boot ([`OnI2c`]).
 pub trait ScriptBus {
     /// Runs `script`: its readings, or the failed operation's error.
     fn run(&mut self, script: &Script) -> ScriptResult;
@@ -122,71 +93,6 @@ pub const fn kind_failure(kind: ErrorKind) -> Failure {
     }
 }
 
-/// Most bytes one transfer of an AMiRo driver writes: the BNO055's configuration burst (the
-/// register and four values).
-pub const MAX_TRANSFER_WRITE: usize = 5;
-/// Transfers a job's log holds: the floor group's boot set-up, four VCNL4020s each with its
-/// select and PRODUCT_ID, then five registers written and read back behind a select sent again
-/// (4 × 17 = 68).
-pub const MAX_LOGGED: usize = 72;
-/// Bytes the logged transfers read.
-pub const MAX_LOGGED_READ: usize = 48;
-/// Rounds of one job at most ([`Replayed::run`]): every round but the last confirms a transfer.
-pub const MAX_ROUNDS: usize = MAX_LOGGED + 1;
-/// The stand-in byte for a read nothing predicts: neither `0x00` nor `0xFF`, so a stand-in never
-/// looks like a dead bus's pattern and calls for no identity check of its own.
-pub const STAND_IN: u8 = 0x5A;
-
-/// What a register read is expected to return, the stand-in while its script has not run: an
-/// identity register, or a mode the driver put the part in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Expected {
-    /// The device's address.
-    pub address: u8,
-    /// The register the read starts at (the transfer's one written byte).
-    pub register: u8,
-    /// The bytes from there on.
-    pub bytes: &'static [u8],
-}
-
-/// A write after which the part needs time before the next transfer (the BNO055's operating
-/// mode switch): the recording ends with it, and the next script waits `us` first
-/// ([`Job::settle_us`]). A paced device's transfer (the bq27500) asks for its bus-free time the
-/// same way.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Settle {
-    /// The device's address.
-    pub address: u8,
-    /// The register written.
-    pub register: u8,
-    /// The value written.
-    pub value: u8,
-    /// The wait before the part takes the next transfer, µs.
-    pub us: u32,
-}
-
-/// Why a replayed transfer did not complete.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ReplayError {
-    /// The transfer ran on the bus and failed.
-    Bus(Failure),
-    /// The transfer is recorded for the next script; the work's result is not used.
-    Deferred,
-    /// A transfer no script can carry (a write then a write after a read, more than
-    /// [`MAX_TRANSFER_WRITE`] bytes, or nothing at all), or a job larger than the log: a
-    /// driver's shape that a host test of it finds.
-    Unsupported,
-}
-
-impl i2c::Error for ReplayError {
-    fn kind(&self) -> ErrorKind {
-        match self {
-            ReplayError::Bus(failure) => failure_kind(*failure),
-            ReplayError::Deferred | ReplayError::Unsupported => ErrorKind::Other,
-        }
-    }
-}
-
 /// The embedded-hal error kind of an engine failure, as a blocking bus reports the same event.
 pub const fn failure_kind(failure: Failure) -> ErrorKind {
     match failure {
@@ -199,822 +105,1234 @@ pub const fn failure_kind(failure: Failure) -> ErrorKind {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Outcome {
-    /// In the script handed to the bus, not back yet.
-    Pending,
-    /// Back with its readings.
-    Read,
-    /// Made on the bus before a failed operation of its script: its readings are lost, the
-    /// replay serves its stand-in.
-    Unknown,
-    /// The failed operation.
-    Failed(Failure),
+/// What a script that did not end within its client's timeout stands for (the block was reset):
+/// its first operation failed, with the kind a polled master's timeout has
+/// ([`ErrorKind::Other`]).
+pub const fn timed_out() -> ScriptResult {
+    Err(ScriptError {
+        operation: 0,
+        failure: Failure::UnexpectedEvent,
+    })
+}
+
+/// The bus of a group whose transfers are scripts: the group holds no bus, the job's owner runs
+/// its scripts (`Compass<Scripts>`, `FloorSensors<Scripts>`, `ImuSensors<Scripts, D>`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Scripts;
+
+/// What a job needs next.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Next<T> {
+    /// Run `script`, `settle_us` after the previous script at the earliest, and hand its result
+    /// back.
+    Run {
+        /// The job's next bus work.
+        script: Script,
+        /// A part's settling time before it (µs; 0 mostly).
+        settle_us: u32,
+    },
+    /// The job is done: its result.
+    Done(T),
+}
+
+/// A sensor group whose jobs are scripts it builds and decodes itself.
+pub trait ScriptedSensors {
+    /// Where a job stands between two of its scripts (kept by the job's owner).
+    type Stage: Copy + Default + core::fmt::Debug;
+    /// Scripts one sample takes at most, a set-up step before it included.
+    const MAX_SCRIPTS: usize;
+    /// Steps of a whole set-up ([`Supervised::boot`]).
+    const SET_UP_STEPS: usize;
+
+    /// The topics the group serves.
+    fn topics(&self) -> &'static [Topic];
+
+    /// A whole set-up begins (the boot's): the step counters start again.
+    fn begin_set_up(&mut self);
+
+    /// One step of the set-up at `now_us` begun (as `SensorGroup::init_step`).
+    fn begin_set_up_step(&mut self, stage: &mut Self::Stage, now_us: u64) -> Next<InitStep>;
+
+    /// The step's last script's `result` in: the next script, or the step's end.
+    fn resume_set_up_step(
+        &mut self,
+        stage: &mut Self::Stage,
+        now_us: u64,
+        result: &ScriptResult,
+    ) -> Next<InitStep>;
+
+    /// A sample of `topic` at `now_us` begun (as `SensorGroup::sample`).
+    fn begin_sample(
+        &mut self,
+        stage: &mut Self::Stage,
+        topic: Topic,
+        now_us: u64,
+    ) -> Next<Result<Samples, SampleError>>;
+
+    /// The sample's last script's `result` in: the next script, or the sample.
+    fn resume_sample(
+        &mut self,
+        stage: &mut Self::Stage,
+        topic: Topic,
+        now_us: u64,
+        result: &ScriptResult,
+    ) -> Next<Result<Samples, SampleError>>;
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Entry {
-    address: u8,
-    written: [u8; MAX_TRANSFER_WRITE],
-    write: u8,
-    read: u8,
-    /// Where its readings are in the log's bytes.
-    read_at: u8,
-    outcome: Outcome,
-    /// A mux select sent again at a script's start: on the bus, not one of the work's transfers.
-    inserted: bool,
+enum Phase {
+    Idle,
+    SetUpStep,
+    Sample,
 }
 
-impl Entry {
-    fn written(&self) -> &[u8] {
-        self.written.get(..usize::from(self.write)).unwrap_or(&[])
-    }
-
-    fn is_select(&self, mux: Option<u8>) -> bool {
-        Some(self.address) == mux && self.write == 1 && self.read == 0
-    }
-}
-
-const EMPTY_ENTRY: Entry = Entry {
-    address: 0,
-    written: [0; MAX_TRANSFER_WRITE],
-    write: 0,
-    read: 0,
-    read_at: 0,
-    outcome: Outcome::Pending,
-    inserted: false,
-};
-
+/// One publisher's sample of a supervised group while its scripts run: kept by the publisher,
+/// a few bytes ([`ScriptedSensors::Stage`] and the phase).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Recording {
-    /// Every transfer so far was in the log.
-    Off,
-    /// Recording from the entry at `start`; `has_read` once a recorded transfer reads.
-    On { start: u8, has_read: bool },
-    /// The script is full (or a device-changing write waits for real data): every further
-    /// transfer of this round is deferred.
-    Closed { start: u8 },
+pub struct Job<S> {
+    phase: Phase,
+    stage: S,
 }
 
-/// The log of one job (a sample, a set-up step, a gauge transfer) while its scripts run: the
-/// transfers recorded so far and what the bus answered. It belongs to the job, not to the
-/// group, so two publishers whose jobs on one group overlap each keep their own; the group's
-/// state changes only when a job ends ([`step`]).
-#[derive(Debug, Clone)]
-pub struct Job {
-    entries: [Entry; MAX_LOGGED],
-    len: u8,
-    bytes: [u8; MAX_LOGGED_READ],
-    bytes_len: u8,
-    /// The settling time of the last script recorded ([`Settle`]).
-    recorded_settle_us: u32,
-    /// The wait the last completed script asks for before the next.
-    settle_us: u32,
-}
-
-impl Default for Job {
+impl<S: Default> Default for Job<S> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl Job {
+impl<S: Default> Job<S> {
     /// A job not begun.
-    pub const fn new() -> Self {
+    pub fn new() -> Self {
         Self {
-            entries: [EMPTY_ENTRY; MAX_LOGGED],
-            len: 0,
-            bytes: [0; MAX_LOGGED_READ],
-            bytes_len: 0,
-            recorded_settle_us: 0,
-            settle_us: 0,
+            phase: Phase::Idle,
+            stage: S::default(),
+        }
+    }
+}
+
+impl<S> Job<S> {
+    /// Whether a script of the job is out (its result not handed back yet).
+    pub const fn under_way(&self) -> bool {
+        !matches!(self.phase, Phase::Idle)
+    }
+}
+
+fn carry<T, U>(next: Next<T>, done: impl FnOnce(T) -> Next<U>) -> Next<U> {
+    match next {
+        Next::Run { script, settle_us } => Next::Run { script, settle_us },
+        Next::Done(value) => done(value),
+    }
+}
+
+impl<G: ScriptedSensors> Supervised<G> {
+    /// A publisher's sample of `topic` at `now_us` begun in `job` (which the publisher keeps
+    /// until the sample is done): the first script, or the frames at once (a reading reused, a
+    /// group in its back-off).
+    pub fn begin_scripted(
+        &mut self,
+        job: &mut Job<G::Stage>,
+        topic: Topic,
+        now_us: u64,
+    ) -> Next<Samples> {
+        *job = Job::new();
+        match self.gate(self.group().topics().contains(&topic), now_us) {
+            Gate::Skip => Next::Done(Samples::new()),
+            Gate::SetUpStep => {
+                job.phase = Phase::SetUpStep;
+                let next = self.group_mut().begin_set_up_step(&mut job.stage, now_us);
+                self.after_step(job, topic, now_us, next)
+            }
+            Gate::Sample => self.start_sample(job, topic, now_us),
         }
     }
 
-    /// Transfers in the log.
-    pub const fn logged(&self) -> usize {
-        self.len as usize
+    /// The same sample with its last script's `result`: the next script, or the frames (none
+    /// when a device failed: counted as on the blocking path). A job not under way has none.
+    pub fn resume_scripted(
+        &mut self,
+        job: &mut Job<G::Stage>,
+        topic: Topic,
+        now_us: u64,
+        result: &ScriptResult,
+    ) -> Next<Samples> {
+        match job.phase {
+            Phase::Idle => Next::Done(Samples::new()),
+            Phase::SetUpStep => {
+                let next = self
+                    .group_mut()
+                    .resume_set_up_step(&mut job.stage, now_us, result);
+                self.after_step(job, topic, now_us, next)
+            }
+            Phase::Sample => {
+                let next = self
+                    .group_mut()
+                    .resume_sample(&mut job.stage, topic, now_us, result);
+                self.after_sample(job, now_us, next)
+            }
+        }
     }
 
-    /// How long to wait before the script [`step`] asked for: a part's settling time after the
-    /// previous script's last write ([`Settle`]), 0 mostly.
-    pub const fn settle_us(&self) -> u32 {
-        self.settle_us
+    fn after_step(
+        &mut self,
+        job: &mut Job<G::Stage>,
+        topic: Topic,
+        now_us: u64,
+        next: Next<InitStep>,
+    ) -> Next<Samples> {
+        carry(next, |step| {
+            if self.stepped(step, now_us) {
+                self.start_sample(job, topic, now_us)
+            } else {
+                job.phase = Phase::Idle;
+                Next::Done(Samples::new())
+            }
+        })
     }
 
-    fn entries(&self) -> &[Entry] {
-        self.entries.get(..usize::from(self.len)).unwrap_or(&[])
+    fn start_sample(
+        &mut self,
+        job: &mut Job<G::Stage>,
+        topic: Topic,
+        now_us: u64,
+    ) -> Next<Samples> {
+        job.phase = Phase::Sample;
+        job.stage = G::Stage::default();
+        let next = self.group_mut().begin_sample(&mut job.stage, topic, now_us);
+        self.after_sample(job, now_us, next)
     }
 
-    /// Stores the result of the script [`step`] asked for in its entries (the pending ones).
-    pub fn complete(&mut self, result: &ScriptResult) {
-        let first = self
-            .entries()
-            .iter()
-            .position(|e| e.outcome == Outcome::Pending)
-            .unwrap_or(usize::from(self.len));
-        let mut keep = usize::from(self.len);
-        self.settle_us = if result.is_ok() {
-            self.recorded_settle_us
-        } else {
-            0
-        };
-        self.recorded_settle_us = 0;
-        for (k, entry) in self.entries.iter_mut().enumerate().take(keep).skip(first) {
-            let op = k - first;
-            match result {
-                Ok(readings) => {
-                    let start = usize::from(entry.read_at);
-                    let end = start + usize::from(entry.read);
-                    if let Some(slot) = self.bytes.get_mut(start..end) {
-                        let got = readings.of(op);
-                        if got.len() == slot.len() {
-                            slot.copy_from_slice(got);
-                        }
+    fn after_sample(
+        &mut self,
+        job: &mut Job<G::Stage>,
+        now_us: u64,
+        next: Next<Result<Samples, SampleError>>,
+    ) -> Next<Samples> {
+        carry(next, |result| {
+            job.phase = Phase::Idle;
+            Next::Done(self.sampled(result, now_us))
+        })
+    }
+
+    /// The group's boot set-up (as `Supervised::new`'s) as scripts on `bus`: each step's scripts
+    /// in turn, a part's settling time and the wait between two steps (the BNO055's mode
+    /// switches) on `delay`. A step still asking for a script after [`ScriptedSensors::MAX_SCRIPTS`]
+    /// is handed a timeout (a failure); a set-up still pending after
+    /// [`ScriptedSensors::SET_UP_STEPS`] goes on stepwise at the first samples.
+    pub fn boot(mut group: G, bus: &mut impl ScriptBus, delay: &mut impl DelayNs) -> Self {
+        group.begin_set_up();
+        let mut now_us = 0;
+        for _ in 0..G::SET_UP_STEPS {
+            let mut stage = G::Stage::default();
+            let mut next = group.begin_set_up_step(&mut stage, now_us);
+            let mut scripts = 0;
+            let step = loop {
+                match next {
+                    Next::Done(step) => break step,
+                    Next::Run { script, settle_us } => {
+                        let result = if scripts < G::MAX_SCRIPTS {
+                            delay.delay_us(settle_us);
+                            bus.run(&script)
+                        } else {
+                            timed_out()
+                        };
+                        scripts += 1;
+                        next = group.resume_set_up_step(&mut stage, now_us, &result);
                     }
-                    entry.outcome = Outcome::Read;
                 }
-                Err(error) if op < usize::from(error.operation) => entry.outcome = Outcome::Unknown,
-                Err(error) if op == usize::from(error.operation) => {
-                    entry.outcome = Outcome::Failed(error.failure)
-                }
-                Err(_) => {
-                    keep = keep.min(k);
+            };
+            match step {
+                InitStep::Done => return Self::set_up(group, Ok(())),
+                InitStep::Failed(error) => return Self::set_up(group, Err(error)),
+                InitStep::Pending { next_us } => {
+                    delay.delay_us(
+                        u32::try_from(next_us.saturating_sub(now_us)).unwrap_or(u32::MAX),
+                    );
+                    now_us = next_us;
                 }
             }
         }
-        self.truncate(keep);
+        Self::set_up_pending(group, now_us)
     }
+}
 
-    /// The script [`step`] asked for did not end within its client's timeout (the block was
-    /// reset): its first operation fails, with the kind a polled master's timeout has
-    /// ([`ErrorKind::Other`]).
-    pub fn timed_out(&mut self) {
-        self.complete(&Err(ScriptError {
-            operation: 0,
-            failure: Failure::UnexpectedEvent,
-        }));
-    }
-
-    fn truncate(&mut self, len: usize) {
-        if len < usize::from(self.len) {
-            if let Some(entry) = self.entries.get(len) {
-                self.bytes_len = entry.read_at;
+/// A sample of `topic` at `now_us` run to its end on a bus that answers at once (the
+/// simulators, the host tests): no settling waits. At most [`ScriptedSensors::MAX_SCRIPTS`]
+/// scripts; a sample that asks for more publishes nothing (as `amiro_firmware`'s
+/// `sample_on_bus`).
+pub fn sample_on<G: ScriptedSensors>(
+    group: &mut Supervised<G>,
+    bus: &mut impl ScriptBus,
+    topic: Topic,
+    now_us: u64,
+) -> Samples {
+    let mut job = Job::new();
+    let mut next = group.begin_scripted(&mut job, topic, now_us);
+    for _ in 0..G::MAX_SCRIPTS {
+        match next {
+            Next::Done(samples) => return samples,
+            Next::Run { script, .. } => {
+                let result = bus.run(&script);
+                next = group.resume_scripted(&mut job, topic, now_us, &result);
             }
-            self.len = len as u8;
+        }
+    }
+    match next {
+        Next::Done(samples) => samples,
+        Next::Run { .. } => Samples::new(),
+    }
+}
+
+/// A script built by `ops`; a shape past a script's capacity (a driver's constant that a host
+/// test finds) is the bus fault a blocking bus reports for a transfer it cannot make.
+fn build(
+    ops: impl FnOnce(&mut Script) -> Result<(), BuildError>,
+) -> Result<Script, Error<ErrorKind>> {
+    let mut script = Script::new();
+    ops(&mut script).map_err(|_| Error::Bus(ErrorKind::Other))?;
+    Ok(script)
+}
+
+/// The bytes operation `op` read, as a register block of `N` (a short one is a bus fault).
+fn block<const N: usize>(readings: &Readings, op: usize) -> Result<[u8; N], Error<ErrorKind>> {
+    readings
+        .of(op)
+        .try_into()
+        .map_err(|_| Error::Bus(ErrorKind::Other))
+}
+
+/// A failed script's error as the blocking driver's.
+fn bus_error(error: &ScriptError) -> Error<ErrorKind> {
+    Error::Bus(failure_kind(error.failure))
+}
+
+/// The readings, or the failed script's error.
+fn readings(result: &ScriptResult) -> Result<&Readings, Error<ErrorKind>> {
+    result.as_ref().map_err(bus_error)
+}
+
+/// The next script of a job at `stage`, or the failure `fail` makes of a build error.
+fn run_or<S, T>(
+    stage: &mut S,
+    at: S,
+    script: Result<Script, Error<ErrorKind>>,
+    settle_us: u32,
+    fail: impl FnOnce(Error<ErrorKind>) -> T,
+) -> Next<T> {
+    match script {
+        Ok(script) => {
+            *stage = at;
+            Next::Run { script, settle_us }
+        }
+        Err(error) => Next::Done(fail(error)),
+    }
+}
+
+// DiWheelDrive 1-1's HMC5883L on I2C1.
+
+/// Where a [`Compass`] job stands.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum CompassStage {
+    /// Not begun.
+    #[default]
+    Begun,
+    /// The set-up's identity read is out.
+    SetUpIdentity,
+    /// The set-up's writes and their read-back are out.
+    SetUpWrites,
+    /// The sample's data read is out, after the identity read when `checked`.
+    Data {
+        /// The periodic identity check is the script's first operation.
+        checked: bool,
+    },
+    /// The data read six bytes of a dead bus's pattern (`raw`): the identity read is out.
+    PatternIdentity {
+        /// The data as read.
+        raw: [i16; 3],
+    },
+}
+
+impl Compass<Scripts> {
+    /// The HMC5883L at the AMiRo's gain, its transfers made as scripts. Does no I/O.
+    pub const fn scripted() -> Self {
+        Self::new(Scripts)
+    }
+
+    fn finish(
+        &mut self,
+        axis: super::Axis,
+        raw: Result<[i16; 3], Error<ErrorKind>>,
+        now_us: u64,
+    ) -> Result<Samples, SampleError> {
+        let gain = self.magnetometer().gain();
+        let read = raw.and_then(|raw| MagneticField::from_raw(raw, gain));
+        let field = self.keep(read.map_err(i2c_error(Device::Magnetometer)), now_us)?;
+        Ok(self.deliver(axis, field))
+    }
+}
+
+fn compass_step_failed(error: Error<ErrorKind>) -> InitStep {
+    InitStep::Failed(i2c_error(Device::Magnetometer)(error))
+}
+
+impl ScriptedSensors for Compass<Scripts> {
+    type Stage = CompassStage;
+    /// A set-up step (the identity, the writes) and a sample whose data is a dead bus's pattern
+    /// (the data, the identity).
+    const MAX_SCRIPTS: usize = 4;
+    const SET_UP_STEPS: usize = 1;
+
+    fn topics(&self) -> &'static [Topic] {
+        DIWHEELDRIVE_TOPICS.get(2..5).unwrap_or(&[])
+    }
+
+    fn begin_set_up(&mut self) {}
+
+    fn begin_set_up_step(&mut self, stage: &mut CompassStage, _now_us: u64) -> Next<InitStep> {
+        self.forget();
+        let script = build(hmc5883l::ops::identity);
+        run_or(
+            stage,
+            CompassStage::SetUpIdentity,
+            script,
+            0,
+            compass_step_failed,
+        )
+    }
+
+    fn resume_set_up_step(
+        &mut self,
+        stage: &mut CompassStage,
+        _now_us: u64,
+        result: &ScriptResult,
+    ) -> Next<InitStep> {
+        let gain = self.magnetometer().gain();
+        let checked = readings(result).and_then(|r| match *stage {
+            CompassStage::SetUpIdentity => block(r, 0).and_then(hmc5883l::identity),
+            _ => block(r, 3).and_then(|readback| {
+                hmc5883l::check_set_up(hmc5883l::set_up_values(gain), readback)
+            }),
+        });
+        match (checked, *stage) {
+            (Err(error), _) => Next::Done(compass_step_failed(error)),
+            (Ok(()), CompassStage::SetUpIdentity) => {
+                let script = build(|s| hmc5883l::ops::set_up(s, gain));
+                run_or(
+                    stage,
+                    CompassStage::SetUpWrites,
+                    script,
+                    0,
+                    compass_step_failed,
+                )
+            }
+            (Ok(()), _) => Next::Done(InitStep::Done),
+        }
+    }
+
+    fn begin_sample(
+        &mut self,
+        stage: &mut CompassStage,
+        topic: Topic,
+        now_us: u64,
+    ) -> Next<Result<Samples, SampleError>> {
+        let axis = match magnetometer_axis(topic) {
+            Ok(axis) => axis,
+            Err(error) => return Next::Done(Err(error)),
+        };
+        if let Some(field) = self.reusable(axis, now_us) {
+            return Next::Done(Ok(self.deliver(axis, field)));
+        }
+        let checked = self.identity_due();
+        let script = build(|s| {
+            if checked {
+                hmc5883l::ops::identity(s)?;
+            }
+            hmc5883l::ops::data(s)
+        });
+        match script {
+            Ok(script) => {
+                *stage = CompassStage::Data { checked };
+                Next::Run {
+                    script,
+                    settle_us: 0,
+                }
+            }
+            Err(error) => Next::Done(self.finish(axis, Err(error), now_us)),
+        }
+    }
+
+    fn resume_sample(
+        &mut self,
+        stage: &mut CompassStage,
+        topic: Topic,
+        now_us: u64,
+        result: &ScriptResult,
+    ) -> Next<Result<Samples, SampleError>> {
+        let axis = match magnetometer_axis(topic) {
+            Ok(axis) => axis,
+            Err(error) => return Next::Done(Err(error)),
+        };
+        let raw = readings(result).and_then(|r| match *stage {
+            CompassStage::Data { checked } => {
+                if checked {
+                    block(r, 0).and_then(hmc5883l::identity)?;
+                }
+                block(r, usize::from(checked)).map(Ok)
+            }
+            CompassStage::PatternIdentity { raw } => {
+                block(r, 0).and_then(hmc5883l::identity).map(|()| Err(raw))
+            }
+            _ => Err(Error::Bus(ErrorKind::Other)),
+        });
+        // `Ok(Ok(bytes))`: data to decode; `Ok(Err(raw))`: a pattern's data, its identity good.
+        let raw = match raw {
+            Ok(Ok(bytes)) if is_bus_pattern(&bytes) => {
+                let pattern = CompassStage::PatternIdentity {
+                    raw: hmc5883l::raw_field(bytes),
+                };
+                match build(hmc5883l::ops::identity) {
+                    Ok(script) => {
+                        *stage = pattern;
+                        return Next::Run {
+                            script,
+                            settle_us: 0,
+                        };
+                    }
+                    Err(error) => Err(error),
+                }
+            }
+            Ok(Ok(bytes)) => Ok(hmc5883l::raw_field(bytes)),
+            Ok(Err(raw)) => Ok(raw),
+            Err(error) => Err(error),
+        };
+        Next::Done(self.finish(axis, raw, now_us))
+    }
+}
+
+// DiWheelDrive's floor on I2C2: the PCA9544A and four VCNL4020s.
+
+/// Sensors of the floor (and the ring's buses): a select and one transfer each per script.
+const FLOOR_SENSORS: usize = FloorSensor::ALL.len();
+
+/// Where a [`FloorSensors`] job stands.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum FloorStage {
+    /// Not begun.
+    #[default]
+    Begun,
+    /// A set-up step of `sensor` is under way.
+    SetUp {
+        /// The sensor (protocol index).
+        sensor: u8,
+        /// Its set-up.
+        set_up: SensorSetUp,
+    },
+    /// The periodic identity check of the four sensors is out.
+    Identities,
+    /// The round's reads from sensor `next` on are out, after the identity read of
+    /// `checked` (the sensor before, whose reading was a dead bus's pattern).
+    Round {
+        /// The sensor whose identity the script reads first.
+        checked: Option<u8>,
+        /// The first sensor whose proximity the script reads.
+        next: u8,
+        /// The counts read so far.
+        counts: [u16; FLOOR_SENSORS],
+    },
+}
+
+impl FloorStage {
+    /// The sensor operation `op` of the stage's script addresses (each sensor's operations
+    /// follow its select).
+    fn sensor_of(self, op: u8) -> u8 {
+        let pair = op / 2;
+        match self {
+            FloorStage::SetUp { sensor, .. } => sensor,
+            FloorStage::Round {
+                checked: Some(k),
+                next,
+                ..
+            } => match pair {
+                0 => k,
+                p => next.saturating_add(p - 1),
+            },
+            FloorStage::Round {
+                checked: None,
+                next,
+                ..
+            } => next.saturating_add(pair),
+            FloorStage::Identities | FloorStage::Begun => pair,
         }
     }
 }
 
-/// An embedded-hal `I2c` whose transfers are recorded into scripts and served from their
-/// results ([`Replayed`]). One per bus; it carries the log of the job under way.
-#[derive(Debug, Clone)]
-pub struct ReplayBus {
-    /// The PCA9544A on this bus, if there is one (its selects are sent again at a script's
-    /// start).
-    mux: Option<u8>,
-    /// A device beside the mux that needs bus-free time between packets (the bq27500): each of
-    /// its transfers is a script of its own.
-    paced: Option<u8>,
-    expected: &'static [Expected],
-    settles: &'static [Settle],
-    /// The job's log while a round runs (empty between rounds).
-    log: Job,
-    // The round under way.
-    cursor: u8,
-    recording: Recording,
-    /// The control byte of the work's last mux select in this round.
-    selected: Option<u8>,
-    unsupported: bool,
+impl FloorSensors<Scripts> {
+    /// The mux at 0x77 and four VCNL4020s at the original firmware's settings, their transfers
+    /// made as scripts. Does no I/O.
+    pub const fn scripted() -> Self {
+        Self::new(Scripts)
+    }
+
+    fn select(&self, script: &mut Script, sensor: FloorSensor) -> Result<(), BuildError> {
+        pca9544a::select_op(script, self.mux_address(), sensor.channel())
+    }
+
+    fn set_up_of(&self, sensor: u8) -> Option<SensorSetUp> {
+        let part = FloorSensor::ALL.get(usize::from(sensor))?;
+        Some(SensorSetUp::new(
+            self.mux_address(),
+            part.channel(),
+            *self.config(),
+        ))
+    }
+
+    /// The round's script: `checked`'s identity, then the proximity of every sensor from
+    /// `next` on, each behind its select.
+    fn round_script(&self, checked: Option<u8>, next: u8) -> Result<Script, Error<ErrorKind>> {
+        build(|s| {
+            if let Some(&k) = checked.and_then(|k| FloorSensor::ALL.get(usize::from(k))) {
+                self.select(s, k)?;
+                vcnl4020::ops::identity(s)?;
+            }
+            for &sensor in FloorSensor::ALL.get(usize::from(next)..).unwrap_or(&[]) {
+                self.select(s, sensor)?;
+                vcnl4020::ops::result(s, vcnl4020::reg::PROXIMITY_RESULT)?;
+            }
+            Ok(())
+        })
+    }
+
+    fn step_failed(&mut self, sensor: u8, error: Error<ErrorKind>) -> InitStep {
+        self.set_next_to_set_up(0);
+        InitStep::Failed(floor_error(GroupError { sensor, error }))
+    }
 }
 
-impl ReplayBus {
-    /// A bus with `mux` (a PCA9544A's address) or none, and the reads whose answers the
-    /// datasheets fix.
-    pub const fn new(mux: Option<u8>, expected: &'static [Expected]) -> Self {
+fn floor_failed(sensor: u8, error: Error<ErrorKind>) -> Result<Samples, SampleError> {
+    Err(floor_error(GroupError { sensor, error }))
+}
+
+impl ScriptedSensors for FloorSensors<Scripts> {
+    type Stage = FloorStage;
+    /// The last sensor's set-up step (its identity and five writes), then a round with the
+    /// identity check and a dead bus's pattern at every sensor.
+    const MAX_SCRIPTS: usize = 6 + 2 + FLOOR_SENSORS;
+    const SET_UP_STEPS: usize = FLOOR_SENSORS;
+
+    fn topics(&self) -> &'static [Topic] {
+        DIWHEELDRIVE_TOPICS.get(5..).unwrap_or(&[])
+    }
+
+    fn begin_set_up(&mut self) {
+        self.set_next_to_set_up(0);
+    }
+
+    fn begin_set_up_step(&mut self, stage: &mut FloorStage, now_us: u64) -> Next<InitStep> {
+        let sensor = self.next_to_set_up();
+        let Some(set_up) = self.set_up_of(sensor) else {
+            // Out of range only if the field were corrupted: start again.
+            self.set_next_to_set_up(0);
+            return Next::Done(InitStep::Pending { next_us: now_us });
+        };
+        match set_up.script() {
+            Ok(script) => {
+                *stage = FloorStage::SetUp { sensor, set_up };
+                Next::Run {
+                    script,
+                    settle_us: 0,
+                }
+            }
+            Err(error) => Next::Done(self.step_failed(sensor, error)),
+        }
+    }
+
+    fn resume_set_up_step(
+        &mut self,
+        stage: &mut FloorStage,
+        now_us: u64,
+        result: &ScriptResult,
+    ) -> Next<InitStep> {
+        let FloorStage::SetUp { sensor, mut set_up } = *stage else {
+            return Next::Done(self.step_failed(0, Error::Bus(ErrorKind::Other)));
+        };
+        match set_up.complete(result) {
+            Some(Err(error)) => Next::Done(self.step_failed(sensor, error)),
+            None => match set_up.script() {
+                Ok(script) => {
+                    *stage = FloorStage::SetUp { sensor, set_up };
+                    Next::Run {
+                        script,
+                        settle_us: 0,
+                    }
+                }
+                Err(error) => Next::Done(self.step_failed(sensor, error)),
+            },
+            Some(Ok(())) if usize::from(sensor) + 1 >= FLOOR_SENSORS => {
+                self.set_next_to_set_up(0);
+                Next::Done(InitStep::Done)
+            }
+            Some(Ok(())) => {
+                self.set_next_to_set_up(sensor + 1);
+                Next::Done(InitStep::Pending { next_us: now_us })
+            }
+        }
+    }
+
+    fn begin_sample(
+        &mut self,
+        stage: &mut FloorStage,
+        topic: Topic,
+        _now_us: u64,
+    ) -> Next<Result<Samples, SampleError>> {
+        if topic != Topic::FloorProximity {
+            return Next::Done(Err(SampleError::NotServed(topic)));
+        }
+        let (at, script) = if self.identity_check_due() {
+            let script = build(|s| {
+                for sensor in FloorSensor::ALL {
+                    self.select(s, sensor)?;
+                    vcnl4020::ops::identity(s)?;
+                }
+                Ok(())
+            });
+            (FloorStage::Identities, script)
+        } else {
+            let round = FloorStage::Round {
+                checked: None,
+                next: 0,
+                counts: [0; FLOOR_SENSORS],
+            };
+            (round, self.round_script(None, 0))
+        };
+        run_or(stage, at, script, 0, |error| floor_failed(0, error))
+    }
+
+    fn resume_sample(
+        &mut self,
+        stage: &mut FloorStage,
+        _topic: Topic,
+        _now_us: u64,
+        result: &ScriptResult,
+    ) -> Next<Result<Samples, SampleError>> {
+        let r = match result {
+            Ok(r) => r,
+            Err(error) => {
+                return Next::Done(floor_failed(
+                    stage.sensor_of(error.operation),
+                    bus_error(error),
+                ))
+            }
+        };
+        match *stage {
+            FloorStage::Identities => {
+                for sensor in 0..FLOOR_SENSORS as u8 {
+                    let op = usize::from(sensor) * 2 + 1;
+                    if let Err(error) = block::<1>(r, op).and_then(|[id]| vcnl4020::identity(id)) {
+                        return Next::Done(floor_failed(sensor, error));
+                    }
+                }
+                let round = FloorStage::Round {
+                    checked: None,
+                    next: 0,
+                    counts: [0; FLOOR_SENSORS],
+                };
+                let script = self.round_script(None, 0);
+                run_or(stage, round, script, 0, |error| floor_failed(0, error))
+            }
+            FloorStage::Round {
+                checked,
+                next,
+                mut counts,
+            } => {
+                let mut op = 1;
+                if let Some(k) = checked {
+                    if let Err(error) = block::<1>(r, op).and_then(|[id]| vcnl4020::identity(id)) {
+                        return Next::Done(floor_failed(k, error));
+                    }
+                    op += 2;
+                }
+                for sensor in next..FLOOR_SENSORS as u8 {
+                    let bytes = match block::<2>(r, op) {
+                        Ok(bytes) => bytes,
+                        Err(error) => return Next::Done(floor_failed(sensor, error)),
+                    };
+                    op += 2;
+                    if let Some(count) = counts.get_mut(usize::from(sensor)) {
+                        *count = vcnl4020::result(bytes);
+                    }
+                    if is_bus_pattern(&bytes) {
+                        // As the blocking driver: the sensor's identity first, then the rest.
+                        let round = FloorStage::Round {
+                            checked: Some(sensor),
+                            next: sensor + 1,
+                            counts,
+                        };
+                        let script = self.round_script(Some(sensor), sensor + 1);
+                        return run_or(stage, round, script, 0, |error| {
+                            floor_failed(sensor, error)
+                        });
+                    }
+                }
+                Next::Done(Ok(one(SensorData::FloorProximity(counts))))
+            }
+            FloorStage::SetUp { .. } | FloorStage::Begun => {
+                Next::Done(floor_failed(0, Error::Bus(ErrorKind::Other)))
+            }
+        }
+    }
+}
+
+// A VCNL4020 behind a PCA9544A channel (the floor's, the ring's) and PowerManagement's buses.
+
+/// The set-up of one VCNL4020 behind its mux channel, as scripts: its PRODUCT_ID, then each of
+/// the five set-up registers (`vcnl4020::set_up_writes`) written and read back, each script
+/// behind the channel's select (a write reaches the part only after every check before it
+/// passed, as on the blocking path). Six scripts: 59, then 88 SCL periods each.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SensorSetUp {
+    mux: u8,
+    channel: Channel,
+    config: vcnl4020::Config,
+    /// 0 the identity, then the set-up writes.
+    register: u8,
+}
+
+impl Default for SensorSetUp {
+    fn default() -> Self {
+        Self::new(
+            pca9544a::AMIRO_ADDRESS,
+            Channel::Ch0,
+            vcnl4020::Config::AMIRO,
+        )
+    }
+}
+
+impl SensorSetUp {
+    /// The set-up of the sensor behind `channel` of the mux at `mux`, at `config`.
+    pub const fn new(mux: u8, channel: Channel, config: vcnl4020::Config) -> Self {
         Self {
             mux,
-            paced: None,
-            expected,
-            settles: &[],
-            log: Job::new(),
-            cursor: 0,
-            recording: Recording::Off,
-            selected: None,
-            unsupported: false,
+            channel,
+            config,
+            register: 0,
         }
     }
 
-    /// DiWheelDrive 1-1's I2C1: the HMC5883L.
-    pub const fn compass() -> Self {
-        Self::new(None, &COMPASS_EXPECTED)
+    /// The next script.
+    pub fn script(&self) -> Result<Script, Error<ErrorKind>> {
+        let writes = vcnl4020::set_up_writes(&self.config);
+        build(|s| {
+            pca9544a::select_op(s, self.mux, self.channel)?;
+            match usize::from(self.register).checked_sub(1) {
+                None => vcnl4020::ops::identity(s),
+                Some(k) => match writes.get(k) {
+                    Some(&write) => vcnl4020::ops::set_up_write(s, write),
+                    None => Err(BuildError::EmptyOperation),
+                },
+            }
+        })
     }
 
-    /// DiWheelDrive 1-2's I2C1: the BNO055.
-    pub const fn imu() -> Self {
-        let mut bus = Self::new(None, &IMU_EXPECTED);
-        bus.settles = &IMU_SETTLES;
-        bus
+    /// The last script's result in: `None` while scripts remain, then the set-up's outcome.
+    pub fn complete(&mut self, result: &ScriptResult) -> Option<Result<(), Error<ErrorKind>>> {
+        let writes = vcnl4020::set_up_writes(&self.config);
+        let checked = readings(result).and_then(|r| {
+            // Behind the select: PRODUCT_ID's read, or a write and its read-back.
+            let [read] = block::<1>(r, if self.register == 0 { 1 } else { 2 })?;
+            match usize::from(self.register).checked_sub(1) {
+                None => vcnl4020::identity(read),
+                Some(k) => match writes.get(k) {
+                    Some(write) => write.check(read),
+                    None => Err(Error::Bus(ErrorKind::Other)),
+                },
+            }
+        });
+        match checked {
+            Err(error) => Some(Err(error)),
+            Ok(()) if usize::from(self.register) >= writes.len() => Some(Ok(())),
+            Ok(()) => {
+                self.register += 1;
+                None
+            }
+        }
     }
+}
 
-    /// A bus of VCNL4020s behind a PCA9544A at 0x77 (DiWheelDrive's floor on I2C2, either of
-    /// PowerManagement's buses), with PowerManagement's bq27500 beside them.
-    pub const fn muxed() -> Self {
-        let mut bus = Self::new(Some(pca9544a::AMIRO_ADDRESS), &MUXED_EXPECTED);
-        bus.paced = Some(bq27500::ADDRESS);
-        bus
-    }
+/// Sensors on one of PowerManagement's buses.
+pub const RING_BUS_SENSORS: usize = 4;
 
-    fn begin_round(&mut self) {
-        self.cursor = 0;
-        self.recording = Recording::Off;
-        self.selected = None;
-        self.unsupported = false;
-    }
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RingSensor {
+    /// Its proximity is to be read.
+    Pending,
+    /// It read a dead bus's pattern: its PRODUCT_ID is to be read.
+    Check(u16),
+    /// Its count.
+    Read(u16),
+    /// It failed (its select, its read, or its identity after a pattern).
+    Failed,
+}
 
-    /// The script this round recorded, if it recorded one.
-    fn recorded(&self) -> Option<Script> {
-        let start = match self.recording {
-            Recording::Off => return None,
-            Recording::On { start, .. } | Recording::Closed { start } => usize::from(start),
+/// One PowerManagement bus's ring sensors read as scripts (the board's ring read of a bus): each
+/// sensor's proximity behind its channel's select, in the bus's order, one script; a sensor that
+/// fails yields no count and the others are read all the same, as on the blocking path. A
+/// sensor whose count is a dead bus's pattern (0 or 0xFFFF) has its PRODUCT_ID read first, in the
+/// next script with the sensors still to read. A failed script (which returns no readings) fails
+/// the sensor its operation addressed; the sensors before it in that script are read again in the
+/// next (their counts are the later ones, where the blocking path's were read before the
+/// failure). At most [`RingRead::MAX_SCRIPTS`] scripts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RingRead {
+    mux: u8,
+    channels: [Channel; RING_BUS_SENSORS],
+    count: u8,
+    sensors: [RingSensor; RING_BUS_SENSORS],
+}
+
+impl RingRead {
+    /// Scripts a read takes at most: each fails one sensor or moves every sensor it reads on
+    /// (to its count, or to its identity check).
+    pub const MAX_SCRIPTS: usize = 2 * RING_BUS_SENSORS + 1;
+
+    /// A read of the sensors behind `channels` (the first four) of the mux at `mux`.
+    pub fn new(mux: u8, channels: &[Channel]) -> Self {
+        let mut read = Self {
+            mux,
+            channels: [Channel::Ch0; RING_BUS_SENSORS],
+            count: 0,
+            sensors: [RingSensor::Pending; RING_BUS_SENSORS],
         };
-        let entries = self.log.entries().get(start..)?;
-        if entries.is_empty() {
+        for (slot, &channel) in read.channels.iter_mut().zip(channels) {
+            *slot = channel;
+            read.count += 1;
+        }
+        read
+    }
+
+    fn involved(&self) -> impl Iterator<Item = (usize, Channel, RingSensor)> + '_ {
+        self.channels
+            .iter()
+            .zip(self.sensors)
+            .take(usize::from(self.count))
+            .enumerate()
+            .filter(|(_, (_, s))| matches!(s, RingSensor::Pending | RingSensor::Check(_)))
+            .map(|(k, (&c, s))| (k, c, s))
+    }
+
+    /// The next script, or `None` once every sensor has its count or failed.
+    pub fn script(&self) -> Option<Result<Script, Error<ErrorKind>>> {
+        self.involved().next()?;
+        Some(build(|s| {
+            for (_, channel, sensor) in self.involved() {
+                pca9544a::select_op(s, self.mux, channel)?;
+                match sensor {
+                    RingSensor::Check(_) => vcnl4020::ops::identity(s)?,
+                    _ => vcnl4020::ops::result(s, vcnl4020::reg::PROXIMITY_RESULT)?,
+                }
+            }
+            Ok(())
+        }))
+    }
+
+    /// The last script's result in.
+    pub fn complete(&mut self, result: &ScriptResult) {
+        let involved: heapless::Vec<(usize, RingSensor), RING_BUS_SENSORS> =
+            self.involved().map(|(k, _, s)| (k, s)).collect();
+        match result {
+            Err(error) => {
+                let failed = involved.get(usize::from(error.operation / 2));
+                if let Some(slot) = failed.and_then(|&(k, _)| self.sensors.get_mut(k)) {
+                    *slot = RingSensor::Failed;
+                }
+            }
+            Ok(r) => {
+                for (i, &(k, sensor)) in involved.iter().enumerate() {
+                    let op = 2 * i + 1;
+                    let next = match sensor {
+                        RingSensor::Check(count) => match block::<1>(r, op) {
+                            Ok([id]) if vcnl4020::identity::<()>(id).is_ok() => {
+                                RingSensor::Read(count)
+                            }
+                            _ => RingSensor::Failed,
+                        },
+                        _ => match block::<2>(r, op) {
+                            Ok(bytes) if is_bus_pattern(&bytes) => {
+                                RingSensor::Check(vcnl4020::result(bytes))
+                            }
+                            Ok(bytes) => RingSensor::Read(vcnl4020::result(bytes)),
+                            Err(_) => RingSensor::Failed,
+                        },
+                    };
+                    if let Some(slot) = self.sensors.get_mut(k) {
+                        *slot = next;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Once no script remains: each sensor's count in the order of the channels given, `None`
+    /// for one that failed (and past the channels given).
+    pub fn counts(&self) -> Option<[Option<u16>; RING_BUS_SENSORS]> {
+        if self.involved().next().is_some() {
             return None;
         }
-        let mut script = Script::new();
-        for entry in entries {
-            // The recording kept within the script's capacities, so every push succeeds.
-            let _ = match (entry.write, entry.read) {
-                (0, n) => script.read(entry.address, usize::from(n)),
-                (_, 0) => script.write(entry.address, entry.written()),
-                (_, n) => script.write_read(entry.address, entry.written(), usize::from(n)),
-            };
-        }
-        Some(script)
-    }
-
-    /// The stand-in for a read of `read.len()` bytes after writing `write` to `address`.
-    fn stand_in(&self, upto: usize, address: u8, write: &[u8], read: &mut [u8]) {
-        read.fill(STAND_IN);
-        let [register] = write else {
-            return;
-        };
-        if let Some(expected) = self
-            .expected
-            .iter()
-            .find(|e| e.address == address && e.register == *register)
+        let mut counts = [None; RING_BUS_SENSORS];
+        for (out, sensor) in counts
+            .iter_mut()
+            .zip(self.sensors)
+            .take(usize::from(self.count))
         {
-            for (out, &byte) in read.iter_mut().zip(expected.bytes) {
-                *out = byte;
-            }
-            return;
-        }
-        // A read-back: the last value the work wrote to each register of the read.
-        let earlier = self.log.entries().get(..upto).unwrap_or(&[]);
-        for (offset, out) in read.iter_mut().enumerate() {
-            let wanted = register.wrapping_add(offset as u8);
-            let last = earlier.iter().rev().find_map(|e| {
-                let [first, values @ ..] = e.written() else {
-                    return None;
-                };
-                if e.address != address || e.read != 0 || e.inserted {
-                    return None;
-                }
-                let at = wanted.wrapping_sub(*first);
-                values.get(usize::from(at)).copied()
-            });
-            if let Some(value) = last {
-                *out = value;
+            if let RingSensor::Read(count) = sensor {
+                *out = Some(count);
             }
         }
-    }
-
-    /// One transfer of the work: served from the log, or recorded.
-    fn transfer(&mut self, address: u8, write: &[u8], read: &mut [u8]) -> Result<(), ReplayError> {
-        if let Recording::Closed { .. } = self.recording {
-            return Err(ReplayError::Deferred);
-        }
-        let select = Some(address) == self.mux && write.len() == 1 && read.is_empty();
-        if self.recording == Recording::Off {
-            // Skip the selects sent again at a script's start: the work did not make them. One that
-            // failed failed the script there (the engine ran nothing after it): that failure is the
-            // work's next transfer's, so the group counts it as the blocking path would.
-            while let Some(entry) = self
-                .log
-                .entries()
-                .get(usize::from(self.cursor))
-                .filter(|e| e.inserted)
-            {
-                let outcome = entry.outcome;
-                self.cursor += 1;
-                if let Outcome::Failed(failure) = outcome {
-                    return Err(ReplayError::Bus(failure));
-                }
-            }
-            let at = usize::from(self.cursor);
-            if let Some(&entry) = self.log.entries().get(at) {
-                if entry.address == address
-                    && entry.written() == write
-                    && usize::from(entry.read) == read.len()
-                {
-                    self.cursor += 1;
-                    if select {
-                        self.selected = write.first().copied();
-                    }
-                    return match entry.outcome {
-                        Outcome::Read => {
-                            let start = usize::from(entry.read_at);
-                            match self.log.bytes.get(start..start + read.len()) {
-                                Some(bytes) => read.copy_from_slice(bytes),
-                                None => read.fill(STAND_IN),
-                            }
-                            Ok(())
-                        }
-                        Outcome::Failed(failure) => Err(ReplayError::Bus(failure)),
-                        // Pending: not reached, `step` refuses a job with a script out.
-                        Outcome::Unknown | Outcome::Pending => {
-                            self.stand_in(at, address, write, read);
-                            Ok(())
-                        }
-                    };
-                }
-                // The work went another way than the stand-ins guessed: the rest of the log
-                // was made on a guess (reads and selects only) and is dropped.
-                self.log.truncate(at);
-            }
-            self.recording = Recording::On {
-                start: self.log.len,
-                has_read: false,
-            };
-            if !select && Some(address) != self.paced {
-                if let Some(control) = self.selected {
-                    self.push_inserted_select(control)?;
-                }
-            }
-        }
-        let Recording::On { start, has_read } = self.recording else {
-            return Err(ReplayError::Deferred);
-        };
-        if read.is_empty() && !select && has_read {
-            return self.close(start);
-        }
-        if write.is_empty() && read.is_empty() {
-            return Err(self.unsupported());
-        }
-        let paced = Some(address) == self.paced;
-        let recorded = usize::from(self.log.len) - usize::from(start);
-        if !self.fits(start, write.len(), read.len()) || (paced && recorded > 0) {
-            return self.close(start);
-        }
-        let at = usize::from(self.log.len);
-        self.push(address, write, read.len(), false);
-        self.stand_in(at, address, write, read);
-        if select {
-            self.selected = write.first().copied();
-        }
-        let settle = self
-            .settles
-            .iter()
-            .find(|s| s.address == address && write == [s.register, s.value]);
-        if let Some(settle) = settle {
-            self.log.recorded_settle_us = settle.us;
-        } else if paced {
-            self.log.recorded_settle_us = bq27500::BUS_FREE_NS.div_ceil(1_000);
-        }
-        self.recording = if paced || settle.is_some() {
-            Recording::Closed { start }
-        } else {
-            Recording::On {
-                start,
-                has_read: has_read || !read.is_empty(),
-            }
-        };
-        Ok(())
-    }
-
-    /// Ends the recording: a select at its end goes to the next script, with its reads.
-    fn close(&mut self, start: u8) -> Result<(), ReplayError> {
-        let len = usize::from(self.log.len);
-        if len > usize::from(start) + 1 {
-            if let Some(last) = self.log.entries().get(len - 1) {
-                if last.is_select(self.mux) && !last.inserted {
-                    self.log.truncate(len - 1);
-                }
-            }
-        }
-        let recorded = self.log.entries().get(usize::from(start)..).unwrap_or(&[]);
-        if recorded.iter().all(|e| e.inserted) {
-            // Nothing fits: a transfer larger than a script, or a job larger than the log.
-            self.unsupported = true;
-            return Err(ReplayError::Unsupported);
-        }
-        self.recording = Recording::Closed { start };
-        Err(ReplayError::Deferred)
-    }
-
-    /// A transfer this bus cannot log (larger than a script or the log): the job ends `Unfinished`
-    /// (`step` reads the mark), never a bus fault of the group's.
-    fn unsupported(&mut self) -> ReplayError {
-        self.unsupported = true;
-        ReplayError::Unsupported
-    }
-
-    fn push_inserted_select(&mut self, control: u8) -> Result<(), ReplayError> {
-        let Some(mux) = self.mux else {
-            return Ok(());
-        };
-        if usize::from(self.log.len) >= MAX_LOGGED {
-            self.unsupported = true;
-            return Err(ReplayError::Unsupported);
-        }
-        self.push(mux, &[control], 0, true);
-        Ok(())
-    }
-
-    /// Whether one more transfer fits the script recorded from `start` and the log.
-    fn fits(&self, start: u8, write: usize, read: usize) -> bool {
-        let recorded = self.log.entries().get(usize::from(start)..).unwrap_or(&[]);
-        let written: usize = recorded.iter().map(|e| usize::from(e.write)).sum();
-        let reads: usize = recorded.iter().map(|e| usize::from(e.read)).sum();
-        recorded.len() < MAX_OPERATIONS
-            && written + write <= MAX_WRITE_BYTES
-            && reads + read <= MAX_READ_BYTES
-            && usize::from(self.log.len) < MAX_LOGGED
-            && usize::from(self.log.bytes_len) + read <= MAX_LOGGED_READ
-    }
-
-    fn push(&mut self, address: u8, write: &[u8], read: usize, inserted: bool) {
-        let mut written = [0; MAX_TRANSFER_WRITE];
-        for (slot, &byte) in written.iter_mut().zip(write) {
-            *slot = byte;
-        }
-        if let Some(entry) = self.log.entries.get_mut(usize::from(self.log.len)) {
-            // Both within their capacities (checked by `fits`), so the narrowing is exact.
-            *entry = Entry {
-                address,
-                written,
-                write: write.len() as u8,
-                read: read as u8,
-                read_at: self.log.bytes_len,
-                outcome: Outcome::Pending,
-                inserted,
-            };
-            self.log.len += 1;
-            self.log.bytes_len += read as u8;
-        }
+        Some(counts)
     }
 }
 
-impl ErrorType for ReplayBus {
-    type Error = ReplayError;
+/// The wait before each of a bq27500's scripts: its bus-free time between packets (a job's first
+/// script too: another job's last transfer to the gauge may just have ended).
+pub const GAUGE_SETTLE_US: u32 = bq27500::BUS_FREE_NS.div_ceil(1_000);
+
+/// A gauge transfer as a script of its own ([`bq27500::transfer_op`]).
+pub fn gauge_script(transfer: bq27500::Transfer) -> Result<Script, Error<ErrorKind>> {
+    build(|s| bq27500::transfer_op(s, transfer))
 }
 
-impl I2c for ReplayBus {
-    fn transaction(
-        &mut self,
-        address: u8,
-        operations: &mut [Operation<'_>],
-    ) -> Result<(), Self::Error> {
-        // A transaction is a script's operation: writes, then reads after a repeated START.
-        let mut write = [0u8; MAX_TRANSFER_WRITE];
-        let mut write_len = 0;
-        let mut read = [0u8; MAX_READ_BYTES];
-        let mut read_len = 0;
-        for operation in operations.iter() {
-            match operation {
-                Operation::Write(bytes) if read_len == 0 => {
-                    let slot = write
-                        .get_mut(write_len..write_len + bytes.len())
-                        .ok_or_else(|| self.unsupported())?;
-                    slot.copy_from_slice(bytes);
-                    write_len += bytes.len();
-                }
-                Operation::Write(_) => return Err(self.unsupported()),
-                Operation::Read(buffer) => {
-                    read_len += buffer.len();
-                    if read_len > MAX_READ_BYTES {
-                        return Err(self.unsupported());
-                    }
-                }
-            }
-        }
-        let (Some(write), Some(read)) = (write.get(..write_len), read.get_mut(..read_len)) else {
-            return Err(self.unsupported());
-        };
-        self.transfer(address, write, read)?;
-        let mut from = 0;
-        for operation in operations.iter_mut() {
-            if let Operation::Read(buffer) = operation {
-                let end = from + buffer.len();
-                if let Some(bytes) = read.get(from..end) {
-                    buffer.copy_from_slice(bytes);
-                }
-                from = end;
-            }
-        }
-        Ok(())
-    }
-}
-
-/// What a group's replay needs: its bus.
-pub trait Replaying {
-    /// The group's [`ReplayBus`].
-    fn replay_bus(&mut self) -> &mut ReplayBus;
-}
-
-impl Replaying for ReplayBus {
-    fn replay_bus(&mut self) -> &mut ReplayBus {
-        self
-    }
-}
-
-impl Replaying for Hmc5883l<ReplayBus> {
-    fn replay_bus(&mut self) -> &mut ReplayBus {
-        self.bus_mut()
-    }
-}
-
-impl Replaying for Compass<ReplayBus> {
-    fn replay_bus(&mut self) -> &mut ReplayBus {
-        self.magnetometer.bus_mut()
-    }
-}
-
-impl<D> Replaying for ImuSensors<ReplayBus, D> {
-    fn replay_bus(&mut self) -> &mut ReplayBus {
-        self.imu.bus_mut()
-    }
-}
-
-impl Replaying for Bno055<ReplayBus> {
-    fn replay_bus(&mut self) -> &mut ReplayBus {
-        self.bus_mut()
-    }
-}
-
-impl Replaying for Pca9544a<ReplayBus> {
-    fn replay_bus(&mut self) -> &mut ReplayBus {
-        self.bus_mut()
-    }
-}
-
-impl Replaying for FloorSensors<ReplayBus> {
-    fn replay_bus(&mut self) -> &mut ReplayBus {
-        self.mux_mut().bus_mut()
-    }
-}
-
-impl<G: Replaying + SensorGroup> Replaying for Supervised<G> {
-    fn replay_bus(&mut self) -> &mut ReplayBus {
-        self.group_mut().replay_bus()
-    }
-}
-
-/// What a round of [`Replayed::step`] asks for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Next<T> {
-    /// Run this script on the bus and hand its result to [`Replayed::complete`].
-    Run(Script),
-    /// The work ended on the devices' answers: its result.
-    Done(T),
-}
-
-/// A job's rounds did not end within [`MAX_ROUNDS`], or a transfer could not be carried by a
-/// script: a driver's shape that a host test finds (the state is left as before the job).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Unfinished;
-
-/// One round of `work` on `state` for `job` ([module documentation](self)): the script the work
-/// needs next, or its result. The work runs on a copy of `state`; only a round that needs no
-/// further script (the work's result is the devices' answers) puts its copy in `state`, and
-/// `job` begins again empty. `state`'s bus log is empty between rounds. A step while the last
-/// script's result is not in `job` ([`Job::complete`]) is refused, the job dropped: its work
-/// would otherwise end on stand-ins.
-pub fn step<S: Clone + Replaying, T>(
-    state: &mut S,
-    job: &mut Job,
-    work: impl FnOnce(&mut S) -> T,
-) -> Result<Next<T>, Unfinished> {
-    if job.entries().iter().any(|e| e.outcome == Outcome::Pending) {
-        *job = Job::new();
-        return Err(Unfinished);
-    }
-    let mut round = state.clone();
-    let bus = round.replay_bus();
-    bus.log = job.clone();
-    bus.begin_round();
-    let value = work(&mut round);
-    let bus = round.replay_bus();
-    if bus.unsupported {
-        *job = Job::new();
-        return Err(Unfinished);
-    }
-    if let Some(script) = bus.recorded() {
-        *job = bus.log.clone();
-        return Ok(Next::Run(script));
-    }
-    bus.log = Job::new();
-    bus.begin_round();
-    *state = round;
-    *job = Job::new();
-    Ok(Next::Done(value))
-}
-
-/// A publisher's sample of `topic` taken at `now_us` on a supervised group, begun: the first
-/// script it needs, or its frames at once (a reading reused, a group in its back-off). The
-/// caller keeps `job` until the sample is done.
-pub fn begin_sample<G: SensorGroup + Clone + Replaying>(
-    group: &mut Supervised<G>,
-    job: &mut Job,
-    topic: Topic,
-    now_us: u64,
-) -> Next<Samples> {
-    *job = Job::new();
-    resume(group, job, topic, now_us)
-}
-
-/// The same sample, its last script's `result` in: the next script, or the frames. A sample
-/// whose rounds run out ([`Unfinished`]) has no frames.
-pub fn finish_sample<G: SensorGroup + Clone + Replaying>(
-    group: &mut Supervised<G>,
-    job: &mut Job,
-    topic: Topic,
-    now_us: u64,
+/// A gauge script's outcome as the blocking driver's transfer gives it: a read's word, 0 for a
+/// write, or the bus fault.
+pub fn gauge_outcome(
+    transfer: bq27500::Transfer,
     result: &ScriptResult,
-) -> Next<Samples> {
-    job.complete(result);
-    resume(group, job, topic, now_us)
+) -> Result<u16, Error<ErrorKind>> {
+    let r = readings(result)?;
+    match transfer {
+        bq27500::Transfer::Write { .. } => Ok(0),
+        bq27500::Transfer::Read(_) => block(r, 0).map(bq27500::word),
+    }
 }
 
-fn resume<G: SensorGroup + Clone + Replaying>(
-    group: &mut Supervised<G>,
-    job: &mut Job,
-    topic: Topic,
-    now_us: u64,
-) -> Next<Samples> {
-    step(group, job, |g| g.sample(topic, now_us)).unwrap_or(Next::Done(Samples::new()))
+/// The gauge's identity check as scripts (`Bq27500::init`'s Control(DEVICE_TYPE)): its three
+/// transfers, each a script of its own after [`GAUGE_SETTLE_US`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct GaugeIdentity {
+    made: u8,
 }
 
-/// A state (a supervised group, a bus with a gauge's read) and one job on it at a time: the
-/// simulators' and the host tests' way to run [`step`].
-#[derive(Debug, Clone)]
-pub struct Replayed<S> {
-    state: S,
-    job: Job,
-}
+impl GaugeIdentity {
+    /// A check not begun.
+    pub const fn new() -> Self {
+        Self { made: 0 }
+    }
 
-impl<S: Clone + Replaying> Replayed<S> {
-    /// The state, its bus's log emptied. Its constructor must have made no transfer (a
-    /// [`Supervised`] group's boot set-up is a job: [`Replayed::boot`]).
-    pub fn new(mut state: S) -> Self {
-        let bus = state.replay_bus();
-        bus.log = Job::new();
-        bus.begin_round();
-        Self {
-            state,
-            job: Job::new(),
+    /// The next transfer (`None` after the third).
+    pub fn next_transfer(&self) -> Option<bq27500::Transfer> {
+        bq27500::control_transfers(bq27500::subcommand::DEVICE_TYPE)
+            .get(usize::from(self.made))
+            .copied()
+    }
+
+    /// The transfer's outcome: `None` while transfers remain, then the check's.
+    pub fn complete<E>(&mut self, outcome: Result<u16, Error<E>>) -> Option<Result<(), Error<E>>> {
+        let last = usize::from(self.made) + 1 >= bq27500::control_transfers(0).len();
+        self.made = self.made.saturating_add(1);
+        match outcome {
+            Err(error) => Some(Err(error)),
+            Ok(found) if last => Some(bq27500::device_type(found)),
+            Ok(_) => None,
         }
     }
+}
 
-    /// The state between jobs.
-    pub fn state(&self) -> &S {
-        &self.state
+// DiWheelDrive 1-2's BNO055 on I2C1.
+
+/// Where an [`ImuSensors`] job stands.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum ImuStage {
+    /// Not begun.
+    #[default]
+    Begun,
+    /// Set-up step 1: the identities and the self-test are out.
+    Checks,
+    /// Set-up step 1: page 0 and configuration mode are out.
+    EnterConfig,
+    /// Set-up step 2: the configuration and its read-backs are out.
+    Configure,
+    /// Set-up step 2: AMG mode is out.
+    StartAmg,
+    /// Set-up step 3: OPR_MODE is out.
+    CheckAmg,
+    /// A sample's block and OPR_MODE are out.
+    Sample,
+}
+
+/// The BNO055's set-up step that failed: `Idle` again.
+fn imu_step_failed<D>(imu: &mut ImuSensors<Scripts, D>, error: Error<ErrorKind>) -> InitStep {
+    imu.set_up_at(ImuReinit::Idle);
+    InitStep::Failed(i2c_error(Device::Imu)(error))
+}
+
+impl<D> ImuSensors<Scripts, D> {
+    /// The BNO055, its transfers made as scripts (`delay` is not used: the mode switches' waits
+    /// are the jobs', between scripts, and the supervisor's, between set-up steps).
+    pub const fn scripted(delay: D) -> Self {
+        Self::new(Scripts, delay)
     }
 
-    /// The state between jobs, e.g. to feed a sensor's calibration.
-    pub fn state_mut(&mut self) -> &mut S {
-        &mut self.state
-    }
-
-    /// One round of `work` ([`step`]).
-    pub fn step<T>(&mut self, work: impl FnOnce(&mut S) -> T) -> Result<Next<T>, Unfinished> {
-        step(&mut self.state, &mut self.job, work)
-    }
-
-    /// How long to wait before running the script the last [`step`](Self::step) asked for
-    /// ([`Job::settle_us`]). The simulators need no wait ([`Replayed::run`] makes none).
-    pub fn settle_us(&self) -> u32 {
-        self.job.settle_us()
-    }
-
-    /// The result of the script the last [`step`](Self::step) asked for.
-    pub fn complete(&mut self, result: &ScriptResult) {
-        self.job.complete(result);
-    }
-
-    /// A whole job on a bus that runs scripts at once (the simulators, the host tests):
-    /// rounds until the work is done.
-    pub fn run<T>(
+    fn next_script(
         &mut self,
-        bus: &mut impl ScriptBus,
-        work: impl FnMut(&mut S) -> T,
-    ) -> Result<T, Unfinished> {
-        self.run_paced(bus, &mut crate::sim::NoDelay, work)
-    }
-
-    /// [`run`](Self::run) on real devices: waits each script's [`settle_us`](Self::settle_us)
-    /// on `delay` before it (the boot on the polled master, [`OnI2c`]).
-    pub fn run_paced<T>(
-        &mut self,
-        bus: &mut impl ScriptBus,
-        delay: &mut impl DelayNs,
-        mut work: impl FnMut(&mut S) -> T,
-    ) -> Result<T, Unfinished> {
-        for _ in 0..MAX_ROUNDS {
-            match self.step(&mut work)? {
-                Next::Run(script) => {
-                    delay.delay_us(self.settle_us());
-                    let result = bus.run(&script);
-                    self.complete(&result);
+        stage: &mut ImuStage,
+        at: ImuStage,
+        ops: impl FnOnce(&mut Script) -> Result<(), BuildError>,
+    ) -> Next<InitStep> {
+        match build(ops) {
+            Ok(script) => {
+                *stage = at;
+                Next::Run {
+                    script,
+                    settle_us: 0,
                 }
-                Next::Done(value) => return Ok(value),
+            }
+            Err(error) => Next::Done(imu_step_failed(self, error)),
+        }
+    }
+}
+
+impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
+    type Stage = ImuStage;
+    /// Set-up step 2's two scripts, then the sample's.
+    const MAX_SCRIPTS: usize = 3;
+    const SET_UP_STEPS: usize = 3;
+
+    fn topics(&self) -> &'static [Topic] {
+        DIWHEELDRIVE_TOPICS.get(..5).unwrap_or(&[])
+    }
+
+    fn begin_set_up(&mut self) {
+        ImuSensors::begin_set_up(self);
+    }
+
+    fn begin_set_up_step(&mut self, stage: &mut ImuStage, _now_us: u64) -> Next<InitStep> {
+        match self.begin_set_up_step() {
+            ImuReinit::Idle => self.next_script(stage, ImuStage::Checks, bno055::ops::checks),
+            ImuReinit::EnteringConfig => {
+                self.next_script(stage, ImuStage::Configure, bno055::ops::configure)
+            }
+            ImuReinit::EnteringAmg => {
+                self.next_script(stage, ImuStage::CheckAmg, bno055::ops::operating_mode)
             }
         }
-        self.job = Job::new();
-        Err(Unfinished)
+    }
+
+    fn resume_set_up_step(
+        &mut self,
+        stage: &mut ImuStage,
+        now_us: u64,
+        result: &ScriptResult,
+    ) -> Next<InitStep> {
+        let checked = readings(result).and_then(|r| match *stage {
+            ImuStage::Checks => {
+                block(r, 0).and_then(bno055::identity)?;
+                block::<1>(r, 1).and_then(|[st]| bno055::self_test(st))
+            }
+            ImuStage::Configure => {
+                block(r, 4).and_then(bno055::check_configuration)?;
+                block::<1>(r, 6).and_then(|[units]| bno055::check_units(units))
+            }
+            ImuStage::CheckAmg => block::<1>(r, 0).and_then(|[opr]| bno055::check_amg_started(opr)),
+            ImuStage::EnterConfig | ImuStage::StartAmg => Ok(()),
+            ImuStage::Begun | ImuStage::Sample => Err(Error::Bus(ErrorKind::Other)),
+        });
+        if let Err(error) = checked {
+            return Next::Done(imu_step_failed(self, error));
+        }
+        let pending = |state, wait_ms: u32| {
+            (
+                state,
+                InitStep::Pending {
+                    next_us: now_us.saturating_add(u64::from(wait_ms) * 1_000),
+                },
+            )
+        };
+        let (state, step) = match *stage {
+            ImuStage::Checks => {
+                return self.next_script(stage, ImuStage::EnterConfig, bno055::ops::enter_config)
+            }
+            ImuStage::Configure => {
+                return self.next_script(stage, ImuStage::StartAmg, bno055::ops::start_amg)
+            }
+            ImuStage::EnterConfig => {
+                pending(ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)
+            }
+            ImuStage::StartAmg => pending(ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS),
+            _ => (ImuReinit::Idle, InitStep::Done),
+        };
+        self.set_up_at(state);
+        Next::Done(step)
+    }
+
+    fn begin_sample(
+        &mut self,
+        stage: &mut ImuStage,
+        topic: Topic,
+        now_us: u64,
+    ) -> Next<Result<Samples, SampleError>> {
+        let read = match ImuRead::of(topic) {
+            Ok(read) => read,
+            Err(error) => return Next::Done(Err(error)),
+        };
+        if let ImuRead::Field(axis) = read {
+            if let Some(field) = self.reusable_field(axis, now_us) {
+                return Next::Done(Ok(self.deliver_field(axis, field)));
+            }
+        }
+        let script = build(|s| bno055::ops::verified_block(s, read.first_register()));
+        match script {
+            Ok(script) => {
+                *stage = ImuStage::Sample;
+                Next::Run {
+                    script,
+                    settle_us: 0,
+                }
+            }
+            Err(error) => Next::Done(self.finish(read, Err(error), now_us)),
+        }
+    }
+
+    fn resume_sample(
+        &mut self,
+        _stage: &mut ImuStage,
+        topic: Topic,
+        now_us: u64,
+        result: &ScriptResult,
+    ) -> Next<Result<Samples, SampleError>> {
+        let read = match ImuRead::of(topic) {
+            Ok(read) => read,
+            Err(error) => return Next::Done(Err(error)),
+        };
+        let raw = readings(result).and_then(|r| {
+            let bytes = block::<6>(r, 0)?;
+            block::<1>(r, 1).and_then(|[opr]| bno055::still_running(opr))?;
+            Ok(bno055::le3(&bytes))
+        });
+        Next::Done(self.finish(read, raw, now_us))
     }
 }
 
-impl<G: Clone + Replaying + SensorGroup> Replayed<Supervised<G>> {
-    /// A supervised group whose boot set-up ([`Supervised::new`]) ran as scripts on `bus`, with no
-    /// waits between them (the simulators).
-    pub fn boot(group: G, bus: &mut impl ScriptBus) -> Result<Self, Unfinished> {
-        Self::boot_paced(group, bus, &mut crate::sim::NoDelay)
-    }
-
-    /// [`boot`](Self::boot) on real devices, each script's settling time waited on `delay`.
-    pub fn boot_paced(
-        group: G,
-        bus: &mut impl ScriptBus,
-        delay: &mut impl DelayNs,
-    ) -> Result<Self, Unfinished> {
-        let mut boot = Replayed::new(group);
-        let supervised = boot.run_paced(bus, delay, |group| {
-            // The set-up's transfers are made on the new value's bus: the round's bus takes
-            // them over, so the round sees what was recorded.
-            let mut supervised = Supervised::new(group.clone());
-            *group.replay_bus() = supervised.replay_bus().clone();
-            supervised
-        })?;
-        Ok(Replayed::new(supervised))
+impl<D> ImuSensors<Scripts, D> {
+    fn finish(
+        &mut self,
+        read: ImuRead,
+        raw: Result<[i16; 3], Error<ErrorKind>>,
+        now_us: u64,
+    ) -> Result<Samples, SampleError> {
+        let raw = raw.map_err(i2c_error(Device::Imu));
+        match read {
+            ImuRead::Field(axis) => {
+                let field = self.keep_field(raw, now_us)?;
+                Ok(self.deliver_field(axis, field))
+            }
+            block => imu_frame(block, raw?).ok_or(SampleError::NotServed(Topic::Gyroscope)),
+        }
     }
 }
-
-/// The BNO055's operating mode switches (datasheet table "operating mode switching time").
-static IMU_SETTLES: [Settle; 2] = [
-    Settle {
-        address: bno055::ADDRESS,
-        register: bno055::reg::OPR_MODE,
-        value: bno055::mode::CONFIG,
-        us: bno055::OPERATING_TO_CONFIG_MS * 1_000,
-    },
-    Settle {
-        address: bno055::ADDRESS,
-        register: bno055::reg::OPR_MODE,
-        value: bno055::mode::AMG,
-        us: bno055::CONFIG_TO_OPERATING_MS * 1_000,
-    },
-];
-
-/// The HMC5883L's identification registers.
-static COMPASS_EXPECTED: [Expected; 1] = [Expected {
-    address: hmc5883l::ADDRESS,
-    register: hmc5883l::reg::IDENTIFICATION_A,
-    bytes: &hmc5883l::IDENTITY,
-}];
-
-/// The BNO055's identities, its self-test passed, and the AMG mode the driver runs it in.
-static IMU_EXPECTED: [Expected; 3] = [
-    Expected {
-        address: bno055::ADDRESS,
-        register: bno055::reg::CHIP_ID,
-        bytes: &bno055::IDENTITY,
-    },
-    Expected {
-        address: bno055::ADDRESS,
-        register: bno055::reg::ST_RESULT,
-        bytes: &[bno055::SELF_TEST_PASSED],
-    },
-    Expected {
-        address: bno055::ADDRESS,
-        register: bno055::reg::OPR_MODE,
-        bytes: &[bno055::mode::AMG],
-    },
-];
-
-/// The VCNL4020's product ID and the bq27500's answer to Control(DEVICE_TYPE).
-static MUXED_EXPECTED: [Expected; 2] = [
-    Expected {
-        address: vcnl4020::ADDRESS,
-        register: vcnl4020::reg::PRODUCT_ID,
-        bytes: &[vcnl4020::PRODUCT_ID_VALUE],
-    },
-    Expected {
-        address: bq27500::ADDRESS,
-        register: bq27500::cmd::CONTROL,
-        bytes: &DEVICE_TYPE_LE,
-    },
-];
-
-const DEVICE_TYPE_LE: [u8; 2] = bq27500::DEVICE_TYPE_VALUE.to_le_bytes();

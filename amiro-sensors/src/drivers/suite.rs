@@ -38,7 +38,7 @@ pub type Samples = heapless::Vec<SensorData, MAX_SAMPLES>;
 /// DiWheelDrive's sensor topics, grouped as its devices serve them: the inertial pair
 /// (`..2`), the magnetometer's three axes (`2..5`; a BNO055 serves all five, `..5`), then the floor
 /// sensors. Each group's topic list is a slice of this one.
-static DIWHEELDRIVE_TOPICS: [Topic; 6] = [
+pub(crate) static DIWHEELDRIVE_TOPICS: [Topic; 6] = [
     Topic::Gyroscope,
     Topic::Accelerometer,
     Topic::MagnetometerX,
@@ -116,14 +116,14 @@ fn spi_error<E: spi::Error>(device: Device) -> impl Fn(Error<E>) -> SampleError 
     }
 }
 
-fn i2c_error<E: i2c::Error>(device: Device) -> impl Fn(Error<E>) -> SampleError {
+pub(crate) fn i2c_error<E: i2c::Error>(device: Device) -> impl Fn(Error<E>) -> SampleError {
     move |error| SampleError::Device {
         device,
         error: error.map_bus(|e| BusFault::I2c(e.kind())),
     }
 }
 
-fn one(data: SensorData) -> Samples {
+pub(crate) fn one(data: SensorData) -> Samples {
     let mut samples = Samples::new();
     // Capacity is MAX_SAMPLES ≥ 1, so the push cannot fail.
     let _ = samples.push(data);
@@ -295,7 +295,7 @@ pub struct Compass<I2C> {
 /// One output period of the HMC5883L at the AMiRo's 30 Hz, in µs.
 pub const MAGNETOMETER_PERIOD_US: u64 = 33_333;
 
-impl<I2C: I2c> Compass<I2C> {
+impl<I2C> Compass<I2C> {
     /// The magnetometer at the AMiRo's gain. Does no I/O.
     pub const fn new(i2c: I2C) -> Self {
         Self {
@@ -316,7 +316,9 @@ impl<I2C: I2c> Compass<I2C> {
     pub fn set_reuse_window_us(&mut self, window_us: u64) {
         self.reuse_window_us = window_us;
     }
+}
 
+impl<I2C: I2c> Compass<I2C> {
     /// Reads all three axes now (bypassing the reuse) and returns them as three frames, X, Y, Z.
     pub fn sample_all(&mut self, now_us: u64) -> Result<Samples, SampleError> {
         let field = self.read_fresh(now_us)?;
@@ -337,7 +339,34 @@ impl<I2C: I2c> Compass<I2C> {
         } else {
             Ok(())
         };
-        match checked.and_then(|()| self.magnetometer.read()) {
+        let read = checked.and_then(|()| self.magnetometer.read());
+        self.keep(read.map_err(i2c_error(Device::Magnetometer)), now_us)
+    }
+}
+
+impl<I2C> Compass<I2C> {
+    /// The reading kept, if it may serve `axis` at `now_us` without the bus (not yet delivered
+    /// for that axis, within the reuse window).
+    pub(crate) fn reusable(&self, axis: Axis, now_us: u64) -> Option<MagneticField> {
+        let already_sent = self.delivered.get(axis.index()).copied().unwrap_or(true);
+        match self.last {
+            Some((field, at))
+                if !already_sent && now_us >= at && now_us - at < self.reuse_window_us =>
+            {
+                Some(field)
+            }
+            _ => None,
+        }
+    }
+
+    /// A fresh read's outcome at `now_us`: a field kept for the other axes, a failure forgets
+    /// the last one.
+    pub(crate) fn keep(
+        &mut self,
+        read: Result<MagneticField, SampleError>,
+        now_us: u64,
+    ) -> Result<MagneticField, SampleError> {
+        match read {
             Ok(field) => {
                 self.last = Some((field, now_us));
                 self.delivered = [false; 3];
@@ -345,9 +374,54 @@ impl<I2C: I2c> Compass<I2C> {
             }
             Err(error) => {
                 self.last = None;
-                Err(i2c_error(Device::Magnetometer)(error))
+                Err(error)
             }
         }
+    }
+
+    /// `field`'s frame of `axis`, the axis marked delivered.
+    pub(crate) fn deliver(&mut self, axis: Axis, field: MagneticField) -> Samples {
+        if let Some(flag) = self.delivered.get_mut(axis.index()) {
+            *flag = true;
+        }
+        one(SensorData::Magnetometer {
+            axis: can_axis(axis),
+            nanotesla: field.axis(axis),
+        })
+    }
+
+    /// Counts a fresh read; whether it checks the identity first.
+    pub(crate) fn identity_due(&mut self) -> bool {
+        self.identity.due()
+    }
+
+    /// The magnetometer (its gain).
+    pub(crate) fn magnetometer(&self) -> &Hmc5883l<I2C> {
+        &self.magnetometer
+    }
+
+    /// The set-up forgets the kept reading.
+    pub(crate) fn forget(&mut self) {
+        self.last = None;
+    }
+}
+
+/// The axis of a magnetometer topic.
+pub(crate) fn magnetometer_axis(topic: Topic) -> Result<Axis, SampleError> {
+    match topic {
+        Topic::MagnetometerX => Ok(Axis::X),
+        Topic::MagnetometerY => Ok(Axis::Y),
+        Topic::MagnetometerZ => Ok(Axis::Z),
+        other => Err(SampleError::NotServed(other)),
+    }
+}
+
+/// The protocol's axis of a sensor axis.
+fn can_axis(axis: Axis) -> CanAxis {
+    match axis {
+        Axis::X => CanAxis::X,
+        Axis::Y => CanAxis::Y,
+        Axis::Z => CanAxis::Z,
     }
 }
 
@@ -364,28 +438,12 @@ impl<I2C: I2c> SensorGroup for Compass<I2C> {
     }
 
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
-        let (axis, can_axis) = match topic {
-            Topic::MagnetometerX => (Axis::X, CanAxis::X),
-            Topic::MagnetometerY => (Axis::Y, CanAxis::Y),
-            Topic::MagnetometerZ => (Axis::Z, CanAxis::Z),
-            other => return Err(SampleError::NotServed(other)),
+        let axis = magnetometer_axis(topic)?;
+        let field = match self.reusable(axis, now_us) {
+            Some(field) => field,
+            None => self.read_fresh(now_us)?,
         };
-        let already_sent = self.delivered.get(axis.index()).copied().unwrap_or(true);
-        let field = match self.last {
-            Some((field, at))
-                if !already_sent && now_us >= at && now_us - at < self.reuse_window_us =>
-            {
-                field
-            }
-            _ => self.read_fresh(now_us)?,
-        };
-        if let Some(flag) = self.delivered.get_mut(axis.index()) {
-            *flag = true;
-        }
-        Ok(one(SensorData::Magnetometer {
-            axis: can_axis,
-            nanotesla: field.axis(axis),
-        }))
+        Ok(self.deliver(axis, field))
     }
 }
 
@@ -420,7 +478,7 @@ impl<I2C: I2c> SensorGroup for FloorSensors<I2C> {
     }
 }
 
-fn floor_error<E: i2c::Error>(e: GroupError<E>) -> SampleError {
+pub(crate) fn floor_error<E: i2c::Error>(e: GroupError<E>) -> SampleError {
     i2c_error(Device::FloorSensor(e.sensor))(e.error)
 }
 
@@ -447,7 +505,7 @@ pub struct ImuSensors<I2C, D> {
 
 /// Where a stepwise re-initialisation of the BNO055 stands ([`ImuSensors`]'s `init_step`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ImuReinit {
+pub(crate) enum ImuReinit {
     /// No re-initialisation under way: the next step enters configuration mode.
     Idle,
     /// Configuration mode requested: configure once the part is there.
@@ -456,7 +514,7 @@ enum ImuReinit {
     EnteringAmg,
 }
 
-impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
+impl<I2C, D> ImuSensors<I2C, D> {
     /// The BNO055 on `i2c`. Does no I/O.
     pub const fn new(i2c: I2C, delay: D) -> Self {
         Self {
@@ -468,7 +526,9 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
             reinit: ImuReinit::Idle,
         }
     }
+}
 
+impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
     /// Waits (at most `timeout_ms`) for the part to answer after the board released its reset.
     pub fn wait_for_boot(&mut self, timeout_ms: u32) -> Result<(), SampleError> {
         self.imu
@@ -481,28 +541,110 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
             .read_verified(first)
             .map_err(i2c_error(Device::Imu))
     }
+}
 
-    fn field(&mut self, axis: Axis, now_us: u64) -> Result<[i32; 3], SampleError> {
+/// What a sample of one of [`ImuSensors`]' topics reads: one sensor's register block.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ImuRead {
+    /// The gyroscope's block.
+    Gyroscope,
+    /// The accelerometer's block.
+    Accelerometer,
+    /// The magnetometer's block, for one axis (a reading serves the three).
+    Field(Axis),
+}
+
+impl ImuRead {
+    /// The read of `topic`.
+    pub(crate) fn of(topic: Topic) -> Result<Self, SampleError> {
+        match topic {
+            Topic::Gyroscope => Ok(ImuRead::Gyroscope),
+            Topic::Accelerometer => Ok(ImuRead::Accelerometer),
+            other => magnetometer_axis(other).map(ImuRead::Field),
+        }
+    }
+
+    /// The block's first register.
+    pub(crate) const fn first_register(self) -> u8 {
+        match self {
+            ImuRead::Gyroscope => bno055::reg::GYR_DATA_X_LSB,
+            ImuRead::Accelerometer => bno055::reg::ACC_DATA_X_LSB,
+            ImuRead::Field(_) => bno055::reg::MAG_DATA_X_LSB,
+        }
+    }
+}
+
+/// The frame of a gyroscope or accelerometer block's digits (`None` for the magnetometer's,
+/// whose reading is kept: [`ImuSensors`]).
+pub(crate) fn imu_frame(read: ImuRead, raw: [i16; 3]) -> Option<Samples> {
+    match read {
+        ImuRead::Gyroscope => Some(one(SensorData::Gyroscope(bno055::degrees_per_s(raw)))),
+        ImuRead::Accelerometer => Some(one(SensorData::Accelerometer(raw))),
+        ImuRead::Field(_) => None,
+    }
+}
+
+impl<I2C, D> ImuSensors<I2C, D> {
+    /// The field kept, if it may serve `axis` at `now_us` without the bus.
+    pub(crate) fn reusable_field(&self, axis: Axis, now_us: u64) -> Option<[i32; 3]> {
         let already_sent = self.delivered.get(axis.index()).copied().unwrap_or(true);
         match self.last_field {
             Some((field, at))
                 if !already_sent && now_us >= at && now_us - at < self.reuse_window_us =>
             {
+                Some(field)
+            }
+            _ => None,
+        }
+    }
+
+    /// A fresh magnetometer block's outcome at `now_us`: the field kept for the other axes, or
+    /// a failure that forgets the last one.
+    pub(crate) fn keep_field(
+        &mut self,
+        raw: Result<[i16; 3], SampleError>,
+        now_us: u64,
+    ) -> Result<[i32; 3], SampleError> {
+        match raw {
+            Ok(raw) => {
+                let field = bno055::nanotesla(raw);
+                self.last_field = Some((field, now_us));
+                self.delivered = [false; 3];
                 Ok(field)
             }
-            _ => match self.read(bno055::reg::MAG_DATA_X_LSB) {
-                Ok(raw) => {
-                    let field = bno055::nanotesla(raw);
-                    self.last_field = Some((field, now_us));
-                    self.delivered = [false; 3];
-                    Ok(field)
-                }
-                Err(error) => {
-                    self.last_field = None;
-                    Err(error)
-                }
-            },
+            Err(error) => {
+                self.last_field = None;
+                Err(error)
+            }
         }
+    }
+
+    /// `field`'s frame of `axis`, the axis marked delivered.
+    pub(crate) fn deliver_field(&mut self, axis: Axis, field: [i32; 3]) -> Samples {
+        if let Some(flag) = self.delivered.get_mut(axis.index()) {
+            *flag = true;
+        }
+        one(SensorData::Magnetometer {
+            axis: can_axis(axis),
+            nanotesla: field.get(axis.index()).copied().unwrap_or(0),
+        })
+    }
+
+    /// Where a stepwise set-up stands; a step forgets the kept field.
+    pub(crate) fn begin_set_up_step(&mut self) -> ImuReinit {
+        self.last_field = None;
+        self.reinit
+    }
+
+    /// The next step of the set-up (`Idle` after the last, or after a failure).
+    pub(crate) fn set_up_at(&mut self, reinit: ImuReinit) {
+        self.reinit = reinit;
+    }
+
+    /// A whole set-up begins (boot).
+    pub(crate) fn begin_set_up(&mut self) {
+        self.last_field = None;
+        self.reinit = ImuReinit::Idle;
     }
 }
 
@@ -553,32 +695,19 @@ impl<I2C: I2c, D: DelayNs> SensorGroup for ImuSensors<I2C, D> {
     }
 
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
-        let axis = match topic {
-            Topic::Gyroscope => {
-                let raw = self.read(bno055::reg::GYR_DATA_X_LSB)?;
-                return Ok(one(SensorData::Gyroscope(bno055::degrees_per_s(raw))));
-            }
-            Topic::Accelerometer => {
-                let mg = self.read(bno055::reg::ACC_DATA_X_LSB)?;
-                return Ok(one(SensorData::Accelerometer(mg)));
-            }
-            Topic::MagnetometerX => Axis::X,
-            Topic::MagnetometerY => Axis::Y,
-            Topic::MagnetometerZ => Axis::Z,
-            other => return Err(SampleError::NotServed(other)),
-        };
-        let field = self.field(axis, now_us)?;
-        if let Some(flag) = self.delivered.get_mut(axis.index()) {
-            *flag = true;
+        let read = ImuRead::of(topic)?;
+        if let ImuRead::Field(axis) = read {
+            let field = match self.reusable_field(axis, now_us) {
+                Some(field) => field,
+                None => {
+                    let raw = self.read(read.first_register());
+                    self.keep_field(raw, now_us)?
+                }
+            };
+            return Ok(self.deliver_field(axis, field));
         }
-        let can_axis = CanAxis::ALL
-            .get(axis.index())
-            .copied()
-            .unwrap_or(CanAxis::X);
-        Ok(one(SensorData::Magnetometer {
-            axis: can_axis,
-            nanotesla: field.get(axis.index()).copied().unwrap_or(0),
-        }))
+        let raw = self.read(read.first_register())?;
+        imu_frame(read, raw).ok_or(SampleError::NotServed(topic))
     }
 }
 
@@ -863,6 +992,42 @@ impl<G: SensorGroup> Supervised<G> {
     /// Initialises `group` (boot, time 0).
     pub fn new(mut group: G) -> Self {
         let result = group.init();
+        Self::set_up(group, result)
+    }
+
+    /// One sample of `topic`: its frames, or none while the group is missing or when it failed.
+    pub fn sample(&mut self, topic: Topic, now_us: u64) -> Samples {
+        match self.gate(self.group.serves(topic), now_us) {
+            Gate::Skip => return Samples::new(),
+            Gate::SetUpStep => {
+                let step = self.group.init_step(now_us);
+                if !self.stepped(step, now_us) {
+                    return Samples::new();
+                }
+            }
+            Gate::Sample => {}
+        }
+        let result = self.group.sample(topic, now_us);
+        self.sampled(result, now_us)
+    }
+}
+
+/// What a supervised group's sample begins with ([`Supervised`]'s policy, shared by the
+/// blocking path and the scripted one, `drivers::scripted`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Gate {
+    /// Nothing: a topic the group does not serve, or a missing group before its retry time.
+    Skip,
+    /// A step of the set-up first ([`SensorGroup::init_step`]), then the sample if it was the
+    /// last ([`Supervised::stepped`]).
+    SetUpStep,
+    /// The sample.
+    Sample,
+}
+
+impl<G> Supervised<G> {
+    /// The group after its boot set-up ended with `result` (time 0): ready, or missing.
+    pub(crate) fn set_up(group: G, result: Result<(), SampleError>) -> Self {
         let mut supervised = Self {
             group,
             ready: result.is_ok(),
@@ -875,6 +1040,15 @@ impl<G: SensorGroup> Supervised<G> {
         if let Err(error) = result {
             supervised.missing(0, error);
         }
+        supervised
+    }
+
+    /// The group whose boot set-up has steps to go at `next_us` (the first samples from then
+    /// take them, one each).
+    pub(crate) fn set_up_pending(group: G, next_us: u64) -> Self {
+        let mut supervised = Self::set_up(group, Ok(()));
+        supervised.ready = false;
+        supervised.retry_at_us = next_us;
         supervised
     }
 
@@ -903,34 +1077,47 @@ impl<G: SensorGroup> Supervised<G> {
         &mut self.group
     }
 
-    /// One sample of `topic`: its frames, or none while the group is missing or when it failed.
-    pub fn sample(&mut self, topic: Topic, now_us: u64) -> Samples {
-        if !self.group.serves(topic) {
-            return Samples::new();
+    /// The group.
+    pub const fn group(&self) -> &G {
+        &self.group
+    }
+
+    /// What a sample at `now_us` of a topic the group `serves` (or not) begins with.
+    pub(crate) fn gate(&self, serves: bool, now_us: u64) -> Gate {
+        if !serves || (!self.ready && now_us < self.retry_at_us) {
+            Gate::Skip
+        } else if !self.ready {
+            Gate::SetUpStep
+        } else {
+            Gate::Sample
         }
-        if !self.ready {
-            if now_us < self.retry_at_us {
-                return Samples::new();
+    }
+
+    /// A set-up step ended with `step`: whether the sample goes on (the last step done).
+    pub(crate) fn stepped(&mut self, step: InitStep, now_us: u64) -> bool {
+        match step {
+            InitStep::Done => {
+                self.ready = true;
+                self.consecutive_failures = 0;
+                true
             }
-            match self.group.init_step(now_us) {
-                InitStep::Done => {
-                    self.ready = true;
-                    self.consecutive_failures = 0;
-                }
-                InitStep::Pending { next_us } => {
-                    // Not a fault: more devices to set up (the next at the next sample), or the
-                    // group's parts are switching modes; the next step at `next_us` (the
-                    // back-off is left as it is).
-                    self.retry_at_us = next_us;
-                    return Samples::new();
-                }
-                InitStep::Failed(error) => {
-                    self.missing(now_us, error);
-                    return Samples::new();
-                }
+            InitStep::Pending { next_us } => {
+                // Not a fault: more devices to set up (the next at the next sample), or the
+                // group's parts are switching modes; the next step at `next_us` (the back-off is
+                // left as it is).
+                self.retry_at_us = next_us;
+                false
+            }
+            InitStep::Failed(error) => {
+                self.missing(now_us, error);
+                false
             }
         }
-        match self.group.sample(topic, now_us) {
+    }
+
+    /// A sample ended with `result`: its frames, or none with the failure counted.
+    pub(crate) fn sampled(&mut self, result: Result<Samples, SampleError>, now_us: u64) -> Samples {
+        match result {
             Ok(samples) => {
                 self.consecutive_failures = 0;
                 self.backoff_us = RETRY_FIRST_US;

@@ -104,26 +104,17 @@ impl<I2C: I2c> Vcnl4020<I2C> {
     /// measurement.
     pub fn init(&mut self, config: &Config) -> Result<(), Error<I2C::Error>> {
         self.check_identity()?;
-        self.write_checked(reg::COMMAND, COMMAND_OFF, 0x07)?;
-        self.write_checked(reg::PROXIMITY_RATE, config.proximity_rate, 0x07)?;
-        self.write_checked(reg::LED_CURRENT, config.led_current, 0x3F)?;
-        self.write_checked(reg::AMBIENT_PARAMETER, config.ambient_parameter, 0xFF)?;
-        // Bits 7..3 of COMMAND are the read-only lock and data-ready flags and the self-clearing
-        // on-demand triggers; only the three enables read back as written.
-        self.write_checked(reg::COMMAND, COMMAND_SELF_TIMED, 0x07)
+        let [off, rate, current, ambient, on] = set_up_writes(config);
+        self.write_checked(off)?;
+        self.write_checked(rate)?;
+        self.write_checked(current)?;
+        self.write_checked(ambient)?;
+        self.write_checked(on)
     }
 
     /// Reads the product-ID register and compares it with [`PRODUCT_ID_VALUE`].
     pub fn check_identity(&mut self) -> Result<(), Error<I2C::Error>> {
-        let id = self.read_register(reg::PRODUCT_ID)?;
-        if id == PRODUCT_ID_VALUE {
-            Ok(())
-        } else {
-            Err(Error::WrongIdentity {
-                expected: PRODUCT_ID_VALUE.into(),
-                found: id.into(),
-            })
-        }
+        identity(self.read_register(reg::PRODUCT_ID)?)
     }
 
     /// The latest proximity result in counts.
@@ -168,17 +159,107 @@ impl<I2C: I2c> Vcnl4020<I2C> {
         if super::is_bus_pattern(&value) {
             self.check_identity()?;
         }
-        Ok(u16::from_be_bytes(value))
+        Ok(result(value))
     }
 
-    fn write_checked(
-        &mut self,
-        register: u8,
-        value: u8,
-        writable: u8,
-    ) -> Result<(), Error<I2C::Error>> {
-        self.i2c.write(ADDRESS, &[register, value])?;
-        let read = self.read_register(register)?;
-        check_register(register, value, read, writable)
+    fn write_checked(&mut self, write: SetUpWrite) -> Result<(), Error<I2C::Error>> {
+        self.i2c.write(ADDRESS, &[write.register, write.value])?;
+        let read = self.read_register(write.register)?;
+        write.check(read)
+    }
+}
+
+/// One register of the set-up: written, then read back and compared on its writable bits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SetUpWrite {
+    /// The register.
+    pub register: u8,
+    /// The value written.
+    pub value: u8,
+    /// The bits that read back as written.
+    pub writable: u8,
+}
+
+impl SetUpWrite {
+    /// The read-back `read` checked against the value written.
+    pub fn check<E>(self, read: u8) -> Result<(), Error<E>> {
+        check_register(self.register, self.value, read, self.writable)
+    }
+}
+
+/// The set-up's five register writes in the datasheet's order (rates only while self-timed
+/// measurement is off): COMMAND off, PROX_RATE, LED_CURRENT, AMBIENT_PARAMETER, COMMAND on.
+pub const fn set_up_writes(config: &Config) -> [SetUpWrite; 5] {
+    [
+        SetUpWrite {
+            register: reg::COMMAND,
+            value: COMMAND_OFF,
+            writable: 0x07,
+        },
+        SetUpWrite {
+            register: reg::PROXIMITY_RATE,
+            value: config.proximity_rate,
+            writable: 0x07,
+        },
+        SetUpWrite {
+            register: reg::LED_CURRENT,
+            value: config.led_current,
+            writable: 0x3F,
+        },
+        SetUpWrite {
+            register: reg::AMBIENT_PARAMETER,
+            value: config.ambient_parameter,
+            writable: 0xFF,
+        },
+        // Bits 7..3 of COMMAND are the read-only lock and data-ready flags and the self-clearing
+        // on-demand triggers; only the three enables read back as written.
+        SetUpWrite {
+            register: reg::COMMAND,
+            value: COMMAND_SELF_TIMED,
+            writable: 0x07,
+        },
+    ]
+}
+
+/// PRODUCT_ID's byte: [`PRODUCT_ID_VALUE`], or [`Error::WrongIdentity`].
+pub fn identity<E>(id: u8) -> Result<(), Error<E>> {
+    if id == PRODUCT_ID_VALUE {
+        Ok(())
+    } else {
+        Err(Error::WrongIdentity {
+            expected: PRODUCT_ID_VALUE.into(),
+            found: id.into(),
+        })
+    }
+}
+
+/// A result register pair (high byte first) as counts.
+pub const fn result(bytes: [u8; 2]) -> u16 {
+    u16::from_be_bytes(bytes)
+}
+
+/// The part's transactions as script operations (decoded by the functions above).
+pub mod ops {
+    use super::{reg, SetUpWrite, ADDRESS};
+    use crate::script::{BuildError, Script};
+
+    /// PRODUCT_ID: write 0x81, read 1 ([`super::identity`]).
+    pub fn identity(script: &mut Script) -> Result<(), BuildError> {
+        script.write_read(ADDRESS, &[reg::PRODUCT_ID], 1)?;
+        Ok(())
+    }
+
+    /// A result pair from `high_register` (the proximity's 0x87, the ambient light's 0x85):
+    /// write it, read 2 ([`super::result`]).
+    pub fn result(script: &mut Script, high_register: u8) -> Result<(), BuildError> {
+        script.write_read(ADDRESS, &[high_register], 2)?;
+        Ok(())
+    }
+
+    /// A set-up register written, then read back: two operations ([`SetUpWrite::check`]).
+    pub fn set_up_write(script: &mut Script, write: SetUpWrite) -> Result<(), BuildError> {
+        script.write(ADDRESS, &[write.register, write.value])?;
+        script.write_read(ADDRESS, &[write.register], 1)?;
+        Ok(())
     }
 }
