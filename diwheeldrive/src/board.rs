@@ -452,15 +452,14 @@ pub mod scripted {
     use amiro_firmware::i2c_engine::Block as _;
     use amiro_firmware::scripted::I2cPort;
     use amiro_sensors::drivers::floor::FloorSensors;
-    use amiro_sensors::drivers::scripted::{OnI2c, ReplayBus, Replayed, Replaying};
-    use amiro_sensors::drivers::suite::{self, SensorGroup, Supervised};
-
+    use amiro_sensors::drivers::scripted::{OnI2c, ScriptedSensors, Scripts};
+    use amiro_sensors::drivers::suite::{self, Supervised};
     use stm32f1xx_hal::pac::{interrupt, Interrupt, NVIC, NVIC_PRIO_BITS};
 
     use super::{Clock, SYSCLK_HZ};
     use crate::levels;
-
     use crate::sensors::{CLIENTS, TIMEOUT_ALLOWANCE_US};
+
     /// One I2C block's bus once the app runs.
     pub type ScriptBus = I2cBus<Registers, CLIENTS>;
     /// A publisher task's slot on a [`ScriptBus`], its timeout on the board's clock.
@@ -550,20 +549,12 @@ pub mod scripted {
         CORE_HZ.store(sysclk_hz, Ordering::Relaxed);
     }
 
-    /// `group` set up by its scripts on the polled master `boot` (the compass and the floor state
-    /// no settling time, so none is waited), then `boot`'s block handed to `bus`: set up again at
-    /// the plan's clocks, its interrupts off until a script starts. A set-up that asked for more
-    /// scripts than a job may run (`Unfinished`: none of these groups does) leaves the group
-    /// missing, retried with its back-off.
-    fn boot_on<G: SensorGroup + Clone + Replaying>(
-        group: G,
-        boot: Master,
-        bus: &ScriptBus,
-    ) -> Supervised<G> {
+    /// `group` set up by its scripts on the polled master `boot` (each script operation by
+    /// operation, a part's settling time waited on the core clock), then `boot`'s block handed
+    /// to `bus`: set up again at the plan's clocks, its interrupts off until a script starts.
+    fn boot_on<G: ScriptedSensors>(group: G, boot: Master, bus: &ScriptBus) -> Supervised<G> {
         // The polled master is consumed here: the block is the engine's from now on.
-        let booted = Replayed::boot(group.clone(), &mut OnI2c(boot))
-            .map(|booted| booted.state().clone())
-            .unwrap_or_else(|_| Replayed::new(Supervised::new(group)).state().clone());
+        let booted = Supervised::boot(group, &mut OnI2c(boot), &mut CoreDelay);
         bus.with_block(|block| {
             block.set_clocks(
                 PCLK1_HZ.load(Ordering::Relaxed),
@@ -574,14 +565,25 @@ pub mod scripted {
         booted
     }
 
+    /// The boot's waits: a busy wait on the core clock (none of the compass's or the floor's
+    /// set-up steps states one today; the set-up's interface takes it).
+    struct CoreDelay;
+
+    impl embedded_hal::delay::DelayNs for CoreDelay {
+        fn delay_ns(&mut self, ns: u32) {
+            let mhz = CORE_HZ.load(Ordering::Relaxed) / 1_000_000;
+            cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(mhz));
+        }
+    }
+
     /// The compass set up on I2C1's polled master, then I2C1 handed to its engine.
-    pub fn boot_compass(boot: Master) -> Supervised<suite::Compass<ReplayBus>> {
-        boot_on(suite::Compass::new(ReplayBus::compass()), boot, &I2C1_BUS)
+    pub fn boot_compass(boot: Master) -> Supervised<suite::Compass<Scripts>> {
+        boot_on(suite::Compass::scripted(), boot, &I2C1_BUS)
     }
 
     /// The floor set up on I2C2's polled master, then I2C2 handed to its engine.
-    pub fn boot_floor(boot: Master) -> Supervised<FloorSensors<ReplayBus>> {
-        boot_on(FloorSensors::new(ReplayBus::muxed()), boot, &I2C2_BUS)
+    pub fn boot_floor(boot: Master) -> Supervised<FloorSensors<Scripts>> {
+        boot_on(FloorSensors::scripted(), boot, &I2C2_BUS)
     }
 
     /// Publisher task `CLIENT`'s slots on I2C1 and I2C2.

@@ -321,9 +321,9 @@ impl Encoders {
 pub mod scripted {
     use amiro_firmware::i2c_sim::{SimBus, SimPort};
     use amiro_sensors::drivers::floor::FloorSensors;
-    use amiro_sensors::drivers::scripted::{OnI2c, ReplayBus, Replayed, Replaying};
-    use amiro_sensors::drivers::suite::{self, SensorGroup, Supervised};
-    use amiro_sensors::sim::{SimCompassBus, SimFloorBus};
+    use amiro_sensors::drivers::scripted::{OnI2c, ScriptBus, ScriptedSensors, Scripts};
+    use amiro_sensors::drivers::suite::{self, Supervised};
+    use amiro_sensors::sim::{NoDelay, SimCompassBus, SimFloorBus};
 
     use super::{Clock, CompassI2c, Fed, FloorI2c};
     use crate::sensors::TIMEOUT_ALLOWANCE_US;
@@ -343,30 +343,18 @@ pub mod scripted {
     pub static I2C2_BUS: SimBus<FloorDevices> = SimBus::new(OnI2c(Fed(SimFloorBus::new())));
 
     /// `group` set up by its scripts on `bus`'s devices (no waits: the simulated parts need none).
-    /// A set-up that asked for more scripts than a job may run leaves the group missing, retried
-    /// with its back-off.
-    fn boot_on<
-        G: SensorGroup + Clone + Replaying,
-        D: amiro_sensors::drivers::scripted::ScriptBus,
-    >(
-        group: G,
-        bus: &SimBus<D>,
-    ) -> Supervised<G> {
-        bus.with_devices(|devices| {
-            Replayed::boot(group.clone(), devices)
-                .map(|booted| booted.state().clone())
-                .unwrap_or_else(|_| Replayed::new(Supervised::new(group)).state().clone())
-        })
+    fn boot_on<G: ScriptedSensors, D: ScriptBus>(group: G, bus: &SimBus<D>) -> Supervised<G> {
+        bus.with_devices(|devices| Supervised::boot(group, devices, &mut NoDelay))
     }
 
     /// The compass set up on I2C1's simulated part.
-    pub fn boot_compass(_boot: CompassI2c) -> Supervised<suite::Compass<ReplayBus>> {
-        boot_on(suite::Compass::new(ReplayBus::compass()), &I2C1_BUS)
+    pub fn boot_compass(_boot: CompassI2c) -> Supervised<suite::Compass<Scripts>> {
+        boot_on(suite::Compass::scripted(), &I2C1_BUS)
     }
 
     /// The floor set up on I2C2's simulated parts.
-    pub fn boot_floor(_boot: FloorI2c) -> Supervised<FloorSensors<ReplayBus>> {
-        boot_on(FloorSensors::new(ReplayBus::muxed()), &I2C2_BUS)
+    pub fn boot_floor(_boot: FloorI2c) -> Supervised<FloorSensors<Scripts>> {
+        boot_on(FloorSensors::scripted(), &I2C2_BUS)
     }
 
     /// Publisher task `CLIENT`'s clients of I2C1 and I2C2.

@@ -9,8 +9,9 @@
 //!
 //! With the feature `scripted-i2c` (revision 1-1 only; not in the shipped image until the analysis
 //! takes the sensor buses, docs/i2c.md "What step (c) wires") the I2C groups — the compass on I2C1,
-//! the floor on I2C2 — sample by script instead: their drivers replayed into I2C scripts
-//! (amiro-sensors' `drivers::scripted`) that the bus runs while the publisher suspends
+//! the floor on I2C2 — sample by script instead: I2C scripts built from the drivers' register
+//! maps and decoded by them (amiro-sensors' `drivers::scripted`) that the bus runs while the
+//! publisher suspends
 //! (`amiro_firmware::scripted::sample_on_bus`, a client slot per publisher task), the group's lock
 //! held only to record and decode, never across the bus. The SPI groups stay as they are.
 use amiro_can::{SensorData, Topic, Velocity};
@@ -216,8 +217,8 @@ mod scripted_groups {
     use amiro_firmware::publisher::SuspendingSampler;
     use amiro_firmware::scripted::{sample_on_bus, BusFault, ScriptPort, ScriptedGroup, Step};
     use amiro_sensors::drivers::floor::FloorSensors;
-    use amiro_sensors::drivers::scripted::{Job, ReplayBus, Replaying, MAX_ROUNDS};
-    use amiro_sensors::drivers::suite::{self, SensorGroup, Supervised};
+    use amiro_sensors::drivers::scripted::Scripts;
+    use amiro_sensors::drivers::suite::{self, Supervised};
     use amiro_sensors::script::Readings;
 
     use super::{sample_drive, sample_inertial_spi, DriveSample, Imu, Samples};
@@ -229,7 +230,7 @@ mod scripted_groups {
         index: usize,
     }
 
-    impl<G: SensorGroup> Scripted<G> {
+    impl<G> Scripted<G> {
         /// The group set up at boot (`supervised`); `index` names it in the health report.
         pub fn new(supervised: Supervised<G>, index: usize) -> Self {
             let group = Self { supervised, index };
@@ -259,22 +260,25 @@ mod scripted_groups {
         }
     }
 
-    impl<G: SensorGroup + Clone + Replaying> ScriptedGroup for Scripted<G> {
-        type Job = Job;
-        const MAX_ROUNDS: usize = MAX_ROUNDS;
+    impl<G> ScriptedGroup for Scripted<G>
+    where
+        Supervised<G>: ScriptedGroup,
+    {
+        type Job = <Supervised<G> as ScriptedGroup>::Job;
+        const MAX_ROUNDS: usize = <Supervised<G> as ScriptedGroup>::MAX_ROUNDS;
 
-        fn new_job() -> Job {
-            Job::new()
+        fn new_job() -> Self::Job {
+            <Supervised<G> as ScriptedGroup>::new_job()
         }
 
-        fn begin(&mut self, job: &mut Job, topic: Topic, now_us: u64) -> Step {
+        fn begin(&mut self, job: &mut Self::Job, topic: Topic, now_us: u64) -> Step {
             let step = self.supervised.begin(job, topic, now_us);
             self.reported(step)
         }
 
         fn resume(
             &mut self,
-            job: &mut Job,
+            job: &mut Self::Job,
             topic: Topic,
             now_us: u64,
             outcome: Result<Readings, BusFault>,
@@ -284,10 +288,10 @@ mod scripted_groups {
         }
     }
 
-    /// The HMC5883L on I2C1, its driver replayed into scripts.
-    pub type Compass = Scripted<suite::Compass<ReplayBus>>;
-    /// The floor sensors behind the PCA9544A on I2C2, replayed into scripts.
-    pub type Floor = Scripted<FloorSensors<ReplayBus>>;
+    /// The HMC5883L on I2C1, its transfers made as scripts.
+    pub type Compass = Scripted<suite::Compass<Scripts>>;
+    /// The floor sensors behind the PCA9544A on I2C2, their transfers made as scripts.
+    pub type Floor = Scripted<FloorSensors<Scripts>>;
 
     /// One sample of a magnetometer axis: the HMC5883L's scripts on I2C1 (not inlined, per topic
     /// family, as the blocking build's: the analysis tells a job's topic by the function).
