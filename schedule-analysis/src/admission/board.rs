@@ -632,47 +632,110 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
         wcrt: [NONE; N],
         first_window: [Time::ZERO; N],
     };
-    if set
+    let scripted = set
         .sources
         .iter()
         .take(set.jobs.len)
-        .any(|s| matches!(s, Source::Engine { .. }))
-    {
+        .any(|s| matches!(s, Source::Engine { .. }));
+    if scripted {
         // Jobs that suspend on a sensor bus: the rounds of views, buses and engine events to their fixed point.
         suspension::analyse(
             input,
-            &set,
+            &mut set,
             &blocking,
-            &shares,
+            &mut shares,
             iterations,
-            &mut bounds.wcrt,
+            &mut bounds,
         )?;
         // Its windows are not all the board analysis's: kept only for the same horizon.
         summary.beyond = true;
-        summary.note_board(input, &set.jobs, &bounds.wcrt);
-        return Ok(());
+    } else {
+        let outcome = run_view(
+            &mut set.timings,
+            &set.jobs,
+            &blocking,
+            &shares,
+            input.limits,
+            None,
+            &mut bounds,
+        )?;
+        *iterations += outcome.iterations;
+        summary.reach = summary.reach.max(outcome.reach);
+        summary.beyond |= outcome.beyond;
     }
+    summary.note_board(input, &set.jobs, &bounds.wcrt);
+    Ok(())
+}
+
+/// What a view of the sensor buses' rounds (`suspension`) changes in the board's jobs: per job whether the view
+/// sets its jitter itself (its release cut), and its view (0: the default; a job whose bound the rounds read is
+/// never settled in closed form).
+#[derive(Clone, Copy)]
+struct Cut<'a, const N: usize> {
+    unreleased: &'a [bool; N],
+    view: &'a [u8; N],
+}
+
+/// The board's jobs as one analysis reads them: as built, or as a view of the rounds changes them.
+struct ViewJobs<'a, const N: usize> {
+    index: &'a JobIndex<N>,
+    cut: Option<Cut<'a, N>>,
+}
+
+impl<const N: usize> board_analysis::Jobs for ViewJobs<'_, N> {
+    fn release(&self, p: usize) -> Option<board_analysis::Release> {
+        if self
+            .cut
+            .is_some_and(|c| c.unreleased.get(p).copied().unwrap_or(true))
+        {
+            return None;
+        }
+        self.index.release(p)
+    }
+    fn level_end(&self, p: usize) -> usize {
+        self.index.level_end(p)
+    }
+    fn verdict_only(&self, p: usize) -> Option<Time> {
+        if self
+            .cut
+            .is_some_and(|c| c.view.get(p).copied().unwrap_or(1) != 0)
+        {
+            return None;
+        }
+        self.index.verdict_only(p)
+    }
+}
+
+/// One [`board_analysis::analyse`] of the board's jobs (`timings`, their jitters left as inherited) under the
+/// board's budget of iterations (`limits`), every job's bound into `bounds`: the board's analysis, and each view
+/// of the sensor buses' rounds (`cut`) — one instance of the analysis linked for both.
+#[inline(never)]
+fn run_view<const N: usize>(
+    timings: &mut [TaskTiming; N],
+    jobs: &JobIndex<N>,
+    blocking: &[Time; N],
+    shares: &[Share; N],
+    limits: &Limits,
+    cut: Option<Cut<'_, N>>,
+    bounds: &mut JobWcrt<N>,
+) -> Result<board_analysis::Outcome, Refusal> {
+    bounds.wcrt = [NONE; N];
     let mut scratch = const { [Counter::ZERO; N] };
-    let len = set.jobs.len;
-    let jobs = board_analysis::BoardJobs {
-        timings: set.timings.get_mut(..len).unwrap_or(&mut []),
+    let len = jobs.len;
+    let set = board_analysis::BoardJobs {
+        timings: timings.get_mut(..len).unwrap_or(&mut []),
         blocking: blocking.get(..len).unwrap_or(&[]),
         shares: shares.get(..len).unwrap_or(&[]),
         scratch: &mut scratch,
     };
-    let outcome = board_analysis::analyse(
-        jobs,
-        &set.jobs,
-        &mut bounds,
-        input.limits,
+    board_analysis::analyse(
+        set,
+        &ViewJobs { index: jobs, cut },
+        bounds,
+        limits,
         board_analysis::IterationBudget::Board,
     )
-    .map_err(|_| Refusal::Budget)?;
-    *iterations += outcome.iterations;
-    summary.reach = summary.reach.max(outcome.reach);
-    summary.beyond |= outcome.beyond;
-    summary.note_board(input, &set.jobs, &bounds.wcrt);
-    Ok(())
+    .map_err(|_| Refusal::Budget)
 }
 
 impl<const M: usize> Summary<M> {
