@@ -109,7 +109,7 @@ enum Cmd {
         #[arg(long, value_name = "1-2|1-1")]
         revision: Option<String>,
         /// Build the QEMU images with these board features as well (a trial the shipped image
-        /// does not enable: DiWheelDrive 1-1's `scripted-i2c`).
+        /// does not enable: `scripted-i2c`); for `robot`, `board/feature` names one board's.
         #[arg(long, value_delimiter = ',')]
         features: Vec<String>,
     },
@@ -261,9 +261,12 @@ fn run(cmd: Cmd) -> Result<bool> {
         }
         // `robot` names the whole robot's scenarios (robot/scenarios/, docs/qemu.md).
         Cmd::Scenarios {
-            boards, revision, ..
+            boards,
+            revision,
+            features,
         } if boards.iter().any(|b| b == "robot") => {
-            robot::scenarios::run_all(&root)?;
+            let extra: Vec<&str> = features.iter().map(String::as_str).collect();
+            robot::scenarios::run_all_with(&root, &extra)?;
             let rest: Vec<String> = boards.into_iter().filter(|b| b != "robot").collect();
             if !rest.is_empty() {
                 let choice = match revision.as_deref() {
@@ -271,7 +274,7 @@ fn run(cmd: Cmd) -> Result<bool> {
                     some => revision::Choice::parse(some)?,
                 };
                 let plan = revision::plan(&select_boards(&rest)?, &choice)?;
-                run_scenarios(&root, &plan, &[])?;
+                run_scenarios(&root, &plan, &extra)?;
             }
             Ok(true)
         }
