@@ -324,31 +324,31 @@ impl<G: ScriptedSensors> Supervised<G> {
         for _ in 0..G::SET_UP_STEPS {
             let mut stage = G::Stage::default();
             let mut next = group.begin_set_up_step(&mut stage, now_us);
-            let mut scripts = 0;
-            let step = loop {
-                match next {
-                    Next::Done(step) => break step,
-                    Next::Run { script, settle_us } => {
-                        let result = if scripts < G::MAX_SCRIPTS {
-                            delay.delay_us(settle_us);
-                            bus.run(&script)
-                        } else {
-                            timed_out()
-                        };
-                        scripts += 1;
-                        next = group.resume_set_up_step(&mut stage, now_us, &result);
-                    }
-                }
-            };
-            match step {
-                InitStep::Done => return Self::set_up(group, Ok(())),
-                InitStep::Failed(error) => return Self::set_up(group, Err(error)),
-                InitStep::Pending { next_us } => {
+            // One more pass than scripts: the last hands the step a timeout, which every group
+            // ends its step on.
+            for scripts in 0..=G::MAX_SCRIPTS {
+                let Next::Run { script, settle_us } = next else {
+                    break;
+                };
+                let result = if scripts < G::MAX_SCRIPTS {
+                    delay.delay_us(settle_us);
+                    bus.run(&script)
+                } else {
+                    timed_out()
+                };
+                next = group.resume_set_up_step(&mut stage, now_us, &result);
+            }
+            match next {
+                Next::Done(InitStep::Done) => return Self::set_up(group, Ok(())),
+                Next::Done(InitStep::Failed(error)) => return Self::set_up(group, Err(error)),
+                Next::Done(InitStep::Pending { next_us }) => {
                     delay.delay_us(
                         u32::try_from(next_us.saturating_sub(now_us)).unwrap_or(u32::MAX),
                     );
                     now_us = next_us;
                 }
+                // A step that did not end: the set-up goes on stepwise at the first samples.
+                Next::Run { .. } => break,
             }
         }
         Self::set_up_pending(group, now_us)
@@ -626,41 +626,38 @@ pub enum FloorStage {
         /// Its set-up.
         set_up: SensorSetUp,
     },
-    /// The periodic identity check of the four sensors is out.
-    Identities,
-    /// The round's reads from sensor `next` on are out, after the identity read of
-    /// `checked` (the sensor before, whose reading was a dead bus's pattern).
-    Round {
-        /// The sensor whose identity the script reads first.
-        checked: Option<u8>,
-        /// The first sensor whose proximity the script reads.
-        next: u8,
-        /// The counts read so far.
-        counts: [u16; FLOOR_SENSORS],
+    /// The identity reads of the sensors in `sensors` (a bit per sensor) are out: all four for
+    /// the periodic check before a round, or after a round the sensors whose count was a dead
+    /// bus's pattern, with the round's `counts`.
+    Identities {
+        /// The sensors checked, bit k for sensor k.
+        sensors: u8,
+        /// The round's counts, once it was read.
+        counts: Option<[u16; FLOOR_SENSORS]>,
     },
+    /// The round's reads are out.
+    Round,
+}
+
+/// Every floor sensor, a bit each.
+const ALL_FLOOR_SENSORS: u8 = (1 << FLOOR_SENSORS) - 1;
+
+/// The sensors of `mask` in order.
+fn floor_sensors_of(mask: u8) -> impl Iterator<Item = u8> {
+    (0..FLOOR_SENSORS as u8).filter(move |k| mask & (1 << k) != 0)
 }
 
 impl FloorStage {
     /// The sensor operation `op` of the stage's script addresses (each sensor's operations
     /// follow its select).
     fn sensor_of(self, op: u8) -> u8 {
-        let pair = op / 2;
+        let pair = usize::from(op / 2);
         match self {
             FloorStage::SetUp { sensor, .. } => sensor,
-            FloorStage::Round {
-                checked: Some(k),
-                next,
-                ..
-            } => match pair {
-                0 => k,
-                p => next.saturating_add(p - 1),
-            },
-            FloorStage::Round {
-                checked: None,
-                next,
-                ..
-            } => next.saturating_add(pair),
-            FloorStage::Identities | FloorStage::Begun => pair,
+            FloorStage::Identities { sensors, .. } => {
+                floor_sensors_of(sensors).nth(pair).unwrap_or(0)
+            }
+            FloorStage::Round | FloorStage::Begun => pair as u8,
         }
     }
 }
@@ -685,17 +682,25 @@ impl FloorSensors<Scripts> {
         ))
     }
 
-    /// The round's script: `checked`'s identity, then the proximity of every sensor from
-    /// `next` on, each behind its select.
-    fn round_script(&self, checked: Option<u8>, next: u8) -> Result<Script, Error<ErrorKind>> {
+    /// The round's script: each sensor's proximity behind its select.
+    fn round_script(&self) -> Result<Script, Error<ErrorKind>> {
         build(|s| {
-            if let Some(&k) = checked.and_then(|k| FloorSensor::ALL.get(usize::from(k))) {
-                self.select(s, k)?;
-                vcnl4020::ops::identity(s)?;
-            }
-            for &sensor in FloorSensor::ALL.get(usize::from(next)..).unwrap_or(&[]) {
+            for sensor in FloorSensor::ALL {
                 self.select(s, sensor)?;
                 vcnl4020::ops::result(s, vcnl4020::reg::PROXIMITY_RESULT)?;
+            }
+            Ok(())
+        })
+    }
+
+    /// The identity reads of the sensors of `mask`, each behind its select.
+    fn identities_script(&self, mask: u8) -> Result<Script, Error<ErrorKind>> {
+        build(|s| {
+            for k in floor_sensors_of(mask) {
+                if let Some(&sensor) = FloorSensor::ALL.get(usize::from(k)) {
+                    self.select(s, sensor)?;
+                    vcnl4020::ops::identity(s)?;
+                }
             }
             Ok(())
         })
@@ -714,8 +719,8 @@ fn floor_failed(sensor: u8, error: Error<ErrorKind>) -> Result<Samples, SampleEr
 impl ScriptedSensors for FloorSensors<Scripts> {
     type Stage = FloorStage;
     /// The last sensor's set-up step (its identity and five writes), then a round with the
-    /// identity check and a dead bus's pattern at every sensor.
-    const MAX_SCRIPTS: usize = 6 + 2 + FLOOR_SENSORS;
+    /// periodic identity check before it and the identity check of its patterns after it.
+    const MAX_SCRIPTS: usize = 6 + 3;
     const SET_UP_STEPS: usize = FLOOR_SENSORS;
 
     fn topics(&self) -> &'static [Topic] {
@@ -787,21 +792,13 @@ impl ScriptedSensors for FloorSensors<Scripts> {
             return Next::Done(Err(SampleError::NotServed(topic)));
         }
         let (at, script) = if self.identity_check_due() {
-            let script = build(|s| {
-                for sensor in FloorSensor::ALL {
-                    self.select(s, sensor)?;
-                    vcnl4020::ops::identity(s)?;
-                }
-                Ok(())
-            });
-            (FloorStage::Identities, script)
-        } else {
-            let round = FloorStage::Round {
-                checked: None,
-                next: 0,
-                counts: [0; FLOOR_SENSORS],
+            let at = FloorStage::Identities {
+                sensors: ALL_FLOOR_SENSORS,
+                counts: None,
             };
-            (round, self.round_script(None, 0))
+            (at, self.identities_script(ALL_FLOOR_SENSORS))
+        } else {
+            (FloorStage::Round, self.round_script())
         };
         run_or(stage, at, script, 0, |error| floor_failed(0, error))
     }
@@ -816,63 +813,54 @@ impl ScriptedSensors for FloorSensors<Scripts> {
         let r = match result {
             Ok(r) => r,
             Err(error) => {
-                return Next::Done(floor_failed(
-                    stage.sensor_of(error.operation),
-                    bus_error(error),
-                ))
+                let sensor = stage.sensor_of(error.operation);
+                return Next::Done(floor_failed(sensor, bus_error(error)));
             }
         };
         match *stage {
-            FloorStage::Identities => {
-                for sensor in 0..FLOOR_SENSORS as u8 {
-                    let op = usize::from(sensor) * 2 + 1;
-                    if let Err(error) = block::<1>(r, op).and_then(|[id]| vcnl4020::identity(id)) {
+            FloorStage::Identities { sensors, counts } => {
+                // In sensor order: the first that fails is the sample's failure, as the
+                // blocking driver stops at it.
+                for (i, sensor) in floor_sensors_of(sensors).enumerate() {
+                    let checked = block::<1>(r, 2 * i + 1).and_then(|[id]| vcnl4020::identity(id));
+                    if let Err(error) = checked {
                         return Next::Done(floor_failed(sensor, error));
                     }
                 }
-                let round = FloorStage::Round {
-                    checked: None,
-                    next: 0,
-                    counts: [0; FLOOR_SENSORS],
-                };
-                let script = self.round_script(None, 0);
-                run_or(stage, round, script, 0, |error| floor_failed(0, error))
+                match counts {
+                    Some(counts) => Next::Done(Ok(one(SensorData::FloorProximity(counts)))),
+                    None => {
+                        let script = self.round_script();
+                        run_or(stage, FloorStage::Round, script, 0, |error| {
+                            floor_failed(0, error)
+                        })
+                    }
+                }
             }
-            FloorStage::Round {
-                checked,
-                next,
-                mut counts,
-            } => {
-                let mut op = 1;
-                if let Some(k) = checked {
-                    if let Err(error) = block::<1>(r, op).and_then(|[id]| vcnl4020::identity(id)) {
-                        return Next::Done(floor_failed(k, error));
-                    }
-                    op += 2;
-                }
-                for sensor in next..FLOOR_SENSORS as u8 {
-                    let bytes = match block::<2>(r, op) {
+            FloorStage::Round => {
+                let mut counts = [0; FLOOR_SENSORS];
+                let mut patterns = 0u8;
+                for (k, count) in counts.iter_mut().enumerate() {
+                    let bytes = match block::<2>(r, 2 * k + 1) {
                         Ok(bytes) => bytes,
-                        Err(error) => return Next::Done(floor_failed(sensor, error)),
+                        Err(error) => return Next::Done(floor_failed(k as u8, error)),
                     };
-                    op += 2;
-                    if let Some(count) = counts.get_mut(usize::from(sensor)) {
-                        *count = vcnl4020::result(bytes);
-                    }
+                    *count = vcnl4020::result(bytes);
                     if is_bus_pattern(&bytes) {
-                        // As the blocking driver: the sensor's identity first, then the rest.
-                        let round = FloorStage::Round {
-                            checked: Some(sensor),
-                            next: sensor + 1,
-                            counts,
-                        };
-                        let script = self.round_script(Some(sensor), sensor + 1);
-                        return run_or(stage, round, script, 0, |error| {
-                            floor_failed(sensor, error)
-                        });
+                        patterns |= 1 << k;
                     }
                 }
-                Next::Done(Ok(one(SensorData::FloorProximity(counts))))
+                if patterns == 0 {
+                    return Next::Done(Ok(one(SensorData::FloorProximity(counts))));
+                }
+                // As the blocking driver: a count of 0 or 0xFFFF is passed on only after the
+                // sensor's PRODUCT_ID still answers.
+                let at = FloorStage::Identities {
+                    sensors: patterns,
+                    counts: Some(counts),
+                };
+                let script = self.identities_script(patterns);
+                run_or(stage, at, script, 0, |error| floor_failed(0, error))
             }
             FloorStage::SetUp { .. } | FloorStage::Begun => {
                 Next::Done(floor_failed(0, Error::Bus(ErrorKind::Other)))
@@ -1035,17 +1023,21 @@ impl RingRead {
 
     /// The last script's result in.
     pub fn complete(&mut self, result: &ScriptResult) {
-        let involved: heapless::Vec<(usize, RingSensor), RING_BUS_SENSORS> =
-            self.involved().map(|(k, _, s)| (k, s)).collect();
+        // The sensors the script read, in its order (a copy: the loop below changes them).
+        let mut involved = [None; RING_BUS_SENSORS];
+        for (slot, (k, _, sensor)) in involved.iter_mut().zip(self.involved()) {
+            *slot = Some((k, sensor));
+        }
+        let involved = involved.into_iter().flatten();
         match result {
             Err(error) => {
-                let failed = involved.get(usize::from(error.operation / 2));
-                if let Some(slot) = failed.and_then(|&(k, _)| self.sensors.get_mut(k)) {
+                let failed = involved.clone().nth(usize::from(error.operation / 2));
+                if let Some(slot) = failed.and_then(|(k, _)| self.sensors.get_mut(k)) {
                     *slot = RingSensor::Failed;
                 }
             }
             Ok(r) => {
-                for (i, &(k, sensor)) in involved.iter().enumerate() {
+                for (i, (k, sensor)) in involved.enumerate() {
                     let op = 2 * i + 1;
                     let next = match sensor {
                         RingSensor::Check(count) => match block::<1>(r, op) {
@@ -1200,8 +1192,9 @@ impl<D> ImuSensors<Scripts, D> {
 
 impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
     type Stage = ImuStage;
-    /// Set-up step 2's two scripts, then the sample's.
-    const MAX_SCRIPTS: usize = 3;
+    /// Set-up step 1's or step 2's two scripts (a step that ends pending takes no sample), or
+    /// step 3's one and the sample's.
+    const MAX_SCRIPTS: usize = 2;
     const SET_UP_STEPS: usize = 3;
 
     fn topics(&self) -> &'static [Topic] {
