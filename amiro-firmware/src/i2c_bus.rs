@@ -144,7 +144,7 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
 
     /// The block's event interrupt (I2Cx_EV): reads SR1 and advances the running script.
     pub fn on_event(&self) {
-        let ended = self.with(|inner| {
+        let (ended, awaiting) = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
             let running = inner.running.and_then(|index| inner.slots.get_mut(index));
             let progress = match running {
@@ -158,34 +158,39 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                     Progress::Running
                 }
             };
-            match progress {
+            let ended = match progress {
                 Progress::Running => None,
                 Progress::Finished(result) => Some(inner.end(result)),
-            }
+            };
+            (ended, inner.engine.awaiting().is_some())
         });
-        self.wake_after(ended);
+        self.wake_after(ended, awaiting);
     }
 
     /// The block's error interrupt (I2Cx_ER).
     pub fn on_error(&self) {
-        let ended = self.with(|inner| {
+        let (ended, awaiting) = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
             let progress = inner.engine.on_error(sr1, &mut inner.block);
-            match progress {
+            let ended = match progress {
                 Progress::Running => None,
                 Progress::Finished(result) => Some(inner.end(result)),
-            }
+            };
+            (ended, inner.engine.awaiting().is_some())
         });
-        self.wake_after(ended);
+        self.wake_after(ended, awaiting);
     }
 
-    /// After an interrupt's step: the condition wait ([`I2cBus::settle`]), then the wakers, outside
-    /// the critical section, in one call of [`wake`] (the execution-time analysis charges it by
-    /// parts: tools/engine-bound): a finished client's at a script's end, the re-arm task's at a
-    /// stall. (The two do not come from one event: after a script's end the wait is for a STOP,
-    /// the next script's START, which stalls nothing.)
-    fn wake_after(&self, ended: Option<[Option<Waker>; 2]>) {
-        match (ended, self.settle()) {
+    /// After an interrupt's step: the condition wait ([`I2cBus::settle`]) where the step left the
+    /// engine awaiting one (an operation's start, a repeated START: not called otherwise, so that
+    /// the execution-time analysis charges its code per START, not per event), then the wakers,
+    /// outside the critical section, in one call of [`wake`] (charged by parts:
+    /// tools/engine-bound): a finished client's at a script's end, the re-arm task's at a stall.
+    /// (The two do not come from one event: after a script's end the wait is for a STOP, the next
+    /// script's START, which stalls nothing.)
+    fn wake_after(&self, ended: Option<[Option<Waker>; 2]>, awaiting: bool) {
+        let stalled = if awaiting { self.settle() } else { None };
+        match (ended, stalled) {
             (Some([finished, started]), stalled) => wake([finished, started, stalled]),
             (None, Some(stalled)) => wake([Some(stalled), None, None]),
             (None, None) => {}

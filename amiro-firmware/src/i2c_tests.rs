@@ -424,6 +424,24 @@ fn a_configuration_write_sends_every_byte_then_stop() {
 /// DiWheelDrive's floor round: four VCNL4020 at one address behind the PCA9544A's four channels,
 /// each selected (a transaction of its own: the mux connects at the STOP) then read twice.
 fn floor() -> (Model, Script) {
+    let model = floor_model();
+    let mut script = Script::new();
+    for channel in 0..4u8 {
+        script
+            .write(pca9544a::AMIRO_ADDRESS, &[pca9544a::ENABLE | channel])
+            .unwrap();
+        script
+            .write_read(vcnl4020::ADDRESS, &[vcnl4020::reg::PROXIMITY_RESULT], 2)
+            .unwrap();
+        script
+            .write_read(vcnl4020::ADDRESS, &[vcnl4020::reg::AMBIENT_RESULT], 2)
+            .unwrap();
+    }
+    (model, script)
+}
+
+/// The floor's bus: the PCA9544A and four VCNL4020 at one address, one behind each channel.
+fn floor_model() -> Model {
     let mut devices = Vec::new();
     for channel in 0..4u8 {
         let mut sensor = Device::new(vcnl4020::ADDRESS);
@@ -438,19 +456,7 @@ fn floor() -> (Model, Script) {
         address: pca9544a::AMIRO_ADDRESS,
         ..Mux::default()
     });
-    let mut script = Script::new();
-    for channel in 0..4u8 {
-        script
-            .write(pca9544a::AMIRO_ADDRESS, &[pca9544a::ENABLE | channel])
-            .unwrap();
-        script
-            .write_read(vcnl4020::ADDRESS, &[vcnl4020::reg::PROXIMITY_RESULT], 2)
-            .unwrap();
-        script
-            .write_read(vcnl4020::ADDRESS, &[vcnl4020::reg::AMBIENT_RESULT], 2)
-            .unwrap();
-    }
-    (model, script)
+    model
 }
 
 #[test]
@@ -1284,4 +1290,62 @@ fn a_device_holding_scl_for_ever_at_a_repeated_start_stops_after_max_rearms() {
         .as_mut()
         .poll(&mut Context::from_waker(&waker))
         .is_pending());
+}
+
+/// The engine's interrupts per sample script of DiWheelDrive 1-1's groups, counted on the register
+/// model with the scripts the groups build (the events a timing file states for them,
+/// `tests/scripted_i2c_analysis.rs`): the HMC5883L's sample 11 (SB, ADDR, TXE, BTF; SB, ADDR,
+/// RXNE × 3, BTF, RXNE), the floor's round 44 (per sensor the select's SB, ADDR, TXE, BTF and the
+/// proximity read's SB, ADDR, TXE, BTF, SB, ADDR, BTF).
+#[test]
+fn dwd_sample_scripts_raise_the_stated_events() {
+    use amiro_can::Topic;
+    use amiro_sensors::drivers::floor::FloorSensors;
+    use amiro_sensors::drivers::scripted::{Job, Next, ScriptedSensors, Scripts};
+    use amiro_sensors::drivers::suite::{Compass, Supervised};
+    use amiro_sensors::sim::{NoDelay, SimCompassBus, SimFloorBus};
+
+    fn first_script<G: ScriptedSensors>(group: &mut Supervised<G>, topic: Topic) -> Script {
+        let mut job = Job::new();
+        match group.begin_scripted(&mut job, topic, 1_000) {
+            Next::Run { script, .. } => script,
+            Next::Done(_) => panic!("no script for {topic:?}"),
+        }
+    }
+    fn entries(model: Model, script: Script) -> usize {
+        let bus = I2cBus::new(model, [1]);
+        let (woken, waker) = test_waker::counting();
+        let mut transfer = pin!(bus.run(bus.client(0).unwrap(), script));
+        assert!(transfer
+            .as_mut()
+            .poll(&mut Context::from_waker(&waker))
+            .is_pending());
+        let entries = pump_counting(&bus);
+        assert_eq!(woken.count(), 1);
+        assert!(matches!(
+            transfer.poll(&mut Context::from_waker(&waker)),
+            Poll::Ready(Ok(_))
+        ));
+        bus.with_block(|m| {
+            check_wire(m, &script);
+        });
+        entries
+    }
+
+    let mut compass = Supervised::boot(
+        Compass::<Scripts>::scripted(),
+        &mut SimCompassBus::new(),
+        &mut NoDelay,
+    );
+    let script = first_script(&mut compass, Topic::MagnetometerX);
+    let model = Model::new(vec![Device::new(hmc5883l::ADDRESS)]);
+    assert_eq!(entries(model, script), 11);
+
+    let mut floor = Supervised::boot(
+        FloorSensors::<Scripts>::scripted(),
+        &mut SimFloorBus::new(),
+        &mut NoDelay,
+    );
+    let script = first_script(&mut floor, Topic::FloorProximity);
+    assert_eq!(entries(floor_model(), script), 44);
 }

@@ -537,3 +537,35 @@ fn a_topics_script_and_its_siblings_through_the_chip() {
         assert_eq!(response(publisher_tasks, 569), None);
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 16, .. ProptestConfig::default() })]
+
+    /// A board with scripts keeps its analysis between decisions as any board does (for the same horizon only): a
+    /// sequence of requests on the scripted workspace decided with the cache gets the decisions of the check
+    /// without it.
+    #[test]
+    fn the_cache_changes_no_decision_with_scripts(
+        requests in proptest::collection::vec((any::<prop::sample::Index>(), 0usize..4, 0u32..1000), 1..12),
+    ) {
+        let robot = robot();
+        let topics = publishable();
+        let mut running: Vec<Stream> = Vec::new();
+        let mut cache = admission::Cache::<32>::new();
+        for (index, level, scale) in requests {
+            let topic = index.get(&topics);
+            let period = (1000.0 * 1000f64.powf(f64::from(scale) / 1000.0)).round() as u64;
+            let request = robot
+                .publisher_stream(topic, LEVELS[level], Time::from_us(period), None)
+                .expect("stream");
+            let plain = robot.with_table(|t| admission::admit::<48, 32>(t, &running, &request, false));
+            let cached = robot.with_table(|t| admission::admit_cached::<48, 32>(t, &running, &request, &mut cache, false));
+            prop_assert_eq!(plain.refusal, cached.refusal, "{} at {} µs {}", topic, period, LEVELS[level]);
+            prop_assert_eq!(plain.floor, cached.floor);
+            if plain.admitted() {
+                running.retain(|s| s.sender.map(|x| (x.board, x.topic)) != request.sender.map(|x| (x.board, x.topic)));
+                running.push(request);
+            }
+        }
+    }
+}
