@@ -522,6 +522,13 @@ fn a_timing_file_topic_states_several_scripts_and_the_engine_names_its_handlers(
     };
     write(&timing);
     let built = build().expect("builds");
+    // The machine code's row of the handler (DiWheelDrive's generated bounds file bounds `can_status`) is the
+    // engine's, not a misnamed budget.
+    assert!(
+        !built.warnings.iter().any(|w| w.contains("`can_status`")),
+        "{:?}",
+        built.warnings
+    );
     let system = built.model.validate().expect("valid");
     let dwd = system
         .boards
