@@ -392,9 +392,9 @@ fn check(root: &Path) -> Result<()> {
         cargo(&root.join(board.name), &args)
             .with_context(|| format!("clippy on the QEMU build of {}", build.stem()))?;
     }
-    // DiWheelDrive 1-1's `scripted-i2c` trial (docs/i2c.md; not in the shipped image): linted for
-    // the chip and QEMU, and built for the chip in a target directory of its own (its QEMU image is
-    // built and run by the scenarios).
+    // The `scripted-i2c` trials, DiWheelDrive 1-1's and PowerManagement's (docs/i2c.md; not in the
+    // shipped images): linted for the chip and QEMU, and built for the chip in a target directory
+    // of their own (their QEMU images are built and run by the scenarios).
     for build in scripted_i2c_builds(&every) {
         build.select_models();
         let trial = target_dir(root).join("scripted-i2c");
@@ -423,11 +423,14 @@ fn check(root: &Path) -> Result<()> {
     Ok(())
 }
 
-/// DiWheelDrive 1-1, the one board revision with the `scripted-i2c` trial.
+/// The board images with the `scripted-i2c` trial: DiWheelDrive 1-1 and PowerManagement.
 fn scripted_i2c_builds(every: &[revision::Build]) -> Vec<revision::Build> {
     every
         .iter()
-        .filter(|b| b.board.name == "diwheeldrive" && b.revision.name == "1-1")
+        .filter(|b| {
+            (b.board.name == "diwheeldrive" && b.revision.name == "1-1")
+                || b.board.name == "powermgmt"
+        })
         .cloned()
         .collect()
 }
@@ -501,14 +504,18 @@ fn test(root: &Path) -> Result<()> {
     timed("the boards' QEMU scenarios", || {
         run_scenarios(root, &every, &[])
     })?;
-    // DiWheelDrive 1-1's I2C groups sampled by script (feature `scripted-i2c`, docs/i2c.md): not
-    // in the shipped image yet, its scenarios run all the same.
+    // DiWheelDrive 1-1's and PowerManagement's I2C groups sampled by script (feature
+    // `scripted-i2c`, docs/i2c.md): not in the shipped images yet, their scenarios run all the same.
     let scripted = scripted_i2c_builds(&every);
-    timed("DiWheelDrive 1-1's scenarios with scripted-i2c", || {
+    timed("the scenarios with scripted-i2c", || {
         run_scenarios(root, &scripted, &["scripted-i2c"])
     })?;
     // The whole robot on one bus (issue 23), with its bus report against the analysis.
     timed("the robot scenarios", || robot::scenarios::run_all(root))?;
+    // … and with PowerManagement sampling by script (its trial; DiWheelDrive 1-1's is not in it).
+    timed("the robot scenarios with powermgmt/scripted-i2c", || {
+        robot::scenarios::run_all_with(root, &["powermgmt/scripted-i2c"])
+    })?;
     // The production images booted in QEMU (issue 21): every revision's, as built above.
     timed("the smoke runs", || smoke::run(root, &every, true))?;
     // After the scenarios: their bus logs are among what the other CAN tools must read.
