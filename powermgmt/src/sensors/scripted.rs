@@ -55,6 +55,19 @@ pub struct ScriptedBus {
     gauge_faults: u32,
 }
 
+/// A bus's state behind its RTIC lock, as the jobs below take it: one code for every task's
+/// lock (each task's resource proxy is a type of its own; the jobs are not made once per task).
+pub trait BusLock {
+    /// Runs `f` on the bus's state under the lock.
+    fn with(&mut self, f: &mut dyn FnMut(&mut ScriptedBus));
+}
+
+impl<M: rtic::Mutex<T = ScriptedBus>> BusLock for M {
+    fn with(&mut self, f: &mut dyn FnMut(&mut ScriptedBus)) {
+        self.lock(|bus| f(bus));
+    }
+}
+
 /// A script's outcome as amiro-sensors' decoders take it (a client's timeout is the kind a polled
 /// master's timeout had).
 fn result_of(outcome: Result<Readings, BusFault>) -> ScriptResult {
@@ -245,12 +258,11 @@ impl ScriptedBus {
     }
 
     /// A gauge read's end: a failed one counted, and the bus's faults reported.
-    fn end_gauge_read(&mut self, status: Option<BatteryStatus>) -> Option<BatteryStatus> {
+    fn end_gauge_read(&mut self, status: Option<BatteryStatus>) {
         if status.is_none() {
             self.gauge_faults = self.gauge_faults.saturating_add(1);
         }
         self.report();
-        status
     }
 
     /// This bus's faults (missed ring samples and failed gauge reads) and whether a sensor is out
@@ -288,21 +300,27 @@ async fn set_up_on_bus(port: &mut impl ScriptPort, set_up: &mut SensorSetUp) -> 
 /// job by the function.
 #[inline(never)]
 pub async fn sample_ring(
-    bus: &mut impl rtic::Mutex<T = ScriptedBus>,
+    bus: &mut dyn BusLock,
     port: &mut impl ScriptPort,
     now_us: u64,
     sample: &mut RingSample,
 ) {
-    let set_up = match bus.lock(|b| b.due_set_up(now_us)) {
+    let mut due = None;
+    bus.with(&mut |b| due = b.due_set_up(now_us));
+    let set_up = match due {
         Some((k, mut set_up)) => Some((k, set_up_on_bus(port, &mut set_up).await)),
         None => None,
     };
-    let (mut read, places) = bus.lock(|b| {
+    let mut planned = None;
+    bus.with(&mut |b| {
         if let Some((k, ready)) = set_up {
             b.end_set_up(k, now_us, ready);
         }
-        b.ring_read()
+        planned = Some(b.ring_read());
     });
+    let Some((mut read, places)) = planned else {
+        return;
+    };
     for _ in 0..RingRead::MAX_SCRIPTS {
         let script = match read.script() {
             Some(Ok(script)) => script,
@@ -312,7 +330,7 @@ pub async fn sample_ring(
         let result = result_of(port.run(script, 0).await);
         read.complete(&result);
     }
-    bus.lock(|b| b.end_ring_read(now_us, &read, places, sample));
+    bus.with(&mut |b| b.end_ring_read(now_us, &read, places, sample));
 }
 
 /// One status read of the bus's fuel gauge, each transfer a script on `port` after the gauge's
@@ -320,7 +338,7 @@ pub async fn sample_ring(
 /// as [`sample_ring`].
 #[inline(never)]
 pub async fn read_gauge(
-    bus: &mut impl rtic::Mutex<T = ScriptedBus>,
+    bus: &mut dyn BusLock,
     port: &mut impl ScriptPort,
 ) -> Option<BatteryStatus> {
     let mut read = StatusRead::new();
@@ -341,13 +359,14 @@ pub async fn read_gauge(
             break;
         }
     }
-    bus.lock(|b| b.end_gauge_read(status))
+    bus.with(&mut |b| b.end_gauge_read(status));
+    status
 }
 
 /// Both gauges' status, front (I2C2) then rear (I2C1), each on its bus through the task's ports.
 pub async fn read_batteries(
-    rear: &mut impl rtic::Mutex<T = ScriptedBus>,
-    front: &mut impl rtic::Mutex<T = ScriptedBus>,
+    rear: &mut dyn BusLock,
+    front: &mut dyn BusLock,
     rear_port: &mut impl ScriptPort,
     front_port: &mut impl ScriptPort,
 ) -> (Option<BatteryStatus>, Option<BatteryStatus>) {
