@@ -368,72 +368,23 @@ fn the_check_decides_most_sets_with_scripts() {
 /// admits at the figure itself.
 #[test]
 fn the_hand_worked_script_through_the_chip() {
-    let decide = |job_deadline_us: u32, background_deadline_us: u32| {
-        let tasks = [
-            TaskRow {
-                cost: 50_000,
-                period: 10_000_000,
-                deadline: job_deadline_us * 1000,
-                jitter: 0,
-                priority: 3,
-                released_by: NO_RELEASER,
-                own_frame: false,
-                deadline_own_frames: 0,
-                share: SHARE_AT_RUNTIME,
-            },
-            TaskRow {
-                cost: 100_000,
-                period: 1_000_000,
-                deadline: background_deadline_us * 1000,
-                priority: 1,
-                ..TaskRow {
-                    cost: 0,
-                    period: 0,
-                    deadline: NO_DEADLINE,
-                    jitter: 0,
-                    priority: 0,
-                    released_by: NO_RELEASER,
-                    own_frame: false,
-                    deadline_own_frames: 0,
-                    share: SHARE_AT_RUNTIME,
-                }
-            },
-        ];
-        let scripts = [ScriptRow {
+    let plain = (
+        ScriptRow {
             bus: 0,
             bus_time: 150_000,
             events: 14,
             starts: 1,
             settle: 0,
-        }];
-        let task_scripts = [(0u8, &scripts[..])];
-        let buses = [BusRow {
+        },
+        BusRow {
             engine_priority: 7,
             per_event: 3_000,
             per_script: 0,
             condition_wait: 0,
-        }];
-        let boards = [BoardTable {
-            name: "b",
-            tasks: &tasks,
-            sections: &[],
-            blocking: &[],
-            topics: &[],
-            shortest_dlc: 0,
-            levels: [None; 4],
-            monotonic: None,
-            can_tx: None,
-            command_handler: None,
-            buses: &buses,
-            task_scripts: &task_scripts,
-            publisher_tasks: [0; 4],
-        }];
-        let robot = RobotTable {
-            boards: &boards,
-            bit_time: Time::from_ns(1000),
-            frame_cost: FrameCost::Exact,
-        };
-        admission::evaluate::<8, 8>(&robot, &[]).refusal
+        },
+    );
+    let decide = |job_deadline_us: u32, background_deadline_us: u32| {
+        decide_one(plain, job_deadline_us, background_deadline_us)
     };
     assert_eq!(decide(284, 192), None);
     let named = |refusal: Option<Refusal>| match refusal {
@@ -446,6 +397,91 @@ fn the_hand_worked_script_through_the_chip() {
     };
     assert_eq!(named(decide(283, 192)), (task(0), Some(Time::from_us(284))));
     assert_eq!(named(decide(284, 191)), (task(1), Some(Time::from_us(192))));
+    // `the_engine_charged_by_its_parts`: 7 bytes and two STARTs (167.5 µs on the wire, 10 µs stretch, 18 events),
+    // 4 µs per script and a 5 µs condition wait: the engine row 18 × 3 + 4 + 2 × 5 = 68 µs, the bus time
+    // 177.5 + 12 + 2 × 8 + 15 × 3 = 250.5 µs, the job 50 + 250.5 + 68 = 368.5 µs.
+    let parts = (
+        ScriptRow {
+            bus: 0,
+            bus_time: 177_500,
+            events: 18,
+            starts: 2,
+            settle: 0,
+        },
+        BusRow {
+            per_script: 4_000,
+            condition_wait: 5_000,
+            ..plain.1
+        },
+    );
+    assert_eq!(
+        named(decide_one(parts, 368, 1000)),
+        (task(0), Some(Time::from_ns(368_500)))
+    );
+    assert_eq!(decide_one(parts, 369, 1000), None);
+}
+
+/// The hand-worked board of `tests/sensor_buses.rs` as chip rows: a job of 50 µs every 10 ms at priority 3 running
+/// `script` on a bus with `engine`, and a task of 100 µs every 1 ms at priority 1, with these deadlines.
+fn decide_one(
+    (script, engine): (ScriptRow, BusRow),
+    job_deadline_us: u32,
+    background_deadline_us: u32,
+) -> Option<Refusal> {
+    let tasks = [
+        TaskRow {
+            cost: 50_000,
+            period: 10_000_000,
+            deadline: job_deadline_us * 1000,
+            jitter: 0,
+            priority: 3,
+            released_by: NO_RELEASER,
+            own_frame: false,
+            deadline_own_frames: 0,
+            share: SHARE_AT_RUNTIME,
+        },
+        TaskRow {
+            cost: 100_000,
+            period: 1_000_000,
+            deadline: background_deadline_us * 1000,
+            priority: 1,
+            ..TaskRow {
+                cost: 0,
+                period: 0,
+                deadline: NO_DEADLINE,
+                jitter: 0,
+                priority: 0,
+                released_by: NO_RELEASER,
+                own_frame: false,
+                deadline_own_frames: 0,
+                share: SHARE_AT_RUNTIME,
+            }
+        },
+    ];
+    let scripts = [script];
+    let task_scripts = [(0u8, &scripts[..])];
+    let buses = [engine];
+    let boards = [BoardTable {
+        name: "b",
+        tasks: &tasks,
+        sections: &[],
+        blocking: &[],
+        topics: &[],
+        shortest_dlc: 0,
+        levels: [None; 4],
+        monotonic: None,
+        can_tx: None,
+        command_handler: None,
+        buses: &buses,
+        task_scripts: &task_scripts,
+        publisher_tasks: [0; 4],
+    }];
+    let robot = RobotTable {
+        boards: &boards,
+        bit_time: Time::from_ns(1000),
+        frame_cost: FrameCost::Exact,
+    };
+    admission::evaluate::<8, 8>(&robot, &[]).refusal
 }
 
 /// A publisher topic's script on the chip: the same hand-worked job as a publisher job of a stream (its period
