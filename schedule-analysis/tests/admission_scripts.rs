@@ -605,3 +605,142 @@ proptest! {
         }
     }
 }
+
+/// A fixed task of a hand-worked board: priority, CPU µs, period µs, its scripts' bus times µs (one bus, engine of
+/// no cost), its critical section's length µs on a resource of ceiling 3 (0: none).
+type HandTask = (u8, u32, u32, &'static [u32], u32);
+
+/// The chip's WCRT of each of `tasks` (`tests/known_answers.rs`'s boards as chip rows) with an `expected` figure
+/// (0: its period, not read): each such task's deadline one µs short of it in turn, the check names the task and
+/// its WCRT; at `expected` it admits the set.
+fn chip_wcrts_us(tasks: &[HandTask], expected: &[u32]) -> Vec<Option<u64>> {
+    let decide = |short: Option<usize>| {
+        let rows: Vec<TaskRow> = tasks
+            .iter()
+            .enumerate()
+            .map(|(i, &(priority, cpu, period, _, _))| TaskRow {
+                cost: cpu * 1000,
+                period: period * 1000,
+                deadline: match expected[i] {
+                    0 => NO_DEADLINE,
+                    e => (e - u32::from(short == Some(i))) * 1000,
+                },
+                jitter: 0,
+                priority,
+                released_by: NO_RELEASER,
+                own_frame: false,
+                deadline_own_frames: 0,
+                share: SHARE_AT_RUNTIME,
+            })
+            .collect();
+        let sections: Vec<admission::SectionRow> = tasks
+            .iter()
+            .filter(|t| t.4 > 0)
+            .map(|&(priority, _, _, _, length)| admission::SectionRow {
+                length: length * 1000,
+                holder_priority: priority,
+                ceiling: 3,
+            })
+            .collect();
+        let scripts: Vec<Vec<ScriptRow>> = tasks
+            .iter()
+            .map(|t| {
+                t.3.iter()
+                    .map(|&us| ScriptRow {
+                        bus: 0,
+                        bus_time: us * 1000,
+                        events: 0,
+                        starts: 0,
+                        settle: 0,
+                    })
+                    .collect()
+            })
+            .collect();
+        let task_scripts: Vec<admission::TaskScripts<'_>> = scripts
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| !l.is_empty())
+            .map(|(i, l)| (i as u8, l.as_slice()))
+            .collect();
+        let buses = [BusRow {
+            engine_priority: 10,
+            per_event: 0,
+            per_script: 0,
+            condition_wait: 0,
+        }];
+        let boards = [BoardTable {
+            name: "b",
+            tasks: &rows,
+            sections: &sections,
+            blocking: &[],
+            topics: &[],
+            shortest_dlc: 0,
+            levels: [None; 4],
+            monotonic: None,
+            can_tx: None,
+            command_handler: None,
+            buses: &buses,
+            task_scripts: &task_scripts,
+            publisher_tasks: [0; 4],
+        }];
+        let robot = RobotTable {
+            boards: &boards,
+            bit_time: Time::from_ns(1000),
+            frame_cost: FrameCost::Exact,
+        };
+        admission::evaluate::<16, 8>(&robot, &[]).refusal
+    };
+    assert_eq!(decide(None), None, "admitted at the expected WCRTs");
+    (0..tasks.len())
+        .filter(|&i| expected[i] > 0)
+        .map(|i| match decide(Some(i)) {
+            Some(Refusal::Deadline(v))
+                if v.culprit
+                    == Culprit::Task {
+                        board: 0,
+                        task: TaskId::Fixed(i as u16),
+                    } =>
+            {
+                v.wcrt.map(|w| w.as_ns() / 1000)
+            }
+            other => panic!("task {i}: {other:?}"),
+        })
+        .collect()
+}
+
+/// `tests/known_answers.rs`'s hand-worked suspension examples through the chip's check: the suspending task seen
+/// by the one below as its CPU with jitter `R − C` (8 and 8 µs, where the naive charge says 6), three scripts on
+/// one bus to their fixed point round by round (410, 630, 640 µs), and a job blocked again when it resumes (15 µs,
+/// where one blocking says 11).
+#[test]
+fn the_known_answers_through_the_chip() {
+    let expected = [8, 8];
+    assert_eq!(
+        chip_wcrts_us(&[(2, 2, 10, &[6], 0), (1, 4, 100, &[], 0)], &expected),
+        [Some(8), Some(8)]
+    );
+    let expected = [410, 630, 640];
+    assert_eq!(
+        chip_wcrts_us(
+            &[
+                (3, 10, 1000, &[100], 0),
+                (2, 10, 2000, &[200], 0),
+                (1, 10, 5000, &[300], 0)
+            ],
+            &expected
+        ),
+        [Some(410), Some(630), Some(640)]
+    );
+    let expected = [15, 0, 0];
+    assert_eq!(
+        chip_wcrts_us(
+            &[
+                (3, 2, 100, &[5], 0),
+                (1, 4, 100, &[], 4),
+                (2, 4, 100, &[], 4)
+            ],
+            &expected
+        ),
+        [Some(15)]
+    );
+}
