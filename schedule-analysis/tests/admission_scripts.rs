@@ -368,72 +368,23 @@ fn the_check_decides_most_sets_with_scripts() {
 /// admits at the figure itself.
 #[test]
 fn the_hand_worked_script_through_the_chip() {
-    let decide = |job_deadline_us: u32, background_deadline_us: u32| {
-        let tasks = [
-            TaskRow {
-                cost: 50_000,
-                period: 10_000_000,
-                deadline: job_deadline_us * 1000,
-                jitter: 0,
-                priority: 3,
-                released_by: NO_RELEASER,
-                own_frame: false,
-                deadline_own_frames: 0,
-                share: SHARE_AT_RUNTIME,
-            },
-            TaskRow {
-                cost: 100_000,
-                period: 1_000_000,
-                deadline: background_deadline_us * 1000,
-                priority: 1,
-                ..TaskRow {
-                    cost: 0,
-                    period: 0,
-                    deadline: NO_DEADLINE,
-                    jitter: 0,
-                    priority: 0,
-                    released_by: NO_RELEASER,
-                    own_frame: false,
-                    deadline_own_frames: 0,
-                    share: SHARE_AT_RUNTIME,
-                }
-            },
-        ];
-        let scripts = [ScriptRow {
+    let plain = (
+        ScriptRow {
             bus: 0,
             bus_time: 150_000,
             events: 14,
             starts: 1,
             settle: 0,
-        }];
-        let task_scripts = [(0u8, &scripts[..])];
-        let buses = [BusRow {
+        },
+        BusRow {
             engine_priority: 7,
             per_event: 3_000,
             per_script: 0,
             condition_wait: 0,
-        }];
-        let boards = [BoardTable {
-            name: "b",
-            tasks: &tasks,
-            sections: &[],
-            blocking: &[],
-            topics: &[],
-            shortest_dlc: 0,
-            levels: [None; 4],
-            monotonic: None,
-            can_tx: None,
-            command_handler: None,
-            buses: &buses,
-            task_scripts: &task_scripts,
-            publisher_tasks: [0; 4],
-        }];
-        let robot = RobotTable {
-            boards: &boards,
-            bit_time: Time::from_ns(1000),
-            frame_cost: FrameCost::Exact,
-        };
-        admission::evaluate::<8, 8>(&robot, &[]).refusal
+        },
+    );
+    let decide = |job_deadline_us: u32, background_deadline_us: u32| {
+        decide_one(plain, job_deadline_us, background_deadline_us)
     };
     assert_eq!(decide(284, 192), None);
     let named = |refusal: Option<Refusal>| match refusal {
@@ -446,6 +397,91 @@ fn the_hand_worked_script_through_the_chip() {
     };
     assert_eq!(named(decide(283, 192)), (task(0), Some(Time::from_us(284))));
     assert_eq!(named(decide(284, 191)), (task(1), Some(Time::from_us(192))));
+    // `the_engine_charged_by_its_parts`: 7 bytes and two STARTs (167.5 µs on the wire, 10 µs stretch, 18 events),
+    // 4 µs per script and a 5 µs condition wait: the engine row 18 × 3 + 4 + 2 × 5 = 68 µs, the bus time
+    // 177.5 + 12 + 2 × 8 + 15 × 3 = 250.5 µs, the job 50 + 250.5 + 68 = 368.5 µs.
+    let parts = (
+        ScriptRow {
+            bus: 0,
+            bus_time: 177_500,
+            events: 18,
+            starts: 2,
+            settle: 0,
+        },
+        BusRow {
+            per_script: 4_000,
+            condition_wait: 5_000,
+            ..plain.1
+        },
+    );
+    assert_eq!(
+        named(decide_one(parts, 368, 1000)),
+        (task(0), Some(Time::from_ns(368_500)))
+    );
+    assert_eq!(decide_one(parts, 369, 1000), None);
+}
+
+/// The hand-worked board of `tests/sensor_buses.rs` as chip rows: a job of 50 µs every 10 ms at priority 3 running
+/// `script` on a bus with `engine`, and a task of 100 µs every 1 ms at priority 1, with these deadlines.
+fn decide_one(
+    (script, engine): (ScriptRow, BusRow),
+    job_deadline_us: u32,
+    background_deadline_us: u32,
+) -> Option<Refusal> {
+    let tasks = [
+        TaskRow {
+            cost: 50_000,
+            period: 10_000_000,
+            deadline: job_deadline_us * 1000,
+            jitter: 0,
+            priority: 3,
+            released_by: NO_RELEASER,
+            own_frame: false,
+            deadline_own_frames: 0,
+            share: SHARE_AT_RUNTIME,
+        },
+        TaskRow {
+            cost: 100_000,
+            period: 1_000_000,
+            deadline: background_deadline_us * 1000,
+            priority: 1,
+            ..TaskRow {
+                cost: 0,
+                period: 0,
+                deadline: NO_DEADLINE,
+                jitter: 0,
+                priority: 0,
+                released_by: NO_RELEASER,
+                own_frame: false,
+                deadline_own_frames: 0,
+                share: SHARE_AT_RUNTIME,
+            }
+        },
+    ];
+    let scripts = [script];
+    let task_scripts = [(0u8, &scripts[..])];
+    let buses = [engine];
+    let boards = [BoardTable {
+        name: "b",
+        tasks: &tasks,
+        sections: &[],
+        blocking: &[],
+        topics: &[],
+        shortest_dlc: 0,
+        levels: [None; 4],
+        monotonic: None,
+        can_tx: None,
+        command_handler: None,
+        buses: &buses,
+        task_scripts: &task_scripts,
+        publisher_tasks: [0; 4],
+    }];
+    let robot = RobotTable {
+        boards: &boards,
+        bit_time: Time::from_ns(1000),
+        frame_cost: FrameCost::Exact,
+    };
+    admission::evaluate::<8, 8>(&robot, &[]).refusal
 }
 
 /// A publisher topic's script on the chip: the same hand-worked job as a publisher job of a stream (its period
@@ -568,4 +604,143 @@ proptest! {
             }
         }
     }
+}
+
+/// A fixed task of a hand-worked board: priority, CPU µs, period µs, its scripts' bus times µs (one bus, engine of
+/// no cost), its critical section's length µs on a resource of ceiling 3 (0: none).
+type HandTask = (u8, u32, u32, &'static [u32], u32);
+
+/// The chip's WCRT of each of `tasks` (`tests/known_answers.rs`'s boards as chip rows) with an `expected` figure
+/// (0: its period, not read): each such task's deadline one µs short of it in turn, the check names the task and
+/// its WCRT; at `expected` it admits the set.
+fn chip_wcrts_us(tasks: &[HandTask], expected: &[u32]) -> Vec<Option<u64>> {
+    let decide = |short: Option<usize>| {
+        let rows: Vec<TaskRow> = tasks
+            .iter()
+            .enumerate()
+            .map(|(i, &(priority, cpu, period, _, _))| TaskRow {
+                cost: cpu * 1000,
+                period: period * 1000,
+                deadline: match expected[i] {
+                    0 => NO_DEADLINE,
+                    e => (e - u32::from(short == Some(i))) * 1000,
+                },
+                jitter: 0,
+                priority,
+                released_by: NO_RELEASER,
+                own_frame: false,
+                deadline_own_frames: 0,
+                share: SHARE_AT_RUNTIME,
+            })
+            .collect();
+        let sections: Vec<admission::SectionRow> = tasks
+            .iter()
+            .filter(|t| t.4 > 0)
+            .map(|&(priority, _, _, _, length)| admission::SectionRow {
+                length: length * 1000,
+                holder_priority: priority,
+                ceiling: 3,
+            })
+            .collect();
+        let scripts: Vec<Vec<ScriptRow>> = tasks
+            .iter()
+            .map(|t| {
+                t.3.iter()
+                    .map(|&us| ScriptRow {
+                        bus: 0,
+                        bus_time: us * 1000,
+                        events: 0,
+                        starts: 0,
+                        settle: 0,
+                    })
+                    .collect()
+            })
+            .collect();
+        let task_scripts: Vec<admission::TaskScripts<'_>> = scripts
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| !l.is_empty())
+            .map(|(i, l)| (i as u8, l.as_slice()))
+            .collect();
+        let buses = [BusRow {
+            engine_priority: 10,
+            per_event: 0,
+            per_script: 0,
+            condition_wait: 0,
+        }];
+        let boards = [BoardTable {
+            name: "b",
+            tasks: &rows,
+            sections: &sections,
+            blocking: &[],
+            topics: &[],
+            shortest_dlc: 0,
+            levels: [None; 4],
+            monotonic: None,
+            can_tx: None,
+            command_handler: None,
+            buses: &buses,
+            task_scripts: &task_scripts,
+            publisher_tasks: [0; 4],
+        }];
+        let robot = RobotTable {
+            boards: &boards,
+            bit_time: Time::from_ns(1000),
+            frame_cost: FrameCost::Exact,
+        };
+        admission::evaluate::<16, 8>(&robot, &[]).refusal
+    };
+    assert_eq!(decide(None), None, "admitted at the expected WCRTs");
+    (0..tasks.len())
+        .filter(|&i| expected[i] > 0)
+        .map(|i| match decide(Some(i)) {
+            Some(Refusal::Deadline(v))
+                if v.culprit
+                    == Culprit::Task {
+                        board: 0,
+                        task: TaskId::Fixed(i as u16),
+                    } =>
+            {
+                v.wcrt.map(|w| w.as_ns() / 1000)
+            }
+            other => panic!("task {i}: {other:?}"),
+        })
+        .collect()
+}
+
+/// `tests/known_answers.rs`'s hand-worked suspension examples through the chip's check: the suspending task seen
+/// by the one below as its CPU with jitter `R − C` (8 and 8 µs, where the naive charge says 6), three scripts on
+/// one bus to their fixed point round by round (410, 630, 640 µs), and a job blocked again when it resumes (15 µs,
+/// where one blocking says 11).
+#[test]
+fn the_known_answers_through_the_chip() {
+    let expected = [8, 8];
+    assert_eq!(
+        chip_wcrts_us(&[(2, 2, 10, &[6], 0), (1, 4, 100, &[], 0)], &expected),
+        [Some(8), Some(8)]
+    );
+    let expected = [410, 630, 640];
+    assert_eq!(
+        chip_wcrts_us(
+            &[
+                (3, 10, 1000, &[100], 0),
+                (2, 10, 2000, &[200], 0),
+                (1, 10, 5000, &[300], 0)
+            ],
+            &expected
+        ),
+        [Some(410), Some(630), Some(640)]
+    );
+    let expected = [15, 0, 0];
+    assert_eq!(
+        chip_wcrts_us(
+            &[
+                (3, 2, 100, &[5], 0),
+                (1, 4, 100, &[], 4),
+                (2, 4, 100, &[], 4)
+            ],
+            &expected
+        ),
+        [Some(15)]
+    );
 }

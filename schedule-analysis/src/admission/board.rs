@@ -132,6 +132,17 @@ struct Originals<const N: usize> {
 }
 
 impl<const N: usize> Originals<N> {
+    /// The board's jobs in original order.
+    fn of<const M: usize>(input: &BoardInput<'_, M>) -> Result<Self, Refusal> {
+        let mut originals = Originals {
+            priority: [0; N],
+            source: [Source::Fixed(0); N],
+            count: 0,
+        };
+        originals.collect(input)?;
+        Ok(originals)
+    }
+
     fn add(&mut self, priority: u8, what: Source) -> Result<u8, Refusal> {
         let original = u8::try_from(self.count)
             .ok()
@@ -405,8 +416,6 @@ fn blocking_at<const M: usize>(input: &BoardInput<'_, M>, p: u32) -> Time {
 struct BoardSet<const N: usize> {
     timings: [TaskTiming; N],
     jobs: JobIndex<N>,
-    /// What each job is made of, by sorted position.
-    sources: [Source; N],
 }
 
 /// What the analysis reads of a board's sorted jobs besides their timings ([`board_analysis::Jobs`]).
@@ -419,14 +428,11 @@ struct JobIndex<const N: usize> {
 
 impl<const N: usize> BoardSet<N> {
     /// Builds each job once, at its sorted place, in place (a set built and then returned or copied was a copy
-    /// of 2.5 KB a board analysis).
-    fn fill<const M: usize>(&mut self, input: &BoardInput<'_, M>) -> Result<(), Refusal> {
-        let mut originals = Originals {
-            priority: [0; N],
-            source: [Source::Fixed(0); N],
-            count: 0,
-        };
-        originals.collect(input)?;
+    /// of 2.5 KB a board analysis); whether a job runs scripts (it has engine rows). Out of line: its working
+    /// arrays are not in the frame of the analysis that follows.
+    #[inline(never)]
+    fn fill<const M: usize>(&mut self, input: &BoardInput<'_, M>) -> Result<bool, Refusal> {
+        let originals = Originals::<N>::of(input)?;
         let order = originals.sorted();
         let own_frame = input.own_frame();
         self.jobs.len = originals.count;
@@ -451,20 +457,13 @@ impl<const N: usize> BoardSet<N> {
                 own_frame,
             )?;
         }
-        for (slot, &original) in self
-            .sources
-            .iter_mut()
-            .zip(order.iter())
-            .take(originals.count)
-        {
-            *slot = originals
-                .source
-                .get(usize::from(original))
-                .copied()
-                .ok_or(Refusal::Capacity)?;
-        }
         self.jobs.index(&self.timings, input.table);
-        Ok(())
+        let scripted = originals
+            .source
+            .iter()
+            .take(originals.count)
+            .any(|s| matches!(s, Source::Engine { .. }));
+        Ok(scripted)
     }
 
     /// SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job (the
@@ -621,9 +620,8 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
             metas: const { [EMPTY_META; N] },
             position: [NO_JOB; N],
         },
-        sources: [Source::Fixed(0); N],
     };
-    set.fill(input)?;
+    let scripted = set.fill(input)?;
     let mut blocking = [Time::ZERO; N];
     set.blockings(input, &mut blocking);
     let mut shares = [Share::default(); N];
@@ -632,11 +630,6 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
         wcrt: [NONE; N],
         first_window: [Time::ZERO; N],
     };
-    let scripted = set
-        .sources
-        .iter()
-        .take(set.jobs.len)
-        .any(|s| matches!(s, Source::Engine { .. }));
     if scripted {
         // Jobs that suspend on a sensor bus: the rounds of views, buses and engine events to their fixed point.
         suspension::analyse(

@@ -60,7 +60,18 @@ impl<'a, const N: usize> Scripts<'a, N> {
     ) -> Result<(), Refusal> {
         let mut groups = [0u16; N];
         let len = set.jobs.len;
-        for (p, &what) in set.sources.iter().enumerate().take(len) {
+        // What each job is made of, by sorted position (its original index in the board's jobs rebuilt).
+        let originals = Originals::<N>::of(input)?;
+        let source = |p: usize| {
+            let original = set.jobs.metas.get(p).map_or(NO_JOB, |m| m.original);
+            originals
+                .source
+                .get(usize::from(original))
+                .copied()
+                .unwrap_or(Source::Timer { stream: 0 })
+        };
+        for p in 0..len {
+            let what = source(p);
             let scripts = input.scripts_of(what);
             let Some(group) = group_of(input, what).filter(|_| !scripts.is_empty()) else {
                 continue;
@@ -89,8 +100,8 @@ impl<'a, const N: usize> Scripts<'a, N> {
                 out.len += 1;
             }
         }
-        for ((&what, slot), _) in set.sources.iter().zip(out.view.iter_mut()).zip(0..len) {
-            let view = group_of(input, what).and_then(|g| {
+        for (p, slot) in out.view.iter_mut().enumerate().take(len) {
+            let view = group_of(input, source(p)).and_then(|g| {
                 groups
                     .iter()
                     .take(usize::from(out.views))
