@@ -55,19 +55,6 @@ pub struct ScriptedBus {
     gauge_faults: u32,
 }
 
-/// A bus's state behind its RTIC lock, as the jobs below take it: one code for every task's
-/// lock (each task's resource proxy is a type of its own; the jobs are not made once per task).
-pub trait BusLock {
-    /// Runs `f` on the bus's state under the lock.
-    fn with(&mut self, f: &mut dyn FnMut(&mut ScriptedBus));
-}
-
-impl<M: rtic::Mutex<T = ScriptedBus>> BusLock for M {
-    fn with(&mut self, f: &mut dyn FnMut(&mut ScriptedBus)) {
-        self.lock(|bus| f(bus));
-    }
-}
-
 /// A script's outcome as amiro-sensors' decoders take it (a client's timeout is the kind a polled
 /// master's timeout had).
 fn result_of(outcome: Result<Readings, BusFault>) -> ScriptResult {
@@ -258,11 +245,12 @@ impl ScriptedBus {
     }
 
     /// A gauge read's end: a failed one counted, and the bus's faults reported.
-    fn end_gauge_read(&mut self, status: Option<BatteryStatus>) {
+    fn end_gauge_read(&mut self, status: Option<BatteryStatus>) -> Option<BatteryStatus> {
         if status.is_none() {
             self.gauge_faults = self.gauge_faults.saturating_add(1);
         }
         self.report();
+        status
     }
 
     /// This bus's faults (missed ring samples and failed gauge reads) and whether a sensor is out
@@ -300,27 +288,21 @@ async fn set_up_on_bus(port: &mut impl ScriptPort, set_up: &mut SensorSetUp) -> 
 /// job by the function.
 #[inline(never)]
 pub async fn sample_ring(
-    bus: &mut dyn BusLock,
+    bus: &mut impl rtic::Mutex<T = ScriptedBus>,
     port: &mut impl ScriptPort,
     now_us: u64,
     sample: &mut RingSample,
 ) {
-    let mut due = None;
-    bus.with(&mut |b| due = b.due_set_up(now_us));
-    let set_up = match due {
+    let set_up = match bus.lock(|b| b.due_set_up(now_us)) {
         Some((k, mut set_up)) => Some((k, set_up_on_bus(port, &mut set_up).await)),
         None => None,
     };
-    let mut planned = None;
-    bus.with(&mut |b| {
+    let (mut read, places) = bus.lock(|b| {
         if let Some((k, ready)) = set_up {
             b.end_set_up(k, now_us, ready);
         }
-        planned = Some(b.ring_read());
+        b.ring_read()
     });
-    let Some((mut read, places)) = planned else {
-        return;
-    };
     for _ in 0..RingRead::MAX_SCRIPTS {
         let script = match read.script() {
             Some(Ok(script)) => script,
@@ -330,7 +312,7 @@ pub async fn sample_ring(
         let result = result_of(port.run(script, 0).await);
         read.complete(&result);
     }
-    bus.with(&mut |b| b.end_ring_read(now_us, &read, places, sample));
+    bus.lock(|b| b.end_ring_read(now_us, &read, places, sample));
 }
 
 /// One status read of the bus's fuel gauge, each transfer a script on `port` after the gauge's
@@ -338,7 +320,7 @@ pub async fn sample_ring(
 /// as [`sample_ring`].
 #[inline(never)]
 pub async fn read_gauge(
-    bus: &mut dyn BusLock,
+    bus: &mut impl rtic::Mutex<T = ScriptedBus>,
     port: &mut impl ScriptPort,
 ) -> Option<BatteryStatus> {
     let mut read = StatusRead::new();
@@ -359,14 +341,13 @@ pub async fn read_gauge(
             break;
         }
     }
-    bus.with(&mut |b| b.end_gauge_read(status));
-    status
+    bus.lock(|b| b.end_gauge_read(status))
 }
 
 /// Both gauges' status, front (I2C2) then rear (I2C1), each on its bus through the task's ports.
 pub async fn read_batteries(
-    rear: &mut dyn BusLock,
-    front: &mut dyn BusLock,
+    rear: &mut impl rtic::Mutex<T = ScriptedBus>,
+    front: &mut impl rtic::Mutex<T = ScriptedBus>,
     rear_port: &mut impl ScriptPort,
     front_port: &mut impl ScriptPort,
 ) -> (Option<BatteryStatus>, Option<BatteryStatus>) {
