@@ -49,6 +49,14 @@ impl Registers {
         }
     }
 
+    /// The block's clocks as the board's clock plan set them up at run time (the value was made
+    /// at compile time, in a static): APB1 at `pclk1_hz`, the condition waits timed in cycles of
+    /// a `sysclk_hz` core clock. Touches nothing: [`Block::reset`] applies it.
+    pub fn set_clocks(&mut self, pclk1_hz: u32, sysclk_hz: u32) {
+        // SAFETY: `new` touches nothing and keeps `base`; the caller's value already owns it.
+        *self = unsafe { Self::new(self.base, pclk1_hz, sysclk_hz) };
+    }
+
     fn read(&self, offset: usize) -> u16 {
         // SAFETY: `new`'s contract: a register of the I2C block this value owns.
         unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) as u16 }

@@ -20,6 +20,12 @@
 //! section per poll, for at most [`CONDITION_WAIT_NS`](crate::i2c_engine::CONDITION_WAIT_NS) (two SCL periods, on the cycle counter)
 //! and at most [`CONDITION_POLLS`] polls. No heap; a slot holds its script and readings
 //! by value.
+//!
+//! A repeated START a device delays past that wait stalls the script with the event interrupt
+//! masked (`i2c_engine`); the board's re-arm task ([`I2cBus::serve_stretches`]) looks at it every
+//! [`STRETCH_REARM_US`](crate::i2c_engine::STRETCH_REARM_US) on the monotonic, at most
+//! [`MAX_REARMS`](crate::i2c_engine::MAX_REARMS) times a script, so a device holding SCL costs
+//! neither a handler re-entered at the engine's priority nor a wait in it.
 use core::cell::UnsafeCell;
 use core::future::Future;
 use core::pin::Pin;
@@ -64,6 +70,8 @@ struct Inner<B, const SLOTS: usize> {
     slots: [Slot; SLOTS],
     running: Option<usize>,
     submitted: u64,
+    /// The re-arm task's waker ([`I2cBus::stalled`]).
+    rearm: Option<Waker>,
 }
 
 /// One I2C bus: its block, its engine and a slot per client.
@@ -100,6 +108,7 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                 slots,
                 running: None,
                 submitted: 0,
+                rearm: None,
             }),
         }
     }
@@ -112,6 +121,13 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
     /// Client `index`, if the bus has that slot.
     pub fn client(&self, index: usize) -> Option<Client<SLOTS>> {
         (index < SLOTS && index <= usize::from(u8::MAX)).then_some(Client(index as u8))
+    }
+
+    /// Client `INDEX`, checked against the slot count when the program is built (a board's
+    /// wiring: a task's fixed slot).
+    pub const fn client_at<const INDEX: usize>(&self) -> Client<SLOTS> {
+        const { assert!(INDEX < SLOTS && INDEX <= u8::MAX as usize) };
+        Client(INDEX as u8)
     }
 
     /// Runs `script` for `client`: the future submits it on its first poll and gives its
@@ -128,7 +144,7 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
 
     /// The block's event interrupt (I2Cx_EV): reads SR1 and advances the running script.
     pub fn on_event(&self) {
-        let ended = self.with(|inner| {
+        let (ended, awaiting) = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
             let running = inner.running.and_then(|index| inner.slots.get_mut(index));
             let progress = match running {
@@ -142,49 +158,59 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                     Progress::Running
                 }
             };
-            match progress {
+            let ended = match progress {
                 Progress::Running => None,
                 Progress::Finished(result) => Some(inner.end(result)),
-            }
+            };
+            (ended, inner.engine.awaiting().is_some())
         });
-        // A script's end only (its waker, outside the critical section).
-        if let Some(wakers) = ended {
-            wake(wakers);
-        }
-        self.settle();
+        self.wake_after(ended, awaiting);
     }
 
     /// The block's error interrupt (I2Cx_ER).
     pub fn on_error(&self) {
-        let ended = self.with(|inner| {
+        let (ended, awaiting) = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
             let progress = inner.engine.on_error(sr1, &mut inner.block);
-            match progress {
+            let ended = match progress {
                 Progress::Running => None,
                 Progress::Finished(result) => Some(inner.end(result)),
-            }
+            };
+            (ended, inner.engine.awaiting().is_some())
         });
-        // A script's end only (its waker, outside the critical section).
-        if let Some(wakers) = ended {
-            wake(wakers);
+        self.wake_after(ended, awaiting);
+    }
+
+    /// After an interrupt's step: the condition wait ([`I2cBus::settle`]) where the step left the
+    /// engine awaiting one (an operation's start, a repeated START: not called otherwise, so that
+    /// the execution-time analysis charges its code per START, not per event), then the wakers,
+    /// outside the critical section, in one call of [`wake`] (charged by parts:
+    /// tools/engine-bound): a finished client's at a script's end, the re-arm task's at a stall.
+    /// (The two do not come from one event: after a script's end the wait is for a STOP, the next
+    /// script's START, which stalls nothing.)
+    fn wake_after(&self, ended: Option<[Option<Waker>; 2]>, awaiting: bool) {
+        let stalled = if awaiting { self.settle() } else { None };
+        match (ended, stalled) {
+            (Some([finished, started]), stalled) => wake([finished, started, stalled]),
+            (None, Some(stalled)) => wake([Some(stalled), None, None]),
+            (None, None) => {}
         }
-        self.settle();
     }
 
     /// Waits for the condition the engine awaits (a STOP to clear before a START, a repeated
     /// START to go out), each poll a critical section of its own, for at most
     /// [`CONDITION_WAIT_NS`](crate::i2c_engine::CONDITION_WAIT_NS) on the block's cycle counter and at most [`CONDITION_POLLS`] polls;
     /// then lets the engine go on. A client's abort and a new script between two polls change the
-    /// wait's number, and the old wait ends without touching the new one. Not inlined: the
-    /// execution-time analysis states its loop as a peripheral wait (tools/engine-bound).
+    /// wait's number, and the old wait ends without touching the new one. A repeated START that
+    /// did not go out stalls the script (`Engine::resume`): the re-arm task's waker is returned,
+    /// to be woken outside the critical section. Not inlined: the execution-time analysis states
+    /// its loop as a peripheral wait (tools/engine-bound).
     #[inline(never)]
-    fn settle(&self) {
-        let Some((wait, start, limit)) = self.with(|inner| {
+    fn settle(&self) -> Option<Waker> {
+        let (wait, start, limit) = self.with(|inner| {
             let wait = inner.engine.awaiting()?;
             Some((wait, inner.block.cycles(), inner.block.condition_cycles()))
-        }) else {
-            return;
-        };
+        })?;
         let mut cleared = false;
         for _ in 0..CONDITION_POLLS {
             let (pending, now) = self.with(|inner| {
@@ -201,10 +227,45 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
             }
         }
         self.with(|inner| {
-            if inner.engine.awaiting() == Some(wait) {
-                inner.engine.resume(cleared, &mut inner.block);
+            if inner.engine.awaiting() != Some(wait) {
+                return None;
+            }
+            inner.engine.resume(cleared, &mut inner.block);
+            // A stalled repeated START: the re-arm task takes over.
+            inner.engine.stalled()?;
+            inner.rearm.take()
+        })
+    }
+
+    /// Resolves to the stall's number when the running script's repeated START is stalled (the
+    /// event interrupt masked, `Engine::stalled`); the re-arm task's wait.
+    pub fn stalled(&self) -> Stalled<'_, B, SLOTS> {
+        Stalled { bus: self }
+    }
+
+    /// One look at stall `stall` (a poll of CR1.START in one critical section): the event
+    /// interrupt back on if the START is out, else the stall goes on (`Engine::rearm`). A stall
+    /// that has ended (the script aborted, failed or re-armed) is left alone.
+    pub fn rearm(&self, stall: u32) {
+        self.with(|inner| {
+            if inner.engine.stalled() == Some(stall) {
+                let pending = inner.block.start_pending();
+                inner.engine.rearm(pending, &mut inner.block);
             }
         });
+    }
+
+    /// The bus's re-arm task: waits for a stall, then `delay()` (the board's monotonic wait of
+    /// [`STRETCH_REARM_US`](crate::i2c_engine::STRETCH_REARM_US)), then looks ([`I2cBus::rearm`]),
+    /// for ever. A board runs one per bus, at its engine's priority (each look is one poll in a
+    /// critical section; a script has at most
+    /// [`MAX_REARMS`](crate::i2c_engine::MAX_REARMS) of them).
+    pub async fn serve_stretches<F: Future<Output = ()>>(&self, mut delay: impl FnMut() -> F) -> ! {
+        loop {
+            let stall = self.stalled().await;
+            delay().await;
+            self.rearm(stall);
+        }
     }
 
     /// Runs `f` on the block (a test's model, or the board's look at the adapter), inside the
@@ -228,7 +289,7 @@ fn rank(slot: &Slot) -> u64 {
 /// Wakes the wakers a script's end or start handed out. Not inlined: the execution-time analysis
 /// bounds it on its own (tools/engine-bound: with `Inner::end`, the handler's per-script part).
 #[inline(never)]
-fn wake(wakers: [Option<Waker>; 2]) {
+fn wake(wakers: [Option<Waker>; 3]) {
     for waker in wakers.into_iter().flatten() {
         waker.wake();
     }
@@ -279,6 +340,28 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
             // Only an empty script finishes at its start, and `Transfer` never submits one.
             Progress::Finished(result) => self.finish(result),
         }
+    }
+}
+
+/// The re-arm task's wait for a stall ([`I2cBus::stalled`]).
+pub struct Stalled<'a, B, const SLOTS: usize> {
+    bus: &'a I2cBus<B, SLOTS>,
+}
+
+impl<B: Block, const SLOTS: usize> Future for Stalled<'_, B, SLOTS> {
+    type Output = u32;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<u32> {
+        self.bus.with(|inner| match inner.engine.stalled() {
+            Some(stall) => Poll::Ready(stall),
+            None => {
+                match &inner.rearm {
+                    Some(waker) if waker.will_wake(cx.waker()) => {}
+                    _ => inner.rearm = Some(cx.waker().clone()),
+                }
+                Poll::Pending
+            }
+        })
     }
 }
 
@@ -358,8 +441,8 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
             }
             (Poll::Pending, started)
         });
-        wake([started, None]);
-        this.bus.settle();
+        let stalled = this.bus.settle();
+        wake([started, stalled, None]);
         poll
     }
 }
@@ -384,7 +467,7 @@ impl<B: Block, const SLOTS: usize> Drop for Transfer<'_, B, SLOTS> {
                 None
             }
         });
-        wake([started, None]);
-        self.bus.settle();
+        let stalled = self.bus.settle();
+        wake([started, stalled, None]);
     }
 }

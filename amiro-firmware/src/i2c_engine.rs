@@ -41,6 +41,17 @@
 //! ([`Engine::awaiting`]) and the caller polls it outside the critical section, for at most
 //! [`CONDITION_WAIT_NS`] (two SCL periods) on the cycle counter and at most [`CONDITION_POLLS`]
 //! times, each poll a section of its own, then calls [`Engine::resume`].
+//!
+//! **A repeated START a device delays past that wait** (it stretches SCL after its acknowledge)
+//! would leave BTF raising the event interrupt until the START is out: a handler re-entered at
+//! the engine's priority for as long as the device holds SCL (for ever, if it never lets go).
+//! Instead the engine *stalls*: it masks the event interrupt (ITEVTEN off, ITERREN kept;
+//! [`Engine::stalled`]) and the bus's re-arm (`I2cBus::serve_stretches`, a task on the monotonic)
+//! looks again every [`STRETCH_REARM_US`]: one poll of CR1.START, and the event interrupt back on
+//! once the START is out (SB then raises it), else the stall goes on. After [`MAX_REARMS`] looks
+//! the engine stops looking and leaves the script to its client's timeout, which aborts it (the
+//! block reset). So a script costs at most its own events and [`MAX_REARMS`] re-arms of one poll
+//! each, whatever a device does with SCL.
 use amiro_sensors::script::{Failure, Operation, Readings, Script, ScriptError};
 
 /// CR1: peripheral enable.
@@ -100,11 +111,25 @@ pub const CONDITION_WAIT_NS: u32 = 5_600;
 /// no DWT, the host model's default) the count ends it, as in the polled master (`i2c::Master`).
 pub const CONDITION_POLLS: u32 = 128;
 
+/// The interval between two looks at a stalled repeated START (µs): a hundred SCL periods at
+/// 400 kHz, so a stretch costs one re-arm's poll per 250 µs of it instead of the handler's
+/// continuous re-entry.
+pub const STRETCH_REARM_US: u32 = 250;
+
+/// Looks at a stalled repeated START per script at most; after them the engine leaves the event
+/// interrupt masked and the script to its client's timeout. 20 × [`STRETCH_REARM_US`] = 5 ms, more
+/// than the longest stretch an AMiRo device states within a packet (the bq27500's 4 ms; the
+/// HMC5883L, the VCNL4020, the PCA9544A and the BNO055 state none longer).
+pub const MAX_REARMS: u8 = 20;
+
 /// Which of the block's interrupts are on (CR2's three enables).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Interrupts {
     /// None: the block is idle.
     Off,
+    /// ITERREN alone: a stalled repeated START (BTF would raise the event interrupt until the
+    /// START is out; the errors still end the script).
+    Errors,
     /// ITEVTEN and ITERREN: SB, ADDR, BTF and the errors (a step that waits for BTF).
     Events,
     /// ITEVTEN, ITBUFEN and ITERREN: TXE and RXNE as well (a step that moves one byte).
@@ -116,6 +141,7 @@ impl Interrupts {
     pub const fn bits(self) -> u16 {
         match self {
             Interrupts::Off => 0,
+            Interrupts::Errors => CR2_ITERREN,
             Interrupts::Events => CR2_ITEVTEN | CR2_ITERREN,
             Interrupts::Buffer => CR2_ITEVTEN | CR2_ITERREN | CR2_ITBUFEN,
         }
@@ -209,6 +235,11 @@ pub struct Engine {
     /// the polls make the old wait's resume a no-op).
     awaiting: Option<(Condition, u32)>,
     waits: u32,
+    /// A repeated START that did not go out within the condition wait: the wait's number, while
+    /// the event interrupt is masked for it.
+    stalled: Option<u32>,
+    /// The running script's re-arms so far ([`MAX_REARMS`] at most).
+    rearms: u8,
     /// The running operation's index.
     operation: u8,
     /// The script's written bytes before the running operation's.
@@ -228,6 +259,8 @@ impl Engine {
             phase: Phase::Idle,
             awaiting: None,
             waits: 0,
+            stalled: None,
+            rearms: 0,
             operation: 0,
             written: 0,
         }
@@ -242,6 +275,7 @@ impl Engine {
     pub fn start(&mut self, script: &Script, block: &mut impl Block) -> Progress {
         self.operation = 0;
         self.written = 0;
+        self.rearms = 0;
         self.begin(script, block)
     }
 
@@ -250,6 +284,7 @@ impl Engine {
     pub fn abort(&mut self, block: &mut impl Block) {
         self.phase = Phase::Idle;
         self.awaiting = None;
+        self.stalled = None;
         block.reset();
     }
 
@@ -265,6 +300,7 @@ impl Engine {
         let Some(op) = self.current(script) else {
             self.phase = Phase::Idle;
             self.awaiting = None;
+            self.stalled = None;
             block.set_interrupts(Interrupts::Off);
             return Progress::Finished(Ok(()));
         };
@@ -300,12 +336,15 @@ impl Engine {
     /// that did not clear is a device holding SCL: the block is reset (which drops the STOP) and
     /// the START set anyway; it waits for a free bus, which a stuck bus never gives, and the
     /// client's timeout ends the script. A repeated START that did not go out within the polls
-    /// (a device stretching SCL after its acknowledge) is left to go out: until it does, BTF
-    /// raises the event interrupt again, each entry a whole handler's run (docs/i2c.md: open
-    /// before a board binds the engine, a device holding SCL there re-enters it until the
-    /// client's timeout).
+    /// (a device stretching SCL after its acknowledge) stalls the script: the event interrupt
+    /// masked (BTF would raise it until the START is out), to be re-armed by
+    /// [`Engine::rearm`] ([`Engine::stalled`] says so).
     pub fn resume(&mut self, cleared: bool, block: &mut impl Block) {
         match self.awaiting.take() {
+            Some((Condition::Start, wait)) if !cleared => {
+                block.set_interrupts(Interrupts::Errors);
+                self.stalled = Some(wait);
+            }
             Some((Condition::Stop, _)) => {
                 if !cleared {
                     block.reset();
@@ -317,6 +356,34 @@ impl Engine {
             }
             Some((Condition::Start, _)) | None => {}
         }
+    }
+
+    /// The stalled repeated START's wait number, while the event interrupt is masked for it and
+    /// the re-arms are not spent.
+    pub fn stalled(&self) -> Option<u32> {
+        self.stalled
+    }
+
+    /// One look at the stalled repeated START, [`STRETCH_REARM_US`] after the last (`pending`:
+    /// CR1.START still set, the caller's one poll). Out: the event interrupt on again (SB raises
+    /// it at once). Still pending: the stall goes on, for [`MAX_REARMS`] looks a script; after the
+    /// last the event interrupt stays masked and [`Engine::stalled`] is `None`: the client's
+    /// timeout ends the script (its abort resets the block). Returns whether to look again.
+    pub fn rearm(&mut self, pending: bool, block: &mut impl Block) -> bool {
+        if self.stalled.is_none() {
+            return false;
+        }
+        if !pending {
+            self.stalled = None;
+            block.set_interrupts(Interrupts::Events);
+            return false;
+        }
+        self.rearms = self.rearms.saturating_add(1);
+        if self.rearms >= MAX_REARMS {
+            self.stalled = None;
+            return false;
+        }
+        true
     }
 
     /// The next operation, or the script's end.
@@ -334,6 +401,7 @@ impl Engine {
     fn fail(&mut self, failure: Failure) -> Progress {
         self.phase = Phase::Idle;
         self.awaiting = None;
+        self.stalled = None;
         Progress::Finished(Err(ScriptError {
             operation: self.operation,
             failure,
@@ -463,6 +531,7 @@ impl Engine {
     pub fn on_stray_event(&mut self, block: &mut impl Block) {
         self.phase = Phase::Idle;
         self.awaiting = None;
+        self.stalled = None;
         block.set_interrupts(Interrupts::Off);
     }
 

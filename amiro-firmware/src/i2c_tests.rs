@@ -424,6 +424,24 @@ fn a_configuration_write_sends_every_byte_then_stop() {
 /// DiWheelDrive's floor round: four VCNL4020 at one address behind the PCA9544A's four channels,
 /// each selected (a transaction of its own: the mux connects at the STOP) then read twice.
 fn floor() -> (Model, Script) {
+    let model = floor_model();
+    let mut script = Script::new();
+    for channel in 0..4u8 {
+        script
+            .write(pca9544a::AMIRO_ADDRESS, &[pca9544a::ENABLE | channel])
+            .unwrap();
+        script
+            .write_read(vcnl4020::ADDRESS, &[vcnl4020::reg::PROXIMITY_RESULT], 2)
+            .unwrap();
+        script
+            .write_read(vcnl4020::ADDRESS, &[vcnl4020::reg::AMBIENT_RESULT], 2)
+            .unwrap();
+    }
+    (model, script)
+}
+
+/// The floor's bus: the PCA9544A and four VCNL4020 at one address, one behind each channel.
+fn floor_model() -> Model {
     let mut devices = Vec::new();
     for channel in 0..4u8 {
         let mut sensor = Device::new(vcnl4020::ADDRESS);
@@ -438,19 +456,7 @@ fn floor() -> (Model, Script) {
         address: pca9544a::AMIRO_ADDRESS,
         ..Mux::default()
     });
-    let mut script = Script::new();
-    for channel in 0..4u8 {
-        script
-            .write(pca9544a::AMIRO_ADDRESS, &[pca9544a::ENABLE | channel])
-            .unwrap();
-        script
-            .write_read(vcnl4020::ADDRESS, &[vcnl4020::reg::PROXIMITY_RESULT], 2)
-            .unwrap();
-        script
-            .write_read(vcnl4020::ADDRESS, &[vcnl4020::reg::AMBIENT_RESULT], 2)
-            .unwrap();
-    }
-    (model, script)
+    model
 }
 
 #[test]
@@ -1102,4 +1108,244 @@ fn a_held_stop_ends_the_condition_wait_on_the_cycle_counter() {
     assert_eq!(held(0), (1 + CONDITION_POLLS as usize, 1));
     // 10 cycles a poll: the wait ends at the first poll past 403 cycles, the 41st.
     assert_eq!(held(10), (1 + 41, 1));
+}
+
+/// Serves `bus` as the chip would until nothing moves: its interrupts while raised, else the
+/// bus's own next move. Returns the handler entries (I2Cx_EV and I2Cx_ER).
+fn pump_counting<const N: usize>(bus: &I2cBus<Model, N>) -> usize {
+    let mut entries = 0;
+    for _ in 0..10_000 {
+        let (ev, er) = bus.with_block(|m| m.pending());
+        if er {
+            bus.on_error();
+        } else if ev {
+            bus.on_event();
+        } else if !bus.with_block(|m| m.advance()) {
+            return entries;
+        }
+        entries += usize::from(ev || er);
+    }
+    panic!("the handler re-entered without end: {entries} entries");
+}
+
+/// What a stretched repeated START cost: the handler's entries, the re-arm task's looks, and the
+/// client's transfer (`None`: still pending when nothing more moves).
+struct Stretch {
+    entries: usize,
+    looks: usize,
+    result: Option<Result<Readings, ScriptError>>,
+}
+
+/// An HMC5883L sample (write the register, repeated START, read six) whose device holds SCL after
+/// the register byte's acknowledge (before wire byte 2: the repeated START) for `hold_us`
+/// (`None`: for ever). The time is the re-arm task's: each look comes `STRETCH_REARM_US` after
+/// the stall (or the last look), and the device lets go at the first look at or after `hold_us`.
+fn stretched_repeated_start(hold_us: Option<u32>) -> (Stretch, I2cBus<Model, 1>) {
+    let device = Device::new(hmc5883l::ADDRESS);
+    let bus = I2cBus::new(Model::new(vec![device]), [1]);
+    bus.with_block(|m| m.hold_at = Some(2));
+    let client = bus.client(0).unwrap();
+    let script = register_read(hmc5883l::ADDRESS, hmc5883l::reg::DATA_X_MSB, 6);
+    let (client_woken, client_waker) = test_waker::counting();
+    let (rearm_woken, rearm_waker) = test_waker::counting();
+    let mut transfer = Box::pin(bus.run(client, script));
+    assert!(transfer
+        .as_mut()
+        .poll(&mut Context::from_waker(&client_waker))
+        .is_pending());
+    let mut entries = 0;
+    let mut looks = 0;
+    let mut now_us = 0;
+    let result = loop {
+        entries += pump_counting(&bus);
+        if client_woken.count() > 0 {
+            let Poll::Ready(result) = transfer
+                .as_mut()
+                .poll(&mut Context::from_waker(&client_waker))
+            else {
+                panic!("woken and pending");
+            };
+            break Some(result);
+        }
+        // The re-arm task's `stalled().await`.
+        let mut stalled = pin!(bus.stalled());
+        let Poll::Ready(stall) = stalled
+            .as_mut()
+            .poll(&mut Context::from_waker(&rearm_waker))
+        else {
+            break None;
+        };
+        // Its delay, then its look.
+        now_us += STRETCH_REARM_US;
+        if hold_us.is_some_and(|hold| now_us >= hold) {
+            // The device lets go; the START goes out within an SCL period, before the look.
+            bus.with_block(|m| {
+                m.release();
+                m.advance()
+            });
+        }
+        bus.rearm(stall);
+        looks += 1;
+    };
+    // The re-arm task was woken by the stall (its waker registered before), never otherwise.
+    assert!(rearm_woken.count() <= 1);
+    // Pending: the client's timeout drops the transfer, which aborts the script (resolved: no
+    // effect).
+    drop(transfer);
+    (
+        Stretch {
+            entries,
+            looks,
+            result,
+        },
+        bus,
+    )
+}
+
+/// A device that stretches SCL for 4 ms at a repeated START (the bq27500's stated worst case
+/// within a packet): the handler is entered no more often than on an unstretched bus, the re-arm
+/// task looks once per `STRETCH_REARM_US` of the stretch, and the script ends with its readings.
+#[test]
+fn a_four_millisecond_stretch_at_a_repeated_start_costs_one_look_per_interval() {
+    let (plain, _) = stretched_repeated_start(Some(0));
+    let (stretch, bus) = stretched_repeated_start(Some(4_000));
+    // SB, ADDR, TXE, BTF; SB, ADDR, RXNE × 3, BTF, RXNE.
+    assert_eq!(plain.entries, 11);
+    assert_eq!(stretch.entries, 11);
+    // The first look finds the START still held (the device lets go at 4 ms: the 16th look).
+    assert_eq!(plain.looks, 1);
+    assert_eq!(stretch.looks, 4_000 / STRETCH_REARM_US as usize);
+    let device = Device::new(hmc5883l::ADDRESS);
+    let bytes = expected_bytes(&device, hmc5883l::reg::DATA_X_MSB, 6);
+    assert_eq!(stretch.result.unwrap().unwrap().of(0), bytes);
+    bus.with_block(|m| {
+        let script = register_read(hmc5883l::ADDRESS, hmc5883l::reg::DATA_X_MSB, 6);
+        check_wire(m, &script);
+        // One condition wait (CONDITION_POLLS polls, the counter not running) at the BTF, then
+        // one poll per look.
+        let start_polls = m.access.iter().filter(|a| **a == StartPoll).count();
+        assert_eq!(start_polls, CONDITION_POLLS as usize + 16);
+        // The stall masked the event interrupt (errors kept) and the last look unmasked it.
+        let masked = m
+            .access
+            .iter()
+            .position(|a| *a == Enable(Interrupts::Errors))
+            .unwrap();
+        let unmasked = m.access.iter().rposition(|a| *a == StartPoll).unwrap();
+        assert!(masked < unmasked);
+        assert_eq!(m.access[unmasked + 1], Enable(Interrupts::Events));
+    });
+}
+
+/// A device that holds SCL for ever at a repeated START: BTF stays raised, yet the handler is not
+/// entered again (the event interrupt masked), the re-arm task looks `MAX_REARMS` times and then
+/// stops, and the client's timeout aborts the script (the block reset).
+#[test]
+fn a_device_holding_scl_for_ever_at_a_repeated_start_stops_after_max_rearms() {
+    let (stretch, bus) = stretched_repeated_start(None);
+    // SB, ADDR, TXE, BTF: the write phase, then nothing.
+    assert_eq!(stretch.entries, 4);
+    assert_eq!(stretch.looks, usize::from(MAX_REARMS));
+    assert!(stretch.result.is_none());
+    bus.with_block(|m| {
+        let start_polls = m.access.iter().filter(|a| **a == StartPoll).count();
+        assert_eq!(
+            start_polls,
+            CONDITION_POLLS as usize + usize::from(MAX_REARMS)
+        );
+        // The timeout's abort reset the block (after the last look, nothing else).
+        assert_eq!(m.access.last(), Some(&Reset));
+        assert!(m.violations.is_empty(), "{:?}", m.violations);
+    });
+    // Before the abort, BTF was raised with the event interrupt masked: on the old engine every
+    // instant of it was a handler entry. Shown on a fresh bus stalled the same way.
+    let bus = I2cBus::new(Model::new(vec![Device::new(hmc5883l::ADDRESS)]), [1]);
+    bus.with_block(|m| m.hold_at = Some(2));
+    let script = register_read(hmc5883l::ADDRESS, hmc5883l::reg::DATA_X_MSB, 6);
+    let (_, waker) = test_waker::counting();
+    let mut transfer = pin!(bus.run(bus.client(0).unwrap(), script));
+    assert!(transfer
+        .as_mut()
+        .poll(&mut Context::from_waker(&waker))
+        .is_pending());
+    assert_eq!(pump_counting(&bus), 4);
+    bus.with_block(|m| {
+        assert_ne!(m.sr1 & SR1_BTF, 0);
+        assert_eq!(m.cr2 & CR2_ITEVTEN, 0);
+        assert_ne!(m.cr2 & CR2_ITERREN, 0);
+        assert_eq!(m.pending(), (false, false));
+    });
+    // An error while stalled still ends the script (the error interrupt kept).
+    bus.with_block(|m| m.sr1 |= SR1_BERR);
+    assert_eq!(pump_counting(&bus), 1);
+    assert_eq!(
+        transfer.poll(&mut Context::from_waker(&waker)),
+        Poll::Ready(Err(ScriptError {
+            operation: 0,
+            failure: Failure::Bus
+        }))
+    );
+    let mut stalled = pin!(bus.stalled());
+    assert!(stalled
+        .as_mut()
+        .poll(&mut Context::from_waker(&waker))
+        .is_pending());
+}
+
+/// The engine's interrupts per sample script of DiWheelDrive 1-1's groups, counted on the register
+/// model with the scripts the groups build (the events a timing file states for them,
+/// `tests/scripted_i2c_analysis.rs`): the HMC5883L's sample 11 (SB, ADDR, TXE, BTF; SB, ADDR,
+/// RXNE × 3, BTF, RXNE), the floor's round 44 (per sensor the select's SB, ADDR, TXE, BTF and the
+/// proximity read's SB, ADDR, TXE, BTF, SB, ADDR, BTF).
+#[test]
+fn dwd_sample_scripts_raise_the_stated_events() {
+    use amiro_can::Topic;
+    use amiro_sensors::drivers::floor::FloorSensors;
+    use amiro_sensors::drivers::scripted::{Job, Next, ScriptedSensors, Scripts};
+    use amiro_sensors::drivers::suite::{Compass, Supervised};
+    use amiro_sensors::sim::{NoDelay, SimCompassBus, SimFloorBus};
+
+    fn first_script<G: ScriptedSensors>(group: &mut Supervised<G>, topic: Topic) -> Script {
+        let mut job = Job::new();
+        match group.begin_scripted(&mut job, topic, 1_000) {
+            Next::Run { script, .. } => script,
+            Next::Done(_) => panic!("no script for {topic:?}"),
+        }
+    }
+    fn entries(model: Model, script: Script) -> usize {
+        let bus = I2cBus::new(model, [1]);
+        let (woken, waker) = test_waker::counting();
+        let mut transfer = pin!(bus.run(bus.client(0).unwrap(), script));
+        assert!(transfer
+            .as_mut()
+            .poll(&mut Context::from_waker(&waker))
+            .is_pending());
+        let entries = pump_counting(&bus);
+        assert_eq!(woken.count(), 1);
+        assert!(matches!(
+            transfer.poll(&mut Context::from_waker(&waker)),
+            Poll::Ready(Ok(_))
+        ));
+        bus.with_block(|m| {
+            check_wire(m, &script);
+        });
+        entries
+    }
+
+    let mut compass = Supervised::boot(
+        Compass::<Scripts>::scripted(),
+        &mut SimCompassBus::new(),
+        &mut NoDelay,
+    );
+    let script = first_script(&mut compass, Topic::MagnetometerX);
+    let model = Model::new(vec![Device::new(hmc5883l::ADDRESS)]);
+    assert_eq!(entries(model, script), 11);
+
+    let mut floor = Supervised::boot(
+        FloorSensors::<Scripts>::scripted(),
+        &mut SimFloorBus::new(),
+        &mut NoDelay,
+    );
+    let script = first_script(&mut floor, Topic::FloorProximity);
+    assert_eq!(entries(floor_model(), script), 44);
 }

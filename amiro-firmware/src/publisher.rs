@@ -236,6 +236,14 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
             Some((release, period_us, taken)) => {
                 // The suspension: the sample's scripts on the bus (none for a topic off I2C).
                 let samples = sampler.sample(release.topic, taken).await;
+                // A periodic row stopped while its sample was suspended (a stop command, the
+                // shutdown) publishes none of it; a one-shot's frames go out.
+                let stopped = !release.once
+                    && !handler.lock(|h| {
+                        h.publisher(release.topic)
+                            .is_some_and(|p| p.is_publishing())
+                    });
+                let samples = if stopped { Samples::new() } else { samples };
                 Some((release, period_us, taken, samples))
             }
             None => {

@@ -105,7 +105,12 @@ pub fn init(
     #[cfg(feature = "rev-1-1")]
     amiro_firmware::chip::reset_and_enable_spi1();
     TIMER_CLOCK_HZ.store(clocks.timer_hz, core::sync::atomic::Ordering::Relaxed);
-    // The blocking I2C driver times out on the DWT cycle counter.
+    #[cfg(feature = "scripted-i2c")]
+    scripted::set_clocks(clocks.pclk1_hz, clocks.sysclk_hz);
+    #[cfg(feature = "scripted-i2c")]
+    scripted::bind_engines(&mut cp.NVIC);
+    // The blocking I2C driver times out on the DWT cycle counter (and the engine's condition wait
+    // on it, with `scripted-i2c`).
     cp.DCB.enable_trace();
     cp.DWT.enable_cycle_counter();
 
@@ -433,3 +438,169 @@ pub fn start_monotonic(priority: u8) {
 
 /// Interrupt of the SYS_PD_N line.
 pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI9_5;
+
+/// With `scripted-i2c`: the I2C blocks driven by their interrupts once the app runs
+/// (`amiro_firmware::i2c_bus`: the engine, a slot per publisher task), after the boot set the
+/// devices up on the polled master (docs/i2c.md).
+#[cfg(feature = "scripted-i2c")]
+pub mod scripted {
+    use core::sync::atomic::{AtomicU32, Ordering};
+
+    use amiro_firmware::i2c::{self, Master};
+    use amiro_firmware::i2c_block::Registers;
+    use amiro_firmware::i2c_bus::I2cBus;
+    use amiro_firmware::i2c_engine::Block as _;
+    use amiro_firmware::scripted::I2cPort;
+    use amiro_sensors::drivers::floor::FloorSensors;
+    use amiro_sensors::drivers::scripted::{OnI2c, ScriptedSensors, Scripts};
+    use amiro_sensors::drivers::suite::{self, Supervised};
+    use stm32f1xx_hal::pac::{interrupt, Interrupt, NVIC, NVIC_PRIO_BITS};
+
+    use super::{Clock, SYSCLK_HZ};
+    use crate::levels;
+    use crate::sensors::{CLIENTS, TIMEOUT_ALLOWANCE_US};
+
+    /// One I2C block's bus once the app runs.
+    pub type ScriptBus = I2cBus<Registers, CLIENTS>;
+    /// A publisher task's slot on a [`ScriptBus`], its timeout on the board's clock.
+    pub type Port = I2cPort<'static, Clock, Registers, CLIENTS>;
+    /// The task's slot on I2C1 (the compass).
+    pub type CompassPort = Port;
+    /// The task's slot on I2C2 (the floor).
+    pub type FloorPort = Port;
+
+    /// The clients' RTIC priorities, by slot: the bus serves the most urgent waiting script next.
+    const CLIENT_PRIORITIES: [u8; CLIENTS] = [
+        levels::PUBLISH_URGENT,
+        levels::PUBLISH_HIGH,
+        levels::PUBLISH_MEDIUM,
+        levels::PUBLISH_LOW,
+    ];
+
+    /// APB1 and the core clock as `init`'s clock plan set them up (the design plan's until then).
+    static PCLK1_HZ: AtomicU32 = AtomicU32::new(SYSCLK_HZ / 2);
+    static CORE_HZ: AtomicU32 = AtomicU32::new(SYSCLK_HZ);
+
+    /// I2C1: the HMC5883L.
+    // SAFETY: the block is touched only after `boot_compass` took it from the polled master.
+    pub static I2C1_BUS: ScriptBus = I2cBus::new(
+        unsafe { Registers::new(i2c::I2C1, SYSCLK_HZ / 2, SYSCLK_HZ) },
+        CLIENT_PRIORITIES,
+    );
+    /// I2C2: the PCA9544A and the four VCNL4020.
+    // SAFETY: as I2C1's, after `boot_floor`.
+    pub static I2C2_BUS: ScriptBus = I2cBus::new(
+        unsafe { Registers::new(i2c::I2C2, SYSCLK_HZ / 2, SYSCLK_HZ) },
+        CLIENT_PRIORITIES,
+    );
+
+    /// I2C1's events: the compass bus's engine advances its script (docs/i2c.md).
+    #[interrupt]
+    fn I2C1_EV() {
+        I2C1_BUS.on_event();
+    }
+
+    /// I2C1's errors (a missing acknowledge, a bus error, arbitration lost, an overrun).
+    #[interrupt]
+    fn I2C1_ER() {
+        I2C1_BUS.on_error();
+    }
+
+    /// I2C2's events: the floor bus's engine.
+    #[interrupt]
+    fn I2C2_EV() {
+        I2C2_BUS.on_event();
+    }
+
+    /// I2C2's errors.
+    #[interrupt]
+    fn I2C2_ER() {
+        I2C2_BUS.on_error();
+    }
+
+    /// The four handlers at one priority, RTIC's `levels::I2C_ENGINE` (so that neither pre-empts
+    /// another's critical step; above every publisher, below the CAN interrupts; RTIC's locks
+    /// mask them as they mask a task of that priority), and unmasked: the blocks raise nothing
+    /// until a script turns CR2's enables on. Bound here, not as tasks of the app: RTIC sets up
+    /// the NVIC for a hardware task even where a `cfg` leaves the task out, which would change
+    /// the shipped image; they become the app's tasks when the analysis takes the sensor buses
+    /// (docs/i2c.md, "What step (c) wires").
+    pub(super) fn bind_engines(nvic: &mut NVIC) {
+        let logical = levels::I2C_ENGINE;
+        let hardware = ((1u8 << NVIC_PRIO_BITS) - logical) << (8 - NVIC_PRIO_BITS);
+        for irq in [
+            Interrupt::I2C1_EV,
+            Interrupt::I2C1_ER,
+            Interrupt::I2C2_EV,
+            Interrupt::I2C2_ER,
+        ] {
+            // SAFETY: init runs with interrupts off; the handlers share no RTIC resource (the
+            // buses are statics under their own critical sections).
+            unsafe {
+                nvic.set_priority(irq, hardware);
+                NVIC::unmask(irq);
+            }
+        }
+    }
+
+    /// Keeps the clock plan's APB1 and core clocks for the blocks' hand-over.
+    pub(super) fn set_clocks(pclk1_hz: u32, sysclk_hz: u32) {
+        PCLK1_HZ.store(pclk1_hz, Ordering::Relaxed);
+        CORE_HZ.store(sysclk_hz, Ordering::Relaxed);
+    }
+
+    /// `group` set up by its scripts on the polled master `boot` (each script operation by
+    /// operation, a part's settling time waited on the core clock), then `boot`'s block handed
+    /// to `bus`: set up again at the plan's clocks, its interrupts off until a script starts.
+    fn boot_on<G: ScriptedSensors>(group: G, boot: Master, bus: &ScriptBus) -> Supervised<G> {
+        // The polled master is consumed here: the block is the engine's from now on.
+        let booted = Supervised::boot(group, &mut OnI2c(boot), &mut CoreDelay);
+        bus.with_block(|block| {
+            block.set_clocks(
+                PCLK1_HZ.load(Ordering::Relaxed),
+                CORE_HZ.load(Ordering::Relaxed),
+            );
+            block.reset();
+        });
+        booted
+    }
+
+    /// The boot's waits: a busy wait on the core clock (none of the compass's or the floor's
+    /// set-up steps states one today; the set-up's interface takes it).
+    struct CoreDelay;
+
+    impl embedded_hal::delay::DelayNs for CoreDelay {
+        fn delay_ns(&mut self, ns: u32) {
+            let mhz = CORE_HZ.load(Ordering::Relaxed) / 1_000_000;
+            cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(mhz));
+        }
+    }
+
+    /// The compass set up on I2C1's polled master, then I2C1 handed to its engine.
+    pub fn boot_compass(boot: Master) -> Supervised<suite::Compass<Scripts>> {
+        boot_on(suite::Compass::scripted(), boot, &I2C1_BUS)
+    }
+
+    /// The floor set up on I2C2's polled master, then I2C2 handed to its engine.
+    pub fn boot_floor(boot: Master) -> Supervised<FloorSensors<Scripts>> {
+        boot_on(FloorSensors::scripted(), boot, &I2C2_BUS)
+    }
+
+    /// Publisher task `CLIENT`'s slots on I2C1 and I2C2.
+    pub fn ports<const CLIENT: usize>() -> (CompassPort, FloorPort) {
+        (
+            Port::new(
+                &I2C1_BUS,
+                I2C1_BUS.client_at::<CLIENT>(),
+                TIMEOUT_ALLOWANCE_US,
+            ),
+            Port::new(
+                &I2C2_BUS,
+                I2C2_BUS.client_at::<CLIENT>(),
+                TIMEOUT_ALLOWANCE_US,
+            ),
+        )
+    }
+}
+#[cfg(feature = "scripted-i2c")]
+pub use scripted::{boot_compass, boot_floor, ports, CompassPort, FloorPort};

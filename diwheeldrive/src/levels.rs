@@ -26,6 +26,10 @@ pub const MOTOR_CONTROL: u8 = 1;
 /// The shutdown sequence runs at motor control's level, so that its motors-off comes after any
 /// control step in progress (which may have read the shutdown flag before it was set).
 pub const SHUTDOWN_SEQUENCE: u8 = 1;
+/// The I2C blocks' event and error interrupts (with `scripted-i2c`: the sensor buses' engines), at
+/// command handling's level: above every publisher, whose scripts they run, below the CAN
+/// interrupts.
+pub const I2C_ENGINE: u8 = 5;
 /// The CAN transmit interrupt.
 pub const CAN_TX: u8 = 6;
 /// The CAN receive interrupt: above transmit, so the 3-frame receive FIFO is emptied even while
@@ -60,6 +64,7 @@ const _: () = {
     assert!(MOTOR_CONTROL == PUBLISH_LOW);
     assert!(SHUTDOWN_SEQUENCE == MOTOR_CONTROL);
     assert!(CAN_TX > CONTROL);
+    assert!(I2C_ENGINE > PUBLISH_URGENT && I2C_ENGINE < CAN_TX);
     assert!(CAN_RX > CAN_TX);
     assert!(SHUTDOWN > CAN_TX);
     assert!(MONOTONIC > SHUTDOWN);

@@ -34,6 +34,8 @@ compile_error!(
 );
 #[cfg(not(any(feature = "rev-1-1", feature = "rev-1-2")))]
 compile_error!("choose a board revision: feature `rev-1-1` or `rev-1-2`");
+#[cfg(all(feature = "scripted-i2c", not(feature = "rev-1-1")))]
+compile_error!("`scripted-i2c` wires revision 1-1's I2C groups (the compass and the floor) only");
 
 // The trace numbers of the tasks below (`trace_task::CAN_RX`, …), from this file.
 amiro_firmware::trace_tasks!();
@@ -407,13 +409,26 @@ mod app {
     async fn publish_urgent(cx: publish_urgent::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_URGENT);
         let s = cx.shared;
+        #[cfg(not(feature = "scripted-i2c"))]
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
+        #[cfg(not(feature = "scripted-i2c"))]
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Urgent],
             cx.local.wake_urgent,
             s.handler,
             s.tx_queue,
             sampler,
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+        // The compass's and the floor's samples suspend this task on its slots of I2C1 and I2C2.
+        #[cfg(feature = "scripted-i2c")]
+        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+            &[Priority::Urgent],
+            cx.local.wake_urgent,
+            s.handler,
+            s.tx_queue,
+            sensors::scripted_sampler(s.imu, s.compass, s.floor, s.drive, platform::ports::<0>()),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -424,13 +439,26 @@ mod app {
     async fn publish_high(cx: publish_high::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_HIGH);
         let s = cx.shared;
+        #[cfg(not(feature = "scripted-i2c"))]
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
+        #[cfg(not(feature = "scripted-i2c"))]
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::High],
             cx.local.wake_high,
             s.handler,
             s.tx_queue,
             sampler,
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+        // The compass's and the floor's samples suspend this task on its slots of I2C1 and I2C2.
+        #[cfg(feature = "scripted-i2c")]
+        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+            &[Priority::High],
+            cx.local.wake_high,
+            s.handler,
+            s.tx_queue,
+            sensors::scripted_sampler(s.imu, s.compass, s.floor, s.drive, platform::ports::<1>()),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -441,13 +469,26 @@ mod app {
     async fn publish_medium(cx: publish_medium::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_MEDIUM);
         let s = cx.shared;
+        #[cfg(not(feature = "scripted-i2c"))]
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
+        #[cfg(not(feature = "scripted-i2c"))]
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Medium],
             cx.local.wake_medium,
             s.handler,
             s.tx_queue,
             sampler,
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+        // The compass's and the floor's samples suspend this task on its slots of I2C1 and I2C2.
+        #[cfg(feature = "scripted-i2c")]
+        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+            &[Priority::Medium],
+            cx.local.wake_medium,
+            s.handler,
+            s.tx_queue,
+            sensors::scripted_sampler(s.imu, s.compass, s.floor, s.drive, platform::ports::<2>()),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -458,13 +499,26 @@ mod app {
     async fn publish_low(cx: publish_low::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_LOW);
         let s = cx.shared;
+        #[cfg(not(feature = "scripted-i2c"))]
         let sampler = sensors::sampler(s.imu, s.compass, s.floor, s.drive);
+        #[cfg(not(feature = "scripted-i2c"))]
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Low],
             cx.local.wake_low,
             s.handler,
             s.tx_queue,
             sampler,
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+        // The compass's and the floor's samples suspend this task on its slots of I2C1 and I2C2.
+        #[cfg(feature = "scripted-i2c")]
+        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+            &[Priority::Low],
+            cx.local.wake_low,
+            s.handler,
+            s.tx_queue,
+            sensors::scripted_sampler(s.imu, s.compass, s.floor, s.drive, platform::ports::<3>()),
             platform::CAN_TX_INTERRUPT,
         )
         .await;

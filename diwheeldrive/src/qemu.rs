@@ -312,3 +312,59 @@ impl Encoders {
         })
     }
 }
+
+/// With `scripted-i2c`: the compass's and the floor's buses as the QEMU build runs their scripts
+/// (`amiro_firmware::i2c_sim`: each script answered by the simulated devices, fed from the world,
+/// after its time on the wire). The devices live in the bus from the start; the boot's set-up
+/// runs on them too (the boot bus values `init` hands over are not used).
+#[cfg(feature = "scripted-i2c")]
+pub mod scripted {
+    use amiro_firmware::i2c_sim::{SimBus, SimPort};
+    use amiro_sensors::drivers::floor::FloorSensors;
+    use amiro_sensors::drivers::scripted::{OnI2c, ScriptBus, ScriptedSensors, Scripts};
+    use amiro_sensors::drivers::suite::{self, Supervised};
+    use amiro_sensors::sim::{NoDelay, SimCompassBus, SimFloorBus};
+
+    use super::{Clock, CompassI2c, Fed, FloorI2c};
+    use crate::sensors::TIMEOUT_ALLOWANCE_US;
+
+    /// I2C1's simulated HMC5883L, fed from the world.
+    type CompassDevices = OnI2c<Fed<SimCompassBus>>;
+    /// I2C2's simulated PCA9544A and floor sensors, fed from the world.
+    type FloorDevices = OnI2c<Fed<SimFloorBus>>;
+    /// The task's slot on I2C1 (the compass).
+    pub type CompassPort = SimPort<'static, Clock, CompassDevices>;
+    /// The task's slot on I2C2 (the floor).
+    pub type FloorPort = SimPort<'static, Clock, FloorDevices>;
+
+    /// I2C1.
+    pub static I2C1_BUS: SimBus<CompassDevices> = SimBus::new(OnI2c(Fed(SimCompassBus::new())));
+    /// I2C2.
+    pub static I2C2_BUS: SimBus<FloorDevices> = SimBus::new(OnI2c(Fed(SimFloorBus::new())));
+
+    /// `group` set up by its scripts on `bus`'s devices (no waits: the simulated parts need none).
+    fn boot_on<G: ScriptedSensors, D: ScriptBus>(group: G, bus: &SimBus<D>) -> Supervised<G> {
+        bus.with_devices(|devices| Supervised::boot(group, devices, &mut NoDelay))
+    }
+
+    /// The compass set up on I2C1's simulated part.
+    pub fn boot_compass(_boot: CompassI2c) -> Supervised<suite::Compass<Scripts>> {
+        boot_on(suite::Compass::scripted(), &I2C1_BUS)
+    }
+
+    /// The floor set up on I2C2's simulated parts.
+    pub fn boot_floor(_boot: FloorI2c) -> Supervised<FloorSensors<Scripts>> {
+        boot_on(FloorSensors::scripted(), &I2C2_BUS)
+    }
+
+    /// Publisher task `CLIENT`'s clients of I2C1 and I2C2.
+    pub fn ports<const CLIENT: usize>() -> (CompassPort, FloorPort) {
+        const { assert!(CLIENT < crate::sensors::CLIENTS) };
+        (
+            SimPort::new(&I2C1_BUS, TIMEOUT_ALLOWANCE_US),
+            SimPort::new(&I2C2_BUS, TIMEOUT_ALLOWANCE_US),
+        )
+    }
+}
+#[cfg(feature = "scripted-i2c")]
+pub use scripted::{boot_compass, boot_floor, ports, CompassPort, FloorPort};

@@ -6,7 +6,16 @@
 //! accelerometer and I2C1 magnetometer, or 1-2's BNO055 on I2C1; both revisions publish the same
 //! topics in the same units) and keeps a group that failed its identity check
 //! from being read again (its topics then publish nothing, and the fault is counted).
+//!
+//! With the feature `scripted-i2c` (revision 1-1 only; not in the shipped image until the analysis
+//! takes the sensor buses, docs/i2c.md "What step (c) wires") the I2C groups — the compass on I2C1,
+//! the floor on I2C2 — sample by script instead: I2C scripts built from the drivers' register
+//! maps and decoded by them (amiro-sensors' `drivers::scripted`) that the bus runs while the
+//! publisher suspends
+//! (`amiro_firmware::scripted::sample_on_bus`, a client slot per publisher task), the group's lock
+//! held only to record and decode, never across the bus. The SPI groups stay as they are.
 use amiro_can::{SensorData, Topic, Velocity};
+#[cfg(not(feature = "scripted-i2c"))]
 use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::suite::{self, SensorGroup};
 use amiro_sensors::motion::{DriveController, Pose};
@@ -93,17 +102,21 @@ impl<G: SensorGroup> Group<G> {
 }
 
 /// Floor sensors behind the PCA9544A on I2C2 (both revisions).
+#[cfg(not(feature = "scripted-i2c"))]
 pub type Floor = Group<FloorSensors<FloorI2c>>;
 
 #[cfg(feature = "rev-1-1")]
 mod revision {
-    use super::{suite, Group};
-    use crate::platform::{AccelSpi, CompassI2c, GyroSpi};
+    use super::Group;
+    use crate::platform::{AccelSpi, GyroSpi};
     use amiro_sensors::drivers::suite::InertialSensors;
+    #[cfg(not(feature = "scripted-i2c"))]
+    use {super::suite, crate::platform::CompassI2c};
 
     /// Gyroscope and accelerometer on SPI1.
     pub type Imu = Group<InertialSensors<GyroSpi, AccelSpi>>;
     /// Magnetometer on I2C1.
+    #[cfg(not(feature = "scripted-i2c"))]
     pub type Compass = Group<suite::Compass<CompassI2c>>;
 }
 
@@ -137,9 +150,14 @@ mod revision {
     }
 }
 
-pub use revision::{Compass, Imu};
+#[cfg(not(feature = "scripted-i2c"))]
+pub use revision::Compass;
+pub use revision::Imu;
+#[cfg(feature = "scripted-i2c")]
+pub use scripted_groups::{Compass, Floor, ScriptedSampler};
 
 /// Brings every sensor group up on its bus: the motion sensors (per revision) and the floor.
+#[cfg(not(feature = "scripted-i2c"))]
 pub fn groups(buses: SensorBuses) -> (Imu, Compass, Floor) {
     #[cfg(feature = "rev-1-1")]
     let (imu, compass, floor_i2c) = (
@@ -157,6 +175,217 @@ pub fn groups(buses: SensorBuses) -> (Imu, Compass, Floor) {
         buses.floor_i2c,
     );
     (imu, compass, Floor::new(FloorSensors::new(floor_i2c), 2))
+}
+
+/// Brings every sensor group up: the SPI pair as in the blocking build; the compass and the floor
+/// set up by their scripts on the boot's bus (`platform::boot_compass`, `platform::boot_floor`: the
+/// polled master on the chip, whose block then goes to its engine; the simulated bus in QEMU).
+#[cfg(feature = "scripted-i2c")]
+pub fn groups(buses: SensorBuses) -> (Imu, Compass, Floor) {
+    let imu = Imu::new(
+        suite::InertialSensors::new(buses.gyro_spi, buses.accel_spi),
+        0,
+    );
+    let compass = crate::platform::boot_compass(buses.compass_i2c);
+    let floor = crate::platform::boot_floor(buses.floor_i2c);
+    (
+        imu,
+        scripted_groups::Scripted::new(compass, 1),
+        scripted_groups::Scripted::new(floor, 2),
+    )
+}
+
+/// Clients of each I2C bus: the four publisher tasks, by slot `0` urgent to `3` low (the bus
+/// serves the most urgent waiting script next).
+#[cfg(feature = "scripted-i2c")]
+pub const CLIENTS: usize = 4;
+
+/// A script's timeout beyond its time on the wire at 400 kHz (`scripted::script_timeout_us`), µs:
+/// the other three clients' scripts it may wait behind, each at most a full script's 504 SCL
+/// periods (12 operations, 52 bytes: 1.26 ms), and 1 ms for the delays of its own events'
+/// interrupts (the engine at priority 5 beside the command handler, under the CAN interrupts). No
+/// stretch: the HMC5883L, the PCA9544A and the VCNL4020 state none (docs/analysis.md, the I2C
+/// waits), so on the chip a repeated START stretched past the engine's condition wait stalls its
+/// script until this timeout ends it (`amiro_firmware::i2c_engine`: this board runs no re-arm
+/// task). A stated allowance, not yet the analysis's bus response.
+#[cfg(feature = "scripted-i2c")]
+pub const TIMEOUT_ALLOWANCE_US: u32 = 3 * 1_260 + 1_000;
+
+#[cfg(feature = "scripted-i2c")]
+mod scripted_groups {
+    use amiro_can::Topic;
+    use amiro_firmware::publisher::SuspendingSampler;
+    use amiro_firmware::scripted::{sample_on_bus, BusFault, ScriptPort, ScriptedGroup, Step};
+    use amiro_sensors::drivers::floor::FloorSensors;
+    use amiro_sensors::drivers::scripted::Scripts;
+    use amiro_sensors::drivers::suite::{self, Supervised};
+    use amiro_sensors::script::Readings;
+
+    use super::{sample_drive, sample_inertial_spi, DriveSample, Imu, Samples};
+
+    /// A supervised group that samples by script, and its place in the board's health report
+    /// (reported after each sample, as [`super::Group`] does).
+    pub struct Scripted<G> {
+        supervised: Supervised<G>,
+        index: usize,
+    }
+
+    impl<G> Scripted<G> {
+        /// The group set up at boot (`supervised`); `index` names it in the health report.
+        pub fn new(supervised: Supervised<G>, index: usize) -> Self {
+            let group = Self { supervised, index };
+            group.report();
+            group
+        }
+
+        fn report(&self) {
+            amiro_firmware::health::report_sensor_group(
+                self.index,
+                self.supervised.faults(),
+                !self.supervised.is_ready(),
+            );
+        }
+
+        /// Whether the group is up.
+        pub fn is_ready(&self) -> bool {
+            self.supervised.is_ready()
+        }
+
+        /// A step's frames reported when the sample is done.
+        fn reported(&self, step: Step) -> Step {
+            if let Step::Done(_) = step {
+                self.report();
+            }
+            step
+        }
+    }
+
+    impl<G> ScriptedGroup for Scripted<G>
+    where
+        Supervised<G>: ScriptedGroup,
+    {
+        type Job = <Supervised<G> as ScriptedGroup>::Job;
+        const MAX_ROUNDS: usize = <Supervised<G> as ScriptedGroup>::MAX_ROUNDS;
+
+        fn new_job() -> Self::Job {
+            <Supervised<G> as ScriptedGroup>::new_job()
+        }
+
+        fn begin(&mut self, job: &mut Self::Job, topic: Topic, now_us: u64) -> Step {
+            let step = self.supervised.begin(job, topic, now_us);
+            self.reported(step)
+        }
+
+        fn resume(
+            &mut self,
+            job: &mut Self::Job,
+            topic: Topic,
+            now_us: u64,
+            outcome: Result<Readings, BusFault>,
+        ) -> Step {
+            let step = self.supervised.resume(job, topic, now_us, outcome);
+            self.reported(step)
+        }
+    }
+
+    /// The HMC5883L on I2C1, its transfers made as scripts.
+    pub type Compass = Scripted<suite::Compass<Scripts>>;
+    /// The floor sensors behind the PCA9544A on I2C2, their transfers made as scripts.
+    pub type Floor = Scripted<FloorSensors<Scripts>>;
+
+    /// One sample of a magnetometer axis: the HMC5883L's scripts on I2C1 (not inlined, per topic
+    /// family, as the blocking build's: the analysis tells a job's topic by the function).
+    #[inline(never)]
+    async fn sample_compass_scripted(
+        compass: &mut impl rtic::Mutex<T = Compass>,
+        port: &mut impl ScriptPort,
+        topic: Topic,
+        taken: u64,
+    ) -> Samples {
+        sample_on_bus(compass, port, topic, taken).await
+    }
+
+    /// One sample of the floor sensors: the round's scripts on I2C2.
+    #[inline(never)]
+    async fn sample_floor_scripted(
+        floor: &mut impl rtic::Mutex<T = Floor>,
+        port: &mut impl ScriptPort,
+        topic: Topic,
+        taken: u64,
+    ) -> Samples {
+        sample_on_bus(floor, port, topic, taken).await
+    }
+
+    /// What DiWheelDrive samples for a topic, a publisher task's own: each topic locks only the
+    /// group it reads; the compass's and the floor's samples suspend the task while their scripts
+    /// run on the task's client slots (`compass_port` on I2C1, `floor_port` on I2C2).
+    pub struct ScriptedSampler<I, C, F, D, PC, PF> {
+        /// The SPI pair.
+        pub imu: I,
+        /// The compass group.
+        pub compass: C,
+        /// The floor group.
+        pub floor: F,
+        /// Motor control's last pose and velocity.
+        pub drive: D,
+        /// The task's slot on I2C1.
+        pub compass_port: PC,
+        /// The task's slot on I2C2.
+        pub floor_port: PF,
+    }
+
+    impl<I, C, F, D, PC, PF> SuspendingSampler for ScriptedSampler<I, C, F, D, PC, PF>
+    where
+        I: rtic::Mutex<T = Imu>,
+        C: rtic::Mutex<T = Compass>,
+        F: rtic::Mutex<T = Floor>,
+        D: rtic::Mutex<T = DriveSample>,
+        PC: ScriptPort,
+        PF: ScriptPort,
+    {
+        async fn sample(&mut self, topic: Topic, taken_us: u64) -> Samples {
+            match topic {
+                Topic::Gyroscope | Topic::Accelerometer => {
+                    sample_inertial_spi(&mut self.imu, topic, taken_us)
+                }
+                Topic::MagnetometerX | Topic::MagnetometerY | Topic::MagnetometerZ => {
+                    sample_compass_scripted(
+                        &mut self.compass,
+                        &mut self.compass_port,
+                        topic,
+                        taken_us,
+                    )
+                    .await
+                }
+                Topic::FloorProximity => {
+                    sample_floor_scripted(&mut self.floor, &mut self.floor_port, topic, taken_us)
+                        .await
+                }
+                Topic::Odometry | Topic::Velocity => sample_drive(&mut self.drive, topic),
+                _ => Samples::new(),
+            }
+        }
+    }
+}
+
+/// A publisher task's sampler with `scripted-i2c`: the groups behind its locks and its slots on
+/// I2C1 and I2C2 (`platform::ports`).
+#[cfg(feature = "scripted-i2c")]
+pub fn scripted_sampler(
+    imu: impl rtic::Mutex<T = Imu>,
+    compass: impl rtic::Mutex<T = Compass>,
+    floor: impl rtic::Mutex<T = Floor>,
+    drive: impl rtic::Mutex<T = DriveSample>,
+    (compass_port, floor_port): (crate::platform::CompassPort, crate::platform::FloorPort),
+) -> impl amiro_firmware::publisher::SuspendingSampler {
+    ScriptedSampler {
+        imu,
+        compass,
+        floor,
+        drive,
+        compass_port,
+        floor_port,
+    }
 }
 
 /// One word on the groups for the boot log.
@@ -222,7 +451,7 @@ fn sample_inertial_spi(imu: &mut impl rtic::Mutex<T = Imu>, topic: Topic, taken:
 }
 
 /// One sample of a magnetometer axis: 1-1's HMC5883L on I2C1.
-#[cfg(feature = "rev-1-1")]
+#[cfg(all(feature = "rev-1-1", not(feature = "scripted-i2c")))]
 #[inline(never)]
 fn sample_compass_hmc5883l(
     compass: &mut impl rtic::Mutex<T = Compass>,
@@ -240,12 +469,14 @@ fn sample_imu_bno055(imu: &mut impl rtic::Mutex<T = Imu>, topic: Topic, taken: u
 }
 
 /// One sample of the floor sensors (the four VCNL4020 behind the PCA9544A on I2C2).
+#[cfg(not(feature = "scripted-i2c"))]
 #[inline(never)]
 fn sample_floor(floor: &mut impl rtic::Mutex<T = Floor>, topic: Topic, taken: u64) -> Samples {
     floor.lock(|d| d.sample(topic, taken))
 }
 
 /// What DiWheelDrive samples for a topic: each topic locks only the device group it reads.
+#[cfg(not(feature = "scripted-i2c"))]
 pub fn sampler(
     mut imu: impl rtic::Mutex<T = Imu>,
     #[cfg_attr(feature = "rev-1-2", allow(unused_mut))] mut compass: impl rtic::Mutex<T = Compass>,

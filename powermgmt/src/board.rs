@@ -125,7 +125,11 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
             .clear_bit()
     });
     let mut rcc = dp.RCC.constrain();
-    // The I2C timeouts count core cycles.
+    #[cfg(feature = "scripted-i2c")]
+    scripted::set_clocks(clocks.pclk1_hz, clocks.sysclk_hz);
+    #[cfg(feature = "scripted-i2c")]
+    scripted::bind_engines(&mut cp.NVIC);
+    // The I2C timeouts count core cycles (and the engine's condition wait, with `scripted-i2c`).
     cp.DCB.enable_trace();
     cp.DWT.enable_cycle_counter();
 
@@ -311,3 +315,172 @@ pub fn start_monotonic(priority: u8) {
         priority,
     );
 }
+
+/// With `scripted-i2c`: the I2C blocks driven by their interrupts once the app runs
+/// (`amiro_firmware::i2c_bus`: the engine, a slot per client task), after the boot set the
+/// devices up on the polled master (docs/i2c.md).
+#[cfg(feature = "scripted-i2c")]
+pub mod scripted {
+    use core::sync::atomic::{AtomicU32, Ordering};
+
+    use amiro_firmware::i2c::{self, Master};
+    use amiro_firmware::i2c_block::Registers;
+    use amiro_firmware::i2c_bus::I2cBus;
+    use amiro_firmware::i2c_engine::{Block as _, STRETCH_REARM_US};
+    use amiro_firmware::mono::Clock as _;
+    use amiro_firmware::scripted::I2cPort;
+    use amiro_sensors::drivers::ring::RingBus;
+    use amiro_sensors::drivers::scripted::OnI2c;
+    use stm32f4xx_hal::pac::{interrupt, Interrupt, NVIC, NVIC_PRIO_BITS};
+
+    use super::{Clock, SYSCLK_HZ};
+    use crate::levels;
+    use crate::sensors::scripted::{ScriptedBus, CLIENTS, TIMEOUT_ALLOWANCE_US};
+
+    /// One I2C block's bus once the app runs.
+    pub type ScriptBus = I2cBus<Registers, CLIENTS>;
+    /// A client task's slot on a [`ScriptBus`], its timeout on the board's clock.
+    pub type Port = I2cPort<'static, Clock, Registers, CLIENTS>;
+
+    /// The clients' RTIC priorities, by slot (`sensors::scripted::CLIENTS`).
+    const CLIENT_PRIORITIES: [u8; CLIENTS] = [
+        levels::PUBLISH_URGENT,
+        levels::PUBLISH_HIGH,
+        levels::PUBLISH_MEDIUM,
+        levels::PUBLISH_LOW,
+        levels::POWER_MONITOR,
+    ];
+
+    /// APB1 and the core clock as `init`'s clock plan set them up (the design plan's until then).
+    static PCLK1_HZ: AtomicU32 = AtomicU32::new(SYSCLK_HZ / 4);
+    static CORE_HZ: AtomicU32 = AtomicU32::new(SYSCLK_HZ);
+
+    /// I2C1, the rear bus.
+    // SAFETY: the block is touched only after `boot_rear` took it from the polled master.
+    pub static I2C1_BUS: ScriptBus = I2cBus::new(
+        unsafe { Registers::new(i2c::I2C1, SYSCLK_HZ / 4, SYSCLK_HZ) },
+        CLIENT_PRIORITIES,
+    );
+    /// I2C2, the front bus.
+    // SAFETY: as I2C1's, after `boot_front`.
+    pub static I2C2_BUS: ScriptBus = I2cBus::new(
+        unsafe { Registers::new(i2c::I2C2, SYSCLK_HZ / 4, SYSCLK_HZ) },
+        CLIENT_PRIORITIES,
+    );
+
+    /// I2C1's events: the rear bus's engine advances its script (docs/i2c.md).
+    #[interrupt]
+    fn I2C1_EV() {
+        I2C1_BUS.on_event();
+    }
+
+    /// I2C1's errors (a missing acknowledge, a bus error, arbitration lost, an overrun).
+    #[interrupt]
+    fn I2C1_ER() {
+        I2C1_BUS.on_error();
+    }
+
+    /// I2C2's events: the front bus's engine.
+    #[interrupt]
+    fn I2C2_EV() {
+        I2C2_BUS.on_event();
+    }
+
+    /// I2C2's errors.
+    #[interrupt]
+    fn I2C2_ER() {
+        I2C2_BUS.on_error();
+    }
+
+    /// The four handlers at one priority, RTIC's `levels::I2C_ENGINE` (so that neither pre-empts
+    /// another's critical step; above every client, below the CAN interrupts; RTIC's locks mask
+    /// them as they mask a task of that priority), and unmasked: the blocks raise nothing until a
+    /// script turns CR2's enables on. Bound here, not as tasks of the app, as DiWheelDrive 1-1's
+    /// trial binds them: RTIC sets up the NVIC of a hardware task even where a `cfg` leaves the
+    /// task out, which would change the shipped image.
+    pub(crate) fn bind_engines(nvic: &mut NVIC) {
+        let logical = levels::I2C_ENGINE;
+        let hardware = ((1u8 << NVIC_PRIO_BITS) - logical) << (8 - NVIC_PRIO_BITS);
+        for irq in [
+            Interrupt::I2C1_EV,
+            Interrupt::I2C1_ER,
+            Interrupt::I2C2_EV,
+            Interrupt::I2C2_ER,
+        ] {
+            // SAFETY: init runs with interrupts off; the handlers share no RTIC resource (the
+            // buses are statics under their own critical sections).
+            unsafe {
+                nvic.set_priority(irq, hardware);
+                NVIC::unmask(irq);
+            }
+        }
+    }
+
+    /// Keeps the clock plan's APB1 and core clocks for the blocks' hand-over.
+    pub(crate) fn set_clocks(pclk1_hz: u32, sysclk_hz: u32) {
+        PCLK1_HZ.store(pclk1_hz, Ordering::Relaxed);
+        CORE_HZ.store(sysclk_hz, Ordering::Relaxed);
+    }
+
+    /// `which`'s sensors and gauge set up by their scripts on the polled master `boot` (the
+    /// gauge's bus-free pauses on the core clock, `GaugeDelay`), then `boot`'s block handed to
+    /// `bus`: set up again at the plan's clocks, its interrupts off until a script starts.
+    fn boot_on(which: RingBus, boot: Master, bus: &ScriptBus) -> ScriptedBus {
+        // The polled master is consumed here: the block is the engine's from now on.
+        let booted = ScriptedBus::boot(which, &mut OnI2c(boot), &mut super::GaugeDelay);
+        bus.with_block(|block| {
+            block.set_clocks(
+                PCLK1_HZ.load(Ordering::Relaxed),
+                CORE_HZ.load(Ordering::Relaxed),
+            );
+            block.reset();
+        });
+        booted
+    }
+
+    /// I2C1's devices set up on its polled master, then I2C1 handed to its engine.
+    pub fn boot_rear(boot: Master) -> ScriptedBus {
+        boot_on(RingBus::I2c1, boot, &I2C1_BUS)
+    }
+
+    /// I2C2's devices set up on its polled master, then I2C2 handed to its engine.
+    pub fn boot_front(boot: Master) -> ScriptedBus {
+        boot_on(RingBus::I2c2, boot, &I2C2_BUS)
+    }
+
+    /// Client `CLIENT`'s slots on I2C1 and I2C2.
+    pub fn ports<const CLIENT: usize>() -> (Port, Port) {
+        (
+            Port::new(
+                &I2C1_BUS,
+                I2C1_BUS.client_at::<CLIENT>(),
+                TIMEOUT_ALLOWANCE_US,
+            ),
+            Port::new(
+                &I2C2_BUS,
+                I2C2_BUS.client_at::<CLIENT>(),
+                TIMEOUT_ALLOWANCE_US,
+            ),
+        )
+    }
+
+    /// The re-arm task's loop for `bus`: a repeated START the gauge stretches past the engine's
+    /// condition wait is looked at every `STRETCH_REARM_US` (docs/i2c.md, "A stretched repeated
+    /// START").
+    async fn rearm(bus: &'static ScriptBus) -> ! {
+        bus.serve_stretches(|| Clock::delay_until_us(Clock::now_us() + u64::from(STRETCH_REARM_US)))
+            .await
+    }
+
+    /// I2C1's re-arm loop.
+    pub async fn rearm_rear() -> ! {
+        rearm(&I2C1_BUS).await
+    }
+
+    /// I2C2's re-arm loop.
+    pub async fn rearm_front() -> ! {
+        rearm(&I2C2_BUS).await
+    }
+}
+#[cfg(feature = "scripted-i2c")]
+pub use scripted::{boot_front, boot_rear, ports, rearm_front, rearm_rear};

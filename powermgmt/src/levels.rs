@@ -19,6 +19,10 @@ pub const CONTROL: u8 = 5;
 /// The power master's periodic work (VSYS → chargers, battery check) and the watchdog: the least
 /// urgent level, so a fed watchdog proves every level above it leaves time.
 pub const POWER_MONITOR: u8 = 1;
+/// The I2C blocks' event and error interrupts (with `scripted-i2c`: the sensor buses' engines) and
+/// the buses' re-arm tasks, at command handling's level: above every client of the buses, below
+/// the CAN interrupts.
+pub const I2C_ENGINE: u8 = 5;
 /// The CAN transmit interrupt.
 pub const CAN_TX: u8 = 6;
 /// The CAN receive interrupt: above transmit, so the 3-frame receive FIFO is emptied even while
@@ -50,6 +54,7 @@ const _: () = {
     assert!(POWER_MONITOR >= 1);
     assert!(CONTROL > PUBLISH_URGENT);
     assert!(CAN_TX > CONTROL);
+    assert!(I2C_ENGINE > PUBLISH_URGENT && I2C_ENGINE < CAN_TX);
     assert!(CAN_RX > CAN_TX);
     assert!(SHUTDOWN > CAN_TX);
     assert!(MONOTONIC > SHUTDOWN);

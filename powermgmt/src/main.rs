@@ -16,6 +16,8 @@
 
 mod levels;
 mod power;
+// With `scripted-i2c` the blocking buses are not used (the scripted ones are).
+#[cfg_attr(feature = "scripted-i2c", allow(dead_code))]
 mod sensors;
 
 #[cfg(not(feature = "qemu"))]
@@ -118,13 +120,18 @@ type AdmissionState = amiro_firmware::admission::State<
 
 #[rtic::app(device = stm32f4xx_hal::pac, dispatchers = [UART4, UART5, TIM7, SDIO, DMA2_STREAM0, DMA2_STREAM1])]
 mod app {
-    use crate::sensors::{self, FrontBus, RearBus};
+    use crate::sensors;
+    #[cfg(feature = "scripted-i2c")]
+    use crate::sensors::scripted::{ScriptedBus as RearBus, ScriptedBus as FrontBus};
+    #[cfg(not(feature = "scripted-i2c"))]
+    use crate::sensors::{FrontBus, RearBus};
     use crate::{levels, platform, power, Clock, ADMISSION_QUEUE_LEN, RX_QUEUE_LEN, TX_QUEUE_LEN};
     use amiro_can::{Board as CanBoard, Command, Priority, ShutdownMode};
     use amiro_firmware::liveness::Liveness;
     use amiro_firmware::mono::Clock as _;
     use amiro_firmware::signals::{self, SystemSignals as _};
     use amiro_firmware::{bootloader, publisher, tasks};
+    #[cfg(not(feature = "scripted-i2c"))]
     use amiro_sensors::drivers::ring::RingBus;
     use amiro_sensors::handler::{Outcome, SensorDataHandler};
     use amiro_sensors::tx_queue::TxQueue;
@@ -180,8 +187,16 @@ mod app {
         let (wake_h, wake_high) = make_channel!((), 1);
         let (wake_m, wake_medium) = make_channel!((), 1);
         let (wake_l, wake_low) = make_channel!((), 1);
+        #[cfg(not(feature = "scripted-i2c"))]
         let rear_bus = RearBus::new(RingBus::I2c1, hw.rear_i2c, platform::GaugeDelay);
+        #[cfg(not(feature = "scripted-i2c"))]
         let front_bus = FrontBus::new(RingBus::I2c2, hw.front_i2c, platform::GaugeDelay);
+        // The devices set up by their scripts on the polled master, then each block handed to
+        // its engine (QEMU: the simulated buses).
+        #[cfg(feature = "scripted-i2c")]
+        let rear_bus = platform::boot_rear(hw.rear_i2c);
+        #[cfg(feature = "scripted-i2c")]
+        let front_bus = platform::boot_front(hw.front_i2c);
         let mut signals = hw.signals;
         // The power lines keep their configuration; nothing in the app touches them again.
         let _power_lines = hw.power_lines;
@@ -196,6 +211,10 @@ mod app {
         drain_trace::spawn().ok();
         power_monitor::spawn().ok();
         watchdog::spawn().ok();
+        #[cfg(feature = "scripted-i2c")]
+        rearm_rear::spawn().ok();
+        #[cfg(feature = "scripted-i2c")]
+        rearm_front::spawn().ok();
         #[cfg(feature = "qemu")]
         stimulus::spawn().ok();
         amiro_firmware::log!("PowerManagement up");
@@ -336,12 +355,32 @@ mod app {
     async fn publish_urgent(cx: publish_urgent::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_URGENT);
         let s = cx.shared;
+        #[cfg(not(feature = "scripted-i2c"))]
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Urgent],
             cx.local.wake_urgent,
             s.handler,
             s.tx_queue,
             sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+        // The ring's and the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        #[cfg(feature = "scripted-i2c")]
+        let (rear_port, front_port) = platform::ports::<0>();
+        #[cfg(feature = "scripted-i2c")]
+        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+            &[Priority::Urgent],
+            cx.local.wake_urgent,
+            s.handler,
+            s.tx_queue,
+            sensors::ScriptedSampler {
+                rear: s.rear_bus,
+                front: s.front_bus,
+                charger: s.charger,
+                rear_port,
+                front_port,
+            },
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -352,12 +391,32 @@ mod app {
     async fn publish_high(cx: publish_high::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_HIGH);
         let s = cx.shared;
+        #[cfg(not(feature = "scripted-i2c"))]
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::High],
             cx.local.wake_high,
             s.handler,
             s.tx_queue,
             sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+        // The ring's and the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        #[cfg(feature = "scripted-i2c")]
+        let (rear_port, front_port) = platform::ports::<1>();
+        #[cfg(feature = "scripted-i2c")]
+        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+            &[Priority::High],
+            cx.local.wake_high,
+            s.handler,
+            s.tx_queue,
+            sensors::ScriptedSampler {
+                rear: s.rear_bus,
+                front: s.front_bus,
+                charger: s.charger,
+                rear_port,
+                front_port,
+            },
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -368,12 +427,32 @@ mod app {
     async fn publish_medium(cx: publish_medium::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_MEDIUM);
         let s = cx.shared;
+        #[cfg(not(feature = "scripted-i2c"))]
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Medium],
             cx.local.wake_medium,
             s.handler,
             s.tx_queue,
             sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+        // The ring's and the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        #[cfg(feature = "scripted-i2c")]
+        let (rear_port, front_port) = platform::ports::<2>();
+        #[cfg(feature = "scripted-i2c")]
+        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+            &[Priority::Medium],
+            cx.local.wake_medium,
+            s.handler,
+            s.tx_queue,
+            sensors::ScriptedSampler {
+                rear: s.rear_bus,
+                front: s.front_bus,
+                charger: s.charger,
+                rear_port,
+                front_port,
+            },
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -384,12 +463,32 @@ mod app {
     async fn publish_low(cx: publish_low::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_LOW);
         let s = cx.shared;
+        #[cfg(not(feature = "scripted-i2c"))]
         publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Low],
             cx.local.wake_low,
             s.handler,
             s.tx_queue,
             sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            platform::CAN_TX_INTERRUPT,
+        )
+        .await;
+        // The ring's and the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        #[cfg(feature = "scripted-i2c")]
+        let (rear_port, front_port) = platform::ports::<3>();
+        #[cfg(feature = "scripted-i2c")]
+        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+            &[Priority::Low],
+            cx.local.wake_low,
+            s.handler,
+            s.tx_queue,
+            sensors::ScriptedSampler {
+                rear: s.rear_bus,
+                front: s.front_bus,
+                charger: s.charger,
+                rear_port,
+                front_port,
+            },
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -403,6 +502,10 @@ mod app {
         amiro_firmware::tracing::enter(crate::trace_task::POWER_MONITOR);
         let mut next = Clock::now_us();
         let mut round = 0u32;
+        // With `scripted-i2c` the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        #[cfg(feature = "scripted-i2c")]
+        let (mut rear_port, mut front_port) =
+            platform::ports::<{ sensors::scripted::POWER_MONITOR_CLIENT }>();
         loop {
             next += crate::POWER_MONITOR_PERIOD_US;
             Clock::delay_until_us(next).await;
@@ -412,9 +515,21 @@ mod app {
             cx.shared.charger.lock(power::regulate_charging);
             round = round.wrapping_add(1);
             if round.is_multiple_of(crate::BATTERY_CHECK_EVERY) {
+                #[cfg(not(feature = "scripted-i2c"))]
                 let round =
                     sensors::read_batteries(&mut cx.shared.rear_bus, &mut cx.shared.front_bus);
+                #[cfg(not(feature = "scripted-i2c"))]
                 let (front, rear) = round.batteries();
+                #[cfg(feature = "scripted-i2c")]
+                let (front, rear) = sensors::scripted::read_batteries(
+                    &mut cx.shared.rear_bus,
+                    &mut cx.shared.front_bus,
+                    &mut rear_port,
+                    &mut front_port,
+                )
+                .await;
+                #[cfg(feature = "scripted-i2c")]
+                let (front, rear) = (front.as_ref(), rear.as_ref());
                 let lines = cx.shared.charger.lock(|c| c.lines());
                 if power::critically_low(front, rear, &lines) {
                     amiro_firmware::log!("battery critically low: shutting down");
@@ -506,6 +621,21 @@ mod app {
             amiro_firmware::log!("shutdown requested from outside: publishers stopped");
             bootloader::hand_over(bootloader::Callback::HandleShutdownRequest);
         }
+    }
+
+    /// With `scripted-i2c`: I2C1's re-arm task, which brings back a repeated START the rear gauge
+    /// stretched past the engine's condition wait (docs/i2c.md, "A stretched repeated START").
+    #[cfg(feature = "scripted-i2c")]
+    #[task(priority = 5)]
+    async fn rearm_rear(_cx: rearm_rear::Context) {
+        platform::rearm_rear().await;
+    }
+
+    /// With `scripted-i2c`: I2C2's re-arm task (the front gauge).
+    #[cfg(feature = "scripted-i2c")]
+    #[task(priority = 5)]
+    async fn rearm_front(_cx: rearm_front::Context) {
+        platform::rearm_front().await;
     }
 
     /// QEMU only: replays the stimulus log as if its frames arrived on the bus.

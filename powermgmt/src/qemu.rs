@@ -119,7 +119,7 @@ pub struct SimBus {
 }
 
 impl SimBus {
-    fn new(which: RingBus) -> Self {
+    const fn new(which: RingBus) -> Self {
         let (first, gauge_bit) = match which {
             RingBus::I2c1 => (0, 2),
             RingBus::I2c2 => (4, 1),
@@ -319,3 +319,61 @@ pub fn write_shutdown_reason(reason: u8) {
     let reason = digits::decimal_u16(u16::from(reason), &mut buffer);
     print_line_around(b"# qemu: RTC_BKP0R byte 0 = ", reason, b"");
 }
+
+/// With `scripted-i2c`: the buses as the QEMU build runs their scripts (`amiro_firmware::i2c_sim`:
+/// each script answered by the simulated devices, with the stimulus's faults, after its time on
+/// the wire). The devices live in the bus from the start; the boot's set-up runs on them too (the
+/// boot bus values `init` hands over are not used).
+#[cfg(feature = "scripted-i2c")]
+pub mod scripted {
+    use amiro_firmware::i2c_sim::{SimBus as ScriptSimBus, SimPort};
+    use amiro_sensors::drivers::ring::RingBus;
+    use amiro_sensors::drivers::scripted::OnI2c;
+    use amiro_sensors::sim::NoDelay;
+
+    use super::{Clock, SimBus};
+    use crate::sensors::scripted::{ScriptedBus, CLIENTS, TIMEOUT_ALLOWANCE_US};
+
+    /// A bus's simulated devices, each script's operations run on them as blocking transfers.
+    type Devices = OnI2c<SimBus>;
+    /// A client task's slot on a bus.
+    pub type Port = SimPort<'static, Clock, Devices>;
+
+    /// I2C1, the rear bus.
+    pub static I2C1_BUS: ScriptSimBus<Devices> =
+        ScriptSimBus::new(OnI2c(SimBus::new(RingBus::I2c1)));
+    /// I2C2, the front bus.
+    pub static I2C2_BUS: ScriptSimBus<Devices> =
+        ScriptSimBus::new(OnI2c(SimBus::new(RingBus::I2c2)));
+
+    /// I2C1's devices set up on its simulated parts.
+    pub fn boot_rear(_boot: SimBus) -> ScriptedBus {
+        I2C1_BUS.with_devices(|devices| ScriptedBus::boot(RingBus::I2c1, devices, &mut NoDelay))
+    }
+
+    /// I2C2's devices set up on its simulated parts.
+    pub fn boot_front(_boot: SimBus) -> ScriptedBus {
+        I2C2_BUS.with_devices(|devices| ScriptedBus::boot(RingBus::I2c2, devices, &mut NoDelay))
+    }
+
+    /// Client `CLIENT`'s slots on I2C1 and I2C2.
+    pub fn ports<const CLIENT: usize>() -> (Port, Port) {
+        const { assert!(CLIENT < CLIENTS) };
+        (
+            SimPort::new(&I2C1_BUS, TIMEOUT_ALLOWANCE_US),
+            SimPort::new(&I2C2_BUS, TIMEOUT_ALLOWANCE_US),
+        )
+    }
+
+    /// The simulated bus stretches no clock: the re-arm task has nothing to look at.
+    pub async fn rearm_rear() -> ! {
+        core::future::pending().await
+    }
+
+    /// As [`rearm_rear`].
+    pub async fn rearm_front() -> ! {
+        core::future::pending().await
+    }
+}
+#[cfg(feature = "scripted-i2c")]
+pub use scripted::{boot_front, boot_rear, ports, rearm_front, rearm_rear};

@@ -349,3 +349,69 @@ pub fn sampler(
         samples
     }
 }
+
+/// With `scripted-i2c`: the buses sampled by script (docs/i2c.md), the publishers and the power
+/// monitor suspended while their scripts run.
+#[cfg(feature = "scripted-i2c")]
+pub mod scripted;
+
+/// What PowerManagement samples for a topic with `scripted-i2c`, a publisher task's own: the ring
+/// reads the rear bus, then the front (each a job of scripts on the task's slot of that bus), power
+/// status both gauges (front, then rear) and the charge lines. Every other topic has no samples
+/// here.
+#[cfg(feature = "scripted-i2c")]
+pub struct ScriptedSampler<R, F, C, PR, PF> {
+    /// I2C1's ring sensors and gauge.
+    pub rear: R,
+    /// I2C2's ring sensors and gauge.
+    pub front: F,
+    /// The charge lines.
+    pub charger: C,
+    /// The task's slot on I2C1.
+    pub rear_port: PR,
+    /// The task's slot on I2C2.
+    pub front_port: PF,
+}
+
+#[cfg(feature = "scripted-i2c")]
+impl<R, F, C, PR, PF> amiro_firmware::publisher::SuspendingSampler
+    for ScriptedSampler<R, F, C, PR, PF>
+where
+    R: rtic::Mutex<T = scripted::ScriptedBus>,
+    F: rtic::Mutex<T = scripted::ScriptedBus>,
+    C: rtic::Mutex<T = Charger>,
+    PR: amiro_firmware::scripted::ScriptPort,
+    PF: amiro_firmware::scripted::ScriptPort,
+{
+    async fn sample(&mut self, topic: Topic, taken: u64) -> Samples {
+        let mut samples = Samples::new();
+        match topic {
+            Topic::ProximityRing => {
+                let mut ring: RingSample = [None; RING_SENSORS];
+                scripted::sample_ring(&mut self.rear, &mut self.rear_port, taken, &mut ring).await;
+                scripted::sample_ring(&mut self.front, &mut self.front_port, taken, &mut ring)
+                    .await;
+                for (sensor, mm) in (0u8..).zip(ring) {
+                    if let Some(mm) = mm {
+                        let _ = samples.push(SensorData::ProximityRing { sensor, mm });
+                    }
+                }
+            }
+            Topic::PowerStatus => {
+                let (f, r) = scripted::read_batteries(
+                    &mut self.rear,
+                    &mut self.front,
+                    &mut self.rear_port,
+                    &mut self.front_port,
+                )
+                .await;
+                let lines = self.charger.lock(|c| c.lines());
+                if let Some(status) = power::status(f.as_ref(), r.as_ref(), &lines) {
+                    let _ = samples.push(SensorData::PowerStatus(status));
+                }
+            }
+            _ => {}
+        }
+        samples
+    }
+}

@@ -21,8 +21,9 @@ use std::path::{Path, PathBuf};
 use amiro_can::{CanId, Kind, Priority, Topic};
 
 use crate::admission::{
-    self, BoardTable, MonotonicRow, RobotTable, RowTime, SectionRow, Sender, Stream, TaskRow,
-    TopicRow, TopicSection, INTERRUPTS_DISABLED, LEVELS, NO_DEADLINE, NO_RELEASER,
+    self, BoardTable, BusRow, MonotonicRow, RobotTable, RowTime, ScriptRow, SectionRow, Sender,
+    Stream, TaskRow, TopicRow, TopicSection, INTERRUPTS_DISABLED, LEVELS, MAX_BUSES, NO_DEADLINE,
+    NO_RELEASER,
 };
 use crate::can::{self, FrameCost};
 use crate::model::{
@@ -47,6 +48,8 @@ pub struct OwnedTopic {
     pub bcet: RowTime,
     /// Critical sections.
     pub sections: Vec<TopicSection>,
+    /// The scripts one sample runs, in order.
+    pub scripts: Vec<ScriptRow>,
 }
 
 /// One board's table, owned.
@@ -72,6 +75,12 @@ pub struct OwnedBoard {
     pub can_tx: Option<u16>,
     /// Command handler index.
     pub command_handler: Option<u16>,
+    /// Its sensor buses.
+    pub buses: Vec<BusRow>,
+    /// The fixed tasks with scripts (index in `tasks`) and their scripts.
+    pub task_scripts: Vec<(u8, Vec<ScriptRow>)>,
+    /// Per level, its publisher task's number (levels of one task share it).
+    pub publisher_tasks: [u8; LEVELS],
 }
 
 impl OwnedBoard {
@@ -240,30 +249,6 @@ pub fn lower(
     let mut timings = Vec::new();
     for path in timing_paths {
         let timing = read_timing(root, path)?;
-        // The chip's check has no self-suspending jobs yet: a table without the scripts would admit too much
-        // (docs/analysis.md, "Self-suspending publishers and the sensor buses").
-        let topics = timing.topics.iter().map(|(name, t)| {
-            (
-                format!("topics.{name}"),
-                t.script.is_some(),
-                t.scripts.is_some(),
-            )
-        });
-        let tasks = timing.tasks.iter().map(|(name, t)| {
-            (
-                format!("tasks.{name}"),
-                t.script.is_some(),
-                t.scripts.is_some(),
-            )
-        });
-        if let Some((job, one, _)) = topics.chain(tasks).find(|(_, one, list)| *one || *list) {
-            let field = if one { "script" } else { "scripts" };
-            return Err(BuildError {
-                file: relative(root, path),
-                path: format!("{job}.{field}"),
-                problem: "the on-chip admission check does not model sensor-bus scripts yet".into(),
-            });
-        }
         timings.push(timing);
     }
     let base = build_with(root, timing_paths, "base", &[])?;
@@ -273,6 +258,8 @@ pub fn lower(
         let lowering = Lowering::new(Rows { file: &file }, timing, board);
         let (mut sections, tasks) = lowering.task_rows()?;
         sections.extend(lowering.idle_rows()?);
+        let buses = lowering.bus_rows()?;
+        let task_scripts = lowering.task_script_rows()?;
         let publishers = lowering.publisher_rows(root, timing_paths)?;
         // Every priority a job of the board can have: its tasks', its publisher levels' and its monotonic's.
         let highest = tasks
@@ -280,6 +267,7 @@ pub fn lower(
             .map(|t| t.priority)
             .chain(publishers.levels.iter().flatten().copied())
             .chain(publishers.monotonic.map(|m| m.priority))
+            .chain(buses.iter().map(|b| b.engine_priority))
             .max()
             .unwrap_or(0);
         let blocking = (0..=u32::from(highest))
@@ -302,6 +290,9 @@ pub fn lower(
                 .command_handler
                 .as_deref()
                 .and_then(|n| lowering.index_of(n)),
+            buses,
+            task_scripts,
+            publisher_tasks: publisher_tasks(timing),
         });
     }
     Ok(OwnedRobot {
@@ -310,6 +301,27 @@ pub fn lower(
         frame_cost: frame_cost.cost(),
         sources: timing_paths.iter().map(|p| relative(root, p)).collect(),
     })
+}
+
+/// Per CAN level, a number for its publisher task: levels published by one RTIC task share it (LightRing's one
+/// `publish`), so that the check groups their jobs as the analysis groups them (`job_of`).
+fn publisher_tasks(timing: &Timing) -> [u8; LEVELS] {
+    let mut names: Vec<&str> = Vec::new();
+    let mut out = [0u8; LEVELS];
+    for (slot, level) in out.iter_mut().zip(Priority::ALL.iter()) {
+        let Some(name) = timing.publishers.get(level.name()) else {
+            continue;
+        };
+        let at = names
+            .iter()
+            .position(|n| *n == name.as_str())
+            .unwrap_or_else(|| {
+                names.push(name.as_str());
+                names.len() - 1
+            });
+        *slot = at as u8;
+    }
+    out
 }
 
 /// `path` relative to `root`, as the messages and the generated source name files.
@@ -438,6 +450,89 @@ impl<'a> Lowering<'a> {
         Ok((sections, tasks))
     }
 
+    /// The board's sensor buses as the check's rows (the analysis's validation, the board's overheads).
+    fn bus_rows(&self) -> Result<Vec<BusRow>, BuildError> {
+        let buses = crate::sensor_bus::validate_buses(&self.board.sensor_buses, &self.overheads)
+            .map_err(|(field, e)| self.rows.fail(&field, e.to_string()))?;
+        if buses.len() > MAX_BUSES {
+            return Err(self.rows.fail(
+                "sensor_buses",
+                format!("more than the on-chip admission check's {MAX_BUSES} sensor buses"),
+            ));
+        }
+        buses
+            .iter()
+            .enumerate()
+            .map(|(b, bus)| {
+                let field = |name: &str| format!("sensor_buses[{b}].engine.{name}");
+                let part =
+                    |p: &Option<crate::sensor_bus::Part>| p.as_ref().map_or(Time::ZERO, |p| p.time);
+                Ok(BusRow {
+                    engine_priority: self
+                        .rows
+                        .priority(&field("priority"), bus.engine_priority)?,
+                    per_event: self.rows.time(&field("per_event_us"), bus.per_event)?,
+                    per_script: self
+                        .rows
+                        .time(&field("per_script"), part(&bus.per_script))?,
+                    condition_wait: self
+                        .rows
+                        .time(&field("condition_wait"), part(&bus.condition_wait))?,
+                })
+            })
+            .collect()
+    }
+
+    /// A job's scripts (`field`: the task's or topic's) as the check's rows, validated as the analysis does.
+    fn script_rows(&self, job: &TaskModel, field: &str) -> Result<Vec<ScriptRow>, BuildError> {
+        let fail = |(f, e): crate::sensor_bus::Refusal| self.rows.fail(&f, e.to_string());
+        let buses = crate::sensor_bus::validate_buses(&self.board.sensor_buses, &self.overheads)
+            .map_err(fail)?;
+        let mut out = Vec::new();
+        for (p, script) in
+            crate::sensor_bus::job_scripts(job.script.as_ref(), job.scripts.as_deref(), field)
+                .map_err(fail)?
+        {
+            let s = crate::sensor_bus::validate_script(&buses, script, &p).map_err(fail)?;
+            let count = |n: u32, name: &str| {
+                u16::try_from(n).map_err(|_| {
+                    self.rows.fail(
+                        &format!("{p}.{name}"),
+                        format!("{n} does not fit the on-chip admission table (at most 65 535)"),
+                    )
+                })
+            };
+            out.push(ScriptRow {
+                bus: u8::try_from(s.bus).unwrap_or(u8::MAX),
+                bus_time: self
+                    .rows
+                    .time(&format!("{p}.bus_time_us"), s.wire.plus(s.stretch))?,
+                events: count(s.events, "events")?,
+                starts: count(s.starts, "starts")?,
+                settle: self.rows.time(&format!("{p}.settle_us"), s.settle)?,
+            });
+        }
+        Ok(out)
+    }
+
+    /// The fixed tasks that run scripts, with their rows.
+    fn task_script_rows(&self) -> Result<Vec<(u8, Vec<ScriptRow>)>, BuildError> {
+        let mut out = Vec::new();
+        for (i, t) in self.board.tasks.iter().enumerate() {
+            let scripts = self.script_rows(t, &format!("tasks.{}", t.name))?;
+            if !scripts.is_empty() {
+                let i = u8::try_from(i).map_err(|_| {
+                    self.rows.fail(
+                        &format!("tasks.{}", t.name),
+                        "more tasks than the on-chip admission table indexes (255)".to_string(),
+                    )
+                })?;
+                out.push((i, scripts));
+            }
+        }
+        Ok(out)
+    }
+
     /// Idle's critical sections (holder priority 0).
     fn idle_rows(&self) -> Result<Vec<SectionRow>, BuildError> {
         let mut sections = Vec::new();
@@ -553,6 +648,7 @@ impl<'a> Lowering<'a> {
                 Time::from_us_down(job.bcet_us.unwrap_or(0.0)),
             )?,
             sections: topic_sections,
+            scripts: self.script_rows(job, &format!("topics.{}", info.name))?,
         })
     }
 
@@ -584,7 +680,18 @@ impl OwnedRobot {
                         cost: t.cost,
                         bcet: t.bcet,
                         sections: &t.sections,
+                        scripts: &t.scripts,
                     })
+                    .collect()
+            })
+            .collect();
+        let task_scripts: Vec<Vec<admission::TaskScripts<'_>>> = self
+            .boards
+            .iter()
+            .map(|b| {
+                b.task_scripts
+                    .iter()
+                    .map(|(i, list)| (*i, list.as_slice()))
                     .collect()
             })
             .collect();
@@ -592,7 +699,8 @@ impl OwnedRobot {
             .boards
             .iter()
             .zip(&topic_rows)
-            .map(|(b, topics)| BoardTable {
+            .zip(&task_scripts)
+            .map(|((b, topics), task_scripts)| BoardTable {
                 name: &b.name,
                 tasks: &b.tasks,
                 sections: &b.sections,
@@ -603,6 +711,9 @@ impl OwnedRobot {
                 monotonic: b.monotonic,
                 can_tx: b.can_tx,
                 command_handler: b.command_handler,
+                buses: &b.buses,
+                task_scripts,
+                publisher_tasks: b.publisher_tasks,
             })
             .collect();
         f(&RobotTable {
@@ -612,11 +723,16 @@ impl OwnedRobot {
         })
     }
 
-    /// The most jobs one board can have: its fixed tasks plus a job and a timer job per publishable topic.
+    /// The most jobs one board can have: its fixed tasks plus a job and a timer job per publishable topic, and
+    /// an engine row per script of each.
     pub fn max_tasks(&self) -> usize {
         self.boards
             .iter()
-            .map(|b| b.tasks.len() + 2 * b.topics.len())
+            .map(|b| {
+                let scripts: usize = b.task_scripts.iter().map(|(_, l)| l.len()).sum::<usize>()
+                    + b.topics.iter().map(|t| t.scripts.len()).sum::<usize>();
+                b.tasks.len() + 2 * b.topics.len() + scripts
+            })
             .max()
             .unwrap_or(0)
     }
@@ -793,8 +909,8 @@ impl OwnedRobot {
                     .collect();
                 let _ = writeln!(
                     s,
-                    "                // {}\n                {a}::TopicRow {{ topic: {}, cost: {}, bcet: {}, sections: &[{}] }},",
-                    topic.name, topic.topic, topic.cost, topic.bcet, sections.join(", ")
+                    "                // {}\n                {a}::TopicRow {{ topic: {}, cost: {}, bcet: {}, sections: &[{}], scripts: &[{}] }},",
+                    topic.name, topic.topic, topic.cost, topic.bcet, sections.join(", "), script_rows(&a, &topic.scripts)
                 );
             }
             let _ = writeln!(
@@ -825,6 +941,29 @@ impl OwnedRobot {
                 "            command_handler: {},",
                 opt(b.command_handler)
             );
+            let buses: Vec<String> = b
+                .buses
+                .iter()
+                .map(|bus| {
+                    format!(
+                        "{a}::BusRow {{ engine_priority: {}, per_event: {}, per_script: {}, condition_wait: {} }}",
+                        bus.engine_priority, bus.per_event, bus.per_script, bus.condition_wait
+                    )
+                })
+                .collect();
+            let _ = writeln!(s, "            buses: &[{}],", buses.join(", "));
+            let task_scripts: Vec<String> = b
+                .task_scripts
+                .iter()
+                .map(|(i, list)| format!("({i}, &[{}])", script_rows(&a, list)))
+                .collect();
+            let _ = writeln!(
+                s,
+                "            task_scripts: &[{}],",
+                task_scripts.join(", ")
+            );
+            let groups: Vec<String> = b.publisher_tasks.iter().map(u8::to_string).collect();
+            let _ = writeln!(s, "            publisher_tasks: [{}],", groups.join(", "));
             let _ = writeln!(s, "        }},");
         }
         let cost = match self.frame_cost {
@@ -897,6 +1036,20 @@ impl OwnedRobot {
         }
         worst
     }
+}
+
+/// Script rows as Rust source (`{a}`: the admission module's path).
+fn script_rows(a: &str, scripts: &[ScriptRow]) -> String {
+    let rows: Vec<String> = scripts
+        .iter()
+        .map(|r| {
+            format!(
+                "{a}::ScriptRow {{ bus: {}, bus_time: {}, events: {}, starts: {}, settle: {} }}",
+                r.bus, r.bus_time, r.events, r.starts, r.settle
+            )
+        })
+        .collect();
+    rows.join(", ")
 }
 
 /// What one on-chip decision costs, in fixed-point iterations.

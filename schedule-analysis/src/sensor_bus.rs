@@ -531,7 +531,7 @@ pub fn engine_handlers(buses: &[SensorBusModel]) -> Result<Vec<(usize, &str)>, R
     Ok(out)
 }
 
-fn validate_buses(
+pub(crate) fn validate_buses(
     models: &[SensorBusModel],
     overheads: &OverheadTimes,
 ) -> Result<Vec<SensorBus>, Refusal> {
@@ -584,7 +584,11 @@ fn validate_buses(
 }
 
 /// A script checked against its board's buses (`task` and `engine_row` still to be filled in).
-fn validate_script(buses: &[SensorBus], script: &ScriptModel, p: &str) -> Result<Script, Refusal> {
+pub(crate) fn validate_script(
+    buses: &[SensorBus],
+    script: &ScriptModel,
+    p: &str,
+) -> Result<Script, Refusal> {
     let (b, bus) = buses
         .iter()
         .enumerate()

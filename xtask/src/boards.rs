@@ -213,7 +213,10 @@ pub const BOARDS: [Board; 3] = [
             base: 0x4000_0C00,
         },
         flash_budget: 40 * 1024,
-        admission_allowance: 28 * 1024,
+        // 28 KiB, and 6 844 B since the check takes sensor-bus scripts (issue 33: the rounds, views, bus and
+        // engine-event steps; measured +6 832 B on 1-2, 63 008 -> 69 840 B, 1-1 73 552 B; the largest growth of
+        // the three boards' images, PowerManagement's): the margin it had.
+        admission_allowance: 28 * 1024 + 6_844,
         revisions: &[
             Revision::own_image("1-2", "rev-1-2", &["1-2"], &[0x0100_0102]),
             Revision::own_image("1-1", "rev-1-1", &["1-1"], &[0x0100_0101, 1]),
@@ -237,14 +240,21 @@ pub const BOARDS: [Board; 3] = [
             base: 0x4000_0000,
         },
         internal_oscillator_hz: 16_000_000,
-        flash_budget: 48 * 1024,
+        // 48 KiB, and 13 KiB for its sensor buses' scripted path (issue 33 step (c), feature
+        // `scripted-i2c`: the bus engines and their queues, the scripts' builders and decoders, the
+        // buses' jobs, the suspending publisher loop; measured 61 804 -> 75 008 B, docs/i2c.md
+        // "PowerManagement with `scripted-i2c`"), the lead's decision (the F405 has 1 MiB): the
+        // trial fits with 444 B left; the shipped image does not link it yet.
+        flash_budget: 48 * 1024 + 13 * 1024,
         // PowerManagement fits its own 48 KiB with the admission check (issue 10).
         // Issue 20: the hard floor, the busy verdicts and the paced admission task (≈ 1.5 KB) put
         // PowerManagement ≈ 3.3 KB over its own 48 KiB (the check, issue 20's cost work +0.7 KB, issue 21's bounded waits and
         // timer monotonic): a stated allowance until the check shrinks. Issue 20's one board per step
         // (the preparation and refresh steps, ≈ 0.9 KB) put it at 54 056 B, over 48 + 4 KiB: 6 KiB, still
-        // within issue 20's 12 KiB.
-        admission_allowance: 6 * 1024,
+        // within issue 20's 12 KiB. Issue 33: the check takes sensor-bus scripts (the rounds of the host's
+        // `sensor_bus::analyse`, its views, the scripts' bus responses and the engine events; measured +6 844 B,
+        // 54 940 -> 61 784 B): that much more, the lead's decision, keeping the margin it had (356 B).
+        admission_allowance: 6 * 1024 + 6_844,
         // 1-1 and 1-2 differ only in PA1 (1-2's battery switch input), which the firmware leaves
         // alone: one image for both (docs/boards.md).
         revisions: &[Revision {
@@ -262,7 +272,9 @@ pub const BOARDS: [Board; 3] = [
             base: 0x4000_0400,
         },
         flash_budget: 24 * 1024,
-        admission_allowance: 28 * 1024,
+        // 28 KiB, and 6 844 B since the check takes sensor-bus scripts (issue 33: measured +6 836 B on 1-2,
+        // 48 936 -> 55 772 B; 1-0 55 564 B): the margin it had.
+        admission_allowance: 28 * 1024 + 6_844,
         // The 1-2 ring (three TLC5947, 24 LEDs) of a 1-2 robot; the 1-0 ring (one TLC5947, eight
         // LEDs) of a 1-1 robot (docs/boards.md).
         revisions: &[

@@ -33,8 +33,8 @@ mod workspace;
 
 use boards::{select_boards, BOARDS};
 use workspace::{
-    build_boards, build_qemu, cargo, ensure_qemu, ensure_toolchain, qemu_target_dir, target_dir,
-    workspace_root,
+    build_boards, build_qemu, build_qemu_with, cargo, ensure_qemu, ensure_toolchain,
+    qemu_target_dir, target_dir, workspace_root,
 };
 
 #[derive(Parser, Debug)]
@@ -108,6 +108,10 @@ enum Cmd {
         /// Only the scenarios of this robot revision (1-2, 1-1). Default: every revision's.
         #[arg(long, value_name = "1-2|1-1")]
         revision: Option<String>,
+        /// Build the QEMU images with these board features as well (a trial the shipped image
+        /// does not enable: `scripted-i2c`); for `robot`, `board/feature` names one board's.
+        #[arg(long, value_delimiter = ',')]
+        features: Vec<String>,
     },
     /// The whole robot: the three boards' QEMU builds on one simulated CAN bus with the system
     /// lines between them, in lock-step virtual time (docs/qemu.md, "The whole robot").
@@ -256,8 +260,13 @@ fn run(cmd: Cmd) -> Result<bool> {
             campaign::run(&root, &select_boards(&boards)?, seed, frames, runs).map(|()| true)
         }
         // `robot` names the whole robot's scenarios (robot/scenarios/, docs/qemu.md).
-        Cmd::Scenarios { boards, revision } if boards.iter().any(|b| b == "robot") => {
-            robot::scenarios::run_all(&root)?;
+        Cmd::Scenarios {
+            boards,
+            revision,
+            features,
+        } if boards.iter().any(|b| b == "robot") => {
+            let extra: Vec<&str> = features.iter().map(String::as_str).collect();
+            robot::scenarios::run_all_with(&root, &extra)?;
             let rest: Vec<String> = boards.into_iter().filter(|b| b != "robot").collect();
             if !rest.is_empty() {
                 let choice = match revision.as_deref() {
@@ -265,17 +274,22 @@ fn run(cmd: Cmd) -> Result<bool> {
                     some => revision::Choice::parse(some)?,
                 };
                 let plan = revision::plan(&select_boards(&rest)?, &choice)?;
-                run_scenarios(&root, &plan)?;
+                run_scenarios(&root, &plan, &extra)?;
             }
             Ok(true)
         }
-        Cmd::Scenarios { boards, revision } => {
+        Cmd::Scenarios {
+            boards,
+            revision,
+            features,
+        } => {
             let choice = match revision.as_deref() {
                 None => revision::Choice::All,
                 some => revision::Choice::parse(some)?,
             };
             let plan = revision::plan(&select_boards(&boards)?, &choice)?;
-            run_scenarios(&root, &plan).map(|()| true)
+            let features: Vec<&str> = features.iter().map(String::as_str).collect();
+            run_scenarios(&root, &plan, &features).map(|()| true)
         }
         Cmd::Robot(args) => robot::cli::command(&root, &args),
         Cmd::Smoke { boards, revision } => {
@@ -378,7 +392,47 @@ fn check(root: &Path) -> Result<()> {
         cargo(&root.join(board.name), &args)
             .with_context(|| format!("clippy on the QEMU build of {}", build.stem()))?;
     }
+    // The `scripted-i2c` trials, DiWheelDrive 1-1's and PowerManagement's (docs/i2c.md; not in the
+    // shipped images): linted for the chip and QEMU, and built for the chip in a target directory
+    // of their own (their QEMU images are built and run by the scenarios).
+    for build in scripted_i2c_builds(&every) {
+        build.select_models();
+        let trial = target_dir(root).join("scripted-i2c");
+        let trial = trial.to_string_lossy().into_owned();
+        for (command, extra, dir) in [
+            ("clippy", &["scripted-i2c"][..], &trial),
+            ("build", &["scripted-i2c"][..], &trial),
+            (
+                "clippy",
+                &["qemu", "task-trace", "scripted-i2c"][..],
+                &qemu_target,
+            ),
+        ] {
+            let mut args = vec![command.to_string(), "--quiet".into(), "--release".into()];
+            args.extend(build.feature_args(extra));
+            args.extend(["--target-dir", dir.as_str()].map(String::from));
+            if command == "clippy" {
+                args.extend(["--", "-D", "warnings"].map(String::from));
+            }
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            cargo(&root.join(build.board.name), &args).with_context(|| {
+                format!("{command} on {} with {}", build.stem(), extra.join(","))
+            })?;
+        }
+    }
     Ok(())
+}
+
+/// The board images with the `scripted-i2c` trial: DiWheelDrive 1-1 and PowerManagement.
+fn scripted_i2c_builds(every: &[revision::Build]) -> Vec<revision::Build> {
+    every
+        .iter()
+        .filter(|b| {
+            (b.board.name == "diwheeldrive" && b.revision.name == "1-1")
+                || b.board.name == "powermgmt"
+        })
+        .cloned()
+        .collect()
 }
 
 /// Runs one step of `ci`/`test` and prints its wall time (CI's whole run must stay within its
@@ -447,9 +501,21 @@ fn test(root: &Path) -> Result<()> {
             wcet_gate::check_bounds_current(root)
         },
     )?;
-    timed("the boards' QEMU scenarios", || run_scenarios(root, &every))?;
+    timed("the boards' QEMU scenarios", || {
+        run_scenarios(root, &every, &[])
+    })?;
+    // DiWheelDrive 1-1's and PowerManagement's I2C groups sampled by script (feature
+    // `scripted-i2c`, docs/i2c.md): not in the shipped images yet, their scenarios run all the same.
+    let scripted = scripted_i2c_builds(&every);
+    timed("the scenarios with scripted-i2c", || {
+        run_scenarios(root, &scripted, &["scripted-i2c"])
+    })?;
     // The whole robot on one bus (issue 23), with its bus report against the analysis.
     timed("the robot scenarios", || robot::scenarios::run_all(root))?;
+    // … and with PowerManagement sampling by script (its trial; DiWheelDrive 1-1's is not in it).
+    timed("the robot scenarios with powermgmt/scripted-i2c", || {
+        robot::scenarios::run_all_with(root, &["powermgmt/scripted-i2c"])
+    })?;
     // The production images booted in QEMU (issue 21): every revision's, as built above.
     timed("the smoke runs", || smoke::run(root, &every, true))?;
     // After the scenarios: their bus logs are among what the other CAN tools must read.
@@ -492,8 +558,9 @@ fn analysis_gate(root: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Runs every board's QEMU scenarios and checks their output.
-fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
+/// Runs every board's QEMU scenarios and checks their output, the images built with the boards'
+/// `extra` features as well.
+fn run_scenarios(root: &Path, builds: &[revision::Build], extra: &[&str]) -> Result<()> {
     ensure_qemu()?;
     let bounds = scenarios::Bounds::from_analysis(root)?;
     let mut passed = 0;
@@ -506,7 +573,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
         }
         // One QEMU build per board revision, shared by its scenarios; the analysis bounds of that
         // revision's timing files (`build_qemu` selects them).
-        let elf = build_qemu(root, build)?;
+        let elf = build_qemu_with(root, build, extra)?;
         let mut ram_high_water = 0;
         // The runs whose output the bench measures afterwards (no second QEMU run).
         let mut outputs = Vec::new();
@@ -571,14 +638,30 @@ fn run_scenarios(root: &Path, builds: &[revision::Build]) -> Result<()> {
             "{} RAM in QEMU (static + deepest stack): {ram_high_water} bytes of a {goal}-byte goal",
             board.name
         );
+        // A trial's image (`extra` features: not the shipped one, and not the app the timing
+        // files and bounds describe) is held to its scenarios' checks; its RAM and its jobs against
+        // the shipped image's analysis are printed, not gated, until the analysis covers it.
+        let trial = !extra.is_empty();
         if ram_high_water > goal {
-            failed += 1;
-            println!("{} RAM goal missed", board.name);
+            if trial {
+                println!(
+                    "{} with {}: RAM goal missed (a trial, not gated)",
+                    board.name,
+                    extra.join(",")
+                );
+            } else {
+                failed += 1;
+                println!("{} RAM goal missed", board.name);
+            }
         }
         // Measured against analysed, from the same runs (`cargo xtask bench --qemu --check`).
         if let Err(e) = bench::check_scenario_runs(root, build, &elf, &outputs) {
-            failed += 1;
-            println!("{e:#}");
+            if trial {
+                println!("{e:#} (a trial against the shipped image's analysis, not gated)");
+            } else {
+                failed += 1;
+                println!("{e:#}");
+            }
         }
     }
     println!("scenarios: {passed} passed, {failed} failed");

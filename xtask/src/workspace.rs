@@ -79,13 +79,21 @@ pub fn kept_elf(root: &Path, build: &revision::Build, bare_chip: bool) -> PathBu
 /// Builds a board revision's QEMU variant (its own target dir: the features differ from the robot
 /// build) and keeps its ELF apart from the other revision's (`target/qemu/firmware/`).
 pub fn build_qemu(root: &Path, build: &revision::Build) -> Result<PathBuf> {
+    build_qemu_with(root, build, &[])
+}
+
+/// [`build_qemu`] with the board's `extra` features as well (a trial the shipped image does not
+/// enable, e.g. DiWheelDrive 1-1's `scripted-i2c`); kept beside it under its own name.
+pub fn build_qemu_with(root: &Path, build: &revision::Build, extra: &[&str]) -> Result<PathBuf> {
     let board = build.board;
     let dir = qemu_target_dir(root);
     let cargo_bin = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     build.select_models();
     let mut args = vec!["build".to_string(), "--release".into(), "--quiet".into()];
     // With the task trace: the bench measures the scenario runs (docs/bench.md).
-    args.extend(build.feature_args(&["qemu", "task-trace"]));
+    let mut features = vec!["qemu", "task-trace"];
+    features.extend_from_slice(extra);
+    args.extend(build.feature_args(&features));
     let mut command = Command::new(cargo_bin);
     command
         .args(&args)
@@ -101,7 +109,11 @@ pub fn build_qemu(root: &Path, build: &revision::Build) -> Result<PathBuf> {
             board.name
         );
     }
-    let kept = dir.join("firmware").join(build.stem());
+    let stem = std::iter::once(build.stem())
+        .chain(extra.iter().map(|f| f.to_string()))
+        .collect::<Vec<_>>()
+        .join("+");
+    let kept = dir.join("firmware").join(stem);
     std::fs::create_dir_all(dir.join("firmware"))?;
     std::fs::copy(
         dir.join(board.target).join("release").join(board.name),

@@ -4,6 +4,8 @@
 
 use super::*;
 
+mod suspension;
+
 /// What the analysis keeps of one job besides its [`TaskTiming`].
 #[derive(Debug, Clone, Copy)]
 struct JobMeta {
@@ -51,6 +53,8 @@ enum Source {
     /// The publisher job of the stream at this [`View`] position: its topic row, and its timer job's original
     /// index ([`NO_JOB`]: none).
     Publisher { stream: u8, topic: u8, timer: u8 },
+    /// The engine row of script `script` of the job at original index `job` (its charge on the CPU).
+    Engine { job: u8, script: u8 },
 }
 
 /// What one board's analysis reads: the board (index `b` of the robot's table), the configuration and the limits.
@@ -92,6 +96,23 @@ impl<'a, const M: usize> BoardInput<'a, M> {
         self.table.levels.get(usize::from(level)).copied().flatten()
     }
 
+    /// The scripts a job runs (empty for a timer job, an engine row and a job without scripts).
+    fn scripts_of(&self, what: Source) -> &'a [ScriptRow] {
+        let table = self.table;
+        match what {
+            Source::Fixed(row) => table
+                .task_scripts
+                .iter()
+                .find(|(task, _)| *task == row)
+                .map_or(&[], |(_, list)| *list),
+            Source::Publisher { topic, .. } => table
+                .topics
+                .get(usize::from(topic))
+                .map_or(&[], |t| t.scripts),
+            Source::Timer { .. } | Source::Engine { .. } => &[],
+        }
+    }
+
     /// The shortest frame this board can send (its transmit-complete interrupt's minimum inter-arrival time): of every
     /// topic of its table (the table's `shortest_dlc`), not only the running streams: a decided one-shot's or a
     /// stopped stream's queued frames still go out after they left the set.
@@ -111,6 +132,17 @@ struct Originals<const N: usize> {
 }
 
 impl<const N: usize> Originals<N> {
+    /// The board's jobs in original order.
+    fn of<const M: usize>(input: &BoardInput<'_, M>) -> Result<Self, Refusal> {
+        let mut originals = Originals {
+            priority: [0; N],
+            source: [Source::Fixed(0); N],
+            count: 0,
+        };
+        originals.collect(input)?;
+        Ok(originals)
+    }
+
     fn add(&mut self, priority: u8, what: Source) -> Result<u8, Refusal> {
         let original = u8::try_from(self.count)
             .ok()
@@ -134,7 +166,8 @@ impl<const N: usize> Originals<N> {
         let table = input.table;
         for (i, t) in table.tasks.iter().enumerate() {
             let row = u8::try_from(i).map_err(|_| Refusal::Capacity)?;
-            self.add(t.priority, Source::Fixed(row))?;
+            let job = self.add(t.priority, Source::Fixed(row))?;
+            self.engines(input, Source::Fixed(row), job)?;
         }
         for (m, s) in input.mine() {
             let Some(sender) = s.sender else { continue };
@@ -152,14 +185,32 @@ impl<const N: usize> Originals<N> {
                 Some(mono) => self.add(mono.priority, Source::Timer { stream })?,
                 None => NO_JOB,
             };
-            self.add(
-                priority,
-                Source::Publisher {
-                    stream,
-                    topic,
-                    timer,
-                },
-            )?;
+            let what = Source::Publisher {
+                stream,
+                topic,
+                timer,
+            };
+            let job = self.add(priority, what)?;
+            self.engines(input, what, job)?;
+        }
+        Ok(())
+    }
+
+    /// The engine rows of job `job`'s scripts, right after it (the `k`th script's row at original `job + 1 + k`).
+    fn engines<const M: usize>(
+        &mut self,
+        input: &BoardInput<'_, M>,
+        what: Source,
+        job: u8,
+    ) -> Result<(), Refusal> {
+        for (k, script) in input.scripts_of(what).iter().enumerate() {
+            let bus = input
+                .table
+                .buses
+                .get(usize::from(script.bus))
+                .ok_or(Refusal::Capacity)?;
+            let script = u8::try_from(k).map_err(|_| Refusal::Capacity)?;
+            self.add(bus.engine_priority, Source::Engine { job, script })?;
         }
         Ok(())
     }
@@ -177,9 +228,42 @@ impl<const N: usize> Originals<N> {
     }
 }
 
-/// Job `original`'s timing and meta, built from what it is made of.
+/// In an engine row's deadline: none (its analysed response places its interference and is no completion: its
+/// job's deadline covers the engine's work, docs/analysis.md); only an unbounded one is a violation.
+const UNCHECKED: Time = Time::from_ns(NONE - 1);
+
+/// The period of a fixed task or a stream's job.
+fn period_of<const M: usize>(
+    input: &BoardInput<'_, M>,
+    what: Source,
+    own_frame: Time,
+) -> Result<Time, Refusal> {
+    match what {
+        Source::Fixed(row) => {
+            let t = input
+                .table
+                .tasks
+                .get(usize::from(row))
+                .ok_or(Refusal::Capacity)?;
+            Ok(if t.own_frame {
+                own_frame
+            } else {
+                row_time(t.period)
+            })
+        }
+        Source::Timer { stream } | Source::Publisher { stream, .. } => input
+            .streams
+            .get(usize::from(stream))
+            .map(|s| s.period)
+            .ok_or(Refusal::Capacity),
+        Source::Engine { .. } => Err(Refusal::Capacity),
+    }
+}
+
+/// Job `original`'s timing and meta, built from what it is made of (`sources`: every job's, by original index).
 fn build_job<const M: usize>(
     input: &BoardInput<'_, M>,
+    sources: &[Source],
     what: Source,
     priority: u32,
     original: u8,
@@ -268,7 +352,64 @@ fn build_job<const M: usize>(
                 timer,
             )
         }
+        Source::Engine { job: by, script } => {
+            // The engine's charge for the script, at the engine's priority, released by the job with its period;
+            // named as its job (an unbounded engine row is its job's violation).
+            let job_source = sources
+                .get(usize::from(by))
+                .copied()
+                .ok_or(Refusal::Capacity)?;
+            let row = input
+                .scripts_of(job_source)
+                .get(usize::from(script))
+                .ok_or(Refusal::Capacity)?;
+            let bus = table
+                .buses
+                .get(usize::from(row.bus))
+                .ok_or(Refusal::Capacity)?;
+            let charge = row_time(bus.per_event)
+                .times(u64::from(row.events))
+                .plus(row_time(bus.per_script))
+                .plus(row_time(bus.condition_wait).times(u64::from(row.starts)));
+            let id = match job_source {
+                Source::Fixed(r) => TaskId::Fixed(u16::from(r)),
+                Source::Publisher { topic, .. } => table
+                    .topics
+                    .get(usize::from(topic))
+                    .map_or(TaskId::Fixed(0), |t| TaskId::Publisher(t.topic)),
+                _ => return Err(Refusal::Capacity),
+            };
+            let period = period_of(input, job_source, own_frame)?;
+            job(charge, period, Time::ZERO, id, UNCHECKED, by)
+        }
     })
+}
+
+/// The SRP blocking of a job of priority `p` on the board: the longest section of a lower-priority holder whose
+/// ceiling reaches `p` (the fixed tasks' from the table, the running publisher jobs' from their topics).
+fn blocking_at<const M: usize>(input: &BoardInput<'_, M>, p: u32) -> Time {
+    let table = input.table;
+    let mut longest = usize::try_from(p)
+        .ok()
+        .and_then(|p| table.blocking.get(p))
+        .copied()
+        .unwrap_or_else(|| fixed_blocking(table.sections, p));
+    for (_, s) in input.mine() {
+        let Some(sender) = s.sender else { continue };
+        let holder = input.level_priority(sender.level).map_or(0, u32::from);
+        if holder >= p {
+            continue;
+        }
+        if let Some(topic) = table.topics.iter().find(|t| t.topic == sender.topic) {
+            for cs in topic.sections {
+                // The effective ceiling is at least the holder's priority, which is below `p`.
+                if row_ceiling(cs.ceiling) >= p {
+                    longest = longest.max(cs.length);
+                }
+            }
+        }
+    }
+    row_time(longest)
 }
 
 /// One board's jobs sorted by priority: their timings, and what else the analysis reads of each.
@@ -287,14 +428,11 @@ struct JobIndex<const N: usize> {
 
 impl<const N: usize> BoardSet<N> {
     /// Builds each job once, at its sorted place, in place (a set built and then returned or copied was a copy
-    /// of 2.5 KB a board analysis).
-    fn fill<const M: usize>(&mut self, input: &BoardInput<'_, M>) -> Result<(), Refusal> {
-        let mut originals = Originals {
-            priority: [0; N],
-            source: [Source::Fixed(0); N],
-            count: 0,
-        };
-        originals.collect(input)?;
+    /// of 2.5 KB a board analysis); whether a job runs scripts (it has engine rows). Out of line: its working
+    /// arrays are not in the frame of the analysis that follows.
+    #[inline(never)]
+    fn fill<const M: usize>(&mut self, input: &BoardInput<'_, M>) -> Result<bool, Refusal> {
+        let originals = Originals::<N>::of(input)?;
         let order = originals.sorted();
         let own_frame = input.own_frame();
         self.jobs.len = originals.count;
@@ -310,17 +448,28 @@ impl<const N: usize> BoardSet<N> {
                 .copied()
                 .ok_or(Refusal::Capacity)?;
             let priority = u32::from(originals.urgency(original));
-            (*timing, *meta) = build_job(input, what, priority, original, own_frame)?;
+            (*timing, *meta) = build_job(
+                input,
+                &originals.source,
+                what,
+                priority,
+                original,
+                own_frame,
+            )?;
         }
         self.jobs.index(&self.timings, input.table);
-        Ok(())
+        let scripted = originals
+            .source
+            .iter()
+            .take(originals.count)
+            .any(|s| matches!(s, Source::Engine { .. }));
+        Ok(scripted)
     }
 
     /// SRP blocking per job: the longest section of a lower-priority holder whose ceiling reaches the job (the
     /// fixed tasks' from the table, the publisher jobs' from their topics). Jobs of one priority share it: worked
     /// out once per level (the jobs are sorted by priority).
     fn blockings<const M: usize>(&self, input: &BoardInput<'_, M>, blocking: &mut [Time; N]) {
-        let table = input.table;
         let mut last_level: Option<(u32, Time)> = None;
         for (slot, timing) in blocking
             .iter_mut()
@@ -332,27 +481,8 @@ impl<const N: usize> BoardSet<N> {
                 *slot = known;
                 continue;
             }
-            let mut longest = usize::try_from(p)
-                .ok()
-                .and_then(|p| table.blocking.get(p))
-                .copied()
-                .unwrap_or_else(|| fixed_blocking(table.sections, p));
-            for (_, s) in input.mine() {
-                let Some(sender) = s.sender else { continue };
-                let holder = input.level_priority(sender.level).map_or(0, u32::from);
-                if holder >= p {
-                    continue;
-                }
-                if let Some(topic) = table.topics.iter().find(|t| t.topic == sender.topic) {
-                    for cs in topic.sections {
-                        // The effective ceiling is at least the holder's priority, which is below `p`.
-                        if row_ceiling(cs.ceiling) >= p {
-                            longest = longest.max(cs.length);
-                        }
-                    }
-                }
-            }
-            *slot = row_time(longest);
+            let longest = blocking_at(input, p);
+            *slot = longest;
             last_level = Some((p, *slot));
         }
     }
@@ -367,7 +497,8 @@ impl<const N: usize> BoardSet<N> {
             .take(self.jobs.len)
         {
             let known = match meta.id {
-                TaskId::Fixed(row) => table
+                // An engine row is named as its job, a fixed task's: its share is its own.
+                TaskId::Fixed(row) if meta.deadline != UNCHECKED => table
                     .tasks
                     .get(usize::from(row))
                     .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
@@ -387,7 +518,7 @@ impl<const N: usize> JobIndex<N> {
             if let Some(slot) = self.position.get_mut(usize::from(meta.original)) {
                 *slot = p as u8;
             }
-            if let TaskId::Fixed(row) = meta.id {
+            if let (TaskId::Fixed(row), false) = (meta.id, meta.deadline == UNCHECKED) {
                 let row = Some(row);
                 meta.verdict_only = table.can_tx != row && table.command_handler != row;
             }
@@ -490,7 +621,7 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
             position: [NO_JOB; N],
         },
     };
-    set.fill(input)?;
+    let scripted = set.fill(input)?;
     let mut blocking = [Time::ZERO; N];
     set.blockings(input, &mut blocking);
     let mut shares = [Share::default(); N];
@@ -499,27 +630,105 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
         wcrt: [NONE; N],
         first_window: [Time::ZERO; N],
     };
+    if scripted {
+        // Jobs that suspend on a sensor bus: the rounds of views, buses and engine events to their fixed point.
+        suspension::analyse(
+            input,
+            &mut set,
+            &blocking,
+            &mut shares,
+            iterations,
+            &mut bounds,
+        )?;
+        // Its windows are not all the board analysis's: kept only for the same horizon.
+        summary.beyond = true;
+    } else {
+        let outcome = run_view(
+            &mut set.timings,
+            &set.jobs,
+            &blocking,
+            &shares,
+            input.limits,
+            None,
+            &mut bounds,
+        )?;
+        *iterations += outcome.iterations;
+        summary.reach = summary.reach.max(outcome.reach);
+        summary.beyond |= outcome.beyond;
+    }
+    summary.note_board(input, &set.jobs, &bounds.wcrt);
+    Ok(())
+}
+
+/// What a view of the sensor buses' rounds (`suspension`) changes in the board's jobs: per job whether the view
+/// sets its jitter itself (its release cut), and its view (0: the default; a job whose bound the rounds read is
+/// never settled in closed form).
+#[derive(Clone, Copy)]
+struct Cut<'a, const N: usize> {
+    unreleased: &'a [bool; N],
+    view: &'a [u8; N],
+}
+
+/// The board's jobs as one analysis reads them: as built, or as a view of the rounds changes them.
+struct ViewJobs<'a, const N: usize> {
+    index: &'a JobIndex<N>,
+    cut: Option<Cut<'a, N>>,
+}
+
+impl<const N: usize> board_analysis::Jobs for ViewJobs<'_, N> {
+    fn release(&self, p: usize) -> Option<board_analysis::Release> {
+        if self
+            .cut
+            .is_some_and(|c| c.unreleased.get(p).copied().unwrap_or(true))
+        {
+            return None;
+        }
+        self.index.release(p)
+    }
+    fn level_end(&self, p: usize) -> usize {
+        self.index.level_end(p)
+    }
+    fn verdict_only(&self, p: usize) -> Option<Time> {
+        if self
+            .cut
+            .is_some_and(|c| c.view.get(p).copied().unwrap_or(1) != 0)
+        {
+            return None;
+        }
+        self.index.verdict_only(p)
+    }
+}
+
+/// One [`board_analysis::analyse`] of the board's jobs (`timings`, their jitters left as inherited) under the
+/// board's budget of iterations (`limits`), every job's bound into `bounds`: the board's analysis, and each view
+/// of the sensor buses' rounds (`cut`) — one instance of the analysis linked for both.
+#[inline(never)]
+fn run_view<const N: usize>(
+    timings: &mut [TaskTiming; N],
+    jobs: &JobIndex<N>,
+    blocking: &[Time; N],
+    shares: &[Share; N],
+    limits: &Limits,
+    cut: Option<Cut<'_, N>>,
+    bounds: &mut JobWcrt<N>,
+) -> Result<board_analysis::Outcome, Refusal> {
+    bounds.wcrt = [NONE; N];
     let mut scratch = const { [Counter::ZERO; N] };
-    let len = set.jobs.len;
-    let jobs = board_analysis::BoardJobs {
-        timings: set.timings.get_mut(..len).unwrap_or(&mut []),
+    let len = jobs.len;
+    let set = board_analysis::BoardJobs {
+        timings: timings.get_mut(..len).unwrap_or(&mut []),
         blocking: blocking.get(..len).unwrap_or(&[]),
         shares: shares.get(..len).unwrap_or(&[]),
         scratch: &mut scratch,
     };
-    let outcome = board_analysis::analyse(
-        jobs,
-        &set.jobs,
-        &mut bounds,
-        input.limits,
+    board_analysis::analyse(
+        set,
+        &ViewJobs { index: jobs, cut },
+        bounds,
+        limits,
         board_analysis::IterationBudget::Board,
     )
-    .map_err(|_| Refusal::Budget)?;
-    *iterations += outcome.iterations;
-    summary.reach = summary.reach.max(outcome.reach);
-    summary.beyond |= outcome.beyond;
-    summary.note_board(input, &set.jobs, &bounds.wcrt);
-    Ok(())
+    .map_err(|_| Refusal::Budget)
 }
 
 impl<const M: usize> Summary<M> {

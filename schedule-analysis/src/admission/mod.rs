@@ -47,6 +47,10 @@ pub const LEVELS: usize = 4;
 /// search found one: 217 ms of a board's CPU for one decision, docs/analysis.md); the requests the scenarios and
 /// the thesis make take at most a few hundred.
 pub const DECISION_ITERATIONS: u64 = 250;
+/// [`DECISION_ITERATIONS`] for a board whose running jobs run sensor-bus scripts: its rounds (each scripts' bus
+/// responses, the board once per view, the engine events) to their fixed point, each round counted as one beside
+/// its fixed points' iterations. The rounds of the sets `tests/admission_scripts.rs` decides take 40 to 2 500.
+pub const SCRIPT_ITERATIONS: u64 = 4_000;
 /// The longest period the period search tries (the protocol's 32-bit microsecond span, ≈ 71.6 min).
 pub const MAX_PERIOD: Time = Time::from_ns(4_294_967_295_000);
 
@@ -163,7 +167,45 @@ pub struct TopicRow<'a> {
     pub bcet: RowTime,
     /// Its critical sections.
     pub sections: &'a [TopicSection],
+    /// The scripts one sample runs on the board's sensor buses, in the sample's order (empty: none).
+    pub scripts: &'a [ScriptRow],
 }
+
+/// Most sensor buses a board's table may state (the check's per-bus working arrays).
+pub const MAX_BUSES: usize = 4;
+
+/// One sensor bus of a board (docs/analysis.md, "Self-suspending publishers and the sensor buses"): its engine's
+/// interrupt priority and charge by its parts; a script's charge is `events · per_event + per_script + starts ·
+/// condition_wait`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BusRow {
+    /// The engine interrupt's RTIC priority.
+    pub engine_priority: u8,
+    /// One engine event on the CPU, interrupt entry and exit included.
+    pub per_event: RowTime,
+    /// Charged once per script (0 where the engine does not state it).
+    pub per_script: RowTime,
+    /// Charged once per START condition of a script (0 where the engine does not state it).
+    pub condition_wait: RowTime,
+}
+
+/// One script a job runs on a sensor bus: the host turned its bytes into time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ScriptRow {
+    /// Index into the board's `buses`.
+    pub bus: u8,
+    /// Its time on the wire plus the devices' stretch allowance (the chip adds its events' responses).
+    pub bus_time: RowTime,
+    /// Engine events one script raises.
+    pub events: u16,
+    /// Its START conditions (the events that take the condition wait).
+    pub starts: u16,
+    /// The job's own wait before it submits the script (suspension, not bus time).
+    pub settle: RowTime,
+}
+
+/// A fixed task's scripts: its index in the board's `tasks` and its job's scripts in order.
+pub type TaskScripts<'a> = (u8, &'a [ScriptRow]);
 
 /// The monotonic's timer interrupt, one job per timer-released publisher job.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -201,6 +243,13 @@ pub struct BoardTable<'a> {
     pub can_tx: Option<u16>,
     /// Index of the command handler (the end of a command's path).
     pub command_handler: Option<u16>,
+    /// The sensor buses its scripts run on (empty: none).
+    pub buses: &'a [BusRow],
+    /// The fixed tasks that run scripts, with their scripts (empty: none).
+    pub task_scripts: &'a [TaskScripts<'a>],
+    /// Per CAN level, which RTIC task publishes it (levels of one publisher task share a number): the jobs of one
+    /// RTIC task run one after the other, so a script's siblings and a suspending task's view follow it.
+    pub publisher_tasks: [u8; LEVELS],
 }
 
 /// Every board of the robot and the bus.
@@ -883,6 +932,7 @@ mod tests {
         cost: 100_000,
         bcet: 50_000,
         sections: &SECTIONS,
+        scripts: &[],
     }];
     const TASKS: [TaskRow; 1] = [TaskRow {
         priority: 3,
@@ -906,6 +956,9 @@ mod tests {
         monotonic: None,
         can_tx: None,
         command_handler: None,
+        buses: &[],
+        task_scripts: &[],
+        publisher_tasks: [0, 1, 2, 3],
     }];
     /// The table is `const`-constructible, as a build script's generated source needs.
     static ROBOT: RobotTable<'static> = RobotTable {

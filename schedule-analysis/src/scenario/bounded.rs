@@ -187,11 +187,16 @@ pub(super) fn apply(
         None => "no bounds file".to_string(),
         Some(_) => format!("no row `{row}` in {name}"),
     };
-    // Rows the timing file has no budget for are not used; say so, they may be misnamed.
+    // Rows the timing file has no budget for are not used; say so, they may be misnamed. The buses' engine handlers
+    // have no budget of their own (their engine rows charge them, per script): their rows are the engine's.
     if let Some(b) = &read {
         for t in &b.tasks {
             let known = timing.tasks.contains_key(&t.task)
                 || bounds::OVERHEAD_ROWS.contains(&t.task.as_str())
+                || timing
+                    .sensor_buses
+                    .iter()
+                    .any(|bus| bus.engine.handlers.contains(&t.task))
                 || timing
                     .topics
                     .keys()

@@ -40,6 +40,14 @@ pub extern "C" fn i2c_error() {
     BUS.on_error();
 }
 
+/// One look of the bus's re-arm task at a stalled repeated START (`I2cBus::rearm`: a poll of
+/// CR1.START in a critical section, the event interrupt back on if it is out).
+#[no_mangle]
+#[inline(never)]
+pub extern "C" fn i2c_rearm(stall: u32) {
+    BUS.rearm(stall);
+}
+
 /// The engine's step for one event alone (`Engine::on_event`: the state machine and its register
 /// actions), without the bus around it (its critical section, the script's end, the condition
 /// wait), on a script and readings the caller passes (not inlined: bounded on its own).
@@ -77,6 +85,9 @@ pub extern "C" fn pend_dispatcher() {
 
 #[used]
 static HANDLERS: [extern "C" fn(); 3] = [i2c_event, i2c_error, pend_dispatcher];
+
+#[used]
+static REARM: extern "C" fn(u32) = i2c_rearm;
 
 /// `engine_event`'s type.
 type EventStep =

@@ -10,6 +10,13 @@ pub const ROBOT_REVISION: &str = "1-1";
 
 /// Builds the boards' QEMU builds (one cargo invocation each) in node order.
 pub fn firmware(root: &Path) -> Result<[Firmware; 3]> {
+    firmware_with(root, &[])
+}
+
+/// [`firmware`] with trial features the shipped images do not enable: a `board/feature` (e.g.
+/// `powermgmt/scripted-i2c`) for that board alone, a plain `feature` for each board whose manifest
+/// declares it.
+pub fn firmware_with(root: &Path, extra: &[&str]) -> Result<[Firmware; 3]> {
     let mut out = Vec::new();
     for name in stimulus::BOARDS {
         let board = crate::boards::by_name(name).with_context(|| format!("no board {name}"))?;
@@ -20,8 +27,20 @@ pub fn firmware(root: &Path) -> Result<[Firmware; 3]> {
                 .into_iter()
                 .next()
                 .with_context(|| format!("no revision-{ROBOT_REVISION} image of {name}"))?;
+        let manifest = std::fs::read_to_string(root.join(name).join("Cargo.toml"))
+            .with_context(|| format!("reading {name}'s Cargo.toml"))?;
+        let declared: Vec<&str> = extra
+            .iter()
+            .filter_map(|f| match f.split_once('/') {
+                Some((board, feature)) => (board == name).then_some(feature),
+                None => manifest
+                    .lines()
+                    .any(|l| l.starts_with(&format!("{f} =")))
+                    .then_some(*f),
+            })
+            .collect();
         out.push(Firmware {
-            elf: crate::workspace::build_qemu(root, &build)?,
+            elf: crate::workspace::build_qemu_with(root, &build, &declared)?,
             machine: board.qemu_machine,
         });
     }

@@ -534,7 +534,8 @@ fn babbling_board(run: &Run) -> Result<String> {
 }
 
 fn mailbox_abort(run: &Run) -> Result<String> {
-    const FROM: u64 = 40_000;
+    // The babbling's start (robot/scenarios/mailbox-abort.log).
+    const FROM: u64 = 35_000;
     every_board_ended(run)?;
     nothing_dropped(run)?;
     let babble = run.frames(0x610);
@@ -834,8 +835,13 @@ impl Tally {
 
 /// Runs every robot scenario; fails if any check fails.
 pub fn run_all(root: &Path) -> Result<()> {
+    run_all_with(root, &[])
+}
+
+/// [`run_all`] with trial features (`super::firmware::firmware_with`).
+pub fn run_all_with(root: &Path, extra: &[&str]) -> Result<()> {
     crate::workspace::ensure_qemu()?;
-    let firmware = super::firmware::firmware(root)?;
+    let firmware = super::firmware::firmware_with(root, extra)?;
     let mut tally = Tally::default();
     for scenario in SCENARIOS {
         let path = root

@@ -1,0 +1,339 @@
+//! PowerManagement's `scripted-i2c` trial fed to the analysis (docs/i2c.md, "PowerManagement with
+//! `scripted-i2c`"): its two sensor buses, the proximity ring's and the power status's scripts and
+//! the power monitor's, stated as a timing file would state them, in a scratch copy of the
+//! workspace's timing files (the shipped image does not run them, so the real file does not state
+//! them yet). The statements are checked against the scripts the board's jobs put on the wire; the
+//! copy lowers into the chip's admission table with the figures stated; and the report of the
+//! thesis demo (the ring every 10 ms) is printed with the engine charged per script.
+
+use std::path::{Path, PathBuf};
+
+use amiro_sensors::drivers::bq27500::StatusRead;
+use amiro_sensors::drivers::pca9544a::{self, Channel};
+use amiro_sensors::drivers::ring::{RingBus, WIRING};
+use amiro_sensors::drivers::scripted::{gauge_script, RingRead, GAUGE_SETTLE_US};
+use amiro_sensors::script::{Script, Symbol};
+use schedule_analysis::admission_host;
+use schedule_analysis::analysis::{analyse, Options};
+use schedule_analysis::model::FrameCostSpec;
+use schedule_analysis::scenario;
+use serde_json::json;
+
+/// A ring bus's read as the timing file states it: per VCNL4020 the PCA9544A's select (an
+/// address, a control byte) and the proximity result's read (write the register, repeated START,
+/// read two): 4 × (2 + 5) bytes, 4 × (1 + 2) STARTs, 4 × (4 + 7) events.
+const RING_BYTES: u32 = 28;
+const RING_STARTS: u32 = 12;
+const RING_EVENTS: u32 = 44;
+/// A gauge's standard command: write the command, repeated START, read two: 5 bytes, 2 STARTs,
+/// 7 events; ten of them a status read.
+const GAUGE_BYTES: u32 = 5;
+const GAUGE_STARTS: u32 = 2;
+const GAUGE_EVENTS: u32 = 7;
+const GAUGE_SCRIPTS: usize = 10;
+
+/// The engine's parts on the F405 at 168 MHz, tools/engine-bound's bounds (README.md), µs.
+const PER_EVENT_US: f64 = 6.02;
+const PER_SCRIPT_US: f64 = 9.11;
+const CONDITION_WAIT_US: f64 = 8.93;
+
+/// The bq27500's clock stretching, µs: within a packet addressed to it up to 4 ms, and a wake
+/// from SLEEP at the beginning of traffic (5 ms, the family's only stated figure for it).
+const GAUGE_STRETCH_US: f64 = 4_000.0;
+const GAUGE_WAKE_US: f64 = 5_000.0;
+const STRETCH_SOURCE: &str = "TI's bq27xxx data sheets, 'I2C Clock Stretching' (docs/analysis.md, PowerManagement's I2C waits): within a packet addressed to the gauge up to 4 ms; at the beginning of traffic as it wakes from SLEEP 5 ms (the bq27520-G4's figure; the bq27500's SLUS785 states none); the PCA9544A and the VCNL4020 state no stretching";
+
+/// Bytes (address bytes included) and STARTs (operation starts and repeated STARTs) on the wire.
+fn wire_counts(script: &Script) -> (u32, u32) {
+    script
+        .wire()
+        .fold((0, 0), |(bytes, starts), symbol| match symbol {
+            Symbol::Start | Symbol::RepeatedStart => (bytes, starts + 1),
+            Symbol::Stop => (bytes, starts),
+            _ => (bytes + 1, starts),
+        })
+}
+
+/// The engine's event interrupts for a script, from its steps (docs/i2c.md, "The engine"): a
+/// write of n bytes SB, ADDR, n × TXE, BTF; a read of N bytes after a repeated START SB, ADDR and
+/// one RXNE (N = 1), one BTF (N = 2), or N − 3 RXNE, BTF and the last RXNE (N > 2).
+fn engine_events(script: &Script) -> u32 {
+    script
+        .operations()
+        .iter()
+        .map(|op| {
+            let write = if op.write > 0 {
+                3 + u32::from(op.write)
+            } else {
+                0
+            };
+            let read = match op.read {
+                0 => 0,
+                1 | 2 => 3,
+                n => 2 + u32::from(n) - 1,
+            };
+            write + read
+        })
+        .sum()
+}
+
+#[test]
+fn the_stated_scripts_are_the_ones_the_jobs_put_on_the_wire() {
+    for bus in [RingBus::I2c1, RingBus::I2c2] {
+        let channels: Vec<Channel> = WIRING
+            .iter()
+            .filter(|(on, _)| *on == bus)
+            .map(|&(_, channel)| channel)
+            .collect();
+        let read = RingRead::new(pca9544a::AMIRO_ADDRESS, &channels);
+        let script = read.script().expect("a script").expect("it builds");
+        assert_eq!(wire_counts(&script), (RING_BYTES, RING_STARTS));
+        assert_eq!(engine_events(&script), RING_EVENTS);
+        // The analysis's wire time (9 bit times a byte, 2 a START) covers the script's SCL periods.
+        assert!(9 * RING_BYTES + 2 * RING_STARTS >= script.scl_periods());
+    }
+    // A status read's ten standard commands, each a script of its own after the bus-free time.
+    let read = StatusRead::new();
+    let transfer = read.next_transfer().expect("a first transfer");
+    let script = gauge_script(transfer).expect("it builds");
+    assert_eq!(wire_counts(&script), (GAUGE_BYTES, GAUGE_STARTS));
+    assert_eq!(engine_events(&script), GAUGE_EVENTS);
+    assert_eq!(StatusRead::MAX_TRANSFERS, GAUGE_SCRIPTS + 3);
+    assert_eq!(GAUGE_SETTLE_US, 66);
+    // The HMC5883L's sample (write 1, read 6) raises the 11 events counted on the register model.
+    let mut compass = Script::new();
+    compass
+        .write_read(0x1E, &[0x03], 6)
+        .expect("the compass's sample");
+    assert_eq!(engine_events(&compass), 11);
+}
+
+fn repository() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("the workspace")
+        .to_path_buf()
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
+fn ring_script(bus: &str) -> serde_json::Value {
+    json!({
+        "bus": bus, "bytes": RING_BYTES, "starts": RING_STARTS, "events": RING_EVENTS,
+        "source": "a ring bus's read (RingRead: four VCNL4020 behind the PCA9544A)",
+        "stretch_us": GAUGE_WAKE_US, "stretch_source": STRETCH_SOURCE
+    })
+}
+
+/// A gauge's status read: ten scripts, each after the bus-free time; the first may wake it.
+fn gauge_scripts(bus: &str) -> Vec<serde_json::Value> {
+    (0..GAUGE_SCRIPTS)
+        .map(|k| {
+            json!({
+                "bus": bus, "bytes": GAUGE_BYTES, "starts": GAUGE_STARTS, "events": GAUGE_EVENTS,
+                "source": "a bq27500 standard command (StatusRead's transfer as gauge_script)",
+                "stretch_us": if k == 0 { GAUGE_STRETCH_US + GAUGE_WAKE_US } else { GAUGE_STRETCH_US },
+                "stretch_source": STRETCH_SOURCE,
+                "settle_us": f64::from(GAUGE_SETTLE_US),
+                "settle_source": "the bq27500's 66 µs of bus-free time between packets (bq27500::BUS_FREE_NS)"
+            })
+        })
+        .collect()
+}
+
+/// Both gauges' reads, front (I2C2) then rear (I2C1), as `sensors::scripted::read_batteries`.
+fn both_gauges() -> serde_json::Value {
+    let mut scripts = gauge_scripts("i2c2");
+    scripts.extend(gauge_scripts("i2c1"));
+    serde_json::Value::Array(scripts)
+}
+
+/// The workspace's apps and timing files, PowerManagement's file stating the trial's buses and
+/// scripts (its app read with `scripted-i2c`: the re-arm tasks are in it).
+fn scripted_workspace() -> PathBuf {
+    let real = repository();
+    let root = std::env::temp_dir().join(format!("pm-scripted-analysis-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(&root).unwrap();
+    for board in ["diwheeldrive", "powermgmt", "lightring"] {
+        std::os::unix::fs::symlink(real.join(board), root.join(board)).unwrap();
+    }
+    let models = root.join(scenario::MODELS_DIR);
+    copy_dir(&real.join(scenario::MODELS_DIR), &models);
+    let file = models.join("powermgmt.timing.json");
+    let mut timing: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    assert_eq!(timing["app"]["features"], json!([]));
+    timing["app"]["features"] = json!(["scripted-i2c"]);
+    let engine = json!({
+        "priority": 5,
+        "per_event_us": PER_EVENT_US, "per_event_from": "bound",
+        "source": "tools/engine-bound: I2Cx_EV without Inner::end, settle and wake, F405",
+        "per_script": { "us": PER_SCRIPT_US, "from": "bound", "source": "tools/engine-bound: Inner::end + wake, F405" },
+        "condition_wait": { "us": CONDITION_WAIT_US, "from": "bound", "source": "tools/engine-bound: I2cBus::settle, its code and the stated wait (i2c_engine::CONDITION_WAIT_NS), F405" }
+    });
+    timing["sensor_buses"] = json!([
+        { "name": "i2c1", "bitrate": 400000, "engine": engine },
+        { "name": "i2c2", "bitrate": 400000, "engine": engine },
+    ]);
+    // The CPU of a release, its polls together: estimates from the QEMU runs (the largest
+    // publisher job 11 701 instructions, about 105 µs at 1.5 cycles an instruction; a release of k
+    // scripts is k + 1 polls, most of them a script's submission and decoding).
+    // The ring: the rear bus's read, then the front's; no bus lock held across either.
+    let ring = &mut timing["topics"]["proximity-ring"];
+    ring["wcet_us"] = json!(320.0);
+    ring["bcet_us"] = json!(100.0);
+    ring["scripts"] = json!([ring_script("i2c1"), ring_script("i2c2")]);
+    ring["critical_sections_us"]["rear_bus"] = json!(20.0);
+    ring["critical_sections_us"]["front_bus"] = json!(20.0);
+    let status = &mut timing["topics"]["power-status"];
+    status["wcet_us"] = json!(1_200.0);
+    status["bcet_us"] = json!(400.0);
+    status["scripts"] = both_gauges();
+    status["critical_sections_us"]["rear_bus"] = json!(20.0);
+    status["critical_sections_us"]["front_bus"] = json!(20.0);
+    let monitor = &mut timing["tasks"]["power_monitor"];
+    monitor["wcet_us"] = json!(1_200.0);
+    monitor["scripts"] = both_gauges();
+    monitor["critical_sections_us"]["rear_bus"] = json!(20.0);
+    monitor["critical_sections_us"]["front_bus"] = json!(20.0);
+    for task in ["rearm_rear", "rearm_front"] {
+        timing["tasks"][task] = json!({
+            "wcet_us": 5.0, "bcet_us": 1.0,
+            "arrival": { "sporadic_us": 250 },
+            "released_by": "timer",
+            "note": "A look at a stalled repeated START (I2cBus::rearm, 127 cycles, tools/engine-bound) and the monotonic's wait around it, at most one per STRETCH_REARM_US = 250 µs: an estimate"
+        });
+    }
+    std::fs::write(&file, timing.to_string()).unwrap();
+    root
+}
+
+#[test]
+fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine() {
+    let root = scripted_workspace();
+    let robot = admission_host::lower_robot(&root).unwrap_or_else(|e| panic!("{e}"));
+    let pm = robot
+        .boards
+        .iter()
+        .find(|b| b.name == "powermgmt")
+        .expect("PowerManagement");
+    assert_eq!(pm.buses.len(), 2);
+    for bus in &pm.buses {
+        assert_eq!(
+            (bus.engine_priority, bus.per_script, bus.condition_wait),
+            (5, 9_110, 8_930)
+        );
+    }
+    let topic = |name: &str| {
+        pm.topics
+            .iter()
+            .find(|t| t.name == name)
+            .unwrap_or_else(|| panic!("{name}"))
+            .scripts
+            .clone()
+    };
+    // 28 bytes and 12 STARTs at 400 kHz: (9 × 28 + 2 × 12) × 2.5 µs = 690 µs, and a gauge's wake.
+    let ring = topic("proximity-ring");
+    assert_eq!(ring.len(), 2);
+    assert_eq!(
+        (
+            ring[0].bus,
+            ring[0].bus_time,
+            ring[0].events,
+            ring[0].starts
+        ),
+        (0, 5_690_000, 44, 12)
+    );
+    assert_eq!(ring[1].bus, 1);
+    // 5 bytes and 2 STARTs: (45 + 4) × 2.5 µs = 122.5 µs and the stretch; 66 µs before each.
+    let status = topic("power-status");
+    assert_eq!(status.len(), 2 * GAUGE_SCRIPTS);
+    assert_eq!(
+        (
+            status[0].bus,
+            status[0].bus_time,
+            status[0].events,
+            status[0].settle
+        ),
+        (1, 9_122_500, 7, 66_000)
+    );
+    assert_eq!(
+        (status[1].bus_time, status[GAUGE_SCRIPTS].bus),
+        (4_122_500, 0)
+    );
+    let monitor = pm
+        .task_names
+        .iter()
+        .position(|n| n == "power_monitor")
+        .expect("power_monitor");
+    let scripts = pm
+        .task_scripts
+        .iter()
+        .find(|(task, _)| usize::from(*task) == monitor)
+        .map(|(_, s)| s.clone())
+        .expect("power_monitor's scripts");
+    assert_eq!(scripts, status);
+
+    // The thesis demo's report with the trial's statements: printed (docs/i2c.md).
+    let scenario_file = root
+        .join(scenario::MODELS_DIR)
+        .join("thesis-demo.scenario.json");
+    let built = scenario::build(&root, &scenario_file, &scenario::timing_files(&root))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let analysis = analyse(
+        &built.model.validate().expect("valid"),
+        &Options {
+            frame_cost: FrameCostSpec::Exact,
+            horizon: None,
+        },
+    );
+    let board = analysis
+        .boards
+        .iter()
+        .find(|b| b.name == "powermgmt")
+        .expect("PowerManagement in the report");
+    let engine = board
+        .tasks
+        .iter()
+        .find(|t| t.name.starts_with("i2c1_engine["))
+        .unwrap_or_else(|| {
+            panic!(
+                "no engine row: {:?}",
+                board.tasks.iter().map(|t| &t.name).collect::<Vec<_>>()
+            )
+        });
+    assert_eq!(engine.priority, 5);
+    println!("utilisation {:.3}", board.utilisation);
+    for task in board.tasks.iter().filter(|t| !t.name.contains("_engine[")) {
+        println!("{}: wcet {:?} {:?}", task.name, task.wcet, task.bound);
+    }
+    for bus in &board.sensor_buses {
+        println!(
+            "{}: event response {:?}, utilisation {:.3}",
+            bus.name, bus.event_response, bus.utilisation
+        );
+        for s in bus
+            .scripts
+            .iter()
+            .filter(|s| !s.task.contains('#') || s.task.ends_with("#1"))
+        {
+            println!(
+                "  {}: wire {:?} events {} bus time {:?} blocking {:?} suspension {:?} {:?}",
+                s.task, s.wire, s.events, s.bus_time, s.blocking, s.suspension, s.bound
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}

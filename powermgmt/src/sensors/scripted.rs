@@ -1,0 +1,357 @@
+//! With `scripted-i2c`: PowerManagement's two buses sampled by script (docs/i2c.md,
+//! "PowerManagement's buses"). A ring read, a missing sensor's set-up and a gauge's status read
+//! are jobs of I2C scripts that the bus runs while the task that asked suspends on its own client
+//! slot (`ScriptPort`); the bus's state (which sensors answer, their missed samples, the gauge's
+//! faults) is locked only to plan a job and to take its outcome, never across the bus.
+//!
+//! The scripts are amiro-sensors' (`drivers::scripted`: `RingRead`, `SensorSetUp`, the gauge's
+//! `StatusRead` a transfer a script after its 66 µs of bus-free time, `GaugeIdentity`), built from
+//! the drivers' register maps; the bus's policy is the blocking [`super::SensorBus`]'s: at most one
+//! missing sensor set up again per job and bus, each after [`RETRY_US`]; a sensor that does not
+//! answer yields no frame and is counted; the log lines and the health report are made when the
+//! job ends, from what it changed.
+use amiro_firmware::scripted::{BusFault, ScriptPort};
+use amiro_sensors::drivers::bq27500::{BatteryStatus, StatusRead};
+use amiro_sensors::drivers::pca9544a::{self, Channel};
+use amiro_sensors::drivers::proximity::ProximityCalibration;
+use amiro_sensors::drivers::ring::{RingBus, WIRING};
+use amiro_sensors::drivers::scripted::{
+    self, gauge_outcome, gauge_script, GaugeIdentity, RingRead, ScriptBus, ScriptResult,
+    SensorSetUp, GAUGE_SETTLE_US, RING_BUS_SENSORS,
+};
+use amiro_sensors::drivers::vcnl4020::{self, Config};
+use amiro_sensors::script::Readings;
+use embedded_hal::delay::DelayNs;
+
+use super::{bus_name, RingSample, RingSlot, PER_BUS, RETRY_US};
+
+/// Scripts a sensor's set-up takes: its identity, then each set-up register written and read
+/// back.
+const SET_UP_SCRIPTS: usize = 1 + vcnl4020::set_up_writes(&Config::AMIRO).len();
+
+const _: () = assert!(PER_BUS == RING_BUS_SENSORS);
+
+/// Clients of each bus, by slot: the four publisher tasks, urgent (`0`) to low (`3`), and the
+/// power monitor (`4`); the bus serves the most urgent waiting script next.
+pub const CLIENTS: usize = 5;
+/// The power monitor's slot.
+pub const POWER_MONITOR_CLIENT: usize = 4;
+
+/// A script's timeout beyond its time on the wire at 400 kHz (`scripted::script_timeout_us`), µs:
+/// the other four clients' scripts it may wait behind, each at most a ring read's 272 SCL periods
+/// (680 µs; a set-up script is 88, a gauge's 48), and 4 ms for the gauge's clock stretching
+/// within a packet (the bq27500 family's stated stretch; the engine's re-arm task brings a
+/// stretched repeated START back, `amiro_firmware::i2c_bus::I2cBus::serve_stretches`), which also
+/// covers its own events' interrupt delays. A stated allowance, not yet the analysis's bus
+/// response.
+pub const TIMEOUT_ALLOWANCE_US: u32 = 4 * 680 + 4_000;
+
+/// One bus's ring sensors and gauge as the scripted path keeps them: no bus inside (the job's
+/// owner runs the scripts on its port).
+pub struct ScriptedBus {
+    bus: RingBus,
+    slots: [RingSlot; PER_BUS],
+    calibration: [ProximityCalibration; PER_BUS],
+    gauge_faults: u32,
+}
+
+/// A script's outcome as amiro-sensors' decoders take it (a client's timeout is the kind a polled
+/// master's timeout had).
+fn result_of(outcome: Result<Readings, BusFault>) -> ScriptResult {
+    match outcome {
+        Ok(readings) => Ok(readings),
+        Err(BusFault::Script(error)) => Err(error),
+        Err(BusFault::Timeout) => scripted::timed_out(),
+    }
+}
+
+impl ScriptedBus {
+    /// The sensors of `bus` set up by their scripts on `boot` (the polled master before the
+    /// engine takes the block, or the simulated devices), and the gauge's identity checked
+    /// (logged), each gauge script after its bus-free time on `delay`.
+    pub fn boot(bus: RingBus, boot: &mut impl ScriptBus, delay: &mut impl DelayNs) -> Self {
+        let mut slots = [RingSlot {
+            index: 0,
+            channel: Channel::Ch0,
+            ready: false,
+            last_try_us: 0,
+            missed: 0,
+        }; PER_BUS];
+        let mut n = 0;
+        for (index, &(on, channel)) in (0u8..).zip(WIRING.iter()) {
+            if on == bus {
+                if let Some(slot) = slots.get_mut(n) {
+                    slot.index = index;
+                    slot.channel = channel;
+                }
+                n += 1;
+            }
+        }
+        let mut this = Self {
+            bus,
+            slots,
+            calibration: [ProximityCalibration::DEFAULT; PER_BUS],
+            gauge_faults: 0,
+        };
+        for k in 0..PER_BUS {
+            if let Some(mut set_up) = this.begin_set_up(k, 0) {
+                let mut ready = false;
+                for _ in 0..SET_UP_SCRIPTS {
+                    let result = match set_up.script() {
+                        Ok(script) => boot.run(&script),
+                        Err(_) => break,
+                    };
+                    if let Some(outcome) = set_up.complete(&result) {
+                        ready = outcome.is_ok();
+                        break;
+                    }
+                }
+                this.end_set_up(k, 0, ready);
+            }
+        }
+        let mut identity = GaugeIdentity::new();
+        let mut checked = false;
+        while let Some(transfer) = identity.next_transfer() {
+            delay.delay_us(GAUGE_SETTLE_US);
+            let outcome = match gauge_script(transfer) {
+                Ok(script) => gauge_outcome(transfer, &boot.run(&script)),
+                Err(error) => Err(error),
+            };
+            if let Some(result) = identity.complete(outcome) {
+                checked = result.is_ok();
+                break;
+            }
+        }
+        if !checked {
+            amiro_firmware::log!(
+                bus_name(bus),
+                ": fuel gauge did not answer its identity check"
+            );
+        }
+        this
+    }
+
+    /// Slot `k`'s set-up begun at `now_us` (its `last_try_us`, so no other job takes it up too).
+    fn begin_set_up(&mut self, k: usize, now_us: u64) -> Option<SensorSetUp> {
+        let slot = self.slots.get_mut(k)?;
+        slot.last_try_us = now_us;
+        Some(SensorSetUp::new(
+            pca9544a::AMIRO_ADDRESS,
+            slot.channel,
+            Config::AMIRO,
+        ))
+    }
+
+    /// Slot `k`'s set-up ended (`ready`: it answers now), logged as the blocking path logs it.
+    fn end_set_up(&mut self, k: usize, now_us: u64, ready: bool) {
+        let Some(slot) = self.slots.get_mut(k) else {
+            return;
+        };
+        let mut index = [0u8; 10];
+        let index = amiro_firmware::telemetry::decimal(u32::from(slot.index), &mut index);
+        if !ready && now_us > 0 {
+            let mut missed = [0u8; 10];
+            amiro_firmware::log!(
+                "ring sensor ",
+                index,
+                " still missing (",
+                amiro_firmware::telemetry::decimal(slot.missed, &mut missed),
+                " samples without a frame)"
+            );
+        }
+        if ready != slot.ready {
+            amiro_firmware::log!(
+                "ring sensor ",
+                index,
+                if ready { " ready" } else { " missing" }
+            );
+        }
+        slot.ready = ready;
+    }
+
+    /// The first missing sensor whose retry passed, its set-up begun: one a job.
+    fn due_set_up(&mut self, now_us: u64) -> Option<(usize, SensorSetUp)> {
+        let due = |s: &RingSlot| !s.ready && now_us.saturating_sub(s.last_try_us) >= RETRY_US;
+        let k = self.slots.iter().position(due)?;
+        self.begin_set_up(k, now_us).map(|set_up| (k, set_up))
+    }
+
+    /// The read of the sensors that answer now, and which slot each of its places is.
+    fn ring_read(&self) -> (RingRead, [Option<usize>; PER_BUS]) {
+        let mut channels = [Channel::Ch0; PER_BUS];
+        let mut places = [None; PER_BUS];
+        let mut n = 0;
+        for (k, slot) in self.slots.iter().enumerate() {
+            if slot.ready {
+                if let (Some(c), Some(p)) = (channels.get_mut(n), places.get_mut(n)) {
+                    *c = slot.channel;
+                    *p = Some(k);
+                }
+                n += 1;
+            }
+        }
+        let read = RingRead::new(pca9544a::AMIRO_ADDRESS, channels.get(..n).unwrap_or(&[]));
+        (read, places)
+    }
+
+    /// The read's counts into `sample` (by sensor index); every slot without one missed.
+    fn end_ring_read(
+        &mut self,
+        now_us: u64,
+        read: &RingRead,
+        places: [Option<usize>; PER_BUS],
+        sample: &mut RingSample,
+    ) {
+        let counts = read.counts().unwrap_or([None; RING_BUS_SENSORS]);
+        let mut read_at = [None; PER_BUS];
+        for (place, count) in places.into_iter().zip(counts) {
+            if let (Some(k), Some(count)) = (place, count) {
+                if let Some(slot) = read_at.get_mut(k) {
+                    *slot = Some(count);
+                }
+            }
+        }
+        for (k, count) in read_at.into_iter().enumerate() {
+            let Some(slot) = self.slots.get(k).copied() else {
+                continue;
+            };
+            let cal = self
+                .calibration
+                .get(k)
+                .copied()
+                .unwrap_or(ProximityCalibration::DEFAULT);
+            match (count, sample.get_mut(usize::from(slot.index))) {
+                (Some(counts), Some(out)) => *out = Some(cal.counts_to_mm(counts)),
+                _ => self.missed(k, now_us),
+            }
+        }
+        self.report();
+    }
+
+    fn missed(&mut self, k: usize, now_us: u64) {
+        if let Some(slot) = self.slots.get_mut(k) {
+            slot.missed = slot.missed.saturating_add(1);
+            if slot.ready {
+                slot.ready = false;
+                slot.last_try_us = now_us;
+                let mut index = [0u8; 10];
+                amiro_firmware::log!(
+                    "ring sensor ",
+                    amiro_firmware::telemetry::decimal(u32::from(slot.index), &mut index),
+                    " stopped answering"
+                );
+            }
+        }
+    }
+
+    /// A gauge read's end: a failed one counted, and the bus's faults reported.
+    fn end_gauge_read(&mut self, status: Option<BatteryStatus>) -> Option<BatteryStatus> {
+        if status.is_none() {
+            self.gauge_faults = self.gauge_faults.saturating_add(1);
+        }
+        self.report();
+        status
+    }
+
+    /// This bus's faults (missed ring samples and failed gauge reads) and whether a sensor is out
+    /// of service now, into the board's diagnostics (one sensor group per bus).
+    fn report(&self) {
+        let missed = self
+            .slots
+            .iter()
+            .fold(0u32, |sum, s| sum.saturating_add(s.missed));
+        amiro_firmware::health::report_sensor_group(
+            self.bus as usize,
+            missed.saturating_add(self.gauge_faults),
+            self.slots.iter().any(|s| !s.ready),
+        );
+    }
+}
+
+/// A sensor's set-up as a job of scripts on `port`: whether it answers now.
+async fn set_up_on_bus(port: &mut impl ScriptPort, set_up: &mut SensorSetUp) -> bool {
+    for _ in 0..SET_UP_SCRIPTS {
+        let Ok(script) = set_up.script() else {
+            return false;
+        };
+        let result = result_of(port.run(script, 0).await);
+        if let Some(outcome) = set_up.complete(&result) {
+            return outcome.is_ok();
+        }
+    }
+    false
+}
+
+/// One ring read of the bus behind `bus` into `sample` (by sensor index), its scripts on `port`:
+/// a missing sensor whose retry passed set up first (at most one), then the sensors that answer
+/// read, each script with the bus's lock released. Not inlined: the analysis tells the ring's
+/// job by the function.
+#[inline(never)]
+pub async fn sample_ring(
+    bus: &mut impl rtic::Mutex<T = ScriptedBus>,
+    port: &mut impl ScriptPort,
+    now_us: u64,
+    sample: &mut RingSample,
+) {
+    let set_up = match bus.lock(|b| b.due_set_up(now_us)) {
+        Some((k, mut set_up)) => Some((k, set_up_on_bus(port, &mut set_up).await)),
+        None => None,
+    };
+    let (mut read, places) = bus.lock(|b| {
+        if let Some((k, ready)) = set_up {
+            b.end_set_up(k, now_us, ready);
+        }
+        b.ring_read()
+    });
+    for _ in 0..RingRead::MAX_SCRIPTS {
+        let script = match read.script() {
+            Some(Ok(script)) => script,
+            // A script the build refuses: the sensors still to read give no count this time.
+            Some(Err(_)) | None => break,
+        };
+        let result = result_of(port.run(script, 0).await);
+        read.complete(&result);
+    }
+    bus.lock(|b| b.end_ring_read(now_us, &read, places, sample));
+}
+
+/// One status read of the bus's fuel gauge, each transfer a script on `port` after the gauge's
+/// bus-free time: the status, or `None` (counted) when the gauge did not answer. Not inlined,
+/// as [`sample_ring`].
+#[inline(never)]
+pub async fn read_gauge(
+    bus: &mut impl rtic::Mutex<T = ScriptedBus>,
+    port: &mut impl ScriptPort,
+) -> Option<BatteryStatus> {
+    let mut read = StatusRead::new();
+    let mut status = None;
+    for _ in 0..StatusRead::MAX_TRANSFERS {
+        let Some(transfer) = read.next_transfer() else {
+            break;
+        };
+        let outcome = match gauge_script(transfer) {
+            Ok(script) => gauge_outcome(
+                transfer,
+                &result_of(port.run(script, GAUGE_SETTLE_US).await),
+            ),
+            Err(error) => Err(error),
+        };
+        if let Some(ended) = read.complete(outcome) {
+            status = ended.ok();
+            break;
+        }
+    }
+    bus.lock(|b| b.end_gauge_read(status))
+}
+
+/// Both gauges' status, front (I2C2) then rear (I2C1), each on its bus through the task's ports.
+pub async fn read_batteries(
+    rear: &mut impl rtic::Mutex<T = ScriptedBus>,
+    front: &mut impl rtic::Mutex<T = ScriptedBus>,
+    rear_port: &mut impl ScriptPort,
+    front_port: &mut impl ScriptPort,
+) -> (Option<BatteryStatus>, Option<BatteryStatus>) {
+    let front = read_gauge(front, front_port).await;
+    let rear = read_gauge(rear, rear_port).await;
+    (front, rear)
+}
