@@ -240,12 +240,7 @@ pub const BOARDS: [Board; 3] = [
             base: 0x4000_0000,
         },
         internal_oscillator_hz: 16_000_000,
-        // 48 KiB, and 13 KiB for its sensor buses' scripted path (issue 33 step (c), feature
-        // `scripted-i2c`: the bus engines and their queues, the scripts' builders and decoders, the
-        // buses' jobs, the suspending publisher loop; measured 61 804 -> 75 008 B, docs/i2c.md
-        // "PowerManagement with `scripted-i2c`"), the lead's decision (the F405 has 1 MiB): the
-        // trial fits with 444 B left; the shipped image does not link it yet.
-        flash_budget: 48 * 1024 + 13 * 1024,
+        flash_budget: 48 * 1024,
         // PowerManagement fits its own 48 KiB with the admission check (issue 10).
         // Issue 20: the hard floor, the busy verdicts and the paced admission task (≈ 1.5 KB) put
         // PowerManagement ≈ 3.3 KB over its own 48 KiB (the check, issue 20's cost work +0.7 KB, issue 21's bounded waits and
