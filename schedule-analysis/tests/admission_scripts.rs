@@ -55,7 +55,11 @@ fn buses() -> serde_json::Value {
 fn workspace() -> &'static PathBuf {
     static ROOT: OnceLock<PathBuf> = OnceLock::new();
     ROOT.get_or_init(|| {
-        let root = common::scratch_workspace("admission-scripts", None);
+        // One workspace for every test of this binary, replaced by each run.
+        let root = common::scratch_workspace_at(
+            Path::new(env!("CARGO_TARGET_TMPDIR")).join("admission-scripts"),
+            None,
+        );
         let models = root.join(scenario::MODELS_DIR);
         let edit = |file: &Path, f: &dyn Fn(&mut serde_json::Value)| {
             let mut timing: serde_json::Value =
