@@ -55,7 +55,11 @@ fn buses() -> serde_json::Value {
 fn workspace() -> &'static PathBuf {
     static ROOT: OnceLock<PathBuf> = OnceLock::new();
     ROOT.get_or_init(|| {
-        let root = common::scratch_workspace("admission-scripts", None);
+        // One workspace for every test of this binary, replaced by each run.
+        let root = common::scratch_workspace_at(
+            Path::new(env!("CARGO_TARGET_TMPDIR")).join("admission-scripts"),
+            None,
+        );
         let models = root.join(scenario::MODELS_DIR);
         let edit = |file: &Path, f: &dyn Fn(&mut serde_json::Value)| {
             let mut timing: serde_json::Value =
@@ -607,8 +611,9 @@ proptest! {
 }
 
 /// A fixed task of a hand-worked board: priority, CPU µs, period µs, its scripts' bus times µs (one bus, engine of
-/// no cost), its critical section's length µs on a resource of ceiling 3 (0: none).
-type HandTask = (u8, u32, u32, &'static [u32], u32);
+/// no cost), its critical section's length µs on a resource of ceiling 3 (0: none), the task that releases it
+/// ([`NO_RELEASER`]: none).
+type HandTask = (u8, u32, u32, &'static [u32], u32, u8);
 
 /// The chip's WCRT of each of `tasks` (`tests/known_answers.rs`'s boards as chip rows) with an `expected` figure
 /// (0: its period, not read): each such task's deadline one µs short of it in turn, the check names the task and
@@ -618,7 +623,7 @@ fn chip_wcrts_us(tasks: &[HandTask], expected: &[u32]) -> Vec<Option<u64>> {
         let rows: Vec<TaskRow> = tasks
             .iter()
             .enumerate()
-            .map(|(i, &(priority, cpu, period, _, _))| TaskRow {
+            .map(|(i, &(priority, cpu, period, _, _, released_by))| TaskRow {
                 cost: cpu * 1000,
                 period: period * 1000,
                 deadline: match expected[i] {
@@ -627,7 +632,7 @@ fn chip_wcrts_us(tasks: &[HandTask], expected: &[u32]) -> Vec<Option<u64>> {
                 },
                 jitter: 0,
                 priority,
-                released_by: NO_RELEASER,
+                released_by,
                 own_frame: false,
                 deadline_own_frames: 0,
                 share: SHARE_AT_RUNTIME,
@@ -636,7 +641,7 @@ fn chip_wcrts_us(tasks: &[HandTask], expected: &[u32]) -> Vec<Option<u64>> {
         let sections: Vec<admission::SectionRow> = tasks
             .iter()
             .filter(|t| t.4 > 0)
-            .map(|&(priority, _, _, _, length)| admission::SectionRow {
+            .map(|&(priority, _, _, _, length, _)| admission::SectionRow {
                 length: length * 1000,
                 holder_priority: priority,
                 ceiling: 3,
@@ -716,16 +721,22 @@ fn chip_wcrts_us(tasks: &[HandTask], expected: &[u32]) -> Vec<Option<u64>> {
 fn the_known_answers_through_the_chip() {
     let expected = [8, 8];
     assert_eq!(
-        chip_wcrts_us(&[(2, 2, 10, &[6], 0), (1, 4, 100, &[], 0)], &expected),
+        chip_wcrts_us(
+            &[
+                (2, 2, 10, &[6], 0, NO_RELEASER),
+                (1, 4, 100, &[], 0, NO_RELEASER)
+            ],
+            &expected
+        ),
         [Some(8), Some(8)]
     );
     let expected = [410, 630, 640];
     assert_eq!(
         chip_wcrts_us(
             &[
-                (3, 10, 1000, &[100], 0),
-                (2, 10, 2000, &[200], 0),
-                (1, 10, 5000, &[300], 0)
+                (3, 10, 1000, &[100], 0, NO_RELEASER),
+                (2, 10, 2000, &[200], 0, NO_RELEASER),
+                (1, 10, 5000, &[300], 0, NO_RELEASER)
             ],
             &expected
         ),
@@ -735,12 +746,28 @@ fn the_known_answers_through_the_chip() {
     assert_eq!(
         chip_wcrts_us(
             &[
-                (3, 2, 100, &[5], 0),
-                (1, 4, 100, &[], 4),
-                (2, 4, 100, &[], 4)
+                (3, 2, 100, &[5], 0, NO_RELEASER),
+                (1, 4, 100, &[], 4, NO_RELEASER),
+                (2, 4, 100, &[], 4, NO_RELEASER)
             ],
             &expected
         ),
         [Some(15)]
+    );
+    // A fixed task with scripts before a released one: the chip keeps every fixed task at its row's index (its
+    // engine rows after all of them), so the release names the task the table names. t0 (3): 10 µs, a 100 µs
+    // script: 110; t1 (2): 20 + t0's 10 with jitter 100: 30; t2 (1), released by t1: its jitter 30, then
+    // 30 + 10 + 20 in its window: 90 (released by t0's engine row instead it would be 110 + 60 = 170).
+    let expected = [110, 30, 90];
+    assert_eq!(
+        chip_wcrts_us(
+            &[
+                (3, 10, 1000, &[100], 0, NO_RELEASER),
+                (2, 20, 1000, &[], 0, NO_RELEASER),
+                (1, 30, 1000, &[], 0, 1)
+            ],
+            &expected
+        ),
+        [Some(110), Some(30), Some(90)]
     );
 }

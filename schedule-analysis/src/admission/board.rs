@@ -166,8 +166,12 @@ impl<const N: usize> Originals<N> {
         let table = input.table;
         for (i, t) in table.tasks.iter().enumerate() {
             let row = u8::try_from(i).map_err(|_| Refusal::Capacity)?;
-            let job = self.add(t.priority, Source::Fixed(row))?;
-            self.engines(input, Source::Fixed(row), job)?;
+            self.add(t.priority, Source::Fixed(row))?;
+        }
+        // The fixed tasks' engine rows after every fixed task: a fixed task's original index stays its row's,
+        // which the table's `released_by`, `can_tx` and `command_handler` name.
+        for &(row, _) in table.task_scripts {
+            self.engines(input, Source::Fixed(row), row)?;
         }
         for (m, s) in input.mine() {
             let Some(sender) = s.sender else { continue };
@@ -196,7 +200,7 @@ impl<const N: usize> Originals<N> {
         Ok(())
     }
 
-    /// The engine rows of job `job`'s scripts, right after it (the `k`th script's row at original `job + 1 + k`).
+    /// The engine rows of job `job`'s scripts (`Source::Engine { job, script }`, one per script in its order).
     fn engines<const M: usize>(
         &mut self,
         input: &BoardInput<'_, M>,

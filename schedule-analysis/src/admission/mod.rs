@@ -19,9 +19,15 @@
 //! frame misses its deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without
 //! jitter budgets (a property test checks that they agree).
 //!
+//! A board whose running jobs run sensor-bus scripts (the table's [`BusRow`]s and [`ScriptRow`]s) is analysed as
+//! `sensor_bus::analyse` analyses it: its jobs' engine rows, rounds of the scripts' bus responses, one board analysis
+//! per view and the engine events, to a fixed point within [`SCRIPT_ITERATIONS`] (docs/analysis.md, "The chip's
+//! check with scripts").
+//!
 //! Its parts: this module (the table, the request and the verdict, one decision and the cache's refresh steps),
-//! `board` (a board's jobs into [`board_analysis::analyse`]), `bus` (the streams into [`bus_analysis::analyse`])
-//! and `cache` (what is kept of a board's analysis between decisions).
+//! `board` (a board's jobs into [`board_analysis::analyse`]; `board::suspension`, the sensor-bus rounds), `bus`
+//! (the streams into [`bus_analysis::analyse`]) and `cache` (what is kept of a board's analysis between
+//! decisions).
 
 use crate::board::TaskTiming;
 use crate::board_analysis;
@@ -366,7 +372,8 @@ pub enum Refusal {
     Capacity,
     /// The request's period is zero.
     ZeroPeriod,
-    /// A board's analysis, or the bus's, needed more than [`DECISION_ITERATIONS`] fixed-point iterations: refused
+    /// A board's analysis, or the bus's, needed more than [`DECISION_ITERATIONS`] fixed-point iterations (a board
+    /// with scripts: [`SCRIPT_ITERATIONS`], its rounds counted): refused
     /// without a verdict on
     /// its deadlines (the check's cost stays bounded; refusing never breaks a deadline). Below the hard floor.
     Budget,

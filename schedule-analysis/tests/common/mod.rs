@@ -15,9 +15,17 @@ pub fn workspace() -> PathBuf {
 /// A workspace of its own under the temporary folder, named by `tag`: the boards' apps linked, a copy of the
 /// models folder (which a test may then change), and, when given, `dwd_bounds` as DiWheelDrive 1-1's generated
 /// bounds file.
+#[allow(dead_code)]
 pub fn scratch_workspace(tag: &str, dwd_bounds: Option<&serde_json::Value>) -> PathBuf {
-    let real = workspace();
     let root = std::env::temp_dir().join(format!("{tag}-{}", std::process::id()));
+    scratch_workspace_at(root, dwd_bounds)
+}
+
+/// [`scratch_workspace`] at `root` (emptied first): a test binary that keeps one workspace for all its tests puts it
+/// under its `CARGO_TARGET_TMPDIR`, so that each run replaces the last one's.
+#[allow(dead_code)]
+pub fn scratch_workspace_at(root: PathBuf, dwd_bounds: Option<&serde_json::Value>) -> PathBuf {
+    let real = workspace();
     let _ = std::fs::remove_dir_all(&root);
     std::fs::create_dir_all(&root).unwrap();
     for board in ["diwheeldrive", "powermgmt", "lightring"] {

@@ -88,10 +88,13 @@ impl<'a, const N: usize> Scripts<'a, N> {
             }
             let original = set.jobs.metas.get(p).map_or(NO_JOB, |m| m.original);
             for (k, row) in scripts.iter().enumerate() {
-                // The `k`th script's engine row follows its job ([`Originals::engines`]).
-                let engine = set
-                    .jobs
-                    .at(original.saturating_add(1).saturating_add(k as u8));
+                // The `k`th script's engine row ([`Originals::engines`]).
+                let engine = originals
+                    .source
+                    .iter()
+                    .take(originals.count)
+                    .position(|s| matches!(*s, Source::Engine { job, script } if job == original && usize::from(script) == k))
+                    .map_or(NO_JOB, |e| set.jobs.at(e as u8));
                 *out.list.get_mut(out.len).ok_or(Refusal::Capacity)? = ScriptJob {
                     job: p as u8,
                     engine,
