@@ -144,7 +144,7 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
 
     /// The block's event interrupt (I2Cx_EV): reads SR1 and advances the running script.
     pub fn on_event(&self) {
-        let (ended, awaiting) = self.with(|inner| {
+        let after = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
             let running = inner.running.and_then(|index| inner.slots.get_mut(index));
             let progress = match running {
@@ -158,42 +158,47 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                     Progress::Running
                 }
             };
-            let ended = match progress {
-                Progress::Running => None,
-                Progress::Finished(result) => Some(inner.end(result)),
-            };
-            (ended, inner.engine.awaiting().is_some())
+            inner.after(progress)
         });
-        self.wake_after(ended, awaiting);
+        // The common event (a byte, an address) neither ends the script nor awaits a condition:
+        // it returns here. `Nothing` holds no waker: forgetting it drops nothing, and keeps the
+        // enum's drop glue (a call through a waker's vtable) off this path.
+        if let After::Nothing = after {
+            core::mem::forget(after);
+        } else {
+            self.after_interrupt(after);
+        }
     }
 
     /// The block's error interrupt (I2Cx_ER).
     pub fn on_error(&self) {
-        let (ended, awaiting) = self.with(|inner| {
+        let after = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
             let progress = inner.engine.on_error(sr1, &mut inner.block);
-            let ended = match progress {
-                Progress::Running => None,
-                Progress::Finished(result) => Some(inner.end(result)),
-            };
-            (ended, inner.engine.awaiting().is_some())
+            inner.after(progress)
         });
-        self.wake_after(ended, awaiting);
+        if let After::Nothing = after {
+            core::mem::forget(after);
+        } else {
+            self.after_interrupt(after);
+        }
     }
 
-    /// After an interrupt's step: the condition wait ([`I2cBus::settle`]) where the step left the
-    /// engine awaiting one (an operation's start, a repeated START: not called otherwise, so that
-    /// the execution-time analysis charges its code per START, not per event), then the wakers,
-    /// outside the critical section, in one call of [`wake`] (charged by parts:
-    /// tools/engine-bound): a finished client's at a script's end, the re-arm task's at a stall.
-    /// (The two do not come from one event: after a script's end the wait is for a STOP, the next
-    /// script's START, which stalls nothing.)
-    fn wake_after(&self, ended: Option<[Option<Waker>; 2]>, awaiting: bool) {
-        let stalled = if awaiting { self.settle() } else { None };
-        match (ended, stalled) {
-            (Some([finished, started]), stalled) => wake([finished, started, stalled]),
-            (None, Some(stalled)) => wake([Some(stalled), None, None]),
-            (None, None) => {}
+    /// After an interrupt's step that ended the script or left the engine awaiting a condition:
+    /// the condition wait ([`I2cBus::settle`]: an operation's start, a repeated START), then the
+    /// wakers, outside the critical section, in one call of [`wake`]: a finished client's at a
+    /// script's end, the re-arm task's at a stall. Not inlined and not called for the other
+    /// events, so that the execution-time analysis charges it per START and per script, not per
+    /// event (tools/engine-bound). (A finished client's waker and a stall do not come from one
+    /// event: after a script's end the wait is for a STOP, the next script's START, which stalls
+    /// nothing.)
+    #[inline(never)]
+    fn after_interrupt(&self, after: After) {
+        let stalled = self.settle();
+        match (after, stalled) {
+            (After::Ended([finished, started]), stalled) => wake([finished, started, stalled]),
+            (_, Some(stalled)) => wake([Some(stalled), None, None]),
+            (_, None) => {}
         }
     }
 
@@ -295,7 +300,27 @@ fn wake(wakers: [Option<Waker>; 3]) {
     }
 }
 
+/// What follows an interrupt's step outside its critical section ([`I2cBus::after_interrupt`]).
+enum After {
+    /// Nothing: the script goes on and no condition is awaited (most events).
+    Nothing,
+    /// A condition to wait for (an operation's START, a repeated START).
+    Settle,
+    /// The script ended: the wakers its end handed out (the next script's condition wait, if one
+    /// started, is awaited as well).
+    Ended([Option<Waker>; 2]),
+}
+
 impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
+    /// The script's end if the step finished it, and what is left to do outside the section.
+    fn after(&mut self, progress: Progress) -> After {
+        match progress {
+            Progress::Finished(result) => After::Ended(self.end(result)),
+            Progress::Running if self.engine.awaiting().is_some() => After::Settle,
+            Progress::Running => After::Nothing,
+        }
+    }
+
     /// A script's end: its slot holds its result and its waker is handed out; the next script
     /// starts. At most two wakers: the finished client's and (never in practice, see
     /// `start_next`) the started one's. Once per script, not per event; not inlined, so that the

@@ -207,8 +207,10 @@ pub enum Progress {
 enum Phase {
     /// No script.
     Idle,
-    /// START set; waiting for SB (EV5), then the address byte with this direction.
-    Start { read: bool },
+    /// START set; waiting for SB (EV5), then the address byte: an operation's first START
+    /// (`repeated` false: its direction is the operation's), or the repeated START of a write
+    /// then a read (the read's).
+    Start { repeated: bool },
     /// Address byte written; waiting for ADDR (EV6).
     Address { read: bool },
     /// Writing: `sent` bytes of the operation are in DR or gone; waiting for TXE (EV8_1, EV8).
@@ -244,6 +246,14 @@ pub struct Engine {
     operation: u8,
     /// The script's written bytes before the running operation's.
     written: u8,
+    /// The running operation's address byte with its direction bit clear, its bytes to write and
+    /// to read: taken from the script once, at the operation's start, so that an event's step
+    /// reads them from the engine instead of looking the operation up again.
+    address: u8,
+    write: u8,
+    read: u8,
+    /// The running script's operations, counted once at its start.
+    count: u8,
 }
 
 impl Default for Engine {
@@ -263,6 +273,10 @@ impl Engine {
             rearms: 0,
             operation: 0,
             written: 0,
+            address: 0,
+            write: 0,
+            read: 0,
+            count: 0,
         }
     }
 
@@ -276,7 +290,9 @@ impl Engine {
         self.operation = 0;
         self.written = 0;
         self.rearms = 0;
-        self.begin(script, block)
+        // At most `MAX_OPERATIONS` (12).
+        self.count = u8::try_from(script.operations().len()).unwrap_or(u8::MAX);
+        self.begin(block)
     }
 
     /// Stops the running script where it is (the client's timeout, or a dropped client) and
@@ -295,20 +311,21 @@ impl Engine {
             .copied()
     }
 
-    /// The running operation's START, or the script's end.
-    fn begin(&mut self, script: &Script, block: &mut impl Block) -> Progress {
-        let Some(op) = self.current(script) else {
+    /// The running operation's START, or the script's end. The operation itself is looked up at
+    /// its SB (EV5), the one event every operation has: the event that ended the operation before
+    /// it then does no look-up.
+    #[inline(always)]
+    fn begin(&mut self, block: &mut impl Block) -> Progress {
+        if self.operation >= self.count {
             self.phase = Phase::Idle;
             self.awaiting = None;
             self.stalled = None;
             block.set_interrupts(Interrupts::Off);
             return Progress::Finished(Ok(()));
-        };
+        }
         // RM0008 §26.6.1, CR1 note: no write to CR1 until the STOP set before has cleared; the
         // START is set in `resume`.
-        self.phase = Phase::Start {
-            read: op.write == 0,
-        };
+        self.phase = Phase::Start { repeated: false };
         self.wait_for(Condition::Stop);
         Progress::Running
     }
@@ -387,15 +404,11 @@ impl Engine {
     }
 
     /// The next operation, or the script's end.
-    fn next_operation(
-        &mut self,
-        op: Operation,
-        script: &Script,
-        block: &mut impl Block,
-    ) -> Progress {
+    #[inline(always)]
+    fn next_operation(&mut self, block: &mut impl Block) -> Progress {
         self.operation += 1;
-        self.written += op.write;
-        self.begin(script, block)
+        self.written += self.write;
+        self.begin(block)
     }
 
     fn fail(&mut self, failure: Failure) -> Progress {
@@ -416,18 +429,29 @@ impl Engine {
         readings: &mut Readings,
         block: &mut impl Block,
     ) -> Progress {
-        let op = match self.current(script) {
-            Some(op) if self.phase != Phase::Idle => op,
-            _ => {
-                self.on_stray_event(block);
-                return Progress::Running;
-            }
-        };
         match self.phase {
-            Phase::Start { read } if sr1 & SR1_SB != 0 => {
+            Phase::Idle => {
+                self.on_stray_event(block);
+                Progress::Running
+            }
+            Phase::Start { repeated } if sr1 & SR1_SB != 0 => {
+                let read = if repeated {
+                    true
+                } else {
+                    // The operation's address and byte counts, kept for its other events.
+                    let Some(op) = self.current(script) else {
+                        // Not the script `start` was given: nothing to address.
+                        block.reset();
+                        return self.fail(Failure::UnexpectedEvent);
+                    };
+                    self.address = op.address << 1;
+                    self.write = op.write;
+                    self.read = op.read;
+                    op.write == 0
+                };
                 // EV5: SB is cleared by the SR1 read (the caller's) followed by the DR write of
                 // the address byte.
-                block.write_dr((op.address << 1) | u8::from(read));
+                block.write_dr(self.address | u8::from(read));
                 self.phase = Phase::Address { read };
                 Progress::Running
             }
@@ -440,7 +464,7 @@ impl Engine {
                 Progress::Running
             }
             Phase::Address { read: true } if sr1 & SR1_ADDR != 0 => {
-                self.addressed_for_read(op.read, block);
+                self.addressed_for_read(self.read, block);
                 Progress::Running
             }
             Phase::Transmit { sent } if sr1 & SR1_TXE != 0 => {
@@ -449,7 +473,7 @@ impl Engine {
                 let byte = script.written().get(index).copied().unwrap_or(0);
                 block.write_dr(byte);
                 let sent = sent + 1;
-                if sent >= op.write {
+                if sent >= self.write {
                     // The last byte is in DR: TXE off, wait for BTF (EV8_2).
                     block.set_interrupts(Interrupts::Events);
                     self.phase = Phase::TransmitEnd;
@@ -459,19 +483,19 @@ impl Engine {
                 Progress::Running
             }
             Phase::TransmitEnd if sr1 & SR1_BTF != 0 => {
-                if op.read > 0 {
+                if self.read > 0 {
                     // §26.3.3 "Closing the communication" / a write then a read: a repeated
                     // START instead of the STOP, set while BTF holds SCL low. BTF stays set
                     // (and would raise this interrupt again) until the START is on the bus: the
                     // caller waits for it (`Condition::Start`); SB's own interrupt follows.
                     block.modify_cr1(CR1_START, 0);
-                    self.phase = Phase::Start { read: true };
+                    self.phase = Phase::Start { repeated: true };
                     self.wait_for(Condition::Start);
                     Progress::Running
                 } else {
                     // EV8_2: TXE = BTF = 1, program STOP (it clears both).
                     block.modify_cr1(CR1_STOP, 0);
-                    self.next_operation(op, script, block)
+                    self.next_operation(block)
                 }
             }
             Phase::Receive { left } if sr1 & SR1_RXNE != 0 => {
@@ -507,12 +531,12 @@ impl Engine {
                 block.modify_cr1(CR1_STOP, 0);
                 readings.push(block.read_dr());
                 readings.push(block.read_dr());
-                self.next_operation(op, script, block)
+                self.next_operation(block)
             }
             Phase::ReceiveLast if sr1 & SR1_RXNE != 0 => {
                 // EV7 of the last byte (its NACK and the STOP programmed before it came).
                 readings.push(block.read_dr());
-                self.next_operation(op, script, block)
+                self.next_operation(block)
             }
             _ if sr1 & (SR1_SB | SR1_ADDR) != 0 => {
                 // SB or ADDR where the sequence has none: they hold SCL and raise the event
