@@ -196,9 +196,12 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
     fn after_interrupt(&self, after: After) {
         let stalled = self.settle();
         match (after, stalled) {
-            (After::Ended([finished, started]), stalled) => wake([finished, started, stalled]),
-            (_, Some(stalled)) => wake([Some(stalled), None, None]),
-            (_, None) => {}
+            (After::Ended([finished, started]), stalled) => {
+                wake(finished);
+                wake(started);
+                wake(stalled);
+            }
+            (_, stalled) => wake(stalled),
         }
     }
 
@@ -291,11 +294,11 @@ fn rank(slot: &Slot) -> u64 {
     }
 }
 
-/// Wakes the wakers a script's end or start handed out. Not inlined: the execution-time analysis
-/// bounds it on its own (tools/engine-bound: with `Inner::end`, the handler's per-script part).
+/// Wakes a waker a script's end or start, or a stall, handed out. Not inlined: the execution-time
+/// analysis states its call through the waker's vtable (tools/engine-bound).
 #[inline(never)]
-fn wake(wakers: [Option<Waker>; 3]) {
-    for waker in wakers.into_iter().flatten() {
+fn wake(waker: Option<Waker>) {
+    if let Some(waker) = waker {
         waker.wake();
     }
 }
@@ -313,6 +316,7 @@ enum After {
 
 impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
     /// The script's end if the step finished it, and what is left to do outside the section.
+    #[inline(always)]
     fn after(&mut self, progress: Progress) -> After {
         match progress {
             Progress::Finished(result) => After::Ended(self.end(result)),
@@ -467,7 +471,8 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
             (Poll::Pending, started)
         });
         let stalled = this.bus.settle();
-        wake([started, stalled, None]);
+        wake(started);
+        wake(stalled);
         poll
     }
 }
@@ -493,6 +498,7 @@ impl<B: Block, const SLOTS: usize> Drop for Transfer<'_, B, SLOTS> {
             }
         });
         let stalled = self.bus.settle();
-        wake([started, stalled, None]);
+        wake(started);
+        wake(stalled);
     }
 }

@@ -304,6 +304,7 @@ impl Engine {
         block.reset();
     }
 
+    #[inline(always)]
     fn current(&self, script: &Script) -> Option<Operation> {
         script
             .operations()
@@ -317,9 +318,9 @@ impl Engine {
     #[inline(always)]
     fn begin(&mut self, block: &mut impl Block) -> Progress {
         if self.operation >= self.count {
+            // Nothing is awaited or stalled here: an event comes only after the wait before it
+            // was resumed and with no stall (a stall masks the event interrupt until it ends).
             self.phase = Phase::Idle;
-            self.awaiting = None;
-            self.stalled = None;
             block.set_interrupts(Interrupts::Off);
             return Progress::Finished(Ok(()));
         }
@@ -422,6 +423,9 @@ impl Engine {
     }
 
     /// An event interrupt (I2Cx_EV) with SR1 read as `sr1`; bytes read go to `readings`.
+    /// Inlined into its caller (the bus's handler), so that an event pays no second call and
+    /// prologue.
+    #[inline(always)]
     pub fn on_event(
         &mut self,
         sr1: u16,
@@ -440,9 +444,10 @@ impl Engine {
                 } else {
                     // The operation's address and byte counts, kept for its other events.
                     let Some(op) = self.current(script) else {
-                        // Not the script `start` was given: nothing to address.
-                        block.reset();
-                        return self.fail(Failure::UnexpectedEvent);
+                        // Not the script `start` was given (the bus never does this): nothing to
+                        // address; the interrupts off, the client's timeout aborts the script.
+                        self.on_stray_event(block);
+                        return Progress::Running;
                     };
                     self.address = op.address << 1;
                     self.write = op.write;
