@@ -50,8 +50,8 @@ impl<const SLOTS: usize> Client<SLOTS> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
     Free,
-    /// Submitted `seq`-th (ties among equal priorities go to the lower).
-    Waiting(u64),
+    /// Submitted, not started (the slot's `rank` orders it among the waiting).
+    Waiting,
     Running,
     Finished(Result<(), ScriptError>),
 }
@@ -59,6 +59,9 @@ enum State {
 struct Slot {
     priority: u8,
     state: State,
+    /// Its rank among the waiting ([`rank`]) while it waits, else 0: worked out at the submission
+    /// (in the client's job), so that a script's end compares one number per slot.
+    rank: u64,
     script: Script,
     readings: Readings,
     waker: Option<Waker>,
@@ -91,6 +94,7 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
             Slot {
                 priority: 0,
                 state: State::Free,
+                rank: 0,
                 script: Script::new(),
                 readings: Readings::empty(),
                 waker: None,
@@ -283,15 +287,13 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
     }
 }
 
-/// A slot's rank among the waiting: 0 for a slot that does not wait; above every slot of lower
-/// priority, and among equal priorities the earlier submission higher (the submission number's
-/// low 55 bits: 2^55 submissions, a thousand years at a million a second, before it wraps).
-fn rank(slot: &Slot) -> u64 {
+/// The rank among the waiting of a slot of `priority` submitted `seq`-th (a slot that does not
+/// wait ranks 0): above every slot of lower priority, and among equal priorities the earlier
+/// submission higher (the submission number's low 55 bits: 2^55 submissions, a thousand years
+/// at a million a second, before it wraps).
+fn rank(priority: u8, seq: u64) -> u64 {
     const SEQ: u64 = (1 << 55) - 1;
-    match slot.state {
-        State::Waiting(seq) => (1 << 63) | (u64::from(slot.priority) << 55) | (SEQ - (seq & SEQ)),
-        _ => 0,
-    }
+    (1 << 63) | (u64::from(priority) << 55) | (SEQ - (seq & SEQ))
 }
 
 /// Wakes a waker a script's end or start, or a stall, handed out. Not inlined: the execution-time
@@ -344,15 +346,15 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
     }
 
     /// Starts the most urgent waiting script if the bus is idle: one walk of the slots, a pass
-    /// per slot with no branch out of it (each slot's rank, [`rank`], against the best so far),
-    /// so that the loop is one counted loop of `SLOTS` passes.
+    /// per slot with no branch out of it (each slot's rank, [`rank`], stored at its submission,
+    /// against the best so far), so that the loop is one counted loop of `SLOTS` passes.
     fn start_next(&mut self) -> Option<Waker> {
         if self.running.is_some() {
             return None;
         }
         let mut best = (0, 0);
         for index in 0..SLOTS {
-            let key = self.slots.get(index).map_or(0, rank);
+            let key = self.slots.get(index).map_or(0, |slot| slot.rank);
             if key > best.1 {
                 best = (index, key);
             }
@@ -364,6 +366,7 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
         let slot = self.slots.get_mut(index)?;
         self.running = Some(index);
         slot.state = State::Running;
+        slot.rank = 0;
         match self.engine.start(&slot.script, &mut self.block) {
             Progress::Running => None,
             // Only an empty script finishes at its start, and `Transfer` never submits one.
@@ -449,7 +452,8 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
                 }
                 slot.script = this.script;
                 slot.readings = readings;
-                slot.state = State::Waiting(inner.submitted);
+                slot.state = State::Waiting;
+                slot.rank = rank(slot.priority, inner.submitted);
                 inner.submitted += 1;
                 this.stage = Stage::Submitted;
                 started = inner.start_next();
@@ -487,6 +491,7 @@ impl<B: Block, const SLOTS: usize> Drop for Transfer<'_, B, SLOTS> {
             let slot = inner.slots.get_mut(client)?;
             let was = slot.state;
             slot.state = State::Free;
+            slot.rank = 0;
             slot.waker = None;
             if was == State::Running && inner.running == Some(client) {
                 // The client's own script only: abort it, reset the block, start the next.

@@ -213,8 +213,9 @@ enum Phase {
     Start { repeated: bool },
     /// Address byte written; waiting for ADDR (EV6).
     Address { read: bool },
-    /// Writing: `sent` bytes of the operation are in DR or gone; waiting for TXE (EV8_1, EV8).
-    Transmit { sent: u8 },
+    /// Writing: the script's bytes before [`Engine::cursor`] are in DR or gone; waiting for TXE
+    /// (EV8_1, EV8).
+    Transmit,
     /// Every byte written; waiting for BTF (EV8_2).
     TransmitEnd,
     /// Reading N > 3 bytes, `left` of them still to come (> 3); RXNE each (EV7).
@@ -244,13 +245,15 @@ pub struct Engine {
     rearms: u8,
     /// The running operation's index.
     operation: u8,
-    /// The script's written bytes before the running operation's.
-    written: u8,
-    /// The running operation's address byte with its direction bit clear, its bytes to write and
-    /// to read: taken from the script once, at the operation's start, so that an event's step
-    /// reads them from the engine instead of looking the operation up again.
+    /// The next byte to write: its index in the script's written bytes (the bytes of the
+    /// operations before are all sent, or the script failed).
+    cursor: u8,
+    /// The running operation's address byte with its direction bit clear, the end of its
+    /// written bytes (an index like `cursor`) and its bytes to read: taken from the script once,
+    /// at the operation's SB, so that its other events read them from the engine instead of
+    /// looking the operation up again.
     address: u8,
-    write: u8,
+    write_end: u8,
     read: u8,
     /// The running script's operations, counted once at its start.
     count: u8,
@@ -272,9 +275,9 @@ impl Engine {
             stalled: None,
             rearms: 0,
             operation: 0,
-            written: 0,
+            cursor: 0,
             address: 0,
-            write: 0,
+            write_end: 0,
             read: 0,
             count: 0,
         }
@@ -288,7 +291,7 @@ impl Engine {
     /// Starts `script` (its first operation's START). An empty script finishes at once.
     pub fn start(&mut self, script: &Script, block: &mut impl Block) -> Progress {
         self.operation = 0;
-        self.written = 0;
+        self.cursor = 0;
         self.rearms = 0;
         // At most `MAX_OPERATIONS` (12).
         self.count = u8::try_from(script.operations().len()).unwrap_or(u8::MAX);
@@ -408,7 +411,6 @@ impl Engine {
     #[inline(always)]
     fn next_operation(&mut self, block: &mut impl Block) -> Progress {
         self.operation += 1;
-        self.written += self.write;
         self.begin(block)
     }
 
@@ -450,7 +452,7 @@ impl Engine {
                         return Progress::Running;
                     };
                     self.address = op.address << 1;
-                    self.write = op.write;
+                    self.write_end = self.cursor.wrapping_add(op.write);
                     self.read = op.read;
                     op.write == 0
                 };
@@ -465,25 +467,23 @@ impl Engine {
                 // then has TXE (EV8_1), served with the buffer interrupt.
                 block.read_sr2();
                 block.set_interrupts(Interrupts::Buffer);
-                self.phase = Phase::Transmit { sent: 0 };
+                self.phase = Phase::Transmit;
                 Progress::Running
             }
             Phase::Address { read: true } if sr1 & SR1_ADDR != 0 => {
                 self.addressed_for_read(self.read, block);
                 Progress::Running
             }
-            Phase::Transmit { sent } if sr1 & SR1_TXE != 0 => {
+            Phase::Transmit if sr1 & SR1_TXE != 0 => {
                 // EV8_1 (first byte), EV8 (the others): TXE is cleared by writing DR.
-                let index = usize::from(self.written) + usize::from(sent);
-                let byte = script.written().get(index).copied().unwrap_or(0);
-                block.write_dr(byte);
-                let sent = sent + 1;
-                if sent >= self.write {
+                let index = self.cursor;
+                let byte = script.written().get(usize::from(index)).copied();
+                block.write_dr(byte.unwrap_or(0));
+                self.cursor = index.wrapping_add(1);
+                if self.cursor == self.write_end {
                     // The last byte is in DR: TXE off, wait for BTF (EV8_2).
                     block.set_interrupts(Interrupts::Events);
                     self.phase = Phase::TransmitEnd;
-                } else {
-                    self.phase = Phase::Transmit { sent };
                 }
                 Progress::Running
             }
@@ -522,9 +522,11 @@ impl Engine {
                 // starts, to be NACKed); program STOP; read DataN-1. The last three must not be
                 // interrupted (AN2824; the critical section, above).
                 block.modify_cr1(0, CR1_ACK);
-                readings.push(block.read_dr());
+                let n_2 = block.read_dr();
                 block.modify_cr1(CR1_STOP, 0);
-                readings.push(block.read_dr());
+                let n_1 = block.read_dr();
+                readings.push(n_2);
+                readings.push(n_1);
                 // Then RXNE for DataN (EV7).
                 block.set_interrupts(Interrupts::Buffer);
                 self.phase = Phase::ReceiveLast;
@@ -534,8 +536,10 @@ impl Engine {
                 // Method 2, N = 2: BTF = 1 (data 1 in DR, data 2 in the shift register); program
                 // STOP, read data 1 and data 2.
                 block.modify_cr1(CR1_STOP, 0);
-                readings.push(block.read_dr());
-                readings.push(block.read_dr());
+                let first = block.read_dr();
+                let second = block.read_dr();
+                readings.push(first);
+                readings.push(second);
                 self.next_operation(block)
             }
             Phase::ReceiveLast if sr1 & SR1_RXNE != 0 => {
@@ -628,7 +632,7 @@ impl Engine {
         } else {
             match self.phase {
                 Phase::Address { .. } => Failure::NackAddress,
-                Phase::Transmit { .. } | Phase::TransmitEnd => Failure::NackData,
+                Phase::Transmit | Phase::TransmitEnd => Failure::NackData,
                 // A missing acknowledge while the block receives or starts is not a step of
                 // the sequence.
                 _ => Failure::UnexpectedEvent,
