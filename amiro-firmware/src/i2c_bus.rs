@@ -33,7 +33,7 @@ use core::task::{Context, Poll, Waker};
 
 use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
 
-use crate::i2c_engine::{Block, Engine, Progress, CONDITION_POLLS};
+use crate::i2c_engine::{Block, Condition, Engine, Progress, CONDITION_POLLS};
 
 /// A client of a bus with `SLOTS` slots: a slot index checked against that count when it was made
 /// ([`I2cBus::client`]).
@@ -165,12 +165,11 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
             inner.after(progress)
         });
         // The common event (a byte, an address) neither ends the script nor awaits a condition:
-        // it returns here. `Nothing` holds no waker: forgetting it drops nothing, and keeps the
-        // enum's drop glue (a call through a waker's vtable) off this path.
-        if let After::Nothing = after {
-            core::mem::forget(after);
-        } else {
-            self.after_interrupt(after);
+        // it returns here.
+        match after {
+            After::Nothing => {}
+            After::Settle => self.after_start(),
+            After::Ended(wakers) => self.after_end(wakers),
         }
     }
 
@@ -181,32 +180,37 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
             let progress = inner.engine.on_error(sr1, &mut inner.block);
             inner.after(progress)
         });
-        if let After::Nothing = after {
-            core::mem::forget(after);
-        } else {
-            self.after_interrupt(after);
+        match after {
+            After::Nothing => {}
+            After::Settle => self.after_start(),
+            After::Ended(wakers) => self.after_end(wakers),
         }
     }
 
-    /// After an interrupt's step that ended the script or left the engine awaiting a condition:
-    /// the condition wait ([`I2cBus::settle`]: an operation's start, a repeated START), then the
-    /// wakers, outside the critical section, in one call of [`wake`]: a finished client's at a
-    /// script's end, the re-arm task's at a stall. Not inlined and not called for the other
-    /// events, so that the execution-time analysis charges it per START and per script, not per
-    /// event (tools/engine-bound). (A finished client's waker and a stall do not come from one
-    /// event: after a script's end the wait is for a STOP, the next script's START, which stalls
-    /// nothing.)
+    /// After an interrupt's step that left the engine awaiting a condition (an operation's
+    /// START, a repeated START): the condition wait ([`I2cBus::settle`]), then, if it stalled a
+    /// repeated START, the re-arm task's wake. Not inlined and called only then, so that the
+    /// execution-time analysis charges it per START, not per event (tools/engine-bound).
     #[inline(never)]
-    fn after_interrupt(&self, after: After) {
-        let stalled = self.settle();
-        match (after, stalled) {
-            (After::Ended([finished, started]), stalled) => {
-                wake(finished);
-                wake(started);
-                wake(stalled);
-            }
-            (_, stalled) => wake(stalled),
+    fn after_start(&self) {
+        if let Some(stalled) = self.settle() {
+            wake(Some(stalled));
         }
+    }
+
+    /// After an interrupt's step that ended the script: the next script's first START, if one
+    /// started ([`I2cBus::after_start`]), then the wakers the end handed out, outside the
+    /// critical section, one call of [`wake`] each (a finished client's; a started one's, which
+    /// only an empty script has). Not inlined and called only then: the per-script part
+    /// (tools/engine-bound). A script's end stalls nothing (its wait, if any, is for a STOP).
+    #[inline(never)]
+    fn after_end(&self, [finished, started]: [Option<Waker>; 2]) {
+        // Whether a next script started: asked here, once per script, not in the event.
+        if self.with(|inner| inner.engine.awaiting().is_some()) {
+            self.after_start();
+        }
+        wake(finished);
+        wake(started);
     }
 
     /// Waits for the condition the engine awaits (a STOP to clear before a START, a repeated
@@ -243,9 +247,14 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                 return None;
             }
             inner.engine.resume(cleared, &mut inner.block);
-            // A stalled repeated START: the re-arm task takes over.
-            inner.engine.stalled()?;
-            inner.rearm.take()
+            match wait {
+                // A stalled repeated START: the re-arm task takes over.
+                (Condition::Start, _) if !cleared => {
+                    inner.engine.stalled()?;
+                    inner.rearm.take()
+                }
+                _ => None,
+            }
         })
     }
 
@@ -305,14 +314,14 @@ fn wake(waker: Option<Waker>) {
     }
 }
 
-/// What follows an interrupt's step outside its critical section ([`I2cBus::after_interrupt`]).
+/// What follows an interrupt's step outside its critical section.
 enum After {
     /// Nothing: the script goes on and no condition is awaited (most events).
     Nothing,
     /// A condition to wait for (an operation's START, a repeated START).
     Settle,
-    /// The script ended: the wakers its end handed out (the next script's condition wait, if one
-    /// started, is awaited as well).
+    /// The script ended: the wakers its end handed out (a next script, if one started, has its
+    /// first START's condition wait awaited as well).
     Ended([Option<Waker>; 2]),
 }
 
@@ -370,7 +379,11 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
         match self.engine.start(&slot.script, &mut self.block) {
             Progress::Running => None,
             // Only an empty script finishes at its start, and `Transfer` never submits one.
-            Progress::Finished(result) => self.finish(result),
+            Progress::Finished(result) => {
+                self.running = None;
+                slot.state = State::Finished(result);
+                slot.waker.take()
+            }
         }
     }
 }
