@@ -12,8 +12,6 @@ const SR1: usize = 0x14;
 const SR2: usize = 0x18;
 const CCR: usize = 0x1C;
 const TRISE: usize = 0x20;
-/// CR2's interrupt enables (ITERREN, ITEVTEN, ITBUFEN).
-const CR2_INTERRUPTS: u16 = 0b111 << 8;
 
 /// One I2C block's registers.
 pub struct Registers {
@@ -109,7 +107,8 @@ impl Block for Registers {
     }
 
     fn set_interrupts(&mut self, interrupts: Interrupts) {
-        self.write(CR2, (self.read(CR2) & !CR2_INTERRUPTS) | interrupts.bits());
+        // CR2 holds FREQ and the enables (DMAEN and LAST stay 0: no DMA): written whole, not read.
+        self.write(CR2, self.pclk1_mhz | interrupts.bits());
     }
 
     fn clear_sr1(&mut self, flags: u16) {

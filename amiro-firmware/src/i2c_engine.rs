@@ -243,8 +243,10 @@ pub struct Engine {
     stalled: Option<u32>,
     /// The running script's re-arms so far ([`MAX_REARMS`] at most).
     rearms: u8,
-    /// The running operation's index.
-    operation: u8,
+    /// The running operation's index (the low byte) and the running script's operation count,
+    /// taken once at its start (the high byte): one load at an operation's end tells whether the
+    /// script has another.
+    operations: u16,
     /// The next byte to write: its index in the script's written bytes (the bytes of the
     /// operations before are all sent, or the script failed).
     cursor: u8,
@@ -255,8 +257,6 @@ pub struct Engine {
     address: u8,
     write_end: u8,
     read: u8,
-    /// The running script's operations, counted once at its start.
-    count: u8,
 }
 
 impl Default for Engine {
@@ -274,12 +274,11 @@ impl Engine {
             waits: 0,
             stalled: None,
             rearms: 0,
-            operation: 0,
+            operations: 0,
             cursor: 0,
             address: 0,
             write_end: 0,
             read: 0,
-            count: 0,
         }
     }
 
@@ -290,11 +289,11 @@ impl Engine {
 
     /// Starts `script` (its first operation's START). An empty script finishes at once.
     pub fn start(&mut self, script: &Script, block: &mut impl Block) -> Progress {
-        self.operation = 0;
         self.cursor = 0;
         self.rearms = 0;
-        // At most `MAX_OPERATIONS` (12).
-        self.count = u8::try_from(script.operations().len()).unwrap_or(u8::MAX);
+        // At most `MAX_OPERATIONS` (12); the running one 0.
+        self.operations =
+            u16::from(u8::try_from(script.operations().len()).unwrap_or(u8::MAX)) << 8;
         self.begin(block)
     }
 
@@ -307,11 +306,17 @@ impl Engine {
         block.reset();
     }
 
+    /// The running operation's index.
+    #[inline(always)]
+    fn operation(&self) -> u8 {
+        self.operations as u8
+    }
+
     #[inline(always)]
     fn current(&self, script: &Script) -> Option<Operation> {
         script
             .operations()
-            .get(usize::from(self.operation))
+            .get(usize::from(self.operation()))
             .copied()
     }
 
@@ -320,7 +325,7 @@ impl Engine {
     /// it then does no look-up.
     #[inline(always)]
     fn begin(&mut self, block: &mut impl Block) -> Progress {
-        if self.operation >= self.count {
+        if self.operations & 0xff >= self.operations >> 8 {
             // Nothing is awaited or stalled here: an event comes only after the wait before it
             // was resumed and with no stall (a stall masks the event interrupt until it ends).
             self.phase = Phase::Idle;
@@ -410,7 +415,7 @@ impl Engine {
     /// The next operation, or the script's end.
     #[inline(always)]
     fn next_operation(&mut self, block: &mut impl Block) -> Progress {
-        self.operation += 1;
+        self.operations += 1;
         self.begin(block)
     }
 
@@ -419,7 +424,7 @@ impl Engine {
         self.awaiting = None;
         self.stalled = None;
         Progress::Finished(Err(ScriptError {
-            operation: self.operation,
+            operation: self.operation(),
             failure,
         }))
     }
@@ -612,6 +617,7 @@ impl Engine {
     /// acknowledge programs the STOP the reference manual asks the master for and leaves the
     /// block as it is. Arbitration loss is served first (the block is no longer a master), then
     /// a bus error, an overrun, and a missing acknowledge.
+    #[inline(always)]
     pub fn on_error(&mut self, sr1: u16, block: &mut impl Block) -> Progress {
         let flags = sr1 & SR1_ERRORS;
         if flags == 0 {
