@@ -12,14 +12,16 @@ const SR1: usize = 0x14;
 const SR2: usize = 0x18;
 const CCR: usize = 0x1C;
 const TRISE: usize = 0x20;
-/// CR2's interrupt enables (ITERREN, ITEVTEN, ITBUFEN).
-const CR2_INTERRUPTS: u16 = 0b111 << 8;
 
 /// One I2C block's registers.
 pub struct Registers {
     base: usize,
-    /// APB1 in MHz (CR2's FREQ field and the timing).
+    /// APB1 in MHz (CR2's FREQ field).
     pclk1_mhz: u16,
+    /// CCR and TRISE for 400 kHz at that APB1 clock, worked out when the value is made so that a
+    /// reset (on an event's failure path) divides nothing.
+    ccr: u16,
+    trise: u16,
     /// [`CONDITION_WAIT_NS`] in core cycles.
     condition_cycles: u32,
 }
@@ -42,9 +44,16 @@ impl Registers {
         } else {
             mhz
         };
+        let mhz = mhz as u16;
+        // Fast mode, duty 2:1: SCL = PCLK1 / (3 × CCR), rounded so it never exceeds 400 kHz;
+        // TRISE: the 300 ns rise time in PCLK1 cycles, plus one (as `i2c::Master::setup`).
+        let ccr = (mhz * 10).div_ceil(12);
+        let ccr = if ccr < 1 { 1 } else { ccr };
         Self {
             base,
-            pclk1_mhz: mhz as u16,
+            pclk1_mhz: mhz,
+            ccr: (1 << 15) | ccr,
+            trise: mhz * 300 / 1000 + 1,
             condition_cycles: (CONDITION_WAIT_NS as u64 * sysclk_hz as u64 / 1_000_000_000) as u32,
         }
     }
@@ -98,7 +107,8 @@ impl Block for Registers {
     }
 
     fn set_interrupts(&mut self, interrupts: Interrupts) {
-        self.write(CR2, (self.read(CR2) & !CR2_INTERRUPTS) | interrupts.bits());
+        // CR2 holds FREQ and the enables (DMAEN and LAST stay 0: no DMA): written whole, not read.
+        self.write(CR2, self.pclk1_mhz | interrupts.bits());
     }
 
     fn clear_sr1(&mut self, flags: u16) {
@@ -115,15 +125,11 @@ impl Block for Registers {
     }
 
     fn reset(&mut self) {
-        // Fast mode, duty 2:1: SCL = PCLK1 / (3 × CCR), rounded so it never exceeds 400 kHz;
-        // TRISE: the 300 ns rise time in PCLK1 cycles, plus one (as `i2c::Master::setup`).
-        let ccr = (self.pclk1_mhz * 10).div_ceil(12).max(1);
-        let trise = self.pclk1_mhz * 300 / 1000 + 1;
         self.write(CR1, CR1_SWRST);
         self.write(CR1, 0);
         self.write(CR2, self.pclk1_mhz);
-        self.write(CCR, (1 << 15) | ccr);
-        self.write(TRISE, trise);
+        self.write(CCR, self.ccr);
+        self.write(TRISE, self.trise);
         self.write(CR1, CR1_PE);
     }
 }

@@ -33,7 +33,7 @@ use core::task::{Context, Poll, Waker};
 
 use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
 
-use crate::i2c_engine::{Block, Engine, Progress, CONDITION_POLLS};
+use crate::i2c_engine::{Block, Condition, Engine, Progress, CONDITION_POLLS};
 
 /// A client of a bus with `SLOTS` slots: a slot index checked against that count when it was made
 /// ([`I2cBus::client`]).
@@ -50,8 +50,8 @@ impl<const SLOTS: usize> Client<SLOTS> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
     Free,
-    /// Submitted `seq`-th (ties among equal priorities go to the lower).
-    Waiting(u64),
+    /// Submitted, not started (the slot's `rank` orders it among the waiting).
+    Waiting,
     Running,
     Finished(Result<(), ScriptError>),
 }
@@ -59,6 +59,9 @@ enum State {
 struct Slot {
     priority: u8,
     state: State,
+    /// Its rank among the waiting ([`rank`]) while it waits, else 0: worked out at the submission
+    /// (in the client's job), so that a script's end compares one number per slot.
+    rank: u64,
     script: Script,
     readings: Readings,
     waker: Option<Waker>,
@@ -91,6 +94,7 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
             Slot {
                 priority: 0,
                 state: State::Free,
+                rank: 0,
                 script: Script::new(),
                 readings: Readings::empty(),
                 waker: None,
@@ -144,7 +148,7 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
 
     /// The block's event interrupt (I2Cx_EV): reads SR1 and advances the running script.
     pub fn on_event(&self) {
-        let (ended, awaiting) = self.with(|inner| {
+        let after = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
             let running = inner.running.and_then(|index| inner.slots.get_mut(index));
             let progress = match running {
@@ -158,43 +162,55 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                     Progress::Running
                 }
             };
-            let ended = match progress {
-                Progress::Running => None,
-                Progress::Finished(result) => Some(inner.end(result)),
-            };
-            (ended, inner.engine.awaiting().is_some())
+            inner.after(progress)
         });
-        self.wake_after(ended, awaiting);
+        // The common event (a byte, an address) neither ends the script nor awaits a condition:
+        // it returns here.
+        match after {
+            After::Nothing => {}
+            After::Settle => self.after_start(),
+            After::Ended(wakers) => self.after_end(wakers),
+        }
     }
 
     /// The block's error interrupt (I2Cx_ER).
     pub fn on_error(&self) {
-        let (ended, awaiting) = self.with(|inner| {
+        let after = self.with(|inner| {
             let sr1 = inner.block.read_sr1();
             let progress = inner.engine.on_error(sr1, &mut inner.block);
-            let ended = match progress {
-                Progress::Running => None,
-                Progress::Finished(result) => Some(inner.end(result)),
-            };
-            (ended, inner.engine.awaiting().is_some())
+            inner.after(progress)
         });
-        self.wake_after(ended, awaiting);
+        match after {
+            After::Nothing => {}
+            After::Settle => self.after_start(),
+            After::Ended(wakers) => self.after_end(wakers),
+        }
     }
 
-    /// After an interrupt's step: the condition wait ([`I2cBus::settle`]) where the step left the
-    /// engine awaiting one (an operation's start, a repeated START: not called otherwise, so that
-    /// the execution-time analysis charges its code per START, not per event), then the wakers,
-    /// outside the critical section, in one call of [`wake`] (charged by parts:
-    /// tools/engine-bound): a finished client's at a script's end, the re-arm task's at a stall.
-    /// (The two do not come from one event: after a script's end the wait is for a STOP, the next
-    /// script's START, which stalls nothing.)
-    fn wake_after(&self, ended: Option<[Option<Waker>; 2]>, awaiting: bool) {
-        let stalled = if awaiting { self.settle() } else { None };
-        match (ended, stalled) {
-            (Some([finished, started]), stalled) => wake([finished, started, stalled]),
-            (None, Some(stalled)) => wake([Some(stalled), None, None]),
-            (None, None) => {}
+    /// After an interrupt's step that left the engine awaiting a condition (an operation's
+    /// START, a repeated START): the condition wait ([`I2cBus::settle`]), then, if it stalled a
+    /// repeated START, the re-arm task's wake. Not inlined and called only then, so that the
+    /// execution-time analysis charges it per START, not per event (tools/engine-bound).
+    #[inline(never)]
+    fn after_start(&self) {
+        if let Some(stalled) = self.settle() {
+            wake(Some(stalled));
         }
+    }
+
+    /// After an interrupt's step that ended the script: the next script's first START, if one
+    /// started ([`I2cBus::after_start`]), then the wakers the end handed out, outside the
+    /// critical section, one call of [`wake`] each (a finished client's; a started one's, which
+    /// only an empty script has). Not inlined and called only then: the per-script part
+    /// (tools/engine-bound). A script's end stalls nothing (its wait, if any, is for a STOP).
+    #[inline(never)]
+    fn after_end(&self, [finished, started]: [Option<Waker>; 2]) {
+        // Whether a next script started: asked here, once per script, not in the event.
+        if self.with(|inner| inner.engine.awaiting().is_some()) {
+            self.after_start();
+        }
+        wake(finished);
+        wake(started);
     }
 
     /// Waits for the condition the engine awaits (a STOP to clear before a START, a repeated
@@ -231,9 +247,14 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                 return None;
             }
             inner.engine.resume(cleared, &mut inner.block);
-            // A stalled repeated START: the re-arm task takes over.
-            inner.engine.stalled()?;
-            inner.rearm.take()
+            match wait {
+                // A stalled repeated START: the re-arm task takes over.
+                (Condition::Start, _) if !cleared => {
+                    inner.engine.stalled()?;
+                    inner.rearm.take()
+                }
+                _ => None,
+            }
         })
     }
 
@@ -275,27 +296,46 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
     }
 }
 
-/// A slot's rank among the waiting: 0 for a slot that does not wait; above every slot of lower
-/// priority, and among equal priorities the earlier submission higher (the submission number's
-/// low 55 bits: 2^55 submissions, a thousand years at a million a second, before it wraps).
-fn rank(slot: &Slot) -> u64 {
+/// The rank among the waiting of a slot of `priority` submitted `seq`-th (a slot that does not
+/// wait ranks 0): above every slot of lower priority, and among equal priorities the earlier
+/// submission higher (the submission number's low 55 bits: 2^55 submissions, a thousand years
+/// at a million a second, before it wraps).
+fn rank(priority: u8, seq: u64) -> u64 {
     const SEQ: u64 = (1 << 55) - 1;
-    match slot.state {
-        State::Waiting(seq) => (1 << 63) | (u64::from(slot.priority) << 55) | (SEQ - (seq & SEQ)),
-        _ => 0,
-    }
+    (1 << 63) | (u64::from(priority) << 55) | (SEQ - (seq & SEQ))
 }
 
-/// Wakes the wakers a script's end or start handed out. Not inlined: the execution-time analysis
-/// bounds it on its own (tools/engine-bound: with `Inner::end`, the handler's per-script part).
+/// Wakes a waker a script's end or start, or a stall, handed out. Not inlined: the execution-time
+/// analysis states its call through the waker's vtable (tools/engine-bound).
 #[inline(never)]
-fn wake(wakers: [Option<Waker>; 3]) {
-    for waker in wakers.into_iter().flatten() {
+fn wake(waker: Option<Waker>) {
+    if let Some(waker) = waker {
         waker.wake();
     }
 }
 
+/// What follows an interrupt's step outside its critical section.
+enum After {
+    /// Nothing: the script goes on and no condition is awaited (most events).
+    Nothing,
+    /// A condition to wait for (an operation's START, a repeated START).
+    Settle,
+    /// The script ended: the wakers its end handed out (a next script, if one started, has its
+    /// first START's condition wait awaited as well).
+    Ended([Option<Waker>; 2]),
+}
+
 impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
+    /// The script's end if the step finished it, and what is left to do outside the section.
+    #[inline(always)]
+    fn after(&mut self, progress: Progress) -> After {
+        match progress {
+            Progress::Finished(result) => After::Ended(self.end(result)),
+            Progress::Running if self.engine.awaiting().is_some() => After::Settle,
+            Progress::Running => After::Nothing,
+        }
+    }
+
     /// A script's end: its slot holds its result and its waker is handed out; the next script
     /// starts. At most two wakers: the finished client's and (never in practice, see
     /// `start_next`) the started one's. Once per script, not per event; not inlined, so that the
@@ -315,15 +355,15 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
     }
 
     /// Starts the most urgent waiting script if the bus is idle: one walk of the slots, a pass
-    /// per slot with no branch out of it (each slot's rank, [`rank`], against the best so far),
-    /// so that the loop is one counted loop of `SLOTS` passes.
+    /// per slot with no branch out of it (each slot's rank, [`rank`], stored at its submission,
+    /// against the best so far), so that the loop is one counted loop of `SLOTS` passes.
     fn start_next(&mut self) -> Option<Waker> {
         if self.running.is_some() {
             return None;
         }
         let mut best = (0, 0);
         for index in 0..SLOTS {
-            let key = self.slots.get(index).map_or(0, rank);
+            let key = self.slots.get(index).map_or(0, |slot| slot.rank);
             if key > best.1 {
                 best = (index, key);
             }
@@ -335,10 +375,15 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
         let slot = self.slots.get_mut(index)?;
         self.running = Some(index);
         slot.state = State::Running;
+        slot.rank = 0;
         match self.engine.start(&slot.script, &mut self.block) {
             Progress::Running => None,
             // Only an empty script finishes at its start, and `Transfer` never submits one.
-            Progress::Finished(result) => self.finish(result),
+            Progress::Finished(result) => {
+                self.running = None;
+                slot.state = State::Finished(result);
+                slot.waker.take()
+            }
         }
     }
 }
@@ -420,7 +465,8 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
                 }
                 slot.script = this.script;
                 slot.readings = readings;
-                slot.state = State::Waiting(inner.submitted);
+                slot.state = State::Waiting;
+                slot.rank = rank(slot.priority, inner.submitted);
                 inner.submitted += 1;
                 this.stage = Stage::Submitted;
                 started = inner.start_next();
@@ -442,7 +488,8 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
             (Poll::Pending, started)
         });
         let stalled = this.bus.settle();
-        wake([started, stalled, None]);
+        wake(started);
+        wake(stalled);
         poll
     }
 }
@@ -457,6 +504,7 @@ impl<B: Block, const SLOTS: usize> Drop for Transfer<'_, B, SLOTS> {
             let slot = inner.slots.get_mut(client)?;
             let was = slot.state;
             slot.state = State::Free;
+            slot.rank = 0;
             slot.waker = None;
             if was == State::Running && inner.running == Some(client) {
                 // The client's own script only: abort it, reset the block, start the next.
@@ -468,6 +516,7 @@ impl<B: Block, const SLOTS: usize> Drop for Transfer<'_, B, SLOTS> {
             }
         });
         let stalled = self.bus.settle();
-        wake([started, stalled, None]);
+        wake(started);
+        wake(stalled);
     }
 }

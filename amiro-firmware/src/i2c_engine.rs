@@ -207,12 +207,15 @@ pub enum Progress {
 enum Phase {
     /// No script.
     Idle,
-    /// START set; waiting for SB (EV5), then the address byte with this direction.
-    Start { read: bool },
+    /// START set; waiting for SB (EV5), then the address byte: an operation's first START
+    /// (`repeated` false: its direction is the operation's), or the repeated START of a write
+    /// then a read (the read's).
+    Start { repeated: bool },
     /// Address byte written; waiting for ADDR (EV6).
     Address { read: bool },
-    /// Writing: `sent` bytes of the operation are in DR or gone; waiting for TXE (EV8_1, EV8).
-    Transmit { sent: u8 },
+    /// Writing: the script's bytes before [`Engine::cursor`] are in DR or gone; waiting for TXE
+    /// (EV8_1, EV8).
+    Transmit,
     /// Every byte written; waiting for BTF (EV8_2).
     TransmitEnd,
     /// Reading N > 3 bytes, `left` of them still to come (> 3); RXNE each (EV7).
@@ -240,10 +243,20 @@ pub struct Engine {
     stalled: Option<u32>,
     /// The running script's re-arms so far ([`MAX_REARMS`] at most).
     rearms: u8,
-    /// The running operation's index.
-    operation: u8,
-    /// The script's written bytes before the running operation's.
-    written: u8,
+    /// The running operation's index (the low byte) and the running script's operation count,
+    /// taken once at its start (the high byte): one load at an operation's end tells whether the
+    /// script has another.
+    operations: u16,
+    /// The next byte to write: its index in the script's written bytes (the bytes of the
+    /// operations before are all sent, or the script failed).
+    cursor: u8,
+    /// The running operation's address byte with its direction bit clear, the end of its
+    /// written bytes (an index like `cursor`) and its bytes to read: taken from the script once,
+    /// at the operation's SB, so that its other events read them from the engine instead of
+    /// looking the operation up again.
+    address: u8,
+    write_end: u8,
+    read: u8,
 }
 
 impl Default for Engine {
@@ -261,8 +274,11 @@ impl Engine {
             waits: 0,
             stalled: None,
             rearms: 0,
-            operation: 0,
-            written: 0,
+            operations: 0,
+            cursor: 0,
+            address: 0,
+            write_end: 0,
+            read: 0,
         }
     }
 
@@ -273,10 +289,12 @@ impl Engine {
 
     /// Starts `script` (its first operation's START). An empty script finishes at once.
     pub fn start(&mut self, script: &Script, block: &mut impl Block) -> Progress {
-        self.operation = 0;
-        self.written = 0;
+        self.cursor = 0;
         self.rearms = 0;
-        self.begin(script, block)
+        // At most `MAX_OPERATIONS` (12); the running one 0.
+        self.operations =
+            u16::from(u8::try_from(script.operations().len()).unwrap_or(u8::MAX)) << 8;
+        self.begin(block)
     }
 
     /// Stops the running script where it is (the client's timeout, or a dropped client) and
@@ -288,27 +306,35 @@ impl Engine {
         block.reset();
     }
 
+    /// The running operation's index.
+    #[inline(always)]
+    fn operation(&self) -> u8 {
+        self.operations as u8
+    }
+
+    #[inline(always)]
     fn current(&self, script: &Script) -> Option<Operation> {
         script
             .operations()
-            .get(usize::from(self.operation))
+            .get(usize::from(self.operation()))
             .copied()
     }
 
-    /// The running operation's START, or the script's end.
-    fn begin(&mut self, script: &Script, block: &mut impl Block) -> Progress {
-        let Some(op) = self.current(script) else {
+    /// The running operation's START, or the script's end. The operation itself is looked up at
+    /// its SB (EV5), the one event every operation has: the event that ended the operation before
+    /// it then does no look-up.
+    #[inline(always)]
+    fn begin(&mut self, block: &mut impl Block) -> Progress {
+        if self.operations & 0xff >= self.operations >> 8 {
+            // Nothing is awaited or stalled here: an event comes only after the wait before it
+            // was resumed and with no stall (a stall masks the event interrupt until it ends).
             self.phase = Phase::Idle;
-            self.awaiting = None;
-            self.stalled = None;
             block.set_interrupts(Interrupts::Off);
             return Progress::Finished(Ok(()));
-        };
+        }
         // RM0008 §26.6.1, CR1 note: no write to CR1 until the STOP set before has cleared; the
         // START is set in `resume`.
-        self.phase = Phase::Start {
-            read: op.write == 0,
-        };
+        self.phase = Phase::Start { repeated: false };
         self.wait_for(Condition::Stop);
         Progress::Running
     }
@@ -387,15 +413,10 @@ impl Engine {
     }
 
     /// The next operation, or the script's end.
-    fn next_operation(
-        &mut self,
-        op: Operation,
-        script: &Script,
-        block: &mut impl Block,
-    ) -> Progress {
-        self.operation += 1;
-        self.written += op.write;
-        self.begin(script, block)
+    #[inline(always)]
+    fn next_operation(&mut self, block: &mut impl Block) -> Progress {
+        self.operations += 1;
+        self.begin(block)
     }
 
     fn fail(&mut self, failure: Failure) -> Progress {
@@ -403,12 +424,15 @@ impl Engine {
         self.awaiting = None;
         self.stalled = None;
         Progress::Finished(Err(ScriptError {
-            operation: self.operation,
+            operation: self.operation(),
             failure,
         }))
     }
 
     /// An event interrupt (I2Cx_EV) with SR1 read as `sr1`; bytes read go to `readings`.
+    /// Inlined into its caller (the bus's handler), so that an event pays no second call and
+    /// prologue.
+    #[inline(always)]
     pub fn on_event(
         &mut self,
         sr1: u16,
@@ -416,18 +440,30 @@ impl Engine {
         readings: &mut Readings,
         block: &mut impl Block,
     ) -> Progress {
-        let op = match self.current(script) {
-            Some(op) if self.phase != Phase::Idle => op,
-            _ => {
-                self.on_stray_event(block);
-                return Progress::Running;
-            }
-        };
         match self.phase {
-            Phase::Start { read } if sr1 & SR1_SB != 0 => {
+            Phase::Idle => {
+                self.on_stray_event(block);
+                Progress::Running
+            }
+            Phase::Start { repeated } if sr1 & SR1_SB != 0 => {
+                let read = if repeated {
+                    true
+                } else {
+                    // The operation's address and byte counts, kept for its other events.
+                    let Some(op) = self.current(script) else {
+                        // Not the script `start` was given (the bus never does this): nothing to
+                        // address; the interrupts off, the client's timeout aborts the script.
+                        self.on_stray_event(block);
+                        return Progress::Running;
+                    };
+                    self.address = op.address << 1;
+                    self.write_end = self.cursor.wrapping_add(op.write);
+                    self.read = op.read;
+                    op.write == 0
+                };
                 // EV5: SB is cleared by the SR1 read (the caller's) followed by the DR write of
                 // the address byte.
-                block.write_dr((op.address << 1) | u8::from(read));
+                block.write_dr(self.address | u8::from(read));
                 self.phase = Phase::Address { read };
                 Progress::Running
             }
@@ -436,42 +472,40 @@ impl Engine {
                 // then has TXE (EV8_1), served with the buffer interrupt.
                 block.read_sr2();
                 block.set_interrupts(Interrupts::Buffer);
-                self.phase = Phase::Transmit { sent: 0 };
+                self.phase = Phase::Transmit;
                 Progress::Running
             }
             Phase::Address { read: true } if sr1 & SR1_ADDR != 0 => {
-                self.addressed_for_read(op.read, block);
+                self.addressed_for_read(self.read, block);
                 Progress::Running
             }
-            Phase::Transmit { sent } if sr1 & SR1_TXE != 0 => {
+            Phase::Transmit if sr1 & SR1_TXE != 0 => {
                 // EV8_1 (first byte), EV8 (the others): TXE is cleared by writing DR.
-                let index = usize::from(self.written) + usize::from(sent);
-                let byte = script.written().get(index).copied().unwrap_or(0);
-                block.write_dr(byte);
-                let sent = sent + 1;
-                if sent >= op.write {
+                let index = self.cursor;
+                let byte = script.written().get(usize::from(index)).copied();
+                block.write_dr(byte.unwrap_or(0));
+                self.cursor = index.wrapping_add(1);
+                if self.cursor == self.write_end {
                     // The last byte is in DR: TXE off, wait for BTF (EV8_2).
                     block.set_interrupts(Interrupts::Events);
                     self.phase = Phase::TransmitEnd;
-                } else {
-                    self.phase = Phase::Transmit { sent };
                 }
                 Progress::Running
             }
             Phase::TransmitEnd if sr1 & SR1_BTF != 0 => {
-                if op.read > 0 {
+                if self.read > 0 {
                     // §26.3.3 "Closing the communication" / a write then a read: a repeated
                     // START instead of the STOP, set while BTF holds SCL low. BTF stays set
                     // (and would raise this interrupt again) until the START is on the bus: the
                     // caller waits for it (`Condition::Start`); SB's own interrupt follows.
                     block.modify_cr1(CR1_START, 0);
-                    self.phase = Phase::Start { read: true };
+                    self.phase = Phase::Start { repeated: true };
                     self.wait_for(Condition::Start);
                     Progress::Running
                 } else {
                     // EV8_2: TXE = BTF = 1, program STOP (it clears both).
                     block.modify_cr1(CR1_STOP, 0);
-                    self.next_operation(op, script, block)
+                    self.next_operation(block)
                 }
             }
             Phase::Receive { left } if sr1 & SR1_RXNE != 0 => {
@@ -493,9 +527,11 @@ impl Engine {
                 // starts, to be NACKed); program STOP; read DataN-1. The last three must not be
                 // interrupted (AN2824; the critical section, above).
                 block.modify_cr1(0, CR1_ACK);
-                readings.push(block.read_dr());
+                let n_2 = block.read_dr();
                 block.modify_cr1(CR1_STOP, 0);
-                readings.push(block.read_dr());
+                let n_1 = block.read_dr();
+                readings.push(n_2);
+                readings.push(n_1);
                 // Then RXNE for DataN (EV7).
                 block.set_interrupts(Interrupts::Buffer);
                 self.phase = Phase::ReceiveLast;
@@ -505,14 +541,16 @@ impl Engine {
                 // Method 2, N = 2: BTF = 1 (data 1 in DR, data 2 in the shift register); program
                 // STOP, read data 1 and data 2.
                 block.modify_cr1(CR1_STOP, 0);
-                readings.push(block.read_dr());
-                readings.push(block.read_dr());
-                self.next_operation(op, script, block)
+                let first = block.read_dr();
+                let second = block.read_dr();
+                readings.push(first);
+                readings.push(second);
+                self.next_operation(block)
             }
             Phase::ReceiveLast if sr1 & SR1_RXNE != 0 => {
                 // EV7 of the last byte (its NACK and the STOP programmed before it came).
                 readings.push(block.read_dr());
-                self.next_operation(op, script, block)
+                self.next_operation(block)
             }
             _ if sr1 & (SR1_SB | SR1_ADDR) != 0 => {
                 // SB or ADDR where the sequence has none: they hold SCL and raise the event
@@ -579,6 +617,7 @@ impl Engine {
     /// acknowledge programs the STOP the reference manual asks the master for and leaves the
     /// block as it is. Arbitration loss is served first (the block is no longer a master), then
     /// a bus error, an overrun, and a missing acknowledge.
+    #[inline(always)]
     pub fn on_error(&mut self, sr1: u16, block: &mut impl Block) -> Progress {
         let flags = sr1 & SR1_ERRORS;
         if flags == 0 {
@@ -599,7 +638,7 @@ impl Engine {
         } else {
             match self.phase {
                 Phase::Address { .. } => Failure::NackAddress,
-                Phase::Transmit { .. } | Phase::TransmitEnd => Failure::NackData,
+                Phase::Transmit | Phase::TransmitEnd => Failure::NackData,
                 // A missing acknowledge while the block receives or starts is not a step of
                 // the sequence.
                 _ => Failure::UnexpectedEvent,

@@ -763,6 +763,39 @@ fn an_event_the_sequence_has_no_step_for_resets_the_block() {
 }
 
 #[test]
+fn an_operation_is_taken_from_the_script_at_its_sb_and_a_script_without_it_is_left_stray() {
+    // The engine reads an operation's address and counts at its SB, not at the end of the
+    // operation before: a two-operation script addresses each device with its own direction.
+    let mut model = Model::new(vec![Device::new(0x13), Device::new(0x77)]);
+    let mut script = Script::new();
+    script.write(0x77, &[0x05]).unwrap();
+    script.write_read(0x13, &[0x87], 2).unwrap();
+    let result = run(&mut model, &script, 0).unwrap();
+    assert_eq!(result.unwrap().of(1).len(), 2);
+    check_wire(&model, &script);
+
+    // An SB with a script that lacks the running operation (the bus never passes one): nothing
+    // to address; the interrupts off, no reset, the script left to its client's timeout.
+    let mut model = Model::new(vec![Device::new(0x1E)]);
+    let script = register_read(0x1E, 3, 6);
+    let mut engine = Engine::new();
+    engine.start(&script, &mut model);
+    settle(&mut engine, &mut model);
+    model.advance();
+    let sr1 = model.read_sr1();
+    assert_ne!(sr1 & SR1_SB, 0);
+    let empty = Script::new();
+    let mut readings = Readings::for_script(&empty);
+    let accesses = model.access.len();
+    assert_eq!(
+        engine.on_event(sr1, &empty, &mut readings, &mut model),
+        Progress::Running
+    );
+    assert_eq!(model.access[accesses..], [Enable(Interrupts::Off)]);
+    assert!(engine.is_idle());
+}
+
+#[test]
 fn a_stretch_holds_the_script_and_a_stuck_bus_is_aborted_and_reset() {
     let device = Device::new(0x1E);
     let script = register_read(0x1E, 3, 6);

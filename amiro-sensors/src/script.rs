@@ -339,9 +339,10 @@ impl Readings {
     /// Stores the next byte read (the engine calls it in wire order); a byte past the capacity is
     /// dropped (the engine reads no more than the script asks for).
     pub fn push(&mut self, byte: u8) {
-        if let Some(slot) = self.bytes.get_mut(usize::from(self.stored)) {
+        let stored = self.stored;
+        if let Some(slot) = self.bytes.get_mut(usize::from(stored)) {
             *slot = byte;
-            self.stored += 1;
+            self.stored = stored + 1;
         }
     }
 
