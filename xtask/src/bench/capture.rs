@@ -128,7 +128,9 @@ impl Capture {
     /// The runs of each release of the topic whose row is `row` (`publisher[<topic>]`): per sample taken of it, the
     /// runs of the task that took it (the innermost run at its `SampleTaken` event) from the one running at the
     /// release's instant, or the first to start after it, to the one that took it (docs/analysis.md, "A suspending
-    /// release: the sum of its polls"). A run that ended one release and took the next is in both.
+    /// release: the sum of its polls"), but none before the run that took the task's previous sample (of any
+    /// topic): two topics of one task due together are taken one after the other, and the second's release owns
+    /// only the runs after the first was taken. A run that ended one release and took the next is in both.
     pub fn release_runs(&self, row: &str) -> Vec<Vec<&Run>> {
         let Some(topic) = row
             .strip_prefix("publisher[")
@@ -136,20 +138,32 @@ impl Capture {
         else {
             return Vec::new();
         };
+        let took = |s: &Sample| {
+            self.runs
+                .iter()
+                .filter(|r| r.start_ns <= s.taken_ns && s.taken_ns <= r.end_ns)
+                .min_by_key(|r| r.end_ns - r.start_ns)
+        };
         self.samples
             .iter()
             .filter(|s| s.topic.name() == topic)
             .filter_map(|s| {
-                let took = self
-                    .runs
+                let took_it = took(s)?;
+                // The task's sample taken last before this one, by the run that took it.
+                let after = self
+                    .samples
                     .iter()
-                    .filter(|r| r.start_ns <= s.taken_ns && s.taken_ns <= r.end_ns)
-                    .min_by_key(|r| r.end_ns - r.start_ns)?;
+                    .filter(|o| o.taken_ns < s.taken_ns)
+                    .filter_map(|o| took(o).filter(|r| r.task == took_it.task))
+                    .map(|r| r.start_ns)
+                    .max()
+                    .unwrap_or(0);
                 Some(
                     self.runs
                         .iter()
-                        .filter(|r| r.task == took.task)
-                        .filter(|r| r.end_ns >= s.release_ns && r.start_ns <= took.start_ns)
+                        .filter(|r| r.task == took_it.task)
+                        .filter(|r| r.end_ns >= s.release_ns && r.start_ns >= after)
+                        .filter(|r| r.start_ns <= took_it.start_ns)
                         .collect(),
                 )
             })
@@ -688,6 +702,55 @@ mod tests {
         // Another topic's row, or no publisher row: none.
         assert!(c.release_runs("publisher[gyroscope]").is_empty());
         assert!(c.release_runs("can_rx").is_empty());
+    }
+
+    #[test]
+    fn a_release_due_with_another_topics_of_its_task_owns_only_the_runs_after_that_ones_take() {
+        // 1 MHz clock. Task 4 publishes magnetometer-x and magnetometer-y, both due at 1 000: it takes x's release
+        // first (scripts: runs 1 002–1 010 and 1 100–1 110, x taken at 1 108), then y's (1 108 run's rest, then
+        // 1 200–1 215, y taken at 1 212). y's release owns the run that took x (it went on to start y) and its own,
+        // not x's first run; x's owns its two.
+        let start = |at, task| (at, Kind::TaskStart { task });
+        let end = |at, task| {
+            (
+                at,
+                Kind::TaskEnd {
+                    task,
+                    next_release_in_us: u32::MAX,
+                },
+            )
+        };
+        let taken = |topic, release_us| TraceKind::SampleTaken { topic, release_us };
+        let bytes = wire(&[
+            hello(1_000_000),
+            start(1_002, 4),
+            end(1_010, 4),
+            start(1_100, 4),
+            event(1_108, taken(amiro_can::Topic::MagnetometerX, 1_000)),
+            end(1_110, 4),
+            start(1_200, 4),
+            event(1_212, taken(amiro_can::Topic::MagnetometerY, 1_000)),
+            end(1_215, 4),
+        ]);
+        let c = read(&bytes, 1).unwrap();
+        let spans = |row| -> Vec<Vec<(u64, u64)>> {
+            c.release_runs(row)
+                .iter()
+                .map(|runs| {
+                    runs.iter()
+                        .map(|r| (r.start_ns / 1_000, r.end_ns / 1_000))
+                        .collect()
+                })
+                .collect()
+        };
+        assert_eq!(
+            spans("publisher[magnetometer-x]"),
+            [vec![(1_002, 1_010), (1_100, 1_110)]]
+        );
+        assert_eq!(
+            spans("publisher[magnetometer-y]"),
+            [vec![(1_100, 1_110), (1_200, 1_215)]]
+        );
     }
 
     #[test]
