@@ -109,22 +109,21 @@ pub struct Budgets {
     pub scripts: BTreeMap<String, Vec<bool>>,
 }
 
-/// The scripts one entry of a timing file states (`script`, or `scripts` in order): per script whether the job
-/// waits before it (`settle_us` above 0). `None` without either.
-fn scripts_of(entry: &serde_json::Value) -> Option<Vec<bool>> {
-    let settle = |s: &serde_json::Value| {
-        s.get("settle_us")
-            .and_then(|v| v.as_f64())
-            .is_some_and(|v| v > 0.0)
-    };
-    match (
-        entry.get("script"),
-        entry.get("scripts").and_then(|v| v.as_array()),
-    ) {
-        (Some(one), _) => Some(vec![settle(one)]),
-        (None, Some(list)) => Some(list.iter().map(settle).collect()),
-        (None, None) => None,
-    }
+/// The scripts one job of a timing file states, through the analysis's own reading
+/// ([`schedule_analysis::sensor_bus::job_scripts`]: both `script` and `scripts`, or an empty list, is refused
+/// as the analysis refuses it): per script whether the job waits before it (`settle_us` above 0), in the job's
+/// order. Empty without either.
+fn scripts_of(
+    script: Option<&schedule_analysis::sensor_bus::ScriptModel>,
+    scripts: Option<&[schedule_analysis::sensor_bus::ScriptModel]>,
+    field: &str,
+) -> Result<Vec<bool>> {
+    let list = schedule_analysis::sensor_bus::job_scripts(script, scripts, field)
+        .map_err(|(at, e)| anyhow::anyhow!("{at}: {e}"))?;
+    Ok(list
+        .into_iter()
+        .map(|(_, s)| s.settle_us.is_some_and(|v| v > 0.0))
+        .collect())
 }
 
 /// Reads the timing file of `build`'s board at its robot revision.
@@ -171,17 +170,31 @@ fn budgets_of(root: &Path, build: &Build) -> Result<Budgets> {
                 .collect()
         })
         .unwrap_or_default();
+    let typed: schedule_analysis::scenario::Timing =
+        serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
     let mut scripts = BTreeMap::new();
-    for field in ["tasks", "topics"] {
-        for (name, entry) in json
-            .get(field)
-            .and_then(|v| v.as_object())
-            .into_iter()
-            .flatten()
-        {
-            if let Some(list) = scripts_of(entry) {
-                scripts.insert(format!("{field}.{name}"), list);
-            }
+    let jobs = typed
+        .tasks
+        .iter()
+        .map(|(name, t)| {
+            (
+                format!("tasks.{name}"),
+                t.script.as_ref(),
+                t.scripts.as_deref(),
+            )
+        })
+        .chain(typed.topics.iter().map(|(name, t)| {
+            (
+                format!("topics.{name}"),
+                t.script.as_ref(),
+                t.scripts.as_deref(),
+            )
+        }));
+    for (field, script, list) in jobs {
+        let settles =
+            scripts_of(script, list, &field).with_context(|| format!("{}", path.display()))?;
+        if !settles.is_empty() {
+            scripts.insert(field, settles);
         }
     }
     Ok(Budgets {
@@ -1224,6 +1237,33 @@ mod app {
     }
 
     /// A publisher that is no async task cannot have its polls found: its suspending topic is declined.
+    #[test]
+    fn a_jobs_scripts_are_read_as_the_analysis_reads_them() {
+        let script = |settle: Option<f64>| schedule_analysis::sensor_bus::ScriptModel {
+            settle_us: settle,
+            settle_source: settle.map(|_| "bq27500 bus-free time".into()),
+            ..serde_json::from_value(serde_json::json!({
+                "bus": "i2c1", "bytes": 5, "source": "Script::wire",
+                "stretch_us": 0.0, "stretch_source": "none"
+            }))
+            .unwrap()
+        };
+        let two = [script(None), script(Some(66.0))];
+        assert_eq!(
+            scripts_of(None, Some(&two), "topics.power-status").unwrap(),
+            [false, true]
+        );
+        assert_eq!(
+            scripts_of(Some(&two[1]), None, "tasks.power_monitor").unwrap(),
+            [true]
+        );
+        assert!(scripts_of(None, None, "tasks.watchdog").unwrap().is_empty());
+        // Both, or an empty list: refused as the analysis refuses them (a raw reading took `script`).
+        let both = scripts_of(Some(&two[0]), Some(&two), "topics.floor").unwrap_err();
+        assert!(both.to_string().starts_with("topics.floor"), "{both}");
+        assert!(scripts_of(None, Some(&[]), "topics.floor").is_err());
+    }
+
     #[test]
     fn a_suspending_topic_whose_publisher_is_a_handler_is_declined() {
         let app = parse_app(APP).unwrap();
