@@ -48,7 +48,8 @@ pub const RX_QUEUE_LEN: usize = 16;
 pub const TX_QUEUE_LEN: usize = 16;
 /// The power monitor's period: VSYS → chargers every period.
 pub const POWER_MONITOR_PERIOD_US: u64 = 100_000;
-/// The power monitor reads both fuel gauges every this many periods (500 ms).
+/// The power monitor reads both fuel gauges every this many periods (500 ms), the only reads of
+/// the gauges (the power-status sample takes the latest round; docs/boards.md, "PowerManagement").
 pub const BATTERY_CHECK_EVERY: u32 = 5;
 /// Watchdog check period; the IWDG resets the board if it is not fed for `WATCHDOG_TIMEOUT_MS`.
 pub const WATCHDOG_PERIOD_US: u64 = 100_000;
@@ -155,6 +156,9 @@ mod app {
         charger: platform::Charger,
         /// SYS_SYNC_N and SYS_PD_N.
         signals: platform::SystemSignals,
+        /// The power monitor's latest round of both fuel gauges, which the power-status sample
+        /// takes (the gauges are read by the power monitor alone).
+        batteries: power::LatestRound,
         /// The power monitor's progress mark for the watchdog.
         alive: Liveness,
         /// The CAN controller's error state (status interrupt, and polled by the watchdog task).
@@ -232,6 +236,7 @@ mod app {
                 front_bus,
                 charger: hw.charger,
                 signals,
+                batteries: power::LatestRound::new(),
                 alive: Liveness::new(),
                 can_errors: hw.can_errors,
             },
@@ -351,7 +356,7 @@ mod app {
     }
 
     /// Publisher for topics at CAN priority urgent.
-    #[task(priority = 4, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_urgent])]
+    #[task(priority = 4, shared = [handler, tx_queue, rear_bus, front_bus, charger, batteries], local = [wake_urgent])]
     async fn publish_urgent(cx: publish_urgent::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_URGENT);
         let s = cx.shared;
@@ -361,11 +366,11 @@ mod app {
             cx.local.wake_urgent,
             s.handler,
             s.tx_queue,
-            sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            sensors::sampler(s.rear_bus, s.front_bus, s.charger, s.batteries),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
-        // The ring's and the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        // The ring's reads suspend this task on its slots of I2C1 and I2C2.
         #[cfg(feature = "scripted-i2c")]
         let (rear_port, front_port) = platform::ports::<0>();
         #[cfg(feature = "scripted-i2c")]
@@ -378,6 +383,7 @@ mod app {
                 rear: s.rear_bus,
                 front: s.front_bus,
                 charger: s.charger,
+                batteries: s.batteries,
                 rear_port,
                 front_port,
             },
@@ -387,7 +393,7 @@ mod app {
     }
 
     /// Publisher for topics at CAN priority high.
-    #[task(priority = 3, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_high])]
+    #[task(priority = 3, shared = [handler, tx_queue, rear_bus, front_bus, charger, batteries], local = [wake_high])]
     async fn publish_high(cx: publish_high::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_HIGH);
         let s = cx.shared;
@@ -397,11 +403,11 @@ mod app {
             cx.local.wake_high,
             s.handler,
             s.tx_queue,
-            sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            sensors::sampler(s.rear_bus, s.front_bus, s.charger, s.batteries),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
-        // The ring's and the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        // The ring's reads suspend this task on its slots of I2C1 and I2C2.
         #[cfg(feature = "scripted-i2c")]
         let (rear_port, front_port) = platform::ports::<1>();
         #[cfg(feature = "scripted-i2c")]
@@ -414,6 +420,7 @@ mod app {
                 rear: s.rear_bus,
                 front: s.front_bus,
                 charger: s.charger,
+                batteries: s.batteries,
                 rear_port,
                 front_port,
             },
@@ -423,7 +430,7 @@ mod app {
     }
 
     /// Publisher for topics at CAN priority medium.
-    #[task(priority = 2, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_medium])]
+    #[task(priority = 2, shared = [handler, tx_queue, rear_bus, front_bus, charger, batteries], local = [wake_medium])]
     async fn publish_medium(cx: publish_medium::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_MEDIUM);
         let s = cx.shared;
@@ -433,11 +440,11 @@ mod app {
             cx.local.wake_medium,
             s.handler,
             s.tx_queue,
-            sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            sensors::sampler(s.rear_bus, s.front_bus, s.charger, s.batteries),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
-        // The ring's and the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        // The ring's reads suspend this task on its slots of I2C1 and I2C2.
         #[cfg(feature = "scripted-i2c")]
         let (rear_port, front_port) = platform::ports::<2>();
         #[cfg(feature = "scripted-i2c")]
@@ -450,6 +457,7 @@ mod app {
                 rear: s.rear_bus,
                 front: s.front_bus,
                 charger: s.charger,
+                batteries: s.batteries,
                 rear_port,
                 front_port,
             },
@@ -459,7 +467,7 @@ mod app {
     }
 
     /// Publisher for topics at CAN priority low.
-    #[task(priority = 1, shared = [handler, tx_queue, rear_bus, front_bus, charger], local = [wake_low])]
+    #[task(priority = 1, shared = [handler, tx_queue, rear_bus, front_bus, charger, batteries], local = [wake_low])]
     async fn publish_low(cx: publish_low::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::PUBLISH_LOW);
         let s = cx.shared;
@@ -469,11 +477,11 @@ mod app {
             cx.local.wake_low,
             s.handler,
             s.tx_queue,
-            sensors::sampler(s.rear_bus, s.front_bus, s.charger),
+            sensors::sampler(s.rear_bus, s.front_bus, s.charger, s.batteries),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
-        // The ring's and the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        // The ring's reads suspend this task on its slots of I2C1 and I2C2.
         #[cfg(feature = "scripted-i2c")]
         let (rear_port, front_port) = platform::ports::<3>();
         #[cfg(feature = "scripted-i2c")]
@@ -486,6 +494,7 @@ mod app {
                 rear: s.rear_bus,
                 front: s.front_bus,
                 charger: s.charger,
+                batteries: s.batteries,
                 rear_port,
                 front_port,
             },
@@ -495,9 +504,10 @@ mod app {
     }
 
     /// The power master's periodic duty: the chargers run only while VSYS allows it (every
-    /// period), and a critically low battery shuts the robot down (gauges read every
-    /// `BATTERY_CHECK_EVERY` periods). Marks the watchdog's progress.
-    #[task(priority = 1, shared = [rear_bus, front_bus, charger, alive])]
+    /// period); every `BATTERY_CHECK_EVERY` periods, from its first job on, both fuel gauges are
+    /// read (the only reads of the gauges: the round is kept for the power-status sample) and a
+    /// critically low battery shuts the robot down. Marks the watchdog's progress.
+    #[task(priority = 1, shared = [rear_bus, front_bus, charger, batteries, alive])]
     async fn power_monitor(mut cx: power_monitor::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::POWER_MONITOR);
         let mut next = Clock::now_us();
@@ -506,37 +516,44 @@ mod app {
         #[cfg(feature = "scripted-i2c")]
         let (mut rear_port, mut front_port) =
             platform::ports::<{ sensors::scripted::POWER_MONITOR_CLIENT }>();
+        // The first wait is for the time the task starts (it ends at once) and the round counter
+        // starts at a gauge round: the first round is read as the task starts, so a power-status
+        // sample taken after the boot has a round to report.
         loop {
-            next += crate::POWER_MONITOR_PERIOD_US;
             Clock::delay_until_us(next).await;
-            if signals::shutting_down() {
-                continue;
-            }
-            cx.shared.charger.lock(power::regulate_charging);
-            round = round.wrapping_add(1);
-            if round.is_multiple_of(crate::BATTERY_CHECK_EVERY) {
-                #[cfg(not(feature = "scripted-i2c"))]
-                let round =
-                    sensors::read_batteries(&mut cx.shared.rear_bus, &mut cx.shared.front_bus);
-                #[cfg(not(feature = "scripted-i2c"))]
-                let (front, rear) = round.batteries();
-                #[cfg(feature = "scripted-i2c")]
-                let (front, rear) = sensors::scripted::read_batteries(
-                    &mut cx.shared.rear_bus,
-                    &mut cx.shared.front_bus,
-                    &mut rear_port,
-                    &mut front_port,
-                )
-                .await;
-                #[cfg(feature = "scripted-i2c")]
-                let (front, rear) = (front.as_ref(), rear.as_ref());
-                let lines = cx.shared.charger.lock(|c| c.lines());
-                if power::critically_low(front, rear, &lines) {
-                    amiro_firmware::log!("battery critically low: shutting down");
-                    shutdown_sequence::spawn(Some(power::LOW_BATTERY_MODE)).ok();
+            next += crate::POWER_MONITOR_PERIOD_US;
+            if !signals::shutting_down() {
+                cx.shared.charger.lock(power::regulate_charging);
+                if round.is_multiple_of(crate::BATTERY_CHECK_EVERY) {
+                    #[cfg(not(feature = "scripted-i2c"))]
+                    sensors::read_batteries(
+                        &mut cx.shared.rear_bus,
+                        &mut cx.shared.front_bus,
+                        &mut cx.shared.batteries,
+                    );
+                    #[cfg(feature = "scripted-i2c")]
+                    {
+                        let (front, rear) = sensors::scripted::read_batteries(
+                            &mut cx.shared.rear_bus,
+                            &mut cx.shared.front_bus,
+                            &mut rear_port,
+                            &mut front_port,
+                        )
+                        .await;
+                        cx.shared.batteries.lock(|b| {
+                            b.record(false, front);
+                            b.record(true, rear);
+                        });
+                    }
+                    let lines = cx.shared.charger.lock(|c| c.lines());
+                    if cx.shared.batteries.lock(|b| b.critically_low(&lines)) {
+                        amiro_firmware::log!("battery critically low: shutting down");
+                        shutdown_sequence::spawn(Some(power::LOW_BATTERY_MODE)).ok();
+                    }
                 }
+                round = round.wrapping_add(1);
+                cx.shared.alive.lock(|a| a.mark());
             }
-            cx.shared.alive.lock(|a| a.mark());
         }
     }
 

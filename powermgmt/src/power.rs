@@ -1,5 +1,6 @@
 //! The power master's decisions, free of pins: when the chargers may run, what the power-status
-//! frame says about two batteries, and when the battery is too low to go on.
+//! frame says about two batteries (from the power monitor's latest gauge round), and when the
+//! battery is too low to go on.
 //!
 //! The board (`board.rs`, or `qemu.rs`) reads the lines and the gauges and applies the answers;
 //! docs/boards.md ("PowerManagement") explains each rule.
@@ -53,6 +54,50 @@ impl ChargeLines {
     /// The robot is charging: plug in, chargers enabled, and at least one charger says so.
     pub const fn charging(&self) -> bool {
         self.plug && self.enabled && (self.stat[0] || self.stat[1])
+    }
+}
+
+/// Both fuel gauges' statuses from the power monitor's latest round, the only place the gauges
+/// are read (docs/boards.md, "PowerManagement": the power-status sample's age): a gauge whose read
+/// failed in that round is `None` (its failure counted in the bus's diagnostics when it happened),
+/// and so is each gauge before the first round has ended. No time stamp: the schedule bounds the
+/// age (a round every `BATTERY_CHECK_EVERY` periods), and a power monitor that stops leaves the
+/// watchdog unfed, which resets the board.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LatestRound {
+    front: Option<BatteryStatus>,
+    rear: Option<BatteryStatus>,
+}
+
+impl LatestRound {
+    /// No round yet: the power-status sample has no frame until the first one ends.
+    pub const fn new() -> Self {
+        Self {
+            front: None,
+            rear: None,
+        }
+    }
+
+    /// One gauge's read (`rear`: the rear gauge's, else the front one's) replaces its last status,
+    /// a failed read's `None` included.
+    pub fn record(&mut self, rear: bool, status: Option<BatteryStatus>) {
+        if rear {
+            self.rear = status;
+        } else {
+            self.front = status;
+        }
+    }
+
+    /// [`critically_low`] with the latest statuses.
+    pub fn critically_low(&self, lines: &ChargeLines) -> bool {
+        critically_low(self.front.as_ref(), self.rear.as_ref(), lines)
+    }
+
+    /// The power-status frame ([`status`]) from the latest statuses and the charge lines read
+    /// now: `None` (no frame) when neither gauge answered in the latest round or no round has
+    /// ended yet.
+    pub fn status(&self, lines: &ChargeLines) -> Option<PowerStatus> {
+        status(self.front.as_ref(), self.rear.as_ref(), lines)
     }
 }
 

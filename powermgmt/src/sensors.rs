@@ -242,38 +242,35 @@ pub type FrontBus = SensorBus<FrontI2c, GaugeDelay>;
 
 /// Both gauges read one transfer a call, front then rear, each transfer under its own lock of its
 /// bus: a publisher waiting for either bus waits for one transfer to a gauge, not a whole read.
+/// Each gauge's status goes to the power monitor's [`power::LatestRound`] as its read ends.
 #[derive(Debug, Default)]
 pub struct BatteryRound {
     read: StatusRead,
     /// The rear gauge's read is under way (the front one's has ended).
     at_rear: bool,
-    /// The front gauge's last status (`None`: its last read failed).
-    front: Option<BatteryStatus>,
-    /// The rear gauge's last status.
-    rear: Option<BatteryStatus>,
 }
 
 impl BatteryRound {
     /// The most transfers a round makes: both gauges' reads at their longest.
     pub const MAX_TRANSFERS: usize = 2 * StatusRead::MAX_TRANSFERS;
 
-    /// A round not begun, with no status yet.
+    /// A round not begun.
     pub const fn new() -> Self {
         Self {
             read: StatusRead::new(),
             at_rear: false,
-            front: None,
-            rear: None,
         }
     }
 
-    /// Makes the round's next transfer, under its bus's lock; whether the round has ended (the
-    /// rear gauge's read with it: [`BatteryRound::batteries`] are both this round's, and the next
-    /// call begins a new round). A round takes at most [`BatteryRound::MAX_TRANSFERS`] calls.
+    /// Makes the round's next transfer, under its bus's lock; a gauge's read that ends puts its
+    /// status (`None`: the gauge did not answer, counted) into `latest`.
+    /// Whether the round has ended (the rear gauge's read with it; the next call begins a new
+    /// round). A round takes at most [`BatteryRound::MAX_TRANSFERS`] calls.
     pub fn step(
         &mut self,
         rear: &mut impl rtic::Mutex<T = RearBus>,
         front: &mut impl rtic::Mutex<T = FrontBus>,
+        latest: &mut impl rtic::Mutex<T = power::LatestRound>,
     ) -> bool {
         let read = &mut self.read;
         let ended = if self.at_rear {
@@ -285,43 +282,37 @@ impl BatteryRound {
             return false;
         };
         self.read.restart();
-        if self.at_rear {
-            self.rear = status;
-        } else {
-            self.front = status;
-        }
-        self.at_rear = !self.at_rear;
-        !self.at_rear
-    }
-
-    /// The last statuses read, front and rear (`None` for a gauge that did not answer, counted).
-    pub fn batteries(&self) -> (Option<&BatteryStatus>, Option<&BatteryStatus>) {
-        (self.front.as_ref(), self.rear.as_ref())
+        let at_rear = self.at_rear;
+        latest.lock(|l| l.record(at_rear, status));
+        self.at_rear = !at_rear;
+        at_rear
     }
 }
 
 /// Both batteries' gauges, front then rear, each transfer under its own lock of its bus: a
-/// [`BatteryRound`] made at once (its [`BatteryRound::batteries`] are this round's).
+/// [`BatteryRound`] made at once, its statuses in `latest`. The power monitor's, the only reader
+/// of the gauges.
 pub fn read_batteries(
     rear: &mut impl rtic::Mutex<T = RearBus>,
     front: &mut impl rtic::Mutex<T = FrontBus>,
-) -> BatteryRound {
+    latest: &mut impl rtic::Mutex<T = power::LatestRound>,
+) {
     let mut round = BatteryRound::new();
     for _ in 0..BatteryRound::MAX_TRANSFERS {
-        if round.step(rear, front) {
+        if round.step(rear, front, latest) {
             break;
         }
     }
-    round
 }
 
-/// What PowerManagement samples for a topic: the ring locks each bus in turn, power status both
-/// gauges and the charge lines. Every other topic (the diagnostics topic is the runtime's) has no
-/// samples here.
+/// What PowerManagement samples for a topic: the ring locks each bus in turn; power status takes
+/// the power monitor's latest gauge round and reads the charge lines, no I2C (`power_status`).
+/// Every other topic (the diagnostics topic is the runtime's) has no samples here.
 pub fn sampler(
     mut rear: impl rtic::Mutex<T = RearBus>,
     mut front: impl rtic::Mutex<T = FrontBus>,
     mut charger: impl rtic::Mutex<T = Charger>,
+    mut batteries: impl rtic::Mutex<T = power::LatestRound>,
 ) -> impl amiro_firmware::publisher::Sampler {
     move |topic: Topic, taken: u64| {
         let mut samples = Samples::new();
@@ -337,10 +328,7 @@ pub fn sampler(
                 }
             }
             Topic::PowerStatus => {
-                let round = read_batteries(&mut rear, &mut front);
-                let (f, r) = round.batteries();
-                let lines = charger.lock(|c| c.lines());
-                if let Some(status) = power::status(f, r, &lines) {
+                if let Some(status) = power_status(&mut batteries, &mut charger) {
                     let _ = samples.push(SensorData::PowerStatus(status));
                 }
             }
@@ -350,23 +338,35 @@ pub fn sampler(
     }
 }
 
+/// The power-status sample: the power monitor's latest gauge round and the charge lines read now
+/// ([`power::LatestRound::status`]); `None` (no frame) when neither gauge has a status.
+pub fn power_status(
+    batteries: &mut impl rtic::Mutex<T = power::LatestRound>,
+    charger: &mut impl rtic::Mutex<T = Charger>,
+) -> Option<amiro_can::PowerStatus> {
+    let lines = charger.lock(|c| c.lines());
+    batteries.lock(|latest| latest.status(&lines))
+}
+
 /// With `scripted-i2c`: the buses sampled by script (docs/i2c.md), the publishers and the power
 /// monitor suspended while their scripts run.
 #[cfg(feature = "scripted-i2c")]
 pub mod scripted;
 
 /// What PowerManagement samples for a topic with `scripted-i2c`, a publisher task's own: the ring
-/// reads the rear bus, then the front (each a job of scripts on the task's slot of that bus), power
-/// status both gauges (front, then rear) and the charge lines. Every other topic has no samples
-/// here.
+/// reads the rear bus, then the front (each a job of scripts on the task's slot of that bus);
+/// power status takes the power monitor's latest gauge round and the charge lines, no script
+/// ([`power_status`]). Every other topic has no samples here.
 #[cfg(feature = "scripted-i2c")]
-pub struct ScriptedSampler<R, F, C, PR, PF> {
+pub struct ScriptedSampler<R, F, C, B, PR, PF> {
     /// I2C1's ring sensors and gauge.
     pub rear: R,
     /// I2C2's ring sensors and gauge.
     pub front: F,
     /// The charge lines.
     pub charger: C,
+    /// The power monitor's latest gauge round.
+    pub batteries: B,
     /// The task's slot on I2C1.
     pub rear_port: PR,
     /// The task's slot on I2C2.
@@ -374,12 +374,13 @@ pub struct ScriptedSampler<R, F, C, PR, PF> {
 }
 
 #[cfg(feature = "scripted-i2c")]
-impl<R, F, C, PR, PF> amiro_firmware::publisher::SuspendingSampler
-    for ScriptedSampler<R, F, C, PR, PF>
+impl<R, F, C, B, PR, PF> amiro_firmware::publisher::SuspendingSampler
+    for ScriptedSampler<R, F, C, B, PR, PF>
 where
     R: rtic::Mutex<T = scripted::ScriptedBus>,
     F: rtic::Mutex<T = scripted::ScriptedBus>,
     C: rtic::Mutex<T = Charger>,
+    B: rtic::Mutex<T = power::LatestRound>,
     PR: amiro_firmware::scripted::ScriptPort,
     PF: amiro_firmware::scripted::ScriptPort,
 {
@@ -398,15 +399,7 @@ where
                 }
             }
             Topic::PowerStatus => {
-                let (f, r) = scripted::read_batteries(
-                    &mut self.rear,
-                    &mut self.front,
-                    &mut self.rear_port,
-                    &mut self.front_port,
-                )
-                .await;
-                let lines = self.charger.lock(|c| c.lines());
-                if let Some(status) = power::status(f.as_ref(), r.as_ref(), &lines) {
+                if let Some(status) = power_status(&mut self.batteries, &mut self.charger) {
                     let _ = samples.push(SensorData::PowerStatus(status));
                 }
             }
