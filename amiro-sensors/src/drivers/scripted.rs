@@ -1325,7 +1325,7 @@ impl<D> ImuSensors<Scripts, D> {
                 let field = self.keep_field(raw, now_us)?;
                 Ok(self.deliver_field(axis, field))
             }
-            block => imu_frame(block, raw?).ok_or(SampleError::NotServed(Topic::Gyroscope)),
+            ImuRead::Block(block) => Ok(imu_frame(block, raw?)),
         }
     }
 }

@@ -546,20 +546,27 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
 /// What a sample of one of [`ImuSensors`]' topics reads: one sensor's register block.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum ImuRead {
+    /// The gyroscope's or the accelerometer's block: one frame of its own.
+    Block(ImuBlock),
+    /// The magnetometer's block, for one axis (a reading serves the three).
+    Field(Axis),
+}
+
+/// A block whose read is one frame: the gyroscope's or the accelerometer's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ImuBlock {
     /// The gyroscope's block.
     Gyroscope,
     /// The accelerometer's block.
     Accelerometer,
-    /// The magnetometer's block, for one axis (a reading serves the three).
-    Field(Axis),
 }
 
 impl ImuRead {
     /// The read of `topic`.
     pub(crate) fn of(topic: Topic) -> Result<Self, SampleError> {
         match topic {
-            Topic::Gyroscope => Ok(ImuRead::Gyroscope),
-            Topic::Accelerometer => Ok(ImuRead::Accelerometer),
+            Topic::Gyroscope => Ok(ImuRead::Block(ImuBlock::Gyroscope)),
+            Topic::Accelerometer => Ok(ImuRead::Block(ImuBlock::Accelerometer)),
             other => magnetometer_axis(other).map(ImuRead::Field),
         }
     }
@@ -567,20 +574,19 @@ impl ImuRead {
     /// The block's first register.
     pub(crate) const fn first_register(self) -> u8 {
         match self {
-            ImuRead::Gyroscope => bno055::reg::GYR_DATA_X_LSB,
-            ImuRead::Accelerometer => bno055::reg::ACC_DATA_X_LSB,
+            ImuRead::Block(ImuBlock::Gyroscope) => bno055::reg::GYR_DATA_X_LSB,
+            ImuRead::Block(ImuBlock::Accelerometer) => bno055::reg::ACC_DATA_X_LSB,
             ImuRead::Field(_) => bno055::reg::MAG_DATA_X_LSB,
         }
     }
 }
 
-/// The frame of a gyroscope or accelerometer block's digits (`None` for the magnetometer's,
-/// whose reading is kept: [`ImuSensors`]).
-pub(crate) fn imu_frame(read: ImuRead, raw: [i16; 3]) -> Option<Samples> {
-    match read {
-        ImuRead::Gyroscope => Some(one(SensorData::Gyroscope(bno055::degrees_per_s(raw)))),
-        ImuRead::Accelerometer => Some(one(SensorData::Accelerometer(raw))),
-        ImuRead::Field(_) => None,
+/// The frame of a gyroscope or accelerometer block's digits (the magnetometer's reading is kept
+/// instead: [`ImuSensors`]).
+pub(crate) fn imu_frame(block: ImuBlock, raw: [i16; 3]) -> Samples {
+    match block {
+        ImuBlock::Gyroscope => one(SensorData::Gyroscope(bno055::degrees_per_s(raw))),
+        ImuBlock::Accelerometer => one(SensorData::Accelerometer(raw)),
     }
 }
 
@@ -696,18 +702,19 @@ impl<I2C: I2c, D: DelayNs> SensorGroup for ImuSensors<I2C, D> {
 
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
         let read = ImuRead::of(topic)?;
-        if let ImuRead::Field(axis) = read {
-            let field = match self.reusable_field(axis, now_us) {
-                Some(field) => field,
-                None => {
-                    let raw = self.read(read.first_register());
-                    self.keep_field(raw, now_us)?
-                }
-            };
-            return Ok(self.deliver_field(axis, field));
+        match read {
+            ImuRead::Field(axis) => {
+                let field = match self.reusable_field(axis, now_us) {
+                    Some(field) => field,
+                    None => {
+                        let raw = self.read(read.first_register());
+                        self.keep_field(raw, now_us)?
+                    }
+                };
+                Ok(self.deliver_field(axis, field))
+            }
+            ImuRead::Block(block) => Ok(imu_frame(block, self.read(read.first_register())?)),
         }
-        let raw = self.read(read.first_register())?;
-        imu_frame(read, raw).ok_or(SampleError::NotServed(topic))
     }
 }
 
