@@ -673,13 +673,8 @@ impl FloorSensors<Scripts> {
         pca9544a::select_op(script, self.mux_address(), sensor.channel())
     }
 
-    fn set_up_of(&self, sensor: u8) -> Option<SensorSetUp> {
-        let part = FloorSensor::ALL.get(usize::from(sensor))?;
-        Some(SensorSetUp::new(
-            self.mux_address(),
-            part.channel(),
-            *self.config(),
-        ))
+    fn set_up_of(&self, part: FloorSensor) -> SensorSetUp {
+        SensorSetUp::new(self.mux_address(), part.channel(), *self.config())
     }
 
     /// The round's script: each sensor's proximity behind its select.
@@ -707,7 +702,7 @@ impl FloorSensors<Scripts> {
     }
 
     fn step_failed(&mut self, sensor: u8, error: Error<ErrorKind>) -> InitStep {
-        self.set_next_to_set_up(0);
+        self.end_set_up_step(sensor, false);
         InitStep::Failed(floor_error(GroupError { sensor, error }))
     }
 }
@@ -732,12 +727,10 @@ impl ScriptedSensors for FloorSensors<Scripts> {
     }
 
     fn begin_set_up_step(&mut self, stage: &mut FloorStage, now_us: u64) -> Next<InitStep> {
-        let sensor = self.next_to_set_up();
-        let Some(set_up) = self.set_up_of(sensor) else {
-            // Out of range only if the field were corrupted: start again.
-            self.set_next_to_set_up(0);
+        let Some((sensor, part)) = self.sensor_to_set_up() else {
             return Next::Done(InitStep::Pending { next_us: now_us });
         };
+        let set_up = self.set_up_of(part);
         match set_up.script() {
             Ok(script) => {
                 *stage = FloorStage::SetUp { sensor, set_up };
@@ -771,14 +764,8 @@ impl ScriptedSensors for FloorSensors<Scripts> {
                 }
                 Err(error) => Next::Done(self.step_failed(sensor, error)),
             },
-            Some(Ok(())) if usize::from(sensor) + 1 >= FLOOR_SENSORS => {
-                self.set_next_to_set_up(0);
-                Next::Done(InitStep::Done)
-            }
-            Some(Ok(())) => {
-                self.set_next_to_set_up(sensor + 1);
-                Next::Done(InitStep::Pending { next_us: now_us })
-            }
+            Some(Ok(())) if self.end_set_up_step(sensor, true) => Next::Done(InitStep::Done),
+            Some(Ok(())) => Next::Done(InitStep::Pending { next_us: now_us }),
         }
     }
 
@@ -1158,12 +1145,6 @@ pub enum ImuStage {
     Sample,
 }
 
-/// The BNO055's set-up step that failed: `Idle` again.
-fn imu_step_failed<D>(imu: &mut ImuSensors<Scripts, D>, error: Error<ErrorKind>) -> InitStep {
-    imu.set_up_at(ImuReinit::Idle);
-    InitStep::Failed(i2c_error(Device::Imu)(error))
-}
-
 impl<D> ImuSensors<Scripts, D> {
     /// The BNO055, its transfers made as scripts (`delay` is not used: the mode switches' waits
     /// are the jobs', between scripts, and the supervisor's, between set-up steps).
@@ -1185,7 +1166,7 @@ impl<D> ImuSensors<Scripts, D> {
                     settle_us: 0,
                 }
             }
-            Err(error) => Next::Done(imu_step_failed(self, error)),
+            Err(error) => Next::Done(self.set_up_step_failed(error)),
         }
     }
 }
@@ -1237,31 +1218,21 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
             ImuStage::Begun | ImuStage::Sample => Err(Error::Bus(ErrorKind::Other)),
         });
         if let Err(error) = checked {
-            return Next::Done(imu_step_failed(self, error));
+            return Next::Done(self.set_up_step_failed(error));
         }
-        let pending = |state, wait_ms: u32| {
-            (
-                state,
-                InitStep::Pending {
-                    next_us: now_us.saturating_add(u64::from(wait_ms) * 1_000),
-                },
-            )
-        };
-        let (state, step) = match *stage {
+        // The step whose last script this was (the others go on with their next script).
+        let passed = match *stage {
             ImuStage::Checks => {
                 return self.next_script(stage, ImuStage::EnterConfig, bno055::ops::enter_config)
             }
             ImuStage::Configure => {
                 return self.next_script(stage, ImuStage::StartAmg, bno055::ops::start_amg)
             }
-            ImuStage::EnterConfig => {
-                pending(ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)
-            }
-            ImuStage::StartAmg => pending(ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS),
-            _ => (ImuReinit::Idle, InitStep::Done),
+            ImuStage::EnterConfig => ImuReinit::Idle,
+            ImuStage::StartAmg => ImuReinit::EnteringConfig,
+            _ => ImuReinit::EnteringAmg,
         };
-        self.set_up_at(state);
-        Next::Done(step)
+        Next::Done(self.set_up_step_passed(passed, now_us))
     }
 
     fn begin_sample(

@@ -514,6 +514,20 @@ pub(crate) enum ImuReinit {
     EnteringAmg,
 }
 
+impl ImuReinit {
+    /// The state after this state's step passed and the part's mode-switch time to wait before
+    /// it (ms), or `None` once the set-up is done.
+    const fn after_step(self) -> Option<(ImuReinit, u32)> {
+        match self {
+            ImuReinit::Idle => Some((ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)),
+            ImuReinit::EnteringConfig => {
+                Some((ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS))
+            }
+            ImuReinit::EnteringAmg => None,
+        }
+    }
+}
+
 impl<I2C, D> ImuSensors<I2C, D> {
     /// The BNO055 on `i2c`. Does no I/O.
     pub const fn new(i2c: I2C, delay: D) -> Self {
@@ -642,9 +656,27 @@ impl<I2C, D> ImuSensors<I2C, D> {
         self.reinit
     }
 
-    /// The next step of the set-up (`Idle` after the last, or after a failure).
-    pub(crate) fn set_up_at(&mut self, reinit: ImuReinit) {
-        self.reinit = reinit;
+    /// The step begun at `passed` passed: the next one pending after the part's mode switch, or
+    /// the set-up done (both paths' stepwise set-up).
+    pub(crate) fn set_up_step_passed(&mut self, passed: ImuReinit, now_us: u64) -> InitStep {
+        match passed.after_step() {
+            Some((state, wait_ms)) => {
+                self.reinit = state;
+                InitStep::Pending {
+                    next_us: now_us.saturating_add(u64::from(wait_ms) * 1_000),
+                }
+            }
+            None => {
+                self.reinit = ImuReinit::Idle;
+                InitStep::Done
+            }
+        }
+    }
+
+    /// A set-up step failed: the next set-up starts at `Idle` (both paths).
+    pub(crate) fn set_up_step_failed<E: i2c::Error>(&mut self, error: Error<E>) -> InitStep {
+        self.reinit = ImuReinit::Idle;
+        InitStep::Failed(i2c_error(Device::Imu)(error))
     }
 
     /// A whole set-up begins (boot).
@@ -671,32 +703,15 @@ impl<I2C: I2c, D: DelayNs> SensorGroup for ImuSensors<I2C, D> {
     /// part's two mode switches (19 ms and 7 ms) waited between calls, outside the bus lock.
     fn init_step(&mut self, now_us: u64) -> InitStep {
         self.last_field = None;
-        let (result, next) = match self.reinit {
-            ImuReinit::Idle => (
-                self.imu.init_enter_config(),
-                Some((ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)),
-            ),
-            ImuReinit::EnteringConfig => (
-                self.imu.init_configure(),
-                Some((ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS)),
-            ),
-            ImuReinit::EnteringAmg => (self.imu.init_check_running(), None),
+        let step = self.reinit;
+        let result = match step {
+            ImuReinit::Idle => self.imu.init_enter_config(),
+            ImuReinit::EnteringConfig => self.imu.init_configure(),
+            ImuReinit::EnteringAmg => self.imu.init_check_running(),
         };
-        match (result, next) {
-            (Err(error), _) => {
-                self.reinit = ImuReinit::Idle;
-                InitStep::Failed(i2c_error(Device::Imu)(error))
-            }
-            (Ok(()), Some((state, wait_ms))) => {
-                self.reinit = state;
-                InitStep::Pending {
-                    next_us: now_us.saturating_add(u64::from(wait_ms) * 1_000),
-                }
-            }
-            (Ok(()), None) => {
-                self.reinit = ImuReinit::Idle;
-                InitStep::Done
-            }
+        match result {
+            Ok(()) => self.set_up_step_passed(step, now_us),
+            Err(error) => self.set_up_step_failed(error),
         }
     }
 
