@@ -33,7 +33,7 @@ use super::suite::{
     ImuReinit, ImuSensors, InitStep, SampleError, Samples, Supervised, DIWHEELDRIVE_TOPICS,
 };
 use super::{bno055, bq27500, is_bus_pattern, vcnl4020, Error};
-use crate::script::{BuildError, Failure, Readings, Script, ScriptError, MAX_READ_BYTES};
+use crate::script::{At, BuildError, Failure, Readings, Script, ScriptError, MAX_READ_BYTES};
 
 /// What a script came back with.
 pub type ScriptResult = Result<Readings, ScriptError>;
@@ -387,9 +387,21 @@ pub fn sample_on<G: ScriptedSensors>(
 fn build(
     ops: impl FnOnce(&mut Script) -> Result<(), BuildError>,
 ) -> Result<Script, Error<ErrorKind>> {
+    build_with(ops).map(|(script, ())| script)
+}
+
+/// [`build`] for a sequence that answers where its reads land ([`At`]).
+fn build_with<R>(
+    ops: impl FnOnce(&mut Script) -> Result<R, BuildError>,
+) -> Result<(Script, R), Error<ErrorKind>> {
     let mut script = Script::new();
-    ops(&mut script).map_err(|_| Error::Bus(ErrorKind::Other))?;
-    Ok(script)
+    let reads = ops(&mut script).map_err(|_| Error::Bus(ErrorKind::Other))?;
+    Ok((script, reads))
+}
+
+/// The bytes of the read at `at` (a short one is a bus fault).
+fn bytes<const N: usize>(readings: &Readings, at: At<N>) -> Result<[u8; N], Error<ErrorKind>> {
+    at.of(readings).ok_or(Error::Bus(ErrorKind::Other))
 }
 
 /// The bytes operation `op` read, as a register block of `N` (a short one is a bus fault).
@@ -438,7 +450,10 @@ pub enum CompassStage {
     /// The set-up's identity read is out.
     SetUpIdentity,
     /// The set-up's writes and their read-back are out.
-    SetUpWrites,
+    SetUpWrites {
+        /// Where the read-back lands.
+        readback: At<3>,
+    },
     /// The sample's data read is out, after the identity read when `checked`.
     Data {
         /// The periodic identity check is the script's first operation.
@@ -508,21 +523,24 @@ impl ScriptedSensors for Compass<Scripts> {
         let gain = self.magnetometer().gain();
         let checked = readings(result).and_then(|r| match *stage {
             CompassStage::SetUpIdentity => block(r, 0).and_then(hmc5883l::identity),
-            _ => block(r, 3).and_then(|readback| {
+            CompassStage::SetUpWrites { readback } => bytes(r, readback).and_then(|readback| {
                 hmc5883l::check_set_up(hmc5883l::set_up_values(gain), readback)
             }),
+            _ => Err(Error::Bus(ErrorKind::Other)),
         });
         match (checked, *stage) {
             (Err(error), _) => Next::Done(compass_step_failed(error)),
             (Ok(()), CompassStage::SetUpIdentity) => {
-                let script = build(|s| hmc5883l::ops::set_up(s, gain));
-                run_or(
-                    stage,
-                    CompassStage::SetUpWrites,
-                    script,
-                    0,
-                    compass_step_failed,
-                )
+                match build_with(|s| hmc5883l::ops::set_up(s, gain)) {
+                    Ok((script, readback)) => {
+                        *stage = CompassStage::SetUpWrites { readback };
+                        Next::Run {
+                            script,
+                            settle_us: 0,
+                        }
+                    }
+                    Err(error) => Next::Done(compass_step_failed(error)),
+                }
             }
             (Ok(()), _) => Next::Done(InitStep::Done),
         }
@@ -900,7 +918,7 @@ impl SensorSetUp {
             match usize::from(self.register).checked_sub(1) {
                 None => vcnl4020::ops::identity(s),
                 Some(k) => match writes.get(k) {
-                    Some(&write) => vcnl4020::ops::set_up_write(s, write),
+                    Some(&write) => vcnl4020::ops::set_up_write(s, write).map(|_| ()),
                     None => Err(BuildError::EmptyOperation),
                 },
             }
@@ -1132,11 +1150,21 @@ pub enum ImuStage {
     #[default]
     Begun,
     /// Set-up step 1: the identities and the self-test are out.
-    Checks,
+    Checks {
+        /// Where the four identity bytes land.
+        identity: At<4>,
+        /// Where ST_RESULT lands.
+        self_test: At<1>,
+    },
     /// Set-up step 1: page 0 and configuration mode are out.
     EnterConfig,
     /// Set-up step 2: the configuration and its read-backs are out.
-    Configure,
+    Configure {
+        /// Where the page-1 configuration's read-back lands.
+        readback: At<4>,
+        /// Where UNIT_SEL's read-back lands.
+        units: At<1>,
+    },
     /// Set-up step 2: AMG mode is out.
     StartAmg,
     /// Set-up step 3: OPR_MODE is out.
@@ -1152,15 +1180,15 @@ impl<D> ImuSensors<Scripts, D> {
         Self::new(Scripts, delay)
     }
 
-    fn next_script(
+    fn next_script<R>(
         &mut self,
         stage: &mut ImuStage,
-        at: ImuStage,
-        ops: impl FnOnce(&mut Script) -> Result<(), BuildError>,
+        at: impl FnOnce(R) -> ImuStage,
+        ops: impl FnOnce(&mut Script) -> Result<R, BuildError>,
     ) -> Next<InitStep> {
-        match build(ops) {
-            Ok(script) => {
-                *stage = at;
+        match build_with(ops) {
+            Ok((script, reads)) => {
+                *stage = at(reads);
                 Next::Run {
                     script,
                     settle_us: 0,
@@ -1188,12 +1216,21 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
 
     fn begin_set_up_step(&mut self, stage: &mut ImuStage, _now_us: u64) -> Next<InitStep> {
         match self.begin_set_up_step() {
-            ImuReinit::Idle => self.next_script(stage, ImuStage::Checks, bno055::ops::checks),
-            ImuReinit::EnteringConfig => {
-                self.next_script(stage, ImuStage::Configure, bno055::ops::configure)
-            }
+            ImuReinit::Idle => self.next_script(
+                stage,
+                |(identity, self_test)| ImuStage::Checks {
+                    identity,
+                    self_test,
+                },
+                bno055::ops::checks,
+            ),
+            ImuReinit::EnteringConfig => self.next_script(
+                stage,
+                |(readback, units)| ImuStage::Configure { readback, units },
+                bno055::ops::configure,
+            ),
             ImuReinit::EnteringAmg => {
-                self.next_script(stage, ImuStage::CheckAmg, bno055::ops::operating_mode)
+                self.next_script(stage, |()| ImuStage::CheckAmg, bno055::ops::operating_mode)
             }
         }
     }
@@ -1205,13 +1242,16 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
         result: &ScriptResult,
     ) -> Next<InitStep> {
         let checked = readings(result).and_then(|r| match *stage {
-            ImuStage::Checks => {
-                block(r, 0).and_then(bno055::identity)?;
-                block::<1>(r, 1).and_then(|[st]| bno055::self_test(st))
+            ImuStage::Checks {
+                identity,
+                self_test,
+            } => {
+                bytes(r, identity).and_then(bno055::identity)?;
+                bytes(r, self_test).and_then(|[st]| bno055::self_test(st))
             }
-            ImuStage::Configure => {
-                block(r, 4).and_then(bno055::check_configuration)?;
-                block::<1>(r, 6).and_then(|[units]| bno055::check_units(units))
+            ImuStage::Configure { readback, units } => {
+                bytes(r, readback).and_then(bno055::check_configuration)?;
+                bytes(r, units).and_then(|[units]| bno055::check_units(units))
             }
             ImuStage::CheckAmg => block::<1>(r, 0).and_then(|[opr]| bno055::check_amg_started(opr)),
             ImuStage::EnterConfig | ImuStage::StartAmg => Ok(()),
@@ -1222,11 +1262,15 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
         }
         // The step whose last script this was (the others go on with their next script).
         let passed = match *stage {
-            ImuStage::Checks => {
-                return self.next_script(stage, ImuStage::EnterConfig, bno055::ops::enter_config)
+            ImuStage::Checks { .. } => {
+                return self.next_script(
+                    stage,
+                    |()| ImuStage::EnterConfig,
+                    bno055::ops::enter_config,
+                )
             }
-            ImuStage::Configure => {
-                return self.next_script(stage, ImuStage::StartAmg, bno055::ops::start_amg)
+            ImuStage::Configure { .. } => {
+                return self.next_script(stage, |()| ImuStage::StartAmg, bno055::ops::start_amg)
             }
             ImuStage::EnterConfig => ImuReinit::Idle,
             ImuStage::StartAmg => ImuReinit::EnteringConfig,
