@@ -416,7 +416,7 @@ pub fn still_running<E>(opr: u8) -> Result<(), Error<E>> {
 /// ([`crate::script::Transfers`]; decoded by the functions above).
 pub mod ops {
     use super::{mode, reg, ADDRESS, CONFIGURATION, UNIT_SEL_AMIRO};
-    use crate::script::{BuildError, Script, Transfers};
+    use crate::script::{At, BuildError, Script, Transfers};
 
     /// Set-up step 1's checks: the four identities (write 0x00, read 4, [`super::identity`])
     /// and ST_RESULT (write 0x36, read 1, [`super::self_test`]).
@@ -472,15 +472,14 @@ pub mod ops {
 
     /// OPR_MODE: write 0x3D, read 1 (set-up step 3, [`super::check_amg_started`]; beside a
     /// sample, [`super::still_running`]).
-    pub fn operating_mode(script: &mut Script) -> Result<(), BuildError> {
-        script.write_read(ADDRESS, &[reg::OPR_MODE], 1)?;
-        Ok(())
+    pub fn operating_mode(script: &mut Script) -> Result<At<1>, BuildError> {
+        script.fetch::<1>(ADDRESS, &[reg::OPR_MODE])
     }
 
     /// A sample of one sensor ([`super::Bno055::read_verified`]): its six data bytes from
     /// `first` (write it, read 6, [`super::le3`]), then OPR_MODE.
-    pub fn verified_block(script: &mut Script, first: u8) -> Result<(), BuildError> {
-        script.write_read(ADDRESS, &[first], 6)?;
-        operating_mode(script)
+    pub fn verified_block(script: &mut Script, first: u8) -> Result<(At<6>, At<1>), BuildError> {
+        let data = script.fetch::<6>(ADDRESS, &[first])?;
+        Ok((data, operating_mode(script)?))
     }
 }

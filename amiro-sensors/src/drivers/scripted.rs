@@ -1168,9 +1168,17 @@ pub enum ImuStage {
     /// Set-up step 2: AMG mode is out.
     StartAmg,
     /// Set-up step 3: OPR_MODE is out.
-    CheckAmg,
+    CheckAmg {
+        /// Where OPR_MODE lands.
+        opr: At<1>,
+    },
     /// A sample's block and OPR_MODE are out.
-    Sample,
+    Sample {
+        /// Where the block's six bytes land.
+        data: At<6>,
+        /// Where OPR_MODE lands.
+        opr: At<1>,
+    },
 }
 
 impl<D> ImuSensors<Scripts, D> {
@@ -1229,9 +1237,11 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
                 |(readback, units)| ImuStage::Configure { readback, units },
                 bno055::ops::configure,
             ),
-            ImuReinit::EnteringAmg => {
-                self.next_script(stage, |()| ImuStage::CheckAmg, bno055::ops::operating_mode)
-            }
+            ImuReinit::EnteringAmg => self.next_script(
+                stage,
+                |opr| ImuStage::CheckAmg { opr },
+                bno055::ops::operating_mode,
+            ),
         }
     }
 
@@ -1253,9 +1263,11 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
                 bytes(r, readback).and_then(bno055::check_configuration)?;
                 bytes(r, units).and_then(|[units]| bno055::check_units(units))
             }
-            ImuStage::CheckAmg => block::<1>(r, 0).and_then(|[opr]| bno055::check_amg_started(opr)),
+            ImuStage::CheckAmg { opr } => {
+                bytes(r, opr).and_then(|[opr]| bno055::check_amg_started(opr))
+            }
             ImuStage::EnterConfig | ImuStage::StartAmg => Ok(()),
-            ImuStage::Begun | ImuStage::Sample => Err(Error::Bus(ErrorKind::Other)),
+            ImuStage::Begun | ImuStage::Sample { .. } => Err(Error::Bus(ErrorKind::Other)),
         });
         if let Err(error) = checked {
             return Next::Done(self.set_up_step_failed(error));
@@ -1294,10 +1306,10 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
                 return Next::Done(Ok(self.deliver_field(axis, field)));
             }
         }
-        let script = build(|s| bno055::ops::verified_block(s, read.first_register()));
+        let script = build_with(|s| bno055::ops::verified_block(s, read.first_register()));
         match script {
-            Ok(script) => {
-                *stage = ImuStage::Sample;
+            Ok((script, (data, opr))) => {
+                *stage = ImuStage::Sample { data, opr };
                 Next::Run {
                     script,
                     settle_us: 0,
@@ -1309,7 +1321,7 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
 
     fn resume_sample(
         &mut self,
-        _stage: &mut ImuStage,
+        stage: &mut ImuStage,
         topic: Topic,
         now_us: u64,
         result: &ScriptResult,
@@ -1318,10 +1330,13 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
             Ok(read) => read,
             Err(error) => return Next::Done(Err(error)),
         };
+        let ImuStage::Sample { data, opr } = *stage else {
+            return Next::Done(self.finish(read, Err(Error::Bus(ErrorKind::Other)), now_us));
+        };
         let raw = readings(result).and_then(|r| {
-            let bytes = block::<6>(r, 0)?;
-            block::<1>(r, 1).and_then(|[opr]| bno055::still_running(opr))?;
-            Ok(bno055::le3(&bytes))
+            let block = bytes(r, data)?;
+            bytes(r, opr).and_then(|[opr]| bno055::still_running(opr))?;
+            Ok(bno055::le3(&block))
         });
         Next::Done(self.finish(read, raw, now_us))
     }
