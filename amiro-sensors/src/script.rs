@@ -407,6 +407,80 @@ impl fmt::Display for ScriptError {
     }
 }
 
+/// Where a part's transactions go, so that each sequence is written once (the drivers' `ops`
+/// modules) and both paths run it: a script being built ([`Script`]; a read answers with where its
+/// bytes will land, [`At`]) or a blocking bus that runs each transaction at once ([`Blocking`]; a
+/// read answers with its bytes). The methods are named apart from [`Script`]'s own builders.
+pub trait Transfers {
+    /// What a transaction that cannot be made reports.
+    type Error;
+    /// What a read of `N` bytes answers with.
+    type Read<const N: usize>;
+    /// A write of `bytes` to `address`.
+    fn send(&mut self, address: u8, bytes: &[u8]) -> Result<(), Self::Error>;
+    /// A register read: `bytes` written to `address`, then `N` bytes read after a repeated START.
+    fn fetch<const N: usize>(
+        &mut self,
+        address: u8,
+        bytes: &[u8],
+    ) -> Result<Self::Read<N>, Self::Error>;
+}
+
+/// Where an `N`-byte read of a script lands in its [`Readings`]: its operation's index, as the
+/// sequence that built the script answered it (no caller restates a script's layout).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct At<const N: usize>(u8);
+
+impl<const N: usize> At<N> {
+    /// The read's operation index.
+    pub const fn operation(self) -> usize {
+        self.0 as usize
+    }
+
+    /// The bytes the read gave, or `None` if `readings` hold another count there (a script
+    /// that came back short).
+    pub fn of(self, readings: &Readings) -> Option<[u8; N]> {
+        readings.of(self.operation()).try_into().ok()
+    }
+}
+
+impl Transfers for Script {
+    type Error = BuildError;
+    type Read<const N: usize> = At<N>;
+
+    fn send(&mut self, address: u8, bytes: &[u8]) -> Result<(), BuildError> {
+        self.write(address, bytes).map(|_| ())
+    }
+
+    fn fetch<const N: usize>(&mut self, address: u8, bytes: &[u8]) -> Result<At<N>, BuildError> {
+        let at = At(self.count);
+        self.write_read(address, bytes, N)?;
+        Ok(at)
+    }
+}
+
+/// A blocking embedded-hal bus seen as [`Transfers`]: each transaction runs at once (the blocking
+/// drivers' side of their `ops`).
+#[derive(Debug)]
+pub struct Blocking<'a, I>(pub &'a mut I);
+
+impl<I: embedded_hal::i2c::I2c> Transfers for Blocking<'_, I> {
+    type Error = I::Error;
+    type Read<const N: usize> = [u8; N];
+
+    #[inline(always)]
+    fn send(&mut self, address: u8, bytes: &[u8]) -> Result<(), I::Error> {
+        self.0.write(address, bytes)
+    }
+
+    #[inline(always)]
+    fn fetch<const N: usize>(&mut self, address: u8, bytes: &[u8]) -> Result<[u8; N], I::Error> {
+        let mut read = [0u8; N];
+        self.0.write_read(address, bytes, &mut read)?;
+        Ok(read)
+    }
+}
+
 /// The sensor buses' SCL rate: 400 kHz (fast mode) on I2C1 and I2C2 of every board
 /// (amiro-boards.md); the one figure the engine's timeouts and the simulated buses' times use.
 pub const SCL_HZ: u32 = 400_000;

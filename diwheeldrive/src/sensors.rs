@@ -62,13 +62,11 @@ pub struct Group<G> {
     index: usize,
 }
 
-impl<G: SensorGroup> Group<G> {
-    /// Checks and configures the group's devices; `index` names the group in the health report.
-    pub fn new(group: G, index: usize) -> Self {
-        let group = Self {
-            supervised: suite::Supervised::new(group),
-            index,
-        };
+impl<G> Group<G> {
+    /// A group already brought up (`supervised`: the blocking build's [`Group::new`], or the
+    /// scripted build's boot by its scripts); `index` names it in the health report.
+    pub fn from_booted(supervised: suite::Supervised<G>, index: usize) -> Self {
+        let group = Self { supervised, index };
         group.report();
         group
     }
@@ -86,6 +84,13 @@ impl<G: SensorGroup> Group<G> {
     /// worked.
     pub fn is_ready(&self) -> bool {
         self.supervised.is_ready()
+    }
+}
+
+impl<G: SensorGroup> Group<G> {
+    /// Checks and configures the group's devices; `index` names the group in the health report.
+    pub fn new(group: G, index: usize) -> Self {
+        Self::from_booted(suite::Supervised::new(group), index)
     }
 
     /// One sample of `topic`: its frames, or none when the group is missing or the read failed.
@@ -190,8 +195,8 @@ pub fn groups(buses: SensorBuses) -> (Imu, Compass, Floor) {
     let floor = crate::platform::boot_floor(buses.floor_i2c);
     (
         imu,
-        scripted_groups::Scripted::new(compass, 1),
-        scripted_groups::Scripted::new(floor, 2),
+        Group::from_booted(compass, 1),
+        Group::from_booted(floor, 2),
     )
 }
 
@@ -221,46 +226,11 @@ mod scripted_groups {
     use amiro_sensors::drivers::suite::{self, Supervised};
     use amiro_sensors::script::Readings;
 
-    use super::{sample_drive, sample_inertial_spi, DriveSample, Imu, Samples};
+    use super::{sample_drive, sample_inertial_spi, DriveSample, Group, Imu, Samples};
 
-    /// A supervised group that samples by script, and its place in the board's health report
-    /// (reported after each sample, as [`super::Group`] does).
-    pub struct Scripted<G> {
-        supervised: Supervised<G>,
-        index: usize,
-    }
-
-    impl<G> Scripted<G> {
-        /// The group set up at boot (`supervised`); `index` names it in the health report.
-        pub fn new(supervised: Supervised<G>, index: usize) -> Self {
-            let group = Self { supervised, index };
-            group.report();
-            group
-        }
-
-        fn report(&self) {
-            amiro_firmware::health::report_sensor_group(
-                self.index,
-                self.supervised.faults(),
-                !self.supervised.is_ready(),
-            );
-        }
-
-        /// Whether the group is up.
-        pub fn is_ready(&self) -> bool {
-            self.supervised.is_ready()
-        }
-
-        /// A step's frames reported when the sample is done.
-        fn reported(&self, step: Step) -> Step {
-            if let Step::Done(_) = step {
-                self.report();
-            }
-            step
-        }
-    }
-
-    impl<G> ScriptedGroup for Scripted<G>
+    /// A group that samples by script is a [`Group`] too: its frames reported when its sample is
+    /// done, as the blocking build's `Group::sample` reports them.
+    impl<G> ScriptedGroup for Group<G>
     where
         Supervised<G>: ScriptedGroup,
     {
@@ -288,10 +258,20 @@ mod scripted_groups {
         }
     }
 
+    impl<G> Group<G> {
+        /// A step's frames reported when the sample is done.
+        fn reported(&self, step: Step) -> Step {
+            if let Step::Done(_) = step {
+                self.report();
+            }
+            step
+        }
+    }
+
     /// The HMC5883L on I2C1, its transfers made as scripts.
-    pub type Compass = Scripted<suite::Compass<Scripts>>;
+    pub type Compass = Group<suite::Compass<Scripts>>;
     /// The floor sensors behind the PCA9544A on I2C2, their transfers made as scripts.
-    pub type Floor = Scripted<FloorSensors<Scripts>>;
+    pub type Floor = Group<FloorSensors<Scripts>>;
 
     /// One sample of a magnetometer axis: the HMC5883L's scripts on I2C1 (not inlined, per topic
     /// family, as the blocking build's: the analysis tells a job's topic by the function).

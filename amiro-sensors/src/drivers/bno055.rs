@@ -20,6 +20,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::I2c;
 
 use super::{check_register, div_round, saturate_i16, Error};
+use crate::script::Blocking;
 
 /// The part's 7-bit address with COM3 low (the AMiRo's wiring); 0x29 with COM3 high.
 pub const ADDRESS: u8 = 0x28;
@@ -229,8 +230,7 @@ impl<I2C: I2c> Bno055<I2C> {
     pub fn init_enter_config(&mut self) -> Result<(), Error<I2C::Error>> {
         self.check_identity()?;
         self.check_self_test()?;
-        self.i2c.write(ADDRESS, &[reg::PAGE_ID, 0])?;
-        self.i2c.write(ADDRESS, &[reg::OPR_MODE, mode::CONFIG])?;
+        ops::enter_config(&mut Blocking(&mut self.i2c))?;
         Ok(())
     }
 
@@ -238,21 +238,13 @@ impl<I2C: I2c> Bno055<I2C> {
     /// configurations written and read back, AMG mode requested (the part takes
     /// [`CONFIG_TO_OPERATING_MS`] to get there).
     pub fn init_configure(&mut self) -> Result<(), Error<I2C::Error>> {
-        self.i2c.write(ADDRESS, &[reg::PWR_MODE, 0x00])?;
-        self.i2c.write(ADDRESS, &[reg::UNIT_SEL, UNIT_SEL_AMIRO])?;
-        // Page 1: the four sensor configuration registers in one burst, read back in one.
-        self.i2c.write(ADDRESS, &[reg::PAGE_ID, 1])?;
-        let [a, m, g0, g1] = CONFIGURATION;
-        self.i2c.write(ADDRESS, &[reg::ACC_CONFIG, a, m, g0, g1])?;
-        let mut readback = [0u8; 4];
-        self.i2c
-            .write_read(ADDRESS, &[reg::ACC_CONFIG], &mut readback)?;
-        self.i2c.write(ADDRESS, &[reg::PAGE_ID, 0])?;
-        check_configuration(readback)?;
-        let mut units = [0u8; 1];
-        self.i2c.write_read(ADDRESS, &[reg::UNIT_SEL], &mut units)?;
-        check_units(units[0])?;
-        self.i2c.write(ADDRESS, &[reg::OPR_MODE, mode::AMG])?;
+        let bus = &mut Blocking(&mut self.i2c);
+        // The configuration is checked before UNIT_SEL is read: a part that did not take it
+        // ends the step there. The scripted step reads both in one script (`ops::configure`).
+        check_configuration(ops::configure_page_1(bus)?)?;
+        let [units] = ops::units(bus)?;
+        check_units(units)?;
+        ops::start_amg(bus)?;
         Ok(())
     }
 
@@ -420,60 +412,74 @@ pub fn still_running<E>(opr: u8) -> Result<(), Error<E>> {
     check_register(reg::OPR_MODE, mode::AMG, opr, 0xFF)
 }
 
-/// The part's transactions as script operations (decoded by the functions above).
+/// The part's transactions, written once for the blocking driver and the scripts
+/// ([`crate::script::Transfers`]; decoded by the functions above).
 pub mod ops {
     use super::{mode, reg, ADDRESS, CONFIGURATION, UNIT_SEL_AMIRO};
-    use crate::script::{BuildError, Script};
+    use crate::script::{At, BuildError, Script, Transfers};
 
     /// Set-up step 1's checks: the four identities (write 0x00, read 4, [`super::identity`])
     /// and ST_RESULT (write 0x36, read 1, [`super::self_test`]).
-    pub fn checks(script: &mut Script) -> Result<(), BuildError> {
-        script.write_read(ADDRESS, &[reg::CHIP_ID], 4)?;
-        script.write_read(ADDRESS, &[reg::ST_RESULT], 1)?;
-        Ok(())
+    pub fn checks<T: Transfers>(bus: &mut T) -> Result<(T::Read<4>, T::Read<1>), T::Error> {
+        let identity = bus.fetch::<4>(ADDRESS, &[reg::CHIP_ID])?;
+        let self_test = bus.fetch::<1>(ADDRESS, &[reg::ST_RESULT])?;
+        Ok((identity, self_test))
     }
 
     /// Set-up step 1's writes: page 0, configuration mode (the part then takes
     /// [`super::OPERATING_TO_CONFIG_MS`]).
-    pub fn enter_config(script: &mut Script) -> Result<(), BuildError> {
-        script.write(ADDRESS, &[reg::PAGE_ID, 0])?;
-        script.write(ADDRESS, &[reg::OPR_MODE, mode::CONFIG])?;
-        Ok(())
+    #[inline(always)]
+    pub fn enter_config<T: Transfers>(bus: &mut T) -> Result<(), T::Error> {
+        bus.send(ADDRESS, &[reg::PAGE_ID, 0])?;
+        bus.send(ADDRESS, &[reg::OPR_MODE, mode::CONFIG])
     }
 
-    /// Set-up step 2 up to its checks: power mode, units, page 1, the configuration burst and
-    /// its read-back (operation 4, [`super::check_configuration`]), page 0, UNIT_SEL's read-back
-    /// (operation 6, [`super::check_units`]).
-    pub fn configure(script: &mut Script) -> Result<(), BuildError> {
+    /// Set-up step 2 up to its checks: [`configure_page_1`], then [`units`] (the scripted step's
+    /// one script; the blocking one checks the first read before it makes the second).
+    pub fn configure<T: Transfers>(bus: &mut T) -> Result<(T::Read<4>, T::Read<1>), T::Error> {
+        let readback = configure_page_1(bus)?;
+        let units = units(bus)?;
+        Ok((readback, units))
+    }
+
+    /// Power mode, units, page 1, the configuration burst and its read-back
+    /// ([`super::check_configuration`]), page 0.
+    #[inline(always)]
+    pub fn configure_page_1<T: Transfers>(bus: &mut T) -> Result<T::Read<4>, T::Error> {
         let [a, m, g0, g1] = CONFIGURATION;
-        script.write(ADDRESS, &[reg::PWR_MODE, 0x00])?;
-        script.write(ADDRESS, &[reg::UNIT_SEL, UNIT_SEL_AMIRO])?;
-        script.write(ADDRESS, &[reg::PAGE_ID, 1])?;
-        script.write(ADDRESS, &[reg::ACC_CONFIG, a, m, g0, g1])?;
-        script.write_read(ADDRESS, &[reg::ACC_CONFIG], 4)?;
-        script.write(ADDRESS, &[reg::PAGE_ID, 0])?;
-        script.write_read(ADDRESS, &[reg::UNIT_SEL], 1)?;
-        Ok(())
+        bus.send(ADDRESS, &[reg::PWR_MODE, 0x00])?;
+        bus.send(ADDRESS, &[reg::UNIT_SEL, UNIT_SEL_AMIRO])?;
+        // Page 1: the four sensor configuration registers in one burst, read back in one.
+        bus.send(ADDRESS, &[reg::PAGE_ID, 1])?;
+        bus.send(ADDRESS, &[reg::ACC_CONFIG, a, m, g0, g1])?;
+        let readback = bus.fetch::<4>(ADDRESS, &[reg::ACC_CONFIG])?;
+        bus.send(ADDRESS, &[reg::PAGE_ID, 0])?;
+        Ok(readback)
+    }
+
+    /// UNIT_SEL's read-back ([`super::check_units`]).
+    #[inline(always)]
+    pub fn units<T: Transfers>(bus: &mut T) -> Result<T::Read<1>, T::Error> {
+        bus.fetch::<1>(ADDRESS, &[reg::UNIT_SEL])
     }
 
     /// Set-up step 2's end once its checks passed: AMG mode (the part then takes
     /// [`super::CONFIG_TO_OPERATING_MS`]).
-    pub fn start_amg(script: &mut Script) -> Result<(), BuildError> {
-        script.write(ADDRESS, &[reg::OPR_MODE, mode::AMG])?;
-        Ok(())
+    #[inline(always)]
+    pub fn start_amg<T: Transfers>(bus: &mut T) -> Result<(), T::Error> {
+        bus.send(ADDRESS, &[reg::OPR_MODE, mode::AMG])
     }
 
     /// OPR_MODE: write 0x3D, read 1 (set-up step 3, [`super::check_amg_started`]; beside a
     /// sample, [`super::still_running`]).
-    pub fn operating_mode(script: &mut Script) -> Result<(), BuildError> {
-        script.write_read(ADDRESS, &[reg::OPR_MODE], 1)?;
-        Ok(())
+    pub fn operating_mode(script: &mut Script) -> Result<At<1>, BuildError> {
+        script.fetch::<1>(ADDRESS, &[reg::OPR_MODE])
     }
 
     /// A sample of one sensor ([`super::Bno055::read_verified`]): its six data bytes from
     /// `first` (write it, read 6, [`super::le3`]), then OPR_MODE.
-    pub fn verified_block(script: &mut Script, first: u8) -> Result<(), BuildError> {
-        script.write_read(ADDRESS, &[first], 6)?;
-        operating_mode(script)
+    pub fn verified_block(script: &mut Script, first: u8) -> Result<(At<6>, At<1>), BuildError> {
+        let data = script.fetch::<6>(ADDRESS, &[first])?;
+        Ok((data, operating_mode(script)?))
     }
 }

@@ -90,11 +90,6 @@ impl<I2C> FloorSensors<I2C> {
         self.mux.address()
     }
 
-    /// The sensor (protocol index) the next set-up step configures.
-    pub(crate) const fn next_to_set_up(&self) -> u8 {
-        self.next_to_init
-    }
-
     /// Sets the sensor the next set-up step configures.
     pub(crate) fn set_next_to_set_up(&mut self, sensor: u8) {
         self.next_to_init = sensor;
@@ -103,6 +98,27 @@ impl<I2C> FloorSensors<I2C> {
     /// Counts one sample; true every [`super::IDENTITY_CHECK_EVERY`] samples.
     pub(crate) fn identity_check_due(&mut self) -> bool {
         self.identity.due()
+    }
+
+    /// The sensor (protocol index and part) the next set-up step configures, or `None` with the
+    /// set-up started again at the first (the index is out of range only if the field were
+    /// corrupted). Both paths' stepwise set-up begins a step here.
+    pub(crate) fn sensor_to_set_up(&mut self) -> Option<(u8, FloorSensor)> {
+        let index = self.next_to_init;
+        let sensor = FloorSensor::ALL.get(usize::from(index)).copied();
+        if sensor.is_none() {
+            self.next_to_init = 0;
+        }
+        sensor.map(|sensor| (index, sensor))
+    }
+
+    /// Ends the set-up step of sensor `index`, which `passed` or failed: true once the fourth is
+    /// configured. After the fourth or a failure the next set-up starts at the first sensor.
+    /// Both paths' stepwise set-up ends a step here.
+    pub(crate) fn end_set_up_step(&mut self, index: u8, passed: bool) -> bool {
+        let last = usize::from(index) + 1 >= FloorSensor::ALL.len();
+        self.next_to_init = if passed && !last { index + 1 } else { 0 };
+        passed && last
     }
 }
 
@@ -122,27 +138,13 @@ impl<I2C: I2c> FloorSensors<I2C> {
     /// once the fourth is configured (the next call starts again at the first); a failure also
     /// starts the next set-up at the first sensor.
     pub fn init_next(&mut self) -> Result<bool, GroupError<I2C::Error>> {
-        let index = self.next_to_init;
-        let Some(&sensor) = FloorSensor::ALL.get(usize::from(index)) else {
-            // Out of range only if the field were corrupted: start again.
-            self.next_to_init = 0;
+        let Some((index, sensor)) = self.sensor_to_set_up() else {
             return Ok(false);
         };
         let config = self.config;
-        match self.with_sensor(sensor, |vcnl| vcnl.init(&config)) {
-            Ok(()) if usize::from(index) + 1 >= FloorSensor::ALL.len() => {
-                self.next_to_init = 0;
-                Ok(true)
-            }
-            Ok(()) => {
-                self.next_to_init = index + 1;
-                Ok(false)
-            }
-            Err(error) => {
-                self.next_to_init = 0;
-                Err(error)
-            }
-        }
+        let result = self.with_sensor(sensor, |vcnl| vcnl.init(&config));
+        let done = self.end_set_up_step(index, result.is_ok());
+        result.map(|()| done)
     }
 
     /// Reads every sensor's PRODUCT_ID through its mux channel (a mux that does not switch, or a

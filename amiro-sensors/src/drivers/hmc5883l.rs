@@ -157,14 +157,8 @@ impl<I2C: I2c> Hmc5883l<I2C> {
     /// continuous mode that sample is gone long before the first publisher asks (33 ms at 30 Hz).
     pub fn init(&mut self) -> Result<(), Error<I2C::Error>> {
         self.check_identity()?;
-        let config = set_up_values(self.gain);
-        for (register, value) in (reg::CONFIG_A..).zip(config) {
-            self.i2c.write(ADDRESS, &[register, value])?;
-        }
-        let mut readback = [0u8; 3];
-        self.i2c
-            .write_read(ADDRESS, &[reg::CONFIG_A], &mut readback)?;
-        check_set_up(config, readback)
+        let readback = ops::set_up(&mut crate::script::Blocking(&mut self.i2c), self.gain)?;
+        check_set_up(set_up_values(self.gain), readback)
     }
 
     /// Reads the three identification registers and compares them with "H43".
@@ -258,7 +252,7 @@ pub const fn raw_field(out: [u8; 6]) -> [i16; 3] {
 /// reads and writes, decoded by the same functions).
 pub mod ops {
     use super::{reg, set_up_values, Gain, ADDRESS};
-    use crate::script::{BuildError, Script};
+    use crate::script::{BuildError, Script, Transfers};
 
     /// The identification registers: write 0x0A, read 3 ([`super::identity`]).
     pub fn identity(script: &mut Script) -> Result<(), BuildError> {
@@ -273,12 +267,12 @@ pub mod ops {
     }
 
     /// The set-up's three register writes (one transfer each) and their read-back, read 3 from
-    /// CRA ([`super::check_set_up`]).
-    pub fn set_up(script: &mut Script, gain: Gain) -> Result<(), BuildError> {
+    /// CRA ([`super::check_set_up`]): [`super::Hmc5883l::init`]'s and the scripted set-up's.
+    #[inline(always)]
+    pub fn set_up<T: Transfers>(bus: &mut T, gain: Gain) -> Result<T::Read<3>, T::Error> {
         for (register, value) in (reg::CONFIG_A..).zip(set_up_values(gain)) {
-            script.write(ADDRESS, &[register, value])?;
+            bus.send(ADDRESS, &[register, value])?;
         }
-        script.write_read(ADDRESS, &[reg::CONFIG_A], 3)?;
-        Ok(())
+        bus.fetch::<3>(ADDRESS, &[reg::CONFIG_A])
     }
 }

@@ -33,7 +33,7 @@ use super::suite::{
     ImuReinit, ImuSensors, InitStep, SampleError, Samples, Supervised, DIWHEELDRIVE_TOPICS,
 };
 use super::{bno055, bq27500, is_bus_pattern, vcnl4020, Error};
-use crate::script::{BuildError, Failure, Readings, Script, ScriptError, MAX_READ_BYTES};
+use crate::script::{At, BuildError, Failure, Readings, Script, ScriptError, MAX_READ_BYTES};
 
 /// What a script came back with.
 pub type ScriptResult = Result<Readings, ScriptError>;
@@ -387,9 +387,21 @@ pub fn sample_on<G: ScriptedSensors>(
 fn build(
     ops: impl FnOnce(&mut Script) -> Result<(), BuildError>,
 ) -> Result<Script, Error<ErrorKind>> {
+    build_with(ops).map(|(script, ())| script)
+}
+
+/// [`build`] for a sequence that answers where its reads land ([`At`]).
+fn build_with<R>(
+    ops: impl FnOnce(&mut Script) -> Result<R, BuildError>,
+) -> Result<(Script, R), Error<ErrorKind>> {
     let mut script = Script::new();
-    ops(&mut script).map_err(|_| Error::Bus(ErrorKind::Other))?;
-    Ok(script)
+    let reads = ops(&mut script).map_err(|_| Error::Bus(ErrorKind::Other))?;
+    Ok((script, reads))
+}
+
+/// The bytes of the read at `at` (a short one is a bus fault).
+fn bytes<const N: usize>(readings: &Readings, at: At<N>) -> Result<[u8; N], Error<ErrorKind>> {
+    at.of(readings).ok_or(Error::Bus(ErrorKind::Other))
 }
 
 /// The bytes operation `op` read, as a register block of `N` (a short one is a bus fault).
@@ -438,7 +450,10 @@ pub enum CompassStage {
     /// The set-up's identity read is out.
     SetUpIdentity,
     /// The set-up's writes and their read-back are out.
-    SetUpWrites,
+    SetUpWrites {
+        /// Where the read-back lands.
+        readback: At<3>,
+    },
     /// The sample's data read is out, after the identity read when `checked`.
     Data {
         /// The periodic identity check is the script's first operation.
@@ -508,21 +523,24 @@ impl ScriptedSensors for Compass<Scripts> {
         let gain = self.magnetometer().gain();
         let checked = readings(result).and_then(|r| match *stage {
             CompassStage::SetUpIdentity => block(r, 0).and_then(hmc5883l::identity),
-            _ => block(r, 3).and_then(|readback| {
+            CompassStage::SetUpWrites { readback } => bytes(r, readback).and_then(|readback| {
                 hmc5883l::check_set_up(hmc5883l::set_up_values(gain), readback)
             }),
+            _ => Err(Error::Bus(ErrorKind::Other)),
         });
         match (checked, *stage) {
             (Err(error), _) => Next::Done(compass_step_failed(error)),
             (Ok(()), CompassStage::SetUpIdentity) => {
-                let script = build(|s| hmc5883l::ops::set_up(s, gain));
-                run_or(
-                    stage,
-                    CompassStage::SetUpWrites,
-                    script,
-                    0,
-                    compass_step_failed,
-                )
+                match build_with(|s| hmc5883l::ops::set_up(s, gain)) {
+                    Ok((script, readback)) => {
+                        *stage = CompassStage::SetUpWrites { readback };
+                        Next::Run {
+                            script,
+                            settle_us: 0,
+                        }
+                    }
+                    Err(error) => Next::Done(compass_step_failed(error)),
+                }
             }
             (Ok(()), _) => Next::Done(InitStep::Done),
         }
@@ -673,13 +691,8 @@ impl FloorSensors<Scripts> {
         pca9544a::select_op(script, self.mux_address(), sensor.channel())
     }
 
-    fn set_up_of(&self, sensor: u8) -> Option<SensorSetUp> {
-        let part = FloorSensor::ALL.get(usize::from(sensor))?;
-        Some(SensorSetUp::new(
-            self.mux_address(),
-            part.channel(),
-            *self.config(),
-        ))
+    fn set_up_of(&self, part: FloorSensor) -> SensorSetUp {
+        SensorSetUp::new(self.mux_address(), part.channel(), *self.config())
     }
 
     /// The round's script: each sensor's proximity behind its select.
@@ -707,7 +720,7 @@ impl FloorSensors<Scripts> {
     }
 
     fn step_failed(&mut self, sensor: u8, error: Error<ErrorKind>) -> InitStep {
-        self.set_next_to_set_up(0);
+        self.end_set_up_step(sensor, false);
         InitStep::Failed(floor_error(GroupError { sensor, error }))
     }
 }
@@ -732,12 +745,10 @@ impl ScriptedSensors for FloorSensors<Scripts> {
     }
 
     fn begin_set_up_step(&mut self, stage: &mut FloorStage, now_us: u64) -> Next<InitStep> {
-        let sensor = self.next_to_set_up();
-        let Some(set_up) = self.set_up_of(sensor) else {
-            // Out of range only if the field were corrupted: start again.
-            self.set_next_to_set_up(0);
+        let Some((sensor, part)) = self.sensor_to_set_up() else {
             return Next::Done(InitStep::Pending { next_us: now_us });
         };
+        let set_up = self.set_up_of(part);
         match set_up.script() {
             Ok(script) => {
                 *stage = FloorStage::SetUp { sensor, set_up };
@@ -771,14 +782,8 @@ impl ScriptedSensors for FloorSensors<Scripts> {
                 }
                 Err(error) => Next::Done(self.step_failed(sensor, error)),
             },
-            Some(Ok(())) if usize::from(sensor) + 1 >= FLOOR_SENSORS => {
-                self.set_next_to_set_up(0);
-                Next::Done(InitStep::Done)
-            }
-            Some(Ok(())) => {
-                self.set_next_to_set_up(sensor + 1);
-                Next::Done(InitStep::Pending { next_us: now_us })
-            }
+            Some(Ok(())) if self.end_set_up_step(sensor, true) => Next::Done(InitStep::Done),
+            Some(Ok(())) => Next::Done(InitStep::Pending { next_us: now_us }),
         }
     }
 
@@ -913,7 +918,7 @@ impl SensorSetUp {
             match usize::from(self.register).checked_sub(1) {
                 None => vcnl4020::ops::identity(s),
                 Some(k) => match writes.get(k) {
-                    Some(&write) => vcnl4020::ops::set_up_write(s, write),
+                    Some(&write) => vcnl4020::ops::set_up_write(s, write).map(|_| ()),
                     None => Err(BuildError::EmptyOperation),
                 },
             }
@@ -1145,23 +1150,35 @@ pub enum ImuStage {
     #[default]
     Begun,
     /// Set-up step 1: the identities and the self-test are out.
-    Checks,
+    Checks {
+        /// Where the four identity bytes land.
+        identity: At<4>,
+        /// Where ST_RESULT lands.
+        self_test: At<1>,
+    },
     /// Set-up step 1: page 0 and configuration mode are out.
     EnterConfig,
     /// Set-up step 2: the configuration and its read-backs are out.
-    Configure,
+    Configure {
+        /// Where the page-1 configuration's read-back lands.
+        readback: At<4>,
+        /// Where UNIT_SEL's read-back lands.
+        units: At<1>,
+    },
     /// Set-up step 2: AMG mode is out.
     StartAmg,
     /// Set-up step 3: OPR_MODE is out.
-    CheckAmg,
+    CheckAmg {
+        /// Where OPR_MODE lands.
+        opr: At<1>,
+    },
     /// A sample's block and OPR_MODE are out.
-    Sample,
-}
-
-/// The BNO055's set-up step that failed: `Idle` again.
-fn imu_step_failed<D>(imu: &mut ImuSensors<Scripts, D>, error: Error<ErrorKind>) -> InitStep {
-    imu.set_up_at(ImuReinit::Idle);
-    InitStep::Failed(i2c_error(Device::Imu)(error))
+    Sample {
+        /// Where the block's six bytes land.
+        data: At<6>,
+        /// Where OPR_MODE lands.
+        opr: At<1>,
+    },
 }
 
 impl<D> ImuSensors<Scripts, D> {
@@ -1171,21 +1188,21 @@ impl<D> ImuSensors<Scripts, D> {
         Self::new(Scripts, delay)
     }
 
-    fn next_script(
+    fn next_script<R>(
         &mut self,
         stage: &mut ImuStage,
-        at: ImuStage,
-        ops: impl FnOnce(&mut Script) -> Result<(), BuildError>,
+        at: impl FnOnce(R) -> ImuStage,
+        ops: impl FnOnce(&mut Script) -> Result<R, BuildError>,
     ) -> Next<InitStep> {
-        match build(ops) {
-            Ok(script) => {
-                *stage = at;
+        match build_with(ops) {
+            Ok((script, reads)) => {
+                *stage = at(reads);
                 Next::Run {
                     script,
                     settle_us: 0,
                 }
             }
-            Err(error) => Next::Done(imu_step_failed(self, error)),
+            Err(error) => Next::Done(self.set_up_step_failed(error)),
         }
     }
 }
@@ -1207,13 +1224,24 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
 
     fn begin_set_up_step(&mut self, stage: &mut ImuStage, _now_us: u64) -> Next<InitStep> {
         match self.begin_set_up_step() {
-            ImuReinit::Idle => self.next_script(stage, ImuStage::Checks, bno055::ops::checks),
-            ImuReinit::EnteringConfig => {
-                self.next_script(stage, ImuStage::Configure, bno055::ops::configure)
-            }
-            ImuReinit::EnteringAmg => {
-                self.next_script(stage, ImuStage::CheckAmg, bno055::ops::operating_mode)
-            }
+            ImuReinit::Idle => self.next_script(
+                stage,
+                |(identity, self_test)| ImuStage::Checks {
+                    identity,
+                    self_test,
+                },
+                bno055::ops::checks,
+            ),
+            ImuReinit::EnteringConfig => self.next_script(
+                stage,
+                |(readback, units)| ImuStage::Configure { readback, units },
+                bno055::ops::configure,
+            ),
+            ImuReinit::EnteringAmg => self.next_script(
+                stage,
+                |opr| ImuStage::CheckAmg { opr },
+                bno055::ops::operating_mode,
+            ),
         }
     }
 
@@ -1224,44 +1252,43 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
         result: &ScriptResult,
     ) -> Next<InitStep> {
         let checked = readings(result).and_then(|r| match *stage {
-            ImuStage::Checks => {
-                block(r, 0).and_then(bno055::identity)?;
-                block::<1>(r, 1).and_then(|[st]| bno055::self_test(st))
+            ImuStage::Checks {
+                identity,
+                self_test,
+            } => {
+                bytes(r, identity).and_then(bno055::identity)?;
+                bytes(r, self_test).and_then(|[st]| bno055::self_test(st))
             }
-            ImuStage::Configure => {
-                block(r, 4).and_then(bno055::check_configuration)?;
-                block::<1>(r, 6).and_then(|[units]| bno055::check_units(units))
+            ImuStage::Configure { readback, units } => {
+                bytes(r, readback).and_then(bno055::check_configuration)?;
+                bytes(r, units).and_then(|[units]| bno055::check_units(units))
             }
-            ImuStage::CheckAmg => block::<1>(r, 0).and_then(|[opr]| bno055::check_amg_started(opr)),
+            ImuStage::CheckAmg { opr } => {
+                bytes(r, opr).and_then(|[opr]| bno055::check_amg_started(opr))
+            }
             ImuStage::EnterConfig | ImuStage::StartAmg => Ok(()),
-            ImuStage::Begun | ImuStage::Sample => Err(Error::Bus(ErrorKind::Other)),
+            ImuStage::Begun | ImuStage::Sample { .. } => Err(Error::Bus(ErrorKind::Other)),
         });
         if let Err(error) = checked {
-            return Next::Done(imu_step_failed(self, error));
+            return Next::Done(self.set_up_step_failed(error));
         }
-        let pending = |state, wait_ms: u32| {
-            (
-                state,
-                InitStep::Pending {
-                    next_us: now_us.saturating_add(u64::from(wait_ms) * 1_000),
-                },
-            )
+        // The step whose last script this was (the others go on with their next script).
+        let passed = match *stage {
+            ImuStage::Checks { .. } => {
+                return self.next_script(
+                    stage,
+                    |()| ImuStage::EnterConfig,
+                    bno055::ops::enter_config,
+                )
+            }
+            ImuStage::Configure { .. } => {
+                return self.next_script(stage, |()| ImuStage::StartAmg, bno055::ops::start_amg)
+            }
+            ImuStage::EnterConfig => ImuReinit::Idle,
+            ImuStage::StartAmg => ImuReinit::EnteringConfig,
+            _ => ImuReinit::EnteringAmg,
         };
-        let (state, step) = match *stage {
-            ImuStage::Checks => {
-                return self.next_script(stage, ImuStage::EnterConfig, bno055::ops::enter_config)
-            }
-            ImuStage::Configure => {
-                return self.next_script(stage, ImuStage::StartAmg, bno055::ops::start_amg)
-            }
-            ImuStage::EnterConfig => {
-                pending(ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)
-            }
-            ImuStage::StartAmg => pending(ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS),
-            _ => (ImuReinit::Idle, InitStep::Done),
-        };
-        self.set_up_at(state);
-        Next::Done(step)
+        Next::Done(self.set_up_step_passed(passed, now_us))
     }
 
     fn begin_sample(
@@ -1279,10 +1306,10 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
                 return Next::Done(Ok(self.deliver_field(axis, field)));
             }
         }
-        let script = build(|s| bno055::ops::verified_block(s, read.first_register()));
+        let script = build_with(|s| bno055::ops::verified_block(s, read.first_register()));
         match script {
-            Ok(script) => {
-                *stage = ImuStage::Sample;
+            Ok((script, (data, opr))) => {
+                *stage = ImuStage::Sample { data, opr };
                 Next::Run {
                     script,
                     settle_us: 0,
@@ -1294,7 +1321,7 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
 
     fn resume_sample(
         &mut self,
-        _stage: &mut ImuStage,
+        stage: &mut ImuStage,
         topic: Topic,
         now_us: u64,
         result: &ScriptResult,
@@ -1303,10 +1330,13 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
             Ok(read) => read,
             Err(error) => return Next::Done(Err(error)),
         };
+        let ImuStage::Sample { data, opr } = *stage else {
+            return Next::Done(self.finish(read, Err(Error::Bus(ErrorKind::Other)), now_us));
+        };
         let raw = readings(result).and_then(|r| {
-            let bytes = block::<6>(r, 0)?;
-            block::<1>(r, 1).and_then(|[opr]| bno055::still_running(opr))?;
-            Ok(bno055::le3(&bytes))
+            let block = bytes(r, data)?;
+            bytes(r, opr).and_then(|[opr]| bno055::still_running(opr))?;
+            Ok(bno055::le3(&block))
         });
         Next::Done(self.finish(read, raw, now_us))
     }
@@ -1325,7 +1355,7 @@ impl<D> ImuSensors<Scripts, D> {
                 let field = self.keep_field(raw, now_us)?;
                 Ok(self.deliver_field(axis, field))
             }
-            block => imu_frame(block, raw?).ok_or(SampleError::NotServed(Topic::Gyroscope)),
+            ImuRead::Block(block) => Ok(imu_frame(block, raw?)),
         }
     }
 }

@@ -514,6 +514,20 @@ pub(crate) enum ImuReinit {
     EnteringAmg,
 }
 
+impl ImuReinit {
+    /// The state after this state's step passed and the part's mode-switch time to wait before
+    /// it (ms), or `None` once the set-up is done.
+    const fn after_step(self) -> Option<(ImuReinit, u32)> {
+        match self {
+            ImuReinit::Idle => Some((ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)),
+            ImuReinit::EnteringConfig => {
+                Some((ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS))
+            }
+            ImuReinit::EnteringAmg => None,
+        }
+    }
+}
+
 impl<I2C, D> ImuSensors<I2C, D> {
     /// The BNO055 on `i2c`. Does no I/O.
     pub const fn new(i2c: I2C, delay: D) -> Self {
@@ -546,20 +560,27 @@ impl<I2C: I2c, D: DelayNs> ImuSensors<I2C, D> {
 /// What a sample of one of [`ImuSensors`]' topics reads: one sensor's register block.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum ImuRead {
+    /// The gyroscope's or the accelerometer's block: one frame of its own.
+    Block(ImuBlock),
+    /// The magnetometer's block, for one axis (a reading serves the three).
+    Field(Axis),
+}
+
+/// A block whose read is one frame: the gyroscope's or the accelerometer's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ImuBlock {
     /// The gyroscope's block.
     Gyroscope,
     /// The accelerometer's block.
     Accelerometer,
-    /// The magnetometer's block, for one axis (a reading serves the three).
-    Field(Axis),
 }
 
 impl ImuRead {
     /// The read of `topic`.
     pub(crate) fn of(topic: Topic) -> Result<Self, SampleError> {
         match topic {
-            Topic::Gyroscope => Ok(ImuRead::Gyroscope),
-            Topic::Accelerometer => Ok(ImuRead::Accelerometer),
+            Topic::Gyroscope => Ok(ImuRead::Block(ImuBlock::Gyroscope)),
+            Topic::Accelerometer => Ok(ImuRead::Block(ImuBlock::Accelerometer)),
             other => magnetometer_axis(other).map(ImuRead::Field),
         }
     }
@@ -567,20 +588,19 @@ impl ImuRead {
     /// The block's first register.
     pub(crate) const fn first_register(self) -> u8 {
         match self {
-            ImuRead::Gyroscope => bno055::reg::GYR_DATA_X_LSB,
-            ImuRead::Accelerometer => bno055::reg::ACC_DATA_X_LSB,
+            ImuRead::Block(ImuBlock::Gyroscope) => bno055::reg::GYR_DATA_X_LSB,
+            ImuRead::Block(ImuBlock::Accelerometer) => bno055::reg::ACC_DATA_X_LSB,
             ImuRead::Field(_) => bno055::reg::MAG_DATA_X_LSB,
         }
     }
 }
 
-/// The frame of a gyroscope or accelerometer block's digits (`None` for the magnetometer's,
-/// whose reading is kept: [`ImuSensors`]).
-pub(crate) fn imu_frame(read: ImuRead, raw: [i16; 3]) -> Option<Samples> {
-    match read {
-        ImuRead::Gyroscope => Some(one(SensorData::Gyroscope(bno055::degrees_per_s(raw)))),
-        ImuRead::Accelerometer => Some(one(SensorData::Accelerometer(raw))),
-        ImuRead::Field(_) => None,
+/// The frame of a gyroscope or accelerometer block's digits (the magnetometer's reading is kept
+/// instead: [`ImuSensors`]).
+pub(crate) fn imu_frame(block: ImuBlock, raw: [i16; 3]) -> Samples {
+    match block {
+        ImuBlock::Gyroscope => one(SensorData::Gyroscope(bno055::degrees_per_s(raw))),
+        ImuBlock::Accelerometer => one(SensorData::Accelerometer(raw)),
     }
 }
 
@@ -636,9 +656,27 @@ impl<I2C, D> ImuSensors<I2C, D> {
         self.reinit
     }
 
-    /// The next step of the set-up (`Idle` after the last, or after a failure).
-    pub(crate) fn set_up_at(&mut self, reinit: ImuReinit) {
-        self.reinit = reinit;
+    /// The step begun at `passed` passed: the next one pending after the part's mode switch, or
+    /// the set-up done (both paths' stepwise set-up).
+    pub(crate) fn set_up_step_passed(&mut self, passed: ImuReinit, now_us: u64) -> InitStep {
+        match passed.after_step() {
+            Some((state, wait_ms)) => {
+                self.reinit = state;
+                InitStep::Pending {
+                    next_us: now_us.saturating_add(u64::from(wait_ms) * 1_000),
+                }
+            }
+            None => {
+                self.reinit = ImuReinit::Idle;
+                InitStep::Done
+            }
+        }
+    }
+
+    /// A set-up step failed: the next set-up starts at `Idle` (both paths).
+    pub(crate) fn set_up_step_failed<E: i2c::Error>(&mut self, error: Error<E>) -> InitStep {
+        self.reinit = ImuReinit::Idle;
+        InitStep::Failed(i2c_error(Device::Imu)(error))
     }
 
     /// A whole set-up begins (boot).
@@ -665,49 +703,33 @@ impl<I2C: I2c, D: DelayNs> SensorGroup for ImuSensors<I2C, D> {
     /// part's two mode switches (19 ms and 7 ms) waited between calls, outside the bus lock.
     fn init_step(&mut self, now_us: u64) -> InitStep {
         self.last_field = None;
-        let (result, next) = match self.reinit {
-            ImuReinit::Idle => (
-                self.imu.init_enter_config(),
-                Some((ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)),
-            ),
-            ImuReinit::EnteringConfig => (
-                self.imu.init_configure(),
-                Some((ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS)),
-            ),
-            ImuReinit::EnteringAmg => (self.imu.init_check_running(), None),
+        let step = self.reinit;
+        let result = match step {
+            ImuReinit::Idle => self.imu.init_enter_config(),
+            ImuReinit::EnteringConfig => self.imu.init_configure(),
+            ImuReinit::EnteringAmg => self.imu.init_check_running(),
         };
-        match (result, next) {
-            (Err(error), _) => {
-                self.reinit = ImuReinit::Idle;
-                InitStep::Failed(i2c_error(Device::Imu)(error))
-            }
-            (Ok(()), Some((state, wait_ms))) => {
-                self.reinit = state;
-                InitStep::Pending {
-                    next_us: now_us.saturating_add(u64::from(wait_ms) * 1_000),
-                }
-            }
-            (Ok(()), None) => {
-                self.reinit = ImuReinit::Idle;
-                InitStep::Done
-            }
+        match result {
+            Ok(()) => self.set_up_step_passed(step, now_us),
+            Err(error) => self.set_up_step_failed(error),
         }
     }
 
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError> {
         let read = ImuRead::of(topic)?;
-        if let ImuRead::Field(axis) = read {
-            let field = match self.reusable_field(axis, now_us) {
-                Some(field) => field,
-                None => {
-                    let raw = self.read(read.first_register());
-                    self.keep_field(raw, now_us)?
-                }
-            };
-            return Ok(self.deliver_field(axis, field));
+        match read {
+            ImuRead::Field(axis) => {
+                let field = match self.reusable_field(axis, now_us) {
+                    Some(field) => field,
+                    None => {
+                        let raw = self.read(read.first_register());
+                        self.keep_field(raw, now_us)?
+                    }
+                };
+                Ok(self.deliver_field(axis, field))
+            }
+            ImuRead::Block(block) => Ok(imu_frame(block, self.read(read.first_register())?)),
         }
-        let raw = self.read(read.first_register())?;
-        imu_frame(read, raw).ok_or(SampleError::NotServed(topic))
     }
 }
 

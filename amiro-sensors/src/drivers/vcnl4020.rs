@@ -163,8 +163,7 @@ impl<I2C: I2c> Vcnl4020<I2C> {
     }
 
     fn write_checked(&mut self, write: SetUpWrite) -> Result<(), Error<I2C::Error>> {
-        self.i2c.write(ADDRESS, &[write.register, write.value])?;
-        let read = self.read_register(write.register)?;
+        let [read] = ops::set_up_write(&mut crate::script::Blocking(&mut self.i2c), write)?;
         write.check(read)
     }
 }
@@ -241,7 +240,7 @@ pub const fn result(bytes: [u8; 2]) -> u16 {
 /// The part's transactions as script operations (decoded by the functions above).
 pub mod ops {
     use super::{reg, SetUpWrite, ADDRESS};
-    use crate::script::{BuildError, Script};
+    use crate::script::{BuildError, Script, Transfers};
 
     /// PRODUCT_ID: write 0x81, read 1 ([`super::identity`]).
     pub fn identity(script: &mut Script) -> Result<(), BuildError> {
@@ -256,10 +255,14 @@ pub mod ops {
         Ok(())
     }
 
-    /// A set-up register written, then read back: two operations ([`SetUpWrite::check`]).
-    pub fn set_up_write(script: &mut Script, write: SetUpWrite) -> Result<(), BuildError> {
-        script.write(ADDRESS, &[write.register, write.value])?;
-        script.write_read(ADDRESS, &[write.register], 1)?;
-        Ok(())
+    /// A set-up register written, then read back: two operations ([`SetUpWrite::check`]), the
+    /// blocking [`super::Vcnl4020::init`]'s and the scripted set-up's.
+    #[inline(always)]
+    pub fn set_up_write<T: Transfers>(
+        bus: &mut T,
+        write: SetUpWrite,
+    ) -> Result<T::Read<1>, T::Error> {
+        bus.send(ADDRESS, &[write.register, write.value])?;
+        bus.fetch::<1>(ADDRESS, &[write.register])
     }
 }
