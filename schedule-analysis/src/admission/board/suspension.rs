@@ -290,10 +290,11 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
         }
     }
 
-    /// Bus `b`'s engine events on the CPU in the default view's jobs (`timings`, before their analysis): each at
-    /// the engine's priority, interfered with by every job at or above it but the bus's own engine rows (these very
-    /// events, one at a time; costed 0 meanwhile), blocked as a job of that priority; the event itself takes the
-    /// place after the jobs at or above it for the while. `None`: unbounded.
+    /// Bus `b`'s engine events on the CPU in the default view's jobs (`timings`, after their analysis, so that a
+    /// released job carries the jitter it inherits from its releaser's response, as the host's found jitters do):
+    /// each at the engine's priority, interfered with by every job at or above it but the bus's own engine rows
+    /// (these very events, one at a time; costed 0 meanwhile), blocked as a job of that priority; the event itself
+    /// takes the place after the jobs at or above it for the while. `None`: unbounded.
     #[inline(never)]
     fn events(
         &mut self,
@@ -427,27 +428,10 @@ pub(super) fn analyse<const N: usize, const M: usize>(
         if failed.is_some() {
             break;
         }
-        // 2. The board once per view, the default view's jobs first for 3., the engine events.
+        // 2. The board once per view; after the default view's analysis, 3., the engine events.
         let mut next_events = events;
         for v in 0..=scripts.views {
             round.view_jobs(v, set, blocking, shares, &suspension, &own, &mut unreleased);
-            if v == 0 {
-                for (b, slot) in next_events
-                    .iter_mut()
-                    .enumerate()
-                    .take(input.table.buses.len())
-                {
-                    let on_bus = scripts
-                        .scripts()
-                        .iter()
-                        .find(|s| usize::from(s.row.bus) == b);
-                    let Some(s) = on_bus else { continue };
-                    match round.events(b, &mut set.timings, len)? {
-                        Some(e) => *slot = e,
-                        None => failed = failed.or(Some(s.job)),
-                    }
-                }
-            }
             let cut = Cut {
                 unreleased: &unreleased,
                 view: &scripts.view,
@@ -466,6 +450,25 @@ pub(super) fn analyse<const N: usize, const M: usize>(
             for (p, (slot, &w)) in wcrt.iter_mut().zip(bounds.wcrt.iter()).enumerate() {
                 if scripts.view(p) == v {
                     *slot = w;
+                }
+            }
+            if v == 0 {
+                // The default view's jobs as analysed: a released job's jitter is now the one it inherits from
+                // its releaser's response (its own plus that response), not its own alone.
+                for (b, slot) in next_events
+                    .iter_mut()
+                    .enumerate()
+                    .take(input.table.buses.len())
+                {
+                    let on_bus = scripts
+                        .scripts()
+                        .iter()
+                        .find(|s| usize::from(s.row.bus) == b);
+                    let Some(s) = on_bus else { continue };
+                    match round.events(b, &mut set.timings, len)? {
+                        Some(e) => *slot = e,
+                        None => failed = failed.or(Some(s.job)),
+                    }
                 }
             }
         }
