@@ -775,7 +775,8 @@ fn the_known_answers_through_the_chip() {
 /// `tests/sensor_buses.rs`'s `an_event_counts_a_released_jobs_inherited_jitter` as chip rows: `tick` (9, 1 µs
 /// every 50 µs, 10 µs jitter) releases `follow` (8, 20 µs) above the engine (7, 27 µs per event); the job (3,
 /// 50 µs) runs a one-byte script (27.5 µs on the wire, 4 events). An event counts `follow` with the jitter it
-/// inherits from `tick`'s 11 µs response: 69 µs (the simulator reaches 68), the job 818.5 µs, as the host finds.
+/// inherits from `tick`'s 11 µs response: 69 µs (the simulator reaches 68); the script as one job meets `follow`
+/// with that jitter too (261.5 µs on the bus, below the events' 303.5), the job 734.5 µs, as the host finds.
 /// With `follow`'s own jitter the event was 49 µs and the job's bound below the host's.
 #[test]
 fn an_event_counts_a_released_jobs_inherited_jitter_on_the_chip() {
@@ -836,8 +837,8 @@ fn an_event_counts_a_released_jobs_inherited_jitter_on_the_chip() {
         };
         admission::evaluate::<8, 8>(&robot, &[]).refusal
     };
-    assert_eq!(decide(818_500), None);
-    match decide(818_499) {
+    assert_eq!(decide(734_500), None);
+    match decide(734_499) {
         Some(Refusal::Deadline(v)) => {
             assert_eq!(
                 v.culprit,
@@ -846,7 +847,7 @@ fn an_event_counts_a_released_jobs_inherited_jitter_on_the_chip() {
                     task: TaskId::Fixed(2),
                 }
             );
-            assert_eq!(v.wcrt, Some(Time::from_ns(818_500)));
+            assert_eq!(v.wcrt, Some(Time::from_ns(734_500)));
         }
         other => panic!("{other:?}"),
     }

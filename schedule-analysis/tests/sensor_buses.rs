@@ -399,9 +399,11 @@ fn a_job_of_several_scripts_has_an_engine_row_per_script() {
             .collect::<Vec<_>>(),
         vec![(0, 0, 2, Time::ZERO), (1, 1, 2, Time::from_us(66))]
     );
-    // An i2c2 event (2 µs at priority 6) may wait for i2c1's engine row (42 µs at 7): its response 44 µs, so the
-    // second script's bus time is 300 + 4 × 44 = 476 µs; i2c1's events still answer in 3 µs (192 µs as above).
-    // The job: 50 + 192 + 476 + its settle 66 + both engine rows (42 + 8, released by the job, above it) = 834 µs.
+    // An i2c2 event (2 µs at priority 6) may wait for i2c1's engine row (42 µs at 7): its response 44 µs, so each
+    // event's own response gives the second script 300 + 4 × 44 = 476 µs on the bus; as one job at priority 6 it
+    // meets that row once (one instance per 10 ms): 300 + 4 × 2 + 42 = 350 µs, the bound taken. i2c1's events
+    // still answer in 3 µs (192 µs as above). The job: 50 + 192 + 350 + its settle 66 + both engine rows (42 + 8,
+    // released by the job, above it) = 708 µs.
     let result = analysis::analyse_board(b, &Limits::default());
     assert_eq!(
         result.sensor_buses[1].event_response,
@@ -409,9 +411,9 @@ fn a_job_of_several_scripts_has_an_engine_row_per_script() {
     );
     assert_eq!(
         result.sensor_buses[1].scripts[0].bus_time,
-        Time::from_us(476)
+        Time::from_us(350)
     );
-    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(834)));
+    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(708)));
     assert_eq!(result.sensor_buses[1].scripts[0].task, "publish[floor]#2");
     assert_eq!(result.sensor_buses[1].scripts[0].settle, Time::from_us(66));
     let report = Report::build(&system, "t".into(), Vec::new(), Vec::new(), None);
@@ -914,8 +916,11 @@ fn released_above_the_engine() -> BoardModel {
 /// runs 10 to 11 µs, `follow` 11 to 31 µs, an event of 27 µs arriving at 11 µs runs 31 to 50, `tick`'s next job
 /// (on time) 50 to 51, `follow`'s 51 to 71, the event's last 8 µs 71 to 79: 68 µs. With `follow`'s own jitter (0)
 /// the event's window holds one `follow`: 27 + 2 × 1 + 20 = 49 µs, below that; with its inherited 11 µs:
-/// 27 + 2 × 1 + 2 × 20 = 69 µs. The script: 11 bit times (27.5 µs) and 4 events of 69 µs, 303.5 µs on the bus;
-/// the job 818.5 µs (`tests/admission_scripts.rs` decides the same from the chip's rows).
+/// 27 + 2 × 1 + 2 × 20 = 69 µs. The script: 11 bit times (27.5 µs) and 4 events of 69 µs, 303.5 µs on the bus by
+/// each event's own response; as one job of 27.5 + 4 × 27 = 135.5 µs at priority 7 it meets `tick` 6 times
+/// (⌈(261.5 + 10)/50⌉) and `follow` 6 times (⌈(261.5 + 11)/50⌉): 135.5 + 6 + 120 = 261.5 µs, the bound taken
+/// (with `follow`'s own jitter it would be 241.5 µs). The job: 50 + 261.5 + its engine row's 108 + 15 of `tick`'s
+/// and `follow`'s jobs (15 × 21) = 734.5 µs (`tests/admission_scripts.rs` decides the same from the chip's rows).
 #[test]
 fn an_event_counts_a_released_jobs_inherited_jitter() {
     let model = Model {
@@ -928,8 +933,8 @@ fn an_event_counts_a_released_jobs_inherited_jitter() {
     assert_eq!(result.tasks[1].jitter, Time::from_us(11));
     let bus = &result.sensor_buses[0];
     assert_eq!(bus.event_response, Some(Time::from_us(69)));
-    assert_eq!(bus.scripts[0].bus_time, Time::from_ns(303_500));
-    assert_eq!(result.tasks[2].wcrt(), Some(Time::from_ns(818_500)));
+    assert_eq!(bus.scripts[0].bus_time, Time::from_ns(261_500));
+    assert_eq!(result.tasks[2].wcrt(), Some(Time::from_ns(734_500)));
 
     let us = 1000;
     let job = |task, arrival: u64, release: u64, length: u64| sim::Job {

@@ -180,6 +180,7 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
         timings: &[TaskTiming; N],
         own: &[Time; N],
         events: &[Events; MAX_BUSES],
+        whole: &[Option<Time>; N],
     ) -> Result<Option<Time>, Refusal> {
         let list = self.scripts.scripts();
         let me = list.get(k).ok_or(Refusal::Capacity)?;
@@ -206,10 +207,17 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
             if o == k {
                 at = len;
             }
+            // The tighter of two bounds, both sound: each event's own worst response, and the script as one job.
+            let per_event = row_time(s.row.bus_time).plus(Self::events_of(s.row, &bus_events));
+            let bus_time = whole
+                .get(o)
+                .copied()
+                .flatten()
+                .map_or(per_event, |w| w.min(per_event));
             *subset.get_mut(len).ok_or(Refusal::Capacity)? = MessageTiming {
                 // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
                 key: u32::MAX - job.priority,
-                frame_time: row_time(s.row.bus_time).plus(Self::events_of(s.row, &bus_events)),
+                frame_time: bus_time,
                 frames: 1,
                 period: job.period,
                 jitter: own.get(p).copied().unwrap_or(Time::ZERO),
@@ -301,6 +309,7 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
         b: usize,
         timings: &mut [TaskTiming; N],
         len: usize,
+        whole: &mut [Option<Time>; N],
     ) -> Result<Option<Events>, Refusal> {
         let Some(bus) = self.input.table.buses.get(b) else {
             return Ok(Some(Events::default()));
@@ -350,6 +359,31 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
                 (Some(r), Some(slot)) => *slot = r,
                 _ => out = None,
             }
+        }
+        // Each script on the bus as one job at the engine's priority (the host's `script_response`): its events'
+        // work and its wire time as execution, blocked once per event; `None` where it has no bound.
+        for (s, slot) in self.scripts.scripts().iter().zip(whole.iter_mut()) {
+            if usize::from(s.row.bus) != b {
+                continue;
+            }
+            if let Some(t) = timings.get_mut(end) {
+                *t = TaskTiming {
+                    priority: engine,
+                    wcet: row_time(s.row.bus_time).plus(Self::events_of(s.row, &costs)),
+                    period: self.input.limits.horizon,
+                    jitter: Time::ZERO,
+                };
+            }
+            let mut scratch = const { [Counter::ZERO; N] };
+            let limits = self.limits()?;
+            let result = crate::board::response_time(
+                timings.get(..=end).unwrap_or(&[]),
+                end,
+                blocking.times(u64::from(s.row.events)),
+                &limits,
+                &mut scratch,
+            );
+            *slot = self.count(result)?;
         }
         // The jobs as they were.
         if let Some(slot) = timings.get_mut(end) {
@@ -407,6 +441,8 @@ pub(super) fn analyse<const N: usize, const M: usize>(
     // responses; and per job its bound from its own view.
     let mut own = [Time::ZERO; N];
     let mut events = [Events::default(); MAX_BUSES];
+    // Each script's bus time as one job (by script; `None`: the per-event bound holds).
+    let mut whole: [Option<Time>; N] = [None; N];
     let mut wcrt = [NONE; N];
     let mut suspension = [Time::ZERO; N];
     let mut unreleased = [false; N];
@@ -420,7 +456,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
         // 1. Each script on its bus: its suspension, from its actual submission.
         for (k, (slot, s)) in suspension.iter_mut().zip(scripts.scripts()).enumerate() {
             let jitter = own.get(usize::from(s.job)).copied().unwrap_or(Time::ZERO);
-            match round.on_bus(k, &set.timings, &own, &events)? {
+            match round.on_bus(k, &set.timings, &own, &events, &whole)? {
                 Some(r) => *slot = r.minus(jitter),
                 None => failed = failed.or(Some(s.job)),
             }
@@ -430,6 +466,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
         }
         // 2. The board once per view; after the default view's analysis, 3., the engine events.
         let mut next_events = events;
+        let mut next_whole = whole;
         for v in 0..=scripts.views {
             round.view_jobs(v, set, blocking, shares, &suspension, &own, &mut unreleased);
             let cut = Cut {
@@ -465,7 +502,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
                         .iter()
                         .find(|s| usize::from(s.row.bus) == b);
                     let Some(s) = on_bus else { continue };
-                    match round.events(b, &mut set.timings, len)? {
+                    match round.events(b, &mut set.timings, len, &mut next_whole)? {
                         Some(e) => *slot = e,
                         None => failed = failed.or(Some(s.job)),
                     }
@@ -473,8 +510,9 @@ pub(super) fn analyse<const N: usize, const M: usize>(
             }
         }
         // 4. The suspending tasks' jobs' responses: the next jitters.
-        converged = next_events == events;
+        converged = next_events == events && next_whole == whole;
         events = next_events;
+        whole = next_whole;
         for (p, (slot, &w)) in own.iter_mut().zip(wcrt.iter()).enumerate().take(len) {
             if scripts.view(p) == 0 {
                 continue;
