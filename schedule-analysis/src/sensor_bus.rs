@@ -1025,7 +1025,10 @@ pub(crate) fn analyse(
             failures = stop;
             break;
         }
-        if next_response == response && next_event == event && next_own == own && next_whole == whole
+        if next_response == response
+            && next_event == event
+            && next_own == own
+            && next_whole == whole
         {
             failures = Vec::new();
             break;
