@@ -23,9 +23,12 @@
 //!   submitting job, costing the engine's charge by its parts ([`SensorBus::script_charge`]): the script's events
 //!   times the per-event figure with interrupt entry and exit, the per-script part once (its end and its client's
 //!   wake), and the condition wait once per START condition (an operation's start, a repeated START). The master
-//!   holds SCL low while an event waits for the engine, so each event's worst response on the CPU (by what it
-//!   carries: plain, with the wait, or the ending one) is added to the script's bus time as well. The app's tasks that are the
-//!   engine's handlers ([`EngineModel::handlers`]) have no row of their own: the engine rows are their charge.
+//!   holds SCL low while an event waits for the engine, so a script's bus time holds its events' time on the CPU:
+//!   the lower of each event's own worst response (by what it carries: plain, with the wait, or the ending one)
+//!   added per event, and the script as one job at the engine's priority over its whole bus time (the wire as
+//!   execution, a blocking per event, each higher job counted once per window: suspension-oblivious). The app's
+//!   tasks that are the engine's handlers ([`EngineModel::handlers`]) have no row of their own: the engine rows are
+//!   their charge.
 //!
 //! The jitters feed the bus responses, which feed the jobs' responses, which are the jitters: iterated from zero
 //! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason.

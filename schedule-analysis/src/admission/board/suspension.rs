@@ -1,8 +1,9 @@
 //! A board whose running jobs run scripts on its sensor buses: the host's `sensor_bus::analyse` on the check's
 //! fixed-capacity arrays (docs/analysis.md, "Self-suspending publishers and the sensor buses", "The chip's check
 //! with scripts"). From zero jitters and event responses, rounds of: each script's response on its bus
-//! (non-preemptive fixed priority, [`can::response_time`], without its siblings), each bus's engine events on the
-//! CPU in the default view ([`crate::board::response_time`]), and the board once per view ([`run_view`]: a view
+//! (non-preemptive fixed priority, [`can::response_time`], without its siblings; its bus time the lower of its
+//! events' own responses and the script as one job at the engine's priority), each bus's engine events and each
+//! script as one job on the CPU in the default view ([`crate::board::response_time`]), and the board once per view ([`run_view`]: a view
 //! per RTIC task with a suspending job, where its jobs cost their suspensions, settles and one blocking per
 //! resumption, every job of every other such task its CPU with jitter `R − C`; and the default view); until no
 //! response changes. Every fixed point and every round counts against [`SCRIPT_ITERATIONS`] ([`Refusal::Budget`]
