@@ -161,7 +161,8 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
     }
 
     /// What a script's events hold SCL on the CPU: its ending event, one with the condition wait per further
-    /// START (as many as its other events allow), the rest plain.
+    /// START (as many as its other events allow), the rest plain. Out of line: taken for the costs and the responses.
+    #[inline(never)]
     fn events_of(row: &ScriptRow, events: &Events) -> Time {
         let Some(others) = row.events.checked_sub(1) else {
             return Time::ZERO;
@@ -180,8 +181,7 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
         k: usize,
         timings: &[TaskTiming; N],
         own: &[Time; N],
-        events: &[Events; MAX_BUSES],
-        whole: &[Option<Time>; N],
+        bus_times: &[Time; N],
     ) -> Result<Option<Time>, Refusal> {
         let list = self.scripts.scripts();
         let me = list.get(k).ok_or(Refusal::Capacity)?;
@@ -193,10 +193,6 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
             jitter: Time::ZERO,
         }; N];
         let (mut len, mut at) = (0, 0);
-        let bus_events = events
-            .get(usize::from(me.row.bus))
-            .copied()
-            .unwrap_or_default();
         let my_view = self.scripts.view(usize::from(me.job));
         for (o, s) in list.iter().enumerate() {
             let sibling = o != k && self.scripts.view(usize::from(s.job)) == my_view;
@@ -208,13 +204,11 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
             if o == k {
                 at = len;
             }
-            // The tighter of two bounds, both sound: each event's own worst response, and the script as one job.
-            let per_event = row_time(s.row.bus_time).plus(Self::events_of(s.row, &bus_events));
-            let bus_time = whole
-                .get(o)
-                .copied()
-                .flatten()
-                .map_or(per_event, |w| w.min(per_event));
+            // Its bus time as the last round's events found it; before any, its wire and stretch alone.
+            let bus_time = match bus_times.get(o) {
+                Some(&t) if t > Time::ZERO => t,
+                _ => row_time(s.row.bus_time),
+            };
             *subset.get_mut(len).ok_or(Refusal::Capacity)? = MessageTiming {
                 // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
                 key: u32::MAX - job.priority,
@@ -303,17 +297,19 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
     /// released job carries the jitter it inherits from its releaser's response, as the host's found jitters do):
     /// each at the engine's priority, interfered with by every job at or above it but the bus's own engine rows
     /// (these very events, one at a time; costed 0 meanwhile), blocked as a job of that priority; the event itself
-    /// takes the place after the jobs at or above it for the while. `None`: unbounded.
+    /// takes the place after the jobs at or above it for the while. Then each script on the bus as one job the
+    /// same way, and its bus time (by script, into `bus_times`) the lower of the two bounds, both sound: its wire
+    /// and stretch plus each event's own response, and the script as one job. `false`: an event is unbounded.
     #[inline(never)]
     fn events(
         &mut self,
         b: usize,
         timings: &mut [TaskTiming; N],
         len: usize,
-        whole: &mut [Option<Time>; N],
-    ) -> Result<Option<Events>, Refusal> {
+        bus_times: &mut [Time; N],
+    ) -> Result<bool, Refusal> {
         let Some(bus) = self.input.table.buses.get(b) else {
-            return Ok(Some(Events::default()));
+            return Ok(true);
         };
         let engine = u32::from(bus.engine_priority);
         for s in self.scripts.scripts() {
@@ -337,8 +333,21 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
             plain.plus(wait),
             plain.plus(row_time(bus.per_script)).plus(wait),
         ];
-        let mut out = Some(Events::default());
-        for (k, cost) in costs.into_iter().enumerate() {
+        let (mut out, mut bounded) = (Events::default(), true);
+        // The three events, then each script on the bus as one job at the engine's priority (the host's
+        // `script_response`): its events' work and its wire time as execution, blocked once per event; one call
+        // site for both. A script's window without a bound leaves its events' bound.
+        let list = self.scripts.scripts();
+        for k in 0..costs.len() + list.len() {
+            let script = k.checked_sub(costs.len());
+            let (cost, resumptions) = match script.map(|i| list.get(i)) {
+                None => (costs.get(k).copied().unwrap_or(Time::ZERO), 1),
+                Some(Some(s)) if usize::from(s.row.bus) == b => (
+                    row_time(s.row.bus_time).plus(Self::events_of(s.row, &costs)),
+                    u64::from(s.row.events),
+                ),
+                Some(_) => continue,
+            };
             if let Some(slot) = timings.get_mut(end) {
                 *slot = TaskTiming {
                     priority: engine,
@@ -352,39 +361,27 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
             let result = crate::board::response_time(
                 timings.get(..=end).unwrap_or(&[]),
                 end,
-                blocking,
+                blocking.times(resumptions),
                 &limits,
                 &mut scratch,
             );
-            match (self.count(result)?, out.as_mut().and_then(|e| e.get_mut(k))) {
-                (Some(r), Some(slot)) => *slot = r,
-                _ => out = None,
+            let r = self.count(result)?;
+            match (script, r) {
+                (Some(i), _) => {
+                    // The events come first: `out` is complete.
+                    let row = list.get(i).map_or(&NO_ROW, |s| s.row);
+                    let per_event = row_time(row.bus_time).plus(Self::events_of(row, &out));
+                    if let Some(slot) = bus_times.get_mut(i) {
+                        *slot = r.map_or(per_event, |w| w.min(per_event));
+                    }
+                }
+                (None, Some(r)) => {
+                    if let Some(slot) = out.get_mut(k) {
+                        *slot = r;
+                    }
+                }
+                (None, None) => bounded = false,
             }
-        }
-        // Each script on the bus as one job at the engine's priority (the host's `script_response`): its events'
-        // work and its wire time as execution, blocked once per event; `None` where it has no bound.
-        for (s, slot) in self.scripts.scripts().iter().zip(whole.iter_mut()) {
-            if usize::from(s.row.bus) != b {
-                continue;
-            }
-            if let Some(t) = timings.get_mut(end) {
-                *t = TaskTiming {
-                    priority: engine,
-                    wcet: row_time(s.row.bus_time).plus(Self::events_of(s.row, &costs)),
-                    period: self.input.limits.horizon,
-                    jitter: Time::ZERO,
-                };
-            }
-            let mut scratch = const { [Counter::ZERO; N] };
-            let limits = self.limits()?;
-            let result = crate::board::response_time(
-                timings.get(..=end).unwrap_or(&[]),
-                end,
-                blocking.times(u64::from(s.row.events)),
-                &limits,
-                &mut scratch,
-            );
-            *slot = self.count(result)?;
         }
         // The jobs as they were.
         if let Some(slot) = timings.get_mut(end) {
@@ -399,7 +396,7 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
                     .unwrap_or(Time::ZERO);
             }
         }
-        Ok(out)
+        Ok(bounded)
     }
 }
 
@@ -441,9 +438,8 @@ pub(super) fn analyse<const N: usize, const M: usize>(
     // The rounds' state: each suspending task's job's own-view response (its scripts' jitter), each bus's event
     // responses; and per job its bound from its own view.
     let mut own = [Time::ZERO; N];
-    let mut events = [Events::default(); MAX_BUSES];
-    // Each script's bus time as one job (by script; `None`: the per-event bound holds).
-    let mut whole: [Option<Time>; N] = [None; N];
+    // Each script's bus time (by script; 0 before the first round's events: its wire and stretch alone).
+    let mut bus_times = [Time::ZERO; N];
     let mut wcrt = [NONE; N];
     let mut suspension = [Time::ZERO; N];
     let mut unreleased = [false; N];
@@ -457,7 +453,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
         // 1. Each script on its bus: its suspension, from its actual submission.
         for (k, (slot, s)) in suspension.iter_mut().zip(scripts.scripts()).enumerate() {
             let jitter = own.get(usize::from(s.job)).copied().unwrap_or(Time::ZERO);
-            match round.on_bus(k, &set.timings, &own, &events, &whole)? {
+            match round.on_bus(k, &set.timings, &own, &bus_times)? {
                 Some(r) => *slot = r.minus(jitter),
                 None => failed = failed.or(Some(s.job)),
             }
@@ -466,8 +462,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
             break;
         }
         // 2. The board once per view; after the default view's analysis, 3., the engine events.
-        let mut next_events = events;
-        let mut next_whole = whole;
+        let mut next_bus_times = bus_times;
         for v in 0..=scripts.views {
             round.view_jobs(v, set, blocking, shares, &suspension, &own, &mut unreleased);
             let cut = Cut {
@@ -493,27 +488,21 @@ pub(super) fn analyse<const N: usize, const M: usize>(
             if v == 0 {
                 // The default view's jobs as analysed: a released job's jitter is now the one it inherits from
                 // its releaser's response (its own plus that response), not its own alone.
-                for (b, slot) in next_events
-                    .iter_mut()
-                    .enumerate()
-                    .take(input.table.buses.len())
-                {
+                for b in 0..input.table.buses.len() {
                     let on_bus = scripts
                         .scripts()
                         .iter()
                         .find(|s| usize::from(s.row.bus) == b);
                     let Some(s) = on_bus else { continue };
-                    match round.events(b, &mut set.timings, len, &mut next_whole)? {
-                        Some(e) => *slot = e,
-                        None => failed = failed.or(Some(s.job)),
+                    if !round.events(b, &mut set.timings, len, &mut next_bus_times)? {
+                        failed = failed.or(Some(s.job));
                     }
                 }
             }
         }
         // 4. The suspending tasks' jobs' responses: the next jitters.
-        converged = next_events == events && next_whole == whole;
-        events = next_events;
-        whole = next_whole;
+        converged = next_bus_times == bus_times;
+        bus_times = next_bus_times;
         for (p, (slot, &w)) in own.iter_mut().zip(wcrt.iter()).enumerate().take(len) {
             if scripts.view(p) == 0 {
                 continue;
