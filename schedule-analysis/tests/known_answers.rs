@@ -796,8 +796,9 @@ fn a_failure_leaves_no_unconverged_bound_behind() {
 ///
 /// Each event's own worst response: 10 + 8 = 18 µs (its window meets one `tick`), so the events' bound is
 /// 100 + 4 × 18 = 172 µs: it counts the one `tick` four times. As one job at priority 5 (the wire executed too):
-/// S = 100 + 4 × 10 + ⌈S/1000⌉·8 → 148 µs, the bound taken. The simulator reaches it: the script starts at 0, its
-/// first event arrives at 25 with `tick`, which runs 25..33; the events run 33..43, 68..78, 103..113 and 138..148.
+/// S = 100 + 4 × 10 + ⌈S/1000⌉·8 → 148 µs, the bound taken. The simulator reaches it: the script starts at 0 (the
+/// engine's job arrives; the wire runs without the CPU), its first event arrives at 25 with `tick`, which runs
+/// 25..33; the events run 33..43, 68..78, 103..113 and 138..148.
 /// Without the interference term the bound would be 140 µs, below that. The client: 1 + 148 + `tick`'s 8 = 157 µs.
 #[test]
 fn a_scripts_bus_time_as_one_job_worked_by_hand() {
@@ -827,8 +828,8 @@ fn a_scripts_bus_time_as_one_job_worked_by_hand() {
         SuspendingJob {
             task: 1,
             arrival: 0,
-            release: 0,
-            pieces: vec![wire, event, wire, event, wire, event, wire, event],
+            release: 25 * us,
+            pieces: vec![event, wire, event, wire, event, wire, event],
         },
         SuspendingJob {
             task: 0,

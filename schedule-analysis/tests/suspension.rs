@@ -490,18 +490,22 @@ fn script_board(above: &[Above], engine: Engine) -> BoardSystem {
     }
 }
 
-/// The script as the engine runs it: from its first START, a stretch of wire, an event's handler at the engine's
-/// priority, and so on to its ending event (the first `starts` events with the condition wait, the last with the
-/// per-script part and the wait); the wire split at random among the gaps.
-fn script_pieces(engine: Engine, rng: &mut Lcg) -> Vec<Piece> {
+/// The script as the engine runs it: from its first START, a stretch of wire (the first, returned apart: the job's
+/// release after its arrival, the START, since the wire runs whether the CPU is free or not), an event's handler at
+/// the engine's priority, and so on to its ending event (the first `starts` events with the condition wait, the
+/// last with the per-script part and the wait); the wire split at random among the gaps.
+fn script_pieces(engine: Engine, rng: &mut Lcg) -> (u64, Vec<Piece>) {
     let (per_event, wait, per_script, events, starts, wire, _) = engine;
     let n = u64::from(events);
     let mut left = wire * US;
+    let mut first = 0;
     let mut pieces = Vec::new();
     for e in 0..n {
         let gap = if e + 1 == n { left } else { rng.split(left) };
         left -= gap;
-        if gap > 0 {
+        if e == 0 {
+            first = gap;
+        } else if gap > 0 {
             pieces.push(Piece::Settle(gap));
         }
         let cost = if e + 1 == n {
@@ -513,7 +517,7 @@ fn script_pieces(engine: Engine, rng: &mut Lcg) -> Vec<Piece> {
         };
         pieces.push(cpu(cost * US, false));
     }
-    pieces
+    (first, pieces)
 }
 
 /// Simulates the engine running scripts (each from its first START) among random jobs of the tasks at or above
@@ -565,11 +569,12 @@ fn check_script(above: &[Above], engine: Engine, seed: u64) -> Result<usize, Str
     let mut start = rng.below(bound / US + 1) * US;
     let mut scripts = 0;
     while start <= horizon {
+        let (first, pieces) = script_pieces(engine, &mut rng);
         jobs.push(SuspendingJob {
             task: engine_task,
             arrival: start,
-            release: start,
-            pieces: script_pieces(engine, &mut rng),
+            release: start + first,
+            pieces,
         });
         scripts += 1;
         start += bound + rng.below(bound / US + 1) * US;

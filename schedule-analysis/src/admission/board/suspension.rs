@@ -133,6 +133,8 @@ struct Round<'r, 'a, const N: usize, const M: usize> {
     base: &'r [Time; N],
     /// Iterations spent on the board so far.
     spent: u64,
+    /// Whether this round's engine events moved a script's bus time (the rounds' state, kept in place).
+    moved: bool,
 }
 
 impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
@@ -371,8 +373,10 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
                     // The events come first: `out` is complete.
                     let row = list.get(i).map_or(&NO_ROW, |s| s.row);
                     let per_event = row_time(row.bus_time).plus(Self::events_of(row, &out));
-                    if let Some(slot) = bus_times.get_mut(i) {
-                        *slot = r.map_or(per_event, |w| w.min(per_event));
+                    let bus_time = r.map_or(per_event, |w| w.min(per_event));
+                    if let Some(slot) = bus_times.get_mut(i).filter(|slot| **slot != bus_time) {
+                        *slot = bus_time;
+                        self.moved = true;
                     }
                 }
                 (None, Some(r)) => {
@@ -434,6 +438,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
         scripts: &scripts,
         base: &base,
         spent: 0,
+        moved: false,
     };
     // The rounds' state: each suspending task's job's own-view response (its scripts' jitter), each bus's event
     // responses; and per job its bound from its own view.
@@ -462,7 +467,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
             break;
         }
         // 2. The board once per view; after the default view's analysis, 3., the engine events.
-        let mut next_bus_times = bus_times;
+        round.moved = false;
         for v in 0..=scripts.views {
             round.view_jobs(v, set, blocking, shares, &suspension, &own, &mut unreleased);
             let cut = Cut {
@@ -494,15 +499,14 @@ pub(super) fn analyse<const N: usize, const M: usize>(
                         .iter()
                         .find(|s| usize::from(s.row.bus) == b);
                     let Some(s) = on_bus else { continue };
-                    if !round.events(b, &mut set.timings, len, &mut next_bus_times)? {
+                    if !round.events(b, &mut set.timings, len, &mut bus_times)? {
                         failed = failed.or(Some(s.job));
                     }
                 }
             }
         }
         // 4. The suspending tasks' jobs' responses: the next jitters.
-        converged = next_bus_times == bus_times;
-        bus_times = next_bus_times;
+        converged = !round.moved;
         for (p, (slot, &w)) in own.iter_mut().zip(wcrt.iter()).enumerate().take(len) {
             if scripts.view(p) == 0 {
                 continue;
