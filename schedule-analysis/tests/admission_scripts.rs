@@ -852,3 +852,20 @@ fn an_event_counts_a_released_jobs_inherited_jitter_on_the_chip() {
         other => panic!("{other:?}"),
     }
 }
+
+/// A build that does not link the check's sensor-bus rounds (a board without `scripted-i2c`) takes no table that
+/// states a bus or a script: the lowering refuses it, naming the first such board (the build fails), and takes the
+/// shipped timing files' table, which states none.
+#[test]
+fn a_build_without_the_rounds_takes_no_table_with_buses() {
+    assert_eq!(
+        robot().check_sensor_buses_linked(false),
+        Err(admission_host::SensorBusesNotLinked {
+            board: "diwheeldrive".into()
+        })
+    );
+    assert_eq!(robot().check_sensor_buses_linked(true), Ok(()));
+    let shipped =
+        admission_host::lower_robot(&common::workspace()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(shipped.check_sensor_buses_linked(false), Ok(()));
+}
