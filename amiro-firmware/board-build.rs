@@ -42,7 +42,10 @@ fn main() {
         env::set_var("AMIRO_REVISION", revision);
     }
     println!("cargo:rerun-if-env-changed=AMIRO_REVISION");
-    let table = amiro_firmware::admission::table_source(&root).unwrap_or_else(|e| {
+    // A board without `scripted-i2c` links no sensor-bus rounds (`amiro-firmware/sensor-buses`), so its
+    // table may state no sensor bus and no script.
+    let sensor_buses = env::var_os("CARGO_FEATURE_SCRIPTED_I2C").is_some();
+    let table = amiro_firmware::admission::table_source(&root, sensor_buses).unwrap_or_else(|e| {
         panic!("admission table: the apps and the timing files disagree (as `cargo xtask analyze` would say): {e}")
     });
     fs::write(out.join("admission_table.rs"), table).expect("write admission_table.rs");

@@ -724,9 +724,14 @@ fn reason(refusal: &Refusal) -> RefusalReason {
 extern crate std;
 
 /// Host side, for `board-build.rs`: the robot's admission table as Rust source, from the timing
-/// files and app sources under `root`; an error when they disagree (the build fails).
+/// files and app sources under `root`; an error when they disagree, or when the table states a
+/// sensor bus or a script and the build does not link the check's sensor-bus rounds
+/// (`sensor_buses`: the board's `scripted-i2c`) (the build fails).
 #[cfg(not(target_os = "none"))]
-pub fn table_source(root: &std::path::Path) -> Result<std::string::String, std::string::String> {
+pub fn table_source(
+    root: &std::path::Path,
+    sensor_buses: bool,
+) -> Result<std::string::String, std::string::String> {
     use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
     use std::string::ToString;
     let robot = admission_host::lower(
@@ -736,6 +741,9 @@ pub fn table_source(root: &std::path::Path) -> Result<std::string::String, std::
         FrameCostSpec::Exact,
     )
     .map_err(|e| e.to_string())?;
+    robot
+        .check_sensor_buses_linked(sensor_buses)
+        .map_err(|e| e.to_string())?;
     Ok(robot.to_rust_source("::amiro_firmware::admission::schedule_analysis"))
 }
 

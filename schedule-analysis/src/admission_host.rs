@@ -107,6 +107,28 @@ pub struct OwnedRobot {
     pub sources: Vec<String>,
 }
 
+/// A table with sensor buses or scripts lowered for a build that does not link the check's sensor-bus rounds
+/// (`schedule-analysis`'s feature `sensor-buses`, which a board's `scripted-i2c` enables): its check would refuse
+/// every request, so the build fails instead.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SensorBusesNotLinked {
+    /// The first board whose table states a sensor bus or a script.
+    pub board: String,
+}
+
+impl std::fmt::Display for SensorBusesNotLinked {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}'s admission table states sensor buses or scripts, and this build does not link the check's \
+             sensor-bus rounds (enable the board's `scripted-i2c`, i.e. `schedule-analysis/sensor-buses`)",
+            self.board
+        )
+    }
+}
+
+impl std::error::Error for SensorBusesNotLinked {}
+
 fn read_timing(root: &Path, path: &Path) -> Result<Timing, BuildError> {
     let file = path
         .strip_prefix(root)
@@ -829,6 +851,24 @@ impl OwnedRobot {
             )?);
         }
         Some(out)
+    }
+
+    /// Whether a build that links the check's sensor-bus rounds or not (`sensor_buses`) can decide this table:
+    /// one without them cannot take a board that states a sensor bus or a script.
+    pub fn check_sensor_buses_linked(
+        &self,
+        sensor_buses: bool,
+    ) -> Result<(), SensorBusesNotLinked> {
+        match self.boards.iter().find(|b| {
+            !b.buses.is_empty()
+                || !b.task_scripts.is_empty()
+                || b.topics.iter().any(|t| !t.scripts.is_empty())
+        }) {
+            Some(b) if !sensor_buses => Err(SensorBusesNotLinked {
+                board: b.name.clone(),
+            }),
+            _ => Ok(()),
+        }
     }
 
     /// The table as Rust source: `static ROBOT: RobotTable<'static>` and its capacities, with types from

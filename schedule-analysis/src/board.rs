@@ -287,6 +287,8 @@ pub fn response_time_at_level(
 
 /// The response time of `tasks[index]` whose level ends at `end`, the prefix `tasks[..end]` known to be ordered;
 /// `own`: its CPU share when the caller has worked it out.
+// Out of line: one instance for every caller (the board analysis and, with `sensor-buses`, the engine events).
+#[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn response_time_in(
     tasks: &[TaskTiming],

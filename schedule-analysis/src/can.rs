@@ -266,6 +266,8 @@ pub fn response_times_into<R: Results + ?Sized>(
     }
 }
 
+// Out of line: one instance for every caller (the bus analysis and, with `sensor-buses`, a script's bus response).
+#[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn response_time_from(
     messages: &[MessageTiming],

@@ -23,9 +23,12 @@
 //!   submitting job, costing the engine's charge by its parts ([`SensorBus::script_charge`]): the script's events
 //!   times the per-event figure with interrupt entry and exit, the per-script part once (its end and its client's
 //!   wake), and the condition wait once per START condition (an operation's start, a repeated START). The master
-//!   holds SCL low while an event waits for the engine, so each event's worst response on the CPU (by what it
-//!   carries: plain, with the wait, or the ending one) is added to the script's bus time as well. The app's tasks that are the
-//!   engine's handlers ([`EngineModel::handlers`]) have no row of their own: the engine rows are their charge.
+//!   holds SCL low while an event waits for the engine, so a script's bus time holds its events' time on the CPU:
+//!   the lower of each event's own worst response (by what it carries: plain, with the wait, or the ending one)
+//!   added per event, and the script as one job at the engine's priority over its whole bus time (the wire as
+//!   execution, a blocking per event, each higher job counted once per window: suspension-oblivious). The app's
+//!   tasks that are the engine's handlers ([`EngineModel::handlers`]) have no row of their own: the engine rows are
+//!   their charge.
 //!
 //! The jitters feed the bus responses, which feed the jobs' responses, which are the jitters: iterated from zero
 //! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason.
@@ -848,6 +851,8 @@ pub(crate) fn analyse(
     // Each job of a suspending RTIC task (script or not): its own-view response.
     let mut own = vec![Time::ZERO; n];
     let mut event = vec![EventResponses::default(); buses.len()];
+    // Each script's bus time as one job at its engine's priority (`None`: no such bound; the per-event one holds).
+    let mut whole: Vec<Option<Time>> = vec![None; scripts.len()];
     let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
     let mut jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
     let mut on_bus: Vec<Vec<OnBus>> = vec![Vec::new(); buses.len()];
@@ -857,7 +862,8 @@ pub(crate) fn analyse(
         let mut suspension = vec![Time::ZERO; scripts.len()];
         let mut stop: Vec<Failure> = Vec::new();
         for (b, results) in on_bus.iter_mut().enumerate() {
-            *results = bus_responses(board, scripts, b, &response, event.get(b).copied(), limits);
+            let bus_event = event.get(b).copied();
+            *results = bus_responses(board, scripts, b, &response, bus_event, &whole, limits);
             for s in results.iter() {
                 match s.result {
                     Ok(r) => {
@@ -947,6 +953,7 @@ pub(crate) fn analyse(
         jitters = next_jitters;
         // 3. Each bus's engine event on the CPU, in the default view.
         let mut next_event = event.clone();
+        let mut next_whole = whole.clone();
         if let Some((view_costs, view_jitters)) = &default_view {
             for (b, bus) in buses.iter().enumerate() {
                 // The bus's own engine rows are this handler's events, one at a time: not its interference.
@@ -983,6 +990,12 @@ pub(crate) fn analyse(
                     }
                     Err(e) => stop.push(Failure::Event(b, Unbounded::Analysis(e).to_string())),
                 }
+                // Each script on the bus as one job: its events' work, its wire time as if executed.
+                for (k, s) in scripts.iter().enumerate().filter(|(_, s)| s.bus == b) {
+                    if let Some(slot) = next_whole.get_mut(k) {
+                        *slot = script_response(bus, s, &tasks, &sections, limits).ok();
+                    }
+                }
             }
         }
         // 4. The suspending jobs' responses: the scripts' next jitters.
@@ -1015,12 +1028,17 @@ pub(crate) fn analyse(
             failures = stop;
             break;
         }
-        if next_response == response && next_event == event && next_own == own {
+        if next_response == response
+            && next_event == event
+            && next_own == own
+            && next_whole == whole
+        {
             failures = Vec::new();
             break;
         }
         response = next_response;
         event = next_event;
+        whole = next_whole;
         own = next_own;
     }
     if !failures.is_empty() {
@@ -1056,6 +1074,7 @@ fn bus_responses(
     b: usize,
     response: &[Time],
     event: Option<EventResponses>,
+    whole: &[Option<Time>],
     limits: &Limits,
 ) -> Vec<OnBus> {
     let priority = |k: usize| {
@@ -1080,7 +1099,8 @@ fn bus_responses(
         Some(MessageTiming {
             // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
             key: u32::MAX - priority(k),
-            frame_time: s.wire.plus(s.stretch).plus(event.of(s)),
+            // The tighter of two bounds, both sound: each event's own worst response, and the script as one job.
+            frame_time: bus_time(s, &event, whole.get(k).copied().flatten()),
             frames: 1,
             period: board.tasks.get(s.task).map_or(Time::ZERO, |t| t.period),
             jitter: response.get(k).copied().unwrap_or(Time::ZERO),
@@ -1123,6 +1143,41 @@ fn bus_responses(
         .collect()
 }
 
+/// A script's bus time, from its first START to its end: its wire time and stretch plus each event's own worst
+/// response (`event`), or its bound as one job (`whole`, [`script_response`]) where that is lower.
+fn bus_time(script: &Script, event: &EventResponses, whole: Option<Time>) -> Time {
+    let per_event = script.wire.plus(script.stretch).plus(event.of(script));
+    whole.map_or(per_event, |w| w.min(per_event))
+}
+
+/// A script's bus time as one job at its engine's priority (docs/analysis.md, "Self-suspending publishers and the
+/// sensor buses"): from its first START to its end the engine runs the script's events' handlers (their work as
+/// [`EventResponses::of`] places it: the ending one, one with the condition wait per further START, the rest plain)
+/// and is suspended on the wire between them. Suspension-oblivious (Chen et al. 2019, §5), the wire time and the
+/// stretch are executed too, and each event, a resumption, may be blocked once by a lower critical section with a
+/// ceiling at or above the engine's priority: one busy window at the engine's priority over `tasks` (every other
+/// task at or above it, with its jitter), so each higher job is counted once per window, not once per event.
+fn script_response(
+    bus: &SensorBus,
+    script: &Script,
+    tasks: &[TaskTiming],
+    sections: &[board::CriticalSection],
+    limits: &Limits,
+) -> Result<Time, AnalysisError> {
+    let wait = part_time(bus.condition_wait.as_ref());
+    let work = EventResponses {
+        plain: bus.per_event,
+        waiting: bus.per_event.plus(wait),
+        ending: bus
+            .per_event
+            .plus(part_time(bus.per_script.as_ref()))
+            .plus(wait),
+    }
+    .of(script);
+    let cost = script.wire.plus(script.stretch).plus(work);
+    engine_response(bus, cost, u64::from(script.events), tasks, sections, limits)
+}
+
 /// One engine event's worst response on the CPU: its `cost` at the engine's priority, interfered with by every
 /// other task of at least that priority (`tasks`: not the bus's own engine rows, which are these very events),
 /// blocked by SRP as a task of that priority. One instance: the block waits for the engine at each event, and the
@@ -1130,6 +1185,19 @@ fn bus_responses(
 fn event_response(
     bus: &SensorBus,
     cost: Time,
+    tasks: &[TaskTiming],
+    sections: &[board::CriticalSection],
+    limits: &Limits,
+) -> Result<Time, AnalysisError> {
+    engine_response(bus, cost, 1, tasks, sections, limits)
+}
+
+/// One job of `cost` at the engine's priority, after every task of at least that priority in `tasks`, blocked once
+/// per resumption (`resumptions`, each by SRP as a task of that priority); one instance.
+fn engine_response(
+    bus: &SensorBus,
+    cost: Time,
+    resumptions: u64,
     tasks: &[TaskTiming],
     sections: &[board::CriticalSection],
     limits: &Limits,
@@ -1148,7 +1216,7 @@ fn event_response(
     });
     let index = timings.len() - 1;
     let mut scratch = vec![Counter::default(); timings.len()];
-    let blocking = board::srp_blocking(bus.engine_priority, sections);
+    let blocking = board::srp_blocking(bus.engine_priority, sections).times(resumptions);
     board::response_time(&timings, index, blocking, limits, &mut scratch).map(|r| r.wcrt)
 }
 

@@ -771,3 +771,101 @@ fn the_known_answers_through_the_chip() {
         [Some(110), Some(30), Some(90)]
     );
 }
+
+/// `tests/sensor_buses.rs`'s `an_event_counts_a_released_jobs_inherited_jitter` as chip rows: `tick` (9, 1 µs
+/// every 50 µs, 10 µs jitter) releases `follow` (8, 20 µs) above the engine (7, 27 µs per event); the job (3,
+/// 50 µs) runs a one-byte script (27.5 µs on the wire, 4 events). An event counts `follow` with the jitter it
+/// inherits from `tick`'s 11 µs response: 69 µs (the simulator reaches 68); the script as one job meets `follow`
+/// with that jitter too (261.5 µs on the bus, below the events' 303.5), the job 734.5 µs, as the host finds.
+/// With `follow`'s own jitter the event was 49 µs and the job's bound below the host's.
+#[test]
+fn an_event_counts_a_released_jobs_inherited_jitter_on_the_chip() {
+    let decide = |job_deadline: u32| {
+        let row =
+            |cost_us: u32, period_us: u32, jitter_us: u32, priority: u8, released_by: u8| TaskRow {
+                cost: cost_us * 1000,
+                period: period_us * 1000,
+                deadline: NO_DEADLINE,
+                jitter: jitter_us * 1000,
+                priority,
+                released_by,
+                own_frame: false,
+                deadline_own_frames: 0,
+                share: SHARE_AT_RUNTIME,
+            };
+        let tasks = [
+            row(1, 50, 10, 9, NO_RELEASER),
+            row(20, 50, 0, 8, 0),
+            TaskRow {
+                deadline: job_deadline,
+                ..row(50, 100_000, 0, 3, NO_RELEASER)
+            },
+        ];
+        let scripts = [ScriptRow {
+            bus: 0,
+            bus_time: 27_500,
+            events: 4,
+            starts: 1,
+            settle: 0,
+        }];
+        let task_scripts = [(2u8, &scripts[..])];
+        let buses = [BusRow {
+            engine_priority: 7,
+            per_event: 27_000,
+            per_script: 0,
+            condition_wait: 0,
+        }];
+        let boards = [BoardTable {
+            name: "b",
+            tasks: &tasks,
+            sections: &[],
+            blocking: &[],
+            topics: &[],
+            shortest_dlc: 0,
+            levels: [None; 4],
+            monotonic: None,
+            can_tx: None,
+            command_handler: None,
+            buses: &buses,
+            task_scripts: &task_scripts,
+            publisher_tasks: [0; 4],
+        }];
+        let robot = RobotTable {
+            boards: &boards,
+            bit_time: Time::from_ns(1000),
+            frame_cost: FrameCost::Exact,
+        };
+        admission::evaluate::<8, 8>(&robot, &[]).refusal
+    };
+    assert_eq!(decide(734_500), None);
+    match decide(734_499) {
+        Some(Refusal::Deadline(v)) => {
+            assert_eq!(
+                v.culprit,
+                Culprit::Task {
+                    board: 0,
+                    task: TaskId::Fixed(2),
+                }
+            );
+            assert_eq!(v.wcrt, Some(Time::from_ns(734_500)));
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// A build that does not link the check's sensor-bus rounds (a board without `scripted-i2c`) takes no table that
+/// states a bus or a script: the lowering refuses it, naming the first such board (the build fails), and takes the
+/// shipped timing files' table, which states none.
+#[test]
+fn a_build_without_the_rounds_takes_no_table_with_buses() {
+    assert_eq!(
+        robot().check_sensor_buses_linked(false),
+        Err(admission_host::SensorBusesNotLinked {
+            board: "diwheeldrive".into()
+        })
+    );
+    assert_eq!(robot().check_sensor_buses_linked(true), Ok(()));
+    let shipped =
+        admission_host::lower_robot(&common::workspace()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(shipped.check_sensor_buses_linked(false), Ok(()));
+}

@@ -789,3 +789,59 @@ fn a_failure_leaves_no_unconverged_bound_behind() {
         "above the 6 µs the failed round gave τ2"
     );
 }
+
+/// A script's bus time as one job, worked by hand. The engine at priority 5 takes 10 µs an event (no entry or exit
+/// here); a script of 100 µs on the wire raises 4 events; `tick` (priority 6) runs 8 µs every 1 ms; the client
+/// (priority 1) runs 1 µs.
+///
+/// Each event's own worst response: 10 + 8 = 18 µs (its window meets one `tick`), so the events' bound is
+/// 100 + 4 × 18 = 172 µs: it counts the one `tick` four times. As one job at priority 5 (the wire executed too):
+/// S = 100 + 4 × 10 + ⌈S/1000⌉·8 → 148 µs, the bound taken. The simulator reaches it: the script starts at 0 (the
+/// engine's job arrives; the wire runs without the CPU), its first event arrives at 25 with `tick`, which runs
+/// 25..33; the events run 33..43, 68..78, 103..113 and 138..148.
+/// Without the interference term the bound would be 140 µs, below that. The client: 1 + 148 + `tick`'s 8 = 157 µs.
+#[test]
+fn a_scripts_bus_time_as_one_job_worked_by_hand() {
+    let mut board = suspending_board(
+        vec![
+            board_task("tick", 6, 8, 1000),
+            board_task("client", 1, 1, 100_000),
+        ],
+        &[(1, 100)],
+    );
+    board.sensor_buses.buses[0].engine_priority = 5;
+    board.sensor_buses.buses[0].per_event = Time::from_us(10);
+    board.sensor_buses.scripts[0].events = 4;
+    let result = analysis::analyse_board(&board, &Limits::default());
+    let bus = &result.sensor_buses[0];
+    assert_eq!(bus.event_response, Some(Time::from_us(18)));
+    assert_eq!(bus.scripts[0].bus_time, Time::from_us(148));
+    assert_eq!(result.tasks[1].wcrt(), Some(Time::from_us(157)));
+
+    let us = 1000;
+    let event = Piece::Cpu(Segment {
+        length: 10 * us,
+        lock: None,
+    });
+    let wire = Piece::Settle(25 * us);
+    let jobs = [
+        SuspendingJob {
+            task: 1,
+            arrival: 0,
+            release: 25 * us,
+            pieces: vec![event, wire, event, wire, event, wire, event],
+        },
+        SuspendingJob {
+            task: 0,
+            arrival: 25 * us,
+            release: 25 * us,
+            pieces: vec![Piece::Cpu(Segment {
+                length: 8 * us,
+                lock: None,
+            })],
+        },
+    ];
+    let simulated = sim::suspending_run(&[6, 5], &[0, 1], &[], &jobs);
+    assert_eq!(simulated[0], 148 * us);
+    assert!(Time::from_ns(simulated[0]) <= bus.scripts[0].bus_time);
+}

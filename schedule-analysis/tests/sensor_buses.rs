@@ -3,7 +3,8 @@
 //! without scripts is analysed as before.
 
 use schedule_analysis::analysis::{self, Options};
-use schedule_analysis::busy_window::Limits;
+use schedule_analysis::board::{self, TaskTiming};
+use schedule_analysis::busy_window::{Counter, Limits};
 use schedule_analysis::model::{BoardModel, FrameCostSpec, Model, OverheadTimes};
 use schedule_analysis::report::{self, Format, Report};
 use schedule_analysis::scenario;
@@ -12,6 +13,7 @@ use schedule_analysis::time::Time;
 use serde_json::json;
 
 mod common;
+mod sim;
 
 /// A board with a publisher job that runs a 6-byte script (one START) on `i2c1` at 400 kHz, a lower task, and
 /// the engine at priority 7 with 2 µs per event (1 µs entry and exit).
@@ -397,9 +399,11 @@ fn a_job_of_several_scripts_has_an_engine_row_per_script() {
             .collect::<Vec<_>>(),
         vec![(0, 0, 2, Time::ZERO), (1, 1, 2, Time::from_us(66))]
     );
-    // An i2c2 event (2 µs at priority 6) may wait for i2c1's engine row (42 µs at 7): its response 44 µs, so the
-    // second script's bus time is 300 + 4 × 44 = 476 µs; i2c1's events still answer in 3 µs (192 µs as above).
-    // The job: 50 + 192 + 476 + its settle 66 + both engine rows (42 + 8, released by the job, above it) = 834 µs.
+    // An i2c2 event (2 µs at priority 6) may wait for i2c1's engine row (42 µs at 7): its response 44 µs, so each
+    // event's own response gives the second script 300 + 4 × 44 = 476 µs on the bus; as one job at priority 6 it
+    // meets that row once (one instance per 10 ms): 300 + 4 × 2 + 42 = 350 µs, the bound taken. i2c1's events
+    // still answer in 3 µs (192 µs as above). The job: 50 + 192 + 350 + its settle 66 + both engine rows (42 + 8,
+    // released by the job, above it) = 708 µs.
     let result = analysis::analyse_board(b, &Limits::default());
     assert_eq!(
         result.sensor_buses[1].event_response,
@@ -407,9 +411,9 @@ fn a_job_of_several_scripts_has_an_engine_row_per_script() {
     );
     assert_eq!(
         result.sensor_buses[1].scripts[0].bus_time,
-        Time::from_us(476)
+        Time::from_us(350)
     );
-    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(834)));
+    assert_eq!(result.tasks[0].wcrt(), Some(Time::from_us(708)));
     assert_eq!(result.sensor_buses[1].scripts[0].task, "publish[floor]#2");
     assert_eq!(result.sensor_buses[1].scripts[0].settle, Time::from_us(66));
     let report = Report::build(&system, "t".into(), Vec::new(), Vec::new(), None);
@@ -882,4 +886,102 @@ fn engine_handlers_on_a_bus_without_scripts_are_refused() {
         ),
         Ok(())
     );
+}
+
+/// A board whose timer job `tick` (priority 9, 1 µs every 50 µs, 10 µs release jitter) releases `follow`
+/// (priority 8, 20 µs) above the engine (priority 7, 26 µs per event with 1 µs entry and exit), and a publisher job
+/// at priority 3 with a one-byte script: `follow`'s releases lie 1 to 11 µs after `tick`'s activation.
+fn released_above_the_engine() -> BoardModel {
+    board(json!({
+        "name": "b",
+        "overheads": { "isr_entry_us": 0.5, "isr_exit_us": 0.5 },
+        "sensor_buses": [{
+            "name": "i2c1", "bitrate": 400000,
+            "engine": { "priority": 7, "per_event_us": 26.0, "per_event_from": "estimate",
+                        "source": "a figure large enough that two of follow's jobs reach one event" }
+        }],
+        "tasks": [
+            { "name": "tick", "priority": 9, "wcet_us": 1.0, "period_us": 50.0, "jitter_us": 10.0 },
+            { "name": "follow", "priority": 8, "wcet_us": 20.0, "period_us": 50.0, "released_by": "tick" },
+            { "name": "publish[floor]", "priority": 3, "wcet_us": 50.0, "period_us": 100000.0,
+              "job_of": "publish",
+              "script": { "bus": "i2c1", "bytes": 1, "source": "one address byte",
+                          "stretch_us": 0.0, "stretch_source": "none stated" } }
+        ]
+    }))
+}
+
+/// An engine event's response counts a released job above the engine with the jitter it inherits from its
+/// releaser (its own plus the releaser's response), not its own alone. The simulator: `tick` released 10 µs late
+/// runs 10 to 11 µs, `follow` 11 to 31 µs, an event of 27 µs arriving at 11 µs runs 31 to 50, `tick`'s next job
+/// (on time) 50 to 51, `follow`'s 51 to 71, the event's last 8 µs 71 to 79: 68 µs. With `follow`'s own jitter (0)
+/// the event's window holds one `follow`: 27 + 2 × 1 + 20 = 49 µs, below that; with its inherited 11 µs:
+/// 27 + 2 × 1 + 2 × 20 = 69 µs. The script: 11 bit times (27.5 µs) and 4 events of 69 µs, 303.5 µs on the bus by
+/// each event's own response; as one job of 27.5 + 4 × 27 = 135.5 µs at priority 7 it meets `tick` 6 times
+/// (⌈(261.5 + 10)/50⌉) and `follow` 6 times (⌈(261.5 + 11)/50⌉): 135.5 + 6 + 120 = 261.5 µs, the bound taken
+/// (with `follow`'s own jitter it would be 241.5 µs). The job: 50 + 261.5 + its engine row's 108 + 15 of `tick`'s
+/// and `follow`'s jobs (15 × 21) = 734.5 µs (`tests/admission_scripts.rs` decides the same from the chip's rows).
+#[test]
+fn an_event_counts_a_released_jobs_inherited_jitter() {
+    let model = Model {
+        name: None,
+        boards: vec![released_above_the_engine()],
+        can: None,
+    };
+    let system = model.validate().expect("valid");
+    let result = analysis::analyse_board(&system.boards[0], &Limits::default());
+    assert_eq!(result.tasks[1].jitter, Time::from_us(11));
+    let bus = &result.sensor_buses[0];
+    assert_eq!(bus.event_response, Some(Time::from_us(69)));
+    assert_eq!(bus.scripts[0].bus_time, Time::from_ns(261_500));
+    assert_eq!(result.tasks[2].wcrt(), Some(Time::from_ns(734_500)));
+
+    let us = 1000;
+    let job = |task, arrival: u64, release: u64, length: u64| sim::Job {
+        task,
+        arrival: arrival * us,
+        release: release * us,
+        segments: vec![sim::Segment {
+            length: length * us,
+            lock: None,
+        }],
+    };
+    let jobs = [
+        job(0, 0, 10, 1),
+        job(1, 11, 11, 20),
+        job(2, 11, 11, 27),
+        job(0, 50, 50, 1),
+        job(1, 51, 51, 20),
+    ];
+    let responses = sim::board_run(&[9, 8, 7], &[], &jobs);
+    let event = Time::from_ns(responses[2]);
+    assert_eq!(event, Time::from_us(68));
+    assert!(event <= bus.event_response.expect("bounded"));
+    // What the event's window gives with `follow`'s own jitter: below the simulated response.
+    let own_jitter = [
+        TaskTiming {
+            priority: 9,
+            wcet: Time::from_us(1),
+            period: Time::from_us(50),
+            jitter: Time::from_us(10),
+        },
+        TaskTiming {
+            priority: 8,
+            wcet: Time::from_us(20),
+            period: Time::from_us(50),
+            jitter: Time::ZERO,
+        },
+        TaskTiming {
+            priority: 7,
+            wcet: Time::from_us(27),
+            period: Limits::default().horizon,
+            jitter: Time::ZERO,
+        },
+    ];
+    let mut scratch = [Counter::default(); 3];
+    let optimistic =
+        board::response_time(&own_jitter, 2, Time::ZERO, &Limits::default(), &mut scratch)
+            .expect("bounded");
+    assert_eq!(optimistic.wcrt, Time::from_us(49));
+    assert!(optimistic.wcrt < event);
 }

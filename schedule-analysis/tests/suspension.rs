@@ -9,7 +9,7 @@ use proptest::prelude::*;
 use schedule_analysis::analysis;
 use schedule_analysis::busy_window::Limits;
 use schedule_analysis::model::{BoardSystem, OverheadTimes, TaskKind, TaskSpec};
-use schedule_analysis::sensor_bus::{BoardBuses, PerEventFrom, Script, SensorBus};
+use schedule_analysis::sensor_bus::{BoardBuses, Part, PerEventFrom, Script, SensorBus};
 use schedule_analysis::time::Time;
 
 mod sim;
@@ -389,4 +389,308 @@ fn the_random_sets_are_mostly_bounded() {
     );
     assert!(jobs > 10_000, "{jobs} jobs checked");
     assert!(several > 50, "{several} bounded jobs of several scripts");
+}
+
+/// A task at or above the engine's priority in [`script_board`]: priority (5 to 7), CPU (µs), period (µs), release
+/// jitter (µs), whether it locks the resource the task below the engine locks.
+type Above = (u32, u64, u64, u64, bool);
+
+/// The engine's figures in [`script_board`] (µs): per event, the condition wait, the per-script part; and the
+/// script's events, STARTs, wire time (µs) and the critical section of the task below the engine (µs, 0: none).
+type Engine = (u64, u64, u64, u32, u32, u64, u64);
+
+/// The engine's priority in [`script_board`].
+const ENGINE: u32 = 5;
+
+/// A board with one bus whose engine runs at priority 5: the tasks `above` (at or above it), a task at 2 whose jobs
+/// are one critical section on a resource some of them may lock too, and a client at 1 that runs one script.
+fn script_board(above: &[Above], engine: Engine) -> BoardSystem {
+    let (per_event, wait, per_script, events, starts, wire, section) = engine;
+    let task =
+        |name: String, priority, wcet: u64, period: u64, jitter: u64, lock: Option<u64>| TaskSpec {
+            name: name.clone(),
+            priority,
+            wcet: Time::from_us(wcet),
+            bcet: Time::ZERO,
+            period: Time::from_us(period),
+            deadline: Time::from_us(period),
+            deadline_follows_period: true,
+            jitter: Time::from_us(jitter),
+            sections: lock
+                .map(|l| vec![("r".to_string(), Time::from_us(l))])
+                .unwrap_or_default(),
+            blocking: None,
+            kind: TaskKind::Plain,
+            released_by: None,
+            sporadic: false,
+            job_of: Some(name),
+        };
+    let mut tasks: Vec<TaskSpec> = above
+        .iter()
+        .enumerate()
+        .map(|(i, &(priority, wcet, period, jitter, locks))| {
+            task(
+                format!("a{i}"),
+                priority,
+                wcet,
+                period,
+                jitter,
+                locks.then_some(1),
+            )
+        })
+        .collect();
+    tasks.push(task(
+        "lower".into(),
+        2,
+        section.max(1),
+        40,
+        0,
+        (section > 0).then_some(section),
+    ));
+    tasks.push(task("client".into(), 1, 1, 1_000_000, 0, None));
+    let part = |us: u64| {
+        (us > 0).then(|| Part {
+            time: Time::from_us(us),
+            from: PerEventFrom::Estimate,
+            source: "random".into(),
+        })
+    };
+    BoardSystem {
+        name: "engine".into(),
+        overheads: OverheadTimes::default(),
+        sensor_buses: BoardBuses {
+            buses: vec![SensorBus {
+                name: "i2c1".into(),
+                bitrate: 400_000,
+                bit_time: Time::from_ns(2500),
+                engine_priority: ENGINE,
+                per_event: Time::from_us(per_event),
+                per_event_from: PerEventFrom::Estimate,
+                source: "random".into(),
+                per_script: part(per_script),
+                condition_wait: part(wait),
+            }],
+            scripts: vec![Script {
+                task: tasks.len() - 1,
+                bus: 0,
+                wire: Time::from_us(wire),
+                stretch: Time::ZERO,
+                events,
+                starts,
+                engine_row: usize::MAX,
+                position: 0,
+                of: 1,
+                settle: Time::ZERO,
+            }],
+        },
+        tasks,
+        idle_sections: Vec::new(),
+        can_tx_task: None,
+        static_ceilings: Vec::new(),
+    }
+}
+
+/// The script as the engine runs it: from its first START, a stretch of wire (the first, returned apart: the job's
+/// release after its arrival, the START, since the wire runs whether the CPU is free or not), an event's handler at
+/// the engine's priority, and so on to its ending event (the first `starts` events with the condition wait, the
+/// last with the per-script part and the wait); the wire split at random among the gaps.
+fn script_pieces(engine: Engine, rng: &mut Lcg) -> (u64, Vec<Piece>) {
+    let (per_event, wait, per_script, events, starts, wire, _) = engine;
+    let n = u64::from(events);
+    let mut left = wire * US;
+    let mut first = 0;
+    let mut pieces = Vec::new();
+    for e in 0..n {
+        let gap = if e + 1 == n { left } else { rng.split(left) };
+        left -= gap;
+        if e == 0 {
+            first = gap;
+        } else if gap > 0 {
+            pieces.push(Piece::Settle(gap));
+        }
+        let cost = if e + 1 == n {
+            per_event + per_script + wait
+        } else if e < u64::from(starts) {
+            per_event + wait
+        } else {
+            per_event
+        };
+        pieces.push(cpu(cost * US, false));
+    }
+    (first, pieces)
+}
+
+/// Simulates the engine running scripts (each from its first START) among random jobs of the tasks at or above
+/// it and the task below it; every script's time from its START to its end against the analysed bus time. Returns
+/// how many scripts were checked (0 when the analysis left the client unbounded).
+fn check_script(above: &[Above], engine: Engine, seed: u64) -> Result<usize, String> {
+    let board = script_board(above, engine);
+    let result = analysis::analyse_board(&board, &Limits::default());
+    let client = board.tasks.len() - 1;
+    if result.tasks[client].wcrt().is_none() {
+        return Ok(0);
+    }
+    let bound = result.sensor_buses[0].scripts[0].bus_time.as_ns();
+    let mut rng = Lcg(seed);
+    let mut jobs = Vec::new();
+    let horizon = 30 * bound.max(1000 * US);
+    let lower = above.len();
+    for (t, spec) in board.tasks.iter().enumerate().take(lower + 1) {
+        let period = spec.period.as_ns();
+        let mut arrival = rng.below(period / US) * US;
+        let mut last = 0;
+        while arrival <= horizon {
+            let release = (arrival + rng.below(spec.jitter.as_ns() / US + 1) * US).max(last);
+            last = release;
+            let locks = !spec.sections.is_empty();
+            let pieces = if t == lower {
+                vec![cpu(spec.wcet.as_ns(), locks)]
+            } else if locks {
+                vec![cpu(US, true), cpu(spec.wcet.as_ns() - US, false)]
+            } else {
+                vec![cpu(spec.wcet.as_ns(), false)]
+            };
+            jobs.push(SuspendingJob {
+                task: t,
+                arrival,
+                release,
+                pieces,
+            });
+            arrival += period
+                + if rng.below(3) == 0 {
+                    rng.below(period / US) * US
+                } else {
+                    0
+                };
+        }
+    }
+    // The engine's scripts, each started after the previous one's bound has passed (the bus runs one at a time).
+    let engine_task = lower + 1;
+    let mut start = rng.below(bound / US + 1) * US;
+    let mut scripts = 0;
+    while start <= horizon {
+        let (first, pieces) = script_pieces(engine, &mut rng);
+        jobs.push(SuspendingJob {
+            task: engine_task,
+            arrival: start,
+            release: start + first,
+            pieces,
+        });
+        scripts += 1;
+        start += bound + rng.below(bound / US + 1) * US;
+    }
+    let mut priorities: Vec<u32> = board
+        .tasks
+        .iter()
+        .take(lower + 1)
+        .map(|t| t.priority)
+        .collect();
+    priorities.push(ENGINE);
+    let serial: Vec<usize> = (0..priorities.len()).collect();
+    let ceiling = board
+        .tasks
+        .iter()
+        .filter(|t| !t.sections.is_empty())
+        .map(|t| t.priority)
+        .max()
+        .unwrap_or(0);
+    let responses = sim::suspending_run(&priorities, &serial, &[ceiling], &jobs);
+    for (job, r) in jobs.iter().zip(responses) {
+        if job.task == engine_task && r > bound {
+            return Err(format!(
+                "script at {}: simulated {} > analysed bus time {}",
+                job.arrival, r, bound
+            ));
+        }
+    }
+    Ok(scripts)
+}
+
+fn above_the_engine() -> impl Strategy<Value = Vec<Above>> {
+    prop::collection::vec(
+        (ENGINE..=7, 1u64..=20, 40u64..=400, 0u64..=30, any::<bool>()).prop_map(
+            |(priority, wcet, period, jitter, locks)| {
+                (priority, wcet.min(period / 8).max(1), period, jitter, locks)
+            },
+        ),
+        0..=3,
+    )
+}
+
+fn engine_figures() -> impl Strategy<Value = Engine> {
+    (
+        1u64..=10,
+        0u64..=6,
+        0u64..=13,
+        1u32..=24,
+        1u32..=4,
+        10u64..=600,
+        0u64..=8,
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    /// A script's bus time (the lower of its events' own responses and the script as one job) is never below what
+    /// the engine, simulated among the tasks at or above it and a lower critical section, takes.
+    #[test]
+    fn a_scripts_simulated_bus_time_never_exceeds_its_bound(
+        above in above_the_engine(),
+        engine in engine_figures(),
+        seed in any::<u64>(),
+    ) {
+        let checked = check_script(&above, engine, seed);
+        prop_assert!(checked.is_ok(), "{}", checked.unwrap_err());
+    }
+}
+
+/// The property above is not vacuous: on a fixed sweep most scripts are bounded and checked, and the bound as one
+/// job is the one taken in many (below the events' own responses, which are at least `events × R_event`).
+#[test]
+fn the_scripts_bound_as_one_job_is_often_the_one_taken() {
+    let mut rng = Lcg(0xb05);
+    let (mut checked, mut taken, mut cases) = (0, 0, 0);
+    for case in 0..200 {
+        let above: Vec<Above> = (0..rng.below(4))
+            .map(|_| {
+                let period = 40 + rng.below(361);
+                (
+                    ENGINE + rng.below(3) as u32,
+                    (1 + rng.below(20)).min(period / 8).max(1),
+                    period,
+                    rng.below(31),
+                    rng.below(2) == 0,
+                )
+            })
+            .collect();
+        let engine: Engine = (
+            1 + rng.below(10),
+            rng.below(7),
+            rng.below(14),
+            1 + rng.below(24) as u32,
+            1 + rng.below(4) as u32,
+            10 + rng.below(591),
+            rng.below(9),
+        );
+        let scripts = check_script(&above, engine, case).expect("within the bound");
+        if scripts > 0 {
+            cases += 1;
+            checked += scripts;
+            let board = script_board(&above, engine);
+            let result = analysis::analyse_board(&board, &Limits::default());
+            let bus = &result.sensor_buses[0];
+            let floor = Time::from_us(engine.5).plus(
+                bus.event_response
+                    .expect("bounded")
+                    .times(u64::from(engine.3)),
+            );
+            if bus.scripts[0].bus_time < floor {
+                taken += 1;
+            }
+        }
+    }
+    assert!(cases > 150, "{cases} sets bounded");
+    assert!(checked > 3_000, "{checked} scripts simulated");
+    assert!(taken > 50, "the bound as one job taken in {taken} sets");
 }

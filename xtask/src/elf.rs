@@ -281,7 +281,7 @@ pub fn print_table(reports: &[SizeReport]) {
     if reports.iter().any(|r| r.analysis_symbols > 0) {
         println!(
             "flash budget: the board's own budget, plus its allowance for the on-chip admission analysis where it is \
-             built in (DiWheelDrive, LightRing: 28 KiB + 6 932 B; PowerManagement: 6 KiB + 6 932 B) (admission: bytes in its named \
+             built in (DiWheelDrive, LightRing: 28 KiB + 1 520 B; PowerManagement: 6 KiB + 1 520 B) (admission: bytes in its named \
              symbols, a lower bound)"
         );
     }

@@ -4,6 +4,7 @@
 
 use super::*;
 
+#[cfg(feature = "sensor-buses")]
 mod suspension;
 
 /// What the analysis keeps of one job besides its [`TaskTiming`].
@@ -133,6 +134,7 @@ struct Originals<const N: usize> {
 
 impl<const N: usize> Originals<N> {
     /// The board's jobs in original order.
+    #[inline(never)]
     fn of<const M: usize>(input: &BoardInput<'_, M>) -> Result<Self, Refusal> {
         let mut originals = Originals {
             priority: [0; N],
@@ -207,6 +209,14 @@ impl<const N: usize> Originals<N> {
         what: Source,
         job: u8,
     ) -> Result<(), Refusal> {
+        // A build without the sensor-bus rounds has no engine rows: a table with scripts is not its table (the
+        // lowering refuses it for such a build).
+        if cfg!(not(feature = "sensor-buses")) {
+            return match input.scripts_of(what) {
+                [] => Ok(()),
+                _ => Err(Refusal::Capacity),
+            };
+        }
         for (k, script) in input.scripts_of(what).iter().enumerate() {
             let bus = input
                 .table
@@ -391,6 +401,7 @@ fn build_job<const M: usize>(
 
 /// The SRP blocking of a job of priority `p` on the board: the longest section of a lower-priority holder whose
 /// ceiling reaches `p` (the fixed tasks' from the table, the running publisher jobs' from their topics).
+#[inline(never)]
 fn blocking_at<const M: usize>(input: &BoardInput<'_, M>, p: u32) -> Time {
     let table = input.table;
     let mut longest = usize::try_from(p)
@@ -628,12 +639,20 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
     let scripted = set.fill(input)?;
     let mut blocking = [Time::ZERO; N];
     set.blockings(input, &mut blocking);
+    #[cfg_attr(not(feature = "sensor-buses"), allow(unused_mut))]
     let mut shares = [Share::default(); N];
     set.shares(input.table, &mut shares);
     let mut bounds = JobWcrt {
         wcrt: [NONE; N],
         first_window: [Time::ZERO; N],
     };
+    #[cfg(not(feature = "sensor-buses"))]
+    if scripted {
+        // A build without the sensor-bus rounds (a board whose table states no bus): the lowering refuses such a
+        // table for it, so this is a table it was not built for.
+        return Err(Refusal::Capacity);
+    }
+    #[cfg(feature = "sensor-buses")]
     if scripted {
         // Jobs that suspend on a sensor bus: the rounds of views, buses and engine events to their fixed point.
         suspension::analyse(
@@ -646,7 +665,10 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
         )?;
         // Its windows are not all the board analysis's: kept only for the same horizon.
         summary.beyond = true;
-    } else {
+        summary.note_board(input, &set.jobs, &bounds.wcrt);
+        return Ok(());
+    }
+    {
         let outcome = run_view(
             &mut set.timings,
             &set.jobs,

@@ -1,8 +1,9 @@
 //! A board whose running jobs run scripts on its sensor buses: the host's `sensor_bus::analyse` on the check's
 //! fixed-capacity arrays (docs/analysis.md, "Self-suspending publishers and the sensor buses", "The chip's check
 //! with scripts"). From zero jitters and event responses, rounds of: each script's response on its bus
-//! (non-preemptive fixed priority, [`can::response_time`], without its siblings), each bus's engine events on the
-//! CPU in the default view ([`crate::board::response_time`]), and the board once per view ([`run_view`]: a view
+//! (non-preemptive fixed priority, [`can::response_time`], without its siblings; its bus time the lower of its
+//! events' own responses and the script as one job at the engine's priority), each bus's engine events and each
+//! script as one job on the CPU in the default view ([`crate::board::response_time`]), and the board once per view ([`run_view`]: a view
 //! per RTIC task with a suspending job, where its jobs cost their suspensions, settles and one blocking per
 //! resumption, every job of every other such task its CPU with jitter `R − C`; and the default view); until no
 //! response changes. Every fixed point and every round counts against [`SCRIPT_ITERATIONS`] ([`Refusal::Budget`]
@@ -132,6 +133,8 @@ struct Round<'r, 'a, const N: usize, const M: usize> {
     base: &'r [Time; N],
     /// Iterations spent on the board so far.
     spent: u64,
+    /// Whether this round's engine events moved a script's bus time (the rounds' state, kept in place).
+    moved: bool,
 }
 
 impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
@@ -160,7 +163,8 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
     }
 
     /// What a script's events hold SCL on the CPU: its ending event, one with the condition wait per further
-    /// START (as many as its other events allow), the rest plain.
+    /// START (as many as its other events allow), the rest plain. Out of line: taken for the costs and the responses.
+    #[inline(never)]
     fn events_of(row: &ScriptRow, events: &Events) -> Time {
         let Some(others) = row.events.checked_sub(1) else {
             return Time::ZERO;
@@ -179,7 +183,7 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
         k: usize,
         timings: &[TaskTiming; N],
         own: &[Time; N],
-        events: &[Events; MAX_BUSES],
+        bus_times: &[Time; N],
     ) -> Result<Option<Time>, Refusal> {
         let list = self.scripts.scripts();
         let me = list.get(k).ok_or(Refusal::Capacity)?;
@@ -191,10 +195,6 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
             jitter: Time::ZERO,
         }; N];
         let (mut len, mut at) = (0, 0);
-        let bus_events = events
-            .get(usize::from(me.row.bus))
-            .copied()
-            .unwrap_or_default();
         let my_view = self.scripts.view(usize::from(me.job));
         for (o, s) in list.iter().enumerate() {
             let sibling = o != k && self.scripts.view(usize::from(s.job)) == my_view;
@@ -206,10 +206,15 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
             if o == k {
                 at = len;
             }
+            // Its bus time as the last round's events found it; before any, its wire and stretch alone.
+            let bus_time = match bus_times.get(o) {
+                Some(&t) if t > Time::ZERO => t,
+                _ => row_time(s.row.bus_time),
+            };
             *subset.get_mut(len).ok_or(Refusal::Capacity)? = MessageTiming {
                 // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
                 key: u32::MAX - job.priority,
-                frame_time: row_time(s.row.bus_time).plus(Self::events_of(s.row, &bus_events)),
+                frame_time: bus_time,
                 frames: 1,
                 period: job.period,
                 jitter: own.get(p).copied().unwrap_or(Time::ZERO),
@@ -290,19 +295,23 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
         }
     }
 
-    /// Bus `b`'s engine events on the CPU in the default view's jobs (`timings`, before their analysis): each at
-    /// the engine's priority, interfered with by every job at or above it but the bus's own engine rows (these very
-    /// events, one at a time; costed 0 meanwhile), blocked as a job of that priority; the event itself takes the
-    /// place after the jobs at or above it for the while. `None`: unbounded.
+    /// Bus `b`'s engine events on the CPU in the default view's jobs (`timings`, after their analysis, so that a
+    /// released job carries the jitter it inherits from its releaser's response, as the host's found jitters do):
+    /// each at the engine's priority, interfered with by every job at or above it but the bus's own engine rows
+    /// (these very events, one at a time; costed 0 meanwhile), blocked as a job of that priority; the event itself
+    /// takes the place after the jobs at or above it for the while. Then each script on the bus as one job the
+    /// same way, and its bus time (by script, into `bus_times`) the lower of the two bounds, both sound: its wire
+    /// and stretch plus each event's own response, and the script as one job. `false`: an event is unbounded.
     #[inline(never)]
     fn events(
         &mut self,
         b: usize,
         timings: &mut [TaskTiming; N],
         len: usize,
-    ) -> Result<Option<Events>, Refusal> {
+        bus_times: &mut [Time; N],
+    ) -> Result<bool, Refusal> {
         let Some(bus) = self.input.table.buses.get(b) else {
-            return Ok(Some(Events::default()));
+            return Ok(true);
         };
         let engine = u32::from(bus.engine_priority);
         for s in self.scripts.scripts() {
@@ -326,8 +335,21 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
             plain.plus(wait),
             plain.plus(row_time(bus.per_script)).plus(wait),
         ];
-        let mut out = Some(Events::default());
-        for (k, cost) in costs.into_iter().enumerate() {
+        let (mut out, mut bounded) = (Events::default(), true);
+        // The three events, then each script on the bus as one job at the engine's priority (the host's
+        // `script_response`): its events' work and its wire time as execution, blocked once per event; one call
+        // site for both. A script's window without a bound leaves its events' bound.
+        let list = self.scripts.scripts();
+        for k in 0..costs.len() + list.len() {
+            let script = k.checked_sub(costs.len());
+            let (cost, resumptions) = match script.map(|i| list.get(i)) {
+                None => (costs.get(k).copied().unwrap_or(Time::ZERO), 1),
+                Some(Some(s)) if usize::from(s.row.bus) == b => (
+                    row_time(s.row.bus_time).plus(Self::events_of(s.row, &costs)),
+                    u64::from(s.row.events),
+                ),
+                Some(_) => continue,
+            };
             if let Some(slot) = timings.get_mut(end) {
                 *slot = TaskTiming {
                     priority: engine,
@@ -341,13 +363,28 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
             let result = crate::board::response_time(
                 timings.get(..=end).unwrap_or(&[]),
                 end,
-                blocking,
+                blocking.times(resumptions),
                 &limits,
                 &mut scratch,
             );
-            match (self.count(result)?, out.as_mut().and_then(|e| e.get_mut(k))) {
-                (Some(r), Some(slot)) => *slot = r,
-                _ => out = None,
+            let r = self.count(result)?;
+            match (script, r) {
+                (Some(i), _) => {
+                    // The events come first: `out` is complete.
+                    let row = list.get(i).map_or(&NO_ROW, |s| s.row);
+                    let per_event = row_time(row.bus_time).plus(Self::events_of(row, &out));
+                    let bus_time = r.map_or(per_event, |w| w.min(per_event));
+                    if let Some(slot) = bus_times.get_mut(i).filter(|slot| **slot != bus_time) {
+                        *slot = bus_time;
+                        self.moved = true;
+                    }
+                }
+                (None, Some(r)) => {
+                    if let Some(slot) = out.get_mut(k) {
+                        *slot = r;
+                    }
+                }
+                (None, None) => bounded = false,
             }
         }
         // The jobs as they were.
@@ -363,7 +400,7 @@ impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
                     .unwrap_or(Time::ZERO);
             }
         }
-        Ok(out)
+        Ok(bounded)
     }
 }
 
@@ -401,11 +438,13 @@ pub(super) fn analyse<const N: usize, const M: usize>(
         scripts: &scripts,
         base: &base,
         spent: 0,
+        moved: false,
     };
     // The rounds' state: each suspending task's job's own-view response (its scripts' jitter), each bus's event
     // responses; and per job its bound from its own view.
     let mut own = [Time::ZERO; N];
-    let mut events = [Events::default(); MAX_BUSES];
+    // Each script's bus time (by script; 0 before the first round's events: its wire and stretch alone).
+    let mut bus_times = [Time::ZERO; N];
     let mut wcrt = [NONE; N];
     let mut suspension = [Time::ZERO; N];
     let mut unreleased = [false; N];
@@ -419,7 +458,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
         // 1. Each script on its bus: its suspension, from its actual submission.
         for (k, (slot, s)) in suspension.iter_mut().zip(scripts.scripts()).enumerate() {
             let jitter = own.get(usize::from(s.job)).copied().unwrap_or(Time::ZERO);
-            match round.on_bus(k, &set.timings, &own, &events)? {
+            match round.on_bus(k, &set.timings, &own, &bus_times)? {
                 Some(r) => *slot = r.minus(jitter),
                 None => failed = failed.or(Some(s.job)),
             }
@@ -427,27 +466,10 @@ pub(super) fn analyse<const N: usize, const M: usize>(
         if failed.is_some() {
             break;
         }
-        // 2. The board once per view, the default view's jobs first for 3., the engine events.
-        let mut next_events = events;
+        // 2. The board once per view; after the default view's analysis, 3., the engine events.
+        round.moved = false;
         for v in 0..=scripts.views {
             round.view_jobs(v, set, blocking, shares, &suspension, &own, &mut unreleased);
-            if v == 0 {
-                for (b, slot) in next_events
-                    .iter_mut()
-                    .enumerate()
-                    .take(input.table.buses.len())
-                {
-                    let on_bus = scripts
-                        .scripts()
-                        .iter()
-                        .find(|s| usize::from(s.row.bus) == b);
-                    let Some(s) = on_bus else { continue };
-                    match round.events(b, &mut set.timings, len)? {
-                        Some(e) => *slot = e,
-                        None => failed = failed.or(Some(s.job)),
-                    }
-                }
-            }
             let cut = Cut {
                 unreleased: &unreleased,
                 view: &scripts.view,
@@ -468,10 +490,23 @@ pub(super) fn analyse<const N: usize, const M: usize>(
                     *slot = w;
                 }
             }
+            if v == 0 {
+                // The default view's jobs as analysed: a released job's jitter is now the one it inherits from
+                // its releaser's response (its own plus that response), not its own alone.
+                for b in 0..input.table.buses.len() {
+                    let on_bus = scripts
+                        .scripts()
+                        .iter()
+                        .find(|s| usize::from(s.row.bus) == b);
+                    let Some(s) = on_bus else { continue };
+                    if !round.events(b, &mut set.timings, len, &mut bus_times)? {
+                        failed = failed.or(Some(s.job));
+                    }
+                }
+            }
         }
         // 4. The suspending tasks' jobs' responses: the next jitters.
-        converged = next_events == events;
-        events = next_events;
+        converged = !round.moved;
         for (p, (slot, &w)) in own.iter_mut().zip(wcrt.iter()).enumerate().take(len) {
             if scripts.view(p) == 0 {
                 continue;
