@@ -1,9 +1,15 @@
 //! The register adapter under [`crate::i2c_engine`]: one I2C block (I2C1 or I2C2, RM0008 §26.6 /
 //! RM0090 §27.6) as volatile reads and writes, and its set-up for 400 kHz (the polled master's,
 //! `i2c::Master`, which the boards still use until the engine is wired).
+use cortex_m::interrupt::InterruptNumber;
+use cortex_m::peripheral::NVIC;
+
+use crate::i2c_bus::I2cBus;
 use crate::i2c_engine::{
     Block, Interrupts, CONDITION_WAIT_NS, CR1_PE, CR1_START, CR1_STOP, CR1_SWRST,
 };
+use crate::scripted::I2cPort;
+use crate::timer_monotonic::nvic_priority;
 
 const CR1: usize = 0x00;
 const CR2: usize = 0x04;
@@ -132,4 +138,67 @@ impl Block for Registers {
         self.write(TRISE, self.trise);
         self.write(CR1, CR1_PE);
     }
+}
+
+/// A board's I2C1 and I2C2 as their engines' buses (the `scripted-i2c` trials' wiring, shared by
+/// DiWheelDrive 1-1 and PowerManagement).
+pub struct EngineBuses<const SLOTS: usize> {
+    /// I2C1's bus.
+    pub i2c1: &'static I2cBus<Registers, SLOTS>,
+    /// I2C2's bus.
+    pub i2c2: &'static I2cBus<Registers, SLOTS>,
+}
+
+impl<const SLOTS: usize> EngineBuses<SLOTS> {
+    /// Client `CLIENT`'s slots on I2C1 and I2C2, a script's timeout its wire time plus
+    /// `allowance_us` on the clock `D`.
+    pub const fn ports<const CLIENT: usize, D>(
+        &self,
+        allowance_us: u32,
+    ) -> (
+        I2cPort<'static, D, Registers, SLOTS>,
+        I2cPort<'static, D, Registers, SLOTS>,
+    ) {
+        (
+            I2cPort::new(self.i2c1, self.i2c1.client_at::<CLIENT>(), allowance_us),
+            I2cPort::new(self.i2c2, self.i2c2.client_at::<CLIENT>(), allowance_us),
+        )
+    }
+
+    /// The clock plan's APB1 (`pclk1_hz`) and core clock (`sysclk_hz`) kept in both blocks'
+    /// values for their hand-over (their statics were made with the design plan's). Touches no
+    /// register: `init` calls it while the polled masters still own the blocks.
+    pub fn set_clocks(&self, pclk1_hz: u32, sysclk_hz: u32) {
+        for bus in [self.i2c1, self.i2c2] {
+            bus.with_block(|block| block.set_clocks(pclk1_hz, sysclk_hz));
+        }
+    }
+
+    /// The four interrupts (`interrupts`: each block's event and error interrupt) at RTIC's
+    /// logical `priority` ([`nvic_priority`]), unmasked: the blocks raise nothing until a script
+    /// turns CR2's enables on. Bound by the board, not as tasks of the app: RTIC sets up the NVIC
+    /// of a hardware task even where a `cfg` leaves the task out, which would change the shipped
+    /// images (docs/i2c.md, "What step (c) wires").
+    pub fn bind_engines<I: InterruptNumber>(
+        &self,
+        nvic: &mut NVIC,
+        interrupts: [I; 4],
+        priority: u8,
+    ) {
+        for irq in interrupts {
+            // SAFETY: init runs with interrupts off; the handlers share no RTIC resource (the
+            // buses are statics under their own critical sections).
+            unsafe {
+                nvic.set_priority(irq, nvic_priority(priority));
+                NVIC::unmask(irq);
+            }
+        }
+    }
+}
+
+/// `bus`'s block taken over from the polled master that set its devices up: set up again
+/// ([`Block::reset`], at the clocks [`EngineBuses::set_clocks`] kept), its interrupts off until a
+/// script starts.
+pub fn hand_over<const SLOTS: usize>(bus: &I2cBus<Registers, SLOTS>) {
+    bus.with_block(|block| block.reset());
 }

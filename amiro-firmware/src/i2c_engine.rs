@@ -394,22 +394,20 @@ impl Engine {
     /// CR1.START still set, the caller's one poll). Out: the event interrupt on again (SB raises
     /// it at once). Still pending: the stall goes on, for [`MAX_REARMS`] looks a script; after the
     /// last the event interrupt stays masked and [`Engine::stalled`] is `None`: the client's
-    /// timeout ends the script (its abort resets the block). Returns whether to look again.
-    pub fn rearm(&mut self, pending: bool, block: &mut impl Block) -> bool {
+    /// timeout ends the script (its abort resets the block).
+    pub fn rearm(&mut self, pending: bool, block: &mut impl Block) {
         if self.stalled.is_none() {
-            return false;
+            return;
         }
         if !pending {
             self.stalled = None;
             block.set_interrupts(Interrupts::Events);
-            return false;
+            return;
         }
         self.rearms = self.rearms.saturating_add(1);
         if self.rearms >= MAX_REARMS {
             self.stalled = None;
-            return false;
         }
-        true
     }
 
     /// The next operation, or the script's end.

@@ -23,7 +23,7 @@
 use core::future::Future;
 
 use amiro_can::Topic;
-use amiro_sensors::drivers::scripted::{self, Job, Next, ScriptedSensors};
+use amiro_sensors::drivers::scripted::{self, Job, Next, ScriptResult, ScriptedSensors};
 use amiro_sensors::drivers::suite::{Samples, Supervised};
 use amiro_sensors::script::{Readings, Script, ScriptError};
 use rtic_core::Mutex;
@@ -60,6 +60,16 @@ pub enum BusFault {
     Script(ScriptError),
     /// The script did not end within its client's timeout: the block was reset.
     Timeout,
+}
+
+/// A script's outcome as amiro-sensors' decoders take it (a client's timeout is the kind a polled
+/// master's timeout had).
+pub fn script_result(outcome: Result<Readings, BusFault>) -> ScriptResult {
+    match outcome {
+        Ok(readings) => Ok(readings),
+        Err(BusFault::Script(error)) => Err(error),
+        Err(BusFault::Timeout) => scripted::timed_out(),
+    }
 }
 
 /// A sensor group whose sample is a job of scripts and their decoding.
@@ -116,12 +126,7 @@ impl<G: ScriptedSensors> ScriptedGroup for Supervised<G> {
         now_us: u64,
         outcome: Result<Readings, BusFault>,
     ) -> Step {
-        let result = match outcome {
-            Ok(readings) => Ok(readings),
-            Err(BusFault::Script(error)) => Err(error),
-            Err(BusFault::Timeout) => scripted::timed_out(),
-        };
-        step_of(self.resume_scripted(job, topic, now_us, &result))
+        step_of(self.resume_scripted(job, topic, now_us, &script_result(outcome)))
     }
 }
 

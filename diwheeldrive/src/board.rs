@@ -70,13 +70,16 @@ pub type CanErrors = amiro_firmware::bxcan::ErrorMonitor<Mmio>;
 /// The board's monotonic clock (TIM5).
 pub type Clock = crate::mono::Clock;
 
-/// The BNO055's mode-switch and boot waits: a busy wait on the core clock (at most 800 ms at boot,
-/// 26 ms per (re-)initialisation).
-#[cfg(feature = "rev-1-2")]
+/// A busy wait on the core clock, counted at the design plan's clock (a slower fallback clock
+/// waits longer): 1-2's BNO055 mode-switch and boot waits (at most 800 ms at boot, 26 ms per
+/// (re-)initialisation) and, with `scripted-i2c`, 1-1's boot's set-up waits (none of the
+/// compass's or the floor's set-up steps states one today; the set-up's interface takes it).
+/// Named for 1-2's use: a new name re-hashes the shipped image's symbols, which moves its code.
+#[cfg(any(feature = "rev-1-2", feature = "scripted-i2c"))]
 #[derive(Debug, Default, Clone, Copy)]
 pub struct ImuDelay;
 
-#[cfg(feature = "rev-1-2")]
+#[cfg(any(feature = "rev-1-2", feature = "scripted-i2c"))]
 impl embedded_hal::delay::DelayNs for ImuDelay {
     fn delay_ns(&mut self, ns: u32) {
         cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(SYSCLK_HZ / 1_000_000));
@@ -444,19 +447,16 @@ pub const SHUTDOWN_INTERRUPT: pac::Interrupt = pac::Interrupt::EXTI9_5;
 /// devices up on the polled master (docs/i2c.md).
 #[cfg(feature = "scripted-i2c")]
 pub mod scripted {
-    use core::sync::atomic::{AtomicU32, Ordering};
-
     use amiro_firmware::i2c::{self, Master};
-    use amiro_firmware::i2c_block::Registers;
+    use amiro_firmware::i2c_block::{hand_over, EngineBuses, Registers};
     use amiro_firmware::i2c_bus::I2cBus;
-    use amiro_firmware::i2c_engine::Block as _;
     use amiro_firmware::scripted::I2cPort;
     use amiro_sensors::drivers::floor::FloorSensors;
     use amiro_sensors::drivers::scripted::{OnI2c, ScriptedSensors, Scripts};
     use amiro_sensors::drivers::suite::{self, Supervised};
-    use stm32f1xx_hal::pac::{interrupt, Interrupt, NVIC, NVIC_PRIO_BITS};
+    use stm32f1xx_hal::pac::{interrupt, Interrupt, NVIC};
 
-    use super::{Clock, SYSCLK_HZ};
+    use super::{Clock, ImuDelay, SYSCLK_HZ};
     use crate::levels;
     use crate::sensors::{CLIENTS, TIMEOUT_ALLOWANCE_US};
 
@@ -477,10 +477,6 @@ pub mod scripted {
         levels::PUBLISH_LOW,
     ];
 
-    /// APB1 and the core clock as `init`'s clock plan set them up (the design plan's until then).
-    static PCLK1_HZ: AtomicU32 = AtomicU32::new(SYSCLK_HZ / 2);
-    static CORE_HZ: AtomicU32 = AtomicU32::new(SYSCLK_HZ);
-
     /// I2C1: the HMC5883L.
     // SAFETY: the block is touched only after `boot_compass` took it from the polled master.
     pub static I2C1_BUS: ScriptBus = I2cBus::new(
@@ -493,6 +489,11 @@ pub mod scripted {
         unsafe { Registers::new(i2c::I2C2, SYSCLK_HZ / 2, SYSCLK_HZ) },
         CLIENT_PRIORITIES,
     );
+    /// Both, for the wiring amiro-firmware shares with PowerManagement's trial.
+    static BUSES: EngineBuses<CLIENTS> = EngineBuses {
+        i2c1: &I2C1_BUS,
+        i2c2: &I2C2_BUS,
+    };
 
     /// I2C1's events: the compass bus's engine advances its script (docs/i2c.md).
     #[interrupt]
@@ -520,60 +521,35 @@ pub mod scripted {
 
     /// The four handlers at one priority, RTIC's `levels::I2C_ENGINE` (so that neither pre-empts
     /// another's critical step; above every publisher, below the CAN interrupts; RTIC's locks
-    /// mask them as they mask a task of that priority), and unmasked: the blocks raise nothing
-    /// until a script turns CR2's enables on. Bound here, not as tasks of the app: RTIC sets up
-    /// the NVIC for a hardware task even where a `cfg` leaves the task out, which would change
-    /// the shipped image; they become the app's tasks when the analysis takes the sensor buses
-    /// (docs/i2c.md, "What step (c) wires").
+    /// mask them as they mask a task of that priority), and unmasked (`EngineBuses::bind_engines`;
+    /// they become the app's tasks when the analysis takes the sensor buses, docs/i2c.md, "What
+    /// step (c) wires").
     pub(super) fn bind_engines(nvic: &mut NVIC) {
-        let logical = levels::I2C_ENGINE;
-        let hardware = ((1u8 << NVIC_PRIO_BITS) - logical) << (8 - NVIC_PRIO_BITS);
-        for irq in [
-            Interrupt::I2C1_EV,
-            Interrupt::I2C1_ER,
-            Interrupt::I2C2_EV,
-            Interrupt::I2C2_ER,
-        ] {
-            // SAFETY: init runs with interrupts off; the handlers share no RTIC resource (the
-            // buses are statics under their own critical sections).
-            unsafe {
-                nvic.set_priority(irq, hardware);
-                NVIC::unmask(irq);
-            }
-        }
+        BUSES.bind_engines(
+            nvic,
+            [
+                Interrupt::I2C1_EV,
+                Interrupt::I2C1_ER,
+                Interrupt::I2C2_EV,
+                Interrupt::I2C2_ER,
+            ],
+            levels::I2C_ENGINE,
+        );
     }
 
     /// Keeps the clock plan's APB1 and core clocks for the blocks' hand-over.
     pub(super) fn set_clocks(pclk1_hz: u32, sysclk_hz: u32) {
-        PCLK1_HZ.store(pclk1_hz, Ordering::Relaxed);
-        CORE_HZ.store(sysclk_hz, Ordering::Relaxed);
+        BUSES.set_clocks(pclk1_hz, sysclk_hz);
     }
 
     /// `group` set up by its scripts on the polled master `boot` (each script operation by
-    /// operation, a part's settling time waited on the core clock), then `boot`'s block handed
-    /// to `bus`: set up again at the plan's clocks, its interrupts off until a script starts.
+    /// operation, a part's settling time waited on the core clock, `ImuDelay`), then `boot`'s
+    /// block handed to `bus` (`i2c_block::hand_over`).
     fn boot_on<G: ScriptedSensors>(group: G, boot: Master, bus: &ScriptBus) -> Supervised<G> {
         // The polled master is consumed here: the block is the engine's from now on.
-        let booted = Supervised::boot(group, &mut OnI2c(boot), &mut CoreDelay);
-        bus.with_block(|block| {
-            block.set_clocks(
-                PCLK1_HZ.load(Ordering::Relaxed),
-                CORE_HZ.load(Ordering::Relaxed),
-            );
-            block.reset();
-        });
+        let booted = Supervised::boot(group, &mut OnI2c(boot), &mut ImuDelay);
+        hand_over(bus);
         booted
-    }
-
-    /// The boot's waits: a busy wait on the core clock (none of the compass's or the floor's
-    /// set-up steps states one today; the set-up's interface takes it).
-    struct CoreDelay;
-
-    impl embedded_hal::delay::DelayNs for CoreDelay {
-        fn delay_ns(&mut self, ns: u32) {
-            let mhz = CORE_HZ.load(Ordering::Relaxed) / 1_000_000;
-            cortex_m::asm::delay(ns.div_ceil(1_000).saturating_mul(mhz));
-        }
     }
 
     /// The compass set up on I2C1's polled master, then I2C1 handed to its engine.
@@ -588,18 +564,7 @@ pub mod scripted {
 
     /// Publisher task `CLIENT`'s slots on I2C1 and I2C2.
     pub fn ports<const CLIENT: usize>() -> (CompassPort, FloorPort) {
-        (
-            Port::new(
-                &I2C1_BUS,
-                I2C1_BUS.client_at::<CLIENT>(),
-                TIMEOUT_ALLOWANCE_US,
-            ),
-            Port::new(
-                &I2C2_BUS,
-                I2C2_BUS.client_at::<CLIENT>(),
-                TIMEOUT_ALLOWANCE_US,
-            ),
-        )
+        BUSES.ports::<CLIENT, Clock>(TIMEOUT_ALLOWANCE_US)
     }
 }
 #[cfg(feature = "scripted-i2c")]

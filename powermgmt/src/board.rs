@@ -321,17 +321,15 @@ pub fn start_monotonic(priority: u8) {
 /// devices up on the polled master (docs/i2c.md).
 #[cfg(feature = "scripted-i2c")]
 pub mod scripted {
-    use core::sync::atomic::{AtomicU32, Ordering};
-
     use amiro_firmware::i2c::{self, Master};
-    use amiro_firmware::i2c_block::Registers;
+    use amiro_firmware::i2c_block::{hand_over, EngineBuses, Registers};
     use amiro_firmware::i2c_bus::I2cBus;
-    use amiro_firmware::i2c_engine::{Block as _, STRETCH_REARM_US};
+    use amiro_firmware::i2c_engine::STRETCH_REARM_US;
     use amiro_firmware::mono::Clock as _;
     use amiro_firmware::scripted::I2cPort;
     use amiro_sensors::drivers::ring::RingBus;
     use amiro_sensors::drivers::scripted::OnI2c;
-    use stm32f4xx_hal::pac::{interrupt, Interrupt, NVIC, NVIC_PRIO_BITS};
+    use stm32f4xx_hal::pac::{interrupt, Interrupt, NVIC};
 
     use super::{Clock, SYSCLK_HZ};
     use crate::levels;
@@ -351,10 +349,6 @@ pub mod scripted {
         levels::POWER_MONITOR,
     ];
 
-    /// APB1 and the core clock as `init`'s clock plan set them up (the design plan's until then).
-    static PCLK1_HZ: AtomicU32 = AtomicU32::new(SYSCLK_HZ / 4);
-    static CORE_HZ: AtomicU32 = AtomicU32::new(SYSCLK_HZ);
-
     /// I2C1, the rear bus.
     // SAFETY: the block is touched only after `boot_rear` took it from the polled master.
     pub static I2C1_BUS: ScriptBus = I2cBus::new(
@@ -367,6 +361,11 @@ pub mod scripted {
         unsafe { Registers::new(i2c::I2C2, SYSCLK_HZ / 4, SYSCLK_HZ) },
         CLIENT_PRIORITIES,
     );
+    /// Both, for the wiring amiro-firmware shares with DiWheelDrive 1-1's trial.
+    static BUSES: EngineBuses<CLIENTS> = EngineBuses {
+        i2c1: &I2C1_BUS,
+        i2c2: &I2C2_BUS,
+    };
 
     /// I2C1's events: the rear bus's engine advances its script (docs/i2c.md).
     #[interrupt]
@@ -394,47 +393,33 @@ pub mod scripted {
 
     /// The four handlers at one priority, RTIC's `levels::I2C_ENGINE` (so that neither pre-empts
     /// another's critical step; above every client, below the CAN interrupts; RTIC's locks mask
-    /// them as they mask a task of that priority), and unmasked: the blocks raise nothing until a
-    /// script turns CR2's enables on. Bound here, not as tasks of the app, as DiWheelDrive 1-1's
-    /// trial binds them: RTIC sets up the NVIC of a hardware task even where a `cfg` leaves the
-    /// task out, which would change the shipped image.
+    /// them as they mask a task of that priority), and unmasked (`EngineBuses::bind_engines`, as
+    /// DiWheelDrive 1-1's trial binds them).
     pub(crate) fn bind_engines(nvic: &mut NVIC) {
-        let logical = levels::I2C_ENGINE;
-        let hardware = ((1u8 << NVIC_PRIO_BITS) - logical) << (8 - NVIC_PRIO_BITS);
-        for irq in [
-            Interrupt::I2C1_EV,
-            Interrupt::I2C1_ER,
-            Interrupt::I2C2_EV,
-            Interrupt::I2C2_ER,
-        ] {
-            // SAFETY: init runs with interrupts off; the handlers share no RTIC resource (the
-            // buses are statics under their own critical sections).
-            unsafe {
-                nvic.set_priority(irq, hardware);
-                NVIC::unmask(irq);
-            }
-        }
+        BUSES.bind_engines(
+            nvic,
+            [
+                Interrupt::I2C1_EV,
+                Interrupt::I2C1_ER,
+                Interrupt::I2C2_EV,
+                Interrupt::I2C2_ER,
+            ],
+            levels::I2C_ENGINE,
+        );
     }
 
     /// Keeps the clock plan's APB1 and core clocks for the blocks' hand-over.
     pub(crate) fn set_clocks(pclk1_hz: u32, sysclk_hz: u32) {
-        PCLK1_HZ.store(pclk1_hz, Ordering::Relaxed);
-        CORE_HZ.store(sysclk_hz, Ordering::Relaxed);
+        BUSES.set_clocks(pclk1_hz, sysclk_hz);
     }
 
     /// `which`'s sensors and gauge set up by their scripts on the polled master `boot` (the
     /// gauge's bus-free pauses on the core clock, `GaugeDelay`), then `boot`'s block handed to
-    /// `bus`: set up again at the plan's clocks, its interrupts off until a script starts.
+    /// `bus` (`i2c_block::hand_over`).
     fn boot_on(which: RingBus, boot: Master, bus: &ScriptBus) -> ScriptedBus {
         // The polled master is consumed here: the block is the engine's from now on.
         let booted = ScriptedBus::boot(which, &mut OnI2c(boot), &mut super::GaugeDelay);
-        bus.with_block(|block| {
-            block.set_clocks(
-                PCLK1_HZ.load(Ordering::Relaxed),
-                CORE_HZ.load(Ordering::Relaxed),
-            );
-            block.reset();
-        });
+        hand_over(bus);
         booted
     }
 
@@ -450,18 +435,7 @@ pub mod scripted {
 
     /// Client `CLIENT`'s slots on I2C1 and I2C2.
     pub fn ports<const CLIENT: usize>() -> (Port, Port) {
-        (
-            Port::new(
-                &I2C1_BUS,
-                I2C1_BUS.client_at::<CLIENT>(),
-                TIMEOUT_ALLOWANCE_US,
-            ),
-            Port::new(
-                &I2C2_BUS,
-                I2C2_BUS.client_at::<CLIENT>(),
-                TIMEOUT_ALLOWANCE_US,
-            ),
-        )
+        BUSES.ports::<CLIENT, Clock>(TIMEOUT_ALLOWANCE_US)
     }
 
     /// The re-arm task's loop for `bus`: a repeated START the gauge stretches past the engine's

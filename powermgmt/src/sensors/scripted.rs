@@ -10,17 +10,16 @@
 //! missing sensor set up again per job and bus, each after [`RETRY_US`]; a sensor that does not
 //! answer yields no frame and is counted; the log lines and the health report are made when the
 //! job ends, from what it changed.
-use amiro_firmware::scripted::{BusFault, ScriptPort};
+use amiro_firmware::scripted::{script_result, ScriptPort};
 use amiro_sensors::drivers::bq27500::{BatteryStatus, StatusRead};
 use amiro_sensors::drivers::pca9544a::{self, Channel};
 use amiro_sensors::drivers::proximity::ProximityCalibration;
 use amiro_sensors::drivers::ring::{RingBus, WIRING};
 use amiro_sensors::drivers::scripted::{
-    self, gauge_outcome, gauge_script, GaugeIdentity, RingRead, ScriptBus, ScriptResult,
-    SensorSetUp, GAUGE_SETTLE_US, RING_BUS_SENSORS,
+    gauge_outcome, gauge_script, GaugeIdentity, RingRead, ScriptBus, SensorSetUp, GAUGE_SETTLE_US,
+    RING_BUS_SENSORS,
 };
 use amiro_sensors::drivers::vcnl4020::{self, Config};
-use amiro_sensors::script::Readings;
 use embedded_hal::delay::DelayNs;
 
 use super::{bus_name, RingSample, RingSlot, PER_BUS, RETRY_US};
@@ -53,16 +52,6 @@ pub struct ScriptedBus {
     slots: [RingSlot; PER_BUS],
     calibration: [ProximityCalibration; PER_BUS],
     gauge_faults: u32,
-}
-
-/// A script's outcome as amiro-sensors' decoders take it (a client's timeout is the kind a polled
-/// master's timeout had).
-fn result_of(outcome: Result<Readings, BusFault>) -> ScriptResult {
-    match outcome {
-        Ok(readings) => Ok(readings),
-        Err(BusFault::Script(error)) => Err(error),
-        Err(BusFault::Timeout) => scripted::timed_out(),
-    }
 }
 
 impl ScriptedBus {
@@ -274,7 +263,7 @@ async fn set_up_on_bus(port: &mut impl ScriptPort, set_up: &mut SensorSetUp) -> 
         let Ok(script) = set_up.script() else {
             return false;
         };
-        let result = result_of(port.run(script, 0).await);
+        let result = script_result(port.run(script, 0).await);
         if let Some(outcome) = set_up.complete(&result) {
             return outcome.is_ok();
         }
@@ -309,7 +298,7 @@ pub async fn sample_ring(
             // A script the build refuses: the sensors still to read give no count this time.
             Some(Err(_)) | None => break,
         };
-        let result = result_of(port.run(script, 0).await);
+        let result = script_result(port.run(script, 0).await);
         read.complete(&result);
     }
     bus.lock(|b| b.end_ring_read(now_us, &read, places, sample));
@@ -332,7 +321,7 @@ pub async fn read_gauge(
         let outcome = match gauge_script(transfer) {
             Ok(script) => gauge_outcome(
                 transfer,
-                &result_of(port.run(script, GAUGE_SETTLE_US).await),
+                &script_result(port.run(script, GAUGE_SETTLE_US).await),
             ),
             Err(error) => Err(error),
         };
