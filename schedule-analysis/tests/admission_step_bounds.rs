@@ -47,13 +47,14 @@ fn the_tables_are_within_the_capacities_the_bounds_files_state() {
             assert!(board.tasks.len() <= 14, "{at}: 14 fixed tasks at most");
             assert!(board.topics.len() <= 9, "{at}: 9 topics at most");
             assert!(board.sections.len() <= 23, "{at}: 23 sections at most");
-            // The bounds files state the sensor-bus rounds' loops (admission/board/suspension.rs) for tables
-            // without scripts: a board that states sensor buses or scripts must restate them first.
+            // The shipped images do not link the sensor-bus rounds (admission/board/suspension.rs, feature
+            // `sensor-buses`) and the bounds files state none of their loops: a board that states sensor buses or
+            // scripts must state them first (docs/analysis.md, "The chip's check with scripts").
             assert!(
                 board.buses.is_empty()
                     && board.task_scripts.is_empty()
                     && board.topics.iter().all(|t| t.scripts.is_empty()),
-                "{at}: no sensor buses and no scripts (the bounds files' script loops at one pass)"
+                "{at}: no sensor buses and no scripts (the bounds files state no loop of the rounds)"
             );
             for topic in &board.topics {
                 assert!(
