@@ -7,13 +7,16 @@
 //! copy lowers into the chip's admission table with the figures stated; and the report of the
 //! thesis demo (the ring every 10 ms) is printed with the engine charged per script.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
+
+mod common;
+use common::{copy_dir, repository, wire_counts};
 
 use amiro_sensors::drivers::bq27500::StatusRead;
 use amiro_sensors::drivers::pca9544a::{self, Channel};
 use amiro_sensors::drivers::ring::{RingBus, WIRING};
 use amiro_sensors::drivers::scripted::{gauge_script, RingRead, GAUGE_SETTLE_US};
-use amiro_sensors::script::{Script, Symbol};
+use amiro_sensors::script::Script;
 use schedule_analysis::admission_host;
 use schedule_analysis::analysis::{analyse, Options};
 use schedule_analysis::model::FrameCostSpec;
@@ -43,17 +46,6 @@ const CONDITION_WAIT_US: f64 = 8.93;
 const GAUGE_STRETCH_US: f64 = 4_000.0;
 const GAUGE_WAKE_US: f64 = 5_000.0;
 const STRETCH_SOURCE: &str = "TI's bq27xxx data sheets, 'I2C Clock Stretching' (docs/analysis.md, PowerManagement's I2C waits): within a packet addressed to the gauge up to 4 ms; at the beginning of traffic as it wakes from SLEEP 5 ms (the bq27520-G4's figure; the bq27500's SLUS785 states none); the PCA9544A and the VCNL4020 state no stretching";
-
-/// Bytes (address bytes included) and STARTs (operation starts and repeated STARTs) on the wire.
-fn wire_counts(script: &Script) -> (u32, u32) {
-    script
-        .wire()
-        .fold((0, 0), |(bytes, starts), symbol| match symbol {
-            Symbol::Start | Symbol::RepeatedStart => (bytes, starts + 1),
-            Symbol::Stop => (bytes, starts),
-            _ => (bytes + 1, starts),
-        })
-}
 
 /// The engine's event interrupts for a script, from its steps (docs/i2c.md, "The engine"): a
 /// write of n bytes SB, ADDR, n × TXE, BTF; a read of N bytes after a repeated START SB, ADDR and
@@ -107,26 +99,6 @@ fn the_stated_scripts_are_the_ones_the_jobs_put_on_the_wire() {
         .write_read(0x1E, &[0x03], 6)
         .expect("the compass's sample");
     assert_eq!(engine_events(&compass), 11);
-}
-
-fn repository() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("the workspace")
-        .to_path_buf()
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).unwrap();
-        }
-    }
 }
 
 fn ring_script(bus: &str) -> serde_json::Value {

@@ -5,13 +5,16 @@
 //! the groups put on the wire; the copy lowers into the chip's admission table with the figures
 //! stated; and the report charges the engine per script.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
+
+mod common;
+use common::{copy_dir, repository, wire_counts};
 
 use amiro_can::Topic;
 use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::scripted::{Job, Next, ScriptBus, ScriptedSensors, Scripts};
 use amiro_sensors::drivers::suite::{Compass, Supervised};
-use amiro_sensors::script::{Script, Symbol};
+use amiro_sensors::script::Script;
 use amiro_sensors::sim::{NoDelay, SimCompassBus, SimFloorBus};
 use schedule_analysis::admission_host;
 use schedule_analysis::analysis::{analyse, Options};
@@ -41,17 +44,6 @@ const FLOOR_EVENTS: u32 = 44;
 const PER_EVENT_US: f64 = 3.53;
 const PER_SCRIPT_US: f64 = 8.34;
 const CONDITION_WAIT_US: f64 = 10.72;
-
-/// Bytes (address bytes included) and STARTs (operation starts and repeated STARTs) on the wire.
-fn wire_counts(script: &Script) -> (u32, u32) {
-    script
-        .wire()
-        .fold((0, 0), |(bytes, starts), symbol| match symbol {
-            Symbol::Start | Symbol::RepeatedStart => (bytes, starts + 1),
-            Symbol::Stop => (bytes, starts),
-            _ => (bytes + 1, starts),
-        })
-}
 
 /// The scripts of one sample of `topic` on a bus that answers at once.
 fn sample_scripts<G: ScriptedSensors>(
@@ -94,26 +86,6 @@ fn the_stated_scripts_are_the_ones_the_groups_put_on_the_wire() {
     assert_eq!(scripts.len(), 1);
     assert_eq!(wire_counts(&scripts[0]), (FLOOR_BYTES, FLOOR_STARTS));
     assert!(9 * FLOOR_BYTES + 2 * FLOOR_STARTS >= scripts[0].scl_periods());
-}
-
-fn repository() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("the workspace")
-        .to_path_buf()
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).unwrap();
-        }
-    }
 }
 
 /// A script statement of the timing file.
