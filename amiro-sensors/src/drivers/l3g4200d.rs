@@ -8,7 +8,7 @@
 
 use embedded_hal::spi::SpiDevice;
 
-use super::{div_round, saturate_i16, st_spi, Error};
+use super::{div_round_i32, saturate_i16, st_spi, Error};
 
 /// Register addresses (datasheet register map).
 pub mod reg {
@@ -83,13 +83,17 @@ pub struct AngularRate {
 
 impl AngularRate {
     /// Converts raw output digits at `range` to millidegrees per second.
+    ///
+    /// Every sensitivity is a whole number of 250 µdps (8 750, 17 500, 70 000), so `raw × s / 1000`
+    /// rounded is `raw × (s / 250) / 4` rounded, the same value in 32 bits (|raw × s / 250| <
+    /// 2^24): no 64-bit division on the chip.
     pub const fn from_raw(raw: [i16; 3], range: Range) -> Self {
-        let s = range.micro_dps_per_digit() as i64;
+        let k = range.micro_dps_per_digit() / 250;
         Self {
             millidegrees_per_s: [
-                div_round(raw[0] as i64 * s, 1000) as i32,
-                div_round(raw[1] as i64 * s, 1000) as i32,
-                div_round(raw[2] as i64 * s, 1000) as i32,
+                div_round_i32(raw[0] as i32 * k, 4),
+                div_round_i32(raw[1] as i32 * k, 4),
+                div_round_i32(raw[2] as i32 * k, 4),
             ],
         }
     }
@@ -98,9 +102,9 @@ impl AngularRate {
     pub const fn degrees_per_s(&self) -> [i16; 3] {
         let m = self.millidegrees_per_s;
         [
-            saturate_i16(div_round(m[0] as i64, 1000)),
-            saturate_i16(div_round(m[1] as i64, 1000)),
-            saturate_i16(div_round(m[2] as i64, 1000)),
+            saturate_i16(div_round_i32(m[0], 1000) as i64),
+            saturate_i16(div_round_i32(m[1], 1000) as i64),
+            saturate_i16(div_round_i32(m[2], 1000) as i64),
         ]
     }
 }
@@ -164,13 +168,13 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
     /// Puts the part into sleep mode (axes off, powered), as the original firmware did on
     /// shutdown.
     pub fn sleep(&mut self) -> Result<(), Error<SPI::Error>> {
-        st_spi::write(&mut self.spi, reg::CTRL_REG1, &[CTRL_REG1_SLEEP])?;
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, [CTRL_REG1_SLEEP])?;
         Ok(())
     }
 
     /// Wakes the part from [`sleep`](Self::sleep).
     pub fn wake(&mut self) -> Result<(), Error<SPI::Error>> {
-        st_spi::write(&mut self.spi, reg::CTRL_REG1, &[CTRL_REG1_RUN])?;
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, [CTRL_REG1_RUN])?;
         Ok(())
     }
 

@@ -9,7 +9,7 @@
 
 use embedded_hal::spi::SpiDevice;
 
-use super::{div_round, saturate_i16, st_spi, Error};
+use super::{div_round_i32, saturate_i16, st_spi, Error};
 
 /// Register addresses (datasheet register map).
 pub mod reg {
@@ -98,9 +98,9 @@ impl Acceleration {
     pub const fn milli_g(&self) -> [i16; 3] {
         let u = self.micro_g;
         [
-            saturate_i16(div_round(u[0] as i64, 1000)),
-            saturate_i16(div_round(u[1] as i64, 1000)),
-            saturate_i16(div_round(u[2] as i64, 1000)),
+            saturate_i16(div_round_i32(u[0], 1000) as i64),
+            saturate_i16(div_round_i32(u[1], 1000) as i64),
+            saturate_i16(div_round_i32(u[2], 1000) as i64),
         ]
     }
 }
@@ -171,7 +171,7 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
 
     /// Powers the part down (CTRL_REG1 PM=000).
     pub fn power_down(&mut self) -> Result<(), Error<SPI::Error>> {
-        st_spi::write(&mut self.spi, reg::CTRL_REG1, &[CTRL_REG1_POWER_DOWN])?;
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, [CTRL_REG1_POWER_DOWN])?;
         Ok(())
     }
 
