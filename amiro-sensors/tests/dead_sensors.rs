@@ -78,6 +78,50 @@ fn a_plausible_stuck_pattern_is_caught_by_the_periodic_identity_check() {
     );
 }
 
+/// Each part's identity is checked over its own topic's samples: a plausible stuck line on the
+/// accelerometer is caught within `IDENTITY_CHECK_EVERY` accelerometer samples however often the
+/// gyroscope is sampled between them, and never fails a gyroscope sample.
+#[test]
+fn each_part_is_checked_over_its_own_samples_and_fails_only_its_own_topic() {
+    let mut group = inertial();
+    group.accelerometer.bus_mut().set_stuck_miso(Some(0x5A));
+    let mut failed_at = None;
+    for n in 0..2 * u32::from(IDENTITY_CHECK_EVERY) {
+        for k in 0..3 {
+            let t = u64::from(n * 4 + k) * 1_000;
+            assert!(
+                group.sample(Topic::Gyroscope, t).is_ok(),
+                "gyroscope at {t}"
+            );
+        }
+        let t = u64::from(n * 4 + 3) * 1_000;
+        if group.sample(Topic::Accelerometer, t).is_err() {
+            failed_at = Some(n);
+            break;
+        }
+    }
+    assert!(
+        failed_at.is_some_and(|n| n < u32::from(IDENTITY_CHECK_EVERY)),
+        "{failed_at:?}"
+    );
+}
+
+/// The periodic check and the reading in one: a reading of all zeros right after a passed identity
+/// check is taken as it is (two accesses, not three).
+#[test]
+fn a_zero_reading_right_after_the_periodic_check_is_not_checked_again() {
+    let mut script = read_tx(0x8F, &[0xD3]);
+    script.extend(read_tx(0xE8, &[0; 6]));
+    let mut spi = SpiMock::new(&script);
+    let mut gyro = L3g4200d::new(spi.clone());
+    assert_eq!(
+        gyro.read_after_identity_check()
+            .map(|r| r.millidegrees_per_s),
+        Ok([0, 0, 0])
+    );
+    spi.done();
+}
+
 #[test]
 fn a_real_zero_reading_passes_after_the_identity_check() {
     // A gyroscope at rest that reads exactly zero: the driver checks WHO_AM_I and returns it.

@@ -165,6 +165,15 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
         Ok(AngularRate::from_raw(self.read_raw()?, self.range))
     }
 
+    /// Checks WHO_AM_I, then reads and converts one sample: the periodic identity check and the
+    /// reading in one, whose bytes need no second identity check when they look like a stuck
+    /// line (the part answered an access before; `st_spi::read_xyz_identified`).
+    pub fn read_after_identity_check(&mut self) -> Result<AngularRate, Error<SPI::Error>> {
+        self.check_identity()?;
+        let raw = st_spi::read_xyz_identified(&mut self.spi, reg::OUT_X_L)?;
+        Ok(AngularRate::from_raw(raw, self.range))
+    }
+
     /// Puts the part into sleep mode (axes off, powered), as the original firmware did on
     /// shutdown.
     pub fn sleep(&mut self) -> Result<(), Error<SPI::Error>> {

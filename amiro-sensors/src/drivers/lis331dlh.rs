@@ -169,6 +169,15 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
         Ok(Acceleration::from_raw(self.read_raw()?, self.range))
     }
 
+    /// Checks WHO_AM_I, then reads and converts one sample: the periodic identity check and the
+    /// reading in one, whose bytes need no second identity check when they look like a stuck
+    /// line (the part answered an access before; `st_spi::read_xyz_identified`).
+    pub fn read_after_identity_check(&mut self) -> Result<Acceleration, Error<SPI::Error>> {
+        self.check_identity()?;
+        let raw = st_spi::read_xyz_identified(&mut self.spi, reg::OUT_X_L)?;
+        Ok(Acceleration::from_raw(raw, self.range))
+    }
+
     /// Powers the part down (CTRL_REG1 PM=000).
     pub fn power_down(&mut self) -> Result<(), Error<SPI::Error>> {
         st_spi::write(&mut self.spi, reg::CTRL_REG1, [CTRL_REG1_POWER_DOWN])?;

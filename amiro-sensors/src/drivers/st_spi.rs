@@ -121,9 +121,24 @@ pub(crate) fn read_xyz<S: SpiDevice>(
     if super::is_bus_pattern(&out) {
         check_identity(spi, who_am_i, expected)?;
     }
-    Ok([
+    Ok(xyz(out))
+}
+
+/// Reads the six output bytes from `first` as [`read_xyz`] does, for a part whose identity was
+/// checked just before in the same sample: a bus pattern then is a real reading (the line
+/// answered the identity an access earlier), so it is not checked again.
+pub(crate) fn read_xyz_identified<S: SpiDevice>(
+    spi: &mut S,
+    first: u8,
+) -> Result<[i16; 3], Error<S::Error>> {
+    Ok(xyz(read(spi, first)?))
+}
+
+/// X, Y, Z from the six output bytes, each little-endian `i16`.
+fn xyz(out: [u8; 6]) -> [i16; 3] {
+    [
         i16::from_le_bytes([out[0], out[1]]),
         i16::from_le_bytes([out[2], out[3]]),
         i16::from_le_bytes([out[4], out[5]]),
-    ])
+    ]
 }

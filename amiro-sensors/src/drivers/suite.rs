@@ -184,7 +184,9 @@ pub struct InertialSensors<G, A> {
     pub gyroscope: L3g4200d<G>,
     /// The LIS331DLH.
     pub accelerometer: Lis331dlh<A>,
-    identity: IdentitySchedule,
+    /// Each part's own periodic identity check, counted over its own topic's samples: the
+    /// gyroscope's, then the accelerometer's.
+    identity: [IdentitySchedule; 2],
     /// The next step of a stepwise set-up: 0 the gyroscope, 1 the accelerometer.
     next_to_init: u8,
 }
@@ -195,7 +197,7 @@ impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
         Self {
             gyroscope: L3g4200d::new(gyroscope),
             accelerometer: Lis331dlh::new(accelerometer),
-            identity: IdentitySchedule { samples: 0 },
+            identity: [IdentitySchedule { samples: 0 }; 2],
             next_to_init: 0,
         }
     }
@@ -254,22 +256,29 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
         }
     }
 
+    /// A topic's sample reads its own part; every [`IDENTITY_CHECK_EVERY`](super::IDENTITY_CHECK_EVERY)
+    /// of its samples checks that part's identity first (and then not again on a reading that
+    /// looks like a stuck line): at most two SPI accesses a sample.
     fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
-        if self.serves(topic) && self.identity.due() {
-            self.gyroscope
-                .check_identity()
-                .map_err(spi_error(Device::Gyroscope))?;
-            self.accelerometer
-                .check_identity()
-                .map_err(spi_error(Device::Accelerometer))?;
-        }
         match topic {
-            Topic::Gyroscope => Ok(one(SensorData::Gyroscope(
-                self.read_gyroscope()?.degrees_per_s(),
-            ))),
-            Topic::Accelerometer => Ok(one(SensorData::Accelerometer(
-                self.read_accelerometer()?.milli_g(),
-            ))),
+            Topic::Gyroscope => {
+                let rate = if self.identity[0].due() {
+                    self.gyroscope.read_after_identity_check()
+                } else {
+                    self.gyroscope.read()
+                };
+                let rate = rate.map_err(spi_error(Device::Gyroscope))?;
+                Ok(one(SensorData::Gyroscope(rate.degrees_per_s())))
+            }
+            Topic::Accelerometer => {
+                let acceleration = if self.identity[1].due() {
+                    self.accelerometer.read_after_identity_check()
+                } else {
+                    self.accelerometer.read()
+                };
+                let acceleration = acceleration.map_err(spi_error(Device::Accelerometer))?;
+                Ok(one(SensorData::Accelerometer(acceleration.milli_g())))
+            }
             other => Err(SampleError::NotServed(other)),
         }
     }
