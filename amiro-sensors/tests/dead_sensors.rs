@@ -8,8 +8,8 @@ use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::hmc5883l::Hmc5883l;
 use amiro_sensors::drivers::l3g4200d::L3g4200d;
 use amiro_sensors::drivers::suite::{
-    Compass, Device, InertialSensors, SampleError, SensorGroup, Supervised, RETRY_FIRST_US,
-    RETRY_MAX_US,
+    Compass, Device, InertialSensors, SampleError, SensorGroup, Supervised, INERTIAL_SET_UP_STEPS,
+    RETRY_FIRST_US, RETRY_MAX_US,
 };
 use amiro_sensors::drivers::vcnl4020::Vcnl4020;
 use amiro_sensors::drivers::{Error, IDENTITY_CHECK_EVERY};
@@ -259,21 +259,19 @@ fn a_dead_group_stops_publishing_is_counted_and_retried_with_back_off() {
             ..
         })
     ));
-    // Repaired: the next attempt brings it back in two steps, one part each (the gyroscope, then
-    // the accelerometer with that sample's reading), and it publishes again.
+    // Repaired: the next attempt brings it back in four steps, one or two accesses each (each
+    // part's configuration written, then read back; the last with that sample's reading), and it
+    // publishes again.
     group.group_mut().gyroscope.bus_mut().set_stuck_miso(None);
     let back = group.retry_at_us();
-    assert!(group.sample(Topic::Gyroscope, back).is_empty());
-    assert!(
-        !group.is_ready(),
-        "still missing after the first part's set-up"
-    );
-    assert_eq!(
-        group.retry_at_us(),
-        back,
-        "the next step at the next sample"
-    );
-    assert_eq!(group.sample(Topic::Gyroscope, back + 2_000).len(), 1);
+    for step in 0..u64::from(INERTIAL_SET_UP_STEPS) - 1 {
+        let now = back + step * 2_000;
+        assert!(group.sample(Topic::Gyroscope, now).is_empty());
+        assert!(!group.is_ready(), "still missing after set-up step {step}");
+        assert_eq!(group.retry_at_us(), now, "the next step at the next sample");
+    }
+    let last = back + (u64::from(INERTIAL_SET_UP_STEPS) - 1) * 2_000;
+    assert_eq!(group.sample(Topic::Gyroscope, last).len(), 1);
     assert!(group.is_ready());
     // Not served topics are no fault.
     assert!(group.sample(Topic::PowerStatus, back).is_empty());

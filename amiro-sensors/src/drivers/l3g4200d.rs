@@ -139,6 +139,22 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
         st_spi::configure(&mut self.spi, reg::CTRL_REG1, config, |_| 0xFF)
     }
 
+    /// [`init`](Self::init)'s middle access: writes CTRL_REG1..5 (a stepwise set-up's step, after
+    /// [`check_identity`](Self::check_identity); [`verify_configuration`](Self::verify_configuration)
+    /// is the next).
+    pub fn write_configuration(&mut self) -> Result<(), Error<SPI::Error>> {
+        let config = self.control_registers();
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, config)?;
+        Ok(())
+    }
+
+    /// [`init`](Self::init)'s last access: reads CTRL_REG1..5 back and compares them with what
+    /// [`write_configuration`](Self::write_configuration) wrote.
+    pub fn verify_configuration(&mut self) -> Result<(), Error<SPI::Error>> {
+        let config = self.control_registers();
+        st_spi::verify(&mut self.spi, reg::CTRL_REG1, config, |_| 0xFF)
+    }
+
     /// Reads WHO_AM_I and compares it with [`WHO_AM_I_VALUE`].
     pub fn check_identity(&mut self) -> Result<(), Error<SPI::Error>> {
         st_spi::check_identity(&mut self.spi, reg::WHO_AM_I, WHO_AM_I_VALUE)

@@ -105,6 +105,16 @@ impl Acceleration {
     }
 }
 
+/// The bits of a control register that read back as written: CTRL_REG2 bit 7 (BOOT) clears
+/// itself, every other bit stays.
+fn writable(register: u8) -> u8 {
+    if register == reg::CTRL_REG2 {
+        0x7F
+    } else {
+        0xFF
+    }
+}
+
 /// The accelerometer on its SPI device (the `SpiDevice` owns the chip select).
 #[derive(Debug)]
 pub struct Lis331dlh<SPI> {
@@ -132,15 +142,23 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
     pub fn init(&mut self) -> Result<(), Error<SPI::Error>> {
         self.check_identity()?;
         let config = self.control_registers();
-        // CTRL_REG2 bit 7 (BOOT) clears itself; every other bit reads back as written.
-        let writable = |register| {
-            if register == reg::CTRL_REG2 {
-                0x7F
-            } else {
-                0xFF
-            }
-        };
         st_spi::configure(&mut self.spi, reg::CTRL_REG1, config, writable)
+    }
+
+    /// [`init`](Self::init)'s middle access: writes CTRL_REG1..5 (a stepwise set-up's step, after
+    /// [`check_identity`](Self::check_identity); [`verify_configuration`](Self::verify_configuration)
+    /// is the next).
+    pub fn write_configuration(&mut self) -> Result<(), Error<SPI::Error>> {
+        let config = self.control_registers();
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, config)?;
+        Ok(())
+    }
+
+    /// [`init`](Self::init)'s last access: reads CTRL_REG1..5 back and compares them with what
+    /// [`write_configuration`](Self::write_configuration) wrote.
+    pub fn verify_configuration(&mut self) -> Result<(), Error<SPI::Error>> {
+        let config = self.control_registers();
+        st_spi::verify(&mut self.spi, reg::CTRL_REG1, config, writable)
     }
 
     /// Reads WHO_AM_I and compares it with [`WHO_AM_I_VALUE`].

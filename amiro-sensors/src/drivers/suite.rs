@@ -177,6 +177,10 @@ pub enum InitStep {
     Failed(SampleError),
 }
 
+/// The steps of [`InertialSensors`]' stepwise set-up, one SPI access each: each part's identity
+/// checked, its configuration written, then read back.
+pub const INERTIAL_SET_UP_STEPS: u8 = 6;
+
 /// DiWheelDrive 1-1's gyroscope and accelerometer (SPI1, each with its own chip select).
 #[derive(Debug)]
 pub struct InertialSensors<G, A> {
@@ -187,7 +191,7 @@ pub struct InertialSensors<G, A> {
     /// Each part's own periodic identity check, counted over its own topic's samples: the
     /// gyroscope's, then the accelerometer's.
     identity: [IdentitySchedule; 2],
-    /// The next step of a stepwise set-up: 0 the gyroscope, 1 the accelerometer.
+    /// The next step of a stepwise set-up ([`INERTIAL_SET_UP_STEPS`]).
     next_to_init: u8,
 }
 
@@ -230,19 +234,30 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
             .map_err(spi_error(Device::Accelerometer))
     }
 
-    /// One part per step: the gyroscope, then (at the next call) the accelerometer.
+    /// Six steps of one SPI access each: the gyroscope's identity checked, its configuration
+    /// written, read back; then the accelerometer's. A release that takes a step and, after the
+    /// last, the group's sample makes at most three accesses.
     fn init_step(&mut self, now_us: u64) -> InitStep {
-        let gyroscope = self.next_to_init == 0;
-        let result = if gyroscope {
-            self.gyroscope.init().map_err(spi_error(Device::Gyroscope))
-        } else {
-            self.accelerometer
-                .init()
-                .map_err(spi_error(Device::Accelerometer))
+        let step = self.next_to_init;
+        let gyroscope = spi_error(Device::Gyroscope);
+        let accelerometer = spi_error(Device::Accelerometer);
+        let result = match step {
+            0 => self.gyroscope.check_identity().map_err(gyroscope),
+            1 => self.gyroscope.write_configuration().map_err(gyroscope),
+            2 => self.gyroscope.verify_configuration().map_err(gyroscope),
+            3 => self.accelerometer.check_identity().map_err(accelerometer),
+            4 => self
+                .accelerometer
+                .write_configuration()
+                .map_err(accelerometer),
+            _ => self
+                .accelerometer
+                .verify_configuration()
+                .map_err(accelerometer),
         };
         match result {
-            Ok(()) if gyroscope => {
-                self.next_to_init = 1;
+            Ok(()) if step + 1 < INERTIAL_SET_UP_STEPS => {
+                self.next_to_init = step + 1;
                 InitStep::Pending { next_us: now_us }
             }
             Ok(()) => {
