@@ -8,8 +8,8 @@ use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::hmc5883l::Hmc5883l;
 use amiro_sensors::drivers::l3g4200d::L3g4200d;
 use amiro_sensors::drivers::suite::{
-    Compass, Device, InertialSensors, SampleError, SensorGroup, Supervised, RETRY_FIRST_US,
-    RETRY_MAX_US,
+    Compass, Device, InertialSensors, SampleError, SensorGroup, Supervised, INERTIAL_SET_UP_STEPS,
+    RETRY_FIRST_US, RETRY_MAX_US,
 };
 use amiro_sensors::drivers::vcnl4020::Vcnl4020;
 use amiro_sensors::drivers::{Error, IDENTITY_CHECK_EVERY};
@@ -76,6 +76,50 @@ fn a_plausible_stuck_pattern_is_caught_by_the_periodic_identity_check() {
         failed_at.is_some_and(|n| n < usize::from(IDENTITY_CHECK_EVERY)),
         "{failed_at:?}"
     );
+}
+
+/// Each part's identity is checked over its own topic's samples: a plausible stuck line on the
+/// accelerometer is caught within `IDENTITY_CHECK_EVERY` accelerometer samples however often the
+/// gyroscope is sampled between them, and never fails a gyroscope sample.
+#[test]
+fn each_part_is_checked_over_its_own_samples_and_fails_only_its_own_topic() {
+    let mut group = inertial();
+    group.accelerometer.bus_mut().set_stuck_miso(Some(0x5A));
+    let mut failed_at = None;
+    for n in 0..2 * u32::from(IDENTITY_CHECK_EVERY) {
+        for k in 0..3 {
+            let t = u64::from(n * 4 + k) * 1_000;
+            assert!(
+                group.sample(Topic::Gyroscope, t).is_ok(),
+                "gyroscope at {t}"
+            );
+        }
+        let t = u64::from(n * 4 + 3) * 1_000;
+        if group.sample(Topic::Accelerometer, t).is_err() {
+            failed_at = Some(n);
+            break;
+        }
+    }
+    assert!(
+        failed_at.is_some_and(|n| n < u32::from(IDENTITY_CHECK_EVERY)),
+        "{failed_at:?}"
+    );
+}
+
+/// The periodic check and the reading in one: a reading of all zeros right after a passed identity
+/// check is taken as it is (two accesses, not three).
+#[test]
+fn a_zero_reading_right_after_the_periodic_check_is_not_checked_again() {
+    let mut script = read_tx(0x8F, &[0xD3]);
+    script.extend(read_tx(0xE8, &[0; 6]));
+    let mut spi = SpiMock::new(&script);
+    let mut gyro = L3g4200d::new(spi.clone());
+    assert_eq!(
+        gyro.read_after_identity_check()
+            .map(|r| r.millidegrees_per_s),
+        Ok([0, 0, 0])
+    );
+    spi.done();
 }
 
 #[test]
@@ -215,21 +259,19 @@ fn a_dead_group_stops_publishing_is_counted_and_retried_with_back_off() {
             ..
         })
     ));
-    // Repaired: the next attempt brings it back in two steps, one part each (the gyroscope, then
-    // the accelerometer with that sample's reading), and it publishes again.
+    // Repaired: the next attempt brings it back in four steps, one or two accesses each (each
+    // part's configuration written, then read back; the last with that sample's reading), and it
+    // publishes again.
     group.group_mut().gyroscope.bus_mut().set_stuck_miso(None);
     let back = group.retry_at_us();
-    assert!(group.sample(Topic::Gyroscope, back).is_empty());
-    assert!(
-        !group.is_ready(),
-        "still missing after the first part's set-up"
-    );
-    assert_eq!(
-        group.retry_at_us(),
-        back,
-        "the next step at the next sample"
-    );
-    assert_eq!(group.sample(Topic::Gyroscope, back + 2_000).len(), 1);
+    for step in 0..u64::from(INERTIAL_SET_UP_STEPS) - 1 {
+        let now = back + step * 2_000;
+        assert!(group.sample(Topic::Gyroscope, now).is_empty());
+        assert!(!group.is_ready(), "still missing after set-up step {step}");
+        assert_eq!(group.retry_at_us(), now, "the next step at the next sample");
+    }
+    let last = back + (u64::from(INERTIAL_SET_UP_STEPS) - 1) * 2_000;
+    assert_eq!(group.sample(Topic::Gyroscope, last).len(), 1);
     assert!(group.is_ready());
     // Not served topics are no fault.
     assert!(group.sample(Topic::PowerStatus, back).is_empty());

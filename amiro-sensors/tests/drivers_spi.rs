@@ -196,3 +196,60 @@ fn accel_power_down_and_bus_errors() {
     assert_eq!(broken.read(), Err(Error::Bus(ErrorKind::Overrun)));
     assert_eq!(broken.check_identity(), Err(Error::Bus(ErrorKind::Overrun)));
 }
+
+/// The conversions' 64-bit definition: `n / d` rounded to nearest, halves away from zero.
+fn rounded(n: i64, d: i64) -> i64 {
+    if n >= 0 {
+        (n + d / 2) / d
+    } else {
+        (n - d / 2) / d
+    }
+}
+
+/// The protocol's saturation to `i16`.
+fn saturated(v: i64) -> i16 {
+    v.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i16
+}
+
+#[test]
+fn gyro_conversions_in_32_bits_equal_the_64_bit_definition_for_every_reading() {
+    for range in [
+        l3g4200d::Range::Dps250,
+        l3g4200d::Range::Dps500,
+        l3g4200d::Range::Dps2000,
+    ] {
+        let s = i64::from(range.micro_dps_per_digit());
+        for raw in i16::MIN..=i16::MAX {
+            let expected_m = rounded(i64::from(raw) * s, 1000);
+            let rate = AngularRate::from_raw([raw, 0, raw], range);
+            assert_eq!(
+                rate.millidegrees_per_s,
+                [expected_m as i32, 0, expected_m as i32],
+                "{range:?} {raw}"
+            );
+            assert_eq!(
+                rate.degrees_per_s()[0],
+                saturated(rounded(expected_m, 1000)),
+                "{range:?} {raw}"
+            );
+        }
+    }
+}
+
+#[test]
+fn accel_milli_g_in_32_bits_equals_the_64_bit_definition_for_every_reading() {
+    for range in [
+        lis331dlh::Range::G2,
+        lis331dlh::Range::G4,
+        lis331dlh::Range::G8,
+    ] {
+        for raw in i16::MIN..=i16::MAX {
+            let a = Acceleration::from_raw([raw, 0, 0], range);
+            assert_eq!(
+                a.milli_g()[0],
+                saturated(rounded(i64::from(a.micro_g[0]), 1000)),
+                "{range:?} {raw}"
+            );
+        }
+    }
+}

@@ -8,7 +8,7 @@
 
 use embedded_hal::spi::SpiDevice;
 
-use super::{div_round, saturate_i16, st_spi, Error};
+use super::{div_round_i32, saturate_i16, st_spi, Error};
 
 /// Register addresses (datasheet register map).
 pub mod reg {
@@ -83,13 +83,17 @@ pub struct AngularRate {
 
 impl AngularRate {
     /// Converts raw output digits at `range` to millidegrees per second.
+    ///
+    /// Every sensitivity is a whole number of 250 µdps (8 750, 17 500, 70 000), so `raw × s / 1000`
+    /// rounded is `raw × (s / 250) / 4` rounded, the same value in 32 bits (|raw × s / 250| <
+    /// 2^24): no 64-bit division on the chip.
     pub const fn from_raw(raw: [i16; 3], range: Range) -> Self {
-        let s = range.micro_dps_per_digit() as i64;
+        let k = range.micro_dps_per_digit() / 250;
         Self {
             millidegrees_per_s: [
-                div_round(raw[0] as i64 * s, 1000) as i32,
-                div_round(raw[1] as i64 * s, 1000) as i32,
-                div_round(raw[2] as i64 * s, 1000) as i32,
+                div_round_i32(raw[0] as i32 * k, 4),
+                div_round_i32(raw[1] as i32 * k, 4),
+                div_round_i32(raw[2] as i32 * k, 4),
             ],
         }
     }
@@ -98,9 +102,9 @@ impl AngularRate {
     pub const fn degrees_per_s(&self) -> [i16; 3] {
         let m = self.millidegrees_per_s;
         [
-            saturate_i16(div_round(m[0] as i64, 1000)),
-            saturate_i16(div_round(m[1] as i64, 1000)),
-            saturate_i16(div_round(m[2] as i64, 1000)),
+            saturate_i16(div_round_i32(m[0], 1000) as i64),
+            saturate_i16(div_round_i32(m[1], 1000) as i64),
+            saturate_i16(div_round_i32(m[2], 1000) as i64),
         ]
     }
 }
@@ -135,6 +139,22 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
         st_spi::configure(&mut self.spi, reg::CTRL_REG1, config, |_| 0xFF)
     }
 
+    /// [`init`](Self::init)'s middle access: writes CTRL_REG1..5 (a stepwise set-up's step, after
+    /// [`check_identity`](Self::check_identity); [`verify_configuration`](Self::verify_configuration)
+    /// is the next).
+    pub fn write_configuration(&mut self) -> Result<(), Error<SPI::Error>> {
+        let config = self.control_registers();
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, config)?;
+        Ok(())
+    }
+
+    /// [`init`](Self::init)'s last access: reads CTRL_REG1..5 back and compares them with what
+    /// [`write_configuration`](Self::write_configuration) wrote.
+    pub fn verify_configuration(&mut self) -> Result<(), Error<SPI::Error>> {
+        let config = self.control_registers();
+        st_spi::verify(&mut self.spi, reg::CTRL_REG1, config, |_| 0xFF)
+    }
+
     /// Reads WHO_AM_I and compares it with [`WHO_AM_I_VALUE`].
     pub fn check_identity(&mut self) -> Result<(), Error<SPI::Error>> {
         st_spi::check_identity(&mut self.spi, reg::WHO_AM_I, WHO_AM_I_VALUE)
@@ -161,16 +181,25 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
         Ok(AngularRate::from_raw(self.read_raw()?, self.range))
     }
 
+    /// Checks WHO_AM_I, then reads and converts one sample: the periodic identity check and the
+    /// reading in one, whose bytes need no second identity check when they look like a stuck
+    /// line (the part answered an access before; `st_spi::read_xyz_identified`).
+    pub fn read_after_identity_check(&mut self) -> Result<AngularRate, Error<SPI::Error>> {
+        self.check_identity()?;
+        let raw = st_spi::read_xyz_identified(&mut self.spi, reg::OUT_X_L)?;
+        Ok(AngularRate::from_raw(raw, self.range))
+    }
+
     /// Puts the part into sleep mode (axes off, powered), as the original firmware did on
     /// shutdown.
     pub fn sleep(&mut self) -> Result<(), Error<SPI::Error>> {
-        st_spi::write(&mut self.spi, reg::CTRL_REG1, &[CTRL_REG1_SLEEP])?;
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, [CTRL_REG1_SLEEP])?;
         Ok(())
     }
 
     /// Wakes the part from [`sleep`](Self::sleep).
     pub fn wake(&mut self) -> Result<(), Error<SPI::Error>> {
-        st_spi::write(&mut self.spi, reg::CTRL_REG1, &[CTRL_REG1_RUN])?;
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, [CTRL_REG1_RUN])?;
         Ok(())
     }
 

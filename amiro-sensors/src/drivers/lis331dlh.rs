@@ -9,7 +9,7 @@
 
 use embedded_hal::spi::SpiDevice;
 
-use super::{div_round, saturate_i16, st_spi, Error};
+use super::{div_round_i32, saturate_i16, st_spi, Error};
 
 /// Register addresses (datasheet register map).
 pub mod reg {
@@ -98,10 +98,20 @@ impl Acceleration {
     pub const fn milli_g(&self) -> [i16; 3] {
         let u = self.micro_g;
         [
-            saturate_i16(div_round(u[0] as i64, 1000)),
-            saturate_i16(div_round(u[1] as i64, 1000)),
-            saturate_i16(div_round(u[2] as i64, 1000)),
+            saturate_i16(div_round_i32(u[0], 1000) as i64),
+            saturate_i16(div_round_i32(u[1], 1000) as i64),
+            saturate_i16(div_round_i32(u[2], 1000) as i64),
         ]
+    }
+}
+
+/// The bits of a control register that read back as written: CTRL_REG2 bit 7 (BOOT) clears
+/// itself, every other bit stays.
+fn writable(register: u8) -> u8 {
+    if register == reg::CTRL_REG2 {
+        0x7F
+    } else {
+        0xFF
     }
 }
 
@@ -132,15 +142,23 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
     pub fn init(&mut self) -> Result<(), Error<SPI::Error>> {
         self.check_identity()?;
         let config = self.control_registers();
-        // CTRL_REG2 bit 7 (BOOT) clears itself; every other bit reads back as written.
-        let writable = |register| {
-            if register == reg::CTRL_REG2 {
-                0x7F
-            } else {
-                0xFF
-            }
-        };
         st_spi::configure(&mut self.spi, reg::CTRL_REG1, config, writable)
+    }
+
+    /// [`init`](Self::init)'s middle access: writes CTRL_REG1..5 (a stepwise set-up's step, after
+    /// [`check_identity`](Self::check_identity); [`verify_configuration`](Self::verify_configuration)
+    /// is the next).
+    pub fn write_configuration(&mut self) -> Result<(), Error<SPI::Error>> {
+        let config = self.control_registers();
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, config)?;
+        Ok(())
+    }
+
+    /// [`init`](Self::init)'s last access: reads CTRL_REG1..5 back and compares them with what
+    /// [`write_configuration`](Self::write_configuration) wrote.
+    pub fn verify_configuration(&mut self) -> Result<(), Error<SPI::Error>> {
+        let config = self.control_registers();
+        st_spi::verify(&mut self.spi, reg::CTRL_REG1, config, writable)
     }
 
     /// Reads WHO_AM_I and compares it with [`WHO_AM_I_VALUE`].
@@ -169,9 +187,18 @@ impl<SPI: SpiDevice> Lis331dlh<SPI> {
         Ok(Acceleration::from_raw(self.read_raw()?, self.range))
     }
 
+    /// Checks WHO_AM_I, then reads and converts one sample: the periodic identity check and the
+    /// reading in one, whose bytes need no second identity check when they look like a stuck
+    /// line (the part answered an access before; `st_spi::read_xyz_identified`).
+    pub fn read_after_identity_check(&mut self) -> Result<Acceleration, Error<SPI::Error>> {
+        self.check_identity()?;
+        let raw = st_spi::read_xyz_identified(&mut self.spi, reg::OUT_X_L)?;
+        Ok(Acceleration::from_raw(raw, self.range))
+    }
+
     /// Powers the part down (CTRL_REG1 PM=000).
     pub fn power_down(&mut self) -> Result<(), Error<SPI::Error>> {
-        st_spi::write(&mut self.spi, reg::CTRL_REG1, &[CTRL_REG1_POWER_DOWN])?;
+        st_spi::write(&mut self.spi, reg::CTRL_REG1, [CTRL_REG1_POWER_DOWN])?;
         Ok(())
     }
 

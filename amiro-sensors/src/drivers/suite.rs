@@ -177,6 +177,10 @@ pub enum InitStep {
     Failed(SampleError),
 }
 
+/// The steps of [`InertialSensors`]' stepwise set-up, one SPI access each: each part's identity
+/// checked, its configuration written, then read back.
+pub const INERTIAL_SET_UP_STEPS: u8 = 6;
+
 /// DiWheelDrive 1-1's gyroscope and accelerometer (SPI1, each with its own chip select).
 #[derive(Debug)]
 pub struct InertialSensors<G, A> {
@@ -184,8 +188,10 @@ pub struct InertialSensors<G, A> {
     pub gyroscope: L3g4200d<G>,
     /// The LIS331DLH.
     pub accelerometer: Lis331dlh<A>,
-    identity: IdentitySchedule,
-    /// The next step of a stepwise set-up: 0 the gyroscope, 1 the accelerometer.
+    /// Each part's own periodic identity check, counted over its own topic's samples: the
+    /// gyroscope's, then the accelerometer's.
+    identity: [IdentitySchedule; 2],
+    /// The next step of a stepwise set-up ([`INERTIAL_SET_UP_STEPS`]).
     next_to_init: u8,
 }
 
@@ -195,7 +201,7 @@ impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
         Self {
             gyroscope: L3g4200d::new(gyroscope),
             accelerometer: Lis331dlh::new(accelerometer),
-            identity: IdentitySchedule { samples: 0 },
+            identity: [IdentitySchedule { samples: 0 }; 2],
             next_to_init: 0,
         }
     }
@@ -228,19 +234,30 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
             .map_err(spi_error(Device::Accelerometer))
     }
 
-    /// One part per step: the gyroscope, then (at the next call) the accelerometer.
+    /// Six steps of one SPI access each: the gyroscope's identity checked, its configuration
+    /// written, read back; then the accelerometer's. A release that takes a step and, after the
+    /// last, the group's sample makes at most three accesses.
     fn init_step(&mut self, now_us: u64) -> InitStep {
-        let gyroscope = self.next_to_init == 0;
-        let result = if gyroscope {
-            self.gyroscope.init().map_err(spi_error(Device::Gyroscope))
-        } else {
-            self.accelerometer
-                .init()
-                .map_err(spi_error(Device::Accelerometer))
+        let step = self.next_to_init;
+        let gyroscope = spi_error(Device::Gyroscope);
+        let accelerometer = spi_error(Device::Accelerometer);
+        let result = match step {
+            0 => self.gyroscope.check_identity().map_err(gyroscope),
+            1 => self.gyroscope.write_configuration().map_err(gyroscope),
+            2 => self.gyroscope.verify_configuration().map_err(gyroscope),
+            3 => self.accelerometer.check_identity().map_err(accelerometer),
+            4 => self
+                .accelerometer
+                .write_configuration()
+                .map_err(accelerometer),
+            _ => self
+                .accelerometer
+                .verify_configuration()
+                .map_err(accelerometer),
         };
         match result {
-            Ok(()) if gyroscope => {
-                self.next_to_init = 1;
+            Ok(()) if step + 1 < INERTIAL_SET_UP_STEPS => {
+                self.next_to_init = step + 1;
                 InitStep::Pending { next_us: now_us }
             }
             Ok(()) => {
@@ -254,22 +271,29 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
         }
     }
 
+    /// A topic's sample reads its own part; every [`IDENTITY_CHECK_EVERY`](super::IDENTITY_CHECK_EVERY)
+    /// of its samples checks that part's identity first (and then not again on a reading that
+    /// looks like a stuck line): at most two SPI accesses a sample.
     fn sample(&mut self, topic: Topic, _now_us: u64) -> Result<Samples, SampleError> {
-        if self.serves(topic) && self.identity.due() {
-            self.gyroscope
-                .check_identity()
-                .map_err(spi_error(Device::Gyroscope))?;
-            self.accelerometer
-                .check_identity()
-                .map_err(spi_error(Device::Accelerometer))?;
-        }
         match topic {
-            Topic::Gyroscope => Ok(one(SensorData::Gyroscope(
-                self.read_gyroscope()?.degrees_per_s(),
-            ))),
-            Topic::Accelerometer => Ok(one(SensorData::Accelerometer(
-                self.read_accelerometer()?.milli_g(),
-            ))),
+            Topic::Gyroscope => {
+                let rate = if self.identity[0].due() {
+                    self.gyroscope.read_after_identity_check()
+                } else {
+                    self.gyroscope.read()
+                };
+                let rate = rate.map_err(spi_error(Device::Gyroscope))?;
+                Ok(one(SensorData::Gyroscope(rate.degrees_per_s())))
+            }
+            Topic::Accelerometer => {
+                let acceleration = if self.identity[1].due() {
+                    self.accelerometer.read_after_identity_check()
+                } else {
+                    self.accelerometer.read()
+                };
+                let acceleration = acceleration.map_err(spi_error(Device::Accelerometer))?;
+                Ok(one(SensorData::Accelerometer(acceleration.milli_g())))
+            }
             other => Err(SampleError::NotServed(other)),
         }
     }
