@@ -1,6 +1,7 @@
 //! The analysis of one image: each function's graph, loops, costs and longest paths, worked out
 //! once and composed bottom up ([`super`] states the method).
 use std::collections::{BTreeMap, BTreeSet};
+use std::rc::Rc;
 
 use super::bounds::{BoundsFile, JOB_PASSES};
 use super::cfg::{self, Call, Cfg};
@@ -10,6 +11,7 @@ use super::length::{self, Args, LENGTH_UNKNOWN, NO_ARGS};
 use super::path::{self, Cost, LoopCount, LoopNodes, Node, PathError};
 use super::polled;
 use super::stored;
+use super::values::{self, State, Values};
 use super::LoopInfo;
 use crate::callgraph::is_panic;
 use crate::decode::{Flow, Insn, Opcode, PC, SP};
@@ -74,6 +76,8 @@ pub(super) struct Analysis<'a> {
     excluded: BTreeSet<String>,
     /// Whether a function has a way to its return with the excluded calls left out.
     feasible: BTreeMap<u64, bool>,
+    /// Each function's register values where its blocks start ([`values`]), on its whole graph.
+    values: BTreeMap<u64, Rc<Values>>,
 }
 
 /// Where a machine-outlined helper (`OUTLINED_FUNCTION_n`) is called from: the calling function's
@@ -114,6 +118,7 @@ impl<'a> Analysis<'a> {
             open: Vec::new(),
             excluded: BTreeSet::new(),
             feasible: BTreeMap::new(),
+            values: BTreeMap::new(),
         }
     }
 
@@ -326,6 +331,20 @@ impl<'a> Analysis<'a> {
             returning.insert(t, r);
         }
         Cfg::build(f, &read, &|t| returning.get(&t).copied().unwrap_or(true))
+    }
+
+    /// `f`'s register values ([`values`]), worked out once on its whole graph as built: every path
+    /// of any part of it (a task's part of its dispatcher, a job with calls left out, a section, a
+    /// split copy) is a path of that graph, so what holds there holds on the part; a part's block is
+    /// read from the instruction it starts at ([`Values::before`]).
+    fn values(&mut self, f: &'a Function) -> Result<Rc<Values>, Error> {
+        if let Some(v) = self.values.get(&f.start) {
+            return Ok(Rc::clone(v));
+        }
+        let graph = self.built(f)?;
+        let v = Rc::new(Values::of(self.image, f.instructions()?, &graph));
+        self.values.insert(f.start, Rc::clone(&v));
+        Ok(v)
     }
 
     /// `graph` (of `f`) with each cycle of more than one entry (an async task's loop) made a
@@ -596,10 +615,14 @@ impl<'a> Analysis<'a> {
             });
         }
         // Node costs: the block's instructions, and what it calls.
+        let values = self.values(f)?;
         let mut time_nodes = Vec::with_capacity(graph.blocks.len());
         let mut count_nodes = Vec::with_capacity(graph.blocks.len());
         for (index, block) in graph.blocks.iter().enumerate() {
-            let own = self.block_cost(&insns[block.first..=block.last]);
+            let own = self.block_cost(
+                &insns[block.first..=block.last],
+                values.before(image, insns, block.first),
+            );
             let (mut time, mut count) = (own, own);
             // What a tail call adds is paid only on the way out through it; a conditional one
             // (`B<c>` out of the function) also pays its refill there.
@@ -882,16 +905,16 @@ impl<'a> Analysis<'a> {
         Ok(outcome)
     }
 
-    /// A straight run of instructions: each one's core and memory cycles, at least the cycles
-    /// fetching the flash lines it spans takes.
-    fn block_cost(&self, insns: &[Insn]) -> Cost {
+    /// A straight run of instructions entered with the registers `state`: each one's core and memory
+    /// cycles, at least the cycles fetching the flash lines it spans takes.
+    fn block_cost(&self, insns: &[Insn], mut state: State) -> Cost {
         let chip = self.chip;
-        let mut known = [None; 16];
         let mut cycles = 0;
         for insn in insns {
-            let base = insn.memory_base().and_then(|r| known[usize::from(r)]);
+            let base = super::chip::base_register(insn)
+                .map_or(values::Value::Unknown, |r| state[usize::from(r)]);
             cycles += chip.core_cycles(insn) + chip.memory_cycles(insn, base);
-            crate::waits::step_constants(self.image, insn, &mut known);
+            values::step(self.image, insn, &mut state);
         }
         let fetch = match (insns.first(), insns.last()) {
             (Some(first), Some(last)) => chip.fetch_cycles(first.addr, last.next()),
@@ -956,7 +979,7 @@ fn time_key(chip: Chip) -> impl Fn(Cost) -> u64 {
 }
 
 /// A jump-table entry (1 or 2 bytes) of the image.
-fn read_entry(image: &Image, address: u64, size: u64) -> Option<u64> {
+pub(super) fn read_entry(image: &Image, address: u64, size: u64) -> Option<u64> {
     let bytes = image.bytes(address, size)?;
     Some(match bytes[..] {
         [b] => u64::from(b),

@@ -3,7 +3,8 @@
 //! ("Execution-time bounds from the machine code").
 use serde::Serialize;
 
-use crate::decode::{Flow, Insn, Opcode, PC, SP};
+use super::values::Value;
+use crate::decode::{Flow, Insn, Opcode, Operand, PC, SP};
 use crate::Error;
 
 /// The pipeline refill after a taken branch: the TRMs give P as 1 to 3 cycles; taken at its
@@ -261,44 +262,102 @@ impl Chip {
         ((end - 1) / line - start / line + 1) * (self.wait_states() + 1)
     }
 
-    /// The memory cycles an instruction adds, given what is known of its base register's value.
-    pub fn memory_cycles(self, insn: &Insn, base_value: Option<u32>) -> u64 {
+    /// The memory cycles an instruction adds, given what is known of its base register's value
+    /// ([`base_register`]; [`super::values`]): the accesses' count times the worst latency of any
+    /// region the address may be in.
+    pub fn memory_cycles(self, insn: &Insn, base_value: Value) -> u64 {
         if !(insn.is_load() || insn.is_store()) {
             return 0;
         }
-        let words = match insn.inst.opcode {
+        let list = match insn.inst.opcode {
             Opcode::LDM(..) | Opcode::STM(..) | Opcode::PUSH | Opcode::POP => {
-                u64::from(insn.register_list().unwrap_or(0).count_ones()).max(1)
+                Some(u64::from(insn.register_list().unwrap_or(0).count_ones()).max(1))
             }
+            _ => None,
+        };
+        let words = match insn.inst.opcode {
             Opcode::LDRD | Opcode::STRD => 2,
-            _ => 1,
+            _ => list.unwrap_or(1),
         };
-        let base = match insn.inst.opcode {
-            Opcode::PUSH | Opcode::POP => Some(SP),
-            _ => insn.memory_base().or_else(|| insn.memory_base_wback()),
+        let store = insn.is_store();
+        let charge = |region: Region| {
+            // Stores never go to flash in running code: an unknown store is a peripheral's at worst.
+            let region = match region {
+                Region::Flash | Region::Unknown if store => Region::Apb1,
+                other => other,
+            };
+            self.access_cycles(region)
         };
-        let region = match base {
-            Some(SP) => Region::Ram,
-            Some(PC) => Region::Flash,
+        let worst = match base_register(insn) {
+            Some(SP) => charge(Region::Ram),
+            Some(PC) => charge(Region::Flash),
             _ => match base_value {
-                Some(value) => {
-                    let offset = insn.memory_offset().unwrap_or(0);
-                    self.region(u32::try_from(i64::from(value) + offset).unwrap_or(value))
+                Value::Stack => charge(Region::Ram),
+                Value::Range(lo, hi) => {
+                    // The accessed span: the immediate offset's (an index register's access is
+                    // within the object its base addresses), a list's words either side of its base.
+                    let (from, to) = match list {
+                        Some(n) => (i64::from(lo) - 4 * n as i64, i64::from(hi) + 4 * n as i64),
+                        None => {
+                            let k = insn.memory_offset().unwrap_or(0);
+                            (i64::from(lo) + k, i64::from(hi) + k)
+                        }
+                    };
+                    let (low, high) = (u32::try_from(from), u32::try_from(to));
+                    match (low, high) {
+                        (Ok(low), Ok(high)) => self
+                            .regions(low, high)
+                            .into_iter()
+                            .map(charge)
+                            .max()
+                            .unwrap_or_else(|| charge(Region::Unknown)),
+                        _ => charge(Region::Unknown),
+                    }
                 }
-                None => Region::Unknown,
+                Value::Unknown => charge(Region::Unknown),
             },
         };
-        // Stores never go to flash in running code: an unknown store is a peripheral's at worst.
-        let region = if insn.is_store() && region == Region::Flash {
-            Region::Unknown
-        } else {
-            region
-        };
-        let region = if insn.is_store() && region == Region::Unknown {
-            Region::Apb1
-        } else {
-            region
-        };
-        words * self.access_cycles(region)
+        words * worst
+    }
+
+    /// The regions any address of `low..=high` is in (the memory map of [`Chip::region`]).
+    pub fn regions(self, low: u32, high: u32) -> Vec<Region> {
+        // Where each region starts, in order; each runs to the next one's start.
+        const STARTS: [u32; 9] = [
+            0,
+            0x2000_0000,
+            0x4000_0000,
+            0x4001_0000,
+            0x4001_8000,
+            0x4002_0000,
+            0x6000_0000,
+            0xe000_0000,
+            0xe010_0000,
+        ];
+        let mut found = Vec::new();
+        for (k, &start) in STARTS.iter().enumerate() {
+            let end = STARTS.get(k + 1).map_or(u32::MAX, |&next| next - 1);
+            if start <= high && low <= end {
+                let region = self.region(start);
+                if !found.contains(&region) {
+                    found.push(region);
+                }
+            }
+        }
+        found
+    }
+}
+
+/// The register a load or store addresses memory through: SP for `PUSH`/`POP`, the base of a
+/// memory operand, or the base of a list's (`LDM Rn{!}`, `STMDB Rn!`, `VLDM`).
+pub fn base_register(insn: &Insn) -> Option<u8> {
+    match insn.inst.opcode {
+        Opcode::PUSH | Opcode::POP => Some(SP),
+        _ => insn.memory_base().or_else(|| {
+            insn.inst.operands.iter().find_map(|o| match o {
+                Operand::RegWBack(r, _) => Some(r.number()),
+                _ => None,
+            })
+        }),
     }
 }

@@ -19,6 +19,7 @@ pub mod path;
 pub mod polled;
 pub mod stored;
 pub mod topics;
+pub mod values;
 
 use serde::Serialize;
 
@@ -582,3 +583,5 @@ mod tests_activation;
 mod tests_polled;
 #[cfg(test)]
 mod tests_topics;
+#[cfg(test)]
+mod tests_values;
