@@ -11,7 +11,7 @@ use super::length::{self, Args, LENGTH_UNKNOWN, NO_ARGS};
 use super::path::{self, Cost, LoopCount, LoopNodes, Node, PathError};
 use super::polled;
 use super::stored;
-use super::values::{self, State, Values};
+use super::values::{self, Context, State, Values, NO_CONTEXT};
 use super::LoopInfo;
 use crate::callgraph::is_panic;
 use crate::decode::{Flow, Insn, Opcode, PC, SP};
@@ -63,12 +63,16 @@ fn merge_totals(into: &mut Totals, from: &Totals, chip: Chip) {
     }
 }
 
+/// A function's summary is worked out once per start, argument bounds ([`length`]), outlined helper's
+/// call site ([`Site`]) and register context ([`values::context`]).
+type SummaryKey = (u64, Args, Option<Site>, Context);
+
 /// The analysis of one image: function summaries worked out once each.
 pub(super) struct Analysis<'a> {
     image: &'a Image,
     chip: Chip,
     bounds: &'a BoundsFile,
-    known: BTreeMap<(u64, Args, Option<Site>), Result<Summary, String>>,
+    known: BTreeMap<SummaryKey, Result<Summary, String>>,
     returns: BTreeMap<u64, bool>,
     open: Vec<u64>,
     /// Functions no path of the job calls (by name, [`super::topics`]): a call of one, and the
@@ -77,7 +81,10 @@ pub(super) struct Analysis<'a> {
     /// Whether a function has a way to its return with the excluded calls left out.
     feasible: BTreeMap<u64, bool>,
     /// Each function's register values where its blocks start ([`values`]), on its whole graph.
-    values: BTreeMap<u64, Rc<Values>>,
+    values: BTreeMap<(u64, Context), Rc<Values>>,
+    /// Whether a callee is worked out with what its call leaves in its registers ([`values::context`]);
+    /// off, every callee is entered knowing nothing ([`Self::without_call_contexts`]).
+    contexts: bool,
 }
 
 /// Where a machine-outlined helper (`OUTLINED_FUNCTION_n`) is called from: the calling function's
@@ -119,6 +126,7 @@ impl<'a> Analysis<'a> {
             excluded: BTreeSet::new(),
             feasible: BTreeMap::new(),
             values: BTreeMap::new(),
+            contexts: true,
         }
     }
 
@@ -132,6 +140,14 @@ impl<'a> Analysis<'a> {
         let mut analysis = Analysis::new(image, chip, bounds);
         analysis.excluded = excluded.iter().cloned().collect();
         analysis
+    }
+
+    /// The same analysis with every callee entered knowing nothing of its registers: a function's
+    /// bound is then the same at every call, as the transmit interrupt's parts need (a part is the
+    /// difference of two bounds, checked against a function's bound of its own: [`super::FrameBound`]).
+    pub(super) fn without_call_contexts(mut self) -> Analysis<'a> {
+        self.contexts = false;
+        self
     }
 
     /// Whether the function at `at` is one the job does not call: named as excluded, or left with no
@@ -250,7 +266,7 @@ impl<'a> Analysis<'a> {
     /// The summary of the function at `at`: `Err(Error)` for an image that cannot be analysed,
     /// `Ok(Err(reason))` for a declined bound.
     pub(super) fn summary(&mut self, at: u64) -> Result<Result<Summary, String>, Error> {
-        self.summary_with(at, NO_ARGS, None)
+        self.summary_with(at, NO_ARGS, None, &NO_CONTEXT)
     }
 
     /// [`Self::summary`] of a call whose argument registers are bounded by `args` ([`length`]);
@@ -260,8 +276,9 @@ impl<'a> Analysis<'a> {
         at: u64,
         args: Args,
         site: Option<Site>,
+        context: &Context,
     ) -> Result<Result<Summary, String>, Error> {
-        if let Some(known) = self.known.get(&(at, args, site.clone())) {
+        if let Some(known) = self.known.get(&(at, args, site.clone(), *context)) {
             return Ok(known.clone());
         }
         if self.open.contains(&at) {
@@ -277,10 +294,11 @@ impl<'a> Analysis<'a> {
             Error::Other(format!("a call to {at:#010x}, where no function starts"))
         })?;
         self.open.push(at);
-        let outcome = self.work_out(f, args, site.as_ref());
+        let outcome = self.work_out(f, args, site.as_ref(), context);
         self.open.pop();
         let outcome = outcome?;
-        self.known.insert((at, args, site), outcome.clone());
+        self.known
+            .insert((at, args, site, *context), outcome.clone());
         Ok(outcome)
     }
 
@@ -289,12 +307,13 @@ impl<'a> Analysis<'a> {
         f: &'a Function,
         args: Args,
         site: Option<&Site>,
+        context: &Context,
     ) -> Result<Result<Summary, String>, Error> {
         let graph = match self.graph(f)? {
             Ok(graph) => graph,
             Err(reason) => return Ok(Err(reason)),
         };
-        self.bound_graph(f, graph, args, site)
+        self.bound_graph(f, graph, args, site, context)
     }
 
     /// The control-flow graph of `f` as the bound reads it: the blocks after a call of a function
@@ -337,13 +356,13 @@ impl<'a> Analysis<'a> {
     /// of any part of it (a task's part of its dispatcher, a job with calls left out, a section, a
     /// split copy) is a path of that graph, so what holds there holds on the part; a part's block is
     /// read from the instruction it starts at ([`Values::before`]).
-    fn values(&mut self, f: &'a Function) -> Result<Rc<Values>, Error> {
-        if let Some(v) = self.values.get(&f.start) {
+    fn values(&mut self, f: &'a Function, context: &Context) -> Result<Rc<Values>, Error> {
+        if let Some(v) = self.values.get(&(f.start, *context)) {
             return Ok(Rc::clone(v));
         }
         let graph = self.built(f)?;
-        let v = Rc::new(Values::of(self.image, f.instructions()?, &graph));
-        self.values.insert(f.start, Rc::clone(&v));
+        let v = Rc::new(Values::of(self.image, f.instructions()?, &graph, context));
+        self.values.insert((f.start, *context), Rc::clone(&v));
         Ok(v)
     }
 
@@ -415,7 +434,7 @@ impl<'a> Analysis<'a> {
         })?;
         match self.polled_graph(at, task, others)? {
             None => self.summary(at),
-            Some(Ok(graph)) => self.bound_graph(f, graph, NO_ARGS, None),
+            Some(Ok(graph)) => self.bound_graph(f, graph, NO_ARGS, None, &NO_CONTEXT),
             Some(Err(reason)) => Ok(Err(reason)),
         }
     }
@@ -430,6 +449,7 @@ impl<'a> Analysis<'a> {
         graph: Cfg,
         args: Args,
         site: Option<&Site>,
+        context: &Context,
     ) -> Result<Result<Summary, String>, Error> {
         let insns = f.instructions()?;
         let image = self.image;
@@ -615,7 +635,7 @@ impl<'a> Analysis<'a> {
             });
         }
         // Node costs: the block's instructions, and what it calls.
-        let values = self.values(f)?;
+        let values = self.values(f, context)?;
         let mut time_nodes = Vec::with_capacity(graph.blocks.len());
         let mut count_nodes = Vec::with_capacity(graph.blocks.len());
         for (index, block) in graph.blocks.iter().enumerate() {
@@ -646,7 +666,7 @@ impl<'a> Analysis<'a> {
                 // from it); a tail call of one is no return either.
                 Some(Call::Direct { target, tail }) if !self.can_return(target) => exit &= !tail,
                 Some(Call::Direct { target, .. }) => match self
-                    .call_summary(target, &f.name, insns, &graph, index, &args, site)?
+                    .call_summary(target, &f.name, insns, &graph, index, &args, site, &values)?
                 {
                     Ok(s) => {
                         *time_ref = time_ref.plus(s.time);
@@ -662,7 +682,9 @@ impl<'a> Analysis<'a> {
                 {
                     // A register that holds one function's address: a direct call in effect.
                     let target = length::constant_target(image, insns, &graph, index).unwrap_or(0);
-                    match self.call_summary(target, &f.name, insns, &graph, index, &args, site)? {
+                    match self
+                        .call_summary(target, &f.name, insns, &graph, index, &args, site, &values)?
+                    {
                         Ok(s) => {
                             *time_ref = time_ref.plus(s.time);
                             *count_ref = count_ref.plus(s.count);
@@ -847,8 +869,20 @@ impl<'a> Analysis<'a> {
         index: usize,
         entry: &Args,
         site: Option<&Site>,
+        values: &Values,
     ) -> Result<Result<Summary, String>, Error> {
         let call = insns[graph.blocks[index].last].addr;
+        // What the call leaves in the callee's registers.
+        let outlined = self
+            .image
+            .function_at(target)
+            .is_some_and(|callee| callee.start == target && is_outlined(callee));
+        let before = values.before(self.image, insns, graph.blocks[index].last);
+        let context = if self.contexts {
+            values::context(&before, outlined)
+        } else {
+            NO_CONTEXT
+        };
         let site = match self.image.function_at(target) {
             Some(callee) if callee.start == target && is_outlined(callee) => {
                 match call_line(self.image, insns, graph.blocks[index].last) {
@@ -858,7 +892,7 @@ impl<'a> Analysis<'a> {
             }
             _ => None,
         };
-        let plain = self.summary_with(target, NO_ARGS, site.clone())?;
+        let plain = self.summary_with(target, NO_ARGS, site.clone(), &context)?;
         if !matches!(&plain, Err(reason) if reason.contains(LENGTH_UNKNOWN)) {
             return Ok(plain);
         }
@@ -885,7 +919,7 @@ impl<'a> Analysis<'a> {
         let mut outcome = if args == NO_ARGS {
             plain
         } else {
-            self.summary_with(target, args, site)?
+            self.summary_with(target, args, site, &context)?
         };
         if let (Ok(s), Some(info)) = (&mut outcome, stated_info) {
             s.loops.push(info);

@@ -149,3 +149,45 @@ fn a_conditional_write_joins_the_value_before_it() {
     // way would give 12).
     assert_eq!(figures(&img, "maybe", F103_0WS), (17, 6, None));
 }
+
+/// A caller that passes `address` in r0 to a callee that loads through it.
+fn passes(address: u32) -> Image {
+    let [low, high] = [address as u16, (address >> 16) as u16];
+    image(
+        &[
+            0xb580, // 0x00 push {r7, lr}: 1 + 2
+            0x4802, // 0x02 ldr r0, [pc, #8]: `address`: 2
+            0xf000, 0xf804, // 0x04 bl 0x10: 1 + P
+            0xbd80, // 0x08 pop {r7, pc}: 1 + 2 + P
+            0xbf00, // 0x0a (padding)
+            low, high,   // 0x0c .word address
+            0x6841, // 0x10 callee: ldr r1, [r0, #4]: what the call passed
+            0x4770, // 0x12 bx lr: 1 + P
+        ],
+        &[
+            Sym::function("caller", 0, 0x10),
+            Sym::data(0x0c),
+            Sym::code(0x10),
+            Sym::function("callee", 0x10, 4),
+        ],
+    )
+}
+
+#[test]
+fn a_callee_is_charged_for_what_its_call_passes() {
+    // Alone, the callee's load is of an unknown address: 2 + 5, and 4: 11 cycles.
+    assert_eq!(
+        figures(&passes(0x2000_0100), "callee", F103_0WS),
+        (11, 2, None)
+    );
+    // Called with a RAM address in r0: the load is RAM's, 2. 3 + 2 + 4, the callee 2 + 4, 6: 21.
+    assert_eq!(
+        figures(&passes(0x2000_0100), "caller", F103_0WS),
+        (21, 6, None)
+    );
+    // With TIM2's (APB1): 2 + 5 again, 26.
+    assert_eq!(
+        figures(&passes(0x4000_0000), "caller", F103_0WS),
+        (26, 6, None)
+    );
+}

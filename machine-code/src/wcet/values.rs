@@ -19,7 +19,7 @@ use crate::decode::{Flow, Insn, Opcode, Operand, PC, SP};
 use crate::Image;
 
 /// What is known of one register's value.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Value {
     /// Nothing.
     Unknown,
@@ -35,11 +35,39 @@ pub type State = [Value; 16];
 /// Changes of a block's entry after which a register that changes again is widened to unknown.
 pub const WIDEN_AFTER: u32 = 4;
 
-/// Where a function starts: nothing known but that SP addresses the stack.
-fn entry_state() -> State {
+/// What a call leaves in r0-r12 for its callee ([`context`]).
+pub type Context = [Value; 13];
+
+/// A function entered with nothing known of r0-r12.
+pub const NO_CONTEXT: Context = [Value::Unknown; 13];
+
+/// Where a function starts: `context` in r0-r12, SP an address in the stack, nothing known of LR.
+fn entry_state(context: &Context) -> State {
     let mut state = [Value::Unknown; 16];
+    state[..13].copy_from_slice(context);
     state[usize::from(SP)] = Value::Stack;
     state
+}
+
+/// The context a call passes its callee, from the registers before it (`state`): r0-r3, the
+/// arguments (a callee reads nothing else of its caller's registers but to save and restore them),
+/// or, for a machine-outlined helper, which keeps no convention, r0-r12. Each range is widened to
+/// the 64 KiB-aligned span that holds it: the callee's analysis then starts from values that hold
+/// the caller's (sound), and a callee is worked out once per few contexts rather than once per
+/// address a call passes (a static's, a peripheral's: an offset into the object stays in the span's
+/// region, as the memory map's regions start at multiples of 64 KiB but APB2's end on the F103,
+/// where AHB follows it and costs less).
+pub fn context(state: &State, outlined: bool) -> Context {
+    let passed = if outlined { 13 } else { 4 };
+    std::array::from_fn(|r| {
+        if r >= passed {
+            return Value::Unknown;
+        }
+        match state[r] {
+            Value::Range(lo, hi) => Value::Range(lo & !0xffff, hi | 0xffff),
+            other => other,
+        }
+    })
 }
 
 /// The smallest and largest address of SRAM's region (0x2000_0000..0x4000_0000), which holds the stack.
@@ -222,13 +250,9 @@ pub struct Values {
 }
 
 impl Values {
-    /// The analysis of `graph` (the function's whole graph, entered at block 0).
-    pub fn of(image: &Image, insns: &[Insn], graph: &Cfg) -> Values {
-        Values::entered(image, insns, graph, entry_state())
-    }
-
-    /// The analysis of `graph` entered with the registers `entry`.
-    pub fn entered(image: &Image, insns: &[Insn], graph: &Cfg, entry: State) -> Values {
+    /// The analysis of `graph` (the function's whole graph, entered at block 0 with `context`).
+    pub fn of(image: &Image, insns: &[Insn], graph: &Cfg, context: &Context) -> Values {
+        let entry = entry_state(context);
         let n = graph.blocks.len();
         let mut entries: Vec<Option<State>> = vec![None; n];
         let mut changes = vec![0u32; n];
@@ -299,7 +323,7 @@ impl Values {
                 }
                 state
             }
-            _ => entry_state(),
+            _ => entry_state(&NO_CONTEXT),
         }
     }
 }
