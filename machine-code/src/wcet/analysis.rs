@@ -945,9 +945,7 @@ impl<'a> Analysis<'a> {
         let chip = self.chip;
         let mut cycles = 0;
         for insn in insns {
-            let base = super::chip::base_register(insn)
-                .map_or(values::Value::Unknown, |r| state[usize::from(r)]);
-            cycles += chip.core_cycles(insn) + chip.memory_cycles(insn, base);
+            cycles += chip.core_cycles(insn) + chip.memory_cycles(insn, &state);
             values::step(self.image, insn, &mut state);
         }
         let fetch = match (insns.first(), insns.last()) {

@@ -3,9 +3,10 @@
 //! ("Execution-time bounds from the machine code").
 use serde::Serialize;
 
-use super::values::Value;
+use super::values::{State, Value};
 use crate::decode::{Flow, Insn, Opcode, Operand, PC, SP};
 use crate::Error;
+use yaxpeax_arm::armv7::{RegShiftStyle, ShiftStyle};
 
 /// The pipeline refill after a taken branch: the TRMs give P as 1 to 3 cycles; taken at its
 /// maximum.
@@ -262,10 +263,10 @@ impl Chip {
         ((end - 1) / line - start / line + 1) * (self.wait_states() + 1)
     }
 
-    /// The memory cycles an instruction adds, given what is known of its base register's value
-    /// ([`base_register`]; [`super::values`]): the accesses' count times the worst latency of any
-    /// region the address may be in.
-    pub fn memory_cycles(self, insn: &Insn, base_value: Value) -> u64 {
+    /// The memory cycles an instruction adds, given what is known of the registers before it
+    /// ([`super::values`]): the accesses' count times the worst latency of any region the address
+    /// may be in.
+    pub fn memory_cycles(self, insn: &Insn, registers: &State) -> u64 {
         if !(insn.is_load() || insn.is_store()) {
             return 0;
         }
@@ -288,30 +289,29 @@ impl Chip {
             };
             self.access_cycles(region)
         };
-        let worst = match base_register(insn) {
+        let base = base_register(insn);
+        let worst = match base {
             Some(SP) => charge(Region::Ram),
             Some(PC) => charge(Region::Flash),
-            _ => match base_value {
+            _ => match base.map_or(Value::Unknown, |r| registers[usize::from(r)]) {
                 Value::Stack => charge(Region::Ram),
                 Value::Range(lo, hi) => {
-                    // The accessed span: the immediate offset's (an index register's access is
-                    // within the object its base addresses), a list's words either side of its base.
+                    // The accessed span: a list's words either side of its base, else the offset's.
                     let (from, to) = match list {
                         Some(n) => (i64::from(lo) - 4 * n as i64, i64::from(hi) + 4 * n as i64),
                         None => {
-                            let k = insn.memory_offset().unwrap_or(0);
-                            (i64::from(lo) + k, i64::from(hi) + k)
+                            let (a, b) = offsets(insn, registers);
+                            (i64::from(lo) + a, i64::from(hi) + b)
                         }
                     };
-                    let (low, high) = (u32::try_from(from), u32::try_from(to));
-                    match (low, high) {
-                        (Ok(low), Ok(high)) => self
+                    match wrapped(from, to) {
+                        Some((low, high)) => self
                             .regions(low, high)
                             .into_iter()
                             .map(charge)
                             .max()
                             .unwrap_or_else(|| charge(Region::Unknown)),
-                        _ => charge(Region::Unknown),
+                        None => charge(Region::Unknown),
                     }
                 }
                 Value::Unknown => charge(Region::Unknown),
@@ -360,4 +360,51 @@ pub fn base_register(insn: &Insn) -> Option<u8> {
             })
         }),
     }
+}
+
+/// The least and largest offset a load or store adds to its base: its immediate (0 post-indexed),
+/// or its index register's range, shifted left as the operand says and added or subtracted (the core
+/// adds modulo 2³², so a constant index such as 0xffff_f800 is a negative offset: LLVM folds two
+/// constants into base and index). An index register the analysis does not know (or shifted other
+/// than left) is taken as an index into the object its base addresses: 0, the base's region.
+fn offsets(insn: &Insn, registers: &State) -> (i64, i64) {
+    let index = insn.inst.operands.iter().find_map(|o| match *o {
+        Operand::RegDerefPreindexReg(_, rm, add, _) => Some((rm.number(), 0, add)),
+        Operand::RegDerefPreindexRegShift(_, shift, add, _) => match shift.into_shift() {
+            RegShiftStyle::RegImm(s) if s.stype() == ShiftStyle::LSL => {
+                Some((s.shiftee().number(), u32::from(s.imm()), add))
+            }
+            _ => None,
+        },
+        _ => None,
+    });
+    match index {
+        Some((rm, shift, add)) => match registers[usize::from(rm)] {
+            Value::Range(a, b) if shift <= 3 => {
+                let (a, b) = (i64::from(a) << shift, i64::from(b) << shift);
+                if add {
+                    (a, b)
+                } else {
+                    (-b, -a)
+                }
+            }
+            _ => (0, 0),
+        },
+        None => {
+            let k = insn.memory_offset().unwrap_or(0);
+            (k, k)
+        }
+    }
+}
+
+/// The addresses `from..=to` modulo 2³², as one range of `u32`s; `None` when they wrap around or
+/// cover every address.
+fn wrapped(from: i64, to: i64) -> Option<(u32, u32)> {
+    const SPAN: i64 = 1 << 32;
+    if to - from >= SPAN {
+        return None;
+    }
+    let low = from.rem_euclid(SPAN);
+    let high = low + (to - from);
+    (high < SPAN).then_some((low as u32, high as u32))
 }

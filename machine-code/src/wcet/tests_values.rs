@@ -191,3 +191,31 @@ fn a_callee_is_charged_for_what_its_call_passes() {
         (26, 6, None)
     );
 }
+
+/// A store through a base and an index register, both constants (`index` a two's complement offset).
+fn indexed(index: u32) -> Image {
+    let [low, high] = [index as u16, (index >> 16) as u16];
+    image(
+        &[
+            0x4801, // 0x00 ldr r0, [pc, #4]: `index`: 2
+            0x4a02, // 0x02 ldr r2, [pc, #8]: 0x4001_0010 (APB2 on the F103): 2
+            0x5011, // 0x04 str r1, [r2, r0]: at r2 + r0
+            0x4770, // 0x06 bx lr: 1 + P
+            low, high, // 0x08 .word index
+            0x0010, 0x4001, // 0x0c .word 0x40010010
+        ],
+        &[Sym::function("indexed", 0, 0x10), Sym::data(0x08)],
+    )
+}
+
+#[test]
+fn a_known_index_register_moves_the_address() {
+    // 0x4001_0010 + 0x10: APB2, 2 + 3: 2 + 2 + 5 + 4 = 13 cycles.
+    assert_eq!(figures(&indexed(0x10), "indexed", F103_0WS), (13, 4, None));
+    // 0x4001_0010 − 0x800 (0xffff_f800 added modulo 2³², as LLVM folds two constants): 0x4000_f810,
+    // APB1, 2 + 5: 15 (the base's region alone would say APB2, 13).
+    assert_eq!(
+        figures(&indexed(0xffff_f800), "indexed", F103_0WS),
+        (15, 4, None)
+    );
+}
