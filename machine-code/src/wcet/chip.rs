@@ -299,10 +299,14 @@ impl Chip {
                     // The accessed span: a list's words either side of its base, else the offset's.
                     let (from, to) = match list {
                         Some(n) => (i64::from(lo) - 4 * n as i64, i64::from(hi) + 4 * n as i64),
-                        None => {
-                            let (a, b) = offsets(insn, registers);
-                            (i64::from(lo) + a, i64::from(hi) + b)
-                        }
+                        None => match offsets(insn, registers) {
+                            Some((a, b)) => (i64::from(lo) + a, i64::from(hi) + b),
+                            // An index the analysis does not know, into the object its base
+                            // addresses: the base's region, where the base is an address of the
+                            // memory map (a small constant base is an offset, its index the pointer).
+                            None if lo >= FIRST_ADDRESS => (i64::from(lo), i64::from(hi)),
+                            None => (0, i64::from(u32::MAX)),
+                        },
                     };
                     match wrapped(from, to) {
                         Some((low, high)) => self
@@ -362,37 +366,39 @@ pub fn base_register(insn: &Insn) -> Option<u8> {
     }
 }
 
+/// The lowest address of the memory map's code, data and peripherals the images address (flash at
+/// 0x0800_0000; below it only the boot alias of flash, which the code does not address).
+const FIRST_ADDRESS: u32 = 0x0800_0000;
+
 /// The least and largest offset a load or store adds to its base: its immediate (0 post-indexed),
 /// or its index register's range, shifted left as the operand says and added or subtracted (the core
 /// adds modulo 2³², so a constant index such as 0xffff_f800 is a negative offset: LLVM folds two
-/// constants into base and index). An index register the analysis does not know (or shifted other
-/// than left) is taken as an index into the object its base addresses: 0, the base's region.
-fn offsets(insn: &Insn, registers: &State) -> (i64, i64) {
+/// constants into base and index); `None` for an index register the analysis does not know (or
+/// shifted other than left).
+fn offsets(insn: &Insn, registers: &State) -> Option<(i64, i64)> {
+    // An index operand: its register, left shift and sign (`None` inside: shifted otherwise).
     let index = insn.inst.operands.iter().find_map(|o| match *o {
-        Operand::RegDerefPreindexReg(_, rm, add, _) => Some((rm.number(), 0, add)),
-        Operand::RegDerefPreindexRegShift(_, shift, add, _) => match shift.into_shift() {
+        Operand::RegDerefPreindexReg(_, rm, add, _) => Some(Some((rm.number(), 0, add))),
+        Operand::RegDerefPreindexRegShift(_, shift, add, _) => Some(match shift.into_shift() {
             RegShiftStyle::RegImm(s) if s.stype() == ShiftStyle::LSL => {
                 Some((s.shiftee().number(), u32::from(s.imm()), add))
             }
             _ => None,
-        },
+        }),
         _ => None,
     });
     match index {
-        Some((rm, shift, add)) => match registers[usize::from(rm)] {
+        Some(None) => None,
+        Some(Some((rm, shift, add))) => match registers[usize::from(rm)] {
             Value::Range(a, b) if shift <= 3 => {
                 let (a, b) = (i64::from(a) << shift, i64::from(b) << shift);
-                if add {
-                    (a, b)
-                } else {
-                    (-b, -a)
-                }
+                Some(if add { (a, b) } else { (-b, -a) })
             }
-            _ => (0, 0),
+            _ => None,
         },
         None => {
             let k = insn.memory_offset().unwrap_or(0);
-            (k, k)
+            Some((k, k))
         }
     }
 }

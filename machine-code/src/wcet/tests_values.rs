@@ -219,3 +219,30 @@ fn a_known_index_register_moves_the_address() {
         (15, 4, None)
     );
 }
+
+#[test]
+fn an_unknown_index_keeps_the_base_region_only_where_the_base_is_an_address() {
+    // A RAM address in the base, the index unknown (r0, an argument): an index into the object
+    // the base addresses, RAM, 2: 2 + 2 + 4 = 8 cycles.
+    let img = image(
+        &[
+            0x4a01, // 0x00 ldr r2, [pc, #4]: 0x2000_0100 (RAM): 2
+            0x5811, // 0x02 ldr r1, [r2, r0]: 2
+            0x4770, // 0x04 bx lr: 1 + P
+            0xbf00, // 0x06 (padding)
+            0x0100, 0x2000, // 0x08 .word 0x20000100
+        ],
+        &[Sym::function("into_ram", 0, 0x0c), Sym::data(0x08)],
+    );
+    assert_eq!(figures(&img, "into_ram", F103_0WS), (8, 3, None));
+    // A small constant in the base (an offset; the pointer is the index): unknown, 2 + 5: 1 + 7 + 4.
+    let img = image(
+        &[
+            0x2210, // 0x00 movs r2, #16: 1
+            0x5811, // 0x02 ldr r1, [r2, r0]
+            0x4770, // 0x04 bx lr: 1 + P
+        ],
+        &[Sym::function("offset_base", 0, 6)],
+    );
+    assert_eq!(figures(&img, "offset_base", F103_0WS), (12, 3, None));
+}
