@@ -1,6 +1,7 @@
 //! The analysis of one image: each function's graph, loops, costs and longest paths, worked out
 //! once and composed bottom up ([`super`] states the method).
 use std::collections::{BTreeMap, BTreeSet};
+use std::rc::Rc;
 
 use super::bounds::{BoundsFile, JOB_PASSES};
 use super::cfg::{self, Call, Cfg};
@@ -10,6 +11,7 @@ use super::length::{self, Args, LENGTH_UNKNOWN, NO_ARGS};
 use super::path::{self, Cost, LoopCount, LoopNodes, Node, PathError};
 use super::polled;
 use super::stored;
+use super::values::{self, Context, State, Values, NO_CONTEXT};
 use super::LoopInfo;
 use crate::callgraph::is_panic;
 use crate::decode::{Flow, Insn, Opcode, PC, SP};
@@ -61,12 +63,16 @@ fn merge_totals(into: &mut Totals, from: &Totals, chip: Chip) {
     }
 }
 
+/// A function's summary is worked out once per start, argument bounds ([`length`]), outlined helper's
+/// call site ([`Site`]) and register context ([`values::context`]).
+type SummaryKey = (u64, Args, Option<Site>, Context);
+
 /// The analysis of one image: function summaries worked out once each.
 pub(super) struct Analysis<'a> {
     image: &'a Image,
     chip: Chip,
     bounds: &'a BoundsFile,
-    known: BTreeMap<(u64, Args, Option<Site>), Result<Summary, String>>,
+    known: BTreeMap<SummaryKey, Result<Summary, String>>,
     returns: BTreeMap<u64, bool>,
     open: Vec<u64>,
     /// Functions no path of the job calls (by name, [`super::topics`]): a call of one, and the
@@ -74,6 +80,11 @@ pub(super) struct Analysis<'a> {
     excluded: BTreeSet<String>,
     /// Whether a function has a way to its return with the excluded calls left out.
     feasible: BTreeMap<u64, bool>,
+    /// Each function's register values where its blocks start ([`values`]), on its whole graph.
+    values: BTreeMap<(u64, Context), Rc<Values>>,
+    /// Whether a callee is worked out with what its call leaves in its registers ([`values::context`]);
+    /// off, every callee is entered knowing nothing ([`Self::without_call_contexts`]).
+    contexts: bool,
 }
 
 /// Where a machine-outlined helper (`OUTLINED_FUNCTION_n`) is called from: the calling function's
@@ -114,6 +125,8 @@ impl<'a> Analysis<'a> {
             open: Vec::new(),
             excluded: BTreeSet::new(),
             feasible: BTreeMap::new(),
+            values: BTreeMap::new(),
+            contexts: true,
         }
     }
 
@@ -127,6 +140,14 @@ impl<'a> Analysis<'a> {
         let mut analysis = Analysis::new(image, chip, bounds);
         analysis.excluded = excluded.iter().cloned().collect();
         analysis
+    }
+
+    /// The same analysis with every callee entered knowing nothing of its registers: a function's
+    /// bound is then the same at every call, as the transmit interrupt's parts need (a part is the
+    /// difference of two bounds, checked against a function's bound of its own: [`super::FrameBound`]).
+    pub(super) fn without_call_contexts(mut self) -> Analysis<'a> {
+        self.contexts = false;
+        self
     }
 
     /// Whether the function at `at` is one the job does not call: named as excluded, or left with no
@@ -245,7 +266,7 @@ impl<'a> Analysis<'a> {
     /// The summary of the function at `at`: `Err(Error)` for an image that cannot be analysed,
     /// `Ok(Err(reason))` for a declined bound.
     pub(super) fn summary(&mut self, at: u64) -> Result<Result<Summary, String>, Error> {
-        self.summary_with(at, NO_ARGS, None)
+        self.summary_with(at, NO_ARGS, None, &NO_CONTEXT)
     }
 
     /// [`Self::summary`] of a call whose argument registers are bounded by `args` ([`length`]);
@@ -255,8 +276,9 @@ impl<'a> Analysis<'a> {
         at: u64,
         args: Args,
         site: Option<Site>,
+        context: &Context,
     ) -> Result<Result<Summary, String>, Error> {
-        if let Some(known) = self.known.get(&(at, args, site.clone())) {
+        if let Some(known) = self.known.get(&(at, args, site.clone(), *context)) {
             return Ok(known.clone());
         }
         if self.open.contains(&at) {
@@ -272,10 +294,11 @@ impl<'a> Analysis<'a> {
             Error::Other(format!("a call to {at:#010x}, where no function starts"))
         })?;
         self.open.push(at);
-        let outcome = self.work_out(f, args, site.as_ref());
+        let outcome = self.work_out(f, args, site.as_ref(), context);
         self.open.pop();
         let outcome = outcome?;
-        self.known.insert((at, args, site), outcome.clone());
+        self.known
+            .insert((at, args, site, *context), outcome.clone());
         Ok(outcome)
     }
 
@@ -284,12 +307,13 @@ impl<'a> Analysis<'a> {
         f: &'a Function,
         args: Args,
         site: Option<&Site>,
+        context: &Context,
     ) -> Result<Result<Summary, String>, Error> {
         let graph = match self.graph(f)? {
             Ok(graph) => graph,
             Err(reason) => return Ok(Err(reason)),
         };
-        self.bound_graph(f, graph, args, site)
+        self.bound_graph(f, graph, args, site, context)
     }
 
     /// The control-flow graph of `f` as the bound reads it: the blocks after a call of a function
@@ -326,6 +350,20 @@ impl<'a> Analysis<'a> {
             returning.insert(t, r);
         }
         Cfg::build(f, &read, &|t| returning.get(&t).copied().unwrap_or(true))
+    }
+
+    /// `f`'s register values ([`values`]), worked out once on its whole graph as built: every path
+    /// of any part of it (a task's part of its dispatcher, a job with calls left out, a section, a
+    /// split copy) is a path of that graph, so what holds there holds on the part; a part's block is
+    /// read from the instruction it starts at ([`Values::before`]).
+    fn values(&mut self, f: &'a Function, context: &Context) -> Result<Rc<Values>, Error> {
+        if let Some(v) = self.values.get(&(f.start, *context)) {
+            return Ok(Rc::clone(v));
+        }
+        let graph = self.built(f)?;
+        let v = Rc::new(Values::of(self.image, f.instructions()?, &graph, context));
+        self.values.insert((f.start, *context), Rc::clone(&v));
+        Ok(v)
     }
 
     /// `graph` (of `f`) with each cycle of more than one entry (an async task's loop) made a
@@ -396,7 +434,7 @@ impl<'a> Analysis<'a> {
         })?;
         match self.polled_graph(at, task, others)? {
             None => self.summary(at),
-            Some(Ok(graph)) => self.bound_graph(f, graph, NO_ARGS, None),
+            Some(Ok(graph)) => self.bound_graph(f, graph, NO_ARGS, None, &NO_CONTEXT),
             Some(Err(reason)) => Ok(Err(reason)),
         }
     }
@@ -411,6 +449,7 @@ impl<'a> Analysis<'a> {
         graph: Cfg,
         args: Args,
         site: Option<&Site>,
+        context: &Context,
     ) -> Result<Result<Summary, String>, Error> {
         let insns = f.instructions()?;
         let image = self.image;
@@ -596,10 +635,14 @@ impl<'a> Analysis<'a> {
             });
         }
         // Node costs: the block's instructions, and what it calls.
+        let values = self.values(f, context)?;
         let mut time_nodes = Vec::with_capacity(graph.blocks.len());
         let mut count_nodes = Vec::with_capacity(graph.blocks.len());
         for (index, block) in graph.blocks.iter().enumerate() {
-            let own = self.block_cost(&insns[block.first..=block.last]);
+            let own = self.block_cost(
+                &insns[block.first..=block.last],
+                values.before(image, insns, block.first),
+            );
             let (mut time, mut count) = (own, own);
             // What a tail call adds is paid only on the way out through it; a conditional one
             // (`B<c>` out of the function) also pays its refill there.
@@ -623,7 +666,7 @@ impl<'a> Analysis<'a> {
                 // from it); a tail call of one is no return either.
                 Some(Call::Direct { target, tail }) if !self.can_return(target) => exit &= !tail,
                 Some(Call::Direct { target, .. }) => match self
-                    .call_summary(target, &f.name, insns, &graph, index, &args, site)?
+                    .call_summary(target, &f.name, insns, &graph, index, &args, site, &values)?
                 {
                     Ok(s) => {
                         *time_ref = time_ref.plus(s.time);
@@ -639,7 +682,9 @@ impl<'a> Analysis<'a> {
                 {
                     // A register that holds one function's address: a direct call in effect.
                     let target = length::constant_target(image, insns, &graph, index).unwrap_or(0);
-                    match self.call_summary(target, &f.name, insns, &graph, index, &args, site)? {
+                    match self
+                        .call_summary(target, &f.name, insns, &graph, index, &args, site, &values)?
+                    {
                         Ok(s) => {
                             *time_ref = time_ref.plus(s.time);
                             *count_ref = count_ref.plus(s.count);
@@ -824,8 +869,20 @@ impl<'a> Analysis<'a> {
         index: usize,
         entry: &Args,
         site: Option<&Site>,
+        values: &Values,
     ) -> Result<Result<Summary, String>, Error> {
         let call = insns[graph.blocks[index].last].addr;
+        // What the call leaves in the callee's registers.
+        let outlined = self
+            .image
+            .function_at(target)
+            .is_some_and(|callee| callee.start == target && is_outlined(callee));
+        let before = values.before(self.image, insns, graph.blocks[index].last);
+        let context = if self.contexts {
+            values::context(&before, outlined)
+        } else {
+            NO_CONTEXT
+        };
         let site = match self.image.function_at(target) {
             Some(callee) if callee.start == target && is_outlined(callee) => {
                 match call_line(self.image, insns, graph.blocks[index].last) {
@@ -835,7 +892,7 @@ impl<'a> Analysis<'a> {
             }
             _ => None,
         };
-        let plain = self.summary_with(target, NO_ARGS, site.clone())?;
+        let plain = self.summary_with(target, NO_ARGS, site.clone(), &context)?;
         if !matches!(&plain, Err(reason) if reason.contains(LENGTH_UNKNOWN)) {
             return Ok(plain);
         }
@@ -862,7 +919,7 @@ impl<'a> Analysis<'a> {
         let mut outcome = if args == NO_ARGS {
             plain
         } else {
-            self.summary_with(target, args, site)?
+            self.summary_with(target, args, site, &context)?
         };
         if let (Ok(s), Some(info)) = (&mut outcome, stated_info) {
             s.loops.push(info);
@@ -882,16 +939,14 @@ impl<'a> Analysis<'a> {
         Ok(outcome)
     }
 
-    /// A straight run of instructions: each one's core and memory cycles, at least the cycles
-    /// fetching the flash lines it spans takes.
-    fn block_cost(&self, insns: &[Insn]) -> Cost {
+    /// A straight run of instructions entered with the registers `state`: each one's core and memory
+    /// cycles, at least the cycles fetching the flash lines it spans takes.
+    fn block_cost(&self, insns: &[Insn], mut state: State) -> Cost {
         let chip = self.chip;
-        let mut known = [None; 16];
         let mut cycles = 0;
         for insn in insns {
-            let base = insn.memory_base().and_then(|r| known[usize::from(r)]);
-            cycles += chip.core_cycles(insn) + chip.memory_cycles(insn, base);
-            crate::waits::step_constants(self.image, insn, &mut known);
+            cycles += chip.core_cycles(insn) + chip.memory_cycles(insn, &state);
+            values::step(self.image, insn, &mut state);
         }
         let fetch = match (insns.first(), insns.last()) {
             (Some(first), Some(last)) => chip.fetch_cycles(first.addr, last.next()),
@@ -956,7 +1011,7 @@ fn time_key(chip: Chip) -> impl Fn(Cost) -> u64 {
 }
 
 /// A jump-table entry (1 or 2 bytes) of the image.
-fn read_entry(image: &Image, address: u64, size: u64) -> Option<u64> {
+pub(super) fn read_entry(image: &Image, address: u64, size: u64) -> Option<u64> {
     let bytes = image.bytes(address, size)?;
     Some(match bytes[..] {
         [b] => u64::from(b),

@@ -3,8 +3,10 @@
 //! ("Execution-time bounds from the machine code").
 use serde::Serialize;
 
-use crate::decode::{Flow, Insn, Opcode, PC, SP};
+use super::values::{State, Value};
+use crate::decode::{Flow, Insn, Opcode, Operand, PC, SP};
 use crate::Error;
+use yaxpeax_arm::armv7::{RegShiftStyle, ShiftStyle};
 
 /// The pipeline refill after a taken branch: the TRMs give P as 1 to 3 cycles; taken at its
 /// maximum.
@@ -261,44 +263,154 @@ impl Chip {
         ((end - 1) / line - start / line + 1) * (self.wait_states() + 1)
     }
 
-    /// The memory cycles an instruction adds, given what is known of its base register's value.
-    pub fn memory_cycles(self, insn: &Insn, base_value: Option<u32>) -> u64 {
+    /// The memory cycles an instruction adds, given what is known of the registers before it
+    /// ([`super::values`]): the accesses' count times the worst latency of any region the address
+    /// may be in.
+    pub fn memory_cycles(self, insn: &Insn, registers: &State) -> u64 {
         if !(insn.is_load() || insn.is_store()) {
             return 0;
         }
-        let words = match insn.inst.opcode {
+        let list = match insn.inst.opcode {
             Opcode::LDM(..) | Opcode::STM(..) | Opcode::PUSH | Opcode::POP => {
-                u64::from(insn.register_list().unwrap_or(0).count_ones()).max(1)
+                Some(u64::from(insn.register_list().unwrap_or(0).count_ones()).max(1))
             }
+            _ => None,
+        };
+        let words = match insn.inst.opcode {
             Opcode::LDRD | Opcode::STRD => 2,
-            _ => 1,
+            _ => list.unwrap_or(1),
         };
-        let base = match insn.inst.opcode {
-            Opcode::PUSH | Opcode::POP => Some(SP),
-            _ => insn.memory_base().or_else(|| insn.memory_base_wback()),
+        let store = insn.is_store();
+        let charge = |region: Region| {
+            // Stores never go to flash in running code: an unknown store is a peripheral's at worst.
+            let region = match region {
+                Region::Flash | Region::Unknown if store => Region::Apb1,
+                other => other,
+            };
+            self.access_cycles(region)
         };
-        let region = match base {
-            Some(SP) => Region::Ram,
-            Some(PC) => Region::Flash,
-            _ => match base_value {
-                Some(value) => {
-                    let offset = insn.memory_offset().unwrap_or(0);
-                    self.region(u32::try_from(i64::from(value) + offset).unwrap_or(value))
+        let base = base_register(insn);
+        let worst = match base {
+            Some(SP) => charge(Region::Ram),
+            Some(PC) => charge(Region::Flash),
+            _ => match base.map_or(Value::Unknown, |r| registers[usize::from(r)]) {
+                Value::Stack => charge(Region::Ram),
+                Value::Range(lo, hi) => {
+                    // The accessed span: a list's words either side of its base, else the offset's.
+                    let (from, to) = match list {
+                        Some(n) => (i64::from(lo) - 4 * n as i64, i64::from(hi) + 4 * n as i64),
+                        None => match offsets(insn, registers) {
+                            Some((a, b)) => (i64::from(lo) + a, i64::from(hi) + b),
+                            // An index the analysis does not know, into the object its base
+                            // addresses: the base's region, where the base is an address of the
+                            // memory map (a small constant base is an offset, its index the pointer).
+                            None if lo >= FIRST_ADDRESS => (i64::from(lo), i64::from(hi)),
+                            None => (0, i64::from(u32::MAX)),
+                        },
+                    };
+                    match wrapped(from, to) {
+                        Some((low, high)) => self
+                            .regions(low, high)
+                            .into_iter()
+                            .map(charge)
+                            .max()
+                            .unwrap_or_else(|| charge(Region::Unknown)),
+                        None => charge(Region::Unknown),
+                    }
                 }
-                None => Region::Unknown,
+                Value::Unknown => charge(Region::Unknown),
             },
         };
-        // Stores never go to flash in running code: an unknown store is a peripheral's at worst.
-        let region = if insn.is_store() && region == Region::Flash {
-            Region::Unknown
-        } else {
-            region
-        };
-        let region = if insn.is_store() && region == Region::Unknown {
-            Region::Apb1
-        } else {
-            region
-        };
-        words * self.access_cycles(region)
+        words * worst
     }
+
+    /// The regions any address of `low..=high` is in (the memory map of [`Chip::region`]).
+    pub fn regions(self, low: u32, high: u32) -> Vec<Region> {
+        // Where each region starts, in order; each runs to the next one's start.
+        const STARTS: [u32; 9] = [
+            0,
+            0x2000_0000,
+            0x4000_0000,
+            0x4001_0000,
+            0x4001_8000,
+            0x4002_0000,
+            0x6000_0000,
+            0xe000_0000,
+            0xe010_0000,
+        ];
+        let mut found = Vec::new();
+        for (k, &start) in STARTS.iter().enumerate() {
+            let end = STARTS.get(k + 1).map_or(u32::MAX, |&next| next - 1);
+            if start <= high && low <= end {
+                let region = self.region(start);
+                if !found.contains(&region) {
+                    found.push(region);
+                }
+            }
+        }
+        found
+    }
+}
+
+/// The register a load or store addresses memory through: SP for `PUSH`/`POP`, the base of a
+/// memory operand, or the base of a list's (`LDM Rn{!}`, `STMDB Rn!`, `VLDM`).
+pub fn base_register(insn: &Insn) -> Option<u8> {
+    match insn.inst.opcode {
+        Opcode::PUSH | Opcode::POP => Some(SP),
+        _ => insn.memory_base().or_else(|| {
+            insn.inst.operands.iter().find_map(|o| match o {
+                Operand::RegWBack(r, _) => Some(r.number()),
+                _ => None,
+            })
+        }),
+    }
+}
+
+/// The lowest address of the memory map's code, data and peripherals the images address (flash at
+/// 0x0800_0000; below it only the boot alias of flash, which the code does not address).
+const FIRST_ADDRESS: u32 = 0x0800_0000;
+
+/// The least and largest offset a load or store adds to its base: its immediate (0 post-indexed),
+/// or its index register's range, shifted left as the operand says and added or subtracted (the core
+/// adds modulo 2³², so a constant index such as 0xffff_f800 is a negative offset: LLVM folds two
+/// constants into base and index); `None` for an index register the analysis does not know (or
+/// shifted other than left).
+fn offsets(insn: &Insn, registers: &State) -> Option<(i64, i64)> {
+    // An index operand: its register, left shift and sign (`None` inside: shifted otherwise).
+    let index = insn.inst.operands.iter().find_map(|o| match *o {
+        Operand::RegDerefPreindexReg(_, rm, add, _) => Some(Some((rm.number(), 0, add))),
+        Operand::RegDerefPreindexRegShift(_, shift, add, _) => Some(match shift.into_shift() {
+            RegShiftStyle::RegImm(s) if s.stype() == ShiftStyle::LSL => {
+                Some((s.shiftee().number(), u32::from(s.imm()), add))
+            }
+            _ => None,
+        }),
+        _ => None,
+    });
+    match index {
+        Some(None) => None,
+        Some(Some((rm, shift, add))) => match registers[usize::from(rm)] {
+            Value::Range(a, b) if shift <= 3 => {
+                let (a, b) = (i64::from(a) << shift, i64::from(b) << shift);
+                Some(if add { (a, b) } else { (-b, -a) })
+            }
+            _ => None,
+        },
+        None => {
+            let k = insn.memory_offset().unwrap_or(0);
+            Some((k, k))
+        }
+    }
+}
+
+/// The addresses `from..=to` modulo 2³², as one range of `u32`s; `None` when they wrap around or
+/// cover every address.
+fn wrapped(from: i64, to: i64) -> Option<(u32, u32)> {
+    const SPAN: i64 = 1 << 32;
+    if to - from >= SPAN {
+        return None;
+    }
+    let low = from.rem_euclid(SPAN);
+    let high = low + (to - from);
+    (high < SPAN).then_some((low as u32, high as u32))
 }

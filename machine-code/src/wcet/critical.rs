@@ -501,7 +501,10 @@ impl<'a> Finder<'a> {
                 return Ok(section);
             }
         };
-        match self.analysis.bound_graph(f, sub, NO_ARGS, None)? {
+        match self
+            .analysis
+            .bound_graph(f, sub, NO_ARGS, None, &super::values::NO_CONTEXT)?
+        {
             Ok(Summary { time, count, .. }) => {
                 section.cycles = time.cycles;
                 section.instructions = count.instructions;

@@ -19,6 +19,7 @@ pub mod path;
 pub mod polled;
 pub mod stored;
 pub mod topics;
+pub mod values;
 
 use serde::Serialize;
 
@@ -273,7 +274,8 @@ fn frame_bound(
         let at_passes = |passes: u64, left_out: &[&String]| -> Result<(u64, u64), String> {
             let stated = bounds.at_passes(charge, passes);
             let excluded: Vec<String> = left_out.iter().map(|s| s.to_string()).collect();
-            let mut again = Analysis::excluding(image, chip, &stated, &excluded);
+            let mut again =
+                Analysis::excluding(image, chip, &stated, &excluded).without_call_contexts();
             let (_, b) = bound_task(&mut again, image, task);
             match b.declined {
                 Some(d) => Err(d),
@@ -285,7 +287,8 @@ fn frame_bound(
                 .function_named(&charge.completion)
                 .map_err(|e| e.to_string())?;
             let excluded: Vec<String> = left_out.iter().map(|s| s.to_string()).collect();
-            let mut again = Analysis::excluding(image, chip, bounds, &excluded);
+            let mut again =
+                Analysis::excluding(image, chip, bounds, &excluded).without_call_contexts();
             match again.summary(f.start) {
                 Ok(outcome) => {
                     let b = to_bound(outcome);
@@ -582,3 +585,5 @@ mod tests_activation;
 mod tests_polled;
 #[cfg(test)]
 mod tests_topics;
+#[cfg(test)]
+mod tests_values;
