@@ -690,15 +690,15 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
 /// sets its jitter itself (its release cut), and its view (0: the default; a job whose bound the rounds read is
 /// never settled in closed form).
 #[derive(Clone, Copy)]
-struct Cut<'a, const N: usize> {
-    unreleased: &'a [bool; N],
-    view: &'a [u8; N],
+struct Cut<'a> {
+    unreleased: &'a [bool],
+    view: &'a [u8],
 }
 
 /// The board's jobs as one analysis reads them: as built, or as a view of the rounds changes them.
 struct ViewJobs<'a, const N: usize> {
     index: &'a JobIndex<N>,
-    cut: Option<Cut<'a, N>>,
+    cut: Option<Cut<'a>>,
 }
 
 impl<const N: usize> board_analysis::Jobs for ViewJobs<'_, N> {
@@ -730,12 +730,12 @@ impl<const N: usize> board_analysis::Jobs for ViewJobs<'_, N> {
 /// of the sensor buses' rounds (`cut`) — one instance of the analysis linked for both.
 #[inline(never)]
 fn run_view<const N: usize>(
-    timings: &mut [TaskTiming; N],
+    timings: &mut [TaskTiming],
     jobs: &JobIndex<N>,
     blocking: &[Time; N],
-    shares: &[Share; N],
+    shares: &[Share],
     limits: &Limits,
-    cut: Option<Cut<'_, N>>,
+    cut: Option<Cut<'_>>,
     bounds: &mut JobWcrt<N>,
 ) -> Result<board_analysis::Outcome, Refusal> {
     bounds.wcrt = [NONE; N];
