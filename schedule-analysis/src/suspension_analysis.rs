@@ -411,7 +411,7 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             return Ok(());
         };
         let my_view = self.board.view(me.job);
-        let (mut len, mut at) = (0, 0);
+        let (mut len, mut at) = (0, None);
         for o in 0..self.board.scripts() {
             let Some(s) = self.board.script(o) else {
                 continue;
@@ -421,13 +421,7 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
                 continue;
             }
             let job = self.work.timings.get(s.job).copied();
-            let Some(slot) = self.work.subset.get_mut(len) else {
-                break;
-            };
-            if o == k {
-                at = len;
-            }
-            *slot = MessageTiming {
+            let timing = MessageTiming {
                 // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
                 key: u32::MAX - job.map_or(0, |j| j.priority),
                 frame_time: self.work.bus_times.get(o).copied().unwrap_or(s.wire),
@@ -435,8 +429,29 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
                 period: job.map_or(Time::ZERO, |j| j.period),
                 jitter: self.work.own.get(s.job).copied().unwrap_or(Time::ZERO),
             };
+            // In key order (after the equal keys), whatever the scripts' order.
+            let Some(list) = self.work.subset.get_mut(..=len) else {
+                break;
+            };
+            let place = list
+                .iter()
+                .take(len)
+                .position(|m| m.key > timing.key)
+                .unwrap_or(len);
+            if let Some(tail) = list.get_mut(place..) {
+                tail.rotate_right(1);
+            }
+            if let Some(slot) = list.get_mut(place) {
+                *slot = timing;
+            }
+            at = match at {
+                _ if o == k => Some(place),
+                Some(a) if place <= a => Some(a + 1),
+                other => other,
+            };
             len += 1;
         }
+        let at = at.unwrap_or(len);
         let limits = self.limits()?;
         let subset = self.work.subset.get(..len).unwrap_or(&[]);
         let blocking = can::blocking(subset, at);
