@@ -20,9 +20,21 @@ struct JobMeta {
     original: u8,
     /// Where its priority level ends (a sorted position).
     level_end: u8,
-    /// Whether nothing reads its bound but its deadline check: a fixed task that releases no job and is neither
-    /// the transmit interrupt nor the command handler (whose bounds the bus and the end-to-end paths read).
-    verdict_only: bool,
+    /// What reads its bound.
+    check: Check,
+}
+
+/// What reads a job's bound besides the rounds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Check {
+    /// Its bound is read (by the jobs it releases, the bus, the end-to-end paths) and checked against its deadline.
+    Read,
+    /// Nothing reads its bound but its deadline check: a fixed task that releases no job and is neither the
+    /// transmit interrupt nor the command handler (whose bounds the bus and the end-to-end paths read).
+    VerdictOnly,
+    /// An engine row: no deadline (its analysed response places its interference and is no completion: its
+    /// job's deadline covers the engine's work, docs/analysis.md); only an unbounded one is a violation.
+    Unchecked,
 }
 
 /// The working arrays' placeholder (every entry the analysis reads is written first): all zero bytes, so that a
@@ -34,7 +46,7 @@ const EMPTY_META: JobMeta = JobMeta {
     released_by: 0,
     original: 0,
     level_end: 0,
-    verdict_only: false,
+    check: Check::Read,
 };
 
 const EMPTY_TIMING: TaskTiming = TaskTiming {
@@ -242,10 +254,6 @@ impl<const N: usize> Originals<N> {
     }
 }
 
-/// In an engine row's deadline: none (its analysed response places its interference and is no completion: its
-/// job's deadline covers the engine's work, docs/analysis.md); only an unbounded one is a violation.
-const UNCHECKED: Time = Time::from_ns(NONE - 1);
-
 /// The period of a fixed task or a stream's job.
 fn period_of<const M: usize>(
     input: &BoardInput<'_, M>,
@@ -301,18 +309,14 @@ fn build_job<const M: usize>(
                 original,
                 // Set by `JobIndex::index`.
                 level_end: 0,
-                verdict_only: false,
+                check: Check::Read,
             },
         )
     };
     Ok(match what {
         Source::Fixed(row) => {
             let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
-            let period = if t.own_frame {
-                own_frame
-            } else {
-                row_time(t.period)
-            };
+            let period = period_of(input, what, own_frame)?;
             let deadline = if t.own_frame && t.deadline_own_frames > 0 {
                 can::own_frames(own_frame, t.deadline_own_frames)
             } else if t.deadline == NO_DEADLINE {
@@ -381,10 +385,9 @@ fn build_job<const M: usize>(
                 .buses
                 .get(usize::from(row.bus))
                 .ok_or(Refusal::Capacity)?;
-            let charge = row_time(bus.per_event)
-                .times(u64::from(row.events))
-                .plus(row_time(bus.per_script))
-                .plus(row_time(bus.condition_wait).times(u64::from(row.starts)));
+            let charge = bus
+                .engine(Time::ZERO)
+                .charge(row.events.into(), row.starts.into());
             let id = match job_source {
                 Source::Fixed(r) => TaskId::Fixed(u16::from(r)),
                 Source::Publisher { topic, .. } => table
@@ -394,7 +397,9 @@ fn build_job<const M: usize>(
                 _ => return Err(Refusal::Capacity),
             };
             let period = period_of(input, job_source, own_frame)?;
-            job(charge, period, Time::ZERO, id, UNCHECKED, by)
+            let (timing, mut meta) = job(charge, period, Time::ZERO, id, period, by);
+            meta.check = Check::Unchecked;
+            (timing, meta)
         }
     })
 }
@@ -513,7 +518,7 @@ impl<const N: usize> BoardSet<N> {
         {
             let known = match meta.id {
                 // An engine row is named as its job, a fixed task's: its share is its own.
-                TaskId::Fixed(row) if meta.deadline != UNCHECKED => table
+                TaskId::Fixed(row) if meta.check != Check::Unchecked => table
                     .tasks
                     .get(usize::from(row))
                     .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
@@ -533,9 +538,11 @@ impl<const N: usize> JobIndex<N> {
             if let Some(slot) = self.position.get_mut(usize::from(meta.original)) {
                 *slot = p as u8;
             }
-            if let (TaskId::Fixed(row), false) = (meta.id, meta.deadline == UNCHECKED) {
+            if let (TaskId::Fixed(row), false) = (meta.id, meta.check == Check::Unchecked) {
                 let row = Some(row);
-                meta.verdict_only = table.can_tx != row && table.command_handler != row;
+                if table.can_tx != row && table.command_handler != row {
+                    meta.check = Check::VerdictOnly;
+                }
             }
         }
         let mut end = len;
@@ -553,8 +560,12 @@ impl<const N: usize> JobIndex<N> {
                 // NO_JOB stays NO_JOB.
                 meta.released_by = releaser;
             }
-            if let Some(releasing) = self.metas.get_mut(usize::from(releaser)) {
-                releasing.verdict_only = false;
+            if let Some(releasing) = self
+                .metas
+                .get_mut(usize::from(releaser))
+                .filter(|m| m.check == Check::VerdictOnly)
+            {
+                releasing.check = Check::Read;
             }
         }
     }
@@ -581,7 +592,7 @@ impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
     }
     fn verdict_only(&self, p: usize) -> Option<Time> {
         let meta = self.metas.get(p)?;
-        meta.verdict_only.then_some(meta.deadline)
+        (meta.check == Check::VerdictOnly).then_some(meta.deadline)
     }
 }
 
@@ -773,7 +784,7 @@ impl<const M: usize> Summary<M> {
             let (Some(meta), Some(&w)) = (set.metas.get(p), wcrt.get(p)) else {
                 continue;
             };
-            let missed = w == NONE || w > meta.deadline.as_ns();
+            let missed = w == NONE || (meta.check != Check::Unchecked && w > meta.deadline.as_ns());
             if !self.violated && missed {
                 self.violated = true;
                 self.task = meta.id;

@@ -247,14 +247,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
     }
     let mut engines = [Engine::default(); MAX_BUSES];
     for (slot, bus) in engines.iter_mut().zip(input.table.buses.iter()) {
-        let priority = u32::from(bus.engine_priority);
-        *slot = Engine {
-            priority,
-            per_event: row_time(bus.per_event),
-            per_script: row_time(bus.per_script),
-            condition_wait: row_time(bus.condition_wait),
-            blocking: blocking_at(input, priority),
-        };
+        *slot = bus.engine(blocking_at(input, u32::from(bus.engine_priority)));
     }
     let mut board = ChipBoard {
         input,
