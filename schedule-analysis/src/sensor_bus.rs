@@ -858,12 +858,13 @@ impl SuspendingBoard for HostBoard<'_> {
         unreleased: &[bool],
         _: &Limits,
     ) -> Result<board_analysis::Outcome, board_analysis::OutOfIterations> {
+        let n = self.sorted.order.len();
         self.current = analysis::view_bounds(
             self.board,
             &self.sorted,
-            timings,
+            timings.get_mut(..n).unwrap_or(&mut []),
             &self.blocking,
-            shares,
+            shares.get(..n).unwrap_or(&[]),
             unreleased,
             &self.limits,
         );

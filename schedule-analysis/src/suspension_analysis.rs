@@ -180,9 +180,10 @@ pub trait SuspendingBoard {
     fn own_jitter(&self, p: usize) -> Time;
     /// The job whose completion releases job `p`.
     fn released_by(&self, p: usize) -> Option<usize>;
-    /// Analyses the board's jobs (`timings`, each jitter its own or, for a job `unreleased` marks, the view's;
-    /// jitters found by release chains left in place) under `limits`: every job's bound into the caller's
-    /// storage, read back by [`SuspendingBoard::wcrt`].
+    /// Analyses the board's jobs (the first [`Work::jobs`] of `timings`, `shares` and `unreleased`, the caller's
+    /// whole arrays: each jitter its own or, for a job `unreleased` marks, the view's; jitters found by release
+    /// chains left in place) under `limits`: every job's bound into the caller's storage, read back through
+    /// [`SuspendingBoard::keep`].
     fn analyse_view(
         &mut self,
         timings: &mut [TaskTiming],
@@ -372,12 +373,11 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             self.view_jobs(v);
             let limits = self.limits()?;
             let w = &mut *self.work;
-            let timings = w.timings.get_mut(..w.jobs).unwrap_or(&mut []);
-            let outcome = self
-                .board
-                .analyse_view(timings, &*w.shares, &*w.unreleased, &limits)?;
+            let outcome =
+                self.board
+                    .analyse_view(w.timings, &*w.shares, &*w.unreleased, &limits)?;
             self.spent += outcome.iterations;
-            self.board.keep(v, timings);
+            self.board.keep(v, w.timings);
             if v == 0 {
                 for b in 0..self.board.buses() {
                     self.events(b)?;

@@ -66,7 +66,9 @@ enum Source {
     /// The publisher job of the stream at this [`View`] position: its topic row, and its timer job's original
     /// index ([`NO_JOB`]: none).
     Publisher { stream: u8, topic: u8, timer: u8 },
-    /// The engine row of script `script` of the job at original index `job` (its charge on the CPU).
+    /// The engine row of script `script` of the job at original index `job` (its charge on the CPU); built only
+    /// with the sensor-bus rounds.
+    #[cfg_attr(not(feature = "sensor-buses"), allow(dead_code))]
     Engine { job: u8, script: u8 },
 }
 
@@ -109,7 +111,9 @@ impl<'a, const M: usize> BoardInput<'a, M> {
         self.table.levels.get(usize::from(level)).copied().flatten()
     }
 
-    /// The scripts a job runs (empty for a timer job, an engine row and a job without scripts).
+    /// The scripts a job runs (empty for a timer job, an engine row and a job without scripts). Out of line: the
+    /// bounds files key its loop by it whatever calls it.
+    #[inline(never)]
     fn scripts_of(&self, what: Source) -> &'a [ScriptRow] {
         let table = self.table;
         match what {
@@ -285,7 +289,7 @@ fn period_of<const M: usize>(
 /// Job `original`'s timing and meta, built from what it is made of (`sources`: every job's, by original index).
 fn build_job<const M: usize>(
     input: &BoardInput<'_, M>,
-    sources: &[Source],
+    #[cfg_attr(not(feature = "sensor-buses"), allow(unused_variables))] sources: &[Source],
     what: Source,
     priority: u32,
     original: u8,
@@ -370,6 +374,10 @@ fn build_job<const M: usize>(
                 timer,
             )
         }
+        // A build without the sensor-bus rounds builds no engine row (`Originals::engines`).
+        #[cfg(not(feature = "sensor-buses"))]
+        Source::Engine { .. } => return Err(Refusal::Capacity),
+        #[cfg(feature = "sensor-buses")]
         Source::Engine { job: by, script } => {
             // The engine's charge for the script, at the engine's priority, released by the job with its period;
             // named as its job (an unbounded engine row is its job's violation).
@@ -701,15 +709,15 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
 /// sets its jitter itself (its release cut), and its view (0: the default; a job whose bound the rounds read is
 /// never settled in closed form).
 #[derive(Clone, Copy)]
-struct Cut<'a> {
-    unreleased: &'a [bool],
-    view: &'a [u8],
+struct Cut<'a, const N: usize> {
+    unreleased: &'a [bool; N],
+    view: &'a [u8; N],
 }
 
 /// The board's jobs as one analysis reads them: as built, or as a view of the rounds changes them.
 struct ViewJobs<'a, const N: usize> {
     index: &'a JobIndex<N>,
-    cut: Option<Cut<'a>>,
+    cut: Option<Cut<'a, N>>,
 }
 
 impl<const N: usize> board_analysis::Jobs for ViewJobs<'_, N> {
@@ -741,12 +749,12 @@ impl<const N: usize> board_analysis::Jobs for ViewJobs<'_, N> {
 /// of the sensor buses' rounds (`cut`) — one instance of the analysis linked for both.
 #[inline(never)]
 fn run_view<const N: usize>(
-    timings: &mut [TaskTiming],
+    timings: &mut [TaskTiming; N],
     jobs: &JobIndex<N>,
     blocking: &[Time; N],
-    shares: &[Share],
+    shares: &[Share; N],
     limits: &Limits,
-    cut: Option<Cut<'_>>,
+    cut: Option<Cut<'_, N>>,
     bounds: &mut JobWcrt<N>,
 ) -> Result<board_analysis::Outcome, Refusal> {
     bounds.wcrt = [NONE; N];

@@ -177,6 +177,14 @@ impl<const N: usize, const M: usize> SuspendingBoard for ChipBoard<'_, '_, N, M>
         unreleased: &[bool],
         limits: &Limits,
     ) -> Result<board_analysis::Outcome, board_analysis::OutOfIterations> {
+        // The rounds hand back the check's own arrays (`Work`): of `N` entries each.
+        let (Ok(timings), Ok(shares), Ok(unreleased)) = (
+            <&mut [TaskTiming; N]>::try_from(timings),
+            <&[Share; N]>::try_from(shares),
+            <&[bool; N]>::try_from(unreleased),
+        ) else {
+            return Err(board_analysis::OutOfIterations);
+        };
         let cut = Cut {
             unreleased,
             view: &self.scripts.view,
