@@ -773,8 +773,10 @@ struct HostBoard<'b> {
     sorted: analysis::SortedTasks,
     /// Per sorted position: its SRP blocking.
     blocking: Vec<Time>,
-    /// The scripts as the rounds read them (the board's script order).
+    /// The scripts as the rounds read them, in their jobs' sorted order (most urgent first).
     scripts: Vec<ScriptJob>,
+    /// Per script of the rounds: its index in the board's scripts.
+    model: Vec<usize>,
     engines: Vec<Engine>,
     /// Per sorted position: its view (0: the default).
     view: Vec<usize>,
@@ -890,7 +892,8 @@ impl SuspendingBoard for HostBoard<'_> {
         self.kept.get(p)?.as_ref().ok().map(|r| r.wcrt)
     }
     fn on_bus(&mut self, k: usize, found: &OnBus) {
-        if let Some(slot) = self.on_bus.get_mut(k) {
+        let model = self.model.get(k).copied().unwrap_or(usize::MAX);
+        if let Some(slot) = self.on_bus.get_mut(model) {
             *slot = Some(*found);
         }
     }
@@ -1007,6 +1010,9 @@ pub(crate) fn analyse(
         })
         .collect();
     let sections = analysis::critical_sections(board);
+    // The scripts in their jobs' sorted order (a job's in its order): a bus's scripts by priority.
+    let mut model: Vec<usize> = (0..scripts.len()).collect();
+    model.sort_by_key(|&m| scripts.get(m).map_or(usize::MAX, |s| at(s.task)));
     let mut host = HostBoard {
         board,
         blocking: sorted
@@ -1014,8 +1020,9 @@ pub(crate) fn analyse(
             .iter()
             .map(|&i| blocking.get(i).copied().unwrap_or(Time::ZERO))
             .collect(),
-        scripts: scripts
+        scripts: model
             .iter()
+            .filter_map(|&m| scripts.get(m))
             .map(|s| ScriptJob {
                 job: at(s.task),
                 engine: at(s.engine_row),
@@ -1026,6 +1033,7 @@ pub(crate) fn analyse(
                 settle: s.settle,
             })
             .collect(),
+        model,
         engines: buses
             .iter()
             .map(|bus| bus.engine(board::srp_blocking(bus.engine_priority, &sections)))

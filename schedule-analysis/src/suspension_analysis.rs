@@ -164,7 +164,8 @@ pub enum Budget {
 /// What the rounds read of a board with scripts and where their results go, per sorted position of its jobs
 /// (most urgent first).
 pub trait SuspendingBoard {
-    /// How many running scripts (most urgent job first, each job's in its order, or any order).
+    /// How many running scripts, in their jobs' sorted order (most urgent first; a job's in its order): a bus's
+    /// scripts are analysed in that order, which must be by priority (else they have no bound, `NotSorted`).
     fn scripts(&self) -> usize;
     /// Script `k`.
     fn script(&self, k: usize) -> Option<ScriptJob>;
@@ -411,7 +412,7 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             return Ok(());
         };
         let my_view = self.board.view(me.job);
-        let (mut len, mut at) = (0, None);
+        let (mut len, mut at) = (0, 0);
         for o in 0..self.board.scripts() {
             let Some(s) = self.board.script(o) else {
                 continue;
@@ -429,29 +430,16 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
                 period: job.map_or(Time::ZERO, |j| j.period),
                 jitter: self.work.own.get(s.job).copied().unwrap_or(Time::ZERO),
             };
-            // In key order (after the equal keys), whatever the scripts' order.
-            let Some(list) = self.work.subset.get_mut(..=len) else {
+            // In key order: the scripts come in their jobs' order, most urgent first.
+            let Some(slot) = self.work.subset.get_mut(len) else {
                 break;
             };
-            let place = list
-                .iter()
-                .take(len)
-                .position(|m| m.key > timing.key)
-                .unwrap_or(len);
-            if let Some(tail) = list.get_mut(place..) {
-                tail.rotate_right(1);
+            *slot = timing;
+            if o == k {
+                at = len;
             }
-            if let Some(slot) = list.get_mut(place) {
-                *slot = timing;
-            }
-            at = match at {
-                _ if o == k => Some(place),
-                Some(a) if place <= a => Some(a + 1),
-                other => other,
-            };
             len += 1;
         }
-        let at = at.unwrap_or(len);
         let limits = self.limits()?;
         let subset = self.work.subset.get(..len).unwrap_or(&[]);
         let blocking = can::blocking(subset, at);
