@@ -702,9 +702,8 @@ fn task_bounds(
     task_bounds_in(board, costs, blocking, &jitters, &releases, limits)
 }
 
-/// [`task_bounds`] with each task's own release jitter and releaser given (model order) in place of the model's:
-/// the views the self-suspension analysis ([`crate::sensor_bus`]) runs the board in.
-pub(crate) fn task_bounds_in(
+/// [`task_bounds`] with each task's own release jitter and releaser given (model order).
+fn task_bounds_in(
     board: &BoardSystem,
     costs: &[Time],
     blocking: &[Time],
