@@ -41,7 +41,7 @@ use serde::{Deserialize, Serialize};
 use crate::analysis::{self, Bound, Unbounded};
 use crate::board::{self, TaskTiming};
 use crate::board_analysis;
-use crate::busy_window::{AnalysisError, Counter, Limits, Share};
+use crate::busy_window::{AnalysisError, Counter, Limits, Response, Share};
 use crate::can::{self, MessageTiming};
 use crate::model::{BoardModel, OverheadTimes, TaskKind, TaskSpec};
 use crate::suspension_analysis::{
@@ -871,6 +871,13 @@ impl SuspendingBoard for HostBoard<'_> {
             &self.limits,
         );
         Ok(board_analysis::Outcome::default())
+    }
+    fn refine(&mut self, p: usize, found: Response) {
+        if let Some(slot) = self.current.get_mut(p) {
+            if slot.as_ref().map_or(true, |r| found.wcrt < r.wcrt) {
+                *slot = Ok(found);
+            }
+        }
     }
     fn keep(&mut self, v: usize, timings: &[TaskTiming]) {
         for (p, ((kept, jitter), t)) in self

@@ -192,6 +192,9 @@ pub trait SuspendingBoard {
         unreleased: &[bool],
         limits: &Limits,
     ) -> Result<Outcome, OutOfIterations>;
+    /// Job `p`'s bound in this view by its CPU segments (one instance, its period at least `found.wcrt`): the
+    /// caller keeps the lower of it and the view's.
+    fn refine(&mut self, p: usize, found: Response);
     /// After view `v`'s analysis (`timings` as it found them): keeps the bounds of the jobs of that view as their
     /// own.
     fn keep(&mut self, v: usize, timings: &[TaskTiming]);
@@ -378,6 +381,10 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
                 self.board
                     .analyse_view(w.timings, &*w.shares, &*w.unreleased, &limits)?;
             self.spent += outcome.iterations;
+            if v != 0 {
+                self.segmented(v)?;
+            }
+            let w = &mut *self.work;
             self.board.keep(v, w.timings);
             if v == 0 {
                 for b in 0..self.board.buses() {
@@ -400,6 +407,80 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             }
         }
         Ok(converged)
+    }
+
+    /// View `v`'s suspending jobs bounded by their CPU segments as well (docs/analysis.md, "The suspending job by
+    /// its segments"): a job that runs `r` resumptions (one after each script, one more after each settle) runs its
+    /// CPU `C` in `r + 1` segments, each, from when it is ready, at most the response `W` of one instance of `C`
+    /// alone at its place (its blocking, the interference of every job at or above its priority, its siblings at
+    /// their suspension-oblivious cost; a segment of `c ≤ C` meets no more: `c + (W − C)`), so its response is at
+    /// most its suspensions and settles plus `W + r · (W − C)` (Chen et al. 2019, §5: the suspension neither
+    /// executed nor met by the interference of another window). That holds only while the job's previous instance
+    /// has ended at its next activation: a bound above its period is not taken. The caller keeps the lower of it and
+    /// the view's suspension-oblivious bound, both sound.
+    #[inline(never)]
+    fn segmented(&mut self, v: usize) -> Result<(), OutOfIterations> {
+        for p in 0..self.work.jobs {
+            if self.board.view(p) != v {
+                continue;
+            }
+            let (mut suspended, mut resumptions) = (Time::ZERO, 0u64);
+            for k in 0..self.board.scripts() {
+                let Some(s) = self.board.script(k).filter(|s| s.job == p) else {
+                    continue;
+                };
+                let suspension = self.work.suspension.get(k).copied().unwrap_or(Time::ZERO);
+                suspended = suspended.plus(suspension).plus(s.settle);
+                resumptions += if s.settle > Time::ZERO { 2 } else { 1 };
+            }
+            let (Some(me), Some(&cpu)) = (self.work.timings.get(p).copied(), self.work.base.get(p))
+            else {
+                continue;
+            };
+            if resumptions == 0 {
+                continue;
+            }
+            // One instance of its CPU alone at its place.
+            if let Some(slot) = self.work.timings.get_mut(p) {
+                *slot = TaskTiming {
+                    wcet: cpu,
+                    period: self.limits.horizon,
+                    ..me
+                };
+            }
+            let limits = self.limits()?;
+            let jobs = self.work.jobs;
+            let result = board::response_time(
+                self.work.timings.get(..jobs).unwrap_or(&[]),
+                p,
+                self.work.blocking.get(p).copied().unwrap_or(Time::ZERO),
+                &limits,
+                self.work.scratch,
+            );
+            if let Some(slot) = self.work.timings.get_mut(p) {
+                *slot = me;
+            }
+            let Ok(alone) = self.count(result)? else {
+                continue;
+            };
+            let around = alone.wcrt.minus(cpu);
+            let bound = suspended.plus(alone.wcrt).plus(around.times(resumptions));
+            if bound <= me.period {
+                self.board.refine(
+                    p,
+                    Response {
+                        wcrt: bound,
+                        worst_instance: 0,
+                        instances: 1,
+                        busy_window: bound,
+                        interference: around.times(resumptions + 1),
+                        first_window: bound,
+                        iterations: alone.iterations,
+                    },
+                );
+            }
+        }
+        Ok(())
     }
 
     /// Script `k`'s response on its bus among the bus's scripts that are not its siblings (the other scripts of

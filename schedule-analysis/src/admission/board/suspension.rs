@@ -200,6 +200,11 @@ impl<const N: usize, const M: usize> SuspendingBoard for ChipBoard<'_, '_, N, M>
         )
         .map_err(|_| board_analysis::OutOfIterations)
     }
+    fn refine(&mut self, p: usize, found: Response) {
+        if let Some(slot) = self.bounds.wcrt.get_mut(p) {
+            *slot = (*slot).min(found.wcrt.as_ns());
+        }
+    }
     fn keep(&mut self, v: usize, _: &[TaskTiming]) {
         for (p, (slot, &w)) in self
             .kept
