@@ -12,8 +12,10 @@
 //!   the job's response as its jitter.
 //! * **The suspending job** is analysed suspension-oblivious for itself: its CPU plus, per script, its bus
 //!   response (from submission), its settle and one more blocking per resumption (after the settle, after the
-//!   script: a lower-priority critical section may start while it is suspended), all as if executed. The jobs of
-//!   the same RTIC task (`job_of`) run one after the other, so for them the suspension is execution too.
+//!   script: a lower-priority critical section may start while it is suspended), all as if executed; or, where
+//!   lower and within its period, by its CPU segments (its suspensions and settles plus, per segment, its CPU and
+//!   the interference of its CPU's own window). The jobs of the same RTIC task (`job_of`) run one after the
+//!   other, so for them the suspension is execution too.
 //! * **Every other task** sees a suspending job as its CPU alone, released with jitter = its response minus its
 //!   CPU (Chen, Nelissen, Huang et al., "Many suspensions, many problems", Real-Time Systems 55, 2019, §5;
 //!   Bletsas et al., "Errata for three papers (2004-05) on fixed-priority scheduling with self-suspensions",
@@ -31,7 +33,9 @@
 //!   their charge.
 //!
 //! The jitters feed the bus responses, which feed the jobs' responses, which are the jitters: iterated from zero
-//! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason.
+//! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason. The rounds are
+//! [`suspension_analysis::analyse`], which the chip's check runs too; this module validates the model's buses and
+//! scripts, says what the rounds read of the board, and keeps what they find for the report.
 
 use std::collections::BTreeSet;
 use std::fmt;

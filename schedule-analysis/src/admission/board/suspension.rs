@@ -1,13 +1,11 @@
-//! A board whose running jobs run scripts on its sensor buses: the host's `sensor_bus::analyse` on the check's
-//! fixed-capacity arrays (docs/analysis.md, "Self-suspending publishers and the sensor buses", "The chip's check
-//! with scripts"). From zero jitters and event responses, rounds of: each script's response on its bus
-//! (non-preemptive fixed priority, [`can::response_time`], without its siblings; its bus time the lower of its
-//! events' own responses and the script as one job at the engine's priority), each bus's engine events and each
-//! script as one job on the CPU in the default view ([`crate::board::response_time`]), and the board once per view ([`run_view`]: a view
-//! per RTIC task with a suspending job, where its jobs cost their suspensions, settles and one blocking per
-//! resumption, every job of every other such task its CPU with jitter `R − C`; and the default view); until no
-//! response changes. Every fixed point and every round counts against [`SCRIPT_ITERATIONS`] ([`Refusal::Budget`]
-//! beyond). The board's job arrays are changed in place per view and set back from `base` for the next.
+//! A board whose running jobs run scripts on its sensor buses: the chip's side of the sensor buses' rounds
+//! ([`suspension_analysis::analyse`], the one implementation the report's `sensor_bus::analyse` runs too;
+//! docs/analysis.md, "Self-suspending publishers and the sensor buses", "The chip's check with scripts"). It says
+//! what the rounds read — the running scripts (most urgent job first), each job's view (one per RTIC task with a
+//! running script), the buses' engines with the SRP blocking at their priorities — and runs each view's board
+//! analysis in [`run_view`], the one instance both of the check's paths link; it keeps each job's bound from its
+//! own view. The rounds' working arrays are the check's fixed-capacity ones; every fixed point and every round
+//! counts against [`SCRIPT_ITERATIONS`] ([`Refusal::Budget`] beyond).
 
 use super::*;
 use crate::suspension_analysis::{self, Budget, Engine, Failure, ScriptJob, SuspendingBoard, Work};
