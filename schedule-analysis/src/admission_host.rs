@@ -277,7 +277,7 @@ pub fn lower(
     let mut boards = Vec::new();
     for ((timing, board), path) in timings.iter().zip(&base.boards).zip(timing_paths) {
         let file = relative(root, path);
-        let lowering = Lowering::new(Rows { file: &file }, timing, board);
+        let lowering = Lowering::new(Rows { file: &file }, timing, board)?;
         let (mut sections, tasks) = lowering.task_rows()?;
         sections.extend(lowering.idle_rows()?);
         let buses = lowering.bus_rows()?;
@@ -363,6 +363,9 @@ struct Lowering<'a> {
     overheads: OverheadTimes,
     /// Ceilings as the analysis computes them: the static ones, raised by every user's priority.
     ceilings: BTreeMap<&'a str, u32>,
+    /// The board's sensor buses, validated by the analysis with the board's overheads (once for every job's
+    /// scripts).
+    buses: Vec<crate::sensor_bus::SensorBus>,
 }
 
 /// What the publisher jobs lower to.
@@ -373,7 +376,7 @@ struct PublisherRows {
 }
 
 impl<'a> Lowering<'a> {
-    fn new(rows: Rows<'a>, timing: &'a Timing, board: &'a BoardModel) -> Self {
+    fn new(rows: Rows<'a>, timing: &'a Timing, board: &'a BoardModel) -> Result<Self, BuildError> {
         let mut ceilings: BTreeMap<&str, u32> = board
             .ceilings
             .iter()
@@ -385,13 +388,17 @@ impl<'a> Lowering<'a> {
                 *c = (*c).max(t.priority);
             }
         }
-        Lowering {
+        let overheads = overhead_times(&board.overheads);
+        let buses = crate::sensor_bus::validate_buses(&board.sensor_buses, &overheads)
+            .map_err(|(field, e)| rows.fail(&field, e.to_string()))?;
+        Ok(Lowering {
             rows,
             timing,
             board,
-            overheads: overhead_times(&board.overheads),
+            overheads,
             ceilings,
-        }
+            buses,
+        })
     }
 
     /// A task's index in the board's fixed tasks.
@@ -474,8 +481,7 @@ impl<'a> Lowering<'a> {
 
     /// The board's sensor buses as the check's rows (the analysis's validation, the board's overheads).
     fn bus_rows(&self) -> Result<Vec<BusRow>, BuildError> {
-        let buses = crate::sensor_bus::validate_buses(&self.board.sensor_buses, &self.overheads)
-            .map_err(|(field, e)| self.rows.fail(&field, e.to_string()))?;
+        let buses = &self.buses;
         if buses.len() > MAX_BUSES {
             return Err(self.rows.fail(
                 "sensor_buses",
@@ -508,14 +514,12 @@ impl<'a> Lowering<'a> {
     /// A job's scripts (`field`: the task's or topic's) as the check's rows, validated as the analysis does.
     fn script_rows(&self, job: &TaskModel, field: &str) -> Result<Vec<ScriptRow>, BuildError> {
         let fail = |(f, e): crate::sensor_bus::Refusal| self.rows.fail(&f, e.to_string());
-        let buses = crate::sensor_bus::validate_buses(&self.board.sensor_buses, &self.overheads)
-            .map_err(fail)?;
         let mut out = Vec::new();
         for (p, script) in
             crate::sensor_bus::job_scripts(job.script.as_ref(), job.scripts.as_deref(), field)
                 .map_err(fail)?
         {
-            let s = crate::sensor_bus::validate_script(&buses, script, &p).map_err(fail)?;
+            let s = crate::sensor_bus::validate_script(&self.buses, script, &p).map_err(fail)?;
             let count = |n: u32, name: &str| {
                 u16::try_from(n).map_err(|_| {
                     self.rows.fail(

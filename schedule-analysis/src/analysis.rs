@@ -530,12 +530,12 @@ pub(crate) fn critical_sections(board: &BoardSystem) -> Vec<CriticalSection> {
 }
 
 /// A board's tasks as [`board_analysis`] reads them: in priority order (highest first, ties in model order).
-struct SortedTasks {
+pub(crate) struct SortedTasks {
     /// Model index per sorted position.
-    order: Vec<usize>,
+    pub(crate) order: Vec<usize>,
     /// Per sorted position: how it is released (the releaser at `usize::MAX` when the model names none that
     /// exists), and where its level ends.
-    release: Vec<Option<board_analysis::Release>>,
+    pub(crate) release: Vec<Option<board_analysis::Release>>,
     level_end: Vec<usize>,
 }
 
@@ -597,6 +597,99 @@ impl board_analysis::JobBounds for Records {
     }
 }
 
+/// The tasks of [`SortedTasks`] with some releases cut (a view of the sensor buses' rounds sets those jobs'
+/// jitters itself).
+struct CutReleases<'a> {
+    sorted: &'a SortedTasks,
+    unreleased: &'a [bool],
+}
+
+impl board_analysis::Jobs for CutReleases<'_> {
+    fn release(&self, p: usize) -> Option<board_analysis::Release> {
+        if self.unreleased.get(p).copied().unwrap_or(false) {
+            return None;
+        }
+        self.sorted.release(p)
+    }
+    fn level_end(&self, p: usize) -> usize {
+        self.sorted.level_end(p)
+    }
+    fn verdict_only(&self, _: usize) -> Option<Time> {
+        None
+    }
+}
+
+/// One view of the sensor buses' rounds ([`crate::suspension_analysis`]): the sorted tasks' `timings` (their
+/// jitters as the view sets them, found ones left in place) analysed by [`board_analysis::analyse`], the jobs
+/// `unreleased` marks with their releases cut; every task's bound per sorted position.
+pub(crate) fn view_bounds(
+    board: &BoardSystem,
+    sorted: &SortedTasks,
+    timings: &mut [TaskTiming],
+    blocking: &[Time],
+    shares: &[Share],
+    unreleased: &[bool],
+    limits: &Limits,
+) -> Vec<Bound> {
+    let n = timings.len();
+    let mut scratch = vec![Counter::default(); n];
+    let mut records = Records(vec![
+        Err(NoBound::Inherited(
+            board_analysis::Unbound::NoConvergence
+        ));
+        n
+    ]);
+    let jobs = board_analysis::BoardJobs {
+        timings,
+        blocking,
+        shares,
+        scratch: &mut scratch,
+    };
+    let cut = CutReleases { sorted, unreleased };
+    // Per job, never out of a board's budget.
+    let _ = board_analysis::analyse(
+        jobs,
+        &cut,
+        &mut records,
+        limits,
+        board_analysis::IterationBudget::PerJob,
+    );
+    let name = |p: usize| {
+        sorted
+            .order
+            .get(p)
+            .and_then(|&i| board.tasks.get(i))
+            .map_or("?", |t| t.name.as_str())
+            .to_string()
+    };
+    records
+        .0
+        .iter()
+        .enumerate()
+        .map(|(p, record)| {
+            (*record).map_err(|why| match why {
+                NoBound::Inherited(board_analysis::Unbound::Releaser) => {
+                    let by = board_analysis::Jobs::release(&cut, p).map_or(usize::MAX, |r| r.by);
+                    Unbounded::Releaser(name(by))
+                }
+                other => no_bound(other),
+            })
+        })
+        .collect()
+}
+
+/// Why a task has no bound, but for a releaser's name.
+fn no_bound(why: NoBound) -> Unbounded {
+    match why {
+        NoBound::Analysis(e) => Unbounded::Analysis(e),
+        NoBound::Inherited(board_analysis::Unbound::Overflow) => {
+            Unbounded::Analysis(AnalysisError::Overflow)
+        }
+        NoBound::Inherited(board_analysis::Unbound::NoConvergence) => Unbounded::NoConvergence,
+        NoBound::Inherited(board_analysis::Unbound::Releaser) => Unbounded::Releaser("?".into()),
+    }
+}
+
 /// Every task's bound and the release jitter it was found with (own plus inherited), in model order.
 fn task_bounds(
     board: &BoardSystem,
@@ -609,9 +702,8 @@ fn task_bounds(
     task_bounds_in(board, costs, blocking, &jitters, &releases, limits)
 }
 
-/// [`task_bounds`] with each task's own release jitter and releaser given (model order) in place of the model's:
-/// the views the self-suspension analysis ([`crate::sensor_bus`]) runs the board in.
-pub(crate) fn task_bounds_in(
+/// [`task_bounds`] with each task's own release jitter and releaser given (model order).
+fn task_bounds_in(
     board: &BoardSystem,
     costs: &[Time],
     blocking: &[Time],
@@ -693,7 +785,11 @@ pub(crate) fn task_bounds_in(
 
 /// The board's tasks in priority order (highest first; ties keep model order), with what the analysis reads of
 /// each.
-fn sort_tasks(board: &BoardSystem, jitters: &[Time], releases: &[Option<usize>]) -> SortedTasks {
+pub(crate) fn sort_tasks(
+    board: &BoardSystem,
+    jitters: &[Time],
+    releases: &[Option<usize>],
+) -> SortedTasks {
     let n = board.tasks.len();
     let priority = |i: usize| board.tasks.get(i).map_or(0, |t| t.priority);
     let mut order: Vec<usize> = (0..n).collect();

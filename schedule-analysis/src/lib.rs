@@ -2,8 +2,8 @@
 //!
 //! One analysis, two layers around it:
 //!
-//! * the **core** — [`time`], [`busy_window`], [`board`], [`can`], [`board_analysis`], [`bus_analysis`] and
-//!   [`admission`] — is `no_std` and allocation-free (build with `--no-default-features`).
+//! * the **core** — [`time`], [`busy_window`], [`board`], [`can`], [`board_analysis`], [`bus_analysis`],
+//!   [`suspension_analysis`] (the sensor buses' rounds) and [`admission`] — is `no_std` and allocation-free (build with `--no-default-features`).
 //!   [`board_analysis::analyse`] analyses one board and [`bus_analysis::analyse`] the bus, for the report and for
 //!   the chip alike; [`admission`] is the check a board runs with them before it starts a publisher, on a table
 //!   [`admission_host`] lowers from the same apps and timing files;
@@ -24,6 +24,7 @@ pub mod board_analysis;
 pub mod bus_analysis;
 pub mod busy_window;
 pub mod can;
+pub mod suspension_analysis;
 pub mod time;
 
 #[cfg(feature = "std")]

@@ -12,8 +12,10 @@
 //!   the job's response as its jitter.
 //! * **The suspending job** is analysed suspension-oblivious for itself: its CPU plus, per script, its bus
 //!   response (from submission), its settle and one more blocking per resumption (after the settle, after the
-//!   script: a lower-priority critical section may start while it is suspended), all as if executed. The jobs of
-//!   the same RTIC task (`job_of`) run one after the other, so for them the suspension is execution too.
+//!   script: a lower-priority critical section may start while it is suspended), all as if executed; or, where
+//!   lower and within its period, by its CPU segments (its suspensions and settles plus, per segment, its CPU and
+//!   the interference of its CPU's own window). The jobs of the same RTIC task (`job_of`) run one after the
+//!   other, so for them the suspension is execution too.
 //! * **Every other task** sees a suspending job as its CPU alone, released with jitter = its response minus its
 //!   CPU (Chen, Nelissen, Huang et al., "Many suspensions, many problems", Real-Time Systems 55, 2019, §5;
 //!   Bletsas et al., "Errata for three papers (2004-05) on fixed-priority scheduling with self-suspensions",
@@ -31,7 +33,9 @@
 //!   their charge.
 //!
 //! The jitters feed the bus responses, which feed the jobs' responses, which are the jitters: iterated from zero
-//! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason.
+//! to a fixed point ([`MAX_ROUNDS`]), or the affected jobs are unbounded with the reason. The rounds are
+//! [`suspension_analysis::analyse`], which the chip's check runs too; this module validates the model's buses and
+//! scripts, says what the rounds read of the board, and keeps what they find for the report.
 
 use std::collections::BTreeSet;
 use std::fmt;
@@ -40,9 +44,13 @@ use serde::{Deserialize, Serialize};
 
 use crate::analysis::{self, Bound, Unbounded};
 use crate::board::{self, TaskTiming};
-use crate::busy_window::{AnalysisError, Counter, Limits, Response};
+use crate::board_analysis;
+use crate::busy_window::{AnalysisError, Counter, Limits, Response, Share};
 use crate::can::{self, MessageTiming};
 use crate::model::{BoardModel, OverheadTimes, TaskKind, TaskSpec};
+use crate::suspension_analysis::{
+    self, Budget, Engine, Failure, OnBus, ScriptJob, SuspendingBoard, Work,
+};
 use crate::time::Time;
 
 /// Bit times one byte takes on an I2C bus: eight data bits and the acknowledge.
@@ -214,13 +222,21 @@ fn part_time(part: Option<&Part>) -> Time {
 }
 
 impl SensorBus {
-    /// The engine's charge for one script: `events × per_event` (each with the interrupt's entry and exit), plus
-    /// the per-script part once, plus the condition wait once per START condition.
+    /// The engine's charge for one script ([`Engine::charge`]): `events × per_event` (each with the interrupt's
+    /// entry and exit), plus the per-script part once, plus the condition wait once per START condition.
     pub fn script_charge(&self, script: &Script) -> Time {
-        self.per_event
-            .times(u64::from(script.events))
-            .plus(part_time(self.per_script.as_ref()))
-            .plus(part_time(self.condition_wait.as_ref()).times(u64::from(script.starts)))
+        self.engine(Time::ZERO).charge(script.events, script.starts)
+    }
+
+    /// Its engine as the rounds read it ([`suspension_analysis`]), with the SRP `blocking` at its priority.
+    pub fn engine(&self, blocking: Time) -> Engine {
+        Engine {
+            priority: self.engine_priority,
+            per_event: self.per_event,
+            per_script: part_time(self.per_script.as_ref()),
+            condition_wait: part_time(self.condition_wait.as_ref()),
+            blocking,
+        }
     }
 }
 
@@ -754,60 +770,214 @@ pub struct ScriptResult {
     pub suspension: Option<Time>,
 }
 
-/// A bus's engine events' worst responses on the CPU, by what the event carries beside the per-event part.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-struct EventResponses {
-    /// An event with the per-event part alone.
-    plain: Time,
-    /// An event that takes the condition wait.
-    waiting: Time,
-    /// The event that ends a script: the per-script part and, if the engine states one, the condition wait.
-    ending: Time,
+/// The report's side of the rounds ([`suspension_analysis::SuspendingBoard`]): the board's tasks sorted by
+/// priority, its scripts and views, and what the rounds found, kept for the report.
+struct HostBoard<'b> {
+    board: &'b crate::model::BoardSystem,
+    sorted: analysis::SortedTasks,
+    /// Per sorted position: its SRP blocking.
+    blocking: Vec<Time>,
+    /// The scripts as the rounds read them, in their jobs' sorted order (most urgent first).
+    scripts: Vec<ScriptJob>,
+    /// Per script of the rounds: its index in the board's scripts.
+    model: Vec<usize>,
+    engines: Vec<Engine>,
+    /// Per sorted position: its view (0: the default).
+    view: Vec<usize>,
+    views: usize,
+    limits: Limits,
+    /// The last view's bounds, per sorted position.
+    current: Vec<Bound>,
+    /// Each task's bound from its own view and the jitter it was found with, per sorted position.
+    kept: Vec<Bound>,
+    jitters: Vec<Time>,
+    /// Per script: its response on its bus in the last round.
+    on_bus: Vec<Option<OnBus>>,
+    /// Per bus: its plain event response in the last round (none for a bus no script uses).
+    events: Vec<Option<Time>>,
+    /// The failing tasks (sorted positions) and why, in the order found.
+    failing: Vec<(usize, Unbounded)>,
 }
 
-impl EventResponses {
-    /// What a script's events hold SCL on the CPU: its ending event, one that takes the condition wait per
-    /// further START (as many as its other events allow), the rest plain. The ending event is charged the wait as
-    /// well, so whichever event takes which wait, each event is charged at least its cost.
-    fn of(&self, script: &Script) -> Time {
-        if script.events == 0 {
-            return Time::ZERO;
-        }
-        let others = u64::from(script.events.saturating_sub(1));
-        let waiting = u64::from(script.starts).min(others);
-        self.ending
-            .plus(self.waiting.times(waiting))
-            .plus(self.plain.times(others - waiting))
+impl HostBoard<'_> {
+    fn name(&self, p: usize) -> String {
+        self.sorted
+            .order
+            .get(p)
+            .and_then(|&i| self.board.tasks.get(i))
+            .map_or("?", |t| t.name.as_str())
+            .to_string()
+    }
+
+    fn priority(&self, p: usize) -> u32 {
+        self.sorted
+            .order
+            .get(p)
+            .and_then(|&i| self.board.tasks.get(i))
+            .map_or(0, |t| t.priority)
+    }
+
+    fn bus_name(&self, b: usize) -> String {
+        self.board
+            .sensor_buses
+            .buses
+            .get(b)
+            .map_or("?", |bus| bus.name.as_str())
+            .to_string()
     }
 }
 
-/// One script as its bus's analysis found it.
-#[derive(Debug, Clone, Copy)]
-struct OnBus {
-    /// Index into the board's scripts.
-    script: usize,
-    result: Result<Response, AnalysisError>,
-    bus_time: Time,
-    jitter: Time,
-    blocking: Time,
+impl SuspendingBoard for HostBoard<'_> {
+    fn scripts(&self) -> usize {
+        self.scripts.len()
+    }
+    fn script(&self, k: usize) -> Option<ScriptJob> {
+        self.scripts.get(k).copied()
+    }
+    fn buses(&self) -> usize {
+        self.engines.len()
+    }
+    fn engine(&self, b: usize) -> Option<Engine> {
+        self.engines.get(b).copied()
+    }
+    fn view(&self, p: usize) -> usize {
+        self.view.get(p).copied().unwrap_or(0)
+    }
+    fn views(&self) -> usize {
+        self.views
+    }
+    fn own_jitter(&self, p: usize) -> Time {
+        self.sorted
+            .order
+            .get(p)
+            .and_then(|&i| self.board.tasks.get(i))
+            .map_or(Time::ZERO, |t| t.jitter)
+    }
+    fn released_by(&self, p: usize) -> Option<usize> {
+        let by = self.sorted.release.get(p).copied().flatten()?.by;
+        (by < self.sorted.order.len()).then_some(by)
+    }
+    fn analyse_view(
+        &mut self,
+        timings: &mut [TaskTiming],
+        shares: &[Share],
+        unreleased: &[bool],
+        _: &Limits,
+    ) -> Result<board_analysis::Outcome, board_analysis::OutOfIterations> {
+        let n = self.sorted.order.len();
+        self.current = analysis::view_bounds(
+            self.board,
+            &self.sorted,
+            timings.get_mut(..n).unwrap_or(&mut []),
+            &self.blocking,
+            shares.get(..n).unwrap_or(&[]),
+            unreleased,
+            &self.limits,
+        );
+        Ok(board_analysis::Outcome::default())
+    }
+    fn refine(&mut self, p: usize, found: Response) {
+        if let Some(slot) = self.current.get_mut(p) {
+            if slot.as_ref().map_or(true, |r| found.wcrt < r.wcrt) {
+                *slot = Ok(found);
+            }
+        }
+    }
+    fn keep(&mut self, v: usize, timings: &[TaskTiming]) {
+        for (p, ((kept, jitter), t)) in self
+            .kept
+            .iter_mut()
+            .zip(self.jitters.iter_mut())
+            .zip(timings)
+            .enumerate()
+        {
+            if self.view.get(p).copied().unwrap_or(0) == v {
+                if let Some(bound) = self.current.get(p) {
+                    *kept = bound.clone();
+                }
+                *jitter = t.jitter;
+            }
+        }
+    }
+    fn kept(&self, p: usize) -> Option<Time> {
+        self.kept.get(p)?.as_ref().ok().map(|r| r.wcrt)
+    }
+    fn on_bus(&mut self, k: usize, found: &OnBus) {
+        let model = self.model.get(k).copied().unwrap_or(usize::MAX);
+        if let Some(slot) = self.on_bus.get_mut(model) {
+            *slot = Some(*found);
+        }
+    }
+    fn event(&mut self, b: usize, plain: Result<Time, AnalysisError>) {
+        if let Some(slot) = self.events.get_mut(b) {
+            *slot = plain.ok();
+        }
+    }
+    fn fail(&mut self, failure: Failure) {
+        match failure {
+            Failure::Script { script, why } => {
+                if let Some(s) = self.scripts.get(script).copied() {
+                    let why = Unbounded::SensorBus(
+                        self.bus_name(s.bus),
+                        Unbounded::Analysis(why).to_string(),
+                    );
+                    self.failing.push((s.job, why));
+                }
+            }
+            Failure::Event { bus, why } => {
+                let why = Unbounded::SensorBus(
+                    self.bus_name(bus),
+                    format!("its engine's event: {}", Unbounded::Analysis(why)),
+                );
+                for s in self.scripts.iter().filter(|s| s.bus == bus) {
+                    self.failing.push((s.job, why.clone()));
+                }
+            }
+            Failure::Job { job } => {
+                let why = match self.kept.get(job) {
+                    Some(Err(why)) => why.clone(),
+                    _ => Unbounded::NoConvergence,
+                };
+                self.failing.push((job, why));
+            }
+            Failure::Rounds => {
+                for s in &self.scripts {
+                    self.failing.push((s.job, Unbounded::NoConvergence));
+                }
+            }
+        }
+    }
+    fn unbound(&mut self, p: usize, releaser: Option<usize>) {
+        // A failing task says why it failed (the last reason found); a released one names its releaser; every
+        // other one names the first failing task at or above its priority, or else the first failing task.
+        let why = match (
+            self.failing.iter().rev().find(|(task, _)| *task == p),
+            releaser,
+        ) {
+            (Some((_, why)), _) => why.clone(),
+            (None, Some(r)) => Unbounded::Releaser(self.name(r)),
+            (None, None) => {
+                let priority = self.priority(p);
+                let cause = self
+                    .failing
+                    .iter()
+                    .find(|(task, _)| self.priority(*task) >= priority)
+                    .or(self.failing.first());
+                match cause {
+                    Some((task, _)) => Unbounded::Suspending(self.name(*task)),
+                    None => Unbounded::NoConvergence,
+                }
+            }
+        };
+        if let Some(slot) = self.kept.get_mut(p) {
+            *slot = Err(why);
+        }
+    }
 }
 
-/// What stopped the iteration: the bus or job that has no bound.
-enum Failure {
-    /// A script has no bound on the bus (`scripts` index), why.
-    Script(usize, String),
-    /// A bus's engine event has no bound on the CPU.
-    Event(usize, String),
-    /// A suspending job has no bound: its script index, why.
-    Job(usize, Unbounded),
-    /// A job of a suspending RTIC task without a script has no bound: its task index, why.
-    Task(usize, Unbounded),
-    /// The rounds ran out.
-    Rounds,
-}
-
-/// Analyses a board with scripts: per task its bound and the release jitter it was found with (model order), and
-/// the buses' results. `costs` are the tasks' CPU costs with overheads, `blocking` their SRP blockings.
+/// Analyses a board with scripts by the rounds ([`suspension_analysis::analyse`], the one the chip's check runs):
+/// per task its bound and the release jitter it was found with (model order), and the buses' results. `costs` are
+/// the tasks' CPU costs with overheads, `blocking` their SRP blockings.
 pub(crate) fn analyse(
     board: &crate::model::BoardSystem,
     costs: &[Time],
@@ -817,546 +987,187 @@ pub(crate) fn analyse(
     let n = board.tasks.len();
     let buses = &board.sensor_buses.buses;
     let scripts = &board.sensor_buses.scripts;
-    let cost = |i: usize| costs.get(i).copied().unwrap_or(Time::ZERO);
+    let own_jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
+    let releases: Vec<Option<usize>> = board.tasks.iter().map(|t| t.released_by).collect();
+    let sorted = analysis::sort_tasks(board, &own_jitters, &releases);
+    let mut position = vec![usize::MAX; n];
+    for (p, &i) in sorted.order.iter().enumerate() {
+        if let Some(slot) = position.get_mut(i) {
+            *slot = p;
+        }
+    }
+    let at = |i: usize| position.get(i).copied().unwrap_or(usize::MAX);
     let group = |i: usize| {
         board
             .tasks
             .get(i)
             .map(|t| t.job_of.as_deref().unwrap_or(t.name.as_str()))
     };
-    let mut script_of: Vec<Option<usize>> = vec![None; n];
-    for (k, s) in scripts.iter().enumerate() {
-        if let Some(slot) = script_of.get_mut(s.task) {
-            *slot = Some(k);
-        }
-    }
     // The views: one per RTIC task with a suspending job (its jobs see the suspensions as execution), and the
-    // default view for every other task (position 0).
+    // default view for every other task (0).
     let groups: Vec<&str> = scripts
         .iter()
         .filter_map(|s| group(s.task))
         .collect::<BTreeSet<_>>()
         .into_iter()
         .collect();
-    let view_of = |i: usize| {
-        group(i)
-            .and_then(|g| groups.iter().position(|o| *o == g))
-            .map_or(0, |v| v + 1)
-    };
+    let view: Vec<usize> = sorted
+        .order
+        .iter()
+        .map(|&i| {
+            group(i)
+                .and_then(|g| groups.iter().position(|o| *o == g))
+                .map_or(0, |v| v + 1)
+        })
+        .collect();
     let sections = analysis::critical_sections(board);
-    let priorities: Vec<u32> = board.tasks.iter().map(|t| t.priority).collect();
-
-    // The iteration's state: each suspending job's response (its script's jitter), each bus's event response.
-    let mut response = vec![Time::ZERO; scripts.len()];
-    // Each job of a suspending RTIC task (script or not): its own-view response.
-    let mut own = vec![Time::ZERO; n];
-    let mut event = vec![EventResponses::default(); buses.len()];
-    // Each script's bus time as one job at its engine's priority (`None`: no such bound; the per-event one holds).
-    let mut whole: Vec<Option<Time>> = vec![None; scripts.len()];
+    // The scripts in their jobs' sorted order (a job's in its order): a bus's scripts by priority.
+    let mut model: Vec<usize> = (0..scripts.len()).collect();
+    model.sort_by_key(|&m| scripts.get(m).map_or(usize::MAX, |s| at(s.task)));
+    let mut host = HostBoard {
+        board,
+        blocking: sorted
+            .order
+            .iter()
+            .map(|&i| blocking.get(i).copied().unwrap_or(Time::ZERO))
+            .collect(),
+        scripts: model
+            .iter()
+            .filter_map(|&m| scripts.get(m))
+            .map(|s| ScriptJob {
+                job: at(s.task),
+                engine: at(s.engine_row),
+                bus: s.bus,
+                wire: s.wire.plus(s.stretch),
+                events: s.events,
+                starts: s.starts,
+                settle: s.settle,
+            })
+            .collect(),
+        model,
+        engines: buses
+            .iter()
+            .map(|bus| bus.engine(board::srp_blocking(bus.engine_priority, &sections)))
+            .collect(),
+        view,
+        views: groups.len(),
+        limits: *limits,
+        current: Vec::new(),
+        kept: vec![Err(Unbounded::NoConvergence); n],
+        jitters: sorted
+            .order
+            .iter()
+            .map(|&i| own_jitters.get(i).copied().unwrap_or(Time::ZERO))
+            .collect(),
+        on_bus: vec![None; scripts.len()],
+        events: vec![None; buses.len()],
+        failing: Vec::new(),
+        sorted,
+    };
+    let mut timings: Vec<TaskTiming> = host
+        .sorted
+        .order
+        .iter()
+        .map(|&i| TaskTiming {
+            priority: board.tasks.get(i).map_or(0, |t| t.priority),
+            wcet: costs.get(i).copied().unwrap_or(Time::ZERO),
+            period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
+            jitter: own_jitters.get(i).copied().unwrap_or(Time::ZERO),
+        })
+        .collect();
+    // An engine event takes the place after the jobs at or above its engine for the while.
+    timings.push(TaskTiming {
+        priority: 0,
+        wcet: Time::ZERO,
+        period: Time::ZERO,
+        jitter: Time::ZERO,
+    });
+    let mut shares: Vec<Share> = timings
+        .iter()
+        .map(|t| Share::of(t.wcet, t.period))
+        .collect();
+    let k = scripts.len();
+    let (mut base, mut own, mut unreleased) =
+        (vec![Time::ZERO; n], vec![Time::ZERO; n], vec![false; n]);
+    let (mut suspension, mut bus_times) = (vec![Time::ZERO; k], vec![Time::ZERO; k]);
+    let mut subset = vec![
+        MessageTiming {
+            key: 0,
+            frame_time: Time::ZERO,
+            frames: 1,
+            period: Time::ZERO,
+            jitter: Time::ZERO,
+        };
+        k
+    ];
+    let mut scratch = vec![Counter::default(); n + 1];
+    let sorted_blocking = host.blocking.clone();
+    let mut work = Work {
+        timings: &mut timings,
+        jobs: n,
+        blocking: &sorted_blocking,
+        shares: &mut shares,
+        base: &mut base,
+        own: &mut own,
+        unreleased: &mut unreleased,
+        suspension: &mut suspension,
+        bus_times: &mut bus_times,
+        subset: &mut subset,
+        scratch: &mut scratch,
+    };
+    // Each fixed point has the limits' iterations of its own: the rounds never run out of a board's budget.
+    let _ = suspension_analysis::analyse(&mut host, &mut work, limits, Budget::Rounds(MAX_ROUNDS));
     let mut bounds: Vec<Bound> = vec![Err(Unbounded::NoConvergence); n];
-    let mut jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
-    let mut on_bus: Vec<Vec<OnBus>> = vec![Vec::new(); buses.len()];
-    let mut failures = vec![Failure::Rounds];
-    for _ in 0..MAX_ROUNDS {
-        // 1. The buses, with the scripts' jitters and the events' responses as they stand.
-        let mut suspension = vec![Time::ZERO; scripts.len()];
-        let mut stop: Vec<Failure> = Vec::new();
-        for (b, results) in on_bus.iter_mut().enumerate() {
-            let bus_event = event.get(b).copied();
-            *results = bus_responses(board, scripts, b, &response, bus_event, &whole, limits);
-            for s in results.iter() {
-                match s.result {
-                    Ok(r) => {
-                        if let Some(slot) = suspension.get_mut(s.script) {
-                            *slot = r.wcrt.minus(s.jitter);
-                        }
-                    }
-                    Err(e) => {
-                        let why = Unbounded::Analysis(e).to_string();
-                        stop.push(Failure::Script(s.script, why));
-                    }
-                }
-            }
+    let mut jitters = own_jitters.clone();
+    for (p, &i) in host.sorted.order.iter().enumerate() {
+        if let (Some(slot), Some(bound)) = (bounds.get_mut(i), host.kept.get(p)) {
+            *slot = bound.clone();
         }
-        if !stop.is_empty() {
-            failures = stop;
-            break;
+        if let (Some(slot), Some(j)) = (jitters.get_mut(i), host.jitters.get(p)) {
+            *slot = *j;
         }
-        // 2. The board, once per view.
-        let mut next_bounds = bounds.clone();
-        let mut next_jitters = jitters.clone();
-        let mut default_view = None;
-        for v in 0..=groups.len() {
-            let mut view_costs = costs.to_vec();
-            let mut view_jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
-            let mut releases: Vec<Option<usize>> =
-                board.tasks.iter().map(|t| t.released_by).collect();
-            for (k, s) in scripts.iter().enumerate() {
-                if view_of(s.task) == v {
-                    // Suspension-oblivious: each script's suspension and its settle, and the blocking on each
-                    // resumption (after the settle's wait and after the script), as execution.
-                    let resumptions = if s.settle > Time::ZERO { 2 } else { 1 };
-                    if let Some(c) = view_costs.get_mut(s.task) {
-                        *c = c
-                            .plus(suspension.get(k).copied().unwrap_or(Time::ZERO))
-                            .plus(s.settle)
-                            .plus(
-                                blocking
-                                    .get(s.task)
-                                    .copied()
-                                    .unwrap_or(Time::ZERO)
-                                    .times(resumptions),
-                            );
-                    }
-                }
-            }
-            // Every job of a suspending RTIC task, with a script or not, seen from another view: its CPU,
-            // released anywhere up to its own-view response minus its CPU after its activation (a job without a
-            // script still waits behind its task's suspended job, so its own response holds that wait).
-            for i in (0..n).filter(|&i| view_of(i) != 0 && view_of(i) != v) {
-                if let (Some(j), Some(rel)) = (view_jitters.get_mut(i), releases.get_mut(i)) {
-                    *j = own.get(i).copied().unwrap_or(Time::ZERO).minus(cost(i));
-                    *rel = None;
-                }
-            }
-            // A job released by a job of a suspending RTIC task inherits that job's whole own-view response.
-            for (i, t) in board.tasks.iter().enumerate() {
-                let Some(r) = t.released_by.filter(|&r| view_of(r) != 0) else {
-                    continue;
-                };
-                if let (Some(j), Some(rel)) = (view_jitters.get_mut(i), releases.get_mut(i)) {
-                    *j = t.jitter.plus(own.get(r).copied().unwrap_or(Time::ZERO));
-                    *rel = None;
-                }
-            }
-            let (view_bounds, found_jitters) = analysis::task_bounds_in(
-                board,
-                &view_costs,
-                blocking,
-                &view_jitters,
-                &releases,
-                limits,
-            );
-            for i in (0..n).filter(|&i| view_of(i) == v) {
-                if let (Some(slot), Some(bound)) = (next_bounds.get_mut(i), view_bounds.get(i)) {
-                    *slot = bound.clone();
-                }
-                if let (Some(slot), Some(j)) = (next_jitters.get_mut(i), found_jitters.get(i)) {
-                    *slot = *j;
-                }
-            }
-            if v == 0 {
-                default_view = Some((view_costs, found_jitters));
-            }
-        }
-        bounds = next_bounds;
-        jitters = next_jitters;
-        // 3. Each bus's engine event on the CPU, in the default view.
-        let mut next_event = event.clone();
-        let mut next_whole = whole.clone();
-        if let Some((view_costs, view_jitters)) = &default_view {
-            for (b, bus) in buses.iter().enumerate() {
-                // The bus's own engine rows are this handler's events, one at a time: not its interference.
-                let own_rows: Vec<usize> = scripts
-                    .iter()
-                    .filter(|s| s.bus == b)
-                    .map(|s| s.engine_row)
-                    .collect();
-                let others = (0..n).filter(|i| !own_rows.contains(i));
-                let tasks: Vec<TaskTiming> = others
-                    .map(|i| TaskTiming {
-                        priority: priorities.get(i).copied().unwrap_or(0),
-                        wcet: view_costs.get(i).copied().unwrap_or(Time::ZERO),
-                        period: board.tasks.get(i).map_or(Time::ZERO, |t| t.period),
-                        jitter: view_jitters.get(i).copied().unwrap_or(Time::ZERO),
-                    })
-                    .collect();
-                let wait = part_time(bus.condition_wait.as_ref());
-                let respond = |extra: Time| {
-                    event_response(bus, bus.per_event.plus(extra), &tasks, &sections, limits)
-                };
-                let responses = respond(Time::ZERO).and_then(|plain| {
-                    Ok(EventResponses {
-                        plain,
-                        waiting: respond(wait)?,
-                        ending: respond(part_time(bus.per_script.as_ref()).plus(wait))?,
-                    })
-                });
-                match responses {
-                    Ok(r) => {
-                        if let Some(slot) = next_event.get_mut(b) {
-                            *slot = r;
-                        }
-                    }
-                    Err(e) => stop.push(Failure::Event(b, Unbounded::Analysis(e).to_string())),
-                }
-                // Each script on the bus as one job: its events' work, its wire time as if executed.
-                for (k, s) in scripts.iter().enumerate().filter(|(_, s)| s.bus == b) {
-                    if let Some(slot) = next_whole.get_mut(k) {
-                        *slot = script_response(bus, s, &tasks, &sections, limits).ok();
-                    }
-                }
-            }
-        }
-        // 4. The suspending jobs' responses: the scripts' next jitters.
-        let mut next_response = response.clone();
-        for (k, s) in scripts.iter().enumerate() {
-            match bounds.get(s.task) {
-                Some(Ok(r)) => {
-                    if let Some(slot) = next_response.get_mut(k) {
-                        *slot = r.wcrt;
-                    }
-                }
-                Some(Err(why)) => stop.push(Failure::Job(k, why.clone())),
-                None => {}
-            }
-        }
-        // The own-view responses of every job of a suspending RTIC task: their jitters in the other views.
-        let mut next_own = own.clone();
-        for i in (0..n).filter(|&i| view_of(i) != 0) {
-            match bounds.get(i) {
-                Some(Ok(r)) => {
-                    if let Some(slot) = next_own.get_mut(i) {
-                        *slot = r.wcrt;
-                    }
-                }
-                Some(Err(why)) => stop.push(Failure::Task(i, why.clone())),
-                None => {}
-            }
-        }
-        if !stop.is_empty() {
-            failures = stop;
-            break;
-        }
-        if next_response == response
-            && next_event == event
-            && next_own == own
-            && next_whole == whole
-        {
-            failures = Vec::new();
-            break;
-        }
-        response = next_response;
-        event = next_event;
-        whole = next_whole;
-        own = next_own;
-    }
-    if !failures.is_empty() {
-        mark_unbounded(board, scripts, buses, &failures, &view_of, &mut bounds);
     }
     let results = buses
         .iter()
         .enumerate()
         .map(|(b, bus)| {
-            let list = on_bus.get(b).map(Vec::as_slice).unwrap_or(&[]);
-            let event_failed = failures
-                .iter()
-                .any(|f| matches!(f, Failure::Event(e, _) if *e == b));
-            let event_response = if event_failed {
-                None
-            } else {
-                event.get(b).map(|e| e.plain)
-            };
-            bus_result(board, scripts, bus, list, event_response)
+            // The bus's scripts, most urgent first (ties in model order).
+            let mut list: Vec<(usize, OnBus)> = (0..k)
+                .filter(|&s| scripts.get(s).is_some_and(|s| s.bus == b))
+                .filter_map(|s| Some((s, host.on_bus.get(s).copied().flatten()?)))
+                .collect();
+            list.sort_by_key(|&(s, _)| {
+                std::cmp::Reverse(
+                    scripts
+                        .get(s)
+                        .and_then(|s| board.tasks.get(s.task))
+                        .map_or(0, |t| t.priority),
+                )
+            });
+            bus_result(
+                board,
+                scripts,
+                bus,
+                &list,
+                host.events.get(b).copied().flatten(),
+            )
         })
         .collect();
     (bounds, jitters, results)
-}
-
-/// The scripts on bus `b` analysed as non-preemptive fixed priority: per script (most urgent first) its index,
-/// its response, its bus time and its jitter. A script is analysed without its *siblings*, the other scripts of
-/// its RTIC task (`job_of`, or the task itself): a job submits its scripts one after the other, each when the one
-/// before it has ended, and the task runs one job at a time, so no sibling is waiting or on the bus while a script
-/// is pending; a sibling neither interferes with it nor blocks it.
-fn bus_responses(
-    board: &crate::model::BoardSystem,
-    scripts: &[Script],
-    b: usize,
-    response: &[Time],
-    event: Option<EventResponses>,
-    whole: &[Option<Time>],
-    limits: &Limits,
-) -> Vec<OnBus> {
-    let priority = |k: usize| {
-        scripts
-            .get(k)
-            .and_then(|s| board.tasks.get(s.task))
-            .map_or(0, |t| t.priority)
-    };
-    let group = |k: usize| {
-        scripts
-            .get(k)
-            .and_then(|s| board.tasks.get(s.task))
-            .map(|t| t.job_of.as_deref().unwrap_or(t.name.as_str()))
-    };
-    let mut order: Vec<usize> = (0..scripts.len())
-        .filter(|&k| scripts.get(k).is_some_and(|s| s.bus == b))
-        .collect();
-    order.sort_by_key(|&k| std::cmp::Reverse(priority(k)));
-    let event = event.unwrap_or_default();
-    let timing = |k: usize| {
-        let s = scripts.get(k)?;
-        Some(MessageTiming {
-            // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
-            key: u32::MAX - priority(k),
-            // The tighter of two bounds, both sound: each event's own worst response, and the script as one job.
-            frame_time: bus_time(s, &event, whole.get(k).copied().flatten()),
-            frames: 1,
-            period: board.tasks.get(s.task).map_or(Time::ZERO, |t| t.period),
-            jitter: response.get(k).copied().unwrap_or(Time::ZERO),
-        })
-    };
-    order
-        .iter()
-        .filter_map(|&script| {
-            // The script and every script on the bus that is not its sibling, most urgent first.
-            let subset: Vec<usize> = order
-                .iter()
-                .copied()
-                .filter(|&o| o == script || group(o) != group(script))
-                .collect();
-            let timings: Vec<MessageTiming> = subset.iter().filter_map(|&o| timing(o)).collect();
-            let at = subset.iter().position(|&o| o == script)?;
-            let mut blockings = vec![Time::ZERO; timings.len()];
-            can::blockings(&timings, &mut blockings);
-            let mut scratch = vec![Counter::default(); timings.len()];
-            let mut out = vec![Err(AnalysisError::NoSuchIndex); timings.len()];
-            // The engine picks the next script when one ends; a script submitted at that very instant is counted
-            // as having been in time (the CAN analysis's bit term, one nanosecond here).
-            can::response_times_into(
-                &timings,
-                &blockings,
-                Time::from_ns(1),
-                limits,
-                &mut scratch,
-                out.as_mut_slice(),
-            );
-            let t = timings.get(at)?;
-            Some(OnBus {
-                script,
-                result: out.get(at).copied()?,
-                bus_time: t.frame_time,
-                jitter: t.jitter,
-                blocking: blockings.get(at).copied().unwrap_or(Time::ZERO),
-            })
-        })
-        .collect()
-}
-
-/// A script's bus time, from its first START to its end: its wire time and stretch plus each event's own worst
-/// response (`event`), or its bound as one job (`whole`, [`script_response`]) where that is lower.
-fn bus_time(script: &Script, event: &EventResponses, whole: Option<Time>) -> Time {
-    let per_event = script.wire.plus(script.stretch).plus(event.of(script));
-    whole.map_or(per_event, |w| w.min(per_event))
-}
-
-/// A script's bus time as one job at its engine's priority (docs/analysis.md, "Self-suspending publishers and the
-/// sensor buses"): from its first START to its end the engine runs the script's events' handlers (their work as
-/// [`EventResponses::of`] places it: the ending one, one with the condition wait per further START, the rest plain)
-/// and is suspended on the wire between them. Suspension-oblivious (Chen et al. 2019, §5), the wire time and the
-/// stretch are executed too, and each event, a resumption, may be blocked once by a lower critical section with a
-/// ceiling at or above the engine's priority: one busy window at the engine's priority over `tasks` (every other
-/// task at or above it, with its jitter), so each higher job is counted once per window, not once per event.
-fn script_response(
-    bus: &SensorBus,
-    script: &Script,
-    tasks: &[TaskTiming],
-    sections: &[board::CriticalSection],
-    limits: &Limits,
-) -> Result<Time, AnalysisError> {
-    let wait = part_time(bus.condition_wait.as_ref());
-    let work = EventResponses {
-        plain: bus.per_event,
-        waiting: bus.per_event.plus(wait),
-        ending: bus
-            .per_event
-            .plus(part_time(bus.per_script.as_ref()))
-            .plus(wait),
-    }
-    .of(script);
-    let cost = script.wire.plus(script.stretch).plus(work);
-    engine_response(bus, cost, u64::from(script.events), tasks, sections, limits)
-}
-
-/// One engine event's worst response on the CPU: its `cost` at the engine's priority, interfered with by every
-/// other task of at least that priority (`tasks`: not the bus's own engine rows, which are these very events),
-/// blocked by SRP as a task of that priority. One instance: the block waits for the engine at each event, and the
-/// bus runs one script at a time, so the engine's events never overlap.
-fn event_response(
-    bus: &SensorBus,
-    cost: Time,
-    tasks: &[TaskTiming],
-    sections: &[board::CriticalSection],
-    limits: &Limits,
-) -> Result<Time, AnalysisError> {
-    engine_response(bus, cost, 1, tasks, sections, limits)
-}
-
-/// One job of `cost` at the engine's priority, after every task of at least that priority in `tasks`, blocked once
-/// per resumption (`resumptions`, each by SRP as a task of that priority); one instance.
-fn engine_response(
-    bus: &SensorBus,
-    cost: Time,
-    resumptions: u64,
-    tasks: &[TaskTiming],
-    sections: &[board::CriticalSection],
-    limits: &Limits,
-) -> Result<Time, AnalysisError> {
-    let mut timings: Vec<TaskTiming> = tasks
-        .iter()
-        .filter(|t| t.priority >= bus.engine_priority)
-        .copied()
-        .collect();
-    timings.sort_by_key(|t| std::cmp::Reverse(t.priority));
-    timings.push(TaskTiming {
-        priority: bus.engine_priority,
-        wcet: cost,
-        period: limits.horizon,
-        jitter: Time::ZERO,
-    });
-    let index = timings.len() - 1;
-    let mut scratch = vec![Counter::default(); timings.len()];
-    let blocking = board::srp_blocking(bus.engine_priority, sections).times(resumptions);
-    board::response_time(&timings, index, blocking, limits, &mut scratch).map(|r| r.wcrt)
-}
-
-/// Marks what the failures leave without a bound: the failing suspending jobs, every task at or below their
-/// priority, every other task not above every suspending job and every engine (its bound came from a round that
-/// did not converge, with jitters and suspensions still growing), and every task released by one of those. Only
-/// a task above all of them, in no suspending RTIC task, keeps its bound: nothing the iteration moves reaches it.
-fn mark_unbounded(
-    board: &crate::model::BoardSystem,
-    scripts: &[Script],
-    buses: &[SensorBus],
-    failures: &[Failure],
-    view_of: &dyn Fn(usize) -> usize,
-    bounds: &mut [Bound],
-) {
-    let bus_name = |b: usize| {
-        buses
-            .get(b)
-            .map_or("?", |bus| bus.name.as_str())
-            .to_string()
-    };
-    let failing: Vec<(usize, Unbounded)> = failures
-        .iter()
-        .flat_map(|failure| match failure {
-            Failure::Script(k, why) => scripts
-                .get(*k)
-                .map(|s| vec![(s.task, Unbounded::SensorBus(bus_name(s.bus), why.clone()))])
-                .unwrap_or_default(),
-            Failure::Event(b, why) => scripts
-                .iter()
-                .filter(|s| s.bus == *b)
-                .map(|s| {
-                    (
-                        s.task,
-                        Unbounded::SensorBus(bus_name(*b), format!("its engine's event: {why}")),
-                    )
-                })
-                .collect(),
-            Failure::Job(k, why) => scripts
-                .get(*k)
-                .map(|s| vec![(s.task, why.clone())])
-                .unwrap_or_default(),
-            Failure::Task(i, why) => vec![(*i, why.clone())],
-            Failure::Rounds => scripts
-                .iter()
-                .map(|s| (s.task, Unbounded::NoConvergence))
-                .collect(),
-        })
-        .collect();
-    let name = |i: usize| {
-        board
-            .tasks
-            .get(i)
-            .map_or("?", |t| t.name.as_str())
-            .to_string()
-    };
-    let mut unbounded = vec![false; board.tasks.len()];
-    for (task, why) in &failing {
-        if let Some(slot) = bounds.get_mut(*task) {
-            *slot = Err(why.clone());
-        }
-        if let Some(u) = unbounded.get_mut(*task) {
-            *u = true;
-        }
-        let priority = board.tasks.get(*task).map_or(0, |t| t.priority);
-        for (i, t) in board.tasks.iter().enumerate() {
-            if i != *task && t.priority <= priority {
-                if let (Some(slot), Some(u)) = (bounds.get_mut(i), unbounded.get_mut(i)) {
-                    if !*u {
-                        *slot = Err(Unbounded::Suspending(name(*task)));
-                        *u = true;
-                    }
-                }
-            }
-        }
-    }
-    // Every other task not above every suspending job and every engine: its bound is not a fixed point's.
-    let top = scripts
-        .iter()
-        .filter_map(|s| board.tasks.get(s.task).map(|t| t.priority))
-        .chain(
-            scripts
-                .iter()
-                .filter_map(|s| buses.get(s.bus).map(|b| b.engine_priority)),
-        )
-        .chain(
-            scripts
-                .iter()
-                .filter_map(|s| board.tasks.get(s.engine_row).map(|t| t.priority)),
-        )
-        .max()
-        .unwrap_or(0);
-    let cause = failing.first().map(|(task, _)| *task);
-    for (i, t) in board.tasks.iter().enumerate() {
-        if t.priority > top && view_of(i) == 0 {
-            continue;
-        }
-        if let (Some(slot), Some(u)) = (bounds.get_mut(i), unbounded.get_mut(i)) {
-            if !*u {
-                *slot =
-                    Err(cause.map_or(Unbounded::NoConvergence, |c| Unbounded::Suspending(name(c))));
-                *u = true;
-            }
-        }
-    }
-    // Release chains from an unbounded task are unbounded too.
-    let mut changed = true;
-    while changed {
-        changed = false;
-        for (i, t) in board.tasks.iter().enumerate() {
-            let Some(r) = t.released_by else {
-                continue;
-            };
-            if unbounded.get(r).copied().unwrap_or(false)
-                && !unbounded.get(i).copied().unwrap_or(true)
-            {
-                if let Some(slot) = bounds.get_mut(i) {
-                    *slot = Err(Unbounded::Releaser(name(r)));
-                }
-                if let Some(u) = unbounded.get_mut(i) {
-                    *u = true;
-                }
-                changed = true;
-            }
-        }
-    }
 }
 
 fn bus_result(
     board: &crate::model::BoardSystem,
     scripts: &[Script],
     bus: &SensorBus,
-    list: &[OnBus],
+    list: &[(usize, OnBus)],
     event_response: Option<Time>,
 ) -> SensorBusResult {
     let mut utilisation = 0.0;
     let scripts_out = list
         .iter()
-        .filter_map(|on| {
-            let s = scripts.get(on.script)?;
+        .filter_map(|(script, on)| {
+            let s = scripts.get(*script)?;
             let task = board.tasks.get(s.task)?;
             utilisation += on.bus_time.as_ns() as f64 / task.period.as_ns().max(1) as f64;
             Some(ScriptResult {

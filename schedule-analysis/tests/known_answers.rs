@@ -845,3 +845,63 @@ fn a_scripts_bus_time_as_one_job_worked_by_hand() {
     assert_eq!(simulated[0], 148 * us);
     assert!(Time::from_ns(simulated[0]) <= bus.scripts[0].bus_time);
 }
+
+/// The suspending job by its CPU segments: H (priority 2) CPU 10 µs, T 50 µs; J (priority 1) CPU 20 µs, one 70 µs
+/// script alone on its bus, T 120 µs.
+///
+/// Suspension-oblivious for itself, J costs 20 + 70 = 90 µs: R = 90 + ⌈R/50⌉·10 → 100 → 110 → 120 → 120 (H's
+/// third job, released at 100 while J is on the bus, counted as if J waited for the CPU then).
+///
+/// By its segments: its CPU alone, one instance at its place, W = 20 + ⌈W/50⌉·10 = 30; one resumption (after the
+/// script), so two segments, each at most its own CPU plus W − C = 10: R = 70 + 30 + 1 · 10 = 110 ≤ 120, its
+/// period, so its previous job has ended when it is activated: the bound taken.
+///
+/// The simulator reaches the 110: H runs 0..10, J half its CPU 10..20, its script 20..90, H's next job (released
+/// at 90, 90 µs after its first) 90..100 as J resumes, and J the rest of its CPU 100..110. Leaving out the second
+/// segment's `W − C` (the interference a resumption meets) gives 100, below it.
+#[test]
+fn a_suspending_job_by_its_segments_worked_by_hand() {
+    let cpu = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: None,
+        })
+    };
+    let h = |arrival: u64| SuspendingJob {
+        task: 0,
+        arrival,
+        release: arrival,
+        pieces: vec![cpu(10)],
+    };
+    let jobs = vec![
+        h(0),
+        h(90_000),
+        SuspendingJob {
+            task: 1,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(10), Piece::Script(70_000), cpu(10)],
+        },
+    ];
+    let simulated = sim::suspending_run(&[2, 1], &[0, 1], &[], &jobs);
+    assert_eq!(simulated, vec![10_000, 10_000, 110_000]);
+
+    let board = suspending_board(
+        vec![board_task("h", 2, 10, 50), board_task("j", 1, 20, 120)],
+        &[(1, 70)],
+    );
+    assert_eq!(board_wcrts_us(&board), vec![Some(10), Some(110)]);
+    let result = analysis::analyse_board(&board, &Limits::default());
+    assert_eq!(
+        result.sensor_buses[0].scripts[0].suspension,
+        Some(Time::from_us(70))
+    );
+
+    // Its period shorter than that bound (110 > 100): the segments' bound does not hold (its previous job may
+    // not have ended), and suspension-oblivious it overloads (90/100 + 10/50 > 1): no bound.
+    let board = suspending_board(
+        vec![board_task("h", 2, 10, 50), board_task("j", 1, 20, 100)],
+        &[(1, 70)],
+    );
+    assert_eq!(board_wcrts_us(&board), vec![Some(10), None]);
+}

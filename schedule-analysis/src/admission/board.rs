@@ -20,9 +20,21 @@ struct JobMeta {
     original: u8,
     /// Where its priority level ends (a sorted position).
     level_end: u8,
-    /// Whether nothing reads its bound but its deadline check: a fixed task that releases no job and is neither
-    /// the transmit interrupt nor the command handler (whose bounds the bus and the end-to-end paths read).
-    verdict_only: bool,
+    /// What reads its bound.
+    check: Check,
+}
+
+/// What reads a job's bound besides the rounds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Check {
+    /// Its bound is read (by the jobs it releases, the bus, the end-to-end paths) and checked against its deadline.
+    Read,
+    /// Nothing reads its bound but its deadline check: a fixed task that releases no job and is neither the
+    /// transmit interrupt nor the command handler (whose bounds the bus and the end-to-end paths read).
+    VerdictOnly,
+    /// An engine row: no deadline (its analysed response places its interference and is no completion: its
+    /// job's deadline covers the engine's work, docs/analysis.md); only an unbounded one is a violation.
+    Unchecked,
 }
 
 /// The working arrays' placeholder (every entry the analysis reads is written first): all zero bytes, so that a
@@ -34,7 +46,7 @@ const EMPTY_META: JobMeta = JobMeta {
     released_by: 0,
     original: 0,
     level_end: 0,
-    verdict_only: false,
+    check: Check::Read,
 };
 
 const EMPTY_TIMING: TaskTiming = TaskTiming {
@@ -54,7 +66,9 @@ enum Source {
     /// The publisher job of the stream at this [`View`] position: its topic row, and its timer job's original
     /// index ([`NO_JOB`]: none).
     Publisher { stream: u8, topic: u8, timer: u8 },
-    /// The engine row of script `script` of the job at original index `job` (its charge on the CPU).
+    /// The engine row of script `script` of the job at original index `job` (its charge on the CPU); built only
+    /// with the sensor-bus rounds.
+    #[cfg_attr(not(feature = "sensor-buses"), allow(dead_code))]
     Engine { job: u8, script: u8 },
 }
 
@@ -97,7 +111,9 @@ impl<'a, const M: usize> BoardInput<'a, M> {
         self.table.levels.get(usize::from(level)).copied().flatten()
     }
 
-    /// The scripts a job runs (empty for a timer job, an engine row and a job without scripts).
+    /// The scripts a job runs (empty for a timer job, an engine row and a job without scripts). Out of line: the
+    /// bounds files key its loop by it whatever calls it.
+    #[inline(never)]
     fn scripts_of(&self, what: Source) -> &'a [ScriptRow] {
         let table = self.table;
         match what {
@@ -242,10 +258,6 @@ impl<const N: usize> Originals<N> {
     }
 }
 
-/// In an engine row's deadline: none (its analysed response places its interference and is no completion: its
-/// job's deadline covers the engine's work, docs/analysis.md); only an unbounded one is a violation.
-const UNCHECKED: Time = Time::from_ns(NONE - 1);
-
 /// The period of a fixed task or a stream's job.
 fn period_of<const M: usize>(
     input: &BoardInput<'_, M>,
@@ -277,7 +289,7 @@ fn period_of<const M: usize>(
 /// Job `original`'s timing and meta, built from what it is made of (`sources`: every job's, by original index).
 fn build_job<const M: usize>(
     input: &BoardInput<'_, M>,
-    sources: &[Source],
+    #[cfg_attr(not(feature = "sensor-buses"), allow(unused_variables))] sources: &[Source],
     what: Source,
     priority: u32,
     original: u8,
@@ -301,18 +313,14 @@ fn build_job<const M: usize>(
                 original,
                 // Set by `JobIndex::index`.
                 level_end: 0,
-                verdict_only: false,
+                check: Check::Read,
             },
         )
     };
     Ok(match what {
         Source::Fixed(row) => {
             let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
-            let period = if t.own_frame {
-                own_frame
-            } else {
-                row_time(t.period)
-            };
+            let period = period_of(input, what, own_frame)?;
             let deadline = if t.own_frame && t.deadline_own_frames > 0 {
                 can::own_frames(own_frame, t.deadline_own_frames)
             } else if t.deadline == NO_DEADLINE {
@@ -366,6 +374,10 @@ fn build_job<const M: usize>(
                 timer,
             )
         }
+        // A build without the sensor-bus rounds builds no engine row (`Originals::engines`).
+        #[cfg(not(feature = "sensor-buses"))]
+        Source::Engine { .. } => return Err(Refusal::Capacity),
+        #[cfg(feature = "sensor-buses")]
         Source::Engine { job: by, script } => {
             // The engine's charge for the script, at the engine's priority, released by the job with its period;
             // named as its job (an unbounded engine row is its job's violation).
@@ -381,10 +393,9 @@ fn build_job<const M: usize>(
                 .buses
                 .get(usize::from(row.bus))
                 .ok_or(Refusal::Capacity)?;
-            let charge = row_time(bus.per_event)
-                .times(u64::from(row.events))
-                .plus(row_time(bus.per_script))
-                .plus(row_time(bus.condition_wait).times(u64::from(row.starts)));
+            let charge = bus
+                .engine(Time::ZERO)
+                .charge(row.events.into(), row.starts.into());
             let id = match job_source {
                 Source::Fixed(r) => TaskId::Fixed(u16::from(r)),
                 Source::Publisher { topic, .. } => table
@@ -394,7 +405,9 @@ fn build_job<const M: usize>(
                 _ => return Err(Refusal::Capacity),
             };
             let period = period_of(input, job_source, own_frame)?;
-            job(charge, period, Time::ZERO, id, UNCHECKED, by)
+            let (timing, mut meta) = job(charge, period, Time::ZERO, id, period, by);
+            meta.check = Check::Unchecked;
+            (timing, meta)
         }
     })
 }
@@ -513,7 +526,7 @@ impl<const N: usize> BoardSet<N> {
         {
             let known = match meta.id {
                 // An engine row is named as its job, a fixed task's: its share is its own.
-                TaskId::Fixed(row) if meta.deadline != UNCHECKED => table
+                TaskId::Fixed(row) if meta.check != Check::Unchecked => table
                     .tasks
                     .get(usize::from(row))
                     .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
@@ -533,9 +546,11 @@ impl<const N: usize> JobIndex<N> {
             if let Some(slot) = self.position.get_mut(usize::from(meta.original)) {
                 *slot = p as u8;
             }
-            if let (TaskId::Fixed(row), false) = (meta.id, meta.deadline == UNCHECKED) {
+            if let (TaskId::Fixed(row), false) = (meta.id, meta.check == Check::Unchecked) {
                 let row = Some(row);
-                meta.verdict_only = table.can_tx != row && table.command_handler != row;
+                if table.can_tx != row && table.command_handler != row {
+                    meta.check = Check::VerdictOnly;
+                }
             }
         }
         let mut end = len;
@@ -553,8 +568,12 @@ impl<const N: usize> JobIndex<N> {
                 // NO_JOB stays NO_JOB.
                 meta.released_by = releaser;
             }
-            if let Some(releasing) = self.metas.get_mut(usize::from(releaser)) {
-                releasing.verdict_only = false;
+            if let Some(releasing) = self
+                .metas
+                .get_mut(usize::from(releaser))
+                .filter(|m| m.check == Check::VerdictOnly)
+            {
+                releasing.check = Check::Read;
             }
         }
     }
@@ -581,7 +600,7 @@ impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
     }
     fn verdict_only(&self, p: usize) -> Option<Time> {
         let meta = self.metas.get(p)?;
-        meta.verdict_only.then_some(meta.deadline)
+        (meta.check == Check::VerdictOnly).then_some(meta.deadline)
     }
 }
 
@@ -773,7 +792,7 @@ impl<const M: usize> Summary<M> {
             let (Some(meta), Some(&w)) = (set.metas.get(p), wcrt.get(p)) else {
                 continue;
             };
-            let missed = w == NONE || w > meta.deadline.as_ns();
+            let missed = w == NONE || (meta.check != Check::Unchecked && w > meta.deadline.as_ns());
             if !self.violated && missed {
                 self.violated = true;
                 self.task = meta.id;

@@ -195,6 +195,20 @@ pub struct BusRow {
     pub condition_wait: RowTime,
 }
 
+impl BusRow {
+    /// Its engine as the sensor buses' rounds read it ([`crate::suspension_analysis`]), with the SRP `blocking`
+    /// at its priority.
+    pub fn engine(&self, blocking: Time) -> crate::suspension_analysis::Engine {
+        crate::suspension_analysis::Engine {
+            priority: u32::from(self.engine_priority),
+            per_event: row_time(self.per_event),
+            per_script: row_time(self.per_script),
+            condition_wait: row_time(self.condition_wait),
+            blocking,
+        }
+    }
+}
+
 /// One script a job runs on a sensor bus: the host turned its bytes into time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ScriptRow {

@@ -1,19 +1,18 @@
-//! A board whose running jobs run scripts on its sensor buses: the host's `sensor_bus::analyse` on the check's
-//! fixed-capacity arrays (docs/analysis.md, "Self-suspending publishers and the sensor buses", "The chip's check
-//! with scripts"). From zero jitters and event responses, rounds of: each script's response on its bus
-//! (non-preemptive fixed priority, [`can::response_time`], without its siblings; its bus time the lower of its
-//! events' own responses and the script as one job at the engine's priority), each bus's engine events and each
-//! script as one job on the CPU in the default view ([`crate::board::response_time`]), and the board once per view ([`run_view`]: a view
-//! per RTIC task with a suspending job, where its jobs cost their suspensions, settles and one blocking per
-//! resumption, every job of every other such task its CPU with jitter `R − C`; and the default view); until no
-//! response changes. Every fixed point and every round counts against [`SCRIPT_ITERATIONS`] ([`Refusal::Budget`]
-//! beyond). The board's job arrays are changed in place per view and set back from `base` for the next.
+//! A board whose running jobs run scripts on its sensor buses: the chip's side of the sensor buses' rounds
+//! ([`suspension_analysis::analyse`], the one implementation the report's `sensor_bus::analyse` runs too;
+//! docs/analysis.md, "Self-suspending publishers and the sensor buses", "The chip's check with scripts"). It says
+//! what the rounds read — the running scripts (most urgent job first), each job's view (one per RTIC task with a
+//! running script), the buses' engines with the SRP blocking at their priorities — and runs each view's board
+//! analysis in [`run_view`], the one instance both of the check's paths link; it keeps each job's bound from its
+//! own view. The rounds' working arrays are the check's fixed-capacity ones; every fixed point and every round
+//! counts against [`SCRIPT_ITERATIONS`] ([`Refusal::Budget`] beyond).
 
 use super::*;
+use crate::suspension_analysis::{self, Budget, Engine, Failure, ScriptJob, SuspendingBoard, Work};
 
 /// A running job's script: its job's and its engine row's sorted positions and its row.
 #[derive(Debug, Clone, Copy)]
-struct ScriptJob<'a> {
+struct Running<'a> {
     job: u8,
     engine: u8,
     row: &'a ScriptRow,
@@ -27,12 +26,9 @@ const NO_ROW: ScriptRow = ScriptRow {
     settle: 0,
 };
 
-/// An engine event's worst responses on the CPU, by what it carries: plain, with the condition wait, the ending one.
-type Events = [Time; 3];
-
 /// The running scripts (most urgent job first, each job's in its order) and each job's view.
 struct Scripts<'a, const N: usize> {
-    list: [ScriptJob<'a>; N],
+    list: [Running<'a>; N],
     len: usize,
     /// Per sorted job: 0 (the default view) or `v` for the `v`th RTIC task with a script.
     view: [u8; N],
@@ -96,7 +92,7 @@ impl<'a, const N: usize> Scripts<'a, N> {
                     .take(originals.count)
                     .position(|s| matches!(*s, Source::Engine { job, script } if job == original && usize::from(script) == k))
                     .map_or(NO_JOB, |e| set.jobs.at(e as u8));
-                *out.list.get_mut(out.len).ok_or(Refusal::Capacity)? = ScriptJob {
+                *out.list.get_mut(out.len).ok_or(Refusal::Capacity)? = Running {
                     job: p as u8,
                     engine,
                     row,
@@ -116,7 +112,7 @@ impl<'a, const N: usize> Scripts<'a, N> {
         Ok(())
     }
 
-    fn scripts(&self) -> &[ScriptJob<'a>] {
+    fn scripts(&self) -> &[Running<'a>] {
         self.list.get(..self.len).unwrap_or(&[])
     }
 
@@ -125,289 +121,116 @@ impl<'a, const N: usize> Scripts<'a, N> {
     }
 }
 
-/// What every step of the rounds reads, and the iterations spent.
-struct Round<'r, 'a, const N: usize, const M: usize> {
+/// The chip's side of the rounds ([`suspension_analysis::SuspendingBoard`]): the board's jobs, its running
+/// scripts and views, each view's bounds (`bounds`) and each job's own-view bound (`kept`).
+struct ChipBoard<'r, 'a, const N: usize, const M: usize> {
     input: &'r BoardInput<'a, M>,
     scripts: &'r Scripts<'a, N>,
-    /// Each job's cost as built.
-    base: &'r [Time; N],
-    /// Iterations spent on the board so far.
-    spent: u64,
-    /// Whether this round's engine events moved a script's bus time (the rounds' state, kept in place).
-    moved: bool,
+    jobs: &'r JobIndex<N>,
+    blocking: &'r [Time; N],
+    engines: [Engine; MAX_BUSES],
+    bounds: &'r mut JobWcrt<N>,
+    kept: [u64; N],
 }
 
-impl<const N: usize, const M: usize> Round<'_, '_, N, M> {
-    /// The limits of the next fixed point: what is left of the board's budget ([`Refusal::Budget`] when nothing).
-    fn limits(&self) -> Result<Limits, Refusal> {
-        let left = SCRIPT_ITERATIONS.saturating_sub(self.spent);
-        if left == 0 {
-            return Err(Refusal::Budget);
-        }
-        Ok(Limits {
-            horizon: self.input.limits.horizon,
-            iterations: left,
+impl<const N: usize, const M: usize> SuspendingBoard for ChipBoard<'_, '_, N, M> {
+    fn scripts(&self) -> usize {
+        self.scripts.len
+    }
+    fn script(&self, k: usize) -> Option<ScriptJob> {
+        let s = self.scripts.scripts().get(k)?;
+        Some(ScriptJob {
+            job: usize::from(s.job),
+            engine: usize::from(s.engine),
+            bus: usize::from(s.row.bus),
+            wire: row_time(s.row.bus_time),
+            events: u32::from(s.row.events),
+            starts: u32::from(s.row.starts),
+            settle: row_time(s.row.settle),
         })
     }
-
-    /// A fixed point's outcome counted; `Ok(None)` when it has no bound (an overload), `Budget` when it ran out.
-    fn count(&mut self, result: Result<Response, AnalysisError>) -> Result<Option<Time>, Refusal> {
-        match result {
-            Ok(r) => {
-                self.spent += r.iterations;
-                Ok(Some(r.wcrt))
-            }
-            Err(AnalysisError::IterationLimit) => Err(Refusal::Budget),
-            Err(_) => Ok(None),
-        }
+    fn buses(&self) -> usize {
+        self.input.table.buses.len().min(MAX_BUSES)
     }
-
-    /// What a script's events hold SCL on the CPU: its ending event, one with the condition wait per further
-    /// START (as many as its other events allow), the rest plain. Out of line: taken for the costs and the responses.
-    #[inline(never)]
-    fn events_of(row: &ScriptRow, events: &Events) -> Time {
-        let Some(others) = row.events.checked_sub(1) else {
-            return Time::ZERO;
-        };
-        let waiting = row.starts.min(others);
-        let [plain, wait, end] = *events;
-        end.plus(wait.times(u64::from(waiting)))
-            .plus(plain.times(u64::from(others - waiting)))
+    fn engine(&self, b: usize) -> Option<Engine> {
+        self.engines.get(b).copied()
     }
-
-    /// Script `k`'s response on its bus from its nominal submission (`None`: unbounded), among the bus's scripts
-    /// that are not its siblings (the other scripts of its RTIC task), each with its job's response as jitter.
-    #[inline(never)]
-    fn on_bus(
+    fn view(&self, p: usize) -> usize {
+        usize::from(self.scripts.view(p))
+    }
+    fn views(&self) -> usize {
+        usize::from(self.scripts.views)
+    }
+    fn own_jitter(&self, p: usize) -> Time {
+        self.jobs.metas.get(p).map_or(Time::ZERO, |m| m.own_jitter)
+    }
+    fn released_by(&self, p: usize) -> Option<usize> {
+        let meta = self.jobs.metas.get(p)?;
+        (meta.released_by != NO_JOB).then_some(usize::from(meta.released_by))
+    }
+    fn analyse_view(
         &mut self,
-        k: usize,
-        timings: &[TaskTiming; N],
-        own: &[Time; N],
-        bus_times: &[Time; N],
-    ) -> Result<Option<Time>, Refusal> {
-        let list = self.scripts.scripts();
-        let me = list.get(k).ok_or(Refusal::Capacity)?;
-        let mut subset = [MessageTiming {
-            key: 0,
-            frame_time: Time::ZERO,
-            frames: 1,
-            period: Time::ZERO,
-            jitter: Time::ZERO,
-        }; N];
-        let (mut len, mut at) = (0, 0);
-        let my_view = self.scripts.view(usize::from(me.job));
-        for (o, s) in list.iter().enumerate() {
-            let sibling = o != k && self.scripts.view(usize::from(s.job)) == my_view;
-            if s.row.bus != me.row.bus || sibling {
-                continue;
-            }
-            let p = usize::from(s.job);
-            let job = timings.get(p).copied().unwrap_or(EMPTY_TIMING);
-            if o == k {
-                at = len;
-            }
-            // Its bus time as the last round's events found it; before any, its wire and stretch alone.
-            let bus_time = match bus_times.get(o) {
-                Some(&t) if t > Time::ZERO => t,
-                _ => row_time(s.row.bus_time),
-            };
-            *subset.get_mut(len).ok_or(Refusal::Capacity)? = MessageTiming {
-                // Lower key first: the most urgent submitter; equal priorities share a key and interfere.
-                key: u32::MAX - job.priority,
-                frame_time: bus_time,
-                frames: 1,
-                period: job.period,
-                jitter: own.get(p).copied().unwrap_or(Time::ZERO),
-            };
-            len += 1;
-        }
-        let subset = subset.get(..len).unwrap_or(&[]);
-        let mut scratch = const { [Counter::ZERO; N] };
-        let limits = self.limits()?;
-        // A script submitted at the very instant the engine picks the next one counts as in time (1 ns).
-        let result = can::response_time(
-            subset,
-            at,
-            can::blocking(subset, at),
-            Time::from_ns(1),
-            &limits,
-            &mut scratch,
-        );
-        self.count(result)
+        timings: &mut [TaskTiming],
+        shares: &[Share],
+        unreleased: &[bool],
+        limits: &Limits,
+    ) -> Result<board_analysis::Outcome, board_analysis::OutOfIterations> {
+        // The rounds hand back the check's own arrays (`Work`): of `N` entries each.
+        let (Ok(timings), Ok(shares), Ok(unreleased)) = (
+            <&mut [TaskTiming; N]>::try_from(timings),
+            <&[Share; N]>::try_from(shares),
+            <&[bool; N]>::try_from(unreleased),
+        ) else {
+            return Err(board_analysis::OutOfIterations);
+        };
+        let cut = Cut {
+            unreleased,
+            view: &self.scripts.view,
+        };
+        run_view(
+            timings,
+            self.jobs,
+            self.blocking,
+            shares,
+            limits,
+            Some(cut),
+            self.bounds,
+        )
+        .map_err(|_| board_analysis::OutOfIterations)
     }
-
-    /// View `v`'s jobs in place (`timings`, `shares`, `unreleased`: the jobs whose jitter the view sets), from the
-    /// scripts' suspensions and the suspending tasks' own-view responses; every other job as built.
-    #[allow(clippy::too_many_arguments)]
-    fn view_jobs(
-        &self,
-        v: u8,
-        set: &mut BoardSet<N>,
-        blocking: &[Time; N],
-        shares: &mut [Share; N],
-        suspension: &[Time; N],
-        own: &[Time; N],
-        unreleased: &mut [bool; N],
-    ) {
-        let scripts = self.scripts;
-        for (p, (((t, share), cut), meta)) in set
-            .timings
+    fn refine(&mut self, p: usize, found: Response) {
+        if let Some(slot) = self.bounds.wcrt.get_mut(p) {
+            *slot = (*slot).min(found.wcrt.as_ns());
+        }
+    }
+    fn keep(&mut self, v: usize, _: &[TaskTiming]) {
+        for (p, (slot, &w)) in self
+            .kept
             .iter_mut()
-            .zip(shares.iter_mut())
-            .zip(unreleased.iter_mut())
-            .zip(set.jobs.metas.iter())
+            .zip(self.bounds.wcrt.iter())
             .enumerate()
-            .take(set.jobs.len)
         {
-            let base = self.base.get(p).copied().unwrap_or(Time::ZERO);
-            let mut cost = base;
-            for (s, &suspended) in scripts.scripts().iter().zip(suspension.iter()) {
-                if usize::from(s.job) == p && scripts.view(p) == v {
-                    // Suspension-oblivious: the suspension, the settle and a blocking per resumption as execution.
-                    let resumptions = if s.row.settle > 0 { 2 } else { 1 };
-                    let b = blocking.get(p).copied().unwrap_or(Time::ZERO);
-                    cost = cost
-                        .plus(suspended)
-                        .plus(row_time(s.row.settle))
-                        .plus(b.times(resumptions));
-                }
-            }
-            if cost != t.wcet {
-                t.wcet = cost;
-                *share = Share::of(cost, t.period);
-            }
-            t.jitter = meta.own_jitter;
-            *cut = false;
-            // Another suspending task's job: its CPU anywhere in its own-view response.
-            let view = scripts.view(p);
-            if view != 0 && view != v {
-                t.jitter = own.get(p).copied().unwrap_or(Time::ZERO).minus(base);
-                *cut = true;
-            }
-            // Released by a suspending task's job: that job's whole own-view response.
-            let by = usize::from(meta.released_by);
-            if meta.released_by != NO_JOB && scripts.view(by) != 0 {
-                t.jitter = meta
-                    .own_jitter
-                    .plus(own.get(by).copied().unwrap_or(Time::ZERO));
-                *cut = true;
+            if usize::from(self.scripts.view(p)) == v {
+                *slot = w;
             }
         }
     }
-
-    /// Bus `b`'s engine events on the CPU in the default view's jobs (`timings`, after their analysis, so that a
-    /// released job carries the jitter it inherits from its releaser's response, as the host's found jitters do):
-    /// each at the engine's priority, interfered with by every job at or above it but the bus's own engine rows
-    /// (these very events, one at a time; costed 0 meanwhile), blocked as a job of that priority; the event itself
-    /// takes the place after the jobs at or above it for the while. Then each script on the bus as one job the
-    /// same way, and its bus time (by script, into `bus_times`) the lower of the two bounds, both sound: its wire
-    /// and stretch plus each event's own response, and the script as one job. `false`: an event is unbounded.
-    #[inline(never)]
-    fn events(
-        &mut self,
-        b: usize,
-        timings: &mut [TaskTiming; N],
-        len: usize,
-        bus_times: &mut [Time; N],
-    ) -> Result<bool, Refusal> {
-        let Some(bus) = self.input.table.buses.get(b) else {
-            return Ok(true);
-        };
-        let engine = u32::from(bus.engine_priority);
-        for s in self.scripts.scripts() {
-            if usize::from(s.row.bus) == b {
-                if let Some(t) = timings.get_mut(usize::from(s.engine)) {
-                    t.wcet = Time::ZERO;
-                }
-            }
+    fn kept(&self, p: usize) -> Option<Time> {
+        bound(self.kept.get(p).copied().unwrap_or(NONE))
+    }
+    fn fail(&mut self, _: Failure) {
+        // The rounds mark what a failure leaves unbounded; the decision is a refusal either way.
+    }
+    fn unbound(&mut self, p: usize, _: Option<usize>) {
+        if let Some(slot) = self.kept.get_mut(p) {
+            *slot = NONE;
         }
-        let end = timings
-            .iter()
-            .take(len)
-            .position(|t| t.priority < engine)
-            .unwrap_or(len);
-        let kept = timings.get(end).copied().ok_or(Refusal::Capacity)?;
-        let blocking = blocking_at(self.input, engine);
-        let wait = row_time(bus.condition_wait);
-        let plain = row_time(bus.per_event);
-        let costs = [
-            plain,
-            plain.plus(wait),
-            plain.plus(row_time(bus.per_script)).plus(wait),
-        ];
-        let (mut out, mut bounded) = (Events::default(), true);
-        // The three events, then each script on the bus as one job at the engine's priority (the host's
-        // `script_response`): its events' work and its wire time as execution, blocked once per event; one call
-        // site for both. A script's window without a bound leaves its events' bound.
-        let list = self.scripts.scripts();
-        for k in 0..costs.len() + list.len() {
-            let script = k.checked_sub(costs.len());
-            let (cost, resumptions) = match script.map(|i| list.get(i)) {
-                None => (costs.get(k).copied().unwrap_or(Time::ZERO), 1),
-                Some(Some(s)) if usize::from(s.row.bus) == b => (
-                    row_time(s.row.bus_time).plus(Self::events_of(s.row, &costs)),
-                    u64::from(s.row.events),
-                ),
-                Some(_) => continue,
-            };
-            if let Some(slot) = timings.get_mut(end) {
-                *slot = TaskTiming {
-                    priority: engine,
-                    wcet: cost,
-                    period: self.input.limits.horizon,
-                    jitter: Time::ZERO,
-                };
-            }
-            let mut scratch = const { [Counter::ZERO; N] };
-            let limits = self.limits()?;
-            let result = crate::board::response_time(
-                timings.get(..=end).unwrap_or(&[]),
-                end,
-                blocking.times(resumptions),
-                &limits,
-                &mut scratch,
-            );
-            let r = self.count(result)?;
-            match (script, r) {
-                (Some(i), _) => {
-                    // The events come first: `out` is complete.
-                    let row = list.get(i).map_or(&NO_ROW, |s| s.row);
-                    let per_event = row_time(row.bus_time).plus(Self::events_of(row, &out));
-                    let bus_time = r.map_or(per_event, |w| w.min(per_event));
-                    if let Some(slot) = bus_times.get_mut(i).filter(|slot| **slot != bus_time) {
-                        *slot = bus_time;
-                        self.moved = true;
-                    }
-                }
-                (None, Some(r)) => {
-                    if let Some(slot) = out.get_mut(k) {
-                        *slot = r;
-                    }
-                }
-                (None, None) => bounded = false,
-            }
-        }
-        // The jobs as they were.
-        if let Some(slot) = timings.get_mut(end) {
-            *slot = kept;
-        }
-        for s in self.scripts.scripts() {
-            if let Some(t) = timings.get_mut(usize::from(s.engine)) {
-                t.wcet = self
-                    .base
-                    .get(usize::from(s.engine))
-                    .copied()
-                    .unwrap_or(Time::ZERO);
-            }
-        }
-        Ok(bounded)
     }
 }
 
-/// The board's jobs with scripts to their fixed point: each job's bound (by sorted position, [`NONE`]: unbounded)
-/// into `bounds`, read from its own view. When a script, an engine event or a suspending task's job has no
-/// bound, that job and every job not above every suspending job and every engine, or in a suspending RTIC task,
-/// is unbounded (the host's rule: only a job that nothing the rounds move reaches keeps its bound).
+/// The board's jobs with scripts to their fixed point ([`suspension_analysis::analyse`] under the board's
+/// [`SCRIPT_ITERATIONS`]): each job's bound (by sorted position, [`NONE`]: unbounded) into `bounds`, read from
+/// its own view.
 #[inline(never)]
 pub(super) fn analyse<const N: usize, const M: usize>(
     input: &BoardInput<'_, M>,
@@ -418,7 +241,7 @@ pub(super) fn analyse<const N: usize, const M: usize>(
     bounds: &mut JobWcrt<N>,
 ) -> Result<(), Refusal> {
     let mut scripts = Scripts {
-        list: [ScriptJob {
+        list: [Running {
             job: 0,
             engine: 0,
             row: &NO_ROW,
@@ -428,134 +251,58 @@ pub(super) fn analyse<const N: usize, const M: usize>(
         views: 0,
     };
     Scripts::collect(input, set, &mut scripts)?;
-    let len = set.jobs.len;
-    let mut base = [Time::ZERO; N];
-    for (slot, t) in base.iter_mut().zip(set.timings.iter()) {
-        *slot = t.wcet;
+    let jobs = set.jobs.len;
+    // An engine event takes the place after the jobs at or above its engine for the while.
+    if jobs >= N {
+        return Err(Refusal::Capacity);
     }
-    let mut round = Round {
+    let mut engines = [Engine::default(); MAX_BUSES];
+    for (slot, bus) in engines.iter_mut().zip(input.table.buses.iter()) {
+        *slot = bus.engine(blocking_at(input, u32::from(bus.engine_priority)));
+    }
+    let mut board = ChipBoard {
         input,
         scripts: &scripts,
-        base: &base,
-        spent: 0,
-        moved: false,
+        jobs: &set.jobs,
+        blocking,
+        engines,
+        bounds,
+        kept: [NONE; N],
     };
-    // The rounds' state: each suspending task's job's own-view response (its scripts' jitter), each bus's event
-    // responses; and per job its bound from its own view.
+    let mut base = [Time::ZERO; N];
     let mut own = [Time::ZERO; N];
-    // Each script's bus time (by script; 0 before the first round's events: its wire and stretch alone).
-    let mut bus_times = [Time::ZERO; N];
-    let mut wcrt = [NONE; N];
-    let mut suspension = [Time::ZERO; N];
     let mut unreleased = [false; N];
-    let mut failed: Option<u8> = None;
-    let mut converged = false;
-    // Each round counts one iteration beside its fixed points' (a round of closed forms still costs), so the
-    // rounds end within the budget.
-    for _ in 0..SCRIPT_ITERATIONS {
-        round.limits()?;
-        round.spent += 1;
-        // 1. Each script on its bus: its suspension, from its actual submission.
-        for (k, (slot, s)) in suspension.iter_mut().zip(scripts.scripts()).enumerate() {
-            let jitter = own.get(usize::from(s.job)).copied().unwrap_or(Time::ZERO);
-            match round.on_bus(k, &set.timings, &own, &bus_times)? {
-                Some(r) => *slot = r.minus(jitter),
-                None => failed = failed.or(Some(s.job)),
-            }
-        }
-        if failed.is_some() {
-            break;
-        }
-        // 2. The board once per view; after the default view's analysis, 3., the engine events.
-        round.moved = false;
-        for v in 0..=scripts.views {
-            round.view_jobs(v, set, blocking, shares, &suspension, &own, &mut unreleased);
-            let cut = Cut {
-                unreleased: &unreleased,
-                view: &scripts.view,
-            };
-            let limits = round.limits()?;
-            let outcome = run_view(
-                &mut set.timings,
-                &set.jobs,
-                blocking,
-                shares,
-                &limits,
-                Some(cut),
-                bounds,
-            )?;
-            round.spent += outcome.iterations;
-            for (p, (slot, &w)) in wcrt.iter_mut().zip(bounds.wcrt.iter()).enumerate() {
-                if scripts.view(p) == v {
-                    *slot = w;
-                }
-            }
-            if v == 0 {
-                // The default view's jobs as analysed: a released job's jitter is now the one it inherits from
-                // its releaser's response (its own plus that response), not its own alone.
-                for b in 0..input.table.buses.len() {
-                    let on_bus = scripts
-                        .scripts()
-                        .iter()
-                        .find(|s| usize::from(s.row.bus) == b);
-                    let Some(s) = on_bus else { continue };
-                    if !round.events(b, &mut set.timings, len, &mut bus_times)? {
-                        failed = failed.or(Some(s.job));
-                    }
-                }
-            }
-        }
-        // 4. The suspending tasks' jobs' responses: the next jitters.
-        converged = !round.moved;
-        for (p, (slot, &w)) in own.iter_mut().zip(wcrt.iter()).enumerate().take(len) {
-            if scripts.view(p) == 0 {
-                continue;
-            }
-            match bound(w) {
-                Some(r) => {
-                    converged &= *slot == r;
-                    *slot = r;
-                }
-                None => failed = failed.or(Some(p as u8)),
-            }
-        }
-        if failed.is_some() || converged {
-            break;
-        }
-    }
-    *iterations += round.spent;
-    if let Some(job) = failed {
-        unbound_after(set, &scripts, job, &mut wcrt);
-    } else if !converged {
-        return Err(Refusal::Budget);
-    }
-    bounds.wcrt = wcrt;
+    let mut suspension = [Time::ZERO; N];
+    let mut bus_times = [Time::ZERO; N];
+    let mut subset = [MessageTiming {
+        key: 0,
+        frame_time: Time::ZERO,
+        frames: 1,
+        period: Time::ZERO,
+        jitter: Time::ZERO,
+    }; N];
+    let mut scratch = const { [Counter::ZERO; N] };
+    let mut work = Work {
+        timings: &mut set.timings,
+        jobs,
+        blocking,
+        shares,
+        base: &mut base,
+        own: &mut own,
+        unreleased: &mut unreleased,
+        suspension: &mut suspension,
+        bus_times: &mut bus_times,
+        subset: &mut subset,
+        scratch: &mut scratch,
+    };
+    let limits = Limits {
+        horizon: input.limits.horizon,
+        iterations: SCRIPT_ITERATIONS,
+    };
+    let spent = suspension_analysis::analyse(&mut board, &mut work, &limits, Budget::Board)
+        .map_err(|_| Refusal::Budget)?;
+    *iterations += spent;
+    let kept = board.kept;
+    bounds.wcrt = kept;
     Ok(())
-}
-
-/// After a failure of `job`: it, and every job not above every suspending job and every engine or in a suspending
-/// RTIC task, has no bound.
-fn unbound_after<const N: usize>(
-    set: &BoardSet<N>,
-    scripts: &Scripts<'_, N>,
-    job: u8,
-    wcrt: &mut [u64; N],
-) {
-    let priority = |p: u8| set.timings.get(usize::from(p)).map_or(0, |t| t.priority);
-    let top = scripts
-        .scripts()
-        .iter()
-        .map(|s| priority(s.job).max(priority(s.engine)))
-        .max()
-        .unwrap_or(0);
-    for (p, (slot, t)) in wcrt
-        .iter_mut()
-        .zip(set.timings.iter())
-        .enumerate()
-        .take(set.jobs.len)
-    {
-        if p == usize::from(job) || t.priority <= top || scripts.view(p) != 0 {
-            *slot = NONE;
-        }
-    }
 }
