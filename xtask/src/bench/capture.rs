@@ -122,6 +122,9 @@ pub struct Capture {
     /// A QEMU run's received frames, as its stimulus replays them: the shortest time between two of them, µs
     /// (the whole run when it has fewer than two). `None`: not known (a capture from a robot).
     pub received_gap_us: Option<f64>,
+    /// A QEMU run's admission verdicts of the board (its diagnostics pages 0x80 and 0x81): whether it accepted a
+    /// request with a warning (policy accept-and-warn), which promises nothing for the set it then runs.
+    pub warned: bool,
 }
 
 impl Capture {
@@ -502,7 +505,22 @@ pub fn read_qemu_clocked(
             }
         }
     }
+    builder.capture.warned = accepted_with_warning(text)?;
     Ok(builder.capture)
+}
+
+/// Whether a QEMU run's output shows an admission verdict "accepted with a warning" from any board (a single-board
+/// run's frames are its board's own).
+fn accepted_with_warning(text: &str) -> Result<bool> {
+    let out = crate::scenarios::RunOutput::parse(text)?;
+    Ok([
+        amiro_can::Board::DiWheelDrive,
+        amiro_can::Board::PowerManagement,
+        amiro_can::Board::LightRing,
+    ]
+    .into_iter()
+    .flat_map(|board| crate::scenarios::admission_verdicts(&out, board))
+    .any(|(_, v)| v.verdict == amiro_can::Verdict::AcceptedWithWarning))
 }
 
 /// Reads a QEMU run's work directory (`output.log` and `trace.bin`).
@@ -538,6 +556,54 @@ pub fn read_qemu_dir(dir: &std::path::Path, default_hz: u64) -> Result<Capture> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A run's output with one admission verdict of PowerManagement's (its two diagnostics pages as candump lines).
+    fn verdict_output(verdict: amiro_can::Verdict) -> String {
+        use amiro_can::{
+            AdmissionVerdict, Board, Count, Priority, SampleTime, SensorData, TimeUnit, Topic,
+            Violation,
+        };
+        let v = AdmissionVerdict {
+            board: Board::PowerManagement,
+            topic: Topic::PowerStatus,
+            requested: SampleTime {
+                value: 20,
+                unit: TimeUnit::Millis,
+            },
+            priority: Priority::Medium,
+            verdict,
+            violation: Violation::Unknown,
+            wcrt_us: Count::saturating(6_090),
+            deadline_us: Count::saturating(6_000),
+            shortest_period: None,
+            priority_needed: None,
+            searched: false,
+            one_shot: false,
+        };
+        v.pages()
+            .iter()
+            .enumerate()
+            .map(|(i, &page)| {
+                let frame = SensorData::Diagnostics {
+                    board: Board::PowerManagement,
+                    page,
+                }
+                .encode(Priority::Low);
+                let data: String = frame.data().iter().map(|b| format!("{b:02X}")).collect();
+                format!("(0.{:06}) can0 {:03X}#{data}", 1_000 + i, frame.id().raw())
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    #[test]
+    fn a_run_whose_board_warned_is_told_from_one_that_refused() {
+        let warned = verdict_output(amiro_can::Verdict::AcceptedWithWarning);
+        assert!(accepted_with_warning(&warned).unwrap());
+        let refused = verdict_output(amiro_can::Verdict::Refused);
+        assert!(!accepted_with_warning(&refused).unwrap());
+        assert!(!accepted_with_warning("(0.001000) can0 608#000000000000").unwrap());
+    }
 
     fn wire(records: &[(u64, Kind)]) -> Vec<u8> {
         records
