@@ -1402,6 +1402,117 @@ fn a_raise_of_no_constant_leaves_the_task_incomplete() {
     assert!(reason.contains("no constant"), "{reason}");
 }
 
+#[test]
+fn a_conditional_write_is_joined_with_the_value_before_it() {
+    let img = image(
+        &[
+            0x2003, // 0x00 movs r0, #3
+            0x2105, // 0x02 movs r1, #5
+            0x2a00, // 0x04 cmp r2, #0
+            0xbf04, // 0x06 itt eq
+            0x2005, // 0x08 moveq r0, #5: 3 or 5
+            0x2105, // 0x0a moveq r1, #5: 5 either way
+            0x4770, // 0x0c bx lr
+        ],
+        &[Sym::function("maybe", 0, 0x0e)],
+    );
+    let insns = img.function_named("maybe").unwrap().instructions().unwrap();
+    let after = |conditional| {
+        let mut known = [None; 16];
+        for insn in &insns[..6] {
+            crate::waits::step_constants(&img, insn, &mut known, conditional);
+        }
+        (known[0], known[1])
+    };
+    use crate::waits::Conditional;
+    assert_eq!(after(Conditional::Joined), (None, Some(5)));
+    // The scans of what the code may hold see the value where it is written.
+    assert_eq!(after(Conditional::Taken), (Some(5), Some(5)));
+}
+
+#[test]
+fn a_raise_of_a_value_written_under_a_condition_has_no_ceiling() {
+    let code = |before: u16| {
+        [
+            0xf3ef, 0x8411, // 0x00 mrs r4, BASEPRI
+            before, // 0x04 movs r0, #before
+            0x2900, // 0x06 cmp r1, #0
+            0xbf08, // 0x08 it eq
+            0x20a0, // 0x0a moveq r0, #0xa0: only where r1 is 0
+            0xf380, 0x8812, // 0x0c msr BASEPRI_MAX, r0: the raise
+            0xf384, 0x8811, // 0x10 msr BASEPRI, r4
+            0x4770, // 0x14 bx lr
+        ]
+    };
+    // r0 is 0x20 or 0xa0 at the raise: priority 14 or 6, neither on every path.
+    let img = image(&code(0x2020), &[Sym::function("raise", 0, 0x16)]);
+    let found = sections_of(&img, "raise", F103_0WS);
+    let reason = found.incomplete.as_deref().expect("incomplete");
+    assert!(reason.contains("no constant"), "{reason}");
+    assert!(found.ceilings.is_empty(), "{:?}", found.ceilings);
+    // 0xa0 either way: the raise's ceiling stands (0xa0 is level 10, priority 16 − 10 = 6).
+    let img = image(&code(0x20a0), &[Sym::function("raise", 0, 0x16)]);
+    let found = sections_of(&img, "raise", F103_0WS);
+    assert_eq!(found.incomplete, None);
+    let ceilings: Vec<Ceiling> = found.ceilings.iter().map(|c| c.ceiling).collect();
+    assert_eq!(
+        ceilings,
+        [Ceiling::Basepri {
+            hardware: 0xa0,
+            priority: 6
+        }]
+    );
+}
+
+#[test]
+fn a_primask_write_that_may_set_it_is_a_raise() {
+    let img = image(
+        &[
+            0xf3ef, 0x8410, // 0x00 mrs r4, PRIMASK: 2
+            0x2001, // 0x04 movs r0, #1: 1
+            0x2900, // 0x06 cmp r1, #0: 1
+            0xbf08, // 0x08 it eq
+            0x2000, // 0x0a moveq r0, #0: 1 where r1 is 0 (r0 stays 1 where it is not)
+            0xf380, 0x8810, // 0x0c msr PRIMASK, r0: 2 (interrupts off where r1 is not 0)
+            0x3201, // 0x10 adds r2, #1: 1
+            0xf384, 0x8810, // 0x12 msr PRIMASK, r4: 2 (the restore)
+            0x4770, // 0x16 bx lr
+        ],
+        &[Sym::function("maybe_masked", 0, 0x18)],
+    );
+    let found = sections_of(&img, "maybe_masked", F103_0WS);
+    assert_eq!(found.incomplete, None);
+    let ceilings: Vec<(Ceiling, u64, u64)> = found
+        .ceilings
+        .iter()
+        .map(|c| (c.ceiling, c.cycles, c.instructions))
+        .collect();
+    // From the write to the restore, both in: 2 + 1 + 2 = 5 cycles, 3 instructions.
+    assert_eq!(ceilings, [(Ceiling::InterruptsOff, 5, 3)]);
+}
+
+#[test]
+fn a_section_whose_restore_is_conditional_is_declined() {
+    let img = image(
+        &[
+            0xf3ef, 0x8411, // 0x00 mrs r4, BASEPRI
+            0x20b0, // 0x04 movs r0, #0xb0
+            0xf380, 0x8812, // 0x06 msr BASEPRI_MAX, r0: the raise
+            0x2900, // 0x0a cmp r1, #0
+            0xbf08, // 0x0c it eq
+            0xf384, 0x8811, // 0x0e msreq BASEPRI, r4: restored only where r1 is 0
+            0x3201, // 0x12 adds r2, #1: still masked where r1 is not 0
+            0xf384, 0x8811, // 0x14 msr BASEPRI, r4
+            0x4770, // 0x18 bx lr
+        ],
+        &[Sym::function("restores_maybe", 0, 0x1a)],
+    );
+    let found = sections_of(&img, "restores_maybe", F103_0WS);
+    assert_eq!(found.ceilings.len(), 1, "{found:?}");
+    let reason = found.ceilings[0].declined.as_deref().expect("declined");
+    assert!(reason.contains("restored under a condition"), "{reason}");
+}
+
 /// `bounds_file` with the async loop of [`async_loop`] stated as one pass per job.
 fn one_job_of_poll() -> BoundsFile {
     BoundsFile::parse(
