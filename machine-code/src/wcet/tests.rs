@@ -778,6 +778,96 @@ fn a_loop_tested_at_its_top_is_counted() {
     assert!(b.loops[0].source.starts_with("counted"), "{:?}", b.loops[0]);
 }
 
+/// `for _ in 0..4 { ..; if r2 == 7 { break } .. }` as rustc compiles it: the header tests the count
+/// and leaves, the body may leave too, the latch steps the count and branches back. `first` is the
+/// instruction at 0x00: `movs r0, #0` (the count fixed), or a `nop` (its start unknown).
+fn leaves_mid_body(first: u16) -> Image {
+    let code = thumb(&[
+        first,  // 0x00 movs r0, #0 | nop: 1
+        0x2804, // 0x02 cmp r0, #4: 1 (the header: 5 runs)
+        0xd005, // 0x04 beq 0x12: 1, taken 1 + P (the count's way out)
+        0x3201, // 0x06 adds r2, #1: 1
+        0x2a07, // 0x08 cmp r2, #7: 1
+        0xd002, // 0x0a beq 0x12: 1, taken 1 + P (the way out from inside the body)
+        0x3301, // 0x0c adds r3, #1: 1
+        0x3001, // 0x0e adds r0, #1: 1 (the count's step)
+        0xe7f7, // 0x10 b 0x02: 1 + P
+        0x4770, // 0x12 bx lr: 1 + P
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("leaves", 0, 0x14)],
+        "firmware/src/leaves.rs",
+        &[(0, 5), (2, 7), (0x12, 9)],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+#[test]
+fn a_counted_loop_left_from_inside_its_body_is_charged_its_passes_up_to_the_exit() {
+    // From the TRM's table at 0 wait states (P = 3): an iteration is cmp, beq, adds, cmp, beq,
+    // adds, adds, b: 7 + 4 = 11 cycles, 8 instructions; the way out at the header cmp, beq taken:
+    // 1 + 4 = 5 cycles, 2 instructions; the way out from the body cmp, beq, adds, cmp, beq taken:
+    // 4 + 4 = 8 cycles, 5 instructions. The header runs at most 5 times and its test leaves on the
+    // fifth, so at most 4 passes go on past it: either 4 iterations and the header's way out (44 +
+    // 5 = 49 cycles, 34 instructions) or 3 iterations and the body's (33 + 8 = 41, 29). With the
+    // movs before (1) and the bx lr after (4): 54 cycles, 36 instructions, exactly the longest run.
+    // Charging 4 iterations before the body's way out (a fifth pass into the body, which the count
+    // never lets run) would be 57 cycles, 39 instructions.
+    let img = leaves_mid_body(0x2000);
+    let b = bound(&img, "leaves", F103_0WS);
+    assert_eq!(figures(&b), (54, 36, None));
+    assert_eq!(b.loops[0].bound, 5);
+    assert!(
+        b.loops[0].source.starts_with("counted") && b.loops[0].source.contains("at most 4 passes"),
+        "{:?}",
+        b.loops[0]
+    );
+    // The same loop with its count's start unknown, stated: 5 header runs alone charge the body's
+    // way out after 4 whole passes; 5 runs of which 4 go on past the header, as the count does.
+    let img = leaves_mid_body(0xbf00);
+    let stated = |body: &str| {
+        let file = format!(
+            r#"{{"loops":[{{"function":"leaves","file":"src/leaves.rs","line":7,"bound":5{body},"reason":"four elements"}}]}}"#
+        );
+        bound_function(&img, "leaves", F103_0WS, &BoundsFile::parse(&file).unwrap()).unwrap()
+    };
+    assert_eq!(figures(&stated("")), (57, 39, None));
+    let b = stated(r#","body":4"#);
+    assert_eq!(figures(&b), (54, 36, None));
+    assert_eq!(
+        b.loops[0].source,
+        "bounds file, at most 4 passes on past the header: four elements"
+    );
+}
+
+#[test]
+fn a_loop_tested_at_its_bottom_left_from_inside_on_its_last_pass_is_charged_whole_passes() {
+    // `loop { ..; if r2 == 7 { break } r0 += 1; if r0 == 4 { break } }`: every pass goes on past the
+    // header's own way out, the last one too.
+    let img = image(
+        &[
+            0x2000, // 0x00 movs r0, #0: 1
+            0x3201, // 0x02 adds r2, #1: 1 (the header: 4 runs)
+            0x2a07, // 0x04 cmp r2, #7: 1
+            0xd002, // 0x06 beq 0x0e: 1, taken 1 + P (a way out on any pass)
+            0x3001, // 0x08 adds r0, #1: 1
+            0x2804, // 0x0a cmp r0, #4: 1
+            0xd1f9, // 0x0c bne 0x02: 1, taken 1 + P (the count's branch back)
+            0x4770, // 0x0e bx lr: 1 + P
+        ],
+        &[Sym::function("bottom", 0, 0x10)],
+    );
+    let b = bound(&img, "bottom", F103_0WS);
+    // An iteration: 5 + 4 = 9 cycles, 6 instructions; the way out at the bottom, the whole fourth
+    // pass: 6 cycles, 6 instructions (the header's: 2 + 4 = 6 cycles, 3 instructions). 3 iterations
+    // and the longer way out, with the movs and the bx lr: 1 + 27 + 6 + 4 = 38 cycles,
+    // 1 + 18 + 6 + 1 = 26 instructions: four whole passes, as run.
+    assert_eq!(figures(&b), (38, 26, None));
+    assert_eq!(b.loops[0].bound, 4);
+    assert!(!b.loops[0].source.contains("passes on"), "{:?}", b.loops[0]);
+}
+
 /// `__aeabi_memclr` as a byte loop on its length in r1 (16 bytes of code, its branches relative):
 /// `movs r2, #0`; header `cmp r1, #0; beq` out; `strb r2, [r0]; adds r0, #1; subs r1, #1; b` header;
 /// `bx lr`.
