@@ -338,6 +338,52 @@ fn a_stated_wait_is_kept_apart_from_the_cycles() {
     assert_eq!((c.cycles, c.instructions), (31, 16));
 }
 
+#[test]
+fn passes_on_past_the_header_bound_the_body_apart_from_the_header() {
+    use path::{longest, LoopNodes, Node};
+    let cycles = |c: u64| Cost {
+        cycles: c,
+        ..Cost::default()
+    };
+    let node = |cost: u64, succs: Vec<(usize, Cost)>, exit: bool| Node {
+        cost: cycles(cost),
+        succs,
+        exit,
+        exit_cost: Cost::default(),
+    };
+    // Header 0 (3 cycles): back to itself (+3), into the body 1, or out to 2. Body 1 (10): back (+3)
+    // or out (+3). The return 2 (4).
+    let nodes = vec![
+        node(
+            3,
+            vec![(0, cycles(3)), (1, cycles(0)), (2, cycles(0))],
+            false,
+        ),
+        node(10, vec![(0, cycles(3)), (2, cycles(3))], false),
+        node(4, vec![], true),
+    ];
+    let path = |count| {
+        let l = [LoopNodes {
+            header: 0,
+            body: [0, 1].into(),
+            count,
+        }];
+        longest(nodes.clone(), &l, &|c: Cost| c.cycles)
+            .unwrap()
+            .path
+            .cycles
+    };
+    // A pass back through the body 3 + 10 + 3 = 16, one in the header 3 + 3 = 6; the way out from
+    // the header 3, from the body 3 + 10 + 3 = 16. 5 header runs, 2 passes on past it: 3 in the
+    // header, 1 through the body and the body's way out (18 + 16 + 16 = 50), or 2 through the body,
+    // 2 in the header and the header's way out (32 + 12 + 3 = 47); then the return: 54.
+    assert_eq!(path(LoopCount::Body { header: 5, body: 2 }), 54);
+    // The header's count alone: 4 passes back through the body and its way out, 64 + 16 + 4.
+    assert_eq!(path(LoopCount::Passes(5)), 84);
+    // No pass on past the header: 4 in the header and its way out, 24 + 3 + 4.
+    assert_eq!(path(LoopCount::Body { header: 5, body: 0 }), 31);
+}
+
 /// `spin` of [`a_loop_without_a_bound_is_declined_by_name`], its loop at src/spin.rs:7, its
 /// return at line 9.
 fn spin_with_lines() -> Image {
