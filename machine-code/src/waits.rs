@@ -76,19 +76,39 @@ pub fn is_peripheral(address: u32) -> bool {
     (0x4000_0000..0x6000_0000).contains(&address) || (0xE000_0000..0xE010_0000).contains(&address)
 }
 
+/// How [`step_constants`] takes a conditional instruction (one in an `IT` block), which may not
+/// execute.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Conditional {
+    /// Joined with the value before it: a register keeps a constant only where both agree, so a
+    /// known constant is the register's value on every path (what a raise of the masking writes).
+    Joined,
+    /// As executed: each value the code may build is seen where it is written, and replaces the
+    /// one before (a scan for what the code may hold looks at each value at its write: a polled
+    /// peripheral's address, an object's or a function's address taken).
+    Taken,
+}
+
 /// The registers holding a known constant after `insns` (straight-line view: the last definition
 /// wins, anything else that writes a register forgets it): literal loads, `MOV`/`MOVW` of an
-/// immediate, `MOVT` over a known low half.
+/// immediate, `MOVT` over a known low half; a conditional write as executed (the wait scan looks
+/// for every peripheral address a loop may poll).
 pub fn constants(image: &Image, insns: &[Insn]) -> [Option<u32>; 16] {
     let mut known = [None; 16];
     for insn in insns {
-        step_constants(image, insn, &mut known);
+        step_constants(image, insn, &mut known, Conditional::Taken);
     }
     known
 }
 
-/// One instruction's effect on [`constants`].
-pub fn step_constants(image: &Image, insn: &Insn, known: &mut [Option<u32>; 16]) {
+/// One instruction's effect on [`constants`], a conditional one taken as `conditional` says.
+pub fn step_constants(
+    image: &Image,
+    insn: &Insn,
+    known: &mut [Option<u32>; 16],
+    conditional: Conditional,
+) {
+    let before = *known;
     let regs = insn.registers();
     let value = match insn.inst.opcode {
         Opcode::LDR if insn.memory_base() == Some(PC) => {
@@ -110,6 +130,13 @@ pub fn step_constants(image: &Image, insn: &Insn, known: &mut [Option<u32>; 16])
     }
     if let (Some(v), Some(&rd)) = (value, regs.first()) {
         known[usize::from(rd)] = Some(v);
+    }
+    if insn.conditional && conditional == Conditional::Joined {
+        for r in 0..16 {
+            if known[r] != before[r] {
+                known[r] = None;
+            }
+        }
     }
 }
 

@@ -536,15 +536,24 @@ impl<'a> Analysis<'a> {
                     }
                 };
                 LoopCount::Total { key: index }
-            } else if let Some((n, how)) = counted::counted(insns, &graph, l) {
+            } else if let Some(c) = counted::counted(insns, &graph, l) {
                 loops_info.push(LoopInfo {
                     function: f.name.clone(),
                     file: file.clone(),
                     line,
-                    bound: n,
-                    source: how,
+                    bound: c.header,
+                    source: match c.body {
+                        Some(b) => format!("{}; at most {b} passes on past it", c.how),
+                        None => c.how,
+                    },
                 });
-                LoopCount::Passes(n)
+                match c.body {
+                    Some(body) => LoopCount::Body {
+                        header: c.header,
+                        body,
+                    },
+                    None => LoopCount::Passes(c.header),
+                }
             } else if let Some(stated) = file
                 .as_deref()
                 .zip(line)
@@ -555,9 +564,21 @@ impl<'a> Analysis<'a> {
                     file: file.clone(),
                     line,
                     bound: stated.bound,
-                    source: format!("bounds file: {}", stated.reason),
+                    source: match stated.body {
+                        Some(b) => format!(
+                            "bounds file, at most {b} passes on past the header: {}",
+                            stated.reason
+                        ),
+                        None => format!("bounds file: {}", stated.reason),
+                    },
                 });
-                LoopCount::Passes(stated.bound)
+                match stated.body {
+                    Some(body) => LoopCount::Body {
+                        header: stated.bound,
+                        body,
+                    },
+                    None => LoopCount::Passes(stated.bound),
+                }
             } else if let Some(job) = file
                 .as_deref()
                 .zip(line)

@@ -4,8 +4,8 @@
 //!
 //! ```json
 //! {
-//!   "loops": [{ "function": "…", "file": "src/tasks.rs", "line": 42, "bound": 8,
-//!               "reason": "the heapless::Vec holds at most 8 frames" }],
+//!   "loops": [{ "function": "…", "file": "src/tasks.rs", "line": 42, "bound": 9, "body": 8,
+//!               "reason": "the heapless::Vec holds at most 8 frames: 8 passes and the one that ends" }],
 //!   "waits": [{ "function": "…", "file": "src/i2c.rs", "line": 120, "wait_us": 25.0,
 //!               "source": "one I2C byte at 400 kHz: 9 bit times (UM10204 §3.1)" }],
 //!   "indirect": [{ "function": "…", "file": "src/waker.rs", "line": 7,
@@ -40,7 +40,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::Error;
 
-/// A loop's stated bound: the most times its header runs per entry.
+/// A loop's stated bound: the most times its header runs per entry (`bound`), and, where stated,
+/// the most of those passes that go on past the header into the rest of the loop (`body`: a loop
+/// whose header's test ends it on its last run, `for x in ..` over at most k elements, makes k + 1
+/// header runs and k passes on). Without `body` a way out from inside the body is charged after
+/// `bound` − 1 whole passes; with it, after `body` − 1 ([`super::path::LoopCount::Body`]).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LoopBound {
@@ -48,6 +52,8 @@ pub struct LoopBound {
     pub file: String,
     pub line: u32,
     pub bound: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub body: Option<u64>,
     pub reason: String,
 }
 

@@ -89,11 +89,35 @@ fn sets_flags(insn: &Insn) -> bool {
     ) || insn.inst.s
 }
 
-/// The most times the loop's header runs per entry when it is a counted loop, with how it was
-/// found: tested at the bottom (the branch back decides) or at the top (the header's branch out
-/// decides, as `for i in 0..n` compiles).
-pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
-    counted_at_bottom(insns, cfg, l).or_else(|| counted_at_top(insns, cfg, l))
+/// A counted loop's bound.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Counted {
+    /// The most times its header runs per entry.
+    pub header: u64,
+    /// The most passes per entry that go on past the header, where the count says (tested at the
+    /// top: the header's test ends the loop on its last run, so at most `header` − 1).
+    pub body: Option<u64>,
+    /// How it was found.
+    pub how: String,
+}
+
+/// The bound of a counted loop: tested at the bottom (the branch back decides) or at the top (the
+/// header's branch out decides, as `for i in 0..n` compiles).
+pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<Counted> {
+    if let Some((header, how)) = counted_at_bottom(insns, cfg, l) {
+        return Some(Counted {
+            header,
+            body: None,
+            how,
+        });
+    }
+    // The header's one way into the body is its test's, which leaves on the run the count gives:
+    // every run before it goes on, that one does not.
+    counted_at_top(insns, cfg, l).map(|(header, how)| Counted {
+        header,
+        body: Some(header.saturating_sub(1)),
+        how,
+    })
 }
 
 /// A loop whose header ends in a conditional branch out of the loop on a `CMP rX, #c`, with rX stepped

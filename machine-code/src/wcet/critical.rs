@@ -10,8 +10,12 @@
 //!   `MSR BASEPRI, rS`. The ceiling is the raise's constant read back to RTIC's logical priority
 //!   (`(2^bits − hw >> (8 − bits))`, 4 priority bits on both chips).
 //! * interrupts off (`critical_section::with`, a lock at the top priority): `MRS rS, PRIMASK`;
-//!   `CPSID i` … `MSR PRIMASK, rS` (or `CPSIE i`). An `MSR PRIMASK` of a constant with bit 0 set
-//!   is a raise too.
+//!   `CPSID i` … `MSR PRIMASK, rS` (or `CPSIE i`). An `MSR PRIMASK` of a register that may hold a
+//!   constant with bit 0 set is a raise too.
+//!
+//! A write in an `IT` block may not execute: the raise's constant is joined with the value before it
+//! (it must be the register's on every path), a raise under a condition is counted, and a restore
+//! under one declines its section (`wcet::masking`).
 //!
 //! Raises of one kind nest (a lock inside a lock): a section runs from its raise to the restore
 //! that brings its kind's nesting back to where it was, through every inner section; the inner
@@ -33,7 +37,7 @@ use super::bounds::BoundsFile;
 use super::cfg::{Block, Call, Cfg};
 use super::chip::Chip;
 use super::length::{self, NO_ARGS};
-use super::masking::{effect, region, value_before, Effect, Kind};
+use super::masking::{effect, region, value_before, Effect, Kind, Known};
 use super::stored;
 use super::{Task, TaskEntry};
 use crate::decode::Insn;
@@ -415,7 +419,7 @@ impl<'a> Finder<'a> {
         // longest of them is the section's bound).
         let mut raises: BTreeMap<usize, Vec<(usize, Kind, Option<u8>)>> = BTreeMap::new();
         for (b, block) in graph.blocks.iter().enumerate() {
-            let mut known = [None; 16];
+            let mut known = Known::default();
             for (k, insn) in insns
                 .iter()
                 .enumerate()
@@ -425,7 +429,7 @@ impl<'a> Finder<'a> {
                 if let Some(Effect::Raise(kind, reg)) = effect(insn, &known) {
                     raises.entry(k).or_default().push((b, kind, reg));
                 }
-                crate::waits::step_constants(image, insn, &mut known);
+                known.step(image, insn);
             }
         }
         for (k, copies) in raises {

@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 
 use super::cfg::{Block, Cfg, Edge};
 use crate::decode::{Insn, Opcode, Operand};
+use crate::waits::Conditional;
 use crate::Image;
 
 /// The deepest nesting of raises of one kind a section is followed through.
@@ -27,9 +28,46 @@ pub(super) enum Effect {
     Restore(Kind),
 }
 
+/// What [`effect`] reads of the registers before an instruction, followed through a block.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Known {
+    /// The constant each holds on every path ([`Conditional::Joined`]: a conditional write, which
+    /// may not execute, joined with the value before it).
+    constants: [Option<u32>; 16],
+    /// The registers that may hold a constant with bit 0 set (one was written, under a condition
+    /// or not, and no unconditional write has replaced it since): an `MSR PRIMASK` of one of them
+    /// may set PRIMASK.
+    may_set: u16,
+}
+
+impl Known {
+    /// The registers after `insn`.
+    pub(super) fn step(&mut self, image: &Image, insn: &Insn) {
+        let mut taken = self.constants;
+        crate::waits::step_constants(image, insn, &mut taken, Conditional::Taken);
+        crate::waits::step_constants(image, insn, &mut self.constants, Conditional::Joined);
+        let written = insn.writes();
+        for r in 0..16u8 {
+            if !written.contains(r) {
+                continue;
+            }
+            let bit = 1u16 << r;
+            let sets = taken[usize::from(r)].is_some_and(|v| v & 1 == 1);
+            if sets {
+                self.may_set |= bit;
+            } else if !insn.conditional {
+                self.may_set &= !bit;
+            }
+        }
+    }
+}
+
 /// The masking effect of `insn` (its encoding: ARMv7-M ARM B5.2.3 `MSR`, B5.2.1 `CPS`); `known`
-/// the constants in the registers before it.
-pub(super) fn effect(insn: &Insn, known: &[Option<u32>; 16]) -> Option<Effect> {
+/// what the registers hold before it. An `MSR PRIMASK` is a raise when its register may hold a
+/// constant with bit 0 set on some path, else a restore (the value an `MRS` saved, which the code
+/// does not fix). A conditional `MSR` (in an `IT` block) has its effect where it executes: a raise
+/// is counted as one ([`region`] declines a section whose restore is conditional).
+pub(super) fn effect(insn: &Insn, known: &Known) -> Option<Effect> {
     let [hw1, hw2] = insn.raw;
     if insn.len == 2 && hw1 & 0xffe8 == 0xb660 {
         // CPS: im (bit 4) 1 disables; I (bit 1) is PRIMASK.
@@ -45,9 +83,10 @@ pub(super) fn effect(insn: &Insn, known: &[Option<u32>; 16]) -> Option<Effect> {
     if insn.len == 4 && hw1 & 0xfff0 == 0xf380 && hw2 & 0xff00 == 0x8800 {
         let rn = (hw1 & 0xf) as u8;
         return match hw2 & 0xff {
-            0x10 => Some(match known[usize::from(rn)] {
-                Some(v) if v & 1 == 1 => Effect::Raise(Kind::Primask, None),
-                _ => Effect::Restore(Kind::Primask),
+            0x10 => Some(if known.may_set & (1 << rn) != 0 {
+                Effect::Raise(Kind::Primask, None)
+            } else {
+                Effect::Restore(Kind::Primask)
             }),
             0x11 => Some(Effect::Restore(Kind::Basepri)),
             0x12 => Some(Effect::Raise(Kind::Basepri, Some(rn))),
@@ -78,7 +117,7 @@ pub(super) fn region(
         let me = index[&(ob, first, depth_in)];
         let block = &graph.blocks[ob];
         let mut depth = depth_in;
-        let mut known = [None; 16];
+        let mut known = Known::default();
         let mut end = None;
         for (j, insn) in insns
             .iter()
@@ -89,6 +128,14 @@ pub(super) fn region(
             if j >= first {
                 match effect(insn, &known) {
                     Some(Effect::Raise(kd, _)) if kd == kind => depth += 1,
+                    // A restore that may not execute: the section may run on past it, to a
+                    // restore this part of the graph does not fix.
+                    Some(Effect::Restore(kd)) if kd == kind && insn.conditional => {
+                        return Err(format!(
+                            "restored under a condition (an IT block) at {:#010x}",
+                            insn.addr
+                        ));
+                    }
                     Some(Effect::Restore(kd)) if kd == kind => {
                         depth = depth.saturating_sub(1);
                         if depth == 0 {
@@ -104,7 +151,7 @@ pub(super) fn region(
                     ));
                 }
             }
-            crate::waits::step_constants(image, insn, &mut known);
+            known.step(image, insn);
         }
         if let Some(j) = end {
             blocks[me] = Block {
@@ -180,8 +227,8 @@ impl Held {
     }
 }
 
-/// `held` after `run`: the constants [`crate::waits::step_constants`] follows, `r` seeded with
-/// what it held before.
+/// `held` after `run`: the constants [`crate::waits::step_constants`] follows on every path (a
+/// conditional write joined with the value before it), `r` seeded with what it held before.
 fn through(image: &Image, run: &[Insn], r: u8, held: Held) -> Held {
     let mut known = [None; 16];
     if let Held::Constant(v) = held {
@@ -196,7 +243,7 @@ fn through(image: &Image, run: &[Insn], r: u8, held: Held) -> Held {
             }
             _ => None,
         };
-        crate::waits::step_constants(image, insn, &mut known);
+        crate::waits::step_constants(image, insn, &mut known, Conditional::Joined);
         if let Some((d, v)) = copied {
             known[usize::from(d)] = v;
         }

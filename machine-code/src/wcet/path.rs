@@ -5,6 +5,11 @@
 //! iteration at most as long as the longest, and the last pass leaves by some exit at most as long
 //! as the longest: so the collapsed node bounds every path through the loop, and the longest path
 //! on the acyclic graph that remains bounds every path through the function.
+//!
+//! Where it is known too that at most B passes go on past the header (a loop whose header's test
+//! ends it on its last run, as `for x in ..` compiles: B = N − 1), a way out from inside the body
+//! ends one of those B passes: such a path makes at most B − 1 passes past the header back to it
+//! before its last ([`LoopCount::Body`]).
 use std::collections::BTreeSet;
 
 use serde::Serialize;
@@ -52,6 +57,14 @@ impl Cost {
 pub enum LoopCount {
     /// The header runs at most this many times per entry.
     Passes(u64),
+    /// The header runs at most `header` times per entry, and at most `body` of those passes go on
+    /// past it (into any other block of the loop): a loop whose header's test ends it on its last
+    /// run has `body` = `header` − 1. Charged the longer of: a way out from the header after
+    /// `header` − 1 passes back, at most `body` of them through the body; a way out from the body
+    /// after `header` − 1 passes back, at most `body` − 1 of them through the body (the last pass
+    /// is one of the `body`). A pass back that stays in the header (a header with an edge to
+    /// itself) is charged its own longest such pass.
+    Body { header: u64, body: u64 },
     /// A wait: the loop spins for at most this long (ns, and as cycles at the clock); it costs its
     /// way out plus the wait, and at most one instruction per cycle of the wait.
     Wait { ns: u64, cycles: u64 },
@@ -199,30 +212,57 @@ pub fn longest(
         let h = rep[l.header];
         let is_member = |x: usize| members.contains(&x);
         let dist = longest_from(&nodes, h, &is_member, h, key)?;
-        let mut iteration: Option<Cost> = None;
-        let mut way_out: Option<Cost> = None;
+        // Iterations and ways out, [0] those that stay in the header, [1] those through the body.
+        let mut iterations: [Option<Cost>; 2] = [None, None];
+        let mut ways_out: [Option<Cost>; 2] = [None, None];
         let mut exits: Vec<usize> = Vec::new();
         let mut exit_here = false;
         for &m in &members {
             let Some(d) = dist[m] else { continue };
+            let part = usize::from(m != h);
             if nodes[m].exit {
-                way_out = better(way_out, d.plus(nodes[m].exit_cost), key);
+                ways_out[part] = better(ways_out[part], d.plus(nodes[m].exit_cost), key);
                 exit_here = true;
             }
             for &(to, edge) in &nodes[m].succs {
                 if to == h {
-                    iteration = better(iteration, d.plus(edge), key);
+                    iterations[part] = better(iterations[part], d.plus(edge), key);
                 } else if !members.contains(&to) {
-                    way_out = better(way_out, d.plus(edge), key);
+                    ways_out[part] = better(ways_out[part], d.plus(edge), key);
                     exits.push(to);
                 }
             }
         }
-        let iteration = iteration.unwrap_or_default();
+        let iteration = iterations[1]
+            .map_or(iterations[0], |i| better(iterations[0], i, key))
+            .unwrap_or_default();
+        let way_out = ways_out[1].map_or(ways_out[0], |o| better(ways_out[0], o, key));
         let collapsed = match (l.count, way_out) {
             (_, None) | (LoopCount::Endless, _) => None,
             (LoopCount::Passes(passes), Some(out)) => {
                 Some(iteration.times(passes.max(1) - 1).plus(out))
+            }
+            (LoopCount::Body { header, body }, Some(out)) => {
+                let back = header.max(1) - 1;
+                let in_header = iterations[0].unwrap_or_default();
+                // `back` passes back, at most `through` of them through the body.
+                let passes = |through: u64| {
+                    let through = through.min(back);
+                    iteration
+                        .times(through)
+                        .plus(in_header.times(back - through))
+                };
+                let from_header = ways_out[0].map(|o| passes(body).plus(o));
+                let from_body = ways_out[1]
+                    .filter(|_| body >= 1)
+                    .map(|o| passes(body - 1).plus(o));
+                match (from_header, from_body) {
+                    (Some(a), Some(b)) => better(Some(a), b, key),
+                    (a, b) => a.or(b),
+                }
+                // No way out the counts allow (a statement the graph contradicts): the header's
+                // count alone.
+                .or(Some(iteration.times(back).plus(out)))
             }
             (LoopCount::Retry, Some(out)) => {
                 retry = better(retry, iteration, key);

@@ -29,6 +29,7 @@ use super::bounds::IndirectTargets;
 use super::cfg::Cfg;
 use crate::decode::{Flow, Insn, Opcode, Operand};
 use crate::image::Function;
+use crate::waits::Conditional;
 use crate::{Error, Image};
 
 /// The argument and result registers r0-r3.
@@ -135,8 +136,9 @@ pub fn stored_with(image: &Image, object: &str) -> Result<BTreeSet<u64>, String>
             continue;
         };
         let mut known = [None; 16];
+        // A conditional write taken as done: an address the code may build takes the object's.
         for insn in insns {
-            crate::waits::step_constants(image, insn, &mut known);
+            crate::waits::step_constants(image, insn, &mut known, Conditional::Taken);
             if known.contains(&Some(value)) {
                 takers.insert(f.start);
                 break;
@@ -236,12 +238,13 @@ fn data_constants(image: &Image, f: &Function) -> Result<BTreeSet<u64>, String> 
             word += 4;
         }
     }
-    // Each constant a register is given, followed from there.
+    // Each constant a register is given, followed from there (a conditional write taken as done,
+    // seen where it is written; `used_as_data` keeps a register through a conditional write).
     for (b, block) in graph.blocks.iter().enumerate() {
         let mut known = [None; 16];
         for k in block.first..=block.last {
             let before = known;
-            crate::waits::step_constants(image, &insns[k], &mut known);
+            crate::waits::step_constants(image, &insns[k], &mut known, Conditional::Taken);
             for r in 0..13u8 {
                 let now = known[usize::from(r)];
                 if now == before[usize::from(r)] && !insns[k].writes().contains(r) {

@@ -338,6 +338,52 @@ fn a_stated_wait_is_kept_apart_from_the_cycles() {
     assert_eq!((c.cycles, c.instructions), (31, 16));
 }
 
+#[test]
+fn passes_on_past_the_header_bound_the_body_apart_from_the_header() {
+    use path::{longest, LoopNodes, Node};
+    let cycles = |c: u64| Cost {
+        cycles: c,
+        ..Cost::default()
+    };
+    let node = |cost: u64, succs: Vec<(usize, Cost)>, exit: bool| Node {
+        cost: cycles(cost),
+        succs,
+        exit,
+        exit_cost: Cost::default(),
+    };
+    // Header 0 (3 cycles): back to itself (+3), into the body 1, or out to 2. Body 1 (10): back (+3)
+    // or out (+3). The return 2 (4).
+    let nodes = vec![
+        node(
+            3,
+            vec![(0, cycles(3)), (1, cycles(0)), (2, cycles(0))],
+            false,
+        ),
+        node(10, vec![(0, cycles(3)), (2, cycles(3))], false),
+        node(4, vec![], true),
+    ];
+    let path = |count| {
+        let l = [LoopNodes {
+            header: 0,
+            body: [0, 1].into(),
+            count,
+        }];
+        longest(nodes.clone(), &l, &|c: Cost| c.cycles)
+            .unwrap()
+            .path
+            .cycles
+    };
+    // A pass back through the body 3 + 10 + 3 = 16, one in the header 3 + 3 = 6; the way out from
+    // the header 3, from the body 3 + 10 + 3 = 16. 5 header runs, 2 passes on past it: 3 in the
+    // header, 1 through the body and the body's way out (18 + 16 + 16 = 50), or 2 through the body,
+    // 2 in the header and the header's way out (32 + 12 + 3 = 47); then the return: 54.
+    assert_eq!(path(LoopCount::Body { header: 5, body: 2 }), 54);
+    // The header's count alone: 4 passes back through the body and its way out, 64 + 16 + 4.
+    assert_eq!(path(LoopCount::Passes(5)), 84);
+    // No pass on past the header: 4 in the header and its way out, 24 + 3 + 4.
+    assert_eq!(path(LoopCount::Body { header: 5, body: 0 }), 31);
+}
+
 /// `spin` of [`a_loop_without_a_bound_is_declined_by_name`], its loop at src/spin.rs:7, its
 /// return at line 9.
 fn spin_with_lines() -> Image {
@@ -776,6 +822,96 @@ fn a_loop_tested_at_its_top_is_counted() {
     assert_eq!(b.loops.len(), 1);
     assert_eq!(b.loops[0].bound, 4);
     assert!(b.loops[0].source.starts_with("counted"), "{:?}", b.loops[0]);
+}
+
+/// `for _ in 0..4 { ..; if r2 == 7 { break } .. }` as rustc compiles it: the header tests the count
+/// and leaves, the body may leave too, the latch steps the count and branches back. `first` is the
+/// instruction at 0x00: `movs r0, #0` (the count fixed), or a `nop` (its start unknown).
+fn leaves_mid_body(first: u16) -> Image {
+    let code = thumb(&[
+        first,  // 0x00 movs r0, #0 | nop: 1
+        0x2804, // 0x02 cmp r0, #4: 1 (the header: 5 runs)
+        0xd005, // 0x04 beq 0x12: 1, taken 1 + P (the count's way out)
+        0x3201, // 0x06 adds r2, #1: 1
+        0x2a07, // 0x08 cmp r2, #7: 1
+        0xd002, // 0x0a beq 0x12: 1, taken 1 + P (the way out from inside the body)
+        0x3301, // 0x0c adds r3, #1: 1
+        0x3001, // 0x0e adds r0, #1: 1 (the count's step)
+        0xe7f7, // 0x10 b 0x02: 1 + P
+        0x4770, // 0x12 bx lr: 1 + P
+    ]);
+    let bytes = crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("leaves", 0, 0x14)],
+        "firmware/src/leaves.rs",
+        &[(0, 5), (2, 7), (0x12, 9)],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+#[test]
+fn a_counted_loop_left_from_inside_its_body_is_charged_its_passes_up_to_the_exit() {
+    // From the TRM's table at 0 wait states (P = 3): an iteration is cmp, beq, adds, cmp, beq,
+    // adds, adds, b: 7 + 4 = 11 cycles, 8 instructions; the way out at the header cmp, beq taken:
+    // 1 + 4 = 5 cycles, 2 instructions; the way out from the body cmp, beq, adds, cmp, beq taken:
+    // 4 + 4 = 8 cycles, 5 instructions. The header runs at most 5 times and its test leaves on the
+    // fifth, so at most 4 passes go on past it: either 4 iterations and the header's way out (44 +
+    // 5 = 49 cycles, 34 instructions) or 3 iterations and the body's (33 + 8 = 41, 29). With the
+    // movs before (1) and the bx lr after (4): 54 cycles, 36 instructions, exactly the longest run.
+    // Charging 4 iterations before the body's way out (a fifth pass into the body, which the count
+    // never lets run) would be 57 cycles, 39 instructions.
+    let img = leaves_mid_body(0x2000);
+    let b = bound(&img, "leaves", F103_0WS);
+    assert_eq!(figures(&b), (54, 36, None));
+    assert_eq!(b.loops[0].bound, 5);
+    assert!(
+        b.loops[0].source.starts_with("counted") && b.loops[0].source.contains("at most 4 passes"),
+        "{:?}",
+        b.loops[0]
+    );
+    // The same loop with its count's start unknown, stated: 5 header runs alone charge the body's
+    // way out after 4 whole passes; 5 runs of which 4 go on past the header, as the count does.
+    let img = leaves_mid_body(0xbf00);
+    let stated = |body: &str| {
+        let file = format!(
+            r#"{{"loops":[{{"function":"leaves","file":"src/leaves.rs","line":7,"bound":5{body},"reason":"four elements"}}]}}"#
+        );
+        bound_function(&img, "leaves", F103_0WS, &BoundsFile::parse(&file).unwrap()).unwrap()
+    };
+    assert_eq!(figures(&stated("")), (57, 39, None));
+    let b = stated(r#","body":4"#);
+    assert_eq!(figures(&b), (54, 36, None));
+    assert_eq!(
+        b.loops[0].source,
+        "bounds file, at most 4 passes on past the header: four elements"
+    );
+}
+
+#[test]
+fn a_loop_tested_at_its_bottom_left_from_inside_on_its_last_pass_is_charged_whole_passes() {
+    // `loop { ..; if r2 == 7 { break } r0 += 1; if r0 == 4 { break } }`: every pass goes on past the
+    // header's own way out, the last one too.
+    let img = image(
+        &[
+            0x2000, // 0x00 movs r0, #0: 1
+            0x3201, // 0x02 adds r2, #1: 1 (the header: 4 runs)
+            0x2a07, // 0x04 cmp r2, #7: 1
+            0xd002, // 0x06 beq 0x0e: 1, taken 1 + P (a way out on any pass)
+            0x3001, // 0x08 adds r0, #1: 1
+            0x2804, // 0x0a cmp r0, #4: 1
+            0xd1f9, // 0x0c bne 0x02: 1, taken 1 + P (the count's branch back)
+            0x4770, // 0x0e bx lr: 1 + P
+        ],
+        &[Sym::function("bottom", 0, 0x10)],
+    );
+    let b = bound(&img, "bottom", F103_0WS);
+    // An iteration: 5 + 4 = 9 cycles, 6 instructions; the way out at the bottom, the whole fourth
+    // pass: 6 cycles, 6 instructions (the header's: 2 + 4 = 6 cycles, 3 instructions). 3 iterations
+    // and the longer way out, with the movs and the bx lr: 1 + 27 + 6 + 4 = 38 cycles,
+    // 1 + 18 + 6 + 1 = 26 instructions: four whole passes, as run.
+    assert_eq!(figures(&b), (38, 26, None));
+    assert_eq!(b.loops[0].bound, 4);
+    assert!(!b.loops[0].source.contains("passes on"), "{:?}", b.loops[0]);
 }
 
 /// `__aeabi_memclr` as a byte loop on its length in r1 (16 bytes of code, its branches relative):
@@ -1400,6 +1536,117 @@ fn a_raise_of_no_constant_leaves_the_task_incomplete() {
     let found = sections_of(&img, "raises_an_argument", F103_0WS);
     let reason = found.incomplete.expect("incomplete");
     assert!(reason.contains("no constant"), "{reason}");
+}
+
+#[test]
+fn a_conditional_write_is_joined_with_the_value_before_it() {
+    let img = image(
+        &[
+            0x2003, // 0x00 movs r0, #3
+            0x2105, // 0x02 movs r1, #5
+            0x2a00, // 0x04 cmp r2, #0
+            0xbf04, // 0x06 itt eq
+            0x2005, // 0x08 moveq r0, #5: 3 or 5
+            0x2105, // 0x0a moveq r1, #5: 5 either way
+            0x4770, // 0x0c bx lr
+        ],
+        &[Sym::function("maybe", 0, 0x0e)],
+    );
+    let insns = img.function_named("maybe").unwrap().instructions().unwrap();
+    let after = |conditional| {
+        let mut known = [None; 16];
+        for insn in &insns[..6] {
+            crate::waits::step_constants(&img, insn, &mut known, conditional);
+        }
+        (known[0], known[1])
+    };
+    use crate::waits::Conditional;
+    assert_eq!(after(Conditional::Joined), (None, Some(5)));
+    // The scans of what the code may hold see the value where it is written.
+    assert_eq!(after(Conditional::Taken), (Some(5), Some(5)));
+}
+
+#[test]
+fn a_raise_of_a_value_written_under_a_condition_has_no_ceiling() {
+    let code = |before: u16| {
+        [
+            0xf3ef, 0x8411, // 0x00 mrs r4, BASEPRI
+            before, // 0x04 movs r0, #before
+            0x2900, // 0x06 cmp r1, #0
+            0xbf08, // 0x08 it eq
+            0x20a0, // 0x0a moveq r0, #0xa0: only where r1 is 0
+            0xf380, 0x8812, // 0x0c msr BASEPRI_MAX, r0: the raise
+            0xf384, 0x8811, // 0x10 msr BASEPRI, r4
+            0x4770, // 0x14 bx lr
+        ]
+    };
+    // r0 is 0x20 or 0xa0 at the raise: priority 14 or 6, neither on every path.
+    let img = image(&code(0x2020), &[Sym::function("raise", 0, 0x16)]);
+    let found = sections_of(&img, "raise", F103_0WS);
+    let reason = found.incomplete.as_deref().expect("incomplete");
+    assert!(reason.contains("no constant"), "{reason}");
+    assert!(found.ceilings.is_empty(), "{:?}", found.ceilings);
+    // 0xa0 either way: the raise's ceiling stands (0xa0 is level 10, priority 16 − 10 = 6).
+    let img = image(&code(0x20a0), &[Sym::function("raise", 0, 0x16)]);
+    let found = sections_of(&img, "raise", F103_0WS);
+    assert_eq!(found.incomplete, None);
+    let ceilings: Vec<Ceiling> = found.ceilings.iter().map(|c| c.ceiling).collect();
+    assert_eq!(
+        ceilings,
+        [Ceiling::Basepri {
+            hardware: 0xa0,
+            priority: 6
+        }]
+    );
+}
+
+#[test]
+fn a_primask_write_that_may_set_it_is_a_raise() {
+    let img = image(
+        &[
+            0xf3ef, 0x8410, // 0x00 mrs r4, PRIMASK: 2
+            0x2001, // 0x04 movs r0, #1: 1
+            0x2900, // 0x06 cmp r1, #0: 1
+            0xbf08, // 0x08 it eq
+            0x2000, // 0x0a moveq r0, #0: 1 where r1 is 0 (r0 stays 1 where it is not)
+            0xf380, 0x8810, // 0x0c msr PRIMASK, r0: 2 (interrupts off where r1 is not 0)
+            0x3201, // 0x10 adds r2, #1: 1
+            0xf384, 0x8810, // 0x12 msr PRIMASK, r4: 2 (the restore)
+            0x4770, // 0x16 bx lr
+        ],
+        &[Sym::function("maybe_masked", 0, 0x18)],
+    );
+    let found = sections_of(&img, "maybe_masked", F103_0WS);
+    assert_eq!(found.incomplete, None);
+    let ceilings: Vec<(Ceiling, u64, u64)> = found
+        .ceilings
+        .iter()
+        .map(|c| (c.ceiling, c.cycles, c.instructions))
+        .collect();
+    // From the write to the restore, both in: 2 + 1 + 2 = 5 cycles, 3 instructions.
+    assert_eq!(ceilings, [(Ceiling::InterruptsOff, 5, 3)]);
+}
+
+#[test]
+fn a_section_whose_restore_is_conditional_is_declined() {
+    let img = image(
+        &[
+            0xf3ef, 0x8411, // 0x00 mrs r4, BASEPRI
+            0x20b0, // 0x04 movs r0, #0xb0
+            0xf380, 0x8812, // 0x06 msr BASEPRI_MAX, r0: the raise
+            0x2900, // 0x0a cmp r1, #0
+            0xbf08, // 0x0c it eq
+            0xf384, 0x8811, // 0x0e msreq BASEPRI, r4: restored only where r1 is 0
+            0x3201, // 0x12 adds r2, #1: still masked where r1 is not 0
+            0xf384, 0x8811, // 0x14 msr BASEPRI, r4
+            0x4770, // 0x18 bx lr
+        ],
+        &[Sym::function("restores_maybe", 0, 0x1a)],
+    );
+    let found = sections_of(&img, "restores_maybe", F103_0WS);
+    assert_eq!(found.ceilings.len(), 1, "{found:?}");
+    let reason = found.ceilings[0].declined.as_deref().expect("declined");
+    assert!(reason.contains("restored under a condition"), "{reason}");
 }
 
 /// `bounds_file` with the async loop of [`async_loop`] stated as one pass per job.
