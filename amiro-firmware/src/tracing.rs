@@ -505,6 +505,31 @@ pub fn event(event: &TraceEvent) {
     }));
 }
 
+/// The transmit interrupt's event for a frame put into a mailbox (`TraceKind::FrameSent`): the
+/// record [`event`] writes for it, with the event's fields stored straight into the slot, where
+/// [`event`] copies a whole event built on the caller's stack (six words loaded through a pointer
+/// the execution-time bound cannot place, so charged at a peripheral's latency, on every frame the
+/// interrupt sends; docs/analysis.md, "The transmit interrupt's parts"). The slot's other bytes
+/// are the event's padding for that kind, which the drain's encoding never reads. QEMU prints the
+/// frame itself as it enters the (virtual) mailbox, so its build has no such event.
+#[cfg(not(feature = "qemu"))]
+#[inline(never)]
+pub fn frame_sent(at_us: u64, id: u16) {
+    let reserved = critical_section::with(|_| reserve());
+    if let Some((claim, cycles)) = reserved {
+        claim.fill(|slot| {
+            slot.cycles = cycles;
+            let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
+            // SAFETY: as in [`event`]: the tag is written, and the event as a whole value.
+            unsafe {
+                (*what).tag = EVENT_TAG;
+                (*what).event =
+                    TraceEvent::new(at_us, amiro_sensors::trace::TraceKind::FrameSent { id });
+            }
+        });
+    }
+}
+
 /// A handler event for the drain to stamp ([`drain`], priority 0), for the handlers whose bound
 /// the analysis uses at the most urgent priority (`can_status`'s bus-state change): four words
 /// stored into a static under a short critical section, where [`event`]'s stamp, reservation and
