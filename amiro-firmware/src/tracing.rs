@@ -486,16 +486,7 @@ pub fn event(event: &TraceEvent) {
     {
         let reserved = critical_section::with(|_| reserve());
         if let Some((claim, cycles)) = reserved {
-            claim.fill(|slot| {
-                slot.cycles = cycles;
-                let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
-                // SAFETY: `what` is the slot's `What`, laid out as `EventWhat` once its tag says
-                // `Event` (`repr(u8)`): the tag is written and the event copied whole.
-                unsafe {
-                    (*what).tag = EVENT_TAG;
-                    copy_event(event, &mut (*what).event);
-                }
-            });
+            claim.fill(|slot| fill_event(slot, cycles, event));
         }
     }
     // QEMU: encoded before the critical section, as the robot's drain does outside it.
@@ -503,6 +494,20 @@ pub fn event(event: &TraceEvent) {
     emit(What::Kind(Kind::Event {
         record: event.encode(),
     }));
+}
+
+/// [`event`]'s record in `slot`.
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn fill_event(slot: &mut Slot, cycles: u32, event: &TraceEvent) {
+    slot.cycles = cycles;
+    let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
+    // SAFETY: `what` is the slot's `What`, laid out as `EventWhat` once its tag says `Event`
+    // (`repr(u8)`): the tag is written and the event copied whole.
+    unsafe {
+        (*what).tag = EVENT_TAG;
+        copy_event(event, &mut (*what).event);
+    }
 }
 
 /// The transmit interrupt's event for a frame put into a mailbox (`TraceKind::FrameSent`): the
@@ -517,16 +522,20 @@ pub fn event(event: &TraceEvent) {
 pub fn frame_sent(at_us: u64, id: u16) {
     let reserved = critical_section::with(|_| reserve());
     if let Some((claim, cycles)) = reserved {
-        claim.fill(|slot| {
-            slot.cycles = cycles;
-            let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
-            // SAFETY: as in [`event`]: the tag is written, and the event as a whole value.
-            unsafe {
-                (*what).tag = EVENT_TAG;
-                (*what).event =
-                    TraceEvent::new(at_us, amiro_sensors::trace::TraceKind::FrameSent { id });
-            }
-        });
+        claim.fill(|slot| fill_frame_sent(slot, cycles, at_us, id));
+    }
+}
+
+/// [`frame_sent`]'s record in `slot`.
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn fill_frame_sent(slot: &mut Slot, cycles: u32, at_us: u64, id: u16) {
+    slot.cycles = cycles;
+    let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
+    // SAFETY: as in [`event`]: the tag is written, and the event as a whole value.
+    unsafe {
+        (*what).tag = EVENT_TAG;
+        (*what).event = TraceEvent::new(at_us, amiro_sensors::trace::TraceKind::FrameSent { id });
     }
 }
 

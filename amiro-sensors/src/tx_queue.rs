@@ -588,6 +588,33 @@ mod tests {
         );
     }
 
+    /// The straight-line search against a count, for every capacity's steps (0, 1, powers of two
+    /// and between) and every prefix length and floor of descending entries.
+    #[test]
+    fn the_unrolled_search_counts_the_entries_at_least_the_floor() {
+        fn check<const N: usize>() {
+            let entries: Vec<u32> = (0..N as u32).rev().map(|i| 2 * i + 10).collect();
+            for len in 0..=N {
+                let queued = &entries[..len];
+                for floor in 0..=(2 * N as u32 + 12) {
+                    let counted = queued.iter().filter(|&&e| e >= floor).count();
+                    assert_eq!(
+                        count_at_least::<N>(queued, floor),
+                        counted,
+                        "N {N} len {len} floor {floor}"
+                    );
+                }
+            }
+        }
+        check::<0>();
+        check::<1>();
+        check::<3>();
+        check::<8>();
+        check::<16>();
+        check::<17>();
+        check::<256>();
+    }
+
     #[test]
     fn zero_capacity_drops_everything() {
         let mut queue = TxQueue::<0>::new();
