@@ -16,11 +16,11 @@
 //! last. An entry packs the frame's identifier (the sort key, in its top bits, so entries compare as
 //! plain words), the index byte that tells a multi-frame topic's frames apart, and the slot number.
 //! So `pop` in the transmit interrupt is O(1); `push` and `requeue` find the frame's place by one
-//! binary search over the entries (at most `log2 N + 1` word loads and compares, no frame read),
-//! look for an older sample only among the frames of the same identifier (one entry for a topic of
-//! one frame per sample; a requeue walks those frames to their end, which is its place), and move
-//! at most `N - 1` entries by one place, each carried through a register (one load and one store),
-//! never a frame.
+//! binary search over the entries (at most `log2 N + 1` word loads and compares, straight-line
+//! code, no frame read), look for another sample of its topic only among the frames of the same
+//! identifier (one entry for a topic of one frame per sample, none for a command; a push from where
+//! those frames start, a requeue back from its place, where they end), and move at most `N - 1`
+//! entries by one place, each carried through a register (one load and one store), never a frame.
 
 use amiro_can::{CanId, Frame, Kind, Topic};
 
