@@ -539,6 +539,48 @@ fn fill_frame_sent(slot: &mut Slot, cycles: u32, at_us: u64, id: u16) {
     }
 }
 
+/// The events for a frame a publisher pushed into the transmit queue
+/// ([`TraceKind::for_push`](amiro_sensors::trace::TraceKind::for_push)'s one or two, stamped
+/// `at_us`): [`event`]'s records, with both slots reserved under one critical section and each
+/// event's fields stored straight into its slot, where two calls of [`event`] took two critical
+/// sections and copied each event from one built on the caller's stack (the copy's loads charged
+/// at a peripheral's latency, as [`frame_sent`] says). QEMU writes each through as [`event`] does.
+#[inline(never)]
+pub fn frame_pushed(at_us: u64, id: u16, outcome: &amiro_sensors::tx_queue::PushOutcome) {
+    let (first, second) = amiro_sensors::trace::TraceKind::push_kinds(id, outcome);
+    #[cfg(not(feature = "qemu"))]
+    {
+        let (reserved, reserved_second) = critical_section::with(|_| {
+            let first = reserve();
+            // The second's slot after the first's, so their stamps are in the slots' order.
+            (first, second.and_then(|_| reserve()))
+        });
+        if let Some((claim, cycles)) = reserved {
+            claim.fill(|slot| fill_kind(slot, cycles, at_us, first));
+        }
+        if let (Some((claim, cycles)), Some(second)) = (reserved_second, second) {
+            claim.fill(|slot| fill_kind(slot, cycles, at_us, second));
+        }
+    }
+    #[cfg(feature = "qemu")]
+    for kind in core::iter::once(first).chain(second) {
+        event(&TraceEvent::new(at_us, kind));
+    }
+}
+
+/// An event of `kind` at `at_us` in `slot`, stored in place ([`fill_frame_sent`]'s way).
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn fill_kind(slot: &mut Slot, cycles: u32, at_us: u64, kind: amiro_sensors::trace::TraceKind) {
+    slot.cycles = cycles;
+    let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
+    // SAFETY: as in [`event`]: the tag is written, and the event as a whole value.
+    unsafe {
+        (*what).tag = EVENT_TAG;
+        (*what).event = TraceEvent::new(at_us, kind);
+    }
+}
+
 /// A handler event for the drain to stamp ([`drain`], priority 0), for the handlers whose bound
 /// the analysis uses at the most urgent priority (`can_status`'s bus-state change): four words
 /// stored into a static under a short critical section, where [`event`]'s stamp, reservation and
