@@ -440,9 +440,7 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     let now = C::now_us();
     for verdict_frame in verdict {
         let pushed = tx_queue.lock(|q| enqueue(q, verdict_frame));
-        for kind in TraceKind::for_push(verdict_frame.id().raw(), &pushed) {
-            telemetry::trace(&TraceEvent::new(now, kind));
-        }
+        crate::tracing::frame_pushed(now, verdict_frame.id().raw(), &pushed);
     }
     cortex_m::peripheral::NVIC::pend(tx_interrupt);
     outcome

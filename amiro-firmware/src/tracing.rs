@@ -563,8 +563,11 @@ pub fn frame_pushed(at_us: u64, id: u16, outcome: &amiro_sensors::tx_queue::Push
         }
     }
     #[cfg(feature = "qemu")]
-    for kind in core::iter::once(first).chain(second) {
-        event(&TraceEvent::new(at_us, kind));
+    {
+        event(&TraceEvent::new(at_us, first));
+        if let Some(second) = second {
+            event(&TraceEvent::new(at_us, second));
+        }
     }
 }
 
