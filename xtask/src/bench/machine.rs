@@ -1481,6 +1481,27 @@ mod tests {
             "{}",
             declined.verdict
         );
+        // Either way the check fails on it: CI lets no job above its bound through without a bound that holds it.
+        let bench = crate::bench::Bench {
+            board: "t".into(),
+            origin: "t".into(),
+            build: "qemu".into(),
+            model: "t".into(),
+            clock_hz: 1,
+            records: 0,
+            damaged: 0,
+            lost: 0,
+            unbalanced: 0,
+            span_us: 0.0,
+            tasks: Vec::new(),
+            topics: Vec::new(),
+            machine_bounds: String::new(),
+            machine: vec![declined, far, near],
+            admitted: true,
+        };
+        let failed = bench.bound_failures();
+        assert_eq!(failed.len(), 2, "{failed:?}");
+        assert!(failed.iter().all(|f| f.starts_with("t/can_rx: ")));
         // A task that runs the release code is held to the release file whatever the image says.
         let release_code = rows_against(
             &bounds,
