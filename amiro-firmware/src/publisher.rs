@@ -15,7 +15,7 @@ use rtic_core::Mutex;
 use rtic_sync::channel::Receiver;
 
 use crate::mono::Clock;
-use crate::publisher_walk::{next_due, next_to_take, Ranks};
+use crate::publisher_walk::{next_due, take_next, Next, Ranks};
 use crate::{health, telemetry};
 
 /// What a board samples for a topic.
@@ -28,14 +28,6 @@ pub trait Sampler {
 impl<F: FnMut(Topic, u64) -> Samples> Sampler for F {
     fn sample(&mut self, topic: Topic, taken_us: u64) -> Samples {
         self(topic, taken_us)
-    }
-}
-
-// One copy for the four publisher tasks (they are generic over their locks).
-#[inline(never)]
-fn trace_push(at: u64, id: u16, outcome: &PushOutcome) {
-    for kind in TraceKind::for_push(id, outcome) {
-        telemetry::trace(&TraceEvent::new(at, kind));
     }
 }
 
@@ -57,8 +49,10 @@ pub async fn serve_level<C: Clock, const N: usize>(
     tx_interrupt: impl InterruptNumber,
 ) -> ! {
     let ranks = Ranks::of(levels);
+    // The first due time from a walk of its own; after that each from the walk that ended the
+    // last pass of releases (a command that changes the table meanwhile wakes the task).
+    let mut due = handler.lock(|h| next_due(h, ranks));
     loop {
-        let due = handler.lock(|h| next_due(h, ranks));
         match due {
             Some(due) => {
                 let _ = C::timeout_at_us(due, wake.recv()).await;
@@ -69,7 +63,7 @@ pub async fn serve_level<C: Clock, const N: usize>(
                 crate::tracing::resume(task);
             }
         }
-        serve_due::<C, N>(
+        due = serve_due::<C, N>(
             ranks,
             &mut handler,
             &mut tx_queue,
@@ -87,18 +81,19 @@ fn serve_due<C: Clock, const N: usize>(
     tx_queue: &mut impl Mutex<T = TxQueue<N>>,
     sampler: &mut impl Sampler,
     tx_interrupt: impl InterruptNumber,
-) {
+) -> Option<u64> {
     let now = C::now_us();
     // Take the due releases one at a time under the handler's lock (the first served level's
     // first, each level's earliest first, as `take_due_releases` orders them), each sampled after
     // releasing it: one pass of this loop is one release, which the execution-time analysis
     // charges as one job of its topic (docs/analysis.md, "One topic's job"). Each take makes its
-    // row not due at `now`, so the publisher table's size bounds the loop.
-    while let Some((release, period_us)) = handler.lock(|h| {
-        let (level, period_us) = next_to_take(h, ranks, now)?;
-        h.take_next_release(level, now)
-            .map(|release| (release, period_us))
-    }) {
+    // row not due at `now`, so the publisher table's size bounds the loop; the walk that takes
+    // none returns the due time the task parks on.
+    loop {
+        let (release, period_us) = match handler.lock(|h| take_next(h, ranks, now)) {
+            Next::Release(release, period_us) => (release, period_us),
+            Next::Park(due) => return due,
+        };
         let level = release.priority;
         note_release(now, level, &release);
         let topic = release.topic;
@@ -181,7 +176,7 @@ fn note_push(
     id: u16,
     outcome: &PushOutcome,
 ) {
-    trace_push(queued, id, outcome);
+    crate::tracing::frame_pushed(queued, id, outcome);
     if let Some(late_us) = late_by(queued, deadline) {
         health::count_late_frame(level);
         telemetry::trace(&TraceEvent::new(
@@ -231,6 +226,8 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
 ) -> ! {
     let ranks = Ranks::of(levels);
     let mut next: Option<(Release, u32, u64)> = None;
+    // The due time the last pass's walk found, when it took no release (`None`: walk for it).
+    let mut parked: Option<Option<u64>> = None;
     loop {
         let sampled = match next.take() {
             Some((release, period_us, taken)) => {
@@ -247,7 +244,11 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
                 Some((release, period_us, taken, samples))
             }
             None => {
-                match handler.lock(|h| next_due(h, ranks)) {
+                let due = match parked.take() {
+                    Some(due) => due,
+                    None => handler.lock(|h| next_due(h, ranks)),
+                };
+                match due {
                     Some(due) => {
                         let _ = C::timeout_at_us(due, wake.recv()).await;
                     }
@@ -276,11 +277,13 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
         }
         // The next release due now: the diagnostics' served here, a sensor's sampled at the top.
         let now = C::now_us();
-        let taken = handler.lock(|h| {
-            let (level, period_us) = next_to_take(h, ranks, now)?;
-            h.take_next_release(level, now)
-                .map(|release| (release, period_us))
-        });
+        let taken = match handler.lock(|h| take_next(h, ranks, now)) {
+            Next::Release(release, period_us) => Some((release, period_us)),
+            Next::Park(due) => {
+                parked = Some(due);
+                None
+            }
+        };
         if let Some((release, period_us)) = taken {
             note_release(now, release.priority, &release);
             let taken = C::now_us();

@@ -2,12 +2,13 @@
 //! `crate::publisher::serve_level`, apart from the task's locks and clock so they run on the host.
 //!
 //! A task serves the CAN priorities of its `levels` (DiWheelDrive and PowerManagement one per task,
-//! LightRing all four from one). Its earliest due time and its next release are each found in one
-//! walk of the table for all its levels, where one walk per level made the job's cost grow with the
-//! levels (the execution-time analysis charges every level's walk to every job; docs/analysis.md,
-//! "One topic's job").
+//! LightRing all four from one). Its next release is found and taken in one walk of the table for
+//! all its levels ([`take_next`]), and the walk that finds none due finds the earliest due time the
+//! task parks on: where one walk per level made the job's cost grow with the levels, and finding a
+//! release, taking it and finding the next due time were walks of their own (the execution-time
+//! analysis charges every walk to every job; docs/analysis.md, "One topic's job").
 use amiro_can::Priority;
-use amiro_sensors::handler::{SensorDataHandler, LEVELS};
+use amiro_sensors::handler::{Release, SensorDataHandler, LEVELS};
 
 /// Where each CAN priority comes in a publisher task's `levels` (its first place there), or
 /// [`Ranks::NOT_SERVED`]: taken once from the board's slice, so that finding the next due time or
@@ -63,30 +64,50 @@ pub fn next_due(handler: &SensorDataHandler, ranks: Ranks) -> Option<u64> {
     earliest
 }
 
-/// The next release to take at `now_us`: the level of the task's `levels` that comes first and has a
-/// row due, with that row's period (which its release keeps). Taking that level's next release
-/// ([`SensorDataHandler::take_next_release`]: its earliest due row, ties to the lower topic byte) until
-/// this finds none hands out the releases the levels' own loops would (`for level in levels`,
-/// take each level's until none), in their order, with one walk of the table to find the level.
-pub fn next_to_take(
-    handler: &SensorDataHandler,
-    ranks: Ranks,
-    now_us: u64,
-) -> Option<(Priority, u32)> {
+/// What [`take_next`] found in its walk of the publisher table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Next {
+    /// The release taken, with its row's period (which the release keeps).
+    Release(Release, u32),
+    /// Nothing of the task's levels was due: their earliest due time ([`next_due`]'s; `None` when
+    /// none of them has anything to do), which lies after the walk's `now_us`.
+    Park(Option<u64>),
+}
+
+/// Takes the next release due at `now_us` for a task of `ranks`, or says when to look again, in one
+/// walk of the table. The release is that of the level of the task's `levels` that comes first and
+/// has a row due, its earliest due row there (ties to the lower topic byte): taking releases until
+/// this parks hands out the releases the levels' own loops would (`for level in levels`, take each
+/// level's [`SensorDataHandler::take_next_release`] until none), in their order. The walk that
+/// finds nothing due finds the earliest due time as it goes, so the task parks on it without
+/// another walk ([`next_due`]); where the task found a level and then took that level's release,
+/// each was a walk of its own.
+pub fn take_next(handler: &mut SensorDataHandler, ranks: Ranks, now_us: u64) -> Next {
     let rows = handler.publishers();
-    // The best row so far: its (rank, due, topic byte), its level and its period.
-    let mut best: Option<((u8, u64, u8), Priority, u32)> = None;
+    // The best row due so far: its (rank, due, topic byte), its place and its period.
+    let mut best: Option<((u8, u64, u8), usize, u32)> = None;
+    let mut earliest: Option<u64> = None;
     let mut i = 0;
     while let Some(row) = rows.get(i) {
         if let (Some(rank), Some(due)) = (ranks.of_level(row.priority()), row.next_due_us()) {
-            let key = (rank, due, row.topic() as u8);
-            if due <= now_us && best.is_none_or(|(best_key, _, _)| key < best_key) {
-                best = Some((key, row.priority(), row.period_us()));
+            if due <= now_us {
+                let key = (rank, due, row.topic() as u8);
+                if best.is_none_or(|(best_key, _, _)| key < best_key) {
+                    best = Some((key, i, row.period_us()));
+                }
             }
+            earliest = Some(earliest.map_or(due, |e| e.min(due)));
         }
         i += 1;
     }
-    best.map(|(_, level, period_us)| (level, period_us))
+    let Some((_, row, period_us)) = best else {
+        return Next::Park(earliest);
+    };
+    match handler.take_release_of_row(row, now_us) {
+        Some(release) => Next::Release(release, period_us),
+        // Not taken: the walk found the row due, and nothing has changed the table since.
+        None => Next::Park(earliest),
+    }
 }
 
 #[cfg(test)]
@@ -96,7 +117,7 @@ mod tests {
     use amiro_can::{Board, CanId, Kind, Priority, TimeUnit, Topic};
     use amiro_sensors::handler::{Release, SensorDataHandler};
 
-    use super::{next_due, next_to_take, Ranks};
+    use super::{next_due, take_next, Next, Ranks};
 
     /// A random table of DiWheelDrive: each topic stopped, publishing at a random period and
     /// level, or a pending one-shot, set up at random times before `at`.
@@ -137,23 +158,47 @@ mod tests {
         out
     }
 
-    /// What it does now: the level from one walk, then that level's next release.
+    /// What it does now: one walk takes each release, and the walk that takes none parks on the
+    /// levels' earliest due time.
     fn one_walk(handler: &mut SensorDataHandler, levels: &[Priority], now: u64) -> Vec<Release> {
         let ranks = Ranks::of(levels);
         let mut out = Vec::new();
-        while let Some((level, period_us)) = next_to_take(handler, ranks, now) {
-            let release = handler
-                .take_next_release(level, now)
-                .expect("a level with a due row releases");
-            assert_eq!(release.priority, level);
-            assert_eq!(
-                handler.publisher(release.topic).map(|p| p.period_us()),
-                Some(period_us),
-                "the period handed out is the released row's"
-            );
-            out.push(release);
+        loop {
+            let before = handler.clone();
+            match take_next(handler, ranks, now) {
+                Next::Release(release, period_us) => {
+                    assert_eq!(
+                        handler.publisher(release.topic).map(|p| p.period_us()),
+                        Some(period_us),
+                        "the period handed out is the released row's"
+                    );
+                    assert_eq!(
+                        handler.counters().releases,
+                        before.counters().releases + 1,
+                        "the release is counted"
+                    );
+                    out.push(release);
+                }
+                Next::Park(due) => {
+                    assert_eq!(
+                        handler.publishers(),
+                        before.publishers(),
+                        "a park changes nothing"
+                    );
+                    assert_eq!(handler.counters(), before.counters());
+                    assert_eq!(
+                        due,
+                        next_due(handler, ranks),
+                        "it parks on the earliest due time"
+                    );
+                    assert!(
+                        due.is_none_or(|due| due > now),
+                        "nothing of the levels is due"
+                    );
+                    return out;
+                }
+            }
         }
-        out
     }
 
     const LEVEL_SETS: &[&[Priority]] = &[
@@ -173,7 +218,7 @@ mod tests {
     ];
 
     #[test]
-    fn one_walk_takes_the_releases_the_per_level_loops_took_in_their_order() {
+    fn one_walk_takes_the_releases_the_per_level_loops_take_in_their_order() {
         let mut seed = 0x2545_F491_4F6C_DD1Du64;
         let mut released = 0;
         for round in 0..400u64 {

@@ -62,7 +62,7 @@ pub fn transmit_pending<C: Clock, const N: usize>(port: &mut impl CanTx, queue: 
         // QEMU prints the frame itself as it enters the (virtual) mailbox: the event would say it
         // twice, at a cost the robot does not have.
         #[cfg(not(feature = "qemu"))]
-        telemetry::trace(&TraceEvent::new(C::now_us(), TraceKind::FrameSent { id }));
+        crate::tracing::frame_sent(C::now_us(), id);
         #[cfg(feature = "qemu")]
         let _ = id;
     });
@@ -440,9 +440,7 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     let now = C::now_us();
     for verdict_frame in verdict {
         let pushed = tx_queue.lock(|q| enqueue(q, verdict_frame));
-        for kind in TraceKind::for_push(verdict_frame.id().raw(), &pushed) {
-            telemetry::trace(&TraceEvent::new(now, kind));
-        }
+        crate::tracing::frame_pushed(now, verdict_frame.id().raw(), &pushed);
     }
     cortex_m::peripheral::NVIC::pend(tx_interrupt);
     outcome

@@ -594,10 +594,30 @@ impl SensorDataHandler {
             .filter(|slot| slot.is_due_at(level, now_us))
             .min_by_key(|slot| (slot.next_due_us, slot.topic as u8))?;
         let release = slot.release(now_us);
+        Some(self.count(release))
+    }
+
+    /// The release of row `index` of [`publishers`](Self::publishers) if that row is due at
+    /// `now_us` (running or a pending one-shot, its due time passed), taken and its next one
+    /// scheduled as [`take_next_release`](Self::take_next_release) takes it; `None` otherwise.
+    /// For a caller that chose the row in its own walk of the table (the publisher task's one walk
+    /// for all its levels, `amiro_firmware::publisher_walk::take_next`), so that choosing and taking
+    /// a release is one walk, not two.
+    pub fn take_release_of_row(&mut self, index: usize, now_us: u64) -> Option<Release> {
+        let slot = self
+            .publishers
+            .get_mut(index)
+            .filter(|slot| slot.is_due_at(slot.priority, now_us))?;
+        let release = slot.release(now_us);
+        Some(self.count(release))
+    }
+
+    /// Counts a release taken.
+    fn count(&mut self, release: Release) -> Release {
         self.counters.releases = self.counters.releases.saturating_add(1);
         self.counters.deadline_misses =
             self.counters.deadline_misses.saturating_add(release.missed);
-        Some(release)
+        release
     }
 
     fn release_due(&mut self, level: Priority, now_us: u64, mut out: impl FnMut(Release)) -> usize {

@@ -215,7 +215,15 @@ impl TraceKind {
     /// The kinds for what [`TxQueue::push`](crate::tx_queue::TxQueue::push) did with a frame
     /// with identifier `id`: one or two (queued, and another frame dropped to make room).
     pub fn for_push(id: u16, outcome: &PushOutcome) -> impl Iterator<Item = TraceKind> {
-        let (first, second) = match outcome {
+        let (first, second) = Self::push_kinds(id, outcome);
+        core::iter::once(first).chain(second)
+    }
+
+    /// [`for_push`](Self::for_push)'s kinds as a pair: the first, and the second where there is
+    /// one (for a writer that stores them without an iterator's state).
+    #[inline]
+    pub fn push_kinds(id: u16, outcome: &PushOutcome) -> (TraceKind, Option<TraceKind>) {
+        match outcome {
             PushOutcome::Queued => (TraceKind::FrameQueued { id }, None),
             PushOutcome::Replaced { .. } => (TraceKind::FrameReplaced { id }, None),
             PushOutcome::DroppedOther { dropped } => (
@@ -225,8 +233,7 @@ impl TraceKind {
                 }),
             ),
             PushOutcome::DroppedNew { .. } => (TraceKind::QueueOverflow { id }, None),
-        };
-        core::iter::once(first).chain(second)
+        }
     }
 
     /// The kind for a release that skipped earlier ones, if it did.

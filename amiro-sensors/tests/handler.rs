@@ -710,6 +710,40 @@ fn nothing_is_released_before_it_is_due() {
 }
 
 #[test]
+fn a_row_is_taken_by_its_place_only_when_due() {
+    let mut h = dwd();
+    h.on_frame(
+        1_000,
+        command_id(Priority::High, Topic::Gyroscope),
+        &publish(1, TimeUnit::Millis),
+    )
+    .unwrap();
+    let gyro = h
+        .publishers()
+        .iter()
+        .position(|p| p.topic() == Topic::Gyroscope)
+        .expect("DiWheelDrive publishes the gyroscope");
+    let stopped = (gyro + 1) % h.publishers().len();
+    let before = (snapshot(&h), *h.counters());
+    // Not yet due, a stopped row, a place past the table: nothing taken, nothing counted.
+    assert_eq!(h.take_release_of_row(gyro, 999), None);
+    assert_eq!(h.take_release_of_row(stopped, 5_000), None);
+    assert_eq!(h.take_release_of_row(MAX_PUBLISHERS, 5_000), None);
+    assert_eq!((snapshot(&h), *h.counters()), before);
+    // Due: the release take_next_release would hand out, counted, the next one scheduled.
+    let mut by_level = h.clone();
+    let taken = h.take_release_of_row(gyro, 2_500);
+    assert_eq!(taken, by_level.take_next_release(Priority::High, 2_500));
+    assert_eq!(
+        taken.map(|r| (r.topic, r.release_us, r.missed)),
+        Some((Topic::Gyroscope, 2_000, 1))
+    );
+    assert_eq!(snapshot(&h), snapshot(&by_level));
+    assert_eq!(h.counters(), by_level.counters());
+    assert_eq!(h.take_release_of_row(gyro, 2_500), None, "taken once");
+}
+
+#[test]
 fn stop_all_stops_publishers_and_pending_one_shots() {
     let mut h = dwd();
     h.on_frame(
