@@ -301,16 +301,16 @@ impl<R: Registers + Copy> CanTx for Mailboxes<R> {
         let [s0, s1, s2] = &self.shadow;
         let collected =
             u32::from(s0.is_none()) | u32::from(s1.is_none()) << 1 | u32::from(s2.is_none()) << 2;
-        // The identifier a pending mailbox holds (one whose completion is not collected holds none).
-        let held = |shadow: &Option<amiro_can::Frame>, i: u32| {
-            shadow
-                .as_ref()
-                .filter(|_| empty & (1 << i) == 0)
-                .map(|held| held.id().raw())
+        // A pending mailbox's identifier plus one, 0 for one that is empty or holds no frame (one
+        // whose completion is not collected holds none): plain words, so the checks below are
+        // compares, not matches on options.
+        let held = |shadow: &Option<amiro_can::Frame>, i: u32| match shadow {
+            Some(held) if empty & (1 << i) == 0 => u32::from(held.id().raw()) + 1,
+            _ => 0,
         };
         let (h0, h1, h2) = (held(s0, 0), held(s1, 1), held(s2, 2));
-        let id = frame.id().raw();
-        if h0 == Some(id) || h1 == Some(id) || h2 == Some(id) {
+        let key = u32::from(frame.id().raw()) + 1;
+        if h0 == key || h1 == key || h2 == key {
             return Transmit::Busy;
         }
         let free = empty & collected;
@@ -345,16 +345,18 @@ impl<R: Registers + Copy> CanTx for Mailboxes<R> {
         // is not 0 here, as no mailbox is free): that completion pends the interrupt, whose next
         // job frees the mailbox, so no frame asks for a second abort behind one that ended unseen
         // (docs/analysis.md, "Refinements examined").
-        let later = |best: Option<(usize, u16)>, i: usize, held: Option<u16>| match (best, held) {
-            (Some((_, most)), Some(id)) if id < most => best,
-            (_, Some(id)) => Some((i, id)),
-            (_, None) => best,
+        // Two compares, no loop: the greatest held key, the later mailbox among equals (a key of 0,
+        // no frame pending, is below every frame's).
+        let (i, least) = if h2 >= h1 && h2 >= h0 {
+            (2, h2)
+        } else if h1 >= h0 {
+            (1, h1)
+        } else {
+            (0, h0)
         };
-        if let Some((i, least)) = later(later(later(None, 0, h0), 1, h1), 2, h2) {
-            if id < least && tsr & bit::abrq(i) == 0 && empty == 0 {
-                // Setting ABRQ; the other TSR bits are write-1-to-clear flags, written as 0.
-                regs.write(reg::TSR, bit::abrq(i));
-            }
+        if key < least && tsr & bit::abrq(i) == 0 && empty == 0 {
+            // Setting ABRQ; the other TSR bits are write-1-to-clear flags, written as 0.
+            regs.write(reg::TSR, bit::abrq(i));
         }
         Transmit::Busy
     }
@@ -362,15 +364,23 @@ impl<R: Registers + Copy> CanTx for Mailboxes<R> {
     fn completed(&mut self, on_completion: &mut dyn FnMut(Completion)) {
         let regs = self.regs;
         let tsr = regs.read(reg::TSR);
+        // One write clears the completion flags (RQCP, and with it TXOK, ALST, TERR) of every
+        // mailbox whose completion this read found, and only those (a completion after the read
+        // stays set, its interrupt pending); ABRQ and the read-only bits are written as 0. The
+        // flags read stay in `tsr` for the scan, which only reads the shadows.
+        regs.write(reg::TSR, tsr & (bit::rqcp(0) | bit::rqcp(1) | bit::rqcp(2)));
         for i in 0..3 {
             if tsr & bit::rqcp(i) == 0 {
                 continue;
             }
-            // Writing RQCP clears that mailbox's completion flags (TXOK, ALST, TERR).
-            regs.write(reg::TSR, bit::rqcp(i));
-            let Some(frame) = self.shadow.get_mut(i).and_then(Option::take) else {
+            // A completion with no frame in the shadow (none was handed over) writes nothing.
+            let Some(shadow) = self.shadow.get_mut(i) else {
                 continue;
             };
+            let Some(frame) = *shadow else {
+                continue;
+            };
+            *shadow = None;
             // With automatic retransmission on, a completion without TXOK is an abort.
             if tsr & bit::txok(i) != 0 {
                 on_completion(Completion::Sent(frame));

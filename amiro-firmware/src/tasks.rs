@@ -62,7 +62,7 @@ pub fn transmit_pending<C: Clock, const N: usize>(port: &mut impl CanTx, queue: 
         // QEMU prints the frame itself as it enters the (virtual) mailbox: the event would say it
         // twice, at a cost the robot does not have.
         #[cfg(not(feature = "qemu"))]
-        telemetry::trace(&TraceEvent::new(C::now_us(), TraceKind::FrameSent { id }));
+        crate::tracing::frame_sent(C::now_us(), id);
         #[cfg(feature = "qemu")]
         let _ = id;
     });

@@ -486,16 +486,7 @@ pub fn event(event: &TraceEvent) {
     {
         let reserved = critical_section::with(|_| reserve());
         if let Some((claim, cycles)) = reserved {
-            claim.fill(|slot| {
-                slot.cycles = cycles;
-                let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
-                // SAFETY: `what` is the slot's `What`, laid out as `EventWhat` once its tag says
-                // `Event` (`repr(u8)`): the tag is written and the event copied whole.
-                unsafe {
-                    (*what).tag = EVENT_TAG;
-                    copy_event(event, &mut (*what).event);
-                }
-            });
+            claim.fill(|slot| fill_event(slot, cycles, event));
         }
     }
     // QEMU: encoded before the critical section, as the robot's drain does outside it.
@@ -503,6 +494,49 @@ pub fn event(event: &TraceEvent) {
     emit(What::Kind(Kind::Event {
         record: event.encode(),
     }));
+}
+
+/// [`event`]'s record in `slot`.
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn fill_event(slot: &mut Slot, cycles: u32, event: &TraceEvent) {
+    slot.cycles = cycles;
+    let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
+    // SAFETY: `what` is the slot's `What`, laid out as `EventWhat` once its tag says `Event`
+    // (`repr(u8)`): the tag is written and the event copied whole.
+    unsafe {
+        (*what).tag = EVENT_TAG;
+        copy_event(event, &mut (*what).event);
+    }
+}
+
+/// The transmit interrupt's event for a frame put into a mailbox (`TraceKind::FrameSent`): the
+/// record [`event`] writes for it, with the event's fields stored straight into the slot, where
+/// [`event`] copies a whole event built on the caller's stack (six words loaded through a pointer
+/// the execution-time bound cannot place, so charged at a peripheral's latency, on every frame the
+/// interrupt sends; docs/analysis.md, "The transmit interrupt's parts"). The slot's other bytes
+/// are the event's padding for that kind, which the drain's encoding never reads. QEMU prints the
+/// frame itself as it enters the (virtual) mailbox, so its build has no such event.
+#[cfg(not(feature = "qemu"))]
+#[inline(never)]
+pub fn frame_sent(at_us: u64, id: u16) {
+    let reserved = critical_section::with(|_| reserve());
+    if let Some((claim, cycles)) = reserved {
+        claim.fill(|slot| fill_frame_sent(slot, cycles, at_us, id));
+    }
+}
+
+/// [`frame_sent`]'s record in `slot`.
+#[cfg(not(feature = "qemu"))]
+#[inline(always)]
+fn fill_frame_sent(slot: &mut Slot, cycles: u32, at_us: u64, id: u16) {
+    slot.cycles = cycles;
+    let what = core::ptr::from_mut(&mut slot.what).cast::<EventWhat>();
+    // SAFETY: as in [`event`]: the tag is written, and the event as a whole value.
+    unsafe {
+        (*what).tag = EVENT_TAG;
+        (*what).event = TraceEvent::new(at_us, amiro_sensors::trace::TraceKind::FrameSent { id });
+    }
 }
 
 /// A handler event for the drain to stamp ([`drain`], priority 0), for the handlers whose bound

@@ -425,3 +425,42 @@ fn error_monitor_counts_passive_and_bus_off_episodes() {
     let change = monitor.poll().unwrap();
     assert_eq!((change.to, change.rec), (BusState::Passive, 200));
 }
+
+#[test]
+fn one_collection_clears_every_completion_it_found_and_no_abort_request() {
+    let can = configured();
+    let mut tx = Mailboxes::new(&can);
+    for id in [0x630u16, 0x640, 0x620] {
+        tx.transmit(&frame(id, &[4]));
+    }
+    // The least urgent (0x640) asked to abort for a more urgent frame, still pending; then the
+    // other two are sent.
+    assert_eq!(tx.transmit(&frame(0x508, &[9])), Transmit::Busy);
+    assert!(abort_requested(&can, 1));
+    assert_eq!(bus_sends_one(&can).map(|(id, _)| id), Some(0x620));
+    assert_eq!(bus_sends_one(&can).map(|(id, _)| id), Some(0x630));
+    // The driver clears both completions with one write and reports them in mailbox order; the
+    // abort request of the pending mailbox is not a flag it clears.
+    assert_eq!(
+        drain_completions(&mut tx),
+        vec![
+            Completion::Sent(frame(0x630, &[4])),
+            Completion::Sent(frame(0x620, &[4]))
+        ]
+    );
+    let tsr = can.borrow().read(0x008);
+    let rqcp = (1 << 0) | (1 << 8) | (1 << 16);
+    assert_eq!(tsr & rqcp, 0, "every completion found is cleared");
+    assert!(abort_requested(&can, 1), "the abort stays under way");
+    assert!(
+        drain_completions(&mut tx).is_empty(),
+        "nothing reported twice"
+    );
+    // The abort ends: the next collection hands the frame back.
+    assert!(can.borrow_mut().abort(1));
+    assert_eq!(
+        drain_completions(&mut tx),
+        vec![Completion::Aborted(frame(0x640, &[4]))]
+    );
+    assert_eq!(can.borrow().ignored_writes(), 0);
+}

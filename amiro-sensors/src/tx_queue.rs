@@ -16,11 +16,11 @@
 //! last. An entry packs the frame's identifier (the sort key, in its top bits, so entries compare as
 //! plain words), the index byte that tells a multi-frame topic's frames apart, and the slot number.
 //! So `pop` in the transmit interrupt is O(1); `push` and `requeue` find the frame's place by one
-//! binary search over the entries (at most `log2 N + 1` word loads and compares, no frame read),
-//! look for an older sample only among the frames of the same identifier (one entry for a topic of
-//! one frame per sample; a requeue walks those frames to their end, which is its place), and move
-//! at most `N - 1` entries by one place, each carried through a register (one load and one store),
-//! never a frame.
+//! binary search over the entries (at most `log2 N + 1` word loads and compares, straight-line
+//! code, no frame read), look for another sample of its topic only among the frames of the same
+//! identifier (one entry for a topic of one frame per sample, none for a command; a push from where
+//! those frames start, a requeue back from its place, where they end), and move at most `N - 1`
+//! entries by one place, each carried through a register (one load and one store), never a frame.
 
 use amiro_can::{CanId, Frame, Kind, Topic};
 
@@ -149,6 +149,7 @@ fn key_floor(raw: u16) -> u32 {
 }
 
 /// The index tag of a frame: its first data byte, if it has one (bits 8–16 of an entry).
+#[inline(always)]
 fn tag(frame: &Frame) -> u32 {
     frame
         .data()
@@ -156,61 +157,84 @@ fn tag(frame: &Frame) -> u32 {
         .map_or(0, |&byte| (0x100 | u32::from(byte)) << TAG_SHIFT)
 }
 
-/// The entry of `frame` in slot `slot`.
-fn entry(frame: &Frame, slot: u32) -> u32 {
-    key_floor(frame.id().raw()) | tag(frame) | (slot & SLOT_MASK)
-}
-
 /// The slot number of an entry.
 fn slot_of(entry: u32) -> usize {
     (entry & SLOT_MASK) as usize
 }
 
-/// How many of `entries` (in descending order) are at least `floor`: the length of the prefix that
-/// is. Binary lifting over the positions, from the largest power of two at most `entries.len()`
-/// down to 1: one word load and compare per step, `log2 len + 1` steps (5 for 16 frames). One
-/// function for every queue and every caller, so the execution-time bound finds its loop under one
-/// name (the bounds files' `count_at_least` entries).
-#[inline(never)]
-fn count_at_least(entries: &[u32], floor: u32) -> usize {
-    let len = entries.len();
-    if len == 0 {
-        return 0;
-    }
-    let mut step = 1usize << (usize::BITS - 1 - len.leading_zeros());
+/// How many of `entries` (in descending order, at most `N` of them) are at least `floor`: the
+/// length of the prefix that is. Binary lifting over the positions, from the largest power of two
+/// at most `N` down to 1: one word load and compare per step, `log2 N + 1` steps (5 for 16 frames,
+/// 4 for 8), written out as straight-line code: the steps larger than `N` are constants the
+/// compiler drops, and no loop is left for the transmit interrupt's bound to charge a taken branch,
+/// a pipeline refill and a flash line per step (and a bounds-file entry to state). `N` is at most
+/// 256 ([`TxQueue`]).
+#[inline(always)]
+fn count_at_least<const N: usize>(entries: &[u32], floor: u32) -> usize {
     let mut count = 0;
-    while step > 0 {
-        let next = count + step;
-        if entries
-            .get(next.wrapping_sub(1))
-            .is_some_and(|&e| e >= floor)
-        {
-            count = next;
-        }
-        step >>= 1;
+    // One step: take `STEP` more if the last of them is still at least `floor`.
+    macro_rules! step {
+        ($step:literal) => {
+            if $step <= N
+                && entries
+                    .get(count + ($step - 1))
+                    .is_some_and(|&e| e >= floor)
+            {
+                count += $step;
+            }
+        };
     }
+    step!(256);
+    step!(128);
+    step!(64);
+    step!(32);
+    step!(16);
+    step!(8);
+    step!(4);
+    step!(2);
+    step!(1);
     count
 }
 
 /// The bits of an entry that say which frame of which identifier it is (all but the slot number).
 const SAMPLE_MASK: u32 = !SLOT_MASK;
 
+/// The bits of an entry that say which identifier its frame has (its sort key, [`key_floor`]).
+const ID_MASK: u32 = !(TAG_MASK | SLOT_MASK);
+
 /// Where among `entries`, from their start as far as the first with another identifier than
-/// `key`'s, the entry of the frame `sample` (identifier and tag bits) is: `Ok` with its position,
-/// or `Err` with how many entries from the start have `key`'s identifier (none is the frame; a
-/// `sample` of 0 matches no queued entry, so it only counts them). One compare for the frame and
-/// one for the end of the identifier's frames per entry.
+/// `key`'s, the entry of the frame `sample` (identifier and tag bits) is, if it is there: a push's
+/// search for an older sample among the frames of its identifier, which start at `entries`' start.
+/// One compare for the frame and one for the end of the identifier's frames per entry.
 #[inline(never)]
-fn position_of_sample(entries: &[u32], key: u32, sample: u32) -> Result<usize, usize> {
+fn position_of_sample(entries: &[u32], key: u32, sample: u32) -> Option<usize> {
     for (at, &queued) in entries.iter().enumerate() {
         if queued & SAMPLE_MASK == sample {
-            return Ok(at);
+            return Some(at);
         }
-        if queued & !(TAG_MASK | SLOT_MASK) != key {
-            return Err(at);
+        if queued & ID_MASK != key {
+            return None;
         }
     }
-    Err(entries.len())
+    None
+}
+
+/// Whether the frame `sample` (identifier and tag bits) is among `entries`, from their end back as
+/// far as the first with another identifier: a requeue's search for a newer sample among the
+/// frames of its identifier, which end at `entries`' end (they leave after it). The same two
+/// compares per entry as [`position_of_sample`], the other way.
+#[inline(never)]
+fn holds_sample_at_end(entries: &[u32], sample: u32) -> bool {
+    let key = sample & ID_MASK;
+    for &queued in entries.iter().rev() {
+        if queued & SAMPLE_MASK == sample {
+            return true;
+        }
+        if queued & ID_MASK != key {
+            return false;
+        }
+    }
+    false
 }
 
 /// Moves every entry of `entries` one place up (towards the end) and puts `new` first: the last
@@ -246,8 +270,9 @@ enum Replaces {
     /// is queued: a second sample always replaced the first).
     SameId,
     /// A sensor topic whose sample spans several frames: the one with the same first data byte
-    /// (the frame's index, such as the proximity ring's sensor number), as an entry's tag bits.
-    SameIndex(u32),
+    /// (the frame's index, such as the proximity ring's sensor number): the same entry bits but for
+    /// the slot number.
+    SameIndex,
 }
 
 /// The topic bytes (bit `b` for byte `b`; every topic's byte is below 32) of the topics whose sample
@@ -268,6 +293,7 @@ const MULTI_FRAME_TOPICS: u32 = {
 };
 
 impl Replaces {
+    #[inline(always)]
     fn of(newer: &Frame) -> Replaces {
         let id = newer.id();
         if id.kind() != Kind::Sensor {
@@ -277,7 +303,7 @@ impl Replaces {
             .checked_shr(u32::from(id.topic_byte()))
             .is_some_and(|bits| bits & 1 != 0);
         if multi_frame {
-            Replaces::SameIndex(tag(newer))
+            Replaces::SameIndex
         } else {
             Replaces::SameId
         }
@@ -324,66 +350,44 @@ impl<const N: usize> TxQueue<N> {
         self.entries.get(..self.len).unwrap_or(&[])
     }
 
-    /// Queues a new frame under the overload policy of this module.
-    pub fn push(&mut self, frame: Frame) -> PushOutcome {
-        self.add(frame, false)
-    }
-
-    /// [`Self::push`] (`requeue` false) and [`Self::requeue`] in one body (the boards' flash is
-    /// tight): the frames with a greater identifier end at `above` (they leave after it, one binary
-    /// search), the ones with its identifier follow, newest first, for `run` entries. An older
-    /// sample is looked for among those (one entry for a topic of one frame per sample, none for a
-    /// command); a push replaces it, a requeue is discarded for it. Otherwise a push goes in front
-    /// of (below) its equals, a requeue behind them, at `above + run`: the walk that looks for the
-    /// older sample counts `run` on the way (a requeued command walks them for it alone), where a
-    /// second binary search cost the transmit interrupt's requeue more than the walk.
+    /// Queues a new frame under the overload policy of this module: the frames with a greater
+    /// identifier end at `above` (one binary search) and leave after it, the ones with its identifier
+    /// follow, newest first. An older sample is looked for among those (one entry for a topic of one
+    /// frame per sample, none for a command) and replaced; otherwise the frame goes in front of
+    /// (below) its equals, at `above`.
     #[inline(never)]
-    fn add(&mut self, frame: Frame, requeue: bool) -> PushOutcome {
-        let counter = if requeue {
-            &mut self.counters.requeued
-        } else {
-            &mut self.counters.pushed
-        };
-        *counter = counter.saturating_add(1);
-        let raw = frame.id().raw();
-        let key = key_floor(raw);
-        let above = count_at_least(self.queued(), key + (1 << KEY_SHIFT));
+    pub fn push(&mut self, frame: Frame) -> PushOutcome {
+        self.counters.pushed = self.counters.pushed.saturating_add(1);
+        let key = key_floor(frame.id().raw());
+        let sample = key | tag(&frame);
+        let above = count_at_least::<N>(self.queued(), key + (1 << KEY_SHIFT));
         let from_above = self.queued().get(above..).unwrap_or(&[]);
         let older = match Replaces::of(&frame) {
-            // A push needs no count of its equals: it goes in front of them.
-            Replaces::Nothing if !requeue => Err(0),
-            Replaces::Nothing => position_of_sample(from_above, key, 0),
+            Replaces::Nothing => None,
             // At most one is queued: the first after `above`, if it has the identifier.
-            Replaces::SameId => match from_above.first() {
-                Some(&queued) if queued & !(TAG_MASK | SLOT_MASK) == key => Ok(0),
-                _ => Err(0),
-            },
-            Replaces::SameIndex(tag) => position_of_sample(from_above, key, key | tag),
+            Replaces::SameId => from_above
+                .first()
+                .filter(|&&queued| queued & ID_MASK == key)
+                .map(|_| 0),
+            Replaces::SameIndex => position_of_sample(from_above, key, sample),
         };
         match older {
-            Ok(_) if requeue => {
-                // A newer sample is already queued: the requeued frame is the one discarded.
-                self.counters.replaced = self.counters.replaced.saturating_add(1);
-                PushOutcome::Replaced { older: frame }
-            }
-            Ok(found) => self.replace_at(above + found, frame),
-            // It leaves before every frame of its identifier: a full queue's last frame leaves
-            // after it if its identifier is at least as great.
-            Err(run) if requeue => self.insert_or_drop(above + run, frame, raw),
-            // A full queue's last frame leaves after it only with a greater identifier.
-            Err(_) => self.insert_or_drop(above, frame, raw.saturating_add(1)),
+            Some(found) => self.replace_at(above + found, frame, sample),
+            // A full queue's last frame (at 0) leaves after it only with a greater identifier,
+            // that is when `above` counted it.
+            None => self.insert_or_drop(above, frame, sample, above > 0),
         }
     }
 
     /// Puts `frame` in the place of the queued frame at `at`, an older sample of it.
-    fn replace_at(&mut self, at: usize, frame: Frame) -> PushOutcome {
+    fn replace_at(&mut self, at: usize, frame: Frame, sample: u32) -> PushOutcome {
         let Some(queued) = self.entries.get_mut(at) else {
             // Unreachable: `at` was read. Report it as a drop rather than queue a second sample.
             self.counters.dropped = self.counters.dropped.saturating_add(1);
             return PushOutcome::DroppedNew { dropped: frame };
         };
         let slot = *queued & SLOT_MASK;
-        *queued = entry(&frame, slot);
+        *queued = sample | slot;
         let Some(place) = self.slots.get_mut(slot as usize) else {
             // Unreachable: a slot number is below N.
             self.counters.dropped = self.counters.dropped.saturating_add(1);
@@ -396,12 +400,32 @@ impl<const N: usize> TxQueue<N> {
 
     /// Puts back a frame that a more urgent one displaced from a transmit mailbox (bxcan hands it
     /// back from `transmit`). It was queued before anything now waiting with its identifier, so it
-    /// goes ahead of those; if a newer sample of its topic is already queued, it is discarded
-    /// instead (counted as replaced). Not inlined: the transmit interrupt's bound charges it per
-    /// aborted frame by its name (the bounds files' `per_frame` `requeue`).
+    /// goes ahead of those, at `at`: one binary search counts the frames with its identifier or a
+    /// greater one, which leave after it. If a newer sample of its topic is already queued (among
+    /// the last of those), it is discarded instead (counted as replaced). Its own body, not
+    /// [`Self::push`]'s: a requeue needs neither `push`'s second bound (where its equals start)
+    /// nor a count of its equals, and the transmit interrupt's bound charges it per aborted frame
+    /// by its name (the bounds files' `per_frame` `requeue`), so it is not inlined.
     #[inline(never)]
     pub fn requeue(&mut self, frame: Frame) -> PushOutcome {
-        self.add(frame, true)
+        self.counters.requeued = self.counters.requeued.saturating_add(1);
+        let key = key_floor(frame.id().raw());
+        let sample = key | tag(&frame);
+        let at = count_at_least::<N>(self.queued(), key);
+        let after = self.queued().get(..at).unwrap_or(&[]);
+        let newer = match Replaces::of(&frame) {
+            Replaces::Nothing => false,
+            // At most one is queued: the last before `at`, if it has the identifier.
+            Replaces::SameId => after.last().is_some_and(|&queued| queued & ID_MASK == key),
+            Replaces::SameIndex => holds_sample_at_end(after, sample),
+        };
+        if newer {
+            self.counters.replaced = self.counters.replaced.saturating_add(1);
+            return PushOutcome::Replaced { older: frame };
+        }
+        // A full queue's last frame (at 0) leaves after it if its identifier is at least as
+        // great, that is when `at` counted it.
+        self.insert_or_drop(at, frame, sample, at > 0)
     }
 
     /// The frame at `at` in the leaving order (0 leaves last), if queued.
@@ -413,11 +437,12 @@ impl<const N: usize> TxQueue<N> {
         self.slots.get(slot_of(*entry))
     }
 
-    /// Inserts `frame` at `at` of the entries (`at` queued frames leave after it); when full,
+    /// Inserts `frame` (its entry's bits but the slot number: `sample`) at `at` of the entries (`at` queued frames leave after it); when full,
     /// drops whichever of it and the frame that would leave last goes last (the one leaving last
-    /// is evicted when its identifier is at least `evict_from`). The entries between move by one place ([`carry_up`],
+    /// is evicted when `evict`: the caller's count of the frames leaving after it included it,
+    /// so no frame is read for it). The entries between move by one place ([`carry_up`],
     /// [`carry_down`]), only one way per call: at most `N - 1` of them.
-    fn insert_or_drop(&mut self, at: usize, frame: Frame, evict_from: u16) -> PushOutcome {
+    fn insert_or_drop(&mut self, at: usize, frame: Frame, sample: u32, evict: bool) -> PushOutcome {
         if self.len < N {
             // The first free slot takes the frame, and the entries from `at` move up by one onto
             // the free entry at `len` (`at` <= len: it counted queued frames).
@@ -428,7 +453,7 @@ impl<const N: usize> TxQueue<N> {
                 self.counters.dropped = self.counters.dropped.saturating_add(1);
                 return PushOutcome::DroppedNew { dropped: frame };
             };
-            carry_up(moving, entry(&frame, free));
+            carry_up(moving, sample | (free & SLOT_MASK));
             if let Some(slot) = self.slots.get_mut(slot_of(free)) {
                 *slot = frame;
             }
@@ -436,11 +461,7 @@ impl<const N: usize> TxQueue<N> {
             self.note_high_water();
             return PushOutcome::Queued;
         }
-        let evict = match self.at(0) {
-            Some(last_in_line) => last_in_line.id().raw() >= evict_from,
-            // Only with N = 0: nowhere to put anything.
-            None => false,
-        };
+        // With N = 0 nothing is queued, so `at` is 0 and nothing is evicted: nowhere to put it.
         if !evict {
             self.counters.dropped = self.counters.dropped.saturating_add(1);
             return PushOutcome::DroppedNew { dropped: frame };
@@ -454,7 +475,7 @@ impl<const N: usize> TxQueue<N> {
             self.counters.dropped = self.counters.dropped.saturating_add(1);
             return PushOutcome::DroppedNew { dropped: frame };
         };
-        carry_down(moving, entry(&frame, last));
+        carry_down(moving, sample | (last & SLOT_MASK));
         let Some(slot) = self.slots.get_mut(slot_of(last)) else {
             // Unreachable: a slot number is below N.
             self.counters.dropped = self.counters.dropped.saturating_add(1);
@@ -462,7 +483,7 @@ impl<const N: usize> TxQueue<N> {
         };
         let dropped = core::mem::replace(slot, frame);
         self.counters.dropped = self.counters.dropped.saturating_add(1);
-        self.note_high_water();
+        // No high-water mark to note: the queue was full before, so it is already `N`.
         PushOutcome::DroppedOther { dropped }
     }
 
@@ -565,6 +586,33 @@ mod tests {
             MULTI_FRAME_TOPICS, 0,
             "the proximity ring spans several frames"
         );
+    }
+
+    /// The straight-line search against a count, for every capacity's steps (0, 1, powers of two
+    /// and between) and every prefix length and floor of descending entries.
+    #[test]
+    fn the_unrolled_search_counts_the_entries_at_least_the_floor() {
+        fn check<const N: usize>() {
+            let entries: Vec<u32> = (0..N as u32).rev().map(|i| 2 * i + 10).collect();
+            for len in 0..=N {
+                let queued = &entries[..len];
+                for floor in 0..=(2 * N as u32 + 12) {
+                    let counted = queued.iter().filter(|&&e| e >= floor).count();
+                    assert_eq!(
+                        count_at_least::<N>(queued, floor),
+                        counted,
+                        "N {N} len {len} floor {floor}"
+                    );
+                }
+            }
+        }
+        check::<0>();
+        check::<1>();
+        check::<3>();
+        check::<8>();
+        check::<16>();
+        check::<17>();
+        check::<256>();
     }
 
     #[test]
