@@ -1128,7 +1128,9 @@ impl OwnedRobot {
             });
             let cost = CheckCost {
                 publishers: streams.len(),
-                tasks: b.tasks.len() + 2 * b.topics.len(),
+                tasks: b.tasks.len()
+                    + 2 * b.topics.len()
+                    + b.topics.iter().filter(|t| t.transmit > 0).count(),
                 iterations_per_analysis: plain.iterations,
                 iterations_with_search: searched.iterations,
                 analyses_with_search: searched.evaluations,
