@@ -1,5 +1,5 @@
-//! One board's part of the check: its jobs (the fixed tasks of the table, and per stream it sends its publisher job,
-//! its timer job and, where the transmit interrupt is charged by its parts, its transmit job) built into byte-indexed fixed-capacity arrays, their SRP blockings from the table, then
+//! One board's part of the check: its jobs (the table's fixed tasks; per stream it sends its publisher, timer and, by
+//! parts, transmit job) in byte-indexed fixed-capacity arrays, their SRP blockings from the table, then
 //! [`board_analysis::analyse`] and what the rest of the check reads of it (a [`Summary`]).
 
 use super::*;
