@@ -50,6 +50,8 @@ pub struct OwnedTopic {
     pub sections: Vec<TopicSection>,
     /// The scripts one sample runs, in order.
     pub scripts: Vec<ScriptRow>,
+    /// The transmit interrupt's job per sample, with overheads (0: none; [`TopicRow::transmit`]).
+    pub transmit: RowTime,
 }
 
 /// One board's table, owned.
@@ -209,6 +211,7 @@ fn build_with(
     timing_paths: &[PathBuf],
     label: &str,
     publishers: &[(String, &str)],
+    held: scenario::Held<'_>,
 ) -> Result<Model, BuildError> {
     // Unique per call: two lowerings in one process (threads of a test run) must not share the file.
     static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
@@ -228,7 +231,7 @@ fn build_with(
         path: String::new(),
         problem: e.to_string(),
     })?;
-    let built = scenario::build(root, &path, timing_paths);
+    let built = scenario::build_held(root, &path, timing_paths, held);
     let _ = std::fs::remove_file(&path);
     Ok(built?.model)
 }
@@ -268,12 +271,31 @@ pub fn lower(
     bitrate: u32,
     frame_cost: FrameCostSpec,
 ) -> Result<OwnedRobot, BuildError> {
+    lower_held(
+        root,
+        timing_paths,
+        bitrate,
+        frame_cost,
+        scenario::Held::Kept,
+    )
+}
+
+/// [`lower`] from the model [`scenario::build_held`] builds with `held`: the table of a model that uses bounds the
+/// bounds files hold back (what the boards would carry were those bounds used), for the tests that compare the
+/// check with the report on it.
+pub fn lower_held(
+    root: &Path,
+    timing_paths: &[PathBuf],
+    bitrate: u32,
+    frame_cost: FrameCostSpec,
+    held: scenario::Held<'_>,
+) -> Result<OwnedRobot, BuildError> {
     let mut timings = Vec::new();
     for path in timing_paths {
         let timing = read_timing(root, path)?;
         timings.push(timing);
     }
-    let base = build_with(root, timing_paths, "base", &[])?;
+    let base = build_with(root, timing_paths, "base", &[], held)?;
     let mut boards = Vec::new();
     for ((timing, board), path) in timings.iter().zip(&base.boards).zip(timing_paths) {
         let file = relative(root, path);
@@ -282,7 +304,7 @@ pub fn lower(
         sections.extend(lowering.idle_rows()?);
         let buses = lowering.bus_rows()?;
         let task_scripts = lowering.task_script_rows()?;
-        let publishers = lowering.publisher_rows(root, timing_paths)?;
+        let publishers = lowering.publisher_rows(root, timing_paths, held)?;
         // Every priority a job of the board can have: its tasks', its publisher levels' and its monotonic's.
         let highest = tasks
             .iter()
@@ -592,6 +614,7 @@ impl<'a> Lowering<'a> {
         &self,
         root: &Path,
         timing_paths: &[PathBuf],
+        held: scenario::Held<'_>,
     ) -> Result<PublisherRows, BuildError> {
         let timing = self.timing;
         let owned = self.publishable();
@@ -616,6 +639,7 @@ impl<'a> Lowering<'a> {
                 timing_paths,
                 &format!("{}-{}", timing.board, level.name()),
                 &wanted,
+                held,
             )?;
             let Some(b) = model.boards.iter().find(|b| b.name == timing.board) else {
                 continue;
@@ -632,7 +656,9 @@ impl<'a> Lowering<'a> {
                     );
                 }
                 if !out.topics.iter().any(|t| t.name == info.name) {
-                    out.topics.push(self.topic_row(info, job)?);
+                    let mut row = self.topic_row(info, job)?;
+                    row.transmit = self.transmit_cost(&b.tasks, job)?;
+                    out.topics.push(row);
                 }
                 if let Some(timer) = b
                     .tasks
@@ -644,6 +670,46 @@ impl<'a> Lowering<'a> {
             }
         }
         Ok(out)
+    }
+
+    /// The cost of the transmit interrupt's job that publisher job `job` releases (the report's
+    /// `<can_tx>[<topic>]`, built where the transmit interrupt is charged by its parts), with the hardware-task
+    /// overheads; 0 where the report builds none. The check builds that job at the transmit task's priority, at the
+    /// publisher's period with that as its deadline, released by the publisher job with
+    /// [`crate::can::transmit_abort_latency`] as its own jitter: a row the report builds otherwise fails here.
+    fn transmit_cost(&self, tasks: &[TaskModel], job: &TaskModel) -> Result<RowTime, BuildError> {
+        let Some(tx_name) = self.timing.can_tx_task.as_deref() else {
+            return Ok(0);
+        };
+        let Some(topic) = job.name.split_once('[').map(|(_, rest)| rest) else {
+            return Ok(0);
+        };
+        let name = format!("{tx_name}[{topic}");
+        let Some(row) = tasks.iter().find(|t| t.name == name) else {
+            return Ok(0);
+        };
+        let field = format!("tasks.{name}");
+        let tx = self.board.tasks.iter().find(|t| t.name == tx_name);
+        let bit = can::bit_time(can::DEFAULT_BITRATE);
+        let as_built = row.released_by.as_deref() == Some(job.name.as_str())
+            && tx.is_some_and(|tx| tx.priority == row.priority)
+            && row.period_us == job.period_us
+            && row.deadline_us.is_none()
+            && Time::from_us_up(row.jitter_us) == can::transmit_abort_latency(bit);
+        if !as_built {
+            return Err(self.rows.fail(
+                &field,
+                format!(
+                    "the on-chip check builds this job at `{tx_name}`'s priority, released by `{}` at its period \
+                     with three of the longest frames as its jitter; the report built it otherwise",
+                    job.name
+                ),
+            ));
+        }
+        self.rows.time(
+            &field,
+            Time::from_us_up(row.wcet_us).plus(self.overheads.for_kind(row.kind)),
+        )
     }
 
     /// A topic's row from its publisher job.
@@ -675,6 +741,7 @@ impl<'a> Lowering<'a> {
             )?,
             sections: topic_sections,
             scripts: self.script_rows(job, &format!("topics.{}", info.name))?,
+            transmit: 0,
         })
     }
 
@@ -707,6 +774,7 @@ impl OwnedRobot {
                         bcet: t.bcet,
                         sections: &t.sections,
                         scripts: &t.scripts,
+                        transmit: t.transmit,
                     })
                     .collect()
             })
@@ -749,15 +817,16 @@ impl OwnedRobot {
         })
     }
 
-    /// The most jobs one board can have: its fixed tasks plus a job and a timer job per publishable topic, and
-    /// an engine row per script of each.
+    /// The most jobs one board can have: its fixed tasks plus a job and a timer job per publishable topic, an
+    /// engine row per script of each, and a transmit job per topic with a `transmit` cost.
     pub fn max_tasks(&self) -> usize {
         self.boards
             .iter()
             .map(|b| {
                 let scripts: usize = b.task_scripts.iter().map(|(_, l)| l.len()).sum::<usize>()
                     + b.topics.iter().map(|t| t.scripts.len()).sum::<usize>();
-                b.tasks.len() + 2 * b.topics.len() + scripts
+                let transmit = b.topics.iter().filter(|t| t.transmit > 0).count();
+                b.tasks.len() + 2 * b.topics.len() + scripts + transmit
             })
             .max()
             .unwrap_or(0)
@@ -953,8 +1022,8 @@ impl OwnedRobot {
                     .collect();
                 let _ = writeln!(
                     s,
-                    "                // {}\n                {a}::TopicRow {{ topic: {}, cost: {}, bcet: {}, sections: &[{}], scripts: &[{}] }},",
-                    topic.name, topic.topic, topic.cost, topic.bcet, sections.join(", "), script_rows(&a, &topic.scripts)
+                    "                // {}\n                {a}::TopicRow {{ topic: {}, cost: {}, bcet: {}, sections: &[{}], scripts: &[{}], transmit: {} }},",
+                    topic.name, topic.topic, topic.cost, topic.bcet, sections.join(", "), script_rows(&a, &topic.scripts), topic.transmit
                 );
             }
             let _ = writeln!(
@@ -1059,7 +1128,9 @@ impl OwnedRobot {
             });
             let cost = CheckCost {
                 publishers: streams.len(),
-                tasks: b.tasks.len() + 2 * b.topics.len(),
+                tasks: b.tasks.len()
+                    + 2 * b.topics.len()
+                    + b.topics.iter().filter(|t| t.transmit > 0).count(),
                 iterations_per_analysis: plain.iterations,
                 iterations_with_search: searched.iterations,
                 analyses_with_search: searched.evaluations,

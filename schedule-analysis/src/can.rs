@@ -81,6 +81,16 @@ pub fn shortest_frame_time(bit: Time) -> Time {
     bit.times(u64::from(frame_bits_best(0, false)))
 }
 
+/// The release jitter of a transmit-interrupt job that a job queuing frames releases, where the transmit interrupt
+/// is charged by its parts (docs/analysis.md, "The transmit interrupt's parts"): the aborts its frames may cause
+/// come after the pend, requested in the job the pend starts or in the job that collects the abort under way (one
+/// at a time, at most one per mailbox), each completing at once or, its frame on the bus, with that frame: three of
+/// the longest frames (eight data bytes, extended identifier not counted: the boards send standard ones). The host
+/// analysis (`scenario`) and the on-chip admission check both take it from here.
+pub fn transmit_abort_latency(bit: Time) -> Time {
+    frame_time(FrameCost::Exact, 8, false, bit).times(3)
+}
+
 /// The shortest frame a board sends, from the data lengths of the frames it sends (standard identifiers, no stuff
 /// bits): its transmit-complete interrupt's minimum inter-arrival time; [`shortest_frame_time`] when it sends none.
 /// The host analysis (`scenario`) and the on-chip admission check both take it from here.

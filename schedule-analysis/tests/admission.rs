@@ -31,18 +31,64 @@ fn robot() -> &'static OwnedRobot {
 
 const LEVELS: [&str; 4] = ["urgent", "high", "medium", "low"];
 
+/// LightRing's transmit interrupt charged by its parts (its `can_tx` bound used, every other held bound held
+/// back): the report adds a `can_tx[<topic>]` job per publisher job, and the check builds the same jobs.
+fn by_parts() -> scenario::Held<'static> {
+    static ROWS: OnceLock<Vec<String>> = OnceLock::new();
+    scenario::Held::Only {
+        board: "lightring",
+        rows: ROWS.get_or_init(|| vec!["can_tx".to_string()]),
+    }
+}
+
+/// The table lowered from the model with LightRing's transmit interrupt charged by its parts.
+fn robot_by_parts() -> &'static OwnedRobot {
+    static ROBOT: OnceLock<OwnedRobot> = OnceLock::new();
+    ROBOT.get_or_init(|| {
+        let root = root();
+        admission_host::lower_held(
+            &root,
+            &scenario::timing_files(&root),
+            schedule_analysis::can::DEFAULT_BITRATE,
+            FrameCostSpec::Exact,
+            by_parts(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
+    })
+}
+
 /// The report's `--check` verdict for the scenario `json` (written to a temporary file named after `case`), and the
 /// notes the report prints with it.
 fn report_of(json: &serde_json::Value, case: &str) -> (bool, Vec<String>) {
+    let (ok, notes, _) = report_held(json, case, scenario::Held::Kept);
+    (ok, notes)
+}
+
+/// [`report_of`] on the model built with `held`, with the board tasks' names.
+fn report_held(
+    json: &serde_json::Value,
+    case: &str,
+    held: scenario::Held<'_>,
+) -> (bool, Vec<String>, Vec<String>) {
     let root = root();
     let path = std::env::temp_dir().join(format!(
         "admission-{}-{case}.scenario.json",
         std::process::id()
     ));
     std::fs::write(&path, json.to_string()).expect("temp scenario");
-    let built = scenario::build(&root, &path, &scenario::timing_files(&root));
+    let built = scenario::build_held(&root, &path, &scenario::timing_files(&root), held);
     let _ = std::fs::remove_file(&path);
     let built = built.unwrap_or_else(|e| panic!("{e}"));
+    let names = built
+        .model
+        .boards
+        .iter()
+        .flat_map(|b| {
+            b.tasks
+                .iter()
+                .map(move |t| format!("{}/{}", b.name, t.name))
+        })
+        .collect();
     let system = built.model.validate().expect("valid");
     let ok = analyse(
         &system,
@@ -52,7 +98,7 @@ fn report_of(json: &serde_json::Value, case: &str) -> (bool, Vec<String>) {
         },
     )
     .all_ok();
-    (ok, built.warnings)
+    (ok, built.warnings, names)
 }
 
 /// The report's `--check` verdict for a scenario with these publishers and commands.
@@ -61,6 +107,16 @@ fn report_verdict(
     commands: &[(&str, &str, u64, u64)],
     case: u64,
 ) -> bool {
+    report_verdict_held(publishers, commands, case, scenario::Held::Kept).0
+}
+
+/// [`report_verdict`] on the model built with `held`, with the board tasks' names (`<board>/<task>`).
+fn report_verdict_held(
+    publishers: &[(String, &str, u64)],
+    commands: &[(&str, &str, u64, u64)],
+    case: u64,
+    held: scenario::Held<'_>,
+) -> (bool, Vec<String>) {
     let json = serde_json::json!({
         "name": "admission-property",
         "publishers": publishers.iter().map(|(t, l, p)| serde_json::json!({
@@ -68,7 +124,8 @@ fn report_verdict(
         "commands": commands.iter().map(|(t, l, p, j)| serde_json::json!({
             "topic": t, "priority": l, "period_us": p, "jitter_us": j })).collect::<Vec<_>>(),
     });
-    report_of(&json, &format!("prop-{case}")).0
+    let (ok, _, names) = report_held(&json, &format!("prop-{case}"), held);
+    (ok, names)
 }
 
 /// The report's `--check` verdict for publishers and one-shots (`one_shots` of a scenario file), and its notes.
@@ -160,8 +217,23 @@ fn admitted(
     publishers: &[(String, &str, u64)],
     commands: &[(&str, &str, u64, u64)],
 ) -> admission::Decision {
-    let robot = robot();
-    let mut streams = publisher_streams(publishers.iter().map(|(t, l, p)| (t.as_str(), *l, *p)));
+    admitted_on(robot(), publishers, commands)
+}
+
+/// [`admitted`] on `robot`'s table.
+fn admitted_on(
+    robot: &OwnedRobot,
+    publishers: &[(String, &str, u64)],
+    commands: &[(&str, &str, u64, u64)],
+) -> admission::Decision {
+    let mut streams: Vec<admission::Stream> = publishers
+        .iter()
+        .map(|(t, l, p)| {
+            robot
+                .publisher_stream(t, l, Time::from_us(*p), None)
+                .expect("stream")
+        })
+        .collect();
     for (t, l, p, j) in commands {
         streams.push(
             robot
@@ -432,6 +504,92 @@ proptest! {
         let report = report_verdict(&publishers, &commands, case);
         let decision = admitted(&publishers, &commands);
         prop_assert_eq!(decision.admitted(), report, "publishers {:?} commands {:?}: {:?}", publishers, commands, decision);
+    }
+
+    /// The same with LightRing's transmit interrupt charged by its parts, a LightRing topic always among the
+    /// publishers (the report's `can_tx[<topic>]` jobs, the check's transmit jobs): the check admits exactly
+    /// what the report finds schedulable.
+    #[test]
+    fn admission_equals_the_report_with_the_transmit_interrupt_by_its_parts(
+        lightring in (any::<prop::sample::Index>(), 0usize..4, 0u32..1000),
+        picks in proptest::collection::vec((any::<prop::sample::Index>(), 0usize..4, 0u32..1000), 0..6),
+        command in proptest::option::of((0usize..4, 1_000u64..50_000, 0u64..2_000)),
+        case in any::<u64>(),
+    ) {
+        let robot = robot_by_parts();
+        let own: Vec<String> = robot
+            .boards
+            .iter()
+            .filter(|b| b.name == "lightring")
+            .flat_map(|b| b.topics.iter().map(|t| t.name.clone()))
+            .collect();
+        let topics = publishable();
+        let mut publishers: Vec<(String, &str, u64)> = Vec::new();
+        let period = |scale: u32| (100.0 * 1000f64.powf(f64::from(scale) / 1000.0)).round() as u64;
+        for (i, (index, level, scale)) in std::iter::once(lightring).chain(picks).enumerate() {
+            let topic = if i == 0 { index.get(&own) } else { index.get(&topics) }.clone();
+            if publishers.iter().any(|(t, _, _)| *t == topic) {
+                continue;
+            }
+            publishers.push((topic, LEVELS[level], period(scale)));
+        }
+        let commands: Vec<(&str, &str, u64, u64)> = command
+            .map(|(level, period, jitter)| vec![("motor", LEVELS[level], period, jitter)])
+            .unwrap_or_default();
+        let (report, names) = report_verdict_held(&publishers, &commands, case, by_parts());
+        prop_assert!(
+            names.iter().any(|n| n.starts_with("lightring/can_tx[") && !n.ends_with("[mailboxes]")),
+            "the report charges no LightRing publisher's frames: {:?}", names
+        );
+        let decision = admitted_on(robot, &publishers, &commands);
+        prop_assert_eq!(decision.admitted(), report, "publishers {:?} commands {:?}: {:?}", publishers, commands, decision);
+    }
+}
+
+/// The set on which the check and the report were apart before the check built the transmit jobs (odometry at
+/// high every 10 ms, LightRing's diagnostics at urgent every 50 ms) and LightRing's publishers alone: with the
+/// transmit interrupt charged by its parts both agree, and the table carries each LightRing topic's transmit job.
+#[test]
+fn the_transmit_jobs_are_in_the_table_and_decide_as_the_report() {
+    let robot = robot_by_parts();
+    let lightring = robot
+        .boards
+        .iter()
+        .find(|b| b.name == "lightring")
+        .expect("lightring");
+    assert!(
+        !lightring.topics.is_empty() && lightring.topics.iter().all(|t| t.transmit > 0),
+        "{:?}",
+        lightring.topics
+    );
+    // Where the transmit interrupt stays held (charged as a whole), its board's topics have no transmit job.
+    for board in &robot.boards {
+        if board.name != "lightring" {
+            assert!(board.topics.iter().all(|t| t.transmit == 0), "{board:?}");
+        }
+    }
+    let sets: [&[(&str, &str, u64)]; 3] = [
+        &[
+            ("odometry", "high", 10_000),
+            ("lightring-diagnostics", "urgent", 50_000),
+        ],
+        &[("lightring-diagnostics", "urgent", 50_000)],
+        &[("lightring-diagnostics", "low", 1_000)],
+    ];
+    for (case, set) in sets.iter().enumerate() {
+        let owned: Vec<(String, &str, u64)> = set
+            .iter()
+            .map(|(t, l, p)| (t.to_string(), *l, *p))
+            .collect();
+        let (report, names) = report_verdict_held(&owned, &[], 7_000 + case as u64, by_parts());
+        assert!(
+            names
+                .iter()
+                .any(|n| n == "lightring/can_tx[lightring-diagnostics]"),
+            "{names:?}"
+        );
+        let decision = admitted_on(robot, &owned, &[]);
+        assert_eq!(decision.admitted(), report, "{set:?}: {decision:?}");
     }
 }
 

@@ -508,6 +508,7 @@ fn a_topics_script_and_its_siblings_through_the_chip() {
             bcet: 0,
             sections: &[],
             scripts: &scripts,
+            transmit: 0,
         },
         TopicRow {
             topic: 8,
@@ -515,6 +516,7 @@ fn a_topics_script_and_its_siblings_through_the_chip() {
             bcet: 0,
             sections: &[],
             scripts: &scripts,
+            transmit: 0,
         },
     ];
     let buses = [BusRow {

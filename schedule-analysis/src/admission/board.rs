@@ -1,5 +1,5 @@
-//! One board's part of the check: its jobs (the fixed tasks of the table, and per stream it sends its publisher job
-//! and timer job) built into byte-indexed fixed-capacity arrays, their SRP blockings from the table, then
+//! One board's part of the check: its jobs (the table's fixed tasks; per stream it sends its publisher, timer and, by
+//! parts, transmit job) in byte-indexed fixed-capacity arrays, their SRP blockings from the table, then
 //! [`board_analysis::analyse`] and what the rest of the check reads of it (a [`Summary`]).
 
 use super::*;
@@ -70,6 +70,14 @@ enum Source {
     /// with the sensor-bus rounds.
     #[cfg_attr(not(feature = "sensor-buses"), allow(dead_code))]
     Engine { job: u8, script: u8 },
+    /// The transmit interrupt's job per sample of the stream at this [`View`] position (the report's
+    /// `can_tx[<topic>]`, built only where the topic row has a `transmit` cost): its topic row, and its publisher
+    /// job's original index (its releaser).
+    Transmit {
+        stream: u8,
+        topic: u8,
+        publisher: u8,
+    },
 }
 
 /// What one board's analysis reads: the board (index `b` of the robot's table), the configuration and the limits.
@@ -126,7 +134,7 @@ impl<'a, const M: usize> BoardInput<'a, M> {
                 .topics
                 .get(usize::from(topic))
                 .map_or(&[], |t| t.scripts),
-            Source::Timer { .. } | Source::Engine { .. } => &[],
+            Source::Timer { .. } | Source::Engine { .. } | Source::Transmit { .. } => &[],
         }
     }
 
@@ -179,7 +187,8 @@ impl<const N: usize> Originals<N> {
             .unwrap_or(0)
     }
 
-    /// The fixed tasks, then per stream of the board its timer job and its publisher job.
+    /// The fixed tasks, then per stream of the board its timer job, its publisher job (with its engine rows) and,
+    /// where the transmit interrupt is charged by its parts, the transmit job the publisher job releases.
     fn collect<const M: usize>(&mut self, input: &BoardInput<'_, M>) -> Result<(), Refusal> {
         let table = input.table;
         for (i, t) in table.tasks.iter().enumerate() {
@@ -214,6 +223,19 @@ impl<const N: usize> Originals<N> {
             };
             let job = self.add(priority, what)?;
             self.engines(input, what, job)?;
+            let charged = table
+                .topics
+                .get(usize::from(topic))
+                .is_some_and(|t| t.transmit > 0);
+            if let (true, Some(tx)) = (charged, table.can_tx) {
+                let tx = table.tasks.get(usize::from(tx)).ok_or(Refusal::Capacity)?;
+                let transmit = Source::Transmit {
+                    stream,
+                    topic,
+                    publisher: job,
+                };
+                self.add(tx.priority, transmit)?;
+            }
         }
         Ok(())
     }
@@ -277,7 +299,9 @@ fn period_of<const M: usize>(
                 row_time(t.period)
             })
         }
-        Source::Timer { stream } | Source::Publisher { stream, .. } => input
+        Source::Timer { stream }
+        | Source::Publisher { stream, .. }
+        | Source::Transmit { stream, .. } => input
             .streams
             .get(usize::from(stream))
             .map(|s| s.period)
@@ -372,6 +396,30 @@ fn build_job<const M: usize>(
                 id,
                 s.deadline(),
                 timer,
+            )
+        }
+        Source::Transmit {
+            stream,
+            topic,
+            publisher,
+        } => {
+            // The report's `can_tx[<topic>]`: at the transmit interrupt's priority (its row's, `Originals::collect`),
+            // with its sections (the transmit task's, already the table's: nothing to add to the blockings), at the
+            // publisher job's period with that as its deadline, released by it. Named as the transmit task: a
+            // deadline it misses is the transmit interrupt's (below the hard floor).
+            let s = stream_of(stream)?;
+            let row = table
+                .topics
+                .get(usize::from(topic))
+                .ok_or(Refusal::Capacity)?;
+            let tx = table.can_tx.ok_or(Refusal::Capacity)?;
+            job(
+                row_time(row.transmit),
+                s.period,
+                can::transmit_abort_latency(input.bit_time),
+                TaskId::Fixed(tx),
+                s.period,
+                publisher,
             )
         }
         // A build without the sensor-bus rounds builds no engine row (`Originals::engines`).
@@ -525,12 +573,17 @@ impl<const N: usize> BoardSet<N> {
             .take(self.jobs.len)
         {
             let known = match meta.id {
-                // An engine row is named as its job, a fixed task's: its share is its own.
-                TaskId::Fixed(row) if meta.check != Check::Unchecked => table
-                    .tasks
-                    .get(usize::from(row))
-                    .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
-                    .map(|t| Share::with_utilisation(u64::from(t.share))),
+                // An engine row is named as its job, a transmit job as the transmit task: a fixed task's share is
+                // its own row's (a fixed task's original index is its row).
+                TaskId::Fixed(row)
+                    if meta.check != Check::Unchecked && u16::from(meta.original) == row =>
+                {
+                    table
+                        .tasks
+                        .get(usize::from(row))
+                        .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
+                        .map(|t| Share::with_utilisation(u64::from(t.share)))
+                }
                 _ => None,
             };
             *share = known.unwrap_or_else(|| Share::of(timing.wcet, timing.period));

@@ -175,6 +175,12 @@ pub struct TopicRow<'a> {
     pub sections: &'a [TopicSection],
     /// The scripts one sample runs on the board's sensor buses, in the sample's order (empty: none).
     pub scripts: &'a [ScriptRow],
+    /// Where the board's transmit interrupt is charged by its parts (docs/analysis.md, "The transmit interrupt's
+    /// parts"): the cost of its job per sample of this topic (`can_tx[<topic>]`: fixed + the topic's frames per
+    /// sample × (fixed + per frame + abort), hardware-task overheads included), which the publisher job releases
+    /// with [`crate::can::transmit_abort_latency`] as its own jitter. 0: no such job (the transmit interrupt charged
+    /// as a whole).
+    pub transmit: RowTime,
 }
 
 /// Most sensor buses a board's table may state (the check's per-bus working arrays).
@@ -954,6 +960,7 @@ mod tests {
         bcet: 50_000,
         sections: &SECTIONS,
         scripts: &[],
+        transmit: 0,
     }];
     const TASKS: [TaskRow; 1] = [TaskRow {
         priority: 3,

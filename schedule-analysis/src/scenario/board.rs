@@ -64,7 +64,7 @@ pub(super) fn build_boards(
         let arrivals = Arrivals {
             bus_frame: received.map_or(bus_frame, |gap| gap.max(bus_frame)),
             own_frame,
-            longest_frame: can::frame_time(can::FrameCost::Exact, 8, false, bit),
+            bit,
         };
         let board = build_board(
             root, file, timing, &mine, scenario, arrivals, firmware, held, built,
@@ -126,8 +126,8 @@ struct Arrivals {
     bus_frame: Time,
     /// The shortest frame this board sends.
     own_frame: Time,
-    /// The longest standard frame on the bus (8 bytes, worst-case stuffing).
-    longest_frame: Time,
+    /// One bit time on the bus.
+    bit: Time,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -180,7 +180,7 @@ fn build_board(
                 timing,
                 &declared,
                 &parts,
-                arrivals.longest_frame,
+                arrivals.bit,
                 &mut tasks,
             )?;
             built.sources.push(line);

@@ -28,7 +28,7 @@ pub(super) fn charge_by_parts(
     timing: &Timing,
     declared: &[Declared],
     parts: &FrameParts,
-    longest_frame: Time,
+    bit: Time,
     tasks: &mut Vec<TaskModel>,
 ) -> Result<String, BuildError> {
     let tx_name = timing.can_tx_task.as_deref().ok_or_else(|| {
@@ -77,11 +77,9 @@ pub(super) fn charge_by_parts(
     // cause — the aborted frame's completion in a job of its own (the fixed part and a completion), its requeue,
     // and the pass that had put the aborted frame in its mailbox (a pass and a completion are one frame's).
     let per_queued = parts.fixed_us + parts.per_frame_us + parts.abort_us;
-    // The abort a frame causes comes after the job that queued it: requested in the job its pend starts, or, while
-    // an abort is under way (one at a time), in the job that collects that abort; an abort completes at once or,
-    // its frame on the bus, turns into that frame's completion. At most three under way one after the other (one
-    // per mailbox): three of the longest frames after the pend.
-    let abort_latency = longest_frame.times(3).as_us_f64();
+    // The aborts a job's frames cause come after it: three of the longest frames after the pend (shared with the
+    // on-chip check, which builds these jobs from the same rule).
+    let abort_latency = crate::can::transmit_abort_latency(bit).as_us_f64();
     let mut added = Vec::new();
     for t in tasks.iter() {
         let publisher_job = t.job_of.as_deref().is_some_and(|p| publishers.contains(p));

@@ -35,8 +35,8 @@ struct Scripts<'a, const N: usize> {
     views: u8,
 }
 
-/// The RTIC task a job belongs to: a fixed task is its own, a publisher job its level's publisher task; timer jobs
-/// and engine rows run no script (`None`).
+/// The RTIC task a job belongs to: a fixed task is its own, a publisher job its level's publisher task; timer jobs,
+/// engine rows and transmit jobs run no script (`None`).
 fn group_of<const M: usize>(input: &BoardInput<'_, M>, what: Source) -> Option<u16> {
     match what {
         Source::Fixed(row) => Some(u16::from(row)),
@@ -45,7 +45,7 @@ fn group_of<const M: usize>(input: &BoardInput<'_, M>, what: Source) -> Option<u
             let task = input.table.publisher_tasks.get(usize::from(level))?;
             Some(0x100 | u16::from(*task))
         }
-        Source::Timer { .. } | Source::Engine { .. } => None,
+        Source::Timer { .. } | Source::Engine { .. } | Source::Transmit { .. } => None,
     }
 }
 
