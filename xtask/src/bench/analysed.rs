@@ -102,7 +102,11 @@ pub(super) fn analysis_for(
     // run whose board accepted a request with a warning (accept-and-warn) runs a set the board itself found
     // breaking a bound, whatever the set the capture shows (which holds only this board's publishers, not the
     // other boards' streams the board's view kept) would give.
-    let admitted = !capture.warned
+    let warned_here = capture
+        .warned
+        .iter()
+        .any(|t| seen_publishers(capture).iter().any(|p| p.0 == *t));
+    let admitted = !warned_here
         && analyse_scenario(root, &path, &timings, scenario::Firmware::Production, None)?.all_ok();
     let mut label = match scenario_name {
         Some(name) => format!("scenario {name}"),
@@ -123,9 +127,9 @@ pub(super) fn analysis_for(
         }
         (None, None) => label.push_str("; a command flood at full bus rate"),
     }
-    if capture.warned {
+    if warned_here {
         label.push_str(
-            "; the board accepted a request with a warning (accept-and-warn): it admits no set it then runs",
+            "; the board accepted a topic of this set with a warning (accept-and-warn): it promises nothing for it",
         );
     }
     Ok((analysis, label, admitted))

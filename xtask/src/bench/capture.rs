@@ -122,9 +122,9 @@ pub struct Capture {
     /// A QEMU run's received frames, as its stimulus replays them: the shortest time between two of them, µs
     /// (the whole run when it has fewer than two). `None`: not known (a capture from a robot).
     pub received_gap_us: Option<f64>,
-    /// A QEMU run's admission verdicts of the board (its diagnostics pages 0x80 and 0x81): whether it accepted a
-    /// request with a warning (policy accept-and-warn), which promises nothing for the set it then runs.
-    pub warned: bool,
+    /// A QEMU run's admission verdicts (diagnostics pages 0x80 and 0x81): the topics whose last verdict was
+    /// "accepted with a warning" (policy accept-and-warn), for which the board promised nothing.
+    pub warned: Vec<amiro_can::Topic>,
 }
 
 impl Capture {
@@ -505,22 +505,33 @@ pub fn read_qemu_clocked(
             }
         }
     }
-    builder.capture.warned = accepted_with_warning(text)?;
+    builder.capture.warned = warned_topics(text)?;
     Ok(builder.capture)
 }
 
-/// Whether a QEMU run's output shows an admission verdict "accepted with a warning" from any board (a single-board
-/// run's frames are its board's own).
-fn accepted_with_warning(text: &str) -> Result<bool> {
+/// The topics whose last admission verdict in a QEMU run's output was "accepted with a warning" (a single-board
+/// run's verdict frames are its board's own; a later refusal of the same topic changed nothing it runs, so only the
+/// last verdict of a topic counts).
+fn warned_topics(text: &str) -> Result<Vec<amiro_can::Topic>> {
     let out = crate::scenarios::RunOutput::parse(text)?;
-    Ok([
+    let mut verdicts: Vec<(u64, amiro_can::AdmissionVerdict)> = [
         amiro_can::Board::DiWheelDrive,
         amiro_can::Board::PowerManagement,
         amiro_can::Board::LightRing,
     ]
     .into_iter()
     .flat_map(|board| crate::scenarios::admission_verdicts(&out, board))
-    .any(|(_, v)| v.verdict == amiro_can::Verdict::AcceptedWithWarning))
+    .collect();
+    verdicts.sort_by_key(|(at, _)| *at);
+    let mut last: BTreeMap<u8, amiro_can::Verdict> = BTreeMap::new();
+    for (_, v) in &verdicts {
+        last.insert(v.topic.byte(), v.verdict);
+    }
+    Ok(last
+        .into_iter()
+        .filter(|(_, v)| *v == amiro_can::Verdict::AcceptedWithWarning)
+        .filter_map(|(t, _)| amiro_can::Topic::from_byte(t))
+        .collect())
 }
 
 /// Reads a QEMU run's work directory (`output.log` and `trace.bin`).
@@ -558,7 +569,7 @@ mod tests {
     use super::*;
 
     /// A run's output with one admission verdict of PowerManagement's (its two diagnostics pages as candump lines).
-    fn verdict_output(verdict: amiro_can::Verdict) -> String {
+    fn verdict_output(verdict: amiro_can::Verdict, at_us: u64) -> String {
         use amiro_can::{
             AdmissionVerdict, Board, Count, Priority, SampleTime, SensorData, TimeUnit, Topic,
             Violation,
@@ -590,7 +601,11 @@ mod tests {
                 }
                 .encode(Priority::Low);
                 let data: String = frame.data().iter().map(|b| format!("{b:02X}")).collect();
-                format!("(0.{:06}) can0 {:03X}#{data}", 1_000 + i, frame.id().raw())
+                format!(
+                    "(0.{:06}) can0 {:03X}#{data}",
+                    at_us + i as u64,
+                    frame.id().raw()
+                )
             })
             .collect::<Vec<_>>()
             .join("\n")
@@ -598,11 +613,17 @@ mod tests {
 
     #[test]
     fn a_run_whose_board_warned_is_told_from_one_that_refused() {
-        let warned = verdict_output(amiro_can::Verdict::AcceptedWithWarning);
-        assert!(accepted_with_warning(&warned).unwrap());
-        let refused = verdict_output(amiro_can::Verdict::Refused);
-        assert!(!accepted_with_warning(&refused).unwrap());
-        assert!(!accepted_with_warning("(0.001000) can0 608#000000000000").unwrap());
+        use amiro_can::{Topic, Verdict};
+        let warned = verdict_output(Verdict::AcceptedWithWarning, 1_000);
+        assert_eq!(warned_topics(&warned).unwrap(), vec![Topic::PowerStatus]);
+        let refused = verdict_output(Verdict::Refused, 1_000);
+        assert!(warned_topics(&refused).unwrap().is_empty());
+        assert!(warned_topics("(0.001000) can0 608#000000000000")
+            .unwrap()
+            .is_empty());
+        // Only a topic's last verdict counts.
+        let then_refused = format!("{warned}\n{}", verdict_output(Verdict::Refused, 2_000));
+        assert!(warned_topics(&then_refused).unwrap().is_empty());
     }
 
     fn wire(records: &[(u64, Kind)]) -> Vec<u8> {
