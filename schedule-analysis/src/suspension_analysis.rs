@@ -192,6 +192,8 @@ pub trait SuspendingBoard {
         unreleased: &[bool],
         limits: &Limits,
     ) -> Result<Outcome, OutOfIterations>;
+    /// Job `p`'s bound in the view just analysed ([`SuspendingBoard::analyse_view`]), `None` while it has none.
+    fn current(&self, p: usize) -> Option<Time>;
     /// Job `p`'s bound in this view by its CPU segments (one instance, its period at least `found.wcrt`): the
     /// caller keeps the lower of it and the view's.
     fn refine(&mut self, p: usize, found: Response);
@@ -440,11 +442,23 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             if resumptions == 0 {
                 continue;
             }
+            // Its jitter: as the view set it where it cut its release, else its own plus its releaser's bound in
+            // this view. A releaser without one leaves it none: the view's error stands (not a bound that leaves
+            // the inherited jitter out).
+            let cut = self.work.unreleased.get(p).copied().unwrap_or(false);
+            let jitter = match self.board.released_by(p).filter(|_| !cut) {
+                None => me.jitter,
+                Some(by) => match self.board.current(by) {
+                    Some(r) => self.board.own_jitter(p).plus(r),
+                    None => continue,
+                },
+            };
             // One instance of its CPU alone at its place.
             if let Some(slot) = self.work.timings.get_mut(p) {
                 *slot = TaskTiming {
                     wcet: cpu,
                     period: self.limits.horizon,
+                    jitter,
                     ..me
                 };
             }

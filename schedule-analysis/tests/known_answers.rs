@@ -905,3 +905,42 @@ fn a_suspending_job_by_its_segments_worked_by_hand() {
     );
     assert_eq!(board_wcrts_us(&board), vec![Some(10), None]);
 }
+
+/// A suspending job released by a job that overloads in the suspending job's view: p (priority 2, CPU 20 µs, one
+/// 170 µs script alone on its bus, T 400 µs), released by r's completion (priority 1, CPU 300 µs, T 400 µs).
+///
+/// In p's view it costs 20 + 170 = 190 µs and r overloads below it (190/400 + 300/400 > 1): r has no bound there,
+/// so neither has the jitter p inherits from it, and no bound of p (by its segments either) may leave that jitter
+/// out. Counting p's CPU alone with no jitter says 190 µs, yet p is ready only when r ends: the simulator, r
+/// running 0..300, p 300..310, its script 310..480 and p's rest 480..490, finds 490 µs from p's activation, above
+/// its 400 µs period and deadline. Neither has a bound.
+#[test]
+fn a_suspending_job_whose_releaser_overloads_in_its_view_has_no_bound() {
+    let cpu = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: None,
+        })
+    };
+    let jobs = vec![
+        SuspendingJob {
+            task: 1,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(300)],
+        },
+        SuspendingJob {
+            task: 0,
+            arrival: 0,
+            release: 300_000,
+            pieces: vec![cpu(10), Piece::Script(170_000), cpu(10)],
+        },
+    ];
+    let simulated = sim::suspending_run(&[2, 1], &[0, 1], &[], &jobs);
+    assert_eq!(simulated, vec![300_000, 490_000]);
+
+    let mut p = board_task("p", 2, 20, 400);
+    p.released_by = Some(1);
+    let board = suspending_board(vec![p, board_task("r", 1, 300, 400)], &[(0, 170)]);
+    assert_eq!(board_wcrts_us(&board), vec![None, None]);
+}
