@@ -142,7 +142,8 @@ pub enum Failure {
         /// Why.
         why: AnalysisError,
     },
-    /// Job `job` of a suspending RTIC task has no bound in its own view (the caller's bound says why).
+    /// Job `job` of a suspending RTIC task has no bound in its own view, or a default-view job's releaser has no
+    /// bound in the default view while a suspending task's view needs its jitter (the caller's bound says why).
     Job {
         /// Its sorted position.
         job: usize,
@@ -574,6 +575,7 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
     fn view_jobs(&mut self, v: usize) {
         let board = &*self.board;
         let w = &mut *self.work;
+        let mut orphan = None;
         for p in 0..w.jobs {
             let base = w.base.get(p).copied().unwrap_or(Time::ZERO);
             let mut cost = base;
@@ -600,12 +602,31 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
                 jitter = w.own.get(p).copied().unwrap_or(Time::ZERO).minus(base);
                 cut = true;
             }
-            // Released by a suspending task's job: that job's whole own-view response.
+            // Released by a suspending task's job: that job's whole own-view response, or, for another suspending
+            // task's job, its `R − C` where larger (its own-view response counts from its activation, so its
+            // inherited release with its suspensions: the release alone would leave the suspensions out).
             if let Some(by) = board.released_by(p).filter(|&by| board.view(by) != 0) {
-                jitter = board
-                    .own_jitter(p)
-                    .plus(w.own.get(by).copied().unwrap_or(Time::ZERO));
+                jitter = jitter.max(
+                    board
+                        .own_jitter(p)
+                        .plus(w.own.get(by).copied().unwrap_or(Time::ZERO)),
+                );
                 cut = true;
+            }
+            // In a suspending task's view, a default-view job released by a default-view job: its jitter from the
+            // default view (analysed first this round), its release cut. The view's own bound of its releaser may
+            // be none (the suspending job's suspensions as execution may overload it) where the default view's is
+            // one; without either the job's jitter is not known and the view's jobs at or below it have no bound.
+            if v != 0 && view == 0 && !cut {
+                if let Some(by) = board.released_by(p).filter(|&by| board.view(by) == 0) {
+                    match board.kept(by) {
+                        Some(r) => {
+                            jitter = board.own_jitter(p).plus(r);
+                            cut = true;
+                        }
+                        None => orphan = orphan.or(Some(p)),
+                    }
+                }
             }
             if let (Some(t), Some(share)) = (w.timings.get_mut(p), w.shares.get_mut(p)) {
                 if cost != t.wcet {
@@ -617,6 +638,9 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             if let Some(slot) = w.unreleased.get_mut(p) {
                 *slot = cut;
             }
+        }
+        if let Some(job) = orphan {
+            self.fail(Failure::Job { job });
         }
     }
 

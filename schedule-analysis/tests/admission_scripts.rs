@@ -892,3 +892,41 @@ fn a_suspending_job_whose_releaser_overloads_through_the_chip() {
         }
     }
 }
+
+/// `tests/known_answers.rs`'s `a_job_released_by_a_suspending_job_counts_its_own_suspensions` through the chip:
+/// a (3, 10 µs, a 50 µs script) releases b (2, 10 µs, a 300 µs script), l (1, 380 µs) below, T 1000 µs each: b
+/// seen by l with its `R − C` of 720 µs as jitter, not its release's 360: 360, 730 and 410 µs.
+#[test]
+fn a_job_released_by_a_suspending_job_through_the_chip() {
+    let expected = [360, 730, 410];
+    assert_eq!(
+        chip_wcrts_us(
+            &[
+                (3, 10, 1000, &[50], 0, NO_RELEASER),
+                (2, 10, 1000, &[300], 0, 0),
+                (1, 380, 1000, &[], 0, NO_RELEASER)
+            ],
+            &expected
+        ),
+        [Some(360), Some(730), Some(410)]
+    );
+}
+
+/// `tests/known_answers.rs`'s `a_job_released_across_a_suspending_one_keeps_its_jitter_in_its_view` through the
+/// chip: x (3, 10 µs, T 100) released by r (1, 60 µs, T 100) keeps its 100 µs jitter from the default view in the
+/// view of p (2, 20 µs, a 170 µs script, T 400), where r overloads: 110, 100 and 230 µs.
+#[test]
+fn a_job_released_across_a_suspending_one_through_the_chip() {
+    let expected = [110, 100, 230];
+    assert_eq!(
+        chip_wcrts_us(
+            &[
+                (3, 10, 100, &[], 0, 1),
+                (1, 60, 100, &[], 0, NO_RELEASER),
+                (2, 20, 400, &[170], 0, NO_RELEASER)
+            ],
+            &expected
+        ),
+        [Some(110), Some(100), Some(230)]
+    );
+}
