@@ -255,6 +255,8 @@ struct Rounds<'w, 'a, S> {
     failed: bool,
     /// The highest priority of a failing job.
     failed_top: u32,
+    /// Whether the default view has been analysed.
+    viewed: bool,
 }
 
 /// Runs the rounds to their fixed point (docs/analysis.md, "Self-suspending publishers and the sensor buses"):
@@ -288,6 +290,7 @@ pub fn analyse<S: SuspendingBoard>(
         moved: false,
         failed: false,
         failed_top: 0,
+        viewed: false,
     };
     let most = match budget {
         Budget::Rounds(n) => n as u64,
@@ -311,6 +314,11 @@ pub fn analyse<S: SuspendingBoard>(
         rounds.fail(Failure::Rounds);
     }
     if rounds.failed {
+        if !rounds.viewed {
+            // A script without a bound in the first round: the jobs above every suspending job and every engine
+            // keep their bounds, which no suspension moves; the default view once finds them.
+            rounds.default_view()?;
+        }
         rounds.mark_unbounded();
     }
     Ok(rounds.spent)
@@ -365,6 +373,20 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
         self.board.fail(failure);
     }
 
+    /// The default view alone, its jobs' bounds kept (after a failure before any view).
+    fn default_view(&mut self) -> Result<(), OutOfIterations> {
+        self.view_jobs(0);
+        let limits = self.limits()?;
+        let w = &mut *self.work;
+        let outcome = self
+            .board
+            .analyse_view(w.timings, &*w.shares, &*w.unreleased, &limits)?;
+        self.spent += outcome.iterations;
+        let w = &mut *self.work;
+        self.board.keep(0, w.timings);
+        Ok(())
+    }
+
     /// One round; whether it reached the fixed point (no response and no bus time changed).
     fn round(&mut self) -> Result<bool, OutOfIterations> {
         // 1. Each script on its bus: its suspension, from its actual submission.
@@ -389,6 +411,7 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             }
             let w = &mut *self.work;
             self.board.keep(v, w.timings);
+            self.viewed = true;
             if v == 0 {
                 for b in 0..self.board.buses() {
                     self.events(b)?;

@@ -1006,3 +1006,19 @@ fn a_job_released_across_a_suspending_one_keeps_its_jitter_in_its_view() {
     assert_eq!(stated[2], Some(230));
     assert_eq!(with_release[2], stated[2]);
 }
+
+/// A script without a bound in the first round: h (priority 3, CPU 10 µs, T 100 µs) above p (2, CPU 10 µs, a
+/// 150 µs script, T 100 µs: the bus overloads). p and every job not above it have no bound; h, above every
+/// suspending job, keeps its own: 10 µs.
+#[test]
+fn a_script_without_a_bound_in_the_first_round_leaves_the_jobs_above_bounded() {
+    let board = suspending_board(
+        vec![
+            board_task("h", 3, 10, 100),
+            board_task("p", 2, 10, 100),
+            board_task("l", 1, 10, 1000),
+        ],
+        &[(1, 150)],
+    );
+    assert_eq!(board_wcrts_us(&board), vec![Some(10), None, None]);
+}
