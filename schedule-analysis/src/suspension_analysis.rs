@@ -477,12 +477,13 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
                     None => continue,
                 },
             };
-            // One instance of its CPU alone at its place.
+            // One instance of its CPU alone at its place, from its release (its jitter added once below: one
+            // instance's window does not depend on its own jitter).
             if let Some(slot) = self.work.timings.get_mut(p) {
                 *slot = TaskTiming {
                     wcet: cpu,
                     period: self.limits.horizon,
-                    jitter,
+                    jitter: Time::ZERO,
                     ..me
                 };
             }
@@ -502,7 +503,10 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
                 continue;
             };
             let around = alone.wcrt.minus(cpu);
-            let bound = suspended.plus(alone.wcrt).plus(around.times(resumptions));
+            let bound = jitter
+                .plus(suspended)
+                .plus(alone.wcrt)
+                .plus(around.times(resumptions));
             if bound <= me.period {
                 self.board.refine(
                     p,

@@ -1022,3 +1022,14 @@ fn a_script_without_a_bound_in_the_first_round_leaves_the_jobs_above_bounded() {
     );
     assert_eq!(board_wcrts_us(&board), vec![Some(10), None, None]);
 }
+
+/// `a_suspending_job_by_its_segments_worked_by_hand`'s J with a release jitter of 5 µs of its own: by its segments
+/// 5 + 70 + 30 + 10 = 115 µs, the jitter once (one instance's window from its release does not depend on it; with
+/// the jitter in `W` and so in each `W − C` it counts twice: 70 + 35 + 15 = 120).
+#[test]
+fn a_suspending_jobs_segments_count_its_jitter_once() {
+    let mut j = board_task("j", 1, 20, 120);
+    j.jitter = Time::from_us(5);
+    let board = suspending_board(vec![board_task("h", 2, 10, 50), j], &[(1, 70)]);
+    assert_eq!(board_wcrts_us(&board), vec![Some(10), Some(115)]);
+}
