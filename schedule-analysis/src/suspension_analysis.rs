@@ -8,8 +8,9 @@
 //!    siblings, the other scripts of its RTIC task), its jitter its job's own-view response: its suspension;
 //! 2. the board once per *view* (the caller's [`SuspendingBoard::analyse_view`], the board analysis): one view per
 //!    RTIC task with a suspending job, where its jobs cost their suspensions, settles and one blocking per
-//!    resumption (suspension-oblivious) and every job of every other such task its CPU with jitter `R − C`, and
-//!    the default view;
+//!    resumption (suspension-oblivious), every job of every other such task its CPU with jitter `R − C` and every
+//!    default-view job released by a default-view job the jitter the default view found for it, and the default
+//!    view;
 //! 3. after the default view's analysis, each bus's engine events on the CPU and each script as one job at the
 //!    engine's priority ([`board::response_time`]): a script's bus time is the lower of its wire time plus its
 //!    events' own responses and the script as one job;
@@ -598,7 +599,9 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
     /// View `v`'s jobs in place, from the scripts' suspensions and the suspending tasks' own-view responses:
     /// its own jobs cost their suspensions, settles and a blocking per resumption; every job of every other
     /// suspending task is its CPU with jitter `R − C` and its release cut; every job released by one of them
-    /// inherits the releaser's whole own-view response; every other job as built.
+    /// inherits the releaser's whole own-view response (the larger of it and its `R − C` for a suspending one); in
+    /// a suspending task's view every default-view job released by a default-view job takes its releaser's
+    /// default-view bound, its release cut (none: a failure); every other job as built.
     fn view_jobs(&mut self, v: usize) {
         let board = &*self.board;
         let w = &mut *self.work;
