@@ -876,6 +876,9 @@ impl SuspendingBoard for HostBoard<'_> {
         );
         Ok(board_analysis::Outcome::default())
     }
+    fn current(&self, p: usize) -> Option<Time> {
+        self.current.get(p)?.as_ref().ok().map(|r| r.wcrt)
+    }
     fn refine(&mut self, p: usize, found: Response) {
         if let Some(slot) = self.current.get_mut(p) {
             if slot.as_ref().map_or(true, |r| found.wcrt < r.wcrt) {

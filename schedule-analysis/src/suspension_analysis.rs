@@ -8,8 +8,9 @@
 //!    siblings, the other scripts of its RTIC task), its jitter its job's own-view response: its suspension;
 //! 2. the board once per *view* (the caller's [`SuspendingBoard::analyse_view`], the board analysis): one view per
 //!    RTIC task with a suspending job, where its jobs cost their suspensions, settles and one blocking per
-//!    resumption (suspension-oblivious) and every job of every other such task its CPU with jitter `R − C`, and
-//!    the default view;
+//!    resumption (suspension-oblivious), every job of every other such task its CPU with jitter `R − C` and every
+//!    default-view job released by a default-view job the jitter the default view found for it, and the default
+//!    view;
 //! 3. after the default view's analysis, each bus's engine events on the CPU and each script as one job at the
 //!    engine's priority ([`board::response_time`]): a script's bus time is the lower of its wire time plus its
 //!    events' own responses and the script as one job;
@@ -142,7 +143,8 @@ pub enum Failure {
         /// Why.
         why: AnalysisError,
     },
-    /// Job `job` of a suspending RTIC task has no bound in its own view (the caller's bound says why).
+    /// Job `job` of a suspending RTIC task has no bound in its own view, or a default-view job's releaser has no
+    /// bound in the default view while a suspending task's view needs its jitter (the caller's bound says why).
     Job {
         /// Its sorted position.
         job: usize,
@@ -192,6 +194,8 @@ pub trait SuspendingBoard {
         unreleased: &[bool],
         limits: &Limits,
     ) -> Result<Outcome, OutOfIterations>;
+    /// Job `p`'s bound in the view just analysed ([`SuspendingBoard::analyse_view`]), `None` while it has none.
+    fn current(&self, p: usize) -> Option<Time>;
     /// Job `p`'s bound in this view by its CPU segments (one instance, its period at least `found.wcrt`): the
     /// caller keeps the lower of it and the view's.
     fn refine(&mut self, p: usize, found: Response);
@@ -252,6 +256,8 @@ struct Rounds<'w, 'a, S> {
     failed: bool,
     /// The highest priority of a failing job.
     failed_top: u32,
+    /// Whether the default view has been analysed.
+    viewed: bool,
 }
 
 /// Runs the rounds to their fixed point (docs/analysis.md, "Self-suspending publishers and the sensor buses"):
@@ -285,6 +291,7 @@ pub fn analyse<S: SuspendingBoard>(
         moved: false,
         failed: false,
         failed_top: 0,
+        viewed: false,
     };
     let most = match budget {
         Budget::Rounds(n) => n as u64,
@@ -308,6 +315,11 @@ pub fn analyse<S: SuspendingBoard>(
         rounds.fail(Failure::Rounds);
     }
     if rounds.failed {
+        if !rounds.viewed {
+            // A script without a bound in the first round: the jobs above every suspending job and every engine
+            // keep their bounds, which no suspension moves; the default view once finds them.
+            rounds.default_view()?;
+        }
         rounds.mark_unbounded();
     }
     Ok(rounds.spent)
@@ -362,6 +374,20 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
         self.board.fail(failure);
     }
 
+    /// The default view alone, its jobs' bounds kept (after a failure before any view).
+    fn default_view(&mut self) -> Result<(), OutOfIterations> {
+        self.view_jobs(0);
+        let limits = self.limits()?;
+        let w = &mut *self.work;
+        let outcome = self
+            .board
+            .analyse_view(w.timings, &*w.shares, &*w.unreleased, &limits)?;
+        self.spent += outcome.iterations;
+        let w = &mut *self.work;
+        self.board.keep(0, w.timings);
+        Ok(())
+    }
+
     /// One round; whether it reached the fixed point (no response and no bus time changed).
     fn round(&mut self) -> Result<bool, OutOfIterations> {
         // 1. Each script on its bus: its suspension, from its actual submission.
@@ -386,6 +412,7 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             }
             let w = &mut *self.work;
             self.board.keep(v, w.timings);
+            self.viewed = true;
             if v == 0 {
                 for b in 0..self.board.buses() {
                     self.events(b)?;
@@ -440,11 +467,24 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             if resumptions == 0 {
                 continue;
             }
-            // One instance of its CPU alone at its place.
+            // Its jitter: as the view set it where it cut its release, else its own plus its releaser's bound in
+            // this view. A releaser without one leaves it none: the view's error stands (not a bound that leaves
+            // the inherited jitter out).
+            let cut = self.work.unreleased.get(p).copied().unwrap_or(false);
+            let jitter = match self.board.released_by(p).filter(|_| !cut) {
+                None => me.jitter,
+                Some(by) => match self.board.current(by) {
+                    Some(r) => self.board.own_jitter(p).plus(r),
+                    None => continue,
+                },
+            };
+            // One instance of its CPU alone at its place, from its release (its jitter added once below: one
+            // instance's window does not depend on its own jitter).
             if let Some(slot) = self.work.timings.get_mut(p) {
                 *slot = TaskTiming {
                     wcet: cpu,
                     period: self.limits.horizon,
+                    jitter: Time::ZERO,
                     ..me
                 };
             }
@@ -464,7 +504,10 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
                 continue;
             };
             let around = alone.wcrt.minus(cpu);
-            let bound = suspended.plus(alone.wcrt).plus(around.times(resumptions));
+            let bound = jitter
+                .plus(suspended)
+                .plus(alone.wcrt)
+                .plus(around.times(resumptions));
             if bound <= me.period {
                 self.board.refine(
                     p,
@@ -556,10 +599,13 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
     /// View `v`'s jobs in place, from the scripts' suspensions and the suspending tasks' own-view responses:
     /// its own jobs cost their suspensions, settles and a blocking per resumption; every job of every other
     /// suspending task is its CPU with jitter `R − C` and its release cut; every job released by one of them
-    /// inherits the releaser's whole own-view response; every other job as built.
+    /// inherits the releaser's whole own-view response (the larger of it and its `R − C` for a suspending one); in
+    /// a suspending task's view every default-view job released by a default-view job takes its releaser's
+    /// default-view bound, its release cut (none: a failure); every other job as built.
     fn view_jobs(&mut self, v: usize) {
         let board = &*self.board;
         let w = &mut *self.work;
+        let mut orphan = None;
         for p in 0..w.jobs {
             let base = w.base.get(p).copied().unwrap_or(Time::ZERO);
             let mut cost = base;
@@ -586,12 +632,31 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
                 jitter = w.own.get(p).copied().unwrap_or(Time::ZERO).minus(base);
                 cut = true;
             }
-            // Released by a suspending task's job: that job's whole own-view response.
+            // Released by a suspending task's job: that job's whole own-view response, or, for another suspending
+            // task's job, its `R − C` where larger (its own-view response counts from its activation, so its
+            // inherited release with its suspensions: the release alone would leave the suspensions out).
             if let Some(by) = board.released_by(p).filter(|&by| board.view(by) != 0) {
-                jitter = board
-                    .own_jitter(p)
-                    .plus(w.own.get(by).copied().unwrap_or(Time::ZERO));
+                jitter = jitter.max(
+                    board
+                        .own_jitter(p)
+                        .plus(w.own.get(by).copied().unwrap_or(Time::ZERO)),
+                );
                 cut = true;
+            }
+            // In a suspending task's view, a default-view job released by a default-view job: its jitter from the
+            // default view (analysed first this round), its release cut. The view's own bound of its releaser may
+            // be none (the suspending job's suspensions as execution may overload it) where the default view's is
+            // one; without either the job's jitter is not known and the view's jobs at or below it have no bound.
+            if v != 0 && view == 0 && !cut {
+                if let Some(by) = board.released_by(p).filter(|&by| board.view(by) == 0) {
+                    match board.kept(by) {
+                        Some(r) => {
+                            jitter = board.own_jitter(p).plus(r);
+                            cut = true;
+                        }
+                        None => orphan = orphan.or(Some(p)),
+                    }
+                }
             }
             if let (Some(t), Some(share)) = (w.timings.get_mut(p), w.shares.get_mut(p)) {
                 if cost != t.wcet {
@@ -603,6 +668,9 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             if let Some(slot) = w.unreleased.get_mut(p) {
                 *slot = cut;
             }
+        }
+        if let Some(job) = orphan {
+            self.fail(Failure::Job { job });
         }
     }
 

@@ -617,86 +617,90 @@ proptest! {
 /// ([`NO_RELEASER`]: none).
 type HandTask = (u8, u32, u32, &'static [u32], u32, u8);
 
+/// The chip's decision on `tasks` (as [`chip_wcrts_us`] reads them), each deadline `expected` µs (0: none), task
+/// `short`'s one µs less.
+fn chip_decide(tasks: &[HandTask], expected: &[u32], short: Option<usize>) -> Option<Refusal> {
+    let rows: Vec<TaskRow> = tasks
+        .iter()
+        .enumerate()
+        .map(|(i, &(priority, cpu, period, _, _, released_by))| TaskRow {
+            cost: cpu * 1000,
+            period: period * 1000,
+            deadline: match expected[i] {
+                0 => NO_DEADLINE,
+                e => (e - u32::from(short == Some(i))) * 1000,
+            },
+            jitter: 0,
+            priority,
+            released_by,
+            own_frame: false,
+            deadline_own_frames: 0,
+            share: SHARE_AT_RUNTIME,
+        })
+        .collect();
+    let sections: Vec<admission::SectionRow> = tasks
+        .iter()
+        .filter(|t| t.4 > 0)
+        .map(|&(priority, _, _, _, length, _)| admission::SectionRow {
+            length: length * 1000,
+            holder_priority: priority,
+            ceiling: 3,
+        })
+        .collect();
+    let scripts: Vec<Vec<ScriptRow>> = tasks
+        .iter()
+        .map(|t| {
+            t.3.iter()
+                .map(|&us| ScriptRow {
+                    bus: 0,
+                    bus_time: us * 1000,
+                    events: 0,
+                    starts: 0,
+                    settle: 0,
+                })
+                .collect()
+        })
+        .collect();
+    let task_scripts: Vec<admission::TaskScripts<'_>> = scripts
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| !l.is_empty())
+        .map(|(i, l)| (i as u8, l.as_slice()))
+        .collect();
+    let buses = [BusRow {
+        engine_priority: 10,
+        per_event: 0,
+        per_script: 0,
+        condition_wait: 0,
+    }];
+    let boards = [BoardTable {
+        name: "b",
+        tasks: &rows,
+        sections: &sections,
+        blocking: &[],
+        topics: &[],
+        shortest_dlc: 0,
+        levels: [None; 4],
+        monotonic: None,
+        can_tx: None,
+        command_handler: None,
+        buses: &buses,
+        task_scripts: &task_scripts,
+        publisher_tasks: [0; 4],
+    }];
+    let robot = RobotTable {
+        boards: &boards,
+        bit_time: Time::from_ns(1000),
+        frame_cost: FrameCost::Exact,
+    };
+    admission::evaluate::<16, 8>(&robot, &[]).refusal
+}
+
 /// The chip's WCRT of each of `tasks` (`tests/known_answers.rs`'s boards as chip rows) with an `expected` figure
 /// (0: its period, not read): each such task's deadline one µs short of it in turn, the check names the task and
 /// its WCRT; at `expected` it admits the set.
 fn chip_wcrts_us(tasks: &[HandTask], expected: &[u32]) -> Vec<Option<u64>> {
-    let decide = |short: Option<usize>| {
-        let rows: Vec<TaskRow> = tasks
-            .iter()
-            .enumerate()
-            .map(|(i, &(priority, cpu, period, _, _, released_by))| TaskRow {
-                cost: cpu * 1000,
-                period: period * 1000,
-                deadline: match expected[i] {
-                    0 => NO_DEADLINE,
-                    e => (e - u32::from(short == Some(i))) * 1000,
-                },
-                jitter: 0,
-                priority,
-                released_by,
-                own_frame: false,
-                deadline_own_frames: 0,
-                share: SHARE_AT_RUNTIME,
-            })
-            .collect();
-        let sections: Vec<admission::SectionRow> = tasks
-            .iter()
-            .filter(|t| t.4 > 0)
-            .map(|&(priority, _, _, _, length, _)| admission::SectionRow {
-                length: length * 1000,
-                holder_priority: priority,
-                ceiling: 3,
-            })
-            .collect();
-        let scripts: Vec<Vec<ScriptRow>> = tasks
-            .iter()
-            .map(|t| {
-                t.3.iter()
-                    .map(|&us| ScriptRow {
-                        bus: 0,
-                        bus_time: us * 1000,
-                        events: 0,
-                        starts: 0,
-                        settle: 0,
-                    })
-                    .collect()
-            })
-            .collect();
-        let task_scripts: Vec<admission::TaskScripts<'_>> = scripts
-            .iter()
-            .enumerate()
-            .filter(|(_, l)| !l.is_empty())
-            .map(|(i, l)| (i as u8, l.as_slice()))
-            .collect();
-        let buses = [BusRow {
-            engine_priority: 10,
-            per_event: 0,
-            per_script: 0,
-            condition_wait: 0,
-        }];
-        let boards = [BoardTable {
-            name: "b",
-            tasks: &rows,
-            sections: &sections,
-            blocking: &[],
-            topics: &[],
-            shortest_dlc: 0,
-            levels: [None; 4],
-            monotonic: None,
-            can_tx: None,
-            command_handler: None,
-            buses: &buses,
-            task_scripts: &task_scripts,
-            publisher_tasks: [0; 4],
-        }];
-        let robot = RobotTable {
-            boards: &boards,
-            bit_time: Time::from_ns(1000),
-            frame_cost: FrameCost::Exact,
-        };
-        admission::evaluate::<16, 8>(&robot, &[]).refusal
-    };
+    let decide = |short: Option<usize>| chip_decide(tasks, expected, short);
     assert_eq!(decide(None), None, "admitted at the expected WCRTs");
     (0..tasks.len())
         .filter(|&i| expected[i] > 0)
@@ -870,4 +874,59 @@ fn a_build_without_the_rounds_takes_no_table_with_buses() {
     let shipped =
         admission_host::lower_robot(&common::workspace()).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(shipped.check_sensor_buses_linked(false), Ok(()));
+}
+
+/// `tests/known_answers.rs`'s `a_suspending_job_whose_releaser_overloads_in_its_view_has_no_bound` through the
+/// chip: p (2, CPU 20 µs, a 170 µs script, T 400) released by r (1, 300 µs, T 400), which overloads in p's view.
+/// The simulator finds p at 490 µs; the check refuses the set without a bound, at any deadline.
+#[test]
+fn a_suspending_job_whose_releaser_overloads_through_the_chip() {
+    let tasks: [HandTask; 2] = [
+        (2, 20, 400, &[170], 0, 1),
+        (1, 300, 400, &[], 0, NO_RELEASER),
+    ];
+    for expected in [[400, 400], [0, 400], [400, 0]] {
+        match chip_decide(&tasks, &expected, None) {
+            Some(Refusal::Deadline(v)) => assert_eq!(v.wcrt, None, "{expected:?}: {v:?}"),
+            other => panic!("{expected:?}: {other:?}"),
+        }
+    }
+}
+
+/// `tests/known_answers.rs`'s `a_job_released_by_a_suspending_job_counts_its_own_suspensions` through the chip:
+/// a (3, 10 µs, a 50 µs script) releases b (2, 10 µs, a 300 µs script), l (1, 380 µs) below, T 1000 µs each: b
+/// seen by l with its `R − C` of 720 µs as jitter, not its release's 360: 360, 730 and 410 µs.
+#[test]
+fn a_job_released_by_a_suspending_job_through_the_chip() {
+    let expected = [360, 730, 410];
+    assert_eq!(
+        chip_wcrts_us(
+            &[
+                (3, 10, 1000, &[50], 0, NO_RELEASER),
+                (2, 10, 1000, &[300], 0, 0),
+                (1, 380, 1000, &[], 0, NO_RELEASER)
+            ],
+            &expected
+        ),
+        [Some(360), Some(730), Some(410)]
+    );
+}
+
+/// `tests/known_answers.rs`'s `a_job_released_across_a_suspending_one_keeps_its_jitter_in_its_view` through the
+/// chip: x (3, 10 µs, T 100) released by r (1, 60 µs, T 100) keeps its 100 µs jitter from the default view in the
+/// view of p (2, 20 µs, a 170 µs script, T 400), where r overloads: 110, 100 and 230 µs.
+#[test]
+fn a_job_released_across_a_suspending_one_through_the_chip() {
+    let expected = [110, 100, 230];
+    assert_eq!(
+        chip_wcrts_us(
+            &[
+                (3, 10, 100, &[], 0, 1),
+                (1, 60, 100, &[], 0, NO_RELEASER),
+                (2, 20, 400, &[170], 0, NO_RELEASER)
+            ],
+            &expected
+        ),
+        [Some(110), Some(100), Some(230)]
+    );
 }

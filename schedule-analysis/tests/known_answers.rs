@@ -905,3 +905,131 @@ fn a_suspending_job_by_its_segments_worked_by_hand() {
     );
     assert_eq!(board_wcrts_us(&board), vec![Some(10), None]);
 }
+
+/// A suspending job released by a job that overloads in the suspending job's view: p (priority 2, CPU 20 µs, one
+/// 170 µs script alone on its bus, T 400 µs), released by r's completion (priority 1, CPU 300 µs, T 400 µs).
+///
+/// In p's view it costs 20 + 170 = 190 µs and r overloads below it (190/400 + 300/400 > 1): r has no bound there,
+/// so neither has the jitter p inherits from it, and no bound of p (by its segments either) may leave that jitter
+/// out. Counting p's CPU alone with no jitter says 190 µs, yet p is ready only when r ends: the simulator, r
+/// running 0..300, p 300..310, its script 310..480 and p's rest 480..490, finds 490 µs from p's activation, above
+/// its 400 µs period and deadline. Neither has a bound.
+#[test]
+fn a_suspending_job_whose_releaser_overloads_in_its_view_has_no_bound() {
+    let cpu = |length_us: u64| {
+        Piece::Cpu(Segment {
+            length: length_us * 1000,
+            lock: None,
+        })
+    };
+    let jobs = vec![
+        SuspendingJob {
+            task: 1,
+            arrival: 0,
+            release: 0,
+            pieces: vec![cpu(300)],
+        },
+        SuspendingJob {
+            task: 0,
+            arrival: 0,
+            release: 300_000,
+            pieces: vec![cpu(10), Piece::Script(170_000), cpu(10)],
+        },
+    ];
+    let simulated = sim::suspending_run(&[2, 1], &[0, 1], &[], &jobs);
+    assert_eq!(simulated, vec![300_000, 490_000]);
+
+    let mut p = board_task("p", 2, 20, 400);
+    p.released_by = Some(1);
+    let board = suspending_board(vec![p, board_task("r", 1, 300, 400)], &[(0, 170)]);
+    assert_eq!(board_wcrts_us(&board), vec![None, None]);
+}
+
+/// A suspending job released by another: a (priority 3, CPU 10 µs, a 50 µs script, T 1000 µs) releases b (2, CPU
+/// 10 µs, a 300 µs script, T 1000 µs); l (1, CPU 380 µs, T 1000 µs) has no script.
+///
+/// a's script waits for b's (non-preemptive): 350 µs, a 360 µs. b's release jitter is a's 360 µs; in its own view
+/// it responds in 730 µs from its activation, so its CPU may run anywhere up to 720 µs after it: seen by l, b is
+/// 10 µs with jitter 720 (R − C), not the 360 of its release alone. l = 380 + 10 (a, jitter 350) + 2 · 10 (b: the
+/// window of 410 µs and the 720 µs jitter reach its second job) = 410 µs. Stating b's 360 µs release jitter as its
+/// own instead of the release gives l the same 410 µs.
+#[test]
+fn a_job_released_by_a_suspending_job_counts_its_own_suspensions() {
+    let mut b = board_task("b", 2, 10, 1000);
+    b.released_by = Some(0);
+    let board = suspending_board(
+        vec![
+            board_task("a", 3, 10, 1000),
+            b,
+            board_task("l", 1, 380, 1000),
+        ],
+        &[(0, 50), (1, 300)],
+    );
+    assert_eq!(
+        board_wcrts_us(&board),
+        vec![Some(360), Some(730), Some(410)]
+    );
+    let mut board = board;
+    board.tasks[1].released_by = None;
+    board.tasks[1].jitter = Time::from_us(360);
+    assert_eq!(
+        board_wcrts_us(&board),
+        vec![Some(360), Some(730), Some(410)]
+    );
+}
+
+/// A job above a suspending one, released by a job below it: X (priority 3, CPU 10 µs, T 100 µs) released by R (1,
+/// 60 µs, T 100 µs); p (2, CPU 20 µs, one 170 µs script, T 400 µs).
+///
+/// In the default view R responds in 100 µs, so X's release jitter is 100 µs. In p's view (p costing 190 µs) R
+/// overloads below it, yet X above p still comes with that jitter: p = 20 + 170 + ⌈(W + 100)/100⌉ · 10 → 230 µs,
+/// as with X's 100 µs stated as its own jitter; its jitter 0 there (R's bound in p's view, none) would give 210.
+#[test]
+fn a_job_released_across_a_suspending_one_keeps_its_jitter_in_its_view() {
+    let mut x = board_task("x", 3, 10, 100);
+    x.released_by = Some(1);
+    let board = suspending_board(
+        vec![x, board_task("r", 1, 60, 100), board_task("p", 2, 20, 400)],
+        &[(2, 170)],
+    );
+    let result = analysis::analyse_board(&board, &Limits::default());
+    assert_eq!(
+        result.tasks[0].jitter,
+        Time::from_us(100),
+        "x's inherited jitter"
+    );
+    let with_release = board_wcrts_us(&board);
+    let mut board = board;
+    board.tasks[0].released_by = None;
+    board.tasks[0].jitter = Time::from_us(100);
+    let stated = board_wcrts_us(&board);
+    assert_eq!(stated[2], Some(230));
+    assert_eq!(with_release[2], stated[2]);
+}
+
+/// A script without a bound in the first round: h (priority 3, CPU 10 µs, T 100 µs) above p (2, CPU 10 µs, a
+/// 150 µs script, T 100 µs: the bus overloads). p and every job not above it have no bound; h, above every
+/// suspending job, keeps its own: 10 µs.
+#[test]
+fn a_script_without_a_bound_in_the_first_round_leaves_the_jobs_above_bounded() {
+    let board = suspending_board(
+        vec![
+            board_task("h", 3, 10, 100),
+            board_task("p", 2, 10, 100),
+            board_task("l", 1, 10, 1000),
+        ],
+        &[(1, 150)],
+    );
+    assert_eq!(board_wcrts_us(&board), vec![Some(10), None, None]);
+}
+
+/// `a_suspending_job_by_its_segments_worked_by_hand`'s J with a release jitter of 5 µs of its own: by its segments
+/// 5 + 70 + 30 + 10 = 115 µs, the jitter once (one instance's window from its release does not depend on it; with
+/// the jitter in `W` and so in each `W − C` it counts twice: 70 + 35 + 15 = 120).
+#[test]
+fn a_suspending_jobs_segments_count_its_jitter_once() {
+    let mut j = board_task("j", 1, 20, 120);
+    j.jitter = Time::from_us(5);
+    let board = suspending_board(vec![board_task("h", 2, 10, 50), j], &[(1, 70)]);
+    assert_eq!(board_wcrts_us(&board), vec![Some(10), Some(115)]);
+}

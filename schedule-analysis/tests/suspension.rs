@@ -46,6 +46,13 @@ struct Set {
 }
 
 fn set(raw: &[RawTask], utilisation: u64) -> Set {
+    chained_set(raw, utilisation, &[])
+}
+
+/// [`set`] with release chains: task `i` is released by task `i − releases[i]` where that is a task of another RTIC
+/// task (0 or out of range: not released), at its releaser's period (one job per releaser's job), its own jitter
+/// on top of its releaser's completion. The releaser's priority is random: lower or higher, suspending or not.
+fn chained_set(raw: &[RawTask], utilisation: u64, releases: &[u64]) -> Set {
     let shares: u64 = raw.iter().map(|t| t.2).sum::<u64>().max(1);
     let mut tasks = Vec::new();
     let mut serial = Vec::new();
@@ -57,9 +64,16 @@ fn set(raw: &[RawTask], utilisation: u64) -> Set {
         &(priority, period_us, share, jitter_pct, joins, script_pct, section_pct, count, settle_pm),
     ) in raw.iter().enumerate()
     {
-        let period = period_us * US;
-        let wcet = ((period * utilisation * share) / (shares * 1000) / US).max(1) * US;
         let joined = joins && i > 0;
+        let released_by = releases
+            .get(i)
+            .and_then(|&back| i.checked_sub(back as usize).filter(|_| back > 0))
+            .filter(|&by| !joined && serial[by] != i);
+        let period = released_by.map_or(period_us * US, |by| {
+            let releaser: &TaskSpec = &tasks[by];
+            releaser.period.as_ns()
+        });
+        let wcet = ((period * utilisation * share) / (shares * 1000) / US).max(1) * US;
         let (priority, group) = if joined {
             let previous: &TaskSpec = &tasks[i - 1];
             (previous.priority, serial[i - 1])
@@ -103,7 +117,7 @@ fn set(raw: &[RawTask], utilisation: u64) -> Set {
                 .unwrap_or_default(),
             blocking: None,
             kind: TaskKind::Plain,
-            released_by: None,
+            released_by,
             sporadic: false,
             job_of: Some(format!("rtic{group}")),
         });
@@ -186,18 +200,54 @@ fn cpu(length: u64, lock: bool) -> Piece {
     })
 }
 
+/// A released job's link to the job whose completion releases it: the releaser's index in the jobs and the job's
+/// own jitter drawn, on top of that completion.
+#[derive(Clone, Copy)]
+struct Link {
+    job: usize,
+    releaser: usize,
+    jitter: u64,
+}
+
 /// Random jobs: offsets, periodic or sporadic, release jitter, the CPU split at random around the scripts (often all
-/// in one part), shorter CPU, scripts and settles at times, the critical section in any one part.
-fn random_jobs(set: &Set, seed: u64, horizon: u64) -> Vec<SuspendingJob> {
+/// in one part), shorter CPU, scripts and settles at times, the critical section in any one part. A released task
+/// has one job per job of its releaser, from the same arrival; its release is set by [`chained_run`].
+fn random_jobs(set: &Set, seed: u64, horizon: u64) -> (Vec<SuspendingJob>, Vec<Link>) {
     let mut rng = Lcg(seed);
-    let mut jobs = Vec::new();
+    let mut jobs: Vec<SuspendingJob> = Vec::new();
+    let mut links = Vec::new();
     for (task, t) in set.board.tasks.iter().enumerate() {
         let period = t.period.as_ns();
         let mut arrival = rng.below(period / US) * US;
         let sporadic = rng.below(3) == 0;
         let mut last_release = 0;
-        while arrival <= horizon {
-            let jitter = rng.below(t.jitter.as_ns() / US + 1) * US;
+        // A released task's jobs: one per job of its releaser (generated before it: its releaser comes first).
+        let releasers: Option<Vec<usize>> = t.released_by.map(|by| {
+            (0..jobs.len())
+                .filter(|&j| jobs[j].task == by)
+                .collect::<Vec<usize>>()
+        });
+        let mut next_releaser = 0;
+        loop {
+            if let Some(list) = &releasers {
+                let Some(&r) = list.get(next_releaser) else {
+                    break;
+                };
+                next_releaser += 1;
+                arrival = jobs[r].arrival;
+                links.push(Link {
+                    job: jobs.len(),
+                    releaser: r,
+                    jitter: rng.below(t.jitter.as_ns() / US + 1) * US,
+                });
+            } else if arrival > horizon {
+                break;
+            }
+            let jitter = if releasers.is_some() {
+                0
+            } else {
+                rng.below(t.jitter.as_ns() / US + 1) * US
+            };
             let release = (arrival + jitter).max(last_release);
             last_release = release;
             let wcet = t.wcet.as_ns();
@@ -265,7 +315,40 @@ fn random_jobs(set: &Set, seed: u64, horizon: u64) -> Vec<SuspendingJob> {
                 };
         }
     }
-    jobs
+    (jobs, links)
+}
+
+/// [`sim::suspending_run`] with each released job ready at its releaser's completion plus its own jitter (no earlier
+/// than its task's previous job): replayed until the releases agree with the completions. The replay is causal
+/// (what happens before an instant depends on the releases before it alone), so each replay settles at least one
+/// more release in time order: at most one replay per released job and one more. `None` if it did not settle.
+fn chained_run(
+    priorities: &[u32],
+    serial: &[usize],
+    ceilings: &[u32],
+    jobs: &mut [SuspendingJob],
+    links: &[Link],
+) -> Option<Vec<u64>> {
+    for _ in 0..=links.len() {
+        let responses = sim::suspending_run(priorities, serial, ceilings, jobs);
+        let mut changed = false;
+        let mut last: Vec<u64> = vec![0; priorities.len()];
+        for link in links {
+            let releaser = &jobs[link.releaser];
+            let done = releaser.arrival + responses[link.releaser];
+            let task = jobs[link.job].task;
+            let release = (done + link.jitter).max(last[task]);
+            last[task] = release;
+            if jobs[link.job].release != release {
+                jobs[link.job].release = release;
+                changed = true;
+            }
+        }
+        if !changed {
+            return Some(responses);
+        }
+    }
+    None
 }
 
 fn raw_tasks() -> impl Strategy<Value = Vec<RawTask>> {
@@ -295,9 +378,10 @@ fn check(set: &Set, seed: u64) -> Result<usize, String> {
         .map(|t| t.period.as_ns())
         .max()
         .unwrap_or(0);
-    let jobs = random_jobs(set, seed, 40 * longest);
+    let (mut jobs, links) = random_jobs(set, seed, 40 * longest);
     let priorities: Vec<u32> = set.board.tasks.iter().map(|t| t.priority).collect();
-    let responses = sim::suspending_run(&priorities, &set.serial, &[set.ceiling], &jobs);
+    let responses = chained_run(&priorities, &set.serial, &[set.ceiling], &mut jobs, &links)
+        .ok_or("the releases did not settle")?;
     let mut bounded = 0;
     for (job, r) in jobs.iter().zip(responses) {
         if let Some(bound) = result.tasks[job.task].wcrt() {
@@ -329,6 +413,173 @@ proptest! {
         let checked = check(&set, seed);
         prop_assert!(checked.is_ok(), "{}", checked.unwrap_err());
     }
+}
+
+/// Per task: how far back its releaser is (0: none), as [`chained_set`] reads it; mostly released.
+fn releases() -> impl Strategy<Value = Vec<u64>> {
+    prop::collection::vec(prop_oneof![1 => Just(0u64), 2 => 1u64..=4], 5)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 100, ..ProptestConfig::default() })]
+
+    /// Release chains: a lower job releasing a higher one and the reverse, a suspending job releasing a suspending
+    /// one or a plain one; the simulator readies each released job at its releaser's completion.
+    #[test]
+    fn chained_simulation_never_exceeds_the_analysis(
+        raw in raw_tasks(),
+        releases in releases(),
+        utilisation in 100u64..=600,
+        seed in any::<u64>(),
+    ) {
+        let set = chained_set(&raw, utilisation, &releases);
+        let checked = check(&set, seed);
+        prop_assert!(checked.is_ok(), "{}", checked.unwrap_err());
+    }
+
+    /// The same on [`heavy_tasks`]' sets, where the suspending job's segments' bound is often the one taken.
+    #[test]
+    fn chained_heavy_simulation_never_exceeds_the_analysis(
+        raw in heavy_tasks(),
+        releases in releases(),
+        utilisation in 100u64..=500,
+        seed in any::<u64>(),
+    ) {
+        let set = chained_set(&raw, utilisation, &releases);
+        let checked = check(&set, seed);
+        prop_assert!(checked.is_ok(), "{}", checked.unwrap_err());
+    }
+}
+
+/// Release chains where the suspension matters most, each with zero to two short tasks above (priorities 5 and 6):
+/// a suspending job (priority 2, its scripts 20 to 60 % of its period) released by a heavy one below it (1); a job
+/// above (3) released by a heavy one at the bottom (1) across a suspending one between them (2); a suspending job (3)
+/// releasing another (2, a long script) over a heavy plain one (1).
+fn chain_templates() -> impl Strategy<Value = (Vec<RawTask>, Vec<u64>)> {
+    let above = (
+        5u32..=6,
+        10u64..=60,
+        1u64..=5,
+        0u64..=30,
+        Just(false),
+        Just(0u64),
+        prop_oneof![Just(0u64), 10u64..=100],
+        Just(1u64),
+        Just(0u64),
+    );
+    let heavy = |priority: u32| {
+        (
+            Just(priority),
+            100u64..=400,
+            5u64..=10,
+            0u64..=20,
+            Just(false),
+            Just(0u64),
+            prop_oneof![Just(0u64), 10u64..=100],
+            Just(1u64),
+            Just(0u64),
+        )
+    };
+    let suspending = |priority: u32, script: std::ops::RangeInclusive<u64>| {
+        (
+            Just(priority),
+            100u64..=400,
+            1u64..=3,
+            0u64..=20,
+            Just(false),
+            script,
+            prop_oneof![Just(0u64), 10u64..=100],
+            prop_oneof![3 => Just(1u64), 1 => Just(2u64)],
+            prop_oneof![3 => Just(0u64), 1 => 1u64..=20],
+        )
+    };
+    let plain = |priority: u32| {
+        (
+            Just(priority),
+            20u64..=200,
+            1u64..=3,
+            0u64..=20,
+            Just(false),
+            Just(0u64),
+            Just(0u64),
+            Just(1u64),
+            Just(0u64),
+        )
+    };
+    let templates = prop_oneof![
+        (heavy(1), suspending(2, 20..=60)).prop_map(|(r, p)| (vec![r, p], vec![0, 1])),
+        (heavy(1), suspending(2, 20..=60), plain(3))
+            .prop_map(|(r, p, x)| (vec![r, p, x], vec![0, 0, 2])),
+        (suspending(3, 5..=15), suspending(2, 20..=50), heavy(1))
+            .prop_map(|(a, b, l)| (vec![a, b, l], vec![0, 1, 0])),
+    ];
+    (templates, prop::collection::vec(above, 0..=2)).prop_map(|((mut raw, mut releases), above)| {
+        releases.extend(above.iter().map(|_| 0));
+        raw.extend(above);
+        (raw, releases)
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
+
+    /// [`chain_templates`]' sets against the simulator.
+    #[test]
+    fn chain_templates_never_exceed_the_analysis(
+        (raw, releases) in chain_templates(),
+        utilisation in 300u64..=900,
+        seed in any::<u64>(),
+    ) {
+        let set = chained_set(&raw, utilisation, &releases);
+        let checked = check(&set, seed);
+        prop_assert!(checked.is_ok(), "{}", checked.unwrap_err());
+    }
+}
+
+/// The chained properties are not vacuous: on a fixed sweep of [`raw_tasks`]' and [`heavy_tasks`]' sets with
+/// releases (128 released tasks, 95 of them bounded, 21 released by a lower one, 11 suspending ones released by a
+/// suspending one, 178 530 jobs checked), released tasks are bounded and their jobs checked.
+#[test]
+fn the_chained_sets_are_checked() {
+    let mut runner = proptest::test_runner::TestRunner::deterministic();
+    let strategy = (
+        prop_oneof![raw_tasks(), heavy_tasks()],
+        releases(),
+        100u64..=600,
+    );
+    let (mut released, mut bounded, mut by_lower, mut suspending_pairs, mut jobs) = (0, 0, 0, 0, 0);
+    for case in 0..200 {
+        let (raw, releases, utilisation) = strategy.new_tree(&mut runner).unwrap().current();
+        let set = chained_set(&raw, utilisation, &releases);
+        let result = analysis::analyse_board(&set.board, &Limits::default());
+        let suspends = |i: usize| !set.script[i].is_empty();
+        for (i, t) in set.board.tasks.iter().enumerate() {
+            let Some(by) = t.released_by else {
+                continue;
+            };
+            released += 1;
+            if result.tasks[i].wcrt().is_some() {
+                bounded += 1;
+                by_lower += usize::from(set.board.tasks[by].priority < t.priority);
+                suspending_pairs += usize::from(suspends(i) && suspends(by));
+            }
+        }
+        jobs += check(&set, case).expect("within the analysis");
+    }
+    assert!(released > 100, "{released} released tasks");
+    assert!(
+        bounded * 3 >= released,
+        "{bounded} of {released} released tasks bounded"
+    );
+    assert!(
+        by_lower > 20,
+        "{by_lower} bounded tasks released by a lower one"
+    );
+    assert!(
+        suspending_pairs > 10,
+        "{suspending_pairs} bounded suspending tasks released by a suspending one"
+    );
+    assert!(jobs > 10_000, "{jobs} jobs checked");
 }
 
 /// The property above is not vacuous: on a fixed sweep of sets most tasks with a script are bounded, and their

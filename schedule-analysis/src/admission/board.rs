@@ -280,6 +280,18 @@ impl<const N: usize> Originals<N> {
     }
 }
 
+/// A fixed task's deadline at `period`: its own frames' where it states them, else its row's, else its period.
+#[inline(always)]
+fn fixed_deadline(t: &TaskRow, own_frame: Time, period: Time) -> Time {
+    if t.own_frame && t.deadline_own_frames > 0 {
+        can::own_frames(own_frame, t.deadline_own_frames)
+    } else if t.deadline == NO_DEADLINE {
+        period
+    } else {
+        row_time(t.deadline)
+    }
+}
+
 /// The period of a fixed task or a stream's job.
 fn period_of<const M: usize>(
     input: &BoardInput<'_, M>,
@@ -345,13 +357,7 @@ fn build_job<const M: usize>(
         Source::Fixed(row) => {
             let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
             let period = period_of(input, what, own_frame)?;
-            let deadline = if t.own_frame && t.deadline_own_frames > 0 {
-                can::own_frames(own_frame, t.deadline_own_frames)
-            } else if t.deadline == NO_DEADLINE {
-                period
-            } else {
-                row_time(t.deadline)
-            };
+            let deadline = fixed_deadline(t, own_frame, period);
             // NO_RELEASER is NO_JOB.
             let id = TaskId::Fixed(u16::from(row));
             job(
@@ -453,7 +459,16 @@ fn build_job<const M: usize>(
                 _ => return Err(Refusal::Capacity),
             };
             let period = period_of(input, job_source, own_frame)?;
-            let (timing, mut meta) = job(charge, period, Time::ZERO, id, period, by);
+            // Its job's deadline, which a refusal for an unbounded row names (the row itself has none).
+            let deadline = match job_source {
+                Source::Fixed(r) => {
+                    let t = table.tasks.get(usize::from(r)).ok_or(Refusal::Capacity)?;
+                    fixed_deadline(t, own_frame, period)
+                }
+                Source::Publisher { stream, .. } => stream_of(stream)?.deadline(),
+                _ => return Err(Refusal::Capacity),
+            };
+            let (timing, mut meta) = job(charge, period, Time::ZERO, id, deadline, by);
             meta.check = Check::Unchecked;
             (timing, meta)
         }

@@ -198,6 +198,9 @@ impl<const N: usize, const M: usize> SuspendingBoard for ChipBoard<'_, '_, N, M>
         )
         .map_err(|_| board_analysis::OutOfIterations)
     }
+    fn current(&self, p: usize) -> Option<Time> {
+        bound(self.bounds.wcrt.get(p).copied().unwrap_or(NONE))
+    }
     fn refine(&mut self, p: usize, found: Response) {
         if let Some(slot) = self.bounds.wcrt.get_mut(p) {
             *slot = (*slot).min(found.wcrt.as_ns());
