@@ -309,12 +309,15 @@ impl Chip {
                         },
                     };
                     match wrapped(from, to) {
-                        Some((low, high)) => self
-                            .regions(low, high)
-                            .into_iter()
-                            .map(charge)
-                            .max()
-                            .unwrap_or_else(|| charge(Region::Unknown)),
+                        Some((low, high)) => {
+                            let plain = self
+                                .regions(low, high)
+                                .into_iter()
+                                .map(charge)
+                                .max()
+                                .unwrap_or_else(|| charge(Region::Unknown));
+                            plain.max(self.bit_band_cycles(low, high, store))
+                        }
                         None => charge(Region::Unknown),
                     }
                 }
@@ -322,6 +325,29 @@ impl Chip {
             },
         };
         words * worst
+    }
+
+    /// The cycles an access to a bit-band alias in `low..=high` adds at worst (ARMv7-M ARM A3.7,
+    /// the Cortex-M3 TRM §4.2: the SRAM alias 0x2200_0000-0x23ff_ffff and the peripheral alias
+    /// 0x4200_0000-0x43ff_ffff address one bit each, word `n` of the alias bit `n % 8` of byte
+    /// `n / 8` of the region's first MiB): the real byte's region on its own bus, and a store is a
+    /// read-modify-write of it, two transfers and a cycle between; 0 where the range misses both.
+    fn bit_band_cycles(self, low: u32, high: u32, store: bool) -> u64 {
+        const ALIASES: [(u32, u32); 2] = [(0x2200_0000, 0x2000_0000), (0x4200_0000, 0x4000_0000)];
+        let mut worst = 0;
+        for (alias, real) in ALIASES {
+            let end = alias + 0x01ff_ffff;
+            if high < alias || low > end {
+                continue;
+            }
+            let (a, b) = (low.max(alias), high.min(end));
+            let (real_low, real_high) = (real + (a - alias) / 32, real + (b - alias) / 32);
+            for region in self.regions(real_low, real_high) {
+                let one = self.access_cycles(region);
+                worst = worst.max(if store { 2 * one + 1 } else { one });
+            }
+        }
+        worst
     }
 
     /// The regions any address of `low..=high` is in (the memory map of [`Chip::region`]).

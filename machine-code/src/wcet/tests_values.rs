@@ -246,3 +246,45 @@ fn an_unknown_index_keeps_the_base_region_only_where_the_base_is_an_address() {
     );
     assert_eq!(figures(&img, "offset_base", F103_0WS), (12, 3, None));
 }
+
+/// `op` (at 0x02) through r1, loaded with `address` from flash.
+fn through_address(address: u32, op: u16) -> Image {
+    let [low, high] = [address as u16, (address >> 16) as u16];
+    image(
+        &[
+            0x4901, // 0x00 ldr r1, [pc, #4]: `address`: 2
+            op,     // 0x02 through r1
+            0x4770, // 0x04 bx lr: 1 + P
+            0xbf00, // 0x06 (padding)
+            low, high, // 0x08 .word address
+        ],
+        &[Sym::function("through", 0, 0x0c), Sym::data(0x08)],
+    )
+}
+
+#[test]
+fn a_bit_band_alias_is_charged_on_the_bus_of_its_bit() {
+    // 0x4201_8400 is bit 0 of byte 0x4000_0c20 (0x4000_0000 + 0x1_8400 / 32): TIM5 on APB1. A load
+    // of it is one APB1 transfer, 2 + 5; a store a read-modify-write, two APB1 transfers and a
+    // cycle between, 2 + 5 + 1 + 5. ldr 2, bx lr 4: 13 and 19 cycles (as AHB, 1 more: 9).
+    let str_r0 = 0x6008; // str r0, [r1]
+    let ldr_r2 = 0x680a; // ldr r2, [r1]
+    assert_eq!(
+        figures(&through_address(0x4201_8400, ldr_r2), "through", F103_0WS),
+        (13, 3, None)
+    );
+    assert_eq!(
+        figures(&through_address(0x4201_8400, str_r0), "through", F103_0WS),
+        (19, 3, None)
+    );
+    // The SRAM alias: RAM's bit, a store two transfers without wait and the cycle between: 2 + 1.
+    assert_eq!(
+        figures(&through_address(0x2200_0100, str_r0), "through", F103_0WS),
+        (9, 3, None)
+    );
+    // The plain register: one APB1 store, 2 + 5.
+    assert_eq!(
+        figures(&through_address(0x4000_0c20, str_r0), "through", F103_0WS),
+        (13, 3, None)
+    );
+}
