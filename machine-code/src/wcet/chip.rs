@@ -276,10 +276,14 @@ impl Chip {
             }
             _ => None,
         };
-        let words = match insn.inst.opcode {
-            Opcode::LDRD | Opcode::STRD => 2,
+        let fp = fp_span(insn);
+        let words = match (fp, insn.inst.opcode) {
+            (Some((n, _, _)), _) => n,
+            (_, Opcode::LDRD | Opcode::STRD) => 2,
             _ => list.unwrap_or(1),
         };
+        // The bytes past its address the access reaches (a word's 3, a doubleword's 7).
+        let width = i64::try_from(insn.bytes_moved()).unwrap_or(4).max(1) - 1;
         let store = insn.is_store();
         let charge = |region: Region| {
             // Stores never go to flash in running code: an unknown store is a peripheral's at worst.
@@ -297,14 +301,18 @@ impl Chip {
                 Value::Stack => charge(Region::Ram),
                 Value::Range(lo, hi) => {
                     // The accessed span: a list's words either side of its base, else the offset's.
-                    let (from, to) = match list {
-                        Some(n) => (i64::from(lo) - 4 * n as i64, i64::from(hi) + 4 * n as i64),
-                        None => match offsets(insn, registers) {
-                            Some((a, b)) => (i64::from(lo) + a, i64::from(hi) + b),
+                    // A floating-point transfer's words from its base (below it for a decrement).
+                    let (from, to) = match (fp, list) {
+                        (Some((_, a, b)), _) => (i64::from(lo) + a, i64::from(hi) + b),
+                        (None, Some(n)) => {
+                            (i64::from(lo) - 4 * n as i64, i64::from(hi) + 4 * n as i64)
+                        }
+                        (None, None) => match offsets(insn, registers) {
+                            Some((a, b)) => (i64::from(lo) + a, i64::from(hi) + b + width),
                             // An index the analysis does not know, into the object its base
                             // addresses: the base's region, where the base is an address of the
                             // memory map (a small constant base is an offset, its index the pointer).
-                            None if lo >= FIRST_ADDRESS => (i64::from(lo), i64::from(hi)),
+                            None if lo >= FIRST_ADDRESS => (i64::from(lo), i64::from(hi) + width),
                             None => (0, i64::from(u32::MAX)),
                         },
                     };
@@ -390,6 +398,32 @@ pub fn base_register(insn: &Insn) -> Option<u8> {
             })
         }),
     }
+}
+
+/// A floating-point load or store (`LDC`/`STC` to coprocessor 10 or 11: `VLDR`, `VSTR`, `VLDM`,
+/// `VSTM`, `VPUSH`, `VPOP`; ARMv7-M ARM A7.7.229-230, A7.7.255-256): the words it moves and the
+/// first and last byte it reaches, as offsets from its base.
+fn fp_span(insn: &Insn) -> Option<(u64, i64, i64)> {
+    if insn.len != 4 || !(insn.is_coprocessor_load() || insn.is_coprocessor_store()) {
+        return None;
+    }
+    let [hw1, hw2] = insn.raw;
+    // hw1: 1110 110P UDWL Rn; hw2: Vd 101 sz imm8.
+    let (p, u, w) = (hw1 & 0x0100 != 0, hw1 & 0x0080 != 0, hw1 & 0x0020 != 0);
+    let imm8 = i64::from(hw2 & 0xff);
+    if p && !w {
+        // VLDR/VSTR: a single (one word) or a double (two) at ±imm8 words.
+        let words = if hw2 & 0x0100 != 0 { 2 } else { 1 };
+        let off = if u { 4 * imm8 } else { -4 * imm8 };
+        return Some((words, off, off + 4 * words as i64 - 1));
+    }
+    // VLDM/VSTM: imm8 words from the base up (increment after) or below it (decrement before).
+    let words = imm8.max(1);
+    Some(if u {
+        (words as u64, 0, 4 * words - 1)
+    } else {
+        (words as u64, -4 * words, -1)
+    })
 }
 
 /// The lowest address of the memory map's code, data and peripherals the images address (flash at

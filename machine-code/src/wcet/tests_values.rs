@@ -288,3 +288,68 @@ fn a_bit_band_alias_is_charged_on_the_bus_of_its_bit() {
         (13, 3, None)
     );
 }
+
+/// The 32-bit `op` (at 0x02) through r1, loaded with `address` from flash.
+fn wide_through_address(address: u32, op: [u16; 2]) -> Image {
+    let [low, high] = [address as u16, (address >> 16) as u16];
+    image(
+        &[
+            0x4901, // 0x00 ldr r1, [pc, #4]: `address`: 2
+            op[0], op[1],  // 0x02 through r1
+            0x4770, // 0x06 bx lr: 1 + P
+            low, high, // 0x08 .word address
+        ],
+        &[Sym::function("through", 0, 0x0c), Sym::data(0x08)],
+    )
+}
+
+#[test]
+fn a_doubleword_reaches_its_second_word() {
+    // ldrd r0, r2, [r1]: two words, at the base and 4 above it (TRM: 1 + N = 3 on the core).
+    let ldrd = [0xe9d1, 0x0200];
+    // In RAM: ldr 2, ldrd 3, bx lr 4: 9 cycles.
+    assert_eq!(
+        figures(
+            &wide_through_address(0x2000_0100, ldrd),
+            "through",
+            F103_0WS
+        ),
+        (9, 3, None)
+    );
+    // From RAM's last word: the second word is TIM2's (0x4000_0000, APB1), and each word is
+    // charged the worse, 5 more each: 19 (the first word alone would be RAM's: 9).
+    assert_eq!(
+        figures(
+            &wide_through_address(0x3fff_fffc, ldrd),
+            "through",
+            F103_0WS
+        ),
+        (19, 3, None)
+    );
+}
+
+#[test]
+fn a_floating_point_list_is_charged_per_word_over_its_span() {
+    const F405_0WS: Chip = Chip::Stm32f405 { wait_states: 0 };
+    // vldmia r1, {s0-s3}: 4 words from TIM2 (APB1, on the F405 2 × 4 + 1 = 9 more each), 1 + 4
+    // on the core: ldr 2, vldmia 5 + 36, bx lr 4: 47 cycles (one access charged: 20).
+    assert_eq!(
+        figures(
+            &wide_through_address(0x4000_0000, [0xec91, 0x0a04]),
+            "through",
+            F405_0WS
+        ),
+        (47, 3, None)
+    );
+    // vldmdb r1!, {s0-s1} from 0x4001_0004 (APB2's start + 4): the words at 0x4000_fffc (APB1)
+    // and 0x4001_0000 (APB2), below the base: 2 × 9 more, 1 + 2 on the core: 2 + 21 + 4 = 27
+    // (charged as APB2's base, once: 14).
+    assert_eq!(
+        figures(
+            &wide_through_address(0x4001_0004, [0xed31, 0x0a02]),
+            "through",
+            F405_0WS
+        ),
+        (27, 3, None)
+    );
+}
