@@ -312,6 +312,20 @@ impl Chip {
                             // An index the analysis does not know, into the object its base
                             // addresses: the base's region, where the base is an address of the
                             // memory map (a small constant base is an offset, its index the pointer).
+                            // Among the peripherals LLVM folds constants between base and
+                            // index (a bus's start as the base, a negative index), so where a
+                            // bus starts within 64 KiB of the base the index may reach it: the
+                            // peripheral regions 64 KiB either side are charged. (RAM and flash
+                            // objects lie in one region each, far from another's.)
+                            None if (PERIPHERALS..PERIPHERALS_END).contains(&lo)
+                                && (PERIPHERALS..PERIPHERALS_END).contains(&hi) =>
+                            {
+                                (
+                                    (i64::from(lo) - NEAR).max(i64::from(PERIPHERALS)),
+                                    (i64::from(hi) + NEAR + width)
+                                        .min(i64::from(PERIPHERALS_END) - 1),
+                                )
+                            }
                             None if lo >= FIRST_ADDRESS => (i64::from(lo), i64::from(hi) + width),
                             None => (0, i64::from(u32::MAX)),
                         },
@@ -425,6 +439,14 @@ fn fp_span(insn: &Insn) -> Option<(u64, i64, i64)> {
         (words as u64, -4 * words, -1)
     })
 }
+
+/// The peripheral buses' addresses (APB1, APB2, AHB: 0x4000_0000-0x5fff_ffff).
+const PERIPHERALS: u32 = 0x4000_0000;
+const PERIPHERALS_END: u32 = 0x6000_0000;
+
+/// How far from its base an index the analysis does not know is taken to reach (64 KiB: the
+/// memory map's regions start at multiples of it but APB2's end on the F103).
+const NEAR: i64 = 0x1_0000;
 
 /// The lowest address of the memory map's code, data and peripherals the images address (flash at
 /// 0x0800_0000; below it only the boot alias of flash, which the code does not address).

@@ -353,3 +353,20 @@ fn a_floating_point_list_is_charged_per_word_over_its_span() {
         (27, 3, None)
     );
 }
+
+#[test]
+fn an_unknown_index_from_a_bus_start_may_reach_the_bus_below() {
+    let img = image(
+        &[
+            0x4902, // 0x00 ldr r1, [pc, #8]: 0x4001_0000 (APB2's start on the F103): 2
+            0x681a, // 0x02 ldr r2, [r3]: an index the code does not fix: 2 + 5 (unknown: APB1)
+            0x5888, // 0x04 ldr r0, [r1, r2]: 0x4001_0000 + r2 may be APB1's (r2 = -0x800): 2 + 5
+            0x4770, // 0x06 bx lr: 1 + P
+            0xbf00, 0xbf00, // 0x08 (padding)
+            0x0000, 0x4001, // 0x0c .word 0x40010000
+        ],
+        &[Sym::function("folded", 0, 0x10), Sym::data(0x0c)],
+    );
+    // 2 + 7 + 7 + 4 = 20 cycles (charged as APB2's, 2 + 3: 18).
+    assert_eq!(figures(&img, "folded", F103_0WS), (20, 4, None));
+}
