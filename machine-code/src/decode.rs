@@ -504,7 +504,9 @@ impl Insn {
                 }
             }
             BX => {}
-            LDRD | UMULL | SMULL | UMLAL | SMLAL | UMAAL | MRRC(..) => {
+            // Two destinations: RdLo and RdHi (the long multiplies and accumulates).
+            LDRD | UMULL | SMULL | UMLAL | SMLAL | SMLAL_halfword(..) | SMLALD(_) | SMLSLD(_)
+            | UMAAL | MRRC(..) => {
                 for r in self.registers().into_iter().take(2) {
                     out.insert(r);
                 }
@@ -533,5 +535,25 @@ impl Regs {
     /// Whether the set holds `r`.
     pub fn contains(self, r: u8) -> bool {
         r < 16 && self.0 & (1 << r) != 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::thumb;
+
+    #[test]
+    fn a_long_accumulate_writes_both_halves() {
+        // ARMv7-M ARM A7.7.139-142: RdLo (hw2 15:12) and RdHi (11:8) are both written.
+        let code = thumb(&[
+            0xfbc2, 0x0183, // smlalbb r0, r1, r2, r3
+            0xfbc2, 0x45c3, // smlald r4, r5, r2, r3
+            0xfbd2, 0x67c3, // smlsld r6, r7, r2, r3
+            0xfbc2, 0x8903, // smlal r8, r9, r2, r3
+        ]);
+        let insns = decode("f", 0, &code, &[]).expect("decodes");
+        let written: Vec<u16> = insns.iter().map(|i| i.writes().0).collect();
+        assert_eq!(written, [0b11, 0b11 << 4, 0b11 << 6, 0b11 << 8]);
     }
 }

@@ -276,10 +276,14 @@ impl Chip {
             }
             _ => None,
         };
-        let words = match insn.inst.opcode {
-            Opcode::LDRD | Opcode::STRD => 2,
+        let fp = fp_span(insn);
+        let words = match (fp, insn.inst.opcode) {
+            (Some((n, _, _)), _) => n,
+            (_, Opcode::LDRD | Opcode::STRD) => 2,
             _ => list.unwrap_or(1),
         };
+        // The bytes past its address the access reaches (a word's 3, a doubleword's 7).
+        let width = i64::try_from(insn.bytes_moved()).unwrap_or(4).max(1) - 1;
         let store = insn.is_store();
         let charge = |region: Region| {
             // Stores never go to flash in running code: an unknown store is a peripheral's at worst.
@@ -297,24 +301,45 @@ impl Chip {
                 Value::Stack => charge(Region::Ram),
                 Value::Range(lo, hi) => {
                     // The accessed span: a list's words either side of its base, else the offset's.
-                    let (from, to) = match list {
-                        Some(n) => (i64::from(lo) - 4 * n as i64, i64::from(hi) + 4 * n as i64),
-                        None => match offsets(insn, registers) {
-                            Some((a, b)) => (i64::from(lo) + a, i64::from(hi) + b),
+                    // A floating-point transfer's words from its base (below it for a decrement).
+                    let (from, to) = match (fp, list) {
+                        (Some((_, a, b)), _) => (i64::from(lo) + a, i64::from(hi) + b),
+                        (None, Some(n)) => {
+                            (i64::from(lo) - 4 * n as i64, i64::from(hi) + 4 * n as i64)
+                        }
+                        (None, None) => match offsets(insn, registers) {
+                            Some((a, b)) => (i64::from(lo) + a, i64::from(hi) + b + width),
                             // An index the analysis does not know, into the object its base
                             // addresses: the base's region, where the base is an address of the
                             // memory map (a small constant base is an offset, its index the pointer).
-                            None if lo >= FIRST_ADDRESS => (i64::from(lo), i64::from(hi)),
+                            // Among the peripherals LLVM folds constants between base and
+                            // index (a bus's start as the base, a negative index), so where a
+                            // bus starts within 64 KiB of the base the index may reach it: the
+                            // peripheral regions 64 KiB either side are charged. (RAM and flash
+                            // objects lie in one region each, far from another's.)
+                            None if (PERIPHERALS..PERIPHERALS_END).contains(&lo)
+                                && (PERIPHERALS..PERIPHERALS_END).contains(&hi) =>
+                            {
+                                (
+                                    (i64::from(lo) - NEAR).max(i64::from(PERIPHERALS)),
+                                    (i64::from(hi) + NEAR + width)
+                                        .min(i64::from(PERIPHERALS_END) - 1),
+                                )
+                            }
+                            None if lo >= FIRST_ADDRESS => (i64::from(lo), i64::from(hi) + width),
                             None => (0, i64::from(u32::MAX)),
                         },
                     };
                     match wrapped(from, to) {
-                        Some((low, high)) => self
-                            .regions(low, high)
-                            .into_iter()
-                            .map(charge)
-                            .max()
-                            .unwrap_or_else(|| charge(Region::Unknown)),
+                        Some((low, high)) => {
+                            let plain = self
+                                .regions(low, high)
+                                .into_iter()
+                                .map(charge)
+                                .max()
+                                .unwrap_or_else(|| charge(Region::Unknown));
+                            plain.max(self.bit_band_cycles(low, high, store))
+                        }
                         None => charge(Region::Unknown),
                     }
                 }
@@ -322,6 +347,29 @@ impl Chip {
             },
         };
         words * worst
+    }
+
+    /// The cycles an access to a bit-band alias in `low..=high` adds at worst (ARMv7-M ARM A3.7,
+    /// the Cortex-M3 TRM §4.2: the SRAM alias 0x2200_0000-0x23ff_ffff and the peripheral alias
+    /// 0x4200_0000-0x43ff_ffff address one bit each, word `n` of the alias bit `n % 8` of byte
+    /// `n / 8` of the region's first MiB): the real byte's region on its own bus, and a store is a
+    /// read-modify-write of it, two transfers and a cycle between; 0 where the range misses both.
+    fn bit_band_cycles(self, low: u32, high: u32, store: bool) -> u64 {
+        const ALIASES: [(u32, u32); 2] = [(0x2200_0000, 0x2000_0000), (0x4200_0000, 0x4000_0000)];
+        let mut worst = 0;
+        for (alias, real) in ALIASES {
+            let end = alias + 0x01ff_ffff;
+            if high < alias || low > end {
+                continue;
+            }
+            let (a, b) = (low.max(alias), high.min(end));
+            let (real_low, real_high) = (real + (a - alias) / 32, real + (b - alias) / 32);
+            for region in self.regions(real_low, real_high) {
+                let one = self.access_cycles(region);
+                worst = worst.max(if store { 2 * one + 1 } else { one });
+            }
+        }
+        worst
     }
 
     /// The regions any address of `low..=high` is in (the memory map of [`Chip::region`]).
@@ -365,6 +413,40 @@ pub fn base_register(insn: &Insn) -> Option<u8> {
         }),
     }
 }
+
+/// A floating-point load or store (`LDC`/`STC` to coprocessor 10 or 11: `VLDR`, `VSTR`, `VLDM`,
+/// `VSTM`, `VPUSH`, `VPOP`; ARMv7-M ARM A7.7.229-230, A7.7.255-256): the words it moves and the
+/// first and last byte it reaches, as offsets from its base.
+fn fp_span(insn: &Insn) -> Option<(u64, i64, i64)> {
+    if insn.len != 4 || !(insn.is_coprocessor_load() || insn.is_coprocessor_store()) {
+        return None;
+    }
+    let [hw1, hw2] = insn.raw;
+    // hw1: 1110 110P UDWL Rn; hw2: Vd 101 sz imm8.
+    let (p, u, w) = (hw1 & 0x0100 != 0, hw1 & 0x0080 != 0, hw1 & 0x0020 != 0);
+    let imm8 = i64::from(hw2 & 0xff);
+    if p && !w {
+        // VLDR/VSTR: a single (one word) or a double (two) at ±imm8 words.
+        let words = if hw2 & 0x0100 != 0 { 2 } else { 1 };
+        let off = if u { 4 * imm8 } else { -4 * imm8 };
+        return Some((words, off, off + 4 * words as i64 - 1));
+    }
+    // VLDM/VSTM: imm8 words from the base up (increment after) or below it (decrement before).
+    let words = imm8.max(1);
+    Some(if u {
+        (words as u64, 0, 4 * words - 1)
+    } else {
+        (words as u64, -4 * words, -1)
+    })
+}
+
+/// The peripheral buses' addresses (APB1, APB2, AHB: 0x4000_0000-0x5fff_ffff).
+const PERIPHERALS: u32 = 0x4000_0000;
+const PERIPHERALS_END: u32 = 0x6000_0000;
+
+/// How far from its base an index the analysis does not know is taken to reach (64 KiB: the
+/// memory map's regions start at multiples of it but APB2's end on the F103).
+const NEAR: i64 = 0x1_0000;
 
 /// The lowest address of the memory map's code, data and peripherals the images address (flash at
 /// 0x0800_0000; below it only the boot alias of flash, which the code does not address).

@@ -37,7 +37,7 @@ use super::bounds::BoundsFile;
 use super::cfg::{Block, Call, Cfg};
 use super::chip::Chip;
 use super::length::{self, NO_ARGS};
-use super::masking::{effect, region, value_before, Effect, Kind, Known};
+use super::masking::{effect, region, value_before, Effect, Kind, Masks};
 use super::stored;
 use super::{Task, TaskEntry};
 use crate::decode::Insn;
@@ -413,21 +413,34 @@ impl<'a> Finder<'a> {
         // A call of a function that cannot return (a panic, the fault handler's halt) ends the
         // job: the board halts into its safe state, no task runs after it to be blocked.
         callees.retain(|&c| self.analysis.can_return(c));
-        let incomplete = None;
+        let mut incomplete = None;
         let mut sections = Vec::new();
+        let masks = Masks::new(image, insns, &graph);
         // The raises, by instruction (a block copied by node splitting raises once per copy: the
         // longest of them is the section's bound).
         let mut raises: BTreeMap<usize, Vec<(usize, Kind, Option<u8>)>> = BTreeMap::new();
         for (b, block) in graph.blocks.iter().enumerate() {
-            let mut known = Known::default();
+            let mut known = masks.entry(b);
             for (k, insn) in insns
                 .iter()
                 .enumerate()
                 .take(block.last + 1)
                 .skip(block.first)
             {
-                if let Some(Effect::Raise(kind, reg)) = effect(insn, &known) {
-                    raises.entry(k).or_default().push((b, kind, reg));
+                match effect(insn, &known) {
+                    Some(Effect::Raise(kind, reg)) => {
+                        raises.entry(k).or_default().push((b, kind, reg));
+                    }
+                    // A write of a mask the code does not fix may raise it: a section this list
+                    // cannot bound.
+                    Some(Effect::Unclear(kind)) if incomplete.is_none() => {
+                        incomplete = Some(format!(
+                            "{}: the {kind:?} write at {:#010x} is neither a raise nor a restore \
+                             of a value an MRS saved",
+                            f.name, insn.addr
+                        ));
+                    }
+                    _ => {}
                 }
                 known.step(image, insn);
             }
@@ -435,7 +448,7 @@ impl<'a> Finder<'a> {
         for (k, copies) in raises {
             let mut worst: Option<Section> = None;
             for (b, kind, reg) in copies {
-                let s = self.section(f, insns, &graph, b, k, kind, reg)?;
+                let s = self.section(f, insns, &graph, &masks, b, k, kind, reg)?;
                 worst = Some(match worst {
                     None => s,
                     Some(w) if w.declined.is_some() => w,
@@ -460,6 +473,7 @@ impl<'a> Finder<'a> {
         f: &'a Function,
         insns: &[Insn],
         graph: &Cfg,
+        masks: &Masks,
         b: usize,
         k: usize,
         kind: Kind,
@@ -477,7 +491,7 @@ impl<'a> Finder<'a> {
             declined: None,
         };
         let ceiling = match (kind, reg) {
-            (Kind::Primask, _) => Some(Ceiling::InterruptsOff),
+            (Kind::Primask | Kind::Faultmask, _) => Some(Ceiling::InterruptsOff),
             (Kind::Basepri, Some(r)) => match value_before(image, insns, graph, b, k, r) {
                 Some(v) => match u8::try_from(v).ok().and_then(Ceiling::of_basepri) {
                     Some(c) => Some(c),
@@ -498,7 +512,7 @@ impl<'a> Finder<'a> {
             (Kind::Basepri, None) => None,
         };
         section.ceiling = ceiling;
-        let sub = match region(image, insns, graph, b, k, kind) {
+        let sub = match region(image, insns, graph, masks, b, k, kind) {
             Ok(sub) => sub,
             Err(reason) => {
                 section.declined = Some(reason);

@@ -5,93 +5,651 @@
 use std::collections::BTreeMap;
 
 use super::cfg::{Block, Cfg, Edge};
-use crate::decode::{Insn, Opcode, Operand};
+use crate::decode::{Flow, Insn, Opcode, Operand, Regs, LR, SP};
 use crate::waits::Conditional;
 use crate::Image;
 
 /// The deepest nesting of raises of one kind a section is followed through.
 const MAX_NESTING: u32 = 16;
 
-/// The two kinds of masking, nested apart.
+/// The kinds of masking, nested apart.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Kind {
     Basepri,
     Primask,
+    /// FAULTMASK set (`CPSID f`, `MSR FAULTMASK`): every interrupt waits, as with PRIMASK.
+    Faultmask,
 }
 
 /// What an instruction does to the masking.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Effect {
-    /// A raise: `MSR BASEPRI_MAX, rN` (the register), `CPSID i`, `MSR PRIMASK` of a set constant.
+    /// A raise: `MSR BASEPRI_MAX, rN` (the register), `MSR BASEPRI, rN` of a register that may hold
+    /// a nonzero constant (the register), `CPSID i`/`f`, `MSR PRIMASK`/`FAULTMASK` of a register
+    /// that may hold a constant with bit 0 set.
     Raise(Kind, Option<u8>),
-    /// A restore: `MSR BASEPRI, rN`, `MSR PRIMASK, rN`, `CPSIE i`.
+    /// A restore: an `MSR` of a register that holds, on every path, what an `MRS` of the same mask
+    /// register saved or a constant that clears the mask; `CPSIE i`/`f`.
     Restore(Kind),
+    /// An `MSR` of the mask register `Kind` of a value the code does not fix (neither a saved mask
+    /// nor a constant), or a `CPS` of PRIMASK and FAULTMASK at once: the task's section list is
+    /// incomplete.
+    Unclear(Kind),
 }
 
-/// What [`effect`] reads of the registers before an instruction, followed through a block.
-#[derive(Debug, Clone, Copy, Default)]
+// What a register may hold (a set of these), as the masking reads it.
+/// What an `MRS` of PRIMASK saved.
+const SAVED_PRIMASK: u8 = 1;
+/// What an `MRS` of BASEPRI (or BASEPRI_MAX) saved.
+const SAVED_BASEPRI: u8 = 1 << 1;
+/// What an `MRS` of FAULTMASK saved.
+const SAVED_FAULTMASK: u8 = 1 << 2;
+/// The constant 0.
+const ZERO: u8 = 1 << 3;
+/// A constant with bit 0 set.
+const ODD: u8 = 1 << 4;
+/// A nonzero constant with bit 0 clear.
+const EVEN: u8 = 1 << 5;
+/// Anything else.
+const OTHER: u8 = 1 << 6;
+/// An address in the function's frame (SP, or a value worked from it).
+const FRAME: u8 = 1 << 7;
+
+/// What one register may hold at a point, on every path that reaches it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+struct Holds {
+    /// The kinds of value it may hold; none: no path reaches the point (yet).
+    may: u8,
+    /// The constant it holds on every path, where it is one.
+    constant: Option<u32>,
+    /// Where it may hold a frame address: the lowest offset from the entry's SP it may point to
+    /// (an object in the frame is reached from its address upwards), `i32::MIN` where not fixed.
+    low: i32,
+}
+
+impl Holds {
+    const UNKNOWN: Holds = Holds {
+        may: OTHER,
+        constant: None,
+        low: i32::MAX,
+    };
+
+    fn constant(v: u32) -> Holds {
+        let may = match v {
+            0 => ZERO,
+            v if v & 1 == 1 => ODD,
+            _ => EVEN,
+        };
+        Holds {
+            may,
+            constant: Some(v),
+            low: i32::MAX,
+        }
+    }
+
+    fn saved(kind: Kind) -> Holds {
+        Holds {
+            may: match kind {
+                Kind::Primask => SAVED_PRIMASK,
+                Kind::Basepri => SAVED_BASEPRI,
+                Kind::Faultmask => SAVED_FAULTMASK,
+            },
+            constant: None,
+            low: i32::MAX,
+        }
+    }
+
+    fn meet(self, other: Holds) -> Holds {
+        if self.may == 0 {
+            return other;
+        }
+        if other.may == 0 {
+            return self;
+        }
+        Holds {
+            may: self.may | other.may,
+            constant: if self.constant == other.constant {
+                self.constant
+            } else {
+                None
+            },
+            low: self.low.min(other.low),
+        }
+    }
+
+    /// A frame address pointing no lower than `low`.
+    fn frame(low: i32) -> Holds {
+        Holds {
+            may: FRAME,
+            constant: None,
+            low,
+        }
+    }
+
+    /// The lowest frame offset it may point to, where it may hold a frame address.
+    fn frame_low(self) -> Option<i32> {
+        (self.may & FRAME != 0).then_some(self.low)
+    }
+}
+
+/// What the registers may hold before an instruction: [`Masks::entry`] of its block, stepped
+/// through the block's instructions before it ([`Known::step`]). A mask an `MRS` saved is often
+/// kept in the frame across the section (a spill): the words a store through SP wrote are followed
+/// too, by their offset from SP at the function's entry, while SP's offset is fixed.
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub(super) struct Known {
-    /// The constant each holds on every path ([`Conditional::Joined`]: a conditional write, which
-    /// may not execute, joined with the value before it).
-    constants: [Option<u32>; 16],
-    /// The registers that may hold a constant with bit 0 set (one was written, under a condition
-    /// or not, and no unconditional write has replaced it since): an `MSR PRIMASK` of one of them
-    /// may set PRIMASK.
-    may_set: u16,
+    regs: [Holds; 16],
+    /// SP's offset from its value at the function's entry, where the code fixes it.
+    sp: Option<i32>,
+    /// What the frame's words a store through SP wrote hold, by offset from the entry's SP.
+    slots: BTreeMap<i32, Holds>,
+    /// The lowest frame offset an address that has left the registers and words the pass follows
+    /// (stored to memory, passed to a call) may point to: a store through any register, or a
+    /// call, may write the frame's words from there up.
+    escaped: Option<i32>,
 }
 
 impl Known {
-    /// The registers after `insn`.
+    /// At a function's entry: nothing fixed but SP's offset.
+    fn entry() -> Known {
+        Known {
+            regs: [Holds::UNKNOWN; 16],
+            sp: Some(0),
+            slots: BTreeMap::new(),
+            escaped: None,
+        }
+    }
+
+    fn unreached() -> Known {
+        Known {
+            regs: [Holds::default(); 16],
+            sp: None,
+            slots: BTreeMap::new(),
+            escaped: None,
+        }
+    }
+
+    fn reached(&self) -> bool {
+        self.regs[usize::from(SP)].may != 0
+    }
+
+    fn meet(&mut self, other: &Known) -> bool {
+        if !other.reached() {
+            return false;
+        }
+        if !self.reached() {
+            *self = other.clone();
+            return true;
+        }
+        let before = self.clone();
+        for (a, b) in self.regs.iter_mut().zip(other.regs.iter()) {
+            *a = a.meet(*b);
+        }
+        if self.sp != other.sp {
+            self.sp = None;
+            self.forget(|_| true);
+        }
+        let mut slots = BTreeMap::new();
+        let mut lost = Vec::new();
+        for (&at, &a) in self.slots.iter().chain(other.slots.iter()) {
+            match (self.slots.get(&at), other.slots.get(&at)) {
+                (Some(a), Some(b)) => {
+                    slots.insert(at, a.meet(*b));
+                }
+                // A word kept on one path only: a frame address in it is no longer followed.
+                _ => lost.extend(a.frame_low()),
+            }
+        }
+        self.slots = slots;
+        for low in lost {
+            self.escape(low);
+        }
+        if let Some(low) = other.escaped {
+            self.escape(low);
+        }
+        *self != before
+    }
+
+    /// Forgets the frame's words a store through an address not in the frame (or a call) may
+    /// write: all where a frame address escaped.
+    fn clobber_escaped(&mut self) {
+        if let Some(low) = self.escaped {
+            self.forget(|at| at + 4 > low);
+        }
+    }
+
+    /// A frame address that may point as low as `low` escapes.
+    fn escape(&mut self, low: i32) {
+        self.escaped = Some(self.escaped.map_or(low, |e| e.min(low)));
+    }
+
+    /// Forgets the frame's words at the offsets `gone` picks: a frame address one held is no
+    /// longer followed, so it has escaped.
+    fn forget(&mut self, gone: impl Fn(i32) -> bool) {
+        let mut lost = i32::MAX;
+        self.slots.retain(|&at, held| {
+            let keep = !gone(at);
+            if !keep {
+                lost = lost.min(held.frame_low().unwrap_or(i32::MAX));
+            }
+            keep
+        });
+        if lost != i32::MAX {
+            self.escape(lost);
+        }
+    }
+
+    /// The lowest frame offset register `r` may point to, where it may hold a frame address.
+    fn frame(&self, r: u8) -> Option<i32> {
+        if r == SP {
+            return Some(self.sp.unwrap_or(i32::MIN));
+        }
+        self.regs[usize::from(r)].frame_low()
+    }
+
+    /// Forgets the frame's words `[at, at + bytes)` overlaps.
+    fn clobber(&mut self, at: i32, bytes: i32) {
+        self.forget(|w| w + 4 > at && w < at + bytes);
+    }
+
+    /// The frame after `insn`: SP's offset, the words it stores through SP, the addresses in the
+    /// frame it takes. Returns what it loads from the frame into which registers.
+    fn step_frame(&mut self, insn: &Insn) -> Vec<(u8, Holds)> {
+        let opcode = insn.inst.opcode;
+        let before = self.regs;
+        let sp = self.sp;
+        let base_sp = insn.memory_base() == Some(SP)
+            || insn.memory_base_wback() == Some(SP)
+            || matches!(opcode, Opcode::PUSH | Opcode::POP);
+        let call = matches!(opcode, Opcode::BL | Opcode::BLX);
+        if call && insn.outlined.is_some() {
+            // An outlined helper runs on its caller's frame and may store anywhere in it.
+            self.forget(|_| true);
+        } else if call {
+            // A frame address among the arguments escapes to the callee.
+            if let Some(low) = (0..4u8).filter_map(|r| self.frame(r)).min() {
+                self.escape(low);
+            }
+            self.clobber_escaped();
+        }
+        let writes_sp = insn.writes().contains(SP);
+        if insn.is_store() || insn.is_coprocessor_store() {
+            // A frame address stored to memory escapes.
+            let data: Vec<u8> = match insn.register_list() {
+                Some(list) => (0..16u8).filter(|r| list & 1 << r != 0).collect(),
+                None => insn.registers(),
+            };
+            let base = insn.memory_base().or_else(|| match insn.inst.operands[0] {
+                // STM's base, written back or not.
+                Operand::RegWBack(r, _) if matches!(opcode, Opcode::STM(..)) => Some(r.number()),
+                _ => None,
+            });
+            if !(base_sp && sp.is_some()) {
+                if let Some(low) = data.iter().filter_map(|&r| self.frame(r)).min() {
+                    self.escape(low);
+                }
+            }
+            match (base_sp, sp) {
+                (true, Some(sp)) => self.store_to_frame(insn, sp, &before),
+                (true, None) => self.forget(|_| true),
+                // Through a register that may hold a frame address: any word of the frame.
+                (false, _) => {
+                    // Through a register that may hold a frame address: the words from its
+                    // lowest address (and offset, where negative) up; through any register, the
+                    // words an escaped address reaches.
+                    let low = match base {
+                        None => Some(i32::MIN),
+                        Some(b) => self.frame(b).map(|low| {
+                            let below = match (insn.inst.opcode, insn.memory_offset()) {
+                                (_, Some(off)) => i32::try_from(off.min(0)).unwrap_or(i32::MIN),
+                                // STMIA from its base up; STMDB below it.
+                                (Opcode::STM(true, ..), None) => 0,
+                                (Opcode::STM(false, ..), None) => {
+                                    -4 * list_of(insn).unwrap_or(0xffff).count_ones() as i32
+                                }
+                                _ => i32::MIN,
+                            };
+                            low.saturating_add(below)
+                        }),
+                    };
+                    if let Some(low) = low {
+                        self.forget(|at| at + 4 > low);
+                    }
+                    self.clobber_escaped();
+                }
+            }
+        }
+        let mut loaded: Vec<(u8, Holds)> = Vec::new();
+        if let (true, Some(sp)) = (base_sp, sp) {
+            match opcode {
+                Opcode::LDR => {
+                    if let (Some(&rt), Some(off)) = (insn.registers().first(), self.access(insn)) {
+                        let held = self.slots.get(&(sp + off)).copied();
+                        loaded.push((rt, held.unwrap_or(Holds::UNKNOWN)));
+                    }
+                }
+                Opcode::POP | Opcode::LDM(true, false, true, _) => {
+                    let list = list_of(insn).unwrap_or(0);
+                    let mut at = sp;
+                    for r in 0..16u8 {
+                        if list & 1 << r != 0 {
+                            let held = self.slots.get(&at).copied();
+                            loaded.push((r, held.unwrap_or(Holds::UNKNOWN)));
+                            at += 4;
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+        // SP's new offset.
+        self.sp = match (sp, writes_sp) {
+            (_, false) => sp,
+            (None, true) => None,
+            (Some(sp), true) => Self::moved(insn, sp),
+        };
+        match self.sp {
+            // The words below SP are free: an interrupt's frame may overwrite them.
+            Some(now) => self.forget(|at| at < now),
+            None => self.forget(|_| true),
+        }
+        loaded
+    }
+
+    /// The offset from SP of a word access through SP (pre-indexed or plain; post-indexed: 0).
+    fn access(&self, insn: &Insn) -> Option<i32> {
+        match insn.inst.operands.iter().find(|o| {
+            matches!(
+                o,
+                Operand::RegDerefPostindexOffset(..)
+                    | Operand::RegDerefPostindexReg(..)
+                    | Operand::RegDerefPostindexRegShift(..)
+            )
+        }) {
+            Some(Operand::RegDerefPostindexOffset(..)) => Some(0),
+            Some(_) => None,
+            None => insn.memory_offset().and_then(|o| i32::try_from(o).ok()),
+        }
+    }
+
+    /// SP's offset after `insn`, which writes SP (`sp` before it).
+    fn moved(insn: &Insn, sp: i32) -> Option<i32> {
+        let words = |list: u16| 4 * list.count_ones() as i32;
+        match insn.inst.opcode {
+            Opcode::PUSH | Opcode::STM(false, true, true, _) => Some(sp - words(list_of(insn)?)),
+            Opcode::POP | Opcode::LDM(true, false, true, _) => Some(sp + words(list_of(insn)?)),
+            Opcode::ADD | Opcode::SUB
+                if insn.registers().iter().all(|&r| r == SP) && insn.memory_base().is_none() =>
+            {
+                let imm = i32::try_from(insn.immediate()?).ok()?;
+                Some(if insn.inst.opcode == Opcode::ADD {
+                    sp + imm
+                } else {
+                    sp - imm
+                })
+            }
+            _ if insn.vpush_words().is_some() => {
+                Some(sp - 4 * i32::try_from(insn.vpush_words()?).ok()?)
+            }
+            _ => insn.inst.operands.iter().find_map(|o| match *o {
+                Operand::RegDerefPreindexOffset(_, off, add, true)
+                | Operand::RegDerefPostindexOffset(_, off, add, _) => {
+                    let off = i32::from(off);
+                    Some(if add { sp + off } else { sp - off })
+                }
+                _ => None,
+            }),
+        }
+    }
+
+    /// A store through SP (offset `sp` from the entry's); `before` the registers before it.
+    fn store_to_frame(&mut self, insn: &Insn, sp: i32, before: &[Holds; 16]) {
+        let opcode = insn.inst.opcode;
+        let value = |r: u8| before[usize::from(r)];
+        let mut words: Vec<(i32, Holds)> = Vec::new();
+        match opcode {
+            Opcode::PUSH | Opcode::STM(false, true, true, _) => {
+                let list = list_of(insn).unwrap_or(0);
+                let mut at = sp - 4 * list.count_ones() as i32;
+                for r in 0..16u8 {
+                    if list & 1 << r != 0 {
+                        words.push((at, value(r)));
+                        at += 4;
+                    }
+                }
+            }
+            Opcode::STR | Opcode::STRD => match (self.access(insn), &insn.registers()[..]) {
+                (Some(off), &[rt, ..]) if opcode == Opcode::STR => {
+                    words.push((sp + off, value(rt)))
+                }
+                (Some(off), &[rt, rt2, ..]) => {
+                    words.push((sp + off, value(rt)));
+                    words.push((sp + off + 4, value(rt2)));
+                }
+                _ => {
+                    self.forget(|_| true);
+                    return;
+                }
+            },
+            _ => {
+                match self.access(insn) {
+                    // Bytes, halfwords, a floating-point word or two: what they overlap is lost.
+                    Some(off)
+                        if !matches!(opcode, Opcode::STM(..)) && insn.vpush_words().is_none() =>
+                    {
+                        self.clobber(sp + off, 8)
+                    }
+                    _ if insn.vpush_words().is_some() => {}
+                    _ => self.forget(|_| true),
+                }
+                return;
+            }
+        }
+        for (at, held) in words {
+            self.clobber(at, 4);
+            if insn.conditional {
+                // A conditional store: the word may keep what it held.
+                continue;
+            }
+            self.slots.insert(at, held);
+        }
+    }
+
+    /// The registers after `insn`: constants as [`crate::waits::step_constants`] follows them, a
+    /// mask register an `MRS` saves, a copy (`MOV rD, rM`) what its source held, a register an
+    /// outlined helper does not write what it held before the call, a word loaded from the frame
+    /// what the store of it held; a conditional write (in an `IT` block) joined with the value
+    /// before it.
     pub(super) fn step(&mut self, image: &Image, insn: &Insn) {
-        let mut taken = self.constants;
+        if let Some((body, tail_call)) = outlined_body(image, insn) {
+            // A machine-outlined helper is straight-line code on its caller's registers and
+            // frame: its instructions, stepped here, are the call's effect (and LR); one that
+            // ends in a branch to a function calls it.
+            for i in body {
+                self.step(image, i);
+            }
+            if tail_call {
+                if let Some(low) = (0..4u8).filter_map(|r| self.frame(r)).min() {
+                    self.escape(low);
+                }
+                self.clobber_escaped();
+                for r in [0, 1, 2, 3, 12] {
+                    self.regs[r] = Holds::UNKNOWN;
+                }
+            }
+            self.regs[usize::from(LR)] = Holds::UNKNOWN;
+            return;
+        }
+        let mut taken: [Option<u32>; 16] = std::array::from_fn(|r| self.regs[r].constant);
         crate::waits::step_constants(image, insn, &mut taken, Conditional::Taken);
-        crate::waits::step_constants(image, insn, &mut self.constants, Conditional::Joined);
-        let written = insn.writes();
+        let [hw1, hw2] = insn.raw;
+        // MRS (ARMv7-M ARM B5.2.2): hw1 0xf3ef, hw2 1000 Rd SYSm.
+        let saved = if insn.len == 4 && hw1 == 0xf3ef && hw2 & 0xf000 == 0x8000 {
+            let kind = match hw2 & 0xff {
+                0x10 => Some(Kind::Primask),
+                0x11 | 0x12 => Some(Kind::Basepri),
+                0x13 => Some(Kind::Faultmask),
+                _ => None,
+            };
+            Some(((hw2 >> 8) as u8 & 0xf, kind))
+        } else {
+            None
+        };
+        let copied = match (insn.inst.opcode, &insn.inst.operands[..2]) {
+            (Opcode::MOV, [Operand::Reg(d), Operand::Reg(m)]) => {
+                Some((d.number(), self.regs[usize::from(m.number())]))
+            }
+            _ => None,
+        };
+        // A call of an outlined helper writes what the helper writes (and LR), no more: what an
+        // `MRS` saved in r0-r3 lives through it.
+        let written = match (&insn.outlined, insn.inst.opcode) {
+            (Some(outlined), Opcode::BL) => Regs(outlined.writes | 1 << 14),
+            _ => insn.writes(),
+        };
+        let before = self.regs;
+        // Whether it works a value from a frame address (SP or a register holding one, not as a
+        // memory base, not moving SP): what it writes may be one too.
+        let regs = insn.registers();
+        let sources = match regs.split_first() {
+            Some((&d, rest)) if !insn.is_store() && insn.writes().contains(d) => rest,
+            _ => &regs[..],
+        };
+        let from_frame = if insn.writes().contains(SP) {
+            None
+        } else {
+            sources
+                .iter()
+                .filter_map(|&r| self.frame(r))
+                .min()
+                .map(|low| {
+                    // A pointer worked from an object's address stays in the object (above its
+                    // address), but for an immediate added or taken away.
+                    let imm = insn.immediate().and_then(|v| i32::try_from(v).ok());
+                    match (insn.inst.opcode, imm) {
+                        (Opcode::ADD, Some(imm)) => low.saturating_add(imm),
+                        (Opcode::SUB, Some(imm)) => low.saturating_sub(imm),
+                        (Opcode::SUB | Opcode::RSB | Opcode::SBC, None) => i32::MIN,
+                        _ => low,
+                    }
+                })
+        };
+        let loaded = self.step_frame(insn);
         for r in 0..16u8 {
             if !written.contains(r) {
                 continue;
             }
-            let bit = 1u16 << r;
-            let sets = taken[usize::from(r)].is_some_and(|v| v & 1 == 1);
-            if sets {
-                self.may_set |= bit;
-            } else if !insn.conditional {
-                self.may_set &= !bit;
+            let i = usize::from(r);
+            let value = match (saved, copied, taken[i]) {
+                (Some((d, Some(kind))), _, _) if d == r => Holds::saved(kind),
+                (_, Some((d, held)), _) if d == r => held,
+                (_, _, Some(v)) => Holds::constant(v),
+                _ => loaded
+                    .iter()
+                    .find(|&&(d, _)| d == r)
+                    .map_or(Holds::UNKNOWN, |&(_, held)| held),
+            };
+            let value = match from_frame {
+                Some(low) => value.meet(Holds::frame(low)),
+                None => value,
+            };
+            self.regs[i] = if insn.conditional {
+                before[i].meet(value)
+            } else {
+                value
+            };
+        }
+        // SP is reached wherever the function is ([`Known::reached`]).
+        self.regs[usize::from(SP)] = Holds::UNKNOWN;
+    }
+}
+
+/// What the registers may hold at the entry of each block of a function's graph: a forward
+/// data-flow pass to its fixed point, across blocks and the copies node splitting made.
+pub(super) struct Masks {
+    entry: Vec<Known>,
+}
+
+impl Masks {
+    pub(super) fn new(image: &Image, insns: &[Insn], graph: &Cfg) -> Masks {
+        let n = graph.blocks.len();
+        let mut entry = vec![Known::unreached(); n];
+        if n == 0 {
+            return Masks { entry };
+        }
+        entry[0] = Known::entry();
+        let mut work = vec![0usize];
+        let mut queued = vec![false; n];
+        queued[0] = true;
+        while let Some(x) = work.pop() {
+            queued[x] = false;
+            let block = &graph.blocks[x];
+            let mut out = entry[x].clone();
+            for insn in &insns[block.first..=block.last] {
+                out.step(image, insn);
+            }
+            for e in &block.succs {
+                if entry[e.to].meet(&out) && !queued[e.to] {
+                    queued[e.to] = true;
+                    work.push(e.to);
+                }
             }
         }
+        Masks { entry }
+    }
+
+    /// What the registers may hold at the entry of block `b`.
+    pub(super) fn entry(&self, b: usize) -> Known {
+        self.entry[b].clone()
     }
 }
 
 /// The masking effect of `insn` (its encoding: ARMv7-M ARM B5.2.3 `MSR`, B5.2.1 `CPS`); `known`
-/// what the registers hold before it. An `MSR PRIMASK` is a raise when its register may hold a
-/// constant with bit 0 set on some path, else a restore (the value an `MRS` saved, which the code
-/// does not fix). A conditional `MSR` (in an `IT` block) has its effect where it executes: a raise
-/// is counted as one ([`region`] declines a section whose restore is conditional).
+/// what the registers may hold before it. An `MSR` of PRIMASK or FAULTMASK is a raise when its
+/// register may hold a constant with bit 0 set on some path; one of BASEPRI when it may hold a
+/// nonzero constant; a restore when it holds, on every path, what an `MRS` of the same register
+/// saved or a constant that clears the mask; else unclear. A conditional `MSR` (in an `IT` block)
+/// has its effect where it executes: a raise is counted as one ([`region`] declines a section
+/// whose restore is conditional).
 pub(super) fn effect(insn: &Insn, known: &Known) -> Option<Effect> {
     let [hw1, hw2] = insn.raw;
     if insn.len == 2 && hw1 & 0xffe8 == 0xb660 {
-        // CPS: im (bit 4) 1 disables; I (bit 1) is PRIMASK.
-        if hw1 & 0b10 == 0 {
-            return None;
-        }
+        // CPS: im (bit 4) 1 disables; I (bit 1) is PRIMASK, F (bit 0) FAULTMASK.
+        let kind = match hw1 & 0b11 {
+            0b10 => Kind::Primask,
+            0b01 => Kind::Faultmask,
+            0b11 => return Some(Effect::Unclear(Kind::Primask)),
+            _ => return None,
+        };
         return Some(if hw1 & 0x10 != 0 {
-            Effect::Raise(Kind::Primask, None)
+            Effect::Raise(kind, None)
         } else {
-            Effect::Restore(Kind::Primask)
+            Effect::Restore(kind)
         });
     }
     if insn.len == 4 && hw1 & 0xfff0 == 0xf380 && hw2 & 0xff00 == 0x8800 {
         let rn = (hw1 & 0xf) as u8;
-        return match hw2 & 0xff {
-            0x10 => Some(if known.may_set & (1 << rn) != 0 {
-                Effect::Raise(Kind::Primask, None)
-            } else {
-                Effect::Restore(Kind::Primask)
-            }),
-            0x11 => Some(Effect::Restore(Kind::Basepri)),
-            0x12 => Some(Effect::Raise(Kind::Basepri, Some(rn))),
-            _ => None,
+        let may = known.regs[usize::from(rn)].may;
+        let (kind, saved, raises, raise_reg) = match hw2 & 0xff {
+            0x10 => (Kind::Primask, SAVED_PRIMASK, ODD, None),
+            0x11 => (Kind::Basepri, SAVED_BASEPRI, ODD | EVEN, Some(rn)),
+            0x12 => return Some(Effect::Raise(Kind::Basepri, Some(rn))),
+            0x13 => (Kind::Faultmask, SAVED_FAULTMASK, ODD, None),
+            _ => return None,
         };
+        // What clears the mask: 0, and for PRIMASK and FAULTMASK (one bit) any even constant.
+        let clears = if kind == Kind::Basepri {
+            ZERO
+        } else {
+            ZERO | EVEN
+        };
+        return Some(if may & raises != 0 {
+            Effect::Raise(kind, raise_reg)
+        } else if may & !(saved | clears) == 0 {
+            Effect::Restore(kind)
+        } else {
+            Effect::Unclear(kind)
+        });
     }
     None
 }
@@ -103,6 +661,7 @@ pub(super) fn region(
     image: &Image,
     insns: &[Insn],
     graph: &Cfg,
+    masks: &Masks,
     b: usize,
     k: usize,
     kind: Kind,
@@ -117,7 +676,7 @@ pub(super) fn region(
         let me = index[&(ob, first, depth_in)];
         let block = &graph.blocks[ob];
         let mut depth = depth_in;
-        let mut known = Known::default();
+        let mut known = masks.entry(ob);
         let mut end = None;
         for (j, insn) in insns
             .iter()
@@ -292,4 +851,37 @@ pub(super) fn value_before(
         Held::Constant(v) => Some(v),
         _ => None,
     }
+}
+
+/// The registers a `PUSH`, `POP`, `LDM` or `STM` transfers (a one-register `PUSH`/`POP` too).
+fn list_of(insn: &Insn) -> Option<u16> {
+    insn.register_list().or_else(|| match insn.inst.opcode {
+        Opcode::PUSH | Opcode::POP => insn.registers().first().map(|&r| 1u16 << r),
+        _ => None,
+    })
+}
+
+/// The instructions of the machine-outlined helper an unconditional `BL` calls, but its last,
+/// where they run straight to it, and whether that last is a branch to a function (a call) rather
+/// than a return.
+fn outlined_body<'i>(image: &'i Image, insn: &Insn) -> Option<(&'i [Insn], bool)> {
+    if insn.outlined.is_none() || insn.conditional || insn.inst.opcode != Opcode::BL {
+        return None;
+    }
+    let Flow::Call(target) = insn.flow() else {
+        return None;
+    };
+    let helper = image.function_at(target)?;
+    let insns = helper.instructions().ok()?;
+    let (last, body) = insns.split_last()?;
+    let tail_call = match last.flow() {
+        Flow::Return => false,
+        Flow::Branch(t) if !last.conditional && image.function_at(t).is_some() => {
+            !helper.contains(t)
+        }
+        _ => return None,
+    };
+    body.iter()
+        .all(|i| i.flow() == Flow::Next)
+        .then_some((body, tail_call))
 }

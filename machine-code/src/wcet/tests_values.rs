@@ -246,3 +246,127 @@ fn an_unknown_index_keeps_the_base_region_only_where_the_base_is_an_address() {
     );
     assert_eq!(figures(&img, "offset_base", F103_0WS), (12, 3, None));
 }
+
+/// `op` (at 0x02) through r1, loaded with `address` from flash.
+fn through_address(address: u32, op: u16) -> Image {
+    let [low, high] = [address as u16, (address >> 16) as u16];
+    image(
+        &[
+            0x4901, // 0x00 ldr r1, [pc, #4]: `address`: 2
+            op,     // 0x02 through r1
+            0x4770, // 0x04 bx lr: 1 + P
+            0xbf00, // 0x06 (padding)
+            low, high, // 0x08 .word address
+        ],
+        &[Sym::function("through", 0, 0x0c), Sym::data(0x08)],
+    )
+}
+
+#[test]
+fn a_bit_band_alias_is_charged_on_the_bus_of_its_bit() {
+    // 0x4201_8400 is bit 0 of byte 0x4000_0c20 (0x4000_0000 + 0x1_8400 / 32): TIM5 on APB1. A load
+    // of it is one APB1 transfer, 2 + 5; a store a read-modify-write, two APB1 transfers and a
+    // cycle between, 2 + 5 + 1 + 5. ldr 2, bx lr 4: 13 and 19 cycles (as AHB, 1 more: 9).
+    let str_r0 = 0x6008; // str r0, [r1]
+    let ldr_r2 = 0x680a; // ldr r2, [r1]
+    assert_eq!(
+        figures(&through_address(0x4201_8400, ldr_r2), "through", F103_0WS),
+        (13, 3, None)
+    );
+    assert_eq!(
+        figures(&through_address(0x4201_8400, str_r0), "through", F103_0WS),
+        (19, 3, None)
+    );
+    // The SRAM alias: RAM's bit, a store two transfers without wait and the cycle between: 2 + 1.
+    assert_eq!(
+        figures(&through_address(0x2200_0100, str_r0), "through", F103_0WS),
+        (9, 3, None)
+    );
+    // The plain register: one APB1 store, 2 + 5.
+    assert_eq!(
+        figures(&through_address(0x4000_0c20, str_r0), "through", F103_0WS),
+        (13, 3, None)
+    );
+}
+
+/// The 32-bit `op` (at 0x02) through r1, loaded with `address` from flash.
+fn wide_through_address(address: u32, op: [u16; 2]) -> Image {
+    let [low, high] = [address as u16, (address >> 16) as u16];
+    image(
+        &[
+            0x4901, // 0x00 ldr r1, [pc, #4]: `address`: 2
+            op[0], op[1],  // 0x02 through r1
+            0x4770, // 0x06 bx lr: 1 + P
+            low, high, // 0x08 .word address
+        ],
+        &[Sym::function("through", 0, 0x0c), Sym::data(0x08)],
+    )
+}
+
+#[test]
+fn a_doubleword_reaches_its_second_word() {
+    // ldrd r0, r2, [r1]: two words, at the base and 4 above it (TRM: 1 + N = 3 on the core).
+    let ldrd = [0xe9d1, 0x0200];
+    // In RAM: ldr 2, ldrd 3, bx lr 4: 9 cycles.
+    assert_eq!(
+        figures(
+            &wide_through_address(0x2000_0100, ldrd),
+            "through",
+            F103_0WS
+        ),
+        (9, 3, None)
+    );
+    // From RAM's last word: the second word is TIM2's (0x4000_0000, APB1), and each word is
+    // charged the worse, 5 more each: 19 (the first word alone would be RAM's: 9).
+    assert_eq!(
+        figures(
+            &wide_through_address(0x3fff_fffc, ldrd),
+            "through",
+            F103_0WS
+        ),
+        (19, 3, None)
+    );
+}
+
+#[test]
+fn a_floating_point_list_is_charged_per_word_over_its_span() {
+    const F405_0WS: Chip = Chip::Stm32f405 { wait_states: 0 };
+    // vldmia r1, {s0-s3}: 4 words from TIM2 (APB1, on the F405 2 × 4 + 1 = 9 more each), 1 + 4
+    // on the core: ldr 2, vldmia 5 + 36, bx lr 4: 47 cycles (one access charged: 20).
+    assert_eq!(
+        figures(
+            &wide_through_address(0x4000_0000, [0xec91, 0x0a04]),
+            "through",
+            F405_0WS
+        ),
+        (47, 3, None)
+    );
+    // vldmdb r1!, {s0-s1} from 0x4001_0004 (APB2's start + 4): the words at 0x4000_fffc (APB1)
+    // and 0x4001_0000 (APB2), below the base: 2 × 9 more, 1 + 2 on the core: 2 + 21 + 4 = 27
+    // (charged as APB2's base, once: 14).
+    assert_eq!(
+        figures(
+            &wide_through_address(0x4001_0004, [0xed31, 0x0a02]),
+            "through",
+            F405_0WS
+        ),
+        (27, 3, None)
+    );
+}
+
+#[test]
+fn an_unknown_index_from_a_bus_start_may_reach_the_bus_below() {
+    let img = image(
+        &[
+            0x4902, // 0x00 ldr r1, [pc, #8]: 0x4001_0000 (APB2's start on the F103): 2
+            0x681a, // 0x02 ldr r2, [r3]: an index the code does not fix: 2 + 5 (unknown: APB1)
+            0x5888, // 0x04 ldr r0, [r1, r2]: 0x4001_0000 + r2 may be APB1's (r2 = -0x800): 2 + 5
+            0x4770, // 0x06 bx lr: 1 + P
+            0xbf00, 0xbf00, // 0x08 (padding)
+            0x0000, 0x4001, // 0x0c .word 0x40010000
+        ],
+        &[Sym::function("folded", 0, 0x10), Sym::data(0x0c)],
+    );
+    // 2 + 7 + 7 + 4 = 20 cycles (charged as APB2's, 2 + 3: 18).
+    assert_eq!(figures(&img, "folded", F103_0WS), (20, 4, None));
+}
