@@ -775,6 +775,9 @@ fn text_verdict(report: &Report, markdown: bool, out: &mut String) {
         if markdown { "**" } else { "" },
         if markdown { "**" } else { "" }
     );
+    if let Some(line) = report.on_bounds.as_ref().and_then(on_bounds_verdict) {
+        let _ = writeln!(out, "{}{line}", if markdown { "\n" } else { "" });
+    }
     if let Some(c) = comparison {
         let f = c.failures();
         let _ = writeln!(
@@ -789,6 +792,44 @@ fn text_verdict(report: &Report, markdown: bool, out: &mut String) {
             }
         );
     }
+}
+
+/// The verdict's second line where bounds are held: the VERDICT rests on stated estimates kept where the machine
+/// code has a bound, so it says so, and what the verdict is on those bounds (`None` when nothing is held).
+fn on_bounds_verdict(o: &crate::scenario::OnBounds) -> Option<String> {
+    let held: usize = o.boards.iter().map(|b| b.held.len()).sum();
+    if held == 0 {
+        return None;
+    }
+    let rests = format!(
+        "the VERDICT above rests on {held} stated estimate{} held where the machine code has a bound",
+        if held == 1 { "" } else { "s" }
+    );
+    if o.all_ok {
+        return Some(format!(
+            "On the machine code's bounds: schedulable too ({rests}; \"The verdict on the bounds\")"
+        ));
+    }
+    let mut failing: Vec<String> = o
+        .boards
+        .iter()
+        .filter(|b| !b.misses.is_empty())
+        .map(|b| format!("{} ({} of {} jobs miss)", b.board, b.misses.len(), b.jobs))
+        .collect();
+    if !o.bus.is_empty() {
+        failing.push(format!(
+            "the bus and end to end ({} line{})",
+            o.bus.len(),
+            if o.bus.len() == 1 { "" } else { "s" }
+        ));
+    }
+    if failing.is_empty() {
+        failing.push("a budget".to_string());
+    }
+    Some(format!(
+        "On the machine code's bounds: NOT schedulable — {} ({rests}; what breaks and why: \"The verdict on the bounds\")",
+        failing.join(", ")
+    ))
 }
 
 fn json_time(t: Option<Time>) -> Value {

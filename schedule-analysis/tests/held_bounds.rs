@@ -275,12 +275,23 @@ fn the_second_run_names_the_held_bound_that_turns_a_verdict_into_a_miss() {
     }
     assert_eq!(lines[at + 1], format!("    can_tx: {}", listed.join(", ")));
     // In the report, before the verdict, which stays the first run's; and in its JSON.
+    let held: usize = on.boards.iter().map(|b| b.held.len()).sum();
     let report = report.with_on_bounds(Some(on));
     assert!(report.all_ok());
     let text = report::render(&report, Format::Table);
     let section = text.find("The verdict on the bounds").expect("the section");
     assert!(section < text.find("VERDICT").unwrap());
     assert!(text.contains(&expected), "{text}");
+    // The verdict's own lines say that it rests on held estimates and what the bounds' verdict is.
+    let after = &text[text.find("VERDICT: schedulable").expect("the verdict")..];
+    let second = after.lines().nth(1).expect("the verdict's second line");
+    assert!(
+        second.starts_with("On the machine code's bounds: NOT schedulable — diwheeldrive (")
+            && second.contains(&format!(
+                "rests on {held} stated estimates held where the machine code has a bound"
+            )),
+        "{second}"
+    );
     let json: serde_json::Value =
         serde_json::from_str(&report::render(&report, Format::Json)).unwrap();
     assert_eq!(json["schedulable"], true);
