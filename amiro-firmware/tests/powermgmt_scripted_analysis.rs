@@ -35,6 +35,10 @@ const GAUGE_BYTES: u32 = 5;
 const GAUGE_STARTS: u32 = 2;
 const GAUGE_EVENTS: u32 = 7;
 const GAUGE_SCRIPTS: usize = 10;
+/// The power monitor's job with the trial, its CPU, an estimate: the charger's regulation (its
+/// 23.5 µs VSYS conversion) and one gauge script's submission and decoding, two polls (the ring's
+/// release of two scripts, three polls, is stated at 320 µs below).
+const MONITOR_JOB_US: f64 = 200.0;
 
 /// The engine's parts on the F405 at 168 MHz, tools/engine-bound's bounds (README.md), µs.
 const PER_EVENT_US: f64 = 6.02;
@@ -109,28 +113,25 @@ fn ring_script(bus: &str) -> serde_json::Value {
     })
 }
 
-/// A gauge's status read: ten scripts, each after the bus-free time; the first may wake it.
-fn gauge_scripts(bus: &str) -> Vec<serde_json::Value> {
-    (0..GAUGE_SCRIPTS)
-        .map(|k| {
-            json!({
-                "bus": bus, "bytes": GAUGE_BYTES, "starts": GAUGE_STARTS, "events": GAUGE_EVENTS,
-                "source": "a bq27500 standard command (StatusRead's transfer as gauge_script)",
-                "stretch_us": if k == 0 { GAUGE_STRETCH_US + GAUGE_WAKE_US } else { GAUGE_STRETCH_US },
-                "stretch_source": STRETCH_SOURCE,
-                "settle_us": f64::from(GAUGE_SETTLE_US),
-                "settle_source": "the bq27500's 66 µs of bus-free time between packets (bq27500::BUS_FREE_NS)"
-            })
-        })
-        .collect()
+/// One transfer of a gauge's status read: a script after the bus-free time, which may wake the
+/// gauge (its job comes 50 ms after the gauge's last packet).
+fn gauge_script_on(bus: &str) -> serde_json::Value {
+    json!({
+        "bus": bus, "bytes": GAUGE_BYTES, "starts": GAUGE_STARTS, "events": GAUGE_EVENTS,
+        "source": "a bq27500 standard command (StatusRead's transfer as gauge_script)",
+        "stretch_us": GAUGE_STRETCH_US + GAUGE_WAKE_US,
+        "stretch_source": STRETCH_SOURCE,
+        "settle_us": f64::from(GAUGE_SETTLE_US),
+        "settle_source": "the bq27500's 66 µs of bus-free time between packets (bq27500::BUS_FREE_NS)"
+    })
 }
 
-/// Both gauges' reads, front (I2C2) then rear (I2C1), as `sensors::scripted::read_batteries` (the
-/// power monitor's, every fifth period).
-fn both_gauges() -> serde_json::Value {
-    let mut scripts = gauge_scripts("i2c2");
-    scripts.extend(gauge_scripts("i2c1"));
-    serde_json::Value::Array(scripts)
+/// The power monitor's job: one transfer of its round (`sensors::scripted::BatteryRound`), on the
+/// front bus (I2C2) or the rear (I2C1), the round alternating. The file states a script on each
+/// bus: each bus then sees at most one of the monitor's scripts a period, as it does, and the
+/// monitor's own job is charged both (one in fact: pessimistic, the file cannot say "either").
+fn monitor_job() -> serde_json::Value {
+    json!([gauge_script_on("i2c2"), gauge_script_on("i2c1")])
 }
 
 /// The workspace's apps and timing files, PowerManagement's file stating the trial's buses and
@@ -178,8 +179,8 @@ fn scripted_workspace() -> PathBuf {
         .get("rear_bus")
         .is_none());
     let monitor = &mut timing["tasks"]["power_monitor"];
-    monitor["wcet_us"] = json!(1_200.0);
-    monitor["scripts"] = both_gauges();
+    monitor["wcet_us"] = json!(MONITOR_JOB_US);
+    monitor["scripts"] = monitor_job();
     monitor["critical_sections_us"]["rear_bus"] = json!(20.0);
     monitor["critical_sections_us"]["front_bus"] = json!(20.0);
     for task in ["rearm_rear", "rearm_front"] {
@@ -191,6 +192,25 @@ fn scripted_workspace() -> PathBuf {
         });
     }
     std::fs::write(&file, timing.to_string()).unwrap();
+    // The shipped image's bound of `power_monitor` (a transfer's flags polled) is not the trial's
+    // job (its transfer a script the engine carries): declined in the copy, so the statement
+    // above is the budget, as the held publisher rows' are.
+    let wcet = models.join("powermgmt.wcet.json");
+    let mut bounds: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&wcet).unwrap()).unwrap();
+    let monitor = bounds["tasks"]
+        .as_array_mut()
+        .unwrap()
+        .iter_mut()
+        .find(|t| t["task"] == "power_monitor")
+        .expect("power_monitor's bound");
+    for field in ["cycles", "us", "instructions"] {
+        monitor[field] = serde_json::Value::Null;
+    }
+    monitor["declined"] =
+        json!("the shipped image's polled transfer, not the scripted-i2c trial's job");
+    monitor.as_object_mut().unwrap().remove("sections");
+    std::fs::write(&wcet, bounds.to_string()).unwrap();
     root
 }
 
@@ -244,8 +264,9 @@ fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine()
         .find(|(task, _)| usize::from(*task) == monitor)
         .map(|(_, s)| s.clone())
         .expect("power_monitor's scripts");
-    // 5 bytes and 2 STARTs: (45 + 4) × 2.5 µs = 122.5 µs and the stretch; 66 µs before each.
-    assert_eq!(scripts.len(), 2 * GAUGE_SCRIPTS);
+    // 5 bytes and 2 STARTs: (45 + 4) × 2.5 µs = 122.5 µs, the stretch and the wake; 66 µs
+    // before each; one on each bus.
+    assert_eq!(scripts.len(), 2);
     assert_eq!(
         (
             scripts[0].bus,
@@ -255,10 +276,7 @@ fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine()
         ),
         (1, 9_122_500, 7, 66_000)
     );
-    assert_eq!(
-        (scripts[1].bus_time, scripts[GAUGE_SCRIPTS].bus),
-        (4_122_500, 0)
-    );
+    assert_eq!((scripts[1].bus_time, scripts[1].bus), (9_122_500, 0));
 
     // The thesis demo's report with the trial's statements: printed (docs/i2c.md).
     let scenario_file = root

@@ -711,11 +711,11 @@ mod tests {
         assert!(refusal.contains("below the hard floor"), "{refusal}");
         assert!(checker.known().is_empty(), "not started");
         // A bounded publisher miss is started with a warning: beside the thesis request, PowerManagement's ring
-        // every 6 ms, then its power status every 20 ms under accept-and-warn (scenario admission-decisions).
+        // every 7 ms, then its power status every 5 ms under accept-and-warn (scenario admission-decisions).
         checker.heard(&at(0, "205#01840302"));
-        assert!(checker.check(&message("21F#01060000")).is_none());
+        assert!(checker.check(&message("21F#01070000")).is_none());
         checker.heard(&at(0, "21B#0301"));
-        let warning = checker.check(&message("21E#01140000")).expect("warned");
+        let warning = checker.check(&message("21E#01050000")).expect("warned");
         assert!(
             warning.contains("would start, with a warning,"),
             "{warning}"

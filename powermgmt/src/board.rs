@@ -327,6 +327,7 @@ pub mod scripted {
     use amiro_firmware::i2c_engine::STRETCH_REARM_US;
     use amiro_firmware::mono::Clock as _;
     use amiro_firmware::scripted::I2cPort;
+    use amiro_sensors::drivers::bq27500::BatteryStatus;
     use amiro_sensors::drivers::ring::RingBus;
     use amiro_sensors::drivers::scripted::OnI2c;
     use stm32f4xx_hal::pac::{interrupt, Interrupt, NVIC};
@@ -413,10 +414,14 @@ pub mod scripted {
         BUSES.set_clocks(pclk1_hz, sysclk_hz);
     }
 
-    /// `which`'s sensors and gauge set up by their scripts on the polled master `boot` (the
-    /// gauge's bus-free pauses on the core clock, `GaugeDelay`), then `boot`'s block handed to
-    /// `bus` (`i2c_block::hand_over`).
-    fn boot_on(which: RingBus, boot: Master, bus: &ScriptBus) -> ScriptedBus {
+    /// `which`'s sensors and gauge set up (and the gauge's status read) by their scripts on the
+    /// polled master `boot` (the gauge's bus-free pauses on the core clock, `GaugeDelay`), then
+    /// `boot`'s block handed to `bus` (`i2c_block::hand_over`).
+    fn boot_on(
+        which: RingBus,
+        boot: Master,
+        bus: &ScriptBus,
+    ) -> (ScriptedBus, Option<BatteryStatus>) {
         // The polled master is consumed here: the block is the engine's from now on.
         let booted = ScriptedBus::boot(which, &mut OnI2c(boot), &mut super::GaugeDelay);
         hand_over(bus);
@@ -424,12 +429,12 @@ pub mod scripted {
     }
 
     /// I2C1's devices set up on its polled master, then I2C1 handed to its engine.
-    pub fn boot_rear(boot: Master) -> ScriptedBus {
+    pub fn boot_rear(boot: Master) -> (ScriptedBus, Option<BatteryStatus>) {
         boot_on(RingBus::I2c1, boot, &I2C1_BUS)
     }
 
     /// I2C2's devices set up on its polled master, then I2C2 handed to its engine.
-    pub fn boot_front(boot: Master) -> ScriptedBus {
+    pub fn boot_front(boot: Master) -> (ScriptedBus, Option<BatteryStatus>) {
         boot_on(RingBus::I2c2, boot, &I2C2_BUS)
     }
 

@@ -46,11 +46,12 @@ static BLT_CHECKSUM: u32 = 0xFFFF_FFFF;
 pub const RX_QUEUE_LEN: usize = 16;
 /// Depth of the transmit queue (frames waiting for a mailbox): two ring samples.
 pub const TX_QUEUE_LEN: usize = 16;
-/// The power monitor's period: VSYS → chargers every period.
-pub const POWER_MONITOR_PERIOD_US: u64 = 100_000;
-/// The power monitor reads both fuel gauges every this many periods (500 ms), the only reads of
-/// the gauges (the power-status sample takes the latest round; docs/boards.md, "PowerManagement").
-pub const BATTERY_CHECK_EVERY: u32 = 5;
+/// The power monitor's period: one transfer to a fuel gauge a job, so a round of both gauges (20
+/// transfers, 26 at most) takes about a second, the gauges' own update period (docs/boards.md,
+/// "PowerManagement": the decision). The only reads of the gauges after the boot's round.
+pub const POWER_MONITOR_PERIOD_US: u64 = 50_000;
+/// The power monitor regulates the chargers every this many periods (100 ms).
+pub const REGULATE_EVERY: u32 = 2;
 /// Watchdog check period; the IWDG resets the board if it is not fed for `WATCHDOG_TIMEOUT_MS`.
 pub const WATCHDOG_PERIOD_US: u64 = 100_000;
 /// Independent watchdog timeout once the board is up (set at the end of `init`, `tasks::come_up`).
@@ -191,16 +192,23 @@ mod app {
         let (wake_h, wake_high) = make_channel!((), 1);
         let (wake_m, wake_medium) = make_channel!((), 1);
         let (wake_l, wake_low) = make_channel!((), 1);
+        // The boot reads a whole round of both gauges, so a power-status sample taken after it
+        // has one to report (the power monitor then makes a transfer a job).
+        let mut batteries = power::LatestRound::new();
         #[cfg(not(feature = "scripted-i2c"))]
-        let rear_bus = RearBus::new(RingBus::I2c1, hw.rear_i2c, platform::GaugeDelay);
+        let (rear_bus, rear_status) =
+            RearBus::new(RingBus::I2c1, hw.rear_i2c, platform::GaugeDelay);
         #[cfg(not(feature = "scripted-i2c"))]
-        let front_bus = FrontBus::new(RingBus::I2c2, hw.front_i2c, platform::GaugeDelay);
-        // The devices set up by their scripts on the polled master, then each block handed to
-        // its engine (QEMU: the simulated buses).
+        let (front_bus, front_status) =
+            FrontBus::new(RingBus::I2c2, hw.front_i2c, platform::GaugeDelay);
+        // The devices set up (and the gauge's status read) by their scripts on the polled master,
+        // then each block handed to its engine (QEMU: the simulated buses).
         #[cfg(feature = "scripted-i2c")]
-        let rear_bus = platform::boot_rear(hw.rear_i2c);
+        let (rear_bus, rear_status) = platform::boot_rear(hw.rear_i2c);
         #[cfg(feature = "scripted-i2c")]
-        let front_bus = platform::boot_front(hw.front_i2c);
+        let (front_bus, front_status) = platform::boot_front(hw.front_i2c);
+        batteries.record(false, front_status);
+        batteries.record(true, rear_status);
         let mut signals = hw.signals;
         // The power lines keep their configuration; nothing in the app touches them again.
         let _power_lines = hw.power_lines;
@@ -236,7 +244,7 @@ mod app {
                 front_bus,
                 charger: hw.charger,
                 signals,
-                batteries: power::LatestRound::new(),
+                batteries,
                 alive: Liveness::new(),
                 can_errors: hw.can_errors,
             },
@@ -504,54 +512,53 @@ mod app {
     }
 
     /// The power master's periodic duty: the chargers run only while VSYS allows it (every
-    /// period); every `BATTERY_CHECK_EVERY` periods, from its first job on, both fuel gauges are
-    /// read (the only reads of the gauges: the round is kept for the power-status sample) and a
-    /// critically low battery shuts the robot down. Marks the watchdog's progress.
+    /// `REGULATE_EVERY` periods, from the first job on); each job makes one transfer of the
+    /// round of both fuel gauges (a `BatteryRound` kept across jobs: the only reads of the gauges
+    /// after the boot's, kept for the power-status sample), and a round that ends, or the boot's
+    /// round at the first job, is checked for a critically low battery, which shuts the robot
+    /// down. Marks the watchdog's progress.
     #[task(priority = 1, shared = [rear_bus, front_bus, charger, batteries, alive])]
     async fn power_monitor(mut cx: power_monitor::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::POWER_MONITOR);
         let mut next = Clock::now_us();
-        let mut round = 0u32;
-        // With `scripted-i2c` the gauges' reads suspend this task on its slots of I2C1 and I2C2.
+        let mut job = 0u32;
+        #[cfg(not(feature = "scripted-i2c"))]
+        let mut gauges = sensors::BatteryRound::new();
+        // With `scripted-i2c` a gauge's transfer suspends this task on its slot of I2C1 or I2C2.
         #[cfg(feature = "scripted-i2c")]
-        let (mut rear_port, mut front_port) =
-            platform::ports::<{ sensors::scripted::POWER_MONITOR_CLIENT }>();
-        // The first wait is for the time the task starts (it ends at once) and the round counter
-        // starts at a gauge round: the first round is read as the task starts, so a power-status
-        // sample taken after the boot has a round to report.
+        let mut gauges = sensors::scripted::BatteryRound::new(platform::ports::<
+            { sensors::scripted::POWER_MONITOR_CLIENT },
+        >());
+        // The first wait is for the time the task starts (it ends at once).
         loop {
             Clock::delay_until_us(next).await;
             next += crate::POWER_MONITOR_PERIOD_US;
             if !signals::shutting_down() {
-                cx.shared.charger.lock(power::regulate_charging);
-                if round.is_multiple_of(crate::BATTERY_CHECK_EVERY) {
-                    #[cfg(not(feature = "scripted-i2c"))]
-                    sensors::read_batteries(
+                if job.is_multiple_of(crate::REGULATE_EVERY) {
+                    cx.shared.charger.lock(power::regulate_charging);
+                }
+                #[cfg(not(feature = "scripted-i2c"))]
+                let ended = gauges.step(
+                    &mut cx.shared.rear_bus,
+                    &mut cx.shared.front_bus,
+                    &mut cx.shared.batteries,
+                );
+                #[cfg(feature = "scripted-i2c")]
+                let ended = gauges
+                    .step(
                         &mut cx.shared.rear_bus,
                         &mut cx.shared.front_bus,
                         &mut cx.shared.batteries,
-                    );
-                    #[cfg(feature = "scripted-i2c")]
-                    {
-                        let (front, rear) = sensors::scripted::read_batteries(
-                            &mut cx.shared.rear_bus,
-                            &mut cx.shared.front_bus,
-                            &mut rear_port,
-                            &mut front_port,
-                        )
-                        .await;
-                        cx.shared.batteries.lock(|b| {
-                            b.record(false, front);
-                            b.record(true, rear);
-                        });
-                    }
+                    )
+                    .await;
+                if ended || job == 0 {
                     let lines = cx.shared.charger.lock(|c| c.lines());
                     if cx.shared.batteries.lock(|b| b.critically_low(&lines)) {
                         amiro_firmware::log!("battery critically low: shutting down");
                         shutdown_sequence::spawn(Some(power::LOW_BATTERY_MODE)).ok();
                     }
                 }
-                round = round.wrapping_add(1);
+                job = job.wrapping_add(1);
                 cx.shared.alive.lock(|a| a.mark());
             }
         }

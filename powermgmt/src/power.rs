@@ -60,9 +60,9 @@ impl ChargeLines {
 /// Both fuel gauges' statuses from the power monitor's latest round, the only place the gauges
 /// are read (docs/boards.md, "PowerManagement": the power-status sample's age): a gauge whose read
 /// failed in that round is `None` (its failure counted in the bus's diagnostics when it happened),
-/// and so is each gauge before the first round has ended. No time stamp: the schedule bounds the
-/// age (a round every `BATTERY_CHECK_EVERY` periods), and a power monitor that stops leaves the
-/// watchdog unfed, which resets the board.
+/// and so is each gauge before the boot's round has ended. No time stamp: the schedule bounds the
+/// age (a round of at most 26 power monitor periods, a transfer each), and a power
+/// monitor that stops leaves the watchdog unfed, which resets the board.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct LatestRound {
     front: Option<BatteryStatus>,

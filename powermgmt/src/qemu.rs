@@ -327,6 +327,7 @@ pub fn write_shutdown_reason(reason: u8) {
 #[cfg(feature = "scripted-i2c")]
 pub mod scripted {
     use amiro_firmware::i2c_sim::{SimBus as ScriptSimBus, SimPort};
+    use amiro_sensors::drivers::bq27500::BatteryStatus;
     use amiro_sensors::drivers::ring::RingBus;
     use amiro_sensors::drivers::scripted::OnI2c;
     use amiro_sensors::sim::NoDelay;
@@ -347,12 +348,12 @@ pub mod scripted {
         ScriptSimBus::new(OnI2c(SimBus::new(RingBus::I2c2)));
 
     /// I2C1's devices set up on its simulated parts.
-    pub fn boot_rear(_boot: SimBus) -> ScriptedBus {
+    pub fn boot_rear(_boot: SimBus) -> (ScriptedBus, Option<BatteryStatus>) {
         I2C1_BUS.with_devices(|devices| ScriptedBus::boot(RingBus::I2c1, devices, &mut NoDelay))
     }
 
     /// I2C2's devices set up on its simulated parts.
-    pub fn boot_front(_boot: SimBus) -> ScriptedBus {
+    pub fn boot_front(_boot: SimBus) -> (ScriptedBus, Option<BatteryStatus>) {
         I2C2_BUS.with_devices(|devices| ScriptedBus::boot(RingBus::I2c2, devices, &mut NoDelay))
     }
 

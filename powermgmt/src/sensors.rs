@@ -55,8 +55,9 @@ pub struct SensorBus<I, D> {
 
 impl<I: I2c, D: DelayNs> SensorBus<I, D> {
     /// The devices of `bus` on `i2c`; sets up the four ring sensors (a sensor that does not answer
-    /// is retried later) and checks the gauge's identity (logged).
-    pub fn new(bus: RingBus, i2c: I, delay: D) -> Self {
+    /// is retried later), checks the gauge's identity (logged) and reads its status (the boot's
+    /// round: `None`, counted, when it did not answer).
+    pub fn new(bus: RingBus, i2c: I, delay: D) -> (Self, Option<BatteryStatus>) {
         let mut slots = [RingSlot {
             index: 0,
             channel: Channel::Ch0,
@@ -92,7 +93,15 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
                 ": fuel gauge did not answer its identity check"
             );
         }
-        this
+        let mut read = StatusRead::new();
+        let mut status = None;
+        for _ in 0..StatusRead::MAX_TRANSFERS {
+            if let Some(ended) = this.gauge_step(&mut read) {
+                status = ended;
+                break;
+            }
+        }
+        (this, status)
     }
 
     /// Sets sensor slot `k` up; whether it now answers.
@@ -242,7 +251,8 @@ pub type FrontBus = SensorBus<FrontI2c, GaugeDelay>;
 
 /// Both gauges read one transfer a call, front then rear, each transfer under its own lock of its
 /// bus: a publisher waiting for either bus waits for one transfer to a gauge, not a whole read.
-/// Each gauge's status goes to the power monitor's [`power::LatestRound`] as its read ends.
+/// The power monitor keeps one across its jobs and makes one call a job. Each gauge's status goes
+/// to the power monitor's [`power::LatestRound`] as its read ends.
 #[derive(Debug, Default)]
 pub struct BatteryRound {
     read: StatusRead,
@@ -251,9 +261,6 @@ pub struct BatteryRound {
 }
 
 impl BatteryRound {
-    /// The most transfers a round makes: both gauges' reads at their longest.
-    pub const MAX_TRANSFERS: usize = 2 * StatusRead::MAX_TRANSFERS;
-
     /// A round not begun.
     pub const fn new() -> Self {
         Self {
@@ -265,7 +272,8 @@ impl BatteryRound {
     /// Makes the round's next transfer, under its bus's lock; a gauge's read that ends puts its
     /// status (`None`: the gauge did not answer, counted) into `latest`.
     /// Whether the round has ended (the rear gauge's read with it; the next call begins a new
-    /// round). A round takes at most [`BatteryRound::MAX_TRANSFERS`] calls.
+    /// round). A round takes at most 2 × [`StatusRead::MAX_TRANSFERS`] = 26 calls (20 when both
+    /// gauges answer their reads).
     pub fn step(
         &mut self,
         rear: &mut impl rtic::Mutex<T = RearBus>,
@@ -286,22 +294,6 @@ impl BatteryRound {
         latest.lock(|l| l.record(at_rear, status));
         self.at_rear = !at_rear;
         at_rear
-    }
-}
-
-/// Both batteries' gauges, front then rear, each transfer under its own lock of its bus: a
-/// [`BatteryRound`] made at once, its statuses in `latest`. The power monitor's, the only reader
-/// of the gauges.
-pub fn read_batteries(
-    rear: &mut impl rtic::Mutex<T = RearBus>,
-    front: &mut impl rtic::Mutex<T = FrontBus>,
-    latest: &mut impl rtic::Mutex<T = power::LatestRound>,
-) {
-    let mut round = BatteryRound::new();
-    for _ in 0..BatteryRound::MAX_TRANSFERS {
-        if round.step(rear, front, latest) {
-            break;
-        }
     }
 }
 

@@ -2,7 +2,8 @@
 //! "PowerManagement's buses"). A ring read, a missing sensor's set-up and a gauge's status read
 //! are jobs of I2C scripts that the bus runs while the task that asked suspends on its own client
 //! slot (`ScriptPort`); the bus's state (which sensors answer, their missed samples, the gauge's
-//! faults) is locked only to plan a job and to take its outcome, never across the bus.
+//! faults) is locked only to plan a job and to take its outcome, never across the bus. The power
+//! monitor's job is one gauge transfer ([`BatteryRound`]), as on the blocking path.
 //!
 //! The scripts are amiro-sensors' (`drivers::scripted`: `RingRead`, `SensorSetUp`, the gauge's
 //! `StatusRead` a transfer a script after its 66 µs of bus-free time, `GaugeIdentity`), built from
@@ -23,6 +24,7 @@ use amiro_sensors::drivers::vcnl4020::{self, Config};
 use embedded_hal::delay::DelayNs;
 
 use super::{bus_name, RingSample, RingSlot, PER_BUS, RETRY_US};
+use crate::power::LatestRound;
 
 /// Scripts a sensor's set-up takes: its identity, then each set-up register written and read
 /// back.
@@ -56,9 +58,14 @@ pub struct ScriptedBus {
 
 impl ScriptedBus {
     /// The sensors of `bus` set up by their scripts on `boot` (the polled master before the
-    /// engine takes the block, or the simulated devices), and the gauge's identity checked
-    /// (logged), each gauge script after its bus-free time on `delay`.
-    pub fn boot(bus: RingBus, boot: &mut impl ScriptBus, delay: &mut impl DelayNs) -> Self {
+    /// engine takes the block, or the simulated devices), the gauge's identity checked (logged)
+    /// and its status read (the boot's round: `None`, counted, when it did not answer), each
+    /// gauge script after its bus-free time on `delay`.
+    pub fn boot(
+        bus: RingBus,
+        boot: &mut impl ScriptBus,
+        delay: &mut impl DelayNs,
+    ) -> (Self, Option<BatteryStatus>) {
         let mut slots = [RingSlot {
             index: 0,
             channel: Channel::Ch0,
@@ -117,7 +124,24 @@ impl ScriptedBus {
                 ": fuel gauge did not answer its identity check"
             );
         }
-        this
+        let mut read = StatusRead::new();
+        let mut status = None;
+        for _ in 0..StatusRead::MAX_TRANSFERS {
+            let Some(transfer) = read.next_transfer() else {
+                break;
+            };
+            delay.delay_us(GAUGE_SETTLE_US);
+            let outcome = match gauge_script(transfer) {
+                Ok(script) => gauge_outcome(transfer, &boot.run(&script)),
+                Err(error) => Err(error),
+            };
+            if let Some(ended) = read.complete(outcome) {
+                status = ended.ok();
+                break;
+            }
+        }
+        let status = this.end_gauge_read(status);
+        (this, status)
     }
 
     /// Slot `k`'s set-up begun at `now_us` (its `last_try_us`, so no other job takes it up too).
@@ -304,43 +328,75 @@ pub async fn sample_ring(
     bus.lock(|b| b.end_ring_read(now_us, &read, places, sample));
 }
 
-/// One status read of the bus's fuel gauge, each transfer a script on `port` after the gauge's
-/// bus-free time: the status, or `None` (counted) when the gauge did not answer. Not inlined,
-/// as [`sample_ring`].
+/// One transfer of the gauge's status read `read`, a script on `port` after the gauge's bus-free
+/// time: `None` while the read goes on; at its end `Some` of the status, or of `None` (counted)
+/// when the gauge did not answer. Not inlined, as [`sample_ring`].
 #[inline(never)]
-pub async fn read_gauge(
+pub async fn gauge_transfer(
+    read: &mut StatusRead,
     bus: &mut impl rtic::Mutex<T = ScriptedBus>,
     port: &mut impl ScriptPort,
-) -> Option<BatteryStatus> {
-    let mut read = StatusRead::new();
-    let mut status = None;
-    for _ in 0..StatusRead::MAX_TRANSFERS {
-        let Some(transfer) = read.next_transfer() else {
-            break;
-        };
-        let outcome = match gauge_script(transfer) {
-            Ok(script) => gauge_outcome(
-                transfer,
-                &script_result(port.run(script, GAUGE_SETTLE_US).await),
-            ),
-            Err(error) => Err(error),
-        };
-        if let Some(ended) = read.complete(outcome) {
-            status = ended.ok();
-            break;
+) -> Option<Option<BatteryStatus>> {
+    let status = match read.next_transfer() {
+        Some(transfer) => {
+            let outcome = match gauge_script(transfer) {
+                Ok(script) => gauge_outcome(
+                    transfer,
+                    &script_result(port.run(script, GAUGE_SETTLE_US).await),
+                ),
+                Err(error) => Err(error),
+            };
+            read.complete(outcome)?.ok()
         }
-    }
-    bus.lock(|b| b.end_gauge_read(status))
+        // A read past its end (a round restarts each read that ends): no status.
+        None => None,
+    };
+    Some(bus.lock(|b| b.end_gauge_read(status)))
 }
 
-/// Both gauges' status, front (I2C2) then rear (I2C1), each on its bus through the task's ports.
-pub async fn read_batteries(
-    rear: &mut impl rtic::Mutex<T = ScriptedBus>,
-    front: &mut impl rtic::Mutex<T = ScriptedBus>,
-    rear_port: &mut impl ScriptPort,
-    front_port: &mut impl ScriptPort,
-) -> (Option<BatteryStatus>, Option<BatteryStatus>) {
-    let front = read_gauge(front, front_port).await;
-    let rear = read_gauge(rear, rear_port).await;
-    (front, rear)
+/// The power monitor's round of both gauges with `scripted-i2c`, front (I2C2) then rear (I2C1),
+/// one transfer a call, each a script on the monitor's slot of its bus ([`gauge_transfer`]): the
+/// blocking path's [`super::BatteryRound`], its slots kept with it.
+pub struct BatteryRound<P> {
+    rear_port: P,
+    front_port: P,
+    read: StatusRead,
+    /// The rear gauge's read is under way (the front one's has ended).
+    at_rear: bool,
+}
+
+impl<P: ScriptPort> BatteryRound<P> {
+    /// A round not begun, on the monitor's slots of I2C1 and I2C2.
+    pub fn new((rear_port, front_port): (P, P)) -> Self {
+        Self {
+            rear_port,
+            front_port,
+            read: StatusRead::new(),
+            at_rear: false,
+        }
+    }
+
+    /// Makes the round's next transfer; a gauge's read that ends puts its status into `latest`.
+    /// Whether the round has ended (the next call begins a new one); a round takes at most
+    /// 2 × [`StatusRead::MAX_TRANSFERS`] calls, as the blocking path's.
+    pub async fn step(
+        &mut self,
+        rear: &mut impl rtic::Mutex<T = ScriptedBus>,
+        front: &mut impl rtic::Mutex<T = ScriptedBus>,
+        latest: &mut impl rtic::Mutex<T = LatestRound>,
+    ) -> bool {
+        let ended = if self.at_rear {
+            gauge_transfer(&mut self.read, rear, &mut self.rear_port).await
+        } else {
+            gauge_transfer(&mut self.read, front, &mut self.front_port).await
+        };
+        let Some(status) = ended else {
+            return false;
+        };
+        self.read.restart();
+        let at_rear = self.at_rear;
+        latest.lock(|l| l.record(at_rear, status));
+        self.at_rear = !at_rear;
+        at_rear
+    }
 }
