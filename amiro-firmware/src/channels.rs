@@ -7,25 +7,14 @@
 #[cfg(not(feature = "qemu"))]
 mod rtt {
     use core::cell::Cell;
-    use critical_section::{CriticalSection, Mutex};
+    use critical_section::Mutex;
     use rtt_target::{rtt_init, ChannelMode, UpChannel};
 
-    // `Cell`, not `RefCell`: taken out and put back inside one critical section, so there is no
-    // borrow that could fail (and no panic message machinery in the flash).
+    // `Cell`, not `RefCell`: a channel is taken out, written and put back (the writer that finds
+    // the slot empty writes nothing), so there is no borrow that could fail (and no panic message
+    // machinery in the flash).
     static TRACE: Mutex<Cell<Option<UpChannel>>> = Mutex::new(Cell::new(None));
     static LOG: Mutex<Cell<Option<UpChannel>>> = Mutex::new(Cell::new(None));
-
-    fn with_channel(
-        cs: CriticalSection<'_>,
-        slot: &Mutex<Cell<Option<UpChannel>>>,
-        f: impl FnOnce(&mut UpChannel),
-    ) {
-        let cell = slot.borrow(cs);
-        if let Some(mut channel) = cell.take() {
-            f(&mut channel);
-            cell.set(Some(channel));
-        }
-    }
 
     /// Sets up the two RTT channels.
     pub fn init() {
@@ -41,24 +30,27 @@ mod rtt {
         });
     }
 
-    /// Writes one log line made of `parts`, each cut to [`super::LOG_PART_MAX`] bytes.
+    /// Writes one log line made of `parts`, at most [`super::LOG_PARTS_MAX`] of them, each cut to
+    /// [`super::LOG_PART_MAX`] bytes. The channel is taken out and put back under two short
+    /// critical sections and the copies run outside them (as [`write_outside`]), so a log line
+    /// masks no interrupt for its copies; a line logged while a pre-empted task holds the channel
+    /// finds none and is dropped.
     pub fn write_log(parts: &[&str]) {
-        critical_section::with(|cs| {
-            with_channel(cs, &LOG, |channel| {
-                for part in parts {
-                    let bytes = part.as_bytes();
-                    channel.write(&bytes[..bytes.len().min(super::LOG_PART_MAX)]);
-                }
-                channel.write(b"\n");
-            });
-        });
+        let Some(mut channel) = critical_section::with(|cs| LOG.borrow(cs).take()) else {
+            return;
+        };
+        for part in parts.iter().take(super::LOG_PARTS_MAX) {
+            let bytes = part.as_bytes();
+            channel.write(&bytes[..bytes.len().min(super::LOG_PART_MAX)]);
+        }
+        channel.write(b"\n");
+        critical_section::with(|cs| LOG.borrow(cs).set(Some(channel)));
     }
 
     /// Writes `first` and then `second` into the channel in `slot`, or nothing of what finds no
     /// room (`false`). The channel is taken out and put back under two short critical sections
-    /// and the copies run outside them, so the writer blocks no task: only the trace drain
-    /// (priority 0) writes this way, and a task that logs while it holds the log channel finds
-    /// none and its line is dropped (only while a deferred line, a one-off report, is written).
+    /// and the copies run outside them, so the writer blocks no task; a task that logs while a
+    /// pre-empted writer holds the channel finds none and its line is dropped.
     fn write_outside(slot: &Mutex<Cell<Option<UpChannel>>>, first: &[u8], second: &[u8]) -> bool {
         let Some(mut channel) = critical_section::with(|cs| slot.borrow(cs).take()) else {
             return false;
@@ -86,6 +78,13 @@ mod rtt {
 /// 68 bytes): a longer part is cut. It bounds the RTT copy's length, so the log's cost has a bound
 /// (docs/analysis.md, the bounds files' `rtt_target::UpChannel::write` entries).
 pub const LOG_PART_MAX: usize = 96;
+/// The most parts of one log line that reach the channel (`log!` refuses more when it is built):
+/// it bounds `write_log`'s loop under interrupts off (the bounds files' `write_log` entries).
+#[cfg(not(feature = "qemu"))]
+pub const LOG_PARTS_MAX: usize = 5;
+/// The most parts of one log line (QEMU: its admission notes have eight, `tasks::note_decision`).
+#[cfg(feature = "qemu")]
+pub const LOG_PARTS_MAX: usize = 8;
 
 /// Sets up the channels (RTT on the robot; QEMU's are opened by `qemu::init`).
 pub fn init() {
@@ -164,15 +163,15 @@ pub fn write_deferred_log() {
     }
 }
 
-/// Writes one human log line made of `parts` (RTT channel 0 on the robot, a `# ` line on QEMU's
-/// console).
+/// Writes one human log line made of `parts`, at most [`LOG_PARTS_MAX`] of them (RTT channel 0 on
+/// the robot, a `# ` line on QEMU's console).
 pub fn write_log(parts: &[&str]) {
     #[cfg(not(feature = "qemu"))]
     rtt::write_log(parts);
     #[cfg(feature = "qemu")]
     {
         crate::qemu::console_write(b"# ");
-        for part in parts {
+        for part in parts.iter().take(LOG_PARTS_MAX) {
             crate::qemu::console_write(part.as_bytes());
         }
         crate::qemu::console_write(b"\n");

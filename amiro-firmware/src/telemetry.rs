@@ -64,8 +64,11 @@ macro_rules! log {
     };
 }
 
-/// The function behind [`log!`].
-pub fn log_parts(parts: &[&str]) {
+/// The function behind [`log!`]: a line of more than [`crate::channels::LOG_PARTS_MAX`] parts is
+/// refused when it is built, so the channel write's loop has a bound from the code.
+#[inline]
+pub fn log_parts<const N: usize>(parts: &[&str; N]) {
+    const { assert!(N <= crate::channels::LOG_PARTS_MAX, "log!: too many parts") };
     crate::channels::write_log(parts);
 }
 

@@ -554,7 +554,9 @@ mod app {
                 if ended || job == 0 {
                     let lines = cx.shared.charger.lock(|c| c.lines());
                     if cx.shared.batteries.lock(|b| b.critically_low(&lines)) {
-                        amiro_firmware::log!("battery critically low: shutting down");
+                        amiro_firmware::channels::defer_log(
+                            "battery critically low: shutting down",
+                        );
                         shutdown_sequence::spawn(Some(power::LOW_BATTERY_MODE)).ok();
                     }
                 }
