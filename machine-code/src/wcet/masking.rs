@@ -8,6 +8,7 @@ use super::cfg::{Block, Cfg, Edge};
 use crate::decode::{Flow, Insn, Opcode, Operand, Regs, LR, SP};
 use crate::waits::Conditional;
 use crate::Image;
+use yaxpeax_arm::armv7::{RegShiftStyle, ShiftStyle};
 
 /// The deepest nesting of raises of one kind a section is followed through.
 const MAX_NESTING: u32 = 16;
@@ -54,6 +55,16 @@ const EVEN: u8 = 1 << 5;
 const OTHER: u8 = 1 << 6;
 /// An address in the function's frame (SP, or a value worked from it).
 const FRAME: u8 = 1 << 7;
+
+/// Where a frame address is kept, for [`Known::widen`]'s count.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Place {
+    Register(u8),
+    /// The frame's word at this offset from the entry's SP.
+    Word(i32),
+    /// [`Known::escaped`].
+    Escaped,
+}
 
 /// What one register may hold at a point, on every path that reaches it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -208,6 +219,34 @@ impl Known {
             self.escape(low);
         }
         *self != before
+    }
+
+    /// After a join that changed the entry `old`: each lowest frame offset that went down (a
+    /// register's, a word's, the escaped one) counts a step at its place (`lowered`, keyed by
+    /// the place: a register, a word's offset, or the escaped address), and one that went down
+    /// more than [`super::values::WIDEN_AFTER`] times goes to the bottom of the frame, so a
+    /// pointer stepped down on every pass of a loop does not take a pass per step.
+    fn widen(&mut self, old: &Known, mut lowered: impl FnMut(Place) -> u32) {
+        let mut lower = |now: &mut Holds, was: &Holds, place: Place| {
+            if let (Some(a), Some(b)) = (now.frame_low(), was.frame_low()) {
+                if a < b && lowered(place) > super::values::WIDEN_AFTER {
+                    now.low = i32::MIN;
+                }
+            }
+        };
+        for (r, (now, was)) in self.regs.iter_mut().zip(old.regs.iter()).enumerate() {
+            lower(now, was, Place::Register(r as u8));
+        }
+        for (&at, now) in self.slots.iter_mut() {
+            if let Some(was) = old.slots.get(&at) {
+                lower(now, was, Place::Word(at));
+            }
+        }
+        if let (Some(now), Some(was)) = (self.escaped, old.escaped) {
+            if now < was && lowered(Place::Escaped) > super::values::WIDEN_AFTER {
+                self.escaped = Some(i32::MIN);
+            }
+        }
     }
 
     /// Forgets the frame's words a store through an address not in the frame (or a call) may
@@ -474,10 +513,11 @@ impl Known {
     /// may hold one, among the registers its value is worked from: not a load's, whose value
     /// comes from memory, nor a store's): the lowest frame offset the result may point to. Only
     /// a step that cannot take the address below its object keeps it there: an immediate added
-    /// or taken away moves it by the immediate, a register added (an index into the object: a
-    /// pointer worked from an object's address stays in the object), a carry added or bits set
-    /// (`ADC`, `ORR`) and a copy keep it; anything else (a register taken away, bits cleared, a
-    /// shift, a multiply, an extension) may point anywhere in the frame.
+    /// or taken away moves it by the immediate, a register added, shifted or not (an element's
+    /// offset in the object: a pointer worked from an object's address stays in the object), a
+    /// carry added or bits set (`ADC`, `ORR`) and a copy keep it; anything else (a register
+    /// taken away, bits cleared, the address itself shifted, a multiply, an extension) may point
+    /// anywhere in the frame.
     fn worked_from_frame(&self, insn: &Insn) -> Option<i32> {
         if insn.is_load() || insn.is_store() || insn.writes().contains(SP) {
             return None;
@@ -512,15 +552,26 @@ impl Known {
             .filter_map(|r| self.frame(r))
             .min()?;
         let imm = insn.immediate().and_then(|v| i32::try_from(v).ok());
-        let ops = &insn.inst.operands;
-        let plain_registers = ops.iter().all(|o| {
-            matches!(o, Operand::Reg(_) | Operand::Nothing)
-                || matches!(o, Operand::Imm12(_) | Operand::Imm32(_))
+        // A frame address shifted (`ADD Rd, Rn, Rm, LSL #3` with Rm the address) is no address.
+        let scaled = insn.inst.operands.iter().any(|o| match o {
+            Operand::RegShift(shift) => match shift.into_shift() {
+                RegShiftStyle::RegImm(s) => {
+                    !(s.stype() == ShiftStyle::LSL && s.imm() == 0)
+                        && self.frame(s.shiftee().number()).is_some()
+                }
+                RegShiftStyle::RegReg(s) => {
+                    self.frame(s.shiftee().number()).is_some()
+                        || self.frame(s.shifter().number()).is_some()
+                }
+            },
+            _ => false,
         });
         Some(match (insn.inst.opcode, imm) {
-            (Opcode::ADD, Some(imm)) if plain_registers => low.saturating_add(imm),
-            (Opcode::SUB, Some(imm)) if plain_registers => low.saturating_sub(imm),
-            (Opcode::ADD | Opcode::ADC | Opcode::ORR | Opcode::MOV, _) if plain_registers => low,
+            _ if scaled => i32::MIN,
+            (Opcode::ADD, Some(imm)) => low.saturating_add(imm),
+            (Opcode::SUB, Some(imm)) => low.saturating_sub(imm),
+            // An index added (shifted or not: an element's offset), a carry, bits set, a copy.
+            (Opcode::ADD | Opcode::ADC | Opcode::ORR | Opcode::MOV, _) => low,
             // `MOVS Rd, Rm` decodes as `LSLS Rd, Rm, #0`: a copy.
             (Opcode::LSL, Some(0)) => low,
             _ => i32::MIN,
@@ -656,7 +707,9 @@ impl Known {
 }
 
 /// What the registers may hold at the entry of each block of a function's graph: a forward
-/// data-flow pass to its fixed point, across blocks and the copies node splitting made.
+/// data-flow pass to its fixed point, across blocks and the copies node splitting made; a lowest
+/// frame offset that keeps going down at a block's entry (a frame address stepped down on every
+/// pass of a loop) is widened to any offset ([`Known::widen`]), so the pass ends.
 pub(super) struct Masks {
     entry: Vec<Known>,
 }
@@ -671,6 +724,7 @@ impl Masks {
         entry[0] = Known::entry();
         let mut work = vec![0usize];
         let mut queued = vec![false; n];
+        let mut lowered: BTreeMap<(usize, Place), u32> = BTreeMap::new();
         queued[0] = true;
         while let Some(x) = work.pop() {
             queued[x] = false;
@@ -680,9 +734,17 @@ impl Masks {
                 out.step(image, insn);
             }
             for e in &block.succs {
-                if entry[e.to].meet(&out) && !queued[e.to] {
-                    queued[e.to] = true;
-                    work.push(e.to);
+                let old = entry[e.to].clone();
+                if entry[e.to].meet(&out) {
+                    entry[e.to].widen(&old, |place| {
+                        let n = lowered.entry((e.to, place)).or_insert(0);
+                        *n += 1;
+                        *n
+                    });
+                    if !queued[e.to] {
+                        queued[e.to] = true;
+                        work.push(e.to);
+                    }
                 }
             }
         }

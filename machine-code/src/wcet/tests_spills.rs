@@ -238,3 +238,18 @@ fn a_spill_overwritten_on_one_path_is_lost_where_the_paths_join() {
         Ok(vec![(PRIORITY_5, 14, 7)])
     );
 }
+
+#[test]
+fn a_pointer_stepped_down_a_loop_reaches_the_spill_and_the_pass_ends() {
+    // r2 starts above the spill and goes down a word per pass: its lowest offset keeps going down
+    // at the loop's head, is widened to the frame's bottom after a few passes (before, the pass
+    // took one round per step, 2^29 of them), and the store through it may be the spill's word.
+    let between = [
+        0xaa03, // add r2, sp, #12
+        0x3a04, // subs r2, #4 (the loop)
+        0x6011, // str r1, [r2]
+        0x3b01, // subs r3, #1
+        0xd1fb, // bne the loop
+    ];
+    assert_unclear(&lock(&[], &between, RELOAD), &between);
+}
