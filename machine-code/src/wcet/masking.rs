@@ -8,6 +8,7 @@ use super::cfg::{Block, Cfg, Edge};
 use crate::decode::{Flow, Insn, Opcode, Operand, Regs, LR, SP};
 use crate::waits::Conditional;
 use crate::Image;
+use yaxpeax_arm::armv7::{RegShiftStyle, ShiftStyle};
 
 /// The deepest nesting of raises of one kind a section is followed through.
 const MAX_NESTING: u32 = 16;
@@ -54,6 +55,16 @@ const EVEN: u8 = 1 << 5;
 const OTHER: u8 = 1 << 6;
 /// An address in the function's frame (SP, or a value worked from it).
 const FRAME: u8 = 1 << 7;
+
+/// Where a frame address is kept, for [`Known::widen`]'s count.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Place {
+    Register(u8),
+    /// The frame's word at this offset from the entry's SP.
+    Word(i32),
+    /// [`Known::escaped`].
+    Escaped,
+}
 
 /// What one register may hold at a point, on every path that reaches it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -210,12 +221,55 @@ impl Known {
         *self != before
     }
 
+    /// After a join that changed the entry `old`: each lowest frame offset that went down (a
+    /// register's, a word's, the escaped one) counts a step at its place (`lowered`, keyed by
+    /// the place: a register, a word's offset, or the escaped address), and one that went down
+    /// more than [`super::values::WIDEN_AFTER`] times goes to the bottom of the frame, so a
+    /// pointer stepped down on every pass of a loop does not take a pass per step.
+    fn widen(&mut self, old: &Known, mut lowered: impl FnMut(Place) -> u32) {
+        let mut lower = |now: &mut Holds, was: &Holds, place: Place| {
+            if let (Some(a), Some(b)) = (now.frame_low(), was.frame_low()) {
+                if a < b && lowered(place) > super::values::WIDEN_AFTER {
+                    now.low = i32::MIN;
+                }
+            }
+        };
+        for (r, (now, was)) in self.regs.iter_mut().zip(old.regs.iter()).enumerate() {
+            lower(now, was, Place::Register(r as u8));
+        }
+        for (&at, now) in self.slots.iter_mut() {
+            if let Some(was) = old.slots.get(&at) {
+                lower(now, was, Place::Word(at));
+            }
+        }
+        if let (Some(now), Some(was)) = (self.escaped, old.escaped) {
+            if now < was && lowered(Place::Escaped) > super::values::WIDEN_AFTER {
+                self.escaped = Some(i32::MIN);
+            }
+        }
+    }
+
     /// Forgets the frame's words a store through an address not in the frame (or a call) may
     /// write: all where a frame address escaped.
     fn clobber_escaped(&mut self) {
         if let Some(low) = self.escaped {
             self.forget(|at| at + 4 > low);
         }
+    }
+
+    /// A call: a frame address among its arguments escapes to the callee — in r0-r3, or in a
+    /// word of the frame the pass follows (the stack arguments are the words from SP up, and the
+    /// code does not say how many the callee reads) — and the callee may write the frame's words
+    /// from the lowest escaped address up.
+    fn call_escapes(&mut self) {
+        let low = (0..4u8)
+            .filter_map(|r| self.frame(r))
+            .chain(self.slots.values().filter_map(|held| held.frame_low()))
+            .min();
+        if let Some(low) = low {
+            self.escape(low);
+        }
+        self.clobber_escaped();
     }
 
     /// A frame address that may point as low as `low` escapes.
@@ -266,11 +320,7 @@ impl Known {
             // An outlined helper runs on its caller's frame and may store anywhere in it.
             self.forget(|_| true);
         } else if call {
-            // A frame address among the arguments escapes to the callee.
-            if let Some(low) = (0..4u8).filter_map(|r| self.frame(r)).min() {
-                self.escape(low);
-            }
-            self.clobber_escaped();
+            self.call_escapes();
         }
         let writes_sp = insn.writes().contains(SP);
         if insn.is_store() || insn.is_coprocessor_store() {
@@ -322,10 +372,14 @@ impl Known {
         let mut loaded: Vec<(u8, Holds)> = Vec::new();
         if let (true, Some(sp)) = (base_sp, sp) {
             match opcode {
-                Opcode::LDR => {
-                    if let (Some(&rt), Some(off)) = (insn.registers().first(), self.access(insn)) {
-                        let held = self.slots.get(&(sp + off)).copied();
-                        loaded.push((rt, held.unwrap_or(Holds::UNKNOWN)));
+                Opcode::LDR | Opcode::LDRD => {
+                    // `LDRD Rt, Rt2`: Rt from the word at the address, Rt2 from the next.
+                    if let Some(off) = self.access(insn) {
+                        let count = if opcode == Opcode::LDRD { 2 } else { 1 };
+                        for (k, &rt) in insn.registers().iter().take(count).enumerate() {
+                            let held = self.slots.get(&(sp + off + 4 * k as i32)).copied();
+                            loaded.push((rt, held.unwrap_or(Holds::UNKNOWN)));
+                        }
                     }
                 }
                 Opcode::POP | Opcode::LDM(true, false, true, _) => {
@@ -455,6 +509,117 @@ impl Known {
         }
     }
 
+    /// Where `insn` works its destination's value from a frame address (SP, or a register that
+    /// may hold one, among the registers its value is worked from: not a load's, whose value
+    /// comes from memory, nor a store's): the lowest frame offset the result may point to. Only
+    /// a step that cannot take the address below its object keeps it there: an immediate added
+    /// or taken away moves it by the immediate, a register added, shifted or not (an element's
+    /// offset in the object: a pointer worked from an object's address stays in the object), a
+    /// carry added or bits set (`ADC`, `ORR`) and a copy keep it; anything else (a register
+    /// taken away, bits cleared, the address itself shifted, a multiply, an extension) may point
+    /// anywhere in the frame.
+    fn worked_from_frame(&self, insn: &Insn) -> Option<i32> {
+        if insn.is_load() || insn.is_store() || insn.writes().contains(SP) {
+            return None;
+        }
+        let mut sources = super::stored::reads(insn);
+        // Destinations `reads` counts as read but these only write: an `MRS`'s, a two-operand
+        // extension's, count's, reversal's, and the long multiplies' RdHi (the accumulating ones
+        // read it).
+        let regs = insn.registers();
+        let only_written: &[u8] = match insn.inst.opcode {
+            Opcode::UMULL | Opcode::SMULL => regs.get(..2).unwrap_or(&[]),
+            Opcode::MRS
+            | Opcode::UXTB
+            | Opcode::UXTH
+            | Opcode::SXTB
+            | Opcode::SXTH
+            | Opcode::CLZ
+            | Opcode::RBIT
+            | Opcode::REV
+            | Opcode::REV16
+            | Opcode::REVSH => regs.get(..1).unwrap_or(&[]),
+            _ => &[],
+        };
+        for &r in only_written {
+            // Unless it is the source as well (`UXTB r0, r0`).
+            if regs.iter().filter(|&&x| x == r).count() == 1 {
+                sources &= !(1u16 << r);
+            }
+        }
+        let low = (0..16u8)
+            .filter(|r| sources & 1 << r != 0)
+            .filter_map(|r| self.frame(r))
+            .min()?;
+        let imm = insn.immediate().and_then(|v| i32::try_from(v).ok());
+        // A frame address shifted (`ADD Rd, Rn, Rm, LSL #3` with Rm the address) is no address.
+        let scaled = insn.inst.operands.iter().any(|o| match o {
+            Operand::RegShift(shift) => match shift.into_shift() {
+                RegShiftStyle::RegImm(s) => {
+                    !(s.stype() == ShiftStyle::LSL && s.imm() == 0)
+                        && self.frame(s.shiftee().number()).is_some()
+                }
+                RegShiftStyle::RegReg(s) => {
+                    self.frame(s.shiftee().number()).is_some()
+                        || self.frame(s.shifter().number()).is_some()
+                }
+            },
+            _ => false,
+        });
+        Some(match (insn.inst.opcode, imm) {
+            _ if scaled => i32::MIN,
+            (Opcode::ADD, Some(imm)) => low.saturating_add(imm),
+            (Opcode::SUB, Some(imm)) => low.saturating_sub(imm),
+            // An index added (shifted or not: an element's offset), a carry, bits set, a copy.
+            (Opcode::ADD | Opcode::ADC | Opcode::ORR | Opcode::MOV, _) => low,
+            // `MOVS Rd, Rm` decodes as `LSLS Rd, Rm, #0`: a copy.
+            (Opcode::LSL, Some(0)) => low,
+            _ => i32::MIN,
+        })
+    }
+
+    /// The base `insn` writes back (`LDR Rt, [Rn], #k`, `STR Rt, [Rn, #k]!`, `LDM Rn!`, but SP,
+    /// whose offset [`Self::step_frame`] follows) where it may hold a frame address, and what it
+    /// then holds: that address moved (an immediate taken away moves its lowest offset down, one
+    /// added keeps it; a register index taken away may reach anywhere in the frame, one added
+    /// keeps it).
+    fn written_back(&self, insn: &Insn) -> Option<(u8, Holds)> {
+        let (base, moved) = insn.inst.operands.iter().find_map(|o| match *o {
+            Operand::RegDerefPostindexOffset(rn, k, add, _)
+            | Operand::RegDerefPreindexOffset(rn, k, add, true) => {
+                let k = i32::from(k);
+                Some((rn.number(), Some(if add { k } else { -k })))
+            }
+            Operand::RegDerefPostindexReg(rn, _, add, _)
+            | Operand::RegDerefPreindexReg(rn, _, add, true)
+            | Operand::RegDerefPostindexRegShift(rn, _, add, _)
+            | Operand::RegDerefPreindexRegShift(rn, _, add, true) => {
+                Some((rn.number(), add.then_some(0)))
+            }
+            Operand::RegWBack(rn, true) => {
+                let words = 4 * list_of(insn).unwrap_or(0xffff).count_ones() as i32;
+                let down = matches!(
+                    insn.inst.opcode,
+                    Opcode::LDM(false, ..) | Opcode::STM(false, ..)
+                );
+                Some((rn.number(), Some(if down { -words } else { 0 })))
+            }
+            _ => None,
+        })?;
+        if base == SP || !insn.writes().contains(base) {
+            return None;
+        }
+        let held = self.regs[usize::from(base)];
+        let low = held.frame_low()?;
+        let low = moved.map_or(i32::MIN, |k| low.saturating_add(k.min(0)));
+        let rest = if held.may & !FRAME != 0 {
+            Holds::UNKNOWN
+        } else {
+            Holds::default()
+        };
+        Some((base, Holds::frame(low).meet(rest)))
+    }
+
     /// The registers after `insn`: constants as [`crate::waits::step_constants`] follows them, a
     /// mask register an `MRS` saves, a copy (`MOV rD, rM`) what its source held, a register an
     /// outlined helper does not write what it held before the call, a word loaded from the frame
@@ -469,10 +634,7 @@ impl Known {
                 self.step(image, i);
             }
             if tail_call {
-                if let Some(low) = (0..4u8).filter_map(|r| self.frame(r)).min() {
-                    self.escape(low);
-                }
-                self.clobber_escaped();
+                self.call_escapes();
                 for r in [0, 1, 2, 3, 12] {
                     self.regs[r] = Holds::UNKNOWN;
                 }
@@ -508,32 +670,8 @@ impl Known {
             _ => insn.writes(),
         };
         let before = self.regs;
-        // Whether it works a value from a frame address (SP or a register holding one, not as a
-        // memory base, not moving SP): what it writes may be one too.
-        let regs = insn.registers();
-        let sources = match regs.split_first() {
-            Some((&d, rest)) if !insn.is_store() && insn.writes().contains(d) => rest,
-            _ => &regs[..],
-        };
-        let from_frame = if insn.writes().contains(SP) {
-            None
-        } else {
-            sources
-                .iter()
-                .filter_map(|&r| self.frame(r))
-                .min()
-                .map(|low| {
-                    // A pointer worked from an object's address stays in the object (above its
-                    // address), but for an immediate added or taken away.
-                    let imm = insn.immediate().and_then(|v| i32::try_from(v).ok());
-                    match (insn.inst.opcode, imm) {
-                        (Opcode::ADD, Some(imm)) => low.saturating_add(imm),
-                        (Opcode::SUB, Some(imm)) => low.saturating_sub(imm),
-                        (Opcode::SUB | Opcode::RSB | Opcode::SBC, None) => i32::MIN,
-                        _ => low,
-                    }
-                })
-        };
+        let from_frame = self.worked_from_frame(insn);
+        let moved_base = self.written_back(insn);
         let loaded = self.step_frame(insn);
         for r in 0..16u8 {
             if !written.contains(r) {
@@ -549,9 +687,13 @@ impl Known {
                     .find(|&&(d, _)| d == r)
                     .map_or(Holds::UNKNOWN, |&(_, held)| held),
             };
-            let value = match from_frame {
-                Some(low) => value.meet(Holds::frame(low)),
-                None => value,
+            let value = match moved_base {
+                // A base written back: the address it held, moved.
+                Some((base, held)) if base == r => held,
+                _ => match from_frame {
+                    Some(low) => value.meet(Holds::frame(low)),
+                    None => value,
+                },
             };
             self.regs[i] = if insn.conditional {
                 before[i].meet(value)
@@ -565,7 +707,9 @@ impl Known {
 }
 
 /// What the registers may hold at the entry of each block of a function's graph: a forward
-/// data-flow pass to its fixed point, across blocks and the copies node splitting made.
+/// data-flow pass to its fixed point, across blocks and the copies node splitting made; a lowest
+/// frame offset that keeps going down at a block's entry (a frame address stepped down on every
+/// pass of a loop) is widened to any offset ([`Known::widen`]), so the pass ends.
 pub(super) struct Masks {
     entry: Vec<Known>,
 }
@@ -580,6 +724,7 @@ impl Masks {
         entry[0] = Known::entry();
         let mut work = vec![0usize];
         let mut queued = vec![false; n];
+        let mut lowered: BTreeMap<(usize, Place), u32> = BTreeMap::new();
         queued[0] = true;
         while let Some(x) = work.pop() {
             queued[x] = false;
@@ -589,9 +734,17 @@ impl Masks {
                 out.step(image, insn);
             }
             for e in &block.succs {
-                if entry[e.to].meet(&out) && !queued[e.to] {
-                    queued[e.to] = true;
-                    work.push(e.to);
+                let old = entry[e.to].clone();
+                if entry[e.to].meet(&out) {
+                    entry[e.to].widen(&old, |place| {
+                        let n = lowered.entry((e.to, place)).or_insert(0);
+                        *n += 1;
+                        *n
+                    });
+                    if !queued[e.to] {
+                        queued[e.to] = true;
+                        work.push(e.to);
+                    }
                 }
             }
         }

@@ -584,6 +584,8 @@ mod tests_activation;
 #[cfg(test)]
 mod tests_polled;
 #[cfg(test)]
+mod tests_spills;
+#[cfg(test)]
 mod tests_topics;
 #[cfg(test)]
 mod tests_values;

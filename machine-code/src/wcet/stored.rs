@@ -367,7 +367,7 @@ fn helper_reads(image: &Image, at: u64) -> u16 {
 /// they are only written (a load's, a load multiple's list, the first operand of a move or of a
 /// data-processing instruction of three operands or more). Conservative: a destination the
 /// instruction also reads, or one it is not known to only write, counts as read.
-fn reads(insn: &Insn) -> u16 {
+pub(super) fn reads(insn: &Insn) -> u16 {
     let ops = &insn.inst.operands;
     let count = ops
         .iter()
