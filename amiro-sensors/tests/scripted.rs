@@ -358,7 +358,8 @@ fn the_floor_as_scripts_samples_as_the_blocking_path_through_a_fault() {
     blocking.group_mut().mux_mut().bus_mut().set_nack(false);
     bus.bus.set_nack(false);
     bus.scripts.clear();
-    // The set-up is four steps, one sensor each; the fourth sample after the retry publishes.
+    // The set-up is four steps, one sensor each and alone in its release; the release after the
+    // fourth publishes.
     let (published, empty) = run_both(
         &mut blocking,
         &mut scripted,

@@ -240,7 +240,7 @@ impl<G: ScriptedSensors> Supervised<G> {
             Gate::SetUpStep => {
                 job.phase = Phase::SetUpStep;
                 let next = self.group_mut().begin_set_up_step(&mut job.stage, now_us);
-                self.after_step(job, topic, now_us, next)
+                self.after_step(job, now_us, next)
             }
             Gate::Sample => self.start_sample(job, topic, now_us),
         }
@@ -261,7 +261,7 @@ impl<G: ScriptedSensors> Supervised<G> {
                 let next = self
                     .group_mut()
                     .resume_set_up_step(&mut job.stage, now_us, result);
-                self.after_step(job, topic, now_us, next)
+                self.after_step(job, now_us, next)
             }
             Phase::Sample => {
                 let next = self
@@ -272,20 +272,18 @@ impl<G: ScriptedSensors> Supervised<G> {
         }
     }
 
+    /// A set-up step's scripts, then nothing: a release takes a step or a sample, never both (as
+    /// on the blocking path, [`Supervised::sample`]).
     fn after_step(
         &mut self,
         job: &mut Job<G::Stage>,
-        topic: Topic,
         now_us: u64,
         next: Next<InitStep>,
     ) -> Next<Samples> {
         carry(next, |step| {
-            if self.stepped(step, now_us) {
-                self.start_sample(job, topic, now_us)
-            } else {
-                job.phase = Phase::Idle;
-                Next::Done(Samples::new())
-            }
+            self.stepped(step, now_us);
+            job.phase = Phase::Idle;
+            Next::Done(Samples::new())
         })
     }
 

@@ -140,7 +140,7 @@ pub trait SensorGroup {
 
     /// One step of a re-initialisation at `now_us` (the retry of a missing group, inside its bus
     /// lock and inside a publisher's release): at most one device's set-up, so a release that
-    /// recovers a group costs its sample and one bounded step, never the whole group's set-up. A
+    /// recovers a group costs one bounded step (and no sample), never the whole group's set-up. A
     /// group with more steps to go returns [`InitStep::Pending`] and is called again at that
     /// time (`now_us` for the next release; later where a part needs a wait between steps, so no
     /// wait happens inside the lock). Default: [`init`] at once, for a group of one device.
@@ -1012,10 +1012,10 @@ pub const RETRY_MAX_US: u64 = 8_000_000;
 ///
 /// - At construction the group is initialised; if that fails it is *missing*.
 /// - A missing group answers nothing until its retry time; then it is set up again in steps
-///   ([`SensorGroup::init_step`]): one step per sample, at most one device's set-up (its
-///   transfers count against that sample), the group answering nothing until the last step is
-///   done — the sample that takes the last step is read as well. So a release costs its sample
-///   and at most one bounded step, never the whole group's set-up. A failed step doubles the
+///   ([`SensorGroup::init_step`]): one step per release, at most one device's set-up, the
+///   group answering nothing until the release after its last step, which samples it. A release
+///   takes a step or a sample, never both, so it costs the longer of the two, never the whole
+///   group's set-up nor a step and a sample together. A failed step doubles the
 ///   wait, 1 s → 2 → 4 → 8 s, stays at [`RETRY_MAX_US`], and the set-up starts again from its
 ///   first step at the next retry.
 /// - A ready group whose sample fails [`FAILURES_BEFORE_RETRY`] times in a row becomes missing
@@ -1046,10 +1046,11 @@ impl<G: SensorGroup> Supervised<G> {
         match self.gate(self.group.serves(topic), now_us) {
             Gate::Skip => return Samples::new(),
             Gate::SetUpStep => {
+                // A release takes a set-up step or a sample, never both: the group's first
+                // sample is the release after its last step.
                 let step = self.group.init_step(now_us);
-                if !self.stepped(step, now_us) {
-                    return Samples::new();
-                }
+                self.stepped(step, now_us);
+                return Samples::new();
             }
             Gate::Sample => {}
         }
@@ -1139,25 +1140,21 @@ impl<G> Supervised<G> {
         }
     }
 
-    /// A set-up step ended with `step`: whether the sample goes on (the last step done).
-    pub(crate) fn stepped(&mut self, step: InitStep, now_us: u64) -> bool {
+    /// A set-up step ended with `step`: the group ready after its last step (its next release
+    /// samples it), waiting for its next step, or missing again.
+    pub(crate) fn stepped(&mut self, step: InitStep, now_us: u64) {
         match step {
             InitStep::Done => {
                 self.ready = true;
                 self.consecutive_failures = 0;
-                true
             }
             InitStep::Pending { next_us } => {
                 // Not a fault: more devices to set up (the next at the next sample), or the
                 // group's parts are switching modes; the next step at `next_us` (the back-off is
                 // left as it is).
                 self.retry_at_us = next_us;
-                false
             }
-            InitStep::Failed(error) => {
-                self.missing(now_us, error);
-                false
-            }
+            InitStep::Failed(error) => self.missing(now_us, error),
         }
     }
 
