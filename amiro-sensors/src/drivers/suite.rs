@@ -527,26 +527,36 @@ pub struct ImuSensors<I2C, D> {
     reinit: ImuReinit,
 }
 
-/// Where a stepwise re-initialisation of the BNO055 stands ([`ImuSensors`]'s `init_step`).
+/// Where a stepwise re-initialisation of the BNO055 stands ([`ImuSensors`]'s `init_step`): the
+/// next of [`Bno055::init`]'s six steps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum ImuReinit {
-    /// No re-initialisation under way: the next step enters configuration mode.
+    /// No re-initialisation under way: the next step selects page 0 and checks the identities.
     Idle,
-    /// Configuration mode requested: configure once the part is there.
+    /// Identified: check the self-test and request configuration mode.
+    Identified,
+    /// Configuration mode requested: the power mode, the units and page 1 once the part is there.
     EnteringConfig,
+    /// On page 1: the sensors' configuration written and read back.
+    OnPage1,
+    /// Configured: page 0, the units read back, AMG mode requested.
+    Configured,
     /// AMG mode requested: check it once the part is there.
     EnteringAmg,
 }
 
 impl ImuReinit {
     /// The state after this state's step passed and the part's mode-switch time to wait before
-    /// it (ms), or `None` once the set-up is done.
+    /// it (ms; 0: the next release), or `None` once the set-up is done.
     const fn after_step(self) -> Option<(ImuReinit, u32)> {
         match self {
-            ImuReinit::Idle => Some((ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)),
-            ImuReinit::EnteringConfig => {
-                Some((ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS))
+            ImuReinit::Idle => Some((ImuReinit::Identified, 0)),
+            ImuReinit::Identified => {
+                Some((ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS))
             }
+            ImuReinit::EnteringConfig => Some((ImuReinit::OnPage1, 0)),
+            ImuReinit::OnPage1 => Some((ImuReinit::Configured, 0)),
+            ImuReinit::Configured => Some((ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS)),
             ImuReinit::EnteringAmg => None,
         }
     }
@@ -723,14 +733,18 @@ impl<I2C: I2c, D: DelayNs> SensorGroup for ImuSensors<I2C, D> {
             .map_err(i2c_error(Device::Imu))
     }
 
-    /// The re-initialisation without a busy wait: the three steps of [`Bno055::init`], the
-    /// part's two mode switches (19 ms and 7 ms) waited between calls, outside the bus lock.
+    /// The re-initialisation without a busy wait: the six steps of [`Bno055::init`], one a
+    /// release, the part's two mode switches (19 ms and 7 ms) waited between calls, outside the
+    /// bus lock.
     fn init_step(&mut self, now_us: u64) -> InitStep {
         self.last_field = None;
         let step = self.reinit;
         let result = match step {
-            ImuReinit::Idle => self.imu.init_enter_config(),
-            ImuReinit::EnteringConfig => self.imu.init_configure(),
+            ImuReinit::Idle => self.imu.init_identify(),
+            ImuReinit::Identified => self.imu.init_self_test_then_config(),
+            ImuReinit::EnteringConfig => self.imu.init_prepare_page_1(),
+            ImuReinit::OnPage1 => self.imu.init_write_page_1(),
+            ImuReinit::Configured => self.imu.init_start_amg(),
             ImuReinit::EnteringAmg => self.imu.init_check_running(),
         };
         match result {
