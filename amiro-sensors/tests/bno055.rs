@@ -31,9 +31,9 @@ fn unanswered_identity_reads(count: usize, len: usize) -> Vec<T> {
 
 fn init_script(config_readback: [u8; 4], units: u8, mode: u8) -> Vec<T> {
     vec![
+        T::write(A, vec![0x07, 0]),
         T::write_read(A, vec![0x00], IDS.to_vec()),
         T::write_read(A, vec![0x36], vec![0x0F]),
-        T::write(A, vec![0x07, 0]),
         T::write(A, vec![0x3D, 0x00]),
         T::write(A, vec![0x3E, 0x00]),
         T::write(A, vec![0x3B, 0x01]),
@@ -59,7 +59,10 @@ fn init_checks_identity_and_self_test_configures_page_1_and_starts_amg() {
 
 #[test]
 fn init_rejects_a_wrong_part() {
-    let mut i2c = I2cMock::new(&[T::write_read(A, vec![0x00], vec![0xA0, 0xFB, 0x32, 0x00])]);
+    let mut i2c = I2cMock::new(&[
+        T::write(A, vec![0x07, 0]),
+        T::write_read(A, vec![0x00], vec![0xA0, 0xFB, 0x32, 0x00]),
+    ]);
     assert_eq!(
         Bno055::new(i2c.clone()).init(&mut NoopDelay::new()),
         Err(Error::WrongIdentity {
@@ -73,6 +76,7 @@ fn init_rejects_a_wrong_part() {
 #[test]
 fn init_rejects_a_failed_self_test() {
     let mut i2c = I2cMock::new(&[
+        T::write(A, vec![0x07, 0]),
         T::write_read(A, vec![0x00], IDS.to_vec()),
         T::write_read(A, vec![0x36], vec![0x0B]),
     ]);
@@ -85,9 +89,10 @@ fn init_rejects_a_failed_self_test() {
 
 #[test]
 fn init_reports_a_setting_the_part_did_not_take() {
-    // The page is switched back before the check: the script ends there.
+    // The read-back is checked at once: the script ends there, the part left on page 1 (the
+    // next set-up's first step selects page 0 before it reads the identities).
     let script = init_script([0x0E, 0x0F, 0x38, 0x00], 0x01, 0x07);
-    let mut i2c = I2cMock::new(&script[..10]);
+    let mut i2c = I2cMock::new(&script[..9]);
     assert_eq!(
         Bno055::new(i2c.clone()).init(&mut NoopDelay::new()),
         Err(Error::ConfigMismatch {
@@ -110,8 +115,8 @@ fn init_reports_a_setting_the_part_did_not_take() {
 fn an_absent_part_is_a_bus_error() {
     type Attempt = fn(&mut Bno055<I2cMock>) -> Result<(), Error<ErrorKind>>;
     let attempts: [(Vec<T>, Attempt); 2] = [
-        // `init` stops at the first identity read.
-        (unanswered_identity_reads(1, 4), |imu| {
+        // `init` stops at its first transfer, page 0's selection.
+        (vec![T::write(A, vec![0x07, 0]).with_error(NACK)], |imu| {
             imu.init(&mut NoopDelay::new())
         }),
         // `wait_for_boot` is bounded and returns the last error.
@@ -400,19 +405,60 @@ fn a_dead_bno055_stops_its_topics_and_is_counted() {
     }
     assert!(!group.is_ready());
     assert_eq!(group.faults(), 3);
-    // It comes back: the retry after the back-off initialises it again, in three steps whose
-    // waits (19 ms into configuration mode, 7 ms into AMG mode) pass between the calls, outside
-    // the bus lock; no step counts as a fault.
+    // It comes back: the retry after the back-off initialises it again in six steps, one a
+    // release, whose waits (19 ms into configuration mode, 7 ms into AMG mode) pass between the
+    // calls, outside the bus lock; no step counts as a fault.
     group.group_mut().imu.bus_mut().set_nack(false);
+    // 1: page 0, the identities; 2: the self-test, configuration mode requested.
     assert!(group.sample(Topic::Gyroscope, 2_000_000).is_empty());
-    assert_eq!(group.retry_at_us(), 2_019_000);
+    assert_eq!(
+        group.retry_at_us(),
+        2_000_000,
+        "the next step at the next release"
+    );
+    assert!(group.sample(Topic::Gyroscope, 2_001_000).is_empty());
+    assert_eq!(group.retry_at_us(), 2_020_000);
     assert!(group.sample(Topic::Gyroscope, 2_010_000).is_empty());
-    assert!(group.sample(Topic::Gyroscope, 2_019_000).is_empty());
-    assert_eq!(group.retry_at_us(), 2_026_000);
+    // 3: the power mode, the units, page 1; 4: the configuration and its read-back; 5: page 0,
+    // the units read back, AMG mode requested.
+    for t in [2_020_000, 2_021_000, 2_022_000] {
+        assert!(group.sample(Topic::Gyroscope, t).is_empty());
+    }
+    assert_eq!(group.retry_at_us(), 2_029_000);
     assert!(!group.is_ready());
-    assert_eq!(group.sample(Topic::Gyroscope, 2_026_000).len(), 1);
+    // 6: AMG mode checked. The last step's release takes the step alone (a release is a step
+    // or a sample, never both); the group is ready and its next release samples it.
+    assert!(group.sample(Topic::Gyroscope, 2_029_000).is_empty());
     assert!(group.is_ready());
+    assert_eq!(group.sample(Topic::Gyroscope, 2_030_000).len(), 1);
     assert_eq!(group.faults(), 3);
+}
+
+/// Releases of `topic` every 10 ms from `from` until the group is ready: each answers nothing.
+/// Returns the steps taken (releases before a step's wait has passed take none) and the time of
+/// the last release.
+fn set_up_again<I2C, D>(
+    group: &mut Supervised<ImuSensors<I2C, D>>,
+    topic: Topic,
+    from: u64,
+) -> (u32, u64)
+where
+    ImuSensors<I2C, D>: SensorGroup,
+{
+    let mut steps = 0;
+    let mut now = from;
+    loop {
+        let due = group.retry_at_us() <= now;
+        assert!(
+            group.sample(topic, now).is_empty(),
+            "a step's release at {now}"
+        );
+        steps += u32::from(due);
+        if group.is_ready() {
+            return (steps, now);
+        }
+        now += 10_000;
+    }
 }
 
 #[test]
@@ -422,19 +468,20 @@ fn a_step_of_the_re_initialisation_that_fails_starts_the_back_off_again() {
     for t in 1..=3 {
         assert!(group.sample(Topic::Gyroscope, t * 10_000).is_empty());
     }
-    // Step 1 answers, then the part is gone again before step 2.
+    // Steps 1 and 2 answer, then the part is gone again before step 3.
     group.group_mut().imu.bus_mut().set_nack(false);
     assert!(group.sample(Topic::Gyroscope, 2_000_000).is_empty());
+    assert!(group.sample(Topic::Gyroscope, 2_010_000).is_empty());
     group.group_mut().imu.bus_mut().set_nack(true);
-    assert!(group.sample(Topic::Gyroscope, 2_019_000).is_empty());
+    assert!(group.sample(Topic::Gyroscope, 2_029_000).is_empty());
     assert_eq!(group.faults(), 4);
-    assert!(group.retry_at_us() > 2_019_000 + 1_000_000);
+    assert!(group.retry_at_us() > 2_029_000 + 1_000_000);
     // Back: the next retry starts at step 1.
     group.group_mut().imu.bus_mut().set_nack(false);
     let retry = group.retry_at_us();
-    assert!(group.sample(Topic::Gyroscope, retry).is_empty());
-    assert!(group.sample(Topic::Gyroscope, retry + 19_000).is_empty());
-    assert_eq!(group.sample(Topic::Gyroscope, retry + 26_000).len(), 1);
+    let (steps, done) = set_up_again(&mut group, Topic::Gyroscope, retry);
+    assert_eq!(steps, 6);
+    assert_eq!(group.sample(Topic::Gyroscope, done + 10_000).len(), 1);
 }
 
 #[test]
@@ -459,11 +506,11 @@ fn a_bno055_that_reset_is_noticed_on_its_next_sample_and_configured_again() {
             error: Error::ConfigMismatch { register: 0x3D, .. }
         })
     ));
-    // After the back-off the supervisor initialises it again (three steps, the mode switches
-    // waited between them) and it publishes 1 g.
-    assert!(group.sample(Topic::Accelerometer, 2_000_000).is_empty());
-    assert!(group.sample(Topic::Accelerometer, 2_019_000).is_empty());
-    let samples = group.sample(Topic::Accelerometer, 2_026_000);
+    // After the back-off the supervisor initialises it again (six steps, the mode switches
+    // waited between them) and its next release publishes 1 g.
+    let (steps, done) = set_up_again(&mut group, Topic::Accelerometer, 2_000_000);
+    assert_eq!(steps, 6);
+    let samples = group.sample(Topic::Accelerometer, done + 10_000);
     assert!(
         matches!(samples[..], [SensorData::Accelerometer([_, _, z])] if (998..=1002).contains(&z))
     );

@@ -259,9 +259,9 @@ fn a_dead_group_stops_publishing_is_counted_and_retried_with_back_off() {
             ..
         })
     ));
-    // Repaired: the next attempt brings it back in four steps, one or two accesses each (each
-    // part's configuration written, then read back; the last with that sample's reading), and it
-    // publishes again.
+    // Repaired: the next attempt brings it back in six steps, one access each (each part's
+    // identity checked, its configuration written, then read back), each release a step alone,
+    // and the release after the last publishes again.
     group.group_mut().gyroscope.bus_mut().set_stuck_miso(None);
     let back = group.retry_at_us();
     for step in 0..u64::from(INERTIAL_SET_UP_STEPS) - 1 {
@@ -271,8 +271,9 @@ fn a_dead_group_stops_publishing_is_counted_and_retried_with_back_off() {
         assert_eq!(group.retry_at_us(), now, "the next step at the next sample");
     }
     let last = back + (u64::from(INERTIAL_SET_UP_STEPS) - 1) * 2_000;
-    assert_eq!(group.sample(Topic::Gyroscope, last).len(), 1);
+    assert!(group.sample(Topic::Gyroscope, last).is_empty());
     assert!(group.is_ready());
+    assert_eq!(group.sample(Topic::Gyroscope, last + 2_000).len(), 1);
     // Not served topics are no fault.
     assert!(group.sample(Topic::PowerStatus, back).is_empty());
     assert_eq!(group.faults(), 8);
@@ -292,9 +293,14 @@ fn a_compass_that_nacks_from_now_on_is_counted_and_taken_out() {
     assert_eq!(group.faults(), 3);
     group.group_mut().magnetometer.bus_mut().set_nack(false);
     assert!(group.sample(Topic::MagnetometerZ, 1_000_000).is_empty());
+    // The retry's release sets the part up (one step) and answers nothing; the next samples it.
+    assert!(group
+        .sample(Topic::MagnetometerZ, 3_000 + RETRY_FIRST_US)
+        .is_empty());
+    assert!(group.is_ready());
     assert_eq!(
         group
-            .sample(Topic::MagnetometerZ, 3_000 + RETRY_FIRST_US)
+            .sample(Topic::MagnetometerZ, 4_000 + RETRY_FIRST_US)
             .len(),
         1
     );

@@ -358,7 +358,8 @@ fn the_floor_as_scripts_samples_as_the_blocking_path_through_a_fault() {
     blocking.group_mut().mux_mut().bus_mut().set_nack(false);
     bus.bus.set_nack(false);
     bus.scripts.clear();
-    // The set-up is four steps, one sensor each; the fourth sample after the retry publishes.
+    // The set-up is four steps, one sensor each and alone in its release; the release after the
+    // fourth publishes.
     let (published, empty) = run_both(
         &mut blocking,
         &mut scripted,
@@ -485,7 +486,7 @@ const IMU_TOPICS: [Topic; 5] = [
 ];
 
 /// DiWheelDrive 1-2's BNO055: 500 samples of its five topics, the part gone for 12 s (absent:
-/// no acknowledge), then back: the set-up's three steps with the mode switches' 19 ms and 7 ms
+/// no acknowledge), then back: the set-up's six steps with the mode switches' 19 ms and 7 ms
 /// between them, as the blocking path waits them.
 #[test]
 fn the_bno055_as_scripts_samples_as_the_blocking_path_through_a_fault() {
@@ -552,35 +553,41 @@ fn the_bno055_scripts_are_the_datasheet_transactions() {
     let mut waits = bus.clone();
     let mut scripted = Supervised::boot(ImuSensors::scripted(NoDelay), &mut bus, &mut waits);
     assert!(scripted.is_ready());
-    // The boot set-up (BNO055 datasheet, register map page 0 and 1): the identities (0x00, four
-    // bytes) and ST_RESULT (0x36) read; page 0 (PAGE_ID 0x07) and configuration mode (OPR_MODE
-    // 0x3D = 0x00) written; then the part's 19 ms into configuration mode; power mode
-    // (PWR_MODE 0x3E), units (UNIT_SEL 0x3B = 0x01), page 1, the configuration burst from
-    // ACC_CONFIG (0x08: 0x0E, 0x0F, 0x22, 0x00) and its read-back, page 0 and the units'
-    // read-back; AMG mode (OPR_MODE = 0x07); 7 ms into it; OPR_MODE read.
+    // The boot set-up (BNO055 datasheet, register map page 0 and 1), six steps: page 0
+    // (PAGE_ID 0x07) written and the identities (0x00, four bytes) read; ST_RESULT (0x36) read,
+    // then configuration mode (OPR_MODE 0x3D = 0x00) written; the part's 19 ms into
+    // configuration mode; power mode (PWR_MODE 0x3E), units (UNIT_SEL 0x3B = 0x01) and page 1
+    // written; the configuration burst from ACC_CONFIG (0x08: 0x0E, 0x0F, 0x22, 0x00) and its
+    // read-back; page 0 and the units' read-back, then AMG mode (OPR_MODE = 0x07); 7 ms into it;
+    // OPR_MODE read.
     // SCL periods: a two-byte write 29; a register read of n bytes 30 + 9n; the burst 56.
     assert_eq!(
         bus.events(),
         [
-            Event::Script(script(&[(0x28, &[0x00], 4), (0x28, &[0x36], 1)])),
-            Event::Script(script(&[(0x28, &[0x07, 0], 0), (0x28, &[0x3D, 0x00], 0)])),
+            Event::Script(script(&[(0x28, &[0x07, 0], 0), (0x28, &[0x00], 4)])),
+            Event::Script(script(&[(0x28, &[0x36], 1)])),
+            Event::Script(script(&[(0x28, &[0x3D, 0x00], 0)])),
             Event::Wait(19_000),
             Event::Script(script(&[
                 (0x28, &[0x3E, 0x00], 0),
                 (0x28, &[0x3B, 0x01], 0),
                 (0x28, &[0x07, 1], 0),
+            ])),
+            Event::Script(script(&[
                 (0x28, &[0x08, 0x0E, 0x0F, 0x22, 0x00], 0),
                 (0x28, &[0x08], 4),
-                (0x28, &[0x07, 0], 0),
-                (0x28, &[0x3B], 1),
             ])),
+            Event::Script(script(&[(0x28, &[0x07, 0], 0), (0x28, &[0x3B], 1)])),
             Event::Script(script(&[(0x28, &[0x3D, 0x07], 0)])),
             Event::Wait(7_000),
             Event::Script(script(&[(0x28, &[0x3D], 1)])),
         ]
     );
     let scripts: Vec<Script> = bus.scripts();
-    assert_eq!(periods(&scripts), [105, 58, 4 * 29 + 56 + 66 + 39, 29, 39]);
+    assert_eq!(
+        periods(&scripts),
+        [29 + 66, 39, 29, 3 * 29, 56 + 66, 29 + 39, 29, 39]
+    );
     let mut bus = Recorder::new(SimImuBus::new());
     bus.scripts.clear();
     bus.bus_time_ns = 0;

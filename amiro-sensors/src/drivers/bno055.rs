@@ -210,45 +210,71 @@ impl<I2C: I2c> Bno055<I2C> {
     ///
     /// Busy-waits the datasheet's mode switching times on `delay` (19 ms into configuration mode,
     /// 7 ms out of it): the boot's path. A caller that must not wait (a re-initialisation inside a
-    /// bus lock) runs the three steps itself — [`init_enter_config`], then after
-    /// [`OPERATING_TO_CONFIG_MS`] [`init_configure`], then after [`CONFIG_TO_OPERATING_MS`]
-    /// [`init_check_running`] — and waits between them outside.
+    /// bus lock) runs the six steps itself, one a release, and waits between them outside:
+    /// [`init_identify`], [`init_self_test_then_config`], then after [`OPERATING_TO_CONFIG_MS`]
+    /// [`init_prepare_page_1`], [`init_write_page_1`], [`init_start_amg`], then after
+    /// [`CONFIG_TO_OPERATING_MS`] [`init_check_running`]. Each step is two or three short
+    /// transfers, no more bus flags than a sample's two register reads ([`read_verified`]), so a
+    /// release that takes a step is no longer than one that samples.
     ///
-    /// [`init_enter_config`]: Self::init_enter_config
-    /// [`init_configure`]: Self::init_configure
+    /// [`init_identify`]: Self::init_identify
+    /// [`init_self_test_then_config`]: Self::init_self_test_then_config
+    /// [`init_prepare_page_1`]: Self::init_prepare_page_1
+    /// [`init_write_page_1`]: Self::init_write_page_1
+    /// [`init_start_amg`]: Self::init_start_amg
     /// [`init_check_running`]: Self::init_check_running
+    /// [`read_verified`]: Self::read_verified
     pub fn init(&mut self, delay: &mut impl DelayNs) -> Result<(), Error<I2C::Error>> {
-        self.init_enter_config()?;
+        self.init_identify()?;
+        self.init_self_test_then_config()?;
         delay.delay_ms(OPERATING_TO_CONFIG_MS);
-        self.init_configure()?;
+        self.init_prepare_page_1()?;
+        self.init_write_page_1()?;
+        self.init_start_amg()?;
         delay.delay_ms(CONFIG_TO_OPERATING_MS);
         self.init_check_running()
     }
 
-    /// Initialisation, step 1: identities and self-test checked, page 0, configuration mode
-    /// requested (the part takes [`OPERATING_TO_CONFIG_MS`] to get there).
-    pub fn init_enter_config(&mut self) -> Result<(), Error<I2C::Error>> {
-        self.check_identity()?;
-        self.check_self_test()?;
-        ops::enter_config(&mut Blocking(&mut self.i2c))?;
+    /// Initialisation, step 1: register page 0 (where a set-up that failed on page 1 left the
+    /// part), then the four identities checked.
+    pub fn init_identify(&mut self) -> Result<(), Error<I2C::Error>> {
+        identity(ops::identity_on_page_0(&mut Blocking(&mut self.i2c))?)
+    }
+
+    /// Initialisation, step 2: the power-on self-test checked, then configuration mode requested
+    /// (the part takes [`OPERATING_TO_CONFIG_MS`] to get there).
+    pub fn init_self_test_then_config(&mut self) -> Result<(), Error<I2C::Error>> {
+        let bus = &mut Blocking(&mut self.i2c);
+        let [result] = ops::self_test_result(bus)?;
+        self_test(result)?;
+        ops::enter_config(bus)?;
         Ok(())
     }
 
-    /// Initialisation, step 2 (in configuration mode): power mode, units and the four sensor
-    /// configurations written and read back, AMG mode requested (the part takes
+    /// Initialisation, step 3 (in configuration mode): normal power mode, the units, register
+    /// page 1.
+    pub fn init_prepare_page_1(&mut self) -> Result<(), Error<I2C::Error>> {
+        ops::prepare_page_1(&mut Blocking(&mut self.i2c))?;
+        Ok(())
+    }
+
+    /// Initialisation, step 4 (on page 1): the four sensor configurations written in one burst
+    /// and read back.
+    pub fn init_write_page_1(&mut self) -> Result<(), Error<I2C::Error>> {
+        check_configuration(ops::write_page_1(&mut Blocking(&mut self.i2c))?)
+    }
+
+    /// Initialisation, step 5: page 0, the units read back, AMG mode requested (the part takes
     /// [`CONFIG_TO_OPERATING_MS`] to get there).
-    pub fn init_configure(&mut self) -> Result<(), Error<I2C::Error>> {
+    pub fn init_start_amg(&mut self) -> Result<(), Error<I2C::Error>> {
         let bus = &mut Blocking(&mut self.i2c);
-        // The configuration is checked before UNIT_SEL is read: a part that did not take it
-        // ends the step there. The scripted step reads both in one script (`ops::configure`).
-        check_configuration(ops::configure_page_1(bus)?)?;
-        let [units] = ops::units(bus)?;
+        let [units] = ops::page_0_units(bus)?;
         check_units(units)?;
         ops::start_amg(bus)?;
         Ok(())
     }
 
-    /// Initialisation, step 3: the part runs AMG mode.
+    /// Initialisation, step 6: the part runs AMG mode.
     pub fn init_check_running(&mut self) -> Result<(), Error<I2C::Error>> {
         let mut opr = [0u8; 1];
         self.i2c.write_read(ADDRESS, &[reg::OPR_MODE], &mut opr)?;
@@ -418,59 +444,57 @@ pub mod ops {
     use super::{mode, reg, ADDRESS, CONFIGURATION, UNIT_SEL_AMIRO};
     use crate::script::{At, BuildError, Script, Transfers};
 
-    /// Set-up step 1's checks: the four identities (write 0x00, read 4, [`super::identity`])
-    /// and ST_RESULT (write 0x36, read 1, [`super::self_test`]).
-    pub fn checks<T: Transfers>(bus: &mut T) -> Result<(T::Read<4>, T::Read<1>), T::Error> {
-        let identity = bus.fetch::<4>(ADDRESS, &[reg::CHIP_ID])?;
-        let self_test = bus.fetch::<1>(ADDRESS, &[reg::ST_RESULT])?;
-        Ok((identity, self_test))
+    /// Set-up step 1: page 0, then the four identities (write 0x00, read 4,
+    /// [`super::identity`]).
+    pub fn identity_on_page_0<T: Transfers>(bus: &mut T) -> Result<T::Read<4>, T::Error> {
+        bus.send(ADDRESS, &[reg::PAGE_ID, 0])?;
+        bus.fetch::<4>(ADDRESS, &[reg::CHIP_ID])
     }
 
-    /// Set-up step 1's writes: page 0, configuration mode (the part then takes
+    /// Set-up step 2's read: ST_RESULT (write 0x36, read 1, [`super::self_test`]).
+    pub fn self_test_result<T: Transfers>(bus: &mut T) -> Result<T::Read<1>, T::Error> {
+        bus.fetch::<1>(ADDRESS, &[reg::ST_RESULT])
+    }
+
+    /// Set-up step 2's end once the self-test passed: configuration mode (the part then takes
     /// [`super::OPERATING_TO_CONFIG_MS`]).
     #[inline(always)]
     pub fn enter_config<T: Transfers>(bus: &mut T) -> Result<(), T::Error> {
-        bus.send(ADDRESS, &[reg::PAGE_ID, 0])?;
         bus.send(ADDRESS, &[reg::OPR_MODE, mode::CONFIG])
     }
 
-    /// Set-up step 2 up to its checks: [`configure_page_1`], then [`units`] (the scripted step's
-    /// one script; the blocking one checks the first read before it makes the second).
-    pub fn configure<T: Transfers>(bus: &mut T) -> Result<(T::Read<4>, T::Read<1>), T::Error> {
-        let readback = configure_page_1(bus)?;
-        let units = units(bus)?;
-        Ok((readback, units))
-    }
-
-    /// Power mode, units, page 1, the configuration burst and its read-back
-    /// ([`super::check_configuration`]), page 0.
+    /// Set-up step 3: normal power mode, the units, page 1.
     #[inline(always)]
-    pub fn configure_page_1<T: Transfers>(bus: &mut T) -> Result<T::Read<4>, T::Error> {
-        let [a, m, g0, g1] = CONFIGURATION;
+    pub fn prepare_page_1<T: Transfers>(bus: &mut T) -> Result<(), T::Error> {
         bus.send(ADDRESS, &[reg::PWR_MODE, 0x00])?;
         bus.send(ADDRESS, &[reg::UNIT_SEL, UNIT_SEL_AMIRO])?;
-        // Page 1: the four sensor configuration registers in one burst, read back in one.
-        bus.send(ADDRESS, &[reg::PAGE_ID, 1])?;
-        bus.send(ADDRESS, &[reg::ACC_CONFIG, a, m, g0, g1])?;
-        let readback = bus.fetch::<4>(ADDRESS, &[reg::ACC_CONFIG])?;
-        bus.send(ADDRESS, &[reg::PAGE_ID, 0])?;
-        Ok(readback)
+        bus.send(ADDRESS, &[reg::PAGE_ID, 1])
     }
 
-    /// UNIT_SEL's read-back ([`super::check_units`]).
+    /// Set-up step 4 (on page 1): the four sensor configuration registers in one burst, read
+    /// back in one ([`super::check_configuration`]).
     #[inline(always)]
-    pub fn units<T: Transfers>(bus: &mut T) -> Result<T::Read<1>, T::Error> {
+    pub fn write_page_1<T: Transfers>(bus: &mut T) -> Result<T::Read<4>, T::Error> {
+        let [a, m, g0, g1] = CONFIGURATION;
+        bus.send(ADDRESS, &[reg::ACC_CONFIG, a, m, g0, g1])?;
+        bus.fetch::<4>(ADDRESS, &[reg::ACC_CONFIG])
+    }
+
+    /// Set-up step 5's first transfers: page 0, UNIT_SEL's read-back ([`super::check_units`]).
+    #[inline(always)]
+    pub fn page_0_units<T: Transfers>(bus: &mut T) -> Result<T::Read<1>, T::Error> {
+        bus.send(ADDRESS, &[reg::PAGE_ID, 0])?;
         bus.fetch::<1>(ADDRESS, &[reg::UNIT_SEL])
     }
 
-    /// Set-up step 2's end once its checks passed: AMG mode (the part then takes
+    /// Set-up step 5's end once its check passed: AMG mode (the part then takes
     /// [`super::CONFIG_TO_OPERATING_MS`]).
     #[inline(always)]
     pub fn start_amg<T: Transfers>(bus: &mut T) -> Result<(), T::Error> {
         bus.send(ADDRESS, &[reg::OPR_MODE, mode::AMG])
     }
 
-    /// OPR_MODE: write 0x3D, read 1 (set-up step 3, [`super::check_amg_started`]; beside a
+    /// OPR_MODE: write 0x3D, read 1 (set-up step 6, [`super::check_amg_started`]; beside a
     /// sample, [`super::still_running`]).
     pub fn operating_mode(script: &mut Script) -> Result<At<1>, BuildError> {
         script.fetch::<1>(ADDRESS, &[reg::OPR_MODE])

@@ -240,7 +240,7 @@ impl<G: ScriptedSensors> Supervised<G> {
             Gate::SetUpStep => {
                 job.phase = Phase::SetUpStep;
                 let next = self.group_mut().begin_set_up_step(&mut job.stage, now_us);
-                self.after_step(job, topic, now_us, next)
+                self.after_step(job, now_us, next)
             }
             Gate::Sample => self.start_sample(job, topic, now_us),
         }
@@ -261,7 +261,7 @@ impl<G: ScriptedSensors> Supervised<G> {
                 let next = self
                     .group_mut()
                     .resume_set_up_step(&mut job.stage, now_us, result);
-                self.after_step(job, topic, now_us, next)
+                self.after_step(job, now_us, next)
             }
             Phase::Sample => {
                 let next = self
@@ -272,20 +272,18 @@ impl<G: ScriptedSensors> Supervised<G> {
         }
     }
 
+    /// A set-up step's scripts, then nothing: a release takes a step or a sample, never both (as
+    /// on the blocking path, [`Supervised::sample`]).
     fn after_step(
         &mut self,
         job: &mut Job<G::Stage>,
-        topic: Topic,
         now_us: u64,
         next: Next<InitStep>,
     ) -> Next<Samples> {
         carry(next, |step| {
-            if self.stepped(step, now_us) {
-                self.start_sample(job, topic, now_us)
-            } else {
-                job.phase = Phase::Idle;
-                Next::Done(Samples::new())
-            }
+            self.stepped(step, now_us);
+            job.phase = Phase::Idle;
+            Next::Done(Samples::new())
         })
     }
 
@@ -1149,25 +1147,33 @@ pub enum ImuStage {
     /// Not begun.
     #[default]
     Begun,
-    /// Set-up step 1: the identities and the self-test are out.
-    Checks {
+    /// Set-up step 1: page 0 and the identities are out.
+    Identity {
         /// Where the four identity bytes land.
         identity: At<4>,
+    },
+    /// Set-up step 2: the self-test's result is out.
+    SelfTest {
         /// Where ST_RESULT lands.
         self_test: At<1>,
     },
-    /// Set-up step 1: page 0 and configuration mode are out.
+    /// Set-up step 2: configuration mode is out.
     EnterConfig,
-    /// Set-up step 2: the configuration and its read-backs are out.
-    Configure {
+    /// Set-up step 3: the power mode, the units and page 1 are out.
+    PreparePage1,
+    /// Set-up step 4: the configuration and its read-back are out.
+    WritePage1 {
         /// Where the page-1 configuration's read-back lands.
         readback: At<4>,
+    },
+    /// Set-up step 5: page 0 and UNIT_SEL's read-back are out.
+    Units {
         /// Where UNIT_SEL's read-back lands.
         units: At<1>,
     },
-    /// Set-up step 2: AMG mode is out.
+    /// Set-up step 5: AMG mode is out.
     StartAmg,
-    /// Set-up step 3: OPR_MODE is out.
+    /// Set-up step 6: OPR_MODE is out.
     CheckAmg {
         /// Where OPR_MODE lands.
         opr: At<1>,
@@ -1209,10 +1215,10 @@ impl<D> ImuSensors<Scripts, D> {
 
 impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
     type Stage = ImuStage;
-    /// Set-up step 1's or step 2's two scripts (a step that ends pending takes no sample), or
-    /// step 3's one and the sample's.
+    /// Set-up step 2's or step 5's two scripts (a release takes a step or a sample, never both;
+    /// every other step and a sample are one script each).
     const MAX_SCRIPTS: usize = 2;
-    const SET_UP_STEPS: usize = 3;
+    const SET_UP_STEPS: usize = 6;
 
     fn topics(&self) -> &'static [Topic] {
         DIWHEELDRIVE_TOPICS.get(..5).unwrap_or(&[])
@@ -1226,16 +1232,28 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
         match self.begin_set_up_step() {
             ImuReinit::Idle => self.next_script(
                 stage,
-                |(identity, self_test)| ImuStage::Checks {
-                    identity,
-                    self_test,
-                },
-                bno055::ops::checks,
+                |identity| ImuStage::Identity { identity },
+                bno055::ops::identity_on_page_0,
+            ),
+            ImuReinit::Identified => self.next_script(
+                stage,
+                |self_test| ImuStage::SelfTest { self_test },
+                bno055::ops::self_test_result,
             ),
             ImuReinit::EnteringConfig => self.next_script(
                 stage,
-                |(readback, units)| ImuStage::Configure { readback, units },
-                bno055::ops::configure,
+                |()| ImuStage::PreparePage1,
+                bno055::ops::prepare_page_1,
+            ),
+            ImuReinit::OnPage1 => self.next_script(
+                stage,
+                |readback| ImuStage::WritePage1 { readback },
+                bno055::ops::write_page_1,
+            ),
+            ImuReinit::Configured => self.next_script(
+                stage,
+                |units| ImuStage::Units { units },
+                bno055::ops::page_0_units,
             ),
             ImuReinit::EnteringAmg => self.next_script(
                 stage,
@@ -1252,40 +1270,42 @@ impl<D> ScriptedSensors for ImuSensors<Scripts, D> {
         result: &ScriptResult,
     ) -> Next<InitStep> {
         let checked = readings(result).and_then(|r| match *stage {
-            ImuStage::Checks {
-                identity,
-                self_test,
-            } => {
-                bytes(r, identity).and_then(bno055::identity)?;
+            ImuStage::Identity { identity } => bytes(r, identity).and_then(bno055::identity),
+            ImuStage::SelfTest { self_test } => {
                 bytes(r, self_test).and_then(|[st]| bno055::self_test(st))
             }
-            ImuStage::Configure { readback, units } => {
-                bytes(r, readback).and_then(bno055::check_configuration)?;
+            ImuStage::WritePage1 { readback } => {
+                bytes(r, readback).and_then(bno055::check_configuration)
+            }
+            ImuStage::Units { units } => {
                 bytes(r, units).and_then(|[units]| bno055::check_units(units))
             }
             ImuStage::CheckAmg { opr } => {
                 bytes(r, opr).and_then(|[opr]| bno055::check_amg_started(opr))
             }
-            ImuStage::EnterConfig | ImuStage::StartAmg => Ok(()),
+            ImuStage::EnterConfig | ImuStage::PreparePage1 | ImuStage::StartAmg => Ok(()),
             ImuStage::Begun | ImuStage::Sample { .. } => Err(Error::Bus(ErrorKind::Other)),
         });
         if let Err(error) = checked {
             return Next::Done(self.set_up_step_failed(error));
         }
-        // The step whose last script this was (the others go on with their next script).
+        // The step whose last script this was (steps 2 and 5 go on with their second).
         let passed = match *stage {
-            ImuStage::Checks { .. } => {
+            ImuStage::Identity { .. } => ImuReinit::Idle,
+            ImuStage::SelfTest { .. } => {
                 return self.next_script(
                     stage,
                     |()| ImuStage::EnterConfig,
                     bno055::ops::enter_config,
                 )
             }
-            ImuStage::Configure { .. } => {
+            ImuStage::EnterConfig => ImuReinit::Identified,
+            ImuStage::PreparePage1 => ImuReinit::EnteringConfig,
+            ImuStage::WritePage1 { .. } => ImuReinit::OnPage1,
+            ImuStage::Units { .. } => {
                 return self.next_script(stage, |()| ImuStage::StartAmg, bno055::ops::start_amg)
             }
-            ImuStage::EnterConfig => ImuReinit::Idle,
-            ImuStage::StartAmg => ImuReinit::EnteringConfig,
+            ImuStage::StartAmg => ImuReinit::Configured,
             _ => ImuReinit::EnteringAmg,
         };
         Next::Done(self.set_up_step_passed(passed, now_us))

@@ -140,7 +140,7 @@ pub trait SensorGroup {
 
     /// One step of a re-initialisation at `now_us` (the retry of a missing group, inside its bus
     /// lock and inside a publisher's release): at most one device's set-up, so a release that
-    /// recovers a group costs its sample and one bounded step, never the whole group's set-up. A
+    /// recovers a group costs one bounded step (and no sample), never the whole group's set-up. A
     /// group with more steps to go returns [`InitStep::Pending`] and is called again at that
     /// time (`now_us` for the next release; later where a part needs a wait between steps, so no
     /// wait happens inside the lock). Default: [`init`] at once, for a group of one device.
@@ -527,26 +527,36 @@ pub struct ImuSensors<I2C, D> {
     reinit: ImuReinit,
 }
 
-/// Where a stepwise re-initialisation of the BNO055 stands ([`ImuSensors`]'s `init_step`).
+/// Where a stepwise re-initialisation of the BNO055 stands ([`ImuSensors`]'s `init_step`): the
+/// next of [`Bno055::init`]'s six steps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum ImuReinit {
-    /// No re-initialisation under way: the next step enters configuration mode.
+    /// No re-initialisation under way: the next step selects page 0 and checks the identities.
     Idle,
-    /// Configuration mode requested: configure once the part is there.
+    /// Identified: check the self-test and request configuration mode.
+    Identified,
+    /// Configuration mode requested: the power mode, the units and page 1 once the part is there.
     EnteringConfig,
+    /// On page 1: the sensors' configuration written and read back.
+    OnPage1,
+    /// Configured: page 0, the units read back, AMG mode requested.
+    Configured,
     /// AMG mode requested: check it once the part is there.
     EnteringAmg,
 }
 
 impl ImuReinit {
     /// The state after this state's step passed and the part's mode-switch time to wait before
-    /// it (ms), or `None` once the set-up is done.
+    /// it (ms; 0: the next release), or `None` once the set-up is done.
     const fn after_step(self) -> Option<(ImuReinit, u32)> {
         match self {
-            ImuReinit::Idle => Some((ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS)),
-            ImuReinit::EnteringConfig => {
-                Some((ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS))
+            ImuReinit::Idle => Some((ImuReinit::Identified, 0)),
+            ImuReinit::Identified => {
+                Some((ImuReinit::EnteringConfig, bno055::OPERATING_TO_CONFIG_MS))
             }
+            ImuReinit::EnteringConfig => Some((ImuReinit::OnPage1, 0)),
+            ImuReinit::OnPage1 => Some((ImuReinit::Configured, 0)),
+            ImuReinit::Configured => Some((ImuReinit::EnteringAmg, bno055::CONFIG_TO_OPERATING_MS)),
             ImuReinit::EnteringAmg => None,
         }
     }
@@ -723,14 +733,18 @@ impl<I2C: I2c, D: DelayNs> SensorGroup for ImuSensors<I2C, D> {
             .map_err(i2c_error(Device::Imu))
     }
 
-    /// The re-initialisation without a busy wait: the three steps of [`Bno055::init`], the
-    /// part's two mode switches (19 ms and 7 ms) waited between calls, outside the bus lock.
+    /// The re-initialisation without a busy wait: the six steps of [`Bno055::init`], one a
+    /// release, the part's two mode switches (19 ms and 7 ms) waited between calls, outside the
+    /// bus lock.
     fn init_step(&mut self, now_us: u64) -> InitStep {
         self.last_field = None;
         let step = self.reinit;
         let result = match step {
-            ImuReinit::Idle => self.imu.init_enter_config(),
-            ImuReinit::EnteringConfig => self.imu.init_configure(),
+            ImuReinit::Idle => self.imu.init_identify(),
+            ImuReinit::Identified => self.imu.init_self_test_then_config(),
+            ImuReinit::EnteringConfig => self.imu.init_prepare_page_1(),
+            ImuReinit::OnPage1 => self.imu.init_write_page_1(),
+            ImuReinit::Configured => self.imu.init_start_amg(),
             ImuReinit::EnteringAmg => self.imu.init_check_running(),
         };
         match result {
@@ -1012,10 +1026,10 @@ pub const RETRY_MAX_US: u64 = 8_000_000;
 ///
 /// - At construction the group is initialised; if that fails it is *missing*.
 /// - A missing group answers nothing until its retry time; then it is set up again in steps
-///   ([`SensorGroup::init_step`]): one step per sample, at most one device's set-up (its
-///   transfers count against that sample), the group answering nothing until the last step is
-///   done — the sample that takes the last step is read as well. So a release costs its sample
-///   and at most one bounded step, never the whole group's set-up. A failed step doubles the
+///   ([`SensorGroup::init_step`]): one step per release, at most one device's set-up, the
+///   group answering nothing until the release after its last step, which samples it. A release
+///   takes a step or a sample, never both, so it costs the longer of the two, never the whole
+///   group's set-up nor a step and a sample together. A failed step doubles the
 ///   wait, 1 s → 2 → 4 → 8 s, stays at [`RETRY_MAX_US`], and the set-up starts again from its
 ///   first step at the next retry.
 /// - A ready group whose sample fails [`FAILURES_BEFORE_RETRY`] times in a row becomes missing
@@ -1046,10 +1060,11 @@ impl<G: SensorGroup> Supervised<G> {
         match self.gate(self.group.serves(topic), now_us) {
             Gate::Skip => return Samples::new(),
             Gate::SetUpStep => {
+                // A release takes a set-up step or a sample, never both: the group's first
+                // sample is the release after its last step.
                 let step = self.group.init_step(now_us);
-                if !self.stepped(step, now_us) {
-                    return Samples::new();
-                }
+                self.stepped(step, now_us);
+                return Samples::new();
             }
             Gate::Sample => {}
         }
@@ -1139,25 +1154,21 @@ impl<G> Supervised<G> {
         }
     }
 
-    /// A set-up step ended with `step`: whether the sample goes on (the last step done).
-    pub(crate) fn stepped(&mut self, step: InitStep, now_us: u64) -> bool {
+    /// A set-up step ended with `step`: the group ready after its last step (its next release
+    /// samples it), waiting for its next step, or missing again.
+    pub(crate) fn stepped(&mut self, step: InitStep, now_us: u64) {
         match step {
             InitStep::Done => {
                 self.ready = true;
                 self.consecutive_failures = 0;
-                true
             }
             InitStep::Pending { next_us } => {
                 // Not a fault: more devices to set up (the next at the next sample), or the
                 // group's parts are switching modes; the next step at `next_us` (the back-off is
                 // left as it is).
                 self.retry_at_us = next_us;
-                false
             }
-            InitStep::Failed(error) => {
-                self.missing(now_us, error);
-                false
-            }
+            InitStep::Failed(error) => self.missing(now_us, error),
         }
     }
 
