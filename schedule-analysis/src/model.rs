@@ -46,7 +46,8 @@ pub struct BoardModel {
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub idle_critical_sections_us: BTreeMap<String, f64>,
     /// The task that moves queued frames into the CAN controller; its response time is added to the queuing
-    /// jitter of every message sent from this board.
+    /// jitter of every message sent from this board. It has no deadline of its own (`deadline_us` is refused for
+    /// it): the analysis requires only that it is bounded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub can_tx_task: Option<String>,
     /// Static resource ceilings (RTIC computes them from every task that *may* lock a resource, including tasks
@@ -583,6 +584,18 @@ fn validate_board(board: &BoardModel, path: &str) -> Result<BoardSystem, ModelEr
             )
         })?),
     };
+    // The transmit task has no deadline of its own (its response is every message's queuing jitter; only its
+    // bound is checked): a deadline given for it would be read as checked and is refused.
+    if let Some(i) = can_tx_task {
+        if board.tasks.get(i).is_some_and(|t| t.deadline_us.is_some()) {
+            return Err(error(
+                format!("{path}.tasks[{i}].deadline_us"),
+                "the transmit task (`can_tx_task`) has no deadline of its own: its response is every message's \
+                 queuing jitter, and only its bound is checked"
+                    .to_string(),
+            ));
+        }
+    }
     Ok(BoardSystem {
         name: board.name.clone(),
         overheads,

@@ -32,8 +32,10 @@ enum Check {
     /// Nothing reads its bound but its deadline check: a fixed task that releases no job and is neither the
     /// transmit interrupt nor the command handler (whose bounds the bus and the end-to-end paths read).
     VerdictOnly,
-    /// An engine row: no deadline (its analysed response places its interference and is no completion: its
-    /// job's deadline covers the engine's work, docs/analysis.md); only an unbounded one is a violation.
+    /// No deadline, only an unbounded one is a violation: an engine row (its analysed response places its
+    /// interference and is no completion: its job's deadline covers the engine's work, docs/analysis.md), and the
+    /// transmit interrupt's own row (a late job loses no completion; its response, which the bus reads, is every
+    /// message's queuing jitter: docs/analysis.md, "The transmit interrupt keeps no deadline").
     Unchecked,
 }
 
@@ -280,12 +282,10 @@ impl<const N: usize> Originals<N> {
     }
 }
 
-/// A fixed task's deadline at `period`: its own frames' where it states them, else its row's, else its period.
+/// A fixed task's deadline at `period`: its row's, else its period.
 #[inline(always)]
-fn fixed_deadline(t: &TaskRow, own_frame: Time, period: Time) -> Time {
-    if t.own_frame && t.deadline_own_frames > 0 {
-        can::own_frames(own_frame, t.deadline_own_frames)
-    } else if t.deadline == NO_DEADLINE {
+fn fixed_deadline(t: &TaskRow, period: Time) -> Time {
+    if t.deadline == NO_DEADLINE {
         period
     } else {
         row_time(t.deadline)
@@ -357,17 +357,23 @@ fn build_job<const M: usize>(
         Source::Fixed(row) => {
             let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
             let period = period_of(input, what, own_frame)?;
-            let deadline = fixed_deadline(t, own_frame, period);
+            let deadline = fixed_deadline(t, period);
             // NO_RELEASER is NO_JOB.
             let id = TaskId::Fixed(u16::from(row));
-            job(
+            let (timing, mut meta) = job(
                 row_time(t.cost),
                 period,
                 row_time(t.jitter),
                 id,
                 deadline,
                 t.released_by,
-            )
+            );
+            if table.can_tx == Some(u16::from(row)) {
+                // The transmit interrupt's row: checked only for a bound (its deadline, the period, is what a
+                // refusal of an unbounded one names).
+                meta.check = Check::Unchecked;
+            }
+            (timing, meta)
         }
         Source::Timer { stream } => {
             let s = stream_of(stream)?;
@@ -463,7 +469,7 @@ fn build_job<const M: usize>(
             let deadline = match job_source {
                 Source::Fixed(r) => {
                     let t = table.tasks.get(usize::from(r)).ok_or(Refusal::Capacity)?;
-                    fixed_deadline(t, own_frame, period)
+                    fixed_deadline(t, period)
                 }
                 Source::Publisher { stream, .. } => stream_of(stream)?.deadline(),
                 _ => return Err(Refusal::Capacity),
