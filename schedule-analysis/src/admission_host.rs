@@ -446,8 +446,12 @@ impl<'a> Lowering<'a> {
         let rows = &self.rows;
         let mut tasks = Vec::new();
         let mut sections = Vec::new();
+        let transmit = self.timing.can_tx_task.as_deref();
         for t in &self.board.tasks {
             let stated = self.timing.tasks.get(&t.name);
+            // The transmit interrupt and its jobs (`can_tx[…]`): no deadline of their own, a bound only.
+            let bounded_only =
+                transmit.is_some_and(|tx| t.name == tx || t.job_of.as_deref() == Some(tx));
             let own_frame = stated.is_some_and(|b| b.arrival == Some(Arrival::OwnFrame));
             let field = |name: &str| format!("tasks.{}.{name}", t.name);
             let released_by = match t.released_by.as_deref().and_then(|n| self.index_of(n)) {
@@ -469,7 +473,7 @@ impl<'a> Lowering<'a> {
                     Time::from_us_up(t.wcet_us).plus(self.overheads.for_kind(t.kind)),
                 )?,
                 period: rows.time(&field("period_us"), Time::from_us_down(t.period_us))?,
-                // The transmit task's row has none (the scenario refuses one): the check reads `can_tx`.
+                // The transmit task's rows have none (the scenario gives them none): `bounded_only`.
                 deadline: match t.deadline_us {
                     Some(d) => rows.time(&field("deadline_us"), Time::from_us_down(d))?,
                     None => NO_DEADLINE,
@@ -477,6 +481,7 @@ impl<'a> Lowering<'a> {
                 jitter: rows.time(&field("jitter_us"), Time::from_us_up(t.jitter_us))?,
                 released_by,
                 own_frame,
+                bounded_only,
                 share: admission::SHARE_AT_RUNTIME,
             };
             if !own_frame {
@@ -985,8 +990,8 @@ impl OwnedRobot {
             for (row, name) in b.tasks.iter().zip(&b.task_names) {
                 let _ = writeln!(
                     s,
-                    "                // {name}\n                {a}::TaskRow {{ priority: {}, cost: {}, period: {}, deadline: {}, jitter: {}, released_by: {}, own_frame: {}, share: {} }},",
-                    row.priority, row.cost, row.period, row.deadline, row.jitter, row.released_by, row.own_frame, row.share
+                    "                // {name}\n                {a}::TaskRow {{ priority: {}, cost: {}, period: {}, deadline: {}, jitter: {}, released_by: {}, own_frame: {}, bounded_only: {}, share: {} }},",
+                    row.priority, row.cost, row.period, row.deadline, row.jitter, row.released_by, row.own_frame, row.bounded_only, row.share
                 );
             }
             let _ = writeln!(s, "            ],\n            sections: &[");

@@ -133,9 +133,9 @@ pub struct TaskResult {
     /// Its WCRT is checked against its deadline: all but a script's engine row, whose analysed response (its
     /// job's whole response as jitter, then its own window) places its interference and is not its completion:
     /// the engine does a script's work while the job is suspended on it, so the job's own check covers it; and
-    /// but the board's transmit task (`can_tx_task`), which has no deadline of its own: a late job loses no
-    /// completion, and its response is every message's queuing jitter (docs/analysis.md, "The transmit interrupt
-    /// keeps no deadline"). Either must still be bounded.
+    /// but the board's transmit task (`can_tx_task`) and its jobs (`can_tx[…]`), which have no deadline of their
+    /// own: a late job loses no completion, and the transmit task's response is every message's queuing jitter
+    /// (docs/analysis.md, "The transmit interrupt keeps no deadline"). Every row must still be bounded.
     pub deadline_checked: bool,
 }
 
@@ -465,7 +465,7 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
             bcrt: t.bcet,
             blocking: blocking.get(i).copied().unwrap_or(Time::ZERO),
             jitter: jitter.get(i).copied().unwrap_or(t.jitter),
-            deadline_checked: board.can_tx_task != Some(i)
+            deadline_checked: !board.is_transmit(i)
                 && !board.sensor_buses.scripts.iter().any(|s| s.engine_row == i),
             bound: bounds
                 .get(i)

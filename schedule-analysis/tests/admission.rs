@@ -32,8 +32,7 @@ fn robot() -> &'static OwnedRobot {
 const LEVELS: [&str; 4] = ["urgent", "high", "medium", "low"];
 
 /// LightRing's transmit interrupt charged by its parts (its `can_tx` bound used, every other held bound held
-/// back; the shipped files use it too, and this says that the tests below rely on it): the report adds a
-/// `can_tx[<topic>]` job per publisher job, and the check builds the same jobs.
+/// back): the report adds a `can_tx[<topic>]` job per publisher job, and the check builds the same jobs.
 fn by_parts() -> scenario::Held<'static> {
     static ROWS: OnceLock<Vec<String>> = OnceLock::new();
     scenario::Held::Only {
@@ -564,7 +563,7 @@ fn the_transmit_jobs_are_in_the_table_and_decide_as_the_report() {
         lightring.topics
     );
     // Where the transmit interrupt stays held (charged as a whole: DiWheelDrive's), its board's topics have no
-    // transmit job; where it is used (PowerManagement's, LightRing's), every topic has one.
+    // transmit job; where it is used (PowerManagement's, shipped so, and LightRing's here), every topic has one.
     for board in &robot.boards {
         if board.name == "diwheeldrive" {
             assert!(board.topics.iter().all(|t| t.transmit == 0), "{board:?}");

@@ -368,9 +368,9 @@ fn build_job<const M: usize>(
                 deadline,
                 t.released_by,
             );
-            if table.can_tx == Some(u16::from(row)) {
-                // The transmit interrupt's row: checked only for a bound (its deadline, the period, is what a
-                // refusal of an unbounded one names).
+            if t.bounded_only {
+                // The transmit interrupt's row or one of its jobs': checked only for a bound (its deadline, the
+                // period, is what a refusal of an unbounded one names).
                 meta.check = Check::Unchecked;
             }
             (timing, meta)
@@ -417,22 +417,25 @@ fn build_job<const M: usize>(
         } => {
             // The report's `can_tx[<topic>]`: at the transmit interrupt's priority (its row's, `Originals::collect`),
             // with its sections (the transmit task's, already the table's: nothing to add to the blockings), at the
-            // publisher job's period with that as its deadline, released by it. Named as the transmit task: a
-            // deadline it misses is the transmit interrupt's (below the hard floor).
+            // publisher job's period, released by it, with no deadline of its own. Named as the transmit task: left
+            // unbounded, it is the transmit interrupt's (below the hard floor).
             let s = stream_of(stream)?;
             let row = table
                 .topics
                 .get(usize::from(topic))
                 .ok_or(Refusal::Capacity)?;
             let tx = table.can_tx.ok_or(Refusal::Capacity)?;
-            job(
+            let (timing, mut meta) = job(
                 row_time(row.transmit),
                 s.period,
                 can::transmit_abort_latency(input.bit_time),
                 TaskId::Fixed(tx),
                 s.period,
                 publisher,
-            )
+            );
+            // A job of the transmit interrupt: checked only for a bound, as its row.
+            meta.check = Check::Unchecked;
+            (timing, meta)
         }
         // A build without the sensor-bus rounds builds no engine row (`Originals::engines`).
         #[cfg(not(feature = "sensor-buses"))]
@@ -595,16 +598,12 @@ impl<const N: usize> BoardSet<N> {
         {
             let known = match meta.id {
                 // An engine row is named as its job, a transmit job as the transmit task: a fixed task's share is
-                // its own row's (a fixed task's original index is its row).
-                TaskId::Fixed(row)
-                    if meta.check != Check::Unchecked && u16::from(meta.original) == row =>
-                {
-                    table
-                        .tasks
-                        .get(usize::from(row))
-                        .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
-                        .map(|t| Share::with_utilisation(u64::from(t.share)))
-                }
+                // its own row's (a fixed task's original index is its row; every other job comes after them).
+                TaskId::Fixed(row) if u16::from(meta.original) == row => table
+                    .tasks
+                    .get(usize::from(row))
+                    .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
+                    .map(|t| Share::with_utilisation(u64::from(t.share))),
                 _ => None,
             };
             *share = known.unwrap_or_else(|| Share::of(timing.wcet, timing.period));

@@ -92,9 +92,7 @@ pub struct TaskRow {
     pub cost: RowTime,
     /// Period or minimum inter-arrival time (ignored when `own_frame`).
     pub period: RowTime,
-    /// Deadline from the release event; [`NO_DEADLINE`]: the period. The board's transmit interrupt
-    /// ([`BoardTable::can_tx`]) has none of its own whatever this says: only its bound is checked (its response is
-    /// every message's queuing jitter).
+    /// Deadline from the release event; [`NO_DEADLINE`]: the period (ignored when `bounded_only`).
     pub deadline: RowTime,
     /// Release jitter of its own.
     pub jitter: RowTime,
@@ -105,6 +103,11 @@ pub struct TaskRow {
     /// Activated once per frame this board sends: its period is the best-case time of the shortest frame the board's
     /// publishers send (the shortest frame on the bus when it sends nothing).
     pub own_frame: bool,
+    /// No deadline of its own: only its bound is checked (an unbounded one is refused). The transmit interrupt
+    /// ([`BoardTable::can_tx`]) and its jobs per job of a task that queues frames: a late job loses no completion,
+    /// and the transmit interrupt's response is every frame's queuing jitter (docs/analysis.md, "The transmit
+    /// interrupt keeps no deadline").
+    pub bounded_only: bool,
     /// Its share of the CPU, [`row_share`]`(cost, period)`, worked out when the table is built so that a decision
     /// divides only for its streams' jobs; [`SHARE_AT_RUNTIME`]: worked out by the check (an `own_frame` task, whose
     /// period depends on the streams, or a zero period).
@@ -969,6 +972,7 @@ mod tests {
         jitter: 0,
         released_by: NO_RELEASER,
         own_frame: false,
+        bounded_only: false,
         share: SHARE_AT_RUNTIME,
     }];
     const BOARDS: [BoardTable<'static>; 1] = [BoardTable {
@@ -1143,6 +1147,7 @@ mod tests {
                     cost,
                     period: 0,
                     own_frame: true,
+                    bounded_only: transmit,
                     ..TASKS[0]
                 },
             ];
