@@ -296,7 +296,9 @@ fn preparation_steps_leave_a_decision_its_own_board_and_the_same_verdict() {
         [
             ("odometry", "urgent", 800),
             ("gyroscope", "high", 1_000),
-            ("proximity-ring", "low", 8_000),
+            // Schedulable (8 ms was until PowerManagement's transmit interrupt was charged by its parts: its ring
+            // job and frames then miss at 8 ms).
+            ("proximity-ring", "low", 10_000),
         ]
         .into_iter(),
     );

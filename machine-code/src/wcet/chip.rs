@@ -500,3 +500,19 @@ fn wrapped(from: i64, to: i64) -> Option<(u32, u32)> {
     let high = low + (to - from);
     (high < SPAN).then_some((low as u32, high as u32))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::Chip;
+
+    /// The admission step's bound (343 702 075 637 cycles on DiWheelDrive 1-1, 2026-12-05) overflowed the 64-bit
+    /// product of the conversion; a result beyond 64 bits saturates.
+    #[test]
+    fn long_bounds_convert_without_overflow() {
+        let f103 = Chip::Stm32f103 { wait_states: 2 };
+        assert_eq!(f103.cycles_to_ns(72), 1_000);
+        assert_eq!(f103.cycles_to_ns(343_702_075_637), 4_773_639_939_403);
+        assert_eq!(f103.ns_to_cycles(4_773_639_939_403), 343_702_075_638);
+        assert_eq!(f103.cycles_to_ns(u64::MAX), u64::MAX);
+    }
+}
