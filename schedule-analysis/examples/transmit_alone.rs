@@ -71,13 +71,17 @@ fn main() {
                         .wcrt()
                         .map_or("unbounded".to_string(), |r| format!("{:.1}", r.as_us_f64()));
                     if b.name == board && show.iter().any(|s| t.name.starts_with(s.as_str())) {
+                        let deadline = if t.deadline_checked {
+                            format!("{:.0} µs", t.deadline.as_us_f64())
+                        } else {
+                            "none of its own".to_string()
+                        };
                         println!(
-                            "{name} {} {board}: {} wcet {:.2} µs, jitter {:.1}, WCRT {wcrt} µs, deadline {:.0} µs{}",
+                            "{name} {} {board}: {} wcet {:.2} µs, jitter {:.1}, WCRT {wcrt} µs, deadline {deadline}{}",
                             revision.as_deref().unwrap_or("newest"),
                             t.name,
                             t.wcet.as_us_f64(),
                             t.jitter.as_us_f64(),
-                            t.deadline.as_us_f64(),
                             if t.schedulable() { "" } else { "  MISS" }
                         );
                     }

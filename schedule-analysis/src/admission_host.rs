@@ -446,14 +446,13 @@ impl<'a> Lowering<'a> {
         let rows = &self.rows;
         let mut tasks = Vec::new();
         let mut sections = Vec::new();
+        let transmit = self.timing.can_tx_task.as_deref();
         for t in &self.board.tasks {
             let stated = self.timing.tasks.get(&t.name);
+            // The transmit interrupt and its jobs (`can_tx[…]`): no deadline of their own, a bound only.
+            let bounded_only =
+                transmit.is_some_and(|tx| t.name == tx || t.job_of.as_deref() == Some(tx));
             let own_frame = stated.is_some_and(|b| b.arrival == Some(Arrival::OwnFrame));
-            // The scenario built its deadline from these own frames; the board works it out from its streams.
-            let deadline_own_frames = stated
-                .and_then(|b| b.deadline_own_frames)
-                .filter(|_| own_frame)
-                .unwrap_or(0);
             let field = |name: &str| format!("tasks.{}.{name}", t.name);
             let released_by = match t.released_by.as_deref().and_then(|n| self.index_of(n)) {
                 None => NO_RELEASER,
@@ -474,15 +473,15 @@ impl<'a> Lowering<'a> {
                     Time::from_us_up(t.wcet_us).plus(self.overheads.for_kind(t.kind)),
                 )?,
                 period: rows.time(&field("period_us"), Time::from_us_down(t.period_us))?,
+                // The transmit task's rows have none (the scenario gives them none): `bounded_only`.
                 deadline: match t.deadline_us {
-                    Some(_) if deadline_own_frames > 0 => NO_DEADLINE,
                     Some(d) => rows.time(&field("deadline_us"), Time::from_us_down(d))?,
                     None => NO_DEADLINE,
                 },
                 jitter: rows.time(&field("jitter_us"), Time::from_us_up(t.jitter_us))?,
                 released_by,
                 own_frame,
-                deadline_own_frames,
+                bounded_only,
                 share: admission::SHARE_AT_RUNTIME,
             };
             if !own_frame {
@@ -991,8 +990,8 @@ impl OwnedRobot {
             for (row, name) in b.tasks.iter().zip(&b.task_names) {
                 let _ = writeln!(
                     s,
-                    "                // {name}\n                {a}::TaskRow {{ priority: {}, cost: {}, period: {}, deadline: {}, jitter: {}, released_by: {}, own_frame: {}, deadline_own_frames: {}, share: {} }},",
-                    row.priority, row.cost, row.period, row.deadline, row.jitter, row.released_by, row.own_frame, row.deadline_own_frames, row.share
+                    "                // {name}\n                {a}::TaskRow {{ priority: {}, cost: {}, period: {}, deadline: {}, jitter: {}, released_by: {}, own_frame: {}, bounded_only: {}, share: {} }},",
+                    row.priority, row.cost, row.period, row.deadline, row.jitter, row.released_by, row.own_frame, row.bounded_only, row.share
                 );
             }
             let _ = writeln!(s, "            ],\n            sections: &[");

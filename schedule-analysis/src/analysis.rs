@@ -132,7 +132,10 @@ pub struct TaskResult {
     pub bound: Bound,
     /// Its WCRT is checked against its deadline: all but a script's engine row, whose analysed response (its
     /// job's whole response as jitter, then its own window) places its interference and is not its completion:
-    /// the engine does a script's work while the job is suspended on it, so the job's own check covers it.
+    /// the engine does a script's work while the job is suspended on it, so the job's own check covers it; and
+    /// but the board's transmit task (`can_tx_task`) and its jobs (`can_tx[…]`), which have no deadline of their
+    /// own: a late job loses no completion, and the transmit task's response is every message's queuing jitter
+    /// (docs/analysis.md, "The transmit interrupt keeps no deadline"). Every row must still be bounded.
     pub deadline_checked: bool,
 }
 
@@ -146,9 +149,11 @@ impl TaskResult {
         self.wcrt()
             .is_some_and(|r| !self.deadline_checked || r <= self.deadline)
     }
-    /// Deadline minus WCRT, µs (negative when missed).
+    /// Deadline minus WCRT, µs (negative when missed); `None` when unbounded or its deadline is not checked.
     pub fn slack_us(&self) -> Option<f64> {
-        self.wcrt().map(|r| signed_us(self.deadline, r))
+        self.wcrt()
+            .filter(|_| self.deadline_checked)
+            .map(|r| signed_us(self.deadline, r))
     }
 }
 
@@ -460,7 +465,8 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
             bcrt: t.bcet,
             blocking: blocking.get(i).copied().unwrap_or(Time::ZERO),
             jitter: jitter.get(i).copied().unwrap_or(t.jitter),
-            deadline_checked: !board.sensor_buses.scripts.iter().any(|s| s.engine_row == i),
+            deadline_checked: !board.is_transmit(i)
+                && !board.sensor_buses.scripts.iter().any(|s| s.engine_row == i),
             bound: bounds
                 .get(i)
                 .cloned()

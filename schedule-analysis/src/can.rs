@@ -100,13 +100,6 @@ pub fn own_frame_time(bit: Time, dlcs: impl Iterator<Item = u8>) -> Time {
         .unwrap_or_else(|| shortest_frame_time(bit))
 }
 
-/// `frames` of a board's shortest own frames ([`own_frame_time`]): the deadline of a task activated per own frame
-/// whose timing file states `deadline_own_frames` (the transmit interrupt's, two: docs/analysis.md "The deadline,
-/// from bxCAN's behaviour"). The host analysis and the on-chip admission check both take it from here.
-pub const fn own_frames(own_frame: Time, frames: u8) -> Time {
-    own_frame.times(frames as u64)
-}
-
 /// The order in which identifiers win arbitration, as one number (lower wins): the 11 base bits, then the
 /// SRR/IDE bits (a standard frame beats an extended one with the same base), then the 18 extension bits.
 pub fn arbitration_key(id: u32, extended: bool) -> u32 {

@@ -46,7 +46,8 @@ pub struct BoardModel {
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub idle_critical_sections_us: BTreeMap<String, f64>,
     /// The task that moves queued frames into the CAN controller; its response time is added to the queuing
-    /// jitter of every message sent from this board.
+    /// jitter of every message sent from this board. It has no deadline of its own, nor have its jobs (tasks whose
+    /// `job_of` names it; `deadline_us` is refused for them): the analysis requires only that they are bounded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub can_tx_task: Option<String>,
     /// Static resource ceilings (RTIC computes them from every task that *may* lock a resource, including tasks
@@ -583,6 +584,21 @@ fn validate_board(board: &BoardModel, path: &str) -> Result<BoardSystem, ModelEr
             )
         })?),
     };
+    // The transmit task and its jobs have no deadline of their own (its response is every message's queuing
+    // jitter; only their bounds are checked): a deadline given for one would be read as checked and is refused.
+    if let Some(tx) = can_tx_task.and_then(|i| board.tasks.get(i)) {
+        for (i, t) in board.tasks.iter().enumerate() {
+            let transmit = t.name == tx.name || t.job_of.as_deref() == Some(tx.name.as_str());
+            if transmit && t.deadline_us.is_some() {
+                return Err(error(
+                    format!("{path}.tasks[{i}].deadline_us"),
+                    "the transmit task (`can_tx_task`) and its jobs have no deadline of their own: its response is \
+                     every message's queuing jitter, and only their bounds are checked"
+                        .to_string(),
+                ));
+            }
+        }
+    }
     Ok(BoardSystem {
         name: board.name.clone(),
         overheads,
@@ -786,6 +802,24 @@ pub struct BoardSystem {
     pub static_ceilings: Vec<(String, u32)>,
     /// Its sensor buses and the scripts its tasks run on them (none: the board is analysed as without buses).
     pub sensor_buses: crate::sensor_bus::BoardBuses,
+}
+
+impl BoardSystem {
+    /// Whether task `i` is the transmit interrupt (`can_tx_task`) or one of its jobs (a task whose `job_of` names
+    /// it: the `can_tx[…]` rows of a transmit interrupt charged by its parts). Such a row has no deadline of its own:
+    /// only its bound is checked, and the transmit task's WCRT is every message's queuing jitter
+    /// (docs/analysis.md, "The transmit interrupt keeps no deadline").
+    pub fn is_transmit(&self, i: usize) -> bool {
+        let Some(tx) = self.can_tx_task else {
+            return false;
+        };
+        i == tx
+            || self.tasks.get(tx).is_some_and(|t| {
+                self.tasks
+                    .get(i)
+                    .is_some_and(|job| job.job_of.as_deref() == Some(t.name.as_str()))
+            })
+    }
 }
 
 /// A validated task.

@@ -370,7 +370,12 @@ fn board_table(board: &BoardResult) -> Table {
             us(t.blocking),
             us(t.jitter),
             opt(t.wcrt()),
-            us(t.deadline),
+            // A row whose deadline is not checked (the transmit task, a script's engine row) shows none.
+            if t.deadline_checked {
+                us(t.deadline)
+            } else {
+                "-".into()
+            },
             t.slack_us().map_or_else(|| "-".into(), us_f),
             task_verdict(t),
         ]);
@@ -940,7 +945,8 @@ fn to_json(report: &Report) -> Value {
                     "board": b.name, "name": t.name, "job_of": t.job_of, "priority": t.priority,
                     "budget_from": budget_from,
                     "kind": kind_label(t.kind), "sporadic": t.sporadic, "period_us": t.period.as_us_f64(),
-                    "deadline_us": t.deadline.as_us_f64(), "wcet_us": t.wcet.as_us_f64(),
+                    "deadline_us": t.deadline_checked.then(|| t.deadline.as_us_f64()),
+                    "wcet_us": t.wcet.as_us_f64(),
                     "overhead_us": t.overhead.as_us_f64(), "bcrt_us": t.bcrt.as_us_f64(),
                     "blocking_us": t.blocking.as_us_f64(), "jitter_us": t.jitter.as_us_f64(),
                     "wcrt_us": json_time(t.wcrt()), "slack_us": t.slack_us(),

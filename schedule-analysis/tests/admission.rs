@@ -296,7 +296,9 @@ fn preparation_steps_leave_a_decision_its_own_board_and_the_same_verdict() {
         [
             ("odometry", "urgent", 800),
             ("gyroscope", "high", 1_000),
-            ("proximity-ring", "low", 8_000),
+            // Schedulable (8 ms was until PowerManagement's transmit interrupt was charged by its parts: its ring
+            // job and frames then miss at 8 ms).
+            ("proximity-ring", "low", 10_000),
         ]
         .into_iter(),
     );
@@ -562,10 +564,13 @@ fn the_transmit_jobs_are_in_the_table_and_decide_as_the_report() {
         "{:?}",
         lightring.topics
     );
-    // Where the transmit interrupt stays held (charged as a whole), its board's topics have no transmit job.
+    // Where the transmit interrupt stays held (charged as a whole: DiWheelDrive's), its board's topics have no
+    // transmit job; where it is used (PowerManagement's, shipped so, and LightRing's here), every topic has one.
     for board in &robot.boards {
-        if board.name != "lightring" {
+        if board.name == "diwheeldrive" {
             assert!(board.topics.iter().all(|t| t.transmit == 0), "{board:?}");
+        } else {
+            assert!(board.topics.iter().all(|t| t.transmit > 0), "{board:?}");
         }
     }
     let sets: [&[(&str, &str, u64)]; 3] = [

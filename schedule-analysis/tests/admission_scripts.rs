@@ -441,7 +441,7 @@ fn decide_one(
             priority: 3,
             released_by: NO_RELEASER,
             own_frame: false,
-            deadline_own_frames: 0,
+            bounded_only: false,
             share: SHARE_AT_RUNTIME,
         },
         TaskRow {
@@ -457,7 +457,7 @@ fn decide_one(
                 priority: 0,
                 released_by: NO_RELEASER,
                 own_frame: false,
-                deadline_own_frames: 0,
+                bounded_only: false,
                 share: SHARE_AT_RUNTIME,
             }
         },
@@ -634,7 +634,7 @@ fn chip_decide(tasks: &[HandTask], expected: &[u32], short: Option<usize>) -> Op
             priority,
             released_by,
             own_frame: false,
-            deadline_own_frames: 0,
+            bounded_only: false,
             share: SHARE_AT_RUNTIME,
         })
         .collect();
@@ -796,7 +796,7 @@ fn an_event_counts_a_released_jobs_inherited_jitter_on_the_chip() {
                 priority,
                 released_by,
                 own_frame: false,
-                deadline_own_frames: 0,
+                bounded_only: false,
                 share: SHARE_AT_RUNTIME,
             };
         let tasks = [

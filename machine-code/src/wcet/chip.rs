@@ -111,14 +111,18 @@ impl Chip {
         EXCEPTION_ENTRY + EXCEPTION_EXIT + if self.m4() { LAZY_FPU_STACKING } else { 0 }
     }
 
-    /// Cycles as nanoseconds at the chip's clock, rounded up.
+    /// Cycles as nanoseconds at the chip's clock, rounded up. Worked in 128 bits: a bound beyond about 18 G cycles
+    /// (the admission step's, whose stated totals reach hundreds of G cycles) overflows the 64-bit product; a result
+    /// beyond 64 bits (above 10^18 cycles) saturates.
     pub fn cycles_to_ns(self, cycles: u64) -> u64 {
-        (cycles * 1_000_000_000).div_ceil(self.clock_hz())
+        let ns = (u128::from(cycles) * 1_000_000_000).div_ceil(u128::from(self.clock_hz()));
+        u64::try_from(ns).unwrap_or(u64::MAX)
     }
 
-    /// Nanoseconds as cycles at the chip's clock, rounded up.
+    /// Nanoseconds as cycles at the chip's clock, rounded up (in 128 bits, as [`Chip::cycles_to_ns`]).
     pub fn ns_to_cycles(self, ns: u64) -> u64 {
-        (ns * self.clock_hz()).div_ceil(1_000_000_000)
+        let cycles = (u128::from(ns) * u128::from(self.clock_hz())).div_ceil(1_000_000_000);
+        u64::try_from(cycles).unwrap_or(u64::MAX)
     }
 
     /// Which region an address is in (the STM32F1/F4 memory maps, RM0008 §3.3 and RM0090 §2.3).
@@ -495,4 +499,20 @@ fn wrapped(from: i64, to: i64) -> Option<(u32, u32)> {
     let low = from.rem_euclid(SPAN);
     let high = low + (to - from);
     (high < SPAN).then_some((low as u32, high as u32))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Chip;
+
+    /// The admission step's bound (343 702 075 637 cycles on DiWheelDrive 1-1, 2026-12-05) overflowed the 64-bit
+    /// product of the conversion; a result beyond 64 bits saturates.
+    #[test]
+    fn long_bounds_convert_without_overflow() {
+        let f103 = Chip::Stm32f103 { wait_states: 2 };
+        assert_eq!(f103.cycles_to_ns(72), 1_000);
+        assert_eq!(f103.cycles_to_ns(343_702_075_637), 4_773_639_939_403);
+        assert_eq!(f103.ns_to_cycles(4_773_639_939_403), 343_702_075_638);
+        assert_eq!(f103.cycles_to_ns(u64::MAX), u64::MAX);
+    }
 }

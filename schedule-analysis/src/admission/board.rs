@@ -32,8 +32,10 @@ enum Check {
     /// Nothing reads its bound but its deadline check: a fixed task that releases no job and is neither the
     /// transmit interrupt nor the command handler (whose bounds the bus and the end-to-end paths read).
     VerdictOnly,
-    /// An engine row: no deadline (its analysed response places its interference and is no completion: its
-    /// job's deadline covers the engine's work, docs/analysis.md); only an unbounded one is a violation.
+    /// No deadline, only an unbounded one is a violation: an engine row (its analysed response places its
+    /// interference and is no completion: its job's deadline covers the engine's work, docs/analysis.md), and the
+    /// transmit interrupt's own row (a late job loses no completion; its response, which the bus reads, is every
+    /// message's queuing jitter: docs/analysis.md, "The transmit interrupt keeps no deadline").
     Unchecked,
 }
 
@@ -280,12 +282,10 @@ impl<const N: usize> Originals<N> {
     }
 }
 
-/// A fixed task's deadline at `period`: its own frames' where it states them, else its row's, else its period.
+/// A fixed task's deadline at `period`: its row's, else its period.
 #[inline(always)]
-fn fixed_deadline(t: &TaskRow, own_frame: Time, period: Time) -> Time {
-    if t.own_frame && t.deadline_own_frames > 0 {
-        can::own_frames(own_frame, t.deadline_own_frames)
-    } else if t.deadline == NO_DEADLINE {
+fn fixed_deadline(t: &TaskRow, period: Time) -> Time {
+    if t.deadline == NO_DEADLINE {
         period
     } else {
         row_time(t.deadline)
@@ -357,17 +357,23 @@ fn build_job<const M: usize>(
         Source::Fixed(row) => {
             let t = table.tasks.get(usize::from(row)).ok_or(Refusal::Capacity)?;
             let period = period_of(input, what, own_frame)?;
-            let deadline = fixed_deadline(t, own_frame, period);
+            let deadline = fixed_deadline(t, period);
             // NO_RELEASER is NO_JOB.
             let id = TaskId::Fixed(u16::from(row));
-            job(
+            let (timing, mut meta) = job(
                 row_time(t.cost),
                 period,
                 row_time(t.jitter),
                 id,
                 deadline,
                 t.released_by,
-            )
+            );
+            if t.bounded_only {
+                // The transmit interrupt's row or one of its jobs': checked only for a bound (its deadline, the
+                // period, is what a refusal of an unbounded one names).
+                meta.check = Check::Unchecked;
+            }
+            (timing, meta)
         }
         Source::Timer { stream } => {
             let s = stream_of(stream)?;
@@ -411,22 +417,25 @@ fn build_job<const M: usize>(
         } => {
             // The report's `can_tx[<topic>]`: at the transmit interrupt's priority (its row's, `Originals::collect`),
             // with its sections (the transmit task's, already the table's: nothing to add to the blockings), at the
-            // publisher job's period with that as its deadline, released by it. Named as the transmit task: a
-            // deadline it misses is the transmit interrupt's (below the hard floor).
+            // publisher job's period, released by it, with no deadline of its own. Named as the transmit task: left
+            // unbounded, it is the transmit interrupt's (below the hard floor).
             let s = stream_of(stream)?;
             let row = table
                 .topics
                 .get(usize::from(topic))
                 .ok_or(Refusal::Capacity)?;
             let tx = table.can_tx.ok_or(Refusal::Capacity)?;
-            job(
+            let (timing, mut meta) = job(
                 row_time(row.transmit),
                 s.period,
                 can::transmit_abort_latency(input.bit_time),
                 TaskId::Fixed(tx),
                 s.period,
                 publisher,
-            )
+            );
+            // A job of the transmit interrupt: checked only for a bound, as its row.
+            meta.check = Check::Unchecked;
+            (timing, meta)
         }
         // A build without the sensor-bus rounds builds no engine row (`Originals::engines`).
         #[cfg(not(feature = "sensor-buses"))]
@@ -463,7 +472,7 @@ fn build_job<const M: usize>(
             let deadline = match job_source {
                 Source::Fixed(r) => {
                     let t = table.tasks.get(usize::from(r)).ok_or(Refusal::Capacity)?;
-                    fixed_deadline(t, own_frame, period)
+                    fixed_deadline(t, period)
                 }
                 Source::Publisher { stream, .. } => stream_of(stream)?.deadline(),
                 _ => return Err(Refusal::Capacity),
@@ -589,16 +598,12 @@ impl<const N: usize> BoardSet<N> {
         {
             let known = match meta.id {
                 // An engine row is named as its job, a transmit job as the transmit task: a fixed task's share is
-                // its own row's (a fixed task's original index is its row).
-                TaskId::Fixed(row)
-                    if meta.check != Check::Unchecked && u16::from(meta.original) == row =>
-                {
-                    table
-                        .tasks
-                        .get(usize::from(row))
-                        .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
-                        .map(|t| Share::with_utilisation(u64::from(t.share)))
-                }
+                // its own row's (a fixed task's original index is its row; every other job comes after them).
+                TaskId::Fixed(row) if u16::from(meta.original) == row => table
+                    .tasks
+                    .get(usize::from(row))
+                    .filter(|t| !t.own_frame && t.share != SHARE_AT_RUNTIME)
+                    .map(|t| Share::with_utilisation(u64::from(t.share))),
                 _ => None,
             };
             *share = known.unwrap_or_else(|| Share::of(timing.wcet, timing.period));

@@ -92,8 +92,7 @@ pub struct TaskRow {
     pub cost: RowTime,
     /// Period or minimum inter-arrival time (ignored when `own_frame`).
     pub period: RowTime,
-    /// Deadline from the release event; [`NO_DEADLINE`]: the period (or, for an `own_frame` task with
-    /// `deadline_own_frames`, that many own frames).
+    /// Deadline from the release event; [`NO_DEADLINE`]: the period (ignored when `bounded_only`).
     pub deadline: RowTime,
     /// Release jitter of its own.
     pub jitter: RowTime,
@@ -104,10 +103,11 @@ pub struct TaskRow {
     /// Activated once per frame this board sends: its period is the best-case time of the shortest frame the board's
     /// publishers send (the shortest frame on the bus when it sends nothing).
     pub own_frame: bool,
-    /// An `own_frame` task only (0: none): its deadline is this many of the board's shortest own frames
-    /// ([`can::own_frames`]), worked out with its period when the board's streams are known; `deadline` is then
-    /// [`NO_DEADLINE`]. The timing file's `deadline_own_frames`.
-    pub deadline_own_frames: u8,
+    /// No deadline of its own: only its bound is checked (an unbounded one is refused). The transmit interrupt
+    /// ([`BoardTable::can_tx`]) and its jobs per job of a task that queues frames: a late job loses no completion,
+    /// and the transmit interrupt's response is every frame's queuing jitter (docs/analysis.md, "The transmit
+    /// interrupt keeps no deadline").
+    pub bounded_only: bool,
     /// Its share of the CPU, [`row_share`]`(cost, period)`, worked out when the table is built so that a decision
     /// divides only for its streams' jobs; [`SHARE_AT_RUNTIME`]: worked out by the check (an `own_frame` task, whose
     /// period depends on the streams, or a zero period).
@@ -265,7 +265,9 @@ pub struct BoardTable<'a> {
     pub levels: [Option<u8>; LEVELS],
     /// The monotonic's timer job, when publishers are timer-released.
     pub monotonic: Option<MonotonicRow>,
-    /// Index of the transmit interrupt task (its WCRT is queuing jitter for every frame the board sends).
+    /// Index of the transmit interrupt task (its WCRT is queuing jitter for every frame the board sends). It has
+    /// no deadline of its own: the check refuses it only unbounded (docs/analysis.md, "The transmit interrupt keeps
+    /// no deadline").
     pub can_tx: Option<u16>,
     /// Index of the command handler (the end of a command's path).
     pub command_handler: Option<u16>,
@@ -970,7 +972,7 @@ mod tests {
         jitter: 0,
         released_by: NO_RELEASER,
         own_frame: false,
-        deadline_own_frames: 0,
+        bounded_only: false,
         share: SHARE_AT_RUNTIME,
     }];
     const BOARDS: [BoardTable<'static>; 1] = [BoardTable {
@@ -1114,43 +1116,47 @@ mod tests {
         }
     }
 
-    /// A task activated per own frame with `deadline_own_frames`: its deadline is that many of the board's shortest
-    /// own frames, from the topics it can send (its table's rows). Worked by hand: the board's one topic has 3-byte
-    /// frames (the proximity ring; 47 + 24 = 71 bits,
-    /// 71 µs at 1 Mbit/s); the transmit-like task (55 µs, priority 5) is pre-empted once by a 20 µs task at priority 6
-    /// (every 1 ms), so its first job responds in 75 µs; its second, released at 71 µs, starts at 75 and ends at 130
-    /// (59 µs), and the third comes at 142, after the level's busy period. 75 µs misses one own frame (71 µs) and
-    /// meets two (142 µs); a board whose one topic has 4-byte frames (magnetometer-z, 79 µs) meets one frame as well.
+    /// The transmit interrupt ([`BoardTable::can_tx`]) keeps no deadline of its own: a row whose busy window
+    /// closes passes however long its response, that response is the queuing jitter of the board's frames, and a
+    /// row whose window does not close is refused. Worked by hand: the board's one topic has 3-byte frames (the
+    /// proximity ring; 47 + 24 = 71 bits, 71 µs at 1 Mbit/s), so the transmit row (55 µs per own frame, priority 5)
+    /// is released every 71 µs; above it a 20 µs task every 1 ms at priority 6 and the publisher job (100 µs, best
+    /// 50 µs, every 10 ms at priority 9, which nothing delays). The level's busy period: 175 → 285 → 395 → 450 →
+    /// 505 → 560 → 560 µs (⌈w/71⌉·55 + 20 + 100), eight jobs, the first the worst: 175 µs, more than two own frames
+    /// (142 µs). The frame (8 bytes, 135 µs, alone on the bus, so no blocking) is queued with jitter (100 − 50) + 175
+    /// from the publisher's best 50 µs: delivered at worst 50 + 225 + 135 = 410 µs after the release.
     #[test]
-    fn an_own_frame_deadline_is_counted_in_the_boards_own_frames() {
-        // The board's one topic, by its frame length: 3 bytes the proximity ring, 4 magnetometer-z.
-        let decide = |frames: u8, dlc: u8| {
-            let topic = if dlc == 3 { 0x1F } else { 7 };
-            assert_eq!(
-                amiro_can::Topic::from_byte(topic).map(|t| t.dlc()),
-                Some(dlc)
-            );
+    fn the_transmit_interrupt_is_checked_for_a_bound_and_its_response_is_the_frames_jitter() {
+        let own_frame = can::own_frame_time(Time::from_ns(1000), [3u8].into_iter());
+        assert_eq!(own_frame, Time::from_us(71));
+        // `transmit`: the row is the board's transmit interrupt; `cost`, `above`: its and the task above's cost
+        // (ns); `deadline`: the stream's (µs).
+        let decide = |transmit: bool, cost: u32, above: u32, deadline: u64| {
+            let topic = 0x1F;
+            assert_eq!(amiro_can::Topic::from_byte(topic).map(|t| t.dlc()), Some(3));
             let topics = [TopicRow { topic, ..TOPICS[0] }];
             let tasks = [
                 TaskRow {
                     priority: 6,
-                    cost: 20_000,
+                    cost: above,
                     period: 1_000_000,
                     ..TASKS[0]
                 },
                 TaskRow {
                     priority: 5,
-                    cost: 55_000,
+                    cost,
                     period: 0,
                     own_frame: true,
-                    deadline_own_frames: frames,
+                    bounded_only: transmit,
                     ..TASKS[0]
                 },
             ];
             let boards = [BoardTable {
                 tasks: &tasks,
                 topics: &topics,
-                shortest_dlc: dlc,
+                shortest_dlc: 3,
+                levels: [Some(9); LEVELS],
+                can_tx: transmit.then_some(1),
                 ..BOARDS[0]
             }];
             let robot = RobotTable {
@@ -1158,16 +1164,26 @@ mod tests {
                 ..ROBOT
             };
             let mut stream = request(3, 10_000);
-            stream.dlc = dlc;
+            stream.deadline = Some(Time::from_us(deadline));
             if let Some(sender) = stream.sender.as_mut() {
                 sender.topic = topic;
             }
-            evaluate::<8, 8>(&robot, &[stream]).refusal
+            evaluate::<8, 8>(&robot, &[stream])
         };
-        let own_frame = can::own_frame_time(Time::from_ns(1000), [3u8].into_iter());
-        assert_eq!(own_frame, Time::from_us(71));
-        assert_eq!(can::own_frames(own_frame, 2), Time::from_us(142));
-        match decide(1, 3) {
+        // 175 µs, beyond two own frames: admitted, the frames delivered by 410 µs.
+        assert_eq!(decide(true, 55_000, 20_000, 410).refusal, None);
+        match decide(true, 55_000, 20_000, 409).refusal {
+            Some(Refusal::Deadline(v)) => {
+                assert!(matches!(v.culprit, Culprit::Frame { .. }), "{v:?}");
+                assert_eq!(v.wcrt, Some(Time::from_us(410)));
+            }
+            other => panic!("the frames at 409 µs: {other:?}"),
+        }
+        // 80 µs more above it: the first job 255 µs, and the frames 80 µs later.
+        assert_eq!(decide(true, 55_000, 100_000, 490).refusal, None);
+        assert!(decide(true, 55_000, 100_000, 489).refusal.is_some());
+        // The same row as any other fixed task has its period for a deadline (one own frame): refused.
+        match decide(false, 55_000, 20_000, 410).refusal {
             Some(Refusal::Deadline(v)) => {
                 assert_eq!(
                     v.culprit,
@@ -1176,14 +1192,27 @@ mod tests {
                         task: TaskId::Fixed(1)
                     }
                 );
-                assert_eq!((v.wcrt, v.deadline), (Some(Time::from_us(75)), own_frame));
+                assert_eq!((v.wcrt, v.deadline), (Some(Time::from_us(175)), own_frame));
             }
-            other => panic!("one own frame: {other:?}"),
+            other => panic!("not the transmit interrupt: {other:?}"),
         }
-        assert_eq!(decide(2, 3), None);
-        // 0: no own-frame deadline, the period (one own frame) as before.
-        assert!(matches!(decide(0, 3), Some(Refusal::Deadline(_))));
-        assert_eq!(decide(1, 4), None);
+        // 65 µs every 71 µs with 10 % above it: the window never closes, refused below the hard floor.
+        let unbounded = decide(true, 65_000, 100_000, 10_000);
+        for refusal in [unbounded.refusal, unbounded.floor] {
+            match refusal {
+                Some(Refusal::Deadline(v)) => {
+                    assert_eq!(
+                        v.culprit,
+                        Culprit::Task {
+                            board: 0,
+                            task: TaskId::Fixed(1)
+                        }
+                    );
+                    assert_eq!(v.wcrt, None);
+                }
+                other => panic!("unbounded: {other:?}"),
+            }
+        }
     }
 
     #[test]

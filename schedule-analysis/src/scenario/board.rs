@@ -396,18 +396,19 @@ impl Board<'_> {
                 Arrival::SporadicUs(us) => (us, true),
             };
             super::plan::check_positive(file, &format!("{p}.arrival"), period_us)?;
-            let deadline_us =
-                match (t.deadline_own_frames, arrival) {
-                    (None, _) => t.deadline_us,
-                    (Some(n), Arrival::OwnFrame) if n > 0 && t.deadline_us.is_none() => {
-                        Some(can::own_frames(arrivals.own_frame, n).as_us_f64())
-                    }
-                    (Some(_), _) => return Err(fail(
-                        file,
-                        format!("{p}.deadline_own_frames"),
-                        "only for an \"own_frame\" arrival, at least 1, and not with `deadline_us`",
-                    )),
-                };
+            // The transmit task has no deadline of its own: a late job loses no completion, and its response is
+            // charged to every message this board sends as queuing jitter (docs/analysis.md, "The transmit
+            // interrupt keeps no deadline"); the analysis checks only that its busy window closes.
+            let transmit = timing.can_tx_task.as_deref() == Some(d.name.as_str());
+            if transmit && t.deadline_us.is_some() {
+                return Err(fail(
+                    file,
+                    format!("{p}.deadline_us"),
+                    "the transmit task (`can_tx_task`) has no deadline of its own: its response is every \
+                     message's queuing jitter",
+                ));
+            }
+            let deadline_us = t.deadline_us;
             let sections = critical_sections(
                 file,
                 &p,

@@ -340,15 +340,11 @@ pub struct TimingTask {
     /// Release jitter of its own, µs.
     #[serde(default)]
     pub jitter_us: f64,
-    /// Deadline, µs (default: the period).
+    /// Deadline, µs (default: the period). Not for the transmit task (`can_tx_task`), which has none of its own:
+    /// its response is every message's queuing jitter (docs/analysis.md, "The transmit interrupt keeps no
+    /// deadline").
     #[serde(default)]
     pub deadline_us: Option<f64>,
-    /// A task activated per own frame ([`Arrival::OwnFrame`]) only, instead of `deadline_us`: its deadline as this
-    /// many of the board's shortest own frames (the transmit interrupt's, from its three mailboxes: two,
-    /// docs/analysis.md "The deadline, from bxCAN's behaviour"). The host analysis and the boards' admission table
-    /// both take it from here ([`crate::can::own_frames`]).
-    #[serde(default)]
-    pub deadline_own_frames: Option<u8>,
     /// Longest critical section per resource, µs.
     #[serde(default)]
     pub critical_sections_us: BTreeMap<String, f64>,
