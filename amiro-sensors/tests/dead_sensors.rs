@@ -322,10 +322,10 @@ fn run_pair(
     let (mut gyroscope, mut accelerometer) = (0, 0);
     let mut now = from_us;
     while now < until_us {
-        if (now - from_us) % gyroscope_every_us == 0 {
+        if (now - from_us).is_multiple_of(gyroscope_every_us) {
             gyroscope += group.sample(Topic::Gyroscope, now).len();
         }
-        if (now - from_us) % accelerometer_every_us == 0 {
+        if (now - from_us).is_multiple_of(accelerometer_every_us) {
             accelerometer += group.sample(Topic::Accelerometer, now).len();
         }
         now += step;
