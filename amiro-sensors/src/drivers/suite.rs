@@ -1126,21 +1126,25 @@ pub struct Supervised<G> {
 /// The most parts a [`Supervised`] group watches apart.
 pub const SUPERVISED_PARTS: usize = 2;
 
-/// One part's supervision: whether it is ready, its failures in a row, and its back-off.
+/// One part's supervision: whether it is ready, its failures in a row, and its back-off (the
+/// wait in 32 bits, at most [`RETRY_MAX_US`]: 16 bytes a part).
 #[derive(Debug, Clone, Copy)]
 struct PartWatch {
-    ready: bool,
-    consecutive_failures: u8,
     retry_at_us: u64,
-    backoff_us: u64,
+    backoff_us: u32,
+    consecutive_failures: u8,
+    ready: bool,
 }
+
+// The waits fit the part's 32-bit field.
+const _: () = assert!(RETRY_FIRST_US <= RETRY_MAX_US && RETRY_MAX_US <= u32::MAX as u64);
 
 impl PartWatch {
     const READY: Self = Self {
-        ready: true,
-        consecutive_failures: 0,
         retry_at_us: 0,
-        backoff_us: RETRY_FIRST_US,
+        backoff_us: RETRY_FIRST_US as u32,
+        consecutive_failures: 0,
+        ready: true,
     };
 }
 
@@ -1317,7 +1321,7 @@ impl<G> Supervised<G> {
         match result {
             Ok(samples) => {
                 self.parts[index].consecutive_failures = 0;
-                self.parts[index].backoff_us = RETRY_FIRST_US;
+                self.parts[index].backoff_us = PartWatch::READY.backoff_us;
                 samples
             }
             Err(error) => {
@@ -1345,7 +1349,7 @@ impl<G> Supervised<G> {
     fn back_off(&mut self, part: usize, now_us: u64) {
         let watch = &mut self.parts[if part == 0 { 0 } else { 1 }];
         watch.ready = false;
-        watch.retry_at_us = now_us.saturating_add(watch.backoff_us);
-        watch.backoff_us = watch.backoff_us.saturating_mul(2).min(RETRY_MAX_US);
+        watch.retry_at_us = now_us.saturating_add(u64::from(watch.backoff_us));
+        watch.backoff_us = watch.backoff_us.saturating_mul(2).min(RETRY_MAX_US as u32);
     }
 }
