@@ -8,8 +8,9 @@ use amiro_sensors::drivers::floor::FloorSensors;
 use amiro_sensors::drivers::hmc5883l::Hmc5883l;
 use amiro_sensors::drivers::l3g4200d::L3g4200d;
 use amiro_sensors::drivers::suite::{
-    Compass, Device, InertialSensors, SampleError, SensorGroup, Supervised, INERTIAL_SET_UP_STEPS,
-    RETRY_FIRST_US, RETRY_MAX_US,
+    Compass, Device, InertialSensors, InitStep, SampleError, SensorGroup, Supervised,
+    FAILURES_BEFORE_RETRY, INERTIAL_PART_SET_UP_STEPS, INERTIAL_SET_UP_STEPS, RETRY_FIRST_US,
+    RETRY_MAX_US,
 };
 use amiro_sensors::drivers::vcnl4020::Vcnl4020;
 use amiro_sensors::drivers::{Error, IDENTITY_CHECK_EVERY};
@@ -259,18 +260,19 @@ fn a_dead_group_stops_publishing_is_counted_and_retried_with_back_off() {
             ..
         })
     ));
-    // Repaired: the next attempt brings it back in six steps, one access each (each part's
-    // identity checked, its configuration written, then read back), each release a step alone,
-    // and the release after the last publishes again.
+    // Repaired: the next attempt brings the gyroscope alone back in three steps, one access each
+    // (its identity checked, its configuration written, then read back), each release a step
+    // alone, and the release after the last publishes again. The accelerometer stayed in service.
+    assert!(group.is_part_ready(1));
     group.group_mut().gyroscope.bus_mut().set_stuck_miso(None);
     let back = group.retry_at_us();
-    for step in 0..u64::from(INERTIAL_SET_UP_STEPS) - 1 {
+    for step in 0..u64::from(INERTIAL_PART_SET_UP_STEPS) - 1 {
         let now = back + step * 2_000;
         assert!(group.sample(Topic::Gyroscope, now).is_empty());
         assert!(!group.is_ready(), "still missing after set-up step {step}");
         assert_eq!(group.retry_at_us(), now, "the next step at the next sample");
     }
-    let last = back + (u64::from(INERTIAL_SET_UP_STEPS) - 1) * 2_000;
+    let last = back + (u64::from(INERTIAL_PART_SET_UP_STEPS) - 1) * 2_000;
     assert!(group.sample(Topic::Gyroscope, last).is_empty());
     assert!(group.is_ready());
     assert_eq!(group.sample(Topic::Gyroscope, last + 2_000).len(), 1);
@@ -304,4 +306,174 @@ fn a_compass_that_nacks_from_now_on_is_counted_and_taken_out() {
             .len(),
         1
     );
+}
+
+/// The SPI pair through `Supervised`, sampled as two publishers would: `gyroscope_every_us` and
+/// `accelerometer_every_us` apart (the gyroscope first where both fall due), from `from_us` until
+/// `until_us`. Returns the frames each topic published.
+fn run_pair(
+    group: &mut Supervised<InertialSensors<SimGyroscope, SimAccelerometer>>,
+    from_us: u64,
+    until_us: u64,
+    gyroscope_every_us: u64,
+    accelerometer_every_us: u64,
+) -> (usize, usize) {
+    let step = 1_000;
+    let (mut gyroscope, mut accelerometer) = (0, 0);
+    let mut now = from_us;
+    while now < until_us {
+        if (now - from_us).is_multiple_of(gyroscope_every_us) {
+            gyroscope += group.sample(Topic::Gyroscope, now).len();
+        }
+        if (now - from_us).is_multiple_of(accelerometer_every_us) {
+            accelerometer += group.sample(Topic::Accelerometer, now).len();
+        }
+        now += step;
+    }
+    (gyroscope, accelerometer)
+}
+
+/// The waits between a part's failed re-initialisations, rounded up to whole seconds, as
+/// `Supervised` counts them in `faults`: 1, 2, 4, 8 s in a 20 s run.
+const RETRIES_IN_20_S: u32 = 4;
+
+/// Review finding (a): an accelerometer whose MISO sticks high, sampled every 5 ms, beside a
+/// gyroscope sampled every 20 ms. The accelerometer is taken out and retried with back-off on
+/// its own; every gyroscope sample publishes, before and after, and no retry of the
+/// accelerometer costs the gyroscope a frame.
+#[test]
+fn a_dead_accelerometer_sampled_more_often_never_stops_the_gyroscope() {
+    let mut group = Supervised::new(inertial());
+    assert_eq!(run_pair(&mut group, 0, 100_000, 20_000, 5_000), (5, 20));
+    group
+        .group_mut()
+        .accelerometer
+        .bus_mut()
+        .set_stuck_miso(Some(0xFF));
+    let (gyroscope, accelerometer) = run_pair(&mut group, 100_000, 20_100_000, 20_000, 5_000);
+    assert_eq!(gyroscope, 1_000, "every gyroscope sample of 20 s publishes");
+    assert_eq!(accelerometer, 0);
+    assert!(!group.is_ready(), "the group reports a sensor fault now");
+    assert_eq!(
+        group.faults(),
+        u32::from(FAILURES_BEFORE_RETRY) + RETRIES_IN_20_S,
+        "three failed samples, then one failed identity check per retry"
+    );
+    // Repaired: the accelerometer comes back within its wait (8 s) and its three steps.
+    group
+        .group_mut()
+        .accelerometer
+        .bus_mut()
+        .set_stuck_miso(None);
+    let (gyroscope, accelerometer) = run_pair(&mut group, 20_100_000, 29_100_000, 20_000, 5_000);
+    assert_eq!(gyroscope, 450);
+    assert!(accelerometer > 0);
+    assert!(group.is_ready());
+}
+
+/// Review finding (b): the same fault with the gyroscope sampled every 10 ms and the accelerometer
+/// every 20 ms. The gyroscope's successes do not keep the accelerometer in service: after its
+/// third failure in a row it is out (the "sensor fault now" flag set), retried with back-off (one
+/// fault per retry, not one per sample), and publishes again once repaired.
+#[test]
+fn a_dead_accelerometer_sampled_less_often_is_taken_out_and_retried() {
+    let mut group = Supervised::new(inertial());
+    group
+        .group_mut()
+        .accelerometer
+        .bus_mut()
+        .set_stuck_miso(Some(0xFF));
+    let (gyroscope, accelerometer) = run_pair(&mut group, 0, 60_000, 10_000, 20_000);
+    assert_eq!((gyroscope, accelerometer), (6, 0));
+    assert!(!group.is_ready(), "out after its third failed sample");
+    let (gyroscope, accelerometer) = run_pair(&mut group, 60_000, 20_060_000, 10_000, 20_000);
+    assert_eq!(gyroscope, 2_000);
+    assert_eq!(accelerometer, 0);
+    assert_eq!(
+        group.faults(),
+        u32::from(FAILURES_BEFORE_RETRY) + RETRIES_IN_20_S
+    );
+    assert!(matches!(
+        group.last_error(),
+        Some(SampleError::Device {
+            device: Device::Accelerometer,
+            ..
+        })
+    ));
+    group
+        .group_mut()
+        .accelerometer
+        .bus_mut()
+        .set_stuck_miso(None);
+    let (gyroscope, accelerometer) = run_pair(&mut group, 20_060_000, 29_060_000, 10_000, 20_000);
+    assert_eq!(gyroscope, 900);
+    assert!(accelerometer > 0, "re-initialised and publishing");
+    assert!(group.is_ready());
+}
+
+/// A part dead at boot leaves the other part's topic working from its first sample, and joins
+/// when it answers again.
+#[test]
+fn a_part_dead_at_boot_leaves_the_other_publishing() {
+    for dead_gyroscope in [false, true] {
+        let mut parts = InertialSensors::new(SimGyroscope::new(), SimAccelerometer::new());
+        if dead_gyroscope {
+            parts.gyroscope.bus_mut().set_stuck_miso(Some(0x00));
+        } else {
+            parts.accelerometer.bus_mut().set_stuck_miso(Some(0x00));
+        }
+        let mut group = Supervised::new(parts);
+        assert!(!group.is_ready());
+        assert_eq!(group.faults(), 1, "the dead part's set-up failed");
+        let (gyroscope, accelerometer) = run_pair(&mut group, 0, 5_000_000, 10_000, 10_000);
+        let (dead, alive) = if dead_gyroscope {
+            (gyroscope, accelerometer)
+        } else {
+            (accelerometer, gyroscope)
+        };
+        assert_eq!((dead, alive), (0, 500), "dead gyroscope: {dead_gyroscope}");
+        if dead_gyroscope {
+            group.group_mut().gyroscope.bus_mut().set_stuck_miso(None);
+        } else {
+            group
+                .group_mut()
+                .accelerometer
+                .bus_mut()
+                .set_stuck_miso(None);
+        }
+        let (gyroscope, accelerometer) =
+            run_pair(&mut group, 5_000_000, 15_000_000, 10_000, 10_000);
+        assert!(gyroscope > 0 && accelerometer > 0);
+        assert!(group.is_ready());
+    }
+}
+
+/// The whole pair's stepwise set-up (as `DiWheelDriveSensors` runs it): the gyroscope's three
+/// steps, then the accelerometer's; a failed step starts it again from the gyroscope.
+#[test]
+fn the_whole_pair_sets_up_in_six_steps_and_starts_again_after_a_failure() {
+    let mut group = InertialSensors::new(SimGyroscope::new(), SimAccelerometer::new());
+    group.accelerometer.bus_mut().set_stuck_miso(Some(0xFF));
+    for step in 0..INERTIAL_PART_SET_UP_STEPS {
+        assert_eq!(
+            group.init_step(u64::from(step)),
+            InitStep::Pending {
+                next_us: u64::from(step)
+            }
+        );
+    }
+    assert!(matches!(
+        group.init_step(3),
+        InitStep::Failed(SampleError::Device {
+            device: Device::Accelerometer,
+            ..
+        })
+    ));
+    group.accelerometer.bus_mut().set_stuck_miso(None);
+    for _ in 0..INERTIAL_SET_UP_STEPS - 1 {
+        assert!(matches!(group.init_step(10), InitStep::Pending { .. }));
+    }
+    assert_eq!(group.init_step(10), InitStep::Done);
+    assert!(group.gyroscope.bus_mut().is_configured_for_amiro());
+    assert!(group.accelerometer.bus_mut().is_configured_for_amiro());
 }

@@ -253,3 +253,50 @@ fn accel_milli_g_in_32_bits_equals_the_64_bit_definition_for_every_reading() {
         }
     }
 }
+
+/// The public structs hold any i32: the conversions to the protocol's units saturate at both ends
+/// of i16 without overflowing on the way (the rounding offset near i32::MAX and i32::MIN), and
+/// agree with rounding in 64 bits then saturating.
+#[test]
+fn conversions_saturate_at_the_i32_extremes_without_overflow() {
+    let wide = |value: i32| {
+        let v = i64::from(value);
+        let q = if v >= 0 {
+            (v + 500) / 1000
+        } else {
+            (v - 500) / 1000
+        };
+        q.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i16
+    };
+    let extremes = [
+        i32::MAX,
+        i32::MAX - 1,
+        i32::MAX - 499,
+        i32::MAX - 500,
+        i32::MIN,
+        i32::MIN + 1,
+        i32::MIN + 499,
+        i32::MIN + 500,
+        32_767_499,
+        32_767_500,
+        -32_768_499,
+        -32_768_500,
+        -1_500,
+        1_499,
+        0,
+    ];
+    for value in extremes {
+        let rate = AngularRate {
+            millidegrees_per_s: [value, value, value],
+        };
+        let acceleration = Acceleration {
+            micro_g: [value, value, value],
+        };
+        assert_eq!(rate.degrees_per_s(), [wide(value); 3], "{value} mdps");
+        assert_eq!(acceleration.milli_g(), [wide(value); 3], "{value} µg");
+    }
+    let rate = AngularRate {
+        millidegrees_per_s: [i32::MAX, i32::MIN, -1_500],
+    };
+    assert_eq!(rate.degrees_per_s(), [i16::MAX, i16::MIN, -2]);
+}

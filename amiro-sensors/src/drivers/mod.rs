@@ -243,15 +243,17 @@ pub(crate) const fn saturate_i16(value: i64) -> i16 {
     }
 }
 
-/// [`div_round`] in 32 bits, for values that fit: Rust's `/` truncates toward zero as the 64-bit
-/// one does, so the result is the same, and the Cortex-M3 divides by a constant without calling
-/// the 64-bit division routine (`__aeabi_ldivmod`, about 1 800 cycles bounded).
+/// [`div_round`] in 32 bits: Rust's `/` truncates toward zero as the 64-bit one does, so the
+/// result is the same, and the Cortex-M3 divides by a constant without calling the 64-bit division
+/// routine (`__aeabi_ldivmod`, about 1 800 cycles bounded). Within `half` of the i32 ends the
+/// rounding offset saturates (the callers' public structs can hold any i32), so the quotient is at
+/// most one below the 64-bit one in size there: no overflow, and the same side of every i16 end.
 pub(crate) const fn div_round_i32(numerator: i32, denominator: i32) -> i32 {
     let half = denominator / 2;
     if numerator >= 0 {
-        (numerator + half) / denominator
+        numerator.saturating_add(half) / denominator
     } else {
-        (numerator - half) / denominator
+        numerator.saturating_sub(half) / denominator
     }
 }
 

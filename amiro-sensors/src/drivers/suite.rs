@@ -154,6 +154,33 @@ pub trait SensorGroup {
         }
     }
 
+    /// How many parts [`Supervised`] watches apart (1 or [`SUPERVISED_PARTS`]): each part has its
+    /// own failures in a row, readiness and back-off, so a dead part takes out only the topics it
+    /// serves and its retries set up only itself. Default: the group is one part.
+    fn parts(&self) -> usize {
+        1
+    }
+
+    /// The part (0, or 1 where [`parts`](Self::parts) is 2) that serves `topic`. Default: 0.
+    fn part_of(&self, topic: Topic) -> usize {
+        let _ = topic;
+        0
+    }
+
+    /// Checks and configures `part` alone (boot). Default: [`init`](Self::init), for a group
+    /// of one part.
+    fn init_part(&mut self, part: usize) -> Result<(), SampleError> {
+        let _ = part;
+        self.init()
+    }
+
+    /// One step of `part`'s re-initialisation, as [`init_step`](Self::init_step) is the whole
+    /// group's. Default: [`init_step`](Self::init_step), for a group of one part.
+    fn init_part_step(&mut self, part: usize, now_us: u64) -> InitStep {
+        let _ = part;
+        self.init_step(now_us)
+    }
+
     /// Reads one sample of `topic`, taken at `now_us` (groups that reuse a recent reading use it).
     fn sample(&mut self, topic: Topic, now_us: u64) -> Result<Samples, SampleError>;
 
@@ -177,9 +204,13 @@ pub enum InitStep {
     Failed(SampleError),
 }
 
-/// The steps of [`InertialSensors`]' stepwise set-up, one SPI access each: each part's identity
-/// checked, its configuration written, then read back.
-pub const INERTIAL_SET_UP_STEPS: u8 = 6;
+/// The steps of one part of [`InertialSensors`] in a stepwise set-up, one SPI access each: its
+/// identity checked, its configuration written, then read back.
+pub const INERTIAL_PART_SET_UP_STEPS: u8 = 3;
+
+/// The steps of [`InertialSensors`]' whole stepwise set-up ([`SensorGroup::init_step`]): the
+/// gyroscope's, then the accelerometer's.
+pub const INERTIAL_SET_UP_STEPS: u8 = 2 * INERTIAL_PART_SET_UP_STEPS;
 
 /// DiWheelDrive 1-1's gyroscope and accelerometer (SPI1, each with its own chip select).
 #[derive(Debug)]
@@ -191,8 +222,12 @@ pub struct InertialSensors<G, A> {
     /// Each part's own periodic identity check, counted over its own topic's samples: the
     /// gyroscope's, then the accelerometer's.
     identity: [IdentitySchedule; 2],
-    /// The next step of a stepwise set-up ([`INERTIAL_SET_UP_STEPS`]).
-    next_to_init: u8,
+    /// Each part's next set-up step ([`INERTIAL_PART_SET_UP_STEPS`]): the gyroscope's, then the
+    /// accelerometer's.
+    next_step: [u8; 2],
+    /// Whether a whole-group stepwise set-up ([`SensorGroup::init_step`]) is at the
+    /// accelerometer.
+    whole_at_accelerometer: bool,
 }
 
 impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
@@ -202,7 +237,8 @@ impl<G: SpiDevice, A: SpiDevice> InertialSensors<G, A> {
             gyroscope: L3g4200d::new(gyroscope),
             accelerometer: Lis331dlh::new(accelerometer),
             identity: [IdentitySchedule { samples: 0 }; 2],
-            next_to_init: 0,
+            next_step: [0; 2],
+            whole_at_accelerometer: false,
         }
     }
 
@@ -225,47 +261,81 @@ impl<G: SpiDevice, A: SpiDevice> SensorGroup for InertialSensors<G, A> {
     }
 
     fn init(&mut self) -> Result<(), SampleError> {
-        self.next_to_init = 0;
-        self.gyroscope
-            .init()
-            .map_err(spi_error(Device::Gyroscope))?;
-        self.accelerometer
-            .init()
-            .map_err(spi_error(Device::Accelerometer))
+        self.whole_at_accelerometer = false;
+        self.init_part(0)?;
+        self.init_part(1)
     }
 
-    /// Six steps of one SPI access each: the gyroscope's identity checked, its configuration
-    /// written, read back; then the accelerometer's. A release that takes a step and, after the
-    /// last, the group's sample makes at most three accesses.
+    /// Supervised apart: part 0 the gyroscope, part 1 the accelerometer.
+    fn parts(&self) -> usize {
+        2
+    }
+
+    fn part_of(&self, topic: Topic) -> usize {
+        usize::from(topic == Topic::Accelerometer)
+    }
+
+    fn init_part(&mut self, part: usize) -> Result<(), SampleError> {
+        let accelerometer = part != 0;
+        self.next_step[usize::from(accelerometer)] = 0;
+        if accelerometer {
+            self.accelerometer
+                .init()
+                .map_err(spi_error(Device::Accelerometer))
+        } else {
+            self.gyroscope.init().map_err(spi_error(Device::Gyroscope))
+        }
+    }
+
+    /// Six steps of one SPI access each: the gyroscope's three
+    /// ([`init_part_step`](SensorGroup::init_part_step)), then the accelerometer's.
     fn init_step(&mut self, now_us: u64) -> InitStep {
-        let step = self.next_to_init;
-        let gyroscope = spi_error(Device::Gyroscope);
-        let accelerometer = spi_error(Device::Accelerometer);
-        let result = match step {
-            0 => self.gyroscope.check_identity().map_err(gyroscope),
-            1 => self.gyroscope.write_configuration().map_err(gyroscope),
-            2 => self.gyroscope.verify_configuration().map_err(gyroscope),
-            3 => self.accelerometer.check_identity().map_err(accelerometer),
-            4 => self
-                .accelerometer
-                .write_configuration()
-                .map_err(accelerometer),
-            _ => self
-                .accelerometer
-                .verify_configuration()
-                .map_err(accelerometer),
+        let accelerometer = self.whole_at_accelerometer;
+        match self.init_part_step(usize::from(accelerometer), now_us) {
+            InitStep::Done if !accelerometer => {
+                self.whole_at_accelerometer = true;
+                InitStep::Pending { next_us: now_us }
+            }
+            InitStep::Pending { next_us } => InitStep::Pending { next_us },
+            done_or_failed => {
+                self.whole_at_accelerometer = false;
+                done_or_failed
+            }
+        }
+    }
+
+    /// Three steps of one SPI access each for one part: its identity checked, its configuration
+    /// written, read back. A release takes a step or a sample, so it makes at most two accesses.
+    fn init_part_step(&mut self, part: usize, now_us: u64) -> InitStep {
+        let accelerometer = part != 0;
+        let index = usize::from(accelerometer);
+        let step = self.next_step[index];
+        let result = if accelerometer {
+            let error = spi_error(Device::Accelerometer);
+            match step {
+                0 => self.accelerometer.check_identity().map_err(error),
+                1 => self.accelerometer.write_configuration().map_err(error),
+                _ => self.accelerometer.verify_configuration().map_err(error),
+            }
+        } else {
+            let error = spi_error(Device::Gyroscope);
+            match step {
+                0 => self.gyroscope.check_identity().map_err(error),
+                1 => self.gyroscope.write_configuration().map_err(error),
+                _ => self.gyroscope.verify_configuration().map_err(error),
+            }
         };
         match result {
-            Ok(()) if step + 1 < INERTIAL_SET_UP_STEPS => {
-                self.next_to_init = step + 1;
+            Ok(()) if step + 1 < INERTIAL_PART_SET_UP_STEPS => {
+                self.next_step[index] = step + 1;
                 InitStep::Pending { next_us: now_us }
             }
             Ok(()) => {
-                self.next_to_init = 0;
+                self.next_step[index] = 0;
                 InitStep::Done
             }
             Err(error) => {
-                self.next_to_init = 0;
+                self.next_step[index] = 0;
                 InitStep::Failed(error)
             }
         }
@@ -1037,39 +1107,78 @@ pub const RETRY_MAX_US: u64 = 8_000_000;
 ///   [`RETRY_FIRST_US`].
 /// - [`faults`](Self::faults) counts every failed sample and every failed (re-)initialisation;
 ///   a topic the group does not serve is no fault.
+/// - A group of two parts ([`SensorGroup::parts`]: the SPI pair, gyroscope and accelerometer)
+///   has all of the above per part: each part is initialised, counts its failures in a row,
+///   goes missing, backs off and is set up again ([`SensorGroup::init_part_step`]) on its own,
+///   so a dead part stops only its own topic and a working part's samples neither keep it in
+///   service nor wait for it. [`faults`](Self::faults) and [`last_error`](Self::last_error) are
+///   the group's (both parts'); [`is_ready`](Self::is_ready) is false while either part is
+///   missing.
 #[derive(Debug, Clone)]
 pub struct Supervised<G> {
     group: G,
-    ready: bool,
     faults: u32,
-    consecutive_failures: u8,
-    retry_at_us: u64,
-    backoff_us: u64,
     last_error: Option<SampleError>,
+    /// Each part's state (a group of one part uses the first; the second stays ready).
+    parts: [PartWatch; SUPERVISED_PARTS],
+}
+
+/// The most parts a [`Supervised`] group watches apart.
+pub const SUPERVISED_PARTS: usize = 2;
+
+/// One part's supervision: whether it is ready, its failures in a row, and its back-off (the
+/// wait in 32 bits, at most [`RETRY_MAX_US`]: 16 bytes a part).
+#[derive(Debug, Clone, Copy)]
+struct PartWatch {
+    retry_at_us: u64,
+    backoff_us: u32,
+    consecutive_failures: u8,
+    ready: bool,
+}
+
+// The waits fit the part's 32-bit field.
+const _: () = assert!(RETRY_FIRST_US <= RETRY_MAX_US && RETRY_MAX_US <= u32::MAX as u64);
+
+impl PartWatch {
+    const READY: Self = Self {
+        retry_at_us: 0,
+        backoff_us: RETRY_FIRST_US as u32,
+        consecutive_failures: 0,
+        ready: true,
+    };
 }
 
 impl<G: SensorGroup> Supervised<G> {
-    /// Initialises `group` (boot, time 0).
+    /// Initialises `group` (boot, time 0), each of its parts on its own.
     pub fn new(mut group: G) -> Self {
-        let result = group.init();
-        Self::set_up(group, result)
+        let first = group.init_part(0);
+        let mut supervised = Self::set_up(group, first);
+        if supervised.group.parts() > 1 {
+            if let Err(error) = supervised.group.init_part(1) {
+                supervised.parts[1].ready = false;
+                supervised.missing(1, 0, error);
+            }
+        }
+        supervised
     }
 
-    /// One sample of `topic`: its frames, or none while the group is missing or when it failed.
+    /// One sample of `topic`: its frames, or none while its part is missing or when it failed.
     pub fn sample(&mut self, topic: Topic, now_us: u64) -> Samples {
-        match self.gate(self.group.serves(topic), now_us) {
+        let serves = self.group.serves(topic);
+        let part = usize::from(serves && self.group.part_of(topic) != 0);
+        match self.gate_part(part, serves, now_us) {
             Gate::Skip => return Samples::new(),
             Gate::SetUpStep => {
-                // A release takes a set-up step or a sample, never both: the group's first
+                // A release takes a set-up step or a sample, never both: the part's first
                 // sample is the release after its last step.
-                let step = self.group.init_step(now_us);
-                self.stepped(step, now_us);
+                let step = self.group.init_part_step(part, now_us);
+                self.stepped_part(part, step, now_us);
                 return Samples::new();
             }
             Gate::Sample => {}
         }
         let result = self.group.sample(topic, now_us);
-        self.sampled(result, now_us)
+        self.sampled_part(part, result, now_us)
     }
 }
 
@@ -1091,15 +1200,13 @@ impl<G> Supervised<G> {
     pub(crate) fn set_up(group: G, result: Result<(), SampleError>) -> Self {
         let mut supervised = Self {
             group,
-            ready: result.is_ok(),
             faults: 0,
-            consecutive_failures: 0,
-            retry_at_us: 0,
-            backoff_us: RETRY_FIRST_US,
             last_error: None,
+            parts: [PartWatch::READY; SUPERVISED_PARTS],
         };
         if let Err(error) = result {
-            supervised.missing(0, error);
+            supervised.parts[0].ready = false;
+            supervised.missing(0, 0, error);
         }
         supervised
     }
@@ -1108,14 +1215,21 @@ impl<G> Supervised<G> {
     /// take them, one each).
     pub(crate) fn set_up_pending(group: G, next_us: u64) -> Self {
         let mut supervised = Self::set_up(group, Ok(()));
-        supervised.ready = false;
-        supervised.retry_at_us = next_us;
+        supervised.parts[0].ready = false;
+        supervised.parts[0].retry_at_us = next_us;
         supervised
     }
 
-    /// Whether the group is initialised and its last samples worked.
+    /// Whether every part of the group is initialised and its last samples worked (false while
+    /// any part is missing: the board's "sensor fault now").
     pub const fn is_ready(&self) -> bool {
-        self.ready
+        self.parts[0].ready && self.parts[1].ready
+    }
+
+    /// Whether `part` ([`SensorGroup::part_of`]; any other than 0 is the second) is initialised
+    /// and its last samples worked.
+    pub const fn is_part_ready(&self, part: usize) -> bool {
+        self.parts[if part == 0 { 0 } else { 1 }].ready
     }
 
     /// Failed samples and failed (re-)initialisations since boot (saturating).
@@ -1128,9 +1242,15 @@ impl<G> Supervised<G> {
         self.last_error
     }
 
-    /// When a missing group is tried next (µs).
+    /// When a missing group is tried next (µs): its missing part's retry, the earlier of the
+    /// two where both are missing.
     pub const fn retry_at_us(&self) -> u64 {
-        self.retry_at_us
+        let [first, second] = self.parts;
+        if second.ready || (!first.ready && first.retry_at_us <= second.retry_at_us) {
+            first.retry_at_us
+        } else {
+            second.retry_at_us
+        }
     }
 
     /// The group, e.g. for a test to inspect its buses.
@@ -1143,67 +1263,93 @@ impl<G> Supervised<G> {
         &self.group
     }
 
-    /// What a sample at `now_us` of a topic the group `serves` (or not) begins with.
+    /// What a sample at `now_us` of a topic the group `serves` (or not) begins with (a group of
+    /// one part: the scripted path's).
     pub(crate) fn gate(&self, serves: bool, now_us: u64) -> Gate {
-        if !serves || (!self.ready && now_us < self.retry_at_us) {
+        self.gate_part(0, serves, now_us)
+    }
+
+    /// A set-up step of a group of one part ended with `step` ([`Self::stepped_part`]).
+    pub(crate) fn stepped(&mut self, step: InitStep, now_us: u64) {
+        self.stepped_part(0, step, now_us);
+    }
+
+    /// A sample of a group of one part ended with `result` ([`Self::sampled_part`]).
+    pub(crate) fn sampled(&mut self, result: Result<Samples, SampleError>, now_us: u64) -> Samples {
+        self.sampled_part(0, result, now_us)
+    }
+
+    /// What a sample at `now_us` of a topic of `part` the group `serves` (or not) begins with.
+    fn gate_part(&self, part: usize, serves: bool, now_us: u64) -> Gate {
+        let watch = &self.parts[if part == 0 { 0 } else { 1 }];
+        if !serves || (!watch.ready && now_us < watch.retry_at_us) {
             Gate::Skip
-        } else if !self.ready {
+        } else if !watch.ready {
             Gate::SetUpStep
         } else {
             Gate::Sample
         }
     }
 
-    /// A set-up step ended with `step`: the group ready after its last step (its next release
-    /// samples it), waiting for its next step, or missing again.
-    pub(crate) fn stepped(&mut self, step: InitStep, now_us: u64) {
+    /// A set-up step of `part` ended with `step`: the part ready after its last step (its next
+    /// release samples it), waiting for its next step, or missing again.
+    fn stepped_part(&mut self, part: usize, step: InitStep, now_us: u64) {
+        let index = if part == 0 { 0 } else { 1 };
         match step {
             InitStep::Done => {
-                self.ready = true;
-                self.consecutive_failures = 0;
+                self.parts[index].ready = true;
+                self.parts[index].consecutive_failures = 0;
             }
             InitStep::Pending { next_us } => {
                 // Not a fault: more devices to set up (the next at the next sample), or the
                 // group's parts are switching modes; the next step at `next_us` (the back-off is
                 // left as it is).
-                self.retry_at_us = next_us;
+                self.parts[index].retry_at_us = next_us;
             }
-            InitStep::Failed(error) => self.missing(now_us, error),
+            InitStep::Failed(error) => self.missing(index, now_us, error),
         }
     }
 
-    /// A sample ended with `result`: its frames, or none with the failure counted.
-    pub(crate) fn sampled(&mut self, result: Result<Samples, SampleError>, now_us: u64) -> Samples {
+    /// A sample of `part` ended with `result`: its frames, or none with the failure counted.
+    fn sampled_part(
+        &mut self,
+        part: usize,
+        result: Result<Samples, SampleError>,
+        now_us: u64,
+    ) -> Samples {
+        let index = if part == 0 { 0 } else { 1 };
         match result {
             Ok(samples) => {
-                self.consecutive_failures = 0;
-                self.backoff_us = RETRY_FIRST_US;
+                self.parts[index].consecutive_failures = 0;
+                self.parts[index].backoff_us = PartWatch::READY.backoff_us;
                 samples
             }
             Err(error) => {
                 self.faults = self.faults.saturating_add(1);
                 self.last_error = Some(error);
-                self.consecutive_failures = self.consecutive_failures.saturating_add(1);
-                if self.consecutive_failures >= FAILURES_BEFORE_RETRY {
-                    self.consecutive_failures = 0;
-                    self.back_off(now_us);
+                let watch = &mut self.parts[index];
+                watch.consecutive_failures = watch.consecutive_failures.saturating_add(1);
+                if watch.consecutive_failures >= FAILURES_BEFORE_RETRY {
+                    watch.consecutive_failures = 0;
+                    self.back_off(index, now_us);
                 }
                 Samples::new()
             }
         }
     }
 
-    /// A failed (re-)initialisation: count it, wait, and double the next wait.
-    fn missing(&mut self, now_us: u64, error: SampleError) {
+    /// A failed (re-)initialisation of `part`: count it, wait, and double the next wait.
+    fn missing(&mut self, part: usize, now_us: u64, error: SampleError) {
         self.faults = self.faults.saturating_add(1);
         self.last_error = Some(error);
-        self.back_off(now_us);
+        self.back_off(part, now_us);
     }
 
-    /// Stop sampling until the retry time, and double the wait after that.
-    fn back_off(&mut self, now_us: u64) {
-        self.ready = false;
-        self.retry_at_us = now_us.saturating_add(self.backoff_us);
-        self.backoff_us = self.backoff_us.saturating_mul(2).min(RETRY_MAX_US);
+    /// Stop sampling `part` until its retry time, and double its wait after that.
+    fn back_off(&mut self, part: usize, now_us: u64) {
+        let watch = &mut self.parts[if part == 0 { 0 } else { 1 }];
+        watch.ready = false;
+        watch.retry_at_us = now_us.saturating_add(u64::from(watch.backoff_us));
+        watch.backoff_us = watch.backoff_us.saturating_mul(2).min(RETRY_MAX_US as u32);
     }
 }
