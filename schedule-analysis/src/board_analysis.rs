@@ -194,6 +194,9 @@ fn inherit<J: Jobs, B: JobBounds>(timings: &mut [TaskTiming], meta: &J, bounds: 
             _ => {}
         }
     }
+    if !changed {
+        close_release_chains(timings.len(), meta, bounds);
+    }
     changed
 }
 
@@ -424,5 +427,26 @@ impl<J: Jobs> Pass<'_, J> {
         }
         bounds.put(i, result);
         Ok(())
+    }
+}
+
+/// After the last round: a job placed before its releaser in the order read the releaser's bound before the
+/// walk took it away, so release chains are followed to their ends, one link more a pass (a chain is at most
+/// every job long), until every job released by one without a bound has none either.
+fn close_release_chains<J: Jobs, B: JobBounds>(len: usize, meta: &J, bounds: &mut B) {
+    for _ in 0..len {
+        let mut lost = false;
+        for p in 0..len {
+            if bounds.wcrt(p).is_none() {
+                continue;
+            }
+            if let Some(Err(why)) = inherited(meta, bounds, p) {
+                bounds.put_unbound(p, why);
+                lost = true;
+            }
+        }
+        if !lost {
+            break;
+        }
     }
 }

@@ -120,9 +120,11 @@ fn the_bounds_files_state_the_release_rounds_the_tables_need() {
         .map(|(_, robot)| rounds_needed(robot))
         .max()
         .unwrap_or(1);
-    // Today's tables: PowerManagement's and LightRing's transmit interrupts are charged by their parts, whose rows
-    // are released by less urgent jobs (the command handler, the admission task, the publisher jobs).
-    assert_eq!(rounds, MAX_JITTER_ROUNDS);
+    // Today's shipped tables hold every transmit interrupt (charged as a whole), so no releaser is less urgent than
+    // what it releases and one round does; the files state the totals for MAX_JITTER_ROUNDS, which a table whose
+    // transmit interrupt is charged by its parts needs (its rows released by the command handler, the admission
+    // task, the publisher jobs), and the check below holds them to what today's tables need.
+    assert!((1..=MAX_JITTER_ROUNDS).contains(&rounds), "{rounds}");
     let (boards, jobs) = (3, 32);
     for board in ["diwheeldrive", "lightring", "powermgmt"] {
         let path = root()

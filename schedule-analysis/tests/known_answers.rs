@@ -1033,3 +1033,18 @@ fn a_suspending_jobs_segments_count_its_jitter_once() {
     let board = suspending_board(vec![board_task("h", 2, 10, 50), j], &[(1, 70)]);
     assert_eq!(board_wcrts_us(&board), vec![Some(10), Some(115)]);
 }
+
+/// A release chain whose head overloads: a (priority 1, 20 ms every 10 ms) has no bound, so neither has b
+/// (priority 3), which a releases, nor c (priority 5), which b releases. c is analysed before b (the more urgent
+/// first), so it read b's bound of the round before b lost it; the chain is followed to its end after the last round.
+/// Host and chip share this code (`board_analysis`).
+#[test]
+fn a_job_released_down_a_chain_from_an_overloaded_job_has_no_bound() {
+    let mut c = board_task("c", 5, 10, 10_000);
+    c.released_by = Some(1);
+    let mut b = board_task("b", 3, 10, 10_000);
+    b.released_by = Some(2);
+    let a = board_task("a", 1, 20_000, 10_000);
+    let board = suspending_board(vec![c, b, a], &[]);
+    assert_eq!(board_wcrts_us(&board), vec![None, None, None]);
+}
