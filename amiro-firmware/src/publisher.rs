@@ -109,9 +109,9 @@ fn serve_due<C: Clock, const N: usize>(
         } else {
             let samples = sampler.sample(topic, taken);
             let deadline = sample_deadline(taken, &release, period_us);
-            let frames = samples
-                .into_iter()
-                .map(|data| data.encode(release.priority));
+            // By reference: the sample stays where the sampler left it (no copy of its eight
+            // slots into an iterator).
+            let frames = samples.iter().map(|data| data.encode(release.priority));
             queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
         }
         cortex_m::peripheral::NVIC::pend(tx_interrupt);

@@ -39,10 +39,14 @@ impl Ranks {
 
     /// `level`'s place in the task's `levels`, or `None` when the task does not serve it.
     pub fn of_level(self, level: Priority) -> Option<u8> {
-        self.0
-            .get(usize::from(level.bits()))
-            .copied()
-            .filter(|&rank| rank != Self::NOT_SERVED)
+        Some(self.rank_of(level)).filter(|&rank| rank != Self::NOT_SERVED)
+    }
+
+    /// `level`'s place, [`Ranks::NOT_SERVED`] when the task does not serve it: the table walks'
+    /// per-row look-up (a level's bits are below `LEVELS`, so the index needs no check).
+    #[inline(always)]
+    fn rank_of(self, level: Priority) -> u8 {
+        self.0[usize::from(level.bits()) % LEVELS]
     }
 }
 
@@ -84,23 +88,33 @@ pub enum Next {
 /// each was a walk of its own.
 pub fn take_next(handler: &mut SensorDataHandler, ranks: Ranks, now_us: u64) -> Next {
     let rows = handler.publishers();
-    // The best row due so far: its (rank, due, topic byte), its place and its period.
-    let mut best: Option<((u8, u64, u8), usize, u32)> = None;
+    // The best row due so far by (rank, due, topic byte), and its place; the start is beaten by
+    // any row of a served level (whose rank is below `NOT_SERVED`), so a pass keeps no `Option`s
+    // of the key (this walk is most of the code around a release's sample: docs/analysis.md,
+    // "One topic's job").
+    let mut best_key = (Ranks::NOT_SERVED, u64::MAX, u8::MAX);
+    let mut best = None;
     let mut earliest: Option<u64> = None;
     let mut i = 0;
     while let Some(row) = rows.get(i) {
-        if let (Some(rank), Some(due)) = (ranks.of_level(row.priority()), row.next_due_us()) {
-            if due <= now_us {
-                let key = (rank, due, row.topic() as u8);
-                if best.is_none_or(|(best_key, _, _)| key < best_key) {
-                    best = Some((key, i, row.period_us()));
+        let rank = ranks.rank_of(row.priority());
+        if rank != Ranks::NOT_SERVED {
+            if let Some(due) = row.next_due_us() {
+                if due <= now_us {
+                    let key = (rank, due, row.topic() as u8);
+                    if key < best_key {
+                        best_key = key;
+                        best = Some(i);
+                    }
+                }
+                if earliest.is_none_or(|e| due < e) {
+                    earliest = Some(due);
                 }
             }
-            earliest = Some(earliest.map_or(due, |e| e.min(due)));
         }
         i += 1;
     }
-    let Some((_, row, period_us)) = best else {
+    let Some((row, period_us)) = best.and_then(|i| Some((i, rows.get(i)?.period_us()))) else {
         return Next::Park(earliest);
     };
     match handler.take_release_of_row(row, now_us) {
