@@ -80,47 +80,55 @@ pub enum Next {
 
 /// Takes the next release due at `now_us` for a task of `ranks`, or says when to look again, in one
 /// walk of the table. The release is that of the level of the task's `levels` that comes first and
-/// has a row due, its earliest due row there (ties to the lower topic byte): taking releases until
-/// this parks hands out the releases the levels' own loops would (`for level in levels`, take each
-/// level's [`SensorDataHandler::take_next_release`] until none), in their order. The walk that
-/// finds nothing due finds the earliest due time as it goes, so the task parks on it without
-/// another walk ([`next_due`]); where the task found a level and then took that level's release,
-/// each was a walk of its own.
+/// has a row due, its earliest due row there (ties to the row first in the table, which is the
+/// lower topic byte: `SensorDataHandler::new` fills the table in `Topic::ALL`'s order): taking
+/// releases until this parks hands out the releases the levels' own loops would (`for level in
+/// levels`, take each level's [`SensorDataHandler::take_next_release`] until none), in their
+/// order. The walk that finds nothing due finds the earliest due time as it goes, so the task
+/// parks on it without another walk ([`next_due`]); where the task found a level and then took
+/// that level's release, each was a walk of its own.
 pub fn take_next(handler: &mut SensorDataHandler, ranks: Ranks, now_us: u64) -> Next {
     let rows = handler.publishers();
-    // The best row due so far by (rank, due, topic byte), and its place; the start is beaten by
-    // any row of a served level (whose rank is below `NOT_SERVED`), so a pass keeps no `Option`s
-    // of the key (this walk is most of the code around a release's sample: docs/analysis.md,
-    // "One topic's job").
-    let mut best_key = (Ranks::NOT_SERVED, u64::MAX, u8::MAX);
-    let mut best = None;
-    let mut earliest: Option<u64> = None;
+    // One key per row of a served level with something to do: (its rank, its due time) when due
+    // at `now_us`, (NOT_SERVED, its due time) when not. The least key is the release to take
+    // when any row is due (every served rank is below NOT_SERVED), and else the earliest due
+    // time: one comparison a pass finds both (this walk, run twice a job, is most of the code
+    // around a release's sample: docs/analysis.md, "One topic's job").
+    let mut least = (Ranks::NOT_SERVED, u64::MAX);
+    let mut at: Option<usize> = None;
     let mut i = 0;
     while let Some(row) = rows.get(i) {
         let rank = ranks.rank_of(row.priority());
         if rank != Ranks::NOT_SERVED {
             if let Some(due) = row.next_due_us() {
-                if due <= now_us {
-                    let key = (rank, due, row.topic() as u8);
-                    if key < best_key {
-                        best_key = key;
-                        best = Some(i);
-                    }
-                }
-                if earliest.is_none_or(|e| due < e) {
-                    earliest = Some(due);
+                let key_rank = if due <= now_us {
+                    rank
+                } else {
+                    Ranks::NOT_SERVED
+                };
+                let key = (key_rank, due);
+                if at.is_none() || key < least {
+                    least = key;
+                    at = Some(i);
                 }
             }
         }
         i += 1;
     }
-    let Some((row, period_us)) = best.and_then(|i| Some((i, rows.get(i)?.period_us()))) else {
-        return Next::Park(earliest);
+    let (rank, due) = least;
+    let taken = match at {
+        None => return Next::Park(None),
+        Some(_) if rank == Ranks::NOT_SERVED => return Next::Park(Some(due)),
+        Some(row) => rows
+            .get(row)
+            .map(|r| r.period_us())
+            .and_then(|period_us| Some((handler.take_release_of_row(row, now_us)?, period_us))),
     };
-    match handler.take_release_of_row(row, now_us) {
-        Some(release) => Next::Release(release, period_us),
-        // Not taken: the walk found the row due, and nothing has changed the table since.
-        None => Next::Park(earliest),
+    match taken {
+        Some((release, period_us)) => Next::Release(release, period_us),
+        // Not taken: the walk found the row due, and nothing has changed the table since; were
+        // it not so, the task would look again at once (the row's due time, not after `now_us`).
+        None => Next::Park(Some(due)),
     }
 }
 
@@ -265,6 +273,39 @@ mod tests {
             }
         }
         assert!(some > 1_000, "{some} tables had something due");
+    }
+
+    #[test]
+    fn every_board_table_is_in_topic_byte_order() {
+        // take_next breaks a tie of rank and due time by the table's order, which must be the
+        // topic bytes' (take_next_release's and the protocol's order).
+        for board in amiro_can::Board::ALL {
+            let handler = SensorDataHandler::new(board);
+            let bytes: Vec<u8> = handler
+                .publishers()
+                .iter()
+                .map(|p| p.topic().byte())
+                .collect();
+            assert!(!bytes.is_empty(), "{board:?}");
+            assert!(
+                bytes.windows(2).all(|w| w[0] < w[1]),
+                "{board:?}: {bytes:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn equal_due_times_release_in_topic_byte_order() {
+        let mut handler = SensorDataHandler::new(Board::DiWheelDrive);
+        // Every topic one-shot at the same instant and level: released in the table's order.
+        let topics: Vec<Topic> = handler.publishers().iter().map(|p| p.topic()).collect();
+        for &topic in topics.iter().rev() {
+            let id = CanId::new(Kind::Command, Priority::Medium, topic.byte()).raw();
+            let _ = handler.on_frame(100, id, &[2]);
+        }
+        let got = one_walk(&mut handler, &[Priority::Medium], 5_000);
+        let order: Vec<Topic> = got.iter().map(|r| r.topic).collect();
+        assert_eq!(order, topics);
     }
 
     #[test]
