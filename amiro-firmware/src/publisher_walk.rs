@@ -309,6 +309,23 @@ mod tests {
     }
 
     #[test]
+    fn a_fresh_table_has_nothing_due_at_any_level() {
+        // serve_level parks on the wake channel alone at first, without a walk: a fresh table must
+        // have nothing due, so that only a command (which wakes the levels it gives a due time)
+        // starts a release.
+        for board in amiro_can::Board::ALL {
+            let handler = SensorDataHandler::new(board);
+            for levels in LEVEL_SETS {
+                assert_eq!(next_due(&handler, Ranks::of(levels)), None, "{board:?}");
+            }
+            assert!(handler
+                .publishers()
+                .iter()
+                .all(|p| p.next_due_us().is_none()));
+        }
+    }
+
+    #[test]
     fn ranks_keep_each_level_first_place() {
         let ranks = Ranks::of(&[Priority::Medium, Priority::Urgent, Priority::Medium]);
         assert_eq!(ranks.of_level(Priority::Medium), Some(0));
