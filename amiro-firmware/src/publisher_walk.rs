@@ -275,6 +275,66 @@ mod tests {
         assert!(some > 1_000, "{some} tables had something due");
     }
 
+    /// The walk as it was before its one key a row (a key of rank, due time and topic byte among
+    /// the due rows, the earliest due time apart): the oracle of the property test below.
+    fn take_next_before(handler: &mut SensorDataHandler, ranks: Ranks, now_us: u64) -> Next {
+        let rows = handler.publishers();
+        let mut best: Option<((u8, u64, u8), usize, u32)> = None;
+        let mut earliest: Option<u64> = None;
+        for (i, row) in rows.iter().enumerate() {
+            if let (Some(rank), Some(due)) = (ranks.of_level(row.priority()), row.next_due_us()) {
+                if due <= now_us {
+                    let key = (rank, due, row.topic() as u8);
+                    if best.is_none_or(|(best_key, _, _)| key < best_key) {
+                        best = Some((key, i, row.period_us()));
+                    }
+                }
+                earliest = Some(earliest.map_or(due, |e| e.min(due)));
+            }
+        }
+        let Some((_, row, period_us)) = best else {
+            return Next::Park(earliest);
+        };
+        match handler.take_release_of_row(row, now_us) {
+            Some(release) => Next::Release(release, period_us),
+            None => Next::Park(earliest),
+        }
+    }
+
+    #[test]
+    fn the_one_key_walk_answers_as_the_walk_before_it() {
+        let mut seed = 0xD1B5_4A32_D192_ED03u64;
+        let (mut releases, mut parks) = (0, 0);
+        for round in 0..400u64 {
+            let at = 1 + round * 613;
+            for levels in LEVEL_SETS {
+                let ranks = Ranks::of(levels);
+                let table = random_table(&mut seed, at);
+                let (mut old, mut new) = (table.clone(), table);
+                for now in [at, at + 50, at + 7_000] {
+                    // Every step of a job and the park that ends it, answer for answer.
+                    for _ in 0..=new.publishers().len() {
+                        let expected = take_next_before(&mut old, ranks, now);
+                        let got = take_next(&mut new, ranks, now);
+                        assert_eq!(got, expected, "levels {levels:?} at {now}");
+                        assert_eq!(new.publishers(), old.publishers());
+                        match got {
+                            Next::Release(..) => releases += 1,
+                            Next::Park(_) => {
+                                parks += 1;
+                                break;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            releases > 1_000 && parks > 1_000,
+            "{releases} releases, {parks} parks"
+        );
+    }
+
     #[test]
     fn every_board_table_is_in_topic_byte_order() {
         // take_next breaks a tie of rank and due time by the table's order, which must be the
