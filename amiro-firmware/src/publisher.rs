@@ -49,9 +49,9 @@ pub async fn serve_level<C: Clock, const N: usize>(
     tx_interrupt: impl InterruptNumber,
 ) -> ! {
     let ranks = Ranks::of(levels);
-    // The first due time from a walk of its own; after that each from the walk that ended the
-    // last pass of releases (a command that changes the table meanwhile wakes the task).
-    let mut due = handler.lock(|h| next_due(h, ranks));
+    // Nothing due at first (a fresh table's rows are stopped; publisher_walk's tests), and a command
+    // giving a row a due time wakes the task; then each due time from the last pass's walk.
+    let mut due: Option<u64> = None;
     loop {
         match due {
             Some(due) => {
@@ -109,9 +109,9 @@ fn serve_due<C: Clock, const N: usize>(
         } else {
             let samples = sampler.sample(topic, taken);
             let deadline = sample_deadline(taken, &release, period_us);
-            let frames = samples
-                .into_iter()
-                .map(|data| data.encode(release.priority));
+            // By reference: the sample stays where the sampler left it (no copy of its eight
+            // slots into an iterator).
+            let frames = samples.iter().map(|data| data.encode(release.priority));
             queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
         }
         cortex_m::peripheral::NVIC::pend(tx_interrupt);

@@ -39,10 +39,14 @@ impl Ranks {
 
     /// `level`'s place in the task's `levels`, or `None` when the task does not serve it.
     pub fn of_level(self, level: Priority) -> Option<u8> {
-        self.0
-            .get(usize::from(level.bits()))
-            .copied()
-            .filter(|&rank| rank != Self::NOT_SERVED)
+        Some(self.rank_of(level)).filter(|&rank| rank != Self::NOT_SERVED)
+    }
+
+    /// `level`'s place, [`Ranks::NOT_SERVED`] when the task does not serve it: the table walks'
+    /// per-row look-up (a level's bits are below `LEVELS`, so the index needs no check).
+    #[inline(always)]
+    fn rank_of(self, level: Priority) -> u8 {
+        self.0[usize::from(level.bits()) % LEVELS]
     }
 }
 
@@ -76,37 +80,55 @@ pub enum Next {
 
 /// Takes the next release due at `now_us` for a task of `ranks`, or says when to look again, in one
 /// walk of the table. The release is that of the level of the task's `levels` that comes first and
-/// has a row due, its earliest due row there (ties to the lower topic byte): taking releases until
-/// this parks hands out the releases the levels' own loops would (`for level in levels`, take each
-/// level's [`SensorDataHandler::take_next_release`] until none), in their order. The walk that
-/// finds nothing due finds the earliest due time as it goes, so the task parks on it without
-/// another walk ([`next_due`]); where the task found a level and then took that level's release,
-/// each was a walk of its own.
+/// has a row due, its earliest due row there (ties to the row first in the table, which is the
+/// lower topic byte: `SensorDataHandler::new` fills the table in `Topic::ALL`'s order): taking
+/// releases until this parks hands out the releases the levels' own loops would (`for level in
+/// levels`, take each level's [`SensorDataHandler::take_next_release`] until none), in their
+/// order. The walk that finds nothing due finds the earliest due time as it goes, so the task
+/// parks on it without another walk ([`next_due`]); where the task found a level and then took
+/// that level's release, each was a walk of its own.
 pub fn take_next(handler: &mut SensorDataHandler, ranks: Ranks, now_us: u64) -> Next {
     let rows = handler.publishers();
-    // The best row due so far: its (rank, due, topic byte), its place and its period.
-    let mut best: Option<((u8, u64, u8), usize, u32)> = None;
-    let mut earliest: Option<u64> = None;
+    // One key per row of a served level with something to do: (its rank, its due time) when due
+    // at `now_us`, (NOT_SERVED, its due time) when not. The least key is the release to take
+    // when any row is due (every served rank is below NOT_SERVED), and else the earliest due
+    // time: one comparison a pass finds both (this walk, run twice a job, is most of the code
+    // around a release's sample: docs/analysis.md, "One topic's job").
+    let mut least = (Ranks::NOT_SERVED, u64::MAX);
+    let mut at: Option<usize> = None;
     let mut i = 0;
     while let Some(row) = rows.get(i) {
-        if let (Some(rank), Some(due)) = (ranks.of_level(row.priority()), row.next_due_us()) {
-            if due <= now_us {
-                let key = (rank, due, row.topic() as u8);
-                if best.is_none_or(|(best_key, _, _)| key < best_key) {
-                    best = Some((key, i, row.period_us()));
+        let rank = ranks.rank_of(row.priority());
+        if rank != Ranks::NOT_SERVED {
+            if let Some(due) = row.next_due_us() {
+                let key_rank = if due <= now_us {
+                    rank
+                } else {
+                    Ranks::NOT_SERVED
+                };
+                let key = (key_rank, due);
+                if at.is_none() || key < least {
+                    least = key;
+                    at = Some(i);
                 }
             }
-            earliest = Some(earliest.map_or(due, |e| e.min(due)));
         }
         i += 1;
     }
-    let Some((_, row, period_us)) = best else {
-        return Next::Park(earliest);
+    let (rank, due) = least;
+    let taken = match at {
+        None => return Next::Park(None),
+        Some(_) if rank == Ranks::NOT_SERVED => return Next::Park(Some(due)),
+        Some(row) => rows
+            .get(row)
+            .map(|r| r.period_us())
+            .and_then(|period_us| Some((handler.take_release_of_row(row, now_us)?, period_us))),
     };
-    match handler.take_release_of_row(row, now_us) {
-        Some(release) => Next::Release(release, period_us),
-        // Not taken: the walk found the row due, and nothing has changed the table since.
-        None => Next::Park(earliest),
+    match taken {
+        Some((release, period_us)) => Next::Release(release, period_us),
+        // Not taken: the walk found the row due, and nothing has changed the table since; were
+        // it not so, the task would look again at once (the row's due time, not after `now_us`).
+        None => Next::Park(Some(due)),
     }
 }
 
@@ -251,6 +273,116 @@ mod tests {
             }
         }
         assert!(some > 1_000, "{some} tables had something due");
+    }
+
+    /// The walk as it was before its one key a row (a key of rank, due time and topic byte among
+    /// the due rows, the earliest due time apart): the oracle of the property test below.
+    fn take_next_before(handler: &mut SensorDataHandler, ranks: Ranks, now_us: u64) -> Next {
+        let rows = handler.publishers();
+        let mut best: Option<((u8, u64, u8), usize, u32)> = None;
+        let mut earliest: Option<u64> = None;
+        for (i, row) in rows.iter().enumerate() {
+            if let (Some(rank), Some(due)) = (ranks.of_level(row.priority()), row.next_due_us()) {
+                if due <= now_us {
+                    let key = (rank, due, row.topic() as u8);
+                    if best.is_none_or(|(best_key, _, _)| key < best_key) {
+                        best = Some((key, i, row.period_us()));
+                    }
+                }
+                earliest = Some(earliest.map_or(due, |e| e.min(due)));
+            }
+        }
+        let Some((_, row, period_us)) = best else {
+            return Next::Park(earliest);
+        };
+        match handler.take_release_of_row(row, now_us) {
+            Some(release) => Next::Release(release, period_us),
+            None => Next::Park(earliest),
+        }
+    }
+
+    #[test]
+    fn the_one_key_walk_answers_as_the_walk_before_it() {
+        let mut seed = 0xD1B5_4A32_D192_ED03u64;
+        let (mut releases, mut parks) = (0, 0);
+        for round in 0..400u64 {
+            let at = 1 + round * 613;
+            for levels in LEVEL_SETS {
+                let ranks = Ranks::of(levels);
+                let table = random_table(&mut seed, at);
+                let (mut old, mut new) = (table.clone(), table);
+                for now in [at, at + 50, at + 7_000] {
+                    // Every step of a job and the park that ends it, answer for answer.
+                    for _ in 0..=new.publishers().len() {
+                        let expected = take_next_before(&mut old, ranks, now);
+                        let got = take_next(&mut new, ranks, now);
+                        assert_eq!(got, expected, "levels {levels:?} at {now}");
+                        assert_eq!(new.publishers(), old.publishers());
+                        match got {
+                            Next::Release(..) => releases += 1,
+                            Next::Park(_) => {
+                                parks += 1;
+                                break;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            releases > 1_000 && parks > 1_000,
+            "{releases} releases, {parks} parks"
+        );
+    }
+
+    #[test]
+    fn every_board_table_is_in_topic_byte_order() {
+        // take_next breaks a tie of rank and due time by the table's order, which must be the
+        // topic bytes' (take_next_release's and the protocol's order).
+        for board in amiro_can::Board::ALL {
+            let handler = SensorDataHandler::new(board);
+            let bytes: Vec<u8> = handler
+                .publishers()
+                .iter()
+                .map(|p| p.topic().byte())
+                .collect();
+            assert!(!bytes.is_empty(), "{board:?}");
+            assert!(
+                bytes.windows(2).all(|w| w[0] < w[1]),
+                "{board:?}: {bytes:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn equal_due_times_release_in_topic_byte_order() {
+        let mut handler = SensorDataHandler::new(Board::DiWheelDrive);
+        // Every topic one-shot at the same instant and level: released in the table's order.
+        let topics: Vec<Topic> = handler.publishers().iter().map(|p| p.topic()).collect();
+        for &topic in topics.iter().rev() {
+            let id = CanId::new(Kind::Command, Priority::Medium, topic.byte()).raw();
+            let _ = handler.on_frame(100, id, &[2]);
+        }
+        let got = one_walk(&mut handler, &[Priority::Medium], 5_000);
+        let order: Vec<Topic> = got.iter().map(|r| r.topic).collect();
+        assert_eq!(order, topics);
+    }
+
+    #[test]
+    fn a_fresh_table_has_nothing_due_at_any_level() {
+        // serve_level parks on the wake channel alone at first, without a walk: a fresh table must
+        // have nothing due, so that only a command (which wakes the levels it gives a due time)
+        // starts a release.
+        for board in amiro_can::Board::ALL {
+            let handler = SensorDataHandler::new(board);
+            for levels in LEVEL_SETS {
+                assert_eq!(next_due(&handler, Ranks::of(levels)), None, "{board:?}");
+            }
+            assert!(handler
+                .publishers()
+                .iter()
+                .all(|p| p.next_due_us().is_none()));
+        }
     }
 
     #[test]
