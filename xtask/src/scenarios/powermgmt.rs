@@ -312,9 +312,9 @@ const DECISIONS_WARNED: &str = "21E#01050000";
 const DECISIONS_WARNED_US: u64 = 5_000;
 
 /// The ring's period at urgent in `admission-other-board`: the shortest whole milliseconds at
-/// which the ring alone is admitted (6 ms before the power monitor's bound was used, refused now
-/// for the ring's own frames, 6 186 of 6 000 µs on 2026-12-05).
-const OTHER_BOARD_RING: &str = "01F#01070000";
+/// which the ring alone is admitted (at 5 ms its own frames miss, 5 646 of 5 000 µs on
+/// 2026-12-05).
+const OTHER_BOARD_RING: &str = "01F#01060000";
 
 fn admission_other_board(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let v = super::ring_refused_for_odometry(out)?;
@@ -327,7 +327,7 @@ fn admission_other_board(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let alone = super::host_admission(bounds.root(), &[], OTHER_BOARD_RING)?;
     ensure!(
         alone.refusal.is_none(),
-        "the ring at urgent every 7 ms ({OTHER_BOARD_RING}) is refused even alone: {:?}",
+        "the ring at urgent every 6 ms ({OTHER_BOARD_RING}) is refused even alone: {:?}",
         alone.refusal
     );
     ensure!(
