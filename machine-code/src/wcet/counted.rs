@@ -225,7 +225,7 @@ fn counted_at_top(
                 entry_range(insns, cfg, blk, end, counter, args, &mut Vec::new())?
             }
         };
-        if high - low > MAX_ARGUMENT {
+        if high - low >= MAX_ARGUMENT {
             return None;
         }
         for start in low..=high {
