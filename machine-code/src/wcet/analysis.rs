@@ -623,6 +623,31 @@ impl<'a> Analysis<'a> {
                         f.name
                     )));
                 };
+                // A loop whose header's test ends it on the count its entry value (the length, or a
+                // constant) gives: counted per entry as [`counted::counted`]'s loops tested at the
+                // top are, a way out from its body charged after one pass fewer.
+                if let Some(c) = counted::counted_from_arguments(insns, &graph, l, &args) {
+                    loops_info.push(LoopInfo {
+                        function: f.name.clone(),
+                        file: file.clone(),
+                        line,
+                        bound: c.header,
+                        source: format!(
+                            "length: at most {n} at the call (r{r}); {}; at most {} passes on past it",
+                            c.how,
+                            c.body.unwrap_or(c.header)
+                        ),
+                    });
+                    loop_nodes.push(LoopNodes {
+                        header: l.header,
+                        body: l.body.clone(),
+                        count: LoopCount::Body {
+                            header: c.header,
+                            body: c.body.unwrap_or(c.header),
+                        },
+                    });
+                    continue;
+                }
                 let (moved, factor) = length::moved_by(&f.name);
                 let units = u64::from(n) * factor;
                 shared_count = Some(units);

@@ -113,7 +113,30 @@ pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<Counted> {
     }
     // The header's one way into the body is its test's, which leaves on the run the count gives:
     // every run before it goes on, that one does not.
-    counted_at_top(insns, cfg, l).map(|(header, how)| Counted {
+    counted_at_top(insns, cfg, l, None).map(|(header, how)| Counted {
+        header,
+        body: Some(header.saturating_sub(1)),
+        how,
+    })
+}
+
+/// The most entry values of an argument's counter that are run through the header's test (one run
+/// per value the argument may hold): above it, the loop is left to its per-call count.
+const MAX_ARGUMENT: u32 = 1 << 12;
+
+/// A loop of a function called with its argument registers bounded by `args` (a `per_element` or
+/// memory function's length, fixed at the call), tested at its top as [`counted`]'s are, whose
+/// counter comes on every way in from an argument register not written since the function's entry
+/// (directly or through register moves) or from a constant: its header runs at most the most any
+/// entry value from 0 to the argument's bound gives, and as with [`counted`]'s loops tested at the
+/// top, at most one pass fewer go on past it.
+pub fn counted_from_arguments(
+    insns: &[Insn],
+    cfg: &Cfg,
+    l: &Loop,
+    args: &super::length::Args,
+) -> Option<Counted> {
+    counted_at_top(insns, cfg, l, Some(args)).map(|(header, how)| Counted {
         header,
         body: Some(header.saturating_sub(1)),
         how,
@@ -123,7 +146,12 @@ pub fn counted(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<Counted> {
 /// A loop whose header ends in a conditional branch out of the loop on a `CMP rX, #c`, with rX stepped
 /// by a constant exactly once on every way around (in one block every way back passes) and set to a
 /// constant on every way in. Other exits only end it sooner.
-fn counted_at_top(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> {
+fn counted_at_top(
+    insns: &[Insn],
+    cfg: &Cfg,
+    l: &Loop,
+    args: Option<&super::length::Args>,
+) -> Option<(u64, String)> {
     let header = &cfg.blocks[l.header];
     let branch = &insns[header.last];
     // One edge out of the loop, one in: whether taking the branch leaves.
@@ -187,15 +215,29 @@ fn counted_at_top(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> 
         if l.body.contains(&blk) || !block.succs.iter().any(|e| e.to == l.header) {
             continue;
         }
-        let start = initial(insns, cfg, blk, counter, &mut Vec::new())?;
-        most = most.max(run_top(
-            start,
-            &step,
-            limit,
-            code,
-            taken_leaves,
-            stepped_first,
-        )?);
+        let (low, high) = match args {
+            None => {
+                let start = initial(insns, cfg, blk, counter, &mut Vec::new())?;
+                (start, start)
+            }
+            Some(args) => {
+                let end = cfg.blocks[blk].last + 1;
+                entry_range(insns, cfg, blk, end, counter, args, &mut Vec::new())?
+            }
+        };
+        if high - low >= MAX_ARGUMENT {
+            return None;
+        }
+        for start in low..=high {
+            most = most.max(run_top(
+                start,
+                &step,
+                limit,
+                code,
+                taken_leaves,
+                stepped_first,
+            )?);
+        }
         found_entry = true;
     }
     if !found_entry {
@@ -204,7 +246,12 @@ fn counted_at_top(insns: &[Insn], cfg: &Cfg, l: &Loop) -> Option<(u64, String)> 
     Some((
         most,
         format!(
-            "counted: r{counter} from its entry value by {}{}, compared with #{limit} at the loop's top",
+            "counted: r{counter} from its entry value{} by {}{}, compared with #{limit} at the loop's top",
+            if args.is_some() {
+                " (an argument's bound at the call, or a constant)"
+            } else {
+                ""
+            },
             if step.add { '+' } else { '-' },
             step.k
         ),
@@ -496,6 +543,65 @@ fn initial(insns: &[Insn], cfg: &Cfg, b: usize, r: u8, on_the_way: &mut Vec<usiz
     }
     on_the_way.pop();
     value
+}
+
+/// The values register `r` may hold before instruction `end` of block `b` (an index into `insns`),
+/// as a range: a constant `MOV` gives one value; a register `MOV` the values of its source before
+/// it; no write back to the function's entry the argument's bound in `args` (from 0). `None` where
+/// any way in writes it otherwise, or an argument is not bounded.
+fn entry_range(
+    insns: &[Insn],
+    cfg: &Cfg,
+    b: usize,
+    end: usize,
+    r: u8,
+    args: &super::length::Args,
+    on_the_way: &mut Vec<(usize, u8)>,
+) -> Option<(u32, u32)> {
+    let first = cfg.blocks[b].first;
+    if let Some(at) = (first..end)
+        .rev()
+        .find(|&at| insns[at].writes().contains(r))
+    {
+        let last = &insns[at];
+        if last.conditional || last.inst.opcode != Opcode::MOV || last.outlined.is_some() {
+            return None;
+        }
+        if let Some(c) = last.immediate() {
+            return (last.registers() == [r]).then_some((c, c));
+        }
+        // `mov r, rX`: rX's values before it.
+        let (Operand::Reg(to), Operand::Reg(from)) = (last.inst.operands[0], last.inst.operands[1])
+        else {
+            return None;
+        };
+        if to.number() != r || !matches!(last.inst.operands[2], Operand::Nothing) {
+            return None;
+        }
+        return entry_range(insns, cfg, b, at, from.number(), args, on_the_way);
+    }
+    if b == 0 {
+        // The entry's arguments, where nothing branches back to the entry.
+        let entered_again = cfg.blocks.iter().any(|p| p.succs.iter().any(|e| e.to == 0));
+        return (!entered_again)
+            .then(|| args.get(usize::from(r)).copied().flatten())
+            .flatten()
+            .map(|n| (0, n));
+    }
+    if on_the_way.contains(&(b, r)) {
+        return None;
+    }
+    on_the_way.push((b, r));
+    let mut range: Option<(u32, u32)> = None;
+    for (p, pred) in cfg.blocks.iter().enumerate() {
+        if pred.succs.iter().any(|e| e.to == b) {
+            let (low, high) =
+                entry_range(insns, cfg, p, cfg.blocks[p].last + 1, r, args, on_the_way)?;
+            range = Some(range.map_or((low, high), |(l, h)| (l.min(low), h.max(high))));
+        }
+    }
+    on_the_way.pop();
+    range
 }
 
 /// The header's executions: each pass steps the counter and branches back while the condition

@@ -2257,3 +2257,148 @@ fn a_length_fixed_at_a_call_bounds_a_per_element_loop_two_calls_down() {
     assert!(reason.contains(length::LENGTH_UNKNOWN), "{reason}");
     assert!(reason.contains("the call in read"), "{reason}");
 }
+
+/// The I2C driver's byte loop (`Master::send`): `transfer` fixes the length in r2 (`movs r2, #n`) and
+/// calls `send`, a `per_element` function (its length in r2) that copies the length to r4, tests it
+/// at the loop's top (`cbz r4`), calls `poll` (a flag read) and leaves on a fault (`cmp r0, #7;
+/// bne`) from inside the body, then steps r4 and goes back. `count` is the instruction that sets r4
+/// (`mov r4, r2`, or `ldr r4, [r0]`: a count the length does not give); `fault` the instructions the
+/// way out from the body runs before its `pop` (none: it branches to the common `pop`).
+fn byte_loop(n: u16, count: u16, fault: &[u16]) -> Image {
+    let k = u16::try_from(fault.len()).expect("a short fault path");
+    // The fault path at 0x22, its pop after it; `poll` after that.
+    let (bne, poll) = if fault.is_empty() {
+        (0xd102, 0x22) // bne 0x20
+    } else {
+        (0xd103, 0x22 + 2 * k + 2) // bne 0x22
+    };
+    let mut code = vec![
+        0xb580,     // 0x00 push {r7, lr}    (transfer)
+        0x2200 | n, // 0x02 movs r2, #n
+        0xf000,
+        0xf802, // 0x04 bl 0x0c (send)
+        0xbd80, // 0x08 pop {r7, pc}
+        0xbf00, // 0x0a
+        0xb510, // 0x0c push {r4, lr}    (send)
+        count,  // 0x0e mov r4, r2 | ldr r4, [r0]
+        0xb12c, // 0x10 cbz r4, 0x1e     (the header)
+        0xf000,
+        0xf800 | ((poll - 0x16) / 2), // 0x12 bl poll
+        0x2807,                       // 0x16 cmp r0, #7
+        bne,                          // 0x18 bne fault        (the way out from the body)
+        0x3c01,                       // 0x1a subs r4, #1
+        0xe7f8,                       // 0x1c b 0x10
+        0x2007,                       // 0x1e movs r0, #7      (the header's way out)
+        0xbd10,                       // 0x20 pop {r4, pc}
+    ];
+    if !fault.is_empty() {
+        code.extend_from_slice(fault); // 0x22 the fault path
+        code.push(0xbd10); // pop {r4, pc}
+    }
+    code.extend_from_slice(&[
+        0x6808, // poll: ldr r0, [r1]
+        0x4770, // bx lr
+    ]);
+    image(
+        &code,
+        &[
+            Sym::function("transfer", 0, 0x0c),
+            Sym::function("send", 0x0c, u64::from(poll) - 0x0c),
+            Sym::function("poll", u64::from(poll), 4),
+        ],
+    )
+}
+
+fn byte_loop_bound(img: &Image) -> Bound {
+    let stated = BoundsFile::parse(
+        r#"{"per_element":[{"function":"send","register":2,"reason":"one pass per byte"}]}"#,
+    )
+    .unwrap();
+    bound_function(img, "transfer", F103_0WS, &stated).unwrap()
+}
+
+/// `ldr r0, [r1]` from an address the analysis does not know, on the F103 at 0 wait states: 2
+/// cycles, and 5 more for the access, charged as an APB1 peripheral's (2 × 2 + 1).
+const UNKNOWN_LOAD: u64 = 7;
+
+#[test]
+fn a_per_element_loop_left_from_its_body_is_charged_its_passes_up_to_the_exit() {
+    // Instructions: transfer's push, movs, bl, pop (4); send's push, mov (2). A pass: cbz (not
+    // taken), bl, ldr, bx lr, cmp, bne (not taken), subs, b: 8. The header's way out: cbz (taken),
+    // then movs, pop: 3. The body's: cbz, bl, ldr, bx lr, cmp, bne (taken), then pop: 7. The header
+    // runs at most n + 1 times and its test (r4, the length, stepped by −1 to 0) ends the loop on
+    // the last, so at most n passes go into the body: n passes and the header's way out (8n + 3), or
+    // n − 1 passes and the body's (8n − 1). The longest run: 6 + 8n + 3 = 8n + 9 instructions.
+    // Cycles (TRM, P = 3, L the load): push 3, movs 1, bl 4, pop with pc 6 (transfer 14); push 3,
+    // mov 1; a pass 1 + 4 + L + 4 + 1 + 1 + 1 + 4 = 16 + L; the header's way out 4 + 1 + 6 = 11, the
+    // body's 1 + 4 + L + 4 + 1 + 4 + 6 = 20 + L, less than a pass and the header's: 29 + n(16 + L).
+    // Charging the body's way out after n whole passes (n + 1 polls, as a per-element loop was)
+    // would be 8n + 14 instructions and n(16 + L) + 46 cycles (the loop's longest way out, the
+    // body's, before its longer exit, movs and pop).
+    let l = UNKNOWN_LOAD;
+    for n in [1u16, 2, 7] {
+        let b = byte_loop_bound(&byte_loop(n, 0x4614, &[]));
+        let n64 = u64::from(n);
+        assert_eq!(
+            figures(&b),
+            (29 + n64 * (16 + l), 8 * n64 + 9, None),
+            "n = {n}"
+        );
+        let lp = b.loops.iter().find(|l| l.function == "send").unwrap();
+        assert_eq!(lp.bound, n64 + 1, "{lp:?}");
+        assert!(
+            lp.source.contains("counted") && lp.source.contains(&format!("at most {n} passes")),
+            "{lp:?}"
+        );
+    }
+}
+
+#[test]
+fn a_per_element_loop_left_from_its_body_on_its_last_pass_is_charged_no_whole_pass_more() {
+    // As above, with 8 `adds r0, #1` on the fault path before its own pop (9 instructions, 14
+    // cycles). The run whose last pass faults: 6 + 8(n − 1) + 6 + 9 = 8n + 13 instructions, the
+    // longest run. The collapsed loop is charged its longest way out before each of its exits (the
+    // longer of n passes and the header's cbz, 8n + 1 instructions and n(16 + L) + 4 cycles, and n − 1
+    // passes and the body's way out to its bne, 8n − 2 and n(16 + L) + 1): with the fault path,
+    // 6 + 8n + 1 + 9 = 8n + 16 instructions and 18 + n(16 + L) + 4 + 14 cycles, 3 instructions above
+    // the run (the header's cbz and the body's step and branch back, charged before an exit they
+    // do not reach). Charging the body's way out after n whole passes would be 8n + 21 instructions,
+    // n(16 + L) + 53 cycles.
+    let l = UNKNOWN_LOAD;
+    let fault = [0x3001; 8];
+    for n in [1u16, 3, 7] {
+        let b = byte_loop_bound(&byte_loop(n, 0x4614, &fault));
+        let n64 = u64::from(n);
+        assert_eq!(
+            figures(&b),
+            (36 + n64 * (16 + l), 8 * n64 + 16, None),
+            "n = {n}"
+        );
+        assert!(b.instructions >= 8 * n64 + 13);
+    }
+}
+
+#[test]
+fn a_per_element_loop_whose_header_does_not_end_it_by_the_length_is_charged_whole_passes() {
+    // `ldr r4, [r0]`: the header tests a count the length does not give, so its test is not known
+    // to end the loop after n passes into the body. The statement (one pass per element) charges
+    // n whole passes and the loop's longest way out, the body's (6 instructions; 1 + 4 + L + 4 + 1 +
+    // 4 = 14 + L cycles, the header's cbz 4), before its longer exit (movs, pop: 2 and 7): 6 + 8n + 6
+    // + 2 = 8n + 14 instructions; 14 + 3 + L + n(16 + L) + 14 + L + 7 cycles.
+    let l = UNKNOWN_LOAD;
+    for n in [1u16, 7] {
+        let b = byte_loop_bound(&byte_loop(n, 0x6804, &[]));
+        let n64 = u64::from(n);
+        assert_eq!(
+            figures(&b),
+            (38 + 2 * l + n64 * (16 + l), 8 * n64 + 14, None),
+            "n = {n}"
+        );
+        let lp = b.loops.iter().find(|l| l.function == "send").unwrap();
+        assert_eq!(lp.bound, n64 + 1, "{lp:?}");
+        assert!(
+            lp.source.contains("each pass of this one moves at least 1"),
+            "{lp:?}"
+        );
+    }
+}
