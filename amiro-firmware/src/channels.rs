@@ -79,7 +79,7 @@ mod rtt {
 /// (docs/analysis.md, the bounds files' `rtt_target::UpChannel::write` entries).
 pub const LOG_PART_MAX: usize = 96;
 /// The most parts of one log line that reach the channel (`log!` refuses more when it is built):
-/// it bounds `write_log`'s loop under interrupts off (the bounds files' `write_log` entries).
+/// it bounds `write_log`'s loop (the bounds files' `write_log` entries).
 #[cfg(not(feature = "qemu"))]
 pub const LOG_PARTS_MAX: usize = 5;
 /// The most parts of one log line (QEMU: its admission notes have eight, `tasks::note_decision`).
