@@ -452,6 +452,24 @@ impl<B: Backend, F: Future> Future for Timeout<B, F> {
     }
 }
 
+/// The release after a periodic job's: `next` (its release plus the period) while it is ahead of
+/// `now` (read as the job ends); once the job has run past it, `now + period`. The releases it
+/// overran are skipped rather than run back to back: a wait for a release already past ends at once
+/// without suspending, so a task that kept overrunning would never give the processor back, and
+/// the tasks beside it at its priority and every task below (the trace drain at 0) would not run.
+/// PowerManagement's production image on QEMU's `netduinoplus2` is such a case (`cargo xtask
+/// smoke`): there its power monitor's job, whose I2C waits no gauge answers end by their poll
+/// bounds (no DWT), outlasts its 50 ms period as the emulated TIM2 counts it; on a chip only a job
+/// past its stated bound would. Skipping only lengthens the time between releases, which the
+/// schedule analysis allows for (it takes the period as the shortest).
+pub const fn next_release(next: u64, now: u64, period: u64) -> u64 {
+    if next > now {
+        next
+    } else {
+        now.saturating_add(period)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -527,6 +545,39 @@ mod tests {
 
     fn wakes(t: &Task) -> usize {
         t.count()
+    }
+
+    #[test]
+    fn a_periodic_task_that_overruns_its_period_still_waits_before_each_job() {
+        // Period 50, each job 70 long (QEMU's power monitor): the release a job ends past is
+        // skipped, and the wait for the next one suspends the task every time.
+        let _m = model(0);
+        let (_t, w) = task();
+        let mut next = 0;
+        for job in 0..6u64 {
+            let mut d = QUEUE.delay_until(next);
+            let started = if job == 0 {
+                // The first wait is for the task's start: it ends at once.
+                assert!(poll(&mut d, &w).is_ready());
+                NOW.load(Ordering::SeqCst)
+            } else {
+                assert!(poll(&mut d, &w).is_pending(), "job {job}: the task waits");
+                drop(d);
+                NOW.store(next, Ordering::SeqCst);
+                next
+            };
+            next += 50;
+            NOW.store(started + 70, Ordering::SeqCst);
+            next = next_release(next, NOW.load(Ordering::SeqCst), 50);
+            assert_eq!(
+                next,
+                started + 120,
+                "job {job}: a period after the overrun job ended"
+            );
+        }
+        // Jobs on time keep their releases.
+        assert_eq!(next_release(150, 149, 50), 150);
+        assert_eq!(next_release(150, 150, 50), 200);
     }
 
     #[test]

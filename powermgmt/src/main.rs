@@ -563,6 +563,12 @@ mod app {
                 job = job.wrapping_add(1);
                 cx.shared.alive.lock(|a| a.mark());
             }
+            // A job that ran past its next release skips it: the task waits before each job.
+            next = amiro_firmware::timer_queue::next_release(
+                next,
+                Clock::now_us(),
+                crate::POWER_MONITOR_PERIOD_US,
+            );
         }
     }
 
