@@ -255,6 +255,10 @@ pub fn run_board(board: &Board, elf_path: &Path, work: &Path) -> Result<Outcome>
         std::thread::sleep(Duration::from_millis(20));
         Ok((before, qmp.words(timer.base, 16)?))
     })();
+    // The run is over: the patcher takes no stop after this (QEMU is killed with the QMP
+    // connection, and a patch under way would find the gdbstub closed).
+    let stopped_patching = steering.lock().map(|mut ending| *ending = true);
+    drop(stopped_patching);
     drop(qmp);
     let mut patched_loads = None;
     if let Some(patcher) = patcher {

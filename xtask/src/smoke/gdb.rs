@@ -16,8 +16,10 @@ use std::time::Duration;
 
 use anyhow::{bail, ensure, Context, Result};
 
-/// The lock that the QMP polling and the patcher hold while the guest is stopped for them.
-pub type Steering = Arc<Mutex<()>>;
+/// The lock that the QMP polling and the patcher hold while the guest is stopped for them; its
+/// value is whether the run is ending (the polling sets it before QEMU is killed, so a stop the
+/// patcher takes after that is not patched: the gdbstub may close under it).
+pub type Steering = Arc<Mutex<bool>>;
 
 /// One GDB remote-protocol connection (QEMU 7.2's gdbstub has no no-ack mode: every packet is
 /// acknowledged with `+`).
@@ -168,7 +170,10 @@ pub fn hold_inputs(
     Ok(std::thread::spawn(move || -> Result<u32> {
         let mut patched = 0;
         while let Some(stop) = remote.next()? {
-            let _held = steering.lock().unwrap_or_else(|poison| poison.into_inner());
+            let held = steering.lock().unwrap_or_else(|poison| poison.into_inner());
+            if *held {
+                break;
+            }
             // Only a watchpoint's stop is this thread's; a pause from the QMP polling is resumed
             // there.
             let Some(watched) = stop
