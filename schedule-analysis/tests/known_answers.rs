@@ -1048,3 +1048,96 @@ fn a_job_released_down_a_chain_from_an_overloaded_job_has_no_bound() {
     let board = suspending_board(vec![c, b, a], &[]);
     assert_eq!(board_wcrts_us(&board), vec![None, None, None]);
 }
+
+/// A frame that needs a mailbox abort whose victim is on the bus (docs/analysis.md, *Why the bounds are safe*, "A
+/// frame that needs an abort"), and the transmit job its publisher releases, worked by hand at 1 Mbit/s, `exact`:
+///
+/// One board: `can_tx` (its transmit interrupt, priority 3, 20 µs, at least 100 µs apart), its job
+/// `can_tx[data]` (priority 3, 10 µs, released by the publisher with the abort latency of its own,
+/// `can::transmit_abort_latency` = three 135 µs frames = 405 µs), and the publisher (priority 1, 100 µs, best
+/// 50 µs, every 10 ms). On the bus its frame `data` (0x100, 8 bytes, 135 µs) and a command stream `other` (0x200,
+/// 8 bytes, from outside).
+///
+/// * `can_tx`: 20 + its job's 10 once = 30 µs (its window closes at once: 30 ≤ 100).
+/// * `can_tx[data]`: 10 + ⌈w/100⌉·20 = 30, plus its jitter.
+/// * publisher: 100 + ⌈w/100⌉·20 + 10 → 130 → 150 → 150 µs.
+/// * `can_tx[data]`'s jitter: the publisher's 150 + the transmit interrupt's 30 (its abort is asked in a job of
+///   the transmit interrupt, within that response after the pend) + 405 = 585 µs (555 without the 30).
+/// * `data`'s queuing jitter: the publisher's variation 150 − 50, the transmit interrupt's response 30 (the frame
+///   in a mailbox within it), and for the abort it may need — the three mailboxes full of less urgent frames, the
+///   least urgent on the bus — a second transmit response 30 (the job the abort's completion pends fills the freed
+///   mailbox) and the aborted frame, up to 135 µs after the job that asked: 100 + 30 + 30 + 135 = 295 µs (130
+///   without the abort). Blocking: `other`, 135. Response from the earliest queuing: 295 + 135 + 135 = 565, so
+///   delivered 50 + 565 = 615 µs after the publisher's release (450 without the abort's charge).
+#[test]
+fn a_frame_needing_a_mailbox_abort_takes_a_second_transmit_response_and_the_aborted_frame() {
+    let model = serde_json::json!({
+        "boards": [{
+            "name": "node",
+            "can_tx_task": "can_tx",
+            "tasks": [
+                { "name": "can_tx", "priority": 3, "wcet_us": 20, "period_us": 100, "sporadic": true },
+                { "name": "can_tx[data]", "priority": 3, "wcet_us": 10, "period_us": 10000,
+                  "jitter_us": 405, "released_by": "publisher", "job_of": "can_tx" },
+                { "name": "publisher", "priority": 1, "wcet_us": 100, "bcet_us": 50, "period_us": 10000,
+                  "deadline_us": 10000 }
+            ]
+        }],
+        "can": {
+            "bitrate": 1000000,
+            "frame_cost": "exact",
+            "messages": [
+                { "name": "data", "id": 256, "dlc": 8, "period_us": 10000, "deadline_us": 10000,
+                  "sender": "node/publisher" },
+                { "name": "other", "id": 512, "dlc": 8, "period_us": 10000, "deadline_us": 10000 }
+            ]
+        }
+    });
+    assert_eq!(
+        can::transmit_abort_latency(can::bit_time(1_000_000)),
+        Time::from_us(405)
+    );
+    let system = schedule_analysis::model::Model::from_json(&model.to_string())
+        .expect("parses")
+        .validate()
+        .expect("valid");
+    let report = analysis::analyse(
+        &system,
+        &analysis::Options {
+            frame_cost: schedule_analysis::model::FrameCostSpec::Exact,
+            horizon: None,
+        },
+    );
+    let board = &report.boards[0];
+    let task = |name: &str| {
+        board
+            .tasks
+            .iter()
+            .find(|t| t.name == name)
+            .unwrap_or_else(|| panic!("{name}"))
+    };
+    assert_eq!(task("can_tx").wcrt(), Some(Time::from_us(30)));
+    assert_eq!(task("publisher").wcrt(), Some(Time::from_us(150)));
+    let row = task("can_tx[data]");
+    assert_eq!(row.jitter, Time::from_us(585));
+    assert_eq!(row.wcrt(), Some(Time::from_us(615)));
+    let bus = report.bus.as_ref().expect("a bus");
+    let data = bus
+        .messages
+        .iter()
+        .find(|m| m.name == "data")
+        .expect("data");
+    assert_eq!(data.jitter, Time::from_us(295));
+    assert_eq!(data.blocking, Time::from_us(135));
+    assert_eq!(data.offset, Time::from_us(50));
+    assert_eq!(data.wcrt(), Some(Time::from_us(615)));
+    // The charge is the one the chip's check takes (`bus_analysis::Message::timing`, one function for both).
+    assert_eq!(
+        can::abort_refill_delay(Time::from_us(30), FrameCost::Exact, can::bit_time(1_000_000)),
+        Time::from_us(165)
+    );
+    assert_eq!(
+        can::abort_refill_delay(Time::ZERO, FrameCost::Exact, can::bit_time(1_000_000)),
+        Time::ZERO
+    );
+}

@@ -18,6 +18,9 @@ struct JobMeta {
     released_by: u8,
     /// This job's original index.
     original: u8,
+    /// A job of the transmit interrupt released by a job that queues frames: the transmit interrupt's response adds
+    /// to its jitter too (the aborts its frames cause are asked in a job of it, `can::transmit_abort_latency`).
+    after_transmit: bool,
     /// Where its priority level ends (a sorted position).
     level_end: u8,
     /// What reads its bound.
@@ -47,6 +50,7 @@ const EMPTY_META: JobMeta = JobMeta {
     own_jitter: Time::ZERO,
     released_by: 0,
     original: 0,
+    after_transmit: false,
     level_end: 0,
     check: Check::Read,
 };
@@ -347,6 +351,7 @@ fn build_job<const M: usize>(
                 own_jitter: jitter,
                 released_by,
                 original,
+                after_transmit: false,
                 // Set by `JobIndex::index`.
                 level_end: 0,
                 check: Check::Read,
@@ -372,6 +377,9 @@ fn build_job<const M: usize>(
                 // The transmit interrupt's row or one of its jobs': checked only for a bound (its deadline, the
                 // period, is what a refusal of an unbounded one names).
                 meta.check = Check::Unchecked;
+                // One of its jobs, released by a task that queues frames (`can_tx[<task>]`).
+                meta.after_transmit =
+                    t.released_by != NO_RELEASER && table.can_tx != Some(u16::from(row));
             }
             (timing, meta)
         }
@@ -435,6 +443,7 @@ fn build_job<const M: usize>(
             );
             // A job of the transmit interrupt: checked only for a bound, as its row.
             meta.check = Check::Unchecked;
+            meta.after_transmit = true;
             (timing, meta)
         }
         // A build without the sensor-bus rounds builds no engine row (`Originals::engines`).
@@ -524,6 +533,8 @@ struct JobIndex<const N: usize> {
     metas: [JobMeta; N],
     /// Sorted position of each original index.
     position: [u8; N],
+    /// The transmit interrupt's original index (its row; [`NO_JOB`]: none).
+    transmit: u8,
 }
 
 impl<const N: usize> BoardSet<N> {
@@ -615,6 +626,10 @@ impl<const N: usize> JobIndex<N> {
     /// Positions, releasers as positions, level ends and the jobs only a deadline check reads.
     fn index(&mut self, timings: &[TaskTiming; N], table: &BoardTable<'_>) {
         let len = self.len;
+        self.transmit = table
+            .can_tx
+            .and_then(|row| u8::try_from(row).ok())
+            .unwrap_or(NO_JOB);
         for (p, meta) in self.metas.iter_mut().enumerate().take(len) {
             if let Some(slot) = self.position.get_mut(usize::from(meta.original)) {
                 *slot = p as u8;
@@ -666,6 +681,9 @@ impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
         (meta.released_by != NO_JOB).then_some(board_analysis::Release {
             by: usize::from(meta.released_by),
             own_jitter: meta.own_jitter,
+            also: meta
+                .after_transmit
+                .then(|| usize::from(self.at(self.transmit))),
         })
     }
     fn level_end(&self, p: usize) -> usize {
@@ -726,6 +744,7 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
             len: 0,
             metas: const { [EMPTY_META; N] },
             position: [NO_JOB; N],
+            transmit: NO_JOB,
         },
     };
     let scripted = set.fill(input)?;

@@ -1124,7 +1124,9 @@ mod tests {
     /// 50 µs, every 10 ms at priority 9, which nothing delays). The level's busy period: 175 → 285 → 395 → 450 →
     /// 505 → 560 → 560 µs (⌈w/71⌉·55 + 20 + 100), eight jobs, the first the worst: 175 µs, more than two own frames
     /// (142 µs). The frame (8 bytes, 135 µs, alone on the bus, so no blocking) is queued with jitter (100 − 50) + 175
-    /// from the publisher's best 50 µs: delivered at worst 50 + 225 + 135 = 410 µs after the release.
+    /// from the publisher's best 50 µs, and the mailbox abort it may need adds a second transmit response and the
+    /// aborted frame, 175 + 135 (`can::abort_refill_delay`): jitter 535 µs, delivered at worst 50 + 535 + 135 = 720 µs
+    /// after the release.
     #[test]
     fn the_transmit_interrupt_is_checked_for_a_bound_and_its_response_is_the_frames_jitter() {
         let own_frame = can::own_frame_time(Time::from_ns(1000), [3u8].into_iter());
@@ -1170,20 +1172,21 @@ mod tests {
             }
             evaluate::<8, 8>(&robot, &[stream])
         };
-        // 175 µs, beyond two own frames: admitted, the frames delivered by 410 µs.
-        assert_eq!(decide(true, 55_000, 20_000, 410).refusal, None);
-        match decide(true, 55_000, 20_000, 409).refusal {
+        // 175 µs, beyond two own frames: admitted, the frames delivered by 720 µs.
+        assert_eq!(decide(true, 55_000, 20_000, 720).refusal, None);
+        match decide(true, 55_000, 20_000, 719).refusal {
             Some(Refusal::Deadline(v)) => {
                 assert!(matches!(v.culprit, Culprit::Frame { .. }), "{v:?}");
-                assert_eq!(v.wcrt, Some(Time::from_us(410)));
+                assert_eq!(v.wcrt, Some(Time::from_us(720)));
             }
-            other => panic!("the frames at 409 µs: {other:?}"),
+            other => panic!("the frames at 719 µs: {other:?}"),
         }
-        // 80 µs more above it: the first job 255 µs, and the frames 80 µs later.
-        assert_eq!(decide(true, 55_000, 100_000, 490).refusal, None);
-        assert!(decide(true, 55_000, 100_000, 489).refusal.is_some());
+        // 80 µs more above it: the first job 255 µs, and the frames twice 80 µs later (the transmit response is
+        // charged twice).
+        assert_eq!(decide(true, 55_000, 100_000, 880).refusal, None);
+        assert!(decide(true, 55_000, 100_000, 879).refusal.is_some());
         // The same row as any other fixed task has its period for a deadline (one own frame): refused.
-        match decide(false, 55_000, 20_000, 410).refusal {
+        match decide(false, 55_000, 20_000, 720).refusal {
             Some(Refusal::Deadline(v)) => {
                 assert_eq!(
                     v.culprit,
