@@ -142,7 +142,8 @@ pub fn analyse<J: Jobs, B: JobBounds>(
     for (p, timing) in timings.iter().enumerate() {
         if let Some(Release { by: r, also, .. }) = meta.release(p) {
             chained = true;
-            let more_urgent = |q: usize| timings.get(q).is_some_and(|t| t.priority > timing.priority);
+            let more_urgent =
+                |q: usize| timings.get(q).is_some_and(|t| t.priority > timing.priority);
             in_pass &= more_urgent(r) && also.is_none_or(more_urgent);
         }
     }

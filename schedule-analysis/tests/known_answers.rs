@@ -1133,7 +1133,11 @@ fn a_frame_needing_a_mailbox_abort_takes_a_second_transmit_response_and_the_abor
     assert_eq!(data.wcrt(), Some(Time::from_us(615)));
     // The charge is the one the chip's check takes (`bus_analysis::Message::timing`, one function for both).
     assert_eq!(
-        can::abort_refill_delay(Time::from_us(30), FrameCost::Exact, can::bit_time(1_000_000)),
+        can::abort_refill_delay(
+            Time::from_us(30),
+            FrameCost::Exact,
+            can::bit_time(1_000_000)
+        ),
         Time::from_us(165)
     );
     assert_eq!(
