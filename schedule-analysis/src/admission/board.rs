@@ -18,9 +18,6 @@ struct JobMeta {
     released_by: u8,
     /// This job's original index.
     original: u8,
-    /// A job of the transmit interrupt released by a job that queues frames: the transmit interrupt's response adds
-    /// to its jitter too (the aborts its frames cause are asked in a job of it, `can::transmit_abort_latency`).
-    after_transmit: bool,
     /// Where its priority level ends (a sorted position).
     level_end: u8,
     /// What reads its bound.
@@ -50,7 +47,6 @@ const EMPTY_META: JobMeta = JobMeta {
     own_jitter: Time::ZERO,
     released_by: 0,
     original: 0,
-    after_transmit: false,
     level_end: 0,
     check: Check::Read,
 };
@@ -351,7 +347,6 @@ fn build_job<const M: usize>(
                 own_jitter: jitter,
                 released_by,
                 original,
-                after_transmit: false,
                 // Set by `JobIndex::index`.
                 level_end: 0,
                 check: Check::Read,
@@ -377,9 +372,6 @@ fn build_job<const M: usize>(
                 // The transmit interrupt's row or one of its jobs': checked only for a bound (its deadline, the
                 // period, is what a refusal of an unbounded one names).
                 meta.check = Check::Unchecked;
-                // One of its jobs, released by a task that queues frames (`can_tx[<task>]`).
-                meta.after_transmit =
-                    t.released_by != NO_RELEASER && table.can_tx != Some(u16::from(row));
             }
             (timing, meta)
         }
@@ -443,7 +435,6 @@ fn build_job<const M: usize>(
             );
             // A job of the transmit interrupt: checked only for a bound, as its row.
             meta.check = Check::Unchecked;
-            meta.after_transmit = true;
             (timing, meta)
         }
         // A build without the sensor-bus rounds builds no engine row (`Originals::engines`).
@@ -666,6 +657,19 @@ impl<const N: usize> JobIndex<N> {
         }
     }
 
+    /// Whether a released job is one of the transmit interrupt's, released by a job that queues frames, whose jitter
+    /// adds the transmit interrupt's response (the aborts its frames cause are asked in a job of it,
+    /// `can::transmit_abort_latency`): checked for a bound only and named as a fixed task that is either the transmit
+    /// interrupt (a stream's transmit job, `Source::Transmit`) or its own row (`can_tx[<task>]`, a fixed row the
+    /// table marks `bounded_only`); an engine row is named as its job, whose row it is not. Worked out from the
+    /// meta, not kept in it: a flag in `JobMeta` made every job 8 bytes longer (its alignment).
+    fn after_transmit(&self, meta: &JobMeta) -> bool {
+        meta.check == Check::Unchecked
+            && self.transmit != NO_JOB
+            && matches!(meta.id, TaskId::Fixed(row)
+                if row == u16::from(self.transmit) || row == u16::from(meta.original))
+    }
+
     /// The sorted position of the job with this original index ([`NO_JOB`]: none).
     fn at(&self, original: u8) -> u8 {
         self.position
@@ -681,8 +685,8 @@ impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
         (meta.released_by != NO_JOB).then_some(board_analysis::Release {
             by: usize::from(meta.released_by),
             own_jitter: meta.own_jitter,
-            also: meta
-                .after_transmit
+            also: self
+                .after_transmit(meta)
                 .then(|| usize::from(self.at(self.transmit))),
         })
     }
