@@ -170,8 +170,8 @@ pub fn analyse<J: Jobs, B: JobBounds>(
     Ok(pass.outcome)
 }
 
-/// The jitter job `p` inherits from its releaser's current bound, or why it has none.
-#[inline(always)]
+/// The jitter job `p` inherits from its releaser's current bound, or why it has none (one copy for its 3 callers).
+#[inline(never)]
 fn inherited<J: Jobs, B: JobBounds>(
     meta: &J,
     bounds: &B,
