@@ -646,3 +646,218 @@ fn suspending_simulator_runs_two_buses_at_once_and_frees_them_in_a_settle() {
     ];
     assert_eq!(suspending_run(&[2, 1], &[0, 1], &[], &jobs), vec![20, 13]);
 }
+
+/// Who holds the bus in [`node_run`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum OnBus {
+    /// The board's mailbox.
+    Mailbox(usize),
+    /// Another node's frame (an activation's index).
+    Other(usize),
+}
+
+/// One of the board's transmit mailboxes in [`node_run`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Mailbox {
+    key: u32,
+    activation: usize,
+    /// Its abort was asked for.
+    abort: bool,
+    /// Its completion, set and not yet collected: `Some(true)` sent, `Some(false)` aborted.
+    done: Option<bool>,
+}
+
+/// One board's transmit path beside the other nodes' frames, on a bus with arbitration by identifier: the board's
+/// frames (`own`, messages `0..own.len()` of the activations) go into an identifier-ordered queue when queued,
+/// and into bxCAN's three mailboxes only in a job of the transmit interrupt, as the firmware does
+/// (`amiro_firmware::can::{collect_completions, fill_mailboxes}`, `bxcan::Mailboxes`): a job collects every completion (an
+/// aborted frame back into the queue), then fills mailboxes from the queue's head until the head is refused — a
+/// mailbox holds its identifier, or all three are taken, where it asks for the abort of the least urgent pending
+/// frame if it beats it, none under way and no completion uncollected. An abort takes effect at once, or, that
+/// frame on the bus, never (it ends sent: no errors here). A completion and a queued frame pend the interrupt; a
+/// pend while a job is pending merges into it. The other nodes' frames (`others`, messages `own.len()..`) are in
+/// arbitration when queued.
+///
+/// A job acts at one instant, `delay(latest)` after the pend that started it (`delay` returns at most `latest`):
+/// `latest` is `tx_response` for a job a pend started, and, for the job an abort's immediate completion pends,
+/// what is left of the asking job's `tx_response` (the two are one busy window of the interrupt). Returns each
+/// activation's response: its frame's end − its arrival. The board's messages have one frame per activation.
+pub fn node_run(
+    own: &[SimMessage],
+    others: &[SimMessage],
+    activations: &[Activation],
+    tx_response: u64,
+    delay: &mut dyn FnMut(u64) -> u64,
+) -> Vec<u64> {
+    assert!(
+        own.iter().all(|m| m.frames == 1),
+        "one frame per activation"
+    );
+    let message = |m: usize| {
+        if m < own.len() {
+            own[m]
+        } else {
+            others[m - own.len()]
+        }
+    };
+    let mut order: Vec<usize> = (0..activations.len()).collect();
+    order.sort_by_key(|&a| (activations[a].queued, a));
+    let mut response = vec![0u64; activations.len()];
+    // The board's queue: (key, order queued, activation); the other nodes' frames in arbitration.
+    let mut queue: Vec<(u32, usize, usize)> = Vec::new();
+    let mut other_frames: Vec<(u32, usize)> = Vec::new();
+    let mut mailboxes: [Option<Mailbox>; 3] = [None; 3];
+    let mut bus: Option<(OnBus, u64)> = None;
+    // The pending job: when it acts, and when the busy window of the interrupt it is in started.
+    let mut job: Option<(u64, u64)> = None;
+    let mut next = 0usize;
+    let mut seq = 0usize;
+    let mut t = 0u64;
+    loop {
+        // A frame ends.
+        if let Some((who, end)) = bus.filter(|&(_, end)| end == t) {
+            let _ = end;
+            bus = None;
+            match who {
+                OnBus::Mailbox(i) => {
+                    if let Some(mb) = mailboxes[i].as_mut() {
+                        mb.done = Some(true);
+                        response[mb.activation] = t - activations[mb.activation].arrival;
+                    }
+                    if job.is_none() {
+                        job = Some((t + delay(tx_response), t));
+                    }
+                }
+                OnBus::Other(a) => response[a] = t - activations[a].arrival,
+            }
+        }
+        // Frames queued.
+        while next < order.len() && activations[order[next]].queued <= t {
+            let a = order[next];
+            let m = activations[a].message;
+            if m < own.len() {
+                queue.push((own[m].key, seq, a));
+                seq += 1;
+                if job.is_none() {
+                    job = Some((t + delay(tx_response), t));
+                }
+            } else {
+                other_frames.push((message(m).key, a));
+            }
+            next += 1;
+        }
+        // The transmit interrupt's job.
+        if let Some((at, window)) = job.filter(|&(at, _)| at == t) {
+            let _ = at;
+            job = None;
+            for slot in mailboxes.iter_mut() {
+                if let Some(mb) = *slot {
+                    if let Some(sent) = mb.done {
+                        if !sent {
+                            queue.push((mb.key, seq, mb.activation));
+                            seq += 1;
+                        }
+                        *slot = None;
+                    }
+                }
+            }
+            loop {
+                let Some(h) = (0..queue.len()).min_by_key(|&i| (queue[i].0, queue[i].1)) else {
+                    break;
+                };
+                let (key, _, a) = queue[h];
+                let pending = |mb: &Option<Mailbox>| mb.filter(|mb| mb.done.is_none());
+                if mailboxes
+                    .iter()
+                    .any(|mb| pending(mb).is_some_and(|mb| mb.key == key))
+                {
+                    break;
+                }
+                if let Some(free) = mailboxes.iter().position(Option::is_none) {
+                    mailboxes[free] = Some(Mailbox {
+                        key,
+                        activation: a,
+                        abort: false,
+                        done: None,
+                    });
+                    queue.remove(h);
+                    continue;
+                }
+                // All taken: the least urgent pending one, the later mailbox among equals.
+                let least = (0..3)
+                    .filter_map(|i| pending(&mailboxes[i]).map(|mb| (mb.key, i)))
+                    .max();
+                let uncollected = mailboxes
+                    .iter()
+                    .any(|mb| mb.is_some_and(|mb| mb.done.is_some()));
+                if let Some((least_key, i)) = least {
+                    let under_way = mailboxes[i].is_some_and(|mb| mb.abort);
+                    if key < least_key && !under_way && !uncollected {
+                        let on_bus = bus.is_some_and(|(who, _)| who == OnBus::Mailbox(i));
+                        if let Some(mb) = mailboxes[i].as_mut() {
+                            mb.abort = true;
+                            if !on_bus {
+                                mb.done = Some(false);
+                                // Its completion pends the interrupt: a job in this one's busy window.
+                                job = Some((
+                                    t + delay((window + tx_response).saturating_sub(t)),
+                                    window,
+                                ));
+                            }
+                        }
+                    }
+                }
+                break;
+            }
+        }
+        // Arbitration when the bus is idle: the lowest key among the pending mailboxes and the other nodes' frames.
+        if bus.is_none() {
+            let mine = (0..3)
+                .filter_map(|i| {
+                    mailboxes[i]
+                        .filter(|mb| mb.done.is_none())
+                        .map(|mb| (mb.key, i))
+                })
+                .min();
+            let theirs =
+                (0..other_frames.len()).min_by_key(|&i| (other_frames[i].0, other_frames[i].1));
+            match (mine, theirs) {
+                (Some((k, i)), Some(o)) if k <= other_frames[o].0 => {
+                    bus = Some((
+                        OnBus::Mailbox(i),
+                        t + own[activations[mailboxes[i].map_or(0, |mb| mb.activation)].message]
+                            .frame_time,
+                    ));
+                }
+                (_, Some(o)) => {
+                    let (_, a) = other_frames.remove(o);
+                    bus = Some((
+                        OnBus::Other(a),
+                        t + message(activations[a].message).frame_time,
+                    ));
+                }
+                (Some((_, i)), None) => {
+                    bus = Some((
+                        OnBus::Mailbox(i),
+                        t + own[activations[mailboxes[i].map_or(0, |mb| mb.activation)].message]
+                            .frame_time,
+                    ));
+                }
+                (None, None) => {}
+            }
+        }
+        let upcoming = [
+            bus.map(|(_, end)| end),
+            job.map(|(at, _)| at),
+            order.get(next).map(|&a| activations[a].queued),
+        ];
+        match upcoming.into_iter().flatten().min() {
+            Some(at) => t = at.max(t),
+            None => break,
+        }
+        if bus.is_none() && job.is_none() && next >= order.len() && queue.is_empty() {
+            break;
+        }
+    }
+    response
+}
