@@ -761,10 +761,7 @@ pub fn node_run(
                     }
                 }
             }
-            loop {
-                let Some(h) = (0..queue.len()).min_by_key(|&i| (queue[i].0, queue[i].1)) else {
-                    break;
-                };
+            while let Some(h) = (0..queue.len()).min_by_key(|&i| (queue[i].0, queue[i].1)) {
                 let (key, _, a) = queue[h];
                 let pending = |mb: &Option<Mailbox>| mb.filter(|mb| mb.done.is_none());
                 if mailboxes
