@@ -340,7 +340,9 @@ impl Known {
         let sp = self.sp;
         let base = base_of(insn);
         let base_sp = base == Some(SP);
-        let call = matches!(opcode, Opcode::BL | Opcode::BLX);
+        // A supervisor call runs a handler that, as a callee, may write through the pointers it
+        // is given (the stacked r0-r3).
+        let call = matches!(opcode, Opcode::BL | Opcode::BLX | Opcode::SVC);
         if call && insn.outlined.is_some() {
             // An outlined helper runs on its caller's frame and registers, follows no calling
             // convention, and may store anywhere in the frame any register it is given.
@@ -782,6 +784,9 @@ impl Known {
         // `MRS` saved in r0-r3 lives through it.
         let written = match (&insn.outlined, insn.inst.opcode) {
             (Some(outlined), Opcode::BL) => Regs(outlined.writes | 1 << 14),
+            // A supervisor call's handler may change the registers the exception stacked: r0-r3,
+            // r12 and LR.
+            (_, Opcode::SVC) => Regs(0b0101_0000_0000_1111),
             _ => insn.writes(),
         };
         let before = self.regs;

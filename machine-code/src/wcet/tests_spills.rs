@@ -185,6 +185,17 @@ fn a_call_given_the_spills_address_loses_it() {
 }
 
 #[test]
+fn a_supervisor_call_given_the_spills_address_loses_it() {
+    // `add r0, sp, #4; svc #0`: the handler, as a callee, may write through r0.
+    let between = [0xa801, 0xdf00];
+    assert_unclear(&lock(&[], &between, RELOAD), &between);
+    // It may change the stacked r0 too: the saved mask reloaded into r0 before it is no longer
+    // the saved mask after it.
+    let between = [0x9801, 0xdf00, 0x4601]; // ldr r0, [sp, #4]; svc #0; mov r1, r0
+    assert_unclear(&lock(&[], &between, 0x4608), &between); // mov r0, r1
+}
+
+#[test]
 fn a_reload_from_another_word_is_no_restore() {
     // ldr r0, [sp, #8]: a word the function never wrote.
     let between = [0xbf00];
