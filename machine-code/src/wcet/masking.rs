@@ -705,14 +705,8 @@ impl Known {
             | Operand::RegDerefPreindexRegShift(rn, _, add, true) => {
                 Some((rn.number(), add.then_some(0)))
             }
-            Operand::RegWBack(rn, true) => {
-                let words = 4 * list_of(insn).unwrap_or(0xffff).count_ones() as i32;
-                let down = matches!(
-                    insn.inst.opcode,
-                    Opcode::LDM(false, ..) | Opcode::STM(false, ..)
-                );
-                Some((rn.number(), Some(if down { -words } else { 0 })))
-            }
+            // A multiple (a floating-point one too): down by the list where it decrements.
+            Operand::RegWBack(rn, true) => Some((rn.number(), Some(reach(insn).min(0)))),
             _ => None,
         })?;
         if base == SP || !insn.writes().contains(base) {

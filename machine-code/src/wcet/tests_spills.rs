@@ -219,6 +219,19 @@ fn a_base_written_back_stays_a_frame_address() {
 }
 
 #[test]
+fn a_base_written_back_below_stays_a_frame_address_below() {
+    // `vstmdb r2!, {s0}` moves r2 a word down (to [sp, #8]), and the store 4 below it is the
+    // spill's word. (Before, a floating-point store multiple's written-back base was taken to move
+    // up.)
+    let between = [
+        0xaa03, // add r2, sp, #12
+        0xed22, 0x0a01, // vstmdb r2!, {s0}
+        0xf842, 0x1c04, // str.w r1, [r2, #-4]
+    ];
+    assert_unclear(&lock(&[], &between, RELOAD), &between);
+}
+
+#[test]
 fn a_spill_overwritten_on_one_path_is_lost_where_the_paths_join() {
     let between = [
         0xb101, // cbz r1, to the nop: over the store
