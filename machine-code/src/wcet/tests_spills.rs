@@ -296,11 +296,11 @@ fn names_the_restore(prelude: &[u16], between: &[u16], reload: u16) -> bool {
         .is_err_and(|reason| reason.contains(&format!("the Basepri write at {restore:#010x}")))
 }
 
-/// After each `prelude`, the frame address of the spill's word (`add r1, sp, #4`, before the
-/// spill) has left the registers somewhere the pass cannot place (it writes it to `[sp, #8]` or
-/// to a register the pass does not follow); `between` reads it back into r3 and stores through
-/// it: the store may be the spill's word. (Before, such a store forgot the words it might write
-/// but kept the address it stored as no escape, and the restore was believed.)
+/// The frame address of the spill's word (`add r1, sp, #4`) leaves the registers for somewhere
+/// the pass cannot place: after each `prelude` (before the spill) it is in `[sp, #8]` or in a
+/// register the pass does not follow, and `between` reads it back into r3 and stores through it;
+/// or `between` hands it to the debugger. The store may be the spill's word. (Before, the address
+/// was lost without escaping, and the restore was believed.)
 #[test]
 fn a_frame_address_stored_where_the_pass_cannot_place_it_escapes() {
     let read_back = [0x9b02, 0x601c]; // ldr r3, [sp, #8]; str r4, [r3]
@@ -386,7 +386,7 @@ fn an_escaped_word_that_holds_a_frame_address_lets_that_address_escape() {
 /// only in part): the loaded value may be that address, and a store through it may be the
 /// spill's word. (Before, such a load gave a value the pass took for no frame address.)
 #[test]
-fn a_frame_address_loaded_back_by_a_load_not_through_sp_stays_one() {
+fn a_frame_address_loaded_back_by_a_load_not_placed_word_by_word_stays_one() {
     let keep = [0xa901, 0x9102]; // add r1, sp, #4; str r1, [sp, #8]
     let reads: [(&str, &[u16]); 6] = [
         ("add r2, sp, #8; ldr r3, [r2]", &[0xaa02, 0x6813]),
