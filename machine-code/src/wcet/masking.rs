@@ -155,8 +155,9 @@ pub(super) struct Known {
     /// What the frame's words a store through SP wrote hold, by offset from the entry's SP.
     slots: BTreeMap<i32, Holds>,
     /// The lowest frame offset an address that has left the registers and words the pass follows
-    /// (stored to memory, passed to a call) may point to: a store through any register, or a
-    /// call, may write the frame's words from there up.
+    /// (stored where it keeps no word of it, moved to a floating-point or special register,
+    /// passed to a call) may point to: a store through any register, or a call, may write the
+    /// frame's words from there up, and a word from there up may be read by code that has it.
     escaped: Option<i32>,
 }
 
