@@ -483,7 +483,17 @@ impl Known {
     /// What a load through SP (offset `sp` from the entry's) reads into which registers, where
     /// it reads whole words at offsets the pass computes: `LDR`, `LDRD`, `POP`, `LDM`.
     fn load_from_frame(&self, insn: &Insn, sp: i32) -> Option<Vec<(u8, Holds)>> {
-        let word = |at: i32| self.slots.get(&at).copied().unwrap_or(Holds::UNKNOWN);
+        // A word kept at the offset; else anything, or a frame address a kept word it overlaps
+        // (one an unaligned store kept) holds.
+        let word = |at: i32| match self.slots.get(&at) {
+            Some(&held) => held,
+            None => self
+                .slots
+                .range(at.saturating_sub(3)..at.saturating_add(4))
+                .filter_map(|(_, held)| held.frame_low())
+                .min()
+                .map_or(Holds::UNKNOWN, |low| Holds::UNKNOWN.meet(Holds::frame(low))),
+        };
         match insn.inst.opcode {
             Opcode::LDR | Opcode::LDRD => {
                 // `LDRD Rt, Rt2`: Rt from the word at the address, Rt2 from the next.

@@ -411,6 +411,18 @@ fn a_frame_address_loaded_back_by_a_load_not_placed_word_by_word_stays_one() {
         .map(|(what, _)| what)
         .collect();
     assert!(believed.is_empty(), "the restore believed: {believed:?}");
+    // Kept at an unaligned offset (`str.w r1, [sp, #10]`) and put together again from the two
+    // aligned words it straddles.
+    let between = [
+        0xa901, // add r1, sp, #4
+        0xf8cd, 0x100a, // str.w r1, [sp, #10]
+        0x9b02, // ldr r3, [sp, #8]: its low half, in the top half
+        0x9d03, // ldr r5, [sp, #12]: its high half, in the bottom half
+        0x0c1b, // lsrs r3, r3, #16
+        0xea43, 0x4305, // orr.w r3, r3, r5, lsl #16: the address
+        0x601c, // str r4, [r3]
+    ];
+    assert_unclear(&lock(&[], &between, RELOAD), &between);
     // A floating-point load of it (`vldr d0, [sp, #8]`) lets it escape: a store through a
     // pointer read from memory may then be the spill's word.
     let mut between = keep.to_vec();
