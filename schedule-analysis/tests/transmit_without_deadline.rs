@@ -1,9 +1,9 @@
 //! The transmit interrupt keeps no deadline of its own (docs/analysis.md, "The transmit interrupt keeps no
 //! deadline"): the host analysis and the boards' admission table check only that its busy window closes, and its
-//! response is the queuing jitter of every frame its board sends. With its bound used (held on the shipped files),
-//! PowerManagement's `can_tx`, past two of its own frames on thesis-demo (without the ring's jitter budget),
-//! passes on both with that response as its frames' jitter; with LightRing's `can_tx` bound used, its diagnostics are refused by its latch, not by its `can_tx`; a `can_tx`
-//! whose window never closes is refused by both.
+//! response is the queuing jitter of every frame its board sends. PowerManagement's `can_tx` (its bound used on the
+//! shipped files), past two of its own frames on thesis-demo, passes on both with that response as its frames'
+//! jitter; with LightRing's `can_tx` bound used (held on the shipped files), its diagnostics are refused by its latch,
+//! not by its `can_tx`; a `can_tx` whose window never closes is refused by both.
 
 use std::path::{Path, PathBuf};
 
@@ -63,15 +63,6 @@ fn timing_files(case: &str, edit: impl Fn(&mut serde_json::Value)) -> Vec<PathBu
             out
         })
         .collect()
-}
-
-/// PowerManagement's `can_tx` bound used (the bounds file holds it: *Held bounds*), every other held bound held back.
-fn powermgmt_by_parts() -> scenario::Held<'static> {
-    static ROWS: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
-    scenario::Held::Only {
-        board: "powermgmt",
-        rows: ROWS.get_or_init(|| vec!["can_tx".to_string()]),
-    }
 }
 
 /// LightRing's `can_tx` bound used (the bounds file holds it: *Held bounds*), every other held bound held back.
@@ -150,25 +141,9 @@ fn powermanagements_can_tx_past_two_own_frames_passes_as_its_frames_jitter() {
     let own_frame = can::own_frame_time(can::bit_time(can::DEFAULT_BITRATE), [3u8].into_iter());
     assert_eq!(own_frame, Time::from_us(71));
     let files = scenario::timing_files(&root());
-    // thesis-demo without the ring's jitter budget: with the power monitor's one-transfer bus section blocking the
-    // ring, that budget is what this bound breaks (its `held` reason); every deadline holds.
-    let path = {
-        let shipped = scenario::find_scenario(&root(), "thesis-demo");
-        let mut json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(shipped).expect("scenario"))
-                .expect("parses");
-        for p in json["publishers"].as_array_mut().expect("publishers") {
-            if p["topic"] == "proximity-ring" {
-                p.as_object_mut()
-                    .expect("a publisher")
-                    .remove("jitter_budget_us");
-            }
-        }
-        let out = scratch("powermgmt-by-parts").join("thesis-demo-no-ring-budget.scenario.json");
-        std::fs::write(&out, json.to_string()).expect("temp scenario");
-        out
-    };
-    let report = host_held(&path, &files, powermgmt_by_parts());
+    // thesis-demo as shipped, the ring's jitter budget with it: PowerManagement holds no bound of `can_tx`.
+    let path = scenario::find_scenario(&root(), "thesis-demo");
+    let report = host(&path, &files);
     let board = report
         .boards
         .iter()
@@ -211,7 +186,7 @@ fn powermanagements_can_tx_past_two_own_frames_passes_as_its_frames_jitter() {
         assert_eq!(message.jitter, variation.plus(wcrt), "{topic}");
     }
     // The chip decides alike: the set's last request admitted.
-    let (decision, _, _) = on_chip_held(&path, &files, "powermgmt", powermgmt_by_parts());
+    let (decision, _, _) = on_chip(&path, &files, "powermgmt");
     assert!(decision.admitted(), "{decision:?}");
 }
 
