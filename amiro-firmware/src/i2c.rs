@@ -274,10 +274,17 @@ impl Master {
     /// `write_read` of the AMiRo drivers makes; `target` is the device's address (high byte) and
     /// the register's (low byte), so the length of `read` is an argument in a register (r3), which
     /// the call's machine code fixes.
+    ///
+    /// Once the read's address is acknowledged, the master acknowledges every byte itself, so no
+    /// error of the receive is a missing acknowledge (AF is set only while the master transmits,
+    /// RM0008 §26.6.6, RM0090 §27.6.6): it resets the block at once, as [`Master::finish`] does
+    /// with every other error. Finishing it apart keeps the wait for a released bus, which
+    /// follows only a missing acknowledge, off the path that waited for every flag of the
+    /// transfer, where the machine code's bound would otherwise charge it.
     #[inline(never)]
     fn read_register(&mut self, target: u16, read: &mut [u8]) -> Result<(), Error> {
         let [address, register] = target.to_be_bytes();
-        let result = self.wait_idle().and_then(|()| {
+        let addressed = self.wait_idle().and_then(|()| {
             self.address(address, false, false)?;
             self.clear_addr();
             self.send(&[register])?;
@@ -286,10 +293,16 @@ impl Master {
                 self.set_cr1(CR1_STOP, 0);
                 return Ok(());
             }
-            self.read_address(address, read.len())?;
-            self.receive(read, read.len() > 1)
+            self.read_address(address, read.len())
         });
-        self.finish(result)
+        if addressed.is_err() || read.is_empty() {
+            return self.finish(addressed);
+        }
+        let received = self.receive(read, read.len() > 1);
+        if received.is_err() {
+            self.setup();
+        }
+        received
     }
 
     /// After a transfer: on a missing acknowledge the bus is released (the block stays usable),

@@ -14,7 +14,7 @@
 //! wiring table `WIRING`; amiro-sensors' `ProximityRing` holds both buses in one value, which
 //! would make one resource of them, so this module binds the same drivers per bus.
 use amiro_can::{SensorData, Topic};
-use amiro_sensors::drivers::bq27500::{BatteryStatus, Bq27500, StatusRead};
+use amiro_sensors::drivers::bq27500::{self, BatteryStatus, Bq27500, StatusRead};
 use amiro_sensors::drivers::pca9544a::{Channel, Pca9544a};
 use amiro_sensors::drivers::proximity::ProximityCalibration;
 use amiro_sensors::drivers::ring::{RingBus, RING_SENSORS, WIRING};
@@ -96,7 +96,9 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
         let mut read = StatusRead::new();
         let mut status = None;
         for _ in 0..StatusRead::MAX_TRANSFERS {
-            if let Some(ended) = this.gauge_step(&mut read) {
+            let ended = this.gauge_step(&mut read);
+            this.delay.delay_ns(bq27500::BUS_FREE_NS);
+            if let Some(ended) = ended {
                 status = ended;
                 break;
             }
@@ -207,11 +209,12 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
 
     /// One transfer of `read` to this bus's fuel gauge ([`StatusRead::step`]): `None` while the
     /// read goes on; at its end `Some` of the status, or of `None` (counted) when the gauge did not
-    /// answer.
+    /// answer. Without the gauge's bus-free pause: the caller makes it after the transfer, with the
+    /// bus given back ([`PauseAfterUnlock`]).
     #[inline(never)]
     pub fn gauge_step(&mut self, read: &mut StatusRead) -> Option<Option<BatteryStatus>> {
         let status = read
-            .step(&mut Bq27500::new(self.mux.bus_mut(), &mut self.delay))?
+            .step(&mut Bq27500::new(self.mux.bus_mut(), PauseAfterUnlock))?
             .ok();
         if status.is_none() {
             self.gauge_faults = self.gauge_faults.saturating_add(1);
@@ -236,6 +239,17 @@ impl<I: I2c, D: DelayNs> SensorBus<I, D> {
     }
 }
 
+/// The gauge driver's bus-free pause left to the caller of [`SensorBus::gauge_step`], who makes it
+/// after the transfer with the bus's lock given back: the bq27500 asks for [`bq27500::BUS_FREE_NS`]
+/// between packets addressed to it (TI's bq27xxx data sheets, 'I2C Command Waiting Time'), and
+/// packets to the ring's devices may come in between, so the pause holds no lock and a publisher
+/// waiting for the bus does not wait for it.
+struct PauseAfterUnlock;
+
+impl DelayNs for PauseAfterUnlock {
+    fn delay_ns(&mut self, _ns: u32) {}
+}
+
 /// The bus's name in the log.
 const fn bus_name(bus: RingBus) -> &'static str {
     match bus {
@@ -250,7 +264,8 @@ pub type RearBus = SensorBus<RearI2c, GaugeDelay>;
 pub type FrontBus = SensorBus<FrontI2c, GaugeDelay>;
 
 /// Both gauges read one transfer a call, front then rear, each transfer under its own lock of its
-/// bus: a publisher waiting for either bus waits for one transfer to a gauge, not a whole read.
+/// bus and the gauge's bus-free pause after it, outside the lock: a publisher waiting for either
+/// bus waits for one transfer to a gauge, not a whole read, nor the pause.
 /// The power monitor keeps one across its jobs and makes one call a job. Each gauge's status goes
 /// to the power monitor's [`power::LatestRound`] as its read ends.
 #[derive(Debug, Default)]
@@ -269,8 +284,9 @@ impl BatteryRound {
         }
     }
 
-    /// Makes the round's next transfer, under its bus's lock; a gauge's read that ends puts its
-    /// status (`None`: the gauge did not answer, counted) into `latest`.
+    /// Makes the round's next transfer, under its bus's lock, then the gauge's bus-free pause with
+    /// the lock given back; a gauge's read that ends puts its status (`None`: the gauge did not
+    /// answer, counted) into `latest`.
     /// Whether the round has ended (the rear gauge's read with it; the next call begins a new
     /// round). A round takes at most 2 × [`StatusRead::MAX_TRANSFERS`] = 26 calls (20 when both
     /// gauges answer their reads).
@@ -286,6 +302,7 @@ impl BatteryRound {
         } else {
             front.lock(|b| b.gauge_step(read))
         };
+        GaugeDelay.delay_ns(bq27500::BUS_FREE_NS);
         let Some(status) = ended else {
             return false;
         };

@@ -1,9 +1,9 @@
 //! The transmit interrupt keeps no deadline of its own (docs/analysis.md, "The transmit interrupt keeps no
 //! deadline"): the host analysis and the boards' admission table check only that its busy window closes, and its
-//! response is the queuing jitter of every frame its board sends. With its bound used (held on the shipped files),
-//! PowerManagement's `can_tx`, past two of its own frames on thesis-demo (without the ring's jitter budget),
-//! passes on both with that response as its frames' jitter; with LightRing's `can_tx` bound used, its diagnostics are refused by its latch, not by its `can_tx`; a `can_tx`
-//! whose window never closes is refused by both.
+//! response is the queuing jitter of every frame its board sends. PowerManagement's `can_tx` (its bound used on the
+//! shipped files), past two of its own frames on thesis-demo, passes on both with that response as its frames'
+//! jitter; with LightRing's `can_tx` bound used (held on the shipped files), its diagnostics are refused by its latch,
+//! not by its `can_tx`; a `can_tx` whose window never closes is refused by both.
 
 use std::path::{Path, PathBuf};
 
@@ -48,23 +48,6 @@ fn with_diagnostics(case: &str, period_us: u64) -> PathBuf {
     out
 }
 
-/// thesis-demo without its jitter budgets: with the mailbox abort's charge (docs/analysis.md, "A frame that needs
-/// an abort") the gyroscope's is past its 1 000 µs on the shipped files (`tests/default_model.rs` holds that
-/// verdict); the tests here are about the transmit interrupt's deadline, and every deadline holds.
-fn without_jitter_budgets(case: &str) -> PathBuf {
-    let shipped = scenario::find_scenario(&root(), "thesis-demo");
-    let mut json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(shipped).expect("scenario")).expect("parses");
-    for p in json["publishers"].as_array_mut().expect("publishers") {
-        p.as_object_mut()
-            .expect("a publisher")
-            .remove("jitter_budget_us");
-    }
-    let out = scratch(case).join("thesis-demo-no-jitter-budgets.scenario.json");
-    std::fs::write(&out, json.to_string()).expect("temp scenario");
-    out
-}
-
 /// The shipped timing files, `edit` applied to each, written to a folder of their own (the apps and the bounds
 /// files are still read from the workspace).
 fn timing_files(case: &str, edit: impl Fn(&mut serde_json::Value)) -> Vec<PathBuf> {
@@ -80,15 +63,6 @@ fn timing_files(case: &str, edit: impl Fn(&mut serde_json::Value)) -> Vec<PathBu
             out
         })
         .collect()
-}
-
-/// PowerManagement's `can_tx` bound used (the bounds file holds it: *Held bounds*), every other held bound held back.
-fn powermgmt_by_parts() -> scenario::Held<'static> {
-    static ROWS: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
-    scenario::Held::Only {
-        board: "powermgmt",
-        rows: ROWS.get_or_init(|| vec!["can_tx".to_string()]),
-    }
 }
 
 /// LightRing's `can_tx` bound used (the bounds file holds it: *Held bounds*), every other held bound held back.
@@ -167,10 +141,9 @@ fn powermanagements_can_tx_past_two_own_frames_passes_as_its_frames_jitter() {
     let own_frame = can::own_frame_time(can::bit_time(can::DEFAULT_BITRATE), [3u8].into_iter());
     assert_eq!(own_frame, Time::from_us(71));
     let files = scenario::timing_files(&root());
-    // thesis-demo without its jitter budgets: with the power monitor's one-transfer bus section blocking the
-    // ring, the ring's is what this bound breaks (its `held` reason); every deadline holds.
-    let path = without_jitter_budgets("powermgmt-by-parts");
-    let report = host_held(&path, &files, powermgmt_by_parts());
+    // thesis-demo as shipped, the ring's jitter budget with it: PowerManagement holds no bound of `can_tx`.
+    let path = scenario::find_scenario(&root(), "thesis-demo");
+    let report = host(&path, &files);
     let board = report
         .boards
         .iter()
@@ -194,38 +167,8 @@ fn powermanagements_can_tx_past_two_own_frames_passes_as_its_frames_jitter() {
     assert!(wcrt > own_frame.times(2), "{wcrt:?}");
     assert!(!tx.deadline_checked && tx.schedulable() && tx.slack_us().is_none());
     assert!(report.all_ok(), "{:?}", report.failures());
-    // The ring's transmit job is released with the publisher job's response, the transmit interrupt's (the job
-    // that asks for the aborts runs within it after the pend) and three frames after the request as jitter.
-    let publisher = |name: &str| {
-        board
-            .tasks
-            .iter()
-            .find(|t| t.name == name)
-            .and_then(|t| t.wcrt())
-            .expect("bounded")
-    };
-    let row = board
-        .tasks
-        .iter()
-        .find(|t| t.name == "can_tx[proximity-ring]")
-        .expect("the ring's transmit job");
-    assert_eq!(
-        row.jitter,
-        publisher("publish_medium[proximity-ring]")
-            .plus(wcrt)
-            .plus(can::transmit_abort_latency(can::bit_time(
-                can::DEFAULT_BITRATE
-            )))
-    );
     // Its response is the queuing jitter of each of the board's frames: their own (none), their publisher job's
-    // variation, and can_tx's WCRT twice with the aborted frame (the mailbox abort a frame may need,
-    // `can::abort_refill_delay`).
-    let refill = can::abort_refill_delay(
-        wcrt,
-        can::FrameCost::Exact,
-        can::bit_time(can::DEFAULT_BITRATE),
-    );
-    assert_eq!(refill, wcrt.plus(Time::from_us(135)));
+    // variation, and can_tx's WCRT.
     let bus = report.bus.as_ref().expect("a bus");
     for topic in ["proximity-ring", "power-status"] {
         let message = bus
@@ -240,10 +183,10 @@ fn powermanagements_can_tx_past_two_own_frames_passes_as_its_frames_jitter() {
             .expect("the publisher job");
         assert_eq!(message.offset, sender.bcrt, "{topic}");
         let variation = sender.wcrt().expect("bounded").minus(message.offset);
-        assert_eq!(message.jitter, variation.plus(wcrt).plus(refill), "{topic}");
+        assert_eq!(message.jitter, variation.plus(wcrt), "{topic}");
     }
     // The chip decides alike: the set's last request admitted.
-    let (decision, _, _) = on_chip_held(&path, &files, "powermgmt", powermgmt_by_parts());
+    let (decision, _, _) = on_chip(&path, &files, "powermgmt");
     assert!(decision.admitted(), "{decision:?}");
 }
 
@@ -331,7 +274,7 @@ fn a_transmit_interrupt_whose_window_does_not_close_is_refused_by_host_and_chip(
     // magnetometers' 4 bytes, 79 µs) is more than the CPU, so its busy window never closes.
     let own_frame = can::own_frame_time(can::bit_time(can::DEFAULT_BITRATE), [4u8].into_iter());
     assert_eq!(own_frame, Time::from_us(79));
-    let path = without_jitter_budgets("window");
+    let path = scenario::find_scenario(&root(), "thesis-demo");
     for (case, wcet_us, refused) in [("closes", 9.0, false), ("never", 80.0, true)] {
         let files = timing_files(case, |json| {
             if json["board"] == "diwheeldrive" {

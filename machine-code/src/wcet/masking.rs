@@ -155,8 +155,9 @@ pub(super) struct Known {
     /// What the frame's words a store through SP wrote hold, by offset from the entry's SP.
     slots: BTreeMap<i32, Holds>,
     /// The lowest frame offset an address that has left the registers and words the pass follows
-    /// (stored to memory, passed to a call) may point to: a store through any register, or a
-    /// call, may write the frame's words from there up.
+    /// (stored where it keeps no word of it, moved to a floating-point or special register,
+    /// passed to a call) may point to: a store through any register, or a call, may write the
+    /// frame's words from there up, and a word from there up may be read by code that has it.
     escaped: Option<i32>,
 }
 
@@ -218,6 +219,7 @@ impl Known {
         if let Some(low) = other.escaped {
             self.escape(low);
         }
+        self.close();
         *self != before
     }
 
@@ -272,9 +274,28 @@ impl Known {
         self.clobber_escaped();
     }
 
-    /// A frame address that may point as low as `low` escapes.
+    /// A frame address that may point as low as `low` escapes, and with it every frame address a
+    /// word from there up holds (code that has the one may load the other).
     fn escape(&mut self, low: i32) {
-        self.escaped = Some(self.escaped.map_or(low, |e| e.min(low)));
+        let mut low = self.escaped.map_or(low, |e| e.min(low));
+        while let Some(lower) = self
+            .slots
+            .iter()
+            .filter(|&(&at, _)| at.saturating_add(4) > low)
+            .filter_map(|(_, held)| held.frame_low())
+            .filter(|&held| held < low)
+            .min()
+        {
+            low = lower;
+        }
+        self.escaped = Some(low);
+    }
+
+    /// Lets escape every frame address a word an escaped address reaches holds.
+    fn close(&mut self) {
+        if let Some(low) = self.escaped {
+            self.escape(low);
+        }
     }
 
     /// Forgets the frame's words at the offsets `gone` picks: a frame address one held is no
@@ -308,92 +329,123 @@ impl Known {
 
     /// The frame after `insn`: SP's offset, the words it stores through SP, the addresses in the
     /// frame it takes. Returns what it loads from the frame into which registers.
+    ///
+    /// A frame address is either in a place the pass follows (a register, a word it keeps) or
+    /// escaped: every instruction that moves a register's value elsewhere (a store the pass does
+    /// not keep word by word, a floating-point or special register, a call, the debugger's
+    /// semihosting block) lets a frame address in it escape, and a load the pass does not place
+    /// word by word gives whatever frame address the words it may read hold.
     fn step_frame(&mut self, insn: &Insn) -> Vec<(u8, Holds)> {
         let opcode = insn.inst.opcode;
         let before = self.regs;
         let sp = self.sp;
-        let base_sp = insn.memory_base() == Some(SP)
-            || insn.memory_base_wback() == Some(SP)
-            || matches!(opcode, Opcode::PUSH | Opcode::POP);
-        let call = matches!(opcode, Opcode::BL | Opcode::BLX);
+        let base = base_of(insn);
+        let base_sp = base == Some(SP);
+        // A supervisor call runs a handler that, as a callee, may write through the pointers it
+        // is given (the stacked r0-r3).
+        let call = matches!(opcode, Opcode::BL | Opcode::BLX | Opcode::SVC);
         if call && insn.outlined.is_some() {
-            // An outlined helper runs on its caller's frame and may store anywhere in it.
+            // An outlined helper runs on its caller's frame and registers, follows no calling
+            // convention, and may store anywhere in the frame any register it is given.
+            let low = (0..16u8).filter_map(|r| self.frame(r)).min();
             self.forget(|_| true);
+            if let Some(low) = low {
+                self.escape(low);
+            }
         } else if call {
             self.call_escapes();
         }
-        let writes_sp = insn.writes().contains(SP);
+        if let Some(low) = moved_out(insn)
+            .into_iter()
+            .filter_map(|r| self.frame(r))
+            .min()
+        {
+            self.escape(low);
+        }
+        if insn.is_semihosting() {
+            // The debugger reads and writes memory through the block r1 points to.
+            self.clobber_escaped();
+        }
+        let writes_sp = insn.writes().contains(SP) || writes_stack_pointer(insn);
         if insn.is_store() || insn.is_coprocessor_store() {
-            // A frame address stored to memory escapes.
             let data: Vec<u8> = match insn.register_list() {
                 Some(list) => (0..16u8).filter(|r| list & 1 << r != 0).collect(),
                 None => insn.registers(),
             };
-            let base = insn.memory_base().or_else(|| match insn.inst.operands[0] {
-                // STM's base, written back or not.
-                Operand::RegWBack(r, _) if matches!(opcode, Opcode::STM(..)) => Some(r.number()),
-                _ => None,
-            });
-            if !(base_sp && sp.is_some()) {
-                if let Some(low) = data.iter().filter_map(|&r| self.frame(r)).min() {
-                    self.escape(low);
-                }
-            }
-            match (base_sp, sp) {
+            let data_low = data.iter().filter_map(|&r| self.frame(r)).min();
+            let placed = match (base_sp, sp) {
                 (true, Some(sp)) => self.store_to_frame(insn, sp, &before),
-                (true, None) => self.forget(|_| true),
-                // Through a register that may hold a frame address: any word of the frame.
+                (true, None) => {
+                    self.forget(|_| true);
+                    false
+                }
                 (false, _) => {
+                    if let Some(low) = data_low {
+                        self.escape(low);
+                    }
                     // Through a register that may hold a frame address: the words from its
-                    // lowest address (and offset, where negative) up; through any register, the
-                    // words an escaped address reaches.
-                    let low = match base {
-                        None => Some(i32::MIN),
-                        Some(b) => self.frame(b).map(|low| {
-                            let below = match (insn.inst.opcode, insn.memory_offset()) {
-                                (_, Some(off)) => i32::try_from(off.min(0)).unwrap_or(i32::MIN),
-                                // STMIA from its base up; STMDB below it.
-                                (Opcode::STM(true, ..), None) => 0,
-                                (Opcode::STM(false, ..), None) => {
-                                    -4 * list_of(insn).unwrap_or(0xffff).count_ones() as i32
-                                }
-                                _ => i32::MIN,
-                            };
-                            low.saturating_add(below)
-                        }),
-                    };
-                    if let Some(low) = low {
+                    // lowest address (moved by a negative offset, or a list stored below it)
+                    // up; through any register, the words an escaped address reaches.
+                    if let Some(low) = self.reached_from(insn, base) {
                         self.forget(|at| at + 4 > low);
                     }
                     self.clobber_escaped();
+                    false
+                }
+            };
+            // A frame address written where the pass keeps no word of it (a narrower, exclusive
+            // or floating-point store, an offset it cannot compute, any store not through SP)
+            // has escaped.
+            if !placed {
+                if let Some(low) = data_low {
+                    self.escape(low);
                 }
             }
         }
         let mut loaded: Vec<(u8, Holds)> = Vec::new();
-        if let (true, Some(sp)) = (base_sp, sp) {
-            match opcode {
-                Opcode::LDR | Opcode::LDRD => {
-                    // `LDRD Rt, Rt2`: Rt from the word at the address, Rt2 from the next.
-                    if let Some(off) = self.access(insn) {
-                        let count = if opcode == Opcode::LDRD { 2 } else { 1 };
-                        for (k, &rt) in insn.registers().iter().take(count).enumerate() {
-                            let held = self.slots.get(&(sp + off + 4 * k as i32)).copied();
-                            loaded.push((rt, held.unwrap_or(Holds::UNKNOWN)));
+        if insn.is_load() || insn.is_coprocessor_load() {
+            let words = match (base_sp, sp) {
+                (true, Some(sp)) => self.load_from_frame(insn, sp),
+                _ => None,
+            };
+            match words {
+                Some(words) => loaded = words,
+                None => {
+                    // Not placed word by word: through SP at an immediate offset it reads the
+                    // words its (at most 8) bytes overlap; through a register that may hold a
+                    // frame address, any word from that address's lowest offset (moved by a
+                    // negative offset) up. Its destinations may hold any frame address those
+                    // words hold; a word reached through any other register holds none that has
+                    // not escaped.
+                    let span = match (base_sp, sp, insn.memory_offset()) {
+                        (true, Some(sp), Some(off)) => i32::try_from(off)
+                            .ok()
+                            .map(|off| (sp.saturating_add(off), sp.saturating_add(off + 8))),
+                        _ => self.reached_from(insn, base).map(|from| (from, i32::MAX)),
+                    };
+                    let held = span.and_then(|(from, to)| {
+                        self.slots
+                            .iter()
+                            .filter(|&(&at, _)| at.saturating_add(4) > from && at < to)
+                            .filter_map(|(_, held)| held.frame_low())
+                            .min()
+                    });
+                    if insn.is_coprocessor_load() {
+                        // Into a floating-point register, which the pass does not follow.
+                        if let Some(low) = held {
+                            self.escape(low);
                         }
+                    } else {
+                        let value = held
+                            .map_or(Holds::UNKNOWN, |low| Holds::UNKNOWN.meet(Holds::frame(low)));
+                        let written = insn.writes();
+                        loaded.extend(
+                            (0..16u8)
+                                .filter(|&r| written.contains(r))
+                                .map(|r| (r, value)),
+                        );
                     }
                 }
-                Opcode::POP | Opcode::LDM(true, false, true, _) => {
-                    let list = list_of(insn).unwrap_or(0);
-                    let mut at = sp;
-                    for r in 0..16u8 {
-                        if list & 1 << r != 0 {
-                            let held = self.slots.get(&at).copied();
-                            loaded.push((r, held.unwrap_or(Holds::UNKNOWN)));
-                            at += 4;
-                        }
-                    }
-                }
-                _ => {}
             }
         }
         // SP's new offset.
@@ -407,7 +459,69 @@ impl Known {
             Some(now) => self.forget(|at| at < now),
             None => self.forget(|_| true),
         }
+        // A frame address stored in a word an escaped address reaches has escaped too.
+        self.close();
         loaded
+    }
+
+    /// The lowest frame offset an access through `base` (its base register, [`base_of`]) may
+    /// reach, where its address may be worked from a frame address: its base's lowest offset
+    /// moved by [`reach`], or anywhere in the frame where its index register may hold one (or
+    /// its base is not known).
+    fn reached_from(&self, insn: &Insn, base: Option<u8>) -> Option<i32> {
+        let Some(base) = base else {
+            return Some(i32::MIN);
+        };
+        let through_base = self.frame(base).map(|low| low.saturating_add(reach(insn)));
+        let through_index = index_of(insn)
+            .into_iter()
+            .find_map(|r| self.frame(r))
+            .map(|_| i32::MIN);
+        through_base.into_iter().chain(through_index).min()
+    }
+
+    /// What a load through SP (offset `sp` from the entry's) reads into which registers, where
+    /// it reads whole words at offsets the pass computes: `LDR`, `LDRD`, `POP`, `LDM`.
+    fn load_from_frame(&self, insn: &Insn, sp: i32) -> Option<Vec<(u8, Holds)>> {
+        // A word kept at the offset; else anything, or a frame address a kept word it overlaps
+        // (one an unaligned store kept) holds.
+        let word = |at: i32| match self.slots.get(&at) {
+            Some(&held) => held,
+            None => self
+                .slots
+                .range(at.saturating_sub(3)..at.saturating_add(4))
+                .filter_map(|(_, held)| held.frame_low())
+                .min()
+                .map_or(Holds::UNKNOWN, |low| Holds::UNKNOWN.meet(Holds::frame(low))),
+        };
+        match insn.inst.opcode {
+            Opcode::LDR | Opcode::LDRD => {
+                // `LDRD Rt, Rt2`: Rt from the word at the address, Rt2 from the next.
+                let off = self.access(insn)?;
+                let count = if insn.inst.opcode == Opcode::LDRD {
+                    2
+                } else {
+                    1
+                };
+                let regs = insn.registers();
+                (regs.len() >= count).then(|| {
+                    (0..count)
+                        .map(|k| (regs[k], word(sp + off + 4 * k as i32)))
+                        .collect()
+                })
+            }
+            Opcode::POP | Opcode::LDM(..) => {
+                let list = list_of(insn)?;
+                let mut at = sp + reach(insn);
+                let mut out = Vec::new();
+                for r in (0..16u8).filter(|r| list & 1 << r != 0) {
+                    out.push((r, word(at)));
+                    at += 4;
+                }
+                Some(out)
+            }
+            _ => None,
+        }
     }
 
     /// The offset from SP of a word access through SP (pre-indexed or plain; post-indexed: 0).
@@ -457,19 +571,26 @@ impl Known {
     }
 
     /// A store through SP (offset `sp` from the entry's); `before` the registers before it.
-    fn store_to_frame(&mut self, insn: &Insn, sp: i32, before: &[Holds; 16]) {
+    /// Returns whether each register it stores is now in a word the pass keeps (a whole-word
+    /// store at offsets it computes: `STR`, `STRD`, `PUSH`, `STM`).
+    fn store_to_frame(&mut self, insn: &Insn, sp: i32, before: &[Holds; 16]) -> bool {
         let opcode = insn.inst.opcode;
-        let value = |r: u8| before[usize::from(r)];
+        // SP stored is the frame address it holds.
+        let value = |r: u8| {
+            if r == SP {
+                Holds::frame(sp)
+            } else {
+                before[usize::from(r)]
+            }
+        };
         let mut words: Vec<(i32, Holds)> = Vec::new();
         match opcode {
-            Opcode::PUSH | Opcode::STM(false, true, true, _) => {
+            Opcode::PUSH | Opcode::STM(..) => {
                 let list = list_of(insn).unwrap_or(0);
-                let mut at = sp - 4 * list.count_ones() as i32;
-                for r in 0..16u8 {
-                    if list & 1 << r != 0 {
-                        words.push((at, value(r)));
-                        at += 4;
-                    }
+                let mut at = sp + reach(insn);
+                for r in (0..16u8).filter(|r| list & 1 << r != 0) {
+                    words.push((at, value(r)));
+                    at += 4;
                 }
             }
             Opcode::STR | Opcode::STRD => match (self.access(insn), &insn.registers()[..]) {
@@ -482,31 +603,30 @@ impl Known {
                 }
                 _ => {
                     self.forget(|_| true);
-                    return;
+                    return false;
                 }
             },
             _ => {
                 match self.access(insn) {
                     // Bytes, halfwords, a floating-point word or two: what they overlap is lost.
-                    Some(off)
-                        if !matches!(opcode, Opcode::STM(..)) && insn.vpush_words().is_none() =>
-                    {
-                        self.clobber(sp + off, 8)
-                    }
+                    Some(off) if insn.vpush_words().is_none() => self.clobber(sp + off, 8),
+                    // `VPUSH`: below SP, where no word is kept.
                     _ if insn.vpush_words().is_some() => {}
                     _ => self.forget(|_| true),
                 }
-                return;
+                return false;
             }
         }
         for (at, held) in words {
+            // A conditional store: the word may keep what it held.
+            let held = match insn.conditional {
+                true => self.slots.remove(&at).unwrap_or(Holds::UNKNOWN).meet(held),
+                false => held,
+            };
             self.clobber(at, 4);
-            if insn.conditional {
-                // A conditional store: the word may keep what it held.
-                continue;
-            }
             self.slots.insert(at, held);
         }
+        true
     }
 
     /// Where `insn` works its destination's value from a frame address (SP, or a register that
@@ -596,14 +716,8 @@ impl Known {
             | Operand::RegDerefPreindexRegShift(rn, _, add, true) => {
                 Some((rn.number(), add.then_some(0)))
             }
-            Operand::RegWBack(rn, true) => {
-                let words = 4 * list_of(insn).unwrap_or(0xffff).count_ones() as i32;
-                let down = matches!(
-                    insn.inst.opcode,
-                    Opcode::LDM(false, ..) | Opcode::STM(false, ..)
-                );
-                Some((rn.number(), Some(if down { -words } else { 0 })))
-            }
+            // A multiple (a floating-point one too): down by the list where it decrements.
+            Operand::RegWBack(rn, true) => Some((rn.number(), Some(reach(insn).min(0)))),
             _ => None,
         })?;
         if base == SP || !insn.writes().contains(base) {
@@ -657,6 +771,14 @@ impl Known {
         } else {
             None
         };
+        // An `MRS` of MSP or PSP (SYSm 8, 9) may read SP: a frame address.
+        let stack_read = match saved {
+            Some((d, None)) if matches!(hw2 & 0xff, 8 | 9) => Some((
+                d,
+                Holds::UNKNOWN.meet(Holds::frame(self.sp.unwrap_or(i32::MIN))),
+            )),
+            _ => None,
+        };
         let copied = match (insn.inst.opcode, &insn.inst.operands[..2]) {
             (Opcode::MOV, [Operand::Reg(d), Operand::Reg(m)]) => {
                 Some((d.number(), self.regs[usize::from(m.number())]))
@@ -667,6 +789,9 @@ impl Known {
         // `MRS` saved in r0-r3 lives through it.
         let written = match (&insn.outlined, insn.inst.opcode) {
             (Some(outlined), Opcode::BL) => Regs(outlined.writes | 1 << 14),
+            // A supervisor call's handler may change the registers the exception stacked: r0-r3,
+            // r12 and LR.
+            (_, Opcode::SVC) => Regs(0b0101_0000_0000_1111),
             _ => insn.writes(),
         };
         let before = self.regs;
@@ -680,6 +805,9 @@ impl Known {
             let i = usize::from(r);
             let value = match (saved, copied, taken[i]) {
                 (Some((d, Some(kind))), _, _) if d == r => Holds::saved(kind),
+                _ if stack_read.is_some_and(|(d, _)| d == r) => {
+                    stack_read.map_or(Holds::UNKNOWN, |(_, held)| held)
+                }
                 (_, Some((d, held)), _) if d == r => held,
                 (_, _, Some(v)) => Holds::constant(v),
                 _ => loaded
@@ -1004,6 +1132,107 @@ pub(super) fn value_before(
         Held::Constant(v) => Some(v),
         _ => None,
     }
+}
+
+/// The base register of a memory access: its memory operand's, a load or store multiple's
+/// (written back or not; a floating-point one's too), SP for `PUSH` and `POP`.
+fn base_of(insn: &Insn) -> Option<u8> {
+    if matches!(insn.inst.opcode, Opcode::PUSH | Opcode::POP) {
+        return Some(SP);
+    }
+    insn.memory_base().or_else(|| {
+        insn.inst.operands.iter().find_map(|o| match *o {
+            Operand::RegWBack(r, _) => Some(r.number()),
+            _ => None,
+        })
+    })
+}
+
+/// The index registers of a memory operand (`[Rn, Rm]`, `[Rn, Rm, LSL #k]`, post-indexed too).
+fn index_of(insn: &Insn) -> Vec<u8> {
+    let mut out = Vec::new();
+    for o in &insn.inst.operands {
+        match o {
+            Operand::RegDerefPreindexReg(_, rm, ..) | Operand::RegDerefPostindexReg(_, rm, ..) => {
+                out.push(rm.number())
+            }
+            Operand::RegDerefPreindexRegShift(_, shift, ..)
+            | Operand::RegDerefPostindexRegShift(_, shift, ..) => match shift.into_shift() {
+                RegShiftStyle::RegImm(s) => out.push(s.shiftee().number()),
+                RegShiftStyle::RegReg(s) => {
+                    out.extend([s.shiftee().number(), s.shifter().number()])
+                }
+            },
+            _ => {}
+        }
+    }
+    out
+}
+
+/// Where the lowest byte `insn` accesses lies from its base register's value before it, as far
+/// as the instruction says: a negative immediate offset, a list stored or loaded below the base
+/// (`STMDB`, `PUSH`, `VPUSH`, `VSTMDB`); 0 where it accesses from the base up (a positive offset
+/// is taken as 0, a conservative bound); anywhere where a register offset may be negative.
+fn reach(insn: &Insn) -> i32 {
+    let opcode = insn.inst.opcode;
+    let ops = &insn.inst.operands;
+    if let Some(off) = insn.memory_offset() {
+        return i32::try_from(off.min(0)).unwrap_or(i32::MIN);
+    }
+    if ops.iter().any(|o| {
+        matches!(
+            o,
+            Operand::RegDerefPostindexOffset(..)
+                | Operand::RegDerefPostindexReg(..)
+                | Operand::RegDerefPostindexRegShift(..)
+        )
+    }) {
+        // Post-indexed: at the base.
+        return 0;
+    }
+    let words = |list: Option<u16>| 4 * list.unwrap_or(0xffff).count_ones() as i32;
+    match opcode {
+        Opcode::STM(true, ..) | Opcode::LDM(true, ..) | Opcode::POP => 0,
+        Opcode::STM(false, ..) | Opcode::LDM(false, ..) | Opcode::PUSH => -words(list_of(insn)),
+        // VSTM/VLDM (ARMv7-M ARM A7.7.250): P (hw1 bit 8) set decrements before, by imm8 words.
+        _ if insn.is_coprocessor_load() || insn.is_coprocessor_store() => {
+            if insn.raw[0] & 0x100 != 0 {
+                -4 * i32::from(insn.raw[1] & 0xff)
+            } else {
+                0
+            }
+        }
+        _ => i32::MIN,
+    }
+}
+
+/// The core registers `insn` copies where the pass does not follow them: a floating-point
+/// register (`VMOV Sn, Rt`, `VMOV Sm, Sm1, Rt, Rt2`, `VMSR`: `MCR`/`MCRR`, Rt in hw2 15:12 and
+/// Rt2 in hw1 3:0), a special register other than a mask (`MSR`: ARMv7-M ARM B5.2.3, Rn in hw1
+/// 3:0), and the parameter block of a semihosting call (r1), which the debugger reads and writes.
+fn moved_out(insn: &Insn) -> Vec<u8> {
+    let [hw1, hw2] = insn.raw;
+    match insn.inst.opcode {
+        Opcode::MCR(..) => vec![(hw2 >> 12) as u8],
+        Opcode::MCRR(..) => vec![(hw2 >> 12) as u8, (hw1 & 0xf) as u8],
+        _ if special_register_written(insn).is_some_and(|sysm| !(0x10..=0x13).contains(&sysm)) => {
+            vec![(hw1 & 0xf) as u8]
+        }
+        _ if insn.is_semihosting() => vec![1],
+        _ => Vec::new(),
+    }
+}
+
+/// The special register (SYSm) an `MSR` writes.
+fn special_register_written(insn: &Insn) -> Option<u16> {
+    let [hw1, hw2] = insn.raw;
+    (insn.len == 4 && hw1 & 0xfff0 == 0xf380 && hw2 & 0xf300 == 0x8000).then_some(hw2 & 0xff)
+}
+
+/// Whether `insn` is an `MSR` that may move SP: of MSP (8), PSP (9) or CONTROL (0x14, whose
+/// SPSEL picks which of them SP is).
+fn writes_stack_pointer(insn: &Insn) -> bool {
+    special_register_written(insn).is_some_and(|sysm| matches!(sysm, 8 | 9 | 0x14))
 }
 
 /// The registers a `PUSH`, `POP`, `LDM` or `STM` transfers (a one-register `PUSH`/`POP` too).

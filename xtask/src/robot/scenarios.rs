@@ -237,8 +237,17 @@ fn ring_samples_of(ends: &[u64], id: u16, period: u64) -> Result<usize> {
 
 fn thesis_demo(run: &Run) -> Result<String> {
     every_board_ended(run)?;
-    // Commanded at 10 ms: a release every 900 µs until 200 ms.
-    let magnetometer = magnetometer_on_grid(run, 210, 300)?;
+    // Commanded at 10 ms, released from DiWheelDrive's acceptance (its admission step, paced after the ring's
+    // before it: 11.9 ms on 2026-12-05) every 900 µs until 200 ms, each frame on the bus within 300 µs.
+    let accepted = run
+        .view(0)
+        .traces("command-accepted 205")
+        .first()
+        .map(|line| crate::scenarios::trace_time(line))
+        .transpose()?
+        .context("DiWheelDrive did not accept the magnetometer request")?;
+    let releases = 200_000u64.saturating_sub(accepted + 300) / 900 + 1;
+    let magnetometer = magnetometer_on_grid(run, releases as usize, 300)?;
     let samples = ring_samples(run, 0x61F, 10_000)?;
     ensure!(samples >= 18, "{samples} ring samples in 188 ms");
     // Each sample's eight frames in sensor order, as the robot's driver sends them (one frame of an
