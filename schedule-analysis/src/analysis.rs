@@ -806,12 +806,6 @@ pub(crate) fn sort_tasks(
             *slot = p;
         }
     }
-    // A job of the transmit interrupt released by a job that queues frames: the aborts its frames cause are asked
-    // in a job of the transmit interrupt, so that task's response adds to its jitter (`can::transmit_abort_latency`).
-    let transmit = board
-        .can_tx_task
-        .and_then(|t| position.get(t).copied())
-        .filter(|&p| p != usize::MAX);
     let release = order
         .iter()
         .map(|&i| {
@@ -819,7 +813,6 @@ pub(crate) fn sort_tasks(
             Some(board_analysis::Release {
                 by: position.get(r).copied().unwrap_or(usize::MAX),
                 own_jitter: jitters.get(i).copied().unwrap_or(Time::ZERO),
-                also: transmit.filter(|_| board.is_transmit(i) && board.can_tx_task != Some(i)),
             })
         })
         .collect();

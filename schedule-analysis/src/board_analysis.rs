@@ -43,16 +43,12 @@ pub struct Release {
     pub by: usize,
     /// Its release jitter of its own, to which the releaser's response is added.
     pub own_jitter: Time,
-    /// A second job whose response is added too: a transmit-interrupt job's abort is asked in a job of the
-    /// transmit interrupt, within its response after the pend (docs/analysis.md, "How the analysis charges them").
-    pub also: Option<usize>,
 }
 
 /// Why a released job has no bound although its own analysis may have found one.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Unbound {
-    /// Its releaser (or the job whose response its jitter adds, [`Release::also`]) has no bound, so its release
-    /// jitter has none.
+    /// Its releaser has no bound, so its release jitter has none.
     Releaser,
     /// Its inherited release jitter is beyond the 64-bit nanosecond range.
     Overflow,
@@ -140,11 +136,11 @@ pub fn analyse<J: Jobs, B: JobBounds>(
     // Whether any job is released by another, and whether every releaser is more urgent than what it releases.
     let (mut chained, mut in_pass) = (false, true);
     for (p, timing) in timings.iter().enumerate() {
-        if let Some(Release { by: r, also, .. }) = meta.release(p) {
+        if let Some(Release { by: r, .. }) = meta.release(p) {
             chained = true;
-            let more_urgent =
-                |q: usize| timings.get(q).is_some_and(|t| t.priority > timing.priority);
-            in_pass &= more_urgent(r) && also.is_none_or(more_urgent);
+            in_pass &= timings
+                .get(r)
+                .is_some_and(|releaser| releaser.priority > timing.priority);
         }
     }
     let mut pass = Pass {
@@ -170,25 +166,17 @@ pub fn analyse<J: Jobs, B: JobBounds>(
     Ok(pass.outcome)
 }
 
-/// The jitter job `p` inherits from its releaser's current bound, or why it has none (one copy for its 3 callers).
-#[inline(never)]
+/// The jitter job `p` inherits from its releaser's current bound, or why it has none.
+#[inline(always)]
 fn inherited<J: Jobs, B: JobBounds>(
     meta: &J,
     bounds: &B,
     p: usize,
 ) -> Option<Result<Time, Unbound>> {
     let release = meta.release(p)?;
-    let also = match release.also {
-        None => Some(Time::ZERO),
-        Some(q) => bounds.wcrt(q),
-    };
-    Some(match (bounds.wcrt(release.by), also) {
-        (Some(r), Some(a)) => release
-            .own_jitter
-            .checked_plus(r)
-            .and_then(|j| j.checked_plus(a))
-            .ok_or(Unbound::Overflow),
-        _ => Err(Unbound::Releaser),
+    Some(match bounds.wcrt(release.by) {
+        None => Err(Unbound::Releaser),
+        Some(r) => release.own_jitter.checked_plus(r).ok_or(Unbound::Overflow),
     })
 }
 

@@ -24,8 +24,7 @@ pub enum Sender {
         worst: Time,
         /// Its best case: the earliest its frames are queued after its activation.
         best: Time,
-        /// The transmit interrupt's worst-case response (zero for a board without one: its frames are in
-        /// arbitration when queued).
+        /// The transmit interrupt's worst-case response.
         tx: Time,
     },
     /// The sending job, or its board's transmit interrupt, has no bound: neither has the message.
@@ -54,18 +53,13 @@ pub struct Message {
 impl Message {
     /// Its timing on the bus and the earliest its frames are queued after the sender's activation (`None` when the
     /// sender has no bound). The queuing jitter is its own plus, for a sent message, the sender's response
-    /// variation, the transmit interrupt's response and, for the mailbox abort a frame may need, a second one and
-    /// the aborted frame ([`can::abort_refill_delay`]).
+    /// variation and the transmit interrupt's response.
     pub fn timing(&self, cost: FrameCost, bit: Time) -> (MessageTiming, Option<Time>) {
         let (jitter, offset) = match self.sender {
             Sender::Outside => (self.jitter, Some(Time::ZERO)),
-            Sender::Bounded { worst, best, tx } => (
-                self.jitter
-                    .plus(worst.minus(best))
-                    .plus(tx)
-                    .plus(can::abort_refill_delay(tx, cost, bit)),
-                Some(best),
-            ),
+            Sender::Bounded { worst, best, tx } => {
+                (self.jitter.plus(worst.minus(best)).plus(tx), Some(best))
+            }
             Sender::Unbounded => (self.jitter, None),
         };
         let timing = MessageTiming {

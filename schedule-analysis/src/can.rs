@@ -81,32 +81,14 @@ pub fn shortest_frame_time(bit: Time) -> Time {
     bit.times(u64::from(frame_bits_best(0, false)))
 }
 
-/// The release jitter of its own of a transmit-interrupt job that a job queuing frames releases, where the transmit
-/// interrupt is charged by its parts (docs/analysis.md, "The transmit interrupt's parts"): the aborts its frames may
-/// cause are requested in the job the pend starts or in the job that collects the abort under way (one at a time,
-/// at most one per mailbox), each completing at once or, its frame on the bus, with that frame: three of the longest
-/// frames (eight data bytes, extended identifier not counted: the boards send standard ones) after the request. The
-/// request itself comes within the transmit interrupt's response after the pend: the release adds that response to
-/// this and the releasing job's (`board_analysis::Release::also`). The host analysis (`scenario`) and the on-chip
-/// admission check both take it from here.
+/// The release jitter of a transmit-interrupt job that a job queuing frames releases, where the transmit interrupt
+/// is charged by its parts (docs/analysis.md, "The transmit interrupt's parts"): the aborts its frames may cause
+/// come after the pend, requested in the job the pend starts or in the job that collects the abort under way (one
+/// at a time, at most one per mailbox), each completing at once or, its frame on the bus, with that frame: three of
+/// the longest frames (eight data bytes, extended identifier not counted: the boards send standard ones). The host
+/// analysis (`scenario`) and the on-chip admission check both take it from here.
 pub fn transmit_abort_latency(bit: Time) -> Time {
     frame_time(FrameCost::Exact, 8, false, bit).times(3)
-}
-
-/// What a sent frame's queuing jitter adds for the mailbox abort it may need (docs/analysis.md, *Why the bounds are
-/// safe*, "A frame that needs an abort"): its board's three mailboxes hold less urgent frames and the least urgent
-/// one is on the bus, so the job that asks for its abort (within the transmit interrupt's response `tx`) leaves it
-/// queued; the abort takes effect only as that frame ends (at most the longest frame a board sends — eight data
-/// bytes, standard identifier — under `cost`, after the ask), and the frame is in the freed mailbox, in
-/// arbitration, only when the job that completion pends has run (`tx` again). So `tx` + the longest own frame on
-/// top of the one `tx` every sent frame is charged. Zero for a board without a transmit interrupt (`tx` zero: its
-/// frames are in arbitration when queued). The host analysis and the on-chip admission check both take it from
-/// here (`bus_analysis::Message::timing`).
-pub fn abort_refill_delay(tx: Time, cost: FrameCost, bit: Time) -> Time {
-    if tx.is_zero() {
-        return Time::ZERO;
-    }
-    tx.plus(frame_time(cost, 8, false, bit))
 }
 
 /// The shortest frame a board sends, from the data lengths of the frames it sends (standard identifiers, no stuff

@@ -37,6 +37,9 @@ pub struct Report {
     /// The scenario analysed again with every held bound used ([`Report::with_on_bounds`]); it does not change
     /// the verdict.
     pub on_bounds: Option<crate::scenario::OnBounds>,
+    /// The verdict with a frame's abort refill charged ([`Report::with_abort_refill`]); it does not change the
+    /// verdict.
+    pub abort_refill: Option<crate::abort_refill::AbortRefill>,
 }
 
 /// Publishers beyond this many skip the sensitivity search (each costs about twenty whole-system analyses).
@@ -109,6 +112,7 @@ impl Report {
             admission: Vec::new(),
             budget_from: BTreeMap::new(),
             on_bounds: None,
+            abort_refill: None,
         }
     }
 
@@ -142,6 +146,16 @@ impl Report {
     /// before the verdict, which stays the first run's.
     pub fn with_on_bounds(mut self, on_bounds: Option<crate::scenario::OnBounds>) -> Report {
         self.on_bounds = on_bounds;
+        self
+    }
+
+    /// Adds the verdict with a frame's abort refill charged ([`crate::abort_refill::AbortRefill::of`]), printed
+    /// after the VERDICT, which stays the uncharged model's.
+    pub fn with_abort_refill(
+        mut self,
+        charged: Option<crate::abort_refill::AbortRefill>,
+    ) -> Report {
+        self.abort_refill = charged;
         self
     }
 
@@ -783,6 +797,14 @@ fn text_verdict(report: &Report, markdown: bool, out: &mut String) {
     if let Some(line) = report.on_bounds.as_ref().and_then(on_bounds_verdict) {
         let _ = writeln!(out, "{}{line}", if markdown { "\n" } else { "" });
     }
+    if let Some(charged) = &report.abort_refill {
+        let _ = writeln!(
+            out,
+            "{}{}",
+            if markdown { "\n" } else { "" },
+            charged.line()
+        );
+    }
     if let Some(c) = comparison {
         let f = c.failures();
         let _ = writeln!(
@@ -998,6 +1020,12 @@ fn to_json(report: &Report) -> Value {
         map.insert(
             "on_bounds".into(),
             serde_json::to_value(o).unwrap_or(Value::Null),
+        );
+    }
+    if let (Some(a), Value::Object(map)) = (&report.abort_refill, &mut out) {
+        map.insert(
+            "abort_refill".into(),
+            serde_json::to_value(a).unwrap_or(Value::Null),
         );
     }
     if let (Some(s), Value::Object(map)) = (&report.sensitivity, &mut out) {

@@ -153,7 +153,20 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
                 args.frame_cost.unwrap_or(built.frame_cost),
                 &report.primary,
             )?;
-            report.with_budget_sources(built).with_on_bounds(on_bounds)
+            // And with a frame's abort refill charged (docs/analysis.md, "A frame that needs an abort"): what the
+            // verdict would be; the verdict and the boards' admission stay on the uncharged model.
+            progress("with the abort refill charged");
+            let charged = schedule_analysis::abort_refill::AbortRefill::of(
+                &system,
+                &schedule_analysis::analysis::Options {
+                    frame_cost: report.primary.frame_cost,
+                    horizon: None,
+                },
+            );
+            report
+                .with_budget_sources(built)
+                .with_on_bounds(on_bounds)
+                .with_abort_refill(Some(charged))
         }
         None => report,
     };

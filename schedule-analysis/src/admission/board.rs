@@ -524,8 +524,6 @@ struct JobIndex<const N: usize> {
     metas: [JobMeta; N],
     /// Sorted position of each original index.
     position: [u8; N],
-    /// The transmit interrupt's original index (its row; [`NO_JOB`]: none).
-    transmit: u8,
 }
 
 impl<const N: usize> BoardSet<N> {
@@ -617,10 +615,6 @@ impl<const N: usize> JobIndex<N> {
     /// Positions, releasers as positions, level ends and the jobs only a deadline check reads.
     fn index(&mut self, timings: &[TaskTiming; N], table: &BoardTable<'_>) {
         let len = self.len;
-        self.transmit = table
-            .can_tx
-            .and_then(|row| u8::try_from(row).ok())
-            .unwrap_or(NO_JOB);
         for (p, meta) in self.metas.iter_mut().enumerate().take(len) {
             if let Some(slot) = self.position.get_mut(usize::from(meta.original)) {
                 *slot = p as u8;
@@ -657,19 +651,6 @@ impl<const N: usize> JobIndex<N> {
         }
     }
 
-    /// Whether a released job is one of the transmit interrupt's, released by a job that queues frames, whose jitter
-    /// adds the transmit interrupt's response (the aborts its frames cause are asked in a job of it,
-    /// `can::transmit_abort_latency`): checked for a bound only and named as a fixed task that is either the transmit
-    /// interrupt (a stream's transmit job, `Source::Transmit`) or its own row (`can_tx[<task>]`, a fixed row the
-    /// table marks `bounded_only`); an engine row is named as its job, whose row it is not. Worked out from the
-    /// meta, not kept in it: a flag in `JobMeta` made every job 8 bytes longer (its alignment).
-    fn after_transmit(&self, meta: &JobMeta) -> bool {
-        meta.check == Check::Unchecked
-            && self.transmit != NO_JOB
-            && matches!(meta.id, TaskId::Fixed(row)
-                if row == u16::from(self.transmit) || row == u16::from(meta.original))
-    }
-
     /// The sorted position of the job with this original index ([`NO_JOB`]: none).
     fn at(&self, original: u8) -> u8 {
         self.position
@@ -685,9 +666,6 @@ impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
         (meta.released_by != NO_JOB).then_some(board_analysis::Release {
             by: usize::from(meta.released_by),
             own_jitter: meta.own_jitter,
-            also: self
-                .after_transmit(meta)
-                .then(|| usize::from(self.at(self.transmit))),
         })
     }
     fn level_end(&self, p: usize) -> usize {
@@ -748,7 +726,6 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
             len: 0,
             metas: const { [EMPTY_META; N] },
             position: [NO_JOB; N],
-            transmit: NO_JOB,
         },
     };
     let scripted = set.fill(input)?;

@@ -178,8 +178,8 @@ pub struct TopicRow<'a> {
     /// Where the board's transmit interrupt is charged by its parts (docs/analysis.md, "The transmit interrupt's
     /// parts"): the cost of its job per sample of this topic (`can_tx[<topic>]`: fixed + the topic's frames per
     /// sample × (fixed + per frame + abort), hardware-task overheads included), which the publisher job releases
-    /// with [`crate::can::transmit_abort_latency`] as its own jitter, to which its and the transmit interrupt's
-    /// responses add (`board_analysis::Release::also`). 0: no such job (the transmit interrupt charged as a whole).
+    /// with [`crate::can::transmit_abort_latency`] as its own jitter. 0: no such job (the transmit interrupt charged
+    /// as a whole).
     pub transmit: RowTime,
 }
 
@@ -1124,9 +1124,7 @@ mod tests {
     /// 50 µs, every 10 ms at priority 9, which nothing delays). The level's busy period: 175 → 285 → 395 → 450 →
     /// 505 → 560 → 560 µs (⌈w/71⌉·55 + 20 + 100), eight jobs, the first the worst: 175 µs, more than two own frames
     /// (142 µs). The frame (8 bytes, 135 µs, alone on the bus, so no blocking) is queued with jitter (100 − 50) + 175
-    /// from the publisher's best 50 µs, and the mailbox abort it may need adds a second transmit response and the
-    /// aborted frame, 175 + 135 (`can::abort_refill_delay`): jitter 535 µs, delivered at worst 50 + 535 + 135 = 720 µs
-    /// after the release.
+    /// from the publisher's best 50 µs: delivered at worst 50 + 225 + 135 = 410 µs after the release.
     #[test]
     fn the_transmit_interrupt_is_checked_for_a_bound_and_its_response_is_the_frames_jitter() {
         let own_frame = can::own_frame_time(Time::from_ns(1000), [3u8].into_iter());
@@ -1172,21 +1170,20 @@ mod tests {
             }
             evaluate::<8, 8>(&robot, &[stream])
         };
-        // 175 µs, beyond two own frames: admitted, the frames delivered by 720 µs.
-        assert_eq!(decide(true, 55_000, 20_000, 720).refusal, None);
-        match decide(true, 55_000, 20_000, 719).refusal {
+        // 175 µs, beyond two own frames: admitted, the frames delivered by 410 µs.
+        assert_eq!(decide(true, 55_000, 20_000, 410).refusal, None);
+        match decide(true, 55_000, 20_000, 409).refusal {
             Some(Refusal::Deadline(v)) => {
                 assert!(matches!(v.culprit, Culprit::Frame { .. }), "{v:?}");
-                assert_eq!(v.wcrt, Some(Time::from_us(720)));
+                assert_eq!(v.wcrt, Some(Time::from_us(410)));
             }
-            other => panic!("the frames at 719 µs: {other:?}"),
+            other => panic!("the frames at 409 µs: {other:?}"),
         }
-        // 80 µs more above it: the first job 255 µs, and the frames twice 80 µs later (the transmit response is
-        // charged twice).
-        assert_eq!(decide(true, 55_000, 100_000, 880).refusal, None);
-        assert!(decide(true, 55_000, 100_000, 879).refusal.is_some());
+        // 80 µs more above it: the first job 255 µs, and the frames 80 µs later.
+        assert_eq!(decide(true, 55_000, 100_000, 490).refusal, None);
+        assert!(decide(true, 55_000, 100_000, 489).refusal.is_some());
         // The same row as any other fixed task has its period for a deadline (one own frame): refused.
-        match decide(false, 55_000, 20_000, 720).refusal {
+        match decide(false, 55_000, 20_000, 410).refusal {
             Some(Refusal::Deadline(v)) => {
                 assert_eq!(
                     v.culprit,
@@ -1215,63 +1212,6 @@ mod tests {
                 }
                 other => panic!("unbounded: {other:?}"),
             }
-        }
-    }
-
-    /// A stream's transmit job (`can_tx[<topic>]`, the topic row's `transmit`) is released by the publisher job with
-    /// the transmit interrupt's response added to its jitter (`board_analysis::Release::also`: the aborts its frames
-    /// cause are asked in a job of the transmit interrupt). Worked by hand, 1 Mbit/s: the transmit row 10 µs per
-    /// own frame (3 bytes, 71 µs), priority 5; the publisher job 100 µs (best 50 µs) every 1 ms at priority 9, its
-    /// transmit job 200 µs at priority 5. The publisher responds in 100 µs. The transmit row's window:
-    /// w = 10·⌈w/71⌉ + 100·⌈w/1000⌉ + 200·⌈(w + J)/1000⌉ with the transmit job's jitter J = 100 + 405 (three frames,
-    /// `can::transmit_abort_latency`) + R_tx. With R_tx left out, J = 505 and one transmit job: 310 µs. With it, the
-    /// fixed point of the rounds: J = 505 + 510 = 1 015, two transmit jobs in the window, w = 10 + 100 + 400 = 510;
-    /// later instances less (the window closes at the ninth, 90 + 500 = 590 ≤ 9·71). The frame (8 bytes, 135 µs,
-    /// alone) is queued with jitter (100 − 50) + 510 + (510 + 135) = 1 205: delivered by 50 + 1 205 + 135 = 1 390 µs
-    /// (990 with R_tx left out of the transmit job's jitter).
-    #[test]
-    fn a_transmit_job_takes_the_transmit_interrupts_response_as_jitter() {
-        let topic = 0x1F;
-        let topics = [TopicRow {
-            topic,
-            transmit: 200_000,
-            ..TOPICS[0]
-        }];
-        let tasks = [TaskRow {
-            priority: 5,
-            cost: 10_000,
-            period: 0,
-            own_frame: true,
-            bounded_only: true,
-            ..TASKS[0]
-        }];
-        let boards = [BoardTable {
-            tasks: &tasks,
-            topics: &topics,
-            shortest_dlc: 3,
-            levels: [Some(9); LEVELS],
-            can_tx: Some(0),
-            ..BOARDS[0]
-        }];
-        let robot = RobotTable {
-            boards: &boards,
-            ..ROBOT
-        };
-        let decide = |deadline: u64| {
-            let mut stream = request(3, 1_000);
-            stream.deadline = Some(Time::from_us(deadline));
-            if let Some(sender) = stream.sender.as_mut() {
-                sender.topic = topic;
-            }
-            evaluate::<8, 8>(&robot, &[stream])
-        };
-        assert_eq!(decide(1_390).refusal, None);
-        match decide(1_389).refusal {
-            Some(Refusal::Deadline(v)) => {
-                assert!(matches!(v.culprit, Culprit::Frame { .. }), "{v:?}");
-                assert_eq!(v.wcrt, Some(Time::from_us(1_390)));
-            }
-            other => panic!("the frames at 1 389 µs: {other:?}"),
         }
     }
 
