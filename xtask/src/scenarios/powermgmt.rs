@@ -308,7 +308,8 @@ fn admission_decisions(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 }
 
 /// The power-status request accept-and-warn starts in `admission-decisions` (at medium), and its
-/// period: one that makes the ring's frames miss their deadline at [`DECISIONS_ACCEPTED_MS`].
+/// period: one at which the power status's own job would miss its deadline beside the ring at
+/// [`DECISIONS_ACCEPTED_MS`] (the scenario log's header).
 const DECISIONS_WARNED: &str = "21E#01050000";
 const DECISIONS_WARNED_US: u64 = 5_000;
 
