@@ -5,8 +5,9 @@
 //! to end and for a second transmit response before it is in arbitration, and the transmit job that asks the abort
 //! runs within the transmit interrupt's response after its pend. This module analyses the whole system with both
 //! charged ([`analyse`]) and says what that breaks ([`AbortRefill`], the report's line after the VERDICT). The
-//! known answers and the transmit-path simulator show the uncharged model beaten and this one holding; the boards
-//! still admit on the uncharged one (a known soundness gap, docs/analysis.md).
+//! transmit-path simulator (tests/simulation.rs) beats the uncharged model and holds to this one, and the known
+//! answers (tests/known_answers.rs) work both by hand; the boards still admit on the uncharged one (a known
+//! soundness gap, docs/analysis.md).
 //!
 //! The chip's check has none of this (its image has no room to spare and its decisions stay those of the shipped
 //! sets): the charge is applied to the model's own jitters, so the core analyses run unchanged.

@@ -1147,3 +1147,76 @@ fn a_frame_needing_a_mailbox_abort_takes_a_second_transmit_response_and_the_abor
         (555.0, Some(585.0), 130.0, Some(450.0))
     );
 }
+
+/// The charged model's rounds where the transmit interrupt's response grows with them (`abort_refill::analyse`),
+/// worked by hand at 1 Mbit/s, `exact`. One board: `can_tx` (priority 5, 10 µs, at least 71 µs apart), its job
+/// `can_tx[data]` (priority 5, 200 µs, released by the publisher with `can::transmit_abort_latency` = 405 µs of its
+/// own), the publisher (priority 9, 100 µs, best 50 µs, every 1 ms); its frame `data` (8 bytes, 135 µs) alone on
+/// the bus. `can_tx`'s first instance: 10 + the publisher's 100 + the transmit job's 200 per ⌈(w + J)/1 000⌉ of
+/// them, J the job's jitter.
+///
+/// * Uncharged: J = 100 + 405 = 505, one job: `can_tx` 310 µs; the frame's queuing jitter (100 − 50) + 310 = 360,
+///   delivered by 50 + 360 + 135 = 545 µs.
+/// * Charged, round 2: J = 505 + 310 = 815, two jobs in the window: 510 µs; round 3: J = 505 + 510 = 1 015, still
+///   two: 510, the fixed point. The frame: 50 + 510 + (510 + 135) = 1 205 µs of jitter, delivered by
+///   50 + 1 205 + 135 = 1 390 µs.
+#[test]
+fn the_charged_rounds_grow_the_transmit_response_to_its_fixed_point() {
+    let model = serde_json::json!({
+        "boards": [{
+            "name": "node",
+            "can_tx_task": "can_tx",
+            "tasks": [
+                { "name": "can_tx", "priority": 5, "wcet_us": 10, "period_us": 71, "sporadic": true },
+                { "name": "can_tx[data]", "priority": 5, "wcet_us": 200, "period_us": 1000,
+                  "jitter_us": 405, "released_by": "publisher", "job_of": "can_tx" },
+                { "name": "publisher", "priority": 9, "wcet_us": 100, "bcet_us": 50, "period_us": 1000,
+                  "deadline_us": 1000 }
+            ]
+        }],
+        "can": {
+            "bitrate": 1000000,
+            "frame_cost": "exact",
+            "messages": [
+                { "name": "data", "id": 256, "dlc": 8, "period_us": 1000, "deadline_us": 10000,
+                  "sender": "node/publisher" }
+            ]
+        }
+    });
+    let system = schedule_analysis::model::Model::from_json(&model.to_string())
+        .expect("parses")
+        .validate()
+        .expect("valid");
+    let options = analysis::Options {
+        frame_cost: schedule_analysis::model::FrameCostSpec::Exact,
+        horizon: None,
+    };
+    // (can_tx's WCRT, the transmit job's jitter, the frame's jitter, the frame's WCRT), µs.
+    let figures = |report: &analysis::Analysis| {
+        let board = &report.boards[0];
+        let task = |name: &str| {
+            board
+                .tasks
+                .iter()
+                .find(|t| t.name == name)
+                .unwrap_or_else(|| panic!("{name}"))
+        };
+        let data = &report.bus.as_ref().expect("a bus").messages[0];
+        (
+            task("can_tx").wcrt().map(|w| w.as_us_f64()),
+            task("can_tx[data]").jitter.as_us_f64(),
+            data.jitter.as_us_f64(),
+            data.wcrt().map(|w| w.as_us_f64()),
+        )
+    };
+    assert_eq!(
+        figures(&analysis::analyse(&system, &options)),
+        (Some(310.0), 505.0, 360.0, Some(545.0))
+    );
+    let charged =
+        schedule_analysis::abort_refill::analyse(&system, &options).expect("a fixed point");
+    assert_eq!(
+        figures(&charged),
+        (Some(510.0), 1015.0, 1205.0, Some(1390.0))
+    );
+}
