@@ -283,7 +283,7 @@ impl<'q, const N: usize> Consumer<'q, N> {
     }
 
     /// [`Consumer::poll_recv`] with the frame as the ring holds it, for a poll that passes it on
-    /// before it is looked into (the command handler's wait, `tasks::next_frame_after`).
+    /// before it is looked into (the command handler's job, `tasks::serve_commands`).
     pub fn poll_recv_packed(&mut self, cx: &mut Context<'_>) -> Poll<Packed> {
         if let Some(slot) = self.take() {
             return Poll::Ready(Packed(slot));

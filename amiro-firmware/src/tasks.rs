@@ -477,8 +477,8 @@ where
 #[cfg(feature = "qemu")]
 use crate::qemu::robot::parked;
 #[cfg(not(feature = "qemu"))]
-async fn parked<F: core::future::Future>(future: F) -> F::Output {
-    future.await
+fn parked<F: core::future::Future>(future: F) -> F {
+    future
 }
 
 /// QEMU: the cost of a refresh step, as [`note_decision`] logs a decision's.
@@ -593,16 +593,6 @@ fn note_decision<C: Clock, const N: usize, const M: usize>(
 /// Index of a CAN priority level in per-level arrays (0 = urgent).
 pub const fn level_index(p: Priority) -> usize {
     p as usize
-}
-
-/// Waits for the next command frame.
-pub async fn next_command<const N: usize>(
-    commands: &mut crate::rx_queue::Consumer<'static, N>,
-) -> RxFrame {
-    let task = crate::tracing::suspend(None);
-    let frame = commands.recv().await;
-    crate::tracing::resume(task);
-    frame
 }
 
 /// Asks for the task to be polled again (`Waker::wake_by_ref`). Not inlined: its call through the

@@ -404,15 +404,13 @@ impl SensorDataHandler {
     /// Frames for other boards and sensor-data frames are [`Outcome::Ignored`]; malformed commands
     /// are rejected with the decoder's reason and change nothing but their counter.
     pub fn on_frame(&mut self, now_us: u64, id: u16, data: &[u8]) -> Result<Outcome, Rejection> {
-        if let Some(ignored) = self.count_not_for_us(id) {
-            return Ok(Outcome::Ignored(ignored));
-        }
-        self.on_decoded(now_us, decode_command(id, data))
+        self.on_command(now_us, id, decode_command(id, data))
     }
 
     /// [`SensorDataHandler::on_frame`] for a frame its caller has already decoded: `decoded` is
     /// `decode_command(id, data)` of the frame heard (the firmware's command handler decodes each
-    /// frame once, to route it). The same outcome and the same counts as `on_frame`.
+    /// frame once, to route it). Whether the frame is this board's business is decided from the
+    /// identifier first, so a malformed command for another board is ignored, not rejected.
     pub fn on_command(
         &mut self,
         now_us: u64,
@@ -426,6 +424,7 @@ impl SensorDataHandler {
     }
 
     /// [`SensorDataHandler::not_for_us`], counted.
+    #[inline]
     fn count_not_for_us(&mut self, id: u16) -> Option<Ignored> {
         let ignored = self.not_for_us(id)?;
         let count = match ignored {
@@ -438,6 +437,7 @@ impl SensorDataHandler {
 
     /// The rest of [`SensorDataHandler::on_frame`], once the frame is known to be a command this
     /// board may own: the decoder's verdict applied and counted.
+    #[inline]
     fn on_decoded(
         &mut self,
         now_us: u64,
