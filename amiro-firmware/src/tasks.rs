@@ -293,7 +293,7 @@ pub fn route_to_admission<C: Clock, const N: usize>(
 /// the order heard through [`handle_command_admitted`], paced by [`crate::admission::Pacing`]: at most
 /// `K` analysed commands in any window, this board's one-shots at least the one-shot interval apart.
 /// Each of its waits answers the request the command handler set aside for a busy verdict
-/// ([`route_to_admission`]) as soon as it finds one ([`AdmissionWaits`]).
+/// ([`route_to_admission`]) as soon as it finds one (`AdmissionWaits`).
 #[allow(clippy::too_many_arguments)]
 pub async fn serve_admission<
     C: Clock,
@@ -608,7 +608,7 @@ fn poll_again(waker: &core::task::Waker) {
 /// `sporadic_us`, one command per interval, rests on), and hands each to `handle`, the board's part
 /// (routing it with [`route`], [`route_to_admission`], [`handle_command`]). Never returns.
 ///
-/// One future, polled through one function the compiler keeps apart ([`ServeCommands`]'s `poll`), with
+/// One future, polled through one function the compiler keeps apart (`ServeCommands`'s `poll`), with
 /// no loop: a poll is a job, and takes at most one command. Its longest way is the one the
 /// machine-code bound charges, so each part is on it once: the time read against the rate limit's
 /// instant (a wake before it is pending again: the armed timer's interrupt wakes the task at the
