@@ -340,7 +340,8 @@ pub async fn serve_admission<
             admission.analysed(),
             admission.sampled(),
         );
-        parked(waits.until::<C>(next)).await;
+        let delay = core::pin::pin!(C::delay_until_us(next));
+        parked(waits.until(delay)).await;
         if admission.stale() {
             // A stream left the running set (a stop, a one-shot): its board's kept analysis is redone now, as a
             // paced step of its own, so that no decision re-analyses more than its own board and the bus.
@@ -383,7 +384,8 @@ async fn refresh_steps<
         #[cfg(feature = "qemu")]
         note_refresh::<C, N, M>(admission, started);
         let next = pacing.next_start(started, C::now_us(), counted, false);
-        parked(waits.until::<C>(next)).await;
+        let delay = core::pin::pin!(C::delay_until_us(next));
+        parked(waits.until(delay)).await;
     }
 }
 
@@ -400,7 +402,7 @@ struct AdmissionWaits<'w, const R: usize, T, I> {
     tx_interrupt: I,
 }
 
-impl<const R: usize, const Q: usize, T, I> AdmissionWaits<'_, R, T, I>
+impl<'w, const R: usize, const Q: usize, T, I> AdmissionWaits<'w, R, T, I>
 where
     T: rtic_core::Mutex<T = TxQueue<Q>>,
     I: cortex_m::interrupt::InterruptNumber,
@@ -425,20 +427,14 @@ where
         frame
     }
 
-    /// Waits until `at_us` (the pacing's next start).
-    async fn until<C: Clock>(&mut self, at_us: u64) {
-        let mut delay = core::pin::pin!(C::delay_until_us(at_us));
-        core::future::poll_fn(|cx| {
-            if self.answer_set_aside(cx, None) {
-                return core::task::Poll::Pending;
-            }
-            self.requests.watch(cx.waker());
-            if self.answer_set_aside(cx, None) {
-                return core::task::Poll::Pending;
-            }
-            delay.as_mut().poll(cx)
-        })
-        .await;
+    /// Waits for `delay` (until the pacing's next start). A future of its own ([`Until`]), no `async` body: the
+    /// admission check's machine code must reach no panic, and an `async` state machine's poll after its end is
+    /// one.
+    fn until<'a, F: Future<Output = ()>>(
+        &'a mut self,
+        delay: core::pin::Pin<&'a mut F>,
+    ) -> Until<'a, 'w, R, T, I, core::pin::Pin<&'a mut F>> {
+        Until { waits: self, delay }
     }
 
     /// Sends the busy verdict of the request the handler set aside, if there is one, and asks for the
@@ -469,6 +465,36 @@ where
         }
         poll_again(cx.waker());
         true
+    }
+}
+
+/// [`AdmissionWaits`]' wait for the pacing's instant (`delay`), answering a busy verdict meanwhile.
+struct Until<'a, 'w, const R: usize, T, I, E> {
+    waits: &'a mut AdmissionWaits<'w, R, T, I>,
+    delay: E,
+}
+
+impl<const R: usize, const Q: usize, T, I, E> Future for Until<'_, '_, R, T, I, E>
+where
+    T: rtic_core::Mutex<T = TxQueue<Q>>,
+    I: cortex_m::interrupt::InterruptNumber,
+    E: Future<Output = ()> + Unpin,
+{
+    type Output = ();
+
+    fn poll(
+        self: core::pin::Pin<&mut Self>,
+        cx: &mut core::task::Context<'_>,
+    ) -> core::task::Poll<()> {
+        let this = self.get_mut();
+        if this.waits.answer_set_aside(cx, None) {
+            return core::task::Poll::Pending;
+        }
+        this.waits.requests.watch(cx.waker());
+        if this.waits.answer_set_aside(cx, None) {
+            return core::task::Poll::Pending;
+        }
+        core::pin::Pin::new(&mut this.delay).poll(cx)
     }
 }
 
