@@ -194,6 +194,11 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
         }
     }
 
+    /// The board this check decides for.
+    pub fn board(&self) -> Board {
+        self.board
+    }
+
     /// The running publishers of the whole robot, as this board knows them.
     pub fn running(&self) -> &[Stream] {
         self.state.running.get(..self.state.len).unwrap_or(&[])
@@ -569,7 +574,8 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
 /// The verdict a board sends when its admission queue is full and `frame` is one of its own publish or
 /// one-shot requests (`None` for anything else: other boards answer their own requests, and a stop or
 /// policy command needs no answer): refused unseen, reason [`RefusalReason::Busy`], nothing analysed.
-/// The requester hears at once that it asked faster than the check's analysed rate.
+/// The requester hears that it asked faster than the check's analysed rate (the admission task sends it, within
+/// its response: `tasks::serve_admission`).
 pub fn busy_verdict(board: Board, id: u16, data: &[u8]) -> Option<[Frame; 2]> {
     let Ok(Command::Sensor(command)) = decode_command(id, data) else {
         return None;
@@ -577,9 +583,15 @@ pub fn busy_verdict(board: Board, id: u16, data: &[u8]) -> Option<[Frame; 2]> {
     busy_verdict_for(board, &command)
 }
 
+/// Whether `board` answers `command` with a busy verdict when its admission queue is full: one of its own
+/// publish or one-shot requests ([`busy_verdict_for`] builds the verdict, in the admission task).
+pub fn answers_busy(board: Board, command: &SensorCommand) -> bool {
+    command.topic.board() == board && command.mode != SensorMode::Stop
+}
+
 /// [`busy_verdict`] for a sensor command already decoded (the command handler decodes each frame once).
 pub fn busy_verdict_for(board: Board, command: &SensorCommand) -> Option<[Frame; 2]> {
-    if command.topic.board() != board {
+    if !answers_busy(board, command) {
         return None;
     }
     let requested = match command.mode {
@@ -613,8 +625,9 @@ pub fn busy_verdict_for(board: Board, command: &SensorCommand) -> Option<[Frame;
 pub enum Route {
     /// For the admission task: the sensor command (`None` for an admission-policy command).
     Admission(Option<SensorCommand>),
-    /// For the command handler itself (`tasks::handle_command`).
-    Handler,
+    /// For the command handler itself (`tasks::handle_command`): the frame as the decoder took it (an
+    /// actuator command, or why it is no command).
+    Handler(Result<Command, amiro_can::DecodeError>),
 }
 
 /// Decodes `frame` once and says where it goes ([`Route`]).
@@ -622,7 +635,7 @@ pub fn route(frame: &crate::can::RxFrame) -> Route {
     match decode_command(frame.id, frame.payload()) {
         Ok(Command::Sensor(command)) => Route::Admission(Some(command)),
         Ok(Command::Policy { .. }) => Route::Admission(None),
-        _ => Route::Handler,
+        other => Route::Handler(other),
     }
 }
 
@@ -828,6 +841,20 @@ mod tests {
             busy_verdict(Board::DiWheelDrive, publish.id, publish.payload())
         );
         assert!(busy_verdict_for(Board::PowerManagement, &command).is_none());
+        // The handler sets a request aside for a busy verdict exactly when the admission task builds one.
+        for (board, command) in [
+            (Board::DiWheelDrive, command),
+            (Board::PowerManagement, command),
+        ] {
+            assert_eq!(
+                answers_busy(board, &command),
+                busy_verdict_for(board, &command).is_some()
+            );
+        }
+        let Route::Admission(Some(stop_command)) = route(&stop) else {
+            panic!("a stop not routed to the admission task");
+        };
+        assert!(!answers_busy(Board::DiWheelDrive, &stop_command));
 
         let policy = received(
             Command::Policy {
@@ -848,14 +875,21 @@ mod tests {
             }
             .encode(),
         );
-        assert_eq!(route(&motor), Route::Handler);
+        assert_eq!(
+            route(&motor),
+            Route::Handler(decode_command(motor.id, motor.payload()))
+        );
+        assert!(matches!(
+            route(&motor),
+            Route::Handler(Ok(Command::Motor { .. }))
+        ));
         // A frame no command decodes from stays with the handler (which counts it as rejected).
         let unknown = crate::can::RxFrame {
             id: u16::MAX,
             len: 0,
             data: [0; 8],
         };
-        assert_eq!(route(&unknown), Route::Handler);
+        assert!(matches!(route(&unknown), Route::Handler(Err(_))));
         // The handler's stop check reads the mode `route` decoded.
         for frame in [stop, publish, policy, motor, unknown] {
             let routed_stop = matches!(

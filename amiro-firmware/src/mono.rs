@@ -35,7 +35,7 @@ pub trait Clock {
     /// Waits until the monotonic reaches `at_us`.
     fn delay_until_us(at_us: u64) -> impl Future<Output = ()>;
     /// A wait until the monotonic reaches `at_us` that frees its timer slot as it completes
-    /// (`timer_queue::Expiry`): the command handler's rate limit (`tasks::next_frame_after`). Not
+    /// (`timer_queue::Expiry`): the command handler's rate limit (`tasks::serve_commands`). Not
     /// traced: its caller says when its task stops and runs again.
     type Expiry: Future<Output = ()> + Unpin;
     /// [`Clock::Expiry`] for `at_us`.

@@ -36,11 +36,19 @@
 //!   it. A push before the consumer stored its waker is found by its second look; a push after it
 //!   finds the waker. A waker is taken once: the consumer stores it again each time it parks.
 //!
+//! * **One frame set aside.** Beside the ring the queue holds one frame the producer sets aside
+//!   while the ring is full ([`Producer::set_aside`]: the command handler's request that the
+//!   admission task answers with a busy verdict), a ring of one with a flag for its index: written
+//!   only while the flag is clear, published by setting it after the copy; read only while it is
+//!   set, freed by clearing it after the copy. The same wake reaches the consumer, which looks
+//!   for it before each of its waits and again after storing its waker
+//!   ([`Consumer::watch`]).
+//!
 //! The host tests below run these steps in the orders an interrupt can put them in.
 use core::cell::UnsafeCell;
 use core::future::Future;
 use core::pin::Pin;
-use core::sync::atomic::{compiler_fence, AtomicU32, Ordering};
+use core::sync::atomic::{compiler_fence, AtomicBool, AtomicU32, Ordering};
 use core::task::{Context, Poll, Waker};
 
 use crate::can::RxFrame;
@@ -77,6 +85,10 @@ pub struct FrameQueue<const N: usize> {
     /// Frames read, ever (wrapping): stored by the consumer only.
     read: AtomicU32,
     slots: UnsafeCell<[Slot; N]>,
+    /// Whether `aside` holds a frame: set by the producer only, cleared by the consumer only.
+    aside_full: AtomicBool,
+    /// The frame set aside ([`Producer::set_aside`]).
+    aside: UnsafeCell<Slot>,
     /// The parked consumer's waker: stored and taken only with the other side kept out
     /// ([`exclusive`]).
     waker: UnsafeCell<Option<Waker>>,
@@ -110,6 +122,8 @@ impl<const N: usize> FrameQueue<N> {
             written: AtomicU32::new(0),
             read: AtomicU32::new(0),
             slots: UnsafeCell::new([[0; 3]; N]),
+            aside_full: AtomicBool::new(false),
+            aside: UnsafeCell::new([0; 3]),
             waker: UnsafeCell::new(None),
         }
     }
@@ -154,6 +168,23 @@ impl<const N: usize> Producer<'_, N> {
         unsafe { *q.slot(written) = pack(frame) };
         compiler_fence(Ordering::Release);
         q.written.store(written.wrapping_add(1), Ordering::Relaxed);
+        true
+    }
+
+    /// Sets `frame` aside beside the ring (one frame: the module's *One frame set aside*); `false`
+    /// when one is still there, not yet taken. Does not wake the consumer: [`Producer::wake`] does.
+    #[inline(always)]
+    pub fn set_aside(&mut self, frame: &RxFrame) -> bool {
+        let q = self.queue;
+        if q.aside_full.load(Ordering::Relaxed) {
+            return false;
+        }
+        // The consumer's copy of the frame it took came before its clear (one core).
+        compiler_fence(Ordering::Acquire);
+        // SAFETY: clear: the consumer does not read `aside` until the flag is set again below.
+        unsafe { *q.aside.get() = pack(frame) };
+        compiler_fence(Ordering::Release);
+        q.aside_full.store(true, Ordering::Relaxed);
         true
     }
 
@@ -209,6 +240,29 @@ impl<'q, const N: usize> Consumer<'q, N> {
         Some(slot)
     }
 
+    /// The frame the producer set aside ([`Producer::set_aside`]), if any, taken.
+    pub fn take_aside(&mut self) -> Option<RxFrame> {
+        let q = self.queue;
+        if !q.aside_full.load(Ordering::Relaxed) {
+            return None;
+        }
+        // The producer's copy came before its store of the flag (one core).
+        compiler_fence(Ordering::Acquire);
+        // SAFETY: set: the producer does not write `aside` until the flag is cleared below.
+        let slot = unsafe { *q.aside.get() };
+        compiler_fence(Ordering::Release);
+        q.aside_full.store(false, Ordering::Relaxed);
+        Some(unpack(slot))
+    }
+
+    /// Stores `waker` for the producer's next [`Producer::wake`], for a consumer that waits for
+    /// something else as well (the admission task's pacing, which must still hear of a frame set
+    /// aside): look for the frame set aside again after this, as [`Consumer::poll_recv`] looks at
+    /// the ring again after its park.
+    pub fn watch(&mut self, waker: &Waker) {
+        self.park(waker);
+    }
+
     /// Stores `waker` for the producer's next [`Producer::wake`] (kept if it already wakes the
     /// same task).
     fn park(&mut self, waker: &Waker) {
@@ -229,7 +283,7 @@ impl<'q, const N: usize> Consumer<'q, N> {
     }
 
     /// [`Consumer::poll_recv`] with the frame as the ring holds it, for a poll that passes it on
-    /// before it is looked into (the command handler's wait, `tasks::next_frame_after`).
+    /// before it is looked into (the command handler's job, `tasks::serve_commands`).
     pub fn poll_recv_packed(&mut self, cx: &mut Context<'_>) -> Poll<Packed> {
         if let Some(slot) = self.take() {
             return Poll::Ready(Packed(slot));
@@ -393,6 +447,68 @@ mod tests {
         for id in [1, 2, 3, 51] {
             assert_eq!(rx.try_recv(), Some(frame(id)));
         }
+    }
+
+    #[test]
+    fn a_frame_set_aside_waits_beside_a_full_ring_once_and_is_taken_once() {
+        // SAFETY: this test's only split.
+        let (mut tx, mut rx) = unsafe { queue().split() };
+        for id in 0..N as u16 {
+            assert!(tx.push(&frame(id)));
+        }
+        assert!(!tx.push(&frame(40)), "the ring is full");
+        assert!(tx.set_aside(&frame(41)));
+        assert!(
+            !tx.set_aside(&frame(42)),
+            "one frame aside: the next is turned away"
+        );
+        // The ring's frames are not disturbed by it, nor it by them.
+        assert_eq!(rx.try_recv(), Some(frame(0)));
+        assert_eq!(rx.take_aside(), Some(frame(41)));
+        assert_eq!(rx.take_aside(), None, "taken once");
+        assert!(tx.set_aside(&frame(43)), "free again once taken");
+        for id in 1..N as u16 {
+            assert_eq!(rx.try_recv(), Some(frame(id)));
+        }
+        assert_eq!(rx.try_recv(), None);
+        assert_eq!(rx.take_aside(), Some(frame(43)));
+    }
+
+    #[test]
+    fn a_frame_set_aside_reaches_a_consumer_that_watches_or_is_found_by_its_second_look() {
+        let (count, waker) = counter();
+        // SAFETY: this test's only split.
+        let (mut tx, mut rx) = unsafe { queue().split() };
+        // Set aside after the consumer's watch: the wake reaches it.
+        assert_eq!(rx.take_aside(), None);
+        rx.watch(&waker);
+        assert!(tx.set_aside(&frame(5)));
+        tx.wake();
+        assert_eq!(wakes(&count), 1);
+        assert_eq!(rx.take_aside(), Some(frame(5)));
+        // Set aside between the first look and the watch: no waker to wake, the second look finds it.
+        assert_eq!(rx.take_aside(), None);
+        assert!(tx.set_aside(&frame(6)));
+        tx.wake();
+        assert_eq!(wakes(&count), 1);
+        rx.watch(&waker);
+        assert_eq!(rx.take_aside(), Some(frame(6)));
+    }
+
+    #[test]
+    fn a_consumer_preempted_mid_take_aside_makes_the_producer_wait_never_overwrite() {
+        let q = queue();
+        // SAFETY: this test's only split.
+        let (mut tx, mut rx) = unsafe { q.split() };
+        assert!(tx.set_aside(&frame(8)));
+        // The consumer's take up to its copy, then the producer preempts.
+        let copy = unsafe { *q.aside.get() };
+        assert!(!tx.set_aside(&frame(9)), "not freed yet");
+        assert_eq!(unsafe { *q.aside.get() }, copy, "not overwritten");
+        q.aside_full.store(false, Ordering::Relaxed);
+        assert_eq!(unpack(copy), frame(8));
+        assert!(tx.set_aside(&frame(9)));
+        assert_eq!(rx.take_aside(), Some(frame(9)));
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! The bodies of the tasks every board runs the same way: CAN receive, CAN transmit, command
 //! handling. The board's RTIC app binds them to its interrupts and priorities (`levels`) and
 //! passes its resources in; nothing here knows which board it runs on.
+use core::future::Future;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use amiro_can::Priority;
@@ -167,23 +168,34 @@ pub fn trace_outcome(now: u64, id: u16, outcome: &Result<Outcome, Rejection>) {
     telemetry::trace(&TraceEvent::new(now, TraceKind::for_command(id, outcome)));
 }
 
-/// Handles one command frame: decodes it against the board's publisher table, traces the outcome,
-/// wakes the publisher levels whose schedule changed, and returns an actuator outcome (motor, LED,
-/// …) for the board to apply. `wake_levels` holds one sender per CAN priority level (urgent first),
-/// or a single sender when one publisher task serves every level. While the board shuts down
-/// nothing may start again: the frame is dropped unseen.
+/// Handles one command frame the command handler keeps (an actuator command, or a frame no command
+/// decodes from), and a stop before it goes on to the admission task: `decoded` is the frame as
+/// [`route`] decoded it. Applies it to the board's publisher table (a stop takes effect here), traces
+/// the outcome and returns an actuator outcome (motor, LED, …) for the board to apply. It wakes no
+/// publisher level: a stop only removes work, and a level that slept until the stopped topic's next
+/// release wakes then, finds nothing due and sleeps until its next (the admission task, which applies
+/// the stop again, changes nothing more). While the board shuts down nothing may start again: the
+/// frame is dropped unseen.
 pub fn handle_command<C: Clock>(
     frame: &RxFrame,
-    handler: impl rtic_core::Mutex<T = SensorDataHandler>,
-    wake_levels: &mut [Sender<'static, (), 1>],
+    decoded: Result<amiro_can::Command, amiro_can::DecodeError>,
+    mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
 ) -> Option<(u64, Outcome)> {
     if signals::shutting_down() {
         return None;
     }
-    handle_command_at(C::now_us(), frame, handler, wake_levels, true)
+    let now = C::now_us();
+    let outcome = handler.lock(|h| h.on_command(now, frame.id, decoded));
+    trace_outcome(now, frame.id, &outcome);
+    match outcome {
+        Ok(Outcome::Sensor { .. }) | Err(_) => None,
+        Ok(other) => Some((now, other)),
+    }
 }
 
-/// [`handle_command`] as of `now`.
+/// A command the admission task passed, as of `now`: applied to the publisher table, traced when
+/// `traced`, and the publisher levels whose schedule changed woken (`wake_levels`: one sender per CAN
+/// priority level, urgent first, or a single sender when one publisher task serves every level).
 fn handle_command_at(
     now: u64,
     frame: &RxFrame,
@@ -222,68 +234,57 @@ pub fn for_admission(frame: &RxFrame) -> bool {
     matches!(route(frame), Route::Admission(_))
 }
 
-/// When the last busy verdict was sent (ms since boot, 0: never).
+/// When the command handler last set a request aside for a busy verdict (1024 µs units since boot, 0: never).
 static LAST_BUSY_VERDICT_MS: AtomicU32 = AtomicU32::new(0);
 
 /// The command handler's part of a sensor or admission-policy command (`docs/analysis.md`, "The
 /// admission task"), `sensor` as [`route`] decoded it. A **stop** only removes load: it takes effect here,
-/// at the handler's priority and within its deadline, and then goes to the admission task like every such
-/// command, which brings its running set up to date in the order heard (and applies the stop again, in case
-/// a request for the same topic was still waiting there). When the admission queue is full, one of this
-/// board's publish or one-shot requests is refused unseen:
-/// counted as [`amiro_can::RefusalReason::Busy`] and answered with a verdict through the transmit queue;
-/// anything else is dropped and counted as a received frame dropped (the queue is bounded, as the receive
-/// queue is).
-#[allow(clippy::too_many_arguments)]
-pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
+/// at the handler's priority and within its deadline ([`handle_command`]), and then goes to the admission task
+/// like every such command, which brings its running set up to date in the order heard (and applies the stop
+/// again, in case a request for the same topic was still waiting there). When the admission queue is full,
+/// one of this board's publish or one-shot requests is refused unseen: counted as
+/// [`amiro_can::RefusalReason::Busy`] and set aside beside the queue for the admission task, which answers it
+/// with a verdict within its response ([`serve_admission`]); anything else is dropped and counted as a
+/// received frame dropped (the queue is bounded, as the receive queue is).
+pub fn route_to_admission<C: Clock, const N: usize>(
     frame: &RxFrame,
     sensor: Option<amiro_can::SensorCommand>,
     board: amiro_can::Board,
     handler: impl rtic_core::Mutex<T = SensorDataHandler>,
-    wake_levels: &mut [Sender<'static, (), 1>],
     requests: &mut Producer<'static, N>,
-    mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
-    tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
 ) {
-    let stop = sensor.is_some_and(|c| c.mode == amiro_can::SensorMode::Stop);
-    if stop {
-        let _ = handle_command::<C>(frame, handler, wake_levels);
+    let stop = sensor.filter(|c| c.mode == amiro_can::SensorMode::Stop);
+    if let Some(command) = stop {
+        let _ = handle_command::<C>(frame, Ok(amiro_can::Command::Sensor(command)), handler);
     }
     if requests.push(frame) {
         requests.wake();
         return;
     }
-    if stop {
+    if stop.is_some() {
         // A stop that finds the queue full has taken effect all the same (and is traced as handled);
         // only the admission task's view keeps the stream, which errs on the safe side (more load).
         return;
     }
-    match sensor.and_then(|command| crate::admission::busy_verdict_for(board, &command)) {
-        Some(verdict) => {
+    match sensor {
+        Some(command) if crate::admission::answers_busy(board, &command) => {
             crate::health::count_admission(true, amiro_can::RefusalReason::Busy);
-            let now = C::now_us();
             // At most one busy verdict per one-shot interval: a flood of requests must not turn into a
-            // flood of verdicts (each refusal is counted all the same).
+            // flood of verdicts (each refusal is counted all the same), and one waits at a time.
             let last = LAST_BUSY_VERDICT_MS.load(Ordering::Relaxed);
-            let now_ms = crate::admission::ticks_1024us(now);
+            let now_ms = crate::admission::ticks_1024us(C::now_us());
             // 1024 µs units: 40 of them are at least the one-shot interval (40 ms).
             if last != 0
                 && now_ms.wrapping_sub(last) < u32::from(crate::admission::ONE_SHOT_INTERVAL_MS)
             {
                 return;
             }
-            LAST_BUSY_VERDICT_MS.store(now_ms.max(1), Ordering::Relaxed);
-            // Not traced as queued frames: no sample was released for them (the bench would take
-            // them for late samples of the diagnostics topic). One lock per frame: the transmit task
-            // waits for one frame's insertion at most.
-            for verdict_frame in verdict {
-                let _ = tx_queue.lock(|q| enqueue(q, verdict_frame));
+            if requests.set_aside(frame) {
+                LAST_BUSY_VERDICT_MS.store(now_ms.max(1), Ordering::Relaxed);
+                requests.wake();
             }
-            cortex_m::peripheral::NVIC::pend(tx_interrupt);
         }
-        None => {
-            crate::health::count_rx_dropped();
-        }
+        _ => crate::health::count_rx_dropped(),
     }
 }
 
@@ -291,6 +292,8 @@ pub fn route_to_admission<C: Clock, const N: usize, const Q: usize>(
 /// analyses every board once before the first request, then takes the commands the handler queued in
 /// the order heard through [`handle_command_admitted`], paced by [`crate::admission::Pacing`]: at most
 /// `K` analysed commands in any window, this board's one-shots at least the one-shot interval apart.
+/// Each of its waits answers the request the command handler set aside for a busy verdict
+/// ([`route_to_admission`]) as soon as it finds one (`AdmissionWaits`).
 #[allow(clippy::too_many_arguments)]
 pub async fn serve_admission<
     C: Clock,
@@ -304,25 +307,31 @@ pub async fn serve_admission<
     pacing: &mut crate::admission::Pacing<K>,
     requests: &mut crate::rx_queue::Consumer<'static, R>,
     mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
-    mut tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
+    tx_queue: impl rtic_core::Mutex<T = TxQueue<Q>>,
     tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
     wake_levels: &mut [Sender<'static, (), 1>],
 ) {
+    let mut waits = AdmissionWaits {
+        board: admission.board(),
+        requests,
+        tx_queue,
+        tx_interrupt,
+    };
     // Every board analysed once with nothing running, before the first request (cheap: no stream runs yet, so
     // back to back, as one activation).
     admission.prepare();
     loop {
-        let frame = parked(next_command(requests)).await;
+        let frame = parked(waits.next_command()).await;
         // A request whose period moves the analysis horizon changes every board's key: the other boards are
         // analysed first, one per step, so that the decision analyses only its own board and the bus.
-        refresh_steps::<C, N, M, K>(admission, pacing, Some(&frame), false).await;
+        refresh_steps::<C, N, M, K, Q, R>(admission, pacing, Some(&frame), false, &mut waits).await;
         let started = C::now_us();
         handle_command_admitted::<C, N, M, Q>(
             &frame,
             admission,
             &mut handler,
-            &mut tx_queue,
-            tx_interrupt,
+            &mut waits.tx_queue,
+            waits.tx_interrupt,
             wake_levels,
         );
         let next = pacing.next_start(
@@ -331,11 +340,12 @@ pub async fn serve_admission<
             admission.analysed(),
             admission.sampled(),
         );
-        parked(C::delay_until_us(next)).await;
+        let delay = core::pin::pin!(C::delay_until_us(next));
+        parked(waits.until(delay)).await;
         if admission.stale() {
             // A stream left the running set (a stop, a one-shot): its board's kept analysis is redone now, as a
             // paced step of its own, so that no decision re-analyses more than its own board and the bus.
-            refresh_steps::<C, N, M, K>(admission, pacing, None, true).await;
+            refresh_steps::<C, N, M, K, Q, R>(admission, pacing, None, true, &mut waits).await;
         }
     }
 }
@@ -344,11 +354,24 @@ pub async fn serve_admission<
 /// `refresh_step`): one board analysed per step, each board at most once, paced. With `counted` each step counts in
 /// the pacing's window like a decision (the refresh after a stop, as before it was split); the steps preparing a
 /// decision wait only the pacing's interval after a note (the decision they prepare is counted).
-async fn refresh_steps<C: Clock, const N: usize, const M: usize, const K: usize>(
+async fn refresh_steps<
+    C: Clock,
+    const N: usize,
+    const M: usize,
+    const K: usize,
+    const Q: usize,
+    const R: usize,
+>(
     admission: &mut crate::admission::Admission<'_, N, M>,
     pacing: &mut crate::admission::Pacing<K>,
     before: Option<&RxFrame>,
     counted: bool,
+    waits: &mut AdmissionWaits<
+        '_,
+        R,
+        impl rtic_core::Mutex<T = TxQueue<Q>>,
+        impl cortex_m::interrupt::InterruptNumber,
+    >,
 ) {
     let before = before.map(|frame| (frame.id, frame.payload()));
     let mut from = 0;
@@ -361,7 +384,117 @@ async fn refresh_steps<C: Clock, const N: usize, const M: usize, const K: usize>
         #[cfg(feature = "qemu")]
         note_refresh::<C, N, M>(admission, started);
         let next = pacing.next_start(started, C::now_us(), counted, false);
-        parked(C::delay_until_us(next)).await;
+        let delay = core::pin::pin!(C::delay_until_us(next));
+        parked(waits.until(delay)).await;
+    }
+}
+
+/// The admission task's waits: for the next command the handler queued, or for the pacing's instant. Each
+/// answers the request the command handler set aside for a busy verdict (`rx_queue`'s frame set aside, with
+/// the queue's one wake) as soon as it finds it: looked for before the wait and again once the waker is stored,
+/// as the ring is. So a busy verdict goes out within the admission task's response from the refusal: at once
+/// from a wait, or once the step in progress has ended. Answering is an activation of its own (the task is
+/// woken again and the wait goes on in its next poll), so an activation queues at most one verdict.
+struct AdmissionWaits<'w, const R: usize, T, I> {
+    board: amiro_can::Board,
+    requests: &'w mut crate::rx_queue::Consumer<'static, R>,
+    tx_queue: T,
+    tx_interrupt: I,
+}
+
+impl<'w, const R: usize, const Q: usize, T, I> AdmissionWaits<'w, R, T, I>
+where
+    T: rtic_core::Mutex<T = TxQueue<Q>>,
+    I: cortex_m::interrupt::InterruptNumber,
+{
+    /// Waits for the next command the handler queued (the task trace's job ends here: `trace_task` is
+    /// the task it stopped, resumed around an answer).
+    async fn next_command(&mut self) -> RxFrame {
+        let task = crate::tracing::suspend(None);
+        let frame = core::future::poll_fn(|cx| {
+            if self.answer_set_aside(cx, Some(task)) {
+                return core::task::Poll::Pending;
+            }
+            if let core::task::Poll::Ready(frame) = self.requests.poll_recv(cx) {
+                return core::task::Poll::Ready(frame);
+            }
+            // Set aside between the first look and the park.
+            self.answer_set_aside(cx, Some(task));
+            core::task::Poll::Pending
+        })
+        .await;
+        crate::tracing::resume(task);
+        frame
+    }
+
+    /// Waits for `delay` (until the pacing's next start). A future of its own ([`Until`]), no `async` body: the
+    /// admission check's machine code must reach no panic, and an `async` state machine's poll after its end is
+    /// one.
+    fn until<'a, F: Future<Output = ()>>(
+        &'a mut self,
+        delay: core::pin::Pin<&'a mut F>,
+    ) -> Until<'a, 'w, R, T, I, core::pin::Pin<&'a mut F>> {
+        Until { waits: self, delay }
+    }
+
+    /// Sends the busy verdict of the request the handler set aside, if there is one, and asks for the
+    /// task to be polled again (the wait goes on then); `true` if it did.
+    fn answer_set_aside(
+        &mut self,
+        cx: &mut core::task::Context<'_>,
+        trace_task: Option<u8>,
+    ) -> bool {
+        let Some(frame) = self.requests.take_aside() else {
+            return false;
+        };
+        if let Some(task) = trace_task {
+            crate::tracing::resume(task);
+        }
+        if let Some(verdict) = crate::admission::busy_verdict(self.board, frame.id, frame.payload())
+        {
+            // Not traced as queued frames: no sample was released for them (the bench would take them for
+            // late samples of the diagnostics topic). One lock per frame: the transmit task waits for one
+            // frame's insertion at most.
+            for verdict_frame in verdict {
+                let _ = self.tx_queue.lock(|q| enqueue(q, verdict_frame));
+            }
+            cortex_m::peripheral::NVIC::pend(self.tx_interrupt);
+        }
+        if trace_task.is_some() {
+            let _ = crate::tracing::suspend(None);
+        }
+        poll_again(cx.waker());
+        true
+    }
+}
+
+/// [`AdmissionWaits`]' wait for the pacing's instant (`delay`), answering a busy verdict meanwhile.
+struct Until<'a, 'w, const R: usize, T, I, E> {
+    waits: &'a mut AdmissionWaits<'w, R, T, I>,
+    delay: E,
+}
+
+impl<const R: usize, const Q: usize, T, I, E> Future for Until<'_, '_, R, T, I, E>
+where
+    T: rtic_core::Mutex<T = TxQueue<Q>>,
+    I: cortex_m::interrupt::InterruptNumber,
+    E: Future<Output = ()> + Unpin,
+{
+    type Output = ();
+
+    fn poll(
+        self: core::pin::Pin<&mut Self>,
+        cx: &mut core::task::Context<'_>,
+    ) -> core::task::Poll<()> {
+        let this = self.get_mut();
+        if this.waits.answer_set_aside(cx, None) {
+            return core::task::Poll::Pending;
+        }
+        this.waits.requests.watch(cx.waker());
+        if this.waits.answer_set_aside(cx, None) {
+            return core::task::Poll::Pending;
+        }
+        core::pin::Pin::new(&mut this.delay).poll(cx)
     }
 }
 
@@ -370,8 +503,8 @@ async fn refresh_steps<C: Clock, const N: usize, const M: usize, const K: usize>
 #[cfg(feature = "qemu")]
 use crate::qemu::robot::parked;
 #[cfg(not(feature = "qemu"))]
-async fn parked<F: core::future::Future>(future: F) -> F::Output {
-    future.await
+fn parked<F: core::future::Future>(future: F) -> F {
+    future
 }
 
 /// QEMU: the cost of a refresh step, as [`note_decision`] logs a decision's.
@@ -488,88 +621,107 @@ pub const fn level_index(p: Priority) -> usize {
     p as usize
 }
 
-/// Waits for the next command frame.
-pub async fn next_command<const N: usize>(
-    commands: &mut crate::rx_queue::Consumer<'static, N>,
-) -> RxFrame {
-    let task = crate::tracing::suspend(None);
-    let frame = commands.recv().await;
-    crate::tracing::resume(task);
-    frame
+/// Asks for the task to be polled again (`Waker::wake_by_ref`). Not inlined: its call through the
+/// waker's vtable keeps a place of its own in the machine code.
+#[inline(never)]
+fn poll_again(waker: &core::task::Waker) {
+    waker.wake_by_ref();
 }
 
-/// The command handler's one wait (`docs/analysis.md`, "The command handler"): until `not_before_us`
-/// (the rate limit: `None` before the first command), then for the next frame the CAN receive
-/// interrupt queued: a command is taken no earlier than `not_before_us`, which is what the
-/// analysis's arrival model of the handler (`sporadic_us`, one command per interval) rests on.
+/// The command handler's loop (`docs/analysis.md`, "The command handler"), the same on every board:
+/// takes the frames the CAN receive interrupt queued, one at a time, each no earlier than the previous
+/// one's start plus `interval_us` (the rate limit the analysis's arrival model of the handler,
+/// `sporadic_us`, one command per interval, rests on), and hands each to `handle`, the board's part
+/// (routing it with [`route`], [`route_to_admission`], [`handle_command`]). Never returns.
 ///
-/// One future polled through one function the compiler keeps apart (`NextFrame`'s `poll`), so the
-/// handler's loop has one `await` and one place that polls it: a job (from a resume to the next
-/// wait that is pending) runs the loop's body once, and the machine-code bound charges one
-/// command's handling and two polls of the wait — the one that resumes the job and the next wait's
-/// first. Each poll is cheap on every way through it: the rate limit compares the time with its
-/// instant before it arms a timer (none when the frame comes late enough), a wait that has armed one
-/// ends only once the timer's interrupt has taken it off the timer queue, so that the poll that
-/// ends it never arms one (`timer_queue::Expiry`), and nothing is copied but the frame.
-pub async fn next_frame_after<C: Clock, const N: usize>(
+/// One future, polled through one function the compiler keeps apart (`ServeCommands`'s `poll`), with
+/// no loop: a poll is a job, and takes at most one command. Its longest way is the one the
+/// machine-code bound charges, so each part is on it once: the time read against the rate limit's
+/// instant (a wake before it is pending again: the armed timer's interrupt wakes the task at the
+/// instant), the frame queue's look (and the park that finds it empty), the command's handling, and the
+/// rate limit's timer armed for the next instant (the previous command's wait dropped, its slot freed
+/// without a walk). When that instant has come already (a job that ran past it, or one that came
+/// during the arming), the task asks to be polled again: the next command is a job of its own.
+pub async fn serve_commands<C: Clock, const N: usize>(
     frames: &mut crate::rx_queue::Consumer<'static, N>,
-    not_before_us: Option<u64>,
-) -> RxFrame {
-    NextFrame::<C, N> {
+    interval_us: u64,
+    handle: impl FnMut(RxFrame) + Unpin,
+) {
+    let never = ServeCommands::<C, N, _> {
         frames,
-        not_before_us,
-        limit: C::expiry_at_us(not_before_us.unwrap_or(0)),
+        interval_us,
+        handle,
+        limit: C::expiry_at_us(0),
+        not_before_us: None,
         stopped: None,
     }
-    .await
-    .unpack()
+    .await;
+    match never {}
 }
 
-/// [`next_frame_after`]'s two waits, in one future.
-struct NextFrame<'c, C: Clock, const N: usize> {
+/// [`serve_commands`]'s future.
+struct ServeCommands<'c, C: Clock, const N: usize, H> {
     frames: &'c mut crate::rx_queue::Consumer<'static, N>,
-    /// The rate limit's instant, `None` once it has passed (or without one).
-    not_before_us: Option<u64>,
-    /// The rate limit's wait (its instant, or 0 without one: never polled then). Once it has
-    /// completed it holds no timer slot, so nothing is left for its drop to free.
+    interval_us: u64,
+    handle: H,
+    /// The rate limit's wait: polled once, when it is armed; a slot it holds is freed when the next
+    /// arming replaces it.
     limit: C::Expiry,
+    /// The rate limit's instant while it is ahead (`None` once it has passed, or before the first
+    /// command).
+    not_before_us: Option<u64>,
     /// The task the trace stopped at the wait in progress ([`crate::tracing::suspend`]), `None`
-    /// before that wait's first poll.
+    /// while a command is handled.
     stopped: Option<u8>,
 }
 
-impl<C: Clock, const N: usize> core::future::Future for NextFrame<'_, C, N> {
-    type Output = crate::rx_queue::Packed;
+impl<C: Clock, const N: usize, H: FnMut(RxFrame) + Unpin> core::future::Future
+    for ServeCommands<'_, C, N, H>
+{
+    type Output = core::convert::Infallible;
 
     #[inline(never)]
     fn poll(
         self: core::pin::Pin<&mut Self>,
         cx: &mut core::task::Context<'_>,
-    ) -> core::task::Poll<crate::rx_queue::Packed> {
+    ) -> core::task::Poll<core::convert::Infallible> {
         use core::task::Poll;
         let this = self.get_mut();
         if let Some(at_us) = this.not_before_us {
-            // The trace's next release: the rate limit's instant. The time is read in every build (the
-            // QEMU runs' jobs are held to the release image's bound, which must hold their code).
-            let task = *this
-                .stopped
-                .get_or_insert_with(|| crate::tracing::suspend(Some((at_us, C::now_us()))));
-            if core::pin::Pin::new(&mut this.limit).poll(cx).is_pending() {
+            if C::now_us() < at_us {
+                // Woken before the instant: the armed timer's interrupt wakes the task at it.
                 return Poll::Pending;
             }
             this.not_before_us = None;
-            crate::tracing::resume(task);
-            this.stopped = None;
+            if let Some(task) = this.stopped.take() {
+                crate::tracing::resume(task);
+            }
         }
         let task = *this
             .stopped
             .get_or_insert_with(|| crate::tracing::suspend(None));
-        match this.frames.poll_recv_packed(cx) {
-            Poll::Ready(frame) => {
-                crate::tracing::resume(task);
-                Poll::Ready(frame)
-            }
-            Poll::Pending => Poll::Pending,
+        let Poll::Ready(frame) = this.frames.poll_recv_packed(cx) else {
+            return Poll::Pending;
+        };
+        this.stopped = None;
+        crate::tracing::resume(task);
+        let started = C::now_us();
+        (this.handle)(frame.unpack());
+        let at_us = started + this.interval_us;
+        let now = C::now_us();
+        if now >= at_us {
+            poll_again(cx.waker());
+            return Poll::Pending;
         }
+        this.not_before_us = Some(at_us);
+        // The trace's next release: the rate limit's instant. The time is read in every build (the
+        // QEMU runs' jobs are held to the release image's bound, which must hold their code).
+        this.stopped = Some(crate::tracing::suspend(Some((at_us, now))));
+        this.limit = C::expiry_at_us(at_us);
+        // Its first poll arms the timer, or finds the instant come meanwhile.
+        if core::pin::Pin::new(&mut this.limit).poll(cx).is_ready() {
+            poll_again(cx.waker());
+        }
+        Poll::Pending
     }
 }

@@ -404,20 +404,46 @@ impl SensorDataHandler {
     /// Frames for other boards and sensor-data frames are [`Outcome::Ignored`]; malformed commands
     /// are rejected with the decoder's reason and change nothing but their counter.
     pub fn on_frame(&mut self, now_us: u64, id: u16, data: &[u8]) -> Result<Outcome, Rejection> {
-        if let Some(ignored) = self.not_for_us(id) {
-            match ignored {
-                Ignored::OtherBoard(_) => {
-                    self.counters.ignored_other_board =
-                        self.counters.ignored_other_board.saturating_add(1);
-                }
-                Ignored::SensorData => {
-                    self.counters.ignored_sensor_data =
-                        self.counters.ignored_sensor_data.saturating_add(1);
-                }
-            }
+        self.on_command(now_us, id, decode_command(id, data))
+    }
+
+    /// [`SensorDataHandler::on_frame`] for a frame its caller has already decoded: `decoded` is
+    /// `decode_command(id, data)` of the frame heard (the firmware's command handler decodes each
+    /// frame once, to route it). Whether the frame is this board's business is decided from the
+    /// identifier first, so a malformed command for another board is ignored, not rejected.
+    pub fn on_command(
+        &mut self,
+        now_us: u64,
+        id: u16,
+        decoded: Result<Command, DecodeError>,
+    ) -> Result<Outcome, Rejection> {
+        if let Some(ignored) = self.count_not_for_us(id) {
             return Ok(Outcome::Ignored(ignored));
         }
-        let command = match decode_command(id, data) {
+        self.on_decoded(now_us, decoded)
+    }
+
+    /// [`SensorDataHandler::not_for_us`], counted.
+    #[inline]
+    fn count_not_for_us(&mut self, id: u16) -> Option<Ignored> {
+        let ignored = self.not_for_us(id)?;
+        let count = match ignored {
+            Ignored::OtherBoard(_) => &mut self.counters.ignored_other_board,
+            Ignored::SensorData => &mut self.counters.ignored_sensor_data,
+        };
+        *count = count.saturating_add(1);
+        Some(ignored)
+    }
+
+    /// The rest of [`SensorDataHandler::on_frame`], once the frame is known to be a command this
+    /// board may own: the decoder's verdict applied and counted.
+    #[inline]
+    fn on_decoded(
+        &mut self,
+        now_us: u64,
+        decoded: Result<Command, DecodeError>,
+    ) -> Result<Outcome, Rejection> {
+        let command = match decoded {
             Ok(command) => command,
             Err(reason) => {
                 if let Some(count) = self.counters.rejected.get_mut(reason.kind_index()) {

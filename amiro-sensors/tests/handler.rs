@@ -922,6 +922,32 @@ proptest! {
     }
 }
 
+proptest! {
+    /// A frame the caller has decoded already (the firmware's command handler decodes each frame
+    /// once, to route it) gives the outcome, the counters and the table `on_frame` gives, on every
+    /// board and for any frame.
+    #[test]
+    fn a_command_decoded_by_the_caller_is_handled_as_its_frame(
+        frames in proptest::collection::vec((0u16..0x900, proptest::collection::vec(any::<u8>(), 0..10)), 1..60),
+    ) {
+        for board in Board::ALL {
+            let mut by_frame = SensorDataHandler::new(board);
+            let mut by_command = SensorDataHandler::new(board);
+            for (i, (id, data)) in frames.iter().enumerate() {
+                let now = i as u64 * 1_000;
+                let decoded = amiro_can::decode_command(*id, data);
+                prop_assert_eq!(
+                    by_command.on_command(now, *id, decoded),
+                    by_frame.on_frame(now, *id, data)
+                );
+                prop_assert_eq!(by_command.counters(), by_frame.counters());
+                prop_assert_eq!(snapshot(&by_command), snapshot(&by_frame));
+                prop_assert_eq!(by_command.admission_policy(), by_frame.admission_policy());
+            }
+        }
+    }
+}
+
 // Issue 12: under a 20 µs flood a gyroscope frame left 2,810 µs after its release and no deadline
 // miss was counted (only skipped releases were). The publisher loop counts a frame as late when
 // `late_by` says so.

@@ -180,7 +180,6 @@ mod app {
         to_admission: amiro_firmware::rx_queue::Producer<'static, ADMISSION_QUEUE_LEN>,
         requests: amiro_firmware::rx_queue::Consumer<'static, ADMISSION_QUEUE_LEN>,
         wake_levels: [Sender<'static, (), 1>; 4],
-        wake_commands: [Sender<'static, (), 1>; 4],
         wake_urgent: Wake,
         wake_high: Wake,
         wake_medium: Wake,
@@ -247,12 +246,6 @@ mod app {
                 commands,
                 to_admission,
                 requests,
-                wake_commands: [
-                    wake_u.clone(),
-                    wake_h.clone(),
-                    wake_m.clone(),
-                    wake_l.clone(),
-                ],
                 wake_levels: [wake_u, wake_h, wake_m, wake_l],
                 wake_urgent,
                 wake_high,
@@ -294,36 +287,38 @@ mod app {
     /// Decodes each command and sets the motor target; sensor and admission-policy commands go to
     /// `admit_requests` in the order heard; at most one command per
     /// `admission::COMMAND_MIN_INTERVAL_US`.
-    #[task(priority = 5, shared = [handler, motor_command, tx_queue], local = [commands, to_admission, wake_commands])]
+    #[task(priority = 5, shared = [handler, motor_command], local = [commands, to_admission])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
-        let mut not_before = None;
-        loop {
-            let frame =
-                tasks::next_frame_after::<Clock, RX_QUEUE_LEN>(cx.local.commands, not_before).await;
-            let started = Clock::now_us();
-            if let tasks::Route::Admission(sensor) = tasks::route(&frame) {
-                tasks::route_to_admission::<Clock, ADMISSION_QUEUE_LEN, TX_QUEUE_LEN>(
-                    &frame,
-                    sensor,
-                    CanBoard::DiWheelDrive,
-                    &mut cx.shared.handler,
-                    cx.local.wake_commands,
-                    cx.local.to_admission,
-                    &mut cx.shared.tx_queue,
-                    platform::CAN_TX_INTERRUPT,
-                );
-            } else if let Some((now, Outcome::Command(Command::Motor { command, .. }))) =
-                tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
-            {
-                // Motor control takes it at its next step (the same step the controller's target
-                // changed at when the handler set it directly).
-                cx.shared
-                    .motor_command
-                    .lock(|pending| *pending = Some((command, now)));
-            }
-            not_before = Some(started + amiro_firmware::admission::COMMAND_MIN_INTERVAL_US);
-        }
+        tasks::serve_commands::<Clock, RX_QUEUE_LEN>(
+            cx.local.commands,
+            amiro_firmware::admission::COMMAND_MIN_INTERVAL_US,
+            |frame| {
+                match tasks::route(&frame) {
+                    tasks::Route::Admission(sensor) => {
+                        tasks::route_to_admission::<Clock, ADMISSION_QUEUE_LEN>(
+                            &frame,
+                            sensor,
+                            CanBoard::DiWheelDrive,
+                            &mut cx.shared.handler,
+                            cx.local.to_admission,
+                        )
+                    }
+                    tasks::Route::Handler(decoded) => {
+                        if let Some((now, Outcome::Command(Command::Motor { command, .. }))) =
+                            tasks::handle_command::<Clock>(&frame, decoded, &mut cx.shared.handler)
+                        {
+                            // Motor control takes it at its next step (the same step the controller's
+                            // target changed at when the handler set it directly).
+                            cx.shared
+                                .motor_command
+                                .lock(|pending| *pending = Some((command, now)));
+                        }
+                    }
+                }
+            },
+        )
+        .await;
     }
 
     /// Admission control in the background (priority 0, thread mode: it delays no other task,

@@ -174,7 +174,6 @@ mod app {
         requests: amiro_firmware::rx_queue::Consumer<'static, ADMISSION_QUEUE_LEN>,
         wake_latch: Sender<'static, (), 1>,
         wake_publisher: [Sender<'static, (), 1>; 1],
-        wake_commands: [Sender<'static, (), 1>; 1],
         publisher_wakeups: Receiver<'static, (), 1>,
         latch_wakeups: Receiver<'static, (), 1>,
         ring: leds::Ring<platform::LedSpi>,
@@ -224,7 +223,6 @@ mod app {
                 to_admission,
                 requests,
                 wake_latch,
-                wake_commands: [wake_publisher.clone()],
                 wake_publisher: [wake_publisher],
                 publisher_wakeups,
                 latch_wakeups,
@@ -262,33 +260,33 @@ mod app {
     /// Decodes each command and records LED colours (waking the latch); sensor and admission-policy
     /// commands go to `admit_requests` in the order heard; at most one command per
     /// `admission::COMMAND_MIN_INTERVAL_US`.
-    #[task(priority = 5, shared = [handler, leds, tx_queue], local = [commands, to_admission, wake_latch, wake_commands])]
+    #[task(priority = 5, shared = [handler, leds], local = [commands, to_admission, wake_latch])]
     async fn handle_commands(mut cx: handle_commands::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::HANDLE_COMMANDS);
-        let mut not_before = None;
-        loop {
-            let frame =
-                tasks::next_frame_after::<Clock, RX_QUEUE_LEN>(cx.local.commands, not_before).await;
-            let started = Clock::now_us();
-            if let tasks::Route::Admission(sensor) = tasks::route(&frame) {
-                tasks::route_to_admission::<Clock, ADMISSION_QUEUE_LEN, TX_QUEUE_LEN>(
-                    &frame,
-                    sensor,
-                    CanBoard::LightRing,
-                    &mut cx.shared.handler,
-                    cx.local.wake_commands,
-                    cx.local.to_admission,
-                    &mut cx.shared.tx_queue,
-                    platform::CAN_TX_INTERRUPT,
-                );
-            } else if let Some((now, Outcome::Command(Command::Led { command, .. }))) =
-                tasks::handle_command::<Clock>(&frame, &mut cx.shared.handler, &mut [])
-            {
-                cx.shared.leds.lock(|l| l.apply(now, &command));
-                let _ = cx.local.wake_latch.try_send(());
-            }
-            not_before = Some(started + amiro_firmware::admission::COMMAND_MIN_INTERVAL_US);
-        }
+        tasks::serve_commands::<Clock, RX_QUEUE_LEN>(
+            cx.local.commands,
+            amiro_firmware::admission::COMMAND_MIN_INTERVAL_US,
+            |frame| match tasks::route(&frame) {
+                tasks::Route::Admission(sensor) => {
+                    tasks::route_to_admission::<Clock, ADMISSION_QUEUE_LEN>(
+                        &frame,
+                        sensor,
+                        CanBoard::LightRing,
+                        &mut cx.shared.handler,
+                        cx.local.to_admission,
+                    )
+                }
+                tasks::Route::Handler(decoded) => {
+                    if let Some((now, Outcome::Command(Command::Led { command, .. }))) =
+                        tasks::handle_command::<Clock>(&frame, decoded, &mut cx.shared.handler)
+                    {
+                        cx.shared.leds.lock(|l| l.apply(now, &command));
+                        let _ = cx.local.wake_latch.try_send(());
+                    }
+                }
+            },
+        )
+        .await;
     }
 
     /// Admission control in the background (priority 0, thread mode: it delays no other task,

@@ -603,18 +603,19 @@ fn a_timing_file_topic_states_several_scripts_and_the_engine_names_its_handlers(
     );
 
     let mut locks = timing.clone();
-    locks["sensor_buses"][1]["engine"]["priority"] = json!(5);
-    locks["sensor_buses"][1]["engine"]["handlers"] = json!(["handle_commands"]);
+    locks["sensor_buses"][1]["engine"]["priority"] = json!(1);
+    // Motor control (priority 1) locks the command the handler leaves it, whose ceiling is the handler's 5.
+    locks["sensor_buses"][1]["engine"]["handlers"] = json!(["motor_control"]);
     locks["tasks"]
         .as_object_mut()
         .unwrap()
-        .remove("handle_commands");
+        .remove("motor_control");
     write(&locks);
     let error = build().expect_err("refused");
     assert_eq!(error.path, "sensor_buses[1].engine.handlers[0]");
     assert_eq!(
         error.problem,
-        SensorBusError::HandlerLocksAbove("handle_commands".into(), "tx_queue".into(), 6)
+        SensorBusError::HandlerLocksAbove("motor_control".into(), "motor_command".into(), 5)
             .to_string()
     );
 

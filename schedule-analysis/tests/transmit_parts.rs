@@ -72,16 +72,8 @@ fn the_transmit_interrupt_is_charged_per_frame_per_queueing_job_and_once_per_win
     // One frame's job, at the board's own frames' rate (magnetometer-x: 4 bytes, 79 bits unstuffed at 1 Mbit/s).
     assert_eq!(tx.wcet_us, 46.0);
     assert_eq!(tx.period_us, 79.0);
-    // The command handler's busy verdict: 2 frames, its jobs that queue them at least 39 936 µs apart: the fixed
-    // part and per frame an abort with its own job, 30 + 2 × (30 + 16 + 34) = 190 µs; released by the handler, its
-    // abort latency three 8-byte frames of 135 µs.
-    let handler = find(tasks, "can_tx[handle_commands]").expect("the handler's row");
-    assert_eq!(handler.wcet_us, 190.0);
-    assert_eq!(handler.period_us, 39_936.0);
-    assert_eq!(handler.jitter_us, 405.0);
-    assert_eq!(handler.released_by.as_deref(), Some("handle_commands"));
-    assert_eq!(handler.priority, tx.priority);
-    assert_eq!(handler.job_of.as_deref(), Some("can_tx"));
+    // The command handler queues no frames (its busy verdict is the admission task's to send): no row.
+    assert!(find(tasks, "can_tx[handle_commands]").is_none());
     // The admission task's verdict: 2 frames, at its own rate.
     let admission = find(tasks, "can_tx[admit_requests]").expect("the admission's row");
     assert_eq!(admission.wcet_us, 190.0);
@@ -107,6 +99,32 @@ fn the_transmit_interrupt_is_charged_per_frame_per_queueing_job_and_once_per_win
         .sources
         .iter()
         .any(|s| s.starts_with("diwheeldrive: `can_tx` charged by its parts")));
+}
+
+#[test]
+fn a_task_whose_frame_queueing_jobs_are_spaced_gets_a_row_at_that_spacing() {
+    // A task that queues two frames in jobs at least 39 936 µs apart (as the command handler's busy verdicts were):
+    // the fixed part and per frame an abort with its own job, 30 + 2 × (30 + 16 + 34) = 190 µs, at that spacing;
+    // released by the task, its abort latency three 8-byte frames of 135 µs.
+    let root = workspace("spaced", true);
+    let timing = root
+        .join(scenario::MODELS_DIR)
+        .join("diwheeldrive.timing.json");
+    let text = std::fs::read_to_string(&timing).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["tasks"]["can_tx"]["queued_by"]["handle_commands"] =
+        serde_json::json!({ "frames": 2, "at_least_us": 39936 });
+    std::fs::write(&timing, json.to_string()).unwrap();
+    let built = build(&root).expect("the model builds");
+    let tasks = dwd(&built);
+    let tx = find(tasks, "can_tx").expect("can_tx");
+    let handler = find(tasks, "can_tx[handle_commands]").expect("the handler's row");
+    assert_eq!(handler.wcet_us, 190.0);
+    assert_eq!(handler.period_us, 39_936.0);
+    assert_eq!(handler.jitter_us, 405.0);
+    assert_eq!(handler.released_by.as_deref(), Some("handle_commands"));
+    assert_eq!(handler.priority, tx.priority);
+    assert_eq!(handler.job_of.as_deref(), Some("can_tx"));
 }
 
 #[test]

@@ -2,8 +2,8 @@
 //! deadline"): the host analysis and the boards' admission table check only that its busy window closes, and its
 //! response is the queuing jitter of every frame its board sends. PowerManagement's `can_tx` (its bound used on the
 //! shipped files), past two of its own frames on thesis-demo, passes on both with that response as its frames'
-//! jitter; with LightRing's `can_tx` bound used (held on the shipped files), its diagnostics are refused by its latch,
-//! not by its `can_tx`; a `can_tx` whose window never closes is refused by both.
+//! jitter; with LightRing's `can_tx` bound used (held on the shipped files), its diagnostics keep its latch's
+//! deadline on both; a `can_tx` whose window never closes is refused by both.
 
 use std::path::{Path, PathBuf};
 
@@ -190,12 +190,13 @@ fn powermanagements_can_tx_past_two_own_frames_passes_as_its_frames_jitter() {
     assert!(decision.admitted(), "{decision:?}");
 }
 
-/// LightRing's diagnostics with its `can_tx` bound used (the reason its bounds file holds it): a sample's transmit job
+/// LightRing's diagnostics with its `can_tx` bound used (what its bounds file held it for): a sample's transmit job
 /// (six frames, each with the abort it may cause) takes LightRing's `can_tx` past two own frames (111 µs each), which
-/// refuses nothing; what does is `latch_leds` below it on LightRing 1-0, which the same job delays past its 2 ms — on
-/// the host and on the chip, at any period.
+/// refuses nothing, and `latch_leds` below it on LightRing 1-0 keeps its 2 ms: since the command handler queues no
+/// frames (a busy verdict is the admission task's to send), the transmit interrupt's window holds no verdict of the
+/// handler's, and the host and the chip admit the diagnostics at any period. The latch's margin is printed.
 #[test]
-fn lightrings_diagnostics_are_refused_by_its_latch_not_by_can_tx() {
+fn lightrings_diagnostics_keep_its_latch_with_can_tx_used() {
     let own_frame = can::own_frame_time(can::bit_time(can::DEFAULT_BITRATE), [8u8].into_iter());
     assert_eq!(own_frame, Time::from_us(111));
     let files = scenario::timing_files(&root());
@@ -221,15 +222,15 @@ fn lightrings_diagnostics_are_refused_by_its_latch_not_by_can_tx() {
             "{period_us} µs: {wcrt:?}"
         );
         assert!(task("can_tx[lightring-diagnostics]").schedulable());
+        let latch = task("latch_leds");
+        eprintln!(
+            "{period_us} µs: can_tx {:.1} µs, latch_leds {:.1} of {:.0} µs",
+            wcrt.as_us_f64(),
+            latch.wcrt().expect("bounded").as_us_f64(),
+            latch.deadline.as_us_f64()
+        );
         let failures = report.failures();
-        assert!(
-            failures.contains(&"lightring/latch_leds".to_string()),
-            "{failures:?}"
-        );
-        assert!(
-            !failures.iter().any(|f| f.starts_with("lightring/can_tx")),
-            "{failures:?}"
-        );
+        assert!(failures.is_empty(), "{period_us} µs: {failures:?}");
         // On the shipped files (the bound held: its stated 9 µs a frame, no job per sample) the latch meets its 2 ms.
         let shipped = host(&path, &files);
         assert!(
@@ -239,32 +240,9 @@ fn lightrings_diagnostics_are_refused_by_its_latch_not_by_can_tx() {
             "{:?}",
             shipped.failures()
         );
-        let (decision, lightring, _) =
-            on_chip_held(&path, &files, "lightring", lightring_by_parts());
-        assert!(!decision.admitted(), "{period_us} µs: {decision:?}");
-        // Not for the transmit interrupt: the chip's first violation on LightRing, if it names one there, is the latch.
-        if let Some(Refusal::Deadline(v)) = decision.refusal {
-            if let Culprit::Task {
-                board,
-                task: TaskId::Fixed(row),
-            } = v.culprit
-            {
-                if usize::from(board) == lightring {
-                    let robot = admission_host::lower_held(
-                        &root(),
-                        &files,
-                        can::DEFAULT_BITRATE,
-                        FrameCostSpec::Exact,
-                        lightring_by_parts(),
-                    )
-                    .expect("lowered");
-                    assert_eq!(
-                        robot.boards[lightring].task_names[usize::from(row)],
-                        "latch_leds"
-                    );
-                }
-            }
-        }
+        // The chip decides alike.
+        let (decision, _, _) = on_chip_held(&path, &files, "lightring", lightring_by_parts());
+        assert!(decision.admitted(), "{period_us} µs: {decision:?}");
     }
 }
 
