@@ -15,7 +15,7 @@ use rtic_core::Mutex;
 use rtic_sync::channel::Receiver;
 
 use crate::mono::Clock;
-use crate::publisher_walk::{next_due, take_next, Next, Ranks};
+use crate::publisher_walk::{next_due, take_next, After, Next, Ranks};
 use crate::{health, telemetry};
 
 /// What a board samples for a topic.
@@ -87,34 +87,71 @@ fn serve_due<C: Clock, const N: usize>(
     // first, each level's earliest first, as `take_due_releases` orders them), each sampled after
     // releasing it: one pass of this loop is one release, which the execution-time analysis
     // charges as one job of its topic (docs/analysis.md, "One topic's job"). Each take makes its
-    // row not due at `now`, so the publisher table's size bounds the loop; the walk that takes
-    // none returns the due time the task parks on.
+    // row not due at `now`, so the publisher table's size bounds the loop. The walk that takes a
+    // release also says what comes after it (`After`), so the job's last release parks without a
+    // walk of its own: one walk a release.
+    let mut more = true;
+    let mut park: Option<u64> = None;
     loop {
-        let (release, period_us) = match handler.lock(|h| take_next(h, ranks, now)) {
-            Next::Release(release, period_us) => (release, period_us),
-            Next::Park(due) => return due,
-        };
-        let level = release.priority;
-        note_release(now, level, &release);
-        let topic = release.topic;
-        let taken = C::now_us();
-        if let Some(board) = topic.diagnostics_of() {
-            // The runtime's own topic: frames straight from the health counters.
-            let counters = tx_queue.lock(|q| *q.counters());
-            // The snapshot under the handler's lock, its six frames made after it.
-            let diagnostics = handler.lock(|h| health::snapshot(h, &counters, taken));
-            let frames = health::frames_now(&diagnostics, board, release.priority);
-            let deadline = sample_deadline(taken, &release, period_us);
-            queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
-        } else {
-            let samples = sampler.sample(topic, taken);
-            let deadline = sample_deadline(taken, &release, period_us);
-            // By reference: the sample stays where the sampler left it (no copy of its eight
-            // slots into an iterator).
-            let frames = samples.iter().map(|data| data.encode(release.priority));
-            queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
+        // The loop's only way out, at its header: a walk that finds nothing due, or a release
+        // after which nothing is, comes back here to leave (`black_box`: kept as a test of its
+        // own, so the compiler does not fold it into the walk's or the sample's branches, and
+        // the loop's way out holds neither a walk nor a sample).
+        if !core::hint::black_box(more) {
+            return park;
         }
+        let (release, period_us) = match handler.lock(|h| take_next(h, ranks, now)) {
+            Next::Release(release, period_us, after) => {
+                (more, park) = match after {
+                    After::More => (true, None),
+                    After::Park(due) => (false, due),
+                };
+                (release, period_us)
+            }
+            Next::Park(due) => {
+                (more, park) = (false, due);
+                continue;
+            }
+        };
+        serve_release::<C, N>(now, &release, period_us, handler, tx_queue, sampler);
         cortex_m::peripheral::NVIC::pend(tx_interrupt);
+    }
+}
+
+/// One release taken at `now`: its sample (the board's `sampler`, or the runtime's diagnostics
+/// from the health counters), its frames queued. Not inlined into the release loop: the topic
+/// families' sample functions are called in here only, so that a topic's job, whose bound leaves
+/// the other families' samples out (docs/analysis.md, "One topic's job"), leaves the loop with
+/// no branch into a sample it does not take (a branch that ends nowhere, but that the loop's way
+/// out would charge with the walk before it).
+#[inline(never)]
+fn serve_release<C: Clock, const N: usize>(
+    now: u64,
+    release: &Release,
+    period_us: u32,
+    handler: &mut impl Mutex<T = SensorDataHandler>,
+    tx_queue: &mut impl Mutex<T = TxQueue<N>>,
+    sampler: &mut impl Sampler,
+) {
+    let level = release.priority;
+    note_release(now, level, release);
+    let topic = release.topic;
+    let taken = C::now_us();
+    if let Some(board) = topic.diagnostics_of() {
+        // The runtime's own topic: frames straight from the health counters.
+        let counters = tx_queue.lock(|q| *q.counters());
+        // The snapshot under the handler's lock, its six frames made after it.
+        let diagnostics = handler.lock(|h| health::snapshot(h, &counters, taken));
+        let frames = health::frames_now(&diagnostics, board, release.priority);
+        let deadline = sample_deadline(taken, release, period_us);
+        queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
+    } else {
+        let samples = sampler.sample(topic, taken);
+        let deadline = sample_deadline(taken, release, period_us);
+        // By reference: the sample stays where the sampler left it (no copy of its eight
+        // slots into an iterator).
+        let frames = samples.iter().map(|data| data.encode(release.priority));
+        queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
     }
 }
 
@@ -152,13 +189,7 @@ fn note_release(now: u64, level: Priority, release: &Release) {
 /// row (`period_us`, as the row had it when released) after it (`None` for a one-shot).
 #[inline(never)]
 fn sample_deadline(taken: u64, release: &Release, period_us: u32) -> Option<u64> {
-    telemetry::trace(&TraceEvent::new(
-        taken,
-        TraceKind::SampleTaken {
-            topic: release.topic,
-            release_us: release.release_us,
-        },
-    ));
+    crate::tracing::sample_taken(taken, release.topic, release.release_us);
     if release.once {
         return None;
     }
@@ -278,7 +309,8 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
         // The next release due now: the diagnostics' served here, a sensor's sampled at the top.
         let now = C::now_us();
         let taken = match handler.lock(|h| take_next(h, ranks, now)) {
-            Next::Release(release, period_us) => Some((release, period_us)),
+            // The suspending loop walks for its park at the top of its next pass (`next_due`).
+            Next::Release(release, period_us, _) => Some((release, period_us)),
             Next::Park(due) => {
                 parked = Some(due);
                 None

@@ -571,6 +571,25 @@ pub fn frame_pushed(at_us: u64, id: u16, outcome: &amiro_sensors::tx_queue::Push
     }
 }
 
+/// The event for a sample a publisher took at `at_us` for its release at `release_us`
+/// (`TraceKind::SampleTaken`): [`event`]'s record with the event's fields stored straight into the
+/// slot, as [`frame_pushed`] does, where [`event`] copies an event built on the caller's stack
+/// (its loads charged at a peripheral's latency, on every publisher release). QEMU writes it
+/// through as [`event`] does.
+#[inline(never)]
+pub fn sample_taken(at_us: u64, topic: amiro_can::Topic, release_us: u64) {
+    let kind = amiro_sensors::trace::TraceKind::SampleTaken { topic, release_us };
+    #[cfg(not(feature = "qemu"))]
+    {
+        let reserved = critical_section::with(|_| reserve());
+        if let Some((claim, cycles)) = reserved {
+            claim.fill(|slot| fill_kind(slot, cycles, at_us, kind));
+        }
+    }
+    #[cfg(feature = "qemu")]
+    event(&TraceEvent::new(at_us, kind));
+}
+
 /// An event of `kind` at `at_us` in `slot`, stored in place ([`fill_frame_sent`]'s way).
 #[cfg(not(feature = "qemu"))]
 #[inline(always)]
@@ -698,6 +717,20 @@ pub fn suspend(release: Option<(u64, u64)>) -> u8 {
     #[cfg(not(feature = "task-trace"))]
     {
         let _ = release;
+        NO_TASK
+    }
+}
+
+/// [`suspend`] for a timer wait until `at_us`, the clock read through `now_us` only where the trace
+/// records the wait (`task-trace`): a build without task tracing reads no clock for it (the
+/// timer waits of every publisher release, `mono::Clock::timeout_at_us`).
+#[inline(always)]
+pub fn suspend_until(at_us: u64, now_us: impl FnOnce() -> u64) -> u8 {
+    #[cfg(feature = "task-trace")]
+    return suspend(Some((at_us, now_us())));
+    #[cfg(not(feature = "task-trace"))]
+    {
+        let _ = (at_us, now_us);
         NO_TASK
     }
 }
