@@ -189,7 +189,13 @@ fn note_release(now: u64, level: Priority, release: &Release) {
 /// row (`period_us`, as the row had it when released) after it (`None` for a one-shot).
 #[inline(never)]
 fn sample_deadline(taken: u64, release: &Release, period_us: u32) -> Option<u64> {
-    crate::tracing::sample_taken(taken, release.topic, release.release_us);
+    telemetry::trace(&TraceEvent::new(
+        taken,
+        TraceKind::SampleTaken {
+            topic: release.topic,
+            release_us: release.release_us,
+        },
+    ));
     if release.once {
         return None;
     }

@@ -4,9 +4,9 @@
 //! A task serves the CAN priorities of its `levels` (DiWheelDrive and PowerManagement one per task,
 //! LightRing all four from one). Its next release is found and taken in one walk of the table for
 //! all its levels ([`take_next`]), and the walk that finds none due finds the earliest due time the
-//! task parks on: where one walk per level made the job's cost grow with the levels, and finding a
-//! release, taking it and finding the next due time were walks of their own (the execution-time
-//! analysis charges every walk to every job; docs/analysis.md, "One topic's job").
+//! task parks on, and the one that takes a release says what comes after it ([`After`]): one walk a
+//! release, where one walk per level, and walks of their own to find, take and park, each cost every
+//! job (the execution-time analysis charges every walk to every job; "One topic's job").
 use amiro_can::Priority;
 use amiro_sensors::handler::{Release, SensorDataHandler, LEVELS};
 

@@ -571,25 +571,6 @@ pub fn frame_pushed(at_us: u64, id: u16, outcome: &amiro_sensors::tx_queue::Push
     }
 }
 
-/// The event for a sample a publisher took at `at_us` for its release at `release_us`
-/// (`TraceKind::SampleTaken`): [`event`]'s record with the event's fields stored straight into the
-/// slot, as [`frame_pushed`] does, where [`event`] copies an event built on the caller's stack
-/// (its loads charged at a peripheral's latency, on every publisher release). QEMU writes it
-/// through as [`event`] does.
-#[inline(never)]
-pub fn sample_taken(at_us: u64, topic: amiro_can::Topic, release_us: u64) {
-    let kind = amiro_sensors::trace::TraceKind::SampleTaken { topic, release_us };
-    #[cfg(not(feature = "qemu"))]
-    {
-        let reserved = critical_section::with(|_| reserve());
-        if let Some((claim, cycles)) = reserved {
-            claim.fill(|slot| fill_kind(slot, cycles, at_us, kind));
-        }
-    }
-    #[cfg(feature = "qemu")]
-    event(&TraceEvent::new(at_us, kind));
-}
-
 /// An event of `kind` at `at_us` in `slot`, stored in place ([`fill_frame_sent`]'s way).
 #[cfg(not(feature = "qemu"))]
 #[inline(always)]
