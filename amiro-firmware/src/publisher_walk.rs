@@ -102,6 +102,7 @@ pub enum After {
 /// second-least key as well, so it also says what comes after the release ([`After`]): the next
 /// walk's answer, as long as no command changed the table in between (a command that gives a row
 /// of the task's levels an earlier due time wakes the task, which then walks again).
+// Not inlined: one copy for every publisher task's loop and the suspending one (flash).
 #[inline(never)]
 pub fn take_next(handler: &mut SensorDataHandler, ranks: Ranks, now_us: u64) -> Next {
     let rows = handler.publishers();
