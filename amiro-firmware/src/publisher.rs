@@ -249,10 +249,11 @@ pub trait SuspendingSampler {
 ///
 /// Every await is at the top of the loop: the sample of the release taken in the last pass, or,
 /// with none taken, the park until the earliest due time (or the command handler's wake). After
-/// them (the loop's join) a pass queues the sample's frames and takes the next release due. So one
-/// pass holds the end of one release and the start of the next, and a job — a resumed await, then
-/// the code to the next await that is pending — is one pass (docs/analysis.md, "One topic's
-/// job").
+/// them (the loop's join) a pass queues the sample's frames and takes the next release due, or,
+/// where the take of that sample's release said nothing else was due, parks on its due time with
+/// no walk. So one pass holds the end of one release and the start of the next, and a job — a
+/// resumed await, then the code to the next await that is pending — is one pass (docs/analysis.md,
+/// "One topic's job").
 pub async fn serve_level_suspending<C: Clock, const N: usize>(
     levels: &[Priority],
     wake: &mut Receiver<'static, (), 1>,
@@ -265,6 +266,9 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
     let mut next: Option<(Release, u32, u64)> = None;
     // The due time the last pass's walk found, when it took no release (`None`: walk for it).
     let mut parked: Option<Option<u64>> = None;
+    // Where the last take said nothing else was due (`After::Park`), the park that follows the
+    // service of its release, with no walk of its own.
+    let mut hint: Option<Option<u64>> = None;
     loop {
         let sampled = match next.take() {
             Some((release, period_us, taken)) => {
@@ -298,6 +302,7 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
                 None
             }
         };
+        let served = sampled.is_some();
         if let Some((release, period_us, taken, samples)) = sampled {
             let deadline = sample_deadline(taken, &release, period_us);
             let frames = samples
@@ -312,15 +317,29 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
             );
             cortex_m::peripheral::NVIC::pend(tx_interrupt);
         }
-        // The next release due now: the diagnostics' served here, a sensor's sampled at the top.
+        // The next release due now (the diagnostics' served here, a sensor's sampled at the top),
+        // or the park: after a sample whose take said nothing else was due, that take's due time
+        // (a row that fell due during the suspension, or a command's change, which wakes the
+        // task, makes that park ready at once, and the walk after it finds the release).
         let now = C::now_us();
-        let taken = match handler.lock(|h| take_next(h, ranks, now)) {
-            // The suspending loop walks for its park at the top of its next pass (`next_due`).
-            Next::Release(release, period_us, _) => Some((release, period_us)),
-            Next::Park(due) => {
+        let taken = match hint.take().filter(|_| served) {
+            Some(due) => {
                 parked = Some(due);
                 None
             }
+            None => match handler.lock(|h| take_next(h, ranks, now)) {
+                Next::Release(release, period_us, after) => {
+                    hint = match after {
+                        After::More => None,
+                        After::Park(due) => Some(due),
+                    };
+                    Some((release, period_us))
+                }
+                Next::Park(due) => {
+                    parked = Some(due);
+                    None
+                }
+            },
         };
         if let Some((release, period_us)) = taken {
             note_release(now, release.priority, &release);
@@ -340,7 +359,9 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
                     );
                     cortex_m::peripheral::NVIC::pend(tx_interrupt);
                     // The next release (if any is due) in the next pass, after a park that a due
-                    // time past is ready at once.
+                    // time past is ready at once: the take's own due time where it said nothing
+                    // else was due, else the walk at the top (`next_due`).
+                    parked = hint.take();
                 }
                 None => next = Some((release, period_us, taken)),
             }
