@@ -77,7 +77,7 @@ where
     }
 
     async fn timeout_at_us<F: Future>(at_us: u64, future: F) -> Option<F::Output> {
-        let task = crate::tracing::suspend(Some((at_us, Self::now_us())));
+        let task = crate::tracing::suspend_until(at_us, Self::now_us);
         let result = B::queue().timeout_at(at_us.div_ceil(TICK_US), future).await;
         crate::tracing::resume(task);
         result

@@ -15,7 +15,7 @@ use rtic_core::Mutex;
 use rtic_sync::channel::Receiver;
 
 use crate::mono::Clock;
-use crate::publisher_walk::{next_due, take_next, Next, Ranks};
+use crate::publisher_walk::{next_due, take_next, After, Next, Ranks};
 use crate::{health, telemetry};
 
 /// What a board samples for a topic.
@@ -87,34 +87,71 @@ fn serve_due<C: Clock, const N: usize>(
     // first, each level's earliest first, as `take_due_releases` orders them), each sampled after
     // releasing it: one pass of this loop is one release, which the execution-time analysis
     // charges as one job of its topic (docs/analysis.md, "One topic's job"). Each take makes its
-    // row not due at `now`, so the publisher table's size bounds the loop; the walk that takes
-    // none returns the due time the task parks on.
+    // row not due at `now`, so the publisher table's size bounds the loop. The walk that takes a
+    // release also says what comes after it (`After`), so the job's last release parks without a
+    // walk of its own: one walk a release.
+    let mut more = true;
+    let mut park: Option<u64> = None;
     loop {
-        let (release, period_us) = match handler.lock(|h| take_next(h, ranks, now)) {
-            Next::Release(release, period_us) => (release, period_us),
-            Next::Park(due) => return due,
-        };
-        let level = release.priority;
-        note_release(now, level, &release);
-        let topic = release.topic;
-        let taken = C::now_us();
-        if let Some(board) = topic.diagnostics_of() {
-            // The runtime's own topic: frames straight from the health counters.
-            let counters = tx_queue.lock(|q| *q.counters());
-            // The snapshot under the handler's lock, its six frames made after it.
-            let diagnostics = handler.lock(|h| health::snapshot(h, &counters, taken));
-            let frames = health::frames_now(&diagnostics, board, release.priority);
-            let deadline = sample_deadline(taken, &release, period_us);
-            queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
-        } else {
-            let samples = sampler.sample(topic, taken);
-            let deadline = sample_deadline(taken, &release, period_us);
-            // By reference: the sample stays where the sampler left it (no copy of its eight
-            // slots into an iterator).
-            let frames = samples.iter().map(|data| data.encode(release.priority));
-            queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
+        // The loop's only way out, at its header: a walk that finds nothing due, or a release
+        // after which nothing is, comes back here to leave (`black_box`: kept as a test of its
+        // own, so the compiler does not fold it into the walk's or the sample's branches, and
+        // the loop's way out holds neither a walk nor a sample).
+        if !core::hint::black_box(more) {
+            return park;
         }
+        let (release, period_us) = match handler.lock(|h| take_next(h, ranks, now)) {
+            Next::Release(release, period_us, after) => {
+                (more, park) = match after {
+                    After::More => (true, None),
+                    After::Park(due) => (false, due),
+                };
+                (release, period_us)
+            }
+            Next::Park(due) => {
+                (more, park) = (false, due);
+                continue;
+            }
+        };
+        serve_release::<C, N>(now, &release, period_us, handler, tx_queue, sampler);
         cortex_m::peripheral::NVIC::pend(tx_interrupt);
+    }
+}
+
+/// One release taken at `now`: its sample (the board's `sampler`, or the runtime's diagnostics
+/// from the health counters), its frames queued. Not inlined into the release loop: the topic
+/// families' sample functions are called in here only, so that a topic's job, whose bound leaves
+/// the other families' samples out (docs/analysis.md, "One topic's job"), leaves the loop with
+/// no branch into a sample it does not take (a branch that ends nowhere, but that the loop's way
+/// out would charge with the walk before it).
+#[inline(never)]
+fn serve_release<C: Clock, const N: usize>(
+    now: u64,
+    release: &Release,
+    period_us: u32,
+    handler: &mut impl Mutex<T = SensorDataHandler>,
+    tx_queue: &mut impl Mutex<T = TxQueue<N>>,
+    sampler: &mut impl Sampler,
+) {
+    let level = release.priority;
+    note_release(now, level, release);
+    let topic = release.topic;
+    let taken = C::now_us();
+    if let Some(board) = topic.diagnostics_of() {
+        // The runtime's own topic: frames straight from the health counters.
+        let counters = tx_queue.lock(|q| *q.counters());
+        // The snapshot under the handler's lock, its six frames made after it.
+        let diagnostics = handler.lock(|h| health::snapshot(h, &counters, taken));
+        let frames = health::frames_now(&diagnostics, board, release.priority);
+        let deadline = sample_deadline(taken, release, period_us);
+        queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
+    } else {
+        let samples = sampler.sample(topic, taken);
+        let deadline = sample_deadline(taken, release, period_us);
+        // By reference: the sample stays where the sampler left it (no copy of its eight
+        // slots into an iterator).
+        let frames = samples.iter().map(|data| data.encode(release.priority));
+        queue_frames::<C, N>(tx_queue, level, topic, deadline, frames);
     }
 }
 
@@ -212,10 +249,11 @@ pub trait SuspendingSampler {
 ///
 /// Every await is at the top of the loop: the sample of the release taken in the last pass, or,
 /// with none taken, the park until the earliest due time (or the command handler's wake). After
-/// them (the loop's join) a pass queues the sample's frames and takes the next release due. So one
-/// pass holds the end of one release and the start of the next, and a job — a resumed await, then
-/// the code to the next await that is pending — is one pass (docs/analysis.md, "One topic's
-/// job").
+/// them (the loop's join) a pass queues the sample's frames and takes the next release due, or,
+/// where the take of that sample's release said nothing else was due, parks on its due time with
+/// no walk. So one pass holds the end of one release and the start of the next, and a job — a
+/// resumed await, then the code to the next await that is pending — is one pass (docs/analysis.md,
+/// "One topic's job").
 pub async fn serve_level_suspending<C: Clock, const N: usize>(
     levels: &[Priority],
     wake: &mut Receiver<'static, (), 1>,
@@ -228,6 +266,9 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
     let mut next: Option<(Release, u32, u64)> = None;
     // The due time the last pass's walk found, when it took no release (`None`: walk for it).
     let mut parked: Option<Option<u64>> = None;
+    // Where the last take said nothing else was due (`After::Park`), the park that follows the
+    // service of its release, with no walk of its own.
+    let mut hint: Option<Option<u64>> = None;
     loop {
         let sampled = match next.take() {
             Some((release, period_us, taken)) => {
@@ -261,6 +302,7 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
                 None
             }
         };
+        let served = sampled.is_some();
         if let Some((release, period_us, taken, samples)) = sampled {
             let deadline = sample_deadline(taken, &release, period_us);
             let frames = samples
@@ -275,14 +317,29 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
             );
             cortex_m::peripheral::NVIC::pend(tx_interrupt);
         }
-        // The next release due now: the diagnostics' served here, a sensor's sampled at the top.
+        // The next release due now (the diagnostics' served here, a sensor's sampled at the top),
+        // or the park: after a sample whose take said nothing else was due, that take's due time
+        // (a row that fell due during the suspension, or a command's change, which wakes the
+        // task, makes that park ready at once, and the walk after it finds the release).
         let now = C::now_us();
-        let taken = match handler.lock(|h| take_next(h, ranks, now)) {
-            Next::Release(release, period_us) => Some((release, period_us)),
-            Next::Park(due) => {
+        let taken = match hint.take().filter(|_| served) {
+            Some(due) => {
                 parked = Some(due);
                 None
             }
+            None => match handler.lock(|h| take_next(h, ranks, now)) {
+                Next::Release(release, period_us, after) => {
+                    hint = match after {
+                        After::More => None,
+                        After::Park(due) => Some(due),
+                    };
+                    Some((release, period_us))
+                }
+                Next::Park(due) => {
+                    parked = Some(due);
+                    None
+                }
+            },
         };
         if let Some((release, period_us)) = taken {
             note_release(now, release.priority, &release);
@@ -302,7 +359,9 @@ pub async fn serve_level_suspending<C: Clock, const N: usize>(
                     );
                     cortex_m::peripheral::NVIC::pend(tx_interrupt);
                     // The next release (if any is due) in the next pass, after a park that a due
-                    // time past is ready at once.
+                    // time past is ready at once: the take's own due time where it said nothing
+                    // else was due, else the walk at the top (`next_due`).
+                    parked = hint.take();
                 }
                 None => next = Some((release, period_us, taken)),
             }

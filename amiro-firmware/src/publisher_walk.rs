@@ -4,9 +4,9 @@
 //! A task serves the CAN priorities of its `levels` (DiWheelDrive and PowerManagement one per task,
 //! LightRing all four from one). Its next release is found and taken in one walk of the table for
 //! all its levels ([`take_next`]), and the walk that finds none due finds the earliest due time the
-//! task parks on: where one walk per level made the job's cost grow with the levels, and finding a
-//! release, taking it and finding the next due time were walks of their own (the execution-time
-//! analysis charges every walk to every job; docs/analysis.md, "One topic's job").
+//! task parks on, and the one that takes a release says what comes after it ([`After`]): one walk a
+//! release, where one walk per level, and walks of their own to find, take and park, each cost every
+//! job (the execution-time analysis charges every walk to every job; "One topic's job").
 use amiro_can::Priority;
 use amiro_sensors::handler::{Release, SensorDataHandler, LEVELS};
 
@@ -71,10 +71,22 @@ pub fn next_due(handler: &SensorDataHandler, ranks: Ranks) -> Option<u64> {
 /// What [`take_next`] found in its walk of the publisher table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Next {
-    /// The release taken, with its row's period (which the release keeps).
-    Release(Release, u32),
+    /// The release taken, with its row's period (which the release keeps), and what the task
+    /// does after it ([`After`]: what a walk of the table as the take left it would answer).
+    Release(Release, u32, After),
     /// Nothing of the task's levels was due: their earliest due time ([`next_due`]'s; `None` when
     /// none of them has anything to do), which lies after the walk's `now_us`.
+    Park(Option<u64>),
+}
+
+/// What a task does after the release [`take_next`] took, worked out in the same walk: the answer
+/// the next walk at the same `now_us` would give while the table is as the take left it, so that
+/// a job's last release needs no walk of its own to find the due time it parks on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum After {
+    /// Another row of the task's levels is due: walk again (its release is the next walk's).
+    More,
+    /// Nothing else is due: park until this due time (`None`: until a command wakes the task).
     Park(Option<u64>),
 }
 
@@ -86,16 +98,23 @@ pub enum Next {
 /// levels`, take each level's [`SensorDataHandler::take_next_release`] until none), in their
 /// order. The walk that finds nothing due finds the earliest due time as it goes, so the task
 /// parks on it without another walk ([`next_due`]); where the task found a level and then took
-/// that level's release, each was a walk of its own.
+/// that level's release, each was a walk of its own. The walk that takes a release keeps the
+/// second-least key as well, so it also says what comes after the release ([`After`]): the next
+/// walk's answer, as long as no command changed the table in between (a command that gives a row
+/// of the task's levels an earlier due time wakes the task, which then walks again).
+// Not inlined: one copy for every publisher task's loop and the suspending one (flash).
+#[inline(never)]
 pub fn take_next(handler: &mut SensorDataHandler, ranks: Ranks, now_us: u64) -> Next {
     let rows = handler.publishers();
-    // One key per row of a served level with something to do: (its rank, its due time) when due
-    // at `now_us`, (NOT_SERVED, its due time) when not. The least key is the release to take
+    // One key per row of a served level with something to do, as one word: its rank when due at
+    // `now_us` (NOT_SERVED when not) above its due time. The least key is the release to take
     // when any row is due (every served rank is below NOT_SERVED), and else the earliest due
-    // time: one comparison a pass finds both (this walk, run twice a job, is most of the code
-    // around a release's sample: docs/analysis.md, "One topic's job").
-    let mut least = (Ranks::NOT_SERVED, u64::MAX);
-    let mut at: Option<usize> = None;
+    // time: one comparison a pass finds both (this walk is most of the code around a release's
+    // sample: docs/analysis.md, "One topic's job"). The second-least key is the rest of the
+    // table's answer once the least row is taken. Ties go to the row first in the table.
+    let mut least = NO_KEY;
+    let mut second = NO_KEY;
+    let mut at = usize::MAX;
     let mut i = 0;
     while let Some(row) = rows.get(i) {
         let rank = ranks.rank_of(row.priority());
@@ -106,30 +125,73 @@ pub fn take_next(handler: &mut SensorDataHandler, ranks: Ranks, now_us: u64) -> 
                 } else {
                     Ranks::NOT_SERVED
                 };
-                let key = (key_rank, due);
-                if at.is_none() || key < least {
+                let key = key_of(key_rank, due);
+                if key < least {
+                    second = least;
                     least = key;
-                    at = Some(i);
+                    at = i;
+                } else if key < second {
+                    second = key;
                 }
             }
         }
         i += 1;
     }
-    let (rank, due) = least;
-    let taken = match at {
-        None => return Next::Park(None),
-        Some(_) if rank == Ranks::NOT_SERVED => return Next::Park(Some(due)),
-        Some(row) => rows
-            .get(row)
-            .map(|r| r.period_us())
-            .and_then(|period_us| Some((handler.take_release_of_row(row, now_us)?, period_us))),
-    };
-    match taken {
-        Some((release, period_us)) => Next::Release(release, period_us),
+    if !is_due(least) {
+        // Nothing due: park on the earliest due time (none without a row that has one).
+        return Next::Park(due_in(least));
+    }
+    let period_us = rows.get(at).map_or(0, |row| row.period_us());
+    let Some(release) = handler.take_release_of_row(at, now_us) else {
         // Not taken: the walk found the row due, and nothing has changed the table since; were
         // it not so, the task would look again at once (the row's due time, not after `now_us`).
-        None => Next::Park(Some(due)),
-    }
+        return Next::Park(due_in(least));
+    };
+    // The next walk's answer: another row due (the second key), or else the earliest of the
+    // other rows' due times and the taken row's next (none for a one-shot, which stopped); a
+    // taken row due again at `now_us` (it cannot be: its next release lies after `now_us`) is
+    // walked for, as any other.
+    let taken = handler
+        .publishers()
+        .get(at)
+        .and_then(|row| row.next_due_us())
+        .map_or(NO_KEY, |next| key_of(Ranks::NOT_SERVED, next));
+    let after = if is_due(second) || due_in(taken).is_some_and(|next| next <= now_us) {
+        After::More
+    } else {
+        After::Park(due_in(second.min(taken)))
+    };
+    Next::Release(release, period_us, after)
+}
+
+/// Whether a walk key ([`key_of`]) is a row due at the walk's time (a served rank).
+#[inline(always)]
+fn is_due(key: u64) -> bool {
+    key >> KEY_DUE_BITS != u64::from(Ranks::NOT_SERVED)
+}
+
+/// The due time a walk key holds, `None` for [`NO_KEY`].
+#[inline(always)]
+fn due_in(key: u64) -> Option<u64> {
+    Some(key & DUE_MASK).filter(|&due| due != DUE_MASK)
+}
+
+/// The bits of a walk key ([`key_of`]) below its rank: a due time's.
+const KEY_DUE_BITS: u32 = 56;
+
+/// A walk key's due-time bits.
+const DUE_MASK: u64 = (1 << KEY_DUE_BITS) - 1;
+
+/// No key: above every row's ([`key_of`] keeps a due time's bits below all ones).
+const NO_KEY: u64 = u64::MAX;
+
+/// A row's walk key: `rank` above the row's due time, so that one comparison of two words orders
+/// rows by rank and then by due time. The due time is kept to 2^56 - 2 µs (2 284 years of
+/// uptime): below that the order and the due times the walk answers are exact, and no key is
+/// [`NO_KEY`].
+#[inline(always)]
+fn key_of(rank: u8, due: u64) -> u64 {
+    (u64::from(rank) << KEY_DUE_BITS) | due.min(DUE_MASK - 1)
 }
 
 #[cfg(test)]
@@ -139,7 +201,7 @@ mod tests {
     use amiro_can::{Board, CanId, Kind, Priority, TimeUnit, Topic};
     use amiro_sensors::handler::{Release, SensorDataHandler};
 
-    use super::{next_due, take_next, Next, Ranks};
+    use super::{next_due, take_next, After, Next, Ranks};
 
     /// A random table of DiWheelDrive: each topic stopped, publishing at a random period and
     /// level, or a pending one-shot, set up at random times before `at`.
@@ -188,7 +250,12 @@ mod tests {
         loop {
             let before = handler.clone();
             match take_next(handler, ranks, now) {
-                Next::Release(release, period_us) => {
+                Next::Release(release, period_us, after) => {
+                    assert_eq!(
+                        after,
+                        after_by_walk(handler, ranks, now),
+                        "what comes after is the next walk's answer"
+                    );
                     assert_eq!(
                         handler.publisher(release.topic).map(|p| p.period_us()),
                         Some(period_us),
@@ -220,6 +287,16 @@ mod tests {
                     return out;
                 }
             }
+        }
+    }
+
+    /// What a walk of the table as it is now answers, as an [`After`] (the oracle of the walks'
+    /// `After`): another release due, or the park.
+    fn after_by_walk(handler: &SensorDataHandler, ranks: Ranks, now: u64) -> After {
+        let mut copy = handler.clone();
+        match take_next(&mut copy, ranks, now) {
+            Next::Release(..) => After::More,
+            Next::Park(due) => After::Park(due),
         }
     }
 
@@ -296,7 +373,14 @@ mod tests {
             return Next::Park(earliest);
         };
         match handler.take_release_of_row(row, now_us) {
-            Some(release) => Next::Release(release, period_us),
+            // What comes after: the old walk once more, on the table as the take left it.
+            Some(release) => {
+                let after = match take_next_before(&mut handler.clone(), ranks, now_us) {
+                    Next::Release(..) => After::More,
+                    Next::Park(due) => After::Park(due),
+                };
+                Next::Release(release, period_us, after)
+            }
             None => Next::Park(earliest),
         }
     }
@@ -305,6 +389,8 @@ mod tests {
     fn the_one_key_walk_answers_as_the_walk_before_it() {
         let mut seed = 0xD1B5_4A32_D192_ED03u64;
         let (mut releases, mut parks) = (0, 0);
+        // Releases after which another is due, and job's last releases (after which none is).
+        let (mut more, mut last) = (0, 0);
         for round in 0..400u64 {
             let at = 1 + round * 613;
             for levels in LEVEL_SETS {
@@ -319,7 +405,13 @@ mod tests {
                         assert_eq!(got, expected, "levels {levels:?} at {now}");
                         assert_eq!(new.publishers(), old.publishers());
                         match got {
-                            Next::Release(..) => releases += 1,
+                            Next::Release(_, _, after) => {
+                                releases += 1;
+                                match after {
+                                    After::More => more += 1,
+                                    After::Park(_) => last += 1,
+                                }
+                            }
                             Next::Park(_) => {
                                 parks += 1;
                                 break;
@@ -330,8 +422,8 @@ mod tests {
             }
         }
         assert!(
-            releases > 1_000 && parks > 1_000,
-            "{releases} releases, {parks} parks"
+            releases > 1_000 && parks > 1_000 && more > 500 && last > 500,
+            "{releases} releases ({more} with more due, {last} last), {parks} parks"
         );
     }
 

@@ -2,7 +2,8 @@
 //! jobs and bus paths that miss, and `can_tx`'s rows with their WCRTs (docs/analysis.md, "The transmit interrupt's
 //! parts"). `cargo run -p schedule-analysis --example transmit_alone -- [ROOT] [SCENARIO REVISION]...`; without
 //! pairs: thesis-demo on each board's newest revision, thesis-demo on 1-2 and thesis-magnetometer-900us on 1-1.
-//! `SHOW=row,row` names the rows printed with their WCRTs (default `can_tx`).
+//! `SHOW=row,row` names the rows printed with their WCRTs (default `can_tx`); `TOPIC=name` prints where that topic's
+//! jitter comes from (its message's terms, its sender's row, the interference at the sender's priority).
 use std::path::PathBuf;
 
 use schedule_analysis::analysis::{analyse, Options};
@@ -104,6 +105,68 @@ fn main() {
             if let Some(bus) = &analysis.bus {
                 for m in bus.messages.iter().filter(|m| !m.schedulable()) {
                     misses.push(format!("message {}", m.name));
+                }
+            }
+            // `TOPIC=gyroscope`: where the topic's jitter comes from — its message's terms, its sender's row and
+            // the board's rows at or above the sender's priority with the standard interference term
+            // ⌈(R + J)/T⌉·C at the sender's WCRT R (a reading aid: the analysis' own busy window is the verdict).
+            if let Ok(topic) = std::env::var("TOPIC") {
+                let us = |t: schedule_analysis::time::Time| t.as_us_f64();
+                if let (Some(t), Some(m)) = (
+                    analysis.topics.iter().find(|t| t.name == topic),
+                    analysis
+                        .bus
+                        .as_ref()
+                        .and_then(|b| b.messages.iter().find(|m| m.name == topic)),
+                ) {
+                    if !m
+                        .sender
+                        .as_deref()
+                        .is_some_and(|s| s.starts_with(&format!("{board}/")))
+                    {
+                        continue;
+                    }
+                    println!(
+                        "{name} {board}: topic {topic} best {:.1} worst {:?} jitter {:?}; message jitter {:.1} (own, sender, transmit path), blocking {:.1}, {} frame(s) of {:.1}, WCRT {:?}, best {:.1}",
+                        us(t.best),
+                        t.worst.map(us),
+                        t.jitter().map(us),
+                        us(m.jitter),
+                        us(m.blocking),
+                        m.frames,
+                        us(m.frame_time),
+                        m.wcrt().map(us),
+                        us(m.bcrt)
+                    );
+                    let sender = m.sender.clone().unwrap_or_default();
+                    // The sender's board only: the run whose rows are used there.
+                    for b in analysis
+                        .boards
+                        .iter()
+                        .filter(|b| sender.starts_with(&format!("{board}/")) && b.name == board)
+                    {
+                        let Some(s) = b.tasks.iter().find(|x| {
+                            sender.ends_with(&format!("/{}", x.name)) || sender == x.name
+                        }) else {
+                            continue;
+                        };
+                        let r = s.wcrt().unwrap_or(s.deadline);
+                        println!(
+                            "{name} {board}:   sender {}/{}: wcet {:.1}, blocking {:.1}, jitter {:.1}, bcrt {:.1}, WCRT {:.1}",
+                            b.name, s.name, us(s.wcet), us(s.blocking), us(s.jitter), us(s.bcrt), us(r)
+                        );
+                        for x in b
+                            .tasks
+                            .iter()
+                            .filter(|x| x.priority >= s.priority && x.name != s.name)
+                        {
+                            let n = (us(r) + us(x.jitter)) / us(x.period).max(1e-9);
+                            println!(
+                                "{name} {board}:     {} (priority {}): wcet {:.1}, period {:.0}, jitter {:.1}: {:.0} × wcet = {:.1}",
+                                x.name, x.priority, us(x.wcet), us(x.period), us(x.jitter), n.ceil(), n.ceil() * us(x.wcet)
+                            );
+                        }
+                    }
                 }
             }
             for t in &analysis.topics {

@@ -327,3 +327,54 @@ fn wcet_function(args: &WcetArgs) -> Result<bool> {
     }
     Ok(!declined)
 }
+
+#[cfg(test)]
+mod tests {
+    /// A topic group of a board's bounds file may state `TxQueue`'s search for an older sample of a
+    /// frame (`position_of_sample`) at one header run, not called in its job: `push` calls it only for
+    /// a topic whose sample spans several frames, and a release pushes only its sample's frames. That
+    /// holds while every topic of such a group is one frame a sample in amiro-can's table.
+    #[test]
+    fn single_frame_groups_state_no_sample_search() {
+        let models =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../schedule-analysis/models");
+        let mut stated = 0;
+        for board in ["diwheeldrive", "powermgmt", "lightring"] {
+            let path = models.join(format!("{board}.bounds.json"));
+            let text = std::fs::read_to_string(&path).expect("the bounds file reads");
+            let file: serde_json::Value =
+                serde_json::from_str(&text).expect("the bounds file parses");
+            let groups = file["topics"]["groups"]
+                .as_array()
+                .cloned()
+                .unwrap_or_default();
+            for group in groups {
+                let states_it = group["loops"].as_array().is_some_and(|loops| {
+                    loops.iter().any(|l| {
+                        l["function"] == "amiro_sensors::tx_queue::position_of_sample"
+                            && l["bound"] == 1
+                    })
+                });
+                if !states_it {
+                    continue;
+                }
+                stated += 1;
+                for topic in group["topics"]
+                    .as_array()
+                    .expect("a group names its topics")
+                {
+                    let name = topic.as_str().expect("a topic's name");
+                    let topic = amiro_can::Topic::from_name(name)
+                        .unwrap_or_else(|| panic!("{board}: no topic {name}"));
+                    assert_eq!(
+                        topic.frames_per_sample(),
+                        1,
+                        "{board}: group {} states no sample search, but {name} spans several frames",
+                        group["name"]
+                    );
+                }
+            }
+        }
+        assert!(stated > 0, "no group states it: the test checks nothing");
+    }
+}
