@@ -487,9 +487,8 @@ impl Pins {
     /// SCL on pin `scl` and SDA on pin `sda` of the GPIO port at `port` ([`GPIOB`]).
     ///
     /// # Safety
-    /// `port` must be a GPIO port's base address and the two pins the I2C block's (0 to 15; on
-    /// the F103 both 0 to 7 or both 8 to 15, one configuration register), in open-drain alternate
-    /// function, reconfigured by nothing else once the master has them.
+    /// `port` must be a GPIO port's base address and the two pins (0 to 15) the I2C block's, in
+    /// open-drain alternate function, reconfigured by nothing else once the master has them.
     pub const unsafe fn new(port: usize, scl: u8, sda: u8) -> Self {
         Self { port, scl, sda }
     }
@@ -497,28 +496,40 @@ impl Pins {
     /// Both pins as open-drain outputs (`gpio`; their output levels set high before, so the
     /// switch drives nothing low) or back in open-drain alternate function.
     fn hand_to_gpio(&self, gpio: bool) {
-        // F1: CRL/CRH, four bits a pin; the board's alternate open drain is CNF 0b11, an
-        // open-drain output CNF 0b01 (RM0008 §9.2.1-2): only CNF's high bit changes.
-        #[cfg(feature = "f1")]
-        let (offset, mask, output, alternate) = {
-            let cnf1 = |pin: u8| 8u32 << ((u32::from(pin) % 8) * 4);
-            let bits = cnf1(self.scl) | cnf1(self.sda);
-            (if self.scl < 8 { 0x00 } else { 0x04 }, bits, 0, bits)
-        };
-        // F4: MODER, two bits a pin: alternate function 0b10, output 0b01 (RM0090 §8.4.1); the
-        // board set OTYPER's open drain and the AF number, which both modes keep.
-        #[cfg(feature = "f4")]
-        let (offset, mask, output, alternate) = {
-            let low = (1u32 << (u32::from(self.scl) * 2)) | (1u32 << (u32::from(self.sda) * 2));
-            (0x00, low * 3, low, low << 1)
-        };
-        let register = (self.port + offset) as *mut u32;
-        // SAFETY: `new`'s contract: the port's configuration register, the two pins' fields.
-        unsafe {
-            let value = core::ptr::read_volatile(register) & !mask;
-            core::ptr::write_volatile(register, value | if gpio { output } else { alternate });
-        }
+        self.mode(self.scl, gpio);
+        self.mode(self.sda, gpio);
     }
+
+    /// F1: CRL/CRH, four bits a pin; the board's alternate open drain is CNF 0b11, an open-drain
+    /// output CNF 0b01 (RM0008 §9.2.1-2): only CNF's high bit changes.
+    #[cfg(feature = "f1")]
+    fn mode(&self, pin: u8, gpio: bool) {
+        let offset = if pin < 8 { 0x00 } else { 0x04 };
+        write_bit(self.port + offset, u32::from(pin % 8) * 4 + 3, !gpio);
+    }
+
+    /// F4: MODER, two bits a pin: alternate function 0b10, output 0b01 (RM0090 §8.4.1), through
+    /// input (0b00) between the two; the board set OTYPER's open drain and the AF number, which
+    /// both modes keep.
+    #[cfg(feature = "f4")]
+    fn mode(&self, pin: u8, gpio: bool) {
+        let low = u32::from(pin) * 2;
+        let (off, on) = if gpio { (low + 1, low) } else { (low, low + 1) };
+        write_bit(self.port, off, false);
+        write_bit(self.port, on, true);
+    }
+}
+
+/// Sets or clears `bit` of the peripheral register at `register` through its bit-band alias
+/// (Cortex-M3/M4: PM0056 §2.2.5, PM0214 §2.2.5): one write, no read-modify-write, so the two
+/// blocks' masters, whose pins share a configuration register and whose locks may be taken at
+/// different priorities, cannot undo each other's change.
+fn write_bit(register: usize, bit: u32, set: bool) {
+    let alias =
+        0x4200_0000 + register.wrapping_sub(0x4000_0000).wrapping_mul(32) + bit as usize * 4;
+    // SAFETY: `Pins::new`'s contract: a bit of a pin of the master's own in its GPIO port's
+    // configuration register (peripherals below 0x4010_0000 are all in the bit-band region).
+    unsafe { core::ptr::write_volatile(alias as *mut u32, u32::from(set)) }
 }
 
 /// The pins as [`ClearPins`] for one clear, with half an SCL period in core cycles.
