@@ -290,10 +290,10 @@ impl Master {
     ///
     /// Once the read's address is acknowledged, the master acknowledges every byte itself, so no
     /// error of the receive is a missing acknowledge (AF is set only while the master transmits:
-    /// the master receiver and the error conditions, RM0008 §26.3.3-4, RM0090 §27.3.3-4): it resets
-    /// the block at once, as [`Master::finish`] does with every other error. Finishing it apart
-    /// keeps the wait for a released bus, which follows only a missing acknowledge, off the path
-    /// that waited for every flag of the transfer, where the machine code's bound would charge it.
+    /// the master receiver and the error conditions, RM0008 §26.3.3-4, RM0090 §27.3.3-4): it clears
+    /// the bus and resets the block at once ([`Master::recover`]), as [`Master::finish`] does with
+    /// every other error. Finishing it apart keeps the wait for a released bus (after a missing
+    /// acknowledge only) off the path that waited for every flag, where the bound would charge it.
     #[inline(never)]
     fn read_register(&mut self, target: u16, read: &mut [u8]) -> Result<(), Error> {
         let [address, register] = target.to_be_bytes();
