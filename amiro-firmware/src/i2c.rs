@@ -568,13 +568,15 @@ fn half_period(half_cycles: u32) {
 }
 
 impl Master {
-    /// After a timeout or a bus error: the block off, its pins handed to GPIO for the bus clear
-    /// (UM10204 §3.1.16, [`clear_bus`]: up to nine SCL pulses while SDA is low, then a STOP), the
-    /// pins given back, the block reset and set up again. [`Error::BusStuck`] where SDA stays low.
-    /// Not inlined: one copy for every fault path.
+    /// After a timeout or a bus error: the block held in reset (it drives neither line, whatever
+    /// state it was in: clearing PE alone waits for the end of a transfer, RM0008 §26.6.1), its
+    /// pins handed to GPIO for the bus clear (UM10204 §3.1.16, [`clear_bus`]: up to nine SCL
+    /// pulses while SDA is low, then a STOP), the pins given back, the block reset again (with
+    /// its pins back on the lines, as the STM32F10x errata's I2C busy-flag entry asks) and set up.
+    /// [`Error::BusStuck`] where SDA stays low. Not inlined: one copy for every fault path.
     #[inline(never)]
     fn recover(&self) -> Result<(), Error> {
-        self.write(CR1, 0);
+        self.write(CR1, CR1_SWRST);
         let mut pins = Clearing {
             pins: &self.pins,
             half_cycles: self.timeout_cycles / HALF_PERIODS_PER_TIMEOUT,

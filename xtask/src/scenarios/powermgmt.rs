@@ -233,8 +233,8 @@ fn admission(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 
 /// The ring's period the board accepts in `admission-decisions`, and the one before it it refuses:
 /// the shortest whole milliseconds the host's analysis admits beside DiWheelDrive's magnetometer
-/// (at 6 ms the ring's own frames miss, 6 640 of 6 000 µs on 2026-12-05: the power monitor's one
-/// gauge transfer under a bus lock, 1 884.4 µs from the machine code, blocks the ring's job, and
+/// (at 6 ms the ring's own frames miss, 6 489 of 6 000 µs on 2026-12-05: the power monitor's one
+/// gauge transfer under a bus lock, 1 884.8 µs from the machine code, blocks the ring's job, and
 /// the transmit interrupt's machine-code bound is every frame's queuing jitter).
 const DECISIONS_REFUSED_MS: u64 = 6;
 const DECISIONS_ACCEPTED_MS: u64 = 7;
