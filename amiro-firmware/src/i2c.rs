@@ -6,8 +6,12 @@
 //! DWT cycle counter only (stm32f1xx-hal's `BlockingI2c`, which spins for ever where the counter
 //! does not run, as in QEMU). Here each wait ends after [`FLAG_TIMEOUT_US`] on the cycle counter
 //! (which the board starts) or after as many polls as that is cycles, whichever comes first. After
-//! a timeout or a bus error the block is reset and set up again, so the next transfer starts clean.
+//! a timeout or a bus error the bus is cleared ([`crate::i2c_clear`]: a device left driving SDA low
+//! mid-byte is clocked free, then a STOP) and the block reset and set up again, so the next transfer
+//! starts clean.
 use embedded_hal::i2c::{ErrorKind, ErrorType, I2c, NoAcknowledgeSource, Operation};
+
+use crate::i2c_clear::{clear_bus, ClearPins, Stuck};
 
 /// I2C1's base address on both chips.
 pub const I2C1: usize = 0x4000_5400;
@@ -54,6 +58,9 @@ pub enum Error {
     Overrun,
     /// A flag did not come within [`FLAG_TIMEOUT_US`] (bus stuck or device stretching for ever).
     Timeout,
+    /// After a fault, SDA still low when the bus clear's nine pulses were given (a device holds
+    /// the bus; the next transfer's wait for a free bus fails and clears it again).
+    BusStuck,
 }
 
 impl embedded_hal::i2c::Error for Error {
@@ -64,6 +71,7 @@ impl embedded_hal::i2c::Error for Error {
             Error::ArbitrationLoss => ErrorKind::ArbitrationLoss,
             Error::Overrun => ErrorKind::Overrun,
             Error::Timeout => ErrorKind::Other,
+            Error::BusStuck => ErrorKind::Bus,
         }
     }
 }
@@ -75,6 +83,8 @@ pub struct Master {
     pclk1_mhz: u32,
     /// [`FLAG_TIMEOUT_US`] in core cycles (and the poll bound).
     timeout_cycles: u32,
+    /// SCL and SDA, for the bus clear.
+    pins: Pins,
 }
 
 fn cycles() -> u32 {
@@ -82,19 +92,22 @@ fn cycles() -> u32 {
 }
 
 impl Master {
-    /// Takes the block at `base` ([`I2C1`] or [`I2C2`]; its clock on, its pins in open-drain
-    /// alternate function) and sets it up for 400 kHz from a `pclk1_hz` APB1, with its timeouts
-    /// counted in cycles of a `sysclk_hz` core clock.
+    /// Takes the block at `base` ([`I2C1`] or [`I2C2`]; its clock on, its `pins` in open-drain
+    /// alternate function), clears its bus (a device may hold SDA since a reset mid-transfer) and
+    /// sets it up for 400 kHz from a `pclk1_hz` APB1, with its timeouts counted in cycles of a
+    /// `sysclk_hz` core clock.
     ///
     /// # Safety
     /// `base` must be I2C1 or I2C2 and owned by this value alone.
-    pub unsafe fn new(base: usize, pclk1_hz: u32, sysclk_hz: u32) -> Self {
+    pub unsafe fn new(base: usize, pins: Pins, pclk1_hz: u32, sysclk_hz: u32) -> Self {
         let master = Self {
             base,
             pclk1_mhz: (pclk1_hz / 1_000_000).clamp(2, 50),
             timeout_cycles: FLAG_TIMEOUT_US.saturating_mul(sysclk_hz / 1_000_000),
+            pins,
         };
-        master.setup();
+        // A bus still held is the first transfer's fault, reported there.
+        let _ = master.recover();
         master
     }
 
@@ -277,10 +290,10 @@ impl Master {
     ///
     /// Once the read's address is acknowledged, the master acknowledges every byte itself, so no
     /// error of the receive is a missing acknowledge (AF is set only while the master transmits:
-    /// the master receiver and the error conditions, RM0008 §26.3.3-4, RM0090 §27.3.3-4): it resets
-    /// the block at once, as [`Master::finish`] does with every other error. Finishing it apart
-    /// keeps the wait for a released bus, which follows only a missing acknowledge, off the path
-    /// that waited for every flag of the transfer, where the machine code's bound would charge it.
+    /// the master receiver and the error conditions, RM0008 §26.3.3-4, RM0090 §27.3.3-4): it clears
+    /// the bus and resets the block at once ([`Master::recover`]), as [`Master::finish`] does with
+    /// every other error. Finishing it apart keeps the wait for a released bus (after a missing
+    /// acknowledge only) off the path that waited for every flag, where the bound would charge it.
     #[inline(never)]
     fn read_register(&mut self, target: u16, read: &mut [u8]) -> Result<(), Error> {
         let [address, register] = target.to_be_bytes();
@@ -300,23 +313,24 @@ impl Master {
         }
         let received = self.receive(read, read.len() > 1);
         if received.is_err() {
-            self.setup();
+            return self.recover().and(received);
         }
         received
     }
 
     /// After a transfer: on a missing acknowledge the bus is released (the block stays usable),
-    /// after any other error the block is reset and set up again.
+    /// after any other error (or a STOP that does not free the bus) the bus is cleared and the
+    /// block set up again ([`Master::recover`]; [`Error::BusStuck`] where the clear fails).
     fn finish(&mut self, result: Result<(), Error>) -> Result<(), Error> {
         match result {
             Ok(()) => {}
             Err(Error::NoAcknowledge(_)) => {
                 self.set_cr1(CR1_STOP, 0);
                 if self.wait_released().is_err() {
-                    self.setup();
+                    return self.recover().and(result);
                 }
             }
-            Err(_) => self.setup(),
+            Err(_) => return self.recover().and(result),
         }
         result
     }
@@ -433,5 +447,147 @@ impl Master {
             }
         }
         Err(Error::Timeout)
+    }
+}
+
+// The bus clear's chip side, below the waits the bounds files name by line.
+
+/// GPIOB's base address (RM0008 §3.3, RM0090 §2.3): the port of both I2C blocks' pins on every
+/// AMiRo board.
+#[cfg(feature = "f1")]
+pub const GPIOB: usize = 0x4001_0C00;
+/// GPIOB's base address (RM0008 §3.3, RM0090 §2.3): the port of both I2C blocks' pins on every
+/// AMiRo board.
+#[cfg(feature = "f4")]
+pub const GPIOB: usize = 0x4002_0400;
+
+// A GPIO port's input data and bit set/reset registers (RM0008 §9.2, RM0090 §8.4).
+#[cfg(feature = "f1")]
+const GPIO_IDR: usize = 0x08;
+#[cfg(feature = "f1")]
+const GPIO_BSRR: usize = 0x10;
+#[cfg(feature = "f4")]
+const GPIO_IDR: usize = 0x10;
+#[cfg(feature = "f4")]
+const GPIO_BSRR: usize = 0x18;
+
+/// Half an SCL period at 400 kHz, as a fraction of [`FLAG_TIMEOUT_US`]: 200 µs / 1.25 µs.
+const HALF_PERIODS_PER_TIMEOUT: u32 = 160;
+
+/// An I2C block's SCL and SDA: two pins of one GPIO port, which the board puts in open-drain
+/// alternate function and the bus clear turns into open-drain outputs for its pulses, and back.
+#[derive(Debug, Clone, Copy)]
+pub struct Pins {
+    port: usize,
+    scl: u8,
+    sda: u8,
+}
+
+impl Pins {
+    /// SCL on pin `scl` and SDA on pin `sda` of the GPIO port at `port` ([`GPIOB`]).
+    ///
+    /// # Safety
+    /// `port` must be a GPIO port's base address and the two pins (0 to 15) the I2C block's, in
+    /// open-drain alternate function, reconfigured by nothing else once the master has them.
+    pub const unsafe fn new(port: usize, scl: u8, sda: u8) -> Self {
+        Self { port, scl, sda }
+    }
+
+    /// Both pins as open-drain outputs (`gpio`; their output levels set high before, so the
+    /// switch drives nothing low) or back in open-drain alternate function.
+    fn hand_to_gpio(&self, gpio: bool) {
+        self.mode(self.scl, gpio);
+        self.mode(self.sda, gpio);
+    }
+
+    /// F1: CRL/CRH, four bits a pin; the board's alternate open drain is CNF 0b11, an open-drain
+    /// output CNF 0b01 (RM0008 §9.2.1-2): only CNF's high bit changes.
+    #[cfg(feature = "f1")]
+    fn mode(&self, pin: u8, gpio: bool) {
+        let offset = if pin < 8 { 0x00 } else { 0x04 };
+        write_bit(self.port + offset, u32::from(pin % 8) * 4 + 3, !gpio);
+    }
+
+    /// F4: MODER, two bits a pin: alternate function 0b10, output 0b01 (RM0090 §8.4.1), through
+    /// input (0b00) between the two; the board set OTYPER's open drain and the AF number, which
+    /// both modes keep.
+    #[cfg(feature = "f4")]
+    fn mode(&self, pin: u8, gpio: bool) {
+        let low = u32::from(pin) * 2;
+        let (off, on) = if gpio { (low + 1, low) } else { (low, low + 1) };
+        write_bit(self.port, off, false);
+        write_bit(self.port, on, true);
+    }
+}
+
+/// Sets or clears `bit` of the peripheral register at `register` through its bit-band alias
+/// (Cortex-M3/M4: PM0056 §2.2.5, PM0214 §2.2.5): one write, no read-modify-write, so the two
+/// blocks' masters, whose pins share a configuration register and whose locks may be taken at
+/// different priorities, cannot undo each other's change.
+fn write_bit(register: usize, bit: u32, set: bool) {
+    let alias =
+        0x4200_0000 + register.wrapping_sub(0x4000_0000).wrapping_mul(32) + bit as usize * 4;
+    // SAFETY: `Pins::new`'s contract: a bit of a pin of the master's own in its GPIO port's
+    // configuration register (peripherals below 0x4010_0000 are all in the bit-band region).
+    unsafe { core::ptr::write_volatile(alias as *mut u32, u32::from(set)) }
+}
+
+/// The pins as [`ClearPins`] for one clear, with half an SCL period in core cycles.
+struct Clearing<'a> {
+    pins: &'a Pins,
+    half_cycles: u32,
+}
+
+impl ClearPins for Clearing<'_> {
+    fn lines(&mut self, scl: bool, sda: bool) {
+        // One write of the port's bit set/reset register, which leaves its other pins alone.
+        let bit = |pin: u8, high: bool| 1u32 << (pin + if high { 0 } else { 16 });
+        let value = bit(self.pins.scl, scl) | bit(self.pins.sda, sda);
+        // SAFETY: `Pins::new`'s contract: the GPIO port's BSRR, the two pins' bits.
+        unsafe { core::ptr::write_volatile((self.pins.port + GPIO_BSRR) as *mut u32, value) }
+        half_period(self.half_cycles);
+    }
+
+    fn sda_is_high(&mut self) -> bool {
+        // SAFETY: `Pins::new`'s contract: the port's input data register.
+        let idr = unsafe { core::ptr::read_volatile((self.pins.port + GPIO_IDR) as *const u32) };
+        idr & (1 << self.pins.sda) != 0
+    }
+}
+
+/// Waits `half_cycles` core cycles on the cycle counter, or as many polls where it does not run
+/// (as [`Master::wait`]). Not inlined, so it keeps its name for the bounds files.
+#[inline(never)]
+fn half_period(half_cycles: u32) {
+    let start = cycles();
+    for _ in 0..half_cycles {
+        if cycles().wrapping_sub(start) >= half_cycles {
+            return;
+        }
+    }
+}
+
+impl Master {
+    /// After a timeout or a bus error: the block held in reset (it drives neither line, whatever
+    /// state it was in: clearing PE alone waits for the end of a transfer, RM0008 §26.6.1), its
+    /// pins handed to GPIO for the bus clear (UM10204 §3.1.16, [`clear_bus`]: up to nine SCL
+    /// pulses while SDA is low, then a STOP), the pins given back, the block reset again (with
+    /// its pins back on the lines, as the STM32F10x errata's I2C busy-flag entry asks) and set up.
+    /// [`Error::BusStuck`] where SDA stays low. Not inlined: one copy for every fault path.
+    #[inline(never)]
+    fn recover(&self) -> Result<(), Error> {
+        self.write(CR1, CR1_SWRST);
+        let mut pins = Clearing {
+            pins: &self.pins,
+            half_cycles: self.timeout_cycles / HALF_PERIODS_PER_TIMEOUT,
+        };
+        // Both output levels high (the alternate function ignores them) before the pins are
+        // outputs; the half period after it lets the lines settle, released by the block.
+        pins.lines(true, true);
+        self.pins.hand_to_gpio(true);
+        let cleared = clear_bus(&mut pins);
+        self.pins.hand_to_gpio(false);
+        self.setup();
+        cleared.map(|_| ()).map_err(|Stuck| Error::BusStuck)
     }
 }

@@ -248,9 +248,24 @@ pub fn init(
             .modify(|_, w| w.i2c1en().set_bit().i2c2en().set_bit());
     }
     let _ = (dp.I2C1, dp.I2C2);
-    // SAFETY: I2C1 and I2C2 are used by these two values only.
-    let i2c1 = unsafe { Master::new(i2c::I2C1, clocks.pclk1_hz, clocks.sysclk_hz) };
-    let floor_i2c = unsafe { Master::new(i2c::I2C2, clocks.pclk1_hz, clocks.sysclk_hz) };
+    // SAFETY: I2C1 and I2C2 are used by these two values only, their pins (PB8/PB9, PB10/PB11,
+    // alternate open drain above) by their bus clears only.
+    let (i2c1, floor_i2c) = unsafe {
+        (
+            Master::new(
+                i2c::I2C1,
+                i2c::Pins::new(i2c::GPIOB, 8, 9),
+                clocks.pclk1_hz,
+                clocks.sysclk_hz,
+            ),
+            Master::new(
+                i2c::I2C2,
+                i2c::Pins::new(i2c::GPIOB, 10, 11),
+                clocks.pclk1_hz,
+                clocks.sysclk_hz,
+            ),
+        )
+    };
 
     // CAN1 on PA11/PA12 at 1 Mbit/s (no remap): RX floating input, TX alternate push-pull; the
     // runtime's driver configures the controller.

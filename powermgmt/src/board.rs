@@ -187,9 +187,24 @@ pub fn init(dp: pac::Peripherals, mut cp: cortex_m::Peripherals) -> Board {
         gpiob.pb10.into_alternate_open_drain::<4>(),
         gpiob.pb11.into_alternate_open_drain::<4>(),
     );
-    // SAFETY: I2C1 and I2C2 are used by these two values only.
-    let rear_i2c = unsafe { Master::new(i2c::I2C1, clocks.pclk1_hz, clocks.sysclk_hz) };
-    let front_i2c = unsafe { Master::new(i2c::I2C2, clocks.pclk1_hz, clocks.sysclk_hz) };
+    // SAFETY: I2C1 and I2C2 are used by these two values only, their pins (PB8/PB9, PB10/PB11,
+    // alternate open drain above) by their bus clears only.
+    let (rear_i2c, front_i2c) = unsafe {
+        (
+            Master::new(
+                i2c::I2C1,
+                i2c::Pins::new(i2c::GPIOB, 8, 9),
+                clocks.pclk1_hz,
+                clocks.sysclk_hz,
+            ),
+            Master::new(
+                i2c::I2C2,
+                i2c::Pins::new(i2c::GPIOB, 10, 11),
+                clocks.pclk1_hz,
+                clocks.sysclk_hz,
+            ),
+        )
+    };
 
     // CAN1 on PA11/PA12, AF9. The runtime's driver configures the controller: only command frames
     // pass the hardware filter; TX mailboxes are served by identifier; automatic bus-off recovery.
