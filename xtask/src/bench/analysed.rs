@@ -239,7 +239,7 @@ mod tests {
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         // The board's own admission decides on the production model, one request at a time: the gyroscope
         // one-shot beside the 1 ms magnetometer, then the accelerometer beside it, the one-shot's sample gone by then.
-        // (Beside the 1 ms magnetometer all three at once fit as well: its frame at 938.4 of 1 000 µs.)
+        // (Beside the 1 ms magnetometer all three at once fit as well: its frame at 956.4 of 1 000 µs.)
         for (name, without) in [
             ("admitted-once", Topic::Accelerometer),
             ("admitted-stream", Topic::Gyroscope),
