@@ -2,7 +2,7 @@
 //! deadline"): the host analysis and the boards' admission table check only that its busy window closes, and its
 //! response is the queuing jitter of every frame its board sends. PowerManagement's `can_tx` (its bound used on the
 //! shipped files), past two of its own frames on thesis-demo, passes on both with that response as its frames'
-//! jitter; with LightRing's `can_tx` bound used (held on the shipped files), its diagnostics keep its latch's
+//! jitter; with LightRing's `can_tx` bound used (as on the shipped files), its diagnostics keep its latch's
 //! deadline on both; a `can_tx` whose window never closes is refused by both.
 
 use std::path::{Path, PathBuf};
@@ -190,7 +190,7 @@ fn powermanagements_can_tx_past_two_own_frames_passes_as_its_frames_jitter() {
     assert!(decision.admitted(), "{decision:?}");
 }
 
-/// LightRing's diagnostics with its `can_tx` bound used (what its bounds file held it for): a sample's transmit job
+/// LightRing's diagnostics with its `can_tx` bound used (what its bounds file once held it for): a sample's transmit job
 /// (six frames, each with the abort it may cause) takes LightRing's `can_tx` past two own frames (111 µs each), which
 /// refuses nothing, and `latch_leds` below it on LightRing 1-0 keeps its 2 ms: since the command handler queues no
 /// frames (a busy verdict is the admission task's to send), the transmit interrupt's window holds no verdict of the
@@ -231,7 +231,7 @@ fn lightrings_diagnostics_keep_its_latch_with_can_tx_used() {
         );
         let failures = report.failures();
         assert!(failures.is_empty(), "{period_us} µs: {failures:?}");
-        // On the shipped files (the bound held: its stated 9 µs a frame, no job per sample) the latch meets its 2 ms.
+        // On the shipped files as they are (the bound used there too) the latch meets its 2 ms.
         let shipped = host(&path, &files);
         assert!(
             !shipped

@@ -174,9 +174,10 @@ mod tests {
     use crate::bench::machine;
     use amiro_can::Topic;
 
-    /// What the QEMU capture of `diwheeldrive/qemu/admission-one-shots.log` on a 1-1 robot shows: the thesis's
-    /// magnetometer-x every 900 µs at medium, the accelerometer every 5 ms at low and one gyroscope sample at low
-    /// (the floor one-shot was refused: no sample).
+    /// What the QEMU capture of `diwheeldrive/qemu/admission-one-shots.log` on a 1-1 robot shows once the board
+    /// admits its one-shots: magnetometer-x every 1 ms at medium (moved from the thesis's 900 µs, beside which the
+    /// board refuses the gyroscope one-shot, the floor one-shot and the accelerometer), the accelerometer every 5 ms
+    /// at low and one gyroscope sample at low.
     /// The thesis one-shots' scenario, written to a folder of `test`'s own: tests run in parallel in one process,
     /// and a shared file was read half-written by one test while another wrote it.
     fn thesis_one_shots(test: &str) -> PathBuf {
@@ -185,8 +186,8 @@ mod tests {
 
     /// The capture's topics: (topic, level, period µs or a one-shot, samples).
     const SEEN: [(Topic, u8, Option<u64>, usize); 3] = [
-        (Topic::MagnetometerX, 2, Some(900), 189),
-        (Topic::Accelerometer, 3, Some(5000), 12),
+        (Topic::MagnetometerX, 2, Some(1000), 367),
+        (Topic::Accelerometer, 3, Some(5000), 16),
         (Topic::Gyroscope, 3, None, 1),
     ];
 
@@ -202,8 +203,8 @@ mod tests {
         path
     }
 
-    /// The shortest gap between the frames of `admission-one-shots.log` (its requests at 10, 50, 100 and
-    /// 120 ms), as `qemu::received_gap_us` reads it from the run's stimulus.
+    /// The shortest gap between the frames of `admission-one-shots.log` (its requests at 10, 50, 100, 120, 160,
+    /// 240 and 280 ms), as `qemu::received_gap_us` reads it from the run's stimulus.
     const RECEIVED_GAP_US: f64 = 20_000.0;
 
     /// The traced QEMU build's analysis of the scenario at `path`, with the run's received gap.
@@ -224,7 +225,7 @@ mod tests {
         let frames =
             crate::qemu::read_stimulus(&root.join("diwheeldrive/qemu/admission-one-shots.log"))
                 .unwrap();
-        let bin = crate::qemu::encode_stimulus(&frames, 180_000);
+        let bin = crate::qemu::encode_stimulus(&frames, 360_000);
         assert_eq!(
             crate::qemu::received_gap_us(&bin).unwrap() as f64,
             RECEIVED_GAP_US
@@ -237,9 +238,8 @@ mod tests {
         let path = thesis_one_shots("admitted");
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         // The board's own admission decides on the production model, one request at a time: the gyroscope
-        // one-shot beside the magnetometer, then the accelerometer beside it, the one-shot's sample gone by then.
-        // (All three at once it would refuse since the monotonic's bound is charged per expiry: magnetometer-x's
-        // frames miss.)
+        // one-shot beside the 1 ms magnetometer, then the accelerometer beside it, the one-shot's sample gone by then.
+        // (Beside the 1 ms magnetometer all three at once fit as well: its frame at 956.4 of 1 000 µs.)
         for (name, without) in [
             ("admitted-once", Topic::Accelerometer),
             ("admitted-stream", Topic::Gyroscope),
