@@ -1049,6 +1049,30 @@ fn a_job_released_down_a_chain_from_an_overloaded_job_has_no_bound() {
     assert_eq!(board_wcrts_us(&board), vec![None, None, None]);
 }
 
+/// A model file's system, validated, with `exact` frame costs and the default horizon.
+fn exact_system(
+    model: &serde_json::Value,
+) -> (schedule_analysis::model::System, analysis::Options) {
+    let system = schedule_analysis::model::Model::from_json(&model.to_string())
+        .expect("parses")
+        .validate()
+        .expect("valid");
+    let options = analysis::Options {
+        frame_cost: schedule_analysis::model::FrameCostSpec::Exact,
+        horizon: None,
+    };
+    (system, options)
+}
+
+/// The task `name` of a one-board report.
+fn only_board_task<'a>(report: &'a analysis::Analysis, name: &str) -> &'a analysis::TaskResult {
+    report.boards[0]
+        .tasks
+        .iter()
+        .find(|t| t.name == name)
+        .unwrap_or_else(|| panic!("{name}"))
+}
+
 /// A frame that needs a mailbox abort whose victim is on the bus (docs/analysis.md, *Why the bounds are safe*, "A
 /// frame that needs an abort"), and the transmit job its publisher releases, worked by hand at 1 Mbit/s, `exact`:
 ///
@@ -1100,24 +1124,10 @@ fn a_frame_needing_a_mailbox_abort_takes_a_second_transmit_response_and_the_abor
         can::transmit_abort_latency(can::bit_time(1_000_000)),
         Time::from_us(405)
     );
-    let system = schedule_analysis::model::Model::from_json(&model.to_string())
-        .expect("parses")
-        .validate()
-        .expect("valid");
-    let options = analysis::Options {
-        frame_cost: schedule_analysis::model::FrameCostSpec::Exact,
-        horizon: None,
-    };
+    let (system, options) = exact_system(&model);
     // (row's jitter, row's WCRT, frame's jitter, frame's WCRT), µs.
     let figures = |report: &analysis::Analysis| {
-        let board = &report.boards[0];
-        let task = |name: &str| {
-            board
-                .tasks
-                .iter()
-                .find(|t| t.name == name)
-                .unwrap_or_else(|| panic!("{name}"))
-        };
+        let task = |name: &str| only_board_task(report, name);
         assert_eq!(task("can_tx").wcrt(), Some(Time::from_us(30)));
         assert_eq!(task("publisher").wcrt(), Some(Time::from_us(150)));
         let row = task("can_tx[data]");
@@ -1183,24 +1193,10 @@ fn the_charged_rounds_grow_the_transmit_response_to_its_fixed_point() {
             ]
         }
     });
-    let system = schedule_analysis::model::Model::from_json(&model.to_string())
-        .expect("parses")
-        .validate()
-        .expect("valid");
-    let options = analysis::Options {
-        frame_cost: schedule_analysis::model::FrameCostSpec::Exact,
-        horizon: None,
-    };
+    let (system, options) = exact_system(&model);
     // (can_tx's WCRT, the transmit job's jitter, the frame's jitter, the frame's WCRT), µs.
     let figures = |report: &analysis::Analysis| {
-        let board = &report.boards[0];
-        let task = |name: &str| {
-            board
-                .tasks
-                .iter()
-                .find(|t| t.name == name)
-                .unwrap_or_else(|| panic!("{name}"))
-        };
+        let task = |name: &str| only_board_task(report, name);
         let data = &report.bus.as_ref().expect("a bus").messages[0];
         (
             task("can_tx").wcrt().map(|w| w.as_us_f64()),
