@@ -59,9 +59,10 @@ where
     }
 
     // The waits end the running task's run in the trace, with its next release, and start it
-    // again when it resumes (`tracing`).
+    // again when it resumes (`tracing`). Only the traced build reads the clock for that release
+    // (`tracing::suspend_until`): the shipped images' waits read none.
     async fn delay_until_us(at_us: u64) {
-        let task = crate::tracing::suspend(Some((at_us, Self::now_us())));
+        let task = crate::tracing::suspend_until(at_us, Self::now_us);
         B::queue().delay_until(at_us.div_ceil(TICK_US)).await;
         crate::tracing::resume(task);
     }

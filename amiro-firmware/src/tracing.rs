@@ -704,7 +704,8 @@ pub fn suspend(release: Option<(u64, u64)>) -> u8 {
 
 /// [`suspend`] for a timer wait until `at_us`, the clock read through `now_us` only where the trace
 /// records the wait (`task-trace`): a build without task tracing reads no clock for it (the
-/// timer waits of every publisher release, `mono::Clock::timeout_at_us`).
+/// timer waits of the periodic tasks and every publisher release, `mono::Clock::delay_until_us`
+/// and `timeout_at_us`).
 #[inline(always)]
 pub fn suspend_until(at_us: u64, now_us: impl FnOnce() -> u64) -> u8 {
     #[cfg(feature = "task-trace")]
