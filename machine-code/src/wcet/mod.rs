@@ -582,6 +582,8 @@ mod tests;
 #[cfg(test)]
 mod tests_activation;
 #[cfg(test)]
+mod tests_dead_ends;
+#[cfg(test)]
 mod tests_polled;
 #[cfg(test)]
 mod tests_spills;

@@ -10,6 +10,13 @@
 //! ends it on its last run, as `for x in ..` compiles: B = N − 1), a way out from inside the body
 //! ends one of those B passes: such a path makes at most B − 1 passes past the header back to it
 //! before its last ([`LoopCount::Body`]).
+//!
+//! A way out counts only where the function can still return after it: an exit edge into a block
+//! from which no path reaches a return (a trap, a call that never returns, a loop with no exit, or
+//! a block whose ways on were left out, as one topic's job leaves out another's sample) ends no
+//! path that completes, so it is no last pass to charge, and the collapsed node does not lead there
+//! ([`completing`]). The bound is of the paths that complete (a job's execution); one that never
+//! returns is a halt, not a longer job.
 use std::collections::BTreeSet;
 
 use serde::Serialize;
@@ -187,6 +194,29 @@ fn longest_from(
     Ok(dist)
 }
 
+/// Per node, whether some path from it reaches a return, along the edges as they stand (the loops
+/// collapsed so far: an endless one has no edge on). The graph holds every way a run can go, so a
+/// node marked `false` starts no run that returns.
+fn completing(nodes: &[Node]) -> Vec<bool> {
+    let mut preds = vec![Vec::new(); nodes.len()];
+    for (v, node) in nodes.iter().enumerate() {
+        for &(to, _) in &node.succs {
+            preds[to].push(v);
+        }
+    }
+    let mut returns: Vec<bool> = nodes.iter().map(|node| node.exit).collect();
+    let mut work: Vec<usize> = (0..nodes.len()).filter(|&v| returns[v]).collect();
+    while let Some(v) = work.pop() {
+        for &p in &preds[v] {
+            if !returns[p] {
+                returns[p] = true;
+                work.push(p);
+            }
+        }
+    }
+    returns
+}
+
 fn better(a: Option<Cost>, b: Cost, key: &dyn Fn(Cost) -> u64) -> Option<Cost> {
     match a {
         Some(a) if key(a) >= key(b) => Some(a),
@@ -212,6 +242,7 @@ pub fn longest(
         let h = rep[l.header];
         let is_member = |x: usize| members.contains(&x);
         let dist = longest_from(&nodes, h, &is_member, h, key)?;
+        let returns = completing(&nodes);
         // Iterations and ways out, [0] those that stay in the header, [1] those through the body.
         let mut iterations: [Option<Cost>; 2] = [None, None];
         let mut ways_out: [Option<Cost>; 2] = [None, None];
@@ -227,7 +258,7 @@ pub fn longest(
             for &(to, edge) in &nodes[m].succs {
                 if to == h {
                     iterations[part] = better(iterations[part], d.plus(edge), key);
-                } else if !members.contains(&to) {
+                } else if !members.contains(&to) && returns[to] {
                     ways_out[part] = better(ways_out[part], d.plus(edge), key);
                     exits.push(to);
                 }
