@@ -15,7 +15,7 @@
 //! from which no path reaches a return (a trap, a call that never returns, a loop with no exit, or
 //! a block whose ways on were left out, as one topic's job leaves out another's sample) ends no
 //! path that completes, so it is no last pass to charge, and the collapsed node does not lead there
-//! ([`completing`]). The bound is of the paths that complete (a job's execution); one that never
+//! (`completing`). The bound is of the paths that complete (a job's execution); one that never
 //! returns is a halt, not a longer job.
 use std::collections::BTreeSet;
 
