@@ -535,36 +535,24 @@ enum TxModel {
     /// The verdict's and the boards' admission's (`bus_analysis::analyse`, the one the report and the chip's check
     /// run): the board's frames queued within one transmit response.
     Uncharged,
-    /// The host's switch beside it (`abort_refill`): and the abort refill, `abort_refill::refill_delay`, in the
-    /// board's messages' queuing jitter.
-    AbortRefill,
-    /// The sound one of docs/analysis.md ("The sound transmit path: the design"): the board's frames at C + G_b
-    /// (G_b = the transmit response + the longest frame), the blockings worked out on the true frame times and at
-    /// least the longest frame below a page's identifier (a frame outside the model's messages).
+    /// The sound one (`bus_analysis::analyse_sound`; docs/analysis.md, "The sound transmit path: the design"): the
+    /// board's frames at C + G (G = the transmit response + the longest frame), every message below the least
+    /// urgent page (0x71C) blocked by at least the longest frame.
     Sound,
 }
 
 /// Each message's bound under `model` (the board's `own`, sent by a job whose response does not vary, through a
-/// transmit interrupt of response `tx`; other nodes' `others`; `pages_below`: the greatest identifier of the
-/// 8-byte frames outside the model that other nodes may send, which only [`TxModel::Sound`] sees): its response
-/// from its earliest queuing, in the order given (own first), `None` where it has no bound.
+/// transmit interrupt of response `tx`; other nodes' `others`): its response from its earliest queuing, in the order
+/// given (own first), `None` where it has no bound.
 fn node_bounds(
     own: &[NodeMessage],
     others: &[NodeMessage],
     tx: u64,
     model: TxModel,
-    pages_below: Option<u32>,
 ) -> Vec<Option<u64>> {
     use schedule_analysis::bus_analysis::{self, BusWork, Message, Sender};
     let bit = can::bit_time(1_000_000);
     let tx = Time::from_ns(tx);
-    let longest = can::frame_time(FrameCost::Exact, 8, false, bit);
-    let refill = match model {
-        TxModel::AbortRefill => {
-            schedule_analysis::abort_refill::refill_delay(tx, FrameCost::Exact, bit)
-        }
-        TxModel::Uncharged | TxModel::Sound => Time::ZERO,
-    };
     let messages: Vec<Message> = own
         .iter()
         .map(|&(id, dlc, frames, period, jitter)| Message {
@@ -573,7 +561,7 @@ fn node_bounds(
             dlc,
             frames,
             period: Time::from_ns(period),
-            jitter: Time::from_ns(jitter).plus(refill),
+            jitter: Time::from_ns(jitter),
             sender: Sender::Bounded {
                 worst: Time::ZERO,
                 best: Time::ZERO,
@@ -597,67 +585,34 @@ fn node_bounds(
     let n = messages.len();
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by_key(|&i| can::arbitration_key(messages[i].id, false));
+    let empty = MessageTiming {
+        key: 0,
+        frame_time: Time::ZERO,
+        frames: 1,
+        period: Time::ZERO,
+        jitter: Time::ZERO,
+    };
+    let mut timings = vec![empty; n];
+    let mut offsets = vec![None; n];
+    let mut blockings = vec![Time::ZERO; n];
+    let mut scratch = vec![Counter::default(); n];
     let mut out: Vec<Result<Response, AnalysisError>> = vec![Err(AnalysisError::NoSuchIndex); n];
-    if model == TxModel::Sound {
-        let timings: Vec<MessageTiming> = order
-            .iter()
-            .map(|&i| messages[i].timing(FrameCost::Exact, bit).0)
-            .collect();
-        let mut blockings = vec![Time::ZERO; n];
-        can::blockings(&timings, &mut blockings);
-        let floor_key = pages_below.map_or(0, |id| can::arbitration_key(id, false));
-        for (b, m) in blockings.iter_mut().zip(&timings) {
-            if m.key < floor_key {
-                *b = b.max_of(longest);
-            }
+    let work = BusWork {
+        order: &order,
+        timings: &mut timings,
+        offsets: &mut offsets,
+        blockings: &mut blockings,
+        scratch: &mut scratch,
+    };
+    let message = |i: usize| messages.get(i).copied();
+    let out_slice = out.as_mut_slice();
+    match model {
+        TxModel::Uncharged => {
+            bus_analysis::analyse(message, work, FrameCost::Exact, bit, &limits(), out_slice)
         }
-        // A board without a transmit interrupt queues straight into arbitration: no intervals.
-        let gap = if tx.is_zero() {
-            Time::ZERO
-        } else {
-            tx.plus(longest)
-        };
-        let raised: Vec<MessageTiming> = order
-            .iter()
-            .zip(&timings)
-            .map(|(&i, m)| MessageTiming {
-                frame_time: if i < own.len() {
-                    m.frame_time.plus(gap)
-                } else {
-                    m.frame_time
-                },
-                ..*m
-            })
-            .collect();
-        let mut scratch = vec![Counter::default(); n];
-        can::response_times(&raised, &blockings, bit, &limits(), &mut scratch, &mut out);
-    } else {
-        let empty = MessageTiming {
-            key: 0,
-            frame_time: Time::ZERO,
-            frames: 1,
-            period: Time::ZERO,
-            jitter: Time::ZERO,
-        };
-        let mut timings = vec![empty; n];
-        let mut offsets = vec![None; n];
-        let mut blockings = vec![Time::ZERO; n];
-        let mut scratch = vec![Counter::default(); n];
-        let work = BusWork {
-            order: &order,
-            timings: &mut timings,
-            offsets: &mut offsets,
-            blockings: &mut blockings,
-            scratch: &mut scratch,
-        };
-        bus_analysis::analyse(
-            |i| messages.get(i).copied(),
-            work,
-            FrameCost::Exact,
-            bit,
-            &limits(),
-            out.as_mut_slice(),
-        );
+        TxModel::Sound => {
+            bus_analysis::analyse_sound(message, work, FrameCost::Exact, bit, &limits(), out_slice)
+        }
     }
     let mut bounds = vec![None; n];
     for (position, &i) in order.iter().enumerate() {
@@ -704,8 +659,8 @@ fn queued_at(queued: &[u64]) -> Vec<Activation> {
 ///   freed mailbox at 175. At 290 `m` wins over `v2`: 290–425. Its response: 425 − 60 = 365 µs.
 ///
 /// The uncharged model, the verdict's and the boards' (queuing jitter 20, one transmit response; blocking 135):
-/// 20 + 135 + 135 = 290 µs, beaten by 75. With the abort refill charged (jitter 20 + 20 + 135 = 175): 445 µs. The
-/// sound model: jitter 20, blocking 135, its frame 135 + G (G = 20 + 135): 20 + 135 + 290 = 445 µs.
+/// 20 + 135 + 135 = 290 µs, beaten by 75. The sound model: jitter 20, blocking 135, its frame 135 + G (G = 20 +
+/// 135): 20 + 135 + 290 = 445 µs.
 #[test]
 fn an_abort_whose_frame_is_on_the_bus_beats_the_uncharged_model_not_the_charged() {
     let tx = 20 * US;
@@ -721,15 +676,11 @@ fn an_abort_whose_frame_is_on_the_bus_beats_the_uncharged_model_not_the_charged(
     });
     assert_eq!(responses[0], 365 * US);
     assert_eq!(
-        node_bounds(&own, &[], tx, TxModel::Uncharged, None)[0],
+        node_bounds(&own, &[], tx, TxModel::Uncharged)[0],
         Some(290 * US)
     );
     assert_eq!(
-        node_bounds(&own, &[], tx, TxModel::AbortRefill, None)[0],
-        Some(445 * US)
-    );
-    assert_eq!(
-        node_bounds(&own, &[], tx, TxModel::Sound, None)[0],
+        node_bounds(&own, &[], tx, TxModel::Sound)[0],
         Some(445 * US)
     );
 }
@@ -754,7 +705,7 @@ fn scripted(delays: &[u64]) -> impl FnMut(u64) -> u64 + '_ {
 ///
 /// The uncharged model (queuing jitter 5, no blocking): w(1) = 55 + 4·55 = 275, 5 + 275 + 55 = 335 µs, beaten by
 /// the 5 µs the second frame waited for a job. The sound model, each of the board's frames at 55 + G (G = 5 + 135 =
-/// 140): w(1) = 195 + 4·195 = 975, 5 + 975 + 195 = 1 175 µs.
+/// 140), blocked by a page (135): w(1) = 135 + 195 + 4·195 = 1 110, 5 + 1 110 + 195 = 1 310 µs.
 #[test]
 fn a_frame_waiting_for_its_own_identifier_beats_the_uncharged_model_not_the_sound() {
     let tx = 5 * US;
@@ -767,12 +718,12 @@ fn a_frame_waiting_for_its_own_identifier_beats_the_uncharged_model_not_the_soun
     });
     assert_eq!(responses[4], 340 * US);
     assert_eq!(
-        node_bounds(&own, &[], tx, TxModel::Uncharged, None)[4],
+        node_bounds(&own, &[], tx, TxModel::Uncharged)[4],
         Some(335 * US)
     );
     assert_eq!(
-        node_bounds(&own, &[], tx, TxModel::Sound, None)[4],
-        Some(1_175 * US)
+        node_bounds(&own, &[], tx, TxModel::Sound)[4],
+        Some(1_310 * US)
     );
 }
 
@@ -809,21 +760,21 @@ fn a_displaced_frame_beats_the_uncharged_model_not_the_sound() {
     );
     assert_eq!(responses[0], 769 * US);
     assert_eq!(
-        node_bounds(&own, &others, tx, TxModel::Uncharged, None)[0],
+        node_bounds(&own, &others, tx, TxModel::Uncharged)[0],
         Some(635 * US)
     );
     assert_eq!(
-        node_bounds(&own, &others, tx, TxModel::Sound, None)[0],
+        node_bounds(&own, &others, tx, TxModel::Sound)[0],
         Some(1_975 * US)
     );
 }
 
-/// (d) A page outside the model's messages blocks a more urgent frame, by hand, on a board without a transmit
-/// interrupt (its frames in arbitration when queued): the board's `m` 0x100 and another node's `n` 0x200 (no data,
-/// 55 µs); a verdict's page 0x71C (eight bytes, 135 µs) that is no message of the model, queued at 0, on the bus
-/// 0–135; `m` queued at 1 waits for it, 135–190: 189 µs. The uncharged model blocks `m` by the longest lower frame
-/// of the model's messages, `n`: 55 + 55 = 110 µs. The sound model by the longest frame any node can send below it,
-/// a page: 135 + 55 = 190 µs.
+/// (d) A page outside the model's messages blocks a more urgent frame, by hand: the board's `m` 0x100 and another
+/// node's `n` 0x200 (no data, 55 µs), transmit response 1 µs; a verdict's page 0x71C (eight bytes, 135 µs) that is
+/// no message of the model, queued at 0, on the bus 0–135; `m` queued at 1, in a mailbox at 2, waits for it,
+/// 135–190: 189 µs. The uncharged model blocks `m` by the longest lower frame of the model's messages, `n`: 1 + 55 +
+/// 55 = 111 µs. The sound model by the longest frame any node can send below the least urgent page, and its frame at
+/// 55 + G (G = 1 + 135): 1 + 135 + 191 = 327 µs.
 #[test]
 fn a_page_outside_the_model_blocks_longer_than_the_model_s_frames() {
     let own = [(0x100, 0, 1, 10_000 * US, 0)];
@@ -835,17 +786,17 @@ fn a_page_outside_the_model_blocks_longer_than_the_model_s_frames() {
         &node_messages(&own),
         &node_messages(&theirs),
         &activations,
-        0,
+        US,
         &mut |latest| latest,
     );
     assert_eq!(responses[0], 189 * US);
     assert_eq!(
-        node_bounds(&own, &others, 0, TxModel::Uncharged, None)[0],
-        Some(110 * US)
+        node_bounds(&own, &others, US, TxModel::Uncharged)[0],
+        Some(111 * US)
     );
     assert_eq!(
-        node_bounds(&own, &others, 0, TxModel::Sound, Some(0x71C))[0],
-        Some(190 * US)
+        node_bounds(&own, &others, US, TxModel::Sound)[0],
+        Some(327 * US)
     );
 }
 
@@ -854,8 +805,7 @@ proptest! {
 
     /// The board's transmit path (queue, three mailboxes, aborts, jobs acting up to the transmit interrupt's
     /// response after their pends) beside other nodes' frames and their 8-byte pages outside the model: no
-    /// simulated response exceeds the sound model's bound (the uncharged one and the abort refill's are beaten:
-    /// the tests above and below). The board's frames come in bursts, as a publisher job queues them: every period
+    /// simulated response exceeds the sound model's bound (the uncharged one is beaten: the tests above). The board's frames come in bursts, as a publisher job queues them: every period
     /// a multiple of one base period, the first arrivals within 300 µs of each other, so that the mailboxes fill
     /// and more urgent frames come after less urgent ones (the aborts, on and off the bus, and the displaced
     /// frames); up to four frames of one identifier per activation (the frames that wait for a mailbox of their own
@@ -886,11 +836,10 @@ proptest! {
         // page above a message would be interference no model here sees: the model's messages are the bus's).
         let pages: Vec<NodeMessage> = set[own_n + others_n..own_n + others_n + pages_n]
             .iter()
-            .map(|&(id, _, _, period, _)| (0x700 | (id & 0xFF), 8, 1, period, 0))
+            .map(|&(id, _, _, period, _)| (0x700 + id % 0x1D, 8, 1, period, 0))
             .collect();
-        let pages_below = pages.iter().map(|p| p.0).max();
         let tx = tx_us * US;
-        let bounds = node_bounds(own, others, tx, TxModel::Sound, pages_below);
+        let bounds = node_bounds(own, others, tx, TxModel::Sound);
         prop_assume!(bounds.iter().all(Option::is_some));
         let all: Vec<NodeMessage> = own.iter().chain(others).chain(&pages).copied().collect();
         let longest = all.iter().map(|m| m.3).max().unwrap_or(0);
