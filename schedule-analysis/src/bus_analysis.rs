@@ -143,8 +143,35 @@ fn fill<I: Copy + Into<usize>>(
 /// message below [`LEAST_URGENT_PAGE`] is blocked by at least the longest frame (a page outside the model). The
 /// blockings are worked out on the true frame times; each board's messages are analysed with that board's frames
 /// raised, every other message on the true ones (boards with equal `tx` are raised together: more, never less). A
-/// bus with no such sender is [`analyse`]'s.
+/// bus with no such sender is [`analyse`]'s (with its start hints); [`analyse_sound_each`] gives the same bounds
+/// without them.
 pub fn analyse_sound<I, R>(
+    message: impl Fn(usize) -> Option<Message>,
+    work: BusWork<'_, I>,
+    cost: FrameCost,
+    bit: Time,
+    limits: &Limits,
+    out: &mut R,
+) where
+    I: Copy + Into<usize>,
+    R: Results + ?Sized,
+{
+    let charged = work.order.iter().any(|&i| {
+        message(i.into())
+            .is_some_and(|m| matches!(m.sender, Sender::Bounded { tx, .. } if !tx.is_zero()))
+    });
+    if charged {
+        analyse_sound_each(message, work, cost, bit, limits, out);
+    } else {
+        analyse(message, work, cost, bit, limits, out);
+    }
+}
+
+/// [`analyse_sound`]'s bounds, every message by its own fixed point ([`can::response_time`], no start hints from
+/// the next more urgent identifier): the on-chip check's form, whose image then needs neither
+/// [`can::response_times_into`] nor its level loads. A bus with no message through a transmit interrupt gets
+/// [`analyse`]'s bounds (no raised frames, no page floor).
+pub fn analyse_sound_each<I, R>(
     message: impl Fn(usize) -> Option<Message>,
     work: BusWork<'_, I>,
     cost: FrameCost,
@@ -164,10 +191,7 @@ pub fn analyse_sound<I, R>(
         }) => tx,
         _ => Time::ZERO,
     };
-    if (0..n).all(|k| charge(k).is_zero()) {
-        analyse(message, work, cost, bit, limits, out);
-        return;
-    }
+    let charged = (0..n).any(|k| !charge(k).is_zero());
     fill(&message, work.order, work.timings, work.offsets, cost, bit);
     let timings = work.timings.get_mut(..n).unwrap_or(&mut []);
     can::blockings(timings, work.blockings);
@@ -178,7 +202,7 @@ pub fn analyse_sound<I, R>(
         });
     let floor = can::arbitration_key(LEAST_URGENT_PAGE, false);
     for (b, m) in work.blockings.iter_mut().zip(timings.iter()) {
-        if m.key < floor {
+        if charged && m.key < floor {
             *b = b.max_of(longest);
         }
     }
