@@ -367,7 +367,23 @@ impl Failure {
 
 /// Analyses the whole system under `options`.
 pub fn analyse(system: &System, options: &Options) -> Analysis {
-    analyse_with_progress(system, options, &mut |_| {})
+    analyse_on(system, options, TransmitPath::Uncharged)
+}
+
+/// How the bus analysis charges the frames a board sends through its transmit interrupt.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TransmitPath {
+    /// One transmit response in the queuing jitter ([`bus_analysis::analyse`]): the verdict's and the boards'
+    /// admission's model.
+    Uncharged,
+    /// The sound transmit path ([`bus_analysis::analyse_sound`]; docs/analysis.md, "The sound transmit path: the
+    /// design").
+    Sound,
+}
+
+/// [`analyse`] with the bus on `transmit`.
+pub fn analyse_on(system: &System, options: &Options, transmit: TransmitPath) -> Analysis {
+    analyse_on_with_progress(system, options, transmit, &mut |_| {})
 }
 
 /// [`analyse`], telling `progress` what it starts (one line per board and one for the bus), so that a front end
@@ -375,6 +391,15 @@ pub fn analyse(system: &System, options: &Options) -> Analysis {
 pub fn analyse_with_progress(
     system: &System,
     options: &Options,
+    progress: &mut dyn FnMut(&str),
+) -> Analysis {
+    analyse_on_with_progress(system, options, TransmitPath::Uncharged, progress)
+}
+
+fn analyse_on_with_progress(
+    system: &System,
+    options: &Options,
+    transmit: TransmitPath,
     progress: &mut dyn FnMut(&str),
 ) -> Analysis {
     let limits = Limits {
@@ -395,7 +420,7 @@ pub fn analyse_with_progress(
             options.frame_cost.label(),
             bus.messages.len()
         ));
-        analyse_bus(system, bus, &boards, options.frame_cost, &limits)
+        analyse_bus(system, bus, &boards, options.frame_cost, &limits, transmit)
     });
     let topics = match (&system.bus, &bus) {
         (Some(spec), Some(result)) => topics(system, spec, result, &boards),
@@ -931,6 +956,7 @@ fn analyse_bus(
     boards: &[BoardResult],
     frame_cost: FrameCostSpec,
     limits: &Limits,
+    path: TransmitPath,
 ) -> BusResult {
     let cost = frame_cost.cost();
     let bit = bus.bit_time;
@@ -982,7 +1008,14 @@ fn analyse_bus(
         blockings: &mut sorted_blocking,
         scratch: &mut scratch,
     };
-    bus_analysis::analyse(message, work, cost, bit, limits, out.as_mut_slice());
+    match path {
+        TransmitPath::Uncharged => {
+            bus_analysis::analyse(message, work, cost, bit, limits, out.as_mut_slice())
+        }
+        TransmitPath::Sound => {
+            bus_analysis::analyse_sound(message, work, cost, bit, limits, out.as_mut_slice())
+        }
+    }
     let mut messages: Vec<MessageResult> = Vec::with_capacity(n);
     let mut position = vec![0; n];
     for (p, &i) in order.iter().enumerate() {

@@ -87,6 +87,11 @@ pub struct BusWork<'a, I> {
     pub scratch: &'a mut [Counter],
 }
 
+/// The greatest identifier of the frames the boards send outside the model's messages: a verdict's two pages and a
+/// diagnostics sample's six go on the diagnostics topics (0x1A–0x1C) at any of the four levels, eight bytes each, so
+/// the least urgent is 0x400 | 3 << 8 | 0x1C (docs/protocol.md). A message below it may be blocked by one.
+pub const LEAST_URGENT_PAGE: u32 = 0x71C;
+
 /// Analyses the bus: `message(i)` is message `i`; `out.put(k, …)` gets the response of the message at arbitration
 /// position `k` (`work.order[k]`), from its queuing. Its delivery after the sender's activation is
 /// [`delivery`]`(offsets[k], response)`.
@@ -102,16 +107,7 @@ pub fn analyse<I, R>(
     R: Results + ?Sized,
 {
     let n = work.order.len();
-    for ((&i, timing), offset) in work
-        .order
-        .iter()
-        .zip(work.timings.iter_mut())
-        .zip(work.offsets.iter_mut())
-    {
-        if let Some(m) = message(i.into()) {
-            (*timing, *offset) = m.timing(cost, bit);
-        }
-    }
+    fill(&message, work.order, work.timings, work.offsets, cost, bit);
     let timings = work.timings.get(..n).unwrap_or(&[]);
     can::blockings(timings, work.blockings);
     can::response_times_into(
@@ -122,6 +118,132 @@ pub fn analyse<I, R>(
         work.scratch,
         out,
     );
+}
+
+/// Each message's timing and queuing offset, in arbitration order (`order`).
+fn fill<I: Copy + Into<usize>>(
+    message: &impl Fn(usize) -> Option<Message>,
+    order: &[I],
+    timings: &mut [MessageTiming],
+    offsets: &mut [Option<Time>],
+    cost: FrameCost,
+    bit: Time,
+) {
+    for ((&i, timing), offset) in order.iter().zip(timings.iter_mut()).zip(offsets.iter_mut()) {
+        if let Some(m) = message(i.into()) {
+            (*timing, *offset) = m.timing(cost, bit);
+        }
+    }
+}
+
+/// The sound transmit path's analysis (docs/analysis.md, "The sound transmit path: the design"): as [`analyse`],
+/// and for a message a board sends through its transmit interrupt (a [`Sender::Bounded`] sender with a transmit
+/// response `tx` above zero) its board's frames each cost `tx` + the longest frame more (the intervals in which a
+/// queued frame is not covered by a more urgent pending one of its board: one per own frame at most), and every
+/// message below [`LEAST_URGENT_PAGE`] is blocked by at least the longest frame (a page outside the model). The
+/// blockings are worked out on the true frame times; each board's messages are analysed with that board's frames
+/// raised, every other message on the true ones (boards with equal `tx` are raised together: more, never less). A
+/// bus with no such sender is [`analyse`]'s (with its start hints); [`analyse_sound_each`] gives the same bounds
+/// without them.
+pub fn analyse_sound<I, R>(
+    message: impl Fn(usize) -> Option<Message>,
+    work: BusWork<'_, I>,
+    cost: FrameCost,
+    bit: Time,
+    limits: &Limits,
+    out: &mut R,
+) where
+    I: Copy + Into<usize>,
+    R: Results + ?Sized,
+{
+    let charged = work.order.iter().any(|&i| {
+        message(i.into())
+            .is_some_and(|m| matches!(m.sender, Sender::Bounded { tx, .. } if !tx.is_zero()))
+    });
+    if charged {
+        analyse_sound_each(message, work, cost, bit, limits, out);
+    } else {
+        analyse(message, work, cost, bit, limits, out);
+    }
+}
+
+/// [`analyse_sound`]'s bounds, every message by its own fixed point ([`can::response_time`], no start hints from
+/// the next more urgent identifier): the on-chip check's form, whose image then needs neither
+/// [`can::response_times_into`] nor its level loads. A bus with no message through a transmit interrupt gets
+/// [`analyse`]'s bounds (no raised frames, no page floor).
+pub fn analyse_sound_each<I, R>(
+    message: impl Fn(usize) -> Option<Message>,
+    work: BusWork<'_, I>,
+    cost: FrameCost,
+    bit: Time,
+    limits: &Limits,
+    out: &mut R,
+) where
+    I: Copy + Into<usize>,
+    R: Results + ?Sized,
+{
+    let n = work.order.len();
+    // The transmit response of the board sending the message at position `k`, zero for none.
+    let charge = |k: usize| match work.order.get(k).and_then(|&i| message(i.into())) {
+        Some(Message {
+            sender: Sender::Bounded { tx, .. },
+            ..
+        }) => tx,
+        _ => Time::ZERO,
+    };
+    let charged = (0..n).any(|k| !charge(k).is_zero());
+    fill(&message, work.order, work.timings, work.offsets, cost, bit);
+    let timings = work.timings.get_mut(..n).unwrap_or(&mut []);
+    can::blockings(timings, work.blockings);
+    let longest = timings
+        .iter()
+        .fold(can::frame_time(cost, 8, false, bit), |l, m| {
+            l.max_of(m.frame_time)
+        });
+    let floor = can::arbitration_key(LEAST_URGENT_PAGE, false);
+    for (b, m) in work.blockings.iter_mut().zip(timings.iter()) {
+        if charged && m.key < floor {
+            *b = b.max_of(longest);
+        }
+    }
+    for first in 0..n {
+        let tx = charge(first);
+        // Each group of equal transmit responses once, at its first message.
+        if (0..first).any(|k| charge(k) == tx) {
+            continue;
+        }
+        let gap = if tx.is_zero() {
+            Time::ZERO
+        } else {
+            tx.plus(longest)
+        };
+        for (k, m) in timings.iter_mut().enumerate() {
+            if charge(k) == tx {
+                m.frame_time = m.frame_time.plus(gap);
+            }
+        }
+        for k in first..n {
+            if charge(k) != tx {
+                continue;
+            }
+            let limits = Limits {
+                iterations: out
+                    .iterations_left()
+                    .map_or(limits.iterations, |left| left.min(limits.iterations)),
+                ..*limits
+            };
+            let blocking = work.blockings.get(k).copied().unwrap_or(Time::ZERO);
+            out.put(
+                k,
+                can::response_time(timings, k, blocking, bit, &limits, work.scratch),
+            );
+        }
+        for (k, m) in timings.iter_mut().enumerate() {
+            if charge(k) == tx {
+                m.frame_time = m.frame_time.minus(gap);
+            }
+        }
+    }
 }
 
 /// A message's delivery after its sender's activation: its queuing offset plus its response on the bus (`None`

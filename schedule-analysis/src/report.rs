@@ -37,7 +37,7 @@ pub struct Report {
     /// The scenario analysed again with every held bound used ([`Report::with_on_bounds`]); it does not change
     /// the verdict.
     pub on_bounds: Option<crate::scenario::OnBounds>,
-    /// The verdict with a frame's abort refill charged ([`Report::with_abort_refill`]); it does not change the
+    /// The verdict on the sound transmit path ([`Report::with_abort_refill`]); it does not change the
     /// verdict.
     pub abort_refill: Option<crate::abort_refill::AbortRefill>,
 }
@@ -149,7 +149,7 @@ impl Report {
         self
     }
 
-    /// Adds the verdict with a frame's abort refill charged ([`crate::abort_refill::AbortRefill::of`]), printed
+    /// Adds the verdict on the sound transmit path ([`crate::abort_refill::AbortRefill::of`]), printed
     /// after the VERDICT, which stays the uncharged model's.
     pub fn with_abort_refill(
         mut self,

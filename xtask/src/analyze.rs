@@ -153,9 +153,9 @@ pub fn run(args: &AnalyzeArgs, root: &Path) -> Result<bool> {
                 args.frame_cost.unwrap_or(built.frame_cost),
                 &report.primary,
             )?;
-            // And with a frame's abort refill charged (docs/analysis.md, "A frame that needs an abort"): what the
+            // And on the sound transmit path (docs/analysis.md, "The sound transmit path: the design"): what the
             // verdict would be; the verdict and the boards' admission stay on the uncharged model.
-            progress("with the abort refill charged");
+            progress("on the sound transmit path");
             let charged = schedule_analysis::abort_refill::AbortRefill::of(
                 &system,
                 &schedule_analysis::analysis::Options {

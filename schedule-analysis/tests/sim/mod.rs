@@ -680,8 +680,10 @@ struct Mailbox {
 ///
 /// A job acts at one instant, `delay(latest)` after the pend that started it (`delay` returns at most `latest`):
 /// `latest` is `tx_response` for a job a pend started, and, for the job an abort's immediate completion pends,
-/// what is left of the asking job's `tx_response` (the two are one busy window of the interrupt). Returns each
-/// activation's response: its frame's end − its arrival. The board's messages have one frame per activation.
+/// what is left of the asking job's `tx_response` (the two are one busy window of the interrupt). An activation
+/// queues its message's `frames` frames together (the board's into its queue in order, one identifier: a ring
+/// sample's frames, a verdict's pages; another node's into arbitration). Returns each activation's response: its
+/// last frame's end − its arrival.
 pub fn node_run(
     own: &[SimMessage],
     others: &[SimMessage],
@@ -689,10 +691,6 @@ pub fn node_run(
     tx_response: u64,
     delay: &mut dyn FnMut(u64) -> u64,
 ) -> Vec<u64> {
-    assert!(
-        own.iter().all(|m| m.frames == 1),
-        "one frame per activation"
-    );
     let message = |m: usize| {
         if m < own.len() {
             own[m]
@@ -703,6 +701,11 @@ pub fn node_run(
     let mut order: Vec<usize> = (0..activations.len()).collect();
     order.sort_by_key(|&a| (activations[a].queued, a));
     let mut response = vec![0u64; activations.len()];
+    // Each activation's frames not yet sent.
+    let mut left: Vec<u32> = activations
+        .iter()
+        .map(|a| message(a.message).frames.max(1))
+        .collect();
     // The board's queue: (key, order queued, activation); the other nodes' frames in arbitration.
     let mut queue: Vec<(u32, usize, usize)> = Vec::new();
     let mut other_frames: Vec<(u32, usize)> = Vec::new();
@@ -722,13 +725,21 @@ pub fn node_run(
                 OnBus::Mailbox(i) => {
                     if let Some(mb) = mailboxes[i].as_mut() {
                         mb.done = Some(true);
-                        response[mb.activation] = t - activations[mb.activation].arrival;
+                        left[mb.activation] -= 1;
+                        if left[mb.activation] == 0 {
+                            response[mb.activation] = t - activations[mb.activation].arrival;
+                        }
                     }
                     if job.is_none() {
                         job = Some((t + delay(tx_response), t));
                     }
                 }
-                OnBus::Other(a) => response[a] = t - activations[a].arrival,
+                OnBus::Other(a) => {
+                    left[a] -= 1;
+                    if left[a] == 0 {
+                        response[a] = t - activations[a].arrival;
+                    }
+                }
             }
         }
         // Frames queued.
@@ -736,13 +747,17 @@ pub fn node_run(
             let a = order[next];
             let m = activations[a].message;
             if m < own.len() {
-                queue.push((own[m].key, seq, a));
-                seq += 1;
+                for _ in 0..own[m].frames.max(1) {
+                    queue.push((own[m].key, seq, a));
+                    seq += 1;
+                }
                 if job.is_none() {
                     job = Some((t + delay(tx_response), t));
                 }
             } else {
-                other_frames.push((message(m).key, a));
+                for _ in 0..message(m).frames.max(1) {
+                    other_frames.push((message(m).key, a));
+                }
             }
             next += 1;
         }
@@ -817,7 +832,8 @@ pub fn node_run(
                 })
                 .min();
             let theirs =
-                (0..other_frames.len()).min_by_key(|&i| (other_frames[i].0, other_frames[i].1));
+                // Equal identifiers in queuing order (the first minimum).
+                (0..other_frames.len()).min_by_key(|&i| other_frames[i].0);
             match (mine, theirs) {
                 (Some((k, i)), Some(o)) if k <= other_frames[o].0 => {
                     bus = Some((
