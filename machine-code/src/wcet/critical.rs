@@ -159,10 +159,12 @@ pub fn task_sections(
 /// `topics`, docs/analysis.md "One topic's job"): the task's sections as [`task_sections`] finds
 /// them in the job a group's topic bound takes (`super::topics`): every call of a function another
 /// present group names left out of every function, with the blocks only such a call leads to, and
-/// the group's own waits and loops. A release of the group's topics runs none of those blocks, so a
+/// the group's own waits and loops; then every block left with no way to an exit (a raise in a block
+/// of its own before such a call). A release of the group's topics runs none of those blocks, so a
 /// raise in one of them (a lock the sampler takes around another family's sample function) is no
-/// section of the release; the code around the release loop keeps its own. By group name, in the
-/// file's order; empty where the file states no topics or none of its groups is in the image.
+/// section of the release; the code around the release loop keeps its own. A function called
+/// through a register is reached as [`task_sections`] reaches it (a superset). By group name, in
+/// the file's order; empty where the file states no topics or none of its groups is in the image.
 pub fn topic_sections(
     image: &Image,
     task: &Task,
