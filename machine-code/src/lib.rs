@@ -61,8 +61,8 @@ pub use image::Image;
 pub use wcet::bounds::BoundsFile;
 pub use wcet::chip::Chip;
 pub use wcet::{
-    bound_function, bound_tasks, task_sections, ActivationBound, Bound, Ceiling, CeilingBound,
-    FrameBound, LoopInfo, Part, Task, TaskBound, TaskEntry, TaskSections, TopicBound,
+    bound_function, bound_tasks, task_sections, topic_sections, ActivationBound, Bound, Ceiling,
+    CeilingBound, FrameBound, LoopInfo, Part, Task, TaskBound, TaskEntry, TaskSections, TopicBound,
 };
 
 /// Thumb halfwords as the bytes of an image (tests of the decoders).

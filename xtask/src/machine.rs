@@ -310,6 +310,47 @@ pub struct Bounded {
     /// Per topic group of the image (the bounds file's `topics`), the critical sections of each of
     /// its functions and what they reach, with the group's own waits ([`group_sections`]).
     pub group_sections: GroupSections,
+    /// Per task with topic bounds, the sections one release of each of its topic groups can hold
+    /// ([`topic_sections`]).
+    pub topic_sections: TopicSections,
+}
+
+/// Per task's name, per topic group's name, the sections of the task's job as that group's
+/// topic bound takes it.
+pub type TopicSections = std::collections::BTreeMap<
+    String,
+    std::collections::BTreeMap<String, machine_code::TaskSections>,
+>;
+
+/// The sections of each publisher task's job per topic group (`machine_code::topic_sections`: the
+/// calls of the other groups' functions left out with the blocks only they lead to, the group's own
+/// waits), for the tasks whose bound has topic bounds (`found`); a task bounded by several entries
+/// (by name) has per group the longest of theirs at each ceiling ([`sections_per_name`]).
+pub fn topic_sections(
+    image: &Image,
+    tasks: &[machine_code::Task],
+    found: &[machine_code::TaskBound],
+    chip: Chip,
+    bounds: &BoundsFile,
+) -> TopicSections {
+    let mut out = TopicSections::new();
+    for task in tasks {
+        if !found
+            .iter()
+            .any(|f| f.task == task.name && !f.topics.is_empty())
+        {
+            continue;
+        }
+        let per_group = out.entry(task.name.clone()).or_default();
+        for (group, sections) in machine_code::topic_sections(image, task, chip, bounds) {
+            let merged = match per_group.remove(&group) {
+                Some(kept) => sections_per_name(vec![kept, sections]).remove(0),
+                None => sections,
+            };
+            per_group.insert(group, merged);
+        }
+    }
+    out
 }
 
 /// Per topic group's name, each of its functions in the image with its critical sections.
@@ -394,7 +435,9 @@ pub fn bound_build(
     let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
     let sections = sections_per_name(machine_code::task_sections(&image, &tasks, chip, &bounds));
     let group_sections = group_sections(&image, chip, &bounds);
-    let tasks = worst_per_name(machine_code::bound_tasks(&image, &tasks, chip, &bounds));
+    let found = machine_code::bound_tasks(&image, &tasks, chip, &bounds);
+    let topic_sections = topic_sections(&image, &tasks, &found, chip, &bounds);
+    let tasks = worst_per_name(found);
     let missing = bounds.missing_places(&image);
     let held = bounds.held.clone();
     Ok(Bounded {
@@ -405,6 +448,7 @@ pub fn bound_build(
         sections,
         missing,
         group_sections,
+        topic_sections,
     })
 }
 

@@ -226,6 +226,7 @@ fn generate(
         &found.tasks,
         &found.sections,
         &found.group_sections,
+        &found.topic_sections,
         found.chip,
     );
     hold(&mut rows, &found.held);
@@ -656,7 +657,12 @@ fn thread_mode_step(
     format!("{head}; its step's check ({function}) is declined: {reason}")
 }
 
-/// A topic row's critical sections: those one release of `group` may hold, from the publisher task's
+/// A topic row's critical sections: those one release of `group` may hold. Where the machine code
+/// gives the task's sections in the job that group's topic bound takes (`release`: the other groups'
+/// functions' calls left out with the blocks only they lead to, the group's own waits;
+/// [`crate::machine::topic_sections`]) and their list is complete, those: a release of the group runs
+/// none of the blocks left out, so a lock the sampler takes around another family's sample is none of
+/// its sections, wherever it is raised. Otherwise from the publisher task's
 /// (`whole`, any job of the task) and each topic group's functions' (`groups`, bounded with each group's
 /// own waits: [`crate::machine::group_sections`]). Per ceiling of the task, where every section of the task
 /// at that ceiling is accounted for by the groups' functions — each function that has one at that ceiling
@@ -669,8 +675,15 @@ fn group_row_sections(
     whole: &machine_code::TaskSections,
     group: &str,
     groups: &crate::machine::GroupSections,
+    release: Option<&machine_code::TaskSections>,
     clock: u64,
 ) -> Option<CeilingSections> {
+    if let Some(release) = release.filter(|r| r.incomplete.is_none()) {
+        let mut row = sections_row(release, clock);
+        row.ceilings
+            .sort_by_key(|c| std::cmp::Reverse(c.ceiling.unwrap_or(u32::MAX)));
+        return Some(row);
+    }
     let own = groups.get(group)?;
     if whole.incomplete.is_some() {
         return None;
@@ -742,12 +755,14 @@ pub fn rows(
         found,
         sections,
         &crate::machine::GroupSections::new(),
+        &crate::machine::TopicSections::new(),
         chip,
     )
 }
 
-/// `rows`, each topic row with the critical sections of one release of its group where `groups` tells
-/// them apart ([`group_row_sections`]).
+/// `rows`, each topic row with the critical sections of one release of its group where
+/// `topic_sections` or `groups` tell them apart ([`group_row_sections`]).
+#[allow(clippy::too_many_arguments)]
 pub fn rows_with_groups(
     built: &RticApp,
     app: &RticApp,
@@ -755,6 +770,7 @@ pub fn rows_with_groups(
     found: &[machine_code::TaskBound],
     sections: &[machine_code::TaskSections],
     groups: &crate::machine::GroupSections,
+    topic_sections: &crate::machine::TopicSections,
     chip: Chip,
 ) -> Vec<TaskBound> {
     let clock = chip.clock_hz();
@@ -955,7 +971,10 @@ pub fn rows_with_groups(
                         .topics
                         .iter()
                         .find(|g| g.topics.iter().any(|t| t == topic))?;
-                    group_row_sections(s, &g.group, groups, clock)
+                    let release = topic_sections
+                        .get(f.task.as_str())
+                        .and_then(|per_group| per_group.get(&g.group));
+                    group_row_sections(s, &g.group, groups, release, clock)
                 });
                 TaskBound {
                     sections: own.or_else(|| whole.sections.clone()),
@@ -1389,6 +1408,7 @@ mod app {
             &machine,
             std::slice::from_ref(&whole),
             &groups,
+            &crate::machine::TopicSections::new(),
             chip,
         );
         let row = |n: &str| rows.iter().find(|r| r.task == n).unwrap();
@@ -1427,6 +1447,79 @@ mod app {
             &machine,
             std::slice::from_ref(&more),
             &groups,
+            &crate::machine::TopicSections::new(),
+            chip,
+        );
+        let odo = rows.iter().find(|r| r.task == "publisher[odo]").unwrap();
+        let p4_us = odo
+            .sections
+            .as_ref()
+            .unwrap()
+            .ceilings
+            .iter()
+            .find(|c| c.ceiling == Some(4));
+        assert_eq!(p4_us.and_then(|c| c.us), Some(9_000.0));
+        // With the task's sections in the job of the drive's release (the floor's lock left out with
+        // the floor's sample: priority 4 the drive's lock alone, priority 5 the code around the
+        // samples, no interrupts-off section), the drive's row has those, whoever raises them; the
+        // floor's row, without its own, keeps the groups' accounting.
+        let mut release = crate::machine::TopicSections::new();
+        let drive = machine_code::TaskSections {
+            task: "dispatcher LOW".into(),
+            ceilings: vec![ceiling(p5, 50.0, 3, "serve"), ceiling(p4, 30.0, 1, "serve")],
+            incomplete: None,
+        };
+        release
+            .entry("dispatcher LOW".into())
+            .or_default()
+            .insert("drive".into(), drive.clone());
+        let rows = rows_with_groups(
+            &built,
+            &app,
+            &budgets,
+            &machine,
+            std::slice::from_ref(&more),
+            &groups,
+            &release,
+            chip,
+        );
+        let at = |n: &str| {
+            rows.iter()
+                .find(|r| r.task == n)
+                .unwrap()
+                .sections
+                .as_ref()
+                .unwrap()
+                .ceilings
+                .iter()
+                .map(|c| (c.ceiling, c.us))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(
+            at("publisher[odo]"),
+            [(Some(5), Some(50.0)), (Some(4), Some(30.0))]
+        );
+        assert_eq!(
+            at("publisher[floor]"),
+            [(Some(5), Some(50.0)), (Some(4), Some(9_000.0))]
+        );
+        // A release list that may miss sections is not used: the task's longest stands.
+        let incomplete = machine_code::TaskSections {
+            incomplete: Some("a call through a register".into()),
+            ..drive
+        };
+        release
+            .entry("dispatcher LOW".into())
+            .or_default()
+            .insert("drive".into(), incomplete);
+        let rows = rows_with_groups(
+            &built,
+            &app,
+            &budgets,
+            &machine,
+            std::slice::from_ref(&more),
+            &groups,
+            &release,
             chip,
         );
         let odo = rows.iter().find(|r| r.task == "publisher[odo]").unwrap();

@@ -150,6 +150,11 @@ impl<'a> Analysis<'a> {
         self
     }
 
+    /// Whether this analysis leaves calls out of the job ([`Self::excluding`]).
+    pub(super) fn leaves_calls_out(&self) -> bool {
+        !self.excluded.is_empty()
+    }
+
     /// Whether the function at `at` is one the job does not call: named as excluded, or left with no
     /// way to its return once its excluded calls are left out.
     fn left_out(&mut self, at: u64) -> Result<bool, Error> {

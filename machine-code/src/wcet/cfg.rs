@@ -440,6 +440,25 @@ impl Cfg {
         Some(Cfg { blocks })
     }
 
+    /// The graph without the blocks from which no exit is reached (after [`Self::without`], a block
+    /// whose every way on was left out ends no path): the blocks of the paths from block 0 to an
+    /// exit, renumbered as [`Self::without`] does. `None` when block 0 reaches no exit.
+    pub fn on_paths_to_exits(&self) -> Option<Cfg> {
+        let mut live = BTreeSet::new();
+        for (b, block) in self.blocks.iter().enumerate() {
+            if block.exit && !live.contains(&b) {
+                live.extend(self.reach(b, true));
+            }
+        }
+        let dead: BTreeSet<usize> = (0..self.blocks.len())
+            .filter(|b| !live.contains(b))
+            .collect();
+        if dead.is_empty() {
+            return Some(self.clone());
+        }
+        self.without(&dead)
+    }
+
     /// The blocks block 0 reaches without entering any block of `dropped`.
     pub fn reached_avoiding(&self, dropped: &BTreeSet<usize>) -> BTreeSet<usize> {
         let mut seen = BTreeSet::from([0usize]);

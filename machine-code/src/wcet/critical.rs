@@ -152,26 +152,65 @@ pub fn task_sections(
         analysis: Analysis::new(image, chip, bounds),
         per_function: BTreeMap::new(),
     };
-    tasks
+    tasks.iter().map(|task| finder.of_task(task)).collect()
+}
+
+/// The sections one release of each topic group can hold in a job of `task` (the bounds file's
+/// `topics`, docs/analysis.md "One topic's job"): the task's sections as [`task_sections`] finds
+/// them in the job a group's topic bound takes (`super::topics`): every call of a function another
+/// present group names left out of every function, with the blocks only such a call leads to, and
+/// the group's own waits and loops; then every block left with no way to an exit (a raise in a block
+/// of its own before such a call). A release of the group's topics runs none of those blocks, so a
+/// raise in one of them (a lock the sampler takes around another family's sample function) is no
+/// section of the release; the code around the release loop keeps its own. A function called
+/// through a register is reached as [`task_sections`] reaches it (a superset). By group name, in
+/// the file's order; empty where the file states no topics or none of its groups is in the image.
+pub fn topic_sections(
+    image: &Image,
+    task: &Task,
+    chip: Chip,
+    bounds: &BoundsFile,
+) -> Vec<(String, TaskSections)> {
+    let Some(per_topic) = &bounds.topics else {
+        return Vec::new();
+    };
+    let present = per_topic.present(image);
+    present
         .iter()
-        .map(|task| {
-            let start = task.entry.start(image);
-            match (start, &task.entry) {
-                (
-                    Ok(at),
-                    TaskEntry::Polled {
-                        task: own, others, ..
-                    },
-                ) => finder.polled_task(&task.name, at, own, others),
-                (Ok(at), _) => finder.task(&task.name, at),
-                (Err(e), _) => TaskSections {
-                    task: task.name.clone(),
-                    ceilings: Vec::new(),
-                    incomplete: Some(e.to_string()),
-                },
-            }
+        .map(|&group| {
+            let stated = bounds.for_topic_group(per_topic, group);
+            let excluded = super::bounds::PerTopic::excluded(group, &present);
+            let mut finder = Finder {
+                image,
+                chip,
+                bounds: &stated,
+                analysis: Analysis::excluding(image, chip, &stated, &excluded),
+                per_function: BTreeMap::new(),
+            };
+            (group.name.clone(), finder.of_task(task))
         })
         .collect()
+}
+
+impl<'a> Finder<'a> {
+    /// `task`'s sections: its handler's (or its part of its dispatcher) and every function's it
+    /// reaches.
+    fn of_task(&mut self, task: &Task) -> TaskSections {
+        match (task.entry.start(self.image), &task.entry) {
+            (
+                Ok(at),
+                TaskEntry::Polled {
+                    task: own, others, ..
+                },
+            ) => self.polled_task(&task.name, at, own, others),
+            (Ok(at), _) => self.task(&task.name, at),
+            (Err(e), _) => TaskSections {
+                task: task.name.clone(),
+                ceilings: Vec::new(),
+                incomplete: Some(e.to_string()),
+            },
+        }
+    }
 }
 
 /// The sections of one function's code (not its callees'), and the functions it calls.
@@ -243,7 +282,7 @@ impl<'a> Finder<'a> {
             self.image.function_at(entry),
             self.analysis.polled_graph(entry, task, others),
         ) {
-            (Some(f), Ok(Some(Ok(graph)))) => match self.work_out_graph(f, graph) {
+            (Some(f), Ok(Some(Ok(graph)))) => match self.work_out_graph(f, self.on_paths(graph)) {
                 Ok(found) => found,
                 Err(e) => Found {
                     sections: Vec::new(),
@@ -373,7 +412,19 @@ impl<'a> Finder<'a> {
                 })
             }
         };
+        let graph = self.on_paths(graph);
         self.work_out_graph(f, graph)
+    }
+
+    /// `graph` as the job's paths take it: where the job leaves calls out (one topic's release), a
+    /// block left with no way to an exit ends no path of the job, so a raise in it (a lock the
+    /// sampler takes before a left-out sample) is no section of the job: left out with it. A job
+    /// that leaves nothing out keeps the graph as built.
+    fn on_paths(&self, graph: Cfg) -> Cfg {
+        if !self.analysis.leaves_calls_out() {
+            return graph;
+        }
+        graph.on_paths_to_exits().unwrap_or(graph)
     }
 
     /// The sections and callees of `graph`, `f`'s graph or a part of it.

@@ -27,7 +27,7 @@ use crate::{Error, Image};
 use analysis::{Analysis, Summary};
 use bounds::BoundsFile;
 use chip::Chip;
-pub use critical::{task_sections, Ceiling, CeilingBound, TaskSections};
+pub use critical::{task_sections, topic_sections, Ceiling, CeilingBound, TaskSections};
 #[cfg(test)]
 use path::{Cost, LoopCount};
 

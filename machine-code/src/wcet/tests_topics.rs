@@ -288,3 +288,102 @@ fn a_group_states_its_own_loop_bounds_and_waits_in_place_of_the_files() {
         ));
     }
 }
+
+/// `PUB`'s release loop with each arm's sample under a lock of its own, as a sampler takes one around
+/// a topic family's sample function: the arm saves BASEPRI, raises it to 0xc0 (priority 4), calls
+/// `SAMPLE_A` or `WRAP_B` (→ `SAMPLE_B`, its poll at src/pub.rs:40) and restores it at the join. Both
+/// raises are the publisher's own code, not the sample functions'; A's is in the block of its call, B's
+/// in a block of its own before it (a branch between them), as a compiler may place a lock's raise.
+fn locked_publisher() -> Image {
+    let code = thumb(&[
+        0xb530, // 0x00 push {r4, r5, lr}
+        0x6801, // 0x02 ldr r1, [r0] (the loop's header, line 20)
+        0x2900, // 0x04 cmp r1, #0
+        0xd012, // 0x06 beq 0x2e
+        0xf3ef, 0x8511, // 0x08 mrs r5, BASEPRI
+        0x22c0, // 0x0c movs r2, #0xc0
+        0x2901, // 0x0e cmp r1, #1
+        0xd005, // 0x10 beq 0x1e
+        0xf382, 0x8812, // 0x12 msr BASEPRI_MAX, r2: 2 (B's raise)
+        0xe7ff, // 0x16 b 0x18: 4
+        0xf000, 0xf810, // 0x18 bl WRAP_B: 4
+        0xe003, // 0x1c b 0x26: 4
+        0xf382, 0x8812, // 0x1e msr BASEPRI_MAX, r2: 2 (A's raise)
+        0xf000, 0xf805, // 0x22 bl SAMPLE_A: 4
+        0xf385, 0x8811, // 0x26 msr BASEPRI, r5: 2 (the restore of either)
+        0x3401, // 0x2a adds r4, #1
+        0xe7e9, // 0x2c b 0x02
+        0xbd30, // 0x2e pop {r4, r5, pc}
+        0x2001, // 0x30 SAMPLE_A: movs r0, #1: 1
+        0x4770, // 0x32 bx lr: 4
+        0x6802, // 0x34 SAMPLE_B: ldr r2, [r0] (the poll loop, line 40)
+        0x2a00, // 0x36 cmp r2, #0
+        0xd0fc, // 0x38 beq 0x34
+        0x4770, // 0x3a bx lr
+        0xb580, // 0x3c WRAP_B: push {r7, lr}
+        0xf7ff, 0xfff9, // 0x3e bl SAMPLE_B
+        0xbd80, // 0x42 pop {r7, pc}
+    ]);
+    let bytes = elf_with_lines(
+        &code,
+        &[
+            Sym::function("PUB", 0, 0x30),
+            Sym::function("SAMPLE_A", 0x30, 4),
+            Sym::function("SAMPLE_B", 0x34, 8),
+            Sym::function("WRAP_B", 0x3c, 8),
+        ],
+        "firmware/src/pub.rs",
+        &[
+            (0, 10),
+            (2, 20),
+            (0x2e, 22),
+            (0x30, 30),
+            (0x34, 40),
+            (0x3a, 42),
+            (0x3c, 50),
+        ],
+    );
+    Image::parse(&bytes).expect("the test image parses")
+}
+
+#[test]
+fn a_lock_around_another_groups_sample_is_no_section_of_a_release() {
+    let img = locked_publisher();
+    let file = bounds(TOPICS);
+    let p4 = Ceiling::Basepri {
+        hardware: 0xc0,
+        priority: 4,
+    };
+    let at_p4 = |s: &TaskSections| {
+        assert_eq!(s.incomplete, None);
+        s.ceilings.iter().find(|c| c.ceiling == p4).map(|c| {
+            (
+                c.sections,
+                c.bus_wait_us,
+                c.function.clone(),
+                c.declined.clone(),
+            )
+        })
+    };
+    // The whole task: both raises, the longest B's with the file's 200 µs wait.
+    let whole = task_sections(&img, &[pub_task()], F103_0WS, &file).remove(0);
+    assert_eq!(at_p4(&whole), Some((2, 200.0, "PUB".into(), None)));
+    let groups = topic_sections(&img, &pub_task(), F103_0WS, &file);
+    let names: Vec<&str> = groups.iter().map(|(g, _)| g.as_str()).collect();
+    assert_eq!(names, ["a", "b"]);
+    // Group a: B's call of WRAP_B is left out, and B's raise before it with it (its block has no way
+    // on but to that call): A's section alone, no wait.
+    assert_eq!(at_p4(&groups[0].1), Some((1, 0.0, "PUB".into(), None)));
+    // Group b: A's call left out with its raise (in the call's block), B's section with the group's
+    // own 25 µs wait.
+    assert_eq!(at_p4(&groups[1].1), Some((1, 25.0, "PUB".into(), None)));
+    // A's section: msr 2, bl 4, SAMPLE_A 5, msr 2 = 13 cycles; B's: msr 2, b 4, bl 4, WRAP_B 26 (its
+    // poll loop's way out), b 4, msr 2 = 42 cycles and the wait.
+    let cycles = |s: &TaskSections| s.ceilings.iter().map(|c| c.cycles).collect::<Vec<_>>();
+    assert_eq!(
+        (cycles(&whole), cycles(&groups[0].1), cycles(&groups[1].1)),
+        (vec![42], vec![13], vec![42])
+    );
+    // Without topics in the file, no group's sections.
+    assert!(topic_sections(&img, &pub_task(), F103_0WS, &bounds("")).is_empty());
+}

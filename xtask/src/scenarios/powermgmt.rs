@@ -233,7 +233,7 @@ fn admission(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 
 /// The ring's period the board accepts in `admission-decisions`, and the one before it it refuses:
 /// the shortest whole milliseconds the host's analysis admits beside DiWheelDrive's magnetometer
-/// (at 6 ms the ring's own frames miss, 6 489 of 6 000 µs on 2026-12-05: the power monitor's one
+/// (at 6 ms the ring's own frames miss, 6 139 of 6 000 µs on 2026-12-05: the power monitor's one
 /// gauge transfer under a bus lock, 1 884.8 µs from the machine code, blocks the ring's job, and
 /// the transmit interrupt's machine-code bound is every frame's queuing jitter).
 const DECISIONS_REFUSED_MS: u64 = 6;
@@ -314,7 +314,9 @@ const DECISIONS_WARNED: &str = "21E#01050000";
 const DECISIONS_WARNED_US: u64 = 5_000;
 
 /// The ring's period at urgent in `admission-other-board`: the shortest whole milliseconds at
-/// which the ring alone is admitted (at 6 ms its own frames miss).
+/// which the ring alone is admitted and, beside DiWheelDrive's odometry, refused for the odometry's
+/// frames (at 6 ms, admitted alone too, the ring's own frames miss first beside it: 6 084 of 6 000 µs
+/// on 2026-12-05).
 const OTHER_BOARD_RING: &str = "01F#01070000";
 
 fn admission_other_board(out: &RunOutput, bounds: &Bounds) -> Result<String> {
