@@ -406,9 +406,9 @@ impl DriveSample {
 #[inline(never)]
 fn sample_drive(drive: &mut impl rtic::Mutex<T = DriveSample>, topic: Topic) -> Samples {
     let data = match topic {
-        Topic::Odometry => SensorData::Odometry(DriveController::odometry_of(
-            drive.lock(|d| d.pose),
-        )),
+        Topic::Odometry => {
+            SensorData::Odometry(DriveController::odometry_of(drive.lock(|d| d.pose)))
+        }
         Topic::Velocity => SensorData::Velocity(drive.lock(|d| d.velocity)),
         _ => return Samples::new(),
     };
