@@ -121,7 +121,7 @@ impl<R: Registers> Master<R> {
     }
 
     fn exchange(&self, out: u8) -> Result<u8, Error> {
-        self.wait(SR_TXE)?;
+        self.wait_tx_empty()?;
         self.set_register(DR, u32::from(out));
         self.wait(SR_RXNE)?;
         Ok(self.register(DR) as u8)
@@ -360,5 +360,36 @@ impl<R: Registers, CS: OutputPin<Error = Infallible>> SpiDevice for Device<R, CS
         let sent = self.bus.send(buf);
         let Ok(()) = self.cs.set_high();
         Ok(sent?)
+    }
+}
+
+// The exchange's wait for a free transmit buffer, apart from its wait for the answer. Appended
+// (as the transmit-only path above) so that the loops the bounds files name keep their lines.
+
+impl<R: Registers> Master<R> {
+    /// [`Master::wait`] for TXE, before [`Master::exchange`] writes its byte: the same checks in a
+    /// loop of its own, so that the bounds files state its wait apart from the answer's (RXNE).
+    /// The transmit buffer hands its byte to the shift register as the byte starts (RM0008
+    /// §25.3.5), and an exchange writes only after the previous one's answer came in (RXNE: its
+    /// byte shifted out whole) or with the bus idle (a transaction ends with BSY clear, `flush`;
+    /// the block starts with its buffer empty), so TXE is set when this is called and its first
+    /// read finds it, where the answer's wait takes a byte time.
+    fn wait_tx_empty(&self) -> Result<(), Error> {
+        for _ in 0..POLLS {
+            let sr = self.register(SR);
+            if sr & SR_MODF != 0 {
+                self.set_register(CR1, self.register(CR1) | CR1_SPE);
+                return Err(Error::ModeFault);
+            }
+            if sr & SR_OVR != 0 {
+                let _ = self.register(DR);
+                let _ = self.register(SR);
+                return Err(Error::Overrun);
+            }
+            if sr & SR_TXE != 0 {
+                return Ok(());
+            }
+        }
+        Err(Error::Timeout)
     }
 }

@@ -405,17 +405,17 @@ impl DriveSample {
 /// same values as [`DriveController::sample`] of the controller at that step.
 #[inline(never)]
 fn sample_drive(drive: &mut impl rtic::Mutex<T = DriveSample>, topic: Topic) -> Samples {
-    let mut samples = Samples::new();
     let data = match topic {
-        Topic::Odometry => Some(SensorData::Odometry(DriveController::odometry_of(
-            drive.lock(|d| d.pose),
-        ))),
-        Topic::Velocity => Some(SensorData::Velocity(drive.lock(|d| d.velocity))),
-        _ => None,
+        Topic::Odometry => {
+            SensorData::Odometry(DriveController::odometry_of(drive.lock(|d| d.pose)))
+        }
+        Topic::Velocity => SensorData::Velocity(drive.lock(|d| d.velocity)),
+        _ => return Samples::new(),
     };
-    if let Some(data) = data {
-        let _ = samples.push(data);
-    }
+    // Made here, after the reads: the sample is built where the caller receives it (made before
+    // the locks, it was a copy of all eight slots on the way out).
+    let mut samples = Samples::new();
+    let _ = samples.push(data);
     samples
 }
 
