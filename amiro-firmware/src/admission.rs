@@ -28,6 +28,8 @@ use schedule_analysis::admission::{
 };
 use schedule_analysis::time::Time;
 
+use core::sync::atomic::{AtomicU32, Ordering};
+
 /// Declares `mod admission_table` with the board's generated admission table (`ROBOT`,
 /// `MAX_TASKS`, `MAX_PUBLISHERS`, `BOARD_<NAME>`), written by `board-build.rs` into the board
 /// crate's `OUT_DIR`.
@@ -644,6 +646,64 @@ pub fn ticks_1024us(now_us: u64) -> u32 {
     (now_us >> 10) as u32
 }
 
+/// The busy verdicts' rate (`docs/protocol.md`, reason 30): a request refused busy is set aside for a
+/// verdict only while none waits ([`crate::rx_queue`]'s one frame set aside) and at least the one-shot
+/// interval (40 units of 1024 µs) after the last verdict **went out** (the admission task takes it, at
+/// once from a wait or once its step has ended). So the verdicts on the bus are at least that far apart
+/// (the analysis's one per ~41 ms, `can_tx[admit_requests]`) however long a step keeps the admission
+/// task, and the refusals between two of them, the time one waits included, are counted, not answered.
+/// (Started when the verdict was set aside, the window passed during a step longer than it: the refusal
+/// then found the verdict still waiting, unanswered, and the next one went out right behind it.)
+pub struct BusyWindow {
+    /// When the last verdict was taken to be sent, in 1024 µs units since boot (0: never).
+    sent: AtomicU32,
+}
+
+impl Default for BusyWindow {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl BusyWindow {
+    /// No verdict sent yet.
+    pub const fn new() -> Self {
+        Self {
+            sent: AtomicU32::new(0),
+        }
+    }
+
+    /// The command handler's side: `frame`, refused busy at `now_ms` (1024 µs units,
+    /// [`ticks_1024us`]), set aside for its verdict if the window since the last verdict has passed and
+    /// no verdict waits; `true` if it was (the caller wakes the admission task).
+    #[inline(always)]
+    pub fn set_aside<const N: usize>(
+        &self,
+        requests: &mut crate::rx_queue::Producer<'_, N>,
+        frame: &crate::can::RxFrame,
+        now_ms: u32,
+    ) -> bool {
+        let sent = self.sent.load(Ordering::Relaxed);
+        if sent != 0 && now_ms.wrapping_sub(sent) < u32::from(ONE_SHOT_INTERVAL_MS) {
+            return false;
+        }
+        requests.set_aside(frame)
+    }
+
+    /// The admission task's side: the request set aside, if any, taken for its verdict, the window
+    /// started at `now_ms()` first. In that order: a refusal that comes between the two (the handler
+    /// pre-empts the admission task) finds the window begun or the frame still aside, never the slot
+    /// free with the window still open.
+    #[inline(always)]
+    pub fn take<const N: usize>(
+        &self,
+        requests: &mut crate::rx_queue::Consumer<'_, N>,
+        now_ms: impl FnOnce() -> u32,
+    ) -> Option<crate::can::RxFrame> {
+        requests.take_aside_after(|| self.sent.store(now_ms().max(1), Ordering::Relaxed))
+    }
+}
+
 /// Whether `frame` is a stop of a sensor topic (of any board). A stop only removes load, so it needs no
 /// analysis: the command handler applies it at once (within its own deadline) and the admission task only
 /// brings its running set up to date, in the order the commands were heard.
@@ -764,6 +824,74 @@ pub fn table_source(
 mod tests {
     use super::*;
     use amiro_can::{AdmissionPolicy, MotorCommand, Priority};
+
+    /// A refusal a tick at a time: the handler's side at `at`, `true` if set aside.
+    fn refuse(window: &BusyWindow, tx: &mut crate::rx_queue::Producer<'_, 4>, at: u32) -> bool {
+        let request = crate::can::RxFrame {
+            id: 0x208,
+            len: 4,
+            data: [1, 10, 0, 1, 0, 0, 0, 0],
+        };
+        window.set_aside(tx, &request, at)
+    }
+
+    #[test]
+    fn busy_verdicts_go_out_an_interval_apart_however_long_the_admission_task_keeps_one_waiting() {
+        // SAFETY: this test's queue, split once, used on this thread only.
+        let queue = Box::leak(Box::new(unsafe { crate::rx_queue::FrameQueue::<4>::new() }));
+        let (mut tx, mut rx) = unsafe { queue.split() };
+        let window = BusyWindow::new();
+        let interval = u32::from(ONE_SHOT_INTERVAL_MS);
+        let mut sent = Vec::new();
+        // The admission task is in a step from tick 1 to tick 100 (longer than the window); a busy
+        // refusal comes every tick from 1 to 300; the task takes what waits at the step's end and,
+        // from then on, at once (from a wait).
+        for now in 1..=300u32 {
+            refuse(&window, &mut tx, now);
+            if now >= 100 {
+                if let Some(frame) = window.take(&mut rx, || now) {
+                    assert_eq!(frame.id, 0x208);
+                    sent.push(now);
+                }
+            }
+        }
+        assert_eq!(
+            sent.first(),
+            Some(&100),
+            "the first refusal's verdict, at the step's end"
+        );
+        for pair in sent.windows(2) {
+            assert!(
+                pair[1] - pair[0] >= interval,
+                "verdicts at {} and {} ticks: closer than the interval ({sent:?})",
+                pair[0],
+                pair[1]
+            );
+        }
+        // And no verdict is held back once its window has passed: one an interval after another.
+        assert_eq!(sent, [100, 140, 180, 220, 260, 300]);
+    }
+
+    #[test]
+    fn a_busy_refusal_is_set_aside_only_with_none_waiting_and_the_window_passed() {
+        // SAFETY: this test's queue, split once, used on this thread only.
+        let queue = Box::leak(Box::new(unsafe { crate::rx_queue::FrameQueue::<4>::new() }));
+        let (mut tx, mut rx) = unsafe { queue.split() };
+        let window = BusyWindow::new();
+        assert!(
+            window.take(&mut rx, || unreachable!()).is_none(),
+            "nothing aside: no time read"
+        );
+        assert!(refuse(&window, &mut tx, 5), "the first refusal since boot");
+        assert!(!refuse(&window, &mut tx, 500), "one waits: counted only");
+        assert!(window.take(&mut rx, || 600).is_some());
+        assert!(!refuse(&window, &mut tx, 639), "39 ticks after the send");
+        assert!(refuse(&window, &mut tx, 640), "40 ticks after it");
+        // Across the 32-bit wrap of the ticks.
+        assert!(window.take(&mut rx, || u32::MAX - 10).is_some());
+        assert!(!refuse(&window, &mut tx, 28));
+        assert!(refuse(&window, &mut tx, 29));
+    }
 
     #[test]
     fn pacing_decides_a_burst_back_to_back_then_waits_for_the_window() {

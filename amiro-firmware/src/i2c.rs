@@ -9,9 +9,9 @@
 //! a timeout or a bus error the bus is cleared ([`crate::i2c_clear`]: a device left driving SDA low
 //! mid-byte is clocked free, then a STOP) and the block reset and set up again, so the next transfer
 //! starts clean.
-use embedded_hal::i2c::{ErrorKind, ErrorType, I2c, NoAcknowledgeSource, Operation};
+use embedded_hal::i2c::{ErrorType, I2c, NoAcknowledgeSource, Operation};
 
-use crate::i2c_clear::{clear_bus, ClearPins, Stuck};
+use crate::i2c_clear::{clear_bus, ClearPins};
 
 /// I2C1's base address on both chips.
 pub const I2C1: usize = 0x4000_5400;
@@ -45,36 +45,7 @@ const SR1_OVR: u16 = 1 << 11;
 const SR1_ERRORS: u16 = SR1_BERR | SR1_ARLO | SR1_AF | SR1_OVR;
 const SR2_BUSY: u16 = 1 << 1;
 
-/// What went wrong on the bus.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Error {
-    /// Nobody acknowledged the address or a data byte.
-    NoAcknowledge(NoAcknowledgeSource),
-    /// Misplaced START/STOP.
-    Bus,
-    /// Another master won the bus.
-    ArbitrationLoss,
-    /// Data lost.
-    Overrun,
-    /// A flag did not come within [`FLAG_TIMEOUT_US`] (bus stuck or device stretching for ever).
-    Timeout,
-    /// After a fault, SDA still low when the bus clear's nine pulses were given (a device holds
-    /// the bus; the next transfer's wait for a free bus fails and clears it again).
-    BusStuck,
-}
-
-impl embedded_hal::i2c::Error for Error {
-    fn kind(&self) -> ErrorKind {
-        match *self {
-            Error::NoAcknowledge(source) => ErrorKind::NoAcknowledge(source),
-            Error::Bus => ErrorKind::Bus,
-            Error::ArbitrationLoss => ErrorKind::ArbitrationLoss,
-            Error::Overrun => ErrorKind::Overrun,
-            Error::Timeout => ErrorKind::Other,
-            Error::BusStuck => ErrorKind::Bus,
-        }
-    }
-}
+pub use crate::i2c_fault::Error;
 
 /// One I2C block (I2C1 or I2C2) as a bounded polled master at 400 kHz.
 pub struct Master {
@@ -90,6 +61,28 @@ pub struct Master {
 fn cycles() -> u32 {
     cortex_m::peripheral::DWT::cycle_count()
 }
+
+/// CCR for 400 kHz in fast mode, duty 2:1, from a `pclk1_mhz` of 2 to 50: ⌈10·p / 12⌉, as
+/// ⌊(5·p + 5)·171 / 1024⌋.
+const fn fast_mode_ccr(pclk1_mhz: u32) -> u32 {
+    ((5 * pclk1_mhz + 5) * 171) >> 10
+}
+
+/// 300 ns in cycles of a `pclk1_mhz` of 2 to 50: ⌊300·p / 1000⌋, as ⌊77·p / 256⌋.
+const fn rise_cycles(pclk1_mhz: u32) -> u32 {
+    (77 * pclk1_mhz) >> 8
+}
+
+// The two forms above equal their divisions for every APB1 clock `new` allows (checked as the crate
+// compiles).
+const _: () = {
+    let mut p = 2;
+    while p <= 50 {
+        assert!(fast_mode_ccr(p) == (p * 10).div_ceil(12));
+        assert!(rise_cycles(p) == p * 300 / 1000);
+        p += 1;
+    }
+};
 
 impl Master {
     /// Takes the block at `base` ([`I2C1`] or [`I2C2`]; its clock on, its `pins` in open-drain
@@ -123,9 +116,11 @@ impl Master {
 
     fn setup(&self) {
         // Fast mode, duty 2:1: SCL = PCLK1 / (3 × CCR), rounded so it never exceeds 400 kHz;
-        // TRISE: the 300 ns rise time in PCLK1 cycles, plus one.
-        let ccr = self.pclk1_mhz.saturating_mul(10).div_ceil(12).max(1) as u16;
-        let trise = (self.pclk1_mhz * 300 / 1000 + 1) as u16;
+        // TRISE: the 300 ns rise time in PCLK1 cycles, plus one. `pclk1_mhz` is 2 to 50 (`new`
+        // clamps it), where the multiply-shift forms are exact (checked as the crate compiles) and need no
+        // division; CCR is at least 2 (the block's minimum in fast mode is 1).
+        let ccr = fast_mode_ccr(self.pclk1_mhz) as u16;
+        let trise = (rise_cycles(self.pclk1_mhz) + 1) as u16;
         self.write(CR1, CR1_SWRST);
         self.write(CR1, 0);
         self.write(CR2, self.pclk1_mhz as u16);
@@ -538,6 +533,14 @@ struct Clearing<'a> {
     half_cycles: u32,
 }
 
+impl Clearing<'_> {
+    /// The port's input data register.
+    fn idr(&self) -> u32 {
+        // SAFETY: `Pins::new`'s contract: the port's input data register.
+        unsafe { core::ptr::read_volatile((self.pins.port + GPIO_IDR) as *const u32) }
+    }
+}
+
 impl ClearPins for Clearing<'_> {
     fn lines(&mut self, scl: bool, sda: bool) {
         // One write of the port's bit set/reset register, which leaves its other pins alone.
@@ -545,13 +548,18 @@ impl ClearPins for Clearing<'_> {
         let value = bit(self.pins.scl, scl) | bit(self.pins.sda, sda);
         // SAFETY: `Pins::new`'s contract: the GPIO port's BSRR, the two pins' bits.
         unsafe { core::ptr::write_volatile((self.pins.port + GPIO_BSRR) as *mut u32, value) }
+    }
+
+    fn half_period(&mut self) {
         half_period(self.half_cycles);
     }
 
+    fn scl_is_high(&mut self) -> bool {
+        self.idr() & (1 << self.pins.scl) != 0
+    }
+
     fn sda_is_high(&mut self) -> bool {
-        // SAFETY: `Pins::new`'s contract: the port's input data register.
-        let idr = unsafe { core::ptr::read_volatile((self.pins.port + GPIO_IDR) as *const u32) };
-        idr & (1 << self.pins.sda) != 0
+        self.idr() & (1 << self.pins.sda) != 0
     }
 }
 
@@ -571,9 +579,10 @@ impl Master {
     /// After a timeout or a bus error: the block held in reset (it drives neither line, whatever
     /// state it was in: clearing PE alone waits for the end of a transfer, RM0008 §26.6.1), its
     /// pins handed to GPIO for the bus clear (UM10204 §3.1.16, [`clear_bus`]: up to nine SCL
-    /// pulses while SDA is low, then a STOP), the pins given back, the block reset again (with
+    /// pulses while SDA is low, each released SCL awaited for at most `i2c_clear::MAX_STRETCH` half
+    /// periods as a device may stretch it, then a STOP), the pins given back, the block reset again (with
     /// its pins back on the lines, as the STM32F10x errata's I2C busy-flag entry asks) and set up.
-    /// [`Error::BusStuck`] where SDA stays low. Not inlined: one copy for every fault path.
+    /// [`Error::BusStuck`] where SDA stays low, or SCL. Not inlined: one copy for every fault path.
     #[inline(never)]
     fn recover(&self) -> Result<(), Error> {
         self.write(CR1, CR1_SWRST);
@@ -584,10 +593,11 @@ impl Master {
         // Both output levels high (the alternate function ignores them) before the pins are
         // outputs; the half period after it lets the lines settle, released by the block.
         pins.lines(true, true);
+        pins.half_period();
         self.pins.hand_to_gpio(true);
         let cleared = clear_bus(&mut pins);
         self.pins.hand_to_gpio(false);
         self.setup();
-        cleared.map(|_| ()).map_err(|Stuck| Error::BusStuck)
+        cleared.map(|_| ()).map_err(Error::from)
     }
 }

@@ -6,7 +6,7 @@
 //! publisher loop, the independent watchdog, the clock-tree reset, and the QEMU platform. A board
 //! crate keeps only its `board.rs` (pins and devices), its sampling and its RTIC app (wiring).
 //!
-//! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`i2c_bus`], [`i2c_clear`], [`i2c_engine`], [`i2c_sim`],
+//! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`command_job`], [`i2c_bus`], [`i2c_clear`], [`i2c_engine`], [`i2c_fault`], [`i2c_sim`],
 //! [`layout`], [`scripted`], [`spi`], [`timer_monotonic`], [`trace_ring`]) builds and is tested on
 //! the host; the rest exists only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
 //! is enabled on a chip build; `qemu` selects the QEMU platform.
@@ -17,10 +17,12 @@ pub mod admission;
 pub mod bxcan;
 pub mod can;
 pub mod clock_tree;
+pub mod command_job;
 pub mod digits;
 pub mod i2c_bus;
 pub mod i2c_clear;
 pub mod i2c_engine;
+pub mod i2c_fault;
 #[cfg(test)]
 mod i2c_model;
 pub mod i2c_sim;

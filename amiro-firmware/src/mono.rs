@@ -40,6 +40,8 @@ pub trait Clock {
     type Expiry: Future<Output = ()> + Unpin;
     /// [`Clock::Expiry`] for `at_us`.
     fn expiry_at_us(at_us: u64) -> Self::Expiry;
+    /// Whether `expiry` holds its timer slot (`timer_queue::Expiry::holds_slot`).
+    fn expiry_armed(expiry: &Self::Expiry) -> bool;
     /// Runs `future` until it completes or the monotonic reaches `at_us`, whichever is first.
     fn timeout_at_us<F: Future>(at_us: u64, future: F) -> impl Future<Output = Option<F::Output>>;
     /// A fault of the timer to log, once (the timer's interrupt only counts it; the watchdog task
@@ -75,6 +77,11 @@ where
 
     fn expiry_at_us(at_us: u64) -> Self::Expiry {
         B::queue().expiry(at_us.div_ceil(TICK_US))
+    }
+
+    #[inline(always)]
+    fn expiry_armed(expiry: &Self::Expiry) -> bool {
+        expiry.holds_slot()
     }
 
     async fn timeout_at_us<F: Future>(at_us: u64, future: F) -> Option<F::Output> {

@@ -242,12 +242,21 @@ impl<'q, const N: usize> Consumer<'q, N> {
 
     /// The frame the producer set aside ([`Producer::set_aside`]), if any, taken.
     pub fn take_aside(&mut self) -> Option<RxFrame> {
+        self.take_aside_after(|| ())
+    }
+
+    /// [`Consumer::take_aside`], with `first` run when there is a frame, before it is taken (while
+    /// the producer still finds the frame there: the busy verdicts' window, `admission::BusyWindow`).
+    #[inline(always)]
+    pub fn take_aside_after(&mut self, first: impl FnOnce()) -> Option<RxFrame> {
         let q = self.queue;
         if !q.aside_full.load(Ordering::Relaxed) {
             return None;
         }
-        // The producer's copy came before its store of the flag (one core).
-        compiler_fence(Ordering::Acquire);
+        first();
+        // The producer's copy came before its store of the flag (one core); `first`'s stores come
+        // before the clear.
+        compiler_fence(Ordering::SeqCst);
         // SAFETY: set: the producer does not write `aside` until the flag is cleared below.
         let slot = unsafe { *q.aside.get() };
         compiler_fence(Ordering::Release);

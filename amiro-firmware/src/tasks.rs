@@ -2,7 +2,6 @@
 //! handling. The board's RTIC app binds them to its interrupts and priorities (`levels`) and
 //! passes its resources in; nothing here knows which board it runs on.
 use core::future::Future;
-use core::sync::atomic::{AtomicU32, Ordering};
 
 use amiro_can::Priority;
 use amiro_sensors::handler::{Outcome, Rejection, SensorDataHandler};
@@ -234,8 +233,8 @@ pub fn for_admission(frame: &RxFrame) -> bool {
     matches!(route(frame), Route::Admission(_))
 }
 
-/// When the command handler last set a request aside for a busy verdict (1024 µs units since boot, 0: never).
-static LAST_BUSY_VERDICT_MS: AtomicU32 = AtomicU32::new(0);
+/// The busy verdicts' rate: the command handler sets a refused request aside, the admission task takes it.
+static BUSY_VERDICTS: crate::admission::BusyWindow = crate::admission::BusyWindow::new();
 
 /// The command handler's part of a sensor or admission-policy command (`docs/analysis.md`, "The
 /// admission task"), `sensor` as [`route`] decoded it. A **stop** only removes load: it takes effect here,
@@ -269,18 +268,11 @@ pub fn route_to_admission<C: Clock, const N: usize>(
     match sensor {
         Some(command) if crate::admission::answers_busy(board, &command) => {
             crate::health::count_admission(true, amiro_can::RefusalReason::Busy);
-            // At most one busy verdict per one-shot interval: a flood of requests must not turn into a
-            // flood of verdicts (each refusal is counted all the same), and one waits at a time.
-            let last = LAST_BUSY_VERDICT_MS.load(Ordering::Relaxed);
+            // At most one busy verdict per one-shot interval, counted from the last one sent, and one
+            // waits at a time: a flood of requests must not turn into a flood of verdicts (each refusal
+            // is counted all the same).
             let now_ms = crate::admission::ticks_1024us(C::now_us());
-            // 1024 µs units: 40 of them are at least the one-shot interval (40 ms).
-            if last != 0
-                && now_ms.wrapping_sub(last) < u32::from(crate::admission::ONE_SHOT_INTERVAL_MS)
-            {
-                return;
-            }
-            if requests.set_aside(frame) {
-                LAST_BUSY_VERDICT_MS.store(now_ms.max(1), Ordering::Relaxed);
+            if BUSY_VERDICTS.set_aside(requests, frame, now_ms) {
                 requests.wake();
             }
         }
@@ -311,7 +303,8 @@ pub async fn serve_admission<
     tx_interrupt: impl cortex_m::interrupt::InterruptNumber,
     wake_levels: &mut [Sender<'static, (), 1>],
 ) {
-    let mut waits = AdmissionWaits {
+    let mut waits = AdmissionWaits::<C, R, _, _> {
+        clock: core::marker::PhantomData,
         board: admission.board(),
         requests,
         tx_queue,
@@ -368,6 +361,7 @@ async fn refresh_steps<
     counted: bool,
     waits: &mut AdmissionWaits<
         '_,
+        C,
         R,
         impl rtic_core::Mutex<T = TxQueue<Q>>,
         impl cortex_m::interrupt::InterruptNumber,
@@ -395,14 +389,15 @@ async fn refresh_steps<
 /// as the ring is. So a busy verdict goes out within the admission task's response from the refusal: at once
 /// from a wait, or once the step in progress has ended. Answering is an activation of its own (the task is
 /// woken again and the wait goes on in its next poll), so an activation queues at most one verdict.
-struct AdmissionWaits<'w, const R: usize, T, I> {
+struct AdmissionWaits<'w, C, const R: usize, T, I> {
+    clock: core::marker::PhantomData<C>,
     board: amiro_can::Board,
     requests: &'w mut crate::rx_queue::Consumer<'static, R>,
     tx_queue: T,
     tx_interrupt: I,
 }
 
-impl<'w, const R: usize, const Q: usize, T, I> AdmissionWaits<'w, R, T, I>
+impl<'w, C: Clock, const R: usize, const Q: usize, T, I> AdmissionWaits<'w, C, R, T, I>
 where
     T: rtic_core::Mutex<T = TxQueue<Q>>,
     I: cortex_m::interrupt::InterruptNumber,
@@ -433,18 +428,24 @@ where
     fn until<'a, F: Future<Output = ()>>(
         &'a mut self,
         delay: core::pin::Pin<&'a mut F>,
-    ) -> Until<'a, 'w, R, T, I, core::pin::Pin<&'a mut F>> {
+    ) -> Until<'a, 'w, C, R, T, I, core::pin::Pin<&'a mut F>> {
         Until { waits: self, delay }
     }
 
-    /// Sends the busy verdict of the request the handler set aside, if there is one, and asks for the
-    /// task to be polled again (the wait goes on then); `true` if it did.
+    /// Sends the busy verdict of the request the handler set aside, if there is one (the busy verdicts'
+    /// window starts now: `admission::BusyWindow`), and asks for the task to be polled again (the wait
+    /// goes on then); `true` if it did.
     fn answer_set_aside(
         &mut self,
         cx: &mut core::task::Context<'_>,
         trace_task: Option<u8>,
     ) -> bool {
-        let Some(frame) = self.requests.take_aside() else {
+        let Some(frame) =
+            BUSY_VERDICTS.take(
+                self.requests,
+                || crate::admission::ticks_1024us(C::now_us()),
+            )
+        else {
             return false;
         };
         if let Some(task) = trace_task {
@@ -469,12 +470,12 @@ where
 }
 
 /// [`AdmissionWaits`]' wait for the pacing's instant (`delay`), answering a busy verdict meanwhile.
-struct Until<'a, 'w, const R: usize, T, I, E> {
-    waits: &'a mut AdmissionWaits<'w, R, T, I>,
+struct Until<'a, 'w, C, const R: usize, T, I, E> {
+    waits: &'a mut AdmissionWaits<'w, C, R, T, I>,
     delay: E,
 }
 
-impl<const R: usize, const Q: usize, T, I, E> Future for Until<'_, '_, R, T, I, E>
+impl<C: Clock, const R: usize, const Q: usize, T, I, E> Future for Until<'_, '_, C, R, T, I, E>
 where
     T: rtic_core::Mutex<T = TxQueue<Q>>,
     I: cortex_m::interrupt::InterruptNumber,
@@ -632,96 +633,47 @@ fn poll_again(waker: &core::task::Waker) {
 /// takes the frames the CAN receive interrupt queued, one at a time, each no earlier than the previous
 /// one's start plus `interval_us` (the rate limit the analysis's arrival model of the handler,
 /// `sporadic_us`, one command per interval, rests on), and hands each to `handle`, the board's part
-/// (routing it with [`route`], [`route_to_admission`], [`handle_command`]). Never returns.
-///
-/// One future, polled through one function the compiler keeps apart (`ServeCommands`'s `poll`), with
-/// no loop: a poll is a job, and takes at most one command. Its longest way is the one the
-/// machine-code bound charges, so each part is on it once: the time read against the rate limit's
-/// instant (a wake before it is pending again: the armed timer's interrupt wakes the task at the
-/// instant), the frame queue's look (and the park that finds it empty), the command's handling, and the
-/// rate limit's timer armed for the next instant (the previous command's wait dropped, its slot freed
-/// without a walk). When that instant has come already (a job that ran past it, or one that came
-/// during the arming), the task asks to be polled again: the next command is a job of its own.
+/// (routing it with [`route`], [`route_to_admission`], [`handle_command`]). Never returns. One poll is
+/// one job ([`crate::command_job::ServeCommands`]).
 pub async fn serve_commands<C: Clock, const N: usize>(
     frames: &mut crate::rx_queue::Consumer<'static, N>,
     interval_us: u64,
     handle: impl FnMut(RxFrame) + Unpin,
 ) {
-    let never = ServeCommands::<C, N, _> {
-        frames,
-        interval_us,
-        handle,
-        limit: C::expiry_at_us(0),
-        not_before_us: None,
-        stopped: None,
-    }
-    .await;
+    let never =
+        crate::command_job::ServeCommands::<Traced<C>, N, _>::new(frames, interval_us, handle)
+            .await;
     match never {}
 }
 
-/// [`serve_commands`]'s future.
-struct ServeCommands<'c, C: Clock, const N: usize, H> {
-    frames: &'c mut crate::rx_queue::Consumer<'static, N>,
-    interval_us: u64,
-    handle: H,
-    /// The rate limit's wait: polled once, when it is armed; a slot it holds is freed when the next
-    /// arming replaces it.
-    limit: C::Expiry,
-    /// The rate limit's instant while it is ahead (`None` once it has passed, or before the first
-    /// command).
-    not_before_us: Option<u64>,
-    /// The task the trace stopped at the wait in progress ([`crate::tracing::suspend`]), `None`
-    /// while a command is handled.
-    stopped: Option<u8>,
-}
+/// The monotonic `C` and the task trace, as the command handler's job sees them.
+struct Traced<C>(core::marker::PhantomData<C>);
 
-impl<C: Clock, const N: usize, H: FnMut(RxFrame) + Unpin> core::future::Future
-    for ServeCommands<'_, C, N, H>
-{
-    type Output = core::convert::Infallible;
+impl<C: Clock> crate::command_job::JobClock for Traced<C> {
+    #[inline(always)]
+    fn now_us() -> u64 {
+        C::now_us()
+    }
 
-    #[inline(never)]
-    fn poll(
-        self: core::pin::Pin<&mut Self>,
-        cx: &mut core::task::Context<'_>,
-    ) -> core::task::Poll<core::convert::Infallible> {
-        use core::task::Poll;
-        let this = self.get_mut();
-        if let Some(at_us) = this.not_before_us {
-            if C::now_us() < at_us {
-                // Woken before the instant: the armed timer's interrupt wakes the task at it.
-                return Poll::Pending;
-            }
-            this.not_before_us = None;
-            if let Some(task) = this.stopped.take() {
-                crate::tracing::resume(task);
-            }
-        }
-        let task = *this
-            .stopped
-            .get_or_insert_with(|| crate::tracing::suspend(None));
-        let Poll::Ready(frame) = this.frames.poll_recv_packed(cx) else {
-            return Poll::Pending;
-        };
-        this.stopped = None;
+    type Expiry = C::Expiry;
+
+    #[inline(always)]
+    fn expiry_at_us(at_us: u64) -> C::Expiry {
+        C::expiry_at_us(at_us)
+    }
+
+    #[inline(always)]
+    fn armed(expiry: &C::Expiry) -> bool {
+        C::expiry_armed(expiry)
+    }
+
+    #[inline(always)]
+    fn suspend(release: Option<(u64, u64)>) -> u8 {
+        crate::tracing::suspend(release)
+    }
+
+    #[inline(always)]
+    fn resume(task: u8) {
         crate::tracing::resume(task);
-        let started = C::now_us();
-        (this.handle)(frame.unpack());
-        let at_us = started + this.interval_us;
-        let now = C::now_us();
-        if now >= at_us {
-            poll_again(cx.waker());
-            return Poll::Pending;
-        }
-        this.not_before_us = Some(at_us);
-        // The trace's next release: the rate limit's instant. The time is read in every build (the
-        // QEMU runs' jobs are held to the release image's bound, which must hold their code).
-        this.stopped = Some(crate::tracing::suspend(Some((at_us, now))));
-        this.limit = C::expiry_at_us(at_us);
-        // Its first poll arms the timer, or finds the instant come meanwhile.
-        if core::pin::Pin::new(&mut this.limit).poll(cx).is_ready() {
-            poll_again(cx.waker());
-        }
-        Poll::Pending
     }
 }

@@ -388,6 +388,15 @@ impl<B: Backend> Drop for Delay<B> {
 /// command interval.)
 pub struct Expiry<B: Backend>(Delay<B>);
 
+impl<B: Backend> Expiry<B> {
+    /// Whether the wait holds a timer slot: armed and not yet completed. One that found the queue
+    /// full holds none until a poll finds one free.
+    #[inline(always)]
+    pub fn holds_slot(&self) -> bool {
+        self.0.slot != NO_SLOT
+    }
+}
+
 impl<B: Backend> Future for Expiry<B> {
     type Output = ();
 
@@ -419,7 +428,7 @@ impl<B: Backend> Future for Expiry<B> {
 /// the waker's vtable keeps a place of its own in the machine code (the analysis names each such
 /// call by its line).
 #[inline(never)]
-fn poll_again(waker: &Waker) {
+pub(crate) fn poll_again(waker: &Waker) {
     waker.wake_by_ref();
 }
 

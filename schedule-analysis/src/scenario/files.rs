@@ -378,8 +378,9 @@ pub struct TimingTask {
 pub struct QueuedBy {
     /// The most frames one job queues (0: none, and no pend).
     pub frames: u32,
-    /// The shortest time between two of its jobs that queue frames, where the code spaces them further apart than
-    /// the task's period (the command handler's busy verdicts: one per one-shot interval), µs.
+    /// The shortest time between two of its jobs that queue frames, where it is not the task's period: the
+    /// admission task's busy verdicts go out up to once per one-shot interval, counted from the send
+    /// (`amiro_firmware::admission::BusyWindow`), more often than its stated 240 ms, µs.
     #[serde(default)]
     pub at_least_us: Option<f64>,
 }

@@ -105,10 +105,9 @@ pub(super) fn charge_by_parts(
                 _ => continue,
             }
         };
-        let spaced = queued_by
-            .get(&t.name)
-            .and_then(|q| q.at_least_us)
-            .filter(|&us| us > t.period_us);
+        // The jobs that queue frames at the rate the code gives them where it is not the task's period (the
+        // admission task's verdicts: its busy ones come up to once per one-shot interval, counted from the send).
+        let spaced = queued_by.get(&t.name).and_then(|q| q.at_least_us);
         added.push(TaskModel {
             name: format!("{tx_name}[{label}]"),
             wcet_us: parts.fixed_us + f64::from(frames) * per_queued,
