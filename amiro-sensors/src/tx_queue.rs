@@ -221,14 +221,23 @@ const ID_MASK: u32 = !(TAG_MASK | SLOT_MASK);
 #[inline(never)]
 fn position_of_sample(entries: &[u32], from: usize, sample: u32) -> Result<usize, usize> {
     let mut at = from;
-    while let Some(&queued) = entries.get(at) {
+    if at >= entries.len() {
+        return Err(at);
+    }
+    // Tested at the bottom, one branch back a pass (`at` is below the length in the body).
+    loop {
+        let Some(&queued) = entries.get(at) else {
+            return Err(at);
+        };
         let apart = (queued ^ sample) >> TAG_SHIFT;
         if apart.wrapping_sub(1) >= TAG_MASK >> TAG_SHIFT {
             return if apart == 0 { Ok(at) } else { Err(at) };
         }
         at += 1;
+        if at >= entries.len() {
+            return Err(at);
+        }
     }
-    Err(at)
 }
 
 /// Moves every entry of `entries` from `from` on one place up (towards the end) and puts `new` at
