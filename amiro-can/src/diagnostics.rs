@@ -1235,6 +1235,31 @@ mod tests {
         assert_eq!(std::format!("{}", Count::<8>::saturating(3)), "3");
     }
 
+    /// A diagnostics frame's first byte is one of eight pages: a sample's 0–5 and a verdict's two.
+    /// DiWheelDrive's bounds file states the transmit queue's walk over the queued frames of one
+    /// diagnostics identifier at these eight (a newer frame of a page replaces the queued one) and
+    /// the one that ends the walk; every page the encoder writes decodes (strict round trip), so
+    /// the decoder's pages bound the encoder's.
+    #[test]
+    fn a_diagnostics_frame_carries_one_of_eight_page_bytes() {
+        let pages: std::vec::Vec<u8> = (0..=u8::MAX)
+            .filter(|&page| {
+                !matches!(
+                    DiagnosticsPage::from_bytes(
+                        Topic::DiWheelDriveDiagnostics,
+                        [page, 0, 0, 0, 0, 0, 0, 0]
+                    ),
+                    Err(DecodeError::UnknownPage { .. })
+                )
+            })
+            .collect();
+        assert_eq!(pages, [0, 1, 2, 3, 4, 5, VERDICT_PAGE, VERDICT_BOUND_PAGE]);
+        assert_eq!(PAGES_PER_SAMPLE, 6);
+        for page in Diagnostics::ZERO.pages(0) {
+            assert!(pages.contains(&page.page()), "sample page {}", page.page());
+        }
+    }
+
     #[test]
     fn windows_cycle_through_every_reason() {
         let mut window = 0u8;

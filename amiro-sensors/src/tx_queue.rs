@@ -18,9 +18,11 @@
 //! So `pop` in the transmit interrupt is O(1); `push` and `requeue` find the frame's place by one
 //! binary search over the entries (at most `log2 N + 1` word loads and compares, straight-line
 //! code, no frame read), look for another sample of its topic only among the frames of the same
-//! identifier (one entry for a topic of one frame per sample, none for a command; a push from where
-//! those frames start, a requeue back from its place, where they end), and move at most `N - 1`
-//! entries by one place, each carried through a register (one load and one store), never a frame.
+//! identifier (one entry for a topic of one frame per sample, none for a command; for a topic
+//! whose sample spans several frames a walk forward from where those frames start, one test an
+//! entry), and move at most `N` entries by one place, each carried through a register (one load
+//! and one store), never a frame. The walk and the moves index the entries from the array's start
+//! (the execution-time bound then places every access in RAM; `position_of_sample`).
 
 use amiro_can::{CanId, Frame, Kind, Topic};
 
@@ -94,14 +96,18 @@ pub fn swap_with_next<T>(items: &mut [T], i: usize) {
 ///
 /// `N` is at most 256 (a slot number is one byte); a larger `N` does not compile.
 #[derive(Clone)]
+#[repr(C)]
 pub struct TxQueue<const N: usize> {
-    /// The frames, each in its slot from `push` until it leaves; a free slot's contents are stale.
-    slots: [Frame; N],
     /// One entry per slot ([`entry`]); their slot numbers are a permutation of `0..N`.
     /// `entries[..len]` are the queued frames' in reverse leaving order: identifiers descending, and
     /// among equal identifiers the newest first, so the next frame to send is `entries[len - 1]`'s.
     /// `entries[len..]` hold the free slots' numbers (the rest of such an entry is stale).
+    /// First, at the queue's own address (`repr(C)`): the searches and moves then index the queue's
+    /// address itself, which the execution-time bound places in RAM, with no offset for the
+    /// compiler to add to the index first (an address the bound cannot place).
     entries: [u32; N],
+    /// The frames, each in its slot from `push` until it leaves; a free slot's contents are stale.
+    slots: [Frame; N],
     /// Frames queued (at most `N`).
     len: usize,
     counters: TxCounters,
@@ -196,67 +202,90 @@ fn count_at_least<const N: usize>(entries: &[u32], floor: u32) -> usize {
     count
 }
 
-/// The bits of an entry that say which frame of which identifier it is (all but the slot number).
-const SAMPLE_MASK: u32 = !SLOT_MASK;
-
 /// The bits of an entry that say which identifier its frame has (its sort key, [`key_floor`]).
 const ID_MASK: u32 = !(TAG_MASK | SLOT_MASK);
 
-/// Where among `entries`, from their start as far as the first with another identifier than
-/// `key`'s, the entry of the frame `sample` (identifier and tag bits) is, if it is there: a push's
-/// search for an older sample among the frames of its identifier, which start at `entries`' start.
-/// One compare for the frame and one for the end of the identifier's frames per entry.
+/// Where among the queued `entries`, from `from` (where the frames of its identifier start) as far
+/// as the first with another identifier, the entry of the frame `sample` (identifier and tag bits)
+/// is: `Ok` with its place, or `Err` with where its identifier's frames end (the first entry of
+/// another identifier, or the end) when it is not there. A push's search for an older sample
+/// among the frames of its identifier, and a requeue's for a newer one, which also learns its
+/// place from it. One test per entry: the entry's bits above the slot number, against `sample`'s,
+/// are 0 for the frame itself, 1 to 0x1FF for another frame of its identifier (only the tag
+/// differs; bits 17–19 are 0 in every entry) and more for another identifier.
+///
+/// This loop and the two below index `entries` from its start rather than walk a pointer or a
+/// subslice: the execution-time bound then knows every access is into the array's memory (RAM),
+/// where a stepped pointer, which its analysis stops following after a few passes, is charged a
+/// peripheral's bus latency on every load and store (docs/analysis.md, "The cycle model").
 #[inline(never)]
-fn position_of_sample(entries: &[u32], key: u32, sample: u32) -> Option<usize> {
-    for (at, &queued) in entries.iter().enumerate() {
-        if queued & SAMPLE_MASK == sample {
-            return Some(at);
+fn position_of_sample(entries: &[u32], from: usize, sample: u32) -> Result<usize, usize> {
+    let mut at = from;
+    if at >= entries.len() {
+        return Err(at);
+    }
+    // Tested at the bottom, one branch back a pass (`at` is below the length in the body).
+    loop {
+        let Some(&queued) = entries.get(at) else {
+            return Err(at);
+        };
+        let apart = (queued ^ sample) >> TAG_SHIFT;
+        if apart.wrapping_sub(1) >= TAG_MASK >> TAG_SHIFT {
+            return if apart == 0 { Ok(at) } else { Err(at) };
         }
-        if queued & ID_MASK != key {
-            return None;
+        at += 1;
+        if at >= entries.len() {
+            return Err(at);
         }
     }
-    None
 }
 
-/// Whether the frame `sample` (identifier and tag bits) is among `entries`, from their end back as
-/// far as the first with another identifier: a requeue's search for a newer sample among the
-/// frames of its identifier, which end at `entries`' end (they leave after it). The same two
-/// compares per entry as [`position_of_sample`], the other way.
+/// Moves every entry of `entries` from `from` on one place up (towards the end) and puts `new` at
+/// `from`: the last entry, a free slot's whose number `new` carries, is overwritten. Each carried
+/// through a register (a `copy_within` would link `memmove`, whose byte loop the execution-time
+/// bound charges).
 #[inline(never)]
-fn holds_sample_at_end(entries: &[u32], sample: u32) -> bool {
-    let key = sample & ID_MASK;
-    for &queued in entries.iter().rev() {
-        if queued & SAMPLE_MASK == sample {
-            return true;
-        }
-        if queued & ID_MASK != key {
-            return false;
-        }
-    }
-    false
-}
-
-/// Moves every entry of `entries` one place up (towards the end) and puts `new` first: the last
-/// entry, a free slot's whose number `new` carries, is overwritten. Each carried through a register
-/// (a `copy_within` would link `memmove`, whose byte loop the execution-time bound charges). One
-/// entry a pass: unrolled by four it was 32 cycles faster at 16 entries but 60 bytes longer, more
-/// than PowerManagement's flash budget had left.
-#[inline(never)]
-fn carry_up(entries: &mut [u32], new: u32) {
+fn carry_up(entries: &mut [u32], from: usize, new: u32) {
     let mut carried = new;
-    for place in entries {
-        carried = core::mem::replace(place, carried);
+    let mut at = from;
+    if at >= entries.len() {
+        return;
+    }
+    // Tested at the bottom, one branch a pass (`at` is below the length in the body).
+    loop {
+        if let Some(place) = entries.get_mut(at) {
+            carried = core::mem::replace(place, carried);
+        }
+        at += 1;
+        if at >= entries.len() {
+            return;
+        }
     }
 }
 
 /// Moves every entry of `entries` one place down (towards the start) and puts `new` last: the
-/// first entry, the evicted frame's whose slot number `new` carries, is overwritten.
+/// first entry, the evicted frame's whose slot number `new` carries, is overwritten. From the
+/// start, each entry taking the next one's value through two views of the same cells (the one a
+/// word further on), tested at the bottom as [`carry_up`]: a loop down to the start would have the
+/// compiler address the array's start less a word, which the bound cannot place in RAM.
 #[inline(never)]
 fn carry_down(entries: &mut [u32], new: u32) {
-    let mut carried = new;
-    for place in entries.iter_mut().rev() {
-        carried = core::mem::replace(place, carried);
+    let cells = core::cell::Cell::from_mut(entries).as_slice_of_cells();
+    let next = cells.split_first().map_or(cells, |(_, rest)| rest);
+    let mut at = 0;
+    if at < next.len() {
+        loop {
+            if let (Some(place), Some(following)) = (cells.get(at), next.get(at)) {
+                place.set(following.get());
+            }
+            at += 1;
+            if at >= next.len() {
+                break;
+            }
+        }
+    }
+    if let Some(last) = cells.last() {
+        last.set(new);
     }
 }
 
@@ -331,8 +360,8 @@ impl<const N: usize> TxQueue<N> {
         #[allow(clippy::let_unit_value)]
         let () = Self::FITS;
         Self {
-            slots: [Frame::empty(CanId::new(Kind::Command, amiro_can::Priority::Urgent, 0)); N],
             entries: Self::FREE,
+            slots: [Frame::empty(CanId::new(Kind::Command, amiro_can::Priority::Urgent, 0)); N],
             len: 0,
             counters: TxCounters {
                 pushed: 0,
@@ -347,9 +376,8 @@ impl<const N: usize> TxQueue<N> {
 
     /// The queued frames' entries: from the one leaving last to the next one to leave.
     fn queued(&self) -> &[u32] {
-        self.entries.get(..self.len).unwrap_or(&[])
+        self.entries.split_at(self.len.min(N)).0
     }
-
     /// Queues a new frame under the overload policy of this module: the frames with a greater
     /// identifier end at `above` (one binary search) and leave after it, the ones with its identifier
     /// follow, newest first. An older sample is looked for among those (one entry for a topic of one
@@ -361,18 +389,18 @@ impl<const N: usize> TxQueue<N> {
         let key = key_floor(frame.id().raw());
         let sample = key | tag(&frame);
         let above = count_at_least::<N>(self.queued(), key + (1 << KEY_SHIFT));
-        let from_above = self.queued().get(above..).unwrap_or(&[]);
         let older = match Replaces::of(&frame) {
             Replaces::Nothing => None,
             // At most one is queued: the first after `above`, if it has the identifier.
-            Replaces::SameId => from_above
-                .first()
+            Replaces::SameId => self
+                .queued()
+                .get(above)
                 .filter(|&&queued| queued & ID_MASK == key)
-                .map(|_| 0),
-            Replaces::SameIndex => position_of_sample(from_above, key, sample),
+                .map(|_| above),
+            Replaces::SameIndex => position_of_sample(self.queued(), above, sample).ok(),
         };
         match older {
-            Some(found) => self.replace_at(above + found, frame, sample),
+            Some(found) => self.replace_at(found, frame, sample),
             // A full queue's last frame (at 0) leaves after it only with a greater identifier,
             // that is when `above` counted it.
             None => self.insert_or_drop(above, frame, sample, above > 0),
@@ -383,15 +411,13 @@ impl<const N: usize> TxQueue<N> {
     fn replace_at(&mut self, at: usize, frame: Frame, sample: u32) -> PushOutcome {
         let Some(queued) = self.entries.get_mut(at) else {
             // Unreachable: `at` was read. Report it as a drop rather than queue a second sample.
-            self.counters.dropped = self.counters.dropped.saturating_add(1);
-            return PushOutcome::DroppedNew { dropped: frame };
+            return self.refuse(frame);
         };
         let slot = *queued & SLOT_MASK;
         *queued = sample | slot;
         let Some(place) = self.slots.get_mut(slot as usize) else {
             // Unreachable: a slot number is below N.
-            self.counters.dropped = self.counters.dropped.saturating_add(1);
-            return PushOutcome::DroppedNew { dropped: frame };
+            return self.refuse(frame);
         };
         let older = core::mem::replace(place, frame);
         self.counters.replaced = self.counters.replaced.saturating_add(1);
@@ -402,22 +428,38 @@ impl<const N: usize> TxQueue<N> {
     /// back from `transmit`). It was queued before anything now waiting with its identifier, so it
     /// goes ahead of those, at `at`: one binary search counts the frames with its identifier or a
     /// greater one, which leave after it. If a newer sample of its topic is already queued (among
-    /// the last of those), it is discarded instead (counted as replaced). Its own body, not
-    /// [`Self::push`]'s: a requeue needs neither `push`'s second bound (where its equals start)
-    /// nor a count of its equals, and the transmit interrupt's bound charges it per aborted frame
-    /// by its name (the bounds files' `per_frame` `requeue`), so it is not inlined.
+    /// the last of those), it is discarded instead (counted as replaced). For a multi-frame topic
+    /// the search counts only the greater identifiers, where its identifier's frames start, and
+    /// `position_of_sample` walks those forward, as `push`'s does, to the newer sample or to
+    /// where they end, `at` (a walk back from `at` would have the compiler address the array's
+    /// start less a word, which the execution-time bound cannot place in RAM). Its own body, not
+    /// [`Self::push`]'s: the transmit interrupt's bound charges it per aborted frame by its name
+    /// (the bounds files' `per_frame` `requeue`), so it is not inlined.
     #[inline(never)]
     pub fn requeue(&mut self, frame: Frame) -> PushOutcome {
         self.counters.requeued = self.counters.requeued.saturating_add(1);
         let key = key_floor(frame.id().raw());
         let sample = key | tag(&frame);
-        let at = count_at_least::<N>(self.queued(), key);
-        let after = self.queued().get(..at).unwrap_or(&[]);
-        let newer = match Replaces::of(&frame) {
-            Replaces::Nothing => false,
+        let replaces = Replaces::of(&frame);
+        let floor = match replaces {
+            Replaces::SameIndex => key + (1 << KEY_SHIFT),
+            Replaces::Nothing | Replaces::SameId => key,
+        };
+        let counted = count_at_least::<N>(self.queued(), floor);
+        let (newer, at) = match replaces {
+            Replaces::Nothing => (false, counted),
             // At most one is queued: the last before `at`, if it has the identifier.
-            Replaces::SameId => after.last().is_some_and(|&queued| queued & ID_MASK == key),
-            Replaces::SameIndex => holds_sample_at_end(after, sample),
+            Replaces::SameId => {
+                let last = counted
+                    .checked_sub(1)
+                    .and_then(|last| self.queued().get(last));
+                (last.is_some_and(|&queued| queued & ID_MASK == key), counted)
+            }
+            // Its identifier's frames start at `counted`.
+            Replaces::SameIndex => match position_of_sample(self.queued(), counted, sample) {
+                Ok(newer) => (true, newer),
+                Err(end) => (false, end),
+            },
         };
         if newer {
             self.counters.replaced = self.counters.replaced.saturating_add(1);
@@ -448,12 +490,11 @@ impl<const N: usize> TxQueue<N> {
             // the free entry at `len` (`at` <= len: it counted queued frames).
             let len = self.len;
             let free = self.entries.get(len).copied();
-            let (Some(free), Some(moving)) = (free, self.entries.get_mut(at..=len)) else {
+            let (Some(free), Some(moving)) = (free, self.entries.get_mut(..=len)) else {
                 // Unreachable: len < N. Report it as a drop rather than lose it silently.
-                self.counters.dropped = self.counters.dropped.saturating_add(1);
-                return PushOutcome::DroppedNew { dropped: frame };
+                return self.refuse(frame);
             };
-            carry_up(moving, sample | (free & SLOT_MASK));
+            carry_up(moving, at, sample | (free & SLOT_MASK));
             if let Some(slot) = self.slots.get_mut(slot_of(free)) {
                 *slot = frame;
             }
@@ -463,8 +504,7 @@ impl<const N: usize> TxQueue<N> {
         }
         // With N = 0 nothing is queued, so `at` is 0 and nothing is evicted: nowhere to put it.
         if !evict {
-            self.counters.dropped = self.counters.dropped.saturating_add(1);
-            return PushOutcome::DroppedNew { dropped: frame };
+            return self.refuse(frame);
         }
         // The frame leaving last, at 0, gives its slot to the new one, whose entry goes to `at - 1`
         // as the ones from 1 to `at - 1` move down by one (`at` >= 1: the frame at 0 leaves after
@@ -472,19 +512,26 @@ impl<const N: usize> TxQueue<N> {
         let last = self.entries.first().copied();
         let (Some(last), Some(moving)) = (last, self.entries.get_mut(..at)) else {
             // Unreachable: the frame at 0 was just read.
-            self.counters.dropped = self.counters.dropped.saturating_add(1);
-            return PushOutcome::DroppedNew { dropped: frame };
+            return self.refuse(frame);
         };
         carry_down(moving, sample | (last & SLOT_MASK));
         let Some(slot) = self.slots.get_mut(slot_of(last)) else {
             // Unreachable: a slot number is below N.
-            self.counters.dropped = self.counters.dropped.saturating_add(1);
-            return PushOutcome::DroppedNew { dropped: frame };
+            return self.refuse(frame);
         };
         let dropped = core::mem::replace(slot, frame);
         self.counters.dropped = self.counters.dropped.saturating_add(1);
         // No high-water mark to note: the queue was full before, so it is already `N`.
         PushOutcome::DroppedOther { dropped }
+    }
+
+    /// Drops `frame` unqueued, counted: a full queue's frame that would leave last, and the
+    /// unreachable arms where an index was already checked. One body for all of them, out of line.
+    #[cold]
+    #[inline(never)]
+    fn refuse(&mut self, frame: Frame) -> PushOutcome {
+        self.counters.dropped = self.counters.dropped.saturating_add(1);
+        PushOutcome::DroppedNew { dropped: frame }
     }
 
     fn note_high_water(&mut self) {

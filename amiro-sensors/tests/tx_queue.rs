@@ -308,8 +308,11 @@ fn is_same_sample(a: &Frame, b: &Frame) -> bool {
     if a.id() != b.id() || a.id().kind() != Kind::Sensor {
         return false;
     }
-    let ring = a.id().topic_byte() == Topic::ProximityRing.byte();
-    !ring || a.data().first() == b.data().first()
+    // A topic whose sample spans several frames (the proximity ring, the diagnostics topics):
+    // the same first byte, the frame's index.
+    let multi_frame =
+        Topic::from_byte(a.id().topic_byte()).is_some_and(|t| t.frames_per_sample() > 1);
+    !multi_frame || a.data().first() == b.data().first()
 }
 
 impl Model {
@@ -392,6 +395,28 @@ fn arb_op() -> impl Strategy<Value = Op> {
     ]
 }
 
+/// Frames of two multi-frame topics' identifiers (the proximity ring's and a diagnostics topic's)
+/// with up to ten indices and frames without a first byte: long runs of one identifier whose
+/// frames differ in the index alone, which the searches for an older (push) or newer (requeue)
+/// sample walk from where the run starts to where it ends; and a single-frame sensor topic and a
+/// command of the identifiers either side, where the runs end.
+fn arb_run_frame() -> impl Strategy<Value = Frame> {
+    let ids = prop::sample::select(vec![0x71Fu16, 0x71F, 0x71A, 0x71A, 0x720, 0x719, 0x01A]);
+    (ids, 0u8..10, any::<u8>(), 0usize..=8).prop_map(|(id, index, value, len)| {
+        let bytes = [index, value, 0, 0, 0, 0, 0, 0];
+        frame(id, &bytes[..len])
+    })
+}
+
+fn arb_run_op() -> impl Strategy<Value = Op> {
+    prop_oneof![
+        4 => arb_run_frame().prop_map(Op::Push),
+        2 => arb_run_frame().prop_map(Op::Requeue),
+        2 => Just(Op::Pop),
+        1 => (0x700u16..0x720).prop_map(Op::PopIfHigher),
+    ]
+}
+
 fn run_against_model<const N: usize>(ops: &[Op]) -> Result<(), TestCaseError> {
     let mut queue = TxQueue::<N>::new();
     let mut model = Model {
@@ -466,5 +491,17 @@ proptest! {
     #[test]
     fn matches_the_model_with_room_for_one(ops in prop::collection::vec(arb_op(), 0..40)) {
         run_against_model::<1>(&ops)?;
+    }
+
+    // Long runs of one multi-frame identifier: the walk over a run to an older or newer sample
+    // or to its end, with the moves either side of it when the queue is full.
+    #[test]
+    fn matches_the_model_with_long_runs_of_one_identifier(ops in prop::collection::vec(arb_run_op(), 0..200)) {
+        run_against_model::<16>(&ops)?;
+    }
+
+    #[test]
+    fn matches_the_model_with_long_runs_in_room_for_eight(ops in prop::collection::vec(arb_run_op(), 0..120)) {
+        run_against_model::<8>(&ops)?;
     }
 }
