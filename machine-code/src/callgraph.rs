@@ -27,6 +27,17 @@ pub fn is_panic(name: &str) -> bool {
     name.contains("panic") || name.ends_with("_fail") || name.ends_with("_failed")
 }
 
+/// Whether a function is the Rust library's panic machinery: a panic by [`is_panic`]'s names, in `core::`,
+/// `alloc::` or `std::` (`core::panicking::panic_fmt`, `core::option::unwrap_failed`, ...), functions the library
+/// declares `-> !`. The WCET analysis takes these alone by name as never returning; whether any other function
+/// returns it reads from its code (a firmware function named `..._failed` may well return).
+pub fn is_library_panic(name: &str) -> bool {
+    ["core::", "alloc::", "std::"]
+        .iter()
+        .any(|crate_| name.starts_with(crate_))
+        && is_panic(name)
+}
+
 /// What [`admission_panics`] found in one image.
 #[derive(Debug)]
 pub struct PanicPaths {
@@ -151,5 +162,19 @@ mod tests {
         ));
         assert!(is_check("amiro_can::diagnostics::AdmissionVerdict::frames"));
         assert!(!is_check("amiro_firmware::tasks::handle_commands"));
+    }
+
+    #[test]
+    fn only_the_librarys_panics_are_known_by_name_not_to_return() {
+        assert!(is_library_panic("core::panicking::panic_bounds_check"));
+        assert!(is_library_panic("core::option::unwrap_failed"));
+        assert!(is_library_panic("std::panicking::begin_panic"));
+        // The firmware's own `..._failed` functions return (DiWheelDrive's floor and compass steps):
+        // a panic for the admission check's names, not known by name to end the path.
+        assert!(is_panic("amiro_firmware::sensors::floor_failed"));
+        assert!(!is_library_panic("amiro_firmware::sensors::floor_failed"));
+        assert!(!is_library_panic(
+            "core::panicking::panic_const::panic_const_async_fn_resumed"
+        ));
     }
 }

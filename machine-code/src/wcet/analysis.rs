@@ -13,7 +13,7 @@ use super::polled;
 use super::stored;
 use super::values::{self, Context, State, Values, NO_CONTEXT};
 use super::LoopInfo;
-use crate::callgraph::is_panic;
+use crate::callgraph::is_library_panic;
 use crate::decode::{Flow, Insn, Opcode, PC, SP};
 use crate::image::Function;
 use crate::{Error, Image};
@@ -209,7 +209,9 @@ impl<'a> Analysis<'a> {
     }
 
     /// Whether the function at `at` can return: a return or a tail call of a function that can
-    /// is reachable in its graph. A panic cannot; a function being worked out is taken to.
+    /// is reachable in its graph. The library's panics cannot ([`is_library_panic`], declared
+    /// `-> !`); any other function is read from its code, whatever its name says; a function being
+    /// worked out is taken to.
     pub(super) fn can_return(&mut self, at: u64) -> bool {
         if let Some(&known) = self.returns.get(&at) {
             return known;
@@ -217,7 +219,7 @@ impl<'a> Analysis<'a> {
         let Some(f) = self.image.function_at(at) else {
             return true;
         };
-        if is_panic(&f.name) {
+        if is_library_panic(&f.name) {
             self.returns.insert(at, false);
             return false;
         }
@@ -380,8 +382,8 @@ impl<'a> Analysis<'a> {
         };
         match graph.split_irreducible() {
             Ok(split) => Ok(split.unwrap_or(graph)),
-            Err(b) => {
-                let (_, _, text) = place(image, insns[graph.blocks[b].first].addr);
+            Err(first) => {
+                let (_, _, text) = place(image, insns[first].addr);
                 Err(format!(
                     "irreducible control flow in {} at {text}: splitting it into natural loops \
                      would grow the graph more than {}-fold",

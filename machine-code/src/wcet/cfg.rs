@@ -188,7 +188,9 @@ impl Cfg {
                         target: t,
                         tail: false,
                     });
-                    if returns(t) {
+                    // A conditional call (`BL<c>` in an IT block) may be skipped: it goes on
+                    // whether or not its callee returns.
+                    if insn.conditional || returns(t) {
                         fall_through(&mut block);
                     }
                 }
@@ -396,7 +398,10 @@ impl Cfg {
     /// graph is a path of the result (its blocks are copies with the same instructions and edges),
     /// so a bound of the result bounds the graph; its new natural loop has the header's place, where
     /// a bounds file can state its bound (docs/analysis.md, "Async tasks"). `Ok(None)` when the graph
-    /// is reducible; `Err(block)` when splitting would grow it beyond [`MAX_SPLIT_GROWTH`] times.
+    /// is reducible; `Err(first)` when splitting would grow it beyond [`MAX_SPLIT_GROWTH`] times:
+    /// `first`, the instruction the header it came to starts at (an index into the function's
+    /// instructions, as [`Block::first`]: the header may be a copy, a block the graph as given
+    /// does not have).
     pub fn split_irreducible(&self) -> Result<Option<Cfg>, usize> {
         let mut graph = self.clone();
         let limit = self.blocks.len() * MAX_SPLIT_GROWTH;
@@ -407,7 +412,7 @@ impl Cfg {
                 Err(b) => b,
             };
             if graph.blocks.len() > limit {
-                return Err(header);
+                return Err(graph.blocks[header].first);
             }
             graph = graph.split_region(header);
             split = true;
@@ -467,6 +472,29 @@ impl Cfg {
             for e in &self.blocks[b].succs {
                 if !dropped.contains(&e.to) && seen.insert(e.to) {
                     work.push(e.to);
+                }
+            }
+        }
+        seen
+    }
+
+    /// The blocks outside `dropped` from which a path that enters none of `dropped` reaches a block
+    /// where the function may return ([`Block::exit`]).
+    pub fn returning_avoiding(&self, dropped: &BTreeSet<usize>) -> BTreeSet<usize> {
+        let mut preds = vec![Vec::new(); self.blocks.len()];
+        for (b, block) in self.blocks.iter().enumerate() {
+            for e in &block.succs {
+                preds[e.to].push(b);
+            }
+        }
+        let mut seen: BTreeSet<usize> = (0..self.blocks.len())
+            .filter(|b| self.blocks[*b].exit && !dropped.contains(b))
+            .collect();
+        let mut work: Vec<usize> = seen.iter().copied().collect();
+        while let Some(x) = work.pop() {
+            for &p in &preds[x] {
+                if !dropped.contains(&p) && seen.insert(p) {
+                    work.push(p);
                 }
             }
         }

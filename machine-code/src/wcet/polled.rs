@@ -14,8 +14,9 @@
 //! task's own code flows into directly is kept whatever its attribution (code LLVM merged between
 //! two tasks' tails is named after one of them). Without any block of its own in the dispatcher
 //! (no debug information, a poll reached some other way), or with one that only another task's
-//! code leads to (an attribution that does not tell the polls apart), the task is bounded by the
-//! whole dispatcher, as before.
+//! code leads to (an attribution that does not tell the polls apart), or where a block the part
+//! keeps could return only through another task's poll, the task is bounded by the whole
+//! dispatcher, as before.
 use std::collections::BTreeSet;
 
 use super::cfg::{Call, Cfg};
@@ -40,7 +41,7 @@ struct Owners {
 /// The blocks of `graph` (of the dispatcher whose instructions are `insns`) that run another of
 /// `others`' polls and none of `task`'s: what to leave out for `task`'s part. `None` when no block
 /// runs `task`'s poll (nothing to tell its part by), or when leaving them out would leave a block of
-/// `task`'s own unreached.
+/// `task`'s own unreached or a block that had a way to a return without one.
 pub fn others_blocks(
     image: &Image,
     insns: &[Insn],
@@ -97,5 +98,13 @@ pub fn others_blocks(
         .iter()
         .enumerate()
         .all(|(b, o)| !o.own || !before.contains(&b) || after.contains(&b));
-    own_reached.then_some(dropped)
+    // And every block the part keeps that had a way to a return must keep one: the bound charges no
+    // way out of a loop into blocks that cannot return ([`super::path`]), so a way that returned
+    // only through another task's poll would be left out of the part rather than cut off at it.
+    let returned = graph.returning_avoiding(&BTreeSet::new());
+    let returns = graph.returning_avoiding(&dropped);
+    let still_returning = after
+        .iter()
+        .all(|b| !returned.contains(b) || returns.contains(b));
+    (own_reached && still_returning).then_some(dropped)
 }

@@ -2402,3 +2402,69 @@ fn a_per_element_loop_whose_header_does_not_end_it_by_the_length_is_charged_whol
         );
     }
 }
+
+/// `tangle`: four blocks that each branch to every other one (on r1) or return, entered at each (on
+/// r0): one strongly connected region with four ways in, and inside what splitting copies, more
+/// regions with more than one way in — irreducible flow that node splitting would grow past
+/// [`cfg::MAX_SPLIT_GROWTH`] times. Lines 10 (the entry) and 20, 21, 22, 23 (the four blocks).
+fn tangle() -> Image {
+    let code = thumb(&[
+        0x2800, // 0x00 cmp r0, #0
+        0xd004, // 0x02 beq 0x0e
+        0x2801, // 0x04 cmp r0, #1
+        0xd009, // 0x06 beq 0x1c
+        0x2802, // 0x08 cmp r0, #2
+        0xd00e, // 0x0a beq 0x2a
+        0xe014, // 0x0c b 0x38
+        0x2901, // 0x0e cmp r1, #1
+        0xd004, // 0x10 beq 0x1c
+        0x2902, // 0x12 cmp r1, #2
+        0xd009, // 0x14 beq 0x2a
+        0x2903, // 0x16 cmp r1, #3
+        0xd00e, // 0x18 beq 0x38
+        0x4770, // 0x1a bx lr
+        0x2900, // 0x1c cmp r1, #0
+        0xd0f6, // 0x1e beq 0x0e
+        0x2902, // 0x20 cmp r1, #2
+        0xd002, // 0x22 beq 0x2a
+        0x2903, // 0x24 cmp r1, #3
+        0xd007, // 0x26 beq 0x38
+        0x4770, // 0x28 bx lr
+        0x2900, // 0x2a cmp r1, #0
+        0xd0ef, // 0x2c beq 0x0e
+        0x2901, // 0x2e cmp r1, #1
+        0xd0f4, // 0x30 beq 0x1c
+        0x2903, // 0x32 cmp r1, #3
+        0xd000, // 0x34 beq 0x38
+        0x4770, // 0x36 bx lr
+        0x2900, // 0x38 cmp r1, #0
+        0xd0e8, // 0x3a beq 0x0e
+        0x2901, // 0x3c cmp r1, #1
+        0xd0ed, // 0x3e beq 0x1c
+        0x2902, // 0x40 cmp r1, #2
+        0xd0f2, // 0x42 beq 0x2a
+        0x4770, // 0x44 bx lr
+    ]);
+    Image::parse(&crate::testelf::elf_with_lines(
+        &code,
+        &[Sym::function("tangle", 0, 0x46)],
+        "firmware/src/tangle.rs",
+        &[(0, 10), (0x0e, 20), (0x1c, 21), (0x2a, 22), (0x38, 23)],
+    ))
+    .expect("the test image parses")
+}
+
+#[test]
+fn irreducible_flow_too_big_to_split_is_declined_at_its_place() {
+    // The header splitting stops at is a copy, a block the graph as built does not have: named by
+    // its instruction, the bound is declined (it was looked up among the built graph's blocks, a
+    // panic: issue 33, never a panic).
+    let b = bound_function(&tangle(), "tangle", F103_0WS, &BoundsFile::default())
+        .expect("the function is analysed");
+    let reason = b.declined.unwrap_or_default();
+    assert!(
+        reason.starts_with("irreducible control flow in tangle at /work/firmware/src/tangle.rs:2")
+            && reason.ends_with("would grow the graph more than 4-fold"),
+        "{reason}"
+    );
+}

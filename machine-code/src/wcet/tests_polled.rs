@@ -168,3 +168,39 @@ fn a_task_whose_code_only_another_task_reaches_is_bounded_by_the_whole_dispatche
     ];
     assert_eq!(rows(&build(&code, &named))[1], ("fast".into(), 21, 8));
 }
+
+#[test]
+fn a_task_whose_way_returns_only_through_another_tasks_poll_is_bounded_by_the_whole_dispatcher() {
+    // fast's poll either ends at once (`cbz r2`) or runs three moves and branches into slow's poll
+    // (code LLVM shares between the two), past slow's first instruction, and returns through the
+    // rest of it. With slow's blocks left out that way ends nowhere, and fast's part would be its
+    // short way alone: push 3 + cbz 1, cbz 1 + P, cbz 1 + P, pop 6 = 18 cycles, 5 instructions,
+    // where a run of fast's job takes 22 cycles. So fast is bounded by the whole dispatcher, whose
+    // longest path is that run: push 3 + cbz 1, cbz 1, three moves 3 + b 4, slow's rest 1 + 3,
+    // pop 6 = 22 cycles; 2 + 1 + 4 + 1 + 3 + 1 = 12 instructions.
+    let code = [
+        0xb510, // 0x00 push {r4, lr}: 1 + 2
+        0xb120, // 0x02 cbz r0, 0x0e: 1, taken + P (fast not pending)
+        0xb11a, // 0x04 cbz r2, 0x0e: 1, taken + P (fast's poll: done at once)
+        0x2201, // 0x06 movs r2, #1: 1 each
+        0x2202, // 0x08 movs r2, #2
+        0x2203, // 0x0a movs r2, #3
+        0xe001, // 0x0c b 0x12: 1 + P (into slow's poll)
+        0xb121, // 0x0e cbz r1, 0x1a: 1, taken + P (slow not pending)
+        0xe000, // 0x10 b 0x14: 1 + P (slow's poll)
+        0x2301, // 0x12 movs r3, #1: 1 each
+        0x2302, // 0x14 movs r3, #2
+        0x2303, // 0x16 movs r3, #3
+        0x2304, // 0x18 movs r3, #4
+        0xbd10, // 0x1a pop {r4, pc}: 1 + 2 + P
+        0xbf00, // 0x1c
+        0xbf00, // 0x1e
+    ];
+    let inlined = [
+        ("board::app::fast::{{closure}}", 0x04, 0x0e),
+        ("board::app::slow::{{closure}}", 0x10, 0x1a),
+    ];
+    let found = rows(&build(&code, &inlined));
+    assert_eq!(found[0], ("dispatcher".into(), 22, 12));
+    assert_eq!(found[1], ("fast".into(), 22, 12));
+}
