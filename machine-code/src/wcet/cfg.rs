@@ -466,8 +466,17 @@ impl Cfg {
 
     /// The blocks block 0 reaches without entering any block of `dropped`.
     pub fn reached_avoiding(&self, dropped: &BTreeSet<usize>) -> BTreeSet<usize> {
-        let mut seen = BTreeSet::from([0usize]);
-        let mut work = vec![0usize];
+        self.reached_from_avoiding(&BTreeSet::from([0usize]), dropped)
+    }
+
+    /// The blocks of `from` and those they reach without entering any block of `dropped`.
+    pub fn reached_from_avoiding(
+        &self,
+        from: &BTreeSet<usize>,
+        dropped: &BTreeSet<usize>,
+    ) -> BTreeSet<usize> {
+        let mut seen = from.clone();
+        let mut work: Vec<usize> = from.iter().copied().collect();
         while let Some(b) = work.pop() {
             for e in &self.blocks[b].succs {
                 if !dropped.contains(&e.to) && seen.insert(e.to) {

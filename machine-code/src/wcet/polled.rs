@@ -15,8 +15,8 @@
 //! two tasks' tails is named after one of them). Without any block of its own in the dispatcher
 //! (no debug information, a poll reached some other way), or with one that only another task's
 //! code leads to (an attribution that does not tell the polls apart), or where a block the part
-//! keeps could return only through another task's poll, the task is bounded by the whole
-//! dispatcher, as before.
+//! keeps on the way on from this task's own code could return only through another task's poll,
+//! the task is bounded by the whole dispatcher, as before.
 use std::collections::BTreeSet;
 
 use super::cfg::{Call, Cfg};
@@ -41,7 +41,8 @@ struct Owners {
 /// The blocks of `graph` (of the dispatcher whose instructions are `insns`) that run another of
 /// `others`' polls and none of `task`'s: what to leave out for `task`'s part. `None` when no block
 /// runs `task`'s poll (nothing to tell its part by), or when leaving them out would leave a block of
-/// `task`'s own unreached or a block that had a way to a return without one.
+/// `task`'s own unreached, or a block that `task`'s own code leads to and that had a way to a return
+/// without one.
 pub fn others_blocks(
     image: &Image,
     insns: &[Insn],
@@ -98,12 +99,19 @@ pub fn others_blocks(
         .iter()
         .enumerate()
         .all(|(b, o)| !o.own || !before.contains(&b) || after.contains(&b));
-    // And every block the part keeps that had a way to a return must keep one: the bound charges no
-    // way out of a loop into blocks that cannot return ([`super::path`]), so a way that returned
-    // only through another task's poll would be left out of the part rather than cut off at it.
+    // And every block the part keeps on the way on from this task's own code that had a way to a
+    // return must keep one: the bound charges no way into blocks that cannot return
+    // ([`super::path`]), so a way of this task's job that returned only through code named another
+    // task's (code LLVM shares between two polls) would be left out of the part rather than cut off
+    // at it. A kept block that this task's code does not lead to and that returned only through
+    // another task's poll (the executor's code between that task's pending check and its poll) is
+    // on that task's way, charged in its part: a job of this task that runs it runs that task's
+    // poll before its own, and this task's part takes the pending check's other way past them.
+    let own: BTreeSet<usize> = after.iter().copied().filter(|&b| owners[b].own).collect();
+    let on_from_own = graph.reached_from_avoiding(&own, &dropped);
     let returned = graph.returning_avoiding(&BTreeSet::new());
     let returns = graph.returning_avoiding(&dropped);
-    let still_returning = after
+    let still_returning = on_from_own
         .iter()
         .all(|b| !returned.contains(b) || returns.contains(b));
     (own_reached && still_returning).then_some(dropped)

@@ -204,3 +204,45 @@ fn a_task_whose_way_returns_only_through_another_tasks_poll_is_bounded_by_the_wh
     assert_eq!(found[0], ("dispatcher".into(), 22, 12));
     assert_eq!(found[1], ("fast".into(), 22, 12));
 }
+
+#[test]
+fn executor_code_that_goes_on_only_into_another_tasks_poll_stays_in_that_tasks_part() {
+    // fast's pending check falls through into the executor's code ahead of fast's poll (a move and
+    // a branch into the poll, named no task's), which goes on only through fast's poll; then slow's
+    // check and poll. With fast's poll left out of slow's part that code ends nowhere, but slow's
+    // own code does not lead to it: a job of slow that runs it runs fast's poll first, a job of
+    // fast's, and slow's part takes fast's check past both.
+    let code = [
+        0xb510, // 0x00 push {r4, lr}: 1 + 2
+        0xb120, // 0x02 cbz r0, 0x0e: 1, taken + P (fast not pending)
+        0x2200, // 0x04 movs r2, #0: 1 (the executor's code ahead of fast's poll)
+        0xe7ff, // 0x06 b 0x08: 1 + P (into fast's poll)
+        0x2201, // 0x08 movs r2, #1: fast's poll, 1 each
+        0x2202, // 0x0a movs r2, #2
+        0x2203, // 0x0c movs r2, #3
+        0xb119, // 0x0e cbz r1, 0x18: 1, taken + P (slow not pending)
+        0x2301, // 0x10 movs r3, #1: slow's poll, 1 each
+        0x2302, // 0x12 movs r3, #2
+        0x2303, // 0x14 movs r3, #3
+        0x2304, // 0x16 movs r3, #4
+        0xbd10, // 0x18 pop {r4, pc}: 1 + 2 + P
+        0xbf00, // 0x1a
+        0xbf00, // 0x1c
+        0xbf00, // 0x1e
+    ];
+    let inlined = [
+        ("board::app::fast::{{closure}}", 0x08, 0x0e),
+        ("board::app::slow::{{closure}}", 0x10, 0x18),
+    ];
+    let found = rows(&build(&code, &inlined));
+    // The whole dispatcher, both pending: push 3 + cbz 1, move 1 + b 4, fast 3, cbz 1, slow 4,
+    // pop 6 = 23 cycles; 1 + 1 + 1 + 1 + 3 + 1 + 4 + 1 = 13 instructions.
+    assert_eq!(found[0], ("dispatcher".into(), 23, 13));
+    // fast's job: its way in and poll, slow's check taken (1 + P): 3 + 1 + 5 + 3 + 4 + 6 = 22
+    // cycles; 1 + 1 + 2 + 3 + 1 + 1 = 9 instructions.
+    assert_eq!(found[1], ("fast".into(), 22, 9));
+    // slow's job: fast's check taken (1 + P) past the executor's code and fast's poll, then slow's
+    // poll: 3 + 4 + 1 + 4 + 6 = 18 cycles; 1 + 1 + 1 + 4 + 1 = 8 instructions. A run polling both
+    // (23 cycles) is two jobs, charged 22 + 18.
+    assert_eq!(found[2], ("slow".into(), 18, 8));
+}
