@@ -103,8 +103,9 @@ impl<R: Registers> Master<R> {
         for _ in 0..POLLS {
             let sr = self.register(SR);
             if sr & SR_MODF != 0 {
-                // Reading SR then writing CR1 clears MODF; SPE must be set again.
-                self.set_register(CR1, self.register(CR1) | CR1_SPE);
+                // Reading SR then writing CR1 clears MODF; the fault cleared MSTR and SPE
+                // (RM0008 §25.3.10): both are set again.
+                self.set_register(CR1, self.register(CR1) | CR1_MSTR | CR1_SPE);
                 return Err(Error::ModeFault);
             }
             if sr & SR_OVR != 0 {
@@ -207,7 +208,7 @@ impl<R: Registers> Master<R> {
         for _ in 0..POLLS {
             let sr = self.register(SR);
             if sr & SR_MODF != 0 {
-                self.set_register(CR1, self.register(CR1) | CR1_SPE);
+                self.set_register(CR1, self.register(CR1) | CR1_MSTR | CR1_SPE);
                 return Err(Error::ModeFault);
             }
             let done = if until_idle {
@@ -378,7 +379,7 @@ impl<R: Registers> Master<R> {
         for _ in 0..POLLS {
             let sr = self.register(SR);
             if sr & SR_MODF != 0 {
-                self.set_register(CR1, self.register(CR1) | CR1_SPE);
+                self.set_register(CR1, self.register(CR1) | CR1_MSTR | CR1_SPE);
                 return Err(Error::ModeFault);
             }
             if sr & SR_OVR != 0 {

@@ -22,6 +22,8 @@ struct Block {
     overrun: Cell<bool>,
     sr_reads: Cell<u32>,
     frames16: Cell<u32>,
+    /// A mode fault pending: the hardware cleared MSTR and SPE and shows MODF until CR1 is written.
+    mode_fault: Cell<bool>,
 }
 
 impl Registers for &Block {
@@ -39,6 +41,9 @@ impl Registers for &Block {
                 if self.overrun.get() {
                     sr |= 1 << 6;
                 }
+                if self.mode_fault.get() {
+                    sr |= 1 << 5;
+                }
                 sr
             }
             DR => {
@@ -52,7 +57,10 @@ impl Registers for &Block {
 
     fn write(&self, offset: usize, value: u32) {
         match offset {
-            CR1 => self.cr1.set(value),
+            CR1 => {
+                self.mode_fault.set(false);
+                self.cr1.set(value);
+            }
             // A 16-bit frame (CR1 DFF) is recorded as its two bytes, the high one first (MSB
             // first on the wire).
             DR if !self.dead && self.cr1.get() & 1 << 11 != 0 => {
@@ -158,6 +166,19 @@ fn an_overrun_is_reported_and_cleared() {
     assert!(!block.overrun.get(), "reading DR then SR cleared it");
     assert_eq!(bus.write(&[1]), Ok(()));
     let _ = spi::SPI1;
+}
+
+#[test]
+fn a_mode_fault_leaves_the_block_a_master_again() {
+    let block = Block::default();
+    let mut bus = Master::new(&block, 36_000_000, 9_000_000, MODE_0);
+    let set_up = block.cr1.get();
+    // The fault clears MSTR and SPE (RM0008 §25.3.10).
+    block.cr1.set(set_up & !(1 << 2 | 1 << 6));
+    block.mode_fault.set(true);
+    assert_eq!(bus.write(&[1]), Err(Error::ModeFault));
+    assert_eq!(block.cr1.get(), set_up, "MSTR and SPE set again");
+    assert_eq!(bus.write(&[2]), Ok(()));
 }
 
 /// A chip-select pin that records every level it is driven to.
