@@ -172,8 +172,9 @@ pub fn analyse<J: Jobs, B: JobBounds>(
     Ok(pass.outcome)
 }
 
-/// The jitter job `p` inherits from its releasers' current bounds, or why it has none.
-#[inline(always)]
+/// The jitter job `p` inherits from its releasers' current bounds, or why it has none. Out of line: its three
+/// callers share one copy (the chip's flash).
+#[inline(never)]
 fn inherited<J: Jobs, B: JobBounds>(
     meta: &J,
     bounds: &B,
