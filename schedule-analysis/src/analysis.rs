@@ -411,7 +411,7 @@ fn analyse_on_with_progress(
         .iter()
         .map(|b| {
             progress(&format!("board {} ({} tasks)", b.name, b.tasks.len()));
-            analyse_board(b, &limits)
+            analyse_board_on(b, &limits, transmit)
         })
         .collect();
     let bus = system.bus.as_ref().map(|bus| {
@@ -454,6 +454,16 @@ fn default_horizon(system: &System) -> Time {
 /// Analyses one board on its own: the model's tasks with their overheads, SRP blockings and release chains, by
 /// [`board_analysis::analyse`] (the analysis the boards' admission check runs), every task's whole record kept.
 pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
+    analyse_board_on(board, limits, TransmitPath::Uncharged)
+}
+
+/// [`analyse_board`] with its transmit jobs on `transmit`: on [`TransmitPath::Sound`] each takes its board's
+/// transmit-interrupt response into its release jitter beside its releaser's ([`board_analysis::Release::also`]).
+pub fn analyse_board_on(
+    board: &BoardSystem,
+    limits: &Limits,
+    transmit: TransmitPath,
+) -> BoardResult {
     let costs: Vec<Time> = board
         .tasks
         .iter()
@@ -462,10 +472,10 @@ pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
     let blocking = task_blockings(board);
     // A board without scripts is analysed exactly as before the sensor buses existed.
     let (bounds, jitter, sensor_buses) = if board.sensor_buses.scripts.is_empty() {
-        let (bounds, jitter) = task_bounds(board, &costs, &blocking, limits);
+        let (bounds, jitter) = task_bounds(board, &costs, &blocking, limits, transmit);
         (bounds, jitter, Vec::new())
     } else {
-        crate::sensor_bus::analyse(board, &costs, &blocking, limits)
+        crate::sensor_bus::analyse(board, &costs, &blocking, limits, transmit)
     };
     let utilisation = board
         .tasks
@@ -629,18 +639,25 @@ impl board_analysis::JobBounds for Records {
 }
 
 /// The tasks of [`SortedTasks`] with some releases cut (a view of the sensor buses' rounds sets those jobs'
-/// jitters itself).
+/// jitters itself). A cut job with a second releaser (a transmit job's transmit interrupt) keeps that one, on the
+/// jitter the view set (`cut_jitters`): the view sets what its first releaser adds, never the transmit response.
 struct CutReleases<'a> {
     sorted: &'a SortedTasks,
     unreleased: &'a [bool],
+    cut_jitters: &'a [Time],
 }
 
 impl board_analysis::Jobs for CutReleases<'_> {
     fn release(&self, p: usize) -> Option<board_analysis::Release> {
-        if self.unreleased.get(p).copied().unwrap_or(false) {
-            return None;
+        let release = self.sorted.release(p)?;
+        if !self.unreleased.get(p).copied().unwrap_or(false) {
+            return Some(release);
         }
-        self.sorted.release(p)
+        Some(board_analysis::Release {
+            by: release.also?,
+            also: None,
+            own_jitter: self.cut_jitters.get(p).copied().unwrap_or(Time::ZERO),
+        })
     }
     fn level_end(&self, p: usize) -> usize {
         self.sorted.level_end(p)
@@ -670,13 +687,18 @@ pub(crate) fn view_bounds(
         ));
         n
     ]);
+    let cut_jitters: Vec<Time> = timings.iter().map(|t| t.jitter).collect();
     let jobs = board_analysis::BoardJobs {
         timings,
         blocking,
         shares,
         scratch: &mut scratch,
     };
-    let cut = CutReleases { sorted, unreleased };
+    let cut = CutReleases {
+        sorted,
+        unreleased,
+        cut_jitters: &cut_jitters,
+    };
     // Per job, never out of a board's budget.
     let _ = board_analysis::analyse(
         jobs,
@@ -727,10 +749,12 @@ fn task_bounds(
     costs: &[Time],
     blocking: &[Time],
     limits: &Limits,
+    transmit: TransmitPath,
 ) -> (Vec<Bound>, Vec<Time>) {
     let jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
     let releases: Vec<Option<usize>> = board.tasks.iter().map(|t| t.released_by).collect();
-    task_bounds_in(board, costs, blocking, &jitters, &releases, limits)
+    let sorted = sort_tasks(board, &jitters, &releases, transmit);
+    task_bounds_in(board, costs, blocking, &jitters, &releases, &sorted, limits)
 }
 
 /// [`task_bounds`] with each task's own release jitter and releaser given (model order).
@@ -740,10 +764,10 @@ fn task_bounds_in(
     blocking: &[Time],
     jitters: &[Time],
     releases: &[Option<usize>],
+    sorted: &SortedTasks,
     limits: &Limits,
 ) -> (Vec<Bound>, Vec<Time>) {
     let n = board.tasks.len();
-    let sorted = sort_tasks(board, jitters, releases);
     let mut timings: Vec<TaskTiming> = sorted
         .order
         .iter()
@@ -779,7 +803,7 @@ fn task_bounds_in(
     // Per job, never out of a board's budget.
     let _ = board_analysis::analyse(
         jobs,
-        &sorted,
+        sorted,
         &mut records,
         limits,
         board_analysis::IterationBudget::PerJob,
@@ -820,6 +844,7 @@ pub(crate) fn sort_tasks(
     board: &BoardSystem,
     jitters: &[Time],
     releases: &[Option<usize>],
+    path: TransmitPath,
 ) -> SortedTasks {
     let n = board.tasks.len();
     let priority = |i: usize| board.tasks.get(i).map_or(0, |t| t.priority);
@@ -831,12 +856,21 @@ pub(crate) fn sort_tasks(
             *slot = p;
         }
     }
+    // On the sound transmit path a transmit job (a released job of the transmit interrupt) has the transmit
+    // interrupt as its second releaser: the abort its frames cause is asked in one of its jobs.
+    let second = |i: usize| match (path, board.can_tx_task) {
+        (TransmitPath::Sound, Some(tx)) if tx != i && board.is_transmit(i) => {
+            Some(position.get(tx).copied().unwrap_or(usize::MAX))
+        }
+        _ => None,
+    };
     let release = order
         .iter()
         .map(|&i| {
             let r = releases.get(i).copied().flatten()?;
             Some(board_analysis::Release {
                 by: position.get(r).copied().unwrap_or(usize::MAX),
+                also: second(i),
                 own_jitter: jitters.get(i).copied().unwrap_or(Time::ZERO),
             })
         })

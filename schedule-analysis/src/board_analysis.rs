@@ -41,7 +41,11 @@ pub trait Jobs {
 pub struct Release {
     /// The sorted position of the job whose completion releases it.
     pub by: usize,
-    /// Its release jitter of its own, to which the releaser's response is added.
+    /// The sorted position of a second job whose response adds to its release jitter: a transmit job's transmit
+    /// interrupt, in one of whose jobs the mailbox abort its frames cause is asked, within that job's response
+    /// after the pend (docs/analysis.md, "The sound transmit path: the design"). `None`: no second one.
+    pub also: Option<usize>,
+    /// Its release jitter of its own, to which the releasers' responses are added.
     pub own_jitter: Time,
 }
 
@@ -118,7 +122,9 @@ pub struct OutOfIterations;
 /// it releases (the boards' timer jobs and interrupts), a job's jitter is set as its level is entered, from its
 /// releaser's final bound, so one pass reaches the fixed point the round-by-round iteration reaches (it is
 /// unique: the releases form a chain from more to less urgent) and a second confirms it; otherwise jitters change
-/// only between rounds.
+/// only between rounds. A second releaser ([`Release::also`]: a transmit job's transmit interrupt, at the job's own
+/// priority) is read as its level is entered from the round before, so its response, which the job's jitter grows,
+/// reaches its fixed point over the rounds (the least one: every round's jitters are at most the fixed point's).
 pub fn analyse<J: Jobs, B: JobBounds>(
     jobs: BoardJobs<'_>,
     meta: &J,
@@ -166,17 +172,26 @@ pub fn analyse<J: Jobs, B: JobBounds>(
     Ok(pass.outcome)
 }
 
-/// The jitter job `p` inherits from its releaser's current bound, or why it has none.
-#[inline(always)]
+/// The jitter job `p` inherits from its releasers' current bounds, or why it has none. Out of line: its three
+/// callers share one copy (the chip's flash).
+#[inline(never)]
 fn inherited<J: Jobs, B: JobBounds>(
     meta: &J,
     bounds: &B,
     p: usize,
 ) -> Option<Result<Time, Unbound>> {
     let release = meta.release(p)?;
-    Some(match bounds.wcrt(release.by) {
-        None => Err(Unbound::Releaser),
-        Some(r) => release.own_jitter.checked_plus(r).ok_or(Unbound::Overflow),
+    let second = match release.also {
+        None => Some(Time::ZERO),
+        Some(also) => bounds.wcrt(also),
+    };
+    Some(match (bounds.wcrt(release.by), second) {
+        (Some(r), Some(s)) => release
+            .own_jitter
+            .checked_plus(r)
+            .and_then(|j| j.checked_plus(s))
+            .ok_or(Unbound::Overflow),
+        _ => Err(Unbound::Releaser),
     })
 }
 

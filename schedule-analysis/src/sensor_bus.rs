@@ -986,13 +986,14 @@ pub(crate) fn analyse(
     costs: &[Time],
     blocking: &[Time],
     limits: &Limits,
+    transmit: analysis::TransmitPath,
 ) -> (Vec<Bound>, Vec<Time>, Vec<SensorBusResult>) {
     let n = board.tasks.len();
     let buses = &board.sensor_buses.buses;
     let scripts = &board.sensor_buses.scripts;
     let own_jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
     let releases: Vec<Option<usize>> = board.tasks.iter().map(|t| t.released_by).collect();
-    let sorted = analysis::sort_tasks(board, &own_jitters, &releases);
+    let sorted = analysis::sort_tasks(board, &own_jitters, &releases, transmit);
     let mut position = vec![usize::MAX; n];
     for (p, &i) in sorted.order.iter().enumerate() {
         if let Some(slot) = position.get_mut(i) {

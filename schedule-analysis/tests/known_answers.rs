@@ -1095,8 +1095,8 @@ fn only_board_task<'a>(report: &'a analysis::Analysis, name: &str) -> &'a analys
 ///   the three mailboxes full of less urgent frames, the least urgent on the bus: a second transmit response after
 ///   that frame's end — and the longest frame started in it): 130 + 135 + 300 = 565, delivered by 615 µs.
 ///
-/// The sound model is the host's line (`abort_refill::analyse`); the verdict's, the uncharged one, gives the
-/// figures without it.
+/// The sound model is [`analysis::TransmitPath::Sound`] (the transmit job's second releaser its transmit interrupt,
+/// `board_analysis::Release::also`); the uncharged one gives the figures without it.
 #[test]
 fn a_frame_needing_a_mailbox_abort_takes_a_second_transmit_response_and_the_aborted_frame() {
     let model = serde_json::json!({
@@ -1147,8 +1147,7 @@ fn a_frame_needing_a_mailbox_abort_takes_a_second_transmit_response_and_the_abor
             data.wcrt().map(|w| w.as_us_f64()),
         )
     };
-    let charged =
-        schedule_analysis::abort_refill::analyse(&system, &options).expect("a fixed point");
+    let charged = analysis::analyse_on(&system, &options, analysis::TransmitPath::Sound);
     assert_eq!(figures(&charged), (585.0, Some(615.0), 130.0, Some(615.0)));
     // The uncharged model (the verdict's and the boards'): the transmit job without the transmit response, the
     // frame without the refill.
@@ -1159,7 +1158,8 @@ fn a_frame_needing_a_mailbox_abort_takes_a_second_transmit_response_and_the_abor
     );
 }
 
-/// The sound model's rounds where the transmit interrupt's response grows with them (`abort_refill::analyse`),
+/// The sound model's release-jitter rounds where the transmit interrupt's response grows with them (the transmit
+/// job's second releaser, `board_analysis::Release::also`, at its own level),
 /// worked by hand at 1 Mbit/s, `exact`. One board: `can_tx` (priority 5, 10 µs, at least 71 µs apart), its job
 /// `can_tx[data]` (priority 5, 200 µs, released by the publisher with `can::transmit_abort_latency` = 405 µs of its
 /// own), the publisher (priority 9, 100 µs, best 50 µs, every 1 ms); its frame `data` (8 bytes, 135 µs) alone on
@@ -1212,8 +1212,7 @@ fn the_charged_rounds_grow_the_transmit_response_to_its_fixed_point() {
         figures(&analysis::analyse(&system, &options)),
         (Some(310.0), 505.0, 360.0, Some(545.0))
     );
-    let charged =
-        schedule_analysis::abort_refill::analyse(&system, &options).expect("a fixed point");
+    let charged = analysis::analyse_on(&system, &options, analysis::TransmitPath::Sound);
     assert_eq!(
         figures(&charged),
         (Some(510.0), 1015.0, 560.0, Some(1525.0))

@@ -665,6 +665,7 @@ impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
         let meta = self.metas.get(p)?;
         (meta.released_by != NO_JOB).then_some(board_analysis::Release {
             by: usize::from(meta.released_by),
+            also: None,
             own_jitter: meta.own_jitter,
         })
     }
