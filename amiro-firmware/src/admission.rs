@@ -690,6 +690,26 @@ impl BusyWindow {
         requests.set_aside(frame)
     }
 
+    /// The admission task's side, when a decision answered with a verdict at `now_ms`: the window starts
+    /// again, so a busy verdict waits for it as for another busy verdict.
+    #[inline(always)]
+    pub fn stamp(&self, now_ms: u32) {
+        self.sent.store(now_ms.max(1), Ordering::Relaxed);
+    }
+
+    /// The admission task's side, before a decision (which may answer with a verdict): the instant (µs, of
+    /// the clock that read `now_us`) at which the window since the last verdict, a busy one or a decision's,
+    /// ends; `None` when it has ended. A decision starts only then, so every verdict the task sends is at
+    /// least the window after the one before (`can_tx[admit_requests]`'s rate).
+    #[inline(always)]
+    pub fn open_until(&self, now_us: u64) -> Option<u64> {
+        let sent = self.sent.load(Ordering::Relaxed);
+        let now_ms = ticks_1024us(now_us);
+        let gone = now_ms.wrapping_sub(sent);
+        let window = u32::from(ONE_SHOT_INTERVAL_MS);
+        (sent != 0 && gone < window).then(|| ((now_us >> 10) + u64::from(window - gone)) << 10)
+    }
+
     /// The admission task's side: the request set aside, if any, taken for its verdict, the window
     /// started at `now_ms()` first. In that order: a refusal that comes between the two (the handler
     /// pre-empts the admission task) finds the window begun or the frame still aside, never the slot
@@ -891,6 +911,40 @@ mod tests {
         assert!(window.take(&mut rx, || u32::MAX - 10).is_some());
         assert!(!refuse(&window, &mut tx, 28));
         assert!(refuse(&window, &mut tx, 29));
+    }
+
+    #[test]
+    fn a_decisions_verdict_opens_the_window_for_busy_verdicts_and_decisions_alike() {
+        // SAFETY: this test's queue, split once, used on this thread only.
+        let queue = Box::leak(Box::new(unsafe { crate::rx_queue::FrameQueue::<4>::new() }));
+        let (mut tx, mut rx) = unsafe { queue.split() };
+        let window = BusyWindow::new();
+        // Nothing sent yet: a decision starts at once.
+        assert_eq!(window.open_until(5_000), None);
+        // A decision answered with a verdict at 10 240 µs (tick 10): a busy refusal within the next 40
+        // ticks is counted only, and the next decision waits until tick 50 (51 200 µs).
+        window.stamp(ticks_1024us(10_240));
+        assert!(!refuse(&window, &mut tx, 49));
+        assert_eq!(window.open_until(10_240), Some(51_200));
+        assert_eq!(window.open_until(51_199), Some(51_200));
+        assert_eq!(window.open_until(51_200), None);
+        // A verdict at the instant the window ends is at least 39 937 µs after the one before, whatever
+        // the times within their ticks: the analysis charges one per 39 936 µs.
+        for sent_us in [10_240, 11_263] {
+            window.stamp(ticks_1024us(sent_us));
+            let next = window.open_until(sent_us).unwrap_or(0);
+            assert!(next - sent_us >= 39_937, "{sent_us} → {next}");
+            assert_eq!(window.open_until(next), None);
+        }
+        // A busy verdict sent while a decision waits moves the decision's instant on.
+        assert!(refuse(&window, &mut tx, 51));
+        assert!(window.take(&mut rx, || 60).is_some());
+        assert_eq!(window.open_until(61_440), Some(100 * 1024));
+        // Across the 32-bit wrap of the ticks.
+        window.stamp(u32::MAX - 10);
+        let now_us = u64::from(u32::MAX - 10) << 10;
+        assert_eq!(window.open_until(now_us), Some(now_us + 40 * 1024));
+        assert_eq!(window.open_until(now_us + 40 * 1024), None);
     }
 
     #[test]

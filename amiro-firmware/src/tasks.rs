@@ -318,6 +318,14 @@ pub async fn serve_admission<
         // A request whose period moves the analysis horizon changes every board's key: the other boards are
         // analysed first, one per step, so that the decision analyses only its own board and the bus.
         refresh_steps::<C, N, M, K, Q, R>(admission, pacing, Some(&frame), false, &mut waits).await;
+        // The decision may answer with a verdict: it starts once the window since the last verdict (a busy one
+        // or a decision's) has ended, again if a busy verdict went out meanwhile, so the verdicts on the bus are
+        // at least the window apart, the rate `can_tx[admit_requests]` is charged at; a burst of accepted
+        // requests is still decided back to back.
+        while let Some(until) = BUSY_VERDICTS.open_until(C::now_us()) {
+            let delay = core::pin::pin!(C::delay_until_us(until));
+            parked(waits.until(delay)).await;
+        }
         let started = C::now_us();
         handle_command_admitted::<C, N, M, Q>(
             &frame,
@@ -572,6 +580,9 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
         }
     };
     let now = C::now_us();
+    // The busy verdicts' window starts again: every verdict the admission task sends, a decision's or a
+    // busy one, is at least the window after the one before ([`serve_admission`] waits for it).
+    BUSY_VERDICTS.stamp(crate::admission::ticks_1024us(now));
     for verdict_frame in verdict {
         let pushed = tx_queue.lock(|q| enqueue(q, verdict_frame));
         crate::tracing::frame_pushed(now, verdict_frame.id().raw(), &pushed);

@@ -610,6 +610,7 @@ fn run_scenarios(root: &Path, builds: &[revision::Build], extra: &[&str]) -> Res
                 ram_high_water = ram_high_water.max(static_ram + stack);
                 // The analysed bounds of this run: its received frames as its stimulus replays them.
                 let bounds = bounds.for_run(&std::fs::read(work.join("stimulus.bin"))?)?;
+                scenarios::verdicts_spaced(&out, board.name)?;
                 (scenario.check)(&out, &bounds)
             })();
             match result {

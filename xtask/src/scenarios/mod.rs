@@ -760,6 +760,41 @@ pub fn ring_refused_for_odometry(out: &RunOutput) -> Result<amiro_can::Admission
     Ok(v)
 }
 
+/// The shortest time between two admission verdicts of one board the analysis charges
+/// (`can_tx[admit_requests]`'s `at_least_us` in the timing files): the admission task sends every
+/// verdict, a decision's or a busy one, at least 40 × 1024 µs after the one before
+/// (`amiro_firmware::admission::BusyWindow`).
+pub const VERDICT_SPACING_US: u64 = 39_936;
+
+/// Checks that `board` (a board folder's name) sent its admission verdicts at least
+/// [`VERDICT_SPACING_US`] apart (each verdict's second frame; frames are sent in the order queued, and a
+/// verdict's two go out back to back, so its first frame is within the same spacing); every scenario's
+/// run is held to it.
+pub fn verdicts_spaced(out: &RunOutput, board: &str) -> Result<()> {
+    let board = match board {
+        "diwheeldrive" => amiro_can::Board::DiWheelDrive,
+        "powermgmt" => amiro_can::Board::PowerManagement,
+        "lightring" => amiro_can::Board::LightRing,
+        other => bail!("no CAN board for `{other}`"),
+    };
+    let times: Vec<u64> = admission_verdicts(out, board)
+        .into_iter()
+        .map(|(t, _)| t)
+        .collect();
+    if let Some(w) = times
+        .windows(2)
+        .find(|w| w[1].saturating_sub(w[0]) < VERDICT_SPACING_US)
+    {
+        bail!(
+            "two admission verdicts {} µs apart (at {} and {} µs), closer than the {VERDICT_SPACING_US} µs the analysis charges",
+            w[1] - w[0],
+            w[0],
+            w[1]
+        );
+    }
+    Ok(())
+}
+
 /// The admission verdicts `board` sent (pages 0x80 + 0x81 on its diagnostics topic), joined, with
 /// the time of the second frame.
 pub fn admission_verdicts(
