@@ -873,6 +873,10 @@ pub fn run_all_with(root: &Path, extra: &[&str]) -> Result<()> {
             let duration =
                 duration.with_context(|| format!("{}: no `# duration:`", path.display()))?;
             let (run, report) = run_and_report(&firmware, &actions, duration, &work)?;
+            // Each board's admission verdicts at the rate the analysis charges them.
+            for (board, name) in NODES.iter().enumerate().take(3) {
+                crate::scenarios::verdicts_spaced(&run.view(board), name)?;
+            }
             let summary = (scenario.check)(&run)?;
             if scenario.bus_bounds {
                 within_davis(&report)?;
