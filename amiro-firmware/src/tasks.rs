@@ -335,6 +335,12 @@ pub async fn serve_admission<
             waits.tx_interrupt,
             wake_levels,
         );
+        if BUSY_VERDICTS.open_until(C::now_us()).is_some() {
+            // The decision sent a verdict (the window was closed when it started): a request the handler set
+            // aside meanwhile, before the window began again, is counted, not answered — its verdict would
+            // follow this one within the window, as every refusal within it is.
+            let _ = waits.requests.take_aside_after(|| ());
+        }
         let next = pacing.next_start(
             started,
             C::now_us(),
@@ -461,6 +467,8 @@ where
         }
         if let Some(verdict) = crate::admission::busy_verdict(self.board, frame.id, frame.payload())
         {
+            #[cfg(feature = "qemu")]
+            note_verdict(C::now_us());
             // Not traced as queued frames: no sample was released for them (the bench would take them for
             // late samples of the diagnostics topic). One lock per frame: the transmit task waits for one
             // frame's insertion at most.
@@ -583,6 +591,8 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     // The busy verdicts' window starts again: every verdict the admission task sends, a decision's or a
     // busy one, is at least the window after the one before ([`serve_admission`] waits for it).
     BUSY_VERDICTS.stamp(crate::admission::ticks_1024us(now));
+    #[cfg(feature = "qemu")]
+    note_verdict(now);
     for verdict_frame in verdict {
         let pushed = tx_queue.lock(|q| enqueue(q, verdict_frame));
         crate::tracing::frame_pushed(now, verdict_frame.id().raw(), &pushed);
@@ -624,6 +634,19 @@ fn note_decision<C: Clock, const N: usize, const M: usize>(
             telemetry::decimal(u32::try_from(last).unwrap_or(u32::MAX), &mut b),
             " virtual_us=",
             telemetry::decimal(u32::try_from(took).unwrap_or(u32::MAX), &mut c)
+        );
+    });
+}
+
+/// QEMU: when a verdict (a decision's or a busy one) is queued, which the scenarios hold to the spacing the
+/// analysis charges (`xtask`'s `scenarios::verdicts_spaced`; the frames' completions bunch on a flooded bus).
+#[cfg(feature = "qemu")]
+fn note_verdict(now_us: u64) {
+    let mut a = [0u8; 10];
+    cortex_m::interrupt::free(|_| {
+        crate::log!(
+            "verdict queued at_us=",
+            telemetry::decimal(u32::try_from(now_us).unwrap_or(u32::MAX), &mut a)
         );
     });
 }

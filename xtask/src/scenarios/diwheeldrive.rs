@@ -440,7 +440,7 @@ fn admission_warn(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
             "a refusal whose bound holds: {v}"
         );
         ensure!(
-            *at < 70_000 + 5_000 || topic == Topic::MagnetometerX,
+            *at < 110_000 + 5_000 || topic == Topic::MagnetometerX,
             "the attack's verdict came {at} µs after the start, more than 5 ms after its frame"
         );
     }
@@ -804,9 +804,9 @@ fn admission_one_shots(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     const REFUSED: [(u64, Topic, bool); 3] = [
         (50_000, Topic::Gyroscope, true),
         (100_000, Topic::FloorProximity, true),
-        (120_000, Topic::Accelerometer, false),
+        (150_000, Topic::Accelerometer, false),
     ];
-    const MAG_1MS: u64 = 160_000;
+    const MAG_1MS: u64 = 200_000;
     const GYRO_ONCE: u64 = 240_000;
     const ACCEL_START: u64 = 280_000;
     let verdicts = verdicts(out);

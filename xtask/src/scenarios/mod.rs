@@ -766,28 +766,41 @@ pub fn ring_refused_for_odometry(out: &RunOutput) -> Result<amiro_can::Admission
 /// (`amiro_firmware::admission::BusyWindow`).
 pub const VERDICT_SPACING_US: u64 = 39_936;
 
-/// Checks that `board` (a board folder's name) sent its admission verdicts at least
-/// [`VERDICT_SPACING_US`] apart (each verdict's second frame; frames are sent in the order queued, and a
-/// verdict's two go out back to back, so its first frame is within the same spacing); every scenario's
-/// run is held to it.
+/// Checks that a board queued its admission verdicts at least [`VERDICT_SPACING_US`] apart: the QEMU build
+/// notes each as it queues it (`verdict queued at_us=N`; its frames' completions may bunch on a flooded bus,
+/// so the bus log does not tell). Every scenario's run is held to it; `board` names the board in the message.
 pub fn verdicts_spaced(out: &RunOutput, board: &str) -> Result<()> {
-    let board = match board {
+    let mut times = Vec::new();
+    for note in &out.notes {
+        if let Some(at) = note.strip_prefix("verdict queued at_us=") {
+            times.push(
+                at.trim()
+                    .parse::<u64>()
+                    .with_context(|| format!("{board}: `{note}`"))?,
+            );
+        }
+    }
+    // Every verdict on the bus was noted as queued (the notes are the build's, not a format that went
+    // silent).
+    let can_board = match board {
         "diwheeldrive" => amiro_can::Board::DiWheelDrive,
         "powermgmt" => amiro_can::Board::PowerManagement,
         "lightring" => amiro_can::Board::LightRing,
         other => bail!("no CAN board for `{other}`"),
     };
-    let times: Vec<u64> = admission_verdicts(out, board)
-        .into_iter()
-        .map(|(t, _)| t)
-        .collect();
+    let sent = admission_verdicts(out, can_board).len();
+    ensure!(
+        times.len() >= sent,
+        "{board}: {sent} admission verdicts on the bus, {} noted as queued",
+        times.len()
+    );
     if let Some(w) = times
         .windows(2)
         .find(|w| w[1].saturating_sub(w[0]) < VERDICT_SPACING_US)
     {
         bail!(
-            "two admission verdicts {} µs apart (at {} and {} µs), closer than the {VERDICT_SPACING_US} µs the analysis charges",
-            w[1] - w[0],
+            "{board}: two admission verdicts queued {} µs apart (at {} and {} µs), closer than the {VERDICT_SPACING_US} µs the analysis charges",
+            w[1].saturating_sub(w[0]),
             w[0],
             w[1]
         );
@@ -912,6 +925,28 @@ pub fn check_refusal_counts(out: &RunOutput, board: amiro_can::Board) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn verdicts_queued_closer_than_the_charged_spacing_fail_the_run() {
+        let run = |notes: &[&str]| RunOutput {
+            frames: Vec::new(),
+            notes: notes.iter().map(|n| n.to_string()).collect(),
+            work: None,
+        };
+        let spaced = run(&[
+            "verdict queued at_us=1000",
+            "x",
+            "verdict queued at_us=40936",
+        ]);
+        assert!(verdicts_spaced(&spaced, "lightring").is_ok());
+        let close = run(&["verdict queued at_us=1000", "verdict queued at_us=40935"]);
+        let e = verdicts_spaced(&close, "lightring")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("39935 µs apart"), "{e}");
+        assert!(verdicts_spaced(&run(&["verdict queued at_us=x"]), "lightring").is_err());
+        assert!(verdicts_spaced(&spaced, "nowhere").is_err());
+    }
 
     /// A board's refusal without a culprit (0 µs / 0 µs) matches the host's refusal on its iteration budget or
     /// capacity, and no other; a deadline the host names must be the board's.
