@@ -613,20 +613,27 @@ impl board_analysis::JobBounds for Records {
 /// releaser adds, never the transmit response.
 struct CutReleases<'a> {
     sorted: &'a SortedTasks,
-    unreleased: &'a [bool],
-    cut_jitters: &'a [Time],
+    cut: ViewCut<'a>,
+}
+
+/// What a view of the sensor buses' rounds cuts: per sorted position whether it sets the job's jitter itself (its
+/// release cut), and for a cut default-view job that jitter (the rounds' `Work::own`).
+#[derive(Clone, Copy)]
+pub(crate) struct ViewCut<'a> {
+    pub(crate) unreleased: &'a [bool],
+    pub(crate) jitters: &'a [Time],
 }
 
 impl board_analysis::Jobs for CutReleases<'_> {
     fn release(&self, p: usize) -> Option<board_analysis::Release> {
         let release = self.sorted.release(p)?;
-        if !self.unreleased.get(p).copied().unwrap_or(false) {
+        if !self.cut.unreleased.get(p).copied().unwrap_or(false) {
             return Some(release);
         }
         Some(board_analysis::Release {
             by: release.also?,
             also: None,
-            own_jitter: self.cut_jitters.get(p).copied().unwrap_or(Time::ZERO),
+            own_jitter: self.cut.jitters.get(p).copied().unwrap_or(Time::ZERO),
         })
     }
     fn level_end(&self, p: usize) -> usize {
@@ -639,7 +646,7 @@ impl board_analysis::Jobs for CutReleases<'_> {
 
 /// One view of the sensor buses' rounds ([`crate::suspension_analysis`]): the sorted tasks' `timings` (their
 /// jitters as the view sets them, found ones left in place) analysed by [`board_analysis::analyse`], the jobs
-/// `unreleased` marks with their releases cut (a cut transmit job on the jitter `cut_jitters` holds, its transmit
+/// `cut` marks with their releases cut (a cut transmit job on the jitter `cut` holds for it, its transmit
 /// interrupt's response added); every task's bound per sorted position.
 pub(crate) fn view_bounds(
     board: &BoardSystem,
@@ -647,8 +654,7 @@ pub(crate) fn view_bounds(
     timings: &mut [TaskTiming],
     blocking: &[Time],
     shares: &[Share],
-    unreleased: &[bool],
-    cut_jitters: &[Time],
+    cut: ViewCut<'_>,
     limits: &Limits,
 ) -> Vec<Bound> {
     let n = timings.len();
@@ -665,11 +671,7 @@ pub(crate) fn view_bounds(
         shares,
         scratch: &mut scratch,
     };
-    let cut = CutReleases {
-        sorted,
-        unreleased,
-        cut_jitters,
-    };
+    let cut = CutReleases { sorted, cut };
     // Per job, never out of a board's budget.
     let _ = board_analysis::analyse(
         jobs,

@@ -872,8 +872,10 @@ impl SuspendingBoard for HostBoard<'_> {
             timings.get_mut(..n).unwrap_or(&mut []),
             &self.blocking,
             shares.get(..n).unwrap_or(&[]),
-            unreleased,
-            cut,
+            analysis::ViewCut {
+                unreleased,
+                jitters: cut,
+            },
             &self.limits,
         );
         Ok(board_analysis::Outcome::default())

@@ -874,12 +874,13 @@ proptest! {
     }
 }
 
+/// A message's bound as the forms are compared ((WCRT, worst instance, instances, busy window) or why none), and its
+/// blocking.
+type FormBound = (Result<(Time, u64, u64, Time), AnalysisError>, Time);
+
 /// One bus through `bus_analysis`'s host form (`analyse`, start hints where no board is charged) or its chip form
 /// (`analyse_each`): each message's bound in arbitration order, with its blocking.
-fn bus_forms(
-    messages: &[schedule_analysis::bus_analysis::Message],
-    each: bool,
-) -> Vec<(Result<(Time, u64, u64, Time), AnalysisError>, Time)> {
+fn bus_forms(messages: &[schedule_analysis::bus_analysis::Message], each: bool) -> Vec<FormBound> {
     use schedule_analysis::bus_analysis::{self, BusWork};
     let bit = can::bit_time(1_000_000);
     let n = messages.len();
