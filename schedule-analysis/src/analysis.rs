@@ -365,25 +365,11 @@ impl Failure {
     }
 }
 
-/// Analyses the whole system under `options`.
+/// Analyses the whole system under `options`, on the sound transmit path (docs/analysis.md, "The sound transmit
+/// path: the design"): the bus by [`bus_analysis::analyse`], each transmit job with its board's transmit-interrupt
+/// response as a second releaser ([`board_analysis::Release::also`]).
 pub fn analyse(system: &System, options: &Options) -> Analysis {
-    analyse_on(system, options, TransmitPath::Uncharged)
-}
-
-/// How the bus analysis charges the frames a board sends through its transmit interrupt.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum TransmitPath {
-    /// One transmit response in the queuing jitter ([`bus_analysis::analyse`]): the verdict's and the boards'
-    /// admission's model.
-    Uncharged,
-    /// The sound transmit path ([`bus_analysis::analyse_sound`]; docs/analysis.md, "The sound transmit path: the
-    /// design").
-    Sound,
-}
-
-/// [`analyse`] with the bus on `transmit`.
-pub fn analyse_on(system: &System, options: &Options, transmit: TransmitPath) -> Analysis {
-    analyse_on_with_progress(system, options, transmit, &mut |_| {})
+    analyse_with_progress(system, options, &mut |_| {})
 }
 
 /// [`analyse`], telling `progress` what it starts (one line per board and one for the bus), so that a front end
@@ -391,15 +377,6 @@ pub fn analyse_on(system: &System, options: &Options, transmit: TransmitPath) ->
 pub fn analyse_with_progress(
     system: &System,
     options: &Options,
-    progress: &mut dyn FnMut(&str),
-) -> Analysis {
-    analyse_on_with_progress(system, options, TransmitPath::Uncharged, progress)
-}
-
-fn analyse_on_with_progress(
-    system: &System,
-    options: &Options,
-    transmit: TransmitPath,
     progress: &mut dyn FnMut(&str),
 ) -> Analysis {
     let limits = Limits {
@@ -411,7 +388,7 @@ fn analyse_on_with_progress(
         .iter()
         .map(|b| {
             progress(&format!("board {} ({} tasks)", b.name, b.tasks.len()));
-            analyse_board_on(b, &limits, transmit)
+            analyse_board(b, &limits)
         })
         .collect();
     let bus = system.bus.as_ref().map(|bus| {
@@ -420,7 +397,7 @@ fn analyse_on_with_progress(
             options.frame_cost.label(),
             bus.messages.len()
         ));
-        analyse_bus(system, bus, &boards, options.frame_cost, &limits, transmit)
+        analyse_bus(system, bus, &boards, options.frame_cost, &limits)
     });
     let topics = match (&system.bus, &bus) {
         (Some(spec), Some(result)) => topics(system, spec, result, &boards),
@@ -453,17 +430,9 @@ fn default_horizon(system: &System) -> Time {
 
 /// Analyses one board on its own: the model's tasks with their overheads, SRP blockings and release chains, by
 /// [`board_analysis::analyse`] (the analysis the boards' admission check runs), every task's whole record kept.
+/// Each transmit job takes its board's transmit-interrupt response into its release jitter beside its releaser's
+/// ([`board_analysis::Release::also`]).
 pub fn analyse_board(board: &BoardSystem, limits: &Limits) -> BoardResult {
-    analyse_board_on(board, limits, TransmitPath::Uncharged)
-}
-
-/// [`analyse_board`] with its transmit jobs on `transmit`: on [`TransmitPath::Sound`] each takes its board's
-/// transmit-interrupt response into its release jitter beside its releaser's ([`board_analysis::Release::also`]).
-pub fn analyse_board_on(
-    board: &BoardSystem,
-    limits: &Limits,
-    transmit: TransmitPath,
-) -> BoardResult {
     let costs: Vec<Time> = board
         .tasks
         .iter()
@@ -472,10 +441,10 @@ pub fn analyse_board_on(
     let blocking = task_blockings(board);
     // A board without scripts is analysed exactly as before the sensor buses existed.
     let (bounds, jitter, sensor_buses) = if board.sensor_buses.scripts.is_empty() {
-        let (bounds, jitter) = task_bounds(board, &costs, &blocking, limits, transmit);
+        let (bounds, jitter) = task_bounds(board, &costs, &blocking, limits);
         (bounds, jitter, Vec::new())
     } else {
-        crate::sensor_bus::analyse(board, &costs, &blocking, limits, transmit)
+        crate::sensor_bus::analyse(board, &costs, &blocking, limits)
     };
     let utilisation = board
         .tasks
@@ -640,23 +609,31 @@ impl board_analysis::JobBounds for Records {
 
 /// The tasks of [`SortedTasks`] with some releases cut (a view of the sensor buses' rounds sets those jobs'
 /// jitters itself). A cut job with a second releaser (a transmit job's transmit interrupt) keeps that one, on the
-/// jitter the view set (`cut_jitters`): the view sets what its first releaser adds, never the transmit response.
+/// jitter the view set (`cut_jitters`, the rounds' `Work::own` of a default-view job): the view sets what its first
+/// releaser adds, never the transmit response.
 struct CutReleases<'a> {
     sorted: &'a SortedTasks,
-    unreleased: &'a [bool],
-    cut_jitters: &'a [Time],
+    cut: ViewCut<'a>,
+}
+
+/// What a view of the sensor buses' rounds cuts: per sorted position whether it sets the job's jitter itself (its
+/// release cut), and for a cut default-view job that jitter (the rounds' `Work::own`).
+#[derive(Clone, Copy)]
+pub(crate) struct ViewCut<'a> {
+    pub(crate) unreleased: &'a [bool],
+    pub(crate) jitters: &'a [Time],
 }
 
 impl board_analysis::Jobs for CutReleases<'_> {
     fn release(&self, p: usize) -> Option<board_analysis::Release> {
         let release = self.sorted.release(p)?;
-        if !self.unreleased.get(p).copied().unwrap_or(false) {
+        if !self.cut.unreleased.get(p).copied().unwrap_or(false) {
             return Some(release);
         }
         Some(board_analysis::Release {
             by: release.also?,
             also: None,
-            own_jitter: self.cut_jitters.get(p).copied().unwrap_or(Time::ZERO),
+            own_jitter: self.cut.jitters.get(p).copied().unwrap_or(Time::ZERO),
         })
     }
     fn level_end(&self, p: usize) -> usize {
@@ -669,14 +646,15 @@ impl board_analysis::Jobs for CutReleases<'_> {
 
 /// One view of the sensor buses' rounds ([`crate::suspension_analysis`]): the sorted tasks' `timings` (their
 /// jitters as the view sets them, found ones left in place) analysed by [`board_analysis::analyse`], the jobs
-/// `unreleased` marks with their releases cut; every task's bound per sorted position.
+/// `cut` marks with their releases cut (a cut transmit job on the jitter `cut` holds for it, its transmit
+/// interrupt's response added); every task's bound per sorted position.
 pub(crate) fn view_bounds(
     board: &BoardSystem,
     sorted: &SortedTasks,
     timings: &mut [TaskTiming],
     blocking: &[Time],
     shares: &[Share],
-    unreleased: &[bool],
+    cut: ViewCut<'_>,
     limits: &Limits,
 ) -> Vec<Bound> {
     let n = timings.len();
@@ -687,18 +665,13 @@ pub(crate) fn view_bounds(
         ));
         n
     ]);
-    let cut_jitters: Vec<Time> = timings.iter().map(|t| t.jitter).collect();
     let jobs = board_analysis::BoardJobs {
         timings,
         blocking,
         shares,
         scratch: &mut scratch,
     };
-    let cut = CutReleases {
-        sorted,
-        unreleased,
-        cut_jitters: &cut_jitters,
-    };
+    let cut = CutReleases { sorted, cut };
     // Per job, never out of a board's budget.
     let _ = board_analysis::analyse(
         jobs,
@@ -749,11 +722,10 @@ fn task_bounds(
     costs: &[Time],
     blocking: &[Time],
     limits: &Limits,
-    transmit: TransmitPath,
 ) -> (Vec<Bound>, Vec<Time>) {
     let jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
     let releases: Vec<Option<usize>> = board.tasks.iter().map(|t| t.released_by).collect();
-    let sorted = sort_tasks(board, &jitters, &releases, transmit);
+    let sorted = sort_tasks(board, &jitters, &releases);
     task_bounds_in(board, costs, blocking, &jitters, &releases, &sorted, limits)
 }
 
@@ -844,7 +816,6 @@ pub(crate) fn sort_tasks(
     board: &BoardSystem,
     jitters: &[Time],
     releases: &[Option<usize>],
-    path: TransmitPath,
 ) -> SortedTasks {
     let n = board.tasks.len();
     let priority = |i: usize| board.tasks.get(i).map_or(0, |t| t.priority);
@@ -856,10 +827,10 @@ pub(crate) fn sort_tasks(
             *slot = p;
         }
     }
-    // On the sound transmit path a transmit job (a released job of the transmit interrupt) has the transmit
-    // interrupt as its second releaser: the abort its frames cause is asked in one of its jobs.
-    let second = |i: usize| match (path, board.can_tx_task) {
-        (TransmitPath::Sound, Some(tx)) if tx != i && board.is_transmit(i) => {
+    // A transmit job (a released job of the transmit interrupt) has the transmit interrupt as its second
+    // releaser: the abort its frames cause is asked in one of its jobs (the sound transmit path).
+    let second = |i: usize| match board.can_tx_task {
+        Some(tx) if tx != i && board.is_transmit(i) => {
             Some(position.get(tx).copied().unwrap_or(usize::MAX))
         }
         _ => None,
@@ -982,15 +953,14 @@ fn sender_of(
     Ok(bus_analysis::Sender::Bounded { worst, best, tx })
 }
 
-/// The bus, by [`bus_analysis::analyse`] (the analysis the boards' admission check runs), with the senders' bounds
-/// from `boards`.
+/// The bus, by [`bus_analysis::analyse`] (the bounds of the boards' admission check's
+/// [`bus_analysis::analyse_each`]), with the senders' bounds from `boards`.
 fn analyse_bus(
     system: &System,
     bus: &BusSystem,
     boards: &[BoardResult],
     frame_cost: FrameCostSpec,
     limits: &Limits,
-    path: TransmitPath,
 ) -> BusResult {
     let cost = frame_cost.cost();
     let bit = bus.bit_time;
@@ -1042,14 +1012,7 @@ fn analyse_bus(
         blockings: &mut sorted_blocking,
         scratch: &mut scratch,
     };
-    match path {
-        TransmitPath::Uncharged => {
-            bus_analysis::analyse(message, work, cost, bit, limits, out.as_mut_slice())
-        }
-        TransmitPath::Sound => {
-            bus_analysis::analyse_sound(message, work, cost, bit, limits, out.as_mut_slice())
-        }
-    }
+    bus_analysis::analyse(message, work, cost, bit, limits, out.as_mut_slice());
     let mut messages: Vec<MessageResult> = Vec::with_capacity(n);
     let mut position = vec![0; n];
     for (p, &i) in order.iter().enumerate() {

@@ -1,7 +1,9 @@
 //! The bus's analysis, the one both the report ([`crate::analysis`]) and the on-chip admission check
-//! ([`crate::admission`]) run: every message's queuing jitter from its sender's response variation and its
-//! board's transmit interrupt, then non-preemptive fixed-priority response times by arbitration
-//! ([`can::response_times_into`], Davis, Burns, Bril & Lukkien 2007).
+//! ([`crate::admission`]) run, on the sound transmit path (docs/analysis.md, "The sound transmit path: the design"):
+//! every message's queuing jitter from its sender's response variation and its board's transmit interrupt, each
+//! board's frames charged the intervals in which a queued frame of it is not covered, then non-preemptive
+//! fixed-priority response times by arbitration (Davis, Burns, Bril & Lukkien 2007). [`analyse`] is the host's form,
+//! [`analyse_each`] the chip's (the same bounds).
 //!
 //! `no_std` and allocation-free: the caller owns the working memory (the chip fixed-capacity arrays, the host
 //! vectors) and sorts the messages by arbitration itself (the chip by an insertion sort of bytes, the host by the
@@ -92,10 +94,10 @@ pub struct BusWork<'a, I> {
 /// the least urgent is 0x400 | 3 << 8 | 0x1C (docs/protocol.md). A message below it may be blocked by one.
 pub const LEAST_URGENT_PAGE: u32 = 0x71C;
 
-/// Analyses the bus: `message(i)` is message `i`; `out.put(k, …)` gets the response of the message at arbitration
-/// position `k` (`work.order[k]`), from its queuing. Its delivery after the sender's activation is
-/// [`delivery`]`(offsets[k], response)`.
-pub fn analyse<I, R>(
+/// A bus with no message sent through a transmit interrupt, as [`analyse`] reads it: the blockings, then every
+/// message's fixed point by [`can::response_times_into`] (each started from the next more urgent identifier's
+/// windows: the host's form; the same bounds as [`analyse_each`]'s one by one).
+fn analyse_hinted<I, R>(
     message: impl Fn(usize) -> Option<Message>,
     work: BusWork<'_, I>,
     cost: FrameCost,
@@ -136,16 +138,23 @@ fn fill<I: Copy + Into<usize>>(
     }
 }
 
-/// The sound transmit path's analysis (docs/analysis.md, "The sound transmit path: the design"): as [`analyse`],
-/// and for a message a board sends through its transmit interrupt (a [`Sender::Bounded`] sender with a transmit
-/// response `tx` above zero) its board's frames each cost `tx` + the longest frame more (the intervals in which a
-/// queued frame is not covered by a more urgent pending one of its board: one per own frame at most), and every
-/// message below [`LEAST_URGENT_PAGE`] is blocked by at least the longest frame (a page outside the model). The
-/// blockings are worked out on the true frame times; each board's messages are analysed with that board's frames
-/// raised, every other message on the true ones (boards with equal `tx` are raised together: more, never less). A
-/// bus with no such sender is [`analyse`]'s (with its start hints); [`analyse_sound_each`] gives the same bounds
-/// without them.
-pub fn analyse_sound<I, R>(
+/// Analyses the bus on the sound transmit path (docs/analysis.md, "The sound transmit path: the design"):
+/// `message(i)` is message `i`; `out.put(k, …)` gets the response of the message at arbitration position `k`
+/// (`work.order[k]`), from its queuing. Its delivery after the sender's activation is
+/// [`delivery`]`(offsets[k], response)`.
+///
+/// Every message's queuing jitter is its own plus its sender's response variation and its board's transmit
+/// response ([`Message::timing`]); the blockings are the longest less urgent frames; then non-preemptive
+/// fixed-priority response times by arbitration. For a message a board sends through its transmit interrupt (a
+/// [`Sender::Bounded`] sender with a transmit response `tx` above zero) its board's frames each cost `tx` + the
+/// longest frame more (the intervals in which a queued frame is not covered by a more urgent pending one of its
+/// board: one per own frame at most), and every message below [`LEAST_URGENT_PAGE`] is blocked by at least the
+/// longest frame (a page outside the model). The blockings are worked out on the true frame times; each board's
+/// messages are analysed with that board's frames raised, every other message on the true ones (boards with equal
+/// `tx` are raised together: more, never less). A bus with no such sender (a model file's) has no raised frame and
+/// no page floor: the plain analysis, with start hints ([`can::response_times_into`]). [`analyse_each`], the
+/// chip's form, gives the same bounds without the hints.
+pub fn analyse<I, R>(
     message: impl Fn(usize) -> Option<Message>,
     work: BusWork<'_, I>,
     cost: FrameCost,
@@ -161,17 +170,17 @@ pub fn analyse_sound<I, R>(
             .is_some_and(|m| matches!(m.sender, Sender::Bounded { tx, .. } if !tx.is_zero()))
     });
     if charged {
-        analyse_sound_each(message, work, cost, bit, limits, out);
+        analyse_each(message, work, cost, bit, limits, out);
     } else {
-        analyse(message, work, cost, bit, limits, out);
+        analyse_hinted(message, work, cost, bit, limits, out);
     }
 }
 
-/// [`analyse_sound`]'s bounds, every message by its own fixed point ([`can::response_time`], no start hints from
-/// the next more urgent identifier): the on-chip check's form, whose image then needs neither
-/// [`can::response_times_into`] nor its level loads. A bus with no message through a transmit interrupt gets
-/// [`analyse`]'s bounds (no raised frames, no page floor).
-pub fn analyse_sound_each<I, R>(
+/// [`analyse`]'s bounds, every message by its own fixed point ([`can::response_time`], no start hints from the next
+/// more urgent identifier): the on-chip check's form, whose image then needs neither [`can::response_times_into`]
+/// nor its level loads. A bus with no message through a transmit interrupt gets the plain analysis's bounds (no
+/// raised frames, no page floor).
+pub fn analyse_each<I, R>(
     message: impl Fn(usize) -> Option<Message>,
     work: BusWork<'_, I>,
     cost: FrameCost,

@@ -10,7 +10,7 @@
 //! * the **host layer** (feature `std`, on by default) reads models ([`model`]), the generated bounds files
 //!   ([`bounds`]), RTIC apps ([`rtic_source`]), timing files and scenarios ([`scenario`]), runs the whole system ([`analysis`]: names, ceilings and overheads
 //!   around the core's board and bus analyses, then the end-to-end paths; [`sensor_bus`]: jobs that suspend on a
-//!   sensor bus; [`sensitivity`]; [`abort_refill`]: the verdict on the sound transmit path) and renders the report
+//!   sensor bus; [`sensitivity`]) and renders the report
 //!   ([`report`]); [`rng`] is the deterministic generator of its randomised experiments (benchmark sets,
 //!   `cargo xtask campaign`, the admission-cost search). `cargo xtask analyze` is a thin front end over it.
 //!
@@ -28,7 +28,6 @@ pub mod suspension_analysis;
 pub mod time;
 
 #[cfg(feature = "std")]
-pub mod abort_refill;
 #[cfg(feature = "std")]
 pub mod admission_host;
 #[cfg(feature = "std")]

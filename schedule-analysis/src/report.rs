@@ -37,9 +37,9 @@ pub struct Report {
     /// The scenario analysed again with every held bound used ([`Report::with_on_bounds`]); it does not change
     /// the verdict.
     pub on_bounds: Option<crate::scenario::OnBounds>,
-    /// The verdict on the sound transmit path ([`Report::with_abort_refill`]); it does not change the
-    /// verdict.
-    pub abort_refill: Option<crate::abort_refill::AbortRefill>,
+    /// The failures the scenario expects (its `expected_failures`, [`Report::with_expected_failures`]); empty:
+    /// none, everything must pass.
+    pub expected_failures: Vec<String>,
 }
 
 /// Publishers beyond this many skip the sensitivity search (each costs about twenty whole-system analyses).
@@ -112,7 +112,7 @@ impl Report {
             admission: Vec::new(),
             budget_from: BTreeMap::new(),
             on_bounds: None,
-            abort_refill: None,
+            expected_failures: Vec::new(),
         }
     }
 
@@ -149,19 +149,67 @@ impl Report {
         self
     }
 
-    /// Adds the verdict on the sound transmit path ([`crate::abort_refill::AbortRefill::of`]), printed
-    /// after the VERDICT, which stays the uncharged model's.
-    pub fn with_abort_refill(
-        mut self,
-        charged: Option<crate::abort_refill::AbortRefill>,
-    ) -> Report {
-        self.abort_refill = charged;
-        self
-    }
-
     /// The verdict: everything bounded, every deadline and jitter budget met under the primary frame-cost model.
     pub fn all_ok(&self) -> bool {
         self.primary.all_ok()
+    }
+
+    /// Records the failures the scenario expects (its `expected_failures`): the set is a checked refusal.
+    pub fn with_expected_failures(mut self, expected: &[String]) -> Report {
+        self.expected_failures = expected.to_vec();
+        self
+    }
+
+    /// What `--check` decides: with no expected failures, the verdict ([`Report::all_ok`]); with some, whether
+    /// exactly those fail under the primary frame-cost model (each once, in any order).
+    pub fn check_passes(&self) -> bool {
+        let (unexpected, missing) = self.unexpected();
+        unexpected.is_empty() && missing.is_empty()
+    }
+
+    /// The failures the scenario does not expect, and the expected ones that do not fail.
+    fn unexpected(&self) -> (Vec<String>, Vec<String>) {
+        let failures = self.primary.failures();
+        let unexpected = failures
+            .iter()
+            .filter(|f| !self.expected_failures.contains(f))
+            .cloned()
+            .collect();
+        let missing = self
+            .expected_failures
+            .iter()
+            .filter(|e| !failures.contains(e))
+            .cloned()
+            .collect();
+        (unexpected, missing)
+    }
+
+    /// The report's line after the VERDICT for a scenario with expected failures: whether exactly those fail.
+    fn expected_line(&self) -> Option<String> {
+        if self.expected_failures.is_empty() {
+            return None;
+        }
+        let (unexpected, missing) = self.unexpected();
+        let head = "Expected failures (the scenario's `expected_failures`, a checked refusal)";
+        Some(if unexpected.is_empty() && missing.is_empty() {
+            format!(
+                "{head}: exactly these fail, as expected — {} (`--check` passes; the scenario's description says \
+                 why)",
+                self.primary.failure_figures().join(", ")
+            )
+        } else {
+            let mut parts = Vec::new();
+            if !unexpected.is_empty() {
+                parts.push(format!("failing unexpectedly: {}", unexpected.join(", ")));
+            }
+            if !missing.is_empty() {
+                parts.push(format!("expected but not failing: {}", missing.join(", ")));
+            }
+            format!(
+                "{head}: NOT as expected — {} (`--check` fails)",
+                parts.join("; ")
+            )
+        })
     }
 }
 
@@ -794,16 +842,11 @@ fn text_verdict(report: &Report, markdown: bool, out: &mut String) {
         if markdown { "**" } else { "" },
         if markdown { "**" } else { "" }
     );
-    if let Some(line) = report.on_bounds.as_ref().and_then(on_bounds_verdict) {
+    if let Some(line) = report.expected_line() {
         let _ = writeln!(out, "{}{line}", if markdown { "\n" } else { "" });
     }
-    if let Some(charged) = &report.abort_refill {
-        let _ = writeln!(
-            out,
-            "{}{}",
-            if markdown { "\n" } else { "" },
-            charged.line()
-        );
+    if let Some(line) = report.on_bounds.as_ref().and_then(on_bounds_verdict) {
+        let _ = writeln!(out, "{}{line}", if markdown { "\n" } else { "" });
     }
     if let Some(c) = comparison {
         let f = c.failures();
@@ -1022,10 +1065,10 @@ fn to_json(report: &Report) -> Value {
             serde_json::to_value(o).unwrap_or(Value::Null),
         );
     }
-    if let (Some(a), Value::Object(map)) = (&report.abort_refill, &mut out) {
+    if let (false, Value::Object(map)) = (report.expected_failures.is_empty(), &mut out) {
         map.insert(
-            "abort_refill".into(),
-            serde_json::to_value(a).unwrap_or(Value::Null),
+            "expected_failures".into(),
+            json!({ "expected": report.expected_failures, "as_expected": report.check_passes() }),
         );
     }
     if let (Some(s), Value::Object(map)) = (&report.sensitivity, &mut out) {

@@ -862,6 +862,7 @@ impl SuspendingBoard for HostBoard<'_> {
         timings: &mut [TaskTiming],
         shares: &[Share],
         unreleased: &[bool],
+        cut: &[Time],
         _: &Limits,
     ) -> Result<board_analysis::Outcome, board_analysis::OutOfIterations> {
         let n = self.sorted.order.len();
@@ -871,7 +872,10 @@ impl SuspendingBoard for HostBoard<'_> {
             timings.get_mut(..n).unwrap_or(&mut []),
             &self.blocking,
             shares.get(..n).unwrap_or(&[]),
-            unreleased,
+            analysis::ViewCut {
+                unreleased,
+                jitters: cut,
+            },
             &self.limits,
         );
         Ok(board_analysis::Outcome::default())
@@ -986,14 +990,13 @@ pub(crate) fn analyse(
     costs: &[Time],
     blocking: &[Time],
     limits: &Limits,
-    transmit: analysis::TransmitPath,
 ) -> (Vec<Bound>, Vec<Time>, Vec<SensorBusResult>) {
     let n = board.tasks.len();
     let buses = &board.sensor_buses.buses;
     let scripts = &board.sensor_buses.scripts;
     let own_jitters: Vec<Time> = board.tasks.iter().map(|t| t.jitter).collect();
     let releases: Vec<Option<usize>> = board.tasks.iter().map(|t| t.released_by).collect();
-    let sorted = analysis::sort_tasks(board, &own_jitters, &releases, transmit);
+    let sorted = analysis::sort_tasks(board, &own_jitters, &releases);
     let mut position = vec![usize::MAX; n];
     for (p, &i) in sorted.order.iter().enumerate() {
         if let Some(slot) = position.get_mut(i) {

@@ -186,12 +186,15 @@ pub trait SuspendingBoard {
     /// Analyses the board's jobs (the first [`Work::jobs`] of `timings`, `shares` and `unreleased`, the caller's
     /// whole arrays: each jitter its own or, for a job `unreleased` marks, the view's; jitters found by release
     /// chains left in place) under `limits`: every job's bound into the caller's storage, read back through
-    /// [`SuspendingBoard::keep`].
+    /// [`SuspendingBoard::keep`]. `cut` is [`Work::own`]: for a default-view job whose release the view cut, the
+    /// jitter the view set, on which a second releaser ([`crate::board_analysis::Release::also`], a transmit job's
+    /// transmit interrupt) adds its response (the analysis overwrites `timings`' jitters with what it inherits).
     fn analyse_view(
         &mut self,
         timings: &mut [TaskTiming],
         shares: &[Share],
         unreleased: &[bool],
+        cut: &[Time],
         limits: &Limits,
     ) -> Result<Outcome, OutOfIterations>;
     /// Job `p`'s bound in the view just analysed ([`SuspendingBoard::analyse_view`]), `None` while it has none.
@@ -229,7 +232,9 @@ pub struct Work<'a> {
     pub shares: &'a mut [Share],
     /// Per job: its cost as built.
     pub base: &'a mut [Time],
-    /// Per job: its own-view response (a suspending task's job's jitter in the other views).
+    /// Per job: its own-view response (a suspending task's job's jitter in the other views); for a default-view
+    /// job whose release the view being analysed cut, the jitter the view set (read by a second releaser,
+    /// [`SuspendingBoard::analyse_view`]: kept here, not in a copy, for the chip's stack).
     pub own: &'a mut [Time],
     /// Per job: whether a view sets its jitter itself (its release cut); the unbounded ones after a failure.
     pub unreleased: &'a mut [bool],
@@ -379,9 +384,9 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
         self.view_jobs(0);
         let limits = self.limits()?;
         let w = &mut *self.work;
-        let outcome = self
-            .board
-            .analyse_view(w.timings, &*w.shares, &*w.unreleased, &limits)?;
+        let outcome =
+            self.board
+                .analyse_view(w.timings, &*w.shares, &*w.unreleased, &*w.own, &limits)?;
         self.spent += outcome.iterations;
         let w = &mut *self.work;
         self.board.keep(0, w.timings);
@@ -405,7 +410,7 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             let w = &mut *self.work;
             let outcome =
                 self.board
-                    .analyse_view(w.timings, &*w.shares, &*w.unreleased, &limits)?;
+                    .analyse_view(w.timings, &*w.shares, &*w.unreleased, &*w.own, &limits)?;
             self.spent += outcome.iterations;
             if v != 0 {
                 self.segmented(v)?;
@@ -667,6 +672,11 @@ impl<S: SuspendingBoard> Rounds<'_, '_, S> {
             }
             if let Some(slot) = w.unreleased.get_mut(p) {
                 *slot = cut;
+            }
+            // A default-view job's own-view response is never read: its slot keeps the cut jitter for a second
+            // releaser (`SuspendingBoard::analyse_view`).
+            if let (true, 0, Some(slot)) = (cut, view, w.own.get_mut(p)) {
+                *slot = jitter;
             }
         }
         if let Some(job) = orphan {

@@ -71,7 +71,9 @@ fn the_magnetometer_example_builds() {
     );
     let bus = analysis.bus.as_ref().expect("bus");
     assert_eq!(bus.messages[0].id, 0x605);
-    // Issue 11: the thesis's example holds with deadline = period once the command handler is rate-limited.
+    // Issue 11: the thesis's example held with deadline = period once the command handler was rate-limited; on the
+    // sound transmit path (the verdict's since 2026-12-05) it does not, and the set is a checked refusal: its
+    // frames 1 115.3 µs (2026-12-05) against 900 (the scenario's `expected_failures`).
     assert_eq!(bus.messages[0].deadline, Time::from_us(900));
     let handler = analysis.boards[0]
         .tasks
@@ -80,7 +82,15 @@ fn the_magnetometer_example_builds() {
         .expect("handler");
     // One command per amiro_firmware::admission::COMMAND_MIN_INTERVAL_US (xtask's tests hold the timing files to it).
     assert!(handler.sporadic && handler.period == Time::from_us(1000));
-    assert!(analysis.all_ok(), "failures: {:?}", analysis.failures());
+    assert_eq!(analysis.failures(), built.expected_failures);
+    assert_eq!(
+        built.expected_failures,
+        [
+            "bus/magnetometer-x",
+            "topic/magnetometer-x (end-to-end deadline)"
+        ]
+    );
+    assert!(bus.messages[0].wcrt() > Some(Time::from_us(1_100)));
 }
 
 #[test]
@@ -424,4 +434,55 @@ fn every_admission_budget_covers_its_recorded_worst_step() {
         checked, 5,
         "DiWheelDrive and LightRing (both revisions) and PowerManagement"
     );
+}
+
+/// `--check` on a scenario with `expected_failures` passes only when exactly those fail, both ways: a set that fails
+/// as expected passes, and fails the check when one more is expected, one fewer, or none; a schedulable set passes
+/// with none expected and fails the check with one expected that does not fail. The report says which.
+#[test]
+fn the_check_holds_a_refusal_to_exactly_its_expected_failures() {
+    let report_of = |name: &str| {
+        let built = built(name);
+        let system = built.model.validate().expect("valid");
+        let report = Report::build(
+            &system,
+            name.into(),
+            Vec::new(),
+            Vec::new(),
+            Some(built.frame_cost),
+        );
+        (built, report)
+    };
+    let (built, refused) = report_of("thesis-magnetometer-900us");
+    assert!(!refused.all_ok());
+    let expected = built.expected_failures.clone();
+    assert_eq!(expected.len(), 2);
+    let as_expected = refused.clone().with_expected_failures(&expected);
+    assert!(as_expected.check_passes());
+    let text = report::render(&as_expected, Format::Table);
+    assert!(
+        text.contains("exactly these fail, as expected — bus/magnetometer-x WCRT 11"),
+        "{text}"
+    );
+    // No expected failures: the verdict alone, which fails.
+    assert!(!refused.check_passes());
+    // One fewer expected: the other fails unexpectedly.
+    let fewer = refused.clone().with_expected_failures(&expected[..1]);
+    assert!(!fewer.check_passes());
+    assert!(report::render(&fewer, Format::Table).contains(
+        "NOT as expected — failing unexpectedly: topic/magnetometer-x (end-to-end deadline)"
+    ));
+    // One more expected: it does not fail.
+    let mut more = expected.clone();
+    more.push("topic/magnetometer-x (jitter budget)".into());
+    assert!(!refused.clone().with_expected_failures(&more).check_passes());
+    // The schedulable set: passes with none expected, not with one that does not fail.
+    let (_, fine) = report_of("thesis-demo");
+    assert!(fine.all_ok() && fine.check_passes());
+    let wrong = fine.with_expected_failures(&["bus/gyroscope".to_string()]);
+    assert!(!wrong.check_passes());
+    assert!(report::render(&wrong, Format::Table)
+        .contains("NOT as expected — expected but not failing: bus/gyroscope"));
+    let json = report::render(&wrong, Format::Json);
+    assert!(json.contains("\"as_expected\": false"), "{json}");
 }

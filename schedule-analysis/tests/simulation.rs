@@ -532,12 +532,13 @@ type NodeMessage = (u32, u8, u32, u64, u64);
 /// The model that bounds a board's messages in the transmit-path tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum TxModel {
-    /// The verdict's and the boards' admission's (`bus_analysis::analyse`, the one the report and the chip's check
-    /// run): the board's frames queued within one transmit response.
+    /// The model the verdict and the boards' admission ran until 2026-12-05: the board's frames queued within one
+    /// transmit response, nothing more (`bus_analysis::analyse` with the response in the queuing jitter and no
+    /// transmit interrupt to charge: the plain analysis).
     Uncharged,
-    /// The sound one (`bus_analysis::analyse_sound`; docs/analysis.md, "The sound transmit path: the design"): the
-    /// board's frames at C + G (G = the transmit response + the longest frame), every message below the least
-    /// urgent page (0x71C) blocked by at least the longest frame.
+    /// The sound one (`bus_analysis::analyse`, the one the report and the chip's check run; docs/analysis.md, "The
+    /// sound transmit path: the design"): the board's frames at C + G (G = the transmit response + the longest
+    /// frame), every message below the least urgent page (0x71C) blocked by at least the longest frame.
     Sound,
 }
 
@@ -553,6 +554,11 @@ fn node_bounds(
     use schedule_analysis::bus_analysis::{self, BusWork, Message, Sender};
     let bit = can::bit_time(1_000_000);
     let tx = Time::from_ns(tx);
+    // The uncharged model: the transmit response in the queuing jitter, no transmit interrupt to charge.
+    let (extra, charged) = match model {
+        TxModel::Uncharged => (tx, Time::ZERO),
+        TxModel::Sound => (Time::ZERO, tx),
+    };
     let messages: Vec<Message> = own
         .iter()
         .map(|&(id, dlc, frames, period, jitter)| Message {
@@ -561,11 +567,11 @@ fn node_bounds(
             dlc,
             frames,
             period: Time::from_ns(period),
-            jitter: Time::from_ns(jitter),
+            jitter: Time::from_ns(jitter).plus(extra),
             sender: Sender::Bounded {
                 worst: Time::ZERO,
                 best: Time::ZERO,
-                tx,
+                tx: charged,
             },
         })
         .chain(
@@ -605,15 +611,14 @@ fn node_bounds(
         scratch: &mut scratch,
     };
     let message = |i: usize| messages.get(i).copied();
-    let out_slice = out.as_mut_slice();
-    match model {
-        TxModel::Uncharged => {
-            bus_analysis::analyse(message, work, FrameCost::Exact, bit, &limits(), out_slice)
-        }
-        TxModel::Sound => {
-            bus_analysis::analyse_sound(message, work, FrameCost::Exact, bit, &limits(), out_slice)
-        }
-    }
+    bus_analysis::analyse(
+        message,
+        work,
+        FrameCost::Exact,
+        bit,
+        &limits(),
+        out.as_mut_slice(),
+    );
     let mut bounds = vec![None; n];
     for (position, &i) in order.iter().enumerate() {
         bounds[i] = out[position].as_ref().ok().map(|r| r.wcrt.as_ns());
@@ -865,6 +870,131 @@ proptest! {
             if let Some(Some(bound)) = bounds.get(a.message) {
                 prop_assert!(r <= *bound, "message {} at {}: simulated {} > analysed {}", a.message, a.arrival, r, bound);
             }
+        }
+    }
+}
+
+/// A message's bound as the forms are compared ((WCRT, worst instance, instances, busy window) or why none), and its
+/// blocking.
+type FormBound = (Result<(Time, u64, u64, Time), AnalysisError>, Time);
+
+/// One bus through `bus_analysis`'s host form (`analyse`, start hints where no board is charged) or its chip form
+/// (`analyse_each`): each message's bound in arbitration order, with its blocking.
+fn bus_forms(messages: &[schedule_analysis::bus_analysis::Message], each: bool) -> Vec<FormBound> {
+    use schedule_analysis::bus_analysis::{self, BusWork};
+    let bit = can::bit_time(1_000_000);
+    let n = messages.len();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by_key(|&i| can::arbitration_key(messages[i].id, messages[i].extended));
+    let empty = MessageTiming {
+        key: 0,
+        frame_time: Time::ZERO,
+        frames: 1,
+        period: Time::ZERO,
+        jitter: Time::ZERO,
+    };
+    let mut timings = vec![empty; n];
+    let mut offsets = vec![None; n];
+    let mut blockings = vec![Time::ZERO; n];
+    let mut scratch = vec![Counter::default(); n];
+    let mut out: Vec<Result<Response, AnalysisError>> = vec![Err(AnalysisError::NoSuchIndex); n];
+    let work = BusWork {
+        order: &order,
+        timings: &mut timings,
+        offsets: &mut offsets,
+        blockings: &mut blockings,
+        scratch: &mut scratch,
+    };
+    let message = |i: usize| messages.get(i).copied();
+    if each {
+        bus_analysis::analyse_each(
+            message,
+            work,
+            FrameCost::Exact,
+            bit,
+            &limits(),
+            out.as_mut_slice(),
+        );
+    } else {
+        bus_analysis::analyse(
+            message,
+            work,
+            FrameCost::Exact,
+            bit,
+            &limits(),
+            out.as_mut_slice(),
+        );
+    }
+    out.iter()
+        .zip(&blockings)
+        .map(|(r, &b)| {
+            (
+                r.map(|r| (r.wcrt, r.worst_instance, r.instances, r.busy_window)),
+                b,
+            )
+        })
+        .collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    /// The bus's one engine: the host's form (start hints where no board is charged) and the chip's (every
+    /// message by its own fixed point) give the same bounds, charged or not; and a bus with no message sent through
+    /// a transmit interrupt (no sender with a transmit response) gives the plain analysis's figures, the verdict's
+    /// before the sound transmit path (`can::blockings`, `can::response_times`: no raised frames, no page floor).
+    #[test]
+    fn the_host_and_chip_forms_agree_and_an_uncharged_bus_is_the_plain_analysis(
+        (raw, ids) in raw_messages(),
+        senders in proptest::collection::vec((0u8..3, 0u64..=300, 0u64..=200, 0u64..=100), 6),
+        utilisation in 300u64..=990,
+        charged in any::<bool>(),
+    ) {
+        use schedule_analysis::bus_analysis::{Message, Sender};
+        let set = message_set(&raw, utilisation, true, &ids);
+        // `message_set` sorts by arbitration: each raw message's timing found by its identifier.
+        let timing = |id: u32| set.iter().find(|m| m.key == can::arbitration_key(id, false)).copied().unwrap();
+        let messages: Vec<Message> = ids
+            .iter()
+            .zip(&raw)
+            .zip(&senders)
+            .map(|((&id, r), &(kind, worst_us, best_us, tx_us))| (timing(id), id, r, (kind, worst_us, best_us, tx_us)))
+            .map(|(m, id, r, (kind, worst_us, best_us, tx_us))| Message {
+                id,
+                extended: false,
+                dlc: r.0,
+                frames: m.frames,
+                period: m.period,
+                jitter: m.jitter,
+                sender: match kind {
+                    0 => Sender::Outside,
+                    _ => Sender::Bounded {
+                        worst: Time::from_us(worst_us.max(best_us)),
+                        best: Time::from_us(best_us),
+                        // A board of two transmit responses where charged (kind 1 or 2), none otherwise.
+                        tx: if charged { Time::from_us(tx_us * u64::from(kind)) } else { Time::ZERO },
+                    },
+                },
+            })
+            .collect();
+        let host = bus_forms(&messages, false);
+        let chip = bus_forms(&messages, true);
+        prop_assert_eq!(&host, &chip);
+        if !charged {
+            let bit = can::bit_time(1_000_000);
+            let mut plain: Vec<MessageTiming> = messages.iter().map(|m| m.timing(FrameCost::Exact, bit).0).collect();
+            plain.sort_by_key(|m| m.key);
+            let mut blockings = vec![Time::ZERO; plain.len()];
+            can::blockings(&plain, &mut blockings);
+            let mut scratch = vec![Counter::default(); plain.len()];
+            let mut out = vec![Err(AnalysisError::NoSuchIndex); plain.len()];
+            can::response_times(&plain, &blockings, bit, &limits(), &mut scratch, &mut out);
+            let expected: Vec<_> = out
+                .iter()
+                .zip(&blockings)
+                .map(|(r, &b)| (r.map(|r| (r.wcrt, r.worst_instance, r.instances, r.busy_window)), b))
+                .collect();
+            prop_assert_eq!(host, expected);
         }
     }
 }

@@ -37,6 +37,18 @@ enum Check {
     /// transmit interrupt's own row (a late job loses no completion; its response, which the bus reads, is every
     /// message's queuing jitter: docs/analysis.md, "The transmit interrupt keeps no deadline").
     Unchecked,
+    /// As [`Check::Unchecked`], a job of the transmit interrupt that another job releases (the report's
+    /// `can_tx[<topic>]` and `can_tx[<task>]`): the transmit interrupt is its second releaser
+    /// ([`board_analysis::Release::also`]: the abort its frames cause is asked in one of the interrupt's jobs; the
+    /// sound transmit path, as the report's `analysis::sort_tasks`).
+    Transmit,
+}
+
+impl Check {
+    /// Whether a job's bound is checked against its deadline (not only for being bounded).
+    fn deadline_checked(self) -> bool {
+        !matches!(self, Check::Unchecked | Check::Transmit)
+    }
 }
 
 /// The working arrays' placeholder (every entry the analysis reads is written first): all zero bytes, so that a
@@ -370,8 +382,14 @@ fn build_job<const M: usize>(
             );
             if t.bounded_only {
                 // The transmit interrupt's row or one of its jobs': checked only for a bound (its deadline, the
-                // period, is what a refusal of an unbounded one names).
-                meta.check = Check::Unchecked;
+                // period, is what a refusal of an unbounded one names); a released job of it takes the interrupt
+                // as its second releaser.
+                meta.check = if t.released_by != NO_RELEASER && table.can_tx != Some(u16::from(row))
+                {
+                    Check::Transmit
+                } else {
+                    Check::Unchecked
+                };
             }
             (timing, meta)
         }
@@ -433,8 +451,9 @@ fn build_job<const M: usize>(
                 s.period,
                 publisher,
             );
-            // A job of the transmit interrupt: checked only for a bound, as its row.
-            meta.check = Check::Unchecked;
+            // A job of the transmit interrupt: checked only for a bound, as its row; released by its publisher job
+            // and by the interrupt.
+            meta.check = Check::Transmit;
             (timing, meta)
         }
         // A build without the sensor-bus rounds builds no engine row (`Originals::engines`).
@@ -524,6 +543,9 @@ struct JobIndex<const N: usize> {
     metas: [JobMeta; N],
     /// Sorted position of each original index.
     position: [u8; N],
+    /// The transmit interrupt's sorted position ([`NO_JOB`]: none), the second releaser of every
+    /// [`Check::Transmit`] job.
+    tx: u8,
 }
 
 impl<const N: usize> BoardSet<N> {
@@ -619,13 +641,17 @@ impl<const N: usize> JobIndex<N> {
             if let Some(slot) = self.position.get_mut(usize::from(meta.original)) {
                 *slot = p as u8;
             }
-            if let (TaskId::Fixed(row), false) = (meta.id, meta.check == Check::Unchecked) {
+            if let (TaskId::Fixed(row), true) = (meta.id, meta.check.deadline_checked()) {
                 let row = Some(row);
                 if table.can_tx != row && table.command_handler != row {
                     meta.check = Check::VerdictOnly;
                 }
             }
         }
+        self.tx = table
+            .can_tx
+            .and_then(|row| u8::try_from(row).ok())
+            .map_or(NO_JOB, |row| self.at(row));
         let mut end = len;
         for p in (0..len).rev() {
             if let (Some(t), Some(next)) = (timings.get(p), timings.get(p + 1)) {
@@ -651,6 +677,11 @@ impl<const N: usize> JobIndex<N> {
         }
     }
 
+    /// A job's second releaser: the transmit interrupt for a [`Check::Transmit`] job.
+    fn second(&self, meta: &JobMeta) -> Option<usize> {
+        (meta.check == Check::Transmit).then_some(usize::from(self.tx))
+    }
+
     /// The sorted position of the job with this original index ([`NO_JOB`]: none).
     fn at(&self, original: u8) -> u8 {
         self.position
@@ -665,7 +696,7 @@ impl<const N: usize> board_analysis::Jobs for JobIndex<N> {
         let meta = self.metas.get(p)?;
         (meta.released_by != NO_JOB).then_some(board_analysis::Release {
             by: usize::from(meta.released_by),
-            also: None,
+            also: self.second(meta),
             own_jitter: meta.own_jitter,
         })
     }
@@ -727,6 +758,7 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
             len: 0,
             metas: const { [EMPTY_META; N] },
             position: [NO_JOB; N],
+            tx: NO_JOB,
         },
     };
     let scripted = set.fill(input)?;
@@ -781,11 +813,13 @@ pub(super) fn analyse_board<const N: usize, const M: usize>(
 
 /// What a view of the sensor buses' rounds (`suspension`) changes in the board's jobs: per job whether the view
 /// sets its jitter itself (its release cut), and its view (0: the default; a job whose bound the rounds read is
-/// never settled in closed form).
+/// never settled in closed form); `jitter`: the rounds' `Work::own`, for a cut default-view job the jitter the view
+/// set (not a copy of the timings' jitters: the chip's stack).
 #[derive(Clone, Copy)]
 struct Cut<'a, const N: usize> {
     unreleased: &'a [bool; N],
     view: &'a [u8; N],
+    jitter: &'a [Time; N],
 }
 
 /// The board's jobs as one analysis reads them: as built, or as a view of the rounds changes them.
@@ -796,13 +830,19 @@ struct ViewJobs<'a, const N: usize> {
 
 impl<const N: usize> board_analysis::Jobs for ViewJobs<'_, N> {
     fn release(&self, p: usize) -> Option<board_analysis::Release> {
-        if self
-            .cut
-            .is_some_and(|c| c.unreleased.get(p).copied().unwrap_or(true))
-        {
-            return None;
+        match self.cut {
+            // A cut job keeps a second releaser (a transmit job's transmit interrupt), on the jitter the view set:
+            // the view sets what its first releaser adds, never the transmit response.
+            Some(c) if c.unreleased.get(p).copied().unwrap_or(true) => {
+                let meta = self.index.metas.get(p)?;
+                Some(board_analysis::Release {
+                    by: self.index.second(meta)?,
+                    also: None,
+                    own_jitter: c.jitter.get(p).copied().unwrap_or(Time::ZERO),
+                })
+            }
+            _ => self.index.release(p),
         }
-        self.index.release(p)
     }
     fn level_end(&self, p: usize) -> usize {
         self.index.level_end(p)
@@ -866,7 +906,7 @@ impl<const M: usize> Summary<M> {
             let (Some(meta), Some(&w)) = (set.metas.get(p), wcrt.get(p)) else {
                 continue;
             };
-            let missed = w == NONE || (meta.check != Check::Unchecked && w > meta.deadline.as_ns());
+            let missed = w == NONE || (meta.check.deadline_checked() && w > meta.deadline.as_ns());
             if !self.violated && missed {
                 self.violated = true;
                 self.task = meta.id;

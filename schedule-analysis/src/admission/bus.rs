@@ -1,5 +1,6 @@
 //! The bus's part of the check: the configuration's streams, with their senders' bounds, sorted by arbitration
-//! into [`bus_analysis::analyse`], then each stream's violations.
+//! into [`bus_analysis::analyse_each`] (the sound transmit path, the report's bounds without its start hints), then
+//! each stream's violations.
 
 use super::*;
 
@@ -49,7 +50,7 @@ impl crate::board::Results for Bounds<'_> {
     }
 }
 
-/// The bus ([`bus_analysis::analyse`]) with the senders' bounds the boards' analyses found; `left`: the
+/// The bus ([`bus_analysis::analyse_each`]) with the senders' bounds the boards' analyses found; `left`: the
 /// fixed-point iterations all its messages together may take; `false` when they ran out ([`Refusal::Budget`]).
 #[inline(never)]
 pub(super) fn analyse_bus<const M: usize>(
@@ -103,7 +104,7 @@ pub(super) fn analyse_bus<const M: usize>(
         scratch: &mut scratch,
     };
     let message = |m: usize| bus_message(streams.get(m)?, senders, m);
-    bus_analysis::analyse(
+    bus_analysis::analyse_each(
         message,
         work,
         robot.frame_cost,

@@ -15,7 +15,8 @@
 //!
 //! The analysis is the report's own: per board, publisher jobs and their timer jobs are added to the fixed tasks
 //! and their SRP blockings worked out from the table, then [`board_analysis::analyse`] (release jitters to a fixed
-//! point); then [`bus_analysis::analyse`] with every message's sender's bounds. The verdict is "no task and no
+//! point, each transmit job with the transmit interrupt as its second releaser); then [`bus_analysis::analyse_each`]
+//! with every message's sender's bounds (the sound transmit path, docs/analysis.md). The verdict is "no task and no
 //! frame misses its deadline", which is `cargo xtask analyze --check`'s verdict for the same configuration without
 //! jitter budgets (a property test checks that they agree).
 //!
@@ -26,7 +27,7 @@
 //!
 //! Its parts: this module (the table, the request and the verdict, one decision and the cache's refresh steps),
 //! `board` (a board's jobs into [`board_analysis::analyse`]; `board::suspension`, the sensor-bus rounds), `bus`
-//! (the streams into [`bus_analysis::analyse`]) and `cache` (what is kept of a board's analysis between
+//! (the streams into [`bus_analysis::analyse_each`]) and `cache` (what is kept of a board's analysis between
 //! decisions).
 
 use crate::board::TaskTiming;
@@ -1123,8 +1124,10 @@ mod tests {
     /// is released every 71 µs; above it a 20 µs task every 1 ms at priority 6 and the publisher job (100 µs, best
     /// 50 µs, every 10 ms at priority 9, which nothing delays). The level's busy period: 175 → 285 → 395 → 450 →
     /// 505 → 560 → 560 µs (⌈w/71⌉·55 + 20 + 100), eight jobs, the first the worst: 175 µs, more than two own frames
-    /// (142 µs). The frame (8 bytes, 135 µs, alone on the bus, so no blocking) is queued with jitter (100 − 50) + 175
-    /// from the publisher's best 50 µs: delivered at worst 50 + 225 + 135 = 410 µs after the release.
+    /// (142 µs). The frame (8 bytes, 135 µs, alone on the bus) is queued with jitter (100 − 50) + 175 from the
+    /// publisher's best 50 µs; on the sound transmit path it costs 135 + G, G = 175 + 135 (the transmit response and
+    /// the longest frame), and a page outside the model blocks it (135 µs, its identifier 0x707 below 0x71C):
+    /// delivered at worst 50 + 225 + 135 + 445 = 855 µs after the release.
     #[test]
     fn the_transmit_interrupt_is_checked_for_a_bound_and_its_response_is_the_frames_jitter() {
         let own_frame = can::own_frame_time(Time::from_ns(1000), [3u8].into_iter());
@@ -1170,18 +1173,18 @@ mod tests {
             }
             evaluate::<8, 8>(&robot, &[stream])
         };
-        // 175 µs, beyond two own frames: admitted, the frames delivered by 410 µs.
-        assert_eq!(decide(true, 55_000, 20_000, 410).refusal, None);
-        match decide(true, 55_000, 20_000, 409).refusal {
+        // 175 µs, beyond two own frames: admitted, the frames delivered by 855 µs.
+        assert_eq!(decide(true, 55_000, 20_000, 855).refusal, None);
+        match decide(true, 55_000, 20_000, 854).refusal {
             Some(Refusal::Deadline(v)) => {
                 assert!(matches!(v.culprit, Culprit::Frame { .. }), "{v:?}");
-                assert_eq!(v.wcrt, Some(Time::from_us(410)));
+                assert_eq!(v.wcrt, Some(Time::from_us(855)));
             }
-            other => panic!("the frames at 409 µs: {other:?}"),
+            other => panic!("the frames at 854 µs: {other:?}"),
         }
-        // 80 µs more above it: the first job 255 µs, and the frames 80 µs later.
-        assert_eq!(decide(true, 55_000, 100_000, 490).refusal, None);
-        assert!(decide(true, 55_000, 100_000, 489).refusal.is_some());
+        // 80 µs more above it: the first job 255 µs, and the frames 160 µs later (in the jitter and in G).
+        assert_eq!(decide(true, 55_000, 100_000, 1015).refusal, None);
+        assert!(decide(true, 55_000, 100_000, 1014).refusal.is_some());
         // The same row as any other fixed task has its period for a deadline (one own frame): refused.
         match decide(false, 55_000, 20_000, 410).refusal {
             Some(Refusal::Deadline(v)) => {

@@ -439,6 +439,11 @@ pub struct Scenario {
     /// what the boards' admission check decides a one-shot as.
     #[serde(default)]
     pub one_shots: Vec<ScenarioOneShot>,
+    /// The failures the set is known to have, each named as the VERDICT names it (`bus/magnetometer-x`,
+    /// `topic/magnetometer-x (end-to-end deadline)`): `cargo xtask analyze --check` passes only when exactly these
+    /// fail (a set kept as a checked refusal; its description says why). Empty: everything must pass.
+    #[serde(default)]
+    pub expected_failures: Vec<String>,
 }
 
 /// A one-shot request: a sensor topic's sample at a priority, asked for again and again.

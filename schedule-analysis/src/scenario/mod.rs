@@ -64,6 +64,8 @@ pub struct Built {
     /// Per board, where each budget came from: the machine-code bound of its generated bounds file, or the
     /// timing file's stated budget and why ([`BoardBudgets`]).
     pub budgets: Vec<BoardBudgets>,
+    /// The scenario's `expected_failures`: the failures `--check` expects, exactly ([`crate::report::Report::check_passes`]).
+    pub expected_failures: Vec<String>,
 }
 
 impl Built {
@@ -393,6 +395,7 @@ fn build_with(
         sources: Vec::new(),
         warnings: one_shot_notes,
         budgets: Vec::new(),
+        expected_failures: scenario.expected_failures.clone(),
     };
     let ends = board::build_boards(
         root,

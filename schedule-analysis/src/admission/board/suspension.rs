@@ -173,19 +173,22 @@ impl<const N: usize, const M: usize> SuspendingBoard for ChipBoard<'_, '_, N, M>
         timings: &mut [TaskTiming],
         shares: &[Share],
         unreleased: &[bool],
+        jitter: &[Time],
         limits: &Limits,
     ) -> Result<board_analysis::Outcome, board_analysis::OutOfIterations> {
         // The rounds hand back the check's own arrays (`Work`): of `N` entries each.
-        let (Ok(timings), Ok(shares), Ok(unreleased)) = (
+        let (Ok(timings), Ok(shares), Ok(unreleased), Ok(jitter)) = (
             <&mut [TaskTiming; N]>::try_from(timings),
             <&[Share; N]>::try_from(shares),
             <&[bool; N]>::try_from(unreleased),
+            <&[Time; N]>::try_from(jitter),
         ) else {
             return Err(board_analysis::OutOfIterations);
         };
         let cut = Cut {
             unreleased,
             view: &self.scripts.view,
+            jitter,
         };
         run_view(
             timings,
