@@ -669,7 +669,7 @@ impl BusyWindow {
     /// No verdict sent yet.
     pub const fn new() -> Self {
         Self {
-            sent: AtomicU32::new(0),
+            sent: AtomicU32::new(0u32.wrapping_sub(ONE_SHOT_INTERVAL_MS as u32)),
         }
     }
 
@@ -684,7 +684,7 @@ impl BusyWindow {
         now_ms: u32,
     ) -> bool {
         let sent = self.sent.load(Ordering::Relaxed);
-        if sent != 0 && now_ms.wrapping_sub(sent) < u32::from(ONE_SHOT_INTERVAL_MS) {
+        if now_ms.wrapping_sub(sent) < u32::from(ONE_SHOT_INTERVAL_MS) {
             return false;
         }
         requests.set_aside(frame)
@@ -694,7 +694,7 @@ impl BusyWindow {
     /// again, so a busy verdict waits for it as for another busy verdict.
     #[inline(always)]
     pub fn stamp(&self, now_ms: u32) {
-        self.sent.store(now_ms.max(1), Ordering::Relaxed);
+        self.sent.store(now_ms, Ordering::Relaxed);
     }
 
     /// The admission task's side, before a decision (which may answer with a verdict): the instant (µs, of
@@ -707,7 +707,7 @@ impl BusyWindow {
         let now_ms = ticks_1024us(now_us);
         let gone = now_ms.wrapping_sub(sent);
         let window = u32::from(ONE_SHOT_INTERVAL_MS);
-        (sent != 0 && gone < window).then(|| ((now_us >> 10) + u64::from(window - gone)) << 10)
+        (gone < window).then(|| ((now_us >> 10) + u64::from(window - gone)) << 10)
     }
 
     /// The admission task's side: the request set aside, if any, taken for its verdict, the window
@@ -720,7 +720,7 @@ impl BusyWindow {
         requests: &mut crate::rx_queue::Consumer<'_, N>,
         now_ms: impl FnOnce() -> u32,
     ) -> Option<crate::can::RxFrame> {
-        requests.take_aside_after(|| self.sent.store(now_ms().max(1), Ordering::Relaxed))
+        requests.take_aside_after(|| self.sent.store(now_ms(), Ordering::Relaxed))
     }
 }
 
@@ -945,6 +945,38 @@ mod tests {
         let now_us = u64::from(u32::MAX - 10) << 10;
         assert_eq!(window.open_until(now_us), Some(now_us + 40 * 1024));
         assert_eq!(window.open_until(now_us + 40 * 1024), None);
+    }
+
+    #[test]
+    fn a_verdict_in_tick_zero_opens_the_window_as_any_other() {
+        // SAFETY: this test's queue, split once, used on this thread only.
+        let queue = Box::leak(Box::new(unsafe { crate::rx_queue::FrameQueue::<4>::new() }));
+        let (mut tx, mut rx) = unsafe { queue.split() };
+        // A decision's verdict in the tick the 32-bit tick count wraps to 0 (every 2^42 µs, ~50.9 days),
+        // or in the first 1024 µs after boot.
+        let wrap_us: u64 = 1 << 42;
+        let window = BusyWindow::new();
+        window.stamp(ticks_1024us(wrap_us + 100));
+        assert_eq!(
+            window.open_until(wrap_us + 600),
+            Some(wrap_us + 40 * 1024),
+            "decision after decision"
+        );
+        assert!(
+            !refuse(&window, &mut tx, ticks_1024us(wrap_us + 600)),
+            "busy refusal after a decision"
+        );
+        // A busy verdict taken in tick 0, then a decision in the same tick.
+        let window = BusyWindow::new();
+        assert!(refuse(&window, &mut tx, 7));
+        assert!(window
+            .take(&mut rx, || ticks_1024us(wrap_us + 100))
+            .is_some());
+        assert_eq!(
+            window.open_until(wrap_us + 600),
+            Some(wrap_us + 40 * 1024),
+            "decision after a busy verdict"
+        );
     }
 
     #[test]

@@ -319,12 +319,14 @@ pub async fn serve_admission<
         // analysed first, one per step, so that the decision analyses only its own board and the bus.
         refresh_steps::<C, N, M, K, Q, R>(admission, pacing, Some(&frame), false, &mut waits).await;
         // The decision may answer with a verdict: it starts once the window since the last verdict (a busy one
-        // or a decision's) has ended, again if a busy verdict went out meanwhile, so the verdicts on the bus are
-        // at least the window apart, the rate `can_tx[admit_requests]` is charged at; a burst of accepted
-        // requests is still decided back to back.
-        while let Some(until) = BUSY_VERDICTS.open_until(C::now_us()) {
-            let delay = core::pin::pin!(C::delay_until_us(until));
-            parked(waits.until(delay)).await;
+        // or a decision's) has ended, so the verdicts are at least the window apart, the rate
+        // `can_tx[admit_requests]` is charged at; a burst of accepted requests is still decided back to back.
+        // At most one window per command: a busy refusal set aside as it ends is answered after the decision,
+        // or counted only if the decision sent a verdict (below).
+        if let Some(until) = BUSY_VERDICTS.open_until(C::now_us()) {
+            // A plain wait: no busy verdict can be set aside before `until` (the handler sees the same
+            // window), and one set aside after it loses to this decision instead of pushing it on for ever.
+            parked(C::delay_until_us(until)).await;
         }
         let started = C::now_us();
         handle_command_admitted::<C, N, M, Q>(
@@ -454,12 +456,17 @@ where
         cx: &mut core::task::Context<'_>,
         trace_task: Option<u8>,
     ) -> bool {
-        let Some(frame) =
-            BUSY_VERDICTS.take(
-                self.requests,
-                || crate::admission::ticks_1024us(C::now_us()),
-            )
-        else {
+        // The QEMU build notes the very reading the window was stamped with.
+        #[cfg(feature = "qemu")]
+        let mut stamped = 0;
+        let Some(frame) = BUSY_VERDICTS.take(self.requests, || {
+            let now = C::now_us();
+            #[cfg(feature = "qemu")]
+            {
+                stamped = now;
+            }
+            crate::admission::ticks_1024us(now)
+        }) else {
             return false;
         };
         if let Some(task) = trace_task {
@@ -468,7 +475,7 @@ where
         if let Some(verdict) = crate::admission::busy_verdict(self.board, frame.id, frame.payload())
         {
             #[cfg(feature = "qemu")]
-            note_verdict(C::now_us());
+            note_verdict(stamped);
             // Not traced as queued frames: no sample was released for them (the bench would take them for
             // late samples of the diagnostics topic). One lock per frame: the transmit task waits for one
             // frame's insertion at most.
