@@ -244,12 +244,8 @@ pub const BOARDS: [Board; 3] = [
         internal_oscillator_hz: 16_000_000,
         // 48 KiB, and 512 B decided on 2026-12-05 for the polled I2C master's bus clear (UM10204 §3.1.16: a
         // slave left holding SDA low after a timeout or a bus error is clocked free instead of failing every
-        // transfer on its bus for the gauge's 17-21 s bus timeout), which cost PowerManagement 388 B; and 512 B
-        // decided on 2026-12-05 (session 22) for the admission task's verdict spacing (every verdict, a decision's
-        // or a busy one, at least 40 × 1024 µs after the one before, the rate `can_tx[admit_requests]` is
-        // charged at: before, five refusals in a burst sent ten frames within milliseconds against the two
-        // charged), which cost 112 B with 16 B left.
-        flash_budget: 48 * 1024 + 1024,
+        // transfer on its bus for the gauge's 17-21 s bus timeout), which cost PowerManagement 388 B.
+        flash_budget: 48 * 1024 + 512,
         // PowerManagement fits its own 48 KiB with the admission check (issue 10).
         // Issue 20: the hard floor, the busy verdicts and the paced admission task (≈ 1.5 KB) put
         // PowerManagement ≈ 3.3 KB over its own 48 KiB (the check, issue 20's cost work +0.7 KB, issue 21's bounded waits and
