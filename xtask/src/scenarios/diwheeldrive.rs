@@ -8,7 +8,7 @@ use super::{check_health, trace_time, Bounds, RunOutput, Scenario};
 pub const SCENARIOS: &[Scenario] = &[
     Scenario {
         name: "thesis-example",
-        about: "0x205 01 84 03 02 → 0x605 every 900 µs",
+        about: "0x205 01 84 03 02 (every 900 µs) and every 1.1 ms refused as the host decides; every 1.2 ms → 0x605 on its grid",
         check: thesis_example,
     },
     Scenario {
@@ -78,7 +78,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "admission-one-shots",
-        about: "issue 20: beside the thesis example (magnetometer-x every 900 µs) a gyroscope one-shot at low, a floor-sensor one-shot at medium and the accelerometer every 5 ms at low refused with verdicts within 5 ms, the magnetometer's grid untouched; with the magnetometer every 1 ms the gyroscope one-shot answered within 2 ms and the accelerometer admitted",
+        about: "issue 20: beside magnetometer-x every 1 150 µs (near its boundary; the thesis's 900 µs is refused alone) a gyroscope one-shot at low, a floor-sensor one-shot at medium and the accelerometer every 5 ms at low refused with verdicts within 5 ms, the magnetometer's grid untouched; with the magnetometer every 1.2 ms the gyroscope one-shot answered within 2 ms and the accelerometer admitted",
         check: admission_one_shots,
     },
     Scenario {
@@ -88,13 +88,56 @@ pub const SCENARIOS: &[Scenario] = &[
     },
 ];
 
+/// `diwheeldrive/qemu/thesis-example.log`: the thesis's worked example (magnetometer-x every 900 µs at medium) and
+/// every 1.1 ms are refused on the sound transmit path, each verdict equal to the host's check; every 1.2 ms, the
+/// nearest whole 100 µs that fits, is admitted and runs on its exact grid within the analysed bound.
 fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    use amiro_can::{Topic, Verdict};
+    // (frame time, command, period µs): the two refused requests.
+    const REFUSED: [(u64, &str, u64); 2] = [
+        (10_000, "205#01840302", 900),
+        (55_000, "205#014C0402", 1_100),
+    ];
+    const ADMITTED_AT: u64 = 100_000;
+    const PERIOD: u64 = 1_200;
+    let verdict_id = 0x600 | u32::from(amiro_can::Board::DiWheelDrive.diagnostics_topic().byte());
     ensure!(
-        out.frames.iter().all(|f| f.id == 0x605),
-        "only magnetometer-x frames (0x605) expected"
+        out.frames
+            .iter()
+            .all(|f| f.id == 0x605 || f.id == verdict_id),
+        "only magnetometer-x frames (0x605) and the verdicts' (0x{verdict_id:03X}) expected"
     );
     ensure!(
-        out.frames.iter().all(|f| f.data.len() == 4),
+        out.times(0x605).iter().all(|f| *f > ADMITTED_AT),
+        "a magnetometer-x frame before the admitted request: a refused request started"
+    );
+    let verdicts = verdicts(out);
+    ensure!(
+        verdicts.len() == REFUSED.len(),
+        "{} verdicts, expected the refusals of 900 and 1 100 µs",
+        verdicts.len()
+    );
+    let mut refusals = Vec::new();
+    for ((at, v), (sent, command, micros)) in verdicts.iter().zip(REFUSED) {
+        ensure!(
+            v.verdict == Verdict::Refused
+                && v.topic == Topic::MagnetometerX
+                && v.requested.as_micros() == micros,
+            "not the refusal of magnetometer-x every {micros} µs: {v}"
+        );
+        ensure!(
+            *at >= sent && at - sent <= 5_000,
+            "the refusal of {micros} µs came {} µs after its frame",
+            at.saturating_sub(sent)
+        );
+        let host = super::host_admission(bounds.root(), &[], command)?;
+        super::same_refusal(v, &host)?;
+        refusals.push(format!("{v} ({} µs after its frame)", at - sent));
+    }
+    ensure!(
+        out.frames
+            .iter()
+            .all(|f| f.id != 0x605 || f.data.len() == 4),
         "magnetometer frames carry 4 bytes"
     );
     // The window ends just after the last frame: every release before it has its frame in the run
@@ -104,12 +147,12 @@ fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         .last()
         .map(|t| t + 1)
         .context("no magnetometer-x frame")?;
-    let stream = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, end)?;
-    let answered = stream.releases[0] - 10_000;
-    let bound = bounds.publisher_latency_us("magnetometer-x", "medium", 900)?;
+    let stream = out.periodic_stream(0x605, "magnetometer-x", PERIOD, ADMITTED_AT, end)?;
+    let answered = stream.releases[0] - ADMITTED_AT;
+    let bound = bounds.publisher_latency_us("magnetometer-x", "medium", PERIOD)?;
     // The first release is the command's handling: it must come well inside one period.
     ensure!(
-        answered < 900,
+        answered < PERIOD,
         "the publisher started {answered} µs after the command"
     );
     let worst = stream.worst_latency;
@@ -118,7 +161,8 @@ fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         "release jitter {worst} µs exceeds the analysed bound {bound} µs"
     );
     Ok(format!(
-        "{} frames 0x605 every 900 µs (first release {answered} µs after the command), worst latency {worst} µs ≤ analysed {bound} µs",
+        "{} (as the host decides); then {} frames 0x605 every 1 200 µs (first release {answered} µs after the command), worst latency {worst} µs ≤ analysed {bound} µs",
+        refusals.join("; "),
         stream.frames.len()
     ))
 }
@@ -796,23 +840,26 @@ fn admission_latency(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-/// `diwheeldrive/qemu/admission-one-shots.log` (issue 20): one-shots beside the thesis example, refused beside its
-/// 900 µs magnetometer and admitted once the magnetometer runs every 1 ms (the log's header has the analysis' figures).
+/// `diwheeldrive/qemu/admission-one-shots.log` (issue 20): one-shots refused beside the magnetometer every 1 150 µs
+/// (near its boundary on the sound transmit path; the thesis's 900 µs is refused alone) and admitted once the
+/// magnetometer runs every 1.2 ms (the log's header has the analysis' figures).
 fn admission_one_shots(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     use amiro_can::{Topic, Verdict};
-    // The requests beside the 900 µs magnetometer, each refused: (frame time, topic, a one-shot).
+    // The requests beside the 1 150 µs magnetometer, each refused: (frame time, topic, a one-shot).
     const REFUSED: [(u64, Topic, bool); 3] = [
         (50_000, Topic::Gyroscope, true),
         (100_000, Topic::FloorProximity, true),
         (150_000, Topic::Accelerometer, false),
     ];
-    const MAG_1MS: u64 = 200_000;
+    const MAG_FIRST: u64 = 1_150;
+    const MAG_MOVED: u64 = 200_000;
+    const MAG_THEN: u64 = 1_200;
     const GYRO_ONCE: u64 = 240_000;
     const ACCEL_START: u64 = 280_000;
     let verdicts = verdicts(out);
     ensure!(
         verdicts.len() == REFUSED.len(),
-        "{} verdicts, expected the {} refusals beside the 900 µs magnetometer",
+        "{} verdicts, expected the {} refusals beside the 1 150 µs magnetometer",
         verdicts.len(),
         REFUSED.len()
     );
@@ -849,18 +896,30 @@ fn admission_one_shots(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         "the accelerometer every 5 ms at low: {} samples in 60 ms",
         accel.len()
     );
-    let mag = out.periodic_stream(0x605, "magnetometer-x", 900, 10_000, MAG_1MS - 1_000)?;
-    let mag_1ms = out.periodic_stream(0x605, "magnetometer-x", 1_000, MAG_1MS + 5_000, 359_000)?;
+    let mag = out.periodic_stream(
+        0x605,
+        "magnetometer-x",
+        MAG_FIRST,
+        10_000,
+        MAG_MOVED - 1_000,
+    )?;
+    let mag_then = out.periodic_stream(
+        0x605,
+        "magnetometer-x",
+        MAG_THEN,
+        MAG_MOVED + 5_000,
+        359_000,
+    )?;
     Ok(format!(
-        "beside magnetometer-x every 900 µs: {}; magnetometer-x kept its 900 µs grid ({} samples, worst latency {} µs); \
-         moved to every 1 ms ({} samples, worst latency {} µs): the gyroscope one-shot on the bus {} µs after its frame \
+        "beside magnetometer-x every 1 150 µs: {}; magnetometer-x kept its 1 150 µs grid ({} samples, worst latency {} µs); \
+         moved to every 1.2 ms ({} samples, worst latency {} µs): the gyroscope one-shot on the bus {} µs after its frame \
          (≈ {} µs at the F103's speed, every µs scaled: an estimate, not a bound), the accelerometer every 5 ms at low \
          admitted, first sample {} µs after its frame ({} samples)",
         refusals.join("; "),
         mag.frames.len(),
         mag.worst_latency,
-        mag_1ms.frames.len(),
-        mag_1ms.worst_latency,
+        mag_then.frames.len(),
+        mag_then.worst_latency,
         gyro[0] - GYRO_ONCE,
         on_f103_us(gyro[0] - GYRO_ONCE)?,
         accel[0] - ACCEL_START,
