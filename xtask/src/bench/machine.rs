@@ -191,7 +191,8 @@ pub const NOT_HELD: &str = "NOT HELD";
 /// A task's bound in the file, in `unit`: its own row (its job's bound where the row is a charge per activation),
 /// or — for a publisher task, whose run takes one sample of
 /// each topic due — the sum of the rows of the topics the analysis has as its jobs (`publish_medium[magnetometer-x]`
-/// → `publisher[magnetometer-x]`). A row the bounds file holds back (`held`: declined for the analysis, which keeps a
+/// → `publisher[magnetometer-x]`) and of the topics the capture saw sampled at the task's level besides (`seen`:
+/// (task, topic); the analysis has each topic at one level, a run may move a topic between levels). A row the bounds file holds back (`held`: declined for the analysis, which keeps a
 /// stated budget) is held to its machine-code bound all the same: a held bound is still a promise that every job
 /// runs within it. `Some(Ok((bound, held)))`, `held` when any row summed is a held one; `Some(Err(reason))` when a
 /// row has no bound at all (declined by the machine code too); `None` when the file has no row for the task.
@@ -199,6 +200,7 @@ fn bound_of(
     file: &BoundsFile,
     task: &str,
     analysed: Option<&BoardResult>,
+    seen: &[(String, String)],
     qemu: bool,
 ) -> Option<Result<(u64, bool, String), String>> {
     // A row charged per activation holds an observed job against its job's bound: a trace's job does not say
@@ -241,12 +243,19 @@ fn bound_of(
         return Some(value(row).map(|(b, h)| (b, h, loose_reason(&[row]))));
     }
     let prefix = format!("{task}[");
-    let topics: Vec<&str> = analysed?
+    let mut topics: Vec<&str> = analysed?
         .tasks
         .iter()
         .filter(|t| t.job_of.as_deref() == Some(task))
         .filter_map(|t| t.name.strip_prefix(&prefix)?.strip_suffix(']'))
         .collect();
+    if !topics.is_empty() {
+        for (_, topic) in seen.iter().filter(|(t, _)| t == task) {
+            if !topics.contains(&topic.as_str()) {
+                topics.push(topic);
+            }
+        }
+    }
     let rows: Vec<&bounds::TaskBound> = topics
         .iter()
         .filter_map(|topic| file.task(&bounds::publisher_row(topic)))
@@ -530,6 +539,20 @@ pub fn rows_against(
     clock_hz: u64,
     image: Option<&QemuImage>,
 ) -> Vec<MachineRow> {
+    rows_against_seen(bounds, tasks, analysed, &[], qemu, clock_hz, image)
+}
+
+/// [`rows_against`], a publisher task held to the rows of the topics the capture saw sampled at its level as well
+/// (`seen`: (task, topic), [`bound_of`]).
+pub fn rows_against_seen(
+    bounds: &BoardBounds,
+    tasks: &[(String, Vec<Job>)],
+    analysed: Option<&BoardResult>,
+    seen: &[(String, String)],
+    qemu: bool,
+    clock_hz: u64,
+    image: Option<&QemuImage>,
+) -> Vec<MachineRow> {
     let Some(file) = &bounds.bounds else {
         return Vec::new();
     };
@@ -579,7 +602,7 @@ pub fn rows_against(
     };
     let mut out = Vec::new();
     for (task, jobs) in tasks {
-        let Some(release) = bound_of(file, task, analysed, qemu) else {
+        let Some(release) = bound_of(file, task, analysed, seen, qemu) else {
             continue;
         };
         // A simulated device's task in a QEMU run with the image's own bound: held to it, records in it.

@@ -481,8 +481,26 @@ pub fn measure_with(
                     (t.task.clone(), jobs)
                 })
                 .collect();
-            let mut rows =
-                machine::rows_against(b, &executions, board_result, qemu, capture.clock_hz, image);
+            // Every level each topic was sampled at (the analysis has each topic at one level).
+            let mut seen: Vec<(String, String)> = capture
+                .samples
+                .iter()
+                .filter_map(|s| {
+                    let level = LEVELS.get(usize::from(s.level?))?;
+                    Some((format!("publish_{level}"), s.topic.name().to_string()))
+                })
+                .collect();
+            seen.sort_unstable();
+            seen.dedup();
+            let mut rows = machine::rows_against_seen(
+                b,
+                &executions,
+                board_result,
+                &seen,
+                qemu,
+                capture.clock_hz,
+                image,
+            );
             // A suspending release's runs summed against the release's bound.
             // One entry per row and task that took its releases (a topic may be published at several levels).
             let mut releases: Vec<(String, String, Vec<Vec<machine::Job>>)> = Vec::new();
