@@ -17,7 +17,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "admission-decisions",
-        about: "issue 11: ring at 6 ms refused and at 7 ms accepted exactly as the host analysis decides; accept-and-warn starts the power status with a warning",
+        about: "issue 11: ring at 9 ms refused and at 10 ms accepted exactly as the host analysis decides; accept-and-warn starts the power status with a warning",
         check: admission_decisions,
     },
     Scenario {
@@ -233,11 +233,16 @@ fn admission(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 
 /// The ring's period the board accepts in `admission-decisions`, and the one before it it refuses:
 /// the shortest whole milliseconds the host's analysis admits beside DiWheelDrive's magnetometer
-/// (at 6 ms the ring's own frames miss, 6 139 of 6 000 µs on 2026-12-05: the power monitor's one
-/// gauge transfer under a bus lock, 1 884.8 µs from the machine code, blocks the ring's job, and
-/// the transmit interrupt's machine-code bound is every frame's queuing jitter).
-const DECISIONS_REFUSED_MS: u64 = 6;
-const DECISIONS_ACCEPTED_MS: u64 = 7;
+/// every 1.3 ms (at 9 ms the ring's own frames miss, 9 727.4 of 9 000 µs on 2026-12-05, the sound
+/// transmit path: each of its eight frames is charged its transmission and G_b, and the power
+/// monitor's gauge transfer under a bus lock blocks the ring's job).
+const DECISIONS_REFUSED_MS: u64 = 9;
+const DECISIONS_ACCEPTED_MS: u64 = 10;
+
+/// DiWheelDrive's magnetometer-x every 1.3 ms at medium, which PowerManagement keeps in its view (every 1 ms and
+/// 1.2 ms the host's check refuses it for its own frames 0x605, 1 244.1 µs on the robot 1-2's timing files on
+/// 2026-12-05, so no board keeps it).
+const DECISIONS_MAGNETOMETER: &str = "205#01140502";
 
 fn admission_decisions(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     use amiro_can::{Topic, Verdict};
@@ -252,8 +257,13 @@ fn admission_decisions(out: &RunOutput, bounds: &Bounds) -> Result<String> {
             .collect::<Vec<_>>()
             .join("; ")
     );
-    // DiWheelDrive's magnetometer-x every 1 ms at medium (powermgmt/qemu/admission-decisions.log says why not 900 µs).
-    let thesis = "205#01E80302";
+    let magnetometer = DECISIONS_MAGNETOMETER;
+    let kept = super::host_admission(bounds.root(), &[], magnetometer)?;
+    ensure!(
+        kept.refusal.is_none(),
+        "the host refuses DiWheelDrive's magnetometer ({magnetometer}), so no board keeps it: {:?}",
+        kept.refusal
+    );
     let ring = |ms: u64| format!("21F#01{ms:02X}0000");
     let (_, refused) = &verdicts[0];
     ensure!(
@@ -264,10 +274,10 @@ fn admission_decisions(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     );
     super::same_refusal(
         refused,
-        &super::host_admission(bounds.root(), &[thesis], &ring(DECISIONS_REFUSED_MS))?,
+        &super::host_admission(bounds.root(), &[magnetometer], &ring(DECISIONS_REFUSED_MS))?,
     )?;
     let accepted = ring(DECISIONS_ACCEPTED_MS);
-    let host = super::host_admission(bounds.root(), &[thesis], &accepted)?;
+    let host = super::host_admission(bounds.root(), &[magnetometer], &accepted)?;
     ensure!(
         host.refusal.is_none(),
         "the host refuses the ring at {DECISIONS_ACCEPTED_MS} ms: {:?}",
@@ -285,7 +295,7 @@ fn admission_decisions(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     );
     super::same_refusal(
         warned,
-        &super::host_admission(bounds.root(), &[thesis, &accepted], DECISIONS_WARNED)?,
+        &super::host_admission(bounds.root(), &[magnetometer, &accepted], DECISIONS_WARNED)?,
     )?;
     let power = out.times(0x61E);
     ensure!(
@@ -315,13 +325,29 @@ const DECISIONS_WARNED_US: u64 = 5_000;
 
 /// The ring's period at urgent in `admission-other-board`: the shortest whole milliseconds at
 /// which the ring alone is admitted and, beside DiWheelDrive's odometry, refused for the odometry's
-/// frames (at 6 ms, admitted alone too, the ring's own frames miss first beside it: 6 084 of 6 000 µs
-/// on 2026-12-05).
-const OTHER_BOARD_RING: &str = "01F#01070000";
+/// frames (at 9 ms the ring's own frames miss first, beside it or not: 9 347.4 of 9 000 µs on
+/// 2026-12-05, the sound transmit path).
+const OTHER_BOARD_RING: &str = "01F#010A0000";
+
+/// DiWheelDrive's odometry in `admission-other-board`: at low every 1.2 ms, which the host's check
+/// admits (every 1 ms its own frames 0x701 miss, 1 113.8 of 1 000 µs on 2026-12-05, so no board
+/// would keep it).
+const OTHER_BOARD_ODOMETRY: &str = "301#01B00402";
+
+/// The ring's period at low in `admission-other-board`, behind the odometry: the shortest whole
+/// milliseconds the host admits beside it (every 10 ms the ring's own frames 0x71F miss, 10 400.5
+/// of 10 000 µs on 2026-12-05).
+const OTHER_BOARD_LOW_MS: u64 = 11;
 
 fn admission_other_board(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let v = super::ring_refused_for_odometry(out)?;
-    let odometry = "301#01010000";
+    let odometry = OTHER_BOARD_ODOMETRY;
+    let kept = super::host_admission(bounds.root(), &[], odometry)?;
+    ensure!(
+        kept.refusal.is_none(),
+        "the host refuses DiWheelDrive's odometry ({odometry}), so no board keeps it: {:?}",
+        kept.refusal
+    );
     super::same_refusal(
         &v,
         &super::host_admission(bounds.root(), &[odometry], OTHER_BOARD_RING)?,
@@ -330,17 +356,24 @@ fn admission_other_board(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let alone = super::host_admission(bounds.root(), &[], OTHER_BOARD_RING)?;
     ensure!(
         alone.refusal.is_none(),
-        "the ring at urgent every 7 ms ({OTHER_BOARD_RING}) is refused even alone: {:?}",
+        "the ring at urgent ({OTHER_BOARD_RING}) is refused even alone: {:?}",
         alone.refusal
     );
     ensure!(
         out.times(0x41F).is_empty(),
         "urgent ring frames sent: the refused request started"
     );
-    let samples = ring_samples(out, 0x71F, 10_000, 100_000, 240_000)?;
+    let low = format!("31F#01{OTHER_BOARD_LOW_MS:02X}0000");
+    let host = super::host_admission(bounds.root(), &[odometry], &low)?;
+    ensure!(
+        host.refusal.is_none(),
+        "the host refuses the ring at low ({low}) beside the odometry: {:?}",
+        host.refusal
+    );
+    let samples = ring_samples(out, 0x71F, OTHER_BOARD_LOW_MS * 1_000, 100_000, 240_000)?;
     all_eight(&samples)?;
     Ok(format!(
-        "{v}; the ring at low every 10 ms runs ({} samples × 8), no urgent ring frame",
+        "{v}; the ring at low every {OTHER_BOARD_LOW_MS} ms runs ({} samples × 8), no urgent ring frame",
         samples.len()
     ))
 }
@@ -622,6 +655,13 @@ fn shutdown_outside(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
+/// The ring in `once-flood`, at low every 20 ms: beside it the host's check admits the flood's
+/// diagnostics one-shots (every 15 ms the ring's own frames 0x71F would miss behind their six
+/// frames, 15 018.3 of 15 000 µs on 2026-12-05, the sound transmit path; every 10 ms, 15 185.5 of
+/// 10 000 µs) and the power-status one-shot.
+const ONCE_FLOOD_RING: &str = "31F#01140000";
+const ONCE_FLOOD_RING_US: u64 = 20_000;
+
 /// `powermgmt/qemu/once-flood.log`: one-shots decided and paced by the admission task.
 fn once_flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     use amiro_can::{Topic, Verdict};
@@ -669,10 +709,17 @@ fn once_flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         verdicts.len(),
         verdicts.iter().map(|(_, v)| v.to_string()).collect::<Vec<_>>()
     );
-    let host = super::host_admission(bounds.root(), &["31F#010A0000"], "01E#01280000")?;
+    let host = super::host_admission(bounds.root(), &[ONCE_FLOOD_RING], "01E#01280000")?;
     ensure!(
         host.refusal.is_none(),
         "the host refuses the power-status one-shot the board carried out: {:?}",
+        host.refusal
+    );
+    // The flood's one-shots are admitted beside the ring too (decided as a sample every 40 ms).
+    let host = super::host_admission(bounds.root(), &[ONCE_FLOOD_RING], "21B#01280000")?;
+    ensure!(
+        host.refusal.is_none(),
+        "the host refuses the diagnostics one-shots the board carried out: {:?}",
         host.refusal
     );
     let status = out.times(0x41E);
@@ -680,13 +727,14 @@ fn once_flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         status.len() == 1 && status[0] >= 500_000,
         "power-status frames at urgent {status:?}: expected the one-shot's, after its request at 500 ms"
     );
-    let ring = ring_samples(out, 0x71F, 10_000, 10_000, 590_000)?;
+    let ring = ring_samples(out, 0x71F, ONCE_FLOOD_RING_US, 10_000, 590_000)?;
     all_eight(&ring)?;
     Ok(format!(
-        "400 one-shot requests: {} samples during the flood ({} in all), at least 40 ms apart; the power-status one-shot at urgent admitted (as by the host's check) and sent at {} µs; the ring kept its 10 ms grid ({} samples × 8)",
+        "400 one-shot requests: {} samples during the flood ({} in all), at least 40 ms apart; the power-status one-shot at urgent admitted (as by the host's check) and sent at {} µs; the ring kept its {} ms grid ({} samples × 8)",
         during.len(),
         samples.len(),
         status[0],
+        ONCE_FLOOD_RING_US / 1_000,
         ring.len()
     ))
 }
