@@ -51,7 +51,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "admission",
-        about: "issue 11: diagnostics at 1 µs refused, at 5 ms (1-0) or 6 ms (1-2) accepted (2 and 3 ms are refused since the latch's, the command handler's and the publisher's bounds are their budgets; 4 ms passes too), at urgent refused for DiWheelDrive's frames, then started with a warning; each verdict as the host decides; LEDs keep working",
+        about: "issue 11: diagnostics at 1 µs refused, at 7 ms accepted (6 ms is refused: its six frames 0x61C miss their deadline on the sound transmit path), at urgent refused for DiWheelDrive's odometry every 1.5 ms, then started with a warning; each verdict as the host decides; LEDs keep working",
         check: admission,
     },
 ];
@@ -562,14 +562,23 @@ pub(super) fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 
 /// `lightring/qemu/admission.log` (issue 11).
 fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    admission_on(out, bounds, CHIPS, 5)
+    admission_on(out, bounds, CHIPS, ADMITTED_DIAGNOSTICS_MS)
 }
 
+/// The diagnostics period at medium `admission.log` asks for, ms: the shortest whole one the host admits on
+/// both revisions since the sound transmit path (2026-12-05): every 6 ms the six frames 0x61C respond in
+/// 6 268.5 µs (1-0) or 6 488.7 µs (1-2), every 5 ms in 6 452.3 / 6 655.9 µs; 4 ms is refused for the latch
+/// (1-0) or the frames (1-2), 2 and 3 ms on a budget or the publisher's job.
+pub(super) const ADMITTED_DIAGNOSTICS_MS: u64 = 7;
+
+/// DiWheelDrive's odometry request at low that `admission.log` sends LightRing (every 1.5 ms): admitted on its
+/// own, and the reason the diagnostics every 100 ms at urgent is refused (0x701 would respond in 1 924.9 µs on
+/// 1-0's view, 1 923.8 µs on 1-2's, against 1 500 µs). Every 1 ms, the request before the sound transmit path,
+/// is refused on its own now (0x701 in 1 114.9 µs of 1 000), so LightRing does not keep it.
+const ODOMETRY_REQUEST: &str = "301#01DC0502";
+
 /// `admission.log` on a ring of `chips`, whose accepted request is the diagnostics every
-/// `every_ms` at medium (5 ms on 1-0, 6 ms on 1-2). With the latch task's, the command handler's and the publisher's
-/// bounds as their budgets (the handler above the publisher's priority), 1-0 refuses 3 ms (the six frames 0x61C
-/// respond in 3577.8 µs against 3 ms) and 1-2 refuses 4 ms (the publisher's job responds in 4086.6 µs); 1-0's 4 ms
-/// and 1-2's 5 ms pass (docs/boards.md).
+/// `every_ms` at medium, and every `every_ms` − 1 refused by the host (docs/qemu.md).
 pub(super) fn admission_on(
     out: &RunOutput,
     bounds: &Bounds,
@@ -604,6 +613,14 @@ pub(super) fn admission_on(
             .is_none(),
         "the host refuses the diagnostics every {every_ms} ms"
     );
+    // The boundary: one ms less is refused.
+    ensure!(
+        super::host_admission(root, &[], &format!("21C#01{:02X}0000", every_ms - 1))?
+            .refusal
+            .is_some(),
+        "the host admits the diagnostics every {} ms: {every_ms} ms is not the shortest admitted",
+        every_ms - 1
+    );
     let running = out
         .times(0x61C)
         .into_iter()
@@ -625,7 +642,7 @@ pub(super) fn admission_on(
     );
     super::same_refusal(
         other,
-        &super::host_admission(root, &["301#01010000"], "01C#01640000")?,
+        &super::host_admission(root, &[ODOMETRY_REQUEST], "01C#01640000")?,
     )?;
     let (_, warned) = &verdicts[2];
     ensure!(
