@@ -551,8 +551,7 @@ fn node_bounds(
     tx: u64,
     model: TxModel,
 ) -> Vec<Option<u64>> {
-    use schedule_analysis::bus_analysis::{self, BusWork, Message, Sender};
-    let bit = can::bit_time(1_000_000);
+    use schedule_analysis::bus_analysis::{Message, Sender};
     let tx = Time::from_ns(tx);
     // The uncharged model: the transmit response in the queuing jitter, no transmit interrupt to charge.
     let (extra, charged) = match model {
@@ -588,40 +587,14 @@ fn node_bounds(
                 }),
         )
         .collect();
+    // The host's form; its results come in arbitration order.
+    let forms = bus_forms(&messages, false);
     let n = messages.len();
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by_key(|&i| can::arbitration_key(messages[i].id, false));
-    let empty = MessageTiming {
-        key: 0,
-        frame_time: Time::ZERO,
-        frames: 1,
-        period: Time::ZERO,
-        jitter: Time::ZERO,
-    };
-    let mut timings = vec![empty; n];
-    let mut offsets = vec![None; n];
-    let mut blockings = vec![Time::ZERO; n];
-    let mut scratch = vec![Counter::default(); n];
-    let mut out: Vec<Result<Response, AnalysisError>> = vec![Err(AnalysisError::NoSuchIndex); n];
-    let work = BusWork {
-        order: &order,
-        timings: &mut timings,
-        offsets: &mut offsets,
-        blockings: &mut blockings,
-        scratch: &mut scratch,
-    };
-    let message = |i: usize| messages.get(i).copied();
-    bus_analysis::analyse(
-        message,
-        work,
-        FrameCost::Exact,
-        bit,
-        &limits(),
-        out.as_mut_slice(),
-    );
     let mut bounds = vec![None; n];
     for (position, &i) in order.iter().enumerate() {
-        bounds[i] = out[position].as_ref().ok().map(|r| r.wcrt.as_ns());
+        bounds[i] = forms[position].0.as_ref().ok().map(|r| r.0.as_ns());
     }
     bounds
 }
