@@ -293,14 +293,24 @@ impl Board {
         unsafe { libc::fcntl(out.as_raw_fd(), libc::F_SETPIPE_SZ, 1 << 20) };
         self.out = Some(out);
         self.child = Some(child);
-        self.partial.clear();
+        self.new_console();
         self.main_loop_lowered = false;
         self.vcpu = None;
         self.main_loop = None;
-        self.lines.clear();
-        self.ready.clear();
         self.booted(at);
         Ok(())
+    }
+
+    /// The console of a new QEMU of the board: what the last one printed stays, for the host to
+    /// emit. The host emits a board's lines at the end of its boundary (`board_lines`), and a
+    /// reset (`run`, `Action::Reset`) is taken before that: `stop` moves the old QEMU's lines into
+    /// `ready`, where they wait for it. (Until 2026-12-05 they were cleared here: a LightRing reset
+    /// by SYS_WARMRST_N lost everything it printed since its last report the host had emitted, e.g.
+    /// `reset`'s LED command at 10 ms when no other traffic kept LightRing exchanging before the
+    /// pulse at 50 ms, the board sent ahead to the pulse's boundary.)
+    fn new_console(&mut self) {
+        self.flush_partial();
+        self.ready.append(&mut self.lines);
     }
 
     /// Restarts the board in its running QEMU at boundary `at` (a system reset, [`DOWN_RESTART`]):
@@ -578,4 +588,34 @@ pub(crate) fn board_lines(b: &mut Board) -> Vec<String> {
     text.lines()
         .map(|l| format!("{}: {l}", NODES[b.index]))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_new_qemu_keeps_what_the_last_one_printed_until_the_host_emits_it() {
+        let firmware = Firmware {
+            elf: "none.elf".into(),
+            machine: "netduino2",
+        };
+        let mut b = Board::new(2, 2, firmware, "board-2".into(), false);
+        // Its report at the reset's boundary was taken (those lines are ready), a line after it
+        // and one cut short are still in the pipe's buffers when the host stops it.
+        b.ready
+            .push("# (0.010110) trace led-set led=3 rgb=FF8020".into());
+        b.lines.push("# after the report".into());
+        b.partial.extend_from_slice(b"# cut short");
+        b.stop();
+        b.new_console();
+        assert_eq!(
+            board_lines(&mut b),
+            [
+                "lightring: # (0.010110) trace led-set led=3 rgb=FF8020",
+                "lightring: # after the report",
+                "lightring: # cut short",
+            ]
+        );
+    }
 }
