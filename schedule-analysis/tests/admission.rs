@@ -420,7 +420,21 @@ fn the_table_lowers_and_emits_rust() {
 fn magnetometer_frames_in_the_report() -> Time {
     let root = root();
     let path = scenario::find_scenario(&root, "thesis-magnetometer-900us");
-    let built = scenario::build(&root, &path, &scenario::timing_files(&root)).expect("builds");
+    let (_, report) = shipped_report(&root, &path);
+    report
+        .bus
+        .as_ref()
+        .and_then(|b| b.messages.iter().find(|m| m.name == "magnetometer-x"))
+        .and_then(|m| m.wcrt())
+        .expect("bounded")
+}
+
+/// The scenario at `path` as built from the shipped timing files, and the report's analysis of it (exact frames).
+fn shipped_report(
+    root: &std::path::Path,
+    path: &std::path::Path,
+) -> (scenario::Built, schedule_analysis::analysis::Analysis) {
+    let built = scenario::build(root, path, &scenario::timing_files(root)).expect("builds");
     let report = analyse(
         &built.model.validate().expect("valid"),
         &Options {
@@ -428,12 +442,7 @@ fn magnetometer_frames_in_the_report() -> Time {
             horizon: None,
         },
     );
-    report
-        .bus
-        .as_ref()
-        .and_then(|b| b.messages.iter().find(|m| m.name == "magnetometer-x"))
-        .and_then(|m| m.wcrt())
-        .expect("bounded")
+    (built, report)
 }
 
 #[test]
@@ -503,14 +512,7 @@ fn the_shipped_scenarios_agree() {
         let mut streams = robot.scenario_streams(&sc).expect("streams");
         let request = streams.pop().expect("request");
         let d = robot.with_table(|t| admission::admit::<32, 32>(t, &streams, &request, false));
-        let built = scenario::build(&root, &path, &scenario::timing_files(&root)).expect("builds");
-        let report = analyse(
-            &built.model.validate().expect("valid"),
-            &Options {
-                frame_cost: FrameCostSpec::Exact,
-                horizon: None,
-            },
-        );
+        let (built, report) = shipped_report(&root, &path);
         // The shipped scenarios have jitter budgets the on-chip check does not know; they pass anyway, but for a
         // checked refusal (the 900 µs set's frames late on the sound transmit path), which the chip refuses too.
         assert_eq!(report.failures(), built.expected_failures, "{name}");

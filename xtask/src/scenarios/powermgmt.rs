@@ -258,12 +258,7 @@ fn admission_decisions(out: &RunOutput, bounds: &Bounds) -> Result<String> {
             .join("; ")
     );
     let magnetometer = DECISIONS_MAGNETOMETER;
-    let kept = super::host_admission(bounds.root(), &[], magnetometer)?;
-    ensure!(
-        kept.refusal.is_none(),
-        "the host refuses DiWheelDrive's magnetometer ({magnetometer}), so no board keeps it: {:?}",
-        kept.refusal
-    );
+    host_keeps(bounds, magnetometer, "DiWheelDrive's magnetometer")?;
     let ring = |ms: u64| format!("21F#01{ms:02X}0000");
     let (_, refused) = &verdicts[0];
     ensure!(
@@ -339,15 +334,22 @@ const OTHER_BOARD_ODOMETRY: &str = "301#01B00402";
 /// of 10 000 µs on 2026-12-05).
 const OTHER_BOARD_LOW_MS: u64 = 11;
 
+/// The host's check admits `command` (`what`) on a robot running nothing else, so every board keeps the stream the
+/// scenario then relies on.
+fn host_keeps(bounds: &Bounds, command: &str, what: &str) -> Result<()> {
+    let kept = super::host_admission(bounds.root(), &[], command)?;
+    ensure!(
+        kept.refusal.is_none(),
+        "the host refuses {what} ({command}), so no board keeps it: {:?}",
+        kept.refusal
+    );
+    Ok(())
+}
+
 fn admission_other_board(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let v = super::ring_refused_for_odometry(out)?;
     let odometry = OTHER_BOARD_ODOMETRY;
-    let kept = super::host_admission(bounds.root(), &[], odometry)?;
-    ensure!(
-        kept.refusal.is_none(),
-        "the host refuses DiWheelDrive's odometry ({odometry}), so no board keeps it: {:?}",
-        kept.refusal
-    );
+    host_keeps(bounds, odometry, "DiWheelDrive's odometry")?;
     super::same_refusal(
         &v,
         &super::host_admission(bounds.root(), &[odometry], OTHER_BOARD_RING)?,
