@@ -236,13 +236,16 @@ mod tests {
         }
     }
 
+    /// A board's view: per running stream its sender's board index and topic byte, and its period in ns.
+    type View = Vec<(u8, u8, u64)>;
+
     /// Each board's view of the robot's streams after `commands` (`id`, `data`), every board
     /// deciding on the table of the robot revision `tables` names for it (the running set: sender
     /// and period of each stream).
     fn views(
         commands: &[(u16, &[u8])],
         tables: &[(amiro_can::Board, &'static str)],
-    ) -> Vec<(amiro_can::Board, Vec<(u8, u8, u64)>)> {
+    ) -> Vec<(amiro_can::Board, View)> {
         use amiro_firmware::admission::{Admission, State};
         use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
         let root = crate::workspace::workspace_root();
@@ -263,7 +266,7 @@ mod tests {
                 for (id, data) in commands {
                     let _ = admission.on_command(*id, data);
                 }
-                let mut view: Vec<(u8, u8, u64)> = admission
+                let mut view: View = admission
                     .running()
                     .iter()
                     .filter_map(|s| s.sender.map(|t| (t.board, t.topic, s.period.as_ns())))
