@@ -149,8 +149,8 @@ fn scripted_workspace() -> PathBuf {
     let file = models.join("powermgmt.timing.json");
     let mut timing: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
-    assert_eq!(timing["app"]["features"], json!([]));
-    timing["app"]["features"] = json!(["scripted-i2c"]);
+    assert_eq!(timing["app"]["features"], json!(["rev-1-1"]));
+    timing["app"]["features"] = json!(["rev-1-1", "scripted-i2c"]);
     let engine = json!({
         "priority": 5,
         "per_event_us": PER_EVENT_US, "per_event_from": "bound",
@@ -195,7 +195,7 @@ fn scripted_workspace() -> PathBuf {
     // The shipped image's bound of `power_monitor` (a transfer's flags polled) is not the trial's
     // job (its transfer a script the engine carries): declined in the copy, so the statement
     // above is the budget, as the held publisher rows' are.
-    let wcet = models.join("powermgmt.wcet.json");
+    let wcet = models.join("powermgmt-1-1.wcet.json");
     let mut bounds: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&wcet).unwrap()).unwrap();
     let monitor = bounds["tasks"]

@@ -1,4 +1,4 @@
-//! PowerManagement firmware (STM32F405xG, board revision 1-1/1-2): the RTIC app.
+//! PowerManagement firmware (STM32F405xG, board revision 1-1/1-2; one image per robot revision): the RTIC app.
 //!
 //! This file is wiring only: resources, bindings, priorities. The proximity ring and the fuel
 //! gauges are sampled through `sensors` (one resource per I2C bus), the power master's decisions
@@ -684,3 +684,24 @@ mod app {
         amiro_firmware::tracing::serve_drain().await;
     }
 }
+
+// Below the app, so that the app's lines (the bounds files name some) stay where they were.
+#[cfg(all(feature = "rev-1-1", feature = "rev-1-2"))]
+compile_error!(
+    "choose one robot revision: `rev-1-1` or `rev-1-2` (with --no-default-features for 1-1)"
+);
+#[cfg(not(any(feature = "rev-1-1", feature = "rev-1-2")))]
+compile_error!("choose a robot revision: feature `rev-1-1` or `rev-1-2`");
+
+/// The robot revision this image is for, as its AMiRo-BLT device id (`shared/reference` §2). The
+/// board's revisions 1-1 and 1-2 differ only in PA1, which the firmware leaves alone, so the images
+/// differ only in the admission table: the robot's (docs/boards.md, "Revisions"). `cargo xtask
+/// flash` reads this symbol and refuses to write the image into a board whose bootloader answers
+/// with another revision's id.
+#[no_mangle]
+#[used]
+pub static AMIRO_DEVICE_ID: u32 = if cfg!(feature = "rev-1-1") {
+    0x0101_0101
+} else {
+    0x0101_0102
+};

@@ -2,7 +2,7 @@
 //! shipped machine code (`cargo xtask wcet --write`), which the analysis uses in place of a stated estimate.
 //!
 //! One file per image, beside the timing files: `models/<board>[-<revision>].wcet.json` (the revision is the one
-//! the timing file's `rev-…` feature names; a board with one image has none: `powermgmt.wcet.json`). The file
+//! the timing file's `rev-…` feature names: `powermgmt-1-2.wcet.json`; a board with one image would have none). The file
 //! says it is generated, names the chip, its clock and flash wait states, and the identity of the image it was
 //! computed from (a SHA-256 of the image's executable section bytes), so that CI can tell when it no longer
 //! matches the built image. Each row is one job: `task` (an RTIC task of the timing file, `publisher[<topic>]`
@@ -434,8 +434,8 @@ impl fmt::Display for BoundsError {
 
 impl std::error::Error for BoundsError {}
 
-/// The bounds file's name for `board` at image revision `revision` (`diwheeldrive-1-1.wcet.json`,
-/// `powermgmt.wcet.json`).
+/// The bounds file's name for `board` at image revision `revision` (`diwheeldrive-1-1.wcet.json`;
+/// `<board>.wcet.json` without one).
 pub fn file_name(board: &str, revision: Option<&str>) -> String {
     match revision {
         Some(r) => format!("{board}-{r}{FILE_SUFFIX}"),

@@ -430,10 +430,7 @@ fn every_admission_budget_covers_its_recorded_worst_step() {
             checked += 1;
         }
     }
-    assert_eq!(
-        checked, 5,
-        "DiWheelDrive and LightRing (both revisions) and PowerManagement"
-    );
+    assert_eq!(checked, 6, "every board, both revisions");
 }
 
 /// `--check` on a scenario with `expected_failures` passes only when exactly those fail, both ways: a set that fails

@@ -299,7 +299,8 @@ fn nothing_held_means_no_second_run() {
     let root = workspace_with("none", &file);
     // The other boards' generated files hold bounds too: this test's own robot is DiWheelDrive alone.
     for other in [
-        "powermgmt.wcet.json",
+        "powermgmt-1-1.wcet.json",
+        "powermgmt-1-2.wcet.json",
         "lightring-1-0.wcet.json",
         "lightring-1-2.wcet.json",
     ] {

@@ -15,14 +15,20 @@ fn root() -> PathBuf {
 }
 
 #[test]
-fn revision_1_2_replaces_the_diwheeldrive_and_lightring_timing() {
+fn revision_1_2_replaces_every_boards_timing() {
     let root = root();
     let base = scenario::timing_files_for(&root, None);
     let rev = scenario::timing_files_for(&root, Some("1-2"));
     assert_eq!(base.len(), rev.len());
     for (b, r) in base.iter().zip(&rev) {
         let name = b.file_name().and_then(|n| n.to_str()).unwrap_or("");
-        if name == "diwheeldrive.timing.json" || name == "lightring.timing.json" {
+        if [
+            "diwheeldrive.timing.json",
+            "lightring.timing.json",
+            "powermgmt.timing.json",
+        ]
+        .contains(&name)
+        {
             assert!(r.ends_with(format!("models/rev-1-2/{name}")), "{r:?}");
         } else {
             assert_eq!(b, r);
@@ -60,6 +66,30 @@ fn every_scenario_is_schedulable_or_refused_as_expected_on_both_revisions() {
     }
 }
 
+/// PowerManagement's two images (one per robot revision: their admission tables differ, so does their
+/// machine code, so each has its own bounds file) are of one board: their timing files agree but for
+/// the note and the `rev-*` feature that names the image.
+#[test]
+fn the_two_powermanagement_timing_files_describe_one_board() {
+    let read = |path: &str| -> serde_json::Value {
+        let text = std::fs::read_to_string(root().join(path)).expect("timing file");
+        serde_json::from_str(&text).expect("json")
+    };
+    let mut old = read("schedule-analysis/models/powermgmt.timing.json");
+    let mut new = read("schedule-analysis/models/rev-1-2/powermgmt.timing.json");
+    assert_eq!(old["app"]["features"], serde_json::json!(["rev-1-1"]));
+    assert_eq!(new["app"]["features"], serde_json::json!(["rev-1-2"]));
+    for file in [&mut old, &mut new] {
+        let object = file.as_object_mut().expect("an object");
+        object.remove("note");
+        object["app"]
+            .as_object_mut()
+            .expect("app")
+            .remove("features");
+    }
+    assert_eq!(old, new);
+}
+
 #[test]
 fn the_1_2_budgets_put_every_motion_topic_on_the_imu_lock() {
     let path = root().join("schedule-analysis/models/rev-1-2/diwheeldrive.timing.json");
@@ -79,11 +109,13 @@ fn the_1_2_budgets_put_every_motion_topic_on_the_imu_lock() {
     }
 }
 
-/// PowerManagement's one image serves both robots and carries the admission table of a 1-2 robot
-/// (docs/boards.md, "PowerManagement"): safe on a 1-1 robot only if the 1-2 DiWheelDrive model is
-/// at least as demanding as the 1-1 model — every task's and topic's WCET and every critical
-/// section no shorter, the 1-1 compass lock's sections carried by 1-2's imu lock (whose ceiling is
-/// at least both 1-1 locks'), the same tasks, topics and arrivals.
+/// The 1-2 DiWheelDrive model is at least as demanding as the 1-1 model — every task's and topic's
+/// WCET and every critical section no shorter, the 1-1 compass lock's sections carried by 1-2's imu
+/// lock (whose ceiling is at least both 1-1 locks'), the same tasks, topics and arrivals. Until
+/// 2026-12-06 PowerManagement's one image carried a 1-2 robot's table on both robots and relied on
+/// this; that was safe for its own requests only, not for its view of the others' (the gap,
+/// `amiro-firmware/tests/admission.rs`), and each PowerManagement image now carries its own robot's
+/// table (docs/boards.md, "Revisions"). Kept: the 1-2 robot is the more demanding one.
 #[test]
 fn the_1_2_diwheeldrive_model_dominates_the_1_1_model() {
     let read = |path: &str| -> serde_json::Value {
@@ -125,9 +157,9 @@ fn the_1_2_diwheeldrive_model_dominates_the_1_1_model() {
     }
 }
 
-/// PowerManagement's one image carries the table of a 1-2 robot, whose LightRing is a 1-2 (three
-/// TLC5947): safe on a 1-1 robot (LightRing 1-0) only if the 1-2 LightRing model demands at least
-/// as much of its board in every window as the 1-0 model. They differ only in the latch task: one
+/// The 1-2 LightRing model (three TLC5947) demands at least as much of its board in every window as
+/// the 1-0 model (on 1-1 robots; until 2026-12-06 PowerManagement's one image relied on it, as
+/// above). They differ only in the latch task: one
 /// 108-byte latch per 3 ms against one 36-byte latch per 1 ms (docs/boards.md). Every other task and
 /// topic is the same; the latch's demand in any window (ceil((w + J) / T) jobs of C plus the
 /// dispatch overheads) is at least the 1-0 latch's, its critical sections no shorter.

@@ -55,7 +55,7 @@ pub struct MonotonicTimer {
 /// One hardware revision of a board, and how its image is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Revision {
-    /// The board's revision as printed on it (`1-2`), or the revisions one image serves (`1-1/1-2`).
+    /// The board's revision as printed on it (`1-2`; PowerManagement's: the robot's).
     pub name: &'static str,
     /// The robot revisions (`--revision`: the DiWheelDrive's and PowerManagement's) this image is for.
     pub robots: &'static [&'static str],
@@ -257,14 +257,15 @@ pub const BOARDS: [Board; 3] = [
         // merged work since measured 54 940 -> 56 444 B (+1 504 B): 1 520 B more, keeping the margin it had
         // (372 B).
         admission_allowance: 6 * 1024 + 1_520,
-        // 1-1 and 1-2 differ only in PA1 (1-2's battery switch input), which the firmware leaves
-        // alone: one image for both (docs/boards.md).
-        revisions: &[Revision {
-            name: "1-1/1-2",
-            robots: &["1-2", "1-1"],
-            feature: None,
-            device_ids: &[0x0101_0102, 0x0101_0101, 2],
-        }],
+        // The board's 1-1 and 1-2 differ only in PA1 (1-2's battery switch input), which the firmware
+        // leaves alone: the code is the same, but each image carries its robot's admission table, since
+        // a board keeps another board's stream in its view only when its own table admits it
+        // (docs/boards.md, "Revisions"). The legacy id 2 is the 1-1 robot's: only 1-0/1-1 bootloaders
+        // define legacy ids (docs/flashing.md).
+        revisions: &[
+            Revision::own_image("1-2", "rev-1-2", &["1-2"], &[0x0101_0102]),
+            Revision::own_image("1-1", "rev-1-1", &["1-1"], &[0x0101_0101, 2]),
+        ],
     },
     Board {
         name: "lightring",

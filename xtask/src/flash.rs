@@ -614,9 +614,9 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
     };
     let (dwd_all, pm_all, lr_all) = (all_of(dwd), all_of(pm), all_of(lr));
     let revision_on = |board: &Board, robot: &str| board.revision_for(robot).map(|r| r.name);
-    // A 1-2 robot: DiWheelDrive 1-2, PowerManagement, and LightRing once it has a 1-2 image.
+    // A 1-2 robot: DiWheelDrive 1-2, PowerManagement 1-2, and LightRing once it has a 1-2 image.
     let mut jobs = vec![(dwd, dwd_all.clone()), (pm, pm_all.clone())];
-    let mut expected = vec![("diwheeldrive", "1-2"), ("powermgmt", "1-1/1-2")];
+    let mut expected = vec![("diwheeldrive", "1-2"), ("powermgmt", "1-2")];
     if let Some(name) = revision_on(lr, "1-2") {
         jobs.push((lr, lr_all.clone()));
         expected.push(("lightring", name));
@@ -634,7 +634,7 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
         ],
         &[
             ("diwheeldrive", "1-1"),
-            ("powermgmt", "1-1/1-2"),
+            ("powermgmt", "1-1"),
             (
                 "lightring",
                 revision_on(lr, "1-1").context("lightring on a 1-1 robot")?,
@@ -652,7 +652,7 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
             BoardSpec::with_main(robot, "powermgmt").context("powermgmt in the robot")?,
             None,
             &[(pm, pm_all.clone()), (dwd, dwd_all.clone())],
-            &[("powermgmt", "1-1/1-2"), ("diwheeldrive", revision)],
+            &[("powermgmt", revision), ("diwheeldrive", revision)],
         )?;
     }
     // The same with the ids stated, as they agree with the bootloader's.
@@ -713,6 +713,25 @@ pub fn simulated_robot(root: &Path, reports: &[crate::elf::SizeReport]) -> Resul
             "is the diwheeldrive 1-1 image, but this is a revision-1-2 robot (its main board's \
              bootloader is powermgmt with device id 0x01010102), so its diwheeldrive has \
              device id 0x01000102 (diwheeldrive 1-2)",
+        ),
+        (
+            "the 1-1 PowerManagement image on a 1-2 robot",
+            BoardSpec::robot_1_2(),
+            None,
+            vec![(pm, vec![elf("powermgmt", "1-1")?])],
+            "is the powermgmt 1-1 image, but this is a revision-1-2 robot (its main board's \
+             bootloader is diwheeldrive with device id 0x01000102), so its powermgmt has \
+             device id 0x01010102 (powermgmt 1-2)",
+        ),
+        (
+            "the 1-2 PowerManagement image on a 1-1 robot, PowerManagement on the cable",
+            BoardSpec::with_main(BoardSpec::robot_1_1(), "powermgmt")
+                .context("powermgmt in the robot")?,
+            None,
+            vec![(pm, vec![elf("powermgmt", "1-2")?])],
+            "is the powermgmt 1-2 image, but this is a revision-1-1 robot (its main board's \
+             bootloader is powermgmt with device id 0x01010101), so its powermgmt has \
+             device id 0x01010101 (powermgmt 1-1)",
         ),
         (
             "--ids 1-1 on a 1-2 robot",

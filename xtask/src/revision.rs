@@ -67,7 +67,7 @@ impl Build {
         args
     }
 
-    /// A name for files of this image: `diwheeldrive-1-2`, `powermgmt-1-1+1-2`.
+    /// A name for files of this image: `diwheeldrive-1-2`, `lightring-1-0`.
     pub fn stem(&self) -> String {
         format!(
             "{}-{}",
@@ -166,7 +166,7 @@ mod tests {
         let names: Vec<String> = plan.iter().map(Build::stem).collect();
         assert_eq!(
             names,
-            ["diwheeldrive-1-2", "powermgmt-1-1+1-2", "lightring-1-2"]
+            ["diwheeldrive-1-2", "powermgmt-1-2", "lightring-1-2"]
         );
     }
 
@@ -180,12 +180,16 @@ mod tests {
             one[0].feature_args(&["qemu"]),
             ["--no-default-features", "--features", "rev-1-1,qemu"]
         );
-        // PowerManagement: one image for both revisions, no feature.
-        assert_eq!(one[1].revision.name, "1-1/1-2");
+        // PowerManagement: an image per robot revision, for its admission table (the code is the same).
+        assert_eq!(one[1].stem(), "powermgmt-1-1");
+        assert_eq!(one[1].robot(), "1-1");
         assert_eq!(
             one[1].feature_args(&["bare-chip"]),
-            ["--features", "bare-chip"]
+            ["--no-default-features", "--features", "rev-1-1,bare-chip"]
         );
+        let new = plan(&[pm], &Choice::parse(Some("1-2")).unwrap()).unwrap();
+        assert_eq!(new[0].stem(), "powermgmt-1-2");
+        assert_eq!(new[0].robot(), "1-2");
         // LightRing: 1-0 on a 1-1 robot, 1-2 on a 1-2 robot.
         let lr = by_name("lightring").unwrap();
         let old = plan(&[lr], &Choice::parse(Some("1-1")).unwrap()).unwrap();
@@ -210,13 +214,122 @@ mod tests {
             [
                 "diwheeldrive-1-2",
                 "diwheeldrive-1-1",
-                "powermgmt-1-1+1-2",
+                "powermgmt-1-2",
+                "powermgmt-1-1",
                 "lightring-1-2",
                 "lightring-1-0"
             ]
         );
         assert_eq!(plan[0].robot(), "1-2");
         assert_eq!(plan[1].robot(), "1-1");
+    }
+
+    /// The robot revision whose timing files an image's admission table is built from, as the boards'
+    /// build script picks it (`amiro-firmware/board-build.rs`): the `rev-*` feature (LightRing's
+    /// `rev-1-0` sits on 1-1 robots), else `AMIRO_REVISION`, which `cargo xtask` sets to
+    /// [`Build::robot`].
+    fn table_revision(build: &Build) -> &'static str {
+        match build.revision.feature.and_then(|f| f.strip_prefix("rev-")) {
+            Some("1-0") => "1-1",
+            Some(revision) => revision,
+            None => build.robot(),
+        }
+    }
+
+    /// A board's view: per running stream its sender's board index and topic byte, and its period in ns.
+    type View = Vec<(u8, u8, u64)>;
+
+    /// Each board's view of the robot's streams after `commands` (`id`, `data`), every board
+    /// deciding on the table of the robot revision `tables` names for it (the running set: sender
+    /// and period of each stream).
+    fn views(
+        commands: &[(u16, &[u8])],
+        tables: &[(amiro_can::Board, &'static str)],
+    ) -> Vec<(amiro_can::Board, View)> {
+        use amiro_firmware::admission::{Admission, State};
+        use schedule_analysis::{admission_host, model::FrameCostSpec, scenario};
+        let root = crate::workspace::workspace_root();
+        let mut out = Vec::new();
+        for &(board, revision) in tables {
+            let robot = admission_host::lower(
+                &root,
+                &scenario::timing_files_for(&root, Some(revision)),
+                schedule_analysis::can::DEFAULT_BITRATE,
+                FrameCostSpec::Exact,
+            )
+            .unwrap_or_else(|e| panic!("the {revision} robot's table: {e}"));
+            assert!(robot.max_tasks() <= 64 && robot.max_publishers() <= 32);
+            let view = robot.with_table(|table| {
+                let mut state = Box::new(State::<64, 32>::new());
+                let mut admission = Admission::new(table, board, &mut state);
+                admission.prepare();
+                for (id, data) in commands {
+                    let _ = admission.on_command(*id, data);
+                }
+                let mut view: View = admission
+                    .running()
+                    .iter()
+                    .filter_map(|s| s.sender.map(|t| (t.board, t.topic, s.period.as_ns())))
+                    .collect();
+                view.sort_unstable();
+                view
+            });
+            out.push((board, view));
+        }
+        out
+    }
+
+    /// The gap found on 2026-12-05 (docs/boards.md, "Revisions"): a board keeps another board's
+    /// stream in its view only when its own table admits it, so on a robot every board must judge on
+    /// that robot's table. Replayed on the host: magnetometer-x every 1 150 µs at medium (DiWheelDrive
+    /// 1-1 admits it: 1 126.2 µs; a 1-2 robot's table refuses it: 1 244.1 µs), then power-status at high
+    /// every 100 ms. With PowerManagement's one image of before (the 1-2 robot's table on both robots)
+    /// its view missed the magnetometer on a 1-1 robot; every board's image for a robot now carries that
+    /// robot's table, and the views agree on both revisions.
+    #[test]
+    fn every_boards_image_for_a_robot_judges_on_that_robots_table_so_the_views_agree() {
+        let commands: [(u16, &[u8]); 2] = [(0x205, &[1, 0x7E, 0x04, 2]), (0x11E, &[1, 100, 0, 0])];
+        let magnetometer = |view: &[(u8, u8, u64)]| view.iter().any(|s| s.1 == 0x05);
+        for robot in ROBOT_REVISIONS {
+            let builds = plan(&all(), &Choice::Robot(robot)).unwrap();
+            let tables: Vec<(amiro_can::Board, &'static str)> = builds
+                .iter()
+                .map(|b| {
+                    let board = amiro_can::Board::ALL
+                        .into_iter()
+                        .find(|x| schedule_analysis::scenario::board_folder(*x) == b.board.name)
+                        .unwrap();
+                    (board, table_revision(b))
+                })
+                .collect();
+            let views = views(&commands, &tables);
+            for (board, view) in &views {
+                assert_eq!(
+                    view, &views[0].1,
+                    "a {robot} robot: {board:?}'s view differs from {:?}'s",
+                    views[0].0
+                );
+            }
+            for b in &builds {
+                assert_eq!(table_revision(b), robot, "{}", b.stem());
+            }
+            // The example still tells the tables apart: DiWheelDrive 1-1 runs the magnetometer, a 1-2 robot
+            // refuses it.
+            assert_eq!(magnetometer(&views[0].1), robot == "1-1", "{robot}");
+        }
+        // And what the test guards against: PowerManagement on the 1-2 robot's table on a 1-1 robot.
+        let mixed = views(
+            &commands,
+            &[
+                (amiro_can::Board::DiWheelDrive, "1-1"),
+                (amiro_can::Board::PowerManagement, "1-2"),
+            ],
+        );
+        // DiWheelDrive runs the magnetometer, PowerManagement's view misses it, so PowerManagement starts
+        // power-status, which DiWheelDrive's check (the pair: the magnetometer's frames at 1 241.2 µs) refuses.
+        let power_status = |view: &[(u8, u8, u64)]| view.iter().any(|s| s.1 == 0x1E);
+        assert!(magnetometer(&mixed[0].1) && !magnetometer(&mixed[1].1));
+        assert!(power_status(&mixed[1].1) && !power_status(&mixed[0].1));
     }
 
     #[test]
@@ -229,5 +342,11 @@ mod tests {
         assert_eq!(lr.revision_of_id(0x017F_0102).unwrap().name, "1-2");
         assert_eq!(lr.revision_of_id(0x017F_0100).unwrap().name, "1-0");
         assert_eq!(lr.revision_of_id(3).unwrap().name, "1-0");
+        // PowerManagement's legacy id is the 1-1 robot's: 1-2 bootloaders define no legacy ids.
+        let pm = by_name("powermgmt").unwrap();
+        assert_eq!(pm.revision_of_id(0x0101_0102).unwrap().name, "1-2");
+        assert_eq!(pm.revision_of_id(0x0101_0101).unwrap().name, "1-1");
+        assert_eq!(pm.revision_of_id(2).unwrap().name, "1-1");
+        assert!(pm.revision_of_id(1).is_none());
     }
 }

@@ -251,7 +251,7 @@ mod tests {
     fn bounds_for(identity: &ImageIdentity) -> String {
         serde_json::json!({
             "generated": format!("{} from a test image", bounds::GENERATED_PREFIX),
-            "board": "powermgmt", "revision": null, "chip": "stm32f405",
+            "board": "powermgmt", "revision": "1-2", "chip": "stm32f405",
             "clock_hz": 168_000_000, "wait_states": 5,
             "image": identity,
             "tasks": [ { "task": "can_rx", "cycles": 168, "us": 1.0, "instructions": 100, "declined": null } ]
@@ -280,7 +280,7 @@ mod tests {
         std::fs::write(&image, elf(&[0x70, 0x47, 0x00, 0x00], b"")).unwrap();
         let e = check_one(&root, &build, &image).unwrap_err().to_string();
         assert!(
-            e.contains("out of date") && e.contains("powermgmt.wcet.json"),
+            e.contains("out of date") && e.contains("powermgmt-1-2.wcet.json"),
             "{e}"
         );
         std::fs::remove_dir_all(&root).unwrap();
@@ -295,7 +295,7 @@ mod tests {
         let other = dir.join("other.elf");
         std::fs::write(&other, elf(&[0x70, 0x47, 0x00, 0xbf], b"")).unwrap();
         let every = revision::plan(&BOARDS.iter().collect::<Vec<_>>(), &Choice::All).unwrap();
-        assert_eq!(every.len(), 5);
+        assert_eq!(every.len(), 6);
         for build in &every {
             let path = bounds_path(&root, build);
             let file = BoundsFile::read(&path, "f")

@@ -577,12 +577,13 @@ fn admission_budget(path: &str) -> Result<(f64, schedule_analysis::scenario::Wor
 
 /// Every timing file that budgets the admission task (each records the costliest step measured and the chip's clock
 /// and cycles per instruction: `worst_step`).
-const ADMISSION_BUDGETS: [&str; 5] = [
+const ADMISSION_BUDGETS: [&str; 6] = [
     "schedule-analysis/models/diwheeldrive.timing.json",
     "schedule-analysis/models/rev-1-2/diwheeldrive.timing.json",
     "schedule-analysis/models/lightring.timing.json",
     "schedule-analysis/models/rev-1-2/lightring.timing.json",
     "schedule-analysis/models/powermgmt.timing.json",
+    "schedule-analysis/models/rev-1-2/powermgmt.timing.json",
 ];
 
 /// The admission task's analysed steps of a run, `(iterations, virtual µs, line)`: its decisions (`admission id=<id>
