@@ -41,8 +41,9 @@ pub const POWER_MONITOR_CLIENT: usize = 4;
 /// A script's timeout beyond its time on the wire at 400 kHz (`scripted::script_timeout_us`), µs:
 /// the other four clients' scripts it may wait behind, each at most a ring read's 272 SCL periods
 /// (680 µs; a set-up script is 88, a gauge's 48), and 4 ms for the gauge's clock stretching
-/// within a packet (the bq27500 family's stated stretch; the engine's re-arm task brings a
-/// stretched repeated START back, `amiro_firmware::i2c_bus::I2cBus::serve_stretches`), which also
+/// within a packet (the bq27500 family's stated stretch; the bus's watch task brings a stretched
+/// repeated START back and ends a script at its deadline, `amiro_firmware::i2c_bus::I2cBus::
+/// serve_watch`), which also
 /// covers its own events' interrupt delays. A stated allowance, not yet the analysis's bus
 /// response.
 pub const TIMEOUT_ALLOWANCE_US: u32 = 4 * 680 + 4_000;
