@@ -12,11 +12,16 @@ use std::path::PathBuf;
 mod common;
 use common::{copy_dir, repository, wire_counts};
 
+use amiro_firmware::i2c_engine::{deadline_us, events};
 use amiro_sensors::drivers::bq27500::StatusRead;
 use amiro_sensors::drivers::pca9544a::{self, Channel};
 use amiro_sensors::drivers::ring::{RingBus, WIRING};
-use amiro_sensors::drivers::scripted::{gauge_script, RingRead, GAUGE_SETTLE_US};
+use amiro_sensors::drivers::scripted::{
+    gauge_script, RingRead, ScriptBus, SensorSetUp, GAUGE_SETTLE_US,
+};
+use amiro_sensors::drivers::vcnl4020::Config;
 use amiro_sensors::script::Script;
+use amiro_sensors::sim::SimPowerBus;
 use schedule_analysis::admission_host;
 use schedule_analysis::analysis::{analyse, Options};
 use schedule_analysis::model::FrameCostSpec;
@@ -35,10 +40,21 @@ const GAUGE_BYTES: u32 = 5;
 const GAUGE_STARTS: u32 = 2;
 const GAUGE_EVENTS: u32 = 7;
 const GAUGE_SCRIPTS: usize = 10;
+/// A gauge script's deadline: 120 µs on the wire + 7 events × 200 µs (`i2c_engine::deadline_us`).
+const GAUGE_DEADLINE_US: u32 = 1_520;
 /// The power monitor's job with the trial, its CPU, an estimate: the charger's regulation (its
 /// 23.5 µs VSYS conversion) and one gauge script's submission and decoding, two polls (the ring's
 /// release of two scripts, three polls, is stated at 320 µs below).
 const MONITOR_JOB_US: f64 = 200.0;
+/// The CPU of one poll of a release that runs scripts (a script's submission, or its result's
+/// decoding and the next script's submission): the first statement's 320 µs for the ring's
+/// release of two scripts, three polls, an estimate from the QEMU runs.
+const POLL_US: f64 = 320.0 / 3.0;
+/// After a script's deadline, until its bus is free again: the watch's response at priority 5 and
+/// the bus clear (`i2c::BusClear`: 140 µs of stated waits and its code, about 4 130 cycles at
+/// 168 MHz as `i2c::Master::recover`'s bound), µs: an estimate.
+const RECOVERY_US: u32 = 300;
+const DEADLINE_SOURCE: &str = "i2c_engine::deadline_us (the script's wire time + 200 µs an event: the bus's watch ends it with Failure::Stretched) + 300 µs, the watch's response and the bus clear (an estimate)";
 
 /// The engine's parts on the F405 at 168 MHz, tools/engine-bound's bounds (README.md), µs.
 const PER_EVENT_US: f64 = 6.02;
@@ -51,29 +67,6 @@ const GAUGE_STRETCH_US: f64 = 4_000.0;
 const GAUGE_WAKE_US: f64 = 5_000.0;
 const STRETCH_SOURCE: &str = "TI's bq27xxx data sheets, 'I2C Clock Stretching' (docs/analysis.md, PowerManagement's I2C waits): within a packet addressed to the gauge up to 4 ms; at the beginning of traffic as it wakes from SLEEP 5 ms (the bq27520-G4's figure; the bq27500's SLUS785 states none); the PCA9544A and the VCNL4020 state no stretching";
 
-/// The engine's event interrupts for a script, from its steps (docs/i2c.md, "The engine"): a
-/// write of n bytes SB, ADDR, n × TXE, BTF; a read of N bytes after a repeated START SB, ADDR and
-/// one RXNE (N = 1), one BTF (N = 2), or N − 3 RXNE, BTF and the last RXNE (N > 2).
-fn engine_events(script: &Script) -> u32 {
-    script
-        .operations()
-        .iter()
-        .map(|op| {
-            let write = if op.write > 0 {
-                3 + u32::from(op.write)
-            } else {
-                0
-            };
-            let read = match op.read {
-                0 => 0,
-                1 | 2 => 3,
-                n => 2 + u32::from(n) - 1,
-            };
-            write + read
-        })
-        .sum()
-}
-
 #[test]
 fn the_stated_scripts_are_the_ones_the_jobs_put_on_the_wire() {
     for bus in [RingBus::I2c1, RingBus::I2c2] {
@@ -85,7 +78,7 @@ fn the_stated_scripts_are_the_ones_the_jobs_put_on_the_wire() {
         let read = RingRead::new(pca9544a::AMIRO_ADDRESS, &channels);
         let script = read.script().expect("a script").expect("it builds");
         assert_eq!(wire_counts(&script), (RING_BYTES, RING_STARTS));
-        assert_eq!(engine_events(&script), RING_EVENTS);
+        assert_eq!(events(&script), RING_EVENTS);
         // The analysis's wire time (9 bit times a byte, 2 a START) covers the script's SCL periods.
         assert!(9 * RING_BYTES + 2 * RING_STARTS >= script.scl_periods());
     }
@@ -94,7 +87,8 @@ fn the_stated_scripts_are_the_ones_the_jobs_put_on_the_wire() {
     let transfer = read.next_transfer().expect("a first transfer");
     let script = gauge_script(transfer).expect("it builds");
     assert_eq!(wire_counts(&script), (GAUGE_BYTES, GAUGE_STARTS));
-    assert_eq!(engine_events(&script), GAUGE_EVENTS);
+    assert_eq!(events(&script), GAUGE_EVENTS);
+    assert_eq!(deadline_us(&script), GAUGE_DEADLINE_US);
     assert_eq!(StatusRead::MAX_TRANSFERS, GAUGE_SCRIPTS + 3);
     assert_eq!(GAUGE_SETTLE_US, 66);
     // The HMC5883L's sample (write 1, read 6) raises the 11 events counted on the register model.
@@ -102,15 +96,40 @@ fn the_stated_scripts_are_the_ones_the_jobs_put_on_the_wire() {
     compass
         .write_read(0x1E, &[0x03], 6)
         .expect("the compass's sample");
-    assert_eq!(engine_events(&compass), 11);
+    assert_eq!(events(&compass), 11);
 }
 
-fn ring_script(bus: &str) -> serde_json::Value {
+/// A script of the ring's job as the timing file states it: its bytes, STARTs and events as the
+/// script puts them on the wire, the gauge's wake as its stretch (traffic not addressed to the
+/// gauge may wake it), and its deadline.
+fn ring_job_script(bus: &str, script: &Script, source: &str) -> serde_json::Value {
+    let (bytes, starts) = wire_counts(script);
     json!({
-        "bus": bus, "bytes": RING_BYTES, "starts": RING_STARTS, "events": RING_EVENTS,
-        "source": "a ring bus's read (RingRead: four VCNL4020 behind the PCA9544A)",
-        "stretch_us": GAUGE_WAKE_US, "stretch_source": STRETCH_SOURCE
+        "bus": bus, "bytes": bytes, "starts": starts, "events": events(script),
+        "source": source,
+        "stretch_us": GAUGE_WAKE_US, "stretch_source": STRETCH_SOURCE,
+        "deadline_us": f64::from(deadline_us(script) + RECOVERY_US),
+        "deadline_source": DEADLINE_SOURCE
     })
+}
+
+/// The ring's release: each bus's worst job ([`worst_ring_job`]), the rear bus's, then the
+/// front's.
+fn ring_release() -> Vec<serde_json::Value> {
+    let mut scripts = Vec::new();
+    for (bus, name) in [(RingBus::I2c1, "i2c1"), (RingBus::I2c2, "i2c2")] {
+        let job = worst_ring_job(bus);
+        let reads = job.len() - 1;
+        for (k, script) in job.iter().enumerate() {
+            let source = if k < reads {
+                "a missing sensor's set-up (SensorSetUp: identity, then each register written and read back)"
+            } else {
+                "a ring bus's read (RingRead: four VCNL4020 behind the PCA9544A)"
+            };
+            scripts.push(ring_job_script(name, script, source));
+        }
+    }
+    scripts
 }
 
 /// One transfer of a gauge's status read: a script after the bus-free time, which may wake the
@@ -121,6 +140,8 @@ fn gauge_script_on(bus: &str) -> serde_json::Value {
         "source": "a bq27500 standard command (StatusRead's transfer as gauge_script)",
         "stretch_us": GAUGE_STRETCH_US + GAUGE_WAKE_US,
         "stretch_source": STRETCH_SOURCE,
+        "deadline_us": f64::from(GAUGE_DEADLINE_US + RECOVERY_US),
+        "deadline_source": DEADLINE_SOURCE,
         "settle_us": f64::from(GAUGE_SETTLE_US),
         "settle_source": "the bq27500's 66 µs of bus-free time between packets (bq27500::BUS_FREE_NS)"
     })
@@ -136,9 +157,12 @@ fn monitor_job() -> serde_json::Value {
 
 /// The workspace's apps and timing files, PowerManagement's file stating the trial's buses and
 /// scripts (its app read with `scripted-i2c`: the re-arm tasks are in it).
-fn scripted_workspace() -> PathBuf {
+fn scripted_workspace(test: &str) -> PathBuf {
     let real = repository();
-    let root = std::env::temp_dir().join(format!("pm-scripted-analysis-{}", std::process::id()));
+    let root = std::env::temp_dir().join(format!(
+        "pm-scripted-analysis-{}-{test}",
+        std::process::id()
+    ));
     let _ = std::fs::remove_dir_all(&root);
     std::fs::create_dir_all(&root).unwrap();
     for board in ["diwheeldrive", "powermgmt", "lightring"] {
@@ -167,9 +191,10 @@ fn scripted_workspace() -> PathBuf {
     // scripts is k + 1 polls, most of them a script's submission and decoding).
     // The ring: the rear bus's read, then the front's; no bus lock held across either.
     let ring = &mut timing["topics"]["proximity-ring"];
-    ring["wcet_us"] = json!(320.0);
+    let release = ring_release();
+    ring["wcet_us"] = json!(POLL_US * (release.len() + 1) as f64);
     ring["bcet_us"] = json!(100.0);
-    ring["scripts"] = json!([ring_script("i2c1"), ring_script("i2c2")]);
+    ring["scripts"] = json!(release);
     ring["critical_sections_us"]["rear_bus"] = json!(20.0);
     ring["critical_sections_us"]["front_bus"] = json!(20.0);
     // Power status: the power monitor's latest round and the charge lines, no script: the timing
@@ -214,9 +239,78 @@ fn scripted_workspace() -> PathBuf {
     root
 }
 
+/// The ring's worst job on one bus (`sensors::scripted::sample_ring`): a missing sensor whose retry
+/// passed set up first (at most one a job and bus: `SensorSetUp`'s six scripts, its identity and
+/// each set-up register written and read back), then the read of the sensors that answer (one
+/// script, every sensor answering).
+fn worst_ring_job(bus: RingBus) -> Vec<Script> {
+    let channels: Vec<Channel> = WIRING
+        .iter()
+        .filter(|(on, _)| *on == bus)
+        .map(|&(_, channel)| channel)
+        .collect();
+    let mut sim = SimPowerBus::new(0, true);
+    let mut set_up = SensorSetUp::new(pca9544a::AMIRO_ADDRESS, channels[0], Config::AMIRO);
+    let mut scripts = Vec::new();
+    loop {
+        let script = set_up.script().expect("it builds");
+        scripts.push(script);
+        if let Some(done) = set_up.complete(&sim.run(&script)) {
+            assert!(done.is_ok(), "the simulated sensor sets up");
+            break;
+        }
+    }
+    let read = RingRead::new(pca9544a::AMIRO_ADDRESS, &channels);
+    scripts.push(read.script().expect("a script").expect("it builds"));
+    scripts
+}
+
+/// The soundness gap of the trial's first statement (2026-12-05): the ring's release was stated as
+/// one read a bus, but a release may first set up a missing sensor on each bus. Each bus's scripts
+/// in the copy are the worst job's, in order, with the bytes, STARTs and events the scripts put on
+/// the wire and the engine serves.
+#[test]
+fn the_ring_job_states_its_set_up_scripts() {
+    let root = scripted_workspace("ring-job");
+    let robot = admission_host::lower_robot(&root).unwrap_or_else(|e| panic!("{e}"));
+    let pm = robot
+        .boards
+        .iter()
+        .find(|b| b.name == "powermgmt")
+        .expect("PowerManagement");
+    let ring = pm
+        .topics
+        .iter()
+        .find(|t| t.name == "proximity-ring")
+        .expect("the ring")
+        .scripts
+        .clone();
+    let mut stated = ring.iter();
+    for (index, bus) in [RingBus::I2c1, RingBus::I2c2].into_iter().enumerate() {
+        let job = worst_ring_job(bus);
+        assert_eq!(job.len(), 7, "six set-up scripts and the read");
+        for script in &job {
+            let lowered = stated
+                .next()
+                .expect("a stated script for each of the job's");
+            assert_eq!(usize::from(lowered.bus), index);
+            assert_eq!(u32::from(lowered.events), events(script));
+            let (bytes, starts) = wire_counts(script);
+            assert_eq!(u32::from(lowered.starts), starts);
+            // The wire as the analysis counts it (9 bit times a byte, 2 a START, 2.5 µs each)
+            // covers the script's SCL periods; the rest of the bus time is the charged stretch.
+            let wire_ns = u64::from(9 * bytes + 2 * starts) * 2_500;
+            assert!(wire_ns >= script.bus_time_ns(400_000));
+            assert!(u64::from(lowered.bus_time) >= wire_ns);
+        }
+    }
+    assert!(stated.next().is_none());
+    let _ = std::fs::remove_dir_all(&root);
+}
+
 #[test]
 fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine() {
-    let root = scripted_workspace();
+    let root = scripted_workspace("report");
     let robot = admission_host::lower_robot(&root).unwrap_or_else(|e| panic!("{e}"));
     let pm = robot
         .boards
@@ -238,19 +332,25 @@ fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine()
             .scripts
             .clone()
     };
-    // 28 bytes and 12 STARTs at 400 kHz: (9 × 28 + 2 × 12) × 2.5 µs = 690 µs, and a gauge's wake.
+    // Per bus a set-up's six scripts, then the read. The read: 28 bytes and 12 STARTs at 400 kHz,
+    // (9 × 28 + 2 × 12) × 2.5 µs = 690 µs, and a gauge's wake (5 ms): 5 690 µs, below its deadline
+    // (680 + 44 × 200 + 300 = 9 780 µs). A set-up script's stretch is capped by its deadline: the
+    // identity (6 bytes, 3 STARTs, 11 events) 148 + 11 × 200 + 300 = 2 648 µs, each register
+    // written and read back (9 bytes, 4 STARTs, 16 events) 220 + 16 × 200 + 300 = 3 720 µs.
     let ring = topic("proximity-ring");
-    assert_eq!(ring.len(), 2);
+    assert_eq!(ring.len(), 14);
     assert_eq!(
         (
-            ring[0].bus,
-            ring[0].bus_time,
-            ring[0].events,
-            ring[0].starts
+            ring[6].bus,
+            ring[6].bus_time,
+            ring[6].events,
+            ring[6].starts
         ),
         (0, 5_690_000, 44, 12)
     );
-    assert_eq!(ring[1].bus, 1);
+    assert_eq!((ring[0].bus_time, ring[0].events), (2_648_000, 11));
+    assert_eq!((ring[1].bus_time, ring[1].events), (3_720_000, 16));
+    assert_eq!(ring[13].bus, 1);
     // The power-status sample runs no script: the gauges are the power monitor's alone.
     assert!(topic("power-status").is_empty());
     let monitor = pm
@@ -264,8 +364,8 @@ fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine()
         .find(|(task, _)| usize::from(*task) == monitor)
         .map(|(_, s)| s.clone())
         .expect("power_monitor's scripts");
-    // 5 bytes and 2 STARTs: (45 + 4) × 2.5 µs = 122.5 µs, the stretch and the wake; 66 µs
-    // before each; one on each bus.
+    // 5 bytes and 2 STARTs: (45 + 4) × 2.5 µs = 122.5 µs, the stretch and the wake (9 ms)
+    // capped by its deadline: 120 + 7 × 200 + 300 = 1 820 µs; 66 µs before each; one on each bus.
     assert_eq!(scripts.len(), 2);
     assert_eq!(
         (
@@ -274,9 +374,9 @@ fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine()
             scripts[0].events,
             scripts[0].settle
         ),
-        (1, 9_122_500, 7, 66_000)
+        (1, 1_820_000, 7, 66_000)
     );
-    assert_eq!((scripts[1].bus_time, scripts[1].bus), (9_122_500, 0));
+    assert_eq!((scripts[1].bus_time, scripts[1].bus), (1_820_000, 0));
 
     // The thesis demo's report with the trial's statements: printed (docs/i2c.md).
     let scenario_file = root
