@@ -158,6 +158,34 @@ fn monitor_job() -> serde_json::Value {
 /// The workspace's apps and timing files, PowerManagement's file stating the trial's buses and
 /// scripts (its app read with `scripted-i2c`: the re-arm tasks are in it).
 fn scripted_workspace(test: &str) -> PathBuf {
+    scripted_workspace_as(test, Design::Trial)
+}
+
+/// Which statement of the trial the scratch copy makes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Design {
+    /// The trial as built: the ring's publisher runs each bus's worst job, the power monitor one
+    /// gauge transfer every 50 ms.
+    Trial,
+    /// The owner task the review planned (not built): `power_monitor` every 62.5 ms runs both
+    /// buses' worst ring jobs and one gauge transfer a bus; the ring's publisher and the power
+    /// status publish its latest readings, no script.
+    Owner,
+    /// As `Owner`, without the set-up scripts (the review's model, unsound: for comparison).
+    OwnerReadOnly,
+    /// As `Owner`, a sensor's set-up spread over the owner's jobs, one of its scripts a job (as
+    /// DiWheelDrive's stepwise set-up, not built for PowerManagement): per bus the longest set-up
+    /// script, the read and the gauge transfer.
+    OwnerStepwise,
+    /// As `Owner`, the gauge's wake charged once a bus and job (its first script) instead of on
+    /// every script: a figure for the decision, not a stated fact.
+    OwnerWakeOnce,
+}
+
+/// The owner's period (µs).
+const OWNER_PERIOD_US: u32 = 62_500;
+
+fn scripted_workspace_as(test: &str, design: Design) -> PathBuf {
     let real = repository();
     let root = std::env::temp_dir().join(format!(
         "pm-scripted-analysis-{}-{test}",
@@ -208,6 +236,48 @@ fn scripted_workspace(test: &str) -> PathBuf {
     monitor["scripts"] = monitor_job();
     monitor["critical_sections_us"]["rear_bus"] = json!(20.0);
     monitor["critical_sections_us"]["front_bus"] = json!(20.0);
+    if design != Design::Trial {
+        // Each bus: its worst ring job, then one gauge transfer; the rear bus, then the front.
+        let release = ring_release();
+        let (rear, front) = release.split_at(release.len() / 2);
+        let per_bus = |job: &[serde_json::Value], gauge: serde_json::Value| {
+            let mut job = job.to_vec();
+            if design == Design::OwnerReadOnly {
+                job.drain(..job.len() - 1);
+            }
+            if design == Design::OwnerStepwise {
+                // The set-up's second script is its longest (a register written and read back).
+                job.drain(..1);
+                job.drain(1..job.len() - 1);
+            }
+            job.push(gauge);
+            if design == Design::OwnerWakeOnce {
+                for later in job.iter_mut().skip(1) {
+                    let wake = if later.get("settle_us").is_some() {
+                        GAUGE_STRETCH_US
+                    } else {
+                        0.0
+                    };
+                    later["stretch_us"] = json!(wake);
+                }
+            }
+            job
+        };
+        let mut scripts = per_bus(rear, gauge_script_on("i2c1"));
+        scripts.extend(per_bus(front, gauge_script_on("i2c2")));
+        monitor["wcet_us"] = json!(MONITOR_JOB_US + POLL_US * (scripts.len() + 1) as f64);
+        monitor["scripts"] = json!(scripts);
+        monitor["arrival"] = json!({ "periodic_us": OWNER_PERIOD_US });
+        // The ring's publisher takes the owner's latest counts under each bus's lock: eight
+        // frames encoded and pushed, as the power status's sample (64.4 µs bounded) with its
+        // eight frames: an estimate.
+        let ring = &mut timing["topics"]["proximity-ring"];
+        ring.as_object_mut().unwrap().remove("scripts");
+        ring["wcet_us"] = json!(150.0);
+        ring["bcet_us"] = json!(50.0);
+        ring["critical_sections_us"]["rear_bus"] = json!(2.0);
+        ring["critical_sections_us"]["front_bus"] = json!(2.0);
+    }
     for task in ["rearm_rear", "rearm_front"] {
         timing["tasks"][task] = json!({
             "wcet_us": 5.0, "bcet_us": 1.0,
@@ -426,6 +496,79 @@ fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine()
                 s.task, s.wire, s.events, s.bus_time, s.blocking, s.suspension, s.bound
             );
         }
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// The owner-task design, stated in the copy (not built): the verdict of the thesis demo with it
+/// (docs/i2c.md, "The owner task: the analysis's verdict"), printed.
+#[test]
+fn the_owner_design_on_the_thesis_demo() {
+    for (name, design) in [
+        ("owner", Design::Owner),
+        ("owner-read-only", Design::OwnerReadOnly),
+        ("owner-stepwise", Design::OwnerStepwise),
+        ("owner-wake-once", Design::OwnerWakeOnce),
+    ] {
+        owner_verdict(name, design);
+    }
+}
+
+fn owner_verdict(name: &str, design: Design) {
+    let root = scripted_workspace_as(name, design);
+    let scenario_file = root
+        .join(scenario::MODELS_DIR)
+        .join("thesis-demo.scenario.json");
+    let built = scenario::build(&root, &scenario_file, &scenario::timing_files(&root))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let analysis = analyse(
+        &built.model.validate().expect("valid"),
+        &Options {
+            frame_cost: FrameCostSpec::Exact,
+            horizon: None,
+        },
+    );
+    let board = analysis
+        .boards
+        .iter()
+        .find(|b| b.name == "powermgmt")
+        .expect("PowerManagement in the report");
+    println!("{name}: utilisation {:.3}", board.utilisation);
+    for task in board.tasks.iter().filter(|t| {
+        [
+            "power_monitor",
+            "publish_medium[proximity-ring]",
+            "publish_low[power-status]",
+            "handle_commands",
+        ]
+        .contains(&t.name.as_str())
+    }) {
+        println!(
+            "{name}: {}: wcet {:?} jitter {:?} {:?}",
+            task.name, task.wcet, task.jitter, task.bound
+        );
+    }
+    for bus in &board.sensor_buses {
+        let suspension: u64 = bus
+            .scripts
+            .iter()
+            .map(|s| s.suspension.unwrap_or(s.bus_time).as_ns())
+            .sum();
+        println!(
+            "{name}: {}: event response {:?}, utilisation {:.3}, scripts {}, their suspensions {} ns",
+            bus.name,
+            bus.event_response,
+            bus.utilisation,
+            bus.scripts.len(),
+            suspension
+        );
+    }
+    for topic in analysis.topics.iter().filter(|t| {
+        t.sender
+            .as_deref()
+            .is_some_and(|s| s.starts_with("powermgmt"))
+    }) {
+        println!("{name}: topic {topic:?}");
     }
     let _ = std::fs::remove_dir_all(&root);
 }
