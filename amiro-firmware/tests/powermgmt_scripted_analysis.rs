@@ -5,7 +5,8 @@
 //! workspace's timing files (the shipped image does not run them, so the real file does not state
 //! them yet). The statements are checked against the scripts the board's jobs put on the wire; the
 //! copy lowers into the chip's admission table with the figures stated; and the report of the
-//! thesis demo (the ring every 10 ms) is printed with the engine charged per script.
+//! thesis demo (the ring every 62.5 ms) is printed with the engine charged per script, for the trial as
+//! built and for the owner-task design (not built).
 
 use std::path::PathBuf;
 
