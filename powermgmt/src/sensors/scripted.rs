@@ -11,6 +11,7 @@
 //! missing sensor set up again per job and bus, each after [`RETRY_US`]; a sensor that does not
 //! answer yields no frame and is counted; the log lines and the health report are made when the
 //! job ends, from what it changed.
+use amiro_firmware::i2c_engine::FLAG_ALLOWANCE_US;
 use amiro_firmware::scripted::{script_result, ScriptPort};
 use amiro_sensors::drivers::bq27500::{BatteryStatus, StatusRead};
 use amiro_sensors::drivers::pca9544a::{self, Channel};
@@ -38,15 +39,24 @@ pub const CLIENTS: usize = 5;
 /// The power monitor's slot.
 pub const POWER_MONITOR_CLIENT: usize = 4;
 
+/// The longest deadline of the buses' scripts (`amiro_firmware::i2c_engine::deadline_us`), µs: a
+/// ring read's 680 µs on the wire and 44 events at `FLAG_ALLOWANCE_US` (a set-up script's is
+/// 3 420 µs, a gauge transfer's 1 520).
+const LONGEST_DEADLINE_US: u32 = 680 + 44 * FLAG_ALLOWANCE_US;
+/// After a script's deadline until its bus is free: the bus watch's response and the bus clear
+/// (`i2c::BusClear`, 140 µs of stated waits and its code), µs: an estimate.
+const RECOVERY_US: u32 = 300;
+
 /// A script's timeout beyond its time on the wire at 400 kHz (`scripted::script_timeout_us`), µs:
-/// the other four clients' scripts it may wait behind, each at most a ring read's 272 SCL periods
-/// (680 µs; a set-up script is 88, a gauge's 48), and 4 ms for the gauge's clock stretching
-/// within a packet (the bq27500 family's stated stretch; the bus's watch task brings a stretched
-/// repeated START back and ends a script at its deadline, `amiro_firmware::i2c_bus::I2cBus::
-/// serve_watch`), which also
-/// covers its own events' interrupt delays. A stated allowance, not yet the analysis's bus
-/// response.
-pub const TIMEOUT_ALLOWANCE_US: u32 = 4 * 680 + 4_000;
+/// the other four clients' scripts it may wait behind, each ended by the bus's watch at its
+/// deadline at the latest and the bus then cleared, and its own script's flags at
+/// `FLAG_ALLOWANCE_US` and its clear. The client's timeout is thus the backstop behind the watch
+/// (`amiro_firmware::i2c_bus::I2cBus::serve_watch`, which ends a script at its deadline with
+/// `Failure::Stretched` and brings a stretched repeated START back), never before it; before
+/// deadlines (2026-12-05) it was 4 × 680 + 4 000 µs, which ended a ring read stretched past
+/// 7.4 ms before its 9.48 ms deadline. A stated allowance, not the analysis's bus response.
+pub const TIMEOUT_ALLOWANCE_US: u32 =
+    4 * (LONGEST_DEADLINE_US + RECOVERY_US) + 44 * FLAG_ALLOWANCE_US + RECOVERY_US;
 
 /// One bus's ring sensors and gauge as the scripted path keeps them: no bus inside (the job's
 /// owner runs the scripts on its port).
