@@ -354,14 +354,9 @@ pub mod scripted {
     /// A client task's slot on a [`ScriptBus`], its timeout on the board's clock.
     pub type Port = I2cPort<'static, Clock, Registers, CLIENTS>;
 
-    /// The clients' RTIC priorities, by slot (`sensors::scripted::CLIENTS`).
-    const CLIENT_PRIORITIES: [u8; CLIENTS] = [
-        levels::PUBLISH_URGENT,
-        levels::PUBLISH_HIGH,
-        levels::PUBLISH_MEDIUM,
-        levels::PUBLISH_LOW,
-        levels::POWER_MONITOR,
-    ];
+    /// The clients' RTIC priorities, by slot (`sensors::scripted::CLIENTS`): the bus's owner
+    /// task (`ring_rear`, `ring_front`), at the power monitor's level.
+    const CLIENT_PRIORITIES: [u8; CLIENTS] = [levels::POWER_MONITOR];
 
     /// I2C1, the rear bus.
     // SAFETY: the block is touched only after `boot_rear` took it from the polled master.
