@@ -64,8 +64,9 @@ const RECOVERY_US: u32 = 300;
 /// `Failure::Stretched` and brings a stretched repeated START back), never before it; before
 /// deadlines (2026-12-05) it was 4 × 680 + 4 000 µs, which ended a ring read stretched past
 /// 7.4 ms before its 9.48 ms deadline. A stated allowance, not the analysis's bus response.
-pub const TIMEOUT_ALLOWANCE_US: u32 = (CLIENTS as u32 - 1)
-    * (LONGEST_DEADLINE_US + RECOVERY_US) + 44 * FLAG_ALLOWANCE_US + RECOVERY_US;
+pub const TIMEOUT_ALLOWANCE_US: u32 = (CLIENTS as u32 - 1) * (LONGEST_DEADLINE_US + RECOVERY_US)
+    + 44 * FLAG_ALLOWANCE_US
+    + RECOVERY_US;
 
 /// One bus's ring sensors and gauge as the scripted path keeps them: no bus inside (the job's
 /// owner runs the scripts on its port).
