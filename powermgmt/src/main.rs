@@ -478,7 +478,9 @@ mod app {
     /// round of both fuel gauges (a `BatteryRound` kept across jobs: the only reads of the gauges
     /// after the boot's, kept for the power-status sample), and a round that ends, or the boot's
     /// round at the first job, is checked for a critically low battery, which shuts the robot
-    /// down. Marks the watchdog's progress.
+    /// down. Marks the watchdog's progress. With `scripted-i2c` the bus owners (`ring_rear`,
+    /// `ring_front`) read the gauges and check each read that ends; this task regulates and checks
+    /// the boot's round.
     #[task(priority = 1, shared = [rear_bus, front_bus, charger, batteries, alive])]
     async fn power_monitor(mut cx: power_monitor::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::POWER_MONITOR);

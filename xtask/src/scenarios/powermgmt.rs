@@ -660,7 +660,7 @@ fn shutdown_low_battery(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let handover = stopped_and_handed_over(out, seen)?;
     let samples = ring_samples(out, 0x61F, 10_000, 5_000, seen)?;
     all_eight(&samples)?;
-    Ok(format!("{} ring samples, critical battery seen at the gauges' read's end at {} ms, hibernate with reason 1; {handover}", samples.len(), seen / 1_000))
+    Ok(format!("{} ring samples, critical battery seen at {} ms (the power monitor's first round's end; with scripted-i2c a bus owner's first gauge read's), hibernate with reason 1; {handover}", samples.len(), seen / 1_000))
 }
 
 fn shutdown_outside(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
