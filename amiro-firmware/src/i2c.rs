@@ -601,3 +601,52 @@ impl Master {
         cleared.map(|_| ()).map_err(Error::from)
     }
 }
+
+/// The bus clear of a block its interrupt-driven engine runs (`i2c_bus::I2cBus::serve_watch`'s,
+/// after a script ended at its deadline, the `scripted-i2c` trials): the clear of
+/// [`Master`]'s fault path on the same pins, without the master. Linked only where a board calls
+/// it.
+pub struct BusClear {
+    base: usize,
+    pins: Pins,
+    half_cycles: u32,
+}
+
+impl BusClear {
+    /// The clear of the block at `base` ([`I2C1`] or [`I2C2`]) on `pins`, its half SCL periods
+    /// timed in cycles of a `sysclk_hz` core clock (the design plan's: a slower clock only makes
+    /// them longer).
+    ///
+    /// # Safety
+    /// As [`Pins::new`] and [`Master::new`]: `base` the block whose pins these are, used by this
+    /// value only while its bus recovers (the bus starts no script then, and its interrupts are
+    /// off).
+    pub const unsafe fn new(base: usize, pins: Pins, sysclk_hz: u32) -> Self {
+        Self {
+            base,
+            pins,
+            half_cycles: FLAG_TIMEOUT_US * (sysclk_hz / 1_000_000) / HALF_PERIODS_PER_TIMEOUT,
+        }
+    }
+
+    /// The block held in reset, its pins as GPIO, the bus cleared (up to nine SCL pulses while SDA
+    /// is low, then a STOP, each released SCL awaited as a device may stretch it), the pins given
+    /// back; the block left in reset for its bus to set it up (`I2cBus::recovered`). `Stuck`
+    /// where SDA or SCL stays low.
+    pub fn clear(&self) -> Result<(), crate::i2c_clear::Stuck> {
+        // SAFETY: `new`'s contract: this block's CR1, the software reset bit.
+        unsafe {
+            core::ptr::write_volatile((self.base + CR1) as *mut u32, u32::from(CR1_SWRST));
+        }
+        let mut pins = Clearing {
+            pins: &self.pins,
+            half_cycles: self.half_cycles,
+        };
+        pins.lines(true, true);
+        pins.half_period();
+        self.pins.hand_to_gpio(true);
+        let cleared = clear_bus(&mut pins);
+        self.pins.hand_to_gpio(false);
+        cleared.map(|_| ())
+    }
+}

@@ -22,10 +22,13 @@
 //! by value.
 //!
 //! A repeated START a device delays past that wait stalls the script with the event interrupt
-//! masked (`i2c_engine`); the board's re-arm task ([`I2cBus::serve_stretches`]) looks at it every
+//! masked (`i2c_engine`); the board's watch task ([`I2cBus::serve_watch`]) looks at it every
 //! [`STRETCH_REARM_US`](crate::i2c_engine::STRETCH_REARM_US) on the monotonic, at most
 //! [`MAX_REARMS`](crate::i2c_engine::MAX_REARMS) times a script, so a device holding SCL costs
-//! neither a handler re-entered at the engine's priority nor a wait in it.
+//! neither a handler re-entered at the engine's priority nor a wait in it. The same task ends a
+//! script still on the bus at its deadline ([`deadline_us`]: its wire time and
+//! [`FLAG_ALLOWANCE_US`](crate::i2c_engine::FLAG_ALLOWANCE_US) per event) with
+//! [`Failure::Stretched`], has the board clear the lines, and lets the next script run.
 use core::cell::UnsafeCell;
 use core::future::Future;
 use core::pin::Pin;
@@ -33,7 +36,10 @@ use core::task::{Context, Poll, Waker};
 
 use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
 
-use crate::i2c_engine::{Block, Condition, Engine, Progress, CONDITION_POLLS};
+use crate::i2c_engine::{
+    deadline_us, Block, Condition, Engine, Progress, CONDITION_POLLS, STRETCH_REARM_US,
+};
+use crate::scripted::Deadline;
 
 /// A client of a bus with `SLOTS` slots: a slot index checked against that count when it was made
 /// ([`I2cBus::client`]).
@@ -73,8 +79,16 @@ struct Inner<B, const SLOTS: usize> {
     slots: [Slot; SLOTS],
     running: Option<usize>,
     submitted: u64,
-    /// The re-arm task's waker ([`I2cBus::stalled`]).
+    /// The re-arm task's waker ([`I2cBus::stalled`]; the watch's, [`I2cBus::serve_watch`]):
+    /// woken at a stall and at each script's start.
     rearm: Option<Waker>,
+    /// Scripts started so far (wrapping): the running one's number, for the watch.
+    started: u32,
+    /// The running script's deadline from its start (µs, [`deadline_us`]).
+    deadline_us: u32,
+    /// A script ended at its deadline and the lines not yet cleared ([`I2cBus::expire`] to
+    /// [`I2cBus::recovered`]): no script starts.
+    recovering: bool,
 }
 
 /// One I2C bus: its block, its engine and a slot per client.
@@ -113,6 +127,9 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                 running: None,
                 submitted: 0,
                 rearm: None,
+                started: 0,
+                deadline_us: 0,
+                recovering: false,
             }),
         }
     }
@@ -276,17 +293,125 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
         });
     }
 
-    /// The bus's re-arm task: waits for a stall, then `delay()` (the board's monotonic wait of
-    /// [`STRETCH_REARM_US`](crate::i2c_engine::STRETCH_REARM_US)), then looks ([`I2cBus::rearm`]),
-    /// for ever. A board runs one per bus, at its engine's priority (each look is one poll in a
-    /// critical section; a script has at most
-    /// [`MAX_REARMS`](crate::i2c_engine::MAX_REARMS) of them).
-    pub async fn serve_stretches<F: Future<Output = ()>>(&self, mut delay: impl FnMut() -> F) -> ! {
+    /// The bus's watch, a board task per bus at the engine's priority on the monotonic `D`: it
+    /// times each script from its start (the bus wakes it there) to its deadline
+    /// ([`deadline_us`]: the wire time and [`FLAG_ALLOWANCE_US`](crate::i2c_engine::FLAG_ALLOWANCE_US)
+    /// per event), and looks at a stalled repeated START every
+    /// [`STRETCH_REARM_US`] ([`I2cBus::rearm`], at most
+    /// [`MAX_REARMS`](crate::i2c_engine::MAX_REARMS) a script). A script still on the bus at its
+    /// deadline ends with [`Failure::Stretched`] ([`I2cBus::expire`]); then `clear` (the board's
+    /// bus clear on the pins, outside any critical section: up to nine SCL pulses and a STOP,
+    /// docs/i2c.md "The bus clear") and the bus goes on with the next script
+    /// ([`I2cBus::recovered`]). The deadline runs from the watch's first look after the start:
+    /// later than the start by the watch's response at its priority.
+    pub async fn serve_watch<D: Deadline>(&self, mut clear: impl FnMut()) -> ! {
         loop {
-            let stall = self.stalled().await;
-            delay().await;
-            self.rearm(stall);
+            let (script, deadline) = self.next_script().await;
+            let end = D::now_us() + u64::from(deadline);
+            // The next look at a stall (µs), once one is seen.
+            let mut look_at = None;
+            loop {
+                let now = D::now_us();
+                let Some(stall) = self.watched(script) else {
+                    // Ended (and maybe the next one started: timed from the loop's top).
+                    break;
+                };
+                if now >= end {
+                    if self.expire(script) {
+                        clear();
+                        self.recovered();
+                    }
+                    break;
+                }
+                let mut wake_at = end;
+                match stall {
+                    Some(stall) => {
+                        let at = *look_at.get_or_insert(now + u64::from(STRETCH_REARM_US));
+                        if now >= at {
+                            self.rearm(stall);
+                            look_at = None;
+                            continue;
+                        }
+                        wake_at = wake_at.min(at);
+                    }
+                    None => look_at = None,
+                }
+                // Until then, or until the bus moves on (another script, a stall).
+                D::timeout_at_us(wake_at, self.changed(script, stall)).await;
+            }
         }
+    }
+
+    /// Resolves to the running script's number and deadline once one runs.
+    fn next_script(&self) -> impl Future<Output = (u32, u32)> + '_ {
+        core::future::poll_fn(move |cx| {
+            self.with(|inner| {
+                if inner.running.is_some() {
+                    Poll::Ready((inner.started, inner.deadline_us))
+                } else {
+                    inner.watch_with(cx.waker());
+                    Poll::Pending
+                }
+            })
+        })
+    }
+
+    /// Whether script `script` still runs: `Some` with its stall, if any (`None`: it ended).
+    fn watched(&self, script: u32) -> Option<Option<u32>> {
+        self.with(|inner| {
+            (inner.running.is_some() && inner.started == script).then(|| inner.engine.stalled())
+        })
+    }
+
+    /// Resolves when the bus is no longer where the watch saw it: script `script` with `stall`.
+    fn changed(&self, script: u32, stall: Option<u32>) -> impl Future<Output = ()> + '_ {
+        core::future::poll_fn(move |cx| {
+            self.with(|inner| {
+                let same = inner.running.is_some()
+                    && inner.started == script
+                    && inner.engine.stalled() == stall;
+                if same {
+                    inner.watch_with(cx.waker());
+                    Poll::Pending
+                } else {
+                    Poll::Ready(())
+                }
+            })
+        })
+    }
+
+    /// Ends script `script` at its deadline if it still runs: the engine's
+    /// [`Engine::expire`] (the block reset), its client's result [`Failure::Stretched`] and its
+    /// client woken; no script starts until [`I2cBus::recovered`]. Whether it ended it.
+    pub fn expire(&self, script: u32) -> bool {
+        let finished = self.with(|inner| {
+            if inner.running.is_none() || inner.started != script {
+                return None;
+            }
+            let error = inner.engine.expire(&mut inner.block);
+            inner.recovering = true;
+            Some(inner.finish(Err(error)))
+        });
+        match finished {
+            Some(waker) => {
+                wake(waker);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// After the bus clear that follows an [`I2cBus::expire`]: the block set up again (its
+    /// reset), and the next waiting script started.
+    pub fn recovered(&self) {
+        let started = self.with(|inner| {
+            inner.recovering = false;
+            inner.block.reset();
+            inner.start_next()
+        });
+        let stalled = self.settle();
+        wake(started);
+        wake(stalled);
     }
 
     /// Runs `f` on the block (a test's model, or the board's look at the adapter), inside the
@@ -326,6 +451,14 @@ enum After {
 }
 
 impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
+    /// The watch's waker kept, to be woken at a stall or a script's start.
+    fn watch_with(&mut self, waker: &Waker) {
+        match &self.rearm {
+            Some(kept) if kept.will_wake(waker) => {}
+            _ => self.rearm = Some(waker.clone()),
+        }
+    }
+
     /// The script's end if the step finished it, and what is left to do outside the section.
     #[inline(always)]
     fn after(&mut self, progress: Progress) -> After {
@@ -337,8 +470,8 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
     }
 
     /// A script's end: its slot holds its result and its waker is handed out; the next script
-    /// starts. At most two wakers: the finished client's and (never in practice, see
-    /// `start_next`) the started one's. Once per script, not per event; not inlined, so that the
+    /// starts. At most two wakers: the finished client's and the watch's, at the next script's
+    /// start (`start_next`). Once per script, not per event; not inlined, so that the
     /// execution-time analysis bounds it on its own (tools/engine-bound: the handler's
     /// per-script part).
     #[inline(never)]
@@ -358,7 +491,7 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
     /// per slot with no branch out of it (each slot's rank, [`rank`], stored at its submission,
     /// against the best so far), so that the loop is one counted loop of `SLOTS` passes.
     fn start_next(&mut self) -> Option<Waker> {
-        if self.running.is_some() {
+        if self.running.is_some() || self.recovering {
             return None;
         }
         let mut best = (0, 0);
@@ -376,8 +509,11 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
         self.running = Some(index);
         slot.state = State::Running;
         slot.rank = 0;
+        self.started = self.started.wrapping_add(1);
+        self.deadline_us = deadline_us(&slot.script);
         match self.engine.start(&slot.script, &mut self.block) {
-            Progress::Running => None,
+            // The watch times it from here.
+            Progress::Running => self.rearm.take(),
             // Only an empty script finishes at its start, and `Transfer` never submits one.
             Progress::Finished(result) => {
                 self.running = None;

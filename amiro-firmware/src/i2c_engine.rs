@@ -46,12 +46,13 @@
 //! would leave BTF raising the event interrupt until the START is out: a handler re-entered at
 //! the engine's priority for as long as the device holds SCL (for ever, if it never lets go).
 //! Instead the engine *stalls*: it masks the event interrupt (ITEVTEN off, ITERREN kept;
-//! [`Engine::stalled`]) and the bus's re-arm (`I2cBus::serve_stretches`, a task on the monotonic)
+//! [`Engine::stalled`]) and the bus's watch (`I2cBus::serve_watch`, a task on the monotonic)
 //! looks again every [`STRETCH_REARM_US`]: one poll of CR1.START, and the event interrupt back on
 //! once the START is out (SB then raises it), else the stall goes on. After [`MAX_REARMS`] looks
-//! the engine stops looking and leaves the script to its client's timeout, which aborts it (the
+//! the engine stops looking; the script's deadline ([`deadline_us`]) ends it
+//! ([`Engine::expire`], [`Failure::Stretched`]), or its client's timeout, which aborts it (the
 //! block reset). So a script costs at most its own events and [`MAX_REARMS`] re-arms of one poll
-//! each, whatever a device does with SCL.
+//! each, whatever a device does with SCL, and holds its bus at most until its deadline.
 use amiro_sensors::script::{Failure, Operation, Readings, Script, ScriptError};
 
 /// CR1: peripheral enable.
@@ -121,6 +122,53 @@ pub const STRETCH_REARM_US: u32 = 250;
 /// than the longest stretch an AMiRo device states within a packet (the bq27500's 4 ms; the
 /// HMC5883L, the VCNL4020, the PCA9544A and the BNO055 state none longer).
 pub const MAX_REARMS: u8 = 20;
+
+/// A script's allowance per flag the engine awaits (an event: SB, ADDR, TXE, BTF, RXNE): the polled
+/// master's flag timeout (`i2c::FLAG_TIMEOUT_US`, 200 µs against one byte's 22.5 µs at 400 kHz),
+/// kept so that a script ends where the polled path's transfer of the same bytes would have given up
+/// at the latest. A device that stretches SCL longer than its script's flags allow in all
+/// (the bq27xxx family's 4 ms within a packet addressed to it, its 5 ms as it wakes) ends the script
+/// with [`Failure::Stretched`] ([`deadline_us`]).
+pub const FLAG_ALLOWANCE_US: u32 = 200;
+
+/// The events the engine serves for `script` on a bus where every byte is acknowledged (its
+/// interrupts, each a flag the block raises): per operation its first START's SB and ADDR, a TXE per
+/// written byte and BTF; a read (after the repeated START's SB and ADDR, or alone) one RXNE for one
+/// byte, BTF for two, BTF and RXNE for three, and for N > 3 an RXNE per byte but the last three, BTF
+/// and RXNE. The host tests count them on the register model (`i2c_tests`).
+pub fn events(script: &Script) -> u32 {
+    script
+        .operations()
+        .iter()
+        .map(|op| {
+            let write = if op.write > 0 || op.read == 0 {
+                3 + u32::from(op.write)
+            } else {
+                0
+            };
+            let read = match op.read {
+                0 => 0,
+                1 | 2 => 3,
+                3 => 4,
+                n => 1 + u32::from(n),
+            };
+            write + read
+        })
+        .sum()
+}
+
+/// A script's deadline on the bus (µs from its start): its wire time at
+/// [`SCL_HZ`](amiro_sensors::script::SCL_HZ), rounded up, plus [`FLAG_ALLOWANCE_US`] per event
+/// ([`events`]). The bus's watch (`I2cBus::serve_watch`) ends a script still running then with
+/// [`Failure::Stretched`]; the analysis charges a script's bus time at most this (docs/i2c.md, "A
+/// script's deadline").
+pub fn deadline_us(script: &Script) -> u32 {
+    let wire = script
+        .bus_time_ns(amiro_sensors::script::SCL_HZ)
+        .div_ceil(1000);
+    let wire = u32::try_from(wire).unwrap_or(u32::MAX);
+    wire.saturating_add(events(script).saturating_mul(FLAG_ALLOWANCE_US))
+}
 
 /// Which of the block's interrupts are on (CR2's three enables).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -304,6 +352,20 @@ impl Engine {
         self.awaiting = None;
         self.stalled = None;
         block.reset();
+    }
+
+    /// Ends the running script at its deadline (the bus's watch): the block reset (its
+    /// interrupts off), the failure [`Failure::Stretched`] in the operation it had reached.
+    pub fn expire(&mut self, block: &mut impl Block) -> ScriptError {
+        block.reset();
+        let error = ScriptError {
+            operation: self.operation(),
+            failure: Failure::Stretched,
+        };
+        self.phase = Phase::Idle;
+        self.awaiting = None;
+        self.stalled = None;
+        error
     }
 
     /// The running operation's index.

@@ -1382,3 +1382,222 @@ fn dwd_sample_scripts_raise_the_stated_events() {
     let script = first_script(&mut floor, Topic::FloorProximity);
     assert_eq!(entries(floor_model(), script), 44);
 }
+
+/// `events` counts the interrupts the engine serves for each shape the AMiRo scripts have: the
+/// handler entries on the register model, every byte acknowledged.
+#[test]
+fn events_are_the_handler_entries_of_each_script_shape() {
+    let entries = |model: Model, script: Script| {
+        let bus = I2cBus::new(model, [1]);
+        let (_, waker) = test_waker::counting();
+        let mut transfer = pin!(bus.run(bus.client(0).unwrap(), script));
+        assert!(transfer
+            .as_mut()
+            .poll(&mut Context::from_waker(&waker))
+            .is_pending());
+        let entries = pump_counting(&bus);
+        assert!(matches!(
+            transfer.poll(&mut Context::from_waker(&waker)),
+            Poll::Ready(Ok(_))
+        ));
+        entries
+    };
+    let device = || devices(&[0x1E]);
+    for count in [1, 2, 3, 4, 6, 18] {
+        let script = register_read(0x1E, 0, count);
+        assert_eq!(
+            events(&script) as usize,
+            entries(device(), script),
+            "{count}"
+        );
+        let mut read = Script::new();
+        read.read(0x1E, count).unwrap();
+        assert_eq!(events(&read) as usize, entries(device(), read), "{count}");
+    }
+    for bytes in [&[1u8][..], &[1, 2], &[1, 2, 3, 4]] {
+        let mut write = Script::new();
+        write.write(0x1E, bytes).unwrap();
+        assert_eq!(events(&write) as usize, entries(device(), write));
+    }
+    // A ring round (four selects and proximity reads): 44, as the analysis states it.
+    let mut round = Script::new();
+    for channel in 0..4u8 {
+        round
+            .write(pca9544a::AMIRO_ADDRESS, &[0x04 | channel])
+            .unwrap()
+            .write_read(vcnl4020::ADDRESS, &[0x87], 2)
+            .unwrap();
+    }
+    assert_eq!(events(&round), 44);
+    assert_eq!(entries(floor_model(), round), 44);
+    // A gauge's standard command: 7; its deadline 120 µs on the wire + 7 × 200 µs.
+    let gauge = register_read(bq27500::ADDRESS, 0x08, 2);
+    assert_eq!(events(&gauge), 7);
+    assert_eq!(deadline_us(&gauge), 120 + 7 * FLAG_ALLOWANCE_US);
+}
+
+thread_local! {
+    static WATCH_NOW_US: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+}
+
+/// The watch's monotonic as the tests move it.
+struct WatchClock;
+
+impl crate::scripted::Deadline for WatchClock {
+    fn now_us() -> u64 {
+        WATCH_NOW_US.with(std::cell::Cell::get)
+    }
+
+    fn delay_until_us(at_us: u64) -> impl Future<Output = ()> {
+        core::future::poll_fn(move |_| {
+            if Self::now_us() >= at_us {
+                Poll::Ready(())
+            } else {
+                Poll::Pending
+            }
+        })
+    }
+
+    async fn timeout_at_us<F: Future>(at_us: u64, future: F) -> Option<F::Output> {
+        let mut future = pin!(future);
+        core::future::poll_fn(|cx| match future.as_mut().poll(cx) {
+            Poll::Ready(output) => Poll::Ready(Some(output)),
+            Poll::Pending if Self::now_us() >= at_us => Poll::Ready(None),
+            Poll::Pending => Poll::Pending,
+        })
+        .await
+    }
+}
+
+/// What a run under the watch gave: the first client's result, the second's, the watch's looks at
+/// the stall (CR1.START polls after the condition wait), the bus clears, and when the first
+/// client's result came (µs).
+struct Watched {
+    first: Result<Readings, ScriptError>,
+    second: Result<Readings, ScriptError>,
+    clears: usize,
+    ended_at_us: u64,
+    model: Model,
+}
+
+/// Two clients on one bus under its watch (`I2cBus::serve_watch` on [`WatchClock`]): client 0
+/// (the more urgent) reads the HMC5883L's six data bytes from a device that holds SCL from wire
+/// byte `hold_at` on for `hold_us` (`None`: for ever), client 1 waits behind it with a gauge
+/// read. The time moves in 10 µs steps; the device lets go at `hold_us`; the bus clear the watch
+/// calls releases a device still holding SCL (as the nine pulses and the STOP free it).
+fn under_watch(hold_at: usize, hold_us: Option<u64>) -> Watched {
+    WATCH_NOW_US.with(|now| now.set(0));
+    let mut model = Model::new(vec![
+        Device::new(hmc5883l::ADDRESS),
+        Device::new(bq27500::ADDRESS),
+    ]);
+    model.hold_at = Some(hold_at);
+    let bus = I2cBus::new(model, [2, 1]);
+    let clears = std::cell::Cell::new(0);
+    let (_, waker) = test_waker::counting();
+    let mut cx = Context::from_waker(&waker);
+    let mut watch = Box::pin(bus.serve_watch::<WatchClock>(|| {
+        clears.set(clears.get() + 1);
+        bus.with_block(Model::release);
+    }));
+    assert!(watch.as_mut().poll(&mut cx).is_pending());
+    let sample = register_read(hmc5883l::ADDRESS, hmc5883l::reg::DATA_X_MSB, 6);
+    let gauge = register_read(bq27500::ADDRESS, 0x08, 2);
+    let mut first = Box::pin(bus.run(bus.client(0).unwrap(), sample));
+    let mut second = Box::pin(bus.run(bus.client(1).unwrap(), gauge));
+    assert!(first.as_mut().poll(&mut cx).is_pending());
+    assert!(second.as_mut().poll(&mut cx).is_pending());
+    let mut results = (None, None);
+    let mut ended_at_us = 0;
+    for step in 0..2_000u64 {
+        let now = step * 10;
+        WATCH_NOW_US.with(|n| n.set(now));
+        if hold_us.is_some_and(|hold| now >= hold) {
+            bus.with_block(Model::release);
+        }
+        pump(&bus);
+        assert!(watch.as_mut().poll(&mut cx).is_pending());
+        pump(&bus);
+        if results.0.is_none() {
+            if let Poll::Ready(result) = first.as_mut().poll(&mut cx) {
+                results.0 = Some(result);
+                ended_at_us = now;
+            }
+        }
+        if results.1.is_none() {
+            if let Poll::Ready(result) = second.as_mut().poll(&mut cx) {
+                results.1 = Some(result);
+            }
+        }
+        if results.0.is_some() && results.1.is_some() {
+            break;
+        }
+    }
+    drop(watch);
+    let model = bus.with_block(|m| core::mem::replace(m, Model::new(Vec::new())));
+    Watched {
+        first: results.0.expect("the first script never ended"),
+        second: results.1.expect("the second script never ended"),
+        clears: clears.get(),
+        ended_at_us,
+        model,
+    }
+}
+
+/// A device holding SCL past the script's deadline at its repeated START (stalled, looked at every
+/// `STRETCH_REARM_US`) ends the script with `Stretched` at its deadline (wire time + 200 µs per
+/// event: 210 + 11 × 200 µs), the lines cleared once, the block reset; the script behind it then
+/// runs and ends with its readings. Before deadlines, the script stayed on the bus until its
+/// client's timeout (`I2cPort`), and `Failure` had no `Stretched`.
+#[test]
+fn a_stretch_past_the_deadline_ends_the_script_as_stretched_and_the_next_runs() {
+    let sample = register_read(hmc5883l::ADDRESS, hmc5883l::reg::DATA_X_MSB, 6);
+    let deadline = u64::from(deadline_us(&sample));
+    assert_eq!(deadline, 210 + 11 * 200);
+    for (hold_at, operation) in [(2, 0), (5, 0)] {
+        let watched = under_watch(hold_at, None);
+        assert_eq!(
+            watched.first,
+            Err(ScriptError {
+                operation,
+                failure: Failure::Stretched
+            }),
+            "held at wire byte {hold_at}"
+        );
+        // Ended at its deadline, within the test's 10 µs step.
+        assert!(
+            (deadline..deadline + 10).contains(&watched.ended_at_us),
+            "{}",
+            watched.ended_at_us
+        );
+        assert_eq!(watched.clears, 1);
+        let gauge = Device::new(bq27500::ADDRESS);
+        assert_eq!(
+            watched.second.expect("the next script runs").of(0),
+            expected_bytes(&gauge, 0x08, 2)
+        );
+        assert!(watched.model.access.contains(&Reset));
+    }
+}
+
+/// A stretch within the deadline (1 ms at the repeated START, or mid-read) is waited out: the
+/// script ends with its readings, nothing is cleared, and the next script runs.
+#[test]
+fn a_stretch_within_the_deadline_completes() {
+    for hold_at in [2, 5] {
+        let watched = under_watch(hold_at, Some(1_000));
+        let device = Device::new(hmc5883l::ADDRESS);
+        assert_eq!(
+            watched.first.expect("within its deadline").of(0),
+            expected_bytes(&device, hmc5883l::reg::DATA_X_MSB, 6)
+        );
+        assert!(watched.ended_at_us >= 1_000);
+        assert_eq!(watched.clears, 0);
+        assert!(watched.second.is_ok());
+        assert!(
+            watched.model.violations.is_empty(),
+            "{:?}",
+            watched.model.violations
+        );
+    }
+}

@@ -376,6 +376,10 @@ pub enum Failure {
     UnexpectedEvent,
     /// The client already has a script on the bus (one slot per client).
     Busy,
+    /// The script was still on the bus at its deadline (its wire time and a stated allowance per
+    /// flag: a device stretched SCL longer, or held it); the bus ended it, cleared the lines and
+    /// reset the block (`amiro_firmware::i2c_bus`).
+    Stretched,
 }
 
 impl fmt::Display for Failure {
@@ -388,6 +392,7 @@ impl fmt::Display for Failure {
             Failure::Overrun => "overrun",
             Failure::UnexpectedEvent => "unexpected event",
             Failure::Busy => "client busy",
+            Failure::Stretched => "past its deadline (clock stretched)",
         })
     }
 }

@@ -339,8 +339,6 @@ pub mod scripted {
     use amiro_firmware::i2c::{self, Master};
     use amiro_firmware::i2c_block::{hand_over, EngineBuses, Registers};
     use amiro_firmware::i2c_bus::I2cBus;
-    use amiro_firmware::i2c_engine::STRETCH_REARM_US;
-    use amiro_firmware::mono::Clock as _;
     use amiro_firmware::scripted::I2cPort;
     use amiro_sensors::drivers::bq27500::BatteryStatus;
     use amiro_sensors::drivers::ring::RingBus;
@@ -356,14 +354,9 @@ pub mod scripted {
     /// A client task's slot on a [`ScriptBus`], its timeout on the board's clock.
     pub type Port = I2cPort<'static, Clock, Registers, CLIENTS>;
 
-    /// The clients' RTIC priorities, by slot (`sensors::scripted::CLIENTS`).
-    const CLIENT_PRIORITIES: [u8; CLIENTS] = [
-        levels::PUBLISH_URGENT,
-        levels::PUBLISH_HIGH,
-        levels::PUBLISH_MEDIUM,
-        levels::PUBLISH_LOW,
-        levels::POWER_MONITOR,
-    ];
+    /// The clients' RTIC priorities, by slot (`sensors::scripted::CLIENTS`): the bus's owner
+    /// task (`ring_rear`, `ring_front`), at the power monitor's level.
+    const CLIENT_PRIORITIES: [u8; CLIENTS] = [levels::POWER_MONITOR];
 
     /// I2C1, the rear bus.
     // SAFETY: the block is touched only after `boot_rear` took it from the polled master.
@@ -458,22 +451,36 @@ pub mod scripted {
         BUSES.ports::<CLIENT, Clock>(TIMEOUT_ALLOWANCE_US)
     }
 
-    /// The re-arm task's loop for `bus`: a repeated START the gauge stretches past the engine's
-    /// condition wait is looked at every `STRETCH_REARM_US` (docs/i2c.md, "A stretched repeated
-    /// START").
-    async fn rearm(bus: &'static ScriptBus) -> ! {
-        bus.serve_stretches(|| Clock::delay_until_us(Clock::now_us() + u64::from(STRETCH_REARM_US)))
-            .await
+    /// The re-arm task's loop for `bus`, its watch (`I2cBus::serve_watch`): each script timed to
+    /// its deadline (its wire time and 200 µs an event; past it the script ends with
+    /// `Failure::Stretched`, the lines are cleared on `clear` and the next script runs), and a
+    /// repeated START the gauge stretches past the engine's condition wait looked at every
+    /// `STRETCH_REARM_US` (docs/i2c.md, "A script's deadline", "A stretched repeated START").
+    async fn rearm(bus: &'static ScriptBus, clear: &'static i2c::BusClear) -> ! {
+        bus.serve_watch::<Clock>(|| {
+            // A bus still held is the next script's fault (its own deadline), reported there.
+            let _ = clear.clear();
+        })
+        .await
     }
+
+    /// I2C1's clear on PB8/PB9 (as `board::boot`'s master).
+    // SAFETY: I2C1's own pins; used only while its bus recovers (`BusClear::new`).
+    static I2C1_CLEAR: i2c::BusClear =
+        unsafe { i2c::BusClear::new(i2c::I2C1, i2c::Pins::new(i2c::GPIOB, 8, 9), SYSCLK_HZ) };
+    /// I2C2's clear on PB10/PB11.
+    // SAFETY: as I2C1's.
+    static I2C2_CLEAR: i2c::BusClear =
+        unsafe { i2c::BusClear::new(i2c::I2C2, i2c::Pins::new(i2c::GPIOB, 10, 11), SYSCLK_HZ) };
 
     /// I2C1's re-arm loop.
     pub async fn rearm_rear() -> ! {
-        rearm(&I2C1_BUS).await
+        rearm(&I2C1_BUS, &I2C1_CLEAR).await
     }
 
     /// I2C2's re-arm loop.
     pub async fn rearm_front() -> ! {
-        rearm(&I2C2_BUS).await
+        rearm(&I2C2_BUS, &I2C2_CLEAR).await
     }
 }
 #[cfg(feature = "scripted-i2c")]

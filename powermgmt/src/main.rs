@@ -9,7 +9,8 @@
 //! Task priorities (RTIC, higher = more urgent; the constants live in `levels`):
 //! `shutdown`, `can_rx` 7 · `can_tx` 6 · `handle_commands`, `shutdown_sequence` 5 ·
 //! `publish_urgent` 4 · `publish_high` 3 · `publish_medium` 2 ·
-//! `publish_low`, `power_monitor`, `watchdog` 1.
+//! `publish_low`, `power_monitor`, `watchdog` 1 (with `scripted-i2c` also the bus owners
+//! `ring_rear`, `ring_front` 1 and the buses' re-arm tasks 5).
 //! `cargo xtask analyze` reads these tasks, priorities and shared resources from this file.
 #![no_std]
 #![no_main]
@@ -226,6 +227,10 @@ mod app {
         rearm_rear::spawn().ok();
         #[cfg(feature = "scripted-i2c")]
         rearm_front::spawn().ok();
+        #[cfg(feature = "scripted-i2c")]
+        ring_rear::spawn().ok();
+        #[cfg(feature = "scripted-i2c")]
+        ring_front::spawn().ok();
         #[cfg(feature = "qemu")]
         stimulus::spawn().ok();
         amiro_firmware::log!("PowerManagement up");
@@ -371,23 +376,14 @@ mod app {
             platform::CAN_TX_INTERRUPT,
         )
         .await;
-        // The ring's reads suspend this task on its slots of I2C1 and I2C2.
+        // The ring's sample is the owner tasks' latest reading, no script (`ring_rear`, `ring_front`).
         #[cfg(feature = "scripted-i2c")]
-        let (rear_port, front_port) = platform::ports::<0>();
-        #[cfg(feature = "scripted-i2c")]
-        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Urgent],
             cx.local.wake_urgent,
             s.handler,
             s.tx_queue,
-            sensors::ScriptedSampler {
-                rear: s.rear_bus,
-                front: s.front_bus,
-                charger: s.charger,
-                batteries: s.batteries,
-                rear_port,
-                front_port,
-            },
+            sensors::scripted_sampler(s.rear_bus, s.front_bus, s.charger, s.batteries),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -408,23 +404,14 @@ mod app {
             platform::CAN_TX_INTERRUPT,
         )
         .await;
-        // The ring's reads suspend this task on its slots of I2C1 and I2C2.
+        // The ring's sample is the owner tasks' latest reading, no script (`ring_rear`, `ring_front`).
         #[cfg(feature = "scripted-i2c")]
-        let (rear_port, front_port) = platform::ports::<1>();
-        #[cfg(feature = "scripted-i2c")]
-        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::High],
             cx.local.wake_high,
             s.handler,
             s.tx_queue,
-            sensors::ScriptedSampler {
-                rear: s.rear_bus,
-                front: s.front_bus,
-                charger: s.charger,
-                batteries: s.batteries,
-                rear_port,
-                front_port,
-            },
+            sensors::scripted_sampler(s.rear_bus, s.front_bus, s.charger, s.batteries),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -445,23 +432,14 @@ mod app {
             platform::CAN_TX_INTERRUPT,
         )
         .await;
-        // The ring's reads suspend this task on its slots of I2C1 and I2C2.
+        // The ring's sample is the owner tasks' latest reading, no script (`ring_rear`, `ring_front`).
         #[cfg(feature = "scripted-i2c")]
-        let (rear_port, front_port) = platform::ports::<2>();
-        #[cfg(feature = "scripted-i2c")]
-        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Medium],
             cx.local.wake_medium,
             s.handler,
             s.tx_queue,
-            sensors::ScriptedSampler {
-                rear: s.rear_bus,
-                front: s.front_bus,
-                charger: s.charger,
-                batteries: s.batteries,
-                rear_port,
-                front_port,
-            },
+            sensors::scripted_sampler(s.rear_bus, s.front_bus, s.charger, s.batteries),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -482,23 +460,14 @@ mod app {
             platform::CAN_TX_INTERRUPT,
         )
         .await;
-        // The ring's reads suspend this task on its slots of I2C1 and I2C2.
+        // The ring's sample is the owner tasks' latest reading, no script (`ring_rear`, `ring_front`).
         #[cfg(feature = "scripted-i2c")]
-        let (rear_port, front_port) = platform::ports::<3>();
-        #[cfg(feature = "scripted-i2c")]
-        publisher::serve_level_suspending::<Clock, TX_QUEUE_LEN>(
+        publisher::serve_level::<Clock, TX_QUEUE_LEN>(
             &[Priority::Low],
             cx.local.wake_low,
             s.handler,
             s.tx_queue,
-            sensors::ScriptedSampler {
-                rear: s.rear_bus,
-                front: s.front_bus,
-                charger: s.charger,
-                batteries: s.batteries,
-                rear_port,
-                front_port,
-            },
+            sensors::scripted_sampler(s.rear_bus, s.front_bus, s.charger, s.batteries),
             platform::CAN_TX_INTERRUPT,
         )
         .await;
@@ -509,7 +478,9 @@ mod app {
     /// round of both fuel gauges (a `BatteryRound` kept across jobs: the only reads of the gauges
     /// after the boot's, kept for the power-status sample), and a round that ends, or the boot's
     /// round at the first job, is checked for a critically low battery, which shuts the robot
-    /// down. Marks the watchdog's progress.
+    /// down. Marks the watchdog's progress. With `scripted-i2c` the bus owners (`ring_rear`,
+    /// `ring_front`) read the gauges and check each read that ends; this task regulates and checks
+    /// the boot's round.
     #[task(priority = 1, shared = [rear_bus, front_bus, charger, batteries, alive])]
     async fn power_monitor(mut cx: power_monitor::Context) {
         amiro_firmware::tracing::enter(crate::trace_task::POWER_MONITOR);
@@ -517,11 +488,6 @@ mod app {
         let mut job = 0u32;
         #[cfg(not(feature = "scripted-i2c"))]
         let mut gauges = sensors::BatteryRound::new();
-        // With `scripted-i2c` a gauge's transfer suspends this task on its slot of I2C1 or I2C2.
-        #[cfg(feature = "scripted-i2c")]
-        let mut gauges = sensors::scripted::BatteryRound::new(platform::ports::<
-            { sensors::scripted::POWER_MONITOR_CLIENT },
-        >());
         // The first wait is for the time the task starts (it ends at once).
         loop {
             Clock::delay_until_us(next).await;
@@ -536,14 +502,10 @@ mod app {
                     &mut cx.shared.front_bus,
                     &mut cx.shared.batteries,
                 );
+                // With `scripted-i2c` the bus owners read the gauges and check each read that
+                // ends (`ring_rear`, `ring_front`); this job checks the boot's round only.
                 #[cfg(feature = "scripted-i2c")]
-                let ended = gauges
-                    .step(
-                        &mut cx.shared.rear_bus,
-                        &mut cx.shared.front_bus,
-                        &mut cx.shared.batteries,
-                    )
-                    .await;
+                let ended = false;
                 if ended || job == 0 {
                     let lines = cx.shared.charger.lock(|c| c.lines());
                     if cx.shared.batteries.lock(|b| b.critically_low(&lines)) {
@@ -682,6 +644,39 @@ mod app {
     #[task(priority = 0)]
     async fn drain_trace(_cx: drain_trace::Context) {
         amiro_firmware::tracing::serve_drain().await;
+    }
+
+    /// With `scripted-i2c`: I2C1's owner (docs/i2c.md, "PowerManagement with `scripted-i2c`"):
+    /// every 62.5 ms its ring sensors read (one script of a missing sensor's set-up first, at
+    /// most) and one transfer of the rear gauge's read, its scripts on its own slot of I2C1; the
+    /// publishers take its latest reading, the power status the gauges' latest reads. At the lowest level: its
+    /// CPU delays no publisher, and the readings' age bound is its period and response.
+    #[cfg(feature = "scripted-i2c")]
+    #[task(priority = 1, shared = [rear_bus, charger, batteries])]
+    async fn ring_rear(cx: ring_rear::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::RING_REAR);
+        let s = cx.shared;
+        let (port, _) = platform::ports::<{ sensors::scripted::OWNER_CLIENT }>();
+        sensors::scripted::serve_owner(port, s.rear_bus, s.charger, s.batteries, critically_low)
+            .await;
+    }
+
+    /// With `scripted-i2c`: I2C2's owner, as [`ring_rear`] (its ring sensors and the front gauge).
+    #[cfg(feature = "scripted-i2c")]
+    #[task(priority = 1, shared = [front_bus, charger, batteries])]
+    async fn ring_front(cx: ring_front::Context) {
+        amiro_firmware::tracing::enter(crate::trace_task::RING_FRONT);
+        let s = cx.shared;
+        let (_, port) = platform::ports::<{ sensors::scripted::OWNER_CLIENT }>();
+        sensors::scripted::serve_owner(port, s.front_bus, s.charger, s.batteries, critically_low)
+            .await;
+    }
+
+    /// With `scripted-i2c`: a bus owner found a battery critically low after its gauge's read.
+    #[cfg(feature = "scripted-i2c")]
+    fn critically_low() {
+        amiro_firmware::channels::defer_log("battery critically low: shutting down");
+        shutdown_sequence::spawn(Some(power::LOW_BATTERY_MODE)).ok();
     }
 }
 

@@ -357,50 +357,29 @@ pub fn power_status(
     batteries.lock(|latest| latest.status(&lines))
 }
 
-/// With `scripted-i2c`: the buses sampled by script (docs/i2c.md), the publishers and the power
-/// monitor suspended while their scripts run.
+/// With `scripted-i2c`: the buses sampled by script (docs/i2c.md), each bus's owner task
+/// suspended while its scripts run.
 #[cfg(feature = "scripted-i2c")]
 pub mod scripted;
 
-/// What PowerManagement samples for a topic with `scripted-i2c`, a publisher task's own: the ring
-/// reads the rear bus, then the front (each a job of scripts on the task's slot of that bus);
-/// power status takes the power monitor's latest gauge round and the charge lines, no script
-/// ([`power_status`]). Every other topic has no samples here.
+/// What PowerManagement samples for a topic with `scripted-i2c`: the ring takes each bus's
+/// latest reading, its owner task's (`scripted::RingOwner`), under each bus's lock in turn, no
+/// script; power status takes the gauges' latest reads and the charge lines ([`power_status`]).
+/// Every other topic has no samples here.
 #[cfg(feature = "scripted-i2c")]
-pub struct ScriptedSampler<R, F, C, B, PR, PF> {
-    /// I2C1's ring sensors and gauge.
-    pub rear: R,
-    /// I2C2's ring sensors and gauge.
-    pub front: F,
-    /// The charge lines.
-    pub charger: C,
-    /// The power monitor's latest gauge round.
-    pub batteries: B,
-    /// The task's slot on I2C1.
-    pub rear_port: PR,
-    /// The task's slot on I2C2.
-    pub front_port: PF,
-}
-
-#[cfg(feature = "scripted-i2c")]
-impl<R, F, C, B, PR, PF> amiro_firmware::publisher::SuspendingSampler
-    for ScriptedSampler<R, F, C, B, PR, PF>
-where
-    R: rtic::Mutex<T = scripted::ScriptedBus>,
-    F: rtic::Mutex<T = scripted::ScriptedBus>,
-    C: rtic::Mutex<T = Charger>,
-    B: rtic::Mutex<T = power::LatestRound>,
-    PR: amiro_firmware::scripted::ScriptPort,
-    PF: amiro_firmware::scripted::ScriptPort,
-{
-    async fn sample(&mut self, topic: Topic, taken: u64) -> Samples {
+pub fn scripted_sampler(
+    mut rear: impl rtic::Mutex<T = scripted::ScriptedBus>,
+    mut front: impl rtic::Mutex<T = scripted::ScriptedBus>,
+    mut charger: impl rtic::Mutex<T = Charger>,
+    mut batteries: impl rtic::Mutex<T = power::LatestRound>,
+) -> impl amiro_firmware::publisher::Sampler {
+    move |topic: Topic, _taken: u64| {
         let mut samples = Samples::new();
         match topic {
             Topic::ProximityRing => {
                 let mut ring: RingSample = [None; RING_SENSORS];
-                scripted::sample_ring(&mut self.rear, &mut self.rear_port, taken, &mut ring).await;
-                scripted::sample_ring(&mut self.front, &mut self.front_port, taken, &mut ring)
-                    .await;
+                rear.lock(|b| b.latest_into(&mut ring));
+                front.lock(|b| b.latest_into(&mut ring));
                 for (sensor, mm) in (0u8..).zip(ring) {
                     if let Some(mm) = mm {
                         let _ = samples.push(SensorData::ProximityRing { sensor, mm });
@@ -408,7 +387,7 @@ where
                 }
             }
             Topic::PowerStatus => {
-                if let Some(status) = power_status(&mut self.batteries, &mut self.charger) {
+                if let Some(status) = power_status(&mut batteries, &mut charger) {
                     let _ = samples.push(SensorData::PowerStatus(status));
                 }
             }

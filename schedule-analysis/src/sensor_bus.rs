@@ -170,6 +170,16 @@ pub struct ScriptModel {
     /// Where `settle_us` comes from (required with it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub settle_source: Option<String>,
+    /// The time from the script's start by which its bus has ended it and is free again, µs: the
+    /// script's deadline (the firmware's watch ends a script still on the bus then, wire time and an
+    /// allowance per flag, `Failure::Stretched`), the watch's response and the bus clear after it.
+    /// The stretch charged is then at most this less the wire time (docs/i2c.md, "A script's
+    /// deadline"). Absent: the stated stretch in full.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deadline_us: Option<f64>,
+    /// Where `deadline_us` comes from (required with it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deadline_source: Option<String>,
 }
 
 /// A board's validated sensor buses and the scripts its tasks run on them.
@@ -691,6 +701,19 @@ pub(crate) fn validate_script(
             Time::from_us_up(us)
         }
     };
+    let mut stretch = Time::from_us_up(script.stretch_us);
+    if let Some(us) = script.deadline_us {
+        positive(us, format!("{p}.deadline_us"))?;
+        sourced(
+            script.deadline_source.as_deref().unwrap_or(""),
+            format!("{p}.deadline_source"),
+        )?;
+        // Ended by then: no more stretch than the deadline leaves after the wire time.
+        let cap = Time::from_us_up(us).minus(wire);
+        if cap < stretch {
+            stretch = cap;
+        }
+    }
     let events = match (script.events, derived_events) {
         (Some(0), _) => {
             return Err((
@@ -705,7 +728,7 @@ pub(crate) fn validate_script(
         task: usize::MAX,
         bus: b,
         wire,
-        stretch: Time::from_us_up(script.stretch_us),
+        stretch,
         events,
         starts,
         engine_row: usize::MAX,

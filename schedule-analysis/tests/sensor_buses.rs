@@ -986,3 +986,42 @@ fn an_event_counts_a_released_jobs_inherited_jitter() {
     assert_eq!(optimistic.wcrt, Time::from_us(49));
     assert!(optimistic.wcrt < event);
 }
+
+/// A script's deadline bounds its stretch: the bus ends it by `deadline_us` after its start (its
+/// deadline, the watch's response and the bus clear), so the stretch charged is at most the
+/// deadline less the wire time (140 µs here); a deadline above wire + stretch changes nothing; a
+/// deadline without its source is refused.
+#[test]
+fn a_scripts_deadline_caps_its_stretch() {
+    let stretch_of = |stretch: f64, deadline: Option<f64>| {
+        let mut v = board_json();
+        v["tasks"][0]["script"]["stretch_us"] = json!(stretch);
+        if let Some(deadline) = deadline {
+            v["tasks"][0]["script"]["deadline_us"] = json!(deadline);
+            v["tasks"][0]["script"]["deadline_source"] = json!("the bus's watch (test)");
+        }
+        let model = Model {
+            name: None,
+            boards: vec![board(v)],
+            can: None,
+        };
+        let system = model.validate().expect("valid");
+        let script = &system.boards[0].sensor_buses.scripts[0];
+        assert_eq!(script.wire, Time::from_us(140));
+        script.stretch
+    };
+    assert_eq!(stretch_of(9_000.0, None), Time::from_us(9_000));
+    assert_eq!(stretch_of(9_000.0, Some(1_600.0)), Time::from_us(1_460));
+    assert_eq!(stretch_of(10.0, Some(1_600.0)), Time::from_us(10));
+    // A deadline shorter than the wire leaves no stretch (the script ends with `Stretched`).
+    assert_eq!(stretch_of(9_000.0, Some(100.0)), Time::ZERO);
+    let mut v = board_json();
+    v["tasks"][0]["script"]["deadline_us"] = json!(1_600.0);
+    assert_eq!(
+        refusal(v),
+        (
+            "tasks[0].script.deadline_source".into(),
+            SensorBusError::NoSource
+        )
+    );
+}

@@ -101,7 +101,8 @@ pub const fn failure_kind(failure: Failure) -> ErrorKind {
         Failure::Bus => ErrorKind::Bus,
         Failure::ArbitrationLoss => ErrorKind::ArbitrationLoss,
         Failure::Overrun => ErrorKind::Overrun,
-        Failure::UnexpectedEvent | Failure::Busy => ErrorKind::Other,
+        // A script ended at its deadline is a polled master's timeout: `Other`.
+        Failure::UnexpectedEvent | Failure::Busy | Failure::Stretched => ErrorKind::Other,
     }
 }
 

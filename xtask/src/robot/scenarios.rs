@@ -996,7 +996,7 @@ pub fn run_all_with(root: &Path, extra: &[&str]) -> Result<()> {
     tally.record(
         super::world_scenario::STIMULUS,
         Some(&about),
-        super::world_scenario::run(root, &firmware),
+        super::world_scenario::run(root, &firmware, super::world_scenario::ring_age_us(extra)),
     );
     // A behaviour closes the loop: the obstacle-avoidance example in the arena.
     tally.record(
