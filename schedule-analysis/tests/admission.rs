@@ -674,3 +674,36 @@ proptest! {
         }
     }
 }
+
+/// A topic's sections block at every level it runs at: on DiWheelDrive 1-1 (the machine code's publisher rows) the
+/// gyroscope's SPI sample holds a lock at priority 4 for 89.15 µs, which a publisher job at urgent (priority 4) never
+/// raises but one at low does, blocking the magnetometer at medium. The table once kept the urgent job's sections
+/// only, and admitted magnetometer-x every 5 300 µs beside a gyroscope one-shot at low (every 40 ms) where the report
+/// puts 0x605 at 5 358.8 µs (found with the QEMU scenario admission-one-shots, 2026-12-06).
+#[test]
+fn a_topics_sections_block_at_every_level() {
+    let set = [
+        ("magnetometer-x".to_string(), "medium", 5_300),
+        ("gyroscope".to_string(), "low", 40_000),
+    ];
+    assert!(!report_verdict(&set, &[], 4_242));
+    let d = admitted(&set, &[]);
+    match d.refusal {
+        Some(Refusal::Deadline(v)) => {
+            assert_eq!(v.culprit, Culprit::Frame { id: 0x605 });
+            assert!(v.wcrt.is_some_and(|w| w > Time::from_us(5_300)), "{v:?}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let robot = robot();
+    let gyroscope = robot.boards[0]
+        .topics
+        .iter()
+        .find(|t| t.name == "gyroscope")
+        .expect("gyroscope");
+    assert!(
+        gyroscope.sections.iter().any(|s| s.ceiling == 4),
+        "{:?}",
+        gyroscope.sections
+    );
+}
