@@ -676,10 +676,10 @@ proptest! {
 }
 
 /// A topic's sections block at every level it runs at: on DiWheelDrive 1-1 (the machine code's publisher rows) the
-/// gyroscope's SPI sample holds a lock at priority 4 for 89.15 µs, which a publisher job at urgent (priority 4) never
+/// gyroscope's SPI sample holds a lock at priority 4 for 74.75 µs (89.15 µs when found, its SPI waits then at 2 µs a byte), which a publisher job at urgent (priority 4) never
 /// raises but one at low does, blocking the magnetometer at medium. The table once kept the urgent job's sections
 /// only, and admitted magnetometer-x every 5 300 µs beside a gyroscope one-shot at low (every 40 ms) where the report
-/// puts 0x605 at 5 358.8 µs (found with the QEMU scenario admission-one-shots, 2026-12-06).
+/// puts 0x605 at 5 344.4 µs (5 358.8 when found with the QEMU scenario admission-one-shots, 2026-12-06).
 #[test]
 fn a_topics_sections_block_at_every_level() {
     let set = [

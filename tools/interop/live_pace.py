@@ -29,8 +29,8 @@ gyroscope 957.9 µs against 10 ms). `--gyroscope-priority high` shows the refusa
 model before the sound transmit path; since 2026-12-05 the 900 µs magnetometer is refused alone, 1 126.2 µs on a 1-1
 robot, so the tool asked for 1.3 ms; since 2026-12-06 DiWheelDrive 1-1's polled HMC5883L makes a magnetometer-x job
 3.1 ms, and it asks for 6 ms, admitted on both revisions with the ring and the gyroscope at low: magnetometer-x's frames
-at 5 358.8 µs and the gyroscope's at 6 957.2 µs on 1-1, 1 827.8 and 3 232.1 µs on 1-2, `cargo xtask analyze`,
-2026-12-06; with the gyroscope at high both hold too now, 5 946.5 and 5 378.7 µs on 1-1.)
+at 5 344.4 µs and the gyroscope's at 6 942.8 µs on 1-1, 1 827.8 and 3 232.1 µs on 1-2, `cargo xtask analyze`,
+2026-12-06; with the gyroscope at high both hold too now, 5 932.1 and 5 364.3 µs on 1-1.)
 """
 
 import argparse
