@@ -75,19 +75,6 @@ fn workspace() -> &'static PathBuf {
             t["topics"]["magnetometer-x"]["script"] = script("i2c1", 2, 1, None);
             t["topics"]["magnetometer-y"]["script"] = script("i2c2", 2, 1, None);
         });
-        // The scripts stand for reads that leave the CPU; DiWheelDrive 1-1's publisher rows bound the shipped image,
-        // whose reads poll their buses inside the job (the bus waits are CPU time there). Used with the scripts they
-        // would count the bus twice and describe no image: the workspace leaves them out, and the timing file's
-        // budgets stand for the publishers (as they did while the rows were held, before 2026-12-06).
-        edit(&models.join("diwheeldrive-1-1.wcet.json"), &|b| {
-            if let Some(tasks) = b["tasks"].as_array_mut() {
-                tasks.retain(|t| {
-                    !t["task"]
-                        .as_str()
-                        .is_some_and(|n| n.starts_with("publisher["))
-                });
-            }
-        });
         edit(&models.join("powermgmt.timing.json"), &|t| {
             t["sensor_buses"] = buses();
             t["tasks"]["power_monitor"]["scripts"] = json!([
