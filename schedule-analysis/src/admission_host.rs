@@ -654,10 +654,25 @@ impl<'a> Lowering<'a> {
                             .priority(&format!("publishers.{}", level.name()), job.priority)?,
                     );
                 }
-                if !out.topics.iter().any(|t| t.name == info.name) {
-                    let mut row = self.topic_row(info, job)?;
-                    row.transmit = self.transmit_cost(&b.tasks, job)?;
-                    out.topics.push(row);
+                match out.topics.iter_mut().find(|t| t.name == info.name) {
+                    None => {
+                        let mut row = self.topic_row(info, job)?;
+                        row.transmit = self.transmit_cost(&b.tasks, job)?;
+                        out.topics.push(row);
+                    }
+                    // The row is the topic's at every level, but a job's sections are those that block: at a more
+                    // urgent level a section at the job's own priority raises nothing and is not in its model (a
+                    // sample's bus lock at priority 4 in a publisher job at 4), while at a lower level it blocks
+                    // every job up to its ceiling. The row keeps each ceiling's longest section of every level, so
+                    // the check blocks as the report does whatever level the topic runs at.
+                    Some(row) => {
+                        for s in self.topic_row(info, job)?.sections {
+                            match row.sections.iter_mut().find(|k| k.ceiling == s.ceiling) {
+                                Some(k) => k.length = k.length.max(s.length),
+                                None => row.sections.push(s),
+                            }
+                        }
+                    }
                 }
                 if let Some(timer) = b
                     .tasks

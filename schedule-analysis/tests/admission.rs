@@ -416,19 +416,6 @@ fn the_table_lowers_and_emits_rust() {
     assert_eq!(admission::row_share(0, 0), 0);
 }
 
-/// The report's bound of magnetometer-x's frames in the shipped 900 µs set (`thesis-magnetometer-900us`).
-fn magnetometer_frames_in_the_report() -> Time {
-    let root = root();
-    let path = scenario::find_scenario(&root, "thesis-magnetometer-900us");
-    let (_, report) = shipped_report(&root, &path);
-    report
-        .bus
-        .as_ref()
-        .and_then(|b| b.messages.iter().find(|m| m.name == "magnetometer-x"))
-        .and_then(|m| m.wcrt())
-        .expect("bounded")
-}
-
 /// The scenario at `path` as built from the shipped timing files, and the report's analysis of it (exact frames).
 fn shipped_report(
     root: &std::path::Path,
@@ -449,21 +436,26 @@ fn shipped_report(
 fn the_thesis_example_is_refused_by_both_and_the_starvation_request_refused() {
     // The thesis's worked example, magnetometer-x at medium every 900 µs: on the sound transmit path its frames take
     // 1 115.3 µs (2026-12-05) against their 900 µs deadline (the period), so the report and the chip refuse it alike (the
-    // scenario `thesis-magnetometer-900us` keeps it as a checked refusal). At 1 200 µs both admit it.
+    // scenario `thesis-magnetometer-900us` keeps it as a checked refusal). At 6 000 µs both admit it on 1-1 (the
+    // models folder's budgets), whose publisher rows are the machine code's since 2026-12-06: the polled HMC5883L
+    // makes a magnetometer-x job 3 103.9 µs, and the shortest period alone 5 216 µs (1 200 µs was admitted before).
     let magnetometer = [("magnetometer-x".to_string(), "medium", 900)];
     assert!(!report_verdict(&magnetometer, &[], 1_000_001));
     let d = admitted(&magnetometer, &[]);
+    // On 1-1 the job alone overloads DiWheelDrive (382.8 % of its CPU): the check names one of its tasks, unbounded
+    // (the admission task, the first in table order the report finds unbounded too).
     match d.refusal {
         Some(Refusal::Deadline(v)) => {
-            assert_eq!(v.culprit, Culprit::Frame { id: 0x605 });
-            // The report's figure, whatever the machine-code bounds move it by.
-            let report = magnetometer_frames_in_the_report();
-            assert_eq!((v.wcrt, v.deadline), (Some(report), Time::from_us(900)));
-            assert!(report > Time::from_us(1_100), "{report}");
+            assert!(
+                matches!(v.culprit, Culprit::Task { board: 0, .. }),
+                "{:?}",
+                v.culprit
+            );
+            assert!(v.wcrt.is_none_or(|w| w > v.deadline), "{v:?}");
         }
         other => panic!("{other:?}"),
     }
-    let slower = [("magnetometer-x".to_string(), "medium", 1200)];
+    let slower = [("magnetometer-x".to_string(), "medium", 6_000)];
     assert!(report_verdict(&slower, &[], 1_000_002));
     let d = admitted(&slower, &[]);
     assert!(d.admitted(), "{d:?}");
@@ -681,4 +673,37 @@ proptest! {
             }
         }
     }
+}
+
+/// A topic's sections block at every level it runs at: on DiWheelDrive 1-1 (the machine code's publisher rows) the
+/// gyroscope's SPI sample holds a lock at priority 4 for 74.75 µs (89.15 µs when found, its SPI waits then at 2 µs a byte), which a publisher job at urgent (priority 4) never
+/// raises but one at low does, blocking the magnetometer at medium. The table once kept the urgent job's sections
+/// only, and admitted magnetometer-x every 5 300 µs beside a gyroscope one-shot at low (every 40 ms) where the report
+/// puts 0x605 at 5 344.4 µs (5 358.8 when found with the QEMU scenario admission-one-shots, 2026-12-06).
+#[test]
+fn a_topics_sections_block_at_every_level() {
+    let set = [
+        ("magnetometer-x".to_string(), "medium", 5_300),
+        ("gyroscope".to_string(), "low", 40_000),
+    ];
+    assert!(!report_verdict(&set, &[], 4_242));
+    let d = admitted(&set, &[]);
+    match d.refusal {
+        Some(Refusal::Deadline(v)) => {
+            assert_eq!(v.culprit, Culprit::Frame { id: 0x605 });
+            assert!(v.wcrt.is_some_and(|w| w > Time::from_us(5_300)), "{v:?}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let robot = robot();
+    let gyroscope = robot.boards[0]
+        .topics
+        .iter()
+        .find(|t| t.name == "gyroscope")
+        .expect("gyroscope");
+    assert!(
+        gyroscope.sections.iter().any(|s| s.ceiling == 4),
+        "{:?}",
+        gyroscope.sections
+    );
 }

@@ -439,7 +439,7 @@ pub fn bound_build(
     let topic_sections = topic_sections(&image, &tasks, &found, chip, &bounds);
     let tasks = worst_per_name(found);
     let missing = bounds.missing_places(&image);
-    let held = bounds.held.clone();
+    let held = held_on(&bounds.held, board, build.revision)?;
     Ok(Bounded {
         held,
         chip,
@@ -452,9 +452,66 @@ pub fn bound_build(
     })
 }
 
+/// The bounds file's held statements that hold back on `revision`'s image of `board` (a statement
+/// without `revisions` on every image); a statement naming a revision the board has none of is an error.
+fn held_on(
+    held: &[machine_code::wcet::bounds::HeldBound],
+    board: &crate::boards::Board,
+    revision: &crate::boards::Revision,
+) -> Result<Vec<machine_code::wcet::bounds::HeldBound>> {
+    let known: Vec<&str> = board.revisions.iter().map(|r| r.name).collect();
+    let mut out = Vec::new();
+    for h in held {
+        if h.holds_on(revision.name, &known)
+            .with_context(|| format!("{}.bounds.json", board.name))?
+        {
+            out.push(h.clone());
+        }
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_board_holds_back_only_what_its_revision_lists() {
+        let file = BoundsFile::parse(
+            r#"{"held":[{"task":"publisher[*]","revisions":["1-2"],"reason":"polled on 1-2"},
+                        {"task":"can_tx","reason":"every image"}]}"#,
+        )
+        .unwrap();
+        let dwd = crate::boards::by_name("diwheeldrive").unwrap();
+        let on = |rev: &str| -> Vec<String> {
+            let r = dwd.revisions.iter().find(|r| r.name == rev).unwrap();
+            held_on(&file.held, dwd, r)
+                .unwrap()
+                .into_iter()
+                .map(|h| h.task)
+                .collect()
+        };
+        assert_eq!(on("1-2"), ["publisher[*]", "can_tx"]);
+        assert_eq!(on("1-1"), ["can_tx"]);
+        // LightRing's revisions are 1-2 and 1-0: a statement for a 1-1 ring is a typed error naming it.
+        let lightring = crate::boards::by_name("lightring").unwrap();
+        let ring = BoundsFile::parse(
+            r#"{"held":[{"task":"can_tx","revisions":["1-1"],"reason":"loose"}]}"#,
+        )
+        .unwrap();
+        let e = held_on(&ring.held, lightring, lightring.newest()).unwrap_err();
+        let unknown = e
+            .downcast_ref::<machine_code::wcet::bounds::UnknownRevision>()
+            .unwrap();
+        assert_eq!(
+            (unknown.revision.as_str(), &unknown.known[..]),
+            ("1-1", &["1-2".to_string(), "1-0".to_string()][..])
+        );
+        assert!(
+            format!("{e:#}").starts_with("lightring.bounds.json: "),
+            "{e:#}"
+        );
+    }
 
     fn row(
         task: &str,

@@ -1742,6 +1742,7 @@ mod app {
         let mut written = super::rows(&built, &app, &budgets, &machine, &sections, chip);
         let held = machine_code::wcet::bounds::HeldBound {
             task: "can_rx".into(),
+            revisions: None,
             reason: "every set fails".into(),
         };
         hold(&mut written, &[held]);
@@ -1808,6 +1809,7 @@ mod app {
         let mut written = super::rows(&built, &app, &budgets, &machine, &sections, chip);
         let held = machine_code::wcet::bounds::HeldBound {
             task: "can_rx".into(),
+            revisions: None,
             reason: "LightRing's can_tx misses".into(),
         };
         hold(&mut written, &[held]);

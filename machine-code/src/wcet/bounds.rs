@@ -141,18 +141,63 @@ pub struct TaskSpec {
 /// bound is sound but known to be loose (named), and used as the budget it would break the boards'
 /// sets. The generated row says it is held, with the figures, and the analysis keeps the stated
 /// budget (docs/analysis.md, "Held bounds"). `task` is a row's name, or `publisher[*]` for every
-/// topic's row.
+/// topic's row. `revisions`, where given, names the board's revisions whose images hold it back (the
+/// others use the bound); without it every image of the board holds it back.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HeldBound {
     pub task: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub revisions: Option<Vec<String>>,
     pub reason: String,
 }
+
+/// A held bound's `revisions` names a revision the board has no image for ([`HeldBound::holds_on`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownRevision {
+    /// The held row (`task` of the statement).
+    pub task: String,
+    /// The revision it names.
+    pub revision: String,
+    /// The board's revisions.
+    pub known: Vec<String>,
+}
+
+impl std::fmt::Display for UnknownRevision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "the held bound of {} names revision `{}`, which the board has no image for (its revisions: {})",
+            self.task,
+            self.revision,
+            self.known.join(", ")
+        )
+    }
+}
+
+impl std::error::Error for UnknownRevision {}
 
 impl HeldBound {
     /// Whether this statement names the generated row `task`.
     pub fn names(&self, task: &str) -> bool {
         self.task == task || (self.task == "publisher[*]" && task.starts_with("publisher["))
+    }
+
+    /// Whether the image of the board's revision `revision` holds this bound back: every image when
+    /// the statement lists no `revisions`, else the ones it lists. Each listed revision must be one of
+    /// `known` (the board's revisions), else [`UnknownRevision`] names it.
+    pub fn holds_on(&self, revision: &str, known: &[&str]) -> Result<bool, UnknownRevision> {
+        let Some(listed) = &self.revisions else {
+            return Ok(true);
+        };
+        if let Some(r) = listed.iter().find(|r| !known.contains(&r.as_str())) {
+            return Err(UnknownRevision {
+                task: self.task.clone(),
+                revision: r.clone(),
+                known: known.iter().map(|k| k.to_string()).collect(),
+            });
+        }
+        Ok(listed.iter().any(|r| r == revision))
     }
 }
 
@@ -402,6 +447,12 @@ impl BoundsFile {
             }
         }
         for h in &file.held {
+            if h.revisions.as_ref().is_some_and(|r| r.is_empty()) {
+                return Err(Error::Bounds(format!(
+                    "the held bound of {} lists no revisions (leave `revisions` out to hold it on every image)",
+                    h.task
+                )));
+            }
             if h.reason.trim().is_empty() {
                 return Err(Error::Bounds(format!(
                     "the held bound of {} needs a reason (what makes it loose)",
@@ -745,6 +796,42 @@ impl BoundsFile {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_held_bound_holds_on_the_revisions_it_lists_and_names_an_unknown_one() {
+        let file = BoundsFile::parse(
+            r#"{"held":[{"task":"publisher[*]","revisions":["1-2"],"reason":"polled on 1-2"},
+                        {"task":"can_tx","reason":"on every image"}]}"#,
+        )
+        .unwrap();
+        let known = ["1-2", "1-1"];
+        let (publishers, tx) = (&file.held[0], &file.held[1]);
+        assert_eq!(publishers.holds_on("1-2", &known), Ok(true));
+        assert_eq!(publishers.holds_on("1-1", &known), Ok(false));
+        // Without `revisions`, every image holds it back.
+        assert_eq!(tx.holds_on("1-1", &known), Ok(true));
+        assert_eq!(tx.holds_on("1-2", &known), Ok(true));
+        // A revision the board has no image for is an error naming it, not a bound silently used.
+        let wrong = BoundsFile::parse(
+            r#"{"held":[{"task":"publisher[*]","revisions":["1-3"],"reason":"polled"}]}"#,
+        )
+        .unwrap();
+        let e = wrong.held[0].holds_on("1-2", &known).unwrap_err();
+        assert_eq!(
+            e,
+            UnknownRevision {
+                task: "publisher[*]".into(),
+                revision: "1-3".into(),
+                known: vec!["1-2".into(), "1-1".into()],
+            }
+        );
+        assert!(e.to_string().contains("`1-3`"), "{e}");
+        // An empty list holds nothing and says nothing: refused.
+        assert!(matches!(
+            BoundsFile::parse(r#"{"held":[{"task":"can_tx","revisions":[],"reason":"loose"}]}"#),
+            Err(Error::Bounds(_))
+        ));
+    }
 
     #[test]
     fn a_qemu_file_adds_its_places_and_states_none_twice_nor_any_task() {

@@ -569,8 +569,36 @@ pub(super) fn budgets_lines(b: &BoardBudgets, measured: &[String]) -> Vec<String
                 }
             })
             .collect();
-        let names: Vec<&str> = stated.iter().map(|(row, _)| row.as_str()).collect();
-        format!(" ({}; why, each below)", names.join(", "))
+        // Grouped by why: rows this image's file holds back (bounded, not used: `held`, per revision), rows
+        // whose bound is declined (thread mode, a loop without a bound), rows the file has none for.
+        let kind = |row: &str, why: &str| {
+            let held = b
+                .bounds
+                .as_ref()
+                .and_then(|f| f.task(row))
+                .is_some_and(|t| t.held.is_some());
+            if held {
+                "held on this image"
+            } else if why.starts_with("bound declined") {
+                "declined"
+            } else {
+                "no bound"
+            }
+        };
+        let mut groups: Vec<(&str, Vec<&str>)> = Vec::new();
+        for (row, why) in &stated {
+            let k = kind(row, why);
+            match groups.iter_mut().find(|(g, _)| *g == k) {
+                Some((_, rows)) => rows.push(row.as_str()),
+                None => groups.push((k, vec![row.as_str()])),
+            }
+        }
+        groups.sort_by_key(|(k, _)| *k != "held on this image");
+        let parts: Vec<String> = groups
+            .iter()
+            .map(|(k, rows)| format!("{} {k}: {}", rows.len(), rows.join(", ")))
+            .collect();
+        format!(" ({}; why, each below)", parts.join("; "))
     };
     // A topic's row is bounded by a whole publisher job (docs/analysis.md, "Writing the files"): say so.
     let per_topic = b
@@ -794,6 +822,34 @@ mod tests {
             rows: from,
             blocking: Blocking::default(),
         }
+    }
+
+    #[test]
+    fn the_budgets_line_groups_the_stated_rows_by_why() {
+        // publisher[a] held on this image, admit declined (thread mode), can_rx without a row of its own.
+        let mut held = row("publisher[a]", None);
+        held.held = Some(bounds::HeldBound {
+            cycles: Some(72),
+            us: Some(1.0),
+            instructions: Some(30),
+            bus_wait_us: 0.0,
+            reason: "polled on this revision".into(),
+            sections: None,
+            job: None,
+        });
+        let mut b = budgets(vec![held, row("admit", None)]);
+        b.rows.insert(
+            "can_rx".into(),
+            BudgetFrom::Stated {
+                why: "no row `can_rx` in models/b.wcet.json".into(),
+            },
+        );
+        let lines = budgets_lines(&b, &[]);
+        assert_eq!(
+            lines[0],
+            "b: budgets: 0 bounded from the machine code (F103, 72 MHz, 2 wait states; models/b.wcet.json), 3 stated \
+             (1 held on this image: publisher[a]; 1 declined: admit; 1 no bound: can_rx; why, each below)"
+        );
     }
 
     #[test]

@@ -441,9 +441,42 @@ pub struct Scenario {
     pub one_shots: Vec<ScenarioOneShot>,
     /// The failures the set is known to have, each named as the VERDICT names it (`bus/magnetometer-x`,
     /// `topic/magnetometer-x (end-to-end deadline)`): `cargo xtask analyze --check` passes only when exactly these
-    /// fail (a set kept as a checked refusal; its description says why). Empty: everything must pass.
+    /// fail (a set kept as a checked refusal; its description says why). Empty: everything must pass. A list holds
+    /// on every revision; an object keyed by revision (`{"1-1": [...], "1-2": [...]}`) per revision
+    /// ([`ExpectedFailures::on`]).
     #[serde(default)]
-    pub expected_failures: Vec<String>,
+    pub expected_failures: ExpectedFailures,
+}
+
+/// A scenario's `expected_failures`: one list for every revision, or one per revision.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum ExpectedFailures {
+    /// The same failures whatever the revision.
+    All(Vec<String>),
+    /// Per revision (a key is a revision as the boards' bounds files name theirs: `1-1`, `1-2`).
+    PerRevision(BTreeMap<String, Vec<String>>),
+}
+
+impl Default for ExpectedFailures {
+    fn default() -> Self {
+        ExpectedFailures::All(Vec::new())
+    }
+}
+
+impl ExpectedFailures {
+    /// The failures expected of a build whose boards' images are of `revisions` (their bounds files' revisions): the
+    /// list, or the list of the first key among `revisions`; none (everything must pass) when no key is.
+    pub fn on(&self, revisions: &[&str]) -> Vec<String> {
+        match self {
+            ExpectedFailures::All(list) => list.clone(),
+            ExpectedFailures::PerRevision(map) => map
+                .iter()
+                .find(|(k, _)| revisions.contains(&k.as_str()))
+                .map(|(_, v)| v.clone())
+                .unwrap_or_default(),
+        }
+    }
 }
 
 /// A one-shot request: a sensor topic's sample at a priority, asked for again and again.
@@ -497,4 +530,32 @@ pub struct ScenarioCommand {
     /// Budget for the jitter, µs.
     #[serde(default)]
     pub jitter_budget_us: Option<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn expected_failures_are_one_list_or_one_per_revision() {
+        let all: ExpectedFailures = serde_json::from_str(r#"["bus/a"]"#).unwrap();
+        assert_eq!(all.on(&["1-1"]), ["bus/a"]);
+        assert_eq!(all.on(&[]), ["bus/a"]);
+        let per: ExpectedFailures = serde_json::from_str(
+            r#"{"1-1": ["bus/a", "topic/a (jitter budget)"], "1-2": ["bus/a"]}"#,
+        )
+        .unwrap();
+        // A robot of 1-1: DiWheelDrive's file names 1-1, LightRing's 1-0.
+        assert_eq!(
+            per.on(&["1-1", "1-0"]),
+            ["bus/a", "topic/a (jitter budget)"]
+        );
+        assert_eq!(per.on(&["1-2", "1-2"]), ["bus/a"]);
+        // No board of a listed revision: nothing is expected to fail.
+        assert!(per.on(&["1-0"]).is_empty());
+        assert_eq!(
+            ExpectedFailures::default().on(&["1-1"]),
+            Vec::<String>::new()
+        );
+    }
 }

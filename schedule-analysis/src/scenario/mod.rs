@@ -39,8 +39,8 @@ mod transmit;
 
 pub use bounded::{bounds_file, breaking_bounds, BoardBudgets, BudgetFrom, Held};
 pub use files::{
-    AppSource, Arrival, Measured, Monotonic, QemuBuild, QemuReplay, QemuTransmit, Scenario,
-    ScenarioCommand, ScenarioOneShot, ScenarioPublisher, Timing, TimingTask, TopicTiming,
+    AppSource, Arrival, ExpectedFailures, Measured, Monotonic, QemuBuild, QemuReplay, QemuTransmit,
+    Scenario, ScenarioCommand, ScenarioOneShot, ScenarioPublisher, Timing, TimingTask, TopicTiming,
     TraceCost, UnstampedPerPreemption, WorstStep, ACKS_PER_TRANSMIT_JOB,
     QEMU_FRAMES_PER_TRANSMIT_JOB,
 };
@@ -395,7 +395,7 @@ fn build_with(
         sources: Vec::new(),
         warnings: one_shot_notes,
         budgets: Vec::new(),
-        expected_failures: scenario.expected_failures.clone(),
+        expected_failures: Vec::new(),
     };
     let ends = board::build_boards(
         root,
@@ -408,6 +408,13 @@ fn build_with(
         held,
         &mut built,
     )?;
+    // The failures expected of the images the boards' bounds files are of (a per-revision list by their revision).
+    let revisions: Vec<&str> = built
+        .budgets
+        .iter()
+        .filter_map(|b| b.bounds.as_ref()?.revision.as_deref())
+        .collect();
+    built.expected_failures = scenario.expected_failures.on(&revisions);
     let messages = messages::messages(&scenario, &plan, &ends, &mut built.warnings);
     built.model.can = Some(CanModel {
         bitrate: scenario.bitrate,

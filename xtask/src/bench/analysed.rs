@@ -175,10 +175,10 @@ mod tests {
     use amiro_can::Topic;
 
     /// What the QEMU capture of `diwheeldrive/qemu/admission-one-shots.log` on a 1-1 robot shows once the board
-    /// admits its one-shots: magnetometer-x every 1.2 ms at medium (moved from 1 150 µs, beside which the board
-    /// refuses the gyroscope one-shot, the floor one-shot and the accelerometer), the accelerometer every 5 ms at low
-    /// and one gyroscope sample at low (the sound transmit path, 2026-12-05: the thesis's 900 µs and 1 ms are
-    /// refused alone, 1.2 ms is the shortest whole 100 µs the board admits).
+    /// admits its one-shots: magnetometer-x every 6 ms at medium (moved from 5 300 µs, beside which the board
+    /// refuses the gyroscope one-shot, the floor one-shot and the accelerometer), the accelerometer every 10 ms at
+    /// low and one gyroscope sample at low (DiWheelDrive 1-1's machine-code publisher rows, 2026-12-06: the polled
+    /// HMC5883L makes a magnetometer-x job 3.1 ms, the shortest period alone 5 216 µs).
     /// The thesis one-shots' scenario, written to a folder of `test`'s own: tests run in parallel in one process,
     /// and a shared file was read half-written by one test while another wrote it.
     fn thesis_one_shots(test: &str) -> PathBuf {
@@ -187,8 +187,8 @@ mod tests {
 
     /// The capture's topics: (topic, level, period µs or a one-shot, samples).
     const SEEN: [(Topic, u8, Option<u64>, usize); 3] = [
-        (Topic::MagnetometerX, 2, Some(1200), 299),
-        (Topic::Accelerometer, 3, Some(5000), 16),
+        (Topic::MagnetometerX, 2, Some(6000), 62),
+        (Topic::Accelerometer, 3, Some(10_000), 9),
         (Topic::Gyroscope, 3, None, 1),
     ];
 
@@ -239,9 +239,9 @@ mod tests {
         let path = thesis_one_shots("admitted");
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         // The board's own admission decides on the production model, one request at a time: the gyroscope
-        // one-shot beside the 1.2 ms magnetometer, then the accelerometer beside it, the one-shot not kept in the
-        // board's view by then. (All three at once would not fit: the magnetometer's frame at 1 207.4 of 1 200 µs,
-        // `cargo xtask analyze --revision 1-1`, 2026-12-05; each alone beside it, 1 179.3 µs.)
+        // one-shot beside the 6 ms magnetometer, then the accelerometer beside it, the one-shot not kept in the
+        // board's view by then (each alone beside it: the magnetometer's frame at 5 344.4 of 6 000 µs, `cargo xtask
+        // analyze --revision 1-1`, 2026-12-06).
         for (name, without) in [
             ("admitted-once", Topic::Accelerometer),
             ("admitted-stream", Topic::Gyroscope),
