@@ -11,6 +11,7 @@ use amiro_sensors::script::{Failure, Readings, Script, ScriptError, Symbol};
 use crate::i2c_bus::I2cBus;
 use crate::i2c_engine::*;
 use crate::i2c_model::{Access, Device, Model, Mux, Wire};
+use crate::scripted_tests::{set_now, TestClock};
 use crate::test_waker;
 
 use Access::*;
@@ -1436,39 +1437,6 @@ fn events_are_the_handler_entries_of_each_script_shape() {
     assert_eq!(deadline_us(&gauge), 120 + 7 * FLAG_ALLOWANCE_US);
 }
 
-thread_local! {
-    static WATCH_NOW_US: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
-}
-
-/// The watch's monotonic as the tests move it.
-struct WatchClock;
-
-impl crate::scripted::Deadline for WatchClock {
-    fn now_us() -> u64 {
-        WATCH_NOW_US.with(std::cell::Cell::get)
-    }
-
-    fn delay_until_us(at_us: u64) -> impl Future<Output = ()> {
-        core::future::poll_fn(move |_| {
-            if Self::now_us() >= at_us {
-                Poll::Ready(())
-            } else {
-                Poll::Pending
-            }
-        })
-    }
-
-    async fn timeout_at_us<F: Future>(at_us: u64, future: F) -> Option<F::Output> {
-        let mut future = pin!(future);
-        core::future::poll_fn(|cx| match future.as_mut().poll(cx) {
-            Poll::Ready(output) => Poll::Ready(Some(output)),
-            Poll::Pending if Self::now_us() >= at_us => Poll::Ready(None),
-            Poll::Pending => Poll::Pending,
-        })
-        .await
-    }
-}
-
 /// What a run under the watch gave: the first client's result, the second's, the watch's looks at
 /// the stall (CR1.START polls after the condition wait), the bus clears, and when the first
 /// client's result came (µs).
@@ -1480,13 +1448,13 @@ struct Watched {
     model: Model,
 }
 
-/// Two clients on one bus under its watch (`I2cBus::serve_watch` on [`WatchClock`]): client 0
+/// Two clients on one bus under its watch (`I2cBus::serve_watch` on the scripted tests' clock): client 0
 /// (the more urgent) reads the HMC5883L's six data bytes from a device that holds SCL from wire
 /// byte `hold_at` on for `hold_us` (`None`: for ever), client 1 waits behind it with a gauge
 /// read. The time moves in 10 µs steps; the device lets go at `hold_us`; the bus clear the watch
 /// calls releases a device still holding SCL (as the nine pulses and the STOP free it).
 fn under_watch(hold_at: usize, hold_us: Option<u64>) -> Watched {
-    WATCH_NOW_US.with(|now| now.set(0));
+    set_now(0);
     let mut model = Model::new(vec![
         Device::new(hmc5883l::ADDRESS),
         Device::new(bq27500::ADDRESS),
@@ -1496,7 +1464,7 @@ fn under_watch(hold_at: usize, hold_us: Option<u64>) -> Watched {
     let clears = std::cell::Cell::new(0);
     let (_, waker) = test_waker::counting();
     let mut cx = Context::from_waker(&waker);
-    let mut watch = Box::pin(bus.serve_watch::<WatchClock>(|| {
+    let mut watch = Box::pin(bus.serve_watch::<TestClock>(|| {
         clears.set(clears.get() + 1);
         bus.with_block(Model::release);
     }));
@@ -1511,7 +1479,7 @@ fn under_watch(hold_at: usize, hold_us: Option<u64>) -> Watched {
     let mut ended_at_us = 0;
     for step in 0..2_000u64 {
         let now = step * 10;
-        WATCH_NOW_US.with(|n| n.set(now));
+        set_now(now);
         if hold_us.is_some_and(|hold| now >= hold) {
             bus.with_block(Model::release);
         }

@@ -29,12 +29,13 @@ thread_local! {
     static NOW_US: Cell<u64> = const { Cell::new(0) };
 }
 
-fn set_now(us: u64) {
+/// Moves [`TestClock`] to `us` (this test's thread only).
+pub(crate) fn set_now(us: u64) {
     NOW_US.with(|now| now.set(us));
 }
 
-/// The monotonic as the tests move it.
-struct TestClock;
+/// The monotonic as the tests move it (here and in `i2c_tests`' runs under the bus's watch).
+pub(crate) struct TestClock;
 
 impl Deadline for TestClock {
     fn now_us() -> u64 {
