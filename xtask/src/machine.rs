@@ -399,8 +399,21 @@ pub fn bound_build(
     wait_states: Option<u32>,
     bounds: Option<&Path>,
 ) -> Result<Bounded> {
-    let board = build.board;
     let elf = crate::workspace::kept_elf(root, build, false);
+    bound_image(root, build, &[], &elf, wait_states, bounds)
+}
+
+/// [`bound_build`] of the image `elf`, built for `build` with the trial's `extra` features as well (`cargo xtask
+/// wcet --features`: the tasks a feature adds to the app, or removes, as that image has them).
+pub fn bound_image(
+    root: &Path,
+    build: &crate::revision::Build,
+    extra: &[&str],
+    elf: &Path,
+    wait_states: Option<u32>,
+    bounds: Option<&Path>,
+) -> Result<Bounded> {
+    let board = build.board;
     ensure!(
         elf.exists(),
         "{} is not built: cargo xtask build {} --revision {}",
@@ -423,7 +436,12 @@ pub fn bound_build(
         .map_err(|e| anyhow::anyhow!("{}: {e}", board.name))?;
     // A software task the image as built leaves out (`#[cfg]`: DiWheelDrive's QEMU-only stimulus) has
     // no part of its dispatcher to bound.
-    let features: Vec<&str> = build.revision.feature.into_iter().collect();
+    let features: Vec<&str> = build
+        .revision
+        .feature
+        .into_iter()
+        .chain(extra.iter().copied())
+        .collect();
     let built = app.with_features(&features);
     let tasks: Vec<machine_code::Task> = tasks_of(&app, &bounds)
         .into_iter()
@@ -432,7 +450,7 @@ pub fn bound_build(
                 || built.tasks.iter().any(|b| b.name == t.name)
         })
         .collect();
-    let image = Image::read(&elf).with_context(|| format!("{}", elf.display()))?;
+    let image = Image::read(elf).with_context(|| format!("{}", elf.display()))?;
     let sections = sections_per_name(machine_code::task_sections(&image, &tasks, chip, &bounds));
     let group_sections = group_sections(&image, chip, &bounds);
     let found = machine_code::bound_tasks(&image, &tasks, chip, &bounds);

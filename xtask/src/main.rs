@@ -396,9 +396,9 @@ fn check(root: &Path) -> Result<()> {
     // The `scripted-i2c` trials, DiWheelDrive 1-1's and PowerManagement's (docs/i2c.md; not in the
     // shipped images): linted for the chip and QEMU, and built for the chip in a target directory
     // of their own (their QEMU images are built and run by the scenarios).
-    for build in scripted_i2c_builds(&every) {
+    for build in revision::scripted_i2c_builds(&every) {
         build.select_models();
-        let trial = target_dir(root).join("scripted-i2c");
+        let trial = workspace::trial_target_dir(root);
         let trial = trial.to_string_lossy().into_owned();
         for (command, extra, dir) in [
             ("clippy", &["scripted-i2c"][..], &trial),
@@ -422,20 +422,6 @@ fn check(root: &Path) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// The board images with the `scripted-i2c` trial: DiWheelDrive 1-1 and PowerManagement 1-2 (its
-/// two images differ only in their admission table; the robot scenarios run its trial on the 1-1
-/// image).
-fn scripted_i2c_builds(every: &[revision::Build]) -> Vec<revision::Build> {
-    every
-        .iter()
-        .filter(|b| {
-            (b.board.name == "diwheeldrive" && b.revision.name == "1-1")
-                || (b.board.name == "powermgmt" && b.revision.name == "1-2")
-        })
-        .cloned()
-        .collect()
 }
 
 /// Runs one step of `ci`/`test` and prints its wall time (CI's whole run must stay within its
@@ -509,7 +495,7 @@ fn test(root: &Path) -> Result<()> {
     })?;
     // DiWheelDrive 1-1's and PowerManagement's I2C groups sampled by script (feature
     // `scripted-i2c`, docs/i2c.md): not in the shipped images yet, their scenarios run all the same.
-    let scripted = scripted_i2c_builds(&every);
+    let scripted = revision::scripted_i2c_builds(&every);
     timed("the scenarios with scripted-i2c", || {
         run_scenarios(root, &scripted, &["scripted-i2c"])
     })?;

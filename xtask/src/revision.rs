@@ -119,6 +119,20 @@ pub fn plan(boards: &[&'static Board], choice: &Choice) -> Result<Vec<Build>> {
     Ok(builds)
 }
 
+/// The board images with the `scripted-i2c` trial: DiWheelDrive 1-1 and PowerManagement 1-2 (its
+/// two images differ only in their admission table; the robot scenarios run its trial on the 1-1
+/// image).
+pub fn scripted_i2c_builds(every: &[Build]) -> Vec<Build> {
+    every
+        .iter()
+        .filter(|b| {
+            (b.board.name == "diwheeldrive" && b.revision.name == "1-1")
+                || (b.board.name == "powermgmt" && b.revision.name == "1-2")
+        })
+        .cloned()
+        .collect()
+}
+
 /// The board's revisions, for messages: `1-2, 1-1`.
 pub fn names(board: &Board) -> String {
     board

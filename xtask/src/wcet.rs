@@ -35,6 +35,11 @@ pub struct WcetArgs {
     /// bound (default with a board: schedule-analysis/models/BOARD.bounds.json).
     #[arg(long, value_name = "FILE")]
     pub bounds: Option<PathBuf>,
+    /// A trial's features (`scripted-i2c`): build each board's image with them as well (in
+    /// `target/scripted-i2c`, as CI's check step does; kept as `target/firmware/<stem>+<feature>.elf`) and bound
+    /// its tasks, the trial's own among them. Printed only: no generated file is written for a trial.
+    #[arg(long, value_name = "FEATURE,…", value_delimiter = ',', conflicts_with_all = ["elf", "write", "qemu"])]
+    pub features: Vec<String>,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -106,7 +111,20 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
     let mut rows = Vec::new();
     for build in &plan {
         let board = build.board;
-        let found = bound_build(root, build, args.wait_states, args.bounds.as_deref())?;
+        let found = if args.features.is_empty() {
+            bound_build(root, build, args.wait_states, args.bounds.as_deref())?
+        } else {
+            let extra: Vec<&str> = args.features.iter().map(String::as_str).collect();
+            let elf = crate::workspace::build_trial(root, build, &extra)?;
+            crate::machine::bound_image(
+                root,
+                build,
+                &extra,
+                &elf,
+                args.wait_states,
+                args.bounds.as_deref(),
+            )?
+        };
         let chip = found.chip;
         for (t, sections) in found.tasks.into_iter().zip(found.sections) {
             rows.push(Row {
@@ -130,9 +148,14 @@ fn wcet_boards(root: &Path, args: &WcetArgs) -> Result<bool> {
         }
         if !args.json {
             println!(
-                "{} {}: {} at {} MHz, {} flash wait states",
+                "{} {}{}: {} at {} MHz, {} flash wait states",
                 board.name,
                 build.revision.name,
+                if args.features.is_empty() {
+                    String::new()
+                } else {
+                    format!(" with {}", args.features.join(","))
+                },
                 chip.name(),
                 chip.clock_hz() / 1_000_000,
                 chip.wait_states()

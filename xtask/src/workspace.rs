@@ -66,6 +66,54 @@ pub fn firmware_elf(root: &Path, board: &Board) -> PathBuf {
         .join(board.name)
 }
 
+/// Where the boards' trials (a feature the shipped image does not enable, e.g. `scripted-i2c`) are built for the
+/// chip, apart from the shipped images: CI's check step lints and builds them here, and `cargo xtask wcet
+/// --features` and the bounds gate build (cargo finds them current after CI's build) and bound them from here.
+pub fn trial_target_dir(root: &Path) -> PathBuf {
+    target_dir(root).join("scripted-i2c")
+}
+
+/// Builds `build`'s release image with the trial's `extra` features in [`trial_target_dir`] (the same cargo
+/// arguments as CI's check step, so a build there is current) and keeps it as
+/// `target/firmware/<stem>+<feature>….elf` ([`trial_elf`]).
+pub fn build_trial(root: &Path, build: &revision::Build, extra: &[&str]) -> Result<PathBuf> {
+    ensure_toolchain(root)?;
+    let board = build.board;
+    build.select_models();
+    let dir = trial_target_dir(root);
+    let dir = dir.to_string_lossy().into_owned();
+    let mut args = vec!["build".to_string(), "--quiet".into(), "--release".into()];
+    args.extend(build.feature_args(extra));
+    args.extend(["--target-dir".to_string(), dir.clone()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    cargo(&root.join(board.name), &args)
+        .with_context(|| format!("building {} with {}", build.stem(), extra.join(",")))?;
+    let kept = trial_elf(root, build, extra);
+    if let Some(parent) = kept.parent() {
+        std::fs::create_dir_all(parent)?;
+    }
+    std::fs::copy(
+        PathBuf::from(dir)
+            .join(board.target)
+            .join("release")
+            .join(board.name),
+        &kept,
+    )
+    .with_context(|| format!("keeping {}", kept.display()))?;
+    Ok(kept)
+}
+
+/// Where [`build_trial`] keeps a trial's image: `target/firmware/powermgmt-1-2+scripted-i2c.elf`.
+pub fn trial_elf(root: &Path, build: &revision::Build, extra: &[&str]) -> PathBuf {
+    let stem = std::iter::once(build.stem())
+        .chain(extra.iter().map(|f| f.to_string()))
+        .collect::<Vec<_>>()
+        .join("+");
+    target_dir(root)
+        .join("firmware")
+        .join(format!("{stem}.elf"))
+}
+
 /// Where a built image of `build` is kept (the cargo output is overwritten by the next revision's
 /// build): `target/firmware/<board>-<revision>.elf`.
 pub fn kept_elf(root: &Path, build: &revision::Build, bare_chip: bool) -> PathBuf {

@@ -42,15 +42,18 @@ pub struct Cfg {
     pub blocks: Vec<Block>,
 }
 
-/// The entries of a table branch, and where its data ends: the table follows the instruction up to the next code, its
-/// entries limited by a `CMP Rm, #n` on the index before it (n + 1 entries).
+/// The entries of a table branch, where its data ends, and whether a bound check limits them: the table follows the
+/// instruction up to the next code, its entries limited by a `CMP Rm, #n` on the index before it (n + 1 entries).
+/// Without the check (the compiler knew the index's range, e.g. an enum's discriminant loaded as a byte) the data
+/// up to the next code may hold more than the table (its padding, a literal pool): [`Cfg::build`] ends such a
+/// table at its first entry that is no instruction of the function.
 fn table_targets(
     f: &Function,
     insns: &[Insn],
     at: usize,
     halfwords: bool,
     index: u8,
-) -> Result<(Vec<u64>, u64), Error> {
+) -> Result<(Vec<u64>, u64, bool), Error> {
     let insn = &insns[at];
     let table = insn.next();
     let unfollowable = |what: &str| Error::Unfollowable {
@@ -66,16 +69,21 @@ fn table_targets(
     let size = if halfwords { 2 } else { 1 };
     let mut entries = (end - table) / size;
     // The bound check on the index: `cmp Rm, #n` (then `bhi` to the default) shortly before.
-    if let Some(limit) = insns[at.saturating_sub(6)..at].iter().rev().find_map(|i| {
+    let limit = insns[at.saturating_sub(6)..at].iter().rev().find_map(|i| {
         (i.inst.opcode == Opcode::CMP
             && matches!(i.inst.operands[0], Operand::Reg(r) if r.number() == index))
         .then(|| i.immediate())
         .flatten()
-    }) {
+    });
+    if let Some(limit) = limit {
         entries = entries.min(u64::from(limit) + 1);
     }
     // The entries' addresses (their bytes are data, zeroed in `code`: read from the image).
-    Ok(((0..entries).map(|k| table + k * size).collect(), end))
+    Ok((
+        (0..entries).map(|k| table + k * size).collect(),
+        end,
+        limit.is_some(),
+    ))
 }
 
 impl Cfg {
@@ -118,8 +126,8 @@ impl Cfg {
                     index: rm,
                 } => {
                     let mut targets = Vec::new();
-                    let (entries, table_end) = table_targets(f, insns, k, halfwords, rm)?;
-                    for entry in entries {
+                    let (entries, table_end, checked) = table_targets(f, insns, k, halfwords, rm)?;
+                    for (n, entry) in entries.into_iter().enumerate() {
                         let size = if halfwords { 2 } else { 1 };
                         let offset = read(entry, size)
                             .ok_or_else(|| unfollowable(insn, "a jump table outside the image"))?;
@@ -129,9 +137,20 @@ impl Cfg {
                         if target < table_end {
                             continue;
                         }
-                        let to = inside(target).ok_or_else(|| {
-                            unfollowable(insn, "a jump table entry that is not an instruction")
-                        })?;
+                        let Some(to) = inside(target) else {
+                            // Without a bound check, the table's entries are the halfwords (bytes) before
+                            // the first that leads to no instruction of the function: every entry of the
+                            // table leads to one, so the table ends before it, and the data after it (the
+                            // padding, a literal pool) is not the table. Entries of that data that happen to
+                            // lead to an instruction are taken as targets: more paths, never fewer.
+                            if !checked && n > 0 {
+                                break;
+                            }
+                            return Err(unfollowable(
+                                insn,
+                                "a jump table entry that is not an instruction",
+                            ));
+                        };
                         leaders.insert(to);
                         targets.push(to);
                     }

@@ -124,6 +124,33 @@ fn a_jump_table_takes_its_longest_case() {
 }
 
 #[test]
+fn a_jump_table_without_a_bound_check_ends_at_its_first_entry_that_is_no_instruction() {
+    // The compiler knew the index's range (a byte-sized discriminant): no `cmp` before the table,
+    // whose data runs on into a literal pool.
+    let img = image(
+        &[
+            0x7800, // 0x00 ldrb r0, [r0]
+            0xe8df, 0xf000, // 0x02 tbb [pc, r0]
+            0x0503, // 0x06 the table: 3, 5 (cases at 0x0c and 0x10)
+            0xffff, 0xffff, // 0x08 a literal: entries 0xff, which lead out of the function
+            0x200a, // 0x0c case 0: movs r0, #10
+            0x4770, // 0x0e bx lr
+            0x2014, // 0x10 case 1: movs r0, #20
+            0x3001, // 0x12 adds r0, #1
+            0x4770, // 0x14 bx lr
+        ],
+        &[
+            Sym::function("unchecked", 0, 0x16),
+            Sym::data(0x06),
+            Sym::code(0x0c),
+        ],
+    );
+    let b = bound(&img, "unchecked", F103_0WS);
+    // Case 1 is the longest: ldrb, tbb, movs, adds, bx lr.
+    assert_eq!((b.instructions, b.declined.as_deref()), (5, None));
+}
+
+#[test]
 fn a_loop_without_a_bound_is_declined_by_name() {
     let img = image(
         &[
