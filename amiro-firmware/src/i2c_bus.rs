@@ -23,7 +23,7 @@
 //!
 //! A repeated START a device delays past that wait stalls the script with the event interrupt
 //! masked (`i2c_engine`); the board's watch task ([`I2cBus::serve_watch`]) looks at it every
-//! [`STRETCH_REARM_US`](crate::i2c_engine::STRETCH_REARM_US) on the monotonic, at most
+//! [`STRETCH_REARM_US`] on the monotonic, at most
 //! [`MAX_REARMS`](crate::i2c_engine::MAX_REARMS) times a script, so a device holding SCL costs
 //! neither a handler re-entered at the engine's priority nor a wait in it. The same task ends a
 //! script still on the bus at its deadline ([`deadline_us`]: its wire time and
