@@ -295,15 +295,17 @@ mod tests {
 
     /// The gap found on 2026-12-05 (docs/boards.md, "Revisions"): a board keeps another board's
     /// stream in its view only when its own table admits it, so on a robot every board must judge on
-    /// that robot's table. Replayed on the host: magnetometer-x every 1 150 µs at medium (DiWheelDrive
-    /// 1-1 admits it: 1 126.2 µs; a 1-2 robot's table refuses it: 1 244.1 µs), then power-status at high
-    /// every 100 ms. With PowerManagement's one image of before (the 1-2 robot's table on both robots)
-    /// its view missed the magnetometer on a 1-1 robot; every board's image for a robot now carries that
-    /// robot's table, and the views agree on both revisions.
+    /// that robot's table. Replayed on the host (the example re-derived on 2026-12-06, when DiWheelDrive
+    /// 1-1's publisher rows came from the machine code and the 2026-12-05 one, magnetometer-x every
+    /// 1 150 µs, was refused on both robots): the gyroscope every 1 ms at urgent (DiWheelDrive 1-1's table
+    /// admits it, a 1-2 robot's refuses it), then the proximity ring every 10 ms at low (DiWheelDrive 1-1's
+    /// check refuses it beside the gyroscope). With PowerManagement's one image of before (the 1-2 robot's
+    /// table on both robots) its view missed the gyroscope on a 1-1 robot and it started the ring; every
+    /// board's image for a robot now carries that robot's table, and the views agree on both revisions.
     #[test]
     fn every_boards_image_for_a_robot_judges_on_that_robots_table_so_the_views_agree() {
-        let commands: [(u16, &[u8]); 2] = [(0x205, &[1, 0x7E, 0x04, 2]), (0x11E, &[1, 100, 0, 0])];
-        let magnetometer = |view: &[(u8, u8, u64)]| view.iter().any(|s| s.1 == 0x05);
+        let commands: [(u16, &[u8]); 2] = [(0x008, &[1, 0xE8, 0x03, 2]), (0x31F, &[1, 10, 0, 0])];
+        let gyroscope = |view: &[(u8, u8, u64)]| view.iter().any(|s| s.1 == 0x08);
         for robot in ROBOT_REVISIONS {
             let builds = plan(&all(), &Choice::Robot(robot)).unwrap();
             let tables: Vec<(amiro_can::Board, &'static str)> = builds
@@ -327,9 +329,9 @@ mod tests {
             for b in &builds {
                 assert_eq!(table_revision(b), robot, "{}", b.stem());
             }
-            // The example still tells the tables apart: DiWheelDrive 1-1 runs the magnetometer, a 1-2 robot
+            // The example still tells the tables apart: DiWheelDrive 1-1 runs the gyroscope, a 1-2 robot
             // refuses it.
-            assert_eq!(magnetometer(&views[0].1), robot == "1-1", "{robot}");
+            assert_eq!(gyroscope(&views[0].1), robot == "1-1", "{robot}");
         }
         // And what the test guards against: PowerManagement on the 1-2 robot's table on a 1-1 robot.
         let mixed = views(
@@ -339,11 +341,11 @@ mod tests {
                 (amiro_can::Board::PowerManagement, "1-2"),
             ],
         );
-        // DiWheelDrive runs the magnetometer, PowerManagement's view misses it, so PowerManagement starts
-        // power-status, which DiWheelDrive's check (the pair: the magnetometer's frames at 1 241.2 µs) refuses.
-        let power_status = |view: &[(u8, u8, u64)]| view.iter().any(|s| s.1 == 0x1E);
-        assert!(magnetometer(&mixed[0].1) && !magnetometer(&mixed[1].1));
-        assert!(power_status(&mixed[1].1) && !power_status(&mixed[0].1));
+        // DiWheelDrive runs the gyroscope, PowerManagement's view misses it, so PowerManagement starts the
+        // ring, which DiWheelDrive's check refuses beside the gyroscope.
+        let ring = |view: &[(u8, u8, u64)]| view.iter().any(|s| s.1 == 0x1F);
+        assert!(gyroscope(&mixed[0].1) && !gyroscope(&mixed[1].1));
+        assert!(ring(&mixed[1].1) && !ring(&mixed[0].1));
     }
 
     #[test]
