@@ -24,8 +24,6 @@ use amiro_sensors::drivers::vcnl4020::Config;
 use amiro_sensors::script::Script;
 use amiro_sensors::sim::SimPowerBus;
 use schedule_analysis::admission_host;
-use schedule_analysis::analysis::{analyse, Options};
-use schedule_analysis::model::FrameCostSpec;
 use schedule_analysis::scenario;
 use serde_json::json;
 
@@ -414,23 +412,12 @@ fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine()
     }
 
     // The thesis demo's report with the trial's statements: printed (docs/i2c.md).
-    let scenario_file = root
-        .join(scenario::MODELS_DIR)
-        .join("thesis-demo.scenario.json");
-    let built = scenario::build(&root, &scenario_file, &scenario::timing_files(&root))
-        .unwrap_or_else(|e| panic!("{e}"));
-    let analysis = analyse(
-        &built.model.validate().expect("valid"),
-        &Options {
-            frame_cost: FrameCostSpec::Exact,
-            horizon: None,
-        },
-    );
+    let analysis = common::thesis_demo(&root);
     let board = analysis
         .boards
         .iter()
         .find(|b| b.name == "powermgmt")
-        .expect("PowerManagement in the report");
+        .expect("powermgmt in the report");
     let engine = board
         .tasks
         .iter()
@@ -522,23 +509,12 @@ fn owner_verdict(set_up: SetUp, ring_us: Option<f64>) {
         Some(us) => format!("{set_up:?} (ring release {us} µs, bound)"),
         None => format!("{set_up:?}"),
     };
-    let scenario_file = root
-        .join(scenario::MODELS_DIR)
-        .join("thesis-demo.scenario.json");
-    let built = scenario::build(&root, &scenario_file, &scenario::timing_files(&root))
-        .unwrap_or_else(|e| panic!("{e}"));
-    let analysis = analyse(
-        &built.model.validate().expect("valid"),
-        &Options {
-            frame_cost: FrameCostSpec::Exact,
-            horizon: None,
-        },
-    );
+    let analysis = common::thesis_demo(&root);
     let board = analysis
         .boards
         .iter()
         .find(|b| b.name == "powermgmt")
-        .expect("PowerManagement in the report");
+        .expect("powermgmt in the report");
     println!(
         "owners {set_up_label}: utilisation {:.3}",
         board.utilisation

@@ -359,23 +359,12 @@ fn the_trial_lowers_into_the_admission_table_and_the_report_charges_its_engine()
 
     // The thesis demo's set (gyroscope and odometry on DiWheelDrive) samples no I2C topic: the
     // trial's buses carry no script there and add no engine row.
-    let demo_file = root
-        .join(scenario::MODELS_DIR)
-        .join("thesis-demo.scenario.json");
-    let demo = scenario::build(&root, &demo_file, &scenario::timing_files(&root))
-        .unwrap_or_else(|e| panic!("{e}"));
-    let demo = analyse(
-        &demo.model.validate().expect("valid"),
-        &Options {
-            frame_cost: FrameCostSpec::Exact,
-            horizon: None,
-        },
-    );
+    let demo = common::thesis_demo(&root);
     let dwd = demo
         .boards
         .iter()
         .find(|b| b.name == "diwheeldrive")
-        .expect("DiWheelDrive in the demo");
+        .expect("diwheeldrive in the report");
     assert!(dwd.tasks.iter().all(|t| !t.name.contains("_engine[")));
     assert!(dwd.sensor_buses.iter().all(|b| b.scripts.is_empty()));
     println!(

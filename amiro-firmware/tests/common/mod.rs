@@ -4,6 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use amiro_sensors::script::{Script, Symbol};
+use schedule_analysis::analysis::{analyse, Analysis, Options};
+use schedule_analysis::model::FrameCostSpec;
+use schedule_analysis::scenario;
 
 /// Bytes (address bytes included) and STARTs (operation starts and repeated STARTs) on the wire.
 pub fn wire_counts(script: &Script) -> (u32, u32) {
@@ -36,4 +39,21 @@ pub fn copy_dir(from: &Path, to: &Path) {
             std::fs::copy(entry.path(), target).unwrap();
         }
     }
+}
+
+/// The thesis demo's report on the timing files under `root` (exact frame costs).
+#[allow(dead_code)]
+pub fn thesis_demo(root: &Path) -> Analysis {
+    let file = root
+        .join(scenario::MODELS_DIR)
+        .join("thesis-demo.scenario.json");
+    let built = scenario::build(root, &file, &scenario::timing_files(root))
+        .unwrap_or_else(|e| panic!("{e}"));
+    analyse(
+        &built.model.validate().expect("valid"),
+        &Options {
+            frame_cost: FrameCostSpec::Exact,
+            horizon: None,
+        },
+    )
 }
