@@ -1346,25 +1346,6 @@ fn dwd_sample_scripts_raise_the_stated_events() {
             Next::Done(_) => panic!("no script for {topic:?}"),
         }
     }
-    fn entries(model: Model, script: Script) -> usize {
-        let bus = I2cBus::new(model, [1]);
-        let (woken, waker) = test_waker::counting();
-        let mut transfer = pin!(bus.run(bus.client(0).unwrap(), script));
-        assert!(transfer
-            .as_mut()
-            .poll(&mut Context::from_waker(&waker))
-            .is_pending());
-        let entries = pump_counting(&bus);
-        assert_eq!(woken.count(), 1);
-        assert!(matches!(
-            transfer.poll(&mut Context::from_waker(&waker)),
-            Poll::Ready(Ok(_))
-        ));
-        bus.with_block(|m| {
-            check_wire(m, &script);
-        });
-        entries
-    }
 
     let mut compass = Supervised::boot(
         Compass::<Scripts>::scripted(),
@@ -1384,25 +1365,32 @@ fn dwd_sample_scripts_raise_the_stated_events() {
     assert_eq!(entries(floor_model(), script), 44);
 }
 
+/// Runs `script` alone on a bus over `model` and returns the event handler's entries; the client is
+/// woken once, its script succeeds and the wire is the script's.
+fn entries(model: Model, script: Script) -> usize {
+    let bus = I2cBus::new(model, [1]);
+    let (woken, waker) = test_waker::counting();
+    let mut transfer = pin!(bus.run(bus.client(0).unwrap(), script));
+    assert!(transfer
+        .as_mut()
+        .poll(&mut Context::from_waker(&waker))
+        .is_pending());
+    let entries = pump_counting(&bus);
+    assert_eq!(woken.count(), 1);
+    assert!(matches!(
+        transfer.poll(&mut Context::from_waker(&waker)),
+        Poll::Ready(Ok(_))
+    ));
+    bus.with_block(|m| {
+        check_wire(m, &script);
+    });
+    entries
+}
+
 /// `events` counts the interrupts the engine serves for each shape the AMiRo scripts have: the
 /// handler entries on the register model, every byte acknowledged.
 #[test]
 fn events_are_the_handler_entries_of_each_script_shape() {
-    let entries = |model: Model, script: Script| {
-        let bus = I2cBus::new(model, [1]);
-        let (_, waker) = test_waker::counting();
-        let mut transfer = pin!(bus.run(bus.client(0).unwrap(), script));
-        assert!(transfer
-            .as_mut()
-            .poll(&mut Context::from_waker(&waker))
-            .is_pending());
-        let entries = pump_counting(&bus);
-        assert!(matches!(
-            transfer.poll(&mut Context::from_waker(&waker)),
-            Poll::Ready(Ok(_))
-        ));
-        entries
-    };
     let device = || devices(&[0x1E]);
     for count in [1, 2, 3, 4, 6, 18] {
         let script = register_read(0x1E, 0, count);
