@@ -398,9 +398,13 @@ pub struct Load {
 /// utilisation ([`Subject::known_utilisation`]) — does not divide again.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Share {
-    utilisation: u64,
-    zero_period: bool,
+    /// `⌊c/t · 2^UTIL_BITS⌋` (at most [`UTIL_ONE`] = 2^24, so 32 bits), or [`ZERO_PERIOD`] alone for a zero period.
+    utilisation: u32,
 }
+
+/// [`Share`]'s mark of a zero period, a bit above any utilisation: 4 bytes a share, not a `u64` and a flag (16 B), as
+/// the on-chip check keeps one per job of a board (docs/analysis.md, "The on-chip admission check").
+const ZERO_PERIOD: u32 = 1 << 31;
 
 impl Share {
     /// The share of work `cost` every `period` (nothing when it costs nothing; a zero period overloads).
@@ -410,42 +414,38 @@ impl Share {
             Share::default()
         } else if t == 0 {
             Share {
-                utilisation: 0,
-                zero_period: true,
+                utilisation: ZERO_PERIOD,
             }
         } else {
-            Share {
-                utilisation: utilisation_floor(c, t),
-                zero_period: false,
-            }
+            Share::with_utilisation(utilisation_floor(c, t))
         }
     }
 
     /// The share whose utilisation `utilisation` was worked out before, as [`Share::of`] works it out (a table's,
-    /// built on the host): no division.
+    /// built on the host): no division. A utilisation is at most [`UTIL_ONE`] (one such interferer overloads any
+    /// level already); a larger figure is taken as [`UTIL_ONE`], which fits in 32 bits below [`ZERO_PERIOD`].
     pub fn with_utilisation(utilisation: u64) -> Share {
         Share {
-            utilisation,
-            zero_period: false,
+            utilisation: utilisation.min(UTIL_ONE) as u32,
         }
     }
 
     /// Its utilisation, `⌊c/t · 2^UTIL_BITS⌋` capped at [`UTIL_ONE`] (0 for a zero period).
     pub fn utilisation(self) -> u64 {
-        self.utilisation
+        u64::from(self.utilisation & !ZERO_PERIOD)
     }
 
     /// Its load as an interferer with release jitter `jitter`: exactly [`Load::of`].
     pub fn load(self, jitter: Time) -> Load {
-        if self.zero_period {
+        if self.utilisation == ZERO_PERIOD {
             return Load {
                 zero_periods: 1,
                 ..Load::default()
             };
         }
         Load {
-            utilisation: self.utilisation,
-            jitter_load: scaled_floor(jitter.as_ns(), self.utilisation).min(BOUND_LIMIT),
+            utilisation: self.utilisation(),
+            jitter_load: scaled_floor(jitter.as_ns(), self.utilisation()).min(BOUND_LIMIT),
             zero_periods: 0,
         }
     }
