@@ -166,7 +166,7 @@ fn one_shots_are_decided_as_the_report_analyses_them() {
                 .publisher_stream(&topic, level, interval, None)
                 .expect("one-shot stream");
             let decision = robot
-                .with_table(|table| admission::admit::<32, 32>(table, &streams, &request, false));
+                .with_table(|table| admission::admit::<48, 32>(table, &streams, &request, false));
             let (report, notes) = report_verdict_with_one_shots(
                 &running,
                 &[(&topic, level)],
@@ -242,7 +242,7 @@ fn admitted_on(
         );
     }
     let request = streams.pop().expect("a request");
-    robot.with_table(|table| admission::admit::<32, 32>(table, &streams, &request, false))
+    robot.with_table(|table| admission::admit::<48, 32>(table, &streams, &request, false))
 }
 
 /// A kept analysis is found again: after a request replaced a running stream of its board (which a board keeps in
@@ -255,16 +255,16 @@ fn a_decision_redoes_only_its_own_board() {
         [("odometry", "low", 10_000), ("gyroscope", "medium", 5_000)].into_iter(),
     );
     let mut cache = admission::Cache::<32>::new();
-    robot.with_table(|t| admission::refresh::<32, 32>(t, &running, &mut cache));
+    robot.with_table(|t| admission::refresh::<48, 32>(t, &running, &mut cache));
     let mut decide =
         |running: &mut Vec<admission::Stream>, topic: &str, level: &str, period_us: u64| {
             let request = robot
                 .publisher_stream(topic, level, Time::from_us(period_us), None)
                 .expect("stream");
             let plain =
-                robot.with_table(|t| admission::admit::<32, 32>(t, running, &request, false));
+                robot.with_table(|t| admission::admit::<48, 32>(t, running, &request, false));
             let cached = robot.with_table(|t| {
-                admission::admit_cached::<32, 32>(t, running, &request, &mut cache, false)
+                admission::admit_cached::<48, 32>(t, running, &request, &mut cache, false)
             });
             assert_eq!(plain.refusal, cached.refusal, "{topic}");
             assert!(cached.admitted(), "{topic}: {:?}", cached.refusal);
@@ -317,7 +317,7 @@ fn preparation_steps_leave_a_decision_its_own_board_and_the_same_verdict() {
         let mut prepared = Vec::new();
         let mut from = 0;
         while let Some((board, iterations)) = robot.with_table(|t| {
-            admission::refresh_one::<32, 32>(t, &running, Some(&request), &mut cache, from)
+            admission::refresh_one::<48, 32>(t, &running, Some(&request), &mut cache, from)
         }) {
             assert!(iterations <= admission::DECISION_ITERATIONS);
             assert!(
@@ -335,9 +335,9 @@ fn preparation_steps_leave_a_decision_its_own_board_and_the_same_verdict() {
             );
         }
         let cached = robot.with_table(|t| {
-            admission::admit_cached::<32, 32>(t, &running, &request, &mut cache, false)
+            admission::admit_cached::<48, 32>(t, &running, &request, &mut cache, false)
         });
-        let plain = robot.with_table(|t| admission::admit::<32, 32>(t, &running, &request, false));
+        let plain = robot.with_table(|t| admission::admit::<48, 32>(t, &running, &request, false));
         assert_eq!(cached.refusal, plain.refusal, "{period_us} µs");
         assert_eq!(cached.floor, plain.floor, "{period_us} µs");
         assert_eq!(cached.boards, 1, "{period_us} µs: prepared {prepared:?}");
@@ -455,7 +455,7 @@ fn the_thesis_example_is_refused_by_both_and_the_starvation_request_refused() {
         }
         other => panic!("{other:?}"),
     }
-    let slower = [("magnetometer-x".to_string(), "medium", 6_000)];
+    let slower = [("magnetometer-x".to_string(), "medium", 7_000)];
     assert!(report_verdict(&slower, &[], 1_000_002));
     let d = admitted(&slower, &[]);
     assert!(d.admitted(), "{d:?}");
@@ -464,12 +464,14 @@ fn the_thesis_example_is_refused_by_both_and_the_starvation_request_refused() {
     // Issue 11: accelerometer every 1 µs at urgent priority starved every other publisher.
     let robot = robot();
     let running = [robot
-        .publisher_stream("gyroscope", "high", Time::from_us(2000), None)
+        // Every 3 ms (2 ms until DiWheelDrive's transmit jobs became rows, 2026-12-06: beside it no accelerometer
+        // period at urgent passes, in the report as on the chip, and the gyroscope alone needs 1 524 µs).
+        .publisher_stream("gyroscope", "high", Time::from_us(3000), None)
         .expect("gyroscope")];
     let request = robot
         .publisher_stream("accelerometer", "urgent", Time::from_us(1), None)
         .expect("accelerometer");
-    let d = robot.with_table(|t| admission::admit::<32, 32>(t, &running, &request, true));
+    let d = robot.with_table(|t| admission::admit::<48, 32>(t, &running, &request, true));
     match d.refusal {
         Some(Refusal::Deadline(v)) => {
             assert!(matches!(
@@ -485,11 +487,11 @@ fn the_thesis_example_is_refused_by_both_and_the_starvation_request_refused() {
     let mut at = request;
     at.period = shortest;
     assert!(robot
-        .with_table(|t| admission::admit::<32, 32>(t, &running, &at, false))
+        .with_table(|t| admission::admit::<48, 32>(t, &running, &at, false))
         .admitted());
     at.period = shortest.minus(Time::from_us(1));
     assert!(!robot
-        .with_table(|t| admission::admit::<32, 32>(t, &running, &at, false))
+        .with_table(|t| admission::admit::<48, 32>(t, &running, &at, false))
         .admitted());
 }
 
@@ -503,7 +505,7 @@ fn the_shipped_scenarios_agree() {
         let robot = robot();
         let mut streams = robot.scenario_streams(&sc).expect("streams");
         let request = streams.pop().expect("request");
-        let d = robot.with_table(|t| admission::admit::<32, 32>(t, &streams, &request, false));
+        let d = robot.with_table(|t| admission::admit::<48, 32>(t, &streams, &request, false));
         let (built, report) = shipped_report(&root, &path);
         // The shipped scenarios have jitter budgets the on-chip check does not know; they pass anyway, but for a
         // checked refusal (the 900 µs set's frames late on the sound transmit path), which the chip refuses too.
@@ -600,14 +602,10 @@ fn the_transmit_jobs_are_in_the_table_and_decide_as_the_report() {
         "{:?}",
         lightring.topics
     );
-    // Where the transmit interrupt stays held (charged as a whole: DiWheelDrive's, shipped so), its board's topics
-    // have no transmit job; where it is used (LightRing's here, PowerManagement's as shipped), every topic has one.
+    // Where the transmit interrupt is used (every board's: LightRing's here, PowerManagement's and DiWheelDrive's as
+    // shipped, DiWheelDrive's since 2026-12-06), every topic has a transmit job.
     for board in &robot.boards {
-        if board.name == "lightring" || board.name == "powermgmt" {
-            assert!(board.topics.iter().all(|t| t.transmit > 0), "{board:?}");
-        } else {
-            assert!(board.topics.iter().all(|t| t.transmit == 0), "{board:?}");
-        }
+        assert!(board.topics.iter().all(|t| t.transmit > 0), "{board:?}");
     }
     let sets: [&[(&str, &str, u64)]; 3] = [
         &[
@@ -654,7 +652,7 @@ proptest! {
                 running.retain(|s| robot.publisher_stream(topic, LEVELS[level], Time::from_us(1000), None)
                     .is_some_and(|r| r.sender.map(|x| (x.board, x.topic)) != s.sender.map(|x| (x.board, x.topic))));
                 if level % 2 == 0 {
-                    robot.with_table(|t| admission::refresh::<32, 32>(t, &running, &mut cache));
+                    robot.with_table(|t| admission::refresh::<48, 32>(t, &running, &mut cache));
                 }
                 continue;
             }
@@ -662,8 +660,8 @@ proptest! {
             let request = robot
                 .publisher_stream(topic, LEVELS[level], Time::from_us(period), None)
                 .expect("stream");
-            let plain = robot.with_table(|t| admission::admit::<32, 32>(t, &running, &request, false));
-            let cached = robot.with_table(|t| admission::admit_cached::<32, 32>(t, &running, &request, &mut cache, false));
+            let plain = robot.with_table(|t| admission::admit::<48, 32>(t, &running, &request, false));
+            let cached = robot.with_table(|t| admission::admit_cached::<48, 32>(t, &running, &request, &mut cache, false));
             prop_assert_eq!(plain.refusal, cached.refusal, "{} at {} µs {}", topic, period, LEVELS[level]);
             prop_assert_eq!(plain.floor, cached.floor, "the hard floor: {} at {} µs {}", topic, period, LEVELS[level]);
             prop_assert!(cached.iterations <= plain.iterations);
@@ -683,7 +681,7 @@ proptest! {
 #[test]
 fn a_topics_sections_block_at_every_level() {
     let set = [
-        ("magnetometer-x".to_string(), "medium", 5_300),
+        ("magnetometer-x".to_string(), "medium", 6_500),
         ("gyroscope".to_string(), "low", 40_000),
     ];
     assert!(!report_verdict(&set, &[], 4_242));
@@ -691,7 +689,7 @@ fn a_topics_sections_block_at_every_level() {
     match d.refusal {
         Some(Refusal::Deadline(v)) => {
             assert_eq!(v.culprit, Culprit::Frame { id: 0x605 });
-            assert!(v.wcrt.is_some_and(|w| w > Time::from_us(5_300)), "{v:?}");
+            assert!(v.wcrt.is_some_and(|w| w > Time::from_us(6_500)), "{v:?}");
         }
         other => panic!("{other:?}"),
     }

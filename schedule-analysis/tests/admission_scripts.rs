@@ -288,10 +288,11 @@ fn chosen_sets_agree_with_the_report() {
             ("proximity-ring", "urgent", 50_000),
             ("power-status", "low", 500_000),
         ],
-        // Overloaded: the bus cannot carry the gyroscope's script every 80 µs. (Every 100 µs, with DiWheelDrive
-        // 1-1's bounds of 2026-12-05, the check's fixed point runs out of its iteration budget first: a refusal
-        // all the same, but one without a deadline verdict to hold against the report's.)
-        &[("gyroscope", "urgent", 80)],
+        // Overloaded: the bus cannot carry the gyroscope's script every 40 µs. (Every 100 µs, with DiWheelDrive
+        // 1-1's bounds of 2026-12-05, and every 80 µs since its transmit jobs are rows (2026-12-06), the check's
+        // fixed point runs out of its iteration budget first: a refusal all the same, but one without a deadline
+        // verdict to hold against the report's.)
+        &[("gyroscope", "urgent", 40)],
     ];
     let mut verdicts = Vec::new();
     for (case, set) in sets.iter().enumerate() {

@@ -89,10 +89,9 @@ fn a_bound_is_the_budget_wherever_one_exists() {
         task(&built, "admit_requests").wcet_us,
         task(&stated, "admit_requests").wcet_us
     );
-    assert_eq!(
-        task(&built, "can_tx").wcet_us,
-        task(&stated, "can_tx").wcet_us
-    );
+    // Absent from this file: the timing file's stated 9 µs (the shipped generated file, which the workspace
+    // without one keeps, bounds `can_tx` by its parts since 2026-12-06).
+    assert_eq!(task(&built, "can_tx").wcet_us, 9.0);
     assert_ne!(
         task(&built, "can_rx").wcet_us,
         task(&stated, "can_rx").wcet_us

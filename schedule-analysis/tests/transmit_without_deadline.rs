@@ -15,11 +15,36 @@ use schedule_analysis::model::FrameCostSpec;
 use schedule_analysis::scenario;
 use schedule_analysis::time::Time;
 
+mod common;
+
+thread_local! {
+    /// A workspace of this test's own in place of the real one (each test runs on a thread of its own).
+    static ROOT: std::cell::RefCell<Option<PathBuf>> = const { std::cell::RefCell::new(None) };
+}
+
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .map(Path::to_path_buf)
-        .expect("workspace root")
+    ROOT.with(|r| r.borrow().clone())
+        .unwrap_or_else(common::workspace)
+}
+
+/// A workspace whose DiWheelDrive bounds files have no `can_tx` row, so that its timing file's stated budget is
+/// the analysis's (the shipped files bound it by its parts since 2026-12-06).
+fn without_dwd_can_tx_bound() -> PathBuf {
+    let root = common::scratch_workspace("transmit-no-deadline-stated", None);
+    for revision in ["1-1", "1-2"] {
+        let path = root
+            .join(scenario::MODELS_DIR)
+            .join(format!("diwheeldrive-{revision}.wcet.json"));
+        let mut json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).expect("bounds file"))
+                .expect("parses");
+        json["tasks"]
+            .as_array_mut()
+            .expect("tasks")
+            .retain(|t| t["task"] != "can_tx");
+        std::fs::write(&path, json.to_string()).expect("bounds file");
+    }
+    root
 }
 
 /// A folder of its own for this test's files.
@@ -131,7 +156,7 @@ fn on_chip_held(
             .expect("parses");
     let mut streams = robot.scenario_streams(&sc).expect("streams");
     let request = streams.pop().expect("request");
-    let decision = robot.with_table(|t| admission::admit::<32, 32>(t, &streams, &request, false));
+    let decision = robot.with_table(|t| admission::admit::<48, 32>(t, &streams, &request, false));
     (decision, b, tx)
 }
 
@@ -248,8 +273,10 @@ fn lightrings_diagnostics_keep_its_latch_with_can_tx_used() {
 
 #[test]
 fn a_transmit_interrupt_whose_window_does_not_close_is_refused_by_host_and_chip() {
-    // DiWheelDrive's `can_tx` is on its stated budget (its bound held): 80 µs a frame every own frame (its
-    // magnetometers' 4 bytes, 79 µs) is more than the CPU, so its busy window never closes.
+    // DiWheelDrive's `can_tx` on a stated budget (a workspace whose bounds files lack its row): 80 µs a frame every
+    // own frame (its magnetometers' 4 bytes, 79 µs) is more than the CPU, so its busy window never closes.
+    let workspace = without_dwd_can_tx_bound();
+    ROOT.with(|r| *r.borrow_mut() = Some(workspace));
     let own_frame = can::own_frame_time(can::bit_time(can::DEFAULT_BITRATE), [4u8].into_iter());
     assert_eq!(own_frame, Time::from_us(79));
     let path = scenario::find_scenario(&root(), "thesis-demo");
