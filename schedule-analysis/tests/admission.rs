@@ -465,7 +465,7 @@ fn the_thesis_example_is_refused_by_both_and_the_starvation_request_refused() {
     let robot = robot();
     let running = [robot
         // Every 3 ms (2 ms until DiWheelDrive's transmit jobs became rows, 2026-12-06: beside it no accelerometer
-        // period at urgent passes, in the report as on the chip, and the gyroscope alone needs 1 524 µs).
+        // period at urgent passes, in the report as on the chip, and the gyroscope alone needs 1 519 µs).
         .publisher_stream("gyroscope", "high", Time::from_us(3000), None)
         .expect("gyroscope")];
     let request = robot
@@ -677,7 +677,9 @@ proptest! {
 /// gyroscope's SPI sample holds a lock at priority 4 for 74.75 µs (89.15 µs when found, its SPI waits then at 2 µs a byte), which a publisher job at urgent (priority 4) never
 /// raises but one at low does, blocking the magnetometer at medium. The table once kept the urgent job's sections
 /// only, and admitted magnetometer-x every 5 300 µs beside a gyroscope one-shot at low (every 40 ms) where the report
-/// puts 0x605 at 5 344.4 µs (5 358.8 when found with the QEMU scenario admission-one-shots, 2026-12-06).
+/// puts 0x605 at 5 344.4 µs (5 358.8 when found with the QEMU scenario admission-one-shots, 2026-12-06). Since
+/// DiWheelDrive's transmit jobs are rows (2026-12-06) the pair is asked at 6 500 µs: alone the magnetometer needs
+/// 6 480 µs on 1-1, beside the gyroscope at low 6 631 µs.
 #[test]
 fn a_topics_sections_block_at_every_level() {
     let set = [

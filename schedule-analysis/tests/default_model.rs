@@ -105,8 +105,8 @@ fn the_magnetometer_example_builds() {
     assert!(built
         .expected_failures
         .contains(&"diwheeldrive/publish_medium[magnetometer-x]".to_string()));
-    // On 1-2 (its publisher rows held: the BNO055) the frames miss, 2 330.0 µs against 900, and since DiWheelDrive's
-    // transmit jobs are rows (its `can_tx` used, 2026-12-06) the publisher job too (1 253.8 µs: they pre-empt it),
+    // On 1-2 (its publisher rows held: the BNO055) the frames miss, 2 338.0 µs against 900, and since DiWheelDrive's
+    // transmit jobs are rows (its `can_tx` used, 2026-12-06) the publisher job too (1 256.8 µs: they pre-empt it),
     // and the frames' jitter is over its budget.
     let built = built_on("thesis-magnetometer-900us", "1-2");
     let analysis = analyse(

@@ -52,9 +52,7 @@ pub const LEVELS: usize = 4;
 /// Fixed-point iterations one board's analysis may take, and the bus's (all its messages together)
 /// ([`Refusal::Budget`] beyond): what bounds a decision's cost on the chip, which analyses one board and the bus. A configuration loaded close to 100 % can need a hundred thousand iterations (a
 /// search found one: 217 ms of a board's CPU for one decision, docs/analysis.md); the requests the scenarios and
-/// the thesis make take at most a few hundred. 1 000 since DiWheelDrive's transmit jobs are rows (2026-12-06): a
-/// publisher job releases its topic's more urgent transmit job, so a board analysis takes jitter rounds, and the
-/// sets `tests/admission.rs` decides took up to about 1 000 where 250 refused them on the budget.
+/// the thesis make take at most a few hundred (1 000 since 2026-12-06: docs/analysis.md, "Held per revision").
 pub const DECISION_ITERATIONS: u64 = 1_000;
 /// [`DECISION_ITERATIONS`] for a board whose running jobs run sensor-bus scripts: its rounds (each scripts' bus
 /// responses, the board once per view, the engine events) to their fixed point, each round counted as one beside
