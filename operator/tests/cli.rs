@@ -715,11 +715,11 @@ fn send_warns_from_what_a_log_of_the_bus_shows_runs() {
     let (ok, _, stderr) = run(&["send", "208#01D00702", "--bus", &bus]);
     assert!(ok, "{stderr}");
     assert!(!stderr.contains("warning"), "{stderr}");
-    // A candump -l log in which magnetometer-x data arrive at medium every 6 ms (its command was
+    // A candump -l log in which magnetometer-x data arrive at medium every 7 ms (its command was
     // never heard): the same request is refused, and the measured period is named.
     let heard = dir.path().join("heard.log");
     let lines: String = (0..12)
-        .map(|k| format!("(1700000000.{:06}) can0 605#00000000\n", 1000 + k * 6000))
+        .map(|k| format!("(1700000000.{:06}) can0 605#00000000\n", 1000 + k * 7000))
         .collect();
     std::fs::write(&heard, lines).unwrap();
     let (ok, _, stderr) = run(&[
@@ -736,7 +736,7 @@ fn send_warns_from_what_a_log_of_the_bus_shows_runs() {
         "{stderr}"
     );
     assert!(
-        stderr.contains("magnetometer-x at medium every ~6000 µs"),
+        stderr.contains("magnetometer-x at medium every ~7000 µs"),
         "{stderr}"
     );
 }

@@ -624,11 +624,11 @@ mod tests {
             "stop gyroscope --priority medium",
             Duration::ZERO,
         );
-        // Somebody else starts magnetometer-x every 6 ms: the console hears the command.
+        // Somebody else starts magnetometer-x every 7 ms: the console hears the command.
         console.heard(&LoggedFrame {
             timestamp: None,
             interface: None,
-            frame: crate::frame::parse_compact("205#01701702").expect("frame"),
+            frame: crate::frame::parse_compact("205#01581B02").expect("frame"),
         });
         let frames = type_line(
             &mut console,

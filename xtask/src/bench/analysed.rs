@@ -178,7 +178,9 @@ mod tests {
     /// admits its one-shots: magnetometer-x every 6 ms at medium (moved from 5 300 µs, beside which the board
     /// refuses the gyroscope one-shot, the floor one-shot and the accelerometer), the accelerometer every 10 ms at
     /// low and one gyroscope sample at low (DiWheelDrive 1-1's machine-code publisher rows, 2026-12-06: the polled
-    /// HMC5883L makes a magnetometer-x job 3.1 ms, the shortest period alone 5 216 µs).
+    /// HMC5883L makes a magnetometer-x job 3.1 ms, the shortest period alone 5 216 µs). Since DiWheelDrive's
+    /// `can_tx` is used (2026-12-06) every 6 ms is refused (6 480 µs alone): the magnetometer every 7 ms, its
+    /// samples scaled by 6/7 (the capture itself is to be re-derived: docs/qemu.md).
     /// The thesis one-shots' scenario, written to a folder of `test`'s own: tests run in parallel in one process,
     /// and a shared file was read half-written by one test while another wrote it.
     fn thesis_one_shots(test: &str) -> PathBuf {
@@ -187,7 +189,7 @@ mod tests {
 
     /// The capture's topics: (topic, level, period µs or a one-shot, samples).
     const SEEN: [(Topic, u8, Option<u64>, usize); 3] = [
-        (Topic::MagnetometerX, 2, Some(6000), 62),
+        (Topic::MagnetometerX, 2, Some(7000), 53),
         (Topic::Accelerometer, 3, Some(10_000), 9),
         (Topic::Gyroscope, 3, None, 1),
     ];
@@ -239,7 +241,7 @@ mod tests {
         let path = thesis_one_shots("admitted");
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         // The board's own admission decides on the production model, one request at a time: the gyroscope
-        // one-shot beside the 6 ms magnetometer, then the accelerometer beside it, the one-shot not kept in the
+        // one-shot beside the 7 ms magnetometer, then the accelerometer beside it, the one-shot not kept in the
         // board's view by then (each alone beside it: the magnetometer's frame at 5 344.4 of 6 000 µs, `cargo xtask
         // analyze --revision 1-1`, 2026-12-06).
         for (name, without) in [
