@@ -242,7 +242,7 @@ mod tests {
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         // The board's own admission decides on the production model, one request at a time: the gyroscope
         // one-shot beside the 7 ms magnetometer, then the accelerometer beside it, the one-shot not kept in the
-        // board's view by then (each alone beside it: the magnetometer's frame at 5 344.4 of 6 000 µs, `cargo xtask
+        // board's view by then (each alone beside it, in the 6 ms capture before DiWheelDrive's can_tx was used: the magnetometer's frame at 5 344.4 of 6 000 µs, `cargo xtask
         // analyze --revision 1-1`, 2026-12-06).
         for (name, without) in [
             ("admitted-once", Topic::Accelerometer),
