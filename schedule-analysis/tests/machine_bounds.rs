@@ -184,7 +184,7 @@ fn a_bounded_admission_step_is_used_and_said_so() {
     let admission = source(&built, "diwheeldrive: admission reserves");
     assert!(
         admission.contains("one step's bound from the machine code (its iteration caps): 10000 µs")
-            && admission.contains("beside it the stated budget 8600 µs")
+            && admission.contains("beside it the stated budget 15300 µs")
             && admission.contains("the analysis uses the bound"),
         "{admission}"
     );

@@ -303,7 +303,7 @@ mod tests {
     /// table on both robots) its view missed the gyroscope on a 1-1 robot and it started the ring; every
     /// board's image for a robot now carries that robot's table, and the views agree on both revisions.
     /// Re-derived again when DiWheelDrive's `can_tx` was used (2026-12-06): the gyroscope at urgent needs
-    /// 1 519 µs on a 1-1 robot and 1 892 µs on a 1-2 robot, so it is asked every 1.6 ms (1 ms before).
+    /// 1 519 µs on a 1-1 robot and 2 026 µs on a 1-2 robot, so it is asked every 1.6 ms (1 ms before).
     #[test]
     fn every_boards_image_for_a_robot_judges_on_that_robots_table_so_the_views_agree() {
         let commands: [(u16, &[u8]); 2] = [(0x008, &[1, 0x40, 0x06, 2]), (0x31F, &[1, 10, 0, 0])];
