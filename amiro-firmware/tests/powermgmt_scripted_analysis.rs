@@ -273,10 +273,10 @@ fn scripted_workspace_as(test: &str, set_up: SetUp) -> PathBuf {
     root
 }
 
-/// The ring's worst job on one bus (`sensors::scripted::sample_ring`): a missing sensor whose retry
-/// passed set up first (at most one a job and bus: `SensorSetUp`'s six scripts, its identity and
-/// each set-up register written and read back), then the read of the sensors that answer (one
-/// script, every sensor answering).
+/// The ring's worst job on one bus (`sensors::scripted::serve_owner`'s read): a missing sensor
+/// whose retry passed set up first (at most one a job and bus: `SensorSetUp`'s six scripts, its
+/// identity and each set-up register written and read back), then the read of the sensors that
+/// answer (one script, every sensor answering).
 fn worst_ring_job(bus: RingBus) -> Vec<Script> {
     let channels: Vec<Channel> = WIRING
         .iter()

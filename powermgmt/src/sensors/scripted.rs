@@ -1,5 +1,5 @@
 //! With `scripted-i2c`: PowerManagement's two buses sampled by script (docs/i2c.md,
-//! "PowerManagement with `scripted-i2c`"). Each bus has one owner task ([`RingOwner`], the app's
+//! "PowerManagement with `scripted-i2c`"). Each bus has one owner task ([`serve_owner`], the app's
 //! `ring_rear` and `ring_front`, every [`OWNER_PERIOD_US`]): its job reads the bus's ring sensors
 //! (a missing sensor's set-up first, at most one) and makes one transfer of the bus's gauge read,
 //! each a job of I2C scripts that the bus runs while the owner suspends on its client slot
@@ -12,8 +12,8 @@
 //! `StatusRead` a transfer a script after its 66 µs of bus-free time, `GaugeIdentity`), built from
 //! the drivers' register maps; the bus's policy is the blocking [`super::SensorBus`]'s: at most one
 //! missing sensor set up again per job and bus, each after [`RETRY_US`]; a sensor that does not
-//! answer yields no reading (no frame) and is counted; the log lines and the health report are
-//! made when the job ends, from what it changed.
+//! answer yields no reading (no frame) and is counted; the health report is made under the lock as
+//! the job takes its outcome, and the log lines are deferred after it ([`note`]).
 use amiro_firmware::i2c_engine::FLAG_ALLOWANCE_US;
 use amiro_firmware::scripted::{script_result, ScriptPort};
 use amiro_sensors::drivers::bq27500::{BatteryStatus, StatusRead};
