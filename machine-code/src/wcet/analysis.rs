@@ -791,8 +791,43 @@ impl<'a> Analysis<'a> {
                     .call_summary(target, &f.name, insns, &graph, index, &args, site, &values)?
                 {
                     Ok(s) => {
-                        *time_ref = time_ref.plus(s.time);
-                        *count_ref = count_ref.plus(s.count);
+                        let callee = image
+                            .function_at(target)
+                            .filter(|c| c.start == target)
+                            .map(|c| c.name.clone());
+                        match callee
+                            .as_deref()
+                            .and_then(|name| self.bounds.call_total(name))
+                        {
+                            // A function called at most `calls` times per job: charged by the job's
+                            // bound, that many times its longest call, not at each call.
+                            Some(stated) => {
+                                let name = stated.function.clone();
+                                loops_info.push(LoopInfo {
+                                    function: name.clone(),
+                                    file: None,
+                                    line: None,
+                                    bound: stated.calls,
+                                    source: format!(
+                                        "bounds file, calls in total per job: {}",
+                                        stated.reason
+                                    ),
+                                });
+                                let mine = Totals::from([(
+                                    (name, None, None),
+                                    Total {
+                                        passes: stated.calls,
+                                        time: s.time,
+                                        count: s.count,
+                                    },
+                                )]);
+                                merge_totals(&mut totals, &mine, chip);
+                            }
+                            None => {
+                                *time_ref = time_ref.plus(s.time);
+                                *count_ref = count_ref.plus(s.count);
+                            }
+                        }
                         loops_info.extend(s.loops);
                         merge_totals(&mut totals, &s.totals, chip);
                     }

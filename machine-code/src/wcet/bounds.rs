@@ -72,6 +72,18 @@ pub struct WaitBound {
     pub source: String,
 }
 
+/// A function a job calls at most `calls` times in all, wherever it calls it (the bus clear, which only a
+/// failed transfer runs, after which the job makes no transfer): the job's bound charges it that many times
+/// its longest call, in place of each call on the longest path (as [`TotalBound`] charges a loop). The
+/// reason says why no job calls it more often.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CallTotal {
+    pub function: String,
+    pub calls: u64,
+    pub reason: String,
+}
+
 /// A stated wait's place (`function`, `file`, `line`, as [`WaitBound`] keys it), named by a
 /// [`TransactionCap`].
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -111,6 +123,19 @@ pub struct TransactionCap {
     pub per_byte_us: f64,
     pub waits: Vec<WaitPlace>,
     pub reason: String,
+}
+
+impl CallTotal {
+    /// Checks it has a count of at least 1 and a reason.
+    fn check(&self) -> Result<(), Error> {
+        if self.calls == 0 || self.reason.trim().is_empty() {
+            return Err(Error::Bounds(format!(
+                "the calls in total of {} need a count of at least 1 and a reason",
+                self.function
+            )));
+        }
+        Ok(())
+    }
 }
 
 impl TransactionCap {
@@ -382,6 +407,9 @@ pub struct BoundsFile {
     /// Caps on the sum of a bus transaction's flag waits per call ([`TransactionCap`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub transactions: Vec<TransactionCap>,
+    /// Functions called at most a stated number of times per job ([`CallTotal`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub calls: Vec<CallTotal>,
     /// The publisher's release loop and its topic groups: a bound per topic's job
     /// ([`PerTopic`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -424,6 +452,9 @@ pub struct TopicGroup {
     /// wire time and the stretch of the devices its sample addresses).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub transactions: Vec<TransactionCap>,
+    /// Calls in total per job of this group's jobs, in place of the file's for the same function.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub calls: Vec<CallTotal>,
     /// Why only a job of these topics calls `functions` (the sampler's dispatch), and the waits'.
     pub reason: String,
 }
@@ -455,6 +486,9 @@ impl PerTopic {
             }
             for c in &g.transactions {
                 c.check(&format!("topic group {}", g.name))?;
+            }
+            for c in &g.calls {
+                c.check()?;
             }
             for w in &g.waits {
                 if !(w.wait_us.is_finite() && w.wait_us > 0.0) || w.source.trim().is_empty() {
@@ -606,6 +640,9 @@ impl BoundsFile {
         for c in &file.transactions {
             c.check("the file's")?;
         }
+        for c in &file.calls {
+            c.check()?;
+        }
         if let Some(t) = &file.topics {
             t.check()?;
         }
@@ -641,6 +678,11 @@ impl BoundsFile {
         self.waits
             .iter()
             .find(|w| w.function == function && w.line == line && same_file(file, &w.file))
+    }
+
+    /// The stated calls in total per job of `function`, if any.
+    pub fn call_total(&self, function: &str) -> Option<&CallTotal> {
+        self.calls.iter().find(|c| c.function == function)
     }
 
     /// The transaction cap of `function`, if it has one.
@@ -777,6 +819,7 @@ impl BoundsFile {
         out.jobs.extend(extra.jobs.iter().cloned());
         out.totals.extend(extra.totals.iter().cloned());
         out.transactions.extend(extra.transactions.iter().cloned());
+        out.calls.extend(extra.calls.iter().cloned());
         Ok(out)
     }
 
@@ -894,6 +937,17 @@ impl BoundsFile {
                     .iter()
                     .map(|c| ("topic group transaction cap", c))
             }));
+        let calls = self.calls.iter().map(|c| ("calls in total", c)).chain(
+            self.topics
+                .iter()
+                .flat_map(|t| &t.groups)
+                .flat_map(|g| g.calls.iter().map(|c| ("topic group calls in total", c))),
+        );
+        for (kind, c) in calls {
+            if functions(&c.function).is_empty() {
+                missing.push(format!("{kind} function {}", c.function));
+            }
+        }
         for (kind, c) in caps {
             if functions(&c.function).is_empty() {
                 missing.push(format!("{kind} function {}", c.function));

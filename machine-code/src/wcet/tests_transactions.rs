@@ -195,3 +195,55 @@ fn a_cap_needs_its_figures_its_waits_and_a_reason() {
         );
     }
 }
+
+/// The statements of [`bounds`] and `calls`, the calls in total per job.
+fn bounds_with_calls(calls: &str) -> BoundsFile {
+    BoundsFile::parse(&format!(
+        r#"{{"per_element":[{{"function":"send","register":2,"reason":"one pass per byte"}}],
+            "waits":[{{"function":"wait","file":"src/i2c.rs","line":109,"wait_us":25,
+                       "source":"one byte at 400 kHz, rounded"}}],
+            "calls":[{calls}]}}"#
+    ))
+    .expect("the test file parses")
+}
+
+#[test]
+fn a_function_called_at_most_once_per_job_is_charged_once() {
+    // `wait` stated as called at most once per job: of the n + 1 calls on the longest path each costs
+    // only its `bl` (4 cycles, one instruction) where it is made, and the job's bound adds one call,
+    // 13 cycles, 25 µs and 1 804 instructions: 59 + 23n − 13(n + 1) + 13 = 59 + 10n cycles,
+    // 1 817 + 1 808n − 1 804n = 1 817 + 4n instructions, 25 µs of waits.
+    let once = r#"{"function":"wait","calls":1,"reason":"the test's: at most one flag a job"}"#;
+    for n in [1u16, 2, 5] {
+        let n64 = u64::from(n);
+        let b = bound_function(&transfer(n), "caller", F103_0WS, &bounds_with_calls(once)).unwrap();
+        assert_eq!(b.declined, None);
+        assert_eq!(
+            (b.cycles, b.instructions, b.bus_wait_ns),
+            (59 + 10 * n64, 1817 + 4 * n64, 25_000),
+            "n = {n}"
+        );
+        let info = b
+            .loops
+            .iter()
+            .find(|l| l.source.starts_with("bounds file, calls in total per job"))
+            .expect("the statement is listed with the loops");
+        assert_eq!((info.function.as_str(), info.bound), ("wait", 1));
+    }
+    // At n + 1 calls or more the bound is the uncapped one.
+    let many = r#"{"function":"wait","calls":3,"reason":"the test's"}"#;
+    let b = bound_function(&transfer(2), "caller", F103_0WS, &bounds_with_calls(many)).unwrap();
+    assert_eq!((b.cycles, b.instructions), worked(2));
+    assert_eq!(b.bus_wait_ns, 75_000);
+    // A count of 0 or no reason is refused.
+    for bad in [
+        r#"{"function":"wait","calls":0,"reason":"x"}"#,
+        r#"{"function":"wait","calls":1,"reason":" "}"#,
+    ] {
+        let text = format!(r#"{{"calls":[{bad}]}}"#);
+        assert!(
+            matches!(BoundsFile::parse(&text), Err(Error::Bounds(_))),
+            "{bad}"
+        );
+    }
+}

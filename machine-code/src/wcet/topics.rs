@@ -101,6 +101,10 @@ impl BoundsFile {
             file.transactions.retain(|x| x.function != c.function);
             file.transactions.push(c.clone());
         }
+        for c in &group.calls {
+            file.calls.retain(|x| x.function != c.function);
+            file.calls.push(c.clone());
+        }
         file
     }
 }
