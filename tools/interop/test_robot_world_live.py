@@ -111,12 +111,8 @@ def over_line_percent(trajectory, world):
     return 100.0 * over / len(rows)
 
 
-def test_the_line_following_example_gets_no_floor_sensors_live(tmp_path):
-    # A 1-1 robot refuses the floor sensors since 2026-12-06: its floor-proximity row is the machine code's bound, a
-    # floor job of 8.5 ms that leaves motor control no room for its 10 ms deadline at any level and period
-    # (docs/analysis.md, "Held per revision"; the robot scenario world-line checks the verdict). The example steers
-    # only on floor readings, so the robot stays where it starts. While the floor was admitted on a stated budget
-    # this test asked for >= 1.5 m and a floor sensor over the line at >= 90 % of the rows (over_line_percent).
+def test_the_line_following_example_follows_the_line_live(tmp_path):
+    world = ROOT / "robot" / "worlds" / "line-lap.json"
     trajectory = tmp_path / "line.csv"
     with live_robot("line-lap.json", "--trajectory", str(trajectory)) as (port, result):
         subprocess.run(
@@ -124,4 +120,6 @@ def test_the_line_following_example_gets_no_floor_sensors_live(tmp_path):
             timeout=120, check=True,
         )
     assert result["contacts"] == 0, result
-    assert result["travelled"] < 0.01, result
+    assert result["travelled"] >= 1.5, result
+    over = over_line_percent(trajectory, world)
+    assert over >= 90.0, f"a floor sensor over the line at {over:.1f} % of the rows"
