@@ -36,8 +36,10 @@ use core::task::{Context, Poll, Waker};
 
 use amiro_sensors::script::{Failure, Readings, Script, ScriptError};
 
+#[cfg(doc)]
+use crate::i2c_engine::deadline_us;
 use crate::i2c_engine::{
-    deadline_us, Block, Condition, Engine, Progress, CONDITION_POLLS, STRETCH_REARM_US,
+    deadline_after, wire_us, Block, Condition, Engine, Progress, CONDITION_POLLS, STRETCH_REARM_US,
 };
 use crate::scripted::Deadline;
 
@@ -69,6 +71,9 @@ struct Slot {
     /// (in the client's job), so that a script's end compares one number per slot.
     rank: u64,
     script: Script,
+    /// Its script's deadline ([`deadline_us`]): worked out at the submission, outside the
+    /// critical section (in the client's job), so that a script's start only reads it.
+    deadline_us: u32,
     readings: Readings,
     waker: Option<Waker>,
 }
@@ -110,6 +115,7 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
                 state: State::Free,
                 rank: 0,
                 script: Script::new(),
+                deadline_us: 0,
                 readings: Readings::empty(),
                 waker: None,
             }
@@ -153,11 +159,15 @@ impl<B: Block, const SLOTS: usize> I2cBus<B, SLOTS> {
 
     /// Runs `script` for `client`: the future submits it on its first poll and gives its
     /// readings (or the failure and the operation it happened in) at its end. Dropping it
-    /// cancels the script.
+    /// cancels the script. Its wire time and deadline ([`deadline_us`]) are worked out here,
+    /// once, outside the bus's critical section ([`Transfer::wire_us`]).
     pub fn run(&self, client: Client<SLOTS>, script: Script) -> Transfer<'_, B, SLOTS> {
+        let wire_us = wire_us(&script);
         Transfer {
             bus: self,
             client: client.index(),
+            deadline_us: deadline_after(&script, wire_us),
+            wire_us,
             script,
             stage: Stage::New,
         }
@@ -510,7 +520,7 @@ impl<B: Block, const SLOTS: usize> Inner<B, SLOTS> {
         slot.state = State::Running;
         slot.rank = 0;
         self.started = self.started.wrapping_add(1);
-        self.deadline_us = deadline_us(&slot.script);
+        self.deadline_us = slot.deadline_us;
         match self.engine.start(&slot.script, &mut self.block) {
             // The watch times it from here.
             Progress::Running => self.rearm.take(),
@@ -562,7 +572,20 @@ pub struct Transfer<'a, B: Block, const SLOTS: usize> {
     bus: &'a I2cBus<B, SLOTS>,
     client: usize,
     script: Script,
+    /// The script's time on the wire at [`SCL_HZ`](amiro_sensors::script::SCL_HZ), µs rounded up.
+    wire_us: u32,
+    /// The script's deadline ([`deadline_us`]).
+    deadline_us: u32,
     stage: Stage,
+}
+
+impl<B: Block, const SLOTS: usize> Transfer<'_, B, SLOTS> {
+    /// The script's time on the wire at [`SCL_HZ`](amiro_sensors::script::SCL_HZ), µs rounded
+    /// up (a client's timeout,
+    /// `scripted::script_timeout_us`, without walking the wire again).
+    pub fn wire_us(&self) -> u32 {
+        self.wire_us
+    }
 }
 
 /// The answer to a [`Transfer`] that cannot have the client's slot.
@@ -600,6 +623,7 @@ impl<B: Block, const SLOTS: usize> Future for Transfer<'_, B, SLOTS> {
                     return (Poll::Ready(Err(BUSY)), None);
                 }
                 slot.script = this.script;
+                slot.deadline_us = this.deadline_us;
                 slot.readings = readings;
                 slot.state = State::Waiting;
                 slot.rank = rank(slot.priority, inner.submitted);

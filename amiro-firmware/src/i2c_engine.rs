@@ -163,11 +163,20 @@ pub fn events(script: &Script) -> u32 {
 /// [`Failure::Stretched`]; the analysis charges a script's bus time at most this (docs/i2c.md, "A
 /// script's deadline").
 pub fn deadline_us(script: &Script) -> u32 {
+    deadline_after(script, wire_us(script))
+}
+
+/// [`deadline_us`] of `script` whose wire time ([`wire_us`]) is `wire_us`.
+pub fn deadline_after(script: &Script, wire_us: u32) -> u32 {
+    wire_us.saturating_add(events(script).saturating_mul(FLAG_ALLOWANCE_US))
+}
+
+/// A script's time on the wire at [`SCL_HZ`](amiro_sensors::script::SCL_HZ), µs rounded up.
+pub fn wire_us(script: &Script) -> u32 {
     let wire = script
         .bus_time_ns(amiro_sensors::script::SCL_HZ)
         .div_ceil(1000);
-    let wire = u32::try_from(wire).unwrap_or(u32::MAX);
-    wire.saturating_add(events(script).saturating_mul(FLAG_ALLOWANCE_US))
+    u32::try_from(wire).unwrap_or(u32::MAX)
 }
 
 /// Which of the block's interrupts are on (CR2's three enables).

@@ -225,8 +225,11 @@ impl<D: Deadline, B: Block, const SLOTS: usize> ScriptPort for I2cPort<'_, D, B,
         if settle_us > 0 {
             D::delay_until_us(D::now_us() + u64::from(settle_us)).await;
         }
-        let at_us = D::now_us() + script_timeout_us(&script, self.allowance_us);
-        match D::timeout_at_us(at_us, self.bus.run(self.client, script)).await {
+        // The transfer works the script's wire time out once (outside the bus's critical
+        // section); the timeout is that and the allowance, as `script_timeout_us` has it.
+        let transfer = self.bus.run(self.client, script);
+        let at_us = D::now_us() + u64::from(transfer.wire_us()) + u64::from(self.allowance_us);
+        match D::timeout_at_us(at_us, transfer).await {
             Some(Ok(readings)) => Ok(readings),
             Some(Err(error)) => Err(BusFault::Script(error)),
             None => Err(BusFault::Timeout),

@@ -182,8 +182,28 @@ impl Script {
     /// bus-free time after it 0.6 µs and 1.3 µs, of a 2.5 µs period; I2C-bus specification
     /// UM10204, table 10). A device's clock stretching is not in it: the analysis adds the
     /// devices' stated stretches.
+    ///
+    /// Counted per operation, not by walking [`Self::wire`] symbol by symbol (a script's time is
+    /// worked out at each submission, in the client's job: 12 passes at most where the walk
+    /// takes up to 100): its START and STOP; where it writes, its address and written bytes;
+    /// where it writes and reads, the repeated START; where it reads, its address and read bytes
+    /// — the wire's symbols exactly (`the_periods_counted_per_operation_are_the_wires`).
     pub fn scl_periods(&self) -> u32 {
-        self.wire().map(Symbol::scl_periods).sum()
+        let mut periods = 0u32;
+        for op in self.operations() {
+            let (write, read) = (u32::from(op.write), u32::from(op.read));
+            periods += 2;
+            if write > 0 {
+                periods += 9 * (1 + write);
+            }
+            if write > 0 && read > 0 {
+                periods += 1;
+            }
+            if read > 0 {
+                periods += 9 * (1 + read);
+            }
+        }
+        periods
     }
 
     /// The script's time on the bus in nanoseconds at `scl_hz` (rounded up): [`Self::scl_periods`]
@@ -622,6 +642,27 @@ mod tests {
         );
         // Bytes: 4 × (2 + 2 × 5) = 48 → 432 periods, plus 12 + 12 + 8 conditions.
         assert_eq!(floor.scl_periods(), 464);
+    }
+
+    #[test]
+    fn the_periods_counted_per_operation_are_the_wires() {
+        let walk = |s: &Script| s.wire().map(Symbol::scl_periods).sum::<u32>();
+        let floor = floor_round();
+        assert_eq!(floor.scl_periods(), walk(&floor));
+        let mut shapes = Script::new();
+        shapes
+            .write(0x10, &[1])
+            .unwrap()
+            .read(0x11, 1)
+            .unwrap()
+            .write_read(0x12, &[2, 3], 4)
+            .unwrap()
+            .write(0x13, &[4, 5, 6])
+            .unwrap()
+            .read(0x14, 24 - 1 - 4)
+            .unwrap();
+        assert_eq!(shapes.scl_periods(), walk(&shapes));
+        assert_eq!(Script::new().scl_periods(), 0);
     }
 
     #[test]

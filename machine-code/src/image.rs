@@ -294,6 +294,15 @@ impl Image {
     /// the address lies in, then the function it was inlined into, each demangled without its
     /// hash. Empty without DWARF debug information for it.
     pub fn inlined_at(&self, address: u64) -> Vec<String> {
+        self.inlined_raw_at(address)
+            .iter()
+            .map(|raw| format!("{:#}", rustc_demangle::demangle(raw)))
+            .collect()
+    }
+
+    /// [`Image::inlined_at`]'s functions as DWARF names them (the linkage name, mangled with its
+    /// hash where rustc wrote one): a generic function's instances differ by it.
+    pub fn inlined_raw_at(&self, address: u64) -> Vec<String> {
         let Some(context) = self.lines.as_ref() else {
             return Vec::new();
         };
@@ -303,7 +312,7 @@ impl Image {
         let mut names = Vec::new();
         while let Ok(Some(frame)) = frames.next() {
             if let Some(raw) = frame.function.as_ref().and_then(|f| f.raw_name().ok()) {
-                names.push(format!("{:#}", rustc_demangle::demangle(&raw)));
+                names.push(raw.into_owned());
             }
         }
         names

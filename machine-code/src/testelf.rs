@@ -72,7 +72,7 @@ pub struct Inlines<'a> {
 
 /// [`elf_with_lines`] with DWARF subprograms: each of `functions` a subprogram, its inlined
 /// subroutines children of it naming an abstract subprogram of their name (as rustc writes an
-/// inlined function).
+/// inlined function); one whose range lies within an earlier one's is that one's child.
 pub fn elf_with_inlines(
     code: &[u8],
     symbols: &[Sym],
@@ -169,6 +169,8 @@ fn line_table(
             AttributeValue::String(name.as_bytes().to_vec()),
         );
         range(&mut dwarf.unit, outer, from, to);
+        // An inlined subroutine whose range lies within an earlier one's is its child (inlined into it).
+        let mut placed: Vec<(gimli::write::UnitEntryId, u64, u64)> = Vec::new();
         for &(name, from, to) in f.inlined {
             let origin = dwarf.unit.add(root, gimli::DW_TAG_subprogram);
             let abstract_entry = dwarf.unit.get_mut(origin);
@@ -180,7 +182,13 @@ fn line_table(
                 gimli::DW_AT_inline,
                 AttributeValue::Inline(gimli::DW_INL_inlined),
             );
-            let inlined = dwarf.unit.add(outer, gimli::DW_TAG_inlined_subroutine);
+            let parent = placed
+                .iter()
+                .rev()
+                .find(|&&(_, f, t)| f <= from && to <= t && (f, t) != (from, to))
+                .map_or(outer, |&(id, _, _)| id);
+            let inlined = dwarf.unit.add(parent, gimli::DW_TAG_inlined_subroutine);
+            placed.push((inlined, from, to));
             dwarf.unit.get_mut(inlined).set(
                 gimli::DW_AT_abstract_origin,
                 AttributeValue::UnitRef(origin),

@@ -86,6 +86,22 @@ pub struct Checker {
     policies: [AdmissionPolicy; 3],
     /// A verdict's first page, per board, until its second arrives.
     pending: [Option<VerdictRequest>; 3],
+    /// The robot revision whose tables the check lowered (`--revision`; the texts name it).
+    revision: String,
+}
+
+/// The robot revisions whose boards the check knows (`--revision`): a 1-1 robot's boards are the models
+/// folder's timing files, a 1-2 robot's their namesakes in `models/rev-1-2/` (docs/boards.md).
+pub const REVISIONS: [&str; 2] = ["1-1", "1-2"];
+
+/// The robot revision the check uses: `revision` (`--revision`), else `AMIRO_REVISION` where it names one of
+/// [`REVISIONS`], else 1-1 (the models folder's files).
+fn revision_or_default(revision: Option<&str>) -> String {
+    let env = std::env::var(scenario::REVISION_ENV).ok();
+    revision
+        .or(env.as_deref().filter(|r| REVISIONS.contains(r)))
+        .unwrap_or(REVISIONS[0])
+        .to_string()
 }
 
 /// Where the apps and timing files are: `$AMIRO_ROOT`, else the repository `amiro` was built in.
@@ -109,16 +125,25 @@ fn sender_of(stream: &Stream) -> Option<(u8, u8)> {
 }
 
 impl Checker {
-    /// The table lowered from the apps and timing files (an error names what is missing).
-    pub fn load() -> Result<Checker> {
+    /// The table of a robot of `revision` (`--revision`; see [`revision_or_default`]) lowered from the apps
+    /// and timing files, as the boards' build scripts lower it (an error names what is missing).
+    pub fn load(revision: Option<&str>) -> Result<Checker> {
         let root = root();
-        let robot = admission_host::lower_robot(&root).map_err(|e| {
+        let revision = revision_or_default(revision);
+        if !REVISIONS.contains(&revision.as_str()) {
+            return Err(anyhow!(
+                "unknown robot revision {revision:?} (known: {})",
+                REVISIONS.join(", ")
+            ));
+        }
+        let robot = admission_host::lower_robot_for(&root, Some(&revision)).map_err(|e| {
             anyhow!(
                 "the admission check needs the timing files under {}: {e}",
                 root.display()
             )
         })?;
         Ok(Checker {
+            revision,
             robot,
             running: Vec::new(),
             observed: Vec::new(),
@@ -264,7 +289,8 @@ impl Checker {
         let mut text = match sensor.mode {
             SensorMode::Publish(period) => {
                 let mut text = format!(
-                    "{board} {decided} \"publish {topic} every {period} at {level}\": {}",
+                    "{board} on a {} robot {decided} \"publish {topic} every {period} at {level}\": {}",
+                    self.revision,
                     self.reason(&refusal, &request)
                 );
                 text.push_str(&self.suggestion_text(
@@ -276,7 +302,8 @@ impl Checker {
             }
             _ => {
                 let mut text = format!(
-                    "{board} {decided} \"once {topic} at {level}\" (a sample every {}): {}",
+                    "{board} on a {} robot {decided} \"once {topic} at {level}\" (a sample every {}): {}",
+                    self.revision,
                     micros(ONE_SHOT_PERIOD),
                     self.reason(&refusal, &request)
                 );
@@ -570,6 +597,8 @@ fn board_name(folder: &str) -> String {
 /// completes, so watching a bus starts at once.
 #[derive(Default)]
 pub struct Lazy {
+    /// `--revision` (see [`Checker::load`]).
+    revision: Option<String>,
     history: std::collections::VecDeque<LoggedFrame>,
     checker: Option<Checker>,
     unavailable: bool,
@@ -578,6 +607,14 @@ pub struct Lazy {
 impl Lazy {
     /// Frames kept before the first verdict.
     pub const HISTORY: usize = 50_000;
+
+    /// A check of a robot of `revision` (`--revision`; see [`Checker::load`]), lowered at the first verdict.
+    pub fn new(revision: Option<&str>) -> Self {
+        Self {
+            revision: revision.map(str::to_string),
+            ..Self::default()
+        }
+    }
 
     /// A frame heard: the verdict in one sentence when it completes one (see [`Checker::heard`]).
     pub fn heard(&mut self, logged: &LoggedFrame) -> Option<String> {
@@ -604,7 +641,7 @@ impl Lazy {
         if !completes_a_verdict {
             return None;
         }
-        let Ok(mut checker) = Checker::load() else {
+        let Ok(mut checker) = Checker::load(self.revision.as_deref()) else {
             self.unavailable = true;
             self.history.clear();
             return None;
@@ -658,10 +695,13 @@ mod tests {
 
     #[test]
     fn the_starvation_request_is_named_with_what_would_pass() {
-        let mut checker = Checker::load().expect("the repository's timing files");
+        let mut checker = Checker::load(None).expect("the repository's timing files");
         // Issue 11: accelerometer every 1 µs at urgent.
         let warning = checker.check(&message("009#01010002")).expect("refused");
-        assert!(warning.contains("DiWheelDrive would refuse"), "{warning}");
+        assert!(
+            warning.contains("DiWheelDrive on a 1-1 robot would refuse"),
+            "{warning}"
+        );
         assert!(
             warning.contains("At urgent it would accept every"),
             "{warning}"
@@ -679,14 +719,55 @@ mod tests {
     }
 
     #[test]
+    fn the_check_uses_the_named_revisions_tables() {
+        // The two robots' tables no longer dominate one another (DiWheelDrive 1-1's rows are the machine code's,
+        // 1-2's BNO055 budgets stated; docs/boards.md): some request on a DiWheelDrive topic is decided one way on
+        // a 1-1 robot and the other way on a 1-2 robot, so the check must know which robot it speaks for.
+        let decided_on = |revision: &str| {
+            let checker = Checker::load(Some(revision)).expect("the repository's timing files");
+            let mut decisions = Vec::new();
+            for topic in [Topic::MagnetometerX, Topic::Gyroscope, Topic::Odometry] {
+                for priority in Priority::ALL {
+                    for ms in 1..=10 {
+                        let Some(request) =
+                            checker.stream(topic, priority, Time::from_us(ms * 1000))
+                        else {
+                            continue;
+                        };
+                        decisions.push(checker.decide(&request, false).refusal.is_none());
+                    }
+                }
+            }
+            decisions
+        };
+        let (one_one, one_two) = (decided_on("1-1"), decided_on("1-2"));
+        assert_eq!(one_one.len(), one_two.len());
+        assert!(!one_one.is_empty());
+        assert_ne!(one_one, one_two);
+        // The texts name the robot.
+        let mut checker = Checker::load(Some("1-2")).expect("the repository's timing files");
+        let warning = checker.check(&message("009#01010002")).expect("refused");
+        assert!(
+            warning.contains("DiWheelDrive on a 1-2 robot would refuse"),
+            "{warning}"
+        );
+        // A revision the check does not know is a typed error, not the 1-1 tables.
+        let error = Checker::load(Some("1-3")).err().expect("refused");
+        assert!(
+            error.to_string().contains("unknown robot revision \"1-3\""),
+            "{error}"
+        );
+    }
+
+    #[test]
     fn what_runs_is_learned_from_commands_and_data_heard() {
-        let mut checker = Checker::load().expect("the repository's timing files");
+        let mut checker = Checker::load(None).expect("the repository's timing files");
         // Magnetometer-x every 7 ms heard as a command: the gyroscope every 2 ms is then refused.
         assert_eq!(checker.heard(&at(0, "205#01581B02")), None);
         assert!(checker.check(&message("208#01D00702")).is_some());
 
         // Without the command: magnetometer-x data at medium every 7 ms teaches the same.
-        let mut checker = Checker::load().expect("the repository's timing files");
+        let mut checker = Checker::load(None).expect("the repository's timing files");
         assert_eq!(checker.check(&message("208#01D00702")), None, "idle robot");
         checker.heard(&at(0, "208#00"));
         for k in 0..10 {
@@ -707,7 +788,7 @@ mod tests {
 
     #[test]
     fn a_policy_heard_decides_whether_a_refused_request_runs() {
-        let mut checker = Checker::load().expect("the repository's timing files");
+        let mut checker = Checker::load(None).expect("the repository's timing files");
         checker.heard(&at(0, "21A#0301")); // DiWheelDrive: accept-and-warn
                                            // The two-frame attack: below the hard floor, refused whatever the policy.
         let refusal = checker.check(&message("009#01010002")).expect("refused");
@@ -731,7 +812,7 @@ mod tests {
 
     #[test]
     fn a_verdict_heard_is_one_sentence_with_the_task_named_and_a_search() {
-        let mut checker = Checker::load().expect("the repository's timing files");
+        let mut checker = Checker::load(None).expect("the repository's timing files");
         let verdict = AdmissionVerdict {
             board: Board::DiWheelDrive,
             topic: Topic::Accelerometer,

@@ -384,6 +384,10 @@ pub struct SendArgs {
     /// Learn what the robot runs from a log of its bus (candump -l or any form `decode` reads), before listening
     #[arg(long, global = true, value_name = "FILE")]
     pub heard: Option<PathBuf>,
+
+    /// The robot's revision, whose boards' tables the admission check uses [default: AMIRO_REVISION, else 1-1]
+    #[arg(long, global = true, value_name = "REVISION", value_parser = crate::admission::REVISIONS)]
+    pub revision: Option<String>,
 }
 
 /// `amiro monitor`.
@@ -392,6 +396,11 @@ pub struct MonitorArgs {
     /// The bus: socketcan:IFACE, slcan:DEVICE or slcan:DEVICE@BAUD or file:PATH
     #[arg(long, env = "AMIRO_BUS", value_name = "BUS")]
     pub bus: String,
+
+    /// The robot's revision, whose boards' tables explain the admission verdicts heard [default: AMIRO_REVISION,
+    /// else 1-1]
+    #[arg(long, value_name = "REVISION", value_parser = crate::admission::REVISIONS)]
+    pub revision: Option<String>,
 
     /// Print one JSON object per line instead of English
     #[arg(long)]

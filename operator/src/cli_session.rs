@@ -54,6 +54,10 @@ pub struct ConsoleArgs {
     /// With --headless: keep watching this long after the input ended, e.g. 500ms
     #[arg(long, value_name = "DURATION", default_value = "0s")]
     pub linger: String,
+
+    /// The robot's revision, whose boards' tables the admission check uses [default: AMIRO_REVISION, else 1-1]
+    #[arg(long, value_name = "REVISION", value_parser = crate::admission::REVISIONS)]
+    pub revision: Option<String>,
 }
 
 pub const DRIVE_ABOUT: &str = "\

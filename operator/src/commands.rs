@@ -169,7 +169,7 @@ pub fn send(args: &SendArgs) -> Result<ExitCode> {
     });
     let mut checker = None;
     if requests {
-        match crate::admission::Checker::load() {
+        match crate::admission::Checker::load(args.revision.as_deref()) {
             Ok(mut loaded) => {
                 if let Some(path) = &args.heard {
                     learn_from_log(&mut loaded, path)?;

@@ -157,7 +157,7 @@ fn watch(
     let mut out = io::stdout().lock();
     // In English, an admission verdict's two pages are followed by the verdict in one sentence, with what would
     // be accepted as far as the frames heard tell (docs/operator.md).
-    let mut admission = (!view.json).then(crate::admission::Lazy::default);
+    let mut admission = (!view.json).then(|| crate::admission::Lazy::new(args.revision.as_deref()));
     let give_up = args.timeout.map(|timeout| Instant::now() + timeout);
     while args.count.is_none_or(|count| statistics.frames() < count) {
         let left = give_up.map(|give_up| give_up.saturating_duration_since(Instant::now()));

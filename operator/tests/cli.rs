@@ -732,13 +732,32 @@ fn send_warns_from_what_a_log_of_the_bus_shows_runs() {
     ]);
     assert!(ok, "{stderr}");
     assert!(
-        stderr.contains("warning: 208#01D00702: DiWheelDrive would refuse"),
+        stderr.contains("warning: 208#01D00702: DiWheelDrive on a 1-1 robot would refuse"),
         "{stderr}"
     );
     assert!(
         stderr.contains("magnetometer-x at medium every ~7000 µs"),
         "{stderr}"
     );
+}
+
+#[test]
+fn send_names_the_robot_whose_tables_it_checks_and_refuses_an_unknown_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let bus = format!("file:{}", dir.path().join("sent.log").display());
+    // Accelerometer every 1 µs at urgent: refused on either robot, and the warning says which robot it checked.
+    let (ok, _, stderr) = run(&["send", "009#01010002", "--bus", &bus, "--revision", "1-2"]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("warning: 009#01010002: DiWheelDrive on a 1-2 robot would refuse"),
+        "{stderr}"
+    );
+    // A revision the check does not know: nothing is sent.
+    let (ok, _, stderr) = run(&["send", "009#01010002", "--bus", &bus, "--revision", "1-3"]);
+    assert!(!ok);
+    assert!(stderr.contains("1-3") && stderr.contains("1-2"), "{stderr}");
+    let sent = std::fs::read_to_string(dir.path().join("sent.log")).unwrap_or_default();
+    assert_eq!(sent.lines().count(), 1, "{sent}");
 }
 
 #[test]

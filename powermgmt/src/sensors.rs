@@ -363,7 +363,7 @@ pub fn power_status(
 pub mod scripted;
 
 /// What PowerManagement samples for a topic with `scripted-i2c`: the ring takes each bus's
-/// latest reading, its owner task's (`scripted::RingOwner`), under each bus's lock in turn, no
+/// latest reading, its owner task's (`scripted::serve_owner`), under each bus's lock in turn, no
 /// script; power status takes the gauges' latest reads and the charge lines ([`power_status`]).
 /// Every other topic has no samples here.
 #[cfg(feature = "scripted-i2c")]

@@ -248,9 +248,19 @@ fn overhead_times(o: &crate::model::Overheads) -> OverheadTimes {
 /// the bus at [`crate::can::DEFAULT_BITRATE`] under the exact frame cost — what a board's build script
 /// generates, and what the host tools (the operator's check, the scenarios, the examples) compare with.
 pub fn lower_robot(root: &Path) -> Result<OwnedRobot, BuildError> {
+    lower_robot_from(root, &scenario::timing_files(root))
+}
+
+/// [`lower_robot`] for a robot of board revision `revision` (its timing files: [`scenario::timing_files_for`]),
+/// whatever `AMIRO_REVISION` says.
+pub fn lower_robot_for(root: &Path, revision: Option<&str>) -> Result<OwnedRobot, BuildError> {
+    lower_robot_from(root, &scenario::timing_files_for(root, revision))
+}
+
+fn lower_robot_from(root: &Path, timing_paths: &[PathBuf]) -> Result<OwnedRobot, BuildError> {
     lower(
         root,
-        &scenario::timing_files(root),
+        timing_paths,
         crate::can::DEFAULT_BITRATE,
         FrameCostSpec::Exact,
     )

@@ -3,7 +3,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::rc::Rc;
 
-use super::bounds::{BoundsFile, JOB_PASSES};
+use super::bounds::{BoundsFile, TransactionCap, JOB_PASSES};
 use super::cfg::{self, Call, Cfg};
 use super::chip::Chip;
 use super::counted;
@@ -303,10 +303,79 @@ impl<'a> Analysis<'a> {
         self.open.push(at);
         let outcome = self.work_out(f, args, site.as_ref(), context);
         self.open.pop();
-        let outcome = outcome?;
+        let outcome = match (outcome?, self.bounds.transaction(&f.name)) {
+            (Ok(s), Some(cap)) => self.capped(f, args, site.as_ref(), context, s, cap)?,
+            (outcome, _) => outcome,
+        };
         self.known
             .insert((at, args, site, *context), outcome.clone());
         Ok(outcome)
+    }
+
+    /// `summary` of a call of `f`, a bus transaction's function with a transaction cap ([`TransactionCap`]):
+    /// its time the smaller of `summary`'s and the bound with the waits the cap holds at nothing plus
+    /// the cap. Sound on every path p: the time of p is its cycles and other waits, `z(p)`, plus
+    /// its capped waits, at most their stated sum `w(p)` and at most the cap `c`, so at most
+    /// min(z(p) + w(p), z(p) + c) ≤ min(summary, max z + c). The instruction count keeps `summary`'s
+    /// (the QEMU runs are held to it, and a simulated bus's flags need not keep to the wire's time).
+    /// A call whose length the cap needs and does not know keeps `summary`.
+    fn capped(
+        &mut self,
+        f: &'a Function,
+        args: Args,
+        site: Option<&Site>,
+        context: &Context,
+        mut summary: Summary,
+        cap: &TransactionCap,
+    ) -> Result<Result<Summary, String>, Error> {
+        let Some(cap_ns) = cap.cap_ns(&args) else {
+            return Ok(Ok(summary));
+        };
+        let bounds = self.bounds.without_capped_waits(cap);
+        let mut without = Analysis::new(self.image, self.chip, &bounds);
+        without.excluded = self.excluded.clone();
+        without.contexts = self.contexts;
+        without.open = self.open.clone();
+        let zero = match without.summary_with(f.start, args, site.cloned(), context)? {
+            Ok(z) => z,
+            // Declined without the waits, as it was not with them: keep the bound it has.
+            Err(_) => return Ok(Ok(summary)),
+        };
+        let chip = self.chip;
+        let capped = Cost {
+            cycles: zero.time.cycles,
+            instructions: zero.time.instructions + chip.ns_to_cycles(cap_ns),
+            wait_ns: zero.time.wait_ns + cap_ns,
+        };
+        let applies = time_key(chip)(capped) < time_key(chip)(summary.time);
+        let bytes = cap
+            .register
+            .and_then(|r| args[usize::from(r)])
+            .map(|n| format!(", {n} bytes at the call (r{})", cap.register.unwrap_or(0)))
+            .unwrap_or_default();
+        summary.loops.push(LoopInfo {
+            function: f.name.clone(),
+            file: None,
+            line: None,
+            bound: 1,
+            source: format!(
+                "transaction cap: its flag waits at most {} µs in sum{bytes}; {} ({})",
+                cap_ns as f64 / 1000.0,
+                if applies {
+                    format!(
+                        "charged in place of their {} µs on the longest path",
+                        (summary.time.wait_ns.saturating_sub(zero.time.wait_ns)) as f64 / 1000.0
+                    )
+                } else {
+                    "their sum on the longest path is within it".to_string()
+                },
+                cap.reason
+            ),
+        });
+        if applies {
+            summary.time = capped;
+        }
+        Ok(Ok(summary))
     }
 
     fn work_out(
@@ -722,8 +791,43 @@ impl<'a> Analysis<'a> {
                     .call_summary(target, &f.name, insns, &graph, index, &args, site, &values)?
                 {
                     Ok(s) => {
-                        *time_ref = time_ref.plus(s.time);
-                        *count_ref = count_ref.plus(s.count);
+                        let callee = image
+                            .function_at(target)
+                            .filter(|c| c.start == target)
+                            .map(|c| c.name.clone());
+                        match callee
+                            .as_deref()
+                            .and_then(|name| self.bounds.call_total(name))
+                        {
+                            // A function called at most `calls` times per job: charged by the job's
+                            // bound, that many times its longest call, not at each call.
+                            Some(stated) => {
+                                let name = stated.function.clone();
+                                loops_info.push(LoopInfo {
+                                    function: name.clone(),
+                                    file: None,
+                                    line: None,
+                                    bound: stated.calls,
+                                    source: format!(
+                                        "bounds file, calls in total per job: {}",
+                                        stated.reason
+                                    ),
+                                });
+                                let mine = Totals::from([(
+                                    (name, None, None),
+                                    Total {
+                                        passes: stated.calls,
+                                        time: s.time,
+                                        count: s.count,
+                                    },
+                                )]);
+                                merge_totals(&mut totals, &mine, chip);
+                            }
+                            None => {
+                                *time_ref = time_ref.plus(s.time);
+                                *count_ref = count_ref.plus(s.count);
+                            }
+                        }
                         loops_info.extend(s.loops);
                         merge_totals(&mut totals, &s.totals, chip);
                     }

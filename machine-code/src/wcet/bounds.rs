@@ -25,6 +25,9 @@
 //!                "reason": "every pass back is one of the job's at most 500 fixed-point iterations" }],
 //!   "per_activation": [{ "task": "can_rx", "function": "…", "file": "src/bxcan.rs", "line": 125,
 //!                        "passes": 2, "reason": "a job that drains k frames costs at most k times one frame's" }],
+//!   "transactions": [{ "function": "…::Master::read_register", "register": 3, "fixed_us": 126.0,
+//!                      "per_byte_us": 25.2, "waits": [{ "function": "…::Master::wait", "file": "src/i2c.rs",
+//!                      "line": 109 }], "reason": "the flags of one transfer wait in sum at most its wire time" }],
 //!   "per_frame": [{ "task": "can_tx", "function": "…", "file": "src/tx_queue.rs", "line": 372,
 //!                   "completion": "…::collect_completions::{{closure}}", "completions": 3,
 //!                   "requeue": "…::TxQueue<_>::place", "reason": "a job costs at most F + q·P + s·S + a·(S + R)" }]
@@ -67,6 +70,104 @@ pub struct WaitBound {
     pub line: u32,
     pub wait_us: f64,
     pub source: String,
+}
+
+/// A function a job calls at most `calls` times in all, wherever it calls it (the bus clear, which only a
+/// failed transfer runs, after which the job makes no transfer): the job's bound charges it that many times
+/// its longest call, in place of each call on the longest path (as [`TotalBound`] charges a loop). The
+/// reason says why no job calls it more often.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CallTotal {
+    pub function: String,
+    pub calls: u64,
+    pub reason: String,
+}
+
+/// A stated wait's place (`function`, `file`, `line`, as [`WaitBound`] keys it), named by a
+/// [`TransactionCap`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WaitPlace {
+    pub function: String,
+    pub file: String,
+    pub line: u32,
+}
+
+impl WaitPlace {
+    /// Whether this names the wait `w`.
+    pub fn names(&self, w: &WaitBound) -> bool {
+        self.function == w.function && self.line == w.line && same_file(&w.file, &self.file)
+    }
+}
+
+/// A cap on the sum of the stated waits of one call of a bus transaction's function: the waits at
+/// `waits` (the polled flags of the transfer) that the call and its callees make wait at most
+/// `fixed_us` + `per_byte_us` × the call's length in argument `register` in sum (without
+/// `register`, `fixed_us`), because each such wait ends when the bus reaches a state of this
+/// transfer, the waits are disjoint spans of the CPU's time, and the bus moves on from one state to
+/// the next only within the transfer's wire time (plus what its devices stretch it by, stated in
+/// the figures). The function's bound is then its machine-code cycles plus the smaller of the sum
+/// of those waits on its longest path and the cap (the other waits charged as ever): the smaller of
+/// its bound with the waits at their stated figures, and its bound with them at nothing plus the
+/// cap (docs/analysis.md, "The bus transaction's cap"). The reason says why the waits are within
+/// the cap: which bus events it counts, at which bit time, and which devices may stretch.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransactionCap {
+    pub function: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub register: Option<u8>,
+    pub fixed_us: f64,
+    #[serde(default)]
+    pub per_byte_us: f64,
+    pub waits: Vec<WaitPlace>,
+    pub reason: String,
+}
+
+impl CallTotal {
+    /// Checks it has a count of at least 1 and a reason.
+    fn check(&self) -> Result<(), Error> {
+        if self.calls == 0 || self.reason.trim().is_empty() {
+            return Err(Error::Bounds(format!(
+                "the calls in total of {} need a count of at least 1 and a reason",
+                self.function
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl TransactionCap {
+    /// The cap in nanoseconds for a call whose argument registers are bounded by `args`: `None`
+    /// where it names a length register the call does not bound.
+    pub fn cap_ns(&self, args: &[Option<u32>; 4]) -> Option<u64> {
+        let bytes = match self.register {
+            Some(r) => f64::from(args[usize::from(r)]?),
+            None => 0.0,
+        };
+        Some(((self.fixed_us + self.per_byte_us * bytes) * 1000.0).ceil() as u64)
+    }
+
+    /// Checks the figures are finite and not negative, the register an argument's (0-3), and that
+    /// it names waits and has a reason.
+    fn check(&self, whose: &str) -> Result<(), Error> {
+        let figure = |x: f64| x.is_finite() && x >= 0.0;
+        if !figure(self.fixed_us)
+            || !figure(self.per_byte_us)
+            || self.register.is_some_and(|r| r > 3)
+            || (self.per_byte_us > 0.0 && self.register.is_none())
+            || self.waits.is_empty()
+            || self.reason.trim().is_empty()
+        {
+            return Err(Error::Bounds(format!(
+                "the transaction cap of {} ({whose}) needs figures ≥ 0 (a per-byte one with its length \
+                 register, 0-3), the waits it holds and a reason",
+                self.function
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// The functions a call through a register at a place may reach: named (`targets`), or found in
@@ -303,6 +404,12 @@ pub struct BoundsFile {
     /// Transmit interrupts charged by their parts, per job, frame and abort ([`PerFrame`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub per_frame: Vec<PerFrame>,
+    /// Caps on the sum of a bus transaction's flag waits per call ([`TransactionCap`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub transactions: Vec<TransactionCap>,
+    /// Functions called at most a stated number of times per job ([`CallTotal`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub calls: Vec<CallTotal>,
     /// The publisher's release loop and its topic groups: a bound per topic's job
     /// ([`PerTopic`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -341,6 +448,13 @@ pub struct TopicGroup {
     /// this group's sample holds, where the file states the most of any sample).
     #[serde(default)]
     pub loops: Vec<LoopBound>,
+    /// Transaction caps of this group's jobs, in place of the file's for the same function (the
+    /// wire time and the stretch of the devices its sample addresses).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub transactions: Vec<TransactionCap>,
+    /// Calls in total per job of this group's jobs, in place of the file's for the same function.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub calls: Vec<CallTotal>,
     /// Why only a job of these topics calls `functions` (the sampler's dispatch), and the waits'.
     pub reason: String,
 }
@@ -369,6 +483,12 @@ impl PerTopic {
                         g.name, l.file, l.line, l.function
                     )));
                 }
+            }
+            for c in &g.transactions {
+                c.check(&format!("topic group {}", g.name))?;
+            }
+            for c in &g.calls {
+                c.check()?;
             }
             for w in &g.waits {
                 if !(w.wait_us.is_finite() && w.wait_us > 0.0) || w.source.trim().is_empty() {
@@ -517,6 +637,12 @@ impl BoundsFile {
                 }
             }
         }
+        for c in &file.transactions {
+            c.check("the file's")?;
+        }
+        for c in &file.calls {
+            c.check()?;
+        }
         if let Some(t) = &file.topics {
             t.check()?;
         }
@@ -552,6 +678,29 @@ impl BoundsFile {
         self.waits
             .iter()
             .find(|w| w.function == function && w.line == line && same_file(file, &w.file))
+    }
+
+    /// The stated calls in total per job of `function`, if any.
+    pub fn call_total(&self, function: &str) -> Option<&CallTotal> {
+        self.calls.iter().find(|c| c.function == function)
+    }
+
+    /// The transaction cap of `function`, if it has one.
+    pub fn transaction(&self, function: &str) -> Option<&TransactionCap> {
+        self.transactions.iter().find(|c| c.function == function)
+    }
+
+    /// This file with the waits `cap` holds at nothing, and no transaction cap: the bound of a capped
+    /// call's function without the waits the cap stands for.
+    pub fn without_capped_waits(&self, cap: &TransactionCap) -> BoundsFile {
+        let mut file = self.clone();
+        for w in &mut file.waits {
+            if cap.waits.iter().any(|p| p.names(w)) {
+                w.wait_us = 0.0;
+            }
+        }
+        file.transactions.clear();
+        file
     }
 
     /// The async task's loop at `file:line` in `function`, when stated as one pass per job.
@@ -669,6 +818,8 @@ impl BoundsFile {
         out.per_element.extend(extra.per_element.iter().cloned());
         out.jobs.extend(extra.jobs.iter().cloned());
         out.totals.extend(extra.totals.iter().cloned());
+        out.transactions.extend(extra.transactions.iter().cloned());
+        out.calls.extend(extra.calls.iter().cloned());
         Ok(out)
     }
 
@@ -774,6 +925,36 @@ impl BoundsFile {
             for (kind, name) in [("completion", &f.completion), ("requeue", &f.requeue)] {
                 if functions(name).is_empty() {
                     missing.push(format!("per-frame {kind} function {name}"));
+                }
+            }
+        }
+        let caps = self
+            .transactions
+            .iter()
+            .map(|c| ("transaction cap", c))
+            .chain(self.topics.iter().flat_map(|t| &t.groups).flat_map(|g| {
+                g.transactions
+                    .iter()
+                    .map(|c| ("topic group transaction cap", c))
+            }));
+        let calls = self.calls.iter().map(|c| ("calls in total", c)).chain(
+            self.topics
+                .iter()
+                .flat_map(|t| &t.groups)
+                .flat_map(|g| g.calls.iter().map(|c| ("topic group calls in total", c))),
+        );
+        for (kind, c) in calls {
+            if functions(&c.function).is_empty() {
+                missing.push(format!("{kind} function {}", c.function));
+            }
+        }
+        for (kind, c) in caps {
+            if functions(&c.function).is_empty() {
+                missing.push(format!("{kind} function {}", c.function));
+            }
+            for w in &c.waits {
+                if !has_line(&w.function, &w.file, w.line) {
+                    missing.push(format!("{kind} wait {} {}:{}", w.function, w.file, w.line));
                 }
             }
         }

@@ -574,7 +574,20 @@ impl<'a> Finder<'a> {
             .analysis
             .bound_graph(f, sub, NO_ARGS, None, &super::values::NO_CONTEXT)?
         {
-            Ok(Summary { time, count, .. }) => {
+            Ok(Summary {
+                time,
+                count,
+                totals,
+                ..
+            }) => {
+                // The loops and calls stated in total per job, each charged its count of its longest
+                // iteration or call once for the section, as for a job's bound (`to_bound`).
+                let (time, count) = totals.values().fold((time, count), |(t, c), total| {
+                    (
+                        t.plus(total.time.times(total.passes)),
+                        c.plus(total.count.times(total.passes)),
+                    )
+                });
                 section.cycles = time.cycles;
                 section.instructions = count.instructions;
                 section.bus_wait_ns = time.wait_ns;

@@ -590,4 +590,6 @@ mod tests_spills;
 #[cfg(test)]
 mod tests_topics;
 #[cfg(test)]
+mod tests_transactions;
+#[cfg(test)]
 mod tests_values;

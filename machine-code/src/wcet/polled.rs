@@ -16,7 +16,12 @@
 //! (no debug information, a poll reached some other way), or with one that only another task's
 //! code leads to (an attribution that does not tell the polls apart), or where a block the part
 //! keeps on the way on from this task's own code could return only through another task's poll,
-//! the task is bounded by the whole dispatcher, as before.
+//! the task is bounded by the whole dispatcher, as before. That way on stops at another task's
+//! executor code: a block named no task's body whose DWARF frames are only instances of RTIC's
+//! `AsyncTaskExecutor<F>::poll` (told apart by their mangled names) that inline other tasks'
+//! bodies — that task's pending check and the code ahead of its poll, which a job of this task
+//! whose poll ends in that check runs only on its way to the other task's poll — unless this
+//! task's own code flows into it directly.
 use std::collections::BTreeSet;
 
 use super::cfg::{Call, Cfg};
@@ -29,6 +34,12 @@ pub fn is_task_body(name: &str, task: &str) -> bool {
     name.strip_suffix("::{{closure}}")
         .and_then(|p| p.strip_suffix(task))
         .is_some_and(|p| p.ends_with("::app::"))
+}
+
+/// Whether `name` (demangled, without hash) is RTIC 2's executor's poll of one task's future,
+/// `rtic::export::executor::AsyncTaskExecutor<F>::poll` (its instances differ by their hash).
+fn is_executor_poll(name: &str) -> bool {
+    name == "rtic::export::executor::AsyncTaskExecutor<F>::poll"
 }
 
 /// Whose polls a block runs: this task's, another task's.
@@ -57,15 +68,42 @@ pub fn others_blocks(
             into.other = true;
         }
     };
+    // Each block's executor instances (`AsyncTaskExecutor<F>::poll` as DWARF names it, by its
+    // mangled name: one instance per task's future), and which tasks' bodies each instance inlines.
+    let mut instances: Vec<BTreeSet<String>> = vec![BTreeSet::new(); graph.blocks.len()];
+    let mut polls_of: std::collections::BTreeMap<String, BTreeSet<bool>> = Default::default();
     let owners: Vec<Owners> = graph
         .blocks
         .iter()
-        .map(|block| {
+        .enumerate()
+        .map(|(b, block)| {
             let mut owners = Owners::default();
             for insn in &insns[block.first..=block.last] {
-                for name in image.inlined_at(insn.addr) {
-                    classify(&name, &mut owners);
+                let raw = image.inlined_raw_at(insn.addr);
+                let names: Vec<String> = raw
+                    .iter()
+                    .map(|r| format!("{:#}", rustc_demangle::demangle(r)))
+                    .collect();
+                let executors = raw
+                    .iter()
+                    .zip(&names)
+                    .filter(|(_, n)| is_executor_poll(n))
+                    .map(|(r, _)| r.clone());
+                let mut here = Owners::default();
+                for name in &names {
+                    classify(name, &mut here);
                 }
+                for e in executors {
+                    if here.own {
+                        polls_of.entry(e.clone()).or_default().insert(true);
+                    }
+                    if here.other {
+                        polls_of.entry(e.clone()).or_default().insert(false);
+                    }
+                    instances[b].insert(e);
+                }
+                owners.own |= here.own;
+                owners.other |= here.other;
             }
             if let Some(Call::Direct { target, .. }) = block.call {
                 classify(&image.name(target), &mut owners);
@@ -108,7 +146,34 @@ pub fn others_blocks(
     // on that task's way, charged in its part: a job of this task that runs it runs that task's
     // poll before its own, and this task's part takes the pending check's other way past them.
     let own: BTreeSet<usize> = after.iter().copied().filter(|&b| owners[b].own).collect();
-    let on_from_own = graph.reached_from_avoiding(&own, &dropped);
+    // Another task's executor code — a block named no task's body, inlined only from executor
+    // instances that poll other tasks' bodies (its pending check's pending way, the code ahead of
+    // its poll) — is that task's way, not this task's: a run of this task's job that goes on
+    // through it is dispatching the other task, whose part holds it. So the way on from this
+    // task's code is followed up to such code, but for a block this task's own code flows into
+    // directly (code merged with this task's tail stays this task's).
+    let others_executor: BTreeSet<usize> = (0..graph.blocks.len())
+        .filter(|&b| {
+            let o = owners[b];
+            !o.own
+                && !o.other
+                && !instances[b].is_empty()
+                && instances[b].iter().all(|e| {
+                    polls_of
+                        .get(e)
+                        .is_some_and(|t| t == &BTreeSet::from([false]))
+                })
+        })
+        .filter(|b| {
+            !graph
+                .blocks
+                .iter()
+                .enumerate()
+                .any(|(p, block)| owners[p].own && block.succs.iter().any(|e| e.to == *b))
+        })
+        .collect();
+    let past: BTreeSet<usize> = dropped.union(&others_executor).copied().collect();
+    let on_from_own = graph.reached_from_avoiding(&own, &past);
     let returned = graph.returning_avoiding(&BTreeSet::new());
     let returns = graph.returning_avoiding(&dropped);
     let still_returning = on_from_own

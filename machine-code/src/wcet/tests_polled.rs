@@ -246,3 +246,109 @@ fn executor_code_that_goes_on_only_into_another_tasks_poll_stays_in_that_tasks_p
     // (23 cycles) is two jobs, charged 22 + 18.
     assert_eq!(found[2], ("slow".into(), 18, 8));
 }
+
+/// `AsyncTaskExecutor<F>::poll`'s instance for one task, mangled as rustc names it: the hash tells
+/// the instances apart.
+const EXECUTOR_FAST: &str =
+    "_ZN4rtic6export8executor26AsyncTaskExecutor$LT$F$GT$4poll17h0000000000000001E";
+const EXECUTOR_SLOW: &str =
+    "_ZN4rtic6export8executor26AsyncTaskExecutor$LT$F$GT$4poll17h0000000000000002E";
+
+#[test]
+fn another_tasks_executor_code_after_this_tasks_poll_stays_in_that_tasks_part() {
+    // fast is polled first; its poll ends in slow's pending check, whose pending way runs the
+    // executor's code ahead of slow's poll (a move and a branch, named no task's body) and then
+    // slow's poll. That code goes on only through slow's poll, and fast's code leads to it (through
+    // slow's check): the rule for code named no task's cannot tell it from code LLVM shares between
+    // two polls, so without the executor's instances fast is bounded by the whole dispatcher. DWARF
+    // names the check and that code as inlined from slow's instance of the executor's poll (the
+    // instance that inlines slow's body, not fast's): slow's way, in slow's part.
+    let code = [
+        0xb510, // 0x00 push {r4, lr}: 1 + 2
+        0xb120, // 0x02 cbz r0, 0x0e: 1, taken + P (fast not pending)
+        0x2201, // 0x04 movs r2, #1: fast's poll, 1 each
+        0x2202, // 0x06 movs r2, #2
+        0x2203, // 0x08 movs r2, #3
+        0x2204, // 0x0a movs r2, #4
+        0x2205, // 0x0c movs r2, #5
+        0xb121, // 0x0e cbz r1, 0x1a: 1, taken + P (slow not pending): slow's executor
+        0x2300, // 0x10 movs r3, #0: 1 (slow's executor, ahead of its poll)
+        0xe7ff, // 0x12 b 0x14: 1 + P (into slow's poll)
+        0x2301, // 0x14 movs r3, #1: slow's poll, 1 each
+        0x2302, // 0x16 movs r3, #2
+        0x2303, // 0x18 movs r3, #3
+        0xbd10, // 0x1a pop {r4, pc}: 1 + 2 + P
+        0xbf00, // 0x1c
+        0xbf00, // 0x1e
+    ];
+    let bodies = [
+        ("board::app::fast::{{closure}}", 0x04, 0x0e),
+        ("board::app::slow::{{closure}}", 0x14, 0x1a),
+    ];
+    let found = rows(&build(&code, &bodies));
+    // The whole dispatcher, both pending: push 3 + cbz 1, fast 5, cbz 1, move 1 + b 4, slow 3,
+    // pop 6 = 24 cycles; 2 + 5 + 1 + 2 + 3 + 1 = 14 instructions.
+    assert_eq!(found[0], ("dispatcher".into(), 24, 14));
+    assert_eq!(found[1], ("fast".into(), 24, 14));
+    let with_executors = [
+        (EXECUTOR_FAST, 0x02, 0x0e),
+        ("board::app::fast::{{closure}}", 0x04, 0x0e),
+        (EXECUTOR_SLOW, 0x0e, 0x1a),
+        ("board::app::slow::{{closure}}", 0x14, 0x1a),
+    ];
+    let img = build(&code, &with_executors);
+    assert_eq!(
+        img.inlined_at(0x06),
+        [
+            "board::app::fast::{{closure}}",
+            "rtic::export::executor::AsyncTaskExecutor<F>::poll",
+            "DISPATCH"
+        ]
+    );
+    let found = rows(&img);
+    assert_eq!(found[0], ("dispatcher".into(), 24, 14));
+    // fast's job: its poll, then slow's check taken past slow's executor code and poll (1 + P):
+    // 3 + 1 + 5 + 4 + 6 = 19 cycles; 2 + 5 + 1 + 1 = 9 instructions.
+    assert_eq!(found[1], ("fast".into(), 19, 9));
+    // slow's job: fast's check taken (1 + P), slow's check 1, its executor's move 1 and branch
+    // 1 + P, its poll 3, pop 6: 3 + 4 + 1 + 1 + 4 + 3 + 6 = 22 cycles; 2 + 1 + 2 + 3 + 1 = 9
+    // instructions.
+    assert_eq!(found[2], ("slow".into(), 22, 9));
+}
+
+#[test]
+fn code_of_another_tasks_executor_that_this_tasks_poll_flows_into_stays_checked() {
+    // As above, but fast's poll branches straight into slow's executor code ahead of slow's poll
+    // (`b 0x10` in place of fast's last move: code LLVM could have merged), which goes on only
+    // through slow's poll: fast's own code flows into it directly, so it is fast's way, and fast
+    // is bounded by the whole dispatcher: its longest path is that run, push 3 + cbz 1, four moves
+    // 4 + b 4, slow's executor move 1 + b 4, slow's poll 3, pop 6 = 26 cycles; 2 + 5 + 2 + 3 + 1 =
+    // 13 instructions.
+    let code = [
+        0xb510, // 0x00 push {r4, lr}
+        0xb120, // 0x02 cbz r0, 0x0e
+        0x2201, // 0x04 movs r2, #1: fast's poll
+        0x2202, // 0x06 movs r2, #2
+        0x2203, // 0x08 movs r2, #3
+        0x2204, // 0x0a movs r2, #4
+        0xe000, // 0x0c b 0x10: 1 + P (into slow's executor code)
+        0xb121, // 0x0e cbz r1, 0x1a
+        0x2300, // 0x10 movs r3, #0: slow's executor
+        0xe7ff, // 0x12 b 0x14
+        0x2301, // 0x14 movs r3, #1: slow's poll
+        0x2302, // 0x16 movs r3, #2
+        0x2303, // 0x18 movs r3, #3
+        0xbd10, // 0x1a pop {r4, pc}
+        0xbf00, // 0x1c
+        0xbf00, // 0x1e
+    ];
+    let with_executors = [
+        (EXECUTOR_FAST, 0x02, 0x0e),
+        ("board::app::fast::{{closure}}", 0x04, 0x0e),
+        (EXECUTOR_SLOW, 0x0e, 0x1a),
+        ("board::app::slow::{{closure}}", 0x14, 0x1a),
+    ];
+    let found = rows(&build(&code, &with_executors));
+    assert_eq!(found[0], ("dispatcher".into(), 26, 13));
+    assert_eq!(found[1], ("fast".into(), 26, 13));
+}

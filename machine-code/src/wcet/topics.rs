@@ -65,7 +65,8 @@ impl PerTopic {
 
 impl BoundsFile {
     /// This file as a job of `group`'s topics reads it: the release loop one pass in total per job,
-    /// the group's waits and loops in place of the file's at their places (the file's other
+    /// the group's waits and loops in place of the file's at their places, its transaction caps in
+    /// place of the file's of the same function (the file's other
     /// statements unchanged).
     pub fn for_topic_group(&self, per_topic: &PerTopic, group: &TopicGroup) -> BoundsFile {
         let mut file = self.clone();
@@ -95,6 +96,14 @@ impl BoundsFile {
                 !(x.function == w.function && x.line == w.line && same_file(&w.file, &x.file))
             });
             file.waits.push(w.clone());
+        }
+        for c in &group.transactions {
+            file.transactions.retain(|x| x.function != c.function);
+            file.transactions.push(c.clone());
+        }
+        for c in &group.calls {
+            file.calls.retain(|x| x.function != c.function);
+            file.calls.push(c.clone());
         }
         file
     }

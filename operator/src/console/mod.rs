@@ -48,7 +48,7 @@ pub fn run(args: &ConsoleArgs) -> Result<ExitCode> {
     };
     let mut console = Console::new(view, filter);
     // Publish requests are checked against what the console hears (docs/operator.md).
-    match crate::admission::Checker::load() {
+    match crate::admission::Checker::load(args.revision.as_deref()) {
         Ok(checker) => console = console.with_admission(checker),
         Err(error) => console.status = format!("publish requests are not checked: {error:#}"),
     }

@@ -609,7 +609,7 @@ mod tests {
     #[test]
     fn a_request_the_robot_would_refuse_is_warned_about_from_what_was_heard() {
         let mut console =
-            console().with_admission(Checker::load().expect("the repository's timing files"));
+            console().with_admission(Checker::load(None).expect("the repository's timing files"));
         // On an idle robot a gyroscope every 2 ms passes without a word (every 1 ms passes by 3.4 µs only on a 1-1 robot since
         // DiWheelDrive 1-1's publisher rows are the machine code's, 2026-12-06).
         let frames = type_line(
@@ -637,7 +637,9 @@ mod tests {
         );
         assert_eq!(texts(&frames), ["208#01D00702"], "sent all the same");
         assert!(
-            console.status.contains("DiWheelDrive would refuse"),
+            console
+                .status
+                .contains("DiWheelDrive on a 1-1 robot would refuse"),
             "{}",
             console.status
         );

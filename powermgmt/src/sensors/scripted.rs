@@ -1,5 +1,5 @@
 //! With `scripted-i2c`: PowerManagement's two buses sampled by script (docs/i2c.md,
-//! "PowerManagement with `scripted-i2c`"). Each bus has one owner task ([`RingOwner`], the app's
+//! "PowerManagement with `scripted-i2c`"). Each bus has one owner task ([`serve_owner`], the app's
 //! `ring_rear` and `ring_front`, every [`OWNER_PERIOD_US`]): its job reads the bus's ring sensors
 //! (a missing sensor's set-up first, at most one) and makes one transfer of the bus's gauge read,
 //! each a job of I2C scripts that the bus runs while the owner suspends on its client slot
@@ -12,8 +12,8 @@
 //! `StatusRead` a transfer a script after its 66 µs of bus-free time, `GaugeIdentity`), built from
 //! the drivers' register maps; the bus's policy is the blocking [`super::SensorBus`]'s: at most one
 //! missing sensor set up again per job and bus, each after [`RETRY_US`]; a sensor that does not
-//! answer yields no reading (no frame) and is counted; the log lines and the health report are
-//! made when the job ends, from what it changed.
+//! answer yields no reading (no frame) and is counted; the health report is made under the lock as
+//! the job takes its outcome, and the log lines are deferred after it ([`note`]).
 use amiro_firmware::i2c_engine::FLAG_ALLOWANCE_US;
 use amiro_firmware::scripted::{script_result, ScriptPort};
 use amiro_sensors::drivers::bq27500::{BatteryStatus, StatusRead};
@@ -29,6 +29,7 @@ use embedded_hal::delay::DelayNs;
 
 use super::{bus_name, RingSample, RingSlot, PER_BUS, RETRY_US};
 use crate::power::LatestRound;
+use amiro_sensors::drivers::ring::RING_SENSORS;
 
 /// The owner tasks' period, µs: the ring's fastest stated publication (the thesis demo's
 /// 62.5 ms). The ring's sample a publisher takes is at most this plus the owner's response old
@@ -73,7 +74,6 @@ pub const TIMEOUT_ALLOWANCE_US: u32 = (CLIENTS as u32 - 1) * (LONGEST_DEADLINE_U
 pub struct ScriptedBus {
     bus: RingBus,
     slots: [RingSlot; PER_BUS],
-    calibration: [ProximityCalibration; PER_BUS],
     gauge_faults: u32,
     /// The owner's latest ring reading by slot (mm; `None`: no reading in its latest job, or no
     /// job yet).
@@ -112,7 +112,6 @@ impl ScriptedBus {
         let mut this = Self {
             bus,
             slots,
-            calibration: [ProximityCalibration::DEFAULT; PER_BUS],
             gauge_faults: 0,
             latest: [None; PER_BUS],
             read_once: false,
@@ -130,7 +129,9 @@ impl ScriptedBus {
                         break;
                     }
                 }
-                this.end_set_up(k, 0, ready);
+                for noted in this.end_set_up(k, 0, ready).into_iter().flatten() {
+                    boot_note(noted);
+                }
             }
         }
         let mut identity = GaugeIdentity::new();
@@ -183,31 +184,21 @@ impl ScriptedBus {
         ))
     }
 
-    /// Slot `k`'s set-up ended (`ready`: it answers now), logged as the blocking path logs it.
-    fn end_set_up(&mut self, k: usize, now_us: u64, ready: bool) {
+    /// Slot `k`'s set-up ended (`ready`: it answers now): the lines the blocking path logs, for
+    /// the caller to log once the bus's lock is released ([`note`], [`boot_note`]).
+    fn end_set_up(&mut self, k: usize, now_us: u64, ready: bool) -> [Option<Noted>; 2] {
         let Some(slot) = self.slots.get_mut(k) else {
-            return;
+            return [None; 2];
         };
-        let mut index = [0u8; 10];
-        let index = amiro_firmware::telemetry::decimal(u32::from(slot.index), &mut index);
-        if !ready && now_us > 0 {
-            let mut missed = [0u8; 10];
-            amiro_firmware::log!(
-                "ring sensor ",
-                index,
-                " still missing (",
-                amiro_firmware::telemetry::decimal(slot.missed, &mut missed),
-                " samples without a frame)"
-            );
-        }
-        if ready != slot.ready {
-            amiro_firmware::log!(
-                "ring sensor ",
-                index,
-                if ready { " ready" } else { " missing" }
-            );
-        }
+        let still =
+            (!ready && now_us > 0).then_some(Noted(slot.index, Note::StillMissing, slot.missed));
+        let changed = (ready != slot.ready).then_some(Noted(
+            slot.index,
+            if ready { Note::Ready } else { Note::Missing },
+            0,
+        ));
         slot.ready = ready;
+        [still, changed]
     }
 
     /// The first missing sensor whose retry passed, its set-up begun: one a job.
@@ -235,33 +226,25 @@ impl ScriptedBus {
         (read, places)
     }
 
-    /// The read's counts as the bus's latest reading; every slot without one missed.
-    fn end_ring_read(&mut self, now_us: u64, read: &RingRead, places: [Option<usize>; PER_BUS]) {
-        let counts = read.counts().unwrap_or([None; RING_BUS_SENSORS]);
-        let mut read_at = [None; PER_BUS];
-        for (place, count) in places.into_iter().zip(counts) {
-            if let (Some(k), Some(count)) = (place, count) {
-                if let Some(slot) = read_at.get_mut(k) {
-                    *slot = Some(count);
-                }
-            }
-        }
-        for (k, count) in read_at.into_iter().enumerate() {
-            let cal = self
-                .calibration
-                .get(k)
-                .copied()
-                .unwrap_or(ProximityCalibration::DEFAULT);
-            let mm = count.map(|counts| cal.counts_to_mm(counts));
+    /// A ring read's millimetres ([`ring_mm`]) as the bus's latest reading; every slot without one
+    /// missed. The sensors that stopped answering, for the caller to log ([`note`]).
+    fn end_ring_read(
+        &mut self,
+        now_us: u64,
+        mm: [Option<u16>; PER_BUS],
+    ) -> [Option<Noted>; PER_BUS] {
+        let mut lost = [None; PER_BUS];
+        for ((k, mm), lost) in mm.into_iter().enumerate().zip(lost.iter_mut()) {
             if let Some(latest) = self.latest.get_mut(k) {
                 *latest = mm;
             }
             if mm.is_none() {
-                self.lost(k, now_us);
+                *lost = self.lost(k, now_us);
             }
         }
         self.read_once = true;
         self.report();
+        lost
     }
 
     /// The owner's latest reading into `sample` (by sensor index): the publishers' ring sample. A
@@ -292,19 +275,14 @@ impl ScriptedBus {
     /// Slot `k` gave no reading in a ring read: a sensor that answered until now is out of
     /// service (logged), its set-up retried after [`RETRY_US`]. Counted where a sample goes
     /// without its frame ([`Self::latest_into`]).
-    fn lost(&mut self, k: usize, now_us: u64) {
-        if let Some(slot) = self.slots.get_mut(k) {
-            if slot.ready {
-                slot.ready = false;
-                slot.last_try_us = now_us;
-                let mut index = [0u8; 10];
-                amiro_firmware::log!(
-                    "ring sensor ",
-                    amiro_firmware::telemetry::decimal(u32::from(slot.index), &mut index),
-                    " stopped answering"
-                );
-            }
+    fn lost(&mut self, k: usize, now_us: u64) -> Option<Noted> {
+        let slot = self.slots.get_mut(k)?;
+        if !slot.ready {
+            return None;
         }
+        slot.ready = false;
+        slot.last_try_us = now_us;
+        Some(Noted(slot.index, Note::Stopped, 0))
     }
 
     /// A gauge read's end: a failed one counted, and the bus's faults reported.
@@ -331,162 +309,142 @@ impl ScriptedBus {
     }
 }
 
-/// A missing sensor's set-up under way, one of its scripts a job ([`sample_ring`]): its slot, the
-/// set-up, and the scripts it has run.
+/// A missing sensor's set-up under way, one of its scripts a job ([`serve_owner`]): its slot,
+/// the set-up, and the scripts it has run.
 pub struct StepwiseSetUp {
     slot: usize,
     set_up: SensorSetUp,
     steps: usize,
 }
 
-/// One ring job on the bus behind `bus`, its scripts on `port`: one script of a missing sensor's
-/// set-up (the one under way in `set_up`, or the first missing sensor's whose [`RETRY_US`] passed,
-/// begun now), then the read of the sensors that answer into the bus's latest reading, each script
-/// with the bus's lock released. A set-up thus takes [`SET_UP_SCRIPTS`] jobs (six, 375 ms at
-/// [`OWNER_PERIOD_US`]), so that a job carries one set-up script at most (docs/i2c.md, "The owner
-/// tasks": six in one job put more than the period on the bus). Not inlined: the analysis tells the
-/// ring's job by the function.
-#[inline(never)]
-pub async fn sample_ring(
-    bus: &mut impl rtic::Mutex<T = ScriptedBus>,
-    port: &mut impl ScriptPort,
-    set_up: &mut Option<StepwiseSetUp>,
-    now_us: u64,
-) {
-    if set_up.is_none() {
-        *set_up = bus
-            .lock(|b| b.due_set_up(now_us))
-            .map(|(slot, set_up)| StepwiseSetUp {
-                slot,
-                set_up,
-                steps: 0,
-            });
-    }
-    let ended = match set_up.as_mut() {
-        Some(step) => {
-            step.steps += 1;
-            let outcome = match step.set_up.script() {
-                Ok(script) => {
-                    let result = script_result(port.run(script, 0).await);
-                    step.set_up.complete(&result).map(|done| done.is_ok())
-                }
-                Err(_) => Some(false),
-            };
-            // A set-up that has not ended within its scripts has failed.
-            match outcome {
-                None if step.steps >= SET_UP_SCRIPTS => Some((step.slot, false)),
-                None => None,
-                Some(ready) => Some((step.slot, ready)),
-            }
-        }
-        None => None,
-    };
-    if ended.is_some() {
-        *set_up = None;
-    }
-    let (mut read, places) = bus.lock(|b| {
-        if let Some((k, ready)) = ended {
-            b.end_set_up(k, now_us, ready);
-        }
-        b.ring_read()
-    });
-    for _ in 0..RingRead::MAX_SCRIPTS {
-        let script = match read.script() {
-            Some(Ok(script)) => script,
-            // A script the build refuses: the sensors still to read give no count this time.
-            Some(Err(_)) | None => break,
-        };
-        let result = script_result(port.run(script, 0).await);
-        read.complete(&result);
-    }
-    bus.lock(|b| b.end_ring_read(now_us, &read, places));
-}
-
-/// One transfer of the gauge's status read `read`, a script on `port` after the gauge's bus-free
-/// time: `None` while the read goes on; at its end `Some` of the status, or of `None` (counted)
-/// when the gauge did not answer. Not inlined, as [`sample_ring`].
-#[inline(never)]
-pub async fn gauge_transfer(
-    read: &mut StatusRead,
-    bus: &mut impl rtic::Mutex<T = ScriptedBus>,
-    port: &mut impl ScriptPort,
-) -> Option<Option<BatteryStatus>> {
-    let status = match read.next_transfer() {
-        Some(transfer) => {
-            let outcome = match gauge_script(transfer) {
-                Ok(script) => gauge_outcome(
-                    transfer,
-                    &script_result(port.run(script, GAUGE_SETTLE_US).await),
-                ),
-                Err(error) => Err(error),
-            };
-            read.complete(outcome)?.ok()
-        }
-        // A read past its end (a round restarts each read that ends): no status.
-        None => None,
-    };
-    Some(bus.lock(|b| b.end_gauge_read(status)))
-}
-
-/// A bus's owner task's state: its slot on the bus and its gauge's status read, kept across jobs.
-pub struct RingOwner<P> {
-    port: P,
-    read: StatusRead,
-    set_up: Option<StepwiseSetUp>,
-}
-
-impl<P: ScriptPort> RingOwner<P> {
-    /// An owner on its bus's slot `port`, its gauge read not begun.
-    pub fn new(port: P) -> Self {
-        Self {
-            port,
-            read: StatusRead::new(),
-            set_up: None,
-        }
-    }
-
-    /// One job at `now_us`: the bus's ring read ([`sample_ring`]: one script of a missing
-    /// sensor's set-up at most, then the read), then one transfer of its gauge's status read ([`gauge_transfer`]);
-    /// a gauge read that ends puts its status into `latest` and restarts. Whether one ended (the
-    /// caller checks the battery then); a read takes at most [`StatusRead::MAX_TRANSFERS`] jobs.
-    pub async fn job(
-        &mut self,
-        bus: &mut impl rtic::Mutex<T = ScriptedBus>,
-        latest: &mut impl rtic::Mutex<T = LatestRound>,
-        now_us: u64,
-    ) -> bool {
-        sample_ring(bus, &mut self.port, &mut self.set_up, now_us).await;
-        let Some(status) = gauge_transfer(&mut self.read, bus, &mut self.port).await else {
-            return false;
-        };
-        self.read.restart();
-        let rear = bus.lock(|b| b.is_rear());
-        latest.lock(|l| l.record(rear, status));
-        true
-    }
-}
-
-/// A bus's owner task's loop (the app's `ring_rear`, `ring_front`): a [`RingOwner::job`] every
+/// A bus's owner task's loop (the app's `ring_rear`, `ring_front`): a job every
 /// [`OWNER_PERIOD_US`] from the task's start, none while the robot shuts down; after a gauge read
 /// that ends, both gauges' latest statuses are checked against the charge lines read then, and a
 /// critically low battery calls `critically_low` (the app's shutdown). A job that ran past its
 /// next release skips it.
+///
+/// A job: one script of a missing sensor's set-up (the one under way, or the first missing
+/// sensor's whose [`RETRY_US`] passed, begun now), then the read of the sensors that answer into
+/// the bus's latest reading, then one transfer of the gauge's status read (a read that ends puts
+/// its status into `latest` and restarts; a read takes at most [`StatusRead::MAX_TRANSFERS`]
+/// jobs), each script with the bus's lock released. A set-up thus takes [`SET_UP_SCRIPTS`] jobs
+/// (six, 375 ms), so that a job carries one set-up script at most (docs/i2c.md, "The owner
+/// tasks": six in one job put more than the period on the bus).
+///
+/// **Its stretches** (docs/i2c.md, "Session 24 (continued)"): the job is written as short
+/// stretches, each ended by an await that returns pending on its first poll: after each script's
+/// result a [`yield_now`] (a script found ready at once, refused at its submission or ended while
+/// the owner was pre-empted, does not run the next stretch in the same poll), after the read's
+/// last script, after the counts' conversion, and at the end of each pass of the loop (a release
+/// point found ready at once is the next poll's). So one poll of the task runs one stretch: a
+/// script's result decoded and the next submitted, or the counts converted and stored, or the
+/// gauge's status taken and checked. No log line is made in a poll: the sensors' changes are
+/// deferred ([`note`]).
 pub async fn serve_owner<P: ScriptPort>(
-    port: P,
+    mut port: P,
     mut bus: impl rtic::Mutex<T = ScriptedBus>,
     mut charger: impl rtic::Mutex<T = crate::platform::Charger>,
     mut latest: impl rtic::Mutex<T = LatestRound>,
     critically_low: impl Fn(),
 ) -> ! {
     use amiro_firmware::mono::Clock as _;
-    let mut owner = RingOwner::new(port);
+    use amiro_firmware::timer_queue::yield_now;
+    let mut read_gauge = StatusRead::new();
+    let mut set_up: Option<StepwiseSetUp> = None;
     let mut next = crate::Clock::now_us();
     loop {
         crate::Clock::delay_until_us(next).await;
         next += OWNER_PERIOD_US;
         if !amiro_firmware::signals::shutting_down() {
             let now_us = crate::Clock::now_us();
-            if owner.job(&mut bus, &mut latest, now_us).await {
+            // A missing sensor's set-up: one script a job.
+            if set_up.is_none() {
+                set_up = bus
+                    .lock(|b| b.due_set_up(now_us))
+                    .map(|(slot, set_up)| StepwiseSetUp {
+                        slot,
+                        set_up,
+                        steps: 0,
+                    });
+            }
+            let mut ended = None;
+            if let Some(step) = set_up.as_mut() {
+                step.steps += 1;
+                let outcome = match step.set_up.script() {
+                    Ok(script) => {
+                        let outcome = port.run(script, 0).await;
+                        yield_now().await;
+                        step.set_up
+                            .complete(&script_result(outcome))
+                            .map(|done| done.is_ok())
+                    }
+                    Err(_) => Some(false),
+                };
+                // A set-up that has not ended within its scripts has failed.
+                ended = match outcome {
+                    None if step.steps >= SET_UP_SCRIPTS => Some((step.slot, false)),
+                    None => None,
+                    Some(ready) => Some((step.slot, ready)),
+                };
+            }
+            if ended.is_some() {
+                set_up = None;
+            }
+            // The read of the sensors that answer.
+            let (mut read, places, noted) = bus.lock(|b| {
+                let noted = match ended {
+                    Some((k, ready)) => b.end_set_up(k, now_us, ready),
+                    None => [None; 2],
+                };
+                let (read, places) = b.ring_read();
+                (read, places, noted)
+            });
+            let [still, changed] = noted;
+            note(still);
+            note(changed);
+            for _ in 0..RingRead::MAX_SCRIPTS {
+                let script = match read.script() {
+                    Some(Ok(script)) => script,
+                    // A script the build refuses: the sensors still to read give no count this
+                    // time.
+                    Some(Err(_)) | None => break,
+                };
+                let outcome = port.run(script, 0).await;
+                yield_now().await;
+                read.complete(&script_result(outcome));
+            }
+            yield_now().await;
+            // The counts converted outside the bus's lock, then stored under it.
+            let mm = ring_mm(&read, places);
+            let lost = bus.lock(|b| b.end_ring_read(now_us, mm));
+            // Straight-line, no loop over the lines (PER_BUS = 4).
+            let [a, b, c, d] = lost;
+            note(a);
+            note(b);
+            note(c);
+            note(d);
+            yield_now().await;
+            // One transfer of the gauge's status read.
+            let status = match read_gauge.next_transfer() {
+                Some(transfer) => {
+                    let outcome = match gauge_script(transfer) {
+                        Ok(script) => {
+                            let outcome = port.run(script, GAUGE_SETTLE_US).await;
+                            yield_now().await;
+                            gauge_outcome(transfer, &script_result(outcome))
+                        }
+                        Err(error) => Err(error),
+                    };
+                    read_gauge.complete(outcome).map(Result::ok)
+                }
+                // A read past its end (a read restarts each time it ends): no status.
+                None => Some(None),
+            };
+            if let Some(status) = status {
+                let status = bus.lock(|b| b.end_gauge_read(status));
+                read_gauge.restart();
+                let rear = bus.lock(|b| b.is_rear());
+                latest.lock(|l| l.record(rear, status));
                 let lines = charger.lock(|c| c.lines());
                 if latest.lock(|l| l.critically_low(&lines)) {
                     critically_low();
@@ -498,5 +456,95 @@ pub async fn serve_owner<P: ScriptPort>(
             crate::Clock::now_us(),
             OWNER_PERIOD_US,
         );
+        yield_now().await;
+    }
+}
+
+/// A ring read's counts as millimetres by slot (`None`: no reading), with the ring's calibration
+/// (`ProximityCalibration::DEFAULT`, every sensor's, as the blocking path has it).
+fn ring_mm(read: &RingRead, places: [Option<usize>; PER_BUS]) -> [Option<u16>; PER_BUS] {
+    let counts = read.counts().unwrap_or([None; RING_BUS_SENSORS]);
+    let mut mm = [None; PER_BUS];
+    for (place, count) in places.into_iter().zip(counts) {
+        if let (Some(k), Some(count)) = (place, count) {
+            if let Some(slot) = mm.get_mut(k) {
+                *slot = Some(ProximityCalibration::DEFAULT.counts_to_mm(count));
+            }
+        }
+    }
+    mm
+}
+
+/// A ring sensor's change the owner reports.
+#[derive(Clone, Copy)]
+enum Note {
+    Ready = 0,
+    Missing = 1,
+    Stopped = 2,
+    StillMissing = 3,
+}
+
+/// Each ring sensor's lines, by index and [`Note`]: static, so that the owner defers them.
+const NOTES: [[&str; 4]; RING_SENSORS] = {
+    macro_rules! lines {
+        ($($i:literal),*) => {
+            [$([
+                concat!("ring sensor ", $i, " ready"),
+                concat!("ring sensor ", $i, " missing"),
+                concat!("ring sensor ", $i, " stopped answering"),
+                concat!("ring sensor ", $i, " still missing"),
+            ]),*]
+        };
+    }
+    lines!(0, 1, 2, 3, 4, 5, 6, 7)
+};
+
+/// A ring sensor's line: its index, its change, and (for [`Note::StillMissing`]) the samples
+/// it missed.
+#[derive(Clone, Copy)]
+struct Noted(u8, Note, u32);
+
+/// Ring sensor `index`'s line, static ([`NOTES`]).
+fn line(index: u8, what: Note) -> Option<&'static str> {
+    NOTES
+        .get(usize::from(index))
+        .and_then(|lines| lines.get(what as usize))
+        .copied()
+}
+
+/// A ring sensor's line at boot, written at once.
+fn boot_note(Noted(index, what, _): Noted) {
+    if let Some(line) = line(index, what) {
+        amiro_firmware::log!(line);
+    }
+}
+
+/// A ring sensor's line in a job, deferred to the trace drain (`channels::defer_log`: no
+/// formatting and no log write in the owner's poll or under its bus's lock; a line that finds
+/// the drain's two slots taken is dropped, the health report's counts stay). A sensor still
+/// missing after a set-up says how many samples went without its frame in QEMU's log alone (the
+/// scenario's count; on the chip the health report counts them). Inlined: a call kept in a
+/// register (the compiler's, for four calls in a row) is a call the analysis cannot follow.
+#[inline(always)]
+fn note(noted: Option<Noted>) {
+    let Some(Noted(index, what, missed)) = noted else {
+        return;
+    };
+    #[cfg(feature = "qemu")]
+    if let Note::StillMissing = what {
+        let mut i = [0u8; 10];
+        let mut m = [0u8; 10];
+        amiro_firmware::log!(
+            "ring sensor ",
+            amiro_firmware::telemetry::decimal(u32::from(index), &mut i),
+            " still missing (",
+            amiro_firmware::telemetry::decimal(missed, &mut m),
+            " samples without a frame)"
+        );
+        return;
+    }
+    let _ = missed;
+    if let Some(line) = line(index, what) {
+        amiro_firmware::channels::defer_log(line);
     }
 }

@@ -175,12 +175,11 @@ mod tests {
     use amiro_can::Topic;
 
     /// What the QEMU capture of `diwheeldrive/qemu/admission-one-shots.log` on a 1-1 robot shows once the board
-    /// admits its one-shots: magnetometer-x every 6 ms at medium (moved from 5 300 µs, beside which the board
+    /// admits its one-shots: magnetometer-x every 6 ms at medium (moved from 2 800 µs, beside which the board
     /// refuses the gyroscope one-shot, the floor one-shot and the accelerometer), the accelerometer every 10 ms at
     /// low and one gyroscope sample at low (DiWheelDrive 1-1's machine-code publisher rows, 2026-12-06: the polled
-    /// HMC5883L makes a magnetometer-x job 3.1 ms, the shortest period alone 5 216 µs). Since DiWheelDrive's
-    /// `can_tx` is used (2026-12-06) every 6 ms is refused (6 649 µs alone): the magnetometer every 7 ms, its
-    /// samples scaled by 6/7 (the capture itself is to be re-derived: docs/qemu.md).
+    /// HMC5883L makes a magnetometer-x job 1.35 ms with its reads' transaction caps and one bus clear a release, the
+    /// shortest period alone 2 710 µs).
     /// The thesis one-shots' scenario, written to a folder of `test`'s own: tests run in parallel in one process,
     /// and a shared file was read half-written by one test while another wrote it.
     fn thesis_one_shots(test: &str) -> PathBuf {

@@ -191,10 +191,11 @@ fn on_grid(what: &str, times: &[u64], period: u64, slack: u64) -> Result<()> {
 }
 
 /// The magnetometer-x period every robot scenario that runs it asks DiWheelDrive for, µs: admitted by DiWheelDrive
-/// 1-1 with a clear margin (host's check, 2026-12-06: 0x605 in 5 215.2 µs, 784.8 µs of margin; every 5 ms and the
+/// 1-1 with a clear margin (host's check, 2026-12-06: 0x605 in 2 710.0 µs, 3 290.0 µs of margin; every 2.5 ms and the
 /// thesis's 900 µs are refused). Its publisher rows are the machine code's since 2026-12-06: the HMC5883L is polled
-/// on the CPU, a magnetometer-x job 3 103.9 µs, the shortest period alone 5 216 µs. Every 1 150 µs before (the
-/// shortest in 50 µs steps on the stated budgets), every 900 µs before 2026-12-05.
+/// on the CPU, a magnetometer-x job 1 353.4 µs with its reads' transaction caps and one bus clear a release
+/// (3 103.9 µs before), the shortest period alone 2 710 µs (5 216 µs before). Every 1 150 µs before (the shortest in 50 µs steps on the stated
+/// budgets), every 900 µs before 2026-12-05.
 const MAGNETOMETER_US: u64 = 6_000;
 
 /// DiWheelDrive's magnetometer-x frames (0x605, every [`MAGNETOMETER_US`] in every robot scenario that runs it):
@@ -258,20 +259,20 @@ fn verdicts_queued(run: &Run, board: usize) -> Result<Vec<u64>> {
 fn thesis_demo(run: &Run) -> Result<String> {
     use amiro_can::{Topic, Verdict, Violation};
     every_board_ended(run)?;
-    // The thesis's 900 µs and then 5 000 µs, 10 ms apart, both refused by DiWheelDrive 1-1, each verdict with the
-    // host's culprit and figures (900 µs overloads the board: a job of its own unbounded; 5 000 µs names 0x605, its
-    // frames at 5 215.2 µs), the second queued at least the verdict spacing after the first; then 6 000 µs admitted.
+    // The thesis's 900 µs and then 2 500 µs, 10 ms apart, both refused by DiWheelDrive 1-1, each verdict with the
+    // host's culprit and figures (900 µs overloads the board: a job of its own unbounded; 2 500 µs names 0x605, its
+    // frames at 2 710.0 µs), the second queued at least the verdict spacing after the first; then 6 000 µs admitted.
     let root = crate::workspace::workspace_root();
     let verdicts =
         crate::scenarios::admission_verdicts(&run.view(0), amiro_can::Board::DiWheelDrive);
     ensure!(
         verdicts.len() == 2,
-        "{} verdicts from DiWheelDrive, expected the refusals of 900 and 5 000 µs",
+        "{} verdicts from DiWheelDrive, expected the refusals of 900 and 2 500 µs",
         verdicts.len()
     );
     for ((_, v), (request, us)) in verdicts
         .iter()
-        .zip([("205#01840302", 900u64), ("205#01881302", 5_000)])
+        .zip([("205#01840302", 900u64), ("205#01C40902", 2_500)])
     {
         ensure!(
             v.verdict == Verdict::Refused
@@ -279,7 +280,7 @@ fn thesis_demo(run: &Run) -> Result<String> {
                 && v.requested.as_micros() == us
                 && (us == 900
                     || matches!(v.violation, Violation::Message { id } if id.raw() == 0x605)),
-            "not the refusal of magnetometer-x every {us} µs (for 0x605 at 5 000 µs): {v}"
+            "not the refusal of magnetometer-x every {us} µs (for 0x605 at 2 500 µs): {v}"
         );
         crate::scenarios::same_refusal(
             v,
@@ -360,7 +361,7 @@ fn thesis_demo(run: &Run) -> Result<String> {
         "{others} frames besides the magnetometer, the ring and DiWheelDrive's verdicts (0x61A)"
     );
     Ok(format!(
-        "DiWheelDrive refused 900 µs and 5 000 µs ({} and {} µs), the second verdict {spacing} µs after the first; {} magnetometer frames on the {MAGNETOMETER_US} µs grid from {accepted} µs, {samples} ring samples × 8 (in sensor order) on the 10 ms grid, LED 3 latched, all on one bus",
+        "DiWheelDrive refused 900 µs and 2 500 µs ({} and {} µs), the second verdict {spacing} µs after the first; {} magnetometer frames on the {MAGNETOMETER_US} µs grid from {accepted} µs, {samples} ring samples × 8 (in sensor order) on the 10 ms grid, LED 3 latched, all on one bus",
         verdicts[0].1.wcrt_us.get(),
         verdicts[1].1.wcrt_us.get(),
         magnetometer.len()

@@ -78,7 +78,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "admission-one-shots",
-        about: "issue 20: beside magnetometer-x every 5 300 µs (near its boundary on 1-1, whose polled HMC5883L makes its job 3.1 ms; the thesis's 900 µs is refused alone) a gyroscope one-shot at low, a floor-sensor one-shot at medium and the accelerometer every 10 ms at low refused with verdicts within 5 ms, the magnetometer's grid untouched; with the magnetometer every 6 ms the gyroscope one-shot answered within 2 ms and the accelerometer admitted",
+        about: "issue 20: beside magnetometer-x every 2 800 µs (near its boundary on 1-1, whose polled HMC5883L makes its job 1.35 ms; the thesis's 900 µs is refused alone) a gyroscope one-shot at low, a floor-sensor one-shot at medium and the accelerometer every 10 ms at low refused with verdicts within 5 ms, the magnetometer's grid untouched; with the magnetometer every 6 ms the gyroscope one-shot answered within 2 ms and the accelerometer admitted",
         check: admission_one_shots,
     },
     Scenario {
@@ -89,7 +89,7 @@ pub const SCENARIOS: &[Scenario] = &[
 ];
 
 /// `diwheeldrive/qemu/thesis-example.log`: the thesis's worked example (magnetometer-x every 900 µs at medium) and
-/// every 5 ms are refused on DiWheelDrive 1-1 (its polled HMC5883L makes a magnetometer-x job 3.1 ms), each verdict
+/// every 2.5 ms are refused on DiWheelDrive 1-1 (its polled HMC5883L makes a magnetometer-x job 1.35 ms), each verdict
 /// equal to the host's check; every 6 ms, with a clear margin, is admitted and runs on its exact grid within the
 /// analysed bound.
 fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
@@ -97,7 +97,7 @@ fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     // (frame time, command, period µs): the two refused requests.
     const REFUSED: [(u64, &str, u64); 2] = [
         (10_000, "205#01840302", 900),
-        (55_000, "205#01881302", 5_000),
+        (55_000, "205#01C40902", 2_500),
     ];
     const ADMITTED_AT: u64 = 100_000;
     const PERIOD: u64 = 6_000;
@@ -115,7 +115,7 @@ fn thesis_example(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     let verdicts = verdicts(out);
     ensure!(
         verdicts.len() == REFUSED.len(),
-        "{} verdicts, expected the refusals of 900 and 5 000 µs",
+        "{} verdicts, expected the refusals of 900 and 2 500 µs",
         verdicts.len()
     );
     let mut refusals = Vec::new();
@@ -843,18 +843,18 @@ fn admission_latency(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-/// `diwheeldrive/qemu/admission-one-shots.log` (issue 20): one-shots refused beside the magnetometer every 5 300 µs
+/// `diwheeldrive/qemu/admission-one-shots.log` (issue 20): one-shots refused beside the magnetometer every 2 800 µs
 /// (near its boundary on DiWheelDrive 1-1; the thesis's 900 µs is refused alone) and admitted once the magnetometer
 /// runs every 6 ms (the log's header has the analysis' figures).
 fn admission_one_shots(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     use amiro_can::{Topic, Verdict};
-    // The requests beside the 5 300 µs magnetometer, each refused: (frame time, topic, a one-shot).
+    // The requests beside the 2 800 µs magnetometer, each refused: (frame time, topic, a one-shot).
     const REFUSED: [(u64, Topic, bool); 3] = [
         (50_000, Topic::Gyroscope, true),
         (100_000, Topic::FloorProximity, true),
         (150_000, Topic::Accelerometer, false),
     ];
-    const MAG_FIRST: u64 = 5_300;
+    const MAG_FIRST: u64 = 2_800;
     const MAG_MOVED: u64 = 200_000;
     const MAG_THEN: u64 = 6_000;
     const GYRO_ONCE: u64 = 240_000;
@@ -862,7 +862,7 @@ fn admission_one_shots(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     let verdicts = verdicts(out);
     ensure!(
         verdicts.len() == REFUSED.len(),
-        "{} verdicts, expected the {} refusals beside the 5 300 µs magnetometer",
+        "{} verdicts, expected the {} refusals beside the 2 800 µs magnetometer",
         verdicts.len(),
         REFUSED.len()
     );
@@ -914,7 +914,7 @@ fn admission_one_shots(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         359_000,
     )?;
     Ok(format!(
-        "beside magnetometer-x every 5 300 µs: {}; magnetometer-x kept its 5 300 µs grid ({} samples, worst latency {} µs); \
+        "beside magnetometer-x every 2 800 µs: {}; magnetometer-x kept its 2 800 µs grid ({} samples, worst latency {} µs); \
          moved to every 6 ms ({} samples, worst latency {} µs): the gyroscope one-shot on the bus {} µs after its frame \
          (≈ {} µs at the F103's speed, every µs scaled: an estimate, not a bound), the accelerometer every 10 ms at low \
          admitted, first sample {} µs after its frame ({} samples)",
