@@ -192,18 +192,25 @@ pub fn handle_command<C: Clock>(
     }
 }
 
-/// A command the admission task passed, as of `now`: applied to the publisher table, traced when
-/// `traced`, and the publisher levels whose schedule changed woken (`wake_levels`: one sender per CAN
+/// A command the admission task passed, as of `now`: applied to the publisher table, counted and traced when
+/// `first` (a stop the command handler applied, counted and traced already is applied again, neither counted
+/// nor traced), and the publisher levels whose schedule changed woken (`wake_levels`: one sender per CAN
 /// priority level, urgent first, or a single sender when one publisher task serves every level).
 fn handle_command_at(
     now: u64,
     frame: &RxFrame,
     mut handler: impl rtic_core::Mutex<T = SensorDataHandler>,
     wake_levels: &mut [Sender<'static, (), 1>],
-    traced: bool,
+    first: bool,
 ) -> Option<(u64, Outcome)> {
-    let outcome = handler.lock(|h| h.on_frame(now, frame.id, frame.payload()));
-    if traced {
+    let outcome = handler.lock(|h| {
+        if first {
+            h.on_frame(now, frame.id, frame.payload())
+        } else {
+            h.on_frame_again(now, frame.id, frame.payload())
+        }
+    });
+    if first {
         trace_outcome(now, frame.id, &outcome);
     }
     match outcome {
@@ -576,11 +583,11 @@ pub fn handle_command_admitted<C: Clock, const N: usize, const M: usize, const Q
     note_decision::<C, N, M>(frame.id, &check, admission, started);
     let (outcome, verdict) = match check {
         // As of now (after the check): a new publisher's grid starts when it can start.
-        // A stop took effect (and was traced) in the command handler; applied again here, untraced, in
-        // case a request for the same topic was still waiting in the queue.
+        // A stop took effect (and was counted and traced) in the command handler; applied again here,
+        // neither counted nor traced, in case a request for the same topic was still waiting in the queue.
         Check::Pass => {
-            let traced = !crate::admission::is_stop(frame.id, frame.payload());
-            return handle_command_at(C::now_us(), frame, handler, wake_levels, traced);
+            let first = !crate::admission::is_stop(frame.id, frame.payload());
+            return handle_command_at(C::now_us(), frame, handler, wake_levels, first);
         }
         Check::Refused(frames, reason) => {
             crate::health::count_admission(true, reason);

@@ -407,6 +407,22 @@ impl SensorDataHandler {
         self.on_command(now_us, id, decode_command(id, data))
     }
 
+    /// [`SensorDataHandler::on_frame`] for a frame this handler has already handled and counted once: applied
+    /// again, counted no more. The firmware applies a stop as it arrives (so it takes effect at once) and again
+    /// in the admission task's order (in case a request for the same topic was still waiting there); counting
+    /// both made the diagnostics' accepted count one higher than the commands heard for every stop.
+    pub fn on_frame_again(
+        &mut self,
+        now_us: u64,
+        id: u16,
+        data: &[u8],
+    ) -> Result<Outcome, Rejection> {
+        let counted = self.counters;
+        let outcome = self.on_frame(now_us, id, data);
+        self.counters = counted;
+        outcome
+    }
+
     /// [`SensorDataHandler::on_frame`] for a frame its caller has already decoded: `decoded` is
     /// `decode_command(id, data)` of the frame heard (the firmware's command handler decodes each
     /// frame once, to route it). Whether the frame is this board's business is decided from the

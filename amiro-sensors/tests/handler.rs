@@ -1027,3 +1027,30 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn a_stop_applied_again_stops_the_topic_again_and_is_counted_once() {
+    let mut h = dwd();
+    let id = command_id(Priority::Medium, Topic::Gyroscope);
+    h.on_frame(0, id, &publish(2, TimeUnit::Millis)).unwrap();
+    // The stop, as the command handler applies it when it arrives.
+    h.on_frame(100, id, &[0]).unwrap();
+    assert_eq!(h.counters().accepted, 2);
+    // A publish request that was waiting in the admission queue, then the stop again in the queue's order.
+    h.on_frame(200, id, &publish(3, TimeUnit::Millis)).unwrap();
+    h.on_frame_again(300, id, &[0]).unwrap();
+    assert_eq!(
+        row(&h, Topic::Gyroscope).state(),
+        PublisherState::Stopped,
+        "the stop applied again stops the topic again"
+    );
+    assert_eq!(snapshot(&h).1, vec![None; 4], "nothing is due");
+    assert_eq!(
+        h.counters().accepted,
+        3,
+        "the publish counted, the stop not twice"
+    );
+    // A malformed frame applied again is not counted twice either.
+    assert!(h.on_frame_again(400, id, &[9]).is_err());
+    assert_eq!(h.counters().rejected_total(), 0);
+}
