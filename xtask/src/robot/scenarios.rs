@@ -480,10 +480,12 @@ fn shutdown(run: &Run) -> Result<String> {
 fn admission_other_board(run: &Run) -> Result<String> {
     every_board_ended(run)?;
     let odometry = run.ends(0x701);
+    // Requested at 5 ms, every 2 ms: about 22 releases before the ring's request at 50 ms (26 at every 1.5 ms
+    // until DiWheelDrive's transmit jobs, 2026-12-06, which make 1.5 ms at low refused on its own board).
     let before = odometry.iter().filter(|&&t| t < 50_000).count();
     ensure!(
-        before >= 26,
-        "{before} odometry frames on the bus before the request (one per 1.5 ms expected)"
+        before >= 20,
+        "{before} odometry frames on the bus before the request (one per 2 ms expected)"
     );
     let v = crate::scenarios::ring_refused_for_odometry(&run.view(1))?;
     ensure!(
