@@ -30,7 +30,9 @@ model before the sound transmit path; since 2026-12-05 the 900 µs magnetometer 
 robot, so the tool asked for 1.3 ms; since 2026-12-06 DiWheelDrive 1-1's polled HMC5883L makes a magnetometer-x job
 3.1 ms, and it asks for 6 ms, admitted on both revisions with the ring and the gyroscope at low: magnetometer-x's frames
 at 5 344.4 µs and the gyroscope's at 6 942.8 µs on 1-1, 1 827.8 and 3 232.1 µs on 1-2, `cargo xtask analyze`,
-2026-12-06; with the gyroscope at high both hold too now, 5 932.1 and 5 364.3 µs on 1-1.)
+2026-12-06; with the gyroscope at high both hold too now, 5 932.1 and 5 364.3 µs on 1-1. On the tables with the
+transaction caps and DiWheelDrive's transmit jobs, 2026-12-06: 3 777.9 and 5 663.8 µs on 1-1, 2 465.6 and 4 159.5 µs
+on 1-2; with the gyroscope at high 4 609.1 and 3 797.8 µs on 1-1, 3 037.8 and 2 485.6 µs on 1-2.)
 """
 
 import argparse

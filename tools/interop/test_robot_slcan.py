@@ -1,10 +1,11 @@
 """The emulated robot (`cargo xtask robot --slcan`) is an SLCAN adapter to the tools that drive a real one:
 python-can's `slcan` interface and `amiro` send a magnetometer command through its pseudo-terminal and hear
 DiWheelDrive's magnetometer frames come back from the three boards running in QEMU. The command asks for
-magnetometer-x every 6 ms at medium, admitted on both robot revisions: its frames take 5 215.2 µs on a 1-1 robot
-(whose polled HMC5883L makes a magnetometer-x job 3.1 ms since its publisher rows are the machine code's) and
-1 244.1 µs on a 1-2 one (`cargo xtask analyze`, 2026-12-06; docs/analysis.md). The thesis's 900 µs is refused on
-both, and so was 1.3 ms on a 1-1 robot from 2026-12-06.
+magnetometer-x every 6 ms at medium, admitted on both robot revisions: its frames take 3 479.9 µs on a 1-1 robot
+(whose polled HMC5883L makes a magnetometer-x job 1.35 ms with its reads' transaction caps, and whose frames wait
+behind a transmit job of their own; the shortest period 3 572 µs) and 1 800.4 µs on a 1-2 one (`cargo xtask
+analyze`, 2026-12-06; docs/analysis.md). The thesis's 900 µs is refused on both, and so was 1.3 ms on a 1-1 robot
+from 2026-12-06.
 
 Run by `cargo xtask test` (xtask/src/interop.rs: AMIRO_XTASK is the xtask binary); by hand:
     AMIRO=target/debug/amiro AMIRO_XTASK=target/debug/xtask python -m pytest tools/interop/test_robot_slcan.py
