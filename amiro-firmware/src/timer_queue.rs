@@ -486,7 +486,7 @@ pub const fn next_release(next: u64, now: u64, period: u64) -> u64 {
 pub struct YieldNow(bool);
 
 /// An await that ends its task's poll and wakes the task at once ([`YieldNow`]). Its wake is the
-/// waker's, through [`poll_again`].
+/// waker's, through `poll_again`.
 pub const fn yield_now() -> YieldNow {
     YieldNow(false)
 }

@@ -125,8 +125,9 @@ fn sender_of(stream: &Stream) -> Option<(u8, u8)> {
 }
 
 impl Checker {
-    /// The table of a robot of `revision` (`--revision`; see [`revision_or_default`]) lowered from the apps
-    /// and timing files, as the boards' build scripts lower it (an error names what is missing).
+    /// The table of a robot of `revision` (`--revision`, else `AMIRO_REVISION` where it names one of
+    /// [`REVISIONS`], else 1-1) lowered from the apps and timing files, as the boards' build scripts lower it (an
+    /// error names what is missing).
     pub fn load(revision: Option<&str>) -> Result<Checker> {
         let root = root();
         let revision = revision_or_default(revision);
