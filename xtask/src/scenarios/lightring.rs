@@ -571,11 +571,11 @@ fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 /// (1-0) or the frames (1-2), 2 and 3 ms on a budget or the publisher's job.
 pub(super) const ADMITTED_DIAGNOSTICS_MS: u64 = 7;
 
-/// DiWheelDrive's odometry request at low that `admission.log` sends LightRing (every 1.5 ms): admitted on its
-/// own, and the reason the diagnostics every 100 ms at urgent is refused (0x701 would respond in 1 924.9 µs on
-/// 1-0's view, 1 923.8 µs on 1-2's, against 1 500 µs). Every 1 ms, the request before the sound transmit path,
-/// is refused on its own now (0x701 in 1 114.9 µs of 1 000), so LightRing does not keep it.
-const ODOMETRY_REQUEST: &str = "301#01DC0502";
+/// DiWheelDrive's odometry request at low that `admission.log` sends LightRing (every 2 ms): admitted on its own,
+/// and the reason the diagnostics every 100 ms at urgent is refused (0x701 would respond in 2 660 µs on a 1-1
+/// robot's view, 2 434 µs on a 1-2 robot's, against 2 000 µs; 2026-12-06, DiWheelDrive's transmit jobs rows). Every
+/// 1.5 ms, the request before, is refused on its own now (0x701 in 1 928 µs of 1 500; at low it needs 1 850 µs).
+const ODOMETRY_REQUEST: &str = "301#01D00702";
 
 /// `admission.log` on a ring of `chips`, whose accepted request is the diagnostics every
 /// `every_ms` at medium, and every `every_ms` − 1 refused by the host (docs/qemu.md).

@@ -233,16 +233,17 @@ fn admission(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 
 /// The ring's period the board accepts in `admission-decisions`, and the one before it it refuses:
 /// the shortest whole milliseconds the host's analysis admits beside DiWheelDrive's magnetometer
-/// every 1.3 ms (at 9 ms the ring's own frames miss, 9 727.4 of 9 000 µs on 2026-12-05, the sound
+/// every 2.1 ms (at 9 ms the ring's own frames miss, 9 695 of 9 000 µs on 2026-12-06; before, beside every 1.3 ms,
+/// at 9 ms the ring's own frames miss, 9 727.4 of 9 000 µs on 2026-12-05, the sound
 /// transmit path: each of its eight frames is charged its transmission and G_b, and the power
 /// monitor's gauge transfer under a bus lock blocks the ring's job).
 const DECISIONS_REFUSED_MS: u64 = 9;
 const DECISIONS_ACCEPTED_MS: u64 = 10;
 
-/// DiWheelDrive's magnetometer-x every 1.3 ms at medium, which PowerManagement keeps in its view (every 1 ms and
-/// 1.2 ms the host's check refuses it for its own frames 0x605, 1 244.1 µs on the robot 1-2's timing files on
-/// 2026-12-05, so no board keeps it).
-const DECISIONS_MAGNETOMETER: &str = "205#01140502";
+/// DiWheelDrive's magnetometer-x every 2.1 ms at medium, which PowerManagement keeps in its view: on a 1-2 robot it
+/// needs at least 2 025 µs since DiWheelDrive's transmit jobs are rows (2026-12-06; every 1.3 ms before, when 1 ms
+/// and 1.2 ms were refused for its frames 0x605), so no board keeps a shorter one.
+const DECISIONS_MAGNETOMETER: &str = "205#01340802";
 
 fn admission_decisions(out: &RunOutput, bounds: &Bounds) -> Result<String> {
     use amiro_can::{Topic, Verdict};
@@ -324,10 +325,10 @@ const DECISIONS_WARNED_US: u64 = 5_000;
 /// 2026-12-05, the sound transmit path).
 const OTHER_BOARD_RING: &str = "01F#010A0000";
 
-/// DiWheelDrive's odometry in `admission-other-board`: at low every 1.2 ms, which the host's check
-/// admits (every 1 ms its own frames 0x701 miss, 1 113.8 of 1 000 µs on 2026-12-05, so no board
-/// would keep it).
-const OTHER_BOARD_ODOMETRY: &str = "301#01B00402";
+/// DiWheelDrive's odometry in `admission-other-board`: at low every 1.7 ms, which the host's check
+/// admits on a 1-2 robot (it needs at least 1 624 µs since DiWheelDrive's transmit jobs are rows, 2026-12-06; every
+/// 1.2 ms before), so every board keeps it.
+const OTHER_BOARD_ODOMETRY: &str = "301#01A40602";
 
 /// The ring's period at low in `admission-other-board`, behind the odometry: the shortest whole
 /// milliseconds the host admits beside it (every 10 ms the ring's own frames 0x71F miss, 10 400.5
