@@ -707,9 +707,9 @@ mod tests {
             warning.contains("At urgent it would accept every"),
             "{warning}"
         );
-        // The thesis example (magnetometer-x every 900 µs) does not fit (on a 1-1 robot its job is 3.1 ms since
-        // DiWheelDrive 1-1's publisher rows are the machine code's, 2026-12-06); every 7 ms it passes (6 ms did until
-        // DiWheelDrive's `can_tx` was used, 2026-12-06: at least 6 649 µs on a 1-1 robot since), and beside it
+        // The thesis example (magnetometer-x every 900 µs) does not fit (on a 1-1 robot it needs at least 3 572 µs
+        // since DiWheelDrive 1-1's publisher rows and its transmit jobs are the machine code's, 2026-12-06); every
+        // 7 ms it passes, and beside it
         // a gyroscope every 2 ms at medium does not (the magnetometer's job at its level delays its frames past
         // their deadline); once it is stopped the gyroscope does.
         assert!(checker.check(&message("205#01840302")).is_some());

@@ -175,11 +175,11 @@ mod tests {
     use amiro_can::Topic;
 
     /// What the QEMU capture of `diwheeldrive/qemu/admission-one-shots.log` on a 1-1 robot shows once the board
-    /// admits its one-shots: magnetometer-x every 6 ms at medium (moved from 2 800 µs, beside which the board
+    /// admits its one-shots: magnetometer-x every 6 ms at medium (moved from 3 650 µs, beside which the board
     /// refuses the gyroscope one-shot, the floor one-shot and the accelerometer), the accelerometer every 10 ms at
-    /// low and one gyroscope sample at low (DiWheelDrive 1-1's machine-code publisher rows, 2026-12-06: the polled
-    /// HMC5883L makes a magnetometer-x job 1.35 ms with its reads' transaction caps and one bus clear a release, the
-    /// shortest period alone 2 710 µs).
+    /// low and one gyroscope sample at low (DiWheelDrive 1-1's machine-code publisher rows and transmit jobs,
+    /// 2026-12-06: the magnetometer's shortest period alone 3 572 µs); the test's copy asks for every 7 ms, its
+    /// samples scaled.
     /// The thesis one-shots' scenario, written to a folder of `test`'s own: tests run in parallel in one process,
     /// and a shared file was read half-written by one test while another wrote it.
     fn thesis_one_shots(test: &str) -> PathBuf {
@@ -241,8 +241,7 @@ mod tests {
         let timings = scenario::timing_files_for(&root, Some("1-1"));
         // The board's own admission decides on the production model, one request at a time: the gyroscope
         // one-shot beside the 7 ms magnetometer, then the accelerometer beside it, the one-shot not kept in the
-        // board's view by then (each alone beside it, in the 6 ms capture before DiWheelDrive's can_tx was used: the magnetometer's frame at 5 344.4 of 6 000 µs, `cargo xtask
-        // analyze --revision 1-1`, 2026-12-06).
+        // board's view by then (each admitted alone beside it on the combined tables, 2026-12-06).
         for (name, without) in [
             ("admitted-once", Topic::Accelerometer),
             ("admitted-stream", Topic::Gyroscope),
