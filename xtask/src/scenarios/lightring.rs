@@ -51,7 +51,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "admission",
-        about: "issue 11: diagnostics at 1 µs refused, at 7 ms accepted (6 ms is refused: its six frames 0x61C miss their deadline on the sound transmit path), at urgent refused for DiWheelDrive's odometry every 1.5 ms, then started with a warning; each verdict as the host decides; LEDs keep working",
+        about: "issue 11: diagnostics at 1 µs refused, at 21 ms accepted (20 ms is refused: the latch would miss its 2 ms deadline), at urgent refused for DiWheelDrive's odometry every 2 ms, then started with a warning; each verdict as the host decides; LEDs keep working",
         check: admission,
     },
 ];
@@ -562,14 +562,23 @@ pub(super) fn shutdown(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 
 /// `lightring/qemu/admission.log` (issue 11).
 fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    admission_on(out, bounds, CHIPS, ADMITTED_DIAGNOSTICS_MS)
+    admission_on(
+        out,
+        bounds,
+        CHIPS,
+        ADMITTED_DIAGNOSTICS_MS,
+        SHORTEST_DIAGNOSTICS_1_0_MS,
+    )
 }
 
-/// The diagnostics period at medium `admission.log` asks for, ms: the shortest whole one the host admits on
-/// both revisions since the sound transmit path (2026-12-05): every 6 ms the six frames 0x61C respond in
-/// 6 268.5 µs (1-0) or 6 488.7 µs (1-2), every 5 ms in 6 452.3 / 6 655.9 µs; 4 ms is refused for the latch
-/// (1-0) or the frames (1-2), 2 and 3 ms on a budget or the publisher's job.
-pub(super) const ADMITTED_DIAGNOSTICS_MS: u64 = 7;
+/// The diagnostics period at medium `admission.log` asks for, ms: the shortest whole one the host admits on a 1-1
+/// robot (LightRing 1-0) since DiWheelDrive's transmit jobs are rows (2026-12-06): every 20 ms and shorter the latch
+/// misses its 2 000 µs (2 094 µs), every 21 ms (20 456 µs at least) passes. A 1-2 robot admits 7 ms and more (every
+/// 6 ms the six frames 0x61C respond in 7 633 µs). Until 2026-12-06 both admitted 7 ms and refused 6 ms.
+pub(super) const ADMITTED_DIAGNOSTICS_MS: u64 = 21;
+
+/// The shortest whole milliseconds of the diagnostics at medium the host admits on a 1-1 robot (LightRing 1-0).
+const SHORTEST_DIAGNOSTICS_1_0_MS: u64 = 21;
 
 /// DiWheelDrive's odometry request at low that `admission.log` sends LightRing (every 2 ms): admitted on its own,
 /// and the reason the diagnostics every 100 ms at urgent is refused (0x701 would respond in 2 660 µs on a 1-1
@@ -578,12 +587,13 @@ pub(super) const ADMITTED_DIAGNOSTICS_MS: u64 = 7;
 const ODOMETRY_REQUEST: &str = "301#01D00702";
 
 /// `admission.log` on a ring of `chips`, whose accepted request is the diagnostics every
-/// `every_ms` at medium, and every `every_ms` − 1 refused by the host (docs/qemu.md).
+/// `every_ms` at medium; the host admits every `shortest_ms` and refuses every `shortest_ms` − 1 (docs/qemu.md).
 pub(super) fn admission_on(
     out: &RunOutput,
     bounds: &Bounds,
     chips: usize,
     every_ms: u64,
+    shortest_ms: u64,
 ) -> Result<String> {
     use amiro_can::{Topic, Verdict, Violation};
     let verdicts = super::admission_verdicts(out, amiro_can::Board::LightRing);
@@ -613,13 +623,19 @@ pub(super) fn admission_on(
             .is_none(),
         "the host refuses the diagnostics every {every_ms} ms"
     );
-    // The boundary: one ms less is refused.
+    // The boundary: the shortest admitted, and one ms less refused.
     ensure!(
-        super::host_admission(root, &[], &format!("21C#01{:02X}0000", every_ms - 1))?
+        super::host_admission(root, &[], &format!("21C#01{shortest_ms:02X}0000"))?
+            .refusal
+            .is_none(),
+        "the host refuses the diagnostics every {shortest_ms} ms"
+    );
+    ensure!(
+        super::host_admission(root, &[], &format!("21C#01{:02X}0000", shortest_ms - 1))?
             .refusal
             .is_some(),
-        "the host admits the diagnostics every {} ms: {every_ms} ms is not the shortest admitted",
-        every_ms - 1
+        "the host admits the diagnostics every {} ms: {shortest_ms} ms is not the shortest admitted",
+        shortest_ms - 1
     );
     let running = out
         .times(0x61C)
@@ -627,7 +643,7 @@ pub(super) fn admission_on(
         .filter(|t| (60_000..100_000).contains(t))
         .count();
     ensure!(
-        running as u64 >= 6 * (40 / every_ms * 3 / 4),
+        running as u64 >= 6 * (40 / every_ms * 3 / 4).max(1),
         "{running} diagnostics frames between the request and the stop, expected every {every_ms} ms × 6"
     );
     ensure!(
