@@ -48,6 +48,9 @@ pub fn ram_goal(board: &str, revision: &str) -> u64 {
         // with policy changes found (accept-and-warn starts publishers the check refuses, so more priority levels
         // run at once) nested them deeper: 17 792 B (a stack of 11 736 B).
         ("diwheeldrive", _) => 16 * 1024 + DIWHEELDRIVE_ADMISSION_RAM_ALLOWANCE,
+        // PowerManagement kept its 16 KiB with the admission check until its tables held 43 jobs (DiWheelDrive's
+        // transmit jobs as rows, 2026-12-06): 16 592 B measured then, so 1 KiB for the check as well.
+        ("powermgmt", _) => 16 * 1024 + POWERMGMT_ADMISSION_RAM_ALLOWANCE,
         _ => 16 * 1024,
     }
 }
@@ -56,8 +59,11 @@ pub fn ram_goal(board: &str, revision: &str) -> u64 {
 pub const LIGHTRING_1_2_RAM_ALLOWANCE: u64 = 256;
 
 /// What the on-chip admission analysis may add to LightRing's RAM goal (docs/analysis.md, "The on-chip
-/// admission check"); PowerManagement keeps 16 KiB with it.
+/// admission check"); PowerManagement's is [`POWERMGMT_ADMISSION_RAM_ALLOWANCE`].
 pub const ADMISSION_RAM_ALLOWANCE: u64 = 6 * 1024 + 512;
+
+/// What the on-chip admission analysis may add to PowerManagement's 16 KiB RAM goal (see [`ram_goal`]).
+pub const POWERMGMT_ADMISSION_RAM_ALLOWANCE: u64 = 1024;
 
 /// What the on-chip admission analysis may add to DiWheelDrive's 16 KiB RAM goal (docs/analysis.md).
 pub const DIWHEELDRIVE_ADMISSION_RAM_ALLOWANCE: u64 = 2 * 1024;
