@@ -377,7 +377,7 @@ pub struct SendArgs {
     pub raw: bool,
 
     /// Before a publish request leaves, listen this long to learn what the robot runs (commands and sensor
-    /// data heard), so the admission check sees the robot as it is [default: 1s on a live bus; 0 skips it]
+    /// data heard), so the admission check sees the robot as it is [default: 1s on a live bus; 0s skips it]
     #[arg(long, global = true, value_name = "DURATION", value_parser = parse_timeout)]
     pub listen: Option<std::time::Duration>,
 
