@@ -423,7 +423,7 @@ impl Share {
 
     /// The share whose utilisation `utilisation` was worked out before, as [`Share::of`] works it out (a table's,
     /// built on the host): no division. A utilisation is at most [`UTIL_ONE`] (one such interferer overloads any
-    /// level already); a larger figure is taken as [`UTIL_ONE`], which fits in 32 bits below [`ZERO_PERIOD`].
+    /// level already); a larger figure is taken as [`UTIL_ONE`], which fits in 32 bits below the zero period's mark.
     pub fn with_utilisation(utilisation: u64) -> Share {
         Share {
             utilisation: utilisation.min(UTIL_ONE) as u32,
