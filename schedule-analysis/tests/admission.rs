@@ -281,7 +281,7 @@ fn a_decision_redoes_only_its_own_board() {
     assert_eq!(decide(&mut running, "odometry", "low", 5_000), (3, 1));
     // A PowerManagement request next: DiWheelDrive's analysis of the replaced set holds.
     assert_eq!(
-        decide(&mut running, "proximity-ring", "low", 20_000),
+        decide(&mut running, "proximity-ring", "low", 60_000),
         (3, 1)
     );
     // The power status every 500 ms moves the horizon from 60 s to 500 s: no kept window reaches either.
