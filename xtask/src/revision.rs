@@ -303,10 +303,15 @@ mod tests {
     /// table on both robots) its view missed the gyroscope on a 1-1 robot and it started the ring; every
     /// board's image for a robot now carries that robot's table, and the views agree on both revisions.
     /// Re-derived again when DiWheelDrive's `can_tx` was used (2026-12-06): the gyroscope at urgent needs
-    /// 1 519 µs on a 1-1 robot and 2 026 µs on a 1-2 robot, so it is asked every 1.6 ms (1 ms before).
+    /// 1 519 µs on a 1-1 robot and 2 026 µs on a 1-2 robot, so it is asked every 1.6 ms (1 ms before). And
+    /// when PowerManagement's ring row was used (34.9 ms a release, 2026-12-06): the ring at low needs
+    /// 53 647 µs beside that gyroscope on a 1-1 robot and 53 269 µs without it on a 1-2 robot's table
+    /// (`amiro send … --revision 1-1|1-2`), so it is asked every 53 500 µs (every 10 ms before).
     #[test]
     fn every_boards_image_for_a_robot_judges_on_that_robots_table_so_the_views_agree() {
-        let commands: [(u16, &[u8]); 2] = [(0x008, &[1, 0x40, 0x06, 2]), (0x31F, &[1, 10, 0, 0])];
+        // 53 500 µs = 0xD0FC.
+        let commands: [(u16, &[u8]); 2] =
+            [(0x008, &[1, 0x40, 0x06, 2]), (0x31F, &[1, 0xFC, 0xD0, 2])];
         let gyroscope = |view: &[(u8, u8, u64)]| view.iter().any(|s| s.1 == 0x08);
         for robot in ROBOT_REVISIONS {
             let builds = plan(&all(), &Choice::Robot(robot)).unwrap();

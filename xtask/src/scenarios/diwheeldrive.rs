@@ -275,7 +275,19 @@ fn motor_deadman(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
     ))
 }
 
-pub(super) fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+pub(super) fn malformed(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    // The releases a period before the run ends (150 ms), whose frames are on the bus before it does.
+    malformed_with(out, bounds, 3_000, 147_000)
+}
+
+/// The malformed check with the gyroscope publisher every `period` µs until `end` µs (its stop, or a period before
+/// the run's end): 3 ms on 1-1 (the shared log), 11 ms on 1-2 (`rev-1-2/malformed.log`).
+pub(super) fn malformed_with(
+    out: &RunOutput,
+    _bounds: &Bounds,
+    period: u64,
+    end: u64,
+) -> Result<String> {
     // The 10 malformed frames each rejected with its own reason, in the order of the stimulus.
     let rejected = out.expect_rejections(
         &[
@@ -298,8 +310,7 @@ pub(super) fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         out.frames.iter().all(|f| f.id == 0x608 || f.id == 0x61A),
         "a bad frame made the board send something other than the gyroscope's frames (and the diagnostics asked for)"
     );
-    // The releases a period before the run ends (150 ms), whose frames are on the bus before it does.
-    let gyro = out.periodic_stream(0x608, "gyroscope", 3_000, 0, 147_000)?;
+    let gyro = out.periodic_stream(0x608, "gyroscope", period, 0, end)?;
     let health = check_health(out, amiro_can::Board::DiWheelDrive)?;
     ensure!(
         health.rejected == 10,
@@ -307,8 +318,9 @@ pub(super) fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
         health.rejected
     );
     Ok(format!(
-        "{rejected} rejected, {ignored} ignored; gyroscope undisturbed: {} frames on its 3 ms grid, worst latency {} µs; diagnostics: {} accepted, {} rejected",
+        "{rejected} rejected, {ignored} ignored; gyroscope undisturbed: {} frames on its {} ms grid, worst latency {} µs; diagnostics: {} accepted, {} rejected",
         gyro.frames.len(),
+        period / 1000,
         gyro.worst_latency,
         health.accepted,
         health.rejected
@@ -316,11 +328,12 @@ pub(super) fn malformed(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 }
 
 fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    flood_at(out, bounds, 3_000)
+    flood_at(out, bounds, 3_000, super::FLOOD_COMMANDS)
 }
 
-/// The flood check with the gyroscope publisher every `period` µs (3 ms on 1-1 and 1-2).
-pub(super) fn flood_at(out: &RunOutput, bounds: &Bounds, period: u64) -> Result<String> {
+/// The flood check with the gyroscope publisher every `period` µs (3 ms on 1-1, 11 ms on 1-2) and `sent` commands
+/// in the log (1-2's stops the gyroscope before the health one-shot, one more).
+pub(super) fn flood_at(out: &RunOutput, bounds: &Bounds, period: u64, sent: u64) -> Result<String> {
     let gyro = out.periodic_stream(0x608, "gyroscope", period, 0, 250_000)?;
     // Held to its grid by `periodic_stream`, and to the QEMU model's bound where it has one.
     let latency = super::within_flood_bound(
@@ -331,7 +344,7 @@ pub(super) fn flood_at(out: &RunOutput, bounds: &Bounds, period: u64) -> Result<
     // task one per ADMISSION_MIN_INTERVAL_US, which is longer): the flood's excess waits in the
     // bounded receive queue and is dropped there, counted. Every frame is accounted for.
     let (handled, dropped) =
-        super::flood_commands(out, ADMISSION_WAITING, COMMAND_MIN_INTERVAL_US)?;
+        super::flood_commands_sent(out, sent, ADMISSION_WAITING, COMMAND_MIN_INTERVAL_US)?;
     let health = check_health(out, amiro_can::Board::DiWheelDrive)?;
     Ok(format!(
         "{handled} commands handled at most one per {COMMAND_MIN_INTERVAL_US} µs, {dropped} dropped and counted (diagnostics agree: {} dropped); gyroscope on its {} ms grid, {latency}",

@@ -1,5 +1,5 @@
-//! DiWheelDrive 1-2's QEMU scenarios (`diwheeldrive/qemu/rev-1-2/*.log`, and the board's shared
-//! `malformed` log): the BNO055 behind the same topics as 1-1.
+//! DiWheelDrive 1-2's QEMU scenarios (`diwheeldrive/qemu/rev-1-2/*.log`, each its own since 2026-12-06): the BNO055
+//! behind the same topics as 1-1.
 use anyhow::{ensure, Context, Result};
 
 use super::{diwheeldrive, Bounds, RunOutput, Scenario};
@@ -18,8 +18,8 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "malformed",
-        about: "bad frames are counted and harmless (the shared log)",
-        check: diwheeldrive::malformed,
+        about: "bad frames are counted and harmless (the gyroscope every 11 ms, stopped before the health one-shot)",
+        check: malformed,
     },
     Scenario {
         name: "admission-search",
@@ -28,7 +28,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "flood",
-        about: "commands at full bus rate keep a 3 ms gyroscope within its bound",
+        about: "commands at full bus rate keep an 11 ms gyroscope within its bound",
         check: flood,
     },
 ];
@@ -52,12 +52,14 @@ fn i32_of(data: &[u8]) -> Option<i32> {
 }
 
 fn imu_publishers(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    let end = 540_000;
-    let gyro = out.periodic_stream(0x508, "gyroscope", 10_000, 0, end)?;
-    let accel = out.periodic_stream(0x609, "accelerometer", 20_000, 0, end)?;
+    // One BNO055 topic at a time (a second is refused beside the first at every period and level since the
+    // publisher rows are the machine code's, 2026-12-06): each in its own window, from its request to its stop
+    // (`diwheeldrive/qemu/rev-1-2/imu-publishers.log`).
+    let gyro = out.periodic_stream(0x508, "gyroscope", 12_000, 0, 125_000)?;
+    let accel = out.periodic_stream(0x609, "accelerometer", 20_000, 130_000, 330_000)?;
     let mut worst = Vec::new();
     for (stream, topic, level, period) in [
-        (&gyro, "gyroscope", "high", 10_000),
+        (&gyro, "gyroscope", "high", 12_000),
         (&accel, "accelerometer", "medium", 20_000),
     ] {
         let bound = bounds.publisher_latency_us(topic, level, period)?;
@@ -69,27 +71,54 @@ fn imu_publishers(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         worst.push(format!("{topic} {} ≤ {bound} µs", stream.worst_latency));
     }
     let mut axes = [Vec::new(), Vec::new(), Vec::new()];
-    for (axis, (id, topic)) in [
-        (0x705, "magnetometer-x"),
-        (0x706, "magnetometer-y"),
-        (0x707, "magnetometer-z"),
+    for (axis, (id, topic, from, to)) in [
+        (0x705, "magnetometer-x", 335_000, 515_000),
+        (0x706, "magnetometer-y", 520_000, 700_000),
+        (0x707, "magnetometer-z", 705_000, 885_000),
     ]
     .into_iter()
     .enumerate()
     {
-        let stream = out.periodic_stream(id, topic, 50_000, 0, end)?;
+        let stream = out.periodic_stream(id, topic, 20_000, from, to)?;
         ensure!(
             stream.frames.len() >= 8,
             "{topic}: only {} frames",
             stream.frames.len()
         );
-        axes[axis] = payloads(out, id, 0, end)
+        let bound = bounds.publisher_latency_us(topic, "low", 20_000)?;
+        ensure!(
+            stream.worst_latency <= bound,
+            "{topic}: worst latency {} µs above the analysed {bound} µs",
+            stream.worst_latency
+        );
+        if axis == 0 {
+            worst.push(format!("{topic} {} ≤ {bound} µs", stream.worst_latency));
+        }
+        axes[axis] = payloads(out, id, 0, to)
             .into_iter()
             .map(|d| i32_of(d).context("magnetometer frame of 4 bytes"))
             .collect::<Result<Vec<i32>>>()?;
     }
+    // One topic at a time: no BNO055 frame outside its own window.
+    for (id, from, to) in [
+        (0x508, 0, 125_000 + 12_000),
+        (0x609, 130_000, 330_000 + 20_000),
+        (0x705, 335_000, 515_000 + 20_000),
+        (0x706, 520_000, 700_000 + 20_000),
+        (0x707, 705_000, 885_000 + 20_000),
+    ] {
+        let outside: Vec<u64> = out
+            .times(id)
+            .into_iter()
+            .filter(|t| !(from..to).contains(t))
+            .collect();
+        ensure!(
+            outside.is_empty(),
+            "{id:03X} after its stop or before its request: {outside:?} µs"
+        );
+    }
     // At rest: below 1 °/s on every axis.
-    for data in payloads(out, 0x508, 0, end) {
+    for data in payloads(out, 0x508, 0, 950_000) {
         let rate = i16s(data).context("gyroscope frame of 6 bytes")?;
         ensure!(
             rate.iter().all(|r| r.abs() <= 1),
@@ -97,7 +126,7 @@ fn imu_publishers(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         );
     }
     // Level: 1 g on Z, nothing on X and Y.
-    for data in payloads(out, 0x609, 0, end) {
+    for data in payloads(out, 0x609, 0, 950_000) {
         let [x, y, z] = i16s(data).context("accelerometer frame of 6 bytes")?;
         ensure!(
             x.abs() <= 20 && y.abs() <= 20 && (980..=1020).contains(&z),
@@ -121,6 +150,11 @@ fn imu_publishers(out: &RunOutput, bounds: &Bounds) -> Result<String> {
         health.rejected == 0,
         "{} commands rejected",
         health.rejected
+    );
+    let refused = out.end_field("admission refused")?;
+    ensure!(
+        refused == 0,
+        "{refused} requests refused: each topic alone, and the health one-shot with nothing running, are admitted"
     );
     Ok(format!(
         "{} gyroscope, {} accelerometer, {n} × 3 magnetometer samples on their grids ({}); values at rest, level, {:.1} µT at the inclination checked",
@@ -167,58 +201,80 @@ fn sensor_status(out: &RunOutput, from: u64, to: u64) -> Result<(bool, u32)> {
     anyhow::bail!("no diagnostics status page in {from}..{to} µs")
 }
 
+/// The shared malformed check on `rev-1-2/malformed.log`: the gyroscope every 11 ms until its stop at 95 ms.
+fn malformed(out: &RunOutput, bounds: &Bounds) -> Result<String> {
+    diwheeldrive::malformed_with(out, bounds, 11_000, 95_000)
+}
+
 fn flood(out: &RunOutput, bounds: &Bounds) -> Result<String> {
-    diwheeldrive::flood_at(out, bounds, 3_000)
+    diwheeldrive::flood_at(out, bounds, 11_000, super::FLOOD_COMMANDS + 1)
 }
 
 fn dead_imu(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
+    // `rev-1-2/dead-imu.log`: the gyroscope every 12 ms from 5 ms, the part dead at 105 ms, the gyroscope stopped at
+    // 150 ms, the floor every 20 ms from 155 to 305 ms with the health asked at 250 ms, the part back at 300 ms, the
+    // gyroscope asked again at 310 ms and stopped at 1.35 s, the health asked at 1.355 s. One BNO055 topic, and the
+    // health only with none running: since the publisher rows are the machine code's (2026-12-06) the board refuses
+    // the health one-shot and the floor beside a BNO055 publisher.
+    const PERIOD: u64 = 12_000;
+    const RESTART: u64 = 310_000;
+    const STOP: u64 = 1_350_000;
     ensure!(
         out.notes
             .iter()
             .any(|n| n.contains("the BNO055 stops answering")),
         "the control frame did not reach the simulated part"
     );
-    let before = out.periodic_stream(0x508, "gyroscope", 10_000, 0, 100_000)?;
-    let first = before.releases[0];
-    // Nothing invented while the part is dead: no gyroscope or accelerometer frame from 110 ms
-    // (one sample in flight at 105 ms may still leave) until the retry.
+    let before = out.periodic_stream(0x508, "gyroscope", PERIOD, 0, 100_000)?;
+    // Nothing invented while the part is dead: no gyroscope frame from 110 ms (one sample in flight at 105 ms may
+    // still leave) until the retry, the restarted publisher's releases on their grid all along.
     let dead: Vec<u64> = out
         .frames
         .iter()
-        .filter(|f| (f.id == 0x508 || f.id == 0x609) && (110_000..1_100_000).contains(&f.at_us))
+        .filter(|f| f.id == 0x508 && (110_000..1_100_000).contains(&f.at_us))
         .map(|f| f.at_us)
         .collect();
     ensure!(
         dead.is_empty(),
-        "motion frames while the BNO055 was dead: {dead:?} µs"
+        "gyroscope frames while the BNO055 was dead or not yet configured again: {dead:?} µs"
     );
-    // The floor sensors (I2C2) keep their grid the whole run.
-    let floor = out.periodic_stream(0x604, "floor-proximity", 20_000, 0, 1_390_000)?;
+    let restarted = out.releases_on_grid("gyroscope", PERIOD, RESTART, STOP)?;
+    // The floor sensors (I2C2) keep their grid while the BNO055 (I2C1) is dead.
+    let floor = out.periodic_stream(0x604, "floor-proximity", 20_000, 155_000, 305_000)?;
     let (faulty, faults) = sensor_status(out, 250_000, 260_000)?;
     ensure!(
         faulty && faults >= 3,
         "diagnostics at 250 ms: sensor fault {faulty}, {faults} faults (expected the fault flag and at least 3)"
     );
-    // Back after the 1 s back-off: the gyroscope on its original grid again.
-    let after = out.periodic_stream(0x508, "gyroscope", 10_000, 1_200_000, 1_390_000)?;
-    ensure!(
-        (after.releases[0] - first).is_multiple_of(10_000),
-        "after the retry the gyroscope left its grid: release at {} µs, first at {first} µs",
-        after.releases[0]
-    );
+    // Back after the 1 s back-off (its set-up steps taken a release each): from the release of the first frame on,
+    // every release of the second request's grid (checked above) with its frame.
     let resumed = out
         .times(0x508)
         .into_iter()
         .find(|t| *t >= 110_000)
         .context("the gyroscope never resumed")?;
-    let (faulty_after, faults_after) = sensor_status(out, 1_300_000, 1_310_000)?;
+    let from = restarted
+        .iter()
+        .copied()
+        .rfind(|r| *r <= resumed)
+        .context("a gyroscope frame before the second request's first release")?;
+    let after = out.periodic_stream(0x508, "gyroscope", PERIOD, from, STOP)?;
+    ensure!(
+        after.frames.len() >= 5,
+        "only {} gyroscope samples after the retry",
+        after.frames.len()
+    );
+    let (faulty_after, faults_after) = sensor_status(out, STOP, STOP + 20_000)?;
     ensure!(
         !faulty_after && faults_after >= faults,
-        "diagnostics at 1.3 s: sensor fault {faulty_after}, {faults_after} faults (expected the flag clear, the count kept)"
+        "diagnostics at 1.355 s: sensor fault {faulty_after}, {faults_after} faults (expected the flag clear, the count kept)"
     );
+    let refused = out.end_field("admission refused")?;
+    ensure!(refused == 0, "{refused} requests refused");
     Ok(format!(
-        "{} gyroscope frames, then none while dead; {} floor samples on their 20 ms grid throughout; diagnostics: sensor fault, {faults} faults; the retry brought the gyroscope back at {resumed} µs on its grid",
+        "{} gyroscope frames, then none while dead; {} floor samples on their 20 ms grid while it was; diagnostics: sensor fault, {faults} faults; the retry brought the gyroscope back at {resumed} µs on the grid of its request at {} µs",
         before.frames.len(),
-        floor.frames.len()
+        floor.frames.len(),
+        restarted[0]
     ))
 }
