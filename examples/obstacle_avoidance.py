@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Obstacle avoidance on the proximity ring, with the LightRing pointing at the nearest obstacle.
 
-Asks for the ring every 50 ms, drives forward at up to 0.15 m/s and turns away from what the
+Asks for the ring every 60 ms, drives forward at up to 0.15 m/s and turns away from what the
 front half of the ring sees (a Braitenberg-style rule: the closer side pushes harder); when
 something is close ahead it turns on the spot, always the same way until the way is clear, so it
 does not dither in a corner. The LED nearest the closest obstacle glows red, brighter the closer
@@ -32,7 +32,7 @@ class ObstacleAvoidance:
         self.last_lights = None
 
     def start(self):
-        return [publish(PROXIMITY_RING, 50)]
+        return [publish(PROXIMITY_RING, 60)]
 
     def on_message(self, msg):
         reading = ring_reading(msg)

@@ -63,7 +63,7 @@ def test_the_ring_sees_the_wall_and_the_obstacle_avoidance_example_roams_the_are
     with live_robot("arena.json") as (port, result):
         bus = can.Bus(interface="slcan", channel=port, bitrate=1_000_000)
         try:
-            bus.send(can.Message(arbitration_id=0x21F, data=[0x01, 0x14, 0x00, 0x00], is_extended_id=False))
+            bus.send(can.Message(arbitration_id=0x21F, data=[0x01, 0x24, 0xF4, 0x02], is_extended_id=False))
             still = ring_readings(bus, 1.5)
             # 100 mm/s for 1.8 s reaches the wall's 150 mm mark; a machine that cannot keep pace (the live robot
             # says so on stderr) takes longer, so back until both rear sensors see it, for at most 8 s.

@@ -141,7 +141,7 @@ def test_the_same_behaviour_runs_live_on_a_python_can_bus():
             target=amiro_behaviour.run_live, args=(ObstacleAvoidance(), behaviour_bus, 0.5))
         worker.start()
         first = robot.recv(timeout=2)
-        assert (first.arbitration_id, bytes(first.data)) == (0x31F, bytes([1, 50, 0, 0]))
+        assert (first.arbitration_id, bytes(first.data)) == (0x31F, bytes([1, 60, 0, 0]))
         # Something 40 mm away, front-left (sensor 3): turn on the spot, led-8 red.
         for sensor in range(8):
             robot.send(ring_frame(sensor, 40 if sensor == 3 else 200))
@@ -187,7 +187,7 @@ def test_the_lockstep_transport_speaks_the_controller_protocol():
     amiro_behaviour.run_lockstep(ObstacleAvoidance(), stdin, stdout)
     lines = stdout.getvalue().splitlines()
     first = lines[: lines.index("ok")]
-    assert first[0] == "31F#01320000"
+    assert first[0] == "31F#013C0000"
     assert first[1] == "110#00000000807BE1FF", first    # on the spot, −2 rad/s: away from the left
     assert "318#D80000" in first, first                 # led-8 red: 64 + 191 · 160 / 200 = 216
     assert lines[lines.index("ok") + 1:] == ["ok"], "nothing new 10 ms later"

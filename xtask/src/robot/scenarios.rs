@@ -213,6 +213,16 @@ fn magnetometer_on_grid(run: &Run, at_least: usize, slack: u64) -> Result<Vec<u6
     Ok(magnetometer)
 }
 
+/// The proximity ring's period in every robot scenario that runs it at medium, µs: thesis-demo's
+/// (`schedule-analysis/models/thesis-demo.scenario.json`), [`RING`]. Every 10 ms before 2026-12-06: the
+/// ring's release is 34 920.9 µs with its polled I2C waits since its row is used, and PowerManagement 1-1
+/// admits the ring alone at medium every 53 060 µs or slower, beside the magnetometer every 6 000 µs every
+/// 53 202 µs (host's check, `amiro send … --revision 1-1`, 2026-12-06).
+const RING_US: u64 = 62_500;
+
+/// The request for the ring every [`RING_US`] at medium (`21F`, 62 500 µs in µs units).
+const RING: &str = "21F#0124F402";
+
 /// The proximity ring's samples: bursts of eight frames `id`, one burst per period (the run's end
 /// may cut the last burst short).
 fn ring_samples(run: &Run, id: u16, period: u64) -> Result<usize> {
@@ -287,7 +297,7 @@ fn thesis_demo(run: &Run) -> Result<String> {
         );
         crate::scenarios::same_refusal(
             v,
-            &crate::scenarios::host_admission(&root, &["21F#010A0000"], request)?,
+            &crate::scenarios::host_admission(&root, &[RING], request)?,
         )?;
     }
     let queued = verdicts_queued(run, 0)?;
@@ -307,7 +317,7 @@ fn thesis_demo(run: &Run) -> Result<String> {
         crate::scenarios::VERDICT_SPACING_US
     );
     ensure!(
-        crate::scenarios::host_admission(&root, &["21F#010A0000"], "205#01701702")?
+        crate::scenarios::host_admission(&root, &[RING], "205#01701702")?
             .refusal
             .is_none(),
         "the host refuses magnetometer-x every {MAGNETOMETER_US} µs"
@@ -330,8 +340,9 @@ fn thesis_demo(run: &Run) -> Result<String> {
     );
     let releases = 300_000u64.saturating_sub(accepted + 300) / MAGNETOMETER_US + 1;
     let magnetometer = magnetometer_on_grid(run, releases as usize, 300)?;
-    let samples = ring_samples(run, 0x61F, 10_000)?;
-    ensure!(samples >= 28, "{samples} ring samples in 288 ms");
+    // From the request at 8 ms, a release every 62.5 ms: five by 300 ms, the last one's frames may be cut.
+    let samples = ring_samples(run, 0x61F, RING_US)?;
+    ensure!(samples >= 4, "{samples} ring samples in 292 ms");
     // Each sample's eight frames in sensor order, as the robot's driver sends them (one frame of an
     // identifier in the mailboxes at a time; the controller would break ties by mailbox number).
     let order: Vec<u8> = run
@@ -364,7 +375,7 @@ fn thesis_demo(run: &Run) -> Result<String> {
         "{others} frames besides the magnetometer, the ring and DiWheelDrive's verdicts (0x61A)"
     );
     Ok(format!(
-        "DiWheelDrive refused 900 µs and 3 500 µs ({} and {} µs), the second verdict {spacing} µs after the first; {} magnetometer frames on the {MAGNETOMETER_US} µs grid from {accepted} µs, {samples} ring samples × 8 (in sensor order) on the 10 ms grid, LED 3 latched, all on one bus",
+        "DiWheelDrive refused 900 µs and 3 500 µs ({} and {} µs), the second verdict {spacing} µs after the first; {} magnetometer frames on the {MAGNETOMETER_US} µs grid from {accepted} µs, {samples} ring samples × 8 (in sensor order) on the 62.5 ms grid, LED 3 latched, all on one bus",
         verdicts[0].1.wcrt_us.get(),
         verdicts[1].1.wcrt_us.get(),
         magnetometer.len()
@@ -495,7 +506,8 @@ fn admission_other_board(run: &Run) -> Result<String> {
         run.ends(0x41F).is_empty(),
         "urgent ring frames on the bus: the refused request ran"
     );
-    let samples = ring_samples(run, 0x71F, 15_000)?;
+    // The ring at low every 54 ms (robot/scenarios/admission-other-board.log).
+    let samples = ring_samples(run, 0x71F, 54_000)?;
     Ok(format!("{v}; {before} odometry frames on the bus before it; the ring at low runs ({samples} samples)"))
 }
 
@@ -522,9 +534,9 @@ fn adapter_flood(run: &Run) -> Result<String> {
     // well (`bus_bounds`).
     // 23 of 150 ms at 6 000 µs (125 at 1 150 µs before 2026-12-06, 160 at 900 µs before 2026-12-05).
     let magnetometer = magnetometer_on_grid(run, 23, 700)?;
-    let samples = ring_samples(run, 0x61F, 10_000)?;
+    let samples = ring_samples(run, 0x61F, RING_US)?;
     Ok(format!(
-        "400 flood frames; {} magnetometer frames on the {MAGNETOMETER_US} µs grid, {samples} ring samples on the 10 ms grid",
+        "400 flood frames; {} magnetometer frames on the {MAGNETOMETER_US} µs grid, {samples} ring samples on the 62.5 ms grid",
         magnetometer.len()
     ))
 }
@@ -588,7 +600,7 @@ fn babbling_board(run: &Run) -> Result<String> {
         .filter(|t| t.start >= first.start && t.start <= last.start)
         .count();
     // The loser: the ring's 0x61F waits while the babbling lasts, and its samples are back on
-    // their 10 ms grid after it (frames that waited in PowerManagement's mailboxes go first).
+    // their 62.5 ms grid after it (frames that waited in PowerManagement's mailboxes go first).
     let ring = run.frames(0x61F);
     let starved = ring
         .iter()
@@ -614,8 +626,8 @@ fn babbling_board(run: &Run) -> Result<String> {
         .filter(|t| t.end > last.end + 5_000)
         .map(|t| t.end)
         .collect();
-    let samples_before = ring_samples_of(&before, 0x61F, 10_000)?;
-    let samples_after = ring_samples_of(&after, 0x61F, 10_000)?;
+    let samples_before = ring_samples_of(&before, 0x61F, RING_US)?;
+    let samples_after = ring_samples_of(&after, 0x61F, RING_US)?;
     Ok(format!(
         "LightRing's controller babbled {} × {BABBLE:03X} from {} to {} µs ({share} % of the bus); \
          {during} magnetometer frames won against it, {} in all on the {MAGNETOMETER_US} µs grid, worst {} µs \
@@ -797,7 +809,7 @@ fn bus_fault(run: &Run) -> Result<String> {
             .all(|&t| !(100_100..120_000).contains(&t)),
         "a magnetometer frame on the bus while DiWheelDrive was unplugged"
     );
-    let samples = ring_samples(run, 0x61F, 10_000)?;
+    let samples = ring_samples(run, 0x61F, RING_US)?;
     Ok(format!(
         "3 error frames on 0x605 and retransmission (the frames they hit on the bus at most {worst_wait} µs after they were queued); {held} frames held while unplugged; grid before and after; the ring ran on ({samples} samples)"
     ))
@@ -837,7 +849,7 @@ fn same_bytes_twice(
 }
 
 /// The thesis demo's stimulus run for [`LONG_DEMO_US`]: every magnetometer-x release ([`MAGNETOMETER_US`] from the
-/// command at 60 ms, decided after the refusals' verdict window) on its grid, a ring sample every 10 ms, and every
+/// command at 60 ms, decided after the refusals' verdict window) on its grid, a ring sample every [`RING_US`], and every
 /// stream within its Davis bound.
 fn long_demo(root: &Path, firmware: &[amiro_robot::Firmware; 3]) -> Result<String> {
     let path = root.join("robot").join("scenarios").join("thesis-demo.log");
@@ -854,9 +866,9 @@ fn long_demo(root: &Path, firmware: &[amiro_robot::Firmware; 3]) -> Result<Strin
     // itself.
     let expected = ((LONG_DEMO_US - 120_000) / MAGNETOMETER_US) as usize;
     let magnetometer = magnetometer_on_grid(&run, expected, 300)?;
-    let samples = ring_samples(&run, 0x61F, 10_000)?;
+    let samples = ring_samples(&run, 0x61F, RING_US)?;
     ensure!(
-        samples as u64 >= (LONG_DEMO_US - 20_000) / 10_000,
+        samples as u64 >= (LONG_DEMO_US - 20_000) / RING_US,
         "{samples} ring samples in {LONG_DEMO_US} µs"
     );
     within_davis(&report)?;
