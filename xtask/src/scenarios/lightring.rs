@@ -574,7 +574,8 @@ fn admission(out: &RunOutput, bounds: &Bounds) -> Result<String> {
 /// The diagnostics period at medium `admission.log` asks for, ms: the shortest whole one the host admits on a 1-1
 /// robot (LightRing 1-0) since DiWheelDrive's transmit jobs are rows (2026-12-06): every 20 ms and shorter the latch
 /// misses its 2 000 µs (2 094 µs), every 21 ms (20 456 µs at least) passes. A 1-2 robot admits 7 ms and more (every
-/// 6 ms the six frames 0x61C respond in 7 633 µs). Until 2026-12-06 both admitted 7 ms and refused 6 ms.
+/// 6 ms the six frames 0x61C respond in 7 633 µs; 6 543 µs at least). Until 2026-12-06 both admitted 7 ms and refused
+/// 6 ms. The same figures on the tables with every machine-code bound used (2026-12-06, main 1233d095).
 pub(super) const ADMITTED_DIAGNOSTICS_MS: u64 = 21;
 
 /// The shortest whole milliseconds of the diagnostics at medium the host admits on a 1-1 robot (LightRing 1-0).
@@ -582,8 +583,9 @@ const SHORTEST_DIAGNOSTICS_1_0_MS: u64 = 21;
 
 /// DiWheelDrive's odometry request at low that `admission.log` sends LightRing (every 2 ms): admitted on its own,
 /// and the reason the diagnostics every 100 ms at urgent is refused (0x701 would respond in 2 660 µs on a 1-1
-/// robot's view, 2 434 µs on a 1-2 robot's, against 2 000 µs; 2026-12-06, DiWheelDrive's transmit jobs rows). Every
-/// 1.5 ms, the request before, is refused on its own now (0x701 in 1 928 µs of 1 500; at low it needs 1 850 µs).
+/// robot's view, 2 662 µs on a 1-2 robot's, against 2 000 µs; 2026-12-06, every machine-code bound used: 2 434 µs on
+/// 1-2 while DiWheelDrive 1-2's publisher rows were held). Every 1.5 ms, the request before, is refused on its own
+/// now (0x701 in 1 929 µs of 1 500 on 1-1, 1 931 µs on 1-2; at low it needs 1 850 / 1 852 µs).
 const ODOMETRY_REQUEST: &str = "301#01D00702";
 
 /// `admission.log` on a ring of `chips`, whose accepted request is the diagnostics every
