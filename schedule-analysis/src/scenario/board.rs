@@ -152,7 +152,7 @@ fn build_board(
         timing.trace.as_ref().and_then(|t| t.qemu.as_ref()),
     ) {
         (Firmware::Qemu, Some(q)) if q.budget_scale != 1.0 => {
-            scaled = timing.scaled(q.budget_scale);
+            scaled = timing.scaled(q.budget_scale, &budgets);
             &scaled
         }
         _ => timing,

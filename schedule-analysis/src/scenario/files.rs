@@ -6,6 +6,8 @@ use std::collections::BTreeMap;
 use amiro_can::Priority;
 use serde::Deserialize;
 
+use super::bounded::{BoardBudgets, BudgetFrom};
+use crate::bounds;
 use crate::can;
 use crate::model::{FrameCostSpec, Overheads};
 
@@ -175,10 +177,20 @@ fn one() -> f64 {
 }
 
 impl Timing {
-    /// The timing with every execution budget, critical section and overhead times `factor`.
-    pub(super) fn scaled(&self, factor: f64) -> Timing {
+    /// The timing with every execution budget, critical section and overhead times `factor`, except the stated
+    /// peripheral waits of a budget bounded from the machine code (`budgets`' [`BudgetFrom::Bound`]
+    /// `bus_wait_us`): a wait is the bus's time, not the CPU's, so a slower CPU does not lengthen it, and the
+    /// budget becomes (budget − waits) × `factor` + waits ([`scaled_cpu`]). The traced QEMU build's simulated
+    /// devices answer at once (its waits are about 0), so the unscaled stated waits still cover them. A best case
+    /// is scaled the same way, with at most its whole self taken as waits. Critical sections and the sensor buses'
+    /// engine rows are scaled whole (their waits too: only wider).
+    pub(super) fn scaled(&self, factor: f64, budgets: &BoardBudgets) -> Timing {
         let mut t = self.clone();
         let f = factor.max(1.0);
+        let waits = |row: &str| match budgets.rows.get(row) {
+            Some(BudgetFrom::Bound { bus_wait_us, .. }) => *bus_wait_us,
+            _ => 0.0,
+        };
         t.overheads.isr_entry_us *= f;
         t.overheads.isr_exit_us *= f;
         t.overheads.dispatcher_us *= f;
@@ -188,9 +200,10 @@ impl Timing {
         for v in t.idle_critical_sections_us.values_mut() {
             *v *= f;
         }
-        for task in t.tasks.values_mut() {
-            task.wcet_us = task.wcet_us.map(|w| w * f);
-            task.bcet_us = task.bcet_us.map(|w| w * f);
+        for (name, task) in t.tasks.iter_mut() {
+            let wait = waits(name);
+            task.wcet_us = task.wcet_us.map(|w| scaled_cpu(w, wait, f));
+            task.bcet_us = task.bcet_us.map(|w| scaled_cpu(w, wait, f));
             for v in task.critical_sections_us.values_mut() {
                 *v *= f;
             }
@@ -208,9 +221,10 @@ impl Timing {
                 part.us *= f;
             }
         }
-        for topic in t.topics.values_mut() {
-            topic.wcet_us *= f;
-            topic.bcet_us = topic.bcet_us.map(|w| w * f);
+        for (name, topic) in t.topics.iter_mut() {
+            let wait = waits(&bounds::publisher_row(name));
+            topic.wcet_us = scaled_cpu(topic.wcet_us, wait, f);
+            topic.bcet_us = topic.bcet_us.map(|w| scaled_cpu(w, wait, f));
             for v in topic.critical_sections_us.values_mut() {
                 *v *= f;
             }
@@ -220,6 +234,13 @@ impl Timing {
         }
         t
     }
+}
+
+/// A budget of `us` µs, of which `wait_us` are stated peripheral waits, on a CPU `factor` times slower: its CPU
+/// part times `factor`, its waits as they are (`wait_us` taken as at most `us`, at least 0).
+pub fn scaled_cpu(us: f64, wait_us: f64, factor: f64) -> f64 {
+    let wait = wait_us.clamp(0.0, us.max(0.0));
+    (us - wait) * factor + wait
 }
 
 /// A budget measured on a bench (`cargo xtask bench --calibrate`), kept beside the estimate.

@@ -39,9 +39,9 @@ mod transmit;
 
 pub use bounded::{bounds_file, breaking_bounds, BoardBudgets, BudgetFrom, Held};
 pub use files::{
-    AppSource, Arrival, ExpectedFailures, Measured, Monotonic, QemuBuild, QemuReplay, QemuTransmit,
-    Scenario, ScenarioCommand, ScenarioOneShot, ScenarioPublisher, Timing, TimingTask, TopicTiming,
-    TraceCost, UnstampedPerPreemption, WorstStep, ACKS_PER_TRANSMIT_JOB,
+    scaled_cpu, AppSource, Arrival, ExpectedFailures, Measured, Monotonic, QemuBuild, QemuReplay,
+    QemuTransmit, Scenario, ScenarioCommand, ScenarioOneShot, ScenarioPublisher, Timing,
+    TimingTask, TopicTiming, TraceCost, UnstampedPerPreemption, WorstStep, ACKS_PER_TRANSMIT_JOB,
     QEMU_FRAMES_PER_TRANSMIT_JOB,
 };
 pub use on_bounds::{on_held_bounds, BoardOnBounds, OnBounds};
@@ -303,7 +303,8 @@ pub enum Firmware {
     /// to every job (`cargo xtask bench` on a capture).
     Traced,
     /// The traced QEMU build: every budget times the timing file's `trace.qemu.budget_scale` (the
-    /// emulator runs at 125 MIPS, slower than the F405 and faster than the F103) and its measured
+    /// emulator runs at 125 MIPS, slower than the F405 and faster than the F103) except a bounded budget's
+    /// stated bus waits (wire time, not the CPU's: [`scaled_cpu`]), and the timing file's measured
     /// `trace.qemu.per_job_us` per job (the QEMU scenarios' bounds, `cargo xtask bench --qemu`).
     Qemu,
 }
