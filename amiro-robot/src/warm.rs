@@ -74,13 +74,15 @@ pub fn actions() -> Vec<Timed> {
         plan.send(Priority::Medium, topic, &[0]);
     }
     // The live load (the thesis's example and a gyroscope beside it, as
-    // `tools/interop/live_pace.py` sends it): the ring every 10 ms, LED 3, magnetometer-x every
-    // 900 µs at medium, the gyroscope every 10 ms at low; the streams then run to the restart.
+    // `tools/interop/live_pace.py` sends it): the ring every 62.5 ms (62 500 µs: PowerManagement
+    // refuses it every 10 ms since its ring row is the machine code's, 2026-12-06, so the ring's
+    // sample would not run before the restart), LED 3, magnetometer-x every 900 µs at medium, the
+    // gyroscope every 10 ms at low; the streams then run to the restart.
     plan.from(100_000);
     plan.send(
         Priority::Medium,
         Topic::ProximityRing.byte(),
-        &[1, 10, 0, 0],
+        &[1, 0x24, 0xF4, 2],
     );
     plan.send(Priority::Medium, Topic::Led3.byte(), &[0xFF, 0x80, 0x20]);
     plan.send(

@@ -1,5 +1,5 @@
 """Does the live robot keep pace? Starts `xtask robot --slcan`, sends the thesis load through python-can on its
-SLCAN port — the proximity ring every 10 ms at PowerManagement, LED 3, magnetometer-x every 6 ms at medium — and
+SLCAN port — the proximity ring every 62.5 ms at PowerManagement, LED 3, magnetometer-x every 6 ms at medium — and
 the gyroscope every 10 ms at low priority, 10 ms apart, then counts for `--seconds` of wall time the frames that
 come back, per wall-clock second and identifier (the gyroscope's first), and stops the run with Ctrl-C as a user
 would. The robot's own stderr (its warm-up, its real-time factor and worst lag every 2 s, "cannot keep pace", the
@@ -46,7 +46,11 @@ import time
 
 import can
 
-RING = (0x21F, bytes.fromhex("010A0000"))
+# The proximity ring every 62.5 ms at medium (62 500 µs), thesis-demo's period: since 2026-12-06 PowerManagement's ring
+# row is the machine code's (a release 34 920.9 µs with its polled I2C waits) and its check refuses the ring every
+# 10 ms, as the tool asked before; a 1-1 robot admits it alone every 53 202 µs or slower (the host's check, `amiro
+# send … --revision 1-1`, 2026-12-06; docs/analysis.md, `admission-other-board`).
+RING = (0x21F, bytes.fromhex("0124F402"))
 # Magnetometer-x every 6 ms at medium: admitted on both robot revisions (1-1's polled HMC5883L, 2026-12-06).
 MAGNETOMETER = (0x205, bytes.fromhex("01060000"))
 LED = (0x213, bytes.fromhex("FF8020"))
