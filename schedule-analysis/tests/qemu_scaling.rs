@@ -27,7 +27,11 @@ fn a_budget_of_cpu_c_and_waits_w_scaled_by_f_is_c_f_plus_w() {
 
 /// The wcet of `board`'s job whose budget is row `row`, and that row's bound and its waits.
 fn job(built: &Built, board: &str, row: &str) -> (f64, f64, f64) {
-    let budgets = built.budgets.iter().find(|b| b.board == board).expect(board);
+    let budgets = built
+        .budgets
+        .iter()
+        .find(|b| b.board == board)
+        .expect(board);
     let Some(BudgetFrom::Bound {
         us, bus_wait_us, ..
     }) = budgets.rows.get(row)
@@ -62,7 +66,10 @@ fn the_qemu_model_scales_powermanagements_cpu_not_its_stated_bus_waits() {
             let (on_chip, bound, waits) = job(&chip, "powermgmt", row);
             let (in_qemu, _, _) = job(&qemu, "powermgmt", row);
             assert!(waits > 1_000.0, "{row}: waits {waits}");
-            assert!((on_chip - bound).abs() < 1e-6, "{row}: {on_chip} vs {bound}");
+            assert!(
+                (on_chip - bound).abs() < 1e-6,
+                "{row}: {on_chip} vs {bound}"
+            );
             // PowerManagement's `trace.qemu.budget_scale` is 2.
             let want = 2.0 * (bound - waits) + waits;
             assert!(

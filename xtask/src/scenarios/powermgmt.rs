@@ -94,8 +94,16 @@ const RING_US: u64 = 100_000;
 /// A publish command for the ring with CAN identifier `id` (its priority) every `us` µs: in whole
 /// milliseconds where it is some, else in µs.
 fn ring_command(id: u32, us: u64) -> String {
-    let (count, unit) = if us % 1_000 == 0 { (us / 1_000, 0) } else { (us, 2) };
-    format!("{id:03X}#01{:02X}{:02X}{unit:02X}", count & 0xFF, (count >> 8) & 0xFF)
+    let (count, unit) = if us.is_multiple_of(1_000) {
+        (us / 1_000, 0)
+    } else {
+        (us, 2)
+    };
+    format!(
+        "{id:03X}#01{:02X}{:02X}{unit:02X}",
+        count & 0xFF,
+        (count >> 8) & 0xFF
+    )
 }
 
 /// [`RING_US`] for the messages, in ms.
