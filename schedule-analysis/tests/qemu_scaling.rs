@@ -2,15 +2,14 @@
 //! (QEMU's CPU speed against the chip's), but not the stated bus waits of a budget bounded from the machine code:
 //! a wait is the bus's time, and QEMU's simulated devices answer at once (docs/bench.md, "The traced QEMU model").
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use schedule_analysis::scenario::{self, scaled_cpu, BudgetFrom, Built, Firmware};
 
+mod common;
+
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .map(Path::to_path_buf)
-        .expect("workspace root")
+    common::workspace()
 }
 
 #[test]
