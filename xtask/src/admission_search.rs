@@ -93,14 +93,7 @@ pub fn run(root: &Path, args: &SearchArgs) -> Result<bool> {
                 stored_cost.iterations
             }
             Keep::Found if args.write => {
-                let mut log = found.clone();
-                log.header.push(format!(
-                    "Stored by `cargo xtask admission-search --revision {} --write` on {}: {} on these tables, above the stored sequence's {} iterations.",
-                    target.revision,
-                    today(),
-                    found_cost,
-                    stored_cost.iterations
-                ));
+                let log = replacement(&found, target.revision, &today(), found_cost, stored_cost);
                 std::fs::write(&path, log.render())
                     .with_context(|| format!("writing {}", target.log))?;
                 println!(
@@ -171,6 +164,22 @@ pub fn run(root: &Path, args: &SearchArgs) -> Result<bool> {
         println!("{line}");
     }
     Ok(ok)
+}
+
+/// The log `--write` stores: the search's winner with a header line saying how and when, and what it replaced.
+fn replacement(
+    found: &StoredLog,
+    revision: &str,
+    date: &str,
+    found_cost: admission_search::Cost,
+    stored_cost: admission_search::Cost,
+) -> StoredLog {
+    let mut log = found.clone();
+    log.header.push(format!(
+        "Stored by `cargo xtask admission-search --revision {revision} --write` on {date}: {found_cost} on these tables, above the stored sequence's {} iterations.",
+        stored_cost.iterations
+    ));
+    log
 }
 
 /// A kept QEMU run of scenario `admission-search` (`cargo xtask scenarios` keeps each run's work directory).
@@ -298,6 +307,27 @@ mod tests {
         assert_eq!(civil_from_days(0), (1970, 1, 1));
         assert_eq!(civil_from_days(20_793), (2026, 12, 6));
         assert_eq!(civil_from_days(11_016), (2000, 2, 29));
+    }
+
+    #[test]
+    fn a_replacement_round_trips_with_its_header() {
+        let root = crate::workspace::workspace_root();
+        let text = std::fs::read_to_string(root.join(TARGETS[1].log)).unwrap_or_default();
+        let found = StoredLog::parse(&text).unwrap_or_else(|e| panic!("{e}"));
+        let cost = |iterations| admission_search::Cost {
+            iterations,
+            command: 30,
+            refresh: false,
+        };
+        let log = replacement(&found, "1-2", "2026-12-06", cost(1995), cost(1990));
+        let back = StoredLog::parse(&log.render()).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back, log);
+        assert_eq!(back.commands, found.commands);
+        assert_eq!(back.duration_ms, found.duration_ms);
+        assert_eq!(back.header.len(), found.header.len() + 1);
+        assert!(back.header.last().is_some_and(|l| l.starts_with(
+            "Stored by `cargo xtask admission-search --revision 1-2 --write` on 2026-12-06: 1995 iterations at command 31"
+        ) && l.ends_with("above the stored sequence's 1990 iterations.")));
     }
 
     #[test]
