@@ -8,12 +8,17 @@
 //!
 //! The portable core ([`can`], [`bxcan`], [`clock_tree`], [`command_job`], [`i2c_bus`], [`i2c_clear`], [`i2c_engine`], [`i2c_fault`], [`i2c_sim`],
 //! [`layout`], [`scripted`], [`spi`], [`timer_monotonic`], [`trace_ring`]) builds and is tested on
-//! the host; the rest exists only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
+//! the host; `admission_search` exists only on the host; the rest only on the chips (`target_os = "none"`). Exactly one chip family feature (`f1`, `f4`)
 //! is enabled on a chip build; `qemu` selects the QEMU platform.
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 
 pub mod admission;
+// The host's search for the admission check's costliest step needs `std` (its sequences, its log's text).
+#[cfg(all(not(target_os = "none"), not(test)))]
+extern crate std;
+#[cfg(not(target_os = "none"))]
+pub mod admission_search;
 pub mod bxcan;
 pub mod can;
 pub mod clock_tree;

@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use anyhow::{bail, ensure, Context, Result};
 use clap::{Parser, Subcommand};
 
+mod admission_search;
 mod analyze;
 mod bench;
 mod boards;
@@ -133,6 +134,10 @@ enum Cmd {
     },
     /// The response-time report: worst-case response times of the board tasks and the CAN bus.
     Analyze(analyze::AnalyzeArgs),
+    /// Search again for the admission check's costliest step (scenario `admission-search`'s sequence): the seeded
+    /// search per revision, its winner against the stored log on today's tables, `--write` to store a costlier one,
+    /// and the admission task's recorded worst steps and budgets (docs/qemu.md).
+    AdmissionSearch(admission_search::SearchArgs),
     /// Execution-time bounds from the machine code: every task of the boards' built images, or one
     /// function of any ELF, in cycles on its chip (docs/analysis.md, "Execution-time bounds from the
     /// machine code").
@@ -325,6 +330,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             Ok(stats.damaged == 0)
         }
         Cmd::Wcet(args) => wcet::wcet(&root, &args),
+        Cmd::AdmissionSearch(args) => admission_search::run(&root, &args),
         Cmd::Bench(args) => bench::run(&root, &args),
         Cmd::Timeline(args) => bench::timeline::run(&root, &args).map(|()| true),
         Cmd::Flash(args) => flash::run(&root, &args).map(|()| true),

@@ -578,7 +578,9 @@ fn on_f103_us(virtual_us: u64) -> Result<u64> {
 }
 
 /// The admission task's budget and recorded worst step in the timing file `path`.
-fn admission_budget(path: &str) -> Result<(f64, schedule_analysis::scenario::WorstStep)> {
+pub(crate) fn admission_budget(
+    path: &str,
+) -> Result<(f64, schedule_analysis::scenario::WorstStep)> {
     let text = std::fs::read_to_string(crate::workspace::workspace_root().join(path))
         .with_context(|| path.to_string())?;
     let timing: schedule_analysis::scenario::Timing =
@@ -599,7 +601,7 @@ fn admission_budget(path: &str) -> Result<(f64, schedule_analysis::scenario::Wor
 
 /// Every timing file that budgets the admission task (each records the costliest step measured and the chip's clock
 /// and cycles per instruction: `worst_step`).
-const ADMISSION_BUDGETS: [&str; 6] = [
+pub(crate) const ADMISSION_BUDGETS: [&str; 6] = [
     "schedule-analysis/models/diwheeldrive.timing.json",
     "schedule-analysis/models/rev-1-2/diwheeldrive.timing.json",
     "schedule-analysis/models/lightring.timing.json",
@@ -865,7 +867,7 @@ pub(super) fn admission_search(out: &RunOutput, _bounds: &Bounds) -> Result<Stri
     );
     ensure!(
         most_iterations * 10 >= 2 * cap * 9,
-        "the searched sequence's costliest step took {most_iterations} fixed-point iterations, below 90 % of a step's {}: search again (amiro-firmware/examples/admission_search.rs)",
+        "the searched sequence's costliest step took {most_iterations} fixed-point iterations, below 90 % of a step's {}: search again (`cargo xtask admission-search --write`, docs/qemu.md)",
         2 * cap
     );
     let budget = against_budget(out, &steps)?;
