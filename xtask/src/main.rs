@@ -87,6 +87,10 @@ enum Cmd {
         #[arg(long, value_name = "1-2|1-1")]
         revision: Option<String>,
     },
+    /// The CAN tools' interop (part of `test`): cantools, python-can, can-utils, the MCAP reader, Foxglove's client
+    /// and the example behaviours against `amiro` (tools/interop/, pinned in tools/requirements-ci.txt). Its bus-log
+    /// checks read the QEMU scenarios' logs: run `scenarios` first.
+    Interop,
     /// The hostile-bus campaign on every board with a QEMU build (part of `test`): seeded random
     /// and targeted frames, verdicts checked against an independent model of docs/protocol.md.
     Campaign {
@@ -255,6 +259,7 @@ fn run(cmd: Cmd) -> Result<bool> {
             // expected failures passes when exactly those fail).
             Ok(passes || !args.check)
         }
+        Cmd::Interop => interop::check(&root).map(|()| true),
         Cmd::Campaign {
             seed,
             frames,
