@@ -36,7 +36,7 @@ fn main() {
                 .map(|i| u8::from_str_radix(&data[2 * i..2 * i + 2], 16).expect("hex"))
                 .collect();
             let mut steps = Vec::new();
-            let check = admission.replay(id, &data, |iterations| steps.push(iterations));
+            let check = admission.replay(id, &data, |_, iterations| steps.push(iterations));
             let what = match check {
                 Check::Pass => "pass",
                 Check::Refused(..) => "refused",

@@ -18,7 +18,7 @@ use std::vec::Vec;
 use schedule_analysis::admission::RobotTable;
 use schedule_analysis::rng::Rng;
 
-use crate::admission::{Admission, State};
+use crate::admission::{Admission, State, StepKind};
 
 /// Every sensor topic of the robot: DiWheelDrive's nine, PowerManagement's three, LightRing's one.
 const TOPICS: [u8; 13] = [
@@ -120,7 +120,8 @@ pub struct Cost {
     pub iterations: u64,
     /// The index of the command whose step it was (0 for the first).
     pub command: usize,
-    /// Whether it was a refresh step after the command rather than its decision.
+    /// Whether it was a step of the command other than its decision (a refresh after a stop, or a step preparing
+    /// the decision).
     pub refresh: bool,
 }
 
@@ -147,14 +148,12 @@ pub fn worst_step(table: &RobotTable<'_>, commands: &[Command]) -> Cost {
     admission.prepare();
     let mut worst = Cost::default();
     for (i, c) in commands.iter().enumerate() {
-        let mut steps = 0;
-        let _ = admission.replay(c.id, c.data(), |iterations| {
+        let _ = admission.replay(c.id, c.data(), |kind, iterations| {
             worst = worst.max(Cost {
                 iterations,
                 command: i,
-                refresh: steps > 0,
+                refresh: kind != StepKind::Decision,
             });
-            steps += 1;
         });
     }
     worst

@@ -221,7 +221,7 @@ fn last_replay(root: &Path, target: &Target) -> Result<Option<Replay>> {
     if runs == 0 {
         bail!("its task trace shows no run of admit_requests");
     }
-    let instructions = (own_us * 1000.0) as u64 >> crate::qemu::ICOUNT_SHIFT;
+    let instructions = crate::scenarios::diwheeldrive::qemu_instructions(own_us);
     Ok(Some(Replay {
         work,
         when,

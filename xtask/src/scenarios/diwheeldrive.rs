@@ -567,6 +567,11 @@ fn admission_other_board(out: &RunOutput, _bounds: &Bounds) -> Result<String> {
 /// Virtual nanoseconds per instruction in the QEMU runs (`-icount shift=N`: 2^N ns).
 const NS_PER_INSTRUCTION: u64 = 1 << crate::qemu::ICOUNT_SHIFT;
 
+/// The instructions QEMU ran in `virtual_us` µs of a task's own execution.
+pub(crate) fn qemu_instructions(virtual_us: f64) -> u64 {
+    (virtual_us * 1000.0) as u64 / NS_PER_INSTRUCTION
+}
+
 /// A QEMU latency at the F103's speed (the clock and cycles per instruction DiWheelDrive's timing file states for its
 /// admission budget, `worst_step`), every microsecond of it scaled as if it were instructions: frames on the bus and
 /// the sensors' transfers, which do not scale, are over-estimated and the transfers QEMU's simulated sensors do not
@@ -639,7 +644,7 @@ fn against_budget(out: &RunOutput, steps: &[(u64, u64, String)]) -> Result<Strin
     let (own_us, runs) = out.own_execution_us("diwheeldrive", "admit_requests")?;
     ensure!(runs > 0, "the task trace shows no run of admit_requests");
     let longest = steps.iter().map(|d| d.1).max().context("no decision")?;
-    let instructions = (own_us * 1000.0) as u64 / NS_PER_INSTRUCTION;
+    let instructions = qemu_instructions(own_us);
     let mut figures = Vec::new();
     for path in ADMISSION_BUDGETS {
         let (budget, step) = admission_budget(path)?;
@@ -787,12 +792,12 @@ struct HostSteps {
 }
 
 /// The admission task's steps for `out`'s stimulus (scenario `admission-cost` on DiWheelDrive 1-1) as the host
-/// takes them with the same check on the 1-1 robot's table (`amiro_firmware::admission::Admission`), in the order
-/// `amiro_firmware::tasks::serve_admission` runs them: for each command heard, the steps preparing it, the
-/// decision, the refresh steps when a stream left the running set. Requires that the board lost no command (its
+/// takes them with the same check on the 1-1 robot's table (`amiro_firmware::admission::Admission::replay`, in the
+/// order `amiro_firmware::tasks::serve_admission` runs them: for each command heard, the steps preparing it, the
+/// decision, the refresh steps when a stream left the running set). Requires that the board lost no command (its
 /// queues dropped none), so it heard what the host replays.
 fn host_admission_steps(root: &std::path::Path, out: &RunOutput) -> Result<HostSteps> {
-    use amiro_firmware::admission::{Admission, State};
+    use amiro_firmware::admission::{Admission, State, StepKind};
     ensure!(
         out.end_field("rx dropped")? == 0 && out.end_field("admission busy")? == 0,
         "the board dropped or refused unseen a command: the host's replay would not be what it heard"
@@ -820,16 +825,10 @@ fn host_admission_steps(root: &std::path::Path, out: &RunOutput) -> Result<HostS
                 continue;
             };
             let data = frame.data.as_slice();
-            let mut from = 0;
-            while let Some(board) = admission.step(Some((id, data)), from) {
-                host.steps.push((false, admission.iterations().0));
-                from = board + 1;
-            }
             let running = admission.running().len();
-            let _ = admission.on_command(id, data);
-            if admission.analysed() {
-                host.steps.push((true, admission.iterations().0));
-            }
+            let _ = admission.replay(id, data, |kind, iterations| {
+                host.steps.push((kind == StepKind::Decision, iterations));
+            });
             if matches!(
                 amiro_can::decode_command(id, data),
                 Ok(amiro_can::Command::Sensor(c)) if c.mode == amiro_can::SensorMode::Stop
@@ -840,13 +839,6 @@ fn host_admission_steps(root: &std::path::Path, out: &RunOutput) -> Result<HostS
                 }
             }
             host.most_running = host.most_running.max(admission.running().len());
-            if admission.stale() {
-                let mut from = 0;
-                while let Some(board) = admission.step(None, from) {
-                    host.steps.push((false, admission.iterations().0));
-                    from = board + 1;
-                }
-            }
         }
         host
     }))
