@@ -64,17 +64,6 @@ const ONE_SHOT_PERIOD: SampleTime =
         Err(_) => panic!("the one-shot interval is a valid sample time"),
     };
 
-/// The kind of an analysed step of the admission task ([`Admission::replay`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum StepKind {
-    /// A step preparing a command's decision (a board's kept analysis brought up to date first).
-    Preparation,
-    /// The command's decision.
-    Decision,
-    /// A refresh step after a stream left the running set.
-    Refresh,
-}
-
 /// What the command handler does with a command after the admission check.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Check {
@@ -327,8 +316,7 @@ impl<'s, const N: usize, const M: usize> Admission<'s, N, M> {
 
     /// The admission task's steps for one command run back to back, as `tasks::serve_admission` runs them between
     /// its waits: the preparation steps, the decision, the refresh steps after a stop. `step` gets each analysed
-    /// step's kind and fixed-point iterations. For host replays (the cost search, its examples, the QEMU scenarios'
-    /// host side).
+    /// step's kind and iterations. For host replays (the cost search, its examples, the QEMU scenarios' host side).
     pub fn replay(&mut self, id: u16, data: &[u8], mut step: impl FnMut(StepKind, u64)) -> Check {
         self.steps(Some((id, data)), |i| step(StepKind::Preparation, i));
         let check = self.on_command(id, data);
@@ -850,6 +838,17 @@ pub fn table_source(
         .check_sensor_buses_linked(sensor_buses)
         .map_err(|e| e.to_string())?;
     Ok(robot.to_rust_source("::amiro_firmware::admission::schedule_analysis"))
+}
+
+/// The kind of an analysed step of the admission task ([`Admission::replay`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StepKind {
+    /// A step preparing a command's decision (a board's kept analysis brought up to date first).
+    Preparation,
+    /// The command's decision.
+    Decision,
+    /// A refresh step after a stream left the running set.
+    Refresh,
 }
 
 #[cfg(test)]
